@@ -1,0 +1,5 @@
+"""Allow ``python -m stationd``."""
+
+from stationd.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,36 @@
+"""One exception hierarchy for the whole station.
+
+Commands turn a :class:`StationError` into one readable line on stderr and exit code 2;
+the daemon turns it into a fault state.  Vision failures are *not* exceptions: a detection
+that does not find the marker is a value that carries its reason (see ``vision.types``).
+"""
+
+from __future__ import annotations
+
+
+class StationError(Exception):
+    """Base of every error the station reports to a person."""
+
+
+class InputError(StationError):
+    """Bad input: a file that is missing, unreadable, malformed or out of range."""
+
+
+class ConfigError(InputError):
+    """A configuration or calibration file is invalid; the message names file, line and key."""
+
+    def __init__(self, message: str, *, path: str | None = None, line: int | None = None,
+                 key: str | None = None) -> None:
+        self.path = path
+        self.line = line
+        self.key = key
+        where = ""
+        if path is not None:
+            where = path if line is None else f"{path}:{line}"
+        prefix = f"{where}: " if where else ""
+        keypart = f"{key}: " if key else ""
+        super().__init__(f"{prefix}{keypart}{message}")
+
+
+class ImageError(InputError):
+    """An image that cannot be read or has the wrong shape or channel count."""

@@ -1,0 +1,1 @@
+"""Camera model, stereo geometry, calibration and frames (no image processing here)."""
