@@ -1,0 +1,253 @@
+"""One image in, one marker (or a reason) out: the pipeline of paper sections 2-3.
+
+``detect`` searches a reduced image for purple regions enclosing a ring (segment), then for each
+candidate works at full resolution inside its ROI only: edges -> sub-pixel points ->
+undistortion -> Leitz-robust ellipse fits of both boundaries -> projected centre.  Every
+detection passes the quality gates or is refused with the reason; two markers in view is a
+refusal for ``detect`` (``detect_all`` returns both).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+
+from stationd.errors import ImageError
+from stationd.geometry.camera import Camera
+from stationd.vision import centre as cm
+from stationd.vision.edges import BoundaryEdges, boundary_edges
+from stationd.vision.ellipse import fit_ellipse
+from stationd.vision.marker import MarkerSpec
+from stationd.vision.params import Gates, VisionParams
+from stationd.vision.segment import Candidate, find_candidates
+from stationd.vision.types import Ellipse, Refusal
+
+Box = tuple[int, int, int, int]
+
+
+@dataclass(frozen=True, eq=False)
+class Detection:
+    """A localized marker in one image, or why there is none (``found`` False)."""
+
+    found: bool
+    reason: str | None = None
+    centre_px: np.ndarray | None = None          # corrected projected centre, raw pixels
+    ellipse_centre_px: np.ndarray | None = None  # inner ellipse centre (baseline), raw pixels
+    centre_undist: np.ndarray | None = None      # corrected centre, undistorted pixels
+    normal: np.ndarray | None = None             # unit, camera frame, facing the camera
+    normal_candidates: tuple[np.ndarray, np.ndarray] | None = None  # inner cone's two normals
+    inner: Ellipse | None = None
+    outer: Ellipse | None = None
+    inner_points: np.ndarray | None = field(default=None, repr=False)  # undistorted inliers
+    outer_points: np.ndarray | None = field(default=None, repr=False)
+    pencil_ratio: float | None = None
+    centre_split_px: float | None = None
+    method: str = ""
+    roi: Box | None = None
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        def vec(a: np.ndarray | None) -> list[float] | None:
+            return None if a is None else [float(x) for x in a]
+
+        return {
+            "found": self.found,
+            "reason": self.reason,
+            "centre_px": vec(self.centre_px),
+            "ellipse_centre_px": vec(self.ellipse_centre_px),
+            "normal": vec(self.normal),
+            "inner": None if self.inner is None else self.inner.to_json(),
+            "outer": None if self.outer is None else self.outer.to_json(),
+            "pencil_ratio": self.pencil_ratio,
+            "centre_split_px": self.centre_split_px,
+            "method": self.method,
+            "roi": None if self.roi is None else list(self.roi),
+            "timings_ms": {k: round(v, 3) for k, v in self.timings_ms.items()},
+        }
+
+
+def check_image(image: np.ndarray) -> None:
+    """The detector needs an 8-bit colour image (BGR): anything else is bad input."""
+    if not isinstance(image, np.ndarray) or image.dtype != np.uint8:
+        raise ImageError("image must be 8-bit")
+    if image.ndim != 3 or image.shape[2] != 3:
+        channels = 1 if image.ndim == 2 else (image.shape[2] if image.ndim == 3 else "?")
+        raise ImageError(f"image must have 3 colour channels (BGR), got {channels}")
+
+
+def reduce(image: np.ndarray, scale: int) -> np.ndarray:
+    """The search image: 1/scale of the frame (bilinear, about 1 ms for 20 MP at 1/8)."""
+    h, w = image.shape[:2]
+    if scale <= 1:
+        return image
+    return cv2.resize(image, (max(w // scale, 1), max(h // scale, 1)),
+                      interpolation=cv2.INTER_LINEAR)
+
+
+def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = None,
+               marker: MarkerSpec | None = None) -> tuple[list[Detection], list[str]]:
+    """Every marker in the image, and the reasons candidates were refused."""
+    params = params or VisionParams()
+    marker = marker or MarkerSpec()
+    check_image(image)
+    h, w = image.shape[:2]
+    if (w, h) != camera.size:
+        raise ImageError(f"image is {w}x{h} but the camera model is {camera.size[0]}x"
+                         f"{camera.size[1]}")
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    small = reduce(image, params.search_scale)
+    t1 = time.perf_counter()
+    timings["reduce"] = (t1 - t0) * 1e3
+    cands = find_candidates(small, params.search_scale, params.hsv,
+                            enhance=params.enhance_params if params.enhance else None,
+                            full_size=(w, h), margin=params.roi_margin)
+    t2 = time.perf_counter()
+    timings["segment"] = (t2 - t1) * 1e3
+    found: list[Detection] = []
+    reasons: list[str] = []
+    for cand in cands[: params.max_candidates]:
+        det = measure(image, camera, cand, params, marker, dict(timings))
+        if det.found:
+            found.append(det)
+        elif det.reason:
+            reasons.append(det.reason)
+    if not cands:
+        reasons.append("no purple region enclosing a ring in view")
+    # one marker seen through two candidate regions (e.g. a field split by a glint) counts once
+    unique: list[Detection] = []
+    for d in found:
+        assert d.centre_px is not None  # noqa: S101 - found detections carry a centre
+        if all(np.hypot(*(d.centre_px - u.centre_px)) > 2.0 for u in unique
+               if u.centre_px is not None):
+            unique.append(d)
+    return unique, reasons
+
+
+def detect(image: np.ndarray, camera: Camera, params: VisionParams | None = None,
+           marker: MarkerSpec | None = None) -> Detection:
+    """The one marker in view; refused when there is none or more than one."""
+    t0 = time.perf_counter()
+    found, reasons = detect_all(image, camera, params, marker)
+    total = (time.perf_counter() - t0) * 1e3
+    if len(found) == 1:
+        det = found[0]
+        det.timings_ms["total"] = total
+        return det
+    if len(found) > 1:
+        return Detection(False, f"ambiguous: {len(found)} markers in view",
+                         timings_ms={"total": total})
+    reason = "; ".join(dict.fromkeys(reasons)) or "marker not found"
+    return Detection(False, reason, timings_ms={"total": total})
+
+
+def _coverage(e: Ellipse, pts: np.ndarray) -> float:
+    ang = np.arctan2(pts[:, 1] - e.centre[1], pts[:, 0] - e.centre[0])
+    bins = np.unique(((ang + np.pi) / (2 * np.pi) * 36).astype(int) % 36)
+    return bins.size / 36.0
+
+
+def _fit_boundary(name: str, pts: np.ndarray, params: VisionParams) -> Ellipse | Refusal:
+    g = params.gates
+    if len(pts) < g.min_points:
+        return Refusal(f"{name} boundary: {len(pts)} edge points (< {g.min_points})")
+    e = fit_ellipse(pts, leitz=params.leitz, residual=params.residual)
+    if isinstance(e, Refusal):
+        return Refusal(f"{name} boundary: {e.reason}")
+    if e.used < g.min_points:
+        return Refusal(f"{name} boundary: {e.used} edge points after the Leitz criterion "
+                       f"(< {g.min_points})")
+    if e.rms > g.max_rms_px:
+        return Refusal(f"{name} boundary: fit residual {e.rms:.3f} px (> {g.max_rms_px})")
+    kept = pts if e.inliers is None else pts[e.inliers]
+    cov = _coverage(e, kept)
+    if cov < g.min_coverage:
+        return Refusal(f"{name} boundary: edge points cover {cov:.0%} of it "
+                       f"(< {g.min_coverage:.0%}): occluded or cut")
+    return e
+
+
+def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionParams,
+            marker: MarkerSpec, timings: dict[str, float] | None = None) -> Detection:
+    """Full-resolution measurement of one candidate ROI."""
+    timings = timings if timings is not None else {}
+    x, y, w, h = (int(v) for v in cand.roi)
+    roi: Box = (x, y, w, h)
+
+    def refuse(reason: str) -> Detection:
+        return Detection(False, reason, roi=roi, timings_ms=timings)
+
+    if cand.touches_border:
+        return refuse("marker cut by the image border")
+    t0 = time.perf_counter()
+    hint = (cand.hole_centre[0] - x, cand.hole_centre[1] - y)
+    edges = boundary_edges(image[y:y + h, x:x + w], marker.ratio_sq, hint)
+    t1 = time.perf_counter()
+    timings["edges"] = (t1 - t0) * 1e3
+    if isinstance(edges, Refusal):
+        return refuse(edges.reason)
+    assert isinstance(edges, BoundaryEdges)  # noqa: S101 - narrowed for mypy
+    offset = np.array([x, y], dtype=np.float64)
+    pin = camera.undistort_pixels(edges.inner + offset)
+    pout = camera.undistort_pixels(edges.outer + offset)
+    t2 = time.perf_counter()
+    timings["undistort"] = (t2 - t1) * 1e3
+    inner = _fit_boundary("inner", pin, params)
+    outer = _fit_boundary("outer", pout, params)
+    t3 = time.perf_counter()
+    timings["fit"] = (t3 - t2) * 1e3
+    if isinstance(inner, Refusal):
+        return refuse(inner.reason)
+    if isinstance(outer, Refusal):
+        return refuse(outer.reason)
+    det = _centre(camera, inner, outer, params, marker)
+    timings["centre"] = (time.perf_counter() - t3) * 1e3
+    if isinstance(det, Refusal):
+        return refuse(det.reason)
+    c, n, ratio, split, cands = det
+    ellipse_c = np.array(inner.centre)
+    return Detection(
+        True, None,
+        centre_px=camera.distort_pixels(c)[0],
+        ellipse_centre_px=camera.distort_pixels(ellipse_c)[0],
+        centre_undist=c, normal=n, normal_candidates=cands,
+        inner=inner, outer=outer,
+        inner_points=pin if inner.inliers is None else pin[inner.inliers],
+        outer_points=pout if outer.inliers is None else pout[outer.inliers],
+        pencil_ratio=ratio, centre_split_px=split, method=params.centre_method,
+        roi=roi, timings_ms=timings)
+
+
+CentreResult = tuple[np.ndarray, np.ndarray, float, float, tuple[np.ndarray, np.ndarray]]
+
+
+def _centre(camera: Camera, inner: Ellipse, outer: Ellipse, params: VisionParams,
+            marker: MarkerSpec) -> CentreResult | Refusal:
+    """Projected centre and normal by the configured method, with the structural gates."""
+    g: Gates = params.gates
+    K = camera.K
+    c_conc, ratio = cm.concentric_centre(inner.conic, outer.conic)
+    if not np.isfinite(ratio) or abs(ratio / marker.ratio_sq - 1.0) > g.ratio_tolerance:
+        return Refusal(f"not this marker's two circles: pencil ratio {ratio:.3f} "
+                       f"(expected {marker.ratio_sq:.3f})")
+    candidates = cm.circle_normals(inner.conic, K)
+    if params.centre_method == "paper":
+        res = cm.resolve_normals_mono(inner.conic, outer.conic, K,
+                                      min_margin_deg=g.min_normal_margin_deg)
+        if isinstance(res, Refusal):
+            return Refusal(f"normal ambiguous: {res.reason}")
+        n = res[0]
+        c = cm.centre_from_normal(inner.conic, K, n)
+    else:
+        n = cm.normal_from_centre(inner.conic, K, c_conc)
+        c = c_conc if params.centre_method == "concentric" else np.array(inner.centre)
+    # both circles must put the centre in the same place for this normal
+    split = float(np.hypot(*(cm.centre_from_normal(inner.conic, K, n)
+                             - cm.centre_from_normal(outer.conic, K, n))))
+    if not split <= g.max_centre_split_px:
+        return Refusal(f"inner and outer circles disagree on the centre by {split:.2f} px")
+    return c, n, float(ratio), split, candidates
