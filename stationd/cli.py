@@ -152,7 +152,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 def cmd_demo(args: argparse.Namespace) -> int:
     from stationd.demo import run_demo
 
-    return run_demo(args)
+    return int(run_demo(args))
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -78,10 +78,6 @@ class Camera:
     def to_dict(self) -> dict[str, Any]:
         return {"K": self.K.tolist(), "dist": self.dist.tolist(), "size": list(self.size)}
 
-    @property
-    def Kinv(self) -> np.ndarray:
-        return np.linalg.inv(self.K)
-
     # -- distortion -----------------------------------------------------------------------
     def _coeffs(self) -> np.ndarray:
         d = np.zeros(8)
@@ -105,13 +101,13 @@ class Camera:
         if not np.any(self.dist):
             return xyd.copy()
         xy = xyd.copy()
-        h = 1e-7
+        hx, hy = np.array([1e-7, 0.0]), np.array([0.0, 1e-7])
         for _ in range(iterations):
             f = self.distort_normalized(xy) - xyd
             if np.max(np.abs(f), initial=0.0) < 1e-15:
                 break
-            jx = (self.distort_normalized(xy + [h, 0.0]) - self.distort_normalized(xy - [h, 0.0])) / (2 * h)
-            jy = (self.distort_normalized(xy + [0.0, h]) - self.distort_normalized(xy - [0.0, h])) / (2 * h)
+            jx = (self.distort_normalized(xy + hx) - self.distort_normalized(xy - hx)) / 2e-7
+            jy = (self.distort_normalized(xy + hy) - self.distort_normalized(xy - hy)) / 2e-7
             a, c = jx[:, 0], jx[:, 1]
             b, d = jy[:, 0], jy[:, 1]
             det = a * d - b * c
@@ -142,7 +138,7 @@ class Camera:
     def undistort_pixels(self, uv: np.ndarray) -> np.ndarray:
         """Raw pixels -> undistorted pixels (``K`` applied to the ideal ray)."""
         xy = self.pixels_to_normalized(uv)
-        return self._apply_K(xy)
+        return self._apply_k(xy)
 
     def distort_pixels(self, uv_undistorted: np.ndarray) -> np.ndarray:
         """Undistorted pixels -> raw pixels."""
@@ -152,7 +148,7 @@ class Camera:
         x = (uv[:, 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
         return self.normalized_to_pixels(np.stack([x, y], axis=1))
 
-    def _apply_K(self, xy: np.ndarray) -> np.ndarray:
+    def _apply_k(self, xy: np.ndarray) -> np.ndarray:
         K = self.K
         return np.stack([K[0, 0] * xy[:, 0] + K[0, 1] * xy[:, 1] + K[0, 2],
                          K[1, 1] * xy[:, 1] + K[1, 2]], axis=1)

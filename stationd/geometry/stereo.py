@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -107,7 +107,7 @@ def epipolar_residual(pair: StereoPair, uv_left: np.ndarray, uv_right: np.ndarra
     lr = F @ xl
     ll = F.T @ xr
     e = float(xr @ F @ xl)
-    return 0.5 * (abs(e) / np.hypot(lr[0], lr[1]) + abs(e) / np.hypot(ll[0], ll[1]))
+    return float(0.5 * (abs(e) / np.hypot(lr[0], lr[1]) + abs(e) / np.hypot(ll[0], ll[1])))
 
 
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
@@ -130,21 +130,27 @@ def localize_detections(pair: StereoPair, left: Detection, right: Detection,
                 or d.normal_candidates is None:
             return StereoResult(False, "incomplete detection", left, right)
     assert left.centre_undist is not None and right.centre_undist is not None  # noqa: S101
-    assert left.normal is not None and right.normal is not None  # noqa: S101
     assert left.inner is not None and right.inner is not None  # noqa: S101
+    assert left.normal is not None and right.normal is not None  # noqa: S101
     assert left.normal_candidates is not None  # noqa: S101
     assert right.normal_candidates is not None  # noqa: S101
     cl, cr = left.centre_undist, right.centre_undist
-    nl, nr = left.normal, right.normal
-    if params.centre_method == "paper":
-        res = cm.resolve_normals_stereo(left.normal_candidates, right.normal_candidates, pair.R,
-                                        min_margin_deg=g.min_normal_margin_deg)
-        if isinstance(res, Refusal):
+    # Eq. 16: each view's true normal is the one the other view confirms
+    res = cm.resolve_normals_stereo(left.normal_candidates, right.normal_candidates, pair.R,
+                                    min_margin_deg=g.min_normal_margin_deg)
+    if isinstance(res, Refusal):
+        if left.normal_ambiguous or right.normal_ambiguous:
             return StereoResult(False, f"normal ambiguous in stereo: {res.reason}", left, right)
-        il, ir = res[0], res[1]
-        nl, nr = left.normal_candidates[il], right.normal_candidates[ir]
+        nl, nr = left.normal, right.normal  # each view already chose by the concentric split
+    else:
+        nl, nr = left.normal_candidates[res[0]], right.normal_candidates[res[1]]
+    if params.centre_method == "paper":
         cl = cm.centre_from_normal(left.inner.conic, pair.left.K, nl)
         cr = cm.centre_from_normal(right.inner.conic, pair.right.K, nr)
+        left = replace(left, centre_undist=cl, centre_px=pair.left.distort_pixels(cl)[0],
+                       normal=nl, method="paper", normal_ambiguous=False)
+        right = replace(right, centre_undist=cr, centre_px=pair.right.distort_pixels(cr)[0],
+                        normal=nr, method="paper", normal_ambiguous=False)
     epi = epipolar_residual(pair, cl, cr)
     if epi > g.max_epipolar_px:
         return StereoResult(False, f"epipolar residual {epi:.2f} px (> {g.max_epipolar_px}): "
@@ -176,12 +182,12 @@ def localize(pair: StereoPair, image_left: np.ndarray, image_right: np.ndarray,
     """Detect in both images (in parallel: OpenCV releases the GIL) and combine."""
     t0 = time.perf_counter()
     if parallel:
-        fl = _pool.submit(detect, image_left, pair.left, params, marker)
-        fr = _pool.submit(detect, image_right, pair.right, params, marker)
+        fl = _pool.submit(detect, image_left, pair.left, params, marker, defer_normal=True)
+        fr = _pool.submit(detect, image_right, pair.right, params, marker, defer_normal=True)
         left, right = fl.result(), fr.result()
     else:
-        left = detect(image_left, pair.left, params, marker)
-        right = detect(image_right, pair.right, params, marker)
+        left = detect(image_left, pair.left, params, marker, defer_normal=True)
+        right = detect(image_right, pair.right, params, marker, defer_normal=True)
     t1 = time.perf_counter()
     res = localize_detections(pair, left, right, params)
     t2 = time.perf_counter()

@@ -40,6 +40,7 @@ class Detection:
     centre_undist: np.ndarray | None = None      # corrected centre, undistorted pixels
     normal: np.ndarray | None = None             # unit, camera frame, facing the camera
     normal_candidates: tuple[np.ndarray, np.ndarray] | None = None  # inner cone's two normals
+    normal_ambiguous: bool = False  # one image could not choose; stereo (Eq. 16) decides
     inner: Ellipse | None = None
     outer: Ellipse | None = None
     inner_points: np.ndarray | None = field(default=None, repr=False)  # undistorted inliers
@@ -60,6 +61,7 @@ class Detection:
             "centre_px": vec(self.centre_px),
             "ellipse_centre_px": vec(self.ellipse_centre_px),
             "normal": vec(self.normal),
+            "normal_ambiguous": self.normal_ambiguous,
             "inner": None if self.inner is None else self.inner.to_json(),
             "outer": None if self.outer is None else self.outer.to_json(),
             "pencil_ratio": self.pencil_ratio,
@@ -89,8 +91,12 @@ def reduce(image: np.ndarray, scale: int) -> np.ndarray:
 
 
 def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = None,
-               marker: MarkerSpec | None = None) -> tuple[list[Detection], list[str]]:
-    """Every marker in the image, and the reasons candidates were refused."""
+               marker: MarkerSpec | None = None, *,
+               defer_normal: bool = False) -> tuple[list[Detection], list[str]]:
+    """Every marker in the image, and the reasons candidates were refused.
+
+    ``defer_normal``: keep a detection whose normal one image cannot choose (stereo will).
+    """
     params = params or VisionParams()
     marker = marker or MarkerSpec()
     check_image(image)
@@ -105,13 +111,13 @@ def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = 
     timings["reduce"] = (t1 - t0) * 1e3
     cands = find_candidates(small, params.search_scale, params.hsv,
                             enhance=params.enhance_params if params.enhance else None,
-                            full_size=(w, h), margin=params.roi_margin)
+                            full_size=(w, h))
     t2 = time.perf_counter()
     timings["segment"] = (t2 - t1) * 1e3
     found: list[Detection] = []
     reasons: list[str] = []
     for cand in cands[: params.max_candidates]:
-        det = measure(image, camera, cand, params, marker, dict(timings))
+        det = measure(image, camera, cand, params, marker, dict(timings), defer_normal)
         if det.found:
             found.append(det)
         elif det.reason:
@@ -129,10 +135,10 @@ def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = 
 
 
 def detect(image: np.ndarray, camera: Camera, params: VisionParams | None = None,
-           marker: MarkerSpec | None = None) -> Detection:
+           marker: MarkerSpec | None = None, *, defer_normal: bool = False) -> Detection:
     """The one marker in view; refused when there is none or more than one."""
     t0 = time.perf_counter()
-    found, reasons = detect_all(image, camera, params, marker)
+    found, reasons = detect_all(image, camera, params, marker, defer_normal=defer_normal)
     total = (time.perf_counter() - t0) * 1e3
     if len(found) == 1:
         det = found[0]
@@ -172,7 +178,8 @@ def _fit_boundary(name: str, pts: np.ndarray, params: VisionParams) -> Ellipse |
 
 
 def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionParams,
-            marker: MarkerSpec, timings: dict[str, float] | None = None) -> Detection:
+            marker: MarkerSpec, timings: dict[str, float] | None = None,
+            defer_normal: bool = False) -> Detection:
     """Full-resolution measurement of one candidate ROI."""
     timings = timings if timings is not None else {}
     x, y, w, h = (int(v) for v in cand.roi)
@@ -181,7 +188,7 @@ def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionPa
     def refuse(reason: str) -> Detection:
         return Detection(False, reason, roi=roi, timings_ms=timings)
 
-    if cand.touches_border:
+    if cand.at_border:
         return refuse("marker cut by the image border")
     t0 = time.perf_counter()
     hint = (cand.hole_centre[0] - x, cand.hole_centre[1] - y)
@@ -204,50 +211,78 @@ def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionPa
         return refuse(inner.reason)
     if isinstance(outer, Refusal):
         return refuse(outer.reason)
-    det = _centre(camera, inner, outer, params, marker)
+    det = _centre(camera, inner, outer, params, marker, defer_normal)
     timings["centre"] = (time.perf_counter() - t3) * 1e3
     if isinstance(det, Refusal):
         return refuse(det.reason)
-    c, n, ratio, split, cands = det
     ellipse_c = np.array(inner.centre)
     return Detection(
         True, None,
-        centre_px=camera.distort_pixels(c)[0],
+        centre_px=camera.distort_pixels(det.centre)[0],
         ellipse_centre_px=camera.distort_pixels(ellipse_c)[0],
-        centre_undist=c, normal=n, normal_candidates=cands,
+        centre_undist=det.centre, normal=det.normal, normal_candidates=det.candidates,
+        normal_ambiguous=det.ambiguous,
         inner=inner, outer=outer,
         inner_points=pin if inner.inliers is None else pin[inner.inliers],
         outer_points=pout if outer.inliers is None else pout[outer.inliers],
-        pencil_ratio=ratio, centre_split_px=split, method=params.centre_method,
+        pencil_ratio=det.ratio, centre_split_px=det.split, method=det.method,
         roi=roi, timings_ms=timings)
 
 
-CentreResult = tuple[np.ndarray, np.ndarray, float, float, tuple[np.ndarray, np.ndarray]]
+@dataclass(frozen=True, eq=False)
+class _Centre:
+    centre: np.ndarray
+    normal: np.ndarray
+    ratio: float
+    split: float
+    candidates: tuple[np.ndarray, np.ndarray]
+    ambiguous: bool
+    method: str
+
+
+def _centre_noise(e: Ellipse) -> float:
+    """Standard deviation of a fitted centre from the residuals: about rms * sqrt(2 / N)."""
+    return float(e.rms * np.sqrt(2.0 / max(e.used, 1)))
 
 
 def _centre(camera: Camera, inner: Ellipse, outer: Ellipse, params: VisionParams,
-            marker: MarkerSpec) -> CentreResult | Refusal:
-    """Projected centre and normal by the configured method, with the structural gates."""
+            marker: MarkerSpec, defer_normal: bool) -> _Centre | Refusal:
+    """Projected centre and normal by the configured method, with the structural gates.
+
+    The normal is always one of the inner cone's two candidates (accurate to a fraction of a
+    degree), chosen by the concentric constraint; the pencil's own normal is far noisier at
+    distance.  When one image cannot tell the candidates apart but both give the same centre,
+    the detection stands with ``normal_ambiguous`` set and stereo decides (paper Eq. 16).
+    """
     g: Gates = params.gates
     K = camera.K
     c_conc, ratio = cm.concentric_centre(inner.conic, outer.conic)
     if not np.isfinite(ratio) or abs(ratio / marker.ratio_sq - 1.0) > g.ratio_tolerance:
         return Refusal(f"not this marker's two circles: pencil ratio {ratio:.3f} "
                        f"(expected {marker.ratio_sq:.3f})")
-    candidates = cm.circle_normals(inner.conic, K)
-    if params.centre_method == "paper":
-        res = cm.resolve_normals_mono(inner.conic, outer.conic, K,
-                                      min_margin_deg=g.min_normal_margin_deg)
-        if isinstance(res, Refusal):
-            return Refusal(f"normal ambiguous: {res.reason}")
-        n = res[0]
-        c = cm.centre_from_normal(inner.conic, K, n)
-    else:
+    noise = float(np.hypot(_centre_noise(inner), _centre_noise(outer)))
+    res = cm.resolve_normals_mono(inner.conic, outer.conic, K, noise_px=noise)
+    method = params.centre_method
+    if isinstance(res, Refusal):
+        if method == "paper" and not defer_normal:
+            return res
+        # The pencil and ellipse centres do not depend on the normal; the paper's centre
+        # does, and is computed by stereo once Eq. 16 has chosen (until then: the pencil's).
+        cands = cm.circle_normals(inner.conic, K)
         n = cm.normal_from_centre(inner.conic, K, c_conc)
-        c = c_conc if params.centre_method == "concentric" else np.array(inner.centre)
-    # both circles must put the centre in the same place for this normal
-    split = float(np.hypot(*(cm.centre_from_normal(inner.conic, K, n)
-                             - cm.centre_from_normal(outer.conic, K, n))))
-    if not split <= g.max_centre_split_px:
-        return Refusal(f"inner and outer circles disagree on the centre by {split:.2f} px")
-    return c, n, float(ratio), split, candidates
+        split, ambiguous = float("nan"), True
+        if method == "paper":
+            method = "concentric"
+    else:
+        n, cands, split, ambiguous = res.normal, res.candidates, res.split_px, res.ambiguous
+        if split > g.max_centre_split_px:
+            return Refusal(f"inner and outer circles disagree on the centre by {split:.2f} px")
+    if method == "paper":
+        c = cm.centre_from_normal(inner.conic, K, n)
+    elif method == "concentric":
+        c = c_conc
+    else:
+        c = np.array(inner.centre)
+    if not np.all(np.isfinite(c)):
+        return Refusal("no finite projected centre")
+    return _Centre(c, n, float(ratio), split, cands, ambiguous, method)

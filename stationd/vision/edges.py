@@ -24,6 +24,7 @@ Steps, all at full resolution but only inside the ROI:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -37,12 +38,20 @@ GRADIENT_SIGMA = 1.0
 IMPULSE_THRESHOLD = 25.0
 
 
+RotatedBox = tuple[tuple[float, float], tuple[float, float], float]
+
+
+def _box(b: tuple[Sequence[float], Sequence[float], float]) -> RotatedBox:
+    """cv2.fitEllipse's ((cx, cy), (w, h), angle) as plain floats."""
+    return (float(b[0][0]), float(b[0][1])), (float(b[1][0]), float(b[1][1])), float(b[2])
+
+
 @dataclass(frozen=True, eq=False)
 class RingOutline:
     """Rough geometry of the black ring from the Otsu binarisation (ROI pixel coordinates)."""
 
-    inner: tuple[tuple[float, float], tuple[float, float], float]  # cv2.fitEllipse box
-    outer: tuple[tuple[float, float], tuple[float, float], float]
+    inner: RotatedBox  # cv2.fitEllipse box
+    outer: RotatedBox
     area_ratio: float
     threshold: float
 
@@ -60,7 +69,7 @@ class BoundaryEdges:
 
 def intensity(roi_bgr: np.ndarray) -> np.ndarray:
     """V = max(B, G, R) as float32."""
-    return np.max(roi_bgr, axis=2).astype(np.float32)
+    return np.asarray(np.max(roi_bgr, axis=2), dtype=np.float32)
 
 
 def remove_impulses(v: np.ndarray, threshold: float = IMPULSE_THRESHOLD) -> np.ndarray:
@@ -97,10 +106,14 @@ def ring_outline(smooth: np.ndarray, threshold: float, ratio_sq: float,
     if hierarchy is None:
         return Refusal("no dark ring in the ROI")
     hier = hierarchy.reshape(-1, 4)
+    rows, cols = smooth.shape
     best: tuple[float, RingOutline] | None = None
     for i, h in enumerate(hier):
         if h[3] != -1 or h[2] == -1 or len(contours[i]) < 12:
             continue  # not a top-level region with a hole
+        bx, by, bw, bh = cv2.boundingRect(contours[i])
+        if bx == 0 or by == 0 or bx + bw >= cols or by + bh >= rows:
+            continue  # the ring lies inside the purple field; the dark background does not
         outer_area = cv2.contourArea(contours[i])
         # the largest hole of this region
         child, hole, hole_area = h[2], -1, 0.0
@@ -117,8 +130,8 @@ def ring_outline(smooth: np.ndarray, threshold: float, ratio_sq: float,
         # concentric-pencil check after the fit is the tight one.
         if not 0.5 * ratio_sq < ratio < 1.6 * ratio_sq:
             continue
-        inner_box = cv2.fitEllipse(contours[hole])
-        outer_box = cv2.fitEllipse(contours[i])
+        inner_box = _box(cv2.fitEllipse(contours[hole]))
+        outer_box = _box(cv2.fitEllipse(contours[i]))
         score = abs(np.log(ratio / ratio_sq))
         if hint is not None:
             d = np.hypot(inner_box[0][0] - hint[0], inner_box[0][1] - hint[1])
@@ -131,7 +144,7 @@ def ring_outline(smooth: np.ndarray, threshold: float, ratio_sq: float,
     return best[1]
 
 
-def _box_conic(box: tuple[tuple[float, float], tuple[float, float], float]) -> np.ndarray:
+def _box_conic(box: RotatedBox) -> np.ndarray:
     (cx, cy), (w, h), ang = box
     a, b = max(w / 2.0, 0.5), max(h / 2.0, 0.5)
     t = np.radians(ang)

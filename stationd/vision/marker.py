@@ -44,6 +44,7 @@ class MarkerSpec:
         m = node.mapping(("inner_mm", "outer_mm", "field_mm"))
         kw = {k: v.number(lo=0.1, hi=1000.0) for k, v in m.items()}
         try:
-            return cls(**kw)
+            return cls(inner_mm=kw.get("inner_mm", 10.0), outer_mm=kw.get("outer_mm", 15.0),
+                       field_mm=kw.get("field_mm", 25.0))
         except ValueError as exc:
             raise node.error(str(exc)) from None

@@ -49,14 +49,13 @@ class VisionParams:
     centre_method: str = "concentric"
     leitz: bool = True
     residual: str = "sampson"
-    roi_margin: float = 0.15
     max_candidates: int = 4
     gates: Gates = field(default_factory=Gates)
 
     @classmethod
     def from_node(cls, node: YamlNode, base_dir: Path | None = None) -> VisionParams:
         m = node.mapping(("search_scale", "enhance", "enhancement", "hsv", "centre_method",
-                          "leitz", "residual", "roi_margin", "max_candidates", "gates"))
+                          "leitz", "residual", "max_candidates", "gates"))
         p = cls()
         if "search_scale" in m:
             p = replace(p, search_scale=m["search_scale"].integer(lo=1, hi=32))
@@ -72,8 +71,6 @@ class VisionParams:
             p = replace(p, leitz=m["leitz"].flag())
         if "residual" in m:
             p = replace(p, residual=m["residual"].text(RESIDUALS))
-        if "roi_margin" in m:
-            p = replace(p, roi_margin=m["roi_margin"].number(lo=0.0, hi=2.0))
         if "max_candidates" in m:
             p = replace(p, max_candidates=m["max_candidates"].integer(lo=1, hi=64))
         if "gates" in m:

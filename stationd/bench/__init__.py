@@ -1,0 +1,1 @@
+"""Benchmarks: commands that print figures (accuracy and speed), never pass/fail tests."""

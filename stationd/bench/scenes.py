@@ -1,0 +1,121 @@
+"""Rendered test scenes for the benchmarks: stereo rigs, marker poses, windowed renders.
+
+Renders are windows around the marker (the detector runs on them with the cropped camera),
+so that thousands of accuracy samples stay cheap; the speed benchmark renders whole frames.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from stationd.geometry.camera import Camera, StereoPair
+from stationd.sim.render import MarkerPose, Scene, crop_camera, default_camera, render
+from stationd.vision.marker import MarkerSpec
+
+Window = tuple[int, int, int, int]
+
+
+def look_at_pair(camera: Camera, target_mm: np.ndarray, baseline_mm: float) -> StereoPair:
+    """A pair whose right camera sits ``baseline_mm`` to the right and aims at the target."""
+    c_right = np.array([baseline_mm, 0.0, 0.0])
+    z = np.asarray(target_mm, dtype=np.float64) - c_right
+    z /= np.linalg.norm(z)
+    x = np.array([1.0, 0.0, 0.0]) - z[0] * z
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    R = np.vstack([x, y, z])  # rows: right camera axes in the left frame
+    return StereoPair(camera, camera, R, -R @ c_right)
+
+
+def station_pair(baseline_mm: float = 400.0, converge_mm: float = 1300.0) -> StereoPair:
+    """The station's pair: two 20 MP cameras converging on the working height."""
+    return look_at_pair(default_camera(), np.array([0.0, 0.0, converge_mm]), baseline_mm)
+
+
+def to_right(pair: StereoPair, pose: MarkerPose) -> MarkerPose:
+    """The same marker pose in the right camera's frame."""
+    return MarkerPose(pair.R @ pose.centre_mm + pair.T, pair.R @ pose.rotation)
+
+
+def marker_window(camera: Camera, pose: MarkerPose, spec: MarkerSpec,
+                  margin_px: float = 48.0) -> Window | None:
+    """Sensor window around the marker's purple field (None when it leaves the sensor)."""
+    f = spec.field_mm
+    corners = np.array([[-f, -f, 0], [f, -f, 0], [f, f, 0], [-f, f, 0]], dtype=np.float64)
+    pts = camera.project(pose.centre_mm + corners @ pose.rotation.T)
+    lo = np.floor(pts.min(axis=0) - margin_px)
+    hi = np.ceil(pts.max(axis=0) + margin_px)
+    w, h = camera.size
+    if lo[0] < 0 or lo[1] < 0 or hi[0] > w - 1 or hi[1] > h - 1:
+        return None
+    return int(lo[0]), int(lo[1]), int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1)
+
+
+@dataclass(frozen=True, eq=False)
+class View:
+    """One windowed render: the image, the camera cropped to it, the truth in its pixels."""
+
+    image: np.ndarray
+    camera: Camera
+    window: Window
+    centre_px: np.ndarray
+    field_bbox: Window  # in window pixels
+
+
+def render_view(camera: Camera, pose: MarkerPose, spec: MarkerSpec, seed: int,
+                **scene_kw: Any) -> View | None:
+    """Render one marker through ``camera`` in a window around it (None if out of view).
+
+    ``scene_kw`` are :class:`Scene` fields; ``salt_pepper_in_field`` (int) puts that many
+    salt-and-pepper points inside the field's bounding box, as in the paper's section 4.1.
+    """
+    win = marker_window(camera, pose, spec)
+    if win is None:
+        return None
+    sp = int(scene_kw.pop("salt_pepper_in_field", 0))
+    scene = Scene(markers=[(pose, spec)], **scene_kw)
+    if sp:
+        probe = render(camera, replace(scene, noise_sigma=0.0, blur_sigma=0.0), window=win,
+                       seed=seed, supersample=1)
+        bx, by, bw, bh = probe.truth[0].bbox
+        scene = replace(scene, salt_pepper=sp, salt_pepper_roi=(win[0] + bx, win[1] + by, bw, bh))
+    out = render(camera, scene, window=win, seed=seed)
+    t = out.truth[0]
+    return View(out.image, crop_camera(camera, win), win, t.centre_px, t.bbox)
+
+
+def crop_pair(pair: StereoPair, left: View, right: View) -> StereoPair:
+    """The pair with each camera cropped to its view's window."""
+    return StereoPair(left.camera, right.camera, pair.R, pair.T)
+
+
+def random_pose(rng: np.random.Generator, camera: Camera, distance_mm: float, tilt_deg: float,
+                spread: float = 0.6) -> MarkerPose:
+    """A marker at ``distance_mm`` along a random ray within ``spread`` of the half-field,
+    its normal tilted ``tilt_deg`` from the line of sight at a random azimuth and spin."""
+    w, h = camera.size
+    u = w / 2 + rng.uniform(-spread, spread) * w / 2
+    v = h / 2 + rng.uniform(-spread, spread) * h / 2
+    ray = np.append(camera.pixels_to_normalized(np.array([[u, v]]))[0], 1.0)
+    centre = distance_mm * ray / np.linalg.norm(ray)
+    return MarkerPose.look(centre, tilt_deg, float(rng.uniform(0, 360)),
+                           float(rng.uniform(0, 360)))
+
+
+def rotation_towards(normal: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """A rotation whose third column is ``normal`` and whose in-plane spin is random."""
+    n = normal / np.linalg.norm(normal)
+    a = rng.normal(size=3)
+    x = a - (a @ n) * n
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, np.cross(n, x), n])
+
+
+def tilt_of(normal: np.ndarray, centre: np.ndarray) -> float:
+    """Angle (deg) between a normal and the line of sight back to the camera."""
+    return math.degrees(math.acos(float(np.clip(-normal @ centre / np.linalg.norm(centre),
+                                                 -1, 1))))

@@ -1,0 +1,380 @@
+"""``stationd bench vision``: the paper's experiments on rendered images, with our figures.
+
+Sections (``--only``): radii (Table 1), centre (Tables 2-3), rod (reference rod), saltpepper
+(section 4.1), lowlight (enhancement), speed (per stage, per image, per pair, vs AprilTag 3).
+Every number printed is measured in this run; the paper's figures are quoted beside them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import platform
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from stationd.bench import scenes as sc
+from stationd.geometry.stereo import localize_detections, triangulate
+from stationd.sim.render import MarkerPose, default_camera
+from stationd.vision.detect import Detection, detect
+from stationd.vision.marker import MarkerSpec
+from stationd.vision.params import VisionParams
+
+SPEC = MarkerSpec()
+NOISE: dict[str, Any] = {"blur_sigma": 0.8, "noise_sigma": 2.0}
+ROD_LENGTHS = (882.546, 882.753, 882.473, 882.902)
+Result = dict[str, Any]
+
+
+def _stats(errors: list[float]) -> dict[str, float]:
+    a = np.abs(np.asarray(errors, dtype=np.float64))
+    if a.size == 0:
+        return {"n": 0}
+    return {"n": int(a.size), "mean": float(a.mean()), "median": float(np.median(a)),
+            "p95": float(np.percentile(a, 95)), "max": float(a.max()), "min": float(a.min())}
+
+
+def _err(d: Detection, truth: np.ndarray, attr: str = "centre_px") -> float:
+    v = getattr(d, attr)
+    return float(np.hypot(*(v - truth)))
+
+
+def _stereo_views(pair: Any, pose: MarkerPose, seed: int, **kw: Any) -> tuple[Any, Any] | None:
+    left = sc.render_view(pair.left, pose, SPEC, seed, **dict(kw))
+    right = sc.render_view(pair.right, sc.to_right(pair, pose), SPEC, seed + 1, **dict(kw))
+    if left is None or right is None:
+        return None
+    return left, right
+
+
+# -- Tables 2-3: centre error over distance and tilt ----------------------------------------
+def bench_centre(rng: np.random.Generator, quick: bool) -> Result:
+    """Centre error against the true projection: ellipse centre, paper (stereo Eq. 16),
+    concentric pencil; each sample is a stereo pair converging on the marker."""
+    cam = default_camera()
+    distances = [400, 700, 1000, 1500, 2000]
+    tilts = [0, 15, 30, 45, 55, 65]
+    reps = 1 if quick else 3
+    conc = VisionParams(centre_method="concentric")
+    paper = VisionParams(centre_method="paper")
+    errs: dict[str, list[float]] = {"ellipse": [], "paper": [], "concentric": []}
+    per_cell: dict[str, dict[str, float]] = {}
+    failures: list[str] = []
+    samples = 0
+    for dist in distances:
+        for tilt in tilts:
+            cell: dict[str, list[float]] = {"ellipse": [], "paper": [], "concentric": []}
+            for _ in range(reps):
+                pose = sc.random_pose(rng, cam, dist, tilt, spread=0.5)
+                pair = sc.look_at_pair(cam, pose.centre_mm, 0.3 * dist)
+                seed = int(rng.integers(1 << 30))
+                views = _stereo_views(pair, pose, seed, **NOISE)
+                if views is None:
+                    continue
+                samples += 1
+                lv, rv = views
+                dl = detect(lv.image, lv.camera, conc, SPEC, defer_normal=True)
+                dr = detect(rv.image, rv.camera, conc, SPEC, defer_normal=True)
+                if not (dl.found and dr.found):
+                    failures.append(f"{dist} mm {tilt} deg: {dl.reason or dr.reason}")
+                    continue
+                st = localize_detections(sc.crop_pair(pair, lv, rv), dl, dr, paper)
+                for d, v, ds in ((dl, lv, st.left), (dr, rv, st.right)):
+                    cell["ellipse"].append(_err(d, v.centre_px, "ellipse_centre_px"))
+                    cell["concentric"].append(_err(d, v.centre_px))
+                    if st.found:
+                        cell["paper"].append(_err(ds, v.centre_px))
+                if not st.found:
+                    failures.append(f"{dist} mm {tilt} deg (paper, stereo): {st.reason}")
+            for k, v in cell.items():
+                errs[k] += v
+            per_cell[f"{dist}mm/{tilt}deg"] = {k: float(np.median(v)) if v else math.nan
+                                               for k, v in cell.items()}
+    return {"samples": samples, "images": 2 * samples,
+            "methods": {k: _stats(v) for k, v in errs.items()},
+            "per_cell_median": per_cell, "failures": failures[:20],
+            "failure_count": len(failures)}
+
+
+# -- Table 1: 3D radii with and without the Leitz criterion ---------------------------------
+def bench_radii(rng: np.random.Generator, quick: bool) -> Result:
+    pair = sc.station_pair()
+    n = 10 if quick else 30
+    out: Result = {}
+    poses = [_station_pose(rng, pair, (1100, 1500), (0, 40)) for _ in range(n)]
+    seeds = [int(rng.integers(1 << 30)) for _ in range(n)]
+    for leitz in (True, False):
+        params = VisionParams(leitz=leitz)
+        radii: dict[str, list[float]] = {"inner": [], "outer": []}
+        for pose, seed in zip(poses, seeds, strict=True):
+            # clutter on the ring (salt-and-pepper) gives the edge outliers the criterion is for
+            views = _stereo_views(pair, pose, seed, salt_pepper_in_field=120, **NOISE)
+            if views is None:
+                continue
+            lv, rv = views
+            dl = detect(lv.image, lv.camera, params, SPEC, defer_normal=True)
+            dr = detect(rv.image, rv.camera, params, SPEC, defer_normal=True)
+            st = localize_detections(sc.crop_pair(pair, lv, rv), dl, dr, params)
+            if st.found:
+                radii["inner"].append(st.radii_mm["inner"])
+                radii["outer"].append(st.radii_mm["outer"])
+        key = "leitz" if leitz else "plain"
+        out[key] = {}
+        for name, true_r in (("inner", SPEC.inner_mm), ("outer", SPEC.outer_mm)):
+            r = np.asarray(radii[name])
+            e = np.abs(r - true_r)
+            out[key][name] = {"n": int(r.size), "std": float(r.std()) if r.size else math.nan,
+                              "mean_error": float(e.mean()) if r.size else math.nan,
+                              "max_error": float(e.max()) if r.size else math.nan,
+                              "min_error": float(e.min()) if r.size else math.nan}
+    return out
+
+
+def _station_pose(rng: np.random.Generator, pair: Any, depth: tuple[float, float],
+                  tilt: tuple[float, float]) -> MarkerPose:
+    """A marker under the chassis, in view of both cameras of the station's pair."""
+    for _ in range(100):
+        z = rng.uniform(*depth)
+        c = np.array([rng.uniform(-350, 550), rng.uniform(-300, 300), z])
+        pose = MarkerPose.look(c, float(rng.uniform(*tilt)), float(rng.uniform(0, 360)),
+                               float(rng.uniform(0, 360)))
+        if sc.marker_window(pair.left, pose, SPEC) and sc.marker_window(
+                pair.right, sc.to_right(pair, pose), SPEC):
+            return pose
+    raise RuntimeError("no pose in view of both cameras")
+
+
+# -- the reference rod -----------------------------------------------------------------------
+def bench_rod(rng: np.random.Generator, quick: bool) -> Result:
+    """Lengths between two marker centres triangulated with the exact calibration."""
+    pair = sc.station_pair()
+    placements = 4 if quick else 10
+    errs: dict[str, list[float]] = {"corrected": [], "ellipse": []}
+    refused = 0
+    for _ in range(placements):
+        for length in ROD_LENGTHS:
+            ends = _rod_ends(rng, pair, length)
+            pts: dict[str, list[np.ndarray]] = {"corrected": [], "ellipse": []}
+            for pose in ends:
+                views = _stereo_views(pair, pose, int(rng.integers(1 << 30)), **NOISE)
+                if views is None:
+                    break
+                lv, rv = views
+                dl = detect(lv.image, lv.camera, VisionParams(), SPEC, defer_normal=True)
+                dr = detect(rv.image, rv.camera, VisionParams(), SPEC, defer_normal=True)
+                cp = sc.crop_pair(pair, lv, rv)
+                st = localize_detections(cp, dl, dr)
+                if not st.found or st.point_mm is None:
+                    break
+                assert dl.inner is not None and dr.inner is not None  # noqa: S101
+                # window pixels and the cropped pair triangulate the same 3D point
+                pts["corrected"].append(st.point_mm)
+                pts["ellipse"].append(triangulate(cp, np.array(dl.inner.centre),
+                                                  np.array(dr.inner.centre)))
+            if len(pts["corrected"]) != 2:
+                refused += 1
+                continue
+            for k in errs:
+                errs[k].append(float(np.linalg.norm(pts[k][0] - pts[k][1])) - length)
+    return {"placements": placements, "segments": len(ROD_LENGTHS), "refused": refused,
+            "corrected": _stats(errs["corrected"]), "ellipse": _stats(errs["ellipse"])}
+
+
+def _rod_ends(rng: np.random.Generator, pair: Any, length: float) -> list[MarkerPose]:
+    for _ in range(200):
+        mid = np.array([rng.uniform(-50, 250), rng.uniform(-150, 150), rng.uniform(1150, 1450)])
+        ang = rng.uniform(-0.35, 0.35)
+        d = np.array([math.cos(ang), math.sin(ang), rng.uniform(-0.15, 0.15)])
+        d /= np.linalg.norm(d)
+        # both markers on the rod, facing down at the cameras with a common tilt
+        normal = np.array([rng.uniform(-0.4, 0.4), rng.uniform(-0.4, 0.4), -1.0])
+        normal /= np.linalg.norm(normal)
+        rot = sc.rotation_towards(normal, rng)
+        ends = [MarkerPose(mid + s * 0.5 * length * d, rot) for s in (-1.0, 1.0)]
+        if all(sc.marker_window(pair.left, p, SPEC) and sc.marker_window(
+                pair.right, sc.to_right(pair, p), SPEC) for p in ends):
+            return ends
+    raise RuntimeError("no rod placement in view")
+
+
+# -- section 4.1: salt-and-pepper in a 120x75 px ROI ----------------------------------------
+def bench_saltpepper(rng: np.random.Generator, quick: bool) -> Result:
+    pair = sc.station_pair(baseline_mm=500.0, converge_mm=2050.0)
+    n = 10 if quick else 50
+    out: Result = {}
+    poses: list[MarkerPose] = []
+    while len(poses) < n:
+        # ~2.05 m and ~50 deg: the field's box is about 120 x 75 px, as in the paper
+        c = np.array([rng.uniform(-150, 650), rng.uniform(-350, 350), rng.uniform(1950, 2150)])
+        pose = MarkerPose.look(c, float(rng.uniform(45, 55)), float(rng.choice([0.0, 180.0])),
+                               0.0)
+        if sc.marker_window(pair.left, pose, SPEC) and sc.marker_window(
+                pair.right, sc.to_right(pair, pose), SPEC):
+            poses.append(pose)
+    for count in (200, 300, 400):
+        found = 0
+        centre: list[float] = []
+        rin: list[float] = []
+        rout: list[float] = []
+        boxes: list[tuple[int, int]] = []
+        for pose in poses:
+            views = _stereo_views(pair, pose, int(rng.integers(1 << 30)),
+                                  salt_pepper_in_field=count, **NOISE)
+            if views is None:
+                continue
+            lv, rv = views
+            boxes.append((lv.field_bbox[2], lv.field_bbox[3]))
+            dl = detect(lv.image, lv.camera, VisionParams(), SPEC, defer_normal=True)
+            dr = detect(rv.image, rv.camera, VisionParams(), SPEC, defer_normal=True)
+            st = localize_detections(sc.crop_pair(pair, lv, rv), dl, dr)
+            if not st.found:
+                continue
+            found += 1
+            centre += [_err(dl, lv.centre_px), _err(dr, rv.centre_px)]
+            rin.append(st.radii_mm["inner"] - SPEC.inner_mm)
+            rout.append(st.radii_mm["outer"] - SPEC.outer_mm)
+        bw = np.median([b[0] for b in boxes]) if boxes else math.nan
+        bh = np.median([b[1] for b in boxes]) if boxes else math.nan
+        out[str(count)] = {"pairs": len(poses), "detection_rate": found / len(poses),
+                           "roi_median_px": [float(bw), float(bh)],
+                           "centre_px": _stats(centre), "inner_radius_mm": _stats(rin),
+                           "outer_radius_mm": _stats(rout)}
+    return out
+
+
+# -- low light --------------------------------------------------------------------------------
+def bench_lowlight(rng: np.random.Generator, quick: bool) -> Result:
+    cam = default_camera()
+    n = 20 if quick else 100
+    levels = [1.0, 0.5, 0.25, 0.1]
+    poses = [sc.random_pose(rng, cam, float(rng.uniform(500, 2000)), float(rng.uniform(0, 50)))
+             for _ in range(n)]
+    seeds = [int(rng.integers(1 << 30)) for _ in range(n)]
+    out: Result = {}
+    for level in levels:
+        row: Result = {}
+        views = [sc.render_view(cam, p, SPEC, s, illumination=level, vignetting=0.3,
+                                gradient=0.3, gradient_deg=float(s % 360), **NOISE)
+                 for p, s in zip(poses, seeds, strict=True)]
+        for enhance in (True, False):
+            params = VisionParams(enhance=enhance)
+            found, errs = 0, []
+            for v in views:
+                if v is None:
+                    continue
+                d = detect(v.image, v.camera, params, SPEC)
+                if d.found:
+                    found += 1
+                    errs.append(_err(d, v.centre_px))
+            total = sum(v is not None for v in views)
+            row["enhanced" if enhance else "plain"] = {
+                "images": total, "detection_rate": found / max(total, 1),
+                "centre_px": _stats(errs)}
+        out[f"{int(level * 100)}%"] = row
+    return out
+
+
+# -- speed ------------------------------------------------------------------------------------
+def bench_speed(rng: np.random.Generator, quick: bool) -> Result:
+    from stationd.geometry.stereo import localize
+    from stationd.sim.render import Scene, render
+
+    pair = sc.station_pair()
+    pose = _station_pose(rng, pair, (1200, 1300), (10, 30))
+    scene_l = Scene(markers=[(pose, SPEC)], texture=0.15, vignetting=0.3, **NOISE)
+    scene_r = replace(scene_l, markers=[(sc.to_right(pair, pose), SPEC)])
+    left = render(pair.left, scene_l, seed=1).image
+    right = render(pair.right, scene_r, seed=2).image
+    runs = 5 if quick else 21
+    params = VisionParams()
+    res = localize(pair, left, right, params, SPEC)  # warm-up (imports, thread pool, caches)
+    pair_ms, image_ms = [], []
+    stages: dict[str, list[float]] = {}
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        res = localize(pair, left, right, params, SPEC)
+        pair_ms.append((time.perf_counter() - t0) * 1e3)
+        t0 = time.perf_counter()
+        d = detect(left, pair.left, params, SPEC)
+        image_ms.append((time.perf_counter() - t0) * 1e3)
+        for k, v in d.timings_ms.items():
+            stages.setdefault(k, []).append(v)
+    out: Result = {"frame": list(pair.left.size), "runs": runs, "found": res.found,
+                   "pair_ms_median": float(np.median(pair_ms)),
+                   "image_ms_median": float(np.median(image_ms)),
+                   "stage_ms_median": {k: float(np.median(v)) for k, v in stages.items()}}
+    out["apriltag"] = _apriltag_peer(left, right, pair, pose, runs)
+    return out
+
+
+def _apriltag_peer(left: np.ndarray, right: np.ndarray, pair: Any, pose: MarkerPose,
+                   runs: int) -> Result:
+    """AprilTag 3 (pupil-apriltags, quad_decimate=2, 2 threads) on the same frames, with a
+    tag36h11 of the marker's field size pasted beside the marker so it has one to find."""
+    try:
+        import cv2
+        from pupil_apriltags import Detector
+    except ImportError:
+        return {"skipped": "pupil-apriltags not installed (pip install -e '.[bench]')"}
+    tag = cv2.aruco.generateImageMarker(cv2.aruco.getPredefinedDictionary(
+        cv2.aruco.DICT_APRILTAG_36h11), 0, 200)
+    tag = np.pad(tag, 20, constant_values=255)
+    frames = []
+    for img, cam, p in ((left, pair.left, pose), (right, pair.right, sc.to_right(pair, pose))):
+        f = SPEC.field_mm
+        offset = p.rotation[:, 0] * 3 * f  # beside the marker, in its plane
+        corners = np.array([[-f, -f, 0], [f, -f, 0], [f, f, 0], [-f, f, 0]], dtype=np.float64)
+        dst = cam.project(p.centre_mm + offset + corners @ p.rotation.T).astype(np.float32)
+        src = np.array([[0, 0], [240, 0], [240, 240], [0, 240]], dtype=np.float32)
+        H = cv2.getPerspectiveTransform(src, dst)
+        warped = cv2.warpPerspective(tag, H, (img.shape[1], img.shape[0]), flags=cv2.INTER_AREA,
+                                     borderValue=0)
+        mask = cv2.warpPerspective(np.full_like(tag, 255), H, (img.shape[1], img.shape[0])) > 0
+        grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+        grey[mask] = warped[mask]
+        frames.append(grey)
+    det = Detector(families="tag36h11", nthreads=2, quad_decimate=2.0)
+    found = len(det.detect(frames[0]))
+    times = []
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        for g in frames:
+            det.detect(g)
+        times.append((time.perf_counter() - t0) * 1e3)
+    return {"pair_ms_median": float(np.median(times)), "tags_found_left": found,
+            "settings": "tag36h11, quad_decimate=2, nthreads=2, grey input"}
+
+
+SECTIONS: dict[str, Callable[[np.random.Generator, bool], Result]] = {
+    "radii": bench_radii, "centre": bench_centre, "rod": bench_rod,
+    "saltpepper": bench_saltpepper, "lowlight": bench_lowlight, "speed": bench_speed,
+}
+
+
+def run_vision_bench(args: argparse.Namespace) -> int:
+    from stationd.bench.report import print_report
+    from stationd.errors import InputError
+
+    names = list(SECTIONS) if not args.only else [s.strip() for s in args.only.split(",")]
+    unknown = [n for n in names if n not in SECTIONS]
+    if unknown:
+        raise InputError(f"--only: unknown section(s) {', '.join(unknown)} "
+                         f"(accepted: {', '.join(SECTIONS)})")
+    results: Result = {"machine": {"cpus": __import__("os").cpu_count(),
+                                   "python": platform.python_version()},
+                       "quick": bool(args.quick), "seed": args.seed}
+    for name in names:
+        t0 = time.perf_counter()
+        print(f"[bench vision] {name} ...", flush=True)
+        results[name] = SECTIONS[name](np.random.default_rng(args.seed), args.quick)
+        results.setdefault("seconds", {})[name] = round(time.perf_counter() - t0, 1)
+    print_report(results)
+    Path(args.out).write_text(json.dumps(results, indent=1, default=float) + "\n")
+    print(f"[bench vision] wrote {args.out}")
+    return 0

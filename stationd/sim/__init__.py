@@ -1,0 +1,1 @@
+"""Synthetic scenes: the physically exact renderer that provides ground truth for benchmarks."""
