@@ -200,7 +200,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     dm = sub.add_parser("demo", help="the main job: a simulated run")
     dm.add_argument("--seed", type=int, default=7)
-    dm.add_argument("--json", action="store_true")
+    dm.add_argument("--cycles", type=int, default=3, help="marker placements to localize")
+    dm.add_argument("--save", help="also write the rendered images and pair.yaml here")
+    dm.add_argument("--json", action="store_true", help="print one summary object")
     dm.set_defaults(func=cmd_demo)
     return p
 

@@ -188,8 +188,9 @@ def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionPa
     def refuse(reason: str) -> Detection:
         return Detection(False, reason, roi=roi, timings_ms=timings)
 
-    if cand.at_border:
-        return refuse("marker cut by the image border")
+    # A purple region touching the image border is not refused here: what matters is the
+    # ring, and a ring cut by the border fails the outline search (border regions are
+    # excluded) or the coverage gate, each with its reason.
     t0 = time.perf_counter()
     hint = (cand.hole_centre[0] - x, cand.hole_centre[1] - y)
     edges = boundary_edges(image[y:y + h, x:x + w], marker.ratio_sq, hint)

@@ -1,0 +1,44 @@
+"""Shared fixtures: rendered marker views (windows around the marker keep tests fast)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from stationd.bench import scenes as sc
+from stationd.sim.render import MarkerPose, default_camera
+from stationd.vision.marker import MarkerSpec
+
+SPEC = MarkerSpec()
+NOISE = {"blur_sigma": 0.8, "noise_sigma": 2.0}
+
+
+@pytest.fixture(scope="session")
+def camera():
+    return default_camera()
+
+
+@pytest.fixture(scope="session")
+def station_pair():
+    return sc.station_pair()
+
+
+def view(camera, distance, tilt, seed=0, **kw):
+    """A rendered window around a marker at ``distance`` mm and ``tilt`` deg."""
+    rng = np.random.default_rng(seed)
+    pose = sc.random_pose(rng, camera, distance, tilt, spread=0.4)
+    v = sc.render_view(camera, pose, SPEC, seed, **{**NOISE, **kw})
+    assert v is not None
+    return v, pose
+
+
+def pose_in_pair(pair, seed=0, tilt=(5.0, 35.0)):
+    rng = np.random.default_rng(seed)
+    for _ in range(200):
+        c = np.array([rng.uniform(-200, 400), rng.uniform(-200, 200), rng.uniform(1150, 1450)])
+        pose = MarkerPose.look(c, float(rng.uniform(*tilt)), float(rng.uniform(0, 360)),
+                               float(rng.uniform(0, 360)))
+        if sc.marker_window(pair.left, pose, SPEC) and sc.marker_window(
+                pair.right, sc.to_right(pair, pose), SPEC):
+            return pose
+    raise AssertionError("no pose in view")

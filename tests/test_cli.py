@@ -1,0 +1,121 @@
+"""The command line contract: JSON fields, exit codes, one-line errors."""
+
+import json
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from stationd.bench import scenes as sc
+from stationd.cli import main
+from tests.conftest import NOISE, SPEC, pose_in_pair, view
+
+DETECT_KEYS = {"found", "reason", "centre_px", "ellipse_centre_px", "normal", "inner", "outer",
+               "roi", "timings_ms"}
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory, camera, station_pair):
+    d = tmp_path_factory.mktemp("cli")
+    v, _ = view(camera, 700, 35, seed=11)
+    cv2.imwrite(str(d / "one.png"), v.image)
+    (d / "cam.yaml").write_text(yaml.safe_dump(v.camera.to_dict()))
+    pose = pose_in_pair(station_pair, seed=12)
+    lv = sc.render_view(station_pair.left, pose, SPEC, 1, **NOISE)
+    rv = sc.render_view(station_pair.right, sc.to_right(station_pair, pose), SPEC, 2, **NOISE)
+    cv2.imwrite(str(d / "left.png"), lv.image)
+    cv2.imwrite(str(d / "right.png"), rv.image)
+    pair = sc.crop_pair(station_pair, lv, rv)
+    (d / "pair.yaml").write_text(yaml.safe_dump(pair.to_dict()))
+    cv2.imwrite(str(d / "blank.png"), np.full_like(v.image, 70))
+    cv2.imwrite(str(d / "grey.png"), v.image[:, :, 0])
+    (d / "notimage.png").write_text("not an image")
+    return d, v, pose
+
+
+def _run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_detect_json(files, capsys):
+    d, v, _ = files
+    code, out, err = _run(capsys, "detect", str(d / "one.png"), "--camera", str(d / "cam.yaml"),
+                          "--json")
+    assert code == 0 and err == ""
+    obj = json.loads(out)
+    assert DETECT_KEYS <= set(obj)
+    assert obj["found"] is True and obj["reason"] is None
+    assert np.hypot(*(np.array(obj["centre_px"]) - v.centre_px)) < 0.05
+    assert set(obj["inner"]) >= {"centre", "semi_axes", "angle_deg", "points_used",
+                                 "points_rejected"}
+    assert len(obj["roi"]) == 4 and abs(np.linalg.norm(obj["normal"]) - 1) < 1e-9
+
+
+def test_detect_not_found_exits_1_with_reason(files, capsys):
+    d, _, _ = files
+    code, out, _ = _run(capsys, "detect", str(d / "blank.png"), "--camera",
+                        str(d / "cam.yaml"), "--json")
+    obj = json.loads(out)
+    assert code == 1 and obj["found"] is False and obj["reason"]
+
+
+def test_localize_json_and_repeat(files, capsys):
+    d, _, pose = files
+    code, out, _ = _run(capsys, "localize", str(d / "left.png"), str(d / "right.png"),
+                        "--pair", str(d / "pair.yaml"), "--json", "--repeat", "3")
+    assert code == 0
+    obj = json.loads(out)
+    assert {"found", "reason", "left", "right", "point_mm", "normal", "epipolar_px",
+            "timings_ms"} <= set(obj)
+    assert DETECT_KEYS <= set(obj["left"])
+    assert np.linalg.norm(np.array(obj["point_mm"]) - pose.centre_mm) < 0.05
+    assert obj["repeat"]["n"] == 3 and obj["repeat"]["median_ms"] > 0
+
+
+@pytest.mark.parametrize("make_args,needle", [
+    (lambda d: ["detect", str(d / "missing.png"), "--camera", str(d / "cam.yaml")],
+     "no such file"),
+    (lambda d: ["detect", str(d / "notimage.png"), "--camera", str(d / "cam.yaml")],
+     "not a readable image"),
+    (lambda d: ["detect", str(d / "grey.png"), "--camera", str(d / "cam.yaml")],
+     "grey image"),
+    (lambda d: ["detect", str(d / "one.png"), "--camera", str(d / "notimage.png")],
+     "expected a mapping"),
+    (lambda d: ["detect", str(d / "one.png"), "--camera", str(d / "bad_k.yaml")],
+     "K: expected a 3x3 matrix"),
+    (lambda d: ["localize", str(d / "left.png"), str(d / "right.png"), "--pair",
+                str(d / "cam.yaml")], "unknown key"),
+    (lambda d: ["localize", str(d / "left.png"), str(d / "right.png"), "--pair",
+                str(d / "pair.yaml"), "--repeat", "0"], "--repeat"),
+    (lambda d: ["detect", str(d / "one.png"), "--camera", str(d / "cam.yaml"), "--config",
+                str(d / "bad_config.yaml")], "bad_config.yaml:2: vision.centre_method"),
+])
+def test_bad_input_exits_2_with_one_line(files, capsys, make_args, needle):
+    d, _, _ = files
+    (d / "bad_k.yaml").write_text("K: [[1, 0], [0, 1]]\nsize: [10, 10]\n")
+    (d / "bad_config.yaml").write_text("vision:\n  centre_method: magic\n")
+    code, out, err = _run(capsys, *make_args(d))
+    assert code == 2
+    assert needle in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_console_script_usage_error_is_one_line():
+    r = subprocess.run([sys.executable, "-m", "stationd", "detect"], capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "required" in r.stderr
+
+
+def test_config_selects_the_method(files, capsys, tmp_path):
+    d, _, _ = files
+    cfg = tmp_path / "station.yaml"
+    cfg.write_text("vision:\n  centre_method: ellipse\n")
+    code, out, _ = _run(capsys, "detect", str(d / "one.png"), "--camera", str(d / "cam.yaml"),
+                        "--config", str(cfg), "--json")
+    obj = json.loads(out)
+    assert code == 0 and obj["method"] == "ellipse"
+    assert obj["centre_px"] == obj["ellipse_centre_px"]

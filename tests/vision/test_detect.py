@@ -1,0 +1,98 @@
+"""The whole single-image pipeline on rendered images (ground truth from the renderer)."""
+
+import numpy as np
+import pytest
+
+from stationd.errors import ImageError
+from stationd.sim.render import Distractor, MarkerPose, Scene, crop_camera, render
+from stationd.vision.detect import detect, detect_all
+from stationd.vision.params import VisionParams
+from tests.conftest import NOISE, SPEC, view
+
+
+@pytest.mark.parametrize("distance,tilt", [(450, 30), (900, 0), (1200, 50), (2000, 65)])
+@pytest.mark.parametrize("method", ["concentric", "paper"])
+def test_centre_is_corrected_to_a_fraction_of_a_pixel(camera, distance, tilt, method):
+    v, _ = view(camera, distance, tilt, seed=distance + tilt)
+    d = detect(v.image, v.camera, VisionParams(centre_method=method), SPEC, defer_normal=True)
+    assert d.found, d.reason
+    err = np.hypot(*(d.centre_px - v.centre_px))
+    ell = np.hypot(*(d.ellipse_centre_px - v.centre_px))
+    assert err < 0.05
+    assert abs(d.pencil_ratio / SPEC.ratio_sq - 1) < 0.02
+    if tilt >= 30 and distance <= 1200:
+        assert ell > 5 * err  # the uncorrected ellipse centre is clearly worse
+    assert d.inner.used >= 24 and d.outer.used >= 24
+    assert set(d.timings_ms) >= {"reduce", "segment", "edges", "fit", "centre", "total"}
+
+
+def test_normal_faces_the_camera_and_matches_truth(camera):
+    v, pose = view(camera, 600, 40, seed=3)
+    d = detect(v.image, v.camera, VisionParams(centre_method="paper"), SPEC)
+    assert d.found, d.reason
+    assert not d.normal_ambiguous
+    assert np.degrees(np.arccos(np.clip(d.normal @ pose.normal, -1, 1))) < 1.0
+
+
+def test_no_marker_is_a_refusal_with_reason(camera):
+    img = render(crop_camera(camera, (0, 0, 400, 300)), Scene(**NOISE)).image
+    d = detect(img, crop_camera(camera, (0, 0, 400, 300)))
+    assert not d.found and "no purple region" in d.reason
+
+
+def test_two_markers_are_ambiguous_but_both_found_by_detect_all(camera):
+    win = (2300, 1500, 900, 700)
+    cam = crop_camera(camera, win)
+    poses = [MarkerPose.look(np.array(c, float), 20, az) for c, az in
+             (((-60.0, 0.0, 1500.0), 0.0), ((60.0, 20.0, 1500.0), 90.0))]
+    img = render(camera, Scene(markers=[(p, SPEC) for p in poses], **NOISE), window=win).image
+    found, _ = detect_all(img, cam, VisionParams(), SPEC)
+    assert len(found) == 2
+    d = detect(img, cam, VisionParams(), SPEC)
+    assert not d.found and "ambiguous: 2 markers" in d.reason
+
+
+def test_purple_distractors_are_ignored(camera):
+    win = (2300, 1500, 900, 700)
+    cam = crop_camera(camera, win)
+    marker = MarkerPose.look(np.array([-50.0, 0.0, 1400.0]), 25, 30)
+    disc = Distractor(MarkerPose.look(np.array([70.0, 30.0, 1400.0]), 10, 0), "disc", 20.0)
+    bar = Distractor(MarkerPose.look(np.array([40.0, -50.0, 1400.0]), 10, 0), "bar", 40.0, 5.0)
+    r = render(camera, Scene(markers=[(marker, SPEC)], distractors=[disc, bar], **NOISE),
+               window=win)
+    d = detect(r.image, cam, VisionParams(), SPEC)
+    assert d.found, d.reason
+    assert np.hypot(*(d.centre_px - r.truth[0].centre_px)) < 0.05
+
+
+def test_marker_cut_by_the_border_is_refused(camera):
+    v, _ = view(camera, 800, 20, seed=5)
+    x = int(v.centre_px[0])  # cut the image through the middle of the ring
+    img = np.ascontiguousarray(v.image[:, x - 10:])
+    cam = crop_camera(v.camera, (x - 10, 0, img.shape[1], img.shape[0]))
+    d = detect(img, cam, VisionParams(), SPEC)
+    assert not d.found and d.reason
+
+
+def test_salt_and_pepper_in_the_roi(camera):
+    v, _ = view(camera, 2050, 50, seed=8, salt_pepper_in_field=400)
+    d = detect(v.image, v.camera, VisionParams(), SPEC)
+    assert d.found, d.reason
+    assert np.hypot(*(d.centre_px - v.centre_px)) < 0.1
+
+
+def test_low_light_needs_the_enhancement(camera):
+    v, _ = view(camera, 1200, 30, seed=9, illumination=0.1, vignetting=0.3)
+    d = detect(v.image, v.camera, VisionParams(enhance=True), SPEC)
+    assert d.found, d.reason
+    assert np.hypot(*(d.centre_px - v.centre_px)) < 0.1
+
+
+def test_bad_images_are_input_errors(camera):
+    cam = crop_camera(camera, (0, 0, 64, 48))
+    with pytest.raises(ImageError, match="3 colour channels"):
+        detect(np.zeros((48, 64), np.uint8), cam)
+    with pytest.raises(ImageError, match="8-bit"):
+        detect(np.zeros((48, 64, 3), np.uint16), cam)
+    with pytest.raises(ImageError, match="camera model is 64x48"):
+        detect(np.zeros((40, 64, 3), np.uint8), cam)
