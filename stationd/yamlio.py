@@ -151,12 +151,13 @@ class YamlNode:
         """A nested list of numbers of shape rows x cols."""
         row_nodes = self.items()
         if len(row_nodes) != rows:
-            raise self.error(f"expected a {rows}x{cols} matrix (nested list), got {len(row_nodes)} rows")
+            raise self.error(f"expected a {rows}x{cols} matrix (nested list), "
+                             f"got {len(row_nodes)} rows")
         out = np.empty((rows, cols), dtype=np.float64)
         for i, r in enumerate(row_nodes):
             try:
                 out[i] = r.vector([cols])
             except ConfigError:
-                raise r.error(f"expected a {rows}x{cols} matrix: row {i} must have {cols} numbers") \
-                    from None
+                raise r.error(f"expected a {rows}x{cols} matrix: row {i} must have "
+                              f"{cols} numbers") from None
         return out

@@ -99,7 +99,7 @@ def test_bad_input_exits_2_with_one_line(files, capsys, make_args, needle):
     d, _, _ = files
     (d / "bad_k.yaml").write_text("K: [[1, 0], [0, 1]]\nsize: [10, 10]\n")
     (d / "bad_config.yaml").write_text("vision:\n  centre_method: magic\n")
-    code, out, err = _run(capsys, *make_args(d))
+    code, _, err = _run(capsys, *make_args(d))
     assert code == 2
     assert needle in err and err.count("\n") == 1 and "Traceback" not in err
 

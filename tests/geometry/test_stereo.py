@@ -21,7 +21,7 @@ def test_triangulation_is_exact_on_exact_projections(station_pair):
         ur = _undist(station_pair.right, station_pair.R @ X + station_pair.T)
         assert np.linalg.norm(triangulate(station_pair, ul, ur) - X) < 1e-6
         assert epipolar_residual(station_pair, ul, ur) < 1e-6
-        assert epipolar_residual(station_pair, ul, ur + [0.0, 3.0]) > 1.0
+        assert epipolar_residual(station_pair, ul, ur + np.array([0.0, 3.0])) > 1.0
 
 
 def _views(pair, pose, seed=0):
