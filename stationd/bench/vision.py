@@ -55,21 +55,24 @@ def _stereo_views(pair: Any, pose: MarkerPose, seed: int, **kw: Any) -> tuple[An
 
 # -- Tables 2-3: centre error over distance and tilt ----------------------------------------
 def bench_centre(rng: np.random.Generator, quick: bool) -> Result:
-    """Centre error against the true projection: ellipse centre, paper (stereo Eq. 16),
-    concentric pencil; each sample is a stereo pair converging on the marker."""
+    """Centre error against the true projection: ellipse centre, concentric pencil, the
+    paper's correction with the normal chosen in one image (paper_mono: by the concentric
+    split, else the pencil's centre) and in stereo (paper: Eq. 16, normals fused); each
+    sample is a stereo pair converging on the marker."""
     cam = default_camera()
     distances = [400, 700, 1000, 1500, 2000]
     tilts = [0, 15, 30, 45, 55, 65]
     reps = 1 if quick else 3
     conc = VisionParams(centre_method="concentric")
     paper = VisionParams(centre_method="paper")
-    errs: dict[str, list[float]] = {"ellipse": [], "paper": [], "concentric": []}
+    methods = ("ellipse", "concentric", "paper_mono", "paper")
+    errs: dict[str, list[float]] = {m: [] for m in methods}
     per_cell: dict[str, dict[str, float]] = {}
     failures: list[str] = []
     samples = 0
     for dist in distances:
         for tilt in tilts:
-            cell: dict[str, list[float]] = {"ellipse": [], "paper": [], "concentric": []}
+            cell: dict[str, list[float]] = {m: [] for m in methods}
             for _ in range(reps):
                 pose = sc.random_pose(rng, cam, dist, tilt, spread=0.5)
                 pair = sc.look_at_pair(cam, pose.centre_mm, 0.3 * dist)
@@ -79,15 +82,19 @@ def bench_centre(rng: np.random.Generator, quick: bool) -> Result:
                     continue
                 samples += 1
                 lv, rv = views
-                dl = detect(lv.image, lv.camera, conc, SPEC, defer_normal=True)
-                dr = detect(rv.image, rv.camera, conc, SPEC, defer_normal=True)
-                if not (dl.found and dr.found):
-                    failures.append(f"{dist} mm {tilt} deg: {dl.reason or dr.reason}")
+                dl = detect(lv.image, lv.camera, conc, SPEC)
+                dr = detect(rv.image, rv.camera, conc, SPEC)
+                pl = detect(lv.image, lv.camera, paper, SPEC)
+                pr = detect(rv.image, rv.camera, paper, SPEC)
+                if not (dl.found and dr.found and pl.found and pr.found):
+                    failures.append(f"{dist} mm {tilt} deg: "
+                                    f"{dl.reason or dr.reason or pl.reason or pr.reason}")
                     continue
-                st = localize_detections(sc.crop_pair(pair, lv, rv), dl, dr, paper)
-                for d, v, ds in ((dl, lv, st.left), (dr, rv, st.right)):
+                st = localize_detections(sc.crop_pair(pair, lv, rv), pl, pr, paper)
+                for d, p, v, ds in ((dl, pl, lv, st.left), (dr, pr, rv, st.right)):
                     cell["ellipse"].append(_err(d, v.centre_px, "ellipse_centre_px"))
                     cell["concentric"].append(_err(d, v.centre_px))
+                    cell["paper_mono"].append(_err(p, v.centre_px))
                     if st.found:
                         cell["paper"].append(_err(ds, v.centre_px))
                 if not st.found:
@@ -118,8 +125,8 @@ def bench_radii(rng: np.random.Generator, quick: bool) -> Result:
             if views is None:
                 continue
             lv, rv = views
-            dl = detect(lv.image, lv.camera, params, SPEC, defer_normal=True)
-            dr = detect(rv.image, rv.camera, params, SPEC, defer_normal=True)
+            dl = detect(lv.image, lv.camera, params, SPEC)
+            dr = detect(rv.image, rv.camera, params, SPEC)
             st = localize_detections(sc.crop_pair(pair, lv, rv), dl, dr, params)
             if st.found:
                 radii["inner"].append(st.radii_mm["inner"])
@@ -166,8 +173,8 @@ def bench_rod(rng: np.random.Generator, quick: bool) -> Result:
                 if views is None:
                     break
                 lv, rv = views
-                dl = detect(lv.image, lv.camera, VisionParams(), SPEC, defer_normal=True)
-                dr = detect(rv.image, rv.camera, VisionParams(), SPEC, defer_normal=True)
+                dl = detect(lv.image, lv.camera, VisionParams(), SPEC)
+                dr = detect(rv.image, rv.camera, VisionParams(), SPEC)
                 cp = sc.crop_pair(pair, lv, rv)
                 st = localize_detections(cp, dl, dr)
                 if not st.found or st.point_mm is None:
@@ -230,8 +237,8 @@ def bench_saltpepper(rng: np.random.Generator, quick: bool) -> Result:
                 continue
             lv, rv = views
             boxes.append((lv.field_bbox[2], lv.field_bbox[3]))
-            dl = detect(lv.image, lv.camera, VisionParams(), SPEC, defer_normal=True)
-            dr = detect(rv.image, rv.camera, VisionParams(), SPEC, defer_normal=True)
+            dl = detect(lv.image, lv.camera, VisionParams(), SPEC)
+            dr = detect(rv.image, rv.camera, VisionParams(), SPEC)
             st = localize_detections(sc.crop_pair(pair, lv, rv), dl, dr)
             if not st.found:
                 continue

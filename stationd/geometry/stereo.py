@@ -21,7 +21,6 @@ from stationd.vision import centre as cm
 from stationd.vision.detect import Detection, detect
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import VisionParams
-from stationd.vision.types import Refusal
 
 _pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="stereo")
 
@@ -115,6 +114,17 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
                                               -1.0, 1.0))))
 
 
+def _choose(own: tuple[np.ndarray, np.ndarray], other: tuple[np.ndarray, np.ndarray],
+            min_margin_deg: float) -> np.ndarray | None:
+    """The candidate of ``own`` closest to either of ``other`` (same frame), or None when the
+    other candidate is nearly as close (this view cannot choose)."""
+    d = [min(_angle_deg(a, b) for b in other) for a in own]
+    i = int(np.argmin(d))
+    if d[1 - i] - d[i] < min_margin_deg:
+        return None
+    return own[i]
+
+
 def localize_detections(pair: StereoPair, left: Detection, right: Detection,
                         params: VisionParams | None = None) -> StereoResult:
     """Combine a left and a right detection of the same marker."""
@@ -135,15 +145,33 @@ def localize_detections(pair: StereoPair, left: Detection, right: Detection,
     assert left.normal_candidates is not None  # noqa: S101
     assert right.normal_candidates is not None  # noqa: S101
     cl, cr = left.centre_undist, right.centre_undist
-    # Eq. 16: each view's true normal is the one the other view confirms
-    res = cm.resolve_normals_stereo(left.normal_candidates, right.normal_candidates, pair.R,
-                                    min_margin_deg=g.min_normal_margin_deg)
-    if isinstance(res, Refusal):
-        if left.normal_ambiguous or right.normal_ambiguous:
-            return StereoResult(False, f"normal ambiguous in stereo: {res.reason}", left, right)
-        nl, nr = left.normal, right.normal  # each view already chose by the concentric split
-    else:
-        nl, nr = left.normal_candidates[res[0]], right.normal_candidates[res[1]]
+    # Eq. 16, per view: a view's true normal is the candidate the other view confirms.  A
+    # view that sees the marker head-on cannot choose (its candidates hug the cone axis) but
+    # then the other one can; the plane has one normal, so the decisive views' normals are
+    # fused and both centres are computed from it.
+    Rt = pair.R.T
+    right_in_left = (Rt @ right.normal_candidates[0], Rt @ right.normal_candidates[1])
+    choice_l = _choose(left.normal_candidates, right_in_left, g.min_normal_margin_deg)
+    choice_r = _choose(right_in_left, left.normal_candidates, g.min_normal_margin_deg)
+    decisive = [n for n in (choice_l, choice_r) if n is not None]
+    angle = _angle_deg(choice_l, choice_r) if choice_l is not None and choice_r is not None \
+        else 0.0
+    if angle > g.max_normal_angle_deg:
+        return StereoResult(False, f"left and right normals disagree by {angle:.1f} deg "
+                            f"(> {g.max_normal_angle_deg})", left, right, normal_angle_deg=angle)
+    if decisive:
+        n = decisive[0] if len(decisive) == 1 else decisive[0] + decisive[1]
+    elif left.normal_ambiguous or right.normal_ambiguous:
+        return StereoResult(False, "normal ambiguous in both views", left, right)
+    else:  # each view chose by its concentric split; they must agree
+        angle = _angle_deg(left.normal, Rt @ right.normal)
+        if angle > g.max_normal_angle_deg:
+            return StereoResult(False, f"left and right normals disagree by {angle:.1f} deg "
+                                f"(> {g.max_normal_angle_deg})", left, right,
+                                normal_angle_deg=angle)
+        n = left.normal + Rt @ right.normal
+    n = n / np.linalg.norm(n)
+    nl, nr = n, pair.R @ n
     if params.centre_method == "paper":
         cl = cm.centre_from_normal(left.inner.conic, pair.left.K, nl)
         cr = cm.centre_from_normal(right.inner.conic, pair.right.K, nr)
@@ -155,15 +183,7 @@ def localize_detections(pair: StereoPair, left: Detection, right: Detection,
     if epi > g.max_epipolar_px:
         return StereoResult(False, f"epipolar residual {epi:.2f} px (> {g.max_epipolar_px}): "
                             "not the same point in both views", left, right, epipolar_px=epi)
-    nr_left = pair.R.T @ nr
-    angle = _angle_deg(nl, nr_left)
-    if angle > g.max_normal_angle_deg:
-        return StereoResult(False, f"left and right normals disagree by {angle:.1f} deg "
-                            f"(> {g.max_normal_angle_deg})", left, right, epipolar_px=epi,
-                            normal_angle_deg=angle)
     X = triangulate(pair, cl, cr)
-    n = nl + nr_left
-    n = n / np.linalg.norm(n)
     radii: dict[str, float] = {}
     for name, pts_l, pts_r in (("inner", left.inner_points, right.inner_points),
                                ("outer", left.outer_points, right.outer_points)):
@@ -182,12 +202,12 @@ def localize(pair: StereoPair, image_left: np.ndarray, image_right: np.ndarray,
     """Detect in both images (in parallel: OpenCV releases the GIL) and combine."""
     t0 = time.perf_counter()
     if parallel:
-        fl = _pool.submit(detect, image_left, pair.left, params, marker, defer_normal=True)
-        fr = _pool.submit(detect, image_right, pair.right, params, marker, defer_normal=True)
+        fl = _pool.submit(detect, image_left, pair.left, params, marker)
+        fr = _pool.submit(detect, image_right, pair.right, params, marker)
         left, right = fl.result(), fr.result()
     else:
-        left = detect(image_left, pair.left, params, marker, defer_normal=True)
-        right = detect(image_right, pair.right, params, marker, defer_normal=True)
+        left = detect(image_left, pair.left, params, marker)
+        right = detect(image_right, pair.right, params, marker)
     t1 = time.perf_counter()
     res = localize_detections(pair, left, right, params)
     t2 = time.perf_counter()

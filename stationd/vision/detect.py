@@ -91,12 +91,8 @@ def reduce(image: np.ndarray, scale: int) -> np.ndarray:
 
 
 def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = None,
-               marker: MarkerSpec | None = None, *,
-               defer_normal: bool = False) -> tuple[list[Detection], list[str]]:
-    """Every marker in the image, and the reasons candidates were refused.
-
-    ``defer_normal``: keep a detection whose normal one image cannot choose (stereo will).
-    """
+               marker: MarkerSpec | None = None) -> tuple[list[Detection], list[str]]:
+    """Every marker in the image, and the reasons candidates were refused."""
     params = params or VisionParams()
     marker = marker or MarkerSpec()
     check_image(image)
@@ -117,7 +113,7 @@ def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = 
     found: list[Detection] = []
     reasons: list[str] = []
     for cand in cands[: params.max_candidates]:
-        det = measure(image, camera, cand, params, marker, dict(timings), defer_normal)
+        det = measure(image, camera, cand, params, marker, dict(timings))
         if det.found:
             found.append(det)
         elif det.reason:
@@ -135,10 +131,10 @@ def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = 
 
 
 def detect(image: np.ndarray, camera: Camera, params: VisionParams | None = None,
-           marker: MarkerSpec | None = None, *, defer_normal: bool = False) -> Detection:
+           marker: MarkerSpec | None = None) -> Detection:
     """The one marker in view; refused when there is none or more than one."""
     t0 = time.perf_counter()
-    found, reasons = detect_all(image, camera, params, marker, defer_normal=defer_normal)
+    found, reasons = detect_all(image, camera, params, marker)
     total = (time.perf_counter() - t0) * 1e3
     if len(found) == 1:
         det = found[0]
@@ -178,8 +174,7 @@ def _fit_boundary(name: str, pts: np.ndarray, params: VisionParams) -> Ellipse |
 
 
 def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionParams,
-            marker: MarkerSpec, timings: dict[str, float] | None = None,
-            defer_normal: bool = False) -> Detection:
+            marker: MarkerSpec, timings: dict[str, float] | None = None) -> Detection:
     """Full-resolution measurement of one candidate ROI."""
     timings = timings if timings is not None else {}
     x, y, w, h = (int(v) for v in cand.roi)
@@ -212,7 +207,7 @@ def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionPa
         return refuse(inner.reason)
     if isinstance(outer, Refusal):
         return refuse(outer.reason)
-    det = _centre(camera, inner, outer, params, marker, defer_normal)
+    det = _centre(camera, inner, outer, params, marker)
     timings["centre"] = (time.perf_counter() - t3) * 1e3
     if isinstance(det, Refusal):
         return refuse(det.reason)
@@ -247,7 +242,7 @@ def _centre_noise(e: Ellipse) -> float:
 
 
 def _centre(camera: Camera, inner: Ellipse, outer: Ellipse, params: VisionParams,
-            marker: MarkerSpec, defer_normal: bool) -> _Centre | Refusal:
+            marker: MarkerSpec) -> _Centre | Refusal:
     """Projected centre and normal by the configured method, with the structural gates.
 
     The normal is always one of the inner cone's two candidates (accurate to a fraction of a
@@ -265,10 +260,9 @@ def _centre(camera: Camera, inner: Ellipse, outer: Ellipse, params: VisionParams
     res = cm.resolve_normals_mono(inner.conic, outer.conic, K, noise_px=noise)
     method = params.centre_method
     if isinstance(res, Refusal):
-        if method == "paper" and not defer_normal:
-            return res
-        # The pencil and ellipse centres do not depend on the normal; the paper's centre
-        # does, and is computed by stereo once Eq. 16 has chosen (until then: the pencil's).
+        # The paper's centre depends on the normal, which this image cannot choose: never
+        # guess; the pencil's centre needs no normal (stereo recomputes the paper's once
+        # Eq. 16 has chosen).  The pencil and ellipse centres are unaffected.
         cands = cm.circle_normals(inner.conic, K)
         n = cm.normal_from_centre(inner.conic, K, c_conc)
         split, ambiguous = float("nan"), True

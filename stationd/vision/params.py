@@ -12,7 +12,7 @@ from stationd.vision.enhance import EnhanceParams
 from stationd.vision.segment import HsvRange
 from stationd.yamlio import YamlNode
 
-CENTRE_METHODS = ("concentric", "paper", "ellipse")
+CENTRE_METHODS = ("paper", "concentric", "ellipse")
 RESIDUALS = ("sampson", "centre")
 
 
@@ -46,7 +46,7 @@ class VisionParams:
     enhance: bool = True
     enhance_params: EnhanceParams = field(default_factory=EnhanceParams)
     hsv: HsvRange = field(default_factory=HsvRange)
-    centre_method: str = "concentric"
+    centre_method: str = "paper"
     leitz: bool = True
     residual: str = "sampson"
     max_candidates: int = 4

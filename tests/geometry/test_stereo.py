@@ -35,8 +35,8 @@ def test_rendered_pair_localizes_to_hundredths_of_a_mm(station_pair, method):
     pose = pose_in_pair(station_pair, seed=1)
     lv, rv = _views(station_pair, pose)
     params = VisionParams(centre_method=method)
-    dl = detect(lv.image, lv.camera, params, SPEC, defer_normal=True)
-    dr = detect(rv.image, rv.camera, params, SPEC, defer_normal=True)
+    dl = detect(lv.image, lv.camera, params, SPEC)
+    dr = detect(rv.image, rv.camera, params, SPEC)
     res = localize_detections(sc.crop_pair(station_pair, lv, rv), dl, dr, params)
     assert res.found, res.reason
     assert np.linalg.norm(res.point_mm - pose.centre_mm) < 0.05
@@ -50,8 +50,8 @@ def test_different_points_fail_the_epipolar_gate(station_pair):
     p2 = pose_in_pair(station_pair, seed=3)
     lv, _ = _views(station_pair, p1)
     _, rv = _views(station_pair, p2)
-    dl = detect(lv.image, lv.camera, VisionParams(), SPEC, defer_normal=True)
-    dr = detect(rv.image, rv.camera, VisionParams(), SPEC, defer_normal=True)
+    dl = detect(lv.image, lv.camera, VisionParams(), SPEC)
+    dr = detect(rv.image, rv.camera, VisionParams(), SPEC)
     res = localize_detections(sc.crop_pair(station_pair, lv, rv), dl, dr)
     assert not res.found and ("epipolar" in res.reason or "normals disagree" in res.reason)
 

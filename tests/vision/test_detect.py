@@ -14,7 +14,7 @@ from tests.conftest import NOISE, SPEC, view
 @pytest.mark.parametrize("method", ["concentric", "paper"])
 def test_centre_is_corrected_to_a_fraction_of_a_pixel(camera, distance, tilt, method):
     v, _ = view(camera, distance, tilt, seed=distance + tilt)
-    d = detect(v.image, v.camera, VisionParams(centre_method=method), SPEC, defer_normal=True)
+    d = detect(v.image, v.camera, VisionParams(centre_method=method), SPEC)
     assert d.found, d.reason
     err = np.hypot(*(d.centre_px - v.centre_px))
     ell = np.hypot(*(d.ellipse_centre_px - v.centre_px))
