@@ -79,18 +79,18 @@ def run_demo(args: argparse.Namespace) -> int:
                       f"{res.timings_ms['total']:.1f} ms")
         elif not args.json:
             print(f"{head}\n  refused: {res.reason}")
+    err_mean = float(np.mean(errors)) if errors else float("nan")
+    err_max = float(np.max(errors)) if errors else float("nan")
+    p50 = float(np.percentile(latencies, 50))
     summary = {"placements": count, "found": found,
-               "error_mm": {"mean": float(np.mean(errors)) if errors else None,
-                            "max": float(np.max(errors)) if errors else None},
-               "latency_ms": {"p50": float(np.percentile(latencies, 50)),
-                              "max": float(np.max(latencies))}}
+               "error_mm": {"mean": err_mean if errors else None,
+                            "max": err_max if errors else None},
+               "latency_ms": {"p50": p50, "max": float(np.max(latencies))}}
     if args.json:
         sys.stdout.write(json.dumps(summary) + "\n")
     else:
-        print(f"summary: {found}/{count} localized; 3D error mean "
-              f"{summary['error_mm']['mean'] or float('nan'):.3f} mm, max "
-              f"{summary['error_mm']['max'] or float('nan'):.3f} mm; localization "
-              f"p50 {summary['latency_ms']['p50']:.1f} ms per 20 MP stereo pair")
+        print(f"summary: {found}/{count} localized; 3D error mean {err_mean:.3f} mm, max "
+              f"{err_max:.3f} mm; localization p50 {p50:.1f} ms per 20 MP stereo pair")
         if save is not None:
             print(f"images and pair.yaml written to {save}/; try: stationd localize "
                   f"{save}/left_0.png {save}/right_0.png --pair {save}/pair.yaml --json")

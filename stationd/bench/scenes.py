@@ -71,12 +71,16 @@ def render_view(camera: Camera, pose: MarkerPose, spec: MarkerSpec, seed: int,
     """Render one marker through ``camera`` in a window around it (None if out of view).
 
     ``scene_kw`` are :class:`Scene` fields; ``salt_pepper_in_field`` (int) puts that many
-    salt-and-pepper points inside the field's bounding box, as in the paper's section 4.1.
+    salt-and-pepper points inside the field's bounding box, as in the paper's section 4.1;
+    ``dirt`` (int) paints that many grey spots of 1-2.5 px radius on the ring's boundaries
+    after rendering: clutter that survives the impulse filter and gives the edge outliers the
+    Leitz criterion is for (the marker's geometry, the truth, is untouched).
     """
     win = marker_window(camera, pose, spec)
     if win is None:
         return None
     sp = int(scene_kw.pop("salt_pepper_in_field", 0))
+    dirt = int(scene_kw.pop("dirt", 0))
     scene = Scene(markers=[(pose, spec)], **scene_kw)
     if sp:
         probe = render(camera, replace(scene, noise_sigma=0.0, blur_sigma=0.0), window=win,
@@ -85,7 +89,26 @@ def render_view(camera: Camera, pose: MarkerPose, spec: MarkerSpec, seed: int,
         scene = replace(scene, salt_pepper=sp, salt_pepper_roi=(win[0] + bx, win[1] + by, bw, bh))
     out = render(camera, scene, window=win, seed=seed)
     t = out.truth[0]
-    return View(out.image, crop_camera(camera, win), win, t.centre_px, t.bbox)
+    image = _dirty(out.image, camera, pose, spec, win, dirt, seed) if dirt else out.image
+    return View(image, crop_camera(camera, win), win, t.centre_px, t.bbox)
+
+
+def _dirty(image: np.ndarray, camera: Camera, pose: MarkerPose, spec: MarkerSpec, win: Window,
+           count: int, seed: int) -> np.ndarray:
+    import cv2
+
+    rng = np.random.default_rng(seed + 7919)
+    r = rng.choice([spec.inner_mm, spec.outer_mm], count) + rng.uniform(-0.6, 0.6, count)
+    phi = rng.uniform(0, 2 * math.pi, count)
+    local = np.stack([r * np.cos(phi), r * np.sin(phi), np.zeros(count)], axis=1)
+    px = camera.project(pose.centre_mm + local @ pose.rotation.T) - np.array(win[:2])
+    out = image.copy()
+    shift = 4  # sub-pixel drawing precision (1/16 px)
+    for (u, v), rad, grey in zip(px, rng.uniform(1.0, 2.5, count),
+                                 rng.uniform(40, 200, count), strict=True):
+        cv2.circle(out, (round(u * 16), round(v * 16)), round(rad * 16), (grey, grey, grey),
+                   -1, cv2.LINE_AA, shift)
+    return out
 
 
 def crop_pair(pair: StereoPair, left: View, right: View) -> StereoPair:

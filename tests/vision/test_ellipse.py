@@ -187,7 +187,7 @@ def test_fit_refuses_non_finite_points():
     rng = np.random.default_rng(4)
     pts = ellipse_points(rng, (50.0, 50.0), 20.0, 10.0, 0.0, 50)
     pts[7, 1] = np.nan
-    assert "non-finite" in fit_conic(pts).reason  # type: ignore[union-attr]
+    assert "non-finite" in fit_conic(pts).reason
     pts[7, 1] = np.inf
     assert isinstance(fit_ellipse(pts), Refusal)
 
