@@ -119,3 +119,29 @@ def test_config_selects_the_method(files, capsys, tmp_path):
     obj = json.loads(out)
     assert code == 0 and obj["method"] == "ellipse"
     assert obj["centre_px"] == obj["ellipse_centre_px"]
+
+
+def test_tune_color_output_is_read_by_the_config(files, capsys, tmp_path):
+    d, v, _ = files
+    out = tmp_path / "hsv.yaml"
+    code, _, _ = _run(capsys, "tune-color", str(d / "one.png"), "--out", str(out))
+    assert code == 0
+    cfg = tmp_path / "station.yaml"
+    cfg.write_text("vision:\n  hsv: hsv.yaml\n")
+    from stationd.config import load_station_config
+
+    tuned = load_station_config(cfg).vision.hsv
+    written = yaml.safe_load(out.read_text())["hsv"]
+    assert [list(tuned.h), list(tuned.s), list(tuned.v)] == [written["h"], written["s"],
+                                                            written["v"]]
+    code, out_json, _ = _run(capsys, "detect", str(d / "one.png"), "--camera",
+                             str(d / "cam.yaml"), "--config", str(cfg), "--json")
+    assert code == 0 and json.loads(out_json)["found"]
+
+
+def test_marker_svg_is_written_at_true_scale(tmp_path, capsys):
+    out = tmp_path / "m.svg"
+    code, text, _ = _run(capsys, "marker", "--out", str(out))
+    assert code == 0 and "r=10 mm" in text
+    svg = out.read_text()
+    assert 'r="10"' in svg and 'r="15"' in svg and "mm" in svg

@@ -96,3 +96,16 @@ def test_bad_images_are_input_errors(camera):
         detect(np.zeros((48, 64, 3), np.uint16), cam)
     with pytest.raises(ImageError, match="camera model is 64x48"):
         detect(np.zeros((40, 64, 3), np.uint8), cam)
+
+
+def test_a_ring_of_other_proportions_is_not_this_marker(camera):
+    """Two concentric circles, but 12/15 instead of 10/15: the pencil ratio gate refuses."""
+    from stationd.bench import scenes as sc
+    from stationd.vision.marker import MarkerSpec
+
+    other = MarkerSpec(inner_mm=12.0)
+    pose = sc.random_pose(np.random.default_rng(4), camera, 700, 30, spread=0.4)
+    v = sc.render_view(camera, pose, other, 4, **NOISE)
+    d = detect(v.image, v.camera, VisionParams(), SPEC)
+    assert not d.found and "pencil ratio" in d.reason
+    assert detect(v.image, v.camera, VisionParams(), other).found
