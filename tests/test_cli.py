@@ -122,7 +122,7 @@ def test_config_selects_the_method(files, capsys, tmp_path):
 
 
 def test_tune_color_output_is_read_by_the_config(files, capsys, tmp_path):
-    d, v, _ = files
+    d, _, _ = files
     out = tmp_path / "hsv.yaml"
     code, _, _ = _run(capsys, "tune-color", str(d / "one.png"), "--out", str(out))
     assert code == 0
