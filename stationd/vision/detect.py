@@ -100,16 +100,23 @@ def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = 
     if (w, h) != camera.size:
         raise ImageError(f"image is {w}x{h} but the camera model is {camera.size[0]}x"
                          f"{camera.size[1]}")
-    timings: dict[str, float] = {}
-    t0 = time.perf_counter()
-    small = reduce(image, params.search_scale)
-    t1 = time.perf_counter()
-    timings["reduce"] = (t1 - t0) * 1e3
-    cands = find_candidates(small, params.search_scale, params.hsv,
-                            enhance=params.enhance_params if params.enhance else None,
-                            full_size=(w, h))
-    t2 = time.perf_counter()
-    timings["segment"] = (t2 - t1) * 1e3
+    timings: dict[str, float] = {"reduce": 0.0, "segment": 0.0}
+    # A marker too small for the reduced search (a far marker, a small sensor) is looked for
+    # again at half the reduction; this costs time only when nothing was found.
+    scale = params.search_scale
+    while True:
+        t0 = time.perf_counter()
+        small = reduce(image, scale)
+        t1 = time.perf_counter()
+        cands = find_candidates(small, scale, params.hsv,
+                                enhance=params.enhance_params if params.enhance else None,
+                                full_size=(w, h))
+        t2 = time.perf_counter()
+        timings["reduce"] += (t1 - t0) * 1e3
+        timings["segment"] += (t2 - t1) * 1e3
+        if cands or scale <= 2:
+            break
+        scale //= 2
     found: list[Detection] = []
     reasons: list[str] = []
     for cand in cands[: params.max_candidates]:

@@ -109,3 +109,18 @@ def test_a_ring_of_other_proportions_is_not_this_marker(camera):
     d = detect(v.image, v.camera, VisionParams(), SPEC)
     assert not d.found and "pencil ratio" in d.reason
     assert detect(v.image, v.camera, VisionParams(), other).found
+
+
+def test_a_marker_too_small_for_the_reduced_search_is_found_at_finer_scale(camera):
+    """At 4.5 m the ring's outer radius is ~17 px, 2 px at 1/8 (no candidate there, checked
+    below): the search retries at 1/4."""
+    from stationd.vision.detect import reduce
+    from stationd.vision.enhance import EnhanceParams
+    from stationd.vision.segment import find_candidates
+
+    v, _ = view(camera, 4500, 20, seed=6)
+    h, w = v.image.shape[:2]
+    assert not find_candidates(reduce(v.image, 8), 8, enhance=EnhanceParams(), full_size=(w, h))
+    d = detect(v.image, v.camera, VisionParams(), SPEC)
+    assert d.found, d.reason
+    assert np.hypot(*(d.centre_px - v.centre_px)) < 0.1
