@@ -43,6 +43,8 @@ def print_report(res: dict[str, Any]) -> None:
                f"tilt 0-65 deg, noise 2, blur 0.8; failures {c['failure_count']})",
                ["method", "n", "mean", "median", "p95", "max"], rows)
         print(f"  paper: {PAPER['centre_px']}; target: median <= 0.02, p95 <= 0.06")
+        for f in c["failures"]:
+            print(f"  refused: {f}")
     if "radii" in res:
         r = res["radii"]
         rows = []

@@ -87,7 +87,10 @@ def bench_centre(rng: np.random.Generator, quick: bool) -> Result:
                 pl = detect(lv.image, lv.camera, paper, SPEC)
                 pr = detect(rv.image, rv.camera, paper, SPEC)
                 if not (dl.found and dr.found and pl.found and pr.found):
-                    failures.append(f"{dist} mm {tilt} deg: "
+                    side = "left" if not (dl.found and pl.found) else "right"
+                    view_pose = pose if side == "left" else sc.to_right(pair, pose)
+                    view_tilt = sc.tilt_of(view_pose.normal, view_pose.centre_mm)
+                    failures.append(f"{dist} mm {tilt} deg, {side} view at {view_tilt:.0f} deg: "
                                     f"{dl.reason or dr.reason or pl.reason or pr.reason}")
                     continue
                 st = localize_detections(sc.crop_pair(pair, lv, rv), pl, pr, paper)
@@ -243,6 +246,7 @@ def bench_saltpepper(rng: np.random.Generator, quick: bool) -> Result:
         rin: list[float] = []
         rout: list[float] = []
         boxes: list[tuple[int, int]] = []
+        reasons: list[str] = []
         for pose in poses:
             views = _stereo_views(pair, pose, int(rng.integers(1 << 30)),
                                   salt_pepper_in_field=count, **NOISE)
@@ -254,6 +258,7 @@ def bench_saltpepper(rng: np.random.Generator, quick: bool) -> Result:
             dr = detect(rv.image, rv.camera, VisionParams(), SPEC)
             st = localize_detections(sc.crop_pair(pair, lv, rv), dl, dr)
             if not st.found:
+                reasons.append(str(st.reason))
                 continue
             found += 1
             centre += [_err(dl, lv.centre_px), _err(dr, rv.centre_px)]
@@ -264,7 +269,7 @@ def bench_saltpepper(rng: np.random.Generator, quick: bool) -> Result:
         out[str(count)] = {"pairs": len(poses), "detection_rate": found / len(poses),
                            "roi_median_px": [float(bw), float(bh)],
                            "centre_px": _stats(centre), "inner_radius_mm": _stats(rin),
-                           "outer_radius_mm": _stats(rout)}
+                           "outer_radius_mm": _stats(rout), "refusals": reasons}
     return out
 
 
@@ -284,7 +289,7 @@ def bench_lowlight(rng: np.random.Generator, quick: bool) -> Result:
                  for p, s in zip(poses, seeds, strict=True)]
         for enhance in (True, False):
             params = VisionParams(enhance=enhance)
-            found, errs = 0, []
+            found, errs, reasons = 0, [], []
             for v in views:
                 if v is None:
                     continue
@@ -292,10 +297,12 @@ def bench_lowlight(rng: np.random.Generator, quick: bool) -> Result:
                 if d.found:
                     found += 1
                     errs.append(_err(d, v.centre_px))
+                else:
+                    reasons.append(str(d.reason))
             total = sum(v is not None for v in views)
             row["enhanced" if enhance else "plain"] = {
                 "images": total, "detection_rate": found / max(total, 1),
-                "centre_px": _stats(errs)}
+                "centre_px": _stats(errs), "refusals": reasons[:10]}
         out[f"{int(level * 100)}%"] = row
     return out
 
