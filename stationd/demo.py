@@ -28,16 +28,7 @@ from stationd.vision.params import VisionParams
 
 def _placements(rng: np.random.Generator, count: int) -> list[MarkerPose]:
     pair = sc.station_pair()
-    spec = MarkerSpec()
-    out: list[MarkerPose] = []
-    while len(out) < count:
-        c = np.array([rng.uniform(-300, 500), rng.uniform(-250, 250), rng.uniform(1100, 1500)])
-        pose = MarkerPose.look(c, float(rng.uniform(0, 35)), float(rng.uniform(0, 360)),
-                               float(rng.uniform(0, 360)))
-        if sc.marker_window(pair.left, pose, spec) and sc.marker_window(
-                pair.right, sc.to_right(pair, pose), spec):
-            out.append(pose)
-    return out
+    return [sc.pose_in_pair(rng, pair, (1100.0, 1500.0), (0.0, 35.0)) for _ in range(count)]
 
 
 def run_demo(args: argparse.Namespace) -> int:

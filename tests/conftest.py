@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from stationd.bench import scenes as sc
-from stationd.sim.render import MarkerPose, default_camera
+from stationd.sim.render import default_camera
 from stationd.vision.marker import MarkerSpec
 
 SPEC = MarkerSpec()
@@ -33,12 +33,4 @@ def view(camera, distance, tilt, seed=0, **kw):
 
 
 def pose_in_pair(pair, seed=0, tilt=(5.0, 35.0)):
-    rng = np.random.default_rng(seed)
-    for _ in range(200):
-        c = np.array([rng.uniform(-200, 400), rng.uniform(-200, 200), rng.uniform(1150, 1450)])
-        pose = MarkerPose.look(c, float(rng.uniform(*tilt)), float(rng.uniform(0, 360)),
-                               float(rng.uniform(0, 360)))
-        if sc.marker_window(pair.left, pose, SPEC) and sc.marker_window(
-                pair.right, sc.to_right(pair, pose), SPEC):
-            return pose
-    raise AssertionError("no pose in view")
+    return sc.pose_in_pair(np.random.default_rng(seed), pair, tilt=tilt)

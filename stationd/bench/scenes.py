@@ -129,6 +129,22 @@ def random_pose(rng: np.random.Generator, camera: Camera, distance_mm: float, ti
                            float(rng.uniform(0, 360)))
 
 
+def pose_in_pair(rng: np.random.Generator, pair: StereoPair,
+                 depth: tuple[float, float] = (1150.0, 1450.0),
+                 tilt: tuple[float, float] = (5.0, 35.0),
+                 spec: MarkerSpec | None = None) -> MarkerPose:
+    """A marker under the chassis (left frame), in full view of both cameras of the pair."""
+    spec = spec or MarkerSpec()
+    for _ in range(200):
+        c = np.array([rng.uniform(-350, 550), rng.uniform(-300, 300), rng.uniform(*depth)])
+        pose = MarkerPose.look(c, float(rng.uniform(*tilt)), float(rng.uniform(0, 360)),
+                               float(rng.uniform(0, 360)))
+        if marker_window(pair.left, pose, spec) and marker_window(
+                pair.right, to_right(pair, pose), spec):
+            return pose
+    raise RuntimeError("no marker pose in view of both cameras")
+
+
 def rotation_towards(normal: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """A rotation whose third column is ``normal`` and whose in-plane spin is random."""
     n = normal / np.linalg.norm(normal)

@@ -117,7 +117,7 @@ def bench_radii(rng: np.random.Generator, quick: bool) -> Result:
     pair = sc.station_pair()
     n = 10 if quick else 30
     out: Result = {}
-    poses = [_station_pose(rng, pair, (1100, 1500), (0, 40)) for _ in range(n)]
+    poses = [sc.pose_in_pair(rng, pair, (1100, 1500), (0, 40)) for _ in range(n)]
     seeds = [int(rng.integers(1 << 30)) for _ in range(n)]
     # dirt on the ring's boundaries gives the edge outliers the criterion is for
     views = [_stereo_views(pair, pose, seed, dirt=12, **NOISE)
@@ -157,20 +157,6 @@ def bench_radii(rng: np.random.Generator, quick: bool) -> Result:
                               "max_error": float(e.max()) if r.size else math.nan,
                               "min_error": float(e.min()) if r.size else math.nan}
     return out
-
-
-def _station_pose(rng: np.random.Generator, pair: Any, depth: tuple[float, float],
-                  tilt: tuple[float, float]) -> MarkerPose:
-    """A marker under the chassis, in view of both cameras of the station's pair."""
-    for _ in range(100):
-        z = rng.uniform(*depth)
-        c = np.array([rng.uniform(-350, 550), rng.uniform(-300, 300), z])
-        pose = MarkerPose.look(c, float(rng.uniform(*tilt)), float(rng.uniform(0, 360)),
-                               float(rng.uniform(0, 360)))
-        if sc.marker_window(pair.left, pose, SPEC) and sc.marker_window(
-                pair.right, sc.to_right(pair, pose), SPEC):
-            return pose
-    raise RuntimeError("no pose in view of both cameras")
 
 
 # -- the reference rod -----------------------------------------------------------------------
@@ -313,7 +299,7 @@ def bench_speed(rng: np.random.Generator, quick: bool) -> Result:
     from stationd.sim.render import Scene, render
 
     pair = sc.station_pair()
-    pose = _station_pose(rng, pair, (1200, 1300), (10, 30))
+    pose = sc.pose_in_pair(rng, pair, (1200, 1300), (10, 30))
     scene_l = Scene(markers=[(pose, SPEC)], texture=0.15, vignetting=0.3, **NOISE)
     scene_r = replace(scene_l, markers=[(sc.to_right(pair, pose), SPEC)])
     left = render(pair.left, scene_l, seed=1).image
