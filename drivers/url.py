@@ -1,0 +1,72 @@
+"""Device URLs, like pyserial's ``serial_for_url``: the scheme picks the backend, the query
+string carries options, and anything unknown is an error that shows the accepted forms.
+
+    modbus-tcp://192.168.10.20:502?unit=1
+    modbus-rtu:///dev/ttyUSB0?baud=19200&parity=E&unit=3
+    openprotocol://192.168.10.30:4545
+    openprotocol+serial:///dev/ttyUSB1?baud=9600
+    sim://lift
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+from urllib.parse import parse_qsl, urlsplit
+
+from drivers.errors import UrlError
+
+
+@dataclass(frozen=True)
+class DeviceUrl:
+    """A parsed device URL: ``scheme``, ``host``, ``port``, ``path`` and raw ``options``."""
+
+    text: str
+    scheme: str
+    host: str | None
+    port: int | None
+    path: str
+    options: dict[str, str] = field(default_factory=dict)
+
+    def error(self, message: str) -> UrlError:
+        return UrlError(message, device=self.text)
+
+    def typed_options(self, spec: Mapping[str, tuple[Callable[[str], Any], Any]],
+                      forms: str = "") -> dict[str, Any]:
+        """Options converted by ``spec`` (name -> (converter, default)); unknown ones are
+        errors naming the accepted options (and ``forms``, an example of the URL)."""
+        unknown = sorted(set(self.options) - set(spec))
+        if unknown:
+            accepted = ", ".join(sorted(spec)) or "none"
+            hint = f"; e.g. {forms}" if forms else ""
+            raise self.error(f"unknown option(s) {', '.join(unknown)} (accepted: {accepted}"
+                             f"{hint})")
+        out: dict[str, Any] = {}
+        for name, (conv, default) in spec.items():
+            if name not in self.options:
+                out[name] = default
+                continue
+            try:
+                out[name] = conv(self.options[name])
+            except (TypeError, ValueError):
+                raise self.error(f"option {name}={self.options[name]!r} is not valid") from None
+        return out
+
+
+def parse_url(text: str) -> DeviceUrl:
+    """Split a device URL; the backend checks what it needs (host, port, path, options)."""
+    if not isinstance(text, str) or "://" not in text:
+        raise UrlError(f"{text!r} is not a device URL (scheme://...)")
+    parts = urlsplit(text)
+    try:
+        port = parts.port
+    except ValueError:
+        raise UrlError("the port is not a number in 0-65535", device=text) from None
+    options: dict[str, str] = {}
+    for k, v in parse_qsl(parts.query, keep_blank_values=True):
+        if k in options:
+            raise UrlError(f"option {k} given twice", device=text)
+        options[k] = v
+    return DeviceUrl(text=text, scheme=parts.scheme.lower(), host=parts.hostname, port=port,
+                     path=parts.path, options=options)
