@@ -28,11 +28,11 @@ class ConnectError(DeviceError):
     """The device could not be reached (refused, unreachable, no such port)."""
 
 
-class DeviceTimeout(DeviceError):
+class DeviceTimeoutError(DeviceError):
     """The device did not answer in time."""
 
 
-class ConnectionLost(DeviceError):
+class ConnectionLostError(DeviceError):
     """The link dropped (peer closed, cable pulled, EIO on a pty)."""
 
 
@@ -40,5 +40,5 @@ class ProtocolError(DeviceError):
     """The device sent something that is not the protocol: garbage, a bad frame, a bad length."""
 
 
-class Refused(DeviceError):
+class RefusedError(DeviceError):
     """The device answered with a refusal (Open Protocol MID 0004, a Modbus exception)."""
