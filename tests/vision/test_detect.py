@@ -124,3 +124,50 @@ def test_a_marker_too_small_for_the_reduced_search_is_found_at_finer_scale(camer
     d = detect(v.image, v.camera, VisionParams(), SPEC)
     assert d.found, d.reason
     assert np.hypot(*(d.centre_px - v.centre_px)) < 0.1
+
+
+def _gamma(img):
+    return np.clip(255 * (img / 255.0) ** (1 / 2.2) + 0.5, 0, 255).astype(np.uint8)
+
+
+def _bayer(img):
+    """Mosaic to RGGB and demosaic with OpenCV, as a colour camera's driver does."""
+    import cv2
+
+    b = np.zeros(img.shape[:2], np.uint8)
+    b[0::2, 0::2] = img[0::2, 0::2, 2]
+    b[0::2, 1::2] = img[0::2, 1::2, 1]
+    b[1::2, 0::2] = img[1::2, 0::2, 1]
+    b[1::2, 1::2] = img[1::2, 1::2, 0]
+    return cv2.cvtColor(b, cv2.COLOR_BayerBG2BGR)
+
+
+def _jpeg(img):
+    import cv2
+
+    ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 85])
+    assert ok
+    return cv2.imdecode(buf, cv2.IMREAD_COLOR)
+
+
+@pytest.mark.parametrize("post,limit", [(_gamma, 0.03), (_bayer, 0.05), (_jpeg, 0.08)])
+def test_images_from_other_pipelines(camera, post, limit):
+    """Not our renderer's linear 8-bit output: sRGB-like gamma, a demosaiced Bayer sensor,
+    JPEG compression.  Still found, still within a small fraction of a pixel."""
+    for seed, (dist, tilt) in enumerate([(600, 40), (1500, 20), (1900, 55)]):
+        v, _ = view(camera, dist, tilt, seed=20 + seed)
+        d = detect(post(v.image), v.camera, VisionParams(), SPEC)
+        assert d.found, d.reason
+        assert np.hypot(*(d.centre_px - v.centre_px)) < limit
+
+
+def test_other_lens_with_strong_distortion_full_frame():
+    from stationd.geometry.camera import Camera
+
+    cam = Camera(np.array([[1800.0, 0, 1023.5], [0, 1800.0, 767.5], [0, 0, 1]]),
+                 np.array([-0.3, 0.12, 0.001, -0.0005, -0.02]), (2048, 1536))
+    pose = MarkerPose.look(np.array([-180.0, 120.0, 500.0]), 35, 60, 10)
+    r = render(cam, Scene(markers=[(pose, SPEC)], texture=0.2, vignetting=0.4, **NOISE), seed=2)
+    d = detect(r.image, cam, VisionParams(), SPEC)
+    assert d.found, d.reason
+    assert np.hypot(*(d.centre_px - r.truth[0].centre_px)) < 0.03
