@@ -1,0 +1,90 @@
+import math
+
+import numpy as np
+import pytest
+
+from stationd.geometry.frames import Transform, fit_affine, fit_rigid
+from stationd.geometry.tool import ToolGeometry, bolt_end, fuse
+from stationd.vision.types import Refusal
+from stationd.yamlio import YamlNode
+
+
+def _rotation(rng):
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    w, x, y, z = q
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+@pytest.mark.parametrize("n", [3, 4, 8])
+def test_rigid_fit_recovers_the_transform(n):
+    rng = np.random.default_rng(n)
+    R, t = _rotation(rng), rng.uniform(-2000, 2000, 3)
+    src = rng.uniform(-800, 800, (n, 3))
+    T = fit_rigid(src, src @ R.T + t)
+    assert isinstance(T, Transform)
+    assert np.allclose(T.A, R, atol=1e-9) and np.allclose(T.t, t, atol=1e-6)
+    assert T.rms_mm < 1e-6
+
+
+def test_rigid_fit_with_noise_reports_residuals_and_finds_a_bad_point():
+    rng = np.random.default_rng(1)
+    R, t = _rotation(rng), np.array([100.0, -50.0, 1200.0])
+    src = rng.uniform(-800, 800, (6, 3))
+    dst = src @ R.T + t + rng.normal(0, 0.05, (6, 3))
+    dst[2] += [3.0, 0, 0]  # one reference point measured wrong
+    T = fit_rigid(src, dst)
+    assert isinstance(T, Transform)
+    assert int(np.argmax(T.residuals_mm)) == 2 and T.residuals_mm[2] > 1.5
+
+
+def test_affine_fit_and_its_limits():
+    rng = np.random.default_rng(2)
+    A = np.eye(3) + rng.normal(0, 0.01, (3, 3))
+    src = rng.uniform(-800, 800, (5, 3))
+    T = fit_affine(src, src @ A.T + [1, 2, 3])
+    assert isinstance(T, Transform) and np.allclose(T.A, A, atol=1e-9)
+    flat = src.copy()
+    flat[:, 2] = 0.0
+    assert "coplanar" in fit_affine(flat, flat).reason
+    assert "at least 4" in fit_affine(src[:3], src[:3]).reason
+
+
+def test_rigid_refuses_degenerate_input():
+    line = np.outer(np.arange(4.0), [1.0, 2.0, 3.0])
+    assert "collinear" in fit_rigid(line, line).reason
+    assert "at least 3" in fit_rigid(line[:2], line[:2]).reason
+    bad = line.copy()
+    bad[0, 0] = np.nan
+    assert isinstance(fit_rigid(bad, line), Refusal)
+
+
+def test_transform_from_yaml_checks_rotation():
+    node = YamlNode.parse("A: [[1, 0, 0], [0, 1, 0], [0, 0, 2]]\nt: [0, 0, 0]\n", "v.yaml")
+    with pytest.raises(Exception, match="rotation"):
+        Transform.from_node(node)
+
+
+def test_bolt_end_compensates_tilt():
+    tool = ToolGeometry(length_mm=300.0, max_tilt_deg=10.0)
+    centre = np.array([100.0, 200.0, 50.0])
+    tilt = math.radians(5.0)
+    axis = np.array([math.sin(tilt), 0.0, math.cos(tilt)])  # wrench leaning towards +x
+    end = bolt_end(centre, -axis, tool)
+    assert not isinstance(end, Refusal)
+    assert np.allclose(end.point_mm, centre + 300.0 * axis)
+    assert abs(end.tilt_deg - 5.0) < 1e-9
+    paper = bolt_end(centre, -axis, ToolGeometry(length_mm=300.0, rule="perpendicular"))
+    # the perpendicular assumption misses the bolt by L sin(tilt) = 26 mm
+    assert abs(np.hypot(*(paper.point_mm - end.point_mm)[:2]) - 300 * math.sin(tilt)) < 1e-9
+    assert "tilted 12.0 deg" in bolt_end(centre, -np.array(
+        [math.sin(math.radians(12)), 0, math.cos(math.radians(12))]), tool).reason
+
+
+def test_fusion_weights_and_refuses_disagreement():
+    a, b = np.array([0.0, 0.0, 0.0]), np.array([0.3, 0.0, 0.0])
+    f = fuse([a, b], [0.1, 0.2], max_spread_mm=1.0)
+    assert np.allclose(f.point_mm, [0.06, 0, 0]) and f.spread_mm < 0.3
+    assert "disagree" in fuse([a, np.array([5.0, 0, 0])], [0.1, 0.1], 1.0).reason
