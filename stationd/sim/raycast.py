@@ -191,6 +191,65 @@ class Bar(Shape):
         return _square_outline(self.half_x, self.half_y)
 
 
+@dataclass(frozen=True)
+class Chessboard(Shape):
+    """A calibration chessboard: ``cols`` x ``rows`` inner corners, squares of ``square`` mm,
+    centred on the plane's origin, on a white card ``margin`` squares wide all round.
+
+    Labels: white (0), black (1), outside the card (2).  The square at the board's first
+    corner (-a, -b) is black, as OpenCV's pattern.
+    """
+
+    cols: int
+    rows: int
+    square: float
+    margin: float = 1.0
+    n_labels = 3
+
+    def _half(self) -> tuple[float, float]:
+        return 0.5 * (self.cols + 1) * self.square, 0.5 * (self.rows + 1) * self.square
+
+    def labels(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        hx, hy = self._half()
+        m = self.margin * self.square
+        on_card = (np.abs(a) < hx + m) & (np.abs(b) < hy + m)
+        on_grid = (np.abs(a) < hx) & (np.abs(b) < hy)
+        with np.errstate(invalid="ignore"):
+            i = np.floor((a + hx) / self.square)
+            j = np.floor((b + hy) / self.square)
+        black = on_grid & ((i + j) % 2 == 0)
+        lab = np.where(on_card, 0, 2).astype(np.int8)
+        lab[black] = 1
+        return lab
+
+    def distance(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        hx, hy = self._half()
+        m = self.margin * self.square
+        s = self.square
+        # nearest grid line inside the grid (clamped), and the card's edge
+        ga = np.abs(a + hx - s * np.clip(np.round((a + hx) / s), 0, self.cols + 1))
+        gb = np.abs(b + hy - s * np.clip(np.round((b + hy) / s), 0, self.rows + 1))
+        inside = (np.abs(a) <= hx + 0.5 * s) & (np.abs(b) <= hy + 0.5 * s)
+        grid = np.where(inside, np.minimum(ga, gb), np.inf)
+        card = np.abs(np.maximum(np.abs(a) - hx - m, np.abs(b) - hy - m))
+        outer = np.abs(np.maximum(np.abs(a) - hx, np.abs(b) - hy))
+        return np.asarray(np.minimum(np.minimum(grid, card), outer))
+
+    def outline(self) -> np.ndarray:
+        hx, hy = self._half()
+        m = self.margin * self.square
+        return _square_outline(hx + m, hy + m)
+
+    def corners(self) -> np.ndarray:
+        """The inner corners (cols * rows, 3) in plane coordinates, row by row, as OpenCV
+        orders them for a board seen upright."""
+        hx, hy = self._half()
+        xs = -hx + self.square * np.arange(1, self.cols + 1)
+        ys = -hy + self.square * np.arange(1, self.rows + 1)
+        gx, gy = np.meshgrid(xs, ys)
+        return np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
+
+
 # -- a shape placed in the camera frame -------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class Patch:

@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 
 from stationd.geometry.camera import Camera
-from stationd.sim.raycast import Bar, Disc, Patch, RingMarker, composite
+from stationd.sim.raycast import Bar, Chessboard, Disc, Patch, RingMarker, composite
 from stationd.vision.marker import PURPLE_RGB, RGB, MarkerSpec
 
 Window = tuple[int, int, int, int]
@@ -118,6 +118,7 @@ class Scene:
     texture: float = 0.0  # relative amplitude of the background's blotchy texture
     texture_cell_px: int = 32
     distractors: list[Distractor] = field(default_factory=list)
+    boards: list[tuple[MarkerPose, Chessboard]] = field(default_factory=list)
     illumination: float = 1.0
     vignetting: float = 0.0
     gradient: float = 0.0
@@ -210,6 +211,8 @@ def render(camera: Camera, scene: Scene, *, window: Window | None = None, seed: 
     gain = _gain(scene).astype(np.float64)
     patches = [_marker_patch(p, s, gain) for p, s in scene.markers]
     patches += [_distractor_patch(d, gain) for d in scene.distractors]
+    card = np.array([[235.0, 235.0, 235.0], [25.0, 25.0, 25.0]]) * gain  # white, black (BGR)
+    patches += [Patch(b, card, p.centre_mm, p.rotation) for p, b in scene.boards]
     patches.sort(key=lambda p: -float(np.linalg.norm(p.centre)))  # painter's order: far first
     texture = _texture_octaves(scene, camera.size, seed)
     image = np.empty((h, w, 3), dtype=np.uint8)

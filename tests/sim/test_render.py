@@ -241,3 +241,27 @@ def test_look_tilts_the_normal_from_the_line_of_sight():
         assert math.degrees(math.acos(min(1.0, cosine))) == pytest.approx(tilt, abs=1e-6)
     with pytest.raises(ValueError):
         MarkerPose(np.array([0.0, 0.0, 500.0]), np.eye(3))  # normal +z: faces away
+
+
+def test_chessboard_corners_are_where_the_projection_says():
+    """A rendered calibration board: OpenCV's sub-pixel corners land on the projected truth."""
+    import cv2
+
+    from stationd.geometry.camera import Camera
+    from stationd.sim.raycast import Chessboard
+    from stationd.sim.render import MarkerPose, Scene, render
+
+    cam = Camera(np.array([[1500.0, 0, 639.5], [0, 1500.0, 479.5], [0, 0, 1]]),
+                 np.array([-0.1, 0.05, 0.0, 0.0]), (1280, 960))
+    board = Chessboard(9, 6, 30.0)
+    pose = MarkerPose.look(np.array([20.0, -10.0, 900.0]), 25, 40, 5)
+    img = render(cam, Scene(boards=[(pose, board)], blur_sigma=0.8, noise_sigma=2.0),
+                 seed=1).image
+    grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+    ok, c = cv2.findChessboardCorners(grey, (9, 6))
+    assert ok
+    c = cv2.cornerSubPix(grey, c.reshape(-1, 1, 2), (7, 7), (-1, -1),
+                         (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4))
+    truth = cam.project(pose.centre_mm + board.corners() @ pose.rotation.T)
+    d = np.linalg.norm(c.reshape(-1, 1, 2) - truth[None], axis=2).min(axis=1)
+    assert np.median(d) < 0.05 and d.max() < 0.15
