@@ -1,0 +1,145 @@
+"""``stationd calibrate vehicle``: register a stereo pair into the vehicle frame.
+
+The points file lists reference points with known vehicle coordinates and, per pair, where the
+marker (or a fixture) was localized on them: either a left/right image pair, localized here
+with the station's vision, or the pair-frame point itself::
+
+    kind: rigid                 # rigid (default, 6 dof) or affine (the paper's, 12 dof)
+    points:
+      - name: R1
+        vehicle_mm: [1200.0, -350.0, 0.0]
+        seen_by:
+          pair1: {left: r1_l.png, right: r1_r.png}
+          pair2: {pair_mm: [101.2, -20.4, 1310.8]}
+
+The fitted transform goes to the pair's ``to_vehicle`` file (never into the hand-written
+station config).  Points also seen by pairs registered earlier are compared in the vehicle
+frame: one vehicle frame for all pairs, or an error.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from stationd.config import PairConfig, StationConfig, load_station_config
+from stationd.errors import InputError
+from stationd.geometry.frames import KINDS, Transform, fit_transform
+from stationd.yamlio import YamlNode
+
+EXIT_OK, EXIT_DISAGREE = 0, 1
+
+
+@dataclass(frozen=True)
+class Observation:
+    name: str
+    vehicle_mm: np.ndarray
+    pair_mm: dict[str, np.ndarray]  # pair name -> point in that pair's left camera frame
+
+
+def _observe(node: YamlNode, pair: PairConfig, cfg: StationConfig, base: Path) -> np.ndarray:
+    from stationd.geometry.stereo import localize
+    from stationd.imageio import read_image
+
+    m = node.mapping(("left", "right", "pair_mm"))
+    if "pair_mm" in m:
+        if "left" in m or "right" in m:
+            raise node.error("give either pair_mm or left and right images, not both")
+        return m["pair_mm"].vector([3])
+    if "left" not in m or "right" not in m:
+        raise node.error("expected pair_mm, or left and right images")
+    left = read_image(base / m["left"].text())
+    right = read_image(base / m["right"].text())
+    res = localize(pair.calibration, left, right, cfg.vision, cfg.marker)
+    if not res.found or res.point_mm is None:
+        raise node.error(f"marker not localized: {res.reason}")
+    return res.point_mm
+
+
+def read_points(path: Path, cfg: StationConfig) -> tuple[str, list[Observation]]:
+    root = YamlNode.load(path).mapping(("kind", "points"), required=("points",))
+    kind = root["kind"].text(KINDS) if "kind" in root else "rigid"
+    out: list[Observation] = []
+    for i, item in enumerate(root["points"].items()):
+        m = item.mapping(("name", "vehicle_mm", "seen_by"), required=("vehicle_mm", "seen_by"))
+        name = m["name"].text() if "name" in m else f"#{i + 1}"
+        seen: dict[str, np.ndarray] = {}
+        seen_by = m["seen_by"]
+        names = seen_by.value()
+        if not isinstance(names, dict):
+            raise seen_by.error("expected a mapping of pair names")
+        for pname, obs in seen_by.mapping(tuple(str(k) for k in names)).items():
+            if pname not in cfg.pairs:
+                raise obs.error(f"no pair {pname!r} in the station config "
+                                f"(pairs: {', '.join(cfg.pairs) or 'none'})")
+            seen[pname] = _observe(obs, cfg.pairs[pname], cfg, path.parent)
+        out.append(Observation(name, m["vehicle_mm"].vector([3]), seen))
+    return kind, out
+
+
+def cmd_calibrate_vehicle(args: argparse.Namespace) -> int:
+    if not args.config:
+        raise InputError("--config STATION.yaml is needed: it names the pairs")
+    cfg = load_station_config(args.config)
+    if args.pair not in cfg.pairs:
+        raise InputError(f"--pair {args.pair}: not in {args.config} "
+                         f"(pairs: {', '.join(cfg.pairs) or 'none'})")
+    kind, points = read_points(Path(args.points), cfg)
+    kind = args.kind or kind
+    mine = [p for p in points if args.pair in p.pair_mm]
+    src = np.array([p.pair_mm[args.pair] for p in mine]).reshape(-1, 3)
+    dst = np.array([p.vehicle_mm for p in mine]).reshape(-1, 3)
+    fit = fit_transform(src, dst, kind)
+    if not isinstance(fit, Transform):
+        raise InputError(f"{args.points}: pair {args.pair}: {fit.reason}")
+    assert fit.residuals_mm is not None  # noqa: S101 - a fit always carries them
+    print(f"pair {args.pair}: {kind} fit to {len(mine)} points, RMS {fit.rms_mm:.3f} mm")
+    for p, r in zip(mine, fit.residuals_mm, strict=True):
+        print(f"  {p.name}: residual {r:.3f} mm")
+    if len(mine) == 3:
+        print("  note: 3 points fit exactly up to noise; 4 or more let the residuals show a "
+              "bad point")
+    target = cfg.pairs[args.pair].to_vehicle_path
+    header = (f"# {args.pair} -> vehicle frame, {kind} fit to {len(mine)} points from "
+              f"{args.points}; RMS {fit.rms_mm:.3f} mm\n# x_vehicle = A x_pair + t (mm)\n")
+    target.write_text(header + yaml.safe_dump(fit.to_dict(), sort_keys=False,
+                                              default_flow_style=None))
+    print(f"wrote {target}")
+    return _cross_check(cfg, args.pair, fit, points)
+
+
+def _cross_check(cfg: StationConfig, pair: str, fit: Transform,
+                 points: list[Observation]) -> int:
+    """Points seen by this pair and by pairs registered earlier must agree in the vehicle
+    frame within the fits' residuals (3 RMS each, and at least 0.5 mm)."""
+    worst = EXIT_OK
+    for p in points:
+        if pair not in p.pair_mm:
+            continue
+        here = fit.apply(p.pair_mm[pair])
+        for other, x in p.pair_mm.items():
+            tv = cfg.pairs[other].to_vehicle
+            if other == pair or tv is None:
+                continue
+            d = float(np.linalg.norm(tv.apply(x) - here))
+            allowed = max(0.5, 3.0 * (fit.rms_mm + (tv.rms_mm if tv.residuals_mm is not None
+                                                     else fit.rms_mm)))
+            flag = "ok" if d <= allowed else "DISAGREE"
+            print(f"  {p.name}: {pair} and {other} agree to {d:.3f} mm ({flag}, allowed "
+                  f"{allowed:.2f} mm)")
+            if d > allowed:
+                worst = EXIT_DISAGREE
+    return worst
+
+
+def add_vehicle_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    v = sub.add_parser("vehicle", help="register a stereo pair into the vehicle frame")
+    v.add_argument("--pair", required=True, help="pair name in the station config")
+    v.add_argument("--points", required=True, help="reference points YAML")
+    v.add_argument("--config", help="station YAML (pairs, vision)")
+    v.add_argument("--kind", choices=KINDS, help="override the points file's kind")
+    v.set_defaults(func=cmd_calibrate_vehicle)
