@@ -1,0 +1,53 @@
+"""Fixtures for the lift tests: simulated PLCs on loopback / a pty, short timings, leak checks."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import threading
+import time
+
+import pytest
+
+from drivers.lift.sim import SimulatedPlc
+
+# short timings keep every file well under 10 s
+FAST = {"timeout": 0.3, "backoff": 0.02, "backoff_max": 0.08}
+VIN = "WVWZZZ1KZAW000123"
+
+
+@pytest.fixture(autouse=True)
+def no_leaked_threads():
+    """Fail a test that leaves a server, reconnect or pty thread behind."""
+    before = set(threading.enumerate())
+    yield
+    deadline = time.monotonic() + 2.0
+    while True:
+        extra = [t for t in threading.enumerate() if t not in before and t.is_alive()]
+        if not extra or time.monotonic() > deadline:
+            break
+        time.sleep(0.01)
+    assert not extra, f"leaked threads: {[t.name for t in extra]}"
+    assert threading.active_count() <= len(before)
+
+
+@pytest.fixture
+def plc():
+    with SimulatedPlc() as p:
+        yield p
+
+
+def require_mbpoll() -> str:
+    path = shutil.which("mbpoll")
+    if path is None:
+        pytest.skip("mbpoll is not installed (apt-get install mbpoll; .ci/bootstrap installs it)")
+    return path
+
+
+def mbpoll(*args: str) -> tuple[int, dict[int, int], str]:
+    """Run Debian's mbpoll once with 0-based addresses: exit code, address -> value, stderr."""
+    r = subprocess.run([require_mbpoll(), "-0", "-1", "-o", "1", *args],
+                       capture_output=True, text=True, timeout=10)
+    values = {int(a): int(v) for a, v in re.findall(r"^\[(\d+)\]:\s+(-?\d+)", r.stdout, re.M)}
+    return r.returncode, values, r.stderr.strip()

@@ -1,0 +1,235 @@
+"""The lift over real Modbus TCP on 127.0.0.1: states, mbpoll cross-check, faults, reconnect."""
+
+from __future__ import annotations
+
+import re
+import socket
+import threading
+import time
+
+import pytest
+
+from drivers.errors import (
+    ConnectError,
+    ConnectionLostError,
+    DeviceError,
+    DeviceTimeoutError,
+    RefusedError,
+)
+from drivers.lift import RegisterMap, open_lift
+from drivers.lift.base import Text
+from drivers.lift.modbus import ModbusLift
+from drivers.lift.sim import SimulatedPlc
+
+from .conftest import FAST, VIN, mbpoll
+
+
+def lift_for(port: int, **kw) -> ModbusLift:
+    lift = open_lift(f"modbus-tcp://127.0.0.1:{port}?unit={kw.pop('unit', 1)}", **{**FAST, **kw})
+    assert isinstance(lift, ModbusLift)
+    return lift
+
+
+def wait_for(fn, seconds=2.0):
+    """Poll ``fn`` until it returns a value (DeviceErrors count as not yet)."""
+    deadline = time.monotonic() + seconds
+    while True:
+        try:
+            return fn()
+        except DeviceError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.01)
+
+
+def test_reads_what_the_world_sets(plc):
+    port = plc.start_tcp()
+    with lift_for(port) as lift:
+        assert lift.identity() == f"Modbus TCP 127.0.0.1:{port} unit 1"
+        s = lift.read_state()
+        assert (s.height_mm, s.at_working_height, s.moving, s.fault) == (0.0, False, False, False)
+        assert (s.model_code, s.vin) == (0, None)
+        assert abs(s.timestamp - time.time()) < 1.0
+        plc.set_vehicle(4711, VIN)
+        plc.raise_lift()
+        s = lift.read_state(timeout=0.5)
+        assert s.ready and s.height_mm == pytest.approx(1750.0)
+        assert (s.model_code, s.vin) == (4711, VIN)
+        plc.set_fault()
+        assert lift.read_state().fault and not lift.read_state().ready
+        plc.set_fault(False)
+        plc.lower_lift()
+        assert not lift.read_state().at_working_height
+
+
+def test_motion_is_seen_while_it_happens():
+    clock = [0.0]
+    with SimulatedPlc(clock=lambda: clock[0]) as plc, lift_for(plc.start_tcp()) as lift:
+        plc.raise_lift(duration=10.0)
+        clock[0] = 4.0
+        s = lift.read_state()
+        assert s.moving and not s.at_working_height and s.height_mm == pytest.approx(700.0)
+        plc.set_fault()  # a fault stops the lift where it is
+        clock[0] = 20.0
+        plc.raise_lift(duration=1.0)  # interlocked while faulted
+        s = lift.read_state()
+        assert s.fault and not s.moving and s.height_mm == pytest.approx(700.0)
+
+
+def test_mbpoll_reads_the_same_registers(plc):
+    port = plc.start_tcp()
+    plc.set_vehicle(65000, VIN)
+    plc.set_height(1234.5)
+    code, regs, err = mbpoll("-m", "tcp", "-p", str(port), "-a", "1", "-t", "4", "-r", "0",
+                             "-c", "12", "127.0.0.1")
+    assert code == 0, err
+    assert regs[0] == 12345 and regs[1] == 0 and regs[2] == 65000
+    assert bytes(b for a in range(3, 12) for b in regs[a].to_bytes(2, "big")).rstrip(b"\0") \
+        == VIN.encode()
+    plc.raise_lift()
+    code, regs, _ = mbpoll("-m", "tcp", "-p", str(port), "-a", "1", "-t", "3", "-r", "0",
+                           "-c", "2", "127.0.0.1")  # input registers serve the same block
+    assert code == 0 and regs == {0: 17500, 1: 0b001}
+    with lift_for(port, register_map=RegisterMap(table="input")) as lift:
+        assert lift.read_state().ready
+
+
+def test_mbpoll_sees_the_same_exception_codes(plc):
+    port = plc.start_tcp()
+    code, _, err = mbpoll("-m", "tcp", "-p", str(port), "-a", "1", "-t", "4", "-r", "12",
+                          "127.0.0.1")
+    assert code != 0 and "Illegal data address" in err
+    code, _, err = mbpoll("-m", "tcp", "-p", str(port), "-a", "7", "-t", "4", "-r", "0",
+                          "127.0.0.1")
+    assert code != 0 and "Slave device or server failure" in err  # exception 4
+
+
+def test_illegal_address_is_a_refusal_and_keeps_the_link(plc):
+    port = plc.start_tcp()
+    with lift_for(port, register_map=RegisterMap(vin=Text(40, 17))) as lift:
+        for _ in range(2):
+            with pytest.raises(RefusedError, match=r"Modbus exception 2 \(illegal data address\)"
+                               r" reading holding registers 40-48 of unit 1: the register map")\
+                    as info:
+                lift.read_state()
+            assert info.value.code == 2
+        assert not [t for t in threading.enumerate() if t.name.startswith("lift-reconnect")]
+
+
+def test_unknown_unit_is_exception_4_with_a_hint(plc):
+    port = plc.start_tcp()
+    with lift_for(port, unit=7) as lift:
+        with pytest.raises(RefusedError, match=r"exception 4 \(server device failure\).*unit=\?")\
+                as info:
+            lift.read_state()
+        assert info.value.code == 4
+
+
+def test_connection_refused(plc):
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()  # nothing listens there now
+    with pytest.raises(ConnectError, match=f"connection refused by 127.0.0.1:{port}"):
+        lift_for(port)
+
+
+def test_connect_timeout_when_the_backlog_is_full():
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(0)
+    port = server.getsockname()[1]
+    filler = socket.create_connection(("127.0.0.1", port), timeout=0.5)  # fills the queue
+    try:
+        t0 = time.monotonic()
+        with pytest.raises(ConnectError, match=r"no answer from .* within 0.20 s"):
+            lift_for(port, timeout=0.2)
+        assert time.monotonic() - t0 < 1.0
+    finally:
+        filler.close()
+        server.close()
+
+
+def test_silent_plc_times_out_then_recovers(plc):
+    port = plc.start_tcp()
+    with lift_for(port) as lift:
+        plc.set_silent()
+        t0 = time.monotonic()
+        with pytest.raises(DeviceTimeoutError, match=r"no answer within 0.1\d s to a read of "
+                                                     r"holding registers 0-11 of unit 1"):
+            lift.read_state(timeout=0.15)
+        assert 0.12 < time.monotonic() - t0 < 0.6
+        plc.set_silent(False)
+        assert wait_for(lift.read_state).height_mm == 0.0
+
+
+def test_garbage_answers_look_like_silence():
+    """pymodbus drops frames it cannot parse, so a non-Modbus peer times out."""
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+
+    def serve() -> None:
+        conn, _ = server.accept()
+        with conn:
+            while conn.recv(256):
+                conn.sendall(b"HTTP/1.1 400 Bad Request\r\n\r\n")
+
+    thread = threading.Thread(target=serve)
+    thread.start()
+    try:
+        with lift_for(server.getsockname()[1]) as lift, pytest.raises(DeviceTimeoutError):
+            lift.read_state(timeout=0.2)
+    finally:
+        thread.join(2.0)
+        server.close()
+
+
+def test_plc_disappears_and_comes_back_with_backoff(plc):
+    port = plc.start_tcp()
+    with lift_for(port) as lift:
+        lift.read_state()
+        plc.stop_tcp()
+        with pytest.raises(ConnectionLostError, match="link lost reading holding registers"):
+            lift.read_state()
+        time.sleep(0.4)
+        with pytest.raises(ConnectionLostError) as info:
+            lift.read_state(timeout=0.05)
+        msg = str(info.value)
+        assert "connection refused" in msg and "reconnecting" in msg
+        attempts = int(re.search(r"(\d+) attempt", msg).group(1))
+        # backoff 0.02, 0.04, 0.08, 0.08, ...: about 6 attempts in 0.45 s, not hundreds
+        assert 3 <= attempts <= 12, msg
+        assert [t.name for t in threading.enumerate() if t.name.startswith("lift-reconnect")]
+        plc.start_tcp(port)
+        assert wait_for(lift.read_state).height_mm == 0.0
+    assert not [t for t in threading.enumerate() if t.name.startswith("lift-reconnect")]
+
+
+def test_close_cancels_the_reconnect_task(plc):
+    port = plc.start_tcp()
+    lift = lift_for(port, backoff=5.0, backoff_max=30.0)
+    try:
+        plc.stop_tcp()
+        with pytest.raises(ConnectionLostError):
+            lift.read_state()
+        assert [t for t in threading.enumerate() if t.name.startswith("lift-reconnect")]
+    finally:
+        t0 = time.monotonic()
+        lift.close()
+        lift.close()
+    assert time.monotonic() - t0 < 0.5  # not waiting out the 5 s backoff
+    with pytest.raises(DeviceError, match="not open"):
+        lift.read_state()
+
+
+def test_sim_url_drives_the_same_path():
+    with open_lift("sim://lift", timeout=0.5) as lift:
+        assert re.fullmatch(r"simulated lift PLC \(Modbus TCP 127\.0\.0\.1:\d+ unit 1\)",
+                            lift.identity())
+        lift.plc.set_vehicle(12, "VIN12345")
+        lift.plc.raise_lift()
+        s = lift.read_state()
+        assert s.ready and (s.model_code, s.vin) == (12, "VIN12345")
+        lift.close()
+        assert not lift.is_open
