@@ -149,6 +149,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return run_vision_bench(args)
 
 
+def cmd_bench_chain(args: argparse.Namespace) -> int:
+    from stationd.bench.chain import run_chain_bench
+
+    return run_chain_bench(args)
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     from stationd.demo import run_demo
 
@@ -197,6 +203,15 @@ def build_parser() -> argparse.ArgumentParser:
                     "radii,centre,rod,saltpepper,lowlight,speed")
     bv.add_argument("--seed", type=int, default=1)
     bv.set_defaults(func=cmd_bench)
+    bc = bsub.add_parser("chain", help="the whole chain: calibration, vehicle frame, rod, bolts")
+    bc.add_argument("--out", default="bench-chain.json", help="JSON results file")
+    bc.add_argument("--quick", action="store_true", help="2 pairs, fewer samples")
+    bc.add_argument("--seed", type=int, default=1)
+    bc.set_defaults(func=cmd_bench_chain)
+
+    from stationd.probe import add_probe_parser
+
+    add_probe_parser(sub)
 
     dm = sub.add_parser("demo", help="the main job: a simulated run")
     dm.add_argument("--seed", type=int, default=7)

@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from drivers.lift.base import MapError, RegisterMap
 from stationd.geometry.camera import StereoPair
 from stationd.geometry.frames import Transform
 from stationd.geometry.tool import ToolGeometry
@@ -18,7 +19,25 @@ from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import VisionParams
 from stationd.yamlio import YamlNode
 
-STATION_KEYS = ("marker", "vision", "pairs", "tool")
+STATION_KEYS = ("marker", "vision", "pairs", "tool", "lift")
+
+
+@dataclass(frozen=True)
+class LiftConfig:
+    """The lift PLC: its URL and register map (``drivers.lift.RegisterMap``)."""
+
+    url: str = "sim://lift"
+    registers: RegisterMap = field(default_factory=RegisterMap)
+
+    @classmethod
+    def from_node(cls, node: YamlNode) -> LiftConfig:
+        m = node.mapping(("url", "registers"))
+        url = m["url"].text() if "url" in m else cls.url
+        try:
+            regs = RegisterMap.from_node(m["registers"]) if "registers" in m else RegisterMap()
+        except MapError as exc:
+            raise m["registers"].error(str(exc)) from None
+        return cls(url=url, registers=regs)
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,6 +62,7 @@ class StationConfig:
     vision: VisionParams = field(default_factory=VisionParams)
     pairs: dict[str, PairConfig] = field(default_factory=dict)
     tool: ToolGeometry = field(default_factory=ToolGeometry)
+    lift: LiftConfig = field(default_factory=LiftConfig)
     path: Path | None = None
 
 
@@ -78,7 +98,9 @@ def load_station_config(path: str | Path | None) -> StationConfig:
         for name_node, value in _pair_items(m["pairs"]):
             pairs[name_node] = _pair(name_node, value, base)
     tool = ToolGeometry.from_node(m["tool"]) if "tool" in m else ToolGeometry()
-    return StationConfig(marker=marker, vision=vision, pairs=pairs, tool=tool, path=p)
+    lift = LiftConfig.from_node(m["lift"]) if "lift" in m else LiftConfig()
+    return StationConfig(marker=marker, vision=vision, pairs=pairs, tool=tool, lift=lift,
+                         path=p)
 
 
 def _pair_items(node: YamlNode) -> list[tuple[str, YamlNode]]:
