@@ -1,0 +1,52 @@
+"""Tightening controllers, chosen by URL (like pyserial's ``serial_for_url``).
+
+    openprotocol://192.168.10.30:4545            Open Protocol over TCP (port 4545 by default)
+    openprotocol+serial:///dev/ttyUSB1?baud=9600  Open Protocol over RS-232
+    sim://wrench                                  a simulated controller, spoken to over the
+                                                  real protocol on loopback (or a pty)
+
+Backends are imported only when their scheme is used (python-can's interface registry), so
+a station without a serial adapter never imports pyserial.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from drivers.errors import UrlError
+from drivers.url import parse_url
+from drivers.wrench.base import LinkStatus, Status, TighteningResult, Wrench
+
+__all__ = ["BACKENDS", "FORMS", "LinkStatus", "Status", "TighteningResult", "Wrench",
+           "open_wrench"]
+
+#: scheme -> "module:Class"; the class has ``from_url(url: DeviceUrl, **kw) -> Wrench``.
+BACKENDS: dict[str, str] = {
+    "openprotocol": "drivers.wrench.client:OpenProtocolWrench",
+    "openprotocol+serial": "drivers.wrench.client:OpenProtocolWrench",
+    "sim": "drivers.wrench.sim:SimWrench",
+}
+FORMS = ("openprotocol://HOST[:4545], openprotocol+serial:///dev/ttyUSB1?baud=9600, "
+         "sim://wrench")
+
+
+def open_wrench(url: str, *, connect: bool = True, **kw: Any) -> Wrench:
+    """The backend for ``url``, opened unless ``connect=False``; keywords override the URL's
+    options (e.g. ``timeout=0.5``; ``psets=...`` for ``sim://``).  An unknown scheme or
+    option is a UrlError that shows the accepted forms."""
+    parsed = parse_url(url)
+    target = BACKENDS.get(parsed.scheme)
+    if target is None:
+        raise UrlError(f"unknown wrench scheme {parsed.scheme!r} (accepted: {FORMS})",
+                       device=url)
+    module_name, _, class_name = target.partition(":")
+    backend = getattr(importlib.import_module(module_name), class_name)
+    wrench: Wrench = backend.from_url(parsed, **kw)
+    if connect:
+        try:
+            wrench.open()
+        except BaseException:
+            wrench.close()
+            raise
+    return wrench

@@ -1,0 +1,227 @@
+"""The tightening-controller interface every backend implements (like python-can's ``BusABC``).
+
+The public methods do the shared work (state checks, argument checks, default timeouts) and
+call one small ``_hook`` each backend overrides, so every backend refuses the same bad calls
+with the same errors.
+
+Why blocking calls with timeouts rather than asyncio: the station's cycle issues one command
+at a time and waits for its acknowledgement; a blocking API with a timeout is the simplest
+contract that says "acknowledged or failed" and is directly usable from the CLI and tests.
+The daemon's asyncio loop calls it through ``asyncio.to_thread`` (STYLE 4).  Backends are
+thread-safe: a command may be issued from one thread while another waits for results.
+"""
+
+from __future__ import annotations
+
+import threading
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from datetime import datetime
+from enum import IntEnum
+from types import TracebackType
+from typing import Self
+
+from drivers.errors import DeviceError
+
+
+class Status(IntEnum):
+    """Torque or angle status of a tightening (Open Protocol: 0 low, 1 OK, 2 high)."""
+
+    LOW = 0
+    OK = 1
+    HIGH = 2
+
+
+@dataclass(frozen=True)
+class TighteningResult:
+    """One tightening as the controller reported it; units are Nm and degrees.
+
+    ``ok`` is the controller's verdict (not recomputed here: the controller owns the limits).
+    ``timestamp`` is the controller's local clock, naive, as it sent it.
+    """
+
+    ok: bool
+    torque_nm: float
+    angle_deg: float
+    torque_status: Status
+    angle_status: Status
+    tightening_id: int
+    pset: int
+    vin: str
+    timestamp: datetime
+    torque_min_nm: float
+    torque_max_nm: float
+    torque_target_nm: float
+    angle_min_deg: float
+    angle_max_deg: float
+    angle_target_deg: float
+    cell_id: int = 0
+    channel_id: int = 0
+    controller_name: str = ""
+    job: int = 0
+    batch_size: int = 0
+    batch_counter: int = 0
+    batch_status: int = 0
+    pset_changed: datetime | None = None
+    raw: str = field(default="", repr=False, compare=False)
+
+
+@dataclass(frozen=True)
+class LinkStatus:
+    """What the daemon shows while a device is faulty: up or down, why, and retry counts."""
+
+    connected: bool
+    reason: str | None = None
+    attempts: int = 0        # failed reconnect attempts since the link went down
+    reconnects: int = 0      # successful reconnects since open()
+
+
+class Wrench(ABC):
+    """A tightening controller: select a parameter set, enable the tool, receive results.
+
+    ``open()`` connects (and fails fast with a typed :class:`DeviceError`); after that a lost
+    link is re-established in the background by the backend.  ``close()`` may be called any
+    number of times; a closed wrench cannot be reopened (make a new one, as with python-can).
+    """
+
+    def __init__(self, device: str, *, timeout: float = 2.0) -> None:
+        if timeout <= 0:
+            raise ValueError("timeout must be > 0")
+        self.device = device
+        self.timeout = timeout
+        self._life = threading.Lock()
+        self._opened = False
+        self._closed = False
+
+    # -- lifecycle -------------------------------------------------------------------------
+    def open(self) -> None:
+        """Connect and start the session; a second call does nothing."""
+        with self._life:
+            if self._closed:
+                raise DeviceError("closed; open a new one", device=self.device)
+            if self._opened:
+                return
+            self._open()
+            self._opened = True
+
+    def close(self) -> None:
+        """Stop everything and release the link; safe to call twice or before ``open()``."""
+        with self._life:
+            if self._closed:
+                return
+            self._closed = True
+            if self._opened:
+                self._close()
+
+    @property
+    def is_open(self) -> bool:
+        return self._opened and not self._closed
+
+    def __enter__(self) -> Self:
+        self.open()
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        state = "closed" if self._closed else "open" if self._opened else "new"
+        return f"<{type(self).__name__} {self.device} {state}>"
+
+    # -- commands --------------------------------------------------------------------------
+    def identity(self) -> str:
+        """The controller's own name (and cell/channel), as it introduced itself."""
+        self._check_open()
+        return self._identity()
+
+    def status(self) -> LinkStatus:
+        """Link state for the station's fault display; never raises once opened."""
+        self._check_open()
+        return self._status()
+
+    def wait_connected(self, timeout: float) -> bool:
+        """Wait until the link is up (e.g. after a reconnect); False on timeout."""
+        self._check_open()
+        return self._wait_connected(timeout)
+
+    def select_pset(self, pset: int, timeout: float | None = None) -> None:
+        """Select parameter set ``pset`` (0-999): returns only once the controller accepted it.
+
+        Raises RefusedError (with the controller's ``code``), DeviceTimeoutError or
+        ConnectionLostError; in every failure the selection must be treated as not done.
+        """
+        if isinstance(pset, bool) or not isinstance(pset, int) or not 0 <= pset <= 999:
+            raise ValueError(f"pset must be an integer 0-999, not {pset!r}")
+        self._check_open()
+        self._select_pset(pset, self._timeout(timeout))
+
+    def enable_tool(self, timeout: float | None = None) -> None:
+        """Allow the operator to run the tool; returns once acknowledged."""
+        self._check_open()
+        self._set_tool(True, self._timeout(timeout))
+
+    def disable_tool(self, timeout: float | None = None) -> None:
+        """Lock the tool; returns once acknowledged."""
+        self._check_open()
+        self._set_tool(False, self._timeout(timeout))
+
+    def send_vin(self, vin: str, timeout: float | None = None) -> None:
+        """Tell the controller which vehicle the next results belong to."""
+        if not isinstance(vin, str):
+            raise TypeError(f"vin must be a str, not {type(vin).__name__}")
+        self._check_open()
+        self._send_vin(vin, self._timeout(timeout))
+
+    def wait_result(self, timeout: float) -> TighteningResult | None:
+        """The next tightening result, or None if none came within ``timeout`` seconds.
+
+        Results already received are returned even after the link dropped; with none
+        pending and the link down, raises ConnectionLostError (the station's fault state).
+        """
+        if timeout < 0:
+            raise ValueError("timeout must be >= 0")
+        self._check_open()
+        return self._wait_result(timeout)
+
+    # -- helpers and hooks -----------------------------------------------------------------
+    def _timeout(self, timeout: float | None) -> float:
+        if timeout is None:
+            return self.timeout
+        if timeout <= 0:
+            raise ValueError("timeout must be > 0")
+        return timeout
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise DeviceError("closed", device=self.device)
+        if not self._opened:
+            raise DeviceError("not open (call open() or use it as a context manager)",
+                              device=self.device)
+
+    @abstractmethod
+    def _open(self) -> None: ...
+
+    @abstractmethod
+    def _close(self) -> None: ...
+
+    @abstractmethod
+    def _identity(self) -> str: ...
+
+    @abstractmethod
+    def _status(self) -> LinkStatus: ...
+
+    @abstractmethod
+    def _wait_connected(self, timeout: float) -> bool: ...
+
+    @abstractmethod
+    def _select_pset(self, pset: int, timeout: float) -> None: ...
+
+    @abstractmethod
+    def _set_tool(self, enabled: bool, timeout: float) -> None: ...
+
+    @abstractmethod
+    def _send_vin(self, vin: str, timeout: float) -> None: ...
+
+    @abstractmethod
+    def _wait_result(self, timeout: float) -> TighteningResult | None: ...

@@ -1,0 +1,337 @@
+"""Open Protocol messages: header, TCP and serial framing, and the replies the station reads.
+
+Pure functions and small stateful framers, no I/O (pymodbus's protocol/transport split): the
+links are in ``link.py`` and the request/answer rules in ``client.py``.  Everything here is
+written from docs/PROTOCOLS.md: a message is a 20-byte ASCII header (length, MID, revision,
+no-ack flag, station, spindle, sequence, parts, part), data, then NUL; over TCP messages follow
+each other; over RS-232 the integrator sends ``BEL HT BEL HT STX message ETX`` and the
+controller ``STX message ETX``.
+
+Decoding never trusts the peer: every malformed input is a :class:`ProtocolError` naming what
+was wrong, never another exception, and framers hold at most one message (9999 bytes) of
+state, so garbage can neither crash nor stall them (property-tested with hypothesis).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from datetime import datetime
+
+from drivers.errors import ProtocolError
+from drivers.wrench.base import Status, TighteningResult
+
+HEADER_LEN = 20
+MAX_LENGTH = 9999                  # the length field has 4 digits
+NUL, STX, ETX = b"\x00", b"\x02", b"\x03"
+INTEGRATOR_PREFIX = b"\x07\x09\x07\x09"   # BEL HT BEL HT, before STX, integrator -> controller
+
+MID_START, MID_START_ACK, MID_STOP, MID_ERROR, MID_ACCEPTED = 1, 2, 3, 4, 5
+MID_PSET_SELECT, MID_TOOL_DISABLE, MID_TOOL_ENABLE, MID_VIN = 18, 42, 43, 50
+MID_RESULT_SUBSCRIBE, MID_RESULT, MID_RESULT_ACK, MID_RESULT_UNSUBSCRIBE = 60, 61, 62, 63
+MID_KEEPALIVE = 9999
+
+#: MID 0004 error codes (Open Protocol specification); others are shown as their number.
+ERROR_TEXT: dict[int, str] = {
+    1: "invalid data", 2: "parameter set not present", 3: "parameter set cannot be set",
+    4: "parameter set not running", 6: "VIN upload subscription already exists",
+    7: "VIN upload subscription does not exist", 8: "VIN input source not granted",
+    9: "result subscription already exists", 10: "result subscription does not exist",
+    96: "client already connected", 97: "MID revision unsupported",
+    98: "controller internal request timeout", 99: "unknown MID",
+}
+
+
+def _show(data: bytes, limit: int = 32) -> str:
+    """Peer bytes for an error message: repr, cut short."""
+    return repr(data[:limit]) + ("..." if len(data) > limit else "")
+
+
+@dataclass(frozen=True)
+class Message:
+    """One Open Protocol message; optional header fields are None when sent as spaces."""
+
+    mid: int
+    revision: int = 1
+    data: bytes = b""
+    no_ack: bool = False
+    station: int | None = None
+    spindle: int | None = None
+    sequence: int | None = None
+    parts: int | None = None
+    part: int | None = None
+    raw: bytes = field(default=b"", repr=False, compare=False)   # as received (no NUL)
+
+    def encode(self) -> bytes:
+        """Header + data, without the terminating NUL (the framing adds it)."""
+        if not 0 <= self.mid <= 9999 or not 0 <= self.revision <= 999:
+            raise ValueError(f"MID {self.mid} / revision {self.revision} out of range")
+        if any(b < 0x20 or b > 0x7E for b in self.data):
+            raise ValueError(f"data must be printable ASCII: {_show(self.data)}")
+        length = HEADER_LEN + len(self.data)
+        if length > MAX_LENGTH:
+            raise ValueError(f"message of {length} bytes exceeds {MAX_LENGTH}")
+        head = (f"{length:04d}{self.mid:04d}{self.revision:03d}{'1' if self.no_ack else ' '}"
+                + _opt(self.station, 2) + _opt(self.spindle, 2) + _opt(self.sequence, 2)
+                + _opt(self.parts, 1) + _opt(self.part, 1))
+        return head.encode("ascii") + self.data
+
+
+def _opt(value: int | None, width: int) -> str:
+    if value is None:
+        return " " * width
+    if not 0 <= value < 10**width:
+        raise ValueError(f"header field {value} does not fit in {width} digits")
+    return f"{value:0{width}d}"
+
+
+def frame_tcp(msg: Message) -> bytes:
+    return msg.encode() + NUL
+
+
+def frame_serial(msg: Message) -> bytes:
+    """Integrator -> controller over RS-232: BEL HT BEL HT STX message NUL ETX."""
+    return INTEGRATOR_PREFIX + STX + msg.encode() + NUL + ETX
+
+
+def _number(raw: bytes, what: str) -> int:
+    if not raw.isdigit():
+        raise ProtocolError(f"{what} field {raw!r} is not a number")
+    return int(raw)
+
+
+def _optional(raw: bytes, what: str) -> int | None:
+    text = raw.strip(b" ")
+    if not text:
+        return None
+    if not text.isdigit():
+        raise ProtocolError(f"header {what} {raw!r} is neither digits nor spaces")
+    return int(text)
+
+
+def decode(raw: bytes) -> Message:
+    """Parse one message (header + data, NUL already removed)."""
+    if len(raw) < HEADER_LEN:
+        raise ProtocolError(f"message shorter than the 20-byte header: {_show(raw)}")
+    length = _number(raw[0:4], "length")
+    if length != len(raw):
+        raise ProtocolError(f"length field says {length} bytes but the message has {len(raw)}")
+    mid = _number(raw[4:8], "MID")
+    rev_text = raw[8:11].strip(b" ")                 # spaces, 000 and 001 all mean revision 1
+    if rev_text and not rev_text.isdigit():
+        raise ProtocolError(f"revision field {raw[8:11]!r} is not a number")
+    flag = raw[11:12]
+    if flag not in (b" ", b"0", b"1"):
+        raise ProtocolError(f"no-ack flag {flag!r} is not 0, 1 or space")
+    return Message(mid=mid, revision=max(int(rev_text or b"1"), 1), data=raw[HEADER_LEN:],
+                   no_ack=flag == b"1", station=_optional(raw[12:14], "station id"),
+                   spindle=_optional(raw[14:16], "spindle id"),
+                   sequence=_optional(raw[16:18], "sequence number"),
+                   parts=_optional(raw[18:19], "number of parts"),
+                   part=_optional(raw[19:20], "part number"), raw=raw)
+
+
+class TcpFramer:
+    """Split a TCP byte stream into messages: length-prefixed, each followed by NUL.
+
+    ``feed`` returns messages in order and, if the stream stops being Open Protocol, one
+    ProtocolError as its last item; after that the stream cannot be trusted (there is no
+    marker to resynchronise on), the framer ignores further input and the link must be reset.
+    """
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+        self._broken = False
+
+    @property
+    def pending(self) -> int:
+        """Bytes of an unfinished message held (to say "closed in the middle of a message")."""
+        return len(self._buf)
+
+    def feed(self, data: bytes) -> list[Message | ProtocolError]:
+        out: list[Message | ProtocolError] = []
+        if self._broken:
+            return out
+        self._buf += data
+        try:
+            while len(self._buf) >= 4:
+                head = bytes(self._buf[:4])
+                if not head.isdigit():
+                    raise ProtocolError(f"garbage where a message should start: "
+                                        f"{_show(bytes(self._buf))}")
+                length = int(head)
+                if length < HEADER_LEN:
+                    raise ProtocolError(f"length field {head!r} is shorter than the header")
+                if len(self._buf) < length + 1:
+                    break
+                if self._buf[length] != 0:
+                    raise ProtocolError(f"message of {length} bytes is not followed by NUL "
+                                        f"(got {bytes(self._buf[length:length + 1])!r})")
+                raw = bytes(self._buf[:length])
+                del self._buf[:length + 1]
+                out.append(decode(raw))
+        except ProtocolError as e:
+            self._broken = True
+            self._buf.clear()
+            out.append(e)
+        return out
+
+
+class SerialFramer:
+    """Split the controller's RS-232 stream (``STX message ETX``) into messages.
+
+    Serial framing can resynchronise, so errors are items, not the end: bytes outside a frame
+    are line noise (counted in ``noise``), a frame cut short by a new STX, a frame longer than
+    any message, or a frame that does not decode gives a ProtocolError and parsing goes on.
+    The NUL before ETX is optional on input.
+    """
+
+    MAX_FRAME = MAX_LENGTH + 1
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+        self._inside = False
+        self.noise = 0
+
+    @property
+    def pending(self) -> int:
+        return len(self._buf) + self._inside
+
+    def feed(self, data: bytes) -> list[Message | ProtocolError]:
+        out: list[Message | ProtocolError] = []
+        i, n = 0, len(data)
+        while i < n:
+            if not self._inside:
+                j = data.find(STX, i)
+                if j < 0:
+                    self.noise += n - i
+                    break
+                self.noise += j - i
+                self._inside, i = True, j + 1
+                self._buf.clear()
+                continue
+            etx, stx = data.find(ETX, i), data.find(STX, i)
+            end = min(k for k in (etx, stx, n) if k >= 0)
+            self._buf += data[i:end]
+            i = end
+            if len(self._buf) > self.MAX_FRAME:    # the delimiter at ``end`` is looked at again
+                out.append(ProtocolError(f"serial frame without ETX after {len(self._buf)} "
+                                         "bytes; dropped"))
+                self._buf.clear()
+                self._inside = False
+            elif end == n:
+                break
+            elif end == stx:
+                out.append(ProtocolError(f"serial frame cut short by a new STX after "
+                                         f"{len(self._buf)} bytes: {_show(bytes(self._buf))}"))
+                self._buf.clear()
+                i += 1
+            else:
+                out.append(self._unframe(bytes(self._buf)))
+                self._buf.clear()
+                self._inside = False
+                i += 1
+        return out
+
+    @staticmethod
+    def _unframe(body: bytes) -> Message | ProtocolError:
+        if body.endswith(NUL):
+            body = body[:-1]
+        try:
+            return decode(body)
+        except ProtocolError as e:
+            return e
+
+
+# -- replies --------------------------------------------------------------------------------
+def accepted_mid(msg: Message) -> int:
+    """The MID a 0005 (command accepted) acknowledges."""
+    return _number(msg.data[:4], "MID 0005 accepted-MID")
+
+
+def refusal(msg: Message) -> tuple[int, int]:
+    """(refused MID, error code) of a 0004; the code may be missing on odd controllers (0)."""
+    mid = _number(msg.data[:4], "MID 0004 refused-MID")
+    code_text = msg.data[4:6]
+    return mid, (_number(code_text, "MID 0004 error code") if code_text else 0)
+
+
+def refusal_text(code: int) -> str:
+    return f"error {code:02d} ({ERROR_TEXT.get(code, 'unknown error code')})"
+
+
+def identity(msg: Message) -> str:
+    """Controller name, cell and channel from MID 0002 revision 1, else its data as text."""
+    text = msg.data.decode("ascii", "replace")
+    if len(text) >= 12 and text[0:2] == "01" and text[6:8] == "02" and text[10:12] == "03":
+        name = text[12:37].rstrip()
+        return f"{name or 'controller'} (cell {text[2:6]}, channel {text[8:10]})"
+    return text.strip() or f"controller (MID 0002 revision {msg.revision})"
+
+
+# MID 0061 revision 1: (name, first, last) byte positions, 1-based as in PROTOCOLS.md; the
+# field's 2-digit tag (01, 02, ... in this order) sits in the two bytes before ``first``.
+RESULT_REV1_LEN = 231
+RESULT_REV1_FIELDS: tuple[tuple[str, int, int], ...] = (
+    ("cell_id", 23, 26), ("channel_id", 29, 30), ("controller_name", 33, 57),
+    ("vin", 60, 84), ("job", 87, 88), ("pset", 91, 93), ("batch_size", 96, 99),
+    ("batch_counter", 102, 105), ("ok", 108, 108), ("torque_status", 111, 111),
+    ("angle_status", 114, 114), ("torque_min", 117, 122), ("torque_max", 125, 130),
+    ("torque_target", 133, 138), ("torque", 141, 146), ("angle_min", 149, 153),
+    ("angle_max", 156, 160), ("angle_target", 163, 167), ("angle", 170, 174),
+    ("timestamp", 177, 195), ("pset_changed", 198, 216), ("batch_status", 219, 219),
+    ("tightening_id", 222, 231),
+)
+_TIME_FORMAT = "%Y-%m-%d:%H:%M:%S"
+
+
+def parse_result(raw: bytes) -> TighteningResult:
+    """A MID 0061 revision 1 message (header included, NUL excluded) -> TighteningResult."""
+    msg = decode(raw)
+    if msg.mid != MID_RESULT or msg.revision != 1:
+        raise ProtocolError(f"expected MID 0061 revision 1, got MID {msg.mid:04d} revision "
+                            f"{msg.revision}")
+    if len(raw) != RESULT_REV1_LEN:
+        raise ProtocolError(f"MID 0061 revision 1 has {RESULT_REV1_LEN} bytes, got {len(raw)}")
+    if not raw.isascii():
+        raise ProtocolError(f"MID 0061 contains non-ASCII bytes: {_show(raw[HEADER_LEN:])}")
+    text = raw.decode("ascii")
+    f: dict[str, str] = {}
+    for tag, (name, first, last) in enumerate(RESULT_REV1_FIELDS, start=1):
+        found = text[first - 3:first - 1]
+        if found != f"{tag:02d}":
+            raise ProtocolError(f"MID 0061: expected tag {tag:02d} ({name}) at byte "
+                                f"{first - 2}, found {found!r}")
+        f[name] = text[first - 1:last]
+
+    def num(name: str) -> int:
+        if not f[name].isdigit():
+            raise ProtocolError(f"MID 0061 {name} {f[name]!r} is not a number")
+        return int(f[name])
+
+    def status(name: str, allowed: int) -> int:
+        value = num(name)
+        if value >= allowed:
+            raise ProtocolError(f"MID 0061 {name} {value} is out of range")
+        return value
+
+    try:
+        timestamp = datetime.strptime(f["timestamp"], _TIME_FORMAT)
+    except ValueError:
+        raise ProtocolError(f"MID 0061 timestamp {f['timestamp']!r} is not "
+                            "YYYY-MM-DD:HH:MM:SS") from None
+    try:   # controllers that never changed pset may send zeros: not worth refusing the result
+        pset_changed: datetime | None = datetime.strptime(f["pset_changed"], _TIME_FORMAT)
+    except ValueError:
+        pset_changed = None
+    return TighteningResult(
+        ok=bool(status("ok", 2)), torque_nm=num("torque") / 100, angle_deg=float(num("angle")),
+        torque_status=Status(status("torque_status", 3)),
+        angle_status=Status(status("angle_status", 3)), tightening_id=num("tightening_id"),
+        pset=num("pset"), vin=f["vin"].rstrip(), timestamp=timestamp,
+        torque_min_nm=num("torque_min") / 100, torque_max_nm=num("torque_max") / 100,
+        torque_target_nm=num("torque_target") / 100, angle_min_deg=float(num("angle_min")),
+        angle_max_deg=float(num("angle_max")), angle_target_deg=float(num("angle_target")),
+        cell_id=num("cell_id"), channel_id=num("channel_id"),
+        controller_name=f["controller_name"].rstrip(), job=num("job"),
+        batch_size=num("batch_size"), batch_counter=num("batch_counter"),
+        batch_status=num("batch_status"), pset_changed=pset_changed, raw=text)

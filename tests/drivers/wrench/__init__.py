@@ -1,0 +1,1 @@
+"""Tests of the tightening-controller drivers (Open Protocol over TCP and a pty)."""
