@@ -56,6 +56,69 @@ def probe_lift(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _result_json(r: Any) -> dict[str, Any]:
+    return {"torque_nm": r.torque_nm, "angle_deg": r.angle_deg, "ok": r.ok,
+            "torque_status": r.torque_status.name, "angle_status": r.angle_status.name,
+            "tightening_id": r.tightening_id, "pset": r.pset, "vin": r.vin}
+
+
+def probe_wrench(args: argparse.Namespace) -> int:
+    """Session start, optionally a pset selection (acknowledged or refused with the
+    controller's code) and one tightening result (the tool is enabled for it, and disabled
+    again before the probe ends)."""
+    from drivers.errors import RefusedError
+    from drivers.wrench import open_wrench
+
+    if args.pset is not None and not 0 <= args.pset <= 999:
+        raise UrlError(f"--pset {args.pset}: Open Protocol psets are 0-999")
+    out: dict[str, Any] = {"device": args.url, "kind": "wrench", "identity": None,
+                           "acknowledged": False, "pset": args.pset, "error": None,
+                           "result": None}
+    code = EXIT_OK
+    try:
+        with open_wrench(args.url, timeout=args.timeout) as w:
+            out["identity"] = w.identity()
+            out["acknowledged"] = args.pset is None  # the session itself was accepted
+            if args.pset is not None:
+                try:
+                    w.select_pset(args.pset, timeout=args.timeout)
+                    out["acknowledged"] = True
+                except RefusedError as exc:
+                    out["error"] = {"code": exc.code, "text": str(exc)}
+                    code = EXIT_NO_ANSWER
+            if code == EXIT_OK and args.wait_result:
+                w.enable_tool()
+                try:
+                    r = w.wait_result(args.wait_result)
+                finally:
+                    w.disable_tool()
+                if r is None:
+                    out["error"] = {"code": None, "text": f"no tightening result within "
+                                                        f"{args.wait_result:g} s"}
+                    code = EXIT_NO_ANSWER
+                else:
+                    out["result"] = _result_json(r)
+    except DeviceError as exc:
+        return _failed(args, "wrench", exc)
+    if args.json:
+        sys.stdout.write(json.dumps(out) + "\n")
+    else:
+        print(out["identity"])
+        if args.pset is not None:
+            print(f"  pset {args.pset}: " + ("acknowledged" if out["acknowledged"] else
+                                             f"REFUSED ({out['error']['text']})"))
+        if out["result"]:
+            r = out["result"]
+            print(f"  result: {'OK' if r['ok'] else 'NOK'} torque {r['torque_nm']:.2f} Nm "
+                  f"({r['torque_status']}), angle {r['angle_deg']:.0f} deg "
+                  f"({r['angle_status']}), id {r['tightening_id']}")
+        elif out["error"] and code and args.wait_result and out["acknowledged"]:
+            print(f"  {out['error']['text']}")
+    if code and not args.json:
+        sys.stderr.write(f"stationd: wrench: {out['error']['text']}\n")
+    return code
+
+
 def add_probe_parser(sub: Any) -> None:
     p = sub.add_parser("probe", help="connect to one device and show its identity and state")
     psub = p.add_subparsers(dest="device", required=True, parser_class=type(p))
@@ -66,3 +129,12 @@ def add_probe_parser(sub: Any) -> None:
     lift.add_argument("--timeout", type=float, default=2.0, help="seconds (default 2)")
     lift.add_argument("--json", action="store_true", help="print one JSON object")
     lift.set_defaults(func=probe_lift)
+    w = psub.add_parser("wrench", help="start a session, select a pset, wait for a result")
+    w.add_argument("url", help="openprotocol://HOST:4545 | openprotocol+serial:///dev/ttyUSB1"
+                               "?baud=9600 | sim://wrench")
+    w.add_argument("--pset", type=int, help="select this pset and wait for the acknowledgement")
+    w.add_argument("--wait-result", type=float, metavar="SECONDS",
+                   help="enable the tool and wait this long for one tightening result")
+    w.add_argument("--timeout", type=float, default=2.0, help="seconds (default 2)")
+    w.add_argument("--json", action="store_true", help="print one JSON object")
+    w.set_defaults(func=probe_wrench)

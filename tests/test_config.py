@@ -29,7 +29,8 @@ def test_sim_pair_file_is_the_demo_pair():
     ("vision:\n  hsv:\n    h: [118]\n    s: [50, 255]\n    v: [45, 255]\n", "vision.hsv.h"),
     ("vision:\n  hsv: missing.yaml\n", "does not exist"),
     ("vision:\n  gates:\n    min_points: 2\n", "out of range"),
-    ("lift: modbus://x\n", "unknown key"),
+    ("lifts: {}\n", "unknown key"),
+    ("lift: modbus://x\n", "lift: expected a mapping"),
 ])
 def test_config_errors_name_file_line_and_key(tmp_path, text, needle):
     p = tmp_path / "cfg.yaml"

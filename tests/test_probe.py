@@ -54,3 +54,55 @@ def test_station_config_lift_register_map(tmp_path):
     cfg.write_text("lift:\n  registers:\n    heigth: {address: 100}\n")
     with pytest.raises(ConfigError, match=r"s.yaml:3: lift.registers.heigth: unknown key"):
         load_station_config(cfg)
+
+
+def test_probe_wrench_selects_a_pset_and_reports_one_result(capsys):
+    import threading
+
+    from drivers.wrench.sim import SimController
+
+    with SimController(seed=3) as ctl:
+        port = ctl.listen_tcp()
+
+        def operator():  # pulls the trigger once the probe has enabled the tool
+            import time
+            for _ in range(200):
+                if ctl.tool_enabled and ctl.pset == 1:
+                    ctl.pull_trigger()
+                    return
+                time.sleep(0.01)
+
+        t = threading.Thread(target=operator)
+        t.start()
+        code = main(["probe", "wrench", f"openprotocol://127.0.0.1:{port}", "--pset", "1",
+                     "--wait-result", "3", "--json"])
+        t.join()
+        assert not ctl.tool_enabled  # the probe leaves the tool disabled
+    obj = json.loads(capsys.readouterr().out)
+    assert code == 0 and obj["acknowledged"] is True and obj["error"] is None
+    r = obj["result"]
+    assert r["pset"] == 1 and r["torque_nm"] > 0 and isinstance(r["ok"], bool)
+    assert {"angle_deg", "torque_status", "angle_status", "tightening_id", "vin"} <= set(r)
+
+
+def test_probe_wrench_refused_pset_exits_1_with_the_code(capsys):
+    from drivers.wrench.sim import SimController
+
+    with SimController(refusals={5: 2}) as ctl:
+        port = ctl.listen_tcp()
+        code = main(["probe", "wrench", f"openprotocol://127.0.0.1:{port}", "--pset", "5",
+                     "--json"])
+    obj = json.loads(capsys.readouterr().out)
+    assert code == 1 and obj["acknowledged"] is False and obj["error"]["code"] == 2
+
+
+def test_probe_wrench_no_result_in_time_exits_1(capsys):
+    code = main(["probe", "wrench", "sim://wrench", "--pset", "1", "--wait-result", "0.3"])
+    err = capsys.readouterr().err
+    assert code == 1 and "no tightening result" in err
+
+
+def test_probe_wrench_bad_input_exits_2(capsys):
+    assert main(["probe", "wrench", "ftp://x"]) == 2
+    assert main(["probe", "wrench", "sim://wrench", "--pset", "1000"]) == 2
+    assert capsys.readouterr().err.count("\n") == 2
