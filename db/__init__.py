@@ -1,4 +1,11 @@
-"""The process-parameter database (SQLAlchemy): vehicle models, bolts, parameters, records.
+"""The process-parameter database: vehicle models, bolts, versioned parameters, vehicles and
+tightening records.
 
-The models, the repository used by the daemon and the migrations arrive with the daemon issue.
+- ``boltfile``: bolts.yaml -> validated ``bolts`` values (all errors, with file, line, key);
+- ``bolts``: the bolt table as typed values and its YAML form (the export);
+- ``models``: the SQLAlchemy schema; ``migrations``: the alembic revisions that create it;
+- ``engine``, ``migrate``: any SQLAlchemy URL, SQLite in WAL mode with foreign keys on,
+  migrated in code when opened;
+- ``repository``: the API the daemon and ``stationd db`` use (``importer`` and ``report``
+  hold its import diff and vehicle reports).
 """

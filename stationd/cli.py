@@ -209,11 +209,14 @@ def build_parser() -> argparse.ArgumentParser:
     bc.add_argument("--seed", type=int, default=1)
     bc.set_defaults(func=cmd_bench_chain)
 
+    from stationd.db_cli import add_config_parser, add_db_parser
     from stationd.geometry.calibrate_cli import add_calibrate_parser
     from stationd.probe import add_probe_parser
 
     add_calibrate_parser(sub)
     add_probe_parser(sub)
+    add_db_parser(sub)
+    add_config_parser(sub)
 
     dm = sub.add_parser("demo", help="the main job: a simulated run")
     dm.add_argument("--seed", type=int, default=7)

@@ -1,0 +1,72 @@
+"""The database engine: any SQLAlchemy URL, with SQLite set up for a station that must not lose
+a record.
+
+SQLite (the default, ``sqlite:///stationd.db``) gets, on every new connection:
+
+- ``journal_mode=WAL``: readers (``stationd db report``) never block the daemon's writes, and a
+  killed writer leaves a database that opens with every committed transaction in it;
+- ``synchronous=FULL``: a commit is on disk (WAL fsynced) when it returns, so a power cut
+  right after ``record_tightening`` returns loses nothing either;
+- ``foreign_keys=ON``: SQLite checks references only when asked, per connection;
+- ``busy_timeout``: a second process waits for the write lock instead of failing at once.
+
+Python 3.11's sqlite3 starts transactions lazily (not before a SELECT), so the read part of a
+read-modify-write would run outside the transaction.  The driver's own BEGIN is switched off and
+SQLAlchemy emits it: plain ``BEGIN`` for reads, ``BEGIN IMMEDIATE`` (the write lock taken at the
+start) on the engine returned by :func:`writer`, so an import never acts on a stale read.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy import Engine, create_engine, event, make_url
+from sqlalchemy.engine import Connection
+from sqlalchemy.exc import ArgumentError, NoSuchModuleError
+
+from stationd.errors import InputError
+
+DEFAULT_URL = "sqlite:///stationd.db"
+BUSY_TIMEOUT_MS = 10_000
+_IMMEDIATE = "stationd_begin_immediate"
+
+
+def make_engine(url: str = DEFAULT_URL) -> Engine:
+    """An engine for ``url``; a malformed URL or an unknown driver is an :class:`InputError`."""
+    try:
+        parsed = make_url(url)
+        engine = create_engine(parsed)
+    except (ArgumentError, NoSuchModuleError, ValueError) as exc:
+        raise InputError(f"database URL {url!r}: {exc}") from None
+    except ImportError as exc:
+        raise InputError(f"database URL {url!r}: driver not installed ({exc.name})") from None
+    if engine.dialect.name == "sqlite":
+        _setup_sqlite(engine)
+    return engine
+
+
+def writer(engine: Engine) -> Engine:
+    """The same engine (same pool), whose transactions take SQLite's write lock at BEGIN."""
+    return engine.execution_options(**{_IMMEDIATE: True})
+
+
+def _setup_sqlite(engine: Engine) -> None:
+    memory = engine.url.database in (None, "", ":memory:")
+
+    @event.listens_for(engine, "connect")
+    def _on_connect(dbapi_connection: Any, _record: Any) -> None:
+        dbapi_connection.isolation_level = None  # SQLAlchemy emits BEGIN (see _on_begin)
+        cursor = dbapi_connection.cursor()
+        try:
+            if not memory:
+                cursor.execute("PRAGMA journal_mode=WAL")
+            cursor.execute("PRAGMA synchronous=FULL")
+            cursor.execute("PRAGMA foreign_keys=ON")
+            cursor.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
+        finally:
+            cursor.close()
+
+    @event.listens_for(engine, "begin")
+    def _on_begin(conn: Connection) -> None:
+        immediate = conn.get_execution_options().get(_IMMEDIATE, False)
+        conn.exec_driver_sql("BEGIN IMMEDIATE" if immediate else "BEGIN")

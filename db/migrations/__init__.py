@@ -1,0 +1,1 @@
+"""Alembic migrations of the process-parameter database (run by ``db.migrate.upgrade``)."""

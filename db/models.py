@@ -1,0 +1,197 @@
+"""The process-parameter database schema (SQLAlchemy 2 declarative models).
+
+Why parameters live in their own versioned table: a tightening record must say exactly which
+targets the controller was given.  Once a bolt has records, a change of its parameters adds a
+new ``ProcessParameters`` version and the old row stays, still referenced by the old records;
+only versions nobody references are updated in place.  The current version of a bolt is its
+highest ``version``.
+
+Bolts and models removed from the bolt file are kept (``removed_at`` set) when records or
+vehicles refer to them, so history never dangles; otherwise they are deleted.
+
+This module is the schema's description for the code; ``db/migrations`` creates it in a
+database, and a test checks that the two agree.  Change both together (new revision).
+"""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import Any
+
+from sqlalchemy import (
+    JSON,
+    CheckConstraint,
+    DateTime,
+    Dialect,
+    ForeignKey,
+    Index,
+    Integer,
+    MetaData,
+    String,
+    TypeDecorator,
+    UniqueConstraint,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+
+# named constraints: alembic can then alter them on SQLite (batch mode) and on other databases
+NAMING = {
+    "ix": "ix_%(column_0_label)s",
+    "uq": "uq_%(table_name)s_%(column_0_N_name)s",
+    "ck": "ck_%(table_name)s_%(constraint_name)s",
+    "fk": "fk_%(table_name)s_%(column_0_name)s_%(referred_table_name)s",
+    "pk": "pk_%(table_name)s",
+}
+
+
+def utcnow() -> datetime:
+    return datetime.now(UTC)
+
+
+class UtcDateTime(TypeDecorator[datetime]):
+    """Timestamps stored as naive UTC, returned timezone-aware (SQLite keeps no zone)."""
+
+    impl = DateTime
+    cache_ok = True
+
+    def process_bind_param(self, value: datetime | None, dialect: Dialect) -> datetime | None:
+        if value is None:
+            return None
+        if value.tzinfo is None:
+            raise ValueError("naive datetime: give timestamps with a timezone (UTC)")
+        return value.astimezone(UTC).replace(tzinfo=None)
+
+    def process_result_value(self, value: datetime | None, dialect: Dialect) -> datetime | None:
+        return None if value is None else value.replace(tzinfo=UTC)
+
+
+class Base(DeclarativeBase):
+    metadata = MetaData(naming_convention=NAMING)
+
+
+class VehicleModel(Base):
+    """A vehicle model of the bolt table (the YAML key), with the code the lift reports."""
+
+    __tablename__ = "vehicle_models"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(32), unique=True)
+    code: Mapped[int | None] = mapped_column(Integer, unique=True)
+    description: Mapped[str | None] = mapped_column(String(200))
+    seq: Mapped[int] = mapped_column(default=0)  # position in the file, for the export
+    removed_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
+
+    bolts: Mapped[list[Bolt]] = relationship(back_populates="model", order_by="Bolt.seq")
+
+
+class PsetProgram(Base):
+    """A controller program (pset) definition: global when ``model_id`` is NULL."""
+
+    __tablename__ = "psets"
+    __table_args__ = (UniqueConstraint("model_id", "number"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    model_id: Mapped[int | None] = mapped_column(ForeignKey("vehicle_models.id"))
+    number: Mapped[int]
+    name: Mapped[str | None] = mapped_column(String(100))
+    torque_target: Mapped[float]
+    torque_min: Mapped[float]
+    torque_max: Mapped[float]
+    angle_target: Mapped[float | None]
+    angle_min: Mapped[float | None]
+    angle_max: Mapped[float | None]
+    seq: Mapped[int] = mapped_column(default=0)
+
+
+class Bolt(Base):
+    """A bolt of a model: its identity and geometry; its parameters are versioned apart."""
+
+    __tablename__ = "bolts"
+    __table_args__ = (UniqueConstraint("model_id", "code"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    model_id: Mapped[int] = mapped_column(ForeignKey("vehicle_models.id"))
+    code: Mapped[str] = mapped_column(String(32))  # the bolt id of the file
+    name: Mapped[str] = mapped_column(String(100))
+    x_mm: Mapped[float]
+    y_mm: Mapped[float]
+    z_mm: Mapped[float]
+    tighten_order: Mapped[int | None]
+    batch: Mapped[str | None] = mapped_column(String(32))
+    seq: Mapped[int] = mapped_column(default=0)
+    removed_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
+
+    model: Mapped[VehicleModel] = relationship(back_populates="bolts")
+    # deleting a bolt deletes its versions; the database refuses it while records refer to them
+    versions: Mapped[list[ProcessParameters]] = relationship(
+        back_populates="bolt", order_by="ProcessParameters.version",
+        cascade="all, delete-orphan")
+
+
+class ProcessParameters(Base):
+    """One version of a bolt's parameters: pset and/or torque and angle windows."""
+
+    __tablename__ = "process_parameters"
+    __table_args__ = (UniqueConstraint("bolt_id", "version"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    bolt_id: Mapped[int] = mapped_column(ForeignKey("bolts.id"))
+    version: Mapped[int]
+    pset: Mapped[int | None]
+    torque_target: Mapped[float]
+    torque_min: Mapped[float]
+    torque_max: Mapped[float]
+    angle_target: Mapped[float | None]
+    angle_min: Mapped[float | None]
+    angle_max: Mapped[float | None]
+    created_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
+    source: Mapped[str | None] = mapped_column(String(500))  # the file it was imported from
+
+    bolt: Mapped[Bolt] = relationship(back_populates="versions")
+
+
+class Vehicle(Base):
+    """A vehicle at the station: its VIN (or sequence id), model, start and end."""
+
+    __tablename__ = "vehicles"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    vin: Mapped[str] = mapped_column(String(32), unique=True)
+    model_id: Mapped[int] = mapped_column(ForeignKey("vehicle_models.id"))
+    started_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
+    ended_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
+
+    model: Mapped[VehicleModel] = relationship()
+
+
+class TighteningRecord(Base):
+    """One tightening: where the wrench was, what was sent, what the controller answered."""
+
+    __tablename__ = "tightening_records"
+    __table_args__ = (
+        CheckConstraint("status IN ('ok', 'nok')", name="status"),
+        Index("ix_tightening_records_vehicle_bolt", "vehicle_id", "bolt_id"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    vehicle_id: Mapped[int] = mapped_column(ForeignKey("vehicles.id"))
+    bolt_id: Mapped[int] = mapped_column(ForeignKey("bolts.id"))
+    parameters_id: Mapped[int] = mapped_column(ForeignKey("process_parameters.id"))
+    x_mm: Mapped[float]              # the localized bolt end, vehicle frame
+    y_mm: Mapped[float]
+    z_mm: Mapped[float]
+    match_distance_mm: Mapped[float]
+    tilt_deg: Mapped[float]
+    params_sent: Mapped[dict[str, Any]] = mapped_column(JSON)
+    acknowledged: Mapped[bool]       # the controller accepted the parameters
+    status: Mapped[str] = mapped_column(String(3))
+    torque_nm: Mapped[float | None]
+    angle_deg: Mapped[float | None]
+    tightening_id: Mapped[int | None]  # the controller's own id of the tightening
+    sent_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
+    result_at: Mapped[datetime | None] = mapped_column(UtcDateTime)  # controller's timestamp
+    recorded_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
+    images: Mapped[list[str]] = mapped_column(JSON)  # references (paths/URLs) of the frames
+
+    vehicle: Mapped[Vehicle] = relationship()
+    bolt: Mapped[Bolt] = relationship()
+    parameters: Mapped[ProcessParameters] = relationship()

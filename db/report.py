@@ -1,0 +1,119 @@
+"""A vehicle's report: each bolt of its model with its last result, and the bolts missing.
+
+Why the *last* record decides a bolt's status: a bolt tightened OK and then hit again with a
+NOK result (a double hit, a loosened joint) must not pass as OK; rework that ends OK clears a
+NOK.  Bolts retired from the table after the vehicle was tightened still appear, with their
+records, so a report never loses what was done.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle
+
+OK, NOK, MISSING = "ok", "nok", "missing"
+
+
+@dataclass(frozen=True)
+class VehicleInfo:
+    vin: str
+    model: str
+    started_at: datetime
+    ended_at: datetime | None
+
+
+@dataclass(frozen=True)
+class BoltResult:
+    bolt_id: str
+    name: str
+    status: str                      # ok | nok | missing
+    attempts: int
+    torque_nm: float | None = None   # of the last record
+    angle_deg: float | None = None
+    tightening_id: int | None = None
+    recorded_at: datetime | None = None
+    version: int | None = None       # the parameter version the last record was tightened with
+    retired: bool = False            # no longer in the bolt table
+
+    def to_json(self) -> dict[str, Any]:
+        return {"bolt": self.bolt_id, "name": self.name, "status": self.status,
+                "attempts": self.attempts, "torque_nm": self.torque_nm,
+                "angle_deg": self.angle_deg, "tightening_id": self.tightening_id,
+                "recorded_at": _iso(self.recorded_at), "parameter_version": self.version,
+                "retired": self.retired}
+
+
+@dataclass(frozen=True)
+class VehicleReport:
+    vehicle: VehicleInfo
+    bolts: tuple[BoltResult, ...]
+
+    @property
+    def missing(self) -> list[str]:
+        return [b.bolt_id for b in self.bolts if b.status == MISSING]
+
+    @property
+    def nok(self) -> list[str]:
+        return [b.bolt_id for b in self.bolts if b.status == NOK]
+
+    @property
+    def ok(self) -> list[str]:
+        return [b.bolt_id for b in self.bolts if b.status == OK]
+
+    @property
+    def complete(self) -> bool:
+        """Every bolt of the model tightened, and every last result OK."""
+        return not self.missing and not self.nok
+
+    def summary(self) -> str:
+        v = self.vehicle
+        state = "closed" if v.ended_at is not None else "open"
+        text = f"{v.vin} ({v.model}, {state}): {len(self.ok)} ok"
+        text += f", {len(self.nok)} NOK ({', '.join(self.nok)})" if self.nok else ", 0 NOK"
+        text += f", {len(self.missing)} missing ({', '.join(self.missing)})" if self.missing \
+            else ", 0 missing"
+        return text
+
+    def to_json(self) -> dict[str, Any]:
+        v = self.vehicle
+        return {"vin": v.vin, "model": v.model, "started_at": _iso(v.started_at),
+                "ended_at": _iso(v.ended_at), "complete": self.complete, "ok": self.ok,
+                "nok": self.nok, "missing": self.missing,
+                "bolts": [b.to_json() for b in self.bolts]}
+
+
+def _iso(t: datetime | None) -> str | None:
+    return None if t is None else t.isoformat()
+
+
+def build_report(s: Session, v: Vehicle) -> VehicleReport:
+    records = s.execute(
+        select(TighteningRecord, ProcessParameters.version)
+        .join(ProcessParameters, TighteningRecord.parameters_id == ProcessParameters.id)
+        .where(TighteningRecord.vehicle_id == v.id)
+        .order_by(TighteningRecord.recorded_at, TighteningRecord.id)).all()
+    by_bolt: dict[int, list[tuple[TighteningRecord, int]]] = {}
+    for rec, version in records:
+        by_bolt.setdefault(rec.bolt_id, []).append((rec, version))
+    bolts = list(s.scalars(select(Bolt).where(Bolt.model_id == v.model_id)
+                           .order_by(Bolt.seq, Bolt.code)))
+    results = []
+    for b in bolts:
+        recs = by_bolt.get(b.id, [])
+        if b.removed_at is not None and not recs:
+            continue
+        if not recs:
+            results.append(BoltResult(b.code, b.name, MISSING, 0))
+            continue
+        last, version = recs[-1]
+        results.append(BoltResult(b.code, b.name, last.status, len(recs), last.torque_nm,
+                                  last.angle_deg, last.tightening_id, last.recorded_at, version,
+                                  b.removed_at is not None))
+    info = VehicleInfo(v.vin, v.model.name, v.started_at, v.ended_at)
+    return VehicleReport(info, tuple(results))

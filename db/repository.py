@@ -1,0 +1,273 @@
+"""The process-parameter repository: the one object the daemon and the commands use.
+
+Why a repository and not sessions in the callers: every write is one transaction with the
+rules in one place (SQLite: ``BEGIN IMMEDIATE``, committed before the method returns), and the
+callers see plain values (``BoltInfo``, ``VehicleReport``), never ORM objects tied to a session.
+``Repository.open`` migrates the database to the current schema first.  The default URL is
+``sqlite:///stationd.db`` (the current directory); the daemon passes one in its StateDirectory.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Self
+
+from alembic.util import CommandError
+from sqlalchemy import Engine, select
+from sqlalchemy.exc import SQLAlchemyError
+from sqlalchemy.orm import Session
+
+from db.boltfile import DEFAULT_TOLERANCE_MM, load_bolts
+from db.bolts import BoltTable, Parameters, dump_bolts
+from db.engine import DEFAULT_URL, make_engine, writer
+from db.importer import ImportReport, current_version, import_table, parameters_of, read_table
+from db.migrate import upgrade
+from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel, utcnow
+from db.report import VehicleInfo, VehicleReport, build_report
+from stationd.errors import InputError, StationError
+
+EXPORT_HEADER = ("stationd bolt table, exported from the process-parameter database.\n"
+                 "Units: positions mm (vehicle frame), torque N m, angle degrees.")
+VIN_MAX = 32
+
+
+class DatabaseError(StationError):
+    """The database cannot be opened, read or written (locked, full, corrupt, unreachable)."""
+
+
+class NotFoundError(InputError):
+    """A VIN, model or bolt that the database does not hold."""
+
+
+@dataclass(frozen=True)
+class BoltInfo:
+    """A bolt of a model as the station uses it: where it is and what to send."""
+
+    model: str
+    bolt_id: str
+    name: str
+    position: tuple[float, float, float]
+    parameters: Parameters
+    parameters_id: int   # pass it back to record_tightening: the version actually sent
+    version: int
+    order: int | None
+    batch: str | None
+
+
+class Repository:
+    """Open with :meth:`open`; use as a context manager or call :meth:`close`."""
+
+    def __init__(self, engine: Engine) -> None:
+        self._engine = engine
+        self._writer = writer(engine)
+
+    @classmethod
+    def open(cls, url: str = DEFAULT_URL) -> Repository:
+        """Connect to ``url`` (any SQLAlchemy URL) and migrate it to the current schema."""
+        engine = make_engine(url)
+        where = engine.url.render_as_string()  # the password, if any, is masked
+        try:
+            upgrade(engine)
+        except SQLAlchemyError as exc:
+            engine.dispose()
+            raise DatabaseError(f"{where}: cannot open: {_reason(exc)}") from None
+        except CommandError as exc:  # e.g. a schema revision this release does not know
+            engine.dispose()
+            raise DatabaseError(f"{where}: cannot migrate: {exc} (a database of a newer "
+                                "stationd?)") from None
+        return cls(engine)
+
+    @property
+    def engine(self) -> Engine:
+        return self._engine
+
+    def close(self) -> None:
+        self._engine.dispose()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    # -- transactions ---------------------------------------------------------------------
+    @contextmanager
+    def _session(self, write: bool) -> Iterator[Session]:
+        """One transaction: committed when the block ends, rolled back if it raises."""
+        try:
+            with Session(self._writer if write else self._engine,
+                         expire_on_commit=False) as s, s.begin():
+                yield s
+        except SQLAlchemyError as exc:
+            raise DatabaseError(f"database {'write' if write else 'read'} failed: "
+                                f"{_reason(exc)}") from None
+
+    # -- bolt table -----------------------------------------------------------------------
+    def import_bolts(self, source: str | Path | BoltTable, *,
+                     tolerance_mm: float = DEFAULT_TOLERANCE_MM) -> ImportReport:
+        """Validate and import a bolt file (or a checked table), all or nothing.
+
+        The file is the whole table: models and bolts it no longer lists are removed (kept as
+        retired while records refer to them).  Importing the same file again changes nothing.
+        """
+        if isinstance(source, BoltTable):
+            table, where = source, None
+        else:
+            table, where = load_bolts(source, tolerance_mm=tolerance_mm), str(source)
+        with self._session(write=True) as s:
+            return import_table(s, table, where)
+
+    def table(self) -> BoltTable:
+        with self._session(write=False) as s:
+            return read_table(s)
+
+    def export_bolts(self) -> str:
+        """The bolt table as YAML text that imports back with no changes."""
+        return dump_bolts(self.table(), EXPORT_HEADER)
+
+    def models(self) -> list[str]:
+        with self._session(write=False) as s:
+            return list(s.scalars(select(VehicleModel.name).where(
+                VehicleModel.removed_at.is_(None)).order_by(VehicleModel.seq)))
+
+    def model_for_code(self, code: int) -> str | None:
+        """The model whose lift code is ``code`` (what the lift PLC reports), if any."""
+        with self._session(write=False) as s:
+            return s.scalar(select(VehicleModel.name).where(
+                VehicleModel.code == code, VehicleModel.removed_at.is_(None)))
+
+    def bolts_for_model(self, model: str) -> list[BoltInfo]:
+        """The model's bolts in file order, each with its current parameter version."""
+        with self._session(write=False) as s:
+            row = _model(s, model)
+            return [_info(model, b) for b in row.bolts if b.removed_at is None]
+
+    # -- vehicles -------------------------------------------------------------------------
+    def start_vehicle(self, vin: str, model: str, *, reopen: bool = False) -> VehicleInfo:
+        """Start (or, after a daemon restart, resume) a vehicle; ``reopen`` a closed one."""
+        _check_vin(vin)
+        with self._session(write=True) as s:
+            m = _model(s, model)
+            v = s.scalar(select(Vehicle).where(Vehicle.vin == vin))
+            if v is None:
+                v = Vehicle(vin=vin, model_id=m.id, started_at=utcnow())
+                s.add(v)
+                s.flush()
+            elif v.model_id != m.id:
+                raise InputError(f"vehicle {vin} is already known as model {v.model.name}, "
+                                 f"not {model}")
+            elif v.ended_at is not None:
+                if not reopen:
+                    raise InputError(f"vehicle {vin} was closed at {v.ended_at:%Y-%m-%d %H:%M:%S}"
+                                     " UTC; reopen it to tighten again")
+                v.ended_at = None
+            return VehicleInfo(v.vin, model, v.started_at, v.ended_at)
+
+    def record_tightening(
+        self, vin: str, bolt: str, *, ok: bool, position_mm: Sequence[float],
+        match_distance_mm: float, tilt_deg: float, torque_nm: float | None,
+        angle_deg: float | None, parameters_id: int | None = None,
+        params_sent: Mapping[str, Any] | None = None, acknowledged: bool = True,
+        tightening_id: int | None = None, sent_at: datetime | None = None,
+        result_at: datetime | None = None, images: Sequence[str] = (),
+    ) -> int:
+        """Record one tightening of ``bolt`` on the open vehicle ``vin``; return its id.
+
+        Committed (and on disk) before it returns.  ``parameters_id`` is the version that was
+        sent (``BoltInfo.parameters_id``); without it, the bolt's current version.
+        ``params_sent`` defaults to that version's pset and targets.
+        """
+        if len(position_mm) != 3:
+            raise InputError("position_mm: expected x, y, z")
+        for name, t in (("sent_at", sent_at), ("result_at", result_at)):
+            if t is not None and t.tzinfo is None:
+                raise InputError(f"{name}: a timestamp with a timezone (UTC) is needed")
+        with self._session(write=True) as s:
+            v = _vehicle(s, vin)
+            if v.ended_at is not None:
+                raise InputError(f"vehicle {vin} is closed: a tightening cannot be recorded")
+            b = s.scalar(select(Bolt).where(Bolt.model_id == v.model_id, Bolt.code == bolt,
+                                            Bolt.removed_at.is_(None)))
+            if b is None:
+                raise NotFoundError(f"bolt {bolt!r} is not a bolt of model {v.model.name}")
+            version = current_version(b) if parameters_id is None \
+                else s.get(ProcessParameters, parameters_id)
+            if version is None or version.bolt_id != b.id:
+                raise InputError(f"parameter version {parameters_id} is not one of bolt {bolt}")
+            sent = dict(params_sent) if params_sent is not None \
+                else _params_json(parameters_of(version))
+            x, y, z = (float(c) for c in position_mm)  # plain floats: NumPy scalars welcome
+            rec = TighteningRecord(
+                vehicle_id=v.id, bolt_id=b.id, parameters_id=version.id, x_mm=x, y_mm=y,
+                z_mm=z, match_distance_mm=float(match_distance_mm), tilt_deg=float(tilt_deg),
+                params_sent=sent, acknowledged=bool(acknowledged),
+                status="ok" if ok else "nok", torque_nm=_opt_float(torque_nm),
+                angle_deg=_opt_float(angle_deg),
+                tightening_id=None if tightening_id is None else int(tightening_id),
+                sent_at=sent_at, result_at=result_at, recorded_at=utcnow(),
+                images=[str(i) for i in images])
+            s.add(rec)
+            s.flush()
+            return rec.id
+
+    def close_vehicle(self, vin: str) -> VehicleReport:
+        """End the vehicle (once; closing again keeps the first end) and return its summary:
+        the bolts still missing and those whose last result is NOK."""
+        with self._session(write=True) as s:
+            v = _vehicle(s, vin)
+            if v.ended_at is None:
+                v.ended_at = utcnow()
+            s.flush()
+            return build_report(s, v)
+
+    def vehicle_report(self, vin: str) -> VehicleReport:
+        with self._session(write=False) as s:
+            return build_report(s, _vehicle(s, vin))
+
+
+# -- helpers ------------------------------------------------------------------------------
+def _reason(exc: SQLAlchemyError) -> str:
+    orig = getattr(exc, "orig", None)
+    return str(orig if orig is not None else exc).splitlines()[0]
+
+
+def _opt_float(v: float | None) -> float | None:
+    return None if v is None else float(v)
+
+
+def _check_vin(vin: str) -> None:
+    if not vin or len(vin) > VIN_MAX or not vin.isprintable() or any(c.isspace() for c in vin):
+        raise InputError(f"VIN {vin!r}: 1-{VIN_MAX} printable characters without spaces")
+
+
+def _model(s: Session, name: str) -> VehicleModel:
+    row = s.scalar(select(VehicleModel).where(VehicleModel.name == name,
+                                              VehicleModel.removed_at.is_(None)))
+    if row is None:
+        raise NotFoundError(f"vehicle model {name!r} is not in the bolt table")
+    return row
+
+
+def _vehicle(s: Session, vin: str) -> Vehicle:
+    v = s.scalar(select(Vehicle).where(Vehicle.vin == vin))
+    if v is None:
+        raise NotFoundError(f"vehicle {vin!r} is not in the database")
+    return v
+
+
+def _info(model: str, b: Bolt) -> BoltInfo:
+    version = current_version(b)
+    return BoltInfo(model, b.code, b.name, (b.x_mm, b.y_mm, b.z_mm), parameters_of(version),
+                    version.id, version.version, b.tighten_order, b.batch)
+
+
+def _params_json(p: Parameters) -> dict[str, Any]:
+    def w(x: Any) -> dict[str, float] | None:
+        return None if x is None else {"target": x.target, "min": x.min, "max": x.max}
+    return {"pset": p.pset, "torque": w(p.torque), "angle": w(p.angle)}

@@ -1,0 +1,198 @@
+"""``stationd db`` (import, export, report) and ``stationd config check``.
+
+Exit codes follow the CLI contract: 0 success, 1 for a report whose vehicle is incomplete (bolts
+missing or NOK), 2 for bad input (an invalid file, an unknown VIN, a database that cannot be
+opened) with one readable line per error on stderr.  A file with errors lists *all* of them
+(one line each, ``file:line: key: message``) before the final line.
+
+The database is given as a SQLAlchemy URL; the default ``sqlite:///stationd.db`` is a file in
+the current directory (the daemon passes its own, under its StateDirectory).  ``import`` is
+all-or-nothing: a file with any error changes nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from stationd.errors import ConfigError, InputError
+
+if TYPE_CHECKING:
+    from db.repository import Repository
+
+EXIT_OK, EXIT_INCOMPLETE, EXIT_BAD_INPUT = 0, 1, 2
+DB_HELP = "database URL (SQLAlchemy; default sqlite:///stationd.db in the current directory)"
+
+
+def _tolerance(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number (mm)") from None
+    if not 0 < v < 1000:
+        raise argparse.ArgumentTypeError(f"{text} mm: expected 0 < tolerance < 1000")
+    return v
+
+
+def _print_errors(errors: Sequence[ConfigError]) -> None:
+    for e in errors:
+        sys.stderr.write(f"{e}\n")
+
+
+def _open(url: str, *, must_exist: bool) -> Repository:
+    """The repository; a read command does not create a missing SQLite file."""
+    from sqlalchemy import make_url
+    from sqlalchemy.exc import ArgumentError
+
+    from db.repository import Repository
+
+    if must_exist:
+        try:
+            u = make_url(url)
+        except ArgumentError as exc:
+            raise InputError(f"database URL {url!r}: {exc}") from None
+        path = u.database
+        if u.get_backend_name() == "sqlite" and path and path != ":memory:" \
+                and not path.startswith("file:") and not Path(path).exists():
+            raise InputError(f"no database at {path} (import a bolt table first, or give --db)")
+    return Repository.open(url)
+
+
+# -- db import / export / report -------------------------------------------------------------
+def cmd_db_import(args: argparse.Namespace) -> int:
+    from db.boltfile import check_bolts
+
+    result = check_bolts(args.file, tolerance_mm=args.tolerance)
+    if result.errors:
+        _print_errors(result.errors)
+        sys.stderr.write(f"stationd: error: {args.file}: {len(result.errors)} error(s), "
+                         "nothing imported\n")
+        return EXIT_BAD_INPUT
+    with _open(args.db, must_exist=False) as repo:
+        report = repo.import_bolts(args.file, tolerance_mm=args.tolerance)
+    if args.json:
+        sys.stdout.write(json.dumps({"changes": report.has_changes, **report.to_json()}) + "\n")
+    else:
+        print("\n".join(report.lines()))
+    return EXIT_OK
+
+
+def cmd_db_export(args: argparse.Namespace) -> int:
+    with _open(args.db, must_exist=True) as repo:
+        text = repo.export_bolts()
+        summary = repo.table().summary()
+    if args.out is None:
+        sys.stdout.write(text)
+        return EXIT_OK
+    out = Path(args.out)
+    _write_atomic(out, text)
+    print(f"wrote {out}: {summary}")
+    return EXIT_OK
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    """Write via a temporary file and a rename: a bolt file is never left half-written."""
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write: {exc.strerror}") from None
+
+
+def cmd_db_report(args: argparse.Namespace) -> int:
+    with _open(args.db, must_exist=True) as repo:
+        report = repo.vehicle_report(args.vin)
+    if args.json:
+        sys.stdout.write(json.dumps(report.to_json()) + "\n")
+    else:
+        print(report.summary())
+        for b in report.bolts:
+            result = "-" if b.status == "missing" else \
+                f"{_num(b.torque_nm)} N m, {_num(b.angle_deg)} deg, v{b.version}, " \
+                f"{b.attempts} attempt(s)"
+            retired = " (retired)" if b.retired else ""
+            print(f"  {b.bolt_id:<12} {b.status.upper():<8} {result}  {b.name}{retired}")
+    return EXIT_OK if report.complete else EXIT_INCOMPLETE
+
+
+def _num(v: float | None) -> str:
+    return "-" if v is None else f"{v:.1f}"
+
+
+# -- config check ----------------------------------------------------------------------------
+def cmd_config_check(args: argparse.Namespace) -> int:
+    """Check bolt files; every error of every file, then one summary line."""
+    from db.boltfile import check_bolts
+
+    failed, errors = 0, 0
+    for name in args.files:
+        result = check_bolts(name, tolerance_mm=args.tolerance)
+        if result.table is not None:
+            print(f"{name}: ok, {result.table.summary()}")
+            continue
+        failed += 1
+        errors += len(result.errors)
+        _print_errors(result.errors)
+    if failed:
+        sys.stderr.write(f"stationd: error: {errors} error(s) in {failed} of "
+                         f"{len(args.files)} file(s)\n")
+        return EXIT_BAD_INPUT
+    return EXIT_OK
+
+
+# -- parsers -----------------------------------------------------------------------------------
+def add_db_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Add ``db`` (import, export, report) to the ``stationd`` sub-parsers."""
+    d: argparse.ArgumentParser = subparsers.add_parser(
+        "db", help="the process-parameter database: bolt tables and vehicle reports")
+    dsub = d.add_subparsers(dest="db_command", required=True, parser_class=type(d))
+    im = dsub.add_parser(
+        "import", help="import a bolt table (validated, all or nothing, idempotent)",
+        description="Validates the file (all errors are listed) and brings the database to it "
+                    "in one transaction; prints what changed, or 'no changes'.  The file is the "
+                    "whole table: models and bolts it no longer lists are removed (kept, "
+                    "retired, while records refer to them).  Changed parameters of a bolt with "
+                    "records become a new version.")
+    im.add_argument("file", help="bolts YAML (see config/bolts.example.yaml)")
+    im.add_argument("--db", default="sqlite:///stationd.db", help=DB_HELP)
+    im.add_argument("--tolerance", type=_tolerance, default=8.0, metavar="MM",
+                    help="matching tolerance: bolts must be twice as far apart (default 8)")
+    im.add_argument("--json", action="store_true", help="print the changes as one JSON object")
+    im.set_defaults(func=cmd_db_import)
+    ex = dsub.add_parser("export", help="write the bolt table back as YAML",
+                         description="Writes the table held by the database; importing it "
+                                     "again reports no changes.")
+    ex.add_argument("--db", default="sqlite:///stationd.db", help=DB_HELP)
+    ex.add_argument("--out", help="file to write (default: standard output)")
+    ex.set_defaults(func=cmd_db_export)
+    rp = dsub.add_parser("report", help="a vehicle's bolts: results and missing ones",
+                         description="Exit 0 when every bolt is tightened and OK, 1 when bolts "
+                                     "are missing or NOK, 2 for an unknown VIN.")
+    rp.add_argument("vin", help="VIN or sequence id")
+    rp.add_argument("--db", default="sqlite:///stationd.db", help=DB_HELP)
+    rp.add_argument("--json", action="store_true", help="print one JSON object")
+    rp.set_defaults(func=cmd_db_report)
+    return d
+
+
+def add_config_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Add ``config`` (with ``check``) to the ``stationd`` sub-parsers."""
+    c: argparse.ArgumentParser = subparsers.add_parser("config", help="check configuration files")
+    csub = c.add_subparsers(dest="config_command", required=True, parser_class=type(c))
+    ck = csub.add_parser("check", help="validate bolt files, reporting every error at once",
+                         description="Checks bolt table files (bolts.yaml); every error is "
+                                     "printed as file:line: key: message.  Exit 0 when all "
+                                     "files are valid, 2 otherwise.")
+    ck.add_argument("files", nargs="+", metavar="FILE")
+    ck.add_argument("--tolerance", type=_tolerance, default=8.0, metavar="MM",
+                    help="matching tolerance: bolts must be twice as far apart (default 8)")
+    ck.set_defaults(func=cmd_config_check)
+    return c

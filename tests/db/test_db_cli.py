@@ -1,0 +1,174 @@
+"""``stationd db import|export|report`` and ``stationd config check``: output and exit codes."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from stationd import cli
+from stationd.db_cli import (
+    add_config_parser,
+    add_db_parser,
+    cmd_config_check,
+    cmd_db_report,
+)
+from tests.db.conftest import BASE, EXAMPLE, record, url_of
+
+
+def _wired(argv, func) -> bool:
+    """Whether stationd's own parser already has the command (cli.py wires them)."""
+    try:
+        args = cli.build_parser().parse_args(argv)
+    except SystemExit:
+        return False
+    return getattr(args, "func", None) is func
+
+
+@pytest.fixture
+def run(monkeypatch, capsys):
+    """Run ``stationd ARGS`` through cli.main (its error handling included); until cli.py
+    wires the commands, a parser with just these commands stands in for build_parser."""
+    if not (_wired(["config", "check", "f.yaml"], cmd_config_check)
+            and _wired(["db", "report", "V"], cmd_db_report)):
+        def build():
+            p = cli._Parser(prog="stationd")
+            sub = p.add_subparsers(dest="command", required=True, parser_class=cli._Parser)
+            add_db_parser(sub)
+            add_config_parser(sub)
+            return p
+        monkeypatch.setattr(cli, "build_parser", build)
+    capsys.readouterr()  # the probe's usage error
+
+    def _run(*argv):
+        try:
+            code = cli.main([str(a) for a in argv])
+        except SystemExit as exc:  # argparse usage errors
+            code = exc.code
+        out, err = capsys.readouterr()
+        return code, out, err
+    return _run
+
+
+@pytest.fixture
+def db(tmp_path):
+    return url_of(tmp_path / "station.db")
+
+
+def _one_line(err: str) -> str:
+    lines = err.splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def test_import_prints_changes_then_no_changes(run, db):
+    code, out, err = run("db", "import", EXAMPLE, "--db", db)
+    assert code == 0 and err == ""
+    assert "models added: SEDAN-A, WAGON-B" in out and "bolts added: SEDAN-A/SF-FL" in out
+    code, out, err = run("db", "import", EXAMPLE, "--db", db)
+    assert (code, out, err) == (0, "no changes (9 bolt(s) unchanged)\n", "")
+    code, out, _ = run("db", "import", EXAMPLE, "--db", db, "--json")
+    obj = json.loads(out)
+    assert code == 0 and obj["changes"] is False and len(obj["unchanged"]) == 9
+
+
+def test_import_of_an_invalid_file_lists_every_error_and_changes_nothing(run, db, tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(BASE.replace("target: 25, min: 23", 'target: "25 Nm", min: 23')
+                   .replace("id: B2", "id: B1"))
+    code, out, err = run("db", "import", bad, "--db", db)
+    lines = err.splitlines()
+    assert code == 2 and out == ""
+    assert lines[0].startswith(f"{bad}:17: models.SEDAN.bolts[1].id: duplicate bolt id")
+    assert lines[1].startswith(f"{bad}:20: models.SEDAN.bolts[1].torque.target: expected a "
+                               "number in N m, got the string '25 Nm'")
+    assert lines[2] == f"stationd: error: {bad}: 2 error(s), nothing imported"
+    assert not (tmp_path / "station.db").exists()
+    code, _, err = run("db", "import", tmp_path / "missing.yaml", "--db", db)
+    assert code == 2 and "missing.yaml: file not found" in err
+
+
+def test_export_round_trip_through_the_commands(run, db, tmp_path):
+    run("db", "import", EXAMPLE, "--db", db)
+    out_file = tmp_path / "out.yaml"
+    code, out, err = run("db", "export", "--db", db, "--out", out_file)
+    assert code == 0 and err == "" and out.startswith(f"wrote {out_file}: 2 model(s), 9 bolt(s)")
+    code, out, _ = run("db", "import", out_file, "--db", db)
+    assert code == 0 and out.startswith("no changes")
+    code, out, _ = run("db", "export", "--db", db)
+    assert code == 0 and out == out_file.read_text()
+
+
+def test_report_exit_codes(run, db):
+    from db.repository import Repository
+
+    run("db", "import", EXAMPLE, "--db", db)
+    with Repository.open(db) as repo:
+        repo.start_vehicle("VIN1", "WAGON-B")
+        record(repo, "VIN1", "SF-FL")
+        record(repo, "VIN1", "SF-FR", ok=False)
+    code, out, err = run("db", "report", "VIN1", "--db", db)
+    assert code == 1 and err == ""
+    assert out.splitlines()[0] == ("VIN1 (WAGON-B, open): 1 ok, 1 NOK (SF-FR), "
+                                   "1 missing (TB-C)")
+    assert "TB-C" in out.splitlines()[3] and "MISSING" in out.splitlines()[3]
+    code, out, _ = run("db", "report", "VIN1", "--db", db, "--json")
+    obj = json.loads(out)
+    assert code == 1 and obj["missing"] == ["TB-C"] and obj["nok"] == ["SF-FR"]
+    with Repository.open(db) as repo:
+        record(repo, "VIN1", "SF-FR")
+        record(repo, "VIN1", "TB-C")
+        repo.close_vehicle("VIN1")
+    code, out, _ = run("db", "report", "VIN1", "--db", db)
+    assert code == 0 and "3 ok, 0 NOK, 0 missing" in out
+    code, out, err = run("db", "report", "NOPE", "--db", db)
+    assert code == 2 and out == ""
+    assert _one_line(err) == "stationd: error: vehicle 'NOPE' is not in the database"
+
+
+def test_read_commands_do_not_create_a_database(run, tmp_path):
+    missing = tmp_path / "none.db"
+    for argv in (("db", "report", "V"), ("db", "export")):
+        code, _, err = run(*argv, "--db", url_of(missing))
+        assert code == 2 and _one_line(err).startswith(f"stationd: error: no database at "
+                                                       f"{missing}")
+    assert not missing.exists()
+
+
+def test_database_errors_are_one_line(run, tmp_path):
+    junk = tmp_path / "junk.db"
+    junk.write_bytes(b"not a database" * 200)
+    code, _, err = run("db", "report", "V", "--db", url_of(junk))
+    assert code == 2 and "cannot open: file is not a database" in _one_line(err)
+    code, _, err = run("db", "import", EXAMPLE, "--db", "nosuchdriver://x")
+    assert code == 2 and _one_line(err).startswith("stationd: error: database URL")
+    code, _, err = run("db", "import", EXAMPLE, "--db", url_of(tmp_path / "a" / "b.db"))
+    assert code == 2 and "unable to open database file" in _one_line(err)
+
+
+def test_default_database_is_stationd_db_in_the_current_directory(run, tmp_path,
+                                                                   monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, _, _ = run("db", "import", EXAMPLE)
+    assert code == 0 and (tmp_path / "stationd.db").exists()
+
+
+def test_config_check(run, tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(BASE.replace("order: 2", "order: zero").replace("    code: 12\n",
+                                                                    "    code: 12\n    x: 1\n"))
+    also_bad = tmp_path / "also.yaml"
+    also_bad.write_text("models: [\n")
+    code, out, err = run("config", "check", EXAMPLE)
+    assert (code, err) == (0, "")
+    assert out == f"{EXAMPLE}: ok, 2 model(s), 9 bolt(s), 3 pset(s)\n"
+    code, out, err = run("config", "check", EXAMPLE, bad, also_bad)
+    lines = err.splitlines()
+    assert code == 2 and out.startswith(f"{EXAMPLE}: ok")
+    assert lines[0].startswith(f"{bad}:9: models.SEDAN.x: unknown key")
+    assert lines[1].startswith(f"{bad}:27: models.SEDAN.bolts[2].order: expected an integer")
+    assert lines[2].startswith(f"{also_bad}:2: malformed YAML")
+    assert lines[3] == "stationd: error: 3 error(s) in 2 of 3 file(s)"
+    code, _, err = run("config", "check", bad, "--tolerance", "-1")
+    assert code == 2 and _one_line(err).startswith(
+        "stationd config check: error: argument --tolerance: -1 mm")

@@ -1,0 +1,237 @@
+"""The repository: atomic, idempotent imports, versioned parameters, vehicles and records."""
+
+from __future__ import annotations
+
+import sqlite3
+from datetime import UTC, datetime
+
+import pytest
+from sqlalchemy import func, select, text
+from sqlalchemy.exc import IntegrityError
+
+import db.importer
+from db.boltfile import load_bolts
+from db.models import Bolt, ProcessParameters, TighteningRecord, VehicleModel
+from db.repository import DatabaseError, NotFoundError, Repository
+from stationd.errors import ConfigError, InputError
+from tests.db.conftest import BASE, EXAMPLE, record, url_of
+
+NEW_B1 = BASE.replace("target: 50, min: 45, max: 55", "target: 52, min: 45, max: 55")
+
+
+def _counts(repo: Repository) -> dict[str, int]:
+    with repo.engine.connect() as c:
+        return {t: c.execute(text(f"SELECT count(*) FROM {t}")).scalar_one()  # noqa: S608
+                for t in ("vehicle_models", "psets", "bolts", "process_parameters", "vehicles",
+                          "tightening_records")}
+
+
+def test_wal_and_foreign_keys_are_on(repo, tmp_path):
+    with repo.engine.connect() as c:
+        assert c.exec_driver_sql("PRAGMA journal_mode").scalar() == "wal"
+        assert c.exec_driver_sql("PRAGMA foreign_keys").scalar() == 1
+        assert c.exec_driver_sql("PRAGMA synchronous").scalar() == 2  # FULL
+    raw = sqlite3.connect(tmp_path / "station.db")  # WAL is a property of the file itself
+    assert raw.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    raw.close()
+    with pytest.raises(IntegrityError, match="FOREIGN KEY"), repo.engine.begin() as c:
+        c.execute(text("INSERT INTO bolts (model_id, code, name, x_mm, y_mm, z_mm, seq) "
+                       "VALUES (999, 'X', 'x', 0, 0, 0, 0)"))
+
+
+def test_import_reports_and_second_import_changes_nothing(repo, bolts_file):
+    first = repo.import_bolts(bolts_file)
+    assert first.models_added == ["SEDAN", "WAGON"]
+    assert first.psets_added == ["pset 1", "SEDAN/pset 21"]
+    assert first.added == ["SEDAN/B1", "SEDAN/B2", "SEDAN/B3", "WAGON/B1"]
+    before = _counts(repo)
+    second = repo.import_bolts(bolts_file)
+    assert not second.has_changes and second.lines() == ["no changes (4 bolt(s) unchanged)"]
+    assert _counts(repo) == before
+    infos = repo.bolts_for_model("SEDAN")
+    assert [b.bolt_id for b in infos] == ["B1", "B2", "B3"]
+    assert infos[0].parameters.pset == 1 and infos[0].parameters.torque.target == 50
+    assert infos[2].order == 2 and infos[2].batch == "wheel" and infos[0].version == 1
+    assert repo.model_for_code(12) == "SEDAN" and repo.model_for_code(13) is None
+
+
+def test_a_file_with_an_error_changes_nothing(repo, bolts_file, tmp_path):
+    repo.import_bolts(bolts_file)
+    before, table = _counts(repo), repo.table()
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(NEW_B1.replace("id: B3", "id: B2"))  # a valid change plus a duplicate
+    with pytest.raises(ConfigError, match="duplicate bolt id"):
+        repo.import_bolts(bad)
+    assert _counts(repo) == before and repo.table() == table
+
+
+def test_a_failure_halfway_through_rolls_everything_back(repo, bolts_file, tmp_path,
+                                                         monkeypatch):
+    repo.import_bolts(bolts_file)
+    before, table = _counts(repo), repo.table()
+    changed = tmp_path / "changed.yaml"
+    changed.write_text(NEW_B1.replace("name: three", "name: THREE")
+                       .replace("  WAGON:", "  VAN:\n    bolts: []\n  WAGON:"))
+    real = db.importer._Importer.sync_bolt
+    calls = []
+
+    def failing(self, *args):
+        calls.append(args)
+        if len(calls) == 3:  # after B1 and B2 were written (flushed) in the transaction
+            raise RuntimeError("disk pulled")
+        return real(self, *args)
+
+    monkeypatch.setattr(db.importer._Importer, "sync_bolt", failing)
+    with pytest.raises(RuntimeError, match="disk pulled"):
+        repo.import_bolts(changed)
+    assert _counts(repo) == before and repo.table() == table
+    monkeypatch.undo()
+    report = repo.import_bolts(changed)
+    assert report.models_added == ["VAN"]
+    assert report.changed == ["SEDAN/B1", "SEDAN/B3", "WAGON/B1"]
+
+
+def test_export_import_round_trip(repo, tmp_path):
+    repo.import_bolts(EXAMPLE)
+    out = tmp_path / "exported.yaml"
+    out.write_text(repo.export_bolts())
+    assert load_bolts(out) == load_bolts(EXAMPLE)
+    assert not repo.import_bolts(out).has_changes
+    other = Repository.open(url_of(tmp_path / "other.db"))  # and into a fresh database
+    other.import_bolts(out)
+    assert other.export_bolts() == repo.export_bolts()
+    other.close()
+
+
+def test_changed_parameters_of_a_bolt_with_records_become_a_new_version(repo, bolts_file):
+    repo.import_bolts(bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    old = repo.bolts_for_model("SEDAN")[0]
+    first = record(repo, "VIN1", "B1")
+    bolts_file.write_text(NEW_B1.replace("target: 25, min: 23", "target: 26, min: 23"))
+    report = repo.import_bolts(bolts_file)
+    assert report.psets_changed == ["pset 1"]
+    assert report.new_versions == ["SEDAN/B1 v2 (v1: 1 record(s))"]  # B1 has a record
+    assert sorted(report.changed) == ["SEDAN/B1", "SEDAN/B2", "WAGON/B1"]
+    new = {b.bolt_id: b for b in repo.bolts_for_model("SEDAN")}
+    assert new["B1"].version == 2 and new["B1"].parameters.torque.target == 52
+    assert new["B1"].parameters_id != old.parameters_id
+    assert new["B2"].version == 1 and new["B2"].parameters.torque.target == 26  # in place
+    wagon = repo.bolts_for_model("WAGON")[0]
+    assert wagon.version == 1 and wagon.parameters.torque.target == 52
+    with repo.engine.connect() as c:  # the old version is kept, unchanged, and still referenced
+        v1 = c.execute(select(ProcessParameters).where(
+            ProcessParameters.id == old.parameters_id)).one()
+        assert (v1.version, v1.torque_target) == (1, 50)
+        rec = c.execute(select(TighteningRecord).where(TighteningRecord.id == first)).one()
+        assert rec.parameters_id == old.parameters_id
+        assert rec.params_sent["torque"]["target"] == 50 and rec.params_sent["pset"] == 1
+    second = record(repo, "VIN1", "B1")
+    report_ = repo.vehicle_report("VIN1")
+    assert report_.bolts[0].version == 2 and report_.bolts[0].attempts == 2
+    with repo.engine.connect() as c:
+        rec = c.execute(select(TighteningRecord).where(TighteningRecord.id == second)).one()
+        assert rec.parameters_id == new["B1"].parameters_id
+    assert not repo.import_bolts(bolts_file).has_changes
+
+
+def test_removed_bolts_are_retired_when_referenced_else_deleted(repo, bolts_file):
+    repo.import_bolts(bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    record(repo, "VIN1", "B2", ok=False)
+    bolts_file.write_text(BASE.replace(
+        "      - id: B2\n        name: two\n        position: [100, 0, 0]\n"
+        "        torque: {target: 25, min: 23, max: 27}\n"
+        "        angle: {target: 30, min: 10, max: 50}\n", "")
+        .replace("  WAGON:\n    bolts:\n      - id: B1\n        name: one\n"
+                 "        position: [0, 0, 0]\n        pset: 1\n", ""))
+    report = repo.import_bolts(bolts_file)
+    assert report.removed == ["WAGON/B1", "SEDAN/B2"] and report.models_removed == ["WAGON"]
+    assert [b.bolt_id for b in repo.bolts_for_model("SEDAN")] == ["B1", "B3"]
+    assert repo.models() == ["SEDAN"]
+    with pytest.raises(NotFoundError, match="WAGON"):
+        repo.bolts_for_model("WAGON")
+    with repo.engine.connect() as c:
+        assert c.scalar(select(func.count()).select_from(VehicleModel)) == 1  # WAGON deleted
+        kept = c.execute(select(Bolt).where(Bolt.code == "B2")).one()
+        assert kept.removed_at is not None
+    rep = repo.vehicle_report("VIN1")  # the NOK of the retired bolt is still reported
+    assert [(b.bolt_id, b.status, b.retired) for b in rep.bolts] == [
+        ("B1", "missing", False), ("B2", "nok", True), ("B3", "missing", False)]
+    bolts_file.write_text(BASE)
+    again = repo.import_bolts(bolts_file)
+    assert again.added == ["SEDAN/B2", "WAGON/B1"] and again.models_added == ["WAGON"]
+    assert not repo.import_bolts(bolts_file).has_changes
+
+
+def test_vehicle_cycle_and_close_summary(repo, bolts_file):
+    repo.import_bolts(bolts_file)
+    info = repo.start_vehicle("WVW1234567890", "SEDAN")
+    assert info.ended_at is None and info.started_at.tzinfo is not None
+    assert repo.start_vehicle("WVW1234567890", "SEDAN") == info  # resumed after a restart
+    with pytest.raises(InputError, match="already known as model SEDAN"):
+        repo.start_vehicle("WVW1234567890", "WAGON")
+    with pytest.raises(NotFoundError, match="model 'TRUCK'"):
+        repo.start_vehicle("V2", "TRUCK")
+    with pytest.raises(InputError, match="VIN"):
+        repo.start_vehicle("has space", "SEDAN")
+    when = datetime(2026, 1, 2, 3, 4, 5, tzinfo=UTC)
+    record(repo, "WVW1234567890", "B1", ok=False, tightening_id=7, result_at=when,
+           images=["cam1/0001.png"], params_sent={"pset": 1})
+    record(repo, "WVW1234567890", "B1", ok=True, tightening_id=8)
+    record(repo, "WVW1234567890", "B2", ok=True)
+    record(repo, "WVW1234567890", "B2", ok=False)  # a double hit: the last result decides
+    with pytest.raises(NotFoundError, match="bolt 'B9'"):
+        record(repo, "WVW1234567890", "B9")
+    with pytest.raises(InputError, match="parameter version"):
+        record(repo, "WVW1234567890", "B3", parameters_id=repo.bolts_for_model("SEDAN")[0]
+               .parameters_id)
+    summary = repo.close_vehicle("WVW1234567890")
+    assert summary.missing == ["B3"] and summary.nok == ["B2"] and summary.ok == ["B1"]
+    assert not summary.complete and summary.vehicle.ended_at is not None
+    assert "1 ok, 1 NOK (B2), 1 missing (B3)" in summary.summary()
+    assert repo.close_vehicle("WVW1234567890").vehicle.ended_at == summary.vehicle.ended_at
+    with pytest.raises(InputError, match="is closed"):
+        record(repo, "WVW1234567890", "B3")
+    with pytest.raises(InputError, match="reopen"):
+        repo.start_vehicle("WVW1234567890", "SEDAN")
+    repo.start_vehicle("WVW1234567890", "SEDAN", reopen=True)
+    record(repo, "WVW1234567890", "B2")
+    record(repo, "WVW1234567890", "B3")
+    final = repo.close_vehicle("WVW1234567890")
+    assert final.complete and final.to_json()["complete"] is True
+    b1 = final.to_json()["bolts"][0]
+    assert b1["attempts"] == 2 and b1["tightening_id"] == 8 and b1["status"] == "ok"
+    with repo.engine.connect() as c:
+        first = c.execute(select(TighteningRecord).order_by(TighteningRecord.id)).first()
+        assert first is not None and first.images == ["cam1/0001.png"]
+        assert first.result_at == when and first.status == "nok"
+    with pytest.raises(NotFoundError, match="'NOPE' is not in the database"):
+        repo.vehicle_report("NOPE")
+
+
+def test_open_errors_are_one_line_station_errors(tmp_path):
+    with pytest.raises(DatabaseError, match="cannot open"):
+        Repository.open(url_of(tmp_path / "no" / "such" / "dir.db"))
+    junk = tmp_path / "junk.db"
+    junk.write_bytes(b"this is not a database" * 100)
+    with pytest.raises(DatabaseError, match="file is not a database"):
+        Repository.open(url_of(junk))
+    with pytest.raises(InputError, match="database URL"):
+        Repository.open("not a url")
+
+
+def test_any_url_works_in_memory():
+    with Repository.open("sqlite://") as r:
+        r.import_bolts(EXAMPLE)
+        assert len(r.bolts_for_model("SEDAN-A")) == 6
+
+
+def test_lift_codes_can_move_between_models_in_one_import(repo, bolts_file):
+    bolts_file.write_text(BASE.replace("  WAGON:\n", "  WAGON:\n    code: 13\n"))
+    repo.import_bolts(bolts_file)
+    bolts_file.write_text(BASE.replace("code: 12", "code: 13")
+                          .replace("  WAGON:\n", "  WAGON:\n    code: 12\n"))
+    report = repo.import_bolts(bolts_file)
+    assert report.models_changed == ["SEDAN", "WAGON"] and not report.changed
+    assert (repo.model_for_code(12), repo.model_for_code(13)) == ("WAGON", "SEDAN")
