@@ -4,6 +4,10 @@
     openprotocol+serial:///dev/ttyUSB1?baud=9600  Open Protocol over RS-232
     sim://wrench                                  a simulated controller, spoken to over the
                                                   real protocol on loopback (or a pty)
+    modbus-tcp://192.168.10.31:502?unit=1         register-driven controller, Modbus TCP
+    modbus-rtu:///dev/ttyUSB2?baud=19200&parity=E  register-driven controller, Modbus RTU
+    sim+modbus://wrench?transport=tcp|rtu         a simulated register-driven controller, a
+                                                  real Modbus server on loopback (or a pty)
 
 Backends are imported only when their scheme is used (python-can's interface registry), so
 a station without a serial adapter never imports pyserial.
@@ -26,9 +30,14 @@ BACKENDS: dict[str, str] = {
     "openprotocol": "drivers.wrench.client:OpenProtocolWrench",
     "openprotocol+serial": "drivers.wrench.client:OpenProtocolWrench",
     "sim": "drivers.wrench.sim:SimWrench",
+    "modbus-tcp": "drivers.wrench.modbus:ModbusWrench",
+    "modbus-rtu": "drivers.wrench.modbus:ModbusWrench",
+    "sim+modbus": "drivers.wrench.modbus_sim:SimModbusWrench",
 }
 FORMS = ("openprotocol://HOST[:4545], openprotocol+serial:///dev/ttyUSB1?baud=9600, "
-         "sim://wrench")
+         "sim://wrench, modbus-tcp://HOST[:502]?unit=1, "
+         "modbus-rtu:///dev/ttyUSB2?baud=19200&parity=E&unit=1, "
+         "sim+modbus://wrench[?transport=rtu]")
 
 
 def open_wrench(url: str, *, connect: bool = True, **kw: Any) -> Wrench:

@@ -182,7 +182,7 @@ def test_urls_pick_the_backend_and_its_options():
 
 
 @pytest.mark.parametrize(("url", "words"), [
-    ("modbus-tcp://10.0.0.1:502", "unknown wrench scheme 'modbus-tcp' (accepted: "
+    ("modbus-udp://10.0.0.1:502", "unknown wrench scheme 'modbus-udp' (accepted: "
                                   "openprotocol://HOST[:4545], openprotocol+serial://"),
     ("openprotocol://10.0.0.1?baud=9600", "unknown option(s) baud (accepted: backoff,"),
     ("openprotocol+serial:///dev/ttyUSB1?parity=E", "unknown option(s) parity"),
