@@ -138,3 +138,6 @@ def add_probe_parser(sub: Any) -> None:
     w.add_argument("--timeout", type=float, default=2.0, help="seconds (default 2)")
     w.add_argument("--json", action="store_true", help="print one JSON object")
     w.set_defaults(func=probe_wrench)
+    from stationd.probe_camera import add_camera_probe
+
+    add_camera_probe(psub)

@@ -1,0 +1,387 @@
+"""``aravis://DEVICE-ID``: GenICam cameras (USB3 Vision, GigE Vision) through Aravis 0.8.
+
+The only module that talks to Aravis.  PyGObject has no type stubs, so ``gi`` is imported
+through importlib and typed ``Any``, when the first ``aravis://`` camera opens.
+
+    aravis://Hikrobot-MV-CS200-10UC-DA1234567?trigger=software&pixel_format=BayerRG8
+        &exposure_us=20000&gain_db=0&buffers=4&region=full&timeout=2&backoff=0.5&backoff_max=10
+
+- ``trigger``: ``software`` (default: no frame without ``trigger()``), ``line0``, ``line1``...
+  (hardware trigger, rising edge) or ``free`` (free-running).
+- ``pixel_format``: Mono8, Bayer{RG,GB,GR,BG}8 (demosaiced on the host), RGB8, BGR8; default
+  the camera's current one if supported, else the first of those it offers.
+- ``buffers``: the stream's pool, each buffer the camera's own payload (20 MB for 5472x3648
+  Bayer8, 60 MB for RGB8), allocated once per connection.  ``region``: ``full`` or X,Y,W,H.
+  ``frame_rate``: the free-running rate in Hz.
+- Timestamps are the host's system timestamp of the buffer, not the camera's clock: Hikrobot
+  cameras report theirs in a wrong unit (Aravis's ``src/arv-test.cfg``), and the host clock is
+  what the two cameras of a stereo pair share.  Chunk data is not used.
+
+Aravis quirks handled here:
+- ``update_device_list()`` (about 1 s: GigE discovery) runs before ``Camera.new`` when the
+  device is not listed yet and before every reconnect attempt.  Without it ``Camera.new``
+  finds a GigE device through whichever interface answers a broadcast first: with an Ethernet
+  port present, the fake camera on 127.0.0.1 then streams to the Ethernet address and no
+  frame ever arrives.
+- A vanished GigE camera makes each register access fail after 2.5 s (500 ms x 5 GVCP
+  retries, fixed in 0.8).  The ``control-lost`` signal is not used: it comes from Aravis's
+  heartbeat thread, where a Python callback leaves a ``threading._DummyThread`` behind for
+  good.  Loss is seen in the errors of ``trigger()`` and of a register read after a grab
+  times out; the failed link is then released by the reconnect thread, not the caller.
+- Shutdown order: stream, then camera, then ``Aravis.shutdown()``, the last only at process
+  end (``shutdown()`` below is registered with atexit when Aravis is first loaded).
+"""
+
+from __future__ import annotations
+
+import atexit
+import importlib
+import logging
+import threading
+import time
+import weakref
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any, TypeVar
+
+from drivers.camera import pixels
+from drivers.camera.aravis_config import Settings, parse_aravis_url, translate
+from drivers.camera.base import CameraDevice, Frame, FrameError, UnsupportedError
+from drivers.camera.link import LinkKeeper
+from drivers.errors import (
+    ConnectError,
+    ConnectionLostError,
+    DeviceError,
+    DeviceTimeoutError,
+    RefusedError,
+)
+
+log = logging.getLogger(__name__)
+T = TypeVar("T")
+_load_lock = threading.Lock()
+_system_lock = threading.Lock()  # Aravis's device list is one per process
+_modules: tuple[Any, Any] | None = None
+_open_cameras: weakref.WeakSet[AravisCamera] = weakref.WeakSet()
+
+
+def load() -> tuple[Any, Any]:
+    """(Aravis, GLib) from PyGObject; ConnectError with what to install if unavailable."""
+    global _modules
+    with _load_lock:
+        if _modules is None:
+            try:
+                gi = importlib.import_module("gi")
+                gi.require_version("Aravis", "0.8")
+                arv = importlib.import_module("gi.repository.Aravis")
+                glib = importlib.import_module("gi.repository.GLib")
+            except (ImportError, ValueError) as exc:
+                raise ConnectError(f"Aravis is not available ({exc}): apt-get install "
+                                   "gir1.2-aravis-0.8, and pip install 'PyGObject<3.51'"
+                                   ) from None
+            _modules = (arv, glib)
+            atexit.register(shutdown)
+        return _modules
+
+
+def available() -> str | None:
+    """None if Aravis can be used here, else the reason (for skipping tests)."""
+    try:
+        load()
+    except ConnectError as exc:
+        return str(exc)
+    return None
+
+
+def shutdown() -> None:
+    """Close every open Aravis camera (stream first, then camera), then ``Aravis.shutdown()``,
+    the order Aravis needs.  Runs at exit; call it earlier only if no camera opens again."""
+    for cam in list(_open_cameras):
+        cam.close()
+    if _modules is not None:
+        with _system_lock:
+            _modules[0].shutdown()
+
+
+class _Link:
+    """One opened camera, configured and acquiring into its buffer pool."""
+
+    def __init__(self, settings: Settings, device: str) -> None:
+        self.settings = settings
+        self.device = device
+        self.arv, self.glib = load()
+        self.cam: Any = None
+        self.stream: Any = None
+        self.payload = 0
+        self.pixel_format = ""
+
+    def _call(self, what: str, fn: Any, *args: Any) -> Any:
+        try:
+            return fn(*args)
+        except self.glib.Error as exc:
+            error = translate(exc, what, self.device)
+        raise error
+
+    def connect(self, refresh: bool) -> None:
+        """Find, configure and start the camera; typed errors, nothing left open on failure."""
+        arv, name = self.arv, self.settings.name
+        with _system_lock:
+            listed = {arv.get_device_id(i) for i in range(arv.get_n_devices())}
+            if refresh or name not in listed:
+                arv.update_device_list()
+                listed = {arv.get_device_id(i) for i in range(arv.get_n_devices())}
+            try:
+                self.cam = arv.Camera.new(name)
+            except self.glib.Error as exc:
+                found = ", ".join(sorted(listed)) or "none"
+                raise ConnectError(f"cannot open camera {name!r}: {exc.message} (cameras "
+                                   f"found: {found})", device=self.device) from None
+        try:
+            self._configure()
+        except BaseException:
+            self.close(lost=True)
+            raise
+
+    def _configure(self) -> None:
+        s, cam, call = self.settings, self.cam, self._call
+        call("stop acquisition", cam.stop_acquisition)  # a crashed run may have left it on
+        available = call("list pixel formats", cam.dup_available_pixel_formats_as_strings)
+        current = call("read pixel format", cam.get_pixel_format_as_string)
+        pf = s.pixel_format or (current if current in pixels.FORMATS else next(
+            (f for f in pixels.PREFERENCE if f in available), None))
+        if pf is None or pf not in available:
+            raise UnsupportedError(f"pixel format {pf or 'Mono8/Bayer*8/RGB8'} not offered by "
+                                   f"the camera (it offers: {', '.join(available)})",
+                                   device=self.device)
+        call(f"set pixel format {pf}", cam.set_pixel_format_from_string, pf)
+        self.pixel_format = pf
+        if s.region is not None:
+            full = call("read sensor size", cam.get_sensor_size)
+            x, y, w, h = s.region if isinstance(s.region, tuple) else (0, 0, *full)
+            call(f"set region {x},{y},{w},{h}", cam.set_region, x, y, w, h)
+        if s.trigger == "free":
+            call("clear triggers", cam.clear_triggers)
+        else:
+            sources = call("list trigger sources", cam.dup_available_trigger_sources)
+            source = next((t for t in sources if t.lower() == s.trigger), None)
+            if source is None:
+                raise UnsupportedError(f"trigger {s.trigger} not offered (sources: "
+                                       f"{', '.join(sources)})", device=self.device)
+            call(f"set trigger {source}", cam.set_trigger, source)
+        call("set acquisition mode", cam.set_acquisition_mode,
+             self.arv.AcquisitionMode.CONTINUOUS)
+        if s.frame_rate is not None:  # free-run rate (cameras may cap it by exposure)
+            call(f"set frame rate {s.frame_rate:g} Hz", cam.set_frame_rate, s.frame_rate)
+        if s.exposure_us is not None:
+            self.set_exposure(s.exposure_us)
+        if s.gain_db is not None:
+            self.set_gain(s.gain_db)
+        self.payload = int(call("read payload size", cam.get_payload))
+        self.stream = call("create stream", cam.create_stream, None, None)
+        if self.stream is None:
+            raise ConnectError("the camera gave no stream", device=self.device)
+        for _ in range(s.buffers):
+            self.stream.push_buffer(self.arv.Buffer.new_allocate(self.payload))
+        call("start acquisition", cam.start_acquisition)
+
+    def identity(self) -> str:
+        cam = self.cam
+        kind = "USB3 Vision" if cam.is_uv_device() else "GigE Vision"
+        if cam.is_gv_device():
+            kind += f" {cam.get_device().get_device_address().to_string()}"
+        region = cam.get_region()
+        return (f"{cam.get_vendor_name()} {cam.get_model_name()} S/N "
+                f"{cam.get_device_serial_number()} ({kind}; Aravis 0.8): trigger "
+                f"{self.settings.trigger}, {self.pixel_format} {region.width}x{region.height}, "
+                f"pool {self.settings.buffers} x {self.payload / 1e6:.2f} MB")
+
+    def set_exposure(self, us: float) -> float:
+        cam, call = self.cam, self._call
+        if not call("check exposure", cam.is_exposure_time_available):
+            raise UnsupportedError("the camera has no exposure time control", device=self.device)
+        lo, hi = call("read exposure bounds", cam.get_exposure_time_bounds)
+        if not lo <= us <= hi:
+            raise RefusedError(f"exposure {us:g} us is outside the camera's range "
+                               f"{lo:g}-{hi:g} us", device=self.device)
+        if call("check auto exposure", cam.is_exposure_auto_available):
+            call("turn auto exposure off", cam.set_exposure_time_auto, self.arv.Auto.OFF)
+        call(f"set exposure {us:g} us", cam.set_exposure_time, us)
+        return float(call("read exposure", cam.get_exposure_time))
+
+    def set_gain(self, db: float) -> float:
+        cam, call = self.cam, self._call
+        if not call("check gain", cam.is_gain_available):
+            raise UnsupportedError("the camera has no gain control", device=self.device)
+        lo, hi = call("read gain bounds", cam.get_gain_bounds)
+        if not lo <= db <= hi:
+            raise RefusedError(f"gain {db:g} dB is outside the camera's range {lo:g}-{hi:g} dB",
+                               device=self.device)
+        if call("check auto gain", cam.is_gain_auto_available):
+            call("turn auto gain off", cam.set_gain_auto, self.arv.Auto.OFF)
+        call(f"set gain {db:g} dB", cam.set_gain, db)
+        return float(call("read gain", cam.get_gain))
+
+    def trigger(self) -> int:
+        """Drop waiting frames, then fire a software trigger (if in that mode): the dropped
+        count."""
+        dropped = 0
+        while (buf := self.stream.try_pop_buffer()) is not None:
+            self.stream.push_buffer(buf)
+            dropped += 1
+        if self.settings.trigger == "software":
+            self._call("software trigger", self.cam.software_trigger)
+        return dropped
+
+    def grab(self, deadline: float) -> Frame | str:
+        """The next good frame before ``deadline`` (monotonic), else why not (a string)."""
+        bad: list[str] = []
+        while (left := deadline - time.monotonic()) > 0:
+            buf = self.stream.timeout_pop_buffer(max(1, int(left * 1e6)))
+            if buf is None:
+                break
+            try:
+                status = buf.get_status()
+                if status != self.arv.BufferStatus.SUCCESS:
+                    bad.append(status.value_nick)
+                    continue
+                return self._frame(buf)
+            finally:
+                self.stream.push_buffer(buf)
+        self._call("check the camera", self.cam.get_payload)  # ConnectionLostError if gone
+        return f"{len(bad)} broken buffer(s): {', '.join(sorted(set(bad)))}" if bad else ""
+
+    def _frame(self, buf: Any) -> Frame:
+        w, h = buf.get_image_width(), buf.get_image_height()
+        name = pixels.format_name(buf.get_image_pixel_format())
+        fmt = pixels.FORMATS.get(name)
+        pad = buf.get_image_padding()
+        stride = w * (fmt.bytes_per_pixel if fmt else 1) + int(pad[0])
+        try:
+            image = pixels.to_bgr(buf.get_image_data(), w, h, name, stride)
+        except ValueError as exc:
+            raise FrameError(str(exc), device=self.device) from None
+        ts = buf.get_system_timestamp()
+        return Frame(image=image, timestamp=ts / 1e9 if ts else time.time(),
+                     frame_id=int(buf.get_frame_id()), camera=self.device, pixel_format=name)
+
+    def close(self, lost: bool = False) -> None:
+        """Stop (unless the camera is gone: that costs GVCP timeouts), then drop the stream,
+        then the camera -- Aravis's order.  Never raises."""
+        if self.cam is not None and self.stream is not None and not lost:
+            try:
+                self.cam.stop_acquisition()
+            except self.glib.Error as exc:
+                log.debug("%s: stop acquisition: %s", self.device, exc.message)
+        self.stream = None
+        self.cam = None
+
+
+def _released(exc: DeviceError) -> DeviceError:
+    """``exc`` without its traceback and context, to raise from the caller's frame.  Those
+    hold the frames of the failed calls, whose locals hold the Aravis camera: an exception
+    kept by the caller (a log record, ``pytest.raises``) would keep a dropped camera alive,
+    heartbeating, in control of the device, and the reconnect would fail against it."""
+    exc.__traceback__ = None
+    exc.__context__ = exc.__cause__ = None
+    return exc
+
+
+class AravisCamera(CameraDevice):
+    """A GenICam camera through Aravis, reconnecting with backoff when it goes away."""
+
+    def __init__(self, url: str, *, timeout: float | None = None, backoff: float | None = None,
+                 backoff_max: float | None = None, buffers: int | None = None) -> None:
+        settings, timing = parse_aravis_url(url)
+        super().__init__(url, timeout=timing["timeout"] or timeout)
+        if buffers is not None and "buffers=" not in url:
+            settings = replace(settings, buffers=int(buffers))
+        self.settings = settings
+        self._io = threading.Lock()  # one trigger/grab/setting at a time
+        self._keeper: LinkKeeper[_Link] = LinkKeeper(
+            url, self._connect, lambda link, lost: link.close(lost=lost),
+            backoff=timing["backoff"] or backoff or 0.5,
+            backoff_max=timing["backoff_max"] or backoff_max or 10.0,
+            name=f"camera-reconnect {url}")
+
+    @property
+    def buffer_count(self) -> int:
+        return self.settings.buffers
+
+    @property
+    def payload_bytes(self) -> int:
+        """The size of each pool buffer: the camera's payload (0 while disconnected)."""
+        link = self._keeper.current()
+        return link.payload if link is not None else 0
+
+    def _connect(self, refresh: bool) -> _Link:
+        link = _Link(self.settings, self.url)
+        try:
+            link.connect(refresh)
+        except DeviceError as exc:
+            raise _released(exc) from None
+        return link
+
+    def identity(self) -> str:
+        link = self._keeper.current()
+        if link is None:
+            return f"Aravis camera {self.settings.name}: {self._keeper.status()}"
+        with self._io:
+            try:
+                return link.identity()
+            except Exception as exc:  # a description must not fail
+                return f"Aravis camera {self.settings.name} ({exc})"
+
+    def _open(self) -> None:
+        self._keeper.start(self._connect(False))
+        _open_cameras.add(self)
+
+    def _close(self) -> None:
+        _open_cameras.discard(self)
+        with self._io:
+            link = self._keeper.stop()
+        if link is not None:
+            link.close()
+
+    def _use(self, deadline: float, action: Callable[[_Link], T]) -> T:
+        """Run ``action`` on the link (waiting for a reconnect until ``deadline``); a lost
+        link goes to the reconnect thread."""
+        with self._io:
+            link = self._keeper.wait(deadline)
+            try:
+                return action(link)
+            except DeviceError as exc:
+                if isinstance(exc, ConnectionLostError):
+                    self._keeper.lost(link, exc)
+                raise _released(exc) from None
+
+    def _trigger(self) -> None:
+        dropped = self._use(time.monotonic() + self.timeout, _Link.trigger)
+        if dropped:
+            log.debug("%s: dropped %d stale frame(s) at trigger", self.url, dropped)
+
+    def _grab(self, timeout: float) -> Frame:
+        deadline = time.monotonic() + timeout
+        got = self._use(deadline, lambda link: link.grab(deadline))
+        if isinstance(got, Frame):
+            return got
+        hint = " (software trigger: call trigger() before grab())" \
+            if self.settings.trigger == "software" else ""
+        raise DeviceTimeoutError(f"no frame within {timeout:g} s{hint}"
+                                 + (f"; {got}" if got else ""), device=self.url)
+
+    def _set_exposure_us(self, exposure_us: float) -> float:
+        applied = self._use(time.monotonic() + self.timeout,
+                            lambda link: link.set_exposure(exposure_us))
+        self._remember(replace(self.settings, exposure_us=applied))
+        return applied
+
+    def _set_gain_db(self, gain_db: float) -> float:
+        applied = self._use(time.monotonic() + self.timeout, lambda link: link.set_gain(gain_db))
+        self._remember(replace(self.settings, gain_db=applied))
+        return applied
+
+    def _remember(self, settings: Settings) -> None:
+        """Keep a runtime setting so that a reconnect applies it again."""
+        self.settings = settings
+        link = self._keeper.current()
+        if link is not None:
+            link.settings = settings

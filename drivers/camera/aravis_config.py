@@ -1,0 +1,103 @@
+"""What an ``aravis://`` URL asks of a camera, and Aravis's error codes as typed errors.
+
+Kept apart from ``aravis.py`` because none of it needs Aravis: it is tested without it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+from urllib.parse import unquote, urlsplit
+
+from drivers.camera import pixels
+from drivers.camera.base import UnsupportedError, choice, positive
+from drivers.errors import (
+    ConnectError,
+    ConnectionLostError,
+    DeviceError,
+    RefusedError,
+)
+from drivers.url import parse_url
+
+FORM = ("aravis://DEVICE-ID?trigger=software|line0|free&pixel_format=" + "|".join(pixels.FORMATS)
+        + "&exposure_us=N&gain_db=N&buffers=4&region=full|X,Y,W,H&frame_rate=HZ")
+DEFAULT_BUFFERS = 4
+# ArvDeviceError codes meaning "the camera is gone": not connected, protocol error, transfer
+# error, timeout, not found; and the ones meaning "someone else controls it"
+LINK_LOST = {2, 3, 4, 5, 6}
+NOT_IN_CONTROL = {10, 17, 18}
+FEATURE_MISSING = {("arv-device-error-quark", 1), ("arv-gc-error-quark", 0),
+                   ("arv-gc-error-quark", 7)}
+
+
+@dataclass(frozen=True)
+class Settings:
+    """What the URL asks of the camera."""
+
+    name: str
+    trigger: str = "software"
+    pixel_format: str | None = None
+    exposure_us: float | None = None
+    gain_db: float | None = None
+    buffers: int = DEFAULT_BUFFERS
+    region: tuple[int, int, int, int] | str | None = None
+    frame_rate: float | None = None
+
+
+def _region(text: str) -> tuple[int, int, int, int] | str:
+    if text.lower() == "full":
+        return "full"
+    x, y, w, h = (int(v) for v in text.split(","))
+    if min(x, y) < 0 or min(w, h) <= 0:
+        raise ValueError(text)
+    return x, y, w, h
+
+
+def _trigger(text: str) -> str:
+    low = text.lower()
+    if low in ("software", "free") or (low.startswith("line") and low[4:].isdigit()):
+        return low
+    raise ValueError(text)
+
+
+def _buffers(text: str) -> int:
+    n = int(text)
+    if not 1 <= n <= 64:
+        raise ValueError(text)
+    return n
+
+
+def parse_aravis_url(text: str) -> tuple[Settings, dict[str, float | None]]:
+    """The camera settings and the timing options of an ``aravis://`` URL.  The device id
+    is taken from the URL as written (case kept, percent-decoded)."""
+    url = parse_url(text)
+    opts = url.typed_options({
+        "trigger": (_trigger, "software"), "pixel_format": (choice(*pixels.FORMATS), None),
+        "exposure_us": (positive, None), "gain_db": (float, None), "buffers": (_buffers, None),
+        "region": (_region, None), "frame_rate": (positive, None), "timeout": (positive, None),
+        "backoff": (positive, None), "backoff_max": (positive, None)}, FORM)
+    name = unquote(urlsplit(text).netloc)
+    if url.scheme != "aravis" or not name or url.path not in ("", "/"):
+        raise url.error(f"expected {FORM} (the device id is VENDOR-MODEL-SERIAL, as Aravis "
+                        "lists it)")
+    settings = Settings(name, opts["trigger"], opts["pixel_format"], opts["exposure_us"],
+                        opts["gain_db"], opts["buffers"] or DEFAULT_BUFFERS, opts["region"],
+                        opts["frame_rate"])
+    return settings, {k: opts[k] for k in ("timeout", "backoff", "backoff_max")}
+
+
+def translate(exc: Any, what: str, device: str) -> DeviceError:
+    """A typed DeviceError for a GLib.Error raised by Aravis while doing ``what``."""
+    domain, code = str(getattr(exc, "domain", "")), int(getattr(exc, "code", -1))
+    msg = f"{what}: {getattr(exc, 'message', exc)}"
+    if domain == "arv-device-error-quark" and code in LINK_LOST:
+        return ConnectionLostError(msg + " (camera unplugged, off, or link down?)",
+                                   device=device, code=code)
+    if domain == "arv-device-error-quark" and code in NOT_IN_CONTROL:
+        return ConnectError(msg + " (is another program using the camera?)", device=device,
+                            code=code)
+    if (domain, code) in FEATURE_MISSING:
+        return UnsupportedError(msg, device=device, code=code)
+    if domain == "arv-gc-error-quark":
+        return RefusedError(msg, device=device, code=code)
+    return DeviceError(msg, device=device, code=code)

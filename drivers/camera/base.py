@@ -1,0 +1,216 @@
+"""A camera as the station sees it: trigger, then grab one BGR frame with its timestamp.
+
+Every backend (Aravis, OpenCV, file replay, simulated world) delivers the same thing -- an
+8-bit BGR image, because the marker is found by its colour -- so the vision code never learns
+where a frame came from.  The public methods here do the shared work (state checks, argument
+checks, timeouts) and call small hooks each backend overrides, like python-can's ``BusABC``.
+
+Trigger semantics, the same for every backend, so that a stereo pair can be driven without
+knowing what it is made of:
+
+- ``trigger()`` starts a new frame *now*: frames already waiting (from earlier triggers) are
+  dropped and a software trigger is fired.  Backends that cannot be triggered (free-running
+  cameras, replays, the simulated world) note the time instead, which becomes the frame's
+  timestamp, so two cameras triggered together get matching timestamps.
+- ``grab(timeout)`` returns the next frame.  A software-triggered camera delivers nothing
+  without a trigger (DeviceTimeoutError); the other backends deliver a frame on every grab.
+
+Classes are named ``CameraDevice`` so they do not clash with the camera *model*
+(``stationd.geometry.camera.Camera``: intrinsics and distortion).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Self
+
+import numpy as np
+
+from drivers.errors import DeviceError
+
+DEFAULT_TIMEOUT = 2.0  # seconds a grab waits when neither the URL nor the caller says
+
+
+class UnsupportedError(DeviceError):
+    """The camera cannot do this (exposure on a file replay, gain on a camera without it)."""
+
+
+class FrameError(DeviceError):
+    """A frame arrived but cannot be used: an unreadable file, an unsupported pixel format,
+    an incomplete buffer.  The camera itself is still usable: grab again."""
+
+
+class EndOfStreamError(DeviceError):
+    """A replay (image files, a video file) has delivered its last frame."""
+
+
+@dataclass(eq=False)
+class Frame:
+    """One image: ``image`` is HxWx3 uint8 in BGR order (OpenCV's), ``timestamp`` is
+    seconds since the epoch on the host clock (``time.time()`` scale) when the exposure was
+    triggered or the frame arrived, ``frame_id`` counts the camera's frames, ``camera`` is
+    the camera's URL, ``pixel_format`` what the camera sent before conversion to BGR."""
+
+    image: np.ndarray
+    timestamp: float
+    frame_id: int
+    camera: str
+    pixel_format: str = "BGR8"
+
+    def __post_init__(self) -> None:
+        img = self.image
+        if not (isinstance(img, np.ndarray) and img.dtype == np.uint8 and img.ndim == 3
+                and img.shape[2] == 3 and img.shape[0] > 0 and img.shape[1] > 0):
+            shape = getattr(img, "shape", None)
+            dtype = getattr(img, "dtype", type(img).__name__)
+            raise ValueError(f"a frame is an HxWx3 uint8 BGR image, got {dtype} {shape}")
+
+    @property
+    def width(self) -> int:
+        return int(self.image.shape[1])
+
+    @property
+    def height(self) -> int:
+        return int(self.image.shape[0])
+
+
+def positive(text: str) -> float:
+    """URL option converter: a finite number > 0 (seconds, microseconds)."""
+    value = float(text)
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(text)
+    return value
+
+
+def flag(text: str) -> bool:
+    """URL option converter: 1/0, yes/no, true/false, on/off."""
+    low = text.strip().lower()
+    if low in ("1", "yes", "true", "on"):
+        return True
+    if low in ("0", "no", "false", "off"):
+        return False
+    raise ValueError(text)
+
+
+def choice(*allowed: str) -> Callable[[str], str]:
+    """URL option converter: one of ``allowed``, case-insensitive, returned as spelled there."""
+    table = {a.lower(): a for a in allowed}
+
+    def conv(text: str) -> str:
+        try:
+            return table[text.strip().lower()]
+        except KeyError:
+            raise ValueError(text) from None
+    return conv
+
+
+class CameraDevice(ABC):
+    """One camera.  ``open()`` and ``close()`` are idempotent and the camera is a context
+    manager; backends implement ``_open`` / ``_close`` / ``_grab`` (and ``_trigger``,
+    ``_set_exposure_us``, ``_set_gain_db`` where they can) and this class does the rest."""
+
+    def __init__(self, url: str, *, timeout: float | None = None) -> None:
+        if timeout is not None and not (math.isfinite(timeout) and timeout > 0):
+            raise ValueError(f"timeout must be > 0, got {timeout}")
+        self.url = url
+        self.timeout = timeout or DEFAULT_TIMEOUT
+        self._is_open = False
+        self._triggered_at: float | None = None
+
+    @property
+    def is_open(self) -> bool:
+        return self._is_open
+
+    def open(self) -> None:
+        """Connect; a DeviceError (ConnectError, UrlError, ...) if the camera cannot be used."""
+        if not self._is_open:
+            self._open()
+            self._is_open = True
+
+    def close(self) -> None:
+        """Stop acquisition and background work, release the camera; safe to call twice."""
+        if self._is_open:
+            self._is_open = False
+            self._triggered_at = None
+            self._close()
+
+    def __enter__(self) -> Self:
+        self.open()
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def _check_open(self) -> None:
+        if not self._is_open:
+            raise DeviceError("the camera is not open", device=self.url)
+
+    def trigger(self) -> None:
+        """Start a new frame now (software trigger); frames already waiting are dropped."""
+        self._check_open()
+        self._triggered_at = time.time()
+        self._trigger()
+
+    def grab(self, timeout: float | None = None) -> Frame:
+        """The next frame, waiting at most ``timeout`` seconds (default: the camera's).
+        DeviceTimeoutError if none arrives (a software-triggered camera needs ``trigger()``
+        first), ConnectionLostError if the camera went away (it reconnects by itself where
+        the backend can), FrameError for a frame that arrived broken."""
+        self._check_open()
+        if timeout is not None and not (math.isfinite(timeout) and timeout > 0):
+            raise ValueError(f"timeout must be > 0, got {timeout}")
+        return self._grab(timeout or self.timeout)
+
+    def set_exposure_us(self, exposure_us: float) -> float:
+        """Set the exposure time in microseconds; returns the value the camera applied
+        (cameras round to their step).  UnsupportedError where there is no such control."""
+        self._check_open()
+        if not (math.isfinite(exposure_us) and exposure_us > 0):
+            raise ValueError(f"exposure must be > 0 us, got {exposure_us}")
+        return self._set_exposure_us(float(exposure_us))
+
+    def set_gain_db(self, gain_db: float) -> float:
+        """Set the analogue gain in dB; returns the value the camera applied."""
+        self._check_open()
+        if not math.isfinite(gain_db):
+            raise ValueError(f"gain must be finite, got {gain_db}")
+        return self._set_gain_db(float(gain_db))
+
+    def _take_trigger_time(self) -> float:
+        """The time of the pending ``trigger()`` (consumed), else now: the timestamp of
+        backends that produce the frame when grabbed."""
+        t, self._triggered_at = self._triggered_at, None
+        return t if t is not None else time.time()
+
+    # -- hooks --------------------------------------------------------------------------
+    @abstractmethod
+    def identity(self) -> str:
+        """A one-line description of the camera and its link, for logs and ``stationd probe``."""
+
+    @abstractmethod
+    def _open(self) -> None:
+        """Connect and start acquisition; clean up everything itself if it fails."""
+
+    @abstractmethod
+    def _close(self) -> None:
+        """Release everything; must not raise."""
+
+    @abstractmethod
+    def _grab(self, timeout: float) -> Frame:
+        """The next frame within ``timeout`` seconds (> 0), or a typed DeviceError."""
+
+    def _trigger(self) -> None:  # noqa: B027 - free-running backends only note the time
+        """Fire the trigger; by default nothing to do (the base class noted the time)."""
+
+    def _set_exposure_us(self, exposure_us: float) -> float:
+        raise UnsupportedError(f"{type(self).__name__} has no exposure control",
+                               device=self.url)
+
+    def _set_gain_db(self, gain_db: float) -> float:
+        raise UnsupportedError(f"{type(self).__name__} has no gain control", device=self.url)

@@ -1,0 +1,121 @@
+"""``sim://PAIR/SIDE``: a camera that shows what the simulated world shows through it.
+
+The camera and the world meet through an in-process channel, like python-can's virtual bus:
+the world calls ``register_world("pair1", source)`` and every ``sim://pair1/left`` or
+``sim://pair1/right`` camera asks ``source(side, seed)`` for a BGR image when it is grabbed.
+The world renders with ``stationd.sim.render`` through that camera's calibration, so lighting,
+noise and what the marker looks like are the world's business, not the camera's.
+
+The pair is looked up at grab time, not at open: the daemon may open its cameras before the
+simulated world has started.  A grab with no world for the pair is a ConnectError that says
+what to register.  ``seed`` is the URL's ``seed`` option plus the frame number, the same for
+the left and right frames of one stereo grab, so a seeded world renders a reproducible run.
+
+    sim://pair1/left?seed=100
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from urllib.parse import unquote, urlsplit
+
+import numpy as np
+
+from drivers.camera.base import CameraDevice, Frame
+from drivers.errors import ConnectError, ProtocolError
+from drivers.url import parse_url
+
+#: ``source(side, seed) -> HxWx3 uint8 BGR image``
+WorldSource = Callable[[str, int], np.ndarray]
+SIDES = ("left", "right")
+FORM = "sim://PAIR/left|right[?seed=N]"
+
+_worlds: dict[str, WorldSource] = {}
+_lock = threading.Lock()
+
+
+def register_world(pair: str, source: WorldSource, *, replace: bool = False) -> None:
+    """Let ``sim://PAIR/...`` cameras render through ``source``.  A pair is registered once
+    (ValueError otherwise, so two worlds never fight over a camera) unless ``replace``."""
+    if not pair or "/" in pair:
+        raise ValueError(f"a pair name is a non-empty word without '/', got {pair!r}")
+    if not callable(source):
+        raise TypeError("source must be callable as source(side, seed)")
+    with _lock:
+        if pair in _worlds and not replace:
+            raise ValueError(f"a simulated world is already registered for pair {pair!r}")
+        _worlds[pair] = source
+
+
+def unregister_world(pair: str) -> None:
+    """Remove the pair's world (nothing if none): its cameras then fail at the next grab."""
+    with _lock:
+        _worlds.pop(pair, None)
+
+
+def registered_worlds() -> list[str]:
+    """The pairs that have a world, sorted (tests check that none is left behind)."""
+    with _lock:
+        return sorted(_worlds)
+
+
+def parse_sim_url(text: str) -> tuple[str, str, int]:
+    """(pair, side, seed) of a ``sim://`` URL; the pair keeps its case (hostnames do not)."""
+    url = parse_url(text)
+    opts = url.typed_options({"seed": (int, 0)}, FORM)
+    parts = urlsplit(text)
+    pair = unquote(parts.netloc)
+    side = unquote(parts.path).strip("/")
+    if url.scheme != "sim" or not pair or side not in SIDES:
+        raise url.error(f"expected {FORM}")
+    if opts["seed"] < 0:
+        raise url.error("option seed must be >= 0")
+    return pair, side, int(opts["seed"])
+
+
+class SimCamera(CameraDevice):
+    """A camera of the simulated station.  It has no exposure or gain: the world decides how
+    bright the image is.  Frames are rendered when grabbed; ``trigger()`` fixes the timestamp,
+    so a stereo pair triggered together shows no skew however long rendering takes."""
+
+    def __init__(self, url: str, *, timeout: float | None = None, backoff: float | None = None,
+                 backoff_max: float | None = None) -> None:
+        """``backoff`` and ``backoff_max`` are accepted so that every backend takes the
+        same keywords; there is nothing to reconnect here."""
+        super().__init__(url, timeout=timeout)
+        self.pair, self.side, self.seed = parse_sim_url(url)
+        self._count = 0
+
+    def identity(self) -> str:
+        with _lock:
+            world = "world registered" if self.pair in _worlds else "no world registered yet"
+        return f"simulated camera {self.pair}/{self.side} ({world})"
+
+    def _open(self) -> None:
+        self._count = 0
+
+    def _close(self) -> None:
+        pass
+
+    def _grab(self, timeout: float) -> Frame:
+        """Render one frame (synchronously: ``timeout`` does not cut a render short)."""
+        with _lock:
+            source = _worlds.get(self.pair)
+            known = sorted(_worlds)
+        if source is None:
+            others = f" (registered: {', '.join(known)})" if known else " (none registered)"
+            raise ConnectError(f"no simulated world for pair {self.pair!r}{others}; the world "
+                               f"must call drivers.camera.sim.register_world({self.pair!r}, "
+                               "source) first", device=self.url)
+        timestamp = self._take_trigger_time()
+        frame_id = self._count
+        self._count += 1
+        image = source(self.side, self.seed + frame_id)
+        if not (isinstance(image, np.ndarray) and image.dtype == np.uint8 and image.ndim == 3
+                and image.shape[2] == 3 and image.size > 0):
+            what = f"{getattr(image, 'dtype', type(image).__name__)} " \
+                   f"{getattr(image, 'shape', '')}".strip()
+            raise ProtocolError(f"the simulated world returned {what}, not an HxWx3 uint8 "
+                                "BGR image", device=self.url)
+        return Frame(image=image, timestamp=timestamp, frame_id=frame_id, camera=self.url)

@@ -1,0 +1,96 @@
+"""``stationd probe camera URL``: connect to one camera, trigger it, grab one frame.
+
+The commissioning check for a camera: does it answer, which camera is it, what does it send
+and when.  Exit 0 with a frame, 1 when the camera cannot be reached or no frame arrives in
+time (one line on stderr), 2 for a bad URL or option (raised as UrlError / InputError, which
+the CLI turns into one line and exit 2).  ``add_camera_probe`` is called by ``stationd.probe``
+with its sub-parsers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from drivers.errors import DeviceError, UrlError
+from stationd.errors import InputError
+
+EXIT_OK, EXIT_NO_FRAME = 0, 1
+
+
+def add_camera_probe(psub: Any) -> None:
+    """Add ``camera`` to the ``stationd probe`` sub-parsers."""
+    from drivers.camera import FORMS
+
+    p = psub.add_parser("camera", help="trigger one camera, grab a frame, show what came")
+    p.add_argument("url", help=FORMS)
+    p.add_argument("--save", metavar="FRAME.png", help="write the frame (.png, .jpg, ...)")
+    p.add_argument("--timeout", type=float, default=5.0,
+                   help="seconds to wait for the frame (default 5)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=probe_camera)
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """Bad options fail before anything is opened."""
+    if not (math.isfinite(args.timeout) and args.timeout > 0):
+        raise UrlError(f"--timeout {args.timeout:g}: must be > 0 seconds", device=args.url)
+    if args.save:
+        import cv2
+
+        save = Path(args.save)
+        if not cv2.haveImageWriter(str(save)):
+            kind = save.suffix or "a name without extension"
+            raise InputError(f"--save {save}: no image writer for {kind} (use .png, .jpg, "
+                             ".bmp or .tif)")
+        if not save.parent.is_dir():
+            raise InputError(f"--save {save}: no such directory {save.parent}")
+
+
+def probe_camera(args: argparse.Namespace) -> int:
+    from drivers.camera import open_camera
+
+    _check_options(args)
+    try:
+        with open_camera(args.url, timeout=args.timeout) as cam:
+            identity = cam.identity()
+            start = time.monotonic()
+            cam.trigger()
+            frame = cam.grab(args.timeout)
+            latency = time.monotonic() - start
+    except UrlError:
+        raise  # bad input: exit 2 through the CLI's error path
+    except DeviceError as exc:
+        if args.json:
+            sys.stdout.write(json.dumps({"device": args.url, "kind": "camera", "ok": False,
+                                         "error": str(exc)}) + "\n")
+        sys.stderr.write(f"stationd: camera: {exc}\n")
+        return EXIT_NO_FRAME
+    saved = None
+    if args.save:
+        import cv2
+
+        if not cv2.imwrite(args.save, frame.image):
+            raise InputError(f"--save {args.save}: the image could not be written")
+        saved = args.save
+    when = dt.datetime.fromtimestamp(frame.timestamp, dt.UTC).isoformat(timespec="milliseconds")
+    out = {"device": args.url, "kind": "camera", "ok": True, "identity": identity,
+           "width": frame.width, "height": frame.height, "pixel_format": frame.pixel_format,
+           "frame_id": frame.frame_id, "timestamp": frame.timestamp, "time_utc": when,
+           "latency_s": round(latency, 4), "saved": saved}
+    if args.json:
+        sys.stdout.write(json.dumps(out) + "\n")
+    else:
+        print(identity)
+        print(f"  frame {frame.frame_id}: {frame.width}x{frame.height} BGR from "
+              f"{frame.pixel_format}, timestamp {when} ({frame.timestamp:.6f}), "
+              f"{latency * 1000:.0f} ms after the trigger")
+        if saved:
+            print(f"  saved {saved}")
+    return EXIT_OK

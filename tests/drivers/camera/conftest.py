@@ -1,0 +1,82 @@
+"""Fixtures for the camera tests: Aravis's own fake GigE camera on loopback, leak checks.
+
+Aravis is exercised through the real library path (GigE Vision on 127.0.0.1, UDP 3956), so
+only one fake camera may exist at a time: the fixture makes one per test and destroys it
+after the test's cameras are closed (stream, then camera, then fake).  ``Aravis.shutdown()``
+is left to the driver's atexit hook, which runs once at the end of the pytest process.
+"""
+
+from __future__ import annotations
+
+import gc
+import threading
+import time
+
+import pytest
+
+from drivers.camera import sim
+
+SERIAL = "STATIOND1"
+FAKE_NAME = "Aravis-Fake-" + SERIAL
+FAST = "timeout=1.0&backoff=0.1&backoff_max=0.4"
+
+
+@pytest.fixture(autouse=True)
+def no_leaks():
+    """Fail a test that leaves a reconnect thread or a registered simulated world behind."""
+    before = set(threading.enumerate())
+    yield
+    deadline = time.monotonic() + 2.0
+    while True:
+        extra = [t for t in threading.enumerate() if t not in before and t.is_alive()]
+        if not extra or time.monotonic() > deadline:
+            break
+        time.sleep(0.01)
+    assert not extra, f"leaked threads: {[t.name for t in extra]}"
+    assert threading.active_count() <= len(before)
+    worlds = sim.registered_worlds()
+    for pair in worlds:
+        sim.unregister_world(pair)
+    assert not worlds, f"simulated worlds left registered: {worlds}"
+
+
+def aravis_or_skip():
+    """The Aravis module, or skip: the only reason to skip is that gi/Aravis cannot load."""
+    from drivers.camera import aravis
+
+    reason = aravis.available()
+    if reason is not None:
+        pytest.skip(f"Aravis is not importable: {reason}")
+    return aravis.load()[0]
+
+
+class FakeGigE:
+    """Aravis's fake GigE Vision camera on 127.0.0.1; ``stop()`` is the cable being pulled,
+    ``start()`` plugging it back (a fresh camera with the same serial, default settings)."""
+
+    def __init__(self, arv):
+        self.arv = arv
+        self.fake = None
+        self.start()
+
+    def start(self):
+        assert self.fake is None, "one fake camera at a time"
+        self.fake = self.arv.GvFakeCamera.new("127.0.0.1", SERIAL)
+        assert self.fake.is_running(), "the fake GigE camera did not start (UDP 3956 busy?)"
+
+    def stop(self):
+        self.fake = None
+        gc.collect()
+
+    def url(self, options=""):
+        return f"aravis://{FAKE_NAME}?{FAST}" + (f"&{options}" if options else "")
+
+    def set_trigger_frequency(self, hz):
+        self.fake.get_fake_camera().set_trigger_frequency(hz)
+
+
+@pytest.fixture
+def fake():
+    f = FakeGigE(aravis_or_skip())
+    yield f
+    f.stop()

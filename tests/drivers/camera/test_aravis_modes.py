@@ -1,0 +1,90 @@
+"""The Aravis backend's trigger modes, errors and lifecycle, against Aravis's fake cameras."""
+
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+
+from drivers.camera import UnsupportedError, open_camera
+from drivers.errors import ConnectError, DeviceError, DeviceTimeoutError
+
+from .conftest import FAKE_NAME, aravis_or_skip
+
+SMALL = "region=0,0,128,96"
+
+
+def test_line_trigger_waits_for_the_line(fake):
+    """The GigE fake simulates no trigger pulses: on Line0 nothing arrives, and trigger()
+    must not fire a software trigger in that mode."""
+    with open_camera(fake.url(SMALL + "&trigger=line0")) as cam:
+        assert "trigger line0" in cam.identity()
+        cam.trigger()
+        with pytest.raises(DeviceTimeoutError) as err:
+            cam.grab(0.3)
+        assert "software trigger" not in str(err.value)
+
+
+def test_line_trigger_pulses_deliver_frames():
+    """Aravis's in-process fake camera ("Fake_1") pulses Line0 at 25 Hz (and ignores
+    software triggers): frames arrive without trigger(), and trigger() drops stale ones."""
+    aravis_or_skip().enable_interface("Fake")
+    with open_camera("aravis://Fake_1?trigger=line0&region=0,0,64,48") as cam:
+        a, b = cam.grab(1.0), cam.grab(1.0)
+        assert b.frame_id == a.frame_id + 1 and 0.02 < b.timestamp - a.timestamp < 0.08
+        time.sleep(0.15)  # frames pile up in the pool
+        cam.trigger()
+        assert cam.grab(1.0).timestamp > time.time() - 0.06
+
+
+def test_free_run_delivers_without_trigger(fake):
+    with open_camera(fake.url(SMALL + "&trigger=free&frame_rate=50")) as cam:
+        a, b = cam.grab(1.0), cam.grab(1.0)
+        assert b.frame_id > a.frame_id and a.image.shape == (96, 128, 3)
+
+
+def test_what_the_camera_does_not_offer(fake):
+    with pytest.raises(UnsupportedError, match=r"pixel format BGR8 not offered by the camera "
+                                               r"\(it offers: .*RGB8"):
+        open_camera(fake.url("pixel_format=BGR8"))
+    with pytest.raises(UnsupportedError, match=r"trigger line3 not offered \(sources: Line0, "
+                                               r"Software\)"):
+        open_camera(fake.url("trigger=line3"))
+    with open_camera(fake.url(SMALL)) as cam:  # and the camera is usable after those
+        cam.trigger()
+        cam.grab()
+
+
+def test_unknown_device_lists_the_cameras_found(fake):
+    with pytest.raises(ConnectError, match=rf"cannot open camera 'Aravis-Fake-NOPE'.*cameras "
+                                           rf"found: .*{FAKE_NAME}"):
+        open_camera("aravis://Aravis-Fake-NOPE")
+
+
+def test_lifecycle(fake):
+    cam = open_camera(fake.url(SMALL))
+    cam.open()  # idempotent
+    assert cam.identity().startswith("Aravis Fake S/N STATIOND1 (GigE Vision 127.0.0.1")
+    cam.close()
+    cam.close()
+    with pytest.raises(DeviceError, match="not open"):
+        cam.grab()
+    assert "closed" in cam.identity()
+
+
+def test_shutdown_order_at_process_end():
+    """A process that exits with a camera still open: the atexit hook closes the stream and
+    the camera before Aravis.shutdown(), and the process exits cleanly."""
+    aravis_or_skip()
+    code = textwrap.dedent("""
+        from drivers.camera import open_camera
+        from drivers.camera.aravis import load
+        arv = load()[0]
+        fake = arv.GvFakeCamera.new("127.0.0.1", "STATIOND9")
+        cam = open_camera("aravis://Aravis-Fake-STATIOND9?region=0,0,64,48")
+        cam.trigger()
+        print(cam.grab().image.shape)
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=30)
+    assert r.returncode == 0 and r.stdout.strip() == "(48, 64, 3)", r.stderr

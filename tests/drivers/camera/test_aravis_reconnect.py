@@ -1,0 +1,58 @@
+"""The camera unplugged and plugged back: a typed error, then recovery by the reconnect thread.
+
+Aravis's fake GigE camera is destroyed (the cable pulled: register accesses time out after
+Aravis's 2.5 s of GVCP retries) and created again with the same serial (plugged back, with
+its power-on defaults: the driver must configure it again).
+"""
+
+import time
+
+import pytest
+
+from drivers.camera import open_camera
+from drivers.errors import ConnectionLostError, DeviceError
+
+SETTINGS = "region=0,0,64,48&pixel_format=RGB8&exposure_us=20000"
+
+
+def test_unplugged_then_plugged_back(fake):
+    with open_camera(fake.url(SETTINGS)) as cam:
+        cam.trigger()
+        before = cam.grab()
+        fake.stop()
+        with pytest.raises(ConnectionLostError, match=r"software trigger: .*timeout .*camera "
+                                                      "unplugged, off, or link down"):
+            cam.trigger()
+        with pytest.raises(ConnectionLostError, match=r"link down for .*reconnecting"):
+            cam.grab(0.2)
+        assert "link down" in cam.identity()
+        fake.start()
+        deadline = time.monotonic() + 10.0
+        while True:
+            try:
+                cam.trigger()
+                after = cam.grab(1.0)
+                break
+            except ConnectionLostError:
+                assert time.monotonic() < deadline, cam.identity()
+                time.sleep(0.1)
+        assert after.pixel_format == "RGB8" and after.image.shape == before.image.shape
+        assert "RGB8 64x48" in cam.identity()
+        assert cam.settings.exposure_us == 20000.0  # configured again after the re-plug
+    assert not cam.is_open
+
+
+def test_close_while_reconnecting_stops_the_thread(fake):
+    """close() stops and joins the reconnect thread whatever it is doing.  The fake is
+    plugged back at once so that releasing the old objects does not sit in GVCP timeouts:
+    with the camera still gone, close() would wait for those (about 7.5 s)."""
+    cam = open_camera(fake.url(SETTINGS))
+    fake.stop()
+    with pytest.raises(ConnectionLostError):
+        cam.trigger()
+    fake.start()
+    start = time.monotonic()
+    cam.close()  # the no_leaks fixture checks that the reconnect thread is gone
+    assert time.monotonic() - start < 5.0
+    with pytest.raises(DeviceError, match="not open"):
+        cam.grab()
