@@ -1,10 +1,8 @@
 import numpy as np
 import pytest
 
-from stationd.bench.scenes import station_pair
 from stationd.config import load_station_config
 from stationd.errors import ConfigError
-from stationd.geometry.camera import StereoPair
 from tests.conftest import SPEC
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
@@ -16,11 +14,22 @@ def test_example_station_config_loads():
     assert cfg.vision.centre_method == "paper" and cfg.vision.gates.max_rms_px == 0.35
 
 
-def test_sim_pair_file_is_the_demo_pair():
-    pair = StereoPair.load(ROOT / "config" / "sim" / "pair1.yaml")
-    ref = station_pair()
-    assert np.allclose(pair.R, ref.R) and np.allclose(pair.T, ref.T)
-    assert np.allclose(pair.left.K, ref.left.K) and pair.left.size == (5472, 3648)
+def test_sim_station_files_are_the_generators_output():
+    from stationd.sim.station_files import files
+
+    for name, text in files().items():
+        assert (ROOT / "config" / "sim" / name).read_text() == text, name
+
+
+def test_sim_station_config_loads_with_its_four_pairs():
+    cfg = load_station_config(ROOT / "config" / "sim" / "station.yaml")
+    assert sorted(cfg.pairs) == ["pair1", "pair2", "pair3", "pair4"]
+    for name, p in cfg.pairs.items():
+        assert p.left == f"{name}_left" and cfg.cameras[p.left] == f"sim://{name}/left"
+        assert p.to_vehicle is not None and abs(np.linalg.det(p.to_vehicle.A) - 1) < 1e-9
+        assert p.calibration.left.size == (5472, 3648)
+    assert cfg.lift.url == "sim://lift" and cfg.wrench.url == "sim://wrench"
+    assert cfg.matching.stable_frames == 3 and cfg.bolts_path.name == "bolts.yaml"
 
 
 @pytest.mark.parametrize("text,needle", [
@@ -30,6 +39,10 @@ def test_sim_pair_file_is_the_demo_pair():
     ("vision:\n  hsv: missing.yaml\n", "does not exist"),
     ("vision:\n  gates:\n    min_points: 2\n", "out of range"),
     ("lifts: {}\n", "unknown key"),
+    ("cameras:\n  c1: {url: 'sim://p/left'}\npairs:\n  p:\n    calibration: cfg.yaml\n"
+     "    left: c9\n", "no camera 'c9'"),
+    ("matching:\n  stable_frames: 0\n", "matching.stable_frames: 0 is out of range"),
+    ("bolts: nowhere.yaml\n", "bolt file"),
     ("lift: modbus://x\n", "lift: expected a mapping"),
 ])
 def test_config_errors_name_file_line_and_key(tmp_path, text, needle):
