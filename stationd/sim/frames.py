@@ -1,0 +1,56 @@
+"""Fast full-resolution frames for the simulated cameras.
+
+A full 20 MP render costs about a second (noise generation dominates), far too slow for a
+station running at frame rate.  The marker covers a small window of the frame: the rest is
+the same background every time.  So each camera renders its background once and each frame
+ray-casts only the window around the marker, pasted into a copy.  The renderer seeds its noise
+by sensor position, so with the same seed the composite equals a full render exactly (tested);
+with a new seed per frame the window's noise is fresh and the background's is frozen, which a
+detector cannot tell apart.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from stationd.bench.scenes import marker_window
+from stationd.geometry.camera import Camera
+from stationd.sim.render import MarkerPose, Scene, render
+from stationd.vision.marker import MarkerSpec
+
+
+class FrameSource:
+    """Frames of one simulated camera for a scene whose only moving thing is the marker."""
+
+    def __init__(self, camera: Camera, scene: Scene, seed: int = 0) -> None:
+        if scene.markers:
+            raise ValueError("the background scene must not contain markers")
+        self.camera = camera
+        self.scene = scene
+        self.seed = seed
+        self._background: np.ndarray | None = None
+
+    @property
+    def background(self) -> np.ndarray:
+        if self._background is None:
+            self._background = render(self.camera, self.scene, seed=self.seed).image
+        return self._background
+
+    def frame(self, pose: MarkerPose | None, spec: MarkerSpec | None = None,
+              seed: int | None = None) -> np.ndarray:
+        """A full frame with the marker at ``pose`` (camera frame), or the bare background."""
+        image = self.background.copy()
+        if pose is None:
+            return image
+        spec = spec or MarkerSpec()
+        win = marker_window(self.camera, pose, spec, margin_px=48.0)
+        if win is None:  # partly or wholly out of view: render what is visible, the slow way
+            return render(self.camera, replace(self.scene, markers=[(pose, spec)]),
+                          seed=self.seed if seed is None else seed).image
+        x, y, w, h = win
+        patch = render(self.camera, replace(self.scene, markers=[(pose, spec)]), window=win,
+                       seed=self.seed if seed is None else seed).image
+        image[y:y + h, x:x + w] = patch
+        return image

@@ -1,0 +1,33 @@
+import numpy as np
+
+from stationd.geometry.camera import Camera
+from stationd.sim.frames import FrameSource
+from stationd.sim.render import MarkerPose, Scene, render
+from stationd.vision.marker import MarkerSpec
+
+CAM = Camera(np.array([[1500.0, 0, 799.5], [0, 1500.0, 599.5], [0, 0, 1]]),
+             np.array([-0.05, 0.02, 0.0, 0.0]), (1600, 1200))
+SCENE = Scene(texture=0.2, vignetting=0.3, blur_sigma=0.8, noise_sigma=2.0)
+
+
+def test_composite_equals_a_full_render_with_the_same_seed():
+    src = FrameSource(CAM, SCENE, seed=5)
+    pose = MarkerPose.look(np.array([60.0, -40.0, 700.0]), 30, 45, 10)
+    fast = src.frame(pose)
+    full = render(CAM, Scene(**{**SCENE.__dict__, "markers": [(pose, MarkerSpec())]}),
+                  seed=5).image
+    assert np.array_equal(fast, full)
+
+
+def test_no_marker_gives_the_background_and_the_cache_is_not_modified():
+    src = FrameSource(CAM, SCENE, seed=1)
+    bg = src.frame(None)
+    src.frame(MarkerPose.look(np.array([0.0, 0.0, 800.0]), 10, 0, 0), seed=9)
+    assert np.array_equal(src.frame(None), bg)
+
+
+def test_a_marker_partly_out_of_view_falls_back_to_a_full_render():
+    src = FrameSource(CAM, SCENE, seed=2)
+    pose = MarkerPose.look(np.array([-390.0, 0.0, 700.0]), 10, 0, 0)  # at the left edge
+    img = src.frame(pose)
+    assert img.shape == (1200, 1600, 3) and not np.array_equal(img, src.frame(None))
