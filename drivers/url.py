@@ -10,6 +10,7 @@ string carries options, and anything unknown is an error that shows the accepted
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -70,3 +71,13 @@ def parse_url(text: str) -> DeviceUrl:
         options[k] = v
     return DeviceUrl(text=text, scheme=parts.scheme.lower(), host=parts.hostname, port=port,
                      path=parts.path, options=options)
+
+
+def load_backend(backends: Mapping[str, str], scheme: str) -> Any:
+    """The class registered for ``scheme`` in ``backends`` (scheme -> "module:Class"),
+    imported only now (python-can's interface registry), or None for an unknown scheme."""
+    target = backends.get(scheme)
+    if target is None:
+        return None
+    module, _, name = target.partition(":")
+    return getattr(importlib.import_module(module), name)

@@ -6,7 +6,6 @@ imports PyGObject; a typo in the scheme fails before any import), like the lift'
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
 
 from drivers.camera.base import (
@@ -17,7 +16,7 @@ from drivers.camera.base import (
     UnsupportedError,
 )
 from drivers.errors import UrlError
-from drivers.url import parse_url
+from drivers.url import load_backend, parse_url
 
 #: scheme -> "module:Class"
 BACKENDS: dict[str, str] = {
@@ -40,11 +39,9 @@ def camera_class(url: str) -> type[CameraDevice]:
         scheme = parse_url(url).scheme
     except UrlError as exc:
         raise UrlError(f"{exc}; accepted: {FORMS}") from None
-    target = BACKENDS.get(scheme)
-    if target is None:
+    cls: type[CameraDevice] | None = load_backend(BACKENDS, scheme)
+    if cls is None:
         raise UrlError(f"unknown camera scheme {scheme!r}; accepted: {FORMS}", device=url)
-    module, name = target.split(":")
-    cls: type[CameraDevice] = getattr(importlib.import_module(module), name)
     return cls
 
 

@@ -47,7 +47,6 @@ from typing import Any, TypeVar
 from drivers.camera import pixels
 from drivers.camera.aravis_config import Settings, parse_aravis_url, translate
 from drivers.camera.base import CameraDevice, Frame, FrameError, UnsupportedError
-from drivers.camera.link import LinkKeeper
 from drivers.errors import (
     ConnectError,
     ConnectionLostError,
@@ -55,6 +54,7 @@ from drivers.errors import (
     DeviceTimeoutError,
     RefusedError,
 )
+from drivers.reconnect import LinkKeeper
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -300,7 +300,7 @@ class AravisCamera(CameraDevice):
             url, self._connect, lambda link, lost: link.close(lost=lost),
             backoff=timing["backoff"] or backoff or 0.5,
             backoff_max=timing["backoff_max"] or backoff_max or 10.0,
-            name=f"camera-reconnect {url}")
+            name=f"camera-reconnect {url}", noun="camera", log=log)
 
     @property
     def buffer_count(self) -> int:

@@ -23,15 +23,14 @@ from __future__ import annotations
 
 import math
 import time
-from abc import ABC, abstractmethod
+from abc import abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
-from types import TracebackType
-from typing import Self
 
 import numpy as np
 
 from drivers.errors import DeviceError
+from drivers.lifecycle import Device
 
 DEFAULT_TIMEOUT = 2.0  # seconds a grab waits when neither the URL nor the caller says
 
@@ -109,43 +108,24 @@ def choice(*allowed: str) -> Callable[[str], str]:
     return conv
 
 
-class CameraDevice(ABC):
+class CameraDevice(Device):
     """One camera.  ``open()`` and ``close()`` are idempotent and the camera is a context
-    manager; backends implement ``_open`` / ``_close`` / ``_grab`` (and ``_trigger``,
-    ``_set_exposure_us``, ``_set_gain_db`` where they can) and this class does the rest."""
+    manager (``drivers.lifecycle.Device``); backends implement ``_open`` (connect and start
+    acquisition) / ``_close`` / ``_grab`` (and ``_trigger``, ``_set_exposure_us``,
+    ``_set_gain_db`` where they can) and this class does the rest."""
 
     def __init__(self, url: str, *, timeout: float | None = None) -> None:
         if timeout is not None and not (math.isfinite(timeout) and timeout > 0):
             raise ValueError(f"timeout must be > 0, got {timeout}")
+        super().__init__()
         self.url = url
         self.timeout = timeout or DEFAULT_TIMEOUT
-        self._is_open = False
         self._triggered_at: float | None = None
-
-    @property
-    def is_open(self) -> bool:
-        return self._is_open
-
-    def open(self) -> None:
-        """Connect; a DeviceError (ConnectError, UrlError, ...) if the camera cannot be used."""
-        if not self._is_open:
-            self._open()
-            self._is_open = True
 
     def close(self) -> None:
         """Stop acquisition and background work, release the camera; safe to call twice."""
-        if self._is_open:
-            self._is_open = False
-            self._triggered_at = None
-            self._close()
-
-    def __enter__(self) -> Self:
-        self.open()
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.close()
+        self._triggered_at = None  # a pending trigger does not outlive the acquisition
+        super().close()
 
     def _check_open(self) -> None:
         if not self._is_open:
@@ -194,18 +174,10 @@ class CameraDevice(ABC):
         """A one-line description of the camera and its link, for logs and ``stationd probe``."""
 
     @abstractmethod
-    def _open(self) -> None:
-        """Connect and start acquisition; clean up everything itself if it fails."""
-
-    @abstractmethod
-    def _close(self) -> None:
-        """Release everything; must not raise."""
-
-    @abstractmethod
     def _grab(self, timeout: float) -> Frame:
         """The next frame within ``timeout`` seconds (> 0), or a typed DeviceError."""
 
-    def _trigger(self) -> None:  # noqa: B027 - free-running backends only note the time
+    def _trigger(self) -> None:  # free-running backends only note the time
         """Fire the trigger; by default nothing to do (the base class noted the time)."""
 
     def _set_exposure_us(self, exposure_us: float) -> float:

@@ -7,12 +7,11 @@ never imports pyserial, and a typo in the scheme fails before any import), like 
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
 
 from drivers.errors import UrlError
 from drivers.lift.base import Lift, LiftState, MapError, RegisterMap
-from drivers.url import parse_url
+from drivers.url import load_backend, parse_url
 
 #: scheme -> "module:Class"
 BACKENDS: dict[str, str] = {
@@ -30,11 +29,9 @@ __all__ = ["BACKENDS", "FORMS", "Lift", "LiftState", "MapError", "RegisterMap", 
 def lift_class(url: str) -> type[Lift]:
     """The backend class for ``url``'s scheme; UrlError listing the accepted forms if none."""
     scheme = parse_url(url).scheme
-    target = BACKENDS.get(scheme)
-    if target is None:
+    cls: type[Lift] | None = load_backend(BACKENDS, scheme)
+    if cls is None:
         raise UrlError(f"unknown lift scheme {scheme!r}; accepted: {FORMS}", device=url)
-    module, name = target.split(":")
-    cls: type[Lift] = getattr(importlib.import_module(module), name)
     return cls
 
 

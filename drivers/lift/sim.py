@@ -10,88 +10,29 @@ station's polling, timeouts and reconnects run over the real protocol path.
     sim://lift                 Modbus TCP on 127.0.0.1
     sim://lift?transport=rtu   Modbus RTU over a pty pair (parity N: ptys refuse parity bits)
 
-The pymodbus server API used here (ModbusTcpServer / ModbusSerialServer with a SimDevice whose
-``action`` refreshes the registers on every request) is the only pymodbus surface besides
-``modbus.py``'s client.
+The server (its event loop thread, TCP and RTU, the pty pair) comes from
+``drivers.modbus_server``, shared with the wrench's simulated register controller; the action
+that refreshes the registers before every request is here.
 """
 
 from __future__ import annotations
 
-import asyncio
-import os
-import select
 import threading
 import time
-import tty
-from collections.abc import Callable, Coroutine
-from types import TracebackType
-from typing import Any, Self, TypeVar, cast
-
-from pymodbus import FramerType
-from pymodbus.constants import ExcCodes
-from pymodbus.server import ModbusSerialServer, ModbusTcpServer
-from pymodbus.simulator import DataType, SimData, SimDevice
+from collections.abc import Callable
 
 from drivers.errors import DeviceError
 from drivers.lift.base import Lift, LiftState, RegisterMap
 from drivers.lift.modbus import ModbusLift
+from drivers.modbus_server import PtyPair, SimServer
 from drivers.url import parse_url
 
+__all__ = ["SIM_FORM", "PtyPair", "SimLift", "SimulatedPlc"]
+
 SIM_FORM = "sim://lift?transport=tcp|rtu&unit=1&timeout=1.0"
-T = TypeVar("T")
 
 
-class PtyPair:
-    """Two pseudo-terminals joined by a thread that copies bytes both ways: a null-modem cable
-    between ``paths[0]`` and ``paths[1]``, in-process (no socat needed).  We keep both slave
-    ends open ourselves, so either side can open and close its end without EIO on ours."""
-
-    def __init__(self) -> None:
-        self._fds: list[int] = []
-        masters, paths = [], []
-        for _ in range(2):
-            master, slave = os.openpty()
-            tty.setraw(slave)  # no echo, no line discipline, before anyone opens it
-            os.set_blocking(master, False)
-            self._fds += [master, slave]
-            masters.append(master)
-            paths.append(os.ttyname(slave))
-        self.paths = (paths[0], paths[1])
-        self._masters = (masters[0], masters[1])
-        self._wake_r, self._wake_w = os.pipe()
-        self._thread = threading.Thread(target=self._run, name="lift-sim-pty", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        a, b = self._masters
-        while True:
-            ready, _, _ = select.select([a, b, self._wake_r], [], [])
-            if self._wake_r in ready:
-                return
-            for src, dst in ((a, b), (b, a)):
-                if src in ready:
-                    try:
-                        os.write(dst, os.read(src, 4096))
-                    except (BlockingIOError, InterruptedError):
-                        pass  # nobody draining the other end: the bytes are lost, as on a wire
-                    except OSError:
-                        return  # an end is gone: the line goes dead (timeouts), no busy loop
-
-    def close(self) -> None:
-        """Stop the copier and close every end; safe to call twice."""
-        if self._thread.is_alive():
-            os.write(self._wake_w, b"x")
-            self._thread.join()
-        for fd in (*self._fds, self._wake_r, self._wake_w):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
-        self._fds = []
-        self._wake_r = self._wake_w = -1
-
-
-class SimulatedPlc:
+class SimulatedPlc(SimServer):
     """A lift PLC serving ``register_map`` as Modbus unit ``unit``.
 
     The world moves the lift with :meth:`raise_lift` / :meth:`lower_lift` (instantly, or over
@@ -102,6 +43,7 @@ class SimulatedPlc:
     def __init__(self, register_map: RegisterMap | None = None, *, unit: int = 1,
                  low_mm: float = 0.0, working_mm: float = 1750.0,
                  clock: Callable[[], float] = time.monotonic) -> None:
+        super().__init__(thread_name="lift-sim-plc", pty_name="lift-sim-pty")
         self.register_map = register_map if register_map is not None else RegisterMap()
         self.unit = unit
         self.low_mm = low_mm
@@ -114,13 +56,6 @@ class SimulatedPlc:
         self._model = 0
         self._vin: str | None = None
         self._silent = False
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._thread: threading.Thread | None = None
-        self._tcp: ModbusTcpServer | None = None
-        self._rtu: ModbusSerialServer | None = None
-        self._pty: PtyPair | None = None
-        self.tcp_port: int | None = None
-        self.rtu_port: str | None = None  # the pty a master opens
 
     # -- the world's side ------------------------------------------------------------------
     def _now_height(self, now: float) -> tuple[float, bool]:
@@ -182,116 +117,21 @@ class SimulatedPlc:
             return self._state(*self._now_height(self._clock()))
 
     # -- the server's side -----------------------------------------------------------------
-    async def _action(self, _function_code: int, start: int, _address: int, _count: int,
-                      registers: list[int], _values: list[int] | list[bool] | None
-                      ) -> ExcCodes | None:
-        """Called by pymodbus before each request is served: write the current state into
-        the block (writes never reach here: the block is read-only)."""
-        for address, value in self.register_map.encode(self.state()).items():
-            registers[address - start] = value
+    def _action(self, function_code: int, start: int, address: int, count: int,
+                registers: list[int], values: list[int] | list[bool] | None) -> int | None:
+        """Write the current state into the block (writes never reach here: the block is
+        read-only)."""
+        for addr, value in self.register_map.encode(self.state()).items():
+            registers[addr - start] = value
         return None
 
     def _trace(self, sending: bool, packet: bytes) -> bytes:
         return b"" if sending and self._silent else packet
 
-    def _device(self) -> SimDevice:
+    def _blocks(self) -> list[tuple[int, int, bool]]:
         addresses = self.register_map.addresses()
         first, last = min(addresses), max(addresses)
-        block = SimData(first, count=last - first + 1, datatype=DataType.REGISTERS,
-                        readonly=True)
-        return SimDevice(id=self.unit, simdata=[block], action=self._action)
-
-    def _run(self, coro: Coroutine[Any, Any, T]) -> T:
-        if self._loop is None:
-            loop = asyncio.new_event_loop()
-            self._thread = threading.Thread(target=loop.run_forever, name="lift-sim-plc",
-                                            daemon=True)
-            self._thread.start()
-            self._loop = loop
-        return asyncio.run_coroutine_threadsafe(coro, self._loop).result(10.0)
-
-    def start_tcp(self, port: int = 0) -> int:
-        """Serve Modbus TCP on 127.0.0.1:``port`` (0: a free port); returns the port."""
-        if self._tcp is not None:
-            raise RuntimeError("the TCP server is already running")
-
-        async def start() -> tuple[ModbusTcpServer, int]:
-            server = ModbusTcpServer(self._device(), address=("127.0.0.1", port),
-                                     trace_packet=self._trace)
-            await server.serve_forever(background=True)
-            listener = cast(asyncio.Server, server.transport)  # listen() stores the Server
-            return server, int(listener.sockets[0].getsockname()[1])
-
-        self._tcp, self.tcp_port = self._run(start())
-        return self.tcp_port
-
-    def start_rtu(self) -> str:
-        """Serve Modbus RTU on one end of a pty pair; returns the other end's path."""
-        if self._rtu is not None:
-            raise RuntimeError("the RTU server is already running")
-        if self._pty is None:
-            self._pty = PtyPair()
-        path = self._pty.paths[0]
-
-        async def start() -> ModbusSerialServer:
-            server = ModbusSerialServer(self._device(), framer=FramerType.RTU, port=path,
-                                        baudrate=19200, parity="N", trace_packet=self._trace)
-            await server.serve_forever(background=True)
-            return server
-
-        self._rtu = self._run(start())
-        self.rtu_port = self._pty.paths[1]
-        return self.rtu_port
-
-    def _stop(self, server: ModbusTcpServer | ModbusSerialServer | None) -> None:
-        async def stop(server: ModbusTcpServer | ModbusSerialServer) -> None:
-            # let connections already accepted finish connection_made(): pymodbus closes only
-            # those, and one caught half-way would live on, orphaned and silent
-            await asyncio.sleep(0.01)
-            await server.shutdown()  # type: ignore[no-untyped-call]
-
-        if server is not None and self._loop is not None:
-            self._run(stop(server))
-
-    def stop_tcp(self) -> None:
-        """Stop listening and drop the connections: masters see the PLC disappear."""
-        server, self._tcp = self._tcp, None
-        self._stop(server)
-
-    def stop_rtu(self) -> None:
-        """Stop answering on the serial line (the pty stays: the cable is still plugged)."""
-        server, self._rtu = self._rtu, None
-        self._stop(server)
-
-    def close(self) -> None:
-        """Stop both servers, the event loop thread and the pty copier; safe to call twice."""
-        self.stop_tcp()
-        self.stop_rtu()
-        loop, self._loop = self._loop, None
-        if loop is not None and self._thread is not None:
-            asyncio.run_coroutine_threadsafe(_cancel_all(), loop).result(10.0)
-            loop.call_soon_threadsafe(loop.stop)
-            self._thread.join()
-            loop.close()
-        self._thread = None
-        if self._pty is not None:
-            self._pty.close()
-            self._pty = None
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.close()
-
-
-async def _cancel_all() -> None:
-    """Cancel what pymodbus leaves running (request handlers, relisten tasks)."""
-    tasks = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
-    for task in tasks:
-        task.cancel()
-    await asyncio.gather(*tasks, return_exceptions=True)
+        return [(first, last - first + 1, True)]
 
 
 class SimLift(Lift):

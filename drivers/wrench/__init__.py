@@ -15,11 +15,10 @@ a station without a serial adapter never imports pyserial.
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
 
 from drivers.errors import UrlError
-from drivers.url import parse_url
+from drivers.url import load_backend, parse_url
 from drivers.wrench.base import LinkStatus, Status, TighteningResult, Wrench
 
 __all__ = ["BACKENDS", "FORMS", "LinkStatus", "Status", "TighteningResult", "Wrench",
@@ -45,12 +44,10 @@ def open_wrench(url: str, *, connect: bool = True, **kw: Any) -> Wrench:
     options (e.g. ``timeout=0.5``; ``psets=...`` for ``sim://``).  An unknown scheme or
     option is a UrlError that shows the accepted forms."""
     parsed = parse_url(url)
-    target = BACKENDS.get(parsed.scheme)
-    if target is None:
+    backend = load_backend(BACKENDS, parsed.scheme)
+    if backend is None:
         raise UrlError(f"unknown wrench scheme {parsed.scheme!r} (accepted: {FORMS})",
                        device=url)
-    module_name, _, class_name = target.partition(":")
-    backend = getattr(importlib.import_module(module_name), class_name)
     wrench: Wrench = backend.from_url(parsed, **kw)
     if connect:
         try:

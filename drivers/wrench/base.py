@@ -9,19 +9,24 @@ at a time and waits for its acknowledgement; a blocking API with a timeout is th
 contract that says "acknowledged or failed" and is directly usable from the CLI and tests.
 The daemon's asyncio loop calls it through ``asyncio.to_thread`` (STYLE 4).  Backends are
 thread-safe: a command may be issued from one thread while another waits for results.
+
+Both backends (Open Protocol, Modbus registers) keep their link up with a supervisor thread
+that reconnects with backoff and queue results as they arrive; :class:`SupervisedWrench` is
+the bookkeeping they share (link status, waiting for the link or a result, error wording).
 """
 
 from __future__ import annotations
 
 import threading
-from abc import ABC, abstractmethod
+import time
+from abc import abstractmethod
+from collections import deque
 from dataclasses import dataclass, field
 from datetime import datetime
 from enum import IntEnum
-from types import TracebackType
-from typing import Self
 
-from drivers.errors import DeviceError
+from drivers.errors import ConnectionLostError, DeviceError
+from drivers.lifecycle import Openable
 
 
 class Status(IntEnum):
@@ -76,12 +81,13 @@ class LinkStatus:
     reconnects: int = 0      # successful reconnects since open()
 
 
-class Wrench(ABC):
+class Wrench(Openable):
     """A tightening controller: select a parameter set, enable the tool, receive results.
 
     ``open()`` connects (and fails fast with a typed :class:`DeviceError`); after that a lost
     link is re-established in the background by the backend.  ``close()`` may be called any
     number of times; a closed wrench cannot be reopened (make a new one, as with python-can).
+    It is a context manager (``drivers.lifecycle.Openable``).
     """
 
     def __init__(self, device: str, *, timeout: float = 2.0) -> None:
@@ -116,14 +122,6 @@ class Wrench(ABC):
     @property
     def is_open(self) -> bool:
         return self._opened and not self._closed
-
-    def __enter__(self) -> Self:
-        self.open()
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.close()
 
     def __repr__(self) -> str:
         state = "closed" if self._closed else "open" if self._opened else "new"
@@ -225,3 +223,99 @@ class Wrench(ABC):
 
     @abstractmethod
     def _wait_result(self, timeout: float) -> TighteningResult | None: ...
+
+
+def check_positive(**values: float) -> None:
+    """ValueError naming the first of ``values`` (in the order given) that is not > 0."""
+    for name, value in values.items():
+        if not value > 0:
+            raise ValueError(f"{name} must be > 0, not {value}")
+
+
+class SupervisedWrench(Wrench):
+    """A backend whose link a supervisor thread keeps up (reconnecting with backoff) and
+    whose results are queued as they arrive.  Everything below is guarded by ``_cond``; the
+    backend says whether its link is up (:meth:`_link_up`) and keeps the counts:
+    ``_reason`` why the link went down, ``_last_error`` of the last failed attempt,
+    ``_attempts`` failed since then, ``_reconnects`` since open, ``_poll_error`` a failure
+    that leaves the link up."""
+
+    def __init__(self, device: str, *, timeout: float = 2.0) -> None:
+        super().__init__(device, timeout=timeout)
+        self._cond = threading.Condition()
+        self._closing = False
+        self._reason: str | None = None
+        self._last_error: str | None = None
+        self._poll_error: str | None = None
+        self._attempts = self._reconnects = 0
+        self._results: deque[TighteningResult | DeviceError] = deque()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @abstractmethod
+    def _link_up(self) -> bool:
+        """Whether the link is up (called with ``_cond`` held)."""
+
+    # -- the counts, as the supervisor sees the link go and come back (``_cond`` held) -------
+    def _link_lost(self, reason: str) -> None:
+        self._reason, self._attempts = reason, 0
+
+    def _attempt_failed(self, e: DeviceError) -> int:
+        """Count a failed reconnect attempt; the number of them so far."""
+        self._attempts += 1
+        self._last_error = str(e)
+        return self._attempts
+
+    def _link_restored(self) -> None:
+        """Count a reconnect (the link is up again) and wake whoever waits for it."""
+        self._reason = self._last_error = None
+        self._attempts = 0
+        self._reconnects += 1
+        self._cond.notify_all()
+
+    def _surface(self, e: DeviceError, what: str, note: str = "") -> DeviceError:
+        """The error as the caller sees it: device name, what was being done, the code."""
+        return type(e)(f"{what}: {e}{note}", device=self.device, code=e.code)
+
+    def _down(self, what: str, note: str = "") -> ConnectionLostError:
+        """What a caller sees while the link is down (call with ``_cond`` held)."""
+        last = f"; last attempt: {self._last_error}" if self._last_error else ""
+        return ConnectionLostError(f"{what}: link down ({self._reason}); reconnecting, "
+                                   f"{self._attempts} failed attempt(s){last}{note}",
+                                   device=self.device)
+
+    def _status(self) -> LinkStatus:
+        with self._cond:
+            up = self._link_up()
+            reason = self._poll_error if up else self._reason
+            if not up and reason and self._last_error:
+                reason = f"{reason}; last attempt: {self._last_error}"
+            return LinkStatus(up, reason, self._attempts, self._reconnects)
+
+    def _wait_connected(self, timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while not self._link_up() and not self._closing:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    break
+                self._cond.wait(remaining)
+            return self._link_up()
+
+    def _wait_result(self, timeout: float) -> TighteningResult | None:
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                if self._results:
+                    item = self._results.popleft()
+                    if isinstance(item, DeviceError):
+                        raise self._surface(item, "tightening result")
+                    return item
+                if self._closing:
+                    raise DeviceError("closed", device=self.device)
+                if not self._link_up():
+                    raise self._down("waiting for a result")
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return None
+                self._cond.wait(remaining)

@@ -18,7 +18,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -32,7 +31,7 @@ from drivers.errors import (
 )
 from drivers.url import DeviceUrl
 from drivers.wrench import openprotocol as op
-from drivers.wrench.base import LinkStatus, TighteningResult, Wrench
+from drivers.wrench.base import SupervisedWrench, TighteningResult, check_positive
 from drivers.wrench.link import Link, SerialLink, TcpLink
 from drivers.wrench.openprotocol import Message, SerialFramer, TcpFramer
 
@@ -66,17 +65,15 @@ class _Pending:
         return True
 
 
-class OpenProtocolWrench(Wrench):
+class OpenProtocolWrench(SupervisedWrench):
     """A tightening controller over Open Protocol (TCP or RS-232)."""
 
     def __init__(self, link: Link | None, *, device: str, timeout: float = 2.0,
                  connect_timeout: float = 5.0, keepalive: float = 10.0, backoff: float = 0.5,
                  backoff_max: float = 30.0) -> None:
         super().__init__(device, timeout=timeout)
-        for name, value in (("connect_timeout", connect_timeout), ("keepalive", keepalive),
-                            ("backoff", backoff), ("backoff_max", backoff_max)):
-            if not value > 0:
-                raise ValueError(f"{name} must be > 0, not {value}")
+        check_positive(connect_timeout=connect_timeout, keepalive=keepalive, backoff=backoff,
+                       backoff_max=backoff_max)
         self._given_link = link
         self._link: Link = link or TcpLink("127.0.0.1", DEFAULT_PORT)
         self._connect_timeout = connect_timeout
@@ -85,19 +82,10 @@ class OpenProtocolWrench(Wrench):
         self._framer: TcpFramer | SerialFramer = TcpFramer()
         self._send_lock = threading.Lock()      # one message on the wire at a time
         self._request_lock = threading.Lock()   # one command in flight
-        self._cond = threading.Condition()      # guards the state below
-        self._connected = False
-        self._closing = False
+        self._connected = False                 # these two guarded by _cond too
         self._epoch = 0
-        self._reason: str | None = None
-        self._last_error: str | None = None
-        self._attempts = 0
-        self._reconnects = 0
         self._pending: _Pending | None = None
-        self._results: deque[TighteningResult | DeviceError] = deque()
         self._ident = ""
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self._last_sent = 0.0
         self._keepalive_sent: float | None = None
 
@@ -204,18 +192,14 @@ class OpenProtocolWrench(Wrench):
                 self._start_session()
             except DeviceError as e:
                 with self._cond:
-                    self._attempts += 1
-                    self._last_error = str(e)
+                    attempts = self._attempt_failed(e)
                 log.info("%s: reconnect attempt %d failed (%s); next in %.3g s", self.device,
-                         self._attempts, e, min(delay * 2, self._backoff_max))
+                         attempts, e, min(delay * 2, self._backoff_max))
                 delay = min(delay * 2, self._backoff_max)
                 continue
             with self._cond:
                 self._connected = True
-                self._reason = self._last_error = None
-                self._attempts = 0
-                self._reconnects += 1
-                self._cond.notify_all()
+                self._link_restored()
             log.info("%s: reconnected", self.device)
             return
 
@@ -279,7 +263,7 @@ class OpenProtocolWrench(Wrench):
             self._closing = self._closing or closing
             self._epoch += 1
             if was_up:
-                self._reason, self._attempts = str(err), 0
+                self._link_lost(str(err))
             if self._pending is not None:
                 self._pending.error = err
                 self._pending.done.set()
@@ -338,7 +322,7 @@ class OpenProtocolWrench(Wrench):
         with self._request_lock:
             with self._cond:
                 if not self._connected:
-                    raise self._down_error(what)
+                    raise self._down(what)
                 epoch = self._epoch
             try:
                 self._transact(msg, {op.MID_ACCEPTED, op.MID_ERROR}, timeout, epoch)
@@ -349,36 +333,12 @@ class OpenProtocolWrench(Wrench):
                 raise self._surface(e, what, "; not acknowledged, treat it as not done (the "
                                     "link is reset and reconnects)") from None
 
-    def _surface(self, e: DeviceError, what: str, note: str = "") -> DeviceError:
-        """The error as the caller sees it: device name, what was being done, the code."""
-        return type(e)(f"{what}: {e}{note}", device=self.device, code=e.code)
-
-    def _down_error(self, what: str) -> ConnectionLostError:
-        last = f"; last attempt: {self._last_error}" if self._last_error else ""
-        return ConnectionLostError(f"{what}: link down ({self._reason}); reconnecting, "
-                                   f"{self._attempts} failed attempt(s){last}",
-                                   device=self.device)
-
     # -- the Wrench hooks ------------------------------------------------------------------
+    def _link_up(self) -> bool:
+        return self._connected
+
     def _identity(self) -> str:
         return self._ident
-
-    def _status(self) -> LinkStatus:
-        with self._cond:
-            reason = self._reason
-            if reason and self._last_error:
-                reason = f"{reason}; last attempt: {self._last_error}"
-            return LinkStatus(self._connected, reason, self._attempts, self._reconnects)
-
-    def _wait_connected(self, timeout: float) -> bool:
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            while not self._connected and not self._closing:
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    break
-                self._cond.wait(remaining)
-            return self._connected
 
     def _select_pset(self, pset: int, timeout: float) -> None:
         self._command(Message(op.MID_PSET_SELECT, data=f"{pset:03d}".encode()),
@@ -395,24 +355,6 @@ class OpenProtocolWrench(Wrench):
                              f"{vin!r}")
         self._command(Message(op.MID_VIN, data=vin.ljust(VIN_LENGTH).encode("ascii")),
                       f"send VIN {vin}", timeout)
-
-    def _wait_result(self, timeout: float) -> TighteningResult | None:
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                if self._results:
-                    item = self._results.popleft()
-                    if isinstance(item, DeviceError):
-                        raise self._surface(item, "tightening result")
-                    return item
-                if self._closing:
-                    raise DeviceError("closed", device=self.device)
-                if not self._connected:
-                    raise self._down_error("waiting for a result")
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    return None
-                self._cond.wait(remaining)
 
 
 def keyword_options(kw: dict[str, Any], spec: Spec) -> dict[str, Any]:

@@ -32,8 +32,8 @@ failed and so whether the controller can have acted.  A timeout or lost link dro
 poller thread then reconnects with exponential backoff and re-reads the station's own
 registers (request number, control bits, result ack), which also lets a restarted station
 continue the sequence.  A Modbus exception keeps the link.  The link itself (own socket or
-serial port, typed connect errors) is the lift's, extended with writes; pymodbus is imported
-here and in ``modbus_sim.py`` only.
+serial port, typed errors, reads and writes) is ``drivers.modbus_link``, shared with the lift;
+pymodbus is imported there and in ``drivers.modbus_server`` only.
 """
 
 from __future__ import annotations
@@ -41,12 +41,9 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
 from datetime import datetime
 from typing import Any, TypeVar
-
-from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 
 from drivers.errors import (
     ConnectionLostError,
@@ -55,64 +52,41 @@ from drivers.errors import (
     ProtocolError,
     RefusedError,
 )
-from drivers.lift.modbus import EXCEPTION_NAMES, LinkSpec, _Link, parse_modbus_url
+from drivers.modbus_link import LinkSpec, ModbusLink, Wording, parse_modbus_url
 from drivers.url import DeviceUrl
-from drivers.wrench.base import LinkStatus, TighteningResult, Wrench
+from drivers.wrench.base import SupervisedWrench, check_positive
 from drivers.wrench.modbus_map import ACK_CODES, WrenchRegisterMap, next_sequence, spans
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
 ACK_POLL = 0.01      # seconds between reads while a command waits for the controller
 KEYWORDS = ("timeout", "connect_timeout", "poll", "backoff", "backoff_max", "register_map")
+#: the wrench's words in link errors (the refused hint is, as it always was, the lift's)
+WORDING = Wording(refused="controller off, or not its Modbus port?")
 
 
-class RegisterLink(_Link):
-    """The lift's Modbus link plus writes; every failure is a typed DeviceError without the
-    device name (the wrench adds it, with what it was doing)."""
+class RegisterLink(ModbusLink):
+    """The shared Modbus link, reading and writing holding registers; every failure is a
+    typed DeviceError without the device name (the wrench adds it, with what it was doing)."""
 
-    def call(self, what: str, timeout: float, fn: Callable[[Any], Any]) -> Any:
-        client = self._client
-        if client is None:
-            raise ConnectionLostError("not connected")
-        # no per-request timeout in pymodbus 3.16: the client and its transaction manager
-        # each keep a copy of the connect parameters, and both time a request
-        client.comm_params.timeout_connect = timeout
-        client.transaction.comm_params.timeout_connect = timeout
-        try:
-            rr = fn(client)
-        except ConnectionException as exc:
-            raise ConnectionLostError(f"link lost {what}: {exc.string}") from None
-        except ModbusIOException as exc:
-            if "No response" in exc.string:
-                raise DeviceTimeoutError(f"no answer within {timeout:g} s {what}") from None
-            raise ProtocolError(f"bad answer {what}: {exc.string}") from None
-        except ModbusException as exc:
-            raise ProtocolError(f"bad answer {what}: {exc.string}") from None
-        except OSError as exc:
-            raise ConnectionLostError(f"link lost {what}: {exc}") from None
-        if rr.isError():
-            code = int(getattr(rr, "exception_code", 0))
-            raise RefusedError(f"Modbus exception {code} ({EXCEPTION_NAMES.get(code, 'unknown')})"
-                               f" {what}", code=code)
-        return rr
+    def __init__(self, spec: LinkSpec) -> None:
+        super().__init__(spec, "", WORDING)
 
     def read_span(self, start: int, count: int, timeout: float) -> dict[int, int]:
         unit = self.spec.unit
-        rr = self.call(f"reading registers {start}-{start + count - 1} of unit {unit}", timeout,
-                       lambda c: c.read_holding_registers(start, count=count, device_id=unit))
-        if len(rr.registers) != count:
-            raise ProtocolError(f"asked for {count} registers at {start}, got {len(rr.registers)}")
-        return dict(zip(range(start, start + count), rr.registers, strict=True))
+        values = self.read("holding", start, count, timeout,
+                           f"reading registers {start}-{start + count - 1} of unit {unit}")
+        if len(values) != count:
+            raise ProtocolError(f"asked for {count} registers at {start}, got {len(values)}")
+        return dict(zip(range(start, start + count), values, strict=True))
 
     def write_span(self, start: int, values: list[int], timeout: float) -> None:
         """One request: function 6 for one register, 16 for more (atomic on the device)."""
-        unit, what = self.spec.unit, f"writing registers {start}-{start + len(values) - 1}"
-        self.call(f"{what} of unit {unit}", timeout, lambda c: c.write_register(
-            start, values[0], device_id=unit) if len(values) == 1 else c.write_registers(
-            start, values, device_id=unit))
+        self.write(start, values, timeout, f"writing registers {start}-"
+                                           f"{start + len(values) - 1} of unit {self.spec.unit}")
 
 
-class ModbusWrench(Wrench):
+class ModbusWrench(SupervisedWrench):
     """A register-driven tightening controller (see the module docstring for the handshake).
     Beyond the :class:`Wrench` interface: :meth:`set_parameters` (pset with torque and angle
     targets) and :meth:`controller_status` (the last polled status bits)."""
@@ -122,29 +96,19 @@ class ModbusWrench(Wrench):
                  connect_timeout: float = 5.0, poll: float = 0.1, backoff: float = 0.1,
                  backoff_max: float = 5.0) -> None:
         super().__init__(device, timeout=timeout)
-        for name, value in (("connect_timeout", connect_timeout), ("poll", poll),
-                            ("backoff", backoff), ("backoff_max", backoff_max)):
-            if not value > 0:
-                raise ValueError(f"{name} must be > 0, not {value}")
+        check_positive(connect_timeout=connect_timeout, poll=poll, backoff=backoff,
+                       backoff_max=backoff_max)
         self.spec = spec
         self.register_map = register_map if register_map is not None else WrenchRegisterMap()
         self._connect_timeout, self._poll = connect_timeout, poll
         self._backoff, self._backoff_max = backoff, max(backoff, backoff_max)
         self._io = threading.Lock()          # one request on the wire
         self._cmd = threading.Lock()         # one handshake at a time
-        self._cond = threading.Condition()   # guards everything below
+        # guarded by _cond, like the link status the base class keeps:
         self._link: RegisterLink | None = None
-        self._closing = False
-        self._reason: str | None = None
-        self._last_error: str | None = None
-        self._poll_error: str | None = None
-        self._attempts = self._reconnects = 0
         self._request = self._control = self._acked = 0   # images of station registers
         self._regs: dict[int, int] = {}                   # the last status block read
         self._delivered: tuple[int, int] | None = None
-        self._results: deque[TighteningResult | DeviceError] = deque()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
 
     @classmethod
     def from_url(cls, url: DeviceUrl, **kw: Any) -> ModbusWrench:
@@ -195,7 +159,7 @@ class ModbusWrench(Wrench):
     def _session(self) -> RegisterLink:
         """Connect and read the station's own registers back (the request number, control
         bits and result ack survive a station restart) and the status block."""
-        m, link = self.register_map, RegisterLink(self._where(), "")
+        m, link = self.register_map, RegisterLink(self._where())
         link.connect(self._connect_timeout)
         try:
             own = {m.request.address, m.tool_enable.address, m.result_ack.address}
@@ -231,10 +195,9 @@ class ModbusWrench(Wrench):
                 link = self._session()
             except DeviceError as e:
                 with self._cond:
-                    self._attempts += 1
-                    self._last_error = str(e)
+                    attempts = self._attempt_failed(e)
                 log.info("%s: reconnect attempt %d failed (%s); next in %.3g s", self.device,
-                         self._attempts, e, delay)
+                         attempts, e, delay)
                 if self._stop.wait(delay):
                     return
                 delay = min(2 * delay, self._backoff_max)
@@ -244,9 +207,7 @@ class ModbusWrench(Wrench):
                     link.close()
                     return
                 self._link, delay = link, self._backoff
-                self._reason = self._last_error = None
-                self._attempts, self._reconnects = 0, self._reconnects + 1
-                self._cond.notify_all()
+                self._link_restored()
             log.info("%s: reconnected", self.device)
 
     def _poll_once(self, link: RegisterLink) -> None:
@@ -293,7 +254,8 @@ class ModbusWrench(Wrench):
             except DeviceError as e:
                 with self._cond:
                     if self._link is link:
-                        self._link, self._reason, self._attempts = None, str(e), 0
+                        self._link = None
+                        self._link_lost(str(e))
                         self._cond.notify_all()
                         log.warning("%s: link lost: %s", self.device, e)
                 link.close()
@@ -311,16 +273,6 @@ class ModbusWrench(Wrench):
             if self._link is None:
                 raise self._down(what, "; nothing was sent")
             return self._link
-
-    def _down(self, what: str, note: str = "") -> ConnectionLostError:
-        """What a caller sees while the link is down (call with ``_cond`` held)."""
-        last = f"; last attempt: {self._last_error}" if self._last_error else ""
-        return ConnectionLostError(f"{what}: link down ({self._reason}); reconnecting, "
-                                   f"{self._attempts} failed attempt(s){last}{note}",
-                                   device=self.device)
-
-    def _surface(self, e: DeviceError, what: str, note: str = "") -> DeviceError:
-        return type(e)(f"{what}: {e}{note}", device=self.device, code=e.code)
 
     def _wait_status(self, link: RegisterLink, done: Callable[[dict[int, int]], bool],
                      timeout: float) -> tuple[bool, dict[int, int]]:
@@ -404,8 +356,7 @@ class ModbusWrench(Wrench):
         with self._cmd:
             link = self._current(what)
             with self._cond:
-                value = self._control | 1 << bit.bit if enabled else \
-                    self._control & ~(1 << bit.bit)
+                value = bit.applied(self._control, enabled)
             try:
                 self._io_call(link, lambda li: li.write_span(bit.address, [value], self.timeout))
                 with self._cond:
@@ -429,6 +380,9 @@ class ModbusWrench(Wrench):
                 raise self._surface(e, f"send VIN {vin}", "; treat it as not done") from None
 
     # -- the Wrench hooks ----------------------------------------------------------------------
+    def _link_up(self) -> bool:
+        return self._link is not None
+
     def _identity(self) -> str:
         return f"register-driven tightening controller, {self._where().describe()}"
 
@@ -438,39 +392,3 @@ class ModbusWrench(Wrench):
         with self._cond:
             return (self.register_map.bit("tool_enabled", self._regs),
                     self.register_map.bit("parameters_valid", self._regs))
-
-    def _status(self) -> LinkStatus:
-        with self._cond:
-            up = self._link is not None
-            reason = self._poll_error if up else self._reason
-            if not up and reason and self._last_error:
-                reason = f"{reason}; last attempt: {self._last_error}"
-            return LinkStatus(up, reason, self._attempts, self._reconnects)
-
-    def _wait_connected(self, timeout: float) -> bool:
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            while self._link is None and not self._closing:
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    break
-                self._cond.wait(remaining)
-            return self._link is not None
-
-    def _wait_result(self, timeout: float) -> TighteningResult | None:
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                if self._results:
-                    item = self._results.popleft()
-                    if isinstance(item, DeviceError):
-                        raise self._surface(item, "tightening result")
-                    return item
-                if self._closing:
-                    raise DeviceError("closed", device=self.device)
-                if self._link is None:
-                    raise self._down("waiting for a result")
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    return None
-                self._cond.wait(remaining)

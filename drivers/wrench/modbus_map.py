@@ -3,8 +3,9 @@
 The backend (``modbus.py``) and the simulated controller (``modbus_sim.py``) both code and
 decode through this module, so they agree by construction; the tests cross-check the layout
 with an independent master (mbpoll).  The field types (:class:`Number`, :class:`Bit`,
-:class:`Text`) are the lift's (``drivers.lift.base``), so a station.yaml reads the same for
-both devices.  Addresses are 0-based wire (PDU) addresses of holding registers.
+:class:`Text`) and their coding come from ``drivers.registers``, shared with the lift, so
+a station.yaml reads the same for both devices.  Addresses are 0-based wire (PDU) addresses of
+holding registers.
 
 Default layout, proposed to the controller's programmer when nothing exists yet (a compact
 block: the station polls registers 6-15 in one read)::
@@ -28,15 +29,16 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields
 from datetime import datetime
-from typing import Any, Literal
+from typing import Any
 
-from drivers.lift.base import MAX_READ, NUMBER_TYPES, ORDERS, Bit, MapError, Number, Text
+from drivers import registers
+from drivers.registers import ORDERS, Bit, MapError, Number, Text, spans
 from drivers.wrench.base import Status, TighteningResult
 from stationd.yamlio import YamlNode
 
-__all__ = ["ACK_CODES", "Bit", "MapError", "Number", "Text", "WrenchRegisterMap"]
+__all__ = ["ACK_CODES", "Bit", "MapError", "Number", "Text", "WrenchRegisterMap", "spans"]
 
 #: ack codes the controller writes; any other non-zero code is a refusal too
 ACK_CODES = {
@@ -79,26 +81,14 @@ def unpack_status(value: int) -> tuple[bool, int, int]:
     return bool(value >> RESULT_OK_BIT & 1), t, a
 
 
-def spans(addresses: set[int]) -> list[tuple[int, int]]:
-    """(start, count) reads covering ``addresses``: contiguous runs only (a gap may be a
-    register the controller does not have), at most 125 registers each."""
-    out: list[tuple[int, int]] = []
-    for a in sorted(addresses):
-        if out and out[-1][0] + out[-1][1] == a and out[-1][1] < MAX_READ:
-            out[-1] = (out[-1][0], out[-1][1] + 1)
-        else:
-            out.append((a, 1))
-    return out
-
-
 @dataclass(frozen=True)
 class WrenchRegisterMap:
     """Where each value lives (see the module docstring for the default layout).  Station
     registers are only written by the station and controller registers only by the
     controller, so the two never share a register."""
 
-    # field(default=...): the defaults are frozen dataclasses from drivers.lift.base, immutable,
-    # which ruff's RUF009 cannot see across modules
+    # field(default=...): the defaults are frozen dataclasses from drivers.registers,
+    # immutable, which ruff's RUF009 cannot see across modules
     word_order: str = "big"            # 32-bit values: big = high word at the lower address
     pset: Number = field(default=Number(0))
     torque_target: Number = field(default=Number(1, scale=0.01))
@@ -124,8 +114,7 @@ class WrenchRegisterMap:
     # -- validation -----------------------------------------------------------------------
     def validate(self) -> None:
         """Raise :class:`MapError` for a map the handshake cannot work with."""
-        if self.word_order not in ORDERS:
-            raise MapError("word_order", f"{self.word_order!r} is not one of: big, little")
+        registers.check_word_order(self.word_order)
         for name in (*COUNTERS, *INTEGERS, *SCALED):
             num: Number = getattr(self, name)
             if name in COUNTERS and (num.type, num.scale, num.offset) != ("uint16", 1.0, 0.0):
@@ -135,18 +124,13 @@ class WrenchRegisterMap:
                                      f"{', '.join(INTEGER_TYPES)} (scaled integers)")
             if name in INTEGERS and (num.scale, num.offset) != (1.0, 0.0):
                 raise MapError(name, "must be an integer without scale or offset")
-            if not (math.isfinite(num.scale) and num.scale != 0 and math.isfinite(num.offset)):
-                raise MapError(name, "scale must be finite and non-zero, offset finite")
+            registers.check_scale(name, num)
         for name in BITS:
-            if not 0 <= getattr(self, name).bit <= 15:
-                raise MapError(name, f"bit {getattr(self, name).bit} is out of range [0, 15]")
+            registers.check_bit(name, getattr(self, name))
         if self.tool_enabled == self.parameters_valid:
             raise MapError("parameters_valid", "uses the same bit as tool_enabled")
         if self.vin is not None:
-            if not 1 <= self.vin.length <= 2 * MAX_READ:
-                raise MapError("vin", f"length {self.vin.length} is out of range [1, 250]")
-            if self.vin.byte_order not in ORDERS:
-                raise MapError("vin", f"byte_order {self.vin.byte_order!r} is not big or little")
+            registers.check_text("vin", self.vin)
         owner: dict[int, str] = {}
         for name, words in self._registers().items():
             for a in words:
@@ -182,10 +166,6 @@ class WrenchRegisterMap:
         return spans(self.controller_addresses())
 
     # -- coding ---------------------------------------------------------------------------
-    def _words(self, data: bytes) -> list[int]:
-        words = [int.from_bytes(data[i:i + 2], "big") for i in range(0, len(data), 2)]
-        return words[::-1] if self.word_order == "little" else words
-
     def encode(self, name: str, value: float) -> dict[int, int]:
         """Registers holding ``value`` in field ``name``; ValueError if it does not fit."""
         num: Number = getattr(self, name)
@@ -193,20 +173,15 @@ class WrenchRegisterMap:
             raise ValueError(f"{name} must be a finite number, not {value}")
         raw = round((value - num.offset) / num.scale)
         try:
-            data = struct.pack(">" + NUMBER_TYPES[num.type][0], raw)
+            return num.pack(raw, self.word_order)
         except struct.error:
             raise ValueError(f"{name} {value:g} does not fit a {num.type} with scale "
                              f"{num.scale:g}") from None
-        return dict(zip(range(num.address, num.address + num.words), self._words(data),
-                        strict=True))
 
     def decode(self, name: str, regs: Mapping[int, int]) -> float:
         """The value of field ``name`` in ``regs`` (address -> register value)."""
         num: Number = getattr(self, name)
-        words = self._words(b"".join(regs[a].to_bytes(2, "big")
-                                     for a in range(num.address, num.address + num.words)))
-        raw: int = struct.unpack(">" + NUMBER_TYPES[num.type][0],
-                                 b"".join(w.to_bytes(2, "big") for w in words))[0]
+        raw = num.unpack(regs, self.word_order)
         # rounded to 9 decimals: 1058 * 0.1 is 105.8, not 105.80000000000001
         return round(raw * num.scale + num.offset, 9) if name in SCALED else raw
 
@@ -215,7 +190,7 @@ class WrenchRegisterMap:
 
     def bit(self, name: str, regs: Mapping[int, int]) -> bool:
         b: Bit = getattr(self, name)
-        return bool(regs[b.address] >> b.bit & 1)
+        return b.is_set(regs)
 
     def result(self, regs: Mapping[int, int], timestamp: datetime) -> TighteningResult:
         """The tightening in the result registers; ValueError for an undefined status.  The
@@ -238,18 +213,12 @@ class WrenchRegisterMap:
         if len(vin) > self.vin.length or not vin.isascii() or not vin.isprintable():
             raise ValueError(f"VIN must be printable ASCII, at most {self.vin.length} "
                              f"characters: {vin!r}")
-        text = vin.encode("ascii").ljust(2 * self.vin.words, b"\0")
-        order: Literal["big", "little"] = "big" if self.vin.byte_order == "big" else "little"
-        return {self.vin.address + i: int.from_bytes(text[2 * i:2 * i + 2], order)
-                for i in range(self.vin.words)}
+        return self.vin.pack(vin.encode("ascii"))
 
     def decode_vin(self, regs: Mapping[int, int]) -> str:
         if self.vin is None:
             return ""
-        order: Literal["big", "little"] = "big" if self.vin.byte_order == "big" else "little"
-        raw = b"".join(regs[self.vin.address + i].to_bytes(2, order)
-                       for i in range(self.vin.words))
-        return raw[:self.vin.length].rstrip(b"\0 ").decode("ascii", "replace")
+        return self.vin.unpack(regs).rstrip(b"\0 ").decode("ascii", "replace")
 
     # -- configuration --------------------------------------------------------------------
     @classmethod
@@ -267,35 +236,15 @@ class WrenchRegisterMap:
                 continue
             keys = ("address",) if name in COUNTERS else ("address", "type") \
                 if name in INTEGERS else ("address", "type", "scale", "offset")
-            sub = m[name].mapping(keys)
-            given: dict[str, Any] = {k: v.number() for k, v in sub.items()
-                                     if k in ("scale", "offset")}
-            if "address" in sub:
-                given["address"] = sub["address"].integer(lo=0, hi=65535)
-            if "type" in sub:
-                given["type"] = sub["type"].text(INTEGER_TYPES)
-            kw[name] = replace(getattr(default, name), **given)
+            kw[name] = registers.number_from_node(m[name], getattr(default, name),
+                                                  INTEGER_TYPES, keys)
         for name in BITS:
             if name in m:
-                sub = m[name].mapping(("address", "bit"))
-                kw[name] = replace(getattr(default, name), **{
-                    k: v.integer(lo=0, hi=65535 if k == "address" else 15)
-                    for k, v in sub.items()})
+                kw[name] = registers.bit_from_node(m[name], getattr(default, name))
         if "vin" in m:
-            kw["vin"] = None if m["vin"].value() is None else cls._text(m["vin"], default.vin)
+            kw["vin"] = None if m["vin"].value() is None else registers.text_from_node(
+                m["vin"], default.vin or Text(0, 25))
         try:
             return cls(**kw)
         except MapError as exc:
             raise m.get(exc.field, node).error(exc.message) from None
-
-    @staticmethod
-    def _text(node: YamlNode, default: Text | None) -> Text:
-        sub = node.mapping(("address", "length", "byte_order"))
-        given: dict[str, Any] = {}
-        if "address" in sub:
-            given["address"] = sub["address"].integer(lo=0, hi=65535)
-        if "length" in sub:
-            given["length"] = sub["length"].integer(lo=1, hi=2 * MAX_READ)
-        if "byte_order" in sub:
-            given["byte_order"] = sub["byte_order"].text(ORDERS)
-        return replace(default or Text(0, 25), **given)

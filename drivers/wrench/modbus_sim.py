@@ -8,7 +8,8 @@ simulator's :class:`SimPset`), writes ack code then ack; it follows the tool-ena
 publishes one result at a time and the next only once the station wrote the counter back.
 
 Its own state (``_regs``) is the truth; pymodbus's block is refreshed from it on every
-request by the device ``action`` (as in the lift's simulated PLC), and the controller's
+request by the device ``action`` (the server around it, event loop thread, TCP, RTU and pty
+pair, comes from ``drivers.modbus_server``, as for the lift's PLC), and the controller's
 registers are read-only on the wire (a write is exception 2).  Time-dependent behaviour is
 evaluated lazily on each request or world call, so there is no scan thread.
 
@@ -25,31 +26,24 @@ belongs to the Open Protocol simulation).
 
 from __future__ import annotations
 
-import asyncio
 import random
 import threading
 import time
 from collections import deque
-from collections.abc import Coroutine, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
-from types import TracebackType
-from typing import Any, Literal, Self, TypeVar, cast
+from typing import Any, Literal, cast
 
-from pymodbus import FramerType
-from pymodbus.constants import ExcCodes
-from pymodbus.server import ModbusSerialServer, ModbusTcpServer
-from pymodbus.simulator import DataType, SimData, SimDevice
-
-from drivers.lift.modbus import LinkSpec
-from drivers.lift.sim import PtyPair, _cancel_all
+from drivers.modbus_link import LinkSpec
+from drivers.modbus_server import SimServer
 from drivers.url import DeviceUrl
 from drivers.wrench.modbus import KEYWORDS, ModbusWrench
 from drivers.wrench.modbus_map import WrenchRegisterMap, next_sequence, pack_status, spans
 from drivers.wrench.sim import DEFAULT_PSETS, SimPset
 
-T = TypeVar("T")
 Fault = Literal["exception", "drop", "lost_answer"]
 WRITES = (6, 16)        # the function codes the controller accepts besides 3 (read)
+ILLEGAL_FUNCTION = 1    # the Modbus exception code for any other function
 
 
 @dataclass(frozen=True)
@@ -74,7 +68,7 @@ class SimResult:
     angle_status: int
 
 
-class SimRegisterController:
+class SimRegisterController(SimServer):
     """The simulated controller: ``start_tcp()`` / ``start_rtu()``, then drive it with
     :meth:`pull_trigger` and the fault controls; ``refusals`` maps a pset to an ack code."""
 
@@ -83,6 +77,7 @@ class SimRegisterController:
                  nok_rate: float = 0.05, refusals: Mapping[int, int] | None = None) -> None:
         if not 0.0 <= nok_rate <= 1.0:
             raise ValueError(f"nok_rate must be in [0, 1], not {nok_rate}")
+        super().__init__(thread_name="wrench-sim-modbus", pty_name="wrench-sim-pty")
         self.map = register_map if register_map is not None else WrenchRegisterMap()
         self.psets = dict(DEFAULT_PSETS if psets is None else psets)
         self.unit, self.nok_rate = unit, nok_rate
@@ -99,13 +94,6 @@ class SimRegisterController:
         self._ack_delay, self._hung, self._silent, self._mute = 0.0, False, False, False
         self._fault: tuple[Fault, int, int] | None = None
         self._serving = (False, False)               # TCP, RTU before power_off()
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._thread: threading.Thread | None = None
-        self._tcp: ModbusTcpServer | None = None
-        self._rtu: ModbusSerialServer | None = None
-        self._pty: PtyPair | None = None
-        self.tcp_port: int | None = None
-        self.rtu_port: str | None = None
 
     # -- the world's side ------------------------------------------------------------------
     def registers(self) -> dict[int, int]:
@@ -177,7 +165,7 @@ class SimRegisterController:
 
     def _set_bit(self, name: str, on: bool) -> None:
         b = getattr(self.map, name)
-        self._regs[b.address] = self._regs[b.address] & ~(1 << b.bit) | int(on) << b.bit
+        self._regs[b.address] = b.applied(self._regs[b.address], on)
 
     def _written(self, addresses: set[int], before: dict[int, int]) -> None:
         """React to the station's writes (called with the new values in place)."""
@@ -248,12 +236,11 @@ class SimRegisterController:
                          stats[0], stats[1])
 
     # -- the server's side -------------------------------------------------------------------
-    async def _action(self, function_code: int, start: int, address: int, count: int,
-                      registers: list[int], values: list[int] | list[bool] | None
-                      ) -> ExcCodes | None:
-        """Called by pymodbus before each request is served, for reads and writes."""
+    def _action(self, function_code: int, start: int, address: int, count: int,
+                registers: list[int], values: list[int] | list[bool] | None) -> int | None:
+        """Called before each request is served, for reads and writes."""
         if function_code != 3 and function_code not in WRITES:
-            return ExcCodes.ILLEGAL_FUNCTION
+            return ILLEGAL_FUNCTION
         with self._lock:
             if values is not None:
                 covered = set(range(address, address + len(values)))
@@ -261,7 +248,7 @@ class SimRegisterController:
                 if fault is not None and fault[1] not in covered:
                     self._fault, fault = fault, None
                 if fault is not None and fault[0] == "exception":
-                    return ExcCodes(fault[2])
+                    return fault[2]
                 self._mute = fault is not None
                 if fault is None or fault[0] == "lost_answer":
                     before = dict(self._regs)
@@ -281,94 +268,12 @@ class SimRegisterController:
             return b""
         return packet
 
-    def _device(self) -> SimDevice:
+    def _blocks(self) -> list[tuple[int, int, bool]]:
         """One block per contiguous run of mapped registers: the gaps answer exception 2,
         and the controller's registers are read-only on the wire."""
         station = self._station
-        blocks = [SimData(a, count=n, datatype=DataType.REGISTERS, readonly=a not in station)
-                  for run in (spans(station), spans(set(self._regs) - station))
-                  for a, n in run]
-        return SimDevice(id=self.unit, simdata=blocks, action=self._action)
-
-    def _run(self, coro: Coroutine[Any, Any, T]) -> T:
-        if self._loop is None:
-            loop = asyncio.new_event_loop()
-            self._thread = threading.Thread(target=loop.run_forever, daemon=True,
-                                            name="wrench-sim-modbus")
-            self._thread.start()
-            self._loop = loop
-        return asyncio.run_coroutine_threadsafe(coro, self._loop).result(10.0)
-
-    def start_tcp(self, port: int = 0) -> int:
-        """Serve Modbus TCP on 127.0.0.1:``port`` (0: a free one); returns the port."""
-        if self._tcp is not None:
-            raise RuntimeError("the TCP server is already running")
-
-        async def start() -> tuple[ModbusTcpServer, int]:
-            server = ModbusTcpServer(self._device(), address=("127.0.0.1", port),
-                                     trace_packet=self._trace)
-            await server.serve_forever(background=True)
-            listener = cast(asyncio.Server, server.transport)  # listen() stores the Server
-            return server, int(listener.sockets[0].getsockname()[1])
-
-        self._tcp, self.tcp_port = self._run(start())
-        return self.tcp_port
-
-    def start_rtu(self) -> str:
-        """Serve Modbus RTU on one end of a pty pair; returns the other end's path."""
-        if self._rtu is not None:
-            raise RuntimeError("the RTU server is already running")
-        self._pty = self._pty or PtyPair()
-        path = self._pty.paths[0]
-
-        async def start() -> ModbusSerialServer:
-            server = ModbusSerialServer(self._device(), framer=FramerType.RTU, port=path,
-                                        baudrate=19200, parity="N", trace_packet=self._trace)
-            await server.serve_forever(background=True)
-            return server
-
-        self._rtu = self._run(start())
-        self.rtu_port = self._pty.paths[1]
-        return self.rtu_port
-
-    def _stop(self, server: ModbusTcpServer | ModbusSerialServer | None) -> None:
-        async def stop(server: ModbusTcpServer | ModbusSerialServer) -> None:
-            await asyncio.sleep(0.01)   # let accepted connections finish connection_made()
-            await server.shutdown()  # type: ignore[no-untyped-call]
-
-        if server is not None and self._loop is not None:
-            self._run(stop(server))
-
-    def stop_tcp(self) -> None:
-        server, self._tcp = self._tcp, None
-        self._stop(server)
-
-    def stop_rtu(self) -> None:
-        """Stop answering on the line (the pty stays: the cable is still plugged)."""
-        server, self._rtu = self._rtu, None
-        self._stop(server)
-
-    def close(self) -> None:
-        """Stop the servers, the event loop thread and the pty copier; safe to call twice."""
-        self.stop_tcp()
-        self.stop_rtu()
-        loop, self._loop = self._loop, None
-        if loop is not None and self._thread is not None:
-            asyncio.run_coroutine_threadsafe(_cancel_all(), loop).result(10.0)
-            loop.call_soon_threadsafe(loop.stop)
-            self._thread.join()
-            loop.close()
-        self._thread = None
-        if self._pty is not None:
-            self._pty.close()
-            self._pty = None
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.close()
+        return [(a, n, a not in station)
+                for run in (spans(station), spans(set(self._regs) - station)) for a, n in run]
 
 
 class SimModbusWrench(ModbusWrench):

@@ -73,7 +73,7 @@ def test_lifecycle(fake):
     assert "closed" in cam.identity()
 
 
-def test_shutdown_order_at_process_end():
+def test_shutdown_order_at_process_end(aravis_port):
     """A process that exits with a camera still open: the atexit hook closes the stream and
     the camera before Aravis.shutdown(), and the process exits cleanly."""
     aravis_or_skip()

@@ -1,12 +1,11 @@
-"""Fixtures for the lift tests: simulated PLCs on loopback / a pty, short timings, leak checks."""
+"""Fixtures for the lift tests: simulated PLCs on loopback / a pty, short timings (leak checks:
+``tests/drivers/conftest.py``)."""
 
 from __future__ import annotations
 
 import re
 import shutil
 import subprocess
-import threading
-import time
 
 import pytest
 
@@ -15,21 +14,6 @@ from drivers.lift.sim import SimulatedPlc
 # short timings keep every file well under 10 s
 FAST = {"timeout": 0.3, "backoff": 0.02, "backoff_max": 0.08}
 VIN = "WVWZZZ1KZAW000123"
-
-
-@pytest.fixture(autouse=True)
-def no_leaked_threads():
-    """Fail a test that leaves a server, reconnect or pty thread behind."""
-    before = set(threading.enumerate())
-    yield
-    deadline = time.monotonic() + 2.0
-    while True:
-        extra = [t for t in threading.enumerate() if t not in before and t.is_alive()]
-        if not extra or time.monotonic() > deadline:
-            break
-        time.sleep(0.01)
-    assert not extra, f"leaked threads: {[t.name for t in extra]}"
-    assert threading.active_count() <= len(before)
 
 
 @pytest.fixture

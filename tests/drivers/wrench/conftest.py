@@ -1,9 +1,9 @@
 """Fixtures for the wrench drivers: a simulated controller, fast client settings, a scripted
-raw peer for faults the simulator does not model, and a check that nothing leaks."""
+raw peer for faults the simulator does not model (the check that nothing leaks is
+``tests/drivers/conftest.py``'s)."""
 
 from __future__ import annotations
 
-import os
 import socket
 import threading
 import time
@@ -17,23 +17,6 @@ from drivers.wrench.sim import SimController
 
 # short timeouts and backoffs keep every file well under 10 s
 FAST = {"timeout": 0.5, "connect_timeout": 0.5, "backoff": 0.02, "backoff_max": 0.2}
-
-
-def _fds() -> int:
-    return len(os.listdir("/proc/self/fd"))
-
-
-@pytest.fixture(autouse=True)
-def no_leaks() -> Iterator[None]:
-    """Fail a test that leaves threads, sockets, ptys or files open."""
-    threads, fds = threading.active_count(), _fds()
-    yield
-    deadline = time.monotonic() + 2.0
-    while ((threading.active_count() > threads or _fds() > fds)
-           and time.monotonic() < deadline):
-        time.sleep(0.01)
-    assert threading.active_count() == threads, [t.name for t in threading.enumerate()]
-    assert _fds() <= fds, f"{_fds() - fds} file descriptor(s) leaked"
 
 
 @pytest.fixture

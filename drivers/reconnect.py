@@ -1,8 +1,8 @@
-"""The link to a camera that may go away: the current connection and the one named thread that
-reconnects with exponential backoff until the camera is back or ``stop()`` is called.
+"""The link to a device that may go away: the current connection and the one named thread that
+reconnects with exponential backoff until the device is back or ``stop()`` is called.
 
-The same design as the lift's Modbus link (pymodbus's transport: one reconnect task that
-``close()`` cancels), kept out of the backend so the Aravis module is only about Aravis.
+pymodbus's transport design (one reconnect task that ``close()`` cancels), used by the lift's
+Modbus backend and the Aravis camera, and kept out of both so each is only about its device.
 Callers wait for the link within their own timeout and otherwise get a ConnectionLostError
 saying how long it has been down, why, and when the next attempt is.
 """
@@ -17,24 +17,32 @@ from typing import Generic, TypeVar
 
 from drivers.errors import ConnectionLostError, DeviceError
 
-log = logging.getLogger(__name__)
 L = TypeVar("L")
 JOIN_TIMEOUT = 30.0  # an attempt may sit in SDK timeouts (GigE: 2.5 s per register access)
 
 
 class LinkKeeper(Generic[L]):
     """Holds the current link of one device.  ``connect(refresh)`` makes a new link (raising
-    a DeviceError when it cannot); ``dispose(link, lost)`` releases one and must not raise."""
+    a DeviceError when it cannot); ``dispose(link, lost)`` releases one and must not raise.
+
+    The thread is called ``name``, and ``stop()`` waits ``join_timeout`` seconds for it.  The
+    device's own words: ``noun`` ("the camera is closed"), ``attempts`` (how the status line
+    counts them), and its logger ``log``."""
 
     def __init__(self, device: str, connect: Callable[[bool], L],
                  dispose: Callable[[L, bool], None], *, backoff: float, backoff_max: float,
-                 name: str) -> None:
+                 name: str, noun: str, attempts: str = "failed attempt(s)",
+                 join_timeout: float = JOIN_TIMEOUT, log: logging.Logger | None = None) -> None:
         self.device = device
         self._connect = connect
         self._dispose = dispose
         self.backoff = backoff
         self.backoff_max = max(backoff, backoff_max)
         self.name = name
+        self._noun = noun
+        self._attempts_word = attempts
+        self._join_timeout = join_timeout
+        self._log = log or logging.getLogger(__name__)
         self._lock = threading.Lock()
         self._up = threading.Event()
         self._stop = threading.Event()
@@ -67,8 +75,8 @@ class LinkKeeper(Generic[L]):
             down = time.monotonic() - self._down_since
             nxt = max(0.0, self._next_try - time.monotonic())
             attempts = self._attempts
-        return (f"link down for {down:.1f} s ({reason}); reconnecting: {attempts} failed "
-                f"attempt(s), next in {nxt:.1f} s")
+        return (f"link down for {down:.1f} s ({reason}); reconnecting: {attempts} "
+                f"{self._attempts_word}, next in {nxt:.1f} s")
 
     def wait(self, deadline: float) -> L:
         """The link, waiting for a reconnect until ``deadline`` (monotonic)."""
@@ -78,12 +86,13 @@ class LinkKeeper(Generic[L]):
             if self._link is not None:
                 return self._link
             if self._stop.is_set():
-                raise DeviceError("the camera is closed", device=self.device)
+                raise DeviceError(f"the {self._noun} is closed", device=self.device)
         raise ConnectionLostError(self.status(), device=self.device)
 
     def lost(self, link: L, exc: DeviceError) -> None:
         """``link`` failed with ``exc``: retire it and start the reconnect thread (which
-        disposes of the old link first, so the caller does not sit in SDK timeouts)."""
+        disposes of the old link first, so the caller does not sit in SDK timeouts).  While
+        ``stop()`` runs, the caller disposes of it here: nobody else would."""
         with self._lock:
             if self._link is not link:
                 return
@@ -93,12 +102,13 @@ class LinkKeeper(Generic[L]):
             self._down_since = time.monotonic()
             self._attempts = 0
             self._next_try = time.monotonic()
-            if self._stop.is_set() or self._thread is not None:
+            if not self._stop.is_set() and self._thread is None:
+                self._log.warning("%s; reconnecting", exc)
+                self._thread = threading.Thread(target=self._run, args=(link,), daemon=True,
+                                                name=self.name)
+                self._thread.start()
                 return
-            log.warning("%s; reconnecting", exc)
-            self._thread = threading.Thread(target=self._run, args=(link,), daemon=True,
-                                            name=self.name)
-            self._thread.start()
+        self._dispose(link, True)
 
     def stop(self) -> L | None:
         """Stop the reconnect thread (waiting for it) and hand back the current link, which
@@ -107,10 +117,10 @@ class LinkKeeper(Generic[L]):
         with self._lock:
             thread = self._thread
         if thread is not None:
-            thread.join(JOIN_TIMEOUT)
+            thread.join(self._join_timeout)
             if thread.is_alive():
-                log.error("%s: reconnect thread did not stop within %.0f s", self.device,
-                          JOIN_TIMEOUT)
+                self._log.error("%s: reconnect thread did not stop within %.0f s", self.device,
+                                self._join_timeout)
         with self._lock:
             link, self._link = self._link, None
             self._up.clear()
@@ -130,14 +140,14 @@ class LinkKeeper(Generic[L]):
                     break
                 except Exception as exc:  # a bug must not end the thread: keep trying
                     if not isinstance(exc, DeviceError):
-                        log.exception("%s: reconnect attempt crashed", self.device)
+                        self._log.exception("%s: reconnect attempt crashed", self.device)
                         exc = DeviceError(f"reconnect attempt crashed: {exc!r}",
                                           device=self.device)
                     with self._lock:
                         self._last_error = str(exc).removeprefix(f"{self.device}: ")
                         self._attempts += 1
                         self._next_try = time.monotonic() + delay
-                    log.debug("%s: reconnect attempt failed: %s", self.device, exc)
+                    self._log.debug("%s: reconnect attempt failed: %s", self.device, exc)
                     del exc  # its traceback holds the failed attempt's objects
                     if self._stop.wait(delay):
                         break
@@ -148,7 +158,7 @@ class LinkKeeper(Generic[L]):
                 if link is not None and not self._stop.is_set():
                     self._link, link = link, None
                     self._up.set()
-                    log.info("%s: reconnected after %d failed attempt(s)", self.device,
-                             self._attempts)
+                    self._log.info("%s: reconnected after %d failed attempt(s)", self.device,
+                                   self._attempts)
             if link is not None:
                 self._dispose(link, False)

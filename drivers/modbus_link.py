@@ -1,0 +1,253 @@
+"""A Modbus TCP or RTU link, and Modbus URLs: the only module that uses pymodbus's client API.
+
+pymodbus is pinned (3.16.*) because its API changes in minor releases; everything the drivers
+ask of its client is in :class:`ModbusLink` below (its server: ``modbus_server.py``), so an
+upgrade is checked here and in the tests, nowhere else.  The lift PLC (``drivers.lift.modbus``)
+and the register-driven wrench (``drivers.wrench.modbus``) both talk through it.
+
+    modbus-tcp://HOST[:PORT]?unit=1&timeout=1.0&backoff=0.1&backoff_max=5
+    modbus-rtu:///dev/ttyUSB0?baud=19200&parity=E&stopbits=1&unit=1&timeout=1.0
+
+The socket or serial port is opened here, not by pymodbus, and handed to its synchronous
+client: pymodbus's ``connect()`` logs the reason and returns False, and the station must tell
+"refused" from "no such port" from "permission denied".  Every failure is a typed DeviceError;
+what a device says in its own words (what a refused connection means, hints for Modbus
+exceptions) is its :class:`Wording`.  Reconnecting is the device's business.
+"""
+
+from __future__ import annotations
+
+import errno
+import importlib
+import socket
+import termios
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from pymodbus import FramerType
+from pymodbus.client import ModbusSerialClient, ModbusTcpClient
+from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
+
+from drivers.errors import (
+    ConnectError,
+    ConnectionLostError,
+    DeviceError,
+    DeviceTimeoutError,
+    ProtocolError,
+    RefusedError,
+)
+from drivers.url import parse_url
+
+# pyserial ships no type hints (and the project has no stub package): typed as Any on purpose.
+serial: Any = importlib.import_module("serial")
+
+TCP_FORM = "modbus-tcp://HOST[:PORT]?unit=1&timeout=1.0"
+RTU_FORM = "modbus-rtu:///dev/ttyUSB0?baud=19200&parity=E&unit=1"
+
+EXCEPTION_NAMES = {
+    1: "illegal function", 2: "illegal data address", 3: "illegal data value",
+    4: "server device failure", 5: "acknowledge", 6: "server device busy",
+    8: "memory parity error", 10: "gateway path unavailable",
+    11: "gateway target device failed to respond",
+}
+
+
+@dataclass(frozen=True)
+class LinkSpec:
+    """Where the device is: TCP host and port, or serial port and line settings."""
+
+    kind: str  # "tcp" | "rtu"
+    target: str  # host name or serial port path
+    port: int = 502
+    unit: int = 1
+    baud: int = 19200
+    parity: str = "E"
+    stopbits: int = 1
+
+    def describe(self) -> str:
+        if self.kind == "tcp":
+            return f"Modbus TCP {self.target}:{self.port} unit {self.unit}"
+        return (f"Modbus RTU {self.target} {self.baud} 8{self.parity}{self.stopbits} "
+                f"unit {self.unit}")
+
+
+@dataclass(frozen=True)
+class Wording:
+    """What a device's link errors say in its own words."""
+
+    refused: str  # after "connection refused by HOST:PORT", in parentheses: what to check
+    unknown_exception: str = "unknown"  # the name of a Modbus exception code not listed
+    hints: Mapping[int, str] = field(default_factory=dict)  # exception code -> what to check
+
+
+def _choice(*allowed: str) -> Callable[[str], str]:
+    def conv(text: str) -> str:
+        if text.upper() not in allowed:
+            raise ValueError(text)
+        return text.upper()
+    return conv
+
+
+def _positive(text: str) -> float:
+    value = float(text)
+    if not 0 < value < 3600:
+        raise ValueError(text)
+    return value
+
+
+def _unit(text: str) -> int:
+    value = int(text)
+    if not 0 <= value <= 247:
+        raise ValueError(text)
+    return value
+
+
+def parse_modbus_url(text: str) -> tuple[LinkSpec, dict[str, float | None]]:
+    """The link and the timing options (None where the URL does not say) of a Modbus URL."""
+    url = parse_url(text)
+    timing = {"timeout": (_positive, None), "backoff": (_positive, None),
+              "backoff_max": (_positive, None)}
+    if url.scheme == "modbus-tcp":
+        opts = url.typed_options({"unit": (_unit, 1), **timing}, TCP_FORM)
+        if not url.host or url.path not in ("", "/"):
+            raise url.error(f"expected a host and optional port, e.g. {TCP_FORM}")
+        spec = LinkSpec("tcp", url.host, url.port or 502, opts.pop("unit"))
+    elif url.scheme == "modbus-rtu":
+        opts = url.typed_options({"unit": (_unit, 1), "baud": (int, 19200),
+                                  "parity": (_choice("N", "E", "O"), "E"),
+                                  "stopbits": (_choice("1", "2"), "1"), **timing}, RTU_FORM)
+        if url.host or not url.path.startswith("/"):
+            raise url.error(f"expected a serial port path, e.g. {RTU_FORM}")
+        spec = LinkSpec("rtu", url.path, 0, opts.pop("unit"), opts.pop("baud"),
+                        opts.pop("parity"), int(opts.pop("stopbits")))
+    else:
+        raise url.error(f"not a Modbus URL; expected {TCP_FORM} or {RTU_FORM}")
+    return spec, opts
+
+
+class ModbusLink:
+    """One open connection wrapped in a pymodbus synchronous client (no retries: the caller
+    polls again).  Errors name ``device`` ("" leaves that to the caller)."""
+
+    def __init__(self, spec: LinkSpec, device: str, wording: Wording) -> None:
+        self.spec = spec
+        self.device = device
+        self.wording = wording
+        self._client: ModbusTcpClient | ModbusSerialClient | None = None
+        self._conn: Any = None  # the socket or serial port, ours to close
+
+    def _error(self, cls: type[DeviceError], message: str, code: int | None = None
+               ) -> DeviceError:
+        return cls(message, device=self.device, code=code)
+
+    def connect(self, timeout: float) -> None:
+        """Open the socket or port; ConnectError with the reason if it cannot be opened."""
+        s = self.spec
+        if s.kind == "tcp":
+            where = f"{s.target}:{s.port}"
+            try:
+                sock = socket.create_connection((s.target, s.port), timeout=timeout)
+            except ConnectionRefusedError:
+                raise self._error(ConnectError, f"connection refused by {where} "
+                                                f"({self.wording.refused})") from None
+            except TimeoutError:
+                raise self._error(ConnectError, f"no answer from {where} within "
+                                                f"{timeout:.2f} s") from None
+            except socket.gaierror as exc:
+                raise self._error(ConnectError, f"unknown host {s.target}: {exc.strerror}"
+                                  ) from None
+            except OSError as exc:
+                raise self._error(ConnectError, f"cannot connect to {where}: {exc.strerror or exc}"
+                                  ) from None
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            tcp = ModbusTcpClient(s.target, port=s.port, timeout=timeout, retries=0)
+            tcp.socket = sock  # connect() then sees an open socket and keeps it
+            self._client, self._conn = tcp, sock
+            return
+        rtu = ModbusSerialClient(s.target, framer=FramerType.RTU, baudrate=s.baud, bytesize=8,
+                                 parity=s.parity, stopbits=s.stopbits, timeout=timeout,
+                                 retries=0)
+        port = serial.serial_for_url(s.target, do_not_open=True, baudrate=s.baud, bytesize=8,
+                                     parity=s.parity, stopbits=s.stopbits, timeout=timeout,
+                                     write_timeout=timeout, exclusive=True,
+                                     inter_byte_timeout=rtu.inter_byte_timeout or None)
+        try:
+            port.open()  # all settings at once: a refused one fails here, not on first use
+        except (serial.SerialException, OSError, ValueError, termios.error) as exc:
+            port.close()
+            raise self._error(ConnectError, _serial_reason(s, exc)) from None
+        rtu.socket = port
+        self._client, self._conn = rtu, port
+
+    def call(self, what: str, timeout: float, fn: Callable[[Any], Any], *,
+             no_answer: str | None = None) -> Any:
+        """One request, ``fn(client)``, answered within ``timeout``; typed errors for every
+        failure, saying ``what`` was being done ("reading registers 6-15 of unit 1"), and
+        ``no_answer`` instead of the default message for a timeout.  A Modbus exception is a
+        RefusedError with its code (the link stays usable)."""
+        client = self._client
+        if client is None:
+            raise self._error(ConnectionLostError, "not connected")
+        # pymodbus 3.16 has no per-request timeout: the client and its transaction manager
+        # each keep a copy of the connect parameters, and both time a request.
+        client.comm_params.timeout_connect = timeout
+        client.transaction.comm_params.timeout_connect = timeout
+        try:
+            rr = fn(client)
+        except ConnectionException as exc:
+            raise self._error(ConnectionLostError, f"link lost {what}: {exc.string}") from None
+        except ModbusIOException as exc:
+            if "No response" in exc.string:
+                raise self._error(DeviceTimeoutError, no_answer or f"no answer within "
+                                                                   f"{timeout:g} s {what}"
+                                  ) from None
+            raise self._error(ProtocolError, f"bad answer {what}: {exc.string}") from None
+        except ModbusException as exc:
+            raise self._error(ProtocolError, f"bad answer {what}: {exc.string}") from None
+        except OSError as exc:
+            raise self._error(ConnectionLostError, f"link lost {what}: {exc}") from None
+        if rr.isError():
+            code = int(getattr(rr, "exception_code", 0))
+            name = EXCEPTION_NAMES.get(code, self.wording.unknown_exception)
+            hint = self.wording.hints.get(code)
+            raise self._error(RefusedError, f"Modbus exception {code} ({name}) {what}"
+                                            + (f": {hint}" if hint else ""), code)
+        return rr
+
+    def read(self, table: str, start: int, count: int, timeout: float, what: str, *,
+             no_answer: str | None = None) -> list[int]:
+        """Registers ``start`` .. ``start + count - 1`` of ``table`` (holding | input), as
+        many as the device sent (the caller checks the count)."""
+        unit = self.spec.unit
+        rr = self.call(what, timeout, lambda c: (
+            c.read_holding_registers if table == "holding" else c.read_input_registers)(
+            start, count=count, device_id=unit), no_answer=no_answer)
+        return list(rr.registers)
+
+    def write(self, start: int, values: list[int], timeout: float, what: str) -> None:
+        """One request: function 6 for one holding register, 16 for more (atomic on the
+        device)."""
+        unit = self.spec.unit
+        self.call(what, timeout, lambda c: c.write_register(
+            start, values[0], device_id=unit) if len(values) == 1 else c.write_registers(
+            start, values, device_id=unit))
+
+    def close(self) -> None:
+        if self._conn is not None:
+            self._conn.close()
+        self._client = self._conn = None
+
+
+def _serial_reason(spec: LinkSpec, exc: BaseException) -> str:
+    code = getattr(exc, "errno", None)
+    if code == errno.ENOENT:
+        return f"no such serial port {spec.target}"
+    if code == errno.EACCES:
+        return f"permission denied on {spec.target} (is the user in group dialout?)"
+    if code == errno.EBUSY or "lock" in str(exc):
+        return f"{spec.target} is in use by another program"
+    if isinstance(exc, termios.error | ValueError):
+        pty = "; a pty may refuse parity bits: use parity=N" if "/pts/" in spec.target else ""
+        return f"{spec.target} refuses {spec.baud} 8{spec.parity}{spec.stopbits} ({exc}){pty}"
+    return f"cannot open {spec.target}: {exc}"
