@@ -156,9 +156,13 @@ def cmd_bench_chain(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from stationd.demo import run_demo
+    if args.vision:
+        from stationd.demo import run_demo
 
-    return int(run_demo(args))
+        return int(run_demo(args))
+    from stationd.station.demo import run_station_demo
+
+    return run_station_demo(args)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -220,8 +224,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     dm = sub.add_parser("demo", help="the main job: a simulated run")
     dm.add_argument("--seed", type=int, default=7)
-    dm.add_argument("--cycles", type=int, default=3, help="marker placements to localize")
-    dm.add_argument("--save", help="also write the rendered images and pair.yaml here")
+    dm.add_argument("--cycles", type=int, default=10, help="bolts to tighten (with --vision: "
+                    "marker placements to localize)")
+    dm.add_argument("--config", help="station YAML (default: config/sim/station.yaml)")
+    dm.add_argument("--vision", action="store_true",
+                    help="only the vision demo: render stereo pairs, localize, print errors")
+    dm.add_argument("--save", help="with --vision: also write the images and pair.yaml here")
     dm.add_argument("--json", action="store_true", help="print one summary object")
     dm.set_defaults(func=cmd_demo)
     return p

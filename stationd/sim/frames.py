@@ -45,8 +45,10 @@ class FrameSource:
         if pose is None:
             return image
         spec = spec or MarkerSpec()
+        if not self._in_view(pose, spec):
+            return image
         win = marker_window(self.camera, pose, spec, margin_px=48.0)
-        if win is None:  # partly or wholly out of view: render what is visible, the slow way
+        if win is None:  # partly out of view: render what is visible, the slow way
             return render(self.camera, replace(self.scene, markers=[(pose, spec)]),
                           seed=self.seed if seed is None else seed).image
         x, y, w, h = win
@@ -54,3 +56,15 @@ class FrameSource:
                        seed=self.seed if seed is None else seed).image
         image[y:y + h, x:x + w] = patch
         return image
+
+    def _in_view(self, pose: MarkerPose, spec: MarkerSpec) -> bool:
+        """Whether any of the marker's field can reach the image (with a blur margin)."""
+        f = spec.field_mm
+        corners = np.array([[-f, -f, 0], [f, -f, 0], [f, f, 0], [-f, f, 0]], dtype=np.float64)
+        pts = pose.centre_mm + corners @ pose.rotation.T
+        if np.any(pts[:, 2] <= 1e-6):
+            return True  # straddles the camera plane: let the renderer decide
+        uv = self.camera.project(pts)
+        w, h = self.camera.size
+        return bool(uv[:, 0].max() >= -8 and uv[:, 1].max() >= -8 and uv[:, 0].min() <= w + 8
+                    and uv[:, 1].min() <= h + 8)

@@ -31,3 +31,9 @@ def test_a_marker_partly_out_of_view_falls_back_to_a_full_render():
     pose = MarkerPose.look(np.array([-390.0, 0.0, 700.0]), 10, 0, 0)  # at the left edge
     img = src.frame(pose)
     assert img.shape == (1200, 1600, 3) and not np.array_equal(img, src.frame(None))
+
+
+def test_a_marker_wholly_out_of_view_is_just_the_background():
+    src = FrameSource(CAM, SCENE, seed=3)
+    pose = MarkerPose.look(np.array([-900.0, 0.0, 700.0]), 10, 0, 0)  # far left of the view
+    assert np.array_equal(src.frame(pose), src.frame(None))

@@ -1,0 +1,94 @@
+"""The simulated world around a station: a vehicle on the lift, an operator with the wrench.
+
+It drives the daemon's own simulated twins (the PLC behind ``sim://lift``, the controller
+behind ``sim://wrench``) and renders what each ``sim://PAIR/SIDE`` camera sees through the
+pair's true geometry (the simulated station's calibration is exact).  The operator takes the
+wrench to bolts, sometimes hovers between two or leaves before tightening, and pulls the
+trigger once the controller has the tool enabled.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from drivers.camera.sim import register_world, unregister_world
+from stationd.config import StationConfig
+from stationd.sim.frames import FrameSource
+from stationd.sim.render import MarkerPose, Scene
+from stationd.vision.marker import MarkerSpec
+
+
+@dataclass(frozen=True)
+class WrenchPose:
+    """Where the wrench is: the marker's centre and rotation in the vehicle frame."""
+
+    centre_v: np.ndarray
+    rotation_v: np.ndarray
+    socket_v: np.ndarray  # the socket tip: the truth the localization is compared with
+
+
+def wrench_at(point_v: np.ndarray, rng: np.random.Generator, length_mm: float,
+              max_tilt_deg: float = 5.0) -> WrenchPose:
+    """The wrench with its socket at ``point_v``, tilted up to ``max_tilt_deg``."""
+    tilt = math.radians(rng.uniform(0, max_tilt_deg))
+    az = rng.uniform(0, 2 * math.pi)
+    axis = np.array([math.sin(tilt) * math.cos(az), math.sin(tilt) * math.sin(az),
+                     math.cos(tilt)])
+    n = -axis  # the marker faces down, at the cameras
+    a = rng.normal(size=3)
+    x = a - (a @ n) * n
+    x /= np.linalg.norm(x)
+    rot = np.column_stack([x, np.cross(n, x), n])
+    return WrenchPose(point_v - length_mm * axis, rot, np.asarray(point_v, dtype=np.float64))
+
+
+class World:
+    """Renders the cameras and holds the wrench pose the operator sets."""
+
+    def __init__(self, cfg: StationConfig, *, seed: int = 0, spec: MarkerSpec | None = None,
+                 scene: Scene | None = None) -> None:
+        self.cfg = cfg
+        self.spec = spec or cfg.marker
+        self.pose: WrenchPose | None = None
+        self._lock = threading.Lock()
+        base = scene or Scene(texture=0.15, vignetting=0.3, blur_sigma=0.8, noise_sigma=2.0)
+        self._sources: dict[tuple[str, str], FrameSource] = {}
+        for k, (name, pc) in enumerate(cfg.pairs.items()):
+            cal = pc.calibration
+            self._sources[(name, "left")] = FrameSource(cal.left, base, seed + 2 * k)
+            self._sources[(name, "right")] = FrameSource(cal.right, base, seed + 2 * k + 1)
+            register_world(name, self._source_for(name), replace=True)
+
+    def close(self) -> None:
+        for name in self.cfg.pairs:
+            unregister_world(name)
+
+    def set_wrench(self, pose: WrenchPose | None) -> None:
+        with self._lock:
+            self.pose = pose
+
+    def _camera_pose(self, pair: str, side: str, pose: WrenchPose) -> MarkerPose | None:
+        pc = self.cfg.pairs[pair]
+        tv = pc.to_vehicle
+        if tv is None:
+            return None
+        c = tv.A.T @ (pose.centre_v - tv.t)
+        rot = tv.A.T @ pose.rotation_v
+        if side == "right":
+            c, rot = pc.calibration.R @ c + pc.calibration.T, pc.calibration.R @ rot
+        if c[2] <= 0 or float(rot[:, 2] @ c) >= 0:
+            return None  # behind the camera or seen from the back
+        return MarkerPose(c, rot)
+
+    def _source_for(self, pair: str) -> Callable[[str, int], np.ndarray]:
+        def source(side: str, seed: int) -> np.ndarray:
+            with self._lock:
+                pose = self.pose
+            mp = None if pose is None else self._camera_pose(pair, side, pose)
+            return self._sources[(pair, side)].frame(mp, self.spec, seed=seed + 1000)
+        return source

@@ -1,0 +1,197 @@
+"""``stationd demo``: the simulated station, end to end, over real protocols on loopback.
+
+The daemon runs on ``config/sim`` (four pairs, one model with 50 bolts) with its lift as a
+Modbus server, its controller as an Open Protocol server and its cameras rendering at full
+resolution; a simulated operator raises the lift and takes the wrench to bolts in a random
+order, with placement noise and tilt, sometimes hovering between two bolts or leaving before
+tightening.  One line per bolt, then a summary; ``--json`` prints it as the last line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import logging
+import sys
+import tempfile
+from collections import Counter
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from db.boltfile import load_bolts
+from drivers.wrench.sim import SimPset
+from stationd.config import load_station_config
+from stationd.errors import InputError
+from stationd.sim.world import World, wrench_at
+from stationd.station.cycle import SendParams, State
+from stationd.station.daemon import Station
+
+SIM_CONFIG = Path(__file__).resolve().parents[2] / "config" / "sim" / "station.yaml"
+
+
+def _sim_psets(bolts_path: Path) -> dict[int, SimPset]:
+    """The controller's programs: the psets of the bolt table."""
+    table = load_bolts(bolts_path)
+    out: dict[int, SimPset] = {}
+    for p in [*table.psets, *(q for m in table.models for q in m.psets)]:
+        t, a = p.torque, p.angle
+        out[p.number] = SimPset(t.target, t.min, t.max, a.target if a else 0.0,
+                            a.min if a else 0.0, a.max if a else 0.0)
+    return out
+
+
+async def _operator(st: Station, world: World, rng: np.random.Generator, cycles: int,
+                    report: list[dict[str, Any]], say: Any, truth: dict[str, Any]) -> None:
+    plc, ctl = st.lift.plc, st.wrench.controller
+    plc.set_vehicle(1, "SIMVIN0000000001")
+    plc.raise_lift()
+    for _ in range(200):
+        if st.vin is not None:
+            break
+        await asyncio.sleep(0.05)
+    bolts = list(st.bolts.values())
+    order = rng.permutation(len(bolts))[:cycles]
+    length = st.cfg.tool.length_mm
+    for k in order:
+        b = bolts[int(k)]
+        target = np.array(b.position)
+        if rng.random() < 0.2:  # hovers between two bolts first: nothing may be sent
+            other = np.array(bolts[int(rng.integers(len(bolts)))].position)
+            truth["bolt"] = None
+            world.set_wrench(wrench_at(0.5 * (target + other), rng, length))
+            await asyncio.sleep(0.6)
+        pose = wrench_at(target + np.append(rng.normal(0, 0.3, 2), 0.0), rng, length)
+        truth["bolt"] = b.bolt_id
+        world.set_wrench(pose)
+        leave = rng.random() < 0.1
+        line: dict[str, Any] = {"bolt": b.bolt_id, "pset": b.parameters.pset, "result": None}
+        for _ in range(300):  # up to ~15 s for selection, acknowledgement, tool enabled
+            if st.cycle.state is State.TIGHTENING and st.cycle.bolt == b.bolt_id \
+                    and ctl.tool_enabled:
+                break
+            await asyncio.sleep(0.05)
+        else:
+            line["result"] = f"not selected ({st.cycle.reason})"
+        if st.last is not None and st.last.point_mm is not None:
+            line["xy_error_mm"] = float(np.hypot(*(st.last.point_mm - pose.socket_v)[:2]))
+        if line["result"] is None and leave:
+            truth["bolt"] = None
+            world.set_wrench(None)  # leaves before tightening: the tool must go off
+            for _ in range(100):
+                if not ctl.tool_enabled:
+                    break
+                await asyncio.sleep(0.05)
+            line["result"] = "left before tightening; tool " + \
+                ("disabled" if not ctl.tool_enabled else "STILL ENABLED")
+        elif line["result"] is None:
+            n_records = sum(1 for e in st.events if e[0] == "Record")
+            shot = ctl.pull_trigger()
+            for _ in range(100):
+                if sum(1 for e in st.events if e[0] == "Record") > n_records:
+                    break
+                await asyncio.sleep(0.05)
+            line["result"] = "no result" if shot is None else \
+                f"{'OK' if shot.ok else 'NOK'} {shot.torque_nm:.1f} Nm"
+            line["ok"] = bool(shot is not None and shot.ok)
+        report.append(line)
+        say(line)
+        truth["bolt"] = None
+        world.set_wrench(None)
+        await asyncio.sleep(0.3)
+    plc.lower_lift()
+    await asyncio.sleep(0.5)
+
+
+def run_station_demo(args: argparse.Namespace) -> int:
+    cycles = int(args.cycles)
+    if cycles < 1:
+        raise InputError("--cycles must be at least 1")
+    logging.basicConfig(level=logging.WARNING, format="%(message)s")
+    cfg = load_station_config(args.config or SIM_CONFIG)
+    bolts_path = cfg.bolts_path
+    if bolts_path is None:
+        raise InputError(f"{cfg.path}: the demo needs a bolt table (bolts:)")
+    tmp = tempfile.TemporaryDirectory(prefix="stationd-demo-")
+    cfg = replace(cfg, database_url=f"sqlite:///{tmp.name}/stationd.db")
+    station = Station(cfg, device_kw={"wrench": {"psets": _sim_psets(bolts_path)}})
+    rng = np.random.default_rng(args.seed)
+    report: list[dict[str, Any]] = []
+    truth: dict[str, Any] = {"bolt": None, "wrong": 0}
+
+    def check(action: Any) -> None:
+        """Every parameter send is compared with where the wrench really is, at that moment."""
+        if isinstance(action, SendParams) and action.bolt != truth["bolt"]:
+            truth["wrong"] += 1
+            print(f"WRONG BOLT: parameters for {action.bolt} while the wrench is on "
+                  f"{truth['bolt']}", file=sys.stderr)
+
+    station.on_action = check
+
+    def say(line: dict[str, Any]) -> None:
+        if not args.json:
+            err = line.get("xy_error_mm")
+            print(f"{line['bolt']}: pset {line['pset']}, XY error "
+                  f"{'-' if err is None else f'{err:.3f} mm'}, {line['result']}", flush=True)
+
+    async def main() -> None:
+        stop = asyncio.Event()
+        world = World(cfg, seed=args.seed)
+        try:
+            task = asyncio.create_task(station.run(stop))
+            await _operator(station, world, rng, cycles, report, say, truth)
+            stop.set()
+            await task
+        finally:
+            world.close()
+
+    station.open()
+    try:
+        asyncio.run(main())
+    finally:
+        station.close()
+        tmp.cleanup()
+    summary = _summary(station, report, cycles, truth["wrong"])
+    if args.json:
+        sys.stdout.write(json.dumps(summary) + "\n")
+    else:
+        print(f"summary: {summary['ok']}/{cycles} bolts OK, parameters sent for a wrong bolt: "
+              f"{summary['wrong_bolt_sends']}, XY error mean "
+              f"{summary['xy_error_mm']['mean']:.3f} mm max {summary['xy_error_mm']['max']:.3f} "
+              f"mm, latency p50 {summary['latency_ms']['p50']:.0f} ms p95 "
+              f"{summary['latency_ms']['p95']:.0f} ms")
+    return 0 if summary["wrong_bolt_sends"] == 0 else 1
+
+
+def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
+             wrong: int) -> dict[str, Any]:
+    sent = [e[1].bolt for e in st.events if e[0] == "SendParams" and isinstance(e[1], SendParams)]
+    refusals: Counter[str] = Counter()
+    for e in st.events:
+        if e[0] == "Log" and str(e[1].message).startswith("no bolt: "):
+            refusals[_kind(str(e[1].message)[9:])] += 1
+    errs = [r["xy_error_mm"] for r in report if "xy_error_mm" in r]
+    lat = [e[1] for e in st.events if e[0] == "latency_ms"]
+    return {"bolts": cycles, "ok": sum(1 for r in report if r.get("ok")),
+            "wrong_bolt_sends": wrong, "parameters_sent": len(sent),
+            "results": sum(1 for r in report if "ok" in r),
+            "recorded": sum(1 for e in st.events if e[0] == "Record"),
+            "refusals": dict(refusals.most_common(8)),
+            "xy_error_mm": {"mean": float(np.mean(errs)) if errs else float("nan"),
+                            "max": float(np.max(errs)) if errs else float("nan")},
+            "latency_ms": {"p50": float(np.percentile(lat, 50)) if lat else float("nan"),
+                           "p95": float(np.percentile(lat, 95)) if lat else float("nan")}}
+
+
+def _kind(reason: str) -> str:
+    """A refusal's category, for the summary (the full reasons are in the log)."""
+    for needle, kind in (("stable for", "not yet stable"), ("ambiguous", "ambiguous"),
+                         ("no bolt within", "no bolt within tolerance"),
+                         ("already done", "bolt already done"), ("stale", "stale"),
+                         ("tilted", "wrench tilted too far"), ("disagree", "pairs disagree")):
+        if needle in reason:
+            return kind
+    return "marker not localized"
