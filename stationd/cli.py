@@ -155,6 +155,12 @@ def cmd_bench_chain(args: argparse.Namespace) -> int:
     return run_chain_bench(args)
 
 
+def cmd_run(args: argparse.Namespace) -> int:
+    from stationd.station.run import run_daemon
+
+    return run_daemon(args)
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     if args.vision:
         from stationd.demo import run_demo
@@ -221,6 +227,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_probe_parser(sub)
     add_db_parser(sub)
     add_config_parser(sub)
+
+    rn = sub.add_parser("run", help="the station daemon (as systemd runs it)")
+    rn.add_argument("--config", required=True, help="station YAML")
+    rn.set_defaults(func=cmd_run)
 
     dm = sub.add_parser("demo", help="the main job: a simulated run")
     dm.add_argument("--seed", type=int, default=7)

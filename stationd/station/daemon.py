@@ -86,8 +86,10 @@ class Station:
     def open(self) -> None:
         self.repo = Repository.open(self.cfg.database_url)
         if self.cfg.bolts_path is not None:
-            report = self.repo.import_bolts(self.cfg.bolts_path)
-            log.info("bolt table %s: %s", self.cfg.bolts_path, report)
+            r = self.repo.import_bolts(self.cfg.bolts_path)
+            log.info("bolt table %s: %d added, %d changed, %d unchanged, %d removed, "
+                     "%d new parameter versions", self.cfg.bolts_path, len(r.added),
+                     len(r.changed), len(r.unchanged), len(r.removed), len(r.new_versions))
         self.lift = open_lift(self.cfg.lift.url, self.cfg.lift.registers,
                               **self.device_kw.get("lift", {}))
         self.wrench = open_wrench(self.cfg.wrench.url, **self.device_kw.get("wrench", {}))

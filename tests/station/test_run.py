@@ -1,0 +1,70 @@
+"""``stationd run`` as systemd runs it: READY over NOTIFY_SOCKET, SIGHUP with a bad config
+keeps the running one, SIGTERM closes everything and exits 0."""
+
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+SIM = Path(__file__).resolve().parents[2] / "config" / "sim"
+
+
+def _recv_until(sock, needle, timeout):
+    end = time.monotonic() + timeout
+    seen = []
+    while time.monotonic() < end:
+        sock.settimeout(max(0.1, end - time.monotonic()))
+        try:
+            msg = sock.recv(4096).decode()
+        except TimeoutError:
+            break
+        seen.append(msg)
+        if needle in msg:
+            return seen
+    raise AssertionError(f"{needle!r} not received; got {seen}")
+
+
+@pytest.mark.timeout(180)
+def test_ready_reload_refused_and_clean_stop(tmp_path):
+    for f in SIM.iterdir():
+        shutil.copy(f, tmp_path)
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(tmp_path / "notify"))
+    env = {**os.environ, "NOTIFY_SOCKET": str(tmp_path / "notify")}
+    p = subprocess.Popen([sys.executable, "-m", "stationd", "run", "--config", "station.yaml"],
+                         cwd=tmp_path, env=env, stderr=subprocess.PIPE, text=True)
+    try:
+        _recv_until(sock, "READY=1", 90)
+        _recv_until(sock, "waiting for vehicle", 30)
+        (tmp_path / "station.yaml").write_text("vision:\n  centre_methd: paper\n")
+        p.send_signal(signal.SIGHUP)
+        _recv_until(sock, "reload refused", 60)
+        assert p.poll() is None  # still running on the old configuration
+        shutil.copy(SIM / "station.yaml", tmp_path / "station.yaml")  # a valid one again
+        p.send_signal(signal.SIGHUP)
+        _recv_until(sock, "READY=1", 90)  # the station came back up on the new file
+        p.send_signal(signal.SIGTERM)
+        _recv_until(sock, "STOPPING=1", 60)
+        assert p.wait(timeout=60) == 0
+    finally:
+        if p.poll() is None:
+            p.kill()
+        err = p.stderr.read() if p.stderr else ""
+        sock.close()
+    assert "reload refused" in err and "centre_methd: unknown key" in err
+    assert "configuration reloaded" in err
+    assert "Traceback" not in err
+    assert all(len(line) < 400 for line in err.splitlines())  # one readable line per event
+
+
+def test_invalid_config_at_start_is_one_line_and_exit_2(tmp_path):
+    (tmp_path / "bad.yaml").write_text("lift: [\n")
+    r = subprocess.run([sys.executable, "-m", "stationd", "run", "--config",
+                        str(tmp_path / "bad.yaml")], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "malformed YAML" in r.stderr
