@@ -122,6 +122,10 @@ class Cycle:
         return [EnableTool(bolt)]
 
     def params_refused(self, bolt: str, reason: str) -> list[Action]:
+        """A refusal is a fault with its reason; the bolt is then skipped for this vehicle
+        (reported missing at the end) so that the same refused parameters are not sent again
+        and again once the fault clears."""
+        self.matcher.skipped[bolt] = f"controller refused its parameters ({reason})"
         return self.fault(f"controller refused the parameters for {bolt}: {reason}")
 
     def result(self, bolt: str, result: Any, ok: bool) -> list[Action]:

@@ -148,8 +148,8 @@ class Station:
             await self._apply(self.cycle.fault(f"lift: {exc}"))
             await asyncio.sleep(0.2)
             return
-        if self.cycle.state is State.FAULT and self.cycle.reason.startswith("lift:"):
-            self.cycle.recovered()
+        if self.cycle.state is State.FAULT:
+            await self._recover()
         await self._vehicle(state)
         await self._apply(self.cycle.lift(state.ready))
         if self.cycle.state in TRACKING_STATES:
@@ -168,6 +168,18 @@ class Station:
         if (self.cycle.state, self.cycle.reason) != before:
             self.notifier.status(f"{self.cycle.state.value}: {self.cycle.reason}")
             log.info("%s: %s", self.cycle.state.value, self.cycle.reason)
+
+    async def _recover(self) -> None:
+        """Leave a fault when its device answers again: the lift just did (this step read it);
+        the controller when its link is up (a refusal needs nothing more: its bolt is skipped).
+        A fault whose cause persists (an unknown vehicle model) is raised again in this step."""
+        reason = self.cycle.reason
+        if reason.startswith("wrench:") or reason.startswith("controller refused"):
+            status = await self._call(self.wrench.status)
+            if not status.connected:
+                return
+        self.cycle.recovered()  # an unknown model code faults again in this very step
+        self.events.append(("recovered", reason))
 
     async def _vehicle(self, state: Any) -> None:
         """Open a vehicle record when a vehicle is at height, close it when the lift lowers."""

@@ -45,6 +45,7 @@ class BoltMatcher:
     bolts: Mapping[str, np.ndarray]  # id -> position (vehicle frame, mm)
     params: MatchParams = field(default_factory=MatchParams)
     done: set[str] = field(default_factory=set)
+    skipped: dict[str, str] = field(default_factory=dict)  # bolt -> why it is not tightened
     _ids: list[str] = field(init=False, repr=False)
     _xy: np.ndarray = field(init=False, repr=False)
     _streak_bolt: str | None = field(default=None, init=False, repr=False)
@@ -86,6 +87,9 @@ class BoltMatcher:
             if second - dist < p.margin_mm:
                 return self.refuse(f"ambiguous: {near} at {dist:.1f} mm, "
                                    f"{self._ids[int(order[1])]} at {second:.1f} mm")
+        if near in self.skipped:
+            self.reset()
+            return Match(None, near, dist, f"{near} skipped: {self.skipped[near]}")
         if near in self.done and not p.allow_retighten:
             self.reset()
             return Match(None, near, dist, f"{near} is already done")
