@@ -208,33 +208,41 @@ class Station:
             self.vin, self.bolts = None, {}
 
     async def _localize(self) -> Localization:
-        t0 = time.monotonic()
+        """Grab and localize in every pair at once; the result's time ``t`` is the earliest
+        arrival of the frames it used (its age, and the latency to the acknowledgement, are
+        counted from there: from the frames, not from the request)."""
         names = list(self.grabbers)
         got = await asyncio.gather(*(self._call(self._localize_pair, n) for n in names))
-        ends = [g for g in got if isinstance(g, BoltEnd)]
-        reasons = [f"{n}: {g}" for n, g in zip(names, got, strict=True) if isinstance(g, str)]
+        ends = [g[0] for g in got if isinstance(g[0], BoltEnd)]
+        used = [g[1] for g in got if isinstance(g[0], BoltEnd)] or [g[1] for g in got]
+        arrived = min(used, default=time.monotonic())
+        reasons = [f"{n}: {g[0]}" for n, g in zip(names, got, strict=True)
+                   if isinstance(g[0], str)]
         if not ends:
-            return Localization(None, reason="; ".join(reasons) or "no pair", t=t0)
+            return Localization(None, reason="; ".join(reasons) or "no pair", t=arrived)
         fused = fuse([e.point_mm for e in ends], [1.0] * len(ends), max_spread_mm=2.0)
         if isinstance(fused, Refusal):
-            return Localization(None, reason=fused.reason, t=t0)
-        return Localization(fused.point_mm, float(np.mean([e.tilt_deg for e in ends])), t=t0)
+            return Localization(None, reason=fused.reason, t=arrived)
+        return Localization(fused.point_mm, float(np.mean([e.tilt_deg for e in ends])),
+                            t=arrived)
 
-    def _localize_pair(self, name: str) -> BoltEnd | str | None:
-        """Grab and localize in one pair (an executor thread): the bolt end, or why not."""
+    def _localize_pair(self, name: str) -> tuple[BoltEnd | str, float]:
+        """Grab and localize in one pair (an executor thread): the bolt end or why not, and
+        when the frames arrived (monotonic clock)."""
         pc: PairConfig = self.cfg.pairs[name]
         try:
             left, right = self.grabbers[name].grab(1.0)
         except DeviceError as exc:
-            return f"cameras: {exc}"
+            return f"cameras: {exc}", time.monotonic()
+        arrived = time.monotonic()
         res = localize(pc.calibration, left.image, right.image, self.cfg.vision, self.cfg.marker)
         if not res.found or res.point_mm is None or res.normal is None:
-            return str(res.reason)
+            return str(res.reason), arrived
         if pc.to_vehicle is None:
-            return "pair not registered into the vehicle frame"
+            return "pair not registered into the vehicle frame", arrived
         end = bolt_end(pc.to_vehicle.apply(res.point_mm),
                        pc.to_vehicle.apply_direction(res.normal), self.cfg.tool)
-        return end.reason if isinstance(end, Refusal) else end
+        return (end.reason if isinstance(end, Refusal) else end), arrived
 
     async def _apply(self, actions: list[Action]) -> None:
         for a in actions:
