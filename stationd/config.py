@@ -16,6 +16,7 @@ from drivers.lift.base import MapError, RegisterMap
 from stationd.geometry.camera import StereoPair
 from stationd.geometry.frames import Transform
 from stationd.geometry.tool import ToolGeometry
+from stationd.station.matching import MatchParams
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import VisionParams
 from stationd.yamlio import YamlNode
@@ -25,14 +26,10 @@ STATION_KEYS = ("marker", "vision", "cameras", "pairs", "tool", "lift", "wrench"
 
 
 @dataclass(frozen=True)
-class MatchingConfig:
-    """Which bolt the wrench is on (see stationd.station.matching) and when it left."""
+class MatchingConfig(MatchParams):
+    """Which bolt the wrench is on (the matcher's parameters, see stationd.station.matching)
+    and after how many frames off it the wrench has left it."""
 
-    tolerance_mm: float = 8.0
-    margin_mm: float = 6.0
-    stable_frames: int = 3
-    max_age_s: float = 0.5
-    allow_retighten: bool = False
     leave_frames: int = 3
 
     @classmethod

@@ -78,9 +78,7 @@ class Station:
         self._pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="station")
 
     def _match_params(self) -> MatchParams:
-        m = self.cfg.matching
-        return MatchParams(m.tolerance_mm, m.margin_mm, m.stable_frames, m.max_age_s,
-                           m.allow_retighten)
+        return self.cfg.matching
 
     # -- devices -----------------------------------------------------------------------------
     def open(self) -> None:
