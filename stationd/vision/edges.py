@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from stationd.vision.ellipse import params_to_conic, sampson_distance
 from stationd.vision.types import Refusal
 
 # Smoothing before the gradient (px).  Wide enough for a stable peak fit, narrow enough that
@@ -145,28 +146,9 @@ def ring_outline(smooth: np.ndarray, threshold: float, ratio_sq: float,
 
 
 def _box_conic(box: RotatedBox) -> np.ndarray:
+    """The conic of a cv2.fitEllipse box ((cx, cy), (width, height), degrees)."""
     (cx, cy), (w, h), ang = box
-    a, b = max(w / 2.0, 0.5), max(h / 2.0, 0.5)
-    t = np.radians(ang)
-    c, s = np.cos(t), np.sin(t)
-    # x' = R^T (x - c); x'^2/a^2 + y'^2/b^2 - 1 = 0
-    A = c * c / a**2 + s * s / b**2
-    B = c * s * (1 / a**2 - 1 / b**2)
-    Cc = s * s / a**2 + c * c / b**2
-    D = -(A * cx + B * cy)
-    E = -(B * cx + Cc * cy)
-    F = A * cx * cx + 2 * B * cx * cy + Cc * cy * cy - 1.0
-    return np.array([[A, B, D], [B, Cc, E], [D, E, F]])
-
-
-def conic_distance(C: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Signed Sampson distance (px) of points to a conic, positive outside."""
-    x, y = pts[:, 0], pts[:, 1]
-    f = C[0, 0] * x * x + 2 * C[0, 1] * x * y + C[1, 1] * y * y + 2 * C[0, 2] * x \
-        + 2 * C[1, 2] * y + C[2, 2]
-    gx = 2 * (C[0, 0] * x + C[0, 1] * y + C[0, 2])
-    gy = 2 * (C[0, 1] * x + C[1, 1] * y + C[1, 2])
-    return np.asarray(f / np.maximum(np.hypot(gx, gy), 1e-12))
+    return params_to_conic((cx, cy), (max(w / 2.0, 0.5), max(h / 2.0, 0.5)), np.radians(ang))
 
 
 def subpixel(mag: np.ndarray, gx: np.ndarray, gy: np.ndarray,
@@ -229,8 +211,8 @@ def boundary_edges(roi_bgr: np.ndarray, ratio_sq: float,
     centre = np.array(outline.inner[0])
     radial = pts - centre
     toward_centre = (gxk * radial[:, 0] + gyk * radial[:, 1]) < 0
-    d_in = conic_distance(inner_c, pts)
-    d_out = conic_distance(outer_c, pts)
+    d_in = sampson_distance(inner_c, pts)
+    d_out = sampson_distance(outer_c, pts)
     ring_w = 0.5 * (min(outline.outer[1]) - min(outline.inner[1]))
     tol = float(np.clip(0.35 * ring_w, 1.5, 4.0))
     is_in = (np.abs(d_in) < tol) & (np.abs(d_in) <= np.abs(d_out)) & toward_centre
