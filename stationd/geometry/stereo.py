@@ -114,17 +114,6 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
                                               -1.0, 1.0))))
 
 
-def _choose(own: tuple[np.ndarray, np.ndarray], other: tuple[np.ndarray, np.ndarray],
-            min_margin_deg: float) -> np.ndarray | None:
-    """The candidate of ``own`` closest to either of ``other`` (same frame), or None when the
-    other candidate is nearly as close (this view cannot choose)."""
-    d = [min(_angle_deg(a, b) for b in other) for a in own]
-    i = int(np.argmin(d))
-    if d[1 - i] - d[i] < min_margin_deg:
-        return None
-    return own[i]
-
-
 def localize_detections(pair: StereoPair, left: Detection, right: Detection,
                         params: VisionParams | None = None) -> StereoResult:
     """Combine a left and a right detection of the same marker."""
@@ -151,8 +140,12 @@ def localize_detections(pair: StereoPair, left: Detection, right: Detection,
     # fused and both centres are computed from it.
     Rt = pair.R.T
     right_in_left = (Rt @ right.normal_candidates[0], Rt @ right.normal_candidates[1])
-    choice_l = _choose(left.normal_candidates, right_in_left, g.min_normal_margin_deg)
-    choice_r = _choose(right_in_left, left.normal_candidates, g.min_normal_margin_deg)
+    il = cm.choose_by_other_view(left.normal_candidates, right_in_left,
+                                 min_margin_deg=g.min_normal_margin_deg)
+    ir = cm.choose_by_other_view(right_in_left, left.normal_candidates,
+                                 min_margin_deg=g.min_normal_margin_deg)
+    choice_l = None if il is None else left.normal_candidates[il]
+    choice_r = None if ir is None else right_in_left[ir]
     decisive = [n for n in (choice_l, choice_r) if n is not None]
     angle = _angle_deg(choice_l, choice_r) if choice_l is not None and choice_r is not None \
         else 0.0

@@ -6,7 +6,7 @@ at the station's tilts.  Two corrections are offered:
 
 - from a plane normal (the paper): the cone ``Q = K^T C K`` gives two candidate normals, one of
   them true; picking the wrong one is worse than no correction, so the choice is made only with
-  a margin (two concentric circles, or the stereo pair), otherwise refused;
+  a margin (two concentric circles, or the other view of the pair), otherwise refused;
 - from the two concentric circles (Kim, Gurdjos, Kweon 2005): the pencil ``C_out^-1 C_in`` has the
   centre as the eigenvector of its simple eigenvalue; no calibration, no ambiguity.
 
@@ -162,26 +162,6 @@ def normal_from_centre(C: np.ndarray, K: np.ndarray, c: np.ndarray) -> np.ndarra
     return _unit_facing(Kp.T @ lp, np.linalg.solve(K, x))
 
 
-def _resolve(A: Pair, B: Pair, fronto_deg: float) -> tuple[int, int, float, float, bool]:
-    """Best (i, j) with the angle of ``A[i]`` to ``B[j]``, the margin to the next distinct
-    choice, and whether a side is fronto-parallel.  Candidates of one side closer than
-    ``fronto_deg`` count as one choice (picking between them changes nothing)."""
-    ang = np.array([[_angle_deg(A[i], B[j]) for j in (0, 1)] for i in (0, 1)])
-    merged_a = _angle_deg(A[0], A[1]) < fronto_deg
-    merged_b = _angle_deg(B[0], B[1]) < fronto_deg
-    groups_a = [(0, 1)] if merged_a else [(0,), (1,)]
-    groups_b = [(0, 1)] if merged_b else [(0,), (1,)]
-    combos = []
-    for ga in groups_a:
-        for gb in groups_b:
-            i, j = min(((i, j) for i in ga for j in gb), key=lambda ij: ang[ij])
-            combos.append((float(ang[i, j]), i, j))
-    combos.sort()
-    best, i, j = combos[0]
-    margin = combos[1][0] - best if len(combos) > 1 else math.inf
-    return i, j, best, margin, merged_a or merged_b
-
-
 def _finite(*vs: np.ndarray) -> bool:
     return all(np.all(np.isfinite(v)) for v in vs)
 
@@ -247,22 +227,18 @@ def resolve_normals_mono(C_in: np.ndarray, C_out: np.ndarray, K: np.ndarray, *,
     return MonoNormal(n, A, i, best, other, ambiguous=False)
 
 
-def resolve_normals_stereo(left: Pair, right: Pair, R: np.ndarray, *,
-                           min_margin_deg: float = 1.0,
-                           fronto_deg: float = 0.5) -> tuple[int, int, float, float] | Refusal:
-    """The paper's Eq. 16: the left/right candidate pair closest in the left frame.
-
-    ``x_right = R x_left + T``, so a right normal is ``R^T n`` in the left frame.  Returns
-    ``(index_left, index_right, angle_deg, margin_deg)``; the margin is to the next distinct
-    choice (inf when both views are fronto-parallel and there is nothing to choose).
-    """
-    if not _finite(*left, *right, R):
-        return Refusal("non-finite normal candidates")
-    Rt = np.asarray(R, dtype=np.float64).T
-    i, j, best, margin, _ = _resolve(left, (Rt @ right[0], Rt @ right[1]), fronto_deg)
-    if margin < min_margin_deg:
-        return Refusal(f"left/right normal margin {margin:.3f} deg (< {min_margin_deg})")
-    return i, j, best, margin
+def choose_by_other_view(own: Pair, other: Pair, *,
+                         min_margin_deg: float = 1.0) -> int | None:
+    """The paper's Eq. 16 for one view: the index of ``own``'s candidate that the other view
+    confirms (the smaller angle to either of ``other``'s candidates, both pairs in one frame:
+    a right normal is ``R^T n`` in the left frame).  None when the other candidate is nearly as
+    close (a view seeing the marker head-on has two candidates hugging the cone axis and cannot
+    choose; the other view usually can) or a candidate is not finite: never a guess."""
+    if not _finite(*own, *other):
+        return None
+    d = [min(_angle_deg(a, b) for b in other) for a in own]
+    i = int(np.argmin(d))
+    return None if d[1 - i] - d[i] < min_margin_deg else i
 
 
 def circle_radius_3d(points_undist: np.ndarray, K: np.ndarray, centre_3d: np.ndarray,

@@ -247,13 +247,15 @@ def test_stereo_resolution_picks_the_true_normals():
             continue  # outside the right image, or seen from behind
         left = cm.circle_normals(conic(R, t, R_IN), K)
         right = cm.circle_normals(conic(Rr, tr, R_IN), K)
-        res = cm.resolve_normals_stereo(left, right, Rs)
-        assert not isinstance(res, Refusal), res
-        i, j, best, margin = res
+        right_l = (Rs.T @ right[0], Rs.T @ right[1])  # the right normals in the left frame
+        i = cm.choose_by_other_view(left, right_l)
+        j = cm.choose_by_other_view(right_l, left)
+        assert i is not None and j is not None
         assert angle_deg(left[i], R[:, 2]) < 1e-6 and angle_deg(right[j], Rr[:, 2]) < 1e-6
-        assert best < 1e-6 and margin > 1.0
-        swapped = cm.resolve_normals_stereo((left[1], left[0]), (right[1], right[0]), Rs)
-        assert not isinstance(swapped, Refusal) and swapped[:2] == (1 - i, 1 - j)
+        assert angle_deg(left[i], right_l[j]) < 1e-6
+        swapped_l = (right_l[1], right_l[0])
+        assert cm.choose_by_other_view((left[1], left[0]), swapped_l) == 1 - i
+        assert cm.choose_by_other_view(swapped_l, (left[1], left[0])) == 1 - j
         # the marker's radius back from both views, as in the paper's Table 1
         rl = cm.circle_radius_3d(circle_points(R, t, R_IN, 200), K, t, left[i])
         rr = cm.circle_radius_3d(circle_points(Rr, tr, R_IN, 200), K, Rs @ t + Ts, Rs @ left[i])
@@ -265,18 +267,19 @@ def test_stereo_resolution_refuses_an_ambiguous_pair():
     Rs, _ = stereo_rig()
     n1, n2 = np.array([0.3, 0.0, -1.0]), np.array([-0.3, 0.1, -1.0])
     n1, n2 = n1 / np.linalg.norm(n1), n2 / np.linalg.norm(n2)
-    res = cm.resolve_normals_stereo((n1, n2), (Rs @ n1, Rs @ n2), Rs)  # both pairs agree
-    assert isinstance(res, Refusal) and "margin" in res.reason
+    # both pairs agree: neither view can tell its true normal from the other
+    assert cm.choose_by_other_view((n1, n2), (n1, n2)) is None
+    assert cm.choose_by_other_view((n1, n2), (Rs.T @ Rs @ n1, Rs.T @ Rs @ n2)) is None
 
 
 def test_stereo_fronto_parallel_side_is_no_ambiguity():
     Rs, _ = stereo_rig()
     n = np.array([0.0, 0.0, -1.0])
     m = np.array([0.5, 0.0, -1.0]) / math.hypot(0.5, 1.0)
-    res = cm.resolve_normals_stereo((n, n), (Rs @ m, Rs @ n), Rs)
-    assert not isinstance(res, Refusal) and res[1] == 1
-    both = cm.resolve_normals_stereo((n, n), (Rs @ n, Rs @ n), Rs)
-    assert not isinstance(both, Refusal) and both[3] == math.inf
+    right_l = (Rs.T @ (Rs @ m), Rs.T @ (Rs @ n))
+    assert cm.choose_by_other_view((n, n), right_l) is None  # head-on: nothing to choose
+    assert cm.choose_by_other_view(right_l, (n, n)) == 1     # the other view decides
+    assert cm.choose_by_other_view((n, n), (n, n)) is None   # both head-on: stereo falls back
 
 
 # -- noisy edge points: the end-to-end figure ----------------------------------------------------
@@ -340,4 +343,4 @@ def test_bad_vectors_give_nan_or_refusal():
     assert math.isnan(cm.circle_radius_3d(circle_points(R, t, R_IN, 9), K, t, nan3))
     assert np.isnan(cm.circle_pose(C, K, -1.0, R[:, 2])).all()
     n = R[:, 2]
-    assert isinstance(cm.resolve_normals_stereo((n, nan3), (n, n), np.eye(3)), Refusal)
+    assert cm.choose_by_other_view((n, nan3), (n, n)) is None
