@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -43,6 +44,7 @@ from stationd.vision.types import Refusal
 
 log = logging.getLogger("stationd")
 TRACKING_STATES = (State.TRACKING, State.BOLT_SELECTED, State.TIGHTENING)
+EVENT_HISTORY = 100_000
 
 
 @dataclass
@@ -67,11 +69,14 @@ class Station:
     cycle: Cycle = field(init=False)
     vin: str | None = None
     bolts: dict[str, BoltInfo] = field(default_factory=dict)
-    events: list[tuple[str, Any]] = field(default_factory=list)  # for the demo and tests
+    # recent actions and events, for the demo, the tests and a status view; bounded: a daemon
+    # runs all shift and would otherwise keep every frame's refusal
+    events: deque[tuple[str, Any]] = field(default_factory=lambda: deque(maxlen=EVENT_HISTORY))
     last: Localization | None = None
     on_action: Any = None  # called with each action before it is carried out (demo, tests)
     _pool: ThreadPoolExecutor = field(init=False)
     _sent_at: datetime | None = None
+    _last_log: str | None = None
 
     def __post_init__(self) -> None:
         self.cycle = Cycle(BoltMatcher({}, self._match_params()), self.cfg.matching.leave_frames)
@@ -265,8 +270,11 @@ class Station:
                     await self._call(self.wrench.disable_tool)
                 elif isinstance(a, Record):
                     await self._record(a)
-                elif isinstance(a, Log):
+                elif isinstance(a, Log) and a.message != self._last_log:
+                    # one journal line per change: the same refusal frame after frame is
+                    # logged once, with its reason, until the reason changes
                     log.info("%s", a.message)
+                    self._last_log = a.message
             except DeviceError as exc:
                 await self._apply(self.cycle.fault(f"wrench: {exc}"))
 
