@@ -17,6 +17,7 @@ the bookkeeping they share (link status, waiting for the link or a result, error
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from abc import abstractmethod
@@ -27,6 +28,8 @@ from enum import IntEnum
 
 from drivers.errors import ConnectionLostError, DeviceError
 from drivers.lifecycle import Openable
+
+log = logging.getLogger(__name__)
 
 
 class Status(IntEnum):
@@ -171,16 +174,37 @@ class Wrench(Openable):
         self._check_open()
         self._send_vin(vin, self._timeout(timeout))
 
-    def wait_result(self, timeout: float) -> TighteningResult | None:
+    def wait_result(self, timeout: float, *, acknowledge: bool = True
+                    ) -> TighteningResult | None:
         """The next tightening result, or None if none came within ``timeout`` seconds.
 
         Results already received are returned even after the link dropped; with none
         pending and the link down, raises ConnectionLostError (the station's fault state).
+
+        The controller is told a result is taken (Open Protocol MID 0062, the Modbus result
+        ack register) only when it is handed out, never on mere receipt.  With
+        ``acknowledge=False`` the caller does it with :meth:`acknowledge_result` once the
+        result is stored: a result lost before that (the process killed) is one the
+        controller was never told it could forget.
         """
         if timeout < 0:
             raise ValueError("timeout must be >= 0")
         self._check_open()
-        return self._wait_result(timeout)
+        result = self._wait_result(timeout)
+        if result is not None and acknowledge:
+            try:
+                self._ack_result(result, self.timeout)
+            except DeviceError as e:  # the result is still the caller's; the controller
+                log.warning("%s", e)  # keeps it too, unacknowledged
+        return result
+
+    def acknowledge_result(self, result: TighteningResult, timeout: float | None = None) -> None:
+        """Tell the controller ``result`` (from ``wait_result(..., acknowledge=False)``) is
+        stored.  ValueError for a result that is not awaiting acknowledgement (acknowledged
+        twice, or not from this wrench); ConnectionLostError when the link it came on is
+        gone (the controller still holds it)."""
+        self._check_open()
+        self._ack_result(result, self._timeout(timeout))
 
     # -- helpers and hooks -----------------------------------------------------------------
     def _timeout(self, timeout: float | None) -> float:
@@ -224,6 +248,9 @@ class Wrench(Openable):
     @abstractmethod
     def _wait_result(self, timeout: float) -> TighteningResult | None: ...
 
+    @abstractmethod
+    def _ack_result(self, result: TighteningResult, timeout: float) -> None: ...
+
 
 def check_positive(**values: float) -> None:
     """ValueError naming the first of ``values`` (in the order given) that is not > 0."""
@@ -249,12 +276,44 @@ class SupervisedWrench(Wrench):
         self._poll_error: str | None = None
         self._attempts = self._reconnects = 0
         self._results: deque[TighteningResult | DeviceError] = deque()
+        # results handed out but not yet acknowledged: id(result) -> (result, the backend's
+        # token for the acknowledgement: the link epoch, the result counter)
+        self._unacked: dict[int, tuple[TighteningResult, int]] = {}
+        self._ack_wanted: set[int] = set()  # tokens whose acknowledgement failed: retry them
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
     @abstractmethod
     def _link_up(self) -> bool:
         """Whether the link is up (called with ``_cond`` held)."""
+
+    @abstractmethod
+    def _send_ack(self, token: int, timeout: float) -> None:
+        """Acknowledge the result received with ``token`` (not called with ``_cond`` held)."""
+
+    def _queue_result(self, result: TighteningResult, token: int) -> None:
+        """Queue a received result; it is acknowledged later with ``token`` (``_cond`` held)."""
+        self._results.append(result)
+        self._unacked[id(result)] = (result, token)
+        self._cond.notify_all()
+
+    def _ack_result(self, result: TighteningResult, timeout: float) -> None:
+        with self._cond:
+            entry = self._unacked.get(id(result))
+            if entry is None or entry[0] is not result:
+                raise ValueError(f"tightening {result.tightening_id} is not awaiting "
+                                 "acknowledgement (already acknowledged, or not from "
+                                 f"{self.device})")
+            token = entry[1]
+            self._ack_wanted.add(token)
+        try:
+            self._send_ack(token, timeout)
+        except DeviceError as e:
+            raise self._surface(e, f"acknowledge tightening {result.tightening_id}",
+                                "; the controller still holds it") from None
+        with self._cond:
+            self._unacked.pop(id(result), None)
+            self._ack_wanted.discard(token)
 
     # -- the counts, as the supervisor sees the link go and come back (``_cond`` held) -------
     def _link_lost(self, reason: str) -> None:

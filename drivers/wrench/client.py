@@ -221,14 +221,17 @@ class OpenProtocolWrench(SupervisedWrench):
     def _dispatch(self, msg: Message) -> None:
         if msg.mid == op.MID_RESULT:
             try:
-                item: TighteningResult | DeviceError = op.parse_result(msg.raw)
+                result = op.parse_result(msg.raw)
             except ProtocolError as e:
-                item = ProtocolError(f"unreadable tightening result, acknowledged anyway (the "
-                                     f"controller keeps its own record): {e}")
-            with self._cond:
-                self._results.append(item)
-                self._cond.notify_all()
-            self._send(Message(op.MID_RESULT_ACK))
+                with self._cond:
+                    self._results.append(ProtocolError(
+                        f"unreadable tightening result, acknowledged anyway (the controller "
+                        f"keeps its own record): {e}"))
+                    self._cond.notify_all()
+                self._send(Message(op.MID_RESULT_ACK))
+                return
+            with self._cond:   # acknowledged (0062) when taken, on this same link only
+                self._queue_result(result, self._epoch)
             return
         if msg.mid == op.MID_KEEPALIVE:
             self._keepalive_sent = None
@@ -339,6 +342,11 @@ class OpenProtocolWrench(SupervisedWrench):
 
     def _identity(self) -> str:
         return self._ident
+
+    def _send_ack(self, token: int, timeout: float) -> None:
+        """MID 0062 on the link the result came on: 0062 names no result, so on a new
+        session it would acknowledge whatever that session sent, not this one."""
+        self._send(Message(op.MID_RESULT_ACK), epoch=token)
 
     def _select_pset(self, pset: int, timeout: float) -> None:
         self._command(Message(op.MID_PSET_SELECT, data=f"{pset:03d}".encode()),

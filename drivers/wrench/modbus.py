@@ -229,13 +229,27 @@ class ModbusWrench(SupervisedWrench):
             if key != self._delivered:
                 self._delivered = key
                 try:
-                    self._results.append(m.result(regs, datetime.now()))
+                    self._queue_result(m.result(regs, datetime.now()), counter)
+                    return    # acknowledged when the station has stored it
                 except ValueError as e:
                     self._results.append(ProtocolError(f"unreadable tightening result, "
                                                        f"acknowledged anyway: {e}"))
-                self._cond.notify_all()
-        self._io_call(link, lambda li: li.write_span(m.result_ack.address, [counter],
-                                                     self.timeout))
+                    self._cond.notify_all()
+            elif counter not in self._ack_wanted:
+                return        # queued or handed out, not yet stored
+            # else: taken, and its acknowledgement failed with the link: write it again
+        self._send_ack(counter, self.timeout)
+
+    def _send_ack(self, token: int, timeout: float) -> None:
+        """Write the result's counter back to ``result_ack``: the controller may then publish
+        the next result (works on a new link too: the counter names the result)."""
+        counter = token
+        with self._cond:
+            link = self._link
+        if link is None:
+            raise ConnectionLostError("link down")
+        self._io_call(link, lambda li: li.write_span(self.register_map.result_ack.address,
+                                                     [counter], timeout))
         with self._cond:
             self._acked = counter
 

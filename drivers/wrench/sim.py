@@ -101,6 +101,7 @@ class SimController(OpenProtocolServer):
         self.tool_enabled = False
         self.vin = ""
         self.acks = 0                            # MID 0062 received
+        self.acked_ids: list[int] = []           # the tightenings those 0062 acknowledged
         self._pset_changed = self._clock()
         self._batch_counter = self._tid = 0
 
@@ -181,8 +182,10 @@ class SimController(OpenProtocolServer):
             else:
                 s.subscribed = mid == 60
                 self._ok(s, mid)
-        elif mid == 62:
+        elif mid == 62:   # 0062 names no result: it acknowledges the oldest one sent
             self.acks += 1
+            if s.unacked:
+                self.acked_ids.append(s.unacked.pop(0))
         else:
             self._refuse(s, mid, 99)
 
@@ -234,6 +237,7 @@ class SimController(OpenProtocolServer):
         for s in self.sessions():
             if s.started and s.subscribed:
                 self.write(s, s.frame(raw))
+                s.unacked.append(self._tid)
         return SimTightening(self._tid, self.pset, ok, t_val / 100, float(a_val), t_stat,
                              a_stat, self.vin, now, raw)
 

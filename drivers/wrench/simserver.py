@@ -113,6 +113,7 @@ class Session:
         self.inbuf, self.out = bytearray(), bytearray()
         self.started = self.subscribed = False
         self.last_rx = time.monotonic()
+        self.unacked: list[int] = []    # results (tightening ids) sent, awaiting MID 0062
 
     def read(self) -> bytes:
         return self.sock.recv(65536) if self.sock else os.read(self.fd, 65536)

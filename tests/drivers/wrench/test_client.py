@@ -204,3 +204,40 @@ def test_bad_urls_say_what_is_accepted(url, words):
 def test_unknown_keyword_is_a_type_error():
     with pytest.raises(TypeError, match=r"unknown option.*retries"):
         open_wrench("openprotocol://10.0.0.1", retries=3)
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_a_result_is_acknowledged_only_when_the_station_says_it_is_stored(sim, transport,
+                                                                          tmp_path):
+    with connect(sim, transport, tmp_path) as w:
+        w.select_pset(1)
+        w.enable_tool()
+        first, second = sim.pull_trigger(), sim.pull_trigger()
+        r1 = w.wait_result(1.0, acknowledge=False)
+        r2 = w.wait_result(1.0, acknowledge=False)
+        assert r1 is not None and r2 is not None and first is not None and second is not None
+        time.sleep(0.2)
+        assert sim.acks == 0 and sim.acked_ids == []      # received, not acknowledged
+        w.acknowledge_result(r1)
+        assert wait_until(lambda: sim.acked_ids == [first.tightening_id])
+        with pytest.raises(ValueError, match="not awaiting acknowledgement"):
+            w.acknowledge_result(r1)                      # twice: refused, nothing sent
+        w.acknowledge_result(r2)
+        assert wait_until(lambda: sim.acked_ids == [1, 2])
+        assert sim.acks == 2
+
+
+def test_an_acknowledgement_never_crosses_to_a_new_session(sim, tmp_path):
+    """0062 names no result: after a reconnect it would acknowledge the new session's
+    results, so a result from the old link cannot be acknowledged any more."""
+    with connect(sim, "tcp", tmp_path) as w:
+        w.select_pset(1)
+        w.enable_tool()
+        sim.pull_trigger()
+        r = w.wait_result(1.0, acknowledge=False)
+        assert r is not None
+        sim.drop_connections()
+        assert wait_until(lambda: w.status().reconnects == 1)
+        with pytest.raises(DeviceError, match="acknowledge tightening 1: .*still holds it"):
+            w.acknowledge_result(r)
+        assert sim.acks == 0

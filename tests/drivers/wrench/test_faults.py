@@ -176,11 +176,12 @@ def test_results_received_before_a_loss_are_still_delivered(sim, tmp_path):
         w.select_pset(1)
         w.enable_tool()
         sim.pull_trigger()
-        assert wait_until(lambda: sim.acks == 1)
+        assert wait_until(lambda: bool(w._results))   # received, not yet taken
         sim.power_off()
         assert wait_until(lambda: not w.status().connected)
         result = w.wait_result(0.1)
         assert result is not None and result.tightening_id == 1
+        assert sim.acks == 0     # taken after the loss: the controller was never told
         with pytest.raises(ConnectionLostError):
             w.wait_result(0.1)
 

@@ -215,3 +215,22 @@ def test_mbpoll_sees_the_documented_registers(ctl, transport):
     assert code != 0 and "Illegal data address" in err
     code, _, err = mbpoll(target, "-r", "29")             # beyond the map
     assert code != 0 and "Illegal data address" in err
+
+
+def test_result_ack_register_is_written_only_once_the_result_is_stored(ctl):
+    with connect(ctl, "tcp") as w:
+        w.select_pset(1)
+        w.enable_tool()
+        t = ctl.pull_trigger()
+        r = w.wait_result(1.0, acknowledge=False)
+        assert t is not None and r is not None and r.tightening_id == t.tightening_id
+        time.sleep(0.3)                                   # a few polls: still not written
+        m = ctl.map
+        assert m.integer("result_ack", ctl.registers()) == 0
+        second = ctl.pull_trigger()          # queued by the controller, not published yet
+        assert second is not None and w.wait_result(0.3) is None
+        w.acknowledge_result(r)
+        assert m.integer("result_ack", ctl.registers()) == 1
+        r2 = w.wait_result(1.0)               # now published; taken and acknowledged
+        assert r2 is not None and r2.tightening_id == second.tightening_id
+        assert wait_until(lambda: m.integer("result_ack", ctl.registers()) == 2)
