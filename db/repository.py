@@ -179,7 +179,8 @@ class Repository:
     ) -> int:
         """Record one tightening of ``bolt`` on the open vehicle ``vin``; return its id.
 
-        Committed (and on disk) before it returns.  ``parameters_id`` is the version that was
+        Committed (and on disk) before it returns.  A ``tightening_id`` already recorded for
+        this vehicle (the controller resent a result) returns the existing record.  ``parameters_id`` is the version that was
         sent (``BoltInfo.parameters_id``); without it, the bolt's current version.
         ``params_sent`` defaults to that version's pset and targets.
         """
@@ -190,6 +191,12 @@ class Repository:
                 raise InputError(f"{name}: a timestamp with a timezone (UTC) is needed")
         with self._session(write=True) as s:
             v = _vehicle(s, vin)
+            if tightening_id is not None:  # a result the controller sent again: stored once
+                known = s.scalar(select(TighteningRecord.id).where(
+                    TighteningRecord.vehicle_id == v.id,
+                    TighteningRecord.tightening_id == int(tightening_id)))
+                if known is not None:
+                    return known
             if v.ended_at is not None:
                 raise InputError(f"vehicle {vin} is closed: a tightening cannot be recorded")
             b = s.scalar(select(Bolt).where(Bolt.model_id == v.model_id, Bolt.code == bolt,

@@ -31,7 +31,7 @@ from drivers.errors import (
 )
 from drivers.url import DeviceUrl
 from drivers.wrench import openprotocol as op
-from drivers.wrench.base import SupervisedWrench, TighteningResult, check_positive
+from drivers.wrench.base import SupervisedWrench, check_positive
 from drivers.wrench.link import Link, SerialLink, TcpLink
 from drivers.wrench.openprotocol import Message, SerialFramer, TcpFramer
 

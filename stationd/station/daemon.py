@@ -17,8 +17,10 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
 
+import cv2
 import numpy as np
 
+from db.bolts import Parameters
 from db.repository import BoltInfo, Repository
 from drivers.camera import open_camera
 from drivers.camera.pair import StereoGrabber
@@ -38,7 +40,7 @@ from stationd.station.cycle import (
     SendParams,
     State,
 )
-from stationd.station.matching import BoltMatcher, MatchParams
+from stationd.station.matching import BoltMatcher, BoltRule, MatchParams
 from stationd.station.sdnotify import Notifier
 from stationd.vision.types import Refusal
 
@@ -53,6 +55,21 @@ class Localization:
     tilt_deg: float = 0.0
     reason: str | None = None
     t: float = 0.0
+    # the marker's neighbourhood in each frame used ("pair1/left" -> crop): the evidence kept
+    # with a tightening record when records.save_images is on (a crop, not 60 MB frames)
+    crops: dict[str, np.ndarray] = field(default_factory=dict)
+    camera_fault: str | None = None  # a camera stopped delivering: the station's fault
+
+
+@dataclass(frozen=True)
+class PairView:
+    """One pair's grab and localization: the bolt end or why not, when the frames arrived,
+    and the crops around the marker."""
+
+    end: BoltEnd | str
+    arrived: float
+    crops: dict[str, np.ndarray] = field(default_factory=dict)
+    camera_fault: bool = False
 
 
 @dataclass
@@ -77,6 +94,9 @@ class Station:
     _pool: ThreadPoolExecutor = field(init=False)
     _sent_at: datetime | None = None
     _last_log: str | None = None
+    _evidence: dict[str, np.ndarray] = field(default_factory=dict)  # crops of the selection
+    _enabled: tuple[str, int | None] | None = None  # (bolt, pset) the tool was last enabled for
+    _vin_sent: tuple[str, int] | None = None  # (VIN, controller reconnect count) it went with
 
     def __post_init__(self) -> None:
         self.cycle = Cycle(BoltMatcher({}, self._match_params()), self.cfg.matching.leave_frames)
@@ -155,31 +175,89 @@ class Station:
             await self._recover()
         await self._vehicle(state)
         await self._apply(self.cycle.lift(state.ready))
+        if self.vin is not None and self.cycle.state is not State.FAULT:
+            await self._send_vin()
         if self.cycle.state in TRACKING_STATES:
             loc = await self._localize()
             self.last = loc
-            await self._apply(self.cycle.localized(loc.point_mm, loc.reason,
-                                                   time.monotonic() - loc.t))
-        if self.cycle.state is State.TIGHTENING:
-            try:
-                result = await self._call(self.wrench.wait_result, 0.05)
-            except DeviceError as exc:
-                await self._apply(self.cycle.fault(f"wrench: {exc}"))
-                return
-            if result is not None and self.cycle.bolt is not None:
-                await self._apply(self.cycle.result(self.cycle.bolt, result, bool(result.ok)))
+            if loc.camera_fault is not None:
+                await self._apply(self.cycle.fault(loc.camera_fault))
+            else:
+                await self._apply(self.cycle.localized(loc.point_mm, loc.reason,
+                                                       time.monotonic() - loc.t))
+        if self.cycle.state is not State.FAULT:
+            await self._results()
         if (self.cycle.state, self.cycle.reason) != before:
             self.notifier.status(f"{self.cycle.state.value}: {self.cycle.reason}")
             log.info("%s: %s", self.cycle.state.value, self.cycle.reason)
 
+    async def _results(self) -> None:
+        """Take the controller's results, in every state: one that arrives after the wrench
+        left its bolt must never wait in the queue to be taken for the next bolt's."""
+        wait = 0.05 if self.cycle.state is State.TIGHTENING else 0.0
+        try:
+            result = await self._call(lambda: self.wrench.wait_result(wait, acknowledge=False))
+        except DeviceError as exc:
+            await self._apply(self.cycle.fault(f"wrench: {exc}"))
+            return
+        if result is None:
+            return
+        if self.cycle.state is State.TIGHTENING and self.cycle.bolt is not None:
+            await self._apply(self.cycle.result(self.cycle.bolt, result, bool(result.ok)))
+        elif self._enabled is not None and result.pset == self._enabled[1] and self.vin:
+            # the trigger was pulled as the wrench left: the result is that bolt's
+            await self._apply(self.cycle.result(self._enabled[0], result, bool(result.ok)))
+        else:
+            log.warning("result %d (pset %d, VIN %r, %s) outside any tightening: not "
+                        "attributable to a bolt, acknowledged (the controller keeps its own "
+                        "record)", result.tightening_id, result.pset, result.vin,
+                        "OK" if result.ok else "NOK")
+            self.events.append(("unattributed result", result))
+            await self._acknowledge(result)
+
+    async def _acknowledge(self, result: Any) -> None:
+        """Tell the controller a result is stored; a failure leaves it with the controller
+        (it is recorded here already, and a resent copy is recognised by its id)."""
+        try:
+            await self._call(self.wrench.acknowledge_result, result)
+        except (DeviceError, ValueError) as exc:
+            log.warning("tightening %d stored, not acknowledged: %s", result.tightening_id, exc)
+
+    async def _send_vin(self) -> None:
+        """The controller tags its results with the VIN: sent once per vehicle and again
+        after the controller reconnects (a power cycle forgets it)."""
+        assert self.vin is not None  # noqa: S101 - called only with a vehicle
+        try:
+            status = await self._call(self.wrench.status)
+        except DeviceError:
+            return
+        if not status.connected or self._vin_sent == (self.vin, status.reconnects):
+            return
+        try:
+            await self._call(self.wrench.send_vin, self.vin)
+        except ValueError as exc:   # the controller cannot take it (no VIN registers, length)
+            log.info("VIN %s not sent to the controller: %s", self.vin, exc)
+        except RefusedError as exc:
+            log.warning("the controller refused VIN %s: %s", self.vin, exc)
+        except DeviceError as exc:
+            await self._apply(self.cycle.fault(f"wrench: {exc}"))
+            return
+        self._vin_sent = (self.vin, status.reconnects)
+
     async def _recover(self) -> None:
         """Leave a fault when its device answers again: the lift just did (this step read it);
-        the controller when its link is up (a refusal needs nothing more: its bolt is skipped).
-        A fault whose cause persists (an unknown vehicle model) is raised again in this step."""
+        the controller when its link is up (a refusal needs nothing more: its bolt is skipped);
+        the cameras when every pair grabs again.  A fault whose cause persists (an unknown
+        vehicle model) is raised again in this step."""
         reason = self.cycle.reason
         if reason.startswith("wrench:") or reason.startswith("controller refused"):
             status = await self._call(self.wrench.status)
             if not status.connected:
+                return
+        if reason.startswith("cameras:"):
+            grabs = await asyncio.gather(*(self._call(self._grab_ok, g)
+                                           for g in self.grabbers.values()))
+            if not all(grabs):
                 return
         self.cycle.recovered()  # an unknown model code faults again in this very step
         self.events.append(("recovered", reason))
@@ -199,8 +277,9 @@ class Station:
             self.bolts = {b.bolt_id: b for b in infos}
             report = await self._call(self.repo.vehicle_report, vin)
             done = {b.bolt_id for b in report.bolts if b.status == "ok"}
-            self.cycle.matcher = BoltMatcher({k: np.array(b.position) for k, b in
-                                              self.bolts.items()}, self._match_params(), done)
+            self.cycle.matcher = BoltMatcher(
+                {k: np.array(b.position) for k, b in self.bolts.items()}, self._match_params(),
+                done, rules={b.bolt_id: BoltRule(b.order, b.batch) for b in infos})
             self.vin = vin
             self.events.append(("vehicle", vin))
         elif not state.at_working_height and self.vin is not None:
@@ -208,44 +287,64 @@ class Station:
             self.events.append(("vehicle closed", (self.vin, report.missing, report.nok)))
             log.info("vehicle %s closed: missing %s, NOK %s", self.vin, report.missing,
                      report.nok)
-            self.vin, self.bolts = None, {}
+            self.vin, self.bolts, self._enabled = None, {}, None
 
     async def _localize(self) -> Localization:
         """Grab and localize in every pair at once; the result's time ``t`` is the earliest
         arrival of the frames it used (its age, and the latency to the acknowledgement, are
-        counted from there: from the frames, not from the request)."""
+        counted from there: from the frames, not from the request).  A pair whose cameras
+        stopped delivering is a fault, not a refusal: the station is blind there."""
         names = list(self.grabbers)
-        got = await asyncio.gather(*(self._call(self._localize_pair, n) for n in names))
-        ends = [g[0] for g in got if isinstance(g[0], BoltEnd)]
-        used = [g[1] for g in got if isinstance(g[0], BoltEnd)] or [g[1] for g in got]
-        arrived = min(used, default=time.monotonic())
-        reasons = [f"{n}: {g[0]}" for n, g in zip(names, got, strict=True)
-                   if isinstance(g[0], str)]
+        got: list[PairView] = await asyncio.gather(*(self._call(self._localize_pair, n)
+                                                     for n in names))
+        broken = [f"{n}: {g.end}" for n, g in zip(names, got, strict=True) if g.camera_fault]
+        if broken:
+            return Localization(None, reason="; ".join(broken),
+                                camera_fault="cameras: " + "; ".join(broken))
+        ends = [g.end for g in got if isinstance(g.end, BoltEnd)]
+        used = [g for g in got if isinstance(g.end, BoltEnd)] or got
+        arrived = min((g.arrived for g in used), default=time.monotonic())
+        crops = {k: c for g in used for k, c in g.crops.items()}
+        reasons = [f"{n}: {g.end}" for n, g in zip(names, got, strict=True)
+                   if isinstance(g.end, str)]
         if not ends:
             return Localization(None, reason="; ".join(reasons) or "no pair", t=arrived)
         fused = fuse([e.point_mm for e in ends], [1.0] * len(ends), max_spread_mm=2.0)
         if isinstance(fused, Refusal):
             return Localization(None, reason=fused.reason, t=arrived)
         return Localization(fused.point_mm, float(np.mean([e.tilt_deg for e in ends])),
-                            t=arrived)
+                            t=arrived, crops=crops)
 
-    def _localize_pair(self, name: str) -> tuple[BoltEnd | str, float]:
-        """Grab and localize in one pair (an executor thread): the bolt end or why not, and
-        when the frames arrived (monotonic clock)."""
+    def _grab_ok(self, grabber: StereoGrabber) -> bool:
+        """Whether a pair delivers frames again (recovery from a camera fault)."""
+        try:
+            grabber.grab(1.0)
+        except DeviceError:
+            return False
+        return True
+
+    def _localize_pair(self, name: str) -> PairView:
+        """Grab and localize in one pair (an executor thread)."""
         pc: PairConfig = self.cfg.pairs[name]
         try:
             left, right = self.grabbers[name].grab(1.0)
         except DeviceError as exc:
-            return f"cameras: {exc}", time.monotonic()
+            return PairView(str(exc), time.monotonic(), camera_fault=True)
         arrived = time.monotonic()
         res = localize(pc.calibration, left.image, right.image, self.cfg.vision, self.cfg.marker)
         if not res.found or res.point_mm is None or res.normal is None:
-            return str(res.reason), arrived
+            return PairView(str(res.reason), arrived)
+        crops = {}
+        if self.cfg.records.save_images:
+            crops = {f"{name}/{side}": crop(frame.image, det.roi)
+                     for side, frame, det in (("left", left, res.left), ("right", right,
+                                                                         res.right))
+                     if det.roi is not None}
         if pc.to_vehicle is None:
-            return "pair not registered into the vehicle frame", arrived
+            return PairView("pair not registered into the vehicle frame", arrived)
         end = bolt_end(pc.to_vehicle.apply(res.point_mm),
                        pc.to_vehicle.apply_direction(res.normal), self.cfg.tool)
-        return (end.reason if isinstance(end, Refusal) else end), arrived
+        return PairView(end.reason if isinstance(end, Refusal) else end, arrived, crops)
 
     async def _apply(self, actions: list[Action]) -> None:
         for a in actions:
@@ -256,8 +355,9 @@ class Station:
                 if isinstance(a, SendParams):
                     params = self.bolts[a.bolt].parameters
                     self._sent_at = datetime.now(UTC)
+                    self._evidence = self.last.crops if self.last is not None else {}
                     try:
-                        await self._call(self.wrench.select_pset, params.pset, 2.0)
+                        await self._call(self._send_parameters, params)
                     except RefusedError as exc:
                         await self._apply(self.cycle.params_refused(a.bolt, str(exc)))
                         continue
@@ -265,11 +365,13 @@ class Station:
                         self.events.append(("latency_ms", (time.monotonic() - self.last.t) * 1e3))
                     await self._apply(self.cycle.params_acknowledged(a.bolt))
                 elif isinstance(a, EnableTool):
+                    self._enabled = (a.bolt, self.bolts[a.bolt].parameters.pset)
                     await self._call(self.wrench.enable_tool)
                 elif isinstance(a, DisableTool):
                     await self._call(self.wrench.disable_tool)
                 elif isinstance(a, Record):
-                    await self._record(a)
+                    await self._record(a)          # on disk first,
+                    await self._acknowledge(a.result)  # then the controller may forget it
                 elif isinstance(a, Log) and a.message != self._last_log:
                     # one journal line per change: the same refusal frame after frame is
                     # logged once, with its reason, until the reason changes
@@ -278,12 +380,28 @@ class Station:
             except DeviceError as exc:
                 await self._apply(self.cycle.fault(f"wrench: {exc}"))
 
+    def _send_parameters(self, params: Parameters) -> None:
+        """A register-driven controller takes the pset with the torque and angle targets; a
+        pset-driven one (Open Protocol) its pset.  A bolt without a pset on a pset-driven
+        controller is refused like a pset the controller does not know."""
+        if hasattr(self.wrench, "set_parameters"):
+            self.wrench.set_parameters(params.pset or 0, params.torque.target,
+                                       params.angle.target if params.angle else 0.0, 2.0)
+        elif params.pset is None:
+            raise RefusedError("the bolt has no pset and this controller takes psets only",
+                               device=self.wrench.device)
+        else:
+            self.wrench.select_pset(params.pset, 2.0)
+
     async def _record(self, a: Record) -> None:
         assert self.repo is not None and self.vin is not None  # noqa: S101
         r = a.result
+        if self._enabled is not None and self._enabled[0] == a.bolt:
+            self._enabled = None   # its result is in: a later one is not this bolt's
         pos = self.last.point_mm if self.last and self.last.point_mm is not None else np.zeros(3)
         info = self.bolts.get(a.bolt)
         repo = self.repo
+        images = await self._call(self._save_images, a.bolt, int(r.tightening_id))
         await self._call(lambda: repo.record_tightening(
             self.vin, a.bolt, ok=bool(r.ok), position_mm=[float(v) for v in pos],
             match_distance_mm=float(a.match.distance_mm or 0.0) if a.match else 0.0,
@@ -291,4 +409,31 @@ class Station:
             torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
             parameters_id=info.parameters_id if info else None,
             tightening_id=int(r.tightening_id), sent_at=self._sent_at,
-            result_at=datetime.now(UTC)))
+            result_at=datetime.now(UTC), images=images))
+
+    def _save_images(self, bolt: str, tightening_id: int) -> list[str]:
+        """Write the selection's crops beside the records (an executor thread); a failure is
+        logged and the tightening is recorded without them, never lost."""
+        folder = self.cfg.records.images_dir
+        if not self.cfg.records.save_images or folder is None or not self._evidence:
+            return []
+        out = []
+        for key, img in sorted(self._evidence.items()):
+            path = folder / str(self.vin) / f"{bolt}-{tightening_id}-{key.replace('/', '-')}.png"
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                if not cv2.imwrite(str(path), img):
+                    raise OSError("the PNG encoder refused it")
+            except (OSError, cv2.error) as exc:
+                log.warning("image %s not saved: %s", path, exc)
+                continue
+            out.append(str(path))
+        return out
+
+
+def crop(image: np.ndarray, roi: tuple[int, int, int, int], margin: int = 16) -> np.ndarray:
+    """The marker's neighbourhood (``roi`` x, y, w, h plus ``margin``), a copy."""
+    x, y, w, h = roi
+    hh, ww = image.shape[:2]
+    x0, y0 = max(0, x - margin), max(0, y - margin)
+    return image[y0:min(hh, y + h + margin), x0:min(ww, x + w + margin)].copy()

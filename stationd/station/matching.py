@@ -4,10 +4,37 @@ A bolt is *taken* only when all of these hold, else the matcher says why it take
 - the bolt end is within ``tolerance_mm`` of the bolt (in the vehicle frame, X and Y: the
   depth along the wrench axis is where the socket sits, not which bolt it is);
 - the second-nearest bolt is farther than the nearest by ``margin_mm`` (unambiguous);
-- the bolt is not done yet (unless re-tightening is allowed);
+- the bolt is not done yet (unless re-tightening is allowed) and not skipped;
+- the bolt table's sequence allows it now (``order`` and ``batch``, below);
 - the same bolt has been the answer for ``stable_frames`` consecutive localizations, each no
   older than ``max_age_s`` (a stale or flickering answer is no answer).
 A refused localization breaks the streak: stability must be earned again.
+
+The checks run in that order (tolerance and ambiguity, then done and skipped, then the sequence,
+then stability), so the reason given is the first one that applies.  A bolt refused for
+tolerance or ambiguity has no ``candidate``; a bolt refused for any later reason keeps its
+``candidate`` and distance, so the cycle still sees where the wrench is (leave detection).
+
+Sequence (``rules``: bolt id -> :class:`BoltRule`, from the bolt table's optional ``order`` and
+``batch``; a bolt without a rule has neither):
+
+- *Order*: "lower orders are tightened first".  A bolt with order k may be taken only when every
+  bolt *of the same batch* with an order below k is done; bolts without a batch are ordered
+  among themselves, as one more group.  Bolts without an order are not constrained by order
+  and do not block anybody's order.  Orders do not reach across batches: with the batch rule
+  below, an order from one batch to another could never be met (batch A started, then A's
+  order 2 waits for B's order 1, which waits for A to be finished), so that a table valid on
+  paper would stop the line.
+- *Batch*: "bolts tightened together as one batch".  Once any bolt of a batch is done, the
+  batch is *open* until all its bolts are done, and only bolts of an open batch may be taken.
+  (Two batches are open at once only if a vehicle resumed like that: then bolts of either may
+  be taken, else neither could ever be finished.)
+- *Done* is what :meth:`BoltMatcher.mark_done` records, plus ``done`` given at construction (a
+  vehicle resumed after a restart).  A skipped bolt is not done: it still blocks (its order's
+  followers, the rest of the world while its batch is open) and the reason says it was skipped
+  and why, so that the operator knows what to do: the vehicle then goes out with the blocked
+  bolts missing rather than tightened out of sequence.
+- The sequence applies to re-tightening a done bolt too (when allowed): it is a tightening.
 """
 
 from __future__ import annotations
@@ -28,6 +55,18 @@ class MatchParams:
 
 
 @dataclass(frozen=True)
+class BoltRule:
+    """A bolt's place in the sequence: the bolt table's ``order`` (1..9999, lower first) and
+    ``batch`` (a name); either may be None (not ordered, in no batch)."""
+
+    order: int | None = None
+    batch: str | None = None
+
+
+NO_RULE = BoltRule()
+
+
+@dataclass(frozen=True)
 class Match:
     """The matcher's verdict for one localization: ``bolt`` is set only when it is taken."""
 
@@ -40,14 +79,24 @@ class Match:
 
 @dataclass
 class BoltMatcher:
-    """Matches bolt ends to a vehicle's bolt table, with the stability rule."""
+    """Matches bolt ends to a vehicle's bolt table, with the sequence and stability rules.
+
+    Pure: no I/O, no clock.  Build ``rules`` from the repository's bolts with
+    ``{b.bolt_id: BoltRule(b.order, b.batch) for b in infos}``; without it nothing is ordered.
+    """
 
     bolts: Mapping[str, np.ndarray]  # id -> position (vehicle frame, mm)
     params: MatchParams = field(default_factory=MatchParams)
     done: set[str] = field(default_factory=set)
     skipped: dict[str, str] = field(default_factory=dict)  # bolt -> why it is not tightened
+    # id -> order and batch; read once, at construction.  Rules of ids that are not in
+    # ``bolts`` are ignored: a bolt the station cannot tighten must not block the others.
+    rules: Mapping[str, BoltRule] = field(default_factory=dict)
     _ids: list[str] = field(init=False, repr=False)
     _xy: np.ndarray = field(init=False, repr=False)
+    _rule: dict[str, BoltRule] = field(init=False, repr=False)
+    _before: dict[str, list[str]] = field(init=False, repr=False)  # lower orders, same group
+    _batches: dict[str, list[str]] = field(init=False, repr=False)  # batch -> its bolts
     _streak_bolt: str | None = field(default=None, init=False, repr=False)
     _streak: int = field(default=0, init=False, repr=False)
 
@@ -55,10 +104,51 @@ class BoltMatcher:
         self._ids = list(self.bolts)
         self._xy = np.array([np.asarray(self.bolts[i], dtype=np.float64)[:2]
                              for i in self._ids]).reshape(-1, 2)
+        # precomputed in table order (the order the operator reads the bolt list in)
+        self._rule = {i: self.rules.get(i, NO_RULE) for i in self._ids}
+        self._before, self._batches = {}, {}
+        for i, r in self._rule.items():
+            if r.batch is not None:
+                self._batches.setdefault(r.batch, []).append(i)
+            if r.order is not None:
+                k = r.order
+                self._before[i] = [j for j, q in self._rule.items() if q.batch == r.batch
+                                   and q.order is not None and q.order < k]
 
     def mark_done(self, bolt: str) -> None:
+        """``bolt`` is tightened OK: it is not taken again, and what follows it in the sequence
+        may now be taken."""
         self.done.add(bolt)
         self.reset()
+
+    def why_blocked(self, bolt: str) -> str | None:
+        """Why the sequence (order, batch) forbids taking ``bolt`` now, or None if it allows it.
+
+        Only the sequence: tolerance, done, skipped and stability are :meth:`update`'s.  Done
+        and skipped are read live, so :meth:`mark_done` (or a new skip) counts at once.
+        """
+        rule = self._rule.get(bolt, NO_RULE)
+        open_batches: dict[str, list[str]] = {}
+        for name, members in self._batches.items():
+            rest = [b for b in members if b not in self.done]
+            if rest and len(rest) < len(members):
+                open_batches[name] = rest
+        if open_batches and rule.batch not in open_batches:
+            why = "; ".join(f"finish batch {name} first: {', '.join(rest)} remaining"
+                            for name, rest in open_batches.items())
+            return self._must_wait(bolt, why, [b for r in open_batches.values() for b in r])
+        before = [b for b in self._before.get(bolt, ()) if b not in self.done]
+        if before:
+            group = f" in batch {rule.batch}" if rule.batch is not None else ""
+            return self._must_wait(bolt, f"order {rule.order}{group} needs {', '.join(before)} "
+                                   "done first", before)
+        return None
+
+    def _must_wait(self, bolt: str, why: str, blocking: list[str]) -> str:
+        """The reason, naming the blocking bolts that were skipped: waiting for them is waiting
+        for something that will not happen on its own, and the operator must know it."""
+        notes = [f"{b} was skipped: {self.skipped[b]}" for b in blocking if b in self.skipped]
+        return "; ".join([f"{bolt} must wait: {why}", *notes])
 
     def reset(self) -> None:
         """Forget the streak (after a selection, a refusal, or the wrench leaving)."""
@@ -93,6 +183,10 @@ class BoltMatcher:
         if near in self.done and not p.allow_retighten:
             self.reset()
             return Match(None, near, dist, f"{near} is already done")
+        blocked = self.why_blocked(near)
+        if blocked is not None:
+            self.reset()
+            return Match(None, near, dist, blocked)
         self._streak = self._streak + 1 if self._streak_bolt == near else 1
         self._streak_bolt = near
         if self._streak < p.stable_frames:

@@ -235,3 +235,14 @@ def test_lift_codes_can_move_between_models_in_one_import(repo, bolts_file):
     report = repo.import_bolts(bolts_file)
     assert report.models_changed == ["SEDAN", "WAGON"] and not report.changed
     assert (repo.model_for_code(12), repo.model_for_code(13)) == ("WAGON", "SEDAN")
+
+
+def test_a_result_sent_again_is_recorded_once(repo, bolts_file):
+    """A station killed after storing a result but before acknowledging it gets the result
+    again from the controller: the same tightening id is one record, not two."""
+    repo.import_bolts(bolts_file)
+    repo.start_vehicle("VINDUP", "SEDAN")
+    first = record(repo, "VINDUP", "B1", tightening_id=77)
+    assert record(repo, "VINDUP", "B1", tightening_id=77) == first
+    assert record(repo, "VINDUP", "B1", tightening_id=78) != first  # a new tightening
+    assert _counts(repo)["tightening_records"] == 2

@@ -1,6 +1,6 @@
 import numpy as np
 
-from stationd.station.matching import BoltMatcher, MatchParams, check_spacing
+from stationd.station.matching import BoltMatcher, BoltRule, MatchParams, check_spacing
 
 BOLTS = {"B1": np.array([0.0, 0.0, 0.0]), "B2": np.array([40.0, 0.0, 10.0]),
          "B3": np.array([40.0, 12.0, 0.0])}
@@ -60,3 +60,151 @@ def test_never_the_wrong_bolt_under_noise():
 
 def test_spacing_check():
     assert check_spacing(BOLTS, 8.0) == ["B2 and B3 are 12.0 mm apart (< 2 x 8)"]
+
+
+# -- sequence: order and batch -------------------------------------------------------------
+# Bolts 40 mm apart on a line: never ambiguous, so only the sequence decides.
+LINE = {b: np.array([40.0 * k, 0.0, 0.0])
+        for k, b in enumerate(["A1", "A2", "A3", "B1", "U1", "U2", "U3", "F"])}
+RULES = {"A1": BoltRule(1, "subframe"), "A2": BoltRule(1, "subframe"),
+         "A3": BoltRule(2, "subframe"), "B1": BoltRule(None, "shield"),
+         "U1": BoltRule(1), "U2": BoltRule(1), "U3": BoltRule(2)}  # F: no rule at all
+
+
+def _seq(done=(), **kw):
+    return BoltMatcher(LINE, MatchParams(**{"stable_frames": 1, **kw}), set(done), rules=RULES)
+
+
+def _at(bolt):
+    return LINE[bolt] + np.array([0.7, -0.4, 250.0])
+
+
+def test_order_blocks_then_allows_once_done():
+    m = _seq()
+    r = m.update(_at("U3"))
+    assert r.bolt is None and r.reason == "U3 must wait: order 2 needs U1, U2 done first"
+    assert r.candidate == "U3" and r.distance_mm is not None  # leave detection still sees it
+    m.mark_done("U1")
+    assert m.update(_at("U3")).reason == "U3 must wait: order 2 needs U2 done first"
+    assert m.update(_at("U2")).bolt == "U2"  # same order as U1: no constraint between them
+    m.mark_done("U2")
+    assert m.update(_at("U3")).bolt == "U3"
+
+
+def test_unordered_bolts_are_unconstrained_and_orders_stay_in_their_batch():
+    m = _seq()
+    assert m.update(_at("F")).bolt == "F"  # no rule at all
+    assert m.update(_at("B1")).bolt == "B1"  # a batch, no order
+    assert m.why_blocked("U1") is None and m.why_blocked("A1") is None
+    # subframe's order 2 waits for subframe's order 1 only, not for the unbatched U1, U2
+    assert m.why_blocked("A3") == "A3 must wait: order 2 in batch subframe needs A1, A2 done first"
+    m.mark_done("A1")
+    m.mark_done("A2")
+    assert m.update(_at("A3")).bolt == "A3"
+
+
+def test_batch_lock_in():
+    m = _seq()
+    m.mark_done("A1")  # subframe is open: nothing else until it is finished
+    for other in ("U1", "B1", "F"):
+        r = m.update(_at(other))
+        assert r.bolt is None and r.candidate == other
+        assert r.reason == f"{other} must wait: finish batch subframe first: A2, A3 remaining"
+    assert m.update(_at("A2")).bolt == "A2"
+    m.mark_done("A2")
+    assert m.update(_at("U1")).reason.endswith("finish batch subframe first: A3 remaining")
+    assert m.update(_at("A3")).bolt == "A3"
+    m.mark_done("A3")  # closed: the rest of the world again
+    assert m.update(_at("U1")).bolt == "U1"
+    m.mark_done("B1")  # a batch of one opens and closes at once
+    assert m.update(_at("F")).bolt == "F"
+
+
+def test_a_skipped_bolt_blocks_and_says_so():
+    m = _seq()
+    m.skipped["A1"] = "controller refused its parameters (pset 2 unknown)"
+    assert m.update(_at("A1")).reason.startswith("A1 skipped:")  # skipped comes first
+    r = m.update(_at("A3"))
+    assert r.bolt is None and r.reason == (
+        "A3 must wait: order 2 in batch subframe needs A1, A2 done first; "
+        "A1 was skipped: controller refused its parameters (pset 2 unknown)")
+    m.mark_done("A2")  # subframe open, A1 will never be done: the rest waits, and says why
+    assert m.update(_at("U1")).reason == (
+        "U1 must wait: finish batch subframe first: A1, A3 remaining; "
+        "A1 was skipped: controller refused its parameters (pset 2 unknown)")
+
+
+def test_resumed_vehicle_counts_what_was_done_before():
+    m = BoltMatcher(LINE, MatchParams(stable_frames=1), {"A1", "A2", "U1"}, rules=RULES)
+    assert "already done" in m.update(_at("A1")).reason
+    assert m.update(_at("U2")).reason == "U2 must wait: finish batch subframe first: A3 remaining"
+    assert m.update(_at("A3")).bolt == "A3"
+    m.mark_done("A3")
+    assert m.update(_at("U3")).reason == "U3 must wait: order 2 needs U2 done first"
+    # two batches left open (resumed like that): either may be finished, else neither could
+    two = BoltMatcher(LINE, MatchParams(stable_frames=1), {"A1", "B1"}, rules={
+        **RULES, "B1": BoltRule(None, "x"), "F": BoltRule(None, "x")})
+    assert two.update(_at("F")).bolt == "F" and two.update(_at("A2")).bolt == "A2"
+    assert two.why_blocked("U1") == ("U1 must wait: finish batch subframe first: A2, A3 "
+                                     "remaining; finish batch x first: F remaining")
+
+
+def test_a_blocked_frame_breaks_the_streak():
+    m = _seq(stable_frames=2, done={"A1"})
+    assert m.update(_at("A2")).streak == 1
+    assert "must wait" in m.update(_at("U1")).reason
+    assert m.update(_at("A2")).bolt is None  # streak restarted
+    assert m.update(_at("A2")).bolt == "A2"
+
+
+def test_without_rules_nothing_is_ordered():
+    m = BoltMatcher(LINE, MatchParams(stable_frames=1), {"A1"})
+    assert all(m.why_blocked(b) is None for b in LINE)
+    assert m.update(_at("U3")).bolt == "U3"
+
+
+def _allowed(bolt, rules, done):
+    """The rule, written out independently: what may be taken next."""
+    order, batch = rules.get(bolt, (None, None))
+    batches = {bt for _, bt in rules.values() if bt is not None}
+    members = {bt: [b for b, (_, x) in rules.items() if x == bt] for bt in batches}
+    opened = {bt for bt, ms in members.items()
+              if any(b in done for b in ms) and not all(b in done for b in ms)}
+    if opened and batch not in opened:
+        return False
+    return order is None or all(b in done for b, (o, bt) in rules.items()
+                                if bt == batch and o is not None and o < order)
+
+
+def test_the_sequence_holds_under_jitter():
+    """Random tables, a wrench dwelling on random bolts with placement noise, some bolts
+    skipped, some vehicles resumed: nothing out of sequence is ever taken, a bolt the rule
+    forbids is refused with its reason, and without skips there is always a next bolt."""
+    rng = np.random.default_rng(7)
+    ids = list(LINE)
+    for _ in range(40):
+        rules = {b: (rng.choice([None, 1, 2, 3]), rng.choice([None, "a", "b"]))
+                 for b in ids if rng.random() < 0.9}
+        done = {b for b in ids if rng.random() < 0.15}
+        m = BoltMatcher(LINE, MatchParams(stable_frames=int(rng.integers(1, 4))), set(done),
+                        rules={b: BoltRule(o, bt) for b, (o, bt) in rules.items()})
+        for _ in range(60):
+            true = str(rng.choice(ids))
+            for _ in range(int(rng.integers(1, 6))):  # dwell on it for a few frames
+                p = LINE[true] + np.append(rng.normal(0, 2.5, 2), rng.normal(250, 30))
+                before = set(m.done)
+                got = m.update(p)
+                if got.bolt is not None:
+                    assert got.bolt == true and got.bolt not in before
+                    assert _allowed(got.bolt, rules, before), (got.bolt, rules, before)
+                    if rng.random() < 0.1:
+                        m.skipped[got.bolt] = "controller refused its parameters"
+                    else:
+                        m.mark_done(got.bolt)
+                    break
+                if (got.candidate == true and true not in m.done and true not in m.skipped
+                        and not _allowed(true, rules, m.done)):
+                    assert "must wait" in got.reason
+            left = [b for b in ids if b not in m.done]
+            if left and not m.skipped:
+                assert any(m.why_blocked(b) is None for b in left), (rules, m.done)

@@ -238,6 +238,6 @@ def test_an_acknowledgement_never_crosses_to_a_new_session(sim, tmp_path):
         assert r is not None
         sim.drop_connections()
         assert wait_until(lambda: w.status().reconnects == 1)
-        with pytest.raises(DeviceError, match="acknowledge tightening 1: .*still holds it"):
+        with pytest.raises(DeviceError, match=r"acknowledge tightening 1: .*still holds it"):
             w.acknowledge_result(r)
         assert sim.acks == 0
