@@ -68,6 +68,14 @@ class World:
         for name in self.cfg.pairs:
             unregister_world(name)
 
+    def cut_cameras(self, pair: str) -> None:
+        """The pair's cameras stop delivering (a cable pulled): every grab fails."""
+        unregister_world(pair)
+
+    def restore_cameras(self, pair: str) -> None:
+        """The pair's cameras deliver again."""
+        register_world(pair, self._source_for(pair), replace=True)
+
     def set_wrench(self, pose: WrenchPose | None) -> None:
         with self._lock:
             self.pose = pose

@@ -8,6 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from db.repository import Repository
 from stationd.config import load_station_config
 from stationd.sim.world import World, wrench_at
 from stationd.station.cycle import EnableTool, SendParams, State
@@ -100,3 +101,64 @@ def test_lift_plc_vanishing_is_a_fault_until_it_returns(tmp_path):
         await _until(lambda: any(isinstance(e[1], SendParams) for e in st.events), 60)
 
     _scenario(tmp_path, body)
+
+
+def _first_bolt(st):
+    return next(iter(st.bolts.values()))
+
+
+@pytest.mark.timeout(240)
+def test_a_camera_that_stops_delivering_is_a_fault_until_it_returns(tmp_path):
+    async def body(st, world):
+        world.cut_cameras("pair2")
+        await _until(lambda: st.cycle.state is State.FAULT, 30)
+        assert st.cycle.reason.startswith("cameras: pair2:")
+        b = _first_bolt(st)
+        world.set_wrench(wrench_at(np.array(b.position), np.random.default_rng(2),
+                                   st.cfg.tool.length_mm))
+        await asyncio.sleep(1.5)
+        assert st.cycle.state is State.FAULT            # still blind: nothing sent
+        assert not any(isinstance(e[1], SendParams) for e in st.events)
+        world.restore_cameras("pair2")
+        await _until(lambda: any(isinstance(e[1], SendParams) for e in st.events), 60)
+        assert [e[1].bolt for e in st.events if isinstance(e[1], SendParams)] == [b.bolt_id]
+        assert any(e[0] == "recovered" and e[1].startswith("cameras:") for e in st.events)
+
+    _scenario(tmp_path, body)
+
+
+@pytest.mark.timeout(240)
+def test_the_controller_dropping_mid_tightening_is_a_fault_then_the_bolt_is_done(tmp_path):
+    vin = "FAULTVIN000000001"
+    seen = {}
+
+    async def body(st, world):
+        ctl = st.wrench.controller
+        await _until(lambda: ctl.vin == vin, 30)          # the VIN went to the controller
+        b = _first_bolt(st)
+        world.set_wrench(wrench_at(np.array(b.position), np.random.default_rng(3),
+                                   st.cfg.tool.length_mm))
+        await _until(lambda: st.cycle.state is State.TIGHTENING and ctl.tool_enabled, 60)
+        ctl.power_off()                                    # gone mid-tightening
+        await _until(lambda: st.cycle.state is State.FAULT, 30)
+        assert st.cycle.reason.startswith("wrench:")
+        sends = sum(isinstance(e[1], SendParams) for e in st.events)
+        await asyncio.sleep(1.0)
+        assert sum(isinstance(e[1], SendParams) for e in st.events) == sends
+        ctl.power_on()                                     # back, with its RAM lost
+        await _until(lambda: st.cycle.state is State.TIGHTENING and ctl.tool_enabled, 60)
+        assert ctl.vin == vin                              # sent again after the reconnect
+        shot = ctl.pull_trigger()
+        assert shot is not None
+        await _until(lambda: shot.tightening_id in ctl.acked_ids, 30)  # stored, acknowledged
+        sent = [e[1].bolt for e in st.events if isinstance(e[1], SendParams)]
+        assert set(sent) == {b.bolt_id}                   # never another bolt's parameters
+        seen.update(bolt=b.bolt_id, shot=shot)
+
+    st = _scenario(tmp_path, body)
+    repo = Repository.open(st.cfg.database_url)
+    try:
+        rows = {r.bolt_id: r for r in repo.vehicle_report(vin).bolts}
+    finally:
+        repo.close()
+    assert rows[seen["bolt"]].status == ("ok" if seen["shot"].ok else "nok")
