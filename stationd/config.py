@@ -4,15 +4,27 @@ It holds the marker, the vision parameters, the stereo pairs (calibration file, 
 the vehicle frame) and the tool geometry; devices, the database and the cycle join it with the
 daemon.  Unknown keys are errors that name file, line and key; relative paths are relative to
 the config file; there are no hidden sources (no environment variables, no merged dotfiles).
+
+:func:`load_station_config` raises the first error (the daemon needs a yes or no);
+:func:`check_station` reads the same sections with the same code and lists every error, with
+those of the files the config names and its device URLs (``stationd config check``).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
+from drivers import camera as camera_drivers
+from drivers import lift as lift_drivers
+from drivers import wrench as wrench_drivers
+from drivers.errors import UrlError
 from drivers.lift.base import MapError, RegisterMap
+from drivers.url import parse_url
+from stationd.errors import ConfigError, InputError
 from stationd.geometry.camera import StereoPair
 from stationd.geometry.frames import Transform
 from stationd.geometry.tool import ToolGeometry
@@ -21,8 +33,23 @@ from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import VisionParams
 from stationd.yamlio import YamlNode
 
+if TYPE_CHECKING:
+    from db.boltfile import BoltCheck
+
+T = TypeVar("T")
+P = ParamSpec("P")
+
 STATION_KEYS = ("marker", "vision", "cameras", "pairs", "tool", "lift", "wrench", "matching",
                 "database", "bolts", "records")
+PAIR_KEYS = ("calibration", "to_vehicle", "left", "right", "max_skew_ms")
+
+#: device kind -> (scheme -> backend, the accepted forms): the drivers' own registries, so the
+#: checker knows a scheme exactly when opening would find a backend for it
+DEVICE_REGISTRIES: dict[str, tuple[Mapping[str, str], str]] = {
+    "camera": (camera_drivers.BACKENDS, camera_drivers.FORMS),
+    "lift": (lift_drivers.BACKENDS, lift_drivers.FORMS),
+    "wrench": (wrench_drivers.BACKENDS, wrench_drivers.FORMS),
+}
 
 
 @dataclass(frozen=True)
@@ -51,9 +78,10 @@ class WrenchConfig:
     url: str = "sim://wrench"
 
     @classmethod
-    def from_node(cls, node: YamlNode) -> WrenchConfig:
+    def from_node(cls, node: YamlNode, *, check_url: bool = False) -> WrenchConfig:
+        """``check_url``: check the URL's form and scheme now (see :func:`device_url`)."""
         m = node.mapping(("url",))
-        return cls(url=m["url"].text()) if "url" in m else cls()
+        return cls(url=device_url(m["url"], "wrench", check=check_url)) if "url" in m else cls()
 
 
 @dataclass(frozen=True)
@@ -72,9 +100,10 @@ class LiftConfig:
     registers: RegisterMap = field(default_factory=RegisterMap)
 
     @classmethod
-    def from_node(cls, node: YamlNode) -> LiftConfig:
+    def from_node(cls, node: YamlNode, *, check_url: bool = False) -> LiftConfig:
+        """``check_url``: check the URL's form and scheme now (see :func:`device_url`)."""
         m = node.mapping(("url", "registers"))
-        url = m["url"].text() if "url" in m else cls.url
+        url = device_url(m["url"], "lift", check=check_url) if "url" in m else cls.url
         try:
             regs = RegisterMap.from_node(m["registers"]) if "registers" in m else RegisterMap()
         except MapError as exc:
@@ -118,72 +147,85 @@ class StationConfig:
     path: Path | None = None
 
 
+@dataclass(frozen=True)
+class StationCheck:
+    """The outcome of checking a station file: the config when it is valid, else every error.
+
+    ``warnings`` do not make the file invalid: they are what the daemon accepts but a person
+    setting the station up wants to know (a pair not registered into the vehicle frame yet).
+    ``bolts`` is the check of the bolt table the file names, when it names an existing one;
+    its errors are among ``errors``.
+    """
+
+    path: str
+    config: StationConfig | None
+    errors: list[ConfigError] = field(default_factory=list)
+    warnings: list[ConfigError] = field(default_factory=list)
+    bolts: BoltCheck | None = None
+
+    @property
+    def ok(self) -> bool:
+        return not self.errors
+
+
+def device_url(node: YamlNode, kind: str, *, check: bool = False) -> str:
+    """A device URL of ``kind`` (camera, lift, wrench).
+
+    With ``check``, its form and scheme are checked against the driver's registry without
+    importing a backend or opening a device (options are the backend's, checked when it opens).
+    The loader does not check: the daemon has always found a bad URL when opening the device,
+    and ``load_station_config`` keeps that behaviour; ``stationd config check`` checks.
+    """
+    url = node.text()
+    if check:
+        backends, forms = DEVICE_REGISTRIES[kind]
+        try:
+            scheme = parse_url(url).scheme
+        except UrlError as exc:
+            raise node.error(f"{exc}; accepted: {forms}") from None
+        if scheme not in backends:
+            raise node.error(f"unknown {kind} scheme {scheme!r}; accepted: {forms}")
+    return url
+
+
 def _path(node: YamlNode, base: Path) -> Path:
     p = Path(node.text())
     return p if p.is_absolute() else base / p
 
 
-def _pair(name: str, node: YamlNode, base: Path, cameras: dict[str, str]) -> PairConfig:
-    m = node.mapping(("calibration", "to_vehicle", "left", "right", "max_skew_ms"),
-                     required=("calibration",))
-    sides: dict[str, str | None] = {"left": None, "right": None}
-    for side in sides:
-        if side in m:
-            cam = m[side].text()
-            if cam not in cameras:
-                raise m[side].error(f"no camera {cam!r} under cameras "
-                                    f"(cameras: {', '.join(cameras) or 'none'})")
-            sides[side] = cam
-    skew = m["max_skew_ms"].number(lo=0.0, hi=1000.0) / 1e3 if "max_skew_ms" in m else 0.005
-    cal_path = _path(m["calibration"], base)
-    if not cal_path.exists():
-        raise m["calibration"].error(f"calibration file {cal_path} does not exist")
-    tv_path = _path(m["to_vehicle"], base) if "to_vehicle" in m \
-        else base / f"{name}.vehicle.yaml"
-    tv = Transform.from_node(YamlNode.load(tv_path)) if tv_path.exists() else None
-    return PairConfig(name, cal_path, StereoPair.load(cal_path), tv_path, tv,
-                      sides["left"], sides["right"], skew)
+def _existing(node: YamlNode, base: Path, what: str) -> Path:
+    """A path (relative to the config file) that must name an existing file."""
+    p = _path(node, base)
+    if not p.exists():
+        raise node.error(f"{what} {p} does not exist")
+    return p
 
 
-def load_station_config(path: str | Path | None) -> StationConfig:
-    """Read a station config; ``None`` gives the built-in defaults."""
-    if path is None:
-        return StationConfig()
-    p = Path(path)
-    root = YamlNode.load(p)
-    m = root.mapping(STATION_KEYS)
-    base = p.parent
-    marker = MarkerSpec.from_node(m["marker"]) if "marker" in m else MarkerSpec()
-    vision = VisionParams.from_node(m["vision"], base_dir=base) if "vision" in m \
-        else VisionParams()
-    cameras: dict[str, str] = {}
-    if "cameras" in m:
-        for name, node in _pair_items(m["cameras"]):
-            cameras[name] = node.mapping(("url",), required=("url",))["url"].text()
-    pairs: dict[str, PairConfig] = {}
-    if "pairs" in m:
-        for name_node, value in _pair_items(m["pairs"]):
-            pairs[name_node] = _pair(name_node, value, base, cameras)
-    tool = ToolGeometry.from_node(m["tool"]) if "tool" in m else ToolGeometry()
-    lift = LiftConfig.from_node(m["lift"]) if "lift" in m else LiftConfig()
-    wrench = WrenchConfig.from_node(m["wrench"]) if "wrench" in m else WrenchConfig()
-    matching = MatchingConfig.from_node(m["matching"]) if "matching" in m else MatchingConfig()
-    db_url = "sqlite:///stationd.db"
-    if "database" in m:
-        db_url = m["database"].mapping(("url",), required=("url",))["url"].text()
-    bolts = None
-    if "bolts" in m:
-        bolts = _path(m["bolts"], base)
-        if not bolts.exists():
-            raise m["bolts"].error(f"bolt file {bolts} does not exist")
-    records = RecordsConfig()
-    if "records" in m:
-        r = m["records"].mapping(("images_dir", "save_images"))
-        records = RecordsConfig(_path(r["images_dir"], base) if "images_dir" in r else None,
-                                r["save_images"].flag() if "save_images" in r else False)
-    return StationConfig(marker=marker, vision=vision, pairs=pairs, tool=tool, lift=lift,
-                         cameras=cameras, wrench=wrench, matching=matching,
-                         database_url=db_url, bolts_path=bolts, records=records, path=p)
+def _camera_url(node: YamlNode, *, check: bool) -> str:
+    return device_url(node.mapping(("url",), required=("url",))["url"], "camera", check=check)
+
+
+def _camera_ref(node: YamlNode, cameras: Collection[str] | None) -> str:
+    """A camera name of a pair; ``cameras`` None: the section is unreadable, not checked."""
+    cam = node.text()
+    if cameras is not None and cam not in cameras:
+        raise node.error(f"no camera {cam!r} under cameras "
+                         f"(cameras: {', '.join(cameras) or 'none'})")
+    return cam
+
+
+def _load_transform(path: Path) -> Transform:
+    return Transform.from_node(YamlNode.load(path))
+
+
+def _database_url(node: YamlNode) -> str:
+    return node.mapping(("url",), required=("url",))["url"].text()
+
+
+def _records(node: YamlNode, base: Path) -> RecordsConfig:
+    r = node.mapping(("images_dir", "save_images"))
+    return RecordsConfig(_path(r["images_dir"], base) if "images_dir" in r else None,
+                         r["save_images"].flag() if "save_images" in r else False)
 
 
 def _pair_items(node: YamlNode) -> list[tuple[str, YamlNode]]:
@@ -193,3 +235,173 @@ def _pair_items(node: YamlNode) -> list[tuple[str, YamlNode]]:
         raise node.error("expected a mapping of names to their settings")
     children = node.mapping(tuple(str(k) for k in value))
     return list(children.items())
+
+
+class _Reader:
+    """Reads the sections of one station file, for the loader and the checker alike.
+
+    Why one reader for both: the daemon wants the first error (:func:`load_station_config`), a
+    person checking a file wants all of them (:func:`check_station`).  The sections are parsed
+    by the same code and only what happens to an error differs: with ``collect`` it is recorded
+    and reading goes on with the default, each section, camera and pair on its own, so
+    independent mistakes are all reported; without, it is raised as before.  Collecting also
+    checks device URLs against the driver registries (see :func:`device_url`).
+    """
+
+    def __init__(self, base: Path, *, collect: bool) -> None:
+        self.base = base
+        self.collect = collect
+        self.errors: list[ConfigError] = []
+        self.warnings: list[ConfigError] = []
+        self.top: dict[str, YamlNode] = {}
+
+    def guard(self, default: T, fn: Callable[P, T], *args: P.args, **kwargs: P.kwargs) -> T:
+        """``fn(...)``; when collecting, an error is recorded and ``default`` returned."""
+        if not self.collect:
+            return fn(*args, **kwargs)
+        try:
+            return fn(*args, **kwargs)
+        except ConfigError as exc:
+            self.errors.append(exc)
+            return default
+
+    def section(self, key: str, default: T, parse: Callable[[YamlNode], T]) -> T:
+        return self.guard(default, parse, self.top[key]) if key in self.top else default
+
+    def sections(self, root: YamlNode) -> dict[str, YamlNode]:
+        """The top-level sections.  ``YamlNode.mapping`` stops at the first unknown key; when
+        collecting, each unknown key is reported at its own line (the known sections are still
+        read) by accepting it and reading the mapping again."""
+        unknown: set[str] = set()
+        while True:
+            try:
+                m = root.mapping((*STATION_KEYS, *unknown))
+                return {k: v for k, v in m.items() if k not in unknown}
+            except ConfigError as exc:
+                if not self.collect:
+                    raise
+                key = exc.key
+                if key is None or key in STATION_KEYS or key in unknown:
+                    self.errors.append(exc)  # not a mapping, a duplicate or a non-string key
+                    return {}
+                unknown.add(key)
+                self.errors.append(ConfigError(
+                    f"unknown key (accepted: {', '.join(sorted(STATION_KEYS))})",
+                    path=exc.path, line=exc.line, key=key))
+
+    def read(self, path: Path) -> StationConfig:
+        """The config of the file at ``path``; an unreadable or malformed file is raised.
+
+        The sections are read in this order (the loader's first error is the first here)."""
+        self.top = self.sections(YamlNode.load(path))
+        d, base, check = StationConfig(), self.base, self.collect
+        marker = self.section("marker", d.marker, MarkerSpec.from_node)
+        vision = self.section("vision", d.vision, partial(VisionParams.from_node, base_dir=base))
+        cameras, names = self.cameras(self.top["cameras"]) if "cameras" in self.top \
+            else ({}, [])
+        pairs = self.pairs(self.top["pairs"], names) if "pairs" in self.top else {}
+        return StationConfig(
+            marker=marker, vision=vision, cameras=cameras, pairs=pairs,
+            tool=self.section("tool", d.tool, ToolGeometry.from_node),
+            lift=self.section("lift", d.lift, partial(LiftConfig.from_node, check_url=check)),
+            wrench=self.section("wrench", d.wrench,
+                                partial(WrenchConfig.from_node, check_url=check)),
+            matching=self.section("matching", d.matching, MatchingConfig.from_node),
+            database_url=self.section("database", d.database_url, _database_url),
+            bolts_path=self.section("bolts", d.bolts_path,
+                                    partial(_existing, base=base, what="bolt file")),
+            records=self.section("records", d.records, partial(_records, base=base)),
+            path=path)
+
+    def cameras(self, node: YamlNode) -> tuple[dict[str, str], list[str] | None]:
+        """Name -> URL, and every name defined, a camera with errors included (a pair naming
+        it is not also told it is undefined); None when the section itself is unreadable."""
+        items = self.guard(None, _pair_items, node)
+        if items is None:
+            return {}, None
+        urls: dict[str, str] = {}
+        for name, item in items:
+            url = self.guard(None, _camera_url, item, check=self.collect)
+            if url is not None:
+                urls[name] = url
+        return urls, [name for name, _ in items]
+
+    def pairs(self, node: YamlNode, cameras: Collection[str] | None) -> dict[str, PairConfig]:
+        out: dict[str, PairConfig] = {}
+        for name, item in self.guard([], _pair_items, node):
+            pair = self.guard(None, self.pair, name, item, cameras)
+            if pair is not None:
+                out[name] = pair
+        return out
+
+    def pair(self, name: str, node: YamlNode, cameras: Collection[str] | None,
+             ) -> PairConfig | None:
+        """One pair; None when collecting and any part of it has errors (all reported)."""
+        m = node.mapping(PAIR_KEYS, required=("calibration",))
+        errors_before = len(self.errors)
+        sides = {side: self.guard(None, _camera_ref, m[side], cameras) if side in m else None
+                 for side in ("left", "right")}
+        skew_ms = self.guard(None, m["max_skew_ms"].number, lo=0.0, hi=1000.0) \
+            if "max_skew_ms" in m else 5.0
+        cal_path = self.guard(None, _existing, m["calibration"], self.base, "calibration file")
+        tv_path = self.guard(None, _path, m["to_vehicle"], self.base) if "to_vehicle" in m \
+            else self.base / f"{name}.vehicle.yaml"
+        tv = None
+        if tv_path is not None and tv_path.exists():
+            tv = self.guard(None, _load_transform, tv_path)
+        calibration = self.guard(None, StereoPair.load, cal_path) \
+            if cal_path is not None else None
+        if len(self.errors) > errors_before or skew_ms is None or cal_path is None \
+                or calibration is None or tv_path is None:
+            return None
+        if tv is None:  # a pair with errors is told those, not this
+            self.warnings.append(m.get("to_vehicle", node).error(
+                f"{tv_path} does not exist: the pair is not registered into the vehicle "
+                "frame yet (stationd calibrate vehicle writes it)"))
+        return PairConfig(name, cal_path, calibration, tv_path, tv, sides["left"],
+                          sides["right"], skew_ms / 1e3)
+
+
+def load_station_config(path: str | Path | None) -> StationConfig:
+    """Read a station config; ``None`` gives the built-in defaults.  The first error is raised
+    (a :class:`ConfigError` naming file, line and key); :func:`check_station` lists them all."""
+    if path is None:
+        return StationConfig()
+    p = Path(path)
+    return _Reader(p.parent, collect=False).read(p)
+
+
+def check_station(path: str | Path) -> StationCheck:
+    """Check a station file and collect all its errors, for ``stationd config check``.
+
+    Each section, camera and pair is checked on its own, so independent mistakes are reported
+    together; so are the files it names (calibration, to_vehicle, HSV, bolt table) and device
+    URLs (form and scheme; no device is opened).  The bolt table is checked with the station's
+    own matching tolerance, the one its bolts must be told apart with.  An unreadable or
+    malformed file is one error.
+    """
+    p = Path(path)
+    reader = _Reader(p.parent, collect=True)
+    try:
+        cfg = reader.read(p)
+    except ConfigError as exc:
+        return StationCheck(str(p), None, [exc])
+    errors = _in_order(reader.errors, str(p))
+    bolts = None
+    if cfg.bolts_path is not None:
+        from db.boltfile import check_bolts
+
+        try:
+            bolts = check_bolts(cfg.bolts_path, tolerance_mm=cfg.matching.tolerance_mm)
+            errors += bolts.errors
+        except InputError as exc:  # a tolerance of 0: the loader takes it, the check cannot
+            errors.append(reader.top["matching"].error(f"{exc}; the bolt table cannot be "
+                                                       "checked"))
+    return StationCheck(str(p), cfg if not errors else None, errors, reader.warnings, bolts)
+
+
+def _in_order(errors: list[ConfigError], path: str) -> list[ConfigError]:
+    """The errors of the file at ``path`` in line order (its sections are read in a fixed
+    order, not the file's), then those of the files it names, in the order found."""
+    own = sorted((e for e in errors if e.path == path), key=lambda e: e.line or 0)
+    return own + [e for e in errors if e.path != path]

@@ -1,4 +1,5 @@
-"""``stationd db`` (import, export, report) and ``stationd config check``.
+"""``stationd db`` (import, export, report) and ``stationd config check`` (station files and
+bolt tables).
 
 Exit codes follow the CLI contract: 0 success, 1 for a report whose vehicle is incomplete (bolts
 missing or NOK), 2 for bad input (an invalid file, an unknown VIN, a database that cannot be
@@ -129,23 +130,82 @@ def _num(v: float | None) -> str:
 
 # -- config check ----------------------------------------------------------------------------
 def cmd_config_check(args: argparse.Namespace) -> int:
-    """Check bolt files; every error of every file, then one summary line."""
-    from db.boltfile import check_bolts
-
+    """Check station files and bolt tables, told apart by their top-level keys; every error of
+    every file, then one summary line.  Warnings (a pair not registered yet) do not fail."""
     failed, errors = 0, 0
     for name in args.files:
-        result = check_bolts(name, tolerance_mm=args.tolerance)
-        if result.table is not None:
-            print(f"{name}: ok, {result.table.summary()}")
+        summary, found, warnings = _check_file(name, args.tolerance)
+        for w in warnings:
+            sys.stderr.write(f"warning: {w}\n")
+        if not found:
+            print(f"{name}: ok, {summary}")
             continue
         failed += 1
-        errors += len(result.errors)
-        _print_errors(result.errors)
+        errors += len(found)
+        _print_errors(found)
     if failed:
         sys.stderr.write(f"stationd: error: {errors} error(s) in {failed} of "
                          f"{len(args.files)} file(s)\n")
         return EXIT_BAD_INPUT
     return EXIT_OK
+
+
+def _check_file(name: str, tolerance_mm: float,
+                ) -> tuple[str, list[ConfigError], list[ConfigError]]:
+    """(summary when valid, errors, warnings) of one file, a station file or a bolt table."""
+    from db.boltfile import check_bolts
+    from stationd.config import check_station
+
+    try:
+        kind = file_kind(name)
+    except ConfigError as exc:
+        return "", [exc], []
+    if kind == "bolts":
+        bolts = check_bolts(name, tolerance_mm=tolerance_mm)
+        return (bolts.table.summary() if bolts.table else ""), bolts.errors, []
+    station = check_station(name)
+    summary = ""
+    if station.config is not None:
+        cfg = station.config
+        summary = f"station: {len(cfg.pairs)} pair(s), {len(cfg.cameras)} camera(s)"
+        if station.bolts is not None and station.bolts.table is not None:
+            summary += f"; bolts {cfg.bolts_path}: {station.bolts.table.summary()}"
+    return summary, station.errors, station.warnings
+
+
+def file_kind(path: str | Path) -> str:
+    """"station" or "bolts": what a file is, by its top-level keys.
+
+    Why by keys: both are YAML mappings and neither has a header; the key sets do not overlap
+    (a station file's ``bolts`` names a bolt table, whose keys are ``psets`` and ``models``).
+    A file with keys of both, of neither, or that is not a mapping is a ConfigError, as is an
+    unreadable, malformed or empty one.
+    """
+    import yaml
+
+    from db.boltfile import TOP_KEYS
+    from stationd.config import STATION_KEYS
+    from stationd.yamlio import YamlNode
+
+    root = YamlNode.load(path)
+    try:
+        value = root.value()
+    except yaml.YAMLError:  # e.g. a list as a key: not a file of either kind
+        value = None
+    if not isinstance(value, dict):
+        raise root.error("expected a mapping (key: value): a station file or a bolt table")
+    keys = [k for k in value if isinstance(k, str)]
+    station = [k for k in keys if k in STATION_KEYS]
+    bolts = [k for k in keys if k in TOP_KEYS]
+    if station and bolts:
+        raise root.error(f"cannot tell a station file (it has {', '.join(station)}) from a bolt "
+                         f"table (it has {', '.join(bolts)}): a file is one or the other")
+    if not station and not bolts:
+        found = f"its keys are {', '.join(keys)}" if keys else "it has no keys"
+        raise root.error(f"neither a station file nor a bolt table ({found}; a station file "
+                         f"has {', '.join(STATION_KEYS)}; a bolt table has "
+                         f"{', '.join(TOP_KEYS)})")
+    return "station" if station else "bolts"
 
 
 # -- parsers -----------------------------------------------------------------------------------
@@ -187,12 +247,19 @@ def add_config_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Add ``config`` (with ``check``) to the ``stationd`` sub-parsers."""
     c: argparse.ArgumentParser = subparsers.add_parser("config", help="check configuration files")
     csub = c.add_subparsers(dest="config_command", required=True, parser_class=type(c))
-    ck = csub.add_parser("check", help="validate bolt files, reporting every error at once",
-                         description="Checks bolt table files (bolts.yaml); every error is "
-                                     "printed as file:line: key: message.  Exit 0 when all "
-                                     "files are valid, 2 otherwise.")
+    ck = csub.add_parser(
+        "check", help="validate station files and bolt tables, reporting every error at once",
+        description="Checks station files (station.yaml) and bolt tables (bolts.yaml), told "
+                    "apart by their top-level keys.  A station file is checked with the files "
+                    "it names (calibrations, to_vehicle transforms, the bolt table) and its "
+                    "device URLs (form and scheme; no device is opened).  Every error is "
+                    "printed as file:line: key: message; warnings (a pair not registered into "
+                    "the vehicle frame yet) do not fail the check.  Exit 0 when all files are "
+                    "valid, 2 otherwise.")
     ck.add_argument("files", nargs="+", metavar="FILE")
     ck.add_argument("--tolerance", type=_tolerance, default=8.0, metavar="MM",
-                    help="matching tolerance: bolts must be twice as far apart (default 8)")
+                    help="matching tolerance for bolt tables given here: bolts must be twice "
+                         "as far apart (default 8); a station file's bolt table is checked "
+                         "with the station's own matching.tolerance_mm")
     ck.set_defaults(func=cmd_config_check)
     return c

@@ -1,11 +1,14 @@
+import shutil
+
 import numpy as np
 import pytest
 
-from stationd.config import load_station_config
+from stationd.config import check_station, load_station_config
 from stationd.errors import ConfigError
 from tests.conftest import SPEC
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
+SIM = ROOT / "config" / "sim"
 
 
 def test_example_station_config_loads():
@@ -51,3 +54,150 @@ def test_config_errors_name_file_line_and_key(tmp_path, text, needle):
     with pytest.raises(ConfigError) as ei:
         load_station_config(p)
     assert needle in str(ei.value)
+
+
+# -- check_station: every error of a station file ------------------------------------------------
+@pytest.fixture
+def sim_copy(tmp_path):
+    """A copy of config/sim (station, calibrations, to_vehicle files, bolts) to break."""
+    for f in SIM.iterdir():
+        shutil.copy(f, tmp_path)
+    return tmp_path
+
+
+def _edit(path, old, new):
+    text = path.read_text()
+    assert old in text, old
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+def _line(path, needle, nth=0):
+    """1-based line of the nth line of the file containing ``needle``."""
+    return [i + 1 for i, line in enumerate(path.read_text().splitlines()) if needle in line][nth]
+
+
+def test_shipped_station_files_check_clean():
+    sim = check_station(SIM / "station.yaml")
+    assert sim.ok and sim.errors == [] and sim.warnings == []
+    assert sim.config is not None and len(sim.config.pairs) == 4 and len(sim.config.cameras) == 8
+    assert sim.bolts is not None and sim.bolts.table is not None
+    assert sim.bolts.table.summary() == "1 model(s), 50 bolt(s), 3 pset(s)"
+    # the example has the marker and the vision parameters only: no files it names, no devices
+    example = check_station(ROOT / "config" / "station.example.yaml")
+    assert example.ok and example.warnings == [] and example.bolts is None
+
+
+def test_independent_errors_are_all_reported_and_load_raises_one_of_them(sim_copy):
+    station = _edit(sim_copy / "station.yaml", "left: pair3_left", "left: pair9_left")
+    station.write_text(station.read_text() + "vision:\n  centre_methd: paper\n")
+    result = check_station(station)
+    assert not result.ok and result.config is None
+    assert [str(e) for e in result.errors] == [
+        f"{station}:{_line(station, 'pair9_left')}: pairs.pair3.left: no camera 'pair9_left' "
+        "under cameras (cameras: pair1_left, pair1_right, pair2_left, pair2_right, pair3_left, "
+        "pair3_right, pair4_left, pair4_right)",
+        f"{station}:{_line(station, 'centre_methd')}: vision.centre_methd: unknown key "
+        "(accepted: centre_method, enhance, enhancement, gates, hsv, leitz, max_candidates, "
+        "residual, search_scale)",
+    ]
+    # the daemon's loader reads the same sections with the same code and stops at the first
+    with pytest.raises(ConfigError) as ei:
+        load_station_config(station)
+    assert str(ei.value) == str(result.errors[1])  # vision is read before the pairs
+
+
+def test_unknown_top_level_keys_are_each_reported_and_the_rest_still_checked(sim_copy):
+    station = _edit(sim_copy / "station.yaml", "lift: {url: 'sim://lift'}",
+                    "lifts: {url: 'sim://lift'}\ntool_: 1")
+    _edit(station, "stable_frames: 3", "stable_frames: 0")
+    keys = [(e.line, e.key) for e in check_station(station).errors]
+    assert keys == [(_line(station, "lifts:"), "lifts"), (_line(station, "tool_:"), "tool_"),
+                    (_line(station, "matching:"), "matching.stable_frames")]
+
+
+def test_files_the_station_names_are_checked(sim_copy):
+    station = sim_copy / "station.yaml"
+    _edit(station, "pair1: {calibration: pair1.yaml", "pair1: {calibration: nope.yaml")
+    _edit(station, "bolts: bolts.yaml", "bolts: gone.yaml")
+    (sim_copy / "pair2.vehicle.yaml").write_text("A: [[1, 0, 0]]\nt: [0, 0, 0]\n")
+    _edit(sim_copy / "pair3.yaml", "R:", "Rot:")
+    result = check_station(station)
+    assert [(e.path, e.key) for e in result.errors] == [
+        (str(station), "pairs.pair1.calibration"),
+        (str(station), "bolts"),
+        (str(sim_copy / "pair2.vehicle.yaml"), "A"),
+        (str(sim_copy / "pair3.yaml"), "Rot"),
+    ]
+    assert "calibration file" in str(result.errors[0]) and "does not exist" in \
+        str(result.errors[0])
+    assert f"bolt file {sim_copy / 'gone.yaml'} does not exist" in str(result.errors[1])
+    assert result.bolts is None
+
+
+def test_a_missing_to_vehicle_file_is_a_warning_not_an_error(sim_copy):
+    """The daemon runs without it (the pair is not registered yet) and ``stationd calibrate
+    vehicle`` writes it: not an error, but a person setting the station up should know."""
+    (sim_copy / "pair4.vehicle.yaml").unlink()
+    station = _edit(sim_copy / "station.yaml", "to_vehicle: pair2.vehicle.yaml",
+                    "to_vehicle: pair2.vehicel.yaml")  # a typo: the loader takes it silently
+    _edit(station, "to_vehicle: pair4.vehicle.yaml, ", "")  # the default, <pair>.vehicle.yaml
+    result = check_station(station)
+    assert result.ok and result.config is not None
+    assert result.config.pairs["pair2"].to_vehicle is None
+    assert [(e.line, e.key) for e in result.warnings] == [
+        (_line(station, "pair2.vehicel"), "pairs.pair2.to_vehicle"),
+        (_line(station, "pair4: {"), "pairs.pair4")]
+    assert "pair4.vehicle.yaml does not exist: the pair is not registered into the vehicle " \
+           "frame yet" in str(result.warnings[1])
+
+
+@pytest.mark.parametrize(("old", "new", "key", "message"), [
+    ("url: 'sim://pair2/right'", "url: 'gige://pair2/right'", "cameras.pair2_right.url",
+     "unknown camera scheme 'gige'; accepted: aravis://"),
+    ("lift: {url: 'sim://lift'}", "lift: {url: 'modbus-udp://10.0.0.1'}", "lift.url",
+     "unknown lift scheme 'modbus-udp'; accepted: modbus-tcp://"),
+    ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'openprotocol://h:99999'}", "wrench.url",
+     "openprotocol://h:99999: the port is not a number in 0-65535; accepted: openprotocol://"),
+    ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'wrench.local'}", "wrench.url",
+     "'wrench.local' is not a device URL (scheme://...)"),
+])
+def test_device_urls_are_checked_without_opening_a_device(sim_copy, old, new, key, message):
+    station = _edit(sim_copy / "station.yaml", old, new)
+    [error] = check_station(station).errors
+    assert (error.line, error.key) == (_line(station, new.split("'")[1]), key)
+    assert message in str(error)
+    load_station_config(station)  # the loader leaves URLs to opening the device, as before
+
+
+def test_the_bolt_table_is_checked_with_the_stations_tolerance(sim_copy):
+    bolts = sim_copy / "bolts.yaml"
+    text = bolts.read_text()
+    _edit(bolts, "- id: B02", "- id: B01")
+    station = sim_copy / "station.yaml"
+    [error] = check_station(station).errors
+    assert (error.path, error.line, error.key) == (str(bolts), _line(bolts, "id: B01", 1),
+                                                   "models.SIM-1.bolts[1].id")
+    assert "duplicate bolt id 'B01'" in str(error)
+    # two bolts 20 mm apart: fine at the 8 mm tolerance, too close at the station's 12 mm
+    bolts.write_text(text.replace("position: [984.0, 358.7, -21.5]",
+                                  "position: [1509.8, -529.3, -44.3]"))
+    assert check_station(station).ok
+    _edit(station, "tolerance_mm: 8.0", "tolerance_mm: 12.0")
+    [error] = check_station(station).errors
+    assert error.path == str(bolts) and "twice the matching tolerance of 12 mm" in str(error)
+    _edit(station, "tolerance_mm: 12.0", "tolerance_mm: 0")  # the loader takes 0
+    [error] = check_station(station).errors
+    assert error.key == "matching" and "the bolt table cannot be checked" in str(error)
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("cameras: [\n", "cfg.yaml:2: malformed YAML"),
+    ("# nothing\n", "cfg.yaml: the file is empty"),
+    ("- marker\n", "cfg.yaml:1: expected a mapping"),
+])
+def test_an_unreadable_station_file_is_one_error(tmp_path, text, message):
+    p = tmp_path / "cfg.yaml"
+    p.write_text(text)
+    [error] = check_station(p).errors
+    assert str(error).startswith(str(tmp_path / message))

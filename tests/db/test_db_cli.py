@@ -13,7 +13,7 @@ from stationd.db_cli import (
     cmd_config_check,
     cmd_db_report,
 )
-from tests.db.conftest import BASE, EXAMPLE, record, url_of
+from tests.db.conftest import BASE, EXAMPLE, ROOT, record, url_of
 
 
 def _wired(argv, func) -> bool:
@@ -172,3 +172,61 @@ def test_config_check(run, tmp_path):
     code, _, err = run("config", "check", bad, "--tolerance", "-1")
     assert code == 2 and _one_line(err).startswith(
         "stationd config check: error: argument --tolerance: -1 mm")
+
+
+def test_config_check_tells_station_files_from_bolt_tables(run, tmp_path):
+    sim = ROOT / "config" / "sim"
+    example = ROOT / "config" / "station.example.yaml"
+    code, out, err = run("config", "check", sim / "station.yaml", example, EXAMPLE)
+    assert (code, err) == (0, "")
+    assert out.splitlines() == [
+        f"{sim / 'station.yaml'}: ok, station: 4 pair(s), 8 camera(s); "
+        f"bolts {sim / 'bolts.yaml'}: 1 model(s), 50 bolt(s), 3 pset(s)",
+        f"{example}: ok, station: 0 pair(s), 0 camera(s)",
+        f"{EXAMPLE}: ok, 2 model(s), 9 bolt(s), 3 pset(s)",
+    ]
+
+
+def test_config_check_of_a_broken_station_lists_every_error(run, tmp_path):
+    station = tmp_path / "station.yaml"
+    station.write_text("cameras:\n  c1: {url: 'sim://p/left'}\n"
+                       "pairs:\n  p: {calibration: p.yaml, left: c1, right: c2}\n"
+                       "wrench: {url: 'torque://w'}\n"
+                       "bolts: bolts.yaml\n")
+    (tmp_path / "bolts.yaml").write_text(BASE.replace("id: B2", "id: B1"))
+    both = tmp_path / "both.yaml"
+    both.write_text("cameras: {}\nmodels: {}\n")
+    neither = tmp_path / "neither.yaml"
+    neither.write_text("{}\n")
+    empty = tmp_path / "empty.yaml"
+    empty.write_text("")
+    code, out, err = run("config", "check", station, both, neither, empty)
+    lines = err.splitlines()
+    assert code == 2 and out == ""
+    assert lines[0] == (f"{station}:4: pairs.p.right: no camera 'c2' under cameras "
+                        "(cameras: c1)")
+    assert lines[1] == (f"{station}:4: pairs.p.calibration: calibration file "
+                        f"{tmp_path / 'p.yaml'} does not exist")
+    assert lines[2].startswith(f"{station}:5: wrench.url: unknown wrench scheme 'torque'")
+    assert lines[3].startswith(f"{tmp_path / 'bolts.yaml'}:17: models.SEDAN.bolts[1].id: "
+                               "duplicate bolt id 'B1'")
+    assert lines[4] == (f"{both}:1: cannot tell a station file (it has cameras) from a bolt "
+                        "table (it has models): a file is one or the other")
+    assert lines[5].startswith(f"{neither}:1: neither a station file nor a bolt table (it has "
+                               "no keys; a station file has marker, vision, cameras")
+    assert lines[6] == f"{empty}: the file is empty"
+    assert lines[7:] == ["stationd: error: 7 error(s) in 4 of 4 file(s)"]
+
+
+def test_config_check_warns_of_an_unregistered_pair_but_passes(run, tmp_path):
+    import shutil
+
+    for f in (ROOT / "config" / "sim").iterdir():
+        shutil.copy(f, tmp_path)
+    (tmp_path / "pair3.vehicle.yaml").unlink()
+    code, out, err = run("config", "check", tmp_path / "station.yaml")
+    assert code == 0 and out.startswith(f"{tmp_path / 'station.yaml'}: ok, station: 4 pair(s)")
+    assert _one_line(err) == (
+        f"warning: {tmp_path / 'station.yaml'}:16: pairs.pair3.to_vehicle: "
+        f"{tmp_path / 'pair3.vehicle.yaml'} does not exist: the pair is not registered into "
+        "the vehicle frame yet (stationd calibrate vehicle writes it)")
