@@ -180,9 +180,10 @@ class Repository:
         """Record one tightening of ``bolt`` on the open vehicle ``vin``; return its id.
 
         Committed (and on disk) before it returns.  A ``tightening_id`` already recorded for
-        this vehicle (the controller resent a result) returns the existing record.  ``parameters_id`` is the version that was
-        sent (``BoltInfo.parameters_id``); without it, the bolt's current version.
-        ``params_sent`` defaults to that version's pset and targets.
+        this vehicle (the controller resent a result) returns the existing record.
+        ``parameters_id`` is the version that was sent (``BoltInfo.parameters_id``); without
+        it, the bolt's current version.  ``params_sent`` defaults to that version's pset and
+        targets.
         """
         if len(position_mm) != 3:
             raise InputError("position_mm: expected x, y, z")

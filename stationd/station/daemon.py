@@ -109,7 +109,8 @@ class Station:
     def open(self) -> None:
         self.repo = Repository.open(self.cfg.database_url)
         if self.cfg.bolts_path is not None:
-            r = self.repo.import_bolts(self.cfg.bolts_path)
+            r = self.repo.import_bolts(self.cfg.bolts_path,
+                                       tolerance_mm=self.cfg.matching.tolerance_mm)
             log.info("bolt table %s: %d added, %d changed, %d unchanged, %d removed, "
                      "%d new parameter versions", self.cfg.bolts_path, len(r.added),
                      len(r.changed), len(r.unchanged), len(r.removed), len(r.new_versions))

@@ -22,7 +22,7 @@ from stationd.station.sdnotify import Notifier
 log = logging.getLogger("stationd")
 
 
-async def _serve(cfg_path: str, cfg: StationConfig, notifier: Notifier) -> None:
+async def serve(cfg_path: str, cfg: StationConfig, notifier: Notifier) -> None:
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     reload = asyncio.Event()
@@ -66,5 +66,5 @@ def run_daemon(args: argparse.Namespace) -> int:
                         format="%(levelname)s %(message)s")  # one line per event (journal)
     logging.getLogger("alembic").setLevel(logging.WARNING)
     cfg = load_station_config(args.config)  # an invalid config at start: exit 2
-    asyncio.run(_serve(args.config, cfg, Notifier()))
+    asyncio.run(serve(args.config, cfg, Notifier()))
     return 0

@@ -1,0 +1,165 @@
+"""A vehicle across daemon restarts: SIGTERM mid-tightening disables the tool and loses
+nothing; SIGKILL leaves a database that opens and holds every result the controller was told
+is stored; the restarted daemon resumes the vehicle without sending a done bolt again.
+
+The lift PLC and the controller run in this process, on loopback, as separate machines would;
+the daemon is a real ``stationd run`` process (``station_proc.py`` adds the simulated world
+its ``sim://`` cameras need)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from db.boltfile import load_bolts
+from db.repository import Repository
+from drivers.lift.sim import SimulatedPlc
+from drivers.wrench.sim import SimController
+from stationd.station.demo import _sim_psets
+
+SIM = Path(__file__).resolve().parents[2] / "config" / "sim"
+PROC = Path(__file__).with_name("station_proc.py")
+VIN = "RESTARTVIN0000001"
+
+
+def _until(pred, timeout, what):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"not reached in {timeout} s: {what}")
+
+
+class Daemon:
+    """One ``stationd run`` process; its journal (stderr) goes to a file."""
+
+    def __init__(self, tmp: Path, n: int) -> None:
+        self.log_path = tmp / f"daemon{n}.log"
+        self._err = self.log_path.open("w")
+        self.p = subprocess.Popen([sys.executable, str(PROC), str(tmp / "station.yaml"),
+                                   str(tmp / "pose")], cwd=tmp, stderr=self._err,
+                                  env={**os.environ, "PYTHONUNBUFFERED": "1"})
+
+    def log(self) -> str:
+        return self.log_path.read_text()
+
+    def wait_log(self, needle: str, timeout: float = 90) -> None:
+        _until(lambda: needle in self.log() or self.p.poll() is not None, timeout,
+               f"{needle!r} in the journal")
+        assert needle in self.log(), f"exited {self.p.returncode}: {self.log()[-2000:]}"
+
+    def stop(self, sig: int) -> int:
+        self.p.send_signal(sig)
+        code = self.p.wait(timeout=60)
+        self._err.close()
+        return code
+
+
+@pytest.mark.timeout(420)
+def test_sigterm_and_sigkill_mid_vehicle_lose_nothing(tmp_path):
+    for f in SIM.iterdir():
+        shutil.copy(f, tmp_path)
+    psets = _sim_psets(tmp_path / "bolts.yaml")
+    bolts = [b.bolt_id for b in load_bolts(tmp_path / "bolts.yaml").models[0].bolts]
+    a, b, c = bolts[0], bolts[17], bolts[33]
+    plc = SimulatedPlc()
+    ctl = SimController(psets, seed=4, nok_rate=0.0)
+    ctl.start()
+    pose = tmp_path / "pose"
+    pose.write_text("")
+    daemons: list[Daemon] = []
+    try:
+        lift_port, ctl_port = plc.start_tcp(), ctl.listen_tcp()
+        station = (tmp_path / "station.yaml").read_text()
+        for old, new in (("sim://lift", f"modbus-tcp://127.0.0.1:{lift_port}"),
+                         ("sim://wrench", f"openprotocol://127.0.0.1:{ctl_port}"),
+                         ("sqlite:///stationd-sim.db", f"sqlite:///{tmp_path}/station.db")):
+            assert old in station
+            station = station.replace(old, new)
+        (tmp_path / "station.yaml").write_text(station)
+        plc.set_vehicle(1, VIN)
+        plc.raise_lift()
+
+        def start() -> Daemon:
+            d = Daemon(tmp_path, len(daemons))
+            daemons.append(d)
+            return d
+
+        def tool_on_for(d: Daemon, bolt: str) -> None:
+            pose.write_text(bolt)
+            d.wait_log(f"tightening bolt {bolt}")
+            _until(lambda: ctl.tool_enabled, 30, "tool enabled")
+
+        def tighten(d: Daemon, bolt: str) -> int:
+            tool_on_for(d, bolt)
+            shot = ctl.pull_trigger()
+            assert shot is not None
+            _until(lambda: shot.tightening_id in ctl.acked_ids, 30, "result acknowledged")
+            pose.write_text("")
+            _until(lambda: not ctl.tool_enabled, 30, "tool disabled after the result")
+            return int(shot.tightening_id)
+
+        # 1. a bolt tightened, then SIGTERM in the middle of the next one
+        d = start()
+        first = tighten(d, a)
+        tool_on_for(d, b)
+        assert d.stop(signal.SIGTERM) == 0
+        assert not ctl.tool_enabled                  # the cycle in progress aborted safely
+        assert "stationd stopped" in d.log() and "Traceback" not in d.log()
+
+        # 2. restarted: the vehicle resumes; the done bolt is refused, the aborted one redone
+        d = start()
+        second = tighten(d, b)
+        pose.write_text(a)
+        d.wait_log(f"{a} is already done")
+        # 3. SIGKILL right after the trigger: the result may or may not be stored, but every
+        # result the controller was told is stored must be in the database
+        tool_on_for(d, c)
+        shot = ctl.pull_trigger()
+        assert shot is not None
+        assert d.stop(signal.SIGKILL) == -signal.SIGKILL
+        acked = list(ctl.acked_ids)
+        assert {first, second} <= set(acked)
+        con = sqlite3.connect(tmp_path / "station.db")
+        try:
+            assert con.execute("PRAGMA integrity_check").fetchone() == ("ok",)
+            stored = [r[0] for r in con.execute("SELECT tightening_id FROM tightening_records")]
+        finally:
+            con.close()
+        assert set(acked) <= set(stored)
+        assert len(stored) == len(set(stored))       # none recorded twice
+
+        # 4. restarted after the kill: the vehicle is closed consistently when the lift lowers
+        pose.write_text("")
+        d = start()
+        d.wait_log("tracking the wrench")
+        plc.lower_lift()
+        d.wait_log(f"vehicle {VIN} closed")
+        assert d.stop(signal.SIGTERM) == 0
+    finally:
+        for d in daemons:
+            if d.p.poll() is None:
+                d.p.kill()
+                d.p.wait()
+        ctl.close()
+        plc.close()
+    repo = Repository.open(f"sqlite:///{tmp_path}/station.db")
+    try:
+        report = repo.vehicle_report(VIN)
+    finally:
+        repo.close()
+    status = {r.bolt_id: r.status for r in report.bolts}
+    assert status[a] == status[b] == "ok"
+    assert status[c] == ("ok" if shot.tightening_id in stored else "missing")
+    assert report.vehicle.ended_at is not None
+    assert sorted(report.missing) == sorted(k for k in bolts if status[k] == "missing")
+    assert len(report.missing) == len(bolts) - 2 - (status[c] == "ok")
