@@ -126,6 +126,31 @@ def test_a_marker_too_small_for_the_reduced_search_is_found_at_finer_scale(camer
     assert np.hypot(*(d.centre_px - v.centre_px)) < 0.1
 
 
+def test_a_frame_without_purple_is_searched_once_not_at_every_scale(camera, monkeypatch):
+    """Most frames of most pairs show no marker: one reduced search, no finer retries (they
+    cost ten times more); a frame with purple but no candidate still retries."""
+    import stationd.vision.detect as detect_module
+
+    scales = []
+    real = detect_module.reduce
+    monkeypatch.setattr(detect_module, "reduce",
+                        lambda img, s: scales.append(s) or real(img, s))
+    bare = render(camera, Scene(texture=0.15, noise_sigma=2.0), seed=1).image
+    assert not detect(bare, camera, VisionParams(), SPEC).found
+    assert scales == [8]
+    scales.clear()
+    v, _ = view(camera, 4500, 20, seed=6)       # purple at 1/8, no candidate: retried
+    assert detect(v.image, v.camera, VisionParams(), SPEC).found
+    assert scales[:2] == [8, 4]
+    scales.clear()                              # a near marker cut by the frame's edge
+    z = 800.0
+    x = (0.0 - camera.K[0, 2]) / camera.K[0, 0] * z
+    cut = render(camera, Scene(markers=[(MarkerPose.look(np.array([x, 0.0, z]), 10, 0, 0),
+                                         SPEC)], noise_sigma=2.0), seed=2).image
+    assert not detect(cut, camera, VisionParams(), SPEC).found
+    assert scales == [8]
+
+
 def _gamma(img):
     return np.clip(255 * (img / 255.0) ** (1 / 2.2) + 0.5, 0, 255).astype(np.uint8)
 
