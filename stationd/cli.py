@@ -149,6 +149,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return run_vision_bench(args)
 
 
+def cmd_bench_station(args: argparse.Namespace) -> int:
+    from stationd.bench.station import run_station_bench
+
+    return run_station_bench(args)
+
+
 def cmd_bench_chain(args: argparse.Namespace) -> int:
     from stationd.bench.chain import run_chain_bench
 
@@ -218,6 +224,13 @@ def build_parser() -> argparse.ArgumentParser:
     bc.add_argument("--quick", action="store_true", help="2 pairs, fewer samples")
     bc.add_argument("--seed", type=int, default=1)
     bc.set_defaults(func=cmd_bench_chain)
+    bs = bsub.add_parser("station", help="the daemon on the simulated station: latency from "
+                         "frame arrival to acknowledged parameters, memory")
+    bs.add_argument("--out", default="bench-station.json", help="JSON results file")
+    bs.add_argument("--cycles", type=int, default=20, help="bolts to select and tighten")
+    bs.add_argument("--seed", type=int, default=1)
+    bs.add_argument("--json", action="store_true", help="print one summary object")
+    bs.set_defaults(func=cmd_bench_station)
 
     from stationd.db_cli import add_config_parser, add_db_parser
     from stationd.geometry.calibrate_cli import add_calibrate_parser

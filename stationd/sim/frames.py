@@ -20,6 +20,9 @@ from stationd.geometry.camera import Camera
 from stationd.sim.render import MarkerPose, Scene, render
 from stationd.vision.marker import MarkerSpec
 
+#: a window (x, y, w, h) and its pixels, a whole frame, or None (the background as it is)
+Patch = tuple[tuple[int, int, int, int], np.ndarray] | np.ndarray | None
+
 
 class FrameSource:
     """Frames of one simulated camera for a scene whose only moving thing is the marker."""
@@ -33,28 +36,49 @@ class FrameSource:
         self._background: np.ndarray | None = None
 
     @property
+    def has_background(self) -> bool:
+        return self._background is not None
+
+    @property
     def background(self) -> np.ndarray:
         if self._background is None:
-            self._background = render(self.camera, self.scene, seed=self.seed).image
+            image = render(self.camera, self.scene, seed=self.seed).image
+            image.setflags(write=False)  # handed out shared: a write would be a bug, loudly
+            self._background = image
         return self._background
 
     def frame(self, pose: MarkerPose | None, spec: MarkerSpec | None = None,
               seed: int | None = None) -> np.ndarray:
         """A full frame with the marker at ``pose`` (camera frame), or the bare background."""
-        image = self.background.copy()
+        return self.compose(self.patch(pose, spec, seed))
+
+    def patch(self, pose: MarkerPose | None, spec: MarkerSpec | None = None,
+              seed: int | None = None) -> Patch:
+        """What the marker at ``pose`` changes in the background: a window and its pixels, or
+        a whole frame (the marker partly out of view), or None (nothing: not in view).  A
+        benchmark renders these ahead and composes frames from them at frame rate."""
         if pose is None:
-            return image
+            return None
         spec = spec or MarkerSpec()
         if not self._in_view(pose, spec):
-            return image
+            return None
+        scene = replace(self.scene, markers=[(pose, spec)])
+        seed = self.seed if seed is None else seed
         win = marker_window(self.camera, pose, spec, margin_px=48.0)
         if win is None:  # partly out of view: render what is visible, the slow way
-            return render(self.camera, replace(self.scene, markers=[(pose, spec)]),
-                          seed=self.seed if seed is None else seed).image
-        x, y, w, h = win
-        patch = render(self.camera, replace(self.scene, markers=[(pose, spec)]), window=win,
-                       seed=self.seed if seed is None else seed).image
-        image[y:y + h, x:x + w] = patch
+            return render(self.camera, scene, seed=seed).image
+        return win, render(self.camera, scene, window=win, seed=seed).image
+
+    def compose(self, patch: Patch) -> np.ndarray:
+        """A frame from a :meth:`patch`: the background itself when nothing changes (shared,
+        not copied: nobody writes into a grabbed frame), else a copy with the window pasted."""
+        if patch is None:
+            return self.background
+        if isinstance(patch, np.ndarray):
+            return patch
+        (x, y, w, h), pixels = patch
+        image = self.background.copy()
+        image[y:y + h, x:x + w] = pixels
         return image
 
     def _in_view(self, pose: MarkerPose, spec: MarkerSpec) -> bool:

@@ -11,14 +11,14 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from drivers.camera.sim import register_world, unregister_world
 from stationd.config import StationConfig
-from stationd.sim.frames import FrameSource
+from stationd.sim.frames import FrameSource, Patch
 from stationd.sim.render import MarkerPose, Scene
 from stationd.vision.marker import MarkerSpec
 
@@ -58,6 +58,8 @@ class World:
         self._lock = threading.Lock()
         base = scene or Scene(texture=0.15, vignetting=0.3, blur_sigma=0.8, noise_sigma=2.0)
         self._sources: dict[tuple[str, str], FrameSource] = {}
+        # (id(pose), pair, side) -> (pose, patches rendered ahead)
+        self._ahead: dict[tuple[int, str, str], tuple[WrenchPose, list[Patch]]] = {}
         for k, (name, pc) in enumerate(cfg.pairs.items()):
             cal = pc.calibration
             self._sources[(name, "left")] = FrameSource(cal.left, base, seed + 2 * k)
@@ -67,6 +69,33 @@ class World:
     def close(self) -> None:
         for name in self.cfg.pairs:
             unregister_world(name)
+
+    def prerender(self, poses: Sequence[WrenchPose], variants: int = 2) -> None:
+        """Render ahead what every camera sees of each pose (``variants`` noise draws each,
+        taken in turn): a benchmark then composes frames at frame rate instead of ray-casting
+        on the cores whose latency it measures.  Other poses are still rendered live."""
+        for src in self._sources.values():
+            _ = src.background
+        for pose in poses:
+            for (pair, side), src in self._sources.items():
+                mp = self._camera_pose(pair, side, pose)
+                self._ahead[(id(pose), pair, side)] = (pose, [
+                    src.patch(mp, self.spec, seed=src.seed + 7919 * (v + 1))
+                    for v in range(variants)])
+
+    def buffer_bytes(self) -> int:
+        """The world's own image memory (backgrounds, frames rendered ahead): a benchmark
+        subtracts it from the process's to tell the daemon's share."""
+        seen: dict[int, int] = {}
+        for src in self._sources.values():
+            if src.has_background:
+                seen[id(src.background)] = src.background.nbytes
+        for _, patches in self._ahead.values():
+            for pt in patches:
+                arr = pt if isinstance(pt, np.ndarray) else pt[1] if pt is not None else None
+                if arr is not None:
+                    seen[id(arr)] = arr.nbytes
+        return sum(seen.values())
 
     def cut_cameras(self, pair: str) -> None:
         """The pair's cameras stop delivering (a cable pulled): every grab fails."""
@@ -97,6 +126,10 @@ class World:
         def source(side: str, seed: int) -> np.ndarray:
             with self._lock:
                 pose = self.pose
+            src = self._sources[(pair, side)]
+            ahead = self._ahead.get((id(pose), pair, side))
+            if ahead is not None and ahead[0] is pose:
+                return src.compose(ahead[1][seed % len(ahead[1])])
             mp = None if pose is None else self._camera_pose(pair, side, pose)
-            return self._sources[(pair, side)].frame(mp, self.spec, seed=seed + 1000)
+            return src.frame(mp, self.spec, seed=seed + 1000)
         return source

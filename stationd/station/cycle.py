@@ -75,6 +75,11 @@ class Cycle:
     _last_match: Match | None = field(default=None, repr=False)
     _away: int = field(default=0, repr=False)
 
+    @property
+    def selected_match(self) -> Match | None:
+        """The matcher's verdict that selected the current bolt (None without one)."""
+        return self._last_match
+
     # -- events ----------------------------------------------------------------------------
     def started(self) -> list[Action]:
         return self._to(State.WAITING_VEHICLE, "waiting for the lift")
@@ -130,6 +135,10 @@ class Cycle:
 
     def result(self, bolt: str, result: Any, ok: bool) -> list[Action]:
         if self.state is not State.TIGHTENING or bolt != self.bolt:
+            # a late result (the trigger pulled as the wrench left): the bolt is tightened
+            # all the same, and an OK one is done (never sent again, order rules move on)
+            if ok:
+                self.matcher.mark_done(bolt)
             return [Log(f"result for {bolt} outside a tightening: recorded, not matched"),
                     Record(bolt, result, None), DisableTool("unexpected result")]
         acts: list[Action] = [DisableTool(f"bolt {bolt} tightened"),

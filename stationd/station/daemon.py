@@ -47,6 +47,9 @@ from stationd.vision.types import Refusal
 log = logging.getLogger("stationd")
 TRACKING_STATES = (State.TRACKING, State.BOLT_SELECTED, State.TIGHTENING)
 EVENT_HISTORY = 100_000
+# a result this long after the tool went off is not the last bolt's late one: the tool cannot
+# tighten while disabled, and the controller reports within milliseconds
+LATE_RESULT_S = 5.0
 
 
 @dataclass
@@ -59,6 +62,22 @@ class Localization:
     # with a tightening record when records.save_images is on (a crop, not 60 MB frames)
     crops: dict[str, np.ndarray] = field(default_factory=dict)
     camera_fault: str | None = None  # a camera stopped delivering: the station's fault
+    done_t: float = 0.0              # when the localization was ready (monotonic)
+    timings_ms: dict[str, float] = field(default_factory=dict)  # slowest pair's stages
+
+
+@dataclass(frozen=True)
+class Selection:
+    """What decided a bolt's selection, kept with its record: a result may arrive after the
+    wrench left (or after the next localization), and must carry this bolt's evidence."""
+
+    bolt: str
+    pset: int | None
+    point_mm: np.ndarray
+    tilt_deg: float
+    match_distance_mm: float
+    sent_at: datetime
+    crops: dict[str, np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -70,6 +89,7 @@ class PairView:
     arrived: float
     crops: dict[str, np.ndarray] = field(default_factory=dict)
     camera_fault: bool = False
+    timings_ms: dict[str, float] = field(default_factory=dict)  # grab, vision
 
 
 @dataclass
@@ -92,10 +112,10 @@ class Station:
     last: Localization | None = None
     on_action: Any = None  # called with each action before it is carried out (demo, tests)
     _pool: ThreadPoolExecutor = field(init=False)
-    _sent_at: datetime | None = None
     _last_log: str | None = None
-    _evidence: dict[str, np.ndarray] = field(default_factory=dict)  # crops of the selection
-    _enabled: tuple[str, int | None] | None = None  # (bolt, pset) the tool was last enabled for
+    _selection: Selection | None = None  # the bolt whose parameters were sent last
+    _enabled: Selection | None = None    # the bolt the tool was last enabled for
+    _disabled_at: float | None = None    # when the tool went off since (monotonic)
     _vin_sent: tuple[str, int] | None = None  # (VIN, controller reconnect count) it went with
 
     def __post_init__(self) -> None:
@@ -203,11 +223,14 @@ class Station:
             return
         if result is None:
             return
-        if self.cycle.state is State.TIGHTENING and self.cycle.bolt is not None:
+        en = self._enabled
+        ours = en is not None and (en.pset is None or result.pset == en.pset)
+        if self.cycle.state is State.TIGHTENING and self.cycle.bolt is not None and ours:
             await self._apply(self.cycle.result(self.cycle.bolt, result, bool(result.ok)))
-        elif self._enabled is not None and result.pset == self._enabled[1] and self.vin:
+        elif ours and en is not None and self.vin and self._disabled_at is not None \
+                and time.monotonic() - self._disabled_at < LATE_RESULT_S:
             # the trigger was pulled as the wrench left: the result is that bolt's
-            await self._apply(self.cycle.result(self._enabled[0], result, bool(result.ok)))
+            await self._apply(self.cycle.result(en.bolt, result, bool(result.ok)))
         else:
             log.warning("result %d (pset %d, VIN %r, %s) outside any tightening: not "
                         "attributable to a bolt, acknowledged (the controller keeps its own "
@@ -298,6 +321,9 @@ class Station:
         names = list(self.grabbers)
         got: list[PairView] = await asyncio.gather(*(self._call(self._localize_pair, n)
                                                      for n in names))
+        done = time.monotonic()
+        timings = {k: max((g.timings_ms.get(k, 0.0) for g in got), default=0.0)
+                   for k in ("grab", "vision")}
         broken = [f"{n}: {g.end}" for n, g in zip(names, got, strict=True) if g.camera_fault]
         if broken:
             return Localization(None, reason="; ".join(broken),
@@ -309,12 +335,14 @@ class Station:
         reasons = [f"{n}: {g.end}" for n, g in zip(names, got, strict=True)
                    if isinstance(g.end, str)]
         if not ends:
-            return Localization(None, reason="; ".join(reasons) or "no pair", t=arrived)
+            return Localization(None, reason="; ".join(reasons) or "no pair", t=arrived,
+                                done_t=done, timings_ms=timings)
         fused = fuse([e.point_mm for e in ends], [1.0] * len(ends), max_spread_mm=2.0)
         if isinstance(fused, Refusal):
-            return Localization(None, reason=fused.reason, t=arrived)
+            return Localization(None, reason=fused.reason, t=arrived, done_t=done,
+                                timings_ms=timings)
         return Localization(fused.point_mm, float(np.mean([e.tilt_deg for e in ends])),
-                            t=arrived, crops=crops)
+                            t=arrived, crops=crops, done_t=done, timings_ms=timings)
 
     def _grab_ok(self, grabber: StereoGrabber) -> bool:
         """Whether a pair delivers frames again (recovery from a camera fault)."""
@@ -327,14 +355,16 @@ class Station:
     def _localize_pair(self, name: str) -> PairView:
         """Grab and localize in one pair (an executor thread)."""
         pc: PairConfig = self.cfg.pairs[name]
+        t0 = time.monotonic()
         try:
             left, right = self.grabbers[name].grab(1.0)
         except DeviceError as exc:
             return PairView(str(exc), time.monotonic(), camera_fault=True)
         arrived = time.monotonic()
         res = localize(pc.calibration, left.image, right.image, self.cfg.vision, self.cfg.marker)
+        timings = {"grab": (arrived - t0) * 1e3, "vision": (time.monotonic() - arrived) * 1e3}
         if not res.found or res.point_mm is None or res.normal is None:
-            return PairView(str(res.reason), arrived)
+            return PairView(str(res.reason), arrived, timings_ms=timings)
         crops = {}
         if self.cfg.records.save_images:
             crops = {f"{name}/{side}": crop(frame.image, det.roi)
@@ -342,10 +372,12 @@ class Station:
                                                                          res.right))
                      if det.roi is not None}
         if pc.to_vehicle is None:
-            return PairView("pair not registered into the vehicle frame", arrived)
+            return PairView("pair not registered into the vehicle frame", arrived,
+                            timings_ms=timings)
         end = bolt_end(pc.to_vehicle.apply(res.point_mm),
                        pc.to_vehicle.apply_direction(res.normal), self.cfg.tool)
-        return PairView(end.reason if isinstance(end, Refusal) else end, arrived, crops)
+        return PairView(end.reason if isinstance(end, Refusal) else end, arrived, crops,
+                        timings_ms=timings)
 
     async def _apply(self, actions: list[Action]) -> None:
         for a in actions:
@@ -355,20 +387,31 @@ class Station:
             try:
                 if isinstance(a, SendParams):
                     params = self.bolts[a.bolt].parameters
-                    self._sent_at = datetime.now(UTC)
-                    self._evidence = self.last.crops if self.last is not None else {}
+                    loc = self.last
+                    match = self.cycle.selected_match
+                    self._selection = Selection(
+                        a.bolt, params.pset,
+                        loc.point_mm if loc is not None and loc.point_mm is not None
+                        else np.zeros(3),
+                        loc.tilt_deg if loc is not None else 0.0,
+                        float(match.distance_mm or 0.0) if match is not None else 0.0,
+                        datetime.now(UTC), loc.crops if loc is not None else {})
+                    t_send = time.monotonic()
                     try:
                         await self._call(self._send_parameters, params)
                     except RefusedError as exc:
                         await self._apply(self.cycle.params_refused(a.bolt, str(exc)))
                         continue
-                    if self.last is not None:  # frame grabbed -> parameters acknowledged
-                        self.events.append(("latency_ms", (time.monotonic() - self.last.t) * 1e3))
+                    if self.last is not None:  # frame arrived -> parameters acknowledged
+                        self.events.append(("latency", self._latency(self.last, t_send)))
                     await self._apply(self.cycle.params_acknowledged(a.bolt))
                 elif isinstance(a, EnableTool):
-                    self._enabled = (a.bolt, self.bolts[a.bolt].parameters.pset)
+                    if self._selection is not None and self._selection.bolt == a.bolt:
+                        self._enabled, self._disabled_at = self._selection, None
                     await self._call(self.wrench.enable_tool)
                 elif isinstance(a, DisableTool):
+                    if self._disabled_at is None:
+                        self._disabled_at = time.monotonic()
                     await self._call(self.wrench.disable_tool)
                 elif isinstance(a, Record):
                     await self._record(a)          # on disk first,
@@ -380,6 +423,16 @@ class Station:
                     self._last_log = a.message
             except DeviceError as exc:
                 await self._apply(self.cycle.fault(f"wrench: {exc}"))
+
+    @staticmethod
+    def _latency(loc: Localization, t_send: float) -> dict[str, float]:
+        """The selection's latency, from the arrival of the frames that decided it to the
+        controller's acknowledgement, and its stages (ms)."""
+        now = time.monotonic()
+        return {"total": (now - loc.t) * 1e3, "localize": (loc.done_t - loc.t) * 1e3,
+                "decide": (t_send - loc.done_t) * 1e3, "acknowledge": (now - t_send) * 1e3,
+                "vision_slowest_pair": loc.timings_ms.get("vision", 0.0),
+                "grab_slowest_pair": loc.timings_ms.get("grab", 0.0)}
 
     def _send_parameters(self, params: Parameters) -> None:
         """A register-driven controller takes the pset with the torque and angle targets; a
@@ -397,29 +450,34 @@ class Station:
     async def _record(self, a: Record) -> None:
         assert self.repo is not None and self.vin is not None  # noqa: S101
         r = a.result
-        if self._enabled is not None and self._enabled[0] == a.bolt:
+        sel = self._enabled if self._enabled is not None and self._enabled.bolt == a.bolt \
+            else None
+        if sel is not None:
             self._enabled = None   # its result is in: a later one is not this bolt's
-        pos = self.last.point_mm if self.last and self.last.point_mm is not None else np.zeros(3)
         info = self.bolts.get(a.bolt)
         repo = self.repo
-        images = await self._call(self._save_images, a.bolt, int(r.tightening_id))
+        images = await self._call(self._save_images, a.bolt, int(r.tightening_id), sel)
+        if sel is None:  # not expected: a result is taken only for an enabled selection
+            log.warning("result %d for %s without its selection: recorded without position",
+                        r.tightening_id, a.bolt)
         await self._call(lambda: repo.record_tightening(
-            self.vin, a.bolt, ok=bool(r.ok), position_mm=[float(v) for v in pos],
-            match_distance_mm=float(a.match.distance_mm or 0.0) if a.match else 0.0,
-            tilt_deg=self.last.tilt_deg if self.last else 0.0,
+            self.vin, a.bolt, ok=bool(r.ok),
+            position_mm=[float(v) for v in sel.point_mm] if sel else [0.0, 0.0, 0.0],
+            match_distance_mm=sel.match_distance_mm if sel else 0.0,
+            tilt_deg=sel.tilt_deg if sel else 0.0,
             torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
             parameters_id=info.parameters_id if info else None,
-            tightening_id=int(r.tightening_id), sent_at=self._sent_at,
+            tightening_id=int(r.tightening_id), sent_at=sel.sent_at if sel else None,
             result_at=datetime.now(UTC), images=images))
 
-    def _save_images(self, bolt: str, tightening_id: int) -> list[str]:
+    def _save_images(self, bolt: str, tightening_id: int, sel: Selection | None) -> list[str]:
         """Write the selection's crops beside the records (an executor thread); a failure is
         logged and the tightening is recorded without them, never lost."""
         folder = self.cfg.records.images_dir
-        if not self.cfg.records.save_images or folder is None or not self._evidence:
+        if not self.cfg.records.save_images or folder is None or sel is None:
             return []
         out = []
-        for key, img in sorted(self._evidence.items()):
+        for key, img in sorted(sel.crops.items()):
             path = folder / str(self.vin) / f"{bolt}-{tightening_id}-{key.replace('/', '-')}.png"
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)

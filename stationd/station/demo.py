@@ -174,7 +174,7 @@ def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
         if e[0] == "Log" and str(e[1].message).startswith("no bolt: "):
             refusals[_kind(str(e[1].message)[9:])] += 1
     errs = [r["xy_error_mm"] for r in report if "xy_error_mm" in r]
-    lat = [e[1] for e in st.events if e[0] == "latency_ms"]
+    lat = [e[1]["total"] for e in st.events if e[0] == "latency"]
     return {"bolts": cycles, "ok": sum(1 for r in report if r.get("ok")),
             "wrong_bolt_sends": wrong, "parameters_sent": len(sent),
             "results": sum(1 for r in report if "ok" in r),
