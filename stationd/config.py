@@ -24,6 +24,7 @@ from drivers import wrench as wrench_drivers
 from drivers.errors import UrlError
 from drivers.lift.base import MapError, RegisterMap
 from drivers.url import parse_url
+from drivers.wrench.modbus_map import WrenchRegisterMap
 from stationd.errors import ConfigError, InputError
 from stationd.geometry.camera import StereoPair
 from stationd.geometry.frames import Transform
@@ -75,13 +76,26 @@ class MatchingConfig(MatchParams):
 
 @dataclass(frozen=True)
 class WrenchConfig:
+    """The tightening controller: its URL, and for a register-driven one (``modbus-tcp://``,
+    ``modbus-rtu://``) its register map (``drivers/wrench/modbus_map.py``; None: defaults)."""
+
     url: str = "sim://wrench"
+    registers: WrenchRegisterMap | None = None
 
     @classmethod
     def from_node(cls, node: YamlNode, *, check_url: bool = False) -> WrenchConfig:
         """``check_url``: check the URL's form and scheme now (see :func:`device_url`)."""
-        m = node.mapping(("url",))
-        return cls(url=device_url(m["url"], "wrench", check=check_url)) if "url" in m else cls()
+        m = node.mapping(("url", "registers"))
+        url = device_url(m["url"], "wrench", check=check_url) if "url" in m else cls.url
+        regs = WrenchRegisterMap.from_node(m["registers"]) if "registers" in m else None
+        if regs is not None and "modbus" not in parse_url(url).scheme:
+            raise m["registers"].error(f"a register map is for a Modbus controller, not "
+                                       f"{url}")
+        return cls(url, regs)
+
+    def open_options(self) -> dict[str, Any]:
+        """Keywords for ``open_wrench``: the register map when one is configured."""
+        return {} if self.registers is None else {"register_map": self.registers}
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,25 @@ def test_example_station_config_loads():
     cfg = load_station_config(ROOT / "config" / "station.example.yaml")
     assert cfg.marker == SPEC
     assert cfg.vision.centre_method == "paper" and cfg.vision.gates.max_rms_px == 0.35
+    assert list(cfg.pairs) == ["front"] and cfg.pairs["front"].left == "front_left"
+    assert cfg.lift.url.startswith("modbus-tcp://") and cfg.lift.registers.vin is not None
+    assert cfg.wrench.url.startswith("openprotocol://") and cfg.wrench.registers is None
+    assert cfg.matching.max_age_s == 0.5 and cfg.records.save_images
+
+
+def test_a_register_driven_wrench_takes_its_register_map(tmp_path):
+    (tmp_path / "s.yaml").write_text(
+        "wrench:\n  url: modbus-tcp://10.0.0.9:502?unit=2\n  registers:\n"
+        "    tool_enable: {address: 205, bit: 15}\n    vin: null\n")
+    w = load_station_config(tmp_path / "s.yaml").wrench
+    assert w.registers is not None and w.registers.vin is None
+    assert w.registers.tool_enable.address == 205
+    assert w.open_options() == {"register_map": w.registers}
+    (tmp_path / "s.yaml").write_text(
+        "wrench:\n  url: openprotocol://10.0.0.9\n  registers:\n    vin: null\n")
+    with pytest.raises(ConfigError, match=r"s.yaml:\d+: wrench.registers: a register map is "
+                                          r"for a Modbus controller"):
+        load_station_config(tmp_path / "s.yaml")
 
 
 def test_sim_station_files_are_the_generators_output():
@@ -83,9 +102,9 @@ def test_shipped_station_files_check_clean():
     assert sim.config is not None and len(sim.config.pairs) == 4 and len(sim.config.cameras) == 8
     assert sim.bolts is not None and sim.bolts.table is not None
     assert sim.bolts.table.summary() == "1 model(s), 50 bolt(s), 3 pset(s)"
-    # the example has the marker and the vision parameters only: no files it names, no devices
+    # the example names the simulated pair's files and the example bolt table
     example = check_station(ROOT / "config" / "station.example.yaml")
-    assert example.ok and example.warnings == [] and example.bolts is None
+    assert example.ok and example.warnings == [] and example.bolts is not None
 
 
 def test_independent_errors_are_all_reported_and_load_raises_one_of_them(sim_copy):

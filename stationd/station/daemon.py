@@ -136,7 +136,8 @@ class Station:
                      len(r.changed), len(r.unchanged), len(r.removed), len(r.new_versions))
         self.lift = open_lift(self.cfg.lift.url, self.cfg.lift.registers,
                               **self.device_kw.get("lift", {}))
-        self.wrench = open_wrench(self.cfg.wrench.url, **self.device_kw.get("wrench", {}))
+        self.wrench = open_wrench(self.cfg.wrench.url, **self.cfg.wrench.open_options(),
+                                  **self.device_kw.get("wrench", {}))
         for name, pc in self.cfg.pairs.items():
             if pc.left and pc.right:
                 left = open_camera(self.cfg.cameras[pc.left])
