@@ -182,7 +182,8 @@ def test_config_check_tells_station_files_from_bolt_tables(run, tmp_path):
     assert out.splitlines() == [
         f"{sim / 'station.yaml'}: ok, station: 4 pair(s), 8 camera(s); "
         f"bolts {sim / 'bolts.yaml'}: 1 model(s), 50 bolt(s), 3 pset(s)",
-        f"{example}: ok, station: 0 pair(s), 0 camera(s)",
+        f"{example}: ok, station: 1 pair(s), 2 camera(s); "
+        f"bolts {EXAMPLE}: 2 model(s), 9 bolt(s), 3 pset(s)",
         f"{EXAMPLE}: ok, 2 model(s), 9 bolt(s), 3 pset(s)",
     ]
 
