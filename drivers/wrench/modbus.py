@@ -243,15 +243,14 @@ class ModbusWrench(SupervisedWrench):
     def _send_ack(self, token: int, timeout: float) -> None:
         """Write the result's counter back to ``result_ack``: the controller may then publish
         the next result (works on a new link too: the counter names the result)."""
-        counter = token
         with self._cond:
             link = self._link
         if link is None:
             raise ConnectionLostError("link down")
         self._io_call(link, lambda li: li.write_span(self.register_map.result_ack.address,
-                                                     [counter], timeout))
+                                                     [token], timeout))
         with self._cond:
-            self._acked = counter
+            self._acked = token
 
     # -- requests -----------------------------------------------------------------------------
     def _io_call(self, link: RegisterLink, fn: Callable[[RegisterLink], T]) -> T:

@@ -49,9 +49,10 @@ class DisableTool:
 
 @dataclass(frozen=True)
 class Record:
+    """Record ``result`` for ``bolt``; where the wrench was is the daemon's selection's."""
+
     bolt: str
     result: Any  # the controller's TighteningResult
-    match: Match | None
 
 
 @dataclass(frozen=True)
@@ -140,9 +141,9 @@ class Cycle:
             if ok:
                 self.matcher.mark_done(bolt)
             return [Log(f"result for {bolt} outside a tightening: recorded, not matched"),
-                    Record(bolt, result, None), DisableTool("unexpected result")]
+                    Record(bolt, result), DisableTool("unexpected result")]
         acts: list[Action] = [DisableTool(f"bolt {bolt} tightened"),
-                              Record(bolt, result, self._last_match)]
+                              Record(bolt, result)]
         if ok:
             self.matcher.mark_done(bolt)
         self.bolt = None

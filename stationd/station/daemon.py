@@ -61,7 +61,7 @@ class Localization:
     # the marker's neighbourhood in each frame used ("pair1/left" -> crop): the evidence kept
     # with a tightening record when records.save_images is on (a crop, not 60 MB frames)
     crops: dict[str, np.ndarray] = field(default_factory=dict)
-    camera_fault: str | None = None  # a camera stopped delivering: the station's fault
+    camera_fault: bool = False       # a camera stopped delivering (``reason`` says which)
     done_t: float = 0.0              # when the localization was ready (monotonic)
     timings_ms: dict[str, float] = field(default_factory=dict)  # slowest pair's stages
 
@@ -202,8 +202,8 @@ class Station:
         if self.cycle.state in TRACKING_STATES:
             loc = await self._localize()
             self.last = loc
-            if loc.camera_fault is not None:
-                await self._apply(self.cycle.fault(loc.camera_fault))
+            if loc.camera_fault:
+                await self._apply(self.cycle.fault(f"cameras: {loc.reason}"))
             else:
                 await self._apply(self.cycle.localized(loc.point_mm, loc.reason,
                                                        time.monotonic() - loc.t))
@@ -327,8 +327,7 @@ class Station:
                    for k in ("grab", "vision")}
         broken = [f"{n}: {g.end}" for n, g in zip(names, got, strict=True) if g.camera_fault]
         if broken:
-            return Localization(None, reason="; ".join(broken),
-                                camera_fault="cameras: " + "; ".join(broken))
+            return Localization(None, reason="; ".join(broken), camera_fault=True)
         ends = [g.end for g in got if isinstance(g.end, BoltEnd)]
         used = [g for g in got if isinstance(g.end, BoltEnd)] or got
         arrived = min((g.arrived for g in used), default=time.monotonic())
