@@ -112,6 +112,18 @@ def cmd_marker(args: argparse.Namespace) -> int:
 
 
 # -- tune-color ---------------------------------------------------------------------------
+def _results_file(text: str) -> str:
+    """A benchmark's ``--out``: checked before a run of minutes, not after it (a file that
+    cannot be written would otherwise lose the run)."""
+    import os
+
+    folder = Path(text).parent
+    if not folder.is_dir() or not os.access(folder, os.W_OK):
+        raise argparse.ArgumentTypeError(f"{text}: folder {folder} does not exist or is not "
+                                         "writable")
+    return text
+
+
 def _parse_roi(text: str) -> tuple[int, int, int, int]:
     parts = text.split(",")
     try:
@@ -213,20 +225,23 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="benchmarks that print figures")
     bsub = b.add_subparsers(dest="bench", required=True, parser_class=_Parser)
     bv = bsub.add_parser("vision", help="the paper's experiments on rendered images")
-    bv.add_argument("--out", default="bench-vision.json", help="JSON results file")
+    bv.add_argument("--out", default="bench-vision.json", type=_results_file,
+                    help="JSON results file")
     bv.add_argument("--quick", action="store_true", help="fewer samples (a smoke run)")
     bv.add_argument("--only", help="comma-separated sections: "
                     "radii,centre,rod,saltpepper,lowlight,speed")
     bv.add_argument("--seed", type=int, default=1)
     bv.set_defaults(func=cmd_bench)
     bc = bsub.add_parser("chain", help="the whole chain: calibration, vehicle frame, rod, bolts")
-    bc.add_argument("--out", default="bench-chain.json", help="JSON results file")
+    bc.add_argument("--out", default="bench-chain.json", type=_results_file,
+                    help="JSON results file")
     bc.add_argument("--quick", action="store_true", help="2 pairs, fewer samples")
     bc.add_argument("--seed", type=int, default=1)
     bc.set_defaults(func=cmd_bench_chain)
     bs = bsub.add_parser("station", help="the daemon on the simulated station: latency from "
                          "frame arrival to acknowledged parameters, memory")
-    bs.add_argument("--out", default="bench-station.json", help="JSON results file")
+    bs.add_argument("--out", default="bench-station.json", type=_results_file,
+                    help="JSON results file")
     bs.add_argument("--cycles", type=int, default=20, help="bolts to select and tighten")
     bs.add_argument("--seed", type=int, default=1)
     bs.add_argument("--json", action="store_true", help="print one summary object")

@@ -94,6 +94,7 @@ def test_localize_json_and_repeat(files, capsys):
                 str(d / "pair.yaml"), "--repeat", "0"], "--repeat"),
     (lambda d: ["detect", str(d / "one.png"), "--camera", str(d / "cam.yaml"), "--config",
                 str(d / "bad_config.yaml")], "bad_config.yaml:2: vision.centre_method"),
+    (lambda d: ["bench", "station", "--cycles", "0"], "--cycles must be at least 1"),
 ])
 def test_bad_input_exits_2_with_one_line(files, capsys, make_args, needle):
     d, _, _ = files
@@ -102,6 +103,16 @@ def test_bad_input_exits_2_with_one_line(files, capsys, make_args, needle):
     code, _, err = _run(capsys, *make_args(d))
     assert code == 2
     assert needle in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+@pytest.mark.parametrize("bench", ["vision", "chain", "station"])
+def test_a_results_file_that_cannot_be_written_is_refused_before_the_run(bench, tmp_path,
+                                                                        capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", bench, "--out", str(tmp_path / "no" / "such.json")])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2
+    assert "does not exist or is not writable" in err and err.count("\n") == 1
 
 
 def test_console_script_usage_error_is_one_line():
