@@ -1,0 +1,294 @@
+"""What the station tells the world: typed events the demo, the bench, the screens and the tests
+consume (never strings to parse).
+
+The daemon publishes one of these for everything that happened, in order, on an
+:class:`EventBus`; consumers subscribe (the web screens, the demo's checker) or read the bounded
+history (tests, the bench).  Every event is a frozen dataclass with a ``t`` (seconds on the
+host's wall clock, ``time.time()`` scale) so it can be serialised as it is (``to_json``) and
+shown in order.  Positions are in the vehicle frame, millimetres.
+
+These are *outputs*.  The pure core's inputs (lift reads, localizations, acknowledgements,
+results, device faults, ticks) and the actions it answers live in
+:mod:`stationd.station.core`; the daemon turns the core's answers into these.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import enum
+import math
+import time
+from collections import deque
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+
+def _now() -> float:
+    return time.time()
+
+
+@dataclass(frozen=True)
+class StationEvent:
+    """Base of every published event."""
+
+    t: float = field(default_factory=_now, kw_only=True)
+
+    @property
+    def kind(self) -> str:
+        """The event's name on the wire (``StateChanged`` -> ``state_changed``)."""
+        name = type(self).__name__
+        return "".join("_" + c.lower() if c.isupper() and i else c.lower()
+                       for i, c in enumerate(name))
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-safe dict: arrays to lists, enums to values, NaN/inf to None."""
+        out: dict[str, Any] = {"kind": self.kind}
+        for f in dataclasses.fields(self):
+            out[f.name] = _jsonable(getattr(self, f.name))
+        return out
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, enum.Enum):
+        return v.value
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, list | tuple | set | frozenset):
+        items = sorted(v) if isinstance(v, set | frozenset) else v
+        return [_jsonable(x) for x in items]
+    if hasattr(v, "tolist"):  # numpy arrays and scalars
+        return _jsonable(v.tolist())
+    if dataclasses.is_dataclass(v) and not isinstance(v, type):
+        return {f.name: _jsonable(getattr(v, f.name)) for f in dataclasses.fields(v)}
+    return v
+
+
+# -- the station's state ----------------------------------------------------------------------
+@dataclass(frozen=True)
+class StateChanged(StationEvent):
+    """The cycle's state or its reason changed (``state`` is a ``State`` value string:
+    ``waiting for vehicle``, ``tracking``, ``bolt selected``, ``tightening``, ``fault``)."""
+
+    state: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class DeviceHealth(StationEvent):
+    """A device's health changed: ``device`` is ``lift``, ``wrench``, ``database`` or a camera
+    pair's name; ``ok`` False with the fault's ``kind`` (``down``, ``timeout``, ``garbage``,
+    ``refused``, ...) and readable ``reason``; ``ok`` True when it answers again."""
+
+    device: str
+    ok: bool
+    kind: str = ""
+    reason: str = ""
+
+
+# -- the vehicle --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class BoltView:
+    """A bolt as the screens draw it."""
+
+    bolt: str
+    x_mm: float
+    y_mm: float
+    z_mm: float
+    pset: int | None
+    order: int | None = None
+    batch: str | None = None
+    status: str = "pending"  # pending | ok | nok | skipped
+
+
+@dataclass(frozen=True)
+class VehicleOpened(StationEvent):
+    """A vehicle is at the station: its bolts, and which are done already (a restart or a
+    rework resumes a vehicle)."""
+
+    vin: str
+    model: str
+    bolts: tuple[BoltView, ...]
+    rework: bool = False
+
+
+@dataclass(frozen=True)
+class VehicleClosed(StationEvent):
+    vin: str
+    missing: tuple[str, ...]
+    nok: tuple[str, ...]
+
+
+# -- tracking and selection ----------------------------------------------------------------------
+@dataclass(frozen=True)
+class Localized(StationEvent):
+    """One localization of the wrench, published at most a few times a second for the screens:
+    the bolt end (None when refused, with ``reason``), the tilt, the nearest bolt, the age
+    counted from the frames' exposure, and which bolts the rules allow next."""
+
+    point_mm: tuple[float, float, float] | None
+    tilt_deg: float | None
+    reason: str | None
+    candidate: str | None
+    distance_mm: float | None
+    age_ms: float
+    allowed: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Refused(StationEvent):
+    """Nothing is sent, and why (stale, ambiguous, tilted, order rule, lift, fault...): emitted
+    when the reason changes, not frame after frame."""
+
+    reason: str
+    bolt: str | None = None
+
+
+@dataclass(frozen=True)
+class BoltSelected(StationEvent):
+    bolt: str
+    pset: int | None
+    point_mm: tuple[float, float, float]
+    distance_mm: float
+    tilt_deg: float
+
+
+@dataclass(frozen=True)
+class ParamsSent(StationEvent):
+    """The controller acknowledged ``bolt``'s parameters; latency from the exposure of the
+    frames that decided it, by stage (ms)."""
+
+    bolt: str
+    pset: int | None
+    latency_ms: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ParamsRefusedEvent(StationEvent):
+    bolt: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class ToolEnabled(StationEvent):
+    bolt: str
+
+
+@dataclass(frozen=True)
+class ToolDisabled(StationEvent):
+    reason: str
+    bolt: str | None = None
+
+
+@dataclass(frozen=True)
+class BoltSkipped(StationEvent):
+    bolt: str
+    reason: str
+
+
+# -- results ------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ResultRecorded(StationEvent):
+    """A tightening result stored for ``bolt`` of ``vin`` (then acknowledged)."""
+
+    vin: str
+    bolt: str
+    ok: bool
+    torque_nm: float
+    angle_deg: float
+    tightening_id: int
+    pset: int | None = None
+    torque_min: float | None = None
+    torque_max: float | None = None
+    angle_min: float | None = None
+    angle_max: float | None = None
+    late: bool = False
+    images: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class ResultUnattributed(StationEvent):
+    """A result no bolt can own (no tool enabled for its pset): acknowledged, not recorded."""
+
+    tightening_id: int
+    pset: int | None
+    ok: bool
+
+
+# -- the cameras (commissioning screen) ---------------------------------------------------------
+@dataclass(frozen=True)
+class PairFrames(StationEvent):
+    """A pair's latest grab, for the commissioning screen: exposure time, per-side detection
+    summary (found, centre, ellipses, ROI, sharpness, reason).  Frames themselves are fetched
+    on demand from the daemon's latest-frame store, never pushed."""
+
+    pair: str
+    exposure_t: float
+    sides: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Notice(StationEvent):
+    """A line for the journal and the operator's log (warnings included)."""
+
+    message: str
+    level: str = "info"
+
+
+@dataclass(frozen=True)
+class WrongBolt(StationEvent):
+    """Only published by the simulation's checker: parameters were sent for ``bolt`` while
+    the simulated wrench was really on ``truth`` (None: on no bolt).  Must never happen."""
+
+    bolt: str
+    truth: str | None
+
+
+# -- the bus ------------------------------------------------------------------------------------
+class EventBus:
+    """Fan-out of published events: a bounded history (a shift-long run neither grows nor
+    floods) plus subscribers.  Synchronous callbacks run in the publisher's thread (keep them
+    short); asyncio subscribers get a bounded queue each, and a slow one loses its oldest
+    events rather than slowing the station."""
+
+    def __init__(self, history: int = 100_000) -> None:
+        self.history: deque[StationEvent] = deque(maxlen=history)
+        self._callbacks: list[Callable[[StationEvent], None]] = []
+        self._queues: list[tuple[asyncio.AbstractEventLoop, asyncio.Queue[StationEvent]]] = []
+
+    def publish(self, event: StationEvent) -> None:
+        self.history.append(event)
+        for cb in list(self._callbacks):
+            cb(event)
+        for loop, q in list(self._queues):
+            loop.call_soon_threadsafe(_put_dropping_oldest, q, event)
+
+    def subscribe(self, callback: Callable[[StationEvent], None]) -> Callable[[], None]:
+        """Call ``callback`` with every event from now on; returns the unsubscribe function."""
+        self._callbacks.append(callback)
+        return lambda: self._callbacks.remove(callback)
+
+    def queue(self, maxsize: int = 1000) -> asyncio.Queue[StationEvent]:
+        """An asyncio queue (of the running loop) fed with every event from now on."""
+        q: asyncio.Queue[StationEvent] = asyncio.Queue(maxsize)
+        self._queues.append((asyncio.get_running_loop(), q))
+        return q
+
+    def unqueue(self, q: asyncio.Queue[StationEvent]) -> None:
+        self._queues = [(lp, x) for lp, x in self._queues if x is not q]
+
+    def of(self, *kinds: type[StationEvent]) -> Iterator[StationEvent]:
+        """The history's events of the given types, oldest first."""
+        return (e for e in list(self.history) if isinstance(e, kinds))
+
+    def count(self, *kinds: type[StationEvent]) -> int:
+        return sum(1 for _ in self.of(*kinds))
+
+
+def _put_dropping_oldest(q: asyncio.Queue[StationEvent], event: StationEvent) -> None:
+    if q.full():
+        q.get_nowait()
+    q.put_nowait(event)
