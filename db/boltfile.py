@@ -9,7 +9,8 @@ Numbers are plain numbers in fixed units (positions mm in the vehicle frame, tor
 degrees): a value such as ``"25 Nm"`` is an error rather than something parsed, so a unit can
 never be misread.  A pset is the number of a program held by the tightening controller; its
 torque/angle program is defined once, globally or in a model, and bolts refer to it.  Bolts
-closer than twice the matching tolerance are refused: the station could not tell them apart.
+closer in X-Y than twice the matching tolerance are refused: the station could not tell them
+apart (:mod:`db.spacing`, the rule the matcher uses).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from typing import TypeVar
 import yaml
 
 from db.bolts import BoltSpec, BoltTable, ModelSpec, Parameters, Pset, Window
+from db.spacing import min_spacing_mm, too_close
 from stationd.errors import ConfigError, InputError
 from stationd.yamlio import YamlNode
 
@@ -306,18 +308,18 @@ class _Checker:
         return False
 
     def too_close(self, bolts: list[_Bolt]) -> None:
-        """Two bolts nearer than twice the tolerance would both match one wrench position.
+        """Two bolts nearer in plan than twice the tolerance would both match one wrench
+        position (:mod:`db.spacing`, the matcher's metric: X and Y of the vehicle frame).
 
         Each bolt is reported once, against the nearest bolt before it in the file."""
-        limit = 2.0 * self.tolerance_mm
-        placed = [(b.position, b) for b in bolts if b.position is not None]
-        for i, (pos, b) in enumerate(placed):
-            near = [(math.dist(p, pos), a) for p, a in placed[:i]]
-            d, a = min(near, key=lambda t: t[0], default=(math.inf, b))
-            if d < limit:
-                self.fail(b.item.keys["position"], f"{d:.1f} mm from bolt {a.bolt_id} (line "
-                          f"{a.item.node.line}): bolts must be at least {limit:g} mm apart "
-                          f"(twice the matching tolerance of {self.tolerance_mm:g} mm)")
+        placed = [b for b in bolts if b.position is not None]
+        limit = min_spacing_mm(self.tolerance_mm)
+        for i, j, d in too_close([b.position for b in placed if b.position is not None],
+                                 self.tolerance_mm):
+            b, a = placed[i], placed[j]
+            self.fail(b.item.keys["position"], f"{d:.1f} mm from bolt {a.bolt_id} in X-Y (line "
+                      f"{a.item.node.line}): bolts must be at least {limit:g} mm apart in X-Y "
+                      f"(twice the matching tolerance of {self.tolerance_mm:g} mm)")
 
     # -- models and the table -----------------------------------------------------------------
     def model(self, name: str, node: YamlNode, globals_: dict[int, tuple[Pset, _Item]],

@@ -44,6 +44,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from db.spacing import min_spacing_mm, too_close
+
 
 @dataclass(frozen=True)
 class MatchParams:
@@ -196,13 +198,10 @@ class BoltMatcher:
 
 
 def check_spacing(bolts: Mapping[str, Iterable[float]], tolerance_mm: float) -> list[str]:
-    """Pairs of bolts closer than twice the tolerance (their capture zones would overlap)."""
+    """Pairs of bolts closer in X-Y than twice the tolerance (their capture zones would
+    overlap): the bolt table's own rule (:mod:`db.spacing`), in this matcher's metric."""
     ids = list(bolts)
-    xy = np.array([list(bolts[i])[:2] for i in ids], dtype=np.float64).reshape(-1, 2)
-    out = []
-    for a in range(len(ids)):
-        for b in range(a + 1, len(ids)):
-            d = float(np.hypot(*(xy[a] - xy[b])))
-            if d < 2 * tolerance_mm:
-                out.append(f"{ids[a]} and {ids[b]} are {d:.1f} mm apart (< 2 x {tolerance_mm:g})")
-    return out
+    pos = [list(bolts[i]) for i in ids]
+    return [f"{ids[j]} and {ids[i]} are {d:.1f} mm apart in X-Y "
+            f"(< {min_spacing_mm(tolerance_mm):g} = 2 x {tolerance_mm:g})"
+            for i, j, d in too_close(pos, tolerance_mm)]

@@ -64,8 +64,11 @@ CASES = [
     ("id: B2", "id: B 2", "id: B 2", f"{B2}.id", "bolt id 'B 2': 1-32 letters"),
     ("id: B2", "id: 2", ("- id: 2", 1), f"{B2}.id", "expected a string, got 2"),
     ("position: [100, 0, 0]", "position: [10, 0, 0]", "[10, 0, 0]", f"{B2}.position",
-     "10.0 mm from bolt B1 (line 13): bolts must be at least 16 mm apart (twice the "
-     "matching tolerance of 8 mm)"),
+     "10.0 mm from bolt B1 in X-Y (line 13): bolts must be at least 16 mm apart in X-Y "
+     "(twice the matching tolerance of 8 mm)"),
+    # one above the other: 30 mm apart in Z, 0 in plan -- the matcher could never tell them apart
+    ("position: [100, 0, 0]", "position: [0, 0, 30]", "[0, 0, 30]", f"{B2}.position",
+     "0.0 mm from bolt B1 in X-Y (line 13): bolts must be at least 16 mm apart in X-Y"),
     ("  WAGON:\n    bolts:\n      - id: B1\n        name: one\n        position: [0, 0, 0]\n"
      "        pset: 1", "  WAGON:\n    bolts:\n      - id: B1\n        name: one\n"
      "        position: [0, 0, 0]\n        pset: 21", ("pset: 21", 1), "models.WAGON.bolts[0].pset",
@@ -133,8 +136,9 @@ def test_tolerance_is_a_parameter_of_the_check():
     assert check_bolts_text(text).ok  # 20 mm >= 2 x 8 mm
     errors = check_bolts_text(text, "b.yaml", tolerance_mm=12).errors
     assert [str(e) for e in errors] == [
-        f"b.yaml:{line_of(text, '[20, 0, 0]')}: {B2}.position: 20.0 mm from bolt B1 (line 13): "
-        "bolts must be at least 24 mm apart (twice the matching tolerance of 12 mm)"]
+        f"b.yaml:{line_of(text, '[20, 0, 0]')}: {B2}.position: 20.0 mm from bolt B1 in X-Y "
+        "(line 13): bolts must be at least 24 mm apart in X-Y (twice the matching tolerance of "
+        "12 mm)"]
     with pytest.raises(InputError, match="tolerance"):
         check_bolts_text(text, tolerance_mm=0)
 

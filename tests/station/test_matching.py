@@ -59,7 +59,19 @@ def test_never_the_wrong_bolt_under_noise():
 
 
 def test_spacing_check():
-    assert check_spacing(BOLTS, 8.0) == ["B2 and B3 are 12.0 mm apart (< 2 x 8)"]
+    assert check_spacing(BOLTS, 8.0) == ["B2 and B3 are 12.0 mm apart in X-Y (< 16 = 2 x 8)"]
+
+
+def test_spacing_rule_is_the_matchers_metric():
+    """Bolts one above the other (30 mm in Z, 0 in plan): the matcher cannot tell them apart,
+    and the shared rule refuses them; bolts far apart in plan but level pass both."""
+    stacked = {"LOW": np.array([0.0, 0.0, 0.0]), "HIGH": np.array([0.0, 0.0, 30.0])}
+    assert check_spacing(stacked, 8.0) == ["LOW and HIGH are 0.0 mm apart in X-Y (< 16 = 2 x 8)"]
+    m = BoltMatcher(stacked, MatchParams(stable_frames=1))
+    assert "ambiguous" in (m.update(np.array([0.0, 0.0, 15.0])).reason or "")
+    apart = {"A": np.array([0.0, 0.0, 0.0]), "B": np.array([16.0, 0.0, 0.0])}
+    assert check_spacing(apart, 8.0) == []
+    assert BoltMatcher(apart, MatchParams(stable_frames=1)).update(np.zeros(3)).bolt == "A"
 
 
 # -- sequence: order and batch -------------------------------------------------------------
