@@ -18,6 +18,8 @@ from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
+import numpy as np
+
 from drivers import camera as camera_drivers
 from drivers import lift as lift_drivers
 from drivers import wrench as wrench_drivers
@@ -40,6 +42,11 @@ if TYPE_CHECKING:
 T = TypeVar("T")
 P = ParamSpec("P")
 
+#: what a station file must name: a file without them would run simulated devices unnoticed
+REQUIRED_KEYS = ("cameras", "pairs", "lift", "wrench")
+MAX_AGE_S = (0.05, 5.0)         # plausible staleness limits, seconds
+BASELINE_MM = (20.0, 2000.0)    # plausible stereo baselines, millimetres
+METRES_LIKE_MM = 10.0           # a pair-to-vehicle translation shorter than this is in metres
 STATION_KEYS = ("marker", "vision", "cameras", "pairs", "tool", "lift", "wrench", "matching",
                 "database", "bolts", "records")
 PAIR_KEYS = ("calibration", "to_vehicle", "left", "right", "max_skew_ms")
@@ -69,6 +76,13 @@ class MatchingConfig(MatchParams):
                 kw[k] = v.integer(lo=1, hi=100)
             elif k == "allow_retighten":
                 kw[k] = v.flag()
+            elif k == "max_age_s":
+                age = v.number()
+                if not MAX_AGE_S[0] <= age <= MAX_AGE_S[1]:
+                    raise v.error(f"{age:g} s is not plausible: a localization older than "
+                                  f"{MAX_AGE_S[0]:g}-{MAX_AGE_S[1]:g} s is stale (seconds, "
+                                  "counted from the frames' exposure)")
+                kw[k] = age
             else:
                 kw[k] = v.number(lo=0.0, hi=1000.0)
         return replace(cls(), **kw)
@@ -229,17 +243,47 @@ def _camera_ref(node: YamlNode, cameras: Collection[str] | None) -> str:
 
 
 def _load_transform(path: Path) -> Transform:
-    return Transform.from_node(YamlNode.load(path))
+    """A pair -> vehicle transform; a translation that looks like metres is refused (the pairs
+    are a metre or more from the vehicle origin: |t| < 10 can only be metres for millimetres)."""
+    node = YamlNode.load(path)
+    tf = Transform.from_node(node)
+    norm = float(np.linalg.norm(tf.t))
+    if norm < METRES_LIKE_MM:
+        raise node.error(f"translation t {[round(float(v), 4) for v in tf.t]} (|t| = "
+                         f"{norm:.3g}) looks like metres: the vehicle frame is in millimetres")
+    return tf
 
 
-def _database_url(node: YamlNode) -> str:
-    return node.mapping(("url",), required=("url",))["url"].text()
+def _baseline(calibration: StereoPair, node: YamlNode) -> StereoPair:
+    """A pair whose baseline is not 20-2000 mm has a calibration in other units (metres)."""
+    b = float(np.linalg.norm(calibration.T))
+    if not BASELINE_MM[0] <= b <= BASELINE_MM[1]:
+        raise node.error(f"stereo baseline {b:.4g} mm is not plausible "
+                         f"({BASELINE_MM[0]:g}-{BASELINE_MM[1]:g} mm): T must be in millimetres")
+    return calibration
+
+
+def _database_url(node: YamlNode, base: Path) -> str:
+    """The database URL; a relative SQLite path is relative to the station file, like every
+    other path in it (not to the daemon's working directory)."""
+    url = node.mapping(("url",), required=("url",))["url"].text()
+    prefix = "sqlite:///"
+    if url.startswith(prefix) and not url.startswith(prefix + "/") \
+            and url[len(prefix):] not in ("", ":memory:"):
+        return prefix + str(base.resolve() / url[len(prefix):])
+    return url
 
 
 def _records(node: YamlNode, base: Path) -> RecordsConfig:
     r = node.mapping(("images_dir", "save_images"))
     return RecordsConfig(_path(r["images_dir"], base) if "images_dir" in r else None,
                          r["save_images"].flag() if "save_images" in r else False)
+
+
+def _missing(root: YamlNode, key: str) -> None:
+    """A required section is missing: never fall back to simulated devices silently."""
+    raise root.error(f"missing section '{key}': a station file names its {key} "
+                     "(write sim:// URLs explicitly for a simulated station)")
 
 
 def _pair_items(node: YamlNode) -> list[tuple[str, YamlNode]]:
@@ -262,9 +306,10 @@ class _Reader:
     checks device URLs against the driver registries (see :func:`device_url`).
     """
 
-    def __init__(self, base: Path, *, collect: bool) -> None:
+    def __init__(self, base: Path, *, collect: bool, require_devices: bool = False) -> None:
         self.base = base
         self.collect = collect
+        self.require_devices = require_devices
         self.errors: list[ConfigError] = []
         self.warnings: list[ConfigError] = []
         self.top: dict[str, YamlNode] = {}
@@ -307,7 +352,12 @@ class _Reader:
         """The config of the file at ``path``; an unreadable or malformed file is raised.
 
         The sections are read in this order (the loader's first error is the first here)."""
-        self.top = self.sections(YamlNode.load(path))
+        root = YamlNode.load(path)
+        self.top = self.sections(root)
+        if self.require_devices and isinstance(root.value(), dict):
+            for key in REQUIRED_KEYS:
+                if key not in self.top:
+                    self.guard(None, _missing, root, key)
         d, base, check = StationConfig(), self.base, self.collect
         marker = self.section("marker", d.marker, MarkerSpec.from_node)
         vision = self.section("vision", d.vision, partial(VisionParams.from_node, base_dir=base))
@@ -321,7 +371,8 @@ class _Reader:
             wrench=self.section("wrench", d.wrench,
                                 partial(WrenchConfig.from_node, check_url=check)),
             matching=self.section("matching", d.matching, MatchingConfig.from_node),
-            database_url=self.section("database", d.database_url, _database_url),
+            database_url=self.section("database", d.database_url,
+                                      partial(_database_url, base=base)),
             bolts_path=self.section("bolts", d.bolts_path,
                                     partial(_existing, base=base, what="bolt file")),
             records=self.section("records", d.records, partial(_records, base=base)),
@@ -365,6 +416,8 @@ class _Reader:
             tv = self.guard(None, _load_transform, tv_path)
         calibration = self.guard(None, StereoPair.load, cal_path) \
             if cal_path is not None else None
+        if calibration is not None:
+            calibration = self.guard(None, _baseline, calibration, m["calibration"])
         if len(self.errors) > errors_before or skew_ms is None or cal_path is None \
                 or calibration is None or tv_path is None:
             return None
@@ -376,13 +429,17 @@ class _Reader:
                           sides["right"], skew_ms / 1e3)
 
 
-def load_station_config(path: str | Path | None) -> StationConfig:
+def load_station_config(path: str | Path | None, *, station: bool = False) -> StationConfig:
     """Read a station config; ``None`` gives the built-in defaults.  The first error is raised
-    (a :class:`ConfigError` naming file, line and key); :func:`check_station` lists them all."""
+    (a :class:`ConfigError` naming file, line and key); :func:`check_station` lists them all.
+
+    ``station``: the file runs a station (the daemon), so its devices (``cameras``, ``pairs``,
+    ``lift``, ``wrench``) must be written; tools that only read its vision or pairs
+    (``detect``, ``localize``) take a file without them."""
     if path is None:
         return StationConfig()
     p = Path(path)
-    return _Reader(p.parent, collect=False).read(p)
+    return _Reader(p.parent, collect=False, require_devices=station).read(p)
 
 
 def check_station(path: str | Path) -> StationCheck:
@@ -395,7 +452,7 @@ def check_station(path: str | Path) -> StationCheck:
     malformed file is one error.
     """
     p = Path(path)
-    reader = _Reader(p.parent, collect=True)
+    reader = _Reader(p.parent, collect=True, require_devices=True)
     try:
         cfg = reader.read(p)
     except ConfigError as exc:

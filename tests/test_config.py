@@ -36,11 +36,32 @@ def test_a_register_driven_wrench_takes_its_register_map(tmp_path):
         load_station_config(tmp_path / "s.yaml")
 
 
+def _close(a, b, path="") -> None:
+    """Equal structures, numbers within 1e-9 (relative or absolute): another CPU's last bit
+    (-1.7e-18 for 0.0) is the same file."""
+    if isinstance(a, dict):
+        assert isinstance(b, dict) and sorted(a) == sorted(b), path
+        for k in a:
+            _close(a[k], b[k], f"{path}.{k}")
+    elif isinstance(a, list):
+        assert isinstance(b, list) and len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            _close(x, y, f"{path}[{i}]")
+    elif isinstance(a, float | int) and not isinstance(a, bool):
+        assert isinstance(b, float | int) and not isinstance(b, bool), path
+        assert b == pytest.approx(a, rel=1e-9, abs=1e-9), path
+    else:
+        assert a == b, path
+
+
 def test_sim_station_files_are_the_generators_output():
+    import yaml
+
     from stationd.sim.station_files import files
 
     for name, text in files().items():
-        assert (ROOT / "config" / "sim" / name).read_text() == text, name
+        committed = (ROOT / "config" / "sim" / name).read_text()
+        _close(yaml.safe_load(text), yaml.safe_load(committed), name)
 
 
 def test_sim_station_config_loads_with_its_four_pairs():
@@ -91,6 +112,16 @@ def _edit(path, old, new):
     return path
 
 
+def _sub(path, pattern, new):
+    """``_edit`` with a regular expression (values the generator may change)."""
+    import re
+
+    text = path.read_text()
+    assert re.search(pattern, text), pattern
+    path.write_text(re.sub(pattern, new, text, count=1))
+    return path
+
+
 def _line(path, needle, nth=0):
     """1-based line of the nth line of the file containing ``needle``."""
     return [i + 1 for i, line in enumerate(path.read_text().splitlines()) if needle in line][nth]
@@ -130,9 +161,65 @@ def test_unknown_top_level_keys_are_each_reported_and_the_rest_still_checked(sim
     station = _edit(sim_copy / "station.yaml", "lift: {url: 'sim://lift'}",
                     "lifts: {url: 'sim://lift'}\ntool_: 1")
     _edit(station, "stable_frames: 3", "stable_frames: 0")
-    keys = [(e.line, e.key) for e in check_station(station).errors]
+    errors = check_station(station).errors
+    assert "missing section 'lift'" in str(errors[0]) and errors[0].key is None
+    keys = [(e.line, e.key) for e in errors[1:]]
     assert keys == [(_line(station, "lifts:"), "lifts"), (_line(station, "tool_:"), "tool_"),
                     (_line(station, "matching:"), "matching.stable_frames")]
+
+
+def test_a_station_file_names_its_devices(sim_copy):
+    """Without lift: or wrench: a station would run simulated devices unnoticed."""
+    station = _edit(sim_copy / "station.yaml", "lift: {url: 'sim://lift'}", "")
+    _edit(station, "wrench: {url: 'sim://wrench'}", "")
+    messages = [str(e) for e in check_station(station).errors]
+    assert len(messages) == 2, messages
+    assert "missing section 'lift'" in messages[0] and "missing section 'wrench'" in messages[1]
+    with pytest.raises(ConfigError, match="missing section 'lift'"):
+        load_station_config(station, station=True)
+    assert load_station_config(station).pairs  # detect/localize read vision and pairs only
+
+
+@pytest.mark.parametrize(("old", "new", "key", "message"), [
+    (r"max_age_s: [0-9.]+", "max_age_s: 500", "matching.max_age_s", "500 s is not plausible"),
+    (r"max_age_s: [0-9.]+", "max_age_s: 0.001", "matching.max_age_s",
+     "0.001 s is not plausible"),
+    (r"length_mm: 300\.0", "length_mm: 0.3", "tool.length_mm",
+     "a tool length of 0.3 mm is not plausible (marker to socket tip: 50-1000 mm)"),
+])
+def test_implausible_values_are_refused_with_their_units(sim_copy, old, new, key, message):
+    station = _sub(sim_copy / "station.yaml", old, new)
+    [error] = check_station(station).errors
+    assert error.key == key and message in str(error), str(error)
+    with pytest.raises(ConfigError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        load_station_config(station)
+
+
+def test_calibrations_in_metres_are_refused(sim_copy):
+    """A pair calibration whose T is in metres (baseline 0.4) and a vehicle transform whose t
+    is in metres: each refused, naming the unit, in its own file."""
+    text = (sim_copy / "pair1.yaml").read_text()
+    _edit(sim_copy / "pair1.yaml", "T: [-384.8296876873498, 0.0, 109.11512944801376]",
+          "T: [-0.3848296876873498, 0.0, 0.10911512944801376]")
+    assert text != (sim_copy / "pair1.yaml").read_text()
+    _sub(sim_copy / "pair2.vehicle.yaml", r"(?m)^t: .*$", "t: [0.9, 0.75, -1.3]")
+    errors = check_station(sim_copy / "station.yaml").errors
+    texts = [str(e) for e in errors]
+    assert any("stereo baseline 0.4 mm is not plausible (20-2000 mm)" in t for t in texts), texts
+    assert any("pair2.vehicle.yaml" in t and "looks like metres" in t for t in texts), texts
+    assert len(texts) == 2, texts
+
+
+def test_a_relative_sqlite_path_is_relative_to_the_station_file(sim_copy, tmp_path,
+                                                                 monkeypatch):
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    cfg = load_station_config(sim_copy / "station.yaml")
+    assert cfg.database_url == f"sqlite:///{sim_copy.resolve() / 'stationd-sim.db'}"
+    _edit(sim_copy / "station.yaml", "sqlite:///stationd-sim.db", "sqlite:////var/lib/s.db")
+    assert load_station_config(sim_copy / "station.yaml").database_url == \
+        "sqlite:////var/lib/s.db"
 
 
 def test_files_the_station_names_are_checked(sim_copy):

@@ -20,6 +20,7 @@ from stationd.vision.types import Refusal
 from stationd.yamlio import YamlNode
 
 RULES = ("axis", "perpendicular")
+TOOL_LENGTH_MM = (50.0, 1000.0)  # marker to socket tip: a real wrench, in millimetres
 
 
 @dataclass(frozen=True)
@@ -38,7 +39,12 @@ class ToolGeometry:
         m = node.mapping(("length_mm", "offset_mm", "max_tilt_deg", "rule"),
                          required=("length_mm",))
         off = m["offset_mm"].vector([2]) if "offset_mm" in m else np.zeros(2)
-        return cls(length_mm=m["length_mm"].number(lo=0.0, hi=2000.0),
+        length = m["length_mm"].number()
+        if not TOOL_LENGTH_MM[0] <= length <= TOOL_LENGTH_MM[1]:
+            raise m["length_mm"].error(
+                f"a tool length of {length:g} mm is not plausible (marker to socket tip: "
+                f"{TOOL_LENGTH_MM[0]:g}-{TOOL_LENGTH_MM[1]:g} mm); lengths are in millimetres")
+        return cls(length_mm=length,
                    offset_mm=(float(off[0]), float(off[1])),
                    max_tilt_deg=m["max_tilt_deg"].number(lo=0.0, hi=60.0)
                    if "max_tilt_deg" in m else 10.0,

@@ -193,7 +193,8 @@ def test_config_check_of_a_broken_station_lists_every_error(run, tmp_path):
     station.write_text("cameras:\n  c1: {url: 'sim://p/left'}\n"
                        "pairs:\n  p: {calibration: p.yaml, left: c1, right: c2}\n"
                        "wrench: {url: 'torque://w'}\n"
-                       "bolts: bolts.yaml\n")
+                       "bolts: bolts.yaml\n"
+                       "lift: {url: 'sim://lift'}\n")
     (tmp_path / "bolts.yaml").write_text(BASE.replace("id: B2", "id: B1"))
     both = tmp_path / "both.yaml"
     both.write_text("cameras: {}\nmodels: {}\n")
