@@ -1,7 +1,9 @@
 """The process-parameter database: vehicle models, bolts, versioned parameters, vehicles and
 tightening records.
 
-- ``boltfile``: bolts.yaml -> validated ``bolts`` values (all errors, with file, line, key);
+- ``errors``: the layer's own errors (``db`` imports nothing from ``stationd``; the bolt
+  table's YAML is read by ``stationd.boltfile``);
+- ``spacing``: the one bolt-spacing rule (the table's check and the matcher's);
 - ``bolts``: the bolt table as typed values and its YAML form (the export);
 - ``models``: the SQLAlchemy schema; ``migrations``: the alembic revisions that create it;
 - ``engine``, ``migrate``: any SQLAlchemy URL, SQLite in WAL mode with foreign keys on,

@@ -1,6 +1,6 @@
 """The bolt table as typed values, and its YAML form (what ``stationd db export`` writes).
 
-The same types come out of the file checker (``db.boltfile``) and out of the database
+The same types come out of the file checker (``stationd.boltfile``) and out of the database
 (``Repository.table()``), so "import, export, import again changes nothing" is a comparison of
 two equal values.  Units are fixed and never written next to a number: positions mm in the
 vehicle frame, torque N m, angle degrees.
@@ -133,7 +133,7 @@ def _bolt(b: BoltSpec, programs: dict[int, Pset]) -> dict[str, Any]:
 
 
 def dump_bolts(table: BoltTable, header: str = "") -> str:
-    """The table as bolts.yaml text, which ``db.boltfile`` reads back to an equal table."""
+    """The table as bolts.yaml text, which ``stationd.boltfile`` reads back to an equal table."""
     globals_ = {p.number: p for p in table.psets}
     doc: dict[str, Any] = {}
     if table.psets:

@@ -24,7 +24,7 @@ from sqlalchemy import Engine, create_engine, event, make_url
 from sqlalchemy.engine import Connection
 from sqlalchemy.exc import ArgumentError, NoSuchModuleError
 
-from stationd.errors import InputError
+from db.errors import DataError
 
 DEFAULT_URL = "sqlite:///stationd.db"
 BUSY_TIMEOUT_MS = 10_000
@@ -32,14 +32,14 @@ _IMMEDIATE = "stationd_begin_immediate"
 
 
 def make_engine(url: str = DEFAULT_URL) -> Engine:
-    """An engine for ``url``; a malformed URL or an unknown driver is an :class:`InputError`."""
+    """An engine for ``url``; a malformed URL or an unknown driver is an :class:`DataError`."""
     try:
         parsed = make_url(url)
         engine = create_engine(parsed)
     except (ArgumentError, NoSuchModuleError, ValueError) as exc:
-        raise InputError(f"database URL {url!r}: {exc}") from None
+        raise DataError(f"database URL {url!r}: {exc}") from None
     except ImportError as exc:
-        raise InputError(f"database URL {url!r}: driver not installed ({exc.name})") from None
+        raise DataError(f"database URL {url!r}: driver not installed ({exc.name})") from None
     if engine.dialect.name == "sqlite":
         _setup_sqlite(engine)
     return engine

@@ -13,7 +13,6 @@ from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import datetime
-from pathlib import Path
 from types import TracebackType
 from typing import Any, Self
 
@@ -22,26 +21,21 @@ from sqlalchemy import Engine, select
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session
 
-from db.boltfile import DEFAULT_TOLERANCE_MM, load_bolts
 from db.bolts import BoltTable, Parameters, dump_bolts
 from db.engine import DEFAULT_URL, make_engine, writer
+from db.errors import DatabaseError, DataError, NotFoundError, VehicleClosedError
 from db.importer import ImportReport, current_version, import_table, parameters_of, read_table
 from db.migrate import upgrade
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel, utcnow
 from db.report import VehicleInfo, VehicleReport, build_report
-from stationd.errors import InputError, StationError
 
 EXPORT_HEADER = ("stationd bolt table, exported from the process-parameter database.\n"
                  "Units: positions mm (vehicle frame), torque N m, angle degrees.")
 VIN_MAX = 32
 
 
-class DatabaseError(StationError):
-    """The database cannot be opened, read or written (locked, full, corrupt, unreachable)."""
-
-
-class NotFoundError(InputError):
-    """A VIN, model or bolt that the database does not hold."""
+__all__ = ["BoltInfo", "DataError", "DatabaseError", "NotFoundError", "Repository",
+           "VehicleClosedError"]
 
 
 @dataclass(frozen=True)
@@ -109,17 +103,13 @@ class Repository:
                                 f"{_reason(exc)}") from None
 
     # -- bolt table -----------------------------------------------------------------------
-    def import_bolts(self, source: str | Path | BoltTable, *,
-                     tolerance_mm: float = DEFAULT_TOLERANCE_MM) -> ImportReport:
-        """Validate and import a bolt file (or a checked table), all or nothing.
+    def import_bolts(self, table: BoltTable, *, where: str | None = None) -> ImportReport:
+        """Import a checked bolt table (``stationd.boltfile`` reads and checks the file; ``where``
+        names it in the parameter versions), all or nothing.
 
-        The file is the whole table: models and bolts it no longer lists are removed (kept as
-        retired while records refer to them).  Importing the same file again changes nothing.
+        The table is the whole table: models and bolts it no longer lists are removed (kept as
+        retired while records refer to them).  Importing the same table again changes nothing.
         """
-        if isinstance(source, BoltTable):
-            table, where = source, None
-        else:
-            table, where = load_bolts(source, tolerance_mm=tolerance_mm), str(source)
         with self._session(write=True) as s:
             return import_table(s, table, where)
 
@@ -160,12 +150,13 @@ class Repository:
                 s.add(v)
                 s.flush()
             elif v.model_id != m.id:
-                raise InputError(f"vehicle {vin} is already known as model {v.model.name}, "
+                raise DataError(f"vehicle {vin} is already known as model {v.model.name}, "
                                  f"not {model}")
             elif v.ended_at is not None:
                 if not reopen:
-                    raise InputError(f"vehicle {vin} was closed at {v.ended_at:%Y-%m-%d %H:%M:%S}"
-                                     " UTC; reopen it to tighten again")
+                    raise VehicleClosedError(
+                        f"vehicle {vin} was closed at {v.ended_at:%Y-%m-%d %H:%M:%S} UTC; "
+                        "reopen it to tighten again", vin=vin)
                 v.ended_at = None
             return VehicleInfo(v.vin, model, v.started_at, v.ended_at)
 
@@ -186,10 +177,10 @@ class Repository:
         targets.
         """
         if len(position_mm) != 3:
-            raise InputError("position_mm: expected x, y, z")
+            raise DataError("position_mm: expected x, y, z")
         for name, t in (("sent_at", sent_at), ("result_at", result_at)):
             if t is not None and t.tzinfo is None:
-                raise InputError(f"{name}: a timestamp with a timezone (UTC) is needed")
+                raise DataError(f"{name}: a timestamp with a timezone (UTC) is needed")
         with self._session(write=True) as s:
             v = _vehicle(s, vin)
             if tightening_id is not None:  # a result the controller sent again: stored once
@@ -199,7 +190,7 @@ class Repository:
                 if known is not None:
                     return known
             if v.ended_at is not None:
-                raise InputError(f"vehicle {vin} is closed: a tightening cannot be recorded")
+                raise DataError(f"vehicle {vin} is closed: a tightening cannot be recorded")
             b = s.scalar(select(Bolt).where(Bolt.model_id == v.model_id, Bolt.code == bolt,
                                             Bolt.removed_at.is_(None)))
             if b is None:
@@ -207,7 +198,7 @@ class Repository:
             version = current_version(b) if parameters_id is None \
                 else s.get(ProcessParameters, parameters_id)
             if version is None or version.bolt_id != b.id:
-                raise InputError(f"parameter version {parameters_id} is not one of bolt {bolt}")
+                raise DataError(f"parameter version {parameters_id} is not one of bolt {bolt}")
             sent = dict(params_sent) if params_sent is not None \
                 else _params_json(parameters_of(version))
             x, y, z = (float(c) for c in position_mm)  # plain floats: NumPy scalars welcome
@@ -251,7 +242,7 @@ def _opt_float(v: float | None) -> float | None:
 
 def _check_vin(vin: str) -> None:
     if not vin or len(vin) > VIN_MAX or not vin.isprintable() or any(c.isspace() for c in vin):
-        raise InputError(f"VIN {vin!r}: 1-{VIN_MAX} printable characters without spaces")
+        raise DataError(f"VIN {vin!r}: 1-{VIN_MAX} printable characters without spaces")
 
 
 def _model(s: Session, name: str) -> VehicleModel:

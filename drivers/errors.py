@@ -6,10 +6,13 @@ and reconnects with backoff; commands print it as one line and exit non-zero.
 
 from __future__ import annotations
 
-from stationd.errors import StationError
+
+class DriverError(Exception):
+    """Base of every error of the device layer (``drivers`` imports nothing from ``stationd``;
+    the station prints these as one line, or turns them into a fault)."""
 
 
-class DeviceError(StationError):
+class DeviceError(DriverError):
     """A device failed; ``device`` names it (its URL), ``code`` is the device's own error code."""
 
     def __init__(self, message: str, *, device: str | None = None,

@@ -16,11 +16,9 @@ from __future__ import annotations
 
 import math
 import struct
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, replace
-from typing import Any, Literal
-
-from stationd.yamlio import YamlNode
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Literal
 
 #: register types: struct code and number of 16-bit registers
 NUMBER_TYPES: dict[str, tuple[str, int]] = {
@@ -150,34 +148,3 @@ def check_text(name: str, text: Text) -> None:
         raise MapError(name, f"length {text.length} is out of range [1, 250]")
     if text.byte_order not in ORDERS:
         raise MapError(name, f"byte_order {text.byte_order!r} is not big or little")
-
-
-# -- station.yaml: every key optional, the rest of a field keeps its default -------------------
-def number_from_node(node: YamlNode, default: Number, types: Sequence[str],
-                     keys: Sequence[str] = ("address", "type", "scale", "offset")) -> Number:
-    """``default`` with what ``node`` gives of ``keys``; a type must be one of ``types``."""
-    sub = node.mapping(keys)
-    given: dict[str, Any] = {k: v.number() for k, v in sub.items() if k in ("scale", "offset")}
-    if "address" in sub:
-        given["address"] = sub["address"].integer(lo=0, hi=65535)
-    if "type" in sub:
-        given["type"] = sub["type"].text(types)
-    return replace(default, **given)
-
-
-def bit_from_node(node: YamlNode, default: Bit) -> Bit:
-    sub = node.mapping(("address", "bit"))
-    return replace(default, **{k: v.integer(lo=0, hi=65535 if k == "address" else 15)
-                               for k, v in sub.items()})
-
-
-def text_from_node(node: YamlNode, default: Text) -> Text:
-    sub = node.mapping(("address", "length", "byte_order"))
-    given: dict[str, Any] = {}
-    if "address" in sub:
-        given["address"] = sub["address"].integer(lo=0, hi=65535)
-    if "length" in sub:
-        given["length"] = sub["length"].integer(lo=1, hi=2 * MAX_READ)
-    if "byte_order" in sub:
-        given["byte_order"] = sub["byte_order"].text(ORDERS)
-    return replace(default, **given)

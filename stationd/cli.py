@@ -16,9 +16,14 @@ from typing import Any, NoReturn
 
 import numpy as np
 
+from db.errors import DbError
+from drivers.errors import DriverError
 from stationd.errors import InputError, StationError
 
 EXIT_OK, EXIT_NOT_FOUND, EXIT_BAD_INPUT = 0, 1, 2
+#: what a command reports as one line (exit 2): the station's errors and those of the layers
+#: below it, which have their own roots (``db`` and ``drivers`` import nothing from stationd)
+REPORTED: tuple[type[Exception], ...] = (StationError, DbError, DriverError)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -279,7 +284,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     func: Callable[[argparse.Namespace], int] = args.func
     try:
         return func(args)
-    except StationError as exc:
+    except REPORTED as exc:
         sys.stderr.write(f"stationd: error: {exc}\n")
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

@@ -24,9 +24,10 @@ from drivers import camera as camera_drivers
 from drivers import lift as lift_drivers
 from drivers import wrench as wrench_drivers
 from drivers.errors import UrlError
-from drivers.lift.base import MapError, RegisterMap
+from drivers.lift.base import RegisterMap
 from drivers.url import parse_url
 from drivers.wrench.modbus_map import WrenchRegisterMap
+from stationd.devicemaps import lift_map, wrench_map
 from stationd.errors import ConfigError, InputError
 from stationd.geometry.camera import StereoPair
 from stationd.geometry.frames import Transform
@@ -37,7 +38,7 @@ from stationd.vision.params import VisionParams
 from stationd.yamlio import YamlNode
 
 if TYPE_CHECKING:
-    from db.boltfile import BoltCheck
+    from stationd.boltfile import BoltCheck
 
 T = TypeVar("T")
 P = ParamSpec("P")
@@ -101,7 +102,7 @@ class WrenchConfig:
         """``check_url``: check the URL's form and scheme now (see :func:`device_url`)."""
         m = node.mapping(("url", "registers"))
         url = device_url(m["url"], "wrench", check=check_url) if "url" in m else cls.url
-        regs = WrenchRegisterMap.from_node(m["registers"]) if "registers" in m else None
+        regs = wrench_map(m["registers"]) if "registers" in m else None
         if regs is not None and "modbus" not in parse_url(url).scheme:
             raise m["registers"].error(f"a register map is for a Modbus controller, not "
                                        f"{url}")
@@ -132,10 +133,7 @@ class LiftConfig:
         """``check_url``: check the URL's form and scheme now (see :func:`device_url`)."""
         m = node.mapping(("url", "registers"))
         url = device_url(m["url"], "lift", check=check_url) if "url" in m else cls.url
-        try:
-            regs = RegisterMap.from_node(m["registers"]) if "registers" in m else RegisterMap()
-        except MapError as exc:
-            raise m["registers"].error(str(exc)) from None
+        regs = lift_map(m["registers"]) if "registers" in m else RegisterMap()
         return cls(url=url, registers=regs)
 
 
@@ -460,7 +458,7 @@ def check_station(path: str | Path) -> StationCheck:
     errors = _in_order(reader.errors, str(p))
     bolts = None
     if cfg.bolts_path is not None:
-        from db.boltfile import check_bolts
+        from stationd.boltfile import check_bolts
 
         try:
             bolts = check_bolts(cfg.bolts_path, tolerance_mm=cfg.matching.tolerance_mm)

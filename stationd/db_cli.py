@@ -67,7 +67,7 @@ def _open(url: str, *, must_exist: bool) -> Repository:
 
 # -- db import / export / report -------------------------------------------------------------
 def cmd_db_import(args: argparse.Namespace) -> int:
-    from db.boltfile import check_bolts
+    from stationd.boltfile import check_bolts
 
     result = check_bolts(args.file, tolerance_mm=args.tolerance)
     if result.errors:
@@ -75,8 +75,9 @@ def cmd_db_import(args: argparse.Namespace) -> int:
         sys.stderr.write(f"stationd: error: {args.file}: {len(result.errors)} error(s), "
                          "nothing imported\n")
         return EXIT_BAD_INPUT
+    assert result.table is not None  # noqa: S101 - a check without errors holds the table
     with _open(args.db, must_exist=False) as repo:
-        report = repo.import_bolts(args.file, tolerance_mm=args.tolerance)
+        report = repo.import_bolts(result.table, where=str(args.file))
     if args.json:
         sys.stdout.write(json.dumps({"changes": report.has_changes, **report.to_json()}) + "\n")
     else:
@@ -153,7 +154,7 @@ def cmd_config_check(args: argparse.Namespace) -> int:
 def _check_file(name: str, tolerance_mm: float,
                 ) -> tuple[str, list[ConfigError], list[ConfigError]]:
     """(summary when valid, errors, warnings) of one file, a station file or a bolt table."""
-    from db.boltfile import check_bolts
+    from stationd.boltfile import check_bolts
     from stationd.config import check_station
 
     try:
@@ -183,7 +184,7 @@ def file_kind(path: str | Path) -> str:
     """
     import yaml
 
-    from db.boltfile import TOP_KEYS
+    from stationd.boltfile import TOP_KEYS
     from stationd.config import STATION_KEYS
     from stationd.yamlio import YamlNode
 

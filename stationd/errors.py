@@ -34,3 +34,4 @@ class ConfigError(InputError):
 
 class ImageError(InputError):
     """An image that cannot be read or has the wrong shape or channel count."""
+

@@ -27,3 +27,10 @@ def test_ruff_clean():
 def test_mypy_clean():
     r = subprocess.run([_tool("mypy")], cwd=ROOT, capture_output=True, text=True)
     assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_layers_hold():
+    """import-linter's contracts (pyproject.toml): drivers and db import nothing from stationd,
+    vision and geometry nothing from devices, the database or the station."""
+    r = subprocess.run([_tool("lint-imports")], cwd=ROOT, capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr

@@ -19,14 +19,12 @@ import struct
 import time
 from abc import abstractmethod
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
-from typing import Any
+from dataclasses import dataclass, field
 
 from drivers import registers
 from drivers.errors import DeviceError, ProtocolError
 from drivers.lifecycle import Device
 from drivers.registers import MAX_READ, NUMBER_TYPES, ORDERS, Bit, MapError, Number, Text, spans
-from stationd.yamlio import YamlNode
 
 __all__ = ["MAX_READ", "NUMBER_TYPES", "ORDERS", "TABLES", "Bit", "Lift", "LiftState",
            "MapError", "Number", "RegisterMap", "Text"]
@@ -182,35 +180,6 @@ class RegisterMap:
                 raise ValueError(f"VIN {state.vin!r} is longer than {self.vin.length} characters")
             out.update(self.vin.pack(text))
         return out
-
-    # -- configuration --------------------------------------------------------------------
-    @classmethod
-    def from_node(cls, node: YamlNode) -> RegisterMap:
-        """A map from station.yaml; every key is optional and keeps its default, also inside
-        a field (``height: {address: 100}`` keeps type and scale)."""
-        names = [f.name for f in fields(cls)]
-        m = node.mapping(names)
-        default = cls()
-        kw: dict[str, Any] = {}
-        if "table" in m:
-            kw["table"] = m["table"].text(TABLES)
-        if "word_order" in m:
-            kw["word_order"] = m["word_order"].text(ORDERS)
-        for name in ("height", "model_code"):
-            if name in m:
-                kw[name] = registers.number_from_node(m[name], getattr(default, name),
-                                                      tuple(NUMBER_TYPES))
-        for name in ("at_working_height", "moving", "fault"):
-            if name in m:
-                kw[name] = registers.bit_from_node(m[name], getattr(default, name))
-        if "vin" in m:
-            kw["vin"] = None if m["vin"].value() is None else registers.text_from_node(
-                m["vin"], default.vin or Text(0))
-        try:
-            return cls(**kw)
-        except MapError as exc:
-            where = m.get(exc.field, node)
-            raise where.error(exc.message) from None
 
 
 class Lift(Device):

@@ -29,14 +29,12 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from datetime import datetime
-from typing import Any
 
 from drivers import registers
-from drivers.registers import ORDERS, Bit, MapError, Number, Text, spans
+from drivers.registers import Bit, MapError, Number, Text, spans
 from drivers.wrench.base import Status, TighteningResult
-from stationd.yamlio import YamlNode
 
 __all__ = ["ACK_CODES", "Bit", "MapError", "Number", "Text", "WrenchRegisterMap", "spans"]
 
@@ -219,32 +217,3 @@ class WrenchRegisterMap:
         if self.vin is None:
             return ""
         return self.vin.unpack(regs).rstrip(b"\0 ").decode("ascii", "replace")
-
-    # -- configuration --------------------------------------------------------------------
-    @classmethod
-    def from_node(cls, node: YamlNode) -> WrenchRegisterMap:
-        """A map from station.yaml; every key is optional and keeps its default, also inside
-        a field (``torque_target: {address: 40}`` keeps type and scale).  Counters take only
-        an address; ``vin: null`` says the controller has no VIN registers."""
-        m = node.mapping([f.name for f in fields(cls)])
-        default = cls()
-        kw: dict[str, Any] = {}
-        if "word_order" in m:
-            kw["word_order"] = m["word_order"].text(ORDERS)
-        for name in (*COUNTERS, *INTEGERS, *SCALED):
-            if name not in m:
-                continue
-            keys = ("address",) if name in COUNTERS else ("address", "type") \
-                if name in INTEGERS else ("address", "type", "scale", "offset")
-            kw[name] = registers.number_from_node(m[name], getattr(default, name),
-                                                  INTEGER_TYPES, keys)
-        for name in BITS:
-            if name in m:
-                kw[name] = registers.bit_from_node(m[name], getattr(default, name))
-        if "vin" in m:
-            kw["vin"] = None if m["vin"].value() is None else registers.text_from_node(
-                m["vin"], default.vin or Text(0, 25))
-        try:
-            return cls(**kw)
-        except MapError as exc:
-            raise m.get(exc.field, node).error(exc.message) from None

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from db.boltfile import load_bolts
+from stationd.boltfile import load_bolts
 from stationd.config import load_station_config
 from stationd.errors import InputError
 from stationd.sim.world import World, WrenchPose, wrench_at

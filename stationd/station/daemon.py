@@ -27,6 +27,7 @@ from drivers.camera.pair import StereoGrabber
 from drivers.errors import DeviceError, RefusedError
 from drivers.lift import open_lift
 from drivers.wrench import open_wrench
+from stationd.boltfile import import_bolts
 from stationd.config import PairConfig, StationConfig
 from stationd.geometry.stereo import localize
 from stationd.geometry.tool import BoltEnd, bolt_end, fuse
@@ -129,8 +130,8 @@ class Station:
     def open(self) -> None:
         self.repo = Repository.open(self.cfg.database_url)
         if self.cfg.bolts_path is not None:
-            r = self.repo.import_bolts(self.cfg.bolts_path,
-                                       tolerance_mm=self.cfg.matching.tolerance_mm)
+            r = import_bolts(self.repo, self.cfg.bolts_path,
+                             tolerance_mm=self.cfg.matching.tolerance_mm)
             log.info("bolt table %s: %d added, %d changed, %d unchanged, %d removed, "
                      "%d new parameter versions", self.cfg.bolts_path, len(r.added),
                      len(r.changed), len(r.unchanged), len(r.removed), len(r.new_versions))

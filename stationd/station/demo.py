@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from db.boltfile import load_bolts
 from drivers.wrench.sim import SimPset
+from stationd.boltfile import load_bolts
 from stationd.config import load_station_config
 from stationd.errors import InputError
 from stationd.sim.world import World, wrench_at

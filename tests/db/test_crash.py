@@ -10,6 +10,7 @@ import sys
 import time
 
 from db.repository import Repository
+from stationd.boltfile import import_bolts
 from tests.db.conftest import ROOT, record, url_of
 
 WRITER = """
@@ -27,7 +28,7 @@ for i in range(100000):
 def test_sigkilled_writer_leaves_every_committed_record(tmp_path, bolts_file):
     url = url_of(tmp_path / "station.db")
     with Repository.open(url) as repo:
-        repo.import_bolts(bolts_file)
+        import_bolts(repo, bolts_file)
         repo.start_vehicle("VIN1", "SEDAN")
         record(repo, "VIN1", "B2")
     env = {**os.environ, "PYTHONPATH": str(ROOT)}

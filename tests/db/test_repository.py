@@ -10,10 +10,11 @@ from sqlalchemy import func, select, text
 from sqlalchemy.exc import IntegrityError
 
 import db.importer
-from db.boltfile import load_bolts
+from db.errors import DataError
 from db.models import Bolt, ProcessParameters, TighteningRecord, VehicleModel
 from db.repository import DatabaseError, NotFoundError, Repository
-from stationd.errors import ConfigError, InputError
+from stationd.boltfile import import_bolts, load_bolts
+from stationd.errors import ConfigError
 from tests.db.conftest import BASE, EXAMPLE, record, url_of
 
 NEW_B1 = BASE.replace("target: 50, min: 45, max: 55", "target: 52, min: 45, max: 55")
@@ -40,12 +41,12 @@ def test_wal_and_foreign_keys_are_on(repo, tmp_path):
 
 
 def test_import_reports_and_second_import_changes_nothing(repo, bolts_file):
-    first = repo.import_bolts(bolts_file)
+    first = import_bolts(repo, bolts_file)
     assert first.models_added == ["SEDAN", "WAGON"]
     assert first.psets_added == ["pset 1", "SEDAN/pset 21"]
     assert first.added == ["SEDAN/B1", "SEDAN/B2", "SEDAN/B3", "WAGON/B1"]
     before = _counts(repo)
-    second = repo.import_bolts(bolts_file)
+    second = import_bolts(repo, bolts_file)
     assert not second.has_changes and second.lines() == ["no changes (4 bolt(s) unchanged)"]
     assert _counts(repo) == before
     infos = repo.bolts_for_model("SEDAN")
@@ -56,18 +57,18 @@ def test_import_reports_and_second_import_changes_nothing(repo, bolts_file):
 
 
 def test_a_file_with_an_error_changes_nothing(repo, bolts_file, tmp_path):
-    repo.import_bolts(bolts_file)
+    import_bolts(repo, bolts_file)
     before, table = _counts(repo), repo.table()
     bad = tmp_path / "bad.yaml"
     bad.write_text(NEW_B1.replace("id: B3", "id: B2"))  # a valid change plus a duplicate
     with pytest.raises(ConfigError, match="duplicate bolt id"):
-        repo.import_bolts(bad)
+        import_bolts(repo, bad)
     assert _counts(repo) == before and repo.table() == table
 
 
 def test_a_failure_halfway_through_rolls_everything_back(repo, bolts_file, tmp_path,
                                                          monkeypatch):
-    repo.import_bolts(bolts_file)
+    import_bolts(repo, bolts_file)
     before, table = _counts(repo), repo.table()
     changed = tmp_path / "changed.yaml"
     changed.write_text(NEW_B1.replace("name: three", "name: THREE")
@@ -83,33 +84,33 @@ def test_a_failure_halfway_through_rolls_everything_back(repo, bolts_file, tmp_p
 
     monkeypatch.setattr(db.importer._Importer, "sync_bolt", failing)
     with pytest.raises(RuntimeError, match="disk pulled"):
-        repo.import_bolts(changed)
+        import_bolts(repo, changed)
     assert _counts(repo) == before and repo.table() == table
     monkeypatch.undo()
-    report = repo.import_bolts(changed)
+    report = import_bolts(repo, changed)
     assert report.models_added == ["VAN"]
     assert report.changed == ["SEDAN/B1", "SEDAN/B3", "WAGON/B1"]
 
 
 def test_export_import_round_trip(repo, tmp_path):
-    repo.import_bolts(EXAMPLE)
+    import_bolts(repo, EXAMPLE)
     out = tmp_path / "exported.yaml"
     out.write_text(repo.export_bolts())
     assert load_bolts(out) == load_bolts(EXAMPLE)
-    assert not repo.import_bolts(out).has_changes
+    assert not import_bolts(repo, out).has_changes
     other = Repository.open(url_of(tmp_path / "other.db"))  # and into a fresh database
-    other.import_bolts(out)
+    import_bolts(other, out)
     assert other.export_bolts() == repo.export_bolts()
     other.close()
 
 
 def test_changed_parameters_of_a_bolt_with_records_become_a_new_version(repo, bolts_file):
-    repo.import_bolts(bolts_file)
+    import_bolts(repo, bolts_file)
     repo.start_vehicle("VIN1", "SEDAN")
     old = repo.bolts_for_model("SEDAN")[0]
     first = record(repo, "VIN1", "B1")
     bolts_file.write_text(NEW_B1.replace("target: 25, min: 23", "target: 26, min: 23"))
-    report = repo.import_bolts(bolts_file)
+    report = import_bolts(repo, bolts_file)
     assert report.psets_changed == ["pset 1"]
     assert report.new_versions == ["SEDAN/B1 v2 (v1: 1 record(s))"]  # B1 has a record
     assert sorted(report.changed) == ["SEDAN/B1", "SEDAN/B2", "WAGON/B1"]
@@ -132,11 +133,11 @@ def test_changed_parameters_of_a_bolt_with_records_become_a_new_version(repo, bo
     with repo.engine.connect() as c:
         rec = c.execute(select(TighteningRecord).where(TighteningRecord.id == second)).one()
         assert rec.parameters_id == new["B1"].parameters_id
-    assert not repo.import_bolts(bolts_file).has_changes
+    assert not import_bolts(repo, bolts_file).has_changes
 
 
 def test_removed_bolts_are_retired_when_referenced_else_deleted(repo, bolts_file):
-    repo.import_bolts(bolts_file)
+    import_bolts(repo, bolts_file)
     repo.start_vehicle("VIN1", "SEDAN")
     record(repo, "VIN1", "B2", ok=False)
     bolts_file.write_text(BASE.replace(
@@ -145,7 +146,7 @@ def test_removed_bolts_are_retired_when_referenced_else_deleted(repo, bolts_file
         "        angle: {target: 30, min: 10, max: 50}\n", "")
         .replace("  WAGON:\n    bolts:\n      - id: B1\n        name: one\n"
                  "        position: [0, 0, 0]\n        pset: 1\n", ""))
-    report = repo.import_bolts(bolts_file)
+    report = import_bolts(repo, bolts_file)
     assert report.removed == ["WAGON/B1", "SEDAN/B2"] and report.models_removed == ["WAGON"]
     assert [b.bolt_id for b in repo.bolts_for_model("SEDAN")] == ["B1", "B3"]
     assert repo.models() == ["SEDAN"]
@@ -159,21 +160,21 @@ def test_removed_bolts_are_retired_when_referenced_else_deleted(repo, bolts_file
     assert [(b.bolt_id, b.status, b.retired) for b in rep.bolts] == [
         ("B1", "missing", False), ("B2", "nok", True), ("B3", "missing", False)]
     bolts_file.write_text(BASE)
-    again = repo.import_bolts(bolts_file)
+    again = import_bolts(repo, bolts_file)
     assert again.added == ["SEDAN/B2", "WAGON/B1"] and again.models_added == ["WAGON"]
-    assert not repo.import_bolts(bolts_file).has_changes
+    assert not import_bolts(repo, bolts_file).has_changes
 
 
 def test_vehicle_cycle_and_close_summary(repo, bolts_file):
-    repo.import_bolts(bolts_file)
+    import_bolts(repo, bolts_file)
     info = repo.start_vehicle("WVW1234567890", "SEDAN")
     assert info.ended_at is None and info.started_at.tzinfo is not None
     assert repo.start_vehicle("WVW1234567890", "SEDAN") == info  # resumed after a restart
-    with pytest.raises(InputError, match="already known as model SEDAN"):
+    with pytest.raises(DataError, match="already known as model SEDAN"):
         repo.start_vehicle("WVW1234567890", "WAGON")
     with pytest.raises(NotFoundError, match="model 'TRUCK'"):
         repo.start_vehicle("V2", "TRUCK")
-    with pytest.raises(InputError, match="VIN"):
+    with pytest.raises(DataError, match="VIN"):
         repo.start_vehicle("has space", "SEDAN")
     when = datetime(2026, 1, 2, 3, 4, 5, tzinfo=UTC)
     record(repo, "WVW1234567890", "B1", ok=False, tightening_id=7, result_at=when,
@@ -183,7 +184,7 @@ def test_vehicle_cycle_and_close_summary(repo, bolts_file):
     record(repo, "WVW1234567890", "B2", ok=False)  # a double hit: the last result decides
     with pytest.raises(NotFoundError, match="bolt 'B9'"):
         record(repo, "WVW1234567890", "B9")
-    with pytest.raises(InputError, match="parameter version"):
+    with pytest.raises(DataError, match="parameter version"):
         record(repo, "WVW1234567890", "B3", parameters_id=repo.bolts_for_model("SEDAN")[0]
                .parameters_id)
     summary = repo.close_vehicle("WVW1234567890")
@@ -191,9 +192,9 @@ def test_vehicle_cycle_and_close_summary(repo, bolts_file):
     assert not summary.complete and summary.vehicle.ended_at is not None
     assert "1 ok, 1 NOK (B2), 1 missing (B3)" in summary.summary()
     assert repo.close_vehicle("WVW1234567890").vehicle.ended_at == summary.vehicle.ended_at
-    with pytest.raises(InputError, match="is closed"):
+    with pytest.raises(DataError, match="is closed"):
         record(repo, "WVW1234567890", "B3")
-    with pytest.raises(InputError, match="reopen"):
+    with pytest.raises(DataError, match="reopen"):
         repo.start_vehicle("WVW1234567890", "SEDAN")
     repo.start_vehicle("WVW1234567890", "SEDAN", reopen=True)
     record(repo, "WVW1234567890", "B2")
@@ -217,22 +218,22 @@ def test_open_errors_are_one_line_station_errors(tmp_path):
     junk.write_bytes(b"this is not a database" * 100)
     with pytest.raises(DatabaseError, match="file is not a database"):
         Repository.open(url_of(junk))
-    with pytest.raises(InputError, match="database URL"):
+    with pytest.raises(DataError, match="database URL"):
         Repository.open("not a url")
 
 
 def test_any_url_works_in_memory():
     with Repository.open("sqlite://") as r:
-        r.import_bolts(EXAMPLE)
+        import_bolts(r, EXAMPLE)
         assert len(r.bolts_for_model("SEDAN-A")) == 6
 
 
 def test_lift_codes_can_move_between_models_in_one_import(repo, bolts_file):
     bolts_file.write_text(BASE.replace("  WAGON:\n", "  WAGON:\n    code: 13\n"))
-    repo.import_bolts(bolts_file)
+    import_bolts(repo, bolts_file)
     bolts_file.write_text(BASE.replace("code: 12", "code: 13")
                           .replace("  WAGON:\n", "  WAGON:\n    code: 12\n"))
-    report = repo.import_bolts(bolts_file)
+    report = import_bolts(repo, bolts_file)
     assert report.models_changed == ["SEDAN", "WAGON"] and not report.changed
     assert (repo.model_for_code(12), repo.model_for_code(13)) == ("WAGON", "SEDAN")
 
@@ -240,7 +241,7 @@ def test_lift_codes_can_move_between_models_in_one_import(repo, bolts_file):
 def test_a_result_sent_again_is_recorded_once(repo, bolts_file):
     """A station killed after storing a result but before acknowledging it gets the result
     again from the controller: the same tightening id is one record, not two."""
-    repo.import_bolts(bolts_file)
+    import_bolts(repo, bolts_file)
     repo.start_vehicle("VINDUP", "SEDAN")
     first = record(repo, "VINDUP", "B1", tightening_id=77)
     assert record(repo, "VINDUP", "B1", tightening_id=77) == first

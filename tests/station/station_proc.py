@@ -23,7 +23,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from db.boltfile import load_bolts  # noqa: E402
+from stationd.boltfile import load_bolts  # noqa: E402
 from stationd.config import load_station_config  # noqa: E402
 from stationd.sim.world import World, wrench_at  # noqa: E402
 from stationd.station.run import serve  # noqa: E402

@@ -59,7 +59,7 @@ def _scenario(tmp_path, body, **wrench_kw):
 @pytest.mark.timeout(240)
 def test_refused_parameters_fault_then_the_bolt_is_skipped(tmp_path):
     cfg = load_station_config(SIM_CONFIG)
-    from db.boltfile import load_bolts
+    from stationd.boltfile import load_bolts
     bolt = load_bolts(cfg.bolts_path).models[0].bolts[0]
 
     async def body(st, world):

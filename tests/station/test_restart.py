@@ -19,10 +19,10 @@ from pathlib import Path
 
 import pytest
 
-from db.boltfile import load_bolts
 from db.repository import Repository
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
+from stationd.boltfile import load_bolts
 from stationd.station.demo import _sim_psets
 
 SIM = Path(__file__).resolve().parents[2] / "config" / "sim"

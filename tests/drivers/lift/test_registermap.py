@@ -12,6 +12,7 @@ from drivers.lift import FORMS, RegisterMap, lift_class, open_lift
 from drivers.lift.base import NUMBER_TYPES, Bit, LiftState, MapError, Number, Text
 from drivers.lift.modbus import ModbusLift, parse_modbus_url
 from drivers.lift.sim import SimLift
+from stationd.devicemaps import lift_map
 from stationd.errors import ConfigError
 from stationd.yamlio import YamlNode
 
@@ -108,12 +109,12 @@ def test_from_node_keeps_defaults_inside_fields():
     node = YamlNode.parse(
         "table: input\nword_order: little\nheight: {address: 20, type: float32}\n"
         "fault: {bit: 5}\nvin: null\n")
-    m = RegisterMap.from_node(node)
+    m = lift_map(node)
     assert m.table == "input" and m.word_order == "little"
     assert m.height == Number(20, "float32", scale=0.1)     # scale kept from the default
     assert m.fault == Bit(1, 5)
     assert m.vin is None
-    assert RegisterMap.from_node(YamlNode.parse("vin: {length: 8}\n")).vin == Text(3, 8)
+    assert lift_map(YamlNode.parse("vin: {length: 8}\n")).vin == Text(3, 8)
 
 
 @pytest.mark.parametrize(("text", "where"), [
@@ -125,7 +126,7 @@ def test_from_node_keeps_defaults_inside_fields():
 ])
 def test_from_node_errors_name_file_line_and_key(text, where):
     with pytest.raises(ConfigError) as info:
-        RegisterMap.from_node(YamlNode.parse(text, "lift.yaml"))
+        lift_map(YamlNode.parse(text, "lift.yaml"))
     assert str(info.value).startswith(where)
 
 

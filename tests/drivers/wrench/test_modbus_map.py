@@ -20,6 +20,7 @@ from drivers.wrench.modbus_map import (
     unpack_status,
 )
 from drivers.wrench.modbus_sim import SimParameters, SimRegisterController
+from stationd.devicemaps import wrench_map
 from stationd.errors import ConfigError
 from stationd.yamlio import YamlNode
 
@@ -75,11 +76,11 @@ def test_maps_that_cannot_work_are_refused(kw, field, text):
 def test_from_node_keeps_defaults_inside_fields():
     node = YamlNode.parse("torque_target: {address: 40, type: uint32}\n"
                           "tool_enable: {bit: 3}\nvin: null\nword_order: little\n")
-    m = WrenchRegisterMap.from_node(node)
+    m = wrench_map(node)
     assert m.torque_target == Number(40, "uint32", scale=0.01)
     assert m.tool_enable == Bit(4, 3) and m.vin is None and m.word_order == "little"
     assert m.pset == WrenchRegisterMap().pset
-    assert WrenchRegisterMap.from_node(YamlNode.parse("vin: {length: 17}")).vin == Text(16, 17)
+    assert wrench_map(YamlNode.parse("vin: {length: 17}")).vin == Text(16, 17)
 
 
 @pytest.mark.parametrize(("text", "where"), [
@@ -91,14 +92,14 @@ def test_from_node_keeps_defaults_inside_fields():
 ])
 def test_from_node_errors_name_file_line_and_key(text, where):
     with pytest.raises(ConfigError) as info:
-        WrenchRegisterMap.from_node(YamlNode.parse(text, "wrench.yaml"))
+        wrench_map(YamlNode.parse(text, "wrench.yaml"))
     assert str(info.value).startswith(where), info.value
 
 
 def test_a_plant_layout_end_to_end():
     """Status block first, ack code below ack and in its own span, 32-bit targets in little
     word order, no VIN: the handshake and results still work over the wire."""
-    m = WrenchRegisterMap.from_node(YamlNode.parse(
+    m = wrench_map(YamlNode.parse(
         "word_order: little\n"
         "tool_enabled: {address: 100, bit: 4}\nparameters_valid: {address: 100, bit: 5}\n"
         "ack_code: {address: 98}\nack: {address: 101}\nresult_counter: {address: 102}\n"

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from db.boltfile import check_bolts, check_bolts_text, load_bolts
 from db.bolts import Parameters, Window, dump_bolts
+from stationd.boltfile import check_bolts, check_bolts_text, load_bolts
 from stationd.errors import ConfigError, InputError
 from tests.db.conftest import BASE, EXAMPLE, line_of
 

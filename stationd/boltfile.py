@@ -25,6 +25,8 @@ from typing import TypeVar
 import yaml
 
 from db.bolts import BoltSpec, BoltTable, ModelSpec, Parameters, Pset, Window
+from db.importer import ImportReport
+from db.repository import Repository
 from db.spacing import min_spacing_mm, too_close
 from stationd.errors import ConfigError, InputError
 from stationd.yamlio import YamlNode
@@ -399,3 +401,10 @@ class _Checker:
                                             "per model)")
                 codes.setdefault(model.code, name)
         return BoltTable(tuple(models), tuple(p for p, _ in globals_.values()))
+
+
+def import_bolts(repo: Repository, path: str | Path, *,
+                 tolerance_mm: float = DEFAULT_TOLERANCE_MM) -> ImportReport:
+    """Check the bolt file at ``path`` (every error raised as the first one) and import it into
+    ``repo``, all or nothing."""
+    return repo.import_bolts(load_bolts(path, tolerance_mm=tolerance_mm), where=str(path))
