@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import glob
-import json
 import re
 import sys
 from pathlib import Path
@@ -18,6 +17,7 @@ from typing import Any
 import yaml
 
 from stationd.errors import InputError
+from stationd.jsonout import strict_json
 
 EXIT_OK = 0
 
@@ -61,7 +61,7 @@ def cmd_calibrate_stereo(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise InputError(f"{out}: cannot write: {exc.strerror}") from None
     if getattr(args, "json", False):
-        sys.stdout.write(json.dumps({**report.to_json(), "out": str(out)}) + "\n")
+        sys.stdout.write(strict_json({**report.to_json(), "out": str(out)}) + "\n")
     else:
         print(report.format())
         print(f"wrote {out}")
