@@ -180,7 +180,7 @@ def _parse_roi(text: str) -> tuple[int, int, int, int]:
 
 def cmd_tune_color(args: argparse.Namespace) -> int:
     from stationd.imageio import read_image
-    from stationd.vision.color import tune_hsv, write_hsv_yaml
+    from stationd.vision.color import tune_hsv, verify_marker, write_hsv_yaml
 
     image = read_image(args.reference)
     roi = _parse_roi(args.roi) if args.roi else None
@@ -189,7 +189,17 @@ def cmd_tune_color(args: argparse.Namespace) -> int:
         x, y, rw, rh = roi
         if x + rw > w or y + rh > h:
             raise InputError(f"--roi {args.roi}: outside the {w}x{h} image")
-    ranges = tune_hsv(image, roi)
+    # Only a verified marker's purple is measured, and the tuned box must still find it:
+    # otherwise nothing is written (exit 1, the reason on stderr).
+    reason = verify_marker(image, roi=roi)
+    if reason is None:
+        ranges = tune_hsv(image, roi)
+        lost = verify_marker(image, ranges, roi)
+        reason = None if lost is None else f"the tuned ranges would lose the marker ({lost})"
+    if reason is not None:
+        sys.stderr.write(f"stationd: tune-color: {args.reference}: {reason}; nothing "
+                         "written\n")
+        return EXIT_NOT_FOUND
     out = Path(args.out)
     write_hsv_yaml(out, ranges, source=str(args.reference), roi=roi)
     print(f"wrote {out}: h {list(ranges.h)}, s {list(ranges.s)}, v {list(ranges.v)}; "

@@ -266,3 +266,33 @@ def test_db_report_into_a_closed_pipe_is_quiet(tmp_path):
     err = p.stderr.read().decode()
     assert p.wait(timeout=60) in (0, 1)
     assert "Traceback" not in err and "BrokenPipe" not in err and err == ""
+
+
+@pytest.mark.parametrize("image", ["blank", "purple_no_ring"])
+def test_tune_color_refuses_an_image_without_a_verified_marker(files, capsys, tmp_path, image):
+    from stationd.vision.marker import PURPLE_RGB
+
+    d, v, _ = files
+    if image == "purple_no_ring":  # a purple patch where the marker was: purple, but no ring
+        img = v.image.copy()
+        x, y = (int(c) for c in v.centre_px)
+        img[y - 120:y + 120, x - 120:x + 120] = PURPLE_RGB[::-1]
+        cv2.imwrite(str(tmp_path / "purple.png"), img)
+        ref = tmp_path / "purple.png"
+    else:
+        ref = d / "blank.png"
+    out = tmp_path / "hsv.yaml"
+    code, text, err = _run(capsys, "tune-color", str(ref), "--out", str(out))
+    assert code == 1 and text == "" and "ring check" in _one_line(err)
+    assert not out.exists()
+
+
+def test_tune_color_never_widens_the_default_box(files, capsys, tmp_path):
+    from stationd.vision.segment import DEFAULT_HSV
+
+    d, _, _ = files
+    out = tmp_path / "hsv.yaml"
+    assert _run(capsys, "tune-color", str(d / "one.png"), "--out", str(out))[0] == 0
+    hsv = yaml.safe_load(out.read_text())["hsv"]
+    for key, (lo, hi) in (("h", DEFAULT_HSV.h), ("s", DEFAULT_HSV.s), ("v", DEFAULT_HSV.v)):
+        assert lo <= hsv[key][0] <= hsv[key][1] <= hi, key
