@@ -125,3 +125,9 @@ def test_probe_camera_sim_url_of_an_unknown_pair_exits_2(capsys):
     code = main(["probe", "camera", "sim://pair9/left"])
     err = capsys.readouterr().err
     assert code == 2 and "pair9" in err and err.count("\n") == 1
+
+
+def test_probe_url_that_urllib_cannot_split_exits_2(capsys):
+    assert main(["probe", "lift", "modbus-tcp://[::1"]) == 2  # found by tests/test_cli_fuzz
+    err = capsys.readouterr().err
+    assert "not a valid URL" in err and err.count("\n") == 1

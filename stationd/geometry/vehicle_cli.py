@@ -106,8 +106,11 @@ def cmd_calibrate_vehicle(args: argparse.Namespace) -> int:
     target = cfg.pairs[args.pair].to_vehicle_path
     header = (f"# {args.pair} -> vehicle frame, {kind} fit to {len(mine)} points from "
               f"{args.points}; RMS {fit.rms_mm:.3f} mm\n# x_vehicle = A x_pair + t (mm)\n")
-    target.write_text(header + yaml.safe_dump(fit.to_dict(), sort_keys=False,
-                                              default_flow_style=None))
+    try:
+        target.write_text(header + yaml.safe_dump(fit.to_dict(), sort_keys=False,
+                                                  default_flow_style=None))
+    except OSError as exc:
+        raise InputError(f"{target}: cannot write: {exc.strerror}") from None
     print(f"wrote {target}")
     return _cross_check(cfg, args.pair, fit, points)
 
