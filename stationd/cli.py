@@ -160,6 +160,10 @@ def _results_file(text: str) -> str:
     cannot be written would otherwise lose the run)."""
     import os
 
+    if Path(text).is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: is a folder; give a file name")
+    if Path(text).exists() and not os.access(text, os.W_OK):
+        raise argparse.ArgumentTypeError(f"{text}: exists and is not writable")
     folder = Path(text).parent
     if not folder.is_dir() or not os.access(folder, os.W_OK):
         raise argparse.ArgumentTypeError(f"{text}: folder {folder} does not exist or is not "

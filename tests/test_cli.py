@@ -115,6 +115,12 @@ def test_a_results_file_that_cannot_be_written_is_refused_before_the_run(bench, 
     assert "does not exist or is not writable" in err and err.count("\n") == 1
 
 
+@pytest.mark.parametrize("bench", ["vision", "chain", "station"])
+def test_a_results_file_that_is_a_folder_is_refused_before_the_run(bench, tmp_path, capsys):
+    code, out, err = _usage_error(capsys, "bench", bench, "--out", str(tmp_path))
+    assert code == 2 and out == "" and "is a folder" in _one_line(err)
+
+
 def test_console_script_usage_error_is_one_line():
     r = subprocess.run([sys.executable, "-m", "stationd", "detect"], capture_output=True,
                        text=True, timeout=60)
