@@ -58,7 +58,7 @@ def _write(path: Path, text: str) -> None:
 
 
 def run_demo(args: argparse.Namespace) -> int:
-    count = int(getattr(args, "cycles", 0) or 3)
+    count = int(getattr(args, "cycles", 3))  # 0 is refused, not taken for the default
     if count < 1:
         raise InputError("--cycles must be at least 1")
     rng = np.random.default_rng(args.seed)

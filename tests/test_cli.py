@@ -302,3 +302,9 @@ def test_tune_color_never_widens_the_default_box(files, capsys, tmp_path):
     hsv = yaml.safe_load(out.read_text())["hsv"]
     for key, (lo, hi) in (("h", DEFAULT_HSV.h), ("s", DEFAULT_HSV.s), ("v", DEFAULT_HSV.v)):
         assert lo <= hsv[key][0] <= hsv[key][1] <= hi, key
+
+
+@pytest.mark.parametrize("cycles", ["0", "-2"])
+def test_demo_vision_refuses_no_placements(cycles, capsys):
+    code, out, err = _run(capsys, "demo", "--vision", "--cycles", cycles)
+    assert code == 2 and out == "" and "--cycles" in _one_line(err)
