@@ -308,3 +308,14 @@ def test_tune_color_never_widens_the_default_box(files, capsys, tmp_path):
 def test_demo_vision_refuses_no_placements(cycles, capsys):
     code, out, err = _run(capsys, "demo", "--vision", "--cycles", cycles)
     assert code == 2 and out == "" and "--cycles" in _one_line(err)
+
+
+def test_every_command_prints_json_through_strict_json():
+    """A command module that called json.dumps itself would print NaN again."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / "stationd"
+    modules = [root / "cli.py", root / "probe.py", root / "probe_camera.py", root / "db_cli.py",
+               root / "demo.py", *sorted((root / "geometry").glob("*_cli.py"))]
+    for path in modules:
+        assert "json.dumps(" not in path.read_text(), path
