@@ -74,6 +74,10 @@ def _sim_world(url: str) -> Any:
     if pair not in cfg.pairs:
         raise UrlError(f"no pair {pair!r} in the simulated station ({SIM_CONFIG.name} has "
                        f"{', '.join(cfg.pairs)})", device=url)
+    from stationd import progress
+
+    progress.note(f"probe: rendering {url} through the simulated station ({SIM_CONFIG.parent.name}"
+                  "/station.yaml; a few seconds for 20 MP)")
     return World(cfg, seed=0)
 
 

@@ -328,6 +328,8 @@ def calibrate_stereo(left_paths: Sequence[str | Path], right_paths: Sequence[str
                                  f"{first[0]}x{first[1]}; all {side} images must have one size")
             corners.append(detect_corners(grey, board))
         views.append(ViewPair(str(lp), str(rp), corners[0], corners[1]))
+    progress.note(f"calibrating from {sum(v.left.found and v.right.found for v in views)} "
+                  f"of {len(views)} pairs ...")
     return calibrate_views(views, board, sizes["left"][:2], sizes["right"][:2], **options)
 
 
