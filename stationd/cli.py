@@ -45,17 +45,6 @@ def seed_arg(text: str) -> int:
     return value
 
 
-def positive_int(text: str) -> int:
-    """A count that must be at least 1 (``--cycles``, ``--repeat``)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value}: must be at least 1")
-    return value
-
-
 def _fmt(v: Any) -> str:
     if v is None:
         return "-"

@@ -166,6 +166,9 @@ def _runnable(argv: list[str], work: Path) -> bool:
             return True  # a usage error: main answers it without running anything
     if args.command in LONG:
         return False
+    if any(a.startswith(("/", "~", "..")) and not Path(a).resolve().is_relative_to(work)
+           for a in argv):
+        return False  # a path outside the test's folder (a device node, a system file)
     for key in ("out", "out_left", "out_right", "save", "points"):
         value = getattr(args, key, None)
         if value is not None and not Path(value).resolve().is_relative_to(work):
