@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from stationd import progress
 from stationd.config import PairConfig, StationConfig, load_station_config
 from stationd.errors import InputError
 from stationd.geometry.frames import KINDS, Transform, fit_transform
@@ -64,7 +65,9 @@ def read_points(path: Path, cfg: StationConfig) -> tuple[str, list[Observation]]
     root = YamlNode.load(path).mapping(("kind", "points"), required=("points",))
     kind = root["kind"].text(KINDS) if "kind" in root else "rigid"
     out: list[Observation] = []
-    for i, item in enumerate(root["points"].items()):
+    items = root["points"].items()
+    for i, item in enumerate(progress.track(items, "reference points", total=len(items),
+                                            unit="point")):
         m = item.mapping(("name", "vehicle_mm", "seen_by"), required=("vehicle_mm", "seen_by"))
         name = m["name"].text() if "name" in m else f"#{i + 1}"
         seen: dict[str, np.ndarray] = {}
