@@ -59,7 +59,10 @@ def parse_url(text: str) -> DeviceUrl:
     """Split a device URL; the backend checks what it needs (host, port, path, options)."""
     if not isinstance(text, str) or "://" not in text:
         raise UrlError(f"{text!r} is not a device URL (scheme://...)")
-    parts = urlsplit(text)
+    try:
+        parts = urlsplit(text)
+    except ValueError as exc:  # e.g. "modbus-tcp://[::1": an unclosed IPv6 bracket
+        raise UrlError(f"not a valid URL: {exc}", device=text) from None
     try:
         port = parts.port
     except ValueError:

@@ -7,7 +7,6 @@ Exit codes are a contract: 0 success (marker found), 1 not found (the JSON still
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -19,6 +18,7 @@ import numpy as np
 from db.errors import DbError
 from drivers.errors import DriverError
 from stationd.errors import InputError, StationError
+from stationd.jsonout import strict_json
 
 EXIT_OK, EXIT_NOT_FOUND, EXIT_BAD_INPUT = 0, 1, 2
 #: what a command reports as one line (exit 2): the station's errors and those of the layers
@@ -35,7 +35,19 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _emit(obj: dict[str, Any]) -> None:
-    sys.stdout.write(json.dumps(obj) + "\n")
+    sys.stdout.write(strict_json(obj) + "\n")
+
+
+def seed_arg(text: str) -> int:
+    """``--seed``: a non-negative integer (numpy's generators refuse negative seeds, after the
+    command has started)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{value}: a seed must be >= 0")
+    return value
 
 
 def _fmt(v: Any) -> str:
@@ -52,7 +64,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
     from stationd.vision.detect import detect
 
     cfg = load_station_config(args.config)
-    camera = Camera.load(args.camera)
+    camera = _detect_camera(args, Camera.load)
     image = read_image(args.image)
     det = detect(image, camera, cfg.vision, cfg.marker)
     if args.json:
@@ -66,6 +78,22 @@ def cmd_detect(args: argparse.Namespace) -> int:
     return EXIT_OK if det.found else EXIT_NOT_FOUND
 
 
+def _detect_camera(args: argparse.Namespace, load_camera: Callable[[str], Any]) -> Any:
+    """The camera of ``detect``: its own file (``--camera``), or one side of a pair file
+    (``--pair PAIR.yaml --side left``), so the output of ``calibrate stereo`` is used as is."""
+    from stationd.geometry.camera import StereoPair
+
+    if (args.camera is None) == (args.pair is None):
+        raise InputError("give either --camera CAMERA.yaml or --pair PAIR.yaml [--side "
+                         "left|right]")
+    if args.camera is not None:
+        if args.side is not None:
+            raise InputError("--side goes with --pair (a camera file has one camera)")
+        return load_camera(args.camera)
+    pair = StereoPair.load(args.pair)
+    return pair.right if args.side == "right" else pair.left
+
+
 # -- localize -----------------------------------------------------------------------------
 def cmd_localize(args: argparse.Namespace) -> int:
     from stationd.config import load_station_config
@@ -77,6 +105,10 @@ def cmd_localize(args: argparse.Namespace) -> int:
         raise InputError("--repeat must be at least 1")
     cfg = load_station_config(args.config)
     pair = StereoPair.load(args.pair)
+    baseline = float(np.linalg.norm(pair.T))
+    if not np.isfinite(baseline) or baseline < 1e-6:
+        raise InputError(f"{args.pair}: T: the baseline is {baseline:g} mm; two cameras at "
+                         "one place cannot triangulate (is T in mm, from calibrate stereo?)")
     left, right = read_image(args.left), read_image(args.right)
     times: list[float] = []
     res = None
@@ -122,6 +154,10 @@ def _results_file(text: str) -> str:
     cannot be written would otherwise lose the run)."""
     import os
 
+    if Path(text).is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: is a folder; give a file name")
+    if Path(text).exists() and not os.access(text, os.W_OK):
+        raise argparse.ArgumentTypeError(f"{text}: exists and is not writable")
     folder = Path(text).parent
     if not folder.is_dir() or not os.access(folder, os.W_OK):
         raise argparse.ArgumentTypeError(f"{text}: folder {folder} does not exist or is not "
@@ -142,7 +178,7 @@ def _parse_roi(text: str) -> tuple[int, int, int, int]:
 
 def cmd_tune_color(args: argparse.Namespace) -> int:
     from stationd.imageio import read_image
-    from stationd.vision.color import tune_hsv, write_hsv_yaml
+    from stationd.vision.color import tune_hsv, verify_marker, write_hsv_yaml
 
     image = read_image(args.reference)
     roi = _parse_roi(args.roi) if args.roi else None
@@ -151,7 +187,17 @@ def cmd_tune_color(args: argparse.Namespace) -> int:
         x, y, rw, rh = roi
         if x + rw > w or y + rh > h:
             raise InputError(f"--roi {args.roi}: outside the {w}x{h} image")
-    ranges = tune_hsv(image, roi)
+    # Only a verified marker's purple is measured, and the tuned box must still find it:
+    # otherwise nothing is written (exit 1, the reason on stderr).
+    reason = verify_marker(image, roi=roi)
+    if reason is None:
+        ranges = tune_hsv(image, roi)
+        lost = verify_marker(image, ranges, roi)
+        reason = None if lost is None else f"the tuned ranges would lose the marker ({lost})"
+    if reason is not None:
+        sys.stderr.write(f"stationd: tune-color: {args.reference}: {reason}; nothing "
+                         "written\n")
+        return EXIT_NOT_FOUND
     out = Path(args.out)
     write_hsv_yaml(out, ranges, source=str(args.reference), roi=roi)
     print(f"wrote {out}: h {list(ranges.h)}, s {list(ranges.s)}, v {list(ranges.v)}; "
@@ -195,12 +241,20 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from stationd import __version__
+
     p = _Parser(prog="stationd", description="Vision-guided bolt-tightening station.")
+    p.add_argument("--version", action="version", version=f"stationd {__version__}")
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bars (they are also off when stderr is not a terminal)")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     d = sub.add_parser("detect", help="localize the marker in one image")
     d.add_argument("image")
-    d.add_argument("--camera", required=True, help="camera YAML (K, dist, size)")
+    d.add_argument("--camera", help="camera YAML (K, dist, size)")
+    d.add_argument("--pair", help="pair YAML (from calibrate stereo): use one of its cameras")
+    d.add_argument("--side", choices=("left", "right"),
+                   help="with --pair: which camera took the image (default left)")
     d.add_argument("--config", help="station YAML (marker, vision)")
     d.add_argument("--json", action="store_true", help="print one JSON object")
     d.set_defaults(func=cmd_detect)
@@ -235,20 +289,20 @@ def build_parser() -> argparse.ArgumentParser:
     bv.add_argument("--quick", action="store_true", help="fewer samples (a smoke run)")
     bv.add_argument("--only", help="comma-separated sections: "
                     "radii,centre,rod,saltpepper,lowlight,speed")
-    bv.add_argument("--seed", type=int, default=1)
+    bv.add_argument("--seed", type=seed_arg, default=1)
     bv.set_defaults(func=cmd_bench)
     bc = bsub.add_parser("chain", help="the whole chain: calibration, vehicle frame, rod, bolts")
     bc.add_argument("--out", default="bench-chain.json", type=_results_file,
                     help="JSON results file")
     bc.add_argument("--quick", action="store_true", help="2 pairs, fewer samples")
-    bc.add_argument("--seed", type=int, default=1)
+    bc.add_argument("--seed", type=seed_arg, default=1)
     bc.set_defaults(func=cmd_bench_chain)
     bs = bsub.add_parser("station", help="the daemon on the simulated station: latency from "
                          "frame arrival to acknowledged parameters, memory")
     bs.add_argument("--out", default="bench-station.json", type=_results_file,
                     help="JSON results file")
     bs.add_argument("--cycles", type=int, default=20, help="bolts to select and tighten")
-    bs.add_argument("--seed", type=int, default=1)
+    bs.add_argument("--seed", type=seed_arg, default=1)
     bs.add_argument("--json", action="store_true", help="print one summary object")
     bs.set_defaults(func=cmd_bench_station)
 
@@ -266,7 +320,7 @@ def build_parser() -> argparse.ArgumentParser:
     rn.set_defaults(func=cmd_run)
 
     dm = sub.add_parser("demo", help="the main job: a simulated run")
-    dm.add_argument("--seed", type=int, default=7)
+    dm.add_argument("--seed", type=seed_arg, default=7)
     dm.add_argument("--cycles", type=int, default=10, help="bolts to tighten (with --vision: "
                     "marker placements to localize)")
     dm.add_argument("--config", help="station YAML (default: config/sim/station.yaml)")
@@ -275,18 +329,51 @@ def build_parser() -> argparse.ArgumentParser:
     dm.add_argument("--save", help="with --vision: also write the images and pair.yaml here")
     dm.add_argument("--json", action="store_true", help="print one summary object")
     dm.set_defaults(func=cmd_demo)
+    _quiet_everywhere(p)
     return p
 
 
+def _quiet_everywhere(parser: argparse.ArgumentParser) -> None:
+    """``--quiet`` is accepted after the sub-command too (``stationd demo --quiet``), where
+    a user types it; SUPPRESS keeps a leaf from resetting the top-level flag."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in action.choices.values():
+                if not any(a.dest == "quiet" for a in child._actions):
+                    child.add_argument("-q", "--quiet", action="store_true",
+                                       default=argparse.SUPPRESS, help=argparse.SUPPRESS)
+                _quiet_everywhere(child)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    from stationd import progress
+
     parser = build_parser()
     args = parser.parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func
+    progress.configure(quiet=bool(getattr(args, "quiet", False)))
     try:
-        return func(args)
+        code = func(args)
+        sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
+        return code
     except REPORTED as exc:
         sys.stderr.write(f"stationd: error: {exc}\n")
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         sys.stderr.write("stationd: interrupted\n")
         return 130
+    except BrokenPipeError:
+        # ``stationd db report VIN | head``: the reader has all it wanted.  Point stdout at
+        # /dev/null so the interpreter's final flush does not fail a second time.
+        _silence_stdout()
+        return EXIT_OK
+
+
+def _silence_stdout() -> None:
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass  # stdout is not a real file (a test's capture): nothing to flush

@@ -14,7 +14,6 @@ all-or-nothing: a file with any error changes nothing.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import tempfile
@@ -23,6 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from stationd.errors import ConfigError, InputError
+from stationd.jsonout import strict_json
 
 if TYPE_CHECKING:
     from db.repository import Repository
@@ -79,7 +79,7 @@ def cmd_db_import(args: argparse.Namespace) -> int:
     with _open(args.db, must_exist=False) as repo:
         report = repo.import_bolts(result.table, where=str(args.file))
     if args.json:
-        sys.stdout.write(json.dumps({"changes": report.has_changes, **report.to_json()}) + "\n")
+        sys.stdout.write(strict_json({"changes": report.has_changes, **report.to_json()}) + "\n")
     else:
         print("\n".join(report.lines()))
     return EXIT_OK
@@ -113,7 +113,7 @@ def cmd_db_report(args: argparse.Namespace) -> int:
     with _open(args.db, must_exist=True) as repo:
         report = repo.vehicle_report(args.vin)
     if args.json:
-        sys.stdout.write(json.dumps(report.to_json()) + "\n")
+        sys.stdout.write(strict_json(report.to_json()) + "\n")
     else:
         print(report.summary())
         for b in report.bolts:

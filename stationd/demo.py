@@ -10,7 +10,7 @@ on them.
 from __future__ import annotations
 
 import argparse
-import json
+import os
 import sys
 from pathlib import Path
 
@@ -18,9 +18,11 @@ import cv2
 import numpy as np
 import yaml
 
+from stationd import progress
 from stationd.bench import scenes as sc
 from stationd.errors import InputError
 from stationd.geometry.stereo import localize
+from stationd.jsonout import strict_json
 from stationd.sim.render import MarkerPose, Scene, render
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import VisionParams
@@ -31,20 +33,44 @@ def _placements(rng: np.random.Generator, count: int) -> list[MarkerPose]:
     return [sc.pose_in_pair(rng, pair, (1100.0, 1500.0), (0.0, 35.0)) for _ in range(count)]
 
 
+def _save_dir(text: str) -> Path:
+    """The ``--save`` folder, checked before minutes of rendering: an existing file, or a
+    folder that cannot be made or written, is refused in one line."""
+    save = Path(text)
+    if save.exists() and not save.is_dir():
+        raise InputError(f"--save {save}: exists and is not a folder (images and pair.yaml "
+                         "are written into a folder)")
+    try:
+        save.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--save {save}: cannot create the folder: {exc.strerror}") from None
+    if not os.access(save, os.W_OK | os.X_OK):
+        raise InputError(f"--save {save}: the folder is not writable")
+    return save
+
+
+def _write(path: Path, text: str) -> None:
+    try:
+        path.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        raise InputError(f"--save {path.parent}: cannot write {path.name}: "
+                         f"{exc.strerror}") from None
+
+
 def run_demo(args: argparse.Namespace) -> int:
-    count = int(getattr(args, "cycles", 0) or 3)
+    count = int(getattr(args, "cycles", 3))  # 0 is refused, not taken for the default
     if count < 1:
         raise InputError("--cycles must be at least 1")
     rng = np.random.default_rng(args.seed)
     pair = sc.station_pair()
     spec = MarkerSpec()
     params = VisionParams()
-    save = Path(args.save) if getattr(args, "save", None) else None
+    save = _save_dir(args.save) if getattr(args, "save", None) else None
     if save is not None:
-        save.mkdir(parents=True, exist_ok=True)
-        (save / "pair.yaml").write_text(yaml.safe_dump(pair.to_dict(), sort_keys=False))
+        _write(save / "pair.yaml", yaml.safe_dump(pair.to_dict(), sort_keys=False))
     errors, latencies, found = [], [], 0
-    for k, pose in enumerate(_placements(rng, count)):
+    for k, pose in enumerate(progress.track(_placements(rng, count), "demo: placements",
+                                            total=count, unit="pair")):
         scene = Scene(markers=[(pose, spec)], texture=0.15, vignetting=0.3, gradient=0.3,
                       gradient_deg=float(rng.uniform(0, 360)), blur_sigma=0.8, noise_sigma=2.0)
         left = render(pair.left, scene, seed=2 * k + 1)
@@ -52,8 +78,9 @@ def run_demo(args: argparse.Namespace) -> int:
                                            "markers": [(sc.to_right(pair, pose), spec)]}),
                        seed=2 * k + 2)
         if save is not None:
-            cv2.imwrite(str(save / f"left_{k}.png"), left.image)
-            cv2.imwrite(str(save / f"right_{k}.png"), right.image)
+            for name, img in ((f"left_{k}.png", left.image), (f"right_{k}.png", right.image)):
+                if not cv2.imwrite(str(save / name), img):
+                    raise InputError(f"--save {save}: {name} could not be written")
         res = localize(pair, left.image, right.image, params, spec)
         latencies.append(res.timings_ms["total"])
         if not args.json:
@@ -78,7 +105,7 @@ def run_demo(args: argparse.Namespace) -> int:
                             "max": err_max if errors else None},
                "latency_ms": {"p50": p50, "max": float(np.max(latencies))}}
     if args.json:
-        sys.stdout.write(json.dumps(summary) + "\n")
+        sys.stdout.write(strict_json(summary) + "\n")
     else:
         print(f"summary: {found}/{count} localized; 3D error mean {err_mean:.3f} mm, max "
               f"{err_max:.3f} mm; localization p50 {p50:.1f} ms per 20 MP stereo pair")

@@ -8,18 +8,31 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
+import math
 import sys
 from typing import Any
 
 from drivers.errors import DeviceError, UrlError
+from stationd.jsonout import strict_json
 
 EXIT_OK, EXIT_NO_ANSWER = 0, 1
 
 
+def seconds(text: str) -> float:
+    """A time option (``--timeout``, ``--wait-result``): a finite number of seconds > 0.
+    NaN would make every wait return at once, a negative one never start."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not (math.isfinite(value) and 0 < value <= 86400):
+        raise argparse.ArgumentTypeError(f"{text}: expected seconds, > 0 and at most a day")
+    return value
+
+
 def _emit(args: argparse.Namespace, obj: dict[str, Any], text: str) -> None:
     if args.json:
-        sys.stdout.write(json.dumps(obj) + "\n")
+        sys.stdout.write(strict_json(obj) + "\n")
     else:
         print(text)
 
@@ -29,7 +42,7 @@ def _failed(args: argparse.Namespace, kind: str, exc: DeviceError) -> int:
     if isinstance(exc, UrlError):
         raise exc  # bad input: exit 2 through the CLI's error path
     if args.json:
-        sys.stdout.write(json.dumps({"device": args.url, "kind": kind, "ok": False,
+        sys.stdout.write(strict_json({"device": args.url, "kind": kind, "ok": False,
                                      "error": str(exc)}) + "\n")
     sys.stderr.write(f"stationd: {kind}: {exc}\n")
     return EXIT_NO_ANSWER
@@ -101,7 +114,7 @@ def probe_wrench(args: argparse.Namespace) -> int:
     except DeviceError as exc:
         return _failed(args, "wrench", exc)
     if args.json:
-        sys.stdout.write(json.dumps(out) + "\n")
+        sys.stdout.write(strict_json(out) + "\n")
     else:
         print(out["identity"])
         if args.pset is not None:
@@ -126,16 +139,16 @@ def add_probe_parser(sub: Any) -> None:
     lift.add_argument("url", help="modbus-tcp://HOST:PORT?unit=N | modbus-rtu:///dev/ttyUSB0?"
                                   "baud=19200&parity=E&unit=N | sim://lift")
     lift.add_argument("--config", help="station YAML (its lift register map)")
-    lift.add_argument("--timeout", type=float, default=2.0, help="seconds (default 2)")
+    lift.add_argument("--timeout", type=seconds, default=2.0, help="seconds (default 2)")
     lift.add_argument("--json", action="store_true", help="print one JSON object")
     lift.set_defaults(func=probe_lift)
     w = psub.add_parser("wrench", help="start a session, select a pset, wait for a result")
     w.add_argument("url", help="openprotocol://HOST:4545 | openprotocol+serial:///dev/ttyUSB1"
                                "?baud=9600 | sim://wrench")
     w.add_argument("--pset", type=int, help="select this pset and wait for the acknowledgement")
-    w.add_argument("--wait-result", type=float, metavar="SECONDS",
+    w.add_argument("--wait-result", type=seconds, metavar="SECONDS",
                    help="enable the tool and wait this long for one tightening result")
-    w.add_argument("--timeout", type=float, default=2.0, help="seconds (default 2)")
+    w.add_argument("--timeout", type=seconds, default=2.0, help="seconds (default 2)")
     w.add_argument("--json", action="store_true", help="print one JSON object")
     w.set_defaults(func=probe_wrench)
     from stationd.probe_camera import add_camera_probe

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
-import json
 import math
 import sys
 import time
@@ -20,6 +19,7 @@ from typing import Any
 
 from drivers.errors import DeviceError, UrlError
 from stationd.errors import InputError
+from stationd.jsonout import strict_json
 
 EXIT_OK, EXIT_NO_FRAME = 0, 1
 
@@ -53,10 +53,47 @@ def _check_options(args: argparse.Namespace) -> None:
             raise InputError(f"--save {save}: no such directory {save.parent}")
 
 
+SIM_CONFIG = Path(__file__).resolve().parents[1] / "config" / "sim" / "station.yaml"
+
+
+def _sim_world(url: str) -> Any:
+    """For ``sim://PAIR/SIDE``: the simulated station's world (config/sim), so the probe
+    shows what that camera sees, as ``sim://lift`` starts its own PLC.  ``None`` for other
+    URLs, or when a world for the pair is already registered (inside a running demo)."""
+    if not url.lower().startswith("sim://"):
+        return None
+    from drivers.camera.sim import parse_sim_url, registered_worlds
+
+    pair, _, _ = parse_sim_url(url)  # a malformed URL is a UrlError: exit 2
+    if pair in registered_worlds():
+        return None
+    from stationd.config import load_station_config
+    from stationd.sim.world import World
+
+    cfg = load_station_config(SIM_CONFIG)
+    if pair not in cfg.pairs:
+        raise UrlError(f"no pair {pair!r} in the simulated station ({SIM_CONFIG.name} has "
+                       f"{', '.join(cfg.pairs)})", device=url)
+    from stationd import progress
+
+    progress.note(f"probe: rendering {url} through the simulated station ({SIM_CONFIG.parent.name}"
+                  "/station.yaml; a few seconds for 20 MP)")
+    return World(cfg, seed=0)
+
+
 def probe_camera(args: argparse.Namespace) -> int:
+    _check_options(args)
+    world = _sim_world(args.url)
+    try:
+        return _probe(args)
+    finally:
+        if world is not None:
+            world.close()
+
+
+def _probe(args: argparse.Namespace) -> int:
     from drivers.camera import open_camera
 
-    _check_options(args)
     try:
         with open_camera(args.url, timeout=args.timeout) as cam:
             identity = cam.identity()
@@ -68,7 +105,7 @@ def probe_camera(args: argparse.Namespace) -> int:
         raise  # bad input: exit 2 through the CLI's error path
     except DeviceError as exc:
         if args.json:
-            sys.stdout.write(json.dumps({"device": args.url, "kind": "camera", "ok": False,
+            sys.stdout.write(strict_json({"device": args.url, "kind": "camera", "ok": False,
                                          "error": str(exc)}) + "\n")
         sys.stderr.write(f"stationd: camera: {exc}\n")
         return EXIT_NO_FRAME
@@ -85,7 +122,7 @@ def probe_camera(args: argparse.Namespace) -> int:
            "frame_id": frame.frame_id, "timestamp": frame.timestamp, "time_utc": when,
            "latency_s": round(latency, 4), "saved": saved}
     if args.json:
-        sys.stdout.write(json.dumps(out) + "\n")
+        sys.stdout.write(strict_json(out) + "\n")
     else:
         print(identity)
         print(f"  frame {frame.frame_id}: {frame.width}x{frame.height} BGR from "

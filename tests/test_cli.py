@@ -115,6 +115,12 @@ def test_a_results_file_that_cannot_be_written_is_refused_before_the_run(bench, 
     assert "does not exist or is not writable" in err and err.count("\n") == 1
 
 
+@pytest.mark.parametrize("bench", ["vision", "chain", "station"])
+def test_a_results_file_that_is_a_folder_is_refused_before_the_run(bench, tmp_path, capsys):
+    code, out, err = _usage_error(capsys, "bench", bench, "--out", str(tmp_path))
+    assert code == 2 and out == "" and "is a folder" in _one_line(err)
+
+
 def test_console_script_usage_error_is_one_line():
     r = subprocess.run([sys.executable, "-m", "stationd", "detect"], capture_output=True,
                        text=True, timeout=60)
@@ -156,3 +162,160 @@ def test_marker_svg_is_written_at_true_scale(tmp_path, capsys):
     assert code == 0 and "r=10 mm" in text
     svg = out.read_text()
     assert 'r="10"' in svg and 'r="15"' in svg and "mm" in svg
+
+
+# -- issue 12: every bad input answered in one line ------------------------------------------
+def _usage_error(capsys, *argv):
+    """(exit code, stderr) of a command argparse refuses (SystemExit) or main refuses."""
+    try:
+        code = main(list(argv))
+    except SystemExit as exc:
+        code = exc.code
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _one_line(err):
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    return err
+
+
+@pytest.mark.parametrize("argv", [
+    ["demo", "--seed", "-1"], ["demo", "--vision", "--seed", "-1"],
+    ["bench", "station", "--seed", "-1"], ["bench", "chain", "--seed", "-1"],
+    ["bench", "vision", "--seed", "-1"], ["demo", "--seed", "x"],
+])
+def test_a_negative_seed_is_refused_in_one_line(argv, capsys):
+    code, out, err = _usage_error(capsys, *argv)
+    assert code == 2 and out == ""
+    assert "--seed" in _one_line(err)
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["probe", "wrench", "sim://wrench", "--wait-result", "-5"], "--wait-result"),
+    (["probe", "lift", "sim://lift", "--timeout", "nan"], "--timeout"),
+    (["probe", "lift", "sim://lift", "--timeout", "inf"], "--timeout"),
+])
+def test_probe_time_options_must_be_finite_positive_seconds(argv, needle, capsys):
+    code, out, err = _usage_error(capsys, *argv)
+    assert code == 2 and out == "" and needle in _one_line(err)
+
+
+def test_version(capsys):
+    from stationd import __version__
+
+    code, out, _ = _usage_error(capsys, "--version")
+    assert code == 0 and out.strip() == f"stationd {__version__}"
+
+
+def test_localize_refuses_a_pair_without_baseline(files, capsys, tmp_path):
+    d, _, _ = files
+    pair = yaml.safe_load((d / "pair.yaml").read_text())
+    pair["T"] = [0, 0, 0]
+    bad = tmp_path / "zero.yaml"
+    bad.write_text(yaml.safe_dump(pair))
+    code, out, err = _run(capsys, "localize", str(d / "left.png"), str(d / "right.png"),
+                          "--pair", str(bad), "--json")
+    assert code == 2 and out == "" and "baseline" in _one_line(err)
+
+
+@pytest.mark.parametrize("where", ["file", "under_file"])
+def test_demo_vision_save_refuses_a_file_or_unmakeable_folder_before_rendering(
+        where, tmp_path, capsys):
+    f = tmp_path / "taken"
+    f.write_text("keep me")
+    target = f if where == "file" else f / "sub"
+    code, out, err = _run(capsys, "demo", "--vision", "--cycles", "1", "--save", str(target))
+    assert code == 2 and out == "" and "--save" in _one_line(err)
+    assert f.read_text() == "keep me" and sorted(p.name for p in tmp_path.iterdir()) == ["taken"]
+
+
+def test_detect_takes_one_camera_of_a_pair_file(files, capsys):
+    d, v, _ = files
+    pair = yaml.safe_load((d / "pair.yaml").read_text())
+    # the single-camera file's camera as the pair's right side: --side picks it
+    pair["right"] = yaml.safe_load((d / "cam.yaml").read_text())
+    (d / "pair_cam.yaml").write_text(yaml.safe_dump(pair))
+    code, out, _ = _run(capsys, "detect", str(d / "one.png"), "--pair",
+                        str(d / "pair_cam.yaml"), "--side", "right", "--json")
+    obj = json.loads(out)
+    assert code == 0 and np.hypot(*(np.array(obj["centre_px"]) - v.centre_px)) < 0.05
+    code, _, err = _run(capsys, "detect", str(d / "one.png"), "--camera", str(d / "cam.yaml"),
+                        "--pair", str(d / "pair_cam.yaml"))
+    assert code == 2 and "either --camera" in _one_line(err)
+
+
+def test_json_output_is_strict():
+    from stationd.jsonout import strict_json
+
+    text = strict_json({"centre_split_px": float("nan"), "a": [1.0, float("inf")],
+                        "n": np.float64(2.5), "arr": np.array([np.nan, 1.0])})
+    assert json.loads(text) == {"centre_split_px": None, "a": [1.0, None], "n": 2.5,
+                                "arr": [None, 1.0]}
+    assert "NaN" not in text and "Infinity" not in text
+
+
+def test_db_report_into_a_closed_pipe_is_quiet(tmp_path):
+    from db.repository import Repository
+    from tests.db.conftest import EXAMPLE, record, url_of
+
+    db = url_of(tmp_path / "s.db")
+    with Repository.open(db) as repo:
+        repo.import_bolts(EXAMPLE)
+        repo.start_vehicle("VIN1", "WAGON-B")
+        record(repo, "VIN1", "SF-FL")
+    # the reader is gone before the command writes (as `| head` once it has its lines)
+    p = subprocess.Popen([sys.executable, "-m", "stationd", "db", "report", "VIN1", "--db", db],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert p.stdout is not None and p.stderr is not None
+    p.stdout.close()
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=60) in (0, 1)
+    assert "Traceback" not in err and "BrokenPipe" not in err and err == ""
+
+
+@pytest.mark.parametrize("image", ["blank", "purple_no_ring"])
+def test_tune_color_refuses_an_image_without_a_verified_marker(files, capsys, tmp_path, image):
+    from stationd.vision.marker import PURPLE_RGB
+
+    d, v, _ = files
+    if image == "purple_no_ring":  # a purple patch where the marker was: purple, but no ring
+        img = v.image.copy()
+        x, y = (int(c) for c in v.centre_px)
+        img[y - 120:y + 120, x - 120:x + 120] = PURPLE_RGB[::-1]
+        cv2.imwrite(str(tmp_path / "purple.png"), img)
+        ref = tmp_path / "purple.png"
+    else:
+        ref = d / "blank.png"
+    out = tmp_path / "hsv.yaml"
+    code, text, err = _run(capsys, "tune-color", str(ref), "--out", str(out))
+    assert code == 1 and text == "" and "ring check" in _one_line(err)
+    assert not out.exists()
+
+
+def test_tune_color_never_widens_the_default_box(files, capsys, tmp_path):
+    from stationd.vision.segment import DEFAULT_HSV
+
+    d, _, _ = files
+    out = tmp_path / "hsv.yaml"
+    assert _run(capsys, "tune-color", str(d / "one.png"), "--out", str(out))[0] == 0
+    hsv = yaml.safe_load(out.read_text())["hsv"]
+    for key, (lo, hi) in (("h", DEFAULT_HSV.h), ("s", DEFAULT_HSV.s), ("v", DEFAULT_HSV.v)):
+        assert lo <= hsv[key][0] <= hsv[key][1] <= hi, key
+
+
+@pytest.mark.parametrize("cycles", ["0", "-2"])
+def test_demo_vision_refuses_no_placements(cycles, capsys):
+    code, out, err = _run(capsys, "demo", "--vision", "--cycles", cycles)
+    assert code == 2 and out == "" and "--cycles" in _one_line(err)
+
+
+def test_every_command_prints_json_through_strict_json():
+    """A command module that called json.dumps itself would print NaN again."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / "stationd"
+    modules = [root / "cli.py", root / "probe.py", root / "probe_camera.py", root / "db_cli.py",
+               root / "demo.py", *sorted((root / "geometry").glob("*_cli.py"))]
+    for path in modules:
+        assert "json.dumps(" not in path.read_text(), path

@@ -106,3 +106,28 @@ def test_probe_wrench_bad_input_exits_2(capsys):
     assert main(["probe", "wrench", "ftp://x"]) == 2
     assert main(["probe", "wrench", "sim://wrench", "--pset", "1000"]) == 2
     assert capsys.readouterr().err.count("\n") == 2
+
+
+def test_probe_camera_sim_url_renders_the_simulated_station(capsys, tmp_path):
+    from drivers.camera.sim import registered_worlds
+
+    frame = tmp_path / "f.png"
+    code = main(["probe", "camera", "sim://pair1/left", "--timeout", "30", "--json",
+                 "--save", str(frame)])
+    out, err = capsys.readouterr()
+    obj = json.loads(out)
+    assert code == 0 and err == "" and obj["ok"] is True
+    assert (obj["width"], obj["height"]) == (5472, 3648) and frame.stat().st_size > 0
+    assert registered_worlds() == []  # the probe's world is gone with the probe
+
+
+def test_probe_camera_sim_url_of_an_unknown_pair_exits_2(capsys):
+    code = main(["probe", "camera", "sim://pair9/left"])
+    err = capsys.readouterr().err
+    assert code == 2 and "pair9" in err and err.count("\n") == 1
+
+
+def test_probe_url_that_urllib_cannot_split_exits_2(capsys):
+    assert main(["probe", "lift", "modbus-tcp://[::1"]) == 2  # found by tests/test_cli_fuzz
+    err = capsys.readouterr().err
+    assert "not a valid URL" in err and err.count("\n") == 1

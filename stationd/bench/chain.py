@@ -20,6 +20,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from stationd import progress
 from stationd.bench import scenes as sc
 from stationd.bench.vision import NOISE, ROD_LENGTHS, SPEC, _stats
 from stationd.geometry.calibration import ViewPair, calibrate_views, detect_corners, parse_board
@@ -256,7 +257,7 @@ def run_chain_bench(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     station = build_station(rng, 2 if quick else 4)
     res: Result = {"quick": quick, "seed": args.seed, "pairs": {}}
-    for i, sp in enumerate(station):
+    for i, sp in enumerate(progress.track(station, "bench chain: pairs", unit="pair")):
         print(f"[bench chain] calibrating and registering {sp.name} ...", flush=True)
         cal, crep = calibrate_pair(rng, sp, 8 if quick else 12)
         sp = replace(sp, calibrated=cal)

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from stationd import progress
 from stationd.boltfile import load_bolts
 from stationd.config import load_station_config
 from stationd.errors import InputError
@@ -66,7 +67,7 @@ async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]
     plc.raise_lift()
     if not await _until(lambda: st.vin is not None, 60):
         raise RuntimeError(f"the station did not start the vehicle: {st.cycle.reason}")
-    for bolt, pose in plan:
+    for bolt, pose in progress.track(plan, "bench station: bolts", unit="bolt"):
         world.set_wrench(pose)
         out["truth"] = bolt
         def on_it(b: str = bolt) -> bool:

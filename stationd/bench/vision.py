@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from stationd import progress
 from stationd.bench import scenes as sc
 from stationd.geometry.stereo import localize_detections, triangulate
 from stationd.sim.render import MarkerPose, default_camera
@@ -382,7 +383,7 @@ def run_vision_bench(args: argparse.Namespace) -> int:
     results: Result = {"machine": {"cpus": __import__("os").cpu_count(),
                                    "python": platform.python_version()},
                        "quick": bool(args.quick), "seed": args.seed}
-    for name in names:
+    for name in progress.track(names, "bench vision: sections", unit="section"):
         t0 = time.perf_counter()
         print(f"[bench vision] {name} ...", flush=True)
         results[name] = SECTIONS[name](np.random.default_rng(args.seed), args.quick)

@@ -10,6 +10,10 @@ Why it is built this way:
   one camera) inflates the errors of the good ones;
 - corners are detected on a reduced image when the image is large (seconds at 20 MP otherwise)
   and always refined at full resolution, so the result does not depend on the reduction;
+- a board not found reduced is searched again at larger sizes (behind OpenCV's fast check) only
+  while the estimated cost fits the per-image time bound (:data:`VIEW_BUDGET_S`): the plain
+  search on a 20 MP image without the board took up to 128 s, and a view whose board is not
+  there is skipped with the reason;
 - object points are in mm, so ``T`` is in mm: ``x_right = R @ x_left + T`` as in
   :class:`~stationd.geometry.camera.StereoPair`.
 """
@@ -17,6 +21,7 @@ Why it is built this way:
 from __future__ import annotations
 
 import re
+import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, replace
 from functools import lru_cache
@@ -26,12 +31,15 @@ from typing import Any, Literal
 import cv2
 import numpy as np
 
+from stationd import progress
 from stationd.errors import ImageError, InputError
 from stationd.geometry.camera import Camera, StereoPair
 
 MIN_PAIRS = 6
 MIN_CORNERS = 6  # common corners a ChArUco view needs (a chessboard has all or none)
 DETECT_MAX_SIDE = 1600  # larger images are searched reduced, then refined at full size
+VIEW_BUDGET_S = 5.0  # per image: larger search sizes are tried only while they fit in this
+RETRY_MAX_SIDE = 2 * DETECT_MAX_SIDE  # and never above this (see _search_chessboard)
 CORNER_ZONE = 0.2  # the board "reached" an image corner if a point fell this close (fraction)
 _SPEC_HELP = ("expected chessboard:COLSxROWS:SQUARE_MM (inner corners, e.g. chessboard:9x6:25) "
               "or charuco:COLSxROWS:SQUARE_MM:MARKER_MM:DICT (squares, e.g. "
@@ -157,8 +165,10 @@ def read_grey(path: str | Path) -> np.ndarray:
     return np.asarray(img)
 
 
-def detect_corners(grey: np.ndarray, board: Board) -> BoardCorners:
-    """Find the board in an 8-bit grey image, with sub-pixel corners."""
+def detect_corners(grey: np.ndarray, board: Board, *,
+                   budget_s: float = VIEW_BUDGET_S) -> BoardCorners:
+    """Find the board in an 8-bit grey image, with sub-pixel corners.  A chessboard search
+    stops at the per-image time bound ``budget_s`` with the reason (module docstring)."""
     if board.kind == "charuco":
         corners, ids, _, marker_ids = _charuco_detector(board).detectBoard(grey)
         if marker_ids is None or len(marker_ids) == 0:
@@ -169,18 +179,9 @@ def detect_corners(grey: np.ndarray, board: Board) -> BoardCorners:
         return BoardCorners(np.asarray(ids).ravel().astype(np.int64),
                             np.asarray(corners, dtype=np.float64).reshape(-1, 2))
     pattern = (board.cols, board.rows)
-    flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
-    scale = min(1.0, DETECT_MAX_SIDE / max(grey.shape))
-    found, pts = False, None
-    if scale < 1.0:
-        small = cv2.resize(grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
-        found, pts = cv2.findChessboardCorners(small, pattern, flags=flags)
-        if found:  # pixel centres: x_full = (x_small + 0.5) / scale - 0.5
-            pts = (np.asarray(pts).reshape(-1, 2) + 0.5) / scale - 0.5
-    if not found:
-        found, pts = cv2.findChessboardCorners(grey, pattern, flags=flags)
+    found, pts, reason = _search_chessboard(grey, pattern, budget_s)
     if not found or pts is None:
-        return BoardCorners.missing("chessboard not found")
+        return BoardCorners.missing(reason)
     pts = np.asarray(pts, dtype=np.float32).reshape(-1, 1, 2)  # (N, 2) in OpenCV 5
     grid = pts.reshape(board.rows, board.cols, 2)
     spacing = min(np.linalg.norm(np.diff(grid, axis=0), axis=2).min(),
@@ -189,6 +190,48 @@ def detect_corners(grey: np.ndarray, board: Board) -> BoardCorners:
     pts = cv2.cornerSubPix(grey, pts, (half, half), (-1, -1), _SUBPIX_CRITERIA)
     return BoardCorners(np.arange(board.cols * board.rows, dtype=np.int64),
                         np.asarray(pts, dtype=np.float64).reshape(-1, 2))
+
+
+def _search_chessboard(grey: np.ndarray, pattern: tuple[int, int], budget_s: float,
+                       ) -> tuple[bool, np.ndarray | None, str]:
+    """(found, full-resolution points, reason): reduced to DETECT_MAX_SIDE first, then twice
+    as large each time up to RETRY_MAX_SIDE (or full size when that is smaller), each step
+    only if its estimated cost (the last step's time, scaled by the pixel count) fits in
+    what is left of ``budget_s``."""
+    flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+    scale = min(1.0, DETECT_MAX_SIDE / max(grey.shape))
+    start = time.monotonic()
+    last_cost, last_scale, spent = 0.0, scale, 0.0
+    while True:
+        if last_cost:
+            spent = time.monotonic() - start
+        estimate = last_cost * (scale / last_scale) ** 2
+        if last_cost and spent + estimate > budget_s:
+            return False, None, (f"chessboard not found at up to {last_scale:.0%} size; larger "
+                                 f"sizes skipped (about {estimate:.1f} s more, the bound is "
+                                 f"{budget_s:g} s per image)")
+        t0 = time.monotonic()
+        img = grey if scale >= 1.0 else cv2.resize(grey, None, fx=scale, fy=scale,
+                                                   interpolation=cv2.INTER_AREA)
+        # a retry at a larger size is for a small board: OpenCV's fast check first makes it
+        # cost a fraction of a second when the board is not there at all (measured on a
+        # rendered 20 MP station frame: 3.7 s -> 0.17 s at 3200 px)
+        retry = cv2.CALIB_CB_FAST_CHECK if last_cost else 0
+        found, pts = cv2.findChessboardCorners(img, pattern, flags=flags | retry)
+        last_cost, last_scale = max(time.monotonic() - t0, 1e-3), scale
+        if found and pts is not None:  # pixel centres: x_full = (x_small + 0.5) / s - 0.5
+            return True, (np.asarray(pts).reshape(-1, 2) + 0.5) / scale - 0.5, ""
+        if scale >= 1.0:
+            return False, None, "chessboard not found"
+        scale = min(1.0, 2.0 * scale)
+        if max(grey.shape) * scale > RETRY_MAX_SIDE + 0.5:
+            # Measured on a rendered 20 MP station frame without a board: 1.0 s at 1600 px,
+            # 0.2 s at 3200 px behind the fast check, but 158 s at full size (the fast check
+            # passed on the texture).  A board too small to be found at 3200 px covers too
+            # little of the image to calibrate it anyway.
+            return False, None, (f"chessboard not found at up to {RETRY_MAX_SIDE} px (the "
+                                 "full-size search is not tried on larger images: it can "
+                                 "take minutes; bring the board closer)")
 
 
 # -- calibration ---------------------------------------------------------------------------
@@ -273,7 +316,8 @@ def calibrate_stereo(left_paths: Sequence[str | Path], right_paths: Sequence[str
         raise InputError("no images given")
     sizes: dict[str, tuple[int, int, str]] = {}
     views = []
-    for lp, rp in zip(left_paths, right_paths, strict=True):
+    for lp, rp in progress.track(zip(left_paths, right_paths, strict=True), "board views",
+                                 total=len(left_paths), unit="pair"):
         corners = []
         for side, path in (("left", lp), ("right", rp)):
             grey = read_grey(path)
@@ -284,6 +328,8 @@ def calibrate_stereo(left_paths: Sequence[str | Path], right_paths: Sequence[str
                                  f"{first[0]}x{first[1]}; all {side} images must have one size")
             corners.append(detect_corners(grey, board))
         views.append(ViewPair(str(lp), str(rp), corners[0], corners[1]))
+    progress.note(f"calibrating from {sum(v.left.found and v.right.found for v in views)} "
+                  f"of {len(views)} pairs ...")
     return calibrate_views(views, board, sizes["left"][:2], sizes["right"][:2], **options)
 
 
@@ -433,3 +479,124 @@ def _corners_missed(points: list[np.ndarray], size: tuple[int, int]) -> list[str
     tests = {"top-left": near_top & near_left, "top-right": near_top & near_right,
              "bottom-left": near_bottom & near_left, "bottom-right": near_bottom & near_right}
     return [name for name, hit in tests.items() if not hit.any()]
+
+
+# -- one camera ------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class CameraReport:
+    """One calibrated camera and how well its board views fit it."""
+
+    camera: Camera
+    board: Board
+    rms_px: float
+    views: tuple[ViewReport, ...]  # ``right_name`` empty, ``error_right_px`` None
+    warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def used(self) -> int:
+        return sum(not v.rejected for v in self.views)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"board": self.board.describe(), "rms_px": self.rms_px,
+                "K": self.camera.K.tolist(), "dist": self.camera.dist.tolist(),
+                "size": list(self.camera.size),
+                "views": [{"name": v.left_name, "corners": v.corners,
+                           "error_px": v.error_left_px, "rejected": v.rejected or None}
+                          for v in self.views],
+                "warnings": list(self.warnings)}
+
+    def format(self) -> str:
+        """The human-readable report the command prints."""
+        k = self.camera.K
+        lines = [f"board: {self.board.describe()}",
+                 f"views: {len(self.views)} images, {self.used} used, "
+                 f"{len(self.views) - self.used} rejected",
+                 f"RMS reprojection error {self.rms_px:.3f} px",
+                 f"fx {k[0, 0]:.1f} px, fy {k[1, 1]:.1f} px, principal point ({k[0, 2]:.1f}, "
+                 f"{k[1, 2]:.1f}) px, image {self.camera.size[0]}x{self.camera.size[1]}",
+                 "per view (RMS px):"]
+        width = max(len(v.left_name) for v in self.views) + 2
+        for i, v in enumerate(self.views, 1):
+            err = "   -  " if v.error_left_px is None else f"{v.error_left_px:6.3f}"
+            status = f"rejected: {v.rejected}" if v.rejected else "used"
+            lines.append(f"  {i:3d}  {v.left_name.ljust(width)}  {err}  {status}")
+        lines += [f"warning: {w}" for w in self.warnings]
+        return "\n".join(lines)
+
+
+def calibrate_camera(paths: Sequence[str | Path], board: Board, *,
+                     outlier_factor: float = 3.0, outlier_floor_px: float = 0.5,
+                     budget_s: float = VIEW_BUDGET_S) -> CameraReport:
+    """Calibrate one camera from board images, with the outlier rule of
+    :func:`calibrate_views` (a view is dropped while its error is an outlier and more than
+    :data:`MIN_PAIRS` remain).  Refuses with :class:`InputError` on mixed image sizes or too
+    few usable views."""
+    if not paths:
+        raise InputError("no images given")
+    board_points = board.object_points()
+    size: tuple[int, int, str] | None = None
+    reports: list[ViewReport] = []
+    data: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    for i, path in enumerate(progress.track(paths, "board views", total=len(paths),
+                                            unit="image")):
+        grey = read_grey(path)
+        here = (grey.shape[1], grey.shape[0])
+        if size is None:
+            size = (*here, str(path))
+        elif here != size[:2]:
+            raise InputError(f"{path}: {here[0]}x{here[1]} pixels, but {size[2]} is "
+                             f"{size[0]}x{size[1]}; all images must have one size")
+        found = detect_corners(grey, board, budget_s=budget_s)
+        obj = board_points[found.ids] if found.found else board_points[:0]
+        if not found.found:
+            reports.append(ViewReport(str(path), "", rejected=f"board not found ({found.reason})"))
+        elif len(obj) < MIN_CORNERS or np.linalg.matrix_rank(
+                obj[:, :2] - obj[:, :2].mean(axis=0), tol=1e-9) < 2:
+            reports.append(ViewReport(str(path), "", rejected="too few corners, or on one line"))
+        else:
+            data[i] = (obj, found.points)
+            reports.append(ViewReport(str(path), "", corners=len(obj)))
+    assert size is not None  # noqa: S101 - paths is not empty
+    wh = (size[0], size[1])
+    if len(data) < MIN_PAIRS:
+        reasons = sorted({r.rejected.split(" (")[0] for r in reports if r.rejected})
+        detail = f"; rejected: {'; '.join(reasons)}" if reasons else ""
+        raise InputError(f"only {len(data)} usable images out of {len(reports)}, at least "
+                         f"{MIN_PAIRS} are needed (the board seen whole, in varied poses)"
+                         f"{detail}")
+    warnings: list[str] = []
+    while True:
+        obj_l = [d[0].astype(np.float32).reshape(-1, 1, 3) for d in data.values()]
+        img_l = [d[1].astype(np.float32).reshape(-1, 1, 2) for d in data.values()]
+        K, dist, rvecs, tvecs = _mono(obj_l, img_l, wh)
+        errors = {}
+        for key, o, im, rv, tv in zip(data, obj_l, img_l, rvecs, tvecs, strict=True):
+            proj = cv2.projectPoints(o, rv, tv, K, dist)[0].reshape(-1, 2)
+            errors[key] = float(np.sqrt(np.mean(np.sum((proj - im.reshape(-1, 2)) ** 2,
+                                                       axis=1))))
+        threshold = max(outlier_factor * float(np.median(list(errors.values()))),
+                        outlier_floor_px)
+        worst = max(errors, key=lambda k: errors[k])
+        if errors[worst] <= threshold:
+            break
+        reason = f"outlier error {errors[worst]:.2f} px > {threshold:.2f} px"
+        if len(data) <= MIN_PAIRS:
+            warnings.append(f"view {worst + 1} ({reports[worst].left_name}) has an {reason} "
+                            f"but was kept: only {MIN_PAIRS} usable views")
+            break
+        reports[worst] = replace(reports[worst], error_left_px=errors.pop(worst),
+                                 rejected=reason)
+        del data[worst]
+    for key, err in errors.items():
+        reports[key] = replace(reports[key], error_left_px=err)
+    missed = _corners_missed([d[1] for d in data.values()], wh)
+    if missed:
+        warnings.append(f"the board never reached the {', '.join(missed)} corner"
+                        f"{'s' if len(missed) > 1 else ''} of the image (within "
+                        f"{CORNER_ZONE:.0%} of its width and height); distortion there is "
+                        "extrapolated: add views with the board in those corners")
+    counts = np.array([len(d[0]) for d in data.values()], dtype=np.float64)
+    per_view = np.array([errors[k] for k in data])
+    rms = float(np.sqrt(counts @ per_view**2 / counts.sum()))
+    camera = Camera(K, np.asarray(dist).ravel(), wh)
+    return CameraReport(camera, board, rms, tuple(reports), tuple(warnings))

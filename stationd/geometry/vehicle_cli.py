@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from stationd import progress
 from stationd.config import PairConfig, StationConfig, load_station_config
 from stationd.errors import InputError
 from stationd.geometry.frames import KINDS, Transform, fit_transform
@@ -64,7 +65,9 @@ def read_points(path: Path, cfg: StationConfig) -> tuple[str, list[Observation]]
     root = YamlNode.load(path).mapping(("kind", "points"), required=("points",))
     kind = root["kind"].text(KINDS) if "kind" in root else "rigid"
     out: list[Observation] = []
-    for i, item in enumerate(root["points"].items()):
+    items = root["points"].items()
+    for i, item in enumerate(progress.track(items, "reference points", total=len(items),
+                                            unit="point")):
         m = item.mapping(("name", "vehicle_mm", "seen_by"), required=("vehicle_mm", "seen_by"))
         name = m["name"].text() if "name" in m else f"#{i + 1}"
         seen: dict[str, np.ndarray] = {}
@@ -106,8 +109,11 @@ def cmd_calibrate_vehicle(args: argparse.Namespace) -> int:
     target = cfg.pairs[args.pair].to_vehicle_path
     header = (f"# {args.pair} -> vehicle frame, {kind} fit to {len(mine)} points from "
               f"{args.points}; RMS {fit.rms_mm:.3f} mm\n# x_vehicle = A x_pair + t (mm)\n")
-    target.write_text(header + yaml.safe_dump(fit.to_dict(), sort_keys=False,
-                                              default_flow_style=None))
+    try:
+        target.write_text(header + yaml.safe_dump(fit.to_dict(), sort_keys=False,
+                                                  default_flow_style=None))
+    except OSError as exc:
+        raise InputError(f"{target}: cannot write: {exc.strerror}") from None
     print(f"wrote {target}")
     return _cross_check(cfg, args.pair, fit, points)
 

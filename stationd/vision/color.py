@@ -17,6 +17,13 @@ result is reproducible:
 3. V (after enhancement, as the detector sees it on its reduced image): half the 10th
    percentile of the enhanced V of the purple pixels, between 20 and the default 45 -- Retinex
    keeps the purple at about the same enhanced V in the dark, so V only has to reject black.
+4. The result never accepts more than the default box (:data:`DEFAULT_HSV`): tuning is for
+   rejecting what a station's print and lamp make look purple, and a box wider than the one
+   derived for every printed purple would only let more of the car in.  So V is the default's.
+
+Which image is a reference: :func:`verify_marker` runs the detector's ring check (a purple field
+around a dark ring around a bright centre) on it; ``stationd tune-color`` refuses an image
+where it finds no marker, and a tuned box that would lose the marker it was tuned on.
 """
 
 from __future__ import annotations
@@ -33,7 +40,7 @@ from stationd.vision.enhance import EnhanceParams, enhance_hsv
 from stationd.vision.segment import DEFAULT_HSV, HsvRange, purple_mask
 from stationd.yamlio import YamlNode
 
-__all__ = ["PURPLISH", "read_hsv_yaml", "tune_hsv", "write_hsv_yaml"]
+__all__ = ["PURPLISH", "read_hsv_yaml", "tune_hsv", "verify_marker", "write_hsv_yaml"]
 
 Roi = tuple[int, int, int, int]
 PURPLISH = HsvRange(h=(110, 175), s=(40, 255), v=(30, 255))  # the net "purple-ish" casts
@@ -111,7 +118,47 @@ def tune_hsv(bgr: np.ndarray, roi: Roi | None = None, *,
     sy = np.clip(np.round((fy + 0.5) / sc - 0.5).astype(np.intp), 0, small.shape[0] - 1)
     v_lo = int(np.clip(round(0.5 * float(np.percentile(v_enh[sy, sx], 10))), 20,
                        DEFAULT_HSV.v[0]))
-    return HsvRange(h=h_range, s=(s_lo, 255), v=(v_lo, 255))
+    return _within_default(HsvRange(h=h_range, s=(s_lo, 255), v=(v_lo, 255)))
+
+
+def _within_default(r: HsvRange) -> HsvRange:
+    """Rule 4: the tuned box cut to the default box (never wider, on any bound)."""
+    d = DEFAULT_HSV
+    h = (max(r.h[0], d.h[0]), min(r.h[1], d.h[1]))
+    if h[0] > h[1]:
+        raise InputError(f"the reference's purple (H {r.h[0]}-{r.h[1]}) lies outside the "
+                         f"hues the detector accepts (H {d.h[0]}-{d.h[1]}); is it the marker?")
+    return HsvRange(h=h, s=(max(r.s[0], d.s[0]), min(r.s[1], d.s[1])),
+                    v=(max(r.v[0], d.v[0]), min(r.v[1], d.v[1])))
+
+
+def verify_marker(bgr: np.ndarray, ranges: HsvRange = DEFAULT_HSV, roi: Roi | None = None, *,
+                  enhance: EnhanceParams | None = None, search_scale: int = 8) -> str | None:
+    """``None`` when the detector's ring check finds a marker with ``ranges`` (its centre
+    inside ``roi`` when one is given), else the reason there is none.  Why: the statistics of
+    :func:`tune_hsv` are only the marker's purple if the purple measured is a marker's."""
+    from stationd.vision.detect import check_image, reduce
+    from stationd.vision.segment import search_candidates
+
+    check_image(bgr)
+    enhance = enhance or EnhanceParams()
+    ih, iw = bgr.shape[:2]
+    scale = max(1, search_scale)
+    while True:
+        cands, _ = search_candidates(reduce(bgr, scale), scale, ranges, enhance=enhance,
+                                     full_size=(iw, ih))
+        if roi is not None:
+            x, y, w, h = roi
+            cands = [c for c in cands
+                     if x <= c.hole_centre[0] < x + w and y <= c.hole_centre[1] < y + h]
+        if cands:
+            return None
+        if scale <= 2:
+            break
+        scale //= 2
+    where = "in the image" if roi is None else "inside --roi"
+    return (f"no marker {where} passes the ring check (a purple field around a black ring "
+            "around a white centre)")
 
 
 def write_hsv_yaml(path: str | Path, ranges: HsvRange, *, source: str | None = None,

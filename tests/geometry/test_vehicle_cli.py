@@ -155,3 +155,22 @@ def test_a_bumped_pair_disagrees_with_the_next_registration(tmp_path, capsys):
     bumped.write_text(yaml.safe_dump(pts))
     assert cmd_calibrate_vehicle(_args(cfg, bumped, "pair2")) == 1
     assert "DISAGREE" in capsys.readouterr().out
+
+
+def test_a_transform_that_cannot_be_written_is_one_line(tmp_path, capsys):
+    import shutil
+    from pathlib import Path
+
+    from stationd.cli import main
+
+    shutil.copy(Path(__file__).resolve().parents[2] / "config/sim/pair1.yaml", tmp_path)
+    cfg = tmp_path / "station.yaml"
+    cfg.write_text("pairs:\n  pair1:\n    calibration: pair1.yaml\n"
+                   "    to_vehicle: no/such/pair1.vehicle.yaml\n"
+                   "  pair2:\n    calibration: pair1.yaml\n")
+    pts = _points(tmp_path)
+    code = main(["calibrate", "vehicle", "--pair", "pair1", "--points", str(pts), "--config",
+                 str(cfg)])
+    err = capsys.readouterr().err
+    assert code == 2 and "pair1.vehicle.yaml: cannot write" in err
+    assert err.count("\n") == 1 and "Traceback" not in err

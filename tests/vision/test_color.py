@@ -101,3 +101,29 @@ def test_yaml_file_round_trip_and_header(tmp_path):
     assert "the whole image" in path.read_text(encoding="utf-8")
     with pytest.raises(InputError, match="cannot write"):
         write_hsv_yaml(tmp_path / "missing" / "hsv.yaml", r)
+
+
+def test_verify_marker_is_the_ring_check(reference):
+    from stationd.vision.color import verify_marker
+
+    assert verify_marker(reference) is None
+    x0, y0, x1, y1 = field_box(MARKER)
+    assert verify_marker(reference, roi=(int(x0), int(y0), int(x1 - x0), int(y1 - y0))) is None
+    # the pale panel is purple-ish but has no ring; an ROI on it finds no marker
+    assert "ring check" in (verify_marker(reference, roi=(50, 50, 400, 800)) or "")
+    # a box that excludes the marker's hue loses it
+    assert verify_marker(reference, HsvRange(h=(20, 40), s=(50, 255), v=(45, 255))) is not None
+
+
+def test_a_tuned_box_is_never_wider_than_the_default(reference):
+    tuned = tune_hsv(reference, enhance=EnhanceParams())
+    for (lo, hi), (dlo, dhi) in ((tuned.h, DEFAULT_HSV.h), (tuned.s, DEFAULT_HSV.s),
+                                 (tuned.v, DEFAULT_HSV.v)):
+        assert dlo <= lo <= hi <= dhi
+    from stationd.vision.color import _within_default
+
+    assert _within_default(HsvRange(h=(100, 175), s=(25, 255), v=(20, 255))) == DEFAULT_HSV
+    assert _within_default(HsvRange(h=(130, 150), s=(90, 255), v=(20, 255))) == HsvRange(
+        h=(130, 150), s=(90, 255), v=(DEFAULT_HSV.v[0], 255))
+    with pytest.raises(InputError, match="outside the hues"):
+        _within_default(HsvRange(h=(170, 175), s=(90, 255), v=(45, 255)))

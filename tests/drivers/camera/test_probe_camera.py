@@ -61,11 +61,14 @@ def test_unreadable_frame_exit_1(frames, capsys):
 
 
 def test_sim_without_then_with_a_world(capsys):
-    code = main(["probe", "camera", "sim://pair1/left", "--json"])
+    # without a world the probe starts the simulated station's (tests/test_probe.py renders
+    # one); a pair that station does not have is bad input
+    code = main(["probe", "camera", "sim://pair9/left", "--json"])
     captured = capsys.readouterr()
-    assert code == 1 and json.loads(captured.out)["ok"] is False
-    assert "no simulated world for pair 'pair1'" in captured.err
+    assert code == 2 and captured.out == ""
+    assert "no pair 'pair9' in the simulated station" in captured.err
     assert captured.err.count("\n") == 1
+    # a world already registered (a running demo) is used, not replaced
     sim.register_world("pair1", lambda side, seed: np.zeros((5, 6, 3), np.uint8))
     try:
         assert main(["probe", "camera", "sim://pair1/right", "--json"]) == 0

@@ -1,0 +1,133 @@
+"""``stationd calibrate camera`` and ``calibrate stereo``'s camera files, through stationd's
+own command line (one-line errors, exit codes), and the per-image time bound of the search."""
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from stationd.cli import main
+from stationd.geometry.calibration import detect_corners, parse_board
+from stationd.geometry.camera import Camera, StereoPair
+from tests.geometry.test_calibration import _render, _rot, _texture
+
+SPEC = "chessboard:9x6:20"
+SIZE = (640, 480)
+K1 = np.array([[560.0, 0, 318.0], [0, 560.0, 243.0], [0, 0, 1]])
+K2 = np.array([[570.0, 0, 325.0], [0, 570.0, 236.0], [0, 0, 1]])
+R12, T12 = _rot(0.3, -2.0, 0.2), np.array([-60.0, 0.5, 1.0])
+
+
+@pytest.fixture(scope="module")
+def boards(tmp_path_factory):
+    """Eight rendered stereo views of a chessboard (seeded), L1..L8 and R1..R8."""
+    d = tmp_path_factory.mktemp("boards")
+    board = parse_board(SPEC)
+    texture, origin = _texture(board)
+    rng = np.random.default_rng(5)
+    obj, n = board.object_points(), 0
+    while n < 8:
+        R = _rot(rng.uniform(-35, 35), rng.uniform(-35, 35), rng.uniform(-15, 15))
+        t = np.array([rng.uniform(-60, 60), rng.uniform(-50, 50), rng.uniform(450, 650)])
+        t -= R @ obj.mean(axis=0)
+        views = ((R, t, K1), (R12 @ R, R12 @ t + T12, K2))
+        if not all(np.all((p > 30) & (p < np.array(SIZE) - 31)) for p in (
+                cv2.projectPoints(obj, cv2.Rodrigues(Rc)[0], tc, Kc, None)[0].reshape(-1, 2)
+                for Rc, tc, Kc in views)):
+            continue
+        n += 1
+        for name, (Rc, tc, Kc) in zip("LR", views, strict=True):
+            cv2.imwrite(str(d / f"{name}{n}.png"), _render(texture, origin, Kc, Rc, tc, SIZE,
+                                                           rng))
+    return d
+
+
+def _cli(capsys, *argv):
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as exc:
+        code = exc.code
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_calibrate_camera_writes_the_file_detect_reads(boards, tmp_path, capsys):
+    out = tmp_path / "cam.yaml"
+    code, text, err = _cli(capsys, "calibrate", "camera", str(boards / "L*.png"), "--board",
+                           SPEC, "--out", out, "--json")
+    assert code == 0 and err == ""
+    rep = json.loads(text)
+    assert len(rep["views"]) == 8 and rep["rms_px"] < 0.3 and rep["out"] == str(out)
+    cam = Camera.load(out)
+    assert out.read_text().startswith("# stationd calibrate camera:")
+    assert cam.size == SIZE and np.abs(cam.K - K1).max() < 6
+    code, text, _ = _cli(capsys, "calibrate", "camera", str(boards / "L*.png"), "--board",
+                         SPEC, "--out", out)
+    assert code == 0 and "views: 8 images, 8 used, 0 rejected" in text
+
+
+def test_calibrate_stereo_also_writes_both_camera_files(boards, tmp_path, capsys):
+    out = tmp_path / "pair.yaml"
+    code, text, err = _cli(capsys, "calibrate", "stereo", "--left", str(boards / "L*.png"),
+                           "--right", str(boards / "R*.png"), "--board", SPEC, "--out", out)
+    assert code == 0 and err == ""
+    left, right = tmp_path / "pair.left.yaml", tmp_path / "pair.right.yaml"
+    assert f"wrote {out}, {left}, {right}" in text
+    pair = StereoPair.load(out)
+    for path, cam in ((left, pair.left), (right, pair.right)):
+        loaded = Camera.load(path)
+        assert np.allclose(loaded.K, cam.K) and np.allclose(loaded.dist, cam.dist)
+        assert loaded.size == cam.size
+    assert abs(pair.baseline_mm / np.linalg.norm(T12) - 1) < 0.01
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["calibrate", "camera", "{d}/L*.png", "--board", "chessboard:9x6", "--out",
+      "{t}/c.yaml"], "board 'chessboard:9x6'"),
+    (["calibrate", "camera", "{t}/none*.png", "--board", SPEC, "--out", "{t}/c.yaml"],
+     "matches no file"),
+    (["calibrate", "camera", "{d}/L1.png", "{d}/L2.png", "--board", SPEC, "--out",
+      "{t}/c.yaml"], "only 2 usable images out of 2"),
+    (["calibrate", "camera", "{d}/L*.png", "--board", SPEC, "--out", "{t}/no/c.yaml"],
+     "no such folder"),
+    (["calibrate", "stereo", "--left", "{d}/L*.png", "--right", "{d}/R*.png", "--board", SPEC,
+      "--out", "{t}/p.yaml", "--out-left", "{t}/p.yaml"], "must differ"),
+    (["calibrate", "stereo", "--left", "{d}/L*.png", "--right", "{d}/R*.png", "--board", SPEC,
+      "--out", "{t}/p.yaml", "--out-right", "{t}/no/r.yaml"], "no such folder"),
+])
+def test_calibrate_refusals_are_one_line_and_write_nothing(boards, tmp_path, capsys, argv,
+                                                           needle):
+    args = [a.format(d=boards, t=tmp_path) for a in argv]
+    code, out, err = _cli(capsys, *args)
+    assert code == 2 and out == "" and needle in err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_board_not_found_reduced_is_skipped_at_the_time_bound():
+    """A large image without the board: with no time left after the reduced search, the
+    full-resolution search (minutes at 20 MP) is not started, and the reason says so."""
+    board = parse_board(SPEC)
+    noise = np.random.default_rng(0).integers(90, 160, (1800, 2400), dtype=np.uint8)
+    blank = cv2.GaussianBlur(noise, (0, 0), 3)  # texture, no board (and no noise to chase)
+    found = detect_corners(blank, board, budget_s=0.0)
+    assert not found.found
+    assert "not found at up to 67% size" in found.reason and "skipped" in found.reason
+    assert "the bound is 0 s per image" in found.reason
+    # with time to spare the larger sizes are searched (behind the fast check) to the end
+    assert detect_corners(blank, board, budget_s=60.0).reason == "chessboard not found"
+
+
+def test_write_all_leaves_nothing_when_one_file_fails(tmp_path):
+    from stationd.errors import InputError
+    from stationd.geometry.calibrate_cli import write_all
+
+    good = tmp_path / "a.yaml"
+    good.write_text("old")
+    with pytest.raises(InputError, match="cannot write"):
+        write_all([(good, "new"), (tmp_path / "missing" / "b.yaml", "x")])
+    assert good.read_text() == "old" and sorted(p.name for p in tmp_path.iterdir()) == [
+        "a.yaml"]
+    assert yaml.safe_load("k: 1") == {"k": 1}

@@ -1,0 +1,60 @@
+""".ci/bootstrap: one line per step, and a second run does nothing again.  Run on a copy of
+the script with stand-ins for apt, dpkg and python on PATH (the real run takes minutes and
+the network), so what is tested is the script's own logic and output."""
+
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+PYTHON_STUB = """#!/bin/sh
+echo "python3 $*" >> "$LOG"
+if [ "$1 $2" = "-m venv" ]; then
+    mkdir -p "$3/bin" && cp "$0" "$3/bin/python" && chmod +x "$3/bin/python"
+fi
+exit 0
+"""
+
+
+def _stub(bin_dir: Path, name: str, body: str) -> None:
+    path = bin_dir / name
+    path.write_text(body)
+    path.chmod(0o755)
+
+
+def _run(tree: Path, env: dict[str, str]) -> list[str]:
+    r = subprocess.run(["bash", str(tree / ".ci" / "bootstrap")], capture_output=True,
+                       text=True, env=env, timeout=60, check=True)
+    return r.stdout.splitlines()
+
+
+def test_bootstrap_prints_a_line_per_step_and_is_idempotent(tmp_path):
+    tree, bin_dir = tmp_path / "tree", tmp_path / "bin"
+    (tree / ".ci").mkdir(parents=True)
+    bin_dir.mkdir()
+    shutil.copy(ROOT / ".ci" / "bootstrap", tree / ".ci" / "bootstrap")
+    log = tmp_path / "calls.log"
+    _stub(bin_dir, "id", "#!/bin/sh\necho 0\n")  # as root
+    _stub(bin_dir, "dpkg", "#!/bin/sh\n[ -f \"$STATE\" ]\n")  # installed once apt-get ran
+    _stub(bin_dir, "apt-get", "#!/bin/sh\necho \"apt-get $*\" >> \"$LOG\"\ntouch \"$STATE\"\n")
+    _stub(bin_dir, "pkg-config", "#!/bin/sh\nexit 1\n")
+    _stub(bin_dir, "python3", PYTHON_STUB)
+    env = {"PATH": f"{bin_dir}:/usr/bin:/bin", "LOG": str(log),
+           "STATE": str(tmp_path / "installed"), "HOME": str(tmp_path)}
+    first = _run(tree, env)
+    steps = [line.split("] ", 1)[1] for line in first]
+    assert all(line.startswith("bootstrap: [") for line in first)
+    assert steps[0] == "apt-get update" and steps[1].startswith("apt-get install python3 ")
+    assert steps[2:5] == ["python3 -m venv .venv", "pip install --upgrade pip",
+                          "pip install -e .[dev,bench] (numpy, OpenCV, ...: a few minutes the "
+                          "first time)"]
+    assert steps[-1] == "ready (.venv)"
+    calls = log.read_text()
+    assert calls.count("apt-get install") == 1 and calls.count("-m venv .venv") == 1
+    second = [line.split("] ", 1)[1] for line in _run(tree, env)]
+    assert second[0].startswith("apt: all ") and second[1] == "venv: .venv exists"
+    calls = log.read_text()
+    assert calls.count("apt-get install") == 1 and calls.count("-m venv .venv") == 1
+    assert os.access(tree / ".venv" / "bin" / "python", os.X_OK)
