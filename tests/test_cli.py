@@ -257,11 +257,12 @@ def test_json_output_is_strict():
 
 def test_db_report_into_a_closed_pipe_is_quiet(tmp_path):
     from db.repository import Repository
+    from stationd.boltfile import import_bolts
     from tests.db.conftest import EXAMPLE, record, url_of
 
     db = url_of(tmp_path / "s.db")
     with Repository.open(db) as repo:
-        repo.import_bolts(EXAMPLE)
+        import_bolts(repo, EXAMPLE)
         repo.start_vehicle("VIN1", "WAGON-B")
         record(repo, "VIN1", "SF-FL")
     # the reader is gone before the command writes (as `| head` once it has its lines)
