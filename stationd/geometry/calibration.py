@@ -92,6 +92,9 @@ def parse_board(spec: str) -> Board:
     if cols < 3 or rows < 3:
         raise InputError(f"board {spec!r}: at least 3x3 needed, got {cols}x{rows}")
     square = _positive_mm(spec, "square size", parts[2])
+    if square < MIN_SQUARE_MM:
+        raise InputError(f"board {spec!r}: a square of {square:g} mm is not plausible (at least "
+                         f"{MIN_SQUARE_MM:g} mm; sizes are in millimetres, not metres)")
     if kind == "chessboard":
         return Board("chessboard", cols, rows, square)
     marker = _positive_mm(spec, "marker size", parts[3])
@@ -109,6 +112,9 @@ def parse_board(spec: str) -> Board:
         raise InputError(f"board {spec!r}: {cols}x{rows} squares need {needed} markers, "
                          f"{name} has {available}")
     return board
+
+
+MIN_SQUARE_MM = 1.0  # a printed board's square: below 1 mm it was given in metres
 
 
 def _positive_mm(spec: str, what: str, text: str) -> float:

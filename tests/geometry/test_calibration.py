@@ -176,6 +176,7 @@ def test_parse_board():
     ("chessboard:2x6:25", "at least 3x3"),
     ("chessboard:9x6:abc", "square size 'abc' is not a number"),
     ("chessboard:9x6:-5", "must be a positive number"),
+    ("chessboard:9x6:0.025", "a square of 0.025 mm is not plausible (at least 1 mm"),
     ("chessboard:9x6:nan", "must be a positive number"),
     ("charuco:11x8:20:15", "expected chessboard:COLSxROWS"),
     ("charuco:11x8:20:25:DICT_5X5_100", "must be smaller than the square"),
