@@ -85,7 +85,7 @@ def test_arguments():
 
 def test_a_simulated_pair_is_in_step():
     """Simulated cameras stamp the trigger time, so rendering order makes no skew."""
-    sim.register_world("p", lambda side, seed: np.full((4, 4, 3), seed, np.uint8))
+    sim.register_world("p", lambda side, seed, at: np.full((4, 4, 3), seed, np.uint8))
     try:
         with open_camera("sim://p/left?seed=3") as left, \
                 open_camera("sim://p/right?seed=3") as right:

@@ -66,7 +66,7 @@ def test_sim_without_then_with_a_world(capsys):
     assert code == 1 and json.loads(captured.out)["ok"] is False
     assert "no simulated world for pair 'pair1'" in captured.err
     assert captured.err.count("\n") == 1
-    sim.register_world("pair1", lambda side, seed: np.zeros((5, 6, 3), np.uint8))
+    sim.register_world("pair1", lambda side, seed, at: np.zeros((5, 6, 3), np.uint8))
     try:
         assert main(["probe", "camera", "sim://pair1/right", "--json"]) == 0
     finally:
