@@ -23,7 +23,7 @@ def _world(seed=0):
     pair = SimpleNamespace(calibration=cal,
                            to_vehicle=SimpleNamespace(A=np.eye(3), t=np.zeros(3)))
     cfg = SimpleNamespace(pairs={"w": pair}, marker=MarkerSpec())
-    return World(cfg, seed=seed, scene=Scene(noise_sigma=1.0))  # type: ignore[arg-type]
+    return World(cfg, seed=seed, scene=Scene(noise_sigma=1.0))
 
 
 def _marker_column(image, background):
