@@ -50,12 +50,14 @@ class ClockMap:
         self._samples: deque[Sample] = deque(maxlen=window)
         self._first: Sample | None = None  # the oldest sample since the last reset (rate check)
         self.reason = "no frames yet"
+        self.checking = True  # not trusted yet only because too few frames were seen
 
     def reset(self, reason: str) -> None:
         """Forget everything (a reconnect, a clock that jumped); ``reason`` says why."""
         self._samples.clear()
         self._first = None
         self.reason = reason
+        self.checking = False
 
     def add(self, device_s: float, system_s: float, trigger_s: float | None = None) -> None:
         """Record one frame's stamps; a zero or non-finite device stamp resets the map."""
@@ -85,13 +87,14 @@ class ClockMap:
             return None
         last = self._samples[-1]
         span_host = last.system_s - self._first.system_s
-        if span_host < self.verify_span_s:
+        self.checking = span_host < self.verify_span_s
+        if self.checking:
             self.reason = (f"the camera's clock is being checked ({span_host:.2f} of "
                            f"{self.verify_span_s:g} s of frames)")
             return None
         rate = (last.device_s - self._first.device_s) / span_host
         if abs(rate - 1.0) > self.rate_tolerance:
-            self.reason = (f"the camera's clock runs at {rate:.4g} x the host's (a wrong "
+            self.reason = (f"the camera's clock runs at {rate:.3g} x the host's (a wrong "
                            "timestamp unit?)")
             return None
         lo, hi = self._bounds()
