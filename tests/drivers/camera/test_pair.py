@@ -1,5 +1,7 @@
 """StereoGrabber: one trigger for both cameras, frames refused when too far apart in time."""
 
+import time
+
 import numpy as np
 import pytest
 
@@ -48,6 +50,21 @@ def test_frames_within_the_skew_pass():
     left, right = g.grab()
     assert (left.camera, right.camera) == ("L", "R") and a.triggers == b.triggers == 1
     assert g.grab()[0].timestamp == 101.0
+
+
+def test_the_skew_is_between_exposures_not_arrivals():
+    """The right frame arrives 40 ms after the left (transfer, rendering): exposed together,
+    the pair is good."""
+    class SlowRight(Scripted):
+        def _grab(self, timeout):
+            time.sleep(0.04)
+            return super()._grab(timeout)
+
+    a, b = Scripted("L", [100.0]), SlowRight("R", [100.001])
+    a.open()
+    b.open()
+    left, right = StereoGrabber(a, b, 0.005).grab()
+    assert right.arrival - left.arrival >= 0.04 and right.timestamp - left.timestamp < 0.005
 
 
 def test_frames_too_far_apart_are_refused():
