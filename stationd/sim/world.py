@@ -12,6 +12,10 @@ late it is grabbed and however long the render takes.  A slow machine therefore 
 same frames later (older, so the station may refuse them as stale), never frames that mix a
 past timestamp with a present wrench: the fault that let a loaded demo send parameters for a
 bolt the wrench had left.
+
+A pose is ray-cast once per camera, the first time a frame needs it, and composed into later
+frames (as :meth:`World.prerender` does ahead of time): the window's noise is then the same
+in every frame of one pose, which the detector cannot tell from fresh noise.
 """
 
 from __future__ import annotations
@@ -57,6 +61,7 @@ def wrench_at(point_v: np.ndarray, rng: np.random.Generator, length_mm: float,
 
 
 HISTORY_S = 30.0  # how far back poses are kept; an older trigger is stale for any station
+LIVE_PATCHES = 64  # live-rendered (pose, camera) patches kept: 8 cameras x 8 recent poses
 
 
 class World:
@@ -75,6 +80,9 @@ class World:
         self._sources: dict[tuple[str, str], FrameSource] = {}
         # (id(pose), pair, side) -> (pose, patches rendered ahead)
         self._ahead: dict[tuple[int, str, str], tuple[WrenchPose, list[Patch]]] = {}
+        # the same for poses rendered live, oldest first (a wrench held still is rendered
+        # once per camera, then composed: ray-casting a 20 MP window costs about a second)
+        self._live: dict[tuple[int, str, str], tuple[WrenchPose | None, Patch]] = {}
         for k, (name, pc) in enumerate(cfg.pairs.items()):
             cal = pc.calibration
             self._sources[(name, "left")] = FrameSource(cal.left, base, seed + 2 * k)
@@ -105,12 +113,17 @@ class World:
         for src in self._sources.values():
             if src.has_background:
                 seen[id(src.background)] = src.background.nbytes
-        for _, patches in self._ahead.values():
+        live = [[patch] for _, patch in self._live.values()]
+        for patches in [p for _, p in self._ahead.values()] + live:
             for pt in patches:
                 arr = pt if isinstance(pt, np.ndarray) else pt[1] if pt is not None else None
                 if arr is not None:
                     seen[id(arr)] = arr.nbytes
         return sum(seen.values())
+
+    def background(self, pair: str, side: str) -> np.ndarray:
+        """What the camera shows with no wrench in view (the very array its frames are then)."""
+        return self._sources[(pair, side)].background
 
     def cut_cameras(self, pair: str) -> None:
         """The pair's cameras stop delivering (a cable pulled): every grab fails."""
@@ -165,6 +178,16 @@ class World:
             ahead = self._ahead.get((id(pose), pair, side))
             if ahead is not None and ahead[0] is pose:
                 return src.compose(ahead[1][seed % len(ahead[1])])
+            key = (id(pose), pair, side)
+            with self._lock:
+                live = self._live.get(key)
+            if live is not None and live[0] is pose:
+                return src.compose(live[1])
             mp = None if pose is None else self._camera_pose(pair, side, pose)
-            return src.frame(mp, self.spec, seed=seed + 1000)
+            patch = src.patch(mp, self.spec, seed=seed + 1000)
+            with self._lock:
+                self._live[key] = (pose, patch)
+                while len(self._live) > LIVE_PATCHES:
+                    del self._live[next(iter(self._live))]
+            return src.compose(patch)
         return source

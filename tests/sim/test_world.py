@@ -75,3 +75,23 @@ def test_pose_history_answers_by_time_and_refuses_rewriting_the_past():
         assert world.pose_at(time.time() + 1) is a
     finally:
         world.close()
+
+
+def test_a_held_pose_is_rendered_once_and_composed_after():
+    """A wrench held still: the second frame is composed from the first one's window (same
+    pixels), and a new pose of the wrench is rendered anew."""
+    rng = np.random.default_rng(6)
+    a = wrench_at(np.array([-60.0, 0.0, 1000.0]), rng, LENGTH, 0.0)
+    b = wrench_at(np.array([60.0, 0.0, 1000.0]), rng, LENGTH, 0.0)
+    world = _world()
+    try:
+        with open_camera("sim://w/left") as cam:
+            world.set_wrench(a)
+            f1, f2 = cam.grab(), cam.grab()
+            world.set_wrench(b)
+            f3 = cam.grab()
+        assert f1.image is not f2.image and np.array_equal(f1.image, f2.image)
+        assert not np.array_equal(f1.image, f3.image)
+        assert world.buffer_bytes() >= world.background("w", "left").nbytes
+    finally:
+        world.close()
