@@ -43,7 +43,6 @@ from __future__ import annotations
 import atexit
 import importlib
 import logging
-import math
 import threading
 import time
 import weakref
@@ -275,16 +274,23 @@ class _Link:
                      frame_id=int(buf.get_frame_id()), camera=self.device, pixel_format=name)
 
     def _exposure_time(self, buf: Any) -> float:
-        """The buffer's exposure instant on host time (see the module's docstring)."""
+        """The buffer's exposure instant on host time (see the module's docstring).  A frame
+        the verified clock places wholly before the pending software trigger is one of an
+        earlier trigger that was still in transit: it keeps its own (older) time, and the
+        trigger waits for its own frame."""
         system_ns = int(buf.get_system_timestamp())
         system_s = system_ns / 1e9 if system_ns else time.time()
-        trigger_s, self.triggered_at = self.triggered_at, None
-        device_ns = int(buf.get_timestamp())
-        self.clock.add(device_ns / 1e9, system_s, trigger_s)
-        mapped = self.clock.host_time(device_ns / 1e9)
+        device_s = int(buf.get_timestamp()) / 1e9
+        trigger_s = self.triggered_at
+        span = self.clock.interval(device_s)
+        if trigger_s is not None and span is not None and span[1] < trigger_s:
+            trigger_s = None  # not this frame's trigger
+        else:
+            self.triggered_at = None
+        self.clock.add(device_s, system_s, trigger_s)
+        mapped = self.clock.host_time(device_s)
         if mapped is not None:
-            # never before the trigger nor after the host saw the frame (clock drift)
-            return min(max(mapped, trigger_s or -math.inf), system_s)
+            return min(mapped, system_s)  # never after the host saw it (drift, rounding)
         if trigger_s is not None:
             return trigger_s
         if not self._warned_clock and not self.clock.checking:

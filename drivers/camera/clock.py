@@ -14,7 +14,8 @@ readout and transfer.  Each frame therefore bounds the offset ``host - device``:
 The offset kept is the middle of the tightest bounds over the last frames (NTP's reasoning:
 the best observations are the ones with the least delay), or the upper bound while no trigger
 bounds it from below.  The map is trusted only once its frames span ``verify_span_s`` of host
-time and the device clock ran at the host's rate over that span (within ``rate_tolerance``):
+time and the device clock ran at the host's rate over that span (within ``rate_tolerance``,
+measured between the least-delayed of the first and of the last few frames):
 until then, or when the device clock is absent (0), runs at another rate or jumps (bounds that
 cross), ``host_time`` answers None and the caller uses its fallback (the software trigger
 time).  Pure arithmetic: tested without a camera.
@@ -25,6 +26,8 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
+
+ENVELOPE = 8  # frames at each end of the rate check
 
 
 @dataclass(frozen=True)
@@ -48,14 +51,14 @@ class ClockMap:
         self.verify_span_s = verify_span_s
         self.rate_tolerance = rate_tolerance
         self._samples: deque[Sample] = deque(maxlen=window)
-        self._first: Sample | None = None  # the oldest sample since the last reset (rate check)
+        self._early: list[Sample] = []  # the first ENVELOPE samples since the last reset
         self.reason = "no frames yet"
         self.checking = True  # not trusted yet only because too few frames were seen
 
     def reset(self, reason: str) -> None:
         """Forget everything (a reconnect, a clock that jumped); ``reason`` says why."""
         self._samples.clear()
-        self._first = None
+        self._early = []
         self.reason = reason
         self.checking = False
 
@@ -68,13 +71,13 @@ class ClockMap:
         if self._samples and device_s <= self._samples[-1].device_s:
             self.reset("the camera's clock went backwards")
         self._samples.append(sample)
-        if self._first is None:
-            self._first = sample
+        if len(self._early) < ENVELOPE:
+            self._early.append(sample)
         lo, hi = self._bounds()
         if lo is not None and lo > hi:
             self.reset("the camera's clock jumped (its stamps contradict the host's)")
             self._samples.append(sample)
-            self._first = sample
+            self._early = [sample]
 
     def _bounds(self) -> tuple[float | None, float]:
         hi = min(s.system_s - s.device_s for s in self._samples)
@@ -83,16 +86,19 @@ class ClockMap:
 
     def offset(self) -> float | None:
         """``host - device`` in seconds, or None while the map is not trusted (``reason``)."""
-        if not self._samples or self._first is None:
+        if not self._samples or not self._early:
             return None
-        last = self._samples[-1]
-        span_host = last.system_s - self._first.system_s
+        # the rate from the least-delayed frame among the first few and among the last few:
+        # a frame delayed by load or transfer does not pass for a clock running slow
+        a = min(self._early, key=lambda s: s.system_s - s.device_s)
+        b = min(list(self._samples)[-ENVELOPE:], key=lambda s: s.system_s - s.device_s)
+        span_host = b.system_s - a.system_s
         self.checking = span_host < self.verify_span_s
         if self.checking:
-            self.reason = (f"the camera's clock is being checked ({span_host:.2f} of "
-                           f"{self.verify_span_s:g} s of frames)")
+            self.reason = (f"the camera's clock is being checked ({max(span_host, 0.0):.2f} "
+                           f"of {self.verify_span_s:g} s of frames)")
             return None
-        rate = (last.device_s - self._first.device_s) / span_host
+        rate = (b.device_s - a.device_s) / span_host
         if abs(rate - 1.0) > self.rate_tolerance:
             self.reason = (f"the camera's clock runs at {rate:.3g} x the host's (a wrong "
                            "timestamp unit?)")
@@ -100,6 +106,14 @@ class ClockMap:
         lo, hi = self._bounds()
         self.reason = ""
         return hi if lo is None else 0.5 * (lo + hi)
+
+    def interval(self, device_s: float) -> tuple[float, float] | None:
+        """The host times device instant ``device_s`` may be (earliest, latest), or None
+        while the map is not trusted.  Without triggers the earliest is unbounded."""
+        if self.offset() is None:
+            return None
+        lo, hi = self._bounds()
+        return device_s + (-math.inf if lo is None else lo), device_s + hi
 
     def host_time(self, device_s: float) -> float | None:
         """The host time of device instant ``device_s``, or None while not trusted."""

@@ -76,3 +76,53 @@ def test_arguments():
         ClockMap(window=1)
     with pytest.raises(ValueError):
         ClockMap(rate_tolerance=0)
+
+
+def test_the_interval_brackets_the_exposure():
+    cm = ClockMap()
+    assert cm.interval(1234.5) is None
+    truth, stamps = _frames(cm, 30)
+    lo, hi = cm.interval(stamps[-1])
+    assert lo <= truth[-1] <= hi and hi - lo < 0.025
+    free = ClockMap()
+    truth, stamps = _frames(free, 30, trigger=False)
+    lo, hi = free.interval(stamps[-1])
+    assert lo == -np.inf and truth[-1] <= hi
+
+
+class _Buffer:
+    """The two stamps of an Aravis buffer, in ns."""
+
+    def __init__(self, device_s, system_s):
+        self.device_ns, self.system_ns = round(device_s * 1e9), round(system_s * 1e9)
+
+    def get_timestamp(self):
+        return self.device_ns
+
+    def get_system_timestamp(self):
+        return self.system_ns
+
+
+def _link():
+    from drivers.camera.aravis import _Link
+
+    link = _Link.__new__(_Link)  # the stamping only: no camera behind it
+    link.clock, link.triggered_at, link._warned_clock, link.device = ClockMap(), None, False, "x"
+    return link
+
+
+def test_aravis_stamps_the_trigger_until_the_clock_is_verified_then_the_mapped_exposure():
+    link = _link()
+    host0, dev0 = 1.7e9, 50.0  # host = device + 1.7e9 - 50
+    stamps = []
+    for k in range(30):
+        exposure = host0 + 0.1 * k
+        link.triggered_at = exposure - 0.002
+        stamps.append(link._exposure_time(_Buffer(dev0 + 0.1 * k, exposure + 0.03)))
+    assert stamps[0] == pytest.approx(host0 - 0.002)  # the trigger while checking the clock
+    assert stamps[-1] == pytest.approx(host0 + 2.9, abs=0.016)  # the mapped exposure
+    # a frame of an earlier trigger still in transit when the next trigger is sent: it keeps
+    # its own, older time, and the trigger stays pending for its own frame
+    link.triggered_at = host0 + 3.5
+    late = link._exposure_time(_Buffer(dev0 + 3.0, host0 + 3.52))
+    assert late == pytest.approx(host0 + 3.0, abs=0.016) and link.triggered_at == host0 + 3.5
