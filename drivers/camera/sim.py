@@ -5,9 +5,10 @@ the world calls ``register_world("pair1", source)`` and every ``sim://pair1/left
 ``sim://pair1/right`` camera asks ``source(side, seed, at)`` for a BGR image when it is
 grabbed, where ``at`` is the trigger instant (host ``time.time()``): the world answers with
 what the camera saw *at that instant*, however late the grab and however long the render
-(the wrench may have moved since), and the frame's timestamp is ``at``.  So a simulated
-station's frame ages do not depend on the machine's load, as a real camera's exposure time
-does not.  Without a ``trigger()``, the grab's own start is the trigger.
+(the wrench may have moved since), and the frame's timestamp is ``at``.  So on a loaded
+machine a frame arrives later (older, and a station may refuse it as stale) but never shows
+another moment than its timestamp says, as with a real camera.  Without a ``trigger()``, the
+grab's own start is the trigger.
 The world renders with ``stationd.sim.render`` through that camera's calibration, so lighting,
 noise and what the marker looks like are the world's business, not the camera's.
 
