@@ -13,9 +13,15 @@ through importlib and typed ``Any``, when the first ``aravis://`` camera opens.
 - ``buffers``: the stream's pool, each buffer the camera's own payload (20 MB for 5472x3648
   Bayer8, 60 MB for RGB8), allocated once per connection.  ``region``: ``full`` or X,Y,W,H.
   ``frame_rate``: the free-running rate in Hz.
-- Timestamps are the host's system timestamp of the buffer, not the camera's clock: Hikrobot
-  cameras report theirs in a wrong unit (Aravis's ``src/arv-test.cfg``), and the host clock is
-  what the two cameras of a stereo pair share.  Chunk data is not used.
+- A frame's timestamp is its exposure instant on the host's ``time.time()`` scale: the
+  buffer's own timestamp (the camera's clock at the start of the frame) mapped onto host
+  time by ``clock.ClockMap`` from the buffer's system timestamp (host time of its first
+  packet, an upper bound) and the software trigger's send time (a lower bound).  Until the
+  map is verified (2 s of frames at the host's rate: Hikrobot cameras report their clock in
+  a wrong unit, Aravis's ``src/arv-test.cfg``), or when the camera gives no timestamp, the
+  software trigger's send time is the timestamp; with a line or free-running trigger and no
+  usable camera clock, the system timestamp is (late by readout and transfer: the one case
+  where a frame looks younger than it is, logged once).  Chunk data is not used.
 
 Aravis quirks handled here:
 - ``update_device_list()`` (about 1 s: GigE discovery) runs before ``Camera.new`` when the
@@ -47,6 +53,7 @@ from typing import Any, TypeVar
 from drivers.camera import pixels
 from drivers.camera.aravis_config import Settings, parse_aravis_url, translate
 from drivers.camera.base import CameraDevice, Frame, FrameError, UnsupportedError
+from drivers.camera.clock import ClockMap
 from drivers.errors import (
     ConnectError,
     ConnectionLostError,
@@ -113,6 +120,9 @@ class _Link:
         self.stream: Any = None
         self.payload = 0
         self.pixel_format = ""
+        self.clock = ClockMap()  # a new connection may bring a reset camera clock
+        self.triggered_at: float | None = None  # host time the last software trigger was sent
+        self._warned_clock = False
 
     def _call(self, what: str, fn: Any, *args: Any) -> Any:
         try:
@@ -228,6 +238,7 @@ class _Link:
             self.stream.push_buffer(buf)
             dropped += 1
         if self.settings.trigger == "software":
+            self.triggered_at = time.time()  # the exposure cannot start before this
             self._call("software trigger", self.cam.software_trigger)
         return dropped
 
@@ -259,9 +270,34 @@ class _Link:
             image = pixels.to_bgr(buf.get_image_data(), w, h, name, stride)
         except ValueError as exc:
             raise FrameError(str(exc), device=self.device) from None
-        ts = buf.get_system_timestamp()
-        return Frame(image=image, timestamp=ts / 1e9 if ts else time.time(),
+        return Frame(image=image, timestamp=self._exposure_time(buf),
                      frame_id=int(buf.get_frame_id()), camera=self.device, pixel_format=name)
+
+    def _exposure_time(self, buf: Any) -> float:
+        """The buffer's exposure instant on host time (see the module's docstring).  A frame
+        the verified clock places wholly before the pending software trigger is one of an
+        earlier trigger that was still in transit: it keeps its own (older) time, and the
+        trigger waits for its own frame."""
+        system_ns = int(buf.get_system_timestamp())
+        system_s = system_ns / 1e9 if system_ns else time.time()
+        device_s = int(buf.get_timestamp()) / 1e9
+        trigger_s = self.triggered_at
+        span = self.clock.interval(device_s)
+        if trigger_s is not None and span is not None and span[1] < trigger_s:
+            trigger_s = None  # not this frame's trigger
+        else:
+            self.triggered_at = None
+        self.clock.add(device_s, system_s, trigger_s)
+        mapped = self.clock.host_time(device_s)
+        if mapped is not None:
+            return min(mapped, system_s)  # never after the host saw it (drift, rounding)
+        if trigger_s is not None:
+            return trigger_s
+        if not self._warned_clock and not self.clock.checking:
+            self._warned_clock = True
+            log.warning("%s: exposure times unknown (%s): frames are stamped when they reach "
+                        "the host", self.device, self.clock.reason)
+        return system_s
 
     def close(self, lost: bool = False) -> None:
         """Stop (unless the camera is gone: that costs GVCP timeouts), then drop the stream,

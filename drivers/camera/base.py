@@ -15,6 +15,13 @@ knowing what it is made of:
 - ``grab(timeout)`` returns the next frame.  A software-triggered camera delivers nothing
   without a trigger (DeviceTimeoutError); the other backends deliver a frame on every grab.
 
+Timing, the same for every backend, because the station judges a frame's age from it (a
+wrench seen 300 ms ago may be on another bolt now): ``Frame.timestamp`` is the instant the
+frame was *exposed* (triggered), on the host's ``time.time()`` scale, never when it arrived;
+``Frame.arrival`` is the host time ``grab()`` delivered it.  Their difference is the camera's
+exposure-to-delivery delay (readout, transfer, queueing, rendering), which the daemon reports.
+Each backend documents where its exposure instant comes from.
+
 Classes are named ``CameraDevice`` so they do not clash with the camera *model*
 (``stationd.geometry.camera.Camera``: intrinsics and distortion).
 """
@@ -25,7 +32,7 @@ import math
 import time
 from abc import abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -51,15 +58,18 @@ class EndOfStreamError(DeviceError):
 @dataclass(eq=False)
 class Frame:
     """One image: ``image`` is HxWx3 uint8 in BGR order (OpenCV's), ``timestamp`` is
-    seconds since the epoch on the host clock (``time.time()`` scale) when the exposure was
-    triggered or the frame arrived, ``frame_id`` counts the camera's frames, ``camera`` is
-    the camera's URL, ``pixel_format`` what the camera sent before conversion to BGR."""
+    seconds since the epoch on the host clock (``time.time()`` scale) when the frame was
+    exposed (triggered) -- what ages are measured from --, ``frame_id`` counts the camera's
+    frames, ``camera`` is the camera's URL, ``pixel_format`` what the camera sent before
+    conversion to BGR, ``arrival`` the host time the frame was delivered (``grab()`` sets
+    it as it returns; a frame built elsewhere gets its construction time)."""
 
     image: np.ndarray
     timestamp: float
     frame_id: int
     camera: str
     pixel_format: str = "BGR8"
+    arrival: float = field(default_factory=time.time)
 
     def __post_init__(self) -> None:
         img = self.image
@@ -68,6 +78,11 @@ class Frame:
             shape = getattr(img, "shape", None)
             dtype = getattr(img, "dtype", type(img).__name__)
             raise ValueError(f"a frame is an HxWx3 uint8 BGR image, got {dtype} {shape}")
+
+    @property
+    def delay_s(self) -> float:
+        """Seconds from exposure to delivery (readout, transfer, queueing, rendering)."""
+        return self.arrival - self.timestamp
 
     @property
     def width(self) -> int:
@@ -145,7 +160,9 @@ class CameraDevice(Device):
         self._check_open()
         if timeout is not None and not (math.isfinite(timeout) and timeout > 0):
             raise ValueError(f"timeout must be > 0, got {timeout}")
-        return self._grab(timeout or self.timeout)
+        frame = self._grab(timeout or self.timeout)
+        frame.arrival = time.time()
+        return frame
 
     def set_exposure_us(self, exposure_us: float) -> float:
         """Set the exposure time in microseconds; returns the value the camera applied
@@ -163,8 +180,9 @@ class CameraDevice(Device):
         return self._set_gain_db(float(gain_db))
 
     def _take_trigger_time(self) -> float:
-        """The time of the pending ``trigger()`` (consumed), else now: the timestamp of
-        backends that produce the frame when grabbed."""
+        """The time of the pending ``trigger()`` (consumed), else now: the exposure instant
+        of backends that produce the frame when grabbed (taken before the frame is read or
+        rendered, so reading time never makes a frame look younger than it is)."""
         t, self._triggered_at = self._triggered_at, None
         return t if t is not None else time.time()
 

@@ -1,8 +1,10 @@
 """Two cameras of a stereo pair, grabbed on one trigger, refused when out of step.
 
 Triangulating a marker that moved between the left and the right exposure puts it where it
-never was, and nothing downstream can tell: so a pair of frames whose timestamps differ by
-more than ``max_skew_s`` is refused here with a typed error instead of being returned.
+never was, and nothing downstream can tell: so a pair of frames whose *exposure* timestamps
+(``Frame.timestamp``) differ by more than ``max_skew_s`` is refused here with a typed error
+instead of being returned.  Arrival times (``Frame.arrival``) may differ by much more (one
+camera's transfer queued behind the other's) without harm: the images were taken together.
 With software triggers both cameras are triggered back to back (each ``trigger()`` also drops
 stale frames, so one refused pair does not shift the next); with a shared hardware trigger
 line, ``trigger()`` only drops stale frames and the line starts both exposures.

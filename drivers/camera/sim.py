@@ -2,7 +2,13 @@
 
 The camera and the world meet through an in-process channel, like python-can's virtual bus:
 the world calls ``register_world("pair1", source)`` and every ``sim://pair1/left`` or
-``sim://pair1/right`` camera asks ``source(side, seed)`` for a BGR image when it is grabbed.
+``sim://pair1/right`` camera asks ``source(side, seed, at)`` for a BGR image when it is
+grabbed, where ``at`` is the trigger instant (host ``time.time()``): the world answers with
+what the camera saw *at that instant*, however late the grab and however long the render
+(the wrench may have moved since), and the frame's timestamp is ``at``.  So on a loaded
+machine a frame arrives later (older, and a station may refuse it as stale) but never shows
+another moment than its timestamp says, as with a real camera.  Without a ``trigger()``, the
+grab's own start is the trigger.
 The world renders with ``stationd.sim.render`` through that camera's calibration, so lighting,
 noise and what the marker looks like are the world's business, not the camera's.
 
@@ -26,8 +32,8 @@ from drivers.camera.base import CameraDevice, Frame
 from drivers.errors import ConnectError, ProtocolError
 from drivers.url import parse_url
 
-#: ``source(side, seed) -> HxWx3 uint8 BGR image``
-WorldSource = Callable[[str, int], np.ndarray]
+#: ``source(side, seed, at) -> HxWx3 uint8 BGR image`` of the world as of host time ``at``
+WorldSource = Callable[[str, int, float], np.ndarray]
 SIDES = ("left", "right")
 FORM = "sim://PAIR/left|right[?seed=N]"
 
@@ -41,7 +47,7 @@ def register_world(pair: str, source: WorldSource, *, replace: bool = False) -> 
     if not pair or "/" in pair:
         raise ValueError(f"a pair name is a non-empty word without '/', got {pair!r}")
     if not callable(source):
-        raise TypeError("source must be callable as source(side, seed)")
+        raise TypeError("source must be callable as source(side, seed, at)")
     with _lock:
         if pair in _worlds and not replace:
             raise ValueError(f"a simulated world is already registered for pair {pair!r}")
@@ -76,8 +82,9 @@ def parse_sim_url(text: str) -> tuple[str, str, int]:
 
 class SimCamera(CameraDevice):
     """A camera of the simulated station.  It has no exposure or gain: the world decides how
-    bright the image is.  Frames are rendered when grabbed; ``trigger()`` fixes the timestamp,
-    so a stereo pair triggered together shows no skew however long rendering takes."""
+    bright the image is.  Frames are rendered when grabbed, of the world as of the trigger
+    instant, which is also their timestamp: a stereo pair triggered together shows no skew
+    and no motion between its frames however long rendering takes."""
 
     def __init__(self, url: str, *, timeout: float | None = None, backoff: float | None = None,
                  backoff_max: float | None = None) -> None:
@@ -99,7 +106,8 @@ class SimCamera(CameraDevice):
         pass
 
     def _grab(self, timeout: float) -> Frame:
-        """Render one frame (synchronously: ``timeout`` does not cut a render short)."""
+        """Render one frame of the world as of the trigger (synchronously: ``timeout`` does
+        not cut a render short)."""
         with _lock:
             source = _worlds.get(self.pair)
             known = sorted(_worlds)
@@ -111,7 +119,7 @@ class SimCamera(CameraDevice):
         timestamp = self._take_trigger_time()
         frame_id = self._count
         self._count += 1
-        image = source(self.side, self.seed + frame_id)
+        image = source(self.side, self.seed + frame_id, timestamp)
         if not (isinstance(image, np.ndarray) and image.dtype == np.uint8 and image.ndim == 3
                 and image.shape[2] == 3 and image.size > 0):
             what = f"{getattr(image, 'dtype', type(image).__name__)} " \

@@ -5,12 +5,25 @@ behind ``sim://wrench``) and renders what each ``sim://PAIR/SIDE`` camera sees t
 pair's true geometry (the simulated station's calibration is exact).  The operator takes the
 wrench to bolts, sometimes hovers between two or leaves before tightening, and pulls the
 trigger once the controller has the tool enabled.
+
+Time: the world keeps the history of the wrench's poses (when each was set, host
+``time.time()``), and a camera triggered at ``t`` is rendered with the pose of ``t``, however
+late it is grabbed and however long the render takes.  A slow machine therefore delivers the
+same frames later (older, so the station may refuse them as stale), never frames that mix a
+past timestamp with a present wrench: the fault that let a loaded demo send parameters for a
+bolt the wrench had left.
+
+A pose is ray-cast once per camera, the first time a frame needs it, and composed into later
+frames (as :meth:`World.prerender` does ahead of time): the window's noise is then the same
+in every frame of one pose, which the detector cannot tell from fresh noise.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 import threading
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -47,8 +60,12 @@ def wrench_at(point_v: np.ndarray, rng: np.random.Generator, length_mm: float,
     return WrenchPose(point_v - length_mm * axis, rot, np.asarray(point_v, dtype=np.float64))
 
 
+HISTORY_S = 30.0  # how far back poses are kept; an older trigger is stale for any station
+LIVE_PATCHES = 64  # live-rendered (pose, camera) patches kept: 8 cameras x 8 recent poses
+
+
 class World:
-    """Renders the cameras and holds the wrench pose the operator sets."""
+    """Renders the cameras and holds the wrench poses the operator sets, with their times."""
 
     def __init__(self, cfg: StationConfig, *, seed: int = 0, spec: MarkerSpec | None = None,
                  scene: Scene | None = None) -> None:
@@ -56,10 +73,16 @@ class World:
         self.spec = spec or cfg.marker
         self.pose: WrenchPose | None = None
         self._lock = threading.Lock()
+        # when each pose was set (ascending) and the pose: before the first, no wrench
+        self._times: list[float] = [-math.inf]
+        self._poses: list[WrenchPose | None] = [None]
         base = scene or Scene(texture=0.15, vignetting=0.3, blur_sigma=0.8, noise_sigma=2.0)
         self._sources: dict[tuple[str, str], FrameSource] = {}
         # (id(pose), pair, side) -> (pose, patches rendered ahead)
         self._ahead: dict[tuple[int, str, str], tuple[WrenchPose, list[Patch]]] = {}
+        # the same for poses rendered live, oldest first (a wrench held still is rendered
+        # once per camera, then composed: ray-casting a 20 MP window costs about a second)
+        self._live: dict[tuple[int, str, str], tuple[WrenchPose | None, Patch]] = {}
         for k, (name, pc) in enumerate(cfg.pairs.items()):
             cal = pc.calibration
             self._sources[(name, "left")] = FrameSource(cal.left, base, seed + 2 * k)
@@ -90,12 +113,17 @@ class World:
         for src in self._sources.values():
             if src.has_background:
                 seen[id(src.background)] = src.background.nbytes
-        for _, patches in self._ahead.values():
+        live = [[patch] for _, patch in self._live.values()]
+        for patches in [p for _, p in self._ahead.values()] + live:
             for pt in patches:
                 arr = pt if isinstance(pt, np.ndarray) else pt[1] if pt is not None else None
                 if arr is not None:
                     seen[id(arr)] = arr.nbytes
         return sum(seen.values())
+
+    def background(self, pair: str, side: str) -> np.ndarray:
+        """What the camera shows with no wrench in view (the very array its frames are then)."""
+        return self._sources[(pair, side)].background
 
     def cut_cameras(self, pair: str) -> None:
         """The pair's cameras stop delivering (a cable pulled): every grab fails."""
@@ -105,9 +133,30 @@ class World:
         """The pair's cameras deliver again."""
         register_world(pair, self._source_for(pair), replace=True)
 
-    def set_wrench(self, pose: WrenchPose | None) -> None:
+    def set_wrench(self, pose: WrenchPose | None, at: float | None = None) -> None:
+        """The wrench is at ``pose`` (None: on no bolt, out of view) from host time ``at``
+        (default now) on.  An explicit time before the last one set is refused (ValueError):
+        the past that cameras may still be rendering does not change.  ``now`` is never
+        refused: a host clock stepped back counts as the last time set."""
         with self._lock:
+            t = max(time.time(), self._times[-1]) if at is None else float(at)
+            if not t >= self._times[-1]:
+                raise ValueError(f"the wrench's poses are set in time order: {t} is before "
+                                 f"{self._times[-1]}")
             self.pose = pose
+            self._times.append(t)
+            self._poses.append(pose)
+            # forget poses older than HISTORY_S, keeping the one in force at the horizon
+            keep = bisect.bisect_right(self._times, t - HISTORY_S) - 1
+            if keep > 0:
+                del self._times[:keep], self._poses[:keep]
+
+    def pose_at(self, t: float) -> WrenchPose | None:
+        """The wrench's pose at host time ``t``: the last one set at or before ``t`` (the
+        oldest kept for a ``t`` older than the history)."""
+        with self._lock:
+            i = bisect.bisect_right(self._times, t) - 1
+            return self._poses[max(i, 0)]
 
     def _camera_pose(self, pair: str, side: str, pose: WrenchPose) -> MarkerPose | None:
         pc = self.cfg.pairs[pair]
@@ -122,14 +171,23 @@ class World:
             return None  # behind the camera or seen from the back
         return MarkerPose(c, rot)
 
-    def _source_for(self, pair: str) -> Callable[[str, int], np.ndarray]:
-        def source(side: str, seed: int) -> np.ndarray:
-            with self._lock:
-                pose = self.pose
+    def _source_for(self, pair: str) -> Callable[[str, int, float], np.ndarray]:
+        def source(side: str, seed: int, at: float) -> np.ndarray:
+            pose = self.pose_at(at)
             src = self._sources[(pair, side)]
             ahead = self._ahead.get((id(pose), pair, side))
             if ahead is not None and ahead[0] is pose:
                 return src.compose(ahead[1][seed % len(ahead[1])])
+            key = (id(pose), pair, side)
+            with self._lock:
+                live = self._live.get(key)
+            if live is not None and live[0] is pose:
+                return src.compose(live[1])
             mp = None if pose is None else self._camera_pose(pair, side, pose)
-            return src.frame(mp, self.spec, seed=seed + 1000)
+            patch = src.patch(mp, self.spec, seed=seed + 1000)
+            with self._lock:
+                self._live[key] = (pose, patch)
+                while len(self._live) > LIVE_PATCHES:
+                    del self._live[next(iter(self._live))]
+            return src.compose(patch)
         return source

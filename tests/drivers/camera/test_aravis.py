@@ -121,3 +121,14 @@ def test_pool_for_full_size_20mp_frames(fake):
             cam.trigger()
             f = cam.grab(3.0)
             assert f.image.shape == (3648, 5472, 3)
+
+
+def test_a_software_triggered_frame_is_stamped_between_trigger_and_arrival(fake):
+    """Exposure time, not arrival: never before the trigger was sent, never after the frame
+    reached the host (until the camera's clock is verified, the trigger time itself)."""
+    with open_camera(fake.url(SMALL)) as cam:
+        for _ in range(2):
+            t0 = time.time()
+            cam.trigger()
+            f = cam.grab(1.0)
+            assert t0 <= f.timestamp <= f.arrival and f.delay_s >= 0

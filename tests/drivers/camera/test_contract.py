@@ -28,7 +28,7 @@ def url(request, tmp_path):
         w.release()
         yield f"opencv://{tmp_path}/v.avi"
     else:
-        sim.register_world("contract", lambda side, seed: np.zeros((48, 64, 3), np.uint8))
+        sim.register_world("contract", lambda side, seed, at: np.zeros((48, 64, 3), np.uint8))
         yield "sim://contract/left"
         sim.unregister_world("contract")
 

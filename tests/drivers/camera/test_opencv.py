@@ -1,5 +1,7 @@
 """``opencv://``: OpenCV VideoCapture on a recorded video (no camera device here)."""
 
+import time
+
 import cv2
 import numpy as np
 import pytest
@@ -42,3 +44,32 @@ def test_no_such_camera_is_one_clear_error(capfd):
 def test_no_exposure_control(video):
     with open_camera(f"opencv://{video}") as cam, pytest.raises(UnsupportedError):
         cam.set_exposure_us(1000)
+
+
+class _SlowCapture:
+    """The real VideoCapture, each read/grab 50 ms slow (a 20 MP frame over USB)."""
+
+    def __init__(self, cap):
+        self.cap = cap
+
+    def __getattr__(self, name):
+        attr = getattr(self.cap, name)
+        if name in ("read", "grab"):
+            def slow(*a):
+                time.sleep(0.05)
+                return attr(*a)
+            return slow
+        return attr
+
+
+@pytest.mark.parametrize("triggered", [False, True])
+def test_the_timestamp_is_the_request_not_the_end_of_the_read(video, triggered):
+    with open_camera(f"opencv://{video}") as cam:
+        cam._cap = _SlowCapture(cam._cap)
+        t0 = time.time()
+        if triggered:
+            cam.trigger()  # VideoCapture.grab(): the exposure is requested here
+        f = cam.grab()
+        t1 = time.time()
+    assert t0 <= f.timestamp < t0 + 0.03 and f.timestamp + 0.05 <= f.arrival <= t1
+    assert f.delay_s >= 0.05

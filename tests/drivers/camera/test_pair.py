@@ -1,5 +1,7 @@
 """StereoGrabber: one trigger for both cameras, frames refused when too far apart in time."""
 
+import time
+
 import numpy as np
 import pytest
 
@@ -50,6 +52,21 @@ def test_frames_within_the_skew_pass():
     assert g.grab()[0].timestamp == 101.0
 
 
+def test_the_skew_is_between_exposures_not_arrivals():
+    """The right frame arrives 40 ms after the left (transfer, rendering): exposed together,
+    the pair is good."""
+    class SlowRight(Scripted):
+        def _grab(self, timeout):
+            time.sleep(0.04)
+            return super()._grab(timeout)
+
+    a, b = Scripted("L", [100.0]), SlowRight("R", [100.001])
+    a.open()
+    b.open()
+    left, right = StereoGrabber(a, b, 0.005).grab()
+    assert right.arrival - left.arrival >= 0.04 and right.timestamp - left.timestamp < 0.005
+
+
 def test_frames_too_far_apart_are_refused():
     g, _, _ = _pair([100.000], [100.012])
     with pytest.raises(StereoSkewError, match=r"12\.0 ms apart, more than the 5\.0 ms") as err:
@@ -85,7 +102,7 @@ def test_arguments():
 
 def test_a_simulated_pair_is_in_step():
     """Simulated cameras stamp the trigger time, so rendering order makes no skew."""
-    sim.register_world("p", lambda side, seed: np.full((4, 4, 3), seed, np.uint8))
+    sim.register_world("p", lambda side, seed, at: np.full((4, 4, 3), seed, np.uint8))
     try:
         with open_camera("sim://p/left?seed=3") as left, \
                 open_camera("sim://p/right?seed=3") as right:

@@ -69,7 +69,7 @@ def test_sim_without_then_with_a_world(capsys):
     assert "no pair 'pair9' in the simulated station" in captured.err
     assert captured.err.count("\n") == 1
     # a world already registered (a running demo) is used, not replaced
-    sim.register_world("pair1", lambda side, seed: np.zeros((5, 6, 3), np.uint8))
+    sim.register_world("pair1", lambda side, seed, at: np.zeros((5, 6, 3), np.uint8))
     try:
         assert main(["probe", "camera", "sim://pair1/right", "--json"]) == 0
     finally:

@@ -1,5 +1,7 @@
 """``sim://PAIR/SIDE``: the in-process channel between simulated cameras and the world."""
 
+import time
+
 import numpy as np
 import pytest
 
@@ -8,14 +10,19 @@ from drivers.camera.base import UnsupportedError
 from drivers.errors import ConnectError, ProtocolError
 from stationd.sim.render import Scene, crop_camera, default_camera, render
 
+AT: list[float] = []
+
 
 @pytest.fixture
 def world():
-    """A world that paints the side and seed into the image, and records its calls."""
+    """A world that paints the side and seed into the image, and records its calls (side,
+    seed) and, in ``AT``, the instants it was asked to render."""
     calls = []
+    AT.clear()
 
-    def source(side, seed):
+    def source(side, seed, at):
         calls.append((side, seed))
+        AT.append(at)
         img = np.zeros((8, 10, 3), np.uint8)
         img[..., 0] = seed % 256
         img[..., 2] = 1 if side == "left" else 2
@@ -44,7 +51,7 @@ def test_the_pair_is_looked_up_at_grab_time():
         with pytest.raises(ConnectError, match=r"no simulated world for pair 'late' \(none "
                                                r"registered\).*register_world\('late'"):
             cam.grab()
-        sim.register_world("late", lambda side, seed: np.zeros((4, 4, 3), np.uint8))
+        sim.register_world("late", lambda side, seed, at: np.zeros((4, 4, 3), np.uint8))
         assert cam.grab().image.shape == (4, 4, 3)
         sim.unregister_world("late")
         with pytest.raises(ConnectError, match="no simulated world for pair 'late'"):
@@ -59,19 +66,29 @@ def test_unknown_pair_names_the_registered_ones(world):
         cam.grab()
 
 
-def test_trigger_fixes_the_timestamp_before_the_render(world):
-    import time
-
+def test_the_world_renders_the_trigger_instant_and_the_frame_carries_it(world):
+    """A late grab still shows (and is stamped with) the trigger instant; ``arrival`` is the
+    grab's, so the frame's delay covers the wait."""
     with open_camera("sim://Pair1/left") as cam:
         t0 = time.time()
         cam.trigger()
+        t1 = time.time()
         time.sleep(0.05)
         f = cam.grab()
-    assert t0 <= f.timestamp < t0 + 0.04
+        t2 = time.time()
+    assert AT == [f.timestamp] and t0 <= f.timestamp <= t1
+    assert t1 + 0.05 <= f.arrival <= t2 and f.delay_s >= 0.05
+
+
+def test_without_a_trigger_the_grab_is_the_trigger(world):
+    with open_camera("sim://Pair1/left") as cam:
+        t0 = time.time()
+        f = cam.grab()
+    assert AT == [f.timestamp] and t0 <= f.timestamp <= f.arrival
 
 
 def test_a_world_that_returns_no_image_is_a_protocol_error():
-    sim.register_world("bad", lambda side, seed: np.zeros((4, 4), np.float32))
+    sim.register_world("bad", lambda side, seed, at: np.zeros((4, 4), np.float32))
     try:
         with open_camera("sim://bad/left") as cam, \
                 pytest.raises(ProtocolError, match=r"returned float32 \(4, 4\), not an HxWx3"):
@@ -82,10 +99,10 @@ def test_a_world_that_returns_no_image_is_a_protocol_error():
 
 def test_registration_rules(world):
     with pytest.raises(ValueError, match="already registered"):
-        sim.register_world("Pair1", lambda side, seed: np.zeros((1, 1, 3), np.uint8))
-    sim.register_world("Pair1", lambda side, seed: np.zeros((1, 1, 3), np.uint8), replace=True)
+        sim.register_world("Pair1", lambda side, seed, at: np.zeros((1, 1, 3), np.uint8))
+    sim.register_world("Pair1", lambda side, seed, at: np.zeros((1, 1, 3), np.uint8), replace=True)
     with pytest.raises(ValueError, match="without '/'"):
-        sim.register_world("a/b", lambda side, seed: np.zeros((1, 1, 3), np.uint8))
+        sim.register_world("a/b", lambda side, seed, at: np.zeros((1, 1, 3), np.uint8))
     assert sim.registered_worlds() == ["Pair1"]
 
 
@@ -103,7 +120,7 @@ def test_a_world_rendering_with_the_station_renderer():
     camera = crop_camera(default_camera(), (2700, 1800, 64, 48))
     scene = Scene(noise_sigma=3.0)
 
-    def source(side, seed):
+    def source(side, seed, at):
         return render(camera, scene, seed=seed, supersample=1).image
 
     sim.register_world("station", source)
