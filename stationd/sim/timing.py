@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from db.boltfile import load_bolts
 from drivers.camera import open_camera
 from drivers.camera.pair import StereoGrabber
+from stationd.boltfile import load_bolts
 from stationd.config import load_station_config
 from stationd.sim.load import cpu_load
 from stationd.sim.world import World, wrench_at
