@@ -103,7 +103,8 @@ def _tag_base(scene: Scene, cam: Camera, win: tuple[int, int, int, int],
         cv2.aruco.DICT_APRILTAG_36h11), 0, 200)
     tag = np.pad(tag, 20, constant_values=255).astype(np.float32)
     f = SPEC.field_mm
-    corners = np.array([[-f, -f, 0], [f, -f, 0], [f, f, 0], [-f, f, 0]], dtype=np.float64)
+    # the printed face looks at the camera: its y axis runs opposite to the image's
+    corners = np.array([[-f, f, 0], [f, f, 0], [f, -f, 0], [-f, -f, 0]], dtype=np.float64)
     dst = (cam.project(pose.centre_mm + corners @ pose.rotation.T) - np.array(win[:2])
            ).astype(np.float32)
     src = np.array([[-0.5, -0.5], [239.5, -0.5], [239.5, 239.5], [-0.5, 239.5]], np.float32)
@@ -159,7 +160,7 @@ def make_sample(setup: Setup, rng: np.random.Generator, with_tag: bool = False) 
     if with_tag:
         tag, tag_truth = _tag_base(scene, cam, win, pose, setup)
     covered = 0.0
-    if setup.occluder is not None:
+    if setup.occluder is not None and setup.occluder[2] > 0:
         shape, colour, frac, ang = setup.occluder
         polys, covered = fx.occluder_polygon(shape, frac, ang, SPEC.inner_mm, SPEC.outer_mm)
         paint(polys, fx.OCCLUDER_COLOURS[colour], img)
@@ -278,7 +279,8 @@ def _apriltag(samples: list[Sample]) -> Result:
             continue
         hits = [d for d in det.detect(s.tag_image) if d.tag_id == 0]
         if hits:
-            errs.append(float(np.hypot(*(np.asarray(hits[0].center) - s.tag_truth))))
+            # AprilTag puts the origin at the corner of pixel (0, 0), OpenCV at its centre
+            errs.append(float(np.hypot(*(np.asarray(hits[0].center) - 0.5 - s.tag_truth))))
     return {"images": len(samples), "found": len(errs), **_stats(errs),
             "wrong": sum(e > WRONG_PX for e in errs)}
 
