@@ -200,7 +200,7 @@ def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionPa
     # excluded) or the coverage gate, each with its reason.
     t0 = time.perf_counter()
     hint = (cand.hole_centre[0] - x, cand.hole_centre[1] - y)
-    edges = boundary_edges(image[y:y + h, x:x + w], marker.ratio_sq, hint)
+    edges = boundary_edges(image[y:y + h, x:x + w], marker.ratio_sq, hint, cand.hole_radius)
     t1 = time.perf_counter()
     timings["edges"] = (t1 - t0) * 1e3
     if isinstance(edges, Refusal):
