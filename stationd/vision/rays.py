@@ -28,7 +28,7 @@ from stationd.vision.types import Ellipse, Refusal
 N_RAYS = 72
 STEP_PX = 0.5
 RATIO_WINDOW = (1.36, 1.64)  # accepted r_out / r_in along a ray (nominal 1.5)
-MIN_RAYS = 18  # rays that must show the ring's structure (a quarter)
+MIN_RAYS = 30  # rays that must show the ring's structure (over 40 %)
 MIN_STEP = 3.0  # grey levels: weaker edges are noise, whatever the light
 
 
@@ -104,6 +104,16 @@ def _pass(smooth: np.ndarray, centre: tuple[float, float], radius: float
                       for k in rows])
     step = np.minimum(white - ring, field - ring)
     ok &= step >= MIN_STEP
+    # each edge must be the transition itself: the level crosses half-way between its two
+    # sides within a few samples of it (a ring of other proportions has its rise elsewhere,
+    # and only noise slopes where 10/15 expects it)
+    delta = np.clip(((bj - bi) * 0.3).astype(np.intp), 2, 8)
+    last = prof.shape[1] - 1
+    half_in, half_out = 0.5 * (white + ring), 0.5 * (ring + field)
+    ok &= prof[rows, np.maximum(bi - delta + 1, 0)] > half_in
+    ok &= prof[rows, np.minimum(bi + delta, last)] < half_in
+    ok &= prof[rows, np.maximum(bj - delta + 1, 0)] < half_out
+    ok &= prof[rows, np.minimum(bj + delta, last)] > half_out
     if ok.sum() >= 3:  # an occluded ray's pair is far weaker than the ring's own
         ok &= step >= 0.35 * float(np.median(step[ok]))
     if ok.sum() < MIN_RAYS:
@@ -130,18 +140,17 @@ def ring_from_rays(smooth: np.ndarray, centre: tuple[float, float], radius: floa
         return Refusal(f"no usable ring radius estimate ({radius})")
     cur, rad = (float(centre[0]), float(centre[1])), float(radius)
     result: RayRing | Refusal = Refusal("no ring")
-    for _ in range(2):
+    for _ in range(3):  # the last pass, from the inner ellipse's centre, decides
         got = _pass(smooth, cur, rad)
         if isinstance(got, Refusal):
-            return got if isinstance(result, Refusal) else result
+            return got
         pin, pout, levels = got
         e_in = fit_ellipse(pin)
         e_out = fit_ellipse(pout)
-        if isinstance(e_in, Refusal) or isinstance(e_out, Refusal):
-            bad = e_in if isinstance(e_in, Refusal) else e_out
-            assert isinstance(bad, Refusal)  # noqa: S101 - narrowed for mypy
-            return Refusal(f"ring rays: {bad.reason}") if isinstance(result, Refusal) \
-                else result
+        if isinstance(e_in, Refusal):
+            return Refusal(f"ring rays, inner boundary: {e_in.reason}")
+        if isinstance(e_out, Refusal):
+            return Refusal(f"ring rays, outer boundary: {e_out.reason}")
         med = np.median(levels, axis=0)
         result = RayRing(e_in, e_out, float(med[0]), float(med[1]), float(med[2]), len(pin))
         shift = math.hypot(e_in.centre[0] - cur[0], e_in.centre[1] - cur[1])
