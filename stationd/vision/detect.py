@@ -10,7 +10,7 @@ refusal for ``detect`` (``detect_all`` returns both).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import cv2
@@ -20,7 +20,7 @@ from stationd.errors import ImageError
 from stationd.geometry.camera import Camera
 from stationd.vision import centre as cm
 from stationd.vision.edges import BoundaryEdges, boundary_edges
-from stationd.vision.ellipse import fit_ellipse
+from stationd.vision.ellipse import fit_ellipse, trim_outliers
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import Gates, VisionParams
 from stationd.vision.segment import MIN_HOLE_RADIUS_PX, Candidate, search_candidates
@@ -49,6 +49,7 @@ class Detection:
     centre_split_px: float | None = None
     method: str = ""
     roi: Box | None = None
+    outer_visible: float | None = None  # fraction of the outer ring's angle with fitted edges
     timings_ms: dict[str, float] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
@@ -67,6 +68,7 @@ class Detection:
             "pencil_ratio": self.pencil_ratio,
             "centre_split_px": self.centre_split_px,
             "method": self.method,
+            "outer_visible": self.outer_visible,
             "roi": None if self.roi is None else list(self.roi),
             "timings_ms": {k: round(v, 3) for k, v in self.timings_ms.items()},
         }
@@ -169,19 +171,26 @@ def _fit_boundary(name: str, pts: np.ndarray, params: VisionParams) -> Ellipse |
     g = params.gates
     if len(pts) < g.min_points:
         return Refusal(f"{name} boundary: {len(pts)} edge points (< {g.min_points})")
-    e = fit_ellipse(pts, leitz=params.leitz, residual=params.residual)
+    trimmed = trim_outliers(pts) if params.leitz else np.ones(len(pts), dtype=bool)
+    if isinstance(trimmed, Refusal):
+        return Refusal(f"{name} boundary: {trimmed.reason}")
+    e = fit_ellipse(pts[trimmed], leitz=params.leitz, residual=params.residual)
     if isinstance(e, Refusal):
         return Refusal(f"{name} boundary: {e.reason}")
+    full = trimmed.copy()
+    if e.inliers is not None:
+        full[np.flatnonzero(trimmed)] = e.inliers
+    e = replace(e, inliers=full, rejected=len(pts) - e.used)
     if e.used < g.min_points:
         return Refusal(f"{name} boundary: {e.used} edge points after the Leitz criterion "
                        f"(< {g.min_points})")
     if e.rms > g.max_rms_px:
         return Refusal(f"{name} boundary: fit residual {e.rms:.3f} px (> {g.max_rms_px})")
-    kept = pts if e.inliers is None else pts[e.inliers]
-    cov = _coverage(e, kept)
-    if cov < g.min_coverage:
+    cov = _coverage(e, pts[full])
+    need = g.min_coverage if name == "inner" else g.min_outer_coverage
+    if cov < need:
         return Refusal(f"{name} boundary: edge points cover {cov:.0%} of it "
-                       f"(< {g.min_coverage:.0%}): occluded or cut")
+                       f"(< {need:.0%}): occluded or cut")
     return e
 
 
@@ -234,7 +243,9 @@ def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionPa
         inner_points=pin if inner.inliers is None else pin[inner.inliers],
         outer_points=pout if outer.inliers is None else pout[outer.inliers],
         pencil_ratio=det.ratio, centre_split_px=det.split, method=det.method,
-        roi=roi, timings_ms=timings)
+        roi=roi, outer_visible=_coverage(outer, pout if outer.inliers is None
+                                         else pout[outer.inliers]),
+        timings_ms=timings)
 
 
 @dataclass(frozen=True, eq=False)

@@ -31,7 +31,7 @@ import cv2
 import numpy as np
 
 from stationd.vision.ellipse import params_to_conic, sampson_distance
-from stationd.vision.rays import RayRing, ring_from_rays
+from stationd.vision.rays import MIN_TINT, RayRing, chroma, ring_from_rays
 from stationd.vision.types import Ellipse, Refusal
 
 # Smoothing before the gradient (px).  Wide enough for a stable peak fit, narrow enough that
@@ -211,11 +211,14 @@ def boundary_edges(roi_bgr: np.ndarray, ratio_sq: float,
     smooth = cv2.GaussianBlur(v, (0, 0), GRADIENT_SIGMA)
     outline: RingOutline | Refusal = Refusal("no candidate ring")
     step = 0.0
+    tint = chroma(roi_bgr)
+    field_tint = 0.0
     if hint is not None and radius is not None:
-        rr = ring_from_rays(smooth, hint, radius)
+        rr = ring_from_rays(smooth, hint, radius, tint)
         if not isinstance(rr, Refusal):
             outline = _outline_from_rays(rr, ratio_sq)
             step = min(rr.white - rr.ring, rr.field - rr.ring)
+            field_tint = rr.tint
         else:
             outline = rr
     if isinstance(outline, Refusal):
@@ -251,6 +254,14 @@ def boundary_edges(roi_bgr: np.ndarray, ratio_sq: float,
     cos_out = _normal_cos(outer_c, pts, gxk, gyk, gnorm)
     is_in = (np.abs(d_in) < tol) & (np.abs(d_in) <= np.abs(d_out)) & (cos_in < -MIN_COS)
     is_out = (np.abs(d_out) < tol) & (np.abs(d_out) < np.abs(d_in)) & (cos_out > MIN_COS)
+    if field_tint > 0.0:
+        # outer points must have the field's colour just beyond them (3 px along the
+        # gradient): the ring's edge against an arm or a glove has the edge but not the colour
+        probe = pts + 3.0 * np.stack([gxk, gyk], 1) / gnorm[:, None]
+        beyond = cv2.remap(tint, probe[:, 0:1].astype(np.float32),
+                           probe[:, 1:2].astype(np.float32), cv2.INTER_LINEAR,
+                           borderMode=cv2.BORDER_REPLICATE)[:, 0]
+        is_out &= beyond >= MIN_TINT * field_tint
     keep = _linked(edges, ys_k, xs_k, is_in | is_out)
     return BoundaryEdges(inner=pts[is_in & keep], outer=pts[is_out & keep], canny_low=low,
                          canny_high=high, outline=outline)

@@ -30,6 +30,7 @@ STEP_PX = 0.5
 RATIO_WINDOW = (1.36, 1.64)  # accepted r_out / r_in along a ray (nominal 1.5)
 MIN_RAYS = 30  # rays that must show the ring's structure (over 40 %)
 MIN_STEP = 3.0  # grey levels: weaker edges are noise, whatever the light
+MIN_TINT = 0.5  # a ray's field chroma, relative to the median of the rays
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,6 +43,7 @@ class RayRing:
     ring: float  # median darkest level of the ring
     field: float  # median level just outside the ring
     rays: int  # rays that showed the structure
+    tint: float = 0.0  # median field chroma just outside the ring (0 without chroma)
 
 
 def _profiles(smooth: np.ndarray, centre: tuple[float, float], r_max: float
@@ -67,12 +69,15 @@ def _peak(d: np.ndarray, idx: np.ndarray) -> np.ndarray:
     return np.asarray(i + np.clip(off, -0.5, 0.5))
 
 
-def _pass(smooth: np.ndarray, centre: tuple[float, float], radius: float
-          ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | Refusal:
+def _pass(smooth: np.ndarray, chroma: np.ndarray | None, centre: tuple[float, float],
+          radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | Refusal:
     """One round of rays: the (inner, outer) points of the rays that show the ring, and the
-    per-ray (white, ring, field) levels."""
+    per-ray (white, ring, field, field chroma) levels."""
     prof, r, dirs = _profiles(smooth, centre, 2.4 * radius + 4.0)
     prof = np.nan_to_num(prof, nan=0.0)
+    chrom = None
+    if chroma is not None:
+        chrom = np.nan_to_num(_profiles(chroma, centre, 2.4 * radius + 4.0)[0], nan=0.0)
     d = np.diff(prof, axis=1)  # d[k] is the slope between samples k and k + 1
     m = d.shape[1]
     lo_i = max(1, int(0.12 * radius / STEP_PX))
@@ -116,6 +121,16 @@ def _pass(smooth: np.ndarray, centre: tuple[float, float], radius: float
     ok &= prof[rows, np.minimum(bj + delta, last)] > half_out
     if ok.sum() >= 3:  # an occluded ray's pair is far weaker than the ring's own
         ok &= step >= 0.35 * float(np.median(step[ok]))
+    tint = np.zeros(N_RAYS)
+    if chrom is not None:
+        # the field beyond the ring has the field's colour; an occluder's edge (a grey
+        # arm, a hand) can mimic the rise but not the colour: judged against the majority
+        tint = np.array([np.median(chrom[k, min(last, bj[k] + delta[k]):
+                                         min(last, bj[k] + delta[k] + max(2, (bj[k] - bi[k])
+                                                                           // 2)) + 1])
+                         for k in rows])
+        if ok.sum() >= 3:
+            ok &= tint >= MIN_TINT * float(np.median(tint[ok]))
     if ok.sum() < MIN_RAYS:
         return Refusal(f"no dark ring with the marker's proportions around the candidate: "
                        f"{int(ok.sum())} of {N_RAYS} rays show bright disk / dark ring / "
@@ -125,15 +140,29 @@ def _pass(smooth: np.ndarray, centre: tuple[float, float], radius: float
     c = np.asarray(centre, np.float64)
     inner = c + dirs * ri[:, None]
     outer = c + dirs * ro[:, None]
-    levels = np.stack([white, ring, field], 1)
+    levels = np.stack([white, ring, field, tint], 1)
     return inner[ok], outer[ok], levels[ok]
 
 
-def ring_from_rays(smooth: np.ndarray, centre: tuple[float, float], radius: float
-                   ) -> RayRing | Refusal:
+def chroma(roi_bgr: np.ndarray) -> np.ndarray:
+    """How purple a pixel is: ((R + B) / 2 - G) / (max + 1), smoothed like the intensity.
+
+    High for any printed purple (R and B above G) whatever its darkness, near 0 for black,
+    white, grey, metal and skin; a white-balance cast shifts it for all of them alike, which
+    is why callers compare it to the field's own median, not to a constant.
+    """
+    f = roi_bgr.astype(np.float32)
+    b, g, r = f[..., 0], f[..., 1], f[..., 2]
+    c = (0.5 * (r + b) - g) / (np.maximum(np.maximum(r, g), b) + 1.0)
+    return np.asarray(cv2.GaussianBlur(c, (0, 0), 1.0))
+
+
+def ring_from_rays(smooth: np.ndarray, centre: tuple[float, float], radius: float,
+                   tint: np.ndarray | None = None) -> RayRing | Refusal:
     """Rough inner/outer ellipses of the ring around ``centre`` (outer radius ~ ``radius``).
 
-    ``smooth`` is the smoothed intensity of the ROI (float32); coordinates are ROI pixels.
+    ``smooth`` is the smoothed intensity of the ROI (float32), ``tint`` its :func:`chroma`
+    (optional: rays whose "field" is not the field's colour are dropped); ROI pixels.
     Refuses, naming what was missing, when too few rays show the ring or a fit fails.
     """
     if not (radius > 1.0 and math.isfinite(radius)):
@@ -141,7 +170,7 @@ def ring_from_rays(smooth: np.ndarray, centre: tuple[float, float], radius: floa
     cur, rad = (float(centre[0]), float(centre[1])), float(radius)
     result: RayRing | Refusal = Refusal("no ring")
     for _ in range(3):  # the last pass, from the inner ellipse's centre, decides
-        got = _pass(smooth, cur, rad)
+        got = _pass(smooth, tint, cur, rad)
         if isinstance(got, Refusal):
             return got
         pin, pout, levels = got
@@ -152,7 +181,8 @@ def ring_from_rays(smooth: np.ndarray, centre: tuple[float, float], radius: floa
         if isinstance(e_out, Refusal):
             return Refusal(f"ring rays, outer boundary: {e_out.reason}")
         med = np.median(levels, axis=0)
-        result = RayRing(e_in, e_out, float(med[0]), float(med[1]), float(med[2]), len(pin))
+        result = RayRing(e_in, e_out, float(med[0]), float(med[1]), float(med[2]), len(pin),
+                         float(med[3]))
         shift = math.hypot(e_in.centre[0] - cur[0], e_in.centre[1] - cur[1])
         cur = (float(e_in.centre[0]), float(e_in.centre[1]))
         rad = float(math.sqrt(e_out.axes[0] * e_out.axes[1]))

@@ -306,9 +306,30 @@ def _disk_seeds(v: np.ndarray, mask: np.ndarray, scale: int, full_size: tuple[in
     purple_v = v[mask > 0]
     if purple_v.size == 0:
         return []
+    out: list[Candidate] = []
+    notp = mask == 0
+    level = float(np.median(purple_v))
+    top = float(np.percentile(v[notp], 99.5)) if notp.any() else level
+    # A bright occluder (metal, skin) reaching close to the disk merges with it at 1/8
+    # scale; the white print is the brightest thing there, so higher levels split it off.
+    for t in (0.0, 0.45, 0.75):
+        bright = (notp & (v > level + t * max(top - level, 0.0))).astype(np.uint8)
+        for cand in _bright_blobs(v, mask, bright, scale, full_size, min_hole_radius_px):
+            if all(math.hypot(cand.hole_centre[0] - c.hole_centre[0],
+                              cand.hole_centre[1] - c.hole_centre[1]) > c.hole_radius
+                   for c in out):
+                out.append(cand)
+        if out:
+            break
+    out.sort(key=lambda c: -c.score)
+    return out
+
+
+def _bright_blobs(v: np.ndarray, mask: np.ndarray, bright: np.ndarray, scale: int,
+                  full_size: tuple[int, int], min_hole_radius_px: float) -> list[Candidate]:
+    """The elliptical bright blobs of one level that pass the ring and purple tests."""
     sh, sw = v.shape
     fw, fh = full_size
-    bright = ((mask == 0) & (v > float(np.median(purple_v)))).astype(np.uint8)
     n, labels, stats, _ = cv2.connectedComponentsWithStats(bright, connectivity=4)
     x, y, w, h, area = (stats[:, i] for i in range(5))
     r_disk = min_hole_radius_px / 1.5
@@ -339,5 +360,4 @@ def _disk_seeds(v: np.ndarray, mask: np.ndarray, scale: int, full_size: tuple[in
         score = 0.5 * min(fit, 1.0 / fit) * min(contrast, 1.0)
         out.append(Candidate((fx0, fy0, fx1 - fx0, fy1 - fy0), centre, 1.5 * radius * scale,
                              score, False, contrast))
-    out.sort(key=lambda c: -c.score)
     return out
