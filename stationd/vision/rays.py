@@ -22,14 +22,16 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from stationd.vision.ellipse import fit_ellipse
+from stationd.vision.ellipse import fit_ellipse, params_to_conic, trim_outliers
 from stationd.vision.types import Ellipse, Refusal
 
 N_RAYS = 72
 STEP_PX = 0.5
+OUTER_OVER_INNER = 1.5  # r_out / r_in of the marker (15 / 10)
 RATIO_WINDOW = (1.36, 1.64)  # accepted r_out / r_in along a ray (nominal 1.5)
 MIN_RAYS = 30  # rays that must show the ring's structure (over 40 %)
 MIN_STEP = 3.0  # grey levels: weaker edges are noise, whatever the light
+PEAKS = 4  # strongest falling / rising edges per ray considered for the pair
 MIN_TINT = 0.5  # a ray's field chroma, relative to the median of the rays
 
 
@@ -69,44 +71,58 @@ def _peak(d: np.ndarray, idx: np.ndarray) -> np.ndarray:
     return np.asarray(i + np.clip(off, -0.5, 0.5))
 
 
+def _top_peaks(x: np.ndarray, lo: int, hi: int, k: int) -> np.ndarray:
+    """Column indices of the ``k`` highest local maxima of each row of ``x`` in [lo, hi)."""
+    v = np.full(x.shape, -np.inf)
+    core = x[:, lo:hi]
+    left = x[:, lo - 1:hi - 1]
+    right = x[:, lo + 1:hi + 1] if hi + 1 <= x.shape[1] else np.pad(
+        x[:, lo + 1:], ((0, 0), (0, 1)), constant_values=-np.inf)
+    v[:, lo:hi] = np.where((core >= left) & (core > right) & (core > 0), core, -np.inf)
+    k = min(k, hi - lo)
+    return np.asarray(np.argpartition(-v, k - 1, axis=1)[:, :k])
+
+
 def _pass(smooth: np.ndarray, chroma: np.ndarray | None, centre: tuple[float, float],
           radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | Refusal:
     """One round of rays: the (inner, outer) points of the rays that show the ring, and the
-    per-ray (white, ring, field, field chroma) levels."""
+    per-ray (white, ring, field, field chroma) levels.
+
+    On each ray only the strongest few falling and rising edges are candidates (a ring, a
+    field border, an occluder's edges: few per ray); of their pairs at the 10/15 ratio the
+    one with the strongest weaker edge wins.
+    """
     prof, r, dirs = _profiles(smooth, centre, 2.4 * radius + 4.0)
     prof = np.nan_to_num(prof, nan=0.0)
-    chrom = None
-    if chroma is not None:
-        chrom = np.nan_to_num(_profiles(chroma, centre, 2.4 * radius + 4.0)[0], nan=0.0)
     d = np.diff(prof, axis=1)  # d[k] is the slope between samples k and k + 1
     m = d.shape[1]
     lo_i = max(1, int(0.12 * radius / STEP_PX))
     hi_i = min(m - 2, int(1.7 * radius / STEP_PX))
-    best = np.full(N_RAYS, -np.inf)
-    bi = np.zeros(N_RAYS, np.intp)
-    bj = np.zeros(N_RAYS, np.intp)
-    # running maximum of the rising slope over the window [1.36 i, 1.64 i] for each i
-    for i in range(lo_i, hi_i):
-        j0 = int(math.ceil(RATIO_WINDOW[0] * (i + 0.5) - 0.5))
-        j1 = min(m - 1, int(RATIO_WINDOW[1] * (i + 0.5) - 0.5))
-        if j1 <= j0:
-            continue
-        seg = d[:, j0:j1 + 1]
-        jj = np.argmax(seg, axis=1)
-        rise = seg[np.arange(N_RAYS), jj]
-        score = np.minimum(-d[:, i], rise)
-        better = score > best
-        best[better] = score[better]
-        bi[better] = i
-        bj[better] = j0 + jj[better]
-    ok = best > 0.0
+    lo_j = int(RATIO_WINDOW[0] * lo_i)
+    if hi_i <= lo_i or m - 1 <= lo_j + 1:
+        return Refusal("candidate ring too small for radial profiles")
     rows = np.arange(N_RAYS)
-    white = np.array([prof[k, max(0, bi[k] - max(2, bi[k] // 3)):bi[k] + 1].max()
-                      for k in rows])
-    ring = np.array([prof[k, bi[k] + 1:bj[k] + 1].min() if bj[k] > bi[k] else np.inf
-                     for k in rows])
-    field = np.array([prof[k, bj[k]:min(m + 1, bj[k] + 2 + (bj[k] - bi[k]) // 2)].max()
-                      for k in rows])
+    fi = _top_peaks(-d, lo_i, hi_i, PEAKS)  # (rays, K) falling edges
+    rj = _top_peaks(d, lo_j, m - 1, PEAKS)  # (rays, K) rising edges
+    fall = -d[rows[:, None], fi]
+    rise = d[rows[:, None], rj]
+    ratio = (rj[:, None, :] + 0.5) / (fi[:, :, None] + 0.5)
+    score = np.minimum(fall[:, :, None], rise[:, None, :])
+    score = np.where((ratio >= RATIO_WINDOW[0]) & (ratio <= RATIO_WINDOW[1]), score, -np.inf)
+    flat = score.reshape(N_RAYS, -1)
+    pick = np.argmax(flat, axis=1)
+    best = flat[rows, pick]
+    bi = fi[rows, pick // fi.shape[1]]
+    bj = rj[rows, pick % rj.shape[1]]
+    ok = np.isfinite(best) & (best > 0.0)
+    bj = np.where(ok, bj, np.minimum(bi + 2, m - 1))
+    idx = np.arange(prof.shape[1])[None, :]
+    bi_, bj_ = bi[:, None], bj[:, None]
+    white = np.where((idx >= np.maximum(0, bi_ - np.maximum(2, bi_ // 3))) & (idx <= bi_),
+                     prof, -np.inf).max(axis=1)
+    ring = np.where((idx > bi_) & (idx <= bj_), prof, np.inf).min(axis=1)
+    field = np.where((idx >= bj_) & (idx < bj_ + 2 + (bj_ - bi_) // 2), prof,
+                     -np.inf).max(axis=1)
     step = np.minimum(white - ring, field - ring)
     ok &= step >= MIN_STEP
     # each edge must be the transition itself: the level crosses half-way between its two
@@ -122,13 +138,14 @@ def _pass(smooth: np.ndarray, chroma: np.ndarray | None, centre: tuple[float, fl
     if ok.sum() >= 3:  # an occluded ray's pair is far weaker than the ring's own
         ok &= step >= 0.35 * float(np.median(step[ok]))
     tint = np.zeros(N_RAYS)
-    if chrom is not None:
+    if chroma is not None:
         # the field beyond the ring has the field's colour; an occluder's edge (a grey
         # arm, a hand) can mimic the rise but not the colour: judged against the majority
-        tint = np.array([np.median(chrom[k, min(last, bj[k] + delta[k]):
-                                         min(last, bj[k] + delta[k] + max(2, (bj[k] - bi[k])
-                                                                           // 2)) + 1])
-                         for k in rows])
+        at = r[0] + (bj + delta + np.maximum(1, (bj - bi) // 4)) * STEP_PX
+        px = (centre[0] + dirs[:, 0] * at).astype(np.float32)[:, None]
+        py = (centre[1] + dirs[:, 1] * at).astype(np.float32)[:, None]
+        tint = cv2.remap(chroma, px, py, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                         borderValue=0.0)[:, 0].astype(np.float64)
         if ok.sum() >= 3:
             ok &= tint >= MIN_TINT * float(np.median(tint[ok]))
     if ok.sum() < MIN_RAYS:
@@ -157,6 +174,28 @@ def chroma(roi_bgr: np.ndarray) -> np.ndarray:
     return np.asarray(cv2.GaussianBlur(c, (0, 0), 1.0))
 
 
+def _robust(pts: np.ndarray) -> Ellipse | Refusal:
+    keep = trim_outliers(pts, floor_px=1.0)
+    if isinstance(keep, Refusal):
+        return keep
+    return fit_ellipse(pts[keep])
+
+
+def _scaled(e: Ellipse, k: float) -> Ellipse:
+    axes = (e.axes[0] * k, e.axes[1] * k)
+    return Ellipse(conic=params_to_conic(e.centre, axes, e.angle), centre=e.centre, axes=axes,
+                   angle=e.angle)
+
+
+def _concentric(inner: Ellipse, outer: Ellipse) -> bool:
+    """The two rough ellipses look like this marker's circles: nearly concentric, radii
+    about 15/10 (perspective moves the centres apart by a few percent of the radius)."""
+    r_in = math.sqrt(inner.axes[0] * inner.axes[1])
+    r_out = math.sqrt(outer.axes[0] * outer.axes[1])
+    shift = math.hypot(outer.centre[0] - inner.centre[0], outer.centre[1] - inner.centre[1])
+    return shift <= 0.08 * r_out and abs(r_out / r_in / OUTER_OVER_INNER - 1.0) <= 0.12
+
+
 def ring_from_rays(smooth: np.ndarray, centre: tuple[float, float], radius: float,
                    tint: np.ndarray | None = None) -> RayRing | Refusal:
     """Rough inner/outer ellipses of the ring around ``centre`` (outer radius ~ ``radius``).
@@ -174,18 +213,22 @@ def ring_from_rays(smooth: np.ndarray, centre: tuple[float, float], radius: floa
         if isinstance(got, Refusal):
             return got
         pin, pout, levels = got
-        e_in = fit_ellipse(pin)
-        e_out = fit_ellipse(pout)
+        e_in = _robust(pin)
         if isinstance(e_in, Refusal):
             return Refusal(f"ring rays, inner boundary: {e_in.reason}")
-        if isinstance(e_out, Refusal):
-            return Refusal(f"ring rays, outer boundary: {e_out.reason}")
+        e_out = _robust(pout)
+        if isinstance(e_out, Refusal) or not _concentric(e_in, e_out):
+            # occluders ahead of most rays: the inner circle (never occluded) scaled by
+            # r_out / r_in is the rough outer boundary; the fine fit corrects perspective
+            e_out = _scaled(e_in, OUTER_OVER_INNER)
         med = np.median(levels, axis=0)
         result = RayRing(e_in, e_out, float(med[0]), float(med[1]), float(med[2]), len(pin),
                          float(med[3]))
         shift = math.hypot(e_in.centre[0] - cur[0], e_in.centre[1] - cur[1])
         cur = (float(e_in.centre[0]), float(e_in.centre[1]))
         rad = float(math.sqrt(e_out.axes[0] * e_out.axes[1]))
-        if shift < 0.5:
+        # the edge points do not depend on where the rays start, only the 10/15 window
+        # does: a hint this close needs no second pass
+        if shift < max(0.5, 0.04 * rad):
             break
     return result
