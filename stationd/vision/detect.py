@@ -50,6 +50,10 @@ class Detection:
     method: str = ""
     roi: Box | None = None
     outer_visible: float | None = None  # fraction of the outer ring's angle with fitted edges
+    # what the fits saw, for drawing (``stationd detect --draw``): every edge point assigned to
+    # a boundary (raw pixels) and which of them the fit kept; set on refusals too when known
+    edges_raw: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+    edges_used: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
     timings_ms: dict[str, float] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
@@ -194,6 +198,13 @@ def _fit_boundary(name: str, pts: np.ndarray, params: VisionParams) -> Ellipse |
     return e
 
 
+def _used(e: Ellipse | Refusal, n: int) -> np.ndarray:
+    """Which of n points a fit kept (none when the fit was refused)."""
+    if isinstance(e, Refusal):
+        return np.zeros(n, dtype=bool)
+    return np.ones(n, dtype=bool) if e.inliers is None else np.asarray(e.inliers, dtype=bool)
+
+
 def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionParams,
             marker: MarkerSpec, timings: dict[str, float] | None = None) -> Detection:
     """Full-resolution measurement of one candidate ROI."""
@@ -201,8 +212,12 @@ def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionPa
     x, y, w, h = (int(v) for v in cand.roi)
     roi: Box = (x, y, w, h)
 
+    raw: tuple[np.ndarray, np.ndarray] | None = None
+    used: tuple[np.ndarray, np.ndarray] | None = None
+
     def refuse(reason: str) -> Detection:
-        return Detection(False, reason, roi=roi, timings_ms=timings)
+        return Detection(False, reason, roi=roi, timings_ms=timings, edges_raw=raw,
+                         edges_used=used)
 
     # A purple region touching the image border is not refused here: what matters is the
     # ring, and a ring cut by the border fails the outline search (border regions are
@@ -220,8 +235,10 @@ def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionPa
     pout = camera.undistort_pixels(edges.outer + offset)
     t2 = time.perf_counter()
     timings["undistort"] = (t2 - t1) * 1e3
+    raw = (edges.inner + offset, edges.outer + offset)
     inner = _fit_boundary("inner", pin, params)
     outer = _fit_boundary("outer", pout, params)
+    used = (_used(inner, len(pin)), _used(outer, len(pout)))
     t3 = time.perf_counter()
     timings["fit"] = (t3 - t2) * 1e3
     if isinstance(inner, Refusal):
@@ -245,7 +262,7 @@ def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionPa
         pencil_ratio=det.ratio, centre_split_px=det.split, method=det.method,
         roi=roi, outer_visible=_coverage(outer, pout if outer.inliers is None
                                          else pout[outer.inliers]),
-        timings_ms=timings)
+        edges_raw=raw, edges_used=used, timings_ms=timings)
 
 
 @dataclass(frozen=True, eq=False)
