@@ -262,7 +262,8 @@ def boundary_edges(roi_bgr: np.ndarray, ratio_sq: float,
                            probe[:, 1:2].astype(np.float32), cv2.INTER_LINEAR,
                            borderMode=cv2.BORDER_REPLICATE)[:, 0]
         is_out &= beyond >= MIN_TINT * field_tint
-    keep = _linked(edges, ys_k, xs_k, is_in | is_out)
+    near = (np.abs(d_in) < 3.0 * tol) | (np.abs(d_out) < 3.0 * tol)
+    keep = _linked(edges, ys_k, xs_k, is_in | is_out, near)
     return BoundaryEdges(inner=pts[is_in & keep], outer=pts[is_out & keep], canny_low=low,
                          canny_high=high, outline=outline)
 
@@ -274,12 +275,17 @@ def _normal_cos(C: np.ndarray, pts: np.ndarray, gx: np.ndarray, gy: np.ndarray,
     return np.asarray((gx * n[:, 0] + gy * n[:, 1]) / (gnorm * nn))
 
 
-def _linked(edges: np.ndarray, ys: np.ndarray, xs: np.ndarray, on: np.ndarray) -> np.ndarray:
-    """Link edge pixels into 8-connected contours; keep contours mostly on a boundary."""
+def _linked(edges: np.ndarray, ys: np.ndarray, xs: np.ndarray, on: np.ndarray,
+            near: np.ndarray) -> np.ndarray:
+    """Link edge pixels into 8-connected contours; keep contours mostly on a boundary.
+
+    "Mostly" counts only the contour's pixels near the ring: a ring edge that runs on into a
+    long occluder edge (a glove's outline across the field) is one contour, and the part
+    far from the ring must not outvote the arc on it.
+    """
     n, labels = cv2.connectedComponents(edges, connectivity=8)
     lab = labels[ys, xs]
-    total = np.bincount(lab, minlength=n)
+    total = np.bincount(lab, weights=near.astype(np.float64), minlength=n)
     good = np.bincount(lab, weights=on.astype(np.float64), minlength=n)
     frac = good / np.maximum(total, 1)
-    # a quarter, not a half: a ring edge running on into an occluder's edge is one contour
-    return np.asarray(frac[lab] >= 0.25)
+    return np.asarray(frac[lab] >= 0.5)
