@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import cv2
 import numpy as np
@@ -87,7 +87,7 @@ def _finish(img: np.ndarray, s: Setup, rng: np.random.Generator) -> np.ndarray:
     out = np.clip(np.rint(img), 0, 255).astype(np.uint8)
     if s.bayer is not None:
         out = fx.demosaic(fx.bayer_mosaic(out, s.bayer[0]), *s.bayer)
-    return out
+    return np.asarray(out)
 
 
 def _gain(s: Setup) -> np.ndarray:
@@ -130,7 +130,7 @@ def make_sample(setup: Setup, rng: np.random.Generator, with_tag: bool = False) 
     scene = Scene(markers=markers, background_rgb=bg, cast=setup.cast,  # type: ignore[arg-type]
                   illumination=setup.illumination, texture=0.1)
     if setup.phantom in ("patch", "disk"):
-        kind = "bar" if setup.phantom == "patch" else "disc"
+        kind: Literal["disc", "bar"] = "bar" if setup.phantom == "patch" else "disc"
         scene.distractors = [Distractor(pose, kind, float(rng.uniform(12, 25)),
                                         float(rng.uniform(5, 12)), setup.purple)]
     seed = int(rng.integers(1 << 30))

@@ -29,7 +29,8 @@ from stationd.geometry.camera import Camera
 
 __all__ = ["BAYER_PATTERNS", "DEMOSAIC_METHODS", "OCCLUDER_COLOURS", "OCCLUDER_SHAPES",
            "bayer_mosaic", "circle_polygon", "defocus", "demosaic", "highlight",
-           "motion_blur", "occluder_polygon", "outer_coverage", "outer_coverage_all", "paint_planar", "purple_rgb"]
+           "motion_blur", "occluder_polygon", "outer_coverage", "outer_coverage_all",
+           "paint_planar", "purple_rgb"]
 
 # Occluder reflectances (linear 0-255, RGB): dark glove/rubber, skin, grey plastic, bare metal.
 OCCLUDER_COLOURS: dict[str, tuple[float, float, float]] = {
@@ -189,7 +190,7 @@ def motion_blur(image: np.ndarray, length_px: float, angle_deg: float) -> np.nda
     xs = np.clip(((half + t * c + 0.5) * ss).astype(int), 0, n * ss - 1)
     ys = np.clip(((half + t * s + 0.5) * ss).astype(int), 0, n * ss - 1)
     np.add.at(k, (ys, xs), 1.0)
-    kern = cv2.resize(k, (n, n), interpolation=cv2.INTER_AREA)
+    kern = np.asarray(cv2.resize(k, (n, n), interpolation=cv2.INTER_AREA), np.float32)
     kern /= kern.sum()
     return np.asarray(cv2.filter2D(image, -1, kern, borderType=cv2.BORDER_REFLECT))
 

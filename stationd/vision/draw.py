@@ -96,7 +96,7 @@ def draw(image: np.ndarray, camera: Camera, det: Detection) -> np.ndarray:
                           interpolation=cv2.INTER_AREA)
     if det.roi is not None:
         cv2.rectangle(overview, (int(x * s), int(y * s)),
-                      (int(math.ceil((x + rw) * s)), int(math.ceil((y + rh) * s))),
+                      (math.ceil((x + rw) * s), math.ceil((y + rh) * s)),
                       CENTRE if det.found else REJECTED, 2)
     height = max(panel.shape[0], overview.shape[0])
     canvas = np.zeros((height + 48, panel.shape[1] + 8 + overview.shape[1], 3), np.uint8)

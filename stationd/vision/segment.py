@@ -330,7 +330,7 @@ def _bright_blobs(v: np.ndarray, mask: np.ndarray, bright: np.ndarray, scale: in
     """The elliptical bright blobs of one level that pass the ring and purple tests."""
     sh, sw = v.shape
     fw, fh = full_size
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(bright, connectivity=4)
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(bright, connectivity=4)
     x, y, w, h, area = (stats[:, i] for i in range(5))
     r_disk = min_hole_radius_px / 1.5
     ok = ((x > 0) & (y > 0) & (x + w < sw) & (y + h < sh) & (np.minimum(w, h) >= 2)

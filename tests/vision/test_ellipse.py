@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from stationd.vision.ellipse import (
     Params,
@@ -14,6 +16,7 @@ from stationd.vision.ellipse import (
     fit_ellipse,
     params_to_conic,
     sampson_distance,
+    trim_outliers,
 )
 from stationd.vision.types import Ellipse, Refusal
 
@@ -295,3 +298,43 @@ def test_json_fields():
     j = e.to_json()
     assert j["points_used"] == 100 - j["points_rejected"]
     assert j["semi_axes"][0] >= j["semi_axes"][1]
+
+
+# -- robust fit of a partly occluded ring (issue 10) ------------------------------------------
+
+
+@settings(max_examples=30, deadline=None)
+@given(a=st.floats(30.0, 90.0), ratio=st.floats(0.45, 1.0), angle=st.floats(0.0, math.pi),
+       hidden=st.floats(0.0, 0.4), start=st.floats(0.0, 2 * math.pi),
+       seed=st.integers(0, 2**16))
+def test_trimmed_fit_recovers_a_partly_occluded_ring(a, ratio, angle, hidden, start, seed):
+    """Up to 40 % of the ring hidden, and the occluder's edge giving a third as many points
+    again near the ring (a straight edge crossing it): the trimmed fit finds the ellipse."""
+    rng = np.random.default_rng(seed)
+    b = a * ratio
+    centre = (400.0, 300.0)
+    t = rng.uniform(start + 2 * math.pi * hidden, start + 2 * math.pi, 400)
+    ca, sa = math.cos(angle), math.sin(angle)
+    ring = np.stack([centre[0] + a * np.cos(t) * ca - b * np.sin(t) * sa,
+                     centre[1] + a * np.cos(t) * sa + b * np.sin(t) * ca], 1)
+    ring += rng.normal(0.0, 0.1, ring.shape)
+    # the occluder's edge: a segment across the hidden arc's chord, inside the ring band
+    mid = start + math.pi * hidden
+    p0 = np.array([centre[0] + a * math.cos(mid) * ca - b * math.sin(mid) * sa,
+                   centre[1] + a * math.cos(mid) * sa + b * math.sin(mid) * ca])
+    tangent = np.array([-math.sin(mid + angle), math.cos(mid + angle)])
+    s = rng.uniform(-0.5 * a, 0.5 * a, 130)
+    inward = (np.array(centre) - p0) / np.linalg.norm(np.array(centre) - p0)
+    clutter = p0 + s[:, None] * tangent + rng.uniform(1.0, 6.0, 130)[:, None] * inward
+    pts = np.vstack([ring, clutter])
+    keep = trim_outliers(pts)
+    assert not isinstance(keep, Refusal)
+    e = fit_ellipse(pts[keep])
+    assert not isinstance(e, Refusal)
+    assert math.hypot(e.centre[0] - centre[0], e.centre[1] - centre[1]) < 0.15
+    assert e.axes[0] == pytest.approx(a, abs=0.3)
+    assert e.axes[1] == pytest.approx(b, abs=0.3)
+
+
+def test_trimmed_fit_refuses_too_few_points():
+    assert isinstance(trim_outliers(np.zeros((3, 2))), Refusal)

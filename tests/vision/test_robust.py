@@ -66,7 +66,7 @@ def test_blur_defocus_glare_and_dim_light(effect):
 @pytest.mark.parametrize("phantom", ["patch", "disk", "washer", "ring"])
 def test_no_marker_is_reported_where_there_is_none(phantom):
     for seed in (1, 2):
-        s, d = _run(rb.Setup(phantom=phantom), seed)
+        _, d = _run(rb.Setup(phantom=phantom), seed)
         assert not d.found
         assert d.reason  # and it says what was missing
 
