@@ -76,17 +76,18 @@ def draw(image: np.ndarray, camera: Camera, det: Detection) -> np.ndarray:
         # pixel centres: raw (u, v) -> panel ((u - x + 0.5) k - 0.5)
         return (np.asarray(p, np.float64) - off + 0.5) * k - 0.5
 
+    # ellipses under the points: where they agree, the points sit on the line
+    for e, colour in ((det.inner, INNER), (det.outer, OUTER)):
+        if e is not None:
+            pts = np.rint(to_panel(_ellipse_raw(e, camera)) * 16).astype(np.int32)
+            cv2.polylines(panel, [pts.reshape(-1, 1, 2)], True, colour, 1, cv2.LINE_AA, 4)
     if det.edges_raw is not None:
         used = det.edges_used or (np.zeros(len(det.edges_raw[0]), bool),
                                   np.zeros(len(det.edges_raw[1]), bool))
         for pts, ok in zip(det.edges_raw, used, strict=True):
             for p, good in zip(to_panel(pts), ok, strict=True):
-                cv2.circle(panel, (round(p[0] * 16), round(p[1] * 16)), 2 * 16,
+                cv2.circle(panel, (round(p[0] * 16), round(p[1] * 16)), 20,
                            USED if good else REJECTED, -1, cv2.LINE_AA, 4)
-    for e, colour in ((det.inner, INNER), (det.outer, OUTER)):
-        if e is not None:
-            pts = np.rint(to_panel(_ellipse_raw(e, camera)) * 16).astype(np.int32)
-            cv2.polylines(panel, [pts.reshape(-1, 1, 2)], True, colour, 1, cv2.LINE_AA, 4)
     if det.ellipse_centre_px is not None:
         _cross(panel, to_panel(det.ellipse_centre_px), ELLIPSE_CENTRE, 8)
     if det.centre_px is not None:

@@ -309,7 +309,9 @@ def _disk_seeds(v: np.ndarray, mask: np.ndarray, scale: int, full_size: tuple[in
     out: list[Candidate] = []
     notp = mask == 0
     level = float(np.median(purple_v))
-    top = float(np.percentile(v[notp], 99.5)) if notp.any() else level
+    # the white print is a small part of the frame: the brightest non-purple level, not a
+    # percentile (which would be the occluder's or the chassis' level)
+    top = float(v[notp].max()) if notp.any() else level
     # A bright occluder (metal, skin) reaching close to the disk merges with it at 1/8
     # scale; the white print is the brightest thing there, so higher levels split it off.
     for t in (0.0, 0.45, 0.75):
