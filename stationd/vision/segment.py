@@ -309,13 +309,17 @@ def _disk_seeds(v: np.ndarray, mask: np.ndarray, scale: int, full_size: tuple[in
     out: list[Candidate] = []
     notp = mask == 0
     level = float(np.median(purple_v))
-    # the white print is a small part of the frame: the brightest non-purple level, not a
-    # percentile (which would be the occluder's or the chassis' level)
-    top = float(v[notp].max()) if notp.any() else level
+    # the white print is a small part of the frame: the brightest level, not a percentile
+    # (which would be the occluder's or the chassis' level)
+    top = float(v.max())
     # A bright occluder (metal, skin) reaching close to the disk merges with it at 1/8
     # scale; the white print is the brightest thing there, so higher levels split it off.
+    # At those levels the purple mask is not asked: white under a white-balance cast of
+    # more than ~8 % towards purple is inside the HSV box (see HsvRange), but it is still
+    # far brighter than any printed purple (V <= 85 %).
     for t in (0.0, 0.45, 0.75):
-        bright = (notp & (v > level + t * max(top - level, 0.0))).astype(np.uint8)
+        above = v > level + t * max(top - level, 0.0)
+        bright = ((notp | (t > 0.0)) & above).astype(np.uint8)
         for cand in _bright_blobs(v, mask, bright, scale, full_size, min_hole_radius_px):
             if all(math.hypot(cand.hole_centre[0] - c.hole_centre[0],
                               cand.hole_centre[1] - c.hole_centre[1]) > c.hole_radius
