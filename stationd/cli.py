@@ -67,6 +67,10 @@ def cmd_detect(args: argparse.Namespace) -> int:
     camera = _detect_camera(args, Camera.load)
     image = read_image(args.image)
     det = detect(image, camera, cfg.vision, cfg.marker)
+    if args.draw:
+        from stationd.vision.draw import write_drawing
+
+        write_drawing(args.draw, image, camera, det, cfg.vision, cfg.marker)
     if args.json:
         _emit(det.to_json())
     elif det.found:
@@ -257,6 +261,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --pair: which camera took the image (default left)")
     d.add_argument("--config", help="station YAML (marker, vision)")
     d.add_argument("--json", action="store_true", help="print one JSON object")
+    d.add_argument("--draw", metavar="OUT.png", help="write what the detector saw: ROI with "
+                   "edge points used/rejected, ellipses, centres, reason; and an overview")
     d.set_defaults(func=cmd_detect)
 
     lo = sub.add_parser("localize", help="localize the marker in a stereo pair (mm)")

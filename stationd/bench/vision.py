@@ -1,7 +1,8 @@
 """``stationd bench vision``: the paper's experiments on rendered images, with our figures.
 
 Sections (``--only``): radii (Table 1), centre (Tables 2-3), rod (reference rod), saltpepper
-(section 4.1), lowlight (enhancement), speed (per stage, per image, per pair, vs AprilTag 3).
+(section 4.1), lowlight (enhancement), speed (per stage, per image, per pair, vs AprilTag 3),
+robustness (purples, casts, dim light, Bayer, blur, defocus, glare, occlusion, phantoms).
 Every number printed is measured in this run; the paper's figures are quoted beside them.
 """
 
@@ -365,9 +366,17 @@ def _apriltag_peer(left: np.ndarray, right: np.ndarray, pair: Any, pose: MarkerP
             "settings": "tag36h11, quad_decimate=2, nthreads=2, grey input"}
 
 
+def bench_robustness(rng: np.random.Generator, quick: bool) -> Result:
+    """Recall, precision and safety under real effects (``stationd.bench.robustness``)."""
+    from stationd.bench.robustness import bench_robustness as run
+
+    return run(rng, quick)
+
+
 SECTIONS: dict[str, Callable[[np.random.Generator, bool], Result]] = {
     "radii": bench_radii, "centre": bench_centre, "rod": bench_rod,
     "saltpepper": bench_saltpepper, "lowlight": bench_lowlight, "speed": bench_speed,
+    "robustness": bench_robustness,
 }
 
 
@@ -389,6 +398,10 @@ def run_vision_bench(args: argparse.Namespace) -> int:
         results[name] = SECTIONS[name](np.random.default_rng(args.seed), args.quick)
         results.setdefault("seconds", {})[name] = round(time.perf_counter() - t0, 1)
     print_report(results)
+    if "robustness" in results:
+        from stationd.bench.robustness import print_table
+
+        print_table(results["robustness"])
     Path(args.out).write_text(json.dumps(results, indent=1, default=float) + "\n")
     print(f"[bench vision] wrote {args.out}")
     return 0

@@ -10,7 +10,7 @@ refusal for ``detect`` (``detect_all`` returns both).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import cv2
@@ -20,7 +20,7 @@ from stationd.errors import ImageError
 from stationd.geometry.camera import Camera
 from stationd.vision import centre as cm
 from stationd.vision.edges import BoundaryEdges, boundary_edges
-from stationd.vision.ellipse import fit_ellipse
+from stationd.vision.ellipse import fit_ellipse, trim_outliers
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import Gates, VisionParams
 from stationd.vision.segment import MIN_HOLE_RADIUS_PX, Candidate, search_candidates
@@ -49,6 +49,11 @@ class Detection:
     centre_split_px: float | None = None
     method: str = ""
     roi: Box | None = None
+    outer_visible: float | None = None  # fraction of the outer ring's angle with fitted edges
+    # what the fits saw, for drawing (``stationd detect --draw``): every edge point assigned to
+    # a boundary (raw pixels) and which of them the fit kept; set on refusals too when known
+    edges_raw: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+    edges_used: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
     timings_ms: dict[str, float] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
@@ -67,6 +72,7 @@ class Detection:
             "pencil_ratio": self.pencil_ratio,
             "centre_split_px": self.centre_split_px,
             "method": self.method,
+            "outer_visible": self.outer_visible,
             "roi": None if self.roi is None else list(self.roi),
             "timings_ms": {k: round(v, 3) for k, v in self.timings_ms.items()},
         }
@@ -169,20 +175,34 @@ def _fit_boundary(name: str, pts: np.ndarray, params: VisionParams) -> Ellipse |
     g = params.gates
     if len(pts) < g.min_points:
         return Refusal(f"{name} boundary: {len(pts)} edge points (< {g.min_points})")
-    e = fit_ellipse(pts, leitz=params.leitz, residual=params.residual)
+    trimmed = trim_outliers(pts) if params.leitz else np.ones(len(pts), dtype=bool)
+    if isinstance(trimmed, Refusal):
+        return Refusal(f"{name} boundary: {trimmed.reason}")
+    e = fit_ellipse(pts[trimmed], leitz=params.leitz, residual=params.residual)
     if isinstance(e, Refusal):
         return Refusal(f"{name} boundary: {e.reason}")
+    full = trimmed.copy()
+    if e.inliers is not None:
+        full[np.flatnonzero(trimmed)] = e.inliers
+    e = replace(e, inliers=full, rejected=len(pts) - e.used)
     if e.used < g.min_points:
         return Refusal(f"{name} boundary: {e.used} edge points after the Leitz criterion "
                        f"(< {g.min_points})")
     if e.rms > g.max_rms_px:
         return Refusal(f"{name} boundary: fit residual {e.rms:.3f} px (> {g.max_rms_px})")
-    kept = pts if e.inliers is None else pts[e.inliers]
-    cov = _coverage(e, kept)
-    if cov < g.min_coverage:
+    cov = _coverage(e, pts[full])
+    need = g.min_coverage if name == "inner" else g.min_outer_coverage
+    if cov < need:
         return Refusal(f"{name} boundary: edge points cover {cov:.0%} of it "
-                       f"(< {g.min_coverage:.0%}): occluded or cut")
+                       f"(< {need:.0%}): occluded or cut")
     return e
+
+
+def _used(e: Ellipse | Refusal, n: int) -> np.ndarray:
+    """Which of n points a fit kept (none when the fit was refused)."""
+    if isinstance(e, Refusal):
+        return np.zeros(n, dtype=bool)
+    return np.ones(n, dtype=bool) if e.inliers is None else np.asarray(e.inliers, dtype=bool)
 
 
 def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionParams,
@@ -192,15 +212,19 @@ def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionPa
     x, y, w, h = (int(v) for v in cand.roi)
     roi: Box = (x, y, w, h)
 
+    raw: tuple[np.ndarray, np.ndarray] | None = None
+    used: tuple[np.ndarray, np.ndarray] | None = None
+
     def refuse(reason: str) -> Detection:
-        return Detection(False, reason, roi=roi, timings_ms=timings)
+        return Detection(False, reason, roi=roi, timings_ms=timings, edges_raw=raw,
+                         edges_used=used)
 
     # A purple region touching the image border is not refused here: what matters is the
     # ring, and a ring cut by the border fails the outline search (border regions are
     # excluded) or the coverage gate, each with its reason.
     t0 = time.perf_counter()
     hint = (cand.hole_centre[0] - x, cand.hole_centre[1] - y)
-    edges = boundary_edges(image[y:y + h, x:x + w], marker.ratio_sq, hint)
+    edges = boundary_edges(image[y:y + h, x:x + w], marker.ratio_sq, hint, cand.hole_radius)
     t1 = time.perf_counter()
     timings["edges"] = (t1 - t0) * 1e3
     if isinstance(edges, Refusal):
@@ -211,8 +235,10 @@ def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionPa
     pout = camera.undistort_pixels(edges.outer + offset)
     t2 = time.perf_counter()
     timings["undistort"] = (t2 - t1) * 1e3
+    raw = (edges.inner + offset, edges.outer + offset)
     inner = _fit_boundary("inner", pin, params)
     outer = _fit_boundary("outer", pout, params)
+    used = (_used(inner, len(pin)), _used(outer, len(pout)))
     t3 = time.perf_counter()
     timings["fit"] = (t3 - t2) * 1e3
     if isinstance(inner, Refusal):
@@ -234,7 +260,9 @@ def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionPa
         inner_points=pin if inner.inliers is None else pin[inner.inliers],
         outer_points=pout if outer.inliers is None else pout[outer.inliers],
         pencil_ratio=det.ratio, centre_split_px=det.split, method=det.method,
-        roi=roi, timings_ms=timings)
+        roi=roi, outer_visible=_coverage(outer, pout if outer.inliers is None
+                                         else pout[outer.inliers]),
+        edges_raw=raw, edges_used=used, timings_ms=timings)
 
 
 @dataclass(frozen=True, eq=False)

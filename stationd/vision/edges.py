@@ -31,12 +31,14 @@ import cv2
 import numpy as np
 
 from stationd.vision.ellipse import params_to_conic, sampson_distance
-from stationd.vision.types import Refusal
+from stationd.vision.rays import MIN_TINT, RayRing, chroma, ring_from_rays
+from stationd.vision.types import Ellipse, Refusal
 
 # Smoothing before the gradient (px).  Wide enough for a stable peak fit, narrow enough that
 # the curvature bias (about sigma^2 / 2R, the same on both sides of the centre) stays ~0.01 px.
 GRADIENT_SIGMA = 1.0
 IMPULSE_THRESHOLD = 25.0
+MIN_COS = 0.7  # an edge point's gradient within ~45 degrees of its boundary's normal
 
 
 RotatedBox = tuple[tuple[float, float], tuple[float, float], float]
@@ -183,18 +185,53 @@ def subpixel(mag: np.ndarray, gx: np.ndarray, gy: np.ndarray,
     return pts[ok], mask
 
 
+def _outline_from_rays(rr: RayRing, ratio_sq: float) -> RingOutline:
+    def box(e: Ellipse) -> RotatedBox:
+        return ((e.centre[0], e.centre[1]), (2.0 * e.axes[0], 2.0 * e.axes[1]),
+                float(np.degrees(e.angle)))
+
+    area = (rr.inner.axes[0] * rr.inner.axes[1]) / max(rr.outer.axes[0] * rr.outer.axes[1],
+                                                      1e-9)
+    return RingOutline(box(rr.inner), box(rr.outer), float(area), 0.5 * (rr.ring + rr.field))
+
+
 def boundary_edges(roi_bgr: np.ndarray, ratio_sq: float,
-                   hint: tuple[float, float] | None = None) -> BoundaryEdges | Refusal:
-    """Sub-pixel edge points of the white/black and black/purple boundaries in a ROI."""
+                   hint: tuple[float, float] | None = None,
+                   radius: float | None = None) -> BoundaryEdges | Refusal:
+    """Sub-pixel edge points of the white/black and black/purple boundaries in a ROI.
+
+    With a ``radius`` (the candidate's estimate of the ring's outer radius, ROI pixels) the
+    ring is found from its own structure by radial profiles (``rays``); the Otsu outline is
+    the fallback, and the only method without one.  Edge points are kept when they lie near
+    a rough ellipse *and* their gradient crosses it the right way (inner: brighter inside;
+    outer: brighter outside, within ~45 degrees of its normal): an occluder's edge meets the
+    ring at an angle or with the wrong polarity, and what survives is left to the fitter.
+    """
     v = remove_impulses(intensity(roi_bgr))
     smooth = cv2.GaussianBlur(v, (0, 0), GRADIENT_SIGMA)
-    t = otsu_threshold(smooth)
-    if t <= 1.0:
-        return Refusal("ROI has no contrast")
-    outline = ring_outline(smooth, t, ratio_sq, hint)
+    outline: RingOutline | Refusal = Refusal("no candidate ring")
+    step = 0.0
+    tint = chroma(roi_bgr)
+    field_tint = 0.0
+    if hint is not None and radius is not None:
+        rr = ring_from_rays(smooth, hint, radius, tint)
+        if not isinstance(rr, Refusal):
+            outline = _outline_from_rays(rr, ratio_sq)
+            step = min(rr.white - rr.ring, rr.field - rr.ring)
+            field_tint = rr.tint
+        else:
+            outline = rr
     if isinstance(outline, Refusal):
-        return outline
-    high, low = t, t / 2.0
+        t = otsu_threshold(smooth)
+        if t <= 1.0:
+            return Refusal("ROI has no contrast")
+        otsu = ring_outline(smooth, t, ratio_sq, hint)
+        if isinstance(otsu, Refusal):
+            return outline if radius is not None else otsu
+        outline = otsu
+        high, low = t, t / 2.0
+    else:
+        high, low = max(0.8 * step, 2.0), max(0.4 * step, 1.0)
     edges = cv2.Canny(np.clip(np.rint(smooth), 0, 255).astype(np.uint8), low, high,
                       L2gradient=True)
     gx = cv2.Sobel(smooth, cv2.CV_32F, 1, 0, ksize=3)
@@ -205,28 +242,50 @@ def boundary_edges(roi_bgr: np.ndarray, ratio_sq: float,
         return Refusal("too few edge pixels in the ROI")
     pts, kept = subpixel(mag, gx, gy, ys, xs)
     ys_k, xs_k = ys[kept], xs[kept]
-    # polarity: the gradient points from dark to bright
-    gxk, gyk = gx[ys_k, xs_k], gy[ys_k, xs_k]
+    gxk, gyk = gx[ys_k, xs_k].astype(np.float64), gy[ys_k, xs_k].astype(np.float64)
+    gnorm = np.maximum(np.hypot(gxk, gyk), 1e-9)
     inner_c, outer_c = _box_conic(outline.inner), _box_conic(outline.outer)
-    centre = np.array(outline.inner[0])
-    radial = pts - centre
-    toward_centre = (gxk * radial[:, 0] + gyk * radial[:, 1]) < 0
     d_in = sampson_distance(inner_c, pts)
     d_out = sampson_distance(outer_c, pts)
     ring_w = 0.5 * (min(outline.outer[1]) - min(outline.inner[1]))
     tol = float(np.clip(0.35 * ring_w, 1.5, 4.0))
-    is_in = (np.abs(d_in) < tol) & (np.abs(d_in) <= np.abs(d_out)) & toward_centre
-    is_out = (np.abs(d_out) < tol) & (np.abs(d_out) < np.abs(d_in)) & ~toward_centre
-    keep = _linked(edges, ys_k, xs_k, is_in | is_out)
+    # cosine between the gradient (dark -> bright) and each conic's outward normal
+    cos_in = _normal_cos(inner_c, pts, gxk, gyk, gnorm)
+    cos_out = _normal_cos(outer_c, pts, gxk, gyk, gnorm)
+    is_in = (np.abs(d_in) < tol) & (np.abs(d_in) <= np.abs(d_out)) & (cos_in < -MIN_COS)
+    is_out = (np.abs(d_out) < tol) & (np.abs(d_out) < np.abs(d_in)) & (cos_out > MIN_COS)
+    if field_tint > 0.0:
+        # outer points must have the field's colour just beyond them (3 px along the
+        # gradient): the ring's edge against an arm or a glove has the edge but not the colour
+        probe = pts + 3.0 * np.stack([gxk, gyk], 1) / gnorm[:, None]
+        beyond = cv2.remap(tint, probe[:, 0:1].astype(np.float32),
+                           probe[:, 1:2].astype(np.float32), cv2.INTER_LINEAR,
+                           borderMode=cv2.BORDER_REPLICATE)[:, 0]
+        is_out &= beyond >= MIN_TINT * field_tint
+    near = (np.abs(d_in) < 3.0 * tol) | (np.abs(d_out) < 3.0 * tol)
+    keep = _linked(edges, ys_k, xs_k, is_in | is_out, near)
     return BoundaryEdges(inner=pts[is_in & keep], outer=pts[is_out & keep], canny_low=low,
                          canny_high=high, outline=outline)
 
 
-def _linked(edges: np.ndarray, ys: np.ndarray, xs: np.ndarray, on: np.ndarray) -> np.ndarray:
-    """Link edge pixels into 8-connected contours; keep contours mostly on a boundary."""
+def _normal_cos(C: np.ndarray, pts: np.ndarray, gx: np.ndarray, gy: np.ndarray,
+                gnorm: np.ndarray) -> np.ndarray:
+    n = pts @ C[:2, :2].T + C[:2, 2]  # half the conic's gradient: outward (inside negative)
+    nn = np.maximum(np.hypot(n[:, 0], n[:, 1]), 1e-12)
+    return np.asarray((gx * n[:, 0] + gy * n[:, 1]) / (gnorm * nn))
+
+
+def _linked(edges: np.ndarray, ys: np.ndarray, xs: np.ndarray, on: np.ndarray,
+            near: np.ndarray) -> np.ndarray:
+    """Link edge pixels into 8-connected contours; keep contours mostly on a boundary.
+
+    "Mostly" counts only the contour's pixels near the ring: a ring edge that runs on into a
+    long occluder edge (a glove's outline across the field) is one contour, and the part
+    far from the ring must not outvote the arc on it.
+    """
     n, labels = cv2.connectedComponents(edges, connectivity=8)
     lab = labels[ys, xs]
-    total = np.bincount(lab, minlength=n)
+    total = np.bincount(lab, weights=near.astype(np.float64), minlength=n)
     good = np.bincount(lab, weights=on.astype(np.float64), minlength=n)
     frac = good / np.maximum(total, 1)
     return np.asarray(frac[lab] >= 0.5)

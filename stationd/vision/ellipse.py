@@ -220,3 +220,35 @@ def fit_ellipse(points: np.ndarray, *, leitz: bool = True, residual: str = "samp
     used = int(keep.sum())
     return Ellipse(conic=C, centre=centre, axes=axes, angle=angle, used=used,
                    rejected=len(pts) - used, rms=float(np.sqrt(np.mean(d * d))), inliers=keep)
+
+
+def trim_outliers(points: np.ndarray, *, k: float = 3.0, floor_px: float = 0.3,
+                  rounds: int = 6) -> np.ndarray | Refusal:
+    """Boolean mask of the points consistent with one ellipse: a median/MAD trimmed fit.
+
+    Why before the Leitz criterion: Leitz judges residuals against their standard deviation,
+    which a few dozen points on an occluder's edge inflate until nothing is rejected (the fit
+    then bends towards them).  The median and the MAD are not moved by outliers up to half the
+    points, so a partly occluded ring's own points decide.  Points may come back in a later
+    round (each round judges all points against the current fit).  ``floor_px`` keeps a
+    noise-free arc from trimming itself on rounding.
+    """
+    pts = _as_xy(points, MIN_FIT_POINTS)
+    if isinstance(pts, Refusal):
+        return pts
+    keep = np.ones(len(pts), dtype=bool)
+    for _ in range(rounds):
+        C = fit_conic(pts[keep])
+        if isinstance(C, Refusal):
+            return C
+        r = sampson_distance(C, pts)
+        rk = r[keep]
+        med = float(np.median(rk))
+        mad = 1.4826 * float(np.median(np.abs(rk - med)))
+        new = np.isfinite(r) & (np.abs(r - med) <= max(k * mad, floor_px))
+        if new.sum() < MIN_FIT_POINTS:
+            return Refusal(f"only {int(new.sum())} points agree on one ellipse")
+        if np.array_equal(new, keep):
+            break
+        keep = new
+    return keep

@@ -22,6 +22,9 @@ class Gates:
 
     min_points: int = 24           # edge points kept per boundary after the Leitz criterion
     min_coverage: float = 0.6      # fraction of the boundary's angle range covered by points
+    # the outer ring may be hidden in part (an arm, a socket): up to 40 % occlusion must pass,
+    # and the inner circle, the pencil ratio and the centre split still check the fit
+    min_outer_coverage: float = 0.5
     max_rms_px: float = 0.35       # RMS geometric residual of a fit
     ratio_tolerance: float = 0.12  # |pencil ratio / (r_in/r_out)^2 - 1|
     max_centre_split_px: float = 0.5  # inner- and outer-circle centres of one method disagree

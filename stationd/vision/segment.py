@@ -230,9 +230,9 @@ def search_candidates(small_bgr: np.ndarray, scale: int, ranges: HsvRange = DEFA
     keep = ((x > 0) & (y > 0) & (x + w < sw) & (y + h < sh) & (np.minimum(w, h) >= 2)
             & (area >= 0.9 * math.pi * min_hole_radius_px ** 2))
     keep[0] = False  # label 0 is the purple itself
-    if not keep.any():
-        return [], purple
     v = np.ascontiguousarray(hsv[..., 2]).astype(np.float32)  # raw V: no model in the check
+    if not keep.any():
+        return _disk_seeds(v, mask, scale, full_size, min_hole_radius_px), purple
     found: list[tuple[Candidate, float, float, float]] = []
     for k in np.flatnonzero(keep):
         x0, y0, x1, y1 = int(x[k]), int(y[k]), int(x[k] + w[k]), int(y[k] + h[k])
@@ -265,9 +265,105 @@ def search_candidates(small_bgr: np.ndarray, scale: int, ranges: HsvRange = DEFA
         cand = Candidate((fx0, fy0, fx1 - fx0, fy1 - fy0), centre, radius * scale, score,
                          at_border, contrast)
         found.append((cand, cx, cy, radius))
+    if not found:
+        return _disk_seeds(v, mask, scale, full_size, min_hole_radius_px), purple
     found.sort(key=lambda t: -t[0].score)
     kept: list[tuple[Candidate, float, float, float]] = []
     for c in found:  # one marker whose hole is split by noise must not give two candidates
         if all(math.hypot(c[1] - k[1], c[2] - k[2]) > max(c[3], k[3]) for k in kept):
             kept.append(c)
     return [c[0] for c in kept], purple
+
+
+MAX_DISK_SEEDS = 24  # bright blobs examined when no purple region encloses a ring
+MIN_PURPLE_AROUND = 0.4  # fraction of directions with purple just outside the ring
+
+
+def _purple_around(mask: np.ndarray, cx: float, cy: float, a: np.ndarray) -> float:
+    """Fraction of 16 directions in which the field just outside the ring (t 1.2-1.6) is
+    purple: an occluder may hide part of the field, not all of it."""
+    pts = a.astype(np.float32) @ _UNIT
+    t = np.array([1.2, 1.4, 1.6], np.float32)
+    mx = np.ascontiguousarray(cx + t[:, None] * pts[0][None, :], dtype=np.float32)
+    my = np.ascontiguousarray(cy + t[:, None] * pts[1][None, :], dtype=np.float32)
+    hit = cv2.remap(mask, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+                    borderValue=0)
+    return float((hit > 0).any(axis=0).mean())
+
+
+def _disk_seeds(v: np.ndarray, mask: np.ndarray, scale: int, full_size: tuple[int, int],
+                min_hole_radius_px: float) -> list[Candidate]:
+    """Candidates from the white disk when no purple region encloses a ring.
+
+    Why: an arm, a socket or a chassis member across the purple field or the ring joins the
+    ring's "hole" to the outside, and the enclosed-hole search sees nothing.  The white disk
+    itself is never occluded (if it were, there would be nothing safe to measure): a bright,
+    not purple, elliptical blob brighter than the field, whose surroundings pass the same
+    bright centre / dark ring / brighter outside test at the 10/15 ratio, with purple in
+    enough directions around it.  Only run when there is purple and no enclosed ring, so a
+    frame without a marker still costs one reduced search.
+    """
+    purple_v = v[mask > 0]
+    if purple_v.size == 0:
+        return []
+    out: list[Candidate] = []
+    notp = mask == 0
+    level = float(np.median(purple_v))
+    # the white print is a small part of the frame: the brightest level, not a percentile
+    # (which would be the occluder's or the chassis' level)
+    top = float(v.max())
+    # A bright occluder (metal, skin) reaching close to the disk merges with it at 1/8
+    # scale; the white print is the brightest thing there, so higher levels split it off.
+    # At those levels the purple mask is not asked: white under a white-balance cast of
+    # more than ~8 % towards purple is inside the HSV box (see HsvRange), but it is still
+    # far brighter than any printed purple (V <= 85 %).
+    for t in (0.0, 0.45, 0.75):
+        above = v > level + t * max(top - level, 0.0)
+        bright = ((notp | (t > 0.0)) & above).astype(np.uint8)
+        for cand in _bright_blobs(v, mask, bright, scale, full_size, min_hole_radius_px):
+            if all(math.hypot(cand.hole_centre[0] - c.hole_centre[0],
+                              cand.hole_centre[1] - c.hole_centre[1]) > c.hole_radius
+                   for c in out):
+                out.append(cand)
+        if out:
+            break
+    out.sort(key=lambda c: -c.score)
+    return out
+
+
+def _bright_blobs(v: np.ndarray, mask: np.ndarray, bright: np.ndarray, scale: int,
+                  full_size: tuple[int, int], min_hole_radius_px: float) -> list[Candidate]:
+    """The elliptical bright blobs of one level that pass the ring and purple tests."""
+    sh, sw = v.shape
+    fw, fh = full_size
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(bright, connectivity=4)
+    x, y, w, h, area = (stats[:, i] for i in range(5))
+    r_disk = min_hole_radius_px / 1.5
+    ok = ((x > 0) & (y > 0) & (x + w < sw) & (y + h < sh) & (np.minimum(w, h) >= 2)
+          & (area >= 0.9 * math.pi * r_disk ** 2))
+    ok[0] = False
+    order = np.flatnonzero(ok)
+    order = order[np.argsort(-area[order])][:MAX_DISK_SEEDS]
+    out: list[Candidate] = []
+    for k in order:
+        x0, y0, x1, y1 = int(x[k]), int(y[k]), int(x[k] + w[k]), int(y[k] + h[k])
+        blob = (labels[y0 - 1:y1 + 1, x0 - 1:x1 + 1] == k).astype(np.uint8)
+        shape = _hole_shape(blob)
+        if shape is None or shape[4] < 0.7:
+            continue
+        hx, hy, a, radius, fit = shape
+        cx, cy = hx + x0 - 1, hy + y0 - 1
+        ring = a * 1.5  # the ring's outer edge, in the hole convention of _ring_contrast
+        contrast = _ring_contrast(v, cx, cy, ring)
+        if contrast < MIN_CONTRAST or _purple_around(mask, cx, cy, ring) < MIN_PURPLE_AROUND:
+            continue
+        reach = 2.6 * float(np.linalg.norm(ring, axis=0).max()) + ROI_MARGIN_PX
+        fx0, fy0 = max(0, math.floor((cx - reach) * scale)), max(0, math.floor((cy - reach)
+                                                                                * scale))
+        fx1 = min(fw, math.ceil((cx + reach + 1) * scale))
+        fy1 = min(fh, math.ceil((cy + reach + 1) * scale))
+        centre = ((cx + 0.5) * scale - 0.5, (cy + 0.5) * scale - 0.5)
+        score = 0.5 * min(fit, 1.0 / fit) * min(contrast, 1.0)
+        out.append(Candidate((fx0, fy0, fx1 - fx0, fy1 - fy0), centre, 1.5 * radius * scale,
+                             score, False, contrast))
+    return out

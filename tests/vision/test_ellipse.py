@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from stationd.vision.ellipse import (
     Params,
@@ -14,6 +16,7 @@ from stationd.vision.ellipse import (
     fit_ellipse,
     params_to_conic,
     sampson_distance,
+    trim_outliers,
 )
 from stationd.vision.types import Ellipse, Refusal
 
@@ -295,3 +298,45 @@ def test_json_fields():
     j = e.to_json()
     assert j["points_used"] == 100 - j["points_rejected"]
     assert j["semi_axes"][0] >= j["semi_axes"][1]
+
+
+# -- robust fit of a partly occluded ring (issue 10) ------------------------------------------
+
+
+@settings(max_examples=30, deadline=None)
+@given(a=st.floats(30.0, 90.0), ratio=st.floats(0.45, 1.0), angle=st.floats(0.0, math.pi),
+       hidden=st.floats(0.0, 0.4), start=st.floats(0.0, 2 * math.pi),
+       seed=st.integers(0, 2**16))
+def test_trimmed_fit_recovers_a_partly_occluded_ring(a, ratio, angle, hidden, start, seed):
+    """Up to 40 % of the ring hidden, and the occluder's two sides crossing the ring band
+    where the hidden arc ends (a finger, an arm) giving a third as many points again: the
+    trimmed fit finds the ellipse."""
+    rng = np.random.default_rng(seed)
+    b = a * ratio
+    centre = np.array([400.0, 300.0])
+    ca, sa = math.cos(angle), math.sin(angle)
+
+    def on(t, scale=1.0):
+        t = np.asarray(t, dtype=np.float64)
+        return np.stack([centre[0] + scale * (a * np.cos(t) * ca - b * np.sin(t) * sa),
+                         centre[1] + scale * (a * np.cos(t) * sa + b * np.sin(t) * ca)], -1)
+
+    t = rng.uniform(start + 2 * math.pi * hidden, start + 2 * math.pi, 400)
+    ring = on(t) + rng.normal(0.0, 0.1, (400, 2))
+    sides = []
+    for end in (start, start + 2 * math.pi * hidden):
+        k = rng.uniform(0.75, 1.25, 65)  # along the ray through the arc's end, across the band
+        sides.append(on(np.full(65, end), 1.0)[0] + (k - 1.0)[:, None] * (on([end])[0] - centre))
+    clutter = np.vstack(sides) + rng.normal(0.0, 0.1, (130, 2))
+    pts = np.vstack([ring, clutter])
+    keep = trim_outliers(pts)
+    assert not isinstance(keep, Refusal)
+    e = fit_ellipse(pts[keep], leitz=False)  # the trimming alone
+    assert not isinstance(e, Refusal)
+    assert math.hypot(e.centre[0] - centre[0], e.centre[1] - centre[1]) < 0.1
+    assert e.axes[0] == pytest.approx(a, abs=0.3)
+    assert e.axes[1] == pytest.approx(b, abs=0.3)
+
+
+def test_trimmed_fit_refuses_too_few_points():
+    assert isinstance(trim_outliers(np.zeros((3, 2))), Refusal)

@@ -449,3 +449,32 @@ def test_speed_on_the_reduced_image():
         find(img)
         times.append(time.perf_counter() - t)
     assert float(np.median(times)) < 0.06, times  # ~5-10 ms on the 2-core station PC
+
+
+@pytest.mark.parametrize(("colour", "side"), [((120, 150, 205), 0), ((40, 40, 40), 90),
+                                              ((200, 195, 190), 225)])  # BGR skin, dark, metal
+def test_occluder_across_field_and_ring_still_gives_the_candidate(colour, side):
+    # the occluder joins the ring's hole to the outside: no enclosed hole, but the white
+    # disk (never occluded) with its ring and purple around most of it is a candidate
+    mk = Marker(3000, 2000, 64)
+    img = render([mk], noise=2.0, seed=5)
+    cx, cy, r = 3000 / 8, 2000 / 8, 64 / 8
+    a = math.radians(side)
+    d = np.array([math.cos(a), math.sin(a)])
+    n = np.array([-d[1], d[0]])
+    near = np.array([cx, cy]) + 0.78 * r * d  # between the disk (0.67 r) and the ring's edge
+    quad = np.array([near - 3 * r * n, near + 3 * r * n, near + 3 * r * n + 6 * r * d,
+                     near - 3 * r * n + 6 * r * d])
+    cv2.fillPoly(img, [np.rint(quad).astype(np.int32)], colour)
+    cands = find(img)
+    assert cands, "no candidate"
+    c = cands[0]
+    assert math.hypot(c.hole_centre[0] - 3000, c.hole_centre[1] - 2000) < 0.5 * 64
+    assert c.hole_radius == pytest.approx(64, rel=0.35)
+
+
+def test_a_bright_blob_on_purple_without_a_ring_is_no_candidate():
+    img = render([], [Patch(2500, 1500, 3500, 2500, PURPLE_RGB)], noise=2.0, seed=6)
+    cv2.circle(img, (375, 250), 5, (245, 245, 245), -1)  # white disk, no dark ring
+    cv2.rectangle(img, (375, 240), (460, 260), (120, 150, 205), -1)  # and a hand across
+    assert find(img) == []
