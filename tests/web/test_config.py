@@ -16,7 +16,7 @@ def read(text: str) -> HttpConfig:
 def test_defaults_and_reading():
     assert read("{}") == HttpConfig("127.0.0.1:8080", None)
     cfg = read("listen: 0.0.0.0:9000\ntoken: s3cret-token\n")
-    assert (cfg.host, cfg.port, cfg.token) == ("0.0.0.0", 9000, "s3cret-token")
+    assert (cfg.host, cfg.port, cfg.token) == ("0.0.0.0", 9000, "s3cret-token")  # noqa: S104
     assert split_listen("[::1]:8080") == ("::1", 8080)
 
 
