@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from db.repository import Repository
 from stationd.station.events import (
@@ -90,7 +91,7 @@ def results_db(tmp: Path) -> Repository:
     repo = Repository.open(f"sqlite:///{tmp / 'station.db'}")
     repo.import_bolts(tmp / "bolts.yaml")
     repo.start_vehicle(VIN, "SEDAN")
-    kw = {"position_mm": (1.0, 1.0, 0.0), "match_distance_mm": 1.4, "tilt_deg": 2.0,
+    kw: dict[str, Any] = {"position_mm": (1.0, 1.0, 0.0), "match_distance_mm": 1.4, "tilt_deg": 2.0,
           "angle_deg": 31.0}
     repo.record_tightening(VIN, "B1", ok=True, torque_nm=50.2, tightening_id=100, **kw)
     repo.record_tightening(VIN, "B2", ok=False, torque_nm=41.0, tightening_id=101, **kw)

@@ -22,7 +22,7 @@ def serve(bus, **kw) -> WebServer:
     return WebServer(bus, listen="127.0.0.1:0", **kw)
 
 
-async def _read_snapshot(resp) -> dict:
+async def _read_snapshot(resp):
     buf = b""
     while b"\n\n" not in buf.split(b"data: ", 1)[-1]:
         buf += await resp.content.readany()
