@@ -74,9 +74,10 @@ def test_cameras_screen_shows_frames_overlay_and_refusal(live_server, browser, s
     rng = np.random.default_rng(5)
     img = (rng.integers(0, 60, (1200, 1600), dtype=np.uint8))
     img[500:700, 700:900] = 200
+    ellipses = [[800, 600, 90, 80, 10], [800, 600, 45, 40, 10]]
     srv.frames.put("front", "left", img, {"found": True, "roi": [600, 400, 400, 400],
-                                          "ellipses": [[800, 600, 90, 80, 10], [800, 600, 45, 40, 10]],
-                                          "centre": [800, 600], "exposure_us": 800})
+                                          "ellipses": ellipses, "centre": [800, 600],
+                                          "exposure_us": 800})
     srv.frames.put("front", "right", img, {"found": False, "reason": "marker not found"})
     browser.get(srv.url + "cameras")
     wait(browser, lambda d: len(d.find_elements(By.CSS_SELECTOR, ".cam img")) == 2)
