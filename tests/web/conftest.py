@@ -94,7 +94,7 @@ def browser(tmp_path: Path) -> Iterator[Any]:
     drv = webdriver.Chrome(options=opts, service=Service(CHROMEDRIVER))
     drv.execute_cdp_cmd("Browser.setDownloadBehavior",
                         {"behavior": "allow", "downloadPath": str(downloads)})
-    drv.downloads = downloads
+    drv.downloads = downloads  # type: ignore[attr-defined]  # where the test finds files
     try:
         yield drv
     finally:

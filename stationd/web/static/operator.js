@@ -3,7 +3,7 @@
 "use strict";
 const NS = "http://www.w3.org/2000/svg";
 const ICONS = {pending: "\u25CB", next: "\u25B6", selected: "\u2691", tightening: "\u21BB",
-  ok: "\u2714", nok: "\u2716", skipped: "\u00BB", blocked: "\u26D4"};
+  ok: "\u2714", nok: "\u2716", skipped: "\u00BB", blocked: "\u2298"};
 const LABELS = {pending: "to do", next: "next", selected: "selected", tightening: "tighten",
   ok: "OK", nok: "NOK", skipped: "skipped", blocked: "blocked"};
 const $ = (id) => document.getElementById(id);
@@ -44,18 +44,18 @@ function drawMap(view) {
   const cx = (x0 + x1) / 2, cy = (y0 + y1) / 2;
   // vehicle X to the right, vehicle Y up (a top view)
   const X = (x) => W / 2 + (x - cx) * s, Y = (y) => H / 2 - (y - cy) * s;
-  const r = Math.max(18, Math.min(34, s * span / 25));
+  const r = Math.max(24, Math.min(44, s * span / 20));
   for (const b of bolts) {
     const g = el("g", {class: `bolt bolt-${b.state}`, "data-bolt": b.bolt, "data-state": b.state,
       transform: `translate(${X(b.x).toFixed(1)},${Y(b.y).toFixed(1)})`});
     g.appendChild(el("title", {}, `${b.bolt}: ${b.label}${b.reason ? " (" + b.reason + ")" : ""}`));
     g.appendChild(el("circle", {r: r}));
     g.appendChild(el("text", {class: "icon", y: 0}, ICONS[b.state] || "?"));
-    g.appendChild(el("text", {y: -r - 8}, b.bolt));
+    g.appendChild(el("text", {y: -r - 10}, b.bolt));
     let tag = b.label;
     if (b.state === "selected" && b.pset !== null) tag += ` P${b.pset}`;
     if ((b.state === "ok" || b.state === "nok") && b.torque_nm !== null) tag += ` ${fmt(b.torque_nm, 1)}`;
-    g.appendChild(el("text", {class: "tag label", y: r + 20}, tag));
+    g.appendChild(el("text", {class: "tag label", y: r + 28}, tag));
     svg.appendChild(g);
   }
   const w = view.wrench;
