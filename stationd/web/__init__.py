@@ -15,12 +15,22 @@ Wiring (the daemon, ``stationd demo``)::
 ``open_bind_problem(cfg)`` is the config checker's test (a non-local bind without a token).
 ``stationd.web.status_cli.add_status_parser(subparsers)`` adds ``stationd status [--url]``.
 ``stationd.web.bench.fanout_bench`` measures the live fan-out with two clients.
+
+Importing this package is cheap (``stationd status`` imports its CLI module): the server and
+its dependencies (aiohttp, OpenCV) load on first use of a name below.
 """
 
-from stationd.web.config import HttpConfig, check_http, open_bind_problem
-from stationd.web.frames import LatestFrames
-from stationd.web.results import Results
-from stationd.web.server import WebServer
+from __future__ import annotations
 
-__all__ = ["HttpConfig", "LatestFrames", "Results", "WebServer", "check_http",
-           "open_bind_problem"]
+from importlib import import_module
+from typing import Any
+
+_WHERE = {"HttpConfig": "config", "check_http": "config", "open_bind_problem": "config",
+          "LatestFrames": "frames", "Results": "results", "WebServer": "server"}
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _WHERE:
+        raise AttributeError(f"module 'stationd.web' has no attribute {name!r}")
+    return getattr(import_module(f"stationd.web.{_WHERE[name]}"), name)

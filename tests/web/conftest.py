@@ -17,7 +17,8 @@ from typing import Any
 import pytest
 
 from stationd.station.events import EventBus, StationEvent
-from stationd.web import LatestFrames, WebServer
+from stationd.web.frames import LatestFrames
+from stationd.web.server import WebServer
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CHROMEDRIVER = shutil.which("chromedriver")

@@ -13,7 +13,8 @@ from aiohttp import ClientSession
 
 from stationd.errors import InputError
 from stationd.station.events import EventBus
-from stationd.web import LatestFrames, WebServer
+from stationd.web.frames import LatestFrames
+from stationd.web.server import WebServer
 from stationd.web.results import Results
 from tests.web.scenario import VIN, fault, opened, results_db, work
 
