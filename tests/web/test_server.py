@@ -14,8 +14,8 @@ from aiohttp import ClientSession
 from stationd.errors import InputError
 from stationd.station.events import EventBus
 from stationd.web.frames import LatestFrames
-from stationd.web.server import WebServer
 from stationd.web.results import Results
+from stationd.web.server import WebServer
 from tests.web.scenario import VIN, fault, opened, results_db, work
 
 
