@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 import platform
 import time
 from importlib import metadata
@@ -32,6 +33,7 @@ from stationd.web.frames import LatestFrames, sharpness
 from stationd.web.results import Results, rundowns_csv
 from stationd.web.view import View, fold
 
+log = logging.getLogger(__name__)
 STATIC = Path(__file__).with_name("static")
 FLUSH_HZ = 10.0
 CLIENT_QUEUE = 16
@@ -68,6 +70,7 @@ class WebServer:
         self.view = View()
         self.started = time.time()
         self.snapshots = 0           # flushes serialised (the bench reads it)
+        self.errors = 0              # events the view could not fold (logged)
         self._snapshot = b""
         self._clients: set[asyncio.Queue[bytes]] = set()
         self._runner: web.AppRunner | None = None
@@ -115,10 +118,14 @@ class WebServer:
     async def _run_pump(self, queue: asyncio.Queue[Any]) -> None:
         try:
             while True:
-                self.view.apply(await queue.get())
+                self._apply(await queue.get())
                 while not queue.empty():
-                    self.view.apply(queue.get_nowait())
-                self._snapshot = self._encode()
+                    self._apply(queue.get_nowait())
+                try:
+                    self._snapshot = self._encode()
+                except (TypeError, ValueError) as exc:
+                    log.warning("screens: snapshot not serialisable: %s", exc)
+                    continue
                 self.snapshots += 1
                 for q in list(self._clients):
                     _offer(q, self._snapshot)
@@ -126,9 +133,18 @@ class WebServer:
         finally:
             self.bus.unqueue(queue)
 
+    def _apply(self, event: Any) -> None:
+        """Fold one event; an event the view cannot take is logged and skipped (the screens
+        must not stop following the station over one odd event)."""
+        try:
+            self.view.apply(event)
+        except Exception:
+            self.errors += 1
+            log.exception("screens: event not shown: %r", event)
+
     def _encode(self) -> bytes:
-        return b"data: " + json.dumps(self.view.to_json(), separators=(",", ":")).encode() \
-            + b"\n\n"
+        return b"data: " + json.dumps(self.view.to_json(), separators=(",", ":"),
+                                      default=_plain).encode() + b"\n\n"
 
     # -- HTTP -----------------------------------------------------------------------------
     def _routes(self, app: web.Application) -> None:
@@ -186,10 +202,11 @@ class WebServer:
                 "clients": self.clients}
 
     async def _status(self, request: web.Request) -> web.Response:
-        return web.json_response(self.status())
+        return web.json_response(self.status(), dumps=lambda o: json.dumps(o, default=_plain))
 
     async def _view(self, request: web.Request) -> web.Response:
-        return web.json_response(self.view.to_json())
+        return web.Response(body=self._snapshot[len(b"data: "):].strip(),
+                            content_type="application/json")
 
     async def _events(self, request: web.Request) -> web.StreamResponse:
         resp = web.StreamResponse(headers={"Content-Type": "text/event-stream",
@@ -324,6 +341,13 @@ def _int_arg(request: web.Request, name: str, default: int) -> int:
 def _attachment(name: str) -> dict[str, str]:
     safe = "".join(c for c in name if c.isalnum() or c in "._-")
     return {"Content-Disposition": f'attachment; filename="{safe}"'}
+
+
+def _plain(o: Any) -> Any:
+    """NumPy scalars and arrays (a daemon may hand them over) as plain JSON values."""
+    if hasattr(o, "tolist"):
+        return o.tolist()
+    raise TypeError(f"{type(o).__name__} is not JSON")
 
 
 def _json_safe(v: Any) -> Any:

@@ -12,7 +12,7 @@ import pytest
 from aiohttp import ClientSession
 
 from stationd.errors import InputError
-from stationd.station.events import EventBus
+from stationd.station.events import EventBus, Localized, StateChanged
 from stationd.web.frames import LatestFrames
 from stationd.web.results import Results
 from stationd.web.server import WebServer
@@ -146,4 +146,32 @@ def test_results_and_exports_from_a_real_database(tmp_path):
         finally:
             await srv.stop()
             repo.close()
+    asyncio.run(main())
+
+
+def test_numpy_values_and_an_odd_event_do_not_stop_the_live_view():
+    async def main():
+        bus = EventBus()
+        srv = serve(bus)
+        await srv.start()
+        try:
+            for e in opened():
+                bus.publish(e)
+            bus.publish(Localized(point_mm=tuple(np.float32([1.5, 2.0, 3.0])),
+                                  tilt_deg=np.float32(2.5), reason=None, candidate="B1",
+                                  distance_mm=1.0, age_ms=30.0))
+            bus.publish(Localized(point_mm=(1.0,), tilt_deg=None,
+                                  reason=None, candidate=None, distance_mm=None, age_ms=1.0))
+            bus.publish(StateChanged(state="tracking", reason="still following"))
+            async with ClientSession() as http:
+                for _ in range(100):
+                    async with http.get(srv.url + "api/view") as r:
+                        v = await r.json()
+                    if v["reason"] == "still following":
+                        break
+                    await asyncio.sleep(0.05)
+            assert v["reason"] == "still following" and srv.errors == 1
+            assert abs(v["wrench"]["x"] - 1.5) < 1e-6 and abs(v["wrench"]["tilt"] - 2.5) < 1e-6
+        finally:
+            await srv.stop()
     asyncio.run(main())
