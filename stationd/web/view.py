@@ -17,6 +17,7 @@ from stationd.station.events import (
     BoltSkipped,
     DeviceHealth,
     Localized,
+    ParamsRefusedEvent,
     ParamsSent,
     Refused,
     ResultRecorded,
@@ -98,6 +99,9 @@ class View:
             self._set(e.bolt, "selected", f"pset {e.pset}" if e.pset is not None else "")
         elif isinstance(e, ParamsSent):
             self.refused = ""
+        elif isinstance(e, ParamsRefusedEvent):
+            self.refused = f"{e.bolt}: controller refused the parameters: {e.reason}"
+            self._set(e.bolt, "blocked", e.reason)
         elif isinstance(e, ToolEnabled):
             self._set(e.bolt, "tightening")
         elif isinstance(e, ToolDisabled):

@@ -11,6 +11,7 @@ import numpy as np
 from selenium.webdriver.common.by import By
 from selenium.webdriver.support.ui import WebDriverWait
 
+from stationd.station.events import BoltSkipped
 from stationd.web.results import Results
 from tests.web.scenario import VIN, fault, opened, results_db, work
 
@@ -57,7 +58,7 @@ def test_operator_screen_follows_the_work_and_shows_the_fault(live_server, brows
     assert cls == "res-nok" and "B2 NOK" in text and "[45.0-55.0]" in text
     shots("operator-working")
 
-    srv.publish(fault())
+    srv.publish([BoltSkipped(bolt="B4", reason="thread damaged"), *fault()])
     head = browser.find_element(By.ID, "headline")     # the element stays, its text changes
     wait(browser, lambda d: "FAULT" in head.text)
     assert "lift: no answer from 10.0.0.7:502" in head.text
@@ -66,6 +67,7 @@ def test_operator_screen_follows_the_work_and_shows_the_fault(live_server, brows
         "const li = document.querySelector('#devices li[data-device=lift]');"
         " return [li.className, li.textContent]")
     assert cls == "dev-bad" and "timeout" in text
+    assert bolts(browser)["B4"] == ("skipped", "skipped")
     shots("operator-fault")
 
 

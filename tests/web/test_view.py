@@ -6,6 +6,7 @@ from stationd.station.events import (
     BoltSkipped,
     DeviceHealth,
     Localized,
+    ParamsRefusedEvent,
     Refused,
     StateChanged,
     ToolDisabled,
@@ -100,3 +101,10 @@ def test_results_keep_only_the_last_few_and_reopen_resets():
     v.apply(StateChanged(state="waiting for vehicle", reason="no vehicle"))
     v.apply(opened()[-1])
     assert v.results == [] and states(v)["B1"] == "pending"
+
+
+def test_controller_refusing_parameters_blocks_the_bolt_and_says_why():
+    v = fold(opened())
+    v.apply(ParamsRefusedEvent(bolt="B1", reason="pset 1 unknown to the controller"))
+    assert states(v)["B1"] == "blocked"
+    assert v.headline() == "B1: controller refused the parameters: pset 1 unknown to the controller"
