@@ -39,7 +39,7 @@ function drawMap(view) {
   let x0 = Math.min(...pts.map((p) => p[0])), x1 = Math.max(...pts.map((p) => p[0]));
   let y0 = Math.min(...pts.map((p) => p[1])), y1 = Math.max(...pts.map((p) => p[1]));
   const span = Math.max(x1 - x0, y1 - y0, 100);
-  const pad = 70, s = Math.min((W - 2 * pad) / Math.max(x1 - x0, span * 0.2),
+  const pad = 100, s = Math.min((W - 2 * pad) / Math.max(x1 - x0, span * 0.2),
                                (H - 2 * pad) / Math.max(y1 - y0, span * 0.2));
   const cx = (x0 + x1) / 2, cy = (y0 + y1) / 2;
   // vehicle X to the right, vehicle Y up (a top view)
@@ -77,6 +77,7 @@ function render(view) {
   $("done").textContent = view.counters.done;
   $("total").textContent = view.counters.total;
   $("nok").textContent = view.counters.nok;
+  $("nok-wrap").style.color = view.counters.nok ? "" : "var(--dim)";
   const h = $("headline");
   h.textContent = view.headline;
   h.title = view.headline;
