@@ -5,8 +5,9 @@ localizations at ``rate_hz`` (the rate the daemon publishes them for the screens
 now and then), first without a server, then with the server and ``clients`` SSE clients
 reading in another thread (as browsers would, out of the loop), and reports the loop
 thread's CPU in both runs (``time.thread_time`` inside the loop thread: the clients' own
-reading is not counted) and what each client received.  ``stationd bench station`` can call
-it and print the figures.
+reading is not counted), the loop's scheduling lag (a 5 ms timer's overshoot, p95: what the
+station's own coroutines would wait for the screens' work) and what each client received.
+``stationd bench station`` can call it and print the figures.
 """
 
 from __future__ import annotations
@@ -42,6 +43,18 @@ async def _publish(bus: EventBus, seconds: float, rate_hz: float) -> int:
     return n
 
 
+async def _lag_probe(stop: asyncio.Event, lags: list[float]) -> None:
+    while not stop.is_set():
+        t0 = time.perf_counter()
+        await asyncio.sleep(0.005)
+        lags.append((time.perf_counter() - t0 - 0.005) * 1000.0)
+
+
+def _p95(xs: list[float]) -> float:
+    ys = sorted(xs)
+    return ys[min(len(ys) - 1, int(0.95 * len(ys)))] if ys else 0.0
+
+
 def _client(port: int, stop: threading.Event, got: dict[str, int]) -> None:
     conn = http.client.HTTPConnection("127.0.0.1", port, timeout=5)
     conn.request("GET", "/api/events")
@@ -67,9 +80,6 @@ def _run(seconds: float, rate_hz: float, clients: int, serve: bool) -> dict[str,
     def call(coro: Any) -> Any:
         return asyncio.run_coroutine_threadsafe(coro, loop).result(timeout=seconds + 30)
 
-    async def cpu() -> float:
-        return time.thread_time()
-
     bus = EventBus(history=10_000)
     bus.publish(_vehicle())
     srv = WebServer(bus, listen="127.0.0.1:0") if serve else None
@@ -86,9 +96,19 @@ def _run(seconds: float, rate_hz: float, clients: int, serve: bool) -> dict[str,
         deadline = time.monotonic() + 5
         while srv.clients < clients and time.monotonic() < deadline:
             time.sleep(0.01)
-    c0, w0 = call(cpu()), time.monotonic()
-    published = call(_publish(bus, seconds, rate_hz))
-    c1, w1 = call(cpu()), time.monotonic()
+    lags: list[float] = []
+
+    async def measured() -> tuple[int, float, float]:
+        probe_stop = asyncio.Event()
+        probe = asyncio.get_running_loop().create_task(_lag_probe(probe_stop, lags))
+        c0, w0 = time.thread_time(), time.monotonic()
+        n = await _publish(bus, seconds, rate_hz)
+        c1, w1 = time.thread_time(), time.monotonic()
+        probe_stop.set()
+        await probe
+        return n, c1 - c0, w1 - w0
+
+    published, cpu_s, wall_s = call(measured())
     stop.set()
     if srv is not None:
         call(srv.stop())
@@ -97,7 +117,7 @@ def _run(seconds: float, rate_hz: float, clients: int, serve: bool) -> dict[str,
     loop.call_soon_threadsafe(loop.stop)
     th.join(5)
     loop.close()
-    return {"published": published, "cpu_pct": 100.0 * (c1 - c0) / (w1 - w0),
+    return {"published": published, "cpu_pct": 100.0 * cpu_s / wall_s, "lag_p95_ms": _p95(lags),
             "snapshots_per_client": [g["snapshots"] for g in got],
             "kbytes_per_client": [round(g["bytes"] / 1024, 1) for g in got]}
 
@@ -112,6 +132,8 @@ def fanout_bench(seconds: float = 3.0, rate_hz: float = 30.0, clients: int = 2
             "published": served["published"], "cpu_pct_without": round(base["cpu_pct"], 2),
             "cpu_pct_with": round(served["cpu_pct"], 2),
             "extra_cpu_pct": round(served["cpu_pct"] - base["cpu_pct"], 2),
+            "loop_lag_p95_ms_without": round(base["lag_p95_ms"], 2),
+            "loop_lag_p95_ms_with": round(served["lag_p95_ms"], 2),
             "snapshots_per_client": served["snapshots_per_client"],
             "kbytes_per_client": served["kbytes_per_client"]}
 
