@@ -27,7 +27,7 @@ from aiohttp import web
 
 from db.repository import Repository
 from stationd.errors import InputError
-from stationd.station.events import EventBus
+from stationd.station.events import EventBus, PairFrames
 from stationd.web.config import HttpConfig, open_bind_problem
 from stationd.web.frames import LatestFrames, sharpness
 from stationd.web.results import Results, rundowns_csv
@@ -71,6 +71,7 @@ class WebServer:
         self.started = time.time()
         self.snapshots = 0           # flushes serialised (the bench reads it)
         self.errors = 0              # events the view could not fold (logged)
+        self.pairs: dict[str, PairFrames] = {}   # each pair's latest detection summary
         self._snapshot = b""
         self._clients: set[asyncio.Queue[bytes]] = set()
         self._runner: web.AppRunner | None = None
@@ -80,7 +81,9 @@ class WebServer:
     # -- lifecycle ---------------------------------------------------------------------
     async def start(self) -> None:
         queue = self.bus.queue(maxsize=10_000)
-        self.view = fold(tuple(self.bus.history))
+        history = tuple(self.bus.history)
+        self.view = fold(history)
+        self.pairs = {e.pair: e for e in history if isinstance(e, PairFrames)}
         self._snapshot = self._encode()
         self._pump = asyncio.get_running_loop().create_task(self._run_pump(queue))
         app = web.Application(middlewares=[self._guard])
@@ -136,6 +139,9 @@ class WebServer:
     def _apply(self, event: Any) -> None:
         """Fold one event; an event the view cannot take is logged and skipped (the screens
         must not stop following the station over one odd event)."""
+        if isinstance(event, PairFrames):
+            self.pairs[event.pair] = event
+            return
         try:
             self.view.apply(event)
         except Exception:
@@ -232,7 +238,11 @@ class WebServer:
         loop = asyncio.get_running_loop()
         out = []
         for f in self.frames.cameras():
-            s = dict(f.summary)
+            pe = self.pairs.get(f.pair)
+            # the pair's published summary, overridden by what was handed over with the frame
+            s = {**(pe.sides.get(f.side, {}) if pe is not None else {}), **f.summary}
+            if pe is not None:
+                s.setdefault("exposure_t", pe.exposure_t)
             if s.get("sharpness") is None and s.get("roi"):
                 x, y, w, h = (int(c) for c in s["roi"])
                 s["sharpness"] = await loop.run_in_executor(None, sharpness, f.image,

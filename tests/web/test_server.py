@@ -12,7 +12,7 @@ import pytest
 from aiohttp import ClientSession
 
 from stationd.errors import InputError
-from stationd.station.events import EventBus, Localized, StateChanged
+from stationd.station.events import EventBus, Localized, PairFrames, StateChanged
 from stationd.web.frames import LatestFrames
 from stationd.web.results import Results
 from stationd.web.server import WebServer
@@ -93,7 +93,10 @@ def test_cameras_frames_and_crops_on_demand():
         img = np.random.default_rng(3).integers(0, 255, (480, 640), dtype=np.uint8)
         frames.put("front", "left", img, {"found": False, "reason": "no marker",
                                           "roi": [100, 100, 200, 200]})
-        srv = serve(EventBus(), frames=frames)
+        bus = EventBus()
+        bus.publish(PairFrames(pair="front", exposure_t=12.5,
+                               sides={"left": {"ellipses": [[1, 2, 3, 4, 0]], "reason": "old"}}))
+        srv = serve(bus, frames=frames)
         await srv.start()
         try:
             async with ClientSession() as http:
@@ -101,6 +104,10 @@ def test_cameras_frames_and_crops_on_demand():
                     cams = await r.json()
                 assert [(c["pair"], c["side"]) for c in cams] == [("front", "left")]
                 assert cams[0]["summary"]["sharpness"] > 0 and cams[0]["width"] == 640
+                # the pair's published summary fills in; the frame's own summary wins
+                assert cams[0]["summary"]["ellipses"] == [[1, 2, 3, 4, 0]]
+                assert cams[0]["summary"]["reason"] == "no marker"
+                assert cams[0]["summary"]["exposure_t"] == 12.5
                 async with http.get(srv.url + "api/cameras/front/left/frame.jpg?w=320") as r:
                     assert r.content_type == "image/jpeg" and (await r.read())[:2] == b"\xff\xd8"
                 async with http.get(srv.url + "api/cameras/front/left/crop.jpg?x=5&y=5") as r:
