@@ -186,6 +186,12 @@ class View:
             b = self.bolts.get(self.selected)
             pset = f" (pset {b.pset})" if b is not None and b.pset is not None else ""
             return f"{self.selected}{pset}: tighten"
+        if self.closed is not None:
+            c = self.closed
+            missing = f"missing {', '.join(c['missing'])}" if c["missing"] else ""
+            nok = f"NOK {', '.join(c['nok'])}" if c["nok"] else ""
+            return f"{c['vin']} closed: " + ("; ".join(x for x in (missing, nok) if x)
+                                             or "all bolts OK")
         return self.reason or self.state
 
     def to_json(self) -> dict[str, Any]:

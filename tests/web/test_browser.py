@@ -83,8 +83,9 @@ def test_cameras_screen_shows_frames_overlay_and_refusal(live_server, browser, s
     srv.frames.put("front", "right", img, {"found": False, "reason": "marker not found"})
     browser.get(srv.url + "cameras")
     wait(browser, lambda d: len(d.find_elements(By.CSS_SELECTOR, ".cam img")) == 2)
-    wait(browser, lambda d: all(d.execute_script("return arguments[0].naturalWidth", i) == 640
-                                for i in d.find_elements(By.CSS_SELECTOR, ".cam img")))
+    # reduced on the server to the width shown (half of 1920 rounded up to 320 px steps)
+    wait(browser, lambda d: d.execute_script(
+        "return [...document.querySelectorAll('.cam img')].every(i => i.naturalWidth === 960)"))
     left = browser.find_element(By.CSS_SELECTOR, ".cam[data-camera='front/left']")
     assert len(left.find_elements(By.CSS_SELECTOR, "ellipse")) == 2
     assert left.find_elements(By.CSS_SELECTOR, "rect.roi")

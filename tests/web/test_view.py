@@ -89,6 +89,7 @@ def test_skip_rework_result_close_and_wrong_bolt():
     assert v.counters() == {"total": 4, "done": 2, "nok": 0, "skipped": 1}
     v.apply(VehicleClosed(vin=VIN, missing=("B3",), nok=()))
     assert v.closed == {"vin": VIN, "missing": ["B3"], "nok": []} and v.wrench is None
+    assert v.headline() == f"{VIN} closed: missing B3"
     v.apply(WrongBolt(bolt="B1", truth="B2"))
     assert v.headline().startswith("WRONG BOLT")
 

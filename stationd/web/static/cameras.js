@@ -3,7 +3,8 @@
 "use strict";
 const NS = "http://www.w3.org/2000/svg";
 const $ = (id) => document.getElementById(id);
-const WIDTH = 640;
+// the frames are asked for at the width they are shown (steps of 320 px: cached server-side)
+const WIDTH = Math.min(1920, Math.max(320, Math.ceil(window.innerWidth * (window.devicePixelRatio || 1) / 2 / 320) * 320));
 function fmt(v, d) { return v === null || v === undefined ? "-" : Number(v).toFixed(d); }
 function el(tag, attrs) {
   const e = document.createElementNS(NS, tag);
