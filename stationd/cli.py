@@ -315,11 +315,13 @@ def build_parser() -> argparse.ArgumentParser:
     from stationd.db_cli import add_config_parser, add_db_parser
     from stationd.geometry.calibrate_cli import add_calibrate_parser
     from stationd.probe import add_probe_parser
+    from stationd.web.status_cli import add_status_parser
 
     add_calibrate_parser(sub)
     add_probe_parser(sub)
     add_db_parser(sub)
     add_config_parser(sub)
+    add_status_parser(sub)
 
     rn = sub.add_parser("run", help="the station daemon (as systemd runs it)")
     rn.add_argument("--config", required=True, help="station YAML")

@@ -1,0 +1,145 @@
+"""What the screens cost the daemon: the live fan-out with browsers connected.
+
+``fanout_bench(seconds, rate_hz, clients)`` runs the station's loop in a thread publishing
+localizations at ``rate_hz`` (the rate the daemon publishes them for the screens; a result
+now and then), first without a server, then with the server and ``clients`` SSE clients
+reading in another thread (as browsers would, out of the loop), and reports the loop
+thread's CPU in both runs (``time.thread_time`` inside the loop thread: the clients' own
+reading is not counted), the loop's scheduling lag (a 5 ms timer's overshoot, p95: what the
+station's own coroutines would wait for the screens' work) and what each client received.
+``stationd bench station`` can call it and print the figures.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import http.client
+import threading
+import time
+from typing import Any
+
+from stationd.station.events import BoltView, EventBus, Localized, ResultRecorded, VehicleOpened
+from stationd.web.server import WebServer
+
+
+def _vehicle() -> VehicleOpened:
+    bolts = tuple(BoltView(f"B{i}", 100.0 * (i % 6), 150.0 * (i // 6), 0.0, 1, order=i)
+                  for i in range(24))
+    return VehicleOpened(vin="BENCH0000000001", model="BENCH", bolts=bolts)
+
+
+async def _publish(bus: EventBus, seconds: float, rate_hz: float) -> int:
+    n = 0
+    t_end = time.monotonic() + seconds
+    while time.monotonic() < t_end:
+        bus.publish(Localized(point_mm=(float(n % 500), 100.0, 0.0), tilt_deg=2.0, reason=None,
+                              candidate="B1", distance_mm=3.0, age_ms=40.0,
+                              allowed=("B1", "B2")))
+        if n % 25 == 24:
+            bus.publish(ResultRecorded(vin="BENCH0000000001", bolt=f"B{n % 24}", ok=True,
+                                       torque_nm=50.0, angle_deg=30.0, tightening_id=n))
+        n += 1
+        await asyncio.sleep(1.0 / rate_hz)
+    return n
+
+
+async def _lag_probe(stop: asyncio.Event, lags: list[float]) -> None:
+    while not stop.is_set():
+        t0 = time.perf_counter()
+        await asyncio.sleep(0.005)
+        lags.append((time.perf_counter() - t0 - 0.005) * 1000.0)
+
+
+def _p95(xs: list[float]) -> float:
+    ys = sorted(xs)
+    return ys[min(len(ys) - 1, int(0.95 * len(ys)))] if ys else 0.0
+
+
+def _client(port: int, stop: threading.Event, got: dict[str, int]) -> None:
+    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=5)
+    conn.request("GET", "/api/events")
+    resp = conn.getresponse()
+    while not stop.is_set():
+        try:
+            line = resp.fp.readline()
+        except TimeoutError:
+            continue
+        if not line:
+            break
+        got["bytes"] += len(line)
+        if line.startswith(b"data: "):
+            got["snapshots"] += 1
+    conn.close()
+
+
+def _run(seconds: float, rate_hz: float, clients: int, serve: bool) -> dict[str, Any]:
+    loop = asyncio.new_event_loop()
+    th = threading.Thread(target=loop.run_forever, daemon=True)
+    th.start()
+
+    def call(coro: Any) -> Any:
+        return asyncio.run_coroutine_threadsafe(coro, loop).result(timeout=seconds + 30)
+
+    bus = EventBus(history=10_000)
+    bus.publish(_vehicle())
+    srv = WebServer(bus, listen="127.0.0.1:0") if serve else None
+    got = [{"bytes": 0, "snapshots": 0} for _ in range(clients if serve else 0)]
+    stop = threading.Event()
+    readers = []
+    if srv is not None:
+        call(srv.start())
+        port = int(srv.url.rsplit(":", 1)[1].strip("/"))
+        readers = [threading.Thread(target=_client, args=(port, stop, g), daemon=True)
+                   for g in got]
+        for r in readers:
+            r.start()
+        deadline = time.monotonic() + 5
+        while srv.clients < clients and time.monotonic() < deadline:
+            time.sleep(0.01)
+    lags: list[float] = []
+
+    async def measured() -> tuple[int, float, float]:
+        probe_stop = asyncio.Event()
+        probe = asyncio.get_running_loop().create_task(_lag_probe(probe_stop, lags))
+        c0, w0 = time.thread_time(), time.monotonic()
+        n = await _publish(bus, seconds, rate_hz)
+        c1, w1 = time.thread_time(), time.monotonic()
+        probe_stop.set()
+        await probe
+        return n, c1 - c0, w1 - w0
+
+    published, cpu_s, wall_s = call(measured())
+    stop.set()
+    if srv is not None:
+        call(srv.stop())
+    for r in readers:
+        r.join(5)
+    loop.call_soon_threadsafe(loop.stop)
+    th.join(5)
+    loop.close()
+    return {"published": published, "cpu_pct": 100.0 * cpu_s / wall_s, "lag_p95_ms": _p95(lags),
+            "snapshots_per_client": [g["snapshots"] for g in got],
+            "kbytes_per_client": [round(g["bytes"] / 1024, 1) for g in got]}
+
+
+def fanout_bench(seconds: float = 3.0, rate_hz: float = 30.0, clients: int = 2
+                 ) -> dict[str, Any]:
+    """The loop thread's CPU (% of a core) publishing without a server and with the server
+    and ``clients`` connected; ``extra_cpu_pct`` is the screens' cost."""
+    base = _run(seconds, rate_hz, 0, serve=False)
+    served = _run(seconds, rate_hz, clients, serve=True)
+    return {"seconds": seconds, "rate_hz": rate_hz, "clients": clients,
+            "published": served["published"], "cpu_pct_without": round(base["cpu_pct"], 2),
+            "cpu_pct_with": round(served["cpu_pct"], 2),
+            "extra_cpu_pct": round(served["cpu_pct"] - base["cpu_pct"], 2),
+            "loop_lag_p95_ms_without": round(base["lag_p95_ms"], 2),
+            "loop_lag_p95_ms_with": round(served["lag_p95_ms"], 2),
+            "snapshots_per_client": served["snapshots_per_client"],
+            "kbytes_per_client": served["kbytes_per_client"]}
+
+
+if __name__ == "__main__":
+    import json
+    import sys
+    secs, hz = (float(a) for a in (sys.argv[1:3] + ["3", "30"][len(sys.argv[1:3]):]))
+    print(json.dumps(fanout_bench(secs, hz), indent=1))

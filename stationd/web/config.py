@@ -1,0 +1,92 @@
+"""The ``http:`` section of the station file: where the screens listen and the token that
+guards a non-local bind.
+
+Why a check function apart from the reader: the config checker reports every problem of a
+file at once, and an open bind on a plant network is one of them (anyone on the line's
+network could watch the station), not a reason to stop reading the rest.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+from dataclasses import dataclass
+
+from stationd.errors import ConfigError
+from stationd.yamlio import YamlNode
+
+DEFAULT_LISTEN = "127.0.0.1:8080"
+
+
+@dataclass(frozen=True)
+class HttpConfig:
+    """``listen``: ``host:port`` (``[::1]:8080`` for IPv6); ``token``: required by every
+    request (``Authorization: Bearer``, a ``token`` cookie or ``?token=``) when set."""
+
+    listen: str = DEFAULT_LISTEN
+    token: str | None = None
+
+    @classmethod
+    def from_node(cls, node: YamlNode) -> HttpConfig:
+        m = node.mapping(("listen", "token"))
+        listen = m["listen"].text() if "listen" in m else DEFAULT_LISTEN
+        try:
+            split_listen(listen)
+        except ValueError as exc:
+            raise m["listen"].error(str(exc)) from None
+        token = m["token"].text() if "token" in m else None
+        if token is not None and len(token) < 8:
+            raise m["token"].error("token: at least 8 characters")
+        cfg = cls(listen, token)
+        problem = open_bind_problem(cfg)
+        if problem is not None:
+            raise (m["listen"] if "listen" in m else node).error(problem)
+        return cfg
+
+    @property
+    def host(self) -> str:
+        return split_listen(self.listen)[0]
+
+    @property
+    def port(self) -> int:
+        return split_listen(self.listen)[1]
+
+
+def split_listen(listen: str) -> tuple[str, int]:
+    """``host:port`` -> (host, port); ValueError with a readable message otherwise."""
+    host, sep, port_text = listen.rpartition(":")
+    if not sep or not host or not port_text.isdigit():
+        raise ValueError(f"listen {listen!r}: expected host:port, e.g. {DEFAULT_LISTEN}")
+    port = int(port_text)
+    if not 0 <= port <= 65535:
+        raise ValueError(f"listen {listen!r}: port {port} is not 0-65535")
+    return host.strip("[]"), port
+
+
+def is_local(host: str) -> bool:
+    """True for a loopback address or ``localhost``: only this machine can connect."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def open_bind_problem(cfg: HttpConfig) -> str | None:
+    """The reason a configuration must be refused (a non-local bind without a token), or
+    None.  The config checker calls this; :class:`WebServer` refuses to start on it too."""
+    try:
+        host, _ = split_listen(cfg.listen)
+    except ValueError as exc:
+        return str(exc)
+    if not is_local(host) and not cfg.token:
+        return (f"http listen {cfg.listen}: a non-local bind needs a token (anyone on the "
+                "network could watch the station); set http.token or listen on 127.0.0.1")
+    return None
+
+
+def check_http(cfg: HttpConfig) -> None:
+    """Raise :class:`ConfigError` when :func:`open_bind_problem` finds one."""
+    problem = open_bind_problem(cfg)
+    if problem is not None:
+        raise ConfigError(problem)

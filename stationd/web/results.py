@@ -1,0 +1,96 @@
+"""Read-only results for the results screens and their exports: the vehicles, and every
+rundown of each bolt of a vehicle (OK, NOK, rework), with the saved crops.
+
+Why beside the repository and not in it: ``db.repository.Repository`` is the daemon's write
+path; the screens only read, and only need two queries the repository does not offer (the
+vehicle list, every record rather than the last).  They go through the repository's engine
+in a session that never commits; the vehicle's status comes from ``vehicle_report``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
+from db.repository import Repository
+
+CSV_FIELDS = ("vin", "model", "bolt", "attempt", "status", "torque_nm", "angle_deg", "pset",
+              "parameter_version", "tightening_id", "x_mm", "y_mm", "z_mm",
+              "match_distance_mm", "tilt_deg", "sent_at", "result_at", "recorded_at", "images")
+
+
+def _iso(t: datetime | None) -> str | None:
+    return None if t is None else t.isoformat()
+
+
+class Results:
+    """The read-only results source the web server is given."""
+
+    def __init__(self, repo: Repository) -> None:
+        self.repo = repo
+
+    def vehicles(self, limit: int = 200) -> list[dict[str, Any]]:
+        """The latest vehicles first, each with its status (open, complete, NOK, missing)."""
+        with Session(self.repo.engine) as s:
+            rows = s.execute(select(Vehicle.vin).order_by(Vehicle.started_at.desc(),
+                                                         Vehicle.id.desc()).limit(limit)).all()
+        out = []
+        for (vin,) in rows:
+            r = self.repo.vehicle_report(vin)
+            j = r.to_json()
+            j["status"] = ("open" if r.vehicle.ended_at is None and not r.complete
+                           else "complete" if r.complete else "NOK" if r.nok else "incomplete")
+            j.pop("bolts")
+            out.append(j)
+        return out
+
+    def vehicle(self, vin: str) -> dict[str, Any]:
+        """The report (last result per bolt) plus every rundown per bolt, oldest first.
+        Raises ``NotFoundError`` for an unknown VIN."""
+        report = self.repo.vehicle_report(vin).to_json()
+        runs = self.rundowns(vin)
+        for b in report["bolts"]:
+            b["rundowns"] = [r for r in runs if r["bolt"] == b["bolt"]]
+        return report
+
+    def rundowns(self, vin: str) -> list[dict[str, Any]]:
+        with Session(self.repo.engine) as s:
+            rows = s.execute(
+                select(TighteningRecord, Bolt.code, ProcessParameters.version,
+                       VehicleModel.name)
+                .join(Vehicle, TighteningRecord.vehicle_id == Vehicle.id)
+                .join(VehicleModel, Vehicle.model_id == VehicleModel.id)
+                .join(Bolt, TighteningRecord.bolt_id == Bolt.id)
+                .join(ProcessParameters, TighteningRecord.parameters_id == ProcessParameters.id)
+                .where(Vehicle.vin == vin)
+                .order_by(TighteningRecord.recorded_at, TighteningRecord.id)).all()
+        out: list[dict[str, Any]] = []
+        attempts: dict[str, int] = {}
+        for rec, code, version, model in rows:
+            attempts[code] = attempts.get(code, 0) + 1
+            out.append({
+                "vin": vin, "model": model, "bolt": code, "attempt": attempts[code],
+                "status": rec.status, "torque_nm": rec.torque_nm, "angle_deg": rec.angle_deg,
+                "pset": (rec.params_sent or {}).get("pset"), "parameter_version": version,
+                "tightening_id": rec.tightening_id, "x_mm": rec.x_mm, "y_mm": rec.y_mm,
+                "z_mm": rec.z_mm, "match_distance_mm": rec.match_distance_mm,
+                "tilt_deg": rec.tilt_deg, "sent_at": _iso(rec.sent_at),
+                "result_at": _iso(rec.result_at), "recorded_at": _iso(rec.recorded_at),
+                "images": list(rec.images or [])})
+        return out
+
+
+def rundowns_csv(runs: list[dict[str, Any]]) -> str:
+    """One line per rundown; images joined by ``;``."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=CSV_FIELDS, lineterminator="\n")
+    w.writeheader()
+    for r in runs:
+        w.writerow({**r, "images": ";".join(r["images"])})
+    return buf.getvalue()

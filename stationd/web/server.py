@@ -1,0 +1,365 @@
+"""The web server on the daemon's loop: live view by server-sent events, the commissioning
+frames on demand, the results from the database, all read-only.
+
+Why SSE rather than WebSocket: the screens only listen; SSE is plain HTTP (one long GET),
+reconnects by itself in every browser and needs no protocol code on either side.
+
+Cost on the daemon: one bus queue for the whole server; a pump task folds the events into one
+:class:`View`, serialises its snapshot once per flush (at most ``FLUSH_HZ`` a second, several
+events coalesced) and hands the same bytes to each client's bounded queue (a slow client
+loses intermediate snapshots, never slows the station).  Frames are encoded and the database
+is read in the default thread pool, only when a screen asks.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import platform
+import time
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from aiohttp import web
+
+from db.repository import Repository
+from stationd.errors import InputError
+from stationd.station.events import EventBus, PairFrames
+from stationd.web.config import HttpConfig, open_bind_problem
+from stationd.web.frames import LatestFrames, sharpness
+from stationd.web.results import Results, rundowns_csv
+from stationd.web.view import View, fold
+
+log = logging.getLogger(__name__)
+STATIC = Path(__file__).with_name("static")
+FLUSH_HZ = 10.0
+CLIENT_QUEUE = 16
+PAGES = {"/": "operator.html", "/cameras": "cameras.html", "/vehicles": "vehicles.html"}
+
+
+def _versions() -> dict[str, str]:
+    def v(name: str) -> str:
+        try:
+            return metadata.version(name)
+        except metadata.PackageNotFoundError:
+            return "unknown"
+    return {"stationd": v("stationd"), "aiohttp": v("aiohttp"),
+            "python": platform.python_version()}
+
+
+class WebServer:
+    """``WebServer(bus, results, frames, listen="127.0.0.1:8080", token=None)``; then
+    ``await start()`` on the daemon's loop and ``await stop()`` at shutdown.  ``results``: a
+    :class:`Results` or a ``Repository`` (read only); None hides the results screens' data.
+    ``listen`` with port 0 picks a free port (``url`` tells which)."""
+
+    def __init__(self, bus: EventBus, results: Results | Repository | None = None,
+                 frames: LatestFrames | None = None, listen: str = "127.0.0.1:8080",
+                 token: str | None = None, images_dir: Path | None = None) -> None:
+        problem = open_bind_problem(HttpConfig(listen, token))
+        if problem is not None:
+            raise InputError(problem)
+        self.bus = bus
+        self.results = Results(results) if isinstance(results, Repository) else results
+        self.frames = frames if frames is not None else LatestFrames()
+        self.config = HttpConfig(listen, token)
+        self.images_dir = None if images_dir is None else images_dir.resolve()
+        self.view = View()
+        self.started = time.time()
+        self.snapshots = 0           # flushes serialised (the bench reads it)
+        self.errors = 0              # events the view could not fold (logged)
+        self.pairs: dict[str, PairFrames] = {}   # each pair's latest detection summary
+        self._snapshot = b""
+        self._clients: set[asyncio.Queue[bytes]] = set()
+        self._runner: web.AppRunner | None = None
+        self._pump: asyncio.Task[None] | None = None
+        self._port = 0
+
+    # -- lifecycle ---------------------------------------------------------------------
+    async def start(self) -> None:
+        queue = self.bus.queue(maxsize=10_000)
+        history = tuple(self.bus.history)
+        self.view = fold(history)
+        self.pairs = {e.pair: e for e in history if isinstance(e, PairFrames)}
+        self._snapshot = self._encode()
+        self._pump = asyncio.get_running_loop().create_task(self._run_pump(queue))
+        app = web.Application(middlewares=[self._guard])
+        self._routes(app)
+        self._runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0)
+        await self._runner.setup()
+        site = web.TCPSite(self._runner, self.config.host, self.config.port)
+        await site.start()
+        addr = self._runner.addresses[0]
+        self._port = int(addr[1])
+
+    async def stop(self) -> None:
+        for q in list(self._clients):
+            _offer(q, b"")           # wakes each stream, which then ends
+        if self._pump is not None:
+            self._pump.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._pump
+            self._pump = None
+        if self._runner is not None:
+            await self._runner.cleanup()
+            self._runner = None
+
+    @property
+    def url(self) -> str:
+        host = self.config.host
+        host = f"[{host}]" if ":" in host else host
+        return f"http://{host}:{self._port}/"
+
+    @property
+    def clients(self) -> int:
+        return len(self._clients)
+
+    # -- the live view ---------------------------------------------------------------------
+    async def _run_pump(self, queue: asyncio.Queue[Any]) -> None:
+        try:
+            while True:
+                self._apply(await queue.get())
+                while not queue.empty():
+                    self._apply(queue.get_nowait())
+                try:
+                    self._snapshot = self._encode()
+                except (TypeError, ValueError) as exc:
+                    log.warning("screens: snapshot not serialisable: %s", exc)
+                    continue
+                self.snapshots += 1
+                for q in list(self._clients):
+                    _offer(q, self._snapshot)
+                await asyncio.sleep(1.0 / FLUSH_HZ)
+        finally:
+            self.bus.unqueue(queue)
+
+    def _apply(self, event: Any) -> None:
+        """Fold one event; an event the view cannot take is logged and skipped (the screens
+        must not stop following the station over one odd event)."""
+        if isinstance(event, PairFrames):
+            self.pairs[event.pair] = event
+            return
+        try:
+            self.view.apply(event)
+        except Exception:
+            self.errors += 1
+            log.exception("screens: event not shown: %r", event)
+
+    def _encode(self) -> bytes:
+        return b"data: " + json.dumps(self.view.to_json(), separators=(",", ":"),
+                                      default=_plain).encode() + b"\n\n"
+
+    # -- HTTP -----------------------------------------------------------------------------
+    def _routes(self, app: web.Application) -> None:
+        r = app.router
+        for path, page in PAGES.items():
+            r.add_get(path, self._page(page))
+        r.add_get("/vehicles/{vin}", self._page("vehicle.html"))
+        r.add_static("/static", STATIC, append_version=False)
+        r.add_get("/healthz", self._healthz)
+        r.add_get("/api/status", self._status)
+        r.add_get("/api/view", self._view)
+        r.add_get("/api/events", self._events)
+        r.add_get("/api/cameras", self._cameras)
+        r.add_get("/api/cameras/{pair}/{side}/frame.jpg", self._frame)
+        r.add_get("/api/cameras/{pair}/{side}/crop.jpg", self._crop)
+        r.add_get("/api/vehicles", self._vehicles)
+        r.add_get("/api/vehicles/{vin}/export.csv", self._export_csv)
+        r.add_get("/api/vehicles/{vin}/export.json", self._export_json)
+        r.add_get("/api/vehicles/{vin}", self._vehicle)
+        r.add_get("/images/{path:.+}", self._image)
+
+    @web.middleware
+    async def _guard(self, request: web.Request, handler: Any) -> web.StreamResponse:
+        """Read-only (GET/HEAD only: nothing here can send parameters or enable the tool) and,
+        with a token configured, only for who presents it."""
+        if request.method not in ("GET", "HEAD"):
+            return web.Response(status=405, text="read-only: GET only\n")
+        token = self.config.token
+        set_cookie = False
+        if token:
+            given = request.headers.get("Authorization", "").removeprefix("Bearer ").strip() \
+                or request.cookies.get("token", "") or request.query.get("token", "")
+            if given != token:
+                return web.Response(status=401, text="token required\n")
+            set_cookie = request.query.get("token") == token
+        resp: web.StreamResponse = await handler(request)
+        if set_cookie and token and not resp.prepared:
+            resp.set_cookie("token", token, httponly=True, samesite="Strict")
+        return resp
+
+    def _page(self, name: str) -> Any:
+        async def handler(request: web.Request) -> web.StreamResponse:
+            return web.FileResponse(STATIC / name, headers={"Cache-Control": "no-cache"})
+        return handler
+
+    async def _healthz(self, request: web.Request) -> web.Response:
+        return web.Response(text="ok\n")
+
+    def status(self) -> dict[str, Any]:
+        """What ``GET /api/status`` and ``stationd status`` show."""
+        v = self.view.to_json()
+        return {"state": v["state"], "reason": v["reason"], "headline": v["headline"],
+                "vehicle": v["vehicle"], "counters": v["counters"], "devices": v["devices"],
+                "versions": _versions(), "uptime_s": round(time.time() - self.started, 1),
+                "clients": self.clients}
+
+    async def _status(self, request: web.Request) -> web.Response:
+        return web.json_response(self.status(), dumps=lambda o: json.dumps(o, default=_plain))
+
+    async def _view(self, request: web.Request) -> web.Response:
+        return web.Response(body=self._snapshot[len(b"data: "):].strip(),
+                            content_type="application/json")
+
+    async def _events(self, request: web.Request) -> web.StreamResponse:
+        resp = web.StreamResponse(headers={"Content-Type": "text/event-stream",
+                                           "Cache-Control": "no-cache"})
+        await resp.prepare(request)
+        q: asyncio.Queue[bytes] = asyncio.Queue(CLIENT_QUEUE)
+        self._clients.add(q)
+        try:
+            await resp.write(b"retry: 1000\n\n" + self._snapshot)
+            while True:
+                data = await q.get()
+                if not data:
+                    break
+                await resp.write(data)
+        except (ConnectionResetError, asyncio.CancelledError):
+            pass
+        finally:
+            self._clients.discard(q)
+        return resp
+
+    # -- cameras ---------------------------------------------------------------------------
+    async def _cameras(self, request: web.Request) -> web.Response:
+        loop = asyncio.get_running_loop()
+        out = []
+        for f in self.frames.cameras():
+            pe = self.pairs.get(f.pair)
+            # the pair's published summary, overridden by what was handed over with the frame
+            s = {**(pe.sides.get(f.side, {}) if pe is not None else {}), **f.summary}
+            if pe is not None:
+                s.setdefault("exposure_t", pe.exposure_t)
+            if s.get("sharpness") is None and s.get("roi"):
+                x, y, w, h = (int(c) for c in s["roi"])
+                s["sharpness"] = await loop.run_in_executor(None, sharpness, f.image,
+                                                            (x, y, w, h))
+            out.append({"pair": f.pair, "side": f.side, "grabbed_at": f.grabbed_at,
+                        "age_s": round(time.time() - f.grabbed_at, 3), "fps": f.fps,
+                        "width": int(f.image.shape[1]), "height": int(f.image.shape[0]),
+                        "seq": f.seq, "summary": _json_safe(s)})
+        return web.json_response(out)
+
+    async def _frame(self, request: web.Request) -> web.Response:
+        pair, side = request.match_info["pair"], request.match_info["side"]
+        width = _int_arg(request, "w", 640)
+        data = await asyncio.get_running_loop().run_in_executor(
+            None, self.frames.jpeg, pair, side, width)
+        if data is None:
+            raise web.HTTPNotFound(text=f"no frame from {pair}/{side} yet\n")
+        return web.Response(body=data, content_type="image/jpeg",
+                            headers={"Cache-Control": "no-store"})
+
+    async def _crop(self, request: web.Request) -> web.Response:
+        pair, side = request.match_info["pair"], request.match_info["side"]
+        x, y = _int_arg(request, "x", 0), _int_arg(request, "y", 0)
+        size = _int_arg(request, "size", 512)
+        data = await asyncio.get_running_loop().run_in_executor(
+            None, self.frames.crop, pair, side, x, y, size)
+        if data is None:
+            raise web.HTTPNotFound(text=f"no frame from {pair}/{side} yet\n")
+        return web.Response(body=data, content_type="image/jpeg",
+                            headers={"Cache-Control": "no-store"})
+
+    # -- results ---------------------------------------------------------------------------
+    def _need_results(self) -> Results:
+        if self.results is None:
+            raise web.HTTPServiceUnavailable(text="no results database configured\n")
+        return self.results
+
+    async def _db(self, fn: Any, *args: Any) -> Any:
+        try:
+            return await asyncio.get_running_loop().run_in_executor(None, fn, *args)
+        except InputError as exc:       # NotFoundError: an unknown VIN
+            raise web.HTTPNotFound(text=f"{exc}\n") from None
+        except Exception as exc:        # the database is down: the screen says so
+            raise web.HTTPServiceUnavailable(text=f"database: {exc}\n") from None
+
+    async def _vehicles(self, request: web.Request) -> web.Response:
+        return web.json_response(await self._db(self._need_results().vehicles))
+
+    async def _vehicle(self, request: web.Request) -> web.Response:
+        res = self._need_results()
+        doc = await self._db(res.vehicle, request.match_info["vin"])
+        for b in doc["bolts"]:
+            for r in b["rundowns"]:
+                r["image_urls"] = [u for u in map(self._image_url, r["images"]) if u]
+        return web.json_response(doc)
+
+    def _image_url(self, path: str) -> str | None:
+        """The URL of a record's saved crop, when it lies in the image directory."""
+        if self.images_dir is None:
+            return None
+        p = Path(path)
+        p = (p if p.is_absolute() else self.images_dir / p).resolve()
+        if not p.is_relative_to(self.images_dir):
+            return None
+        return "/images/" + p.relative_to(self.images_dir).as_posix()
+
+    async def _export_json(self, request: web.Request) -> web.Response:
+        res = self._need_results()
+        vin = request.match_info["vin"]
+        doc = await self._db(res.vehicle, vin)
+        return web.Response(text=json.dumps(doc, indent=1), content_type="application/json",
+                            headers=_attachment(f"{vin}.json"))
+
+    async def _export_csv(self, request: web.Request) -> web.Response:
+        res = self._need_results()
+        vin = request.match_info["vin"]
+        await self._db(res.repo.vehicle_report, vin)   # 404 for an unknown VIN
+        runs = await self._db(res.rundowns, vin)
+        return web.Response(text=rundowns_csv(runs), content_type="text/csv",
+                            headers=_attachment(f"{vin}.csv"))
+
+    async def _image(self, request: web.Request) -> web.StreamResponse:
+        """A saved crop of a record, only from inside the records' image directory."""
+        if self.images_dir is None:
+            raise web.HTTPNotFound(text="no image directory configured\n")
+        p = (self.images_dir / request.match_info["path"]).resolve()
+        if not p.is_relative_to(self.images_dir) or not p.is_file():
+            raise web.HTTPNotFound(text="no such image\n")
+        return web.FileResponse(p)
+
+
+def _offer(q: asyncio.Queue[bytes], data: bytes) -> None:
+    """Put without waiting; a full queue loses its oldest snapshot (the newest wins)."""
+    if q.full():
+        q.get_nowait()
+    q.put_nowait(data)
+
+
+def _int_arg(request: web.Request, name: str, default: int) -> int:
+    try:
+        return int(request.query.get(name, default))
+    except ValueError:
+        raise web.HTTPBadRequest(text=f"{name}: an integer\n") from None
+
+
+def _attachment(name: str) -> dict[str, str]:
+    safe = "".join(c for c in name if c.isalnum() or c in "._-")
+    return {"Content-Disposition": f'attachment; filename="{safe}"'}
+
+
+def _plain(o: Any) -> Any:
+    """NumPy scalars and arrays (a daemon may hand them over) as plain JSON values."""
+    if hasattr(o, "tolist"):
+        return o.tolist()
+    raise TypeError(f"{type(o).__name__} is not JSON")
+
+
+def _json_safe(v: Any) -> Any:
+    return json.loads(json.dumps(v, default=lambda o: o.tolist() if hasattr(o, "tolist")
+                                 else str(o)))

@@ -1,0 +1,95 @@
+// Commissioning screen: per pair, the latest left/right frames (JPEG, reduced, encoded by the
+// server on request) with the detector's overlay drawn in SVG over them.
+"use strict";
+const NS = "http://www.w3.org/2000/svg";
+const $ = (id) => document.getElementById(id);
+// the frames are asked for at the width they are shown (steps of 320 px: cached server-side)
+const WIDTH = Math.min(1920, Math.max(320, Math.ceil(window.innerWidth * (window.devicePixelRatio || 1) / 2 / 320) * 320));
+function fmt(v, d) { return v === null || v === undefined ? "-" : Number(v).toFixed(d); }
+function el(tag, attrs) {
+  const e = document.createElementNS(NS, tag);
+  for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, v);
+  return e;
+}
+
+function overlay(cam) {
+  const s = cam.summary || {};
+  const svg = el("svg", {viewBox: `0 0 ${cam.width} ${cam.height}`, preserveAspectRatio: "none"});
+  const k = cam.width / WIDTH;
+  if (s.roi) {
+    const [x, y, w, h] = s.roi;
+    svg.appendChild(el("rect", {class: "roi", x, y, width: w, height: h, fill: "none",
+      stroke: "#2f8fff", "stroke-width": 3 * k}));
+  }
+  for (const e of s.ellipses || []) {   // [cx, cy, a, b, angle_deg]
+    const [cx, cy, a, b, ang] = e;
+    svg.appendChild(el("ellipse", {class: "ellipse", cx, cy, rx: a, ry: b, fill: "none",
+      stroke: "#ffd400", "stroke-width": 3 * k, transform: `rotate(${ang || 0} ${cx} ${cy})`}));
+  }
+  if (s.centre) {
+    const [cx, cy] = s.centre, r = 12 * k;
+    svg.appendChild(el("path", {class: "centre", d: `M${cx - r} ${cy}H${cx + r}M${cx} ${cy - r}V${cy + r}`,
+      stroke: "#ff3b3b", "stroke-width": 3 * k}));
+  }
+  return svg;
+}
+
+function camDiv(cam, stamp) {
+  const s = cam.summary || {};
+  const d = document.createElement("div");
+  d.className = "cam";
+  d.dataset.camera = `${cam.pair}/${cam.side}`;
+  const fr = document.createElement("div");
+  fr.className = "frame";
+  const img = document.createElement("img");
+  img.alt = `${cam.pair} ${cam.side}`;
+  img.src = `/api/cameras/${encodeURIComponent(cam.pair)}/${cam.side}/frame.jpg?w=${WIDTH}&s=${stamp}`;
+  img.onclick = (ev) => {
+    const r = img.getBoundingClientRect();
+    const x = Math.round((ev.clientX - r.left) / r.width * cam.width);
+    const y = Math.round((ev.clientY - r.top) / r.height * cam.height);
+    $("crop").hidden = false;
+    $("crop-title").textContent = `${cam.pair} ${cam.side} at (${x}, ${y}), full resolution`;
+    $("crop-img").src = `/api/cameras/${encodeURIComponent(cam.pair)}/${cam.side}/crop.jpg?x=${x}&y=${y}&size=512&s=${Date.now()}`;
+  };
+  fr.appendChild(img);
+  fr.appendChild(overlay(cam));
+  d.appendChild(fr);
+  const facts = document.createElement("div");
+  facts.className = "facts";
+  facts.textContent = `${cam.side}: ${cam.width}x${cam.height}, ${fmt(cam.fps, 1)} fps, ` +
+    `grabbed ${fmt(cam.age_s, 1)} s ago, sharpness ${fmt(s.sharpness, 0)}` +
+    (s.exposure_us ? `, exposure ${s.exposure_us} \u00B5s` : "") +
+    (s.found === undefined ? "" : s.found ? ", marker found" : ", no marker");
+  d.appendChild(facts);
+  if (s.reason) {
+    const r = document.createElement("div");
+    r.className = "refusal";
+    r.textContent = `refused: ${s.reason}`;
+    d.appendChild(r);
+  }
+  return d;
+}
+
+async function refresh() {
+  const cams = await (await fetch("/api/cameras")).json();
+  const root = $("pairs");
+  root.replaceChildren();
+  if (!cams.length) root.textContent = "No frames yet: the daemon has handed over none.";
+  const pairs = {};
+  for (const c of cams) (pairs[c.pair] = pairs[c.pair] || []).push(c);
+  const stamp = Date.now();
+  for (const [name, list] of Object.entries(pairs)) {
+    const p = document.createElement("section");
+    p.className = "pair";
+    p.innerHTML = "<h2></h2>";
+    p.firstChild.textContent = `pair ${name}`;
+    const row = document.createElement("div");
+    row.className = "cams";
+    for (const c of list) row.appendChild(camDiv(c, stamp));
+    p.appendChild(row);
+    root.appendChild(p);
+  }
+}
+refresh();
+setInterval(() => { if ($("live").checked) refresh(); }, 1000);

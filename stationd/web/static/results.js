@@ -1,0 +1,73 @@
+// Results screens: the vehicles and each vehicle's rundowns, read from the server's API.
+"use strict";
+const q = (s) => document.querySelector(s);
+function fmt(v, d) { return v === null || v === undefined ? "-" : Number(v).toFixed(d); }
+function cell(tr, text, cls) {
+  const td = document.createElement("td");
+  td.textContent = text;
+  if (cls) td.className = cls;
+  tr.appendChild(td);
+  return td;
+}
+async function getJson(url) {
+  const r = await fetch(url);
+  if (!r.ok) throw new Error((await r.text()).trim());
+  return r.json();
+}
+async function listVehicles() {
+  try {
+    const tb = q("#vehicles tbody");
+    for (const v of await getJson("/api/vehicles")) {
+      const tr = document.createElement("tr");
+      tr.dataset.vin = v.vin;
+      const a = document.createElement("a");
+      a.href = "/vehicles/" + encodeURIComponent(v.vin);
+      a.textContent = v.vin;
+      cell(tr, "").appendChild(a);
+      cell(tr, v.model);
+      cell(tr, v.status, "status-" + v.status);
+      cell(tr, v.ok.length);
+      cell(tr, v.nok.length + (v.nok.length ? " (" + v.nok.join(", ") + ")" : ""), v.nok.length ? "status-NOK" : "");
+      cell(tr, v.missing.length);
+      cell(tr, (v.started_at || "").slice(0, 19));
+      cell(tr, (v.ended_at || "open").slice(0, 19));
+      tb.appendChild(tr);
+    }
+  } catch (e) { q("#error").textContent = e.message; }
+}
+async function showVehicle(vin) {
+  const base = "/api/vehicles/" + encodeURIComponent(vin);
+  q("#csv").href = base + "/export.csv";
+  q("#json").href = base + "/export.json";
+  try {
+    const v = await getJson(base);
+    q("#title").textContent = `${v.vin} (${v.model})`;
+    q("#summary").textContent = `${v.ok.length} OK, ${v.nok.length} NOK, ${v.missing.length} missing` +
+      (v.complete ? ": complete" : "");
+    const tb = q("#rundowns tbody");
+    for (const b of v.bolts) {
+      const runs = b.rundowns.length ? b.rundowns : [null];
+      runs.forEach((r, i) => {
+        const tr = document.createElement("tr");
+        tr.className = "rundown";
+        tr.dataset.bolt = b.bolt;
+        cell(tr, i ? "" : b.bolt);
+        cell(tr, i ? "" : b.status.toUpperCase(), "status-" + (b.status === "nok" ? "NOK" : b.status));
+        if (!r) { cell(tr, "-"); cell(tr, "not tightened"); for (let k = 0; k < 7; k++) cell(tr, ""); }
+        else {
+          cell(tr, r.attempt + (r.attempt > 1 ? " (rework)" : ""));
+          cell(tr, r.status.toUpperCase(), "status-" + (r.status === "nok" ? "NOK" : "ok"));
+          cell(tr, fmt(r.torque_nm, 1)); cell(tr, fmt(r.angle_deg, 0)); cell(tr, r.pset ?? "-");
+          cell(tr, fmt(r.tilt_deg, 1)); cell(tr, fmt(r.match_distance_mm, 1));
+          cell(tr, (r.recorded_at || "").slice(0, 19));
+          const td = cell(tr, "");
+          for (const im of r.image_urls || []) {
+            const a = document.createElement("a");
+            a.href = im; a.textContent = "crop "; td.appendChild(a);
+          }
+        }
+        tb.appendChild(tr);
+      });
+    }
+  } catch (e) { q("#error").textContent = e.message; }
+}

@@ -1,0 +1,220 @@
+"""The screens' view model: the typed events folded into the snapshot the operator screen
+shows.
+
+Why a pure fold: the screen must show what the daemon decided, not re-decide it; folding the
+same events the daemon publishes (no database, no clock, no I/O) makes the view testable
+event by event and lets a browser that connects late start from a snapshot, then follow the
+same events live.  ``View.apply`` is the only way state changes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from stationd.station.events import (
+    BoltSelected,
+    BoltSkipped,
+    DeviceHealth,
+    Localized,
+    ParamsRefusedEvent,
+    ParamsSent,
+    Refused,
+    ResultRecorded,
+    StateChanged,
+    StationEvent,
+    ToolDisabled,
+    ToolEnabled,
+    VehicleClosed,
+    VehicleOpened,
+    WrongBolt,
+)
+
+# a bolt's state on the screen; the label is what the operator reads next to the colour
+BOLT_LABELS = {
+    "pending": "to do", "next": "next", "selected": "selected", "tightening": "tighten",
+    "ok": "OK", "nok": "NOK", "skipped": "skipped", "blocked": "blocked",
+}
+LAST_RESULTS = 8
+
+
+@dataclass
+class BoltState:
+    bolt: str
+    x_mm: float
+    y_mm: float
+    pset: int | None
+    order: int | None
+    batch: str | None
+    state: str = "pending"
+    reason: str = ""
+    torque_nm: float | None = None
+    angle_deg: float | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        return {"bolt": self.bolt, "x": self.x_mm, "y": self.y_mm, "pset": self.pset,
+                "order": self.order, "batch": self.batch, "state": self.state,
+                "label": BOLT_LABELS.get(self.state, self.state), "reason": self.reason,
+                "torque_nm": self.torque_nm, "angle_deg": self.angle_deg}
+
+
+@dataclass
+class View:
+    """What the operator screen shows, built from the events in order."""
+
+    state: str = "waiting for vehicle"
+    reason: str = ""
+    vin: str | None = None
+    model: str | None = None
+    rework: bool = False
+    bolts: dict[str, BoltState] = field(default_factory=dict)
+    wrench: dict[str, Any] | None = None
+    refused: str = ""            # why nothing is sent now ("" when parameters may go out)
+    devices: dict[str, dict[str, Any]] = field(default_factory=dict)
+    results: list[dict[str, Any]] = field(default_factory=list)
+    selected: str | None = None
+    closed: dict[str, Any] | None = None
+    alarm: str = ""              # a wrong bolt reported by the simulation's checker
+
+    def apply(self, e: StationEvent) -> None:
+        """Fold one event in."""
+        if isinstance(e, StateChanged):
+            self.state, self.reason = e.state, e.reason
+        elif isinstance(e, DeviceHealth):
+            self.devices[e.device] = {"ok": e.ok, "kind": e.kind, "reason": e.reason}
+        elif isinstance(e, VehicleOpened):
+            self._open(e)
+        elif isinstance(e, VehicleClosed):
+            self.closed = {"vin": e.vin, "missing": list(e.missing), "nok": list(e.nok)}
+            self.wrench, self.selected = None, None
+        elif isinstance(e, Localized):
+            self._localized(e)
+        elif isinstance(e, Refused):
+            self.refused = e.reason
+            if e.bolt in self.bolts and self.bolts[e.bolt].state in ("pending", "next"):
+                self._set(e.bolt, "blocked", e.reason)
+        elif isinstance(e, BoltSelected):
+            self._unselect()
+            self.selected, self.refused = e.bolt, ""
+            self._set(e.bolt, "selected", f"pset {e.pset}" if e.pset is not None else "")
+        elif isinstance(e, ParamsSent):
+            self.refused = ""
+        elif isinstance(e, ParamsRefusedEvent):
+            self.refused = f"{e.bolt}: controller refused the parameters: {e.reason}"
+            self._set(e.bolt, "blocked", e.reason)
+        elif isinstance(e, ToolEnabled):
+            self._set(e.bolt, "tightening")
+        elif isinstance(e, ToolDisabled):
+            b = self.bolts.get(e.bolt or self.selected or "")
+            if b is not None and b.state in ("selected", "tightening"):
+                self._set(b.bolt, "pending")
+            self.refused = e.reason or self.refused
+        elif isinstance(e, BoltSkipped):
+            self._set(e.bolt, "skipped", e.reason)
+        elif isinstance(e, ResultRecorded):
+            self._result(e)
+        elif isinstance(e, WrongBolt):
+            self.alarm = f"parameters sent for {e.bolt} while the wrench was on {e.truth}"
+
+    def _open(self, e: VehicleOpened) -> None:
+        self.vin, self.model, self.rework = e.vin, e.model, e.rework
+        self.closed, self.selected, self.wrench, self.refused = None, None, None, ""
+        self.results = []
+        self.bolts = {b.bolt: BoltState(b.bolt, b.x_mm, b.y_mm, b.pset, b.order, b.batch,
+                                        b.status if b.status in BOLT_LABELS else "pending")
+                      for b in e.bolts}
+
+    def _localized(self, e: Localized) -> None:
+        if e.point_mm is None:
+            self.wrench = None if self.wrench is None else {**self.wrench, "lost": True,
+                                                            "reason": e.reason or ""}
+        else:
+            self.wrench = {"x": e.point_mm[0], "y": e.point_mm[1], "z": e.point_mm[2],
+                           "tilt": e.tilt_deg, "candidate": e.candidate,
+                           "distance": e.distance_mm, "age_ms": e.age_ms, "lost": False,
+                           "reason": e.reason or ""}
+        allowed = set(e.allowed)
+        for b in self.bolts.values():
+            if b.state in ("pending", "next", "blocked"):
+                want = "next" if b.bolt in allowed else "pending"
+                if b.state != "blocked" or want == "next":
+                    b.state, b.reason = want, ""
+
+    def _result(self, e: ResultRecorded) -> None:
+        if e.vin == self.vin and e.bolt in self.bolts:
+            self._set(e.bolt, "ok" if e.ok else "nok", "" if e.ok else "NOK: rework")
+            b = self.bolts[e.bolt]
+            b.torque_nm, b.angle_deg = e.torque_nm, e.angle_deg
+        if self.selected == e.bolt:
+            self.selected = None
+        self.results.insert(0, {
+            "t": e.t, "vin": e.vin, "bolt": e.bolt, "ok": e.ok, "pset": e.pset,
+            "torque_nm": e.torque_nm, "torque_min": e.torque_min, "torque_max": e.torque_max,
+            "angle_deg": e.angle_deg, "angle_min": e.angle_min, "angle_max": e.angle_max,
+            "late": e.late})
+        del self.results[LAST_RESULTS:]
+
+    def _set(self, bolt: str, state: str, reason: str = "") -> None:
+        b = self.bolts.get(bolt)
+        if b is not None:
+            b.state, b.reason = state, reason
+
+    def _unselect(self) -> None:
+        for b in self.bolts.values():
+            if b.state in ("selected", "tightening"):
+                b.state, b.reason = "pending", ""
+
+    # -- what the screens read ----------------------------------------------------------
+    def counters(self) -> dict[str, int]:
+        states = [b.state for b in self.bolts.values()]
+        return {"total": len(states), "done": states.count("ok"), "nok": states.count("nok"),
+                "skipped": states.count("skipped")}
+
+    def headline(self) -> str:
+        """The large words: why nothing is sent, else what to do."""
+        faults = [f"{d}: {h['reason'] or h['kind']}" for d, h in sorted(self.devices.items())
+                  if not h["ok"]]
+        if self.alarm:
+            return f"WRONG BOLT: {self.alarm}"
+        if self.state == "fault":
+            return "FAULT: " + (self.reason or "; ".join(faults) or "see the journal")
+        if faults:
+            return "FAULT: " + "; ".join(faults)
+        if self.refused:
+            return self.refused
+        if self.selected is not None:
+            b = self.bolts.get(self.selected)
+            pset = f" (pset {b.pset})" if b is not None and b.pset is not None else ""
+            return f"{self.selected}{pset}: tighten"
+        if self.closed is not None:
+            c = self.closed
+            missing = f"missing {', '.join(c['missing'])}" if c["missing"] else ""
+            nok = f"NOK {', '.join(c['nok'])}" if c["nok"] else ""
+            return f"{c['vin']} closed: " + ("; ".join(x for x in (missing, nok) if x)
+                                             or "all bolts OK")
+        return self.reason or self.state
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "state": self.state, "reason": self.reason, "headline": self.headline(),
+            "refused": self.refused, "alarm": self.alarm,
+            "vehicle": None if self.vin is None else {"vin": self.vin, "model": self.model,
+                                                      "rework": self.rework},
+            "bolts": [b.to_json() for b in self.bolts.values()],
+            "selected": self.selected, "wrench": self.wrench, "counters": self.counters(),
+            "devices": self.devices, "results": self.results, "closed": self.closed,
+        }
+
+
+def fold(events: list[StationEvent] | tuple[StationEvent, ...]) -> View:
+    """A view built from ``events`` in order (a fresh screen starts from the bus history)."""
+    v = View()
+    for e in events:
+        v.apply(e)
+    return v
+
+
+def copy_view(v: View) -> View:
+    """A shallow-independent copy (tests compare before/after)."""
+    return replace(v, bolts={k: replace(b) for k, b in v.bolts.items()},
+                   devices=dict(v.devices), results=list(v.results))

@@ -1,0 +1,100 @@
+"""A realistic event sequence for the screens' tests, and a real results database."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from db.repository import Repository
+from stationd.station.events import (
+    BoltSelected,
+    BoltView,
+    DeviceHealth,
+    Localized,
+    ParamsSent,
+    Refused,
+    ResultRecorded,
+    StateChanged,
+    StationEvent,
+    ToolEnabled,
+    VehicleOpened,
+)
+
+VIN = "WVWZZZ1JZ3W386752"
+BOLTS_YAML = """\
+psets:
+  - id: 1
+    name: M10
+    torque: {target: 50, min: 45, max: 55}
+    angle: {target: 30, min: 15, max: 60}
+models:
+  SEDAN:
+    code: 12
+    bolts:
+      - {id: B1, name: front left, position: [0, 0, 0], pset: 1}
+      - {id: B2, name: front right, position: [400, 0, 0], pset: 1}
+      - {id: B3, name: rear left, position: [0, 300, 0], pset: 1}
+      - {id: B4, name: rear right, position: [400, 300, 0], pset: 1}
+"""
+
+
+def opened() -> list[StationEvent]:
+    bolts = tuple(BoltView(b, x, y, 0.0, 1, order=i + 1)
+                  for i, (b, x, y) in enumerate([("B1", 0, 0), ("B2", 400, 0),
+                                                  ("B3", 0, 300), ("B4", 400, 300)]))
+    return [
+        DeviceHealth(device="lift", ok=True), DeviceHealth(device="wrench", ok=True),
+        StateChanged(state="tracking", reason="vehicle at height"),
+        VehicleOpened(vin=VIN, model="SEDAN", bolts=bolts),
+    ]
+
+
+def result(bolt: str, ok: bool, tid: int) -> ResultRecorded:
+    return ResultRecorded(vin=VIN, bolt=bolt, ok=ok, torque_nm=50.2 if ok else 41.0,
+                          angle_deg=31.0, tightening_id=tid, pset=1, torque_min=45.0,
+                          torque_max=55.0, angle_min=15.0, angle_max=60.0)
+
+
+def work() -> list[StationEvent]:
+    """B1 tightened OK, B2 NOK, the wrench on B3 selected and tightening."""
+    out: list[StationEvent] = []
+    for i, (bolt, x, ok) in enumerate([("B1", 0.0, True), ("B2", 400.0, False)]):
+        out += [
+            Localized(point_mm=(x + 1, 1.0, 0.0), tilt_deg=2.0, reason=None, candidate=bolt,
+                      distance_mm=1.4, age_ms=40.0, allowed=(bolt,)),
+            BoltSelected(bolt=bolt, pset=1, point_mm=(x + 1, 1.0, 0.0), distance_mm=1.4,
+                         tilt_deg=2.0),
+            ParamsSent(bolt=bolt, pset=1), ToolEnabled(bolt=bolt), result(bolt, ok, 100 + i),
+        ]
+    out += [
+        Localized(point_mm=(2.0, 299.0, 0.0), tilt_deg=1.0, reason=None, candidate="B3",
+                  distance_mm=2.2, age_ms=35.0, allowed=("B2", "B3", "B4")),
+        BoltSelected(bolt="B3", pset=1, point_mm=(2.0, 299.0, 0.0), distance_mm=2.2,
+                     tilt_deg=1.0),
+        ParamsSent(bolt="B3", pset=1), ToolEnabled(bolt="B3"),
+    ]
+    return out
+
+
+def fault() -> list[StationEvent]:
+    return [
+        DeviceHealth(device="lift", ok=False, kind="timeout",
+                     reason="no answer from 10.0.0.7:502 for 2.0 s"),
+        StateChanged(state="fault", reason="lift: no answer from 10.0.0.7:502 for 2.0 s"),
+        Refused(reason="lift: no answer from 10.0.0.7:502 for 2.0 s"),
+    ]
+
+
+def results_db(tmp: Path) -> Repository:
+    """A real sqlite database with the vehicle's rundowns: B1 OK, B2 NOK then OK (rework)."""
+    (tmp / "bolts.yaml").write_text(BOLTS_YAML)
+    repo = Repository.open(f"sqlite:///{tmp / 'station.db'}")
+    repo.import_bolts(tmp / "bolts.yaml")
+    repo.start_vehicle(VIN, "SEDAN")
+    kw: dict[str, Any] = {"position_mm": (1.0, 1.0, 0.0), "match_distance_mm": 1.4, "tilt_deg": 2.0,
+          "angle_deg": 31.0}
+    repo.record_tightening(VIN, "B1", ok=True, torque_nm=50.2, tightening_id=100, **kw)
+    repo.record_tightening(VIN, "B2", ok=False, torque_nm=41.0, tightening_id=101, **kw)
+    repo.record_tightening(VIN, "B2", ok=True, torque_nm=49.7, tightening_id=102,
+                           images=[str(tmp / "img" / "B2-left.jpg")], **kw)
+    return repo

@@ -1,0 +1,43 @@
+"""The http section: listen address and the token a non-local bind needs."""
+
+from __future__ import annotations
+
+import pytest
+
+from stationd.errors import ConfigError
+from stationd.web.config import HttpConfig, check_http, open_bind_problem, split_listen
+from stationd.yamlio import YamlNode
+
+
+def read(text: str) -> HttpConfig:
+    return HttpConfig.from_node(YamlNode.parse(text))
+
+
+def test_defaults_and_reading():
+    assert read("{}") == HttpConfig("127.0.0.1:8080", None)
+    cfg = read("listen: 0.0.0.0:9000\ntoken: s3cret-token\n")
+    assert (cfg.host, cfg.port, cfg.token) == ("0.0.0.0", 9000, "s3cret-token")  # noqa: S104
+    assert split_listen("[::1]:8080") == ("::1", 8080)
+
+
+@pytest.mark.parametrize("listen", ["0.0.0.0:8080", "192.168.1.20:80", "station.local:8080"])
+def test_open_bind_without_token_is_refused(listen):
+    assert "needs a token" in (open_bind_problem(HttpConfig(listen)) or "")
+    with pytest.raises(ConfigError, match="needs a token"):
+        check_http(HttpConfig(listen))
+    with pytest.raises(ConfigError, match="<string>:1: "):
+        read(f"listen: {listen}\n")
+
+
+@pytest.mark.parametrize("listen", ["127.0.0.1:8080", "localhost:1", "[::1]:8080"])
+def test_local_bind_needs_no_token(listen):
+    assert open_bind_problem(HttpConfig(listen)) is None
+
+
+@pytest.mark.parametrize("text, msg", [("listen: nowhere\n", "host:port"),
+                                        ("listen: 127.0.0.1:99999\n", "0-65535"),
+                                        ("token: short\n", "8 characters"),
+                                        ("port: 80\n", "port")])
+def test_bad_section_is_one_readable_error(text, msg):
+    with pytest.raises(ConfigError, match=msg):
+        read(text)

@@ -1,0 +1,49 @@
+"""The latest-frame store: cheap hand-over, lazy downscaled JPEG, full-resolution crops."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from stationd.web.frames import LatestFrames, sharpness
+
+
+def frame(seed: int = 0, h: int = 600, w: int = 800) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return rng.integers(0, 255, (h, w), dtype=np.uint8)
+
+
+def test_jpeg_is_downscaled_and_cached_until_the_next_frame():
+    store = LatestFrames()
+    assert store.jpeg("p1", "left") is None
+    img = frame()
+    store.put("p1", "left", img, {"found": True}, grabbed_at=100.0)
+    data = store.jpeg("p1", "left", width=200)
+    assert data is not None
+    small = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    assert small.shape == (150, 200)
+    assert store.jpeg("p1", "left", width=200) is data        # cached, not re-encoded
+    store.put("p1", "left", frame(1), grabbed_at=100.1)
+    assert store.jpeg("p1", "left", width=200) is not data
+    cam = store.get("p1", "left")
+    assert cam is not None and cam.seq == 1 and abs((cam.fps or 0) - 10.0) < 1e-6
+
+
+def test_crop_is_full_resolution_and_clamped_inside():
+    store = LatestFrames()
+    img = frame()
+    store.put("p1", "right", img)
+    data = store.crop("p1", "right", x=790, y=5, size=100)
+    assert data is not None
+    crop = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    assert crop.shape == (100, 100)
+    # clamped to the bottom-left corner of the request: the top-right 100 x 100 of the image
+    assert abs(float(crop.mean()) - float(img[0:100, 700:800].mean())) < 3.0
+
+
+def test_sharpness_ranks_a_sharp_roi_above_a_blurred_one():
+    img = np.zeros((200, 200), np.uint8)
+    img[::8, :] = 255
+    blurred = cv2.GaussianBlur(img, (0, 0), 4)
+    assert sharpness(img, (0, 0, 100, 100)) > 10 * sharpness(blurred, (0, 0, 100, 100))
+    assert sharpness(img, (500, 500, 10, 10)) == 0.0

@@ -1,0 +1,184 @@
+"""The server over real HTTP on loopback: status, live events, cameras, results, guards."""
+
+from __future__ import annotations
+
+import asyncio
+import csv
+import io
+import json
+
+import numpy as np
+import pytest
+from aiohttp import ClientSession
+
+from stationd.errors import InputError
+from stationd.station.events import EventBus, Localized, PairFrames, StateChanged
+from stationd.web.frames import LatestFrames
+from stationd.web.results import Results
+from stationd.web.server import WebServer
+from tests.web.scenario import VIN, fault, opened, results_db, work
+
+
+def serve(bus, **kw) -> WebServer:
+    return WebServer(bus, listen="127.0.0.1:0", **kw)
+
+
+async def _read_snapshot(resp):
+    buf = b""
+    while b"\n\n" not in buf.split(b"data: ", 1)[-1]:
+        buf += await resp.content.readany()
+    body = buf.split(b"data: ", 1)[1].split(b"\n\n", 1)[0]
+    return json.loads(body)
+
+
+def test_status_healthz_and_live_events():
+    async def main():
+        bus = EventBus()
+        for e in opened():
+            bus.publish(e)
+        srv = serve(bus)
+        await srv.start()
+        try:
+            async with ClientSession() as http:
+                async with http.get(srv.url + "healthz") as r:
+                    assert r.status == 200 and (await r.text()) == "ok\n"
+                async with http.get(srv.url + "api/events") as stream:
+                    first = await _read_snapshot(stream)   # the history, folded
+                    assert first["vehicle"]["vin"] == VIN and first["counters"]["total"] == 4
+                    for e in work() + fault():
+                        bus.publish(e)
+                    snap = first
+                    while snap["state"] != "fault":
+                        snap = await asyncio.wait_for(_read_snapshot(stream), 10)
+                    assert snap["headline"].startswith("FAULT: lift")
+                    assert srv.clients == 1
+                async with http.get(srv.url + "api/status") as r:
+                    st = await r.json()
+                assert st["state"] == "fault" and st["counters"]["done"] == 1
+                assert st["devices"]["lift"]["ok"] is False
+                assert {"stationd", "aiohttp", "python"} <= set(st["versions"])
+                async with http.post(srv.url + "api/status") as r:
+                    assert r.status == 405            # read-only: nothing can be sent
+        finally:
+            await srv.stop()
+    asyncio.run(main())
+
+
+def test_token_guards_every_page_when_configured():
+    async def main():
+        srv = serve(EventBus(), token="a-long-token")  # noqa: S106 - a test token
+        await srv.start()
+        try:
+            async with ClientSession() as http:
+                async with http.get(srv.url + "api/status") as r:
+                    assert r.status == 401
+                async with http.get(srv.url + "api/status",
+                                    headers={"Authorization": "Bearer a-long-token"}) as r:
+                    assert r.status == 200
+                async with http.get(srv.url + "?token=a-long-token") as r:
+                    assert r.status == 200 and "token" in r.cookies
+        finally:
+            await srv.stop()
+    asyncio.run(main())
+
+
+def test_open_bind_without_token_is_refused():
+    with pytest.raises(InputError, match="needs a token"):
+        WebServer(EventBus(), listen="0.0.0.0:0")
+
+
+def test_cameras_frames_and_crops_on_demand():
+    async def main():
+        frames = LatestFrames()
+        img = np.random.default_rng(3).integers(0, 255, (480, 640), dtype=np.uint8)
+        frames.put("front", "left", img, {"found": False, "reason": "no marker",
+                                          "roi": [100, 100, 200, 200]})
+        bus = EventBus()
+        bus.publish(PairFrames(pair="front", exposure_t=12.5,
+                               sides={"left": {"ellipses": [[1, 2, 3, 4, 0]], "reason": "old"}}))
+        srv = serve(bus, frames=frames)
+        await srv.start()
+        try:
+            async with ClientSession() as http:
+                async with http.get(srv.url + "api/cameras") as r:
+                    cams = await r.json()
+                assert [(c["pair"], c["side"]) for c in cams] == [("front", "left")]
+                assert cams[0]["summary"]["sharpness"] > 0 and cams[0]["width"] == 640
+                # the pair's published summary fills in; the frame's own summary wins
+                assert cams[0]["summary"]["ellipses"] == [[1, 2, 3, 4, 0]]
+                assert cams[0]["summary"]["reason"] == "no marker"
+                assert cams[0]["summary"]["exposure_t"] == 12.5
+                async with http.get(srv.url + "api/cameras/front/left/frame.jpg?w=320") as r:
+                    assert r.content_type == "image/jpeg" and (await r.read())[:2] == b"\xff\xd8"
+                async with http.get(srv.url + "api/cameras/front/left/crop.jpg?x=5&y=5") as r:
+                    assert r.status == 200
+                async with http.get(srv.url + "api/cameras/front/right/frame.jpg") as r:
+                    assert r.status == 404
+                async with http.get(srv.url + "api/cameras/front/left/frame.jpg?w=x") as r:
+                    assert r.status == 400
+        finally:
+            await srv.stop()
+    asyncio.run(main())
+
+
+def test_results_and_exports_from_a_real_database(tmp_path):
+    repo = results_db(tmp_path)
+    (tmp_path / "img").mkdir()
+    (tmp_path / "img" / "B2-left.jpg").write_bytes(b"\xff\xd8jpeg")
+
+    async def main():
+        srv = serve(EventBus(), results=Results(repo), images_dir=tmp_path / "img")
+        await srv.start()
+        try:
+            async with ClientSession() as http:
+                async with http.get(srv.url + "api/vehicles") as r:
+                    (v,) = await r.json()
+                assert v["vin"] == VIN and v["status"] == "open" and v["missing"] == ["B3", "B4"]
+                async with http.get(srv.url + f"api/vehicles/{VIN}") as r:
+                    doc = await r.json()
+                b2 = next(b for b in doc["bolts"] if b["bolt"] == "B2")
+                assert [x["status"] for x in b2["rundowns"]] == ["nok", "ok"]
+                assert b2["rundowns"][1]["image_urls"] == ["/images/B2-left.jpg"]
+                async with http.get(srv.url + "images/B2-left.jpg") as r:
+                    assert r.status == 200
+                async with http.get(srv.url + "images/..%2Fstation.db") as r:
+                    assert r.status == 404
+                async with http.get(srv.url + f"api/vehicles/{VIN}/export.csv") as r:
+                    assert "attachment" in r.headers["Content-Disposition"]
+                    rows = list(csv.DictReader(io.StringIO(await r.text())))
+                assert [(x["bolt"], x["status"], x["attempt"]) for x in rows] == [
+                    ("B1", "ok", "1"), ("B2", "nok", "1"), ("B2", "ok", "2")]
+                async with http.get(srv.url + "api/vehicles/NOPE/export.csv") as r:
+                    assert r.status == 404
+        finally:
+            await srv.stop()
+            repo.close()
+    asyncio.run(main())
+
+
+def test_numpy_values_and_an_odd_event_do_not_stop_the_live_view():
+    async def main():
+        bus = EventBus()
+        srv = serve(bus)
+        await srv.start()
+        try:
+            for e in opened():
+                bus.publish(e)
+            bus.publish(Localized(point_mm=tuple(np.float32([1.5, 2.0, 3.0])),
+                                  tilt_deg=np.float32(2.5), reason=None, candidate="B1",
+                                  distance_mm=1.0, age_ms=30.0))
+            bus.publish(Localized(point_mm=(1.0,), tilt_deg=None,
+                                  reason=None, candidate=None, distance_mm=None, age_ms=1.0))
+            bus.publish(StateChanged(state="tracking", reason="still following"))
+            async with ClientSession() as http:
+                for _ in range(100):
+                    async with http.get(srv.url + "api/view") as r:
+                        v = await r.json()
+                    if v["reason"] == "still following":
+                        break
+                    await asyncio.sleep(0.05)
+            assert v["reason"] == "still following" and srv.errors == 1
+            assert abs(v["wrench"]["x"] - 1.5) < 1e-6 and abs(v["wrench"]["tilt"] - 2.5) < 1e-6
+        finally:
+            await srv.stop()
+    asyncio.run(main())

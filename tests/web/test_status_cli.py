@@ -1,0 +1,38 @@
+"""``stationd status``: a running daemon's state over its web server."""
+
+from __future__ import annotations
+
+import pytest
+
+from stationd.cli import main
+from tests.web.scenario import fault, opened
+
+
+def test_status_prints_state_vehicle_and_faulty_device(live_server, capsys):
+    srv = live_server()
+    srv.publish(opened() + fault())
+    srv.call(_settle(srv))
+    assert main(["status", "--url", srv.url]) == 0
+    out = capsys.readouterr().out
+    assert "state:    fault (lift: no answer" in out
+    assert "vehicle:  WVWZZZ1JZ3W386752 (SEDAN): 0/4 done, 0 NOK" in out
+    assert "device:   lift: timeout no answer" in out and "versions: aiohttp" in out
+
+
+async def _settle(srv):
+    import asyncio
+    while srv.server.view.state != "fault":
+        await asyncio.sleep(0.02)
+
+
+def test_status_without_daemon_is_one_line_exit_1(capsys):
+    assert main(["status", "--url", "http://127.0.0.1:9/", "--timeout", "2"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("stationd: status: no daemon answers at") and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("url", ["ftp://x/", "localhost:8080"])
+def test_status_bad_url_is_one_line_exit_2(url, capsys):
+    assert main(["status", "--url", url]) == 2
+    err = capsys.readouterr().err
+    assert "expected http://host:port/" in err and err.count("\n") == 1

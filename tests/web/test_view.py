@@ -1,0 +1,111 @@
+"""The view model: events folded into what the operator screen shows."""
+
+from __future__ import annotations
+
+from stationd.station.events import (
+    BoltSkipped,
+    DeviceHealth,
+    Localized,
+    ParamsRefusedEvent,
+    Refused,
+    StateChanged,
+    ToolDisabled,
+    VehicleClosed,
+    WrongBolt,
+)
+from stationd.web.view import View, fold
+from tests.web.scenario import VIN, fault, opened, result, work
+
+
+def states(v: View) -> dict[str, str]:
+    return {b.bolt: b.state for b in v.bolts.values()}
+
+
+def test_opened_vehicle_has_pending_bolts_and_counters():
+    v = fold(opened())
+    assert (v.vin, v.model) == (VIN, "SEDAN")
+    assert set(states(v).values()) == {"pending"}
+    assert v.counters() == {"total": 4, "done": 0, "nok": 0, "skipped": 0}
+    assert v.headline() == "vehicle at height"
+
+
+def test_work_marks_ok_nok_selected_tightening_and_next():
+    v = fold(opened() + work())
+    assert states(v) == {"B1": "ok", "B2": "nok", "B3": "tightening", "B4": "next"}
+    assert v.counters()["done"] == 1 and v.counters()["nok"] == 1
+    assert v.selected == "B3"
+    assert v.headline() == "B3 (pset 1): tighten"
+    assert v.wrench is not None and abs(v.wrench["y"] - 299.0) < 1e-9
+    last = v.results[0]
+    assert last["bolt"] == "B2" and not last["ok"] and last["torque_min"] == 45.0
+    j = v.to_json()
+    labels = {b["bolt"]: b["label"] for b in j["bolts"]}
+    assert labels == {"B1": "OK", "B2": "NOK", "B3": "tighten", "B4": "next"}
+
+
+def test_fault_shows_device_and_reason_in_large_words():
+    v = fold(opened() + work() + fault())
+    assert v.state == "fault"
+    assert v.headline().startswith("FAULT: lift: no answer")
+    assert v.devices["lift"] == {"ok": False, "kind": "timeout",
+                                 "reason": "no answer from 10.0.0.7:502 for 2.0 s"}
+
+
+def test_device_fault_without_fault_state_still_headlines():
+    v = fold([*opened(), DeviceHealth(device="cam-a", ok=False, kind="down", reason="no frames")])
+    assert v.headline() == "FAULT: cam-a: no frames"
+    v.apply(DeviceHealth(device="cam-a", ok=True))
+    assert v.headline() == "vehicle at height"
+
+
+def test_refusal_blocks_its_bolt_and_is_the_headline_until_a_selection():
+    v = fold([*opened(), Refused(reason="order rule: B1 first", bolt="B2")])
+    assert states(v)["B2"] == "blocked" and v.bolts["B2"].reason == "order rule: B1 first"
+    assert v.headline() == "order rule: B1 first"
+    v.apply(Localized(point_mm=(0.0, 0.0, 0.0), tilt_deg=1.0, reason=None, candidate="B1",
+                      distance_mm=0.5, age_ms=30.0, allowed=("B2",)))
+    assert states(v)["B2"] == "next"     # the rule now allows it
+
+
+def test_lost_wrench_keeps_last_position_marked_lost():
+    v = fold(opened() + work())
+    v.apply(Localized(point_mm=None, tilt_deg=None, reason="stale frames", candidate=None,
+                      distance_mm=None, age_ms=400.0))
+    assert v.wrench is not None and v.wrench["lost"] and v.wrench["reason"] == "stale frames"
+
+
+def test_tool_disabled_returns_selection_to_pending_with_reason():
+    v = fold(opened() + work())
+    v.apply(ToolDisabled(reason="wrench left the bolt", bolt="B3"))
+    assert states(v)["B3"] == "pending"
+    assert v.headline() == "wrench left the bolt"
+
+
+def test_skip_rework_result_close_and_wrong_bolt():
+    v = fold(opened() + work())
+    v.apply(BoltSkipped(bolt="B4", reason="skipped by supervisor"))
+    v.apply(result("B2", True, 200))
+    assert states(v)["B4"] == "skipped" and states(v)["B2"] == "ok"
+    assert v.counters() == {"total": 4, "done": 2, "nok": 0, "skipped": 1}
+    v.apply(VehicleClosed(vin=VIN, missing=("B3",), nok=()))
+    assert v.closed == {"vin": VIN, "missing": ["B3"], "nok": []} and v.wrench is None
+    assert v.headline() == f"{VIN} closed: missing B3"
+    v.apply(WrongBolt(bolt="B1", truth="B2"))
+    assert v.headline().startswith("WRONG BOLT")
+
+
+def test_results_keep_only_the_last_few_and_reopen_resets():
+    v = fold(opened())
+    for i in range(20):
+        v.apply(result("B1", i % 2 == 0, i))
+    assert len(v.results) == 8 and v.results[0]["t"] >= v.results[-1]["t"]
+    v.apply(StateChanged(state="waiting for vehicle", reason="no vehicle"))
+    v.apply(opened()[-1])
+    assert v.results == [] and states(v)["B1"] == "pending"
+
+
+def test_controller_refusing_parameters_blocks_the_bolt_and_says_why():
+    v = fold(opened())
+    v.apply(ParamsRefusedEvent(bolt="B1", reason="pset 1 unknown to the controller"))
+    assert states(v)["B1"] == "blocked"
+    assert v.headline() == "B1: controller refused the parameters: pset 1 unknown to the controller"
