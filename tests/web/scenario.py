@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Any
 
 from db.repository import Repository
+from stationd.boltfile import import_bolts
 from stationd.station.events import (
     BoltSelected,
     BoltView,
@@ -89,7 +90,7 @@ def results_db(tmp: Path) -> Repository:
     """A real sqlite database with the vehicle's rundowns: B1 OK, B2 NOK then OK (rework)."""
     (tmp / "bolts.yaml").write_text(BOLTS_YAML)
     repo = Repository.open(f"sqlite:///{tmp / 'station.db'}")
-    repo.import_bolts(tmp / "bolts.yaml")
+    import_bolts(repo, tmp / "bolts.yaml")
     repo.start_vehicle(VIN, "SEDAN")
     kw: dict[str, Any] = {"position_mm": (1.0, 1.0, 0.0), "match_distance_mm": 1.4, "tilt_deg": 2.0,
           "angle_deg": 31.0}
