@@ -25,6 +25,7 @@ from typing import Any
 
 from aiohttp import web
 
+from db.errors import NotFoundError
 from db.repository import Repository
 from stationd.errors import InputError
 from stationd.station.events import EventBus, PairFrames
@@ -283,7 +284,7 @@ class WebServer:
     async def _db(self, fn: Any, *args: Any) -> Any:
         try:
             return await asyncio.get_running_loop().run_in_executor(None, fn, *args)
-        except InputError as exc:       # NotFoundError: an unknown VIN
+        except NotFoundError as exc:    # an unknown VIN
             raise web.HTTPNotFound(text=f"{exc}\n") from None
         except Exception as exc:        # the database is down: the screen says so
             raise web.HTTPServiceUnavailable(text=f"database: {exc}\n") from None
