@@ -35,6 +35,7 @@ from stationd.geometry.tool import ToolGeometry
 from stationd.station.matching import MatchParams
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import VisionParams
+from stationd.web.config import HttpConfig
 from stationd.yamlio import YamlNode
 
 if TYPE_CHECKING:
@@ -49,7 +50,7 @@ MAX_AGE_S = (0.05, 5.0)         # plausible staleness limits, seconds
 BASELINE_MM = (20.0, 2000.0)    # plausible stereo baselines, millimetres
 METRES_LIKE_MM = 10.0           # a pair-to-vehicle translation shorter than this is in metres
 STATION_KEYS = ("marker", "vision", "cameras", "pairs", "tool", "lift", "wrench", "matching",
-                "database", "bolts", "records")
+                "database", "bolts", "records", "http")
 PAIR_KEYS = ("calibration", "to_vehicle", "left", "right", "max_skew_ms")
 
 #: device kind -> (scheme -> backend, the accepted forms): the drivers' own registries, so the
@@ -170,6 +171,7 @@ class StationConfig:
     database_url: str = "sqlite:///stationd.db"
     bolts_path: Path | None = None
     records: RecordsConfig = field(default_factory=RecordsConfig)
+    http: HttpConfig | None = None  # the screens (stationd.web); None: not served
     path: Path | None = None
 
 
@@ -374,6 +376,7 @@ class _Reader:
             bolts_path=self.section("bolts", d.bolts_path,
                                     partial(_existing, base=base, what="bolt file")),
             records=self.section("records", d.records, partial(_records, base=base)),
+            http=self.section("http", d.http, HttpConfig.from_node),
             path=path)
 
     def cameras(self, node: YamlNode) -> tuple[dict[str, str], list[str] | None]:

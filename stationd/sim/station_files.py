@@ -82,6 +82,8 @@ def files() -> dict[str, str]:
                      "max_age_s": 0.5, "leave_frames": 3},
         "database": {"url": "sqlite:///stationd-sim.db"},
         "bolts": "bolts.yaml",
+        # the screens on this machine only (stationd demo serves them; --no-http turns off)
+        "http": {"listen": "127.0.0.1:8080"},
     })
     return out
 
