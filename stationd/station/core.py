@@ -300,8 +300,8 @@ class StationCore:
         handler = getattr(self, "_on_" + type(ev).__name__)
         acts: list[Action] = handler(ev)
         acts += self._vin_due()
-        if (self.state, self.reason) != before:
-            acts.append(Publish(StateChanged(self.state.value, self.reason, t=ev.t)))
+        if (self.state, self.reason) != before:  # first: follow-ups may change it again
+            acts.insert(0, Publish(StateChanged(self.state.value, self.reason, t=ev.t)))
         return acts
 
     @property

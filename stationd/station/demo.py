@@ -24,11 +24,17 @@ import numpy as np
 
 from db.boltfile import load_bolts
 from drivers.wrench.sim import SimPset
-from stationd.config import load_station_config
+from stationd.config import RecordsConfig, StationConfig, load_station_config
 from stationd.errors import InputError
 from stationd.sim.world import World, wrench_at
-from stationd.station.cycle import SendParams, State
+from stationd.station.core import SendParams, State
 from stationd.station.daemon import Station
+from stationd.station.events import (
+    Localized,
+    ParamsSent,
+    ResultRecorded,
+    WrongBolt,
+)
 
 SIM_CONFIG = Path(__file__).resolve().parents[2] / "config" / "sim" / "station.yaml"
 
@@ -88,10 +94,10 @@ async def _operator(st: Station, world: World, rng: np.random.Generator, cycles:
             line["result"] = "left before tightening; tool " + \
                 ("disabled" if not ctl.tool_enabled else "STILL ENABLED")
         elif line["result"] is None:
-            n_records = sum(1 for e in st.events if e[0] == "Record")
+            n_records = st.bus.count(ResultRecorded)
             shot = ctl.pull_trigger()
             for _ in range(100):
-                if sum(1 for e in st.events if e[0] == "Record") > n_records:
+                if st.bus.count(ResultRecorded) > n_records:
                     break
                 await asyncio.sleep(0.05)
             line["result"] = "no result" if shot is None else \
@@ -115,19 +121,25 @@ def run_station_demo(args: argparse.Namespace) -> int:
     bolts_path = cfg.bolts_path
     if bolts_path is None:
         raise InputError(f"{cfg.path}: the demo needs a bolt table (bolts:)")
+    _check_demo_station(cfg)
     tmp = tempfile.TemporaryDirectory(prefix="stationd-demo-")
-    cfg = replace(cfg, database_url=f"sqlite:///{tmp.name}/stationd.db")
+    cfg = simulated(cfg, Path(tmp.name))
     station = Station(cfg, device_kw={"wrench": {"psets": _sim_psets(bolts_path)}})
     rng = np.random.default_rng(args.seed)
     report: list[dict[str, Any]] = []
     truth: dict[str, Any] = {"bolt": None, "wrong": 0}
 
     def check(action: Any) -> None:
-        """Every parameter send is compared with where the wrench really is, at that moment."""
+        """Every parameter send is compared with where the wrench really is, at that moment;
+        a wrong one is published, counted and printed where it happens."""
         if isinstance(action, SendParams) and action.bolt != truth["bolt"]:
             truth["wrong"] += 1
-            print(f"WRONG BOLT: parameters for {action.bolt} while the wrench is on "
-                  f"{truth['bolt']}", file=sys.stderr)
+            station.bus.publish(WrongBolt(action.bolt, truth["bolt"]))
+            line = f"WRONG BOLT: parameters for {action.bolt} while the wrench is on " \
+                   f"{truth['bolt'] or 'no bolt'}"
+            print(line, file=sys.stderr, flush=True)
+            if not args.json:
+                print(line, flush=True)
 
     station.on_action = check
 
@@ -156,34 +168,85 @@ def run_station_demo(args: argparse.Namespace) -> int:
         tmp.cleanup()
     summary = _summary(station, report, cycles, truth["wrong"])
     if args.json:
-        sys.stdout.write(json.dumps(summary) + "\n")
+        sys.stdout.write(json.dumps(summary, allow_nan=False) + "\n")
     else:
         print(f"summary: {summary['ok']}/{cycles} bolts OK, parameters sent for a wrong bolt: "
               f"{summary['wrong_bolt_sends']}, XY error mean "
-              f"{summary['xy_error_mm']['mean']:.3f} mm max {summary['xy_error_mm']['max']:.3f} "
-              f"mm, latency p50 {summary['latency_ms']['p50']:.0f} ms p95 "
-              f"{summary['latency_ms']['p95']:.0f} ms")
+              f"{_ms(summary['xy_error_mm']['mean'], '.3f')} mm max "
+              f"{_ms(summary['xy_error_mm']['max'], '.3f')} mm, latency from exposure p50 "
+              f"{_ms(summary['latency_ms']['p50'], '.0f')} ms p95 "
+              f"{_ms(summary['latency_ms']['p95'], '.0f')} ms")
+        print(summary["verdict"])
     return 0 if summary["wrong_bolt_sends"] == 0 else 1
+
+
+def _ms(v: float | None, fmt: str) -> str:
+    return "-" if v is None else format(v, fmt)
+
+
+def _check_demo_station(cfg: StationConfig) -> None:
+    """The demo simulates the lift, the controller and the cameras; it needs each pair's
+    calibration and its transform into the vehicle frame to render and localize."""
+    missing = [n for n, pc in cfg.pairs.items() if pc.to_vehicle is None]
+    if not cfg.pairs or missing:
+        raise InputError(f"{cfg.path}: the demo needs pairs registered into the vehicle frame "
+                         f"(to_vehicle missing for: {', '.join(missing) or 'no pairs'})")
+
+
+def simulated(cfg: StationConfig, tmp: Path) -> StationConfig:
+    """``cfg`` with simulated devices (lift, controller, one sim camera per pair side), a
+    database and an images folder in ``tmp``: any station file's geometry can be demonstrated
+    without touching its real devices or records."""
+    cams: dict[str, str] = {}
+    pairs = {}
+    for name, pc in cfg.pairs.items():
+        left, right = f"{name}_left", f"{name}_right"
+        cams[left], cams[right] = f"sim://{name}/left", f"sim://{name}/right"
+        pairs[name] = replace(pc, left=left, right=right)
+    return replace(cfg, cameras=cams, pairs=pairs,
+                   lift=replace(cfg.lift, url="sim://lift"),
+                   wrench=replace(cfg.wrench, url="sim://wrench", registers=None),
+                   database_url=f"sqlite:///{tmp}/stationd.db",
+                   records=RecordsConfig(images_dir=tmp / "images",
+                                         save_images=cfg.records.save_images))
 
 
 def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
              wrong: int) -> dict[str, Any]:
-    sent = [e[1].bolt for e in st.events if e[0] == "SendParams" and isinstance(e[1], SendParams)]
+    """The run in figures, from the station's typed events; ``verdict`` is the last line."""
     refusals: Counter[str] = Counter()
-    for e in st.events:
-        if e[0] == "Log" and str(e[1].message).startswith("no bolt: "):
-            refusals[_kind(str(e[1].message)[9:])] += 1
+    for e in st.bus.of(Localized):
+        assert isinstance(e, Localized)  # noqa: S101 - of() filters
+        if e.reason:
+            refusals[_kind(e.reason)] += 1
     errs = [r["xy_error_mm"] for r in report if "xy_error_mm" in r]
-    lat = [e[1]["total"] for e in st.events if e[0] == "latency"]
-    return {"bolts": cycles, "ok": sum(1 for r in report if r.get("ok")),
-            "wrong_bolt_sends": wrong, "parameters_sent": len(sent),
-            "results": sum(1 for r in report if "ok" in r),
-            "recorded": sum(1 for e in st.events if e[0] == "Record"),
+    lat = [e.latency_ms["total"] for e in st.bus.of(ParamsSent) if isinstance(e, ParamsSent)]
+    recorded = st.bus.count(ResultRecorded)
+    ok = sum(1 for r in report if r.get("ok"))
+    results = sum(1 for r in report if "ok" in r)
+    handled = sum(1 for r in report if r["result"] and not str(r["result"]).startswith("not "))
+    problems = []
+    if wrong:
+        problems.append(f"{wrong} parameter send(s) for a wrong bolt")
+    if recorded != results:
+        problems.append(f"{results - recorded} result(s) not recorded")
+    if any("STILL ENABLED" in str(r["result"]) for r in report):
+        problems.append("the tool stayed enabled after the wrench left")
+    verdict = f"FAIL: {'; '.join(problems)}" if problems else \
+        f"PASS: {handled}/{cycles} bolts handled, 0 wrong bolts, every result recorded"
+    return {"bolts": cycles, "ok": ok, "handled": handled,
+            "wrong_bolt_sends": wrong, "parameters_sent": len(lat),
+            "results": results, "recorded": recorded,
             "refusals": dict(refusals.most_common(8)),
-            "xy_error_mm": {"mean": float(np.mean(errs)) if errs else float("nan"),
-                            "max": float(np.max(errs)) if errs else float("nan")},
-            "latency_ms": {"p50": float(np.percentile(lat, 50)) if lat else float("nan"),
-                           "p95": float(np.percentile(lat, 95)) if lat else float("nan")}}
+            "xy_error_mm": {"mean": _num(np.mean(errs)) if errs else None,
+                            "max": _num(np.max(errs)) if errs else None},
+            "latency_ms": {"p50": _num(np.percentile(lat, 50)) if lat else None,
+                           "p95": _num(np.percentile(lat, 95)) if lat else None},
+            "verdict": verdict}
+
+
+def _num(v: Any) -> float:
+    return float(v)
 
 
 def _kind(reason: str) -> str:
