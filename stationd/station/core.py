@@ -25,6 +25,7 @@ The safety rules, each enforced in exactly one place below:
 from __future__ import annotations
 
 import enum
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -49,6 +50,7 @@ from stationd.station.matching import BoltMatcher, BoltRule, Match, MatchParams
 #: tighten while disabled, and a controller reports within milliseconds
 LATE_RESULT_S = 5.0
 LIFT, WRENCH, VEHICLE = "lift", "wrench", "vehicle"
+_DIGITS = re.compile(r"\d+(\.\d+)?")
 
 
 class State(enum.Enum):
@@ -410,8 +412,9 @@ class StationCore:
     def _track(self, ev: LocalizedIn, m: Match) -> list[Action]:
         assert self.matcher is not None  # noqa: S101 - tracking has a vehicle
         if m.bolt is None:
-            if m.reason and m.reason != self._last_refusal:
-                self._last_refusal = m.reason
+            key = _DIGITS.sub("#", m.reason or "")   # "stale (812 ms)" and "(790 ms)": one
+            if m.reason and key != self._last_refusal:
+                self._last_refusal = key
                 return [Publish(Refused(m.reason, m.candidate, t=ev.t))]
             return []
         ready = self._lift is not None and self._lift.ready

@@ -73,9 +73,11 @@ from stationd.station.core import (
 )
 from stationd.station.events import (
     BoltView,
+    DeviceHealth,
     EventBus,
     Notice,
     ParamsSent,
+    Refused,
     ResultRecorded,
     StateChanged,
     ToolDisabled,
@@ -532,6 +534,13 @@ class Station:
             log.info("%s: %s", ev.state, ev.reason)
         elif isinstance(ev, Notice):
             (log.warning if ev.level == "warning" else log.info)("%s", ev.message)
+        elif isinstance(ev, Refused):   # once per change of reason, not frame after frame
+            log.info("no bolt: %s", ev.reason)
+        elif isinstance(ev, DeviceHealth):
+            if ev.ok:
+                log.info("%s: back", ev.device)
+            else:
+                log.warning("fault: %s (%s): %s", ev.device, ev.kind, ev.reason)
 
     async def _send(self, a: SendParams) -> Event:
         if self.wrench is None:
