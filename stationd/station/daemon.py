@@ -166,6 +166,7 @@ class Station:
     _cams: dict[str, list[Any]] = field(default_factory=dict)  # pair -> cameras opened
     _next_try: dict[str, float] = field(default_factory=dict)  # device -> next attempt
     _wait: dict[str, float] = field(default_factory=dict)      # device -> current backoff
+    _open_error: dict[str, str] = field(default_factory=dict)  # device -> why it did not open
 
     def __post_init__(self) -> None:
         self.core = StationCore(self.cfg.matching, self.cfg.matching.leave_frames)
@@ -212,8 +213,12 @@ class Station:
             else:
                 self._open_pair(device)
         except (StationError, OSError, ValueError) as exc:
-            log.warning("%s not opened: %s", device, one_line(exc))
+            if self._open_error.get(device) != one_line(exc):   # once per reason, not retry
+                log.warning("%s not opened: %s", device, one_line(exc))
+                self._open_error[device] = one_line(exc)
             return DeviceFault(time.time(), device, fault_kind(exc), one_line(exc))
+        if self._open_error.pop(device, None) is not None:
+            log.info("%s opened", device)
         return None
 
     def _open_pair(self, name: str) -> None:
@@ -406,16 +411,22 @@ class Station:
             await self.feed(DeviceBack(time.time(), name))
 
     def _grab_ok(self, grabber: StereoGrabber) -> bool:
+        name = next((n for n, g in self.grabbers.items() if g is grabber), "")
         try:
             left, right = grabber.grab(1.0)
         except (DeviceError, ValueError):
             return False
-        return self._size_problem(left.image, right.image) is None
+        return self._size_problem(name, left.image, right.image) is None
 
-    def _size_problem(self, left: np.ndarray, right: np.ndarray) -> str | None:
-        if left.shape[:2] != right.shape[:2]:
-            return f"left and right frames differ in size ({left.shape[1]}x{left.shape[0]} " \
-                   f"vs {right.shape[1]}x{right.shape[0]})"
+    def _size_problem(self, pair: str, left: np.ndarray, right: np.ndarray) -> str | None:
+        """Frames the pair's calibration does not describe: garbage to this station."""
+        cal = self.cfg.pairs[pair].calibration if pair in self.cfg.pairs else None
+        for side, img in (("left", left), ("right", right)):
+            want = getattr(getattr(cal, side, None), "size", None)
+            got = (int(img.shape[1]), int(img.shape[0]))
+            if want is not None and tuple(want) != got:
+                return f"{side} frames are {got[0]}x{got[1]}, the calibration is for " \
+                       f"{want[0]}x{want[1]}"
         return None
 
     async def _localize(self) -> Localization | None:
@@ -472,7 +483,7 @@ class Station:
             return PairView(one_line(exc), 0.0, failed=True)
         exposure = min(left.timestamp, right.timestamp)
         t1 = time.monotonic()
-        size = self._size_problem(left.image, right.image)
+        size = self._size_problem(name, left.image, right.image)
         if size is not None:
             return PairView(size, exposure, failed=True)
         try:

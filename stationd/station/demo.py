@@ -83,7 +83,9 @@ async def _operator(st: Station, world: World, rng: np.random.Generator, cycles:
                 break
             await asyncio.sleep(0.05)
         else:
-            line["result"] = f"not selected ({st.cycle.reason})"
+            seen = [e for e in st.bus.of(Localized) if isinstance(e, Localized)]
+            why = seen[-1].reason if seen and seen[-1].reason else st.core.reason
+            line["result"] = f"not selected ({why})"
         if st.last is not None and st.last.point_mm is not None:
             line["xy_error_mm"] = float(np.hypot(*(st.last.point_mm - pose.socket_v)[:2]))
         if line["result"] is None and leave:

@@ -187,3 +187,36 @@ def test_the_controller_dropping_mid_tightening_is_a_fault_then_the_bolt_is_done
     finally:
         repo.close()
     assert rows[seen["bolt"]].status == ("ok" if seen["shot"].ok else "nok")
+
+
+@pytest.mark.timeout(240)
+def test_frames_of_the_wrong_size_are_a_fault_not_an_exit(tmp_path, monkeypatch):
+    """A pair whose cameras deliver frames its calibration does not describe (here 64x48
+    image files): retried, then a fault naming the sizes; the station stays up, sends
+    nothing."""
+    import shutil
+
+    import cv2
+
+    import tests.station.test_faults as harness
+
+    dst = tmp_path / "sim"
+    shutil.copytree(SIM_CONFIG.parent, dst)
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for side in ("left", "right"):
+        cv2.imwrite(str(frames / f"{side}_0.png"), np.full((48, 64, 3), 90, np.uint8))
+    text = (dst / "station.yaml").read_text()
+    for side in ("left", "right"):
+        text = text.replace(f"'sim://pair1/{side}'", f"'file://{frames}/{side}_*.png?loop=1'")
+    (dst / "station.yaml").write_text(text)
+    monkeypatch.setattr(harness, "SIM_CONFIG", dst / "station.yaml")
+
+    async def body(st, world):
+        await _until(lambda: st.cycle.state is State.FAULT, 60)
+        assert st.cycle.reason.startswith("pair1: left frames are 64x48, the calibration is "
+                                          "for 5472x3648")
+        await asyncio.sleep(1.0)
+        assert st.cycle.state is State.FAULT and not _sends(st)
+
+    _scenario(tmp_path, body)
