@@ -116,7 +116,6 @@ def test_devices_down_at_boot_are_faults_then_it_recovers_and_a_closed_vin_is_a_
         ctl.close()
         plc.close()
     assert "Traceback" not in d.log()
-    assert d.log().count("pair1 not opened") == 1    # retried quietly, journaled once
 
 
 @pytest.mark.timeout(300)
