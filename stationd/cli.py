@@ -179,6 +179,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     return run_daemon(args)
 
 
+def cmd_bench_soak(args: argparse.Namespace) -> int:
+    from stationd.bench.soak import run_soak
+
+    return run_soak(args)
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     if args.vision:
         from stationd.demo import run_demo
@@ -246,6 +252,14 @@ def build_parser() -> argparse.ArgumentParser:
     bs.add_argument("--seed", type=int, default=1)
     bs.add_argument("--json", action="store_true", help="print one summary object")
     bs.set_defaults(func=cmd_bench_station)
+    bk = bsub.add_parser("soak", help="the daemon through a long shift: outages, reworks, load")
+    bk.add_argument("--bolts", type=int, default=100, help="bolts to tighten in all")
+    bk.add_argument("--per-vehicle", type=int, default=10, help="bolts per vehicle")
+    bk.add_argument("--faults", action="store_true", help="random device outages and reworks")
+    bk.add_argument("--load", type=int, default=0, help="busy processes during the run")
+    bk.add_argument("--seed", type=int, default=1)
+    bk.add_argument("--json", action="store_true", help="print one summary object")
+    bk.set_defaults(func=cmd_bench_soak)
 
     from stationd.db_cli import add_config_parser, add_db_parser
     from stationd.geometry.calibrate_cli import add_calibrate_parser

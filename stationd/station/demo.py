@@ -77,7 +77,7 @@ async def _operator(st: Station, world: World, rng: np.random.Generator, cycles:
         world.set_wrench(pose)
         leave = rng.random() < 0.1
         line: dict[str, Any] = {"bolt": b.bolt_id, "pset": b.parameters.pset, "result": None}
-        for _ in range(300):  # up to ~15 s for selection, acknowledgement, tool enabled
+        for _ in range(600):  # up to ~30 s for selection, acknowledgement, tool enabled
             if st.cycle.state is State.TIGHTENING and st.cycle.bolt == b.bolt_id \
                     and ctl.tool_enabled:
                 break
