@@ -497,7 +497,12 @@ class StationCore:
             if self._wrench_reconnects is not None:
                 self._wrench_epoch += 1   # a reconnected controller may have lost the VIN
             self._wrench_reconnects = ev.reconnects
-        return self._back(ev.t, ev.device)
+        acts: list[Action] = []
+        if ev.device == WRENCH and WRENCH in self.faults:
+            # the DisableTool sent at the fault may never have arrived: off, whatever it did
+            acts.append(DisableTool("controller back: the tool stays off until a bolt is "
+                                    "confirmed"))
+        return acts + self._back(ev.t, ev.device)
 
     def _on_VinSent(self, ev: VinSent) -> list[Action]:  # noqa: N802
         self._vin_pending = False

@@ -374,6 +374,9 @@ def test_the_vin_is_sent_once_per_vehicle_and_again_after_a_controller_reconnect
     assert vins() == ["VIN1", "VIN1"]
     d.step(("fault", 0.1, "wrench"))
     assert vins() == ["VIN1", "VIN1"]                 # not while it is down
+    acts = d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    assert _kinds(acts)[0] == "DisableTool"           # whatever the fault left it in
+    d.down.discard("wrench")
 
 
 def test_parameters_wait_for_the_vin():
