@@ -59,7 +59,7 @@ class Proc:
                                    str(tmp / "pose")], cwd=tmp, stderr=self._err, env=env)
 
     def status(self, needle: str, timeout: float = 90) -> list[str]:
-        return _recv_until(self.sock, needle, timeout)
+        return list(_recv_until(self.sock, needle, timeout))
 
     def log(self) -> str:
         return self.log_path.read_text()
