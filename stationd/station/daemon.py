@@ -76,6 +76,7 @@ from stationd.station.events import (
     DeviceHealth,
     EventBus,
     Notice,
+    PairFrames,
     ParamsSent,
     Refused,
     ResultRecorded,
@@ -95,6 +96,7 @@ RESULT_WAIT_S = 0.5         # one blocking wait for pushed results (a condition,
 TICK_S = 0.5
 BAD_GRABS = 3               # a pair failing this many grabs in a row is a fault
 IDLE_S = 0.1                # the vision loop's wait while the core is not tracking
+PAIR_FRAMES_S = 0.5         # a pair's detection summary is published at most this often
 
 
 def fault_kind(exc: BaseException) -> str:
@@ -140,6 +142,7 @@ class PairView:
     failed: bool = False
     skew: bool = False
     timings_ms: dict[str, float] = field(default_factory=dict)
+    sides: dict[str, dict[str, Any]] = field(default_factory=dict)  # detection summaries
 
 
 @dataclass
@@ -167,6 +170,7 @@ class Station:
     _next_try: dict[str, float] = field(default_factory=dict)  # device -> next attempt
     _wait: dict[str, float] = field(default_factory=dict)      # device -> current backoff
     _open_error: dict[str, str] = field(default_factory=dict)  # device -> why it did not open
+    _next_frames: dict[str, float] = field(default_factory=dict)  # pair -> next PairFrames
 
     def __post_init__(self) -> None:
         self.core = StationCore(self.cfg.matching, self.cfg.matching.leave_frames)
@@ -447,6 +451,10 @@ class Station:
                     await self.feed(DeviceFault(time.time(), n, "down", str(g.end)))
             elif not g.failed:
                 self._bad[n] = 0
+        for n, g in zip(names, got, strict=True):   # for the commissioning screen
+            if g.sides and time.monotonic() >= self._next_frames.get(n, 0.0):
+                self._next_frames[n] = time.monotonic() + PAIR_FRAMES_S
+                self.bus.publish(PairFrames(n, g.exposure_t, g.sides))
         usable = [g for g in got if not g.failed]
         if not usable:
             return None
@@ -492,8 +500,9 @@ class Station:
         except (cv2.error, ValueError, IndexError, np.linalg.LinAlgError) as exc:
             return PairView(f"frames not usable: {one_line(exc)}", exposure, failed=True)
         timings = {"grab": (t1 - t0) * 1e3, "vision": (time.monotonic() - t1) * 1e3}
+        sides = {"left": res.left.to_json(), "right": res.right.to_json()}
         if not res.found or res.point_mm is None or res.normal is None:
-            return PairView(str(res.reason), exposure, timings_ms=timings)
+            return PairView(str(res.reason), exposure, timings_ms=timings, sides=sides)
         crops = {}
         if self.cfg.records.save_images:
             crops = {f"{name}/{side}": crop(frame.image, det.roi)
@@ -502,11 +511,11 @@ class Station:
                      if det.roi is not None}
         if pc.to_vehicle is None:
             return PairView("pair not registered into the vehicle frame", exposure,
-                            timings_ms=timings)
+                            timings_ms=timings, sides=sides)
         end = bolt_end(pc.to_vehicle.apply(res.point_mm),
                        pc.to_vehicle.apply_direction(res.normal), self.cfg.tool)
         return PairView(end.reason if isinstance(end, Refusal) else end, exposure, crops,
-                        timings_ms=timings)
+                        timings_ms=timings, sides=sides)
 
     # -- the actions -------------------------------------------------------------------------
     async def _do(self, a: Action) -> Event | None:

@@ -2,6 +2,7 @@
 sends nothing wrong, and resumes when the device is back."""
 
 import asyncio
+import json
 import time
 from dataclasses import replace
 
@@ -18,6 +19,7 @@ from stationd.station.events import (
     BoltSelected,
     BoltSkipped,
     DeviceHealth,
+    PairFrames,
     ParamsRefusedEvent,
     ToolEnabled,
     VehicleClosed,
@@ -125,6 +127,10 @@ def test_lift_plc_vanishing_is_a_fault_until_it_returns(tmp_path):
         plc.start_tcp(port)
         await _until(lambda: st.cycle.state is not State.FAULT, 60)
         await _until(lambda: _sends(st), 60)
+        # the commissioning screen's pair summaries, JSON as they are (no NaN)
+        frames = [e for e in _of(st, PairFrames) if e.sides["left"]["found"]]
+        assert frames and {e.pair for e in frames} <= set(st.cfg.pairs)
+        json.dumps(frames[-1].to_json(), allow_nan=False)
 
     _scenario(tmp_path, body)
 
