@@ -245,7 +245,7 @@ def build_parser() -> argparse.ArgumentParser:
     bc.add_argument("--seed", type=int, default=1)
     bc.set_defaults(func=cmd_bench_chain)
     bs = bsub.add_parser("station", help="the daemon on the simulated station: latency from "
-                         "frame arrival to acknowledged parameters, memory")
+                         "frame exposure to acknowledged parameters, memory")
     bs.add_argument("--out", default="bench-station.json", type=_results_file,
                     help="JSON results file")
     bs.add_argument("--cycles", type=int, default=20, help="bolts to select and tighten")
