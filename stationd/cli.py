@@ -234,6 +234,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     return run_daemon(args)
 
 
+def cmd_bench_soak(args: argparse.Namespace) -> int:
+    from stationd.bench.soak import run_soak
+
+    return run_soak(args)
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     if args.vision:
         from stationd.demo import run_demo
@@ -304,13 +310,21 @@ def build_parser() -> argparse.ArgumentParser:
     bc.add_argument("--seed", type=seed_arg, default=1)
     bc.set_defaults(func=cmd_bench_chain)
     bs = bsub.add_parser("station", help="the daemon on the simulated station: latency from "
-                         "frame arrival to acknowledged parameters, memory")
+                         "frame exposure to acknowledged parameters, memory")
     bs.add_argument("--out", default="bench-station.json", type=_results_file,
                     help="JSON results file")
     bs.add_argument("--cycles", type=int, default=20, help="bolts to select and tighten")
     bs.add_argument("--seed", type=seed_arg, default=1)
     bs.add_argument("--json", action="store_true", help="print one summary object")
     bs.set_defaults(func=cmd_bench_station)
+    bk = bsub.add_parser("soak", help="the daemon through a long shift: outages, reworks, load")
+    bk.add_argument("--bolts", type=int, default=100, help="bolts to tighten in all")
+    bk.add_argument("--per-vehicle", type=int, default=10, help="bolts per vehicle")
+    bk.add_argument("--faults", action="store_true", help="random device outages and reworks")
+    bk.add_argument("--load", type=int, default=0, help="busy processes during the run")
+    bk.add_argument("--seed", type=int, default=1)
+    bk.add_argument("--json", action="store_true", help="print one summary object")
+    bk.set_defaults(func=cmd_bench_soak)
 
     from stationd.db_cli import add_config_parser, add_db_parser
     from stationd.geometry.calibrate_cli import add_calibrate_parser
@@ -336,6 +350,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="only the vision demo: render stereo pairs, localize, print errors")
     dm.add_argument("--save", help="with --vision: also write the images and pair.yaml here")
     dm.add_argument("--json", action="store_true", help="print one summary object")
+    dm.add_argument("--http", metavar="HOST:PORT", help="serve the screens here (default: the "
+                    "station file's http.listen, else 127.0.0.1:8080)")
+    dm.add_argument("--no-http", action="store_true", help="do not serve the screens")
+    dm.add_argument("--load", type=int, default=0, metavar="N",
+                    help="N busy processes beside the station for the run (CPU load)")
     dm.set_defaults(func=cmd_demo)
     _quiet_everywhere(p)
     return p

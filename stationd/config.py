@@ -101,7 +101,7 @@ class WrenchConfig:
     @classmethod
     def from_node(cls, node: YamlNode, *, check_url: bool = False) -> WrenchConfig:
         """``check_url``: check the URL's form and scheme now (see :func:`device_url`)."""
-        m = node.mapping(("url", "registers"))
+        m = node.mapping(("url", "registers", "poll_ms"))
         url = device_url(m["url"], "wrench", check=check_url) if "url" in m else cls.url
         regs = wrench_map(m["registers"]) if "registers" in m else None
         if regs is not None and "modbus" not in parse_url(url).scheme:
@@ -128,14 +128,16 @@ class LiftConfig:
 
     url: str = "sim://lift"
     registers: RegisterMap = field(default_factory=RegisterMap)
+    poll_ms: float = 100.0  # a PLC serves an HMI and a line controller too: read this often
 
     @classmethod
     def from_node(cls, node: YamlNode, *, check_url: bool = False) -> LiftConfig:
         """``check_url``: check the URL's form and scheme now (see :func:`device_url`)."""
-        m = node.mapping(("url", "registers"))
+        m = node.mapping(("url", "registers", "poll_ms"))
         url = device_url(m["url"], "lift", check=check_url) if "url" in m else cls.url
         regs = lift_map(m["registers"]) if "registers" in m else RegisterMap()
-        return cls(url=url, registers=regs)
+        poll = m["poll_ms"].number(lo=10.0, hi=5000.0) if "poll_ms" in m else cls.poll_ms
+        return cls(url=url, registers=regs, poll_ms=poll)
 
 
 @dataclass(frozen=True, eq=False)

@@ -7,7 +7,7 @@ background or a copy with a pre-rendered window pasted, as fast as a real camera
 The demo cannot measure latency this way, because its ray-casting shares the two cores with
 the daemon; here the cores are the daemon's.
 
-Latency is counted from the arrival of the stereo frames that decided a selection to the
+Latency is counted from the exposure of the stereo frames that decided a selection to the
 controller's acknowledgement of that bolt's parameters, with its stages: localize (the
 slowest pair's grab-to-bolt-end, all pairs at once), decide (matching and the cycle), and
 acknowledge (the Open Protocol round trip).  Memory is the process's resident set: peak and
@@ -34,9 +34,10 @@ from stationd.boltfile import load_bolts
 from stationd.config import load_station_config
 from stationd.errors import InputError
 from stationd.sim.world import World, WrenchPose, wrench_at
-from stationd.station.cycle import Record, SendParams, State
+from stationd.station.core import SendParams, State
 from stationd.station.daemon import Station
 from stationd.station.demo import SIM_CONFIG, _sim_psets
+from stationd.station.events import ParamsSent, ResultRecorded
 
 
 def _rss_mb() -> float:
@@ -78,10 +79,9 @@ async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]
         if not selected:
             out["not_selected"].append(f"{bolt}: {st.cycle.reason}")
         else:
-            n = sum(1 for e in st.events if e[0] == "Record")
+            n = st.bus.count(ResultRecorded)
             if ctl.pull_trigger() is not None:
-                await _until(lambda n=n: sum(1 for e in st.events if e[0] == "Record") > n,
-                             10)
+                await _until(lambda n=n: st.bus.count(ResultRecorded) > n, 10)
         out["truth"] = None
         world.set_wrench(None)
         await _until(lambda: st.cycle.state is State.TRACKING, 10)
@@ -141,7 +141,7 @@ def run_station_bench(args: argparse.Namespace) -> int:
         station.close()
         world.close()
         tmp.cleanup()
-    lat = [e[1] for e in station.events if e[0] == "latency"]
+    lat = [e.latency_ms for e in station.bus.of(ParamsSent) if isinstance(e, ParamsSent)]
     summary = _summary(lat, cycles, out, station, prerender_s, run_s, world_mb, rss_open,
                        rss_end)
     Path(args.out).write_text(json.dumps(summary, indent=2) + "\n")
@@ -167,8 +167,7 @@ def _summary(lat: list[dict[str, float]], cycles: int, out: dict[str, Any], st: 
     peak = _peak_rss_mb()
     return {
         "image_size": "5472x3648", "cameras": 2 * len(st.cfg.pairs), "bolts": cycles,
-        "selected": len(total), "recorded": sum(1 for e in st.events
-                                                if e[0] == "Record" and isinstance(e[1], Record)),
+        "selected": len(total), "recorded": st.bus.count(ResultRecorded),
         "wrong_bolt_sends": out["wrong"], "not_selected": out["not_selected"],
         "latency_ms": {"p50": _pct(total, 50), "p95": _pct(total, 95),
                        "max": max(total, default=float("nan"))},
@@ -186,7 +185,7 @@ def _print(s: dict[str, Any]) -> None:
           f"parameters sent for a wrong bolt: {s['wrong_bolt_sends']}")
     for miss in s["not_selected"]:
         print(f"  not selected: {miss}")
-    print(f"latency frame arrival -> parameters acknowledged ({s['cameras']} cameras, "
+    print(f"latency frame exposure -> parameters acknowledged ({s['cameras']} cameras, "
           f"{s['image_size']}): p50 {lat['p50']:.1f} ms, p95 {lat['p95']:.1f} ms, max "
           f"{lat['max']:.1f} ms")
     for name, v in s["stages_ms"].items():

@@ -1,9 +1,13 @@
-"""The station daemon: one asyncio loop wiring devices, vision, the cycle and the database.
+"""The station daemon: I/O and timing around the pure core (:mod:`stationd.station.core`).
 
-Blocking work (device I/O, grabbing, vision, the database) runs in executor threads; the loop
-only sequences it.  The rules live in :class:`stationd.station.cycle.Cycle`; this module feeds
-it events and carries out its actions.  A device error is a fault state with its reason, never
-a crash; the loop keeps polling and leaves the fault when the device answers again.
+Every decision is the core's.  This module reads the devices on their own clocks (the lift every
+``lift.poll_ms``, the controller's results as it pushes them, the cameras while the core is
+tracking), feeds what happened to the core, carries out the actions it answers and publishes
+typed events on :attr:`Station.bus`.  Blocking work runs in executor threads.
+
+A device or data fault is never an exception out of the loop: a device that is down at boot,
+vanishes, or returns garbage is a fault (DeviceHealth, STATUS=) and is retried with backoff; a
+skewed stereo pair or one bad frame is retried, a camera that keeps failing is a fault.
 """
 
 from __future__ import annotations
@@ -11,7 +15,6 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -21,81 +24,152 @@ import cv2
 import numpy as np
 
 from db.bolts import Parameters
+from db.errors import DataError, DbError, VehicleClosedError
 from db.repository import BoltInfo, Repository
 from drivers.camera import open_camera
-from drivers.camera.pair import StereoGrabber
-from drivers.errors import DeviceError, RefusedError
+from drivers.camera.pair import StereoGrabber, StereoSkewError
+from drivers.errors import (
+    ConnectionLostError,
+    DeviceError,
+    DeviceTimeoutError,
+    DriverError,
+    ProtocolError,
+    RefusedError,
+)
 from drivers.lift import open_lift
 from drivers.wrench import open_wrench
 from stationd.boltfile import import_bolts
 from stationd.config import PairConfig, StationConfig
+from stationd.errors import StationError
 from stationd.geometry.stereo import localize
 from stationd.geometry.tool import BoltEnd, bolt_end, fuse
-from stationd.station.cycle import (
+from stationd.station.core import (
+    LIFT,
+    LOCALIZING,
+    WRENCH,
+    Acknowledge,
     Action,
-    Cycle,
+    BoltSpec,
+    CloseVehicle,
+    DeviceBack,
+    DeviceFault,
     DisableTool,
     EnableTool,
-    Log,
+    Event,
+    LiftRead,
+    LoadVehicle,
+    LocalizedIn,
+    ParamsAcked,
+    ParamsRefused,
+    Publish,
     Record,
+    ResultIn,
     SendParams,
+    SendVin,
+    Started,
     State,
+    StationCore,
+    Tick,
+    VehicleLoaded,
+    VehicleRejected,
+    VinSent,
 )
-from stationd.station.matching import BoltMatcher, BoltRule, MatchParams
+from stationd.station.events import (
+    BoltView,
+    DeviceHealth,
+    EventBus,
+    Notice,
+    PairFrames,
+    ParamsSent,
+    Refused,
+    ResultRecorded,
+    StateChanged,
+    ToolDisabled,
+    ToolEnabled,
+    VehicleClosed,
+    VehicleOpened,
+)
 from stationd.station.sdnotify import Notifier
 from stationd.vision.types import Refusal
 
 log = logging.getLogger("stationd")
-TRACKING_STATES = (State.TRACKING, State.BOLT_SELECTED, State.TIGHTENING)
-EVENT_HISTORY = 100_000
-# a result this long after the tool went off is not the last bolt's late one: the tool cannot
-# tighten while disabled, and the controller reports within milliseconds
-LATE_RESULT_S = 5.0
+DATABASE = "database"
+BACKOFF_S = (0.5, 5.0)      # first and longest wait between attempts on a faulty device
+RESULT_WAIT_S = 0.5         # one blocking wait for pushed results (a condition, not a poll)
+TICK_S = 0.5
+BAD_GRABS = 3               # a pair failing this many grabs in a row is a fault
+IDLE_S = 0.1                # the vision loop's wait while the core is not tracking
+PAIR_FRAMES_S = 0.5         # a pair's detection summary is published at most this often
+
+
+#: what a device, the database or the station's own data raise: a fault, never an exit (the
+#: layers below have their own error roots)
+STATION_FAULTS: tuple[type[Exception], ...] = (StationError, DbError, DriverError)
+#: and what opening a device may raise besides (a port that does not exist, a bad option)
+OPEN_ERRORS: tuple[type[Exception], ...] = (*STATION_FAULTS, OSError, ValueError)
+
+
+def fault_kind(exc: BaseException) -> str:
+    """The fault's kind for DeviceHealth, from the driver's error type."""
+    if isinstance(exc, DeviceTimeoutError):
+        return "timeout"
+    if isinstance(exc, ProtocolError):
+        return "garbage"
+    if isinstance(exc, RefusedError):
+        return "refused"
+    if isinstance(exc, DeviceError):
+        return "down"
+    return "garbage"
+
+
+def frame_summary(det: Any) -> dict[str, Any]:
+    """What the commissioning screen draws over a frame: found or why not, the ROI, both
+    ellipses (undistorted pixels: close to the raw frame away from the image corners) as
+    ``[cx, cy, a, b, angle_deg]``, the corrected centre."""
+    ellipses = [[*e.centre, *e.axes, float(np.degrees(e.angle))]
+                for e in (det.inner, det.outer) if e is not None]
+    return {"found": bool(det.found), "reason": det.reason,
+            "roi": list(det.roi) if det.roi is not None else None,
+            "ellipses": [[float(v) for v in e] for e in ellipses],
+            "centre": [float(v) for v in det.centre_px] if det.centre_px is not None else None}
+
+
+def one_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
 
 
 @dataclass
 class Localization:
+    """What the cameras saw: the bolt end or why not, with the frames' exposure instant
+    (``exposure_t``, ``time.time()`` scale), the marker crops (evidence kept with a record)
+    and the slowest pair's stage timings."""
+
     point_mm: np.ndarray | None
     tilt_deg: float = 0.0
     reason: str | None = None
-    t: float = 0.0
-    # the marker's neighbourhood in each frame used ("pair1/left" -> crop): the evidence kept
-    # with a tightening record when records.save_images is on (a crop, not 60 MB frames)
+    exposure_t: float = 0.0
     crops: dict[str, np.ndarray] = field(default_factory=dict)
-    camera_fault: bool = False       # a camera stopped delivering (``reason`` says which)
-    done_t: float = 0.0              # when the localization was ready (monotonic)
-    timings_ms: dict[str, float] = field(default_factory=dict)  # slowest pair's stages
-
-
-@dataclass(frozen=True)
-class Selection:
-    """What decided a bolt's selection, kept with its record: a result may arrive after the
-    wrench left (or after the next localization), and must carry this bolt's evidence."""
-
-    bolt: str
-    pset: int | None
-    point_mm: np.ndarray
-    tilt_deg: float
-    match_distance_mm: float
-    sent_at: datetime
-    crops: dict[str, np.ndarray]
+    done_t: float = 0.0
+    timings_ms: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
 class PairView:
-    """One pair's grab and localization: the bolt end or why not, when the frames arrived,
-    and the crops around the marker."""
+    """One pair's grab and localization; ``failed`` when the grab gave no usable pair."""
 
     end: BoltEnd | str
-    arrived: float
+    exposure_t: float
     crops: dict[str, np.ndarray] = field(default_factory=dict)
-    camera_fault: bool = False
-    timings_ms: dict[str, float] = field(default_factory=dict)  # grab, vision
+    failed: bool = False
+    skew: bool = False
+    timings_ms: dict[str, float] = field(default_factory=dict)
+    sides: dict[str, dict[str, Any]] = field(default_factory=dict)  # detection summaries
 
 
 @dataclass
 class Station:
-    """A running station; ``open()`` the devices, ``await run(stop)``, ``close()``."""
+    """A running station: ``open()``, ``await run(stop)``, ``close()``."""
 
     cfg: StationConfig
     notifier: Notifier = field(default_factory=Notifier)
@@ -104,30 +178,43 @@ class Station:
     wrench: Any = None
     repo: Repository | None = None
     grabbers: dict[str, StereoGrabber] = field(default_factory=dict)
-    cycle: Cycle = field(init=False)
-    vin: str | None = None
+    core: StationCore = field(init=False)
+    bus: EventBus = field(default_factory=EventBus)
+    # the screens' latest-frame store (stationd.web.LatestFrames): put(pair, side, image,
+    # summary, exposure) per grab; None when the screens are off
+    frames: Any = None
     bolts: dict[str, BoltInfo] = field(default_factory=dict)
-    # recent actions and events, for the demo, the tests and a status view; bounded: a daemon
-    # runs all shift and would otherwise keep every frame's refusal
-    events: deque[tuple[str, Any]] = field(default_factory=lambda: deque(maxlen=EVENT_HISTORY))
     last: Localization | None = None
     on_action: Any = None  # called with each action before it is carried out (demo, tests)
     _pool: ThreadPoolExecutor = field(init=False)
-    _last_log: str | None = None
-    _selection: Selection | None = None  # the bolt whose parameters were sent last
-    _enabled: Selection | None = None    # the bolt the tool was last enabled for
-    _disabled_at: float | None = None    # when the tool went off since (monotonic)
-    _vin_sent: tuple[str, int] | None = None  # (VIN, controller reconnect count) it went with
+    _results_pool: ThreadPoolExecutor = field(init=False)
+    _lock: asyncio.Lock | None = None
+    _pending: list[Event] = field(default_factory=list)    # faults found before run()
+    _bad: dict[str, int] = field(default_factory=dict)     # pair -> failed grabs in a row
+    _cams: dict[str, list[Any]] = field(default_factory=dict)  # pair -> cameras opened
+    _next_try: dict[str, float] = field(default_factory=dict)  # device -> next attempt
+    _wait: dict[str, float] = field(default_factory=dict)      # device -> current backoff
+    _open_error: dict[str, str] = field(default_factory=dict)  # device -> why it did not open
+    _next_frames: dict[str, float] = field(default_factory=dict)  # pair -> next PairFrames
 
     def __post_init__(self) -> None:
-        self.cycle = Cycle(BoltMatcher({}, self._match_params()), self.cfg.matching.leave_frames)
+        self.core = StationCore(self.cfg.matching, self.cfg.matching.leave_frames)
         self._pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="station")
+        self._results_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="results")
 
-    def _match_params(self) -> MatchParams:
-        return self.cfg.matching
+    @property
+    def cycle(self) -> StationCore:
+        """The core (the name the cycle had)."""
+        return self.core
+
+    @property
+    def vin(self) -> str | None:
+        return self.core.vin
 
     # -- devices -----------------------------------------------------------------------------
     def open(self) -> None:
+        """Open the database (and import the bolt table), then try every device once: a
+        device that does not open is a fault retried by ``run``, never an exception here."""
         self.repo = Repository.open(self.cfg.database_url)
         if self.cfg.bolts_path is not None:
             r = import_bolts(self.repo, self.cfg.bolts_path,
@@ -135,305 +222,393 @@ class Station:
             log.info("bolt table %s: %d added, %d changed, %d unchanged, %d removed, "
                      "%d new parameter versions", self.cfg.bolts_path, len(r.added),
                      len(r.changed), len(r.unchanged), len(r.removed), len(r.new_versions))
-        self.lift = open_lift(self.cfg.lift.url, self.cfg.lift.registers,
-                              **self.device_kw.get("lift", {}))
-        self.wrench = open_wrench(self.cfg.wrench.url, **self.cfg.wrench.open_options(),
-                                  **self.device_kw.get("wrench", {}))
-        for name, pc in self.cfg.pairs.items():
-            if pc.left and pc.right:
-                left = open_camera(self.cfg.cameras[pc.left])
-                right = open_camera(self.cfg.cameras[pc.right])
-                left.open()
-                right.open()
-                self.grabbers[name] = StereoGrabber(left, right, pc.max_skew_s)
-        self.cycle.started()
+        for device in (LIFT, WRENCH, *self._pair_names()):
+            fault = self._open_device(device)
+            if fault is not None:
+                self._pending.append(fault)
+
+    def _pair_names(self) -> list[str]:
+        return [n for n, pc in self.cfg.pairs.items() if pc.left and pc.right]
+
+    def _open_device(self, device: str) -> DeviceFault | None:
+        """One attempt to open ``device`` (an executor thread); the fault if it fails."""
+        try:
+            if device == LIFT:
+                self.lift = open_lift(self.cfg.lift.url, self.cfg.lift.registers,
+                                      **self.device_kw.get("lift", {}))
+            elif device == WRENCH:
+                self.wrench = open_wrench(self.cfg.wrench.url, **self.cfg.wrench.open_options(),
+                                          **self.device_kw.get("wrench", {}))
+            else:
+                self._open_pair(device)
+        except OPEN_ERRORS as exc:
+            if self._open_error.get(device) != one_line(exc):   # once per reason, not retry
+                log.warning("%s not opened: %s", device, one_line(exc))
+                self._open_error[device] = one_line(exc)
+            return DeviceFault(time.time(), device, fault_kind(exc), one_line(exc))
+        if self._open_error.pop(device, None) is not None:
+            log.info("%s opened", device)
+        return None
+
+    def _open_pair(self, name: str) -> None:
+        pc = self.cfg.pairs[name]
+        assert pc.left is not None and pc.right is not None  # noqa: S101 - _pair_names
+        for cam in self._cams.pop(name, []):
+            _quiet(cam.close)
+        cams: list[Any] = []
+        try:
+            for side in (pc.left, pc.right):
+                cam = open_camera(self.cfg.cameras[side])
+                cams.append(cam)
+                cam.open()
+        except BaseException:
+            for cam in cams:
+                _quiet(cam.close)
+            raise
+        self._cams[name] = cams
+        self.grabbers[name] = StereoGrabber(cams[0], cams[1], pc.max_skew_s)
 
     def close(self) -> None:
         """Tool off first, then every device, then the database; a failure is logged and the
         shutdown goes on."""
-        def cameras(g: StereoGrabber) -> None:
-            g.left.close()
-            g.right.close()
-
         steps: list[tuple[str, Any]] = []
         if self.wrench is not None:
             steps += [("disable tool", self.wrench.disable_tool), ("wrench", self.wrench.close)]
         if self.lift is not None:
             steps.append(("lift", self.lift.close))
-        steps += [(f"{n} cameras", lambda g=g: cameras(g)) for n, g in self.grabbers.items()]
+        steps += [(f"{n} cameras", c.close) for n, cams in self._cams.items() for c in cams]
         if self.repo is not None:
             steps.append(("database", self.repo.close))
         for what, fn in steps:
             try:
                 fn()
             except Exception as exc:
-                log.warning("closing %s: %s", what, exc)
+                log.warning("closing %s: %s", what, one_line(exc))
         self._pool.shutdown(wait=True)
+        self._results_pool.shutdown(wait=True)
 
     # -- the loop ----------------------------------------------------------------------------
     async def run(self, stop: asyncio.Event) -> None:
-        self.notifier.ready(self.cycle.state.value)
-        next_ping = time.monotonic()
-        while not stop.is_set():
-            await self.step()
-            now = time.monotonic()
-            if self.notifier.watchdog_s and now >= next_ping:
-                self.notifier.watchdog()
-                next_ping = now + self.notifier.watchdog_s
-            await asyncio.sleep(0)
+        """Serve until ``stop``: READY=1 at once, whatever the devices do."""
+        self._lock = asyncio.Lock()
+        pending, self._pending = self._pending, []
+        for ev in pending:
+            await self.feed(ev)
+        await self.feed(Started(time.time()))
+        self.notifier.ready(f"{self.core.state.value}: {self.core.reason}")
+        tasks = [asyncio.create_task(c) for c in (self._lift_loop(stop), self._wrench_loop(stop),
+                                                    self._vision_loop(stop),
+                                                    self._tick_loop(stop))]
+        try:
+            await stop.wait()
+        finally:
+            async with self._lock:   # never cut an event's actions (a record) in half
+                for t in tasks:
+                    t.cancel()
+                await asyncio.gather(*tasks, return_exceptions=True)
         self.notifier.stopping("stopping")
 
     async def _call(self, fn: Any, *args: Any) -> Any:
         return await asyncio.get_running_loop().run_in_executor(self._pool, fn, *args)
 
-    async def step(self) -> None:
-        before = (self.cycle.state, self.cycle.reason)
-        try:
-            state = await self._call(self.lift.read_state, 1.0)
-        except DeviceError as exc:
-            await self._apply(self.cycle.fault(f"lift: {exc}"))
-            await asyncio.sleep(0.2)
-            return
-        if self.cycle.state is State.FAULT:
-            await self._recover()
-        await self._vehicle(state)
-        await self._apply(self.cycle.lift(state.ready))
-        if self.vin is not None and self.cycle.state is not State.FAULT:
-            await self._send_vin()
-        if self.cycle.state in TRACKING_STATES:
+    async def feed(self, ev: Event) -> None:
+        """Feed the core one event and carry out its actions (one event at a time)."""
+        assert self._lock is not None  # noqa: S101 - set by run()
+        async with self._lock:
+            await self._apply(self.core.feed(ev))
+
+    async def _apply(self, actions: list[Action]) -> None:
+        for a in actions:
+            if self.on_action is not None:
+                self.on_action(a)
+            follow = await self._do(a)
+            if follow is not None:
+                await self._apply(self.core.feed(follow))
+
+    def _backoff(self, device: str, failed: bool) -> float:
+        """The wait before the next attempt on ``device``: doubles while it keeps failing."""
+        if not failed:
+            self._wait.pop(device, None)
+            return 0.0
+        w = min(BACKOFF_S[1], self._wait.get(device, BACKOFF_S[0] / 2) * 2)
+        self._wait[device] = w
+        return w
+
+    async def _lift_loop(self, stop: asyncio.Event) -> None:
+        """Read the PLC every ``lift.poll_ms`` (never faster), reopen it with backoff."""
+        period = float(getattr(self.cfg.lift, "poll_ms", 100.0)) / 1e3
+        while not stop.is_set():
+            t0 = time.monotonic()
+            if self.lift is None:
+                fault = await self._call(self._open_device, LIFT)
+                if fault is not None:
+                    await self.feed(fault)
+                    await asyncio.sleep(self._backoff(LIFT, True))
+                    continue
+            try:
+                s = await self._call(self.lift.read_state, 1.0)
+                ev: Event = LiftRead(time.time(), bool(s.ready), bool(s.at_working_height),
+                                     int(s.model_code), s.vin)
+                self._backoff(LIFT, False)
+            except Exception as exc:  # a device or its data: a fault, never an exit
+                await self.feed(DeviceFault(time.time(), LIFT, fault_kind(exc),
+                                            one_line(exc)))
+                await asyncio.sleep(self._backoff(LIFT, True))
+                continue
+            await self.feed(ev)
+            await asyncio.sleep(max(0.0, period - (time.monotonic() - t0)))
+
+    async def _wrench_loop(self, stop: asyncio.Event) -> None:
+        """The controller's results as it pushes them (a blocking wait on the driver's queue,
+        in a thread of its own), and its link state."""
+        loop = asyncio.get_running_loop()
+        while not stop.is_set():
+            if self.wrench is None:
+                fault = await self._call(self._open_device, WRENCH)
+                if fault is not None:
+                    await self.feed(fault)
+                    await asyncio.sleep(self._backoff(WRENCH, True))
+                    continue
+            try:
+                status = self.wrench.status()
+                if status.connected:
+                    await self.feed(DeviceBack(time.time(), WRENCH, status.reconnects))
+                else:
+                    await self.feed(DeviceFault(time.time(), WRENCH, "down",
+                                                status.reason or "link down"))
+                result = await loop.run_in_executor(
+                    self._results_pool,
+                    lambda: self.wrench.wait_result(RESULT_WAIT_S, acknowledge=False))
+            except ConnectionLostError as exc:
+                await self.feed(DeviceFault(time.time(), WRENCH, "down", one_line(exc)))
+                await asyncio.sleep(self._backoff(WRENCH, True))
+                continue
+            except Exception as exc:
+                await self.feed(DeviceFault(time.time(), WRENCH, fault_kind(exc),
+                                            one_line(exc)))
+                await asyncio.sleep(self._backoff(WRENCH, True))
+                continue
+            self._backoff(WRENCH, False)
+            if result is not None:
+                await self.feed(ResultIn(time.time(), result))
+
+    async def _tick_loop(self, stop: asyncio.Event) -> None:
+        """Time for the core, the systemd watchdog, and the database's recovery probe."""
+        next_ping = time.monotonic()
+        while not stop.is_set():
+            await self.feed(Tick(time.time()))
+            if DATABASE in self.core.faults and self.repo is not None:
+                try:
+                    await self._call(self.repo.models)
+                    await self.feed(DeviceBack(time.time(), DATABASE))
+                except STATION_FAULTS:
+                    pass
+            now = time.monotonic()
+            if self.notifier.watchdog_s and now >= next_ping:
+                self.notifier.watchdog()
+                next_ping = now + self.notifier.watchdog_s
+            await asyncio.sleep(TICK_S)
+
+    async def _vision_loop(self, stop: asyncio.Event) -> None:
+        """Grab and localize while the core tracks; reopen or probe faulty pairs meanwhile."""
+        while not stop.is_set():
+            down = [n for n in self._pair_names() if n in self.core.faults]
+            due = [n for n in down if time.monotonic() >= self._next_try.get(n, 0.0)]
+            for name in due:
+                await self._probe_pair(name)
+            if self.core.state not in LOCALIZING or not self.grabbers or down:
+                await asyncio.sleep(IDLE_S)
+                continue
             loc = await self._localize()
+            if loc is None:
+                continue
             self.last = loc
-            if loc.camera_fault:
-                await self._apply(self.cycle.fault(f"cameras: {loc.reason}"))
-            else:
-                await self._apply(self.cycle.localized(loc.point_mm, loc.reason,
-                                                       time.monotonic() - loc.t))
-        if self.cycle.state is not State.FAULT:
-            await self._results()
-        if (self.cycle.state, self.cycle.reason) != before:
-            self.notifier.status(f"{self.cycle.state.value}: {self.cycle.reason}")
-            log.info("%s: %s", self.cycle.state.value, self.cycle.reason)
+            point = None if loc.point_mm is None else _xyz(loc.point_mm)
+            await self.feed(LocalizedIn(time.time(), loc.exposure_t, point, loc.reason,
+                                        loc.tilt_deg, loc))
 
-    async def _results(self) -> None:
-        """Take the controller's results, in every state: one that arrives after the wrench
-        left its bolt must never wait in the queue to be taken for the next bolt's."""
-        wait = 0.05 if self.cycle.state is State.TIGHTENING else 0.0
-        try:
-            result = await self._call(lambda: self.wrench.wait_result(wait, acknowledge=False))
-        except DeviceError as exc:
-            await self._apply(self.cycle.fault(f"wrench: {exc}"))
-            return
-        if result is None:
-            return
-        en = self._enabled
-        ours = en is not None and (en.pset is None or result.pset == en.pset)
-        if self.cycle.state is State.TIGHTENING and self.cycle.bolt is not None and ours:
-            await self._apply(self.cycle.result(self.cycle.bolt, result, bool(result.ok)))
-        elif ours and en is not None and self.vin and self._disabled_at is not None \
-                and time.monotonic() - self._disabled_at < LATE_RESULT_S:
-            # the trigger was pulled as the wrench left: the result is that bolt's
-            await self._apply(self.cycle.result(en.bolt, result, bool(result.ok)))
+    async def _probe_pair(self, name: str) -> None:
+        """A faulty pair: reopen it if it never opened, else grab once; back when it works."""
+        ok = False
+        if name not in self.grabbers:
+            ok = await self._call(self._open_device, name) is None
         else:
-            log.warning("result %d (pset %d, VIN %r, %s) outside any tightening: not "
-                        "attributable to a bolt, acknowledged (the controller keeps its own "
-                        "record)", result.tightening_id, result.pset, result.vin,
-                        "OK" if result.ok else "NOK")
-            self.events.append(("unattributed result", result))
-            await self._acknowledge(result)
+            ok = await self._call(self._grab_ok, self.grabbers[name])
+        self._next_try[name] = time.monotonic() + self._backoff(name, not ok)
+        if ok:
+            self._bad[name] = 0
+            await self.feed(DeviceBack(time.time(), name))
 
-    async def _acknowledge(self, result: Any) -> None:
-        """Tell the controller a result is stored; a failure leaves it with the controller
-        (it is recorded here already, and a resent copy is recognised by its id)."""
+    def _grab_ok(self, grabber: StereoGrabber) -> bool:
+        name = next((n for n, g in self.grabbers.items() if g is grabber), "")
         try:
-            await self._call(self.wrench.acknowledge_result, result)
-        except (DeviceError, ValueError) as exc:
-            log.warning("tightening %d stored, not acknowledged: %s", result.tightening_id, exc)
+            left, right = grabber.grab(1.0)
+        except (DeviceError, ValueError):
+            return False
+        return self._size_problem(name, left.image, right.image) is None
 
-    async def _send_vin(self) -> None:
-        """The controller tags its results with the VIN: sent once per vehicle and again
-        after the controller reconnects (a power cycle forgets it)."""
-        assert self.vin is not None  # noqa: S101 - called only with a vehicle
-        try:
-            status = await self._call(self.wrench.status)
-        except DeviceError:
-            return
-        if not status.connected or self._vin_sent == (self.vin, status.reconnects):
-            return
-        try:
-            await self._call(self.wrench.send_vin, self.vin)
-        except ValueError as exc:   # the controller cannot take it (no VIN registers, length)
-            log.info("VIN %s not sent to the controller: %s", self.vin, exc)
-        except RefusedError as exc:
-            log.warning("the controller refused VIN %s: %s", self.vin, exc)
-        except DeviceError as exc:
-            await self._apply(self.cycle.fault(f"wrench: {exc}"))
-            return
-        self._vin_sent = (self.vin, status.reconnects)
+    def _size_problem(self, pair: str, left: np.ndarray, right: np.ndarray) -> str | None:
+        """Frames the pair's calibration does not describe: garbage to this station."""
+        cal = self.cfg.pairs[pair].calibration if pair in self.cfg.pairs else None
+        for side, img in (("left", left), ("right", right)):
+            want = getattr(getattr(cal, side, None), "size", None)
+            got = (int(img.shape[1]), int(img.shape[0]))
+            if want is not None and tuple(want) != got:
+                return f"{side} frames are {got[0]}x{got[1]}, the calibration is for " \
+                       f"{want[0]}x{want[1]}"
+        return None
 
-    async def _recover(self) -> None:
-        """Leave a fault when its device answers again: the lift just did (this step read it);
-        the controller when its link is up (a refusal needs nothing more: its bolt is skipped);
-        the cameras when every pair grabs again.  A fault whose cause persists (an unknown
-        vehicle model) is raised again in this step."""
-        reason = self.cycle.reason
-        if reason.startswith("wrench:") or reason.startswith("controller refused"):
-            status = await self._call(self.wrench.status)
-            if not status.connected:
-                return
-        if reason.startswith("cameras:"):
-            grabs = await asyncio.gather(*(self._call(self._grab_ok, g)
-                                           for g in self.grabbers.values()))
-            if not all(grabs):
-                return
-        self.cycle.recovered()  # an unknown model code faults again in this very step
-        self.events.append(("recovered", reason))
-
-    async def _vehicle(self, state: Any) -> None:
-        """Open a vehicle record when a vehicle is at height, close it when the lift lowers."""
-        assert self.repo is not None  # noqa: S101 - opened in open()
-        if state.ready and self.vin is None:
-            model = await self._call(self.repo.model_for_code, state.model_code)
-            if model is None:
-                await self._apply(self.cycle.fault(f"unknown vehicle model code "
-                                                   f"{state.model_code}"))
-                return
-            vin = state.vin or f"SEQ-{int(time.time())}"
-            await self._call(self.repo.start_vehicle, vin, model)
-            infos = await self._call(self.repo.bolts_for_model, model)
-            self.bolts = {b.bolt_id: b for b in infos}
-            report = await self._call(self.repo.vehicle_report, vin)
-            done = {b.bolt_id for b in report.bolts if b.status == "ok"}
-            self.cycle.matcher = BoltMatcher(
-                {k: np.array(b.position) for k, b in self.bolts.items()}, self._match_params(),
-                done, rules={b.bolt_id: BoltRule(b.order, b.batch) for b in infos})
-            self.vin = vin
-            self.events.append(("vehicle", vin))
-        elif not state.at_working_height and self.vin is not None:
-            report = await self._call(self.repo.close_vehicle, self.vin)
-            self.events.append(("vehicle closed", (self.vin, report.missing, report.nok)))
-            log.info("vehicle %s closed: missing %s, NOK %s", self.vin, report.missing,
-                     report.nok)
-            self.vin, self.bolts, self._enabled = None, {}, None
-
-    async def _localize(self) -> Localization:
-        """Grab and localize in every pair at once; the result's time ``t`` is the earliest
-        arrival of the frames it used (its age, and the latency to the acknowledgement, are
-        counted from there: from the frames, not from the request).  A pair whose cameras
-        stopped delivering is a fault, not a refusal: the station is blind there."""
+    async def _localize(self) -> Localization | None:
+        """Grab and localize in every pair at once.  The localization's ``exposure_t`` is the
+        earliest exposure of the frames it used (its age is counted from there).  A pair that
+        failed its grab is left out of this localization; after ``BAD_GRABS`` failures in a
+        row it is a fault.  None when every pair failed (nothing to tell the core)."""
         names = list(self.grabbers)
         got: list[PairView] = await asyncio.gather(*(self._call(self._localize_pair, n)
                                                      for n in names))
-        done = time.monotonic()
-        timings = {k: max((g.timings_ms.get(k, 0.0) for g in got), default=0.0)
+        done = time.time()
+        for n, g in zip(names, got, strict=True):
+            if g.failed and not g.skew:
+                self._bad[n] = self._bad.get(n, 0) + 1
+                if self._bad[n] >= BAD_GRABS:
+                    self._bad[n] = 0
+                    self._next_try[n] = time.monotonic() + self._backoff(n, True)
+                    await self.feed(DeviceFault(time.time(), n, "down", str(g.end)))
+            elif not g.failed:
+                self._bad[n] = 0
+        for n, g in zip(names, got, strict=True):   # for the commissioning screen
+            if g.sides and time.monotonic() >= self._next_frames.get(n, 0.0):
+                self._next_frames[n] = time.monotonic() + PAIR_FRAMES_S
+                self.bus.publish(PairFrames(n, g.exposure_t, g.sides))
+        usable = [g for g in got if not g.failed]
+        if not usable:
+            return None
+        timings = {k: max((g.timings_ms.get(k, 0.0) for g in usable), default=0.0)
                    for k in ("grab", "vision")}
-        broken = [f"{n}: {g.end}" for n, g in zip(names, got, strict=True) if g.camera_fault]
-        if broken:
-            return Localization(None, reason="; ".join(broken), camera_fault=True)
-        ends = [g.end for g in got if isinstance(g.end, BoltEnd)]
-        used = [g for g in got if isinstance(g.end, BoltEnd)] or got
-        arrived = min((g.arrived for g in used), default=time.monotonic())
-        crops = {k: c for g in used for k, c in g.crops.items()}
+        ends = [g for g in usable if isinstance(g.end, BoltEnd)]
+        used = ends or usable
+        exposure = min(g.exposure_t for g in used)
         reasons = [f"{n}: {g.end}" for n, g in zip(names, got, strict=True)
-                   if isinstance(g.end, str)]
+                   if not g.failed and isinstance(g.end, str)]
         if not ends:
-            return Localization(None, reason="; ".join(reasons) or "no pair", t=arrived,
-                                done_t=done, timings_ms=timings)
-        fused = fuse([e.point_mm for e in ends], [1.0] * len(ends), max_spread_mm=2.0)
+            return Localization(None, reason="; ".join(reasons) or "no pair",
+                                exposure_t=exposure, done_t=done, timings_ms=timings)
+        points = [g.end.point_mm for g in ends if isinstance(g.end, BoltEnd)]
+        fused = fuse(points, [1.0] * len(points), max_spread_mm=2.0)
         if isinstance(fused, Refusal):
-            return Localization(None, reason=fused.reason, t=arrived, done_t=done,
+            return Localization(None, reason=fused.reason, exposure_t=exposure, done_t=done,
                                 timings_ms=timings)
-        return Localization(fused.point_mm, float(np.mean([e.tilt_deg for e in ends])),
-                            t=arrived, crops=crops, done_t=done, timings_ms=timings)
-
-    def _grab_ok(self, grabber: StereoGrabber) -> bool:
-        """Whether a pair delivers frames again (recovery from a camera fault)."""
-        try:
-            grabber.grab(1.0)
-        except DeviceError:
-            return False
-        return True
+        crops = {k: c for g in ends for k, c in g.crops.items()}
+        tilt = float(np.mean([g.end.tilt_deg for g in ends if isinstance(g.end, BoltEnd)]))
+        return Localization(fused.point_mm, tilt, exposure_t=exposure, crops=crops,
+                            done_t=done, timings_ms=timings)
 
     def _localize_pair(self, name: str) -> PairView:
-        """Grab and localize in one pair (an executor thread)."""
+        """Grab and localize in one pair (an executor thread).  A skewed pair or a bad frame
+        is a failed grab to retry; garbage from the vision (a frame of the wrong size) too."""
         pc: PairConfig = self.cfg.pairs[name]
         t0 = time.monotonic()
         try:
             left, right = self.grabbers[name].grab(1.0)
-        except DeviceError as exc:
-            return PairView(str(exc), time.monotonic(), camera_fault=True)
-        arrived = time.monotonic()
-        res = localize(pc.calibration, left.image, right.image, self.cfg.vision, self.cfg.marker)
-        timings = {"grab": (arrived - t0) * 1e3, "vision": (time.monotonic() - arrived) * 1e3}
+        except StereoSkewError as exc:
+            return PairView(one_line(exc), 0.0, failed=True, skew=True)
+        except (DeviceError, ValueError) as exc:
+            return PairView(one_line(exc), 0.0, failed=True)
+        exposure = min(left.timestamp, right.timestamp)
+        t1 = time.monotonic()
+        size = self._size_problem(name, left.image, right.image)
+        if size is not None:
+            return PairView(size, exposure, failed=True)
+        try:
+            res = localize(pc.calibration, left.image, right.image, self.cfg.vision,
+                           self.cfg.marker)
+        except (cv2.error, ValueError, IndexError, np.linalg.LinAlgError) as exc:
+            return PairView(f"frames not usable: {one_line(exc)}", exposure, failed=True)
+        timings = {"grab": (t1 - t0) * 1e3, "vision": (time.monotonic() - t1) * 1e3}
+        sides = {"left": res.left.to_json(), "right": res.right.to_json()}
+        if self.frames is not None:   # the commissioning screen's latest frames (no copy)
+            for side, frame, det in (("left", left, res.left), ("right", right, res.right)):
+                self.frames.put(name, side, frame.image, frame_summary(det), frame.timestamp)
         if not res.found or res.point_mm is None or res.normal is None:
-            return PairView(str(res.reason), arrived, timings_ms=timings)
+            return PairView(str(res.reason), exposure, timings_ms=timings, sides=sides)
         crops = {}
         if self.cfg.records.save_images:
             crops = {f"{name}/{side}": crop(frame.image, det.roi)
-                     for side, frame, det in (("left", left, res.left), ("right", right,
-                                                                         res.right))
+                     for side, frame, det in (("left", left, res.left),
+                                              ("right", right, res.right))
                      if det.roi is not None}
         if pc.to_vehicle is None:
-            return PairView("pair not registered into the vehicle frame", arrived,
-                            timings_ms=timings)
+            return PairView("pair not registered into the vehicle frame", exposure,
+                            timings_ms=timings, sides=sides)
         end = bolt_end(pc.to_vehicle.apply(res.point_mm),
                        pc.to_vehicle.apply_direction(res.normal), self.cfg.tool)
-        return PairView(end.reason if isinstance(end, Refusal) else end, arrived, crops,
-                        timings_ms=timings)
+        return PairView(end.reason if isinstance(end, Refusal) else end, exposure, crops,
+                        timings_ms=timings, sides=sides)
 
-    async def _apply(self, actions: list[Action]) -> None:
-        for a in actions:
-            self.events.append((type(a).__name__, a))
-            if self.on_action is not None:
-                self.on_action(a)
-            try:
-                if isinstance(a, SendParams):
-                    params = self.bolts[a.bolt].parameters
-                    loc = self.last
-                    match = self.cycle.selected_match
-                    self._selection = Selection(
-                        a.bolt, params.pset,
-                        loc.point_mm if loc is not None and loc.point_mm is not None
-                        else np.zeros(3),
-                        loc.tilt_deg if loc is not None else 0.0,
-                        float(match.distance_mm or 0.0) if match is not None else 0.0,
-                        datetime.now(UTC), loc.crops if loc is not None else {})
-                    t_send = time.monotonic()
-                    try:
-                        await self._call(self._send_parameters, params)
-                    except RefusedError as exc:
-                        await self._apply(self.cycle.params_refused(a.bolt, str(exc)))
-                        continue
-                    if self.last is not None:  # frame arrived -> parameters acknowledged
-                        self.events.append(("latency", self._latency(self.last, t_send)))
-                    await self._apply(self.cycle.params_acknowledged(a.bolt))
-                elif isinstance(a, EnableTool):
-                    if self._selection is not None and self._selection.bolt == a.bolt:
-                        self._enabled, self._disabled_at = self._selection, None
-                    await self._call(self.wrench.enable_tool)
-                elif isinstance(a, DisableTool):
-                    if self._disabled_at is None:
-                        self._disabled_at = time.monotonic()
+    # -- the actions -------------------------------------------------------------------------
+    async def _do(self, a: Action) -> Event | None:
+        """Carry out one action; what came of it, for the core (or None)."""
+        if isinstance(a, Publish):
+            self._publish(a.event)
+            return None
+        try:
+            if isinstance(a, SendParams):
+                return await self._send(a)
+            if isinstance(a, EnableTool):
+                await self._call(self.wrench.enable_tool)
+                self.bus.publish(ToolEnabled(a.bolt))
+            elif isinstance(a, DisableTool):
+                self.bus.publish(ToolDisabled(a.reason, a.bolt))
+                if self.wrench is not None:
                     await self._call(self.wrench.disable_tool)
-                elif isinstance(a, Record):
-                    await self._record(a)          # on disk first,
-                    await self._acknowledge(a.result)  # then the controller may forget it
-                elif isinstance(a, Log) and a.message != self._last_log:
-                    # one journal line per change: the same refusal frame after frame is
-                    # logged once, with its reason, until the reason changes
-                    log.info("%s", a.message)
-                    self._last_log = a.message
-            except DeviceError as exc:
-                await self._apply(self.cycle.fault(f"wrench: {exc}"))
+            elif isinstance(a, SendVin):
+                return await self._send_vin(a.vin)
+            elif isinstance(a, LoadVehicle):
+                return await self._load(a)
+            elif isinstance(a, CloseVehicle):
+                await self._close_vehicle(a.vin)
+            elif isinstance(a, Record):
+                await self._record(a)
+            elif isinstance(a, Acknowledge):
+                await self._acknowledge(a.result)
+        except DeviceError as exc:
+            return DeviceFault(time.time(), WRENCH, fault_kind(exc), one_line(exc))
+        return None
 
-    @staticmethod
-    def _latency(loc: Localization, t_send: float) -> dict[str, float]:
-        """The selection's latency, from the arrival of the frames that decided it to the
-        controller's acknowledgement, and its stages (ms)."""
-        now = time.monotonic()
-        return {"total": (now - loc.t) * 1e3, "localize": (loc.done_t - loc.t) * 1e3,
-                "decide": (t_send - loc.done_t) * 1e3, "acknowledge": (now - t_send) * 1e3,
-                "vision_slowest_pair": loc.timings_ms.get("vision", 0.0),
-                "grab_slowest_pair": loc.timings_ms.get("grab", 0.0)}
+    def _publish(self, ev: Any) -> None:
+        self.bus.publish(ev)
+        if isinstance(ev, StateChanged):
+            self.notifier.status(f"{ev.state}: {ev.reason}")
+            log.info("%s: %s", ev.state, ev.reason)
+        elif isinstance(ev, Notice):
+            (log.warning if ev.level == "warning" else log.info)("%s", ev.message)
+        elif isinstance(ev, Refused):   # once per change of reason, not frame after frame
+            log.info("no bolt: %s", ev.reason)
+        elif isinstance(ev, DeviceHealth):
+            if ev.ok:
+                log.info("%s: back", ev.device)
+            else:
+                log.warning("fault: %s (%s): %s", ev.device, ev.kind, ev.reason)
+
+    async def _send(self, a: SendParams) -> Event:
+        if self.wrench is None:
+            return DeviceFault(time.time(), WRENCH, "down", "not connected")
+        params = self.bolts[a.bolt].parameters
+        t_send = time.time()
+        try:
+            await self._call(self._send_parameters, params)
+        except RefusedError as exc:
+            return ParamsRefused(time.time(), a.bolt, one_line(exc))
+        now = time.time()
+        sel = a.selection
+        loc = sel.evidence if isinstance(sel.evidence, Localization) else None
+        lat = {"total": (now - sel.exposure_t) * 1e3,
+               "localize": (sel.decided_t - sel.exposure_t) * 1e3,
+               "decide": (t_send - sel.decided_t) * 1e3, "acknowledge": (now - t_send) * 1e3,
+               "vision_slowest_pair": loc.timings_ms.get("vision", 0.0) if loc else 0.0,
+               "grab_slowest_pair": loc.timings_ms.get("grab", 0.0) if loc else 0.0}
+        self.bus.publish(ParamsSent(a.bolt, params.pset, lat))
+        return ParamsAcked(now, a.bolt)
 
     def _send_parameters(self, params: Parameters) -> None:
         """A register-driven controller takes the pset with the torque and angle targets; a
@@ -448,38 +623,112 @@ class Station:
         else:
             self.wrench.select_pset(params.pset, 2.0)
 
-    async def _record(self, a: Record) -> None:
-        assert self.repo is not None and self.vin is not None  # noqa: S101
-        r = a.result
-        sel = self._enabled if self._enabled is not None and self._enabled.bolt == a.bolt \
-            else None
-        if sel is not None:
-            self._enabled = None   # its result is in: a later one is not this bolt's
-        info = self.bolts.get(a.bolt)
-        repo = self.repo
-        images = await self._call(self._save_images, a.bolt, int(r.tightening_id), sel)
-        if sel is None:  # not expected: a result is taken only for an enabled selection
-            log.warning("result %d for %s without its selection: recorded without position",
-                        r.tightening_id, a.bolt)
-        await self._call(lambda: repo.record_tightening(
-            self.vin, a.bolt, ok=bool(r.ok),
-            position_mm=[float(v) for v in sel.point_mm] if sel else [0.0, 0.0, 0.0],
-            match_distance_mm=sel.match_distance_mm if sel else 0.0,
-            tilt_deg=sel.tilt_deg if sel else 0.0,
-            torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
-            parameters_id=info.parameters_id if info else None,
-            tightening_id=int(r.tightening_id), sent_at=sel.sent_at if sel else None,
-            result_at=datetime.now(UTC), images=images))
+    async def _send_vin(self, vin: str) -> Event:
+        if self.wrench is None:
+            return DeviceFault(time.time(), WRENCH, "down", "not connected")
+        try:
+            await self._call(self.wrench.send_vin, vin)
+        except ValueError as exc:   # the controller cannot take it (no VIN registers, length)
+            log.info("VIN %s not sent to the controller: %s", vin, exc)
+        except RefusedError as exc:
+            log.warning("the controller refused VIN %s: %s", vin, one_line(exc))
+        return VinSent(time.time(), vin)
 
-    def _save_images(self, bolt: str, tightening_id: int, sel: Selection | None) -> list[str]:
+    async def _load(self, a: LoadVehicle) -> Event:
+        """The vehicle at height, from the database: loaded, rejected (unknown model, a closed
+        VIN, another model's VIN) or a database fault."""
+        repo = self.repo
+        assert repo is not None  # noqa: S101 - opened in open()
+        try:
+            model = await self._call(repo.model_for_code, a.model_code)
+            if model is None:
+                return VehicleRejected(time.time(), a.vin,
+                                       f"unknown vehicle model code {a.model_code}")
+            try:
+                await self._call(lambda: repo.start_vehicle(a.vin, model, reopen=a.reopen))
+            except DataError as exc:   # a closed VIN back, another model's VIN
+                return VehicleRejected(time.time(), a.vin, one_line(exc),
+                                       closed=isinstance(exc, VehicleClosedError))
+            infos = await self._call(repo.bolts_for_model, model)
+            report = await self._call(repo.vehicle_report, a.vin)
+        except STATION_FAULTS as exc:
+            return DeviceFault(time.time(), DATABASE, "down", one_line(exc))
+        self.bolts = {b.bolt_id: b for b in infos}
+        status = {b.bolt_id: b.status for b in report.bolts}
+        done = frozenset(k for k, s in status.items() if s == "ok")
+        specs = {b.bolt_id: BoltSpec(_xyz(b.position), b.parameters.pset, b.order, b.batch)
+                 for b in infos}
+        self.bus.publish(VehicleOpened(a.vin, model, tuple(
+            BoltView(b.bolt_id, *_xyz(b.position), pset=b.parameters.pset, order=b.order,
+                     batch=b.batch, status=status.get(b.bolt_id) or "pending")
+            for b in infos), rework=a.reopen))
+        return VehicleLoaded(time.time(), a.vin, model, specs, done, a.reopen)
+
+    async def _close_vehicle(self, vin: str) -> None:
+        assert self.repo is not None  # noqa: S101
+        try:
+            report = await self._call(self.repo.close_vehicle, vin)
+        except STATION_FAULTS as exc:
+            log.error("vehicle %s not closed: %s", vin, one_line(exc))
+            return
+        self.bus.publish(VehicleClosed(vin, tuple(report.missing), tuple(report.nok)))
+        log.info("vehicle %s closed: missing %s, NOK %s", vin, report.missing, report.nok)
+        self.bolts = {}
+
+    async def _acknowledge(self, result: Any) -> None:
+        """Tell the controller a result is stored; a failure leaves it with the controller
+        (it is recorded here already, and a resent copy is recognised by its id)."""
+        if self.wrench is None:
+            return
+        try:
+            await self._call(self.wrench.acknowledge_result, result)
+        except (DeviceError, ValueError) as exc:
+            log.warning("tightening %d stored, not acknowledged: %s", result.tightening_id,
+                        one_line(exc))
+
+    async def _record(self, a: Record) -> None:
+        """On disk first, then the controller may forget it; a database failure leaves the
+        result unacknowledged with the controller (it will send it again)."""
+        repo = self.repo
+        assert repo is not None  # noqa: S101
+        r, sel = a.result, a.selection
+        info = self.bolts.get(a.bolt)
+        loc = sel.evidence if sel is not None and isinstance(sel.evidence, Localization) \
+            else None
+        images = await self._call(self._save_images, a.vin, a.bolt, int(r.tightening_id), loc)
+        try:
+            await self._call(lambda: repo.record_tightening(
+                a.vin, a.bolt, ok=bool(r.ok),
+                position_mm=list(sel.point_mm) if sel else [0.0, 0.0, 0.0],
+                match_distance_mm=sel.distance_mm if sel else 0.0,
+                tilt_deg=sel.tilt_deg if sel else 0.0,
+                torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
+                parameters_id=info.parameters_id if info else None,
+                tightening_id=int(r.tightening_id),
+                sent_at=datetime.fromtimestamp(sel.decided_t, UTC) if sel else None,
+                result_at=datetime.now(UTC), images=images))
+        except STATION_FAULTS as exc:
+            log.error("tightening %d of %s NOT stored (left with the controller): %s",
+                      r.tightening_id, a.bolt, one_line(exc))
+            self.bus.publish(Notice(f"tightening {r.tightening_id} of {a.bolt} not stored: "
+                                    f"{one_line(exc)}", "error"))
+            return
+        self.bus.publish(ResultRecorded(
+            a.vin, a.bolt, bool(r.ok), float(r.torque_nm), float(r.angle_deg),
+            int(r.tightening_id), int(r.pset), float(r.torque_min_nm), float(r.torque_max_nm),
+            float(r.angle_min_deg), float(r.angle_max_deg), a.late, tuple(images)))
+        await self._acknowledge(r)
+
+    def _save_images(self, vin: str, bolt: str, tightening_id: int,
+                     loc: Localization | None) -> list[str]:
         """Write the selection's crops beside the records (an executor thread); a failure is
         logged and the tightening is recorded without them, never lost."""
         folder = self.cfg.records.images_dir
-        if not self.cfg.records.save_images or folder is None or sel is None:
+        if not self.cfg.records.save_images or folder is None or loc is None:
             return []
         out = []
-        for key, img in sorted(sel.crops.items()):
-            path = folder / str(self.vin) / f"{bolt}-{tightening_id}-{key.replace('/', '-')}.png"
+        for key, img in sorted(loc.crops.items()):
+            path = folder / vin / f"{bolt}-{tightening_id}-{key.replace('/', '-')}.png"
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
                 if not cv2.imwrite(str(path), img):
@@ -491,9 +740,23 @@ class Station:
         return out
 
 
+def _xyz(p: Any) -> tuple[float, float, float]:
+    return float(p[0]), float(p[1]), float(p[2])
+
+
+def _quiet(fn: Any) -> None:
+    try:
+        fn()
+    except Exception as exc:
+        log.warning("closing: %s", one_line(exc))
+
+
 def crop(image: np.ndarray, roi: tuple[int, int, int, int], margin: int = 16) -> np.ndarray:
     """The marker's neighbourhood (``roi`` x, y, w, h plus ``margin``), a copy."""
     x, y, w, h = roi
     hh, ww = image.shape[:2]
     x0, y0 = max(0, x - margin), max(0, y - margin)
     return image[y0:min(hh, y + h + margin), x0:min(ww, x + w + margin)].copy()
+
+
+__all__ = ["Localization", "State", "Station", "crop"]

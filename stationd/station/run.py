@@ -1,9 +1,12 @@
 """``stationd run --config station.yaml``: the daemon as systemd runs it.
 
-READY=1 once the devices are open; STATUS= on every state change; WATCHDOG=1 as the unit asks.
-SIGTERM (and SIGINT) stop the loop, disable the tool and close every device in order, then
-exit 0.  SIGHUP re-reads the configuration: a valid one replaces the running station (devices
-reopened), an invalid one is logged with its reason and the running one stays.
+READY=1 once the station serves, whatever its devices do (a device that is down is a fault with
+its reason in STATUS=, retried with backoff); STATUS= on every state change; WATCHDOG=1 as the
+unit asks.  SIGTERM (and SIGINT) stop the loop, disable the tool and close every device in
+order, then exit 0.  SIGHUP validates the whole new station (the file, every file it names, the
+bolt table) before switching: an invalid one is logged with its reason and the running station
+stays; a valid one whose devices are down runs in fault.  Only a configuration that is invalid
+at the very first start exits (2).
 """
 
 from __future__ import annotations
@@ -13,13 +16,53 @@ import asyncio
 import logging
 import signal
 import sys
+from pathlib import Path
+from typing import Any
 
+from stationd.boltfile import load_bolts
 from stationd.config import StationConfig, load_station_config
 from stationd.errors import StationError
-from stationd.station.daemon import Station
+from stationd.lock import StationLock, lock_path
+from stationd.station.daemon import OPEN_ERRORS, STATION_FAULTS, Station, one_line
+from stationd.station.events import EventBus
 from stationd.station.sdnotify import Notifier
 
 log = logging.getLogger("stationd")
+OPEN_RETRY_S = (1.0, 30.0)   # a database that does not open: first and longest wait
+
+
+def validate_station(path: str | Path) -> StationConfig:
+    """The whole station, checked before it is used: the file and every file it names (the
+    loader reads calibrations and transforms) and the bolt table, with the station's own
+    matching tolerance.  Raises the first error (one line, file and key)."""
+    cfg = load_station_config(path, station=True)
+    if cfg.bolts_path is not None:
+        load_bolts(cfg.bolts_path, tolerance_mm=cfg.matching.tolerance_mm)
+    return cfg
+
+
+async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bool:
+    """Open the station's database (its devices are the station's to retry); a database that
+    does not open is retried with backoff, never an exit.  False if stopped meanwhile."""
+    loop = asyncio.get_running_loop()
+    wait = OPEN_RETRY_S[0]
+    told = False
+    while not stop.is_set():
+        try:
+            await loop.run_in_executor(None, station.open)
+            return True
+        except STATION_FAULTS as exc:
+            log.error("fault: database: %s (retrying in %.0f s)", one_line(exc), wait)
+            if not told:
+                notifier.ready(f"fault: database: {one_line(exc)}")
+                told = True
+            notifier.status(f"fault: database: {one_line(exc)}")
+        try:
+            await asyncio.wait_for(stop.wait(), wait)
+        except TimeoutError:
+            pass
+        wait = min(OPEN_RETRY_S[1], wait * 2)
+    return False
 
 
 async def serve(cfg_path: str, cfg: StationConfig, notifier: Notifier) -> None:
@@ -29,9 +72,68 @@ async def serve(cfg_path: str, cfg: StationConfig, notifier: Notifier) -> None:
     for sig in (signal.SIGTERM, signal.SIGINT):
         loop.add_signal_handler(sig, stop.set)
     loop.add_signal_handler(signal.SIGHUP, reload.set)
+    bus = EventBus()    # one for the daemon's life: the screens follow it across reloads
+    screens = Screens(bus)
+    try:
+        await _serve(cfg_path, cfg, notifier, bus, screens, stop, reload)
+    finally:
+        await screens.stop()
+
+
+class Screens:
+    """The web screens (``stationd.web``) of the running configuration: started when its
+    ``http`` section asks, moved when a reload changes it.  A port in use is a logged fault of
+    the screens, never of the station (the tool keeps working without them)."""
+
+    def __init__(self, bus: EventBus) -> None:
+        self.bus = bus
+        self.server: Any = None
+        self.frames: Any = None
+        self._for: tuple[Any, str] | None = None
+
+    async def follow(self, cfg: StationConfig) -> None:
+        key = (cfg.http, cfg.database_url)
+        if key == self._for:
+            return
+        await self.stop()
+        self._for = key
+        if cfg.http is None:
+            return
+        from db.repository import Repository
+        from stationd.web import LatestFrames, Results, WebServer
+
+        self.frames = LatestFrames()
+        try:
+            repo = Repository.open(cfg.database_url)
+            self.server = WebServer(self.bus, Results(repo), self.frames,
+                                    listen=cfg.http.listen, token=cfg.http.token,
+                                    images_dir=cfg.records.images_dir)
+            await self.server.start()
+        except OPEN_ERRORS as exc:
+            log.error("screens not served on %s: %s", cfg.http.listen, one_line(exc))
+            self.server = None
+            return
+        log.info("screens: %s", self.server.url)
+
+    async def stop(self) -> None:
+        if self.server is not None:
+            try:
+                await self.server.stop()
+            except Exception as exc:  # stopping the screens never stops the daemon's exit
+                log.warning("stopping the screens: %s", one_line(exc))
+        self.server, self.frames, self._for = None, None, None
+
+
+async def _serve(cfg_path: str, cfg: StationConfig, notifier: Notifier, bus: EventBus,
+                 screens: Screens, stop: asyncio.Event, reload: asyncio.Event) -> None:
+    loop = asyncio.get_running_loop()
     while True:
-        station = Station(cfg, notifier=notifier)
-        await loop.run_in_executor(None, station.open)
+        await screens.follow(cfg)
+        station = Station(cfg, notifier=notifier, bus=bus, frames=screens.frames)
+        if not await _open(station, notifier, stop):
+            await loop.run_in_executor(None, station.close)
+            notifier.stopping("stopping")
+            return
         inner = asyncio.Event()
         task = asyncio.create_task(station.run(inner))
         log.info("stationd running: %s", cfg_path)
@@ -43,28 +145,40 @@ async def serve(cfg_path: str, cfg: StationConfig, notifier: Notifier) -> None:
                 w.cancel()
             if reload.is_set() and not stop.is_set():
                 reload.clear()
-                try:  # validate first: an invalid file never stops the running station
-                    new = load_station_config(cfg_path)
+                try:  # validate first: an invalid station never stops the running one
+                    new = await loop.run_in_executor(None, validate_station, cfg_path)
                 except StationError as exc:
-                    log.error("reload refused, keeping the running configuration: %s", exc)
-                    notifier.status(f"reload refused: {exc}")
+                    log.error("reload refused, keeping the running configuration: %s",
+                              one_line(exc))
+                    notifier.status(f"reload refused: {one_line(exc)}")
         inner.set()
-        await task
-        if new is not None and not stop.is_set():
-            log.info("configuration reloaded; reopening the devices")
-            await loop.run_in_executor(None, station.close)
-            cfg = new
-            continue
-        notifier.stopping("closing devices")
+        try:
+            await task
+        except Exception as exc:  # a bug, not a device: logged, the station restarts
+            log.error("station loop failed: %s: %s", type(exc).__name__, one_line(exc))
+            await asyncio.sleep(1.0)
         await loop.run_in_executor(None, station.close)
-        log.info("stationd stopped")
-        return
+        if stop.is_set():
+            notifier.stopping("closing devices")
+            log.info("stationd stopped")
+            return
+        if new is not None:
+            log.info("configuration reloaded; reopening the devices")
+            cfg = new
 
 
 def run_daemon(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(levelname)s %(message)s")  # one line per event (journal)
     logging.getLogger("alembic").setLevel(logging.WARNING)
-    cfg = load_station_config(args.config)  # an invalid config at start: exit 2
-    asyncio.run(serve(args.config, cfg, Notifier()))
+    cfg = validate_station(args.config)  # an invalid station at the first start: exit 2
+    where = lock_path(cfg.database_url, cfg.records.images_dir)
+    lock = StationLock(where) if where is not None else None
+    if lock is not None:
+        lock.acquire()  # a second daemon on this database: one line naming the holder, exit 2
+    try:
+        asyncio.run(serve(args.config, cfg, Notifier()))
+    finally:
+        if lock is not None:
+            lock.release()
     return 0

@@ -18,8 +18,9 @@ import tests.station.test_faults as harness
 from db.models import Bolt, TighteningRecord, Vehicle
 from db.repository import Repository
 from stationd.sim.world import wrench_at
-from stationd.station.cycle import DisableTool, SendParams, State
+from stationd.station.core import DisableTool, State
 from stationd.station.demo import SIM_CONFIG
+from stationd.station.events import BoltSelected, Localized, Notice, ResultUnattributed
 from tests.station.test_faults import _scenario, _until
 
 VIN = "FAULTVIN000000001"  # the harness's vehicle
@@ -89,11 +90,14 @@ def _records(url: str) -> list[tuple[str, int | None, list[str], tuple[float, fl
 
 
 def _sends(st) -> list[str]:
-    return [e[1].bolt for e in st.events if isinstance(e[1], SendParams)]
+    """The bolts whose parameters were sent (one BoltSelected per send)."""
+    return [e.bolt for e in st.bus.of(BoltSelected)]
 
 
 def _logs(st) -> list[str]:
-    return [e[1].message for e in st.events if e[0] == "Log"]
+    """The operator's log lines and every localization's refusal reason."""
+    return [e.message if isinstance(e, Notice) else e.reason
+            for e in st.bus.of(Notice, Localized) if getattr(e, "reason", "x") is not None]
 
 
 # -- 1. the marker crops kept with a record -------------------------------------------------
@@ -150,16 +154,17 @@ def _same_pset_bolts(st) -> tuple[str, str]:
 
 
 def _pull_as_the_wrench_leaves(st, world, a: str, then=None) -> dict[str, Any]:
-    """Arrange for the trigger to be pulled at the moment the station has left bolt ``a``
-    (the cycle is back in TRACKING) but before its DisableTool reached the controller: the
-    tool is still on, so the controller tightens, and its result comes in after the cycle
-    left the bolt.  ``then``: where the operator takes the wrench at that same moment."""
+    """Arrange for the trigger to be pulled at the moment the station saw the wrench off bolt
+    ``a`` (the core turned the tool off) but before its DisableTool reached the controller:
+    the tool is still on, so the controller tightens, and its result comes in after the core
+    let go of the bolt.  ``then``: where the operator takes the wrench at that same moment."""
     pulled: dict[str, Any] = {}
 
     def on_action(act):
-        if isinstance(act, DisableTool) and act.reason.startswith(f"wrench left bolt {a} ") \
+        if isinstance(act, DisableTool) and act.bolt == a \
+                and act.reason.startswith(f"wrench not confirmed on bolt {a} ") \
                 and "late" not in pulled:
-            assert st.cycle.state is State.TRACKING
+            assert st.cycle.state is not State.TIGHTENING
             pulled["late"] = st.wrench.controller.pull_trigger()
             world.set_wrench(then)
 
@@ -194,7 +199,7 @@ def test_a_result_after_the_wrench_left_is_its_bolts_never_the_next_ones(tmp_pat
     st = _scenario(tmp_path, body, **NO_NOK)
     a, b, late, shot = seen["a"], seen["b"], seen["late"], seen["shot"]
     assert late.tightening_id != shot.tightening_id
-    assert not any(e[0] == "unattributed result" for e in st.events)
+    assert not list(st.bus.of(ResultUnattributed))
     assert _sends(st) == [a, b]
     records = _records(st.cfg.database_url)
     assert [r[:2] for r in records] == [(a, late.tightening_id), (b, shot.tightening_id)]

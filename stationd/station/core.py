@@ -1,0 +1,580 @@
+"""The station's decisions, pure: typed input events in, typed actions out.
+
+The daemon only does I/O and timing: it reads the lift, grabs and localizes, talks to the
+controller and the database, and feeds what happened to :meth:`StationCore.feed`; it carries out
+the actions returned, in order, and feeds their outcome back (an acknowledgement, a refusal, a
+fault).  Every rule lives here, so every rule is testable without a device, a clock or a thread:
+time comes in with the events (``t``, ``time.time()`` scale; a localization also carries its
+frames' *exposure* instant).
+
+The safety rules, each enforced in exactly one place below:
+
+- parameters are sent only from TRACKING, for the bolt the matcher *took*, while the lift is
+  ready, a vehicle is loaded (its VIN with the controller) and no device is in fault;
+- the tool is enabled only after the controller acknowledged that bolt's parameters AND a
+  localization from frames exposed after that acknowledgement still finds the wrench on it;
+- the tool goes off at the first localization that does not confirm the bolt (stale, refused,
+  elsewhere), when the lift is not ready, on any fault, and after each result; the selection
+  itself is dropped after ``leave_frames`` such localizations in a row;
+- every result is recorded once, to the bolt the tool was enabled for (also when it arrives
+  within ``late_result_s`` after the tool went off: the trigger was pulled as the wrench left);
+  any other result is acknowledged unrecorded (the controller keeps its own record);
+- faults are kept per device; the station leaves FAULT when every faulty device is back.
+"""
+
+from __future__ import annotations
+
+import enum
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from stationd.station.events import (
+    BoltSelected,
+    BoltSkipped,
+    DeviceHealth,
+    Localized,
+    Notice,
+    ParamsRefusedEvent,
+    Refused,
+    ResultUnattributed,
+    StateChanged,
+    StationEvent,
+)
+from stationd.station.matching import BoltMatcher, BoltRule, Match, MatchParams
+
+#: a result this long after the tool went off is not the last bolt's late one: the tool cannot
+#: tighten while disabled, and a controller reports within milliseconds
+LATE_RESULT_S = 5.0
+LIFT, WRENCH, VEHICLE = "lift", "wrench", "vehicle"
+_DIGITS = re.compile(r"\d+(\.\d+)?")
+
+
+class State(enum.Enum):
+    STARTING = "starting"
+    WAITING_VEHICLE = "waiting for vehicle"
+    TRACKING = "tracking"
+    BOLT_SELECTED = "bolt selected"
+    TIGHTENING = "tightening"
+    FAULT = "fault"
+
+
+ON_A_BOLT = (State.BOLT_SELECTED, State.TIGHTENING)
+LOCALIZING = (State.TRACKING, *ON_A_BOLT)
+
+
+# -- inputs -------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Input:
+    """Base of every input: ``t`` is when it happened (``time.time()`` scale)."""
+
+    t: float
+
+
+@dataclass(frozen=True)
+class Started(Input):
+    """The daemon is serving (devices may still be down)."""
+
+
+@dataclass(frozen=True)
+class LiftRead(Input):
+    """One successful read of the lift PLC (the read itself proves the PLC is back)."""
+
+    ready: bool
+    at_height: bool
+    model_code: int
+    vin: str | None
+    why: str = "lift not at working height"
+
+
+@dataclass(frozen=True)
+class LocalizedIn(Input):
+    """A localization of the wrench: ``point_mm`` (bolt end, vehicle frame) or ``reason`` why
+    none; ``exposure_t`` is when its frames were exposed (the earliest of those used).
+    ``evidence`` is the daemon's (marker crops), handed back with the selection it decided."""
+
+    exposure_t: float
+    point_mm: tuple[float, float, float] | None
+    reason: str | None = None
+    tilt_deg: float = 0.0
+    evidence: Any = None
+
+
+@dataclass(frozen=True)
+class ParamsAcked(Input):
+    bolt: str
+
+
+@dataclass(frozen=True)
+class ParamsRefused(Input):
+    bolt: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class ResultIn(Input):
+    """A tightening result from the controller (``result`` has ``ok``, ``pset``,
+    ``tightening_id``), not yet acknowledged."""
+
+    result: Any
+
+
+@dataclass(frozen=True)
+class DeviceFault(Input):
+    """``device`` (lift, wrench, database, a pair's name) failed: ``kind`` (down, timeout,
+    garbage, refused, ...) and a readable ``reason``."""
+
+    device: str
+    kind: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class DeviceBack(Input):
+    """``device`` answers again; for the wrench, ``reconnects`` is its link's reconnect count
+    (a change means a controller that may have forgotten the VIN)."""
+
+    device: str
+    reconnects: int | None = None
+
+
+@dataclass(frozen=True)
+class BoltSpec:
+    position: tuple[float, float, float]
+    pset: int | None
+    order: int | None = None
+    batch: str | None = None
+
+
+@dataclass(frozen=True)
+class VehicleLoaded(Input):
+    """The database has the vehicle open: its bolts and those already done."""
+
+    vin: str
+    model: str
+    bolts: Mapping[str, BoltSpec]
+    done: frozenset[str] = frozenset()
+    rework: bool = False
+
+
+@dataclass(frozen=True)
+class VehicleRejected(Input):
+    """The vehicle at height cannot be opened: ``closed`` when its VIN was closed before."""
+
+    vin: str | None
+    reason: str
+    closed: bool = False
+
+
+@dataclass(frozen=True)
+class VinSent(Input):
+    """The VIN went to the controller (or the controller cannot take one: nothing to wait for)."""
+
+    vin: str
+
+
+@dataclass(frozen=True)
+class Tick(Input):
+    """Time passes (expires the late-result window)."""
+
+
+Event = (Started | LiftRead | LocalizedIn | ParamsAcked | ParamsRefused | ResultIn
+         | DeviceFault | DeviceBack | VehicleLoaded | VehicleRejected | VinSent | Tick)
+
+
+# -- actions ------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Selection:
+    """What decided a bolt's selection, kept with its record."""
+
+    bolt: str
+    pset: int | None
+    point_mm: tuple[float, float, float]
+    tilt_deg: float
+    distance_mm: float
+    exposure_t: float
+    decided_t: float
+    evidence: Any = None
+
+
+@dataclass(frozen=True)
+class SendParams:
+    bolt: str
+    selection: Selection
+
+
+@dataclass(frozen=True)
+class EnableTool:
+    bolt: str
+
+
+@dataclass(frozen=True)
+class DisableTool:
+    reason: str
+    bolt: str | None = None
+
+
+@dataclass(frozen=True)
+class SendVin:
+    vin: str
+
+
+@dataclass(frozen=True)
+class LoadVehicle:
+    """Open (``reopen``: reopen a closed one, a rework) the vehicle at height."""
+
+    model_code: int
+    vin: str
+    reopen: bool = False
+
+
+@dataclass(frozen=True)
+class CloseVehicle:
+    vin: str
+
+
+@dataclass(frozen=True)
+class Record:
+    """Store ``result`` for ``bolt`` of ``vin``, then acknowledge it to the controller."""
+
+    vin: str
+    bolt: str
+    result: Any
+    selection: Selection | None
+    late: bool = False
+
+
+@dataclass(frozen=True)
+class Acknowledge:
+    """Tell the controller a result no bolt owns may be forgotten."""
+
+    result: Any
+
+
+@dataclass(frozen=True)
+class Publish:
+    event: StationEvent
+
+
+Action = (SendParams | EnableTool | DisableTool | SendVin | LoadVehicle | CloseVehicle | Record
+          | Acknowledge | Publish)
+
+
+@dataclass
+class StationCore:
+    """One station's rules.  ``rework``: a vehicle whose VIN was closed comes back -> reopen it
+    (its history kept) rather than a named fault that clears when the lift lowers."""
+
+    params: MatchParams = field(default_factory=MatchParams)
+    leave_frames: int = 3
+    rework: bool = True
+    late_result_s: float = LATE_RESULT_S
+    state: State = State.STARTING
+    reason: str = "starting"
+    bolt: str | None = None
+    matcher: BoltMatcher | None = None
+    vin: str | None = None
+    model: str | None = None
+    faults: dict[str, tuple[str, str]] = field(default_factory=dict)  # device -> kind, reason
+    tool_on: bool = False
+    _specs: dict[str, BoltSpec] = field(default_factory=dict, repr=False)
+    _lift: LiftRead | None = field(default=None, repr=False)
+    _loading: bool = field(default=False, repr=False)
+    _selection: Selection | None = field(default=None, repr=False)
+    _acked_at: float | None = field(default=None, repr=False)
+    _away: int = field(default=0, repr=False)
+    _enabled: Selection | None = field(default=None, repr=False)  # tool last enabled for
+    _off_at: float | None = field(default=None, repr=False)
+    _recorded: set[int] = field(default_factory=set, repr=False)
+    _wrench_epoch: int = field(default=0, repr=False)
+    _wrench_reconnects: int | None = field(default=None, repr=False)
+    _vin_for: tuple[str, int] | None = field(default=None, repr=False)
+    _vin_pending: bool = field(default=False, repr=False)
+    _last_refusal: str | None = field(default=None, repr=False)
+
+    # -- the one entry point ---------------------------------------------------------------
+    def feed(self, ev: Event) -> list[Action]:
+        """Everything that happened goes in here; what to do comes out, in order."""
+        before = (self.state, self.reason)
+        handler = getattr(self, "_on_" + type(ev).__name__)
+        acts: list[Action] = handler(ev)
+        acts += self._vin_due()
+        if (self.state, self.reason) != before:  # first: follow-ups may change it again
+            acts.insert(0, Publish(StateChanged(self.state.value, self.reason, t=ev.t)))
+        return acts
+
+    @property
+    def selection(self) -> Selection | None:
+        return self._selection
+
+    def allowed(self) -> tuple[str, ...]:
+        """The bolts the sequence allows now (not done, not skipped, not blocked)."""
+        m = self.matcher
+        if m is None:
+            return ()
+        return tuple(b for b in m.bolts if b not in m.done and b not in m.skipped
+                     and m.why_blocked(b) is None)
+
+    # -- handlers --------------------------------------------------------------------------
+    def _on_Started(self, ev: Started) -> list[Action]:  # noqa: N802 - named after the event
+        if self.state is State.STARTING:
+            self._to(State.FAULT if self.faults else State.WAITING_VEHICLE,
+                     self._fault_reason() if self.faults else "waiting for the lift")
+        return []
+
+    def _on_LiftRead(self, ev: LiftRead) -> list[Action]:  # noqa: N802
+        acts: list[Action] = []
+        self._lift = ev
+        if LIFT in self.faults:
+            acts += self._back(ev.t, LIFT)
+        if VEHICLE in self.faults and not ev.at_height:
+            acts += self._back(ev.t, VEHICLE)   # a vehicle fault lasts while that vehicle is up
+        if self.vin is not None and not ev.at_height:
+            acts += self._drop(ev.t, State.WAITING_VEHICLE, ev.why)
+            acts.append(CloseVehicle(self.vin))
+            self._forget_vehicle()
+        if self.state in (State.STARTING, State.FAULT):
+            return acts
+        if not ev.ready:
+            if self.state in ON_A_BOLT or self.state is State.TRACKING:
+                acts += self._drop(ev.t, State.WAITING_VEHICLE, ev.why)
+            else:
+                self._to(State.WAITING_VEHICLE, ev.why)
+            return acts
+        if self.vin is None:
+            if not self._loading:
+                self._loading = True
+                vin = ev.vin or f"SEQ-{int(ev.t)}"
+                acts.append(LoadVehicle(ev.model_code, vin))
+                self._to(State.WAITING_VEHICLE, f"loading vehicle {vin}")
+            return acts
+        if self.state is State.WAITING_VEHICLE:
+            self._to(State.TRACKING, "tracking the wrench")
+        return acts
+
+    def _on_VehicleLoaded(self, ev: VehicleLoaded) -> list[Action]:  # noqa: N802
+        self._loading = False
+        self.vin, self.model = ev.vin, ev.model
+        self._specs = dict(ev.bolts)
+        self._recorded = set()
+        self.matcher = BoltMatcher(
+            {k: np.asarray(b.position, dtype=np.float64) for k, b in ev.bolts.items()},
+            self.params, set(ev.done),
+            rules={k: BoltRule(b.order, b.batch) for k, b in ev.bolts.items()})
+        if self.state is State.WAITING_VEHICLE and self._lift is not None and self._lift.ready:
+            self._to(State.TRACKING, "tracking the wrench")
+        return []
+
+    def _on_VehicleRejected(self, ev: VehicleRejected) -> list[Action]:  # noqa: N802
+        if ev.closed and self.rework and ev.vin is not None and self._lift is not None:
+            return [Publish(Notice(f"VIN {ev.vin} already closed: reopened as a rework "
+                                   "(its records kept)", t=ev.t)),
+                    LoadVehicle(self._lift.model_code, ev.vin, reopen=True)]
+        self._loading = False
+        why = ev.reason
+        if ev.closed:
+            why = f"VIN {ev.vin} already closed: rework needs the vehicle reopened " \
+                  f"({ev.reason}); lower the lift to clear"
+        return self._fault(ev.t, VEHICLE, "rejected", why)
+
+    def _on_LocalizedIn(self, ev: LocalizedIn) -> list[Action]:  # noqa: N802
+        if self.state not in LOCALIZING or self.matcher is None:
+            return []
+        age = ev.t - ev.exposure_t
+        m = self.matcher.update(np.asarray(ev.point_mm), age) if ev.point_mm is not None \
+            else self.matcher.refuse(ev.reason or "no localization")
+        acts: list[Action] = [Publish(Localized(
+            ev.point_mm, ev.tilt_deg if ev.point_mm is not None else None, m.reason,
+            m.candidate, m.distance_mm, age * 1e3, self.allowed(), t=ev.t))]
+        if self.state is State.TRACKING:
+            return acts + self._track(ev, m)
+        on_bolt = m.candidate == self.bolt and age <= self.params.max_age_s
+        if on_bolt:
+            self._away = 0
+            if self.state is State.BOLT_SELECTED and self._acked_at is not None \
+                    and ev.exposure_t > self._acked_at and self.bolt is not None:
+                self._to(State.TIGHTENING, f"tightening bolt {self.bolt}")
+                self.tool_on, self._enabled, self._off_at = True, self._selection, None
+                acts.append(EnableTool(self.bolt))
+            return acts
+        self._away += 1
+        why = m.reason or f"nearest {m.candidate}"
+        if self.tool_on:
+            acts += self._tool_off(ev.t, f"wrench not confirmed on bolt {self.bolt} ({why})")
+            self._to(State.BOLT_SELECTED, f"bolt {self.bolt} selected; wrench not confirmed")
+        if self._away >= self.leave_frames:
+            acts += self._drop(ev.t, State.TRACKING, f"wrench left bolt {self.bolt} ({why})")
+        return acts
+
+    def _track(self, ev: LocalizedIn, m: Match) -> list[Action]:
+        assert self.matcher is not None  # noqa: S101 - tracking has a vehicle
+        if m.bolt is None:
+            key = _DIGITS.sub("#", m.reason or "")   # "stale (812 ms)" and "(790 ms)": one
+            if m.reason and key != self._last_refusal:
+                self._last_refusal = key
+                return [Publish(Refused(m.reason, m.candidate, t=ev.t))]
+            return []
+        ready = self._lift is not None and self._lift.ready
+        if self.faults or not ready or self.vin is None \
+                or self._vin_for != (self.vin, self._wrench_epoch) or ev.point_mm is None:
+            self.matcher.reset()   # never reached: TRACKING implies all of these; belt and braces
+            return []
+        spec = self._specs[m.bolt]
+        sel = Selection(m.bolt, spec.pset, ev.point_mm, ev.tilt_deg, float(m.distance_mm or 0.0),
+                        ev.exposure_t, ev.t, ev.evidence)
+        self.bolt, self._selection, self._acked_at, self._away = m.bolt, sel, None, 0
+        self._last_refusal = None
+        self.matcher.reset()
+        self._to(State.BOLT_SELECTED, f"bolt {m.bolt} selected")
+        return [Publish(BoltSelected(m.bolt, spec.pset, ev.point_mm, sel.distance_mm,
+                                     ev.tilt_deg, t=ev.t)),
+                SendParams(m.bolt, sel)]
+
+    def _on_ParamsAcked(self, ev: ParamsAcked) -> list[Action]:  # noqa: N802
+        if self.state is State.BOLT_SELECTED and ev.bolt == self.bolt and self._acked_at is None:
+            self._acked_at = ev.t   # the tool waits for a frame exposed after this
+            self.reason = f"bolt {ev.bolt} acknowledged; confirming the wrench is on it"
+            return []
+        return [DisableTool(f"late acknowledgement for {ev.bolt} ignored", ev.bolt),
+                Publish(Notice(f"late acknowledgement for {ev.bolt} ignored", t=ev.t))]
+
+    def _on_ParamsRefused(self, ev: ParamsRefused) -> list[Action]:  # noqa: N802
+        """The bolt is skipped for this vehicle (reported missing) so that the same refused
+        parameters are not sent again and again; the controller is in fault until it answers."""
+        why = f"controller refused its parameters ({ev.reason})"
+        acts: list[Action] = [Publish(ParamsRefusedEvent(ev.bolt, ev.reason, t=ev.t))]
+        if self.matcher is not None and ev.bolt in self.matcher.bolts:
+            self.matcher.skipped[ev.bolt] = why
+            acts.append(Publish(BoltSkipped(ev.bolt, why, t=ev.t)))
+        return acts + self._fault(ev.t, WRENCH, "refused",
+                                  f"controller refused the parameters for {ev.bolt}: "
+                                  f"{ev.reason}")
+
+    def _on_ResultIn(self, ev: ResultIn) -> list[Action]:  # noqa: N802
+        r = ev.result
+        tid = int(r.tightening_id)
+        en = self._enabled
+        ours = en is not None and (en.pset is None or int(r.pset) == en.pset)
+        if self.vin is not None and tid in self._recorded:
+            return [Acknowledge(r)]   # sent again by the controller: stored once already
+        if ours and en is not None and self.vin is not None and (
+                self.tool_on or (self._off_at is not None
+                                 and ev.t - self._off_at < self.late_result_s)):
+            late = not self.tool_on
+            acts: list[Action] = []
+            if self.tool_on:
+                acts += self._tool_off(ev.t, f"bolt {en.bolt} tightened")
+            acts.append(Record(self.vin, en.bolt, r, en, late))
+            if late:
+                acts.append(Publish(Notice(f"result for {en.bolt} outside a tightening: "
+                                           "recorded, not matched", t=ev.t)))
+            self._recorded.add(tid)
+            self._enabled = None
+            if bool(r.ok) and self.matcher is not None:
+                self.matcher.mark_done(en.bolt)
+            if self.bolt == en.bolt:
+                self.bolt, self._selection, self._acked_at, self._away = None, None, None, 0
+                if self.state in ON_A_BOLT:
+                    self._to(State.TRACKING,
+                             f"bolt {en.bolt} {'OK' if r.ok else 'NOK'}; tracking")
+            return acts
+        return [Acknowledge(r),
+                Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
+                Publish(Notice(f"result {tid} (pset {r.pset}) outside any tightening: not "
+                               "attributable to a bolt, acknowledged", "warning", t=ev.t))]
+
+    def _on_DeviceFault(self, ev: DeviceFault) -> list[Action]:  # noqa: N802
+        if ev.device == WRENCH:
+            self._vin_pending = False
+        return self._fault(ev.t, ev.device, ev.kind, ev.reason)
+
+    def _on_DeviceBack(self, ev: DeviceBack) -> list[Action]:  # noqa: N802
+        if ev.device == WRENCH and ev.reconnects is not None \
+                and ev.reconnects != self._wrench_reconnects:
+            if self._wrench_reconnects is not None:
+                self._wrench_epoch += 1   # a reconnected controller may have lost the VIN
+            self._wrench_reconnects = ev.reconnects
+        acts: list[Action] = []
+        if ev.device == WRENCH and WRENCH in self.faults:
+            # the DisableTool sent at the fault may never have arrived: off, whatever it did
+            acts.append(DisableTool("controller back: the tool stays off until a bolt is "
+                                    "confirmed"))
+        return acts + self._back(ev.t, ev.device)
+
+    def _on_VinSent(self, ev: VinSent) -> list[Action]:  # noqa: N802
+        self._vin_pending = False
+        if ev.vin == self.vin:
+            self._vin_for = (ev.vin, self._wrench_epoch)
+        return []
+
+    def _on_Tick(self, ev: Tick) -> list[Action]:  # noqa: N802
+        if self._off_at is not None and ev.t - self._off_at >= self.late_result_s:
+            self._enabled, self._off_at = None, None
+        return []
+
+    # -- rules shared by the handlers ------------------------------------------------------
+    def _vin_due(self) -> list[Action]:
+        """The controller tags its results with the VIN: sent once per vehicle and again after
+        the controller reconnected (a power cycle forgets it)."""
+        if self.vin is None or WRENCH in self.faults or self._vin_pending:
+            return []
+        if self._vin_for == (self.vin, self._wrench_epoch):
+            return []
+        self._vin_pending = True
+        return [SendVin(self.vin)]
+
+    def _fault(self, t: float, device: str, kind: str, reason: str) -> list[Action]:
+        acts: list[Action] = []
+        if self.faults.get(device) != (kind, reason):
+            acts.append(Publish(DeviceHealth(device, False, kind, reason, t=t)))
+        self.faults[device] = (kind, reason)
+        acts += self._drop(t, State.FAULT, self._fault_reason())
+        return acts
+
+    def _back(self, t: float, device: str) -> list[Action]:
+        if device not in self.faults:
+            return []
+        del self.faults[device]
+        acts: list[Action] = [Publish(DeviceHealth(device, True, t=t))]
+        if self.state is State.FAULT:
+            if self.faults:
+                self.reason = self._fault_reason()
+            else:
+                self._to(State.WAITING_VEHICLE, "recovered; waiting for the lift")
+        return acts
+
+    def _fault_reason(self) -> str:
+        return "; ".join(f"{d}: {r}" for d, (_, r) in self.faults.items())
+
+    def _tool_off(self, t: float, reason: str) -> list[Action]:
+        was = self.tool_on
+        self.tool_on = False
+        if was:
+            self._off_at = t
+        return [DisableTool(reason, self.bolt)]
+
+    def _drop(self, t: float, state: State, reason: str) -> list[Action]:
+        """Leave a bolt: the tool goes off first, whatever happens next."""
+        acts: list[Action] = []
+        if self.state in ON_A_BOLT or self.tool_on:
+            acts += self._tool_off(t, reason)
+        self.bolt, self._selection, self._acked_at, self._away = None, None, None, 0
+        if self.matcher is not None:
+            self.matcher.reset()
+        self._to(state, reason)
+        return acts
+
+    def _forget_vehicle(self) -> None:
+        self.vin, self.model, self.matcher, self._specs = None, None, None, {}
+        self._loading, self._enabled, self._off_at = False, None, None
+        self._vin_for, self._vin_pending, self._last_refusal = None, False, None
+
+    def _to(self, state: State, reason: str) -> None:
+        """The one place the state changes: with any device in fault the state is FAULT, so no
+        rule elsewhere can leave it by accident."""
+        if self.faults:
+            state, reason = State.FAULT, self._fault_reason()
+        self.state, self.reason = state, reason

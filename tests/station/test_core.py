@@ -1,0 +1,450 @@
+"""The pure station core: every rule on fakes, no device, no clock.
+
+A small driver plays the daemon (answers vehicle loads and VIN sends at once) and keeps the
+truth (where the wrench is, what the lift says, which devices are down, what the tool is);
+hypothesis feeds it hundreds of random event sequences and the safety invariants are checked
+after every event."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from stationd.station.core import (
+    Acknowledge,
+    BoltSpec,
+    CloseVehicle,
+    DeviceBack,
+    DeviceFault,
+    DisableTool,
+    EnableTool,
+    LiftRead,
+    LoadVehicle,
+    LocalizedIn,
+    ParamsAcked,
+    ParamsRefused,
+    Publish,
+    Record,
+    ResultIn,
+    SendParams,
+    SendVin,
+    Started,
+    State,
+    StationCore,
+    Tick,
+    VehicleLoaded,
+    VehicleRejected,
+    VinSent,
+)
+from stationd.station.events import DeviceHealth, ResultUnattributed, StateChanged
+from stationd.station.matching import MatchParams
+
+BOLTS = {"B1": BoltSpec((0.0, 0.0, 0.0), 1), "B2": BoltSpec((60.0, 0.0, 0.0), 2),
+         "B3": BoltSpec((0.0, 60.0, 5.0), 1)}
+PARAMS = MatchParams(tolerance_mm=8.0, margin_mm=6.0, stable_frames=2, max_age_s=0.5)
+
+
+def result(tid: int, pset: int, ok: bool = True) -> Any:
+    return SimpleNamespace(tightening_id=tid, pset=pset, ok=ok)
+
+
+@dataclass
+class Driver:
+    """Plays the daemon around a core and checks the invariants on every answer."""
+
+    core: StationCore = field(default_factory=lambda: StationCore(PARAMS, leave_frames=2))
+    t: float = 1000.0
+    ready: bool = False
+    at_height: bool = False
+    down: set[str] = field(default_factory=set)
+    where: str | None = None          # the bolt the wrench is really on (None: none)
+    fresh: bool = True                # the last localization's frames were fresh
+    tool: bool = False
+    tool_bolt: str | None = None
+    pending: str | None = None        # parameters sent, not yet answered
+    acked: dict[str, float] = field(default_factory=dict)  # bolt -> ack instant
+    sends: list[str] = field(default_factory=list)
+    records: dict[int, str] = field(default_factory=dict)
+    closed_vins: set[str] = field(default_factory=set)
+    vin_seq: int = 0
+    log: list[Any] = field(default_factory=list)
+
+    def feed(self, ev: Any) -> list[Any]:
+        before = self.core.state
+        acts = self.core.feed(ev)
+        self.log.append((ev, acts))
+        out = list(acts)
+        for a in acts:
+            self.check(a, before, ev)
+            if isinstance(a, LoadVehicle):
+                vin = a.vin
+                if vin in self.closed_vins and not a.reopen:
+                    out += self.feed(VehicleRejected(self.t, vin, "closed", closed=True))
+                else:
+                    self.closed_vins.discard(vin)
+                    out += self.feed(VehicleLoaded(self.t, vin, "M", BOLTS,
+                                                   rework=a.reopen))
+            elif isinstance(a, SendVin):
+                out += self.feed(VinSent(self.t, a.vin))
+            elif isinstance(a, CloseVehicle):
+                self.closed_vins.add(a.vin)
+        return out
+
+    def check(self, a: Any, before: State, ev: Any) -> None:
+        c = self.core
+        if isinstance(a, SendParams):
+            assert isinstance(ev, LocalizedIn) and before is State.TRACKING
+            assert self.ready and not self.down and self.fresh
+            assert a.bolt == self.where, (a.bolt, self.where)   # only where the wrench is
+            assert ev.t - ev.exposure_t <= PARAMS.max_age_s
+            self.pending = a.bolt   # a send before the last one's answer supersedes it
+            self.sends.append(a.bolt)
+        elif isinstance(a, EnableTool):
+            assert isinstance(ev, LocalizedIn), ev        # only a localization enables
+            assert a.bolt == self.where == c.bolt and self.fresh
+            assert a.bolt in self.acked and ev.exposure_t > self.acked[a.bolt]
+            assert self.ready and not self.down
+            self.tool, self.tool_bolt = True, a.bolt
+        elif isinstance(a, DisableTool):
+            self.tool = False
+        elif isinstance(a, Record):
+            tid = int(a.result.tightening_id)
+            assert tid not in self.records, "a result recorded twice"
+            assert a.bolt == self.tool_bolt, (a.bolt, self.tool_bolt)
+            self.records[tid] = a.bolt
+
+    # -- the operations hypothesis draws ------------------------------------------------------
+    def step(self, op: tuple[Any, ...]) -> None:
+        kind = op[0]
+        self.t += op[1]
+        if kind == "lift":
+            self.ready, self.at_height = op[2] and op[3], op[3]
+            if op[3] and op[4] is not None:
+                self.vin_seq += 1
+            if "lift" not in self.down:
+                self.feed(LiftRead(self.t, self.ready, self.at_height, 7, op[4]))
+        elif kind == "loc":
+            for k in range(op[5] if len(op) > 5 else 1):   # the wrench stays a few frames
+                self.t += 0.1 * bool(k)
+                self.loc(op[2], op[3], op[4])
+        elif kind == "ack" and self.pending is not None:
+            bolt, self.pending = self.pending, None
+            if op[2]:
+                self.acked[bolt] = self.t
+                self.feed(ParamsAcked(self.t, bolt))
+            else:
+                self.feed(ParamsRefused(self.t, bolt, "pset unknown"))
+        elif kind == "result":
+            tid = op[3] if op[4] else 100 + len(self.log)
+            pset = BOLTS[self.tool_bolt].pset if self.tool_bolt and op[2] else 9
+            self.feed(ResultIn(self.t, result(tid, pset or 0, op[5])))
+        elif kind == "fault":
+            self.down.add(op[2])
+            self.feed(DeviceFault(self.t, op[2], "down", f"{op[2]} gone"))
+            assert self.core.state is State.FAULT and not self.tool
+        elif kind == "back" and self.down:
+            device = sorted(self.down)[op[3] % len(self.down)]
+            self.down.discard(device)
+            self.feed(DeviceBack(self.t, device, reconnects=op[3]))
+        elif kind == "tick":
+            self.feed(Tick(self.t))
+        if self.down:
+            assert self.core.state is State.FAULT
+
+    def loc(self, target: int, age: float, noise: float) -> None:
+        """The wrench moves to bolt ``target`` (0: none, 4: between two bolts) and is seen
+        by frames exposed ``age`` s ago."""
+        names = list(BOLTS)
+        if target == 5:      # stays where it is
+            target = 0 if self.where is None else names.index(self.where) + 1
+        if target == 0:
+            p, self.where = None, None
+        elif target == 4:
+            p, self.where = (30.0, 0.0, 0.0), None
+        else:
+            self.where = names[target - 1]
+            pos = BOLTS[self.where].position
+            p = (pos[0] + noise, pos[1] - noise, pos[2])
+        self.fresh = age <= PARAMS.max_age_s
+        had = self.tool
+        self.feed(LocalizedIn(self.t, self.t - age, p, None if p else "marker not found"))
+        if had and not (self.fresh and self.where == self.tool_bolt):
+            assert not self.tool, "tool still on a localization after leaving the bolt"
+        if self.tool:
+            assert self.where == self.tool_bolt and self.fresh
+
+
+KINDS = ["lift"] * 2 + ["loc"] * 8 + ["ack"] * 2 + ["result"] * 2 + ["fault", "back", "tick"]
+RAW = st.tuples(st.sampled_from(KINDS), st.sampled_from([0.02, 0.05, 0.1, 0.2, 0.3]),
+                st.sampled_from(range(256)), st.sampled_from([-3.0, -1.0, 0.0, 0.5, 2.0, 4.0]),
+                st.sampled_from([0.05, 0.05, 0.1, 0.3, 0.6, 2.0]), st.sampled_from([1, 2, 3, 4]))
+
+
+def decode(raw: tuple[Any, ...]) -> tuple[Any, ...]:
+    """A drawn tuple as one of :meth:`Driver.step`'s operations (biased towards a working
+    station, so that selections, enables and results happen often)."""
+    kind, dt, n, noise, age, rep = raw
+    if kind == "lift":
+        return ("lift", dt, n % 4 != 0, n % 8 != 1, ["VIN1", "VIN1", "VIN2", None][n // 64])
+    if kind == "loc":
+        return ("loc", dt, [0, 1, 2, 3, 4, 5, 5, 5][n % 8], age, noise, rep)
+    if kind == "ack":
+        return ("ack", dt, n % 5 != 0)
+    if kind == "result":
+        return ("result", dt * (1 + 20 * (n % 3 == 0)), n % 4 != 0, 1 + n % 3, n % 5 == 0,
+                n % 7 != 0)
+    if kind == "fault":
+        return ("fault", dt, ["lift", "wrench", "pair1"][n % 3])
+    if kind == "back":
+        return ("back", dt, "", n % 3)
+    return ("tick", dt * 20)
+
+
+OPS = RAW.map(decode)
+
+
+@settings(max_examples=300, derandomize=True, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(OPS, min_size=5, max_size=80))
+def test_random_event_sequences_keep_the_safety_invariants(ops):
+    d = Driver()
+    d.feed(Started(d.t))
+    d.step(("lift", 0.1, True, True, "VIN1"))
+    for op in ops:
+        d.step(op)
+
+
+def test_seeded_random_walks_keep_the_safety_invariants_and_get_work_done():
+    """Hundreds of longer walks with a realistic mix (numpy, seeded): the invariants hold and
+    the walks really select, enable and record (else the invariants were checked on nothing)."""
+    rng = np.random.default_rng(12)
+    kinds = ["lift", "loc", "ack", "result", "fault", "back", "tick"]
+    weights = np.array([0.04, 0.6, 0.15, 0.1, 0.02, 0.06, 0.03])
+    totals: dict[str, int] = {"send": 0, "enable": 0, "record": 0}
+    for _ in range(300):
+        d = Driver()
+        d.feed(Started(d.t))
+        d.step(("lift", 0.1, True, True, "VIN1"))
+        for _ in range(60):
+            raw = (str(rng.choice(kinds, p=weights)), float(rng.choice([0.02, 0.1, 0.2])),
+                   int(rng.integers(256)), float(rng.normal(0, 1.5)),
+                   float(rng.choice([0.05, 0.05, 0.1, 0.3, 0.6])), int(rng.integers(1, 5)))
+            d.step(decode(raw))
+        totals["send"] += len(d.sends)
+        totals["record"] += len(d.records)
+        totals["enable"] += sum(isinstance(a, EnableTool) for _, acts in d.log for a in acts)
+    assert min(totals.values()) > 30, totals
+
+
+@settings(max_examples=150, derandomize=True, deadline=None)
+@given(st.lists(st.tuples(st.integers(1, 3), st.floats(0.0, 0.2), st.floats(-3, 3)),
+                min_size=1, max_size=40), st.integers(1, 3))
+def test_a_busy_operator_gets_bolts_tightened_and_every_result_recorded(places, shots):
+    """Mostly good conditions: the invariants hold and results land on their bolts."""
+    d = Driver()
+    d.feed(Started(d.t))
+    d.step(("lift", 0.1, True, True, "VINX"))
+    for target, age, noise in places:
+        for _ in range(4):
+            d.step(("loc", 0.1, target, age, noise))
+            d.step(("ack", 0.01, True))
+        for _ in range(shots):
+            d.step(("result", 0.05, True, 1, False, True))
+    assert set(d.records.values()) <= set(d.sends)
+
+
+# -- the rules one by one -----------------------------------------------------------------------
+def _ready(vin: str = "VIN1") -> Driver:
+    d = Driver()
+    d.feed(Started(d.t))
+    d.step(("lift", 0.1, True, True, vin))
+    assert d.core.state is State.TRACKING and d.core.vin == vin
+    return d
+
+
+def _on(d: Driver, bolt: int, n: int = 2, age: float = 0.05) -> None:
+    for _ in range(n):
+        d.step(("loc", 0.1, bolt, age, 0.3))
+
+
+def _kinds(acts: list[Any]) -> list[str]:
+    return [type(a).__name__ for a in acts if not isinstance(a, Publish)]
+
+
+def test_the_tool_waits_for_a_frame_exposed_after_the_acknowledgement():
+    d = _ready()
+    _on(d, 1)
+    assert d.sends == ["B1"] and d.core.state is State.BOLT_SELECTED
+    d.step(("ack", 0.2, True))
+    # frames exposed before the ack (older than the 0.2 s since): no tool
+    acts = d.feed(LocalizedIn(d.t + 0.01, d.t - 0.1, (0.2, 0.1, 0.0)))
+    assert "EnableTool" not in _kinds(acts) and not d.tool
+    acts = d.feed(LocalizedIn(d.t + 0.05, d.t + 0.02, (0.2, 0.1, 0.0)))
+    assert _kinds(acts) == ["EnableTool"] and d.core.state is State.TIGHTENING
+
+
+def test_the_tool_goes_off_at_the_first_frame_off_the_bolt_and_comes_back_without_a_resend():
+    d = _ready()
+    _on(d, 1)
+    d.step(("ack", 0.01, True))
+    _on(d, 1, 1)
+    assert d.tool
+    d.step(("loc", 0.1, 0, 0.05, 0.0))            # one frame without the marker
+    assert not d.tool and d.core.state is State.BOLT_SELECTED
+    _on(d, 1, 1)                                   # back on it, same parameters
+    assert d.tool and d.sends == ["B1"]
+    d.step(("loc", 0.1, 1, 0.9, 0.0))              # a stale frame: off again
+    assert not d.tool
+    d.step(("loc", 0.1, 2, 0.05, 0.0))
+    assert d.core.state is State.TRACKING and d.core.bolt is None   # left after 2 frames
+
+
+def test_a_result_is_recorded_to_its_bolt_and_the_bolt_is_done():
+    d = _ready()
+    _on(d, 2)
+    d.step(("ack", 0.01, True))
+    _on(d, 2, 1)
+    acts = d.feed(ResultIn(d.t, result(5, 2)))
+    assert _kinds(acts) == ["DisableTool", "Record"] and d.records == {5: "B2"}
+    assert d.core.state is State.TRACKING
+    _on(d, 2, 4)
+    assert d.sends == ["B2"]                       # done: never sent again
+    assert _kinds(d.feed(ResultIn(d.t, result(5, 2)))) == ["Acknowledge"]  # resent: once
+
+
+def test_a_late_result_goes_to_the_bolt_the_tool_was_on_within_the_window_only():
+    d = _ready()
+    _on(d, 1)
+    d.step(("ack", 0.01, True))
+    _on(d, 1, 1)
+    _on(d, 3, 2)                                   # left B1, now near B3 (same pset)
+    assert not d.tool and d.core.bolt is None
+    acts = d.feed(ResultIn(d.t + 1.0, result(8, 1)))
+    assert next(a for a in acts if isinstance(a, Record)).late
+    assert d.records == {8: "B1"}
+    acts = d.feed(ResultIn(d.t + 1.5, result(9, 1)))   # a second one: nobody's
+    assert _kinds(acts) == ["Acknowledge"]
+    assert any(isinstance(a, Publish) and isinstance(a.event, ResultUnattributed)
+               for a in acts)
+
+
+def test_a_result_after_the_window_is_not_attributed():
+    d = _ready()
+    _on(d, 1)
+    d.step(("ack", 0.01, True))
+    _on(d, 1, 1)
+    d.step(("lift", 0.1, False, True, "VIN1"))     # lift moving: tool off
+    assert not d.tool
+    assert _kinds(d.feed(ResultIn(d.t + 6.0, result(3, 1)))) == ["Acknowledge"]
+
+
+def test_faults_are_per_device_and_the_station_recovers_when_all_are_back():
+    d = _ready()
+    d.step(("fault", 0.1, "lift"))
+    d.step(("fault", 0.1, "pair1"))
+    assert d.core.reason.startswith("lift: ") and "pair1: " in d.core.reason
+    d.down.discard("lift")
+    d.step(("lift", 0.1, True, True, "VIN1"))       # the lift answers: one fault left
+    assert d.core.state is State.FAULT and d.core.reason.startswith("pair1:")
+    d.step(("back", 0.1, "pair1", 0))
+    assert d.core.state is State.WAITING_VEHICLE
+    d.step(("lift", 0.1, True, True, "VIN1"))
+    assert d.core.state is State.TRACKING
+    health = [a.event for _, acts in d.log for a in acts
+              if isinstance(a, Publish) and isinstance(a.event, DeviceHealth)]
+    assert [(h.device, h.ok) for h in health] == [("lift", False), ("pair1", False),
+                                                  ("lift", True), ("pair1", True)]
+    states = [a.event.state for _, acts in d.log for a in acts
+              if isinstance(a, Publish) and isinstance(a.event, StateChanged)]
+    assert states[-1] == "tracking"
+
+
+def test_the_vin_is_sent_once_per_vehicle_and_again_after_a_controller_reconnect():
+    d = _ready()
+    vins = lambda: [a.vin for _, acts in d.log for a in acts if isinstance(a, SendVin)]  # noqa: E731
+    assert vins() == ["VIN1"]
+    d.feed(DeviceBack(d.t, "wrench", reconnects=0))   # the first count seen: no resend
+    assert vins() == ["VIN1"]
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))   # it reconnected behind our back
+    assert vins() == ["VIN1", "VIN1"]
+    d.step(("fault", 0.1, "wrench"))
+    assert vins() == ["VIN1", "VIN1"]                 # not while it is down
+    acts = d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    assert _kinds(acts)[0] == "DisableTool"           # whatever the fault left it in
+    d.down.discard("wrench")
+
+
+def test_parameters_wait_for_the_vin():
+    d = Driver()
+    d.feed(Started(d.t))
+    d.core.feed(LiftRead(d.t, True, True, 7, "VIN9"))   # nobody answers the loads here
+    d.core.feed(VehicleLoaded(d.t, "VIN9", "M", BOLTS))
+    assert d.core.state is State.TRACKING
+    for k in range(5):
+        acts = d.core.feed(LocalizedIn(d.t + k, d.t + k, (0.0, 0.0, 0.0)))
+        assert not any(isinstance(a, SendParams) for a in acts)
+
+
+def test_a_refusal_skips_the_bolt_and_faults_the_controller_until_it_is_back():
+    d = _ready()
+    _on(d, 1)
+    d.step(("ack", 0.01, False))
+    assert d.core.state is State.FAULT and "refused the parameters for B1" in d.core.reason
+    d.down.add("wrench")
+    d.step(("back", 0.1, "wrench", 0))
+    d.step(("lift", 0.1, True, True, "VIN1"))
+    _on(d, 1, 5)
+    assert d.sends == ["B1"]                         # skipped: not sent again
+
+
+def test_a_closed_vin_back_is_reopened_as_a_rework_or_a_named_fault():
+    d = _ready("VINR")
+    d.step(("lift", 0.1, False, False, "VINR"))       # lowered: closed
+    assert "VINR" in d.closed_vins and d.core.vin is None
+    d.step(("lift", 0.1, True, True, "VINR"))
+    assert d.core.vin == "VINR" and d.core.state is State.TRACKING
+    loads = [a for _, acts in d.log for a in acts if isinstance(a, LoadVehicle)]
+    assert loads[-1].reopen
+
+    d2 = Driver(core=StationCore(PARAMS, rework=False))
+    d2.closed_vins.add("VINR")
+    d2.feed(Started(d2.t))
+    d2.step(("lift", 0.1, True, True, "VINR"))
+    assert d2.core.state is State.FAULT and "VIN VINR already closed" in d2.core.reason
+    d2.step(("lift", 0.1, False, False, None))        # lowering clears it
+    assert d2.core.state is State.WAITING_VEHICLE
+
+
+def test_a_late_acknowledgement_keeps_the_tool_off():
+    d = _ready()
+    _on(d, 1)
+    _on(d, 0, 2)                                      # gone before the ack
+    acts = d.feed(ParamsAcked(d.t, "B1"))
+    assert _kinds(acts) == ["DisableTool"]
+    _on(d, 1, 1)
+    assert not d.tool
+
+
+def test_nothing_is_sent_while_the_lift_is_not_ready_or_on_stale_frames():
+    d = Driver()
+    d.feed(Started(d.t))
+    _on(d, 1, 5)
+    d.step(("lift", 0.1, True, True, "VIN1"))
+    _on(d, 1, 5, age=0.6)
+    assert d.sends == []
+    refusals = [a.event.reason for _, acts in d.log for a in acts
+                if isinstance(a, Publish) and type(a.event).__name__ == "Refused"]
+    assert len(refusals) == 1 and "stale" in refusals[0]   # once per change, not per frame
+
+
+def test_unattributed_results_without_a_vehicle_are_acknowledged():
+    d = Driver()
+    d.feed(Started(d.t))
+    acts = d.feed(ResultIn(d.t, result(1, 1)))
+    assert any(isinstance(a, Acknowledge) for a in acts)
+    assert not any(isinstance(a, Record) for a in acts)

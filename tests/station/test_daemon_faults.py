@@ -1,0 +1,183 @@
+"""Exit versus fault, with the daemon as systemd runs it (``station_proc.py``: the real
+``serve`` with its signals, the simulated world for the ``sim://`` cameras), its lift PLC and
+controller served from this process over Modbus TCP and Open Protocol on loopback.
+
+Only a station invalid at the very first start exits; everything else is a fault with its
+reason in STATUS=, and the daemon recovers when the device is back."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from drivers.lift.sim import SimulatedPlc
+from drivers.wrench.sim import SimController
+from stationd.station.demo import _sim_psets
+from tests.station.test_run import _recv_until
+
+SIM = Path(__file__).resolve().parents[2] / "config" / "sim"
+PROC = Path(__file__).with_name("station_proc.py")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class Proc:
+    """``station_proc.py`` on a copy of config/sim whose lift and controller are on loopback
+    ports (nothing listening until the test says so); the journal goes to a file."""
+
+    def __init__(self, tmp: Path, lift_port: int, ctl_port: int, edit=None) -> None:
+        for f in SIM.iterdir():
+            shutil.copy(f, tmp)
+        text = (tmp / "station.yaml").read_text()
+        for old, new in (("sim://lift", f"modbus-tcp://127.0.0.1:{lift_port}?timeout=0.5"),
+                         ("sim://wrench", f"openprotocol://127.0.0.1:{ctl_port}"),
+                         ("sqlite:///stationd-sim.db", f"sqlite:///{tmp}/station.db"),
+                         ("max_age_s: 2.0", "max_age_s: 5.0")):
+            assert old in text
+            text = text.replace(old, new)
+        (tmp / "station.yaml").write_text(edit(text) if edit else text)
+        (tmp / "pose").write_text("")
+        self.tmp = tmp
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        self.sock.bind(str(tmp / "notify"))
+        self.log_path = tmp / "daemon.log"
+        self._err = self.log_path.open("w")
+        env = {**os.environ, "NOTIFY_SOCKET": str(tmp / "notify"), "PYTHONUNBUFFERED": "1"}
+        self.p = subprocess.Popen([sys.executable, str(PROC), str(tmp / "station.yaml"),
+                                   str(tmp / "pose")], cwd=tmp, stderr=self._err, env=env)
+
+    def status(self, needle: str, timeout: float = 90) -> list[str]:
+        return list(_recv_until(self.sock, needle, timeout))
+
+    def log(self) -> str:
+        return self.log_path.read_text()
+
+    def wait_log(self, needle: str, timeout: float = 90) -> None:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and needle not in self.log() and self.p.poll() is None:
+            time.sleep(0.1)
+        assert needle in self.log(), f"{needle!r} not in the journal: {self.log()[-3000:]}"
+
+    def stop(self) -> int:
+        self.p.send_signal(signal.SIGTERM)
+        code = self.p.wait(timeout=60)
+        self._err.close()
+        self.sock.close()
+        return code
+
+    def kill(self) -> None:
+        if self.p.poll() is None:
+            self.p.kill()
+            self.p.wait()
+
+
+@pytest.mark.timeout(300)
+def test_devices_down_at_boot_are_faults_then_it_recovers_and_a_closed_vin_is_a_rework(
+        tmp_path):
+    lift_port, ctl_port = _free_port(), _free_port()
+    plc = SimulatedPlc()
+    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
+    d = Proc(tmp_path, lift_port, ctl_port)
+    try:
+        d.status("READY=1")                     # serving, with both devices down
+        d.wait_log("fault: lift")
+        d.wait_log("fault: wrench")
+        assert d.p.poll() is None
+        plc.set_vehicle(1, "REWORKVIN00000001")
+        plc.start_tcp(lift_port)
+        ctl.start()
+        ctl.listen_tcp(port=ctl_port)
+        d.wait_log("lift: back")
+        d.wait_log("wrench: back")
+        plc.raise_lift()
+        d.wait_log("tracking: tracking the wrench")
+        plc.lower_lift()
+        d.wait_log("vehicle REWORKVIN00000001 closed")
+        plc.raise_lift()                        # the same VIN back: a rework, not an exit
+        d.wait_log("VIN REWORKVIN00000001 already closed: reopened as a rework")
+        assert d.log().count("tracking: tracking the wrench") >= 2 or \
+            d.wait_log("tracking: tracking the wrench") is None
+        assert d.p.poll() is None
+        assert d.stop() == 0
+    finally:
+        d.kill()
+        ctl.close()
+        plc.close()
+    assert "Traceback" not in d.log()
+
+
+@pytest.mark.timeout(300)
+def test_sighup_with_a_bad_bolt_table_is_refused_and_with_a_down_device_is_a_fault(tmp_path):
+    lift_port, ctl_port = _free_port(), _free_port()
+    plc = SimulatedPlc()
+    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
+    plc.start_tcp(lift_port)
+    ctl.start()
+    ctl.listen_tcp(port=ctl_port)
+    d = Proc(tmp_path, lift_port, ctl_port)
+    try:
+        d.status("READY=1")
+        d.status("waiting for vehicle")
+        bolts = tmp_path / "bolts.yaml"
+        good = bolts.read_text()
+        assert good.count("    - id: B02\n") == 1
+        bolts.write_text(good.replace("    - id: B02\n", "    - id: B01\n"))  # a duplicate id
+        d.p.send_signal(signal.SIGHUP)
+        d.status("reload refused")
+        assert d.p.poll() is None
+        bolts.write_text(good)
+        station = tmp_path / "station.yaml"
+        station.write_text(station.read_text().replace(f"127.0.0.1:{lift_port}",
+                                                       f"127.0.0.1:{_free_port()}"))
+        d.p.send_signal(signal.SIGHUP)           # valid, but its lift is down: a fault
+        d.wait_log("configuration reloaded")
+        d.status("fault: lift")
+        time.sleep(2.0)
+        assert d.p.poll() is None
+        assert d.stop() == 0
+    finally:
+        d.kill()
+        ctl.close()
+        plc.close()
+    err = d.log()
+    assert "duplicate" in err.lower() and "Traceback" not in err
+
+
+@pytest.mark.timeout(300)
+def test_a_camera_glob_matching_nothing_is_a_fault_not_an_exit(tmp_path):
+    lift_port, ctl_port = _free_port(), _free_port()
+    plc = SimulatedPlc()
+    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
+    plc.start_tcp(lift_port)
+    ctl.start()
+    ctl.listen_tcp(port=ctl_port)
+    nothing = tmp_path / "nothing"
+
+    def cameras(text: str) -> str:
+        return text.replace("'sim://pair1/left'", f"'file://{nothing}/left_*.png'")
+
+    d = Proc(tmp_path, lift_port, ctl_port, edit=cameras)
+    try:
+        ready = d.status("READY=1")                 # serving, and saying why not fully
+        assert any("fault: pair1: " in m and "no files match" in m for m in ready), ready
+        time.sleep(3.0)
+        assert d.p.poll() is None
+        assert d.stop() == 0
+    finally:
+        d.kill()
+        ctl.close()
+        plc.close()
+    assert "Traceback" not in d.log()
+    assert d.log().count("pair1 not opened") == 1    # retried quietly, journaled once

@@ -1,0 +1,56 @@
+"""Idle, the daemon leaves its devices alone: with the lift up but not at working height it
+reads the PLC once per ``lift.poll_ms`` (a real PLC serves an HMI and a line controller too)
+and does not spin a core.  Counted at the simulated PLC's Modbus server."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+
+import pytest
+
+from stationd.station.core import State
+from tests.station.test_faults import _station
+
+
+@pytest.mark.timeout(120)
+def test_idle_station_reads_the_plc_at_most_20_times_a_second(tmp_path):
+    st, world = _station(tmp_path)
+    plc = st.lift.plc
+    served = [0]
+    action = plc._action
+
+    def counting(*args, **kw):
+        served[0] += 1
+        return action(*args, **kw)
+
+    plc._action = counting
+    figures = {}
+
+    async def main():
+        stop = asyncio.Event()
+        task = asyncio.create_task(st.run(stop))
+        try:
+            plc.set_height(400.0)              # up, not at working height
+            for _ in range(100):
+                if st.core.state is State.WAITING_VEHICLE:
+                    break
+                await asyncio.sleep(0.05)
+            assert st.core.state is State.WAITING_VEHICLE, st.core.reason
+            n0, c0, t0 = served[0], time.process_time(), time.monotonic()
+            await asyncio.sleep(3.0)
+            dt = time.monotonic() - t0
+            figures.update(rate=(served[0] - n0) / dt, cpu=(time.process_time() - c0) / dt)
+        finally:
+            stop.set()
+            await task
+
+    try:
+        asyncio.run(main())
+    finally:
+        world.close()
+        st.close()
+    print(f"idle: {figures['rate']:.1f} PLC requests/s, {100 * figures['cpu']:.1f} % of a core "
+          "(daemon and simulated PLC together)")
+    assert 0 < figures["rate"] <= 20
+    assert figures["cpu"] < 0.5     # a spinning loop took 94 %; the figure is printed above
