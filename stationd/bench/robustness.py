@@ -295,9 +295,9 @@ def _stats(errs: list[float]) -> dict[str, float]:
 
 def bench_robustness(rng: np.random.Generator, quick: bool,
                      only: tuple[str, ...] | None = None, n: int | None = None) -> Result:
-    """Every condition (or ``only`` those), ``n`` seeded images each (default 8 with
-    ``quick``, 30 otherwise)."""
-    n = n or (8 if quick else 30)
+    """Every condition (or ``only`` those), ``n`` seeded images each (default 4 with
+    ``quick``, a smoke run of under a minute of CPU; 30 otherwise)."""
+    n = n or (4 if quick else 30)
     seed = int(rng.integers(1 << 30))
     params = VisionParams()
     out: Result = {"per_condition": n}

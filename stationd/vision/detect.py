@@ -54,6 +54,7 @@ class Detection:
     # a boundary (raw pixels) and which of them the fit kept; set on refusals too when known
     edges_raw: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
     edges_used: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+    edges_dropped: np.ndarray | None = field(default=None, repr=False)  # near, not assigned
     timings_ms: dict[str, float] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
@@ -214,10 +215,11 @@ def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionPa
 
     raw: tuple[np.ndarray, np.ndarray] | None = None
     used: tuple[np.ndarray, np.ndarray] | None = None
+    dropped: np.ndarray | None = None
 
     def refuse(reason: str) -> Detection:
         return Detection(False, reason, roi=roi, timings_ms=timings, edges_raw=raw,
-                         edges_used=used)
+                         edges_used=used, edges_dropped=dropped)
 
     # A purple region touching the image border is not refused here: what matters is the
     # ring, and a ring cut by the border fails the outline search (border regions are
@@ -236,6 +238,7 @@ def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionPa
     t2 = time.perf_counter()
     timings["undistort"] = (t2 - t1) * 1e3
     raw = (edges.inner + offset, edges.outer + offset)
+    dropped = edges.dropped + offset
     inner = _fit_boundary("inner", pin, params)
     outer = _fit_boundary("outer", pout, params)
     used = (_used(inner, len(pin)), _used(outer, len(pout)))
@@ -262,7 +265,7 @@ def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionPa
         pencil_ratio=det.ratio, centre_split_px=det.split, method=det.method,
         roi=roi, outer_visible=_coverage(outer, pout if outer.inliers is None
                                          else pout[outer.inliers]),
-        edges_raw=raw, edges_used=used, timings_ms=timings)
+        edges_raw=raw, edges_used=used, edges_dropped=dropped, timings_ms=timings)
 
 
 @dataclass(frozen=True, eq=False)

@@ -3,8 +3,9 @@
 Why: engineers commissioning a station focus the cameras and need to understand a refusal
 ("outer boundary: edge points cover 42 %" means nothing until one sees the glove over the
 ring).  The picture has two panels: the ROI crop, enlarged, with the edge points the fits
-used (green) and rejected (red), both fitted ellipses (inner cyan, outer yellow), the
-ellipse centre (blue) and the corrected projected centre (magenta); and a reduced overview
+used (green) and rejected (red: by the fit, or near the ring but taken by neither boundary:
+an occluder's edge), both fitted ellipses (inner cyan, outer yellow), the ellipse centre
+(blue) and the corrected projected centre (magenta); and a reduced overview
 of the whole frame with the ROI boxed.  The reason, or the centre and the visible fraction
 of the outer ring, is written under it.  Drawing never changes a result: it reads one.
 """
@@ -43,7 +44,8 @@ def explain(image: np.ndarray, camera: Camera, det: Detection, params: VisionPar
         return det
     again = measure(image, camera, cands[0], params, marker)
     return Detection(False, det.reason, roi=again.roi, edges_raw=again.edges_raw,
-                     edges_used=again.edges_used, timings_ms=det.timings_ms)
+                     edges_used=again.edges_used, edges_dropped=again.edges_dropped,
+                     timings_ms=det.timings_ms)
 
 
 def _ellipse_raw(e: Ellipse, camera: Camera, n: int = 360) -> np.ndarray:
@@ -81,6 +83,10 @@ def draw(image: np.ndarray, camera: Camera, det: Detection) -> np.ndarray:
         if e is not None:
             pts = np.rint(to_panel(_ellipse_raw(e, camera)) * 16).astype(np.int32)
             cv2.polylines(panel, [pts.reshape(-1, 1, 2)], True, colour, 1, cv2.LINE_AA, 4)
+    if det.edges_dropped is not None:  # near the ring, taken by neither boundary
+        for p in to_panel(det.edges_dropped):
+            cv2.circle(panel, (round(p[0] * 16), round(p[1] * 16)), 20, REJECTED, -1,
+                       cv2.LINE_AA, 4)
     if det.edges_raw is not None:
         used = det.edges_used or (np.zeros(len(det.edges_raw[0]), bool),
                                   np.zeros(len(det.edges_raw[1]), bool))

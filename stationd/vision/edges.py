@@ -25,7 +25,7 @@ Steps, all at full resolution but only inside the ROI:
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -68,6 +68,9 @@ class BoundaryEdges:
     canny_low: float
     canny_high: float
     outline: RingOutline
+    # edge points near the ring that neither boundary took (wrong direction, polarity or
+    # colour beyond: an occluder's edge), for drawing what was rejected
+    dropped: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
 
 
 def intensity(roi_bgr: np.ndarray) -> np.ndarray:
@@ -264,8 +267,11 @@ def boundary_edges(roi_bgr: np.ndarray, ratio_sq: float,
         is_out &= beyond >= MIN_TINT * field_tint
     near = (np.abs(d_in) < 3.0 * tol) | (np.abs(d_out) < 3.0 * tol)
     keep = _linked(edges, ys_k, xs_k, is_in | is_out, near)
+    taken = (is_in | is_out) & keep
     return BoundaryEdges(inner=pts[is_in & keep], outer=pts[is_out & keep], canny_low=low,
-                         canny_high=high, outline=outline)
+                         canny_high=high, outline=outline,
+                         dropped=pts[near & ~taken & (np.minimum(np.abs(d_in), np.abs(d_out))
+                                                      < tol)])
 
 
 def _normal_cos(C: np.ndarray, pts: np.ndarray, gx: np.ndarray, gy: np.ndarray,

@@ -30,6 +30,8 @@ def test_found_picture_has_points_ellipses_and_centre(occluded):
     pic = dr.draw(s.image, s.camera, d)
     assert pic.ndim == 3 and pic.shape[1] > dr.PANEL  # ROI panel + overview side by side
     assert _count(pic, dr.USED) > 100  # used edge points drawn
+    assert d.edges_dropped is not None and len(d.edges_dropped) > 0  # the fingers' edges
+    assert _count(pic, dr.REJECTED) > 10
     assert _count(pic, dr.CENTRE, 30) > 10
     bare = dr.draw(s.image, s.camera, replace(d, edges_raw=None))  # the points hide the lines
     assert _count(bare, dr.OUTER, 30) > 100 and _count(bare, dr.INNER, 30) > 100
