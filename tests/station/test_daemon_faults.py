@@ -44,7 +44,8 @@ class Proc:
         for old, new in (("sim://lift", f"modbus-tcp://127.0.0.1:{lift_port}?timeout=0.5"),
                          ("sim://wrench", f"openprotocol://127.0.0.1:{ctl_port}"),
                          ("sqlite:///stationd-sim.db", f"sqlite:///{tmp}/station.db"),
-                         ("max_age_s: 2.0", "max_age_s: 5.0")):
+                         ("max_age_s: 0.5", "max_age_s: 5.0"),
+                         ("http: {listen: '127.0.0.1:8080'}", "")):
             assert old in text
             text = text.replace(old, new)
         (tmp / "station.yaml").write_text(edit(text) if edit else text)

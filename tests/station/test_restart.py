@@ -85,7 +85,8 @@ def test_sigterm_and_sigkill_mid_vehicle_lose_nothing(tmp_path):
                          ("sqlite:///stationd-sim.db", f"sqlite:///{tmp_path}/station.db"),
                          # the simulator renders 20 MP on shared cores, seconds after the
                          # exposure when the machine is busy: freshness is test_core's
-                         ("max_age_s: 2.0", "max_age_s: 5.0")):
+                         ("max_age_s: 0.5", "max_age_s: 5.0"),
+                         ("http: {listen: '127.0.0.1:8080'}", "")):
             assert old in station
             station = station.replace(old, new)
         (tmp_path / "station.yaml").write_text(station)

@@ -18,8 +18,8 @@ def test_simulated_vehicle_every_bolt_its_own_parameters(capsys, tmp_path):
     shutil.copytree(SIM_CONFIG.parent, tmp_path / "sim")
     station = tmp_path / "sim" / "station.yaml"
     text = station.read_text()
-    assert "max_age_s: 2.0" in text
-    station.write_text(text.replace("max_age_s: 2.0", "max_age_s: 5.0"))
+    assert "max_age_s: 0.5" in text
+    station.write_text(text.replace("max_age_s: 0.5", "max_age_s: 5.0"))
     code = main(["demo", "--config", str(station), "--cycles", "3", "--seed", "11", "--json"])
     out = capsys.readouterr().out.strip().splitlines()
     summary = json.loads(out[-1])
