@@ -356,17 +356,13 @@ class _Reader:
         The sections are read in this order (the loader's first error is the first here)."""
         root = YamlNode.load(path)
         self.top = self.sections(root)
-        if self.require_devices and isinstance(root.value(), dict):
-            for key in REQUIRED_KEYS:
-                if key not in self.top:
-                    self.guard(None, _missing, root, key)
         d, base, check = StationConfig(), self.base, self.collect
         marker = self.section("marker", d.marker, MarkerSpec.from_node)
         vision = self.section("vision", d.vision, partial(VisionParams.from_node, base_dir=base))
         cameras, names = self.cameras(self.top["cameras"]) if "cameras" in self.top \
             else ({}, [])
         pairs = self.pairs(self.top["pairs"], names) if "pairs" in self.top else {}
-        return StationConfig(
+        config = StationConfig(
             marker=marker, vision=vision, cameras=cameras, pairs=pairs,
             tool=self.section("tool", d.tool, ToolGeometry.from_node),
             lift=self.section("lift", d.lift, partial(LiftConfig.from_node, check_url=check)),
@@ -380,6 +376,12 @@ class _Reader:
             records=self.section("records", d.records, partial(_records, base=base)),
             http=self.section("http", d.http, HttpConfig.from_node),
             path=path)
+        # after the sections: a mistake written in the file is told before what is missing
+        if self.require_devices and isinstance(root.value(), dict):
+            for key in REQUIRED_KEYS:
+                if key not in self.top:
+                    self.guard(None, _missing, root, key)
+        return config
 
     def cameras(self, node: YamlNode) -> tuple[dict[str, str], list[str] | None]:
         """Name -> URL, and every name defined, a camera with errors included (a pair naming
