@@ -50,7 +50,9 @@ from stationd.station.matching import BoltMatcher, BoltRule, Match, MatchParams
 #: tighten while disabled, and a controller reports within milliseconds
 LATE_RESULT_S = 5.0
 LIFT, WRENCH, VEHICLE = "lift", "wrench", "vehicle"
-_DIGITS = re.compile(r"\d+(\.\d+)?")
+# a refusal's measurements ("812 ms", "3.1 mm"), not the bolt ids in it ("B01"): the reason
+# "B18 is already done" and "B01 is already done" are two refusals, "(812 ms)" and "(790 ms)" one
+_DIGITS = re.compile(r"(?<![A-Za-z0-9_.:/+-])\d+(\.\d+)?")
 
 
 class State(enum.Enum):

@@ -41,7 +41,7 @@ from stationd.station.core import (
     VehicleRejected,
     VinSent,
 )
-from stationd.station.events import DeviceHealth, ResultUnattributed, StateChanged
+from stationd.station.events import DeviceHealth, Refused, ResultUnattributed, StateChanged
 from stationd.station.matching import MatchParams
 
 BOLTS = {"B1": BoltSpec((0.0, 0.0, 0.0), 1), "B2": BoltSpec((60.0, 0.0, 0.0), 2),
@@ -448,3 +448,28 @@ def test_unattributed_results_without_a_vehicle_are_acknowledged():
     acts = d.feed(ResultIn(d.t, result(1, 1)))
     assert any(isinstance(a, Acknowledge) for a in acts)
     assert not any(isinstance(a, Record) for a in acts)
+
+
+def test_a_refusal_is_published_per_bolt_and_reason_not_per_measurement():
+    """The wrench moved from one done bolt to another: the screens and the journal must say
+    which (a refusal's key keeps bolt ids; only measurements such as ages are folded)."""
+    d = _ready()
+    for k, tid in ((1, 5), (2, 6)):
+        _on(d, k)
+        d.step(("ack", 0.01, True))
+        _on(d, k, 1)
+        d.feed(ResultIn(d.t, result(tid, BOLTS[f"B{k}"].pset or 0)))
+    start = len(d.log)
+    for k in (1, 1, 2, 2, 1):
+        _on(d, k, 2)
+    refused = [a.event for _, acts in d.log[start:] for a in acts
+               if isinstance(a, Publish) and isinstance(a.event, Refused)]
+    assert [(e.bolt, e.reason) for e in refused] == [
+        ("B1", "B1 is already done"), ("B2", "B2 is already done"),
+        ("B1", "B1 is already done")]
+    stale = len(d.log)
+    for age in (0.8, 0.9, 1.3):
+        _on(d, 1, 1, age=age)
+    ages = [a.event.reason for _, acts in d.log[stale:] for a in acts
+            if isinstance(a, Publish) and isinstance(a.event, Refused)]
+    assert len(ages) == 1 and "stale" in ages[0]   # one refusal, not one per frame's age
