@@ -35,6 +35,11 @@ class DeviceTimeoutError(DeviceError):
     """The device did not answer in time."""
 
 
+class ConnectTimeoutError(ConnectError, DeviceTimeoutError):
+    """Connecting got no answer in time.  One type on every backend (Open Protocol, Modbus
+    TCP, ...): it is both a failed connect and a timeout, so a handler of either sees it."""
+
+
 class ConnectionLostError(DeviceError):
     """The link dropped (peer closed, cable pulled, EIO on a pty)."""
 

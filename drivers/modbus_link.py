@@ -32,6 +32,7 @@ from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOEx
 from drivers.errors import (
     ConnectError,
     ConnectionLostError,
+    ConnectTimeoutError,
     DeviceError,
     DeviceTimeoutError,
     ProtocolError,
@@ -152,8 +153,8 @@ class ModbusLink:
                 raise self._error(ConnectError, f"connection refused by {where} "
                                                 f"({self.wording.refused})") from None
             except TimeoutError:
-                raise self._error(ConnectError, f"no answer from {where} within "
-                                                f"{timeout:.2f} s") from None
+                raise self._error(ConnectTimeoutError, f"no answer connecting to {where} "
+                                                       f"within {timeout:g} s") from None
             except socket.gaierror as exc:
                 raise self._error(ConnectError, f"unknown host {s.target}: {exc.strerror}"
                                   ) from None

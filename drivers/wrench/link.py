@@ -15,7 +15,11 @@ import socket
 from abc import ABC, abstractmethod
 from typing import Any, Literal
 
-from drivers.errors import ConnectError, ConnectionLostError, DeviceTimeoutError
+from drivers.errors import (
+    ConnectError,
+    ConnectionLostError,
+    ConnectTimeoutError,
+)
 
 Kind = Literal["tcp", "serial"]
 
@@ -68,8 +72,8 @@ class TcpLink(Link):
             raise ConnectError(f"connection refused by {self.where} (controller off, or Open "
                                "Protocol not enabled on this port?)") from None
         except TimeoutError:
-            raise DeviceTimeoutError(f"no answer connecting to {self.where} within "
-                                     f"{timeout:g} s") from None
+            raise ConnectTimeoutError(f"no answer connecting to {self.where} within "
+                                      f"{timeout:g} s") from None
         except OSError as e:
             raise ConnectError(f"cannot connect to {self.where}: {e.strerror or e}") from None
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)

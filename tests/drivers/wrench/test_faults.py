@@ -15,6 +15,7 @@ import pytest
 from drivers.errors import (
     ConnectError,
     ConnectionLostError,
+    ConnectTimeoutError,
     DeviceTimeoutError,
     ProtocolError,
     RefusedError,
@@ -44,7 +45,7 @@ def test_connect_timeout():
         port = server.getsockname()[1]
         with socket.create_connection(("127.0.0.1", port)):
             t0 = time.monotonic()
-            with pytest.raises(DeviceTimeoutError, match="no answer connecting to "
+            with pytest.raises(ConnectTimeoutError, match="no answer connecting to "
                                                          r"127.0.0.1:\d+ within 0.3 s"):
                 open_wrench(f"openprotocol://127.0.0.1:{port}", **{**FAST,
                                                                    "connect_timeout": 0.3})

@@ -9,7 +9,12 @@ import time
 
 import pytest
 
-from drivers.errors import ConnectError, ConnectionLostError, DeviceError, DeviceTimeoutError
+from drivers.errors import (
+    ConnectionLostError,
+    ConnectTimeoutError,
+    DeviceError,
+    DeviceTimeoutError,
+)
 from drivers.wrench import open_wrench
 from drivers.wrench.modbus_sim import SimParameters
 
@@ -161,8 +166,8 @@ def test_connect_timeout_when_the_backlog_is_full():
         port = server.getsockname()[1]
         with socket.create_connection(("127.0.0.1", port)):
             t0 = time.monotonic()
-            with pytest.raises(ConnectError, match=r"open: no answer from 127.0.0.1:\d+ within "
-                                                   r"0.20 s"):
+            with pytest.raises(ConnectTimeoutError, match=r"open: no answer connecting to "
+                                                          r"127.0.0.1:\d+ within 0.2 s"):
                 open_wrench(f"modbus-tcp://127.0.0.1:{port}", **{**FAST,
                                                                  "connect_timeout": 0.2})
             assert time.monotonic() - t0 < 1.0

@@ -1,0 +1,48 @@
+"""The same failure is the same error type on every backend (the daemon's fault handling and
+the commands' messages key on the type, not on which protocol the controller speaks)."""
+
+from __future__ import annotations
+
+import socket
+from typing import Any
+
+import pytest
+
+from drivers.errors import ConnectError, ConnectTimeoutError, DeviceError, DeviceTimeoutError
+from drivers.lift import open_lift
+from drivers.wrench import open_wrench
+
+OPTS: dict[str, Any] = {"timeout": 0.3, "connect_timeout": 0.2, "backoff": 0.02,
+                       "backoff_max": 0.1}
+
+
+def _open(url: str) -> object:
+    if url.startswith("lift+"):
+        return open_lift(url.removeprefix("lift+"), timeout=0.2, backoff=0.02, backoff_max=0.1)
+    return open_wrench(url, **OPTS)
+
+
+@pytest.mark.parametrize("scheme", ["openprotocol", "modbus-tcp", "lift+modbus-tcp"])
+def test_a_connect_timeout_is_one_error_type_over_every_protocol(scheme):
+    with socket.socket() as server:                # a full accept queue drops the SYN
+        server.bind(("127.0.0.1", 0))
+        server.listen(0)
+        port = server.getsockname()[1]
+        with socket.create_connection(("127.0.0.1", port)):
+            with pytest.raises(ConnectTimeoutError) as info:
+                _open(f"{scheme}://127.0.0.1:{port}")
+    error = info.value
+    # one type, caught as a failed connect and as a timeout alike, with one wording
+    assert isinstance(error, ConnectError) and isinstance(error, DeviceTimeoutError)
+    assert f"no answer connecting to 127.0.0.1:{port} within 0.2 s" in str(error)
+
+
+@pytest.mark.parametrize("scheme", ["openprotocol", "modbus-tcp", "lift+modbus-tcp"])
+def test_a_refused_connect_is_one_error_type_over_every_protocol(scheme):
+    with socket.socket() as s:                     # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    with pytest.raises(ConnectError) as info:
+        _open(f"{scheme}://127.0.0.1:{port}")
+    assert type(info.value) is ConnectError and isinstance(info.value, DeviceError)
+    assert f"connection refused by 127.0.0.1:{port}" in str(info.value)
