@@ -18,6 +18,7 @@ import os
 import sys
 import tempfile
 from collections.abc import Sequence
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -86,6 +87,11 @@ def cmd_db_import(args: argparse.Namespace) -> int:
 
 
 def cmd_db_export(args: argparse.Namespace) -> int:
+    if args.results:
+        return _export_results(args)
+    if args.vin is not None or args.since is not None or args.format != "yaml":
+        raise InputError("--vin, --since and --format go with --results (the bolt table is "
+                         "YAML)")
     with _open(args.db, must_exist=True) as repo:
         text = repo.export_bolts()
         summary = repo.table().summary()
@@ -96,6 +102,46 @@ def cmd_db_export(args: argparse.Namespace) -> int:
     _write_atomic(out, text)
     print(f"wrote {out}: {summary}")
     return EXIT_OK
+
+
+def _since(text: str) -> datetime:
+    """``--since``: an ISO date or date-time (UTC when no zone is given)."""
+    try:
+        t = datetime.fromisoformat(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an ISO date or date-time "
+                                         "(e.g. 2026-11-23 or 2026-11-23T06:00)") from None
+    return t if t.tzinfo is not None else t.replace(tzinfo=UTC)
+
+
+def _export_results(args: argparse.Namespace) -> int:
+    """Every rundown (OK, NOK, rework) of the chosen vehicles as CSV or JSON, oldest first:
+    what quality takes out of the station (the results screen's export, for all vehicles)."""
+    from stationd.web.results import Results, rundowns_csv
+
+    fmt = "csv" if args.format == "yaml" else args.format
+    with _open(args.db, must_exist=True) as repo:
+        results = Results(repo)
+        if args.vin is not None:
+            repo.vehicle_report(args.vin)   # an unknown VIN: one line, exit 2
+        vins = [args.vin] if args.vin is not None else \
+            [v["vin"] for v in reversed(results.vehicles(limit=1_000_000))]
+        runs = [r for vin in vins for r in results.rundowns(vin)]
+    if args.since is not None:
+        runs = [r for r in runs if r["recorded_at"] is not None
+                and _aware(datetime.fromisoformat(r["recorded_at"])) >= args.since]
+    text = rundowns_csv(runs) if fmt == "csv" else strict_json(runs) + "\n"
+    if args.out is None:
+        sys.stdout.write(text)
+    else:
+        _write_atomic(Path(args.out), text)
+        print(f"wrote {args.out}: {len(runs)} rundown(s) of {len({r['vin'] for r in runs})} "
+              "vehicle(s)")
+    return EXIT_OK
+
+
+def _aware(t: datetime) -> datetime:
+    return t if t.tzinfo is not None else t.replace(tzinfo=UTC)
 
 
 def _write_atomic(path: Path, text: str) -> None:
@@ -233,6 +279,13 @@ def add_db_parser(subparsers: Any) -> argparse.ArgumentParser:
                                      "again reports no changes.")
     ex.add_argument("--db", default="sqlite:///stationd.db", help=DB_HELP)
     ex.add_argument("--out", help="file to write (default: standard output)")
+    ex.add_argument("--results", action="store_true",
+                    help="the tightening results (every rundown) instead of the bolt table")
+    ex.add_argument("--vin", help="with --results: this vehicle only")
+    ex.add_argument("--since", type=_since, metavar="DATE",
+                    help="with --results: rundowns recorded since (ISO date or date-time, UTC)")
+    ex.add_argument("--format", choices=("yaml", "csv", "json"), default="yaml",
+                    help="yaml for the bolt table; csv (default) or json for --results")
     ex.set_defaults(func=cmd_db_export)
     rp = dsub.add_parser("report", help="a vehicle's bolts: results and missing ones",
                          description="Exit 0 when every bolt is tightened and OK, 1 when bolts "

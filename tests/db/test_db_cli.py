@@ -232,3 +232,41 @@ def test_config_check_warns_of_an_unregistered_pair_but_passes(run, tmp_path):
         f"warning: {tmp_path / 'station.yaml'}:16: pairs.pair3.to_vehicle: "
         f"{tmp_path / 'pair3.vehicle.yaml'} does not exist: the pair is not registered into "
         "the vehicle frame yet (stationd calibrate vehicle writes it)")
+
+
+def test_export_results_every_rundown_as_csv_or_json(run, db, tmp_path):
+    """Quality's export: every rundown (a NOK then its rework), per VIN or all, since a date;
+    bad choices in one line."""
+    import csv
+    import io
+    from datetime import UTC, datetime
+
+    from db.repository import Repository
+    from stationd.boltfile import import_bolts
+
+    with Repository.open(db) as repo:
+        import_bolts(repo, EXAMPLE)
+        repo.start_vehicle("VIN1", "WAGON-B")
+        record(repo, "VIN1", "SF-FL", ok=False, tightening_id=1)
+        record(repo, "VIN1", "SF-FL", ok=True, tightening_id=2)
+        repo.start_vehicle("VIN2", "WAGON-B")
+        record(repo, "VIN2", "SF-FL", ok=True, tightening_id=3)
+    code, out, err = run("db", "export", "--results", "--db", db)
+    rows = list(csv.DictReader(io.StringIO(out)))
+    assert code == 0 and err == ""
+    assert [(r["vin"], r["bolt"], r["attempt"], r["status"]) for r in rows] == [
+        ("VIN1", "SF-FL", "1", "nok"), ("VIN1", "SF-FL", "2", "ok"), ("VIN2", "SF-FL", "1", "ok")]
+    code, out, _ = run("db", "export", "--results", "--vin", "VIN2", "--format", "json",
+                       "--db", db)
+    assert code == 0 and [r["tightening_id"] for r in json.loads(out)] == [3]
+    tomorrow = datetime.now(UTC).date().isoformat() + "T23:59:59"
+    code, out, _ = run("db", "export", "--results", "--since", tomorrow, "--db", db)
+    assert code == 0 and out.count("\n") == 1          # the header, no rundown
+    target = tmp_path / "results.csv"
+    code, out, _ = run("db", "export", "--results", "--out", str(target), "--db", db)
+    assert code == 0 and target.read_text().count("\n") == 4
+    for args, message in ((["--vin", "NOPE"], "NOPE"), (["--since", "yesterday"], "ISO date"),
+                          (["--format", "csv"], "go with --results")):
+        extra = ["--results"] if args[0] != "--format" else []
+        code, out, err = run("db", "export", *extra, *args, "--db", db)
+        assert code == 2 and out == "" and message in _one_line(err), err
