@@ -181,7 +181,7 @@ class View:
         if faults:
             return "FAULT: " + "; ".join(faults)
         if self.refused:
-            return self.refused
+            return short_reason(self.refused)
         if self.selected is not None:
             b = self.bolts.get(self.selected)
             pset = f" (pset {b.pset})" if b is not None and b.pset is not None else ""
@@ -218,3 +218,21 @@ def copy_view(v: View) -> View:
     """A shallow-independent copy (tests compare before/after)."""
     return replace(v, bolts={k: replace(b) for k, b in v.bolts.items()},
                    devices=dict(v.devices), results=list(v.results))
+
+
+def short_reason(reason: str) -> str:
+    """Large words for the operator: the daemon's per-pair refusal ("pair1: left: no purple
+    region ...; pair2: left: no purple region ...") said once, with how many pairs say it; the
+    full text stays in ``reason`` and on the cameras screen."""
+    parts = [p.strip() for p in reason.split(";") if p.strip()]
+    if len(parts) < 2:
+        return reason
+    tails = []
+    for p in parts:
+        words = p.split(": ")
+        while len(words) > 1 and (words[0].startswith("pair") or words[0] in ("left", "right")):
+            words = words[1:]
+        tails.append(": ".join(words))
+    if len(set(tails)) == 1:
+        return f"{tails[0]} (all {len(parts)} pairs)"
+    return reason

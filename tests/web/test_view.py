@@ -109,3 +109,14 @@ def test_controller_refusing_parameters_blocks_the_bolt_and_says_why():
     v.apply(ParamsRefusedEvent(bolt="B1", reason="pset 1 unknown to the controller"))
     assert states(v)["B1"] == "blocked"
     assert v.headline() == "B1: controller refused the parameters: pset 1 unknown to the controller"
+
+
+def test_the_headline_says_a_refusal_shared_by_every_pair_once():
+    from stationd.web.view import short_reason
+
+    every = "; ".join(f"pair{k}: left: no purple region enclosing a ring in view"
+                      for k in range(1, 5))
+    assert short_reason(every) == "no purple region enclosing a ring in view (all 4 pairs)"
+    mixed = "pair1: left: no purple region in view; pair2: ambiguous: B1 at 3 mm, B2 at 5 mm"
+    assert short_reason(mixed) == mixed
+    assert short_reason("B18 is already done") == "B18 is already done"

@@ -44,18 +44,28 @@ function drawMap(view) {
   const cx = (x0 + x1) / 2, cy = (y0 + y1) / 2;
   // vehicle X to the right, vehicle Y up (a top view)
   const X = (x) => W / 2 + (x - cx) * s, Y = (y) => H / 2 - (y - cy) * s;
-  const r = Math.max(24, Math.min(44, s * span / 20));
+  // symbols as large as the nearest two bolts allow (a 50-bolt underbody on a 1280x800 panel
+  // must not pile up); when dense, only the bolts that matter now keep their state words
+  let dmin = Infinity;
+  for (let i = 0; i < bolts.length; i++)
+    for (let j = i + 1; j < bolts.length; j++)
+      dmin = Math.min(dmin, Math.hypot(X(bolts[i].x) - X(bolts[j].x), Y(bolts[i].y) - Y(bolts[j].y)));
+  const r = Math.max(9, Math.min(44, s * span / 20, 0.42 * dmin));
+  const dense = r < 22;
+  svg.classList.toggle("dense", dense);
   for (const b of bolts) {
     const g = el("g", {class: `bolt bolt-${b.state}`, "data-bolt": b.bolt, "data-state": b.state,
       transform: `translate(${X(b.x).toFixed(1)},${Y(b.y).toFixed(1)})`});
     g.appendChild(el("title", {}, `${b.bolt}: ${b.label}${b.reason ? " (" + b.reason + ")" : ""}`));
     g.appendChild(el("circle", {r: r}));
     g.appendChild(el("text", {class: "icon", y: 0}, ICONS[b.state] || "?"));
-    g.appendChild(el("text", {y: -r - 10}, b.bolt));
+    g.appendChild(el("text", {class: "bolt-id", y: -r - (dense ? 4 : 10)}, b.bolt));
     let tag = b.label;
     if (b.state === "selected" && b.pset !== null) tag += ` P${b.pset}`;
     if ((b.state === "ok" || b.state === "nok") && b.torque_nm !== null) tag += ` ${fmt(b.torque_nm, 1)}`;
-    g.appendChild(el("text", {class: "tag label", y: r + 28}, tag));
+    const matters = ["selected", "tightening", "nok", "blocked"].includes(b.state);
+    if (!dense || matters)
+      g.appendChild(el("text", {class: "tag label", y: r + (dense ? 16 : 28)}, tag));
     svg.appendChild(g);
   }
   const w = view.wrench;
