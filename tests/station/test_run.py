@@ -68,3 +68,32 @@ def test_invalid_config_at_start_is_one_line_and_exit_2(tmp_path):
     r = subprocess.run([sys.executable, "-m", "stationd", "run", "--config",
                         str(tmp_path / "bad.yaml")], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "malformed YAML" in r.stderr
+
+
+@pytest.mark.timeout(180)
+def test_a_second_daemon_on_the_same_database_exits_2_naming_the_first(tmp_path):
+    for f in SIM.iterdir():
+        shutil.copy(f, tmp_path)
+    station = tmp_path / "station.yaml"
+    station.write_text(station.read_text().replace("http: {listen: '127.0.0.1:8080'}", ""))
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(tmp_path / "notify"))
+    env = {**os.environ, "NOTIFY_SOCKET": str(tmp_path / "notify")}
+    first = subprocess.Popen([sys.executable, "-m", "stationd", "run", "--config",
+                              "station.yaml"], cwd=tmp_path, env=env,
+                             stderr=subprocess.DEVNULL)
+    try:
+        _recv_until(sock, "READY=1", 90)
+        second = subprocess.run([sys.executable, "-m", "stationd", "run", "--config",
+                                 str(station)], capture_output=True, text=True, timeout=60,
+                                env={k: v for k, v in os.environ.items()
+                                     if k != "NOTIFY_SOCKET"})
+        assert second.returncode == 2 and second.stderr.count("\n") == 1, second.stderr
+        assert f"already run by pid {first.pid}" in second.stderr
+        assert first.poll() is None   # the first one is untouched
+        first.send_signal(signal.SIGTERM)
+        assert first.wait(timeout=60) == 0
+    finally:
+        if first.poll() is None:
+            first.kill()
+        sock.close()
