@@ -114,6 +114,16 @@ def parse_board(spec: str) -> Board:
     return board
 
 
+
+def _outlier(errors: dict[int, float], factor: float, floor_px: float) -> tuple[int, str] | None:
+    """The view whose RMS error is above ``factor`` x the median (and ``floor_px``), with the
+    reason it is dropped; None when every view is within: one rule for mono and stereo."""
+    threshold = max(factor * float(np.median(list(errors.values()))), floor_px)
+    worst = max(errors, key=lambda k: errors[k])
+    if errors[worst] <= threshold:
+        return None
+    return worst, f"outlier error {errors[worst]:.2f} px > {threshold:.2f} px"
+
 MIN_SQUARE_MM = 1.0  # a printed board's square: below 1 mm it was given in metres
 
 
@@ -380,12 +390,10 @@ def calibrate_views(views: Sequence[ViewPair], board: Board, left_size: tuple[in
         fit = _fit(list(data.values()), left_size, right_size)
         errors = dict(zip(data, fit["per_view"], strict=True))
         combined = {i: float(np.sqrt(np.mean(e**2))) for i, e in errors.items()}
-        threshold = max(outlier_factor * float(np.median(list(combined.values()))),
-                        outlier_floor_px)
-        worst = max(combined, key=lambda i: combined[i])
-        if combined[worst] <= threshold:
+        found = _outlier(combined, outlier_factor, outlier_floor_px)
+        if found is None:
             break
-        reason = f"outlier error {combined[worst]:.2f} px > {threshold:.2f} px"
+        worst, reason = found
         if len(data) <= MIN_PAIRS:
             warnings.append(f"view {worst + 1} ({views[worst].left_name}) has an {reason} but "
                             f"was kept: only {MIN_PAIRS} usable pairs")
@@ -580,12 +588,10 @@ def calibrate_camera(paths: Sequence[str | Path], board: Board, *,
             proj = cv2.projectPoints(o, rv, tv, K, dist)[0].reshape(-1, 2)
             errors[key] = float(np.sqrt(np.mean(np.sum((proj - im.reshape(-1, 2)) ** 2,
                                                        axis=1))))
-        threshold = max(outlier_factor * float(np.median(list(errors.values()))),
-                        outlier_floor_px)
-        worst = max(errors, key=lambda k: errors[k])
-        if errors[worst] <= threshold:
+        dropped = _outlier(errors, outlier_factor, outlier_floor_px)
+        if dropped is None:
             break
-        reason = f"outlier error {errors[worst]:.2f} px > {threshold:.2f} px"
+        worst, reason = dropped
         if len(data) <= MIN_PAIRS:
             warnings.append(f"view {worst + 1} ({reports[worst].left_name}) has an {reason} "
                             f"but was kept: only {MIN_PAIRS} usable views")

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from drivers.wrench.sim import SimPset
+from stationd import progress
 from stationd.boltfile import load_bolts
 from stationd.config import RecordsConfig, StationConfig, load_station_config
 from stationd.errors import InputError
@@ -187,7 +188,11 @@ def run_station_demo(args: argparse.Namespace) -> int:
             world.close()
             await screens.stop()
 
+    progress.note("demo: opening the station (database, bolt table, simulated PLC, controller "
+                  "and 8 cameras)")
     station.open()
+    progress.note("demo: the simulated operator starts; each camera renders its background "
+                  "once (about a second each), then frames at the trigger instant")
     try:
         with cpu_load(int(args.load)):
             asyncio.run(main())
