@@ -28,6 +28,7 @@ from stationd.geometry.camera import Camera, StereoPair
 from stationd.geometry.frames import Transform, fit_rigid
 from stationd.geometry.stereo import localize_detections
 from stationd.geometry.tool import BoltEnd, ToolGeometry, bolt_end, fuse
+from stationd.jsonout import finite
 from stationd.sim.raycast import Chessboard
 from stationd.sim.render import MarkerPose, Scene, crop_camera, default_camera, render
 from stationd.vision.detect import detect
@@ -270,7 +271,7 @@ def run_chain_bench(args: argparse.Namespace) -> int:
     res["bolts"] = bench_bolts(rng, station, 12 if quick else 50)
     res["seconds"] = round(time.perf_counter() - t0, 1)
     _print(res)
-    Path(args.out).write_text(json.dumps(res, indent=1, default=float) + "\n")
+    Path(args.out).write_text(json.dumps(finite(res), indent=1, allow_nan=False) + "\n")
     print(f"[bench chain] wrote {args.out}")
     return 0
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import json
 import multiprocessing
 import sys
 import tempfile
@@ -28,6 +27,7 @@ import numpy as np
 from stationd.boltfile import load_bolts
 from stationd.config import load_station_config
 from stationd.errors import InputError
+from stationd.jsonout import strict_json
 from stationd.sim.world import World, WrenchPose, wrench_at
 from stationd.station.core import SendParams, State
 from stationd.station.daemon import Station
@@ -209,7 +209,7 @@ def run_soak(args: argparse.Namespace) -> int:
                "exits": len(exits), "results_lost": len(set(shift.pulled) - recorded),
                "load_processes": load, "run_s": time.perf_counter() - t0}
     if args.json:
-        sys.stdout.write(json.dumps(summary, allow_nan=False) + "\n")
+        sys.stdout.write(strict_json(summary) + "\n")
     else:
         print(f"{summary['tightened']}/{total} bolts tightened over {shift.vehicles} vehicles "
               f"in {summary['run_s']:.0f} s (load: {load} busy processes)")

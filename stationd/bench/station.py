@@ -33,6 +33,7 @@ from stationd import progress
 from stationd.boltfile import load_bolts
 from stationd.config import load_station_config
 from stationd.errors import InputError
+from stationd.jsonout import finite, strict_json
 from stationd.sim.world import World, WrenchPose, wrench_at
 from stationd.station.core import SendParams, State
 from stationd.station.daemon import Station
@@ -144,9 +145,9 @@ def run_station_bench(args: argparse.Namespace) -> int:
     lat = [e.latency_ms for e in station.bus.of(ParamsSent) if isinstance(e, ParamsSent)]
     summary = _summary(lat, cycles, out, station, prerender_s, run_s, world_mb, rss_open,
                        rss_end)
-    Path(args.out).write_text(json.dumps(summary, indent=2) + "\n")
+    Path(args.out).write_text(json.dumps(finite(summary), indent=2, allow_nan=False) + "\n")
     if args.json:
-        sys.stdout.write(json.dumps(summary) + "\n")
+        sys.stdout.write(strict_json(summary) + "\n")
     else:
         _print(summary)
     ok = summary["wrong_bolt_sends"] == 0 and not out["not_selected"]

@@ -23,6 +23,7 @@ import numpy as np
 from stationd import progress
 from stationd.bench import scenes as sc
 from stationd.geometry.stereo import localize_detections, triangulate
+from stationd.jsonout import finite
 from stationd.sim.render import MarkerPose, default_camera
 from stationd.vision.detect import Detection, detect
 from stationd.vision.marker import MarkerSpec
@@ -402,6 +403,6 @@ def run_vision_bench(args: argparse.Namespace) -> int:
         from stationd.bench.robustness import print_table
 
         print_table(results["robustness"])
-    Path(args.out).write_text(json.dumps(results, indent=1, default=float) + "\n")
+    Path(args.out).write_text(json.dumps(finite(results), indent=1, allow_nan=False) + "\n")
     print(f"[bench vision] wrote {args.out}")
     return 0

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import json
 import logging
 import sys
 import tempfile
@@ -27,6 +26,7 @@ from stationd import progress
 from stationd.boltfile import load_bolts
 from stationd.config import RecordsConfig, StationConfig, load_station_config
 from stationd.errors import InputError
+from stationd.jsonout import strict_json
 from stationd.sim.load import cpu_load
 from stationd.sim.world import World, wrench_at
 from stationd.station.core import SendParams, State
@@ -201,7 +201,7 @@ def run_station_demo(args: argparse.Namespace) -> int:
         tmp.cleanup()
     summary = _summary(station, report, cycles, truth["wrong"])
     if args.json:
-        sys.stdout.write(json.dumps(summary, allow_nan=False) + "\n")
+        sys.stdout.write(strict_json(summary) + "\n")
     else:
         print(f"summary: {summary['ok']}/{cycles} bolts OK, parameters sent for a wrong bolt: "
               f"{summary['wrong_bolt_sends']}, XY error mean "
