@@ -3,7 +3,9 @@
 The daemon runs as in ``stationd demo`` (config/sim: eight 20 MP cameras in four pairs, the
 lift PLC on Modbus TCP and the controller on Open Protocol, both on loopback), but the world
 renders every wrench placement *before* the run: during it, a camera's frame is the cached
-background or a copy with a pre-rendered window pasted, as fast as a real camera's buffer.
+background or a pool buffer with a pre-rendered window pasted, as a camera fills its queued
+DMA buffers at no cost to the host.  (A Bayer camera demosaiced on the host costs that
+conversion on top: ``drivers/camera/pixels.py``; the README gives its figure.)
 The demo cannot measure latency this way, because its ray-casting shares the two cores with
 the daemon; here the cores are the daemon's.
 
@@ -112,7 +114,7 @@ def run_station_bench(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     world.prerender([p for _, p in plan])
     prerender_s = time.perf_counter() - t0
-    world_mb = world.buffer_bytes() / 2**20
+    world_mb = float("nan")
     station = Station(cfg, device_kw={"wrench": {"psets": _sim_psets(cfg.bolts_path)}})
     out: dict[str, Any] = {"truth": None, "wrong": 0, "not_selected": []}
 
@@ -140,6 +142,7 @@ def run_station_bench(args: argparse.Namespace) -> int:
         rss_end = _rss_mb()
     finally:
         station.close()
+        world_mb = world.buffer_bytes() / 2**20  # with the cameras' frame pools, now filled
         world.close()
         tmp.cleanup()
     lat = [e.latency_ms for e in station.bus.of(ParamsSent) if isinstance(e, ParamsSent)]

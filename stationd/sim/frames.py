@@ -7,11 +7,19 @@ ray-casts only the window around the marker, pasted into a copy.  The renderer s
 by sensor position, so with the same seed the composite equals a full render exactly (tested);
 with a new seed per frame the window's noise is fresh and the background's is frozen, which a
 detector cannot tell apart.
+
+Composing is a camera's buffer pool: a frame is written into a buffer that nobody holds any
+more (the background is copied into it once; afterwards only the last window is put back and
+the new one pasted), so a grab costs a window, not 60 MB of memory traffic, as a real camera
+that DMAs into queued buffers costs the host nothing per frame.  A frame still referenced by
+anyone (the vision, the screens' latest frames, a test) is never written into again.
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
+import sys
+import threading
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -24,6 +32,20 @@ from stationd.vision.marker import MarkerSpec
 Patch = tuple[tuple[int, int, int, int], np.ndarray] | np.ndarray | None
 
 
+#: buffers a camera keeps before it allocates more (one per frame in flight is the usual need)
+POOL = 4
+
+
+@dataclass
+class _Buffer:
+    """One frame buffer of the pool and the window last pasted into it (None: it equals the
+    background)."""
+
+    image: np.ndarray
+    window: tuple[int, int, int, int] | None = None
+    free_refs: int = 2
+
+
 class FrameSource:
     """Frames of one simulated camera for a scene whose only moving thing is the marker."""
 
@@ -34,6 +56,8 @@ class FrameSource:
         self.scene = scene
         self.seed = seed
         self._background: np.ndarray | None = None
+        self._pool: list[_Buffer] = []
+        self._pool_lock = threading.Lock()
 
     @property
     def has_background(self) -> bool:
@@ -46,6 +70,11 @@ class FrameSource:
             image.setflags(write=False)  # handed out shared: a write would be a bug, loudly
             self._background = image
         return self._background
+
+    def pool(self) -> list[np.ndarray]:
+        """The frame buffers the pool holds (the world's memory, not the daemon's)."""
+        with self._pool_lock:
+            return [b.image for b in self._pool]
 
     def frame(self, pose: MarkerPose | None, spec: MarkerSpec | None = None,
               seed: int | None = None) -> np.ndarray:
@@ -71,15 +100,37 @@ class FrameSource:
 
     def compose(self, patch: Patch) -> np.ndarray:
         """A frame from a :meth:`patch`: the background itself when nothing changes (shared,
-        not copied: nobody writes into a grabbed frame), else a copy with the window pasted."""
+        not copied: nobody writes into a grabbed frame), else a free pool buffer with the
+        window pasted."""
         if patch is None:
             return self.background
         if isinstance(patch, np.ndarray):
             return patch
         (x, y, w, h), pixels = patch
-        image = self.background.copy()
-        image[y:y + h, x:x + w] = pixels
+        with self._pool_lock:   # taken and written under the lock: no other grab picks it
+            buf = self._free_buffer()
+            image = buf.image
+            if buf.window is not None:
+                bx, by, bw, bh = buf.window
+                image[by:by + bh, bx:bx + bw] = self.background[by:by + bh, bx:bx + bw]
+            image[y:y + h, x:x + w] = pixels
+            buf.window = (x, y, w, h)
         return image
+
+    def _free_buffer(self) -> _Buffer:
+        """A pool buffer that no one but the pool references (a new one, a copy of the
+        background, when all are held): one whose ``sys.getrefcount`` is what it was when the
+        buffer was made and held by the pool alone (measured then, not assumed: interpreters
+        count temporaries differently).  Anything more is a holder, views included (a view
+        keeps its base array referenced).  Called with the pool's lock held."""
+        for buf in self._pool:
+            if sys.getrefcount(buf.image) <= buf.free_refs:
+                return buf
+        buf = _Buffer(self.background.copy())
+        buf.free_refs = sys.getrefcount(buf.image)  # the count that means "unheld", here
+        if len(self._pool) < POOL:
+            self._pool.append(buf)
+        return buf
 
     def _in_view(self, pose: MarkerPose, spec: MarkerSpec) -> bool:
         """Whether any of the marker's field can reach the image (with a blur margin)."""

@@ -113,6 +113,8 @@ class World:
         for src in self._sources.values():
             if src.has_background:
                 seen[id(src.background)] = src.background.nbytes
+            for buf in src.pool():
+                seen[id(buf)] = buf.nbytes
         live = [[patch] for _, patch in self._live.values()]
         for patches in [p for _, p in self._ahead.values()] + live:
             for pt in patches:

@@ -37,3 +37,40 @@ def test_a_marker_wholly_out_of_view_is_just_the_background():
     src = FrameSource(CAM, SCENE, seed=3)
     pose = MarkerPose.look(np.array([-900.0, 0.0, 700.0]), 10, 0, 0)  # far left of the view
     assert np.array_equal(src.frame(pose), src.frame(None))
+
+
+def _two_patches(src: FrameSource) -> tuple:
+    a = src.patch(MarkerPose.look(np.array([-80.0, -50.0, 700.0]), 10, 0, 0), seed=11)
+    b = src.patch(MarkerPose.look(np.array([90.0, 60.0, 700.0]), 20, 90, 0), seed=12)
+    assert isinstance(a, tuple) and isinstance(b, tuple)
+    return a, b
+
+
+def _expected(src: FrameSource, patch: tuple) -> np.ndarray:
+    (x, y, w, h), pixels = patch
+    want = src.background.copy()
+    want[y:y + h, x:x + w] = pixels
+    return want
+
+
+def test_a_held_frame_is_never_written_into_by_later_grabs():
+    src = FrameSource(CAM, SCENE, seed=4)
+    a, b = _two_patches(src)
+    held = src.compose(a)
+    view = src.compose(a)[100:200, 100:200]  # only a view of this one is kept
+    view_copy = view.copy()
+    for _ in range(6):                     # more grabs than the pool has buffers
+        src.compose(b)
+    assert np.array_equal(held, _expected(src, a))
+    assert np.array_equal(view, view_copy)
+
+
+def test_a_released_buffer_is_reused_with_the_old_window_put_back():
+    src = FrameSource(CAM, SCENE, seed=6)
+    a, b = _two_patches(src)
+    first = src.compose(a)
+    first_id = id(first)
+    del first                               # the consumer is done with it
+    second = src.compose(b)
+    assert id(second) == first_id           # the same buffer, not a new 60 MB copy
+    assert np.array_equal(second, _expected(src, b))   # and nothing of a is left
