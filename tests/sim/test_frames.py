@@ -39,14 +39,17 @@ def test_a_marker_wholly_out_of_view_is_just_the_background():
     assert np.array_equal(src.frame(pose), src.frame(None))
 
 
-def _two_patches(src: FrameSource) -> tuple:
+Window = tuple[tuple[int, int, int, int], np.ndarray]
+
+
+def _two_patches(src: FrameSource) -> tuple[Window, Window]:
     a = src.patch(MarkerPose.look(np.array([-80.0, -50.0, 700.0]), 10, 0, 0), seed=11)
     b = src.patch(MarkerPose.look(np.array([90.0, 60.0, 700.0]), 20, 90, 0), seed=12)
     assert isinstance(a, tuple) and isinstance(b, tuple)
     return a, b
 
 
-def _expected(src: FrameSource, patch: tuple) -> np.ndarray:
+def _expected(src: FrameSource, patch: Window) -> np.ndarray:
     (x, y, w, h), pixels = patch
     want = src.background.copy()
     want[y:y + h, x:x + w] = pixels
