@@ -165,8 +165,11 @@ class World:
         tv = pc.to_vehicle
         if tv is None:
             return None
-        c = tv.A.T @ (pose.centre_v - tv.t)
-        rot = tv.A.T @ pose.rotation_v
+        # the inverse of x_v = A x_p + t, for an affine A too (A.T inverts only a rotation);
+        # the marker's axes are then made orthonormal again (the nearest rotation)
+        c = np.linalg.solve(tv.A, pose.centre_v - tv.t)
+        u, _, vt = np.linalg.svd(np.linalg.solve(tv.A, pose.rotation_v))
+        rot = u @ vt
         if side == "right":
             c, rot = pc.calibration.R @ c + pc.calibration.T, pc.calibration.R @ rot
         if c[2] <= 0 or float(rot[:, 2] @ c) >= 0:
