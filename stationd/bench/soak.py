@@ -1,19 +1,19 @@
 """``stationd bench soak --bolts N [--faults] [--load N]``: the daemon through a long shift.
 
 The daemon runs as ``stationd run`` runs it (the serve loop of :mod:`stationd.station.run`,
-one event bus for its life, a configuration file it reloads), on a copy of config/sim whose
-lift PLC (Modbus TCP) and tightening controller (Open Protocol) are *independent* servers on
-loopback, as on a line: a reload reopens the daemon's connections, not the devices.  Eight
-20 MP cameras compose pre-rendered placements.  It tightens ``N`` bolts over as many vehicles
-as it takes.  With ``--faults`` a random disturbance hits before some bolts: the lift PLC stops
-answering, the controller powers off (sometimes mid-tightening), a camera pair stops
-delivering, a vehicle whose VIN was closed comes back (a rework), the station file is reloaded
-(valid: the station reopens; a bolt table with a duplicate id: refused, the running station
-stays; a lift URL on a port where nothing answers: the new station runs in fault until the next
-reload puts it back).  ``--load N`` keeps N busy processes on the cores meanwhile.  The shift
-is observed only through the daemon's typed events.  It prints what a shift must show: bolts
-tightened, refusals by reason, parameters sent for a wrong bolt (must be 0), daemon exits
-(must be 0), results lost (pulled, never recorded: must be 0) and reloads applied/refused.
+one event bus for its life, a station file it reloads), on a copy of config/sim whose lift PLC
+(Modbus TCP) and tightening controller (Open Protocol) are *independent* servers on loopback,
+as on a line: a reload reopens the daemon's connections, not the devices.  Eight 20 MP
+cameras compose placements rendered ahead.  The shift is a seeded script
+(:func:`stationd.sim.soak.plan_soak`): ``N`` tightenings over vehicles of up to
+``--per-vehicle`` bolts, with hovering between two bolts and leaving before tightening; with
+``--faults`` also lift, controller (also mid-tightening) and camera-pair outages, reloads (a
+valid file; a bolt table with a duplicate id, refused while the running station stays; a lift
+URL where nothing answers, a fault of the new station until the next reload) and vehicles
+whose closed VIN comes back (rework).  ``--load N`` keeps N busy processes on the cores.
+The daemon is observed only through its typed events.  It prints what a shift must show:
+bolts tightened, refusals by reason, parameters sent for a wrong bolt (must be 0), daemon
+exits (must be 0), results lost (made by the controller, never recorded: must be 0).
 """
 
 from __future__ import annotations
@@ -30,7 +30,6 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import yaml
 
 from drivers.lift.sim import SimulatedPlc
@@ -38,7 +37,18 @@ from drivers.wrench.sim import SimController
 from stationd.boltfile import load_bolts
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
-from stationd.sim.world import World, WrenchPose, wrench_at
+from stationd.sim.soak import (
+    Device,
+    ReloadKind,
+    SimDevices,
+    SoakTally,
+    Step,
+    plan_soak,
+)
+from stationd.sim.soak import (
+    run_soak as play,
+)
+from stationd.sim.world import World
 from stationd.station.demo import SIM_CONFIG, _kind, _sim_psets
 from stationd.station.events import (
     BoltSelected,
@@ -55,10 +65,8 @@ from stationd.station.events import (
 from stationd.station.run import Screens, serve_station, validate_station
 from stationd.station.sdnotify import Notifier
 
-FAULTS = ("lift", "controller", "controller mid-tightening", "cameras", "closed VIN back",
-          "reload", "reload with a bad bolt table", "reload with the lift down")
-FAULT_RATE = 0.15       # of bolts preceded by a disturbance (dealt from a shuffled deck)
-OUTAGE_S = 1.5
+RELOAD_SETTLE_S = 0.5    # after a reload is taken, before the shift goes on
+LIFT_DOWN_S = 1.5        # how long a station reloaded onto a dead lift runs before it is fixed
 
 
 def _busy() -> None:
@@ -83,14 +91,15 @@ async def _until(pred: Any, timeout: float) -> bool:
 
 class Watch:
     """What the daemon said, from its typed events: state, vehicle, tool, and every selection
-    checked against where the simulated wrench really is at that instant."""
+    checked by ``tally`` against where the simulated wrench really is at that instant (the
+    bus calls :meth:`see` as the daemon publishes, on the loop the shift runs on)."""
 
-    def __init__(self, bus: EventBus) -> None:
+    def __init__(self, bus: EventBus, tally: SoakTally) -> None:
         self.state, self.reason = "starting", ""
         self.vin: str | None = None
         self.enabled: str | None = None       # the bolt the tool is enabled for
-        self.truth: str | None = None
-        self.wrong = 0
+        self.tally = tally
+        self.refusal = ""                     # the last reason nothing was selected
         bus.subscribe(self.see)
 
     def see(self, ev: StationEvent) -> None:
@@ -100,14 +109,17 @@ class Watch:
                 self.vin = None
         elif isinstance(ev, VehicleOpened):
             self.vin = ev.vin
+        elif isinstance(ev, Refused):
+            self.refusal = ev.reason
         elif isinstance(ev, ToolEnabled):
             self.enabled = ev.bolt
         elif isinstance(ev, ToolDisabled):
             self.enabled = None
-        elif isinstance(ev, BoltSelected) and ev.bolt != self.truth:
-            self.wrong += 1
-            print(f"WRONG BOLT: parameters for {ev.bolt} while the wrench is on "
-                  f"{self.truth or 'no bolt'}", flush=True)
+        elif isinstance(ev, BoltSelected):
+            wrong = len(self.tally.wrong_sends)
+            self.tally.check_send(ev.bolt)
+            if len(self.tally.wrong_sends) > wrong:
+                print(f"WRONG BOLT: {self.tally.wrong_sends[-1]}", flush=True)
 
 
 class StationFiles:
@@ -151,103 +163,68 @@ class StationFiles:
         self.write()
 
 
-class Shift:
-    """The simulated operator and line around one daemon; counts what happened."""
+class DaemonHooks(SimDevices):
+    """The station's side of the soak's hooks, over the running daemon: what it enabled and
+    why not (its events), reloads by rewriting its station file and asking as SIGHUP does."""
 
-    def __init__(self, watch: Watch, world: World, plc: SimulatedPlc, ctl: SimController,
-                 files: StationFiles, reload: asyncio.Event, rng: np.random.Generator,
-                 poses: dict[str, WrenchPose], faults: bool) -> None:
-        self.w, self.world, self.plc, self.ctl, self.files = watch, world, plc, ctl, files
-        self.reload, self.rng, self.poses, self.faults = reload, rng, poses, faults
-        self.pulled: list[int] = []
-        self.injected: Counter[str] = Counter()
-        self.skipped: list[str] = []
-        self.vehicles = 0
-        self.deck: list[str] = []
-        self.pairs = sorted(yaml.safe_load(files.path.read_text())["pairs"])
+    def __init__(self, watch: Watch, files: StationFiles, reload: asyncio.Event,
+                 recorded: set[int], *args: Any, **kw: Any) -> None:
+        super().__init__(*args, **kw)
+        self.watch, self.files, self._reload, self._recorded = watch, files, reload, recorded
+        self.daemon: asyncio.Task[None] | None = None
 
-    def tightening(self, bolt: str) -> bool:
-        return self.w.state == "tightening" and self.w.enabled == bolt \
-            and bool(self.ctl.tool_enabled)
+    async def arrive(self, vin: str, model_code: int) -> None:
+        await super().arrive(vin, model_code)
+        await _until(lambda: self.watch.vin == vin and self.watch.state == "tracking", 30)
 
-    async def vehicle(self, vin: str) -> None:
-        self.plc.set_vehicle(1, vin)
-        self.plc.raise_lift()
-        self.vehicles += 1
-        await _until(lambda: self.w.vin == vin and self.w.state == "tracking", 30)
+    async def depart(self) -> None:
+        await super().depart()
+        await _until(lambda: self.watch.state == "waiting for vehicle", 30)
 
-    async def leave(self) -> None:
-        self.plc.lower_lift()
-        await _until(lambda: self.w.state == "waiting for vehicle", 30)
+    async def wait_enabled(self, bolt: str, timeout: float) -> bool:
+        return await _until(lambda: self.watch.state == "tightening"
+                            and self.watch.enabled == bolt
+                            and bool(self.controller.tool_enabled), timeout)
+
+    async def wait_disabled(self, timeout: float) -> bool:
+        return await _until(lambda: self.watch.enabled is None
+                            and not self.controller.tool_enabled, timeout)
+
+    async def device_up(self, device: Device) -> None:
+        await super().device_up(device)
+        await _until(lambda: self.watch.state in ("tracking", "waiting for vehicle"), 30)
 
     async def _reloaded(self) -> None:
-        """Ask for a reload (SIGHUP) and give the daemon time to validate and switch."""
-        self.reload.set()
-        await _until(lambda: not self.reload.is_set(), 15)
-        await asyncio.sleep(0.5)
+        self._reload.set()                  # what SIGHUP sets
+        await _until(lambda: not self._reload.is_set(), 15)
+        await asyncio.sleep(RELOAD_SETTLE_S)
 
-    async def outage(self, kind: str) -> None:
-        self.injected[kind] += 1
-        if kind == "lift":
-            port = self.plc.tcp_port or 0
-            self.plc.stop_tcp()
-            await asyncio.sleep(OUTAGE_S)
-            self.plc.start_tcp(port)
-        elif kind.startswith("controller"):
-            self.ctl.power_off()
-            await asyncio.sleep(OUTAGE_S)
-            self.ctl.power_on()
-        elif kind == "cameras":
-            pair = str(self.rng.choice(self.pairs))
-            self.world.cut_cameras(pair)
-            await asyncio.sleep(OUTAGE_S)
-            self.world.restore_cameras(pair)
-        elif kind == "closed VIN back":
-            vin = self.w.vin
-            if vin is not None:
-                await self.leave()
-                await self.vehicle(vin)      # the same VIN again: reopened as a rework
-        elif kind == "reload":
+    async def reload(self, kind: ReloadKind) -> None:
+        if kind == "valid":
             self.files.toggle_stable_frames()
             await self._reloaded()
-        elif kind == "reload with a bad bolt table":
+        elif kind == "bad bolt table":
             self.files.duplicate_bolt()
             await self._reloaded()           # refused: the running station stays
             self.files.restore_bolts()
-        elif kind == "reload with the lift down":
+        else:
             self.files.lift_url(f"modbus-tcp://127.0.0.1:{_free_port()}?unit=1&timeout=0.3")
             await self._reloaded()
-            await asyncio.sleep(OUTAGE_S)    # the new station runs in fault, lift unreachable
+            await asyncio.sleep(LIFT_DOWN_S)    # the new station runs in fault, lift unreachable
             self.files.lift_url(self.files.good_lift)
             await self._reloaded()
-        await _until(lambda: self.w.state in ("tracking", "waiting for vehicle"), 30)
+        await _until(lambda: self.watch.state in ("tracking", "waiting for vehicle"), 30)
 
-    def next_fault(self) -> str:
-        """Dealt from a shuffled deck of every kind: a shift sees each kind as often."""
-        if not self.deck:
-            self.deck = [FAULTS[int(k)] for k in self.rng.permutation(len(FAULTS))]
-        return self.deck.pop()
+    def recorded(self) -> int:
+        return len(self._recorded)
 
-    async def bolt(self, bolt: str) -> None:
-        fault = self.next_fault() if self.faults and self.rng.random() < FAULT_RATE else None
-        if fault is not None and fault != "controller mid-tightening":
-            await self.outage(fault)
-        self.world.set_wrench(self.poses[bolt])
-        self.w.truth = bolt
-        if not await _until(lambda: self.tightening(bolt), 60):
-            self.skipped.append(f"{bolt}: {self.w.state}: {self.w.reason}")
-        else:
-            if fault == "controller mid-tightening":
-                await self.outage(fault)
-                await _until(lambda: self.tightening(bolt), 60)
-            shot = self.ctl.pull_trigger() if self.tightening(bolt) else None
-            if shot is not None:
-                self.pulled.append(int(shot.tightening_id))
-                await _until(lambda: self.w.enabled is None, 15)
-        await asyncio.sleep(0.2)        # the wrench lifts off after the rundown
-        self.w.truth = None
-        self.world.set_wrench(None)
-        await _until(lambda: self.w.state in ("tracking", "fault", "waiting for vehicle"), 15)
+    def alive(self) -> bool:
+        return self.daemon is not None and not self.daemon.done()
+
+    def why_not(self) -> str:
+        w = self.watch
+        return f"{w.state}: {_kind(w.refusal or w.reason)}" if w.refusal or w.reason \
+            else w.state
 
 
 class _QuietNotifier(Notifier):
@@ -268,67 +245,86 @@ def run_soak(args: argparse.Namespace) -> int:
         raise InputError("--bolts must be at least 1")
     if int(args.seed) < 0:
         raise InputError("--seed must be >= 0")
+    if int(args.per_vehicle) < 1:
+        raise InputError("--per-vehicle must be at least 1")
     if not 0 <= load <= 64:
         raise InputError("--load must be 0-64 busy processes")
+    table = load_bolts(SIM_CONFIG.parent / "bolts.yaml")
+    model = table.models[0]
+    code = model.code if model.code is not None else 1
+    plan = plan_soak([b.bolt_id for b in model.bolts], total, model_code=code,
+                     per_vehicle=int(args.per_vehicle), faults=bool(args.faults),
+                     seed=int(args.seed))
+    tally = soak_station(plan, load=load, seed=int(args.seed))
+    summary = {"bolts": total, **tally.summary(), "load_processes": load}
+    if args.json:
+        sys.stdout.write(strict_json(summary) + "\n")
+    else:
+        print(f"{tally.tightened}/{total} bolts tightened in {summary['duration_s']:.0f} s "
+              f"(load: {load} busy processes); reworks {tally.reworks}")
+        print(f"outages: {dict(tally.outages) or 'none'}; reloads: {dict(tally.reloads) or 'none'}"
+              f" (refused: {summary['reloads_refused']}); device faults seen: "
+              f"{summary['device_faults'] or 'none'}")
+        print(f"refusals by reason: {summary['refusals']}")
+        for why, n in tally.not_tightened.items():
+            print(f"  not tightened ({n}): {why}")
+        for w in tally.wrong_sends[:10]:
+            print(f"  WRONG BOLT: {w}")
+        print(f"parameters sent for a wrong bolt: {len(tally.wrong_sends)}; daemon exits: "
+              f"{tally.exits}; results lost: {tally.results_lost} "
+              f"(made {tally.results_made}, recorded {tally.results_recorded})")
+        print(f"{'PASS' if tally.passed else 'FAIL'}: {len(tally.wrong_sends)} wrong, "
+              f"{tally.exits} exits, {tally.results_lost} lost")
+    return 0 if tally.passed else 1
+
+
+def soak_station(plan: list[Step], *, load: int = 0, seed: int = 0) -> SoakTally:
+    """Play ``plan`` on the daemon serving a private copy of the simulated station, beside
+    ``load`` busy processes; the tally (its summary has the daemon's refusals, device faults
+    and refused reloads too)."""
     tmp = tempfile.TemporaryDirectory(prefix="stationd-soak-")
-    rng = np.random.default_rng(args.seed)
     plc = SimulatedPlc()
-    ctl = SimController(psets=_sim_psets(SIM_CONFIG.parent / "bolts.yaml"), seed=args.seed)
+    ctl = SimController(psets=_sim_psets(SIM_CONFIG.parent / "bolts.yaml"), seed=seed)
     ctl.start()
     files = StationFiles(Path(tmp.name), plc.start_tcp(), ctl.listen_tcp())
     cfg = validate_station(files.path)
     assert cfg.bolts_path is not None  # noqa: S101 - the simulated station names its bolts
     plc.register_map = cfg.lift.registers
-    model = load_bolts(cfg.bolts_path).models[0]
-    per_vehicle = min(int(args.per_vehicle), len(model.bolts))
-    chosen = [model.bolts[int(k)] for k in rng.permutation(len(model.bolts))[:per_vehicle]]
-    poses = {b.bolt_id: wrench_at(np.array(b.position) + np.append(rng.normal(0, 0.3, 2), 0.0),
-                                  rng, cfg.tool.length_mm) for b in chosen}
-    print(f"rendering {len(poses)} placements ahead (not timed) ...", file=sys.stderr,
-          flush=True)
-    world = World(cfg, seed=args.seed)
-    world.prerender(list(poses.values()))
+    world = World(cfg, seed=seed)
     bus = EventBus()
-    watch = Watch(bus)
+    tally = SoakTally()
+    watch = Watch(bus, tally)
     recorded: set[int] = set()
     bus.subscribe(lambda e: recorded.add(e.tightening_id)
                   if isinstance(e, ResultRecorded) else None)
+    model = load_bolts(cfg.bolts_path).models[0]
     notifier = _QuietNotifier()
-    exits: list[str] = []
     busy = [multiprocessing.Process(target=_busy, daemon=True) for _ in range(load)]
-    shift: Shift | None = None
 
-    async def main() -> None:
-        nonlocal shift
-        stop, reload = asyncio.Event(), asyncio.Event()
-        shift = Shift(watch, world, plc, ctl, files, reload, rng, poses, bool(args.faults))
-        daemon = asyncio.create_task(serve_station(str(files.path), cfg, notifier, bus,
-                                                   Screens(bus), stop, reload))
+    async def main(hooks: DaemonHooks) -> None:
+        stop, reload = asyncio.Event(), hooks._reload
+        hooks.daemon = asyncio.create_task(serve_station(str(files.path), cfg, notifier, bus,
+                                                         Screens(bus), stop, reload))
+        tally.started = time.monotonic()
         try:
-            done, vin_no = 0, 0
-            while done < total:
-                vin_no += 1
-                await shift.vehicle(f"SOAK{vin_no:013d}")
-                for b in list(poses)[:total - done]:
-                    if daemon.done():
-                        raise RuntimeError("the daemon's serve loop ended")
-                    await shift.bolt(b)
-                    done += 1
-                await shift.leave()
+            await play(plan, hooks, tally)
         finally:
             stop.set()
             try:
-                await daemon
+                await hooks.daemon
             except Exception as exc:  # counted: an exit is what the soak must never see
-                exits.append(f"{type(exc).__name__}: {exc}")
+                print(f"the daemon ended: {type(exc).__name__}: {exc}", file=sys.stderr)
+                tally.exits += 1
 
-    for p in busy:
-        p.start()
-    t0 = time.perf_counter()
     try:
-        asyncio.run(main())
-    except RuntimeError as exc:
-        exits.append(str(exc))
+        hooks = DaemonHooks(watch, files, asyncio.Event(), recorded, world, plc, ctl,
+                            {b.bolt_id: b.position for b in model.bolts}, cfg.tool.length_mm,
+                            seed=seed)
+        print(f"rendering {hooks.prepare(plan)} placements ahead (not timed) ...",
+              file=sys.stderr, flush=True)
+        for p in busy:
+            p.start()
+        asyncio.run(main(hooks))
     finally:
         for p in busy:
             p.terminate()
@@ -336,33 +332,12 @@ def run_soak(args: argparse.Namespace) -> int:
         ctl.close()
         plc.close()
         tmp.cleanup()
-    assert shift is not None  # noqa: S101 - main() made it
-    refusals = Counter(_kind(e.reason) for e in bus.of(Refused) if isinstance(e, Refused))
-    down = Counter(e.device for e in bus.of(DeviceHealth)
-                   if isinstance(e, DeviceHealth) and not e.ok)
-    refused_reloads = [s for s in notifier.said if s.startswith("reload refused")]
-    summary = {"bolts": total, "tightened": len(recorded), "vehicles": shift.vehicles,
-               "faults_injected": dict(shift.injected), "not_tightened": shift.skipped,
-               "refusals": dict(refusals.most_common()), "wrong_bolt_sends": watch.wrong,
-               "reloads_refused": len(refused_reloads), "device_faults": dict(down),
-               "exits": len(exits), "results_lost": len(set(shift.pulled) - recorded),
-               "load_processes": load, "run_s": time.perf_counter() - t0}
-    ok = watch.wrong == 0 and not exits and summary["results_lost"] == 0
-    if args.json:
-        sys.stdout.write(strict_json(summary) + "\n")
-    else:
-        print(f"{summary['tightened']}/{total} bolts tightened over {shift.vehicles} vehicles "
-              f"in {summary['run_s']:.0f} s (load: {load} busy processes)")
-        print(f"disturbances: {dict(shift.injected) or 'none'}; reloads refused: "
-              f"{len(refused_reloads)}")
-        print(f"device faults seen: {dict(down) or 'none'}")
-        print(f"refusals by reason: {summary['refusals']}")
-        for miss in shift.skipped:
-            print(f"  not tightened: {miss}")
-        for e in exits:
-            print(f"  exit: {e}")
-        print(f"parameters sent for a wrong bolt: {watch.wrong}; daemon exits: {len(exits)}; "
-              f"results lost: {summary['results_lost']}")
-        print(f"{'PASS' if ok else 'FAIL'}: {watch.wrong} wrong, {len(exits)} exits, "
-              f"{summary['results_lost']} lost")
-    return 0 if ok else 1
+    tally.results_recorded = len(recorded)
+    for e in bus.of(Refused):
+        if isinstance(e, Refused):
+            tally.refused(_kind(e.reason))
+    tally.extra.update({
+        "device_faults": dict(Counter(e.device for e in bus.of(DeviceHealth)
+                                      if isinstance(e, DeviceHealth) and not e.ok)),
+        "reloads_refused": sum(x.startswith("reload refused") for x in notifier.said)})
+    return tally
