@@ -180,6 +180,10 @@ class DaemonHooks(SimDevices):
     async def depart(self) -> None:
         await super().depart()
         await _until(lambda: self.watch.state == "waiting for vehicle", 30)
+        t = self.watch.tally    # one line per vehicle on stderr: a long soak is never silent
+        print(f"soak: {t.tightened} tightened, {len(t.wrong_sends)} wrong, "
+              f"{t.results_made - len(self._recorded)} unrecorded, "
+              f"{time.monotonic() - t.started:.0f} s", file=sys.stderr, flush=True)
 
     async def wait_enabled(self, bolt: str, timeout: float) -> bool:
         return await _until(lambda: self.watch.state == "tightening"
