@@ -89,6 +89,7 @@ from stationd.station.events import (
     VehicleClosed,
     VehicleOpened,
 )
+from stationd.station.scan import ScanPlan
 from stationd.station.sdnotify import Notifier
 from stationd.vision.types import Refusal
 
@@ -196,6 +197,7 @@ class Station:
     _wait: dict[str, float] = field(default_factory=dict)      # device -> current backoff
     _open_error: dict[str, str] = field(default_factory=dict)  # device -> why it did not open
     _next_frames: dict[str, float] = field(default_factory=dict)  # pair -> next PairFrames
+    _scan: ScanPlan = field(default_factory=ScanPlan)   # which pairs to localize per cycle
 
     def __post_init__(self) -> None:
         self.core = StationCore(self.cfg.matching, self.cfg.matching.leave_frames)
@@ -459,14 +461,17 @@ class Station:
         return None
 
     async def _localize(self) -> Localization | None:
-        """Grab and localize in every pair at once.  The localization's ``exposure_t`` is the
-        earliest exposure of the frames it used (its age is counted from there).  A pair that
-        failed its grab is left out of this localization; after ``BAD_GRABS`` failures in a
-        row it is a fault.  None when every pair failed (nothing to tell the core)."""
-        names = list(self.grabbers)
+        """Grab and localize at once in the pairs the scan plan chooses (those that see the
+        marker, and every pair now and then: :mod:`stationd.station.scan`).  The
+        localization's ``exposure_t`` is the earliest exposure of the frames it used (its age
+        is counted from there).  A pair that failed its grab is left out of this
+        localization; after ``BAD_GRABS`` failures in a row it is a fault.  None when every pair failed (nothing to tell the core)."""
+        names = self._scan.choose(list(self.grabbers))
         got: list[PairView] = await asyncio.gather(*(self._call(self._localize_pair, n)
                                                      for n in names))
         done = time.time()
+        self._scan.saw({n: any(d.get("found") for d in g.sides.values())
+                        for n, g in zip(names, got, strict=True)})
         for n, g in zip(names, got, strict=True):
             if g.failed and not g.skew:
                 self._bad[n] = self._bad.get(n, 0) + 1
