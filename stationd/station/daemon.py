@@ -465,7 +465,8 @@ class Station:
         marker, and every pair now and then: :mod:`stationd.station.scan`).  The
         localization's ``exposure_t`` is the earliest exposure of the frames it used (its age
         is counted from there).  A pair that failed its grab is left out of this
-        localization; after ``BAD_GRABS`` failures in a row it is a fault.  None when every pair failed (nothing to tell the core)."""
+        localization; after ``BAD_GRABS`` failures in a row it is a fault.  None when every
+        pair failed (nothing to tell the core)."""
         names = self._scan.choose(list(self.grabbers))
         got: list[PairView] = await asyncio.gather(*(self._call(self._localize_pair, n)
                                                      for n in names))
