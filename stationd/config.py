@@ -203,8 +203,8 @@ def device_url(node: YamlNode, kind: str, *, check: bool = False) -> str:
 
     With ``check``, its form and scheme are checked against the driver's registry without
     importing a backend or opening a device (options are the backend's, checked when it opens).
-    The loader does not check: the daemon has always found a bad URL when opening the device,
-    and ``load_station_config`` keeps that behaviour; ``stationd config check`` checks.
+    ``stationd config check`` and the daemon's loader (``station=True``: the first start and
+    every reload) check; other readers of a station file (tools, benchmarks) do not need to.
     """
     url = node.text()
     if check:
@@ -265,14 +265,24 @@ def _baseline(calibration: StereoPair, node: YamlNode) -> StereoPair:
     return calibration
 
 
-def _database_url(node: YamlNode, base: Path) -> str:
+def _database_url(node: YamlNode, base: Path, check: bool = False) -> str:
     """The database URL; a relative SQLite path is relative to the station file, like every
-    other path in it (not to the daemon's working directory)."""
-    url = node.mapping(("url",), required=("url",))["url"].text()
+    other path in it (not to the daemon's working directory).  With ``check``, the URL must
+    parse and name a database whose driver is installed (nothing is connected)."""
+    url_node = node.mapping(("url",), required=("url",))["url"]
+    url = url_node.text()
     prefix = "sqlite:///"
     if url.startswith(prefix) and not url.startswith(prefix + "/") \
             and url[len(prefix):] not in ("", ":memory:"):
-        return prefix + str(base.resolve() / url[len(prefix):])
+        url = prefix + str(base.resolve() / url[len(prefix):])
+    if check:
+        from db.engine import make_engine
+        from db.errors import DbError
+
+        try:
+            make_engine(url).dispose()
+        except DbError as exc:
+            raise url_node.error(str(exc)) from None
     return url
 
 
@@ -356,7 +366,9 @@ class _Reader:
         The sections are read in this order (the loader's first error is the first here)."""
         root = YamlNode.load(path)
         self.top = self.sections(root)
-        d, base, check = StationConfig(), self.base, self.collect
+        # URLs are checked (form, scheme, database driver) by the checker and for a station
+        # the daemon runs: a typo is refused at the start and by a reload, never run in fault
+        d, base, check = StationConfig(), self.base, self.collect or self.require_devices
         marker = self.section("marker", d.marker, MarkerSpec.from_node)
         vision = self.section("vision", d.vision, partial(VisionParams.from_node, base_dir=base))
         cameras, names = self.cameras(self.top["cameras"]) if "cameras" in self.top \
@@ -370,7 +382,7 @@ class _Reader:
                                 partial(WrenchConfig.from_node, check_url=check)),
             matching=self.section("matching", d.matching, MatchingConfig.from_node),
             database_url=self.section("database", d.database_url,
-                                      partial(_database_url, base=base)),
+                                      partial(_database_url, base=base, check=check)),
             bolts_path=self.section("bolts", d.bolts_path,
                                     partial(_existing, base=base, what="bolt file")),
             records=self.section("records", d.records, partial(_records, base=base)),
@@ -391,7 +403,8 @@ class _Reader:
             return {}, None
         urls: dict[str, str] = {}
         for name, item in items:
-            url = self.guard(None, _camera_url, item, check=self.collect)
+            url = self.guard(None, _camera_url, item,
+                             check=self.collect or self.require_devices)
             if url is not None:
                 urls[name] = url
         return urls, [name for name, _ in items]

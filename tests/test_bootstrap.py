@@ -42,12 +42,13 @@ def test_bootstrap_prints_a_line_per_step_and_is_idempotent(tmp_path):
     _stub(bin_dir, "pkg-config", "#!/bin/sh\nexit 1\n")
     _stub(bin_dir, "python3", PYTHON_STUB)
     env = {"PATH": f"{bin_dir}:/usr/bin:/bin", "LOG": str(log),
-           "STATE": str(tmp_path / "installed"), "HOME": str(tmp_path)}
+           "STATE": str(tmp_path / "installed"), "HOME": str(tmp_path),
+           "SYSTEM_PYTHON": str(bin_dir / "python3")}   # as root: the system's Python
     first = _run(tree, env)
     steps = [line.split("] ", 1)[1] for line in first]
     assert all(line.startswith("bootstrap: [") for line in first)
     assert steps[0] == "apt-get update" and steps[1].startswith("apt-get install python3 ")
-    assert steps[2:5] == ["python3 -m venv .venv", "pip install --upgrade pip",
+    assert steps[2:5] == [f"{bin_dir}/python3 -m venv .venv", "pip install --upgrade pip",
                           "pip install -e .[dev,bench] (numpy, OpenCV, ...: a few minutes the "
                           "first time)"]
     assert steps[-1] == "ready (.venv)"
