@@ -38,7 +38,7 @@ from drivers.errors import (
     ProtocolError,
     RefusedError,
 )
-from drivers.url import parse_url
+from drivers.url import OptionError, parse_url
 
 # pyserial ships no type hints (and the project has no stub package): typed as Any on purpose.
 serial: Any = importlib.import_module("serial")
@@ -100,7 +100,7 @@ def _positive(text: str) -> float:
 def _unit(text: str) -> int:
     value = int(text)
     if not 0 <= value <= 247:
-        raise ValueError(text)
+        raise OptionError("a Modbus unit id is 0-247")
     return value
 
 

@@ -215,6 +215,13 @@ def device_url(node: YamlNode, kind: str, *, check: bool = False) -> str:
             raise node.error(f"{exc}; accepted: {forms}") from None
         if scheme not in backends:
             raise node.error(f"unknown {kind} scheme {scheme!r}; accepted: {forms}")
+        if scheme.startswith("modbus-"):   # its options too: pure parsing, nothing opened
+            from drivers.modbus_link import parse_modbus_url
+
+            try:
+                parse_modbus_url(url)
+            except UrlError as exc:
+                raise node.error(str(exc)) from None
     return url
 
 

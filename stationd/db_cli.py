@@ -89,9 +89,9 @@ def cmd_db_import(args: argparse.Namespace) -> int:
 def cmd_db_export(args: argparse.Namespace) -> int:
     if args.results:
         return _export_results(args)
-    if args.vin is not None or args.since is not None or args.format != "yaml":
-        raise InputError("--vin, --since and --format go with --results (the bolt table is "
-                         "YAML)")
+    if args.vin is not None or args.since is not None or args.format not in (None, "yaml"):
+        raise InputError("--vin, --since and --format csv|json go with --results (the bolt "
+                         "table is YAML)")
     with _open(args.db, must_exist=True) as repo:
         text = repo.export_bolts()
         summary = repo.table().summary()
@@ -119,7 +119,9 @@ def _export_results(args: argparse.Namespace) -> int:
     what quality takes out of the station (the results screen's export, for all vehicles)."""
     from stationd.web.results import Results, rundowns_csv
 
-    fmt = "csv" if args.format == "yaml" else args.format
+    if args.format == "yaml":
+        raise InputError("--results are exported as csv (the default) or json, not yaml")
+    fmt = args.format or "csv"
     with _open(args.db, must_exist=True) as repo:
         results = Results(repo)
         if args.vin is not None:
@@ -284,7 +286,7 @@ def add_db_parser(subparsers: Any) -> argparse.ArgumentParser:
     ex.add_argument("--vin", help="with --results: this vehicle only")
     ex.add_argument("--since", type=_since, metavar="DATE",
                     help="with --results: rundowns recorded since (ISO date or date-time, UTC)")
-    ex.add_argument("--format", choices=("yaml", "csv", "json"), default="yaml",
+    ex.add_argument("--format", choices=("yaml", "csv", "json"), default=None,
                     help="yaml for the bolt table; csv (default) or json for --results")
     ex.set_defaults(func=cmd_db_export)
     rp = dsub.add_parser("report", help="a vehicle's bolts: results and missing ones",
@@ -302,7 +304,8 @@ def add_config_parser(subparsers: Any) -> argparse.ArgumentParser:
     c: argparse.ArgumentParser = subparsers.add_parser("config", help="check configuration files")
     csub = c.add_subparsers(dest="config_command", required=True, parser_class=type(c))
     ck = csub.add_parser(
-        "check", help="validate station files and bolt tables, reporting every error at once",
+        "check", help="validate station files and bolt tables: the first error of each section, "
+        "camera, pair and file, all at once",
         description="Checks station files (station.yaml) and bolt tables (bolts.yaml), told "
                     "apart by their top-level keys.  A station file is checked with the files "
                     "it names (calibrations, to_vehicle transforms, the bolt table) and its "

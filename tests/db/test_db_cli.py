@@ -266,7 +266,8 @@ def test_export_results_every_rundown_as_csv_or_json(run, db, tmp_path):
     code, out, _ = run("db", "export", "--results", "--out", str(target), "--db", db)
     assert code == 0 and target.read_text().count("\n") == 4
     for args, message in ((["--vin", "NOPE"], "NOPE"), (["--since", "yesterday"], "ISO date"),
-                          (["--format", "csv"], "go with --results")):
-        extra = ["--results"] if args[0] != "--format" else []
+                          (["--format", "csv"], "go with --results"),
+                          (["--results", "--format", "yaml"], "csv (the default) or json")):
+        extra = ["--results"] if args[0] not in ("--format", "--results") else []
         code, out, err = run("db", "export", *extra, *args, "--db", db)
         assert code == 2 and out == "" and message in _one_line(err), err
