@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import multiprocessing
+import secrets
 import shutil
 import socket
 import sys
@@ -75,9 +76,23 @@ def _busy() -> None:
 
 
 def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    """A free TCP port on loopback *outside* the kernel's ephemeral range: a client that keeps
+    reconnecting to a port in that range while nothing listens can be given that very port as
+    its own and connect to itself (TCP simultaneous open), and then holds it: the device
+    coming back cannot bind its port again."""
+    try:
+        low = int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        low = 32768
+    for _ in range(200):
+        port = 10000 + secrets.randbelow(max(1, low - 10000))
+        with socket.socket() as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    raise OSError("no free TCP port below the ephemeral range")
 
 
 async def _until(pred: Any, timeout: float) -> bool:
@@ -290,7 +305,8 @@ def soak_station(plan: list[Step], *, load: int = 0, seed: int = 0) -> SoakTally
     plc = SimulatedPlc()
     ctl = SimController(psets=_sim_psets(SIM_CONFIG.parent / "bolts.yaml"), seed=seed)
     ctl.start()
-    files = StationFiles(Path(tmp.name), plc.start_tcp(), ctl.listen_tcp())
+    files = StationFiles(Path(tmp.name), plc.start_tcp(_free_port()),
+                         ctl.listen_tcp(port=_free_port()))
     cfg = validate_station(files.path)
     assert cfg.bolts_path is not None  # noqa: S101 - the simulated station names its bolts
     plc.register_map = cfg.lift.registers

@@ -331,7 +331,7 @@ class SimDevices:
                 if step.hover_with is not None:
                     hover = self.pose(step.bolt, step.hover_with)
                     poses[id(hover)] = hover
-        self.world.prerender(list(poses.values()))
+        self.world.prerender(list(poses.values()), variants=1)   # a soak needs no noise variety
         return len(poses)
 
     async def arrive(self, vin: str, model_code: int) -> None:
