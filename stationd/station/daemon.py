@@ -421,13 +421,15 @@ class Station:
             if self.core.state not in LOCALIZING or not self.grabbers or down:
                 await asyncio.sleep(IDLE_S)
                 continue
-            loc = await self._localize()
-            if loc is None:
-                continue
-            self.last = loc
-            point = None if loc.point_mm is None else _xyz(loc.point_mm)
-            await self.feed(LocalizedIn(time.time(), loc.exposure_t, point, loc.reason,
-                                        loc.tilt_deg, loc))
+            cycle = self._scan.choose(list(self.grabbers))
+            loc = await self._localize(cycle.decide)
+            if loc is not None:
+                self.last = loc
+                point = None if loc.point_mm is None else _xyz(loc.point_mm)
+                await self.feed(LocalizedIn(time.time(), loc.exposure_t, point, loc.reason,
+                                            loc.tilt_deg, loc))
+            if cycle.scout and self._scan.watching:   # after the decision, never before it
+                await self._localize(cycle.scout)
 
     async def _probe_pair(self, name: str) -> None:
         """A faulty pair: reopen it if it never opened, else grab once; back when it works."""
@@ -460,14 +462,13 @@ class Station:
                        f"{want[0]}x{want[1]}"
         return None
 
-    async def _localize(self) -> Localization | None:
-        """Grab and localize at once in the pairs the scan plan chooses (those that see the
-        marker, and every pair now and then: :mod:`stationd.station.scan`).  The
+    async def _localize(self, names: list[str]) -> Localization | None:
+        """Grab and localize at once in the pairs ``names`` (the scan plan's choice: those
+        that see the marker, or all: :mod:`stationd.station.scan`).  The
         localization's ``exposure_t`` is the earliest exposure of the frames it used (its age
         is counted from there).  A pair that failed its grab is left out of this
         localization; after ``BAD_GRABS`` failures in a row it is a fault.  None when every
         pair failed (nothing to tell the core)."""
-        names = self._scan.choose(list(self.grabbers))
         got: list[PairView] = await asyncio.gather(*(self._call(self._localize_pair, n)
                                                      for n in names))
         done = time.time()
