@@ -107,7 +107,7 @@ def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = 
     if (w, h) != camera.size:
         raise ImageError(f"image is {w}x{h} but the camera model is {camera.size[0]}x"
                          f"{camera.size[1]}")
-    timings: dict[str, float] = {"reduce": 0.0, "segment": 0.0}
+    timings: dict[str, float] = {"reduce": 0.0, "segment": 0.0, "retinex": 0.0}
     # A marker too small for the reduced search (a far marker, a small sensor) is looked for
     # again at half the reduction, but only if a purple region small enough to be such a
     # marker was seen: a frame with no marker (most frames of most pairs) or with one cut by
@@ -122,7 +122,7 @@ def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = 
         t1 = time.perf_counter()
         cands, purple = search_candidates(
             small, scale, params.hsv, enhance=params.enhance_params if params.enhance else None,
-            full_size=(w, h))
+            full_size=(w, h), timings=timings)
         t2 = time.perf_counter()
         timings["reduce"] += (t1 - t0) * 1e3
         timings["segment"] += (t2 - t1) * 1e3
@@ -226,9 +226,11 @@ def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionPa
     # excluded) or the coverage gate, each with its reason.
     t0 = time.perf_counter()
     hint = (cand.hole_centre[0] - x, cand.hole_centre[1] - y)
-    edges = boundary_edges(image[y:y + h, x:x + w], marker.ratio_sq, hint, cand.hole_radius)
+    edges = boundary_edges(image[y:y + h, x:x + w], marker.ratio_sq, hint, cand.hole_radius,
+                           timings)
     t1 = time.perf_counter()
-    timings["edges"] = (t1 - t0) * 1e3
+    # "edges" is the ROI's own work; the rays that find the ring inside it are "rays"
+    timings["edges"] = (t1 - t0) * 1e3 - timings.get("rays", 0.0)
     if isinstance(edges, Refusal):
         return refuse(edges.reason)
     assert isinstance(edges, BoundaryEdges)  # noqa: S101 - narrowed for mypy

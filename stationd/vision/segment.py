@@ -15,6 +15,7 @@ other print sizes only need "purple around a dark ring around a bright centre".
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import cv2
@@ -206,7 +207,8 @@ def find_candidates(small_bgr: np.ndarray, scale: int, ranges: HsvRange = DEFAUL
 
 def search_candidates(small_bgr: np.ndarray, scale: int, ranges: HsvRange = DEFAULT_HSV, *,
                       enhance: EnhanceParams | None, full_size: tuple[int, int],
-                      min_hole_radius_px: float = MIN_HOLE_RADIUS_PX
+                      min_hole_radius_px: float = MIN_HOLE_RADIUS_PX,
+                      timings: dict[str, float] | None = None
                       ) -> tuple[list[Candidate], int]:
     """:func:`find_candidates`, and the area (reduced px) of the largest purple region: the
     detector retries at a finer scale only when that region is small enough to be a marker
@@ -215,7 +217,9 @@ def search_candidates(small_bgr: np.ndarray, scale: int, ranges: HsvRange = DEFA
 
     The area is only needed when nothing was found, so it is 0 whenever candidates are
     returned: labelling every purple region of the frame costs ~2 ms, while a candidate's
-    own region is flood-filled from its hole (:func:`_region_box`)."""
+    own region is flood-filled from its hole (:func:`_region_box`).  ``timings``, when
+    given, accumulates the milliseconds of the enhancement (``"retinex"``, a part of the
+    search) for the speed benchmark."""
     if small_bgr.dtype != np.uint8 or small_bgr.ndim != 3 or small_bgr.shape[2] != 3:
         raise ValueError(f"expected a uint8 HxWx3 BGR image, got {small_bgr.dtype} "
                          f"{small_bgr.shape}")
@@ -224,7 +228,10 @@ def search_candidates(small_bgr: np.ndarray, scale: int, ranges: HsvRange = DEFA
     if scale < 1 or abs(sw * scale - fw) >= scale or abs(sh * scale - fh) >= scale:
         raise ValueError(f"image {sw}x{sh} at 1/{scale} does not match full size {fw}x{fh}")
     hsv = cv2.cvtColor(small_bgr, cv2.COLOR_BGR2HSV)
+    t0 = time.perf_counter()
     seg = hsv if enhance is None else enhance_hsv(hsv, enhance, float(scale))
+    if timings is not None:
+        timings["retinex"] = timings.get("retinex", 0.0) + (time.perf_counter() - t0) * 1e3
     mask = purple_mask(seg, ranges)
     _, holes, stats, _ = cv2.connectedComponentsWithStats(cv2.bitwise_not(mask), connectivity=4)
     x, y, w, h, area = (stats[:, i] for i in range(5))
