@@ -98,8 +98,13 @@ def reduce(image: np.ndarray, scale: int) -> np.ndarray:
 
 
 def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = None,
-               marker: MarkerSpec | None = None) -> tuple[list[Detection], list[str]]:
-    """Every marker in the image, and the reasons candidates were refused."""
+               marker: MarkerSpec | None = None, timings: dict[str, float] | None = None
+               ) -> tuple[list[Detection], list[str]]:
+    """Every marker in the image, and the reasons candidates were refused.
+
+    ``timings``, when given, receives the search's stage times (ms), which a refusal for
+    want of candidates would otherwise not show.
+    """
     params = params or VisionParams()
     marker = marker or MarkerSpec()
     check_image(image)
@@ -107,7 +112,8 @@ def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = 
     if (w, h) != camera.size:
         raise ImageError(f"image is {w}x{h} but the camera model is {camera.size[0]}x"
                          f"{camera.size[1]}")
-    timings: dict[str, float] = {"reduce": 0.0, "segment": 0.0, "retinex": 0.0}
+    timings = timings if timings is not None else {}
+    timings.update({"reduce": 0.0, "segment": 0.0, "retinex": 0.0})
     # A marker too small for the reduced search (a far marker, a small sensor) is looked for
     # again at half the reduction, but only if a purple region small enough to be such a
     # marker was seen: a frame with no marker (most frames of most pairs) or with one cut by
@@ -153,7 +159,8 @@ def detect(image: np.ndarray, camera: Camera, params: VisionParams | None = None
            marker: MarkerSpec | None = None) -> Detection:
     """The one marker in view; refused when there is none or more than one."""
     t0 = time.perf_counter()
-    found, reasons = detect_all(image, camera, params, marker)
+    search: dict[str, float] = {}
+    found, reasons = detect_all(image, camera, params, marker, search)
     total = (time.perf_counter() - t0) * 1e3
     if len(found) == 1:
         det = found[0]
@@ -161,9 +168,9 @@ def detect(image: np.ndarray, camera: Camera, params: VisionParams | None = None
         return det
     if len(found) > 1:
         return Detection(False, f"ambiguous: {len(found)} markers in view",
-                         timings_ms={"total": total})
+                         timings_ms={**search, "total": total})
     reason = "; ".join(dict.fromkeys(reasons)) or "marker not found"
-    return Detection(False, reason, timings_ms={"total": total})
+    return Detection(False, reason, timings_ms={**search, "total": total})
 
 
 def _coverage(e: Ellipse, pts: np.ndarray) -> float:
