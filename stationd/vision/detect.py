@@ -20,7 +20,7 @@ from stationd.errors import ImageError
 from stationd.geometry.camera import Camera
 from stationd.vision import centre as cm
 from stationd.vision.edges import BoundaryEdges, boundary_edges
-from stationd.vision.ellipse import fit_ellipse, trim_outliers
+from stationd.vision.ellipse import fit_ellipse, fit_trimmed
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import Gates, VisionParams
 from stationd.vision.segment import MIN_HOLE_RADIUS_PX, Candidate, search_candidates
@@ -183,12 +183,17 @@ def _fit_boundary(name: str, pts: np.ndarray, params: VisionParams) -> Ellipse |
     g = params.gates
     if len(pts) < g.min_points:
         return Refusal(f"{name} boundary: {len(pts)} edge points (< {g.min_points})")
-    trimmed = trim_outliers(pts) if params.leitz else np.ones(len(pts), dtype=bool)
-    if isinstance(trimmed, Refusal):
-        return Refusal(f"{name} boundary: {trimmed.reason}")
-    e = fit_ellipse(pts[trimmed], leitz=params.leitz, residual=params.residual)
-    if isinstance(e, Refusal):
-        return Refusal(f"{name} boundary: {e.reason}")
+    if params.leitz:
+        got = fit_trimmed(pts, residual=params.residual)
+        if isinstance(got, Refusal):
+            return Refusal(f"{name} boundary: {got.reason}")
+        trimmed, e = got
+    else:
+        trimmed = np.ones(len(pts), dtype=bool)
+        fit = fit_ellipse(pts, leitz=False, residual=params.residual)
+        if isinstance(fit, Refusal):
+            return Refusal(f"{name} boundary: {fit.reason}")
+        e = fit
     full = trimmed.copy()
     if e.inliers is not None:
         full[np.flatnonzero(trimmed)] = e.inliers
