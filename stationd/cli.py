@@ -353,6 +353,8 @@ def build_parser() -> argparse.ArgumentParser:
     dm.add_argument("--http", metavar="HOST:PORT", help="serve the screens here (default: the "
                     "station file's http.listen, else 127.0.0.1:8080)")
     dm.add_argument("--no-http", action="store_true", help="do not serve the screens")
+    dm.add_argument("--hold", action="store_true", help="after the run, keep serving the "
+                    "screens (results, export) until Ctrl-C")
     dm.add_argument("--load", type=int, default=0, metavar="N",
                     help="N busy processes beside the station for the run (CPU load)")
     dm.set_defaults(func=cmd_demo)

@@ -71,24 +71,38 @@ function camDiv(cam, stamp) {
   return d;
 }
 
+// A refresh builds the new frames off screen and swaps them in only once every image has
+// decoded, and the next refresh waits for that: the shown frames never go blank while the
+// server encodes (8 reduced 20 MP frames can take longer than the refresh period on a busy
+// station PC), and the refresh rate falls to what the server delivers instead of piling up.
+let busy = false;
 async function refresh() {
-  const cams = await (await fetch("/api/cameras")).json();
-  const root = $("pairs");
-  root.replaceChildren();
-  if (!cams.length) root.textContent = "No frames yet: the daemon has handed over none.";
-  const pairs = {};
-  for (const c of cams) (pairs[c.pair] = pairs[c.pair] || []).push(c);
-  const stamp = Date.now();
-  for (const [name, list] of Object.entries(pairs)) {
-    const p = document.createElement("section");
-    p.className = "pair";
-    p.innerHTML = "<h2></h2>";
-    p.firstChild.textContent = `pair ${name}`;
-    const row = document.createElement("div");
-    row.className = "cams";
-    for (const c of list) row.appendChild(camDiv(c, stamp));
-    p.appendChild(row);
-    root.appendChild(p);
+  if (busy) return;
+  busy = true;
+  try {
+    const cams = await (await fetch("/api/cameras")).json();
+    const pairs = {};
+    for (const c of cams) (pairs[c.pair] = pairs[c.pair] || []).push(c);
+    const stamp = Date.now();
+    const sections = [];
+    for (const [name, list] of Object.entries(pairs)) {
+      const p = document.createElement("section");
+      p.className = "pair";
+      p.innerHTML = "<h2></h2>";
+      p.firstChild.textContent = `pair ${name}`;
+      const row = document.createElement("div");
+      row.className = "cams";
+      for (const c of list) row.appendChild(camDiv(c, stamp));
+      p.appendChild(row);
+      sections.push(p);
+    }
+    const imgs = sections.flatMap((p) => [...p.querySelectorAll("img")]);
+    await Promise.allSettled(imgs.map((i) => i.decode()));  // a missing frame shows its alt
+    const root = $("pairs");
+    if (!cams.length) root.textContent = "No frames yet: the daemon has handed over none.";
+    else root.replaceChildren(...sections);
+  } finally {
+    busy = false;
   }
 }
 refresh();
