@@ -85,17 +85,22 @@ def _client(port: int, stop: threading.Event, got: dict[str, int]) -> None:
     conn.close()
 
 
-def _cameras_client(url: str, stop: threading.Event, width: int = 960) -> None:
-    """What the cameras screen does, without a browser: the page, then each second the
-    cameras' list and every frame at the width it shows them."""
+def _cameras_client(url: str, stop: threading.Event, width: int = 960, shown: int = 4
+                    ) -> None:
+    """What the cameras screen does in a 1920x1080 window, without a browser: the page,
+    every frame once, then each second the cameras' list and the frames in view (the first
+    ``shown``: one pair and the top of the next) at the width it shows them."""
     def get(path: str) -> bytes:
         with urllib.request.urlopen(url + path, timeout=10) as r:  # noqa: S310 - loopback
             return bytes(r.read())
     get("cameras")
+    first = True
     while not stop.is_set():
         try:
-            for c in json.loads(get("api/cameras")):
+            cams = json.loads(get("api/cameras"))
+            for c in cams if first else cams[:shown]:
                 get(f"api/cameras/{c['pair']}/{c['side']}/frame.jpg?w={width}")
+            first = not cams
         except OSError:
             pass
         stop.wait(1.0)

@@ -163,3 +163,33 @@ def test_results_screens_and_csv_download(live_server, page, shots, tmp_path):
                                                            ("B2", "ok")]
     finally:
         repo.close()
+
+
+def test_cameras_screen_fetches_again_only_the_frames_in_view(live_server, page):
+    """Four pairs of 20 MP-sized frames: after the first load, only the pairs in the window
+    are fetched each second (the daemon encodes nothing nobody sees); scrolled down, the last
+    pair is fetched again and the first no longer."""
+    srv = live_server()
+    img = np.random.default_rng(2).integers(0, 60, (1200, 1800), dtype=np.uint8)
+    pairs = ("p1", "p2", "p3", "p4")
+    for p in pairs:
+        for side in ("left", "right"):
+            srv.frames.put(p, side, img, {"found": False, "reason": "marker not found"})
+    page.get(srv.url + "cameras")
+    page.js("performance.setResourceTimingBufferSize(100000)")
+    page.wait(lambda p: p.js("const i = [...document.querySelectorAll('.cam img')];"
+                             " return i.length === 8 && i.every(x => x.naturalWidth > 0)"),
+              what="8 frames loaded")
+
+    def fetched() -> dict[str, int]:
+        got = page.js("return performance.getEntriesByType('resource').map(e => e.name)"
+                      ".filter(n => n.includes('frame.jpg'))")
+        return {p: sum(f"/cameras/{p}/" in n for n in got) for p in pairs}
+    page.wait(lambda p: fetched()["p1"] >= 8, 20, "p1 fetched 4 more times")
+    now = fetched()
+    assert now["p4"] == 2, now             # once per side, at the first load only
+    page.js("document.querySelector(\".cam[data-camera='p4/left']\").scrollIntoView()")
+    page.wait(lambda p: fetched()["p4"] >= 6, 20, "p4 fetched again once in view")
+    p1 = fetched()["p1"]
+    page.wait(lambda p: fetched()["p4"] >= 10, 20, "p4 fetched twice more")
+    assert fetched()["p1"] == p1           # out of view now
