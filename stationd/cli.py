@@ -318,6 +318,14 @@ def build_parser() -> argparse.ArgumentParser:
     bs.add_argument("--cycles", type=int, default=20, help="bolts to select and tighten")
     bs.add_argument("--seed", type=seed_arg, default=1, help="(default: %(default)s)")
     bs.add_argument("--json", action="store_true", help="print one summary object")
+    bs.add_argument("--browsers", type=int, default=0, metavar="N",
+                    help="run the plan again with the screens served and N headless Chromium "
+                    "windows on / and /cameras; print latency and the daemon's CPU with and "
+                    "without")
+    bs.add_argument("--clients", choices=("chromium", "sse"), default="chromium",
+                    help="with --browsers: real headless Chromium (default), or SSE readers "
+                    "and frame loaders standing in for them (the server's own cost, without "
+                    "browsers rendering on the same cores)")
     bs.set_defaults(func=cmd_bench_station)
     bk = bsub.add_parser("soak", help="the daemon through a long shift: outages, reworks, load")
     bk.add_argument("--bolts", type=int, default=100,
@@ -359,6 +367,8 @@ def build_parser() -> argparse.ArgumentParser:
     dm.add_argument("--http", metavar="HOST:PORT", help="serve the screens here (default: the "
                     "station file's http.listen, else 127.0.0.1:8080)")
     dm.add_argument("--no-http", action="store_true", help="do not serve the screens")
+    dm.add_argument("--hold", action="store_true", help="after the run, keep serving the "
+                    "screens (results, export) until Ctrl-C")
     dm.add_argument("--load", type=int, default=0, metavar="N",
                     help="N busy processes beside the station for the run (CPU load)")
     dm.set_defaults(func=cmd_demo)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import logging
+import signal
 import sys
 import tempfile
 from collections import Counter
@@ -57,7 +58,7 @@ def _sim_psets(bolts_path: Path) -> dict[int, SimPset]:
 async def _operator(st: Station, world: World, rng: np.random.Generator, cycles: int,
                     report: list[dict[str, Any]], say: Any, truth: dict[str, Any]) -> None:
     plc, ctl = st.lift.plc, st.wrench.controller
-    plc.set_vehicle(truth["model_code"], "SIMVIN0000000001")
+    plc.set_vehicle(truth["model_code"], truth["vin"])
     plc.raise_lift()
     for _ in range(200):
         if st.vin is not None and st.bolts:
@@ -145,7 +146,8 @@ def run_station_demo(args: argparse.Namespace) -> int:
     codes = [m.code for m in load_bolts(bolts_path).models if m.code is not None and m.bolts]
     if not codes:
         raise InputError(f"{bolts_path}: the demo needs a model with a lift code and bolts")
-    truth: dict[str, Any] = {"bolt": None, "wrong": 0, "model_code": codes[0]}
+    truth: dict[str, Any] = {"bolt": None, "wrong": 0, "model_code": codes[0],
+                             "vin": "SIMVIN0000000001"}
 
     def check(action: Any) -> None:
         """Every parameter send is compared with where the wrench really is, at that moment;
@@ -184,6 +186,8 @@ def run_station_demo(args: argparse.Namespace) -> int:
             await _operator(station, world, rng, cycles, report, say, truth)
             stop.set()
             await task
+            if getattr(args, "hold", False) and screens.server is not None:
+                await _hold(screens.server.url, report, cycles, truth, args.json)
         finally:
             world.close()
             await screens.stop()
@@ -211,6 +215,26 @@ def run_station_demo(args: argparse.Namespace) -> int:
               f"{_ms(summary['latency_ms']['p95'], '.0f')} ms")
         print(summary["verdict"])
     return 0 if summary["verdict"].startswith("PASS") else 1
+
+
+async def _hold(url: str, report: list[dict[str, Any]], cycles: int, truth: dict[str, Any],
+                json_out: bool) -> None:
+    """``--hold``: the run is over (station stopped, results recorded); the screens keep
+    serving its results from the run's temporary database until SIGINT or SIGTERM, so they
+    can be browsed (and exported) before the demo's folder is removed."""
+    done = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, done.set)
+    ok = sum(1 for r in report if r.get("ok"))
+    print(f"run over ({ok}/{cycles} bolts OK); still serving {url}vehicles/"
+          f"{truth['vin']} until Ctrl-C (--hold)", file=sys.stderr if json_out else sys.stdout,
+          flush=True)
+    try:
+        await done.wait()
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
 
 
 def _listen(args: argparse.Namespace, cfg: StationConfig) -> str | None:
