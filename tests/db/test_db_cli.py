@@ -271,3 +271,24 @@ def test_export_results_every_rundown_as_csv_or_json(run, db, tmp_path):
         extra = ["--results"] if args[0] not in ("--format", "--results") else []
         code, out, err = run("db", "export", *extra, *args, "--db", db)
         assert code == 2 and out == "" and message in _one_line(err), err
+
+
+def test_db_commands_take_the_database_of_a_station_file(run, tmp_path):
+    """``--config STATION.yaml``: the database the daemon of that station writes (a relative
+    SQLite path is the station file's folder's), and its matching tolerance for an import."""
+    import shutil
+
+    for f in (ROOT / "config" / "sim").iterdir():
+        if f.is_file() and not f.name.startswith("stationd-sim.db"):
+            shutil.copy(f, tmp_path)
+    station = tmp_path / "station.yaml"
+    code, out, _ = run("db", "import", tmp_path / "bolts.yaml", "--config", station)
+    assert code == 0 and (tmp_path / "stationd-sim.db").exists()
+    code, out, _ = run("db", "export", "--config", station)
+    assert code == 0 and "B01" in out
+    code, out, err = run("db", "export", "--config", station, "--db", "sqlite:///x.db")
+    assert code == 2 and "not allowed with argument" in err
+    # the station's tolerance: 30 mm makes the simulated vehicle's close bolts too close
+    station.write_text(station.read_text().replace("tolerance_mm: 8.0", "tolerance_mm: 30.0"))
+    code, out, err = run("db", "import", tmp_path / "bolts.yaml", "--config", station)
+    assert code == 2 and "twice the matching tolerance of 30 mm" in err
