@@ -56,6 +56,8 @@ def test_bootstrap_prints_a_line_per_step_and_is_idempotent(tmp_path):
     assert calls.count("apt-get install") == 1 and calls.count("-m venv .venv") == 1
     second = [line.split("] ", 1)[1] for line in _run(tree, env)]
     assert second[0].startswith("apt: all ") and second[1] == "venv: .venv exists"
+    assert second[2] == "python packages: as installed for this pyproject.toml (dev,bench)"
+    assert second[3] == "ready (.venv)" and len(second) == 4
     calls = log.read_text()
     assert calls.count("apt-get install") == 1 and calls.count("-m venv .venv") == 1
     assert os.access(tree / ".venv" / "bin" / "python", os.X_OK)
