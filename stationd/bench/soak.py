@@ -292,9 +292,12 @@ def run_soak(args: argparse.Namespace) -> int:
         print(f"parameters sent for a wrong bolt: {len(tally.wrong_sends)}; daemon exits: "
               f"{tally.exits}; results lost: {tally.results_lost} "
               f"(made {tally.results_made}, recorded {tally.results_recorded})")
-        print(f"{'PASS' if tally.passed else 'FAIL'}: {len(tally.wrong_sends)} wrong, "
+        if "harness_error" in summary:
+            print(f"the simulated world failed (not the daemon): {summary['harness_error']}")
+        ok = tally.passed and "harness_error" not in summary
+        print(f"{'PASS' if ok else 'FAIL'}: {len(tally.wrong_sends)} wrong, "
               f"{tally.exits} exits, {tally.results_lost} lost")
-    return 0 if tally.passed else 1
+    return 0 if tally.passed and "harness_error" not in summary else 1
 
 
 def soak_station(plan: list[Step], *, load: int = 0, seed: int = 0) -> SoakTally:
@@ -328,6 +331,8 @@ def soak_station(plan: list[Step], *, load: int = 0, seed: int = 0) -> SoakTally
         tally.started = time.monotonic()
         try:
             await play(plan, hooks, tally)
+        except OSError as exc:  # the simulated world failed, not the daemon: say so, stop
+            tally.extra["harness_error"] = f"{type(exc).__name__}: {exc}"
         finally:
             stop.set()
             try:
