@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from db.repository import BoltInfo
 from drivers.wrench.sim import SimPset
 from stationd import progress
 from stationd.boltfile import load_bolts
@@ -66,9 +67,23 @@ async def _operator(st: Station, world: World, rng: np.random.Generator, cycles:
         await asyncio.sleep(0.05)
     else:
         raise InputError(f"the simulated vehicle was not opened: {st.core.reason}")
-    bolts = list(st.bolts.values())
-    order = rng.permutation(len(bolts))[:cycles]
     length = st.cfg.tool.length_mm
+    bolts: list[BoltInfo] = []
+    unseen: list[BoltInfo] = []
+    for b in st.bolts.values():   # a bolt no pair sees cannot be demonstrated: say so
+        pairs = world.seen_by(wrench_at(np.array(b.position), np.random.default_rng(0), length,
+                                       max_tilt_deg=0.0))
+        (bolts if pairs else unseen).append(b)
+    if not bolts:
+        raise InputError(f"no bolt of the vehicle (lift code {truth['model_code']}) is in view "
+                         "of any pair of this station (check the pairs' to_vehicle transforms "
+                         "and the bolt positions)")
+    if unseen:
+        print(f"note: {len(unseen)} of {len(st.bolts)} bolts are in view of no pair and are "
+              f"left out: {', '.join(b.bolt_id for b in unseen[:8])}"
+              f"{' ...' if len(unseen) > 8 else ''}", file=sys.stderr, flush=True)
+    order = rng.permutation(len(bolts))[:cycles]
+    truth["cycles"] = len(order)      # fewer when fewer bolts can be shown
     for k in order:
         b = bolts[int(k)]
         target = np.array(b.position)
@@ -187,7 +202,8 @@ def run_station_demo(args: argparse.Namespace) -> int:
             stop.set()
             await task
             if getattr(args, "hold", False) and screens.server is not None:
-                await _hold(screens.server.url, report, cycles, truth, args.json)
+                await _hold(screens.server.url, report, int(truth.get("cycles", cycles)),
+                            truth, args.json)
         finally:
             world.close()
             await screens.stop()
@@ -203,6 +219,7 @@ def run_station_demo(args: argparse.Namespace) -> int:
     finally:
         station.close()
         tmp.cleanup()
+    cycles = int(truth.get("cycles", cycles))
     summary = _summary(station, report, cycles, truth["wrong"])
     if args.json:
         sys.stdout.write(strict_json(summary) + "\n")

@@ -113,3 +113,17 @@ def test_an_affine_vehicle_transform_is_inverted_not_transposed():
         assert np.allclose(seen.rotation.T @ seen.rotation, np.eye(3), atol=1e-9)
     finally:
         w.close()
+
+
+def test_seen_by_names_the_pairs_whose_two_cameras_see_the_marker():
+    w = _world()
+    try:
+        rng = np.random.default_rng(2)
+        here = wrench_at(np.array([-50.0, 0.0, 1000.0]), rng, LENGTH)
+        assert w.seen_by(here, margin_px=10) == ["w"]
+        assert w.seen_by(here, margin_px=130) == []     # the frames are only 320x240
+        # far to the side: out of the frames
+        assert w.seen_by(wrench_at(np.array([-900.0, 0.0, 1000.0]), rng, LENGTH),
+                         margin_px=10) == []
+    finally:
+        w.close()
