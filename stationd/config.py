@@ -493,7 +493,26 @@ def check_station(path: str | Path) -> StationCheck:
         except InputError as exc:  # a tolerance of 0: the loader takes it, the check cannot
             errors.append(reader.top["matching"].error(f"{exc}; the bolt table cannot be "
                                                        "checked"))
+    if bolts is not None and bolts.table is not None and "wrench" in reader.top:
+        warning = _psets_only_warning(cfg.wrench.url, bolts.table, reader.top["wrench"])
+        if warning is not None:
+            reader.warnings.append(warning)
     return StationCheck(str(p), cfg if not errors else None, errors, reader.warnings, bolts)
+
+
+def _psets_only_warning(url: str, table: Any, node: YamlNode) -> ConfigError | None:
+    """Bolts with their own torque and no pset, on a controller that selects psets only (Open
+    Protocol, and its simulated twin): the daemon would refuse them at every visit."""
+    if not (url.startswith("openprotocol") or url.startswith("sim://wrench")):
+        return None
+    nopset = [f"{b.bolt_id} ({m.name})" for m in table.models for b in m.bolts
+              if b.parameters.pset is None]
+    if not nopset:
+        return None
+    more = f" and {len(nopset) - 5} more" if len(nopset) > 5 else ""
+    return node.error(f"{', '.join(nopset[:5])}{more}: no pset, and this controller ({url}) "
+                      "selects psets only: they will be refused at the station (give them a "
+                      "pset, or drive the controller over Modbus)")
 
 
 def _in_order(errors: list[ConfigError], path: str) -> list[ConfigError]:

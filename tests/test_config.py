@@ -315,3 +315,16 @@ def test_an_unreadable_station_file_is_one_error(tmp_path, text, message):
     p.write_text(text)
     [error] = check_station(p).errors
     assert str(error).startswith(str(tmp_path / message))
+
+
+def test_a_bolt_without_pset_on_a_psets_only_controller_is_a_warning(sim_copy):
+    bolts = sim_copy / "bolts.yaml"
+    text = bolts.read_text()
+    head, tail = text.split("- id: B01", 1)
+    bolts.write_text(head + "- id: B01" + tail.replace(
+        "pset: 1", "torque: {target: 9.0, min: 8.0, max: 10.0}", 1))
+    result = check_station(sim_copy / "station.yaml")
+    assert result.ok
+    [warning] = result.warnings
+    assert warning.key == "wrench" and "B01 (SIM-1): no pset" in str(warning)
+    assert "selects psets only" in str(warning)
