@@ -161,7 +161,7 @@ def test_config_check(run, tmp_path):
     also_bad.write_text("models: [\n")
     code, out, err = run("config", "check", EXAMPLE)
     assert (code, err) == (0, "")
-    assert out == f"{EXAMPLE}: ok, 2 model(s), 9 bolt(s), 3 pset(s)\n"
+    assert out == f"{EXAMPLE}: ok, 2 model(s), 9 bolt(s), 4 pset(s)\n"
     code, out, err = run("config", "check", EXAMPLE, bad, also_bad)
     lines = err.splitlines()
     assert code == 2 and out.startswith(f"{EXAMPLE}: ok")
@@ -183,8 +183,8 @@ def test_config_check_tells_station_files_from_bolt_tables(run, tmp_path):
         f"{sim / 'station.yaml'}: ok, station: 4 pair(s), 8 camera(s); "
         f"bolts {sim / 'bolts.yaml'}: 1 model(s), 50 bolt(s), 3 pset(s)",
         f"{example}: ok, station: 1 pair(s), 2 camera(s); "
-        f"bolts {EXAMPLE}: 2 model(s), 9 bolt(s), 3 pset(s)",
-        f"{EXAMPLE}: ok, 2 model(s), 9 bolt(s), 3 pset(s)",
+        f"bolts {EXAMPLE}: 2 model(s), 9 bolt(s), 4 pset(s)",
+        f"{EXAMPLE}: ok, 2 model(s), 9 bolt(s), 4 pset(s)",
     ]
 
 
