@@ -69,9 +69,37 @@ async def _until(pred: Any, timeout: float) -> bool:
     return False
 
 
+IDLE_S = 3.0   # how long the idle station is watched
+
+
+async def _idle(st: Station, plc: Any) -> dict[str, float]:
+    """The station idle (the lift up but not at working height, as between two cars): the
+    Modbus requests its PLC serves per second and the process's CPU, over ``IDLE_S``."""
+    served = [0]
+    action = plc._action
+
+    def counting(*args: Any, **kw: Any) -> Any:
+        served[0] += 1
+        return action(*args, **kw)
+
+    plc._action = counting
+    try:
+        plc.set_height(400.0)
+        await _until(lambda: st.cycle.state is State.WAITING_VEHICLE, 30)
+        n0, c0, t0 = served[0], time.process_time(), time.monotonic()
+        await asyncio.sleep(IDLE_S)
+        dt = time.monotonic() - t0
+        return {"plc_requests_per_s": (served[0] - n0) / dt,
+                "cpu_pct_of_a_core": 100.0 * (time.process_time() - c0) / dt}
+    finally:
+        plc._action = action
+
+
 async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]],
                     out: dict[str, Any]) -> None:
     plc, ctl = st.lift.plc, st.wrench.controller
+    if "idle" not in out:
+        out["idle"] = await _idle(st, plc)
     plc.set_vehicle(1, "BENCHVIN000000001")
     plc.raise_lift()
     if not await _until(lambda: st.vin is not None, 60):
@@ -302,6 +330,7 @@ def _summary(lat: list[dict[str, float]], cycles: int, out: dict[str, Any], st: 
                       "simulated_world_buffers": world_mb,
                       "daemon_peak_estimate": peak - world_mb},
         "prerender_s": prerender_s, "run_s": run_s,
+        "idle": out.get("idle", {}),
     }
 
 
@@ -320,6 +349,11 @@ def _print(s: dict[str, Any]) -> None:
           f"buffers {mem['simulated_world_buffers']:.0f} MB: daemon about "
           f"{mem['daemon_peak_estimate']:.0f} MB); after open {mem['rss_after_open']:.0f} MB, "
           f"at the end {mem['rss_end']:.0f} MB")
+    idle = s.get("idle") or {}
+    if idle:
+        print(f"idle (lift up, not at working height; daemon and simulated PLC together): "
+              f"{idle['plc_requests_per_s']:.1f} PLC requests/s, "
+              f"{idle['cpu_pct_of_a_core']:.1f} % of a core (targets <= 20/s, <= 5 %)")
     print(f"pre-render {s['prerender_s']:.1f} s, run {s['run_s']:.1f} s, the bench process's "
           f"CPU during the run {s['cpu_pct']:.0f} % of a core")
     sc = s.get("screens")

@@ -27,6 +27,8 @@ def test_bench_station_reports_latency_stages_and_memory(tmp_path, capsys):
     mem = summary["memory_mb"]
     assert mem["peak_rss"] >= mem["rss_after_open"] > 0
     assert 0 < mem["simulated_world_buffers"] < mem["peak_rss"]
+    idle = summary["idle"]           # polled at its period, not spinning (issue 9)
+    assert 0 < idle["plc_requests_per_s"] <= 20 and idle["cpu_pct_of_a_core"] >= 0
 
 
 @pytest.mark.timeout(300)
