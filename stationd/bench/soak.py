@@ -24,6 +24,7 @@ import multiprocessing
 import secrets
 import shutil
 import socket
+import subprocess
 import sys
 import tempfile
 import time
@@ -68,6 +69,7 @@ from stationd.station.sdnotify import Notifier
 
 RELOAD_SETTLE_S = 0.5    # after a reload is taken, before the shift goes on
 LIFT_DOWN_S = 1.5        # how long a station reloaded onto a dead lift runs before it is fixed
+REBIND_TRIES = 30        # 1 s apart: a simulated device taking its port back after an outage
 
 
 def _busy() -> None:
@@ -93,6 +95,18 @@ def _free_port() -> int:
                 continue
             return port
     raise OSError("no free TCP port below the ephemeral range")
+
+
+def _holders(port: int) -> str:
+    """What holds the port a simulated device could not bind again (ss), for the record."""
+    try:
+        out = subprocess.run(["/usr/bin/ss", "-tanp"], capture_output=True, text=True, timeout=5,
+                             check=False).stdout
+    except (OSError, subprocess.SubprocessError):
+        return "ss not available"
+    lines = [ln.split() for ln in out.splitlines()[1:]]
+    return "; ".join(" ".join(ln[:5]) for ln in lines if any(
+        f.endswith(f":{port}") for f in ln[3:5]))[:300] or "no socket on it now"
 
 
 async def _until(pred: Any, timeout: float) -> bool:
@@ -142,6 +156,7 @@ class StationFiles:
     station file for reloads the way an engineer would."""
 
     def __init__(self, root: Path, lift_port: int, wrench_port: int) -> None:
+        self.lift_port, self.wrench_port = lift_port, wrench_port
         self.dir = root / "station"
         shutil.copytree(SIM_CONFIG.parent, self.dir,
                         ignore=shutil.ignore_patterns("*.db*"))
@@ -187,6 +202,7 @@ class DaemonHooks(SimDevices):
         super().__init__(*args, **kw)
         self.watch, self.files, self._reload, self._recorded = watch, files, reload, recorded
         self.daemon: asyncio.Task[None] | None = None
+        self.rebind_waits: list[str] = []     # a simulated device that could not come back
 
     async def arrive(self, vin: str, model_code: int) -> None:
         await super().arrive(vin, model_code)
@@ -210,7 +226,16 @@ class DaemonHooks(SimDevices):
                             and not self.controller.tool_enabled, timeout)
 
     async def device_up(self, device: Device) -> None:
-        await super().device_up(device)
+        for attempt in range(REBIND_TRIES):
+            try:
+                await super().device_up(device)
+                break
+            except OSError as exc:   # the simulated device's port not free yet: its problem
+                port = self.files.wrench_port if device == "wrench" else self.files.lift_port
+                self.rebind_waits.append(f"{device}: {exc} ({_holders(port)})")
+                if attempt == REBIND_TRIES - 1:
+                    raise
+                await asyncio.sleep(1.0)
         await _until(lambda: self.watch.state in ("tracking", "waiting for vehicle"), 30)
 
     async def _reloaded(self) -> None:
@@ -361,6 +386,8 @@ def soak_station(plan: list[Step], *, load: int = 0, seed: int = 0) -> SoakTally
     for e in bus.of(Refused):
         if isinstance(e, Refused):
             tally.refused(_kind(e.reason))
+    if hooks.rebind_waits:
+        tally.extra["simulated_device_rebind_waits"] = hooks.rebind_waits[:10]
     tally.extra.update({
         "device_faults": dict(Counter(e.device for e in bus.of(DeviceHealth)
                                       if isinstance(e, DeviceHealth) and not e.ok)),
