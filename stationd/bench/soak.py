@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import multiprocessing
 import secrets
 import shutil
 import socket
@@ -39,6 +38,7 @@ from drivers.wrench.sim import SimController
 from stationd.boltfile import load_bolts
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
+from stationd.sim.load import cpu_load
 from stationd.sim.soak import (
     Device,
     ReloadKind,
@@ -70,11 +70,6 @@ from stationd.station.sdnotify import Notifier
 RELOAD_SETTLE_S = 0.5    # after a reload is taken, before the shift goes on
 LIFT_DOWN_S = 1.5        # how long a station reloaded onto a dead lift runs before it is fixed
 REBIND_TRIES = 30        # 1 s apart: a simulated device taking its port back after an outage
-
-
-def _busy() -> None:
-    while True:
-        pass
 
 
 def _free_port() -> int:
@@ -347,7 +342,6 @@ def soak_station(plan: list[Step], *, load: int = 0, seed: int = 0) -> SoakTally
                   if isinstance(e, ResultRecorded) else None)
     model = load_bolts(cfg.bolts_path).models[0]
     notifier = _QuietNotifier()
-    busy = [multiprocessing.Process(target=_busy, daemon=True) for _ in range(load)]
 
     async def main(hooks: DaemonHooks) -> None:
         stop, reload = asyncio.Event(), hooks._reload
@@ -372,12 +366,11 @@ def soak_station(plan: list[Step], *, load: int = 0, seed: int = 0) -> SoakTally
                             seed=seed)
         print(f"rendering {hooks.prepare(plan)} placements ahead (not timed) ...",
               file=sys.stderr, flush=True)
-        for p in busy:
-            p.start()
-        asyncio.run(main(hooks))
+        # spawned, never forked: a forked child would hold the simulated devices' sockets open
+        # (a controller powered off would keep listening in it, and could not come back)
+        with cpu_load(load):
+            asyncio.run(main(hooks))
     finally:
-        for p in busy:
-            p.terminate()
         world.close()
         ctl.close()
         plc.close()
