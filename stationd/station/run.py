@@ -19,11 +19,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from drivers.keeper import one_line
 from stationd.boltfile import load_bolts
 from stationd.config import StationConfig, load_station_config
 from stationd.errors import StationError
 from stationd.lock import StationLock, lock_path
-from stationd.station.daemon import OPEN_ERRORS, STATION_FAULTS, Station, one_line
+from stationd.station.daemon import OPEN_ERRORS, STATION_FAULTS, Station
 from stationd.station.events import EventBus
 from stationd.station.sdnotify import Notifier
 

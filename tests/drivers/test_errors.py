@@ -12,13 +12,12 @@ from drivers.errors import ConnectError, ConnectTimeoutError, DeviceError, Devic
 from drivers.lift import open_lift
 from drivers.wrench import open_wrench
 
-OPTS: dict[str, Any] = {"timeout": 0.3, "connect_timeout": 0.2, "backoff": 0.02,
-                       "backoff_max": 0.1}
+OPTS: dict[str, Any] = {"timeout": 0.3, "connect_timeout": 0.2}
 
 
 def _open(url: str) -> object:
     if url.startswith("lift+"):
-        return open_lift(url.removeprefix("lift+"), timeout=0.2, backoff=0.02, backoff_max=0.1)
+        return open_lift(url.removeprefix("lift+"), timeout=0.2)
     return open_wrench(url, **OPTS)
 
 
