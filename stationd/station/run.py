@@ -14,12 +14,13 @@ from __future__ import annotations
 import argparse
 import asyncio
 import logging
+import random
 import signal
 import sys
 from pathlib import Path
 from typing import Any
 
-from drivers.keeper import one_line
+from drivers.keeper import Backoff, one_line
 from stationd.boltfile import load_bolts
 from stationd.config import StationConfig, load_station_config
 from stationd.errors import StationError
@@ -46,13 +47,14 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bo
     """Open the station's database (its devices are the station's to retry); a database that
     does not open is retried with backoff, never an exit.  False if stopped meanwhile."""
     loop = asyncio.get_running_loop()
-    wait = OPEN_RETRY_S[0]
+    backoff = Backoff(*OPEN_RETRY_S, rng=random.Random("database"))  # noqa: S311 - jitter
     told = False
     while not stop.is_set():
         try:
             await loop.run_in_executor(None, station.open)
             return True
         except STATION_FAULTS as exc:
+            wait = backoff.next()
             log.error("fault: database: %s (retrying in %.0f s)", one_line(exc), wait)
             if not told:
                 notifier.ready(f"fault: database: {one_line(exc)}")
@@ -62,7 +64,6 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bo
             await asyncio.wait_for(stop.wait(), wait)
         except TimeoutError:
             pass
-        wait = min(OPEN_RETRY_S[1], wait * 2)
     return False
 
 
