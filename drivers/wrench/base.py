@@ -24,14 +24,17 @@ import threading
 import time
 from abc import abstractmethod
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime
 from enum import IntEnum
+from typing import TypeVar
 
 from drivers.errors import ConnectionLostError, DeviceError
 from drivers.lifecycle import Openable
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 
 
 class Status(IntEnum):
@@ -347,6 +350,17 @@ class SupervisedWrench(Wrench):
         self._attempts = 0
         self._reconnects += 1
         self._cond.notify_all()
+        log.info("%s: reconnected", self.device)
+
+    def _attempt(self, connect: Callable[[], T]) -> T:
+        """One reconnect attempt, ``connect()``: a failure is counted and raised as
+        "reconnect: ..." with the device's name."""
+        try:
+            return connect()
+        except DeviceError as e:
+            with self._cond:
+                self._attempt_failed(e)
+            raise self._surface(e, "reconnect") from None
 
     def _surface(self, e: DeviceError, what: str, note: str = "") -> DeviceError:
         """The error as the caller sees it: device name, what was being done, the code."""

@@ -191,16 +191,10 @@ class OpenProtocolWrench(SupervisedWrench):
         """Drop the link if it is up, then connect and start a session (0001, 0060)."""
         self._fail_link(ConnectionLostError("reconnect asked for"))
         with self._reader:
-            try:
-                self._start_session()
-            except DeviceError as e:
-                with self._cond:
-                    self._attempt_failed(e)
-                raise self._surface(e, "reconnect") from None
+            self._attempt(self._start_session)
             with self._cond:
                 self._connected = True
                 self._link_restored()
-        log.info("%s: reconnected", self.device)
 
     def _read_once(self) -> None:
         """Read for up to POLL seconds and dispatch every complete message."""

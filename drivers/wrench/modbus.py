@@ -197,16 +197,10 @@ class ModbusWrench(SupervisedWrench):
                 self._link_lost("reconnect asked for")
         if old is not None:
             old.close()
-        try:
-            link = self._session()
-        except DeviceError as e:
-            with self._cond:
-                self._attempt_failed(e)
-            raise self._surface(e, "reconnect") from None
+        link = self._attempt(self._session)
         with self._cond:
             self._link = link
             self._link_restored()
-        log.info("%s: reconnected", self.device)
 
     def _poll_once(self, link: RegisterLink) -> None:
         m = self.register_map
