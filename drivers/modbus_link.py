@@ -35,7 +35,7 @@ from drivers.errors import (
     RefusedError,
 )
 from drivers.link import connect_tcp, open_serial
-from drivers.url import parse_url
+from drivers.url import OptionError, parse_url
 
 TCP_FORM = "modbus-tcp://HOST[:PORT]?unit=1&timeout=1.0"
 RTU_FORM = "modbus-rtu:///dev/ttyUSB0?baud=19200&parity=E&unit=1"
@@ -94,7 +94,7 @@ def _positive(text: str) -> float:
 def _unit(text: str) -> int:
     value = int(text)
     if not 0 <= value <= 247:
-        raise ValueError(text)
+        raise OptionError("a Modbus unit id is 0-247")
     return value
 
 

@@ -19,6 +19,10 @@ from urllib.parse import parse_qsl, urlsplit
 from drivers.errors import UrlError
 
 
+class OptionError(ValueError):
+    """A converter's refusal of an option value that says why (the range, the choices)."""
+
+
 @dataclass(frozen=True)
 class DeviceUrl:
     """A parsed device URL: ``scheme``, ``host``, ``port``, ``path`` and raw ``options``."""
@@ -50,8 +54,10 @@ class DeviceUrl:
                 continue
             try:
                 out[name] = conv(self.options[name])
-            except (TypeError, ValueError):
-                raise self.error(f"option {name}={self.options[name]!r} is not valid") from None
+            except (TypeError, ValueError) as exc:
+                why = str(exc) if isinstance(exc, OptionError) else ""
+                raise self.error(f"option {name}={self.options[name]!r} is not valid"
+                                 + (f": {why}" if why else "")) from None
         return out
 
 

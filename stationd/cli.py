@@ -260,7 +260,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     d = sub.add_parser("detect", help="localize the marker in one image")
-    d.add_argument("image")
+    d.add_argument("image", help="the image (PNG, TIFF, ...; `stationd demo --vision --save DIR` "
+                   "renders some)")
     d.add_argument("--camera", help="camera YAML (K, dist, size)")
     d.add_argument("--pair", help="pair YAML (from calibrate stereo): use one of its cameras")
     d.add_argument("--side", choices=("left", "right"),
@@ -272,22 +273,23 @@ def build_parser() -> argparse.ArgumentParser:
     d.set_defaults(func=cmd_detect)
 
     lo = sub.add_parser("localize", help="localize the marker in a stereo pair (mm)")
-    lo.add_argument("left")
-    lo.add_argument("right")
+    lo.add_argument("left", help="the left camera's image")
+    lo.add_argument("right", help="the right camera's image, taken at the same instant")
     lo.add_argument("--pair", required=True, help="pair YAML (left, right, R, T)")
     lo.add_argument("--config", help="station YAML (marker, vision)")
-    lo.add_argument("--json", action="store_true")
+    lo.add_argument("--json", action="store_true", help="print one JSON object")
     lo.add_argument("--repeat", type=int, default=1,
                     help="localize N times on the loaded images and report timings")
     lo.set_defaults(func=cmd_localize)
 
     mk = sub.add_parser("marker", help="write a printable marker (SVG, true scale)")
-    mk.add_argument("--out", default="marker.svg")
+    mk.add_argument("--out", default="marker.svg", help="SVG file to write (default: "
+                    "%(default)s); print it at 100 %% scale")
     mk.add_argument("--config", help="station YAML (marker sizes)")
     mk.set_defaults(func=cmd_marker)
 
     tc = sub.add_parser("tune-color", help="derive HSV ranges from a well-lit reference image")
-    tc.add_argument("reference")
+    tc.add_argument("reference", help="an image of the marker under the station's light")
     tc.add_argument("--roi", help="x,y,w,h of the marker's purple field in the image")
     tc.add_argument("--out", default="hsv.yaml",
                     help="HSV file to write (the station config reads it as vision.hsv)")
@@ -300,29 +302,41 @@ def build_parser() -> argparse.ArgumentParser:
                     help="JSON results file")
     bv.add_argument("--quick", action="store_true", help="fewer samples (a smoke run)")
     bv.add_argument("--only", help="comma-separated sections: "
-                    "radii,centre,rod,saltpepper,lowlight,speed")
-    bv.add_argument("--seed", type=seed_arg, default=1)
+                    "radii,centre,rod,saltpepper,lowlight,speed,robustness")
+    bv.add_argument("--seed", type=seed_arg, default=1, help="(default: %(default)s)")
     bv.set_defaults(func=cmd_bench)
     bc = bsub.add_parser("chain", help="the whole chain: calibration, vehicle frame, rod, bolts")
     bc.add_argument("--out", default="bench-chain.json", type=_results_file,
                     help="JSON results file")
     bc.add_argument("--quick", action="store_true", help="2 pairs, fewer samples")
-    bc.add_argument("--seed", type=seed_arg, default=1)
+    bc.add_argument("--seed", type=seed_arg, default=1, help="(default: %(default)s)")
     bc.set_defaults(func=cmd_bench_chain)
     bs = bsub.add_parser("station", help="the daemon on the simulated station: latency from "
                          "frame exposure to acknowledged parameters, memory")
     bs.add_argument("--out", default="bench-station.json", type=_results_file,
                     help="JSON results file")
     bs.add_argument("--cycles", type=int, default=20, help="bolts to select and tighten")
-    bs.add_argument("--seed", type=seed_arg, default=1)
+    bs.add_argument("--seed", type=seed_arg, default=1, help="(default: %(default)s)")
     bs.add_argument("--json", action="store_true", help="print one summary object")
+    bs.add_argument("--browsers", type=int, default=0, metavar="N",
+                    help="run the plan again with the screens served and N headless Chromium "
+                    "windows on / and /cameras; print latency and the daemon's CPU with and "
+                    "without")
+    bs.add_argument("--clients", choices=("chromium", "sse"), default="chromium",
+                    help="with --browsers: real headless Chromium (default), or SSE readers "
+                    "and frame loaders standing in for them (the server's own cost, without "
+                    "browsers rendering on the same cores)")
     bs.set_defaults(func=cmd_bench_station)
     bk = bsub.add_parser("soak", help="the daemon through a long shift: outages, reworks, load")
-    bk.add_argument("--bolts", type=int, default=100, help="bolts to tighten in all")
-    bk.add_argument("--per-vehicle", type=int, default=10, help="bolts per vehicle")
-    bk.add_argument("--faults", action="store_true", help="random device outages and reworks")
+    bk.add_argument("--bolts", type=int, default=100,
+                    help="bolts to tighten in all (default: %(default)s)")
+    bk.add_argument("--per-vehicle", type=int, default=10,
+                    help="bolts per vehicle (default: %(default)s)")
+    bk.add_argument("--faults", action="store_true", help="device outages (lift, controller, "
+                    "also mid-tightening, camera pairs), reloads (valid, refused, lift down) "
+                    "and reworks")
     bk.add_argument("--load", type=int, default=0, help="busy processes during the run")
-    bk.add_argument("--seed", type=int, default=1)
+    bk.add_argument("--seed", type=int, default=1, help="(default: %(default)s)")
     bk.add_argument("--json", action="store_true", help="print one summary object")
     bk.set_defaults(func=cmd_bench_soak)
 
@@ -342,9 +356,9 @@ def build_parser() -> argparse.ArgumentParser:
     rn.set_defaults(func=cmd_run)
 
     dm = sub.add_parser("demo", help="the main job: a simulated run")
-    dm.add_argument("--seed", type=seed_arg, default=7)
+    dm.add_argument("--seed", type=seed_arg, default=7, help="(default: %(default)s)")
     dm.add_argument("--cycles", type=int, default=10, help="bolts to tighten (with --vision: "
-                    "marker placements to localize)")
+                    "marker placements to localize; default: %(default)s)")
     dm.add_argument("--config", help="station YAML (default: config/sim/station.yaml)")
     dm.add_argument("--vision", action="store_true",
                     help="only the vision demo: render stereo pairs, localize, print errors")
@@ -353,6 +367,8 @@ def build_parser() -> argparse.ArgumentParser:
     dm.add_argument("--http", metavar="HOST:PORT", help="serve the screens here (default: the "
                     "station file's http.listen, else 127.0.0.1:8080)")
     dm.add_argument("--no-http", action="store_true", help="do not serve the screens")
+    dm.add_argument("--hold", action="store_true", help="after the run, keep serving the "
+                    "screens (results, export) until Ctrl-C")
     dm.add_argument("--load", type=int, default=0, metavar="N",
                     help="N busy processes beside the station for the run (CPU load)")
     dm.set_defaults(func=cmd_demo)

@@ -203,8 +203,8 @@ def device_url(node: YamlNode, kind: str, *, check: bool = False) -> str:
 
     With ``check``, its form and scheme are checked against the driver's registry without
     importing a backend or opening a device (options are the backend's, checked when it opens).
-    The loader does not check: the daemon has always found a bad URL when opening the device,
-    and ``load_station_config`` keeps that behaviour; ``stationd config check`` checks.
+    ``stationd config check`` and the daemon's loader (``station=True``: the first start and
+    every reload) check; other readers of a station file (tools, benchmarks) do not need to.
     """
     url = node.text()
     if check:
@@ -215,6 +215,13 @@ def device_url(node: YamlNode, kind: str, *, check: bool = False) -> str:
             raise node.error(f"{exc}; accepted: {forms}") from None
         if scheme not in backends:
             raise node.error(f"unknown {kind} scheme {scheme!r}; accepted: {forms}")
+        if scheme.startswith("modbus-"):   # its options too: pure parsing, nothing opened
+            from drivers.modbus_link import parse_modbus_url
+
+            try:
+                parse_modbus_url(url)
+            except UrlError as exc:
+                raise node.error(str(exc)) from None
     return url
 
 
@@ -265,14 +272,24 @@ def _baseline(calibration: StereoPair, node: YamlNode) -> StereoPair:
     return calibration
 
 
-def _database_url(node: YamlNode, base: Path) -> str:
+def _database_url(node: YamlNode, base: Path, check: bool = False) -> str:
     """The database URL; a relative SQLite path is relative to the station file, like every
-    other path in it (not to the daemon's working directory)."""
-    url = node.mapping(("url",), required=("url",))["url"].text()
+    other path in it (not to the daemon's working directory).  With ``check``, the URL must
+    parse and name a database whose driver is installed (nothing is connected)."""
+    url_node = node.mapping(("url",), required=("url",))["url"]
+    url = url_node.text()
     prefix = "sqlite:///"
     if url.startswith(prefix) and not url.startswith(prefix + "/") \
             and url[len(prefix):] not in ("", ":memory:"):
-        return prefix + str(base.resolve() / url[len(prefix):])
+        url = prefix + str(base.resolve() / url[len(prefix):])
+    if check:
+        from db.engine import make_engine
+        from db.errors import DbError
+
+        try:
+            make_engine(url).dispose()
+        except DbError as exc:
+            raise url_node.error(str(exc)) from None
     return url
 
 
@@ -356,7 +373,9 @@ class _Reader:
         The sections are read in this order (the loader's first error is the first here)."""
         root = YamlNode.load(path)
         self.top = self.sections(root)
-        d, base, check = StationConfig(), self.base, self.collect
+        # URLs are checked (form, scheme, database driver) by the checker and for a station
+        # the daemon runs: a typo is refused at the start and by a reload, never run in fault
+        d, base, check = StationConfig(), self.base, self.collect or self.require_devices
         marker = self.section("marker", d.marker, MarkerSpec.from_node)
         vision = self.section("vision", d.vision, partial(VisionParams.from_node, base_dir=base))
         cameras, names = self.cameras(self.top["cameras"]) if "cameras" in self.top \
@@ -370,7 +389,7 @@ class _Reader:
                                 partial(WrenchConfig.from_node, check_url=check)),
             matching=self.section("matching", d.matching, MatchingConfig.from_node),
             database_url=self.section("database", d.database_url,
-                                      partial(_database_url, base=base)),
+                                      partial(_database_url, base=base, check=check)),
             bolts_path=self.section("bolts", d.bolts_path,
                                     partial(_existing, base=base, what="bolt file")),
             records=self.section("records", d.records, partial(_records, base=base)),
@@ -391,7 +410,8 @@ class _Reader:
             return {}, None
         urls: dict[str, str] = {}
         for name, item in items:
-            url = self.guard(None, _camera_url, item, check=self.collect)
+            url = self.guard(None, _camera_url, item,
+                             check=self.collect or self.require_devices)
             if url is not None:
                 urls[name] = url
         return urls, [name for name, _ in items]
@@ -473,7 +493,26 @@ def check_station(path: str | Path) -> StationCheck:
         except InputError as exc:  # a tolerance of 0: the loader takes it, the check cannot
             errors.append(reader.top["matching"].error(f"{exc}; the bolt table cannot be "
                                                        "checked"))
+    if bolts is not None and bolts.table is not None and "wrench" in reader.top:
+        warning = _psets_only_warning(cfg.wrench.url, bolts.table, reader.top["wrench"])
+        if warning is not None:
+            reader.warnings.append(warning)
     return StationCheck(str(p), cfg if not errors else None, errors, reader.warnings, bolts)
+
+
+def _psets_only_warning(url: str, table: Any, node: YamlNode) -> ConfigError | None:
+    """Bolts with their own torque and no pset, on a controller that selects psets only (Open
+    Protocol, and its simulated twin): the daemon would refuse them at every visit."""
+    if not (url.startswith("openprotocol") or url.startswith("sim://wrench")):
+        return None
+    nopset = [f"{b.bolt_id} ({m.name})" for m in table.models for b in m.bolts
+              if b.parameters.pset is None]
+    if not nopset:
+        return None
+    more = f" and {len(nopset) - 5} more" if len(nopset) > 5 else ""
+    return node.error(f"{', '.join(nopset[:5])}{more}: no pset, and this controller ({url}) "
+                      "selects psets only: they will be refused at the station (give them a "
+                      "pset, or drive the controller over Modbus)")
 
 
 def _in_order(errors: list[ConfigError], path: str) -> list[ConfigError]:

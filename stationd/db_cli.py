@@ -30,6 +30,24 @@ if TYPE_CHECKING:
 
 EXIT_OK, EXIT_INCOMPLETE, EXIT_BAD_INPUT = 0, 1, 2
 DB_HELP = "database URL (SQLAlchemy; default sqlite:///stationd.db in the current directory)"
+DEFAULT_DB = "sqlite:///stationd.db"
+
+
+def _add_db_args(parser: argparse.ArgumentParser) -> None:
+    """``--db URL`` or ``--config STATION.yaml`` (the database the daemon of that station
+    writes, wherever it lives): one or the other."""
+    g = parser.add_mutually_exclusive_group()
+    g.add_argument("--db", help=DB_HELP)
+    g.add_argument("--config", metavar="STATION.yaml",
+                   help="use the database of this station file (its database.url)")
+
+
+def _db_url(args: argparse.Namespace) -> str:
+    if getattr(args, "config", None):
+        from stationd.config import load_station_config
+
+        return load_station_config(args.config).database_url
+    return args.db or DEFAULT_DB
 
 
 def _tolerance(text: str) -> float:
@@ -62,7 +80,8 @@ def _open(url: str, *, must_exist: bool) -> Repository:
         path = u.database
         if u.get_backend_name() == "sqlite" and path and path != ":memory:" \
                 and not path.startswith("file:") and not Path(path).exists():
-            raise InputError(f"no database at {path} (import a bolt table first, or give --db)")
+            raise InputError(f"no database at {path} (import a bolt table first, or give --db "
+                             "or --config STATION.yaml)")
     return Repository.open(url)
 
 
@@ -70,14 +89,21 @@ def _open(url: str, *, must_exist: bool) -> Repository:
 def cmd_db_import(args: argparse.Namespace) -> int:
     from stationd.boltfile import check_bolts
 
-    result = check_bolts(args.file, tolerance_mm=args.tolerance)
+    tolerance = args.tolerance
+    if tolerance is None:   # the station's own matching tolerance, else the default
+        tolerance = 8.0
+        if args.config:
+            from stationd.config import load_station_config
+
+            tolerance = load_station_config(args.config).matching.tolerance_mm
+    result = check_bolts(args.file, tolerance_mm=tolerance)
     if result.errors:
         _print_errors(result.errors)
         sys.stderr.write(f"stationd: error: {args.file}: {len(result.errors)} error(s), "
                          "nothing imported\n")
         return EXIT_BAD_INPUT
     assert result.table is not None  # noqa: S101 - a check without errors holds the table
-    with _open(args.db, must_exist=False) as repo:
+    with _open(_db_url(args), must_exist=False) as repo:
         report = repo.import_bolts(result.table, where=str(args.file))
     if args.json:
         sys.stdout.write(strict_json({"changes": report.has_changes, **report.to_json()}) + "\n")
@@ -89,10 +115,10 @@ def cmd_db_import(args: argparse.Namespace) -> int:
 def cmd_db_export(args: argparse.Namespace) -> int:
     if args.results:
         return _export_results(args)
-    if args.vin is not None or args.since is not None or args.format != "yaml":
-        raise InputError("--vin, --since and --format go with --results (the bolt table is "
-                         "YAML)")
-    with _open(args.db, must_exist=True) as repo:
+    if args.vin is not None or args.since is not None or args.format not in (None, "yaml"):
+        raise InputError("--vin, --since and --format csv|json go with --results (the bolt "
+                         "table is YAML)")
+    with _open(_db_url(args), must_exist=True) as repo:
         text = repo.export_bolts()
         summary = repo.table().summary()
     if args.out is None:
@@ -119,8 +145,10 @@ def _export_results(args: argparse.Namespace) -> int:
     what quality takes out of the station (the results screen's export, for all vehicles)."""
     from stationd.web.results import Results, rundowns_csv
 
-    fmt = "csv" if args.format == "yaml" else args.format
-    with _open(args.db, must_exist=True) as repo:
+    if args.format == "yaml":
+        raise InputError("--results are exported as csv (the default) or json, not yaml")
+    fmt = args.format or "csv"
+    with _open(_db_url(args), must_exist=True) as repo:
         results = Results(repo)
         if args.vin is not None:
             repo.vehicle_report(args.vin)   # an unknown VIN: one line, exit 2
@@ -156,7 +184,7 @@ def _write_atomic(path: Path, text: str) -> None:
 
 
 def cmd_db_report(args: argparse.Namespace) -> int:
-    with _open(args.db, must_exist=True) as repo:
+    with _open(_db_url(args), must_exist=True) as repo:
         report = repo.vehicle_report(args.vin)
     if args.json:
         sys.stdout.write(strict_json(report.to_json()) + "\n")
@@ -269,29 +297,30 @@ def add_db_parser(subparsers: Any) -> argparse.ArgumentParser:
                     "retired, while records refer to them).  Changed parameters of a bolt with "
                     "records become a new version.")
     im.add_argument("file", help="bolts YAML (see config/bolts.example.yaml)")
-    im.add_argument("--db", default="sqlite:///stationd.db", help=DB_HELP)
-    im.add_argument("--tolerance", type=_tolerance, default=8.0, metavar="MM",
-                    help="matching tolerance: bolts must be twice as far apart (default 8)")
+    _add_db_args(im)
+    im.add_argument("--tolerance", type=_tolerance, default=None, metavar="MM",
+                    help="matching tolerance: bolts must be twice as far apart (default: the "
+                    "station's with --config, else 8)")
     im.add_argument("--json", action="store_true", help="print the changes as one JSON object")
     im.set_defaults(func=cmd_db_import)
     ex = dsub.add_parser("export", help="write the bolt table back as YAML",
                          description="Writes the table held by the database; importing it "
                                      "again reports no changes.")
-    ex.add_argument("--db", default="sqlite:///stationd.db", help=DB_HELP)
+    _add_db_args(ex)
     ex.add_argument("--out", help="file to write (default: standard output)")
     ex.add_argument("--results", action="store_true",
                     help="the tightening results (every rundown) instead of the bolt table")
     ex.add_argument("--vin", help="with --results: this vehicle only")
     ex.add_argument("--since", type=_since, metavar="DATE",
                     help="with --results: rundowns recorded since (ISO date or date-time, UTC)")
-    ex.add_argument("--format", choices=("yaml", "csv", "json"), default="yaml",
+    ex.add_argument("--format", choices=("yaml", "csv", "json"), default=None,
                     help="yaml for the bolt table; csv (default) or json for --results")
     ex.set_defaults(func=cmd_db_export)
     rp = dsub.add_parser("report", help="a vehicle's bolts: results and missing ones",
                          description="Exit 0 when every bolt is tightened and OK, 1 when bolts "
                                      "are missing or NOK, 2 for an unknown VIN.")
     rp.add_argument("vin", help="VIN or sequence id")
-    rp.add_argument("--db", default="sqlite:///stationd.db", help=DB_HELP)
+    _add_db_args(rp)
     rp.add_argument("--json", action="store_true", help="print one JSON object")
     rp.set_defaults(func=cmd_db_report)
     return d
@@ -302,7 +331,8 @@ def add_config_parser(subparsers: Any) -> argparse.ArgumentParser:
     c: argparse.ArgumentParser = subparsers.add_parser("config", help="check configuration files")
     csub = c.add_subparsers(dest="config_command", required=True, parser_class=type(c))
     ck = csub.add_parser(
-        "check", help="validate station files and bolt tables, reporting every error at once",
+        "check", help="validate station files and bolt tables: the first error of each section, "
+        "camera, pair and file, all at once",
         description="Checks station files (station.yaml) and bolt tables (bolts.yaml), told "
                     "apart by their top-level keys.  A station file is checked with the files "
                     "it names (calibrations, to_vehicle transforms, the bolt table) and its "

@@ -49,9 +49,16 @@ class StationLock:
         self._fd: int | None = None
 
     def acquire(self) -> None:
-        """Take the lock or raise :class:`LockHeldError` naming the holder; never waits."""
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        """Take the lock or raise :class:`LockHeldError` naming the holder; never waits.  A
+        folder this user cannot create or write is an :class:`InputError` naming it (an
+        installation mistake, not something a restart cures)."""
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise InputError(f"{self.path}: cannot create the station's lock: "
+                             f"{exc.strerror or exc} (the daemon's user must be able to write "
+                             f"{self.path.parent}: its database lives there)") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

@@ -42,12 +42,13 @@ def test_bootstrap_prints_a_line_per_step_and_is_idempotent(tmp_path):
     _stub(bin_dir, "pkg-config", "#!/bin/sh\nexit 1\n")
     _stub(bin_dir, "python3", PYTHON_STUB)
     env = {"PATH": f"{bin_dir}:/usr/bin:/bin", "LOG": str(log),
-           "STATE": str(tmp_path / "installed"), "HOME": str(tmp_path)}
+           "STATE": str(tmp_path / "installed"), "HOME": str(tmp_path),
+           "SYSTEM_PYTHON": str(bin_dir / "python3")}   # as root: the system's Python
     first = _run(tree, env)
     steps = [line.split("] ", 1)[1] for line in first]
     assert all(line.startswith("bootstrap: [") for line in first)
     assert steps[0] == "apt-get update" and steps[1].startswith("apt-get install python3 ")
-    assert steps[2:5] == ["python3 -m venv .venv", "pip install --upgrade pip",
+    assert steps[2:5] == [f"{bin_dir}/python3 -m venv .venv", "pip install --upgrade pip",
                           "pip install -e .[dev,bench] (numpy, OpenCV, ...: a few minutes the "
                           "first time)"]
     assert steps[-1] == "ready (.venv)"
@@ -55,6 +56,8 @@ def test_bootstrap_prints_a_line_per_step_and_is_idempotent(tmp_path):
     assert calls.count("apt-get install") == 1 and calls.count("-m venv .venv") == 1
     second = [line.split("] ", 1)[1] for line in _run(tree, env)]
     assert second[0].startswith("apt: all ") and second[1] == "venv: .venv exists"
+    assert second[2] == "python packages: as installed for this pyproject.toml (dev,bench)"
+    assert second[3] == "ready (.venv)" and len(second) == 4
     calls = log.read_text()
     assert calls.count("apt-get install") == 1 and calls.count("-m venv .venv") == 1
     assert os.access(tree / ".venv" / "bin" / "python", os.X_OK)

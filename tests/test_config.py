@@ -1,3 +1,4 @@
+import re
 import shutil
 
 import numpy as np
@@ -267,13 +268,20 @@ def test_a_missing_to_vehicle_file_is_a_warning_not_an_error(sim_copy):
      "openprotocol://h:99999: the port is not a number in 0-65535; accepted: openprotocol://"),
     ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'wrench.local'}", "wrench.url",
      "'wrench.local' is not a device URL (scheme://...)"),
+    ("lift: {url: 'sim://lift'}", "lift: {url: 'modbus-tcp://10.0.0.1?unit=300'}", "lift.url",
+     "option unit='300' is not valid: a Modbus unit id is 0-247"),
+    ("database: {url: 'sqlite:///stationd-sim.db'}", "database: {url: 'bogus://x'}",
+     "database.url", "database URL 'bogus://x'"),
 ])
 def test_device_urls_are_checked_without_opening_a_device(sim_copy, old, new, key, message):
     station = _edit(sim_copy / "station.yaml", old, new)
     [error] = check_station(station).errors
     assert (error.line, error.key) == (_line(station, new.split("'")[1]), key)
     assert message in str(error)
-    load_station_config(station)  # the loader leaves URLs to opening the device, as before
+    # the daemon's loader (first start and every reload) refuses the same, with the same words
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        load_station_config(station, station=True)
+    load_station_config(station)  # other readers of a station file need not open its devices
 
 
 def test_the_bolt_table_is_checked_with_the_stations_tolerance(sim_copy):
@@ -307,3 +315,16 @@ def test_an_unreadable_station_file_is_one_error(tmp_path, text, message):
     p.write_text(text)
     [error] = check_station(p).errors
     assert str(error).startswith(str(tmp_path / message))
+
+
+def test_a_bolt_without_pset_on_a_psets_only_controller_is_a_warning(sim_copy):
+    bolts = sim_copy / "bolts.yaml"
+    text = bolts.read_text()
+    head, tail = text.split("- id: B01", 1)
+    bolts.write_text(head + "- id: B01" + tail.replace(
+        "pset: 1", "torque: {target: 9.0, min: 8.0, max: 10.0}", 1))
+    result = check_station(sim_copy / "station.yaml")
+    assert result.ok
+    [warning] = result.warnings
+    assert warning.key == "wrench" and "B01 (SIM-1): no pset" in str(warning)
+    assert "selects psets only" in str(warning)

@@ -42,7 +42,8 @@ def test_security_exposure_is_2_or_better(unit):
 
 def test_unit_keeps_device_access_and_notify():
     text = UNIT.read_text()
-    for line in ("Type=notify", "WatchdogSec=", "Restart=on-failure", "User=stationd",
+    for line in ("Type=notify", "WatchdogSec=", "Restart=on-failure",
+                 "RestartPreventExitStatus=2", "User=stationd",
                  "DeviceAllow=char-ttyUSB rw", "DeviceAllow=char-ttyACM rw",
                  "DeviceAllow=char-usb_device rw", "SupplementaryGroups=dialout plugdev",
                  "StateDirectory=stationd", "ConfigurationDirectory=stationd"):

@@ -92,15 +92,33 @@ def print_report(res: dict[str, Any]) -> None:
                ["light", "enhanced", "plain", "centre med px", "images"], rows)
         print("  target: >= 99 % at 10 % illumination with enhancement")
     if "speed" in res:
-        s = res["speed"]
-        rows = [[k, _f(v, 2)] for k, v in s["stage_ms_median"].items()]
-        rows += [["per image (detect)", _f(s["image_ms_median"], 2)],
-                 ["per stereo pair (localize)", _f(s["pair_ms_median"], 2)]]
-        at = s.get("apriltag", {})
-        if "pair_ms_median" in at:
-            rows.append(["AprilTag 3 per pair (peer)", _f(at["pair_ms_median"], 2)])
-        else:
-            rows.append(["AprilTag 3", at.get("skipped", "-")])
-        _table(f"Speed at {s['frame'][0]}x{s['frame'][1]}, median of {s['runs']} runs, ms "
-               "(decode excluded)", ["stage", "ms"], rows)
-        print("  target: <= 60 ms per stereo pair, faster than AprilTag 3")
+        _speed(res["speed"])
+
+
+def _speed(s: dict[str, Any]) -> None:
+    """Per stage of one image, then per image, per pair (wall and CPU), a frame without a
+    marker, the peer, and the target beside them."""
+    names = {"segment": "segment (HSV, Retinex, regions)", "retinex": "  of which Retinex",
+             "rays": "rays (ring in the ROI)", "edges": "edges (rest of the ROI)",
+             "total": "total (detect)"}
+    rows = [[names.get(k, k), _f(v, 2)] for k, v in s["stage_ms_median"].items()]
+    rows += [["per image (detect), wall", _f(s["image_ms_median"], 2)],
+             ["per image, process CPU", _f(s.get("image_cpu_ms_median"), 2)],
+             ["per stereo pair (localize), wall", _f(s["pair_ms_median"], 2)],
+             ["per stereo pair, process CPU", _f(s.get("pair_cpu_ms_median"), 2)],
+             ["  of which stereo (both views)", _f(s.get("stereo_ms_median"), 2)]]
+    empty = s.get("no_marker")
+    if empty:
+        rows.append(["frame without a marker, wall", _f(empty["ms_median"], 2)])
+        rows.append(["frame without a marker, CPU", _f(empty["cpu_ms_median"], 2)])
+    at = s.get("apriltag", {})
+    if "pair_ms_median" in at:
+        rows.append(["AprilTag 3 per pair (peer)", _f(at["pair_ms_median"], 2)])
+    elif at:
+        rows.append(["AprilTag 3", at.get("skipped", "-")])
+    _table(f"Speed at {s['frame'][0]}x{s['frame'][1]}, median of {s['runs']} runs, ms "
+           "(decode excluded)", ["stage", "ms"], rows)
+    target = s.get("target_pair_ms", 30.0)
+    verdict = "met" if s["pair_ms_median"] <= target else "NOT met"
+    print(f"  target: <= {target:g} ms per stereo pair on 2 cores ({verdict} in this run), "
+          "a frame without a marker one reduced search, faster than AprilTag 3")

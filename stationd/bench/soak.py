@@ -1,13 +1,19 @@
 """``stationd bench soak --bolts N [--faults] [--load N]``: the daemon through a long shift.
 
-The simulated station of ``bench station`` (config/sim, the lift PLC on Modbus, the controller
-on Open Protocol, eight 20 MP cameras composing pre-rendered placements) tightens ``N`` bolts
-over as many vehicles as it takes.  With ``--faults`` a random outage hits before some bolts:
-the lift PLC stops answering, the controller powers off (sometimes mid-tightening), a camera
-pair stops delivering, or a vehicle whose VIN was closed comes back (a rework).  ``--load N``
-keeps N busy processes on the cores meanwhile.  It prints what a shift must show: bolts
-tightened, refusals by reason, parameters sent for a wrong bolt (must be 0), daemon loop
-exits (must be 0) and results lost (pulled, never recorded: must be 0).
+The daemon runs as ``stationd run`` runs it (the serve loop of :mod:`stationd.station.run`,
+one event bus for its life, a station file it reloads), on a copy of config/sim whose lift PLC
+(Modbus TCP) and tightening controller (Open Protocol) are *independent* servers on loopback,
+as on a line: a reload reopens the daemon's connections, not the devices.  Eight 20 MP
+cameras compose placements rendered ahead.  The shift is a seeded script
+(:func:`stationd.sim.soak.plan_soak`): ``N`` tightenings over vehicles of up to
+``--per-vehicle`` bolts, with hovering between two bolts and leaving before tightening; with
+``--faults`` also lift, controller (also mid-tightening) and camera-pair outages, reloads (a
+valid file; a bolt table with a duplicate id, refused while the running station stays; a lift
+URL where nothing answers, a fault of the new station until the next reload) and vehicles
+whose closed VIN comes back (rework).  ``--load N`` keeps N busy processes on the cores.
+The daemon is observed only through its typed events.  It prints what a shift must show:
+bolts tightened, refusals by reason, parameters sent for a wrong bolt (must be 0), daemon
+exits (must be 0), results lost (made by the controller, never recorded: must be 0).
 """
 
 from __future__ import annotations
@@ -15,33 +21,78 @@ from __future__ import annotations
 import argparse
 import asyncio
 import multiprocessing
+import secrets
+import shutil
+import socket
 import sys
 import tempfile
 import time
 from collections import Counter
-from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
-import numpy as np
+import yaml
 
+from drivers.lift.sim import SimulatedPlc
+from drivers.wrench.sim import SimController
 from stationd.boltfile import load_bolts
-from stationd.config import load_station_config
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
-from stationd.sim.world import World, WrenchPose, wrench_at
-from stationd.station.core import SendParams, State
-from stationd.station.daemon import Station
+from stationd.sim.soak import (
+    Device,
+    ReloadKind,
+    SimDevices,
+    SoakTally,
+    Step,
+    plan_soak,
+)
+from stationd.sim.soak import (
+    run_soak as play,
+)
+from stationd.sim.world import World
 from stationd.station.demo import SIM_CONFIG, _kind, _sim_psets
-from stationd.station.events import Refused, ResultRecorded
+from stationd.station.events import (
+    BoltSelected,
+    DeviceHealth,
+    EventBus,
+    Refused,
+    ResultRecorded,
+    StateChanged,
+    StationEvent,
+    ToolDisabled,
+    ToolEnabled,
+    VehicleOpened,
+)
+from stationd.station.run import Screens, serve_station, validate_station
+from stationd.station.sdnotify import Notifier
 
-FAULTS = ("lift", "controller", "controller mid-tightening", "cameras", "closed VIN back")
-FAULT_RATE = 0.15       # of bolts preceded by an outage
-OUTAGE_S = 1.5
+RELOAD_SETTLE_S = 0.5    # after a reload is taken, before the shift goes on
+LIFT_DOWN_S = 1.5        # how long a station reloaded onto a dead lift runs before it is fixed
 
 
 def _busy() -> None:
     while True:
         pass
+
+
+def _free_port() -> int:
+    """A free TCP port on loopback *outside* the kernel's ephemeral range: a client that keeps
+    reconnecting to a port in that range while nothing listens can be given that very port as
+    its own and connect to itself (TCP simultaneous open), and then holds it: the device
+    coming back cannot bind its port again."""
+    try:
+        low = int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        low = 32768
+    for _ in range(200):
+        port = 10000 + secrets.randbelow(max(1, low - 10000))
+        with socket.socket() as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    raise OSError("no free TCP port below the ephemeral range")
 
 
 async def _until(pred: Any, timeout: float) -> bool:
@@ -53,88 +104,158 @@ async def _until(pred: Any, timeout: float) -> bool:
     return False
 
 
-class Shift:
-    """The simulated operator and line around one station; counts what happened."""
+class Watch:
+    """What the daemon said, from its typed events: state, vehicle, tool, and every selection
+    checked by ``tally`` against where the simulated wrench really is at that instant (the
+    bus calls :meth:`see` as the daemon publishes, on the loop the shift runs on)."""
 
-    def __init__(self, st: Station, world: World, rng: np.random.Generator,
-                 poses: dict[str, WrenchPose], faults: bool) -> None:
-        self.st, self.world, self.rng, self.poses, self.faults = st, world, rng, poses, faults
-        self.truth: str | None = None
-        self.wrong = 0
-        self.pulled: list[int] = []
-        self.injected: Counter[str] = Counter()
-        self.skipped: list[str] = []
-        self.vehicles = 0
+    def __init__(self, bus: EventBus, tally: SoakTally) -> None:
+        self.state, self.reason = "starting", ""
+        self.vin: str | None = None
+        self.enabled: str | None = None       # the bolt the tool is enabled for
+        self.tally = tally
+        self.refusal = ""                     # the last reason nothing was selected
+        bus.subscribe(self.see)
 
-    def check(self, action: Any) -> None:
-        if isinstance(action, SendParams) and action.bolt != self.truth:
-            self.wrong += 1
-            print(f"WRONG BOLT: parameters for {action.bolt} while the wrench is on "
-                  f"{self.truth or 'no bolt'}", flush=True)
+    def see(self, ev: StationEvent) -> None:
+        if isinstance(ev, StateChanged):
+            self.state, self.reason = ev.state, ev.reason
+            if ev.state in ("waiting for vehicle", "starting"):
+                self.vin = None
+        elif isinstance(ev, VehicleOpened):
+            self.vin = ev.vin
+        elif isinstance(ev, Refused):
+            self.refusal = ev.reason
+        elif isinstance(ev, ToolEnabled):
+            self.enabled = ev.bolt
+        elif isinstance(ev, ToolDisabled):
+            self.enabled = None
+        elif isinstance(ev, BoltSelected):
+            wrong = len(self.tally.wrong_sends)
+            self.tally.check_send(ev.bolt)
+            if len(self.tally.wrong_sends) > wrong:
+                print(f"WRONG BOLT: {self.tally.wrong_sends[-1]}", flush=True)
 
-    def tightening(self, bolt: str) -> bool:
-        c = self.st.core
-        return c.state is State.TIGHTENING and c.bolt == bolt \
-            and bool(self.st.wrench.controller.tool_enabled)
 
-    async def vehicle(self, vin: str) -> None:
-        plc = self.st.lift.plc
-        plc.set_vehicle(1, vin)
-        plc.raise_lift()
-        self.vehicles += 1
-        await _until(lambda: self.st.vin == vin and self.st.core.state is State.TRACKING, 30)
+class StationFiles:
+    """A private copy of config/sim whose devices are the soak's own servers; rewrites its
+    station file for reloads the way an engineer would."""
 
-    async def leave(self) -> None:
-        plc = self.st.lift.plc
-        plc.lower_lift()
-        await _until(lambda: self.st.vin is None, 30)
+    def __init__(self, root: Path, lift_port: int, wrench_port: int) -> None:
+        self.dir = root / "station"
+        shutil.copytree(SIM_CONFIG.parent, self.dir,
+                        ignore=shutil.ignore_patterns("*.db*"))
+        self.path = self.dir / SIM_CONFIG.name
+        self.doc = yaml.safe_load(self.path.read_text())
+        self.doc.pop("http", None)
+        self.doc["database"] = {"url": f"sqlite:///{root}/stationd.db"}
+        self.doc["lift"] = {"url": f"modbus-tcp://127.0.0.1:{lift_port}?unit=1"}
+        self.doc["wrench"] = {"url": f"openprotocol://127.0.0.1:{wrench_port}"}
+        self.good_lift = self.doc["lift"]["url"]
+        self.bolts = self.dir / str(self.doc["bolts"])
+        self.good_bolts = self.bolts.read_text()
+        self.write()
 
-    async def outage(self, kind: str) -> None:
-        st, world = self.st, self.world
-        self.injected[kind] += 1
-        if kind == "lift":
-            plc = st.lift.plc
-            port = plc.tcp_port
-            plc.stop_tcp()
-            await asyncio.sleep(OUTAGE_S)
-            plc.start_tcp(port)
-        elif kind.startswith("controller"):
-            st.wrench.controller.power_off()
-            await asyncio.sleep(OUTAGE_S)
-            st.wrench.controller.power_on()
-        elif kind == "cameras":
-            pair = str(self.rng.choice(list(st.cfg.pairs)))
-            world.cut_cameras(pair)
-            await asyncio.sleep(OUTAGE_S)
-            world.restore_cameras(pair)
-        elif kind == "closed VIN back":
-            vin = st.vin
-            if vin is not None:
-                await self.leave()
-                await self.vehicle(vin)      # the same VIN again: reopened as a rework
+    def write(self) -> None:
+        self.path.write_text(yaml.safe_dump(self.doc, sort_keys=False))
 
-    async def bolt(self, bolt: str) -> None:
-        fault = str(self.rng.choice(FAULTS)) if self.faults \
-            and self.rng.random() < FAULT_RATE else None
-        if fault is not None and fault != "controller mid-tightening":
-            await self.outage(fault)
-        self.world.set_wrench(self.poses[bolt])
-        self.truth = bolt
-        if not await _until(lambda: self.tightening(bolt), 60):
-            self.skipped.append(f"{bolt}: {self.st.core.reason}")
+    def toggle_stable_frames(self) -> None:
+        m = self.doc["matching"]
+        m["stable_frames"] = 4 if int(m["stable_frames"]) == 3 else 3
+        self.write()
+
+    def duplicate_bolt(self) -> None:
+        doc = yaml.safe_load(self.good_bolts)
+        bolts = next(iter(doc["models"].values()))["bolts"]
+        bolts.append(dict(bolts[0]))
+        self.bolts.write_text(yaml.safe_dump(doc, sort_keys=False))
+
+    def restore_bolts(self) -> None:
+        self.bolts.write_text(self.good_bolts)
+
+    def lift_url(self, url: str) -> None:
+        self.doc["lift"] = {"url": url}
+        self.write()
+
+
+class DaemonHooks(SimDevices):
+    """The station's side of the soak's hooks, over the running daemon: what it enabled and
+    why not (its events), reloads by rewriting its station file and asking as SIGHUP does."""
+
+    def __init__(self, watch: Watch, files: StationFiles, reload: asyncio.Event,
+                 recorded: set[int], *args: Any, **kw: Any) -> None:
+        super().__init__(*args, **kw)
+        self.watch, self.files, self._reload, self._recorded = watch, files, reload, recorded
+        self.daemon: asyncio.Task[None] | None = None
+
+    async def arrive(self, vin: str, model_code: int) -> None:
+        await super().arrive(vin, model_code)
+        await _until(lambda: self.watch.vin == vin and self.watch.state == "tracking", 30)
+
+    async def depart(self) -> None:
+        await super().depart()
+        await _until(lambda: self.watch.state == "waiting for vehicle", 30)
+        t = self.watch.tally    # one line per vehicle on stderr: a long soak is never silent
+        print(f"soak: {t.tightened} tightened, {len(t.wrong_sends)} wrong, "
+              f"{t.results_made - len(self._recorded)} unrecorded, "
+              f"{time.monotonic() - t.started:.0f} s", file=sys.stderr, flush=True)
+
+    async def wait_enabled(self, bolt: str, timeout: float) -> bool:
+        return await _until(lambda: self.watch.state == "tightening"
+                            and self.watch.enabled == bolt
+                            and bool(self.controller.tool_enabled), timeout)
+
+    async def wait_disabled(self, timeout: float) -> bool:
+        return await _until(lambda: self.watch.enabled is None
+                            and not self.controller.tool_enabled, timeout)
+
+    async def device_up(self, device: Device) -> None:
+        await super().device_up(device)
+        await _until(lambda: self.watch.state in ("tracking", "waiting for vehicle"), 30)
+
+    async def _reloaded(self) -> None:
+        self._reload.set()                  # what SIGHUP sets
+        await _until(lambda: not self._reload.is_set(), 15)
+        await asyncio.sleep(RELOAD_SETTLE_S)
+
+    async def reload(self, kind: ReloadKind) -> None:
+        if kind == "valid":
+            self.files.toggle_stable_frames()
+            await self._reloaded()
+        elif kind == "bad bolt table":
+            self.files.duplicate_bolt()
+            await self._reloaded()           # refused: the running station stays
+            self.files.restore_bolts()
         else:
-            if fault == "controller mid-tightening":
-                await self.outage(fault)
-                await _until(lambda: self.tightening(bolt), 60)
-            n = self.st.bus.count(ResultRecorded)
-            shot = self.st.wrench.controller.pull_trigger() if self.tightening(bolt) else None
-            if shot is not None:
-                self.pulled.append(int(shot.tightening_id))
-                await _until(lambda: self.st.bus.count(ResultRecorded) > n, 15)
-        self.truth = None
-        self.world.set_wrench(None)
-        await _until(lambda: self.st.core.state in (State.TRACKING, State.FAULT,
-                                                    State.WAITING_VEHICLE), 15)
+            self.files.lift_url(f"modbus-tcp://127.0.0.1:{_free_port()}?unit=1&timeout=0.3")
+            await self._reloaded()
+            await asyncio.sleep(LIFT_DOWN_S)    # the new station runs in fault, lift unreachable
+            self.files.lift_url(self.files.good_lift)
+            await self._reloaded()
+        await _until(lambda: self.watch.state in ("tracking", "waiting for vehicle"), 30)
+
+    def recorded(self) -> int:
+        return len(self._recorded)
+
+    def alive(self) -> bool:
+        return self.daemon is not None and not self.daemon.done()
+
+    def why_not(self) -> str:
+        w = self.watch
+        return f"{w.state}: {_kind(w.refusal or w.reason)}" if w.refusal or w.reason \
+            else w.state
+
+
+class _QuietNotifier(Notifier):
+    """No systemd here: keeps what the daemon would have told it (reload refusals)."""
+
+    def __init__(self) -> None:
+        super().__init__(environ={})
+        self.said: list[str] = []
+
+    def status(self, text: str) -> bool:
+        self.said.append(text)
+        return False
 
 
 def run_soak(args: argparse.Namespace) -> int:
@@ -143,83 +264,105 @@ def run_soak(args: argparse.Namespace) -> int:
         raise InputError("--bolts must be at least 1")
     if int(args.seed) < 0:
         raise InputError("--seed must be >= 0")
+    if int(args.per_vehicle) < 1:
+        raise InputError("--per-vehicle must be at least 1")
     if not 0 <= load <= 64:
         raise InputError("--load must be 0-64 busy processes")
-    tmp = tempfile.TemporaryDirectory(prefix="stationd-soak-")
-    cfg = replace(load_station_config(SIM_CONFIG),
-                  database_url=f"sqlite:///{tmp.name}/stationd.db")
-    assert cfg.bolts_path is not None  # noqa: S101 - the simulated station names its bolts
-    rng = np.random.default_rng(args.seed)
-    model = load_bolts(cfg.bolts_path).models[0]
-    per_vehicle = min(int(args.per_vehicle), len(model.bolts))
-    chosen = [model.bolts[int(k)] for k in rng.permutation(len(model.bolts))[:per_vehicle]]
-    poses = {b.bolt_id: wrench_at(np.array(b.position) + np.append(rng.normal(0, 0.3, 2), 0.0),
-                                  rng, cfg.tool.length_mm) for b in chosen}
-    print(f"rendering {len(poses)} placements ahead (not timed) ...", file=sys.stderr,
-          flush=True)
-    world = World(cfg, seed=args.seed)
-    world.prerender(list(poses.values()))
-    station = Station(cfg, device_kw={"wrench": {"psets": _sim_psets(cfg.bolts_path)}})
-    shift = Shift(station, world, rng, poses, bool(args.faults))
-    station.on_action = shift.check
-    exits: list[str] = []
-    busy = [multiprocessing.Process(target=_busy, daemon=True) for _ in range(load)]
-
-    async def main() -> None:
-        stop = asyncio.Event()
-        task = asyncio.create_task(station.run(stop))
-        try:
-            done, vin_no = 0, 0
-            while done < total:
-                vin_no += 1
-                await shift.vehicle(f"SOAK{vin_no:013d}")
-                for b in list(poses)[:total - done]:
-                    if task.done():
-                        raise RuntimeError("the station loop ended")
-                    await shift.bolt(b)
-                    done += 1
-                await shift.leave()
-        finally:
-            stop.set()
-            if task.done() and task.exception() is not None:
-                exits.append(repr(task.exception()))
-            await task
-
-    for p in busy:
-        p.start()
-    t0 = time.perf_counter()
-    station.open()
-    try:
-        asyncio.run(main())
-    except RuntimeError as exc:
-        exits.append(str(exc))
-    finally:
-        for p in busy:
-            p.terminate()
-        station.close()
-        world.close()
-        tmp.cleanup()
-    recorded = {e.tightening_id for e in station.bus.of(ResultRecorded)
-                if isinstance(e, ResultRecorded)}
-    refusals = Counter(_kind(e.reason) for e in station.bus.of(Refused)
-                       if isinstance(e, Refused))
-    summary = {"bolts": total, "tightened": len(recorded), "vehicles": shift.vehicles,
-               "faults_injected": dict(shift.injected), "not_tightened": shift.skipped,
-               "refusals": dict(refusals.most_common()), "wrong_bolt_sends": shift.wrong,
-               "exits": len(exits), "results_lost": len(set(shift.pulled) - recorded),
-               "load_processes": load, "run_s": time.perf_counter() - t0}
+    table = load_bolts(SIM_CONFIG.parent / "bolts.yaml")
+    model = table.models[0]
+    code = model.code if model.code is not None else 1
+    plan = plan_soak([b.bolt_id for b in model.bolts], total, model_code=code,
+                     per_vehicle=int(args.per_vehicle), faults=bool(args.faults),
+                     seed=int(args.seed))
+    tally = soak_station(plan, load=load, seed=int(args.seed))
+    summary = {"bolts": total, **tally.summary(), "load_processes": load}
     if args.json:
         sys.stdout.write(strict_json(summary) + "\n")
     else:
-        print(f"{summary['tightened']}/{total} bolts tightened over {shift.vehicles} vehicles "
-              f"in {summary['run_s']:.0f} s (load: {load} busy processes)")
-        print(f"faults injected: {dict(shift.injected) or 'none'}")
+        print(f"{tally.tightened}/{total} bolts tightened in {summary['duration_s']:.0f} s "
+              f"(load: {load} busy processes); reworks {tally.reworks}")
+        print(f"outages: {dict(tally.outages) or 'none'}; reloads: {dict(tally.reloads) or 'none'}"
+              f" (refused: {summary['reloads_refused']}); device faults seen: "
+              f"{summary['device_faults'] or 'none'}")
         print(f"refusals by reason: {summary['refusals']}")
-        for miss in shift.skipped:
-            print(f"  not tightened: {miss}")
-        print(f"parameters sent for a wrong bolt: {shift.wrong}; daemon exits: {len(exits)}; "
-              f"results lost: {summary['results_lost']}")
-        ok = shift.wrong == 0 and not exits and summary["results_lost"] == 0
-        print(f"{'PASS' if ok else 'FAIL'}: {shift.wrong} wrong, {len(exits)} exits, "
-              f"{summary['results_lost']} lost")
-    return 0 if shift.wrong == 0 and not exits and summary["results_lost"] == 0 else 1
+        for why, n in tally.not_tightened.items():
+            print(f"  not tightened ({n}): {why}")
+        for w in tally.wrong_sends[:10]:
+            print(f"  WRONG BOLT: {w}")
+        print(f"parameters sent for a wrong bolt: {len(tally.wrong_sends)}; daemon exits: "
+              f"{tally.exits}; results lost: {tally.results_lost} "
+              f"(made {tally.results_made}, recorded {tally.results_recorded})")
+        if "harness_error" in summary:
+            print(f"the simulated world failed (not the daemon): {summary['harness_error']}")
+        ok = tally.passed and "harness_error" not in summary
+        print(f"{'PASS' if ok else 'FAIL'}: {len(tally.wrong_sends)} wrong, "
+              f"{tally.exits} exits, {tally.results_lost} lost")
+    return 0 if tally.passed and "harness_error" not in summary else 1
+
+
+def soak_station(plan: list[Step], *, load: int = 0, seed: int = 0) -> SoakTally:
+    """Play ``plan`` on the daemon serving a private copy of the simulated station, beside
+    ``load`` busy processes; the tally (its summary has the daemon's refusals, device faults
+    and refused reloads too)."""
+    tmp = tempfile.TemporaryDirectory(prefix="stationd-soak-")
+    plc = SimulatedPlc()
+    ctl = SimController(psets=_sim_psets(SIM_CONFIG.parent / "bolts.yaml"), seed=seed)
+    ctl.start()
+    files = StationFiles(Path(tmp.name), plc.start_tcp(_free_port()),
+                         ctl.listen_tcp(port=_free_port()))
+    cfg = validate_station(files.path)
+    assert cfg.bolts_path is not None  # noqa: S101 - the simulated station names its bolts
+    plc.register_map = cfg.lift.registers
+    world = World(cfg, seed=seed)
+    bus = EventBus()
+    tally = SoakTally()
+    watch = Watch(bus, tally)
+    recorded: set[int] = set()
+    bus.subscribe(lambda e: recorded.add(e.tightening_id)
+                  if isinstance(e, ResultRecorded) else None)
+    model = load_bolts(cfg.bolts_path).models[0]
+    notifier = _QuietNotifier()
+    busy = [multiprocessing.Process(target=_busy, daemon=True) for _ in range(load)]
+
+    async def main(hooks: DaemonHooks) -> None:
+        stop, reload = asyncio.Event(), hooks._reload
+        hooks.daemon = asyncio.create_task(serve_station(str(files.path), cfg, notifier, bus,
+                                                         Screens(bus), stop, reload))
+        tally.started = time.monotonic()
+        try:
+            await play(plan, hooks, tally)
+        except OSError as exc:  # the simulated world failed, not the daemon: say so, stop
+            tally.extra["harness_error"] = f"{type(exc).__name__}: {exc}"
+        finally:
+            stop.set()
+            try:
+                await hooks.daemon
+            except Exception as exc:  # counted: an exit is what the soak must never see
+                print(f"the daemon ended: {type(exc).__name__}: {exc}", file=sys.stderr)
+                tally.exits += 1
+
+    try:
+        hooks = DaemonHooks(watch, files, asyncio.Event(), recorded, world, plc, ctl,
+                            {b.bolt_id: b.position for b in model.bolts}, cfg.tool.length_mm,
+                            seed=seed)
+        print(f"rendering {hooks.prepare(plan)} placements ahead (not timed) ...",
+              file=sys.stderr, flush=True)
+        for p in busy:
+            p.start()
+        asyncio.run(main(hooks))
+    finally:
+        for p in busy:
+            p.terminate()
+        world.close()
+        ctl.close()
+        plc.close()
+        tmp.cleanup()
+    tally.results_recorded = len(recorded)
+    for e in bus.of(Refused):
+        if isinstance(e, Refused):
+            tally.refused(_kind(e.reason))
+    tally.extra.update({
+        "device_faults": dict(Counter(e.device for e in bus.of(DeviceHealth)
+                                      if isinstance(e, DeviceHealth) and not e.ok)),
+        "reloads_refused": sum(x.startswith("reload refused") for x in notifier.said)})
+    return tally

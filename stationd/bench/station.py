@@ -33,7 +33,7 @@ import numpy as np
 
 from stationd import progress
 from stationd.boltfile import load_bolts
-from stationd.config import load_station_config
+from stationd.config import StationConfig, load_station_config
 from stationd.errors import InputError
 from stationd.jsonout import finite, strict_json
 from stationd.sim.world import World, WrenchPose, wrench_at
@@ -41,6 +41,11 @@ from stationd.station.core import SendParams, State
 from stationd.station.daemon import Station
 from stationd.station.demo import SIM_CONFIG, _sim_psets
 from stationd.station.events import ParamsSent, ResultRecorded
+from stationd.station.run import Screens
+from stationd.web.bench import ScreenClients
+from stationd.web.config import HttpConfig
+
+FRAME_ROUTE = "/api/cameras/{pair}/{side}/frame.jpg"
 
 
 def _rss_mb() -> float:
@@ -64,9 +69,37 @@ async def _until(pred: Any, timeout: float) -> bool:
     return False
 
 
+IDLE_S = 3.0   # how long the idle station is watched
+
+
+async def _idle(st: Station, plc: Any) -> dict[str, float]:
+    """The station idle (the lift up but not at working height, as between two cars): the
+    Modbus requests its PLC serves per second and the process's CPU, over ``IDLE_S``."""
+    served = [0]
+    action = plc._action
+
+    def counting(*args: Any, **kw: Any) -> Any:
+        served[0] += 1
+        return action(*args, **kw)
+
+    plc._action = counting
+    try:
+        plc.set_height(400.0)
+        await _until(lambda: st.cycle.state is State.WAITING_VEHICLE, 30)
+        n0, c0, t0 = served[0], time.process_time(), time.monotonic()
+        await asyncio.sleep(IDLE_S)
+        dt = time.monotonic() - t0
+        return {"plc_requests_per_s": (served[0] - n0) / dt,
+                "cpu_pct_of_a_core": 100.0 * (time.process_time() - c0) / dt}
+    finally:
+        plc._action = action
+
+
 async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]],
                     out: dict[str, Any]) -> None:
     plc, ctl = st.lift.plc, st.wrench.controller
+    if "idle" not in out:
+        out["idle"] = await _idle(st, plc)
     plc.set_vehicle(1, "BENCHVIN000000001")
     plc.raise_lift()
     if not await _until(lambda: st.vin is not None, 60):
@@ -96,9 +129,12 @@ def run_station_bench(args: argparse.Namespace) -> int:
     cycles = int(args.cycles)
     if cycles < 1:
         raise InputError("--cycles must be at least 1")
+    browsers = int(getattr(args, "browsers", 0) or 0)
+    if browsers < 0:
+        raise InputError("--browsers must be 0 or more")
     tmp = tempfile.TemporaryDirectory(prefix="stationd-bench-")
     cfg = replace(load_station_config(SIM_CONFIG),
-                  database_url=f"sqlite:///{tmp.name}/stationd.db")
+                  database_url=f"sqlite:///{tmp.name}/stationd.db", http=None)
     assert cfg.bolts_path is not None  # noqa: S101 - the simulated station names its bolts
     rng = np.random.default_rng(args.seed)
     bolts = load_bolts(cfg.bolts_path).models[0].bolts
@@ -115,8 +151,49 @@ def run_station_bench(args: argparse.Namespace) -> int:
     world.prerender([p for _, p in plan])
     prerender_s = time.perf_counter() - t0
     world_mb = float("nan")
+    try:
+        base = _run_once(cfg, world, plan, 0, bool(args.json))
+        served, again = None, None
+        if browsers:
+            # the same plan on a fresh database with the screens served and their clients on,
+            # then once more without: the passes without frame the one with (warm-up and a
+            # drifting machine load do not all fall on one side)
+            kind = str(getattr(args, "clients", "chromium") or "chromium")
+            served = _run_once(replace(cfg, database_url=f"sqlite:///{tmp.name}/screens.db"),
+                               world, plan, browsers, bool(args.json), kind)
+            again = _run_once(replace(cfg, database_url=f"sqlite:///{tmp.name}/again.db"),
+                              world, plan, 0, bool(args.json))
+    finally:
+        world_mb = world.buffer_bytes() / 2**20  # with the cameras' frame pools, now filled
+        world.close()
+        tmp.cleanup()
+    station, out = base["station"], base["out"]
+    lat = [e.latency_ms for e in station.bus.of(ParamsSent) if isinstance(e, ParamsSent)]
+    summary = _summary(lat, cycles, out, station, prerender_s, base["run_s"], world_mb,
+                       base["rss_open"], base["rss_end"])
+    summary["cpu_pct"] = base["cpu_pct"]
+    ok = summary["wrong_bolt_sends"] == 0 and not out["not_selected"]
+    if served is not None and again is not None:
+        summary["screens"] = _screens_summary([base, again], served, browsers)
+        for run in (served, again):
+            ok = ok and run["out"]["wrong"] == 0 and not run["out"]["not_selected"]
+    Path(args.out).write_text(json.dumps(finite(summary), indent=2, allow_nan=False) + "\n")
+    if args.json:
+        sys.stdout.write(strict_json(summary) + "\n")
+    else:
+        _print(summary)
+    return 0 if ok else 1
+
+
+def _run_once(cfg: StationConfig, world: World, plan: list[tuple[str, WrenchPose]],
+              browsers: int, quiet: bool, kind: str = "chromium") -> dict[str, Any]:
+    """One pass of the plan through a freshly opened daemon; with ``browsers``, the screens
+    are served from the daemon's loop (as ``http:`` in the station file does) and that many
+    clients are connected before the first bolt and stay for the whole pass."""
+    assert cfg.bolts_path is not None  # noqa: S101 - checked by the caller
     station = Station(cfg, device_kw={"wrench": {"psets": _sim_psets(cfg.bolts_path)}})
     out: dict[str, Any] = {"truth": None, "wrong": 0, "not_selected": []}
+    info: dict[str, Any] = {"station": station, "out": out, "browsers": browsers}
 
     def check(action: Any) -> None:
         if isinstance(action, SendParams) and action.bolt != out["truth"]:
@@ -126,35 +203,108 @@ def run_station_bench(args: argparse.Namespace) -> int:
 
     async def main() -> None:
         stop = asyncio.Event()
+        screens = Screens(station.bus)
+        clients: ScreenClients | None = None
+        if browsers:
+            await screens.follow(replace(cfg, http=HttpConfig("127.0.0.1:0")))
+            if screens.server is None:
+                raise InputError("bench station --browsers: the screens could not be served")
+            station.frames = screens.frames
         task = asyncio.create_task(station.run(stop))
         try:
+            if browsers:
+                clients = await _connect(screens.server, browsers, info, quiet, kind)
+            c0, w0 = time.process_time(), time.perf_counter()
             await _operator(station, world, plan, out)
+            info["cpu_s"], info["wall_s"] = time.process_time() - c0, time.perf_counter() - w0
+            info["cpu_pct"] = 100.0 * info["cpu_s"] / info["wall_s"]
+            if clients is not None:
+                info["clients_alive"] = clients.kind != "chromium" or clients.alive()
+                info["sse_clients_end"] = screens.server.clients
+                info["frames_served"] = screens.server.requests[FRAME_ROUTE]
+                info["snapshots"] = screens.server.snapshots
         finally:
             stop.set()
             await task
+            if clients is not None:
+                clients.close()
+            await screens.stop()
 
     station.open()
     try:
-        rss_open = _rss_mb()
+        info["rss_open"] = _rss_mb()
         t_run = time.perf_counter()
         asyncio.run(main())
-        run_s = time.perf_counter() - t_run
-        rss_end = _rss_mb()
+        info["run_s"] = time.perf_counter() - t_run
+        info["rss_end"] = _rss_mb()
     finally:
         station.close()
-        world_mb = world.buffer_bytes() / 2**20  # with the cameras' frame pools, now filled
-        world.close()
-        tmp.cleanup()
-    lat = [e.latency_ms for e in station.bus.of(ParamsSent) if isinstance(e, ParamsSent)]
-    summary = _summary(lat, cycles, out, station, prerender_s, run_s, world_mb, rss_open,
-                       rss_end)
-    Path(args.out).write_text(json.dumps(finite(summary), indent=2, allow_nan=False) + "\n")
-    if args.json:
-        sys.stdout.write(strict_json(summary) + "\n")
-    else:
-        _print(summary)
-    ok = summary["wrong_bolt_sends"] == 0 and not out["not_selected"]
-    return 0 if ok else 1
+    info["latency"] = [e.latency_ms["total"] for e in station.bus.of(ParamsSent)
+                       if isinstance(e, ParamsSent)]
+    return info
+
+
+async def _connect(server: Any, n: int, info: dict[str, Any], quiet: bool,
+                   kind: str) -> ScreenClients:
+    """Start the clients and wait until they are really served: each operator page holds
+    its event stream and each cameras page has loaded frames; a Chromium that does not get
+    there in 60 s is replaced by the SSE stand-ins (the output says which ran)."""
+    clients = ScreenClients(server.url, n, force_sse=kind == "sse")
+    kind = clients.start()
+    operators = sum(1 for p in clients.pages if p == "")
+    cameras = n - operators
+
+    def served() -> bool:
+        # before the lift is up the cameras hand over no frames: a cameras page has
+        # connected once it has asked for the cameras' list
+        return bool(server.clients >= operators and
+                    server.requests["/api/cameras"] >= cameras)
+    if not await _until(served, 60):
+        if kind == "chromium":
+            clients.why_not_chromium = "chromium started but its pages did not connect in 60 s"
+            kind = clients.fallback()
+            if not await _until(served, 30):
+                raise InputError("bench station --browsers: the screens' clients did not "
+                                 "connect")
+        else:
+            raise InputError("bench station --browsers: the screens' clients did not connect")
+    info["clients"] = kind
+    info["why_not_chromium"] = clients.why_not_chromium
+    info["pages"] = ["/" + p for p in clients.pages]
+    if not quiet:
+        print(f"screens served at {server.url}: {n} {kind} client(s) on "
+              f"{', '.join(info['pages'])}", flush=True)
+    return clients
+
+
+def _screens_summary(bases: list[dict[str, Any]], served: dict[str, Any], n: int
+                     ) -> dict[str, Any]:
+    """Latency and the daemon's CPU without the screens (the passes before and after, pooled)
+    and with ``n`` clients on them.  The CPU is the whole bench process's (the simulated
+    world's cameras and devices included, the same work in every pass); the screens' cost is
+    the extra CPU seconds for the same plan over the pass's duration, in % of one core (a
+    plain CPU/wall ratio would fall when the screens slow the pass down)."""
+    lat0 = [x for b in bases for x in b["latency"]]
+    cpu0 = sum(b["cpu_s"] for b in bases) / len(bases)
+    wall0 = sum(b["wall_s"] for b in bases) / len(bases)
+    without = {"latency_ms": {"p50": _pct(lat0, 50), "p95": _pct(lat0, 95)},
+               "cpu_s": cpu0, "wall_s": wall0, "cpu_pct": 100.0 * cpu0 / wall0,
+               "passes": [{"latency_p95_ms": _pct(b["latency"], 95), "cpu_s": b["cpu_s"],
+                           "wall_s": b["wall_s"]} for b in bases]}
+    with_ = {"latency_ms": {"p50": _pct(served["latency"], 50),
+                            "p95": _pct(served["latency"], 95)},
+             "cpu_s": served["cpu_s"], "wall_s": served["wall_s"],
+             "cpu_pct": served["cpu_pct"]}
+    return {"browsers": n, "clients": served["clients"], "pages": served["pages"],
+            "why_not_chromium": served["why_not_chromium"] or None,
+            "clients_alive_to_the_end": served.get("clients_alive"),
+            "frames_served": served.get("frames_served"),
+            "snapshots_sent": served.get("snapshots"),
+            "without": without, "with": with_,
+            "delta": {"latency_p95_ms": with_["latency_ms"]["p95"] - without["latency_ms"]["p95"],
+                      "latency_p50_ms": with_["latency_ms"]["p50"] - without["latency_ms"]["p50"],
+                      "cpu_pct_of_a_core": 100.0 * (served["cpu_s"] - cpu0) / served["wall_s"]},
+            "targets": {"latency_p95_ms": 10.0, "cpu_pct_of_a_core": 5.0}}
 
 
 def _pct(values: list[float], q: float) -> float:
@@ -180,6 +330,7 @@ def _summary(lat: list[dict[str, float]], cycles: int, out: dict[str, Any], st: 
                       "simulated_world_buffers": world_mb,
                       "daemon_peak_estimate": peak - world_mb},
         "prerender_s": prerender_s, "run_s": run_s,
+        "idle": out.get("idle", {}),
     }
 
 
@@ -198,4 +349,25 @@ def _print(s: dict[str, Any]) -> None:
           f"buffers {mem['simulated_world_buffers']:.0f} MB: daemon about "
           f"{mem['daemon_peak_estimate']:.0f} MB); after open {mem['rss_after_open']:.0f} MB, "
           f"at the end {mem['rss_end']:.0f} MB")
-    print(f"pre-render {s['prerender_s']:.1f} s, run {s['run_s']:.1f} s")
+    idle = s.get("idle") or {}
+    if idle:
+        print(f"idle (lift up, not at working height; daemon and simulated PLC together): "
+              f"{idle['plc_requests_per_s']:.1f} PLC requests/s, "
+              f"{idle['cpu_pct_of_a_core']:.1f} % of a core (targets <= 20/s, <= 5 %)")
+    print(f"pre-render {s['prerender_s']:.1f} s, run {s['run_s']:.1f} s, the bench process's "
+          f"CPU during the run {s['cpu_pct']:.0f} % of a core")
+    sc = s.get("screens")
+    if sc is not None:
+        w, wo, d = sc["with"], sc["without"], sc["delta"]
+        what = "headless Chromium" if sc["clients"] == "chromium" else \
+            f"SSE readers and frame loaders (no browser: {sc['why_not_chromium']})"
+        print(f"screens: {sc['browsers']} {what} on {', '.join(sc['pages'])}, "
+              f"{sc['frames_served']} camera frames and {sc['snapshots_sent']} live snapshots "
+              f"served")
+        print(f"  latency p50 {w['latency_ms']['p50']:.1f} ms, p95 {w['latency_ms']['p95']:.1f}"
+              f" ms with them; p50 {wo['latency_ms']['p50']:.1f} ms, p95 "
+              f"{wo['latency_ms']['p95']:.1f} ms without (passes before and after): p95 "
+              f"{d['latency_p95_ms']:+.1f} ms (target <= +10 ms)")
+        print(f"  daemon CPU for the plan {w['cpu_s']:.2f} s in {w['wall_s']:.1f} s with them, "
+              f"{wo['cpu_s']:.2f} s in {wo['wall_s']:.1f} s without: "
+              f"{d['cpu_pct_of_a_core']:+.1f} % of a core (target <= +5 %)")

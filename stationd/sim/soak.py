@@ -1,19 +1,20 @@
 """A soak test's script and scorekeeping: many vehicles, an operator, devices that fail.
 
-``stationd bench soak --bolts 500 --faults`` (wired by the daemon's owner) runs the station
+``stationd bench soak --bolts 500 --faults`` (:mod:`stationd.bench.soak`) runs the station
 for hours' worth of an ordinary line day in minutes and must end with 0 wrong sends, 0 exits
 and 0 lost results.  This module holds what does not depend on the daemon's internals, so it
-can be tested on its own and survive the daemon's rewrite:
+is tested on its own:
 
 - :func:`plan_soak`: a seeded script of :class:`Step` s -- vehicles arriving (some with a VIN
   already closed: rework), the wrench taken to bolts (sometimes hovering between two, or
-  leaving before tightening), the lift PLC or the controller going down and coming back,
-  configuration reloads -- with a given number of tightenings;
+  leaving before tightening), the lift PLC, the controller (also mid-tightening) or a camera
+  pair going down and coming back, configuration reloads (valid, refused, onto a lift that
+  is down) -- with a given number of tightenings;
 - :class:`SoakTally`: the figures, including the wrong-send check against the truth (where
   the wrench really is when parameters are sent);
 - :func:`run_soak`: plays a plan through :class:`SoakHooks`, the station-side actions the
   caller provides; :class:`SimDevices` implements the world's side of them (wrench poses,
-  the simulated PLC and controller) for a station on ``config/sim``.
+  rendered ahead by :meth:`SimDevices.prepare`, the simulated PLC, controller and cameras).
 """
 
 from __future__ import annotations
@@ -27,9 +28,11 @@ from typing import Any, Literal, Protocol
 
 import numpy as np
 
-from stationd.sim.world import World, wrench_at
+from stationd.sim.world import World, WrenchPose, wrench_at
 
-Device = Literal["lift", "wrench"]
+Device = Literal["lift", "wrench", "cameras"]
+ReloadKind = Literal["valid", "bad bolt table", "lift down"]
+RELOAD_KINDS: tuple[ReloadKind, ...] = ("valid", "bad bolt table", "lift down")
 
 
 @dataclass(frozen=True)
@@ -45,11 +48,14 @@ class Arrive:
 @dataclass(frozen=True)
 class Visit:
     """The operator takes the wrench to ``bolt``, first hovering halfway to ``hover_with``
-    if given; ``leave``: goes away before tightening (the tool must go off)."""
+    if given; ``leave``: goes away before tightening (the tool must go off); ``power_cut``:
+    the controller powers off once the tool is enabled and comes back (the station must
+    select again before the rundown)."""
 
     bolt: str
     hover_with: str | None = None
     leave: bool = False
+    power_cut: bool = False
 
 
 @dataclass(frozen=True)
@@ -59,7 +65,8 @@ class Depart:
 
 @dataclass(frozen=True)
 class Outage:
-    """``device`` goes down (PLC silent, controller powered off) for ``seconds``."""
+    """``device`` goes down (PLC silent, controller powered off, a camera pair delivering
+    nothing) for ``seconds``."""
 
     device: Device
     seconds: float
@@ -67,7 +74,12 @@ class Outage:
 
 @dataclass(frozen=True)
 class Reload:
-    """The configuration is reloaded (SIGHUP) with the same, valid files."""
+    """The configuration is reloaded (SIGHUP): ``valid`` (a changed, valid file: the station
+    reopens), ``bad bolt table`` (a duplicate bolt id: refused, the running station stays),
+    ``lift down`` (a valid file whose lift does not answer: the new station runs in fault
+    until a reload with the good file, which the hooks do after a while)."""
+
+    kind: ReloadKind = "valid"
 
 
 Step = Arrive | Visit | Depart | Outage | Reload
@@ -77,8 +89,9 @@ def plan_soak(bolts: Sequence[str], tightenings: int, *, model_code: int = 1,
               per_vehicle: int = 10, faults: bool = False, seed: int = 0) -> list[Step]:
     """A script with ``tightenings`` visits meant to end in a tightening (plus visits that
     leave early), ``per_vehicle`` per vehicle at most, over distinct bolts of ``bolts``.
-    With ``faults``: about one PLC and one controller outage per 25 visits, a reload per
-    50, and one vehicle in 8 a rework of an earlier VIN."""
+    With ``faults``: about one PLC, one controller and one camera-pair outage per 25 visits,
+    one power cut mid-tightening per 25, a reload per 25 (of each kind as often), and one
+    vehicle in 8 a rework of an earlier VIN."""
     if tightenings < 0 or per_vehicle < 1 or not bolts:
         raise ValueError("tightenings >= 0, per_vehicle >= 1 and at least one bolt")
     rng = np.random.default_rng(seed)
@@ -96,16 +109,20 @@ def plan_soak(bolts: Sequence[str], tightenings: int, *, model_code: int = 1,
         n = min(per_vehicle, tightenings - done, len(bolts))
         for b in rng.permutation(len(bolts))[:n]:
             bolt = bolts[int(b)]
+            cut = False
             if faults:
-                for device in ("lift", "wrench"):
+                devices: tuple[Device, ...] = ("lift", "wrench", "cameras")
+                for device in devices:
                     if rng.random() < 1 / 25:
                         steps.append(Outage(device, float(rng.uniform(0.5, 3.0))))
-                if rng.random() < 1 / 50:
-                    steps.append(Reload())
+                if rng.random() < 1 / 25:
+                    steps.append(Reload(RELOAD_KINDS[int(rng.integers(len(RELOAD_KINDS)))]))
+                cut = bool(rng.random() < 1 / 25)
             if rng.random() < 0.1:  # leaves before tightening, then comes back to it
                 steps.append(Visit(bolt, leave=True))
             hover = bolts[int(rng.integers(len(bolts)))] if rng.random() < 0.2 else None
-            steps.append(Visit(bolt, hover_with=hover if hover != bolt else None))
+            steps.append(Visit(bolt, hover_with=hover if hover != bolt else None,
+                               power_cut=cut))
             done += 1
         steps.append(Depart())
         if arrival.vin not in closed:
@@ -127,10 +144,11 @@ class SoakTally:
     results_made: int = 0
     results_recorded: int = 0
     outages: Counter[str] = field(default_factory=Counter)
-    reloads: int = 0
+    reloads: Counter[str] = field(default_factory=Counter)
     reworks: int = 0
     truth: str | None = None
     started: float = field(default_factory=time.monotonic)
+    extra: dict[str, Any] = field(default_factory=dict)   # the runner's own figures
 
     def check_send(self, bolt: str) -> None:
         """Parameters for ``bolt`` are being sent: wrong unless the wrench is on it now."""
@@ -154,9 +172,9 @@ class SoakTally:
                 "wrong_sends": len(self.wrong_sends), "wrong": self.wrong_sends[:10],
                 "exits": self.exits, "results_made": self.results_made,
                 "results_recorded": self.results_recorded, "results_lost": self.results_lost,
-                "outages": dict(self.outages), "reloads": self.reloads,
+                "outages": dict(self.outages), "reloads": dict(self.reloads),
                 "reworks": self.reworks,
-                "duration_s": round(time.monotonic() - self.started, 1)}
+                "duration_s": round(time.monotonic() - self.started, 1), **self.extra}
 
     @property
     def passed(self) -> bool:
@@ -188,8 +206,8 @@ class SoakHooks(Protocol):
 
     async def device_up(self, device: Device) -> None: ...
 
-    async def reload(self) -> None:
-        """Reload the station's configuration (SIGHUP)."""
+    async def reload(self, kind: ReloadKind) -> None:
+        """Reload the station's configuration (SIGHUP) with a file of ``kind``."""
 
     def recorded(self) -> int:
         """How many results the station has recorded so far."""
@@ -223,8 +241,8 @@ async def run_soak(plan: Sequence[Step], hooks: SoakHooks, tally: SoakTally | No
             await asyncio.sleep(step.seconds)
             await hooks.device_up(step.device)
         elif isinstance(step, Reload):
-            t.reloads += 1
-            await hooks.reload()
+            t.reloads[step.kind] += 1
+            await hooks.reload(step.kind)
         else:
             await _visit(step, hooks, t, select_timeout, hover_s, settle_s)
     if hooks.alive():
@@ -247,6 +265,8 @@ async def _visit(step: Visit, hooks: SoakHooks, t: SoakTally, select_timeout: fl
         hooks.wrench_to(None)
         if not await hooks.wait_disabled(select_timeout):
             t.not_tightened["tool stayed enabled after the wrench left"] += 1
+    elif step.power_cut and not await _power_cut(step.bolt, hooks, t, select_timeout):
+        t.not_tightened[hooks.why_not() or "not selected after the power cut"] += 1
     elif hooks.pull_trigger():
         t.results_made += 1
         t.tightened += 1
@@ -257,11 +277,25 @@ async def _visit(step: Visit, hooks: SoakHooks, t: SoakTally, select_timeout: fl
     await asyncio.sleep(settle_s)
 
 
+async def _power_cut(bolt: str, hooks: SoakHooks, t: SoakTally, timeout: float) -> bool:
+    """The controller powers off with the tool enabled and comes back: whether the station
+    selected the bolt again (it must not count the cut as a rundown)."""
+    t.outages["controller mid-tightening"] += 1
+    await hooks.device_down("wrench")
+    await asyncio.sleep(1.0)
+    await hooks.device_up("wrench")
+    return await hooks.wait_enabled(bolt, timeout)
+
+
 class SimDevices:
     """The world's side of :class:`SoakHooks` for a simulated station: wrench poses from the
-    bolt table, the simulated PLC (``SimLift.plc``) and controller (``SimWrench``'s server).
-    The station's side (``wait_enabled``, ``reload``, ``recorded``, ``alive``, ``why_not``)
-    is the caller's: subclass or wrap this."""
+    bolt table, the simulated PLC and controller, the world's camera pairs.  The station's
+    side (``wait_enabled``, ``reload``, ``recorded``, ``alive``, ``why_not``) is the
+    caller's: subclass or wrap this.
+
+    Each place the wrench goes (a bolt, with its placement noise drawn once, or halfway
+    between two) has one pose; :meth:`prepare` renders them all before a timed run, so that
+    during it a camera's frame costs what a real camera's buffer does."""
 
     def __init__(self, world: World, plc: Any, controller: Any,
                  bolts: Mapping[str, Sequence[float]], tool_length_mm: float, *,
@@ -273,6 +307,32 @@ class SimDevices:
         self.length = tool_length_mm
         self.tilt = max_tilt_deg
         self.rng = np.random.default_rng(seed)
+        self._poses: dict[tuple[str, str | None], WrenchPose] = {}
+        self._cut: str | None = None
+
+    def pose(self, bolt: str, halfway_to: str | None = None) -> WrenchPose:
+        """The wrench on ``bolt`` (or halfway to ``halfway_to``): the same pose every time."""
+        key = (bolt, halfway_to)
+        if key not in self._poses:
+            p = self.bolts[bolt]
+            if halfway_to is not None:
+                p = 0.5 * (p + self.bolts[halfway_to])
+            else:  # placement noise in XY, as a hand puts it
+                p = p + np.append(self.rng.normal(0, 0.3, 2), 0.0)
+            self._poses[key] = wrench_at(p, self.rng, self.length, self.tilt)
+        return self._poses[key]
+
+    def prepare(self, plan: Sequence[Step]) -> int:
+        """Render every place the plan takes the wrench to, ahead; how many."""
+        poses = {}
+        for step in plan:
+            if isinstance(step, Visit):
+                poses[id(self.pose(step.bolt))] = self.pose(step.bolt)
+                if step.hover_with is not None:
+                    hover = self.pose(step.bolt, step.hover_with)
+                    poses[id(hover)] = hover
+        self.world.prerender(list(poses.values()), variants=1)   # a soak needs no noise variety
+        return len(poses)
 
     async def arrive(self, vin: str, model_code: int) -> None:
         self.plc.set_vehicle(model_code, vin)
@@ -282,15 +342,7 @@ class SimDevices:
         self.plc.lower_lift()
 
     def wrench_to(self, bolt: str | None, halfway_to: str | None = None) -> None:
-        if bolt is None:
-            self.world.set_wrench(None)
-            return
-        p = self.bolts[bolt]
-        if halfway_to is not None:
-            p = 0.5 * (p + self.bolts[halfway_to])
-        else:  # placement noise in XY, as a hand puts it
-            p = p + np.append(self.rng.normal(0, 0.3, 2), 0.0)
-        self.world.set_wrench(wrench_at(p, self.rng, self.length, self.tilt))
+        self.world.set_wrench(None if bolt is None else self.pose(bolt, halfway_to))
 
     def pull_trigger(self) -> bool:
         return self.controller.pull_trigger() is not None
@@ -298,11 +350,18 @@ class SimDevices:
     async def device_down(self, device: Device) -> None:
         if device == "lift":
             self.plc.set_silent(True)
-        else:
+        elif device == "wrench":
             self.controller.power_off()
+        else:
+            pairs = sorted(self.world.cfg.pairs)
+            self._cut = pairs[int(self.rng.integers(len(pairs)))]
+            self.world.cut_cameras(self._cut)
 
     async def device_up(self, device: Device) -> None:
         if device == "lift":
             self.plc.set_silent(False)
-        else:
+        elif device == "wrench":
             self.controller.power_on()
+        elif self._cut is not None:
+            self.world.restore_cameras(self._cut)
+            self._cut = None

@@ -160,13 +160,33 @@ class World:
             i = bisect.bisect_right(self._times, t) - 1
             return self._poses[max(i, 0)]
 
+    def seen_by(self, pose: WrenchPose, margin_px: float = 100.0) -> list[str]:
+        """The pairs whose two cameras both see the marker's centre at ``pose``, at least
+        ``margin_px`` inside their frames: where the station could localize it."""
+        pairs = []
+        for name, pc in self.cfg.pairs.items():
+            ok = True
+            for side in ("left", "right"):
+                mp = self._camera_pose(name, side, pose)
+                cam = getattr(pc.calibration, side)
+                if mp is None or not bool(cam.contains(cam.project(mp.centre_mm[None, :]),
+                                                       margin_px)[0]):
+                    ok = False
+                    break
+            if ok:
+                pairs.append(name)
+        return pairs
+
     def _camera_pose(self, pair: str, side: str, pose: WrenchPose) -> MarkerPose | None:
         pc = self.cfg.pairs[pair]
         tv = pc.to_vehicle
         if tv is None:
             return None
-        c = tv.A.T @ (pose.centre_v - tv.t)
-        rot = tv.A.T @ pose.rotation_v
+        # the inverse of x_v = A x_p + t, for an affine A too (A.T inverts only a rotation);
+        # the marker's axes are then made orthonormal again (the nearest rotation)
+        c = np.linalg.solve(tv.A, pose.centre_v - tv.t)
+        u, _, vt = np.linalg.svd(np.linalg.solve(tv.A, pose.rotation_v))
+        rot = u @ vt
         if side == "right":
             c, rot = pc.calibration.R @ c + pc.calibration.T, pc.calibration.R @ rot
         if c[2] <= 0 or float(rot[:, 2] @ c) >= 0:

@@ -87,6 +87,7 @@ from stationd.station.events import (
     VehicleClosed,
     VehicleOpened,
 )
+from stationd.station.scan import ScanPlan
 from stationd.station.sdnotify import Notifier
 from stationd.vision.types import Refusal
 
@@ -181,6 +182,7 @@ class Station:
     _bad: dict[str, int] = field(default_factory=dict)     # pair -> failed grabs in a row
     keepers: dict[str, DeviceKeeper[Any]] = field(init=False)  # device -> its one keeper
     _next_frames: dict[str, float] = field(default_factory=dict)  # pair -> next PairFrames
+    _scan: ScanPlan = field(default_factory=ScanPlan)   # which pairs to localize per cycle
 
     def __post_init__(self) -> None:
         self.core = StationCore(self.cfg.matching, self.cfg.matching.leave_frames)
@@ -389,13 +391,15 @@ class Station:
             if self.core.state not in LOCALIZING or not self.grabbers or down:
                 await asyncio.sleep(IDLE_S)
                 continue
-            loc = await self._localize()
-            if loc is None:
-                continue
-            self.last = loc
-            point = None if loc.point_mm is None else _xyz(loc.point_mm)
-            await self.feed(LocalizedIn(time.time(), loc.exposure_t, point, loc.reason,
-                                        loc.tilt_deg, loc))
+            cycle = self._scan.choose(list(self.grabbers))
+            loc = await self._localize(cycle.decide)
+            if loc is not None:
+                self.last = loc
+                point = None if loc.point_mm is None else _xyz(loc.point_mm)
+                await self.feed(LocalizedIn(time.time(), loc.exposure_t, point, loc.reason,
+                                            loc.tilt_deg, loc))
+            if cycle.scout and self._scan.watching:   # after the decision, never before it
+                await self._localize(cycle.scout)
 
     def _size_problem(self, pair: str, left: np.ndarray, right: np.ndarray) -> str | None:
         """Frames the pair's calibration does not describe: garbage to this station."""
@@ -408,16 +412,20 @@ class Station:
                        f"{want[0]}x{want[1]}"
         return None
 
-    async def _localize(self) -> Localization | None:
-        """Grab and localize in every pair at once.  The localization's ``exposure_t`` is the
-        earliest exposure of the frames it used (its age is counted from there).  A pair that
-        failed its grab is left out of this localization; after ``BAD_GRABS`` failures in a
-        row it is a fault.  None when every pair failed (nothing to tell the core)."""
+    async def _localize(self, names: list[str]) -> Localization | None:
+        """Grab and localize at once in the pairs ``names`` (the scan plan's choice: those
+        that see the marker, or all: :mod:`stationd.station.scan`) that are up.  The
+        localization's ``exposure_t`` is the earliest exposure of the frames it used (its age
+        is counted from there).  A pair that failed its grab is left out of this
+        localization; after ``BAD_GRABS`` failures in a row its keeper is told it is lost.
+        None when every pair failed (nothing to tell the core)."""
         grabbers = self.grabbers
-        names = list(grabbers)
+        names = [n for n in names if n in grabbers]
         got: list[PairView] = await asyncio.gather(*(self._call(self._localize_pair, n,
                                                                 grabbers[n]) for n in names))
         done = time.time()
+        self._scan.saw({n: any(d.get("found") for d in g.sides.values())
+                        for n, g in zip(names, got, strict=True)})
         for n, g in zip(names, got, strict=True):
             if g.failed and not g.skew:
                 self._bad[n] = self._bad.get(n, 0) + 1

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import logging
+import signal
 import sys
 import tempfile
 from collections import Counter
@@ -21,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from db.repository import BoltInfo
 from drivers.wrench.sim import SimPset
 from stationd import progress
 from stationd.boltfile import load_bolts
@@ -57,7 +59,7 @@ def _sim_psets(bolts_path: Path) -> dict[int, SimPset]:
 async def _operator(st: Station, world: World, rng: np.random.Generator, cycles: int,
                     report: list[dict[str, Any]], say: Any, truth: dict[str, Any]) -> None:
     plc, ctl = st.lift.plc, st.wrench.controller
-    plc.set_vehicle(truth["model_code"], "SIMVIN0000000001")
+    plc.set_vehicle(truth["model_code"], truth["vin"])
     plc.raise_lift()
     for _ in range(200):
         if st.vin is not None and st.bolts:
@@ -65,9 +67,23 @@ async def _operator(st: Station, world: World, rng: np.random.Generator, cycles:
         await asyncio.sleep(0.05)
     else:
         raise InputError(f"the simulated vehicle was not opened: {st.core.reason}")
-    bolts = list(st.bolts.values())
-    order = rng.permutation(len(bolts))[:cycles]
     length = st.cfg.tool.length_mm
+    bolts: list[BoltInfo] = []
+    unseen: list[BoltInfo] = []
+    for b in st.bolts.values():   # a bolt no pair sees cannot be demonstrated: say so
+        pairs = world.seen_by(wrench_at(np.array(b.position), np.random.default_rng(0), length,
+                                       max_tilt_deg=0.0))
+        (bolts if pairs else unseen).append(b)
+    if not bolts:
+        raise InputError(f"no bolt of the vehicle (lift code {truth['model_code']}) is in view "
+                         "of any pair of this station (check the pairs' to_vehicle transforms "
+                         "and the bolt positions)")
+    if unseen:
+        print(f"note: {len(unseen)} of {len(st.bolts)} bolts are in view of no pair and are "
+              f"left out: {', '.join(b.bolt_id for b in unseen[:8])}"
+              f"{' ...' if len(unseen) > 8 else ''}", file=sys.stderr, flush=True)
+    order = rng.permutation(len(bolts))[:cycles]
+    truth["cycles"] = len(order)      # fewer when fewer bolts can be shown
     for k in order:
         b = bolts[int(k)]
         target = np.array(b.position)
@@ -145,7 +161,8 @@ def run_station_demo(args: argparse.Namespace) -> int:
     codes = [m.code for m in load_bolts(bolts_path).models if m.code is not None and m.bolts]
     if not codes:
         raise InputError(f"{bolts_path}: the demo needs a model with a lift code and bolts")
-    truth: dict[str, Any] = {"bolt": None, "wrong": 0, "model_code": codes[0]}
+    truth: dict[str, Any] = {"bolt": None, "wrong": 0, "model_code": codes[0],
+                             "vin": "SIMVIN0000000001"}
 
     def check(action: Any) -> None:
         """Every parameter send is compared with where the wrench really is, at that moment;
@@ -184,6 +201,9 @@ def run_station_demo(args: argparse.Namespace) -> int:
             await _operator(station, world, rng, cycles, report, say, truth)
             stop.set()
             await task
+            if getattr(args, "hold", False) and screens.server is not None:
+                await _hold(screens.server.url, report, int(truth.get("cycles", cycles)),
+                            truth, args.json)
         finally:
             world.close()
             await screens.stop()
@@ -199,6 +219,7 @@ def run_station_demo(args: argparse.Namespace) -> int:
     finally:
         station.close()
         tmp.cleanup()
+    cycles = int(truth.get("cycles", cycles))
     summary = _summary(station, report, cycles, truth["wrong"])
     if args.json:
         sys.stdout.write(strict_json(summary) + "\n")
@@ -211,6 +232,26 @@ def run_station_demo(args: argparse.Namespace) -> int:
               f"{_ms(summary['latency_ms']['p95'], '.0f')} ms")
         print(summary["verdict"])
     return 0 if summary["verdict"].startswith("PASS") else 1
+
+
+async def _hold(url: str, report: list[dict[str, Any]], cycles: int, truth: dict[str, Any],
+                json_out: bool) -> None:
+    """``--hold``: the run is over (station stopped, results recorded); the screens keep
+    serving its results from the run's temporary database until SIGINT or SIGTERM, so they
+    can be browsed (and exported) before the demo's folder is removed."""
+    done = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, done.set)
+    ok = sum(1 for r in report if r.get("ok"))
+    print(f"run over ({ok}/{cycles} bolts OK); still serving {url}vehicles/"
+          f"{truth['vin']} until Ctrl-C (--hold)", file=sys.stderr if json_out else sys.stdout,
+          flush=True)
+    try:
+        await done.wait()
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
 
 
 def _listen(args: argparse.Namespace, cfg: StationConfig) -> str | None:

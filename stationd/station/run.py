@@ -77,7 +77,7 @@ async def serve(cfg_path: str, cfg: StationConfig, notifier: Notifier) -> None:
     bus = EventBus()    # one for the daemon's life: the screens follow it across reloads
     screens = Screens(bus)
     try:
-        await _serve(cfg_path, cfg, notifier, bus, screens, stop, reload)
+        await serve_station(cfg_path, cfg, notifier, bus, screens, stop, reload)
     finally:
         await screens.stop()
 
@@ -126,8 +126,11 @@ class Screens:
         self.server, self.frames, self._for = None, None, None
 
 
-async def _serve(cfg_path: str, cfg: StationConfig, notifier: Notifier, bus: EventBus,
-                 screens: Screens, stop: asyncio.Event, reload: asyncio.Event) -> None:
+async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, bus: EventBus,
+                        screens: Screens, stop: asyncio.Event, reload: asyncio.Event) -> None:
+    """Run the station of ``cfg`` until ``stop``; on ``reload`` validate ``cfg_path`` anew and
+    switch to it (closing and reopening every device) or keep the running one.  Separate from
+    :func:`serve` (which owns the signals) so that ``bench soak`` drives the same loop."""
     loop = asyncio.get_running_loop()
     while True:
         await screens.follow(cfg)

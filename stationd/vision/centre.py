@@ -73,7 +73,11 @@ def _unit_facing(n: np.ndarray, ray: np.ndarray) -> np.ndarray:
 
 def _angle_deg(u: np.ndarray, v: np.ndarray) -> float:
     """Angle between two vectors; atan2 keeps precision at 1e-9 rad where arccos loses it."""
-    return math.degrees(math.atan2(float(np.linalg.norm(np.cross(u, v))), float(u @ v)))
+    # the cross product written out: np.cross's axis handling costs ~17 us for 3 numbers,
+    # and these angles are taken eight times per stereo pair on the serial path (same bits)
+    w = np.array([u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                  u[0] * v[1] - u[1] * v[0]])
+    return math.degrees(math.atan2(float(np.linalg.norm(w)), float(u @ v)))
 
 
 def ellipse_centre(C: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ from stationd.errors import ImageError
 from stationd.geometry.camera import Camera
 from stationd.vision import centre as cm
 from stationd.vision.edges import BoundaryEdges, boundary_edges
-from stationd.vision.ellipse import fit_ellipse, trim_outliers
+from stationd.vision.ellipse import fit_ellipse, fit_trimmed
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import Gates, VisionParams
 from stationd.vision.segment import MIN_HOLE_RADIUS_PX, Candidate, search_candidates
@@ -98,8 +98,13 @@ def reduce(image: np.ndarray, scale: int) -> np.ndarray:
 
 
 def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = None,
-               marker: MarkerSpec | None = None) -> tuple[list[Detection], list[str]]:
-    """Every marker in the image, and the reasons candidates were refused."""
+               marker: MarkerSpec | None = None, timings: dict[str, float] | None = None
+               ) -> tuple[list[Detection], list[str]]:
+    """Every marker in the image, and the reasons candidates were refused.
+
+    ``timings``, when given, receives the search's stage times (ms), which a refusal for
+    want of candidates would otherwise not show.
+    """
     params = params or VisionParams()
     marker = marker or MarkerSpec()
     check_image(image)
@@ -107,7 +112,8 @@ def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = 
     if (w, h) != camera.size:
         raise ImageError(f"image is {w}x{h} but the camera model is {camera.size[0]}x"
                          f"{camera.size[1]}")
-    timings: dict[str, float] = {"reduce": 0.0, "segment": 0.0}
+    timings = timings if timings is not None else {}
+    timings.update({"reduce": 0.0, "segment": 0.0, "retinex": 0.0})
     # A marker too small for the reduced search (a far marker, a small sensor) is looked for
     # again at half the reduction, but only if a purple region small enough to be such a
     # marker was seen: a frame with no marker (most frames of most pairs) or with one cut by
@@ -122,7 +128,7 @@ def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = 
         t1 = time.perf_counter()
         cands, purple = search_candidates(
             small, scale, params.hsv, enhance=params.enhance_params if params.enhance else None,
-            full_size=(w, h))
+            full_size=(w, h), timings=timings)
         t2 = time.perf_counter()
         timings["reduce"] += (t1 - t0) * 1e3
         timings["segment"] += (t2 - t1) * 1e3
@@ -153,7 +159,8 @@ def detect(image: np.ndarray, camera: Camera, params: VisionParams | None = None
            marker: MarkerSpec | None = None) -> Detection:
     """The one marker in view; refused when there is none or more than one."""
     t0 = time.perf_counter()
-    found, reasons = detect_all(image, camera, params, marker)
+    search: dict[str, float] = {}
+    found, reasons = detect_all(image, camera, params, marker, search)
     total = (time.perf_counter() - t0) * 1e3
     if len(found) == 1:
         det = found[0]
@@ -161,9 +168,9 @@ def detect(image: np.ndarray, camera: Camera, params: VisionParams | None = None
         return det
     if len(found) > 1:
         return Detection(False, f"ambiguous: {len(found)} markers in view",
-                         timings_ms={"total": total})
+                         timings_ms={**search, "total": total})
     reason = "; ".join(dict.fromkeys(reasons)) or "marker not found"
-    return Detection(False, reason, timings_ms={"total": total})
+    return Detection(False, reason, timings_ms={**search, "total": total})
 
 
 def _coverage(e: Ellipse, pts: np.ndarray) -> float:
@@ -176,12 +183,17 @@ def _fit_boundary(name: str, pts: np.ndarray, params: VisionParams) -> Ellipse |
     g = params.gates
     if len(pts) < g.min_points:
         return Refusal(f"{name} boundary: {len(pts)} edge points (< {g.min_points})")
-    trimmed = trim_outliers(pts) if params.leitz else np.ones(len(pts), dtype=bool)
-    if isinstance(trimmed, Refusal):
-        return Refusal(f"{name} boundary: {trimmed.reason}")
-    e = fit_ellipse(pts[trimmed], leitz=params.leitz, residual=params.residual)
-    if isinstance(e, Refusal):
-        return Refusal(f"{name} boundary: {e.reason}")
+    if params.leitz:
+        got = fit_trimmed(pts, residual=params.residual)
+        if isinstance(got, Refusal):
+            return Refusal(f"{name} boundary: {got.reason}")
+        trimmed, e = got
+    else:
+        trimmed = np.ones(len(pts), dtype=bool)
+        fit = fit_ellipse(pts, leitz=False, residual=params.residual)
+        if isinstance(fit, Refusal):
+            return Refusal(f"{name} boundary: {fit.reason}")
+        e = fit
     full = trimmed.copy()
     if e.inliers is not None:
         full[np.flatnonzero(trimmed)] = e.inliers
@@ -226,9 +238,11 @@ def measure(image: np.ndarray, camera: Camera, cand: Candidate, params: VisionPa
     # excluded) or the coverage gate, each with its reason.
     t0 = time.perf_counter()
     hint = (cand.hole_centre[0] - x, cand.hole_centre[1] - y)
-    edges = boundary_edges(image[y:y + h, x:x + w], marker.ratio_sq, hint, cand.hole_radius)
+    edges = boundary_edges(image[y:y + h, x:x + w], marker.ratio_sq, hint, cand.hole_radius,
+                           timings)
     t1 = time.perf_counter()
-    timings["edges"] = (t1 - t0) * 1e3
+    # "edges" is the ROI's own work; the rays that find the ring inside it are "rays"
+    timings["edges"] = (t1 - t0) * 1e3 - timings.get("rays", 0.0)
     if isinstance(edges, Refusal):
         return refuse(edges.reason)
     assert isinstance(edges, BoundaryEdges)  # noqa: S101 - narrowed for mypy

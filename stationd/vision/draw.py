@@ -78,11 +78,6 @@ def draw(image: np.ndarray, camera: Camera, det: Detection) -> np.ndarray:
         # pixel centres: raw (u, v) -> panel ((u - x + 0.5) k - 0.5)
         return (np.asarray(p, np.float64) - off + 0.5) * k - 0.5
 
-    # ellipses under the points: where they agree, the points sit on the line
-    for e, colour in ((det.inner, INNER), (det.outer, OUTER)):
-        if e is not None:
-            pts = np.rint(to_panel(_ellipse_raw(e, camera)) * 16).astype(np.int32)
-            cv2.polylines(panel, [pts.reshape(-1, 1, 2)], True, colour, 1, cv2.LINE_AA, 4)
     if det.edges_dropped is not None:  # near the ring, taken by neither boundary
         for p in to_panel(det.edges_dropped):
             cv2.circle(panel, (round(p[0] * 16), round(p[1] * 16)), 20, REJECTED, -1,
@@ -94,6 +89,11 @@ def draw(image: np.ndarray, camera: Camera, det: Detection) -> np.ndarray:
             for p, good in zip(to_panel(pts), ok, strict=True):
                 cv2.circle(panel, (round(p[0] * 16), round(p[1] * 16)), 20,
                            USED if good else REJECTED, -1, cv2.LINE_AA, 4)
+    # the ellipses over the points (a thin line): dense edge points would hide them
+    for e, colour in ((det.inner, INNER), (det.outer, OUTER)):
+        if e is not None:
+            pts = np.rint(to_panel(_ellipse_raw(e, camera)) * 16).astype(np.int32)
+            cv2.polylines(panel, [pts.reshape(-1, 1, 2)], True, colour, 1, cv2.LINE_AA, 4)
     if det.ellipse_centre_px is not None:
         _cross(panel, to_panel(det.ellipse_centre_px), ELLIPSE_CENTRE, 8)
     if det.centre_px is not None:
@@ -130,8 +130,12 @@ def _caption(det: Detection) -> list[str]:
 def write_drawing(path: str, image: np.ndarray, camera: Camera, det: Detection,
                   params: VisionParams, marker: MarkerSpec) -> None:
     """Draw ``det`` and write it to ``path`` (PNG); a path that cannot be written is bad
-    input (one line, exit 2), checked by trying, not guessed from the name."""
+    input (one line, exit 2), checked by trying; a name that is not ``.png`` too (a PNG
+    written into ``out.txt`` or ``out.jpg`` would mislead whoever opens it)."""
     from stationd.errors import InputError
+
+    if not path.lower().endswith(".png"):
+        raise InputError(f"--draw {path}: the drawing is a PNG; name the file .png")
 
     picture = draw(image, camera, explain(image, camera, det, params, marker))
     try:

@@ -24,6 +24,7 @@ Steps, all at full resolution but only inside the ROI:
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -74,8 +75,13 @@ class BoundaryEdges:
 
 
 def intensity(roi_bgr: np.ndarray) -> np.ndarray:
-    """V = max(B, G, R) as float32."""
-    return np.asarray(np.max(roi_bgr, axis=2), dtype=np.float32)
+    """V = max(B, G, R) as float32.
+
+    With OpenCV per channel: numpy's ``max(axis=2)`` over a strided 3-channel ROI costs
+    ~2.5 ms on a 300x300 px ROI, twenty times more, the same values.
+    """
+    b, g, r = cv2.split(roi_bgr)
+    return np.asarray(cv2.max(cv2.max(b, g), r), dtype=np.float32)
 
 
 def remove_impulses(v: np.ndarray, threshold: float = IMPULSE_THRESHOLD) -> np.ndarray:
@@ -200,7 +206,8 @@ def _outline_from_rays(rr: RayRing, ratio_sq: float) -> RingOutline:
 
 def boundary_edges(roi_bgr: np.ndarray, ratio_sq: float,
                    hint: tuple[float, float] | None = None,
-                   radius: float | None = None) -> BoundaryEdges | Refusal:
+                   radius: float | None = None,
+                   timings: dict[str, float] | None = None) -> BoundaryEdges | Refusal:
     """Sub-pixel edge points of the white/black and black/purple boundaries in a ROI.
 
     With a ``radius`` (the candidate's estimate of the ring's outer radius, ROI pixels) the
@@ -209,6 +216,8 @@ def boundary_edges(roi_bgr: np.ndarray, ratio_sq: float,
     a rough ellipse *and* their gradient crosses it the right way (inner: brighter inside;
     outer: brighter outside, within ~45 degrees of its normal): an occluder's edge meets the
     ring at an angle or with the wrong polarity, and what survives is left to the fitter.
+    ``timings``, when given, receives the milliseconds spent on the rays (``"rays"``), for
+    the speed benchmark's breakdown.
     """
     v = remove_impulses(intensity(roi_bgr))
     smooth = cv2.GaussianBlur(v, (0, 0), GRADIENT_SIGMA)
@@ -217,7 +226,10 @@ def boundary_edges(roi_bgr: np.ndarray, ratio_sq: float,
     tint = chroma(roi_bgr)
     field_tint = 0.0
     if hint is not None and radius is not None:
+        t0 = time.perf_counter()
         rr = ring_from_rays(smooth, hint, radius, tint)
+        if timings is not None:
+            timings["rays"] = (time.perf_counter() - t0) * 1e3
         if not isinstance(rr, Refusal):
             outline = _outline_from_rays(rr, ratio_sq)
             step = min(rr.white - rr.ring, rr.field - rr.ring)

@@ -78,6 +78,12 @@ def fit_conic(points: np.ndarray) -> np.ndarray | Refusal:
     pts = _as_xy(points, MIN_FIT_POINTS)
     if isinstance(pts, Refusal):
         return pts
+    return _fit_conic_xy(pts)
+
+
+def _fit_conic_xy(pts: np.ndarray) -> np.ndarray | Refusal:
+    """:func:`fit_conic` of points already checked by ``_as_xy`` (the loops below refit
+    subsets of checked points many times per frame; the checks would only repeat)."""
     m = pts.mean(axis=0)
     d = pts - m
     s = math.sqrt(float(np.mean(np.sum(d * d, axis=1))) / 2.0)  # RMS distance -> sqrt(2)
@@ -191,10 +197,15 @@ def fit_ellipse(points: np.ndarray, *, leitz: bool = True, residual: str = "samp
     pts = _as_xy(points, min_points)
     if isinstance(pts, Refusal):
         return pts
-    keep = np.ones(len(pts), dtype=bool)
-    C = fit_conic(pts)
+    return _leitz(pts, _fit_conic_xy(pts), leitz, residual, sigma, max_iter, min_points)
+
+
+def _leitz(pts: np.ndarray, C: np.ndarray | Refusal, leitz: bool, residual: str,
+           sigma: float, max_iter: int, min_points: int) -> Ellipse | Refusal:
+    """:func:`fit_ellipse` from the first fit ``C`` of the checked points ``pts``."""
     if isinstance(C, Refusal):
         return C
+    keep = np.ones(len(pts), dtype=bool)
     for _ in range(max_iter if leitz else 0):
         idx = np.flatnonzero(keep)
         r = _residuals(C, pts[idx], residual)
@@ -209,7 +220,7 @@ def fit_ellipse(points: np.ndarray, *, leitz: bool = True, residual: str = "samp
         used = int(keep.sum())
         if used < min_points:
             return Refusal(f"only {used} points (< {min_points}) left after the Leitz criterion")
-        C = fit_conic(pts[keep])
+        C = _fit_conic_xy(pts[keep])
         if isinstance(C, Refusal):
             return Refusal(f"after the Leitz criterion: {C.reason}")
     p = conic_to_params(C)
@@ -236,9 +247,17 @@ def trim_outliers(points: np.ndarray, *, k: float = 3.0, floor_px: float = 0.3,
     pts = _as_xy(points, MIN_FIT_POINTS)
     if isinstance(pts, Refusal):
         return pts
+    got = _trim(pts, k, floor_px, rounds)
+    return got if isinstance(got, Refusal) else got[0]
+
+
+def _trim(pts: np.ndarray, k: float, floor_px: float, rounds: int
+          ) -> tuple[np.ndarray, np.ndarray | None] | Refusal:
+    """:func:`trim_outliers` of checked points, with the conic fitted to exactly the kept
+    points when the rounds converged (None when they ran out first)."""
     keep = np.ones(len(pts), dtype=bool)
     for _ in range(rounds):
-        C = fit_conic(pts[keep])
+        C = _fit_conic_xy(pts[keep])
         if isinstance(C, Refusal):
             return C
         r = sampson_distance(C, pts)
@@ -249,6 +268,28 @@ def trim_outliers(points: np.ndarray, *, k: float = 3.0, floor_px: float = 0.3,
         if new.sum() < MIN_FIT_POINTS:
             return Refusal(f"only {int(new.sum())} points agree on one ellipse")
         if np.array_equal(new, keep):
-            break
+            return keep, C
         keep = new
-    return keep
+    return keep, None
+
+
+def fit_trimmed(points: np.ndarray, *, floor_px: float = 0.3, leitz: bool = True,
+                residual: str = "sampson") -> tuple[np.ndarray, Ellipse] | Refusal:
+    """``trim_outliers`` then ``fit_ellipse`` of the kept points: the same mask and ellipse,
+    bit for bit, without fitting the kept points twice (the trim's last round already did).
+
+    Returns the trim's mask and the ellipse, whose ``inliers`` index the kept points.
+    """
+    if residual not in RESIDUALS:
+        raise ValueError(f"residual must be one of {RESIDUALS}, got {residual!r}")
+    pts = _as_xy(points, MIN_FIT_POINTS)
+    if isinstance(pts, Refusal):
+        return pts
+    got = _trim(pts, 3.0, floor_px, 6)
+    if isinstance(got, Refusal):
+        return got
+    keep, C = got
+    kept = pts[keep]
+    e = _leitz(kept, _fit_conic_xy(kept) if C is None else C, leitz, residual, 3.0, 10,
+               MIN_FIT_POINTS)
+    return e if isinstance(e, Refusal) else (keep, e)

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from stationd.vision.ellipse import fit_ellipse, params_to_conic, trim_outliers
+from stationd.vision.ellipse import fit_trimmed, params_to_conic
 from stationd.vision.types import Ellipse, Refusal
 
 N_RAYS = 72
@@ -175,10 +175,8 @@ def chroma(roi_bgr: np.ndarray) -> np.ndarray:
 
 
 def _robust(pts: np.ndarray) -> Ellipse | Refusal:
-    keep = trim_outliers(pts, floor_px=1.0)
-    if isinstance(keep, Refusal):
-        return keep
-    return fit_ellipse(pts[keep])
+    got = fit_trimmed(pts, floor_px=1.0)
+    return got if isinstance(got, Refusal) else got[1]
 
 
 def _scaled(e: Ellipse, k: float) -> Ellipse:

@@ -7,15 +7,26 @@ reading in another thread (as browsers would, out of the loop), and reports the 
 thread's CPU in both runs (``time.thread_time`` inside the loop thread: the clients' own
 reading is not counted), the loop's scheduling lag (a 5 ms timer's overshoot, p95: what the
 station's own coroutines would wait for the screens' work) and what each client received.
-``stationd bench station`` can call it and print the figures.
+
+``ScreenClients`` connects the screens' real clients to a running server for ``stationd bench
+station --browsers N``: headless Chromium windows (Debian's ``chromium``, no driver needed:
+the page runs by itself), alternately on ``/`` and ``/cameras``; where Chromium cannot start,
+SSE readers for ``/`` and page-plus-frames loaders for ``/cameras`` stand in, and ``kind``
+says which.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import http.client
+import json
+import shutil
+import subprocess
+import tempfile
 import threading
 import time
+import urllib.request
 from typing import Any
 
 from stationd.station.events import BoltView, EventBus, Localized, ResultRecorded, VehicleOpened
@@ -56,20 +67,124 @@ def _p95(xs: list[float]) -> float:
 
 
 def _client(port: int, stop: threading.Event, got: dict[str, int]) -> None:
-    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=5)
+    # a blocking read: an idle station sends nothing for minutes, and a socket that timed
+    # out once cannot be read again; the stream ends when the server stops (it closes it)
+    conn = http.client.HTTPConnection("127.0.0.1", port)
     conn.request("GET", "/api/events")
     resp = conn.getresponse()
     while not stop.is_set():
         try:
             line = resp.fp.readline()
-        except TimeoutError:
-            continue
+        except OSError:
+            break
         if not line:
             break
         got["bytes"] += len(line)
         if line.startswith(b"data: "):
             got["snapshots"] += 1
     conn.close()
+
+
+def _cameras_client(url: str, stop: threading.Event, width: int = 960, shown: int = 4
+                    ) -> None:
+    """What the cameras screen does in a 1920x1080 window, without a browser: the page,
+    every frame once, then each second the cameras' list and the frames in view (the first
+    ``shown``: one pair and the top of the next) at the width it shows them."""
+    def get(path: str) -> bytes:
+        with urllib.request.urlopen(url + path, timeout=10) as r:  # noqa: S310 - loopback
+            return bytes(r.read())
+    get("cameras")
+    first = True
+    while not stop.is_set():
+        try:
+            cams = json.loads(get("api/cameras"))
+            for c in cams if first else cams[:shown]:
+                get(f"api/cameras/{c['pair']}/{c['side']}/frame.jpg?w={width}")
+            first = not cams
+        except OSError:
+            pass
+        stop.wait(1.0)
+
+
+class ScreenClients:
+    """``n`` clients of the screens at ``url``: ``start()`` returns their kind
+    ("chromium" or "sse"), ``close()`` ends them.  Browser ``i`` shows ``/`` when ``i`` is
+    even, ``/cameras`` when odd (two browsers: the operator's and the commissioning one)."""
+
+    def __init__(self, url: str, n: int, force_sse: bool = False) -> None:
+        self.url, self.n = url, n
+        self.pages = ["" if i % 2 == 0 else "cameras" for i in range(n)]
+        self.kind = "none"
+        self.why_not_chromium = ""
+        self._procs: list[subprocess.Popen[bytes]] = []
+        self._dirs: list[tempfile.TemporaryDirectory[str]] = []
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._force_sse = force_sse
+
+    def start(self) -> str:
+        exe = shutil.which("chromium") or shutil.which("chromium-browser")
+        if exe is not None and not self._force_sse:
+            try:
+                for page in self.pages:
+                    d = tempfile.TemporaryDirectory(prefix="stationd-bench-browser-")
+                    self._dirs.append(d)
+                    self._procs.append(subprocess.Popen(  # noqa: S603 - a fixed argv
+                        [exe, "--headless", "--no-sandbox", "--disable-gpu",
+                         "--disable-dev-shm-usage", "--no-first-run", "--disable-sync",
+                         "--disable-background-networking", "--disable-component-update",
+                         f"--user-data-dir={d.name}", "--window-size=1920,1080",
+                         self.url + page],
+                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+                self.kind = "chromium"
+                return self.kind
+            except OSError as exc:
+                self.why_not_chromium = str(exc)
+                self._end_browsers()
+        else:
+            self.why_not_chromium = "forced" if self._force_sse else "chromium not installed"
+        return self.fallback()
+
+    def fallback(self) -> str:
+        """SSE readers and frame loaders in threads instead of browsers."""
+        self._end_browsers()
+        self.kind = "sse"
+        port = int(self.url.rstrip("/").rsplit(":", 1)[1])
+        for page in self.pages:
+            if page == "":
+                got = {"bytes": 0, "snapshots": 0}
+                t = threading.Thread(target=_client, args=(port, self._stop, got), daemon=True)
+            else:
+                t = threading.Thread(target=_cameras_client, args=(self.url, self._stop),
+                                     daemon=True)
+            t.start()
+            self._threads.append(t)
+        return self.kind
+
+    def alive(self) -> bool:
+        return all(p.poll() is None for p in self._procs)
+
+    def _end_browsers(self) -> None:
+        for p in self._procs:
+            if p.poll() is None:
+                p.terminate()
+        for p in self._procs:
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+        self._procs = []
+        for d in self._dirs:
+            with contextlib.suppress(OSError):
+                d.cleanup()
+        self._dirs = []
+
+    def close(self) -> None:
+        self._stop.set()
+        self._end_browsers()
+        for t in self._threads:
+            t.join(5)
 
 
 def _run(seconds: float, rate_hz: float, clients: int, serve: bool) -> dict[str, Any]:

@@ -79,10 +79,7 @@ class LatestFrames:
             hit = self._cache.get(key)
         if hit is not None:
             return hit
-        h, w = f.image.shape[:2]
-        small: Image = np.asarray(cv2.resize(f.image, (width, max(1, round(h * width / w))),
-                                             interpolation=cv2.INTER_AREA), dtype=np.uint8)
-        data = _encode(small, quality)
+        data = _encode(reduce(f.image, width), quality)
         with self._lock:
             self._cache = {k: v for k, v in self._cache.items() if k[:2] != (pair, side)}
             self._cache[key] = data
@@ -99,6 +96,22 @@ class LatestFrames:
         x0 = min(max(0, int(x) - size // 2), w - size)
         y0 = min(max(0, int(y) - size // 2), h - size)
         return _encode(f.image[y0:y0 + size, x0:x0 + size], quality)
+
+
+def reduce(image: Image, width: int) -> Image:
+    """``image`` box-filtered down to ``width`` pixels: halved while still at least twice the
+    width (OpenCV's area filter has a fast path for an exact half: a 20 MP frame to 960 px
+    costs about a fifth of one area resize at the odd factor), then one area step.  Each
+    step averages whole pixels, so fine texture is smoothed, not aliased, as before."""
+    img: Image = image
+    while img.shape[1] >= 2 * width and img.shape[0] >= 4:
+        # an odd side is not cropped (that would shift the picture): OpenCV's general area
+        # path then takes the step; the cameras' even sizes keep the fast one
+        size = ((img.shape[1] + 1) // 2, (img.shape[0] + 1) // 2)
+        img = np.asarray(cv2.resize(img, size, interpolation=cv2.INTER_AREA), dtype=np.uint8)
+    h, w = image.shape[:2]
+    return np.asarray(cv2.resize(img, (width, max(1, round(h * width / w))),
+                                 interpolation=cv2.INTER_AREA), dtype=np.uint8)
 
 
 def _encode(img: Image, quality: int) -> bytes:

@@ -19,6 +19,7 @@ import json
 import logging
 import platform
 import time
+from collections import Counter
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -72,6 +73,9 @@ class WebServer:
         self.started = time.time()
         self.snapshots = 0           # flushes serialised (the bench reads it)
         self.errors = 0              # events the view could not fold (logged)
+        # requests served per route ("/api/events", "/api/cameras/{pair}/{side}/frame.jpg",
+        # ...): what the screens' clients really asked for (the bench reads it)
+        self.requests: Counter[str] = Counter()
         self.pairs: dict[str, PairFrames] = {}   # each pair's latest detection summary
         self._snapshot = b""
         self._clients: set[asyncio.Queue[bytes]] = set()
@@ -179,6 +183,8 @@ class WebServer:
         with a token configured, only for who presents it."""
         if request.method not in ("GET", "HEAD"):
             return web.Response(status=405, text="read-only: GET only\n")
+        route = request.match_info.route.resource
+        self.requests[route.canonical if route is not None else "?"] += 1
         token = self.config.token
         set_cookie = False
         if token:

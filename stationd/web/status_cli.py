@@ -18,11 +18,15 @@ from stationd.errors import InputError
 
 DEFAULT_URL = "http://127.0.0.1:8080/"
 EXIT_UNREACHABLE = 1
+EXIT_FAULT = 1          # answered, but the station is in fault: not OK for a monitor
 
 
 def add_status_parser(sub: Any) -> None:
     """Add the ``status`` sub-command to ``build_parser``'s sub-parsers."""
-    st = sub.add_parser("status", help="a running daemon's state (from its web server)")
+    st = sub.add_parser("status", help="a running daemon's state (from its web server)",
+                        description="Exit 0: the daemon answers and its station is not in "
+                                    "fault; 1: it is in fault (the reason is printed) or no "
+                                    "daemon answers; 2: bad input.  For monitoring scripts.")
     st.add_argument("--url", default=DEFAULT_URL, help=f"the daemon's screens (default "
                     f"{DEFAULT_URL})")
     st.add_argument("--token", help="the http token, when the daemon has one")
@@ -79,4 +83,4 @@ def cmd_status(args: argparse.Namespace) -> int:
         sys.stderr.write(f"stationd: status: no daemon answers at {args.url}: {reason}\n")
         return EXIT_UNREACHABLE
     print(json.dumps(st, indent=1) if args.json else format_status(st))
-    return 0
+    return EXIT_FAULT if st.get("state") == "fault" else 0

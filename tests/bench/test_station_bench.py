@@ -27,3 +27,35 @@ def test_bench_station_reports_latency_stages_and_memory(tmp_path, capsys):
     mem = summary["memory_mb"]
     assert mem["peak_rss"] >= mem["rss_after_open"] > 0
     assert 0 < mem["simulated_world_buffers"] < mem["peak_rss"]
+    idle = summary["idle"]           # polled at its period, not spinning (issue 9)
+    assert 0 < idle["plc_requests_per_s"] <= 20 and idle["cpu_pct_of_a_core"] >= 0
+
+
+@pytest.mark.timeout(300)
+def test_bench_station_with_two_browsers_reports_latency_and_cpu_with_and_without(
+        tmp_path, capsys):
+    """``--browsers 2``: the plan with the screens served to two headless Chromium windows
+    (``/`` and ``/cameras``) between two passes without; both sides' figures and the deltas
+    against the issue's targets, and proof the clients were really served."""
+    import shutil
+
+    out = tmp_path / "bench-station.json"
+    code = main(["bench", "station", "--cycles", "2", "--seed", "3", "--browsers", "2",
+                 "--json", "--out", str(out)])
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert code == 0 and summary == json.loads(out.read_text())
+    sc = summary["screens"]
+    has_chromium = bool(shutil.which("chromium") or shutil.which("chromium-browser"))
+    assert sc["clients"] == ("chromium" if has_chromium else "sse"), sc["why_not_chromium"]
+    assert sc["browsers"] == 2 and sc["pages"] == ["/", "/cameras"]
+    assert sc["clients_alive_to_the_end"] is True
+    assert sc["frames_served"] >= 1 and sc["snapshots_sent"] >= 1
+    for side in ("with", "without"):
+        lat = sc[side]["latency_ms"]
+        assert 0 < lat["p50"] <= lat["p95"]
+        assert sc[side]["cpu_s"] > 0 and sc[side]["wall_s"] > 0
+    assert len(sc["without"]["passes"]) == 2
+    assert sc["delta"]["latency_p95_ms"] == sc["with"]["latency_ms"]["p95"] - \
+        sc["without"]["latency_ms"]["p95"]
+    assert set(sc["delta"]) == {"latency_p95_ms", "latency_p50_ms", "cpu_pct_of_a_core"}
+    assert sc["targets"] == {"latency_p95_ms": 10.0, "cpu_pct_of_a_core": 5.0}

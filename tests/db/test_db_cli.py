@@ -161,7 +161,7 @@ def test_config_check(run, tmp_path):
     also_bad.write_text("models: [\n")
     code, out, err = run("config", "check", EXAMPLE)
     assert (code, err) == (0, "")
-    assert out == f"{EXAMPLE}: ok, 2 model(s), 9 bolt(s), 3 pset(s)\n"
+    assert out == f"{EXAMPLE}: ok, 2 model(s), 9 bolt(s), 4 pset(s)\n"
     code, out, err = run("config", "check", EXAMPLE, bad, also_bad)
     lines = err.splitlines()
     assert code == 2 and out.startswith(f"{EXAMPLE}: ok")
@@ -183,8 +183,8 @@ def test_config_check_tells_station_files_from_bolt_tables(run, tmp_path):
         f"{sim / 'station.yaml'}: ok, station: 4 pair(s), 8 camera(s); "
         f"bolts {sim / 'bolts.yaml'}: 1 model(s), 50 bolt(s), 3 pset(s)",
         f"{example}: ok, station: 1 pair(s), 2 camera(s); "
-        f"bolts {EXAMPLE}: 2 model(s), 9 bolt(s), 3 pset(s)",
-        f"{EXAMPLE}: ok, 2 model(s), 9 bolt(s), 3 pset(s)",
+        f"bolts {EXAMPLE}: 2 model(s), 9 bolt(s), 4 pset(s)",
+        f"{EXAMPLE}: ok, 2 model(s), 9 bolt(s), 4 pset(s)",
     ]
 
 
@@ -266,7 +266,29 @@ def test_export_results_every_rundown_as_csv_or_json(run, db, tmp_path):
     code, out, _ = run("db", "export", "--results", "--out", str(target), "--db", db)
     assert code == 0 and target.read_text().count("\n") == 4
     for args, message in ((["--vin", "NOPE"], "NOPE"), (["--since", "yesterday"], "ISO date"),
-                          (["--format", "csv"], "go with --results")):
-        extra = ["--results"] if args[0] != "--format" else []
+                          (["--format", "csv"], "go with --results"),
+                          (["--results", "--format", "yaml"], "csv (the default) or json")):
+        extra = ["--results"] if args[0] not in ("--format", "--results") else []
         code, out, err = run("db", "export", *extra, *args, "--db", db)
         assert code == 2 and out == "" and message in _one_line(err), err
+
+
+def test_db_commands_take_the_database_of_a_station_file(run, tmp_path):
+    """``--config STATION.yaml``: the database the daemon of that station writes (a relative
+    SQLite path is the station file's folder's), and its matching tolerance for an import."""
+    import shutil
+
+    for f in (ROOT / "config" / "sim").iterdir():
+        if f.is_file() and not f.name.startswith("stationd-sim.db"):
+            shutil.copy(f, tmp_path)
+    station = tmp_path / "station.yaml"
+    code, out, _ = run("db", "import", tmp_path / "bolts.yaml", "--config", station)
+    assert code == 0 and (tmp_path / "stationd-sim.db").exists()
+    code, out, _ = run("db", "export", "--config", station)
+    assert code == 0 and "B01" in out
+    code, out, err = run("db", "export", "--config", station, "--db", "sqlite:///x.db")
+    assert code == 2 and "not allowed with argument" in err
+    # the station's tolerance: 30 mm makes the simulated vehicle's close bolts too close
+    station.write_text(station.read_text().replace("tolerance_mm: 8.0", "tolerance_mm: 30.0"))
+    code, out, err = run("db", "import", tmp_path / "bolts.yaml", "--config", station)
+    assert code == 2 and "twice the matching tolerance of 30 mm" in err

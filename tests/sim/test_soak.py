@@ -32,7 +32,10 @@ def test_a_plan_has_the_tightenings_asked_over_vehicles_and_is_seeded():
     kinds = {type(s) for s in plan}
     assert {Outage, Reload} <= kinds and any(a.rework for a in arrivals)
     devices = {s.device for s in plan if isinstance(s, Outage)}
-    assert devices == {"lift", "wrench"}
+    assert devices == {"lift", "wrench", "cameras"}
+    assert {s.kind for s in plan if isinstance(s, Reload)} == {"valid", "bad bolt table",
+                                                               "lift down"}
+    assert any(isinstance(s, Visit) and s.power_cut for s in plan)
     # a rework comes back with a VIN that was closed before it
     for k, a in enumerate(plan):
         if isinstance(a, Arrive) and a.rework:
@@ -108,8 +111,8 @@ class FakeStation:
     async def device_up(self, device):
         self.down.discard(device)
 
-    async def reload(self):
-        self.calls.append(("reload",))
+    async def reload(self, kind):
+        self.calls.append(("reload", kind))
 
     def recorded(self):
         return self.made
@@ -130,15 +133,23 @@ def _play(plan, **kw):
 
 def test_a_good_station_passes_and_every_step_is_played():
     plan = [Arrive("V1", 1), Visit("B01"), Visit("B02", hover_with="B03"),
-            Visit("B04", leave=True), Outage("wrench", 0.0), Reload(), Visit("B04"), Depart(),
+            Visit("B04", leave=True), Outage("wrench", 0.0), Reload("bad bolt table"),
+            Visit("B04"), Depart(),
             Arrive("V1", 1, rework=True), Visit("B01"), Depart()]
     tally, hooks = _play(plan)
     s = tally.summary()
     assert tally.passed and s["bolts_tightened"] == 4 and s["results_lost"] == 0
     assert s["wrong_sends"] == 0 and s["exits"] == 0 and s["reworks"] == 1
-    assert s["outages"] == {"wrench": 1} and s["reloads"] == 1
-    assert hooks.calls == [("arrive", "V1"), ("reload",), ("depart",), ("arrive", "V1"),
+    assert s["outages"] == {"wrench": 1} and s["reloads"] == {"bad bolt table": 1}
+    assert hooks.calls == [("arrive", "V1"), ("reload", "bad bolt table"), ("depart",),
+                           ("arrive", "V1"),
                            ("depart",)]
+
+
+def test_a_power_cut_mid_tightening_needs_a_new_selection_before_the_rundown():
+    tally, _ = _play([Arrive("V1", 1), Visit("B01", power_cut=True), Depart()])
+    assert tally.passed and tally.tightened == 1
+    assert tally.outages == {"controller mid-tightening": 1}
 
 
 def test_a_send_for_a_bolt_the_wrench_is_not_on_is_counted_wrong():
@@ -167,6 +178,8 @@ def test_sim_devices_drive_the_world_the_plc_and_the_controller():
 
     import numpy as np
 
+    from drivers.camera import open_camera
+    from drivers.errors import DeviceError
     from drivers.lift.sim import SimulatedPlc
     from drivers.wrench.sim import SimController
     from stationd.sim.soak import SimDevices
@@ -186,6 +199,9 @@ def test_sim_devices_drive_the_world_the_plc_and_the_controller():
                 7, "SOAK0000000000001")
             dev.wrench_to("B01")
             assert np.hypot(*(world.pose.socket_v - bolts["B01"])[:2]) < 2.0
+            first = world.pose
+            dev.wrench_to("B01")
+            assert world.pose is first   # one pose per place: rendered once, ahead
             dev.wrench_to("B01", halfway_to="B02")
             assert np.allclose(world.pose.socket_v, [0.0, 0.0, 1000.0])
             dev.wrench_to(None)
@@ -195,6 +211,13 @@ def test_sim_devices_drive_the_world_the_plc_and_the_controller():
                 pass
             asyncio.run(dev.device_up("wrench"))
             socket.create_connection(("127.0.0.1", port), 1).close()
+            asyncio.run(dev.device_down("cameras"))      # the only pair, "w": unplugged
+            cam = open_camera("sim://w/left")
+            with pytest.raises(DeviceError):
+                cam.grab(0.5)
+            asyncio.run(dev.device_up("cameras"))
+            assert cam.grab(0.5).image.shape[:2] == (240, 320)
+            cam.close()
             asyncio.run(dev.device_down("lift"))
             assert plc._silent
             asyncio.run(dev.device_up("lift"))

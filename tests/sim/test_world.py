@@ -95,3 +95,35 @@ def test_a_held_pose_is_rendered_once_and_composed_after():
         assert world.buffer_bytes() >= world.background("w", "left").nbytes
     finally:
         world.close()
+
+
+def test_an_affine_vehicle_transform_is_inverted_not_transposed():
+    """``x_v = A x_p + t`` with a scaled, sheared A (an affine registration): the marker
+    the world places in the pair's frame maps back onto the vehicle-frame pose, and its axes
+    stay a rotation."""
+    w = _world()
+    try:
+        a = np.array([[1.02, 0.01, 0.0], [-0.02, 0.99, 0.03], [0.0, 0.01, 1.01]])
+        t = np.array([5.0, -3.0, 2.0])
+        w.cfg.pairs["w"].to_vehicle = SimpleNamespace(A=a, t=t)
+        pose = wrench_at(np.array([10.0, 5.0, 1000.0]), np.random.default_rng(1), LENGTH)
+        seen = w._camera_pose("w", "left", pose)
+        assert seen is not None
+        assert np.allclose(a @ seen.centre_mm + t, pose.centre_v, atol=1e-9)
+        assert np.allclose(seen.rotation.T @ seen.rotation, np.eye(3), atol=1e-9)
+    finally:
+        w.close()
+
+
+def test_seen_by_names_the_pairs_whose_two_cameras_see_the_marker():
+    w = _world()
+    try:
+        rng = np.random.default_rng(2)
+        here = wrench_at(np.array([-50.0, 0.0, 1000.0]), rng, LENGTH)
+        assert w.seen_by(here, margin_px=10) == ["w"]
+        assert w.seen_by(here, margin_px=130) == []     # the frames are only 320x240
+        # far to the side: out of the frames
+        assert w.seen_by(wrench_at(np.array([-900.0, 0.0, 1000.0]), rng, LENGTH),
+                         margin_px=10) == []
+    finally:
+        w.close()

@@ -97,3 +97,54 @@ def test_a_second_daemon_on_the_same_database_exits_2_naming_the_first(tmp_path)
         if first.poll() is None:
             first.kill()
         sock.close()
+
+
+def _sim_copy(tmp_path, **replace):
+    for f in SIM.iterdir():
+        if f.is_file() and not f.name.startswith("stationd-sim.db"):
+            shutil.copy(f, tmp_path)
+    station = tmp_path / "station.yaml"
+    text = station.read_text().replace("http: {listen: '127.0.0.1:8080'}", "")
+    for old, new in replace.items():
+        text = text.replace(old, new)
+    station.write_text(text)
+    return station
+
+
+@pytest.mark.parametrize("old, new, said", [
+    ("lift: {url: 'sim://lift'}", "lift: {url: 'ftp://127.0.0.1:15020'}",
+     "unknown lift scheme 'ftp'"),
+    ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'openprotocl://10.0.0.5:4545'}",
+     "unknown wrench scheme 'openprotocl'"),
+    ("database: {url: 'sqlite:///stationd-sim.db'}", "database: {url: 'bogus://x'}",
+     "database URL 'bogus://x'"),
+])
+def test_a_url_typo_at_start_is_one_line_and_exit_2_not_a_fault_forever(tmp_path, old, new,
+                                                                        said):
+    station = _sim_copy(tmp_path, **{old: new})
+    assert new in station.read_text()
+    r = subprocess.run([sys.executable, "-m", "stationd", "run", "--config", str(station)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and said in r.stderr and "Traceback" not in r.stderr
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes any folder: needs a normal user")
+def test_a_database_folder_the_user_cannot_write_is_one_line_and_exit_2(tmp_path):
+    locked = tmp_path / "ro"
+    locked.mkdir()
+    locked.chmod(0o500)
+    station = _sim_copy(tmp_path, **{"sqlite:///stationd-sim.db": f"sqlite:///{locked}/x.db"})
+    r = subprocess.run([sys.executable, "-m", "stationd", "run", "--config", str(station)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "cannot create the station's lock" in r.stderr
+
+
+def test_a_database_folder_that_cannot_be_created_is_one_line_and_exit_2(tmp_path):
+    """Even root cannot make a folder under /proc: the same one line as a permission error."""
+    station = _sim_copy(tmp_path, **{"sqlite:///stationd-sim.db": "sqlite:////proc/stationd/x.db"})
+    r = subprocess.run([sys.executable, "-m", "stationd", "run", "--config", str(station)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "cannot create the station's lock" in r.stderr and "Traceback" not in r.stderr

@@ -64,3 +64,7 @@ def test_cli_draw_writes_png_and_bad_path_is_one_line_exit_2(occluded, tmp_path,
                  "--draw", str(tmp_path / "no" / "dir" / "x.png")])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "--draw" in err
+    code = main(["detect", str(tmp_path / "one.png"), "--camera", str(tmp_path / "cam.yaml"),
+                 "--draw", str(tmp_path / "seen.txt")])
+    err = capsys.readouterr().err
+    assert code == 2 and "name the file .png" in err and not (tmp_path / "seen.txt").exists()

@@ -14,6 +14,7 @@ from stationd.vision.ellipse import (
     conic_to_params,
     fit_conic,
     fit_ellipse,
+    fit_trimmed,
     params_to_conic,
     sampson_distance,
     trim_outliers,
@@ -340,3 +341,29 @@ def test_trimmed_fit_recovers_a_partly_occluded_ring(a, ratio, angle, hidden, st
 
 def test_trimmed_fit_refuses_too_few_points():
     assert isinstance(trim_outliers(np.zeros((3, 2))), Refusal)
+
+
+@pytest.mark.parametrize(("seed", "residual", "floor_px"),
+                         [(1, "sampson", 0.3), (2, "centre", 0.3), (3, "sampson", 1.0)])
+def test_fit_trimmed_is_trim_then_fit_bit_for_bit(seed, residual, floor_px):
+    """The detector's one-call trim and fit (which reuses the trim's last fit) gives exactly
+    what trimming and then fitting the kept points gives: same mask, same conic bits."""
+    rng = np.random.default_rng(seed)
+    pts = ellipse_points(rng, (2400.0, 1700.0), 60.0, 45.0, 0.4, 500, arc=(0.0, 5.0),
+                         noise=0.08)
+    pts[:40] = ellipse_points(rng, (2400.0, 1700.0), 66.0, 50.0, 0.4, 40, arc=(5.0, 6.0))
+    keep = trim_outliers(pts, floor_px=floor_px)
+    assert not isinstance(keep, Refusal) and not keep.all()  # the trim took some out
+    ref = fitted(fit_ellipse(pts[keep], residual=residual))
+    got = fit_trimmed(pts, floor_px=floor_px, residual=residual)
+    assert not isinstance(got, Refusal)
+    mask, e = got
+    assert np.array_equal(mask, keep)
+    assert np.array_equal(e.conic, ref.conic) and e.centre == ref.centre and e.rms == ref.rms
+    assert np.array_equal(e.inliers, ref.inliers)
+
+
+def test_fit_trimmed_refuses_like_trim_outliers():
+    pts = np.column_stack([np.arange(20.0), 2.0 * np.arange(20.0)])  # collinear
+    got, ref = fit_trimmed(pts), trim_outliers(pts)
+    assert isinstance(got, Refusal) and isinstance(ref, Refusal) and got.reason == ref.reason

@@ -478,3 +478,32 @@ def test_a_bright_blob_on_purple_without_a_ring_is_no_candidate():
     cv2.circle(img, (375, 250), 5, (245, 245, 245), -1)  # white disk, no dark ring
     cv2.rectangle(img, (375, 240), (460, 260), (120, 150, 205), -1)  # and a hand across
     assert find(img) == []
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_enclosed_holes_match_the_full_statistics(seed):
+    """Holes boxed one by one (few) or by the statistics fallback (many): the same labels
+    and boxes as OpenCV's statistics, and the same largest purple region."""
+    from stationd.vision.segment import MAX_BOXED_HOLES, _enclosed_holes, _largest_region
+
+    rng = np.random.default_rng(seed)
+    mask = np.zeros((90, 140), np.uint8)
+    for _ in range(2 + 3 * seed):  # rings: a purple disk with a non-purple hole
+        c = (int(rng.integers(0, 140)), int(rng.integers(0, 90)))
+        r = int(rng.integers(4, 20))
+        cv2.circle(mask, c, r, 255, -1)
+        cv2.circle(mask, c, max(2, r // 2), 0, -1)
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(cv2.bitwise_not(mask), connectivity=4)
+    x, y, w, h, area = (stats[:, i] for i in range(5))
+    ok = ((x > 0) & (y > 0) & (x + w < 140) & (y + h < 90) & (np.minimum(w, h) >= 2)
+          & (area >= 11.0))
+    ok[0] = False
+    want = [(int(k), (int(x[k]), int(y[k]), int(x[k] + w[k]), int(y[k] + h[k])))
+            for k in np.flatnonzero(ok)]
+    holes, boxes = _enclosed_holes(mask, 11.0)
+    assert boxes == want and np.array_equal(holes, labels)
+    if seed == 3:
+        assert len(want) > MAX_BOXED_HOLES  # the fallback ran
+    _, _, st8, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    assert _largest_region(mask) == int(st8[1:, cv2.CC_STAT_AREA].max())
+    assert _largest_region(np.zeros_like(mask)) == 0

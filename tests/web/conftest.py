@@ -1,5 +1,6 @@
-"""Fixtures of the screens' tests: a real server on a loop in a thread, and headless Chromium
-driven by Selenium (Debian's ``chromium`` and ``chromium-driver``).
+"""Fixtures of the screens' tests: a real server on a loop in a thread, and a page in each
+real browser (headless Chromium through Selenium, headless Firefox through WebDriver BiDi:
+``tests/web/pages.py``).
 
 ``--screenshots DIR`` saves each browser test's screens at 1920x1080 and 1280x800.
 """
@@ -7,7 +8,6 @@ driven by Selenium (Debian's ``chromium`` and ``chromium-driver``).
 from __future__ import annotations
 
 import asyncio
-import shutil
 import threading
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
@@ -19,9 +19,8 @@ import pytest
 from stationd.station.events import EventBus, StationEvent
 from stationd.web.frames import LatestFrames
 from stationd.web.server import WebServer
+from tests.web.pages import BROWSERS, Page, missing, open_page
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-CHROMEDRIVER = shutil.which("chromedriver")
 SIZES = ((1920, 1080), (1280, 800))
 
 
@@ -73,38 +72,23 @@ def live_server() -> Iterator[Callable[..., LiveServer]]:
         s.close()
 
 
-@pytest.fixture
-def browser(tmp_path: Path) -> Iterator[Any]:
-    if CHROMIUM is None or CHROMEDRIVER is None:
-        pytest.skip("chromium and chromium-driver are not installed "
-                    "(as root: apt-get install chromium chromium-driver, see .ci/bootstrap)")
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = CHROMIUM
-    for a in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-              "--disable-background-networking", "--disable-component-update",
-              "--disable-sync", "--disable-dev-shm-usage", f"--user-data-dir={tmp_path / 'p'}",
-              "--window-size=1920,1080", "--hide-scrollbars"):
-        opts.add_argument(a)
-    downloads = tmp_path / "downloads"
-    downloads.mkdir()
-    opts.add_experimental_option("prefs", {"download.default_directory": str(downloads),
-                                           "download.prompt_for_download": False})
-    drv = webdriver.Chrome(options=opts, service=Service(CHROMEDRIVER))
-    drv.execute_cdp_cmd("Browser.setDownloadBehavior",
-                        {"behavior": "allow", "downloadPath": str(downloads)})
-    drv.downloads = downloads  # type: ignore[attr-defined]  # where the test finds files
+@pytest.fixture(params=BROWSERS)
+def page(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Page]:
+    """The same test in headless Chromium and in headless Firefox: a browser that is not
+    installed is a skip that names the package, never a silent pass."""
+    why = missing(request.param)
+    if why is not None:
+        pytest.skip(why)
+    p = open_page(request.param, tmp_path)
     try:
-        yield drv
+        yield p
     finally:
-        drv.quit()
+        p.close()
 
 
 @pytest.fixture
-def shots(request: pytest.FixtureRequest, browser: Any) -> Callable[[str], None]:
-    """``shots(name)``: with --screenshots DIR, the current page at both sizes."""
+def shots(request: pytest.FixtureRequest, page: Page) -> Callable[[str], None]:
+    """``shots(name)``: with --screenshots DIR, the current page at both sizes, per browser."""
     out = request.config.getoption("--screenshots")
 
     def take(name: str) -> None:
@@ -112,8 +96,7 @@ def shots(request: pytest.FixtureRequest, browser: Any) -> Callable[[str], None]
             return
         Path(out).mkdir(parents=True, exist_ok=True)
         for w, h in SIZES:
-            browser.set_window_size(w, h)
-            browser.execute_script("window.dispatchEvent(new Event('resize'))")
-            browser.save_screenshot(str(Path(out) / f"{name}-{w}x{h}.png"))
-        browser.set_window_size(*SIZES[0])
+            page.size(w, h)
+            page.screenshot(Path(out) / f"{name}-{page.name}-{w}x{h}.png")
+        page.size(*SIZES[0])
     return take

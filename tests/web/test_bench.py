@@ -12,3 +12,36 @@ def test_fanout_bench_reports_both_clients_served():
     assert len(r["snapshots_per_client"]) == 2
     assert all(n >= 1 for n in r["snapshots_per_client"])
     assert r["cpu_pct_with"] >= 0.0 and r["cpu_pct_without"] >= 0.0
+
+
+def test_screen_clients_stand_ins_read_the_stream_and_load_the_frames_in_view(live_server):
+    """``bench station --clients sse``: one stand-in holds the event stream like the operator
+    screen, the other loads the cameras' list and frames like the cameras screen (all once,
+    then the first four, those a 1920x1080 window shows)."""
+    import time
+
+    import numpy as np
+
+    from stationd.web.bench import ScreenClients
+
+    srv = live_server()
+    img = np.random.default_rng(4).integers(0, 255, (400, 600), dtype=np.uint8)
+    for p in ("p1", "p2", "p3", "p4"):
+        for side in ("left", "right"):
+            srv.frames.put(p, side, img)
+    clients = ScreenClients(srv.url, 2, force_sse=True)
+    try:
+        assert clients.start() == "sse" and clients.why_not_chromium == "forced"
+        assert clients.pages == ["", "cameras"]
+        frame = "/api/cameras/{pair}/{side}/frame.jpg"
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline and not (
+                srv.server.clients == 1 and srv.server.requests["/api/cameras"] >= 3):
+            time.sleep(0.05)
+        assert srv.server.clients == 1
+        lists = srv.server.requests["/api/cameras"]
+        assert lists >= 3 and srv.server.requests["/cameras"] == 1
+        # every frame at the first refresh, then 4 per refresh (one may be in flight)
+        assert 8 + 4 * (lists - 2) <= srv.server.requests[frame] <= 8 + 4 * (lists - 1)
+    finally:
+        clients.close()

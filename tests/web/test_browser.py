@@ -1,77 +1,112 @@
-"""The screens in a real browser (headless Chromium): the operator's bolt map as the station
-works, a fault's reason, the cameras' frames, the results and their export."""
+"""The screens in real browsers (headless Chromium and headless Firefox, the same assertions in
+both): the operator's bolt map as the station works, a fault's reason, the cameras' frames,
+the results and their export, and the layout at 1920x1080 and on a 1280x800 panel PC."""
 
 from __future__ import annotations
 
 import csv
 import io
-import time
+import re
 
 import numpy as np
-from selenium.webdriver.common.by import By
-from selenium.webdriver.support.ui import WebDriverWait
 
 from stationd.station.events import BoltSkipped
 from stationd.web.results import Results
+from tests.web.conftest import SIZES
+from tests.web.pages import Page
 from tests.web.scenario import VIN, fault, opened, results_db, work
 
 
-def wait(browser, cond, timeout: float = 15.0):
-    return WebDriverWait(browser, timeout, poll_frequency=0.05).until(lambda d: cond(d))
-
-
-def bolts(browser) -> dict[str, tuple[str, str]]:
+def bolts(page: Page) -> dict[str, tuple[str, str]]:
     """Bolt -> (state, label text), read in one script (the map is redrawn live)."""
-    got = browser.execute_script(
+    got = page.js(
         "return [...document.querySelectorAll('#bolts g.bolt')].map(g => [g.dataset.bolt,"
         " g.dataset.state, g.querySelector('text.label').textContent])")
     return {b: (s, t) for b, s, t in got}
 
 
-def bolt_states(browser) -> dict[str, str]:
-    return {b: s for b, (s, _) in bolts(browser).items()}
+def bolt_states(page: Page) -> dict[str, str]:
+    return {b: s for b, (s, _) in bolts(page).items()}
 
 
-def test_operator_screen_follows_the_work_and_shows_the_fault(live_server, browser, shots):
+def overflow(page: Page, *selectors: str, long: bool = False) -> list[str]:
+    """What does not fit the viewport: a horizontal scroll, or one of ``selectors`` whose box
+    reaches outside the window (empty: everything visible without scrolling); ``long``: a
+    list that may scroll down (a 50-bolt table), so only its width is checked."""
+    got = page.js("""
+        const out = [], w = window.innerWidth, h = window.innerHeight;
+        if (document.documentElement.scrollWidth > w) out.push(
+            `page ${document.documentElement.scrollWidth} px wide in ${w}`);
+        for (const sel of arguments[0]) {
+            const e = document.querySelector(sel);
+            if (!e) { out.push(sel + ' missing'); continue; }
+            const r = e.getBoundingClientRect();
+            if (r.width < 1 || r.height < 1) out.push(sel + ' empty');
+            if (r.left < 0 || r.right > w + 0.5 ||
+                (!arguments[1] && (r.top < 0 || r.bottom > h + 0.5)))
+                out.push(`${sel} at ${Math.round(r.left)},${Math.round(r.top)}-` +
+                         `${Math.round(r.right)},${Math.round(r.bottom)} in ${w}x${h}`);
+        }
+        return out;""", list(selectors), long)
+    return [str(x) for x in got]
+
+
+def check_fits(page: Page, *selectors: str, long: bool = False) -> None:
+    """At 1920x1080 and at a 1280x800 panel PC's size: see :func:`overflow`."""
+    for w, h in SIZES:
+        page.size(w, h)
+        assert page.js("return [window.innerWidth, window.innerHeight]") == [w, h]
+        assert overflow(page, *selectors, long=long) == [], f"{page.name} at {w}x{h}"
+    page.size(*SIZES[0])
+
+
+def click_centre(page: Page, css: str) -> None:
+    """A real click event in the middle of the element (the crop is taken where one clicks)."""
+    page.js("""const e = document.querySelector(arguments[0]), r = e.getBoundingClientRect();
+               e.dispatchEvent(new MouseEvent('click', {bubbles: true,
+                   clientX: r.left + r.width / 2, clientY: r.top + r.height / 2}));""", css)
+
+
+def test_operator_screen_follows_the_work_and_shows_the_fault(live_server, page, shots):
     srv = live_server()
     srv.publish(opened())
-    browser.get(srv.url)
-    wait(browser, lambda d: len(bolt_states(d)) == 4)
-    assert set(bolt_states(browser).values()) == {"pending"}
-    assert browser.find_element(By.ID, "vin").text == VIN
+    page.get(srv.url)
+    page.wait(lambda p: len(bolt_states(p)) == 4, what="4 bolts on the map")
+    assert set(bolt_states(page).values()) == {"pending"}
+    assert page.text("#vin") == VIN
+    check_fits(page, "#bolts", "#headline", "#done", "#nok")
     shots("operator-opened")
 
     srv.publish(work())
-    wait(browser, lambda d: bolt_states(d).get("B3") == "tightening")
-    assert bolt_states(browser) == {"B1": "ok", "B2": "nok", "B3": "tightening", "B4": "next"}
+    page.wait(lambda p: bolt_states(p).get("B3") == "tightening", what="B3 tightening")
+    assert bolt_states(page) == {"B1": "ok", "B2": "nok", "B3": "tightening", "B4": "next"}
     # colour is never the only cue: each bolt carries its label
-    labels = {b: t for b, (_, t) in bolts(browser).items()}
+    labels = {b: t for b, (_, t) in bolts(page).items()}
     assert labels["B1"].startswith("OK") and labels["B2"].startswith("NOK")
     assert labels["B4"] == "next"
-    assert browser.find_element(By.ID, "done").text == "1"
-    assert browser.find_element(By.ID, "total").text == "4"
-    assert browser.find_element(By.ID, "nok").text == "1"
-    assert "B3 (pset 1): tighten" in browser.find_element(By.ID, "headline").text
-    assert browser.find_elements(By.ID, "wrench-mark")
-    cls, text = browser.execute_script(
+    assert (page.text("#done"), page.text("#total"), page.text("#nok")) == ("1", "4", "1")
+    assert "B3 (pset 1): tighten" in (page.text("#headline") or "")
+    assert page.count("#wrench-mark") == 1
+    cls, text = page.js(
         "const r = document.querySelector('#results tr'); return [r.className, r.innerText]")
     assert cls == "res-nok" and "B2 NOK" in text and "[45.0-55.0]" in text
+    check_fits(page, "#bolts", "#headline", "#done", "#nok")
     shots("operator-working")
 
     srv.publish([BoltSkipped(bolt="B4", reason="thread damaged"), *fault()])
-    head = browser.find_element(By.ID, "headline")     # the element stays, its text changes
-    wait(browser, lambda d: "FAULT" in head.text)
-    assert "lift: no answer from 10.0.0.7:502" in head.text
-    assert "stop" in (head.get_attribute("class") or "")
-    cls, text = browser.execute_script(
+    page.wait(lambda p: "FAULT" in (p.text("#headline") or ""), what="FAULT headline")
+    assert "lift: no answer from 10.0.0.7:502" in (page.text("#headline") or "")
+    assert "stop" in page.js("return document.getElementById('headline').className")
+    cls, text = page.js(
         "const li = document.querySelector('#devices li[data-device=lift]');"
         " return [li.className, li.textContent]")
     assert cls == "dev-bad" and "timeout" in text
-    assert bolts(browser)["B4"] == ("skipped", "skipped")
+    assert bolts(page)["B4"] == ("skipped", "skipped")
+    check_fits(page, "#bolts", "#headline")
     shots("operator-fault")
 
 
-def test_cameras_screen_shows_frames_overlay_and_refusal(live_server, browser, shots):
+def test_cameras_screen_shows_frames_overlay_and_refusal(live_server, page, shots):
     srv = live_server()
     rng = np.random.default_rng(5)
     img = (rng.integers(0, 60, (1200, 1600), dtype=np.uint8))
@@ -81,46 +116,80 @@ def test_cameras_screen_shows_frames_overlay_and_refusal(live_server, browser, s
                                           "ellipses": ellipses, "centre": [800, 600],
                                           "exposure_us": 800})
     srv.frames.put("front", "right", img, {"found": False, "reason": "marker not found"})
-    browser.get(srv.url + "cameras")
-    wait(browser, lambda d: len(d.find_elements(By.CSS_SELECTOR, ".cam img")) == 2)
+    page.get(srv.url + "cameras")
+    page.wait(lambda p: p.count(".cam img") == 2, what="two frames")
     # reduced on the server to the width shown (half of 1920 rounded up to 320 px steps)
-    wait(browser, lambda d: d.execute_script(
-        "return [...document.querySelectorAll('.cam img')].every(i => i.naturalWidth === 960)"))
-    left = browser.find_element(By.CSS_SELECTOR, ".cam[data-camera='front/left']")
-    assert len(left.find_elements(By.CSS_SELECTOR, "ellipse")) == 2
-    assert left.find_elements(By.CSS_SELECTOR, "rect.roi")
-    assert "sharpness" in left.text and "marker found" in left.text
-    right = browser.find_element(By.CSS_SELECTOR, ".cam[data-camera='front/right']")
-    assert "refused: marker not found" in right.text
-    browser.find_element(By.ID, "live").click()          # stop the refresh to click a frame
-    left = browser.find_element(By.CSS_SELECTOR, ".cam[data-camera='front/left'] img")
-    left.click()
-    crop = browser.find_element(By.ID, "crop-img")
-    wait(browser, lambda d: d.execute_script("return arguments[0].naturalWidth", crop) == 512)
+    page.wait(lambda p: p.js("const i = [...document.querySelectorAll('.cam img')];"
+                             " return i.length === 2 && i.every(x => x.naturalWidth === 960)"),
+              what="frames loaded at 960 px")
+    left = ".cam[data-camera='front/left']"
+    assert page.count(f"{left} ellipse") == 2
+    assert page.count(f"{left} rect.roi") == 1
+    text = page.text(left) or ""
+    assert "sharpness" in text and "marker found" in text
+    assert "refused: marker not found" in (page.text(".cam[data-camera='front/right']") or "")
+    check_fits(page, ".cam[data-camera='front/left'] img", ".cam[data-camera='front/right'] img")
+    page.click("#live")                      # stop the refresh to click a frame
+    click_centre(page, f"{left} img")
+    page.wait(lambda p: p.js("return document.getElementById('crop-img').naturalWidth") == 512,
+              what="the full-resolution crop")
+    # where the click fell, in full-resolution pixels (within a pixel of the image's middle)
+    m = re.search(r"at \((\d+), (\d+)\)", page.text("#crop-title") or "")
+    assert m and abs(int(m[1]) - 800) <= 2 and abs(int(m[2]) - 600) <= 2
     shots("cameras")
 
 
-def test_results_screens_and_csv_download(live_server, browser, shots, tmp_path):
+def test_results_screens_and_csv_download(live_server, page, shots, tmp_path):
     repo = results_db(tmp_path)
     try:
         srv = live_server(results=Results(repo))
-        browser.get(srv.url + "vehicles")
-        wait(browser, lambda d: d.find_elements(By.CSS_SELECTOR, "#vehicles tbody tr"))
-        row = browser.find_element(By.CSS_SELECTOR, f"#vehicles tr[data-vin='{VIN}']")
-        assert "SEDAN" in row.text and "open" in row.text
+        page.get(srv.url + "vehicles")
+        page.wait(lambda p: p.count("#vehicles tbody tr") > 0, what="the vehicles' rows")
+        row = f"#vehicles tr[data-vin='{VIN}']"
+        text = page.text(row) or ""
+        assert "SEDAN" in text and "open" in text
+        check_fits(page, "#vehicles")
         shots("vehicles")
-        row.find_element(By.TAG_NAME, "a").click()
-        wait(browser, lambda d: len(d.find_elements(By.CSS_SELECTOR, "tr.rundown")) == 5)
-        b2 = browser.find_elements(By.CSS_SELECTOR, "tr.rundown[data-bolt=B2]")
-        assert "NOK" in b2[0].text and "2 (rework)" in b2[1].text
+        page.click(f"{row} a")
+        page.wait(lambda p: p.count("tr.rundown") == 5, what="5 rundown rows")
+        b2 = page.js("return [...document.querySelectorAll('tr.rundown[data-bolt=B2]')]"
+                     ".map(r => r.innerText)")
+        assert "NOK" in b2[0] and "2 (rework)" in b2[1]
+        check_fits(page, "#rundowns")
         shots("vehicle")
-        browser.find_element(By.ID, "csv").click()
-        target = browser.downloads / f"{VIN}.csv"
-        deadline = time.monotonic() + 15
-        while not target.exists() and time.monotonic() < deadline:
-            time.sleep(0.05)
-        rows = list(csv.DictReader(io.StringIO(target.read_text())))
+        page.click("#csv")
+        rows = list(csv.DictReader(io.StringIO(page.wait_download(f"{VIN}.csv").read_text())))
         assert [(r["bolt"], r["status"]) for r in rows] == [("B1", "ok"), ("B2", "nok"),
                                                            ("B2", "ok")]
     finally:
         repo.close()
+
+
+def test_cameras_screen_fetches_again_only_the_frames_in_view(live_server, page):
+    """Four pairs of 20 MP-sized frames: after the first load, only the pairs in the window
+    are fetched each second (the daemon encodes nothing nobody sees); scrolled down, the last
+    pair is fetched again and the first no longer."""
+    srv = live_server()
+    img = np.random.default_rng(2).integers(0, 60, (1200, 1800), dtype=np.uint8)
+    pairs = ("p1", "p2", "p3", "p4")
+    for p in pairs:
+        for side in ("left", "right"):
+            srv.frames.put(p, side, img, {"found": False, "reason": "marker not found"})
+    page.get(srv.url + "cameras")
+    page.js("performance.setResourceTimingBufferSize(100000)")
+    page.wait(lambda p: p.js("const i = [...document.querySelectorAll('.cam img')];"
+                             " return i.length === 8 && i.every(x => x.naturalWidth > 0)"),
+              what="8 frames loaded")
+
+    def fetched() -> dict[str, int]:
+        got = page.js("return performance.getEntriesByType('resource').map(e => e.name)"
+                      ".filter(n => n.includes('frame.jpg'))")
+        return {p: sum(f"/cameras/{p}/" in n for n in got) for p in pairs}
+    page.wait(lambda p: fetched()["p1"] >= 8, 20, "p1 fetched 4 more times")
+    now = fetched()
+    assert now["p4"] == 2, now             # once per side, at the first load only
+    page.js("document.querySelector(\".cam[data-camera='p4/left']\").scrollIntoView()")
+    page.wait(lambda p: fetched()["p4"] >= 6, 20, "p4 fetched again once in view")
+    p1 = fetched()["p1"]
+    page.wait(lambda p: fetched()["p4"] >= 10, 20, "p4 fetched twice more")
+    assert fetched()["p1"] == p1           # out of view now

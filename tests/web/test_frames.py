@@ -47,3 +47,25 @@ def test_sharpness_ranks_a_sharp_roi_above_a_blurred_one():
     blurred = cv2.GaussianBlur(img, (0, 0), 4)
     assert sharpness(img, (0, 0, 100, 100)) > 10 * sharpness(blurred, (0, 0, 100, 100))
     assert sharpness(img, (500, 500, 10, 10)) == 0.0
+
+
+def test_reduce_matches_one_area_resize_and_does_not_alias():
+    """Halving steps then one area step: the picture of a single area resize (smooth
+    content within 2 grey levels), every pixel still averaged (noise smoothed at least as
+    much, no point sampling), any size and colour."""
+    from stationd.web.frames import reduce
+
+    yy, xx = np.mgrid[0:1823, 0:2737]          # odd sizes: the halving drops one row/column
+    smooth = (127 + 100 * np.sin(xx / 150) * np.cos(yy / 100)).astype(np.uint8)
+    noise = frame(3, 1823, 2737)
+    for width in (200, 480, 700, 1500):
+        size = (width, round(1823 * width / 2737))
+        direct = cv2.resize(smooth, size, interpolation=cv2.INTER_AREA).astype(int)
+        got = reduce(smooth, width)
+        assert got.shape == direct.shape and got.dtype == np.uint8
+        assert np.abs(got.astype(int) - direct).max() <= 2
+        area_std = cv2.resize(noise, size, interpolation=cv2.INTER_AREA).std()
+        assert reduce(noise, width).std() <= area_std * 1.02
+        assert reduce(noise, width).std() < noise.std() / 2     # averaged, not sampled
+    colour = np.dstack([smooth, noise, smooth])
+    assert reduce(colour, 300).shape == (200, 300, 3)

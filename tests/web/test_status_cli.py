@@ -10,9 +10,12 @@ from tests.web.scenario import fault, opened
 
 def test_status_prints_state_vehicle_and_faulty_device(live_server, capsys):
     srv = live_server()
-    srv.publish(opened() + fault())
+    srv.publish(opened())
+    assert main(["status", "--url", srv.url]) == 0        # serving, not in fault
+    capsys.readouterr()
+    srv.publish(fault())
     srv.call(_settle(srv))
-    assert main(["status", "--url", srv.url]) == 0
+    assert main(["status", "--url", srv.url]) == 1        # in fault: not OK for a monitor
     out = capsys.readouterr().out
     assert "state:    fault (lift: no answer" in out
     assert "vehicle:  WVWZZZ1JZ3W386752 (SEDAN): 0/4 done, 0 NOK" in out

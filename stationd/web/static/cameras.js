@@ -34,16 +34,32 @@ function overlay(cam) {
   return svg;
 }
 
-function camDiv(cam, stamp) {
+// Only the frames on screen are fetched again: a frame scrolled out of view keeps its last
+// picture (its facts and overlay still update) and costs the daemon no encoding; at 1920x1080
+// one or two pairs of the four are in view.
+const shown = new Set();
+const seen = new IntersectionObserver((entries) => {
+  for (const e of entries) {
+    if (e.isIntersecting) shown.add(e.target.dataset.camera);
+    else shown.delete(e.target.dataset.camera);
+  }
+});
+
+function camDiv(cam, stamp, old) {
   const s = cam.summary || {};
   const d = document.createElement("div");
   d.className = "cam";
   d.dataset.camera = `${cam.pair}/${cam.side}`;
   const fr = document.createElement("div");
   fr.className = "frame";
-  const img = document.createElement("img");
+  const key = `${cam.pair}/${cam.side}`;
+  const keep = old[key] && !shown.has(key);
+  // a kept frame stays where it is until the swap (moving it now would shorten the page
+  // and scroll what is in view): a placeholder marks its new place
+  const img = keep ? old[key] : document.createElement("img");
   img.alt = `${cam.pair} ${cam.side}`;
-  img.src = `/api/cameras/${encodeURIComponent(cam.pair)}/${cam.side}/frame.jpg?w=${WIDTH}&s=${stamp}`;
+  if (!keep)
+    img.src = `/api/cameras/${encodeURIComponent(cam.pair)}/${cam.side}/frame.jpg?w=${WIDTH}&s=${stamp}`;
   img.onclick = (ev) => {
     const r = img.getBoundingClientRect();
     const x = Math.round((ev.clientX - r.left) / r.width * cam.width);
@@ -52,7 +68,12 @@ function camDiv(cam, stamp) {
     $("crop-title").textContent = `${cam.pair} ${cam.side} at (${x}, ${y}), full resolution`;
     $("crop-img").src = `/api/cameras/${encodeURIComponent(cam.pair)}/${cam.side}/crop.jpg?x=${x}&y=${y}&size=512&s=${Date.now()}`;
   };
-  fr.appendChild(img);
+  if (keep) {
+    const spot = document.createElement("span");
+    spot.className = "kept";
+    fr.appendChild(spot);
+    fr.kept = [spot, img];
+  } else fr.appendChild(img);
   fr.appendChild(overlay(cam));
   d.appendChild(fr);
   const facts = document.createElement("div");
@@ -71,24 +92,46 @@ function camDiv(cam, stamp) {
   return d;
 }
 
+// A refresh builds the new frames off screen and swaps them in only once every image has
+// decoded, and the next refresh waits for that: the shown frames never go blank while the
+// server encodes (8 reduced 20 MP frames can take longer than the refresh period on a busy
+// station PC), and the refresh rate falls to what the server delivers instead of piling up.
+let busy = false;
 async function refresh() {
-  const cams = await (await fetch("/api/cameras")).json();
-  const root = $("pairs");
-  root.replaceChildren();
-  if (!cams.length) root.textContent = "No frames yet: the daemon has handed over none.";
-  const pairs = {};
-  for (const c of cams) (pairs[c.pair] = pairs[c.pair] || []).push(c);
-  const stamp = Date.now();
-  for (const [name, list] of Object.entries(pairs)) {
-    const p = document.createElement("section");
-    p.className = "pair";
-    p.innerHTML = "<h2></h2>";
-    p.firstChild.textContent = `pair ${name}`;
-    const row = document.createElement("div");
-    row.className = "cams";
-    for (const c of list) row.appendChild(camDiv(c, stamp));
-    p.appendChild(row);
-    root.appendChild(p);
+  if (busy) return;
+  busy = true;
+  try {
+    const cams = await (await fetch("/api/cameras")).json();
+    const pairs = {};
+    for (const c of cams) (pairs[c.pair] = pairs[c.pair] || []).push(c);
+    const stamp = Date.now();
+    const old = {};   // the frames now shown, by camera: an off-screen one is moved over
+    for (const d of document.querySelectorAll("#pairs .cam"))
+      old[d.dataset.camera] = d.querySelector(".frame img");
+    const sections = [];
+    for (const [name, list] of Object.entries(pairs)) {
+      const p = document.createElement("section");
+      p.className = "pair";
+      p.innerHTML = "<h2></h2>";
+      p.firstChild.textContent = `pair ${name}`;
+      const row = document.createElement("div");
+      row.className = "cams";
+      for (const c of list) row.appendChild(camDiv(c, stamp, old));
+      p.appendChild(row);
+      sections.push(p);
+    }
+    const imgs = sections.flatMap((p) => [...p.querySelectorAll("img")]);
+    await Promise.allSettled(imgs.map((i) => i.decode()));  // a missing frame shows its alt
+    for (const p of sections)
+      for (const fr of p.querySelectorAll(".frame"))
+        if (fr.kept) fr.kept[0].replaceWith(fr.kept[1]);
+    const root = $("pairs");
+    if (!cams.length) root.textContent = "No frames yet: the daemon has handed over none.";
+    else root.replaceChildren(...sections);
+    seen.disconnect();
+    for (const d of root.querySelectorAll(".cam")) seen.observe(d);
+  } finally {
+    busy = false;
   }
 }
 refresh();
