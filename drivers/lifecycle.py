@@ -1,10 +1,14 @@
-"""Open, close and ``with``: the lifecycle the device interfaces share.
+"""Open, reconnect, close and ``with``: the lifecycle every device kind shares.
 
-:class:`Openable` is the context-manager half, for any device with ``open()`` and ``close()``:
-``with device:`` opens it and closes it again (the wrench, whose ``open()`` and ``close()`` are
+:class:`Openable` is the context-manager half, for any device with ``open()``, ``reconnect()``
+and ``close()``: ``with device:`` opens it and closes it again (the wrench, whose methods are
 its own: thread-safe, and a closed wrench is not reopened).  :class:`Device` adds the simple
 lifecycle of the lift PLC and the cameras: idempotent ``open()`` / ``close()`` around two
 hooks, and a closed device may be opened again.
+
+No device reconnects by itself: a lost link stays down, and every call says so at once, until
+``reconnect()`` (one attempt) brings it back.  Who retries, how often and what is reported
+meanwhile is one component's business, :class:`drivers.keeper.DeviceKeeper`.
 """
 
 from __future__ import annotations
@@ -22,6 +26,11 @@ class Openable(ABC):
 
     @abstractmethod
     def close(self) -> None: ...
+
+    @abstractmethod
+    def reconnect(self) -> None:
+        """Drop the link and connect again, keeping the device object (its settings, and
+        the simulator a simulated device runs): one attempt, a DeviceError if it fails."""
 
     def __enter__(self) -> Self:
         self.open()
@@ -54,6 +63,18 @@ class Device(Openable):
         if self._is_open:
             self._is_open = False
             self._close()
+
+    def reconnect(self) -> None:
+        """Drop the link and connect again (opens a device that is not open).  By default
+        close and open; backends with a link of their own override ``_reconnect``."""
+        if not self._is_open:
+            self.open()
+            return
+        self._reconnect()
+
+    def _reconnect(self) -> None:
+        self.close()
+        self.open()
 
     @abstractmethod
     def _open(self) -> None:

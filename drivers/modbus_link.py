@@ -5,22 +5,20 @@ ask of its client is in :class:`ModbusLink` below (its server: ``modbus_server.p
 upgrade is checked here and in the tests, nowhere else.  The lift PLC (``drivers.lift.modbus``)
 and the register-driven wrench (``drivers.wrench.modbus``) both talk through it.
 
-    modbus-tcp://HOST[:PORT]?unit=1&timeout=1.0&backoff=0.1&backoff_max=5
+    modbus-tcp://HOST[:PORT]?unit=1&timeout=1.0
     modbus-rtu:///dev/ttyUSB0?baud=19200&parity=E&stopbits=1&unit=1&timeout=1.0
 
-The socket or serial port is opened here, not by pymodbus, and handed to its synchronous
-client: pymodbus's ``connect()`` logs the reason and returns False, and the station must tell
-"refused" from "no such port" from "permission denied".  Every failure is a typed DeviceError;
-what a device says in its own words (what a refused connection means, hints for Modbus
-exceptions) is its :class:`Wording`.  Reconnecting is the device's business.
+The socket or serial port is opened by ``drivers.link`` (the link layer Open Protocol uses
+too, so a failure is the same error on every protocol), not by pymodbus, and handed to its
+synchronous client: pymodbus's ``connect()`` logs the reason and returns False, and the
+station must tell "refused" from "no such port" from "permission denied".  Every failure is
+a typed DeviceError; what a device says in its own words (what a refused connection means,
+hints for Modbus exceptions) is its :class:`Wording`.  Reconnecting is the station keeper's
+business.
 """
 
 from __future__ import annotations
 
-import errno
-import importlib
-import socket
-import termios
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -30,18 +28,14 @@ from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 
 from drivers.errors import (
-    ConnectError,
     ConnectionLostError,
-    ConnectTimeoutError,
     DeviceError,
     DeviceTimeoutError,
     ProtocolError,
     RefusedError,
 )
+from drivers.link import connect_tcp, open_serial
 from drivers.url import OptionError, parse_url
-
-# pyserial ships no type hints (and the project has no stub package): typed as Any on purpose.
-serial: Any = importlib.import_module("serial")
 
 TCP_FORM = "modbus-tcp://HOST[:PORT]?unit=1&timeout=1.0"
 RTU_FORM = "modbus-rtu:///dev/ttyUSB0?baud=19200&parity=E&unit=1"
@@ -107,8 +101,7 @@ def _unit(text: str) -> int:
 def parse_modbus_url(text: str) -> tuple[LinkSpec, dict[str, float | None]]:
     """The link and the timing options (None where the URL does not say) of a Modbus URL."""
     url = parse_url(text)
-    timing = {"timeout": (_positive, None), "backoff": (_positive, None),
-              "backoff_max": (_positive, None)}
+    timing = {"timeout": (_positive, None)}
     if url.scheme == "modbus-tcp":
         opts = url.typed_options({"unit": (_unit, 1), **timing}, TCP_FORM)
         if not url.host or url.path not in ("", "/"):
@@ -143,25 +136,14 @@ class ModbusLink:
         return cls(message, device=self.device, code=code)
 
     def connect(self, timeout: float) -> None:
-        """Open the socket or port; ConnectError with the reason if it cannot be opened."""
+        """Open the socket or port (``drivers.link``: the same errors as every protocol's)
+        and hand it to a pymodbus client."""
         s = self.spec
         if s.kind == "tcp":
-            where = f"{s.target}:{s.port}"
             try:
-                sock = socket.create_connection((s.target, s.port), timeout=timeout)
-            except ConnectionRefusedError:
-                raise self._error(ConnectError, f"connection refused by {where} "
-                                                f"({self.wording.refused})") from None
-            except TimeoutError:
-                raise self._error(ConnectTimeoutError, f"no answer connecting to {where} "
-                                                       f"within {timeout:g} s") from None
-            except socket.gaierror as exc:
-                raise self._error(ConnectError, f"unknown host {s.target}: {exc.strerror}"
-                                  ) from None
-            except OSError as exc:
-                raise self._error(ConnectError, f"cannot connect to {where}: {exc.strerror or exc}"
-                                  ) from None
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                sock = connect_tcp(s.target, s.port, timeout, self.wording.refused)
+            except DeviceError as exc:
+                raise self._error(type(exc), str(exc)) from None
             tcp = ModbusTcpClient(s.target, port=s.port, timeout=timeout, retries=0)
             tcp.socket = sock  # connect() then sees an open socket and keeps it
             self._client, self._conn = tcp, sock
@@ -169,15 +151,12 @@ class ModbusLink:
         rtu = ModbusSerialClient(s.target, framer=FramerType.RTU, baudrate=s.baud, bytesize=8,
                                  parity=s.parity, stopbits=s.stopbits, timeout=timeout,
                                  retries=0)
-        port = serial.serial_for_url(s.target, do_not_open=True, baudrate=s.baud, bytesize=8,
-                                     parity=s.parity, stopbits=s.stopbits, timeout=timeout,
-                                     write_timeout=timeout, exclusive=True,
-                                     inter_byte_timeout=rtu.inter_byte_timeout or None)
         try:
-            port.open()  # all settings at once: a refused one fails here, not on first use
-        except (serial.SerialException, OSError, ValueError, termios.error) as exc:
-            port.close()
-            raise self._error(ConnectError, _serial_reason(s, exc)) from None
+            port = open_serial(s.target, baudrate=s.baud, parity=s.parity,
+                               stopbits=s.stopbits, timeout=timeout, write_timeout=timeout,
+                               inter_byte_timeout=rtu.inter_byte_timeout or None)
+        except DeviceError as exc:
+            raise self._error(type(exc), str(exc)) from None
         rtu.socket = port
         self._client, self._conn = rtu, port
 
@@ -238,17 +217,3 @@ class ModbusLink:
         if self._conn is not None:
             self._conn.close()
         self._client = self._conn = None
-
-
-def _serial_reason(spec: LinkSpec, exc: BaseException) -> str:
-    code = getattr(exc, "errno", None)
-    if code == errno.ENOENT:
-        return f"no such serial port {spec.target}"
-    if code == errno.EACCES:
-        return f"permission denied on {spec.target} (is the user in group dialout?)"
-    if code == errno.EBUSY or "lock" in str(exc):
-        return f"{spec.target} is in use by another program"
-    if isinstance(exc, termios.error | ValueError):
-        pty = "; a pty may refuse parity bits: use parity=N" if "/pts/" in spec.target else ""
-        return f"{spec.target} refuses {spec.baud} 8{spec.parity}{spec.stopbits} ({exc}){pty}"
-    return f"cannot open {spec.target}: {exc}"

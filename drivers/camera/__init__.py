@@ -46,8 +46,8 @@ def camera_class(url: str) -> type[CameraDevice]:
 
 
 def open_camera(url: str, **kw: Any) -> CameraDevice:
-    """An open camera for ``url``; ``kw`` go to the backend (e.g. ``timeout``, ``backoff``,
-    ``backoff_max`` in seconds; the URL's own options win).  Close it, or use ``with``."""
+    """An open camera for ``url``; ``kw`` go to the backend (e.g. ``timeout`` in seconds; the
+    URL's own options win).  Close it, or use ``with``."""
     cam = camera_class(url)(url, **kw)
     cam.open()
     return cam

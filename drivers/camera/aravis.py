@@ -4,7 +4,7 @@ The only module that talks to Aravis.  PyGObject has no type stubs, so ``gi`` is
 through importlib and typed ``Any``, when the first ``aravis://`` camera opens.
 
     aravis://Hikrobot-MV-CS200-10UC-DA1234567?trigger=software&pixel_format=BayerRG8
-        &exposure_us=20000&gain_db=0&buffers=4&region=full&timeout=2&backoff=0.5&backoff_max=10
+        &exposure_us=20000&gain_db=0&buffers=4&region=full&timeout=2
 
 - ``trigger``: ``software`` (default: no frame without ``trigger()``), ``line0``, ``line1``...
   (hardware trigger, rising edge) or ``free`` (free-running).
@@ -25,7 +25,7 @@ through importlib and typed ``Any``, when the first ``aravis://`` camera opens.
 
 Aravis quirks handled here:
 - ``update_device_list()`` (about 1 s: GigE discovery) runs before ``Camera.new`` when the
-  device is not listed yet and before every reconnect attempt.  Without it ``Camera.new``
+  device is not listed yet and before every ``reconnect()``.  Without it ``Camera.new``
   finds a GigE device through whichever interface answers a broadcast first: with an Ethernet
   port present, the fake camera on 127.0.0.1 then streams to the Ethernet address and no
   frame ever arrives.
@@ -33,7 +33,8 @@ Aravis quirks handled here:
   retries, fixed in 0.8).  The ``control-lost`` signal is not used: it comes from Aravis's
   heartbeat thread, where a Python callback leaves a ``threading._DummyThread`` behind for
   good.  Loss is seen in the errors of ``trigger()`` and of a register read after a grab
-  times out; the failed link is then released by the reconnect thread, not the caller.
+  times out; the link then stays down (calls say so at once) and the failed link is released
+  by the next ``reconnect()`` (the station keeper's thread), not by the caller that saw it.
 - Shutdown order: stream, then camera, then ``Aravis.shutdown()``, the last only at process
   end (``shutdown()`` below is registered with atexit when Aravis is first loaded).
 """
@@ -61,7 +62,6 @@ from drivers.errors import (
     DeviceTimeoutError,
     RefusedError,
 )
-from drivers.reconnect import LinkKeeper
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -322,21 +322,19 @@ def _released(exc: DeviceError) -> DeviceError:
 
 
 class AravisCamera(CameraDevice):
-    """A GenICam camera through Aravis, reconnecting with backoff when it goes away."""
+    """A GenICam camera through Aravis; a lost link stays down until ``reconnect()``."""
 
-    def __init__(self, url: str, *, timeout: float | None = None, backoff: float | None = None,
-                 backoff_max: float | None = None, buffers: int | None = None) -> None:
+    def __init__(self, url: str, *, timeout: float | None = None,
+                 buffers: int | None = None) -> None:
         settings, timing = parse_aravis_url(url)
         super().__init__(url, timeout=timing["timeout"] or timeout)
         if buffers is not None and "buffers=" not in url:
             settings = replace(settings, buffers=int(buffers))
         self.settings = settings
-        self._io = threading.Lock()  # one trigger/grab/setting at a time
-        self._keeper: LinkKeeper[_Link] = LinkKeeper(
-            url, self._connect, lambda link, lost: link.close(lost=lost),
-            backoff=timing["backoff"] or backoff or 0.5,
-            backoff_max=timing["backoff_max"] or backoff_max or 10.0,
-            name=f"camera-reconnect {url}", noun="camera", log=log)
+        self._io = threading.Lock()  # one trigger/grab/setting at a time; guards the links
+        self._link: _Link | None = None
+        self._failed: _Link | None = None   # lost, released at the next reconnect or close
+        self._down = "not connected"
 
     @property
     def buffer_count(self) -> int:
@@ -345,7 +343,7 @@ class AravisCamera(CameraDevice):
     @property
     def payload_bytes(self) -> int:
         """The size of each pool buffer: the camera's payload (0 while disconnected)."""
-        link = self._keeper.current()
+        link = self._link
         return link.payload if link is not None else 0
 
     def _connect(self, refresh: bool) -> _Link:
@@ -357,9 +355,10 @@ class AravisCamera(CameraDevice):
         return link
 
     def identity(self) -> str:
-        link = self._keeper.current()
+        link = self._link
         if link is None:
-            return f"Aravis camera {self.settings.name}: {self._keeper.status()}"
+            state = f"link down ({self._down})" if self.is_open else "closed"
+            return f"Aravis camera {self.settings.name}: {state}"
         with self._io:
             try:
                 return link.identity()
@@ -367,26 +366,50 @@ class AravisCamera(CameraDevice):
                 return f"Aravis camera {self.settings.name} ({exc})"
 
     def _open(self) -> None:
-        self._keeper.start(self._connect(False))
+        link = self._connect(False)
+        with self._io:
+            self._link = link
         _open_cameras.add(self)
 
-    def _close(self) -> None:
-        _open_cameras.discard(self)
+    def _release(self) -> None:
+        """Close the current and the failed link (the failed one may sit in GVCP timeouts)."""
         with self._io:
-            link = self._keeper.stop()
+            link, self._link = self._link, None
+            failed, self._failed = self._failed, None
+        if failed is not None:
+            failed.close(lost=True)
         if link is not None:
             link.close()
 
-    def _use(self, deadline: float, action: Callable[[_Link], T]) -> T:
-        """Run ``action`` on the link (waiting for a reconnect until ``deadline``); a lost
-        link goes to the reconnect thread."""
+    def _close(self) -> None:
+        _open_cameras.discard(self)
+        self._release()
+
+    def _reconnect(self) -> None:
+        """Release the links, refresh Aravis's device list and connect (one attempt)."""
+        self._release()
+        try:
+            link = self._connect(True)
+        except DeviceError as exc:
+            self._down = str(exc).removeprefix(f"{self.url}: ")
+            raise
         with self._io:
-            link = self._keeper.wait(deadline)
+            self._link = link
+        log.info("%s: reconnected", self.url)
+
+    def _use(self, deadline: float, action: Callable[[_Link], T]) -> T:
+        """Run ``action`` on the link; a lost link is set aside (released by the next
+        ``reconnect()``) and the camera stays down until then."""
+        with self._io:
+            link = self._link
+            if link is None:
+                raise ConnectionLostError(f"link down ({self._down})", device=self.url)
             try:
                 return action(link)
             except DeviceError as exc:
                 if isinstance(exc, ConnectionLostError):
-                    self._keeper.lost(link, exc)
+                    self._link, self._failed = None, link
+                    self._down = str(exc).removeprefix(f"{self.url}: ")
                 raise _released(exc) from None
 
     def _trigger(self) -> None:
@@ -418,6 +441,6 @@ class AravisCamera(CameraDevice):
     def _remember(self, settings: Settings) -> None:
         """Keep a runtime setting so that a reconnect applies it again."""
         self.settings = settings
-        link = self._keeper.current()
+        link = self._link
         if link is not None:
             link.settings = settings

@@ -74,8 +74,8 @@ def parse_aravis_url(text: str) -> tuple[Settings, dict[str, float | None]]:
     opts = url.typed_options({
         "trigger": (_trigger, "software"), "pixel_format": (choice(*pixels.FORMATS), None),
         "exposure_us": (positive, None), "gain_db": (float, None), "buffers": (_buffers, None),
-        "region": (_region, None), "frame_rate": (positive, None), "timeout": (positive, None),
-        "backoff": (positive, None), "backoff_max": (positive, None)}, FORM)
+        "region": (_region, None), "frame_rate": (positive, None),
+        "timeout": (positive, None)}, FORM)
     name = unquote(urlsplit(text).netloc)
     if url.scheme != "aravis" or not name or url.path not in ("", "/"):
         raise url.error(f"expected {FORM} (the device id is VENDOR-MODEL-SERIAL, as Aravis "
@@ -83,7 +83,7 @@ def parse_aravis_url(text: str) -> tuple[Settings, dict[str, float | None]]:
     settings = Settings(name, opts["trigger"], opts["pixel_format"], opts["exposure_us"],
                         opts["gain_db"], opts["buffers"] or DEFAULT_BUFFERS, opts["region"],
                         opts["frame_rate"])
-    return settings, {k: opts[k] for k in ("timeout", "backoff", "backoff_max")}
+    return settings, {"timeout": opts["timeout"]}
 
 
 def translate(exc: Any, what: str, device: str) -> DeviceError:

@@ -155,8 +155,8 @@ class CameraDevice(Device):
     def grab(self, timeout: float | None = None) -> Frame:
         """The next frame, waiting at most ``timeout`` seconds (default: the camera's).
         DeviceTimeoutError if none arrives (a software-triggered camera needs ``trigger()``
-        first), ConnectionLostError if the camera went away (it reconnects by itself where
-        the backend can), FrameError for a frame that arrived broken."""
+        first), ConnectionLostError if the camera went away (it stays down until
+        ``reconnect()``), FrameError for a frame that arrived broken."""
         self._check_open()
         if timeout is not None and not (math.isfinite(timeout) and timeout > 0):
             raise ValueError(f"timeout must be > 0, got {timeout}")

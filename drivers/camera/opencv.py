@@ -9,16 +9,15 @@ as close together in time as possible.  Without a trigger, ``grab()`` reads the 
     opencv://0?width=1920&height=1080&fps=30&fourcc=MJPG&api=v4l2
     opencv:///data/run1/left.avi
 
-A device that stops delivering (unplugged) raises ConnectionLostError and is reopened at a
-later grab, no sooner than ``backoff`` seconds (doubling to ``backoff_max``); a video file
-that ends raises EndOfStreamError.  Exposure and gain are not offered: their units differ per
+A device that stops delivering (unplugged) raises ConnectionLostError and stays down until
+``reconnect()`` reopens it (the station's keeper decides when); a video file that ends raises
+EndOfStreamError.  Exposure and gain are not offered: their units differ per
 OpenCV backend and per driver, so a number set here would mean nothing reliable.
 """
 
 from __future__ import annotations
 
 import logging
-import time
 from typing import Any, NoReturn
 
 import cv2
@@ -50,14 +49,12 @@ def _size(text: str) -> int:
 class OpenCvCamera(CameraDevice):
     """A VideoCapture source as a camera: free-running, no exposure or gain control."""
 
-    def __init__(self, url: str, *, timeout: float | None = None, backoff: float | None = None,
-                 backoff_max: float | None = None) -> None:
+    def __init__(self, url: str, *, timeout: float | None = None) -> None:
         parsed = parse_url(url)
         opts = parsed.typed_options({
             "width": (_size, None), "height": (_size, None), "fps": (positive, None),
             "fourcc": (_fourcc, None), "api": (choice(*APIS), "any"),
-            "timeout": (positive, None), "backoff": (positive, None),
-            "backoff_max": (positive, None)}, FORM)
+            "timeout": (positive, None)}, FORM)
         super().__init__(url, timeout=opts["timeout"] or timeout)
         if parsed.path and parsed.path != "/" and not parsed.host:
             self.source: int | str = parsed.path
@@ -67,13 +64,9 @@ class OpenCvCamera(CameraDevice):
             raise parsed.error(f"expected a camera index or a file path: {FORM}")
         self.is_file = isinstance(self.source, str)
         self.opts = opts
-        self.backoff = opts["backoff"] or backoff or 0.5
-        self.backoff_max = max(self.backoff, opts["backoff_max"] or backoff_max or 10.0)
         self._cap: Any = None
         self._grabbed: float | None = None
         self._count = 0
-        self._next_reopen = 0.0
-        self._delay = self.backoff
         self._backend = ""
 
     def identity(self) -> str:
@@ -116,7 +109,6 @@ class OpenCvCamera(CameraDevice):
         self._cap = self._connect()
         self._grabbed = None
         self._count = 0
-        self._delay = self.backoff
 
     def _close(self) -> None:
         if self._cap is not None:
@@ -125,22 +117,10 @@ class OpenCvCamera(CameraDevice):
         self._grabbed = None
 
     def _ensure(self) -> Any:
-        """The capture, reopened after a loss once the backoff delay has passed."""
-        if self._cap is not None:
-            return self._cap
-        wait = self._next_reopen - time.monotonic()
-        if wait > 0:
-            raise ConnectionLostError(f"camera lost; next reopen attempt in {wait:.1f} s",
-                                      device=self.url)
-        try:
-            self._cap = self._connect()
-        except ConnectError as exc:
-            self._next_reopen = time.monotonic() + self._delay
-            self._delay = min(2 * self._delay, self.backoff_max)
-            raise ConnectionLostError(str(exc).removeprefix(f"{self.url}: ") + "; retrying "
-                                      "at later grabs", device=self.url) from None
-        log.info("%s: reopened", self.url)
-        self._delay = self.backoff
+        """The capture; ConnectionLostError while it is lost (until ``reconnect()``)."""
+        if self._cap is None:
+            raise ConnectionLostError("the camera stopped delivering frames; not reopened "
+                                      "yet", device=self.url)
         return self._cap
 
     def _failed(self, what: str) -> NoReturn:
@@ -151,9 +131,8 @@ class OpenCvCamera(CameraDevice):
         if self._cap is not None:
             self._cap.release()
         self._cap = None
-        self._next_reopen = time.monotonic() + self._delay
-        raise ConnectionLostError(f"{what} failed: the camera stopped delivering frames; "
-                                  "reopening at a later grab", device=self.url)
+        raise ConnectionLostError(f"{what} failed: the camera stopped delivering frames",
+                                  device=self.url)
 
     def _trigger(self) -> None:
         cap = self._ensure()

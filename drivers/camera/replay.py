@@ -73,10 +73,7 @@ def read_frame_image(path: str) -> np.ndarray:
 class FileReplayCamera(CameraDevice):
     """Recorded image files as a free-running camera (no exposure, no gain)."""
 
-    def __init__(self, url: str, *, timeout: float | None = None, backoff: float | None = None,
-                 backoff_max: float | None = None) -> None:
-        """``backoff`` and ``backoff_max`` are accepted so that every backend takes the
-        same keywords; there is nothing to reconnect here."""
+    def __init__(self, url: str, *, timeout: float | None = None) -> None:
         super().__init__(url, timeout=timeout)
         self.pattern, self.loop = parse_file_url(url)
         self.files: list[str] = []

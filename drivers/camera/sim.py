@@ -86,10 +86,7 @@ class SimCamera(CameraDevice):
     instant, which is also their timestamp: a stereo pair triggered together shows no skew
     and no motion between its frames however long rendering takes."""
 
-    def __init__(self, url: str, *, timeout: float | None = None, backoff: float | None = None,
-                 backoff_max: float | None = None) -> None:
-        """``backoff`` and ``backoff_max`` are accepted so that every backend takes the
-        same keywords; there is nothing to reconnect here."""
+    def __init__(self, url: str, *, timeout: float | None = None) -> None:
         super().__init__(url, timeout=timeout)
         self.pair, self.side, self.seed = parse_sim_url(url)
         self._count = 0

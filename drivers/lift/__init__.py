@@ -36,8 +36,8 @@ def lift_class(url: str) -> type[Lift]:
 
 
 def open_lift(url: str, register_map: RegisterMap | None = None, **kw: Any) -> Lift:
-    """An open lift for ``url``; ``kw`` go to the backend (e.g. ``timeout``, ``backoff``,
-    ``backoff_max`` in seconds; the URL's own options win).  Close it, or use ``with``."""
+    """An open lift for ``url``; ``kw`` go to the backend (e.g. ``timeout`` in seconds; the
+    URL's own options win).  Close it, or use ``with``."""
     lift = lift_class(url)(url, register_map, **kw)
     lift.open()
     return lift

@@ -1,13 +1,13 @@
 """Lift PLC over Modbus TCP or RTU, through the shared Modbus link (``drivers.modbus_link``,
 the only module that uses pymodbus's client API).
 
-    modbus-tcp://HOST[:PORT]?unit=1&timeout=1.0&backoff=0.1&backoff_max=5
+    modbus-tcp://HOST[:PORT]?unit=1&timeout=1.0
     modbus-rtu:///dev/ttyUSB0?baud=19200&parity=E&stopbits=1&unit=1&timeout=1.0
 
-A link that fails (timeout, peer gone, garbled answer) is dropped and one named thread
-reconnects with exponential backoff until ``close()`` stops it; reads meanwhile wait for the
-link within their own timeout, then fail with a ConnectionLostError that carries the last
-reason.  A Modbus exception leaves the link up.
+A link that fails (timeout, peer gone, garbled answer) is closed and stays down: reads fail at
+once with a ConnectionLostError that carries the reason, until ``reconnect()`` (the station's
+keeper, :mod:`drivers.keeper`, retries it with backoff).  A Modbus exception leaves the link
+up.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ import threading
 import time
 
 from drivers.errors import (
+    ConnectError,
     ConnectionLostError,
     DeviceTimeoutError,
     ProtocolError,
@@ -31,7 +32,6 @@ from drivers.modbus_link import (
     Wording,
     parse_modbus_url,
 )
-from drivers.reconnect import LinkKeeper
 
 __all__ = ["EXCEPTION_HINTS", "EXCEPTION_NAMES", "RTU_FORM", "TCP_FORM", "LinkSpec",
            "ModbusLift", "parse_modbus_url"]
@@ -39,7 +39,6 @@ __all__ = ["EXCEPTION_HINTS", "EXCEPTION_NAMES", "RTU_FORM", "TCP_FORM", "LinkSp
 log = logging.getLogger(__name__)
 
 DEFAULT_TIMEOUT = 1.0
-DEFAULT_BACKOFF = (0.1, 5.0)  # first and largest delay between reconnect attempts, seconds
 
 EXCEPTION_HINTS = {
     1: "the PLC does not serve this register table (registers.table?)",
@@ -55,47 +54,59 @@ WORDING = Wording(refused="PLC off, or not its Modbus port?",
 
 
 class ModbusLift(Lift):
-    """A lift PLC on Modbus TCP or RTU.  Timing comes from the URL, else the keyword
-    arguments, else the defaults (1 s per poll, reconnect after 0.1 s doubling to 5 s)."""
+    """A lift PLC on Modbus TCP or RTU.  The timeout comes from the URL, else the keyword
+    argument, else 1 s per poll.  A failed link is closed and stays down (reads say so at
+    once, with the reason) until ``reconnect()``."""
 
     def __init__(self, url: str, register_map: RegisterMap | None = None, *,
-                 timeout: float | None = None, backoff: float | None = None,
-                 backoff_max: float | None = None) -> None:
+                 timeout: float | None = None) -> None:
         super().__init__(url, register_map)
         self.spec, opts = parse_modbus_url(url)
         self.timeout = opts["timeout"] or timeout or DEFAULT_TIMEOUT
-        self.backoff = opts["backoff"] or backoff or DEFAULT_BACKOFF[0]
-        self.backoff_max = max(self.backoff, opts["backoff_max"] or backoff_max
-                               or DEFAULT_BACKOFF[1])
-        self._io = threading.Lock()  # one request on the wire at a time
-        self._keeper: LinkKeeper[ModbusLink] = LinkKeeper(
-            url, self._connect, lambda link, _lost: link.close(), backoff=self.backoff,
-            backoff_max=self.backoff_max, name=f"lift-reconnect {url}", noun="lift",
-            attempts="attempt(s)", join_timeout=self.timeout + 1.0, log=log)
+        self._io = threading.Lock()  # one request on the wire at a time; guards the link
+        self._link: ModbusLink | None = None
+        self._down = "not connected"   # why the link is down
 
     def identity(self) -> str:
         return self.spec.describe()
 
-    def _connect(self, _refresh: bool) -> ModbusLink:
+    def _connect(self) -> ModbusLink:
         link = ModbusLink(self.spec, self.url, WORDING)
         link.connect(self.timeout)
         return link
 
     def _open(self) -> None:
-        self._keeper.start(self._connect(False))
+        link = self._connect()
+        with self._io:
+            self._link = link
 
     def _close(self) -> None:
-        link = self._keeper.stop()
+        with self._io:
+            link, self._link = self._link, None
         if link is not None:
             link.close()
+
+    def _reconnect(self) -> None:
+        """Close the link and connect again (one attempt)."""
+        with self._io:
+            link, self._link = self._link, None
+            if link is not None:
+                link.close()
+            try:
+                self._link = self._connect()
+            except ConnectError as exc:
+                self._down = str(exc).removeprefix(f"{self.url}: ")
+                raise
 
     def _read_registers(self, spans: list[tuple[int, int]],
                         timeout: float | None) -> dict[int, int]:
         deadline = time.monotonic() + (timeout or self.timeout)
         out: dict[int, int] = {}
         with self._io:
+            link = self._link
+            if link is None:
+                raise ConnectionLostError(f"link down ({self._down})", device=self.url)
             for start, count in spans:
-                link = self._keeper.wait(deadline)
                 remaining = deadline - time.monotonic()
                 if remaining <= 0:
                     raise DeviceTimeoutError(f"no complete answer within {timeout or self.timeout}"
@@ -103,7 +114,10 @@ class ModbusLift(Lift):
                 try:
                     values = self._read_span(link, start, count, remaining)
                 except (DeviceTimeoutError, ConnectionLostError, ProtocolError) as exc:
-                    self._keeper.lost(link, exc)
+                    # a late answer must never be read as the next one's: drop the link
+                    link.close()
+                    self._link = None
+                    self._down = str(exc).removeprefix(f"{self.url}: ")
                     raise
                 out.update(zip(range(start, start + count), values, strict=True))
         return out

@@ -139,8 +139,7 @@ class SimLift(Lift):
     and reads it through a real :class:`ModbusLift` over TCP or RTU."""
 
     def __init__(self, url: str = "sim://lift", register_map: RegisterMap | None = None, *,
-                 timeout: float | None = None, backoff: float | None = None,
-                 backoff_max: float | None = None) -> None:
+                 timeout: float | None = None) -> None:
         super().__init__(url, register_map)
         parsed = parse_url(url)
         if parsed.scheme != "sim" or parsed.host != "lift" or parsed.path not in ("", "/"):
@@ -149,8 +148,7 @@ class SimLift(Lift):
                                      "timeout": (float, None)}, SIM_FORM)
         self.transport: str = opts["transport"]
         self.plc = SimulatedPlc(self.register_map, unit=opts["unit"])
-        self._timing: dict[str, float | None] = {"timeout": opts["timeout"] or timeout,
-                                                 "backoff": backoff, "backoff_max": backoff_max}
+        self._timing: dict[str, float | None] = {"timeout": opts["timeout"] or timeout}
         self._link: ModbusLift | None = None
 
     def identity(self) -> str:
@@ -177,6 +175,13 @@ class SimLift(Lift):
             self._link.close()
             self._link = None
         self.plc.close()
+
+    def _reconnect(self) -> None:
+        """Reconnect the link only: the simulated PLC (the world's) keeps running."""
+        if self._link is None:
+            super()._reconnect()
+            return
+        self._link.reconnect()
 
     def _read_registers(self, spans: list[tuple[int, int]],
                         timeout: float | None) -> dict[int, int]:

@@ -10,9 +10,11 @@ contract that says "acknowledged or failed" and is directly usable from the CLI 
 The daemon's asyncio loop calls it through ``asyncio.to_thread`` (STYLE 4).  Backends are
 thread-safe: a command may be issued from one thread while another waits for results.
 
-Both backends (Open Protocol, Modbus registers) keep their link up with a supervisor thread
-that reconnects with backoff and queue results as they arrive; :class:`SupervisedWrench` is
-the bookkeeping they share (link status, waiting for the link or a result, error wording).
+Both backends (Open Protocol, Modbus registers) read their link with a supervisor thread and
+queue results as they arrive; a lost link stays down until ``reconnect()`` (one attempt; the
+station's :class:`drivers.keeper.DeviceKeeper` retries with backoff).
+:class:`SupervisedWrench` is the bookkeeping they share (link status, waiting for the link or
+a result, error wording).
 """
 
 from __future__ import annotations
@@ -22,14 +24,17 @@ import threading
 import time
 from abc import abstractmethod
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime
 from enum import IntEnum
+from typing import TypeVar
 
 from drivers.errors import ConnectionLostError, DeviceError
 from drivers.lifecycle import Openable
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 
 
 class Status(IntEnum):
@@ -88,8 +93,9 @@ class Wrench(Openable):
     """A tightening controller: select a parameter set, enable the tool, receive results.
 
     ``open()`` connects (and fails fast with a typed :class:`DeviceError`); after that a lost
-    link is re-established in the background by the backend.  ``close()`` may be called any
-    number of times; a closed wrench cannot be reopened (make a new one, as with python-can).
+    link stays down (every command says so at once) until ``reconnect()``.  ``close()`` may be
+    called any number of times; a closed wrench cannot be reopened (make a new one, as with
+    python-can).
     It is a context manager (``drivers.lifecycle.Openable``).
     """
 
@@ -121,6 +127,19 @@ class Wrench(Openable):
             self._closed = True
             if self._opened:
                 self._close()
+
+    def reconnect(self) -> None:
+        """Drop the link (if it is up) and start a new session: one attempt, a DeviceError if
+        it fails.  Results already queued stay queued; the controller resends the ones not
+        acknowledged."""
+        with self._life:
+            if self._closed or not self._opened:
+                raise DeviceError("not open", device=self.device)
+            self._reconnect()
+
+    @abstractmethod
+    def _reconnect(self) -> None:
+        """One attempt to bring the link back (called with the lifecycle lock held)."""
 
     @property
     def is_open(self) -> bool:
@@ -260,8 +279,8 @@ def check_positive(**values: float) -> None:
 
 
 class SupervisedWrench(Wrench):
-    """A backend whose link a supervisor thread keeps up (reconnecting with backoff) and
-    whose results are queued as they arrive.  Everything below is guarded by ``_cond``; the
+    """A backend whose link a supervisor thread reads (polls, keep-alives) and whose results
+    are queued as they arrive.  Everything below is guarded by ``_cond``; the
     backend says whether its link is up (:meth:`_link_up`) and keeps the counts:
     ``_reason`` why the link went down, ``_last_error`` of the last failed attempt,
     ``_attempts`` failed since then, ``_reconnects`` since open, ``_poll_error`` a failure
@@ -331,6 +350,17 @@ class SupervisedWrench(Wrench):
         self._attempts = 0
         self._reconnects += 1
         self._cond.notify_all()
+        log.info("%s: reconnected", self.device)
+
+    def _attempt(self, connect: Callable[[], T]) -> T:
+        """One reconnect attempt, ``connect()``: a failure is counted and raised as
+        "reconnect: ..." with the device's name."""
+        try:
+            return connect()
+        except DeviceError as e:
+            with self._cond:
+                self._attempt_failed(e)
+            raise self._surface(e, "reconnect") from None
 
     def _surface(self, e: DeviceError, what: str, note: str = "") -> DeviceError:
         """The error as the caller sees it: device name, what was being done, the code."""
@@ -339,8 +369,8 @@ class SupervisedWrench(Wrench):
     def _down(self, what: str, note: str = "") -> ConnectionLostError:
         """What a caller sees while the link is down (call with ``_cond`` held)."""
         last = f"; last attempt: {self._last_error}" if self._last_error else ""
-        return ConnectionLostError(f"{what}: link down ({self._reason}); reconnecting, "
-                                   f"{self._attempts} failed attempt(s){last}{note}",
+        return ConnectionLostError(f"{what}: link down ({self._reason}); "
+                                   f"{self._attempts} failed reconnect(s){last}{note}",
                                    device=self.device)
 
     def _status(self) -> LinkStatus:

@@ -3,8 +3,9 @@
 Threads: one supervisor thread per wrench owns the link's reading side.  It dispatches answers
 to the one command in flight, queues every MID 0061 result and acknowledges it with 0062,
 sends the keep-alive (9999) after ``keepalive`` seconds without traffic, and when the link
-fails it reconnects (0001, then 0060) with exponential backoff until ``close()`` stops it.
-Commands run in the caller's thread, one at a time, and wait for their answer.
+fails it closes it and waits: ``reconnect()`` (0001, then 0060) brings it back, one attempt
+at a time (the station's keeper retries with backoff).  Commands run in the caller's thread,
+one at a time, and wait for their answer.
 
 "Acknowledged or reported failed": a command returns only on its 0005.  A 0004 is a
 RefusedError with the controller's code.  Any other failure (timeout, lost link, garbage)
@@ -29,21 +30,21 @@ from drivers.errors import (
     ProtocolError,
     RefusedError,
 )
+from drivers.link import Link, SerialLink, TcpLink
 from drivers.url import DeviceUrl
 from drivers.wrench import openprotocol as op
 from drivers.wrench.base import SupervisedWrench, check_positive
-from drivers.wrench.link import Link, SerialLink, TcpLink
 from drivers.wrench.openprotocol import Message, SerialFramer, TcpFramer
 
 log = logging.getLogger(__name__)
 
 POLL = 0.05            # the supervisor's read granularity: bounds reaction to close() and resets
 DEFAULT_PORT = 4545
+REFUSED = "controller off, or Open Protocol not enabled on this port?"
 VIN_LENGTH = 25        # MID 0050 revision 1 carries a 25-character VIN
 Spec = dict[str, tuple[Callable[[str], Any], Any]]   # option -> (converter, default)
 OPTIONS: Spec = {
     "timeout": (float, 2.0), "connect_timeout": (float, 5.0), "keepalive": (float, 10.0),
-    "backoff": (float, 0.5), "backoff_max": (float, 30.0),
 }
 
 
@@ -69,19 +70,17 @@ class OpenProtocolWrench(SupervisedWrench):
     """A tightening controller over Open Protocol (TCP or RS-232)."""
 
     def __init__(self, link: Link | None, *, device: str, timeout: float = 2.0,
-                 connect_timeout: float = 5.0, keepalive: float = 10.0, backoff: float = 0.5,
-                 backoff_max: float = 30.0) -> None:
+                 connect_timeout: float = 5.0, keepalive: float = 10.0) -> None:
         super().__init__(device, timeout=timeout)
-        check_positive(connect_timeout=connect_timeout, keepalive=keepalive, backoff=backoff,
-                       backoff_max=backoff_max)
+        check_positive(connect_timeout=connect_timeout, keepalive=keepalive)
         self._given_link = link
-        self._link: Link = link or TcpLink("127.0.0.1", DEFAULT_PORT)
+        self._link: Link = link or TcpLink("127.0.0.1", DEFAULT_PORT, REFUSED)
         self._connect_timeout = connect_timeout
         self._keepalive = keepalive
-        self._backoff, self._backoff_max = backoff, max(backoff, backoff_max)
         self._framer: TcpFramer | SerialFramer = TcpFramer()
         self._send_lock = threading.Lock()      # one message on the wire at a time
         self._request_lock = threading.Lock()   # one command in flight
+        self._reader = threading.Lock()         # the link's reading side: supervisor or session
         self._connected = False                 # these two guarded by _cond too
         self._epoch = 0
         self._pending: _Pending | None = None
@@ -92,8 +91,8 @@ class OpenProtocolWrench(SupervisedWrench):
     @classmethod
     def from_url(cls, url: DeviceUrl, **kw: Any) -> OpenProtocolWrench:
         """``openprotocol://HOST[:PORT]`` or ``openprotocol+serial:///dev/ttyUSB1?baud=9600``;
-        options (URL query or keywords): timeout, connect_timeout, keepalive, backoff,
-        backoff_max (seconds), and baud for serial."""
+        options (URL query or keywords): timeout, connect_timeout, keepalive (seconds), and
+        baud for serial."""
         link: Link
         if url.scheme == "openprotocol+serial":
             spec: Spec = {**OPTIONS, "baud": (int, 9600)}
@@ -107,7 +106,7 @@ class OpenProtocolWrench(SupervisedWrench):
             if not url.host or url.path not in ("", "/"):
                 raise url.error("expected openprotocol://HOST[:PORT] (port 4545 by default)")
             opts.update(keyword_options(kw, OPTIONS))
-            link = TcpLink(url.host, url.port or DEFAULT_PORT)
+            link = TcpLink(url.host, url.port or DEFAULT_PORT, REFUSED)
         try:
             return cls(link, device=url.text, **opts)
         except ValueError as e:
@@ -171,37 +170,31 @@ class OpenProtocolWrench(SupervisedWrench):
 
     # -- the supervisor thread -------------------------------------------------------------
     def _supervise(self) -> None:
+        """Read while the link is up; when it is down, close it and wait for
+        ``reconnect()`` (which holds the reading side while it starts a session)."""
         while not self._stop.is_set():
-            with self._cond:
-                up = self._connected
-            if up:
-                try:
-                    self._read_once()
-                    self._keepalive_tick()
-                except DeviceError as e:
-                    self._fail_link(e)
-                continue
-            with self._send_lock:
-                self._link.close()
-            self._reconnect()
+            with self._reader:
+                with self._cond:
+                    up = self._connected
+                if up:
+                    try:
+                        self._read_once()
+                        self._keepalive_tick()
+                    except DeviceError as e:
+                        self._fail_link(e)
+                    continue
+                with self._send_lock:
+                    self._link.close()
+            self._stop.wait(POLL)
 
     def _reconnect(self) -> None:
-        delay = self._backoff
-        while not self._stop.wait(delay):
-            try:
-                self._start_session()
-            except DeviceError as e:
-                with self._cond:
-                    attempts = self._attempt_failed(e)
-                log.info("%s: reconnect attempt %d failed (%s); next in %.3g s", self.device,
-                         attempts, e, min(delay * 2, self._backoff_max))
-                delay = min(delay * 2, self._backoff_max)
-                continue
+        """Drop the link if it is up, then connect and start a session (0001, 0060)."""
+        self._fail_link(ConnectionLostError("reconnect asked for"))
+        with self._reader:
+            self._attempt(self._start_session)
             with self._cond:
                 self._connected = True
                 self._link_restored()
-            log.info("%s: reconnected", self.device)
-            return
 
     def _read_once(self) -> None:
         """Read for up to POLL seconds and dispatch every complete message."""

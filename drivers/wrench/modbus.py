@@ -1,6 +1,6 @@
 """Register-driven tightening controllers over Modbus TCP or RTU.
 
-    modbus-tcp://HOST[:502]?unit=1&timeout=1.0&backoff=0.1&backoff_max=5
+    modbus-tcp://HOST[:502]?unit=1&timeout=1.0
     modbus-rtu:///dev/ttyUSB0?baud=19200&parity=E&stopbits=1&unit=1
 
 Such a controller has no messages, only registers (layout: :class:`WrenchRegisterMap`, from
@@ -28,11 +28,12 @@ station.yaml), so "acknowledged" has to be built from them.  The handshake:
 
 Every command returns only once acknowledged as above, or raises, saying at which stage it
 failed and so whether the controller can have acted.  A timeout or lost link drops the link
-(over RTU a late answer would otherwise be read as the answer to the next request); the
-poller thread then reconnects with exponential backoff and re-reads the station's own
-registers (request number, control bits, result ack), which also lets a restarted station
-continue the sequence.  A Modbus exception keeps the link.  The link itself (own socket or
-serial port, typed errors, reads and writes) is ``drivers.modbus_link``, shared with the lift;
+(over RTU a late answer would otherwise be read as the answer to the next request) until
+``reconnect()`` (one attempt; the station's keeper retries with backoff) re-reads the
+station's own registers (request number, control bits, result ack), which also lets a
+restarted station continue the sequence.  A Modbus exception keeps the link.  The link itself
+(own socket or serial port, typed errors, reads and writes) is ``drivers.modbus_link``,
+shared with the lift;
 pymodbus is imported there and in ``drivers.modbus_server`` only.
 """
 
@@ -60,7 +61,7 @@ from drivers.wrench.modbus_map import ACK_CODES, WrenchRegisterMap, next_sequenc
 log = logging.getLogger(__name__)
 T = TypeVar("T")
 ACK_POLL = 0.01      # seconds between reads while a command waits for the controller
-KEYWORDS = ("timeout", "connect_timeout", "poll", "backoff", "backoff_max", "register_map")
+KEYWORDS = ("timeout", "connect_timeout", "poll", "register_map")
 #: the wrench's words in link errors (the refused hint is, as it always was, the lift's)
 WORDING = Wording(refused="controller off, or not its Modbus port?")
 
@@ -93,15 +94,12 @@ class ModbusWrench(SupervisedWrench):
 
     def __init__(self, spec: LinkSpec | None, *, device: str,
                  register_map: WrenchRegisterMap | None = None, timeout: float = 1.0,
-                 connect_timeout: float = 5.0, poll: float = 0.1, backoff: float = 0.1,
-                 backoff_max: float = 5.0) -> None:
+                 connect_timeout: float = 5.0, poll: float = 0.1) -> None:
         super().__init__(device, timeout=timeout)
-        check_positive(connect_timeout=connect_timeout, poll=poll, backoff=backoff,
-                       backoff_max=backoff_max)
+        check_positive(connect_timeout=connect_timeout, poll=poll)
         self.spec = spec
         self.register_map = register_map if register_map is not None else WrenchRegisterMap()
         self._connect_timeout, self._poll = connect_timeout, poll
-        self._backoff, self._backoff_max = backoff, max(backoff, backoff_max)
         self._io = threading.Lock()          # one request on the wire
         self._cmd = threading.Lock()         # one handshake at a time
         # guarded by _cond, like the link status the base class keeps:
@@ -112,9 +110,8 @@ class ModbusWrench(SupervisedWrench):
 
     @classmethod
     def from_url(cls, url: DeviceUrl, **kw: Any) -> ModbusWrench:
-        """Link options from the URL (unit, baud, parity, stopbits, timeout, backoff,
-        backoff_max); keywords (the same timings, connect_timeout, poll, register_map)
-        override them."""
+        """Link options from the URL (unit, baud, parity, stopbits, timeout); keywords (the
+        same timeout, connect_timeout, poll, register_map) override them."""
         unknown = sorted(set(kw) - set(KEYWORDS))
         if unknown:
             raise TypeError(f"unknown option(s) {', '.join(unknown)} (accepted: "
@@ -178,9 +175,10 @@ class ModbusWrench(SupervisedWrench):
             out.update(link.read_span(start, count, self.timeout))
         return out
 
-    # -- the poller and reconnect thread ----------------------------------------------------
+    # -- the poller thread --------------------------------------------------------------------
     def _supervise(self) -> None:
-        delay = self._backoff
+        """Poll the status block every ``poll`` seconds while the link is up (a failure drops
+        it, in ``_io_call``; ``reconnect()`` brings it back)."""
         while not self._stop.is_set():
             with self._cond:
                 link = self._link
@@ -188,27 +186,21 @@ class ModbusWrench(SupervisedWrench):
                 try:
                     self._poll_once(link)
                 except DeviceError:
-                    pass                      # _io_call dropped the link; reconnect next
-                self._stop.wait(self._poll)
-                continue
-            try:
-                link = self._session()
-            except DeviceError as e:
-                with self._cond:
-                    attempts = self._attempt_failed(e)
-                log.info("%s: reconnect attempt %d failed (%s); next in %.3g s", self.device,
-                         attempts, e, delay)
-                if self._stop.wait(delay):
-                    return
-                delay = min(2 * delay, self._backoff_max)
-                continue
-            with self._cond:
-                if self._stop.is_set():
-                    link.close()
-                    return
-                self._link, delay = link, self._backoff
-                self._link_restored()
-            log.info("%s: reconnected", self.device)
+                    pass                      # _io_call dropped the link
+            self._stop.wait(self._poll)
+
+    def _reconnect(self) -> None:
+        """Drop the link if it is up, then connect and read the station's registers back."""
+        with self._io, self._cond:
+            old, self._link = self._link, None
+            if old is not None:
+                self._link_lost("reconnect asked for")
+        if old is not None:
+            old.close()
+        link = self._attempt(self._session)
+        with self._cond:
+            self._link = link
+            self._link_restored()
 
     def _poll_once(self, link: RegisterLink) -> None:
         m = self.register_map

@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any
 
+from drivers.link import Link, SerialLink, TcpLink
 from drivers.url import DeviceUrl
-from drivers.wrench.client import OPTIONS, OpenProtocolWrench, Spec, keyword_options
-from drivers.wrench.link import Link, SerialLink, TcpLink
+from drivers.wrench.client import OPTIONS, REFUSED, OpenProtocolWrench, Spec, keyword_options
 from drivers.wrench.simserver import OpenProtocolServer, Received, Session, message
 
 _TIME = "%Y-%m-%d:%H:%M:%S"
@@ -280,7 +280,7 @@ class SimWrench(OpenProtocolWrench):
         if self.transport == "serial":   # behind a symlink, so a power cycle keeps the path
             self._pty_dir = tempfile.mkdtemp(prefix="sim-wrench-")
             return SerialLink(self.controller.open_pty(os.path.join(self._pty_dir, "tty")))
-        return TcpLink("127.0.0.1", self.controller.listen_tcp())
+        return TcpLink("127.0.0.1", self.controller.listen_tcp(), REFUSED)
 
     def _open(self) -> None:
         try:

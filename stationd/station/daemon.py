@@ -7,7 +7,9 @@ typed events on :attr:`Station.bus`.  Blocking work runs in executor threads.
 
 A device or data fault is never an exception out of the loop: a device that is down at boot,
 vanishes, or returns garbage is a fault (DeviceHealth, STATUS=) and is retried with backoff; a
-skewed stereo pair or one bad frame is retried, a camera that keeps failing is a fault.
+skewed stereo pair or one bad frame is retried, a camera that keeps failing is a fault.  Each
+device (the lift, the wrench, every camera pair) has one :class:`drivers.keeper.DeviceKeeper`:
+the one task that opens it, reports its faults and reconnects it with backoff.
 """
 
 from __future__ import annotations
@@ -15,9 +17,11 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
+from functools import partial
 from typing import Any
 
 import cv2
@@ -28,14 +32,8 @@ from db.errors import DataError, DbError, VehicleClosedError
 from db.repository import BoltInfo, Repository
 from drivers.camera import open_camera
 from drivers.camera.pair import StereoGrabber, StereoSkewError
-from drivers.errors import (
-    ConnectionLostError,
-    DeviceError,
-    DeviceTimeoutError,
-    DriverError,
-    ProtocolError,
-    RefusedError,
-)
+from drivers.errors import DeviceError, DriverError, ProtocolError, RefusedError
+from drivers.keeper import DeviceKeeper, fault_kind, one_line
 from drivers.lift import open_lift
 from drivers.wrench import open_wrench
 from stationd.boltfile import import_bolts
@@ -95,7 +93,6 @@ from stationd.vision.types import Refusal
 
 log = logging.getLogger("stationd")
 DATABASE = "database"
-BACKOFF_S = (0.5, 5.0)      # first and longest wait between attempts on a faulty device
 RESULT_WAIT_S = 0.5         # one blocking wait for pushed results (a condition, not a poll)
 TICK_S = 0.5
 BAD_GRABS = 3               # a pair failing this many grabs in a row is a fault
@@ -110,19 +107,6 @@ STATION_FAULTS: tuple[type[Exception], ...] = (StationError, DbError, DriverErro
 OPEN_ERRORS: tuple[type[Exception], ...] = (*STATION_FAULTS, OSError, ValueError)
 
 
-def fault_kind(exc: BaseException) -> str:
-    """The fault's kind for DeviceHealth, from the driver's error type."""
-    if isinstance(exc, DeviceTimeoutError):
-        return "timeout"
-    if isinstance(exc, ProtocolError):
-        return "garbage"
-    if isinstance(exc, RefusedError):
-        return "refused"
-    if isinstance(exc, DeviceError):
-        return "down"
-    return "garbage"
-
-
 def frame_summary(det: Any) -> dict[str, Any]:
     """What the commissioning screen draws over a frame: found or why not, the ROI, both
     ellipses (undistorted pixels: close to the raw frame away from the image corners) as
@@ -133,11 +117,6 @@ def frame_summary(det: Any) -> dict[str, Any]:
             "roi": list(det.roi) if det.roi is not None else None,
             "ellipses": [[float(v) for v in e] for e in ellipses],
             "centre": [float(v) for v in det.centre_px] if det.centre_px is not None else None}
-
-
-def one_line(exc: BaseException) -> str:
-    text = str(exc).strip().splitlines()
-    return text[0] if text else type(exc).__name__
 
 
 @dataclass
@@ -168,6 +147,18 @@ class PairView:
     sides: dict[str, dict[str, Any]] = field(default_factory=dict)  # detection summaries
 
 
+class Pair:
+    """A stereo pair as the station keeps it: its two cameras and their grabber."""
+
+    def __init__(self, cams: list[Any], grabber: StereoGrabber) -> None:
+        self.cams = cams
+        self.grabber = grabber
+
+    def close(self) -> None:
+        for cam in self.cams:
+            _quiet(cam.close)
+
+
 @dataclass
 class Station:
     """A running station: ``open()``, ``await run(stop)``, ``close()``."""
@@ -175,10 +166,7 @@ class Station:
     cfg: StationConfig
     notifier: Notifier = field(default_factory=Notifier)
     device_kw: dict[str, dict[str, Any]] = field(default_factory=dict)
-    lift: Any = None
-    wrench: Any = None
     repo: Repository | None = None
-    grabbers: dict[str, StereoGrabber] = field(default_factory=dict)
     core: StationCore = field(init=False)
     bus: EventBus = field(default_factory=EventBus)
     # the screens' latest-frame store (stationd.web.LatestFrames): put(pair, side, image,
@@ -192,10 +180,7 @@ class Station:
     _lock: asyncio.Lock | None = None
     _pending: list[Event] = field(default_factory=list)    # faults found before run()
     _bad: dict[str, int] = field(default_factory=dict)     # pair -> failed grabs in a row
-    _cams: dict[str, list[Any]] = field(default_factory=dict)  # pair -> cameras opened
-    _next_try: dict[str, float] = field(default_factory=dict)  # device -> next attempt
-    _wait: dict[str, float] = field(default_factory=dict)      # device -> current backoff
-    _open_error: dict[str, str] = field(default_factory=dict)  # device -> why it did not open
+    keepers: dict[str, DeviceKeeper[Any]] = field(init=False)  # device -> its one keeper
     _next_frames: dict[str, float] = field(default_factory=dict)  # pair -> next PairFrames
     _scan: ScanPlan = field(default_factory=ScanPlan)   # which pairs to localize per cycle
 
@@ -203,6 +188,41 @@ class Station:
         self.core = StationCore(self.cfg.matching, self.cfg.matching.leave_frames)
         self._pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="station")
         self._results_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="results")
+        self.keepers = {LIFT: self._keeper(LIFT, self._open_lift, _reconnect),
+                        WRENCH: self._keeper(WRENCH, self._open_wrench, _reconnect)}
+        for name in self._pair_names():
+            self.keepers[name] = self._keeper(name, partial(self._open_pair, name),
+                                              partial(self._reconnect_pair, name))
+
+    def _keeper(self, device: str, opener: Callable[[], Any],
+                reconnect: Callable[[Any], None]) -> DeviceKeeper[Any]:
+        """The device's keeper: its faults and returns go to the core as typed events."""
+        async def on_fault(kind: str, reason: str) -> None:
+            await self.feed(DeviceFault(time.time(), device, kind, reason))
+
+        async def on_back(reconnects: int) -> None:
+            await self.feed(DeviceBack(time.time(), device,
+                                       reconnects if device == WRENCH else None))
+
+        return DeviceKeeper(device, open=opener, reconnect=reconnect, close=_close,
+                            on_fault=on_fault, on_back=on_back, blocking=self._call,
+                            logger=log)
+
+    @property
+    def lift(self) -> Any:
+        """The lift PLC once opened (also while its link is down), else None."""
+        return self.keepers[LIFT].device
+
+    @property
+    def wrench(self) -> Any:
+        """The controller once opened (also while its link is down), else None."""
+        return self.keepers[WRENCH].device
+
+    @property
+    def grabbers(self) -> dict[str, StereoGrabber]:
+        """The grabbers of the pairs that are up."""
+        return {n: k.device.grabber for n, k in self.keepers.items()
+                if n not in (LIFT, WRENCH) and k.up and k.device is not None}
 
     @property
     def cycle(self) -> StationCore:
@@ -224,39 +244,27 @@ class Station:
             log.info("bolt table %s: %d added, %d changed, %d unchanged, %d removed, "
                      "%d new parameter versions", self.cfg.bolts_path, len(r.added),
                      len(r.changed), len(r.unchanged), len(r.removed), len(r.new_versions))
-        for device in (LIFT, WRENCH, *self._pair_names()):
-            fault = self._open_device(device)
+        for device, keeper in self.keepers.items():
+            fault = keeper.open_now()
             if fault is not None:
-                self._pending.append(fault)
+                self._pending.append(DeviceFault(time.time(), device, *fault))
 
     def _pair_names(self) -> list[str]:
         return [n for n, pc in self.cfg.pairs.items() if pc.left and pc.right]
 
-    def _open_device(self, device: str) -> DeviceFault | None:
-        """One attempt to open ``device`` (an executor thread); the fault if it fails."""
-        try:
-            if device == LIFT:
-                self.lift = open_lift(self.cfg.lift.url, self.cfg.lift.registers,
-                                      **self.device_kw.get("lift", {}))
-            elif device == WRENCH:
-                self.wrench = open_wrench(self.cfg.wrench.url, **self.cfg.wrench.open_options(),
-                                          **self.device_kw.get("wrench", {}))
-            else:
-                self._open_pair(device)
-        except OPEN_ERRORS as exc:
-            if self._open_error.get(device) != one_line(exc):   # once per reason, not retry
-                log.warning("%s not opened: %s", device, one_line(exc))
-                self._open_error[device] = one_line(exc)
-            return DeviceFault(time.time(), device, fault_kind(exc), one_line(exc))
-        if self._open_error.pop(device, None) is not None:
-            log.info("%s opened", device)
-        return None
+    def _open_lift(self) -> Any:
+        return open_lift(self.cfg.lift.url, self.cfg.lift.registers,
+                         **self.device_kw.get("lift", {}))
 
-    def _open_pair(self, name: str) -> None:
+    def _open_wrench(self) -> Any:
+        return open_wrench(self.cfg.wrench.url, **self.cfg.wrench.open_options(),
+                           **self.device_kw.get("wrench", {}))
+
+    def _open_pair(self, name: str) -> Pair:
+        """Open both cameras of ``name`` (an executor thread); the one opened is closed again
+        if the other fails."""
         pc = self.cfg.pairs[name]
         assert pc.left is not None and pc.right is not None  # noqa: S101 - _pair_names
-        for cam in self._cams.pop(name, []):
-            _quiet(cam.close)
         cams: list[Any] = []
         try:
             for side in (pc.left, pc.right):
@@ -267,18 +275,25 @@ class Station:
             for cam in cams:
                 _quiet(cam.close)
             raise
-        self._cams[name] = cams
-        self.grabbers[name] = StereoGrabber(cams[0], cams[1], pc.max_skew_s)
+        return Pair(cams, StereoGrabber(cams[0], cams[1], pc.max_skew_s))
+
+    def _reconnect_pair(self, name: str, pair: Pair) -> None:
+        """Reconnect both cameras and grab once: the pair is back only when it delivers
+        frames its calibration describes (a DeviceError or ProtocolError otherwise)."""
+        for cam in pair.cams:
+            cam.reconnect()
+        left, right = pair.grabber.grab(1.0)
+        problem = self._size_problem(name, left.image, right.image)
+        if problem is not None:
+            raise ProtocolError(problem)
 
     def close(self) -> None:
         """Tool off first, then every device, then the database; a failure is logged and the
         shutdown goes on."""
         steps: list[tuple[str, Any]] = []
-        if self.wrench is not None:
-            steps += [("disable tool", self.wrench.disable_tool), ("wrench", self.wrench.close)]
-        if self.lift is not None:
-            steps.append(("lift", self.lift.close))
-        steps += [(f"{n} cameras", c.close) for n, cams in self._cams.items() for c in cams]
+        if self.wrench is not None and self.keepers[WRENCH].up:
+            steps.append(("disable tool", self.wrench.disable_tool))
+        steps += [(device, keeper.close) for device, keeper in self.keepers.items()]
         if self.repo is not None:
             steps.append(("database", self.repo.close))
         for what, fn in steps:
@@ -297,9 +312,12 @@ class Station:
         for ev in pending:
             await self.feed(ev)
         await self.feed(Started(time.time()))
+        if self.keepers[WRENCH].up:   # the reconnect count the core compares from now on
+            await self.feed(DeviceBack(time.time(), WRENCH, self.keepers[WRENCH].reconnects))
         self.notifier.ready(f"{self.core.state.value}: {self.core.reason}")
-        tasks = [asyncio.create_task(c) for c in (self._lift_loop(stop), self._wrench_loop(stop),
-                                                    self._vision_loop(stop),
+        keep = [self.keepers[LIFT].run(self._poll_lift), self.keepers[WRENCH].run(self._results),
+                *(k.run() for n, k in self.keepers.items() if n not in (LIFT, WRENCH))]
+        tasks = [asyncio.create_task(c) for c in (*keep, self._vision_loop(stop),
                                                     self._tick_loop(stop))]
         try:
             await stop.wait()
@@ -327,72 +345,26 @@ class Station:
             if follow is not None:
                 await self._apply(self.core.feed(follow))
 
-    def _backoff(self, device: str, failed: bool) -> float:
-        """The wait before the next attempt on ``device``: doubles while it keeps failing."""
-        if not failed:
-            self._wait.pop(device, None)
-            return 0.0
-        w = min(BACKOFF_S[1], self._wait.get(device, BACKOFF_S[0] / 2) * 2)
-        self._wait[device] = w
-        return w
-
-    async def _lift_loop(self, stop: asyncio.Event) -> None:
-        """Read the PLC every ``lift.poll_ms`` (never faster), reopen it with backoff."""
+    async def _poll_lift(self, lift: Any) -> None:
+        """One read of the PLC, then the rest of ``lift.poll_ms`` (never faster); a failure
+        raises to the lift's keeper."""
+        t0 = time.monotonic()
+        s = await self._call(lift.read_state, 1.0)
+        await self.feed(LiftRead(time.time(), bool(s.ready), bool(s.at_working_height),
+                                 int(s.model_code), s.vin))
         period = float(getattr(self.cfg.lift, "poll_ms", 100.0)) / 1e3
-        while not stop.is_set():
-            t0 = time.monotonic()
-            if self.lift is None:
-                fault = await self._call(self._open_device, LIFT)
-                if fault is not None:
-                    await self.feed(fault)
-                    await asyncio.sleep(self._backoff(LIFT, True))
-                    continue
-            try:
-                s = await self._call(self.lift.read_state, 1.0)
-                ev: Event = LiftRead(time.time(), bool(s.ready), bool(s.at_working_height),
-                                     int(s.model_code), s.vin)
-                self._backoff(LIFT, False)
-            except Exception as exc:  # a device or its data: a fault, never an exit
-                await self.feed(DeviceFault(time.time(), LIFT, fault_kind(exc),
-                                            one_line(exc)))
-                await asyncio.sleep(self._backoff(LIFT, True))
-                continue
-            await self.feed(ev)
-            await asyncio.sleep(max(0.0, period - (time.monotonic() - t0)))
+        await asyncio.sleep(max(0.0, period - (time.monotonic() - t0)))
 
-    async def _wrench_loop(self, stop: asyncio.Event) -> None:
-        """The controller's results as it pushes them (a blocking wait on the driver's queue,
-        in a thread of its own), and its link state."""
-        loop = asyncio.get_running_loop()
-        while not stop.is_set():
-            if self.wrench is None:
-                fault = await self._call(self._open_device, WRENCH)
-                if fault is not None:
-                    await self.feed(fault)
-                    await asyncio.sleep(self._backoff(WRENCH, True))
-                    continue
-            try:
-                status = self.wrench.status()
-                if status.connected:
-                    await self.feed(DeviceBack(time.time(), WRENCH, status.reconnects))
-                else:
-                    await self.feed(DeviceFault(time.time(), WRENCH, "down",
-                                                status.reason or "link down"))
-                result = await loop.run_in_executor(
-                    self._results_pool,
-                    lambda: self.wrench.wait_result(RESULT_WAIT_S, acknowledge=False))
-            except ConnectionLostError as exc:
-                await self.feed(DeviceFault(time.time(), WRENCH, "down", one_line(exc)))
-                await asyncio.sleep(self._backoff(WRENCH, True))
-                continue
-            except Exception as exc:
-                await self.feed(DeviceFault(time.time(), WRENCH, fault_kind(exc),
-                                            one_line(exc)))
-                await asyncio.sleep(self._backoff(WRENCH, True))
-                continue
-            self._backoff(WRENCH, False)
-            if result is not None:
-                await self.feed(ResultIn(time.time(), result))
+    async def _results(self, wrench: Any) -> None:
+        """The controller's results as it pushes them: one blocking wait on the driver's
+        queue, in a thread of its own; a link down raises to the wrench's keeper."""
+        result = await asyncio.get_running_loop().run_in_executor(
+            self._results_pool, lambda: wrench.wait_result(RESULT_WAIT_S, acknowledge=False))
+        if WRENCH in self.core.faults and not self.keepers[WRENCH].losing:
+            # a refusal is a fault until the controller answers
+            await self.feed(DeviceBack(time.time(), WRENCH, self.keepers[WRENCH].reconnects))
+        if result is not None:
+            await self.feed(ResultIn(time.time(), result))
 
     async def _tick_loop(self, stop: asyncio.Event) -> None:
         """Time for the core, the systemd watchdog, and the database's recovery probe."""
@@ -412,12 +384,10 @@ class Station:
             await asyncio.sleep(TICK_S)
 
     async def _vision_loop(self, stop: asyncio.Event) -> None:
-        """Grab and localize while the core tracks; reopen or probe faulty pairs meanwhile."""
+        """Grab and localize while the core tracks and every pair is up (a pair that is down
+        is its keeper's to bring back)."""
         while not stop.is_set():
             down = [n for n in self._pair_names() if n in self.core.faults]
-            due = [n for n in down if time.monotonic() >= self._next_try.get(n, 0.0)]
-            for name in due:
-                await self._probe_pair(name)
             if self.core.state not in LOCALIZING or not self.grabbers or down:
                 await asyncio.sleep(IDLE_S)
                 continue
@@ -430,26 +400,6 @@ class Station:
                                             loc.tilt_deg, loc))
             if cycle.scout and self._scan.watching:   # after the decision, never before it
                 await self._localize(cycle.scout)
-
-    async def _probe_pair(self, name: str) -> None:
-        """A faulty pair: reopen it if it never opened, else grab once; back when it works."""
-        ok = False
-        if name not in self.grabbers:
-            ok = await self._call(self._open_device, name) is None
-        else:
-            ok = await self._call(self._grab_ok, self.grabbers[name])
-        self._next_try[name] = time.monotonic() + self._backoff(name, not ok)
-        if ok:
-            self._bad[name] = 0
-            await self.feed(DeviceBack(time.time(), name))
-
-    def _grab_ok(self, grabber: StereoGrabber) -> bool:
-        name = next((n for n, g in self.grabbers.items() if g is grabber), "")
-        try:
-            left, right = grabber.grab(1.0)
-        except (DeviceError, ValueError):
-            return False
-        return self._size_problem(name, left.image, right.image) is None
 
     def _size_problem(self, pair: str, left: np.ndarray, right: np.ndarray) -> str | None:
         """Frames the pair's calibration does not describe: garbage to this station."""
@@ -464,13 +414,15 @@ class Station:
 
     async def _localize(self, names: list[str]) -> Localization | None:
         """Grab and localize at once in the pairs ``names`` (the scan plan's choice: those
-        that see the marker, or all: :mod:`stationd.station.scan`).  The
+        that see the marker, or all: :mod:`stationd.station.scan`) that are up.  The
         localization's ``exposure_t`` is the earliest exposure of the frames it used (its age
         is counted from there).  A pair that failed its grab is left out of this
-        localization; after ``BAD_GRABS`` failures in a row it is a fault.  None when every
-        pair failed (nothing to tell the core)."""
-        got: list[PairView] = await asyncio.gather(*(self._call(self._localize_pair, n)
-                                                     for n in names))
+        localization; after ``BAD_GRABS`` failures in a row its keeper is told it is lost.
+        None when every pair failed (nothing to tell the core)."""
+        grabbers = self.grabbers
+        names = [n for n in names if n in grabbers]
+        got: list[PairView] = await asyncio.gather(*(self._call(self._localize_pair, n,
+                                                                grabbers[n]) for n in names))
         done = time.time()
         self._scan.saw({n: any(d.get("found") for d in g.sides.values())
                         for n, g in zip(names, got, strict=True)})
@@ -479,10 +431,10 @@ class Station:
                 self._bad[n] = self._bad.get(n, 0) + 1
                 if self._bad[n] >= BAD_GRABS:
                     self._bad[n] = 0
-                    self._next_try[n] = time.monotonic() + self._backoff(n, True)
-                    await self.feed(DeviceFault(time.time(), n, "down", str(g.end)))
+                    self.keepers[n].lost(DeviceError(str(g.end)))
             elif not g.failed:
                 self._bad[n] = 0
+                self.keepers[n].worked()
         for n, g in zip(names, got, strict=True):   # for the commissioning screen
             if g.sides and time.monotonic() >= self._next_frames.get(n, 0.0):
                 self._next_frames[n] = time.monotonic() + PAIR_FRAMES_S
@@ -510,13 +462,13 @@ class Station:
         return Localization(fused.point_mm, tilt, exposure_t=exposure, crops=crops,
                             done_t=done, timings_ms=timings)
 
-    def _localize_pair(self, name: str) -> PairView:
+    def _localize_pair(self, name: str, grabber: StereoGrabber) -> PairView:
         """Grab and localize in one pair (an executor thread).  A skewed pair or a bad frame
         is a failed grab to retry; garbage from the vision (a frame of the wrong size) too."""
         pc: PairConfig = self.cfg.pairs[name]
         t0 = time.monotonic()
         try:
-            left, right = self.grabbers[name].grab(1.0)
+            left, right = grabber.grab(1.0)
         except StereoSkewError as exc:
             return PairView(one_line(exc), 0.0, failed=True, skew=True)
         except (DeviceError, ValueError) as exc:
@@ -578,7 +530,9 @@ class Station:
                 await self._record(a)
             elif isinstance(a, Acknowledge):
                 await self._acknowledge(a.result)
-        except DeviceError as exc:
+        except DeviceError as exc:   # the link is reset: its keeper reconnects and reports
+            if not isinstance(exc, RefusedError):
+                self.keepers[WRENCH].lost(exc)
             return DeviceFault(time.time(), WRENCH, fault_kind(exc), one_line(exc))
         return None
 
@@ -749,6 +703,14 @@ class Station:
 
 def _xyz(p: Any) -> tuple[float, float, float]:
     return float(p[0]), float(p[1]), float(p[2])
+
+
+def _reconnect(device: Any) -> None:
+    device.reconnect()
+
+
+def _close(device: Any) -> None:
+    device.close()
 
 
 def _quiet(fn: Any) -> None:

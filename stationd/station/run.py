@@ -14,16 +14,18 @@ from __future__ import annotations
 import argparse
 import asyncio
 import logging
+import random
 import signal
 import sys
 from pathlib import Path
 from typing import Any
 
+from drivers.keeper import Backoff, one_line
 from stationd.boltfile import load_bolts
 from stationd.config import StationConfig, load_station_config
 from stationd.errors import StationError
 from stationd.lock import StationLock, lock_path
-from stationd.station.daemon import OPEN_ERRORS, STATION_FAULTS, Station, one_line
+from stationd.station.daemon import OPEN_ERRORS, STATION_FAULTS, Station
 from stationd.station.events import EventBus
 from stationd.station.sdnotify import Notifier
 
@@ -45,13 +47,14 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bo
     """Open the station's database (its devices are the station's to retry); a database that
     does not open is retried with backoff, never an exit.  False if stopped meanwhile."""
     loop = asyncio.get_running_loop()
-    wait = OPEN_RETRY_S[0]
+    backoff = Backoff(*OPEN_RETRY_S, rng=random.Random("database"))  # noqa: S311 - jitter
     told = False
     while not stop.is_set():
         try:
             await loop.run_in_executor(None, station.open)
             return True
         except STATION_FAULTS as exc:
+            wait = backoff.next()
             log.error("fault: database: %s (retrying in %.0f s)", one_line(exc), wait)
             if not told:
                 notifier.ready(f"fault: database: {one_line(exc)}")
@@ -61,7 +64,6 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bo
             await asyncio.wait_for(stop.wait(), wait)
         except TimeoutError:
             pass
-        wait = min(OPEN_RETRY_S[1], wait * 2)
     return False
 
 

@@ -1,24 +1,31 @@
 """The same failure is the same error type on every backend (the daemon's fault handling and
-the commands' messages key on the type, not on which protocol the controller speaks)."""
+the commands' messages key on the type, not on which protocol the controller speaks): one
+link layer, ``drivers.link``, opens every socket and serial port."""
 
 from __future__ import annotations
 
 import socket
+import threading
 from typing import Any
 
 import pytest
 
-from drivers.errors import ConnectError, ConnectTimeoutError, DeviceError, DeviceTimeoutError
+from drivers.errors import (
+    ConnectError,
+    ConnectionLostError,
+    ConnectTimeoutError,
+    DeviceError,
+    DeviceTimeoutError,
+)
 from drivers.lift import open_lift
 from drivers.wrench import open_wrench
 
-OPTS: dict[str, Any] = {"timeout": 0.3, "connect_timeout": 0.2, "backoff": 0.02,
-                       "backoff_max": 0.1}
+OPTS: dict[str, Any] = {"timeout": 0.3, "connect_timeout": 0.2}
 
 
 def _open(url: str) -> object:
     if url.startswith("lift+"):
-        return open_lift(url.removeprefix("lift+"), timeout=0.2, backoff=0.02, backoff_max=0.1)
+        return open_lift(url.removeprefix("lift+"), timeout=0.2)
     return open_wrench(url, **OPTS)
 
 
@@ -46,3 +53,45 @@ def test_a_refused_connect_is_one_error_type_over_every_protocol(scheme):
         _open(f"{scheme}://127.0.0.1:{port}")
     assert type(info.value) is ConnectError and isinstance(info.value, DeviceError)
     assert f"connection refused by 127.0.0.1:{port}" in str(info.value)
+
+
+def _use(url: str) -> None:
+    """Open, and for the lift (whose open only connects) read once."""
+    device: Any = _open(url)
+    try:
+        if url.startswith("lift+"):
+            device.read_state()
+    finally:
+        device.close()
+
+
+@pytest.mark.parametrize("scheme", ["openprotocol", "modbus-tcp", "lift+modbus-tcp"])
+def test_a_peer_that_closes_is_one_error_type_over_every_protocol(scheme):
+    """The device accepts, reads the first request and hangs up."""
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    port = server.getsockname()[1]
+
+    def hang_up() -> None:
+        conn, _ = server.accept()
+        with conn:
+            conn.recv(256)
+
+    thread = threading.Thread(target=hang_up)
+    thread.start()
+    try:
+        with pytest.raises(ConnectionLostError) as info:
+            _use(f"{scheme}://127.0.0.1:{port}")
+    finally:
+        thread.join(5.0)
+        server.close()
+    assert type(info.value) is ConnectionLostError
+
+
+@pytest.mark.parametrize("scheme", ["openprotocol+serial", "modbus-rtu", "lift+modbus-rtu"])
+def test_a_missing_serial_port_is_one_error_type_over_every_protocol(scheme):
+    with pytest.raises(ConnectError) as info:
+        _use(f"{scheme}:///dev/ttyNOSUCH7")
+    assert type(info.value) is ConnectError
+    assert "no such serial port /dev/ttyNOSUCH7" in str(info.value)

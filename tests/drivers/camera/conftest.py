@@ -16,7 +16,7 @@ from drivers.camera import sim
 
 SERIAL = "STATIOND1"
 FAKE_NAME = "Aravis-Fake-" + SERIAL
-FAST = "timeout=1.0&backoff=0.1&backoff_max=0.4"
+FAST = "timeout=1.0"
 
 
 @pytest.fixture(scope="session", autouse=True)

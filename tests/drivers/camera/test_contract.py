@@ -8,7 +8,7 @@ import pytest
 from drivers.camera import CameraDevice, Frame, open_camera, sim
 from drivers.errors import DeviceError
 
-KW = {"timeout": 1.0, "backoff": 0.1, "backoff_max": 0.4}  # every backend takes these
+KW = {"timeout": 1.0}  # every backend takes these
 
 
 @pytest.fixture(params=["aravis", "file", "opencv", "sim"])

@@ -49,7 +49,7 @@ def test_aravis_url_keeps_the_device_id_as_written():
                                  "&buffers=6&region=full&timeout=3")
     assert s == Settings("Hikrobot-MV-CS200-10UC-DA1234567", "line1", "BayerRG8", 20000.0, 1.5,
                          6, "full")
-    assert timing == {"timeout": 3.0, "backoff": None, "backoff_max": None}
+    assert timing == {"timeout": 3.0}
     s, _ = parse_aravis_url("aravis://Vendor%20X-Model-1?region=0,0,5472,3648")
     assert s.name == "Vendor X-Model-1" and s.region == (0, 0, 5472, 3648)
     assert s.trigger == "software" and s.buffers == 4

@@ -12,7 +12,7 @@ import pytest
 from drivers.lift.sim import SimulatedPlc
 
 # short timings keep every file well under 10 s
-FAST = {"timeout": 0.3, "backoff": 0.02, "backoff_max": 0.08}
+FAST = {"timeout": 0.3}
 VIN = "WVWZZZ1KZAW000123"
 
 

@@ -6,7 +6,13 @@ import time
 
 import pytest
 
-from drivers.errors import ConnectError, DeviceError, DeviceTimeoutError, RefusedError
+from drivers.errors import (
+    ConnectError,
+    ConnectionLostError,
+    DeviceError,
+    DeviceTimeoutError,
+    RefusedError,
+)
 from drivers.lift import open_lift
 from drivers.lift.modbus import ModbusLift
 from drivers.lift.sim import PtyPair
@@ -64,6 +70,9 @@ def test_silent_line_times_out_and_recovers(plc):
             lift.read_state(timeout=0.15)
         assert time.monotonic() - t0 < 0.6
         plc.set_silent(False)
+        with pytest.raises(ConnectionLostError, match=r"link down \(no answer"):
+            lift.read_state(timeout=0.5)       # the link was dropped: a late answer is no answer
+        lift.reconnect()
         assert lift.read_state(timeout=0.5).height_mm == 0.0
 
 
@@ -79,6 +88,7 @@ def test_plc_stops_and_restarts_on_the_line(plc):
         deadline = time.monotonic() + 2.0
         while True:
             try:
+                lift.reconnect()
                 assert lift.read_state(timeout=0.2).ready
                 break
             except DeviceError:

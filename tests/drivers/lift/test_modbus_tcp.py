@@ -161,7 +161,8 @@ def test_silent_plc_times_out_then_recovers(plc):
             lift.read_state(timeout=0.15)
         assert 0.12 < time.monotonic() - t0 < 0.6
         plc.set_silent(False)
-        assert wait_for(lift.read_state).height_mm == 0.0
+        lift.reconnect()                   # the link was dropped: a late answer is no answer
+        assert lift.read_state().height_mm == 0.0
 
 
 def test_garbage_answers_look_like_silence():
@@ -186,40 +187,42 @@ def test_garbage_answers_look_like_silence():
         server.close()
 
 
-def test_plc_disappears_and_comes_back_with_backoff(plc):
+def test_plc_disappears_and_comes_back_on_reconnect(plc):
+    """No reconnecting behind the caller's back: the link stays down, each read says why at
+    once, and ``reconnect()`` (the station's keeper calls it with backoff) brings it back."""
     port = plc.start_tcp()
+    threads = set(threading.enumerate())
     with lift_for(port) as lift:
         lift.read_state()
         plc.stop_tcp()
         with pytest.raises(ConnectionLostError, match="link lost reading holding registers"):
             lift.read_state()
-        time.sleep(0.4)
-        with pytest.raises(ConnectionLostError) as info:
-            lift.read_state(timeout=0.05)
-        msg = str(info.value)
-        assert "connection refused" in msg and "reconnecting" in msg
-        attempts = int(re.search(r"(\d+) attempt", msg).group(1))
-        # backoff 0.02, 0.04, 0.08, 0.08, ...: about 6 attempts in 0.45 s, not hundreds
-        assert 3 <= attempts <= 12, msg
-        assert [t.name for t in threading.enumerate() if t.name.startswith("lift-reconnect")]
+        t0 = time.monotonic()
+        with pytest.raises(ConnectionLostError, match=r"link down \(link lost reading"):
+            lift.read_state(timeout=5.0)
+        assert time.monotonic() - t0 < 1.0          # said at once, not after the timeout
+        with pytest.raises(ConnectError, match=r"connection refused by 127\.0\.0\.1"):
+            lift.reconnect()
+        with pytest.raises(ConnectionLostError, match=r"link down \(connection refused"):
+            lift.read_state()
+        assert set(threading.enumerate()) <= threads  # nothing retries in the background
         plc.start_tcp(port)
-        assert wait_for(lift.read_state).height_mm == 0.0
-    assert not [t for t in threading.enumerate() if t.name.startswith("lift-reconnect")]
+        lift.reconnect()
+        assert lift.read_state().height_mm == 0.0
 
 
-def test_close_cancels_the_reconnect_task(plc):
+def test_close_while_the_link_is_down_is_immediate(plc):
     port = plc.start_tcp()
-    lift = lift_for(port, backoff=5.0, backoff_max=30.0)
+    lift = lift_for(port)
     try:
         plc.stop_tcp()
         with pytest.raises(ConnectionLostError):
             lift.read_state()
-        assert [t for t in threading.enumerate() if t.name.startswith("lift-reconnect")]
     finally:
         t0 = time.monotonic()
         lift.close()
         lift.close()
-    assert time.monotonic() - t0 < 0.5  # not waiting out the 5 s backoff
+    assert time.monotonic() - t0 < 0.5
     with pytest.raises(DeviceError, match="not open"):
         lift.read_state()
 

@@ -140,13 +140,13 @@ def test_registry_and_urls():
     spec, opts = parse_modbus_url("modbus-rtu:///dev/ttyUSB0?baud=9600&parity=n&unit=3")
     assert (spec.target, spec.baud, spec.parity, spec.unit) == ("/dev/ttyUSB0", 9600, "N", 3)
     assert spec.describe() == "Modbus RTU /dev/ttyUSB0 9600 8N1 unit 3"
-    assert opts == {"timeout": None, "backoff": None, "backoff_max": None}
+    assert opts == {"timeout": None}
     spec, _ = parse_modbus_url("modbus-tcp://plc.local?unit=2")
     assert (spec.target, spec.port, spec.unit) == ("plc.local", 502, 2)
 
 
 @pytest.mark.parametrize(("url", "text"), [
-    ("modbus-tcp://10.0.0.1?slave=1", "unknown option(s) slave (accepted: backoff"),
+    ("modbus-tcp://10.0.0.1?slave=1", "unknown option(s) slave (accepted: timeout"),
     ("modbus-tcp://10.0.0.1?unit=300", "option unit='300' is not valid"),
     ("modbus-tcp:///dev/ttyUSB0", "expected a host"),
     ("modbus-rtu://host:502", "expected a serial port path"),
@@ -161,7 +161,7 @@ def test_bad_urls_say_what_is_accepted(url, text):
 
 
 def test_url_timing_wins_over_keywords():
-    lift = ModbusLift("modbus-tcp://127.0.0.1?timeout=0.5", timeout=2.0, backoff=0.3)
-    assert (lift.timeout, lift.backoff, lift.backoff_max) == (0.5, 0.3, 5.0)
+    lift = ModbusLift("modbus-tcp://127.0.0.1?timeout=0.5", timeout=2.0)
+    assert lift.timeout == 0.5
     assert not lift.is_open
     lift.close()  # closing a lift never opened is fine

@@ -8,15 +8,17 @@ import socket
 import threading
 import time
 from collections.abc import Callable, Iterator
+from typing import Any
 
 import pytest
 
+from drivers.errors import DeviceError
 from drivers.wrench import open_wrench
 from drivers.wrench.client import OpenProtocolWrench
 from drivers.wrench.sim import SimController
 
-# short timeouts and backoffs keep every file well under 10 s
-FAST = {"timeout": 0.5, "connect_timeout": 0.5, "backoff": 0.02, "backoff_max": 0.2}
+# short timeouts keep every file well under 10 s
+FAST = {"timeout": 0.5, "connect_timeout": 0.5}
 
 
 @pytest.fixture
@@ -36,6 +38,20 @@ def connect(sim: SimController, transport: str, tmp_path, **kw) -> OpenProtocolW
     wrench = open_wrench(url_for(sim, transport, tmp_path), **{**FAST, **kw})
     assert isinstance(wrench, OpenProtocolWrench)
     return wrench
+
+
+def reconnect_within(w: Any, timeout: float = 2.0) -> bool:
+    """What the station's keeper (``drivers.keeper``) does, without its backoff: call
+    ``reconnect()`` until it works.  False if it never did within ``timeout``."""
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            w.reconnect()
+            return True
+        except DeviceError:
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.02)
 
 
 def wait_until(cond: Callable[[], bool], timeout: float = 2.0) -> bool:

@@ -10,9 +10,8 @@ from drivers.wrench import open_wrench
 from drivers.wrench.modbus import ModbusWrench
 from drivers.wrench.modbus_sim import SimParameters, SimRegisterController
 
-# short timeouts and backoffs keep every file well under 10 s
-FAST = {"timeout": 0.3, "connect_timeout": 0.5, "poll": 0.02, "backoff": 0.02,
-        "backoff_max": 0.1}
+# short timeouts keep every file well under 10 s
+FAST = {"timeout": 0.3, "connect_timeout": 0.5, "poll": 0.02}
 TRANSPORTS = ["tcp", "rtu"]
 VIN = "WVWZZZ1KZAW000123"
 P1 = SimParameters(1, 0.0, 0.0)

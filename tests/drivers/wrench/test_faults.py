@@ -3,7 +3,6 @@ back with exponential backoff, and a command is either acknowledged or reported 
 
 from __future__ import annotations
 
-import itertools
 import logging
 import re
 import socket
@@ -20,11 +19,11 @@ from drivers.errors import (
     ProtocolError,
     RefusedError,
 )
+from drivers.link import TcpLink
 from drivers.wrench import open_wrench
 from drivers.wrench.client import OpenProtocolWrench
-from drivers.wrench.link import TcpLink
 
-from .conftest import FAST, connect, op, read_message, wait_until
+from .conftest import FAST, connect, op, read_message, reconnect_within, wait_until
 
 TRANSPORTS = ["tcp", "serial"]
 
@@ -86,7 +85,7 @@ def test_a_spoiled_answer_fails_the_command_and_the_link_recovers(sim, transport
             w.select_pset(2)
         if fault in ("truncate", "close") and transport == "serial":
             sim.power_on()                         # the pty went away with the fault
-        assert w.wait_connected(3.0)
+        assert reconnect_within(w, 3.0)
         w.select_pset(1)                           # acknowledged on the new session
         assert w.status().reconnects == 1 and sim.pset == 1
 
@@ -99,7 +98,9 @@ def test_garbage_messages_say_what_came(sim, tmp_path):
             w.enable_tool()
 
 
-def test_the_device_disappears_and_comes_back_with_exponential_backoff(sim):
+def test_the_device_disappears_and_stays_down_until_reconnected(sim):
+    """No reconnecting behind the caller's back (the station's keeper decides when): every
+    call says the link is down at once, and ``reconnect()`` starts a new session."""
     attempts = []
 
     class Recording(TcpLink):
@@ -107,8 +108,7 @@ def test_the_device_disappears_and_comes_back_with_exponential_backoff(sim):
             attempts.append(time.monotonic())
             super().connect(timeout)
 
-    w = OpenProtocolWrench(Recording("127.0.0.1", sim.listen_tcp()), device="rec",
-                           **{**FAST, "backoff": 0.02, "backoff_max": 0.16})
+    w = OpenProtocolWrench(Recording("127.0.0.1", sim.listen_tcp()), device="rec", **FAST)
     with w:
         w.select_pset(1)
         w.enable_tool()
@@ -120,14 +120,15 @@ def test_the_device_disappears_and_comes_back_with_exponential_backoff(sim):
         with pytest.raises(ConnectionLostError, match="waiting for a result: link down"):
             w.wait_result(1.0)
         assert time.monotonic() - t0 < 0.1         # fails at once: nothing was sent
-        time.sleep(0.8)
+        time.sleep(0.3)
+        assert len(attempts) == 1                  # nothing retried by itself
+        with pytest.raises(ConnectError, match="reconnect: connection refused"):
+            w.reconnect()
         status = w.status()
-        assert status.attempts >= 4 and "refused" in (status.reason or "")
-        gaps = [b - a for a, b in itertools.pairwise(attempts[1:])]
-        assert gaps[0] >= 0.015 and gaps[1] >= 0.035 and gaps[2] >= 0.075
-        assert max(gaps) < 0.16 + 0.15             # capped at backoff_max
+        assert status.attempts == 1 and "refused" in (status.reason or "")
         sim.power_on()
-        assert w.wait_connected(2.0) and w.status().reconnects == 1
+        w.reconnect()
+        assert w.status().connected and w.status().reconnects == 1
         restart = [r.mid for r in sim.received()]
         assert restart[-2:] == [1, 60] and restart.count(18) == 1   # nothing leaked
         assert not sim.tool_enabled                # the station must send its state again
@@ -143,9 +144,10 @@ def test_the_serial_device_disappears_and_comes_back(sim, tmp_path):
         sim.power_off()
         assert wait_until(lambda: not w.status().connected)
         assert "is gone" in (w.status().reason or "")
-        assert wait_until(lambda: "cannot open serial port" in (w.status().reason or ""))
+        with pytest.raises(ConnectError, match="reconnect: no such serial port"):
+            w.reconnect()
         sim.power_on()
-        assert w.wait_connected(2.0)
+        assert reconnect_within(w)
         w.select_pset(3)
         assert sim.pset == 3
 
@@ -169,7 +171,7 @@ def test_a_command_in_flight_when_the_link_drops_fails_at_once(sim, tmp_path):
         assert time.monotonic() - t0 < 2.0
         assert isinstance(errors[0], ConnectionLostError)
         assert "select pset 2" in str(errors[0]) and "not acknowledged" in str(errors[0])
-        assert w.wait_connected(2.0)
+        assert reconnect_within(w)
 
 
 def test_results_received_before_a_loss_are_still_delivered(sim, tmp_path):
@@ -212,12 +214,12 @@ def test_a_keepalive_that_is_not_mirrored_resets_the_link(sim, tmp_path, caplog)
     caplog.set_level(logging.WARNING, logger="drivers.wrench.client")
     sim.inject("silent", 9999)
     with connect(sim, "tcp", tmp_path, keepalive=0.1, timeout=0.3) as w:
-        assert wait_until(lambda: w.status().reconnects == 1)
+        assert wait_until(lambda: not w.status().connected)
         assert "keep-alive (MID 9999) not mirrored within 0.3 s" in caplog.text
 
 
 def test_without_keepalive_the_controller_drops_an_idle_link(sim, tmp_path):
     sim.silence_timeout = 0.3
     with connect(sim, "tcp", tmp_path, keepalive=10.0) as w:
-        assert wait_until(lambda: w.status().reconnects >= 1)
+        assert wait_until(lambda: not w.status().connected)
         assert sim.drops >= 1

@@ -1,0 +1,225 @@
+"""The byte links every device protocol runs on: TCP, and serial (a device path, a pty, or any
+pyserial URL), with the same error types for the same failures on every backend.
+
+    connect timeout   -> ConnectTimeoutError    refused, no such host/port -> ConnectError
+    closed by peer    -> ConnectionLostError    (EIO on a pty, "socket disconnected", EOF)
+    garbage           -> ProtocolError          (raised by the protocol on top: framing)
+
+Open Protocol reads and writes bytes through :class:`TcpLink` / :class:`SerialLink`; Modbus
+hands the socket or port from :func:`connect_tcp` / :func:`open_serial` to pymodbus's client
+(``drivers.modbus_link``).  Errors here carry no device name: the protocol layer adds it and
+what it was doing.  Nothing here reconnects: a link is connected, used and closed by one owner,
+and connected again by ``reconnect()`` (the station's keeper decides when).
+"""
+
+from __future__ import annotations
+
+import errno
+import importlib
+import select
+import socket
+import termios
+from abc import ABC, abstractmethod
+from typing import Any, Literal
+
+from drivers.errors import ConnectError, ConnectionLostError, ConnectTimeoutError
+
+Kind = Literal["tcp", "serial"]
+
+
+def pyserial() -> Any:
+    """pyserial ships no type hints and has no stubs here; importing it by name keeps the
+    untyped surface in this one file (and out of the import when only TCP is used)."""
+    return importlib.import_module("serial")
+
+
+def connect_tcp(host: str, port: int, timeout: float, refused_hint: str) -> socket.socket:
+    """A connected TCP socket (no Nagle: requests are small and answered one by one).
+    ``refused_hint`` says what to check when the connection is refused."""
+    where = f"{host}:{port}"
+    try:
+        sock = socket.create_connection((host, port), timeout=timeout)
+    except ConnectionRefusedError:
+        raise ConnectError(f"connection refused by {where} ({refused_hint})") from None
+    except TimeoutError:
+        raise ConnectTimeoutError(f"no answer connecting to {where} within {timeout:g} s") \
+            from None
+    except socket.gaierror as exc:
+        raise ConnectError(f"unknown host {host}: {exc.strerror}") from None
+    except OSError as exc:
+        raise ConnectError(f"cannot connect to {where}: {exc.strerror or exc}") from None
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    return sock
+
+
+def open_serial(port: str, *, baudrate: int, parity: str = "N", stopbits: int = 1,
+                timeout: float, write_timeout: float, exclusive: bool = True,
+                inter_byte_timeout: float | None = None) -> Any:
+    """An open pyserial port (8 data bits), every setting applied at once so that a refused
+    one fails here, not on first use; ConnectError saying why in a person's words."""
+    serial = pyserial()
+    ser = serial.serial_for_url(port, do_not_open=True, baudrate=baudrate, bytesize=8,
+                                parity=parity, stopbits=stopbits, timeout=timeout,
+                                write_timeout=write_timeout, exclusive=exclusive,
+                                inter_byte_timeout=inter_byte_timeout)
+    try:
+        ser.open()
+        ser.reset_input_buffer()
+    except (serial.SerialException, OSError, ValueError, termios.error) as exc:
+        ser.close()
+        raise ConnectError(serial_reason(port, f"{baudrate} 8{parity}{stopbits}", exc)) \
+            from None
+    return ser
+
+
+def serial_reason(port: str, settings: str, exc: BaseException) -> str:
+    """Why ``port`` did not open, in a person's words."""
+    code = getattr(exc, "errno", None)
+    if code == errno.ENOENT:
+        return f"no such serial port {port}"
+    if code == errno.EACCES:
+        return f"permission denied on {port} (is the user in group dialout?)"
+    if code == errno.EBUSY or "lock" in str(exc):
+        return f"{port} is in use by another program"
+    if isinstance(exc, termios.error | ValueError):
+        pty = "; a pty may refuse parity bits: use parity=N" if "/pts/" in port else ""
+        return f"{port} refuses {settings} ({exc}){pty}"
+    return f"cannot open serial port {port}: {exc}"
+
+
+class Link(ABC):
+    """A byte stream to a device; ``kind`` selects the framing the protocol uses."""
+
+    kind: Kind
+    where: str
+
+    @abstractmethod
+    def connect(self, timeout: float) -> None:
+        """Open the link (closing any previous one); ConnectError or ConnectTimeoutError."""
+
+    @abstractmethod
+    def send(self, data: bytes) -> None:
+        """Write all of ``data`` or raise ConnectionLostError (the link is then unusable)."""
+
+    @abstractmethod
+    def recv(self, timeout: float) -> bytes:
+        """Bytes available within ``timeout`` (b"" if none); ConnectionLostError if gone."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Release the link; safe to call at any time, any number of times."""
+
+
+class TcpLink(Link):
+    """A TCP client link; ``refused_hint`` says what to check when the device refuses."""
+
+    kind: Kind = "tcp"
+
+    def __init__(self, host: str, port: int, refused_hint: str = "device off, or not its "
+                 "port?") -> None:
+        self.host = host
+        self.port = port
+        self.where = f"{host}:{port}"
+        self.refused_hint = refused_hint
+        self._sock: socket.socket | None = None
+
+    def connect(self, timeout: float) -> None:
+        self.close()
+        sock = connect_tcp(self.host, self.port, timeout, self.refused_hint)
+        sock.settimeout(timeout)          # bounds sendall when the device stops reading
+        self._sock = sock
+
+    def send(self, data: bytes) -> None:
+        sock = self._sock
+        if sock is None:
+            raise ConnectionLostError(f"not connected to {self.where}")
+        try:
+            sock.sendall(data)
+        except TimeoutError:
+            raise ConnectionLostError(f"sending to {self.where} timed out (device not "
+                                      "reading)") from None
+        except OSError as e:
+            raise ConnectionLostError(f"sending to {self.where} failed: {e.strerror or e}") \
+                from None
+
+    def recv(self, timeout: float) -> bytes:
+        sock = self._sock
+        if sock is None:
+            raise ConnectionLostError(f"not connected to {self.where}")
+        try:
+            ready, _, _ = select.select([sock], [], [], timeout)
+            if not ready:
+                return b""
+            data = sock.recv(65536)
+        except (OSError, ValueError) as e:   # ValueError: the socket was closed under us
+            raise ConnectionLostError(f"reading from {self.where} failed: {e}") from None
+        if not data:
+            raise ConnectionLostError(f"{self.where} closed the connection")
+        return data
+
+    def close(self) -> None:
+        sock, self._sock = self._sock, None
+        if sock is not None:
+            sock.close()
+
+
+class SerialLink(Link):
+    """A serial link through pyserial's ``serial_for_url`` (a device path, a pty, or any
+    pyserial URL such as ``socket://`` or ``loop://``), 8N1 unless told."""
+
+    kind: Kind = "serial"
+
+    def __init__(self, port: str, baudrate: int = 9600, parity: str = "N",
+                 stopbits: int = 1) -> None:
+        self.port = port
+        self.baudrate = baudrate
+        self.parity, self.stopbits = parity, stopbits
+        self.where = port
+        self._ser: Any = None
+        self._timeout: float | None = None
+
+    def connect(self, timeout: float) -> None:
+        self.close()
+        self._ser = open_serial(self.port, baudrate=self.baudrate, parity=self.parity,
+                                stopbits=self.stopbits, timeout=0.05, write_timeout=timeout,
+                                exclusive=False)
+        self._timeout = 0.05
+
+    def send(self, data: bytes) -> None:
+        ser = self._ser
+        if ser is None:
+            raise ConnectionLostError(f"serial port {self.port} is not open")
+        serial = pyserial()
+        try:
+            ser.write(data)
+        except serial.SerialTimeoutException:
+            raise ConnectionLostError(f"writing to {self.port} timed out") from None
+        except (serial.SerialException, OSError) as e:
+            raise ConnectionLostError(f"serial device {self.port} is gone: {e}") from None
+
+    def recv(self, timeout: float) -> bytes:
+        ser = self._ser
+        if ser is None:
+            raise ConnectionLostError(f"serial port {self.port} is not open")
+        serial = pyserial()
+        try:
+            if self._timeout != timeout:    # pyserial reconfigures the port on every change
+                ser.timeout = timeout
+                self._timeout = timeout
+            data: bytes = ser.read(1)
+            if data:
+                waiting = ser.in_waiting
+                if waiting:
+                    data += ser.read(waiting)
+        except (serial.SerialException, OSError, TypeError) as e:
+            # TypeError: pyserial's posix read after a concurrent close (fd is None)
+            raise ConnectionLostError(f"serial device {self.port} is gone: {e}") from None
+        return data
+
+    def close(self) -> None:
+        ser, self._ser = self._ser, None
+        if ser is not None:
+            try:
+                ser.close()
+            except Exception:  # noqa: S110 - a port that vanished may fail to close; it is gone
+                pass
