@@ -48,6 +48,12 @@ def connect_tcp(host: str, port: int, timeout: float, refused_hint: str) -> sock
         raise ConnectError(f"unknown host {host}: {exc.strerror}") from None
     except OSError as exc:
         raise ConnectError(f"cannot connect to {where}: {exc.strerror or exc}") from None
+    if sock.getsockname() == sock.getpeername():
+        # TCP simultaneous open: a local port in the ephemeral range that nothing listens on
+        # can be given to this very socket, which then "connects" to itself and would read
+        # its own requests back; it is the refusal it stands for
+        sock.close()
+        raise ConnectError(f"connection refused by {where} ({refused_hint})")
     sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
     return sock
 

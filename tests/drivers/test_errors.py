@@ -95,3 +95,28 @@ def test_a_missing_serial_port_is_one_error_type_over_every_protocol(scheme):
         _use(f"{scheme}:///dev/ttyNOSUCH7")
     assert type(info.value) is ConnectError
     assert "no such serial port /dev/ttyNOSUCH7" in str(info.value)
+
+
+def test_a_socket_connected_to_itself_is_a_refusal_not_a_link(monkeypatch):
+    """TCP simultaneous open: a client can be given the very port it dials when nothing
+    listens there, and would read its own requests back.  The kernel makes such a socket
+    for real here (bound to the port it connects to); the link layer refuses it."""
+    import socket
+
+    from drivers import link
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+
+    def self_connected(address, timeout=None):
+        s = socket.socket()
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        s.bind(address)
+        s.settimeout(timeout)
+        s.connect(address)
+        return s
+
+    monkeypatch.setattr(link.socket, "create_connection", self_connected)
+    with pytest.raises(ConnectError, match=f"connection refused by 127.0.0.1:{port}"):
+        link.connect_tcp("127.0.0.1", port, 1.0, "nothing listens")
