@@ -177,14 +177,15 @@ class DeviceKeeper(Generic[D]):
         if self._told != fault[1]:    # journaled once per reason, not once per attempt
             self._told = fault[1]
             verb = "not opened" if self.device is None else "not reconnected"
-            self._log.warning("%s %s: %s", self.name, verb, fault[1])
+            # debug: the owner journals the fault it is told (one line per event)
+            self._log.debug("%s %s: %s", self.name, verb, fault[1])
         return fault
 
     def _came_up(self) -> None:
         if self._up_once:
             self.reconnects += 1
         if self._told is not None:
-            self._log.info("%s %s", self.name, "reconnected" if self._up_once else "opened")
+            self._log.debug("%s %s", self.name, "reconnected" if self._up_once else "opened")
         self.up, self._up_once, self._reported = True, True, None
         self._lost, self._told, self._worked = None, None, False
         self._wake.clear()
@@ -238,7 +239,7 @@ class DeviceKeeper(Generic[D]):
     async def _go_down(self, exc: BaseException) -> None:
         self.up, self._lost, self._waited = False, None, False
         fault = (fault_kind(exc), one_line(exc))
-        self._log.warning("%s lost: %s", self.name, fault[1])
+        self._log.debug("%s lost: %s", self.name, fault[1])
         self._reported = fault
         await self._on_fault(*fault)
 

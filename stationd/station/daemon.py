@@ -540,7 +540,10 @@ class Station:
         self.bus.publish(ev)
         if isinstance(ev, StateChanged):
             self.notifier.status(f"{ev.state}: {ev.reason}")
-            log.info("%s: %s", ev.state, ev.reason)
+            if ev.state == State.FAULT.value:   # each device's own line has the reason
+                log.info("state: fault (%s)", ", ".join(sorted(self.core.faults)))
+            else:
+                log.info("%s: %s", ev.state, ev.reason)
         elif isinstance(ev, Notice):
             (log.warning if ev.level == "warning" else log.info)("%s", ev.message)
         elif isinstance(ev, Refused):   # once per change of reason, not frame after frame

@@ -181,4 +181,4 @@ def test_a_camera_glob_matching_nothing_is_a_fault_not_an_exit(tmp_path):
         ctl.close()
         plc.close()
     assert "Traceback" not in d.log()
-    assert d.log().count("pair1 not opened") == 1    # retried quietly, journaled once
+    assert d.log().count("fault: pair1 (") == 1    # retried quietly, journaled once
