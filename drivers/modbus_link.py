@@ -19,6 +19,7 @@ business.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -36,6 +37,11 @@ from drivers.errors import (
 )
 from drivers.link import connect_tcp, open_serial
 from drivers.url import OptionError, parse_url
+
+# pymodbus journals its own view of a failure (hex frame dumps, "Invalid Modbus protocol id",
+# "Repeating...") in lines that name no device; every failure reaches the station as one of
+# our errors, with the device and its reason.  Its lines are kept for a crash only.
+logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
 TCP_FORM = "modbus-tcp://HOST[:PORT]?unit=1&timeout=1.0"
 RTU_FORM = "modbus-rtu:///dev/ttyUSB0?baud=19200&parity=E&unit=1"
