@@ -182,3 +182,34 @@ def test_numpy_values_and_an_odd_event_do_not_stop_the_live_view():
         finally:
             await srv.stop()
     asyncio.run(main())
+
+
+def test_healthz_answers_a_probe_without_the_token_and_says_only_ok_or_fault():
+    async def main():
+        bus = EventBus()
+        for e in opened():
+            bus.publish(e)
+        srv = serve(bus, token="a-long-token", devices=("lift", "wrench"))  # noqa: S106
+        await srv.start()
+        try:
+            async with ClientSession() as http:
+                async with http.get(srv.url + "healthz") as r:
+                    assert r.status == 200 and (await r.text()) == "ok\n"
+                for path in ("", "api/status", "api/view", "api/vehicles", "cameras",
+                             "api/cameras", "healthz/../api/status"):
+                    async with http.get(srv.url + path) as r:
+                        assert r.status == 401, path
+                for e in fault():
+                    bus.publish(e)
+                while srv.view.state != "fault":
+                    await asyncio.sleep(0.02)
+                async with http.get(srv.url + "healthz") as r:
+                    # nothing of the reason: the probe is not authenticated
+                    assert r.status == 503 and (await r.text()) == "fault\n"
+                async with http.get(srv.url + "api/status",
+                                    headers={"Authorization": "Bearer a-long-token"}) as r:
+                    devices = (await r.json())["devices"]
+                assert devices["lift"]["ok"] is False and devices["wrench"]["ok"] is True
+        finally:
+            await srv.stop()
+    asyncio.run(main())
