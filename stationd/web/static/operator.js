@@ -192,7 +192,7 @@ function render(view) {
     const li = document.createElement("li");
     li.className = d.ok ? "dev-ok" : d.kind === "opening" ? "dev-wait" : "dev-bad";
     li.dataset.device = name;
-    li.textContent = d.ok ? `${name}: ok` : `${name}: ${d.kind} ${d.reason}`;
+    li.textContent = d.ok ? `${name}: ok` : `${name} ${d.kind}: ${d.reason}`;
     ul.appendChild(li);
   }
 }
