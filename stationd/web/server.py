@@ -81,6 +81,7 @@ class WebServer:
         # ...): what the screens' clients really asked for (the bench reads it)
         self.requests: Counter[str] = Counter()
         self.pairs: dict[str, PairFrames] = {}   # each pair's latest detection summary
+        self._sharpness: dict[tuple[str, str], tuple[tuple[Any, ...], float]] = {}
         self._snapshot = b""
         self._clients: set[asyncio.Queue[bytes]] = set()
         self._runner: web.AppRunner | None = None
@@ -268,8 +269,13 @@ class WebServer:
                 s.setdefault("exposure_t", pe.exposure_t)
             if s.get("sharpness") is None and s.get("roi"):
                 x, y, w, h = (int(c) for c in s["roi"])
-                s["sharpness"] = await loop.run_in_executor(None, sharpness, f.image,
-                                                            (x, y, w, h))
+                # once per frame and ROI: every cameras page asks for the list each second
+                key = (f.pair, f.side, f.seq, x, y, w, h)
+                hit = self._sharpness.get((f.pair, f.side))
+                if hit is None or hit[0] != key:
+                    value = await loop.run_in_executor(None, sharpness, f.image, (x, y, w, h))
+                    hit = self._sharpness[(f.pair, f.side)] = (key, value)
+                s["sharpness"] = hit[1]
             out.append({"pair": f.pair, "side": f.side, "grabbed_at": f.grabbed_at,
                         "age_s": round(time.time() - f.grabbed_at, 3), "fps": f.fps,
                         "width": int(f.image.shape[1]), "height": int(f.image.shape[0]),

@@ -108,6 +108,15 @@ def test_cameras_frames_and_crops_on_demand():
                 assert cams[0]["summary"]["ellipses"] == [[1, 2, 3, 4, 0]]
                 assert cams[0]["summary"]["reason"] == "no marker"
                 assert cams[0]["summary"]["exposure_t"] == 12.5
+                # the focus figure is kept per frame (asked each second by every cameras
+                # page), and a new frame gets its own: a flat one has none of the noise's
+                async with http.get(srv.url + "api/cameras") as r:
+                    again = (await r.json())[0]["summary"]["sharpness"]
+                assert again == cams[0]["summary"]["sharpness"]
+                frames.put("front", "left", np.full_like(img, 90),
+                           {"found": False, "roi": [100, 100, 200, 200]})
+                async with http.get(srv.url + "api/cameras") as r:
+                    assert (await r.json())[0]["summary"]["sharpness"] == 0.0
                 async with http.get(srv.url + "api/cameras/front/left/frame.jpg?w=320") as r:
                     assert r.content_type == "image/jpeg" and (await r.read())[:2] == b"\xff\xd8"
                 async with http.get(srv.url + "api/cameras/front/left/crop.jpg?x=5&y=5") as r:
