@@ -73,14 +73,12 @@ class LatestFrames:
             return self._frames.get((pair, side))
 
     def jpeg(self, pair: str, side: str, width: int = 640, quality: int = 80) -> bytes | None:
-        """The latest frame downscaled to at least ``width`` pixels (never up), as JPEG; None
-        if the camera has handed over nothing.  The width served is the smallest exact
-        halving of the frame at or above ``width`` (:func:`preview_width`): the browser
-        scales the last step (< 2x), and clients asking 960 or 1280 share one encoding."""
+        """The latest frame downscaled to ``width`` pixels (never up), as JPEG; None if the
+        camera has handed over nothing."""
         f = self.get(pair, side)
         if f is None:
             return None
-        width = preview_width(f.image.shape[1], width)
+        width = max(16, min(int(width), f.image.shape[1]))
         key = (pair, side, f.seq, width)
         with self._lock:
             hit = self._cache.get(key)
@@ -108,19 +106,6 @@ class LatestFrames:
         return _encode(f.image[y0:y0 + size, x0:x0 + size], quality)
 
 
-def preview_width(full: int, asked: int) -> int:
-    """The smallest width reached from ``full`` by exact halvings that is at least ``asked``
-    (``asked`` clamped to 16..full).  Why: the halvings take OpenCV's fast area path (a
-    20 MP frame to 1368 px: about 10 ms), while a last area step at an odd factor (1368 to
-    960 px) took longer than all the halvings together (15-20 ms, measured on this machine);
-    a JPEG at 1368 instead of 960 px costs about 1 ms more to encode."""
-    asked = max(16, min(int(asked), full))
-    w = full
-    while (w + 1) // 2 >= asked:
-        w = (w + 1) // 2
-    return w
-
-
 def reduce(image: Image, width: int) -> Image:
     """``image`` box-filtered down to ``width`` pixels: halved while still at least twice the
     width (OpenCV's area filter has a fast path for an exact half: a 20 MP frame to 960 px
@@ -133,10 +118,7 @@ def reduce(image: Image, width: int) -> Image:
         size = ((img.shape[1] + 1) // 2, (img.shape[0] + 1) // 2)
         img = np.asarray(cv2.resize(img, size, interpolation=cv2.INTER_AREA), dtype=np.uint8)
     h, w = image.shape[:2]
-    size = (width, max(1, round(h * width / w)))
-    if (img.shape[1], img.shape[0]) == size:     # a width reached by the halvings
-        return img
-    return np.asarray(cv2.resize(img, size,
+    return np.asarray(cv2.resize(img, (width, max(1, round(h * width / w))),
                                  interpolation=cv2.INTER_AREA), dtype=np.uint8)
 
 

@@ -72,23 +72,3 @@ def test_reduce_matches_one_area_resize_and_does_not_alias():
     colour = np.dstack([smooth, noise, smooth])
     assert reduce(colour, 300).shape == (200, 300, 3)
 
-
-def test_preview_width_is_an_exact_halving_at_or_above_the_asked_width():
-    from stationd.web.frames import preview_width, reduce
-
-    assert preview_width(5472, 960) == 1368 and preview_width(5472, 1280) == 1368
-    assert preview_width(5472, 1368) == 1368 and preview_width(5472, 1369) == 2736
-    assert preview_width(5472, 640) == 684 and preview_width(5472, 9999) == 5472
-    assert preview_width(2737, 480) == 685                     # odd sides round up
-    assert preview_width(800, 1) == 25                         # never below 16 asked
-    # the served picture: never narrower than asked, and the halvings' box average (a
-    # noise frame is smoothed, not point-sampled)
-    store = LatestFrames()
-    noise = frame(5, 3648, 5472)
-    store.put("p1", "left", noise)
-    data = store.jpeg("p1", "left", width=960)
-    assert data is not None
-    got = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-    assert got.shape == (912, 1368)
-    assert reduce(noise, 1368).std() < noise.std() / 3
-    assert store.jpeg("p1", "left", width=1280) is data       # one encoding for both
