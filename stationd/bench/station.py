@@ -222,6 +222,8 @@ def _run_once(cfg: StationConfig, world: World, plan: list[tuple[str, WrenchPose
                 info["clients_alive"] = clients.kind != "chromium" or clients.alive()
                 info["sse_clients_end"] = screens.server.clients
                 info["frames_served"] = screens.server.requests[FRAME_ROUTE]
+                info["frames_encoded"] = screens.frames.encoded
+                info["encode_wall_s"] = screens.frames.encode_wall_s
                 info["snapshots"] = screens.server.snapshots
         finally:
             stop.set()
@@ -299,6 +301,8 @@ def _screens_summary(bases: list[dict[str, Any]], served: dict[str, Any], n: int
             "why_not_chromium": served["why_not_chromium"] or None,
             "clients_alive_to_the_end": served.get("clients_alive"),
             "frames_served": served.get("frames_served"),
+            "frames_encoded": served.get("frames_encoded"),
+            "frames_encode_wall_s": served.get("encode_wall_s"),
             "snapshots_sent": served.get("snapshots"),
             "without": without, "with": with_,
             "delta": {"latency_p95_ms": with_["latency_ms"]["p95"] - without["latency_ms"]["p95"],
@@ -364,6 +368,10 @@ def _print(s: dict[str, Any]) -> None:
         print(f"screens: {sc['browsers']} {what} on {', '.join(sc['pages'])}, "
               f"{sc['frames_served']} camera frames and {sc['snapshots_sent']} live snapshots "
               f"served")
+        if sc.get("frames_encoded") is not None:
+            print(f"  overview frames reduced and encoded: {sc['frames_encoded']}, "
+                  f"{1e3 * sc['frames_encode_wall_s']:.0f} ms wall in all "
+                  f"({100.0 * sc['frames_encode_wall_s'] / w['wall_s']:.1f} % of the pass)")
         print(f"  latency p50 {w['latency_ms']['p50']:.1f} ms, p95 {w['latency_ms']['p95']:.1f}"
               f" ms with them; p50 {wo['latency_ms']['p50']:.1f} ms, p95 "
               f"{wo['latency_ms']['p95']:.1f} ms without (passes before and after): p95 "

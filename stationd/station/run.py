@@ -25,6 +25,7 @@ from stationd.boltfile import load_bolts
 from stationd.config import StationConfig, load_station_config
 from stationd.errors import StationError
 from stationd.lock import StationLock, lock_path
+from stationd.station.core import LIFT, WRENCH
 from stationd.station.daemon import OPEN_ERRORS, STATION_FAULTS, Station
 from stationd.station.events import EventBus
 from stationd.station.sdnotify import Notifier
@@ -96,6 +97,8 @@ class Screens:
     async def follow(self, cfg: StationConfig) -> None:
         key = (cfg.http, cfg.database_url)
         if key == self._for:
+            if self.server is not None:     # a reload may add or remove a pair
+                self.server.set_devices(configured_devices(cfg))
             return
         await self.stop()
         self._for = key
@@ -109,7 +112,8 @@ class Screens:
             repo = Repository.open(cfg.database_url)
             self.server = WebServer(self.bus, Results(repo), self.frames,
                                     listen=cfg.http.listen, token=cfg.http.token,
-                                    images_dir=cfg.records.images_dir)
+                                    images_dir=cfg.records.images_dir,
+                                    devices=configured_devices(cfg))
             await self.server.start()
         except OPEN_ERRORS as exc:
             log.error("screens not served on %s: %s", cfg.http.listen, one_line(exc))
@@ -124,6 +128,12 @@ class Screens:
             except Exception as exc:  # stopping the screens never stops the daemon's exit
                 log.warning("stopping the screens: %s", one_line(exc))
         self.server, self.frames, self._for = None, None, None
+
+
+def configured_devices(cfg: StationConfig) -> tuple[str, ...]:
+    """The devices the daemon opens (lift, wrench, each pair with both cameras), by the names
+    its DeviceHealth events use: the screens list them before any reports."""
+    return (LIFT, WRENCH, *(n for n, pc in cfg.pairs.items() if pc.left and pc.right))
 
 
 async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, bus: EventBus,

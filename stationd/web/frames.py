@@ -42,6 +42,11 @@ class LatestFrames:
         self._frames: dict[tuple[str, str], CameraFrame] = {}
         self._rate: dict[tuple[str, str], float] = {}
         self._cache: dict[tuple[str, str, int, int], bytes] = {}
+        # what the overview frames cost (the bench reads them): frames reduced and encoded,
+        # and the wall time spent on them (OpenCV's own threads make a CPU clock of this
+        # thread undercount)
+        self.encoded = 0
+        self.encode_wall_s = 0.0
 
     def put(self, pair: str, side: str, image: Image, summary: dict[str, Any] | None = None,
             grabbed_at: float | None = None) -> None:
@@ -79,8 +84,11 @@ class LatestFrames:
             hit = self._cache.get(key)
         if hit is not None:
             return hit
+        t0 = time.perf_counter()
         data = _encode(reduce(f.image, width), quality)
         with self._lock:
+            self.encoded += 1
+            self.encode_wall_s += time.perf_counter() - t0
             self._cache = {k: v for k, v in self._cache.items() if k[:2] != (pair, side)}
             self._cache[key] = data
         return data

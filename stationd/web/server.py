@@ -56,11 +56,14 @@ class WebServer:
     """``WebServer(bus, results, frames, listen="127.0.0.1:8080", token=None)``; then
     ``await start()`` on the daemon's loop and ``await stop()`` at shutdown.  ``results``: a
     :class:`Results` or a ``Repository`` (read only); None hides the results screens' data.
-    ``listen`` with port 0 picks a free port (``url`` tells which)."""
+    ``listen`` with port 0 picks a free port (``url`` tells which).  ``devices``: the
+    configured devices (lift, wrench, each pair), listed on the screens even before one
+    reports its health."""
 
     def __init__(self, bus: EventBus, results: Results | Repository | None = None,
                  frames: LatestFrames | None = None, listen: str = "127.0.0.1:8080",
-                 token: str | None = None, images_dir: Path | None = None) -> None:
+                 token: str | None = None, images_dir: Path | None = None,
+                 devices: tuple[str, ...] = ()) -> None:
         problem = open_bind_problem(HttpConfig(listen, token))
         if problem is not None:
             raise InputError(problem)
@@ -69,7 +72,8 @@ class WebServer:
         self.frames = frames if frames is not None else LatestFrames()
         self.config = HttpConfig(listen, token)
         self.images_dir = None if images_dir is None else images_dir.resolve()
-        self.view = View()
+        self.devices = tuple(devices)
+        self.view = View(configured=self.devices)
         self.started = time.time()
         self.snapshots = 0           # flushes serialised (the bench reads it)
         self.errors = 0              # events the view could not fold (logged)
@@ -77,6 +81,7 @@ class WebServer:
         # ...): what the screens' clients really asked for (the bench reads it)
         self.requests: Counter[str] = Counter()
         self.pairs: dict[str, PairFrames] = {}   # each pair's latest detection summary
+        self._sharpness: dict[tuple[str, str], tuple[tuple[Any, ...], float]] = {}
         self._snapshot = b""
         self._clients: set[asyncio.Queue[bytes]] = set()
         self._runner: web.AppRunner | None = None
@@ -87,7 +92,7 @@ class WebServer:
     async def start(self) -> None:
         queue = self.bus.queue(maxsize=10_000)
         history = tuple(self.bus.history)
-        self.view = fold(history)
+        self.view = fold(history, self.devices)
         self.pairs = {e.pair: e for e in history if isinstance(e, PairFrames)}
         self._snapshot = self._encode()
         self._pump = asyncio.get_running_loop().create_task(self._run_pump(queue))
@@ -117,6 +122,11 @@ class WebServer:
         host = self.config.host
         host = f"[{host}]" if ":" in host else host
         return f"http://{host}:{self._port}/"
+
+    def set_devices(self, devices: tuple[str, ...]) -> None:
+        """The configured devices changed (a reload): the next snapshot lists the new set."""
+        self.devices = tuple(devices)
+        self.view.configured = self.devices
 
     @property
     def clients(self) -> int:
@@ -187,7 +197,9 @@ class WebServer:
         self.requests[route.canonical if route is not None else "?"] += 1
         token = self.config.token
         set_cookie = False
-        if token:
+        # /healthz is for a monitoring probe that holds no token: it says "ok" or "fault"
+        # and nothing else, so it stays open; every other endpoint needs the token
+        if token and request.path != "/healthz":
             given = request.headers.get("Authorization", "").removeprefix("Bearer ").strip() \
                 or request.cookies.get("token", "") or request.query.get("token", "")
             if given != token:
@@ -204,6 +216,11 @@ class WebServer:
         return handler
 
     async def _healthz(self, request: web.Request) -> web.Response:
+        """``ok`` (200), or ``fault`` (503) while the station is in fault or a device reports
+        one: a probe can alarm on the status code alone; no detail is given (the probe is
+        not authenticated)."""
+        if self.view.tone() == "stop" and not self.view.alarm:
+            return web.Response(status=503, text="fault\n")
         return web.Response(text="ok\n")
 
     def status(self) -> dict[str, Any]:
@@ -252,8 +269,13 @@ class WebServer:
                 s.setdefault("exposure_t", pe.exposure_t)
             if s.get("sharpness") is None and s.get("roi"):
                 x, y, w, h = (int(c) for c in s["roi"])
-                s["sharpness"] = await loop.run_in_executor(None, sharpness, f.image,
-                                                            (x, y, w, h))
+                # once per frame and ROI: every cameras page asks for the list each second
+                key = (f.pair, f.side, f.seq, x, y, w, h)
+                hit = self._sharpness.get((f.pair, f.side))
+                if hit is None or hit[0] != key:
+                    value = await loop.run_in_executor(None, sharpness, f.image, (x, y, w, h))
+                    hit = self._sharpness[(f.pair, f.side)] = (key, value)
+                s["sharpness"] = hit[1]
             out.append({"pair": f.pair, "side": f.side, "grabbed_at": f.grabbed_at,
                         "age_s": round(time.time() - f.grabbed_at, 3), "fps": f.fps,
                         "width": int(f.image.shape[1]), "height": int(f.image.shape[0]),

@@ -9,6 +9,7 @@ same events live.  ``View.apply`` is the only way state changes.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -36,6 +37,12 @@ BOLT_LABELS = {
     "ok": "OK", "nok": "NOK", "skipped": "skipped", "blocked": "blocked",
 }
 LAST_RESULTS = 8
+# refusals the operator must act on (amber): the wrench is seen, something about it or the
+# sequence forbids sending; any other refusal while tracking means the wrench is simply not on
+# a bolt (between bolts, out of view): a normal state, shown neutral, never as an alarm
+ACT_ON = re.compile(r"\b(stale|ambiguous|tilt\w*|must wait|order|batch|skipped|already done|"
+                    r"controller refused)\b", re.IGNORECASE)
+NOT_AT_A_BOLT = "Bring the wrench to a bolt"
 
 
 @dataclass
@@ -75,6 +82,11 @@ class View:
     selected: str | None = None
     closed: dict[str, Any] | None = None
     alarm: str = ""              # a wrong bolt reported by the simulation's checker
+    # the devices the station was configured with (lift, wrench, each pair), given by the
+    # server: the daemon reports a device's health only when it faults or comes back, so a
+    # configured device with no report is "ok" once the station is past its start (the daemon
+    # tries every device once before its first state; one that fails is reported as a fault)
+    configured: tuple[str, ...] = ()
 
     def apply(self, e: StationEvent) -> None:
         """Fold one event in."""
@@ -170,17 +182,52 @@ class View:
         return {"total": len(states), "done": states.count("ok"), "nok": states.count("nok"),
                 "skipped": states.count("skipped")}
 
+    def device_health(self) -> dict[str, dict[str, Any]]:
+        """Every configured device, then any other that reported: reported health wins; an
+        unreported configured device is "opening" while the station starts, "ok" after."""
+        started = self.state != "starting"
+        out = {d: {"ok": started, "kind": "" if started else "opening",
+                   "reason": "" if started else "not opened yet", "reported": False}
+               for d in self.configured}
+        for d, h in self.devices.items():
+            out[d] = {**h, "reported": True}
+        return out
+
+    def tone(self) -> str:
+        """How the headline reads: ``stop`` (red: a fault or a wrong bolt, the station
+        stops), ``act`` (amber: a refusal the operator resolves: stale, ambiguous, tilted,
+        order rule, skipped), ``idle`` (neutral: the wrench is not on a bolt), ``go`` (a bolt
+        selected), ``done`` (vehicle finished), else ""."""
+        if self.alarm or self.state == "fault" or any(not h["ok"]
+                                                       for h in self.devices.values()):
+            return "stop"
+        if self.refused:
+            return "act" if refusal_needs_action(self.refused) else "idle"
+        if self.selected is not None:
+            return "go"
+        c = self.counters()
+        if c["total"] and c["done"] == c["total"]:
+            return "done"
+        return ""
+
     def headline(self) -> str:
         """The large words: why nothing is sent, else what to do."""
         faults = [f"{d}: {h['reason'] or h['kind']}" for d, h in sorted(self.devices.items())
                   if not h["ok"]]
         if self.alarm:
             return f"WRONG BOLT: {self.alarm}"
+        if self.state == "fault" and len(faults) > 1:
+            # several devices down: the first in large words, the others named (each one's
+            # reason is in the devices panel); the whole list would not fit 3 lines
+            others = [d for d, h in sorted(self.devices.items()) if not h["ok"]][1:]
+            return f"FAULT: {faults[0]} (and {', '.join(others)}: see Devices)"
         if self.state == "fault":
             return "FAULT: " + (self.reason or "; ".join(faults) or "see the journal")
         if faults:
             return "FAULT: " + "; ".join(faults)
         if self.refused:
+            if not refusal_needs_action(self.refused) and self._not_at_a_bolt():
+                return NOT_AT_A_BOLT
             return short_reason(self.refused)
         if self.selected is not None:
             b = self.bolts.get(self.selected)
@@ -194,21 +241,34 @@ class View:
                                              or "all bolts OK")
         return self.reason or self.state
 
+    def _not_at_a_bolt(self) -> bool:
+        """The wrench is out of view, or seen but near no bolt."""
+        w = self.wrench
+        return w is None or bool(w.get("lost")) or self.refused.startswith("no bolt within")
+
     def to_json(self) -> dict[str, Any]:
         return {
             "state": self.state, "reason": self.reason, "headline": self.headline(),
+            "tone": self.tone(),
             "refused": self.refused, "alarm": self.alarm,
             "vehicle": None if self.vin is None else {"vin": self.vin, "model": self.model,
                                                       "rework": self.rework},
             "bolts": [b.to_json() for b in self.bolts.values()],
             "selected": self.selected, "wrench": self.wrench, "counters": self.counters(),
-            "devices": self.devices, "results": self.results, "closed": self.closed,
+            "devices": self.device_health(), "results": self.results, "closed": self.closed,
         }
 
 
-def fold(events: list[StationEvent] | tuple[StationEvent, ...]) -> View:
+def refusal_needs_action(reason: str) -> bool:
+    """True for a refusal the operator resolves (amber), False for "the wrench is not on a
+    bolt" (neutral); see ``ACT_ON``."""
+    return ACT_ON.search(reason) is not None
+
+
+def fold(events: list[StationEvent] | tuple[StationEvent, ...],
+         configured: tuple[str, ...] = ()) -> View:
     """A view built from ``events`` in order (a fresh screen starts from the bus history)."""
-    v = View()
+    v = View(configured=tuple(configured))
     for e in events:
         v.apply(e)
     return v

@@ -99,3 +99,31 @@ def results_db(tmp: Path) -> Repository:
     repo.record_tightening(VIN, "B2", ok=True, torque_nm=49.7, tightening_id=102,
                            images=[str(tmp / "img" / "B2-left.jpg")], **kw)
     return repo
+
+
+def long_fault() -> list[StationEvent]:
+    """A fault naming every device with the long reasons a real station gives (URLs with
+    query strings): the headline must wrap, the devices panel must fit."""
+    cams = "gige://192.168.10.21/?exposure_us=800&gain_db=0.0&trigger=software&packet_size=9000"
+    faults = [
+        ("lift", "timeout", "no answer from modbus-tcp://10.0.0.7:502/?unit=1&timeout_s=2.0 "
+                            "for 2.0 s (PLC off, or not in RUN)"),
+        ("wrench", "refused", "connection refused by open-protocol://10.0.0.9:4545/?rev=3"),
+        ("pair1", "down", f"left camera {cams}: no frames for 3.0 s"),
+        ("pair2", "down", f"right camera {cams.replace('.21', '.24')}: no frames for 3.0 s"),
+    ]
+    reason = "; ".join(f"{d}: {r}" for d, _, r in faults)
+    return [*(DeviceHealth(device=d, ok=False, kind=k, reason=r) for d, k, r in faults),
+            StateChanged(state="fault", reason=reason), Refused(reason=reason)]
+
+
+def sim_vehicle() -> VehicleOpened:
+    """config/sim's 50-bolt vehicle (close clusters: B41/B13, B3x/B39), as the daemon opens it."""
+    import yaml
+
+    doc = yaml.safe_load((Path(__file__).resolve().parents[2] / "config/sim/bolts.yaml")
+                         .read_text())
+    (model, spec), = doc["models"].items()
+    bolts = tuple(BoltView(b["id"], b["position"][0], b["position"][1], b["position"][2],
+                           b.get("pset")) for b in spec["bolts"])
+    return VehicleOpened(vin="SIMVIN0000000001", model=model, bolts=bolts)

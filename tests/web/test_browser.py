@@ -10,11 +10,20 @@ import re
 
 import numpy as np
 
-from stationd.station.events import BoltSkipped
+from db.repository import Repository
+from stationd.station.events import BoltSkipped, Localized, Refused, StateChanged
 from stationd.web.results import Results
 from tests.web.conftest import SIZES
 from tests.web.pages import Page
-from tests.web.scenario import VIN, fault, opened, results_db, work
+from tests.web.scenario import (
+    VIN,
+    fault,
+    long_fault,
+    opened,
+    results_db,
+    sim_vehicle,
+    work,
+)
 
 
 def bolts(page: Page) -> dict[str, tuple[str, str]]:
@@ -42,6 +51,12 @@ def overflow(page: Page, *selectors: str, long: bool = False) -> list[str]:
             if (!e) { out.push(sel + ' missing'); continue; }
             const r = e.getBoundingClientRect();
             if (r.width < 1 || r.height < 1) out.push(sel + ' empty');
+            // content cut off inside its box (an ellipsis, a clipped or scrolling panel)
+            // (an inline element has no client box to clip in)
+            if (getComputedStyle(e).display !== 'inline' &&
+                (e.scrollWidth > e.clientWidth + 1 || e.scrollHeight > e.clientHeight + 1))
+                out.push(`${sel} clipped: ${e.scrollWidth}x${e.scrollHeight} in ` +
+                         `${e.clientWidth}x${e.clientHeight}`);
             if (r.left < 0 || r.right > w + 0.5 ||
                 (!arguments[1] && (r.top < 0 || r.bottom > h + 0.5)))
                 out.push(`${sel} at ${Math.round(r.left)},${Math.round(r.top)}-` +
@@ -105,6 +120,89 @@ def test_operator_screen_follows_the_work_and_shows_the_fault(live_server, page,
     check_fits(page, "#bolts", "#headline")
     shots("operator-fault")
 
+    # every device down, with the long URLs a real station's reasons carry: the headline
+    # wraps in large type, the devices panel wraps its URLs, nothing is clipped or cut
+    srv.publish(long_fault())
+    page.wait(lambda p: "pair2" in (p.text("#headline") or ""), what="the long fault")
+    head = page.text("#headline") or ""
+    assert "(PLC off, or not in RUN)" in head and "pair2" in head
+    assert page.count("#devices li.dev-bad") == 4
+    assert "packet_size=9000" in (page.text("#devices") or "")
+    check_fits(page, "#bolts", "#headline", "#devices", "#legend", "#results", "#wrench")
+    for w, h in SIZES:
+        page.size(w, h)
+        lines = page.js("const e = document.getElementById('headline');"
+                        " return e.clientHeight / parseFloat(getComputedStyle(e).lineHeight)")
+        assert lines > 1.5, f"{page.name} at {w}x{h}: the long fault on one line"
+        size = page.js("return parseFloat(getComputedStyle("
+                       "document.getElementById('headline')).fontSize)")
+        assert size >= 32, f"{page.name} at {w}x{h}: headline type shrank to {size} px"
+    page.size(*SIZES[0])
+    shots("operator-long-fault")
+
+
+def label_overlaps(page: Page) -> list[str]:
+    """Pairs of visible bolt labels whose boxes intersect (screen boxes, so each label's and
+    its bolt's transforms are applied)."""
+    got = page.js("""
+        const boxes = [...document.querySelectorAll('#bolts g.bolt')].flatMap(g => {
+            const l = g.querySelector('g.lbl');
+            if (!l || getComputedStyle(l).visibility === 'hidden') return [];
+            const r = l.getBoundingClientRect();
+            return [[g.dataset.bolt, r.left, r.top, r.right, r.bottom]];
+        });
+        const out = [];
+        for (let i = 0; i < boxes.length; i++) for (let j = i + 1; j < boxes.length; j++) {
+            const a = boxes[i], b = boxes[j];
+            if (a[1] < b[3] && b[1] < a[3] && a[2] < b[4] && b[2] < a[4])
+                out.push(a[0] + '/' + b[0]);
+        }
+        return out;""")
+    return [str(x) for x in got]
+
+
+def test_dense_map_labels_never_overlap_and_between_bolts_is_neutral(live_server, page, shots):
+    srv = live_server(devices=("lift", "wrench", "pair1", "pair2", "pair3", "pair4"))
+    srv.publish([StateChanged(state="tracking", reason="vehicle at height"), sim_vehicle()])
+    page.get(srv.url)
+    page.wait(lambda p: p.count("#bolts g.bolt") == 50, what="50 bolts on the map")
+    for w, h in SIZES:
+        page.size(w, h)
+        # the map redrawn for this size (its viewBox is the panel's box) with its labels
+        page.wait(lambda p: p.js(
+            "const b = document.getElementById('map').getBoundingClientRect();"
+            " return document.getElementById('bolts').getAttribute('viewBox') ==="
+            " `0 0 ${Math.max(200, b.width)} ${Math.max(150, b.height)}`"
+            " && document.querySelectorAll('#bolts g.lbl').length === 50"), what="redrawn")
+        assert label_overlaps(page) == [], f"{page.name} at {w}x{h}"
+        shown = page.count("#bolts g.lbl:not(.hidden)")
+        assert shown >= 25, f"{page.name} at {w}x{h}: only {shown} of 50 labels placed"
+        # colour is never the only cue: every bolt keeps its state icon and hover title
+        assert page.count("#bolts g.bolt text.icon") == 50
+        assert page.count("#bolts g.bolt > title") == 50
+    page.size(*SIZES[0])
+
+    # the wrench out of view while tracking: a normal state, not a red alarm; the per-pair
+    # reasons stay off the operator screen (the cameras screen has them)
+    every = "; ".join(f"pair{k}: {side}: no purple region enclosing a ring in view"
+                      for k in range(1, 5) for side in ("left", "right"))
+    srv.publish([Localized(point_mm=None, tilt_deg=None, reason=every, candidate=None,
+                           distance_mm=None, age_ms=0.0), Refused(reason=every)])
+    page.wait(lambda p: p.text("#headline") == "Bring the wrench to a bolt",
+              what="the neutral headline")
+    assert page.js("return document.getElementById('headline').dataset.tone") == "idle"
+    assert "purple" not in (page.text(".side") or "")
+    assert [d for d in page.js("return [...document.querySelectorAll('#devices li')]"
+                               ".map(li => li.className + ' ' + li.textContent)")] == \
+        [f"dev-ok {d}: ok" for d in ("lift", "wrench", "pair1", "pair2", "pair3", "pair4")]
+    check_fits(page, "#bolts", "#headline", "#devices", "#legend")
+    shots("operator-between-bolts")
+
+    srv.publish([Refused(reason="ambiguous: B41 at 4.0 mm, B13 at 5.1 mm")])
+    page.wait(lambda p: "ambiguous" in (p.text("#headline") or ""), what="amber refusal")
+    assert page.js("return document.getElementById('headline').dataset.tone") == "act"
+    shots("operator-ambiguous")
+
 
 def test_cameras_screen_shows_frames_overlay_and_refusal(live_server, page, shots):
     srv = live_server()
@@ -155,14 +253,34 @@ def test_results_screens_and_csv_download(live_server, page, shots, tmp_path):
         b2 = page.js("return [...document.querySelectorAll('tr.rundown[data-bolt=B2]')]"
                      ".map(r => r.innerText)")
         assert "NOK" in b2[0] and "2 (rework)" in b2[1]
+        # no image directory, so no crop to show: the column is hidden, not left empty
+        crops_shown = ("return getComputedStyle(document.querySelector('#rundowns th.crops'))"
+                       ".display !== 'none'")
+        assert page.js(crops_shown) is False
         check_fits(page, "#rundowns")
         shots("vehicle")
         page.click("#csv")
         rows = list(csv.DictReader(io.StringIO(page.wait_download(f"{VIN}.csv").read_text())))
         assert [(r["bolt"], r["status"]) for r in rows] == [("B1", "ok"), ("B2", "nok"),
                                                            ("B2", "ok")]
+        # with the records' image directory, B2's saved crop is linked in its column
+        srv = live_server(results=Results(repo), images_dir=tmp_path)
+        page.get(srv.url + f"vehicles/{VIN}")
+        page.wait(lambda p: p.count("tr.rundown") == 5, what="5 rundown rows")
+        assert page.js(crops_shown) is True
+        assert page.js("return [...document.querySelectorAll('td.crops a')]"
+                       ".map(a => a.getAttribute('href'))") == ["/images/img/B2-left.jpg"]
     finally:
         repo.close()
+    empty = Repository.open(f"sqlite:///{tmp_path / 'empty.db'}")
+    try:
+        srv = live_server(results=Results(empty))
+        page.get(srv.url + "vehicles")
+        page.wait(lambda p: p.count("#vehicles tbody tr") == 1, what="the empty list's row")
+        assert "No vehicles yet" in (page.text("#vehicles tbody") or "")
+        shots("vehicles-empty")
+    finally:
+        empty.close()
 
 
 def test_cameras_screen_fetches_again_only_the_frames_in_view(live_server, page):

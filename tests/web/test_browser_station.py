@@ -136,6 +136,9 @@ def test_demo_screens_follow_the_simulated_operator(page, shots, tmp_path):
             " && c.innerText.includes('marker found')).map(c => c.dataset.camera)"),
             60, "a camera with the marker found and its overlay")
         assert all(re.fullmatch(r"pair\d/(left|right)", c) for c in found), found
+        # each pair titled by its name once ("pair1", not "pair pair1")
+        assert page.js("return [...document.querySelectorAll('#pairs h2')]"
+                       ".map(h => h.textContent)") == ["pair1", "pair2", "pair3", "pair4"]
         text = page.text(f".cam[data-camera='{found[0]}']") or ""
         assert "5472x3648" in text and "sharpness" in text
         shots("demo-cameras")

@@ -23,8 +23,10 @@ def test_jpeg_is_downscaled_and_cached_until_the_next_frame():
     small = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
     assert small.shape == (150, 200)
     assert store.jpeg("p1", "left", width=200) is data        # cached, not re-encoded
+    assert store.encoded == 1 and store.encode_wall_s > 0     # counted once (the bench)
     store.put("p1", "left", frame(1), grabbed_at=100.1)
     assert store.jpeg("p1", "left", width=200) is not data
+    assert store.encoded == 2
     cam = store.get("p1", "left")
     assert cam is not None and cam.seq == 1 and abs((cam.fps or 0) - 10.0) < 1e-6
 
@@ -69,3 +71,4 @@ def test_reduce_matches_one_area_resize_and_does_not_alias():
         assert reduce(noise, width).std() < noise.std() / 2     # averaged, not sampled
     colour = np.dstack([smooth, noise, smooth])
     assert reduce(colour, 300).shape == (200, 300, 3)
+

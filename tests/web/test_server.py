@@ -108,6 +108,15 @@ def test_cameras_frames_and_crops_on_demand():
                 assert cams[0]["summary"]["ellipses"] == [[1, 2, 3, 4, 0]]
                 assert cams[0]["summary"]["reason"] == "no marker"
                 assert cams[0]["summary"]["exposure_t"] == 12.5
+                # the focus figure is kept per frame (asked each second by every cameras
+                # page), and a new frame gets its own: a flat one has none of the noise's
+                async with http.get(srv.url + "api/cameras") as r:
+                    again = (await r.json())[0]["summary"]["sharpness"]
+                assert again == cams[0]["summary"]["sharpness"]
+                frames.put("front", "left", np.full_like(img, 90),
+                           {"found": False, "roi": [100, 100, 200, 200]})
+                async with http.get(srv.url + "api/cameras") as r:
+                    assert (await r.json())[0]["summary"]["sharpness"] == 0.0
                 async with http.get(srv.url + "api/cameras/front/left/frame.jpg?w=320") as r:
                     assert r.content_type == "image/jpeg" and (await r.read())[:2] == b"\xff\xd8"
                 async with http.get(srv.url + "api/cameras/front/left/crop.jpg?x=5&y=5") as r:
@@ -179,6 +188,37 @@ def test_numpy_values_and_an_odd_event_do_not_stop_the_live_view():
                     await asyncio.sleep(0.05)
             assert v["reason"] == "still following" and srv.errors == 1
             assert abs(v["wrench"]["x"] - 1.5) < 1e-6 and abs(v["wrench"]["tilt"] - 2.5) < 1e-6
+        finally:
+            await srv.stop()
+    asyncio.run(main())
+
+
+def test_healthz_answers_a_probe_without_the_token_and_says_only_ok_or_fault():
+    async def main():
+        bus = EventBus()
+        for e in opened():
+            bus.publish(e)
+        srv = serve(bus, token="a-long-token", devices=("lift", "wrench"))  # noqa: S106
+        await srv.start()
+        try:
+            async with ClientSession() as http:
+                async with http.get(srv.url + "healthz") as r:
+                    assert r.status == 200 and (await r.text()) == "ok\n"
+                for path in ("", "api/status", "api/view", "api/vehicles", "cameras",
+                             "api/cameras", "healthz/../api/status"):
+                    async with http.get(srv.url + path) as r:
+                        assert r.status == 401, path
+                for e in fault():
+                    bus.publish(e)
+                while srv.view.state != "fault":
+                    await asyncio.sleep(0.02)
+                async with http.get(srv.url + "healthz") as r:
+                    # nothing of the reason: the probe is not authenticated
+                    assert r.status == 503 and (await r.text()) == "fault\n"
+                async with http.get(srv.url + "api/status",
+                                    headers={"Authorization": "Bearer a-long-token"}) as r:
+                    devices = (await r.json())["devices"]
+                assert devices["lift"]["ok"] is False and devices["wrench"]["ok"] is True
         finally:
             await srv.stop()
     asyncio.run(main())

@@ -120,3 +120,52 @@ def test_the_headline_says_a_refusal_shared_by_every_pair_once():
     mixed = "pair1: left: no purple region in view; pair2: ambiguous: B1 at 3 mm, B2 at 5 mm"
     assert short_reason(mixed) == mixed
     assert short_reason("B18 is already done") == "B18 is already done"
+
+
+NOT_SEEN = "; ".join(f"pair{k}: {side}: no purple region enclosing a ring in view"
+                     for k in range(1, 5) for side in ("left", "right"))
+
+
+def lost(reason: str) -> Localized:
+    return Localized(point_mm=None, tilt_deg=None, reason=reason, candidate=None,
+                     distance_mm=None, age_ms=0.0)
+
+
+def test_wrench_between_bolts_is_neutral_not_an_alarm():
+    v = fold([*opened(), lost(NOT_SEEN), Refused(reason=NOT_SEEN)])
+    assert v.tone() == "idle" and v.headline() == "Bring the wrench to a bolt"
+    assert v.to_json()["tone"] == "idle"
+    # seen, but near no bolt: the same normal state
+    v = fold([*opened(), Localized(point_mm=(200.0, 150.0, 0.0), tilt_deg=1.0, reason=None,
+                                   candidate="B1", distance_mm=250.0, age_ms=30.0),
+              Refused(reason="no bolt within 15 mm (nearest B1 at 250.0 mm)")])
+    assert (v.tone(), v.headline()) == ("idle", "Bring the wrench to a bolt")
+
+
+def test_refusals_the_operator_resolves_are_amber_with_the_reason():
+    for reason in ("localization is stale (812 ms old)",
+                   "ambiguous: B1 at 3.0 mm, B2 at 4.1 mm",
+                   "wrench tilted 14.2 deg (> 10)",
+                   "B4 must wait: order 2 needs B3 done first"):
+        v = fold([*opened(), lost(reason), Refused(reason=reason)])
+        assert (v.tone(), v.headline()) == ("act", reason), reason
+
+
+def test_fault_is_red_above_any_refusal_and_a_selection_is_go():
+    v = fold([*opened(), lost(NOT_SEEN), Refused(reason=NOT_SEEN), *fault()])
+    assert v.tone() == "stop" and v.headline().startswith("FAULT: lift")
+    assert fold(opened() + work()).tone() == "go"
+
+
+def test_configured_devices_are_listed_ok_once_started_until_one_reports():
+    v = fold([StateChanged(state="starting", reason="opening devices")],
+             configured=("lift", "wrench", "pair1"))
+    health = v.device_health()
+    assert list(health) == ["lift", "wrench", "pair1"]
+    assert not any(h["ok"] for h in health.values())     # not opened yet: not claimed ok
+    v.apply(StateChanged(state="waiting for vehicle", reason="no vehicle"))
+    assert all(h["ok"] and not h["reported"] for h in v.device_health().values())
+    v.apply(DeviceHealth(device="pair1", ok=False, kind="down", reason="camera 3 gone"))
+    got = v.to_json()["devices"]
+    assert got["pair1"]["ok"] is False and got["pair1"]["reported"] is True
+    assert got["lift"]["ok"] and got["wrench"]["ok"]

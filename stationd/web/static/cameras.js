@@ -113,7 +113,8 @@ async function refresh() {
       const p = document.createElement("section");
       p.className = "pair";
       p.innerHTML = "<h2></h2>";
-      p.firstChild.textContent = `pair ${name}`;
+      // config/sim names its pairs "pair1"...: not "pair pair1"
+      p.firstChild.textContent = /^pair/i.test(name) ? name : `pair ${name}`;
       const row = document.createElement("div");
       row.className = "cams";
       for (const c of list) row.appendChild(camDiv(c, stamp, old));

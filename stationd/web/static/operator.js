@@ -53,21 +53,18 @@ function drawMap(view) {
   const r = Math.max(9, Math.min(44, s * span / 20, 0.42 * dmin));
   const dense = r < 22;
   svg.classList.toggle("dense", dense);
+  const placed = [];   // bolt -> [group, x, y]
   for (const b of bolts) {
+    const x = X(b.x), y = Y(b.y);
     const g = el("g", {class: `bolt bolt-${b.state}`, "data-bolt": b.bolt, "data-state": b.state,
-      transform: `translate(${X(b.x).toFixed(1)},${Y(b.y).toFixed(1)})`});
+      transform: `translate(${x.toFixed(1)},${y.toFixed(1)})`});
     g.appendChild(el("title", {}, `${b.bolt}: ${b.label}${b.reason ? " (" + b.reason + ")" : ""}`));
     g.appendChild(el("circle", {r: r}));
     g.appendChild(el("text", {class: "icon", y: 0}, ICONS[b.state] || "?"));
-    g.appendChild(el("text", {class: "bolt-id", y: -r - (dense ? 4 : 10)}, b.bolt));
-    let tag = b.label;
-    if (b.state === "selected" && b.pset !== null) tag += ` P${b.pset}`;
-    if ((b.state === "ok" || b.state === "nok") && b.torque_nm !== null) tag += ` ${fmt(b.torque_nm, 1)}`;
-    const matters = ["selected", "tightening", "nok", "blocked"].includes(b.state);
-    if (!dense || matters)
-      g.appendChild(el("text", {class: "tag label", y: r + (dense ? 16 : 28)}, tag));
     svg.appendChild(g);
+    placed.push([b, g, x, y]);
   }
+  placeLabels(placed, r, dense, W, H);
   const w = view.wrench;
   if (w && w.x !== undefined) {
     const g = el("g", {class: "wrench-mark" + (w.lost ? " wrench-lost" : ""), id: "wrench-mark",
@@ -76,6 +73,75 @@ function drawMap(view) {
     g.appendChild(el("line", {x1: -26, y1: 0, x2: 26, y2: 0}));
     g.appendChild(el("line", {x1: 0, y1: -26, x2: 0, y2: 26}));
     svg.appendChild(g);
+  }
+}
+
+// Each bolt's label (its id, and its state words when they matter) goes where it collides
+// with no other label and covers no bolt: greedy, the bolts that matter now first, trying
+// above, below, right, left, the diagonals, then farther out.  A label that finds no room is
+// hidden (shown on hover); the bolt keeps its coloured symbol and state icon, so colour is
+// still never the only cue.
+const PRIORITY = {selected: 0, tightening: 0, nok: 1, blocked: 1, next: 2};
+// The map is redrawn with every snapshot (up to 10 a second, the wrench moving): the
+// placement is recomputed only when a label or the layout changed, and each label text is
+// measured once, so a redraw costs the browser (often on the station's own cores) no layout.
+let lastPlacement = {key: "", at: new Map()};
+const measured = new Map();
+function placeLabels(placed, r, dense, W, H) {
+  const hit = (a, b) => a[0] < b[2] && b[0] < a[2] && a[1] < b[3] && b[1] < a[3];
+  const gap = dense ? 2 : 5;
+  const labels = placed.map(([b, g, x, y]) => {
+    let tag = b.label;
+    if (b.state === "selected" && b.pset !== null) tag += ` P${b.pset}`;
+    if ((b.state === "ok" || b.state === "nok") && b.torque_nm !== null) tag += ` ${fmt(b.torque_nm, 1)}`;
+    const matters = ["selected", "tightening", "nok", "blocked"].includes(b.state);
+    if (dense && !matters) tag = null;
+    const lbl = el("g", {class: "lbl"});
+    lbl.appendChild(el("text", {class: "bolt-id", y: 0}, b.bolt));
+    if (tag !== null) lbl.appendChild(el("text", {class: "tag label", y: dense ? 15 : 26}, tag));
+    g.appendChild(lbl);
+    return {b, lbl, x, y, text: `${dense}|${b.bolt}|${tag}`};
+  });
+  const key = `${W}x${H}|${r}|` + labels.map((l) => `${l.text}@${l.x.toFixed(1)},${l.y.toFixed(1)}`).join(";");
+  if (key !== lastPlacement.key) {
+    if (measured.size > 5000) measured.clear();   // torque texts accumulate over vehicles
+    const at = new Map();
+    const taken = labels.map(({x, y}) => [x - r, y - r, x + r, y + r]);   // the symbols
+    const order = [...labels].sort((p, q) => (PRIORITY[p.b.state] ?? 3) - (PRIORITY[q.b.state] ?? 3));
+    for (const {lbl, x, y, text} of order) {
+      if (!measured.has(text)) {
+        const bb = lbl.getBBox();
+        measured.set(text, {x: bb.x, y: bb.y, width: bb.width, height: bb.height});
+      }
+      // getBBox leaves out the text's 4 px outline stroke (Firefox's screen box includes it)
+      const bb = measured.get(text), w = bb.width + 6, h = bb.height + 6;
+      const dirs = [[0, -1], [0, 1], [1, 0], [-1, 0], [1, -1], [-1, -1], [1, 1], [-1, 1]];
+      let best = null;
+      for (const k of [1, 1.8, 2.6]) {
+        for (const [dx, dy] of dirs) {
+          // the label's centre just off the symbol in that direction
+          const cx = x + dx * (r * k + gap + w / 2), cy = y + dy * (r * k + gap + h / 2);
+          const box = [cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2];
+          if (box[0] < 0 || box[1] < 0 || box[2] > W || box[3] > H) continue;
+          if (taken.some((t) => hit(t, box))) continue;
+          best = [cx, cy, box];
+          break;
+        }
+        if (best) break;
+      }
+      if (best) {
+        taken.push(best[2]);
+        at.set(text, [false, `translate(${(best[0] - x - bb.x - bb.width / 2).toFixed(1)},` +
+          `${(best[1] - y - bb.y - bb.height / 2).toFixed(1)})`]);
+      } else
+        at.set(text, [true, `translate(0,${(-r - gap - bb.y - bb.height).toFixed(1)})`]);
+    }
+    lastPlacement = {key, at};
+  }
+  for (const {lbl, text} of labels) {
+    const [hidden, transform] = lastPlacement.at.get(text);
+    lbl.setAttribute("transform", transform);
+    if (hidden) lbl.setAttribute("class", "lbl hidden");
   }
 }
 
@@ -91,13 +157,16 @@ function render(view) {
   const h = $("headline");
   h.textContent = view.headline;
   h.title = view.headline;
-  const stop = view.alarm || view.state === "fault" || view.refused ||
-    Object.values(view.devices).some((d) => !d.ok);
-  h.className = "headline " + (stop ? "stop" : view.selected ? "go" :
-    view.counters.total && view.counters.done === view.counters.total ? "done" : "");
+  // red: fault, stop; amber: a refusal the operator resolves; neutral: the wrench is not on a
+  // bolt (a normal state between bolts, never shown as an alarm)
+  h.className = "headline " + (view.tone || "");
+  h.dataset.tone = view.tone || "";
   drawMap(view);
   const w = view.wrench;
-  $("wrench").textContent = !w ? "not localized" : w.lost ? `lost: ${w.reason}` :
+  // the per-pair reasons of a wrench out of view are the commissioning screen's business:
+  // here one line, the full text on hover
+  $("wrench").title = w && w.lost ? w.reason : "";
+  $("wrench").textContent = !w ? "not localized" : w.lost ? "not in view (details: Cameras)" :
     `X ${fmt(w.x, 0)}  Y ${fmt(w.y, 0)}  Z ${fmt(w.z, 0)} mm, tilt ${fmt(w.tilt, 1)}\u00B0` +
     (w.candidate ? `, near ${w.candidate} (${fmt(w.distance, 1)} mm)` : "");
   const tb = $("results");
@@ -117,11 +186,13 @@ function render(view) {
   }
   const ul = $("devices");
   ul.replaceChildren();
-  for (const [name, d] of Object.entries(view.devices)) {
+  // the faulty first, each on its own lines (a long URL wraps); the healthy on one line
+  const devs = Object.entries(view.devices).sort((a, b) => Number(a[1].ok) - Number(b[1].ok));
+  for (const [name, d] of devs) {
     const li = document.createElement("li");
-    li.className = d.ok ? "dev-ok" : "dev-bad";
+    li.className = d.ok ? "dev-ok" : d.kind === "opening" ? "dev-wait" : "dev-bad";
     li.dataset.device = name;
-    li.textContent = d.ok ? `${name}: ok` : `${name}: ${d.kind} ${d.reason}`;
+    li.textContent = d.ok ? `${name}: ok` : `${name} ${d.kind}: ${d.reason}`;
     ul.appendChild(li);
   }
 }

@@ -17,7 +17,14 @@ async function getJson(url) {
 async function listVehicles() {
   try {
     const tb = q("#vehicles tbody");
-    for (const v of await getJson("/api/vehicles")) {
+    const list = await getJson("/api/vehicles");
+    if (!list.length) {
+      const tr = document.createElement("tr");
+      tr.className = "empty";
+      cell(tr, "No vehicles yet: they appear here once the station opens one.").colSpan = 8;
+      tb.appendChild(tr);
+    }
+    for (const v of list) {
       const tr = document.createElement("tr");
       tr.dataset.vin = v.vin;
       const a = document.createElement("a");
@@ -53,14 +60,17 @@ async function showVehicle(vin) {
         tr.dataset.bolt = b.bolt;
         cell(tr, i ? "" : b.bolt);
         cell(tr, i ? "" : b.status.toUpperCase(), "status-" + (b.status === "nok" ? "NOK" : b.status));
-        if (!r) { cell(tr, "-"); cell(tr, "not tightened"); for (let k = 0; k < 7; k++) cell(tr, ""); }
+        if (!r) {
+          cell(tr, "-"); cell(tr, "not tightened");
+          for (let k = 0; k < 7; k++) cell(tr, "", k === 6 ? "crops" : "");
+        }
         else {
           cell(tr, r.attempt + (r.attempt > 1 ? " (rework)" : ""));
           cell(tr, r.status.toUpperCase(), "status-" + (r.status === "nok" ? "NOK" : "ok"));
           cell(tr, fmt(r.torque_nm, 1)); cell(tr, fmt(r.angle_deg, 0)); cell(tr, r.pset ?? "-");
           cell(tr, fmt(r.tilt_deg, 1)); cell(tr, fmt(r.match_distance_mm, 1));
           cell(tr, (r.recorded_at || "").slice(0, 19));
-          const td = cell(tr, "");
+          const td = cell(tr, "", "crops");
           for (const im of r.image_urls || []) {
             const a = document.createElement("a");
             a.href = im; a.textContent = "crop "; td.appendChild(a);
@@ -69,5 +79,8 @@ async function showVehicle(vin) {
         tb.appendChild(tr);
       });
     }
+    // crops are saved only with records.save_images (off in config/sim): no empty column
+    const crops = v.bolts.some((b) => b.rundowns.some((r) => (r.image_urls || []).length));
+    q("#rundowns").classList.toggle("no-crops", !crops);
   } catch (e) { q("#error").textContent = e.message; }
 }
