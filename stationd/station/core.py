@@ -296,6 +296,9 @@ class StationCore:
     _vin_for: tuple[str, int] | None = field(default=None, repr=False)
     _vin_pending: bool = field(default=False, repr=False)
     _last_refusal: str | None = field(default=None, repr=False)
+    # frames exposed at or before this (a rundown's end) never select: the wrench may have
+    # moved since, and the next bolt's evidence must all come from after it
+    _not_before: float = field(default=float("-inf"), repr=False)
 
     # -- the one entry point ---------------------------------------------------------------
     def feed(self, ev: Event) -> list[Action]:
@@ -385,6 +388,8 @@ class StationCore:
     def _on_LocalizedIn(self, ev: LocalizedIn) -> list[Action]:  # noqa: N802
         if self.state not in LOCALIZING or self.matcher is None:
             return []
+        if self.state is State.TRACKING and ev.exposure_t <= self._not_before:
+            return []   # exposed before the last rundown ended: where the wrench *was*
         age = ev.t - ev.exposure_t
         m = self.matcher.update(np.asarray(ev.point_mm), age) if ev.point_mm is not None \
             else self.matcher.refuse(ev.reason or "no localization")
@@ -475,8 +480,11 @@ class StationCore:
                                            "recorded, not matched", t=ev.t)))
             self._recorded.add(tid)
             self._enabled = None
-            if bool(r.ok) and self.matcher is not None:
-                self.matcher.mark_done(en.bolt)
+            if self.matcher is not None:
+                if bool(r.ok):
+                    self.matcher.mark_done(en.bolt)
+                self.matcher.reset()     # a new selection: a new streak, from new frames
+            self._not_before = max(self._not_before, ev.t)
             if self.bolt == en.bolt:
                 self.bolt, self._selection, self._acked_at, self._away = None, None, None, 0
                 if self.state in ON_A_BOLT:

@@ -473,3 +473,30 @@ def test_a_refusal_is_published_per_bolt_and_reason_not_per_measurement():
     ages = [a.event.reason for _, acts in d.log[stale:] for a in acts
             if isinstance(a, Publish) and isinstance(a.event, Refused)]
     assert len(ages) == 1 and "stale" in ages[0]   # one refusal, not one per frame's age
+
+
+def test_frames_exposed_before_a_rundown_ended_never_select_after_it():
+    """Seen in bench station once selections took 30 ms: a NOK rundown on B2 ends, the
+    operator moves on, and frames exposed while the wrench was still on B2 (in flight) made a
+    new streak and sent B2's parameters with the wrench already elsewhere.  A selection after
+    a rundown needs ``stable_frames`` frames exposed after it."""
+    d = _ready()
+    _on(d, 2)
+    d.step(("ack", 0.01, True))
+    _on(d, 2, 1)
+    assert d.tool
+    end = d.t + 0.05
+    acts = d.feed(ResultIn(end, result(5, 2, ok=False)))     # NOK: B2 may be tightened again
+    assert _kinds(acts) == ["DisableTool", "Record"] and d.core.state is State.TRACKING
+    pos = BOLTS["B2"].position
+    sends = []
+    for k in range(4):   # processed after the rundown, exposed before it: B2 in the picture
+        t = end + 0.03 * (k + 1)
+        sends += [a for a in d.core.feed(LocalizedIn(t, end - 0.02, pos, None))
+                  if isinstance(a, SendParams)]
+    assert sends == [] and d.core.state is State.TRACKING
+    for k in range(PARAMS.stable_frames):   # frames exposed after it: the wrench still there
+        t = end + 0.2 + 0.03 * k
+        sends += [a for a in d.core.feed(LocalizedIn(t, t - 0.02, pos, None))
+                  if isinstance(a, SendParams)]
+    assert [a.bolt for a in sends] == ["B2"]
