@@ -35,6 +35,7 @@ import yaml
 
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
+from stationd.bench.wait import until as _until
 from stationd.boltfile import load_bolts
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
@@ -104,13 +105,6 @@ def _holders(port: int) -> str:
         f.endswith(f":{port}") for f in ln[3:5]))[:300] or "no socket on it now"
 
 
-async def _until(pred: Any, timeout: float) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        await asyncio.sleep(0.01)
-    return False
 
 
 class Watch:

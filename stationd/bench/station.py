@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from stationd import progress
+from stationd.bench.wait import until as _until
 from stationd.boltfile import load_bolts
 from stationd.config import StationConfig, load_station_config
 from stationd.errors import InputError
@@ -60,13 +61,6 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KB on Linux
 
 
-async def _until(pred: Any, timeout: float) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        await asyncio.sleep(0.005)
-    return False
 
 
 IDLE_S = 3.0   # how long the idle station is watched
@@ -117,7 +111,10 @@ async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]
         else:
             n = st.bus.count(ResultRecorded)
             if ctl.pull_trigger() is not None:
-                await _until(lambda n=n: st.bus.count(ResultRecorded) > n, 10)
+                def recorded(before: int = n) -> bool:
+                    return st.bus.count(ResultRecorded) > before
+
+                await _until(recorded, 10)
         out["truth"] = None
         world.set_wrench(None)
         await _until(lambda: st.cycle.state is State.TRACKING, 10)
