@@ -33,7 +33,7 @@ from tests.web.test_browser import check_fits
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO_VIN = "SIMVIN0000000001"
-CYCLES = 3
+CYCLES = 10   # the run must outlast the walk to the cameras screen (a bolt takes ~2 s)
 ICONS = {"OK": "\u2714", "NOK": "\u2716"}          # operator.js: a check mark, a cross
 LINE = re.compile(r"^(B\w+): pset (\d+), XY error [^,]+, (OK|NOK) ([\d.]+) Nm$")
 
