@@ -127,7 +127,9 @@ def test_lift_plc_vanishing_is_a_fault_until_it_returns(tmp_path):
         plc.start_tcp(port)
         await _until(lambda: st.cycle.state is not State.FAULT, 60)
         await _until(lambda: _sends(st), 60)
-        # the commissioning screen's pair summaries, JSON as they are (no NaN)
+        # the commissioning screen's pair summaries (published at their own, throttled rate:
+        # a selection can now come before the next one), JSON as they are (no NaN)
+        await _until(lambda: any(e.sides["left"]["found"] for e in _of(st, PairFrames)), 10)
         frames = [e for e in _of(st, PairFrames) if e.sides["left"]["found"]]
         assert frames and {e.pair for e in frames} <= set(st.cfg.pairs)
         json.dumps(frames[-1].to_json(), allow_nan=False)
