@@ -56,6 +56,7 @@ class SimulatedPlc(SimServer):
         self._model = 0
         self._vin: str | None = None
         self._silent = False
+        self.requests = 0      # register reads served
 
     # -- the world's side ------------------------------------------------------------------
     def _now_height(self, now: float) -> tuple[float, bool]:
@@ -120,7 +121,8 @@ class SimulatedPlc(SimServer):
     def _action(self, function_code: int, start: int, address: int, count: int,
                 registers: list[int], values: list[int] | list[bool] | None) -> int | None:
         """Write the current state into the block (writes never reach here: the block is
-        read-only)."""
+        read-only); counted in ``requests`` (how hard the station polls its PLC)."""
+        self.requests += 1
         for addr, value in self.register_map.encode(self.state()).items():
             registers[addr - start] = value
         return None

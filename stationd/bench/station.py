@@ -69,24 +69,13 @@ IDLE_S = 3.0   # how long the idle station is watched
 async def _idle(st: Station, plc: Any) -> dict[str, float]:
     """The station idle (the lift up but not at working height, as between two cars): the
     Modbus requests its PLC serves per second and the process's CPU, over ``IDLE_S``."""
-    served = [0]
-    action = plc._action
-
-    def counting(*args: Any, **kw: Any) -> Any:
-        served[0] += 1
-        return action(*args, **kw)
-
-    plc._action = counting
-    try:
-        plc.set_height(400.0)
-        await _until(lambda: st.cycle.state is State.WAITING_VEHICLE, 30)
-        n0, c0, t0 = served[0], time.process_time(), time.monotonic()
-        await asyncio.sleep(IDLE_S)
-        dt = time.monotonic() - t0
-        return {"plc_requests_per_s": (served[0] - n0) / dt,
-                "cpu_pct_of_a_core": 100.0 * (time.process_time() - c0) / dt}
-    finally:
-        plc._action = action
+    plc.set_height(400.0)
+    await _until(lambda: st.cycle.state is State.WAITING_VEHICLE, 30)
+    n0, c0, t0 = plc.requests, time.process_time(), time.monotonic()
+    await asyncio.sleep(IDLE_S)
+    dt = time.monotonic() - t0
+    return {"plc_requests_per_s": (plc.requests - n0) / dt,
+            "cpu_pct_of_a_core": 100.0 * (time.process_time() - c0) / dt}
 
 
 async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]],
