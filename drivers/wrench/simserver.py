@@ -15,7 +15,6 @@ The controller's behaviour (what each MID does) is the subclass's ``handle``.
 
 from __future__ import annotations
 
-import errno
 import os
 import selectors
 import socket
@@ -32,7 +31,6 @@ T = TypeVar("T")
 Fault = Literal["silent", "garbage", "partial", "truncate", "close"]
 PREFIX, STX, ETX = b"\x07\x09\x07\x09", b"\x02", b"\x03"
 MAX_MESSAGE = 9999
-BIND_TRIES = 30             # 0.1 s apart: a power-cycled port taken back within 3 s
 
 
 @dataclass(frozen=True)
@@ -198,15 +196,11 @@ class OpenProtocolServer:
         def do() -> int:
             sock = socket.socket()
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            for attempt in range(BIND_TRIES):   # a power cycle: the port may not be free yet
-                try:
-                    sock.bind((host, port))
-                    break
-                except OSError as exc:
-                    if exc.errno != errno.EADDRINUSE or port == 0 or attempt == BIND_TRIES - 1:
-                        sock.close()
-                        raise
-                    time.sleep(0.1)
+            try:
+                sock.bind((host, port))
+            except OSError:
+                sock.close()
+                raise
             sock.listen(4)
             sock.setblocking(False)
             self._sel.register(sock, selectors.EVENT_READ, sock)

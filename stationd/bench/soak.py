@@ -23,7 +23,6 @@ import asyncio
 import secrets
 import shutil
 import socket
-import subprocess
 import sys
 import tempfile
 import time
@@ -70,14 +69,13 @@ from stationd.station.sdnotify import Notifier
 
 RELOAD_SETTLE_S = 0.5    # after a reload is taken, before the shift goes on
 LIFT_DOWN_S = 1.5        # how long a station reloaded onto a dead lift runs before it is fixed
-REBIND_TRIES = 30        # 1 s apart: a simulated device taking its port back after an outage
 
 
 def _free_port() -> int:
     """A free TCP port on loopback *outside* the kernel's ephemeral range: a client that keeps
     reconnecting to a port in that range while nothing listens can be given that very port as
-    its own and connect to itself (TCP simultaneous open), and then holds it: the device
-    coming back cannot bind its port again."""
+    its own (TCP simultaneous open; the link layer refuses such a socket, but it held the port
+    for that moment)."""
     try:
         low = int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
     except (OSError, ValueError, IndexError):
@@ -91,20 +89,6 @@ def _free_port() -> int:
                 continue
             return port
     raise OSError("no free TCP port below the ephemeral range")
-
-
-def _holders(port: int) -> str:
-    """What holds the port a simulated device could not bind again (ss), for the record."""
-    try:
-        out = subprocess.run(["/usr/bin/ss", "-tanp"], capture_output=True, text=True, timeout=5,
-                             check=False).stdout
-    except (OSError, subprocess.SubprocessError):
-        return "ss not available"
-    lines = [ln.split() for ln in out.splitlines()[1:]]
-    return "; ".join(" ".join(ln[:5]) for ln in lines if any(
-        f.endswith(f":{port}") for f in ln[3:5]))[:300] or "no socket on it now"
-
-
 
 
 class Watch:
@@ -191,7 +175,6 @@ class DaemonHooks(SimDevices):
         super().__init__(*args, **kw)
         self.watch, self.files, self._reload, self._recorded = watch, files, reload, recorded
         self.daemon: asyncio.Task[None] | None = None
-        self.rebind_waits: list[str] = []     # a simulated device that could not come back
 
     async def arrive(self, vin: str, model_code: int) -> None:
         await super().arrive(vin, model_code)
@@ -215,16 +198,7 @@ class DaemonHooks(SimDevices):
                             and not self.controller.tool_enabled, timeout)
 
     async def device_up(self, device: Device) -> None:
-        for attempt in range(REBIND_TRIES):
-            try:
-                await super().device_up(device)
-                break
-            except OSError as exc:   # the simulated device's port not free yet: its problem
-                port = self.files.wrench_port if device == "wrench" else self.files.lift_port
-                self.rebind_waits.append(f"{device}: {exc} ({_holders(port)})")
-                if attempt == REBIND_TRIES - 1:
-                    raise
-                await asyncio.sleep(1.0)
+        await super().device_up(device)
         await _until(lambda: self.watch.state in ("tracking", "waiting for vehicle"), 30)
 
     async def _reloaded(self) -> None:
@@ -373,8 +347,6 @@ def soak_station(plan: list[Step], *, load: int = 0, seed: int = 0) -> SoakTally
     for e in bus.of(Refused):
         if isinstance(e, Refused):
             tally.refused(_kind(e.reason))
-    if hooks.rebind_waits:
-        tally.extra["simulated_device_rebind_waits"] = hooks.rebind_waits[:10]
     tally.extra.update({
         "device_faults": dict(Counter(e.device for e in bus.of(DeviceHealth)
                                       if isinstance(e, DeviceHealth) and not e.ok)),
