@@ -126,6 +126,27 @@ def parse_modbus_url(text: str) -> tuple[LinkSpec, dict[str, float | None]]:
     return spec, opts
 
 
+class _Heard:
+    """Mixed into pymodbus's clients: counts the bytes received.  Its framer drops what it
+    cannot parse and then reports "No response", so only the count tells a peer that answered
+    garbage (ProtocolError, as on every other protocol) from a silent one (a timeout)."""
+
+    heard = 0
+
+    def recv(self, size: int | None) -> bytes:
+        data: bytes = super().recv(size)  # type: ignore[misc]  # the client's, after us
+        self.heard += len(data)
+        return data
+
+
+class _HeardTcp(_Heard, ModbusTcpClient):
+    pass
+
+
+class _HeardSerial(_Heard, ModbusSerialClient):
+    pass
+
+
 class ModbusLink:
     """One open connection wrapped in a pymodbus synchronous client (no retries: the caller
     polls again).  Errors name ``device`` ("" leaves that to the caller)."""
@@ -134,7 +155,7 @@ class ModbusLink:
         self.spec = spec
         self.device = device
         self.wording = wording
-        self._client: ModbusTcpClient | ModbusSerialClient | None = None
+        self._client: _HeardTcp | _HeardSerial | None = None
         self._conn: Any = None  # the socket or serial port, ours to close
 
     def _error(self, cls: type[DeviceError], message: str, code: int | None = None
@@ -150,11 +171,11 @@ class ModbusLink:
                 sock = connect_tcp(s.target, s.port, timeout, self.wording.refused)
             except DeviceError as exc:
                 raise self._error(type(exc), str(exc)) from None
-            tcp = ModbusTcpClient(s.target, port=s.port, timeout=timeout, retries=0)
+            tcp = _HeardTcp(s.target, port=s.port, timeout=timeout, retries=0)
             tcp.socket = sock  # connect() then sees an open socket and keeps it
             self._client, self._conn = tcp, sock
             return
-        rtu = ModbusSerialClient(s.target, framer=FramerType.RTU, baudrate=s.baud, bytesize=8,
+        rtu = _HeardSerial(s.target, framer=FramerType.RTU, baudrate=s.baud, bytesize=8,
                                  parity=s.parity, stopbits=s.stopbits, timeout=timeout,
                                  retries=0)
         try:
@@ -179,11 +200,16 @@ class ModbusLink:
         # each keep a copy of the connect parameters, and both time a request.
         client.comm_params.timeout_connect = timeout
         client.transaction.comm_params.timeout_connect = timeout
+        heard = client.heard
         try:
             rr = fn(client)
         except ConnectionException as exc:
             raise self._error(ConnectionLostError, f"link lost {what}: {exc.string}") from None
         except ModbusIOException as exc:
+            if "No response" in exc.string and client.heard > heard:
+                raise self._error(ProtocolError, f"unintelligible answer {what}: "
+                                                 f"{client.heard - heard} bytes that are not "
+                                                 f"a Modbus reply") from None
             if "No response" in exc.string:
                 raise self._error(DeviceTimeoutError, no_answer or f"no answer within "
                                                                    f"{timeout:g} s {what}"

@@ -11,6 +11,7 @@ from drivers.errors import (
     ConnectionLostError,
     DeviceError,
     DeviceTimeoutError,
+    ProtocolError,
     RefusedError,
 )
 from drivers.lift import open_lift
@@ -114,3 +115,32 @@ def test_sim_url_over_rtu():
         lift.plc.raise_lift()
         s = lift.read_state()
         assert s.ready and s.model_code == 7 and s.vin is None
+
+
+def test_garbage_on_the_line_is_a_protocol_error_not_silence():
+    """A peer on the line that answers with something else (another protocol, a wrong baud
+    rate's noise) is ProtocolError, as over TCP and Open Protocol; silence stays a timeout."""
+    import threading
+
+    import serial
+
+    pty = PtyPair()
+    peer = serial.Serial(pty.paths[0], 19200, timeout=0.05)
+    stop = threading.Event()
+
+    def answer_garbage() -> None:
+        while not stop.is_set():
+            if peer.read(64):
+                peer.write(b"\xff\x00garbage, not a Modbus reply\r\n")
+
+    thread = threading.Thread(target=answer_garbage, daemon=True)
+    thread.start()
+    try:
+        with lift_for(pty.paths[1]) as lift, pytest.raises(
+                ProtocolError, match=r"unintelligible answer .*bytes that are not a Modbus"):
+            lift.read_state(timeout=0.3)
+    finally:
+        stop.set()
+        thread.join(2.0)
+        peer.close()
+        pty.close()

@@ -15,6 +15,7 @@ from drivers.errors import (
     ConnectTimeoutError,
     DeviceError,
     DeviceTimeoutError,
+    ProtocolError,
     RefusedError,
 )
 from drivers.lift import RegisterMap, open_lift
@@ -165,8 +166,9 @@ def test_silent_plc_times_out_then_recovers(plc):
         assert lift.read_state().height_mm == 0.0
 
 
-def test_garbage_answers_look_like_silence():
-    """pymodbus drops frames it cannot parse, so a non-Modbus peer times out."""
+def test_garbage_answers_are_a_protocol_error_not_silence():
+    """pymodbus drops frames it cannot parse; the link tells a peer that answered something
+    else from a silent one, as Open Protocol does (ProtocolError, the keeper's "garbage")."""
     server = socket.socket()
     server.bind(("127.0.0.1", 0))
     server.listen(1)
@@ -180,7 +182,9 @@ def test_garbage_answers_look_like_silence():
     thread = threading.Thread(target=serve)
     thread.start()
     try:
-        with lift_for(server.getsockname()[1]) as lift, pytest.raises(DeviceTimeoutError):
+        with lift_for(server.getsockname()[1]) as lift, pytest.raises(
+                ProtocolError, match=r"unintelligible answer .*: \d+ bytes that are not a "
+                                     r"Modbus reply"):
             lift.read_state(timeout=0.2)
     finally:
         thread.join(2.0)
