@@ -487,7 +487,8 @@ class Station:
         sides = {"left": res.left.to_json(), "right": res.right.to_json()}
         if self.frames is not None:   # the commissioning screen's latest frames (no copy)
             for side, frame, det in (("left", left, res.left), ("right", right, res.right)):
-                self.frames.put(name, side, frame.image, frame_summary(det), frame.timestamp)
+                self.frames.put(name, side, frame.image, frame_summary(det), frame.timestamp,
+                                det.search_image)
         if not res.found or res.point_mm is None or res.normal is None:
             return PairView(str(res.reason), exposure, timings_ms=timings, sides=sides)
         crops = {}

@@ -56,6 +56,9 @@ class Detection:
     edges_used: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
     edges_dropped: np.ndarray | None = field(default=None, repr=False)  # near, not assigned
     timings_ms: dict[str, float] = field(default_factory=dict)
+    # the reduced image the search ran on (1/search_scale of the frame, or finer after a
+    # retry): the commissioning screen shows it rather than reducing the 20 MP frame again
+    search_image: np.ndarray | None = field(default=None, repr=False)
 
     def to_json(self) -> dict[str, Any]:
         def vec(a: np.ndarray | None) -> list[float] | None:
@@ -98,12 +101,14 @@ def reduce(image: np.ndarray, scale: int) -> np.ndarray:
 
 
 def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = None,
-               marker: MarkerSpec | None = None, timings: dict[str, float] | None = None
+               marker: MarkerSpec | None = None, timings: dict[str, float] | None = None,
+               searched: list[np.ndarray] | None = None
                ) -> tuple[list[Detection], list[str]]:
     """Every marker in the image, and the reasons candidates were refused.
 
     ``timings``, when given, receives the search's stage times (ms), which a refusal for
-    want of candidates would otherwise not show.
+    want of candidates would otherwise not show; ``searched``, when given, receives the
+    reduced image the search ended on (the last one, after a finer retry).
     """
     params = params or VisionParams()
     marker = marker or MarkerSpec()
@@ -135,6 +140,8 @@ def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = 
         if cands or scale <= 2 or not 0 < purple <= retry_area:
             break
         scale //= 2
+    if searched is not None:
+        searched.append(small)
     found: list[Detection] = []
     reasons: list[str] = []
     for cand in cands[: params.max_candidates]:
@@ -160,17 +167,19 @@ def detect(image: np.ndarray, camera: Camera, params: VisionParams | None = None
     """The one marker in view; refused when there is none or more than one."""
     t0 = time.perf_counter()
     search: dict[str, float] = {}
-    found, reasons = detect_all(image, camera, params, marker, search)
+    searched: list[np.ndarray] = []
+    found, reasons = detect_all(image, camera, params, marker, search, searched)
     total = (time.perf_counter() - t0) * 1e3
+    small = searched[-1] if searched else None
     if len(found) == 1:
         det = found[0]
         det.timings_ms["total"] = total
-        return det
+        return replace(det, search_image=small)
     if len(found) > 1:
         return Detection(False, f"ambiguous: {len(found)} markers in view",
-                         timings_ms={**search, "total": total})
+                         timings_ms={**search, "total": total}, search_image=small)
     reason = "; ".join(dict.fromkeys(reasons)) or "marker not found"
-    return Detection(False, reason, timings_ms={**search, "total": total})
+    return Detection(False, reason, timings_ms={**search, "total": total}, search_image=small)
 
 
 def _coverage(e: Ellipse, pts: np.ndarray) -> float:

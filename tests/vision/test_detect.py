@@ -38,6 +38,8 @@ def test_no_marker_is_a_refusal_with_reason(camera):
     img = render(crop_camera(camera, (0, 0, 400, 300)), Scene(**NOISE)).image
     d = detect(img, crop_camera(camera, (0, 0, 400, 300)))
     assert not d.found and "no purple region" in d.reason
+    # a refusal carries the reduced image too: the screens show every frame, marker or not
+    assert d.search_image is not None and d.search_image.shape == (300 // 8, 400 // 8, 3)
 
 
 def test_two_markers_are_ambiguous_but_both_found_by_detect_all(camera):
@@ -124,6 +126,10 @@ def test_a_marker_too_small_for_the_reduced_search_is_found_at_finer_scale(camer
     d = detect(v.image, v.camera, VisionParams(), SPEC)
     assert d.found, d.reason
     assert np.hypot(*(d.centre_px - v.centre_px)) < 0.1
+    # the search image it carries (the screens show it) is the finer one it found the marker in
+    assert d.search_image is not None and d.search_image.shape[:2] == (h // 4, w // 4)
+    # the search image it carries (the screens show it) is the finer one it found the marker in
+    assert d.search_image is not None and d.search_image.shape[:2] == (h // 4, w // 4)
 
 
 def test_a_frame_without_purple_is_searched_once_not_at_every_scale(camera, monkeypatch):

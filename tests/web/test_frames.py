@@ -31,6 +31,24 @@ def test_jpeg_is_downscaled_and_cached_until_the_next_frame():
     assert cam is not None and cam.seq == 1 and abs((cam.fps or 0) - 10.0) < 1e-6
 
 
+def test_overview_is_encoded_from_the_preview_never_wider_and_crops_stay_full_resolution():
+    store = LatestFrames()
+    img = frame(2, 800, 1600)
+    preview = np.full((100, 200), 77, np.uint8)     # unlike the frame: tells which was used
+    store.put("p1", "left", img, grabbed_at=1.0, preview=preview)
+    for asked, shape in ((960, (100, 200)), (100, (50, 100))):
+        data = store.jpeg("p1", "left", width=asked)
+        assert data is not None
+        got = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+        assert got.shape == shape
+        assert abs(float(got.mean()) - 77.0) < 2.0
+    data = store.crop("p1", "left", x=800, y=400, size=64)
+    assert data is not None
+    crop = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    assert crop.shape == (64, 64)
+    assert abs(float(crop.mean()) - float(img[368:432, 768:832].mean())) < 3.0
+
+
 def test_crop_is_full_resolution_and_clamped_inside():
     store = LatestFrames()
     img = frame()
