@@ -26,18 +26,32 @@ function legend() {
   }
 }
 
+// The map is rebuilt only when the bolts or the screen's size change (a state, a label, a
+// resize); a snapshot that only moves the wrench (most of them: up to 10 a second while it
+// is carried) moves its mark and nothing else.  The browser often runs on the station's own
+// cores: a full redraw per snapshot cost it a tenth of a core, taken from the vision.
+let mapKey = "", toMap = null;
 function drawMap(view) {
   const svg = $("bolts");
   const box = $("map").getBoundingClientRect();
   const W = Math.max(200, box.width), H = Math.max(150, box.height);
+  const bolts = view.bolts;
+  const key = `${W}x${H}|${JSON.stringify(bolts)}`;
+  if (key !== mapKey) {
+    mapKey = key;
+    toMap = buildMap(svg, bolts, W, H);
+  }
+  drawWrench(svg, view.wrench, W, H);
+}
+
+function buildMap(svg, bolts, W, H) {
   svg.setAttribute("viewBox", `0 0 ${W} ${H}`);
   svg.replaceChildren();
-  const bolts = view.bolts;
-  if (!bolts.length) return;
-  const pts = bolts.map((b) => [b.x, b.y]);
-  if (view.wrench && !view.wrench.lost) pts.push([view.wrench.x, view.wrench.y]);
-  let x0 = Math.min(...pts.map((p) => p[0])), x1 = Math.max(...pts.map((p) => p[0]));
-  let y0 = Math.min(...pts.map((p) => p[1])), y1 = Math.max(...pts.map((p) => p[1]));
+  if (!bolts.length) return null;
+  // the frame is the bolts' (a wrench beyond them is drawn at the edge): the map does not
+  // rescale as the wrench moves
+  const xs = bolts.map((b) => b.x), ys = bolts.map((b) => b.y);
+  const x0 = Math.min(...xs), x1 = Math.max(...xs), y0 = Math.min(...ys), y1 = Math.max(...ys);
   const span = Math.max(x1 - x0, y1 - y0, 100);
   const pad = 100, s = Math.min((W - 2 * pad) / Math.max(x1 - x0, span * 0.2),
                                (H - 2 * pad) / Math.max(y1 - y0, span * 0.2));
@@ -65,15 +79,31 @@ function drawMap(view) {
     placed.push([b, g, x, y]);
   }
   placeLabels(placed, r, dense, W, H);
-  const w = view.wrench;
-  if (w && w.x !== undefined) {
-    const g = el("g", {class: "wrench-mark" + (w.lost ? " wrench-lost" : ""), id: "wrench-mark",
-      transform: `translate(${X(w.x).toFixed(1)},${Y(w.y).toFixed(1)})`});
-    g.appendChild(el("circle", {r: 12}));
-    g.appendChild(el("line", {x1: -26, y1: 0, x2: 26, y2: 0}));
-    g.appendChild(el("line", {x1: 0, y1: -26, x2: 0, y2: 26}));
-    svg.appendChild(g);
+  return [X, Y];
+}
+
+function drawWrench(svg, w, W, H) {
+  let g = document.getElementById("wrench-mark");
+  if (!toMap || !w || w.x === undefined) {
+    if (g) g.remove();
+    return;
   }
+  if (!g) {
+    g = document.createElement("div");
+    g.id = "wrench-mark";
+    const mark = el("svg", {viewBox: "-30 -30 60 60"});
+    mark.appendChild(el("circle", {r: 12}));
+    mark.appendChild(el("line", {x1: -26, y1: 0, x2: 26, y2: 0}));
+    mark.appendChild(el("line", {x1: 0, y1: -26, x2: 0, y2: 26}));
+    g.appendChild(mark);
+    $("map").appendChild(g);
+  }
+  const [X, Y] = toMap;
+  // map units are CSS pixels (the view box is the map's own size)
+  const x = Math.min(W - 14, Math.max(14, X(w.x))), y = Math.min(H - 14, Math.max(14, Y(w.y)));
+  const cls = "wrench-mark" + (w.lost ? " wrench-lost" : "");
+  if (g.className !== cls) g.className = cls;
+  g.style.transform = `translate(${x.toFixed(1)}px,${y.toFixed(1)}px)`;
 }
 
 // Each bolt's label (its id, and its state words when they matter) goes where it collides
@@ -145,17 +175,24 @@ function placeLabels(placed, r, dense, W, H) {
   }
 }
 
+// a text is written only when it changed: rewriting the same words still costs the browser
+// a style and layout pass, ten times a second
+function setText(id, text) {
+  const e = $(id);
+  if (e.textContent !== String(text)) e.textContent = text;
+}
+
 function render(view) {
   window.lastView = view;
-  $("vin").textContent = view.vehicle ? view.vehicle.vin : "no vehicle";
-  $("model").textContent = view.vehicle ? view.vehicle.model + (view.vehicle.rework ? " (rework)" : "") : "";
-  $("state").textContent = view.state;
-  $("done").textContent = view.counters.done;
-  $("total").textContent = view.counters.total;
-  $("nok").textContent = view.counters.nok;
+  setText("vin", view.vehicle ? view.vehicle.vin : "no vehicle");
+  setText("model", view.vehicle ? view.vehicle.model + (view.vehicle.rework ? " (rework)" : "") : "");
+  setText("state", view.state);
+  setText("done", view.counters.done);
+  setText("total", view.counters.total);
+  setText("nok", view.counters.nok);
   $("nok-wrap").style.color = view.counters.nok ? "" : "var(--dim)";
   const h = $("headline");
-  h.textContent = view.headline;
+  setText("headline", view.headline);
   h.title = view.headline;
   // red: fault, stop; amber: a refusal the operator resolves; neutral: the wrench is not on a
   // bolt (a normal state between bolts, never shown as an alarm)
@@ -166,12 +203,22 @@ function render(view) {
   // the per-pair reasons of a wrench out of view are the commissioning screen's business:
   // here one line, the full text on hover
   $("wrench").title = w && w.lost ? w.reason : "";
-  $("wrench").textContent = !w ? "not localized" : w.lost ? "not in view (details: Cameras)" :
+  setText("wrench", !w ? "not localized" : w.lost ? "not in view (details: Cameras)" :
     `X ${fmt(w.x, 0)}  Y ${fmt(w.y, 0)}  Z ${fmt(w.z, 0)} mm, tilt ${fmt(w.tilt, 1)}\u00B0` +
-    (w.candidate ? `, near ${w.candidate} (${fmt(w.distance, 1)} mm)` : "");
+    (w.candidate ? `, near ${w.candidate} (${fmt(w.distance, 1)} mm)` : ""));
+  const results = view.results.slice(0, 6);
+  const rkey = JSON.stringify(results), dkey = JSON.stringify(view.devices);
+  if (rkey !== shownKeys.results) { shownKeys.results = rkey; drawResults(results); }
+  if (dkey !== shownKeys.devices) { shownKeys.devices = dkey; drawDevices(view.devices); }
+}
+
+// what the tables show now: they are redrawn only when it changed
+const shownKeys = {results: "", devices: ""};
+
+function drawResults(results) {
   const tb = $("results");
   tb.replaceChildren();
-  for (const r of view.results.slice(0, 6)) {
+  for (const r of results) {
     const tr = document.createElement("tr");
     tr.className = r.ok ? "res-ok" : "res-nok";
     const lim = (v, lo, hi, d) => {
@@ -184,10 +231,13 @@ function render(view) {
       `<td>${lim(r.angle_deg, r.angle_min, r.angle_max, 0)}</td>`;
     tb.appendChild(tr);
   }
+}
+
+function drawDevices(devices) {
   const ul = $("devices");
   ul.replaceChildren();
   // the faulty first, each on its own lines (a long URL wraps); the healthy on one line
-  const devs = Object.entries(view.devices).sort((a, b) => Number(a[1].ok) - Number(b[1].ok));
+  const devs = Object.entries(devices).sort((a, b) => Number(a[1].ok) - Number(b[1].ok));
   for (const [name, d] of devs) {
     const li = document.createElement("li");
     li.className = d.ok ? "dev-ok" : d.kind === "opening" ? "dev-wait" : "dev-bad";
