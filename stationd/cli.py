@@ -323,9 +323,17 @@ def build_parser() -> argparse.ArgumentParser:
                     "windows on / and /cameras; print latency and the daemon's CPU with and "
                     "without")
     bs.add_argument("--clients", choices=("chromium", "sse"), default="chromium",
-                    help="with --browsers: real headless Chromium (default), or SSE readers "
-                    "and frame loaders standing in for them (the server's own cost, without "
-                    "browsers rendering on the same cores)")
+                    help="with --browsers: real headless Chromium on this machine's cores "
+                    "(default), or SSE readers and frame loaders in a process of their own "
+                    "making the same requests, as browsers on the panel PCs would (the "
+                    "daemon's own cost, without browsers rendering beside it)")
+    bs.add_argument("--passes", type=int, default=1, metavar="K",
+                    help="with --browsers: alternate K passes with the screens and K without "
+                    "(after a first without), pooled (default: %(default)s)")
+    bs.add_argument("--browser-nice", type=int, default=5, metavar="N",
+                    help="with --browsers: run Chromium N steps below the daemon's priority, "
+                    "as on a station PC where the unit's Nice=-5 puts the daemon above a "
+                    "kiosk browser at 0 (default: %(default)s; 0: the same priority)")
     bs.set_defaults(func=cmd_bench_station)
     bk = bsub.add_parser("soak", help="the daemon through a long shift: outages, reworks, load")
     bk.add_argument("--bolts", type=int, default=100,

@@ -21,6 +21,8 @@ import asyncio
 import contextlib
 import http.client
 import json
+import multiprocessing
+import os
 import shutil
 import subprocess
 import tempfile
@@ -111,15 +113,16 @@ class ScreenClients:
     ("chromium" or "sse"), ``close()`` ends them.  Browser ``i`` shows ``/`` when ``i`` is
     even, ``/cameras`` when odd (two browsers: the operator's and the commissioning one)."""
 
-    def __init__(self, url: str, n: int, force_sse: bool = False) -> None:
+    def __init__(self, url: str, n: int, force_sse: bool = False, nice: int = 0) -> None:
         self.url, self.n = url, n
+        self.nice = nice
         self.pages = ["" if i % 2 == 0 else "cameras" for i in range(n)]
         self.kind = "none"
         self.why_not_chromium = ""
         self._procs: list[subprocess.Popen[bytes]] = []
         self._dirs: list[tempfile.TemporaryDirectory[str]] = []
-        self._stop = threading.Event()
-        self._threads: list[threading.Thread] = []
+        self._stop_mp: Any = None
+        self._stand_ins: Any = None   # a multiprocessing Process
         self._force_sse = force_sse
 
     def start(self) -> str:
@@ -129,8 +132,9 @@ class ScreenClients:
                 for page in self.pages:
                     d = tempfile.TemporaryDirectory(prefix="stationd-bench-browser-")
                     self._dirs.append(d)
+                    niced = ["nice", "-n", str(self.nice)] if self.nice else []
                     self._procs.append(subprocess.Popen(  # noqa: S603 - a fixed argv
-                        [exe, "--headless", "--no-sandbox", "--disable-gpu",
+                        [*niced, exe, "--headless", "--no-sandbox", "--disable-gpu",
                          "--disable-dev-shm-usage", "--no-first-run", "--disable-sync",
                          "--disable-background-networking", "--disable-component-update",
                          f"--user-data-dir={d.name}", "--window-size=1920,1080",
@@ -146,23 +150,28 @@ class ScreenClients:
         return self.fallback()
 
     def fallback(self) -> str:
-        """SSE readers and frame loaders in threads instead of browsers."""
+        """SSE readers and frame loaders instead of browsers, in a process of their own (as
+        browsers on the panel PCs: the daemon serves the same requests, and their reading
+        neither holds its GIL nor counts as its CPU)."""
         self._end_browsers()
         self.kind = "sse"
-        port = int(self.url.rstrip("/").rsplit(":", 1)[1])
-        for page in self.pages:
-            if page == "":
-                got = {"bytes": 0, "snapshots": 0}
-                t = threading.Thread(target=_client, args=(port, self._stop, got), daemon=True)
-            else:
-                t = threading.Thread(target=_cameras_client, args=(self.url, self._stop),
-                                     daemon=True)
-            t.start()
-            self._threads.append(t)
+        ctx = multiprocessing.get_context("spawn")   # not a fork of the daemon's threads
+        self._stop_mp = ctx.Event()
+        proc = ctx.Process(target=stand_ins, args=(self.url, self.pages, self._stop_mp),
+                           name="stationd-bench-screens", daemon=True)
+        proc.start()
+        self._stand_ins = proc
         return self.kind
 
     def alive(self) -> bool:
         return all(p.poll() is None for p in self._procs)
+
+    def cpu_s(self) -> float:
+        """CPU seconds the browsers (or their stand-ins) have used so far."""
+        pids = [p.pid for p in self._procs]
+        if self._stand_ins is not None and self._stand_ins.pid is not None:
+            pids.append(self._stand_ins.pid)
+        return tree_cpu_s(pids)
 
     def _end_browsers(self) -> None:
         for p in self._procs:
@@ -181,10 +190,60 @@ class ScreenClients:
         self._dirs = []
 
     def close(self) -> None:
-        self._stop.set()
         self._end_browsers()
-        for t in self._threads:
-            t.join(5)
+        if self._stand_ins is not None:
+            self._stop_mp.set()
+            self._stand_ins.join(10)
+            if self._stand_ins.is_alive():
+                self._stand_ins.kill()
+                self._stand_ins.join()
+            self._stand_ins = None
+
+
+def stand_ins(url: str, pages: list[str], stop: Any) -> None:
+    """The stand-in clients' process: one thread per page (``""``: the operator's event
+    stream, ``"cameras"``: the cameras screen), until ``stop`` (a multiprocessing Event)."""
+    port = int(url.rstrip("/").rsplit(":", 1)[1])
+    done = threading.Event()
+    threads = []
+    for page in pages:
+        if page == "":
+            t = threading.Thread(target=_client, args=(port, done, {"bytes": 0, "snapshots": 0}),
+                                 daemon=True)
+        else:
+            t = threading.Thread(target=_cameras_client, args=(url, done), daemon=True)
+        t.start()
+        threads.append(t)
+    stop.wait()
+    done.set()
+
+
+def tree_cpu_s(roots: list[int]) -> float:
+    """User and system CPU seconds of the processes ``roots`` and all their descendants,
+    from ``/proc`` (a browser is a tree of processes; those that ended count through their
+    parent's reaped-children times).  0 where ``/proc`` cannot be read."""
+    parent: dict[int, int] = {}
+    times: dict[int, float] = {}
+    tick = float(os.sysconf("SC_CLK_TCK")) if hasattr(os, "sysconf") else 100.0
+    try:
+        pids = [int(d) for d in os.listdir("/proc") if d.isdigit()]
+    except OSError:
+        return 0.0
+    for pid in pids:
+        try:
+            with open(f"/proc/{pid}/stat", "rb") as f:
+                fields = f.read().rsplit(b")", 1)[1].split()
+        except (OSError, IndexError):
+            continue   # ended meanwhile
+        parent[pid] = int(fields[1])
+        times[pid] = sum(int(x) for x in fields[11:15]) / tick
+    wanted = set(roots)
+    grew = True
+    while grew:
+        more = {p for p, pp in parent.items() if pp in wanted and p not in wanted}
+        wanted |= more
+        grew = bool(more)
+    return sum(times.get(p, 0.0) for p in wanted)
 
 
 def _run(seconds: float, rate_hz: float, clients: int, serve: bool) -> dict[str, Any]:

@@ -59,3 +59,47 @@ def test_bench_station_with_two_browsers_reports_latency_and_cpu_with_and_withou
         sc["without"]["latency_ms"]["p95"]
     assert set(sc["delta"]) == {"latency_p95_ms", "latency_p50_ms", "cpu_pct_of_a_core"}
     assert sc["targets"] == {"latency_p95_ms": 10.0, "cpu_pct_of_a_core": 5.0}
+
+
+@pytest.mark.timeout(300)
+def test_bench_station_stand_in_clients_in_their_own_process_over_several_passes(
+        tmp_path, capsys):
+    """``--clients sse --passes 2``: the stand-ins for browsers on the panel PCs run in a
+    process of their own (their CPU is theirs, not the daemon's) and are really served; two
+    passes with them, three without, pooled."""
+    out = tmp_path / "bench-station.json"
+    code = main(["bench", "station", "--cycles", "2", "--seed", "3", "--browsers", "2",
+                 "--clients", "sse", "--passes", "2", "--json", "--out", str(out)])
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert code == 0
+    sc = summary["screens"]
+    assert sc["clients"] == "sse" and sc["passes"] == 2
+    assert len(sc["without"]["passes"]) == 3
+    assert sc["frames_served"] >= 2 and sc["snapshots_sent"] >= 2
+    assert sc["browser_cpu_pct_of_a_core"] >= 0
+    # the daemon's CPU per pass with the screens is of the same order as without (the
+    # clients' reading is not in it), whatever the machine's speed
+    assert sc["with"]["cpu_s"] < 3 * sc["without"]["cpu_s"]
+
+
+def test_tree_cpu_counts_a_process_and_its_children():
+    import subprocess
+    import sys
+
+    from stationd.web.bench import tree_cpu_s
+
+    busy = "import time\nt = time.process_time()\nwhile time.process_time() - t < 0.3: pass\n"
+    parent = subprocess.Popen([sys.executable, "-c",  # a child that runs a busy grandchild
+                               "import subprocess, sys, time\n"
+                               f"subprocess.run([sys.executable, '-c', {busy!r}])\n"
+                               "time.sleep(5)\n"])
+    try:
+        import time
+        deadline = time.monotonic() + 20
+        while tree_cpu_s([parent.pid]) < 0.3 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert tree_cpu_s([parent.pid]) >= 0.3      # the grandchild's, reaped by the child
+        assert tree_cpu_s([]) == 0.0
+    finally:
+        parent.kill()
+        parent.wait()
