@@ -49,7 +49,7 @@ from stationd.station.matching import BoltMatcher, BoltRule, Match, MatchParams
 #: a result this long after the tool went off is not the last bolt's late one: the tool cannot
 #: tighten while disabled, and a controller reports within milliseconds
 LATE_RESULT_S = 5.0
-LIFT, WRENCH, VEHICLE = "lift", "wrench", "vehicle"
+LIFT, WRENCH, VEHICLE, DATABASE = "lift", "wrench", "vehicle", "database"
 # a refusal's measurements ("812 ms", "3.1 mm"), not the bolt ids in it ("B01"): the reason
 # "B18 is already done" and "B01 is already done" are two refusals, "(812 ms)" and "(790 ms)" one
 _DIGITS = re.compile(r"(?<![A-Za-z0-9_.:/+-])\d+(\.\d+)?")
@@ -499,6 +499,10 @@ class StationCore:
     def _on_DeviceFault(self, ev: DeviceFault) -> list[Action]:  # noqa: N802
         if ev.device == WRENCH:
             self._vin_pending = False
+        if ev.device == DATABASE:
+            # the load under way failed (the only database call the core waits for): the
+            # vehicle is loaded again once the database is back and the lift still ready
+            self._loading = False
         return self._fault(ev.t, ev.device, ev.kind, ev.reason)
 
     def _on_DeviceBack(self, ev: DeviceBack) -> list[Action]:  # noqa: N802

@@ -42,6 +42,7 @@ from stationd.errors import StationError
 from stationd.geometry.stereo import localize
 from stationd.geometry.tool import BoltEnd, bolt_end, fuse
 from stationd.station.core import (
+    DATABASE,
     LIFT,
     LOCALIZING,
     WRENCH,
@@ -92,7 +93,7 @@ from stationd.station.sdnotify import Notifier
 from stationd.vision.types import Refusal
 
 log = logging.getLogger("stationd")
-DATABASE = "database"
+NOT_PAIRS = (LIFT, WRENCH, DATABASE)   # the keepers that are not camera pairs
 RESULT_WAIT_S = 0.5         # one blocking wait for pushed results (a condition, not a poll)
 TICK_S = 0.5
 BAD_GRABS = 3               # a pair failing this many grabs in a row is a fault
@@ -193,9 +194,15 @@ class Station:
         for name in self._pair_names():
             self.keepers[name] = self._keeper(name, partial(self._open_pair, name),
                                               partial(self._reconnect_pair, name))
+        # the database too: opened by ``open`` (a first start that cannot open it exits), then
+        # kept like a device: a failed query reports it lost, the keeper probes it with
+        # backoff and the core hears it back
+        self.keepers[DATABASE] = self._keeper(DATABASE, self._database, _probe_database,
+                                              close=lambda repo: None)
 
     def _keeper(self, device: str, opener: Callable[[], Any],
-                reconnect: Callable[[Any], None]) -> DeviceKeeper[Any]:
+                reconnect: Callable[[Any], None],
+                close: Callable[[Any], None] | None = None) -> DeviceKeeper[Any]:
         """The device's keeper: its faults and returns go to the core as typed events."""
         async def on_fault(kind: str, reason: str) -> None:
             await self.feed(DeviceFault(time.time(), device, kind, reason))
@@ -204,7 +211,7 @@ class Station:
             await self.feed(DeviceBack(time.time(), device,
                                        reconnects if device == WRENCH else None))
 
-        return DeviceKeeper(device, open=opener, reconnect=reconnect, close=_close,
+        return DeviceKeeper(device, open=opener, reconnect=reconnect, close=close or _close,
                             on_fault=on_fault, on_back=on_back, blocking=self._call,
                             logger=log)
 
@@ -222,7 +229,7 @@ class Station:
     def grabbers(self) -> dict[str, StereoGrabber]:
         """The grabbers of the pairs that are up."""
         return {n: k.device.grabber for n, k in self.keepers.items()
-                if n not in (LIFT, WRENCH) and k.up and k.device is not None}
+                if n not in NOT_PAIRS and k.up and k.device is not None}
 
     @property
     def cycle(self) -> StationCore:
@@ -248,6 +255,12 @@ class Station:
             fault = keeper.open_now()
             if fault is not None:
                 self._pending.append(DeviceFault(time.time(), device, *fault))
+
+    def _database(self) -> Repository:
+        """The database for its keeper: opened by ``open`` before any device."""
+        if self.repo is None:
+            raise DeviceError("not open", device=DATABASE)
+        return self.repo
 
     def _pair_names(self) -> list[str]:
         return [n for n, pc in self.cfg.pairs.items() if pc.left and pc.right]
@@ -317,6 +330,8 @@ class Station:
         self.notifier.ready(f"{self.core.state.value}: {self.core.reason}")
         keep = [self.keepers[LIFT].run(self._poll_lift), self.keepers[WRENCH].run(self._results),
                 *(k.run() for n, k in self.keepers.items() if n not in (LIFT, WRENCH))]
+        # (the pairs' and the database's keepers have no ``use``: the vision loop and the
+        # database's callers tell them when their device failed or worked)
         tasks = [asyncio.create_task(c) for c in (*keep, self._vision_loop(stop),
                                                     self._tick_loop(stop))]
         try:
@@ -367,16 +382,10 @@ class Station:
             await self.feed(ResultIn(time.time(), result))
 
     async def _tick_loop(self, stop: asyncio.Event) -> None:
-        """Time for the core, the systemd watchdog, and the database's recovery probe."""
+        """Time for the core and the systemd watchdog."""
         next_ping = time.monotonic()
         while not stop.is_set():
             await self.feed(Tick(time.time()))
-            if DATABASE in self.core.faults and self.repo is not None:
-                try:
-                    await self._call(self.repo.models)
-                    await self.feed(DeviceBack(time.time(), DATABASE))
-                except STATION_FAULTS:
-                    pass
             now = time.monotonic()
             if self.notifier.watchdog_s and now >= next_ping:
                 self.notifier.watchdog()
@@ -617,6 +626,7 @@ class Station:
             infos = await self._call(repo.bolts_for_model, model)
             report = await self._call(repo.vehicle_report, a.vin)
         except STATION_FAULTS as exc:
+            self.keepers[DATABASE].lost(exc)       # its keeper probes it back, with backoff
             return DeviceFault(time.time(), DATABASE, "down", one_line(exc))
         self.bolts = {b.bolt_id: b for b in infos}
         status = {b.bolt_id: b.status for b in report.bolts}
@@ -715,6 +725,15 @@ def _reconnect(device: Any) -> None:
 
 def _close(device: Any) -> None:
     device.close()
+
+
+def _probe_database(repo: Repository) -> None:
+    """The database's "reconnect": one cheap query (the engine's pool reconnects by itself);
+    a failure is a device error, the keeper's kind of failure."""
+    try:
+        repo.models()
+    except STATION_FAULTS as exc:
+        raise DeviceError(one_line(exc), device=DATABASE) from None
 
 
 def _quiet(fn: Any) -> None:

@@ -199,7 +199,7 @@ def decode(raw: tuple[Any, ...]) -> tuple[Any, ...]:
         return ("result", dt * (1 + 20 * (n % 3 == 0)), n % 4 != 0, 1 + n % 3, n % 5 == 0,
                 n % 7 != 0)
     if kind == "fault":
-        return ("fault", dt, ["lift", "wrench", "pair1"][n % 3])
+        return ("fault", dt, ["lift", "wrench", "pair1", "database"][n % 4])
     if kind == "back":
         return ("back", dt, "", n % 3)
     return ("tick", dt * 20)
@@ -500,3 +500,22 @@ def test_frames_exposed_before_a_rundown_ended_never_select_after_it():
         sends += [a for a in d.core.feed(LocalizedIn(t, t - 0.02, pos, None))
                   if isinstance(a, SendParams)]
     assert [a.bolt for a in sends] == ["B2"]
+
+
+def test_a_database_fault_during_a_load_loads_the_vehicle_again_once_it_is_back():
+    """The load's answer was the database's fault: nothing is tracked, and once the database
+    is back and the lift still ready the vehicle is loaded again (it was never loaded again:
+    the load stayed "under way")."""
+    c = StationCore(PARAMS, leave_frames=2)
+    c.feed(Started(1.0))
+    first = c.feed(LiftRead(1.1, True, True, 7, "VINDB"))
+    assert [a for a in first if isinstance(a, LoadVehicle)]
+    c.feed(DeviceFault(1.2, "database", "down", "disk I/O error"))
+    assert c.state is State.FAULT and c.reason == "database: disk I/O error"
+    assert not [a for a in c.feed(LiftRead(1.3, True, True, 7, "VINDB"))
+                if isinstance(a, LoadVehicle)]                     # in fault: no load
+    c.feed(DeviceBack(1.4, "database"))
+    again = c.feed(LiftRead(1.5, True, True, 7, "VINDB"))
+    assert [a.vin for a in again if isinstance(a, LoadVehicle)] == ["VINDB"]
+    c.feed(VehicleLoaded(1.6, "VINDB", "M", BOLTS))
+    assert c.vin == "VINDB" and c.state is State.TRACKING

@@ -228,3 +228,56 @@ def test_frames_of_the_wrong_size_are_a_fault_not_an_exit(tmp_path, monkeypatch)
         assert st.cycle.state is State.FAULT and not _sends(st)
 
     _scenario(tmp_path, body)
+
+
+@pytest.mark.timeout(240)
+def test_a_database_failing_at_a_vehicle_is_a_fault_its_keeper_probes_back(tmp_path):
+    """The database fails as a vehicle arrives (a disk error, injected into the repository:
+    as root a real SQLite file cannot be made unreadable): a fault naming the database, no
+    vehicle, nothing sent; its keeper probes it with backoff (not at every tick) and once it
+    answers the vehicle is loaded."""
+    from db.errors import DbError
+
+    st, world = _station(tmp_path)
+    repo = st.repo
+    real_model, real_models = repo.model_for_code, repo.models
+    probes: list[float] = []
+    down = {"on": True}
+
+    def model_for_code(code):
+        if down["on"]:
+            raise DbError("disk I/O error")
+        return real_model(code)
+
+    def models():
+        probes.append(time.monotonic())
+        if down["on"]:
+            raise DbError("disk I/O error")
+        return real_models()
+
+    repo.model_for_code, repo.models = model_for_code, models
+
+    async def main():
+        stop = asyncio.Event()
+        task = asyncio.create_task(st.run(stop))
+        try:
+            st.lift.plc.set_vehicle(1, "DBFAULTVIN0000001")
+            st.lift.plc.raise_lift()
+            await _until(lambda: "database" in st.cycle.faults, 30)
+            assert st.cycle.state is State.FAULT and "database: disk I/O error" in st.cycle.reason
+            assert st.vin is None and not _sends(st)
+            await asyncio.sleep(4.0)
+            # backoff 0.5 s doubling to 5 s: a handful of probes, not one per tick
+            assert 2 <= len(probes) <= 5, probes
+            down["on"] = False
+            await _until(lambda: st.vin == "DBFAULTVIN0000001", 30)
+            assert "database" not in st.cycle.faults and _back(st, "database")
+        finally:
+            stop.set()
+            await task
+
+    try:
+        asyncio.run(main())
+    finally:
+        world.close()
+        st.close()
