@@ -242,6 +242,11 @@ def _camera_url(node: YamlNode, *, check: bool) -> str:
     return device_url(node.mapping(("url",), required=("url",))["url"], "camera", check=check)
 
 
+def _refuse(error: ConfigError) -> None:
+    """Raise ``error`` (through ``guard``: recorded when collecting)."""
+    raise error
+
+
 def _camera_ref(node: YamlNode, cameras: Collection[str] | None) -> str:
     """A camera name of a pair; ``cameras`` None: the section is unreadable, not checked."""
     cam = node.text()
@@ -409,18 +414,40 @@ class _Reader:
         if items is None:
             return {}, None
         urls: dict[str, str] = {}
+        device: dict[str, str] = {}   # the URL without its options -> the camera naming it
         for name, item in items:
             url = self.guard(None, _camera_url, item,
                              check=self.collect or self.require_devices)
-            if url is not None:
-                urls[name] = url
+            if url is None:
+                continue
+            same = device.setdefault(url.split("?", 1)[0], name)
+            if same != name:   # one camera as two: a pair would triangulate one image twice
+                self.guard(None, _refuse, item.error(
+                    f"the same camera as {same!r} ({url.split('?', 1)[0]}): every camera "
+                    "is one device"))
+                continue
+            urls[name] = url
         return urls, [name for name, _ in items]
 
     def pairs(self, node: YamlNode, cameras: Collection[str] | None) -> dict[str, PairConfig]:
         out: dict[str, PairConfig] = {}
+        used: dict[str, str] = {}   # camera -> "the left camera of pair P"
         for name, item in self.guard([], _pair_items, node):
             pair = self.guard(None, self.pair, name, item, cameras)
-            if pair is not None:
+            if pair is None:
+                continue
+            taken = False
+            for side, cam in (("left", pair.left), ("right", pair.right)):
+                if cam is None:
+                    continue
+                if cam in used:   # both images of a pair, or two pairs, from one camera
+                    self.guard(None, _refuse, item.mapping(PAIR_KEYS)[side].error(
+                        f"camera {cam!r} is already {used[cam]}: a pair needs two cameras "
+                        "of its own (one image triangulated with itself gives a confident, "
+                        "wrong point)"))
+                    taken = True
+                used.setdefault(cam, f"the {side} camera of pair {name!r}")
+            if not taken:
                 out[name] = pair
         return out
 

@@ -328,3 +328,23 @@ def test_a_bolt_without_pset_on_a_psets_only_controller_is_a_warning(sim_copy):
     [warning] = result.warnings
     assert warning.key == "wrench" and "B01 (SIM-1): no pset" in str(warning)
     assert "selects psets only" in str(warning)
+
+
+@pytest.mark.parametrize(("old", "new", "key", "message"), [
+    # a pair whose right image is its left camera's (one image triangulated with itself)
+    ("right: pair1_right", "right: pair1_left", "pairs.pair1.right",
+     "camera 'pair1_left' is already the left camera of pair 'pair1'"),
+    # two pairs sharing a camera
+    ("left: pair2_left", "left: pair1_right", "pairs.pair2.left",
+     "camera 'pair1_right' is already the right camera of pair 'pair1'"),
+    # two camera names for one device (its options aside)
+    ("pair2_left: {url: 'sim://pair2/left'}", "pair2_left: {url: 'sim://pair1/left?x=1'}",
+     "cameras.pair2_left", "the same camera as 'pair1_left' (sim://pair1/left)"),
+])
+def test_a_camera_serves_one_side_of_one_pair(sim_copy, old, new, key, message):
+    station = _edit(sim_copy / "station.yaml", old, new)
+    errors = check_station(station).errors
+    assert [(e.key, e.line) for e in errors][:1] == [(key, _line(station, new))]
+    assert message in str(errors[0])
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        load_station_config(station, station=True)

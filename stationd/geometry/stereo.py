@@ -123,6 +123,13 @@ def localize_detections(pair: StereoPair, left: Detection, right: Detection,
         side = "left" if not left.found else "right"
         reason = left.reason if not left.found else right.reason
         return StereoResult(False, f"{side}: {reason}", left, right)
+    if left.centre_px is not None and right.centre_px is not None \
+            and np.array_equal(left.centre_px, right.centre_px):
+        # two real cameras never agree to the last bit of a sub-pixel centre: this is one
+        # picture twice (one camera wired as both, a file given twice), which triangulates
+        # to a confident, wrong point
+        return StereoResult(False, "left and right are the same picture (one camera as "
+                                   "both?)", left, right)
     # narrowed by ``found``: a found detection carries all of these
     for d in (left, right):
         if d.centre_undist is None or d.normal is None or d.inner is None \

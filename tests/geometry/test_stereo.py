@@ -64,3 +64,17 @@ def test_a_missing_view_is_a_refusal(station_pair):
     dr = detect(blank, rv.camera, VisionParams(), SPEC)
     res = localize_detections(sc.crop_pair(station_pair, lv, rv), dl, dr)
     assert not res.found and res.reason.startswith("right:")
+
+
+def test_one_picture_given_as_both_views_is_refused_not_triangulated(station_pair):
+    """The same image as left and right (one camera wired as both, a file given twice) passed
+    the epipolar gate and triangulated to a confident point 80 mm off: now a refusal."""
+    pose = pose_in_pair(station_pair, seed=5)
+    lv, rv = _views(station_pair, pose)
+    dl = detect(lv.image, lv.camera, VisionParams(), SPEC)
+    again = detect(lv.image, lv.camera, VisionParams(), SPEC)   # the same picture, detected twice
+    pair = sc.crop_pair(station_pair, lv, rv)
+    res = localize_detections(pair, dl, again)
+    assert not res.found and "same picture" in res.reason
+    dr = detect(rv.image, rv.camera, VisionParams(), SPEC)
+    assert localize_detections(pair, dl, dr).found                 # the real pair still is
