@@ -25,9 +25,9 @@ from stationd.boltfile import load_bolts
 from stationd.config import StationConfig, load_station_config
 from stationd.errors import StationError
 from stationd.lock import StationLock, lock_path
-from stationd.station.core import LIFT, WRENCH
+from stationd.station.core import DATABASE, LIFT, WRENCH
 from stationd.station.daemon import OPEN_ERRORS, STATION_FAULTS, Station
-from stationd.station.events import EventBus
+from stationd.station.events import DeviceHealth, EventBus, StateChanged
 from stationd.station.sdnotify import Notifier
 
 log = logging.getLogger("stationd")
@@ -53,6 +53,8 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bo
     while not stop.is_set():
         try:
             await loop.run_in_executor(None, station.open)
+            if told:
+                station.bus.publish(DeviceHealth(DATABASE, True))
             return True
         except STATION_FAULTS as exc:
             wait = backoff.next()
@@ -61,6 +63,9 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bo
                 notifier.ready(f"fault: database: {one_line(exc)}")
                 told = True
             notifier.status(f"fault: database: {one_line(exc)}")
+            # the screens and /healthz say it too (the station's loop is not running yet)
+            station.bus.publish(DeviceHealth(DATABASE, False, "down", one_line(exc)))
+            station.bus.publish(StateChanged("fault", f"database: {one_line(exc)}"))
         try:
             await asyncio.wait_for(stop.wait(), wait)
         except TimeoutError:
@@ -95,11 +100,15 @@ class Screens:
         self._for: tuple[Any, str] | None = None
 
     async def follow(self, cfg: StationConfig) -> None:
+        """Serve the screens ``cfg`` asks for.  A database that does not open yet serves them
+        without the results pages (the operator and monitoring see the fault); called again
+        once it opens, they get their results."""
         key = (cfg.http, cfg.database_url)
-        if key == self._for:
+        if key == self._for and not (self.server is not None and self.server.results is None):
             if self.server is not None:     # a reload may add or remove a pair
                 self.server.set_devices(configured_devices(cfg))
             return
+        frames = self.frames if key == self._for else None   # the station holds them
         await self.stop()
         self._for = key
         if cfg.http is None:
@@ -107,10 +116,15 @@ class Screens:
         from db.repository import Repository
         from stationd.web import LatestFrames, Results, WebServer
 
-        self.frames = LatestFrames()
+        self.frames = frames if frames is not None else LatestFrames()
+        results = None
         try:
-            repo = Repository.open(cfg.database_url)
-            self.server = WebServer(self.bus, Results(repo), self.frames,
+            results = Results(Repository.open(cfg.database_url))
+        except OPEN_ERRORS as exc:
+            log.error("screens served without results until the database opens: %s",
+                      one_line(exc))
+        try:
+            self.server = WebServer(self.bus, results, self.frames,
                                     listen=cfg.http.listen, token=cfg.http.token,
                                     images_dir=cfg.records.images_dir,
                                     devices=configured_devices(cfg))
@@ -149,6 +163,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
             await loop.run_in_executor(None, station.close)
             notifier.stopping("stopping")
             return
+        await screens.follow(cfg)   # their results, if the database opened only now
         inner = asyncio.Event()
         task = asyncio.create_task(station.run(inner))
         log.info("stationd running: %s", cfg_path)

@@ -148,3 +148,71 @@ def test_a_database_folder_that_cannot_be_created_is_one_line_and_exit_2(tmp_pat
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
     assert "cannot create the station's lock" in r.stderr and "Traceback" not in r.stderr
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _get(url: str) -> tuple[int, str]:
+    import urllib.error
+    import urllib.request
+
+    try:
+        with urllib.request.urlopen(url, timeout=5) as r:  # noqa: S310 - loopback
+            return r.status, r.read().decode()
+    except urllib.error.HTTPError as exc:
+        return exc.code, exc.read().decode()
+
+
+@pytest.mark.timeout(180)
+def test_a_database_unusable_at_start_is_served_as_a_fault_then_the_results_come(tmp_path):
+    """A database file that is not a database at the first start: the daemon does not exit,
+    its screens and /healthz say "fault: database" meanwhile (monitoring must not see "no
+    daemon"), and once the file is usable the station runs and the results pages answer."""
+    import json
+
+    port = _free_port()
+    station = _sim_copy(tmp_path, **{"database: {url: 'sqlite:///stationd-sim.db'}":
+                                     "database: {url: 'sqlite:///stationd-sim.db'}\n"
+                                     f"http: {{listen: '127.0.0.1:{port}'}}"})
+    assert f"127.0.0.1:{port}" in station.read_text()
+    db = tmp_path / "stationd-sim.db"
+    db.write_text("this is not a database\n" * 100)
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(tmp_path / "notify"))
+    env = {**os.environ, "NOTIFY_SOCKET": str(tmp_path / "notify")}
+    p = subprocess.Popen([sys.executable, "-m", "stationd", "run", "--config", "station.yaml"],
+                         cwd=tmp_path, env=env, stderr=subprocess.PIPE, text=True)
+    base = f"http://127.0.0.1:{port}"
+    try:
+        _recv_until(sock, "fault: database", 90)
+        end = time.monotonic() + 30
+        while True:
+            try:
+                code, body = _get(base + "/healthz")
+                break
+            except OSError:
+                assert time.monotonic() < end, "the screens never answered"
+                time.sleep(0.2)
+        assert code == 503 and body.strip() == "fault"    # details: /api/status (token)
+        status = json.loads(_get(base + "/api/status")[1])
+        assert status["state"] == "fault" and "database" in status["reason"]
+        assert _get(base + "/api/vehicles")[0] == 503      # no results yet, said so
+        db.unlink()                                     # the disk is fixed: a new database
+        _recv_until(sock, "waiting for vehicle", 90)
+        end = time.monotonic() + 30
+        while _get(base + "/healthz")[0] != 200:
+            assert time.monotonic() < end, "healthz stayed in fault"
+            time.sleep(0.2)
+        assert _get(base + "/api/vehicles")[0] == 200
+        p.send_signal(signal.SIGTERM)
+        assert p.wait(timeout=60) == 0
+    finally:
+        if p.poll() is None:
+            p.kill()
+        err = p.stderr.read() if p.stderr else ""
+        sock.close()
+    assert "Traceback" not in err
