@@ -90,3 +90,30 @@ def _read_pid(fd: int) -> int | None:
     except OSError:
         return None
     return int(text) if text.isdigit() else None
+
+
+class StationLocks:
+    """The lock of the station a daemon runs now, moved when a reload names another database:
+    the new one is taken before the old one is let go, so a reload onto a database another
+    daemon runs is refused (and this daemon keeps its own), and the old one is free after."""
+
+    def __init__(self) -> None:
+        self.where: Path | None = None
+        self._lock: StationLock | None = None
+
+    def hold(self, database_url: str, records_dir: Path | None = None) -> None:
+        """Hold the lock of this database (raises :class:`LockHeldError` and keeps the one
+        held if another process has it)."""
+        where = lock_path(database_url, records_dir)
+        if where == self.where and self._lock is not None:
+            return
+        new = StationLock(where) if where is not None else None
+        if new is not None:
+            new.acquire()
+        self.release()
+        self.where, self._lock = where, new
+
+    def release(self) -> None:
+        if self._lock is not None:
+            self._lock.release()
+        self.where, self._lock = None, None

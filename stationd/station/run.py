@@ -24,7 +24,7 @@ from drivers.keeper import Backoff, one_line
 from stationd.boltfile import load_bolts
 from stationd.config import StationConfig, load_station_config
 from stationd.errors import StationError
-from stationd.lock import StationLock, lock_path
+from stationd.lock import StationLocks
 from stationd.station.core import DATABASE, LIFT, WRENCH
 from stationd.station.daemon import OPEN_ERRORS, STATION_FAULTS, Station
 from stationd.station.events import DeviceHealth, EventBus, StateChanged
@@ -73,7 +73,8 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bo
     return False
 
 
-async def serve(cfg_path: str, cfg: StationConfig, notifier: Notifier) -> None:
+async def serve(cfg_path: str, cfg: StationConfig, notifier: Notifier,
+                locks: StationLocks | None = None) -> None:
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     reload = asyncio.Event()
@@ -83,7 +84,7 @@ async def serve(cfg_path: str, cfg: StationConfig, notifier: Notifier) -> None:
     bus = EventBus()    # one for the daemon's life: the screens follow it across reloads
     screens = Screens(bus)
     try:
-        await serve_station(cfg_path, cfg, notifier, bus, screens, stop, reload)
+        await serve_station(cfg_path, cfg, notifier, bus, screens, stop, reload, locks)
     finally:
         await screens.stop()
 
@@ -151,10 +152,13 @@ def configured_devices(cfg: StationConfig) -> tuple[str, ...]:
 
 
 async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, bus: EventBus,
-                        screens: Screens, stop: asyncio.Event, reload: asyncio.Event) -> None:
+                        screens: Screens, stop: asyncio.Event, reload: asyncio.Event,
+                        locks: StationLocks | None = None) -> None:
     """Run the station of ``cfg`` until ``stop``; on ``reload`` validate ``cfg_path`` anew and
     switch to it (closing and reopening every device) or keep the running one.  Separate from
-    :func:`serve` (which owns the signals) so that ``bench soak`` drives the same loop."""
+    :func:`serve` (which owns the signals) so that ``bench soak`` drives the same loop.
+    ``locks`` holds the one-daemon-per-database lock: a reload onto another database moves
+    it, or is refused when another daemon holds that one."""
     loop = asyncio.get_running_loop()
     while True:
         await screens.follow(cfg)
@@ -177,7 +181,10 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
                 reload.clear()
                 try:  # validate first: an invalid station never stops the running one
                     new = await loop.run_in_executor(None, validate_station, cfg_path)
+                    if locks is not None:
+                        locks.hold(new.database_url, new.records.images_dir)
                 except StationError as exc:
+                    new = None
                     log.error("reload refused, keeping the running configuration: %s",
                               one_line(exc))
                     notifier.status(f"reload refused: {one_line(exc)}")
@@ -202,13 +209,11 @@ def run_daemon(args: argparse.Namespace) -> int:
                         format="%(levelname)s %(message)s")  # one line per event (journal)
     logging.getLogger("alembic").setLevel(logging.WARNING)
     cfg = validate_station(args.config)  # an invalid station at the first start: exit 2
-    where = lock_path(cfg.database_url, cfg.records.images_dir)
-    lock = StationLock(where) if where is not None else None
-    if lock is not None:
-        lock.acquire()  # a second daemon on this database: one line naming the holder, exit 2
+    locks = StationLocks()
+    # a second daemon on this database: one line naming the holder, exit 2
+    locks.hold(cfg.database_url, cfg.records.images_dir)
     try:
-        asyncio.run(serve(args.config, cfg, Notifier()))
+        asyncio.run(serve(args.config, cfg, Notifier(), locks))
     finally:
-        if lock is not None:
-            lock.release()
+        locks.release()
     return 0

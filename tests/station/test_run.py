@@ -216,3 +216,69 @@ def test_a_database_unusable_at_start_is_served_as_a_fault_then_the_results_come
         err = p.stderr.read() if p.stderr else ""
         sock.close()
     assert "Traceback" not in err
+
+
+@pytest.mark.timeout(240)
+def test_a_reload_onto_another_database_moves_the_lock_or_is_refused(tmp_path):
+    """One daemon per database across reloads: onto a new database the lock moves (the old one
+    is free for another daemon, the new one refused to a second daemon); onto a database
+    another daemon runs, the reload is refused and the running station kept."""
+    station = _sim_copy(tmp_path)
+    text = station.read_text()
+    old_db = "database: {url: 'sqlite:///stationd-sim.db'}"
+    assert old_db in text
+    a2 = tmp_path / "a2.yaml"
+    a2.write_text(text.replace(old_db, "database: {url: 'sqlite:///a2.db'}"))
+    other = tmp_path / "other"                 # b's station, on a's first database
+    other.mkdir()
+    for f in tmp_path.iterdir():
+        if f.is_file() and f.suffix == ".yaml":
+            shutil.copy(f, other)
+    first_db = f"database: {{url: 'sqlite:///{tmp_path}/stationd-sim.db'}}"
+    (other / "station.yaml").write_text(text.replace(old_db, first_db))
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(tmp_path / "notify"))
+    env = {**os.environ, "NOTIFY_SOCKET": str(tmp_path / "notify")}
+    quiet = {k: v for k, v in os.environ.items() if k != "NOTIFY_SOCKET"}
+
+    def second(config: Path) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "stationd", "run", "--config",
+                               str(config)], capture_output=True, text=True, timeout=60,
+                              env=quiet)
+
+    a = subprocess.Popen([sys.executable, "-m", "stationd", "run", "--config", "station.yaml"],
+                         cwd=tmp_path, env=env, stderr=subprocess.PIPE, text=True)
+    b = None
+    try:
+        _recv_until(sock, "READY=1", 90)
+        station.write_text(a2.read_text())
+        a.send_signal(signal.SIGHUP)
+        _recv_until(sock, "READY=1", 90)                      # running on a2.db now
+        r = second(a2)
+        assert r.returncode == 2 and f"already run by pid {a.pid}" in r.stderr, r.stderr
+        # a's first database is free: another daemon runs on it
+        b = subprocess.Popen([sys.executable, "-m", "stationd", "run", "--config",
+                              "station.yaml"], cwd=other, env=quiet,
+                             stderr=subprocess.DEVNULL)
+        time.sleep(5.0)
+        assert b.poll() is None
+        # a reload of a back onto it is refused: a keeps a2.db and runs on
+        station.write_text(text.replace(old_db, first_db))
+        a.send_signal(signal.SIGHUP)
+        _recv_until(sock, "reload refused", 60)
+        assert a.poll() is None
+        r = second(a2)
+        assert r.returncode == 2 and f"already run by pid {a.pid}" in r.stderr, r.stderr
+        a.send_signal(signal.SIGTERM)
+        assert a.wait(timeout=60) == 0
+    finally:
+        for p in (a, b):
+            if p is not None and p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+                try:
+                    p.wait(timeout=60)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+        sock.close()
+    err = a.stderr.read() if a.stderr else ""
+    assert b is not None and f"already run by pid {b.pid}" in err and "Traceback" not in err
