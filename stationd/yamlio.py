@@ -53,6 +53,9 @@ class YamlNode:
             line = mark.line + 1 if mark is not None else None
             problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
             raise ConfigError(f"malformed YAML: {problem}", path=path, line=line) from None
+        except RecursionError:   # PyYAML parses nested collections recursively
+            raise ConfigError("malformed YAML: collections nested too deeply", path=path
+                              ) from None
         if node is None:
             raise ConfigError("the file is empty", path=path)
         return cls(node, path, "")

@@ -95,11 +95,16 @@ def test_localize_json_and_repeat(files, capsys):
     (lambda d: ["detect", str(d / "one.png"), "--camera", str(d / "cam.yaml"), "--config",
                 str(d / "bad_config.yaml")], "bad_config.yaml:2: vision.centre_method"),
     (lambda d: ["bench", "station", "--cycles", "0"], "--cycles must be at least 1"),
+    (lambda d: ["bench", "station", "--browsers", "1", "--passes", "0"],
+     "--passes must be at least 1"),
+    (lambda d: ["bench", "station", "--clients", "sse"], "go with --browsers N"),
+    (lambda d: ["run", "--config", str(d / "deep.yaml")], "nested too deeply"),
 ])
 def test_bad_input_exits_2_with_one_line(files, capsys, make_args, needle):
     d, _, _ = files
     (d / "bad_k.yaml").write_text("K: [[1, 0], [0, 1]]\nsize: [10, 10]\n")
     (d / "bad_config.yaml").write_text("vision:\n  centre_method: magic\n")
+    (d / "deep.yaml").write_text("vision: " + "[" * 3000 + "]" * 3000 + "\n")
     code, _, err = _run(capsys, *make_args(d))
     assert code == 2
     assert needle in err and err.count("\n") == 1 and "Traceback" not in err

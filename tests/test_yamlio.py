@@ -36,3 +36,12 @@ def test_range_check():
     n = YamlNode.parse("v: 300\n", "f.yaml").mapping(["v"])["v"]
     with pytest.raises(ConfigError, match="out of range"):
         n.number(lo=0, hi=255)
+
+
+def test_collections_nested_too_deeply_are_one_error_not_a_recursion_crash(tmp_path):
+    """PyYAML parses nesting recursively: a file of 5000 nested lists crashed every reader
+    (config check, db import, the daemon's reload) with RecursionError."""
+    path = tmp_path / "deep.yaml"
+    path.write_text("vision: " + "[" * 5000 + "]" * 5000 + "\n")
+    with pytest.raises(ConfigError, match="nested too deeply"):
+        YamlNode.load(path)

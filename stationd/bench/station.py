@@ -126,9 +126,11 @@ def run_station_bench(args: argparse.Namespace) -> int:
     browsers = int(getattr(args, "browsers", 0) or 0)
     if browsers < 0:
         raise InputError("--browsers must be 0 or more")
-    passes = int(getattr(args, "passes", 1) or 1)
+    passes = int(getattr(args, "passes", 1))
     if passes < 1:
         raise InputError("--passes must be at least 1")
+    if not browsers and (getattr(args, "clients", "chromium") != "chromium" or passes != 1):
+        raise InputError("--clients and --passes go with --browsers N (the screens' clients)")
     tmp = tempfile.TemporaryDirectory(prefix="stationd-bench-")
     cfg = replace(load_station_config(SIM_CONFIG),
                   database_url=f"sqlite:///{tmp.name}/stationd.db", http=None)

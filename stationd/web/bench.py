@@ -312,8 +312,24 @@ def fanout_bench(seconds: float = 3.0, rate_hz: float = 30.0, clients: int = 2
             "kbytes_per_client": served["kbytes_per_client"]}
 
 
-if __name__ == "__main__":
+def main(argv: list[str] | None = None) -> int:
+    """``python -m stationd.web.bench [SECONDS] [RATE_HZ]``: the fan-out figures as JSON."""
+    import argparse
     import json
-    import sys
-    secs, hz = (float(a) for a in (sys.argv[1:3] + ["3", "30"][len(sys.argv[1:3]):]))
-    print(json.dumps(fanout_bench(secs, hz), indent=1))
+
+    ap = argparse.ArgumentParser(prog="python -m stationd.web.bench",
+                                 description="what the screens' live fan-out costs the "
+                                 "daemon's loop, with and without two SSE clients")
+    ap.add_argument("seconds", nargs="?", type=float, default=3.0,
+                    help="each run's length (default: %(default)s)")
+    ap.add_argument("rate_hz", nargs="?", type=float, default=30.0,
+                    help="localizations published per second (default: %(default)s)")
+    args = ap.parse_args(argv)
+    if not (0 < args.seconds <= 3600 and 0 < args.rate_hz <= 1000):
+        ap.error("SECONDS must be in (0, 3600] and RATE_HZ in (0, 1000]")
+    print(json.dumps(fanout_bench(args.seconds, args.rate_hz), indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
