@@ -43,6 +43,7 @@ LAST_RESULTS = 8
 ACT_ON = re.compile(r"\b(stale|ambiguous|tilt\w*|must wait|order|batch|skipped|already done|"
                     r"controller refused)\b", re.IGNORECASE)
 NOT_AT_A_BOLT = "Bring the wrench to a bolt"
+TRACKING_STATES = ("tracking", "bolt selected", "tightening")   # the core's LOCALIZING
 
 
 @dataclass
@@ -92,6 +93,10 @@ class View:
         """Fold one event in."""
         if isinstance(e, StateChanged):
             self.state, self.reason = e.state, e.reason
+            if e.state not in TRACKING_STATES:
+                # a refusal is about the wrench while tracking: a station waiting for its
+                # vehicle (or in fault) says that, not the last vehicle's "bring the wrench"
+                self.refused = ""
         elif isinstance(e, DeviceHealth):
             self.devices[e.device] = {"ok": e.ok, "kind": e.kind, "reason": e.reason}
         elif isinstance(e, VehicleOpened):

@@ -169,3 +169,18 @@ def test_configured_devices_are_listed_ok_once_started_until_one_reports():
     got = v.to_json()["devices"]
     assert got["pair1"]["ok"] is False and got["pair1"]["reported"] is True
     assert got["lift"]["ok"] and got["wrench"]["ok"]
+
+
+def test_a_station_waiting_for_its_vehicle_says_so_not_the_last_refusal():
+    """After the vehicle left (lift lowered), the last "bring the wrench" refusal no longer
+    speaks: the headline is the closed vehicle's summary, then the station's own reason (a
+    newcomer saw "Bring the wrench to a bolt" under "waiting for vehicle")."""
+    v = fold([*opened(), lost(NOT_SEEN), Refused(reason=NOT_SEEN),
+              StateChanged(state="waiting for vehicle", reason="lift not at working height")])
+    assert v.headline() == "lift not at working height" and v.tone() == ""
+    v = fold([*opened(), Refused(reason=NOT_SEEN),
+              VehicleClosed(vin=VIN, missing=("B1",), nok=()),
+              StateChanged(state="waiting for vehicle", reason="lift not at working height")])
+    assert v.headline() == f"{VIN} closed: missing B1"
+    v = fold([*opened(), Refused(reason=NOT_SEEN), StateChanged(state="tracking", reason="")])
+    assert v.headline() == "Bring the wrench to a bolt"      # while tracking it still does
