@@ -63,16 +63,23 @@ def _station(tmp_path, **wrench_kw):
     return st, World(cfg, seed=1)
 
 
-def _scenario(tmp_path, body, **wrench_kw):
+def _scenario(tmp_path, body, vin="FAULTVIN000000001", prepare=None, loaded=True,
+              **wrench_kw):
+    """The daemon running, a vehicle on the lift raised (loaded, unless ``loaded`` is False:
+    a test of a failing load waits for it itself), then ``body``; ``prepare(st)`` runs on
+    the opened station before its loop."""
     st, world = _station(tmp_path, **wrench_kw)
+    if prepare is not None:
+        prepare(st)
 
     async def main():
         stop = asyncio.Event()
         task = asyncio.create_task(st.run(stop))
         try:
-            st.lift.plc.set_vehicle(1, "FAULTVIN000000001")
+            st.lift.plc.set_vehicle(1, vin)
             st.lift.plc.raise_lift()
-            await _until(lambda: st.vin is not None, 30)
+            if loaded:
+                await _until(lambda: st.vin is not None, 30)
             await body(st, world)
         finally:
             stop.set()
@@ -238,46 +245,35 @@ def test_a_database_failing_at_a_vehicle_is_a_fault_its_keeper_probes_back(tmp_p
     answers the vehicle is loaded."""
     from db.errors import DbError
 
-    st, world = _station(tmp_path)
-    repo = st.repo
-    real_model, real_models = repo.model_for_code, repo.models
     probes: list[float] = []
     down = {"on": True}
 
-    def model_for_code(code):
-        if down["on"]:
-            raise DbError("disk I/O error")
-        return real_model(code)
+    def prepare(st):
+        repo = st.repo
+        real_model, real_models = repo.model_for_code, repo.models
 
-    def models():
-        probes.append(time.monotonic())
-        if down["on"]:
-            raise DbError("disk I/O error")
-        return real_models()
+        def model_for_code(code):
+            if down["on"]:
+                raise DbError("disk I/O error")
+            return real_model(code)
 
-    repo.model_for_code, repo.models = model_for_code, models
+        def models():
+            probes.append(time.monotonic())
+            if down["on"]:
+                raise DbError("disk I/O error")
+            return real_models()
 
-    async def main():
-        stop = asyncio.Event()
-        task = asyncio.create_task(st.run(stop))
-        try:
-            st.lift.plc.set_vehicle(1, "DBFAULTVIN0000001")
-            st.lift.plc.raise_lift()
-            await _until(lambda: "database" in st.cycle.faults, 30)
-            assert st.cycle.state is State.FAULT and "database: disk I/O error" in st.cycle.reason
-            assert st.vin is None and not _sends(st)
-            await asyncio.sleep(4.0)
-            # backoff 0.5 s doubling to 5 s: a handful of probes, not one per tick
-            assert 2 <= len(probes) <= 5, probes
-            down["on"] = False
-            await _until(lambda: st.vin == "DBFAULTVIN0000001", 30)
-            assert "database" not in st.cycle.faults and _back(st, "database")
-        finally:
-            stop.set()
-            await task
+        repo.model_for_code, repo.models = model_for_code, models
 
-    try:
-        asyncio.run(main())
-    finally:
-        world.close()
-        st.close()
+    async def body(st, world):
+        await _until(lambda: "database" in st.cycle.faults, 30)
+        assert st.cycle.state is State.FAULT and "database: disk I/O error" in st.cycle.reason
+        assert st.vin is None and not _sends(st)
+        await asyncio.sleep(4.0)
+        # backoff 0.5 s doubling to 5 s: a handful of probes, not one per tick
+        assert 2 <= len(probes) <= 5, probes
+        down["on"] = False
+        await _until(lambda: st.vin == "DBFAULTVIN0000001", 30)
+        assert "database" not in st.cycle.faults and _back(st, "database")
+
+    _scenario(tmp_path, body, vin="DBFAULTVIN0000001", prepare=prepare, loaded=False)
