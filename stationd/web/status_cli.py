@@ -37,8 +37,12 @@ def add_status_parser(sub: Any) -> None:
 
 def status_url(url: str) -> str:
     """``http://host:port[/]`` -> its ``/api/status``; InputError for anything else."""
-    u = urllib.parse.urlsplit(url)
-    if u.scheme not in ("http", "https") or not u.netloc:
+    try:
+        u = urllib.parse.urlsplit(url)
+        port = u.port        # checks the port's range
+    except ValueError:
+        raise InputError(f"--url {url!r}: expected http://host:port/") from None
+    if u.scheme not in ("http", "https") or not u.hostname or port == 0:
         raise InputError(f"--url {url!r}: expected http://host:port/")
     return urllib.parse.urlunsplit((u.scheme, u.netloc, u.path.rstrip("/") + "/api/status",
                                     "", ""))
@@ -73,10 +77,15 @@ def format_status(st: dict[str, Any]) -> str:
 
 
 def cmd_status(args: argparse.Namespace) -> int:
+    if not 0 < args.timeout <= 3600:
+        raise InputError(f"--timeout {args.timeout:g}: expected seconds in (0, 3600]")
+    status_url(args.url)   # bad input is exit 2, not "no daemon"
     try:
         st = fetch_status(args.url, args.token, args.timeout)
     except urllib.error.HTTPError as exc:
-        sys.stderr.write(f"stationd: status: {args.url}: HTTP {exc.code} {exc.reason}\n")
+        hint = " (the daemon has an http token: --token TOKEN)" if exc.code == 401 else ""
+        sys.stderr.write(f"stationd: status: {args.url}: HTTP {exc.code} {exc.reason}"
+                         f"{hint}\n")
         return EXIT_UNREACHABLE
     except (urllib.error.URLError, OSError, ValueError) as exc:
         reason = getattr(exc, "reason", exc)

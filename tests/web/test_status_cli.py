@@ -34,8 +34,16 @@ def test_status_without_daemon_is_one_line_exit_1(capsys):
     assert err.startswith("stationd: status: no daemon answers at") and err.count("\n") == 1
 
 
-@pytest.mark.parametrize("url", ["ftp://x/", "localhost:8080"])
+@pytest.mark.parametrize("url", ["ftp://x/", "localhost:8080", "http://[::1",
+                                 "http://127.0.0.1:99999/"])
 def test_status_bad_url_is_one_line_exit_2(url, capsys):
     assert main(["status", "--url", url]) == 2
     err = capsys.readouterr().err
     assert "expected http://host:port/" in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("timeout", ["0", "-1", "nan"])
+def test_status_bad_timeout_is_one_line_exit_2_not_no_daemon(timeout, capsys):
+    assert main(["status", "--timeout", timeout]) == 2
+    err = capsys.readouterr().err
+    assert "--timeout" in err and "no daemon" not in err and err.count("\n") == 1
