@@ -334,6 +334,7 @@ class _Reader:
         self.base = base
         self.collect = collect
         self.require_devices = require_devices
+        self.unreadable = False   # the top-level mapping could not be read (all reported)
         self.errors: list[ConfigError] = []
         self.warnings: list[ConfigError] = []
         self.top: dict[str, YamlNode] = {}
@@ -366,6 +367,7 @@ class _Reader:
                 key = exc.key
                 if key is None or key in STATION_KEYS or key in unknown:
                     self.errors.append(exc)  # not a mapping, a duplicate or a non-string key
+                    self.unreadable = True   # its sections are not "missing": not read
                     return {}
                 unknown.add(key)
                 self.errors.append(ConfigError(
@@ -401,7 +403,7 @@ class _Reader:
             http=self.section("http", d.http, HttpConfig.from_node),
             path=path)
         # after the sections: a mistake written in the file is told before what is missing
-        if self.require_devices and isinstance(root.value(), dict):
+        if self.require_devices and isinstance(root.value(), dict) and not self.unreadable:
             for key in REQUIRED_KEYS:
                 if key not in self.top:
                     self.guard(None, _missing, root, key)

@@ -348,3 +348,12 @@ def test_a_camera_serves_one_side_of_one_pair(sim_copy, old, new, key, message):
     assert message in str(errors[0])
     with pytest.raises(ConfigError, match=re.escape(message)):
         load_station_config(station, station=True)
+
+
+def test_a_duplicate_top_level_key_is_the_one_error_not_missing_sections(sim_copy):
+    """Every section of a file whose top level has a duplicate key went unread, and was then
+    also reported missing (four made-up errors before the real one)."""
+    station = sim_copy / "station.yaml"
+    station.write_text(station.read_text() + "bolts: bolts.yaml\n")
+    errors = check_station(station).errors
+    assert len(errors) == 1 and "bolts: duplicate key" in str(errors[0]), errors
