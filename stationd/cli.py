@@ -140,8 +140,10 @@ def cmd_marker(args: argparse.Namespace) -> int:
     from stationd.config import load_station_config
     from stationd.vision.printable import marker_svg
 
-    cfg = load_station_config(args.config)
     out = Path(args.out)
+    if out.suffix.lower() != ".svg":   # the print is SVG: a .png of SVG text opens nowhere
+        raise InputError(f"{out}: the marker is written as SVG: give a .svg file name")
+    cfg = load_station_config(args.config)
     try:
         out.write_text(marker_svg(cfg.marker), encoding="utf-8")
     except OSError as exc:

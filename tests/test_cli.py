@@ -98,6 +98,7 @@ def test_localize_json_and_repeat(files, capsys):
     (lambda d: ["bench", "station", "--browsers", "1", "--passes", "0"],
      "--passes must be at least 1"),
     (lambda d: ["bench", "station", "--clients", "sse"], "go with --browsers N"),
+    (lambda d: ["marker", "--out", str(d / "m.png")], "written as SVG: give a .svg"),
     (lambda d: ["run", "--config", str(d / "deep.yaml")], "nested too deeply"),
 ])
 def test_bad_input_exits_2_with_one_line(files, capsys, make_args, needle):
