@@ -626,7 +626,8 @@ class Station:
             infos = await self._call(repo.bolts_for_model, model)
             report = await self._call(repo.vehicle_report, a.vin)
         except STATION_FAULTS as exc:
-            self.keepers[DATABASE].lost(exc)       # its keeper probes it back, with backoff
+            # its keeper probes it back, with backoff (reported as the same "down" fault)
+            self.keepers[DATABASE].lost(DeviceError(one_line(exc)))
             return DeviceFault(time.time(), DATABASE, "down", one_line(exc))
         self.bolts = {b.bolt_id: b for b in infos}
         status = {b.bolt_id: b.status for b in report.bolts}
@@ -733,7 +734,7 @@ def _probe_database(repo: Repository) -> None:
     try:
         repo.models()
     except STATION_FAULTS as exc:
-        raise DeviceError(one_line(exc), device=DATABASE) from None
+        raise DeviceError(one_line(exc)) from None
 
 
 def _quiet(fn: Any) -> None:

@@ -275,5 +275,8 @@ def test_a_database_failing_at_a_vehicle_is_a_fault_its_keeper_probes_back(tmp_p
         down["on"] = False
         await _until(lambda: st.vin == "DBFAULTVIN0000001", 30)
         assert "database" not in st.cycle.faults and _back(st, "database")
+        # one fault and one return, the same kind throughout
+        health = [(e.ok, e.kind) for e in _of(st, DeviceHealth) if e.device == "database"]
+        assert health == [(False, "down"), (True, "")], health
 
     _scenario(tmp_path, body, vin="DBFAULTVIN0000001", prepare=prepare, loaded=False)
