@@ -18,6 +18,7 @@ start) on the engine returned by :func:`writer`, so an import never acts on a st
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from sqlalchemy import Engine, create_engine, event, make_url
@@ -31,17 +32,26 @@ BUSY_TIMEOUT_MS = 10_000
 _IMMEDIATE = "stationd_begin_immediate"
 
 
-def make_engine(url: str = DEFAULT_URL) -> Engine:
-    """An engine for ``url``; a malformed URL or an unknown driver is an :class:`DataError`."""
+def make_engine(url: str = DEFAULT_URL, *, read_only: bool = False) -> Engine:
+    """An engine for ``url``; a malformed URL or an unknown driver is an :class:`DataError`.
+
+    ``read_only``: an SQLite file is opened with ``mode=ro`` (a reader that may not write the
+    file, e.g. an engineer reading the service user's database: SQLite reads a WAL database so
+    while its ``-wal`` and ``-shm`` files exist, as they do while the daemon runs)."""
     try:
         parsed = make_url(url)
+        name = parsed.database
+        if read_only and parsed.get_backend_name() == "sqlite" and name \
+                and name != ":memory:" and not name.startswith("file:"):
+            parsed = parsed.set(database=f"file:{Path(name).resolve()}",
+                                query={"mode": "ro", "uri": "true"})
         engine = create_engine(parsed)
     except (ArgumentError, NoSuchModuleError, ValueError) as exc:
         raise DataError(f"database URL {url!r}: {exc}") from None
     except ImportError as exc:
         raise DataError(f"database URL {url!r}: driver not installed ({exc.name})") from None
     if engine.dialect.name == "sqlite":
-        _setup_sqlite(engine)
+        _setup_sqlite(engine, read_only=read_only)
     return engine
 
 
@@ -50,7 +60,7 @@ def writer(engine: Engine) -> Engine:
     return engine.execution_options(**{_IMMEDIATE: True})
 
 
-def _setup_sqlite(engine: Engine) -> None:
+def _setup_sqlite(engine: Engine, *, read_only: bool = False) -> None:
     memory = engine.url.database in (None, "", ":memory:")
 
     @event.listens_for(engine, "connect")
@@ -58,7 +68,7 @@ def _setup_sqlite(engine: Engine) -> None:
         dbapi_connection.isolation_level = None  # SQLAlchemy emits BEGIN (see _on_begin)
         cursor = dbapi_connection.cursor()
         try:
-            if not memory:
+            if not memory and not read_only:   # setting it is a write
                 cursor.execute("PRAGMA journal_mode=WAL")
             cursor.execute("PRAGMA synchronous=FULL")
             cursor.execute("PRAGMA foreign_keys=ON")

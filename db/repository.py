@@ -17,7 +17,7 @@ from types import TracebackType
 from typing import Any, Self
 
 from alembic.util import CommandError
-from sqlalchemy import Engine, select
+from sqlalchemy import Engine, make_url, select
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session
 
@@ -25,7 +25,7 @@ from db.bolts import BoltTable, Parameters, dump_bolts
 from db.engine import DEFAULT_URL, make_engine, writer
 from db.errors import DatabaseError, DataError, NotFoundError, VehicleClosedError
 from db.importer import ImportReport, current_version, import_table, parameters_of, read_table
-from db.migrate import upgrade
+from db.migrate import current_revision, head_revision, upgrade
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel, utcnow
 from db.report import VehicleInfo, VehicleReport, build_report
 
@@ -61,11 +61,23 @@ class Repository:
         self._writer = writer(engine)
 
     @classmethod
-    def open(cls, url: str = DEFAULT_URL) -> Repository:
-        """Connect to ``url`` (any SQLAlchemy URL) and migrate it to the current schema."""
-        engine = make_engine(url)
-        where = engine.url.render_as_string()  # the password, if any, is masked
+    def open(cls, url: str = DEFAULT_URL, *, read_only: bool = False) -> Repository:
+        """Connect to ``url`` (any SQLAlchemy URL) and migrate it to the current schema.
+
+        ``read_only`` (reports, exports): no migration and, for an SQLite file, no write
+        access needed; a database not at this release's schema is refused with the reason."""
+        engine = make_engine(url, read_only=read_only)
+        where = make_url(url).render_as_string()  # the password, if any, is masked
         try:
+            if read_only:
+                with engine.connect() as conn:
+                    have, want = current_revision(conn), head_revision()
+                if have != want:
+                    engine.dispose()
+                    raise DatabaseError(
+                        f"{where}: schema {have or 'none'}, this stationd reads {want}: open "
+                        "it once with write access (the daemon or db import migrates it)")
+                return cls(engine)
             upgrade(engine)
         except SQLAlchemyError as exc:
             engine.dispose()

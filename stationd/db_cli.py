@@ -66,7 +66,9 @@ def _print_errors(errors: Sequence[ConfigError]) -> None:
 
 
 def _open(url: str, *, must_exist: bool) -> Repository:
-    """The repository; a read command does not create a missing SQLite file."""
+    """The repository; a read command (``must_exist``) does not create a missing SQLite file
+    and opens it read-only (no migration, no write access needed: the service user's
+    database can be read by the line's engineers)."""
     from sqlalchemy import make_url
     from sqlalchemy.exc import ArgumentError
 
@@ -79,10 +81,15 @@ def _open(url: str, *, must_exist: bool) -> Repository:
             raise InputError(f"database URL {url!r}: {exc}") from None
         path = u.database
         if u.get_backend_name() == "sqlite" and path and path != ":memory:" \
-                and not path.startswith("file:") and not Path(path).exists():
-            raise InputError(f"no database at {path} (import a bolt table first, or give --db "
-                             "or --config STATION.yaml)")
-    return Repository.open(url)
+                and not path.startswith("file:"):
+            try:
+                there = Path(path).exists()
+            except OSError as exc:   # a folder on the way this user may not enter
+                raise InputError(f"{path}: cannot read: {exc.strerror}") from None
+            if not there:
+                raise InputError(f"no database at {path} (import a bolt table first, or give "
+                                 "--db or --config STATION.yaml)")
+    return Repository.open(url, read_only=must_exist)
 
 
 # -- db import / export / report -------------------------------------------------------------

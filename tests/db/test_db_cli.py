@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -292,3 +293,61 @@ def test_db_commands_take_the_database_of_a_station_file(run, tmp_path):
     station.write_text(station.read_text().replace("tolerance_mm: 8.0", "tolerance_mm: 30.0"))
     code, out, err = run("db", "import", tmp_path / "bolts.yaml", "--config", station)
     assert code == 2 and "twice the matching tolerance of 30 mm" in err
+
+
+def test_reports_and_exports_open_the_database_read_only(tmp_path):
+    """A read command neither migrates nor writes: it works on a database its user may not
+    write (checked below as uid 65534 when the tests run as root), leaves the file as it was,
+    and refuses a database not at this release's schema instead of migrating it."""
+    import hashlib
+    import os
+    import shutil
+    import sqlite3
+    import subprocess
+    import sys
+
+    from db.errors import DatabaseError
+    from db.repository import Repository
+
+    import tempfile
+
+    # a folder uid 65534 can reach (pytest's own are root's only)
+    folder = Path(tempfile.mkdtemp(prefix="stationd-ro-", dir="/tmp"))
+    db = folder / "s.db"
+    (tmp_path / "bolts.yaml").write_text(BASE)
+    writer = Repository.open(url_of(db))          # the daemon: its -wal and -shm exist
+    try:
+        from stationd.boltfile import import_bolts
+        import_bolts(writer, tmp_path / "bolts.yaml")
+        writer.start_vehicle("VINRO", "SEDAN")
+        record(writer, "VINRO", "B1")
+        before = hashlib.sha256(db.read_bytes()).hexdigest()
+        reader = Repository.open(url_of(db), read_only=True)
+        try:
+            assert [b.status for b in reader.vehicle_report("VINRO").bolts][:1] == ["ok"]
+            with pytest.raises(DatabaseError):
+                reader.start_vehicle("VINRO2", "SEDAN")          # mode=ro: no write
+        finally:
+            reader.close()
+        assert hashlib.sha256(db.read_bytes()).hexdigest() == before
+        if os.geteuid() == 0:
+            # as a user who may read but not write the folder (the service user's database)
+            os.chmod(folder, 0o755)
+            for f in folder.iterdir():
+                os.chmod(f, 0o644)
+            r = subprocess.run(  # noqa: S603 - fixed argv
+                [sys.executable, "-m", "stationd", "db", "report", "VINRO", "--db",
+                 url_of(db)], capture_output=True, text=True, timeout=60,
+                user=65534, group=65534, cwd="/", env={**os.environ, "HOME": "/"})
+            # exit 1: the report's verdict (B2, B3 missing), not an error
+            assert r.returncode == 1 and r.stderr == "", r.stderr
+            assert "VINRO" in r.stdout and "MISSING" in r.stdout
+    finally:
+        writer.close()
+    # a database of another schema (here: none) is refused, not migrated
+    old = tmp_path / "old.db"
+    sqlite3.connect(old).close()
+    with pytest.raises(DatabaseError, match="schema none"):
+        Repository.open(url_of(old), read_only=True)
+    assert old.stat().st_size == 0
+    shutil.rmtree(folder, ignore_errors=True)
