@@ -305,11 +305,10 @@ def test_reports_and_exports_open_the_database_read_only(tmp_path):
     import sqlite3
     import subprocess
     import sys
+    import tempfile
 
     from db.errors import DatabaseError
     from db.repository import Repository
-
-    import tempfile
 
     # a folder uid 65534 can reach (pytest's own are root's only)
     folder = Path(tempfile.mkdtemp(prefix="stationd-ro-", dir="/tmp"))
@@ -332,10 +331,10 @@ def test_reports_and_exports_open_the_database_read_only(tmp_path):
         assert hashlib.sha256(db.read_bytes()).hexdigest() == before
         if os.geteuid() == 0:
             # as a user who may read but not write the folder (the service user's database)
-            os.chmod(folder, 0o755)
+            os.chmod(folder, 0o755)  # noqa: S103 - readable by the other user, on purpose
             for f in folder.iterdir():
                 os.chmod(f, 0o644)
-            r = subprocess.run(  # noqa: S603 - fixed argv
+            r = subprocess.run(
                 [sys.executable, "-m", "stationd", "db", "report", "VINRO", "--db",
                  url_of(db)], capture_output=True, text=True, timeout=60,
                 user=65534, group=65534, cwd="/", env={**os.environ, "HOME": "/"})
