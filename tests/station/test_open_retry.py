@@ -8,6 +8,7 @@ import asyncio
 from typing import Any
 
 from db.errors import DbError
+from stationd.station.events import DeviceHealth, EventBus, StateChanged
 from stationd.station.run import _open
 from stationd.station.sdnotify import Notifier
 
@@ -27,6 +28,7 @@ class FlakyStation:
 
     def __init__(self) -> None:
         self.attempts = 0
+        self.bus = EventBus()      # where the daemon tells its screens meanwhile
 
     def open(self) -> None:
         self.attempts += 1
@@ -44,6 +46,10 @@ def test_a_database_that_does_not_open_is_retried_then_the_daemon_goes_on():
     assert station.attempts == 3
     ready = [f for f in notifier.sent if f.get("ready") == 1]
     assert len(ready) == 1 and "fault: database: unable to open" in str(ready[0]["status"])
+    # the screens heard it (the station's loop is not running yet): faulty, then back
+    health = [(e.ok, e.reason) for e in station.bus.of(DeviceHealth)]
+    assert health[0][0] is False and "unable to open" in health[0][1] and health[-1] == (True, "")
+    assert any(e.state == "fault" for e in station.bus.of(StateChanged))
 
 
 def test_stopping_while_the_database_is_down_ends_the_wait():

@@ -122,10 +122,10 @@ def test_garbage_on_the_line_is_a_protocol_error_not_silence():
     rate's noise) is ProtocolError, as over TCP and Open Protocol; silence stays a timeout."""
     import threading
 
-    import serial
+    from drivers.link import pyserial
 
     pty = PtyPair()
-    peer = serial.Serial(pty.paths[0], 19200, timeout=0.05)
+    peer = pyserial().Serial(pty.paths[0], 19200, timeout=0.05)
     stop = threading.Event()
 
     def answer_garbage() -> None:
