@@ -89,9 +89,24 @@ def load_bolts(path: str | Path, *, tolerance_mm: float = DEFAULT_TOLERANCE_MM) 
     return result.table
 
 
+#: sections only a station file has (``stationd.config``): a bolt table has none of them
+STATION_ONLY = frozenset({"cameras", "pairs", "lift", "wrench", "vision", "marker", "tool"})
+
+
+def _top_keys(root: YamlNode) -> set[str]:
+    """The top-level keys of a file that is a mapping (empty otherwise)."""
+    value = root.value()
+    return {k for k in value if isinstance(k, str)} if isinstance(value, dict) else set()
+
+
 def _check(root: YamlNode, tolerance_mm: float) -> BoltCheck:
     if not (math.isfinite(tolerance_mm) and tolerance_mm > 0):
         raise InputError(f"matching tolerance {tolerance_mm} mm: must be a positive number")
+    keys = _top_keys(root)
+    if keys and not keys & {"models", "psets"} and keys & STATION_ONLY:
+        # one line, not one "unknown key" per section of the wrong kind of file
+        return BoltCheck(root.path, None, [root.error(
+            "this is a station file, not a bolt table (a bolt table has models: and psets:)")])
     checker = _Checker(tolerance_mm)
     table = checker.table(root)
     errors = sorted(checker.errors, key=lambda e: e.line or 0)  # stable: same line keeps order

@@ -212,3 +212,25 @@ def test_a_pset_with_an_error_is_reported_once_not_at_every_bolt_using_it():
     assert [str(e) for e in errors] == [
         "b.yaml:4: psets[0].torque.target: expected a number in N m, got the string '50 Nm' "
         "(write the number alone: the unit is always N m)"]
+
+
+def test_a_station_file_given_as_a_bolt_table_is_one_error_saying_so():
+    """``db import station.yaml`` listed one "unknown key" per section of the station file."""
+    from pathlib import Path
+
+    station = Path(__file__).resolve().parents[1] / "config" / "sim" / "station.yaml"
+    result = check_bolts(station)
+    assert len(result.errors) == 1 and result.table is None
+    assert "this is a station file, not a bolt table" in str(result.errors[0])
+
+
+def test_a_bolt_table_given_as_a_station_file_is_one_error_saying_so():
+    from pathlib import Path
+
+    from stationd.config import check_station, load_station_config
+
+    bolts = Path(__file__).resolve().parents[1] / "config" / "sim" / "bolts.yaml"
+    with pytest.raises(ConfigError, match="this is a bolt table, not a station file"):
+        load_station_config(bolts, station=True)
+    errors = check_station(bolts).errors
+    assert len(errors) == 1 and "this is a bolt table" in str(errors[0])
