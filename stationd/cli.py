@@ -243,6 +243,13 @@ def cmd_bench_soak(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    # options that contradict each other or do nothing here: said, not silently dropped
+    if args.no_http and (args.http is not None or args.hold):
+        raise InputError("--no-http with --http or --hold: --hold keeps serving the screens")
+    if args.save is not None and not args.vision:
+        raise InputError("--save writes the vision demo's images: it goes with --vision")
+    if args.vision and (args.http is not None or args.hold):
+        raise InputError("--http and --hold serve the station demo's screens, not --vision's")
     if args.vision:
         from stationd.demo import run_demo
 
