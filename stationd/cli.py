@@ -183,9 +183,11 @@ def _parse_roi(text: str) -> tuple[int, int, int, int]:
 
 
 def cmd_tune_color(args: argparse.Namespace) -> int:
+    from stationd.boltfile import refuse_to_overwrite
     from stationd.imageio import read_image
     from stationd.vision.color import tune_hsv, verify_marker, write_hsv_yaml
 
+    refuse_to_overwrite(Path(args.out), "HSV ranges", ("station", "bolts"))
     image = read_image(args.reference)
     roi = _parse_roi(args.roi) if args.roi else None
     if roi is not None:

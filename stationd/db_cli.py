@@ -120,6 +120,13 @@ def cmd_db_import(args: argparse.Namespace) -> int:
 
 
 def cmd_db_export(args: argparse.Namespace) -> int:
+    from stationd.boltfile import refuse_to_overwrite
+
+    if args.out is not None:   # before the database is read: a typo costs nothing
+        if args.results:
+            refuse_to_overwrite(Path(args.out), "results", ("station", "bolts"))
+        else:   # a bolt table may replace a bolt table (export, edit, import)
+            refuse_to_overwrite(Path(args.out), "a bolt table", ("station",))
     if args.results:
         return _export_results(args)
     if args.vin is not None or args.since is not None or args.format not in (None, "yaml"):

@@ -329,3 +329,36 @@ def test_every_command_prints_json_through_strict_json():
                root / "demo.py", *sorted((root / "geometry").glob("*_cli.py"))]
     for path in modules:
         assert "json.dumps(" not in path.read_text(), path
+
+
+def test_an_output_never_replaces_a_station_file_or_a_bolt_table(tmp_path, capsys):
+    """``tune-color --out bolts.yaml`` replaced a bolt table, ``db export --out station.yaml``
+    a station file (newcomer trial): refused with one line, the file untouched; a bolt table
+    still replaces a bolt table (export, edit, import)."""
+    import shutil
+    from pathlib import Path
+
+    sim = Path(__file__).resolve().parents[1] / "config" / "sim"
+    for name in ("station.yaml", "bolts.yaml"):
+        shutil.copy(sim / name, tmp_path / name)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    (tmp_path / "ref.png").write_bytes(b"")
+    db = f"sqlite:///{tmp_path / 's.db'}"
+    assert main(["db", "import", str(tmp_path / "bolts.yaml"), "--db", db]) == 0
+    capsys.readouterr()
+    for argv, needle in [
+        (["tune-color", str(tmp_path / "ref.png"), "--out", str(tmp_path / "bolts.yaml")],
+         "is a bolt table; writing HSV ranges would replace it"),
+        (["tune-color", str(tmp_path / "ref.png"), "--out", str(tmp_path / "station.yaml")],
+         "is a station file"),
+        (["db", "export", "--db", db, "--out", str(tmp_path / "station.yaml")],
+         "is a station file; writing a bolt table would replace it"),
+        (["db", "export", "--results", "--db", db, "--out", str(tmp_path / "bolts.yaml")],
+         "is a bolt table; writing results"),
+    ]:
+        code, _, err = _run(capsys, *argv)
+        assert code == 2 and needle in err and err.count("\n") == 1, (argv, err)
+    assert {n: (tmp_path / n).read_bytes() for n in before} == before
+    code, out, _ = _run(capsys, "db", "export", "--db", db, "--out",
+                        str(tmp_path / "bolts.yaml"))
+    assert code == 0 and "wrote" in out
