@@ -102,6 +102,7 @@ def test_localize_json_and_repeat(files, capsys):
     (lambda d: ["demo", "--no-http", "--http", "127.0.0.1:8090"], "--no-http with --http"),
     (lambda d: ["demo", "--hold", "--no-http"], "--no-http with --http or --hold"),
     (lambda d: ["demo", "--save", str(d)], "it goes with --vision"),
+    (lambda d: ["bench", "vision", "--only", ""], "--only: unknown section(s) ''"),
     (lambda d: ["run", "--config", str(d / "deep.yaml")], "nested too deeply"),
 ])
 def test_bad_input_exits_2_with_one_line(files, capsys, make_args, needle):

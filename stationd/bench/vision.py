@@ -424,8 +424,8 @@ def run_vision_bench(args: argparse.Namespace) -> int:
     from stationd.bench.report import print_report
     from stationd.errors import InputError
 
-    names = list(SECTIONS) if not args.only else [s.strip() for s in args.only.split(",")]
-    unknown = [n for n in names if n not in SECTIONS]
+    names = list(SECTIONS) if args.only is None else [s.strip() for s in args.only.split(",")]
+    unknown = [n or "''" for n in names if n not in SECTIONS]   # "" is no section, not all
     if unknown:
         raise InputError(f"--only: unknown section(s) {', '.join(unknown)} "
                          f"(accepted: {', '.join(SECTIONS)})")
