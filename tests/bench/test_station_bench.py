@@ -62,24 +62,39 @@ def test_bench_station_with_two_browsers_reports_latency_and_cpu_with_and_withou
 
 
 @pytest.mark.timeout(300)
-def test_bench_station_stand_in_clients_in_their_own_process_over_several_passes(
-        tmp_path, capsys):
-    """``--clients sse --passes 2``: the stand-ins for browsers on the panel PCs run in a
-    process of their own (their CPU is theirs, not the daemon's) and are really served; two
-    passes with them, three without, pooled."""
+def test_bench_station_stand_in_clients_run_in_their_own_process(tmp_path, capsys):
+    """``--clients sse``: the stand-ins for browsers on the panel PCs run in a process of their
+    own (their CPU is theirs, not the daemon's) and are really served."""
     out = tmp_path / "bench-station.json"
     code = main(["bench", "station", "--cycles", "2", "--seed", "3", "--browsers", "2",
-                 "--clients", "sse", "--passes", "2", "--json", "--out", str(out)])
+                 "--clients", "sse", "--json", "--out", str(out)])
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert code == 0
     sc = summary["screens"]
-    assert sc["clients"] == "sse" and sc["passes"] == 2
-    assert len(sc["without"]["passes"]) == 3
-    assert sc["frames_served"] >= 2 and sc["snapshots_sent"] >= 2
+    assert sc["clients"] == "sse" and sc["passes"] == 1
+    assert sc["frames_served"] >= 1 and sc["snapshots_sent"] >= 1
     assert sc["browser_cpu_pct_of_a_core"] >= 0
     # the daemon's CPU per pass with the screens is of the same order as without (the
     # clients' reading is not in it), whatever the machine's speed
     assert sc["with"]["cpu_s"] < 3 * sc["without"]["cpu_s"]
+
+
+def test_passes_with_the_screens_are_pooled_per_pass():
+    """``--passes K``: latencies pooled, times per pass (mean), counts added; the deltas
+    compare a pass with a pass."""
+    from stationd.bench.station import _pooled, _screens_summary
+
+    def run(lat, cpu, wall, **kw):
+        return {"latency": lat, "cpu_s": cpu, "wall_s": wall, "clients": "sse",
+                "pages": ["/", "/cameras"], "why_not_chromium": "", **kw}
+    served = _pooled([run([10.0, 20.0], 4.0, 10.0, frames_served=3, browser_cpu_s=1.0),
+                      run([30.0, 40.0], 6.0, 10.0, frames_served=5, browser_cpu_s=3.0)])
+    assert served["latency"] == [10.0, 20.0, 30.0, 40.0]
+    assert (served["cpu_s"], served["wall_s"], served["frames_served"]) == (5.0, 10.0, 8)
+    assert served["browser_cpu_s"] == 2.0
+    sc = _screens_summary([run([10.0], 4.0, 10.0), run([12.0], 4.0, 10.0)], served, 2)
+    assert abs(sc["delta"]["cpu_pct_of_a_core"] - 10.0) < 1e-9      # (5 - 4) s in 10 s
+    assert abs(sc["browser_cpu_pct_of_a_core"] - 20.0) < 1e-9       # 2 s in 10 s
 
 
 def test_tree_cpu_counts_a_process_and_its_children():
