@@ -29,7 +29,7 @@ from db.importer import ImportReport
 from db.repository import Repository
 from db.spacing import min_spacing_mm, too_close
 from stationd.errors import ConfigError, InputError
-from stationd.yamlio import YamlNode
+from stationd.yamlio import YamlNode, file_kind, top_keys
 
 DEFAULT_TOLERANCE_MM = 8.0   # the matching tolerance; bolts must be twice as far apart
 TORQUE_MAX_NM = 5000.0
@@ -89,28 +89,15 @@ def load_bolts(path: str | Path, *, tolerance_mm: float = DEFAULT_TOLERANCE_MM) 
     return result.table
 
 
-#: sections only a station file has (``stationd.config``): a bolt table has none of them
-STATION_ONLY = frozenset({"cameras", "pairs", "lift", "wrench", "vision", "marker", "tool"})
-
-
-def _top_keys(root: YamlNode) -> set[str]:
-    """The top-level keys of a file that is a mapping (empty otherwise)."""
-    value = root.value()
-    return {k for k in value if isinstance(k, str)} if isinstance(value, dict) else set()
-
-
 def config_kind(path: Path) -> str | None:
     """``"station"`` or ``"bolts"`` when ``path`` is an existing station file or bolt table,
     else None (missing, unreadable, or another file)."""
     try:
         if not path.is_file():
             return None
-        keys = _top_keys(YamlNode.load(path))
+        return file_kind(top_keys(YamlNode.load(path)))
     except (ConfigError, OSError):
         return None
-    if keys & {"models", "psets"}:
-        return "bolts"
-    return "station" if keys & STATION_ONLY else None
 
 
 def refuse_to_overwrite(path: Path, writing: str, keep: tuple[str, ...]) -> None:
@@ -126,8 +113,7 @@ def refuse_to_overwrite(path: Path, writing: str, keep: tuple[str, ...]) -> None
 def _check(root: YamlNode, tolerance_mm: float) -> BoltCheck:
     if not (math.isfinite(tolerance_mm) and tolerance_mm > 0):
         raise InputError(f"matching tolerance {tolerance_mm} mm: must be a positive number")
-    keys = _top_keys(root)
-    if keys and not keys & {"models", "psets"} and keys & STATION_ONLY:
+    if file_kind(top_keys(root)) == "station":
         # one line, not one "unknown key" per section of the wrong kind of file
         return BoltCheck(root.path, None, [root.error(
             "this is a station file, not a bolt table (a bolt table has models: and psets:)")])

@@ -36,7 +36,7 @@ from stationd.station.matching import MatchParams
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import VisionParams
 from stationd.web.config import HttpConfig
-from stationd.yamlio import YamlNode
+from stationd.yamlio import YamlNode, file_kind, top_keys
 
 if TYPE_CHECKING:
     from stationd.boltfile import BoltCheck
@@ -356,9 +356,8 @@ class _Reader:
         """The top-level sections.  ``YamlNode.mapping`` stops at the first unknown key; when
         collecting, each unknown key is reported at its own line (the known sections are still
         read) by accepting it and reading the mapping again."""
-        value = root.value()
-        keys = {k for k in value if isinstance(k, str)} if isinstance(value, dict) else set()
-        if "models" in keys and not keys & set(STATION_KEYS):
+        keys = top_keys(root)
+        if file_kind(keys) == "bolts" and not keys & set(STATION_KEYS):
             # a bolt table given as the station: one line, not one per unknown section
             raise root.error("this is a bolt table, not a station file (a station file names "
                              "its cameras, pairs, lift and wrench; it may name a bolts: file)")
