@@ -13,6 +13,7 @@ import re
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from stationd.station.core import LOCALIZING
 from stationd.station.events import (
     BoltSelected,
     BoltSkipped,
@@ -43,7 +44,7 @@ LAST_RESULTS = 8
 ACT_ON = re.compile(r"\b(stale|ambiguous|tilt\w*|must wait|order|batch|skipped|already done|"
                     r"controller refused)\b", re.IGNORECASE)
 NOT_AT_A_BOLT = "Bring the wrench to a bolt"
-TRACKING_STATES = ("tracking", "bolt selected", "tightening")   # the core's LOCALIZING
+TRACKING_STATES = tuple(s.value for s in LOCALIZING)   # where a refusal speaks of the wrench
 
 
 @dataclass
