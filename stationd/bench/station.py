@@ -302,16 +302,20 @@ async def _connect(server: Any, n: int, info: dict[str, Any], quiet: bool,
     return clients
 
 
+#: a pass's figures pooled over passes: times as the mean of a pass, counts added
+PER_PASS = ("cpu_s", "wall_s", "browser_cpu_s", "settle_s", "encode_wall_s")
+COUNTED = ("frames_served", "frames_encoded", "snapshots")
+
+
 def _pooled(runs: list[dict[str, Any]]) -> dict[str, Any]:
     """Several passes with the screens as one: latencies pooled, times per pass (mean),
     counts added, the rest (the clients' kind, pages) from the first."""
     out = dict(runs[0])
     out["latency"] = [x for r in runs for x in r["latency"]]
-    for key in ("cpu_s", "wall_s", "browser_cpu_s", "settle_s", "frames_served",
-                "frames_encoded", "encode_wall_s", "snapshots"):
+    for key in (*PER_PASS, *COUNTED):
         values = [r[key] for r in runs if r.get(key) is not None]
-        mean = key in ("cpu_s", "wall_s", "browser_cpu_s", "settle_s", "encode_wall_s")
-        out[key] = (sum(values) / len(values) if mean else sum(values)) if values else None
+        total = sum(values)
+        out[key] = (total / len(values) if key in PER_PASS else total) if values else None
     out["cpu_pct"] = 100.0 * out["cpu_s"] / out["wall_s"]
     out["clients_alive"] = all(r.get("clients_alive", True) for r in runs)
     return out
