@@ -15,6 +15,13 @@ import pytest
 SIM = Path(__file__).resolve().parents[2] / "config" / "sim"
 
 
+def _ended(p: subprocess.Popen[str]) -> str:
+    """The daemon killed if a failed assertion left it running; what it wrote on stderr."""
+    if p.poll() is None:
+        p.kill()
+    return p.stderr.read() if p.stderr else ""
+
+
 def _recv_until(sock, needle, timeout):
     end = time.monotonic() + timeout
     seen = []
@@ -53,9 +60,7 @@ def test_ready_reload_refused_and_clean_stop(tmp_path):
         _recv_until(sock, "STOPPING=1", 60)
         assert p.wait(timeout=60) == 0
     finally:
-        if p.poll() is None:
-            p.kill()
-        err = p.stderr.read() if p.stderr else ""
+        err = _ended(p)
         sock.close()
     assert "reload refused" in err and "centre_methd: unknown key" in err
     assert "configuration reloaded" in err
@@ -211,9 +216,7 @@ def test_a_database_unusable_at_start_is_served_as_a_fault_then_the_results_come
         p.send_signal(signal.SIGTERM)
         assert p.wait(timeout=60) == 0
     finally:
-        if p.poll() is None:
-            p.kill()
-        err = p.stderr.read() if p.stderr else ""
+        err = _ended(p)
         sock.close()
     assert "Traceback" not in err
 
