@@ -58,6 +58,8 @@ def test_bench_station_with_two_browsers_reports_latency_and_cpu_with_and_withou
     assert sc["delta"]["latency_p95_ms"] == sc["with"]["latency_ms"]["p95"] - \
         sc["without"]["latency_ms"]["p95"]
     assert set(sc["delta"]) == {"latency_p95_ms", "latency_p50_ms", "cpu_pct_of_a_core"}
+    lo, hi = sc["delta_p95_interval_ms"]
+    assert lo <= hi and len(sc["with"]["passes"]) == 1
     assert sc["targets"] == {"latency_p95_ms": 10.0, "cpu_pct_of_a_core": 5.0}
 
 
@@ -118,3 +120,25 @@ def test_tree_cpu_counts_a_process_and_its_children():
     finally:
         parent.kill()
         parent.wait()
+
+
+def test_the_p95_difference_interval_finds_a_shift_and_not_an_absent_one():
+    """The interval printed beside the screens' p95 cost: it holds 0 for two samples of one
+    distribution and excludes it for a 30 ms shift; the same latencies give the same
+    interval (seeded); a side without latencies gives no interval."""
+    import math
+
+    import numpy as np
+
+    from stationd.bench.station import p95_delta_interval
+
+    rng = np.random.default_rng(11)
+    without = [list(rng.normal(40, 5, 20)) for _ in range(4)]
+    same = [list(rng.normal(40, 5, 20)) for _ in range(3)]
+    lo, hi = p95_delta_interval(same, without)
+    assert lo < 0 < hi
+    shifted = [[x + 30 for x in p] for p in same]
+    lo2, hi2 = p95_delta_interval(shifted, without)
+    assert 0 < lo2 < 30 < hi2 < 60
+    assert p95_delta_interval(shifted, without) == [lo2, hi2]
+    assert all(math.isnan(x) for x in p95_delta_interval([], without))

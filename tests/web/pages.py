@@ -205,8 +205,11 @@ class FirefoxPage(Page):
 
         def pump() -> None:
             for line in stderr:
-                self.log.write(line)
-                self.log.flush()
+                try:
+                    self.log.write(line)
+                    self.log.flush()
+                except ValueError:   # closed by close(): Firefox's last words are not kept
+                    return
                 lines.put(line)
         threading.Thread(target=pump, daemon=True).start()
         end = time.monotonic() + timeout
