@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -161,6 +162,23 @@ class Pair:
 
 
 @dataclass
+class Unsaved:
+    """A result the database has not taken yet, with what its record needs."""
+
+    record: Record
+    images: list[str]
+    result_at: datetime
+    parameters_id: int | None = None
+
+    def describe(self) -> str:
+        """One journal line with every value of the record (the only copy while unsaved)."""
+        a, r = self.record, self.record.result
+        return (f"VIN {a.vin} bolt {a.bolt} tightening {r.tightening_id} "
+                f"{'OK' if r.ok else 'NOK'} torque {float(r.torque_nm):.2f} Nm angle "
+                f"{float(r.angle_deg):.1f} deg pset {r.pset} at {self.result_at.isoformat()}")
+
+
+@dataclass
 class Station:
     """A running station: ``open()``, ``await run(stop)``, ``close()``."""
 
@@ -180,6 +198,11 @@ class Station:
     _results_pool: ThreadPoolExecutor = field(init=False)
     _lock: asyncio.Lock | None = None
     _pending: list[Event] = field(default_factory=list)    # faults found before run()
+    # results the database refused (a full disk, a lost server): kept here, the database in
+    # fault (nothing more is tightened), written by its keeper before it is called back
+    _unsaved: list[Unsaved] = field(default_factory=list)
+    _saved_late: list[Unsaved] = field(default_factory=list)
+    _unsaved_lock: threading.Lock = field(default_factory=threading.Lock)
     _bad: dict[str, int] = field(default_factory=dict)     # pair -> failed grabs in a row
     keepers: dict[str, DeviceKeeper[Any]] = field(init=False)  # device -> its one keeper
     _next_frames: dict[str, float] = field(default_factory=dict)  # pair -> next PairFrames
@@ -197,7 +220,7 @@ class Station:
         # the database too: opened by ``open`` (a first start that cannot open it exits), then
         # kept like a device: a failed query reports it lost, the keeper probes it with
         # backoff and the core hears it back
-        self.keepers[DATABASE] = self._keeper(DATABASE, self._database, _probe_database,
+        self.keepers[DATABASE] = self._keeper(DATABASE, self._database, self._probe_database,
                                               close=lambda repo: None)
 
     def _keeper(self, device: str, opener: Callable[[], Any],
@@ -208,6 +231,8 @@ class Station:
             await self.feed(DeviceFault(time.time(), device, kind, reason))
 
         async def on_back(reconnects: int) -> None:
+            if device == DATABASE:
+                await self._recorded_late()
             await self.feed(DeviceBack(time.time(), device,
                                        reconnects if device == WRENCH else None))
 
@@ -302,7 +327,12 @@ class Station:
 
     def close(self) -> None:
         """Tool off first, then every device, then the database; a failure is logged and the
-        shutdown goes on."""
+        shutdown goes on.  Results the database never took are journaled in full, one line
+        each: the only copy left (quality re-enters them from the journal)."""
+        with self._unsaved_lock:
+            unsaved = list(self._unsaved)
+        for u in unsaved:
+            log.error("UNSAVED at shutdown: %s", u.describe())
         steps: list[tuple[str, Any]] = []
         if self.wrench is not None and self.keepers[WRENCH].up:
             steps.append(("disable tool", self.wrench.disable_tool))
@@ -663,37 +693,81 @@ class Station:
                         one_line(exc))
 
     async def _record(self, a: Record) -> None:
-        """On disk first, then the controller may forget it; a database failure leaves the
-        result unacknowledged with the controller (it will send it again)."""
-        repo = self.repo
-        assert repo is not None  # noqa: S101
+        """On disk first, then the controller may forget it.  A database that refuses the
+        write (disk full, server gone) is a fault of the database: nothing more is tightened,
+        the result is kept in memory and journaled, its keeper writes it when the database
+        takes writes again (then it is published and acknowledged, as any other)."""
         r, sel = a.result, a.selection
-        info = self.bolts.get(a.bolt)
         loc = sel.evidence if sel is not None and isinstance(sel.evidence, Localization) \
             else None
         images = await self._call(self._save_images, a.vin, a.bolt, int(r.tightening_id), loc)
+        info = self.bolts.get(a.bolt)   # now: the vehicle may change before a late write
+        u = Unsaved(a, images, datetime.now(UTC), info.parameters_id if info else None)
         try:
-            await self._call(lambda: repo.record_tightening(
-                a.vin, a.bolt, ok=bool(r.ok),
-                position_mm=list(sel.point_mm) if sel else [0.0, 0.0, 0.0],
-                match_distance_mm=sel.distance_mm if sel else 0.0,
-                tilt_deg=sel.tilt_deg if sel else 0.0,
-                torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
-                parameters_id=info.parameters_id if info else None,
-                tightening_id=int(r.tightening_id),
-                sent_at=datetime.fromtimestamp(sel.decided_t, UTC) if sel else None,
-                result_at=datetime.now(UTC), images=images))
+            await self._call(self._write, u)
         except STATION_FAULTS as exc:
-            log.error("tightening %d of %s NOT stored (left with the controller): %s",
-                      r.tightening_id, a.bolt, one_line(exc))
+            with self._unsaved_lock:
+                self._unsaved.append(u)
+            log.error("tightening %d of %s NOT stored, kept until the database takes it: "
+                      "%s; %s", r.tightening_id, a.bolt, one_line(exc), u.describe())
             self.bus.publish(Notice(f"tightening {r.tightening_id} of {a.bolt} not stored: "
                                     f"{one_line(exc)}", "error"))
+            self.keepers[DATABASE].lost(DeviceError(f"results not stored: {one_line(exc)}"))
             return
+        await self._recorded(u)
+
+    def _write(self, u: Unsaved) -> None:
+        """One result into the database (an executor thread); raises what the database
+        raises."""
+        repo = self.repo
+        assert repo is not None  # noqa: S101 - opened in open()
+        a = u.record
+        r, sel = a.result, a.selection
+        repo.record_tightening(
+            a.vin, a.bolt, ok=bool(r.ok),
+            position_mm=list(sel.point_mm) if sel else [0.0, 0.0, 0.0],
+            match_distance_mm=sel.distance_mm if sel else 0.0,
+            tilt_deg=sel.tilt_deg if sel else 0.0,
+            torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
+            parameters_id=u.parameters_id,
+            tightening_id=int(r.tightening_id),
+            sent_at=datetime.fromtimestamp(sel.decided_t, UTC) if sel else None,
+            result_at=u.result_at, images=u.images)
+
+    async def _recorded(self, u: Unsaved) -> None:
+        a, r = u.record, u.record.result
         self.bus.publish(ResultRecorded(
             a.vin, a.bolt, bool(r.ok), float(r.torque_nm), float(r.angle_deg),
             int(r.tightening_id), int(r.pset), float(r.torque_min_nm), float(r.torque_max_nm),
-            float(r.angle_min_deg), float(r.angle_max_deg), a.late, tuple(images)))
+            float(r.angle_min_deg), float(r.angle_max_deg), a.late, tuple(u.images)))
         await self._acknowledge(r)
+
+    def _probe_database(self, repo: Repository) -> None:
+        """The database's "reconnect" (its keeper's thread): one cheap query (the engine's
+        pool reconnects by itself), then the results it refused, oldest first: it is back
+        only once it has taken them all (a full disk still answers reads)."""
+        _probe_database(repo)
+        while True:
+            with self._unsaved_lock:
+                if not self._unsaved:
+                    return
+                u = self._unsaved[0]
+            try:
+                self._write(u)
+            except STATION_FAULTS as exc:
+                raise DeviceError(f"results not stored: {one_line(exc)}") from None
+            with self._unsaved_lock:
+                self._unsaved.pop(0)
+                self._saved_late.append(u)
+            log.info("tightening %d of %s stored late", u.record.result.tightening_id,
+                     u.record.bolt)
+
+    async def _recorded_late(self) -> None:
+        """The results the keeper wrote on its way back: published and acknowledged."""
+        with self._unsaved_lock:
+            done, self._saved_late = self._saved_late, []
+        for u in done:
+            await self._recorded(u)
 
     def _save_images(self, vin: str, bolt: str, tightening_id: int,
                      loc: Localization | None) -> list[str]:

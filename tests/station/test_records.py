@@ -3,6 +3,7 @@ a result that arrives after the wrench left its bolt (never the next bolt's), an
 table's order rule.  The harness is test_faults': an in-process station on config/sim (or a
 copy of it), the lift PLC and the controller on loopback, the cameras rendered by a World."""
 
+import asyncio
 import re
 import shutil
 from pathlib import Path
@@ -267,3 +268,66 @@ def test_an_ordered_bolt_waits_for_the_lower_order(tmp_path, monkeypatch):
     st = _scenario(tmp_path, body, **NO_NOK)
     assert [r[:2] for r in _records(st.cfg.database_url)] == [
         (first, seen["shot"].tightening_id)]
+
+
+# -- 4. a database that refuses a result ----------------------------------------------------
+@pytest.mark.timeout(240)
+def test_a_result_the_database_refuses_is_a_fault_kept_and_stored_when_it_can(tmp_path):
+    """A full disk refuses the record of a tightening (injected at the repository: a real
+    SQLite reuses its checkpointed WAL, so filling a disk does not fail a write reliably):
+    the database is in fault (the station too: the tool off, nothing sent for the next bolt),
+    the result is kept and not acknowledged; once the database takes writes again its keeper
+    stores it (same tightening id, once), then it is published and acknowledged, and the
+    station works on."""
+    from db.errors import DbError
+    from stationd.station.events import DeviceHealth, ResultRecorded
+
+    full = {"on": False, "refused": 0}
+    seen: dict[str, Any] = {}
+
+    def prepare(st):
+        repo = st.repo
+        real = repo.record_tightening
+
+        def record_tightening(*args, **kw):
+            if full["on"]:
+                full["refused"] += 1
+                raise DbError("database write failed: database or disk is full")
+            return real(*args, **kw)
+
+        repo.record_tightening = record_tightening
+
+    async def body(st, world):
+        ctl = st.wrench.controller
+        bolts = sorted(st.bolts)
+        first, second = bolts[0], bolts[1]
+        seen[first] = (await _tighten(st, world, first, seed=1)).tightening_id  # had room
+        world.set_wrench(_on(st, second, 2))
+        await _until(lambda: _tightening(st, second), 60)
+        full["on"] = True
+        shot = ctl.pull_trigger()
+        assert shot is not None
+        seen[second] = shot.tightening_id
+        await _until(lambda: "database" in st.cycle.faults, 30)
+        assert st.cycle.state is State.FAULT
+        assert "results not stored" in st.cycle.reason and "disk is full" in st.cycle.reason
+        assert not ctl.tool_enabled
+        assert shot.tightening_id not in ctl.acked_ids
+        sent = len(_sends(st))
+        world.set_wrench(_on(st, bolts[2], 3))               # the next bolt: nothing sent
+        await asyncio.sleep(3.0)
+        assert len(_sends(st)) == sent and not ctl.tool_enabled
+        assert st.cycle.state is State.FAULT and full["refused"] >= 2   # the keeper retried
+        full["on"] = False                                   # room again
+        await _until(lambda: shot.tightening_id in ctl.acked_ids, 30)
+        await _until(lambda: "database" not in st.cycle.faults, 30)
+        late = [e for e in st.bus.of(ResultRecorded) if e.tightening_id == shot.tightening_id]
+        assert len(late) == 1 and late[0].bolt == second
+        health = [(e.ok, e.kind) for e in st.bus.of(DeviceHealth) if e.device == "database"]
+        assert health == [(False, "down"), (True, "")], health
+        await _until(lambda: _sends(st)[-1:] == [bolts[2]], 60)   # the station works on
+
+    st = _scenario(tmp_path, body, prepare=prepare, **NO_NOK)
+    stored = [(bolt, tid) for bolt, tid, _, _ in _records(st.cfg.database_url)]
+    assert stored[:2] == list(seen.items())                  # each once, in order
+    assert len({tid for _, tid in stored}) == len(stored)
