@@ -118,17 +118,19 @@ class Screens:
         from stationd.web import LatestFrames, Results, WebServer
 
         self.frames = frames if frames is not None else LatestFrames()
-        results = None
+        results, results_error = None, None
         try:
             results = Results(Repository.open(cfg.database_url))
         except OPEN_ERRORS as exc:
+            results_error = one_line(exc)
             log.error("screens served without results until the database opens: %s",
-                      one_line(exc))
+                      results_error)
         try:
             self.server = WebServer(self.bus, results, self.frames,
                                     listen=cfg.http.listen, token=cfg.http.token,
                                     images_dir=cfg.records.images_dir,
-                                    devices=configured_devices(cfg))
+                                    devices=configured_devices(cfg),
+                                    results_error=results_error)
             await self.server.start()
         except OPEN_ERRORS as exc:
             log.error("screens not served on %s: %s", cfg.http.listen, one_line(exc))

@@ -29,6 +29,7 @@ from aiohttp import web
 from db.errors import NotFoundError
 from db.repository import Repository
 from stationd.errors import InputError
+from stationd.station.core import LIFT, WRENCH
 from stationd.station.events import EventBus, PairFrames
 from stationd.web.config import HttpConfig, open_bind_problem
 from stationd.web.frames import LatestFrames, sharpness
@@ -58,17 +59,19 @@ class WebServer:
     :class:`Results` or a ``Repository`` (read only); None hides the results screens' data.
     ``listen`` with port 0 picks a free port (``url`` tells which).  ``devices``: the
     configured devices (lift, wrench, each pair), listed on the screens even before one
-    reports its health."""
+    reports its health.  ``results_error``: why a configured results database is not open
+    (the screens say it is down, not that none is configured)."""
 
     def __init__(self, bus: EventBus, results: Results | Repository | None = None,
                  frames: LatestFrames | None = None, listen: str = "127.0.0.1:8080",
                  token: str | None = None, images_dir: Path | None = None,
-                 devices: tuple[str, ...] = ()) -> None:
+                 devices: tuple[str, ...] = (), results_error: str | None = None) -> None:
         problem = open_bind_problem(HttpConfig(listen, token))
         if problem is not None:
             raise InputError(problem)
         self.bus = bus
         self.results = Results(results) if isinstance(results, Repository) else results
+        self.results_error = results_error
         self.frames = frames if frames is not None else LatestFrames()
         self.config = HttpConfig(listen, token)
         self.images_dir = None if images_dir is None else images_dir.resolve()
@@ -174,11 +177,14 @@ class WebServer:
             r.add_get(path, self._page(page))
         r.add_get("/vehicles/{vin}", self._page("vehicle.html"))
         r.add_static("/static", STATIC, append_version=False)
+        # the pages link /static/favicon.svg; a browser asks /favicon.ico anyway on its own
+        r.add_get("/favicon.ico", self._favicon)
         r.add_get("/healthz", self._healthz)
         r.add_get("/api/status", self._status)
         r.add_get("/api/view", self._view)
         r.add_get("/api/events", self._events)
         r.add_get("/api/cameras", self._cameras)
+        r.add_get("/api/pairs", self._pairs)
         r.add_get("/api/cameras/{pair}/{side}/frame.jpg", self._frame)
         r.add_get("/api/cameras/{pair}/{side}/crop.jpg", self._crop)
         r.add_get("/api/vehicles", self._vehicles)
@@ -214,6 +220,10 @@ class WebServer:
         async def handler(request: web.Request) -> web.StreamResponse:
             return web.FileResponse(STATIC / name, headers={"Cache-Control": "no-cache"})
         return handler
+
+    async def _favicon(self, request: web.Request) -> web.StreamResponse:
+        return web.FileResponse(STATIC / "favicon.svg",
+                                headers={"Content-Type": "image/svg+xml"})
 
     async def _healthz(self, request: web.Request) -> web.Response:
         """``ok`` (200), or ``fault`` (503) while the station is in fault or a device reports
@@ -282,6 +292,14 @@ class WebServer:
                         "seq": f.seq, "summary": _json_safe(s)})
         return web.json_response(out)
 
+    async def _pairs(self, request: web.Request) -> web.Response:
+        """Each configured camera pair with its health (the operator screen's devices, the
+        pairs only): the cameras screen shows a pair that is down, or not opened yet, with
+        its reason even when it never handed over a frame."""
+        health = self.view.device_health()
+        pairs = [n for n in self.devices if n not in (LIFT, WRENCH)]
+        return web.json_response([{"pair": n, **health[n]} for n in pairs if n in health])
+
     async def _frame(self, request: web.Request) -> web.Response:
         pair, side = request.match_info["pair"], request.match_info["side"]
         width = _int_arg(request, "w", 640)
@@ -306,7 +324,10 @@ class WebServer:
     # -- results ---------------------------------------------------------------------------
     def _need_results(self) -> Results:
         if self.results is None:
-            raise web.HTTPServiceUnavailable(text="no results database configured\n")
+            # configured but not open (the daemon retries it) is a fault to say, not a setting
+            text = ("no results database configured" if self.results_error is None
+                    else f"results database unavailable: {self.results_error}")
+            raise web.HTTPServiceUnavailable(text=text + "\n")
         return self.results
 
     async def _db(self, fn: Any, *args: Any) -> Any:
@@ -315,7 +336,8 @@ class WebServer:
         except NotFoundError as exc:    # an unknown VIN
             raise web.HTTPNotFound(text=f"{exc}\n") from None
         except Exception as exc:        # the database is down: the screen says so
-            raise web.HTTPServiceUnavailable(text=f"database: {exc}\n") from None
+            raise web.HTTPServiceUnavailable(
+                text=f"results database unavailable: {exc}\n") from None
 
     async def _vehicles(self, request: web.Request) -> web.Response:
         return web.json_response(await self._db(self._need_results().vehicles))

@@ -69,8 +69,9 @@ def format_status(st: dict[str, Any]) -> str:
                                  f": {c.get('done', 0)}/{c.get('total', 0)} done, "
                                  f"{c.get('nok', 0)} NOK"))
     for name, d in sorted(st.get("devices", {}).items()):
-        lines.append(f"device:   {name}: " + ("ok" if d["ok"] else
-                                              f"{d.get('kind', '')} {d.get('reason', '')}"))
+        lines.append(f"device:   {name}: " + (
+            "ok" if d["ok"] else "not opened yet" if d.get("kind") == "opening"
+            else f"{d.get('kind', '')} {d.get('reason', '')}"))
     vers = st.get("versions", {})
     lines.append("versions: " + ", ".join(f"{k} {x}" for k, x in sorted(vers.items())))
     return "\n".join(lines)

@@ -13,7 +13,7 @@ import re
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from stationd.station.core import LOCALIZING
+from stationd.station.core import DATABASE, LOCALIZING
 from stationd.station.events import (
     BoltSelected,
     BoltSkipped,
@@ -36,7 +36,12 @@ from stationd.station.events import (
 BOLT_LABELS = {
     "pending": "to do", "next": "next", "selected": "selected", "tightening": "tighten",
     "ok": "OK", "nok": "NOK", "skipped": "skipped", "blocked": "blocked",
+    "missing": "missing",    # a closed vehicle's bolt left untightened (the daemon's report)
 }
+# states a bolt can no longer be in once its vehicle closed: nothing is next or selected any
+# more on a vehicle that left (the ones the daemon reports missing become "missing")
+LIVE_STATES = ("next", "selected", "tightening", "blocked")
+NAMES_SHOWN = 3   # bolts named in a closed vehicle's headline; the full list is its title
 LAST_RESULTS = 8
 # refusals the operator must act on (amber): the wrench is seen, something about it or the
 # sequence forbids sending; any other refusal while tracking means the wrench is simply not on
@@ -71,7 +76,7 @@ class BoltState:
 class View:
     """What the operator screen shows, built from the events in order."""
 
-    state: str = "waiting for vehicle"
+    state: str = "starting"      # until the daemon says otherwise (it publishes no "starting")
     reason: str = ""
     vin: str | None = None
     model: str | None = None
@@ -89,11 +94,18 @@ class View:
     # configured device with no report is "ok" once the station is past its start (the daemon
     # tries every device once before its first state; one that fails is reported as a fault)
     configured: tuple[str, ...] = ()
+    # the station has tried its devices: the daemon opens the database first and only then
+    # every device (``Station.open``), and its core's first state (after ``Started``) comes
+    # after that; the one state published before, ``run._open``'s "fault: database" while the
+    # database does not open, arrives with the database reported down and does not count
+    opened: bool = False
 
     def apply(self, e: StationEvent) -> None:
         """Fold one event in."""
         if isinstance(e, StateChanged):
             self.state, self.reason = e.state, e.reason
+            if e.state != "starting" and self.devices.get(DATABASE, {}).get("ok", True):
+                self.opened = True
             if e.state not in TRACKING_STATES:
                 # a refusal is about the wrench while tracking: a station waiting for its
                 # vehicle (or in fault) says that, not the last vehicle's "bring the wrench"
@@ -103,8 +115,7 @@ class View:
         elif isinstance(e, VehicleOpened):
             self._open(e)
         elif isinstance(e, VehicleClosed):
-            self.closed = {"vin": e.vin, "missing": list(e.missing), "nok": list(e.nok)}
-            self.wrench, self.selected = None, None
+            self._close(e)
         elif isinstance(e, Localized):
             self._localized(e)
         elif isinstance(e, Refused):
@@ -141,6 +152,18 @@ class View:
         self.bolts = {b.bolt: BoltState(b.bolt, b.x_mm, b.y_mm, b.pset, b.order, b.batch,
                                         b.status if b.status in BOLT_LABELS else "pending")
                       for b in e.bolts}
+
+    def _close(self, e: VehicleClosed) -> None:
+        self.closed = {"vin": e.vin, "missing": list(e.missing), "nok": list(e.nok)}
+        self.wrench, self.selected = None, None
+        if e.vin != self.vin:
+            return
+        missing = set(e.missing)
+        for b in self.bolts.values():
+            if b.bolt in missing and b.state != "nok":
+                b.state, b.reason = "missing", "not tightened when the vehicle left"
+            elif b.state in LIVE_STATES:
+                b.state, b.reason = "pending", ""
 
     def _localized(self, e: Localized) -> None:
         if e.point_mm is None:
@@ -190,10 +213,11 @@ class View:
 
     def device_health(self) -> dict[str, dict[str, Any]]:
         """Every configured device, then any other that reported: reported health wins; an
-        unreported configured device is "opening" while the station starts, "ok" after."""
-        started = self.state != "starting"
-        out = {d: {"ok": started, "kind": "" if started else "opening",
-                   "reason": "" if started else "not opened yet", "reported": False}
+        unreported configured device is "opening" ("not opened yet", neutral) until the
+        station has tried its devices (``opened``), "ok" after (one that failed reported)."""
+        up = self.opened
+        out = {d: {"ok": up, "kind": "" if up else "opening",
+                   "reason": "" if up else "not opened yet", "reported": False}
                for d in self.configured}
         for d, h in self.devices.items():
             out[d] = {**h, "reported": True}
@@ -203,7 +227,10 @@ class View:
         """How the headline reads: ``stop`` (red: a fault or a wrong bolt, the station
         stops), ``act`` (amber: a refusal the operator resolves: stale, ambiguous, tilted,
         order rule, skipped), ``idle`` (neutral: the wrench is not on a bolt), ``go`` (a bolt
-        selected), ``done`` (vehicle finished), else ""."""
+        selected), ``nok`` (red: the vehicle closed with a NOK bolt, with or without missing
+        ones: a joint out of its limits left the station, the worse of the two for quality),
+        ``missing`` (amber: it closed with bolts not tightened), ``done`` (vehicle finished),
+        else "".  ``nok`` is not ``stop``: the station itself is healthy (/healthz stays ok)."""
         if self.alarm or self.state == "fault" or any(not h["ok"]
                                                        for h in self.devices.values()):
             return "stop"
@@ -211,6 +238,9 @@ class View:
             return "act" if refusal_needs_action(self.refused) else "idle"
         if self.selected is not None:
             return "go"
+        if self.closed is not None:
+            return ("nok" if self.closed["nok"] else "missing" if self.closed["missing"]
+                    else "done")
         c = self.counters()
         if c["total"] and c["done"] == c["total"]:
             return "done"
@@ -240,12 +270,22 @@ class View:
             pset = f" (pset {b.pset})" if b is not None and b.pset is not None else ""
             return f"{self.selected}{pset}: tighten"
         if self.closed is not None:
-            c = self.closed
-            missing = f"missing {', '.join(c['missing'])}" if c["missing"] else ""
-            nok = f"NOK {', '.join(c['nok'])}" if c["nok"] else ""
-            return f"{c['vin']} closed: " + ("; ".join(x for x in (missing, nok) if x)
-                                             or "all bolts OK")
+            return self._closed_line(NAMES_SHOWN)
         return self.reason or self.state
+
+    def _closed_line(self, shown: int | None) -> str:
+        """``VIN closed: 38 missing (B01, B02, B03, ...); NOK B04``: the count and the first
+        ``shown`` names (a panel PC fits no 38 names in large type), every name with None."""
+        c = self.closed
+        assert c is not None  # noqa: S101 - called when closed
+        parts = [_named(c["missing"], "missing", shown), _named(c["nok"], "NOK", shown)]
+        return f"{c['vin']} closed: " + ("; ".join(x for x in parts if x) or "all bolts OK")
+
+    def headline_title(self) -> str:
+        """The headline in full (its hover title): a closed vehicle's every name."""
+        if self.closed is not None and self.headline() == self._closed_line(NAMES_SHOWN):
+            return self._closed_line(None)
+        return self.headline()
 
     def _not_at_a_bolt(self) -> bool:
         """The wrench is out of view, or seen but near no bolt."""
@@ -255,6 +295,7 @@ class View:
     def to_json(self) -> dict[str, Any]:
         return {
             "state": self.state, "reason": self.reason, "headline": self.headline(),
+            "headline_title": self.headline_title(),
             "tone": self.tone(),
             "refused": self.refused, "alarm": self.alarm,
             "vehicle": None if self.vin is None else {"vin": self.vin, "model": self.model,
@@ -263,6 +304,15 @@ class View:
             "selected": self.selected, "wrench": self.wrench, "counters": self.counters(),
             "devices": self.device_health(), "results": self.results, "closed": self.closed,
         }
+
+
+def _named(names: list[str], what: str, shown: int | None) -> str:
+    """``missing B01, B02`` for a few, ``38 missing (B01, B02, B03, ...)`` for more."""
+    if not names:
+        return ""
+    if shown is None or len(names) <= shown:
+        return f"{what} {', '.join(names)}"
+    return f"{len(names)} {what} ({', '.join(names[:shown])}, ...)"
 
 
 def refusal_needs_action(reason: str) -> bool:

@@ -47,3 +47,17 @@ def test_status_bad_timeout_is_one_line_exit_2_not_no_daemon(timeout, capsys):
     assert main(["status", "--timeout", timeout]) == 2
     err = capsys.readouterr().err
     assert "--timeout" in err and "no daemon" not in err and err.count("\n") == 1
+
+
+def test_status_says_not_opened_yet_while_the_database_keeps_the_devices_closed(live_server,
+                                                                                capsys):
+    from stationd.station.events import DeviceHealth, StateChanged
+
+    srv = live_server(devices=("lift", "wrench"))
+    srv.publish([DeviceHealth(device="database", ok=False, kind="down", reason="disk I/O error"),
+                 StateChanged(state="fault", reason="database: disk I/O error")])
+    srv.call(_settle(srv))
+    assert main(["status", "--url", srv.url]) == 1
+    out = capsys.readouterr().out
+    assert "device:   lift: not opened yet" in out and "device:   wrench: not opened yet" in out
+    assert "device:   database: down disk I/O error" in out

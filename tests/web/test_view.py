@@ -184,3 +184,60 @@ def test_a_station_waiting_for_its_vehicle_says_so_not_the_last_refusal():
     assert v.headline() == f"{VIN} closed: missing B1"
     v = fold([*opened(), Refused(reason=NOT_SEEN), StateChanged(state="tracking", reason="")])
     assert v.headline() == "Bring the wrench to a bolt"      # while tracking it still does
+
+
+def test_a_closed_vehicle_with_missing_or_nok_bolts_is_an_alarm_and_its_bolts_say_missing():
+    """A newcomer saw "SIMVIN... closed: missing B01, ... B50; NOK B04" in the neutral tone
+    and 38 bolts still "next": a vehicle that left incomplete is amber, with a NOK red; its
+    untightened bolts are "missing"; the headline counts them and names a few."""
+    v = fold(opened() + work())          # B1 OK, B2 NOK, B3 tightening, B4 next
+    v.apply(VehicleClosed(vin=VIN, missing=("B3", "B4"), nok=("B2",)))
+    assert states(v) == {"B1": "ok", "B2": "nok", "B3": "missing", "B4": "missing"}
+    assert v.to_json()["bolts"][3]["label"] == "missing"
+    assert v.tone() == "nok" and v.headline() == f"{VIN} closed: missing B3, B4; NOK B2"
+    v.apply(StateChanged(state="waiting for vehicle", reason="lift not at working height"))
+    assert v.tone() == "nok"             # the closed vehicle still speaks, still red
+    v = fold(opened())
+    v.apply(VehicleClosed(vin=VIN, missing=("B1",), nok=()))
+    assert v.tone() == "missing"
+    v = fold(opened())
+    v.apply(VehicleClosed(vin=VIN, missing=(), nok=()))
+    assert (v.tone(), v.headline()) == ("done", f"{VIN} closed: all bolts OK")
+
+
+def test_many_missing_bolts_are_counted_with_a_few_named_and_all_in_the_title():
+    names = tuple(f"B{k:02d}" for k in range(1, 51) if k != 4)
+    v = fold(opened())
+    v.apply(VehicleClosed(vin=VIN, missing=names, nok=("B04",)))
+    assert v.headline() == f"{VIN} closed: 49 missing (B01, B02, B03, ...); NOK B04"
+    j = v.to_json()
+    assert j["headline_title"] == f"{VIN} closed: missing {', '.join(names)}; NOK B04"
+    assert j["tone"] == "nok"
+
+
+def test_devices_are_not_claimed_ok_while_the_database_keeps_the_station_from_opening_them():
+    """run._open publishes the database's fault and a "fault" state before the station has
+    tried any device: lift and wrench are "not opened yet", not "ok", until the core's first
+    state (published once Station.open has tried them all)."""
+    cfg = ("lift", "wrench", "pair1")
+    v = fold([], configured=cfg)
+    assert v.state == "starting"
+    assert {d: h["reason"] for d, h in v.device_health().items()} == {
+        d: "not opened yet" for d in cfg}
+    down = [DeviceHealth(device="database", ok=False, kind="down", reason="disk I/O error"),
+            StateChanged(state="fault", reason="database: disk I/O error")]
+    v = fold(down * 3, configured=cfg)     # retried with backoff
+    health = v.device_health()
+    assert not any(health[d]["ok"] for d in cfg) and health["database"]["ok"] is False
+    assert health["lift"]["kind"] == "opening"
+    assert v.to_json()["headline"].startswith("FAULT: database")
+    # the database opens; the station tries every device: the wrench does not answer
+    v.apply(DeviceHealth(device="database", ok=True))
+    v.apply(DeviceHealth(device="wrench", ok=False, kind="refused", reason="connection refused"))
+    v.apply(StateChanged(state="fault", reason="wrench: connection refused"))
+    health = v.device_health()
+    assert health["lift"]["ok"] and health["pair1"]["ok"] and not health["wrench"]["ok"]
+    # a later database outage does not make the opened devices "not opened yet" again
+    v.apply(DeviceHealth(device="database", ok=False, kind="down", reason="locked"))
+    v.apply(StateChanged(state="fault", reason="database: locked"))
+    assert v.device_health()["lift"]["ok"]

@@ -64,7 +64,7 @@ function camDiv(cam, stamp, old) {
     const r = img.getBoundingClientRect();
     const x = Math.round((ev.clientX - r.left) / r.width * cam.width);
     const y = Math.round((ev.clientY - r.top) / r.height * cam.height);
-    $("crop").hidden = false;
+    openCrop();
     $("crop-title").textContent = `${cam.pair} ${cam.side} at (${x}, ${y}), full resolution`;
     $("crop-img").src = `/api/cameras/${encodeURIComponent(cam.pair)}/${cam.side}/crop.jpg?x=${x}&y=${y}&size=512&s=${Date.now()}`;
   };
@@ -78,8 +78,19 @@ function camDiv(cam, stamp, old) {
   d.appendChild(fr);
   const facts = document.createElement("div");
   facts.className = "facts";
-  facts.textContent = `${cam.side}: ${cam.width}x${cam.height}, ${fmt(cam.fps, 1)} fps, ` +
-    `grabbed ${fmt(cam.age_s, 1)} s ago, sharpness ${fmt(s.sharpness, 0)}` +
+  // a frame rate is only true of a camera that is grabbing now: an old frame says its age
+  const old_ = !recent(cam);
+  d.classList.toggle("old", old_);
+  if (old_) {
+    const tag = document.createElement("div");
+    tag.className = "old-tag";
+    tag.textContent = `\u26A0 OLD FRAME: ${ago(cam.age_s)}`;
+    fr.appendChild(tag);
+  }
+  facts.textContent = `${cam.side}: ${cam.width}x${cam.height}, ` +
+    (old_ ? `no new frame for ${ago(cam.age_s)}` :
+     `${fmt(cam.fps, 1)} fps, grabbed ${fmt(cam.age_s, 1)} s ago`) +
+    `, sharpness ${fmt(s.sharpness, 0)}` +
     (s.exposure_us ? `, exposure ${s.exposure_us} \u00B5s` : "") +
     (s.found === undefined ? "" : s.found ? ", marker found" : ", no marker");
   d.appendChild(facts);
@@ -92,6 +103,34 @@ function camDiv(cam, stamp, old) {
   return d;
 }
 
+// recent: within three frame periods, and never more than RECENT_S (a 1 fps camera's frame
+// 3 s old is late, not live)
+const RECENT_S = 2;
+function recent(cam) {
+  const period = cam.fps ? 1 / cam.fps : RECENT_S;
+  return cam.age_s !== null && cam.age_s <= Math.min(RECENT_S, Math.max(0.5, 3 * period));
+}
+function ago(s) {
+  return s < 120 ? `${fmt(s, 0)} s` : s < 7200 ? `${fmt(s / 60, 0)} min` : `${fmt(s / 3600, 1)} h`;
+}
+
+// each configured pair's health line: a pair that is down says why, even without a frame
+function healthLine(h) {
+  const p = document.createElement("div");
+  p.className = "pair-health " + (!h ? "" : h.ok ? "dev-ok" : h.kind === "opening" ? "dev-wait" : "dev-bad");
+  p.textContent = !h ? "" : h.ok ? "ok" : h.kind === "opening" ? "not opened yet" :
+    `${h.kind || "fault"}: ${h.reason}`;
+  return p;
+}
+
+function openCrop() {
+  $("crop").hidden = false;
+  $("crop-close").focus();
+}
+function closeCrop() { $("crop").hidden = true; }
+$("crop-close").onclick = closeCrop;
+document.addEventListener("keydown", (e) => { if (e.key === "Escape") closeCrop(); });
+
 // A refresh builds the new frames off screen and swaps them in only once every image has
 // decoded, and the next refresh waits for that: the shown frames never go blank while the
 // server encodes (8 reduced 20 MP frames can take longer than the refresh period on a busy
@@ -101,8 +140,11 @@ async function refresh() {
   if (busy) return;
   busy = true;
   try {
-    const cams = await (await fetch("/api/cameras")).json();
-    const pairs = {};
+    const [cams, configured] = await Promise.all([
+      fetch("/api/cameras").then((r) => r.json()),
+      fetch("/api/pairs").then((r) => r.ok ? r.json() : []).catch(() => [])]);
+    const pairs = {}, health = {};
+    for (const h of configured) { pairs[h.pair] = []; health[h.pair] = h; }   // in their order
     for (const c of cams) (pairs[c.pair] = pairs[c.pair] || []).push(c);
     const stamp = Date.now();
     const old = {};   // the frames now shown, by camera: an off-screen one is moved over
@@ -111,10 +153,18 @@ async function refresh() {
     const sections = [];
     for (const [name, list] of Object.entries(pairs)) {
       const p = document.createElement("section");
-      p.className = "pair";
+      p.className = "pair" + (health[name] && !health[name].ok ? " pair-bad" : "");
+      p.dataset.pair = name;
       p.innerHTML = "<h2></h2>";
       // config/sim names its pairs "pair1"...: not "pair pair1"
       p.firstChild.textContent = /^pair/i.test(name) ? name : `pair ${name}`;
+      if (health[name]) p.appendChild(healthLine(health[name]));
+      if (!list.length) {
+        const none = document.createElement("div");
+        none.className = "no-frames";
+        none.textContent = "No frames from this pair yet.";
+        p.appendChild(none);
+      }
       const row = document.createElement("div");
       row.className = "cams";
       for (const c of list) row.appendChild(camDiv(c, stamp, old));
@@ -127,7 +177,7 @@ async function refresh() {
       for (const fr of p.querySelectorAll(".frame"))
         if (fr.kept) fr.kept[0].replaceWith(fr.kept[1]);
     const root = $("pairs");
-    if (!cams.length) root.textContent = "No frames yet: the daemon has handed over none.";
+    if (!sections.length) root.textContent = "No frames yet: the daemon has handed over none.";
     else root.replaceChildren(...sections);
     seen.disconnect();
     for (const d of root.querySelectorAll(".cam")) seen.observe(d);

@@ -3,9 +3,9 @@
 "use strict";
 const NS = "http://www.w3.org/2000/svg";
 const ICONS = {pending: "\u25CB", next: "\u25B6", selected: "\u2691", tightening: "\u21BB",
-  ok: "\u2714", nok: "\u2716", skipped: "\u00BB", blocked: "\u2298"};
+  ok: "\u2714", nok: "\u2716", skipped: "\u00BB", blocked: "\u2298", missing: "!"};
 const LABELS = {pending: "to do", next: "next", selected: "selected", tightening: "tighten",
-  ok: "OK", nok: "NOK", skipped: "skipped", blocked: "blocked"};
+  ok: "OK", nok: "NOK", skipped: "skipped", blocked: "blocked", missing: "missing"};
 const $ = (id) => document.getElementById(id);
 
 function el(tag, attrs, text) {
@@ -21,7 +21,7 @@ function legend() {
   const L = $("legend");
   for (const s of Object.keys(LABELS)) {
     const span = document.createElement("span");
-    span.innerHTML = `<span class="sw" style="background:var(--${s})"></span>${ICONS[s]} ${LABELS[s]}`;
+    span.innerHTML = `<span class="sw sw-${s}"></span>${ICONS[s]} ${LABELS[s]}`;
     L.appendChild(span);
   }
 }
@@ -44,6 +44,7 @@ function drawMap(view) {
   drawWrench(svg, view.wrench, W, H);
 }
 
+const R_FLOOR = 6;   // px: the smallest dot that still shows its icon
 function buildMap(svg, bolts, W, H) {
   svg.setAttribute("viewBox", `0 0 ${W} ${H}`);
   svg.replaceChildren();
@@ -53,7 +54,9 @@ function buildMap(svg, bolts, W, H) {
   const xs = bolts.map((b) => b.x), ys = bolts.map((b) => b.y);
   const x0 = Math.min(...xs), x1 = Math.max(...xs), y0 = Math.min(...ys), y1 = Math.max(...ys);
   const span = Math.max(x1 - x0, y1 - y0, 100);
-  const pad = 100, s = Math.min((W - 2 * pad) / Math.max(x1 - x0, span * 0.2),
+  // a margin for the labels of the outer bolts, smaller on a short panel (the bolts' spread
+  // is what keeps their dots apart)
+  const pad = Math.max(50, Math.min(100, 0.15 * Math.min(W, H))), s = Math.min((W - 2 * pad) / Math.max(x1 - x0, span * 0.2),
                                (H - 2 * pad) / Math.max(y1 - y0, span * 0.2));
   const cx = (x0 + x1) / 2, cy = (y0 + y1) / 2;
   // vehicle X to the right, vehicle Y up (a top view)
@@ -64,7 +67,10 @@ function buildMap(svg, bolts, W, H) {
   for (let i = 0; i < bolts.length; i++)
     for (let j = i + 1; j < bolts.length; j++)
       dmin = Math.min(dmin, Math.hypot(X(bolts[i].x) - X(bolts[j].x), Y(bolts[i].y) - Y(bolts[j].y)));
-  const r = Math.max(9, Math.min(44, s * span / 20, 0.42 * dmin));
+  // the dots never overlap: the radius follows the closest two bolts (their 3 px outlines
+  // included), down to a floor that keeps the icon readable; only bolts closer than twice
+  // the floor (none on config/sim's vehicle at 1280x657) could still touch
+  const r = Math.max(R_FLOOR, Math.min(44, s * span / 20, (dmin - 5) / 2));
   const dense = r < 22;
   svg.classList.toggle("dense", dense);
   const placed = [];   // bolt -> [group, x, y]
@@ -74,7 +80,9 @@ function buildMap(svg, bolts, W, H) {
       transform: `translate(${x.toFixed(1)},${y.toFixed(1)})`});
     g.appendChild(el("title", {}, `${b.bolt}: ${b.label}${b.reason ? " (" + b.reason + ")" : ""}`));
     g.appendChild(el("circle", {r: r}));
-    g.appendChild(el("text", {class: "icon", y: 0}, ICONS[b.state] || "?"));
+    const icon = el("text", {class: "icon", y: 0}, ICONS[b.state] || "?");
+    if (dense) icon.style.fontSize = `${Math.round(1.3 * r)}px`;   // inside its dot
+    g.appendChild(icon);
     svg.appendChild(g);
     placed.push([b, g, x, y]);
   }
@@ -111,11 +119,29 @@ function drawWrench(svg, w, W, H) {
 // above, below, right, left, the diagonals, then farther out.  A label that finds no room is
 // hidden (shown on hover); the bolt keeps its coloured symbol and state icon, so colour is
 // still never the only cue.
-const PRIORITY = {selected: 0, tightening: 0, nok: 1, blocked: 1, next: 2};
+const PRIORITY = {selected: 0, tightening: 0, nok: 1, blocked: 1, next: 2, missing: 2};
+// A label must read as its own bolt's: it is kept only where its box is nearer its own dot
+// than any other dot by NEARER px (the box's nearest edge to the dot's centre: what the eye
+// pairs), else it is hidden and shown on hover (a label 22 px from B20 and 56 px from B36
+// was read as B20's); NEARER covers the box measured here being 3 px larger than drawn
+const NEARER = 4;
+function boxDist(box, px, py) {
+  const dx = Math.max(box[0] - px, 0, px - box[2]), dy = Math.max(box[1] - py, 0, py - box[3]);
+  return Math.hypot(dx, dy);
+}
+function readsAsOwn(box, x, y, dots) {
+  const own = boxDist(box, x, y);
+  for (const [ox, oy] of dots)
+    if (!(ox === x && oy === y) && boxDist(box, ox, oy) < own + NEARER) return false;
+  return true;
+}
 // The map is redrawn with every snapshot (up to 10 a second, the wrench moving): the
 // placement is recomputed only when a label or the layout changed, and each label text is
 // measured once, so a redraw costs the browser (often on the station's own cores) no layout.
 let lastPlacement = {key: "", at: new Map()};
+// above, below, the sides, the diagonals, then between them (a label beside a cluster)
+const DIRS = [[0, -1], [0, 1], [1, 0], [-1, 0], [1, -1], [-1, -1], [1, 1], [-1, 1],
+  [0.5, -1], [-0.5, -1], [0.5, 1], [-0.5, 1], [1, -0.5], [-1, -0.5], [1, 0.5], [-1, 0.5]];
 const measured = new Map();
 function placeLabels(placed, r, dense, W, H) {
   const hit = (a, b) => a[0] < b[2] && b[0] < a[2] && a[1] < b[3] && b[1] < a[3];
@@ -137,6 +163,7 @@ function placeLabels(placed, r, dense, W, H) {
     if (measured.size > 5000) measured.clear();   // torque texts accumulate over vehicles
     const at = new Map();
     const taken = labels.map(({x, y}) => [x - r, y - r, x + r, y + r]);   // the symbols
+    const dots = labels.map(({x, y}) => [x, y]);
     const order = [...labels].sort((p, q) => (PRIORITY[p.b.state] ?? 3) - (PRIORITY[q.b.state] ?? 3));
     for (const {lbl, x, y, text} of order) {
       if (!measured.has(text)) {
@@ -145,15 +172,24 @@ function placeLabels(placed, r, dense, W, H) {
       }
       // getBBox leaves out the text's 4 px outline stroke (Firefox's screen box includes it)
       const bb = measured.get(text), w = bb.width + 6, h = bb.height + 6;
-      const dirs = [[0, -1], [0, 1], [1, 0], [-1, 0], [1, -1], [-1, -1], [1, 1], [-1, 1]];
+      // a bolt with a close neighbour tries the side away from it first (the pair's labels
+      // go outward, not both into the gap between them)
+      let nx = 0, ny = 0, nd = Infinity;
+      for (const [ox, oy] of dots) {
+        const d = Math.hypot(ox - x, oy - y);
+        if (d > 0 && d < nd) [nx, ny, nd] = [(ox - x) / d, (oy - y) / d, d];
+      }
+      const dirs = nd < 6 * r ? [...DIRS].sort((a, b) => (a[0] * nx + a[1] * ny) /
+        Math.hypot(...a) - (b[0] * nx + b[1] * ny) / Math.hypot(...b)) : DIRS;
       let best = null;
-      for (const k of [1, 1.8, 2.6]) {
+      for (const k of [0, 0.5, 1.2]) {
         for (const [dx, dy] of dirs) {
-          // the label's centre just off the symbol in that direction
-          const cx = x + dx * (r * k + gap + w / 2), cy = y + dy * (r * k + gap + h / 2);
+          // the label's edge just off the symbol in that direction (farther out: k * r)
+          const cx = x + dx * (r + k * r + gap + w / 2), cy = y + dy * (r + k * r + gap + h / 2);
           const box = [cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2];
           if (box[0] < 0 || box[1] < 0 || box[2] > W || box[3] > H) continue;
           if (taken.some((t) => hit(t, box))) continue;
+          if (!readsAsOwn(box, x, y, dots)) continue;
           best = [cx, cy, box];
           break;
         }
@@ -193,7 +229,7 @@ function render(view) {
   $("nok-wrap").style.color = view.counters.nok ? "" : "var(--dim)";
   const h = $("headline");
   setText("headline", view.headline);
-  h.title = view.headline;
+  h.title = view.headline_title || view.headline;   // a closed vehicle's every bolt
   // red: fault, stop; amber: a refusal the operator resolves; neutral: the wrench is not on a
   // bolt (a normal state between bolts, never shown as an alarm)
   h.className = "headline " + (view.tone || "");
@@ -224,7 +260,8 @@ function drawResults(results) {
     const lim = (v, lo, hi, d) => {
       const out = (lo !== null && v < lo) || (hi !== null && v > hi);
       const rng = lo !== null || hi !== null ? ` [${fmt(lo, d)}-${fmt(hi, d)}]` : "";
-      return `<span class="${out ? "out" : ""}">${fmt(v, d)}</span><small>${rng}</small>`;
+      // a range stays on one line ("[22.0-" / "28.0]" wrapped at 1280 px)
+      return `<span class="${out ? "out" : ""}">${fmt(v, d)}</span> <small class="rng">${rng.trim()}</small>`;
     };
     tr.innerHTML = `<td>${esc(r.bolt)} ${r.ok ? "OK" : "NOK"}</td>` +
       `<td>${lim(r.torque_nm, r.torque_min, r.torque_max, 1)}</td>` +
@@ -247,10 +284,43 @@ function drawDevices(devices) {
   }
 }
 
+// A screen that no longer hears the station must not look live: a green "ok" or a "tighten"
+// left standing after the daemon stopped would be believed.  LOST_MS after the stream
+// broke (the browser retries every second: a daemon restarting is back within that) the
+// content is dimmed, the headline says so and no device is shown "ok"; the next snapshot
+// brings it all back.
+const LOST_MS = 2000;
+const NOT_LIVE = "No connection to the station: this screen is not live";
+let lostTimer = null;
+function notLive() {
+  document.body.classList.add("not-live");
+  $("conn").hidden = false;
+  const h = $("headline");
+  setText("headline", NOT_LIVE);
+  h.title = NOT_LIVE;
+  h.className = "headline stop";
+  h.dataset.tone = "offline";
+  for (const li of $("devices").querySelectorAll("li")) {
+    li.className = "dev-unknown";
+    li.textContent = `${li.dataset.device}: unknown`;
+  }
+  shownKeys.devices = "";   // redrawn from the next snapshot
+  setText("state", "not live");
+}
 function connect() {
   const es = new EventSource("/api/events");
-  es.onmessage = (m) => { $("conn").hidden = true; render(JSON.parse(m.data)); };
-  es.onerror = () => { $("conn").hidden = false; };
+  es.onmessage = (m) => {
+    clearTimeout(lostTimer);
+    lostTimer = null;
+    document.body.classList.remove("not-live");
+    $("conn").hidden = true;
+    render(JSON.parse(m.data));
+  };
+  es.onerror = () => {
+    if (lostTimer === null) lostTimer = setTimeout(notLive, LOST_MS);
+    // a refused reconnection (an HTTP error) ends the browser's own retries: retry here
+    if (es.readyState === EventSource.CLOSED) { es.close(); setTimeout(connect, 1000); }
+  };
 }
 legend();
 window.addEventListener("resize", () => { if (window.lastView) drawMap(window.lastView); });

@@ -11,7 +11,11 @@ function cell(tr, text, cls) {
 }
 async function getJson(url) {
   const r = await fetch(url);
-  if (!r.ok) throw new Error((await r.text()).trim());
+  if (!r.ok) {
+    const e = new Error((await r.text()).trim());
+    e.status = r.status;
+    throw e;
+  }
   return r.json();
 }
 async function listVehicles() {
@@ -44,10 +48,13 @@ async function listVehicles() {
 }
 async function showVehicle(vin) {
   const base = "/api/vehicles/" + encodeURIComponent(vin);
-  q("#csv").href = base + "/export.csv";
-  q("#json").href = base + "/export.json";
   try {
     const v = await getJson(base);
+    // the exports and the table only for a vehicle the database holds
+    q("#csv").href = base + "/export.csv";
+    q("#json").href = base + "/export.json";
+    q("#exports").hidden = false;
+    q("#rundowns").hidden = false;
     q("#title").textContent = `${v.vin} (${v.model})`;
     q("#summary").textContent = `${v.ok.length} OK, ${v.nok.length} NOK, ${v.missing.length} missing` +
       (v.complete ? ": complete" : "");
@@ -82,5 +89,10 @@ async function showVehicle(vin) {
     // crops are saved only with records.save_images (off in config/sim): no empty column
     const crops = v.bolts.some((b) => b.rundowns.some((r) => (r.image_urls || []).length));
     q("#rundowns").classList.toggle("no-crops", !crops);
-  } catch (e) { q("#error").textContent = e.message; }
+  } catch (e) {
+    if (e.status === 404) {
+      q("#title").textContent = `no vehicle ${vin}`;
+      q("#summary").textContent = "The results database holds no vehicle with this VIN.";
+    } else q("#error").textContent = e.message;
+  }
 }
