@@ -89,27 +89,6 @@ def load_bolts(path: str | Path, *, tolerance_mm: float = DEFAULT_TOLERANCE_MM) 
     return result.table
 
 
-def config_kind(path: Path) -> str | None:
-    """``"station"`` or ``"bolts"`` when ``path`` is an existing station file or bolt table,
-    else None (missing, unreadable, or another file)."""
-    try:
-        if not path.is_file():
-            return None
-        return file_kind(top_keys(YamlNode.load(path)))
-    except (ConfigError, OSError):
-        return None
-
-
-def refuse_to_overwrite(path: Path, writing: str, keep: tuple[str, ...]) -> None:
-    """An ``--out`` that would replace a station file or bolt table (kinds in ``keep``) with
-    ``writing`` is refused: a typo must not cost the station its configuration."""
-    kind = config_kind(path)
-    if kind in keep:
-        name = "a station file" if kind == "station" else "a bolt table"
-        raise InputError(f"{path}: is {name}; writing {writing} would replace it (give "
-                         "another --out)")
-
-
 def _check(root: YamlNode, tolerance_mm: float) -> BoltCheck:
     if not (math.isfinite(tolerance_mm) and tolerance_mm > 0):
         raise InputError(f"matching tolerance {tolerance_mm} mm: must be a positive number")

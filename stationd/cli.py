@@ -164,6 +164,11 @@ def _results_file(text: str) -> str:
         raise argparse.ArgumentTypeError(f"{text}: is a folder; give a file name")
     if Path(text).exists() and not os.access(text, os.W_OK):
         raise argparse.ArgumentTypeError(f"{text}: exists and is not writable")
+    from stationd.outfile import refuse_to_replace
+    try:   # an earlier benchmark's JSON may be replaced, nothing else
+        refuse_to_replace(Path(text), "benchmark results", ("json",))
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
     folder = Path(text).parent
     if not folder.is_dir() or not os.access(folder, os.W_OK):
         raise argparse.ArgumentTypeError(f"{text}: folder {folder} does not exist or is not "
@@ -183,11 +188,11 @@ def _parse_roi(text: str) -> tuple[int, int, int, int]:
 
 
 def cmd_tune_color(args: argparse.Namespace) -> int:
-    from stationd.boltfile import refuse_to_overwrite
     from stationd.imageio import read_image
+    from stationd.outfile import refuse_to_replace
     from stationd.vision.color import tune_hsv, verify_marker, write_hsv_yaml
 
-    refuse_to_overwrite(Path(args.out), "HSV ranges", ("station", "bolts"))
+    refuse_to_replace(Path(args.out), "HSV ranges", ("hsv",))
     image = read_image(args.reference)
     roi = _parse_roi(args.roi) if args.roi else None
     if roi is not None:

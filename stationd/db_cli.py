@@ -14,9 +14,7 @@ all-or-nothing: a file with any error changes nothing.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
-import tempfile
 from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
@@ -24,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 from stationd.errors import ConfigError, InputError
 from stationd.jsonout import strict_json
+from stationd.outfile import write_atomic
 
 if TYPE_CHECKING:
     from db.repository import Repository
@@ -120,13 +119,13 @@ def cmd_db_import(args: argparse.Namespace) -> int:
 
 
 def cmd_db_export(args: argparse.Namespace) -> int:
-    from stationd.boltfile import refuse_to_overwrite
+    from stationd.outfile import refuse_to_replace
 
     if args.out is not None:   # before the database is read: a typo costs nothing
-        if args.results:
-            refuse_to_overwrite(Path(args.out), "results", ("station", "bolts"))
+        if args.results:       # an earlier export (CSV or JSON) may be replaced, nothing else
+            refuse_to_replace(Path(args.out), "results", ("json", "text"))
         else:   # a bolt table may replace a bolt table (export, edit, import)
-            refuse_to_overwrite(Path(args.out), "a bolt table", ("station",))
+            refuse_to_replace(Path(args.out), "a bolt table", ("bolts",))
     if args.results:
         return _export_results(args)
     if args.vin is not None or args.since is not None or args.format not in (None, "yaml"):
@@ -139,7 +138,7 @@ def cmd_db_export(args: argparse.Namespace) -> int:
         sys.stdout.write(text)
         return EXIT_OK
     out = Path(args.out)
-    _write_atomic(out, text)
+    write_atomic(out, text)
     print(f"wrote {out}: {summary}")
     return EXIT_OK
 
@@ -176,7 +175,7 @@ def _export_results(args: argparse.Namespace) -> int:
     if args.out is None:
         sys.stdout.write(text)
     else:
-        _write_atomic(Path(args.out), text)
+        write_atomic(Path(args.out), text)
         print(f"wrote {args.out}: {len(runs)} rundown(s) of {len({r['vin'] for r in runs})} "
               "vehicle(s)")
     return EXIT_OK
@@ -184,17 +183,6 @@ def _export_results(args: argparse.Namespace) -> int:
 
 def _aware(t: datetime) -> datetime:
     return t if t.tzinfo is not None else t.replace(tzinfo=UTC)
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    """Write via a temporary file and a rename: a bolt file is never left half-written."""
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except OSError as exc:
-        raise InputError(f"{path}: cannot write: {exc.strerror}") from None
 
 
 def cmd_db_report(args: argparse.Namespace) -> int:

@@ -363,3 +363,65 @@ def test_an_output_never_replaces_a_station_file_or_a_bolt_table(tmp_path, capsy
     code, out, _ = _run(capsys, "db", "export", "--db", db, "--out",
                         str(tmp_path / "bolts.yaml"))
     assert code == 0 and "wrote" in out
+
+
+def test_an_output_never_replaces_a_database_a_calibration_or_a_device(tmp_path, capsys):
+    """Newcomer trial: ``db export --results --out self.db`` replaced the very database it
+    read with a CSV (and made it 0600), ``tune-color --out stationd.db`` the same, a results
+    export over a pair calibration too, and ``--out /dev/full`` said "wrote" (as root the
+    rename replaced the device node).  Each is refused with one line, before any work, the
+    file untouched; an earlier export is still replaced, keeping its mode."""
+    import os
+    import shutil
+    import stat
+    from pathlib import Path
+
+    sim = Path(__file__).resolve().parents[1] / "config" / "sim"
+    shutil.copy(sim / "bolts.yaml", tmp_path / "bolts.yaml")
+    shutil.copy(sim / "pair1.yaml", tmp_path / "pair1.yaml")
+    (tmp_path / "ref.png").write_bytes(b"")
+    dbfile = tmp_path / "s.db"
+    db = f"sqlite:///{dbfile}"
+    assert main(["db", "import", str(tmp_path / "bolts.yaml"), "--db", db]) == 0
+    capsys.readouterr()
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}
+    for argv, needle in [
+        (["db", "export", "--results", "--db", db, "--out", str(dbfile)],
+         "is an SQLite database; writing results would replace it"),
+        (["db", "export", "--db", db, "--out", str(dbfile)], "is an SQLite database"),
+        (["tune-color", str(tmp_path / "ref.png"), "--out", str(dbfile)],
+         "is an SQLite database"),
+        (["db", "export", "--results", "--db", db, "--out", str(tmp_path / "pair1.yaml")],
+         "is a YAML settings file"),
+        (["db", "export", "--results", "--db", db, "--out", "/dev/full"],
+         "not a regular file"),
+        (["bench", "station", "--out", str(tmp_path / "bolts.yaml")], "is a bolt table"),
+    ]:
+        code, _, err = _usage_error(capsys, *argv)
+        assert code == 2 and needle in err and err.count("\n") == 1, (argv, err)
+    assert {n: (tmp_path / n).read_bytes() for n in before} == before
+    assert stat.S_ISCHR(os.stat("/dev/full").st_mode)
+    out = tmp_path / "results.csv"
+    out.write_text("an earlier export\n")
+    out.chmod(0o640)
+    for fmt in ("csv", "json", "csv"):    # an earlier export of either format is replaced
+        code, text, _ = _run(capsys, "db", "export", "--results", "--db", db, "--format",
+                             fmt, "--out", str(out))
+        assert code == 0 and "wrote" in text
+    assert stat.S_IMODE(out.stat().st_mode) == 0o640 and out.read_text().startswith("vin")
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_an_output_that_cannot_be_written_is_one_line_not_wrote(tmp_path, capsys):
+    """A folder that does not exist (or a full disk: the same path through write_atomic,
+    which flushes and syncs before the rename) is one line and exit 2, no "wrote"."""
+    from stationd.errors import InputError
+    from stationd.outfile import write_atomic
+
+    code, out, err = _run(capsys, "db", "export", "--results", "--db",
+                          f"sqlite:///{tmp_path / 's.db'}", "--out",
+                          str(tmp_path / "nowhere" / "r.csv"))
+    assert code == 2 and "wrote" not in out and err.count("\n") == 1
+    import pytest
+    with pytest.raises(InputError, match="cannot write"):
+        write_atomic(tmp_path / "nowhere" / "r.csv", "x")

@@ -22,6 +22,7 @@ import yaml
 
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
+from stationd.outfile import refuse_to_replace
 
 EXIT_OK = 0
 
@@ -78,6 +79,8 @@ def _check_outputs(paths: list[Path]) -> None:
             raise InputError(f"{p}: no such folder {p.parent}")
         if p.is_dir():
             raise InputError(f"{p}: is a folder, expected a file name")
+        # an earlier calibration may be replaced; a station file, a database, ... may not
+        refuse_to_replace(p, "a calibration", ("yaml",))
 
 
 def _yaml(header: str, data: dict[str, Any]) -> str:
