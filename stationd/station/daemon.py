@@ -105,6 +105,8 @@ PAIR_FRAMES_S = 0.5         # a pair's detection summary is published at most th
 #: what a device, the database or the station's own data raise: a fault, never an exit (the
 #: layers below have their own error roots)
 STATION_FAULTS: tuple[type[Exception], ...] = (StationError, DbError, DriverError)
+#: how long the read that proves a (re)connected PLC answers may take, s
+LIFT_CHECK_S = 1.0
 #: and what opening a device may raise besides (a port that does not exist, a bad option)
 OPEN_ERRORS: tuple[type[Exception], ...] = (*STATION_FAULTS, OSError, ValueError)
 
@@ -212,7 +214,7 @@ class Station:
         self.core = StationCore(self.cfg.matching, self.cfg.matching.leave_frames)
         self._pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="station")
         self._results_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="results")
-        self.keepers = {LIFT: self._keeper(LIFT, self._open_lift, _reconnect),
+        self.keepers = {LIFT: self._keeper(LIFT, self._open_lift, _reconnect_lift),
                         WRENCH: self._keeper(WRENCH, self._open_wrench, _reconnect)}
         for name in self._pair_names():
             self.keepers[name] = self._keeper(name, partial(self._open_pair, name),
@@ -291,8 +293,16 @@ class Station:
         return [n for n, pc in self.cfg.pairs.items() if pc.left and pc.right]
 
     def _open_lift(self) -> Any:
-        return open_lift(self.cfg.lift.url, self.cfg.lift.registers,
+        """The PLC, opened and read once: it is up when it answers, not when its port
+        accepts a connection (a peer answering garbage was "back" every few seconds)."""
+        lift = open_lift(self.cfg.lift.url, self.cfg.lift.registers,
                          **self.device_kw.get("lift", {}))
+        try:
+            lift.read_state(LIFT_CHECK_S)
+        except BaseException:
+            _quiet(lift.close)
+            raise
+        return lift
 
     def _open_wrench(self) -> Any:
         return open_wrench(self.cfg.wrench.url, **self.cfg.wrench.open_options(),
@@ -796,6 +806,12 @@ def _xyz(p: Any) -> tuple[float, float, float]:
 
 def _reconnect(device: Any) -> None:
     device.reconnect()
+
+
+def _reconnect_lift(lift: Any) -> None:
+    """The PLC's link back, and one read answered: back only on a valid reply."""
+    lift.reconnect()
+    lift.read_state(LIFT_CHECK_S)
 
 
 def _close(device: Any) -> None:

@@ -182,3 +182,59 @@ def test_a_camera_glob_matching_nothing_is_a_fault_not_an_exit(tmp_path):
         plc.close()
     assert "Traceback" not in d.log()
     assert d.log().count("fault: pair1 (") == 1    # retried quietly, journaled once
+
+
+@pytest.mark.timeout(120)
+def test_a_plc_answering_garbage_stays_a_fault_never_back_between_answers(tmp_path):
+    """Newcomer trial: a TCP peer on the lift's port answering every request with bytes that
+    are no Modbus reply was reported "lift: back" at each reconnect (the port accepted) and
+    a fault again at the first read: /healthz and the unit's STATUS flapped every few
+    seconds.  The PLC is back only when it answers; here it never does."""
+    import random
+    import threading
+
+    lift_port, ctl_port = _free_port(), _free_port()
+    srv = socket.socket()
+    srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    srv.bind(("127.0.0.1", lift_port))
+    srv.listen(8)
+    srv.settimeout(0.2)
+    done = threading.Event()
+    rng = random.Random(3)
+
+    def serve() -> None:
+        conns = []
+        while not done.is_set():
+            try:
+                c, _ = srv.accept()
+                c.settimeout(0.05)
+                conns.append(c)
+            except OSError:
+                pass
+            for c in list(conns):
+                try:
+                    if c.recv(260):
+                        c.sendall(bytes(rng.randrange(256) for _ in range(23)))
+                except TimeoutError:
+                    pass
+                except OSError:
+                    conns.remove(c)
+        for c in conns:
+            c.close()
+
+    th = threading.Thread(target=serve, daemon=True)
+    th.start()
+    d = Proc(tmp_path, lift_port, ctl_port)
+    try:
+        d.status("READY=1")
+        d.wait_log("fault: lift")
+        time.sleep(8.0)      # several reconnect attempts (backoff 0.5 s doubling)
+        assert "lift: back" not in d.log(), d.log()[-2000:]
+        assert d.p.poll() is None
+        assert d.stop() == 0
+    finally:
+        d.kill()
+        done.set()
+        th.join(5)
+        srv.close()
+    assert "Traceback" not in d.log()
