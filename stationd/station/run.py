@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import logging
 import random
 import signal
@@ -89,6 +90,10 @@ async def serve(cfg_path: str, cfg: StationConfig, notifier: Notifier,
         await screens.stop()
 
 
+#: a screens' port that was in use is tried again after this long, s
+SCREENS_RETRY_S = 5.0
+
+
 class Screens:
     """The web screens (``stationd.web``) of the running configuration: started when its
     ``http`` section asks, moved when a reload changes it.  A port in use is a logged fault of
@@ -99,13 +104,16 @@ class Screens:
         self.server: Any = None
         self.frames: Any = None
         self._for: tuple[Any, str] | None = None
+        self._retry: asyncio.Task[None] | None = None
+        self._failed: str | None = None   # why the screens are not served (logged once)
 
     async def follow(self, cfg: StationConfig) -> None:
         """Serve the screens ``cfg`` asks for.  A database that does not open yet serves them
         without the results pages (the operator and monitoring see the fault); called again
         once it opens, they get their results."""
         key = (cfg.http, cfg.database_url)
-        if key == self._for and not (self.server is not None and self.server.results is None):
+        if key == self._for and (cfg.http is None or (self.server is not None
+                                                      and self.server.results is not None)):
             if self.server is not None:     # a reload may add or remove a pair
                 self.server.set_devices(configured_devices(cfg))
             return
@@ -133,12 +141,28 @@ class Screens:
                                     results_error=results_error)
             await self.server.start()
         except OPEN_ERRORS as exc:
-            log.error("screens not served on %s: %s", cfg.http.listen, one_line(exc))
+            # a port another program holds may be freed: tried again, journaled once
+            if self._failed != one_line(exc):
+                self._failed = one_line(exc)
+                log.error("screens not served on %s: %s (tried again every %.0f s)",
+                          cfg.http.listen, self._failed, SCREENS_RETRY_S)
             self.server = None
+            self._retry = asyncio.get_running_loop().create_task(self._again(cfg, key))
             return
+        self._failed = None
         log.info("screens: %s", self.server.url)
 
+    async def _again(self, cfg: StationConfig, key: tuple[Any, str]) -> None:
+        await asyncio.sleep(SCREENS_RETRY_S)
+        if self._for == key and self.server is None:
+            await self.follow(cfg)
+
     async def stop(self) -> None:
+        retry, self._retry = self._retry, None
+        if retry is not None and retry is not asyncio.current_task():
+            retry.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await retry
         if self.server is not None:
             try:
                 await self.server.stop()

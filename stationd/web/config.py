@@ -59,7 +59,24 @@ def split_listen(listen: str) -> tuple[str, int]:
     port = int(port_text)
     if not 0 <= port <= 65535:
         raise ValueError(f"listen {listen!r}: port {port} is not 0-65535")
-    return host.strip("[]"), port
+    host = host.strip("[]")
+    if not _host_ok(host):
+        raise ValueError(f"listen {listen!r}: {host!r} is not an IP address or a host name")
+    return host, port
+
+
+def _host_ok(host: str) -> bool:
+    """An IPv4/IPv6 address, or a host name (letters, digits, '-' and '.'): "999.1.1.1" is
+    neither (it was refused as "a non-local bind", which sent the user after a token)."""
+    try:
+        ipaddress.ip_address(host)
+        return True
+    except ValueError:
+        pass
+    if ":" in host or host.replace(".", "").isdigit():
+        return False
+    return all(part and len(part) <= 63 and part.replace("-", "").isalnum()
+               and part.isascii() for part in host.split("."))
 
 
 def is_local(host: str) -> bool:

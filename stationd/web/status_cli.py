@@ -17,16 +17,19 @@ from typing import Any
 from stationd.errors import InputError
 
 DEFAULT_URL = "http://127.0.0.1:8080/"
-EXIT_UNREACHABLE = 1
 EXIT_FAULT = 1          # answered, but the station is in fault: not OK for a monitor
+# no status at all (no daemon answers, or it refused: a wrong token): another alarm than a
+# station in fault, so a monitoring script can tell them apart
+EXIT_UNREACHABLE = 3
 
 
 def add_status_parser(sub: Any) -> None:
     """Add the ``status`` sub-command to ``build_parser``'s sub-parsers."""
     st = sub.add_parser("status", help="a running daemon's state (from its web server)",
                         description="Exit 0: the daemon answers and its station is not in "
-                                    "fault; 1: it is in fault (the reason is printed) or no "
-                                    "daemon answers; 2: bad input.  For monitoring scripts.")
+                                    "fault; 1: it is in fault (the reason is printed); 2: bad "
+                                    "input; 3: no status (no daemon answers, or it refused the "
+                                    "token).  For monitoring scripts.")
     st.add_argument("--url", default=DEFAULT_URL, help=f"the daemon's screens (default "
                     f"{DEFAULT_URL})")
     st.add_argument("--token", help="the http token, when the daemon has one")

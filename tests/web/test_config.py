@@ -36,6 +36,10 @@ def test_local_bind_needs_no_token(listen):
 
 @pytest.mark.parametrize("text, msg", [("listen: nowhere\n", "host:port"),
                                         ("listen: 127.0.0.1:99999\n", "0-65535"),
+                                        ("listen: '999.1.1.1:80'\n",
+                                         "not an IP address or a host name"),
+                                        ("listen: 'a b:80'\n", "not an IP address"),
+                                        ("listen: '[::zz]:80'\n", "not an IP address"),
                                         ("token: short\n", "8 characters"),
                                         ("port: 80\n", "port")])
 def test_bad_section_is_one_readable_error(text, msg):

@@ -28,8 +28,9 @@ async def _settle(srv):
         await asyncio.sleep(0.02)
 
 
-def test_status_without_daemon_is_one_line_exit_1(capsys):
-    assert main(["status", "--url", "http://127.0.0.1:9/", "--timeout", "2"]) == 1
+def test_status_without_daemon_is_one_line_exit_3(capsys):
+    """3, not the 1 of a station in fault: a monitor tells "no status" from "fault"."""
+    assert main(["status", "--url", "http://127.0.0.1:9/", "--timeout", "2"]) == 3
     err = capsys.readouterr().err
     assert err.startswith("stationd: status: no daemon answers at") and err.count("\n") == 1
 
@@ -61,3 +62,15 @@ def test_status_says_not_opened_yet_while_the_database_keeps_the_devices_closed(
     out = capsys.readouterr().out
     assert "device:   lift: not opened yet" in out and "device:   wrench: not opened yet" in out
     assert "device:   database: down disk I/O error" in out
+
+
+def test_status_refused_for_its_token_is_exit_3_with_the_hint(live_server, capsys):
+    """A wrong or missing token is "no status" (3), not "in fault" (1); the line says what
+    to give; the right token gets the status."""
+    srv = live_server(token="s3cret-token")  # noqa: S106 - a test token
+    srv.publish(opened())
+    for extra in ([], ["--token", "wrong-token"]):
+        assert main(["status", "--url", srv.url, *extra]) == 3
+        err = capsys.readouterr().err
+        assert "HTTP 401" in err and "--token" in err and err.count("\n") == 1
+    assert main(["status", "--url", srv.url, "--token", "s3cret-token"]) == 0
