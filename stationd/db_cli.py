@@ -167,17 +167,21 @@ def _export_results(args: argparse.Namespace) -> int:
             repo.vehicle_report(args.vin)   # an unknown VIN: one line, exit 2
         vins = [args.vin] if args.vin is not None else \
             [v["vin"] for v in reversed(results.vehicles(limit=1_000_000))]
-        runs = [r for vin in vins for r in results.rundowns(vin)]
-    if args.since is not None:
-        runs = [r for r in runs if r["recorded_at"] is not None
+        runs = [r for vin in vins for r in results.export(vin)]
+    if args.since is not None:   # a missing bolt has no time: kept with its vehicle's rundowns
+        kept = [r for r in runs if r["recorded_at"] is not None
                 and _aware(datetime.fromisoformat(r["recorded_at"])) >= args.since]
+        vins_kept = {r["vin"] for r in kept}
+        runs = [r for r in runs if r in kept or (r["status"] == "missing"
+                                                 and r["vin"] in vins_kept)]
     text = rundowns_csv(runs) if fmt == "csv" else strict_json(runs) + "\n"
     if args.out is None:
         sys.stdout.write(text)
     else:
         write_atomic(Path(args.out), text)
-        print(f"wrote {args.out}: {len(runs)} rundown(s) of {len({r['vin'] for r in runs})} "
-              "vehicle(s)")
+        missing = sum(1 for r in runs if r["status"] == "missing")
+        print(f"wrote {args.out}: {len(runs) - missing} rundown(s) and {missing} missing "
+              f"bolt(s) of {len({r['vin'] for r in runs})} vehicle(s)")
     return EXIT_OK
 
 

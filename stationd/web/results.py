@@ -20,7 +20,8 @@ from sqlalchemy.orm import Session
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
 from db.repository import Repository
 
-CSV_FIELDS = ("vin", "model", "bolt", "attempt", "status", "torque_nm", "angle_deg", "pset",
+CSV_FIELDS = ("vin", "model", "bolt", "attempt", "status", "torque_nm", "angle_deg",
+              "torque_min_nm", "torque_max_nm", "angle_min_deg", "angle_max_deg", "pset",
               "parameter_version", "tightening_id", "x_mm", "y_mm", "z_mm",
               "match_distance_mm", "tilt_deg", "sent_at", "result_at", "recorded_at", "images")
 
@@ -62,8 +63,7 @@ class Results:
     def rundowns(self, vin: str) -> list[dict[str, Any]]:
         with Session(self.repo.engine) as s:
             rows = s.execute(
-                select(TighteningRecord, Bolt.code, ProcessParameters.version,
-                       VehicleModel.name)
+                select(TighteningRecord, Bolt.code, ProcessParameters, VehicleModel.name)
                 .join(Vehicle, TighteningRecord.vehicle_id == Vehicle.id)
                 .join(VehicleModel, Vehicle.model_id == VehicleModel.id)
                 .join(Bolt, TighteningRecord.bolt_id == Bolt.id)
@@ -72,18 +72,35 @@ class Results:
                 .order_by(TighteningRecord.recorded_at, TighteningRecord.id)).all()
         out: list[dict[str, Any]] = []
         attempts: dict[str, int] = {}
-        for rec, code, version, model in rows:
+        for rec, code, params, model in rows:
             attempts[code] = attempts.get(code, 0) + 1
             out.append({
                 "vin": vin, "model": model, "bolt": code, "attempt": attempts[code],
                 "status": rec.status, "torque_nm": rec.torque_nm, "angle_deg": rec.angle_deg,
-                "pset": (rec.params_sent or {}).get("pset"), "parameter_version": version,
+                # the limits in force for this rundown (its parameter version), as quality
+                # judges it
+                "torque_min_nm": params.torque_min, "torque_max_nm": params.torque_max,
+                "angle_min_deg": params.angle_min, "angle_max_deg": params.angle_max,
+                "pset": (rec.params_sent or {}).get("pset"), "parameter_version": params.version,
                 "tightening_id": rec.tightening_id, "x_mm": rec.x_mm, "y_mm": rec.y_mm,
                 "z_mm": rec.z_mm, "match_distance_mm": rec.match_distance_mm,
                 "tilt_deg": rec.tilt_deg, "sent_at": _iso(rec.sent_at),
                 "result_at": _iso(rec.result_at), "recorded_at": _iso(rec.recorded_at),
                 "images": list(rec.images or [])})
         return out
+
+
+    def export(self, vin: str) -> list[dict[str, Any]]:
+        """The vehicle's rundowns, then one row per bolt with none (status ``missing``, no
+        values): an export that lists only rundowns reads as a complete vehicle.  Raises
+        ``NotFoundError`` for an unknown VIN."""
+        report = self.repo.vehicle_report(vin)
+        runs = self.rundowns(vin)
+        missing: list[dict[str, Any]] = [
+            {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
+             "bolt": b, "attempt": 0, "status": "missing", "images": []}
+            for b in report.missing]
+        return runs + missing
 
 
 def rundowns_csv(runs: list[dict[str, Any]]) -> str:

@@ -252,20 +252,32 @@ def test_export_results_every_rundown_as_csv_or_json(run, db, tmp_path):
         record(repo, "VIN1", "SF-FL", ok=True, tightening_id=2)
         repo.start_vehicle("VIN2", "WAGON-B")
         record(repo, "VIN2", "SF-FL", ok=True, tightening_id=3)
+        others = sorted(set(repo.vehicle_report("VIN1").missing))
     code, out, err = run("db", "export", "--results", "--db", db)
     rows = list(csv.DictReader(io.StringIO(out)))
     assert code == 0 and err == ""
+    # each vehicle's rundowns, then its bolts without any (an export of rundowns alone read
+    # as a complete vehicle: newcomer trial)
     assert [(r["vin"], r["bolt"], r["attempt"], r["status"]) for r in rows] == [
-        ("VIN1", "SF-FL", "1", "nok"), ("VIN1", "SF-FL", "2", "ok"), ("VIN2", "SF-FL", "1", "ok")]
+        ("VIN1", "SF-FL", "1", "nok"), ("VIN1", "SF-FL", "2", "ok"),
+        *(("VIN1", b, "0", "missing") for b in others),
+        ("VIN2", "SF-FL", "1", "ok"), *(("VIN2", b, "0", "missing") for b in others)]
+    assert others and "SF-FL" not in others
+    first = rows[0]   # the limits the rundown was judged against, beside its values
+    assert float(first["torque_min_nm"]) <= float(first["torque_max_nm"])
+    assert all(rows[i]["torque_nm"] == "" for i in range(len(rows))
+               if rows[i]["status"] == "missing")
     code, out, _ = run("db", "export", "--results", "--vin", "VIN2", "--format", "json",
                        "--db", db)
-    assert code == 0 and [r["tightening_id"] for r in json.loads(out)] == [3]
+    assert code == 0 and [r["tightening_id"] for r in json.loads(out)] == \
+        [3] + [None] * len(others)
     tomorrow = datetime.now(UTC).date().isoformat() + "T23:59:59"
     code, out, _ = run("db", "export", "--results", "--since", tomorrow, "--db", db)
     assert code == 0 and out.count("\n") == 1          # the header, no rundown
     target = tmp_path / "results.csv"
     code, out, _ = run("db", "export", "--results", "--out", str(target), "--db", db)
-    assert code == 0 and target.read_text().count("\n") == 4
+    assert code == 0 and target.read_text().count("\n") == 1 + 3 + 2 * len(others)
+    assert f"3 rundown(s) and {2 * len(others)} missing bolt(s) of 2 vehicle(s)" in out
     for args, message in ((["--vin", "NOPE"], "NOPE"), (["--since", "yesterday"], "ISO date"),
                           (["--format", "csv"], "go with --results"),
                           (["--results", "--format", "yaml"], "csv (the default) or json")):

@@ -261,8 +261,11 @@ def test_results_screens_and_csv_download(live_server, page, shots, tmp_path):
         shots("vehicle")
         page.click("#csv")
         rows = list(csv.DictReader(io.StringIO(page.wait_download(f"{VIN}.csv").read_text())))
+        # the rundowns, then the bolts without any (4 rows on the page: B3 and B4 say "not
+        # tightened")
         assert [(r["bolt"], r["status"]) for r in rows] == [("B1", "ok"), ("B2", "nok"),
-                                                           ("B2", "ok")]
+                                                           ("B2", "ok"), ("B3", "missing"),
+                                                           ("B4", "missing")]
         # with the records' image directory, B2's saved crop is linked in its column
         srv = live_server(results=Results(repo), images_dir=tmp_path)
         page.get(srv.url + f"vehicles/{VIN}")
