@@ -39,6 +39,9 @@ from stationd.web.view import View, fold
 log = logging.getLogger(__name__)
 STATIC = Path(__file__).with_name("static")
 FLUSH_HZ = 10.0
+#: with nothing to tell, the latest snapshot is sent again this often, s: a screen that hears
+#: nothing for three of these knows its stream stalled (a dead link need not break it)
+HEARTBEAT_S = 5.0
 CLIENT_QUEUE = 16
 PAGES = {"/": "operator.html", "/cameras": "cameras.html", "/vehicles": "vehicles.html"}
 
@@ -139,7 +142,13 @@ class WebServer:
     async def _run_pump(self, queue: asyncio.Queue[Any]) -> None:
         try:
             while True:
-                self._apply(await queue.get())
+                try:
+                    event = await asyncio.wait_for(queue.get(), HEARTBEAT_S)
+                except TimeoutError:
+                    for q in list(self._clients):
+                        _offer(q, self._snapshot)
+                    continue
+                self._apply(event)
                 while not queue.empty():
                     self._apply(queue.get_nowait())
                 try:
@@ -167,7 +176,8 @@ class WebServer:
             log.exception("screens: event not shown: %r", event)
 
     def _encode(self) -> bytes:
-        return b"data: " + json.dumps(self.view.to_json(), separators=(",", ":"),
+        doc = {**self.view.to_json(), "heartbeat_s": HEARTBEAT_S}
+        return b"data: " + json.dumps(doc, separators=(",", ":"),
                                       default=_plain).encode() + b"\n\n"
 
     # -- HTTP -----------------------------------------------------------------------------

@@ -271,3 +271,33 @@ def test_last_results_keep_each_range_on_one_line(live_server, page):
         got = page.js("return [...document.querySelectorAll('#results small.rng')]"
                       ".map(e => [e.textContent, e.getClientRects().length])")
         assert got and all(n == 1 for _, n in got), f"{page.name} at {w}x{h}: {got}"
+
+
+def test_a_stream_that_stalls_without_breaking_is_not_live_then_reconnects(
+        live_server, page, monkeypatch):
+    """The helper's caveat: a stream that stays open but carries nothing (a dead link, a hung
+    loop) never fires onerror.  The snapshot comes again every heartbeat; three heartbeats of
+    silence mark the screen not live and it connects again, and is live once it hears."""
+    import stationd.web.server as server
+
+    monkeypatch.setattr(server, "HEARTBEAT_S", 0.5)
+    srv = live_server(devices=("lift", "wrench"))
+    srv.publish(opened() + work())
+    page.get(srv.url)
+    page.wait(lambda p: "tighten" in (p.text("#headline") or ""), what="live headline")
+    time.sleep(2.0)      # several heartbeats: still live while they come
+    assert not page.js("return document.body.classList.contains('not-live')")
+    pump = srv.server._pump
+    srv.call(_cancel(pump))          # the stream stays open, nothing more is sent on it
+    page.wait(lambda p: p.js("return document.body.classList.contains('not-live')"), 10,
+              "marked not live after three silent heartbeats")
+    page.wait(lambda p: srv.server.requests["/api/events"] >= 2, 10, "a new stream")
+
+
+async def _cancel(task: Any) -> None:
+    import asyncio
+    import contextlib
+
+    task.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await task

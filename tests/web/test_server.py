@@ -224,3 +224,33 @@ def test_healthz_answers_a_probe_without_the_token_and_says_only_ok_or_fault():
         finally:
             await srv.stop()
     asyncio.run(main())
+
+
+def test_a_quiet_station_sends_its_snapshot_again_every_heartbeat(monkeypatch):
+    """With nothing to tell, the latest snapshot goes out again every HEARTBEAT_S (and says
+    the period): a screen that hears nothing for three of them knows its stream stalled."""
+    import time
+
+    import stationd.web.server as server
+
+    monkeypatch.setattr(server, "HEARTBEAT_S", 0.3)
+
+    async def main():
+        bus = EventBus()
+        for e in opened():
+            bus.publish(e)
+        srv = serve(bus)
+        await srv.start()
+        try:
+            async with ClientSession() as http, http.get(srv.url + "api/events") as stream:
+                first = await _read_snapshot(stream)
+                assert first["heartbeat_s"] == 0.3
+                t0 = time.monotonic()
+                again = [await asyncio.wait_for(_read_snapshot(stream), 5) for _ in range(3)]
+                took = time.monotonic() - t0
+                assert all(a == first for a in again)      # the same view, nothing new
+                assert took >= 0.6                          # one per heartbeat, not a spin
+        finally:
+            await srv.stop()
+
+    asyncio.run(main())

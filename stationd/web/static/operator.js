@@ -307,14 +307,22 @@ function notLive() {
   shownKeys.devices = "";   // redrawn from the next snapshot
   setText("state", "not live");
 }
+// The server sends its snapshot again every heartbeat_s when nothing happens: a stream
+// silent for three of them has stalled without breaking (a dead link, a hung daemon), which
+// onerror never hears; the screen then says it is not live and connects again.
+let silentTimer = null;
 function connect() {
   const es = new EventSource("/api/events");
+  const stalled = () => { notLive(); es.close(); connect(); };
   es.onmessage = (m) => {
     clearTimeout(lostTimer);
     lostTimer = null;
     document.body.classList.remove("not-live");
     $("conn").hidden = true;
-    render(JSON.parse(m.data));
+    const view = JSON.parse(m.data);
+    clearTimeout(silentTimer);
+    if (view.heartbeat_s) silentTimer = setTimeout(stalled, 3000 * view.heartbeat_s);
+    render(view);
   };
   es.onerror = () => {
     if (lostTimer === null) lostTimer = setTimeout(notLive, LOST_MS);
