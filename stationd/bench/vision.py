@@ -331,6 +331,7 @@ def bench_speed(rng: np.random.Generator, quick: bool, *, camera: Camera | None 
     pair_ms, pair_cpu, stereo_ms, image_ms, image_cpu, empty_ms, empty_cpu = (
         [] for _ in range(7))
     stages: dict[str, list[float]] = {}
+    within: list[bool] = []
     empty_det = detect(empty, pair.left, params, SPEC)
     for _ in range(runs):
         c0, t0 = time.process_time(), time.perf_counter()
@@ -344,6 +345,10 @@ def bench_speed(rng: np.random.Generator, quick: bool, *, camera: Camera | None 
         image_cpu.append((time.process_time() - c0) * 1e3)
         for k, v in d.timings_ms.items():
             stages.setdefault(k, []).append(v)
+        # each run's stages add up to no more than its total (Retinex is part of segment);
+        # checked per run: medians of parts need not add up under the median of the whole
+        parts = sum(v for k, v in d.timings_ms.items() if k in STAGES and k != "retinex")
+        within.append(parts <= d.timings_ms.get("total", float("inf")) + 1e-9)
         c0, t0 = time.process_time(), time.perf_counter()
         empty_det = detect(empty, pair.left, params, SPEC)
         empty_ms.append((time.perf_counter() - t0) * 1e3)
@@ -358,6 +363,7 @@ def bench_speed(rng: np.random.Generator, quick: bool, *, camera: Camera | None 
         "pair_cpu_ms_median": med(pair_cpu), "stereo_ms_median": med(stereo_ms),
         "image_ms_median": med(image_ms), "image_cpu_ms_median": med(image_cpu),
         "stage_ms_median": {k: med(stages[k]) for k in (*STAGES, "total") if k in stages},
+        "stages_within_total": all(within),
         "no_marker": {"ms_median": med(empty_ms), "cpu_ms_median": med(empty_cpu),
                       "found": empty_det.found, "reason": empty_det.reason,
                       "stage_ms": {k: round(v, 3) for k, v in empty_det.timings_ms.items()}},

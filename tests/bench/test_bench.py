@@ -62,7 +62,7 @@ def test_speed_section_breaks_the_time_down_by_stage(capsys):
     assert set(STAGES) <= set(stages) and "total" in stages
     assert all(v >= 0.0 for v in stages.values())
     assert stages["retinex"] <= stages["segment"]  # a part of the search
-    assert sum(stages[k] for k in STAGES if k != "retinex") <= stages["total"]
+    assert res["stages_within_total"] is True    # in every run (medians need not add up)
     assert res["pair_cpu_ms_median"] > 0.0 and res["stereo_ms_median"] > 0.0
     assert res["target_pair_ms"] == 30.0
     empty = res["no_marker"]

@@ -292,6 +292,10 @@ def test_a_stream_that_stalls_without_breaking_is_not_live_then_reconnects(
     page.wait(lambda p: p.js("return document.body.classList.contains('not-live')"), 10,
               "marked not live after three silent heartbeats")
     page.wait(lambda p: srv.server.requests["/api/events"] >= 2, 10, "a new stream")
+    # the new stream's first message (the server's last snapshot) does not make it live: it
+    # stays not live while the station feeds nothing
+    time.sleep(1.0)
+    assert page.js("return document.body.classList.contains('not-live')")
 
 
 async def _cancel(task: Any) -> None:

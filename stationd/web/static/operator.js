@@ -310,18 +310,23 @@ function notLive() {
 // The server sends its snapshot again every heartbeat_s when nothing happens: a stream
 // silent for three of them has stalled without breaking (a dead link, a hung daemon), which
 // onerror never hears; the screen then says it is not live and connects again.
+// After a stall the new stream's first message is the server's last snapshot, which proves
+// only that its HTTP server answers: the screen is live again from the next one (an update
+// or a heartbeat: the station feeds it), not before.
 let silentTimer = null;
-function connect() {
+function connect(afterStall = false) {
   const es = new EventSource("/api/events");
-  const stalled = () => { notLive(); es.close(); connect(); };
+  const stalled = () => { notLive(); es.close(); connect(true); };
+  let waitFresh = afterStall;
   es.onmessage = (m) => {
+    const view = JSON.parse(m.data);
+    clearTimeout(silentTimer);
+    if (view.heartbeat_s) silentTimer = setTimeout(stalled, 3000 * view.heartbeat_s);
+    if (waitFresh) { waitFresh = false; return; }
     clearTimeout(lostTimer);
     lostTimer = null;
     document.body.classList.remove("not-live");
     $("conn").hidden = true;
-    const view = JSON.parse(m.data);
-    clearTimeout(silentTimer);
-    if (view.heartbeat_s) silentTimer = setTimeout(stalled, 3000 * view.heartbeat_s);
     render(view);
   };
   es.onerror = () => {
