@@ -346,6 +346,10 @@ def build_parser() -> argparse.ArgumentParser:
     bs.add_argument("--passes", type=int, default=1, metavar="K",
                     help="with --browsers: alternate K passes with the screens and K without "
                     "(after a first without), pooled (default: %(default)s)")
+    bs.add_argument("--paired", action="store_true",
+                    help="with --browsers: within each pass with the screens, hold the "
+                    "clients (SIGSTOP) on every other bolt and compare the bolts with them "
+                    "running against those with them held (the same machine, the same pass)")
     bs.add_argument("--browser-nice", type=int, default=5, metavar="N",
                     help="with --browsers: run Chromium N steps below the daemon's priority, "
                     "as on a station PC where the unit's Nice=-5 puts the daemon above a "

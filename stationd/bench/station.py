@@ -79,7 +79,8 @@ async def _idle(st: Station, plc: Any) -> dict[str, float]:
 
 
 async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]],
-                    out: dict[str, Any]) -> None:
+                    out: dict[str, Any], on_bolt: Any = None) -> None:
+    """The simulated operator through ``plan``; ``on_bolt(i)`` before the i-th bolt."""
     plc, ctl = st.lift.plc, st.wrench.controller
     if "idle" not in out:
         out["idle"] = await _idle(st, plc)
@@ -87,7 +88,10 @@ async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]
     plc.raise_lift()
     if not await _until(lambda: st.vin is not None, 60):
         raise RuntimeError(f"the station did not start the vehicle: {st.cycle.reason}")
-    for bolt, pose in progress.track(plan, "bench station: bolts", unit="bolt"):
+    for i, (bolt, pose) in enumerate(progress.track(plan, "bench station: bolts",
+                                                    unit="bolt")):
+        if on_bolt is not None:
+            on_bolt(i)
         world.set_wrench(pose)
         out["truth"] = bolt
         def on_it(b: str = bolt) -> bool:
@@ -129,8 +133,11 @@ def run_station_bench(args: argparse.Namespace) -> int:
     passes = int(getattr(args, "passes", 1))
     if passes < 1:
         raise InputError("--passes must be at least 1")
-    if not browsers and (getattr(args, "clients", "chromium") != "chromium" or passes != 1):
-        raise InputError("--clients and --passes go with --browsers N (the screens' clients)")
+    paired = bool(getattr(args, "paired", False))
+    if not browsers and (getattr(args, "clients", "chromium") != "chromium" or passes != 1
+                         or paired):
+        raise InputError("--clients, --passes and --paired go with --browsers N (the "
+                         "screens' clients)")
     tmp = tempfile.TemporaryDirectory(prefix="stationd-bench-")
     cfg = replace(load_station_config(SIM_CONFIG),
                   database_url=f"sqlite:///{tmp.name}/stationd.db", http=None)
@@ -164,7 +171,7 @@ def run_station_bench(args: argparse.Namespace) -> int:
                 serveds.append(_run_once(
                     replace(cfg, database_url=f"sqlite:///{tmp.name}/screens{k}.db"), world,
                     plan, browsers, bool(args.json), kind,
-                    int(getattr(args, "browser_nice", 0) or 0)))
+                    int(getattr(args, "browser_nice", 0) or 0), paired))
                 agains.append(_run_once(
                     replace(cfg, database_url=f"sqlite:///{tmp.name}/again{k}.db"), world,
                     plan, 0, bool(args.json)))
@@ -181,6 +188,8 @@ def run_station_bench(args: argparse.Namespace) -> int:
     if serveds:
         summary["screens"] = _screens_summary([base, *agains], _pooled(serveds), browsers)
         summary["screens"]["passes"] = passes
+        if paired:
+            summary["screens"]["paired"] = _paired_summary(serveds)
         for run in (*serveds, *agains):
             ok = ok and run["out"]["wrong"] == 0 and not run["out"]["not_selected"]
     Path(args.out).write_text(json.dumps(finite(summary), indent=2, allow_nan=False) + "\n")
@@ -192,8 +201,8 @@ def run_station_bench(args: argparse.Namespace) -> int:
 
 
 def _run_once(cfg: StationConfig, world: World, plan: list[tuple[str, WrenchPose]],
-              browsers: int, quiet: bool, kind: str = "chromium", nice: int = 0
-              ) -> dict[str, Any]:
+              browsers: int, quiet: bool, kind: str = "chromium", nice: int = 0,
+              paired: bool = False) -> dict[str, Any]:
     """One pass of the plan through a freshly opened daemon; with ``browsers``, the screens
     are served from the daemon's loop (as ``http:`` in the station file does) and that many
     clients are connected before the first bolt and stay for the whole pass."""
@@ -224,9 +233,20 @@ def _run_once(cfg: StationConfig, world: World, plan: list[tuple[str, WrenchPose
                 info["nice"] = nice
             b0 = 0.0 if clients is None else clients.cpu_s()
             c0, w0 = time.process_time(), time.perf_counter()
-            await _operator(station, world, plan, out)
+            on_bolt = None
+            if paired and clients is not None:
+                held_from: list[tuple[int, bool]] = info.setdefault("held_from", [])
+                hold = clients.hold
+
+                def on_bolt(i: int) -> None:
+                    # odd bolts with the clients held: the two halves of one pass see the
+                    # same machine, so its drift between passes leaves the difference
+                    held_from.append((station.bus.count(ParamsSent), i % 2 == 1))
+                    hold(i % 2 == 1)
+            await _operator(station, world, plan, out, on_bolt)
             info["cpu_s"], info["wall_s"] = time.process_time() - c0, time.perf_counter() - w0
             if clients is not None:
+                clients.hold(False)
                 info["browser_cpu_s"] = clients.cpu_s() - b0
                 info["frames_encoded"] = screens.frames.encoded
                 info["encode_wall_s"] = screens.frames.encode_wall_s
@@ -257,7 +277,26 @@ def _run_once(cfg: StationConfig, world: World, plan: list[tuple[str, WrenchPose
         station.close()
     info["latency"] = [e.latency_ms["total"] for e in station.bus.of(ParamsSent)
                        if isinstance(e, ParamsSent)]
+    if "held_from" in info:
+        info["latency_running"], info["latency_held"] = _split_held(info["latency"],
+                                                                    info["held_from"])
     return info
+
+
+def _split_held(latency: list[float], held_from: list[tuple[int, bool]]
+                ) -> tuple[list[float], list[float]]:
+    """The latencies of the bolts with the clients running and of those with them held:
+    ``held_from`` lists (index of the bolt's first latency, held) in bolt order."""
+    running: list[float] = []
+    held: list[float] = []
+    for k, x in enumerate(latency):
+        state = False
+        for start, h in held_from:
+            if start > k:
+                break
+            state = h
+        (held if state else running).append(x)
+    return running, held
 
 
 async def _connect(server: Any, n: int, info: dict[str, Any], quiet: bool,
@@ -360,6 +399,20 @@ def _screens_summary(bases: list[dict[str, Any]], served: dict[str, Any], n: int
                 served.get("latency_passes", [served["latency"]]),
                 [b["latency"] for b in bases]),
             "targets": {"latency_p95_ms": 10.0, "cpu_pct_of_a_core": 5.0}}
+
+
+def _paired_summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Within the passes with the screens: the bolts with the clients running against those
+    with them held (stopped), pooled over the passes, with the interval of the p95
+    difference (each pass resampled within itself)."""
+    on = [r.get("latency_running", []) for r in runs]
+    off = [r.get("latency_held", []) for r in runs]
+    a, b = [x for p in on for x in p], [x for p in off for x in p]
+    return {"running": {"n": len(a), "p50": _pct(a, 50), "p95": _pct(a, 95)},
+            "held": {"n": len(b), "p50": _pct(b, 50), "p95": _pct(b, 95)},
+            "delta_p95_ms": _pct(a, 95) - _pct(b, 95),
+            "delta_p50_ms": _pct(a, 50) - _pct(b, 50),
+            "delta_p95_interval_ms": p95_delta_interval(on, off)}
 
 
 #: draws of the bootstrap behind the p95 difference's interval (seeded: the same figures give
@@ -469,6 +522,14 @@ def _print(s: dict[str, Any]) -> None:
         print("  p95 of each pass with them: " + ", ".join(
             f"{p['latency_p95_ms']:.1f}" for p in w["passes"]) + " ms; without: " + ", ".join(
             f"{p['latency_p95_ms']:.1f}" for p in wo["passes"]) + " ms")
+        pr = sc.get("paired")
+        if pr is not None:
+            plo, phi = pr["delta_p95_interval_ms"]
+            print(f"  paired, within the passes with them: bolts with the clients running "
+                  f"({pr['running']['n']}) p50 {pr['running']['p50']:.1f}, p95 "
+                  f"{pr['running']['p95']:.1f} ms; held ({pr['held']['n']}) p50 "
+                  f"{pr['held']['p50']:.1f}, p95 {pr['held']['p95']:.1f} ms: p95 "
+                  f"{pr['delta_p95_ms']:+.1f} ms (90 % interval {plo:+.1f} to {phi:+.1f})")
         print(f"  daemon CPU {w['cpu_s']:.2f} s in {w['wall_s']:.1f} s per pass with them, "
               f"{wo['cpu_s']:.2f} s in {wo['wall_s']:.1f} s per pass without: "
               f"{d['cpu_pct_of_a_core']:+.1f} % of a core (target <= +5 %)")

@@ -24,6 +24,7 @@ import json
 import multiprocessing
 import os
 import shutil
+import signal
 import subprocess
 import tempfile
 import threading
@@ -166,12 +167,25 @@ class ScreenClients:
     def alive(self) -> bool:
         return all(p.poll() is None for p in self._procs)
 
-    def cpu_s(self) -> float:
-        """CPU seconds the browsers (or their stand-ins) have used so far."""
+    def hold(self, held: bool) -> None:
+        """Stop (SIGSTOP) or continue (SIGCONT) every client process: ``bench station
+        --paired`` alternates bolts with the clients running and held within one pass, so
+        the machine's drift between passes does not enter the difference.  A held client
+        stays connected (its streams fill their buffers; the server drops old snapshots)."""
+        sig = signal.SIGSTOP if held else signal.SIGCONT
+        for pid in tree_pids(self._roots()):
+            with contextlib.suppress(OSError):
+                os.kill(pid, sig)
+
+    def _roots(self) -> list[int]:
         pids = [p.pid for p in self._procs]
         if self._stand_ins is not None and self._stand_ins.pid is not None:
             pids.append(self._stand_ins.pid)
-        return tree_cpu_s(pids)
+        return pids
+
+    def cpu_s(self) -> float:
+        """CPU seconds the browsers (or their stand-ins) have used so far."""
+        return tree_cpu_s(self._roots())
 
     def _end_browsers(self) -> None:
         for p in self._procs:
@@ -190,6 +204,7 @@ class ScreenClients:
         self._dirs = []
 
     def close(self) -> None:
+        self.hold(False)     # a stopped process does not act on SIGTERM
         self._end_browsers()
         if self._stand_ins is not None:
             self._stop_mp.set()
@@ -218,17 +233,16 @@ def stand_ins(url: str, pages: list[str], stop: Any) -> None:
     done.set()
 
 
-def tree_cpu_s(roots: list[int]) -> float:
-    """User and system CPU seconds of the processes ``roots`` and all their descendants,
-    from ``/proc`` (a browser is a tree of processes; those that ended count through their
-    parent's reaped-children times).  0 where ``/proc`` cannot be read."""
+def _proc_table() -> tuple[dict[int, int], dict[int, float]]:
+    """Every process's parent and CPU seconds (its own and its reaped children's), from
+    ``/proc``; empty where it cannot be read."""
     parent: dict[int, int] = {}
     times: dict[int, float] = {}
     tick = float(os.sysconf("SC_CLK_TCK")) if hasattr(os, "sysconf") else 100.0
     try:
         pids = [int(d) for d in os.listdir("/proc") if d.isdigit()]
     except OSError:
-        return 0.0
+        return parent, times
     for pid in pids:
         try:
             with open(f"/proc/{pid}/stat", "rb") as f:
@@ -237,13 +251,28 @@ def tree_cpu_s(roots: list[int]) -> float:
             continue   # ended meanwhile
         parent[pid] = int(fields[1])
         times[pid] = sum(int(x) for x in fields[11:15]) / tick
+    return parent, times
+
+
+def tree_pids(roots: list[int], parent: dict[int, int] | None = None) -> set[int]:
+    """``roots`` and all their descendants (a browser is a tree of processes)."""
+    if parent is None:
+        parent = _proc_table()[0]
     wanted = set(roots)
     grew = True
     while grew:
         more = {p for p, pp in parent.items() if pp in wanted and p not in wanted}
         wanted |= more
         grew = bool(more)
-    return sum(times.get(p, 0.0) for p in wanted)
+    return wanted
+
+
+def tree_cpu_s(roots: list[int]) -> float:
+    """User and system CPU seconds of the processes ``roots`` and all their descendants,
+    from ``/proc`` (those that ended count through their parent's reaped-children times).
+    0 where ``/proc`` cannot be read."""
+    parent, times = _proc_table()
+    return sum(times.get(p, 0.0) for p in tree_pids(roots, parent))
 
 
 def _run(seconds: float, rate_hz: float, clients: int, serve: bool) -> dict[str, Any]:

@@ -69,11 +69,15 @@ def test_bench_station_stand_in_clients_run_in_their_own_process(tmp_path, capsy
     own (their CPU is theirs, not the daemon's) and are really served."""
     out = tmp_path / "bench-station.json"
     code = main(["bench", "station", "--cycles", "2", "--seed", "3", "--browsers", "2",
-                 "--clients", "sse", "--json", "--out", str(out)])
+                 "--clients", "sse", "--paired", "--json", "--out", str(out)])
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert code == 0
     sc = summary["screens"]
     assert sc["clients"] == "sse" and sc["passes"] == 1
+    # --paired: the first bolt with the clients running, the second with them held
+    pr = sc["paired"]
+    assert pr["running"]["n"] == 1 and pr["held"]["n"] == 1
+    assert pr["delta_p95_ms"] == pr["running"]["p95"] - pr["held"]["p95"]
     assert sc["frames_served"] >= 1 and sc["snapshots_sent"] >= 1
     assert sc["browser_cpu_pct_of_a_core"] >= 0
     # the daemon's CPU per pass with the screens is of the same order as without (the
@@ -142,3 +146,15 @@ def test_the_p95_difference_interval_finds_a_shift_and_not_an_absent_one():
     assert 0 < lo2 < 30 < hi2 < 60
     assert p95_delta_interval(shifted, without) == [lo2, hi2]
     assert all(math.isnan(x) for x in p95_delta_interval([], without))
+
+
+def test_paired_latencies_are_split_by_the_bolt_they_belong_to():
+    """``_split_held``: each latency goes with the state of the bolt it was measured at (a
+    bolt may give none, or two when a selection was made again)."""
+    from stationd.bench.station import _split_held
+
+    lat = [10.0, 11.0, 12.0, 13.0, 14.0]
+    # bolt 0 running (latencies 0, 1), bolt 1 held (2), bolt 2 running (none), bolt 3 held
+    held_from = [(0, False), (2, True), (3, False), (3, True)]
+    assert _split_held(lat, held_from) == ([10.0, 11.0], [12.0, 13.0, 14.0])
+    assert _split_held([], held_from) == ([], [])
