@@ -91,7 +91,7 @@ async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]
     for i, (bolt, pose) in enumerate(progress.track(plan, "bench station: bolts",
                                                     unit="bolt")):
         if on_bolt is not None:
-            on_bolt(i)
+            await on_bolt(i)
         world.set_wrench(pose)
         out["truth"] = bolt
         def on_it(b: str = bolt) -> bool:
@@ -121,6 +121,9 @@ SETTLED_CPU_S = 0.35
 SETTLE_MAX_S = 20.0
 #: after a pass with the screens, the clients stay this long before the served counts are read
 DRAIN_S = 2.0
+#: --paired: after the clients are held or resumed, this long before the wrench moves, s (a
+#: resumed browser's catch-up burst is not what a running one costs)
+PAIRED_SETTLE_S = 1.5
 
 
 def run_station_bench(args: argparse.Namespace) -> int:
@@ -238,11 +241,16 @@ def _run_once(cfg: StationConfig, world: World, plan: list[tuple[str, WrenchPose
                 held_from: list[tuple[int, bool]] = info.setdefault("held_from", [])
                 hold = clients.hold
 
-                def on_bolt(i: int) -> None:
+                async def on_bolt(i: int) -> None:
                     # odd bolts with the clients held: the two halves of one pass see the
-                    # same machine, so its drift between passes leaves the difference
-                    held_from.append((station.bus.count(ParamsSent), i % 2 == 1))
-                    hold(i % 2 == 1)
+                    # same machine, so its drift between passes leaves the difference.  A
+                    # resumed browser first works off what piled up while it was stopped
+                    # (queued snapshots, late timers): a burst no running browser has, let
+                    # pass before the wrench moves
+                    held = i % 2 == 1
+                    held_from.append((station.bus.count(ParamsSent), held))
+                    hold(held)
+                    await asyncio.sleep(PAIRED_SETTLE_S)
             await _operator(station, world, plan, out, on_bolt)
             info["cpu_s"], info["wall_s"] = time.process_time() - c0, time.perf_counter() - w0
             if clients is not None:
