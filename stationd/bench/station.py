@@ -538,6 +538,9 @@ def _print(s: dict[str, Any]) -> None:
                   f"{pr['running']['p95']:.1f} ms; held ({pr['held']['n']}) p50 "
                   f"{pr['held']['p50']:.1f}, p95 {pr['held']['p95']:.1f} ms: p95 "
                   f"{pr['delta_p95_ms']:+.1f} ms (90 % interval {plo:+.1f} to {phi:+.1f})")
+        if pr is not None:
+            print("  (--paired passes wait 1.5 s at each bolt: their CPU per pass is not "
+                  "comparable with the passes without; run without --paired for it)")
         print(f"  daemon CPU {w['cpu_s']:.2f} s in {w['wall_s']:.1f} s per pass with them, "
               f"{wo['cpu_s']:.2f} s in {wo['wall_s']:.1f} s per pass without: "
               f"{d['cpu_pct_of_a_core']:+.1f} % of a core (target <= +5 %)")
