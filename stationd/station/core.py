@@ -285,6 +285,7 @@ class StationCore:
     _specs: dict[str, BoltSpec] = field(default_factory=dict, repr=False)
     _lift: LiftRead | None = field(default=None, repr=False)
     _loading: bool = field(default=False, repr=False)
+    _load_code: int | None = field(default=None, repr=False)   # the model code loaded
     _selection: Selection | None = field(default=None, repr=False)
     _acked_at: float | None = field(default=None, repr=False)
     _away: int = field(default=0, repr=False)
@@ -341,6 +342,12 @@ class StationCore:
             acts += self._drop(ev.t, State.WAITING_VEHICLE, ev.why)
             acts.append(CloseVehicle(self.vin))
             self._forget_vehicle()
+        changed = self._vehicle_changed(ev)
+        if changed is not None and VEHICLE not in self.faults:
+            # the PLC now names another vehicle (or model) with the lift still at height:
+            # the loaded bolts are not this car's; nothing more is sent until the lift goes
+            # down (which closes the loaded vehicle and clears this fault)
+            acts += self._fault(ev.t, VEHICLE, "changed", changed)
         if self.state in (State.STARTING, State.FAULT):
             return acts
         if not ev.ready:
@@ -353,12 +360,26 @@ class StationCore:
             if not self._loading:
                 self._loading = True
                 vin = ev.vin or f"SEQ-{int(ev.t)}"
+                self._load_code = ev.model_code
                 acts.append(LoadVehicle(ev.model_code, vin))
                 self._to(State.WAITING_VEHICLE, f"loading vehicle {vin}")
             return acts
         if self.state is State.WAITING_VEHICLE:
             self._to(State.TRACKING, "tracking the wrench")
         return acts
+
+    def _vehicle_changed(self, ev: LiftRead) -> str | None:
+        """Why the vehicle at height is not the one loaded (its VIN or model code changed),
+        else None."""
+        if self.vin is None or not ev.at_height:
+            return None
+        if ev.vin and ev.vin != self.vin:
+            return (f"the PLC reports VIN {ev.vin} at height, the station has {self.vin} "
+                    "loaded: lower the lift")
+        if self._load_code is not None and ev.model_code != self._load_code:
+            return (f"the PLC reports model code {ev.model_code} at height, {self.vin} was "
+                    f"loaded as {self._load_code}: lower the lift")
+        return None
 
     def _on_VehicleLoaded(self, ev: VehicleLoaded) -> list[Action]:  # noqa: N802
         self._loading = False

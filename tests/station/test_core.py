@@ -519,3 +519,30 @@ def test_a_database_fault_during_a_load_loads_the_vehicle_again_once_it_is_back(
     assert [a.vin for a in again if isinstance(a, LoadVehicle)] == ["VINDB"]
     c.feed(VehicleLoaded(1.6, "VINDB", "M", BOLTS))
     assert c.vin == "VINDB" and c.state is State.TRACKING
+
+
+def test_a_vehicle_that_changes_at_height_is_a_fault_until_the_lift_goes_down():
+    """Newcomer trial (independent PLC): a VIN or model code changing while the lift stayed at
+    height was ignored and the old vehicle's parameters went out.  Now: a vehicle fault
+    (tool off, nothing sent) until the lift goes down, which closes the loaded vehicle; the
+    next raise loads the new one."""
+    for changed in (LiftRead(1.3, True, True, 7, "VINOTHER"), LiftRead(1.3, True, True, 9, "VINA")):
+        c = StationCore(PARAMS, leave_frames=2)
+        c.feed(Started(1.0))
+        c.feed(LiftRead(1.1, True, True, 7, "VINA"))
+        c.feed(VehicleLoaded(1.2, "VINA", "M", BOLTS))
+        assert c.state is State.TRACKING
+        acts = c.feed(changed)
+        assert c.state is State.FAULT and "lower the lift" in c.reason
+        assert any(isinstance(a, DisableTool) for a in acts) or not c.tool_on
+        pos = np.asarray(BOLTS["B1"].position, dtype=np.float64)
+        sends = [a for k in range(6) for a in c.feed(LocalizedIn(1.4 + 0.05 * k,
+                                                                  1.39 + 0.05 * k, pos, None))
+                 if isinstance(a, SendParams)]
+        assert sends == []
+        down = c.feed(LiftRead(2.0, False, False, changed.model_code, changed.vin))
+        assert [a.vin for a in down if isinstance(a, CloseVehicle)] == ["VINA"]
+        assert "vehicle" not in c.faults
+        up = c.feed(LiftRead(2.5, True, True, changed.model_code, changed.vin))
+        assert [(a.model_code, a.vin) for a in up if isinstance(a, LoadVehicle)] == \
+            [(changed.model_code, changed.vin)]
