@@ -143,11 +143,11 @@ def cmd_marker(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".svg":   # the print is SVG: a .png of SVG text opens nowhere
         raise InputError(f"{out}: the marker is written as SVG: give a .svg file name")
+    from stationd.outfile import refuse_to_replace, write_atomic
+
+    refuse_to_replace(out, "the marker", ("svg",))   # through a symlink too: its target
     cfg = load_station_config(args.config)
-    try:
-        out.write_text(marker_svg(cfg.marker), encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"{out}: cannot write: {exc.strerror}") from None
+    write_atomic(out, marker_svg(cfg.marker))        # replaces a link, never writes through
     m = cfg.marker
     print(f"wrote {out}: white r={m.inner_mm:g} mm, black ring to r={m.outer_mm:g} mm, purple "
           f"field {2 * m.field_mm:g} mm square; print at 100 % scale")

@@ -123,7 +123,7 @@ def cmd_db_export(args: argparse.Namespace) -> int:
 
     if args.out is not None:   # before the database is read: a typo costs nothing
         if args.results:       # an earlier export (CSV or JSON) may be replaced, nothing else
-            refuse_to_replace(Path(args.out), "results", ("json", "text"))
+            refuse_to_replace(Path(args.out), "results", ("results",))
         else:   # a bolt table may replace a bolt table (export, edit, import)
             refuse_to_replace(Path(args.out), "a bolt table", ("bolts",))
     if args.results:

@@ -18,6 +18,8 @@ from stationd.errors import ConfigError, InputError
 from stationd.yamlio import YamlNode, file_kind, top_keys
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
+#: how a results CSV export begins (stationd.web.results.CSV_FIELDS)
+RESULTS_CSV_HEAD = "vin,model,bolt,"
 #: configuration files are small: a larger file is data (an earlier export), not parsed
 PARSE_LIMIT_BYTES = 5 * 2**20
 NAMES = {
@@ -28,7 +30,9 @@ NAMES = {
     "hsv": "an HSV range file",
     "yaml": "a YAML settings file (a calibration or registration?)",
     "json": "a JSON file",
-    "text": "a text file",
+    "results": "an earlier results export",
+    "svg": "an SVG drawing",
+    "text": "a text file (not one this command wrote)",
     "data": "a large data file",
     "unreadable": "a file that cannot be read",
 }
@@ -50,8 +54,13 @@ def kind_of(path: Path) -> str | None:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError):
         return "unreadable"
-    if text.lstrip()[:1] in ("{", "["):
+    start = text.lstrip()
+    if start.startswith(RESULTS_CSV_HEAD) or start.startswith("["):
+        return "results"    # a results export: CSV with its header, or a JSON list
+    if start.startswith("{"):
         return "json"
+    if start.startswith(("<?xml", "<svg")):
+        return "svg"
     try:
         root = YamlNode.parse(text, str(path))
     except ConfigError:

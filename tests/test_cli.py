@@ -384,6 +384,10 @@ def test_an_output_never_replaces_a_database_a_calibration_or_a_device(tmp_path,
     db = f"sqlite:///{dbfile}"
     assert main(["db", "import", str(tmp_path / "bolts.yaml"), "--db", db]) == 0
     capsys.readouterr()
+    (tmp_path / "notes.txt").write_text("a README, a script, notes\n")
+    (tmp_path / "s.db.lock").write_text("12345\n")
+    shutil.copy(tmp_path / "bolts.yaml", tmp_path / "station-copy.svg")
+    (tmp_path / "link.svg").symlink_to(tmp_path / "pair1.yaml")   # writes through: refused
     before = {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}
     for argv, needle in [
         (["db", "export", "--results", "--db", db, "--out", str(dbfile)],
@@ -396,13 +400,20 @@ def test_an_output_never_replaces_a_database_a_calibration_or_a_device(tmp_path,
         (["db", "export", "--results", "--db", db, "--out", "/dev/full"],
          "not a regular file"),
         (["bench", "station", "--out", str(tmp_path / "bolts.yaml")], "is a bolt table"),
+        # second trial: any text file was "an earlier export" (a README, the daemon's lock)
+        (["db", "export", "--results", "--db", db, "--out", str(tmp_path / "notes.txt")],
+         "is a text file"),
+        (["db", "export", "--results", "--db", db, "--out", str(tmp_path / "s.db.lock")],
+         "is a text file"),
+        (["marker", "--out", str(tmp_path / "station-copy.svg")], "is a bolt table"),
+        (["marker", "--out", str(tmp_path / "link.svg")], "is a YAML settings file"),
     ]:
         code, _, err = _usage_error(capsys, *argv)
         assert code == 2 and needle in err and err.count("\n") == 1, (argv, err)
     assert {n: (tmp_path / n).read_bytes() for n in before} == before
     assert stat.S_ISCHR(os.stat("/dev/full").st_mode)
     out = tmp_path / "results.csv"
-    out.write_text("an earlier export\n")
+    assert main(["db", "export", "--results", "--db", db, "--out", str(out)]) == 0
     out.chmod(0o640)
     for fmt in ("csv", "json", "csv"):    # an earlier export of either format is replaced
         code, text, _ = _run(capsys, "db", "export", "--results", "--db", db, "--format",
@@ -425,3 +436,10 @@ def test_an_output_that_cannot_be_written_is_one_line_not_wrote(tmp_path, capsys
     import pytest
     with pytest.raises(InputError, match="cannot write"):
         write_atomic(tmp_path / "nowhere" / "r.csv", "x")
+
+
+def test_the_results_csv_head_the_out_rule_knows_is_the_exports():
+    from stationd.outfile import RESULTS_CSV_HEAD
+    from stationd.web.results import CSV_FIELDS
+
+    assert ",".join(CSV_FIELDS).startswith(RESULTS_CSV_HEAD)

@@ -422,14 +422,10 @@ class Station:
             await self.feed(ResultIn(time.time(), result))
 
     async def _tick_loop(self, stop: asyncio.Event) -> None:
-        """Time for the core and the systemd watchdog."""
-        next_ping = time.monotonic()
+        """Time for the core.  (The systemd watchdog is ``run.keep_watchdog``'s: a feed may
+        wait seconds on a locked database, and the daemon must not be killed for that.)"""
         while not stop.is_set():
             await self.feed(Tick(time.time()))
-            now = time.monotonic()
-            if self.notifier.watchdog_s and now >= next_ping:
-                self.notifier.watchdog()
-                next_ping = now + self.notifier.watchdog_s
             await asyncio.sleep(TICK_S)
 
     async def _vision_loop(self, stop: asyncio.Event) -> None:

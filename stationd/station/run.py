@@ -84,10 +84,26 @@ async def serve(cfg_path: str, cfg: StationConfig, notifier: Notifier,
     loop.add_signal_handler(signal.SIGHUP, reload.set)
     bus = EventBus()    # one for the daemon's life: the screens follow it across reloads
     screens = Screens(bus)
+    watchdog = asyncio.create_task(keep_watchdog(notifier))
     try:
         await serve_station(cfg_path, cfg, notifier, bus, screens, stop, reload, locks)
     finally:
+        watchdog.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await watchdog
         await screens.stop()
+
+
+async def keep_watchdog(notifier: Notifier) -> None:
+    """WATCHDOG=1 every ``watchdog_s`` for the daemon's life, from its event loop: a loop
+    that stops turning (a blocked call, a deadlock) stops the pings and systemd restarts the
+    daemon; a station in fault, a database that does not open at start or one locked for
+    seconds (its calls run in threads) keeps them going (it was killed for those)."""
+    if not notifier.watchdog_s:
+        return
+    while True:
+        notifier.watchdog()
+        await asyncio.sleep(notifier.watchdog_s)
 
 
 #: a screens' port that was in use is tried again after this long, s

@@ -188,12 +188,17 @@ def test_a_database_unusable_at_start_is_served_as_a_fault_then_the_results_come
     db.write_text("this is not a database\n" * 100)
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
     sock.bind(str(tmp_path / "notify"))
-    env = {**os.environ, "NOTIFY_SOCKET": str(tmp_path / "notify")}
+    # a 2 s watchdog: systemd would kill a daemon that stops pinging while it waits for its
+    # database (second newcomer trial: no WATCHDOG=1 at all meanwhile, killed every ~12 s)
+    env = {**os.environ, "NOTIFY_SOCKET": str(tmp_path / "notify"), "WATCHDOG_USEC": "2000000"}
+    env.pop("WATCHDOG_PID", None)
     p = subprocess.Popen([sys.executable, "-m", "stationd", "run", "--config", "station.yaml"],
                          cwd=tmp_path, env=env, stderr=subprocess.PIPE, text=True)
     base = f"http://127.0.0.1:{port}"
     try:
         _recv_until(sock, "fault: database", 90)
+        for _ in range(3):                      # pinged on, in fault, every second
+            _recv_until(sock, "WATCHDOG=1", 5)
         end = time.monotonic() + 30
         while True:
             try:
