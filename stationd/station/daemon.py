@@ -23,6 +23,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from functools import partial
+from pathlib import Path
 from typing import Any
 
 import cv2
@@ -205,6 +206,9 @@ class Station:
     _unsaved: list[Unsaved] = field(default_factory=list)
     _saved_late: list[Unsaved] = field(default_factory=list)
     _unsaved_lock: threading.Lock = field(default_factory=threading.Lock)
+    # the SQLite file opened and its identity (device, inode): a file deleted or replaced under
+    # the daemon is detected before a result is written to a database nobody will read
+    _db_file: tuple[Path, tuple[int, int]] | None = None
     _bad: dict[str, int] = field(default_factory=dict)     # pair -> failed grabs in a row
     keepers: dict[str, DeviceKeeper[Any]] = field(init=False)  # device -> its one keeper
     _next_frames: dict[str, float] = field(default_factory=dict)  # pair -> next PairFrames
@@ -272,6 +276,7 @@ class Station:
         """Open the database (and import the bolt table), then try every device once: a
         device that does not open is a fault retried by ``run``, never an exception here."""
         self.repo = Repository.open(self.cfg.database_url)
+        self._db_file = _sqlite_file(self.cfg.database_url)
         if self.cfg.bolts_path is not None:
             r = import_bolts(self.repo, self.cfg.bolts_path,
                              tolerance_mm=self.cfg.matching.tolerance_mm)
@@ -727,6 +732,7 @@ class Station:
         raises."""
         repo = self.repo
         assert repo is not None  # noqa: S101 - opened in open()
+        self._check_db_file()
         a = u.record
         r, sel = a.result, a.selection
         repo.record_tightening(
@@ -739,6 +745,20 @@ class Station:
             tightening_id=int(r.tightening_id),
             sent_at=datetime.fromtimestamp(sel.decided_t, UTC) if sel else None,
             result_at=u.result_at, images=u.images)
+
+    def _check_db_file(self) -> None:
+        """Raise DbError when the SQLite file the daemon opened is gone or was replaced (its
+        open connection would go on writing into the deleted file: results acknowledged,
+        then lost, and the bolts tightened again after a restart)."""
+        if self._db_file is None:
+            return
+        path, ident = self._db_file
+        try:
+            st = path.stat()
+        except OSError:
+            raise DbError(f"the database file {path} was removed") from None
+        if (st.st_dev, st.st_ino) != ident:
+            raise DbError(f"the database file {path} was replaced by another file")
 
     async def _recorded(self, u: Unsaved) -> None:
         a, r = u.record, u.record.result
@@ -753,6 +773,7 @@ class Station:
         pool reconnects by itself), then the results it refused, oldest first: it is back
         only once it has taken them all (a full disk still answers reads)."""
         _probe_database(repo)
+        self._check_db_file()
         while True:
             with self._unsaved_lock:
                 if not self._unsaved:
@@ -794,6 +815,22 @@ class Station:
                 continue
             out.append(str(path))
         return out
+
+
+def _sqlite_file(url: str) -> tuple[Path, tuple[int, int]] | None:
+    """The file of an SQLite URL and its (device, inode); None for another database or one
+    in memory."""
+    from sqlalchemy.engine import make_url
+
+    u = make_url(url)
+    if u.get_backend_name() != "sqlite" or not u.database or u.database == ":memory:":
+        return None
+    path = Path(u.database).resolve()
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return path, (st.st_dev, st.st_ino)
 
 
 def _xyz(p: Any) -> tuple[float, float, float]:

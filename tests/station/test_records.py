@@ -331,3 +331,32 @@ def test_a_result_the_database_refuses_is_a_fault_kept_and_stored_when_it_can(tm
     stored = [(bolt, tid) for bolt, tid, _, _ in _records(st.cfg.database_url)]
     assert stored[:2] == list(seen.items())                  # each once, in order
     assert len({tid for _, tid in stored}) == len(stored)
+
+
+@pytest.mark.timeout(240)
+def test_a_database_file_removed_under_the_daemon_is_a_fault_not_acknowledged(tmp_path):
+    """Second newcomer trial: ``rm station.db*`` while the daemon ran went unnoticed (its
+    open connection wrote into the deleted file), the result was acknowledged and lost, and
+    after a restart the bolt was tightened again.  Now the write sees the file gone: a fault
+    of the database, the result kept and not acknowledged, nothing more sent."""
+    import os
+
+    async def body(st, world):
+        ctl = st.wrench.controller
+        bolts = sorted(st.bolts)
+        world.set_wrench(_on(st, bolts[0], 1))
+        await _until(lambda: _tightening(st, bolts[0]), 60)
+        for f in tmp_path.glob("s.db*"):
+            os.unlink(f)
+        shot = ctl.pull_trigger()
+        assert shot is not None
+        await _until(lambda: "database" in st.cycle.faults, 30)
+        assert "was removed" in st.cycle.reason and st.cycle.state is State.FAULT
+        await asyncio.sleep(1.0)
+        assert shot.tightening_id not in ctl.acked_ids and not ctl.tool_enabled
+        sent = len(_sends(st))
+        world.set_wrench(_on(st, bolts[1], 2))
+        await asyncio.sleep(2.0)
+        assert len(_sends(st)) == sent
+
+    _scenario(tmp_path, body, **NO_NOK)
