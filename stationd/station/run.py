@@ -150,12 +150,13 @@ class Screens:
             log.error("screens served without results until the database opens: %s",
                       results_error)
         try:
-            self.server = WebServer(self.bus, results, self.frames,
-                                    listen=cfg.http.listen, token=cfg.http.token,
-                                    images_dir=cfg.records.images_dir,
-                                    devices=configured_devices(cfg),
-                                    results_error=results_error)
-            await self.server.start()
+            server = WebServer(self.bus, results, self.frames,
+                               listen=cfg.http.listen, token=cfg.http.token,
+                               images_dir=cfg.records.images_dir,
+                               devices=configured_devices(cfg),
+                               results_error=results_error)
+            await server.start()
+            self.server = server   # only once it serves (a retry's start is awaited)
         except OPEN_ERRORS as exc:
             # a port another program holds may be freed: tried again, journaled once
             if self._failed != one_line(exc):
