@@ -23,6 +23,16 @@ def serve(bus, **kw) -> WebServer:
     return WebServer(bus, listen="127.0.0.1:0", **kw)
 
 
+async def _serving_opened(**kw) -> WebServer:
+    """A started server whose bus holds the scenario's opened vehicle (``srv.bus``)."""
+    bus = EventBus()
+    for e in opened():
+        bus.publish(e)
+    srv = serve(bus, **kw)
+    await srv.start()
+    return srv
+
+
 async def _read_snapshot(resp):
     buf = b""
     while b"\n\n" not in buf.split(b"data: ", 1)[-1]:
@@ -33,11 +43,8 @@ async def _read_snapshot(resp):
 
 def test_status_healthz_and_live_events():
     async def main():
-        bus = EventBus()
-        for e in opened():
-            bus.publish(e)
-        srv = serve(bus)
-        await srv.start()
+        srv = await _serving_opened()
+        bus = srv.bus
         try:
             async with ClientSession() as http:
                 async with http.get(srv.url + "healthz") as r:
@@ -197,11 +204,8 @@ def test_numpy_values_and_an_odd_event_do_not_stop_the_live_view():
 
 def test_healthz_answers_a_probe_without_the_token_and_says_only_ok_or_fault():
     async def main():
-        bus = EventBus()
-        for e in opened():
-            bus.publish(e)
-        srv = serve(bus, token="a-long-token", devices=("lift", "wrench"))  # noqa: S106
-        await srv.start()
+        srv = await _serving_opened(token="a-long-token",  # noqa: S106
+                                    devices=("lift", "wrench"))
         try:
             async with ClientSession() as http:
                 async with http.get(srv.url + "healthz") as r:
@@ -211,7 +215,7 @@ def test_healthz_answers_a_probe_without_the_token_and_says_only_ok_or_fault():
                     async with http.get(srv.url + path) as r:
                         assert r.status == 401, path
                 for e in fault():
-                    bus.publish(e)
+                    srv.bus.publish(e)
                 while srv.view.state != "fault":
                     await asyncio.sleep(0.02)
                 async with http.get(srv.url + "healthz") as r:
@@ -236,11 +240,7 @@ def test_a_quiet_station_sends_its_snapshot_again_every_heartbeat(monkeypatch):
     monkeypatch.setattr(server, "HEARTBEAT_S", 0.3)
 
     async def main():
-        bus = EventBus()
-        for e in opened():
-            bus.publish(e)
-        srv = serve(bus)
-        await srv.start()
+        srv = await _serving_opened()
         try:
             async with ClientSession() as http, http.get(srv.url + "api/events") as stream:
                 first = await _read_snapshot(stream)
