@@ -771,9 +771,13 @@ class Station:
     def _probe_database(self, repo: Repository) -> None:
         """The database's "reconnect" (its keeper's thread): one cheap query (the engine's
         pool reconnects by itself), then the results it refused, oldest first: it is back
-        only once it has taken them all (a full disk still answers reads)."""
-        _probe_database(repo)
-        self._check_db_file()
+        only once it has taken them all (a full disk still answers reads).  A failure is a
+        device error, the keeper's kind of failure (another is logged as a crash)."""
+        try:
+            repo.models()
+            self._check_db_file()   # a removed file still answers through its connection
+        except STATION_FAULTS as exc:
+            raise DeviceError(one_line(exc)) from None
         while True:
             with self._unsaved_lock:
                 if not self._unsaved:
@@ -849,15 +853,6 @@ def _reconnect_lift(lift: Any) -> None:
 
 def _close(device: Any) -> None:
     device.close()
-
-
-def _probe_database(repo: Repository) -> None:
-    """The database's "reconnect": one cheap query (the engine's pool reconnects by itself);
-    a failure is a device error, the keeper's kind of failure."""
-    try:
-        repo.models()
-    except STATION_FAULTS as exc:
-        raise DeviceError(one_line(exc)) from None
 
 
 def _quiet(fn: Any) -> None:
