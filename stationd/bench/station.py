@@ -382,6 +382,7 @@ def _screens_summary(bases: list[dict[str, Any]], served: dict[str, Any], n: int
     lat0 = [x for b in bases for x in b["latency"]]
     cpu0 = sum(b["cpu_s"] for b in bases) / len(bases)
     wall0 = sum(b["wall_s"] for b in bases) / len(bases)
+    served_passes = served.get("latency_passes", [served["latency"]])
     without = {"latency_ms": {"p50": _pct(lat0, 50), "p95": _pct(lat0, 95)},
                "cpu_s": cpu0, "wall_s": wall0, "cpu_pct": 100.0 * cpu0 / wall0,
                "passes": [{"latency_p95_ms": _pct(b["latency"], 95), "cpu_s": b["cpu_s"],
@@ -390,8 +391,7 @@ def _screens_summary(bases: list[dict[str, Any]], served: dict[str, Any], n: int
                             "p95": _pct(served["latency"], 95)},
              "cpu_s": served["cpu_s"], "wall_s": served["wall_s"],
              "cpu_pct": served["cpu_pct"],
-             "passes": [{"latency_p95_ms": _pct(p, 95)}
-                        for p in served.get("latency_passes", [served["latency"]])]}
+             "passes": [{"latency_p95_ms": _pct(p, 95)} for p in served_passes]}
     return {"browsers": n, "clients": served["clients"], "pages": served["pages"],
             "why_not_chromium": served["why_not_chromium"] or None,
             "clients_alive_to_the_end": served.get("clients_alive"),
@@ -406,9 +406,8 @@ def _screens_summary(bases: list[dict[str, Any]], served: dict[str, Any], n: int
             "delta": {"latency_p95_ms": with_["latency_ms"]["p95"] - without["latency_ms"]["p95"],
                       "latency_p50_ms": with_["latency_ms"]["p50"] - without["latency_ms"]["p50"],
                       "cpu_pct_of_a_core": 100.0 * (served["cpu_s"] - cpu0) / served["wall_s"]},
-            "delta_p95_interval_ms": p95_delta_interval(
-                served.get("latency_passes", [served["latency"]]),
-                [b["latency"] for b in bases]),
+            "delta_p95_interval_ms": p95_delta_interval(served_passes,
+                                                        [b["latency"] for b in bases]),
             "targets": {"latency_p95_ms": 10.0, "cpu_pct_of_a_core": 5.0}}
 
 
@@ -541,9 +540,9 @@ def _print(s: dict[str, Any]) -> None:
                   f"{pr['running']['p95']:.1f} ms; held ({pr['held']['n']}) p50 "
                   f"{pr['held']['p50']:.1f}, p95 {pr['held']['p95']:.1f} ms: p95 "
                   f"{pr['delta_p95_ms']:+.1f} ms (90 % interval {plo:+.1f} to {phi:+.1f})")
-        if pr is not None:
-            print("  (--paired passes wait 1.5 s at each bolt: their CPU per pass is not "
-                  "comparable with the passes without; run without --paired for it)")
+            print(f"  (--paired passes wait {PAIRED_SETTLE_S:g} s at each bolt: their CPU per "
+                  "pass is not comparable with the passes without; run without --paired for "
+                  "it)")
         print(f"  daemon CPU {w['cpu_s']:.2f} s in {w['wall_s']:.1f} s per pass with them, "
               f"{wo['cpu_s']:.2f} s in {wo['wall_s']:.1f} s per pass without: "
               f"{d['cpu_pct_of_a_core']:+.1f} % of a core (target <= +5 %)")
