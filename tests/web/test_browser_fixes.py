@@ -4,6 +4,7 @@ cameras screen's faults, old frames and crop, the favicon and an unknown VIN."""
 
 from __future__ import annotations
 
+import threading
 import time
 from typing import Any
 
@@ -201,10 +202,28 @@ def test_cameras_show_a_pair_that_is_down_old_frames_and_the_crop_in_view(live_s
                  StateChanged(state="fault", reason=f"pair1: {reason}")])
     img = np.random.default_rng(5).integers(0, 60, (1200, 1600), dtype=np.uint8)
     now = time.time()
-    for k in range(5):      # pair2 grabbing at 10 fps, pair3's last frames 25 s old
+    for k in range(5):      # pair3's last frames 25 s old
         for side in ("left", "right"):
-            srv.frames.put("pair2", side, img, {"found": False}, grabbed_at=now - 0.4 + k / 10)
             srv.frames.put("pair3", side, img, {"found": False}, grabbed_at=now - 25.4 + k / 10)
+    # pair2 grabs at 10 fps for the whole test: frames put once before the page loads would
+    # rightly be "old" by the time a loaded machine has drawn them
+    grabbing = threading.Event()
+
+    def grab() -> None:
+        while not grabbing.wait(0.1):
+            for side in ("left", "right"):
+                srv.frames.put("pair2", side, img, {"found": False}, grabbed_at=time.time())
+
+    feeder = threading.Thread(target=grab, daemon=True)
+    feeder.start()
+    try:
+        _cameras_down_old_and_crop(srv, page, shots, reason)
+    finally:
+        grabbing.set()
+        feeder.join()
+
+
+def _cameras_down_old_and_crop(srv: Any, page: Page, shots: Any, reason: str) -> None:
     page.get(srv.url + "cameras")
     page.wait(lambda p: p.count(".cam img") == 4, what="four frames")
     p1 = page.text("section[data-pair=pair1]") or ""
