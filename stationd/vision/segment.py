@@ -210,10 +210,11 @@ def search_candidates(small_bgr: np.ndarray, scale: int, ranges: HsvRange = DEFA
                       min_hole_radius_px: float = MIN_HOLE_RADIUS_PX,
                       timings: dict[str, float] | None = None
                       ) -> tuple[list[Candidate], int]:
-    """:func:`find_candidates`, and the area (reduced px) of the largest purple region: the
-    detector retries at a finer scale only when that region is small enough to be a marker
-    too small for this scale.  No purple, or a large region with no ring in it (a marker cut
-    by the frame's edge), would be searched again for nothing, at ten times the cost.
+    """:func:`find_candidates`, and the area (reduced px) of the largest purple region not
+    on the frame's border: the detector retries at a finer scale only when that region is
+    small enough to be a marker too small for this scale.  No purple, a large region with
+    no ring in it, or only regions on the frame's edge (a marker cut by it) would be
+    searched again for nothing, at four to twenty times the cost.
 
     The area is only needed when nothing was found, so it is 0 whenever candidates are
     returned: labelling every purple region of the frame costs ~2 ms, while a candidate's
@@ -331,18 +332,31 @@ def _region_box(mask: np.ndarray, seed: tuple[int, int], window: tuple[int, int,
 
 
 def _largest_region(mask: np.ndarray) -> int:
-    """Area (px) of the largest 8-connected purple region, 0 without purple (labelling and
-    ``bincount``: the statistics of ``connectedComponentsWithStats`` cost more than both)."""
+    """Area (px) of the largest 8-connected purple region that does not touch the frame's
+    border, 0 without one (labelling and ``bincount``: the statistics of
+    ``connectedComponentsWithStats`` cost more than both).
+
+    Why not a region on the border: the finer retry is for a marker too small for this
+    scale, and a small purple region on the frame's edge is, at a station, a marker leaving
+    the frame with its ring cut (seen whole by another pair).  Searching it again at twice
+    the resolution cost four times the first search for nothing: 70 ms of a 110 ms cycle
+    in ``bench station``.  A marker both too small for the search and with its field cut
+    by the edge is the price (its ring would be within a few mm of the edge)."""
     if not cv2.countNonZero(mask):
         return 0
     n, labels = cv2.connectedComponents(mask, connectivity=8)
-    return int(np.bincount(labels.ravel(), minlength=n)[1:].max()) if n > 1 else 0
+    if n <= 1:
+        return 0
+    area = np.bincount(labels.ravel(), minlength=n)
+    for edge in (labels[0], labels[-1], labels[:, 0], labels[:, -1]):
+        area[edge] = 0
+    return int(area[1:].max())
 
 
 def _no_enclosed_ring(v: np.ndarray, mask: np.ndarray, scale: int, full_size: tuple[int, int],
                       min_hole_radius_px: float) -> tuple[list[Candidate], int]:
-    """The disk seeds when no purple region encloses a ring, and the largest region's area
-    when there are none either (the detector's finer retry needs it)."""
+    """The disk seeds when no purple region encloses a ring, and the largest area of a
+    region off the frame's border when there are none either (the finer retry needs it)."""
     seeds = _disk_seeds(v, mask, scale, full_size, min_hole_radius_px)
     return seeds, 0 if seeds else _largest_region(mask)
 

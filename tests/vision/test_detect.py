@@ -1,5 +1,6 @@
 """The whole single-image pipeline on rendered images (ground truth from the renderer)."""
 
+import cv2
 import numpy as np
 import pytest
 
@@ -153,6 +154,19 @@ def test_a_frame_without_purple_is_searched_once_not_at_every_scale(camera, monk
     x = (0.0 - camera.K[0, 2]) / camera.K[0, 0] * z
     cut = render(camera, Scene(markers=[(MarkerPose.look(np.array([x, 0.0, z]), 10, 0, 0),
                                          SPEC)], noise_sigma=2.0), seed=2).image
+    assert not detect(cut, camera, VisionParams(), SPEC).found
+    assert scales == [8]
+    scales.clear()      # a far marker (too small for 1/8) centred on the frame's edge: a
+    z = 4500.0          # small purple region on the border, searched again at 1/4 and 1/2
+    ray = camera.pixels_to_normalized(np.array([[0.0, camera.K[1, 2]]]))[0]
+    x = float(ray[0]) * z           # before (for nothing: the ring is cut), 300 ms more
+    cut = render(camera, Scene(markers=[(MarkerPose.look(np.array([x, 0.0, z]), 10, 0, 0),
+                                         SPEC)], noise_sigma=2.0), seed=3).image
+    small = detect_module.reduce(cut, 8)
+    from stationd.vision.segment import purple_mask
+    assert cv2.countNonZero(purple_mask(cv2.cvtColor(small, cv2.COLOR_BGR2HSV),
+                                        VisionParams().hsv)[:, :4])    # purple on the edge
+    scales.clear()
     assert not detect(cut, camera, VisionParams(), SPEC).found
     assert scales == [8]
 

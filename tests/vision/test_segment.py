@@ -493,5 +493,12 @@ def test_enclosed_holes_match_the_full_statistics(seed):
     if seed == 3:
         assert len(want) > MAX_BOXED_HOLES  # the fallback ran
     _, _, st8, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
-    assert _largest_region(mask) == int(st8[1:, cv2.CC_STAT_AREA].max())
+    x, y, w, h, area = (st8[1:, i] for i in range(5))
+    inner = (x > 0) & (y > 0) & (x + w < 140) & (y + h < 90)   # off the frame's border
+    assert _largest_region(mask) == int(area[inner].max(initial=0))
     assert _largest_region(np.zeros_like(mask)) == 0
+    edge = np.zeros_like(mask)                 # purple only on the border: nothing to retry
+    cv2.circle(edge, (0, 45), 6, 255, -1)
+    assert _largest_region(edge) == 0
+    cv2.circle(edge, (70, 45), 3, 255, -1)
+    assert _largest_region(edge) == cv2.countNonZero(edge[:, 35:])
