@@ -27,7 +27,7 @@ import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -124,6 +124,8 @@ DRAIN_S = 2.0
 #: --paired: after the clients are held or resumed, this long before the wrench moves, s (a
 #: resumed browser's catch-up burst is not what a running one costs)
 PAIRED_SETTLE_S = 1.5
+
+T = TypeVar("T")
 
 
 def run_station_bench(args: argparse.Namespace) -> int:
@@ -286,20 +288,19 @@ def _run_once(cfg: StationConfig, world: World, plan: list[tuple[str, WrenchPose
         info["rss_end"] = _rss_mb()
     finally:
         station.close()
-    info["latency"] = [e.latency_ms["total"] for e in station.bus.of(ParamsSent)
-                       if isinstance(e, ParamsSent)]
+    sent = [e for e in station.bus.of(ParamsSent) if isinstance(e, ParamsSent)]
+    info["latency"] = [e.latency_ms["total"] for e in sent]
+    info["by_bolt"] = [(e.bolt, e.latency_ms["total"]) for e in sent]
     if "held_from" in info:
-        info["latency_running"], info["latency_held"] = _split_held(info["latency"],
-                                                                    info["held_from"])
+        info["running"], info["held"] = _split_held(info["by_bolt"], info["held_from"])
     return info
 
 
-def _split_held(latency: list[float], held_from: list[tuple[int, bool]]
-                ) -> tuple[list[float], list[float]]:
+def _split_held(latency: list[T], held_from: list[tuple[int, bool]]) -> tuple[list[T], list[T]]:
     """The latencies of the bolts with the clients running and of those with them held:
     ``held_from`` lists (index of the bolt's first latency, held) in bolt order."""
-    running: list[float] = []
-    held: list[float] = []
+    running: list[T] = []
+    held: list[T] = []
     for k, x in enumerate(latency):
         state = False
         for start, h in held_from:
@@ -363,6 +364,7 @@ def _pooled(runs: list[dict[str, Any]]) -> dict[str, Any]:
     out = dict(runs[0])
     out["latency"] = [x for r in runs for x in r["latency"]]
     out["latency_passes"] = [list(r["latency"]) for r in runs]
+    out["by_bolt"] = [x for r in runs for x in r["by_bolt"]]
     for key in (*PER_PASS, *COUNTED):
         values = [r[key] for r in runs if r.get(key) is not None]
         total = sum(values)
@@ -406,18 +408,18 @@ def _screens_summary(bases: list[dict[str, Any]], served: dict[str, Any], n: int
             "delta": {"latency_p95_ms": with_["latency_ms"]["p95"] - without["latency_ms"]["p95"],
                       "latency_p50_ms": with_["latency_ms"]["p50"] - without["latency_ms"]["p50"],
                       "cpu_pct_of_a_core": 100.0 * (served["cpu_s"] - cpu0) / served["wall_s"]},
-            "delta_p95_interval_ms": p95_delta_interval(served_passes,
-                                                        [b["latency"] for b in bases]),
+            "delta_p95_interval_ms": p95_delta_interval(
+                served["by_bolt"], [x for b in bases for x in b["by_bolt"]]),
             "targets": {"latency_p95_ms": 10.0, "cpu_pct_of_a_core": 5.0}}
 
 
 def _paired_summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
     """Within the passes with the screens: the bolts with the clients running against those
     with them held (stopped), pooled over the passes, with the interval of the p95
-    difference (each pass resampled within itself)."""
-    on = [r.get("latency_running", []) for r in runs]
-    off = [r.get("latency_held", []) for r in runs]
-    a, b = [x for p in on for x in p], [x for p in off for x in p]
+    difference."""
+    on = [x for r in runs for x in r.get("running", [])]
+    off = [x for r in runs for x in r.get("held", [])]
+    a, b = [ms for _, ms in on], [ms for _, ms in off]
     return {"running": {"n": len(a), "p50": _pct(a, 50), "p95": _pct(a, 95)},
             "held": {"n": len(b), "p50": _pct(b, 50), "p95": _pct(b, 95)},
             "delta_p95_ms": _pct(a, 95) - _pct(b, 95),
@@ -430,25 +432,34 @@ def _paired_summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
 BOOTSTRAP_DRAWS = 2000
 
 
-def p95_delta_interval(with_passes: list[list[float]], without_passes: list[list[float]],
+def p95_delta_interval(with_: list[tuple[str, float]], without: list[tuple[str, float]],
                        level: float = 0.9, draws: int = BOOTSTRAP_DRAWS) -> list[float]:
-    """The ``level`` interval of p95(with) - p95(without) over resamplings of the latencies,
-    each pass resampled within itself (a pass keeps its share of the pool).  Why: with 20-60
-    selections a side, the p95 is the second or third slowest of them and moves by tens of
-    ms between runs of the same code; a difference without its interval cannot tell the
-    screens' cost from a slow frame.  The drift between passes (the machine's load) is not in
-    it: the per-pass p95s show that.  ``[nan, nan]`` without latencies on a side."""
-    a = [np.asarray(p, dtype=float) for p in with_passes if len(p)]
-    b = [np.asarray(p, dtype=float) for p in without_passes if len(p)]
-    if not a or not b:
-        return [float("nan"), float("nan")]
-    rng = np.random.default_rng(0)
+    """The ``level`` interval of p95(with) - p95(without), the latencies given as (bolt,
+    ms), by resampling bolts: each draw takes bolts with replacement and, for each, all its
+    latencies on both sides.
 
-    def p95s(passes: list[np.ndarray]) -> np.ndarray:
-        pooled = np.concatenate([p[rng.integers(0, len(p), size=(draws, len(p)))]
-                                 for p in passes], axis=1)
-        return np.asarray(np.percentile(pooled, 95, axis=1))
-    d = p95s(a) - p95s(b)
+    Why by bolt: every pass runs the same plan, and a bolt's placement sets much of its
+    latency (one seen by two pairs costs twice the vision of one seen by one), so the p95
+    of 20-50 bolts is mostly which placements are slow.  Resampling latencies one by one
+    on each side, as a first version did, let a slow placement count on one side and not
+    the other, an interval 60-130 ms wide; drawn as a whole it weighs the same on both.
+    What is left is the machine's own noise and the screens' cost.  Only bolts measured on
+    both sides count; ``[nan, nan]`` without one."""
+    a: dict[str, list[float]] = {}
+    b: dict[str, list[float]] = {}
+    for side, pairs in ((a, with_), (b, without)):
+        for bolt, ms in pairs:
+            side.setdefault(bolt, []).append(float(ms))
+    bolts = sorted(set(a) & set(b))
+    if not bolts:
+        return [float("nan"), float("nan")]
+    xa = [np.asarray(a[k]) for k in bolts]
+    xb = [np.asarray(b[k]) for k in bolts]
+    rng = np.random.default_rng(0)
+    d = np.empty(draws)
+    for n, pick in enumerate(rng.integers(0, len(bolts), size=(draws, len(bolts)))):
+        d[n] = (np.percentile(np.concatenate([xa[k] for k in pick]), 95)
+                - np.percentile(np.concatenate([xb[k] for k in pick]), 95))
     lo, hi = np.percentile(d, [50 * (1 - level), 50 * (1 + level)])
     return [float(lo), float(hi)]
 
