@@ -22,6 +22,8 @@ SQLITE_MAGIC = b"SQLite format 3\x00"
 RESULTS_CSV_HEAD = "vin,model,bolt,"
 #: configuration files are small: a larger file is data (an earlier export), not parsed
 PARSE_LIMIT_BYTES = 5 * 2**20
+#: the first bytes read to tell an SQLite database or a results export, at any size
+HEAD_BYTES = 4096
 NAMES = {
     "device": "not a regular file (a device, a pipe or a socket)",
     "sqlite": "an SQLite database",
@@ -46,17 +48,19 @@ def kind_of(path: Path) -> str | None:
         return "device"
     try:
         with path.open("rb") as f:
-            head = f.read(len(SQLITE_MAGIC))
-        if head == SQLITE_MAGIC:
+            head = f.read(HEAD_BYTES)
+        if head.startswith(SQLITE_MAGIC):
             return "sqlite"
+        if _results_head(head.decode("utf-8", errors="replace").lstrip()):
+            return "results"    # whatever its size: a shift's export passes 5 MB
         if path.stat().st_size > PARSE_LIMIT_BYTES:
             return "data"
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError):
         return "unreadable"
     start = text.lstrip()
-    if start.startswith(RESULTS_CSV_HEAD) or start.startswith("["):
-        return "results"    # a results export: CSV with its header, or a JSON list
+    if start.rstrip() == "[]":
+        return "results"    # a JSON export of a vehicle with no rundown and no bolt
     if start.startswith("{"):
         return "json"
     if start.startswith(("<?xml", "<svg")):
@@ -72,6 +76,14 @@ def kind_of(path: Path) -> str | None:
     if kind is not None:
         return kind
     return "hsv" if keys == {"hsv"} else "yaml"
+
+
+def _results_head(start: str) -> bool:
+    """Whether a file's first bytes are a results export's: its CSV header, or a JSON
+    list whose first object carries a VIN (``"vin"``, the export's first key)."""
+    if start.startswith(RESULTS_CSV_HEAD):
+        return True
+    return start.startswith("[") and start[1:].lstrip().startswith('{"vin":')
 
 
 def refuse_to_replace(path: Path, writing: str, may_replace: tuple[str, ...]) -> None:

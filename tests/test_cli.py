@@ -443,3 +443,32 @@ def test_the_results_csv_head_the_out_rule_knows_is_the_exports():
     from stationd.web.results import CSV_FIELDS
 
     assert ",".join(CSV_FIELDS).startswith(RESULTS_CSV_HEAD)
+
+
+def test_a_results_export_larger_than_a_settings_file_is_still_one(tmp_path):
+    """A shift's results pass the 5 MB up to which files are parsed: the export's own head
+    (CSV header, or a JSON list of rundowns) tells it at any size, so exporting again over
+    it works; another large file is still refused as data, a large database as one."""
+    import json
+
+    from stationd.outfile import PARSE_LIMIT_BYTES, SQLITE_MAGIC, kind_of
+    from stationd.web.results import CSV_FIELDS, rundowns_csv
+
+    row = {**dict.fromkeys(CSV_FIELDS, ""), "vin": "V1", "bolt": "B01", "images": []}
+    n = PARSE_LIMIT_BYTES // 20 + 1
+    big_csv = tmp_path / "r.csv"
+    big_csv.write_text(rundowns_csv([row] * n))
+    big_json = tmp_path / "r.json"
+    big_json.write_text(json.dumps([row] * (n // 4)))
+    assert big_csv.stat().st_size > PARSE_LIMIT_BYTES < big_json.stat().st_size
+    assert kind_of(big_csv) == kind_of(big_json) == "results"
+    other = tmp_path / "big.log"
+    other.write_text("[2026-11-26 12:00:00] ok\n" * n)   # a list-like start, not rundowns
+    small = tmp_path / "small.log"
+    small.write_text("[2026-11-26 12:00:00] ok\n")
+    empty = tmp_path / "empty.json"
+    empty.write_text("[]\n")
+    assert (kind_of(small), kind_of(empty)) == ("text", "results")
+    db = tmp_path / "big.db"
+    db.write_bytes(SQLITE_MAGIC + b"\0" * (PARSE_LIMIT_BYTES + 1))
+    assert (kind_of(other), kind_of(db)) == ("data", "sqlite")
