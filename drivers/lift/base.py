@@ -49,6 +49,19 @@ class LiftState:
         """True only when tightening may start: at height, still, no fault."""
         return self.at_working_height and not self.moving and not self.fault
 
+    @property
+    def why_not_ready(self) -> str:
+        """What the operator reads while tightening may not start (empty when ready): the
+        lift's own fault bit first, then moving (at the working height or not), then
+        not at the working height."""
+        if self.fault:
+            return "the lift PLC reports a fault"
+        if self.moving:
+            return "lift moving"
+        if not self.at_working_height:
+            return "lift not at working height"
+        return ""
+
 
 @dataclass(frozen=True)
 class RegisterMap:

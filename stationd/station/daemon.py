@@ -411,7 +411,8 @@ class Station:
         t0 = time.monotonic()
         s = await self._call(lift.read_state, 1.0)
         await self.feed(LiftRead(time.time(), bool(s.ready), bool(s.at_working_height),
-                                 int(s.model_code), s.vin))
+                                 int(s.model_code), s.vin,
+                                 s.why_not_ready or "lift not at working height"))
         period = float(getattr(self.cfg.lift, "poll_ms", 100.0)) / 1e3
         await asyncio.sleep(max(0.0, period - (time.monotonic() - t0)))
 

@@ -44,6 +44,18 @@ def test_ready_needs_height_stillness_and_no_fault():
     assert not state(at_working_height=False).ready
 
 
+def test_why_not_ready_says_which_of_the_three():
+    """The operator reads "lift moving" while it moves at height, not "not at working
+    height" (a newcomer saw that while the lift was settling at height)."""
+    assert state().why_not_ready == ""
+    assert state(moving=True).why_not_ready == "lift moving"
+    assert state(moving=True, at_working_height=False).why_not_ready == "lift moving"
+    assert state(at_working_height=False).why_not_ready == "lift not at working height"
+    assert state(fault=True, moving=True).why_not_ready == "the lift PLC reports a fault"
+    for kw in ({"moving": True}, {"fault": True}, {"at_working_height": False}, {}):
+        assert bool(state(**kw).why_not_ready) != state(**kw).ready
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_encode_decode_round_trip(seed):
     rng = random.Random(seed)
