@@ -5,6 +5,11 @@
 every ``WATCHDOG_USEC`` / 2) and that it is stopping (``STOPPING=1``).  An address starting
 with ``@`` is in the abstract namespace.  Outside systemd (no ``NOTIFY_SOCKET``) every call is
 a no-op, so the daemon runs the same from a terminal.
+
+Sends never block: a manager that does not read (busy, or a harness that stopped reading)
+fills the socket's queue (10 datagrams by default, ``net.unix.max_dgram_qlen``), and a
+blocking send then stopped the daemon's event loop: no lift reads, no stop on SIGTERM.
+A datagram that would block is dropped and counted; the next status says the state again.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ class Notifier:
             self._address = addr
         self.watchdog_s = _watchdog_interval(env)
         self._sock: socket.socket | None = None
+        self.dropped = 0   # datagrams not sent because the manager's queue was full
 
     @property
     def enabled(self) -> bool:
@@ -34,14 +40,18 @@ class Notifier:
 
     def send(self, **fields: str | int) -> bool:
         """Send ``KEY=value`` lines (keys upper-cased); False when there is no manager or the
-        datagram could not be sent (never raises: notifications must not crash the daemon)."""
+        datagram could not be sent, at once (never blocks, never raises: notifications must
+        not stop or crash the daemon)."""
         if self._address is None:
             return False
         msg = "\n".join(f"{k.upper()}={v}" for k, v in fields.items()).encode()
         try:
             if self._sock is None:
                 self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM | socket.SOCK_CLOEXEC)
-            self._sock.sendto(msg, self._address)
+            self._sock.sendto(msg, socket.MSG_DONTWAIT, self._address)
+        except BlockingIOError:
+            self.dropped += 1
+            return False
         except OSError:
             return False
         return True

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.station.notify import NotifyManager
+
 SIM = Path(__file__).resolve().parents[2] / "config" / "sim"
 
 
@@ -22,27 +24,15 @@ def _ended(p: subprocess.Popen[str]) -> str:
     return p.stderr.read() if p.stderr else ""
 
 
-def _recv_until(sock, needle, timeout):
-    end = time.monotonic() + timeout
-    seen = []
-    while time.monotonic() < end:
-        sock.settimeout(max(0.1, end - time.monotonic()))
-        try:
-            msg = sock.recv(4096).decode()
-        except TimeoutError:
-            break
-        seen.append(msg)
-        if needle in msg:
-            return seen
-    raise AssertionError(f"{needle!r} not received; got {seen}")
+def _recv_until(manager: NotifyManager, needle: str, timeout: float) -> list[str]:
+    return manager.until(needle, timeout)
 
 
 @pytest.mark.timeout(180)
 def test_ready_reload_refused_and_clean_stop(tmp_path):
     for f in SIM.iterdir():
         shutil.copy(f, tmp_path)
-    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    sock.bind(str(tmp_path / "notify"))
+    sock = NotifyManager(tmp_path / "notify")
     env = {**os.environ, "NOTIFY_SOCKET": str(tmp_path / "notify")}
     p = subprocess.Popen([sys.executable, "-m", "stationd", "run", "--config", "station.yaml"],
                          cwd=tmp_path, env=env, stderr=subprocess.PIPE, text=True)
@@ -81,8 +71,7 @@ def test_a_second_daemon_on_the_same_database_exits_2_naming_the_first(tmp_path)
         shutil.copy(f, tmp_path)
     station = tmp_path / "station.yaml"
     station.write_text(station.read_text().replace("http: {listen: '127.0.0.1:8080'}", ""))
-    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    sock.bind(str(tmp_path / "notify"))
+    sock = NotifyManager(tmp_path / "notify")
     env = {**os.environ, "NOTIFY_SOCKET": str(tmp_path / "notify")}
     first = subprocess.Popen([sys.executable, "-m", "stationd", "run", "--config",
                               "station.yaml"], cwd=tmp_path, env=env,
@@ -186,8 +175,7 @@ def test_a_database_unusable_at_start_is_served_as_a_fault_then_the_results_come
     assert f"127.0.0.1:{port}" in station.read_text()
     db = tmp_path / "stationd-sim.db"
     db.write_text("this is not a database\n" * 100)
-    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    sock.bind(str(tmp_path / "notify"))
+    sock = NotifyManager(tmp_path / "notify")
     # a 2 s watchdog: systemd would kill a daemon that stops pinging while it waits for its
     # database (second newcomer trial: no WATCHDOG=1 at all meanwhile, killed every ~12 s)
     env = {**os.environ, "NOTIFY_SOCKET": str(tmp_path / "notify"), "WATCHDOG_USEC": "2000000"}
@@ -244,8 +232,7 @@ def test_a_reload_onto_another_database_moves_the_lock_or_is_refused(tmp_path):
             shutil.copy(f, other)
     first_db = f"database: {{url: 'sqlite:///{tmp_path}/stationd-sim.db'}}"
     (other / "station.yaml").write_text(text.replace(old_db, first_db))
-    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    sock.bind(str(tmp_path / "notify"))
+    sock = NotifyManager(tmp_path / "notify")
     env = {**os.environ, "NOTIFY_SOCKET": str(tmp_path / "notify")}
     quiet = {k: v for k, v in os.environ.items() if k != "NOTIFY_SOCKET"}
 

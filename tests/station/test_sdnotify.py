@@ -51,3 +51,27 @@ def test_watchdog_for_another_pid_or_garbage_is_ignored(tmp_path):
 def test_a_vanished_manager_does_not_raise(tmp_path):
     n = Notifier({"NOTIFY_SOCKET": str(tmp_path / "gone.sock")})
     assert n.ready() is False
+
+
+def test_a_manager_that_does_not_read_never_blocks_the_daemon(manager):
+    """A full queue (the manager busy, or stopped reading) drops datagrams at once instead
+    of blocking the event loop (it did: the daemon stopped reading its lift and ignored
+    SIGTERM); once the manager reads again, notifications arrive again."""
+    import time
+
+    sock, addr = manager
+    n = Notifier({"NOTIFY_SOCKET": addr})
+    t0 = time.monotonic()
+    sent = [n.status(f"state {k}") for k in range(200)]
+    assert time.monotonic() - t0 < 1.0
+    assert sent[0] and not sent[-1] and n.dropped == sent.count(False) > 0
+    got = []
+    sock.settimeout(0.2)
+    try:
+        while True:
+            got.append(sock.recv(4096))
+    except TimeoutError:
+        pass
+    assert got[0] == b"STATUS=state 0" and len(got) == sent.count(True)
+    assert n.status("tracking") and sock.recv(4096) == b"STATUS=tracking"
+    n.close()
