@@ -159,6 +159,8 @@ class Vehicle(Base):
     model_id: Mapped[int] = mapped_column(ForeignKey("vehicle_models.id"))
     started_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
     ended_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
+    #: the last time a closed vehicle was reopened for rework (None: never)
+    reopened_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
 
     model: Mapped[VehicleModel] = relationship()
 

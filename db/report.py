@@ -26,6 +26,12 @@ class VehicleInfo:
     model: str
     started_at: datetime
     ended_at: datetime | None
+    reopened_at: datetime | None = None   # the last reopening for rework
+
+    @property
+    def rework(self) -> bool:
+        """Reopened after it was closed: the bolts tightened now are rework."""
+        return self.reopened_at is not None
 
 
 @dataclass(frozen=True)
@@ -74,6 +80,7 @@ class VehicleReport:
     def summary(self) -> str:
         v = self.vehicle
         state = "closed" if v.ended_at is not None else "open"
+        state += ", reworked" if v.rework else ""
         text = f"{v.vin} ({v.model}, {state}): {len(self.ok)} ok"
         text += f", {len(self.nok)} NOK ({', '.join(self.nok)})" if self.nok else ", 0 NOK"
         text += f", {len(self.missing)} missing ({', '.join(self.missing)})" if self.missing \
@@ -83,7 +90,8 @@ class VehicleReport:
     def to_json(self) -> dict[str, Any]:
         v = self.vehicle
         return {"vin": v.vin, "model": v.model, "started_at": _iso(v.started_at),
-                "ended_at": _iso(v.ended_at), "complete": self.complete, "ok": self.ok,
+                "ended_at": _iso(v.ended_at), "reopened_at": _iso(v.reopened_at),
+                "complete": self.complete, "ok": self.ok,
                 "nok": self.nok, "missing": self.missing,
                 "bolts": [b.to_json() for b in self.bolts]}
 
@@ -115,5 +123,5 @@ def build_report(s: Session, v: Vehicle) -> VehicleReport:
         results.append(BoltResult(b.code, b.name, last.status, len(recs), last.torque_nm,
                                   last.angle_deg, last.tightening_id, last.recorded_at, version,
                                   b.removed_at is not None))
-    info = VehicleInfo(v.vin, v.model.name, v.started_at, v.ended_at)
+    info = VehicleInfo(v.vin, v.model.name, v.started_at, v.ended_at, v.reopened_at)
     return VehicleReport(info, tuple(results))

@@ -170,7 +170,8 @@ class Repository:
                         f"vehicle {vin} was closed at {v.ended_at:%Y-%m-%d %H:%M:%S} UTC; "
                         "reopen it to tighten again", vin=vin)
                 v.ended_at = None
-            return VehicleInfo(v.vin, model, v.started_at, v.ended_at)
+                v.reopened_at = utcnow()
+            return VehicleInfo(v.vin, model, v.started_at, v.ended_at, v.reopened_at)
 
     def record_tightening(
         self, vin: str, bolt: str, *, ok: bool, position_mm: Sequence[float],

@@ -661,7 +661,8 @@ class Station:
                 return VehicleRejected(time.time(), a.vin,
                                        f"unknown vehicle model code {a.model_code}")
             try:
-                await self._call(lambda: repo.start_vehicle(a.vin, model, reopen=a.reopen))
+                started = await self._call(
+                    lambda: repo.start_vehicle(a.vin, model, reopen=a.reopen))
             except DataError as exc:   # a closed VIN back, another model's VIN
                 return VehicleRejected(time.time(), a.vin, one_line(exc),
                                        closed=isinstance(exc, VehicleClosedError))
@@ -679,8 +680,11 @@ class Station:
         self.bus.publish(VehicleOpened(a.vin, model, tuple(
             BoltView(b.bolt_id, *_xyz(b.position), pset=b.parameters.pset, order=b.order,
                      batch=b.batch, status=status.get(b.bolt_id) or "pending")
-            for b in infos), rework=a.reopen))
-        return VehicleLoaded(time.time(), a.vin, model, specs, done, a.reopen)
+            for b in infos), rework=started.rework))
+        log.info("vehicle %s (%s) opened%s: %d bolts, %d done", a.vin, model,
+                 " for rework" if started.rework else "", len(infos), len(done))
+        # a rework resumed after a reload or restart is still one (the database keeps it)
+        return VehicleLoaded(time.time(), a.vin, model, specs, done, started.rework)
 
     async def _close_vehicle(self, vin: str) -> None:
         assert self.repo is not None  # noqa: S101

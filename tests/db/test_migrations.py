@@ -31,7 +31,7 @@ def test_migrated_schema_matches_the_models(tmp_path):
     assert set(inspect(engine).get_table_names()) == TABLES
     assert _diff(engine, Base.metadata) == []
     with engine.connect() as conn:
-        assert current_revision(conn) == head_revision() == "0001"
+        assert current_revision(conn) == head_revision() == "0002"
     engine.dispose()
 
 

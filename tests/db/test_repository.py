@@ -196,11 +196,17 @@ def test_vehicle_cycle_and_close_summary(repo, bolts_file):
         record(repo, "WVW1234567890", "B3")
     with pytest.raises(DataError, match="reopen"):
         repo.start_vehicle("WVW1234567890", "SEDAN")
-    repo.start_vehicle("WVW1234567890", "SEDAN", reopen=True)
+    assert not summary.vehicle.rework and summary.to_json()["reopened_at"] is None
+    reopened = repo.start_vehicle("WVW1234567890", "SEDAN", reopen=True)
+    assert reopened.rework and reopened.ended_at is None
+    # resumed (a daemon reloaded mid-rework): still a rework, as the database says
+    assert repo.start_vehicle("WVW1234567890", "SEDAN").reopened_at == reopened.reopened_at
     record(repo, "WVW1234567890", "B2")
     record(repo, "WVW1234567890", "B3")
     final = repo.close_vehicle("WVW1234567890")
     assert final.complete and final.to_json()["complete"] is True
+    assert final.vehicle.rework and final.to_json()["reopened_at"] is not None
+    assert "closed, reworked" in final.summary()
     b1 = final.to_json()["bolts"][0]
     assert b1["attempts"] == 2 and b1["tightening_id"] == 8 and b1["status"] == "ok"
     with repo.engine.connect() as c:

@@ -21,6 +21,7 @@ import pytest
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.station.demo import _sim_psets
+from tests.station.notify import NotifyManager
 from tests.station.test_run import _recv_until
 
 SIM = Path(__file__).resolve().parents[2] / "config" / "sim"
@@ -51,8 +52,7 @@ class Proc:
         (tmp / "station.yaml").write_text(edit(text) if edit else text)
         (tmp / "pose").write_text("")
         self.tmp = tmp
-        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-        self.sock.bind(str(tmp / "notify"))
+        self.sock = NotifyManager(tmp / "notify")
         self.log_path = tmp / "daemon.log"
         self._err = self.log_path.open("w")
         env = {**os.environ, "NOTIFY_SOCKET": str(tmp / "notify"), "PYTHONUNBUFFERED": "1"}
@@ -65,11 +65,13 @@ class Proc:
     def log(self) -> str:
         return self.log_path.read_text()
 
-    def wait_log(self, needle: str, timeout: float = 90) -> None:
+    def wait_log(self, needle: str, timeout: float = 90, count: int = 1) -> None:
         end = time.monotonic() + timeout
-        while time.monotonic() < end and needle not in self.log() and self.p.poll() is None:
+        while (time.monotonic() < end and self.log().count(needle) < count
+               and self.p.poll() is None):
             time.sleep(0.1)
-        assert needle in self.log(), f"{needle!r} not in the journal: {self.log()[-3000:]}"
+        assert self.log().count(needle) >= count, \
+            f"{needle!r} not {count} time(s) in the journal: {self.log()[-3000:]}"
 
     def stop(self) -> int:
         self.p.send_signal(signal.SIGTERM)
@@ -110,6 +112,10 @@ def test_devices_down_at_boot_are_faults_then_it_recovers_and_a_closed_vin_is_a_
         d.wait_log("VIN REWORKVIN00000001 already closed: reopened as a rework")
         assert d.log().count("tracking: tracking the wrench") >= 2 or \
             d.wait_log("tracking: tracking the wrench") is None
+        d.wait_log("vehicle REWORKVIN00000001 (SIM-1) opened for rework")
+        d.p.send_signal(signal.SIGHUP)          # reloaded mid-rework: still a rework
+        d.wait_log("configuration reloaded")
+        d.wait_log("vehicle REWORKVIN00000001 (SIM-1) opened for rework", count=2)
         assert d.p.poll() is None
         assert d.stop() == 0
     finally:

@@ -273,6 +273,13 @@ def test_results_screens_and_csv_download(live_server, page, shots, tmp_path):
         assert page.js(crops_shown) is True
         assert page.js("return [...document.querySelectorAll('td.crops a')]"
                        ".map(a => a.getAttribute('href'))") == ["/images/img/B2-left.jpg"]
+        assert "reworked" not in (page.text("#title") or "")
+        repo.close_vehicle(VIN)                 # closed, then back for rework
+        repo.start_vehicle(VIN, "SEDAN", reopen=True)
+        page.get(srv.url + f"vehicles/{VIN}")
+        page.wait(lambda p: p.text("#title") == f"{VIN} (SEDAN, reworked)", what="reworked")
+        page.get(srv.url + "vehicles")
+        page.wait(lambda p: "open, reworked" in (p.text(row) or ""), what="reworked in the list")
     finally:
         repo.close()
     empty = Repository.open(f"sqlite:///{tmp_path / 'empty.db'}")

@@ -36,7 +36,7 @@ async function listVehicles() {
       a.textContent = v.vin;
       cell(tr, "").appendChild(a);
       cell(tr, v.model);
-      cell(tr, v.status, "status-" + v.status);
+      cell(tr, v.status + (v.reopened_at ? ", reworked" : ""), "status-" + v.status);
       cell(tr, v.ok.length);
       cell(tr, v.nok.length + (v.nok.length ? " (" + v.nok.join(", ") + ")" : ""), v.nok.length ? "status-NOK" : "");
       cell(tr, v.missing.length);
@@ -55,7 +55,7 @@ async function showVehicle(vin) {
     q("#json").href = base + "/export.json";
     q("#exports").hidden = false;
     q("#rundowns").hidden = false;
-    q("#title").textContent = `${v.vin} (${v.model})`;
+    q("#title").textContent = `${v.vin} (${v.model}${v.reopened_at ? ", reworked" : ""})`;
     q("#summary").textContent = `${v.ok.length} OK, ${v.nok.length} NOK, ${v.missing.length} missing` +
       (v.complete ? ": complete" : "");
     const tb = q("#rundowns tbody");
