@@ -225,6 +225,16 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return run_vision_bench(args)
 
 
+def _nice(text: str) -> int | str:
+    """``--browser-nice``: a niceness step (an integer), or ``idle`` (SCHED_IDLE)."""
+    if text == "idle":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: a number or idle") from None
+
+
 def cmd_bench_station(args: argparse.Namespace) -> int:
     from stationd.bench.station import run_station_bench
 
@@ -350,10 +360,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help="with --browsers: within each pass with the screens, hold the "
                     "clients (SIGSTOP) on every other bolt and compare the bolts with them "
                     "running against those with them held (the same machine, the same pass)")
-    bs.add_argument("--browser-nice", type=int, default=5, metavar="N",
+    bs.add_argument("--browser-nice", type=_nice, default=5, metavar="N|idle",
                     help="with --browsers: run Chromium N steps below the daemon's priority, "
                     "as on a station PC where the unit's Nice=-5 puts the daemon above a "
-                    "kiosk browser at 0 (default: %(default)s; 0: the same priority)")
+                    "kiosk browser at 0 (default: %(default)s; 0: the same priority); idle: "
+                    "under SCHED_IDLE, as a kiosk unit with CPUSchedulingPolicy=idle (it "
+                    "runs only on a core the daemon leaves free)")
     bs.set_defaults(func=cmd_bench_station)
     bk = bsub.add_parser("soak", help="the daemon through a long shift: outages, reworks, load")
     bk.add_argument("--bolts", type=int, default=100,

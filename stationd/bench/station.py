@@ -176,7 +176,7 @@ def run_station_bench(args: argparse.Namespace) -> int:
                 serveds.append(_run_once(
                     replace(cfg, database_url=f"sqlite:///{tmp.name}/screens{k}.db"), world,
                     plan, browsers, bool(args.json), kind,
-                    int(getattr(args, "browser_nice", 0) or 0), paired, k))
+                    getattr(args, "browser_nice", 0) or 0, paired, k))
                 agains.append(_run_once(
                     replace(cfg, database_url=f"sqlite:///{tmp.name}/again{k}.db"), world,
                     plan, 0, bool(args.json)))
@@ -206,7 +206,7 @@ def run_station_bench(args: argparse.Namespace) -> int:
 
 
 def _run_once(cfg: StationConfig, world: World, plan: list[tuple[str, WrenchPose]],
-              browsers: int, quiet: bool, kind: str = "chromium", nice: int = 0,
+              browsers: int, quiet: bool, kind: str = "chromium", nice: int | str = 0,
               paired: bool = False, pass_index: int = 0) -> dict[str, Any]:
     """One pass of the plan through a freshly opened daemon; with ``browsers``, the screens
     are served from the daemon's loop (as ``http:`` in the station file does) and that many
@@ -312,7 +312,7 @@ def _split_held(latency: list[T], held_from: list[tuple[int, bool]]) -> tuple[li
 
 
 async def _connect(server: Any, n: int, info: dict[str, Any], quiet: bool,
-                   kind: str, nice: int = 0) -> ScreenClients:
+                   kind: str, nice: int | str = 0) -> ScreenClients:
     """Start the clients and wait until they are really served: each operator page holds
     its event stream and each cameras page has loaded frames; a Chromium that does not get
     there in 60 s is replaced by the SSE stand-ins (the output says which ran).  Then wait
@@ -527,7 +527,9 @@ def _print(s: dict[str, Any]) -> None:
                   f"{1e3 * sc['frames_encode_wall_s']:.0f} ms wall per pass "
                   f"({100.0 * sc['frames_encode_wall_s'] / w['wall_s']:.1f} % of the pass)")
         if sc["clients"] == "chromium":
-            print(f"  the browsers (nice {sc['browser_nice']}, settled {sc['settle_s']:.0f} s "
+            how = "SCHED_IDLE" if sc["browser_nice"] == "idle" else \
+                f"nice {sc['browser_nice']}"
+            print(f"  the browsers ({how}, settled {sc['settle_s']:.0f} s "
                   f"after connecting) used {sc['browser_cpu_pct_of_a_core']:.0f} % of a core "
                   f"during the pass, on the daemon's cores")
         else:

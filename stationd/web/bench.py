@@ -114,7 +114,8 @@ class ScreenClients:
     ("chromium" or "sse"), ``close()`` ends them.  Browser ``i`` shows ``/`` when ``i`` is
     even, ``/cameras`` when odd (two browsers: the operator's and the commissioning one)."""
 
-    def __init__(self, url: str, n: int, force_sse: bool = False, nice: int = 0) -> None:
+    def __init__(self, url: str, n: int, force_sse: bool = False,
+                 nice: int | str = 0) -> None:
         self.url, self.n = url, n
         self.nice = nice
         self.pages = ["" if i % 2 == 0 else "cameras" for i in range(n)]
@@ -133,7 +134,8 @@ class ScreenClients:
                 for page in self.pages:
                     d = tempfile.TemporaryDirectory(prefix="stationd-bench-browser-")
                     self._dirs.append(d)
-                    niced = ["nice", "-n", str(self.nice)] if self.nice else []
+                    niced = (["chrt", "--idle", "0"] if self.nice == "idle" else
+                             ["nice", "-n", str(self.nice)] if self.nice else [])
                     self._procs.append(subprocess.Popen(  # noqa: S603 - a fixed argv
                         [*niced, exe, "--headless", "--no-sandbox", "--disable-gpu",
                          "--disable-dev-shm-usage", "--no-first-run", "--disable-sync",

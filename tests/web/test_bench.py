@@ -45,3 +45,49 @@ def test_screen_clients_stand_ins_read_the_stream_and_load_the_frames_in_view(li
         assert 8 + 4 * (lists - 2) <= srv.server.requests[frame] <= 8 + 4 * (lists - 1)
     finally:
         clients.close()
+
+
+def test_screen_clients_under_sched_idle_run_every_browser_process_so(live_server):
+    """``bench station --browser-nice idle``: Chromium and every process it starts run under
+    SCHED_IDLE (policy 5 in /proc/PID/sched), as a kiosk unit with
+    CPUSchedulingPolicy=idle would run them."""
+    import os
+    import shutil
+    import time
+
+    import pytest
+
+    from stationd.web.bench import ScreenClients, tree_pids
+
+    if shutil.which("chromium") is None:
+        pytest.skip("chromium is not installed (.ci/bootstrap installs it as root)")
+    srv = live_server()
+    clients = ScreenClients(srv.url, 1, nice="idle")
+    try:
+        assert clients.start() == "chromium"
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and srv.server.clients < 1:
+            time.sleep(0.1)
+        assert srv.server.clients == 1            # the page is served and streaming
+        pids = tree_pids([p.pid for p in clients._procs])
+        policies = {}
+        for pid in pids:
+            try:
+                policies[pid] = os.sched_getscheduler(pid)
+            except OSError:
+                continue                          # a process that has just ended
+        assert len(policies) >= 2 and set(policies.values()) == {os.SCHED_IDLE}, policies
+    finally:
+        clients.close()
+
+
+def test_browser_nice_takes_a_number_or_idle(capsys):
+    import pytest
+
+    from stationd.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "station", "--browsers", "1", "--browser-nice", "fast"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "'fast': a number or idle" in err
+    assert "Traceback" not in err
