@@ -386,7 +386,9 @@ class Station:
                 for t in tasks:
                     t.cancel()
                 await asyncio.gather(*tasks, return_exceptions=True)
-        self.notifier.stopping("stopping")
+        # no STOPPING=1 here: a reload ends this station too, and STOPPING=1 tells systemd
+        # the service is going down (it would kill it at TimeoutStopSec); the serve loop says
+        # RELOADING=1 or STOPPING=1
 
     async def _call(self, fn: Any, *args: Any) -> Any:
         return await asyncio.get_running_loop().run_in_executor(self._pool, fn, *args)
@@ -673,7 +675,9 @@ class Station:
             self.keepers[DATABASE].lost(DeviceError(one_line(exc)))
             return DeviceFault(time.time(), DATABASE, "down", one_line(exc))
         self.bolts = {b.bolt_id: b for b in infos}
-        status = {b.bolt_id: b.status for b in report.bolts}
+        # the report's "missing" is "no rundown yet": on an open vehicle the bolt is to do
+        # (the screens said "missing" for every bolt of a vehicle just loaded)
+        status = {b.bolt_id: b.status for b in report.bolts if b.status != "missing"}
         done = frozenset(k for k, s in status.items() if s == "ok")
         specs = {b.bolt_id: BoltSpec(_xyz(b.position), b.parameters.pset, b.order, b.batch)
                  for b in infos}

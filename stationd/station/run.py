@@ -205,6 +205,8 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
     loop = asyncio.get_running_loop()
     while True:
         await screens.follow(cfg)
+        # the screens forget the last configuration's device reports (a reload)
+        bus.publish(StateChanged("starting", "opening the devices"))
         station = Station(cfg, notifier=notifier, bus=bus, frames=screens.frames)
         if not await _open(station, notifier, stop):
             await loop.run_in_executor(None, station.close)
@@ -231,6 +233,9 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
                     log.error("reload refused, keeping the running configuration: %s",
                               one_line(exc))
                     notifier.status(f"reload refused: {one_line(exc)}")
+        if new is not None and not stop.is_set():
+            # systemd: reloading until the new station's READY=1 (never STOPPING=1 here)
+            notifier.reloading("reloading: closing the devices")
         inner.set()
         try:
             await task

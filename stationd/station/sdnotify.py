@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 import socket
+import time
 from collections.abc import Mapping
 
 
@@ -64,6 +65,13 @@ class Notifier:
 
     def watchdog(self) -> bool:
         return self.send(watchdog=1)
+
+    def reloading(self, status: str = "") -> bool:
+        """A reload begins (READY=1 ends it); the monotonic time is what systemd 253+ asks
+        for with it, harmless before."""
+        usec = time.clock_gettime_ns(time.CLOCK_MONOTONIC) // 1000
+        return self.send(reloading=1, monotonic_usec=usec,
+                         **({"status": status} if status else {}))
 
     def stopping(self, status: str = "") -> bool:
         return self.send(stopping=1, **({"status": status} if status else {}))

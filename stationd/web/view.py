@@ -104,6 +104,10 @@ class View:
         """Fold one event in."""
         if isinstance(e, StateChanged):
             self.state, self.reason = e.state, e.reason
+            if e.state == "starting":
+                # a station (re)starting on its configuration: the last one's device
+                # reports are not about these devices (a reload kept a fixed wrench "down")
+                self.devices, self.opened = {}, False
             if e.state != "starting" and self.devices.get(DATABASE, {}).get("ok", True):
                 self.opened = True
             if e.state not in TRACKING_STATES:

@@ -45,7 +45,12 @@ def test_ready_reload_refused_and_clean_stop(tmp_path):
         assert p.poll() is None  # still running on the old configuration
         shutil.copy(SIM / "station.yaml", tmp_path / "station.yaml")  # a valid one again
         p.send_signal(signal.SIGHUP)
-        _recv_until(sock, "READY=1", 90)  # the station came back up on the new file
+        # a reload is RELOADING=1 then READY=1, never STOPPING=1 (systemd would stop the
+        # unit and kill the daemon at TimeoutStopSec; a newcomer read it in systemd's source)
+        got = _recv_until(sock, "READY=1", 90)   # the station came back up on the new file
+        reloading = [m for m in got if "RELOADING=1" in m]
+        assert len(reloading) == 1 and "MONOTONIC_USEC=" in reloading[0], got
+        assert not any("STOPPING=1" in m for m in got), got
         p.send_signal(signal.SIGTERM)
         _recv_until(sock, "STOPPING=1", 60)
         assert p.wait(timeout=60) == 0

@@ -169,6 +169,12 @@ def test_configured_devices_are_listed_ok_once_started_until_one_reports():
     got = v.to_json()["devices"]
     assert got["pair1"]["ok"] is False and got["pair1"]["reported"] is True
     assert got["lift"]["ok"] and got["wrench"]["ok"]
+    # a reload: the station starts again on its (new) configuration; the last one's reports
+    # go (a newcomer's fixed wrench stayed "down ...?foo=1" after the reload that fixed it)
+    v.apply(StateChanged(state="starting", reason="opening the devices"))
+    assert not any(h["ok"] or h["reported"] for h in v.device_health().values())
+    v.apply(StateChanged(state="waiting for vehicle", reason="no vehicle"))
+    assert all(h["ok"] and not h["reported"] for h in v.device_health().values())
 
 
 def test_a_station_waiting_for_its_vehicle_says_so_not_the_last_refusal():
