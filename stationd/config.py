@@ -202,7 +202,8 @@ def device_url(node: YamlNode, kind: str, *, check: bool = False) -> str:
     """A device URL of ``kind`` (camera, lift, wrench).
 
     With ``check``, its form and scheme are checked against the driver's registry without
-    importing a backend or opening a device (options are the backend's, checked when it opens).
+    opening a device; Modbus and Open Protocol options too, with their ranges (a camera's
+    options are its backend's, checked when it opens: Aravis is imported only then).
     ``stationd config check`` and the daemon's loader (``station=True``: the first start and
     every reload) check; other readers of a station file (tools, benchmarks) do not need to.
     """
@@ -220,6 +221,13 @@ def device_url(node: YamlNode, kind: str, *, check: bool = False) -> str:
 
             try:
                 parse_modbus_url(url)
+            except UrlError as exc:
+                raise node.error(str(exc)) from None
+        elif kind == "wrench" and scheme.startswith("openprotocol"):  # built, not opened
+            from drivers.wrench import open_wrench
+
+            try:
+                open_wrench(url, connect=False).close()
             except UrlError as exc:
                 raise node.error(str(exc)) from None
     return url

@@ -25,6 +25,7 @@ PARSE_LIMIT_BYTES = 5 * 2**20
 #: the first bytes read to tell an SQLite database or a results export, at any size
 HEAD_BYTES = 4096
 NAMES = {
+    "folder": "a folder",
     "device": "not a regular file (a device, a pipe or a socket)",
     "sqlite": "an SQLite database",
     "station": "a station file",
@@ -44,6 +45,8 @@ def kind_of(path: Path) -> str | None:
     """The kind of what is at ``path`` (a key of :data:`NAMES`), None when nothing is."""
     if not path.exists() and not path.is_symlink():
         return None
+    if path.is_dir():
+        return "folder"
     if not path.is_file():
         return "device"
     try:
@@ -92,6 +95,8 @@ def refuse_to_replace(path: Path, writing: str, may_replace: tuple[str, ...]) ->
     kind = kind_of(path)
     if kind is None or kind in may_replace:
         return
+    if kind == "folder":
+        raise InputError(f"{path}: is a folder; --out takes a file name")
     raise InputError(f"{path}: is {NAMES[kind]}; writing {writing} would replace it (give "
                      "another --out)")
 

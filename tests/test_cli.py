@@ -407,6 +407,10 @@ def test_an_output_never_replaces_a_database_a_calibration_or_a_device(tmp_path,
          "is a text file"),
         (["marker", "--out", str(tmp_path / "station-copy.svg")], "is a bolt table"),
         (["marker", "--out", str(tmp_path / "link.svg")], "is a YAML settings file"),
+        # third trial: a folder was "not a regular file (a device, a pipe or a socket)"
+        (["db", "export", "--db", db, "--out", str(tmp_path)],
+         "is a folder; --out takes a file name"),
+        (["db", "export", "--db", db, "--out", ""], ".: is a folder"),
     ]:
         code, _, err = _usage_error(capsys, *argv)
         assert code == 2 and needle in err and err.count("\n") == 1, (argv, err)

@@ -272,6 +272,15 @@ def test_a_missing_to_vehicle_file_is_a_warning_not_an_error(sim_copy):
      "option unit='300' is not valid: a Modbus unit id is 0-247"),
     ("database: {url: 'sqlite:///stationd-sim.db'}", "database: {url: 'bogus://x'}",
      "database.url", "database URL 'bogus://x'"),
+    # a third newcomer trial: Open Protocol's options passed the check, the controller then
+    # stayed down ("unknown option(s) foo"), and a reload onto the file was accepted
+    ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'openprotocol://10.0.0.9?foo=1'}",
+     "wrench.url", "unknown option(s) foo (accepted: connect_timeout, keepalive, timeout"),
+    ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'openprotocol://10.0.0.9?timeout=-5'}",
+     "wrench.url", "timeout must be > 0"),
+    ("wrench: {url: 'sim://wrench'}",
+     "wrench: {url: 'openprotocol+serial:///dev/ttyUSB9?baud=abc'}", "wrench.url",
+     "option baud='abc' is not valid"),
 ])
 def test_device_urls_are_checked_without_opening_a_device(sim_copy, old, new, key, message):
     station = _edit(sim_copy / "station.yaml", old, new)
