@@ -42,6 +42,7 @@ BOLT_LABELS = {
 # more on a vehicle that left (the ones the daemon reports missing become "missing")
 LIVE_STATES = ("next", "selected", "tightening", "blocked")
 NAMES_SHOWN = 3   # bolts named in a closed vehicle's headline; the full list is its title
+REASON_SHOWN = 110  # characters of a fault's reason in the headline (whole in its title)
 LAST_RESULTS = 8
 # refusals the operator must act on (amber): the wrench is seen, something about it or the
 # sequence forbids sending; any other refusal while tracking means the wrench is simply not on
@@ -250,10 +251,14 @@ class View:
             return "done"
         return ""
 
-    def headline(self) -> str:
-        """The large words: why nothing is sent, else what to do."""
-        faults = [f"{d}: {h['reason'] or h['kind']}" for d, h in sorted(self.devices.items())
-                  if not h["ok"]]
+    def headline(self, full: bool = False) -> str:
+        """The large words: why nothing is sent, else what to do.  A fault's reason is cut
+        to :data:`REASON_SHOWN` characters (``full``: not; the hover title and the devices
+        panel have it whole): a pair's reason carries both cameras' URLs and errors, 400
+        characters, nine lines of large type over the bolt map on a panel PC."""
+        cut = (lambda s: s) if full else _shortened
+        faults = [f"{d}: {cut(h['reason'] or h['kind'])}"
+                  for d, h in sorted(self.devices.items()) if not h["ok"]]
         if self.alarm:
             return f"WRONG BOLT: {self.alarm}"
         if self.state == "fault" and len(faults) > 1:
@@ -262,9 +267,9 @@ class View:
             others = [d for d, h in sorted(self.devices.items()) if not h["ok"]][1:]
             return f"FAULT: {faults[0]} (and {', '.join(others)}: see Devices)"
         if self.state == "fault":
-            return "FAULT: " + (self.reason or "; ".join(faults) or "see the journal")
+            return "FAULT: " + (cut(self.reason) or "; ".join(faults) or "see the journal")
         if faults:
-            return "FAULT: " + "; ".join(faults)
+            return "FAULT: " + cut("; ".join(faults))
         if self.refused:
             if not refusal_needs_action(self.refused) and self._not_at_a_bolt():
                 return NOT_AT_A_BOLT
@@ -286,10 +291,11 @@ class View:
         return f"{c['vin']} closed: " + ("; ".join(x for x in parts if x) or "all bolts OK")
 
     def headline_title(self) -> str:
-        """The headline in full (its hover title): a closed vehicle's every name."""
+        """The headline in full (its hover title): a closed vehicle's every name, a fault's
+        whole reason."""
         if self.closed is not None and self.headline() == self._closed_line(NAMES_SHOWN):
             return self._closed_line(None)
-        return self.headline()
+        return self.headline(full=True)
 
     def _not_at_a_bolt(self) -> bool:
         """The wrench is out of view, or seen but near no bolt."""
@@ -356,3 +362,13 @@ def short_reason(reason: str) -> str:
     if len(set(tails)) == 1:
         return f"{tails[0]} (all {len(parts)} pairs)"
     return reason
+
+
+def _shortened(text: str, limit: int = REASON_SHOWN) -> str:
+    """``text`` cut at the last word boundary before ``limit`` characters, with an ellipsis
+    (unchanged when it fits)."""
+    if len(text) <= limit:
+        return text
+    head = text[:limit - 1]
+    space = head.rfind(" ")
+    return (head[:space] if space > limit // 2 else head).rstrip(" ,;:(") + "\u2026"

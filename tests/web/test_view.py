@@ -58,6 +58,29 @@ def test_device_fault_without_fault_state_still_headlines():
     assert v.headline() == "vehicle at height"
 
 
+def test_a_long_fault_reason_is_cut_in_the_headline_and_whole_in_its_title():
+    """A pair's reason carries both cameras' URLs and errors (a newcomer's: 400 characters,
+    nine lines of large type over the bolt map): the headline cuts it at a word with an
+    ellipsis; its hover title and the devices panel keep it whole."""
+    side = ("sim://pair1/{0}: no simulated world for pair 'pair1' (none registered); the "
+            "world must call drivers.camera.sim.register_world('pair1', source) first")
+    reason = ("stereo sim://pair1/left + sim://pair1/right: no frame from left and right "
+              f"within 1 s (left: {side.format('left')}; right: {side.format('right')})")
+    for events in ([StateChanged(state="fault", reason=f"pair1: {reason}")],
+                   [StateChanged(state="fault", reason=f"pair1: {reason}"),
+                    DeviceHealth(device="wrench", ok=False, kind="down", reason="refused")]):
+        v = fold([*opened(), DeviceHealth(device="pair1", ok=False, kind="down",
+                                          reason=reason), *events])
+        head, title = v.headline(), v.headline_title()
+        assert head.startswith("FAULT: pair1: stereo sim://pair1/left") and "\u2026" in head
+        assert len(head) <= 160 and not head.split("\u2026")[0].endswith(" ")
+        assert reason in title and v.to_json()["devices"]["pair1"]["reason"] == reason
+        assert ("wrench: see Devices" in head) == (len(events) == 2)
+    short = fold([*opened(), DeviceHealth(device="lift", ok=False, kind="timeout",
+                                          reason="no answer for 2.0 s")])
+    assert short.headline() == short.headline_title() == "FAULT: lift: no answer for 2.0 s"
+
+
 def test_refusal_blocks_its_bolt_and_is_the_headline_until_a_selection():
     v = fold([*opened(), Refused(reason="order rule: B1 first", bolt="B2")])
     assert states(v)["B2"] == "blocked" and v.bolts["B2"].reason == "order rule: B1 first"
