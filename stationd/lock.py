@@ -56,6 +56,11 @@ class StationLock:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
         except OSError as exc:
+            blocker = next((p for p in self.path.parents if p.exists() and not p.is_dir()),
+                           None)
+            if blocker is not None:   # mkdir says "File exists", which misleads
+                raise InputError(f"{self.path}: cannot create the station's lock: {blocker} "
+                                 "is a file, not a folder (check the database URL)") from None
             raise InputError(f"{self.path}: cannot create the station's lock: "
                              f"{exc.strerror or exc} (the daemon's user must be able to write "
                              f"{self.path.parent}: its database lives there)") from None

@@ -52,3 +52,13 @@ def test_a_killed_holder_leaves_no_stale_lock(tmp_path):
     lock = StationLock(path)
     lock.acquire()
     lock.release()
+
+
+def test_a_database_path_through_a_file_names_the_file(tmp_path):
+    """``sqlite:////x/notes.txt/s.db``: mkdir said "File exists" (a newcomer's trial); the
+    refusal names the file standing where a folder should be."""
+    from stationd.errors import InputError
+
+    (tmp_path / "notes.txt").write_text("not a folder\n")
+    with pytest.raises(InputError, match=r"notes\.txt is a file, not a folder"):
+        StationLock(tmp_path / "notes.txt" / "sub" / "s.db.lock").acquire()
