@@ -83,7 +83,9 @@ class Started(Input):
 
 @dataclass(frozen=True)
 class LiftRead(Input):
-    """One successful read of the lift PLC (the read itself proves the PLC is back)."""
+    """One successful read of the lift PLC (the read itself proves the PLC is back);
+    ``why`` is what the operator reads while it is not ready (the daemon passes
+    ``LiftState.why_not_ready``: moving, the PLC's fault bit, not at height)."""
 
     ready: bool
     at_height: bool

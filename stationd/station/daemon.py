@@ -31,6 +31,7 @@ import numpy as np
 
 from db.bolts import Parameters
 from db.errors import DataError, DbError, VehicleClosedError
+from db.report import MISSING
 from db.repository import BoltInfo, Repository
 from drivers.camera import open_camera
 from drivers.camera.pair import StereoGrabber, StereoSkewError
@@ -413,8 +414,7 @@ class Station:
         t0 = time.monotonic()
         s = await self._call(lift.read_state, 1.0)
         await self.feed(LiftRead(time.time(), bool(s.ready), bool(s.at_working_height),
-                                 int(s.model_code), s.vin,
-                                 s.why_not_ready or "lift not at working height"))
+                                 int(s.model_code), s.vin, s.why_not_ready))
         period = float(getattr(self.cfg.lift, "poll_ms", 100.0)) / 1e3
         await asyncio.sleep(max(0.0, period - (time.monotonic() - t0)))
 
@@ -677,7 +677,7 @@ class Station:
         self.bolts = {b.bolt_id: b for b in infos}
         # the report's "missing" is "no rundown yet": on an open vehicle the bolt is to do
         # (the screens said "missing" for every bolt of a vehicle just loaded)
-        status = {b.bolt_id: b.status for b in report.bolts if b.status != "missing"}
+        status = {b.bolt_id: b.status for b in report.bolts if b.status != MISSING}
         done = frozenset(k for k, s in status.items() if s == "ok")
         specs = {b.bolt_id: BoltSpec(_xyz(b.position), b.parameters.pset, b.order, b.batch)
                  for b in infos}
