@@ -197,3 +197,45 @@ class TighteningRecord(Base):
     vehicle: Mapped[Vehicle] = relationship()
     bolt: Mapped[Bolt] = relationship()
     parameters: Mapped[ProcessParameters] = relationship()
+
+
+class ToolEnable(Base):
+    """The tool enabled for a bolt: what the station owes until that bolt's result is recorded.
+
+    Written before the tool is enabled, so that a reload or a restart (kill -9 included) knows
+    which bolt a late result belongs to; ``off_at`` is when the tool went off (None: the
+    station stopped with it on); ``settled_at`` when its result was recorded.  Kept as the trail
+    of every enable.
+    """
+
+    __tablename__ = "tool_enables"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    vin: Mapped[str] = mapped_column(String(32))
+    bolt: Mapped[str] = mapped_column(String(32))   # the bolt's code
+    pset: Mapped[int | None]
+    parameters_id: Mapped[int | None] = mapped_column(ForeignKey("process_parameters.id"))
+    selection: Mapped[dict[str, Any]] = mapped_column(JSON)  # where the wrench was, when
+    enabled_at: Mapped[datetime] = mapped_column(UtcDateTime)
+    off_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
+    settled_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
+
+
+class UnattributedResult(Base):
+    """A controller result no bolt owns (no tool enable it belongs to): stored before it is
+    acknowledged, never only logged, so that quality can see every tightening made."""
+
+    __tablename__ = "unattributed_results"
+    __table_args__ = (CheckConstraint("status IN ('ok', 'nok')", name="status"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    vin: Mapped[str | None] = mapped_column(String(32))   # the vehicle at height, if any
+    controller_vin: Mapped[str | None] = mapped_column(String(32))  # as the result carries it
+    tightening_id: Mapped[int | None]
+    pset: Mapped[int | None]
+    status: Mapped[str] = mapped_column(String(3))
+    torque_nm: Mapped[float | None]
+    angle_deg: Mapped[float | None]
+    result_at: Mapped[datetime | None] = mapped_column(UtcDateTime)   # controller's clock
+    recorded_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
+    reason: Mapped[str] = mapped_column(String(200))

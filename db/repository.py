@@ -26,7 +26,16 @@ from db.engine import DEFAULT_URL, make_engine, writer
 from db.errors import DatabaseError, DataError, NotFoundError, VehicleClosedError
 from db.importer import ImportReport, current_version, import_table, parameters_of, read_table
 from db.migrate import current_revision, head_revision, upgrade
-from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel, utcnow
+from db.models import (
+    Bolt,
+    ProcessParameters,
+    TighteningRecord,
+    ToolEnable,
+    UnattributedResult,
+    Vehicle,
+    VehicleModel,
+    utcnow,
+)
 from db.report import VehicleInfo, VehicleReport, build_report
 
 EXPORT_HEADER = ("stationd bolt table, exported from the process-parameter database.\n"
@@ -34,7 +43,7 @@ EXPORT_HEADER = ("stationd bolt table, exported from the process-parameter datab
 VIN_MAX = 32
 
 
-__all__ = ["BoltInfo", "DataError", "DatabaseError", "NotFoundError", "Repository",
+__all__ = ["BoltInfo", "DataError", "DatabaseError", "NotFoundError", "OwedEnable", "Repository",
            "VehicleClosedError"]
 
 
@@ -51,6 +60,20 @@ class BoltInfo:
     version: int
     order: int | None
     batch: str | None
+
+
+@dataclass(frozen=True)
+class OwedEnable:
+    """The last tool enable whose result is not recorded (what a station owes the next)."""
+
+    id: int
+    vin: str
+    bolt: str
+    pset: int | None
+    parameters_id: int | None
+    selection: dict[str, Any]
+    enabled_at: datetime
+    off_at: datetime | None
 
 
 class Repository:
@@ -180,6 +203,7 @@ class Repository:
         params_sent: Mapping[str, Any] | None = None, acknowledged: bool = True,
         tightening_id: int | None = None, sent_at: datetime | None = None,
         result_at: datetime | None = None, images: Sequence[str] = (),
+        enable_id: int | None = None,
     ) -> int:
         """Record one tightening of ``bolt`` on the open vehicle ``vin``; return its id.
 
@@ -187,7 +211,8 @@ class Repository:
         this vehicle (the controller resent a result) returns the existing record.
         ``parameters_id`` is the version that was sent (``BoltInfo.parameters_id``); without
         it, the bolt's current version.  ``params_sent`` defaults to that version's pset and
-        targets.
+        targets.  ``enable_id`` (:meth:`note_enable`) is settled in the same transaction: the
+        station owes that enable nothing more.
         """
         if len(position_mm) != 3:
             raise DataError("position_mm: expected x, y, z")
@@ -201,6 +226,7 @@ class Repository:
                     TighteningRecord.vehicle_id == v.id,
                     TighteningRecord.tightening_id == int(tightening_id)))
                 if known is not None:
+                    _settle(s, enable_id)
                     return known
             if v.ended_at is not None:
                 raise DataError(f"vehicle {vin} is closed: a tightening cannot be recorded")
@@ -225,8 +251,74 @@ class Repository:
                 sent_at=sent_at, result_at=result_at, recorded_at=utcnow(),
                 images=[str(i) for i in images])
             s.add(rec)
+            _settle(s, enable_id)
             s.flush()
             return rec.id
+
+    # -- what the station owes, results no bolt owns ----------------------------------------
+    def note_enable(self, vin: str, bolt: str, pset: int | None, parameters_id: int | None,
+                    selection: Mapping[str, Any], at: datetime) -> int:
+        """The tool is about to be enabled for ``bolt`` of ``vin``: noted (committed) first, so
+        that the next station (a reload, a restart) records a late result to that bolt."""
+        with self._session(write=True) as s:
+            row = ToolEnable(vin=vin, bolt=bolt, pset=pset, parameters_id=parameters_id,
+                             selection=dict(selection), enabled_at=at)
+            s.add(row)
+            s.flush()
+            return row.id
+
+    def note_tool_off(self, enable_id: int, at: datetime) -> None:
+        """The tool went off (the first time counts: the late-result window starts there)."""
+        with self._session(write=True) as s:
+            row = s.get(ToolEnable, enable_id)
+            if row is not None and row.off_at is None:
+                row.off_at = at
+
+    def owed_enable(self) -> OwedEnable | None:
+        """The latest tool enable, if its result is not recorded (an older one was superseded
+        by it: the tool can only have been enabled for the latest)."""
+        with self._session(write=False) as s:
+            row = s.scalar(select(ToolEnable).order_by(ToolEnable.id.desc()).limit(1))
+            if row is None or row.settled_at is not None:
+                return None
+            return OwedEnable(row.id, row.vin, row.bolt, row.pset, row.parameters_id,
+                              dict(row.selection), row.enabled_at, row.off_at)
+
+    def record_unattributed(self, *, vin: str | None, controller_vin: str | None,
+                            tightening_id: int | None, pset: int | None, ok: bool,
+                            torque_nm: float | None, angle_deg: float | None,
+                            result_at: datetime | None, reason: str) -> int | None:
+        """Store a result no bolt owns; return its id, or None when this very result (same
+        tightening id, torque and angle) is already stored, attributed or not (a resent
+        copy)."""
+        torque, angle = _opt_float(torque_nm), _opt_float(angle_deg)
+        with self._session(write=True) as s:
+            if tightening_id is not None:
+                for model in (TighteningRecord, UnattributedResult):
+                    same = s.scalar(select(model.id).where(
+                        model.tightening_id == int(tightening_id), model.torque_nm == torque,
+                        model.angle_deg == angle).limit(1))
+                    if same is not None:
+                        return None
+            row = UnattributedResult(
+                vin=vin, controller_vin=controller_vin, tightening_id=tightening_id, pset=pset,
+                status="ok" if ok else "nok", torque_nm=torque, angle_deg=angle,
+                result_at=result_at, recorded_at=utcnow(), reason=reason[:200])
+            s.add(row)
+            s.flush()
+            return row.id
+
+    def unattributed(self, vin: str | None = None) -> list[dict[str, Any]]:
+        """The stored results no bolt owns (of ``vin``, or all), oldest first."""
+        with self._session(write=False) as s:
+            q = select(UnattributedResult).order_by(UnattributedResult.id)
+            if vin is not None:
+                q = q.where(UnattributedResult.vin == vin)
+            return [{"vin": r.vin, "controller_vin": r.controller_vin,
+                     "tightening_id": r.tightening_id, "pset": r.pset, "status": r.status,
+                     "torque_nm": r.torque_nm, "angle_deg": r.angle_deg,
+                     "result_at": r.result_at, "recorded_at": r.recorded_at,
+                     "reason": r.reason} for r in s.scalars(q)]
 
     def close_vehicle(self, vin: str) -> VehicleReport:
         """End the vehicle (once; closing again keeps the first end) and return its summary:
@@ -244,6 +336,13 @@ class Repository:
 
 
 # -- helpers ------------------------------------------------------------------------------
+def _settle(s: Session, enable_id: int | None) -> None:
+    if enable_id is not None:
+        row = s.get(ToolEnable, enable_id)
+        if row is not None and row.settled_at is None:
+            row.settled_at = utcnow()
+
+
 def _reason(exc: SQLAlchemyError) -> str:
     orig = getattr(exc, "orig", None)
     return str(orig if orig is not None else exc).splitlines()[0]

@@ -191,8 +191,12 @@ def _aware(t: datetime) -> datetime:
 def cmd_db_report(args: argparse.Namespace) -> int:
     with _open(_db_url(args), must_exist=True) as repo:
         report = repo.vehicle_report(args.vin)
+        loose = repo.unattributed(args.vin)   # results made at height that no bolt owns
     if args.json:
-        sys.stdout.write(strict_json(report.to_json()) + "\n")
+        out = report.to_json()
+        out["unattributed"] = [{**u, "result_at": _iso(u["result_at"]),
+                                "recorded_at": _iso(u["recorded_at"])} for u in loose]
+        sys.stdout.write(strict_json(out) + "\n")
     else:
         print(report.summary())
         for b in report.bolts:
@@ -201,7 +205,15 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                 f"{b.attempts} attempt(s)"
             retired = " (retired)" if b.retired else ""
             print(f"  {b.bolt_id:<12} {b.status.upper():<8} {result}  {b.name}{retired}")
+        for u in loose:
+            print(f"  unattributed: tightening {u['tightening_id']} pset {u['pset']} "
+                  f"{u['status'].upper()} {_num(u['torque_nm'])} N m, "
+                  f"{_num(u['angle_deg'])} deg ({u['reason']})")
     return EXIT_OK if report.complete else EXIT_INCOMPLETE
+
+
+def _iso(t: datetime | None) -> str | None:
+    return None if t is None else _aware(t).isoformat()
 
 
 def _num(v: float | None) -> str:

@@ -84,7 +84,8 @@ class SimController(OpenProtocolServer):
                  nok_rate: float = 0.05, name: str = "SimController", cell: int = 1,
                  channel: int = 1, silence_timeout: float = 15.0,
                  refusals: Mapping[int, int] | None = None,
-                 clock: Callable[[], datetime] | None = None) -> None:
+                 clock: Callable[[], datetime] | None = None,
+                 resend_unacked: bool = False) -> None:
         if not 0.0 <= nok_rate <= 1.0:
             raise ValueError(f"nok_rate must be in [0, 1], not {nok_rate}")
         if silence_timeout <= 0:
@@ -104,6 +105,11 @@ class SimController(OpenProtocolServer):
         self.acked_ids: list[int] = []           # the tightenings those 0062 acknowledged
         self._pset_changed = self._clock()
         self._batch_counter = self._tid = 0
+        # as some controllers do: results nobody acknowledged (MID 0062) are sent again to
+        # the next subscriber, oldest first
+        self.resend_unacked = resend_unacked
+        self._unacked: dict[int, bytes] = {}     # tightening id -> its MID 0061
+        self._rundown: int | None = None         # the pset of a rundown under way
 
     def __enter__(self) -> SimController:
         self.start()
@@ -117,6 +123,26 @@ class SimController(OpenProtocolServer):
         """The operator pulls the trigger: a tightening with the selected pset, reported to
         subscribed integrators; None (nothing happens) if the tool is disabled or no pset."""
         return self.call(self._tighten)
+
+    def start_rundown(self) -> bool:
+        """The trigger pulled, the rundown under way (its result comes with
+        :meth:`finish_rundown`, whatever happens to the tool meanwhile: a rundown started
+        is finished); False (nothing happens) if the tool is disabled or no pset."""
+        def do() -> bool:
+            if not self.tool_enabled or self.pset is None:
+                return False
+            self._rundown = self.pset
+            return True
+        return self.call(do)
+
+    def finish_rundown(self) -> SimTightening:
+        """The rundown started by :meth:`start_rundown` ends: its result is reported."""
+        def do() -> SimTightening:
+            if self._rundown is None:
+                raise RuntimeError("no rundown under way")
+            pset, self._rundown = self._rundown, None
+            return self._result(pset)
+        return self.call(do)
 
     def refuse_pset(self, pset: int, code: int) -> None:
         self.call(lambda: self._refuse_pset.__setitem__(pset, code))
@@ -182,10 +208,17 @@ class SimController(OpenProtocolServer):
             else:
                 s.subscribed = mid == 60
                 self._ok(s, mid)
+                if s.subscribed and self.resend_unacked:
+                    for tid, raw in self._unacked.items():
+                        if tid not in s.unacked:
+                            self.write(s, s.frame(raw))
+                            s.unacked.append(tid)
         elif mid == 62:   # 0062 names no result: it acknowledges the oldest one sent
             self.acks += 1
             if s.unacked:
-                self.acked_ids.append(s.unacked.pop(0))
+                tid = s.unacked.pop(0)
+                self.acked_ids.append(tid)
+                self._unacked.pop(tid, None)
         else:
             self._refuse(s, mid, 99)
 
@@ -205,7 +238,11 @@ class SimController(OpenProtocolServer):
     def _tighten(self) -> SimTightening | None:
         if not self.tool_enabled or self.pset is None:
             return None
-        p, rng = self.psets[self.pset], self._rng
+        return self._result(self.pset)
+
+    def _result(self, pset: int) -> SimTightening:
+        """A tightening with ``pset``, reported to every subscribed session."""
+        p, rng = self.psets[pset], self._rng
         t_lo, t_hi = round(p.torque_min_nm * 100), round(p.torque_max_nm * 100)
         a_lo, a_hi = round(p.angle_min_deg), round(p.angle_max_deg)
         torque = min(max(rng.gauss(p.torque_nm * 100, (t_hi - t_lo) / 12), t_lo), t_hi)
@@ -226,7 +263,7 @@ class SimController(OpenProtocolServer):
         now = self._clock()
         values = (  # MID 0061 revision 1: parameters 01-23 in order, fixed widths
             _fixed(self.cell, 4), _fixed(self.channel, 2), _text(self.name, 25),
-            _text(self.vin, VIN_WIDTH), "00", _fixed(self.pset, 3), _fixed(p.batch_size, 4),
+            _text(self.vin, VIN_WIDTH), "00", _fixed(pset, 3), _fixed(p.batch_size, 4),
             _fixed(self._batch_counter, 4), str(int(ok)), str(t_stat), str(a_stat),
             _fixed(t_lo, 6), _fixed(t_hi, 6), _fixed(p.torque_nm * 100, 6), _fixed(t_val, 6),
             _fixed(a_lo, 5), _fixed(a_hi, 5), _fixed(p.angle_deg, 5), _fixed(a_val, 5),
@@ -234,11 +271,13 @@ class SimController(OpenProtocolServer):
             "1" if self._batch_counter >= p.batch_size else "0", _fixed(self._tid, 10))
         raw = message(61, "".join(f"{tag:02d}{v}" for tag, v in enumerate(values, 1))
                       .encode("ascii"))
+        if self.resend_unacked:
+            self._unacked[self._tid] = raw
         for s in self.sessions():
             if s.started and s.subscribed:
                 self.write(s, s.frame(raw))
                 s.unacked.append(self._tid)
-        return SimTightening(self._tid, self.pset, ok, t_val / 100, float(a_val), t_stat,
+        return SimTightening(self._tid, pset, ok, t_val / 100, float(a_val), t_stat,
                              a_stat, self.vin, now, raw)
 
 

@@ -147,10 +147,14 @@ class DeviceBack(Input):
 
 @dataclass(frozen=True)
 class BoltSpec:
+    """A bolt of the loaded vehicle; ``parameters_id`` is the parameter version the database
+    gave (recorded with the bolt's result: the version actually sent)."""
+
     position: tuple[float, float, float]
     pset: int | None
     order: int | None = None
     batch: str | None = None
+    parameters_id: int | None = None
 
 
 @dataclass(frozen=True)
@@ -192,7 +196,9 @@ Event = (Started | LiftRead | LocalizedIn | ParamsAcked | ParamsRefused | Result
 # -- actions ------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Selection:
-    """What decided a bolt's selection, kept with its record."""
+    """What decided a bolt's selection, kept with its record: the vehicle and the parameter
+    version travel with it, so a result arriving after a reload or restart is recorded to the
+    vehicle and version the tool was enabled for."""
 
     bolt: str
     pset: int | None
@@ -202,6 +208,18 @@ class Selection:
     exposure_t: float
     decided_t: float
     evidence: Any = None
+    vin: str = ""
+    parameters_id: int | None = None
+
+
+@dataclass(frozen=True)
+class Owed:
+    """What a station owes the next one (a reload, a restart): the tool was enabled for
+    ``selection`` and went off at ``off_at`` (the new station's start when it stopped with the
+    tool on); a result of its pset within ``late_result_s`` of that belongs to that bolt."""
+
+    selection: Selection
+    off_at: float
 
 
 @dataclass(frozen=True)
@@ -212,7 +230,10 @@ class SendParams:
 
 @dataclass(frozen=True)
 class EnableTool:
+    """Enable the tool for ``selection`` (noted on disk first: what the station owes)."""
+
     bolt: str
+    selection: Selection
 
 
 @dataclass(frozen=True)
@@ -253,9 +274,19 @@ class Record:
 
 @dataclass(frozen=True)
 class Acknowledge:
-    """Tell the controller a result no bolt owns may be forgotten."""
+    """Tell the controller a result already stored may be forgotten (a resent copy)."""
 
     result: Any
+
+
+@dataclass(frozen=True)
+class StoreUnattributed:
+    """Store a result no bolt owns (``vin``: the vehicle loaded, if any), then acknowledge it:
+    a tightening the controller made is never acknowledged into nothing."""
+
+    result: Any
+    vin: str | None
+    reason: str
 
 
 @dataclass(frozen=True)
@@ -264,7 +295,7 @@ class Publish:
 
 
 Action = (SendParams | EnableTool | DisableTool | SendVin | LoadVehicle | CloseVehicle | Record
-          | Acknowledge | Publish)
+          | Acknowledge | StoreUnattributed | Publish)
 
 
 @dataclass
@@ -318,6 +349,11 @@ class StationCore:
     def selection(self) -> Selection | None:
         return self._selection
 
+    def resume(self, owed: Owed) -> None:
+        """Take over what the last station owed (before :class:`Started`): its result, within
+        the late-result window, is recorded to the bolt the tool was enabled for."""
+        self._enabled, self._off_at = owed.selection, owed.off_at
+
     def allowed(self) -> tuple[str, ...]:
         """The bolts the sequence allows now (not done, not skipped, not blocked)."""
         m = self.matcher
@@ -328,10 +364,12 @@ class StationCore:
 
     # -- handlers --------------------------------------------------------------------------
     def _on_Started(self, ev: Started) -> list[Action]:  # noqa: N802 - named after the event
-        if self.state is State.STARTING:
-            self._to(State.FAULT if self.faults else State.WAITING_VEHICLE,
-                     self._fault_reason() if self.faults else "waiting for the lift")
-        return []
+        if self.state is not State.STARTING:
+            return []
+        self._to(State.FAULT if self.faults else State.WAITING_VEHICLE,
+                 self._fault_reason() if self.faults else "waiting for the lift")
+        # the last station may have been killed with the tool on: off until a bolt is confirmed
+        return [DisableTool("station started: the tool stays off until a bolt is confirmed")]
 
     def _on_LiftRead(self, ev: LiftRead) -> list[Action]:  # noqa: N802
         acts: list[Action] = []
@@ -427,8 +465,10 @@ class StationCore:
             if self.state is State.BOLT_SELECTED and self._acked_at is not None \
                     and ev.exposure_t > self._acked_at and self.bolt is not None:
                 self._to(State.TIGHTENING, f"tightening bolt {self.bolt}")
-                self.tool_on, self._enabled, self._off_at = True, self._selection, None
-                acts.append(EnableTool(self.bolt))
+                sel = self._selection
+                assert sel is not None  # noqa: S101 - a bolt is selected
+                self.tool_on, self._enabled, self._off_at = True, sel, None
+                acts.append(EnableTool(self.bolt, sel))
             return acts
         self._away += 1
         why = m.reason or f"nearest {m.candidate}"
@@ -454,7 +494,7 @@ class StationCore:
             return []
         spec = self._specs[m.bolt]
         sel = Selection(m.bolt, spec.pset, ev.point_mm, ev.tilt_deg, float(m.distance_mm or 0.0),
-                        ev.exposure_t, ev.t, ev.evidence)
+                        ev.exposure_t, ev.t, ev.evidence, self.vin, spec.parameters_id)
         self.bolt, self._selection, self._acked_at, self._away = m.bolt, sel, None, 0
         self._last_refusal = None
         self.matcher.reset()
@@ -488,36 +528,42 @@ class StationCore:
         tid = int(r.tightening_id)
         en = self._enabled
         ours = en is not None and (en.pset is None or int(r.pset) == en.pset)
-        if self.vin is not None and tid in self._recorded:
+        if tid in self._recorded:
             return [Acknowledge(r)]   # sent again by the controller: stored once already
-        if ours and en is not None and self.vin is not None and (
+        if ours and en is not None and en.vin and (
                 self.tool_on or (self._off_at is not None
                                  and ev.t - self._off_at < self.late_result_s)):
-            late = not self.tool_on
-            acts: list[Action] = []
-            if self.tool_on:
-                acts += self._tool_off(ev.t, f"bolt {en.bolt} tightened")
-            acts.append(Record(self.vin, en.bolt, r, en, late))
-            if late:
-                acts.append(Publish(Notice(f"result for {en.bolt} outside a tightening: "
-                                           "recorded, not matched", t=ev.t)))
-            self._recorded.add(tid)
-            self._enabled = None
-            if self.matcher is not None:
-                if bool(r.ok):
-                    self.matcher.mark_done(en.bolt)
-                self.matcher.reset()     # a new selection: a new streak, from new frames
-            self._not_before = max(self._not_before, ev.t)
-            if self.bolt == en.bolt:
-                self.bolt, self._selection, self._acked_at, self._away = None, None, None, 0
-                if self.state in ON_A_BOLT:
-                    self._to(State.TRACKING,
-                             f"bolt {en.bolt} {'OK' if r.ok else 'NOK'}; tracking")
-            return acts
-        return [Acknowledge(r),
+            return self._attribute(ev, en)
+        why = f"result {tid} (pset {r.pset}) outside any tightening"
+        return [StoreUnattributed(r, self.vin, why),
                 Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
-                Publish(Notice(f"result {tid} (pset {r.pset}) outside any tightening: not "
-                               "attributable to a bolt, acknowledged", "warning", t=ev.t))]
+                Publish(Notice(f"{why}: not attributable to a bolt, stored unattributed",
+                               "warning", t=ev.t))]
+
+    def _attribute(self, ev: ResultIn, en: Selection) -> list[Action]:
+        """The result of the tightening the tool was enabled for: recorded to that bolt (of
+        the vehicle it was enabled on, also after a reload or restart)."""
+        r = ev.result
+        late = not self.tool_on
+        acts: list[Action] = []
+        if self.tool_on:
+            acts += self._tool_off(ev.t, f"bolt {en.bolt} tightened")
+        acts.append(Record(en.vin, en.bolt, r, en, late))
+        if late:
+            acts.append(Publish(Notice(f"result for {en.bolt} outside a tightening: "
+                                       "recorded, not matched", t=ev.t)))
+        self._recorded.add(int(r.tightening_id))
+        self._enabled = None
+        if self.matcher is not None and self.vin == en.vin:
+            if bool(r.ok):
+                self.matcher.mark_done(en.bolt)
+            self.matcher.reset()     # a new selection: a new streak, from new frames
+        self._not_before = max(self._not_before, ev.t)
+        if self.bolt == en.bolt:
+            self.bolt, self._selection, self._acked_at, self._away = None, None, None, 0
+            if self.state in ON_A_BOLT:
+                self._to(State.TRACKING, f"bolt {en.bolt} {'OK' if r.ok else 'NOK'}; tracking")
+        return acts
 
     def _on_DeviceFault(self, ev: DeviceFault) -> list[Action]:  # noqa: N802
         if ev.device == WRENCH:

@@ -61,16 +61,19 @@ from stationd.station.core import (
     LiftRead,
     LoadVehicle,
     LocalizedIn,
+    Owed,
     ParamsAcked,
     ParamsRefused,
     Publish,
     Record,
     ResultIn,
+    Selection,
     SendParams,
     SendVin,
     Started,
     State,
     StationCore,
+    StoreUnattributed,
     Tick,
     VehicleLoaded,
     VehicleRejected,
@@ -173,6 +176,7 @@ class Unsaved:
     images: list[str]
     result_at: datetime
     parameters_id: int | None = None
+    enable_id: int | None = None     # the tool enable this result settles
 
     def describe(self) -> str:
         """One journal line with every value of the record (the only copy while unsaved)."""
@@ -214,6 +218,13 @@ class Station:
     keepers: dict[str, DeviceKeeper[Any]] = field(init=False)  # device -> its one keeper
     _next_frames: dict[str, float] = field(default_factory=dict)  # pair -> next PairFrames
     _scan: ScanPlan = field(default_factory=ScanPlan)   # which pairs to localize per cycle
+    # the tool enable the station owes a result to (its selection and its row on disk)
+    _enable: tuple[Selection, int] | None = None
+    _enable_off: bool = False          # its tool-off time is on disk
+    # results taken from the controller and not yet through the core (a stop mid-way feeds
+    # them before the link closes), and the wait for the next one running in its thread
+    _received: list[Any] = field(default_factory=list)
+    _waiting: Any = None
 
     def __post_init__(self) -> None:
         self.core = StationCore(self.cfg.matching, self.cfg.matching.leave_frames)
@@ -284,10 +295,44 @@ class Station:
             log.info("bolt table %s: %d added, %d changed, %d unchanged, %d removed, "
                      "%d new parameter versions", self.cfg.bolts_path, len(r.added),
                      len(r.changed), len(r.unchanged), len(r.removed), len(r.new_versions))
+        self._resume()
         for device, keeper in self.keepers.items():
             fault = keeper.open_now()
             if fault is not None:
                 self._pending.append(DeviceFault(time.time(), device, *fault))
+
+    def carry(self, unsaved: list[Unsaved]) -> None:
+        """Results the last station (a reload) received and could not write: this one writes
+        them once its database takes them, then acknowledges them (before ``run``)."""
+        with self._unsaved_lock:
+            self._unsaved[:0] = unsaved
+
+    def unsaved(self) -> list[Unsaved]:
+        """The results this station could not write (after ``close``: for the next one)."""
+        with self._unsaved_lock:
+            return list(self._unsaved)
+
+    def _resume(self) -> None:
+        """The tool enable the last station (a reload, a restart, a kill) left without its
+        result: within the late-result window it is the core's again, so its result is
+        recorded to that bolt, not acknowledged into nothing."""
+        assert self.repo is not None  # noqa: S101 - opened first
+        owed = self.repo.owed_enable()
+        if owed is None:
+            return
+        now = time.time()
+        off = owed.off_at.timestamp() if owed.off_at is not None else now
+        if now - off >= self.core.late_result_s:
+            return
+        j = owed.selection
+        sel = Selection(owed.bolt, owed.pset, _xyz(j["point_mm"]), float(j["tilt_deg"]),
+                        float(j["distance_mm"]), float(j["exposure_t"]), float(j["decided_t"]),
+                        None, owed.vin, owed.parameters_id)
+        self.core.resume(Owed(sel, off))
+        self._enable, self._enable_off = (sel, owed.id), owed.off_at is not None
+        log.info("the tool was enabled for bolt %s of %s (pset %s) when the last station "
+                 "stopped: its result within %.0f s is recorded to it", owed.bolt, owed.vin,
+                 owed.pset, self.core.late_result_s - (now - off))
 
     def _database(self) -> Repository:
         """The database for its keeper: opened by ``open`` before any device."""
@@ -354,7 +399,7 @@ class Station:
             steps.append(("disable tool", self.wrench.disable_tool))
         steps += [(device, keeper.close) for device, keeper in self.keepers.items()]
         if self.repo is not None:
-            steps.append(("database", self.repo.close))
+            steps += [("noting the tool off", self._note_off), ("database", self.repo.close)]
         for what, fn in steps:
             try:
                 fn()
@@ -374,6 +419,9 @@ class Station:
         if self.keepers[WRENCH].up:   # the reconnect count the core compares from now on
             await self.feed(DeviceBack(time.time(), WRENCH, self.keepers[WRENCH].reconnects))
         self.notifier.ready(f"{self.core.state.value}: {self.core.reason}")
+        if self.unsaved():   # a reload's: written (then acknowledged) by the database keeper
+            self.keepers[DATABASE].lost(DeviceError("results received before the reload "
+                                                    "not stored yet"))
         keep = [self.keepers[LIFT].run(self._poll_lift), self.keepers[WRENCH].run(self._results),
                 *(k.run() for n, k in self.keepers.items() if n not in (LIFT, WRENCH))]
         # (the pairs' and the database's keepers have no ``use``: the vision loop and the
@@ -387,6 +435,7 @@ class Station:
                 for t in tasks:
                     t.cancel()
                 await asyncio.gather(*tasks, return_exceptions=True)
+                await self._drain_results()
         # no STOPPING=1 here: a reload ends this station too, and STOPPING=1 tells systemd
         # the service is going down (it would kill it at TimeoutStopSec); the serve loop says
         # RELOADING=1 or STOPPING=1
@@ -420,14 +469,45 @@ class Station:
 
     async def _results(self, wrench: Any) -> None:
         """The controller's results as it pushes them: one blocking wait on the driver's
-        queue, in a thread of its own; a link down raises to the wrench's keeper."""
-        result = await asyncio.get_running_loop().run_in_executor(
-            self._results_pool, lambda: wrench.wait_result(RESULT_WAIT_S, acknowledge=False))
+        queue, in a thread of its own; a link down raises to the wrench's keeper.  A result
+        is in ``_received`` until the core has it: a stop (a reload) never drops it."""
+        self._waiting = self._results_pool.submit(wrench.wait_result, RESULT_WAIT_S,
+                                                  acknowledge=False)
+        result = await asyncio.wrap_future(self._waiting)
+        self._waiting = None
+        if result is not None:
+            self._received.append(result)
         if WRENCH in self.core.faults and not self.keepers[WRENCH].losing:
             # a refusal is a fault until the controller answers
             await self.feed(DeviceBack(time.time(), WRENCH, self.keepers[WRENCH].reconnects))
         if result is not None:
             await self.feed(ResultIn(time.time(), result))
+            self._received.remove(result)
+
+    async def _drain_results(self) -> None:
+        """At a stop (the lock held, the tasks cancelled): the result the wait was taking and
+        those the driver still holds go through the core while the link is open: recorded
+        to their bolt and acknowledged (a reload lost a result that arrived as it began)."""
+        waiting, self._waiting = self._waiting, None
+        if waiting is not None and not waiting.cancelled():
+            try:
+                got = await asyncio.wrap_future(waiting)
+            except Exception:   # the link went down meanwhile: its keeper's, not ours
+                got = None
+            if got is not None:
+                self._received.append(got)
+        wrench = self.wrench
+        while wrench is not None and self.keepers[WRENCH].up:
+            try:
+                got = await self._call(lambda: wrench.wait_result(0.05, acknowledge=False))
+            except (DeviceError, ValueError):
+                break
+            if got is None:
+                break
+            self._received.append(got)
+        received, self._received = self._received, []
+        for r in received:
+            await self._apply(self.core.feed(ResultIn(time.time(), r)))
 
     async def _tick_loop(self, stop: asyncio.Event) -> None:
         """Time for the core.  (The systemd watchdog is ``run.keep_watchdog``'s: a feed may
@@ -568,12 +648,13 @@ class Station:
             if isinstance(a, SendParams):
                 return await self._send(a)
             if isinstance(a, EnableTool):
-                await self._call(self.wrench.enable_tool)
-                self.bus.publish(ToolEnabled(a.bolt))
-            elif isinstance(a, DisableTool):
+                return await self._enable_tool(a)
+            if isinstance(a, DisableTool):
                 self.bus.publish(ToolDisabled(a.reason, a.bolt))
                 if self.wrench is not None:
                     await self._call(self.wrench.disable_tool)
+                if self._enable is not None and not self._enable_off:
+                    await self._call(self._note_off)
             elif isinstance(a, SendVin):
                 return await self._send_vin(a.vin)
             elif isinstance(a, LoadVehicle):
@@ -584,6 +665,8 @@ class Station:
                 await self._record(a)
             elif isinstance(a, Acknowledge):
                 await self._acknowledge(a.result)
+            elif isinstance(a, StoreUnattributed):
+                await self._store_unattributed(a)
         except DeviceError as exc:   # the link is reset: its keeper reconnects and reports
             if not isinstance(exc, RefusedError):
                 self.keepers[WRENCH].lost(exc)
@@ -607,6 +690,58 @@ class Station:
                 log.info("%s: back", ev.device)
             else:
                 log.warning("fault: %s (%s): %s", ev.device, ev.kind, ev.reason)
+
+    async def _enable_tool(self, a: EnableTool) -> Event | None:
+        """What the station owes goes to disk first (the bolt, its pset and version, where
+        the wrench was), then the tool is enabled: a reload or a kill from here on still
+        records the result to this bolt.  A database that refuses it is a fault of the
+        database and the tool stays off."""
+        repo = self.repo
+        assert repo is not None  # noqa: S101 - opened in open()
+        sel = a.selection
+        try:
+            row = await self._call(lambda: repo.note_enable(
+                sel.vin, sel.bolt, sel.pset, sel.parameters_id, _selection_json(sel),
+                datetime.now(UTC)))
+        except STATION_FAULTS as exc:
+            self.keepers[DATABASE].lost(DeviceError(one_line(exc)))
+            return DeviceFault(time.time(), DATABASE, "down",
+                               f"the tool enable not stored: {one_line(exc)}")
+        self._enable, self._enable_off = (sel, row), False
+        await self._call(self.wrench.enable_tool)
+        self.bus.publish(ToolEnabled(a.bolt))
+        return None
+
+    def _note_off(self) -> None:
+        """The owed enable's tool-off time on disk (an executor thread, or ``close``): the
+        next station counts the late-result window from it.  Best effort: without it the
+        next station counts from its own start."""
+        if self._enable is None or self._enable_off or self.repo is None:
+            return
+        try:
+            self.repo.note_tool_off(self._enable[1], datetime.now(UTC))
+            self._enable_off = True
+        except STATION_FAULTS as exc:
+            log.warning("the tool-off time of bolt %s not stored: %s", self._enable[0].bolt,
+                        one_line(exc))
+
+    async def _store_unattributed(self, a: StoreUnattributed) -> None:
+        """A result no bolt owns: stored, then acknowledged.  A database that refuses it is a
+        fault; the result stays with the controller (not acknowledged)."""
+        repo, r = self.repo, a.result
+        assert repo is not None  # noqa: S101 - opened in open()
+        try:
+            await self._call(lambda: repo.record_unattributed(
+                vin=a.vin, controller_vin=str(r.vin or "").strip() or None,
+                tightening_id=int(r.tightening_id), pset=int(r.pset), ok=bool(r.ok),
+                torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
+                result_at=_aware(r.timestamp), reason=a.reason))
+        except STATION_FAULTS as exc:
+            log.error("tightening %d (unattributed) NOT stored, left with the controller: %s",
+                      r.tightening_id, one_line(exc))
+            self.keepers[DATABASE].lost(DeviceError(f"results not stored: {one_line(exc)}"))
+            return
+        await self._acknowledge(r)
 
     async def _send(self, a: SendParams) -> Event:
         if self.wrench is None:
@@ -679,8 +814,8 @@ class Station:
         # (the screens said "missing" for every bolt of a vehicle just loaded)
         status = {b.bolt_id: b.status for b in report.bolts if b.status != MISSING}
         done = frozenset(k for k, s in status.items() if s == "ok")
-        specs = {b.bolt_id: BoltSpec(_xyz(b.position), b.parameters.pset, b.order, b.batch)
-                 for b in infos}
+        specs = {b.bolt_id: BoltSpec(_xyz(b.position), b.parameters.pset, b.order, b.batch,
+                                     b.parameters_id) for b in infos}
         self.bus.publish(VehicleOpened(a.vin, model, tuple(
             BoltView(b.bolt_id, *_xyz(b.position), pset=b.parameters.pset, order=b.order,
                      batch=b.batch, status=status.get(b.bolt_id) or "pending")
@@ -721,8 +856,11 @@ class Station:
         loc = sel.evidence if sel is not None and isinstance(sel.evidence, Localization) \
             else None
         images = await self._call(self._save_images, a.vin, a.bolt, int(r.tightening_id), loc)
-        info = self.bolts.get(a.bolt)   # now: the vehicle may change before a late write
-        u = Unsaved(a, images, datetime.now(UTC), info.parameters_id if info else None)
+        enable = self._enable[1] if self._enable is not None and sel is not None \
+            and self._enable[0] is sel else None
+        if enable is not None:
+            self._enable = None   # settled with the record, in its transaction
+        u = Unsaved(a, images, datetime.now(UTC), sel.parameters_id if sel else None, enable)
         try:
             await self._call(self._write, u)
         except STATION_FAULTS as exc:
@@ -753,7 +891,7 @@ class Station:
             parameters_id=u.parameters_id,
             tightening_id=int(r.tightening_id),
             sent_at=datetime.fromtimestamp(sel.decided_t, UTC) if sel else None,
-            result_at=u.result_at, images=u.images)
+            result_at=u.result_at, images=u.images, enable_id=u.enable_id)
 
     def _check_db_file(self) -> None:
         """Raise DbError when the SQLite file the daemon opened is gone or was replaced (its
@@ -848,6 +986,19 @@ def _sqlite_file(url: str) -> tuple[Path, tuple[int, int]] | None:
 
 def _xyz(p: Any) -> tuple[float, float, float]:
     return float(p[0]), float(p[1]), float(p[2])
+
+
+def _selection_json(sel: Selection) -> dict[str, Any]:
+    """Where the wrench was when its bolt was selected, for the record of a result that comes
+    after a reload or restart (the evidence, the marker crops, stays in memory)."""
+    return {"point_mm": [float(v) for v in sel.point_mm], "tilt_deg": float(sel.tilt_deg),
+            "distance_mm": float(sel.distance_mm), "exposure_t": float(sel.exposure_t),
+            "decided_t": float(sel.decided_t)}
+
+
+def _aware(t: datetime | None) -> datetime | None:
+    """The controller's naive local timestamp as an aware one (the database keeps UTC)."""
+    return None if t is None else t.astimezone(UTC)
 
 
 def _reconnect(device: Any) -> None:

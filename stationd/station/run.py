@@ -203,11 +203,13 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
     ``locks`` holds the one-daemon-per-database lock: a reload onto another database moves
     it, or is refused when another daemon holds that one."""
     loop = asyncio.get_running_loop()
+    carried: list[Any] = []   # results the last station received and could not write
     while True:
         await screens.follow(cfg)
         # the screens forget the last configuration's device reports (a reload)
         bus.publish(StateChanged("starting", "opening the devices"))
         station = Station(cfg, notifier=notifier, bus=bus, frames=screens.frames)
+        station.carry(carried)
         if not await _open(station, notifier, stop):
             await loop.run_in_executor(None, station.close)
             notifier.stopping("stopping")
@@ -243,6 +245,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
             log.error("station loop failed: %s: %s", type(exc).__name__, one_line(exc))
             await asyncio.sleep(1.0)
         await loop.run_in_executor(None, station.close)
+        carried = station.unsaved()
         if stop.is_set():
             notifier.stopping("closing devices")
             log.info("stationd stopped")

@@ -116,12 +116,19 @@ def test_report_exit_codes(run, db):
     code, out, _ = run("db", "report", "VIN1", "--db", db, "--json")
     obj = json.loads(out)
     assert code == 1 and obj["missing"] == ["TB-C"] and obj["nok"] == ["SF-FR"]
+    assert obj["unattributed"] == []
     with Repository.open(db) as repo:
         record(repo, "VIN1", "SF-FR")
         record(repo, "VIN1", "TB-C")
+        repo.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=77, pset=4,
+                                 ok=False, torque_nm=9.5, angle_deg=12.0, result_at=None,
+                                 reason="result 77 (pset 4) outside any tightening")
         repo.close_vehicle("VIN1")
     code, out, _ = run("db", "report", "VIN1", "--db", db)
     assert code == 0 and "3 ok, 0 NOK, 0 missing" in out
+    assert "unattributed: tightening 77 pset 4 NOK 9.5 N m" in out
+    code, out, _ = run("db", "report", "VIN1", "--db", db, "--json")
+    assert [u["tightening_id"] for u in json.loads(out)["unattributed"]] == [77]
     code, out, err = run("db", "report", "NOPE", "--db", db)
     assert code == 2 and out == ""
     assert _one_line(err) == "stationd: error: vehicle 'NOPE' is not in the database"

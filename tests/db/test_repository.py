@@ -253,3 +253,44 @@ def test_a_result_sent_again_is_recorded_once(repo, bolts_file):
     assert record(repo, "VINDUP", "B1", tightening_id=77) == first
     assert record(repo, "VINDUP", "B1", tightening_id=78) != first  # a new tightening
     assert _counts(repo)["tightening_records"] == 2
+
+
+def test_the_owed_enable_is_the_latest_unsettled_one_and_its_record_settles_it(repo,
+                                                                               bolts_file):
+    """What a station owes the next (a reload, a restart): the latest tool enable until a
+    record settles it; an older one is superseded by a newer enable."""
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    assert repo.owed_enable() is None
+    at = datetime(2026, 11, 27, 8, 0, tzinfo=UTC)
+    pid = repo.bolts_for_model("SEDAN")[1].parameters_id
+    first = repo.note_enable("VIN1", "B1", 1, None, {"point_mm": [0, 0, 0]}, at)
+    second = repo.note_enable("VIN1", "B2", 21, pid, {"point_mm": [1, 2, 3]}, at)
+    owed = repo.owed_enable()
+    assert owed is not None and owed.id == second != first
+    assert (owed.bolt, owed.pset, owed.parameters_id, owed.off_at) == ("B2", 21, pid, None)
+    repo.note_tool_off(second, at.replace(second=5))
+    repo.note_tool_off(second, at.replace(second=9))       # the first time counts
+    owed = repo.owed_enable()
+    assert owed is not None and owed.off_at == at.replace(second=5)
+    record(repo, "VIN1", "B2", tightening_id=70060, parameters_id=pid, enable_id=second)
+    assert repo.owed_enable() is None
+
+
+def test_an_unattributed_result_is_stored_once_and_not_when_already_recorded(repo,
+                                                                              bolts_file):
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    kw = {"vin": "VIN1", "controller_vin": None, "pset": 1, "ok": False,
+          "result_at": None, "reason": "result 7 (pset 1) outside any tightening"}
+    assert repo.record_unattributed(tightening_id=7, torque_nm=12.5, angle_deg=30.0, **kw)
+    assert repo.record_unattributed(tightening_id=7, torque_nm=12.5, angle_deg=30.0,
+                                    **kw) is None                     # a resent copy
+    assert repo.record_unattributed(tightening_id=7, torque_nm=13.0, angle_deg=30.0, **kw)
+    record(repo, "VIN1", "B1", tightening_id=8, torque_nm=50.0, angle_deg=40.0)
+    assert repo.record_unattributed(tightening_id=8, torque_nm=50.0, angle_deg=40.0,
+                                    **kw) is None                     # stored to its bolt
+    rows = repo.unattributed("VIN1")
+    assert [(r["tightening_id"], r["torque_nm"], r["status"]) for r in rows] == \
+        [(7, 12.5, "nok"), (7, 13.0, "nok")]
+    assert repo.unattributed("OTHER") == []

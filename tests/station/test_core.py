@@ -26,16 +26,19 @@ from stationd.station.core import (
     LiftRead,
     LoadVehicle,
     LocalizedIn,
+    Owed,
     ParamsAcked,
     ParamsRefused,
     Publish,
     Record,
     ResultIn,
+    Selection,
     SendParams,
     SendVin,
     Started,
     State,
     StationCore,
+    StoreUnattributed,
     Tick,
     VehicleLoaded,
     VehicleRejected,
@@ -328,7 +331,7 @@ def test_a_late_result_goes_to_the_bolt_the_tool_was_on_within_the_window_only()
     assert next(a for a in acts if isinstance(a, Record)).late
     assert d.records == {8: "B1"}
     acts = d.feed(ResultIn(d.t + 1.5, result(9, 1)))   # a second one: nobody's
-    assert _kinds(acts) == ["Acknowledge"]
+    assert _kinds(acts) == ["StoreUnattributed"]
     assert any(isinstance(a, Publish) and isinstance(a.event, ResultUnattributed)
                for a in acts)
 
@@ -340,7 +343,7 @@ def test_a_result_after_the_window_is_not_attributed():
     _on(d, 1, 1)
     d.step(("lift", 0.1, False, True, "VIN1"))     # lift moving: tool off
     assert not d.tool
-    assert _kinds(d.feed(ResultIn(d.t + 6.0, result(3, 1)))) == ["Acknowledge"]
+    assert _kinds(d.feed(ResultIn(d.t + 6.0, result(3, 1)))) == ["StoreUnattributed"]
 
 
 def test_faults_are_per_device_and_the_station_recovers_when_all_are_back():
@@ -442,12 +445,56 @@ def test_nothing_is_sent_while_the_lift_is_not_ready_or_on_stale_frames():
     assert len(refusals) == 1 and "stale" in refusals[0]   # once per change, not per frame
 
 
-def test_unattributed_results_without_a_vehicle_are_acknowledged():
+def test_unattributed_results_without_a_vehicle_are_stored_then_acknowledged():
     d = Driver()
     d.feed(Started(d.t))
     acts = d.feed(ResultIn(d.t, result(1, 1)))
-    assert any(isinstance(a, Acknowledge) for a in acts)
-    assert not any(isinstance(a, Record) for a in acts)
+    store = [a for a in acts if isinstance(a, StoreUnattributed)]
+    assert len(store) == 1 and store[0].vin is None and "result 1 (pset 1)" in store[0].reason
+    assert not any(isinstance(a, Record | Acknowledge) for a in acts)
+
+
+def _owed(bolt: str = "B2", vin: str = "VIN1") -> Selection:
+    return Selection(bolt, BOLTS[bolt].pset, BOLTS[bolt].position, 1.0, 0.4, 990.0, 991.0,
+                     None, vin, 17)
+
+
+def test_a_resumed_enable_records_its_result_to_its_bolt_and_vehicle_before_any_load():
+    """A reload or restart: the new core takes over the enable the last one owed; its result
+    within the window is recorded to that bolt of that vehicle, with that parameter version,
+    even before the vehicle is loaded again."""
+    core = StationCore(PARAMS, leave_frames=2)
+    sel = _owed()
+    core.resume(Owed(sel, off_at=1000.0))
+    core.feed(Started(1000.1))
+    acts = core.feed(ResultIn(1001.0, result(70060, 2, ok=False)))
+    rec = [a for a in acts if isinstance(a, Record)]
+    assert len(rec) == 1 and rec[0].vin == "VIN1" and rec[0].bolt == "B2" and rec[0].late
+    assert rec[0].selection is sel and rec[0].selection.parameters_id == 17
+    # sent again by the controller: stored once, acknowledged
+    assert _kinds(core.feed(ResultIn(1001.2, result(70060, 2, ok=False)))) == ["Acknowledge"]
+
+
+def test_a_resumed_enable_does_not_take_another_pset_or_a_result_after_its_window():
+    core = StationCore(PARAMS, leave_frames=2)
+    core.resume(Owed(_owed(), off_at=1000.0))
+    core.feed(Started(1000.1))
+    assert _kinds(core.feed(ResultIn(1001.0, result(5, 1)))) == ["StoreUnattributed"]
+    core.feed(Tick(1005.5))
+    acts = core.feed(ResultIn(1005.6, result(6, 2)))
+    assert _kinds(acts) == ["StoreUnattributed"]
+
+
+def test_the_enable_carries_its_selection_with_vehicle_and_parameter_version():
+    bolts = {k: BoltSpec(b.position, b.pset, parameters_id=40 + i)
+             for i, (k, b) in enumerate(BOLTS.items())}
+    d = _ready()
+    d.core.feed(VehicleLoaded(d.t, "VIN1", "M", bolts))
+    _on(d, 2)
+    d.step(("ack", 0.01, True))
+    _on(d, 2, 1)
+    en = [a for _, acts in d.log for a in acts if isinstance(a, EnableTool)]
+    assert en and en[-1].selection.vin == "VIN1" and en[-1].selection.parameters_id == 41
 
 
 def test_a_refusal_is_published_per_bolt_and_reason_not_per_measurement():
