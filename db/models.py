@@ -239,3 +239,43 @@ class UnattributedResult(Base):
     result_at: Mapped[datetime | None] = mapped_column(UtcDateTime)   # controller's clock
     recorded_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
     reason: Mapped[str] = mapped_column(String(200))
+
+
+class CommandRecord(Base):
+    """A command a person gave the station (skip a bolt, reopen a vehicle, ...), accepted by
+    its rules: who, from where, when, on what, and why (their comment).  Never edited."""
+
+    __tablename__ = "commands"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    at: Mapped[datetime] = mapped_column(UtcDateTime)
+    user: Mapped[str] = mapped_column(String(64))
+    source: Mapped[str] = mapped_column(String(100))   # "screen 10.0.0.7", "cli", ...
+    kind: Mapped[str] = mapped_column(String(32))      # skip, reopen, ...
+    vin: Mapped[str | None] = mapped_column(String(32))
+    bolt: Mapped[str | None] = mapped_column(String(32))
+    comment: Mapped[str] = mapped_column(String(500), default="")
+
+
+class FeedEntry(Base):
+    """The results feed: every record (a rundown, an unattributed result, a command) gets the
+    next sequence number in the transaction that writes it, so a reader that was away
+    ("since N") misses nothing and sees each once, in order."""
+
+    __tablename__ = "feed"
+    __table_args__ = ({"sqlite_autoincrement": True},)   # a number is never used twice
+
+    seq: Mapped[int] = mapped_column(primary_key=True)
+    kind: Mapped[str] = mapped_column(String(16))     # rundown, unattributed, command
+    ref: Mapped[int]                                  # the id in that kind's table
+    at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
+
+
+class Meta(Base):
+    """The database's own facts: ``db_id``, a random id made when it was created (a station's
+    records stay unique on a line when its local database is replaced)."""
+
+    __tablename__ = "meta"
+
+    key: Mapped[str] = mapped_column(String(32), primary_key=True)
+    value: Mapped[str] = mapped_column(String(200))

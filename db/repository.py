@@ -25,6 +25,7 @@ from db.bolts import BoltTable, Parameters, dump_bolts
 from db.engine import DEFAULT_URL, make_engine, writer
 from db.errors import DatabaseError, DataError, NotFoundError, VehicleClosedError
 from db.importer import ImportReport, current_version, import_table, parameters_of, read_table
+from db.ledger import RUNDOWN, UNATTRIBUTED, Ledger, add_command, append
 from db.migrate import current_revision, head_revision, upgrade
 from db.models import (
     Bolt,
@@ -82,6 +83,8 @@ class Repository:
     def __init__(self, engine: Engine) -> None:
         self._engine = engine
         self._writer = writer(engine)
+        #: the feed, the commands, the database's id (the same transactions)
+        self.ledger = Ledger(lambda write: self._session(write))
 
     @classmethod
     def open(cls, url: str = DEFAULT_URL, *, read_only: bool = False) -> Repository:
@@ -196,6 +199,19 @@ class Repository:
                 v.reopened_at = utcnow()
             return VehicleInfo(v.vin, model, v.started_at, v.ended_at, v.reopened_at)
 
+    def reopen_vehicle(self, vin: str, *, at: datetime, user: str, source: str,
+                       comment: str) -> None:
+        """Reopen the closed vehicle ``vin`` for rework, recorded as a command of ``user``, in
+        one transaction.  ``NotFoundError`` for an unknown VIN, ``DataError`` for one that is
+        not closed."""
+        with self._session(write=True) as s:
+            v = _vehicle(s, vin)
+            if v.ended_at is None:
+                raise DataError(f"vehicle {vin} is not closed")
+            v.ended_at, v.reopened_at = None, at
+            add_command(s, at=at, user=user, source=source, kind="reopen", vin=vin, bolt=None,
+                        comment=comment)
+
     def record_tightening(
         self, vin: str, bolt: str, *, ok: bool, position_mm: Sequence[float],
         match_distance_mm: float, tilt_deg: float, torque_nm: float | None,
@@ -253,6 +269,7 @@ class Repository:
             s.add(rec)
             _settle(s, enable_id)
             s.flush()
+            append(s, RUNDOWN, rec.id)
             return rec.id
 
     # -- what the station owes, results no bolt owns ----------------------------------------
@@ -306,6 +323,7 @@ class Repository:
                 result_at=result_at, recorded_at=utcnow(), reason=reason[:200])
             s.add(row)
             s.flush()
+            append(s, UNATTRIBUTED, row.id)
             return row.id
 
     def unattributed(self, vin: str | None = None) -> list[dict[str, Any]]:

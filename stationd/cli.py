@@ -380,6 +380,7 @@ def build_parser() -> argparse.ArgumentParser:
     bk.add_argument("--json", action="store_true", help="print one summary object")
     bk.set_defaults(func=cmd_bench_soak)
 
+    from stationd.command_cli import add_command_parsers
     from stationd.db_cli import add_config_parser, add_db_parser
     from stationd.geometry.calibrate_cli import add_calibrate_parser
     from stationd.probe import add_probe_parser
@@ -390,6 +391,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_db_parser(sub)
     add_config_parser(sub)
     add_status_parser(sub)
+    add_command_parsers(sub)
 
     rn = sub.add_parser("run", help="the station daemon (as systemd runs it)")
     rn.add_argument("--config", required=True, help="station YAML")

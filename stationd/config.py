@@ -27,6 +27,7 @@ from drivers.errors import UrlError
 from drivers.lift.base import RegisterMap
 from drivers.url import parse_url
 from drivers.wrench.modbus_map import WrenchRegisterMap
+from stationd.access import AccessConfig
 from stationd.devicemaps import lift_map, wrench_map
 from stationd.errors import ConfigError, InputError
 from stationd.geometry.camera import StereoPair
@@ -50,7 +51,7 @@ MAX_AGE_S = (0.05, 5.0)         # plausible staleness limits, seconds
 BASELINE_MM = (20.0, 2000.0)    # plausible stereo baselines, millimetres
 METRES_LIKE_MM = 10.0           # a pair-to-vehicle translation shorter than this is in metres
 STATION_KEYS = ("marker", "vision", "cameras", "pairs", "tool", "lift", "wrench", "matching",
-                "database", "bolts", "records", "http")
+                "database", "bolts", "records", "http", "access")
 PAIR_KEYS = ("calibration", "to_vehicle", "left", "right", "max_skew_ms")
 
 #: device kind -> (scheme -> backend, the accepted forms): the drivers' own registries, so the
@@ -174,6 +175,7 @@ class StationConfig:
     bolts_path: Path | None = None
     records: RecordsConfig = field(default_factory=RecordsConfig)
     http: HttpConfig | None = None  # the screens (stationd.web); None: not served
+    access: AccessConfig = field(default_factory=AccessConfig)  # who may give commands
     path: Path | None = None
 
 
@@ -414,6 +416,7 @@ class _Reader:
                                     partial(_existing, base=base, what="bolt file")),
             records=self.section("records", d.records, partial(_records, base=base)),
             http=self.section("http", d.http, HttpConfig.from_node),
+            access=self.section("access", d.access, AccessConfig.from_node),
             path=path)
         # after the sections: a mistake written in the file is told before what is missing
         if self.require_devices and isinstance(root.value(), dict) and not self.unreadable:

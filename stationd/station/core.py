@@ -32,6 +32,16 @@ from typing import Any
 
 import numpy as np
 
+from stationd.reasons import Reason, Why
+from stationd.station.commands import (
+    RIGHT,
+    Answer,
+    Command,
+    Issuer,
+    ReopenVehicle,
+    SkipBolt,
+    skip_note,
+)
 from stationd.station.events import (
     BoltSelected,
     BoltSkipped,
@@ -159,13 +169,15 @@ class BoltSpec:
 
 @dataclass(frozen=True)
 class VehicleLoaded(Input):
-    """The database has the vehicle open: its bolts and those already done."""
+    """The database has the vehicle open: its bolts, those already done and those a command
+    skipped since it was (re)opened (bolt -> why)."""
 
     vin: str
     model: str
     bolts: Mapping[str, BoltSpec]
     done: frozenset[str] = frozenset()
     rework: bool = False
+    skipped: Mapping[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -189,8 +201,27 @@ class Tick(Input):
     """Time passes (expires the late-result window)."""
 
 
+@dataclass(frozen=True)
+class CommandIn(Input):
+    """A person's command (``request`` numbers it for the answer)."""
+
+    request: int
+    command: Command
+    issuer: Issuer
+
+
+@dataclass(frozen=True)
+class CommandDone(Input):
+    """The shell carried out a command's :class:`RecordCommand`: recorded (``reason`` None)
+    or refused by the database (an unknown VIN, a vehicle not closed, a failed write)."""
+
+    request: int
+    reason: Reason | None = None
+
+
 Event = (Started | LiftRead | LocalizedIn | ParamsAcked | ParamsRefused | ResultIn
-         | DeviceFault | DeviceBack | VehicleLoaded | VehicleRejected | VinSent | Tick)
+         | DeviceFault | DeviceBack | VehicleLoaded | VehicleRejected | VinSent | Tick
+         | CommandIn | CommandDone)
 
 
 # -- actions ------------------------------------------------------------------------------------
@@ -294,8 +325,26 @@ class Publish:
     event: StationEvent
 
 
+@dataclass(frozen=True)
+class RecordCommand:
+    """Record an accepted command with its user (a reopen also reopens the vehicle in the
+    database), then feed :class:`CommandDone`: a command takes effect only once on disk."""
+
+    request: int
+    command: Command
+    issuer: Issuer
+    t: float
+
+
+@dataclass(frozen=True)
+class Reply:
+    """The answer goes back to who gave the command (and to the journal)."""
+
+    answer: Answer
+
+
 Action = (SendParams | EnableTool | DisableTool | SendVin | LoadVehicle | CloseVehicle | Record
-          | Acknowledge | StoreUnattributed | Publish)
+          | Acknowledge | StoreUnattributed | Publish | RecordCommand | Reply)
 
 
 @dataclass
@@ -333,6 +382,8 @@ class StationCore:
     # frames exposed at or before this (a rundown's end) never select: the wrench may have
     # moved since, and the next bolt's evidence must all come from after it
     _not_before: float = field(default=float("-inf"), repr=False)
+    _commands: dict[int, CommandIn] = field(default_factory=dict, repr=False)  # recording
+    _closed_vin: str | None = field(default=None, repr=False)   # a closed VIN at height
 
     # -- the one entry point ---------------------------------------------------------------
     def feed(self, ev: Event) -> list[Action]:
@@ -377,6 +428,7 @@ class StationCore:
         if LIFT in self.faults:
             acts += self._back(ev.t, LIFT)
         if VEHICLE in self.faults and not ev.at_height:
+            self._closed_vin = None
             acts += self._back(ev.t, VEHICLE)   # a vehicle fault lasts while that vehicle is up
         if self.vin is not None and not ev.at_height:
             acts += self._drop(ev.t, State.WAITING_VEHICLE, ev.why)
@@ -428,7 +480,7 @@ class StationCore:
         self._recorded = set()
         self.matcher = BoltMatcher(
             {k: np.asarray(b.position, dtype=np.float64) for k, b in ev.bolts.items()},
-            self.params, set(ev.done),
+            self.params, set(ev.done), dict(ev.skipped),
             rules={k: BoltRule(b.order, b.batch) for k, b in ev.bolts.items()})
         if self.state is State.WAITING_VEHICLE and self._lift is not None and self._lift.ready:
             self._to(State.TRACKING, "tracking the wrench")
@@ -441,6 +493,7 @@ class StationCore:
                     LoadVehicle(self._lift.model_code, ev.vin, reopen=True)]
         self._loading = False
         why = ev.reason
+        self._closed_vin = ev.vin if ev.closed else None
         if ev.closed:
             why = f"VIN {ev.vin} already closed: rework needs the vehicle reopened " \
                   f"({ev.reason}); lower the lift to clear"
@@ -563,6 +616,67 @@ class StationCore:
             self.bolt, self._selection, self._acked_at, self._away = None, None, None, 0
             if self.state in ON_A_BOLT:
                 self._to(State.TRACKING, f"bolt {en.bolt} {'OK' if r.ok else 'NOK'}; tracking")
+        return acts
+
+    def _on_CommandIn(self, ev: CommandIn) -> list[Action]:  # noqa: N802
+        """A command is checked against the rules now and takes effect once recorded."""
+        why = self._refusal(ev.command, ev.issuer)
+        if why is not None:
+            return [Reply(Answer(ev.request, ev.command, ev.issuer, why))]
+        self._commands[ev.request] = ev
+        return [RecordCommand(ev.request, ev.command, ev.issuer, ev.t)]
+
+    def _refusal(self, cmd: Command, who: Issuer) -> Reason | None:
+        """Why ``cmd`` may not be carried out now, or None."""
+        right = RIGHT[type(cmd)]
+        if right not in who.rights:
+            return Reason(Why.NO_RIGHT, right=right.value)
+        if isinstance(cmd, ReopenVehicle):
+            if cmd.vin == self.vin:
+                return Reason(Why.ALREADY_OPEN, vin=cmd.vin)
+            return None   # the database knows whether it is closed (CommandDone)
+        if self.vin is None or self.matcher is None:
+            return Reason(Why.NO_VEHICLE)
+        if cmd.vin != self.vin:
+            return Reason(Why.OTHER_VEHICLE, vin=cmd.vin)
+        if cmd.bolt not in self.matcher.bolts:
+            return Reason(Why.UNKNOWN_BOLT, bolt=cmd.bolt, vin=cmd.vin)
+        if cmd.bolt in self.matcher.done:
+            return Reason(Why.DONE, bolt=cmd.bolt)
+        if cmd.bolt in self.matcher.skipped:
+            return Reason(Why.SKIPPED, bolt=cmd.bolt, note=self.matcher.skipped[cmd.bolt])
+        if self.tool_on and self.bolt == cmd.bolt:
+            return Reason(Why.TOOL_ON_BOLT, bolt=cmd.bolt)
+        return None
+
+    def _on_CommandDone(self, ev: CommandDone) -> list[Action]:  # noqa: N802
+        c = self._commands.pop(ev.request, None)
+        if c is None:
+            return []
+        answer = Answer(ev.request, c.command, c.issuer, ev.reason)
+        if ev.reason is not None:
+            return [Reply(answer)]
+        cmd = c.command
+        acts: list[Action] = []
+        if isinstance(cmd, SkipBolt):
+            acts += self._skip(ev.t, cmd, c.issuer)
+        elif cmd.vin == self._closed_vin and VEHICLE in self.faults:
+            # the closed vehicle at height, reopened: its fault clears and the next lift read
+            # loads it (open now)
+            self._closed_vin, self._loading = None, False
+            acts += self._back(ev.t, VEHICLE)
+        return [*acts, Reply(answer)]
+
+    def _skip(self, t: float, cmd: SkipBolt, who: Issuer) -> list[Action]:
+        """The bolt is not tightened at this station for this vehicle; a selection of it ends
+        (the tool goes off)."""
+        if self.matcher is None or self.vin != cmd.vin or cmd.bolt not in self.matcher.bolts:
+            return []   # the vehicle left while the command was being recorded
+        why = skip_note(who.user, cmd.comment)
+        self.matcher.skipped[cmd.bolt] = why
+        acts: list[Action] = [Publish(BoltSkipped(cmd.bolt, why, t=t))]
+        if self.bolt == cmd.bolt:
+            acts += self._drop(t, State.TRACKING, f"bolt {cmd.bolt} {why}")
         return acts
 
     def _on_DeviceFault(self, ev: DeviceFault) -> list[Action]:  # noqa: N802

@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 
 from db.bolts import Parameters
-from db.errors import DataError, DbError, VehicleClosedError
+from db.errors import DataError, DbError, NotFoundError, VehicleClosedError
 from db.report import MISSING
 from db.repository import BoltInfo, Repository
 from drivers.camera import open_camera
@@ -44,6 +44,8 @@ from stationd.config import PairConfig, StationConfig
 from stationd.errors import StationError
 from stationd.geometry.stereo import localize
 from stationd.geometry.tool import BoltEnd, bolt_end, fuse
+from stationd.reasons import Reason, Why
+from stationd.station.commands import KIND, Answer, Command, Issuer, ReopenVehicle, skip_note
 from stationd.station.core import (
     DATABASE,
     LIFT,
@@ -53,6 +55,8 @@ from stationd.station.core import (
     Action,
     BoltSpec,
     CloseVehicle,
+    CommandDone,
+    CommandIn,
     DeviceBack,
     DeviceFault,
     DisableTool,
@@ -66,6 +70,8 @@ from stationd.station.core import (
     ParamsRefused,
     Publish,
     Record,
+    RecordCommand,
+    Reply,
     ResultIn,
     Selection,
     SendParams,
@@ -97,6 +103,7 @@ from stationd.station.events import (
 from stationd.station.scan import ScanPlan
 from stationd.station.sdnotify import Notifier
 from stationd.vision.types import Refusal
+from stationd.words import answer_words
 
 log = logging.getLogger("stationd")
 NOT_PAIRS = (LIFT, WRENCH, DATABASE)   # the keepers that are not camera pairs
@@ -204,7 +211,7 @@ class Station:
     on_action: Any = None  # called with each action before it is carried out (demo, tests)
     _pool: ThreadPoolExecutor = field(init=False)
     _results_pool: ThreadPoolExecutor = field(init=False)
-    _lock: asyncio.Lock | None = None
+    _lock: asyncio.Lock | None = field(default_factory=asyncio.Lock)
     _pending: list[Event] = field(default_factory=list)    # faults found before run()
     # results the database refused (a full disk, a lost server): kept here, the database in
     # fault (nothing more is tightened), written by its keeper before it is called back
@@ -225,6 +232,8 @@ class Station:
     # them before the link closes), and the wait for the next one running in its thread
     _received: list[Any] = field(default_factory=list)
     _waiting: Any = None
+    _requests: int = 0                   # commands numbered for their answers
+    _answers: dict[int, asyncio.Future[Answer]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.core = StationCore(self.cfg.matching, self.cfg.matching.leave_frames)
@@ -439,6 +448,22 @@ class Station:
         # no STOPPING=1 here: a reload ends this station too, and STOPPING=1 tells systemd
         # the service is going down (it would kill it at TimeoutStopSec); the serve loop says
         # RELOADING=1 or STOPPING=1
+
+    async def submit(self, command: Command, issuer: Issuer,
+                     timeout: float = 10.0) -> Answer:
+        """A person's command into the core, on the path of the devices' events; its answer
+        (accepted once recorded, or refused with why).  ``TimeoutError`` when the station
+        does not answer in ``timeout`` (a database waiting on a lock)."""
+        self._requests += 1
+        request = self._requests
+        answer: asyncio.Future[Answer] = asyncio.get_running_loop().create_future()
+        self._answers[request] = answer
+        try:
+            await asyncio.wait_for(self.feed(CommandIn(time.time(), request, command, issuer)),
+                                   timeout)
+            return await asyncio.wait_for(answer, timeout)
+        finally:
+            self._answers.pop(request, None)
 
     async def _call(self, fn: Any, *args: Any) -> Any:
         return await asyncio.get_running_loop().run_in_executor(self._pool, fn, *args)
@@ -667,6 +692,10 @@ class Station:
                 await self._acknowledge(a.result)
             elif isinstance(a, StoreUnattributed):
                 await self._store_unattributed(a)
+            elif isinstance(a, RecordCommand):
+                return await self._record_command(a)
+            elif isinstance(a, Reply):
+                self._reply(a.answer)
         except DeviceError as exc:   # the link is reset: its keeper reconnects and reports
             if not isinstance(exc, RefusedError):
                 self.keepers[WRENCH].lost(exc)
@@ -743,6 +772,38 @@ class Station:
             return
         await self._acknowledge(r)
 
+    async def _record_command(self, a: RecordCommand) -> Event:
+        """An accepted command on disk with its user (a reopen reopens the vehicle in the same
+        transaction); what the database said, for the core."""
+        repo, cmd, who = self.repo, a.command, a.issuer
+        assert repo is not None  # noqa: S101 - opened in open()
+        at = datetime.fromtimestamp(a.t, UTC)
+        try:
+            if isinstance(cmd, ReopenVehicle):
+                await self._call(lambda: repo.reopen_vehicle(
+                    cmd.vin, at=at, user=who.user, source=who.source, comment=cmd.comment))
+            else:
+                await self._call(lambda: repo.ledger.record_command(
+                    at=at, user=who.user, source=who.source, kind=KIND[type(cmd)],
+                    vin=cmd.vin, bolt=cmd.bolt, comment=cmd.comment))
+        except NotFoundError:
+            return CommandDone(time.time(), a.request, Reason(Why.UNKNOWN_VEHICLE,
+                                                              vin=cmd.vin))
+        except DataError:
+            return CommandDone(time.time(), a.request, Reason(Why.NOT_CLOSED, vin=cmd.vin))
+        except STATION_FAULTS as exc:
+            self.keepers[DATABASE].lost(DeviceError(one_line(exc)))
+            return CommandDone(time.time(), a.request,
+                               Reason(Why.NOT_RECORDED, note=one_line(exc)))
+        return CommandDone(time.time(), a.request)
+
+    def _reply(self, answer: Answer) -> None:
+        """The journal's line for every command, and the answer to who is waiting for it."""
+        (log.info if answer.accepted else log.warning)("%s", answer_words(answer))
+        waiting = self._answers.get(answer.request)
+        if waiting is not None and not waiting.done():
+            waiting.set_result(answer)
+
     async def _send(self, a: SendParams) -> Event:
         if self.wrench is None:
             return DeviceFault(time.time(), WRENCH, "down", "not connected")
@@ -805,6 +866,8 @@ class Station:
                                        closed=isinstance(exc, VehicleClosedError))
             infos = await self._call(repo.bolts_for_model, model)
             report = await self._call(repo.vehicle_report, a.vin)
+            skipped = await self._call(repo.ledger.skipped, a.vin,
+                                       started.reopened_at or started.started_at)
         except STATION_FAULTS as exc:
             # its keeper probes it back, with backoff (reported as the same "down" fault)
             self.keepers[DATABASE].lost(DeviceError(one_line(exc)))
@@ -818,12 +881,14 @@ class Station:
                                      b.parameters_id) for b in infos}
         self.bus.publish(VehicleOpened(a.vin, model, tuple(
             BoltView(b.bolt_id, *_xyz(b.position), pset=b.parameters.pset, order=b.order,
-                     batch=b.batch, status=status.get(b.bolt_id) or "pending")
+                     batch=b.batch, status=status.get(b.bolt_id)
+                     or ("skipped" if b.bolt_id in skipped else "pending"))
             for b in infos), rework=started.rework))
         log.info("vehicle %s (%s) opened%s: %d bolts, %d done", a.vin, model,
                  " for rework" if started.rework else "", len(infos), len(done))
         # a rework resumed after a reload or restart is still one (the database keeps it)
-        return VehicleLoaded(time.time(), a.vin, model, specs, done, started.rework)
+        return VehicleLoaded(time.time(), a.vin, model, specs, done, started.rework,
+                             {b: skip_note(*who) for b, who in skipped.items()})
 
     async def _close_vehicle(self, vin: str) -> None:
         assert self.repo is not None  # noqa: S101

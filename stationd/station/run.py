@@ -119,6 +119,7 @@ class Screens:
         self.bus = bus
         self.server: Any = None
         self.frames: Any = None
+        self.station: Station | None = None   # whose commands the screens take
         self._for: tuple[Any, str] | None = None
         self._retry: asyncio.Task[None] | None = None
         self._failed: str | None = None   # why the screens are not served (logged once)
@@ -157,6 +158,7 @@ class Screens:
                                results_error=results_error)
             await server.start()
             self.server = server   # only once it serves (a retry's start is awaited)
+            self.attach(self.station, cfg)
         except OPEN_ERRORS as exc:
             # a port another program holds may be freed: tried again, journaled once
             if self._failed != one_line(exc):
@@ -168,6 +170,14 @@ class Screens:
             return
         self._failed = None
         log.info("screens: %s", self.server.url)
+
+    def attach(self, station: Station | None, cfg: StationConfig) -> None:
+        """People's commands go to ``station`` (None: refused, none is running), with the
+        users of ``cfg``."""
+        self.station = station
+        if self.server is not None:
+            self.server.commands.access = cfg.access
+            self.server.commands.submit = None if station is None else station.submit
 
     async def _again(self, cfg: StationConfig, key: tuple[Any, str]) -> None:
         await asyncio.sleep(SCREENS_RETRY_S)
@@ -217,6 +227,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
         await screens.follow(cfg)   # their results, if the database opened only now
         inner = asyncio.Event()
         task = asyncio.create_task(station.run(inner))
+        screens.attach(station, cfg)
         log.info("stationd running: %s", cfg_path)
         new: StationConfig | None = None
         while new is None and not stop.is_set() and not task.done():
@@ -238,6 +249,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
         if new is not None and not stop.is_set():
             # systemd: reloading until the new station's READY=1 (never STOPPING=1 here)
             notifier.reloading("reloading: closing the devices")
+        screens.attach(None, cfg)
         inner.set()
         try:
             await task

@@ -1,5 +1,6 @@
 """The web server on the daemon's loop: live view by server-sent events, the commissioning
-frames on demand, the results from the database, all read-only.
+frames on demand, the results from the database, read-only but for the logged-in users'
+commands (:mod:`stationd.web.commands`).
 
 Why SSE rather than WebSocket: the screens only listen; SSE is plain HTTP (one long GET),
 reconnects by itself in every browser and needs no protocol code on either side.
@@ -31,6 +32,7 @@ from db.repository import Repository
 from stationd.errors import InputError
 from stationd.station.core import LIFT, WRENCH
 from stationd.station.events import EventBus, PairFrames
+from stationd.web.commands import POSTS, CommandRoutes
 from stationd.web.config import HttpConfig, open_bind_problem
 from stationd.web.frames import LatestFrames, sharpness
 from stationd.web.results import Results, rundowns_csv
@@ -93,6 +95,9 @@ class WebServer:
         self._runner: web.AppRunner | None = None
         self._pump: asyncio.Task[None] | None = None
         self._port = 0
+        #: logins, commands and the results feed; the serve loop sets ``commands.submit`` and
+        #: ``commands.access`` from the running station
+        self.commands = CommandRoutes(lambda: self.results)
 
     # -- lifecycle ---------------------------------------------------------------------
     async def start(self) -> None:
@@ -202,13 +207,17 @@ class WebServer:
         r.add_get("/api/vehicles/{vin}/export.json", self._export_json)
         r.add_get("/api/vehicles/{vin}", self._vehicle)
         r.add_get("/images/{path:.+}", self._image)
+        self.commands.add_to(app)
 
     @web.middleware
     async def _guard(self, request: web.Request, handler: Any) -> web.StreamResponse:
-        """Read-only (GET/HEAD only: nothing here can send parameters or enable the tool) and,
-        with a token configured, only for who presents it."""
-        if request.method not in ("GET", "HEAD"):
-            return web.Response(status=405, text="read-only: GET only\n")
+        """Read-only (GET/HEAD only: nothing here can send parameters or enable the tool) but
+        for the logins and commands (JSON POSTs, a session's), and, with a token configured,
+        only for who presents it."""
+        if request.method not in ("GET", "HEAD") and not (request.method == "POST"
+                                                          and request.path in POSTS):
+            return web.Response(status=405, text="read-only: GET only (POST: "
+                                f"{', '.join(POSTS)})\n")
         route = request.match_info.route.resource
         self.requests[route.canonical if route is not None else "?"] += 1
         token = self.config.token

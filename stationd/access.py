@@ -1,0 +1,211 @@
+"""Who may give the station commands: users and roles from the station file, their passwords
+only as scrypt hashes, the screens' sessions and the guard against replayed requests.
+
+Why here and not in the core: authentication is the edges' (a screen's session, the command
+line's password); a command reaches the core with the user's name and the rights of their
+role (:class:`~stationd.station.commands.Issuer`), and the core checks the right it needs.
+
+The ``access:`` section (optional; without it nobody can give commands)::
+
+    access:
+      users:
+        sam: {role: supervisor, password: "scrypt$16384$8$1$<salt>$<key>"}
+      roles:                          # optional: these are the defaults
+        operator: [skip]
+        supervisor: [skip, reopen, release, loosen]
+        engineer: [skip, reopen, teach]
+
+``stationd user hash`` prints the hash of a password typed at its prompt: the file never
+holds a password.  scrypt (RFC 7914, Python's ``hashlib``) is a standard key derivation made
+to be slow to brute-force; the parameters travel in the hash, so they can be raised later.
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import hmac
+import secrets
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+from stationd.station.commands import Issuer, Right
+from stationd.yamlio import YamlNode
+
+SCRYPT_N, SCRYPT_R, SCRYPT_P, KEY_BYTES = 2 ** 14, 8, 1, 32
+DEFAULT_ROLES: dict[str, frozenset[Right]] = {
+    "operator": frozenset({Right.SKIP}),
+    "supervisor": frozenset({Right.SKIP, Right.REOPEN, Right.RELEASE, Right.LOOSEN}),
+    "engineer": frozenset({Right.SKIP, Right.REOPEN, Right.TEACH}),
+}
+#: a screen's session ends after this long idle, and after a shift whatever happens, s
+SESSION_IDLE_S, SESSION_MAX_S = 30 * 60.0, 12 * 3600.0
+#: a command request older (or newer) than this is stale; its nonce is remembered as long, s
+REQUEST_WINDOW_S = 120.0
+
+
+def _b64(b: bytes) -> str:
+    return base64.b64encode(b).decode("ascii")
+
+
+def hash_password(password: str, *, salt: bytes | None = None) -> str:
+    """``scrypt$N$r$p$salt$key`` (base64): what the station file keeps."""
+    salt = salt if salt is not None else secrets.token_bytes(16)
+    key = hashlib.scrypt(password.encode(), salt=salt, n=SCRYPT_N, r=SCRYPT_R, p=SCRYPT_P,
+                         dklen=KEY_BYTES)
+    return f"scrypt${SCRYPT_N}${SCRYPT_R}${SCRYPT_P}${_b64(salt)}${_b64(key)}"
+
+
+def parse_hash(text: str) -> tuple[int, int, int, bytes, bytes]:
+    """The parameters, salt and key of a hash; ``ValueError`` for anything else (a password
+    written in the file by mistake among them)."""
+    parts = text.split("$")
+    if len(parts) != 6 or parts[0] != "scrypt":
+        raise ValueError("not a scrypt hash")
+    try:
+        n, r, p = (int(v) for v in parts[1:4])
+        salt = base64.b64decode(parts[4], validate=True)
+        key = base64.b64decode(parts[5], validate=True)
+    except ValueError:
+        raise ValueError("not a scrypt hash") from None
+    if n < 2 ** 10 or n & (n - 1) or not 1 <= r <= 64 or not 1 <= p <= 16 \
+            or len(salt) < 8 or len(key) < 16:
+        raise ValueError("scrypt parameters out of range")
+    return n, r, p, salt, key
+
+
+def verify_password(password: str, stored: str) -> bool:
+    """Whether ``password`` is the one ``stored`` was made from (compared in constant time)."""
+    n, r, p, salt, key = parse_hash(stored)
+    got = hashlib.scrypt(password.encode(), salt=salt, n=n, r=r, p=p, dklen=len(key),
+                         maxmem=256 * 1024 * 1024)
+    return hmac.compare_digest(got, key)
+
+
+@dataclass(frozen=True)
+class User:
+    name: str
+    role: str
+    password_hash: str
+
+
+@dataclass(frozen=True)
+class AccessConfig:
+    """The users and the rights of their roles."""
+
+    users: Mapping[str, User] = field(default_factory=dict)
+    roles: Mapping[str, frozenset[Right]] = field(default_factory=lambda: dict(DEFAULT_ROLES))
+
+    @classmethod
+    def from_node(cls, node: YamlNode) -> AccessConfig:
+        m = node.mapping(("users", "roles"))
+        roles = dict(DEFAULT_ROLES)
+        if "roles" in m:
+            roles = {}
+            for name, item in _named(m["roles"]):
+                rights = set()
+                for r in item.items():
+                    rights.add(Right(r.text(tuple(x.value for x in Right))))
+                roles[name] = frozenset(rights)
+        users = {}
+        for name, item in _named(m["users"]) if "users" in m else ():
+            u = item.mapping(("role", "password"), required=("role", "password"))
+            role = u["role"].text(tuple(roles))
+            stored = u["password"].text()
+            try:
+                parse_hash(stored)
+            except ValueError:
+                raise u["password"].error(
+                    "not a scrypt hash: the file keeps only the hash of a password "
+                    "(`stationd user hash` prints it), never the password") from None
+            users[name] = User(name, role, stored)
+        return cls(users, roles)
+
+    def issuer(self, user: str, password: str, source: str) -> Issuer | None:
+        """The user with the rights of their role when the password is theirs, else None
+        (an unknown user costs the same time as a wrong password)."""
+        u = self.users.get(user)
+        stored = u.password_hash if u is not None else _DUMMY
+        if not verify_password(password, stored) or u is None:
+            return None
+        return Issuer(u.name, self.roles.get(u.role, frozenset()), source)
+
+
+_DUMMY = hash_password("no such user", salt=b"stationd-dummy-salt")
+
+
+def _named(node: YamlNode) -> list[tuple[str, YamlNode]]:
+    value = node.value()
+    if not isinstance(value, dict):
+        raise node.error("expected a mapping of names to their settings")
+    return list(node.mapping(tuple(str(k) for k in value)).items())
+
+
+@dataclass
+class _Session:
+    issuer: Issuer
+    opened: float
+    seen: float
+
+
+class Sessions:
+    """The screens' logged-in users, by a random token kept in an HttpOnly cookie; a
+    session ends idle after ``idle_s``, and after ``max_s`` in any case."""
+
+    def __init__(self, *, idle_s: float = SESSION_IDLE_S, max_s: float = SESSION_MAX_S,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.idle_s, self.max_s, self._clock = idle_s, max_s, clock
+        self._open: dict[str, _Session] = {}
+
+    def open(self, issuer: Issuer) -> str:
+        now = self._clock()
+        token = secrets.token_urlsafe(32)
+        self._open[token] = _Session(issuer, now, now)
+        return token
+
+    def get(self, token: str | None) -> Issuer | None:
+        """The session's user, or None (unknown, idle too long, too old)."""
+        if not token:
+            return None
+        now = self._clock()
+        for t, old in list(self._open.items()):   # expired ones go
+            if now - old.seen > self.idle_s or now - old.opened > self.max_s:
+                del self._open[t]
+        s = self._open.get(token)
+        if s is None:
+            return None
+        s.seen = now
+        return s.issuer
+
+    def close(self, token: str | None) -> None:
+        self._open.pop(token or "", None)
+
+
+class ReplayGuard:
+    """A command request carries a nonce and when it was issued: one older (or further in the
+    future) than ``window_s`` is stale, a nonce seen within the window is a replay."""
+
+    def __init__(self, window_s: float = REQUEST_WINDOW_S,
+                 clock: Callable[[], float] = time.time) -> None:
+        self.window_s, self._clock = window_s, clock
+        self._seen: dict[str, float] = {}
+
+    def check(self, nonce: str, issued_at: float) -> str | None:
+        """Why the request is refused, or None (then its nonce is spent)."""
+        now = self._clock()
+        for n, t in list(self._seen.items()):
+            if now - t > 2 * self.window_s:
+                del self._seen[n]
+        if not 16 <= len(nonce) <= 128 or not nonce.isascii():
+            return "a request needs a nonce of 16-128 characters"
+        if abs(now - issued_at) > self.window_s:
+            return f"stale request (issued {now - issued_at:.0f} s ago)"
+        if nonce in self._seen:
+            return "replayed request (this nonce was used)"
+        self._seen[nonce] = now
+        return None
+
+
+__all__ = ["AccessConfig", "ReplayGuard", "Sessions", "User", "hash_password",
+           "parse_hash", "verify_password"]

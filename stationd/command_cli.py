@@ -1,0 +1,173 @@
+"""People's commands from the command line, through the running daemon's API (the screens'
+path: log in with a user's password, give the command, read the station's answer), and the
+password hashes the station file keeps.
+
+    stationd skip VIN BOLT [--comment TEXT] --user NAME
+    stationd reopen VIN [--comment TEXT] --user NAME
+    stationd feed [--since N] [--limit M]
+    stationd user hash
+
+The password comes from ``STATIOND_PASSWORD``, else a prompt (a terminal), else the first
+line of standard input; it never goes on the command line (``ps`` would show it).  Exit 0:
+accepted; 1: refused by the station (the reason is printed); 2: bad input; 3: no answer, or
+the login was refused.
+"""
+
+from __future__ import annotations
+
+import argparse
+import getpass
+import http.cookiejar
+import json
+import os
+import secrets
+import sys
+import time
+import urllib.error
+import urllib.request
+from typing import Any
+
+from stationd.access import hash_password
+from stationd.errors import InputError
+from stationd.web.status_cli import DEFAULT_URL, EXIT_UNREACHABLE, status_url
+
+EXIT_REFUSED = 1
+
+
+class _Client:
+    """One session with the daemon's API (a cookie jar; the station token when given)."""
+
+    def __init__(self, url: str, token: str | None, timeout: float) -> None:
+        status_url(url)   # checks the form: bad input is exit 2
+        self.base = url.rstrip("/")
+        self.token, self.timeout = token, timeout
+        self._open = urllib.request.build_opener(
+            urllib.request.HTTPCookieProcessor(http.cookiejar.CookieJar()))
+
+    def call(self, path: str, body: dict[str, Any] | None = None) -> tuple[int, Any]:
+        """(HTTP status, the JSON or text answer)."""
+        data = None if body is None else json.dumps(body).encode()
+        req = urllib.request.Request(self.base + path, data=data)  # noqa: S310 - http(s)
+        if data is not None:
+            req.add_header("Content-Type", "application/json")
+        if self.token:
+            req.add_header("Authorization", f"Bearer {self.token}")
+        try:
+            with self._open.open(req, timeout=self.timeout) as r:
+                status, raw = r.status, r.read()
+        except urllib.error.HTTPError as exc:
+            status, raw = exc.code, exc.read()
+        text = raw.decode("utf-8", "replace")
+        try:
+            return status, json.loads(text)
+        except ValueError:
+            return status, text.strip()
+
+
+def _password() -> str:
+    if "STATIOND_PASSWORD" in os.environ:
+        return os.environ["STATIOND_PASSWORD"]
+    if sys.stdin.isatty():
+        return getpass.getpass("password: ")
+    return sys.stdin.readline().rstrip("\n")
+
+
+def _unreachable(url: str, exc: BaseException) -> int:
+    reason = getattr(exc, "reason", exc)
+    sys.stderr.write(f"stationd: no daemon answers at {url}: {reason}\n")
+    return EXIT_UNREACHABLE
+
+
+def cmd_command(args: argparse.Namespace) -> int:
+    """``skip`` and ``reopen``: log in, give the command, print the station's answer."""
+    if not args.user or not args.user.strip():
+        raise InputError("--user: the name of a user of the station's access section")
+    body: dict[str, Any] = {"kind": args.command, "vin": args.vin,
+                            "comment": args.comment or "",
+                            "nonce": secrets.token_urlsafe(18), "issued_at": time.time()}
+    if args.command == "skip":
+        body["bolt"] = args.bolt
+    client = _Client(args.url, args.token, args.timeout)
+    try:
+        status, who = client.call("/api/login", {"user": args.user, "password": _password(),
+                                                 "client": "cli"})
+        if status != 200:
+            sys.stderr.write(f"stationd: login refused: {who}\n")
+            return EXIT_UNREACHABLE
+        status, answer = client.call("/api/commands", body)
+        client.call("/api/logout", {})
+    except (urllib.error.URLError, OSError) as exc:
+        return _unreachable(args.url, exc)
+    if status in (200, 409) and isinstance(answer, dict):
+        print(answer["words"])
+        return 0 if answer["accepted"] else EXIT_REFUSED
+    sys.stderr.write(f"stationd: {args.command}: HTTP {status}: {answer}\n")
+    return EXIT_UNREACHABLE if status >= 500 else EXIT_REFUSED
+
+
+def cmd_feed(args: argparse.Namespace) -> int:
+    """Every record after ``--since``, one JSON object per line (what a forwarder reads)."""
+    if args.since < 0 or not 1 <= args.limit <= 1000:
+        raise InputError("--since >= 0, --limit 1-1000")
+    client = _Client(args.url, args.token, args.timeout)
+    try:
+        status, doc = client.call(f"/api/feed?since={args.since}&limit={args.limit}")
+    except (urllib.error.URLError, OSError) as exc:
+        return _unreachable(args.url, exc)
+    if status != 200 or not isinstance(doc, dict):
+        sys.stderr.write(f"stationd: feed: HTTP {status}: {doc}\n")
+        return EXIT_UNREACHABLE
+    for e in doc["entries"]:
+        print(json.dumps({"db_id": doc["db_id"], **e}, separators=(",", ":")))
+    return 0
+
+
+def cmd_user_hash(args: argparse.Namespace) -> int:
+    """The scrypt hash of a password (asked twice at a terminal) for ``access.users``."""
+    password = _password()
+    if sys.stdin.isatty() and "STATIOND_PASSWORD" not in os.environ \
+            and getpass.getpass("again: ") != password:
+        raise InputError("the two passwords differ")
+    if len(password) < 8:
+        raise InputError("a password of at least 8 characters")
+    print(hash_password(password))
+    return 0
+
+
+def _client_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--url", default=DEFAULT_URL, help=f"the daemon's screens (default "
+                   f"{DEFAULT_URL})")
+    p.add_argument("--token", help="the http token, when the daemon has one")
+    p.add_argument("--timeout", type=float, default=15.0, help="seconds (default 15)")
+
+
+def add_command_parsers(sub: Any) -> None:
+    """``skip``, ``reopen``, ``feed`` and ``user hash`` on ``build_parser``'s sub-parsers."""
+    epilog = ("The password: STATIOND_PASSWORD, else a prompt, else the first line of "
+              "standard input.  Exit 0 accepted, 1 refused (why is printed), 2 bad input, "
+              "3 no answer or login refused.")
+    sk = sub.add_parser("skip", help="skip a bolt of the vehicle at the station (a command "
+                        "to the running daemon)", epilog=epilog)
+    sk.add_argument("vin")
+    sk.add_argument("bolt")
+    ro = sub.add_parser("reopen", help="reopen a closed vehicle for rework (a command to the "
+                        "running daemon)", epilog=epilog)
+    ro.add_argument("vin")
+    for p, name in ((sk, "skip"), (ro, "reopen")):
+        p.add_argument("--comment", default="", help="why (kept with the command)")
+        p.add_argument("--user", required=True, help="who gives the command")
+        _client_args(p)
+        p.set_defaults(func=cmd_command, command=name)
+    fd = sub.add_parser("feed", help="the records after a sequence number, one JSON per line")
+    fd.add_argument("--since", type=int, default=0)
+    fd.add_argument("--limit", type=int, default=100)
+    _client_args(fd)
+    fd.set_defaults(func=cmd_feed)
+    us = sub.add_parser("user", help="users of the station's access section")
+    usub = us.add_subparsers(dest="user_command", required=True)
+    uh = usub.add_parser("hash", help="print the scrypt hash of a password for "
+                         "access.users.NAME.password")
+    uh.set_defaults(func=cmd_user_hash)
+
+
+__all__ = ["add_command_parsers", "cmd_command", "cmd_feed", "cmd_user_hash"]

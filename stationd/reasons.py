@@ -1,0 +1,69 @@
+"""Why the station does not do something: one enumeration of kinds, with the measured details
+as fields.
+
+Why typed: a refusal is produced where it is decided (the matcher, the core, a command's
+check) and read by several edges (the operator screen, the journal, the command line, later
+an MES and translated screens).  Carried as text it had to be parsed back with regular
+expressions; carried as a :class:`Reason` each edge reads the kind and the fields, and
+:mod:`stationd.words` turns it into words at the very end.  This module is a leaf: it imports
+nothing of the station.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+
+class Why(enum.Enum):
+    """The kinds of refusal."""
+
+    # the matcher: a localization that selects no bolt
+    STALE = "stale"                      # frames older than max_age_s (age_ms, limit_ms)
+    NO_BOLTS = "no bolts"                # the vehicle's table has none
+    NO_BOLT_NEAR = "no bolt near"        # outside every bolt's tolerance (bolt = nearest)
+    AMBIGUOUS = "ambiguous"              # two bolts within the margin (bolt, other)
+    SKIPPED = "skipped"                  # the bolt was skipped (note: why)
+    DONE = "done"                        # already tightened OK
+    MUST_WAIT = "must wait"              # order or batch (blocking, note)
+    NOT_STABLE = "not stable"            # stable for `count` of `needed` frames
+    NOT_LOCALIZED = "not localized"      # the vision's own reason (note)
+    # a command refused by the station's rules
+    NO_RIGHT = "no right"                # the user's role lacks the right (right)
+    NO_VEHICLE = "no vehicle"            # no vehicle at the station
+    OTHER_VEHICLE = "other vehicle"      # the command names another VIN (vin)
+    UNKNOWN_BOLT = "unknown bolt"        # not a bolt of the vehicle (bolt)
+    TOOL_ON_BOLT = "tool on bolt"        # the bolt is being tightened now (bolt)
+    ALREADY_OPEN = "already open"        # a reopen of a vehicle that is open (vin)
+    NOT_CLOSED = "not closed"            # a reopen of a vehicle that is not closed (vin)
+    UNKNOWN_VEHICLE = "unknown vehicle"  # a VIN the database does not know (vin)
+    DEVICE_FAULT = "device fault"        # a device is in fault (note: the faults)
+    NOT_RECORDED = "not recorded"        # the database refused the command's record (note)
+
+
+@dataclass(frozen=True)
+class Reason:
+    """One refusal: its kind and the details that apply (the others stay None)."""
+
+    kind: Why
+    bolt: str | None = None
+    other: str | None = None            # the second bolt of an ambiguity
+    vin: str | None = None
+    distance_mm: float | None = None
+    other_mm: float | None = None
+    limit: float | None = None          # a tolerance (mm) or an age limit (ms)
+    age_ms: float | None = None
+    count: int | None = None
+    needed: int | None = None
+    right: str | None = None
+    blocking: tuple[str, ...] = ()
+    note: str | None = None             # words from elsewhere (the vision, a device)
+
+    def key(self) -> tuple[object, ...]:
+        """What makes two refusals the same for the operator: the kind and the bolts, not the
+        measurements ("stale (812 ms)" and "stale (790 ms)" are one refusal; "B18 is done" and
+        "B01 is done" are two)."""
+        return (self.kind, self.bolt, self.other, self.vin, self.blocking, self.right)
+
+
+__all__ = ["Reason", "Why"]

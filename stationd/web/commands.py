@@ -1,0 +1,181 @@
+"""The screens' and the command line's way into the station: log in, give a command, read the
+results feed.
+
+Why the command line comes here too: one authenticated path for every person's command (a
+session from a user's password, the core's answer), whatever the client; the station token
+(``http.token``) still guards every request as it guards the screens.
+
+- ``POST /api/login`` ``{"user", "password"}``: a session (an HttpOnly, SameSite=Strict cookie);
+  a wrong password or an unknown user is 401 and a journal line, nothing else.
+- ``POST /api/logout``; ``GET /api/me``: who is logged in, with their rights.
+- ``POST /api/commands`` ``{"kind": "skip"|"reopen", "vin", "bolt", "comment", "nonce",
+  "issued_at"}``: with a session; a stale or replayed request is refused (400) before the
+  station sees it; the station's answer is 200 (accepted) or 409 (refused, with its typed
+  reason and the words).
+- ``GET /api/feed?since=N&limit=M``: every record after sequence number N, in order (a
+  subscriber that was away catches up from the database, not from the live bus).
+
+POSTs must be JSON (``Content-Type: application/json``): a cross-site form cannot send that
+without a preflight this server never grants, and the session cookie is SameSite=Strict.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+from collections.abc import Awaitable, Callable
+from dataclasses import asdict
+from typing import Any
+
+from aiohttp import web
+
+from stationd.access import AccessConfig, ReplayGuard, Sessions
+from stationd.station.commands import KIND, Answer, Command, Issuer, ReopenVehicle, SkipBolt
+from stationd.words import answer_words, reason_words
+
+log = logging.getLogger("stationd")
+COOKIE = "session"
+#: the POST endpoints (everything else on the server is read-only)
+POSTS = ("/api/login", "/api/logout", "/api/commands")
+#: the station's answer to one command (the serve loop sets it to the running station's)
+Submit = Callable[[Command, Issuer], Awaitable[Answer]]
+
+
+class CommandRoutes:
+    """Sessions, the replay guard and the handlers; ``submit`` and ``access`` follow the
+    running station (None: no station running, nobody configured)."""
+
+    def __init__(self, feed: Callable[[], Any]) -> None:
+        self.access: AccessConfig | None = None
+        self.submit: Submit | None = None
+        self.sessions = Sessions()
+        self.replays = ReplayGuard()
+        self._feed = feed   # the results source (None while the database is not open)
+
+    def add_to(self, app: web.Application) -> None:
+        r = app.router
+        r.add_post("/api/login", self._login)
+        r.add_post("/api/logout", self._logout)
+        r.add_get("/api/me", self._me)
+        r.add_post("/api/commands", self._command)
+        r.add_get("/api/feed", self._feed_since)
+
+    # -- sessions ---------------------------------------------------------------------------
+    async def _login(self, request: web.Request) -> web.Response:
+        body = await _json(request)
+        user, password = body.get("user"), body.get("password")
+        if not isinstance(user, str) or not isinstance(password, str):
+            raise web.HTTPBadRequest(text="login: user and password\n")
+        access = self.access
+        if access is None or not access.users:
+            raise web.HTTPForbidden(text="no users are configured (access.users)\n")
+        source = f"{body.get('client') or 'screen'} {request.remote or '?'}"[:100]
+        # scrypt takes tens of ms: in a thread, the station's loop goes on
+        issuer = await asyncio.get_running_loop().run_in_executor(
+            None, access.issuer, user, password, source)
+        if issuer is None:
+            log.warning("login refused for user %r from %s", user[:64], request.remote)
+            raise web.HTTPUnauthorized(text="wrong user or password\n")
+        token = self.sessions.open(issuer)
+        log.info("user %s logged in (%s)", issuer.user, source)
+        resp = web.json_response(_who(issuer))
+        resp.set_cookie(COOKIE, token, httponly=True, samesite="Strict", path="/")
+        return resp
+
+    async def _logout(self, request: web.Request) -> web.Response:
+        self.sessions.close(request.cookies.get(COOKIE))
+        resp = web.json_response({"user": None})
+        resp.del_cookie(COOKIE, path="/")
+        return resp
+
+    async def _me(self, request: web.Request) -> web.Response:
+        issuer = self.sessions.get(request.cookies.get(COOKIE))
+        return web.json_response(_who(issuer) if issuer else {"user": None, "rights": []})
+
+    # -- commands ---------------------------------------------------------------------------
+    async def _command(self, request: web.Request) -> web.Response:
+        issuer = self.sessions.get(request.cookies.get(COOKIE))
+        if issuer is None:
+            raise web.HTTPUnauthorized(text="log in first\n")
+        body = await _json(request)
+        nonce, issued = body.get("nonce"), body.get("issued_at")
+        if not isinstance(nonce, str) or isinstance(issued, bool) \
+                or not isinstance(issued, int | float):
+            raise web.HTTPBadRequest(text="a command needs nonce and issued_at\n")
+        problem = self.replays.check(nonce, float(issued))
+        if problem is not None:
+            log.warning("command from %s (%s) refused: %s", issuer.user, issuer.source,
+                        problem)
+            raise web.HTTPBadRequest(text=problem + "\n")
+        command = _command(body)
+        if self.submit is None:
+            raise web.HTTPServiceUnavailable(text="the station is not running\n")
+        try:
+            answer = await self.submit(command, issuer)
+        except TimeoutError:
+            raise web.HTTPServiceUnavailable(text="the station did not answer in time\n"
+                                             ) from None
+        out: dict[str, Any] = {"accepted": answer.accepted, "words": answer_words(answer),
+                               "kind": KIND[type(command)]}
+        if answer.reason is not None:
+            reason = {k: v for k, v in asdict(answer.reason).items() if v not in (None, ())}
+            out["reason"] = {**reason, "kind": answer.reason.kind.value,
+                             "words": reason_words(answer.reason)}
+        return web.json_response(out, status=200 if answer.accepted else 409)
+
+    # -- the feed ---------------------------------------------------------------------------
+    async def _feed_since(self, request: web.Request) -> web.Response:
+        results = self._feed()
+        if results is None:
+            raise web.HTTPServiceUnavailable(text="results database unavailable\n")
+        try:
+            since = int(request.query.get("since", "0"))
+            limit = int(request.query.get("limit", "100"))
+        except ValueError:
+            raise web.HTTPBadRequest(text="since and limit: integers\n") from None
+        ledger = results.repo.ledger
+        loop = asyncio.get_running_loop()
+        entries = await loop.run_in_executor(None, ledger.since, since, limit)
+        last = await loop.run_in_executor(None, ledger.last_seq)
+        db_id = await loop.run_in_executor(None, ledger.db_id)
+        return web.json_response({"db_id": db_id, "last_seq": last, "entries": entries})
+
+
+def _who(issuer: Issuer) -> dict[str, Any]:
+    return {"user": issuer.user, "rights": sorted(r.value for r in issuer.rights)}
+
+
+async def _json(request: web.Request) -> dict[str, Any]:
+    if request.content_type != "application/json":
+        raise web.HTTPUnsupportedMediaType(text="send JSON (Content-Type: application/json)\n")
+    try:
+        body = await request.json(loads=json.loads)
+    except (ValueError, UnicodeDecodeError):
+        raise web.HTTPBadRequest(text="the body is not JSON\n") from None
+    if not isinstance(body, dict):
+        raise web.HTTPBadRequest(text="the body must be a JSON object\n")
+    return body
+
+
+def _text(body: dict[str, Any], key: str, *, limit: int, required: bool = True) -> str:
+    v = body.get(key, None if required else "")
+    if not isinstance(v, str) or (required and not v.strip()) or len(v) > limit:
+        need = "required" if required else "optional"
+        raise web.HTTPBadRequest(text=f"{key}: a text of at most {limit} characters "
+                                      f"({need})\n")
+    return v.strip()
+
+
+def _command(body: dict[str, Any]) -> Command:
+    """The typed command of a request's body; 400 for anything else."""
+    kind = body.get("kind")
+    comment = _text(body, "comment", limit=500, required=False)
+    if kind == "skip":
+        return SkipBolt(_text(body, "vin", limit=32), _text(body, "bolt", limit=32), comment)
+    if kind == "reopen":
+        return ReopenVehicle(_text(body, "vin", limit=32), comment)
+    raise web.HTTPBadRequest(text=f"kind: one of {', '.join(KIND.values())}\n")
+
+
+__all__ = ["COOKIE", "POSTS", "CommandRoutes", "Submit"]

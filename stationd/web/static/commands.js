@@ -1,0 +1,88 @@
+// Commands from the operator screen: log in (a session cookie the server sets), skip a bolt of
+// the vehicle at the station, reopen a closed vehicle.  The station decides: the screen shows
+// its answer (accepted, or refused with the reason in words) and nothing else.
+"use strict";
+(function () {
+  const q = (id) => document.getElementById(id);
+  let rights = [];
+
+  function show(who) {
+    const signed = Boolean(who && who.user);
+    rights = signed ? who.rights : [];
+    q("login").hidden = signed;
+    q("signed").hidden = !signed;
+    q("who").textContent = signed ? `${who.user} (${who.rights.join(", ") || "no rights"})` : "";
+    q("skip").hidden = !rights.includes("skip");
+    q("reopen").hidden = !rights.includes("reopen");
+  }
+
+  function answer(text, ok) {
+    const a = q("cmd-answer");
+    a.textContent = text;
+    a.className = ok ? "cmd-ok" : "cmd-refused";
+    a.dataset.ok = ok ? "1" : "0";
+  }
+
+  async function post(path, body) {
+    const r = await fetch(path, {method: "POST", credentials: "same-origin",
+      headers: {"Content-Type": "application/json"}, body: JSON.stringify(body)});
+    const text = await r.text();
+    let doc = null;
+    try { doc = JSON.parse(text); } catch (e) { doc = null; }
+    return {status: r.status, doc, text: text.trim()};
+  }
+
+  function nonce() {
+    const b = new Uint8Array(18);
+    crypto.getRandomValues(b);
+    return Array.from(b, (x) => x.toString(16).padStart(2, "0")).join("");
+  }
+
+  async function command(body) {
+    const r = await post("/api/commands", {...body, nonce: nonce(), issued_at: Date.now() / 1000});
+    if (r.doc && "accepted" in r.doc) answer(r.doc.accepted ? `accepted: ${r.doc.words}` :
+      `refused: ${r.doc.reason.words}`, r.doc.accepted);
+    else {
+      if (r.status === 401) show(null);
+      answer(r.text || `HTTP ${r.status}`, false);
+    }
+  }
+
+  // the bolts one may skip: those of the vehicle at the station not done yet
+  function fillBolts() {
+    const view = window.lastView;
+    const sel = q("skip-bolt");
+    const bolts = view && view.vehicle ? view.bolts.filter((b) => b.state !== "ok" && b.state !== "skipped") : [];
+    const key = bolts.map((b) => b.bolt).join(",");
+    if (sel.dataset.key === key) return;
+    const keep = sel.value;
+    sel.dataset.key = key;
+    sel.replaceChildren(...bolts.map((b) => new Option(b.bolt, b.bolt)));
+    if (bolts.some((b) => b.bolt === keep)) sel.value = keep;
+  }
+  setInterval(fillBolts, 500);
+
+  q("login").addEventListener("submit", async (e) => {
+    e.preventDefault();
+    const r = await post("/api/login", {user: q("login-user").value, password: q("login-password").value});
+    q("login-password").value = "";
+    if (r.status === 200 && r.doc) { show(r.doc); answer(`logged in as ${r.doc.user}`, true); }
+    else answer(r.text || `HTTP ${r.status}`, false);
+  });
+  q("logout").addEventListener("click", async () => {
+    await post("/api/logout", {});
+    show(null);
+    answer("logged out", true);
+  });
+  q("skip").addEventListener("submit", (e) => {
+    e.preventDefault();
+    const view = window.lastView;
+    if (!view || !view.vehicle) { answer("no vehicle at the station", false); return; }
+    command({kind: "skip", vin: view.vehicle.vin, bolt: q("skip-bolt").value, comment: q("skip-comment").value});
+  });
+  q("reopen").addEventListener("submit", (e) => {
+    e.preventDefault();
+    command({kind: "reopen", vin: q("reopen-vin").value, comment: q("reopen-comment").value});
+  });
+  fetch("/api/me", {credentials: "same-origin"}).then((r) => r.ok ? r.json() : null).then(show, () => show(null));
+})();

@@ -1,0 +1,68 @@
+"""Typed reasons and answers in words, for the edges only (the journal, the screens, the
+command line).  One place, so a screen in another language replaces this module's tables, not
+the station's rules."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from stationd.reasons import Reason, Why
+from stationd.station.commands import KIND, Answer, ReopenVehicle, SkipBolt
+
+
+def _mm(v: float | None) -> str:
+    return "?" if v is None else f"{v:.1f}"
+
+
+_WORDS: dict[Why, Callable[[Reason], str]] = {
+    Why.STALE: lambda r: f"localization is stale ({r.age_ms or 0:.0f} ms old)",
+    Why.NO_BOLTS: lambda r: "this vehicle has no bolts",
+    Why.NO_BOLT_NEAR: lambda r: (f"no bolt within {r.limit or 0:g} mm (nearest {r.bolt} at "
+                                 f"{_mm(r.distance_mm)} mm)"),
+    Why.AMBIGUOUS: lambda r: (f"ambiguous: {r.bolt} at {_mm(r.distance_mm)} mm, {r.other} at "
+                              f"{_mm(r.other_mm)} mm"),
+    Why.SKIPPED: lambda r: f"{r.bolt} skipped: {r.note}",
+    Why.DONE: lambda r: f"{r.bolt} is already done",
+    Why.MUST_WAIT: lambda r: f"{r.bolt} must wait: {r.note}",
+    Why.NOT_STABLE: lambda r: f"{r.bolt}: stable for {r.count} of {r.needed} frames",
+    Why.NOT_LOCALIZED: lambda r: r.note or "no localization",
+    Why.NO_RIGHT: lambda r: f"your role does not have the right to {r.right}",
+    Why.NO_VEHICLE: lambda r: "no vehicle at the station",
+    Why.OTHER_VEHICLE: lambda r: f"vehicle {r.vin} is not the one at the station",
+    Why.UNKNOWN_BOLT: lambda r: f"{r.bolt} is not a bolt of vehicle {r.vin}",
+    Why.TOOL_ON_BOLT: lambda r: f"{r.bolt} is being tightened now",
+    Why.ALREADY_OPEN: lambda r: f"vehicle {r.vin} is open at the station",
+    Why.NOT_CLOSED: lambda r: f"vehicle {r.vin} is not closed",
+    Why.UNKNOWN_VEHICLE: lambda r: f"vehicle {r.vin} is not in the database",
+    Why.DEVICE_FAULT: lambda r: f"a device is in fault: {r.note}",
+    Why.NOT_RECORDED: lambda r: f"the database did not record it: {r.note}",
+}
+
+
+def reason_words(reason: Reason) -> str:
+    """One line an operator reads."""
+    return _WORDS[reason.kind](reason)
+
+
+def command_words(answer: Answer) -> str:
+    """What the command was: ``skip B07 of VIN123 ("no access")``."""
+    cmd = answer.command
+    what = KIND[type(cmd)]
+    if isinstance(cmd, SkipBolt):
+        what += f" {cmd.bolt} of {cmd.vin}"
+    elif isinstance(cmd, ReopenVehicle):
+        what += f" {cmd.vin}"
+    if cmd.comment:
+        what += f" ({cmd.comment!r})"
+    return what
+
+
+def answer_words(answer: Answer) -> str:
+    """The journal's line: the command, who gave it and from where, and the answer."""
+    head = f"command {command_words(answer)} by {answer.issuer.user} ({answer.issuer.source})"
+    if answer.reason is None:
+        return f"{head}: accepted"
+    return f"{head}: refused: {reason_words(answer.reason)}"
+
+
+__all__ = ["answer_words", "command_words", "reason_words"]

@@ -1,0 +1,139 @@
+"""Commands in the pure core: checked against the rules and the issuer's rights, effective only
+once recorded, answered with a typed reason; every input type has its handler."""
+
+from __future__ import annotations
+
+import typing
+
+import pytest
+
+from stationd.reasons import Reason, Why
+from stationd.station import core as core_module
+from stationd.station.commands import Issuer, ReopenVehicle, Right, SkipBolt
+from stationd.station.core import (
+    CommandDone,
+    CommandIn,
+    DisableTool,
+    LiftRead,
+    RecordCommand,
+    Reply,
+    State,
+    StationCore,
+    VehicleLoaded,
+    VehicleRejected,
+)
+from stationd.station.events import BoltSkipped
+from stationd.words import answer_words
+from tests.station.test_core import BOLTS, _on, _ready
+
+SUPERVISOR = Issuer("sam", frozenset(Right), "screen 10.0.0.7")
+OPERATOR = Issuer("olga", frozenset({Right.SKIP}), "cli")
+NOBODY = Issuer("nina", frozenset(), "screen 10.0.0.8")
+
+
+def _answer(acts: list[typing.Any]) -> Reply:
+    replies = [a for a in acts if isinstance(a, Reply)]
+    assert len(replies) == 1, acts
+    return replies[0]
+
+
+def test_every_input_type_has_its_handler():
+    """The core dispatches by the input's class name: each member of ``Event`` must have
+    its ``_on_`` method (a new input without one would raise at run time)."""
+    for cls in typing.get_args(core_module.Event):
+        assert callable(getattr(StationCore, f"_on_{cls.__name__}", None)), cls.__name__
+
+
+def test_a_skip_takes_effect_once_recorded_and_is_answered_accepted():
+    d = _ready()
+    acts = d.core.feed(CommandIn(d.t, 1, SkipBolt("VIN1", "B2", "no access"), OPERATOR))
+    assert [type(a).__name__ for a in acts] == ["RecordCommand"]
+    assert "B2" not in d.core.matcher.skipped          # not before it is on disk
+    acts = d.core.feed(CommandDone(d.t, 1))
+    assert _answer(acts).answer.accepted
+    assert d.core.matcher.skipped["B2"] == "olga's command (no access)"
+    assert any(type(a).__name__ == "Publish" and isinstance(a.event, BoltSkipped)
+               for a in acts)
+    _on(d, 2, 3)
+    assert d.sends == []                               # never sent for a skipped bolt
+
+
+def test_a_skip_of_the_selected_bolt_turns_the_tool_off():
+    d = _ready()
+    _on(d, 2)
+    d.step(("ack", 0.01, True))
+    _on(d, 2, 1)
+    assert d.tool and d.core.state is State.TIGHTENING
+    # while the tool is on that bolt: refused
+    acts = d.core.feed(CommandIn(d.t, 1, SkipBolt("VIN1", "B2"), SUPERVISOR))
+    assert _answer(acts).answer.reason == Reason(Why.TOOL_ON_BOLT, bolt="B2")
+    # selected, not yet enabled (a stale frame turned the tool off): accepted, dropped
+    d.step(("loc", 0.1, 2, 0.9, 0.0))
+    assert d.core.state is State.BOLT_SELECTED and not d.tool
+    d.core.feed(CommandIn(d.t, 2, SkipBolt("VIN1", "B2"), SUPERVISOR))
+    acts = d.core.feed(CommandDone(d.t, 2))
+    assert _answer(acts).answer.accepted
+    assert any(isinstance(a, DisableTool) for a in acts)
+    assert d.core.state is State.TRACKING and d.core.bolt is None
+
+
+@pytest.mark.parametrize(("command", "issuer", "why"), [
+    (SkipBolt("VIN1", "B2"), NOBODY, Reason(Why.NO_RIGHT, right="skip")),
+    (ReopenVehicle("VIN9"), OPERATOR, Reason(Why.NO_RIGHT, right="reopen")),
+    (SkipBolt("VIN9", "B2"), OPERATOR, Reason(Why.OTHER_VEHICLE, vin="VIN9")),
+    (SkipBolt("VIN1", "B9"), OPERATOR, Reason(Why.UNKNOWN_BOLT, bolt="B9", vin="VIN1")),
+    (ReopenVehicle("VIN1"), SUPERVISOR, Reason(Why.ALREADY_OPEN, vin="VIN1")),
+])
+def test_a_command_against_the_rules_is_refused_with_its_reason_and_changes_nothing(
+        command, issuer, why):
+    d = _ready()
+    before = dict(d.core.matcher.skipped)
+    acts = d.core.feed(CommandIn(d.t, 7, command, issuer))
+    reply = _answer(acts)
+    assert reply.answer.reason == why and not reply.answer.accepted
+    assert not any(isinstance(a, RecordCommand) for a in acts)
+    assert d.core.matcher.skipped == before
+    assert "refused" in answer_words(reply.answer) and issuer.user in answer_words(reply.answer)
+
+
+def test_a_skip_without_a_vehicle_or_of_a_done_bolt_is_refused():
+    core = StationCore()
+    acts = core.feed(CommandIn(1.0, 1, SkipBolt("VIN1", "B1"), OPERATOR))
+    assert _answer(acts).answer.reason == Reason(Why.NO_VEHICLE)
+    d = _ready()
+    d.core.matcher.mark_done("B1")
+    acts = d.core.feed(CommandIn(d.t, 2, SkipBolt("VIN1", "B1"), OPERATOR))
+    assert _answer(acts).answer.reason == Reason(Why.DONE, bolt="B1")
+
+
+def test_a_command_the_database_refuses_is_answered_refused_and_has_no_effect():
+    d = _ready()
+    d.core.feed(CommandIn(d.t, 3, SkipBolt("VIN1", "B3"), OPERATOR))
+    acts = d.core.feed(CommandDone(d.t, 3, Reason(Why.NOT_RECORDED, note="disk full")))
+    assert _answer(acts).answer.reason == Reason(Why.NOT_RECORDED, note="disk full")
+    assert "B3" not in d.core.matcher.skipped
+    assert d.core.feed(CommandDone(d.t, 3)) == []      # answered once
+
+
+def test_a_reopen_of_the_closed_vehicle_at_height_clears_its_fault_and_loads_it():
+    core = StationCore(rework=False)
+    core.feed(core_module.Started(1.0))
+    core.feed(LiftRead(1.1, True, True, 7, "OLDVIN"))
+    core.feed(VehicleRejected(1.2, "OLDVIN", "closed", closed=True))
+    assert core.state is State.FAULT and "vehicle" in core.faults
+    acts = core.feed(CommandIn(1.3, 4, ReopenVehicle("OLDVIN", "rework"), SUPERVISOR))
+    assert [type(a).__name__ for a in acts] == ["RecordCommand"]
+    acts = core.feed(CommandDone(1.4, 4))
+    assert _answer(acts).answer.accepted and "vehicle" not in core.faults
+    acts = core.feed(LiftRead(1.5, True, True, 7, "OLDVIN"))
+    assert [type(a).__name__ for a in acts if type(a).__name__ == "LoadVehicle"] \
+        == ["LoadVehicle"]
+    core.feed(VehicleLoaded(1.6, "OLDVIN", "M", BOLTS, rework=True))
+    assert core.state is State.TRACKING
+
+
+def test_skips_recorded_before_a_reload_come_back_with_the_vehicle():
+    d = _ready()
+    d.core.feed(VehicleLoaded(d.t, "VIN1", "M", BOLTS, skipped={"B3": "olga's command"}))
+    _on(d, 3, 3)
+    assert d.sends == []

@@ -1,0 +1,159 @@
+"""People's commands through the running daemon (``station_proc.py``: the real serve loop,
+its lift PLC over Modbus TCP and its controller over Open Protocol on loopback): ``stationd
+skip`` and ``reopen`` log in over the daemon's API with a user's password and are accepted or
+refused with the station's reason; a wrong password, a role without the right, a replayed or
+stale request change nothing; an accepted skip is recorded with its user, is in the results
+feed, and outlives a reload."""
+
+from __future__ import annotations
+
+import http.cookiejar
+import json
+import os
+import sqlite3
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+from drivers.lift.sim import SimulatedPlc
+from drivers.wrench.sim import SimController
+from stationd.access import hash_password
+from stationd.station.demo import _sim_psets
+from tests.station.test_daemon_faults import SIM, Proc, _free_port
+from tests.station.test_restart import _until
+
+ROOT = Path(__file__).resolve().parents[2]
+VIN = "COMMANDVIN0000001"
+PASSWORD = "line-7-password"
+HASH = hash_password(PASSWORD)
+
+
+def _station(port: int):
+    def edit(text: str) -> str:
+        return text + (f"\nhttp: {{listen: '127.0.0.1:{port}'}}\naccess:\n  roles:\n"
+                       "    operator: [skip]\n    supervisor: [skip, reopen]\n    viewer: []\n"
+                       f"  users:\n    olga: {{role: operator, password: '{HASH}'}}\n"
+                       f"    sam: {{role: supervisor, password: '{HASH}'}}\n"
+                       f"    nina: {{role: viewer, password: '{HASH}'}}\n")
+    return edit
+
+
+def _cli(*args: str, password: str = PASSWORD) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "STATIOND_PASSWORD": password, "PYTHONPATH": str(ROOT)}
+    return subprocess.run([sys.executable, "-m", "stationd", *args], capture_output=True,
+                          text=True, env=env, timeout=60, check=False)
+
+
+class Client:
+    """A logged-in HTTP client (as a script would be), to send requests by hand."""
+
+    def __init__(self, url: str) -> None:
+        self.url = url.rstrip("/")
+        self.opener = urllib.request.build_opener(
+            urllib.request.HTTPCookieProcessor(http.cookiejar.CookieJar()))
+
+    def post(self, path: str, body: dict) -> tuple[int, str]:
+        req = urllib.request.Request(self.url + path, data=json.dumps(body).encode(),
+                                     headers={"Content-Type": "application/json"})
+        try:
+            with self.opener.open(req, timeout=30) as r:
+                return r.status, r.read().decode()
+        except urllib.error.HTTPError as exc:
+            return exc.code, exc.read().decode()
+
+
+@pytest.mark.timeout(300)
+def test_commands_through_the_daemon_are_authenticated_recorded_and_outlive_a_reload(
+        tmp_path):
+    lift_port, ctl_port, http_port = _free_port(), _free_port(), _free_port()
+    url = f"http://127.0.0.1:{http_port}/"
+    plc = SimulatedPlc()
+    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=6, nok_rate=0.0)
+    d = Proc(tmp_path, lift_port, ctl_port, edit=_station(http_port))
+    try:
+        plc.set_vehicle(1, VIN)
+        plc.start_tcp(lift_port)
+        ctl.start()
+        ctl.listen_tcp(port=ctl_port)
+        plc.raise_lift()
+        d.wait_log("tracking: tracking the wrench")
+
+        # an operator skips B05 from the command line: accepted, journaled with the user
+        got = _cli("skip", VIN, "B05", "--user", "olga", "--comment", "no access",
+                   "--url", url)
+        assert got.returncode == 0, got.stderr
+        assert "accepted" in got.stdout and "olga" in got.stdout
+        d.wait_log("command skip B05 of COMMANDVIN0000001 ('no access') by olga (cli "
+                   "127.0.0.1): accepted")
+        (tmp_path / "pose").write_text("B05")
+        d.wait_log("no bolt: B05 skipped: olga's command (no access)")
+        assert "tightening bolt B05" not in d.log()
+        (tmp_path / "pose").write_text("")
+
+        # refused: a role without the right, a bolt already skipped, a wrong password
+        got = _cli("skip", VIN, "B06", "--user", "nina", "--url", url)
+        assert got.returncode == 1 and "does not have the right to skip" in got.stdout
+        got = _cli("reopen", "OLDVIN", "--user", "olga", "--url", url)
+        assert got.returncode == 1 and "right to reopen" in got.stdout
+        got = _cli("skip", VIN, "B05", "--user", "sam", "--url", url)
+        assert got.returncode == 1 and "B05 skipped: olga's command" in got.stdout
+        got = _cli("skip", VIN, "B07", "--user", "sam", "--url", url, password="guess1234")
+        assert got.returncode == 3 and "login refused" in got.stderr
+        d.wait_log("login refused for user 'sam'")
+        got = _cli("reopen", VIN, "--user", "sam", "--url", url)   # open at the station
+        assert got.returncode == 1 and f"vehicle {VIN} is open at the station" in got.stdout
+        got = _cli("skip", VIN, "B07", "--user", "olga", "--url", "not a url")
+        assert got.returncode == 2 and "Traceback" not in got.stderr
+
+        # by hand: without a session, a replayed and a stale request are refused
+        c = Client(url)
+        body = {"kind": "skip", "vin": VIN, "bolt": "B08", "nonce": "a" * 24,
+                "issued_at": time.time()}
+        assert c.post("/api/commands", body)[0] == 401
+        assert c.post("/api/login", {"user": "sam", "password": PASSWORD})[0] == 200
+        assert c.post("/api/commands", body)[0] == 200
+        status, text = c.post("/api/commands", {**body, "bolt": "B09"})
+        assert status == 400 and "replayed" in text
+        status, text = c.post("/api/commands", {**body, "bolt": "B09", "nonce": "b" * 24,
+                                                "issued_at": time.time() - 3600})
+        assert status == 400 and "stale" in text
+        req = urllib.request.Request(url + "api/commands", data=b"kind=skip")   # a form
+        with pytest.raises(urllib.error.HTTPError) as err:
+            c.opener.open(req, timeout=30)
+        assert err.value.code == 415
+
+        # the record: the two accepted skips, with their users, in the feed in order
+        con = sqlite3.connect(tmp_path / "station.db")
+        try:
+            rows = list(con.execute("SELECT user, source, kind, vin, bolt, comment "
+                                    "FROM commands ORDER BY id"))
+        finally:
+            con.close()
+        assert rows == [("olga", "cli 127.0.0.1", "skip", VIN, "B05", "no access"),
+                        ("sam", "screen 127.0.0.1", "skip", VIN, "B08", "")]
+        got = _cli("feed", "--url", url)
+        assert got.returncode == 0, got.stderr
+        feed = [json.loads(line) for line in got.stdout.splitlines()]
+        assert [(e["kind"], e["record"]["bolt"]) for e in feed] == [("command", "B05"),
+                                                                    ("command", "B08")]
+        assert feed[0]["seq"] < feed[1]["seq"] and len({e["db_id"] for e in feed}) == 1
+        assert _cli("feed", "--url", url, "--since", str(feed[-1]["seq"])).stdout == ""
+
+        # a reload: the skips come back with the vehicle
+        d.p.send_signal(1)   # SIGHUP
+        d.wait_log("configuration reloaded")
+        d.wait_log("tracking: tracking the wrench", count=2)
+        (tmp_path / "pose").write_text("B08")
+        d.wait_log("no bolt: B08 skipped: sam's command")
+        _until(lambda: d.p.poll() is None, 1, "running")
+        assert d.stop() == 0
+    finally:
+        d.kill()
+        ctl.close()
+        plc.close()
+    assert "Traceback" not in d.log()

@@ -1,0 +1,105 @@
+"""Users, roles, password hashes, sessions and the replay guard of the command channel."""
+
+from __future__ import annotations
+
+import pytest
+
+from stationd.access import (
+    AccessConfig,
+    ReplayGuard,
+    Sessions,
+    hash_password,
+    parse_hash,
+    verify_password,
+)
+from stationd.errors import ConfigError
+from stationd.station.commands import Right
+from stationd.yamlio import YamlNode
+
+HASH = hash_password("correct horse", salt=b"0123456789abcdef")
+
+
+def test_a_hash_verifies_its_password_only_and_carries_its_parameters():
+    assert verify_password("correct horse", HASH)
+    assert not verify_password("correct horsf", HASH)
+    n, r, p, salt, key = parse_hash(HASH)
+    assert (n, r, p, salt, len(key)) == (2 ** 14, 8, 1, b"0123456789abcdef", 32)
+    assert hash_password("correct horse") != hash_password("correct horse")   # salted
+
+
+@pytest.mark.parametrize("text", ["correct horse", "scrypt$16384$8$1$abc", "",
+                                  "scrypt$1000$8$1$MDEyMzQ1Njc4OWFiY2RlZg==$" + "A" * 44,
+                                  "scrypt$16384$8$1$!!!$" + "A" * 44])
+def test_anything_but_a_scrypt_hash_is_refused(text):
+    with pytest.raises(ValueError):
+        parse_hash(text)
+
+
+def _access(yaml_text: str) -> AccessConfig:
+    return AccessConfig.from_node(YamlNode.parse(yaml_text, "station.yaml"))
+
+
+def test_users_get_the_rights_of_their_role_and_a_wrong_password_nothing():
+    a = _access(f"users:\n  sam: {{role: supervisor, password: '{HASH}'}}\n"
+                f"  olga: {{role: operator, password: '{HASH}'}}\n")
+    sam = a.issuer("sam", "correct horse", "cli")
+    assert sam is not None and sam.rights == {Right.SKIP, Right.REOPEN, Right.RELEASE,
+                                              Right.LOOSEN}
+    olga = a.issuer("olga", "correct horse", "screen 10.0.0.7")
+    assert olga is not None and olga.rights == {Right.SKIP} and olga.source.startswith("screen")
+    assert a.issuer("sam", "wrong", "cli") is None
+    assert a.issuer("nobody", "correct horse", "cli") is None
+
+
+def test_custom_roles_replace_the_defaults():
+    a = _access(f"roles:\n  lead: [skip, teach]\nusers:\n  tom: {{role: lead, password: "
+                f"'{HASH}'}}\n")
+    tom = a.issuer("tom", "correct horse", "cli")
+    assert tom is not None and tom.rights == {Right.SKIP, Right.TEACH}
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("users:\n  sam: {role: supervisor, password: hunter22}\n", "never the password"),
+    (f"users:\n  sam: {{role: king, password: '{HASH}'}}\n", "'king' is not one of"),
+    (f"users:\n  sam: {{password: '{HASH}'}}\n", "missing key(s): role"),
+    ("roles:\n  lead: [fly]\n", "'fly' is not one of"),
+    ("groups: {}\n", "unknown key"),
+])
+def test_a_bad_access_section_names_its_line_and_key(text, message):
+    with pytest.raises(ConfigError) as err:
+        _access(text)
+    assert message in str(err.value) and "station.yaml" in str(err.value)
+
+
+def test_sessions_end_idle_and_after_a_shift_and_on_logout():
+    now = [0.0]
+    s = Sessions(idle_s=60, max_s=600, clock=lambda: now[0])
+    who = _access(f"users:\n  sam: {{role: operator, password: '{HASH}'}}\n") \
+        .issuer("sam", "correct horse", "cli")
+    assert who is not None
+    t = s.open(who)
+    for _ in range(9):
+        now[0] += 59
+        assert s.get(t) == who        # kept alive by use
+    now[0] += 200
+    assert s.get(t) is None           # idle too long
+    t = s.open(who)
+    for _ in range(12):
+        now[0] += 55
+    assert s.get(t) is None           # a shift at most
+    t = s.open(who)
+    s.close(t)
+    assert s.get(t) is None and s.get(None) is None and s.get("forged") is None
+
+
+def test_a_replayed_or_stale_request_is_refused():
+    now = [1000.0]
+    g = ReplayGuard(window_s=120, clock=lambda: now[0])
+    nonce = "n" * 24
+    assert g.check(nonce, 999.0) is None
+    assert "replayed" in (g.check(nonce, 999.0) or "")
+    assert "stale" in (g.check("m" * 24, 700.0) or "")
+    assert "stale" in (g.check("k" * 24, 1300.0) or "")     # from the future too
+    assert "nonce" in (g.check("short", 1000.0) or "")
+    now[0] += 500                                            # the window moved on
+    assert "stale" in (g.check(nonce, 999.0) or "")
