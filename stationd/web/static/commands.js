@@ -40,7 +40,7 @@
 
   async function command(body) {
     const r = await post("/api/commands", {...body, nonce: nonce(), issued_at: Date.now() / 1000});
-    if (r.doc && "accepted" in r.doc) answer(r.doc.accepted ? `accepted: ${r.doc.words}` :
+    if (r.doc && "accepted" in r.doc) answer(r.doc.accepted ? r.doc.words :
       `refused: ${r.doc.reason.words}`, r.doc.accepted);
     else {
       if (r.status === 401) show(null);
