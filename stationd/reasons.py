@@ -27,7 +27,10 @@ class Why(enum.Enum):
     DONE = "done"                        # already tightened OK
     MUST_WAIT = "must wait"              # order or batch (blocking, note)
     NOT_STABLE = "not stable"            # stable for `count` of `needed` frames
-    NOT_LOCALIZED = "not localized"      # the vision's own reason (note)
+    ELSEWHERE = "elsewhere"              # on another bolt than the one selected (bolt)
+    NOT_LOCALIZED = "not localized"      # each pair's vision reason (per_pair) or note
+    TILTED = "tilted"                    # the wrench tilted beyond the limit (angle_deg, limit)
+    PAIRS_DISAGREE = "pairs disagree"    # pairs' bolt ends apart (distance_mm, limit)
     # a command refused by the station's rules
     NO_RIGHT = "no right"                # the user's role lacks the right (right)
     NO_VEHICLE = "no vehicle"            # no vehicle at the station
@@ -56,7 +59,9 @@ class Reason:
     count: int | None = None
     needed: int | None = None
     right: str | None = None
+    angle_deg: float | None = None
     blocking: tuple[str, ...] = ()
+    per_pair: tuple[tuple[str, str], ...] = ()   # (pair, the vision's reason) for each pair
     note: str | None = None             # words from elsewhere (the vision, a device)
 
     def key(self) -> tuple[object, ...]:

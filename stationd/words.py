@@ -14,6 +14,24 @@ def _mm(v: float | None) -> str:
     return "?" if v is None else f"{v:.1f}"
 
 
+def _per_pair(r: Reason, full: bool = False) -> str:
+    """Each pair's reason; said once with how many pairs say it when they all say the same
+    (the operator's large words; ``full``: every pair's, as the journal keeps it)."""
+    if not r.per_pair:
+        return r.note or "no localization"
+    said = {_no_side(why) for _, why in r.per_pair}
+    if len(said) == 1 and len(r.per_pair) > 1 and not full:
+        return f"{said.pop()} (all {len(r.per_pair)} pairs)"
+    return "; ".join(f"{pair}: {why}" for pair, why in r.per_pair)
+
+
+def _no_side(why: str) -> str:
+    """A camera's reason without the side that says it ("left: no purple region")."""
+    while why.startswith(("left: ", "right: ")):
+        why = why.split(": ", 1)[1]
+    return why
+
+
 _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.STALE: lambda r: f"localization is stale ({r.age_ms or 0:.0f} ms old)",
     Why.NO_BOLTS: lambda r: "this vehicle has no bolts",
@@ -25,7 +43,11 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.DONE: lambda r: f"{r.bolt} is already done",
     Why.MUST_WAIT: lambda r: f"{r.bolt} must wait: {r.note}",
     Why.NOT_STABLE: lambda r: f"{r.bolt}: stable for {r.count} of {r.needed} frames",
-    Why.NOT_LOCALIZED: lambda r: r.note or "no localization",
+    Why.ELSEWHERE: lambda r: f"nearest {r.bolt}",
+    Why.NOT_LOCALIZED: lambda r: _per_pair(r),
+    Why.TILTED: lambda r: f"wrench tilted {r.angle_deg or 0:.1f} deg (> {r.limit or 0:g} deg)",
+    Why.PAIRS_DISAGREE: lambda r: (f"pairs disagree by {r.distance_mm or 0:.2f} mm "
+                                   f"(> {r.limit or 0:g} mm)"),
     Why.NO_RIGHT: lambda r: f"your role does not have the right to {r.right}",
     Why.NO_VEHICLE: lambda r: "no vehicle at the station",
     Why.OTHER_VEHICLE: lambda r: f"vehicle {r.vin} is not the one at the station",
@@ -39,8 +61,10 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
 }
 
 
-def reason_words(reason: Reason) -> str:
-    """One line an operator reads."""
+def reason_words(reason: Reason, *, full: bool = False) -> str:
+    """One line an operator reads (``full``: each pair's vision reason, for the journal)."""
+    if full and reason.kind is Why.NOT_LOCALIZED:
+        return _per_pair(reason, full=True)
     return _WORDS[reason.kind](reason)
 
 

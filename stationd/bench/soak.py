@@ -38,6 +38,7 @@ from stationd.bench.wait import until as _until
 from stationd.boltfile import load_bolts
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
+from stationd.reasons import Reason
 from stationd.sim.load import cpu_load
 from stationd.sim.soak import (
     Device,
@@ -101,7 +102,7 @@ class Watch:
         self.vin: str | None = None
         self.enabled: str | None = None       # the bolt the tool is enabled for
         self.tally = tally
-        self.refusal = ""                     # the last reason nothing was selected
+        self.refusal: Reason | None = None    # the last reason nothing was selected
         bus.subscribe(self.see)
 
     def see(self, ev: StationEvent) -> None:
@@ -230,8 +231,9 @@ class DaemonHooks(SimDevices):
 
     def why_not(self) -> str:
         w = self.watch
-        return f"{w.state}: {_kind(w.refusal or w.reason)}" if w.refusal or w.reason \
-            else w.state
+        if w.refusal is not None:
+            return f"{w.state}: {_kind(w.refusal)}"
+        return f"{w.state}: {w.reason}" if w.reason else w.state
 
 
 class _QuietNotifier(Notifier):

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from stationd.reasons import Reason, Why
 from stationd.vision.types import Refusal
 from stationd.yamlio import YamlNode
 
@@ -72,7 +73,8 @@ def bolt_end(centre_mm: np.ndarray, normal: np.ndarray, tool: ToolGeometry,
     axis = -n / norm
     tilt = math.degrees(math.acos(float(np.clip(axis @ up_v, -1.0, 1.0))))
     if tilt > tool.max_tilt_deg:
-        return Refusal(f"wrench tilted {tilt:.1f} deg (> {tool.max_tilt_deg} deg)")
+        return Refusal(f"wrench tilted {tilt:.1f} deg (> {tool.max_tilt_deg} deg)",
+                       Reason(Why.TILTED, angle_deg=tilt, limit=tool.max_tilt_deg))
     c = np.asarray(centre_mm, dtype=np.float64)
     if tool.rule == "perpendicular":
         # the paper: the wrench is assumed upright, the marker's (X, Y) is the bolt's
@@ -103,5 +105,6 @@ def fuse(points: list[np.ndarray], sigmas_mm: list[float],
     x = (P * w[:, None]).sum(axis=0) / w.sum()
     spread = float(np.linalg.norm(P - x, axis=1).max())
     if spread > max_spread_mm:
-        return Refusal(f"pairs disagree by {spread:.2f} mm (> {max_spread_mm} mm)")
+        return Refusal(f"pairs disagree by {spread:.2f} mm (> {max_spread_mm} mm)",
+                       Reason(Why.PAIRS_DISAGREE, distance_mm=spread, limit=max_spread_mm))
     return Fused(x, spread)

@@ -25,7 +25,6 @@ The safety rules, each enforced in exactly one place below:
 from __future__ import annotations
 
 import enum
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -60,9 +59,6 @@ from stationd.station.matching import BoltMatcher, BoltRule, Match, MatchParams
 #: tighten while disabled, and a controller reports within milliseconds
 LATE_RESULT_S = 5.0
 LIFT, WRENCH, VEHICLE, DATABASE = "lift", "wrench", "vehicle", "database"
-# a refusal's measurements ("812 ms", "3.1 mm"), not the bolt ids in it ("B01"): the reason
-# "B18 is already done" and "B01 is already done" are two refusals, "(812 ms)" and "(790 ms)" one
-_DIGITS = re.compile(r"(?<![A-Za-z0-9_.:/+-])\d+(\.\d+)?")
 
 
 class State(enum.Enum):
@@ -112,7 +108,7 @@ class LocalizedIn(Input):
 
     exposure_t: float
     point_mm: tuple[float, float, float] | None
-    reason: str | None = None
+    reason: Reason | None = None
     tilt_deg: float = 0.0
     evidence: Any = None
 
@@ -269,8 +265,11 @@ class EnableTool:
 
 @dataclass(frozen=True)
 class DisableTool:
+    """The tool off, with the station's words; ``why`` when a refusal turned it off."""
+
     reason: str
     bolt: str | None = None
+    why: Reason | None = None
 
 
 @dataclass(frozen=True)
@@ -378,7 +377,7 @@ class StationCore:
     _wrench_reconnects: int | None = field(default=None, repr=False)
     _vin_for: tuple[str, int] | None = field(default=None, repr=False)
     _vin_pending: bool = field(default=False, repr=False)
-    _last_refusal: str | None = field(default=None, repr=False)
+    _last_refusal: tuple[object, ...] | None = field(default=None, repr=False)
     # frames exposed at or before this (a rundown's end) never select: the wrench may have
     # moved since, and the next bolt's evidence must all come from after it
     _not_before: float = field(default=float("-inf"), repr=False)
@@ -506,7 +505,7 @@ class StationCore:
             return []   # exposed before the last rundown ended: where the wrench *was*
         age = ev.t - ev.exposure_t
         m = self.matcher.update(np.asarray(ev.point_mm), age) if ev.point_mm is not None \
-            else self.matcher.refuse(ev.reason or "no localization")
+            else self.matcher.refuse(ev.reason or Reason(Why.NOT_LOCALIZED))
         acts: list[Action] = [Publish(Localized(
             ev.point_mm, ev.tilt_deg if ev.point_mm is not None else None, m.reason,
             m.candidate, m.distance_mm, age * 1e3, self.allowed(), t=ev.t))]
@@ -524,20 +523,21 @@ class StationCore:
                 acts.append(EnableTool(self.bolt, sel))
             return acts
         self._away += 1
-        why = m.reason or f"nearest {m.candidate}"
+        # why not on it: the refusal, or the bolt it is on instead (a reason of its own kind)
+        why = m.reason or Reason(Why.ELSEWHERE, bolt=m.candidate)
         if self.tool_on:
-            acts += self._tool_off(ev.t, f"wrench not confirmed on bolt {self.bolt} ({why})")
+            acts += self._tool_off(ev.t, f"wrench not confirmed on bolt {self.bolt}", why)
             self._to(State.BOLT_SELECTED, f"bolt {self.bolt} selected; wrench not confirmed")
         if self._away >= self.leave_frames:
-            acts += self._drop(ev.t, State.TRACKING, f"wrench left bolt {self.bolt} ({why})")
+            acts += self._drop(ev.t, State.TRACKING, f"wrench left bolt {self.bolt}", why)
         return acts
 
     def _track(self, ev: LocalizedIn, m: Match) -> list[Action]:
         assert self.matcher is not None  # noqa: S101 - tracking has a vehicle
         if m.bolt is None:
-            key = _DIGITS.sub("#", m.reason or "")   # "stale (812 ms)" and "(790 ms)": one
-            if m.reason and key != self._last_refusal:
-                self._last_refusal = key
+            # once per change of kind and bolts: "stale (812 ms)" and "(790 ms)" are one
+            if m.reason is not None and m.reason.key() != self._last_refusal:
+                self._last_refusal = m.reason.key()
                 return [Publish(Refused(m.reason, m.candidate, t=ev.t))]
             return []
         ready = self._lift is not None and self._lift.ready
@@ -746,18 +746,19 @@ class StationCore:
     def _fault_reason(self) -> str:
         return "; ".join(f"{d}: {r}" for d, (_, r) in self.faults.items())
 
-    def _tool_off(self, t: float, reason: str) -> list[Action]:
+    def _tool_off(self, t: float, reason: str, why: Reason | None = None) -> list[Action]:
         was = self.tool_on
         self.tool_on = False
         if was:
             self._off_at = t
-        return [DisableTool(reason, self.bolt)]
+        return [DisableTool(reason, self.bolt, why)]
 
-    def _drop(self, t: float, state: State, reason: str) -> list[Action]:
+    def _drop(self, t: float, state: State, reason: str,
+              why: Reason | None = None) -> list[Action]:
         """Leave a bolt: the tool goes off first, whatever happens next."""
         acts: list[Action] = []
         if self.state in ON_A_BOLT or self.tool_on:
-            acts += self._tool_off(t, reason)
+            acts += self._tool_off(t, reason, why)
         self.bolt, self._selection, self._acked_at, self._away = None, None, None, 0
         if self.matcher is not None:
             self.matcher.reset()

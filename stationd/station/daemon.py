@@ -103,7 +103,7 @@ from stationd.station.events import (
 from stationd.station.scan import ScanPlan
 from stationd.station.sdnotify import Notifier
 from stationd.vision.types import Refusal
-from stationd.words import answer_words
+from stationd.words import answer_words, reason_words
 
 log = logging.getLogger("stationd")
 NOT_PAIRS = (LIFT, WRENCH, DATABASE)   # the keepers that are not camera pairs
@@ -143,7 +143,7 @@ class Localization:
 
     point_mm: np.ndarray | None
     tilt_deg: float = 0.0
-    reason: str | None = None
+    reason: Reason | None = None
     exposure_t: float = 0.0
     crops: dict[str, np.ndarray] = field(default_factory=dict)
     done_t: float = 0.0
@@ -154,7 +154,7 @@ class Localization:
 class PairView:
     """One pair's grab and localization; ``failed`` when the grab gave no usable pair."""
 
-    end: BoltEnd | str
+    end: BoltEnd | Refusal
     exposure_t: float
     crops: dict[str, np.ndarray] = field(default_factory=dict)
     failed: bool = False
@@ -589,7 +589,7 @@ class Station:
                 self._bad[n] = self._bad.get(n, 0) + 1
                 if self._bad[n] >= BAD_GRABS:
                     self._bad[n] = 0
-                    self.keepers[n].lost(DeviceError(str(g.end)))
+                    self.keepers[n].lost(DeviceError(_why(g.end)))
             elif not g.failed:
                 self._bad[n] = 0
                 self.keepers[n].worked()
@@ -605,16 +605,21 @@ class Station:
         ends = [g for g in usable if isinstance(g.end, BoltEnd)]
         used = ends or usable
         exposure = min(g.exposure_t for g in used)
-        reasons = [f"{n}: {g.end}" for n, g in zip(names, got, strict=True)
-                   if not g.failed and isinstance(g.end, str)]
         if not ends:
-            return Localization(None, reason="; ".join(reasons) or "no pair",
-                                exposure_t=exposure, done_t=done, timings_ms=timings)
+            refused = [(n, g.end) for n, g in zip(names, got, strict=True)
+                       if not g.failed and isinstance(g.end, Refusal)]
+            # a pair that sees the wrench tilted speaks for the operator's next move
+            typed = [r.why for _, r in refused if r.why is not None]
+            why = typed[0] if typed else Reason(Why.NOT_LOCALIZED, per_pair=tuple(
+                (n, r.reason) for n, r in refused))
+            return Localization(None, reason=why, exposure_t=exposure, done_t=done,
+                                timings_ms=timings)
         points = [g.end.point_mm for g in ends if isinstance(g.end, BoltEnd)]
         fused = fuse(points, [1.0] * len(points), max_spread_mm=2.0)
         if isinstance(fused, Refusal):
-            return Localization(None, reason=fused.reason, exposure_t=exposure, done_t=done,
-                                timings_ms=timings)
+            return Localization(None, reason=fused.why or Reason(Why.NOT_LOCALIZED,
+                                                                 note=fused.reason),
+                                exposure_t=exposure, done_t=done, timings_ms=timings)
         crops = {k: c for g in ends for k, c in g.crops.items()}
         tilt = float(np.mean([g.end.tilt_deg for g in ends if isinstance(g.end, BoltEnd)]))
         return Localization(fused.point_mm, tilt, exposure_t=exposure, crops=crops,
@@ -628,19 +633,20 @@ class Station:
         try:
             left, right = grabber.grab(1.0)
         except StereoSkewError as exc:
-            return PairView(one_line(exc), 0.0, failed=True, skew=True)
+            return PairView(Refusal(one_line(exc)), 0.0, failed=True, skew=True)
         except (DeviceError, ValueError) as exc:
-            return PairView(one_line(exc), 0.0, failed=True)
+            return PairView(Refusal(one_line(exc)), 0.0, failed=True)
         exposure = min(left.timestamp, right.timestamp)
         t1 = time.monotonic()
         size = self._size_problem(name, left.image, right.image)
         if size is not None:
-            return PairView(size, exposure, failed=True)
+            return PairView(Refusal(size), exposure, failed=True)
         try:
             res = localize(pc.calibration, left.image, right.image, self.cfg.vision,
                            self.cfg.marker)
         except (cv2.error, ValueError, IndexError, np.linalg.LinAlgError) as exc:
-            return PairView(f"frames not usable: {one_line(exc)}", exposure, failed=True)
+            return PairView(Refusal(f"frames not usable: {one_line(exc)}"), exposure,
+                            failed=True)
         timings = {"grab": (t1 - t0) * 1e3, "vision": (time.monotonic() - t1) * 1e3}
         sides = {"left": res.left.to_json(), "right": res.right.to_json()}
         if self.frames is not None:   # the commissioning screen's latest frames (no copy)
@@ -648,7 +654,7 @@ class Station:
                 self.frames.put(name, side, frame.image, frame_summary(det), frame.timestamp,
                                 det.search_image)
         if not res.found or res.point_mm is None or res.normal is None:
-            return PairView(str(res.reason), exposure, timings_ms=timings, sides=sides)
+            return PairView(Refusal(str(res.reason)), exposure, timings_ms=timings, sides=sides)
         crops = {}
         if self.cfg.records.save_images:
             crops = {f"{name}/{side}": crop(frame.image, det.roi)
@@ -656,12 +662,11 @@ class Station:
                                               ("right", right, res.right))
                      if det.roi is not None}
         if pc.to_vehicle is None:
-            return PairView("pair not registered into the vehicle frame", exposure,
+            return PairView(Refusal("pair not registered into the vehicle frame"), exposure,
                             timings_ms=timings, sides=sides)
         end = bolt_end(pc.to_vehicle.apply(res.point_mm),
                        pc.to_vehicle.apply_direction(res.normal), self.cfg.tool)
-        return PairView(end.reason if isinstance(end, Refusal) else end, exposure, crops,
-                        timings_ms=timings, sides=sides)
+        return PairView(end, exposure, crops, timings_ms=timings, sides=sides)
 
     # -- the actions -------------------------------------------------------------------------
     async def _do(self, a: Action) -> Event | None:
@@ -675,7 +680,7 @@ class Station:
             if isinstance(a, EnableTool):
                 return await self._enable_tool(a)
             if isinstance(a, DisableTool):
-                self.bus.publish(ToolDisabled(a.reason, a.bolt))
+                self.bus.publish(ToolDisabled(a.reason, a.bolt, a.why))
                 if self.wrench is not None:
                     await self._call(self.wrench.disable_tool)
                 if self._enable is not None and not self._enable_off:
@@ -713,7 +718,7 @@ class Station:
         elif isinstance(ev, Notice):
             (log.warning if ev.level == "warning" else log.info)("%s", ev.message)
         elif isinstance(ev, Refused):   # once per change of reason, not frame after frame
-            log.info("no bolt: %s", ev.reason)
+            log.info("no bolt: %s", reason_words(ev.reason, full=True))
         elif isinstance(ev, DeviceHealth):
             if ev.ok:
                 log.info("%s: back", ev.device)
@@ -1047,6 +1052,10 @@ def _sqlite_file(url: str) -> tuple[Path, tuple[int, int]] | None:
     except OSError:
         return None
     return path, (st.st_dev, st.st_ino)
+
+
+def _why(end: BoltEnd | Refusal) -> str:
+    return end.reason if isinstance(end, Refusal) else "no failure"
 
 
 def _xyz(p: Any) -> tuple[float, float, float]:

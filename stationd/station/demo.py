@@ -29,6 +29,7 @@ from stationd.boltfile import load_bolts
 from stationd.config import RecordsConfig, StationConfig, load_station_config
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
+from stationd.reasons import Reason, Why
 from stationd.sim.load import cpu_load
 from stationd.sim.world import World, wrench_at
 from stationd.station.core import SendParams, State
@@ -41,6 +42,7 @@ from stationd.station.events import (
 )
 from stationd.station.run import Screens
 from stationd.web.config import DEFAULT_LISTEN, HttpConfig, open_bind_problem
+from stationd.words import reason_words
 
 SIM_CONFIG = Path(__file__).resolve().parents[2] / "config" / "sim" / "station.yaml"
 
@@ -104,7 +106,8 @@ async def _operator(st: Station, world: World, rng: np.random.Generator, cycles:
             await asyncio.sleep(0.05)
         else:
             seen = [e for e in st.bus.of(Localized) if isinstance(e, Localized)]
-            why = seen[-1].reason if seen and seen[-1].reason else st.core.reason
+            last = seen[-1].reason if seen else None
+            why = reason_words(last) if last is not None else st.core.reason
             line["result"] = f"not selected ({why})"
         if st.last is not None and st.last.point_mm is not None:
             line["xy_error_mm"] = float(np.hypot(*(st.last.point_mm - pose.socket_v)[:2]))
@@ -345,12 +348,12 @@ def _num(v: Any) -> float:
     return float(v)
 
 
-def _kind(reason: str) -> str:
+def _kind(reason: Reason) -> str:
     """A refusal's category, for the summary (the full reasons are in the log)."""
-    for needle, kind in (("stable for", "not yet stable"), ("ambiguous", "ambiguous"),
-                         ("no bolt within", "no bolt within tolerance"),
-                         ("already done", "bolt already done"), ("stale", "stale"),
-                         ("tilted", "wrench tilted too far"), ("disagree", "pairs disagree")):
-        if needle in reason:
-            return kind
-    return "marker not localized"
+    return _KINDS.get(reason.kind, "marker not localized")
+
+
+_KINDS = {Why.NOT_STABLE: "not yet stable", Why.AMBIGUOUS: "ambiguous",
+          Why.NO_BOLT_NEAR: "no bolt within tolerance", Why.DONE: "bolt already done",
+          Why.STALE: "stale", Why.TILTED: "wrench tilted too far",
+          Why.PAIRS_DISAGREE: "pairs disagree"}

@@ -24,6 +24,8 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
+from stationd.reasons import Reason
+
 
 def _now() -> float:
     return time.time()
@@ -131,7 +133,7 @@ class Localized(StationEvent):
 
     point_mm: tuple[float, float, float] | None
     tilt_deg: float | None
-    reason: str | None
+    reason: Reason | None
     candidate: str | None
     distance_mm: float | None
     age_ms: float
@@ -141,9 +143,9 @@ class Localized(StationEvent):
 @dataclass(frozen=True)
 class Refused(StationEvent):
     """Nothing is sent, and why (stale, ambiguous, tilted, order rule, lift, fault...): emitted
-    when the reason changes, not frame after frame."""
+    when the reason changes (its kind and bolts, not its measurements), not frame after frame."""
 
-    reason: str
+    reason: Reason
     bolt: str | None = None
 
 
@@ -179,8 +181,12 @@ class ToolEnabled(StationEvent):
 
 @dataclass(frozen=True)
 class ToolDisabled(StationEvent):
+    """The tool went off: ``reason`` (the station's words), ``why`` when a refusal turned it
+    off (the wrench not confirmed on its bolt: stale, elsewhere, ...)."""
+
     reason: str
     bolt: str | None = None
+    why: Reason | None = None
 
 
 @dataclass(frozen=True)

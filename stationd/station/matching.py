@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from db.spacing import min_spacing_mm, too_close
+from stationd.reasons import Reason, Why
 
 
 @dataclass(frozen=True)
@@ -70,12 +71,13 @@ NO_RULE = BoltRule()
 
 @dataclass(frozen=True)
 class Match:
-    """The matcher's verdict for one localization: ``bolt`` is set only when it is taken."""
+    """The matcher's verdict for one localization: ``bolt`` is set only when it is taken,
+    else ``reason`` says why not (typed: the edges put it into words)."""
 
     bolt: str | None
     candidate: str | None
     distance_mm: float | None
-    reason: str | None
+    reason: Reason | None
     streak: int = 0
 
 
@@ -129,6 +131,13 @@ class BoltMatcher:
         Only the sequence: tolerance, done, skipped and stability are :meth:`update`'s.  Done
         and skipped are read live, so :meth:`mark_done` (or a new skip) counts at once.
         """
+        blocked = self._blocked(bolt)
+        return None if blocked is None else blocked[0]
+
+    def _blocked(self, bolt: str) -> tuple[str, tuple[str, ...]] | None:
+        """Why the sequence forbids ``bolt`` (naming the blocking bolts that were skipped:
+        waiting for them is waiting for something that will not happen on its own), and the
+        bolts it waits for; None if it allows it."""
         rule = self._rule.get(bolt, NO_RULE)
         open_batches: dict[str, list[str]] = {}
         for name, members in self._batches.items():
@@ -138,25 +147,21 @@ class BoltMatcher:
         if open_batches and rule.batch not in open_batches:
             why = "; ".join(f"finish batch {name} first: {', '.join(rest)} remaining"
                             for name, rest in open_batches.items())
-            return self._must_wait(bolt, why, [b for r in open_batches.values() for b in r])
-        before = [b for b in self._before.get(bolt, ()) if b not in self.done]
-        if before:
+            waits = [b for r in open_batches.values() for b in r]
+        else:
+            waits = [b for b in self._before.get(bolt, ()) if b not in self.done]
+            if not waits:
+                return None
             group = f" in batch {rule.batch}" if rule.batch is not None else ""
-            return self._must_wait(bolt, f"order {rule.order}{group} needs {', '.join(before)} "
-                                   "done first", before)
-        return None
-
-    def _must_wait(self, bolt: str, why: str, blocking: list[str]) -> str:
-        """The reason, naming the blocking bolts that were skipped: waiting for them is waiting
-        for something that will not happen on its own, and the operator must know it."""
-        notes = [f"{b} was skipped: {self.skipped[b]}" for b in blocking if b in self.skipped]
-        return "; ".join([f"{bolt} must wait: {why}", *notes])
+            why = f"order {rule.order}{group} needs {', '.join(waits)} done first"
+        notes = [f"{b} was skipped: {self.skipped[b]}" for b in waits if b in self.skipped]
+        return "; ".join([why, *notes]), tuple(waits)
 
     def reset(self) -> None:
         """Forget the streak (after a selection, a refusal, or the wrench leaving)."""
         self._streak_bolt, self._streak = None, 0
 
-    def refuse(self, reason: str) -> Match:
+    def refuse(self, reason: Reason) -> Match:
         """A localization was refused (or is missing): no bolt, and the streak restarts."""
         self.reset()
         return Match(None, None, None, reason)
@@ -164,36 +169,39 @@ class BoltMatcher:
     def update(self, bolt_end_mm: np.ndarray, age_s: float = 0.0) -> Match:
         p = self.params
         if age_s > p.max_age_s:
-            return self.refuse(f"localization is stale ({age_s * 1e3:.0f} ms old)")
+            return self.refuse(Reason(Why.STALE, age_ms=age_s * 1e3, limit=p.max_age_s * 1e3))
         if not self._ids:
-            return self.refuse("this vehicle has no bolts")
+            return self.refuse(Reason(Why.NO_BOLTS))
         d = np.hypot(*(self._xy - np.asarray(bolt_end_mm, dtype=np.float64)[:2]).T)
         order = np.argsort(d)
         i = int(order[0])
         near, dist = self._ids[i], float(d[i])
         if dist > p.tolerance_mm:
-            return self.refuse(f"no bolt within {p.tolerance_mm:g} mm (nearest {near} at "
-                               f"{dist:.1f} mm)")
+            return self.refuse(Reason(Why.NO_BOLT_NEAR, bolt=near, distance_mm=dist,
+                                      limit=p.tolerance_mm))
         if len(order) > 1:
             second = float(d[int(order[1])])
             if second - dist < p.margin_mm:
-                return self.refuse(f"ambiguous: {near} at {dist:.1f} mm, "
-                                   f"{self._ids[int(order[1])]} at {second:.1f} mm")
+                return self.refuse(Reason(Why.AMBIGUOUS, bolt=near, distance_mm=dist,
+                                          other=self._ids[int(order[1])], other_mm=second))
         if near in self.skipped:
             self.reset()
-            return Match(None, near, dist, f"{near} skipped: {self.skipped[near]}")
+            return Match(None, near, dist, Reason(Why.SKIPPED, bolt=near,
+                                                  note=self.skipped[near]))
         if near in self.done and not p.allow_retighten:
             self.reset()
-            return Match(None, near, dist, f"{near} is already done")
-        blocked = self.why_blocked(near)
+            return Match(None, near, dist, Reason(Why.DONE, bolt=near))
+        blocked = self._blocked(near)
         if blocked is not None:
             self.reset()
-            return Match(None, near, dist, blocked)
+            return Match(None, near, dist, Reason(Why.MUST_WAIT, bolt=near, note=blocked[0],
+                                                  blocking=blocked[1]))
         self._streak = self._streak + 1 if self._streak_bolt == near else 1
         self._streak_bolt = near
         if self._streak < p.stable_frames:
-            return Match(None, near, dist, f"{near}: stable for {self._streak} of "
-                         f"{p.stable_frames} frames", self._streak)
+            return Match(None, near, dist, Reason(Why.NOT_STABLE, bolt=near,
+                                                  count=self._streak, needed=p.stable_frames),
+                         self._streak)
         return Match(near, near, dist, None, self._streak)
 
 

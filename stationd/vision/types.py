@@ -12,12 +12,16 @@ from typing import Any
 
 import numpy as np
 
+from stationd.reasons import Reason
+
 
 @dataclass(frozen=True)
 class Refusal:
-    """Why a stage gave no result.  Falsy, so ``if not result:`` reads naturally."""
+    """Why a stage gave no result.  Falsy, so ``if not result:`` reads naturally.  ``why``:
+    the typed reason where the station acts on its kind (a tilt, pairs that disagree)."""
 
     reason: str
+    why: Reason | None = None
 
     def __bool__(self) -> bool:
         return False

@@ -9,10 +9,10 @@ same events live.  ``View.apply`` is the only way state changes.
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from stationd.reasons import Reason, Why
 from stationd.station.core import DATABASE, LOCALIZING
 from stationd.station.events import (
     BoltSelected,
@@ -31,6 +31,7 @@ from stationd.station.events import (
     VehicleOpened,
     WrongBolt,
 )
+from stationd.words import reason_words
 
 # a bolt's state on the screen; the label is what the operator reads next to the colour
 BOLT_LABELS = {
@@ -47,8 +48,8 @@ LAST_RESULTS = 8
 # refusals the operator must act on (amber): the wrench is seen, something about it or the
 # sequence forbids sending; any other refusal while tracking means the wrench is simply not on
 # a bolt (between bolts, out of view): a normal state, shown neutral, never as an alarm
-ACT_ON = re.compile(r"\b(stale|ambiguous|tilt\w*|must wait|order|batch|skipped|already done|"
-                    r"controller refused)\b", re.IGNORECASE)
+ACT_ON = frozenset({Why.STALE, Why.AMBIGUOUS, Why.TILTED, Why.MUST_WAIT, Why.SKIPPED,
+                    Why.DONE})
 NOT_AT_A_BOLT = "Bring the wrench to a bolt"
 TRACKING_STATES = tuple(s.value for s in LOCALIZING)   # where a refusal speaks of the wrench
 
@@ -85,6 +86,8 @@ class View:
     bolts: dict[str, BoltState] = field(default_factory=dict)
     wrench: dict[str, Any] | None = None
     refused: str = ""            # why nothing is sent now ("" when parameters may go out)
+    act: bool = False            # ... and the operator resolves it (amber), by its kind
+    refused_why: Reason | None = None
     devices: dict[str, dict[str, Any]] = field(default_factory=dict)
     results: list[dict[str, Any]] = field(default_factory=list)
     selected: str | None = None
@@ -114,7 +117,7 @@ class View:
             if e.state not in TRACKING_STATES:
                 # a refusal is about the wrench while tracking: a station waiting for its
                 # vehicle (or in fault) says that, not the last vehicle's "bring the wrench"
-                self.refused = ""
+                self._refuse("")
         elif isinstance(e, DeviceHealth):
             self.devices[e.device] = {"ok": e.ok, "kind": e.kind, "reason": e.reason}
         elif isinstance(e, VehicleOpened):
@@ -124,17 +127,18 @@ class View:
         elif isinstance(e, Localized):
             self._localized(e)
         elif isinstance(e, Refused):
-            self.refused = e.reason
+            self._refuse(reason_words(e.reason), e.reason)
             if e.bolt in self.bolts and self.bolts[e.bolt].state in ("pending", "next"):
-                self._set(e.bolt, "blocked", e.reason)
+                self._set(e.bolt, "blocked", self.refused)
         elif isinstance(e, BoltSelected):
             self._unselect()
-            self.selected, self.refused = e.bolt, ""
+            self.selected = e.bolt
+            self._refuse("")
             self._set(e.bolt, "selected", f"pset {e.pset}" if e.pset is not None else "")
         elif isinstance(e, ParamsSent):
-            self.refused = ""
+            self._refuse("")
         elif isinstance(e, ParamsRefusedEvent):
-            self.refused = f"{e.bolt}: controller refused the parameters: {e.reason}"
+            self._refuse(f"{e.bolt}: controller refused the parameters: {e.reason}", act=True)
             self._set(e.bolt, "blocked", e.reason)
         elif isinstance(e, ToolEnabled):
             self._set(e.bolt, "tightening")
@@ -142,7 +146,10 @@ class View:
             b = self.bolts.get(e.bolt or self.selected or "")
             if b is not None and b.state in ("selected", "tightening"):
                 self._set(b.bolt, "pending")
-            self.refused = e.reason or self.refused
+            if e.why is not None:
+                self._refuse(f"{e.reason} ({reason_words(e.why)})", e.why)
+            elif e.reason:
+                self._refuse(e.reason)
         elif isinstance(e, BoltSkipped):
             self._set(e.bolt, "skipped", e.reason)
         elif isinstance(e, ResultRecorded):
@@ -172,13 +179,14 @@ class View:
 
     def _localized(self, e: Localized) -> None:
         if e.point_mm is None:
-            self.wrench = None if self.wrench is None else {**self.wrench, "lost": True,
-                                                            "reason": e.reason or ""}
+            self.wrench = None if self.wrench is None else {
+                **self.wrench, "lost": True,
+                "reason": reason_words(e.reason, full=True) if e.reason else ""}
         else:
             self.wrench = {"x": e.point_mm[0], "y": e.point_mm[1], "z": e.point_mm[2],
                            "tilt": e.tilt_deg, "candidate": e.candidate,
                            "distance": e.distance_mm, "age_ms": e.age_ms, "lost": False,
-                           "reason": e.reason or ""}
+                           "reason": reason_words(e.reason) if e.reason else ""}
         allowed = set(e.allowed)
         for b in self.bolts.values():
             if b.state in ("pending", "next", "blocked"):
@@ -199,6 +207,12 @@ class View:
             "angle_deg": e.angle_deg, "angle_min": e.angle_min, "angle_max": e.angle_max,
             "late": e.late})
         del self.results[LAST_RESULTS:]
+
+    def _refuse(self, words: str, why: Reason | None = None, *, act: bool = False) -> None:
+        """Why nothing is sent now, in words, and whether the operator acts on it (its kind,
+        or ``act``)."""
+        self.refused, self.refused_why = words, why
+        self.act = act or (why is not None and why.kind in ACT_ON)
 
     def _set(self, bolt: str, state: str, reason: str = "") -> None:
         b = self.bolts.get(bolt)
@@ -240,7 +254,7 @@ class View:
                                                        for h in self.devices.values()):
             return "stop"
         if self.refused:
-            return "act" if refusal_needs_action(self.refused) else "idle"
+            return "act" if self.act else "idle"
         if self.selected is not None:
             return "go"
         if self.closed is not None:
@@ -271,9 +285,9 @@ class View:
         if faults:
             return "FAULT: " + cut("; ".join(faults))
         if self.refused:
-            if not refusal_needs_action(self.refused) and self._not_at_a_bolt():
+            if not self.act and self._not_at_a_bolt():
                 return NOT_AT_A_BOLT
-            return short_reason(self.refused)
+            return self.refused
         if self.selected is not None:
             b = self.bolts.get(self.selected)
             pset = f" (pset {b.pset})" if b is not None and b.pset is not None else ""
@@ -300,7 +314,8 @@ class View:
     def _not_at_a_bolt(self) -> bool:
         """The wrench is out of view, or seen but near no bolt."""
         w = self.wrench
-        return w is None or bool(w.get("lost")) or self.refused.startswith("no bolt within")
+        near_none = self.refused_why is not None and self.refused_why.kind is Why.NO_BOLT_NEAR
+        return w is None or bool(w.get("lost")) or near_none
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -325,12 +340,6 @@ def _named(names: list[str], what: str, shown: int | None) -> str:
     return f"{len(names)} {what} ({', '.join(names[:shown])}, ...)"
 
 
-def refusal_needs_action(reason: str) -> bool:
-    """True for a refusal the operator resolves (amber), False for "the wrench is not on a
-    bolt" (neutral); see ``ACT_ON``."""
-    return ACT_ON.search(reason) is not None
-
-
 def fold(events: list[StationEvent] | tuple[StationEvent, ...],
          configured: tuple[str, ...] = ()) -> View:
     """A view built from ``events`` in order (a fresh screen starts from the bus history)."""
@@ -344,24 +353,6 @@ def copy_view(v: View) -> View:
     """A shallow-independent copy (tests compare before/after)."""
     return replace(v, bolts={k: replace(b) for k, b in v.bolts.items()},
                    devices=dict(v.devices), results=list(v.results))
-
-
-def short_reason(reason: str) -> str:
-    """Large words for the operator: the daemon's per-pair refusal ("pair1: left: no purple
-    region ...; pair2: left: no purple region ...") said once, with how many pairs say it; the
-    full text stays in ``reason`` and on the cameras screen."""
-    parts = [p.strip() for p in reason.split(";") if p.strip()]
-    if len(parts) < 2:
-        return reason
-    tails = []
-    for p in parts:
-        words = p.split(": ")
-        while len(words) > 1 and (words[0].startswith("pair") or words[0] in ("left", "right")):
-            words = words[1:]
-        tails.append(": ".join(words))
-    if len(set(tails)) == 1:
-        return f"{tails[0]} (all {len(parts)} pairs)"
-    return reason
 
 
 def _shortened(text: str, limit: int = REASON_SHOWN) -> str:

@@ -29,7 +29,7 @@ from tests.station.test_restart import _until
 
 ROOT = Path(__file__).resolve().parents[2]
 VIN = "COMMANDVIN0000001"
-PASSWORD = "line-7-password"
+PASSWORD = "line-7-password"  # noqa: S105 - a test user's
 HASH = hash_password(PASSWORD)
 
 
@@ -57,9 +57,10 @@ class Client:
         self.opener = urllib.request.build_opener(
             urllib.request.HTTPCookieProcessor(http.cookiejar.CookieJar()))
 
-    def post(self, path: str, body: dict) -> tuple[int, str]:
-        req = urllib.request.Request(self.url + path, data=json.dumps(body).encode(),
-                                     headers={"Content-Type": "application/json"})
+    def post(self, path: str, body: dict[str, object]) -> tuple[int, str]:
+        req = urllib.request.Request(  # noqa: S310 - http on loopback
+            self.url + path, data=json.dumps(body).encode(),
+            headers={"Content-Type": "application/json"})
         try:
             with self.opener.open(req, timeout=30) as r:
                 return r.status, r.read().decode()
@@ -102,7 +103,7 @@ def test_commands_through_the_daemon_are_authenticated_recorded_and_outlive_a_re
         assert got.returncode == 1 and "right to reopen" in got.stdout
         got = _cli("skip", VIN, "B05", "--user", "sam", "--url", url)
         assert got.returncode == 1 and "B05 skipped: olga's command" in got.stdout
-        got = _cli("skip", VIN, "B07", "--user", "sam", "--url", url, password="guess1234")
+        got = _cli("skip", VIN, "B07", "--user", "sam", "--url", url, password="guess1234")  # noqa: S106
         assert got.returncode == 3 and "login refused" in got.stderr
         d.wait_log("login refused for user 'sam'")
         got = _cli("reopen", VIN, "--user", "sam", "--url", url)   # open at the station
@@ -122,7 +123,7 @@ def test_commands_through_the_daemon_are_authenticated_recorded_and_outlive_a_re
         status, text = c.post("/api/commands", {**body, "bolt": "B09", "nonce": "b" * 24,
                                                 "issued_at": time.time() - 3600})
         assert status == 400 and "stale" in text
-        req = urllib.request.Request(url + "api/commands", data=b"kind=skip")   # a form
+        req = urllib.request.Request(url + "api/commands", data=b"kind=skip")  # noqa: S310
         with pytest.raises(urllib.error.HTTPError) as err:
             c.opener.open(req, timeout=30)
         assert err.value.code == 415

@@ -15,6 +15,7 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from stationd.reasons import Reason, Why
 from stationd.station.core import (
     Acknowledge,
     BoltSpec,
@@ -46,6 +47,7 @@ from stationd.station.core import (
 )
 from stationd.station.events import DeviceHealth, Refused, ResultUnattributed, StateChanged
 from stationd.station.matching import MatchParams
+from stationd.words import reason_words
 
 BOLTS = {"B1": BoltSpec((0.0, 0.0, 0.0), 1), "B2": BoltSpec((60.0, 0.0, 0.0), 2),
          "B3": BoltSpec((0.0, 60.0, 5.0), 1)}
@@ -175,7 +177,8 @@ class Driver:
             p = (pos[0] + noise, pos[1] - noise, pos[2])
         self.fresh = age <= PARAMS.max_age_s
         had = self.tool
-        self.feed(LocalizedIn(self.t, self.t - age, p, None if p else "marker not found"))
+        self.feed(LocalizedIn(self.t, self.t - age, p, None if p else Reason(
+            Why.NOT_LOCALIZED, note="marker not found")))
         if had and not (self.fresh and self.where == self.tool_bolt):
             assert not self.tool, "tool still on a localization after leaving the bolt"
         if self.tool:
@@ -442,7 +445,7 @@ def test_nothing_is_sent_while_the_lift_is_not_ready_or_on_stale_frames():
     assert d.sends == []
     refusals = [a.event.reason for _, acts in d.log for a in acts
                 if isinstance(a, Publish) and type(a.event).__name__ == "Refused"]
-    assert len(refusals) == 1 and "stale" in refusals[0]   # once per change, not per frame
+    assert len(refusals) == 1 and refusals[0].kind is Why.STALE   # once per change
 
 
 def test_unattributed_results_without_a_vehicle_are_stored_then_acknowledged():
@@ -511,7 +514,7 @@ def test_a_refusal_is_published_per_bolt_and_reason_not_per_measurement():
         _on(d, k, 2)
     refused = [a.event for _, acts in d.log[start:] for a in acts
                if isinstance(a, Publish) and isinstance(a.event, Refused)]
-    assert [(e.bolt, e.reason) for e in refused] == [
+    assert [(e.bolt, reason_words(e.reason)) for e in refused] == [
         ("B1", "B1 is already done"), ("B2", "B2 is already done"),
         ("B1", "B1 is already done")]
     stale = len(d.log)
@@ -519,7 +522,7 @@ def test_a_refusal_is_published_per_bolt_and_reason_not_per_measurement():
         _on(d, 1, 1, age=age)
     ages = [a.event.reason for _, acts in d.log[stale:] for a in acts
             if isinstance(a, Publish) and isinstance(a.event, Refused)]
-    assert len(ages) == 1 and "stale" in ages[0]   # one refusal, not one per frame's age
+    assert len(ages) == 1 and ages[0].kind is Why.STALE   # one refusal, not one per frame's age
 
 
 def test_frames_exposed_before_a_rundown_ended_never_select_after_it():

@@ -1,9 +1,15 @@
 import numpy as np
 
 from stationd.station.matching import BoltMatcher, BoltRule, MatchParams, check_spacing
+from stationd.words import reason_words
 
 BOLTS = {"B1": np.array([0.0, 0.0, 0.0]), "B2": np.array([40.0, 0.0, 10.0]),
          "B3": np.array([40.0, 12.0, 0.0])}
+
+
+def _why(match) -> str:
+    """A refusal in the words the operator reads."""
+    return reason_words(match.reason) if match.reason is not None else ""
 
 
 def _m(**kw):
@@ -14,7 +20,7 @@ def test_taken_only_after_stable_frames():
     m = _m(stable_frames=3)
     got = [m.update(np.array([1.0, -1.0, 300.0])) for _ in range(3)]
     assert [g.bolt for g in got] == [None, None, "B1"]
-    assert "stable for 1 of 3" in got[0].reason
+    assert "stable for 1 of 3" in _why(got[0])
 
 
 def test_refusal_breaks_the_streak():
@@ -34,14 +40,14 @@ def test_switching_bolts_restarts_the_streak():
 
 def test_out_of_tolerance_ambiguous_stale_done():
     m = _m(stable_frames=1, tolerance_mm=8.0, margin_mm=6.0)
-    assert "no bolt within" in m.update(np.array([20.0, 0, 0])).reason
+    assert "no bolt within" in _why(m.update(np.array([20.0, 0, 0])))
     r = m.update(np.array([40.0, 6.0, 0]))  # between B2 and B3
-    assert r.bolt is None and "ambiguous" in r.reason
-    assert "stale" in m.update(np.array([0.0, 0, 0]), age_s=2.0).reason
+    assert r.bolt is None and "ambiguous" in _why(r)
+    assert "stale" in _why(m.update(np.array([0.0, 0, 0]), age_s=2.0))
     assert m.update(np.array([0.0, 0, 0])).bolt == "B1"
     m.mark_done("B1")
     r = m.update(np.array([0.0, 0, 0]))
-    assert r.bolt is None and "already done" in r.reason
+    assert r.bolt is None and "already done" in _why(r)
     assert _m(stable_frames=1, allow_retighten=True).update(np.array([0.0, 0, 0])).bolt == "B1"
 
 
@@ -68,7 +74,7 @@ def test_spacing_rule_is_the_matchers_metric():
     stacked = {"LOW": np.array([0.0, 0.0, 0.0]), "HIGH": np.array([0.0, 0.0, 30.0])}
     assert check_spacing(stacked, 8.0) == ["LOW and HIGH are 0.0 mm apart in X-Y (< 16 = 2 x 8)"]
     m = BoltMatcher(stacked, MatchParams(stable_frames=1))
-    assert "ambiguous" in (m.update(np.array([0.0, 0.0, 15.0])).reason or "")
+    assert "ambiguous" in (_why(m.update(np.array([0.0, 0.0, 15.0]))) or "")
     apart = {"A": np.array([0.0, 0.0, 0.0]), "B": np.array([16.0, 0.0, 0.0])}
     assert check_spacing(apart, 8.0) == []
     assert BoltMatcher(apart, MatchParams(stable_frames=1)).update(np.zeros(3)).bolt == "A"
@@ -94,10 +100,10 @@ def _at(bolt):
 def test_order_blocks_then_allows_once_done():
     m = _seq()
     r = m.update(_at("U3"))
-    assert r.bolt is None and r.reason == "U3 must wait: order 2 needs U1, U2 done first"
+    assert r.bolt is None and _why(r) == "U3 must wait: order 2 needs U1, U2 done first"
     assert r.candidate == "U3" and r.distance_mm is not None  # leave detection still sees it
     m.mark_done("U1")
-    assert m.update(_at("U3")).reason == "U3 must wait: order 2 needs U2 done first"
+    assert _why(m.update(_at("U3"))) == "U3 must wait: order 2 needs U2 done first"
     assert m.update(_at("U2")).bolt == "U2"  # same order as U1: no constraint between them
     m.mark_done("U2")
     assert m.update(_at("U3")).bolt == "U3"
@@ -109,7 +115,7 @@ def test_unordered_bolts_are_unconstrained_and_orders_stay_in_their_batch():
     assert m.update(_at("B1")).bolt == "B1"  # a batch, no order
     assert m.why_blocked("U1") is None and m.why_blocked("A1") is None
     # subframe's order 2 waits for subframe's order 1 only, not for the unbatched U1, U2
-    assert m.why_blocked("A3") == "A3 must wait: order 2 in batch subframe needs A1, A2 done first"
+    assert m.why_blocked("A3") == "order 2 in batch subframe needs A1, A2 done first"
     m.mark_done("A1")
     m.mark_done("A2")
     assert m.update(_at("A3")).bolt == "A3"
@@ -121,10 +127,10 @@ def test_batch_lock_in():
     for other in ("U1", "B1", "F"):
         r = m.update(_at(other))
         assert r.bolt is None and r.candidate == other
-        assert r.reason == f"{other} must wait: finish batch subframe first: A2, A3 remaining"
+        assert _why(r) == f"{other} must wait: finish batch subframe first: A2, A3 remaining"
     assert m.update(_at("A2")).bolt == "A2"
     m.mark_done("A2")
-    assert m.update(_at("U1")).reason.endswith("finish batch subframe first: A3 remaining")
+    assert _why(m.update(_at("U1"))).endswith("finish batch subframe first: A3 remaining")
     assert m.update(_at("A3")).bolt == "A3"
     m.mark_done("A3")  # closed: the rest of the world again
     assert m.update(_at("U1")).bolt == "U1"
@@ -135,36 +141,36 @@ def test_batch_lock_in():
 def test_a_skipped_bolt_blocks_and_says_so():
     m = _seq()
     m.skipped["A1"] = "controller refused its parameters (pset 2 unknown)"
-    assert m.update(_at("A1")).reason.startswith("A1 skipped:")  # skipped comes first
+    assert _why(m.update(_at("A1"))).startswith("A1 skipped:")  # skipped comes first
     r = m.update(_at("A3"))
-    assert r.bolt is None and r.reason == (
+    assert r.bolt is None and _why(r) == (
         "A3 must wait: order 2 in batch subframe needs A1, A2 done first; "
         "A1 was skipped: controller refused its parameters (pset 2 unknown)")
     m.mark_done("A2")  # subframe open, A1 will never be done: the rest waits, and says why
-    assert m.update(_at("U1")).reason == (
+    assert _why(m.update(_at("U1"))) == (
         "U1 must wait: finish batch subframe first: A1, A3 remaining; "
         "A1 was skipped: controller refused its parameters (pset 2 unknown)")
 
 
 def test_resumed_vehicle_counts_what_was_done_before():
     m = BoltMatcher(LINE, MatchParams(stable_frames=1), {"A1", "A2", "U1"}, rules=RULES)
-    assert "already done" in m.update(_at("A1")).reason
-    assert m.update(_at("U2")).reason == "U2 must wait: finish batch subframe first: A3 remaining"
+    assert "already done" in _why(m.update(_at("A1")))
+    assert _why(m.update(_at("U2"))) == "U2 must wait: finish batch subframe first: A3 remaining"
     assert m.update(_at("A3")).bolt == "A3"
     m.mark_done("A3")
-    assert m.update(_at("U3")).reason == "U3 must wait: order 2 needs U2 done first"
+    assert _why(m.update(_at("U3"))) == "U3 must wait: order 2 needs U2 done first"
     # two batches left open (resumed like that): either may be finished, else neither could
     two = BoltMatcher(LINE, MatchParams(stable_frames=1), {"A1", "B1"}, rules={
         **RULES, "B1": BoltRule(None, "x"), "F": BoltRule(None, "x")})
     assert two.update(_at("F")).bolt == "F" and two.update(_at("A2")).bolt == "A2"
-    assert two.why_blocked("U1") == ("U1 must wait: finish batch subframe first: A2, A3 "
+    assert two.why_blocked("U1") == ("finish batch subframe first: A2, A3 "
                                      "remaining; finish batch x first: F remaining")
 
 
 def test_a_blocked_frame_breaks_the_streak():
     m = _seq(stable_frames=2, done={"A1"})
     assert m.update(_at("A2")).streak == 1
-    assert "must wait" in m.update(_at("U1")).reason
+    assert "must wait" in _why(m.update(_at("U1")))
     assert m.update(_at("A2")).bolt is None  # streak restarted
     assert m.update(_at("A2")).bolt == "A2"
 
@@ -216,7 +222,7 @@ def test_the_sequence_holds_under_jitter():
                     break
                 if (got.candidate == true and true not in m.done and true not in m.skipped
                         and not _allowed(true, rules, m.done)):
-                    assert "must wait" in got.reason
+                    assert "must wait" in _why(got)
             left = [b for b in ids if b not in m.done]
             if left and not m.skipped:
                 assert any(m.why_blocked(b) is None for b in left), (rules, m.done)

@@ -7,6 +7,7 @@ from typing import Any
 
 from db.repository import Repository
 from stationd.boltfile import import_bolts
+from stationd.reasons import Reason, Why
 from stationd.station.events import (
     BoltSelected,
     BoltView,
@@ -82,7 +83,8 @@ def fault() -> list[StationEvent]:
         DeviceHealth(device="lift", ok=False, kind="timeout",
                      reason="no answer from 10.0.0.7:502 for 2.0 s"),
         StateChanged(state="fault", reason="lift: no answer from 10.0.0.7:502 for 2.0 s"),
-        Refused(reason="lift: no answer from 10.0.0.7:502 for 2.0 s"),
+        Refused(reason=Reason(Why.DEVICE_FAULT, note="lift: no answer from 10.0.0.7:502 for "
+                                                     "2.0 s")),
     ]
 
 
@@ -114,7 +116,8 @@ def long_fault() -> list[StationEvent]:
     ]
     reason = "; ".join(f"{d}: {r}" for d, _, r in faults)
     return [*(DeviceHealth(device=d, ok=False, kind=k, reason=r) for d, k, r in faults),
-            StateChanged(state="fault", reason=reason), Refused(reason=reason)]
+            StateChanged(state="fault", reason=reason),
+            Refused(reason=Reason(Why.DEVICE_FAULT, note=reason))]
 
 
 def sim_vehicle() -> VehicleOpened:

@@ -11,6 +11,7 @@ import re
 import numpy as np
 
 from db.repository import Repository
+from stationd.reasons import Reason, Why
 from stationd.station.events import BoltSkipped, Localized, Refused, StateChanged
 from stationd.web.results import Results
 from tests.web.conftest import SIZES
@@ -184,8 +185,9 @@ def test_dense_map_labels_never_overlap_and_between_bolts_is_neutral(live_server
 
     # the wrench out of view while tracking: a normal state, not a red alarm; the per-pair
     # reasons stay off the operator screen (the cameras screen has them)
-    every = "; ".join(f"pair{k}: {side}: no purple region enclosing a ring in view"
-                      for k in range(1, 5) for side in ("left", "right"))
+    every = Reason(Why.NOT_LOCALIZED, per_pair=tuple(
+        (f"pair{k}", f"{side}: no purple region enclosing a ring in view")
+        for k in range(1, 5) for side in ("left", "right")))
     srv.publish([Localized(point_mm=None, tilt_deg=None, reason=every, candidate=None,
                            distance_mm=None, age_ms=0.0), Refused(reason=every)])
     page.wait(lambda p: p.text("#headline") == "Bring the wrench to a bolt",
@@ -198,7 +200,8 @@ def test_dense_map_labels_never_overlap_and_between_bolts_is_neutral(live_server
     check_fits(page, "#bolts", "#headline", "#devices", "#legend")
     shots("operator-between-bolts")
 
-    srv.publish([Refused(reason="ambiguous: B41 at 4.0 mm, B13 at 5.1 mm")])
+    srv.publish([Refused(reason=Reason(Why.AMBIGUOUS, bolt="B41", distance_mm=4.0,
+                                       other="B13", other_mm=5.1))])
     page.wait(lambda p: "ambiguous" in (p.text("#headline") or ""), what="amber refusal")
     assert page.js("return document.getElementById('headline').dataset.tone") == "act"
     shots("operator-ambiguous")

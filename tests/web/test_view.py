@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from stationd.reasons import Reason, Why
 from stationd.station.events import (
     BoltSkipped,
     DeviceHealth,
@@ -14,6 +15,7 @@ from stationd.station.events import (
     WrongBolt,
 )
 from stationd.web.view import View, fold
+from stationd.words import reason_words
 from tests.web.scenario import VIN, fault, opened, result, work
 
 
@@ -82,9 +84,11 @@ def test_a_long_fault_reason_is_cut_in_the_headline_and_whole_in_its_title():
 
 
 def test_refusal_blocks_its_bolt_and_is_the_headline_until_a_selection():
-    v = fold([*opened(), Refused(reason="order rule: B1 first", bolt="B2")])
-    assert states(v)["B2"] == "blocked" and v.bolts["B2"].reason == "order rule: B1 first"
-    assert v.headline() == "order rule: B1 first"
+    wait = Reason(Why.MUST_WAIT, bolt="B2", note="order 2 needs B1 done first")
+    v = fold([*opened(), Refused(reason=wait, bolt="B2")])
+    said = "B2 must wait: order 2 needs B1 done first"
+    assert states(v)["B2"] == "blocked" and v.bolts["B2"].reason == said
+    assert v.headline() == said and v.tone() == "act"
     v.apply(Localized(point_mm=(0.0, 0.0, 0.0), tilt_deg=1.0, reason=None, candidate="B1",
                       distance_mm=0.5, age_ms=30.0, allowed=("B2",)))
     assert states(v)["B2"] == "next"     # the rule now allows it
@@ -92,9 +96,10 @@ def test_refusal_blocks_its_bolt_and_is_the_headline_until_a_selection():
 
 def test_lost_wrench_keeps_last_position_marked_lost():
     v = fold(opened() + work())
-    v.apply(Localized(point_mm=None, tilt_deg=None, reason="stale frames", candidate=None,
-                      distance_mm=None, age_ms=400.0))
-    assert v.wrench is not None and v.wrench["lost"] and v.wrench["reason"] == "stale frames"
+    v.apply(Localized(point_mm=None, tilt_deg=None, reason=Reason(Why.STALE, age_ms=812.0),
+                      candidate=None, distance_mm=None, age_ms=400.0))
+    assert v.wrench is not None and v.wrench["lost"]
+    assert v.wrench["reason"] == "localization is stale (812 ms old)"
 
 
 def test_tool_disabled_returns_selection_to_pending_with_reason():
@@ -135,21 +140,25 @@ def test_controller_refusing_parameters_blocks_the_bolt_and_says_why():
 
 
 def test_the_headline_says_a_refusal_shared_by_every_pair_once():
-    from stationd.web.view import short_reason
+    every = Reason(Why.NOT_LOCALIZED, per_pair=tuple(
+        (f"pair{k}", "left: no purple region enclosing a ring in view") for k in range(1, 5)))
+    assert reason_words(every) == "no purple region enclosing a ring in view (all 4 pairs)"
+    assert reason_words(every, full=True).startswith(
+        "pair1: left: no purple region enclosing a ring in view; pair2: left: ")
+    mixed = Reason(Why.NOT_LOCALIZED, per_pair=(("pair1", "left: no purple region in view"),
+                                                 ("pair2", "right: ring cut by the frame")))
+    assert reason_words(mixed) == ("pair1: left: no purple region in view; pair2: right: "
+                                   "ring cut by the frame")
+    v = fold([*opened(), lost(every), Refused(reason=Reason(Why.DONE, bolt="B18"))])
+    assert v.headline() == "B18 is already done" and v.tone() == "act"
 
-    every = "; ".join(f"pair{k}: left: no purple region enclosing a ring in view"
-                      for k in range(1, 5))
-    assert short_reason(every) == "no purple region enclosing a ring in view (all 4 pairs)"
-    mixed = "pair1: left: no purple region in view; pair2: ambiguous: B1 at 3 mm, B2 at 5 mm"
-    assert short_reason(mixed) == mixed
-    assert short_reason("B18 is already done") == "B18 is already done"
+
+NOT_SEEN = Reason(Why.NOT_LOCALIZED, per_pair=tuple(
+    (f"pair{k}", f"{side}: no purple region enclosing a ring in view")
+    for k in range(1, 5) for side in ("left", "right")))
 
 
-NOT_SEEN = "; ".join(f"pair{k}: {side}: no purple region enclosing a ring in view"
-                     for k in range(1, 5) for side in ("left", "right"))
-
-
-def lost(reason: str) -> Localized:
+def lost(reason: Reason) -> Localized:
     return Localized(point_mm=None, tilt_deg=None, reason=reason, candidate=None,
                      distance_mm=None, age_ms=0.0)
 
@@ -161,17 +170,21 @@ def test_wrench_between_bolts_is_neutral_not_an_alarm():
     # seen, but near no bolt: the same normal state
     v = fold([*opened(), Localized(point_mm=(200.0, 150.0, 0.0), tilt_deg=1.0, reason=None,
                                    candidate="B1", distance_mm=250.0, age_ms=30.0),
-              Refused(reason="no bolt within 15 mm (nearest B1 at 250.0 mm)")])
+              Refused(reason=Reason(Why.NO_BOLT_NEAR, bolt="B1", distance_mm=250.0,
+                                    limit=15.0))])
     assert (v.tone(), v.headline()) == ("idle", "Bring the wrench to a bolt")
 
 
 def test_refusals_the_operator_resolves_are_amber_with_the_reason():
-    for reason in ("localization is stale (812 ms old)",
-                   "ambiguous: B1 at 3.0 mm, B2 at 4.1 mm",
-                   "wrench tilted 14.2 deg (> 10)",
-                   "B4 must wait: order 2 needs B3 done first"):
+    for reason, said in (
+            (Reason(Why.STALE, age_ms=812.0), "localization is stale (812 ms old)"),
+            (Reason(Why.AMBIGUOUS, bolt="B1", distance_mm=3.0, other="B2", other_mm=4.1),
+             "ambiguous: B1 at 3.0 mm, B2 at 4.1 mm"),
+            (Reason(Why.TILTED, angle_deg=14.2, limit=10.0), "wrench tilted 14.2 deg (> 10 deg)"),
+            (Reason(Why.MUST_WAIT, bolt="B4", note="order 2 needs B3 done first"),
+             "B4 must wait: order 2 needs B3 done first")):
         v = fold([*opened(), lost(reason), Refused(reason=reason)])
-        assert (v.tone(), v.headline()) == ("act", reason), reason
+        assert (v.tone(), v.headline()) == ("act", said), said
 
 
 def test_fault_is_red_above_any_refusal_and_a_selection_is_go():
