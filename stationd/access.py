@@ -122,6 +122,14 @@ class AccessConfig:
             users[name] = User(name, role, stored)
         return cls(users, roles)
 
+    def current(self, issuer: Issuer) -> Issuer | None:
+        """A logged-in user as this configuration has them now: None when they were removed,
+        else with the rights their role has now (a reload changes both)."""
+        u = self.users.get(issuer.user)
+        if u is None:
+            return None
+        return Issuer(u.name, self.roles.get(u.role, frozenset()), issuer.source)
+
     def issuer(self, user: str, password: str, source: str) -> Issuer | None:
         """The user with the rights of their role when the password is theirs, else None
         (an unknown user costs the same time as a wrong password)."""
@@ -183,29 +191,71 @@ class Sessions:
 
 
 class ReplayGuard:
-    """A command request carries a nonce and when it was issued: one older (or further in the
-    future) than ``window_s`` is stale, a nonce seen within the window is a replay."""
+    """Each command request carries a nonce this server issued (``GET /api/nonce``): one it
+    never issued, one already used, or one older than ``window_s`` is refused.  The server's
+    clock alone decides (a panel PC whose clock is off still works), and a captured request
+    cannot be sent again."""
 
     def __init__(self, window_s: float = REQUEST_WINDOW_S,
-                 clock: Callable[[], float] = time.time) -> None:
-        self.window_s, self._clock = window_s, clock
-        self._seen: dict[str, float] = {}
+                 clock: Callable[[], float] = time.monotonic, most: int = 10_000) -> None:
+        self.window_s, self._clock, self._most = window_s, clock, most
+        self._issued: dict[str, float] = {}
+        self._spent: dict[str, float] = {}
 
-    def check(self, nonce: str, issued_at: float) -> str | None:
+    def issue(self) -> str:
+        """A fresh nonce for one request."""
+        self._forget()
+        while len(self._issued) >= self._most:          # bounded: the oldest goes
+            self._issued.pop(next(iter(self._issued)))
+        nonce = secrets.token_urlsafe(18)
+        self._issued[nonce] = self._clock()
+        return nonce
+
+    def check(self, nonce: str) -> str | None:
         """Why the request is refused, or None (then its nonce is spent)."""
-        now = self._clock()
-        for n, t in list(self._seen.items()):
-            if now - t > 2 * self.window_s:
-                del self._seen[n]
-        if not 16 <= len(nonce) <= 128 or not nonce.isascii():
-            return "a request needs a nonce of 16-128 characters"
-        if abs(now - issued_at) > self.window_s:
-            return f"stale request (issued {now - issued_at:.0f} s ago)"
-        if nonce in self._seen:
+        self._forget()
+        if nonce in self._spent:
             return "replayed request (this nonce was used)"
-        self._seen[nonce] = now
+        at = self._issued.pop(nonce, None)
+        if at is None:
+            return "stale or unknown nonce: ask GET /api/nonce for each request"
+        self._spent[nonce] = self._clock()
         return None
 
+    def _forget(self) -> None:
+        now = self._clock()
+        for table in (self._issued, self._spent):
+            for n, t in list(table.items()):
+                if now - t > self.window_s:
+                    del table[n]
 
-__all__ = ["AccessConfig", "ReplayGuard", "Sessions", "User", "hash_password",
+
+class LoginThrottle:
+    """Wrong passwords slow a guesser down: after ``most`` failures for one user within
+    ``window_s``, that user's logins are refused until the window has passed."""
+
+    def __init__(self, most: int = 5, window_s: float = 60.0,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.most, self.window_s, self._clock = most, window_s, clock
+        self._failed: dict[str, list[float]] = {}
+
+    def blocked(self, user: str) -> float:
+        """Seconds until ``user`` may try again (0: now)."""
+        now = self._clock()
+        recent = [t for t in self._failed.get(user, []) if now - t < self.window_s]
+        self._failed[user] = recent
+        if len(recent) < self.most:
+            return 0.0
+        return self.window_s - (now - recent[0])
+
+    def failed(self, user: str) -> None:
+        self._failed.setdefault(user, []).append(self._clock())
+        if len(self._failed) > 10_000:                    # bounded: guessed names too
+            self._failed.pop(next(iter(self._failed)))
+
+    def passed(self, user: str) -> None:
+        self._failed.pop(user, None)
+
+
+__all__ = ["AccessConfig", "LoginThrottle", "ReplayGuard", "Sessions", "User", "hash_password",
            "parse_hash", "verify_password"]

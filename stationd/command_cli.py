@@ -8,7 +8,8 @@ password hashes the station file keeps.
     stationd user hash
 
 The password comes from ``STATIOND_PASSWORD``, else a prompt (a terminal), else the first
-line of standard input; it never goes on the command line (``ps`` would show it).  Exit 0:
+line of standard input; it never goes on the command line (``ps`` would show it); the http
+token from ``--token`` or ``STATIOND_TOKEN``.  Exit 0:
 accepted; 1: refused by the station (the reason is printed); 2: bad input; 3: no answer, or
 the login was refused.
 """
@@ -20,9 +21,7 @@ import getpass
 import http.cookiejar
 import json
 import os
-import secrets
 import sys
-import time
 import urllib.error
 import urllib.request
 from typing import Any
@@ -39,8 +38,11 @@ class _Client:
 
     def __init__(self, url: str, token: str | None, timeout: float) -> None:
         status_url(url)   # checks the form: bad input is exit 2
+        if not 0 < timeout <= 3600:    # NaN too
+            raise InputError(f"--timeout {timeout:g}: expected seconds in (0, 3600]")
         self.base = url.rstrip("/")
-        self.token, self.timeout = token, timeout
+        self.token = token or os.environ.get("STATIOND_TOKEN") or None
+        self.timeout = timeout
         self._open = urllib.request.build_opener(
             urllib.request.HTTPCookieProcessor(http.cookiejar.CookieJar()))
 
@@ -72,6 +74,28 @@ def _password() -> str:
     return sys.stdin.readline().rstrip("\n")
 
 
+def _refused(what: str, status: int, answer: Any) -> int:
+    """A refusal before the station saw the command (the token, the login, the API)."""
+    if status == 401 and str(answer).startswith("token required"):
+        answer = "the daemon refused the http token (--token or STATIOND_TOKEN)"
+    elif status == 405:
+        answer = "not a stationd daemon's screens at this URL (--url http://HOST:PORT/)"
+    sys.stderr.write(f"stationd: {what}: {answer}\n")
+    return EXIT_UNREACHABLE
+
+
+def _check_command(args: argparse.Namespace) -> None:
+    """The command's words, checked before any login (bad input: exit 2)."""
+    if not args.user or not args.user.strip():
+        raise InputError("--user: the name of a user of the station's access section")
+    if not 1 <= len(args.vin.strip()) <= 32 or any(c.isspace() for c in args.vin.strip()):
+        raise InputError(f"VIN {args.vin!r}: 1-32 characters without spaces")
+    if args.command == "skip" and not 1 <= len(args.bolt.strip()) <= 32:
+        raise InputError(f"bolt {args.bolt!r}: 1-32 characters")
+    if len(args.comment or "") > 500:
+        raise InputError(f"--comment: at most 500 characters ({len(args.comment)} given)")
+
+
 def _unreachable(url: str, exc: BaseException) -> int:
     reason = getattr(exc, "reason", exc)
     sys.stderr.write(f"stationd: no daemon answers at {url}: {reason}\n")
@@ -80,21 +104,21 @@ def _unreachable(url: str, exc: BaseException) -> int:
 
 def cmd_command(args: argparse.Namespace) -> int:
     """``skip`` and ``reopen``: log in, give the command, print the station's answer."""
-    if not args.user or not args.user.strip():
-        raise InputError("--user: the name of a user of the station's access section")
-    body: dict[str, Any] = {"kind": args.command, "vin": args.vin,
-                            "comment": args.comment or "",
-                            "nonce": secrets.token_urlsafe(18), "issued_at": time.time()}
+    _check_command(args)
+    body: dict[str, Any] = {"kind": args.command, "vin": args.vin.strip(),
+                            "comment": args.comment or ""}
     if args.command == "skip":
-        body["bolt"] = args.bolt
+        body["bolt"] = args.bolt.strip()
     client = _Client(args.url, args.token, args.timeout)
     try:
         status, who = client.call("/api/login", {"user": args.user, "password": _password(),
                                                  "client": "cli"})
         if status != 200:
-            sys.stderr.write(f"stationd: login refused: {who}\n")
-            return EXIT_UNREACHABLE
-        status, answer = client.call("/api/commands", body)
+            return _refused("login refused", status, who)
+        status, nonce = client.call("/api/nonce")
+        if status != 200 or not isinstance(nonce, dict):
+            return _refused(args.command, status, nonce)
+        status, answer = client.call("/api/commands", {**body, "nonce": nonce["nonce"]})
         client.call("/api/logout", {})
     except (urllib.error.URLError, OSError) as exc:
         return _unreachable(args.url, exc)
@@ -115,8 +139,7 @@ def cmd_feed(args: argparse.Namespace) -> int:
     except (urllib.error.URLError, OSError) as exc:
         return _unreachable(args.url, exc)
     if status != 200 or not isinstance(doc, dict):
-        sys.stderr.write(f"stationd: feed: HTTP {status}: {doc}\n")
-        return EXIT_UNREACHABLE
+        return _refused("feed", status, doc)
     for e in doc["entries"]:
         print(json.dumps({"db_id": doc["db_id"], **e}, separators=(",", ":")))
     return 0
@@ -137,7 +160,8 @@ def cmd_user_hash(args: argparse.Namespace) -> int:
 def _client_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--url", default=DEFAULT_URL, help=f"the daemon's screens (default "
                    f"{DEFAULT_URL})")
-    p.add_argument("--token", help="the http token, when the daemon has one")
+    p.add_argument("--token", help="the http token, when the daemon has one (or "
+                   "STATIOND_TOKEN: an argument shows in ps)")
     p.add_argument("--timeout", type=float, default=15.0, help="seconds (default 15)")
 
 

@@ -192,10 +192,14 @@ def cmd_db_report(args: argparse.Namespace) -> int:
     with _open(_db_url(args), must_exist=True) as repo:
         report = repo.vehicle_report(args.vin)
         loose = repo.unattributed(args.vin)   # results made at height that no bolt owns
+        commands = repo.ledger.commands(args.vin)   # the audit trail: skips, reopens
     if args.json:
         out = report.to_json()
         out["unattributed"] = [{**u, "result_at": _iso(u["result_at"]),
                                 "recorded_at": _iso(u["recorded_at"])} for u in loose]
+        out["commands"] = [{"at": _iso(c.at), "user": c.user, "source": c.source,
+                            "kind": c.kind, "bolt": c.bolt, "comment": c.comment}
+                           for c in commands]
         sys.stdout.write(strict_json(out) + "\n")
     else:
         print(report.summary())
@@ -205,6 +209,11 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                 f"{b.attempts} attempt(s)"
             retired = " (retired)" if b.retired else ""
             print(f"  {b.bolt_id:<12} {b.status.upper():<8} {result}  {b.name}{retired}")
+        for c in commands:
+            on = f" {c.bolt}" if c.bolt else ""
+            why = f": {c.comment}" if c.comment else ""
+            print(f"  {c.kind}{on} by {c.user} ({c.source}) at {c.at:%Y-%m-%d %H:%M:%S} "
+                  f"UTC{why}")
         for u in loose:
             print(f"  unattributed: tightening {u['tightening_id']} pset {u['pset']} "
                   f"{u['status'].upper()} {_num(u['torque_nm'])} N m, "

@@ -6,6 +6,7 @@ import pytest
 
 from stationd.access import (
     AccessConfig,
+    LoginThrottle,
     ReplayGuard,
     Sessions,
     hash_password,
@@ -92,14 +93,36 @@ def test_sessions_end_idle_and_after_a_shift_and_on_logout():
     assert s.get(t) is None and s.get(None) is None and s.get("forged") is None
 
 
-def test_a_replayed_or_stale_request_is_refused():
+def test_only_a_fresh_nonce_the_server_issued_passes_once():
     now = [1000.0]
     g = ReplayGuard(window_s=120, clock=lambda: now[0])
-    nonce = "n" * 24
-    assert g.check(nonce, 999.0) is None
-    assert "replayed" in (g.check(nonce, 999.0) or "")
-    assert "stale" in (g.check("m" * 24, 700.0) or "")
-    assert "stale" in (g.check("k" * 24, 1300.0) or "")     # from the future too
-    assert "nonce" in (g.check("short", 1000.0) or "")
-    now[0] += 500                                            # the window moved on
-    assert "stale" in (g.check(nonce, 999.0) or "")
+    n = g.issue()
+    assert g.check(n) is None
+    assert "replayed" in (g.check(n) or "")
+    assert "unknown" in (g.check("made-up-by-the-client-123") or "")
+    old = g.issue()
+    now[0] += 121
+    assert "stale" in (g.check(old) or "")
+
+
+def test_wrong_passwords_lock_the_user_out_for_a_while():
+    now = [0.0]
+    t = LoginThrottle(most=3, window_s=60, clock=lambda: now[0])
+    for _ in range(3):
+        assert t.blocked("sam") == 0
+        t.failed("sam")
+    assert t.blocked("sam") == pytest.approx(60) and t.blocked("olga") == 0
+    now[0] += 61
+    assert t.blocked("sam") == 0
+    t.failed("sam")
+    t.passed("sam")
+    assert t.blocked("sam") == 0
+
+
+def test_a_removed_user_or_a_changed_role_is_seen_by_a_session():
+    a = _access(f"users:\n  sam: {{role: supervisor, password: '{HASH}'}}\n")
+    sam = a.issuer("sam", "correct horse", "cli")
+    assert sam is not None
+    demoted = _access(f"users:\n  sam: {{role: operator, password: '{HASH}'}}\n")
+    assert demoted.current(sam) == sam.__class__("sam", frozenset({Right.SKIP}), "cli")
+    assert _access("users: {}\n").current(sam) is None

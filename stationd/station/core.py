@@ -636,7 +636,9 @@ class StationCore:
                 return Reason(Why.ALREADY_OPEN, vin=cmd.vin)
             return None   # the database knows whether it is closed (CommandDone)
         if self.vin is None or self.matcher is None:
-            return Reason(Why.NO_VEHICLE)
+            # a vehicle raised while a device is in fault is not loaded until it is back
+            return Reason(Why.DEVICE_FAULT, note=self._fault_reason()) if self.faults \
+                else Reason(Why.NO_VEHICLE)
         if cmd.vin != self.vin:
             return Reason(Why.OTHER_VEHICLE, vin=cmd.vin)
         if cmd.bolt not in self.matcher.bolts:

@@ -8,10 +8,12 @@ session from a user's password, the core's answer), whatever the client; the sta
 - ``POST /api/login`` ``{"user", "password"}``: a session (an HttpOnly, SameSite=Strict cookie);
   a wrong password or an unknown user is 401 and a journal line, nothing else.
 - ``POST /api/logout``; ``GET /api/me``: who is logged in, with their rights.
-- ``POST /api/commands`` ``{"kind": "skip"|"reopen", "vin", "bolt", "comment", "nonce",
-  "issued_at"}``: with a session; a stale or replayed request is refused (400) before the
-  station sees it; the station's answer is 200 (accepted) or 409 (refused, with its typed
-  reason and the words).
+- ``GET /api/nonce``: a single-use nonce for the next command (with a session).
+- ``POST /api/commands`` ``{"kind": "skip"|"reopen", "vin", "bolt", "comment", "nonce"}``:
+  with a session; a nonce this server did not issue, an old or a used one is refused (400)
+  before the station sees it; the station's answer is 200 (accepted) or 409 (refused, with
+  its typed reason and the words).  A session whose user was removed from the station file
+  (a reload) ends; one whose role changed has the new role's rights.
 - ``GET /api/feed?since=N&limit=M``: every record after sequence number N, in order (a
   subscriber that was away catches up from the database, not from the live bus).
 
@@ -30,7 +32,8 @@ from typing import Any
 
 from aiohttp import web
 
-from stationd.access import AccessConfig, ReplayGuard, Sessions
+from db.ledger import FEED_LIMIT
+from stationd.access import AccessConfig, LoginThrottle, ReplayGuard, Sessions
 from stationd.station.commands import KIND, Answer, Command, Issuer, ReopenVehicle, SkipBolt
 from stationd.words import answer_words, reason_words
 
@@ -51,6 +54,7 @@ class CommandRoutes:
         self.submit: Submit | None = None
         self.sessions = Sessions()
         self.replays = ReplayGuard()
+        self.throttle = LoginThrottle()
         self._feed = feed   # the results source (None while the database is not open)
 
     def add_to(self, app: web.Application) -> None:
@@ -58,6 +62,7 @@ class CommandRoutes:
         r.add_post("/api/login", self._login)
         r.add_post("/api/logout", self._logout)
         r.add_get("/api/me", self._me)
+        r.add_get("/api/nonce", self._nonce)
         r.add_post("/api/commands", self._command)
         r.add_get("/api/feed", self._feed_since)
 
@@ -70,13 +75,23 @@ class CommandRoutes:
         access = self.access
         if access is None or not access.users:
             raise web.HTTPForbidden(text="no users are configured (access.users)\n")
-        source = f"{body.get('client') or 'screen'} {request.remote or '?'}"[:100]
+        client = body.get("client")
+        source = f"{client if client in ('cli', 'screen') else 'screen'} " \
+                 f"{request.remote or '?'}"
+        wait = self.throttle.blocked(user)
+        if wait > 0:
+            log.warning("login refused for user %r from %s: too many wrong passwords",
+                        user[:64], request.remote)
+            raise web.HTTPTooManyRequests(text=f"too many wrong passwords for {user[:64]}: "
+                                          f"try again in {wait:.0f} s\n")
         # scrypt takes tens of ms: in a thread, the station's loop goes on
         issuer = await asyncio.get_running_loop().run_in_executor(
             None, access.issuer, user, password, source)
         if issuer is None:
+            self.throttle.failed(user)
             log.warning("login refused for user %r from %s", user[:64], request.remote)
             raise web.HTTPUnauthorized(text="wrong user or password\n")
+        self.throttle.passed(user)
         token = self.sessions.open(issuer)
         log.info("user %s logged in (%s)", issuer.user, source)
         resp = web.json_response(_who(issuer))
@@ -90,27 +105,45 @@ class CommandRoutes:
         return resp
 
     async def _me(self, request: web.Request) -> web.Response:
-        issuer = self.sessions.get(request.cookies.get(COOKIE))
+        issuer = self._session(request)
         return web.json_response(_who(issuer) if issuer else {"user": None, "rights": []})
+
+    def _session(self, request: web.Request) -> Issuer | None:
+        """The request's user as the running configuration has them (None: not logged in,
+        or removed since: then the session ends)."""
+        token = request.cookies.get(COOKIE)
+        issuer = self.sessions.get(token)
+        if issuer is None:
+            return None
+        now = self.access.current(issuer) if self.access is not None else None
+        if now is None:
+            self.sessions.close(token)
+            log.warning("session of %s ended: no longer a user of the station", issuer.user)
+        return now
+
+    async def _nonce(self, request: web.Request) -> web.Response:
+        if self._session(request) is None:
+            raise web.HTTPUnauthorized(text="log in first\n")
+        return web.json_response({"nonce": self.replays.issue()})
 
     # -- commands ---------------------------------------------------------------------------
     async def _command(self, request: web.Request) -> web.Response:
-        issuer = self.sessions.get(request.cookies.get(COOKIE))
+        issuer = self._session(request)
         if issuer is None:
             raise web.HTTPUnauthorized(text="log in first\n")
         body = await _json(request)
-        nonce, issued = body.get("nonce"), body.get("issued_at")
-        if not isinstance(nonce, str) or isinstance(issued, bool) \
-                or not isinstance(issued, int | float):
-            raise web.HTTPBadRequest(text="a command needs nonce and issued_at\n")
-        problem = self.replays.check(nonce, float(issued))
+        nonce = body.get("nonce")
+        if not isinstance(nonce, str):
+            raise web.HTTPBadRequest(text="a command needs a nonce (GET /api/nonce)\n")
+        problem = self.replays.check(nonce)
         if problem is not None:
             log.warning("command from %s (%s) refused: %s", issuer.user, issuer.source,
                         problem)
             raise web.HTTPBadRequest(text=problem + "\n")
         command = _command(body)
         if self.submit is None:
-            raise web.HTTPServiceUnavailable(text="the station is not running\n")
+            raise web.HTTPServiceUnavailable(text="the station is not serving yet (starting, "
+                                             "reloading, or its database does not open)\n")
         try:
             answer = await self.submit(command, issuer)
         except TimeoutError:
@@ -134,6 +167,8 @@ class CommandRoutes:
             limit = int(request.query.get("limit", "100"))
         except ValueError:
             raise web.HTTPBadRequest(text="since and limit: integers\n") from None
+        if not 0 <= since < 2 ** 62 or not 1 <= limit <= FEED_LIMIT:
+            raise web.HTTPBadRequest(text=f"since >= 0, limit 1-{FEED_LIMIT}\n")
         ledger = results.repo.ledger
         loop = asyncio.get_running_loop()
         entries = await loop.run_in_executor(None, ledger.since, since, limit)

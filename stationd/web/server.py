@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import hmac
 import json
 import logging
 import platform
@@ -227,7 +228,7 @@ class WebServer:
         if token and request.path != "/healthz":
             given = request.headers.get("Authorization", "").removeprefix("Bearer ").strip() \
                 or request.cookies.get("token", "") or request.query.get("token", "")
-            if given != token:
+            if not hmac.compare_digest(given.encode(), token.encode()):
                 return web.Response(status=401, text="token required\n")
             set_cookie = request.query.get("token") == token
         resp: web.StreamResponse = await handler(request)

@@ -57,6 +57,10 @@ class Client:
         self.opener = urllib.request.build_opener(
             urllib.request.HTTPCookieProcessor(http.cookiejar.CookieJar()))
 
+    def get(self, path: str) -> str:
+        with self.opener.open(self.url + path, timeout=30) as r:
+            return str(r.read().decode())
+
     def post(self, path: str, body: dict[str, object]) -> tuple[int, str]:
         req = urllib.request.Request(  # noqa: S310 - http on loopback
             self.url + path, data=json.dumps(body).encode(),
@@ -108,25 +112,33 @@ def test_commands_through_the_daemon_are_authenticated_recorded_and_outlive_a_re
         d.wait_log("login refused for user 'sam'")
         got = _cli("reopen", VIN, "--user", "sam", "--url", url)   # open at the station
         assert got.returncode == 1 and f"vehicle {VIN} is open at the station" in got.stdout
-        got = _cli("skip", VIN, "B07", "--user", "olga", "--url", "not a url")
-        assert got.returncode == 2 and "Traceback" not in got.stderr
+        for bad in (("--url", "not a url"), ("--timeout", "-1"), ("--timeout", "nan"),
+                    ("--comment", "x" * 501)):
+            got = _cli("skip", VIN, "B07", "--user", "olga", "--url", url, *bad)
+            assert got.returncode == 2 and "Traceback" not in got.stderr, (bad, got.stderr)
+        got = _cli("skip", VIN, " ", "--user", "olga", "--url", url)
+        assert got.returncode == 2 and "bolt ' '" in got.stderr
 
-        # by hand: without a session, a replayed and a stale request are refused
+        # by hand: without a session, with a nonce the server never issued, replayed
         c = Client(url)
-        body = {"kind": "skip", "vin": VIN, "bolt": "B08", "nonce": "a" * 24,
-                "issued_at": time.time()}
-        assert c.post("/api/commands", body)[0] == 401
+        body = {"kind": "skip", "vin": VIN, "bolt": "B08"}
+        assert c.post("/api/commands", {**body, "nonce": "a" * 24})[0] == 401
         assert c.post("/api/login", {"user": "sam", "password": PASSWORD})[0] == 200
-        assert c.post("/api/commands", body)[0] == 200
-        status, text = c.post("/api/commands", {**body, "bolt": "B09"})
+        status, text = c.post("/api/commands", {**body, "nonce": "a" * 24})
+        assert status == 400 and "unknown nonce" in text
+        nonce = json.loads(c.get("/api/nonce"))["nonce"]
+        assert c.post("/api/commands", {**body, "nonce": nonce})[0] == 200
+        status, text = c.post("/api/commands", {**body, "bolt": "B09", "nonce": nonce})
         assert status == 400 and "replayed" in text
-        status, text = c.post("/api/commands", {**body, "bolt": "B09", "nonce": "b" * 24,
-                                                "issued_at": time.time() - 3600})
-        assert status == 400 and "stale" in text
         req = urllib.request.Request(url + "api/commands", data=b"kind=skip")  # noqa: S310
         with pytest.raises(urllib.error.HTTPError) as err:
             c.opener.open(req, timeout=30)
         assert err.value.code == 415
+        # wrong passwords: the user is locked out for a while, the right one too
+        for _ in range(5):
+            assert c.post("/api/login", {"user": "nina", "password": "nope-nope"})[0] == 401
+        status, text = c.post("/api/login", {"user": "nina", "password": PASSWORD})
+        assert status == 429 and "too many wrong passwords" in text
 
         # the record: the two accepted skips, with their users, in the feed in order
         con = sqlite3.connect(tmp_path / "station.db")
@@ -145,12 +157,19 @@ def test_commands_through_the_daemon_are_authenticated_recorded_and_outlive_a_re
         assert feed[0]["seq"] < feed[1]["seq"] and len({e["db_id"] for e in feed}) == 1
         assert _cli("feed", "--url", url, "--since", str(feed[-1]["seq"])).stdout == ""
 
-        # a reload: the skips come back with the vehicle
+        # a reload that removes sam: his open session ends, his commands are refused
+        assert json.loads(c.get("/api/me"))["user"] == "sam"
+        station = tmp_path / "station.yaml"
+        station.write_text("\n".join(line for line in station.read_text().splitlines()
+                                     if not line.strip().startswith("sam:")) + "\n")
         d.p.send_signal(1)   # SIGHUP
         d.wait_log("configuration reloaded")
         d.wait_log("tracking: tracking the wrench", count=2)
         (tmp_path / "pose").write_text("B08")
         d.wait_log("no bolt: B08 skipped: sam's command")
+        assert json.loads(c.get("/api/me"))["user"] is None
+        status, _ = c.post("/api/commands", {**body, "bolt": "B10", "nonce": "b" * 24})
+        assert status == 401
         _until(lambda: d.p.poll() is None, 1, "running")
         assert d.stop() == 0
     finally:

@@ -32,14 +32,16 @@
     return {status: r.status, doc, text: text.trim()};
   }
 
-  function nonce() {
-    const b = new Uint8Array(18);
-    crypto.getRandomValues(b);
-    return Array.from(b, (x) => x.toString(16).padStart(2, "0")).join("");
-  }
-
   async function command(body) {
-    const r = await post("/api/commands", {...body, nonce: nonce(), issued_at: Date.now() / 1000});
+    // a single-use nonce from the station for each command: a captured request cannot be
+    // sent again, and the panel PC's clock does not matter
+    const n = await fetch("/api/nonce", {credentials: "same-origin"});
+    if (!n.ok) {
+      if (n.status === 401) show(null);
+      answer((await n.text()).trim() || `HTTP ${n.status}`, false);
+      return;
+    }
+    const r = await post("/api/commands", {...body, nonce: (await n.json()).nonce});
     if (r.doc && "accepted" in r.doc) answer(r.doc.accepted ? r.doc.words :
       `refused: ${r.doc.reason.words}`, r.doc.accepted);
     else {
@@ -57,7 +59,8 @@
     if (sel.dataset.key === key) return;
     const keep = sel.value;
     sel.dataset.key = key;
-    sel.replaceChildren(...bolts.map((b) => new Option(b.bolt, b.bolt)));
+    // no bolt chosen until the operator chooses one: one click must not skip the first
+    sel.replaceChildren(new Option("bolt...", ""), ...bolts.map((b) => new Option(b.bolt, b.bolt)));
     if (bolts.some((b) => b.bolt === keep)) sel.value = keep;
   }
   setInterval(fillBolts, 500);
@@ -78,6 +81,7 @@
     e.preventDefault();
     const view = window.lastView;
     if (!view || !view.vehicle) { answer("no vehicle at the station", false); return; }
+    if (!q("skip-bolt").value) { answer("choose the bolt to skip", false); return; }
     command({kind: "skip", vin: view.vehicle.vin, bolt: q("skip-bolt").value, comment: q("skip-comment").value});
   });
   q("reopen").addEventListener("submit", (e) => {
