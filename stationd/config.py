@@ -33,6 +33,7 @@ from stationd.errors import ConfigError, InputError
 from stationd.geometry.camera import StereoPair
 from stationd.geometry.frames import Transform
 from stationd.geometry.tool import ToolGeometry
+from stationd.localize import LocalizeConfig
 from stationd.station.matching import MatchParams
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import VisionParams
@@ -51,7 +52,7 @@ MAX_AGE_S = (0.05, 5.0)         # plausible staleness limits, seconds
 BASELINE_MM = (20.0, 2000.0)    # plausible stereo baselines, millimetres
 METRES_LIKE_MM = 10.0           # a pair-to-vehicle translation shorter than this is in metres
 STATION_KEYS = ("marker", "vision", "cameras", "pairs", "tool", "lift", "wrench", "matching",
-                "database", "bolts", "records", "http", "access")
+                "database", "bolts", "records", "http", "access", "localize")
 PAIR_KEYS = ("calibration", "to_vehicle", "left", "right", "max_skew_ms")
 
 #: device kind -> (scheme -> backend, the accepted forms): the drivers' own registries, so the
@@ -176,6 +177,7 @@ class StationConfig:
     records: RecordsConfig = field(default_factory=RecordsConfig)
     http: HttpConfig | None = None  # the screens (stationd.web); None: not served
     access: AccessConfig = field(default_factory=AccessConfig)  # who may give commands
+    localize: LocalizeConfig = field(default_factory=LocalizeConfig)  # how pairs are fused
     path: Path | None = None
 
 
@@ -417,6 +419,7 @@ class _Reader:
             records=self.section("records", d.records, partial(_records, base=base)),
             http=self.section("http", d.http, HttpConfig.from_node),
             access=self.section("access", d.access, AccessConfig.from_node),
+            localize=self.section("localize", d.localize, LocalizeConfig.from_node),
             path=path)
         # after the sections: a mistake written in the file is told before what is missing
         if self.require_devices and isinstance(root.value(), dict) and not self.unreadable:

@@ -20,14 +20,13 @@ import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from functools import partial
 from pathlib import Path
 from typing import Any
 
 import cv2
-import numpy as np
 
 from db.bolts import Parameters
 from db.errors import DataError, DbError, NotFoundError, VehicleClosedError
@@ -40,10 +39,18 @@ from drivers.keeper import DeviceKeeper, fault_kind, one_line
 from drivers.lift import open_lift
 from drivers.wrench import open_wrench
 from stationd.boltfile import import_bolts
-from stationd.config import PairConfig, StationConfig
+from stationd.config import StationConfig
 from stationd.errors import StationError
-from stationd.geometry.stereo import localize
-from stationd.geometry.tool import BoltEnd, bolt_end, fuse
+from stationd.geometry.tool import BoltEnd
+from stationd.localize import (
+    Localization,
+    PairSetup,
+    PairView,
+    frame_summary,
+    fuse_views,
+    localize_pair,
+    size_problem,
+)
 from stationd.reasons import Reason, Why
 from stationd.station.commands import KIND, Answer, Command, Issuer, ReopenVehicle, skip_note
 from stationd.station.core import (
@@ -123,46 +130,6 @@ LIFT_CHECK_S = 1.0
 OPEN_ERRORS: tuple[type[Exception], ...] = (*STATION_FAULTS, OSError, ValueError)
 
 
-def frame_summary(det: Any) -> dict[str, Any]:
-    """What the commissioning screen draws over a frame: found or why not, the ROI, both
-    ellipses (undistorted pixels: close to the raw frame away from the image corners) as
-    ``[cx, cy, a, b, angle_deg]``, the corrected centre."""
-    ellipses = [[*e.centre, *e.axes, float(np.degrees(e.angle))]
-                for e in (det.inner, det.outer) if e is not None]
-    return {"found": bool(det.found), "reason": det.reason,
-            "roi": list(det.roi) if det.roi is not None else None,
-            "ellipses": [[float(v) for v in e] for e in ellipses],
-            "centre": [float(v) for v in det.centre_px] if det.centre_px is not None else None}
-
-
-@dataclass
-class Localization:
-    """What the cameras saw: the bolt end or why not, with the frames' exposure instant
-    (``exposure_t``, ``time.time()`` scale), the marker crops (evidence kept with a record)
-    and the slowest pair's stage timings."""
-
-    point_mm: np.ndarray | None
-    tilt_deg: float = 0.0
-    reason: Reason | None = None
-    exposure_t: float = 0.0
-    crops: dict[str, np.ndarray] = field(default_factory=dict)
-    done_t: float = 0.0
-    timings_ms: dict[str, float] = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class PairView:
-    """One pair's grab and localization; ``failed`` when the grab gave no usable pair."""
-
-    end: BoltEnd | Refusal
-    exposure_t: float
-    crops: dict[str, np.ndarray] = field(default_factory=dict)
-    failed: bool = False
-    skew: bool = False
-    timings_ms: dict[str, float] = field(default_factory=dict)
-    sides: dict[str, dict[str, Any]] = field(default_factory=dict)  # detection summaries
-
-
 class Pair:
     """A stereo pair as the station keeps it: its two cameras and their grabber."""
 
@@ -237,6 +204,10 @@ class Station:
 
     def __post_init__(self) -> None:
         self.core = StationCore(self.cfg.matching, self.cfg.matching.leave_frames)
+        c = self.cfg
+        self._setups = {n: PairSetup(pc.calibration, pc.to_vehicle, c.vision, c.marker, c.tool,
+                                     c.records.save_images)
+                        for n, pc in c.pairs.items() if pc.calibration is not None}
         self._pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="station")
         self._results_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="results")
         self.keepers = {LIFT: self._keeper(LIFT, self._open_lift, _reconnect_lift),
@@ -391,7 +362,7 @@ class Station:
         for cam in pair.cams:
             cam.reconnect()
         left, right = pair.grabber.grab(1.0)
-        problem = self._size_problem(name, left.image, right.image)
+        problem = size_problem(self.cfg.pairs[name].calibration, left.image, right.image)
         if problem is not None:
             raise ProtocolError(problem)
 
@@ -559,31 +530,17 @@ class Station:
             if cycle.scout and self._scan.watching:   # after the decision, never before it
                 await self._localize(cycle.scout)
 
-    def _size_problem(self, pair: str, left: np.ndarray, right: np.ndarray) -> str | None:
-        """Frames the pair's calibration does not describe: garbage to this station."""
-        cal = self.cfg.pairs[pair].calibration if pair in self.cfg.pairs else None
-        for side, img in (("left", left), ("right", right)):
-            want = getattr(getattr(cal, side, None), "size", None)
-            got = (int(img.shape[1]), int(img.shape[0]))
-            if want is not None and tuple(want) != got:
-                return f"{side} frames are {got[0]}x{got[1]}, the calibration is for " \
-                       f"{want[0]}x{want[1]}"
-        return None
-
     async def _localize(self, names: list[str]) -> Localization | None:
         """Grab and localize at once in the pairs ``names`` (the scan plan's choice: those
-        that see the marker, or all: :mod:`stationd.station.scan`) that are up.  The
-        localization's ``exposure_t`` is the earliest exposure of the frames it used (its age
-        is counted from there).  A pair that failed its grab is left out of this
-        localization; after ``BAD_GRABS`` failures in a row its keeper is told it is lost.
-        None when every pair failed (nothing to tell the core)."""
+        that see the marker, or all: :mod:`stationd.station.scan`) that are up, then fuse
+        (:func:`stationd.localize.fuse_views`).  A pair that failed its grab is left out;
+        after ``BAD_GRABS`` failures in a row its keeper is told it is lost."""
         grabbers = self.grabbers
         names = [n for n in names if n in grabbers]
-        got: list[PairView] = await asyncio.gather(*(self._call(self._localize_pair, n,
+        got: list[PairView] = await asyncio.gather(*(self._call(self._grab_pair, n,
                                                                 grabbers[n]) for n in names))
         done = time.time()
-        self._scan.saw({n: any(d.get("found") for d in g.sides.values())
-                        for n, g in zip(names, got, strict=True)})
+        self._scan.saw({n: g.saw_marker for n, g in zip(names, got, strict=True)})
         for n, g in zip(names, got, strict=True):
             if g.failed and not g.skew:
                 self._bad[n] = self._bad.get(n, 0) + 1
@@ -597,38 +554,11 @@ class Station:
             if g.sides and time.monotonic() >= self._next_frames.get(n, 0.0):
                 self._next_frames[n] = time.monotonic() + PAIR_FRAMES_S
                 self.bus.publish(PairFrames(n, g.exposure_t, g.sides))
-        usable = [g for g in got if not g.failed]
-        if not usable:
-            return None
-        timings = {k: max((g.timings_ms.get(k, 0.0) for g in usable), default=0.0)
-                   for k in ("grab", "vision")}
-        ends = [g for g in usable if isinstance(g.end, BoltEnd)]
-        used = ends or usable
-        exposure = min(g.exposure_t for g in used)
-        if not ends:
-            refused = [(n, g.end) for n, g in zip(names, got, strict=True)
-                       if not g.failed and isinstance(g.end, Refusal)]
-            # a pair that sees the wrench tilted speaks for the operator's next move
-            typed = [r.why for _, r in refused if r.why is not None]
-            why = typed[0] if typed else Reason(Why.NOT_LOCALIZED, per_pair=tuple(
-                (n, r.reason) for n, r in refused))
-            return Localization(None, reason=why, exposure_t=exposure, done_t=done,
-                                timings_ms=timings)
-        points = [g.end.point_mm for g in ends if isinstance(g.end, BoltEnd)]
-        fused = fuse(points, [1.0] * len(points), max_spread_mm=2.0)
-        if isinstance(fused, Refusal):
-            return Localization(None, reason=fused.why or Reason(Why.NOT_LOCALIZED,
-                                                                 note=fused.reason),
-                                exposure_t=exposure, done_t=done, timings_ms=timings)
-        crops = {k: c for g in ends for k, c in g.crops.items()}
-        tilt = float(np.mean([g.end.tilt_deg for g in ends if isinstance(g.end, BoltEnd)]))
-        return Localization(fused.point_mm, tilt, exposure_t=exposure, crops=crops,
-                            done_t=done, timings_ms=timings)
+        return fuse_views(names, got, self.cfg.localize, done)
 
-    def _localize_pair(self, name: str, grabber: StereoGrabber) -> PairView:
-        """Grab and localize in one pair (an executor thread).  A skewed pair or a bad frame
-        is a failed grab to retry; garbage from the vision (a frame of the wrong size) too."""
-        pc: PairConfig = self.cfg.pairs[name]
+    def _grab_pair(self, name: str, grabber: StereoGrabber) -> PairView:
+        """Grab one pair and localize in its frames (an executor thread).  A skewed pair or a
+        bad frame is a failed grab to retry."""
         t0 = time.monotonic()
         try:
             left, right = grabber.grab(1.0)
@@ -636,37 +566,15 @@ class Station:
             return PairView(Refusal(one_line(exc)), 0.0, failed=True, skew=True)
         except (DeviceError, ValueError) as exc:
             return PairView(Refusal(one_line(exc)), 0.0, failed=True)
-        exposure = min(left.timestamp, right.timestamp)
         t1 = time.monotonic()
-        size = self._size_problem(name, left.image, right.image)
-        if size is not None:
-            return PairView(Refusal(size), exposure, failed=True)
-        try:
-            res = localize(pc.calibration, left.image, right.image, self.cfg.vision,
-                           self.cfg.marker)
-        except (cv2.error, ValueError, IndexError, np.linalg.LinAlgError) as exc:
-            return PairView(Refusal(f"frames not usable: {one_line(exc)}"), exposure,
-                            failed=True)
-        timings = {"grab": (t1 - t0) * 1e3, "vision": (time.monotonic() - t1) * 1e3}
-        sides = {"left": res.left.to_json(), "right": res.right.to_json()}
-        if self.frames is not None:   # the commissioning screen's latest frames (no copy)
+        view, res = localize_pair(name, self._setups[name], left.image, right.image,
+                                  min(left.timestamp, right.timestamp))
+        if self.frames is not None and res is not None:   # the commissioning screen's
             for side, frame, det in (("left", left, res.left), ("right", right, res.right)):
                 self.frames.put(name, side, frame.image, frame_summary(det), frame.timestamp,
                                 det.search_image)
-        if not res.found or res.point_mm is None or res.normal is None:
-            return PairView(Refusal(str(res.reason)), exposure, timings_ms=timings, sides=sides)
-        crops = {}
-        if self.cfg.records.save_images:
-            crops = {f"{name}/{side}": crop(frame.image, det.roi)
-                     for side, frame, det in (("left", left, res.left),
-                                              ("right", right, res.right))
-                     if det.roi is not None}
-        if pc.to_vehicle is None:
-            return PairView(Refusal("pair not registered into the vehicle frame"), exposure,
-                            timings_ms=timings, sides=sides)
-        end = bolt_end(pc.to_vehicle.apply(res.point_mm),
-                       pc.to_vehicle.apply_direction(res.normal), self.cfg.tool)
-        return PairView(end, exposure, crops, timings_ms=timings, sides=sides)
+        return replace(view, timings_ms={"grab": (t1 - t0) * 1e3,
+                                         "vision": (time.monotonic() - t1) * 1e3})
 
     # -- the actions -------------------------------------------------------------------------
     async def _do(self, a: Action) -> Event | None:
@@ -1096,12 +1004,4 @@ def _quiet(fn: Any) -> None:
         log.warning("closing: %s", one_line(exc))
 
 
-def crop(image: np.ndarray, roi: tuple[int, int, int, int], margin: int = 16) -> np.ndarray:
-    """The marker's neighbourhood (``roi`` x, y, w, h plus ``margin``), a copy."""
-    x, y, w, h = roi
-    hh, ww = image.shape[:2]
-    x0, y0 = max(0, x - margin), max(0, y - margin)
-    return image[y0:min(hh, y + h + margin), x0:min(ww, x + w + margin)].copy()
-
-
-__all__ = ["Localization", "State", "Station", "crop"]
+__all__ = ["Localization", "State", "Station"]

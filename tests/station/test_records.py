@@ -22,6 +22,7 @@ from stationd.sim.world import wrench_at
 from stationd.station.core import DisableTool, State
 from stationd.station.demo import SIM_CONFIG
 from stationd.station.events import BoltSelected, Localized, Notice, ResultUnattributed
+from stationd.words import reason_words
 from tests.station.test_faults import _scenario, _until
 
 VIN = "FAULTVIN000000001"  # the harness's vehicle
@@ -97,7 +98,7 @@ def _sends(st) -> list[str]:
 
 def _logs(st) -> list[str]:
     """The operator's log lines and every localization's refusal reason."""
-    return [e.message if isinstance(e, Notice) else e.reason
+    return [e.message if isinstance(e, Notice) else reason_words(e.reason)
             for e in st.bus.of(Notice, Localized) if getattr(e, "reason", "x") is not None]
 
 
@@ -163,7 +164,7 @@ def _pull_as_the_wrench_leaves(st, world, a: str, then=None) -> dict[str, Any]:
 
     def on_action(act):
         if isinstance(act, DisableTool) and act.bolt == a \
-                and act.reason.startswith(f"wrench not confirmed on bolt {a} ") \
+                and act.reason == f"wrench not confirmed on bolt {a}" \
                 and "late" not in pulled:
             assert st.cycle.state is not State.TIGHTENING
             pulled["late"] = st.wrench.controller.pull_trigger()
