@@ -22,6 +22,7 @@ from db.models import (
     Bolt,
     CommandRecord,
     FeedEntry,
+    ForwardQuarantine,
     Meta,
     TighteningRecord,
     UnattributedResult,
@@ -100,6 +101,43 @@ class Ledger:
                 q = q.where(CommandRecord.at >= since)
             return {str(r.bolt): (r.user, r.comment)
                     for r in s.scalars(q.order_by(CommandRecord.id))}
+
+    def get_meta(self, key: str) -> str | None:
+        with self._session(False) as s:
+            return s.scalar(select(Meta.value).where(Meta.key == key))
+
+    def set_meta(self, key: str, value: str) -> None:
+        with self._session(True) as s:
+            row = s.get(Meta, key)
+            if row is None:
+                s.add(Meta(key=key, value=value))
+            else:
+                row.value = value
+
+    def quarantine(self, seq: int, reason: str) -> None:
+        """Keep feed entry ``seq`` aside: the line database refused it for good."""
+        with self._session(True) as s:
+            if s.get(ForwardQuarantine, seq) is None:
+                s.add(ForwardQuarantine(seq=seq, reason=reason[:500]))
+
+    def quarantined(self) -> list[dict[str, Any]]:
+        """The quarantined entries, each with its reason and its record."""
+        with self._session(False) as s:
+            rows = list(s.scalars(select(ForwardQuarantine).order_by(ForwardQuarantine.seq)))
+            out = []
+            for q in rows:
+                e = s.get_one(FeedEntry, q.seq)
+                out.append({"seq": e.seq, "kind": e.kind, "at": e.at.isoformat(),
+                            "record": _record(s, e.kind, e.ref), "reason": q.reason,
+                            "quarantined_at": q.at.isoformat()})
+            return out
+
+    def release(self, seq: int) -> None:
+        """A quarantined entry the line database took on a retry."""
+        with self._session(True) as s:
+            row = s.get(ForwardQuarantine, seq)
+            if row is not None:
+                s.delete(row)
 
     def last_seq(self) -> int:
         with self._session(False) as s:

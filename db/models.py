@@ -279,3 +279,14 @@ class Meta(Base):
 
     key: Mapped[str] = mapped_column(String(32), primary_key=True)
     value: Mapped[str] = mapped_column(String(200))
+
+
+class ForwardQuarantine(Base):
+    """A feed entry the line database refused for good, with its reason: kept here, visible
+    and retried on demand, never blocking the entries after it."""
+
+    __tablename__ = "forward_quarantine"
+
+    seq: Mapped[int] = mapped_column(primary_key=True, autoincrement=False)
+    reason: Mapped[str] = mapped_column(String(500))
+    at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)

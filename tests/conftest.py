@@ -34,3 +34,26 @@ def view(camera, distance, tilt, seed=0, **kw):
 
 def pose_in_pair(pair, seed=0, tilt=(5.0, 35.0)):
     return sc.pose_in_pair(np.random.default_rng(seed), pair, tilt=tilt)
+
+
+@pytest.fixture(scope="session")
+def pg_server():
+    """A real PostgreSQL server for this test process (skipped, with the reason, where none
+    can be started); each test makes its own database with ``pg_server.create(name)``."""
+    from tests.pgserver import PgServer
+
+    server = PgServer()
+    if server.missing:
+        pytest.skip(server.missing)
+    server.start()
+    yield server
+    server.stop()
+
+
+@pytest.fixture
+def pg_url(pg_server, request):
+    """A fresh, empty database on the test server."""
+    import re
+
+    name = re.sub(r"\W", "_", request.node.name.lower())[:40] + f"_{id(request) % 100000}"
+    return pg_server.create(name)

@@ -1,0 +1,126 @@
+"""Store and forward to the line's PostgreSQL (a real server the tests start): every record in
+order, exactly once whatever is replayed, stations and replaced databases kept apart, the
+backlog and its alarm while the line database is down, a record it refuses for good kept in a
+visible quarantine without blocking the rest."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+
+import pytest
+from sqlalchemy import select
+
+from db.repository import Repository
+from stationd.boltfile import import_bolts
+from stationd.errors import ConfigError
+from stationd.forward import LINE_FEED, Forwarder, LineConfig, LineDb, LineDown
+from stationd.yamlio import YamlNode
+from tests.db.conftest import bolts_file, record  # noqa: F401 - a fixture
+
+AT = datetime(2026, 11, 27, 8, 0, tzinfo=UTC)
+
+
+def _station(tmp_path, name, bolts_file, vin, results):
+    repo = Repository.open(f"sqlite:///{tmp_path / name}")
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle(vin, "SEDAN")
+    for tid, bolt in results:
+        record(repo, vin, bolt, tightening_id=tid)
+    return repo
+
+
+def _line_rows(url, station_id=None):
+    line = LineDb(url)
+    engine = line._connect()
+    q = select(LINE_FEED.c.station_id, LINE_FEED.c.db_id, LINE_FEED.c.seq, LINE_FEED.c.kind,
+               LINE_FEED.c.record).order_by(LINE_FEED.c.station_id, LINE_FEED.c.seq)
+    if station_id is not None:
+        q = q.where(LINE_FEED.c.station_id == station_id)
+    with engine.connect() as c:
+        rows = list(c.execute(q))
+    line.dispose()
+    return rows
+
+
+def test_every_record_goes_once_in_order_and_a_replay_inserts_nothing(tmp_path, bolts_file,
+                                                                       pg_url):
+    repo = _station(tmp_path, "st1.db", bolts_file, "VINF1", [(1, "B1"), (2, "B2")])
+    repo.ledger.record_command(at=AT, user="sam", source="cli", kind="skip", vin="VINF1",
+                               bolt="B3", comment="no access")
+    f = Forwarder(repo, LineConfig(pg_url, "ST-01"))
+    assert f.step() == 3 and f.step() == 0
+    rows = _line_rows(pg_url)
+    assert [(r.seq, r.kind) for r in rows] == [(1, "rundown"), (2, "rundown"), (3, "command")]
+    assert rows[0].record["tightening_id"] == 1 and rows[2].record["user"] == "sam"
+    assert {r.db_id for r in rows} == {repo.ledger.db_id()}
+    # a crash after the push and before the cursor was saved: the same entries again
+    repo.ledger.set_meta("forwarded_seq", "0")
+    again = Forwarder(repo, LineConfig(pg_url, "ST-01"))
+    assert again.step() == 3 and again.forwarded == 0
+    assert len(_line_rows(pg_url)) == 3
+    st = again.status()
+    assert (st["up"], st["backlog"], st["cursor"], st["alarm"]) == (True, 0, 3, None)
+    repo.close()
+
+
+def test_stations_and_a_replaced_database_stay_apart(tmp_path, bolts_file, pg_url):
+    a = _station(tmp_path, "a.db", bolts_file, "VINA", [(1, "B1")])
+    b = _station(tmp_path, "b.db", bolts_file, "VINB", [(1, "B1"), (2, "B2")])
+    new_a = _station(tmp_path, "a2.db", bolts_file, "VINA2", [(5, "B1")])  # re-commissioned
+    for repo, sid in ((a, "ST-A"), (b, "ST-B"), (new_a, "ST-A")):
+        assert Forwarder(repo, LineConfig(pg_url, sid)).step() > 0
+    rows = _line_rows(pg_url)
+    assert sorted((r.station_id, r.record["vin"]) for r in rows) == [
+        ("ST-A", "VINA"), ("ST-A", "VINA2"), ("ST-B", "VINB"), ("ST-B", "VINB")]
+    assert len({r.db_id for r in rows if r.station_id == "ST-A"}) == 2   # seq 1 twice, apart
+    for repo in (a, b, new_a):
+        repo.close()
+
+
+def test_a_line_database_that_is_down_keeps_the_backlog_then_catches_up(tmp_path, bolts_file,
+                                                                         pg_url, pg_server):
+    repo = _station(tmp_path, "st.db", bolts_file, "VIND", [(1, "B1"), (2, "B2")])
+    down = pg_url.replace(f":{pg_server.port}/", ":1/")       # nothing listens there
+    f = Forwarder(repo, LineConfig(down, "ST-D", max_records=1))
+    with pytest.raises(LineDown):
+        f.step()
+    st = f.status()
+    assert st["up"] is False and st["cursor"] == 0 and st["backlog"] == 2
+    assert st["last_error"] and "bound 1" in (st["alarm"] or "")
+    record(repo, "VIND", "B3", tightening_id=3)              # the station goes on recording
+    back = Forwarder(repo, LineConfig(pg_url, "ST-D", max_records=1))
+    assert back.step() == 3
+    assert [r.record["tightening_id"] for r in _line_rows(pg_url, "ST-D")] == [1, 2, 3]
+    assert back.status()["alarm"] is None
+    repo.close()
+
+
+def test_a_record_the_line_database_refuses_is_quarantined_not_blocking(tmp_path, bolts_file,
+                                                                         pg_url):
+    repo = _station(tmp_path, "st.db", bolts_file, "VINQ", [(1, "B1")])
+    # PostgreSQL's jsonb takes no NUL character: a comment typed with one is refused for good
+    repo.ledger.record_command(at=AT, user="sam", source="cli", kind="skip", vin="VINQ",
+                               bolt="B2", comment="bad\x00comment")
+    record(repo, "VINQ", "B3", tightening_id=3)
+    f = Forwarder(repo, LineConfig(pg_url, "ST-Q"))
+    assert f.step() == 3
+    assert [r.seq for r in _line_rows(pg_url, "ST-Q")] == [1, 3]
+    [q] = repo.ledger.quarantined()
+    assert q["seq"] == 2 and q["kind"] == "command" and "Unicode" in q["reason"]
+    assert f.status()["quarantined"] == 1 and f.status()["backlog"] == 0
+    assert f.retry_quarantined() == (0, 1)                   # still refused, still kept
+    repo.close()
+
+
+def test_the_line_section_is_checked_with_its_line():
+    cfg = LineConfig.from_node(YamlNode.parse(
+        "url: postgresql+psycopg://stationd@line-db/line\nstation_id: ST-07\n"
+        "backlog: {records: 500, age_h: 8}\n"))
+    assert (cfg.station_id, cfg.max_records, cfg.max_age_h) == ("ST-07", 500, 8.0)
+    for text, message in (("url: mysql://x/y\nstation_id: A\n", "PostgreSQL URL"),
+                          ("url: 'not a url'\nstation_id: A\n", "not a database URL"),
+                          ("url: postgresql://x/y\n", r"missing key\(s\): station_id"),
+                          ("url: postgresql://x/y\nstation_id: A\nbacklog: {records: 0}\n",
+                           "out of range")):
+        with pytest.raises(ConfigError, match=message):
+            LineConfig.from_node(YamlNode.parse(text, "station.yaml"))
