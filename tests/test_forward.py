@@ -15,14 +15,22 @@ from stationd.boltfile import import_bolts
 from stationd.errors import ConfigError
 from stationd.forward import LINE_FEED, Forwarder, LineConfig, LineDb, LineDown
 from stationd.yamlio import YamlNode
-from tests.db.conftest import bolts_file, record  # noqa: F401 - a fixture
+from tests.db.conftest import BASE, record
 
 AT = datetime(2026, 11, 27, 8, 0, tzinfo=UTC)
 
 
-def _station(tmp_path, name, bolts_file, vin, results):
+@pytest.fixture
+def table(tmp_path):
+    """The test bolt table (tests/db's)."""
+    p = tmp_path / "bolts.yaml"
+    p.write_text(BASE)
+    return p
+
+
+def _station(tmp_path, name, table, vin, results):
     repo = Repository.open(f"sqlite:///{tmp_path / name}")
-    import_bolts(repo, bolts_file)
+    import_bolts(repo, table)
     repo.start_vehicle(vin, "SEDAN")
     for tid, bolt in results:
         record(repo, vin, bolt, tightening_id=tid)
@@ -42,9 +50,9 @@ def _line_rows(url, station_id=None):
     return rows
 
 
-def test_every_record_goes_once_in_order_and_a_replay_inserts_nothing(tmp_path, bolts_file,
+def test_every_record_goes_once_in_order_and_a_replay_inserts_nothing(tmp_path, table,
                                                                        pg_url):
-    repo = _station(tmp_path, "st1.db", bolts_file, "VINF1", [(1, "B1"), (2, "B2")])
+    repo = _station(tmp_path, "st1.db", table, "VINF1", [(1, "B1"), (2, "B2")])
     repo.ledger.record_command(at=AT, user="sam", source="cli", kind="skip", vin="VINF1",
                                bolt="B3", comment="no access")
     f = Forwarder(repo, LineConfig(pg_url, "ST-01"))
@@ -63,10 +71,10 @@ def test_every_record_goes_once_in_order_and_a_replay_inserts_nothing(tmp_path, 
     repo.close()
 
 
-def test_stations_and_a_replaced_database_stay_apart(tmp_path, bolts_file, pg_url):
-    a = _station(tmp_path, "a.db", bolts_file, "VINA", [(1, "B1")])
-    b = _station(tmp_path, "b.db", bolts_file, "VINB", [(1, "B1"), (2, "B2")])
-    new_a = _station(tmp_path, "a2.db", bolts_file, "VINA2", [(5, "B1")])  # re-commissioned
+def test_stations_and_a_replaced_database_stay_apart(tmp_path, table, pg_url):
+    a = _station(tmp_path, "a.db", table, "VINA", [(1, "B1")])
+    b = _station(tmp_path, "b.db", table, "VINB", [(1, "B1"), (2, "B2")])
+    new_a = _station(tmp_path, "a2.db", table, "VINA2", [(5, "B1")])  # re-commissioned
     for repo, sid in ((a, "ST-A"), (b, "ST-B"), (new_a, "ST-A")):
         assert Forwarder(repo, LineConfig(pg_url, sid)).step() > 0
     rows = _line_rows(pg_url)
@@ -77,9 +85,9 @@ def test_stations_and_a_replaced_database_stay_apart(tmp_path, bolts_file, pg_ur
         repo.close()
 
 
-def test_a_line_database_that_is_down_keeps_the_backlog_then_catches_up(tmp_path, bolts_file,
+def test_a_line_database_that_is_down_keeps_the_backlog_then_catches_up(tmp_path, table,
                                                                          pg_url, pg_server):
-    repo = _station(tmp_path, "st.db", bolts_file, "VIND", [(1, "B1"), (2, "B2")])
+    repo = _station(tmp_path, "st.db", table, "VIND", [(1, "B1"), (2, "B2")])
     down = pg_url.replace(f":{pg_server.port}/", ":1/")       # nothing listens there
     f = Forwarder(repo, LineConfig(down, "ST-D", max_records=1))
     with pytest.raises(LineDown):
@@ -95,9 +103,9 @@ def test_a_line_database_that_is_down_keeps_the_backlog_then_catches_up(tmp_path
     repo.close()
 
 
-def test_a_record_the_line_database_refuses_is_quarantined_not_blocking(tmp_path, bolts_file,
+def test_a_record_the_line_database_refuses_is_quarantined_not_blocking(tmp_path, table,
                                                                          pg_url):
-    repo = _station(tmp_path, "st.db", bolts_file, "VINQ", [(1, "B1")])
+    repo = _station(tmp_path, "st.db", table, "VINQ", [(1, "B1")])
     # PostgreSQL's jsonb takes no NUL character: a comment typed with one is refused for good
     repo.ledger.record_command(at=AT, user="sam", source="cli", kind="skip", vin="VINQ",
                                bolt="B2", comment="bad\x00comment")
