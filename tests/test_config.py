@@ -275,7 +275,8 @@ def test_a_missing_to_vehicle_file_is_a_warning_not_an_error(sim_copy):
     # a third newcomer trial: Open Protocol's options passed the check, the controller then
     # stayed down ("unknown option(s) foo"), and a reload onto the file was accepted
     ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'openprotocol://10.0.0.9?foo=1'}",
-     "wrench.url", "unknown option(s) foo (accepted: connect_timeout, keepalive, timeout"),
+     "wrench.url",
+     "unknown option(s) foo (accepted: connect_timeout, keepalive, link_ack, timeout"),
     ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'openprotocol://10.0.0.9?timeout=-5'}",
      "wrench.url", "timeout must be > 0"),
     ("wrench: {url: 'sim://wrench'}",

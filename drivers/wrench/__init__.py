@@ -1,6 +1,8 @@
 """Tightening controllers, chosen by URL (like pyserial's ``serial_for_url``).
 
-    openprotocol://192.168.10.30:4545            Open Protocol over TCP (port 4545 by default)
+    openprotocol://192.168.10.30:4545            Open Protocol over TCP (port 4545 by default;
+                                                  ?link_ack=1 forces link-level acknowledgement,
+                                                  =0 refuses it, auto by default)
     openprotocol+serial:///dev/ttyUSB1?baud=9600  Open Protocol over RS-232
     sim://wrench                                  a simulated controller, spoken to over the
                                                   real protocol on loopback (or a pty)
@@ -19,10 +21,17 @@ from typing import Any
 
 from drivers.errors import UrlError
 from drivers.url import load_backend, parse_url
-from drivers.wrench.base import LinkStatus, Status, TighteningResult, Wrench
+from drivers.wrench.base import (
+    LinkStatus,
+    ResultType,
+    Status,
+    TighteningResult,
+    TorqueUnit,
+    Wrench,
+)
 
-__all__ = ["BACKENDS", "FORMS", "LinkStatus", "Status", "TighteningResult", "Wrench",
-           "open_wrench"]
+__all__ = ["BACKENDS", "FORMS", "LinkStatus", "ResultType", "Status", "TighteningResult",
+           "TorqueUnit", "Wrench", "open_wrench"]
 
 #: scheme -> "module:Class"; the class has ``from_url(url: DeviceUrl, **kw) -> Wrench``.
 BACKENDS: dict[str, str] = {

@@ -45,12 +45,59 @@ class Status(IntEnum):
     HIGH = 2
 
 
+class ResultType(IntEnum):
+    """What a result reports (Open Protocol MID 0061 revision 3+, parameter 49): a loosening
+    or a batch counter change is a result too, and must never be taken for a tightening."""
+
+    TIGHTENING = 1
+    LOOSENING = 2
+    BATCH_INCREMENT = 3
+    BATCH_DECREMENT = 4
+    BYPASS_PSET = 5
+    ABORT_JOB = 6
+    SYNC_TIGHTENING = 7
+    REFERENCE_SETUP = 8
+
+
+class TorqueUnit(IntEnum):
+    """The unit the controller shows torques in (MID 0061 revision 3+, parameter 48).  The
+    result's ``*_nm`` fields are converted to Nm whatever it is (see ``to_nm``)."""
+
+    NM = 1
+    LBF_FT = 2
+    LBF_IN = 3
+    KPM = 4
+    KGF_CM = 5
+    OZF_IN = 6
+    PERCENT = 7
+    NCM = 8
+
+    @property
+    def to_nm(self) -> float | None:
+        """Nm per unit; None for a percentage of the tool's maximum (not convertible)."""
+        return _NM_PER_UNIT.get(self)
+
+
+_NM_PER_UNIT = {TorqueUnit.NM: 1.0, TorqueUnit.LBF_FT: 1.3558179483314004,
+                TorqueUnit.LBF_IN: 0.1129848290276167, TorqueUnit.KPM: 9.80665,
+                TorqueUnit.KGF_CM: 0.0980665, TorqueUnit.OZF_IN: 0.00706155181422604,
+                TorqueUnit.NCM: 0.01}
+
+
 @dataclass(frozen=True)
 class TighteningResult:
     """One tightening as the controller reported it; units are Nm and degrees.
 
     ``ok`` is the controller's verdict (not recomputed here: the controller owns the limits).
     ``timestamp`` is the controller's local clock, naive, as it sent it.
+
+    The fields after ``raw`` come with Open Protocol revisions 2 to 7 of MID 0061/0065 (and
+    are None, empty or 0 when the revision, or the backend, does not carry them):
+    ``revision`` is the one the result came in, ``fetched`` says it was asked for after the
+    fact (MID 0064/0065) rather than pushed.  A result whose ``torque_unit`` is
+    ``PERCENT`` keeps its torques as sent (percent of the tool's maximum), not in Nm.
+    MID 0065 revision 1 carries no limits, cell, channel or controller name: they are 0 or
+    empty there.
     """
 
     ok: bool
@@ -77,6 +124,41 @@ class TighteningResult:
     batch_status: int = 0
     pset_changed: datetime | None = None
     raw: str = field(default="", repr=False, compare=False)
+    # -- revision 2 and later (Open Protocol) -------------------------------------------------
+    revision: int = 1
+    fetched: bool = False
+    strategy: int | None = None              # 1 torque control, 2 torque/angle monitoring, ...
+    strategy_options: int | None = None      # a bit field, as sent
+    result_type: ResultType | None = None
+    pset_name: str = ""
+    torque_unit: TorqueUnit | None = None
+    rundown_angle_status: Status | None = None
+    current_monitoring_status: Status | None = None
+    selftap_status: Status | None = None
+    prevail_torque_monitoring_status: Status | None = None
+    prevail_torque_compensate_status: Status | None = None
+    tightening_error_status: int | None = None     # a bit field: why a NOK stopped
+    tightening_error_status2: int | None = None
+    rundown_angle_min_deg: float | None = None
+    rundown_angle_max_deg: float | None = None
+    rundown_angle_deg: float | None = None
+    current_monitoring_min_pct: float | None = None
+    current_monitoring_max_pct: float | None = None
+    current_monitoring_pct: float | None = None
+    selftap_min_nm: float | None = None
+    selftap_max_nm: float | None = None
+    selftap_nm: float | None = None
+    prevail_torque_min_nm: float | None = None
+    prevail_torque_max_nm: float | None = None
+    prevail_torque_nm: float | None = None
+    prevail_torque_compensate_nm: float | None = None
+    job_sequence_number: int | None = None
+    sync_tightening_id: int | None = None
+    tool_serial: str = ""
+    identifiers: tuple[str, ...] = ()          # identifier result parts 2-4 (revision 4+)
+    customer_error_code: str = ""
+    compensated_angle_deg: float | None = None
+    angle_decimal_deg: float | None = None     # the final angle with its decimals (rev 7)
 
 
 @dataclass(frozen=True)
@@ -224,6 +306,16 @@ class Wrench(Openable):
         gone (the controller still holds it)."""
         self._check_open()
         self._ack_result(result, self._timeout(timeout))
+
+    #: whether :meth:`fetch_result` can ask the controller for a stored result (Open
+    #: Protocol's MID 0064); a register-driven controller keeps none
+    can_fetch: bool = False
+
+    def fetch_result(self, tightening_id: int, timeout: float | None = None
+                     ) -> TighteningResult | None:
+        """The controller's stored result ``tightening_id`` (0: its newest), or None when it
+        no longer has it.  This controller keeps none (``can_fetch`` is False)."""
+        raise DeviceError("this controller keeps no results to fetch", device=self.device)
 
     # -- helpers and hooks -----------------------------------------------------------------
     def _timeout(self, timeout: float | None) -> float:

@@ -12,14 +12,23 @@ RefusedError with the controller's code.  Any other failure (timeout, lost link,
 raises and also resets the link: the controller's state is then unknown, and a late answer
 must never be taken as the answer to the next command.  Sends carry the link's epoch, so a
 command can never leak onto a reconnected link before its session started.
+
+Revisions: the session asks for the highest revision of 0001 (6) and 0060 (7: results come
+as MID 0061 revision 7) this driver reads, and one lower each time the controller answers
+MID 0004 "revision unsupported" (97, 76 or 74), as integrators' clients do; ``revisions``
+says what was agreed.  ``fetch_result`` asks for an old result (MID 0064 -> 0065) the same
+way.  Link-level acknowledgement (``op_link.py``) is on when the controller's 0002 says it
+supports it (or the URL says ``link_ack=1``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -31,9 +40,11 @@ from drivers.errors import (
     RefusedError,
 )
 from drivers.link import Link, SerialLink, TcpLink
-from drivers.url import DeviceUrl
+from drivers.url import DeviceUrl, OptionError
+from drivers.wrench import op_link
 from drivers.wrench import openprotocol as op
-from drivers.wrench.base import SupervisedWrench, check_positive
+from drivers.wrench.base import SupervisedWrench, TighteningResult, check_positive
+from drivers.wrench.op_identity import ControllerIdentity, parse_identity
 from drivers.wrench.openprotocol import Message, SerialFramer, TcpFramer
 
 log = logging.getLogger(__name__)
@@ -42,9 +53,26 @@ POLL = 0.05            # the supervisor's read granularity: bounds reaction to c
 DEFAULT_PORT = 4545
 REFUSED = "controller off, or Open Protocol not enabled on this port?"
 VIN_LENGTH = 25        # MID 0050 revision 1 carries a 25-character VIN
+#: revisions asked for, highest first (0001: 6, whose 0002 says whether the controller does
+#: link-level acknowledgement; 0061/0065: 1-7, all that ``op_result`` reads)
+START_REVISIONS = (6, 5, 4, 3, 2, 1)
+RESULT_REVISIONS = (7, 6, 5, 4, 3, 2, 1)
+MAX_TIGHTENING_ID = 9_999_999_999            # 10 digits
 Spec = dict[str, tuple[Callable[[str], Any], Any]]   # option -> (converter, default)
+
+
+def link_ack_option(text: str) -> str:
+    """``link_ack``: auto (as the controller's 0002 says), 1/on (always), 0/off (never)."""
+    value = {"auto": "auto", "1": "on", "on": "on", "true": "on", "yes": "on", "0": "off",
+             "off": "off", "false": "off", "no": "off"}.get(text.strip().lower())
+    if value is None:
+        raise OptionError("expected auto, 1 or 0")
+    return value
+
+
 OPTIONS: Spec = {
     "timeout": (float, 2.0), "connect_timeout": (float, 5.0), "keepalive": (float, 10.0),
+    "link_ack": (link_ack_option, "auto"),
 }
 
 
@@ -66,33 +94,55 @@ class _Pending:
         return True
 
 
+@dataclass
+class _LinkWait:
+    """The one sequenced message awaiting its link-level acknowledgement (9997/9998)."""
+
+    seq: int
+    done: threading.Event = field(default_factory=threading.Event)
+    error_code: int | None = None           # a 9998's code
+    lost: DeviceError | None = None         # the link went down meanwhile
+
+
 class OpenProtocolWrench(SupervisedWrench):
     """A tightening controller over Open Protocol (TCP or RS-232)."""
 
     def __init__(self, link: Link | None, *, device: str, timeout: float = 2.0,
-                 connect_timeout: float = 5.0, keepalive: float = 10.0) -> None:
+                 connect_timeout: float = 5.0, keepalive: float = 10.0,
+                 link_ack: str = "auto") -> None:
         super().__init__(device, timeout=timeout)
         check_positive(connect_timeout=connect_timeout, keepalive=keepalive)
+        if link_ack not in ("auto", "on", "off"):
+            raise ValueError(f"link_ack must be auto, on or off, not {link_ack!r}")
         self._given_link = link
         self._link: Link = link or TcpLink("127.0.0.1", DEFAULT_PORT, REFUSED)
         self._connect_timeout = connect_timeout
         self._keepalive = keepalive
         self._framer: TcpFramer | SerialFramer = TcpFramer()
-        self._send_lock = threading.Lock()      # one message on the wire at a time
+        self._write_lock = threading.Lock()     # one message on the wire at a time
+        self._tx_lock = threading.Lock()        # one sequenced message outstanding (link level)
         self._request_lock = threading.Lock()   # one command in flight
         self._reader = threading.Lock()         # the link's reading side: supervisor or session
-        self._connected = False                 # these two guarded by _cond too
+        self._reader_owner: threading.Thread | None = None
+        self._connected = False                 # these guarded by _cond too
         self._epoch = 0
         self._pending: _Pending | None = None
-        self._ident = ""
+        self._link_wait: _LinkWait | None = None
+        self._link_ack_mode = link_ack
+        self._linking = False                   # link-level acknowledgement on this session
+        self._tx_seq = 0
+        self._rx = op_link.RxSequence()         # the reading thread's only
+        self._owed_acks = 0                     # 0062s for unreadable results, to send
+        self._ident: ControllerIdentity | None = None
+        self._revisions: dict[int, int] = {}
         self._last_sent = 0.0
         self._keepalive_sent: float | None = None
 
     @classmethod
     def from_url(cls, url: DeviceUrl, **kw: Any) -> OpenProtocolWrench:
         """``openprotocol://HOST[:PORT]`` or ``openprotocol+serial:///dev/ttyUSB1?baud=9600``;
-        options (URL query or keywords): timeout, connect_timeout, keepalive (seconds), and
-        baud for serial."""
+        options (URL query or keywords): timeout, connect_timeout, keepalive (seconds),
+        link_ack (auto, 1, 0), and baud for serial."""
         link: Link
         if url.scheme == "openprotocol+serial":
             spec: Spec = {**OPTIONS, "baud": (int, 9600)}
@@ -112,6 +162,27 @@ class OpenProtocolWrench(SupervisedWrench):
         except ValueError as e:
             raise url.error(str(e)) from None
 
+    # -- what the controller said ------------------------------------------------------------
+    @property
+    def controller_identity(self) -> ControllerIdentity | None:
+        """The controller's MID 0002 of the current (or last) session, typed; None before
+        the first session."""
+        with self._cond:
+            return self._ident
+
+    @property
+    def revisions(self) -> dict[int, int]:
+        """MID -> the revision agreed with the controller this session (0001, 0060, and 0064
+        once ``fetch_result`` was used)."""
+        with self._cond:
+            return dict(self._revisions)
+
+    @property
+    def link_level(self) -> bool:
+        """Whether this session acknowledges at link level (MID 9997/9998)."""
+        with self._cond:
+            return self._linking
+
     # -- lifecycle -------------------------------------------------------------------------
     def _make_link(self) -> Link:
         """The link to use; the simulated backend overrides this to start its server first."""
@@ -122,7 +193,8 @@ class OpenProtocolWrench(SupervisedWrench):
     def _open(self) -> None:
         self._link = self._make_link()
         try:
-            self._start_session()
+            with self._reading():
+                self._start_session()
         except DeviceError as e:
             raise self._surface(e, "open") from None
         with self._cond:
@@ -140,57 +212,99 @@ class OpenProtocolWrench(SupervisedWrench):
         self._fail_link(DeviceError("closed"), closing=True)
         if self._thread is not None:
             self._thread.join()
-        with self._send_lock:
+        with self._write_lock:
             self._link.close()
 
+    @contextmanager
+    def _reading(self) -> Iterator[None]:
+        """Hold the link's reading side; a sequenced send from this thread then reads its
+        own link-level acknowledgement instead of waiting for the supervisor."""
+        with self._reader:
+            self._reader_owner = threading.current_thread()
+            try:
+                yield
+            finally:
+                self._reader_owner = None
+
     def _start_session(self) -> None:
-        """Connect, communication start (0001 -> 0002), result subscription (0060 -> 0005)."""
+        """Connect, communication start (0001 -> 0002), result subscription (0060 -> 0005),
+        each at the highest revision the controller accepts (called holding ``_reading``)."""
         link = self._link
         link.connect(self._connect_timeout)
         self._framer = SerialFramer() if link.kind == "serial" else TcpFramer()
         self._last_sent, self._keepalive_sent = time.monotonic(), None
+        with self._cond:      # 0001/0002 reset the link level: decided anew below
+            self._linking, self._tx_seq, self._owed_acks = False, 0, 0
+        self._rx.reset()
+        revisions: dict[int, int] = {}
         try:
-            reply = self._transact(Message(op.MID_START), {op.MID_START_ACK, op.MID_ERROR},
-                                   self.timeout)
-            ident = op.identity(reply)
+            reply, revisions[op.MID_START] = self._negotiate(
+                op.MID_START, START_REVISIONS, {op.MID_START_ACK, op.MID_ERROR})
+            ident = parse_identity(reply.revision, reply.data)
+            linking = self._link_ack_mode == "on" or (
+                self._link_ack_mode == "auto" and ident.sequence_number_support is True)
+            with self._cond:
+                self._linking = linking
             try:
-                self._transact(Message(op.MID_RESULT_SUBSCRIBE), {op.MID_ACCEPTED, op.MID_ERROR},
-                               self.timeout)
+                _, revisions[op.MID_RESULT_SUBSCRIBE] = self._negotiate(
+                    op.MID_RESULT_SUBSCRIBE, RESULT_REVISIONS, {op.MID_ACCEPTED, op.MID_ERROR})
             except RefusedError as e:
                 if e.code != 9:                 # 09: already subscribed, which is the goal
                     raise
         except DeviceError as e:
             link.close()
-            what = "communication start" if not self._ident else "session restart"
+            what = "communication start" if self._ident is None else "session restart"
             raise type(e)(f"{what}: {e}", code=e.code) from None
         except BaseException:
             link.close()
             raise
-        self._ident = ident
+        with self._cond:
+            new = self._ident != ident
+            self._ident, self._revisions = ident, revisions
+        if new:
+            log.info("%s: controller %s; MID 0002 revision %d, results as MID 0061 revision "
+                     "%s, link-level acknowledgement %s", self.device, ident.describe(),
+                     ident.revision, revisions.get(op.MID_RESULT_SUBSCRIBE, "?"),
+                     "on" if linking else "off")
+
+    def _negotiate(self, mid: int, revisions: Sequence[int], expect: set[int]
+                   ) -> tuple[Message, int]:
+        """Send ``mid`` at each of ``revisions`` until one is not refused as unsupported:
+        (the answer, the revision asked)."""
+        for rev in revisions:
+            try:
+                return self._transact(Message(mid, revision=rev), expect, self.timeout), rev
+            except RefusedError as e:
+                if e.code not in op.REVISION_REFUSALS or rev == revisions[-1]:
+                    raise
+                log.info("%s: MID %04d revision %d refused (%s), asking for %d", self.device,
+                         mid, rev, op.refusal_text(e.code or 0), rev - 1)
+        raise AssertionError("unreachable: the last revision's refusal is raised")
 
     # -- the supervisor thread -------------------------------------------------------------
     def _supervise(self) -> None:
         """Read while the link is up; when it is down, close it and wait for
         ``reconnect()`` (which holds the reading side while it starts a session)."""
         while not self._stop.is_set():
-            with self._reader:
+            with self._reading():
                 with self._cond:
                     up = self._connected
                 if up:
                     try:
                         self._read_once()
+                        self._flush_owed()
                         self._keepalive_tick()
                     except DeviceError as e:
                         self._fail_link(e)
                     continue
-                with self._send_lock:
+                with self._write_lock:
                     self._link.close()
             self._stop.wait(POLL)
 
     def _reconnect(self) -> None:
         """Drop the link if it is up, then connect and start a session (0001, 0060)."""
         self._fail_link(ConnectionLostError("reconnect asked for"))
-        with self._reader:
+        with self._reading():
             self._attempt(self._start_session)
             with self._cond:
                 self._connected = True
@@ -212,6 +326,17 @@ class OpenProtocolWrench(SupervisedWrench):
             self._dispatch(item)
 
     def _dispatch(self, msg: Message) -> None:
+        if msg.mid in (op.MID_LINK_ACK, op.MID_LINK_ERROR):
+            self._link_answer(msg)
+            return
+        with self._cond:
+            linking = self._linking
+        if linking and op_link.is_sequenced(msg.mid):
+            self._write(op_link.link_ack(msg))       # before anything: the controller waits
+            if not self._rx.is_new(msg.sequence):
+                log.warning("%s: MID %04d repeated (sequence %s): acknowledged again, not "
+                            "processed twice", self.device, msg.mid, msg.sequence)
+                return
         if msg.mid == op.MID_RESULT:
             try:
                 result = op.parse_result(msg.raw)
@@ -220,8 +345,8 @@ class OpenProtocolWrench(SupervisedWrench):
                     self._results.append(ProtocolError(
                         f"unreadable tightening result, acknowledged anyway (the controller "
                         f"keeps its own record): {e}"))
+                    self._owed_acks += 1          # sent by the supervisor, never from here
                     self._cond.notify_all()
-                self._send(Message(op.MID_RESULT_ACK))
                 return
             with self._cond:   # acknowledged (0062) when taken, on this same link only
                 self._queue_result(result, self._epoch)
@@ -237,6 +362,31 @@ class OpenProtocolWrench(SupervisedWrench):
                 return
         log.warning("%s: unexpected MID %04d ignored (data %r)", self.device, msg.mid,
                     msg.data[:40])
+
+    def _link_answer(self, msg: Message) -> None:
+        """A 9997/9998 from the controller: it answers the outstanding sequenced message."""
+        with self._cond:
+            wait = self._link_wait
+            if wait is not None and msg.sequence == wait.seq:
+                if msg.mid == op.MID_LINK_ERROR:
+                    wait.error_code = op_link.link_error_code(msg)
+                wait.done.set()
+                return
+        log.warning("%s: MID %04d for sequence %s, which is not outstanding, ignored",
+                    self.device, msg.mid, msg.sequence)
+
+    def _flush_owed(self) -> None:
+        """Send the 0062s owed for unreadable results (supervisor only): never waiting for
+        the one-outstanding slot, which a caller may hold while this thread reads its
+        acknowledgement."""
+        while True:
+            with self._cond:
+                if not self._owed_acks:
+                    return
+            if not self._send(Message(op.MID_RESULT_ACK), block=False):
+                return
+            with self._cond:
+                self._owed_acks -= 1
 
     def _keepalive_tick(self) -> None:
         now = time.monotonic()
@@ -255,6 +405,8 @@ class OpenProtocolWrench(SupervisedWrench):
             if epoch is not None and epoch != self._epoch:
                 return                                   # that link is already gone
             was_up = self._connected
+            if was_up and not closing:   # logged before anyone can see the link down
+                log.warning("%s: link lost: %s", self.device, err)
             self._connected = False
             self._closing = self._closing or closing
             self._epoch += 1
@@ -264,20 +416,88 @@ class OpenProtocolWrench(SupervisedWrench):
                 self._pending.error = err
                 self._pending.done.set()
                 self._pending = None
+            if self._link_wait is not None:
+                self._link_wait.lost = err
+                self._link_wait.done.set()
             self._cond.notify_all()
-        if was_up and not closing:
-            log.warning("%s: link lost: %s", self.device, err)
 
     # -- sending and commands --------------------------------------------------------------
-    def _send(self, msg: Message, epoch: int | None = None) -> None:
+    def _write(self, msg: Message, epoch: int | None = None) -> None:
+        """Put one message on the wire (nothing waited for)."""
         data = op.frame_serial(msg) if self._link.kind == "serial" else op.frame_tcp(msg)
-        with self._send_lock:
+        with self._write_lock:
             if epoch is not None:
                 with self._cond:
                     if epoch != self._epoch:
                         raise ConnectionLostError("the link was reset before sending")
             self._link.send(data)
             self._last_sent = time.monotonic()
+
+    def _send(self, msg: Message, epoch: int | None = None, block: bool = True,
+              timeout: float | None = None) -> bool:
+        """Send ``msg``; with link-level acknowledgement on, numbered and returning only
+        once the controller acknowledged it (MID 9997), waiting ``timeout`` (the response
+        timeout by default) for each try.  ``block=False``: False, nothing sent, if another
+        sequenced message is outstanding."""
+        with self._cond:
+            linking = self._linking
+        if not linking or not op_link.is_sequenced(msg.mid):
+            self._write(msg, epoch)
+            return True
+        if not self._tx_lock.acquire(blocking=block):
+            return False
+        try:
+            self._send_sequenced(msg, epoch, timeout or self.timeout)
+        finally:
+            self._tx_lock.release()
+        return True
+
+    def _send_sequenced(self, msg: Message, epoch: int | None, timeout: float) -> None:
+        """Number ``msg``, send it, and resend it (same number) until MID 9997 came, up to
+        ``op_link.RESENDS`` times; then the link is lost (called holding ``_tx_lock``)."""
+        with self._cond:   # a number is never spent on a link that is gone: the new
+            if epoch is not None and epoch != self._epoch:   # session counts from 1
+                raise ConnectionLostError("the link was reset before sending")
+            self._tx_seq = seq = op_link.next_seq(self._tx_seq)
+        numbered = dataclasses.replace(msg, sequence=seq)
+        why = ""
+        for attempt in range(1 + op_link.RESENDS):
+            if attempt:
+                log.warning("%s: MID %04d sequence %d: %s; resending (%d of %d)", self.device,
+                            msg.mid, seq, why, attempt, op_link.RESENDS)
+            wait = _LinkWait(seq)
+            with self._cond:
+                self._link_wait = wait
+            try:
+                self._write(numbered, epoch)
+                self._await_link(wait, timeout)
+            finally:
+                with self._cond:
+                    if self._link_wait is wait:
+                        self._link_wait = None
+            if wait.lost is not None:
+                raise wait.lost
+            if wait.done.is_set() and wait.error_code is None:
+                return
+            why = (op_link.link_error_text(wait.error_code) if wait.error_code is not None
+                   else f"no link-level acknowledgement within {timeout:g} s")
+        err = DeviceTimeoutError(f"MID {msg.mid:04d} sequence {seq}: {why} after "
+                                 f"{op_link.RESENDS} resends; the link is taken as lost")
+        if epoch is not None:
+            self._fail_link(err, epoch)
+        raise err
+
+    def _await_link(self, wait: _LinkWait, timeout: float) -> None:
+        """Wait up to ``timeout`` for the answer to ``wait``: read it ourselves if this
+        thread holds the reading side, else the supervisor dispatches it."""
+        if self._reader_owner is not threading.current_thread():
+            wait.done.wait(timeout)
+            return
+        deadline = time.monotonic() + timeout
+        while not wait.done.is_set() and time.monotonic() < deadline:
+            if self._stop.is_set():
+                raise ConnectionLostError("closing")
+            self._read_once()
 
     def _transact(self, msg: Message, expect: set[int], timeout: float,
                   epoch: int | None = None) -> Message:
@@ -289,7 +509,7 @@ class OpenProtocolWrench(SupervisedWrench):
                 raise ConnectionLostError("the link was reset; nothing was sent")
             self._pending = slot
         try:
-            self._send(msg, epoch)
+            self._send(msg, epoch, timeout=timeout)
             if epoch is not None:
                 slot.done.wait(timeout)
             else:
@@ -316,10 +536,7 @@ class OpenProtocolWrench(SupervisedWrench):
 
     def _command(self, msg: Message, what: str, timeout: float) -> None:
         with self._request_lock:
-            with self._cond:
-                if not self._connected:
-                    raise self._down(what)
-                epoch = self._epoch
+            epoch = self._current_epoch(what)
             try:
                 self._transact(msg, {op.MID_ACCEPTED, op.MID_ERROR}, timeout, epoch)
             except RefusedError as e:
@@ -329,17 +546,83 @@ class OpenProtocolWrench(SupervisedWrench):
                 raise self._surface(e, what, "; not acknowledged, treat it as not done (the "
                                     "link is reset and reconnects)") from None
 
+    def _current_epoch(self, what: str) -> int:
+        """The link's epoch, or the "link down" error for ``what``."""
+        with self._cond:
+            if not self._connected:
+                raise self._down(what)
+            return self._epoch
+
+    # -- old results (MID 0064 -> 0065) ----------------------------------------------------
+    can_fetch = True
+
+    def fetch_result(self, tightening_id: int, timeout: float | None = None
+                     ) -> TighteningResult | None:
+        """The controller's stored result ``tightening_id`` (0: its newest), or None if it
+        answers "tightening id not found" (it no longer has it, or has none yet).
+
+        For filling a gap in the tightening ids after a reconnect.  The result is not
+        queued and needs no acknowledgement; it says ``fetched=True``.  Raises as commands
+        do: RefusedError for another refusal, and a timeout or lost link resets the link.
+        """
+        if isinstance(tightening_id, bool) or not isinstance(tightening_id, int) \
+                or not 0 <= tightening_id <= MAX_TIGHTENING_ID:
+            raise ValueError(f"tightening_id must be an integer 0-{MAX_TIGHTENING_ID}, not "
+                             f"{tightening_id!r}")
+        self._check_open()
+        timeout = self._timeout(timeout)
+        what = f"fetch tightening {tightening_id or '(newest)'}"
+        data = f"{tightening_id:010d}".encode()
+        with self._request_lock:
+            epoch = self._current_epoch(what)
+            with self._cond:
+                agreed = self._revisions.get(op.MID_OLD_RESULT_REQUEST)
+            for rev in (agreed,) if agreed else RESULT_REVISIONS:
+                try:
+                    reply = self._transact(Message(op.MID_OLD_RESULT_REQUEST, revision=rev,
+                                                   data=data),
+                                           {op.MID_OLD_RESULT, op.MID_ERROR}, timeout, epoch)
+                except RefusedError as e:
+                    if e.code in op.REVISION_REFUSALS and rev > 1:
+                        continue
+                    if e.code == op.NOT_FOUND:
+                        self._agree(op.MID_OLD_RESULT_REQUEST, rev)
+                        return None
+                    raise self._surface(e, what) from None
+                except DeviceError as e:
+                    self._fail_link(e, epoch)
+                    raise self._surface(e, what, "; the link is reset and reconnects") \
+                        from None
+                self._agree(op.MID_OLD_RESULT_REQUEST, rev)
+                return self._old_result(reply, tightening_id, what)
+        raise AssertionError("unreachable: revision 1's refusal is raised")
+
+    def _agree(self, mid: int, rev: int) -> None:
+        with self._cond:
+            self._revisions[mid] = rev
+
+    def _old_result(self, reply: Message, tightening_id: int, what: str) -> TighteningResult:
+        try:
+            result = op.parse_result(reply.raw)
+        except ProtocolError as e:
+            raise self._surface(e, what) from None
+        if tightening_id and result.tightening_id != tightening_id:
+            raise ProtocolError(f"{what}: the controller answered with tightening "
+                                f"{result.tightening_id}", device=self.device)
+        return result
+
     # -- the Wrench hooks ------------------------------------------------------------------
     def _link_up(self) -> bool:
         return self._connected
 
     def _identity(self) -> str:
-        return self._ident
+        with self._cond:
+            return self._ident.describe() if self._ident is not None else ""
 
     def _send_ack(self, token: int, timeout: float) -> None:
         """MID 0062 on the link the result came on: 0062 names no result, so on a new
         session it would acknowledge whatever that session sent, not this one."""
-        self._send(Message(op.MID_RESULT_ACK), epoch=token)
+        self._send(Message(op.MID_RESULT_ACK), epoch=token, timeout=timeout)
 
     def _select_pset(self, pset: int, timeout: float) -> None:
         self._command(Message(op.MID_PSET_SELECT, data=f"{pset:03d}".encode()),

@@ -5,7 +5,9 @@ links are in ``link.py`` and the request/answer rules in ``client.py``.  Everyth
 written from docs/PROTOCOLS.md: a message is a 20-byte ASCII header (length, MID, revision,
 no-ack flag, station, spindle, sequence, parts, part), data, then NUL; over TCP messages follow
 each other; over RS-232 the integrator sends ``BEL HT BEL HT STX message ETX`` and the
-controller ``STX message ETX``.
+controller ``STX message ETX``.  The results (MID 0061/0065, revisions 1-7) are read in
+``op_result.py``, the controller's identity (MID 0002) in ``op_identity.py``, and the
+link-level acknowledgement rules (MID 9997/9998) are in ``op_link.py``.
 
 Decoding never trusts the peer: every malformed input is a :class:`ProtocolError` naming what
 was wrong, never another exception, and framers hold at most one message (9999 bytes) of
@@ -15,10 +17,11 @@ state, so garbage can neither crash nor stall them (property-tested with hypothe
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from datetime import datetime
 
 from drivers.errors import ProtocolError
-from drivers.wrench.base import Status, TighteningResult
+from drivers.wrench.base import TighteningResult
+from drivers.wrench.op_identity import parse_identity
+from drivers.wrench.op_result import parse_tightening
 
 HEADER_LEN = 20
 MAX_LENGTH = 9999                  # the length field has 4 digits
@@ -28,7 +31,11 @@ INTEGRATOR_PREFIX = b"\x07\x09\x07\x09"   # BEL HT BEL HT, before STX, integrato
 MID_START, MID_START_ACK, MID_STOP, MID_ERROR, MID_ACCEPTED = 1, 2, 3, 4, 5
 MID_PSET_SELECT, MID_TOOL_DISABLE, MID_TOOL_ENABLE, MID_VIN = 18, 42, 43, 50
 MID_RESULT_SUBSCRIBE, MID_RESULT, MID_RESULT_ACK, MID_RESULT_UNSUBSCRIBE = 60, 61, 62, 63
-MID_KEEPALIVE = 9999
+MID_OLD_RESULT_REQUEST, MID_OLD_RESULT = 64, 65
+MID_LINK_ACK, MID_LINK_ERROR, MID_KEEPALIVE = 9997, 9998, 9999
+#: MID 0004 codes that mean "not this revision": ask again one lower (integrators' practice)
+REVISION_REFUSALS = frozenset({74, 76, 97})
+NOT_FOUND = 15                     # MID 0004 to a MID 0064: no result with that id
 
 #: MID 0004 error codes (Open Protocol specification); others are shown as their number.
 ERROR_TEXT: dict[int, str] = {
@@ -36,6 +43,9 @@ ERROR_TEXT: dict[int, str] = {
     4: "parameter set not running", 6: "VIN upload subscription already exists",
     7: "VIN upload subscription does not exist", 8: "VIN input source not granted",
     9: "result subscription already exists", 10: "result subscription does not exist",
+    15: "tightening id not found", 74: "subscribed MID revision unsupported",
+    75: "requested MID unsupported", 76: "requested MID revision unsupported",
+    78: "subscription on specific data not supported",
     96: "client already connected", 97: "MID revision unsupported",
     98: "controller internal request timeout", 99: "unknown MID",
 }
@@ -260,78 +270,18 @@ def refusal_text(code: int) -> str:
 
 
 def identity(msg: Message) -> str:
-    """Controller name, cell and channel from MID 0002 revision 1, else its data as text."""
-    text = msg.data.decode("ascii", "replace")
-    if len(text) >= 12 and text[0:2] == "01" and text[6:8] == "02" and text[10:12] == "03":
-        name = text[12:37].rstrip()
-        return f"{name or 'controller'} (cell {text[2:6]}, channel {text[8:10]})"
-    return text.strip() or f"controller (MID 0002 revision {msg.revision})"
-
-
-# MID 0061 revision 1: (name, first, last) byte positions, 1-based as in PROTOCOLS.md; the
-# field's 2-digit tag (01, 02, ... in this order) sits in the two bytes before ``first``.
-RESULT_REV1_LEN = 231
-RESULT_REV1_FIELDS: tuple[tuple[str, int, int], ...] = (
-    ("cell_id", 23, 26), ("channel_id", 29, 30), ("controller_name", 33, 57),
-    ("vin", 60, 84), ("job", 87, 88), ("pset", 91, 93), ("batch_size", 96, 99),
-    ("batch_counter", 102, 105), ("ok", 108, 108), ("torque_status", 111, 111),
-    ("angle_status", 114, 114), ("torque_min", 117, 122), ("torque_max", 125, 130),
-    ("torque_target", 133, 138), ("torque", 141, 146), ("angle_min", 149, 153),
-    ("angle_max", 156, 160), ("angle_target", 163, 167), ("angle", 170, 174),
-    ("timestamp", 177, 195), ("pset_changed", 198, 216), ("batch_status", 219, 219),
-    ("tightening_id", 222, 231),
-)
-_TIME_FORMAT = "%Y-%m-%d:%H:%M:%S"
+    """MID 0002 (any revision) as one line: name, cell, channel and what it adds."""
+    return parse_identity(msg.revision, msg.data).describe()
 
 
 def parse_result(raw: bytes) -> TighteningResult:
-    """A MID 0061 revision 1 message (header included, NUL excluded) -> TighteningResult."""
+    """A MID 0061 or 0065 message, revisions 1-7 (header included, NUL excluded) ->
+    TighteningResult (``op_result.py`` reads the parameters)."""
     msg = decode(raw)
-    if msg.mid != MID_RESULT or msg.revision != 1:
-        raise ProtocolError(f"expected MID 0061 revision 1, got MID {msg.mid:04d} revision "
+    if msg.mid not in (MID_RESULT, MID_OLD_RESULT):
+        raise ProtocolError(f"expected MID 0061 or 0065, got MID {msg.mid:04d} revision "
                             f"{msg.revision}")
-    if len(raw) != RESULT_REV1_LEN:
-        raise ProtocolError(f"MID 0061 revision 1 has {RESULT_REV1_LEN} bytes, got {len(raw)}")
     if not raw.isascii():
-        raise ProtocolError(f"MID 0061 contains non-ASCII bytes: {_show(raw[HEADER_LEN:])}")
-    text = raw.decode("ascii")
-    f: dict[str, str] = {}
-    for tag, (name, first, last) in enumerate(RESULT_REV1_FIELDS, start=1):
-        found = text[first - 3:first - 1]
-        if found != f"{tag:02d}":
-            raise ProtocolError(f"MID 0061: expected tag {tag:02d} ({name}) at byte "
-                                f"{first - 2}, found {found!r}")
-        f[name] = text[first - 1:last]
-
-    def num(name: str) -> int:
-        if not f[name].isdigit():
-            raise ProtocolError(f"MID 0061 {name} {f[name]!r} is not a number")
-        return int(f[name])
-
-    def status(name: str, allowed: int) -> int:
-        value = num(name)
-        if value >= allowed:
-            raise ProtocolError(f"MID 0061 {name} {value} is out of range")
-        return value
-
-    try:
-        timestamp = datetime.strptime(f["timestamp"], _TIME_FORMAT)
-    except ValueError:
-        raise ProtocolError(f"MID 0061 timestamp {f['timestamp']!r} is not "
-                            "YYYY-MM-DD:HH:MM:SS") from None
-    try:   # controllers that never changed pset may send zeros: not worth refusing the result
-        pset_changed: datetime | None = datetime.strptime(f["pset_changed"], _TIME_FORMAT)
-    except ValueError:
-        pset_changed = None
-    return TighteningResult(
-        ok=bool(status("ok", 2)), torque_nm=num("torque") / 100, angle_deg=float(num("angle")),
-        torque_status=Status(status("torque_status", 3)),
-        angle_status=Status(status("angle_status", 3)), tightening_id=num("tightening_id"),
-        pset=num("pset"), vin=f["vin"].rstrip(), timestamp=timestamp,
-        torque_min_nm=num("torque_min") / 100, torque_max_nm=num("torque_max") / 100,
-        torque_target_nm=num("torque_target") / 100, angle_min_deg=float(num("angle_min")),
-        angle_max_deg=float(num("angle_max")), angle_target_deg=float(num("angle_target")),
-        cell_id=num("cell_id"), channel_id=num("channel_id"),
-        controller_name=f["controller_name"].rstrip(), job=num("job"),
-        batch_size=num("batch_size"), batch_counter=num("batch_counter"),
-        batch_status=num("batch_status"), pset_changed=pset_changed, raw=text)
+        raise ProtocolError(f"MID {msg.mid:04d} contains non-ASCII bytes: "
+                            f"{_show(raw[HEADER_LEN:])}")
+    return parse_tightening(msg.mid, msg.revision, raw.decode("ascii"))

@@ -4,9 +4,18 @@
 on a pty) with a controller's behaviour written from docs/PROTOCOLS.md: it knows a set of
 psets, answers 0001 with 0002, commands with 0005 or 0004 and the specification's error
 codes, mirrors 9999, drops a client silent for 15 s, and, when the operator pulls the
-trigger with the tool enabled and a pset selected, reports a MID 0061 revision 1 result with
-seeded scatter around the pset's targets and NOKs at ``nok_rate``.  Its 0061 writer is a
-table of tags and widths, independent of the client's byte-position parser.
+trigger with the tool enabled and a pset selected, reports a MID 0061 result with seeded
+scatter around the pset's targets and NOKs at ``nok_rate``.  Its 0061 writer
+(``sim_results.py``) is a table of tags and widths, independent of the client's parser.
+
+Revisions: 0001 (so 0002), 0060 (so the 0061 pushed) and 0064 (so its 0065) are served in
+revisions 1 to 7, except those set to be refused (``refused_revisions``, answered MID 0004
+``revision_refusal_code``, 97 by default) so that an integrator's step-down can be tested.
+Every result is kept (the newest ``store_size``) for MID 0064; an id it no longer has is
+MID 0004 error 15.  ``link_ack=True`` makes it acknowledge at link level (MID 9997/9998,
+``simserver.py``) and say so in 0002 revision 6+: with an integrator that started at
+revision 6 or later, or that numbers its messages.  ``python -m drivers.wrench.sim`` serves
+it on a TCP port for any integrator (``sim_cli.py``).
 
 ``SimWrench`` is the real client (``client.OpenProtocolWrench``) plus the lifecycle of an
 in-process controller: ``sim://wrench`` exercises the whole protocol path.
@@ -18,7 +27,8 @@ import os
 import random
 import shutil
 import tempfile
-from collections.abc import Callable, Mapping
+from collections import OrderedDict
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any
@@ -26,10 +36,11 @@ from typing import Any
 from drivers.link import Link, SerialLink, TcpLink
 from drivers.url import DeviceUrl
 from drivers.wrench.client import OPTIONS, REFUSED, OpenProtocolWrench, Spec, keyword_options
+from drivers.wrench.sim_results import NM_PER, SimRecord, fixed, result_data, text
 from drivers.wrench.simserver import OpenProtocolServer, Received, Session, message
 
-_TIME = "%Y-%m-%d:%H:%M:%S"
 VIN_WIDTH = 25
+REVISIONS = range(1, 8)          # of 0001/0002, 0060/0061, 0064/0065 served
 
 
 @dataclass(frozen=True)
@@ -43,6 +54,7 @@ class SimPset:
     angle_min_deg: float
     angle_max_deg: float
     batch_size: int = 1
+    name: str = ""
 
 
 DEFAULT_PSETS: dict[int, SimPset] = {
@@ -65,39 +77,47 @@ class SimTightening:
     angle_status: int
     vin: str
     timestamp: datetime
-    message: bytes = field(repr=False)     # header + data, without NUL or framing
-
-
-def _fixed(value: float, width: int) -> str:
-    return f"{min(max(round(value), 0), 10**width - 1):0{width}d}"
-
-
-def _text(value: str, width: int) -> str:
-    return value[:width].ljust(width)
+    message: bytes = field(repr=False)     # MID 0061 revision 1: header + data, no NUL
+    record: SimRecord | None = field(default=None, repr=False)   # for any other revision
 
 
 class SimController(OpenProtocolServer):
     """The simulated controller; ``start()`` it (or use ``with``), then ``listen_tcp()``
-    and/or ``open_pty()``.  ``refusals`` maps a pset to the error code its selection gets."""
+    and/or ``open_pty()``.  ``refusals`` maps a pset to the error code its selection gets;
+    ``refused_revisions`` maps a MID (1, 60, 64) to the revisions it refuses."""
 
     def __init__(self, psets: Mapping[int, SimPset] | None = None, *, seed: int = 0,
                  nok_rate: float = 0.05, name: str = "SimController", cell: int = 1,
                  channel: int = 1, silence_timeout: float = 15.0,
                  refusals: Mapping[int, int] | None = None,
                  clock: Callable[[], datetime] | None = None,
-                 resend_unacked: bool = False) -> None:
+                 resend_unacked: bool = False, link_ack: bool = False,
+                 refused_revisions: Mapping[int, Iterable[int]] | None = None,
+                 revision_refusal_code: int = 97, store_size: int = 1000,
+                 torque_unit: int = 1, software: str = "stationd-sim 1.0",
+                 serial: str = "SIM0000001") -> None:
         if not 0.0 <= nok_rate <= 1.0:
             raise ValueError(f"nok_rate must be in [0, 1], not {nok_rate}")
         if silence_timeout <= 0:
             raise ValueError("silence_timeout must be > 0")
+        if torque_unit not in NM_PER:
+            raise ValueError(f"torque_unit must be one of {sorted(NM_PER)}, not {torque_unit}")
+        if store_size < 1:
+            raise ValueError("store_size must be >= 1")
         super().__init__()
         self.psets = dict(DEFAULT_PSETS if psets is None else psets)
         self.nok_rate, self.name, self.cell, self.channel = nok_rate, name, cell, channel
         self.silence_timeout = silence_timeout
+        self.link_ack, self.torque_unit = link_ack, torque_unit
+        self.software, self.serial = software, serial
+        self.revision_refusal_code = revision_refusal_code
+        self.store_size = store_size
         self._rng = random.Random(seed)  # noqa: S311 - seeded simulation scatter, not security
         self._clock = clock or (lambda: datetime.now().replace(microsecond=0))
         self._refuse_pset: dict[int, int] = dict(refusals or {})
         self._refuse_mid: dict[int, int] = {}
+        self._refuse_rev: dict[int, set[int]] = {
+            mid: set(revs) for mid, revs in (refused_revisions or {}).items()}
         self.pset: int | None = None
         self.tool_enabled = False
         self.vin = ""
@@ -108,7 +128,8 @@ class SimController(OpenProtocolServer):
         # as some controllers do: results nobody acknowledged (MID 0062) are sent again to
         # the next subscriber, oldest first
         self.resend_unacked = resend_unacked
-        self._unacked: dict[int, bytes] = {}     # tightening id -> its MID 0061
+        self._unacked: dict[int, SimRecord] = {}     # tightening id -> its record
+        self._store: OrderedDict[int, SimRecord] = OrderedDict()   # for MID 0064
         self._rundown: int | None = None         # the pset of a rundown under way
 
     def __enter__(self) -> SimController:
@@ -119,10 +140,11 @@ class SimController(OpenProtocolServer):
         self.close()
 
     # -- controls for the simulation and tests ----------------------------------------------
-    def pull_trigger(self) -> SimTightening | None:
+    def pull_trigger(self, result_type: int = 1) -> SimTightening | None:
         """The operator pulls the trigger: a tightening with the selected pset, reported to
-        subscribed integrators; None (nothing happens) if the tool is disabled or no pset."""
-        return self.call(self._tighten)
+        subscribed integrators; None (nothing happens) if the tool is disabled or no pset.
+        ``result_type`` 2 is a loosening (reported as such from MID 0061 revision 3 on)."""
+        return self.call(lambda: self._tighten(result_type))
 
     def start_rundown(self) -> bool:
         """The trigger pulled, the rundown under way (its result comes with
@@ -151,11 +173,22 @@ class SimController(OpenProtocolServer):
         """Refuse every command ``mid`` with ``code`` (MID 0004)."""
         self.call(lambda: self._refuse_mid.__setitem__(mid, code))
 
+    def refuse_revisions(self, mid: int, revisions: Iterable[int]) -> None:
+        """Refuse ``mid`` (1, 60, 64) at these ``revisions`` (MID 0004 with
+        ``revision_refusal_code``), as a controller that does not know them."""
+        revs = set(revisions)
+        self.call(lambda: self._refuse_rev.__setitem__(mid, revs))
+
     def clear_refusals(self) -> None:
         def do() -> None:
             self._refuse_pset.clear()
             self._refuse_mid.clear()
+            self._refuse_rev.clear()
         self.call(do)
+
+    def forget_results(self, *tightening_ids: int) -> None:
+        """The controller no longer has these results (its store is bounded)."""
+        self.call(lambda: [self._store.pop(t, None) for t in tightening_ids])
 
     def on_power_on(self) -> None:
         """Volatile state is lost in a power cycle; the selected pset is kept."""
@@ -168,24 +201,38 @@ class SimController(OpenProtocolServer):
     def _ok(self, s: Session, mid: int) -> None:
         self.reply(s, mid, 5, f"{mid:04d}".encode())
 
+    def _revision_refused(self, s: Session, msg: Received) -> bool:
+        """MID 0004 for a revision this controller does not serve (or is set to refuse)."""
+        if msg.mid not in (1, 60, 63, 64):
+            return False
+        if msg.revision in REVISIONS and msg.revision not in self._refuse_rev.get(msg.mid, ()):
+            return False
+        self._refuse(s, msg.mid, self.revision_refusal_code)
+        return True
+
     def handle(self, s: Session, msg: Received) -> None:
         mid, data = msg.mid, msg.data
         if mid == 9999:
             self.reply(s, 9999, 9999)
         elif mid == 1:
-            if msg.revision > 1:
-                self._refuse(s, mid, 97)
+            if self._revision_refused(s, msg):
+                pass
             elif s.started and s.kind == "tcp":
                 self._refuse(s, mid, 96)
             else:   # on a serial line a new 0001 starts a new session
                 s.started, s.subscribed = True, False
                 s.out.clear()
-                ident = f"01{self.cell:04d}02{self.channel:02d}03{_text(self.name, 25)}"
-                self.reply(s, mid, 2, ident.encode())
+                s.start_link_level(False)
+                self.reply(s, mid, 2, self._identity(msg.revision), msg.revision)
+                # from the message after 0002 on, with an integrator that can know it
+                # (0002 revision 6+ says so), or one that numbers its messages
+                s.start_link_level(self.link_ack and msg.revision >= 6, self.link_ack)
         elif not s.started:
             self.errors.append(f"MID {mid:04d} before communication start ignored")
         elif mid in self._refuse_mid:
             self._refuse(s, mid, self._refuse_mid[mid])
+        elif self._revision_refused(s, msg):
+            pass
         elif mid == 3:
             self._ok(s, mid)
             s.started = s.subscribed = False
@@ -201,26 +248,63 @@ class SimController(OpenProtocolServer):
                 self.vin = data.decode().strip()
                 self._ok(s, mid)
         elif mid in (60, 63):
-            if msg.revision > 1:
-                self._refuse(s, mid, 97)
-            elif s.subscribed == (mid == 60):    # already (un)subscribed
-                self._refuse(s, mid, 9 if mid == 60 else 10)
-            else:
-                s.subscribed = mid == 60
-                self._ok(s, mid)
-                if s.subscribed and self.resend_unacked:
-                    for tid, raw in self._unacked.items():
-                        if tid not in s.unacked:
-                            self.write(s, s.frame(raw))
-                            s.unacked.append(tid)
+            self._subscription(s, mid, msg.revision)
         elif mid == 62:   # 0062 names no result: it acknowledges the oldest one sent
             self.acks += 1
             if s.unacked:
                 tid = s.unacked.pop(0)
                 self.acked_ids.append(tid)
                 self._unacked.pop(tid, None)
+        elif mid == 64:
+            self._old_result(s, msg)
         else:
             self._refuse(s, mid, 99)
+
+    def _identity(self, revision: int) -> bytes:
+        """MID 0002 data: revision 1's cell, channel and name, and each later revision's
+        parameters after them (numbered on)."""
+        values = [fixed(self.cell, 4), fixed(self.channel, 2), text(self.name, 25)]
+        extra = ([text("SIM", 3)],
+                 [text("2.8.0", 19), text(self.software, 19), text("sim tool 1.0", 19)],
+                 [text("simulated RBU", 24), text(self.serial, 10)],
+                 ["000", "000"],
+                 [str(int(self.link_ack)), "0"],
+                 [text("1", 10), text("simulated station", 25), "1"])
+        for more in extra[:revision - 1]:
+            values += more
+        return "".join(f"{tag:02d}{v}" for tag, v in enumerate(values, 1)).encode("ascii")
+
+    def _subscription(self, s: Session, mid: int, revision: int) -> None:
+        if s.subscribed == (mid == 60):    # already (un)subscribed
+            self._refuse(s, mid, 9 if mid == 60 else 10)
+            return
+        s.subscribed = mid == 60
+        if s.subscribed:
+            s.result_revision = revision
+        self._ok(s, mid)
+        if s.subscribed and self.resend_unacked:
+            for tid, record in self._unacked.items():
+                if tid not in s.unacked:
+                    self.post(s, self._render(61, s.result_revision, record))
+                    s.unacked.append(tid)
+
+    def _old_result(self, s: Session, msg: Received) -> None:
+        """MID 0064 (a tightening id, 0 = the newest) -> MID 0065 of its revision, or 0004
+        error 15 for an id this controller does not have (any more)."""
+        if len(msg.data) != 10 or not msg.data.isdigit():
+            self._refuse(s, 64, 1)
+            return
+        tid = int(msg.data) or next(reversed(self._store), 0)
+        record = self._store.get(tid)
+        if record is None:
+            self._refuse(s, 64, 15)
+            return
+        raw = self._render(65, msg.revision, record)
+        self.reply(s, 64, 65, raw[20:], msg.revision)
+
+    @staticmethod
+    def _render(mid: int, revision: int, record: SimRecord) -> bytes:
+        return message(mid, result_data(mid, revision, record), revision)
 
     def _select(self, s: Session, data: bytes) -> None:
         if len(data) != 3 or not data.isdigit():
@@ -235,12 +319,12 @@ class SimController(OpenProtocolServer):
                 self._batch_counter = 0
             self._ok(s, 18)
 
-    def _tighten(self) -> SimTightening | None:
+    def _tighten(self, result_type: int = 1) -> SimTightening | None:
         if not self.tool_enabled or self.pset is None:
             return None
-        return self._result(self.pset)
+        return self._result(self.pset, result_type)
 
-    def _result(self, pset: int) -> SimTightening:
+    def _result(self, pset: int, result_type: int = 1) -> SimTightening:
         """A tightening with ``pset``, reported to every subscribed session."""
         p, rng = self.psets[pset], self._rng
         t_lo, t_hi = round(p.torque_min_nm * 100), round(p.torque_max_nm * 100)
@@ -261,24 +345,27 @@ class SimController(OpenProtocolServer):
         self._batch_counter += int(ok)
         self._tid += 1
         now = self._clock()
-        values = (  # MID 0061 revision 1: parameters 01-23 in order, fixed widths
-            _fixed(self.cell, 4), _fixed(self.channel, 2), _text(self.name, 25),
-            _text(self.vin, VIN_WIDTH), "00", _fixed(pset, 3), _fixed(p.batch_size, 4),
-            _fixed(self._batch_counter, 4), str(int(ok)), str(t_stat), str(a_stat),
-            _fixed(t_lo, 6), _fixed(t_hi, 6), _fixed(p.torque_nm * 100, 6), _fixed(t_val, 6),
-            _fixed(a_lo, 5), _fixed(a_hi, 5), _fixed(p.angle_deg, 5), _fixed(a_val, 5),
-            now.strftime(_TIME), self._pset_changed.strftime(_TIME),
-            "1" if self._batch_counter >= p.batch_size else "0", _fixed(self._tid, 10))
-        raw = message(61, "".join(f"{tag:02d}{v}" for tag, v in enumerate(values, 1))
-                      .encode("ascii"))
+        record = SimRecord(
+            tightening_id=self._tid, cell=self.cell, channel=self.channel, name=self.name,
+            vin=self.vin, pset=pset, pset_name=p.name or f"pset {pset}",
+            batch_size=p.batch_size, batch_counter=self._batch_counter,
+            batch_status=int(self._batch_counter >= p.batch_size), ok=ok,
+            torque_status=t_stat, angle_status=a_stat, torque_min=t_lo, torque_max=t_hi,
+            torque_target=round(p.torque_nm * 100), torque=t_val, angle_min=a_lo,
+            angle_max=a_hi, angle_target=round(p.angle_deg), angle=a_val,
+            angle_exact=max(angle, 0.0), timestamp=now, pset_changed=self._pset_changed,
+            result_type=result_type, torque_unit=self.torque_unit)
+        self._store[self._tid] = record
+        while len(self._store) > self.store_size:
+            self._store.popitem(last=False)
         if self.resend_unacked:
-            self._unacked[self._tid] = raw
+            self._unacked[self._tid] = record
         for s in self.sessions():
             if s.started and s.subscribed:
-                self.write(s, s.frame(raw))
+                self.post(s, self._render(61, s.result_revision, record))
                 s.unacked.append(self._tid)
         return SimTightening(self._tid, pset, ok, t_val / 100, float(a_val), t_stat,
-                             a_stat, self.vin, now, raw)
+                             a_stat, self.vin, now, self._render(61, 1, record), record)
 
 
 class SimWrench(OpenProtocolWrench):
@@ -338,3 +425,8 @@ class SimWrench(OpenProtocolWrench):
         self.controller.close()
         if self._pty_dir is not None:
             shutil.rmtree(self._pty_dir, ignore_errors=True)
+
+
+if __name__ == "__main__":      # python -m drivers.wrench.sim: see sim_cli.py
+    from drivers.wrench.sim_cli import main
+    raise SystemExit(main())

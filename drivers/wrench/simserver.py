@@ -11,6 +11,14 @@ from any thread.  Transport faults for tests live here: one-shot ``inject`` ("si
 "garbage", "partial", "truncate", "close") and ``power_off``/``power_on`` (the device
 disappears; it comes back on the same TCP port and, for a pty, behind the same symlink).
 The controller's behaviour (what each MID does) is the subclass's ``handle``.
+
+Link-level acknowledgement (MID 9997/9998), when the subclass switches it on for a session
+(``Session.start_link_level``), lives here too, because it is transport work: every message
+the controller sends is numbered 1-99 (wrapping) and the next one waits for the integrator's
+9997; no 9997 within ``link_timeout``: resent with the same number, up to 3 times, then the
+connection is dropped.  Every numbered message from the integrator is acknowledged (a 9998
+if it has no number), and one that repeats the last number is acknowledged again but not
+handled twice.  ``link_fault`` spoils this for tests ("ignore_ack", "no_ack", "nak", "deaf").
 """
 
 from __future__ import annotations
@@ -21,6 +29,7 @@ import socket
 import threading
 import time
 import tty
+from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass
@@ -29,8 +38,12 @@ from typing import Any, Literal, TypeVar
 
 T = TypeVar("T")
 Fault = Literal["silent", "garbage", "partial", "truncate", "close"]
+LinkFault = Literal["ignore_ack", "no_ack", "nak", "deaf"]
 PREFIX, STX, ETX = b"\x07\x09\x07\x09", b"\x02", b"\x03"
 MAX_MESSAGE = 9999
+LINK_ACK, LINK_ERROR, KEEPALIVE = 9997, 9998, 9999
+NOT_NUMBERED = {1, 2, LINK_ACK, LINK_ERROR, KEEPALIVE}   # outside the link level
+LINK_RESENDS = 3
 
 
 @dataclass(frozen=True)
@@ -40,6 +53,7 @@ class Received:
     mid: int
     revision: int
     data: bytes
+    sequence: int | None = None     # the header's sequence number, if any
 
 
 def split_tcp(buf: bytearray) -> tuple[list[bytes], str | None]:
@@ -96,12 +110,21 @@ def parse_message(raw: bytes) -> Received:
     rev = head[8:11].strip(b" ")
     if rev and not rev.isdigit():
         raise ValueError(f"bad revision {head[8:11]!r}")
-    return Received(int(head[4:8]), max(int(rev or b"1"), 1), raw[20:])
+    seq = head[16:18].strip(b" ")
+    if seq and not seq.isdigit():
+        raise ValueError(f"bad sequence number {head[16:18]!r}")
+    return Received(int(head[4:8]), max(int(rev or b"1"), 1), raw[20:],
+                    int(seq) if seq else None)
 
 
-def message(mid: int, data: bytes = b"") -> bytes:
-    """Header (length, MID, revision 001, the other fields blank) + data; no NUL."""
-    return f"{20 + len(data):04d}{mid:04d}001         ".encode() + data
+def message(mid: int, data: bytes = b"", revision: int = 1) -> bytes:
+    """Header (length, MID, revision, the other fields blank) + data; no NUL."""
+    return f"{20 + len(data):04d}{mid:04d}{revision:03d}         ".encode() + data
+
+
+def numbered(raw: bytes, seq: int) -> bytes:
+    """``raw`` with its header's sequence number (bytes 17-18) set."""
+    return raw[:16] + f"{seq:02d}".encode() + raw[18:]
 
 
 class Session:
@@ -112,8 +135,25 @@ class Session:
         self.kind, self.fd, self.sock, self.slave, self.link = kind, fd, sock, slave, link
         self.inbuf, self.out = bytearray(), bytearray()
         self.started = self.subscribed = False
+        self.result_revision = 1        # the revision of MID 0060, so of the 0061 pushed
         self.last_rx = time.monotonic()
         self.unacked: list[int] = []    # results (tightening ids) sent, awaiting MID 0062
+        # link level: off until the controller says so (after its 0002)
+        self.link_level = self.link_capable = False
+        self.tx_seq = 0
+        self.rx_last: int | None = None
+        self.outbox: deque[bytes] = deque()          # numbered messages waiting their turn
+        self.outstanding: bytes | None = None        # the one awaiting the integrator's 9997
+        self.sent_at = 0.0
+        self.resends = 0
+
+    def start_link_level(self, on: bool, capable: bool | None = None) -> None:
+        """Communication start: both counters from 1 again, nothing outstanding; ``on``
+        now, or (``capable``) as soon as the integrator numbers a message."""
+        self.link_level, self.tx_seq, self.rx_last = on, 0, None
+        self.link_capable = on if capable is None else capable
+        self.outbox.clear()
+        self.outstanding = None
 
     def read(self) -> bytes:
         return self.sock.recv(65536) if self.sock else os.read(self.fd, 65536)
@@ -138,10 +178,15 @@ class OpenProtocolServer:
     """Transports and the selector thread; subclasses implement ``handle``."""
 
     silence_timeout = 15.0     # the controller drops a client silent for this long
+    link_timeout = 2.0         # link level: resend when no 9997 came within this long
 
     def __init__(self) -> None:
         self.errors: list[str] = []            # protocol violations the controller saw
         self.drops = 0                          # clients dropped for silence
+        self.repeats = 0                        # link level: repeated messages not handled
+        self.resent = 0                         # link level: messages resent
+        self.link_drops = 0                     # link level: clients dropped, no 9997
+        self._link_faults: list[tuple[LinkFault, int | None]] = []
         self._log: list[Received] = []
         self._faults: list[tuple[Fault, int | None]] = []
         self._sessions: dict[int, Session] = {}
@@ -278,13 +323,15 @@ class OpenProtocolServer:
     def sessions(self) -> list[Session]:
         return list(self._sessions.values())
 
-    def reply(self, s: Session, answering: int, mid: int, data: bytes = b"") -> None:
+    def reply(self, s: Session, answering: int, mid: int, data: bytes = b"",
+              revision: int = 1) -> None:
         """Answer the command ``answering`` with ``mid``, unless a fault is armed for it."""
-        frame = s.frame(message(mid, data))
+        raw = message(mid, data, revision)
+        frame = s.frame(raw)
         armed = next((i for i, (_, only) in enumerate(self._faults)
                       if only == answering or (only is None and answering != 9999)), None)
         if armed is None:
-            self.write(s, frame)
+            self.post(s, raw)
             return
         fault, _ = self._faults.pop(armed)
         if fault == "garbage":
@@ -300,6 +347,93 @@ class OpenProtocolServer:
     def write(self, s: Session, data: bytes) -> None:
         s.out += data
         self._flush(s)
+
+    def post(self, s: Session, raw: bytes) -> None:
+        """Send a message (header + data, no framing): at once, or, with the link level on,
+        numbered and after the messages before it were acknowledged."""
+        if not s.link_level or int(raw[4:8]) in NOT_NUMBERED:
+            self.write(s, s.frame(raw))
+            return
+        s.outbox.append(raw)
+        self._next_out(s)
+
+    def link_fault(self, fault: LinkFault, mid: int | None = None) -> None:
+        """Spoil the link level once (for a message with ``mid`` only, if given):
+        "ignore_ack" (the integrator's next 9997 is not heard: the message is resent),
+        "no_ack" (the integrator's next message is handled but not acknowledged: it resends
+        it), "nak" (it is refused with 9998 and not handled), "deaf" (no 9997 is heard any
+        more: resent 3 times, then the connection dropped; until ``clear_link_faults``)."""
+        self.call(lambda: self._link_faults.append((fault, mid)))
+
+    def clear_link_faults(self) -> None:
+        self.call(self._link_faults.clear)
+
+    # -- the link level -----------------------------------------------------------------
+    def _next_out(self, s: Session) -> None:
+        if s.outstanding is not None or not s.outbox:
+            return
+        s.tx_seq = s.tx_seq % 99 + 1
+        s.outstanding = numbered(s.outbox.popleft(), s.tx_seq)
+        s.resends = 0
+        self._send_outstanding(s)
+
+    def _send_outstanding(self, s: Session) -> None:
+        if s.outstanding is not None:
+            s.sent_at = time.monotonic()
+            self.write(s, s.frame(s.outstanding))
+
+    def _link_fault(self, fault: LinkFault, mid: int) -> bool:
+        """Whether ``fault`` is armed for ``mid`` (a one-shot one is used up; "deaf"
+        stays)."""
+        armed = next((f for f in self._link_faults
+                      if f[0] == fault and f[1] in (None, mid)), None)
+        if armed is None:
+            return False
+        if fault != "deaf":
+            self._link_faults.remove(armed)
+        return True
+
+    def _link_in(self, s: Session, msg: Received) -> bool:
+        """Link-level work on a received message; whether it is to be handled."""
+        if msg.mid in (LINK_ACK, LINK_ERROR):
+            out = s.outstanding
+            if out is None or msg.sequence != int(out[16:18]):
+                self.errors.append(f"MID {msg.mid} for sequence {msg.sequence}, which is "
+                                   "not outstanding")
+            elif msg.mid == LINK_ERROR:
+                self._resend(s)
+            elif not self._link_fault("ignore_ack", int(out[4:8])) \
+                    and not self._link_fault("deaf", int(out[4:8])):
+                s.outstanding = None
+                self._next_out(s)
+            return False
+        if msg.mid in NOT_NUMBERED:
+            return True
+        if not s.link_level and s.link_capable and msg.sequence is not None:
+            s.link_level = True        # an integrator that numbers its messages wants it
+        if not s.link_level:
+            return True
+        ack = message(LINK_ACK, f"{msg.mid:04d}".encode())
+        if msg.sequence is None or self._link_fault("nak", msg.mid):
+            code = 3 if msg.sequence is None else 1
+            self.write(s, s.frame(numbered(message(LINK_ERROR, f"{msg.mid:04d}{code:04d}"
+                                                   .encode()), msg.sequence or 0)))
+            return False
+        repeat = msg.sequence == s.rx_last
+        self.repeats += repeat          # counted before the 9997 is out: whoever sees it
+        s.rx_last = msg.sequence        # may look at the count
+        if not self._link_fault("no_ack", msg.mid):
+            self.write(s, s.frame(numbered(ack, msg.sequence)))
+        return not repeat
+
+    def _resend(self, s: Session) -> None:
+        if s.resends >= LINK_RESENDS:
+            self.link_drops += 1
+            self._drop(s)
+            return
+        s.resends += 1
+        self.resent += 1
+        self._send_outstanding(s)
 
     # -- the selector loop ------------------------------------------------------------------
     def _run(self) -> None:
@@ -322,6 +456,10 @@ class OpenProtocolServer:
                 self._doomed.remove((when, s))
                 self._drop(s)
             for s in list(self._sessions.values()):
+                if s.outstanding is not None and now - s.sent_at > self.link_timeout:
+                    self._resend(s)
+                if not self._alive(s):
+                    continue
                 if now - s.last_rx > self.silence_timeout and (s.kind == "tcp" or s.started):
                     self.drops += 1
                     if s.kind == "tcp":
@@ -350,6 +488,9 @@ class OpenProtocolServer:
         except OSError:
             return
         conn.setblocking(False)
+        # small messages written back to back (a 9997 then an answer) must not wait for
+        # the peer's delayed ACK (Nagle), as a controller's would not
+        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._add(Session("tcp", conn.fileno(), conn))
 
     def _drop(self, s: Session) -> None:
@@ -395,7 +536,8 @@ class OpenProtocolServer:
                 continue
             s.last_rx = time.monotonic()
             self._log.append(msg)
-            self.handle(s, msg)
+            if self._link_in(s, msg):
+                self.handle(s, msg)
         self.errors.extend(errors)
         if errors and s.kind == "tcp":          # a broken TCP stream cannot be resynchronised
             self._drop(s)

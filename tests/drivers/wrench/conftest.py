@@ -72,7 +72,7 @@ def read_message(conn: socket.socket) -> bytes:
     """One TCP message (with its NUL) read by hand: 4 length digits, the rest, NUL."""
     buf = b""
     while len(buf) < 4 or len(buf) < int(buf[:4]) + 1:
-        chunk = conn.recv(4096 if len(buf) < 4 else int(buf[:4]) + 1 - len(buf))
+        chunk = conn.recv(4 - len(buf) if len(buf) < 4 else int(buf[:4]) + 1 - len(buf))
         if not chunk:
             raise ConnectionError("peer closed")
         buf += chunk

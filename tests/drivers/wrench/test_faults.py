@@ -60,7 +60,7 @@ def test_a_controller_that_never_answers(peer):
 
 def test_communication_start_refused(peer):
     def script(c):
-        assert read_message(c) == op(1)
+        assert read_message(c) == op(1, rev="006")     # the highest revision first
         c.sendall(b"00260004001         000196\x00")
         c.recv(100)
     p = peer(script)

@@ -41,7 +41,7 @@ def test_session_and_commands_byte_for_byte(sim):
         assert ask(c, 43) == b"00240005001         0043\x00"
         assert ask(c, 50, b"VIN1".ljust(25)) == b"00240005001         0050\x00"
         assert ask(c, 9999) == b"00209999001         \x00"              # mirrored
-        assert ask(c, 60, rev="002") == b"00260004001         006097\x00"  # revision
+        assert ask(c, 60, rev="008") == b"00260004001         006097\x00"  # revision
         assert ask(c, 60) == b"00240005001         0060\x00"
         assert ask(c, 60) == b"00260004001         006009\x00"          # already subscribed
         assert ask(c, 63) == b"00240005001         0063\x00"

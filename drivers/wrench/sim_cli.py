@@ -1,0 +1,85 @@
+"""``python -m drivers.wrench.sim``: the simulated controller on a TCP port of its own.
+
+Why: so that an Open Protocol client that is not ours (an integrator's library, a vendor's
+test tool) can be pointed at the same controller the station's tests use, and so that a
+person can watch the exchange.  It serves until SIGINT or SIGTERM; with ``--trigger-every``
+the "operator" pulls the trigger at that interval whenever the tool is enabled and a pset
+selected, so results flow without a test driving it.
+
+    python -m drivers.wrench.sim --port 4545 --link-ack --refuse 1:7,6 --trigger-every 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+from collections.abc import Sequence
+from types import FrameType
+
+from drivers.wrench.sim import SimController
+
+
+def refusal(text: str) -> tuple[int, set[int]]:
+    """``MID:REV[,REV...]`` -> (MID, revisions), e.g. ``1:7,6`` or ``60:7``."""
+    mid, _, revs = text.partition(":")
+    try:
+        return int(mid), {int(r) for r in revs.split(",") if r}
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected MID:REV[,REV...], not {text!r}") \
+            from None
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m drivers.wrench.sim",
+                                description="A simulated Open Protocol tightening controller "
+                                            "on TCP.")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (127.0.0.1)")
+    p.add_argument("--port", type=int, default=4545, help="TCP port, 0 for any (4545)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the result scatter (0)")
+    p.add_argument("--nok-rate", type=float, default=0.05, help="share of NOKs (0.05)")
+    p.add_argument("--name", default="SimController", help="controller name in MID 0002")
+    p.add_argument("--link-ack", action="store_true",
+                   help="acknowledge at link level (MID 9997/9998) and say so in MID 0002")
+    p.add_argument("--refuse", type=refusal, action="append", default=[],
+                   metavar="MID:REVS", help="refuse these revisions of MID 1, 60 or 64 "
+                                            "(repeatable), e.g. 1:7,6")
+    p.add_argument("--refusal-code", type=int, default=97,
+                   help="MID 0004 code for a refused revision (97; some controllers: 76)")
+    p.add_argument("--trigger-every", type=float, default=0.0, metavar="SECONDS",
+                   help="pull the trigger at this interval when the tool may run (off)")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parser().parse_args(argv)
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+    refused: dict[int, set[int]] = {}
+    for mid, revs in args.refuse:
+        refused.setdefault(mid, set()).update(revs)
+    try:
+        sim = SimController(seed=args.seed, nok_rate=args.nok_rate, name=args.name,
+                            link_ack=args.link_ack, refused_revisions=refused,
+                            revision_refusal_code=args.refusal_code)
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    with sim:
+        try:
+            port = sim.listen_tcp(args.host, args.port)
+        except OSError as e:
+            print(f"error: cannot listen on {args.host}:{args.port}: {e.strerror or e}",
+                  file=sys.stderr)
+            return 1
+        print(f"listening on {args.host}:{port}", flush=True)
+        while not stop.wait(args.trigger_every or 0.5):
+            if args.trigger_every:
+                sim.pull_trigger()
+    return 0
