@@ -24,13 +24,14 @@ from db.models import (
     FeedEntry,
     ForwardQuarantine,
     Meta,
+    ResultGap,
     TighteningRecord,
     UnattributedResult,
     Vehicle,
 )
 
 #: the kinds of records the feed carries, each in its own table
-RUNDOWN, UNATTRIBUTED, COMMAND = "rundown", "unattributed", "command"
+RUNDOWN, UNATTRIBUTED, COMMAND, GAP = "rundown", "unattributed", "command", "gap"
 FEED_LIMIT = 1000
 
 
@@ -183,10 +184,14 @@ def _record(s: Session, kind: str, ref: int) -> dict[str, Any]:
                 "torque_nm": u.torque_nm, "angle_deg": u.angle_deg,
                 "result_at": _iso(u.result_at), "recorded_at": _iso(u.recorded_at),
                 "reason": u.reason}
+    if kind == GAP:
+        g = s.get_one(ResultGap, ref)
+        return {"id": g.id, "first_id": g.first_id, "last_id": g.last_id, "vin": g.vin,
+                "reason": g.reason, "found_at": _iso(g.found_at)}
     c = _command(s.get_one(CommandRecord, ref))
     return {"id": c.id, "at": c.at.isoformat(), "user": c.user, "source": c.source,
             "kind": c.kind, "vin": c.vin, "bolt": c.bolt, "comment": c.comment}
 
 
-__all__ = ["COMMAND", "RUNDOWN", "UNATTRIBUTED", "CommandEntry", "Ledger", "add_command",
+__all__ = ["COMMAND", "GAP", "RUNDOWN", "UNATTRIBUTED", "CommandEntry", "Ledger", "add_command",
            "append"]

@@ -290,3 +290,17 @@ class ForwardQuarantine(Base):
     seq: Mapped[int] = mapped_column(primary_key=True, autoincrement=False)
     reason: Mapped[str] = mapped_column(String(500))
     at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
+
+
+class ResultGap(Base):
+    """Tightening ids the controller made and the station could not get (the controller no
+    longer had them when asked after a reconnect): a gap, recorded so it is seen."""
+
+    __tablename__ = "result_gaps"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    first_id: Mapped[int]
+    last_id: Mapped[int]
+    vin: Mapped[str | None] = mapped_column(String(32))   # the vehicle at height, if any
+    reason: Mapped[str] = mapped_column(String(200))
+    found_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)

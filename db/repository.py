@@ -17,19 +17,21 @@ from types import TracebackType
 from typing import Any, Self
 
 from alembic.util import CommandError
-from sqlalchemy import Engine, make_url, select
+from sqlalchemy import Engine, func, make_url, select
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session
 
+from db import quality
 from db.bolts import BoltTable, Parameters, dump_bolts
 from db.engine import DEFAULT_URL, make_engine, writer
 from db.errors import DatabaseError, DataError, NotFoundError, VehicleClosedError
 from db.importer import ImportReport, current_version, import_table, parameters_of, read_table
-from db.ledger import RUNDOWN, UNATTRIBUTED, Ledger, add_command, append
+from db.ledger import GAP, RUNDOWN, UNATTRIBUTED, Ledger, add_command, append
 from db.migrate import current_revision, head_revision, upgrade
 from db.models import (
     Bolt,
     ProcessParameters,
+    ResultGap,
     TighteningRecord,
     ToolEnable,
     UnattributedResult,
@@ -272,6 +274,30 @@ class Repository:
             append(s, RUNDOWN, rec.id)
             return rec.id
 
+    def nok_streaks(self, vin: str, since: datetime | None = None) -> dict[str, int]:
+        """Per bolt of ``vin``: its NOKs in a row at the end of its records (since its last OK
+        and its last release command; only records since ``since``, the vehicle's last
+        opening).  What the NOK policy counts, also after a reload or a restart."""
+        with self._session(write=False) as s:
+            v = _vehicle(s, vin)
+            q = (select(Bolt.code, TighteningRecord.status, TighteningRecord.recorded_at)
+                 .join(Bolt, TighteningRecord.bolt_id == Bolt.id)
+                 .where(TighteningRecord.vehicle_id == v.id)
+                 .order_by(TighteningRecord.recorded_at, TighteningRecord.id))
+            if since is not None:
+                q = q.where(TighteningRecord.recorded_at >= since)
+            releases: dict[str, datetime] = {}
+            for c in self.ledger.commands(vin):
+                if c.kind == "release" and c.bolt is not None:
+                    releases[c.bolt] = c.at
+            streak: dict[str, int] = {}
+            for code, status, at in s.execute(q):
+                if status == "ok" or (code in releases and at <= releases[code]):
+                    streak[code] = 0
+                else:
+                    streak[code] = streak.get(code, 0) + 1
+            return {k: n for k, n in streak.items() if n}
+
     # -- what the station owes, results no bolt owns ----------------------------------------
     def note_enable(self, vin: str, bolt: str, pset: int | None, parameters_id: int | None,
                     selection: Mapping[str, Any], at: datetime) -> int:
@@ -325,6 +351,36 @@ class Repository:
             s.flush()
             append(s, UNATTRIBUTED, row.id)
             return row.id
+
+    def spc(self, model: str | None = None, since: datetime | None = None) -> dict[str, Any]:
+        """Cp/Cpk of torque and angle per bolt and pset (OK results), NOK rate per day."""
+        with self._session(write=False) as s:
+            return quality.spc(s, model, since)
+
+    def last_tightening_id(self) -> int | None:
+        """The newest controller tightening id the station accounted for (recorded to a
+        bolt, unattributed, or a gap); None before the first."""
+        with self._session(write=False) as s:
+            ids = [s.scalar(select(func.max(TighteningRecord.tightening_id))),
+                   s.scalar(select(func.max(UnattributedResult.tightening_id))),
+                   s.scalar(select(func.max(ResultGap.last_id)))]
+            known = [int(i) for i in ids if i is not None]
+            return max(known) if known else None
+
+    def record_gap(self, first_id: int, last_id: int, vin: str | None, reason: str) -> int:
+        """Tightening ids the station could not get (the controller no longer has them)."""
+        with self._session(write=True) as s:
+            row = ResultGap(first_id=first_id, last_id=last_id, vin=vin, reason=reason[:200])
+            s.add(row)
+            s.flush()
+            append(s, GAP, row.id)
+            return row.id
+
+    def gaps(self) -> list[dict[str, Any]]:
+        with self._session(write=False) as s:
+            return [{"first_id": g.first_id, "last_id": g.last_id, "vin": g.vin,
+                     "reason": g.reason, "found_at": g.found_at}
+                    for g in s.scalars(select(ResultGap).order_by(ResultGap.id))]
 
     def unattributed(self, vin: str | None = None) -> list[dict[str, Any]]:
         """The stored results no bolt owns (of ``vin``, or all), oldest first."""

@@ -102,8 +102,8 @@ def _detect_camera(args: argparse.Namespace, load_camera: Callable[[str], Any]) 
 def cmd_localize(args: argparse.Namespace) -> int:
     from stationd.config import load_station_config
     from stationd.geometry.camera import StereoPair
-    from stationd.geometry.stereo import localize
     from stationd.imageio import read_image
+    from stationd.localize.stereo import localize
 
     if args.repeat < 1:
         raise InputError("--repeat must be at least 1")
@@ -248,7 +248,7 @@ def cmd_bench_chain(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from stationd.station.run import run_daemon
+    from stationd.serve import run_daemon
 
     return run_daemon(args)
 
@@ -268,10 +268,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if args.vision and (args.http is not None or args.hold):
         raise InputError("--http and --hold serve the station demo's screens, not --vision's")
     if args.vision:
-        from stationd.demo import run_demo
+        from stationd.demo.vision import run_demo
 
         return int(run_demo(args))
-    from stationd.station.demo import run_station_demo
+    from stationd.demo.station import run_station_demo
 
     return run_station_demo(args)
 
@@ -380,9 +380,9 @@ def build_parser() -> argparse.ArgumentParser:
     bk.add_argument("--json", action="store_true", help="print one summary object")
     bk.set_defaults(func=cmd_bench_soak)
 
+    from stationd.calibrate_cli import add_calibrate_parser
     from stationd.command_cli import add_command_parsers
     from stationd.db_cli import add_config_parser, add_db_parser
-    from stationd.geometry.calibrate_cli import add_calibrate_parser
     from stationd.probe import add_probe_parser
     from stationd.web.status_cli import add_status_parser
 

@@ -4,6 +4,7 @@ password hashes the station file keeps.
 
     stationd skip VIN BOLT [--comment TEXT] --user NAME
     stationd reopen VIN [--comment TEXT] --user NAME
+    stationd release VIN BOLT [--comment TEXT] --user NAME
     stationd feed [--since N] [--limit M]
     stationd user hash
 
@@ -90,7 +91,7 @@ def _check_command(args: argparse.Namespace) -> None:
         raise InputError("--user: the name of a user of the station's access section")
     if not 1 <= len(args.vin.strip()) <= 32 or any(c.isspace() for c in args.vin.strip()):
         raise InputError(f"VIN {args.vin!r}: 1-32 characters without spaces")
-    if args.command == "skip" and not 1 <= len(args.bolt.strip()) <= 32:
+    if args.command in ("skip", "release") and not 1 <= len(args.bolt.strip()) <= 32:
         raise InputError(f"bolt {args.bolt!r}: 1-32 characters")
     if len(args.comment or "") > 500:
         raise InputError(f"--comment: at most 500 characters ({len(args.comment)} given)")
@@ -103,11 +104,12 @@ def _unreachable(url: str, exc: BaseException) -> int:
 
 
 def cmd_command(args: argparse.Namespace) -> int:
-    """``skip`` and ``reopen``: log in, give the command, print the station's answer."""
+    """``skip``, ``reopen`` and ``release``: log in, give the command, print the station's
+    answer."""
     _check_command(args)
     body: dict[str, Any] = {"kind": args.command, "vin": args.vin.strip(),
                             "comment": args.comment or ""}
-    if args.command == "skip":
+    if args.command in ("skip", "release"):
         body["bolt"] = args.bolt.strip()
     client = _Client(args.url, args.token, args.timeout)
     try:
@@ -166,7 +168,8 @@ def _client_args(p: argparse.ArgumentParser) -> None:
 
 
 def add_command_parsers(sub: Any) -> None:
-    """``skip``, ``reopen``, ``feed`` and ``user hash`` on ``build_parser``'s sub-parsers."""
+    """``skip``, ``reopen``, ``release``, ``feed`` and ``user hash`` on ``build_parser``'s
+    sub-parsers."""
     epilog = ("The password: STATIOND_PASSWORD, else a prompt, else the first line of "
               "standard input.  Exit 0 accepted, 1 refused (why is printed), 2 bad input, "
               "3 no answer or login refused.")
@@ -177,7 +180,11 @@ def add_command_parsers(sub: Any) -> None:
     ro = sub.add_parser("reopen", help="reopen a closed vehicle for rework (a command to the "
                         "running daemon)", epilog=epilog)
     ro.add_argument("vin")
-    for p, name in ((sk, "skip"), (ro, "reopen")):
+    rl = sub.add_parser("release", help="release a bolt locked after too many NOKs (a "
+                        "command to the running daemon)", epilog=epilog)
+    rl.add_argument("vin")
+    rl.add_argument("bolt")
+    for p, name in ((sk, "skip"), (ro, "reopen"), (rl, "release")):
         p.add_argument("--comment", default="", help="why (kept with the command)")
         p.add_argument("--user", required=True, help="who gives the command")
         _client_args(p)

@@ -30,11 +30,13 @@ from drivers.wrench.modbus_map import WrenchRegisterMap
 from stationd.access import AccessConfig
 from stationd.devicemaps import lift_map, wrench_map
 from stationd.errors import ConfigError, InputError
+from stationd.forward import LineConfig
 from stationd.geometry.camera import StereoPair
 from stationd.geometry.frames import Transform
 from stationd.geometry.tool import ToolGeometry
 from stationd.localize import LocalizeConfig
 from stationd.station.matching import MatchParams
+from stationd.station.policy import NokPolicy
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import VisionParams
 from stationd.web.config import HttpConfig
@@ -52,7 +54,7 @@ MAX_AGE_S = (0.05, 5.0)         # plausible staleness limits, seconds
 BASELINE_MM = (20.0, 2000.0)    # plausible stereo baselines, millimetres
 METRES_LIKE_MM = 10.0           # a pair-to-vehicle translation shorter than this is in metres
 STATION_KEYS = ("marker", "vision", "cameras", "pairs", "tool", "lift", "wrench", "matching",
-                "database", "bolts", "records", "http", "access", "localize")
+                "database", "bolts", "records", "http", "access", "localize", "line", "nok")
 PAIR_KEYS = ("calibration", "to_vehicle", "left", "right", "max_skew_ms")
 
 #: device kind -> (scheme -> backend, the accepted forms): the drivers' own registries, so the
@@ -178,6 +180,8 @@ class StationConfig:
     http: HttpConfig | None = None  # the screens (stationd.web); None: not served
     access: AccessConfig = field(default_factory=AccessConfig)  # who may give commands
     localize: LocalizeConfig = field(default_factory=LocalizeConfig)  # how pairs are fused
+    line: LineConfig | None = None  # the line's database the records are forwarded to
+    nok: NokPolicy = field(default_factory=NokPolicy)  # after a NOK: lock, skip or repeat
     path: Path | None = None
 
 
@@ -420,6 +424,8 @@ class _Reader:
             http=self.section("http", d.http, HttpConfig.from_node),
             access=self.section("access", d.access, AccessConfig.from_node),
             localize=self.section("localize", d.localize, LocalizeConfig.from_node),
+            line=self.section("line", d.line, LineConfig.from_node),
+            nok=self.section("nok", d.nok, NokPolicy.from_node),
             path=path)
         # after the sections: a mistake written in the file is told before what is missing
         if self.require_devices and isinstance(root.value(), dict) and not self.unreadable:

@@ -221,6 +221,30 @@ def cmd_db_report(args: argparse.Namespace) -> int:
     return EXIT_OK if report.complete else EXIT_INCOMPLETE
 
 
+def cmd_db_spc(args: argparse.Namespace) -> int:
+    """Process capability per bolt and pset, and the NOK trend (quality's figures)."""
+    with _open(_db_url(args), must_exist=True) as repo:
+        doc = repo.spc(args.model, args.since)
+    if args.json:
+        sys.stdout.write(strict_json(doc) + "\n")
+        return EXIT_OK
+    print(f"{'model':<10} {'bolt':<8} {'pset':>4} {'n':>4} {'NOK':>4}  "
+          f"{'torque mean':>11} {'Cp':>5} {'Cpk':>5}  {'angle mean':>10} {'Cp':>5} {'Cpk':>5}")
+    for r in doc["bolts"]:
+        t, a = r["torque"], r["angle"]
+        print(f"{r['model']:<10} {r['bolt']:<8} {r['pset'] or '-':>4} {t['n']:>4} "
+              f"{r['nok']:>4}  {_num(t['mean']):>11} {_fig(t['cp']):>5} {_fig(t['cpk']):>5}  "
+              f"{_num(a['mean']):>10} {_fig(a['cp']):>5} {_fig(a['cpk']):>5}")
+    for d in doc["trend"]:
+        print(f"{d['day']}: {d['results']} results, {d['nok']} NOK "
+              f"({100 * (d['nok_rate'] or 0):.1f} %)")
+    return EXIT_OK
+
+
+def _fig(v: float | None) -> str:
+    return "-" if v is None else f"{v:.2f}"
+
+
 def _iso(t: datetime | None) -> str | None:
     return None if t is None else _aware(t).isoformat()
 
@@ -349,6 +373,16 @@ def add_db_parser(subparsers: Any) -> argparse.ArgumentParser:
     _add_db_args(rp)
     rp.add_argument("--json", action="store_true", help="print one JSON object")
     rp.set_defaults(func=cmd_db_report)
+    sp = dsub.add_parser("spc", help="Cp/Cpk of torque and angle per bolt and pset, and the "
+                         "NOK trend per day",
+                         description="On OK results: Cp = (USL-LSL)/6s, Cpk = min(USL-mean, "
+                                     "mean-LSL)/3s against the limits sent; '-' with fewer "
+                                     "than 5 results.")
+    _add_db_args(sp)
+    sp.add_argument("--model", help="this vehicle model only")
+    sp.add_argument("--since", type=_since, metavar="DATE", help="results from this date on")
+    sp.add_argument("--json", action="store_true", help="print one JSON object")
+    sp.set_defaults(func=cmd_db_spc)
     return d
 
 

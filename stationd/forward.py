@@ -178,6 +178,7 @@ class Forwarder:
         self.up: bool | None = None        # None: not tried yet
         self.last_error: str | None = None
         self.forwarded = 0                 # entries the line database took (this process)
+        self.last_status: dict[str, Any] | None = None   # the latest, for the status API
 
     def step(self) -> int:
         """Forward up to one batch; how many entries were handled.  ``LineDown`` when the
@@ -255,6 +256,7 @@ class Forwarder:
                 self.last_error = f"local database: {_reason(exc)}"
                 pause = POLL_S
             st = await loop.run_in_executor(None, self.status)
+            self.last_status = st
             if (st["up"], st["alarm"]) != told:
                 told = (st["up"], st["alarm"])
                 on_change(st)

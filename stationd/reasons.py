@@ -28,6 +28,7 @@ class Why(enum.Enum):
     MUST_WAIT = "must wait"              # order or batch (blocking, note)
     NOT_STABLE = "not stable"            # stable for `count` of `needed` frames
     ELSEWHERE = "elsewhere"              # on another bolt than the one selected (bolt)
+    LOCKED = "locked"                    # too many NOKs in a row: a release unlocks (count)
     NOT_LOCALIZED = "not localized"      # each pair's vision reason (per_pair) or note
     TILTED = "tilted"                    # the wrench tilted beyond the limit (angle_deg, limit)
     PAIRS_DISAGREE = "pairs disagree"    # pairs' bolt ends apart (distance_mm, limit)
@@ -42,6 +43,7 @@ class Why(enum.Enum):
     UNKNOWN_VEHICLE = "unknown vehicle"  # a VIN the database does not know (vin)
     DEVICE_FAULT = "device fault"        # a device is in fault (note: the faults)
     NOT_RECORDED = "not recorded"        # the database refused the command's record (note)
+    NOT_LOCKED = "not locked"            # a release of a bolt that is not locked (bolt)
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from stationd.reasons import Reason, Why
-from stationd.station.commands import KIND, Answer, ReopenVehicle, SkipBolt
+from stationd.station.commands import KIND, Answer, ReleaseBolt, ReopenVehicle, SkipBolt
 
 
 def _mm(v: float | None) -> str:
@@ -44,6 +44,9 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.MUST_WAIT: lambda r: f"{r.bolt} must wait: {r.note}",
     Why.NOT_STABLE: lambda r: f"{r.bolt}: stable for {r.count} of {r.needed} frames",
     Why.ELSEWHERE: lambda r: f"nearest {r.bolt}",
+    Why.LOCKED: lambda r: (f"{r.bolt} locked after {r.count} NOK in a row: a supervisor "
+                           "releases it"),
+    Why.NOT_LOCKED: lambda r: f"{r.bolt} is not locked",
     Why.NOT_LOCALIZED: lambda r: _per_pair(r),
     Why.TILTED: lambda r: f"wrench tilted {r.angle_deg or 0:.1f} deg (> {r.limit or 0:g} deg)",
     Why.PAIRS_DISAGREE: lambda r: (f"pairs disagree by {r.distance_mm or 0:.2f} mm "
@@ -72,7 +75,7 @@ def command_words(answer: Answer) -> str:
     """What the command was: ``skip B07 of VIN123 ("no access")``."""
     cmd = answer.command
     what = KIND[type(cmd)]
-    if isinstance(cmd, SkipBolt):
+    if isinstance(cmd, SkipBolt | ReleaseBolt):
         what += f" {cmd.bolt} of {cmd.vin}"
     elif isinstance(cmd, ReopenVehicle):
         what += f" {cmd.vin}"

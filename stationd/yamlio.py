@@ -98,6 +98,19 @@ class YamlNode:
             raise self.error(f"missing key(s): {', '.join(missing)}")
         return out
 
+    def pairs(self) -> list[tuple[object, YamlNode]]:
+        """The key/value pairs of a mapping whose keys may be any scalar (pset numbers)."""
+        if not isinstance(self._node, yaml.MappingNode):
+            raise self.error("expected a mapping (key: value)")
+        out: list[tuple[object, YamlNode]] = []
+        for key_node, value_node in self._node.value:
+            key = _constructor.construct_object(key_node, deep=True)
+            if any(k == key for k, _ in out):
+                raise YamlNode(key_node, self.path, self._child_key(str(key))).error(
+                    "duplicate key")
+            out.append((key, YamlNode(value_node, self.path, self._child_key(str(key)))))
+        return out
+
     def items(self) -> list[YamlNode]:
         """The elements of a sequence."""
         if not isinstance(self._node, yaml.SequenceNode):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stationd.bench import scenes as sc
+from stationd.sim import scenes as sc
 from stationd.sim.render import default_camera
 from stationd.vision.marker import MarkerSpec
 

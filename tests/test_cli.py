@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import yaml
 
-from stationd.bench import scenes as sc
 from stationd.cli import main
+from stationd.sim import scenes as sc
 from tests.conftest import NOISE, SPEC, pose_in_pair, view
 
 DETECT_KEYS = {"found", "reason", "centre_px", "ellipse_centre_px", "normal", "inner", "outer",
@@ -327,7 +327,8 @@ def test_every_command_prints_json_through_strict_json():
 
     root = Path(__file__).resolve().parents[1] / "stationd"
     modules = [root / "cli.py", root / "probe.py", root / "probe_camera.py", root / "db_cli.py",
-               root / "demo.py", *sorted((root / "geometry").glob("*_cli.py"))]
+               root / "calibrate_cli.py", root / "vehicle_cli.py",
+               *sorted((root / "demo").glob("*.py"))]
     for path in modules:
         assert "json.dumps(" not in path.read_text(), path
 

@@ -13,7 +13,7 @@ import argparse
 import json
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -21,69 +21,25 @@ import cv2
 import numpy as np
 
 from stationd import progress
-from stationd.bench import scenes as sc
 from stationd.bench.vision import NOISE, ROD_LENGTHS, SPEC, _stats
 from stationd.geometry.calibration import ViewPair, calibrate_views, detect_corners, parse_board
-from stationd.geometry.camera import Camera, StereoPair
+from stationd.geometry.camera import StereoPair
 from stationd.geometry.frames import Transform, fit_rigid
-from stationd.geometry.stereo import localize_detections
 from stationd.geometry.tool import BoltEnd, ToolGeometry, bolt_end, fuse
 from stationd.jsonout import finite
+from stationd.localize.stereo import localize_detections
+from stationd.result import Refusal
+from stationd.sim import scenes as sc
 from stationd.sim.raycast import Chessboard
-from stationd.sim.render import MarkerPose, Scene, crop_camera, default_camera, render
+from stationd.sim.render import MarkerPose, Scene, crop_camera, render
+from stationd.sim.scenes import StationPair, build_station
 from stationd.vision.detect import detect
 from stationd.vision.params import VisionParams
-from stationd.vision.types import Refusal
 
 BOARD = Chessboard(9, 6, 60.0)
 BOARD_SPEC = "chessboard:9x6:60"
 TOOL = ToolGeometry(length_mm=300.0, max_tilt_deg=10.0)
 Result = dict[str, Any]
-
-
-@dataclass(frozen=True, eq=False)
-class StationPair:
-    """One pair as built (the truth, for rendering) and as commissioned (for measuring)."""
-
-    name: str
-    true_pair: StereoPair
-    R_vc: np.ndarray  # left camera axes in the vehicle frame (columns)
-    c_v: np.ndarray   # left camera centre in the vehicle frame
-    calibrated: StereoPair | None = None
-    to_vehicle: Transform | None = None
-
-    def to_camera(self, p_v: np.ndarray, rot_v: np.ndarray) -> MarkerPose:
-        return MarkerPose(self.R_vc.T @ (p_v - self.c_v), self.R_vc.T @ rot_v)
-
-
-def _camera(rng: np.random.Generator) -> Camera:
-    """A real camera of the station's model: focal length, centre and lens vary a little."""
-    base = default_camera()
-    K = base.K.copy()
-    K[0, 0] *= 1 + rng.normal(0, 0.005)
-    K[1, 1] = K[0, 0] * (1 + rng.normal(0, 1e-4))
-    K[0, 2] += rng.normal(0, 10)
-    K[1, 2] += rng.normal(0, 10)
-    dist = base.dist + rng.normal(0, 0.005, base.dist.size) * np.array([1, 1, 0.02, 0.02, 0])
-    return Camera(K, dist, base.size)
-
-
-def build_station(rng: np.random.Generator, count: int) -> list[StationPair]:
-    """Pairs on the floor 1.3 m under the chassis, two on each side, looking up and inwards."""
-    spots = [(900.0, -750.0), (900.0, 750.0), (2500.0, -750.0), (2500.0, 750.0)][:count]
-    out = []
-    for k, (x, y) in enumerate(spots):
-        c = np.array([x, y, -1300.0])
-        target = np.array([x + 250.0, 0.35 * y, 0.0])
-        z = (target - c) / np.linalg.norm(target - c)
-        xa = np.array([1.0, 0.0, 0.0]) - z[0] * z
-        xa /= np.linalg.norm(xa)
-        R_vc = np.column_stack([xa, np.cross(z, xa), z])
-        left, right = _camera(rng), _camera(rng)
-        looking = sc.look_at_pair(left, R_vc.T @ (target - c), 400.0)
-        out.append(StationPair(f"pair{k + 1}", StereoPair(left, right, looking.R, looking.T),
-                               R_vc, c))
-    return out
 
 
 # -- commissioning ---------------------------------------------------------------------------

@@ -19,9 +19,9 @@ from typing import Any, Literal
 import cv2
 import numpy as np
 
-from stationd.bench import scenes as sc
 from stationd.geometry.camera import Camera
 from stationd.sim import effects as fx
+from stationd.sim import scenes as sc
 from stationd.sim.render import Distractor, MarkerPose, Scene, crop_camera, default_camera, render
 from stationd.vision.detect import detect
 from stationd.vision.marker import PURPLE_RGB, MarkerSpec

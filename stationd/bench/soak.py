@@ -1,6 +1,6 @@
 """``stationd bench soak --bolts N [--faults] [--load N]``: the daemon through a long shift.
 
-The daemon runs as ``stationd run`` runs it (the serve loop of :mod:`stationd.station.run`,
+The daemon runs as ``stationd run`` runs it (the serve loop of :mod:`stationd.serve`,
 one event bus for its life, a station file it reloads), on a copy of config/sim whose lift PLC
 (Modbus TCP) and tightening controller (Open Protocol) are *independent* servers on loopback,
 as on a line: a reload reopens the daemon's connections, not the devices.  Eight 20 MP
@@ -36,9 +36,11 @@ from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.bench.wait import until as _until
 from stationd.boltfile import load_bolts
+from stationd.demo.station import SIM_CONFIG, _kind, _sim_psets
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
 from stationd.reasons import Reason
+from stationd.serve import Screens, serve_station, validate_station
 from stationd.sim.load import cpu_load
 from stationd.sim.soak import (
     Device,
@@ -52,7 +54,6 @@ from stationd.sim.soak import (
     run_soak as play,
 )
 from stationd.sim.world import World
-from stationd.station.demo import SIM_CONFIG, _kind, _sim_psets
 from stationd.station.events import (
     BoltSelected,
     DeviceHealth,
@@ -65,7 +66,6 @@ from stationd.station.events import (
     ToolEnabled,
     VehicleOpened,
 )
-from stationd.station.run import Screens, serve_station, validate_station
 from stationd.station.sdnotify import Notifier
 
 RELOAD_SETTLE_S = 0.5    # after a reload is taken, before the shift goes on

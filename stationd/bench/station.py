@@ -35,14 +35,14 @@ from stationd import progress
 from stationd.bench.wait import until as _until
 from stationd.boltfile import load_bolts
 from stationd.config import StationConfig, load_station_config
+from stationd.demo.station import SIM_CONFIG, _sim_psets
 from stationd.errors import InputError
 from stationd.jsonout import finite, strict_json
+from stationd.serve import Screens
 from stationd.sim.world import World, WrenchPose, wrench_at
 from stationd.station.core import SendParams, State
 from stationd.station.daemon import Station
-from stationd.station.demo import SIM_CONFIG, _sim_psets
 from stationd.station.events import ParamsSent, ResultRecorded
-from stationd.station.run import Screens
 from stationd.web.bench import ScreenClients
 from stationd.web.config import HttpConfig
 

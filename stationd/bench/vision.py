@@ -21,10 +21,10 @@ from typing import Any
 import numpy as np
 
 from stationd import progress
-from stationd.bench import scenes as sc
 from stationd.geometry.camera import Camera
-from stationd.geometry.stereo import localize_detections, triangulate
 from stationd.jsonout import finite
+from stationd.localize.stereo import localize_detections, triangulate
+from stationd.sim import scenes as sc
 from stationd.sim.render import MarkerPose, default_camera
 from stationd.vision.detect import Detection, detect
 from stationd.vision.marker import MarkerSpec
@@ -314,7 +314,7 @@ def bench_speed(rng: np.random.Generator, quick: bool, *, camera: Camera | None 
     no marker in it (most frames of most pairs) is timed too: it must cost one reduced
     search.  ``camera`` replaces the 20 MP camera (the tests use a smaller one).
     """
-    from stationd.geometry.stereo import localize
+    from stationd.localize.stereo import localize
     from stationd.sim.render import Scene, render
 
     pair = sc.station_pair() if camera is None else sc.look_at_pair(

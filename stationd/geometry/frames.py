@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from stationd.vision.types import Refusal
+from stationd.result import Refusal
 from stationd.yamlio import YamlNode
 
 KINDS = ("rigid", "affine")

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from stationd.reasons import Reason, Why
-from stationd.vision.types import Refusal
+from stationd.result import Refusal
 from stationd.yamlio import YamlNode
 
 RULES = ("axis", "perpendicular")

@@ -23,9 +23,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from stationd.bench.scenes import marker_window
 from stationd.geometry.camera import Camera
 from stationd.sim.render import MarkerPose, Scene, render
+from stationd.sim.scenes import marker_window
 from stationd.vision.marker import MarkerSpec
 
 #: a window (x, y, w, h) and its pixels, a whole frame, or None (the background as it is)

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from stationd.bench.chain import build_station
+from stationd.sim.scenes import build_station
 
 SEED = 2026
 BOLTS = 50

@@ -55,12 +55,24 @@ class ReopenVehicle:
     comment: str = ""
 
 
-Command = SkipBolt | ReopenVehicle
+@dataclass(frozen=True)
+class ReleaseBolt:
+    """Unlock ``bolt`` of ``vin``, locked after too many NOKs in a row (the NOK policy's
+    ``max_nok``): it may be tightened again; ``comment`` says why (a supervisor's decision)."""
+
+    vin: str
+    bolt: str
+    comment: str = ""
+
+
+Command = SkipBolt | ReopenVehicle | ReleaseBolt
 
 #: the right each command needs
-RIGHT: dict[type[Command], Right] = {SkipBolt: Right.SKIP, ReopenVehicle: Right.REOPEN}
+RIGHT: dict[type[Command], Right] = {SkipBolt: Right.SKIP, ReopenVehicle: Right.REOPEN,
+                                     ReleaseBolt: Right.RELEASE}
 #: the name each command has on the wire (HTTP, the command line) and in the records
-KIND: dict[type[Command], str] = {SkipBolt: "skip", ReopenVehicle: "reopen"}
+KIND: dict[type[Command], str] = {SkipBolt: "skip", ReopenVehicle: "reopen",
+                                  ReleaseBolt: "release"}
 
 
 def skip_note(user: str, comment: str) -> str:
@@ -82,5 +94,5 @@ class Answer:
         return self.reason is None
 
 
-__all__ = ["KIND", "RIGHT", "Answer", "Command", "Issuer", "ReopenVehicle", "Right",
-           "SkipBolt", "skip_note"]
+__all__ = ["KIND", "RIGHT", "Answer", "Command", "Issuer", "ReleaseBolt", "ReopenVehicle",
+           "Right", "SkipBolt", "skip_note"]

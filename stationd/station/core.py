@@ -37,11 +37,14 @@ from stationd.station.commands import (
     Answer,
     Command,
     Issuer,
+    ReleaseBolt,
     ReopenVehicle,
     SkipBolt,
     skip_note,
 )
 from stationd.station.events import (
+    BoltLocked,
+    BoltReleased,
     BoltSelected,
     BoltSkipped,
     DeviceHealth,
@@ -54,6 +57,7 @@ from stationd.station.events import (
     StationEvent,
 )
 from stationd.station.matching import BoltMatcher, BoltRule, Match, MatchParams
+from stationd.station.policy import NokPolicy
 
 #: a result this long after the tool went off is not the last bolt's late one: the tool cannot
 #: tighten while disabled, and a controller reports within milliseconds
@@ -127,9 +131,11 @@ class ParamsRefused(Input):
 @dataclass(frozen=True)
 class ResultIn(Input):
     """A tightening result from the controller (``result`` has ``ok``, ``pset``,
-    ``tightening_id``), not yet acknowledged."""
+    ``tightening_id``), not yet acknowledged; ``fetched``: asked for after a reconnect (the
+    station missed it while the link was down)."""
 
     result: Any
+    fetched: bool = False
 
 
 @dataclass(frozen=True)
@@ -174,7 +180,7 @@ class VehicleLoaded(Input):
     done: frozenset[str] = frozenset()
     rework: bool = False
     skipped: Mapping[str, str] = field(default_factory=dict)
-
+    noks: Mapping[str, int] = field(default_factory=dict)   # NOKs in a row, since a release
 
 @dataclass(frozen=True)
 class VehicleRejected(Input):
@@ -355,6 +361,7 @@ class StationCore:
     leave_frames: int = 3
     rework: bool = True
     late_result_s: float = LATE_RESULT_S
+    nok: NokPolicy = field(default_factory=NokPolicy)
     state: State = State.STARTING
     reason: str = "starting"
     bolt: str | None = None
@@ -382,6 +389,7 @@ class StationCore:
     # moved since, and the next bolt's evidence must all come from after it
     _not_before: float = field(default=float("-inf"), repr=False)
     _commands: dict[int, CommandIn] = field(default_factory=dict, repr=False)  # recording
+    _noks: dict[str, int] = field(default_factory=dict, repr=False)   # NOKs in a row per bolt
     _closed_vin: str | None = field(default=None, repr=False)   # a closed VIN at height
 
     # -- the one entry point ---------------------------------------------------------------
@@ -410,7 +418,7 @@ class StationCore:
         if m is None:
             return ()
         return tuple(b for b in m.bolts if b not in m.done and b not in m.skipped
-                     and m.why_blocked(b) is None)
+                     and b not in m.locked and m.why_blocked(b) is None)
 
     # -- handlers --------------------------------------------------------------------------
     def _on_Started(self, ev: Started) -> list[Action]:  # noqa: N802 - named after the event
@@ -481,6 +489,10 @@ class StationCore:
             {k: np.asarray(b.position, dtype=np.float64) for k, b in ev.bolts.items()},
             self.params, set(ev.done), dict(ev.skipped),
             rules={k: BoltRule(b.order, b.batch) for k, b in ev.bolts.items()})
+        self._noks = {k: n for k, n in ev.noks.items() if k in ev.bolts and n > 0}
+        for k, n in self._noks.items():
+            if n >= self.nok.rule(k, ev.bolts[k].pset).max_nok:
+                self.matcher.locked[k] = n
         if self.state is State.WAITING_VEHICLE and self._lift is not None and self._lift.ready:
             self._to(State.TRACKING, "tracking the wrench")
         return []
@@ -587,7 +599,8 @@ class StationCore:
                 self.tool_on or (self._off_at is not None
                                  and ev.t - self._off_at < self.late_result_s)):
             return self._attribute(ev, en)
-        why = f"result {tid} (pset {r.pset}) outside any tightening"
+        why = f"result {tid} (pset {r.pset}) " + (
+            "fetched after a reconnect" if ev.fetched else "outside any tightening")
         return [StoreUnattributed(r, self.vin, why),
                 Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
                 Publish(Notice(f"{why}: not attributable to a bolt, stored unattributed",
@@ -610,6 +623,9 @@ class StationCore:
         if self.matcher is not None and self.vin == en.vin:
             if bool(r.ok):
                 self.matcher.mark_done(en.bolt)
+                self._noks.pop(en.bolt, None)
+            else:
+                acts += self._after_nok(ev.t, en)
             self.matcher.reset()     # a new selection: a new streak, from new frames
         self._not_before = max(self._not_before, ev.t)
         if self.bolt == en.bolt:
@@ -643,6 +659,9 @@ class StationCore:
             return Reason(Why.OTHER_VEHICLE, vin=cmd.vin)
         if cmd.bolt not in self.matcher.bolts:
             return Reason(Why.UNKNOWN_BOLT, bolt=cmd.bolt, vin=cmd.vin)
+        if isinstance(cmd, ReleaseBolt):
+            return None if cmd.bolt in self.matcher.locked else \
+                Reason(Why.NOT_LOCKED, bolt=cmd.bolt)
         if cmd.bolt in self.matcher.done:
             return Reason(Why.DONE, bolt=cmd.bolt)
         if cmd.bolt in self.matcher.skipped:
@@ -662,6 +681,11 @@ class StationCore:
         acts: list[Action] = []
         if isinstance(cmd, SkipBolt):
             acts += self._skip(ev.t, cmd, c.issuer)
+        elif isinstance(cmd, ReleaseBolt):
+            if self.matcher is not None and self.vin == cmd.vin \
+                    and self.matcher.locked.pop(cmd.bolt, None) is not None:
+                self._noks.pop(cmd.bolt, None)
+                acts.append(Publish(BoltReleased(cmd.bolt, c.issuer.user, t=ev.t)))
         elif cmd.vin == self._closed_vin and VEHICLE in self.faults:
             # the closed vehicle at height, reopened: its fault clears and the next lift read
             # loads it (open now)
@@ -680,6 +704,23 @@ class StationCore:
         if self.bolt == cmd.bolt:
             acts += self._drop(t, State.TRACKING, f"bolt {cmd.bolt} {why}")
         return acts
+
+    def _after_nok(self, t: float, en: Selection) -> list[Action]:
+        """The NOK policy: the bolt locks after ``max_nok`` in a row; with ``skip`` it is
+        marked NOK and skipped for this vehicle; with ``repeat`` it is open again."""
+        assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
+        n = self._noks[en.bolt] = self._noks.get(en.bolt, 0) + 1
+        rule = self.nok.rule(en.bolt, en.pset)
+        if n >= rule.max_nok:
+            self.matcher.locked[en.bolt] = n
+            return [Publish(BoltLocked(en.bolt, n, t=t)),
+                    Publish(Notice(f"{en.bolt} locked after {n} NOK in a row: a supervisor "
+                                   "releases it", "warning", t=t))]
+        if rule.strategy == "skip":
+            why = "NOK, skipped by the NOK policy"
+            self.matcher.skipped[en.bolt] = why
+            return [Publish(BoltSkipped(en.bolt, why, t=t))]
+        return []
 
     def _on_DeviceFault(self, ev: DeviceFault) -> list[Action]:  # noqa: N802
         if ev.device == WRENCH:

@@ -52,6 +52,7 @@ from stationd.localize import (
     size_problem,
 )
 from stationd.reasons import Reason, Why
+from stationd.result import Refusal
 from stationd.station.commands import KIND, Answer, Command, Issuer, ReopenVehicle, skip_note
 from stationd.station.core import (
     DATABASE,
@@ -95,6 +96,7 @@ from stationd.station.core import (
 from stationd.station.events import (
     BoltView,
     DeviceHealth,
+    DeviceIdentified,
     EventBus,
     Notice,
     PairFrames,
@@ -107,9 +109,10 @@ from stationd.station.events import (
     VehicleClosed,
     VehicleOpened,
 )
+from stationd.station.gaps import MAX_FETCH
+from stationd.station.gaps import plan as plan_gaps
 from stationd.station.scan import ScanPlan
 from stationd.station.sdnotify import Notifier
-from stationd.vision.types import Refusal
 from stationd.words import answer_words, reason_words
 
 log = logging.getLogger("stationd")
@@ -200,10 +203,12 @@ class Station:
     _received: list[Any] = field(default_factory=list)
     _waiting: Any = None
     _requests: int = 0                   # commands numbered for their answers
+    _catching_up: asyncio.Task[None] | None = None   # results missed while the link was down
     _answers: dict[int, asyncio.Future[Answer]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        self.core = StationCore(self.cfg.matching, self.cfg.matching.leave_frames)
+        self.core = StationCore(self.cfg.matching, self.cfg.matching.leave_frames,
+                                nok=self.cfg.nok)
         c = self.cfg
         self._setups = {n: PairSetup(pc.calibration, pc.to_vehicle, c.vision, c.marker, c.tool,
                                      c.records.save_images)
@@ -233,6 +238,8 @@ class Station:
                 await self._recorded_late()
             await self.feed(DeviceBack(time.time(), device,
                                        reconnects if device == WRENCH else None))
+            if device == WRENCH:
+                self._catch_up_soon()
 
         return DeviceKeeper(device, open=opener, reconnect=reconnect, close=close or _close,
                             on_fault=on_fault, on_back=on_back, blocking=self._call,
@@ -398,6 +405,7 @@ class Station:
         await self.feed(Started(time.time()))
         if self.keepers[WRENCH].up:   # the reconnect count the core compares from now on
             await self.feed(DeviceBack(time.time(), WRENCH, self.keepers[WRENCH].reconnects))
+            self._catch_up_soon()
         self.notifier.ready(f"{self.core.state.value}: {self.core.reason}")
         if self.unsaved():   # a reload's: written (then acknowledged) by the database keeper
             self.keepers[DATABASE].lost(DeviceError("results received before the reload "
@@ -412,6 +420,8 @@ class Station:
             await stop.wait()
         finally:
             async with self._lock:   # never cut an event's actions (a record) in half
+                if self._catching_up is not None:
+                    tasks.append(self._catching_up)
                 for t in tasks:
                     t.cancel()
                 await asyncio.gather(*tasks, return_exceptions=True)
@@ -479,6 +489,62 @@ class Station:
         if result is not None:
             await self.feed(ResultIn(time.time(), result))
             self._received.remove(result)
+
+    def _catch_up_soon(self) -> None:
+        """After the controller came (back): what it says it is (the journal, the devices
+        panel), and the results it made meanwhile, fetched."""
+        wrench = self.wrench
+        if wrench is not None:
+            try:
+                who = wrench.identity()
+            except (DeviceError, ValueError):
+                who = ""
+            if who:
+                log.info("wrench: %s", who)
+                self.bus.publish(DeviceIdentified(WRENCH, who))
+        if self._catching_up is None or self._catching_up.done():
+            self._catching_up = asyncio.get_running_loop().create_task(self._catch_up())
+
+    async def _catch_up(self) -> None:
+        """Compare the last tightening id recorded with the controller's newest and fetch
+        every one between (MID 0064): each goes through the core as any result (recorded to
+        its bolt when the station can tell, else unattributed, never to a guessed bolt); one
+        the controller no longer has is recorded as a gap.  A controller that keeps no
+        results (register-driven) has nothing to fetch."""
+        wrench, repo = self.wrench, self.repo
+        if wrench is None or repo is None or not wrench.can_fetch:
+            return
+        try:
+            last = await self._call(repo.last_tightening_id)
+            newest = await self._call(wrench.fetch_result, 0)
+            if newest is None:
+                return
+            todo = plan_gaps(last, int(newest.tightening_id))
+            if todo.note:
+                log.info("results: %s", todo.note)
+            if todo.gap is not None:
+                await self._gap(*todo.gap, f"more than {MAX_FETCH} results missed")
+            for tid in todo.fetch:
+                got = newest if tid == newest.tightening_id else \
+                    await self._call(wrench.fetch_result, tid)
+                if got is None:
+                    await self._gap(tid, tid, "the controller no longer has it")
+                    continue
+                log.info("tightening %d fetched after a reconnect", tid)
+                await self.feed(ResultIn(time.time(), got, fetched=True))
+        except (DeviceError, ValueError) as exc:   # the link's keeper reports it
+            log.warning("results missed while the link was down not fetched yet: %s",
+                        one_line(exc))
+        except STATION_FAULTS as exc:
+            log.error("results missed while the link was down not fetched: %s", one_line(exc))
+
+    async def _gap(self, first: int, last: int, reason: str) -> None:
+        repo = self.repo
+        assert repo is not None  # noqa: S101 - opened in open()
+        await self._call(repo.record_gap, first, last, self.core.vin, reason)
+        ids = str(first) if first == last else f"{first}-{last}"
+        log.warning("tightening %s missed while the link was down: a gap (%s)", ids, reason)
+        self.bus.publish(Notice(f"tightening {ids} missed: a gap ({reason})", "warning"))
 
     async def _drain_results(self) -> None:
         """At a stop (the lock held, the tasks cancelled): the result the wait was taking and
@@ -779,8 +845,9 @@ class Station:
                                        closed=isinstance(exc, VehicleClosedError))
             infos = await self._call(repo.bolts_for_model, model)
             report = await self._call(repo.vehicle_report, a.vin)
-            skipped = await self._call(repo.ledger.skipped, a.vin,
-                                       started.reopened_at or started.started_at)
+            since = started.reopened_at or started.started_at
+            skipped = await self._call(repo.ledger.skipped, a.vin, since)
+            noks = await self._call(repo.nok_streaks, a.vin, since)
         except STATION_FAULTS as exc:
             # its keeper probes it back, with backoff (reported as the same "down" fault)
             self.keepers[DATABASE].lost(DeviceError(one_line(exc)))
@@ -801,7 +868,7 @@ class Station:
                  " for rework" if started.rework else "", len(infos), len(done))
         # a rework resumed after a reload or restart is still one (the database keeps it)
         return VehicleLoaded(time.time(), a.vin, model, specs, done, started.rework,
-                             {b: skip_note(*who) for b, who in skipped.items()})
+                             {b: skip_note(*who) for b, who in skipped.items()}, noks)
 
     async def _close_vehicle(self, vin: str) -> None:
         assert self.repo is not None  # noqa: S101
@@ -817,8 +884,8 @@ class Station:
     async def _acknowledge(self, result: Any) -> None:
         """Tell the controller a result is stored; a failure leaves it with the controller
         (it is recorded here already, and a resent copy is recognised by its id)."""
-        if self.wrench is None:
-            return
+        if self.wrench is None or getattr(result, "fetched", False):
+            return   # a fetched result is not awaiting an acknowledgement
         try:
             await self._call(self.wrench.acknowledge_result, result)
         except (DeviceError, ValueError) as exc:

@@ -91,6 +91,15 @@ class DeviceHealth(StationEvent):
     reason: str = ""
 
 
+@dataclass(frozen=True)
+class DeviceIdentified(StationEvent):
+    """What a device said it is when it (re)connected: the controller's name, cell and
+    channel, supplier, software versions (Open Protocol MID 0002)."""
+
+    device: str
+    identity: str
+
+
 # -- the vehicle --------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class BoltView:
@@ -193,6 +202,22 @@ class ToolDisabled(StationEvent):
 class BoltSkipped(StationEvent):
     bolt: str
     reason: str
+
+
+@dataclass(frozen=True)
+class BoltLocked(StationEvent):
+    """``count`` NOKs in a row on ``bolt``: the tool is refused there until a release."""
+
+    bolt: str
+    count: int
+
+
+@dataclass(frozen=True)
+class BoltReleased(StationEvent):
+    """A locked bolt released by ``user``: it may be tightened again."""
+
+    bolt: str
+    user: str
 
 
 # -- results ------------------------------------------------------------------------------------

@@ -93,6 +93,8 @@ class BoltMatcher:
     params: MatchParams = field(default_factory=MatchParams)
     done: set[str] = field(default_factory=set)
     skipped: dict[str, str] = field(default_factory=dict)  # bolt -> why it is not tightened
+    locked: dict[str, int] = field(default_factory=dict)   # bolt -> NOKs in a row (released
+    #                                                        only by a supervisor's command)
     # id -> order and batch; read once, at construction.  Rules of ids that are not in
     # ``bolts`` are ignored: a bolt the station cannot tighten must not block the others.
     rules: Mapping[str, BoltRule] = field(default_factory=dict)
@@ -184,6 +186,10 @@ class BoltMatcher:
             if second - dist < p.margin_mm:
                 return self.refuse(Reason(Why.AMBIGUOUS, bolt=near, distance_mm=dist,
                                           other=self._ids[int(order[1])], other_mm=second))
+        if near in self.locked:
+            self.reset()
+            return Match(None, near, dist, Reason(Why.LOCKED, bolt=near,
+                                                  count=self.locked[near]))
         if near in self.skipped:
             self.reset()
             return Match(None, near, dist, Reason(Why.SKIPPED, bolt=near,

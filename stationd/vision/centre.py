@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from stationd.vision.types import Refusal
+from stationd.result import Refusal
 
 Pair = tuple[np.ndarray, np.ndarray]
 _NAN2 = np.full(2, np.nan)

@@ -18,13 +18,14 @@ import numpy as np
 
 from stationd.errors import ImageError
 from stationd.geometry.camera import Camera
+from stationd.result import Refusal
 from stationd.vision import centre as cm
 from stationd.vision.edges import BoundaryEdges, boundary_edges
 from stationd.vision.ellipse import fit_ellipse, fit_trimmed
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import Gates, VisionParams
 from stationd.vision.segment import MIN_HOLE_RADIUS_PX, Candidate, search_candidates
-from stationd.vision.types import Ellipse, Refusal
+from stationd.vision.types import Ellipse
 
 Box = tuple[int, int, int, int]
 

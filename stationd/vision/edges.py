@@ -31,9 +31,10 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from stationd.result import Refusal
 from stationd.vision.ellipse import params_to_conic, sampson_distance
 from stationd.vision.rays import MIN_TINT, RayRing, chroma, ring_from_rays
-from stationd.vision.types import Ellipse, Refusal
+from stationd.vision.types import Ellipse
 
 # Smoothing before the gradient (px).  Wide enough for a stable peak fit, narrow enough that
 # the curvature bias (about sigma^2 / 2R, the same on both sides of the centre) stays ~0.01 px.

@@ -24,7 +24,8 @@ import math
 
 import numpy as np
 
-from stationd.vision.types import Ellipse, Refusal
+from stationd.result import Refusal
+from stationd.vision.types import Ellipse
 
 RESIDUALS = ("sampson", "centre")
 MIN_FIT_POINTS = 6

@@ -22,8 +22,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from stationd.result import Refusal
 from stationd.vision.ellipse import fit_trimmed, params_to_conic
-from stationd.vision.types import Ellipse, Refusal
+from stationd.vision.types import Ellipse
 
 N_RAYS = 72
 STEP_PX = 0.5

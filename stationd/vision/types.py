@@ -1,8 +1,6 @@
-"""Typed results of the vision pipeline.
-
-A failure is a value with a reason (``Refusal``), never an exception and never ``None``:
-the station logs the reason and sends nothing.  Conics are 3x3 symmetric matrices ``C`` with
-``x^T C x = 0`` for homogeneous *undistorted* pixel points ``x = [u, v, 1]``.
+"""Typed results of the vision pipeline (its failure value is :mod:`stationd.result`'s
+``Refusal``).  Conics are 3x3 symmetric matrices ``C`` with ``x^T C x = 0`` for homogeneous
+*undistorted* pixel points ``x = [u, v, 1]``.
 """
 
 from __future__ import annotations
@@ -11,20 +9,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-
-from stationd.reasons import Reason
-
-
-@dataclass(frozen=True)
-class Refusal:
-    """Why a stage gave no result.  Falsy, so ``if not result:`` reads naturally.  ``why``:
-    the typed reason where the station acts on its kind (a tilt, pairs that disagree)."""
-
-    reason: str
-    why: Reason | None = None
-
-    def __bool__(self) -> bool:
-        return False
 
 
 @dataclass(frozen=True, eq=False)

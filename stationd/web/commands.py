@@ -9,7 +9,8 @@ session from a user's password, the core's answer), whatever the client; the sta
   a wrong password or an unknown user is 401 and a journal line, nothing else.
 - ``POST /api/logout``; ``GET /api/me``: who is logged in, with their rights.
 - ``GET /api/nonce``: a single-use nonce for the next command (with a session).
-- ``POST /api/commands`` ``{"kind": "skip"|"reopen", "vin", "bolt", "comment", "nonce"}``:
+- ``POST /api/commands`` ``{"kind": "skip"|"reopen"|"release", "vin", "bolt", "comment",
+  "nonce"}``:
   with a session; a nonce this server did not issue, an old or a used one is refused (400)
   before the station sees it; the station's answer is 200 (accepted) or 409 (refused, with
   its typed reason and the words).  A session whose user was removed from the station file
@@ -34,7 +35,15 @@ from aiohttp import web
 
 from db.ledger import FEED_LIMIT
 from stationd.access import AccessConfig, LoginThrottle, ReplayGuard, Sessions
-from stationd.station.commands import KIND, Answer, Command, Issuer, ReopenVehicle, SkipBolt
+from stationd.station.commands import (
+    KIND,
+    Answer,
+    Command,
+    Issuer,
+    ReleaseBolt,
+    ReopenVehicle,
+    SkipBolt,
+)
 from stationd.words import answer_words, reason_words
 
 log = logging.getLogger("stationd")
@@ -210,6 +219,8 @@ def _command(body: dict[str, Any]) -> Command:
         return SkipBolt(_text(body, "vin", limit=32), _text(body, "bolt", limit=32), comment)
     if kind == "reopen":
         return ReopenVehicle(_text(body, "vin", limit=32), comment)
+    if kind == "release":
+        return ReleaseBolt(_text(body, "vin", limit=32), _text(body, "bolt", limit=32), comment)
     raise web.HTTPBadRequest(text=f"kind: one of {', '.join(KIND.values())}\n")
 
 

@@ -22,6 +22,7 @@ import logging
 import platform
 import time
 from collections import Counter
+from collections.abc import Callable
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -99,6 +100,8 @@ class WebServer:
         #: logins, commands and the results feed; the serve loop sets ``commands.submit`` and
         #: ``commands.access`` from the running station
         self.commands = CommandRoutes(lambda: self.results)
+        #: the line forwarder's latest status (backlog, lag, last error), set by the serve loop
+        self.line: Callable[[], dict[str, Any] | None] = lambda: None
 
     # -- lifecycle ---------------------------------------------------------------------
     async def start(self) -> None:
@@ -259,7 +262,7 @@ class WebServer:
         return {"state": v["state"], "reason": v["reason"], "headline": v["headline"],
                 "vehicle": v["vehicle"], "counters": v["counters"], "devices": v["devices"],
                 "versions": _versions(), "uptime_s": round(time.time() - self.started, 1),
-                "clients": self.clients}
+                "clients": self.clients, "line": self.line()}
 
     async def _status(self, request: web.Request) -> web.Response:
         return web.json_response(self.status(), dumps=lambda o: json.dumps(o, default=_plain))

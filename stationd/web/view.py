@@ -15,9 +15,12 @@ from typing import Any
 from stationd.reasons import Reason, Why
 from stationd.station.core import DATABASE, LOCALIZING
 from stationd.station.events import (
+    BoltLocked,
+    BoltReleased,
     BoltSelected,
     BoltSkipped,
     DeviceHealth,
+    DeviceIdentified,
     Localized,
     ParamsRefusedEvent,
     ParamsSent,
@@ -66,12 +69,14 @@ class BoltState:
     reason: str = ""
     torque_nm: float | None = None
     angle_deg: float | None = None
+    locked: bool = False        # too many NOKs in a row: a supervisor releases it
 
     def to_json(self) -> dict[str, Any]:
         return {"bolt": self.bolt, "x": self.x_mm, "y": self.y_mm, "pset": self.pset,
                 "order": self.order, "batch": self.batch, "state": self.state,
                 "label": BOLT_LABELS.get(self.state, self.state), "reason": self.reason,
-                "torque_nm": self.torque_nm, "angle_deg": self.angle_deg}
+                "torque_nm": self.torque_nm, "angle_deg": self.angle_deg,
+                "locked": self.locked}
 
 
 @dataclass
@@ -89,6 +94,7 @@ class View:
     act: bool = False            # ... and the operator resolves it (amber), by its kind
     refused_why: Reason | None = None
     devices: dict[str, dict[str, Any]] = field(default_factory=dict)
+    identities: dict[str, str] = field(default_factory=dict)   # device -> what it said it is
     results: list[dict[str, Any]] = field(default_factory=list)
     selected: str | None = None
     closed: dict[str, Any] | None = None
@@ -118,6 +124,8 @@ class View:
                 # a refusal is about the wrench while tracking: a station waiting for its
                 # vehicle (or in fault) says that, not the last vehicle's "bring the wrench"
                 self._refuse("")
+        elif isinstance(e, DeviceIdentified):
+            self.identities[e.device] = e.identity
         elif isinstance(e, DeviceHealth):
             self.devices[e.device] = {"ok": e.ok, "kind": e.kind, "reason": e.reason}
         elif isinstance(e, VehicleOpened):
@@ -152,6 +160,12 @@ class View:
                 self._refuse(e.reason)
         elif isinstance(e, BoltSkipped):
             self._set(e.bolt, "skipped", e.reason)
+        elif isinstance(e, BoltLocked | BoltReleased) and e.bolt in self.bolts:
+            locked = isinstance(e, BoltLocked)
+            self.bolts[e.bolt].locked = locked
+            self._set(e.bolt, "blocked" if locked else "pending",
+                      f"locked after {e.count} NOK in a row: a supervisor releases it"
+                      if isinstance(e, BoltLocked) else "")
         elif isinstance(e, ResultRecorded):
             self._result(e)
         elif isinstance(e, WrongBolt):
@@ -240,6 +254,9 @@ class View:
                for d in self.configured}
         for d, h in self.devices.items():
             out[d] = {**h, "reported": True}
+        for d, who in self.identities.items():
+            if d in out:
+                out[d]["identity"] = who
         return out
 
     def tone(self) -> str:

@@ -348,6 +348,14 @@ def test_reports_and_exports_open_the_database_read_only(tmp_path):
         finally:
             reader.close()
         assert hashlib.sha256(db.read_bytes()).hexdigest() == before
+        # the clone's interpreter and code as uid 65534 sees them (a clone in a private
+        # folder, mode 700, is out of its reach: then this part is skipped, saying so)
+        reach = subprocess.run([sys.executable, "-c", "import stationd"], capture_output=True,
+                               user=65534, group=65534, cwd="/", timeout=60,
+                               env={**os.environ, "HOME": "/"}) if os.geteuid() == 0 else None
+        if reach is not None and reach.returncode != 0:
+            pytest.skip("uid 65534 cannot run this clone's interpreter (a private folder?): "
+                        f"{reach.stderr.decode(errors='replace').strip()[-200:]}")
         if os.geteuid() == 0:
             # as a user who may read but not write the folder (the service user's database)
             os.chmod(folder, 0o755)  # noqa: S103 - readable by the other user, on purpose

@@ -294,3 +294,18 @@ def test_an_unattributed_result_is_stored_once_and_not_when_already_recorded(rep
     assert [(r["tightening_id"], r["torque_nm"], r["status"]) for r in rows] == \
         [(7, 12.5, "nok"), (7, 13.0, "nok")]
     assert repo.unattributed("OTHER") == []
+
+
+def test_nok_streaks_count_the_noks_in_a_row_since_an_ok_or_a_release(repo, bolts_file):
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    for tid, ok in ((1, False), (2, False), (3, True), (4, False)):
+        record(repo, "VIN1", "B1", ok=ok, tightening_id=tid)
+    for tid in (5, 6, 7):
+        record(repo, "VIN1", "B2", ok=False, tightening_id=tid)
+    assert repo.nok_streaks("VIN1") == {"B1": 1, "B2": 3}
+    repo.ledger.record_command(at=datetime.now(UTC), user="sam", source="cli", kind="release",
+                               vin="VIN1", bolt="B2", comment="checked")
+    assert repo.nok_streaks("VIN1") == {"B1": 1}
+    record(repo, "VIN1", "B2", ok=False, tightening_id=8)
+    assert repo.nok_streaks("VIN1") == {"B1": 1, "B2": 1}

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 import yaml
 
+from stationd.calibrate_cli import add_calibrate_parser, expand_images
 from stationd.errors import ImageError, InputError
-from stationd.geometry.calibrate_cli import add_calibrate_parser, expand_images
 from stationd.geometry.calibration import (
     BoardCorners,
     ViewPair,

@@ -5,7 +5,7 @@ import pytest
 
 from stationd.geometry.frames import Transform, fit_affine, fit_rigid
 from stationd.geometry.tool import ToolGeometry, bolt_end, fuse
-from stationd.vision.types import Refusal
+from stationd.result import Refusal
 from stationd.yamlio import YamlNode
 
 

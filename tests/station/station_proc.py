@@ -3,7 +3,7 @@
 The test process serves the lift (Modbus TCP) and the controller (Open Protocol TCP), as a
 plant's PLC and controller would be separate machines; the ``sim://`` cameras need their world
 in this process, so it lives here and puts the wrench where the file POSE says (a bolt id, or
-nothing: out of view).  The daemon itself is the real one: ``stationd.station.run.serve``,
+nothing: out of view).  The daemon itself is the real one: ``stationd.serve.serve``,
 with its signal handling, so SIGTERM and SIGKILL hit exactly what systemd would.
 
     python tests/station/station_proc.py STATION.yaml POSE
@@ -25,8 +25,8 @@ sys.path.insert(0, str(ROOT))
 
 from stationd.boltfile import load_bolts  # noqa: E402
 from stationd.config import load_station_config  # noqa: E402
+from stationd.serve import serve  # noqa: E402
 from stationd.sim.world import World, wrench_at  # noqa: E402
-from stationd.station.run import serve  # noqa: E402
 from stationd.station.sdnotify import Notifier  # noqa: E402
 
 

@@ -15,15 +15,17 @@ import subprocess
 import sys
 import urllib.error
 import urllib.request
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
+from db.repository import Repository
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.access import hash_password
-from stationd.station.demo import _sim_psets
-from tests.station.test_daemon_faults import SIM, Proc, _free_port
+from stationd.demo.station import _sim_psets
+from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
 from tests.station.test_restart import _until
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -32,7 +34,7 @@ PASSWORD = "line-7-password"  # noqa: S105 - a test user's
 HASH = hash_password(PASSWORD)
 
 
-def _station(port: int):
+def _station(port: int) -> Callable[[str], str]:
     def edit(text: str) -> str:
         return text + (f"\nhttp: {{listen: '127.0.0.1:{port}'}}\naccess:\n  roles:\n"
                        "    operator: [skip]\n    supervisor: [skip, reopen]\n    viewer: []\n"
@@ -80,12 +82,7 @@ def test_commands_through_the_daemon_are_authenticated_recorded_and_outlive_a_re
     ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=6, nok_rate=0.0)
     d = Proc(tmp_path, lift_port, ctl_port, edit=_station(http_port))
     try:
-        plc.set_vehicle(1, VIN)
-        plc.start_tcp(lift_port)
-        ctl.start()
-        ctl.listen_tcp(port=ctl_port)
-        plc.raise_lift()
-        d.wait_log("tracking: tracking the wrench")
+        at_height(d, plc, ctl, lift_port, ctl_port, VIN)
 
         # an operator skips B05 from the command line: accepted, journaled with the user
         got = _cli("skip", VIN, "B05", "--user", "olga", "--comment", "no access",
@@ -175,4 +172,64 @@ def test_commands_through_the_daemon_are_authenticated_recorded_and_outlive_a_re
         d.kill()
         ctl.close()
         plc.close()
+    assert "Traceback" not in d.log()
+
+
+@pytest.mark.timeout(300)
+def test_a_bolt_locked_after_three_noks_is_released_by_a_supervisor_from_the_cli(tmp_path):
+    """The NOK policy through the daemon: three NOKs in a row on B05 lock it (the tool is
+    refused there with the reason), an operator cannot release it, a supervisor can; then it
+    is tightened OK."""
+    lift_port, ctl_port, http_port = _free_port(), _free_port(), _free_port()
+    url = f"http://127.0.0.1:{http_port}/"
+    plc = SimulatedPlc()
+    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=8, nok_rate=1.0)
+
+    def edit(text: str) -> str:
+        return str(_station(http_port)(text)).replace("    supervisor: [skip, reopen]\n",
+                                                 "    supervisor: [skip, reopen, release]\n")
+
+    d = Proc(tmp_path, lift_port, ctl_port, edit=edit)
+    try:
+        at_height(d, plc, ctl, lift_port, ctl_port, VIN)
+        pose = tmp_path / "pose"
+        for n in range(1, 4):
+            pose.write_text("B05")
+            d.wait_log("tightening bolt B05", count=n)
+            _until(lambda: ctl.tool_enabled, 30, "tool enabled")
+            shot = ctl.pull_trigger()
+            assert shot is not None and not shot.ok
+            _until(lambda s=shot: s.tightening_id in ctl.acked_ids, 30, "NOK recorded")
+            pose.write_text("")
+            d.wait_log("bolt B05 NOK; tracking", count=n)
+        d.wait_log("B05 locked after 3 NOK in a row: a supervisor releases it")
+        pose.write_text("B05")
+        d.wait_log("no bolt: B05 locked after 3 NOK in a row")
+        assert d.log().count("tightening bolt B05") == 3
+        got = _cli("release", VIN, "B05", "--user", "olga", "--url", url)
+        assert got.returncode == 1 and "right to release" in got.stdout
+        got = _cli("release", VIN, "B05", "--user", "sam", "--comment", "thread checked",
+                   "--url", url)
+        assert got.returncode == 0 and "accepted" in got.stdout, got.stdout + got.stderr
+        ctl.nok_rate = 0.0
+        d.wait_log("tightening bolt B05", count=4)
+        _until(lambda: ctl.tool_enabled, 30, "tool enabled")
+        shot = ctl.pull_trigger()
+        assert shot is not None and shot.ok
+        _until(lambda: shot.tightening_id in ctl.acked_ids, 30, "OK recorded")
+        assert d.stop() == 0
+    finally:
+        d.kill()
+        ctl.close()
+        plc.close()
+    repo = Repository.open(f"sqlite:///{tmp_path}/station.db")
+    try:
+        report = repo.vehicle_report(VIN)
+        commands = repo.ledger.commands(VIN)
+    finally:
+        repo.close()
+    [b05] = [b for b in report.bolts if b.bolt_id == "B05"]
+    assert b05.status == "ok" and b05.attempts == 4
+    assert [(c.user, c.kind, c.bolt, c.comment) for c in commands] == [
+        ("sam", "release", "B05", "thread checked")]
     assert "Traceback" not in d.log()

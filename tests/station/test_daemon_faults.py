@@ -20,9 +20,9 @@ import pytest
 
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
-from stationd.station.demo import _sim_psets
+from stationd.demo.station import _sim_psets
 from tests.station.notify import NotifyManager
-from tests.station.test_run import _recv_until
+from tests.test_serve import _recv_until
 
 SIM = Path(__file__).resolve().parents[2] / "config" / "sim"
 PROC = Path(__file__).with_name("station_proc.py")
@@ -84,6 +84,18 @@ class Proc:
         if self.p.poll() is None:
             self.p.kill()
             self.p.wait()
+
+
+def at_height(d: Proc, plc: SimulatedPlc, ctl: SimController, lift_port: int, ctl_port: int,
+              vin: str) -> None:
+    """The PLC and the controller serving on their ports, ``vin`` raised to height, the
+    station tracking the wrench."""
+    plc.set_vehicle(1, vin)
+    plc.start_tcp(lift_port)
+    ctl.start()
+    ctl.listen_tcp(port=ctl_port)
+    plc.raise_lift()
+    d.wait_log("tracking: tracking the wrench")
 
 
 @pytest.mark.timeout(300)

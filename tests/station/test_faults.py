@@ -11,10 +11,10 @@ import pytest
 
 from db.repository import Repository
 from stationd.config import load_station_config
+from stationd.demo.station import SIM_CONFIG, _sim_psets
 from stationd.sim.world import World, wrench_at
 from stationd.station.core import State
 from stationd.station.daemon import Station
-from stationd.station.demo import SIM_CONFIG, _sim_psets
 from stationd.station.events import (
     BoltSelected,
     BoltSkipped,

@@ -13,9 +13,9 @@ from dataclasses import replace
 import pytest
 
 from stationd.config import load_station_config
+from stationd.demo.station import SIM_CONFIG, _sim_psets
 from stationd.station.core import State
 from stationd.station.daemon import Station
-from stationd.station.demo import SIM_CONFIG, _sim_psets
 
 WATCH_S = 6.0
 

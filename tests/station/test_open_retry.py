@@ -8,8 +8,8 @@ import asyncio
 from typing import Any
 
 from db.errors import DbError
+from stationd.serve import _open
 from stationd.station.events import DeviceHealth, EventBus, StateChanged
-from stationd.station.run import _open
 from stationd.station.sdnotify import Notifier
 
 

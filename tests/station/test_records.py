@@ -18,9 +18,9 @@ from sqlalchemy.orm import Session
 import tests.station.test_faults as harness
 from db.models import Bolt, TighteningRecord, Vehicle
 from db.repository import Repository
+from stationd.demo.station import SIM_CONFIG
 from stationd.sim.world import wrench_at
 from stationd.station.core import DisableTool, State
-from stationd.station.demo import SIM_CONFIG
 from stationd.station.events import BoltSelected, Localized, Notice, ResultUnattributed
 from stationd.words import reason_words
 from tests.station.test_faults import _scenario, _until

@@ -22,8 +22,8 @@ import pytest
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.boltfile import load_bolts
-from stationd.station.demo import _sim_psets
-from tests.station.test_daemon_faults import SIM, Proc, _free_port
+from stationd.demo.station import _sim_psets
+from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
 from tests.station.test_restart import _until
 
 VIN = "RELOADVIN00000001"
@@ -54,12 +54,7 @@ def test_a_reload_at_the_enable_during_a_rundown_and_in_flight_records_each_resu
     reloads = 0
     logs: list[str] = []
     try:
-        plc.set_vehicle(1, VIN)
-        plc.start_tcp(lift_port)
-        ctl.start()
-        ctl.listen_tcp(port=ctl_port)
-        plc.raise_lift()
-        d.wait_log("tracking: tracking the wrench")
+        at_height(d, plc, ctl, lift_port, ctl_port, VIN)
 
         def enabled_on(bolt: str) -> None:
             pose.write_text(bolt)

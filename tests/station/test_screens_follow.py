@@ -11,16 +11,16 @@ from dataclasses import replace
 
 import pytest
 
-import stationd.station.run as run
+from stationd import serve
 from stationd.config import load_station_config
-from stationd.station.demo import SIM_CONFIG
+from stationd.demo.station import SIM_CONFIG
 from stationd.station.events import EventBus
 from stationd.web.config import HttpConfig
 
 
 def test_a_port_in_use_at_start_is_tried_again_until_the_screens_are_served(
         tmp_path, monkeypatch, caplog):
-    monkeypatch.setattr(run, "SCREENS_RETRY_S", 0.2)
+    monkeypatch.setattr(serve, "SCREENS_RETRY_S", 0.2)
     holder = socket.socket()
     holder.bind(("127.0.0.1", 0))
     holder.listen(1)
@@ -28,7 +28,7 @@ def test_a_port_in_use_at_start_is_tried_again_until_the_screens_are_served(
     cfg = replace(load_station_config(SIM_CONFIG),
                   database_url=f"sqlite:///{tmp_path}/s.db",
                   http=HttpConfig(f"127.0.0.1:{port}"))
-    screens = run.Screens(EventBus())
+    screens = serve.Screens(EventBus())
 
     async def main() -> None:
         await screens.follow(cfg)

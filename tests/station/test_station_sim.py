@@ -7,7 +7,7 @@ import shutil
 import pytest
 
 from stationd.cli import main
-from stationd.station.demo import SIM_CONFIG
+from stationd.demo.station import SIM_CONFIG
 
 
 @pytest.mark.timeout(420)

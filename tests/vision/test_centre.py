@@ -11,9 +11,10 @@ import math
 import numpy as np
 import pytest
 
+from stationd.result import Refusal
 from stationd.vision import centre as cm
 from stationd.vision.ellipse import conic_to_params, fit_ellipse
-from stationd.vision.types import Ellipse, Refusal
+from stationd.vision.types import Ellipse
 
 K = np.array([[5000.0, 0.0, 2736.0], [0.0, 5000.0, 1824.0], [0.0, 0.0, 1.0]])
 R_IN, R_OUT = 10.0, 15.0

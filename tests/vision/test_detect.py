@@ -103,7 +103,7 @@ def test_bad_images_are_input_errors(camera):
 
 def test_a_ring_of_other_proportions_is_not_this_marker(camera):
     """Two concentric circles, but 12/15 instead of 10/15: the pencil ratio gate refuses."""
-    from stationd.bench import scenes as sc
+    from stationd.sim import scenes as sc
     from stationd.vision.marker import MarkerSpec
 
     other = MarkerSpec(inner_mm=12.0)

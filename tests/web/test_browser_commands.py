@@ -10,9 +10,9 @@ import pytest
 
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
-from stationd.station.demo import _sim_psets
+from stationd.demo.station import _sim_psets
 from tests.station.test_commands_daemon import PASSWORD, _station
-from tests.station.test_daemon_faults import SIM, Proc, _free_port
+from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
 from tests.web.pages import Page
 from tests.web.test_browser import check_fits
 
@@ -44,12 +44,7 @@ def test_operator_screen_logs_in_skips_a_bolt_and_shows_a_refusal(page, shots, t
     ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=7, nok_rate=0.0)
     d = Proc(tmp_path, lift_port, ctl_port, edit=_station(http_port))
     try:
-        plc.set_vehicle(1, VIN)
-        plc.start_tcp(lift_port)
-        ctl.start()
-        ctl.listen_tcp(port=ctl_port)
-        plc.raise_lift()
-        d.wait_log("tracking: tracking the wrench")
+        at_height(d, plc, ctl, lift_port, ctl_port, VIN)
         page.get(f"http://127.0.0.1:{http_port}/")
         page.wait(lambda p: p.text("#vin") == VIN, 60, "the vehicle on the screen")
         assert not _shown(page, "signed") and _shown(page, "login")

@@ -4,7 +4,7 @@
 Open Protocol, eight rendering cameras): the operator screen's counters and colours follow the
 simulated operator, the cameras screen shows the simulated cameras' frames with their
 detection overlay, and the vehicle's page lists exactly the rundowns the demo printed, with
-CSV and JSON exports that download them.  Then the daemon (``stationd.station.run.serve``, as
+CSV and JSON exports that download them.  Then the daemon (``stationd.serve.serve``, as
 systemd runs it) on a copy of config/sim whose lift PLC is not answering: the operator screen
 says FAULT and names the lift.
 """
@@ -26,7 +26,7 @@ from pathlib import Path
 import pytest
 
 from drivers.wrench.sim import SimController
-from stationd.station.demo import _sim_psets
+from stationd.demo.station import _sim_psets
 from tests.station.test_daemon_faults import SIM, Proc, _free_port
 from tests.web.pages import Page
 from tests.web.test_browser import check_fits

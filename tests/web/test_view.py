@@ -283,3 +283,12 @@ def test_devices_are_not_claimed_ok_while_the_database_keeps_the_station_from_op
     v.apply(DeviceHealth(device="database", ok=False, kind="down", reason="locked"))
     v.apply(StateChanged(state="fault", reason="database: locked"))
     assert v.device_health()["lift"]["ok"]
+
+
+def test_what_a_device_said_it_is_goes_with_its_health():
+    from stationd.station.events import DeviceIdentified
+
+    v = fold([*opened(), DeviceIdentified(device="wrench", identity="PF6000 (cell 1, "
+                                          "channel 1), software 1.2")])
+    assert v.device_health()["wrench"]["identity"].startswith("PF6000")
+    assert "identity" not in v.device_health().get("lift", {})

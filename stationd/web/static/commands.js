@@ -14,6 +14,7 @@
     q("who").textContent = signed ? `${who.user} (${who.rights.join(", ") || "no rights"})` : "";
     q("skip").hidden = !rights.includes("skip");
     q("reopen").hidden = !rights.includes("reopen");
+    q("release").hidden = !rights.includes("release");
   }
 
   function answer(text, ok) {
@@ -50,20 +51,24 @@
     }
   }
 
-  // the bolts one may skip: those of the vehicle at the station not done yet
-  function fillBolts() {
+  // the bolts one may skip (those of the vehicle at the station not done yet) and those one
+  // may release (locked after too many NOKs)
+  function fill(id, want) {
     const view = window.lastView;
-    const sel = q("skip-bolt");
-    const bolts = view && view.vehicle ? view.bolts.filter((b) => b.state !== "ok" && b.state !== "skipped") : [];
+    const sel = q(id);
+    const bolts = view && view.vehicle ? view.bolts.filter(want) : [];
     const key = bolts.map((b) => b.bolt).join(",");
     if (sel.dataset.key === key) return;
     const keep = sel.value;
     sel.dataset.key = key;
-    // no bolt chosen until the operator chooses one: one click must not skip the first
+    // no bolt chosen until the user chooses one: one click must not act on the first
     sel.replaceChildren(new Option("bolt...", ""), ...bolts.map((b) => new Option(b.bolt, b.bolt)));
     if (bolts.some((b) => b.bolt === keep)) sel.value = keep;
   }
-  setInterval(fillBolts, 500);
+  setInterval(() => {
+    fill("skip-bolt", (b) => b.state !== "ok" && b.state !== "skipped");
+    fill("release-bolt", (b) => b.locked);
+  }, 500);
 
   q("login").addEventListener("submit", async (e) => {
     e.preventDefault();
@@ -83,6 +88,13 @@
     if (!view || !view.vehicle) { answer("no vehicle at the station", false); return; }
     if (!q("skip-bolt").value) { answer("choose the bolt to skip", false); return; }
     command({kind: "skip", vin: view.vehicle.vin, bolt: q("skip-bolt").value, comment: q("skip-comment").value});
+  });
+  q("release").addEventListener("submit", (e) => {
+    e.preventDefault();
+    const view = window.lastView;
+    if (!view || !view.vehicle) { answer("no vehicle at the station", false); return; }
+    if (!q("release-bolt").value) { answer("choose the locked bolt to release", false); return; }
+    command({kind: "release", vin: view.vehicle.vin, bolt: q("release-bolt").value, comment: q("release-comment").value});
   });
   q("reopen").addEventListener("submit", (e) => {
     e.preventDefault();

@@ -280,6 +280,8 @@ function drawDevices(devices) {
     li.className = d.ok ? "dev-ok" : d.kind === "opening" ? "dev-wait" : "dev-bad";
     li.dataset.device = name;
     li.textContent = d.ok ? `${name}: ok` : `${name} ${d.kind}: ${d.reason}`;
+    // what the device said it is (the controller's name, versions): on hover
+    if (d.identity) li.title = d.identity;
     ul.appendChild(li);
   }
 }

@@ -120,6 +120,7 @@ class Screens:
         self.server: Any = None
         self.frames: Any = None
         self.station: Station | None = None   # whose commands the screens take
+        self.line: Any = None                  # the forwarder to the line database, if any
         self._for: tuple[Any, str] | None = None
         self._retry: asyncio.Task[None] | None = None
         self._failed: str | None = None   # why the screens are not served (logged once)
@@ -173,9 +174,10 @@ class Screens:
 
     def attach(self, station: Station | None, cfg: StationConfig) -> None:
         """People's commands go to ``station`` (None: refused, none is running), with the
-        users of ``cfg``."""
+        users of ``cfg``; the status API reads the line forwarder's state."""
         self.station = station
         if self.server is not None:
+            self.server.line = lambda: None if self.line is None else self.line.last_status
             self.server.commands.access = cfg.access
             self.server.commands.submit = None if station is None else station.submit
 
@@ -196,6 +198,44 @@ class Screens:
             except Exception as exc:  # stopping the screens never stops the daemon's exit
                 log.warning("stopping the screens: %s", one_line(exc))
         self.server, self.frames, self._for = None, None, None
+
+
+async def forward(cfg: StationConfig, notifier: Notifier, screens: Screens,
+                  stop: asyncio.Event) -> None:
+    """The records to the line's database while this station runs (``cfg.line``; nothing
+    without it).  A line database that is down or refuses is never a fault of the station: a
+    journal line (and STATUS=) at each change, the backlog in ``/api/status``."""
+    if cfg.line is None:
+        return
+    from db.repository import Repository
+    from stationd.forward import Forwarder
+
+    loop = asyncio.get_running_loop()
+    try:
+        repo = await loop.run_in_executor(None, Repository.open, cfg.database_url)
+    except OPEN_ERRORS as exc:
+        log.error("line database: not forwarding, the station's database does not open: %s",
+                  one_line(exc))
+        return
+    fwd = Forwarder(repo, cfg.line)
+    screens.line = fwd
+
+    def told(st: dict[str, Any]) -> None:
+        if st["alarm"]:
+            line = f"line database: ALARM: {st['alarm']}"
+        elif st["up"] is False:
+            line = f"line database: down ({st['last_error']}); {st['backlog']} records wait"
+        else:
+            line = f"line database: forwarding to {st['url']} ({st['backlog']} behind)"
+        (log.warning if st["alarm"] or st["up"] is False else log.info)("%s", line)
+        notifier.status(line)
+
+    try:
+        await fwd.run(stop, told)
+    finally:
+        screens.line = None
+        await loop.run_in_executor(None, fwd.line.dispose)
+        await loop.run_in_executor(None, repo.close)
 
 
 def configured_devices(cfg: StationConfig) -> tuple[str, ...]:
@@ -228,6 +268,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
         inner = asyncio.Event()
         task = asyncio.create_task(station.run(inner))
         screens.attach(station, cfg)
+        line = asyncio.create_task(forward(cfg, notifier, screens, inner))
         log.info("stationd running: %s", cfg_path)
         new: StationConfig | None = None
         while new is None and not stop.is_set() and not task.done():
@@ -251,6 +292,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
             notifier.reloading("reloading: closing the devices")
         screens.attach(None, cfg)
         inner.set()
+        await line
         try:
             await task
         except Exception as exc:  # a bug, not a device: logged, the station restarts

@@ -24,12 +24,12 @@ import numpy as np
 
 from stationd.geometry.camera import StereoPair
 from stationd.geometry.frames import Transform
-from stationd.geometry.stereo import localize as localize_stereo
 from stationd.geometry.tool import BoltEnd, ToolGeometry, bolt_end, fuse
+from stationd.localize.stereo import localize as localize_stereo
 from stationd.reasons import Reason, Why
+from stationd.result import Refusal
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import VisionParams
-from stationd.vision.types import Refusal
 from stationd.yamlio import YamlNode
 
 AGREEMENT_MM = 2.0   # a pair's bolt end farther than this from the fused one: send nothing

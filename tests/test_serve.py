@@ -14,7 +14,7 @@ import pytest
 
 from tests.station.notify import NotifyManager
 
-SIM = Path(__file__).resolve().parents[2] / "config" / "sim"
+SIM = Path(__file__).resolve().parents[1] / "config" / "sim"
 
 
 def _ended(p: subprocess.Popen[str]) -> str:

@@ -30,6 +30,7 @@ from stationd.config import RecordsConfig, StationConfig, load_station_config
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
 from stationd.reasons import Reason, Why
+from stationd.serve import Screens
 from stationd.sim.load import cpu_load
 from stationd.sim.world import World, wrench_at
 from stationd.station.core import SendParams, State
@@ -40,7 +41,6 @@ from stationd.station.events import (
     ResultRecorded,
     WrongBolt,
 )
-from stationd.station.run import Screens
 from stationd.web.config import DEFAULT_LISTEN, HttpConfig, open_bind_problem
 from stationd.words import reason_words
 

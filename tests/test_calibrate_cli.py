@@ -121,8 +121,8 @@ def test_a_board_not_found_reduced_is_skipped_at_the_time_bound():
 
 
 def test_write_all_leaves_nothing_when_one_file_fails(tmp_path):
+    from stationd.calibrate_cli import write_all
     from stationd.errors import InputError
-    from stationd.geometry.calibrate_cli import write_all
 
     good = tmp_path / "a.yaml"
     good.write_text("old")

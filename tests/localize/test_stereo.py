@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from stationd.bench import scenes as sc
-from stationd.geometry.stereo import epipolar_residual, localize_detections, triangulate
+from stationd.localize.stereo import epipolar_residual, localize_detections, triangulate
+from stationd.sim import scenes as sc
 from stationd.vision.detect import detect
 from stationd.vision.params import VisionParams
 from tests.conftest import NOISE, SPEC, pose_in_pair

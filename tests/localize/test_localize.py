@@ -10,7 +10,7 @@ from stationd.errors import ConfigError
 from stationd.geometry.tool import BoltEnd
 from stationd.localize import LocalizeConfig, PairView, fuse_views
 from stationd.reasons import Reason, Why
-from stationd.vision.types import Refusal
+from stationd.result import Refusal
 from stationd.yamlio import YamlNode
 
 

@@ -43,8 +43,8 @@ class Observation:
 
 
 def _observe(node: YamlNode, pair: PairConfig, cfg: StationConfig, base: Path) -> np.ndarray:
-    from stationd.geometry.stereo import localize
     from stationd.imageio import read_image
+    from stationd.localize.stereo import localize
 
     m = node.mapping(("left", "right", "pair_mm"))
     if "pair_mm" in m:

@@ -186,7 +186,7 @@ def add_calibrate_parser(subparsers: Any) -> argparse.ArgumentParser:
                    help="camera YAML to write (default camera.yaml)")
     m.add_argument("--json", action="store_true", help="print the report as one JSON object")
     m.set_defaults(func=cmd_calibrate_camera)
-    from stationd.geometry.vehicle_cli import add_vehicle_parser
+    from stationd.vehicle_cli import add_vehicle_parser
 
     add_vehicle_parser(csub)
     return c

@@ -19,10 +19,10 @@ import numpy as np
 import yaml
 
 from stationd import progress
-from stationd.bench import scenes as sc
 from stationd.errors import InputError
-from stationd.geometry.stereo import localize
 from stationd.jsonout import strict_json
+from stationd.localize.stereo import localize
+from stationd.sim import scenes as sc
 from stationd.sim.render import MarkerPose, Scene, render
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import VisionParams

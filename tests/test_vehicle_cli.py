@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 import yaml
 
-from stationd.bench import scenes as sc
 from stationd.config import load_station_config
 from stationd.errors import InputError
 from stationd.geometry.camera import Camera
-from stationd.geometry.vehicle_cli import cmd_calibrate_vehicle
+from stationd.sim import scenes as sc
 from stationd.sim.render import MarkerPose, Scene, render
+from stationd.vehicle_cli import cmd_calibrate_vehicle
 from tests.conftest import NOISE, SPEC
 
 
@@ -68,7 +68,7 @@ def _args(cfg, pts, pair, kind=None):
 def test_two_pairs_one_vehicle_frame(tmp_path, capsys):
     import shutil
     from pathlib import Path
-    shutil.copy(Path(__file__).resolve().parents[2] / "config/sim/pair1.yaml", tmp_path)
+    shutil.copy(Path(__file__).resolve().parents[1] / "config/sim/pair1.yaml", tmp_path)
     cfg = _station(tmp_path, "pair1.yaml")
     pts = _points(tmp_path)
     assert cmd_calibrate_vehicle(_args(cfg, pts, "pair1")) == 0
@@ -85,7 +85,7 @@ def test_two_pairs_one_vehicle_frame(tmp_path, capsys):
 def test_a_bad_reference_point_shows_and_pairs_disagree(tmp_path, capsys):
     import shutil
     from pathlib import Path
-    shutil.copy(Path(__file__).resolve().parents[2] / "config/sim/pair1.yaml", tmp_path)
+    shutil.copy(Path(__file__).resolve().parents[1] / "config/sim/pair1.yaml", tmp_path)
     cfg = _station(tmp_path, "pair1.yaml")
     good = _points(tmp_path)
     assert cmd_calibrate_vehicle(_args(cfg, good, "pair1")) == 0
@@ -98,7 +98,7 @@ def test_a_bad_reference_point_shows_and_pairs_disagree(tmp_path, capsys):
 def test_refusals(tmp_path):
     import shutil
     from pathlib import Path
-    shutil.copy(Path(__file__).resolve().parents[2] / "config/sim/pair1.yaml", tmp_path)
+    shutil.copy(Path(__file__).resolve().parents[1] / "config/sim/pair1.yaml", tmp_path)
     cfg = _station(tmp_path, "pair1.yaml")
     pts = _points(tmp_path)
     with pytest.raises(InputError, match="not in"):
@@ -144,7 +144,7 @@ def test_a_bumped_pair_disagrees_with_the_next_registration(tmp_path, capsys):
     pair2 compares the shared points in the vehicle frame and fails (exit 1)."""
     import shutil
     from pathlib import Path
-    shutil.copy(Path(__file__).resolve().parents[2] / "config/sim/pair1.yaml", tmp_path)
+    shutil.copy(Path(__file__).resolve().parents[1] / "config/sim/pair1.yaml", tmp_path)
     cfg = _station(tmp_path, "pair1.yaml")
     assert cmd_calibrate_vehicle(_args(cfg, _points(tmp_path), "pair1")) == 0
     pts = yaml.safe_load(_points(tmp_path, seed=1).read_text())
@@ -163,7 +163,7 @@ def test_a_transform_that_cannot_be_written_is_one_line(tmp_path, capsys):
 
     from stationd.cli import main
 
-    shutil.copy(Path(__file__).resolve().parents[2] / "config/sim/pair1.yaml", tmp_path)
+    shutil.copy(Path(__file__).resolve().parents[1] / "config/sim/pair1.yaml", tmp_path)
     cfg = tmp_path / "station.yaml"
     cfg.write_text("pairs:\n  pair1:\n    calibration: pair1.yaml\n"
                    "    to_vehicle: no/such/pair1.vehicle.yaml\n"

@@ -1,4 +1,5 @@
-"""Rendered test scenes for the benchmarks: stereo rigs, marker poses, windowed renders.
+"""Rendered test scenes for the benchmarks, the demo and the tests: stereo rigs, marker poses,
+windowed renders, and the simulated station's four pairs (:func:`build_station`).
 
 Renders are windows around the marker (the detector runs on them with the cropped camera),
 so that thousands of accuracy samples stay cheap; the speed benchmark renders whole frames.
@@ -13,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from stationd.geometry.camera import Camera, StereoPair
+from stationd.geometry.frames import Transform
 from stationd.sim.render import MarkerPose, Scene, crop_camera, default_camera, render
 from stationd.vision.marker import MarkerSpec
 
@@ -158,3 +160,49 @@ def tilt_of(normal: np.ndarray, centre: np.ndarray) -> float:
     """Angle (deg) between a normal and the line of sight back to the camera."""
     return math.degrees(math.acos(float(np.clip(-normal @ centre / np.linalg.norm(centre),
                                                  -1, 1))))
+
+
+# -- the simulated station: four pairs under the chassis ------------------------------------
+@dataclass(frozen=True, eq=False)
+class StationPair:
+    """One pair as built (the truth, for rendering) and as commissioned (for measuring)."""
+
+    name: str
+    true_pair: StereoPair
+    R_vc: np.ndarray  # left camera axes in the vehicle frame (columns)
+    c_v: np.ndarray   # left camera centre in the vehicle frame
+    calibrated: StereoPair | None = None
+    to_vehicle: Transform | None = None
+
+    def to_camera(self, p_v: np.ndarray, rot_v: np.ndarray) -> MarkerPose:
+        return MarkerPose(self.R_vc.T @ (p_v - self.c_v), self.R_vc.T @ rot_v)
+
+
+def _camera(rng: np.random.Generator) -> Camera:
+    """A real camera of the station's model: focal length, centre and lens vary a little."""
+    base = default_camera()
+    K = base.K.copy()
+    K[0, 0] *= 1 + rng.normal(0, 0.005)
+    K[1, 1] = K[0, 0] * (1 + rng.normal(0, 1e-4))
+    K[0, 2] += rng.normal(0, 10)
+    K[1, 2] += rng.normal(0, 10)
+    dist = base.dist + rng.normal(0, 0.005, base.dist.size) * np.array([1, 1, 0.02, 0.02, 0])
+    return Camera(K, dist, base.size)
+
+
+def build_station(rng: np.random.Generator, count: int) -> list[StationPair]:
+    """Pairs on the floor 1.3 m under the chassis, two on each side, looking up and inwards."""
+    spots = [(900.0, -750.0), (900.0, 750.0), (2500.0, -750.0), (2500.0, 750.0)][:count]
+    out = []
+    for k, (x, y) in enumerate(spots):
+        c = np.array([x, y, -1300.0])
+        target = np.array([x + 250.0, 0.35 * y, 0.0])
+        z = (target - c) / np.linalg.norm(target - c)
+        xa = np.array([1.0, 0.0, 0.0]) - z[0] * z
+        xa /= np.linalg.norm(xa)
+        R_vc = np.column_stack([xa, np.cross(z, xa), z])
+        left, right = _camera(rng), _camera(rng)
+        looking = look_at_pair(left, R_vc.T @ (target - c), 400.0)
+        out.append(StationPair(f"pair{k + 1}", StereoPair(left, right, looking.R, looking.T),
+                               R_vc, c))
+    return out

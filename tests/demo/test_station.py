@@ -12,7 +12,7 @@ import numpy as np
 
 from stationd.cli import main
 from stationd.config import load_station_config
-from stationd.station.demo import SIM_CONFIG, _summary, simulated
+from stationd.demo.station import SIM_CONFIG, _summary, simulated
 from stationd.station.events import EventBus, ParamsSent, ResultRecorded
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "config" / "station.example.yaml"

@@ -1,0 +1,47 @@
+"""Which tightening ids to ask the controller for after a reconnect: the ids between the last
+one the station recorded and the controller's newest.
+
+Why a rule of its own: Open Protocol's tightening id grows by one with every tightening, so a
+jump after the link was down is a result the station never heard.  It is fetched (MID
+0064/0065) and recorded late, or, if the controller no longer has it, recorded as a gap:
+visibly, never silently.  A station that never recorded anything takes the controller's
+newest as its starting point (the controller's history before it is not this station's), and
+a controller whose ids went backwards (replaced, reset) starts a new count.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+MAX_FETCH = 100   # ids fetched one by one after a reconnect; older ones are one gap
+
+
+@dataclass(frozen=True)
+class GapPlan:
+    """``fetch``: the ids to ask for, oldest first; ``gap``: an id range given up on
+    (too many missing), or None; ``note``: why nothing is fetched, for the journal."""
+
+    fetch: tuple[int, ...] = ()
+    gap: tuple[int, int] | None = None
+    note: str | None = None
+
+
+def plan(last_recorded: int | None, newest: int, most: int = MAX_FETCH) -> GapPlan:
+    """What to fetch when the station last recorded ``last_recorded`` and the controller's
+    newest tightening is ``newest``."""
+    if last_recorded is None:
+        return GapPlan(note=f"no tightening recorded yet: counting from the controller's "
+                            f"newest, {newest}")
+    if newest < last_recorded:
+        return GapPlan(note=f"the controller's newest tightening ({newest}) is older than the "
+                            f"last recorded ({last_recorded}): its ids restarted")
+    missing = newest - last_recorded
+    if missing == 0:
+        return GapPlan()
+    if missing <= most:
+        return GapPlan(tuple(range(last_recorded + 1, newest + 1)))
+    return GapPlan(tuple(range(newest - most + 1, newest + 1)),
+                   (last_recorded + 1, newest - most))
+
+
+__all__ = ["MAX_FETCH", "GapPlan", "plan"]

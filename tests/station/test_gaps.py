@@ -1,0 +1,76 @@
+"""No gap in the results: the ids between the last recorded and the controller's newest are
+fetched after a reconnect (pure rule, then through the daemon over Open Protocol: results made
+while the link was cut are each recorded exactly once, or shown as a gap)."""
+
+from __future__ import annotations
+
+import sqlite3
+
+import pytest
+
+from drivers.lift.sim import SimulatedPlc
+from drivers.wrench.sim import SimController
+from stationd.demo.station import _sim_psets
+from stationd.station.gaps import GapPlan, plan
+from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
+from tests.station.test_restart import _until
+
+
+def test_the_ids_between_the_last_recorded_and_the_newest_are_fetched():
+    assert plan(10, 13) == GapPlan((11, 12, 13))
+    assert plan(10, 10) == GapPlan()
+    assert plan(None, 500).fetch == () and "counting from" in (plan(None, 500).note or "")
+    assert plan(800, 12).fetch == () and "restarted" in (plan(800, 12).note or "")
+    far = plan(10, 1000, most=5)
+    assert far.fetch == (996, 997, 998, 999, 1000) and far.gap == (11, 995)
+
+
+@pytest.mark.timeout(300)
+def test_results_made_while_the_link_was_cut_are_fetched_or_shown_as_gaps(tmp_path):
+    lift_port, ctl_port = _free_port(), _free_port()
+    plc = SimulatedPlc()
+    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=9, nok_rate=0.0)
+    d = Proc(tmp_path, lift_port, ctl_port)
+    pose = tmp_path / "pose"
+    try:
+        at_height(d, plc, ctl, lift_port, ctl_port, "GAPVIN00000000001")
+        pose.write_text("B05")
+        d.wait_log("tightening bolt B05")
+        _until(lambda: ctl.tool_enabled, 30, "tool enabled")
+        first = ctl.pull_trigger()
+        assert first is not None
+        _until(lambda: first.tightening_id in ctl.acked_ids, 30, "the first result stored")
+        pose.write_text("B06")
+        d.wait_log("tightening bolt B06")
+        _until(lambda: ctl.tool_enabled, 30, "tool enabled on B06")
+        # the link is cut and stays down (the controller refuses a new session) while the
+        # operator goes on: three tightenings nobody hears
+        ctl.refuse_mid(1, 99)
+        ctl.drop_connections()
+        d.wait_log("fault: wrench")
+        made = [ctl.pull_trigger() for _ in range(3)]
+        assert all(m is not None for m in made)
+        ids = [m.tightening_id for m in made if m is not None]
+        ctl.forget_results(ids[1])                 # the controller lost one of them
+        ctl.clear_refusals()
+        d.wait_log("wrench: back")
+        d.wait_log(f"tightening {ids[1]} missed while the link was down: a gap")
+        for tid in (ids[0], ids[2]):
+            d.wait_log(f"tightening {tid} fetched after a reconnect")
+        assert d.stop() == 0
+    finally:
+        d.kill()
+        ctl.close()
+        plc.close()
+    con = sqlite3.connect(tmp_path / "station.db")
+    try:
+        to_bolts = [r[0] for r in con.execute("SELECT tightening_id FROM tightening_records")]
+        loose = [r[0] for r in con.execute("SELECT tightening_id FROM unattributed_results")]
+        gaps = list(con.execute("SELECT first_id, last_id FROM result_gaps"))
+    finally:
+        con.close()
+    # every id the controller made: recorded once (to its bolt or unattributed) or a gap
+    assert sorted(to_bolts + loose) == sorted({first.tightening_id, ids[0], ids[2]})
+    assert gaps == [(ids[1], ids[1])]
+    assert first.tightening_id in to_bolts
+    assert "Traceback" not in d.log()

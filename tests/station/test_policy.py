@@ -1,0 +1,117 @@
+"""The NOK policy in the pure core: a bolt locks after max_nok NOKs in a row and only a
+release (a user with the right) unlocks it; the skip strategy; overrides per pset and bolt;
+the count survives a reload (it comes with the vehicle)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from stationd.errors import ConfigError
+from stationd.reasons import Reason, Why
+from stationd.station.commands import ReleaseBolt
+from stationd.station.core import (
+    CommandDone,
+    CommandIn,
+    Record,
+    ResultIn,
+    Started,
+    StationCore,
+    VehicleLoaded,
+)
+from stationd.station.events import BoltLocked, BoltReleased, BoltSkipped
+from stationd.station.policy import NokPolicy, NokRule
+from stationd.yamlio import YamlNode
+from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
+from tests.station.test_core import BOLTS, PARAMS, Driver, _on, result
+
+
+def _tighten(d: Driver, bolt: int, tid: int, ok: bool) -> list[Any]:
+    _on(d, bolt)
+    d.step(("ack", 0.01, True))
+    _on(d, bolt, 1)
+    assert d.tool, d.core.reason
+    acts = d.feed(ResultIn(d.t, result(tid, BOLTS[f"B{bolt}"].pset or 0, ok)))
+    assert any(isinstance(a, Record) for a in acts)
+    return acts
+
+
+def _events(acts: list[Any], kind: type) -> list[Any]:
+    return [a.event for a in acts if type(a).__name__ == "Publish" and isinstance(a.event, kind)]
+
+
+def _driver(policy: NokPolicy) -> Driver:
+    d = Driver(core=StationCore(PARAMS, leave_frames=2, nok=policy))
+    d.feed(Started(d.t))
+    d.step(("lift", 0.1, True, True, "VIN1"))
+    return d
+
+
+def test_a_bolt_locks_after_max_nok_in_a_row_and_a_release_unlocks_it():
+    d = _driver(NokPolicy(NokRule(max_nok=3)))
+    _tighten(d, 2, 1, ok=False)
+    acts = _tighten(d, 2, 2, ok=False)
+    assert not _events(acts, BoltLocked)                 # repeat: open again after two
+    acts = _tighten(d, 2, 3, ok=False)
+    assert [(e.bolt, e.count) for e in _events(acts, BoltLocked)] == [("B2", 3)]
+    sends = len(d.sends)
+    _on(d, 2, 4)
+    assert len(d.sends) == sends                         # locked: never sent again
+    assert "B2" not in d.core.allowed()
+    # an operator may not release; a supervisor may, once it is locked
+    acts = d.core.feed(CommandIn(d.t, 1, ReleaseBolt("VIN1", "B2", "checked"), OPERATOR))
+    assert _answer(acts).answer.reason == Reason(Why.NO_RIGHT, right="release")
+    d.core.feed(CommandIn(d.t, 2, ReleaseBolt("VIN1", "B2", "thread checked"), SUPERVISOR))
+    acts = d.core.feed(CommandDone(d.t, 2))
+    assert _answer(acts).answer.accepted
+    assert [(e.bolt, e.user) for e in _events(acts, BoltReleased)] == [("B2", "sam")]
+    acts = d.core.feed(CommandIn(d.t, 3, ReleaseBolt("VIN1", "B2"), SUPERVISOR))
+    assert _answer(acts).answer.reason == Reason(Why.NOT_LOCKED, bolt="B2")
+    _tighten(d, 2, 4, ok=True)                           # the count starts again
+    assert "B2" in d.core.matcher.done
+
+
+def test_an_ok_resets_the_count():
+    d = _driver(NokPolicy(NokRule(max_nok=2)))
+    _tighten(d, 1, 1, ok=False)
+    acts = _tighten(d, 1, 2, ok=True)
+    assert not _events(acts, BoltLocked) and "B1" in d.core.matcher.done
+
+
+def test_the_skip_strategy_marks_the_bolt_and_goes_on():
+    d = _driver(NokPolicy(NokRule(max_nok=3, strategy="skip")))
+    acts = _tighten(d, 3, 1, ok=False)
+    assert [e.bolt for e in _events(acts, BoltSkipped)] == ["B3"]
+    sends = len(d.sends)
+    _on(d, 3, 3)
+    assert len(d.sends) == sends
+
+
+def test_overrides_per_bolt_win_over_per_pset_over_the_default():
+    p = NokPolicy(NokRule(max_nok=3), psets={1: NokRule(max_nok=1)},
+                  bolts={"B3": NokRule(max_nok=2)})
+    assert p.rule("B1", 1).max_nok == 1 and p.rule("B3", 1).max_nok == 2
+    assert p.rule("B2", 2).max_nok == 3
+    d = _driver(p)
+    acts = _tighten(d, 1, 1, ok=False)                   # pset 1: one NOK locks
+    assert [e.count for e in _events(acts, BoltLocked)] == [1]
+
+
+def test_the_count_comes_back_with_the_vehicle():
+    core = StationCore(PARAMS, leave_frames=2, nok=NokPolicy(NokRule(max_nok=3)))
+    core.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, noks={"B1": 3, "B2": 2}))
+    assert core.matcher is not None and core.matcher.locked == {"B1": 3}
+
+
+def test_the_section_is_checked_with_its_line():
+    p = NokPolicy.from_node(YamlNode.parse(
+        "max_nok: 2\nstrategy: skip\npsets: {125: {max_nok: 1}}\nbolts: {B07: {strategy: "
+        "repeat}}\n"))
+    assert p.default == NokRule(2, "skip") and p.psets == {125: NokRule(1, "skip")}
+    assert p.bolts == {"B07": NokRule(2, "repeat")}
+    for text, message in (("max_nok: 0\n", "out of range"), ("strategy: loosen\n", "not one of"),
+                          ("psets: {abc: {max_nok: 1}}\n", "a pset number"),
+                          ("bolts: [B1]\n", "mapping of names")):
+        with pytest.raises(ConfigError, match=message):
+            NokPolicy.from_node(YamlNode.parse(text, "station.yaml"))
