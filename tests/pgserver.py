@@ -59,6 +59,22 @@ class PgServer:
                   "-c fsync=off -c max_connections=50", "start"]), check=True,
                        capture_output=True, cwd=self.dir)
 
+    def pause(self) -> None:
+        """The server goes down (its data kept): the line database is unreachable."""
+        assert self.dir is not None and self.pg_ctl
+        subprocess.run(self._as_user([self.pg_ctl, "-D", str(self.dir / "data"), "-m", "fast",
+                                      "-w", "stop"]), check=True, capture_output=True,
+                       cwd=self.dir)
+
+    def resume(self) -> None:
+        """The server back on the same port with its data."""
+        assert self.dir is not None and self.pg_ctl
+        subprocess.run(self._as_user([
+            self.pg_ctl, "-D", str(self.dir / "data"), "-l", str(self.dir / "log"), "-w",
+            "-t", "60", "-o", f"-c listen_addresses=127.0.0.1 -p {self.port} -k {self.dir} "
+                              "-c fsync=off -c max_connections=50", "start"]),
+                       check=True, capture_output=True, cwd=self.dir)
+
     def url(self, db: str = "postgres") -> str:
         return f"postgresql+psycopg://postgres@127.0.0.1:{self.port}/{db}"
 
