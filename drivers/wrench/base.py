@@ -30,7 +30,7 @@ from datetime import datetime
 from enum import IntEnum
 from typing import TypeVar
 
-from drivers.errors import ConnectionLostError, DeviceError
+from drivers.errors import ConnectionLostError, DeviceError, RefusedError
 from drivers.lifecycle import Openable
 
 log = logging.getLogger(__name__)
@@ -306,6 +306,17 @@ class Wrench(Openable):
         gone (the controller still holds it)."""
         self._check_open()
         self._ack_result(result, self._timeout(timeout))
+
+    def send_parameters(self, pset: int | None, torque_nm: float, angle_deg: float | None,
+                        timeout: float | None = None) -> None:
+        """A bolt's parameters to the controller, the way this controller takes them: here a
+        pset (the program is on the controller; Open Protocol's MID 0018); a register-driven
+        controller overrides this to take the targets too.  A bolt without a pset is refused
+        like a pset the controller does not know."""
+        if pset is None:
+            raise RefusedError("the bolt has no pset and this controller takes psets only",
+                               device=self.device)
+        self.select_pset(pset, timeout)
 
     #: whether :meth:`fetch_result` can ask the controller for a stored result (Open
     #: Protocol's MID 0064); a register-driven controller keeps none

@@ -294,6 +294,11 @@ class ModbusWrench(SupervisedWrench):
             time.sleep(ACK_POLL)
 
     # -- commands -----------------------------------------------------------------------------
+    def send_parameters(self, pset: int | None, torque_nm: float, angle_deg: float | None,
+                        timeout: float | None = None) -> None:
+        """A register-driven controller takes the pset with the torque and angle targets."""
+        self.set_parameters(pset or 0, torque_nm, angle_deg or 0.0, timeout)
+
     def set_parameters(self, pset: int, torque_nm: float = 0.0, angle_deg: float = 0.0,
                        timeout: float | None = None) -> None:
         """Send pset and targets (0 = the pset's own) with the request/ack handshake; returns

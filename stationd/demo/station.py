@@ -64,7 +64,7 @@ async def _operator(st: Station, world: World, rng: np.random.Generator, cycles:
     plc.set_vehicle(truth["model_code"], truth["vin"])
     plc.raise_lift()
     for _ in range(200):
-        if st.vin is not None and st.bolts:
+        if st.vin is not None and st.core.model is not None:
             break
         await asyncio.sleep(0.05)
     else:
@@ -72,7 +72,9 @@ async def _operator(st: Station, world: World, rng: np.random.Generator, cycles:
     length = st.cfg.tool.length_mm
     bolts: list[BoltInfo] = []
     unseen: list[BoltInfo] = []
-    for b in st.bolts.values():   # a bolt no pair sees cannot be demonstrated: say so
+    assert st.repo is not None and st.core.model is not None  # noqa: S101 - opened above
+    infos = st.repo.bolts_for_model(st.core.model)   # the simulation's truth, from the table
+    for b in infos:   # a bolt no pair sees cannot be demonstrated: say so
         pairs = world.seen_by(wrench_at(np.array(b.position), np.random.default_rng(0), length,
                                        max_tilt_deg=0.0))
         (bolts if pairs else unseen).append(b)
@@ -81,7 +83,7 @@ async def _operator(st: Station, world: World, rng: np.random.Generator, cycles:
                          "of any pair of this station (check the pairs' to_vehicle transforms "
                          "and the bolt positions)")
     if unseen:
-        print(f"note: {len(unseen)} of {len(st.bolts)} bolts are in view of no pair and are "
+        print(f"note: {len(unseen)} of {len(infos)} bolts are in view of no pair and are "
               f"left out: {', '.join(b.bolt_id for b in unseen[:8])}"
               f"{' ...' if len(unseen) > 8 else ''}", file=sys.stderr, flush=True)
     order = rng.permutation(len(bolts))[:cycles]

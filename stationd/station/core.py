@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from db.bolts import Parameters
 from stationd.reasons import Reason, Why
 from stationd.station.commands import (
     RIGHT,
@@ -167,6 +168,7 @@ class BoltSpec:
     order: int | None = None
     batch: str | None = None
     parameters_id: int | None = None
+    parameters: Parameters | None = None   # what goes to the controller for this bolt
 
 
 @dataclass(frozen=True)
@@ -257,8 +259,12 @@ class Owed:
 
 @dataclass(frozen=True)
 class SendParams:
+    """Send ``parameters`` (the bolt's, as the database gave them with the vehicle) for the
+    selected bolt: the shell keeps no bolt table of its own."""
+
     bolt: str
     selection: Selection
+    parameters: Parameters | None = None
 
 
 @dataclass(frozen=True)
@@ -566,7 +572,7 @@ class StationCore:
         self._to(State.BOLT_SELECTED, f"bolt {m.bolt} selected")
         return [Publish(BoltSelected(m.bolt, spec.pset, ev.point_mm, sel.distance_mm,
                                      ev.tilt_deg, t=ev.t)),
-                SendParams(m.bolt, sel)]
+                SendParams(m.bolt, sel, spec.parameters)]
 
     def _on_ParamsAcked(self, ev: ParamsAcked) -> list[Action]:  # noqa: N802
         if self.state is State.BOLT_SELECTED and ev.bolt == self.bolt and self._acked_at is None:

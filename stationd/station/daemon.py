@@ -31,7 +31,7 @@ import cv2
 from db.bolts import Parameters
 from db.errors import DataError, DbError, NotFoundError, VehicleClosedError
 from db.report import MISSING
-from db.repository import BoltInfo, Repository
+from db.repository import Repository
 from drivers.camera import open_camera
 from drivers.camera.pair import StereoGrabber, StereoSkewError
 from drivers.errors import DeviceError, DriverError, ProtocolError, RefusedError
@@ -176,7 +176,6 @@ class Station:
     # the screens' latest-frame store (stationd.web.LatestFrames): put(pair, side, image,
     # summary, exposure) per grab; None when the screens are off
     frames: Any = None
-    bolts: dict[str, BoltInfo] = field(default_factory=dict)
     last: Localization | None = None
     on_action: Any = None  # called with each action before it is carried out (demo, tests)
     _pool: ThreadPoolExecutor = field(init=False)
@@ -786,7 +785,9 @@ class Station:
     async def _send(self, a: SendParams) -> Event:
         if self.wrench is None:
             return DeviceFault(time.time(), WRENCH, "down", "not connected")
-        params = self.bolts[a.bolt].parameters
+        params = a.parameters
+        if params is None:   # a vehicle loaded without its parameters: never guessed
+            return ParamsRefused(time.time(), a.bolt, "no parameters for this bolt")
         t_send = time.time()
         try:
             await self._call(self._send_parameters, params)
@@ -804,17 +805,9 @@ class Station:
         return ParamsAcked(now, a.bolt)
 
     def _send_parameters(self, params: Parameters) -> None:
-        """A register-driven controller takes the pset with the torque and angle targets; a
-        pset-driven one (Open Protocol) its pset.  A bolt without a pset on a pset-driven
-        controller is refused like a pset the controller does not know."""
-        if hasattr(self.wrench, "set_parameters"):
-            self.wrench.set_parameters(params.pset or 0, params.torque.target,
-                                       params.angle.target if params.angle else 0.0, 2.0)
-        elif params.pset is None:
-            raise RefusedError("the bolt has no pset and this controller takes psets only",
-                               device=self.wrench.device)
-        else:
-            self.wrench.select_pset(params.pset, 2.0)
+        """The controller takes them its way (a pset, or registers with the targets)."""
+        self.wrench.send_parameters(params.pset, params.torque.target,
+                                    params.angle.target if params.angle else None, 2.0)
 
     async def _send_vin(self, vin: str) -> Event:
         if self.wrench is None:
@@ -852,13 +845,12 @@ class Station:
             # its keeper probes it back, with backoff (reported as the same "down" fault)
             self.keepers[DATABASE].lost(DeviceError(one_line(exc)))
             return DeviceFault(time.time(), DATABASE, "down", one_line(exc))
-        self.bolts = {b.bolt_id: b for b in infos}
         # the report's "missing" is "no rundown yet": on an open vehicle the bolt is to do
         # (the screens said "missing" for every bolt of a vehicle just loaded)
         status = {b.bolt_id: b.status for b in report.bolts if b.status != MISSING}
         done = frozenset(k for k, s in status.items() if s == "ok")
         specs = {b.bolt_id: BoltSpec(_xyz(b.position), b.parameters.pset, b.order, b.batch,
-                                     b.parameters_id) for b in infos}
+                                     b.parameters_id, b.parameters) for b in infos}
         self.bus.publish(VehicleOpened(a.vin, model, tuple(
             BoltView(b.bolt_id, *_xyz(b.position), pset=b.parameters.pset, order=b.order,
                      batch=b.batch, status=status.get(b.bolt_id)
@@ -879,7 +871,6 @@ class Station:
             return
         self.bus.publish(VehicleClosed(vin, tuple(report.missing), tuple(report.nok)))
         log.info("vehicle %s closed: missing %s, NOK %s", vin, report.missing, report.nok)
-        self.bolts = {}
 
     async def _acknowledge(self, result: Any) -> None:
         """Tell the controller a result is stored; a failure leaves it with the controller

@@ -5,6 +5,7 @@ import asyncio
 import json
 import time
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -24,6 +25,11 @@ from stationd.station.events import (
     ToolEnabled,
     VehicleClosed,
 )
+
+
+def _bolts(st: Any) -> dict[str, Any]:
+    """The loaded vehicle's bolts as the database has them (the test's truth)."""
+    return {b.bolt_id: b for b in st.repo.bolts_for_model(st.core.model)}
 
 
 def _of(st, *kinds):
@@ -127,7 +133,7 @@ def test_lift_plc_vanishing_is_a_fault_until_it_returns(tmp_path):
         plc.stop_tcp()
         await _until(lambda: st.cycle.state is State.FAULT, 30)
         assert st.cycle.reason.startswith("lift:")
-        world.set_wrench(wrench_at(np.array(next(iter(st.bolts.values())).position),
+        world.set_wrench(wrench_at(np.array(next(iter(_bolts(st).values())).position),
                                    np.random.default_rng(1), st.cfg.tool.length_mm))
         await asyncio.sleep(1.0)
         assert not _sends(st)  # nothing in fault
@@ -145,7 +151,7 @@ def test_lift_plc_vanishing_is_a_fault_until_it_returns(tmp_path):
 
 
 def _first_bolt(st):
-    return next(iter(st.bolts.values()))
+    return next(iter(_bolts(st).values()))
 
 
 @pytest.mark.timeout(240)

@@ -23,7 +23,7 @@ from stationd.sim.world import wrench_at
 from stationd.station.core import DisableTool, State
 from stationd.station.events import BoltSelected, Localized, Notice, ResultUnattributed
 from stationd.words import reason_words
-from tests.station.test_faults import _scenario, _until
+from tests.station.test_faults import _bolts, _scenario, _until
 
 VIN = "FAULTVIN000000001"  # the harness's vehicle
 FRAME = (3648, 5472)       # the sim cameras' frame, rows x columns
@@ -53,7 +53,7 @@ def _sim_copy(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, *, records: str =
 
 def _on(st, bolt: str, seed: int):
     """The wrench with its socket on ``bolt``."""
-    return wrench_at(np.array(st.bolts[bolt].position), np.random.default_rng(seed),
+    return wrench_at(np.array(_bolts(st)[bolt].position), np.random.default_rng(seed),
                      st.cfg.tool.length_mm)
 
 
@@ -114,7 +114,7 @@ def test_a_tightening_keeps_the_marker_crops_when_asked(tmp_path, monkeypatch, s
     async def body(st, world):
         assert st.cfg.records.images_dir == images
         assert st.cfg.records.save_images is save
-        bolt = next(iter(st.bolts))
+        bolt = next(iter(_bolts(st)))
         seen.update(bolt=bolt, shot=await _tighten(st, world, bolt, seed=4))
 
     st = _scenario(tmp_path, body, **NO_NOK)
@@ -149,7 +149,7 @@ def test_a_tightening_keeps_the_marker_crops_when_asked(tmp_path, monkeypatch, s
 # -- 2. a result after the wrench left its bolt ---------------------------------------------
 def _same_pset_bolts(st) -> tuple[str, str]:
     """Two bolts with the same pset (the pset cannot tell their results apart)."""
-    infos = list(st.bolts.values())
+    infos = list(_bolts(st).values())
     a = infos[0]
     b = next(i for i in infos[1:] if i.parameters.pset == a.parameters.pset)
     return a.bolt_id, b.bolt_id
@@ -206,7 +206,7 @@ def test_a_result_after_the_wrench_left_is_its_bolts_never_the_next_ones(tmp_pat
     records = _records(st.cfg.database_url)
     assert [r[:2] for r in records] == [(a, late.tightening_id), (b, shot.tightening_id)]
     for (bolt, *_, xy) in records:            # each with its own selection's position
-        assert np.hypot(*(np.array(xy) - np.array(st.bolts[bolt].position[:2]))) < 2.0
+        assert np.hypot(*(np.array(xy) - np.array(_bolts(st)[bolt].position[:2]))) < 2.0
     repo = Repository.open(st.cfg.database_url)
     try:
         rows = {r.bolt_id: r for r in repo.vehicle_report(VIN).bolts}
@@ -220,7 +220,7 @@ def test_a_result_after_the_wrench_left_is_its_bolts_never_the_next_ones(tmp_pat
 def test_a_bolt_whose_late_result_was_ok_is_done(tmp_path):
     async def body(st, world):
         ctl = st.wrench.controller
-        a = next(iter(st.bolts))
+        a = next(iter(_bolts(st)))
         pulled = _pull_as_the_wrench_leaves(st, world, a)
         world.set_wrench(_on(st, a, seed=5))
         await _until(lambda: _tightening(st, a), 60)
@@ -251,7 +251,7 @@ def test_an_ordered_bolt_waits_for_the_lower_order(tmp_path, monkeypatch):
     seen = {}
 
     async def body(st, world):
-        assert (st.bolts[first].order, st.bolts[second].order) == (1, 2)
+        assert (_bolts(st)[first].order, _bolts(st)[second].order) == (1, 2)
         world.set_wrench(_on(st, second, seed=8))
         wait = f"{second} must wait: order 2 needs {first} done first"
         # more refusals than the stable frames a selection needs: it is the rule, not time
@@ -300,7 +300,7 @@ def test_a_result_the_database_refuses_is_a_fault_kept_and_stored_when_it_can(tm
 
     async def body(st, world):
         ctl = st.wrench.controller
-        bolts = sorted(st.bolts)
+        bolts = sorted(_bolts(st))
         first, second = bolts[0], bolts[1]
         seen[first] = (await _tighten(st, world, first, seed=1)).tightening_id  # had room
         world.set_wrench(_on(st, second, 2))
@@ -344,7 +344,7 @@ def test_a_database_file_removed_under_the_daemon_is_a_fault_not_acknowledged(tm
 
     async def body(st, world):
         ctl = st.wrench.controller
-        bolts = sorted(st.bolts)
+        bolts = sorted(_bolts(st))
         world.set_wrench(_on(st, bolts[0], 1))
         await _until(lambda: _tightening(st, bolts[0]), 60)
         for f in tmp_path.glob("s.db*"):
