@@ -23,6 +23,7 @@ from abc import ABC, abstractmethod
 from typing import Any, Literal
 
 from drivers.errors import ConnectError, ConnectionLostError, ConnectTimeoutError
+from drivers.url import OptionError
 
 Kind = Literal["tcp", "serial"]
 
@@ -56,6 +57,21 @@ def connect_tcp(host: str, port: int, timeout: float, refused_hint: str) -> sock
         raise ConnectError(f"connection refused by {where} ({refused_hint})")
     sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
     return sock
+
+
+#: serial line speeds a port can be set to: 0 or a negative speed is a typo (pyserial takes 0
+#: on Linux: B0 hangs the line up, and the device then never answers); above 4 Mbaud no
+#: RS-232/RS-485 adapter goes
+BAUD = (50, 4_000_000)
+
+
+def baud_rate(text: str | int) -> int:
+    """A serial speed in baud (URL option converter); ValueError saying the range."""
+    value = int(text)
+    if not BAUD[0] <= value <= BAUD[1]:
+        raise OptionError(f"a serial speed is {BAUD[0]}-{BAUD[1]} baud (e.g. 9600, 19200, "
+                         "115200)")
+    return value
 
 
 def open_serial(port: str, *, baudrate: int, parity: str = "N", stopbits: int = 1,

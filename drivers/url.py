@@ -72,7 +72,11 @@ def parse_url(text: str) -> DeviceUrl:
     try:
         port = parts.port
     except ValueError:
-        raise UrlError("the port is not a number in 0-65535", device=text) from None
+        port = -1
+    if port is not None and not 1 <= port <= 65535:
+        # port 0 is "any free port" to a server; a client given it reaches nothing (and
+        # ``port or DEFAULT`` would silently swap in the default)
+        raise UrlError("the port is not a number in 1-65535", device=text) from None
     options: dict[str, str] = {}
     for k, v in parse_qsl(parts.query, keep_blank_values=True):
         if k in options:

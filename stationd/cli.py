@@ -30,8 +30,19 @@ class _Parser(argparse.ArgumentParser):
     """argparse, but a usage error is one line and exit code 2."""
 
     def error(self, message: str) -> NoReturn:
-        sys.stderr.write(f"{self.prog}: error: {message} (see --help)\n")
+        sys.stderr.write(f"{self.prog}: error: {self._missing_command(message) or message} "
+                         "(see --help)\n")
         raise SystemExit(EXIT_BAD_INPUT)
+
+    def _missing_command(self, message: str) -> str | None:
+        """A command given without its subcommand (``stationd config``) is told what to
+        type, not ``the following arguments are required: config_command``."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction) and action.dest and \
+                    message == f"the following arguments are required: {action.dest}":
+                choices = " | ".join(action.choices)
+                return f"a command is missing: {self.prog} {choices}"
+        return None
 
 
 def _emit(obj: dict[str, Any]) -> None:
@@ -384,6 +395,7 @@ def build_parser() -> argparse.ArgumentParser:
     from stationd.command_cli import add_command_parsers
     from stationd.db_cli import add_config_parser, add_db_parser
     from stationd.probe import add_probe_parser
+    from stationd.teach_cli import add_teach_parser
     from stationd.web.status_cli import add_status_parser
 
     add_calibrate_parser(sub)
@@ -392,6 +404,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_config_parser(sub)
     add_status_parser(sub)
     add_command_parsers(sub)
+    add_teach_parser(sub)
 
     rn = sub.add_parser("run", help="the station daemon (as systemd runs it)")
     rn.add_argument("--config", required=True, help="station YAML")

@@ -34,7 +34,7 @@ from stationd.web.status_cli import DEFAULT_URL, EXIT_UNREACHABLE, status_url
 EXIT_REFUSED = 1
 
 
-class _Client:
+class ApiClient:
     """One session with the daemon's API (a cookie jar; the station token when given)."""
 
     def __init__(self, url: str, token: str | None, timeout: float) -> None:
@@ -67,7 +67,7 @@ class _Client:
             return status, text.strip()
 
 
-def _password() -> str:
+def read_password() -> str:
     if "STATIOND_PASSWORD" in os.environ:
         return os.environ["STATIOND_PASSWORD"]
     if sys.stdin.isatty():
@@ -75,7 +75,7 @@ def _password() -> str:
     return sys.stdin.readline().rstrip("\n")
 
 
-def _refused(what: str, status: int, answer: Any) -> int:
+def say_refused(what: str, status: int, answer: Any) -> int:
     """A refusal before the station saw the command (the token, the login, the API)."""
     if status == 401 and str(answer).startswith("token required"):
         answer = "the daemon refused the http token (--token or STATIOND_TOKEN)"
@@ -111,15 +111,15 @@ def cmd_command(args: argparse.Namespace) -> int:
                             "comment": args.comment or ""}
     if args.command in ("skip", "release"):
         body["bolt"] = args.bolt.strip()
-    client = _Client(args.url, args.token, args.timeout)
+    client = ApiClient(args.url, args.token, args.timeout)
     try:
-        status, who = client.call("/api/login", {"user": args.user, "password": _password(),
+        status, who = client.call("/api/login", {"user": args.user, "password": read_password(),
                                                  "client": "cli"})
         if status != 200:
-            return _refused("login refused", status, who)
+            return say_refused("login refused", status, who)
         status, nonce = client.call("/api/nonce")
         if status != 200 or not isinstance(nonce, dict):
-            return _refused(args.command, status, nonce)
+            return say_refused(args.command, status, nonce)
         status, answer = client.call("/api/commands", {**body, "nonce": nonce["nonce"]})
         client.call("/api/logout", {})
     except (urllib.error.URLError, OSError) as exc:
@@ -135,13 +135,13 @@ def cmd_feed(args: argparse.Namespace) -> int:
     """Every record after ``--since``, one JSON object per line (what a forwarder reads)."""
     if args.since < 0 or not 1 <= args.limit <= 1000:
         raise InputError("--since >= 0, --limit 1-1000")
-    client = _Client(args.url, args.token, args.timeout)
+    client = ApiClient(args.url, args.token, args.timeout)
     try:
         status, doc = client.call(f"/api/feed?since={args.since}&limit={args.limit}")
     except (urllib.error.URLError, OSError) as exc:
         return _unreachable(args.url, exc)
     if status != 200 or not isinstance(doc, dict):
-        return _refused("feed", status, doc)
+        return say_refused("feed", status, doc)
     for e in doc["entries"]:
         print(json.dumps({"db_id": doc["db_id"], **e}, separators=(",", ":")))
     return 0
@@ -149,7 +149,7 @@ def cmd_feed(args: argparse.Namespace) -> int:
 
 def cmd_user_hash(args: argparse.Namespace) -> int:
     """The scrypt hash of a password (asked twice at a terminal) for ``access.users``."""
-    password = _password()
+    password = read_password()
     if sys.stdin.isatty() and "STATIOND_PASSWORD" not in os.environ \
             and getpass.getpass("again: ") != password:
         raise InputError("the two passwords differ")
@@ -159,7 +159,7 @@ def cmd_user_hash(args: argparse.Namespace) -> int:
     return 0
 
 
-def _client_args(p: argparse.ArgumentParser) -> None:
+def client_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--url", default=DEFAULT_URL, help=f"the daemon's screens (default "
                    f"{DEFAULT_URL})")
     p.add_argument("--token", help="the http token, when the daemon has one (or "
@@ -187,12 +187,12 @@ def add_command_parsers(sub: Any) -> None:
     for p, name in ((sk, "skip"), (ro, "reopen"), (rl, "release")):
         p.add_argument("--comment", default="", help="why (kept with the command)")
         p.add_argument("--user", required=True, help="who gives the command")
-        _client_args(p)
+        client_args(p)
         p.set_defaults(func=cmd_command, command=name)
     fd = sub.add_parser("feed", help="the records after a sequence number, one JSON per line")
     fd.add_argument("--since", type=int, default=0)
     fd.add_argument("--limit", type=int, default=100)
-    _client_args(fd)
+    client_args(fd)
     fd.set_defaults(func=cmd_feed)
     us = sub.add_parser("user", help="users of the station's access section")
     usub = us.add_subparsers(dest="user_command", required=True)
@@ -201,4 +201,5 @@ def add_command_parsers(sub: Any) -> None:
     uh.set_defaults(func=cmd_user_hash)
 
 
-__all__ = ["add_command_parsers", "cmd_command", "cmd_feed", "cmd_user_hash"]
+__all__ = ["ApiClient", "add_command_parsers", "client_args", "cmd_command", "cmd_feed",
+           "cmd_user_hash", "read_password", "say_refused"]

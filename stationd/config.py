@@ -35,6 +35,7 @@ from stationd.geometry.camera import StereoPair
 from stationd.geometry.frames import Transform
 from stationd.geometry.tool import ToolGeometry
 from stationd.localize import LocalizeConfig
+from stationd.opcua import OpcUaConfig
 from stationd.station.matching import MatchParams
 from stationd.station.policy import NokPolicy
 from stationd.vision.marker import MarkerSpec
@@ -53,8 +54,23 @@ REQUIRED_KEYS = ("cameras", "pairs", "lift", "wrench")
 MAX_AGE_S = (0.05, 5.0)         # plausible staleness limits, seconds
 BASELINE_MM = (20.0, 2000.0)    # plausible stereo baselines, millimetres
 METRES_LIKE_MM = 10.0           # a pair-to-vehicle translation shorter than this is in metres
+# what a person types, bounded to what can work (outside: a typo or another unit):
+# the bolt end is localized to about a millimetre, so a tolerance under 1 mm never matches
+# (0.008 is 8 mm written in metres); above 50 mm the wrench is "on" a bolt 5 cm away, and
+# the bolt table's bolts would have to be 10 cm apart to be told apart
+TOLERANCE_MM = (1.0, 50.0)
+# the marker is on the wrench, beside its axis: a lateral offset beyond 250 mm is no wrench
+# (10000 is a typo, or metres/micrometres mixed up)
+TOOL_OFFSET_MM = 250.0
+# a fit's RMS residual: the default gate is 0.35 px and good fits are ~0.1 px; 0 refuses
+# every detection, and above 5 px the "ellipse" is not the marker's edge (1e9: no gate at all)
+MAX_RMS_PX = (0.01, 5.0)
+# a hue box (OpenCV H, 0-179 = 0-358 deg) wider than half the circle accepts nearly every
+# colour: a reversed range ([168, 118] is "all but purple": lo > hi wraps through red)
+MAX_HUE_SPAN = 90
 STATION_KEYS = ("marker", "vision", "cameras", "pairs", "tool", "lift", "wrench", "matching",
-                "database", "bolts", "records", "http", "access", "localize", "line", "nok")
+                "database", "bolts", "records", "http", "access", "localize", "line", "nok",
+                "opcua")
 PAIR_KEYS = ("calibration", "to_vehicle", "left", "right", "max_skew_ms")
 
 #: device kind -> (scheme -> backend, the accepted forms): the drivers' own registries, so the
@@ -82,6 +98,13 @@ class MatchingConfig(MatchParams):
                 kw[k] = v.integer(lo=1, hi=100)
             elif k == "allow_retighten":
                 kw[k] = v.flag()
+            elif k == "tolerance_mm":
+                tol = v.number()
+                if not TOLERANCE_MM[0] <= tol <= TOLERANCE_MM[1]:
+                    raise v.error(f"{tol:g} mm is not plausible: the bolt end must be within "
+                                  f"{TOLERANCE_MM[0]:g}-{TOLERANCE_MM[1]:g} mm of its bolt "
+                                  "(millimetres: 8 for 8 mm, not 0.008)")
+                kw[k] = tol
             elif k == "max_age_s":
                 age = v.number()
                 if not MAX_AGE_S[0] <= age <= MAX_AGE_S[1]:
@@ -182,6 +205,7 @@ class StationConfig:
     localize: LocalizeConfig = field(default_factory=LocalizeConfig)  # how pairs are fused
     line: LineConfig | None = None  # the line's database the records are forwarded to
     nok: NokPolicy = field(default_factory=NokPolicy)  # after a NOK: lock, skip or repeat
+    opcua: OpcUaConfig | None = None  # the OPC UA server for the MES; None: not served
     path: Path | None = None
 
 
@@ -209,14 +233,22 @@ class StationCheck:
 def device_url(node: YamlNode, kind: str, *, check: bool = False) -> str:
     """A device URL of ``kind`` (camera, lift, wrench).
 
-    With ``check``, its form and scheme are checked against the driver's registry without
-    opening a device; Modbus and Open Protocol options too, with their ranges (a camera's
-    options are its backend's, checked when it opens: Aravis is imported only then).
+    With ``check``, the device is built, not opened: its form and scheme are checked against
+    the driver's registry, its options with their ranges (a camera's by its backend, which
+    parses its URL before loading any SDK; the lift's and the controller's likewise), so a
+    URL that can never work is a configuration error, not a station in fault for good.
     ``stationd config check`` and the daemon's loader (``station=True``: the first start and
     every reload) check; other readers of a station file (tools, benchmarks) do not need to.
     """
     url = node.text()
-    if check:
+    if check and kind in ("camera", "lift"):
+        check_url = camera_drivers.check_camera_url if kind == "camera" \
+            else lift_drivers.check_lift_url
+        try:
+            check_url(url)
+        except UrlError as exc:
+            raise node.error(str(exc)) from None
+    elif check:
         backends, forms = DEVICE_REGISTRIES[kind]
         try:
             scheme = parse_url(url).scheme
@@ -293,10 +325,18 @@ def _baseline(calibration: StereoPair, node: YamlNode) -> StereoPair:
     return calibration
 
 
-def _database_url(node: YamlNode, base: Path, check: bool = False) -> str:
+def _database_url(node: YamlNode, base: Path, check: bool = False, checker: bool = False
+                  ) -> str:
     """The database URL; a relative SQLite path is relative to the station file, like every
     other path in it (not to the daemon's working directory).  With ``check``, the URL must
-    parse and name a database whose driver is installed (nothing is connected)."""
+    parse and name a database whose driver is installed (nothing is connected), and an SQLite
+    one a file that can keep the results (:func:`_sqlite_problem`).
+
+    ``checker`` (``config check``) differs from the daemon's start in two cases: a missing
+    :data:`STATE_DIRECTORY` is no error there (the check may run before the service is
+    installed; systemd creates it at the service's start), and a file that is not a database
+    is an error there, while the daemon starts in fault on it ("database: file is not a
+    database") and opens it once it is replaced (the disk fixed: tests/test_serve.py)."""
     url_node = node.mapping(("url",), required=("url",))["url"]
     url = url_node.text()
     prefix = "sqlite:///"
@@ -311,7 +351,114 @@ def _database_url(node: YamlNode, base: Path, check: bool = False) -> str:
             make_engine(url).dispose()
         except DbError as exc:
             raise url_node.error(str(exc)) from None
+        problem = _sqlite_problem(url)
+        if problem is None or (not checker and problem.startswith(NOT_SQLITE)):
+            pass
+        elif checker and problem == _missing_folder(STATE_DIRECTORY):
+            pass
+        else:
+            raise url_node.error(problem)
     return url
+
+
+#: the first 16 bytes of every SQLite database file (https://sqlite.org/fileformat.html)
+SQLITE_HEADER = b"SQLite format 3\x00"
+NOT_SQLITE = "not an SQLite database: "
+#: the service's own folder (systemd/stationd.service: StateDirectory=stationd), made by
+#: systemd when the service starts
+STATE_DIRECTORY = Path("/var/lib/stationd")
+
+
+def _missing_folder(folder: Path) -> str:
+    return (f"folder {folder} does not exist: create it, owned by the user the station runs "
+            "as (or correct the path)")
+
+
+def _sqlite_problem(url: str) -> str | None:
+    """Why the SQLite database of ``url`` cannot keep the station's results, in the words of
+    what to do; None when it can (or ``url`` is another database, checked when it connects).
+
+    Checked without opening anything (opening creates the file, and a FIFO would block): an
+    in-memory database loses every result at exit, a folder or a file that is not an SQLite
+    database cannot be opened (SQLite says "disk I/O error" or retries "unable to open
+    database file" for ever), and a missing folder is a typo or a folder to create, owned by
+    the user the service runs as."""
+    from sqlalchemy.engine import make_url
+
+    parsed = make_url(url)   # it parsed in make_engine already
+    if parsed.get_backend_name() != "sqlite":
+        return None
+    name = parsed.database or ""
+    if name in ("", ":memory:") or "mode=memory" in name:
+        return (f"{url} is a database in memory: every result is lost when the station "
+                "stops (name a file, e.g. sqlite:///stationd.db)")
+    if name.startswith("file:"):   # an SQLite URI: its own options, checked when it opens
+        return None
+    path = Path(name)
+    if path.is_dir():
+        return f"{path} is a folder, not a database file (name a file in it, e.g. " \
+               f"sqlite:///{path / 'stationd.db'})"
+    if not path.parent.is_dir():
+        return _missing_folder(path.parent)
+    if not path.exists():
+        return None   # created at the first start
+    if not path.is_file():
+        return f"{path} is not a regular file (a FIFO or a device?): name a database file"
+    try:
+        with path.open("rb") as f:
+            head = f.read(len(SQLITE_HEADER))
+    except OSError as exc:
+        return f"{path} cannot be read: {exc.strerror or exc}"
+    if head and head != SQLITE_HEADER:   # an empty file is a new database
+        return f"{NOT_SQLITE}{path} is another kind of file: name the station's " \
+               "database, or a new file"
+    return None
+
+
+def _child(node: YamlNode, *keys: str) -> YamlNode | None:
+    """The node at ``keys`` below ``node`` (a mapping already read), None if not written."""
+    for key in keys:
+        if not isinstance(node.value(), dict):
+            return None
+        found = [child for k, child in node.pairs() if k == key]
+        if not found:
+            return None
+        node = found[0]
+    return node
+
+
+def _tool(node: YamlNode) -> ToolGeometry:
+    tool = ToolGeometry.from_node(node)
+    off = float(np.hypot(*tool.offset_mm))
+    if off > TOOL_OFFSET_MM:
+        where = _child(node, "offset_mm") or node
+        raise where.error(f"an offset of {off:g} mm from the wrench axis is not plausible "
+                          f"(the marker is on the wrench: at most {TOOL_OFFSET_MM:g} mm); "
+                          "offsets are in millimetres")
+    return tool
+
+
+def _vision(node: YamlNode, base: Path) -> VisionParams:
+    vision = VisionParams.from_node(node, base_dir=base)
+    rms = vision.gates.max_rms_px
+    if not MAX_RMS_PX[0] <= rms <= MAX_RMS_PX[1]:
+        where = _child(node, "gates", "max_rms_px") or node
+        raise where.error(f"{rms:g} px is not plausible for a fit's RMS residual "
+                          f"({MAX_RMS_PX[0]:g}-{MAX_RMS_PX[1]:g} px; the default is 0.35): "
+                          "0 refuses every marker, a large value lets anything pass")
+    lo, hi = vision.hsv.h
+    span = hi - lo + 1 if lo <= hi else 180 - lo + hi + 1
+    if span > MAX_HUE_SPAN:
+        hsv = _child(node, "hsv")
+        at: YamlNode | None = _child(hsv, "h") if hsv is not None else None
+        wrap = (f"; [{lo}, {hi}] wraps through red (lo > hi): a reversed range? write "
+                f"[{hi}, {lo}]") if lo > hi else ""
+        from_file = f" (in {hsv.text()})" if hsv is not None and \
+            isinstance(hsv.value(), str) else ""
+        raise (at or hsv or node).error(
+            f"a hue range of {span} of 180 accepts nearly every colour, not the marker's "
+            f"(at most {MAX_HUE_SPAN}){wrap}{from_file}")
+    return vision
 
 
 def _records(node: YamlNode, base: Path) -> RecordsConfig:
@@ -354,6 +501,7 @@ class _Reader:
         self.errors: list[ConfigError] = []
         self.warnings: list[ConfigError] = []
         self.top: dict[str, YamlNode] = {}
+        self.camera_urls: dict[str, tuple[str, YamlNode]] = {}  # name -> (URL, its node)
 
     def guard(self, default: T, fn: Callable[P, T], *args: P.args, **kwargs: P.kwargs) -> T:
         """``fn(...)``; when collecting, an error is recorded and ``default`` returned."""
@@ -405,19 +553,20 @@ class _Reader:
         # the daemon runs: a typo is refused at the start and by a reload, never run in fault
         d, base, check = StationConfig(), self.base, self.collect or self.require_devices
         marker = self.section("marker", d.marker, MarkerSpec.from_node)
-        vision = self.section("vision", d.vision, partial(VisionParams.from_node, base_dir=base))
+        vision = self.section("vision", d.vision, partial(_vision, base=base))
         cameras, names = self.cameras(self.top["cameras"]) if "cameras" in self.top \
             else ({}, [])
         pairs = self.pairs(self.top["pairs"], names) if "pairs" in self.top else {}
         config = StationConfig(
             marker=marker, vision=vision, cameras=cameras, pairs=pairs,
-            tool=self.section("tool", d.tool, ToolGeometry.from_node),
+            tool=self.section("tool", d.tool, _tool),
             lift=self.section("lift", d.lift, partial(LiftConfig.from_node, check_url=check)),
             wrench=self.section("wrench", d.wrench,
                                 partial(WrenchConfig.from_node, check_url=check)),
             matching=self.section("matching", d.matching, MatchingConfig.from_node),
             database_url=self.section("database", d.database_url,
-                                      partial(_database_url, base=base, check=check)),
+                                      partial(_database_url, base=base, check=check,
+                                              checker=self.collect)),
             bolts_path=self.section("bolts", d.bolts_path,
                                     partial(_existing, base=base, what="bolt file")),
             records=self.section("records", d.records, partial(_records, base=base)),
@@ -426,6 +575,7 @@ class _Reader:
             localize=self.section("localize", d.localize, LocalizeConfig.from_node),
             line=self.section("line", d.line, LineConfig.from_node),
             nok=self.section("nok", d.nok, NokPolicy.from_node),
+            opcua=self.section("opcua", d.opcua, partial(OpcUaConfig.from_node, base_dir=base)),
             path=path)
         # after the sections: a mistake written in the file is told before what is missing
         if self.require_devices and isinstance(root.value(), dict) and not self.unreadable:
@@ -454,6 +604,7 @@ class _Reader:
                     "is one device"))
                 continue
             urls[name] = url
+            self.camera_urls[name] = (url, item.mapping(("url",))["url"])
         return urls, [name for name, _ in items]
 
     def pairs(self, node: YamlNode, cameras: Collection[str] | None) -> dict[str, PairConfig]:
@@ -476,7 +627,35 @@ class _Reader:
                 used.setdefault(cam, f"the {side} camera of pair {name!r}")
             if not taken:
                 out[name] = pair
+                if self.collect or self.require_devices:
+                    self.sim_cameras(pair, node)
         return out
+
+    def sim_cameras(self, pair: PairConfig, pairs: YamlNode) -> None:
+        """A simulated camera shows the view of the pair it names, which the simulated world
+        renders for each pair of this file through its calibration: ``sim://PAIR/SIDE`` must
+        be the pair and side it serves (another pair's view, or a pair the world does not
+        have, leaves the pair in fault for good)."""
+        names = list(pairs.mapping(tuple(str(k) for k in pairs.value()))) \
+            if isinstance(pairs.value(), dict) else []
+        for side, cam in (("left", pair.left), ("right", pair.right)):
+            if cam is None or cam not in self.camera_urls:
+                continue
+            url, url_node = self.camera_urls[cam]
+            if not url.lower().startswith("sim:"):
+                continue
+            from drivers.camera.sim import parse_sim_url
+
+            sim_pair, sim_side, _ = parse_sim_url(url)   # checked with the camera
+            if (sim_pair, sim_side) == (pair.name, side):
+                continue
+            what = f"the simulated world's {sim_side} view of pair {sim_pair!r}" \
+                if sim_pair in names else \
+                f"pair {sim_pair!r}, which the simulated world does not have (it renders " \
+                f"this file's pairs: {', '.join(names)})"
+            self.guard(None, _refuse, url_node.error(
+                f"camera {cam!r} is the {side} camera of pair {pair.name!r} but shows "
+                f"{what}: write sim://{pair.name}/{side}"))
 
     def pair(self, name: str, node: YamlNode, cameras: Collection[str] | None,
              ) -> PairConfig | None:

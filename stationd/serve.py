@@ -27,8 +27,9 @@ from stationd.config import StationConfig, load_station_config
 from stationd.errors import StationError
 from stationd.lock import StationLocks
 from stationd.station.core import DATABASE, LIFT, WRENCH
-from stationd.station.daemon import OPEN_ERRORS, STATION_FAULTS, Station
+from stationd.station.daemon import OPEN_ERRORS, Station
 from stationd.station.events import DeviceHealth, EventBus, StateChanged
+from stationd.station.records import STATION_FAULTS
 from stationd.station.sdnotify import Notifier
 
 log = logging.getLogger("stationd")
@@ -200,6 +201,19 @@ class Screens:
         self.server, self.frames, self._for = None, None, None
 
 
+async def _reader(cfg: StationConfig, what: str) -> Any:
+    """A connection of its own to the station's database for a reader of its records (the
+    forwarder, the OPC UA server); None, journaled, when it does not open."""
+    from db.repository import Repository
+
+    try:
+        return await asyncio.get_running_loop().run_in_executor(None, Repository.open,
+                                                                 cfg.database_url)
+    except OPEN_ERRORS as exc:
+        log.error("%s: the station's database does not open: %s", what, one_line(exc))
+        return None
+
+
 async def forward(cfg: StationConfig, notifier: Notifier, screens: Screens,
                   stop: asyncio.Event) -> None:
     """The records to the line's database while this station runs (``cfg.line``; nothing
@@ -207,15 +221,11 @@ async def forward(cfg: StationConfig, notifier: Notifier, screens: Screens,
     journal line (and STATUS=) at each change, the backlog in ``/api/status``."""
     if cfg.line is None:
         return
-    from db.repository import Repository
     from stationd.forward import Forwarder
 
     loop = asyncio.get_running_loop()
-    try:
-        repo = await loop.run_in_executor(None, Repository.open, cfg.database_url)
-    except OPEN_ERRORS as exc:
-        log.error("line database: not forwarding, the station's database does not open: %s",
-                  one_line(exc))
+    repo = await _reader(cfg, "line database: not forwarding")
+    if repo is None:
         return
     fwd = Forwarder(repo, cfg.line)
     screens.line = fwd
@@ -235,6 +245,32 @@ async def forward(cfg: StationConfig, notifier: Notifier, screens: Screens,
     finally:
         screens.line = None
         await loop.run_in_executor(None, fwd.line.dispose)
+        await loop.run_in_executor(None, repo.close)
+
+
+async def opcua(cfg: StationConfig, bus: EventBus, stop: asyncio.Event) -> None:
+    """The station's OPC UA server while it runs (``cfg.opcua``; nothing without it).  A port
+    in use or a database that does not open is logged, never a fault of the station."""
+    if cfg.opcua is None:
+        return
+    from stationd.opcua.server import OpcUaServer
+
+    loop = asyncio.get_running_loop()
+    repo = await _reader(cfg, "OPC UA: not served")
+    if repo is None:
+        return
+    server = OpcUaServer(cfg.opcua, bus=bus)
+    try:
+        await server.start()
+    except OSError as exc:
+        log.error("OPC UA: not served on %s: %s", cfg.opcua.endpoint, one_line(exc))
+        await loop.run_in_executor(None, repo.close)
+        return
+    log.info("OPC UA: serving %s", cfg.opcua.endpoint)
+    try:
+        await server.run(stop, repo)
+    finally:
+        await server.stop()
         await loop.run_in_executor(None, repo.close)
 
 
@@ -269,6 +305,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
         task = asyncio.create_task(station.run(inner))
         screens.attach(station, cfg)
         line = asyncio.create_task(forward(cfg, notifier, screens, inner))
+        served = asyncio.create_task(opcua(cfg, bus, inner))
         log.info("stationd running: %s", cfg_path)
         new: StationConfig | None = None
         while new is None and not stop.is_set() and not task.done():
@@ -293,6 +330,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
         screens.attach(None, cfg)
         inner.set()
         await line
+        await served
         try:
             await task
         except Exception as exc:  # a bug, not a device: logged, the station restarts

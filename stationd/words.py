@@ -7,7 +7,15 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from stationd.reasons import Reason, Why
-from stationd.station.commands import KIND, Answer, ReleaseBolt, ReopenVehicle, SkipBolt
+from stationd.station.commands import (
+    KIND,
+    Answer,
+    ReleaseBolt,
+    ReopenVehicle,
+    SkipBolt,
+    TeachPoint,
+    TeachStart,
+)
 
 
 def _mm(v: float | None) -> str:
@@ -47,6 +55,13 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.LOCKED: lambda r: (f"{r.bolt} locked after {r.count} NOK in a row: a supervisor "
                            "releases it"),
     Why.NOT_LOCKED: lambda r: f"{r.bolt} is not locked",
+    Why.TEACHING: lambda r: f"teach mode is on ({r.note})",
+    Why.NOT_TEACHING: lambda r: "teach mode is off: start it first",
+    Why.NOT_STEADY: lambda r: (
+        f"the wrench moved while measured ({r.distance_mm:.1f} mm > {r.limit:g} mm): hold it "
+        "still on the bolt" if r.distance_mm is not None else
+        f"the wrench was not seen steadily ({r.count} of {r.needed} localizations): hold it "
+        "on the bolt"),
     Why.NOT_LOCALIZED: lambda r: _per_pair(r),
     Why.TILTED: lambda r: f"wrench tilted {r.angle_deg or 0:.1f} deg (> {r.limit or 0:g} deg)",
     Why.PAIRS_DISAGREE: lambda r: (f"pairs disagree by {r.distance_mm or 0:.2f} mm "
@@ -79,6 +94,10 @@ def command_words(answer: Answer) -> str:
         what += f" {cmd.bolt} of {cmd.vin}"
     elif isinstance(cmd, ReopenVehicle):
         what += f" {cmd.vin}"
+    elif isinstance(cmd, TeachStart):
+        what += f" {cmd.model}"
+    elif isinstance(cmd, TeachPoint):
+        what += f" {cmd.bolt}"
     if cmd.comment:
         what += f" ({cmd.comment!r})"
     return what

@@ -9,6 +9,8 @@ the file is a default written in code, never an environment variable.
 from __future__ import annotations
 
 import math
+import re
+import stat
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -20,6 +22,80 @@ from yaml.constructor import SafeConstructor
 from stationd.errors import ConfigError
 
 _constructor = SafeConstructor()
+#: numbers YAML 1.1 reads as text: an exponent without a dot or sign (1e9, 2E-3)
+_EXPONENT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+")
+#: a number written with a decimal comma (300,5)
+_DECIMAL_COMMA = re.compile(r"[-+]?\d+,\d+")
+
+
+#: the largest YAML file read: a station file or a calibration is a few kB, a bolt table of
+#: 10 000 bolts about 2 MB; more is not one of them (and is not read into memory)
+MAX_YAML_BYTES = 16 * 2**20
+
+#: the first bytes of the files most often given by mistake, and what they are
+_MAGIC = ((b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"),
+          (b"II*\x00", "a TIFF image"), (b"MM\x00*", "a TIFF image"), (b"BM", "a BMP image"),
+          (b"SQLite format 3\x00", "an SQLite database"), (b"%PDF", "a PDF document"),
+          (b"PK\x03\x04", "a ZIP archive (or an .xlsx, .docx, .ods file)"),
+          (b"\x1f\x8b", "a gzip archive"), (b"\x7fELF", "a program (ELF)"),
+          (b"\xff\xfe", "UTF-16 text"), (b"\xfe\xff", "UTF-16 text"))
+
+
+def read_text_file(path: Path, max_bytes: int, expected: str) -> str:
+    """The UTF-8 text of the regular file at ``path``; a :class:`ConfigError` in a person's
+    words otherwise, at once: a FIFO or a device is never opened (a FIFO would block until a
+    writer comes, /dev/zero would fill memory), a file over ``max_bytes`` is not read, and a
+    file that is not UTF-8 text is told by the kind of file it looks like (``expected``: what
+    was expected, e.g. "a YAML file")."""
+    where = str(path)
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        raise ConfigError("file not found", path=where) from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read: {exc.strerror or exc}", path=where) from None
+    if stat.S_ISDIR(st.st_mode):
+        raise ConfigError(f"a folder, not a file ({expected} was expected)", path=where)
+    if not stat.S_ISREG(st.st_mode):
+        kind = "a FIFO" if stat.S_ISFIFO(st.st_mode) else "a device" \
+            if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else "a socket" \
+            if stat.S_ISSOCK(st.st_mode) else "not a regular file"
+        raise ConfigError(f"{kind}, not a file ({expected} was expected): give the path of "
+                          "a regular file", path=where)
+    if st.st_size > max_bytes:
+        raise ConfigError(f"{st.st_size} bytes: too large for {expected} (at most "
+                          f"{max_bytes // 2**20} MB); is it the right file?", path=where)
+    try:
+        with path.open("rb") as f:
+            data = f.read(max_bytes + 1)
+    except OSError as exc:
+        raise ConfigError(f"cannot read: {exc.strerror or exc}", path=where) from None
+    if len(data) > max_bytes:   # grew, or a special file that says size 0
+        raise ConfigError(f"too large for {expected} (more than {max_bytes // 2**20} MB)",
+                          path=where)
+    return decode_text(data, where, expected)
+
+
+def decode_text(data: bytes, where: str, expected: str) -> str:
+    """``data`` as UTF-8 text (a leading byte-order mark dropped); otherwise a ConfigError
+    that says what the file looks like instead."""
+    for magic, kind in _MAGIC:
+        if data.startswith(magic):
+            what = "UTF-16 text, not UTF-8" if kind == "UTF-16 text" else \
+                f"not a text file: it looks like {kind}"
+            raise ConfigError(f"{what} ({expected} was expected)", path=where)
+    if b"\x00" in data[:8192]:
+        raise ConfigError(f"not a text file: binary data ({expected} was expected)",
+                          path=where)
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        start = data.rfind(b"\n", 0, exc.start) + 1
+        end = data.find(b"\n", exc.start)
+        shown = data[start:end if end >= 0 else len(data)].decode("cp1252", "replace").strip()
+        raise ConfigError(f"not UTF-8 text (Latin-1 or Windows-1252?): {shown[:60]!r}; save "
+                          "the file as UTF-8", path=where, line=line) from None
 
 
 class YamlNode:
@@ -35,13 +111,7 @@ class YamlNode:
     def load(cls, path: str | Path) -> YamlNode:
         """Read a YAML file; a missing file or a syntax error is a :class:`ConfigError`."""
         p = Path(path)
-        try:
-            text = p.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise ConfigError("file not found", path=str(p)) from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"cannot read: {exc}", path=str(p)) from None
-        return cls.parse(text, str(p))
+        return cls.parse(read_text_file(p, MAX_YAML_BYTES, "a YAML file"), str(p))
 
     @classmethod
     def parse(cls, text: str, path: str = "<string>") -> YamlNode:
@@ -81,10 +151,20 @@ class YamlNode:
             raise self.error("expected a mapping (key: value)")
         allowed_set = set(allowed)
         out: dict[str, YamlNode] = {}
+        previous: yaml.Node | None = None
+        previous_name = ""
         for key_node, value_node in self._node.value:
             name = _constructor.construct_object(key_node, deep=True)
             if not isinstance(name, str):
-                raise YamlNode(key_node, self.path, self.key).error(f"key {name!r} is not a string")
+                where = YamlNode(key_node, self.path, self.key)
+                if isinstance(name, int) and previous is not None \
+                        and _comma_split(previous, key_node, value_node):
+                    written = f"{previous.value},{key_node.value}"
+                    raise YamlNode(previous, self.path, self._child_key(previous_name)).error(
+                        f"{written}: a decimal comma? write "
+                        f"{written.replace(',', '.')} (in {{...}} a comma separates keys)")
+                raise where.error(f"key {name!r} is not a string")
+            previous, previous_name = value_node, name
             child = YamlNode(value_node, self.path, self._child_key(name))
             if name not in allowed_set:
                 accepted = ", ".join(sorted(allowed_set))
@@ -123,9 +203,16 @@ class YamlNode:
         return _constructor.construct_object(self._node, deep=True)
 
     def number(self, *, lo: float = -math.inf, hi: float = math.inf) -> float:
-        """A finite number within [lo, hi]."""
+        """A finite number within [lo, hi].  ``1e9`` written plainly is one (YAML 1.1, which
+        PyYAML reads, wants ``1.0e+9``); ``300,5`` is told as a decimal comma."""
         v = self.value()
+        plain = isinstance(self._node, yaml.ScalarNode) and self._node.style is None
+        if plain and isinstance(v, str) and _EXPONENT.fullmatch(v):
+            v = float(v)
         if isinstance(v, bool) or not isinstance(v, int | float):
+            if isinstance(v, str) and _DECIMAL_COMMA.fullmatch(v.strip()):
+                raise self.error(f"expected a number, got {v!r}: a decimal comma? write "
+                                 f"{v.strip().replace(',', '.')}")
             raise self.error(f"expected a number, got {v!r}")
         if not math.isfinite(v):
             raise self.error("expected a finite number")
@@ -177,6 +264,16 @@ class YamlNode:
                 raise r.error(f"expected a {rows}x{cols} matrix: row {i} must have "
                               f"{cols} numbers") from None
         return out
+
+
+def _comma_split(previous: yaml.Node, key: yaml.Node, value: yaml.Node) -> bool:
+    """``{length_mm: 300,5}``: YAML reads ``5`` as the next key (with no value); true when
+    ``key`` is digits right after the digits of ``previous``'s value, on the same line."""
+    return (isinstance(previous, yaml.ScalarNode) and previous.style is None
+            and str(previous.value).lstrip("+-").isdigit()
+            and isinstance(key, yaml.ScalarNode) and str(key.value).isdigit()
+            and isinstance(value, yaml.ScalarNode) and value.value in ("", None)
+            and previous.end_mark.line == key.start_mark.line)
 
 
 #: top-level sections only a bolt table has, and only a station file has (``stationd.config``)

@@ -120,6 +120,36 @@ def test_a_board_not_found_reduced_is_skipped_at_the_time_bound():
     assert detect_corners(blank, board, budget_s=60.0).reason == "chessboard not found"
 
 
+@pytest.mark.parametrize("board", [SPEC, "charuco:11x8:20:15:DICT_5X5_100"])
+@pytest.mark.parametrize("size", [(2, 2), (1, 1), (30, 3000)])
+def test_images_too_small_for_the_board_are_rejected_not_an_opencv_assertion(
+        tmp_path, capsys, board, size):
+    """Issue 19: images without a board, too small to hold one, stopped ``calibrate camera``
+    with OpenCV's ``adaptiveThreshold`` assertion (a traceback)."""
+    w, h = size
+    for i in range(6):
+        cv2.imwrite(str(tmp_path / f"v{i}.png"), np.full((h, w, 3), 60 + 20 * i, np.uint8))
+    code, out, err = _cli(capsys, "calibrate", "camera", str(tmp_path / "v*.png"), "--board",
+                          board, "--out", str(tmp_path / "c.yaml"))
+    assert code == 2 and out == "" and "Traceback" not in err and err.count("\n") == 1
+    assert "only 0 usable images out of 6" in err
+    assert not (tmp_path / "c.yaml").exists()
+    found = detect_corners(np.zeros((h, w), np.uint8), parse_board(board))
+    assert not found.found and "too small to show the board" in found.reason
+
+
+def test_an_opencv_refusal_is_a_board_not_found_with_its_reason(monkeypatch):
+    import stationd.geometry.calibration as calibration
+
+    def refuse(*args, **kwargs):
+        raise cv2.error("OpenCV(5.0.0) thresh.cpp:1908: error: (-215:Assertion failed) "
+                        "blockSize % 2 == 1 in function 'adaptiveThreshold'")
+
+    monkeypatch.setattr(calibration.cv2, "findChessboardCorners", refuse)
+    found = detect_corners(np.zeros((480, 640), np.uint8), parse_board(SPEC))
+    assert not found.found and found.reason.startswith("board not found (OpenCV: ")
+
+
 def test_write_all_leaves_nothing_when_one_file_fails(tmp_path):
     from stationd.calibrate_cli import write_all
     from stationd.errors import InputError

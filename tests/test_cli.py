@@ -104,15 +104,60 @@ def test_localize_json_and_repeat(files, capsys):
     (lambda d: ["demo", "--save", str(d)], "it goes with --vision"),
     (lambda d: ["bench", "vision", "--only", ""], "--only: unknown section(s) ''"),
     (lambda d: ["run", "--config", str(d / "deep.yaml")], "nested too deeply"),
+    # issue 19: hangs, tracebacks and messages in the program's words
+    (lambda d: ["detect", str(d / "huge.png"), "--camera", str(d / "cam.yaml")],
+     "huge.png: the image says it is 100000 x 100000 px: more than 200 MP"),
+    (lambda d: ["run", "--config", str(d / "fifo.yaml")],
+     "fifo.yaml: a FIFO, not a file (a YAML file was expected)"),
+    (lambda d: ["run", "--config", "/dev/zero"], "/dev/zero: a device, not a file"),
+    (lambda d: ["detect", str(d / "one.png"), "--camera", "/dev/zero"],
+     "/dev/zero: a device, not a file"),
+    (lambda d: ["localize", str(d / "left.png"), str(d / "right.png"), "--pair",
+                str(d / "fifo.yaml")], "fifo.yaml: a FIFO, not a file"),
+    (lambda d: ["run", "--config", str(d / "one.png")],
+     "one.png: not a text file: it looks like a PNG image"),
+    (lambda d: ["run", "--config", str(d / "latin1.yaml")],
+     "latin1.yaml:2: not UTF-8 text (Latin-1 or Windows-1252?)"),
+    (lambda d: ["status", "--url", "http://a b/"],
+     "--url 'http://a b/': a URL has no spaces or control characters"),
 ])
 def test_bad_input_exits_2_with_one_line(files, capsys, make_args, needle):
+    import os
+    import struct
+    import zlib
+
     d, _, _ = files
+    if not (d / "fifo.yaml").exists():
+        os.mkfifo(d / "fifo.yaml")   # read, it would block until a writer came
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(
+            ">I", zlib.crc32(kind + data))
+
+    (d / "huge.png").write_bytes(   # 100000 x 100000 px in 60 bytes: OpenCV asserted
+        b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 100000, 100000, 8, 2,
+                                                            0, 0, 0))
+        + chunk(b"IDAT", zlib.compress(b"\0" * 31)) + chunk(b"IEND", b""))
+    (d / "latin1.yaml").write_bytes("tool:\n  rule: caf\u00e9\n".encode("latin-1"))
     (d / "bad_k.yaml").write_text("K: [[1, 0], [0, 1]]\nsize: [10, 10]\n")
     (d / "bad_config.yaml").write_text("vision:\n  centre_method: magic\n")
     (d / "deep.yaml").write_text("vision: " + "[" * 3000 + "]" * 3000 + "\n")
     code, _, err = _run(capsys, *make_args(d))
     assert code == 2
     assert needle in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["config"], "stationd config: error: a command is missing: stationd config check "
+                 "(see --help)\n"),
+    (["calibrate"], "stationd calibrate: error: a command is missing: stationd calibrate "
+                    "stereo | camera | vehicle (see --help)\n"),
+])
+def test_a_command_without_its_subcommand_says_what_to_type(argv, message, capsys):
+    """Issue 19: ``stationd config`` said ``required: config_command``."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2 and capsys.readouterr().err == message
 
 
 @pytest.mark.parametrize("bench", ["vision", "chain", "station"])

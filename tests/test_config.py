@@ -1,5 +1,6 @@
 import re
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -135,6 +136,7 @@ def test_shipped_station_files_check_clean():
     assert sim.bolts is not None and sim.bolts.table is not None
     assert sim.bolts.table.summary() == "1 model(s), 50 bolt(s), 3 pset(s)"
     # the example names the simulated pair's files and the example bolt table
+    # its database is in the service's StateDirectory, made by systemd at the service's start
     example = check_station(ROOT / "config" / "station.example.yaml")
     assert example.ok and example.warnings == [] and example.bolts is not None
 
@@ -265,7 +267,7 @@ def test_a_missing_to_vehicle_file_is_a_warning_not_an_error(sim_copy):
     ("lift: {url: 'sim://lift'}", "lift: {url: 'modbus-udp://10.0.0.1'}", "lift.url",
      "unknown lift scheme 'modbus-udp'; accepted: modbus-tcp://"),
     ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'openprotocol://h:99999'}", "wrench.url",
-     "openprotocol://h:99999: the port is not a number in 0-65535; accepted: openprotocol://"),
+     "openprotocol://h:99999: the port is not a number in 1-65535; accepted: openprotocol://"),
     ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'wrench.local'}", "wrench.url",
      "'wrench.local' is not a device URL (scheme://...)"),
     ("lift: {url: 'sim://lift'}", "lift: {url: 'modbus-tcp://10.0.0.1?unit=300'}", "lift.url",
@@ -282,6 +284,37 @@ def test_a_missing_to_vehicle_file_is_a_warning_not_an_error(sim_copy):
     ("wrench: {url: 'sim://wrench'}",
      "wrench: {url: 'openprotocol+serial:///dev/ttyUSB9?baud=abc'}", "wrench.url",
      "option baud='abc' is not valid"),
+    # issue 19: cameras and the lift were not built, so these passed and the station then
+    # sat in fault for good; they are built (not opened) like the controller now
+    ("url: 'sim://pair1/left'", "url: 'aravis://X?trigger=sometimes'",
+     "cameras.pair1_left.url",
+     "option trigger='sometimes' is not valid: expected software, free or line0"),
+    ("url: 'sim://pair1/left'", "url: 'aravis://X?exposure_us=-1'", "cameras.pair1_left.url",
+     "option exposure_us='-1' is not valid: an exposure in microseconds is 1-1e+06"),
+    ("url: 'sim://pair1/left'", "url: 'aravis://X?gain=9000'", "cameras.pair1_left.url",
+     "unknown option(s) gain (accepted: buffers, exposure_us, frame_rate, gain_db,"),
+    ("url: 'sim://pair1/left'", "url: 'aravis://X?gain_db=9000'", "cameras.pair1_left.url",
+     "option gain_db='9000' is not valid: a gain in dB is 0-48"),
+    ("url: 'sim://pair1/left'", "url: 'opencv://0?width=abc'", "cameras.pair1_left.url",
+     "option width='abc' is not valid"),
+    ("url: 'sim://pair1/left'", "url: 'sim://pair9/left'", "cameras.pair1_left.url",
+     "shows pair 'pair9', which the simulated world does not have (it renders this file's "
+     "pairs: pair1, pair2, pair3, pair4): write sim://pair1/left"),
+    ("url: 'sim://pair1/left'", "url: 'sim://pair1/left?sed=1'", "cameras.pair1_left.url",
+     "unknown option(s) sed (accepted: seed"),
+    ("lift: {url: 'sim://lift'}", "lift: {url: 'openprotocol://10.0.0.9:4545'}", "lift.url",
+     "unknown lift scheme 'openprotocol' (openprotocol:// is a tightening controller's URL "
+     "(wrench.url), not a lift's)"),
+    ("lift: {url: 'sim://lift'}", "lift: {url: 'sim://wrench'}", "lift.url",
+     "not the simulated lift (the simulated tightening controller: wrench.url)"),
+    ("lift: {url: 'sim://lift'}", "lift: {url: 'sim://lift?transport=udp'}", "lift.url",
+     "option transport='udp' is not valid: tcp or rtu"),
+    ("lift: {url: 'sim://lift'}", "lift: {url: 'modbus-tcp://10.0.0.1:0'}", "lift.url",
+     "the port is not a number in 1-65535"),   # was taken as 502 (``port or 502``)
+    ("lift: {url: 'sim://lift'}", "lift: {url: 'modbus-rtu:///dev/ttyUSB0?baud=0'}",
+     "lift.url", "option baud=0 is not valid: a serial speed is 50-4000000 baud"),
+    ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'openprotocol://10.0.0.9:0'}",
+     "wrench.url", "the port is not a number in 1-65535"),
 ])
 def test_device_urls_are_checked_without_opening_a_device(sim_copy, old, new, key, message):
     station = _edit(sim_copy / "station.yaml", old, new)
@@ -292,6 +325,113 @@ def test_device_urls_are_checked_without_opening_a_device(sim_copy, old, new, ke
     with pytest.raises(ConfigError, match=re.escape(message)):
         load_station_config(station, station=True)
     load_station_config(station)  # other readers of a station file need not open its devices
+
+
+DB = "database: {url: 'sqlite:///stationd-sim.db'}"
+
+
+@pytest.mark.parametrize(("url", "setup", "message"), [
+    ("sqlite:///:memory:", None, "is a database in memory: every result is lost when the "
+                                 "station stops"),
+    ("sqlite://", None, "is a database in memory"),
+    ("sqlite:///results", "dir", "results is a folder, not a database file"),
+    ("sqlite:///pipe.db", "fifo", "pipe.db is not a regular file"),
+])
+def test_a_database_that_cannot_keep_the_results_is_refused(sim_copy, url, setup, message):
+    """Issue 19: these passed the check, then lost every result at exit, said "disk I/O
+    error", retried "unable to open database file" for ever, or hung (a FIFO)."""
+    import os
+
+    name = url.removeprefix("sqlite:///")
+    if setup == "dir":
+        (sim_copy / name).mkdir()
+    elif setup == "text":
+        (sim_copy / name).write_text("a note, not a database\n")
+    elif setup == "fifo":
+        os.mkfifo(sim_copy / name)
+    station = _edit(sim_copy / "station.yaml", DB, f"database: {{url: '{url}'}}")
+    [error] = check_station(station).errors
+    assert (error.line, error.key) == (_line(station, url), "database.url")
+    assert message in str(error)
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        load_station_config(station, station=True)
+
+
+def test_a_file_that_is_not_a_database_is_an_error_to_the_check_and_a_fault_at_start(sim_copy):
+    """The daemon starts in fault on it and opens it once replaced (tests/test_serve.py);
+    ``config check`` says what it is."""
+    (sim_copy / "notes.txt").write_text("a note, not a database\n")
+    station = _edit(sim_copy / "station.yaml", DB, "database: {url: 'sqlite:///notes.txt'}")
+    [error] = check_station(station).errors
+    assert (error.line, error.key) == (_line(station, "notes.txt"), "database.url")
+    assert f"not an SQLite database: {sim_copy / 'notes.txt'} is another kind of file" in \
+        str(error)
+    assert load_station_config(station, station=True).database_url.endswith("notes.txt")
+
+
+def test_a_database_in_a_missing_folder_is_refused(sim_copy):
+    """The daemon's lock made the folder silently (as whichever user ran it); refused now,
+    except the service's StateDirectory by the checker (systemd makes it at the start)."""
+    station = _edit(sim_copy / "station.yaml", DB, "database: {url: 'sqlite:///gone/r.db'}")
+    [error] = check_station(station).errors
+    assert (error.line, error.key) == (_line(station, "gone/r.db"), "database.url")
+    message = f"folder {sim_copy / 'gone'} does not exist: create it, owned by the user the " \
+              "station runs as"
+    assert message in str(error)
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        load_station_config(station, station=True)
+    if not Path("/var/lib/stationd").exists():
+        _edit(station, "sqlite:///gone/r.db", "sqlite:////var/lib/stationd/r.db")
+        assert check_station(station).ok
+        with pytest.raises(ConfigError, match="folder /var/lib/stationd does not exist"):
+            load_station_config(station, station=True)
+
+
+def test_a_new_or_empty_database_file_is_accepted(sim_copy):
+    station = sim_copy / "station.yaml"
+    assert check_station(station).ok                       # not there yet: created at start
+    (sim_copy / "stationd-sim.db").write_bytes(b"")           # empty: SQLite takes it as new
+    assert check_station(station).ok
+
+
+TOOL = "tool: {length_mm: 300.0, max_tilt_deg: 10.0, rule: axis}"
+MATCHING = "matching: {tolerance_mm: 8.0,"
+
+
+@pytest.mark.parametrize(("old", "new", "mark", "key", "message"), [
+    (TOOL, "tool: {length_mm: 300.0, offset_mm: [10000, 0]}", "offset_mm", "tool.offset_mm",
+     "an offset of 10000 mm from the wrench axis is not plausible"),
+    (MATCHING, "matching: {tolerance_mm: 0.008,", "tolerance_mm", "matching.tolerance_mm",
+     "0.008 mm is not plausible: the bolt end must be within 1-50 mm of its bolt "
+     "(millimetres: 8 for 8 mm, not 0.008)"),
+    (MATCHING, "matching: {tolerance_mm: 500,", "tolerance_mm", "matching.tolerance_mm",
+     "500 mm is not plausible"),
+    (TOOL, TOOL + "\nvision:\n  hsv: {h: [168, 118], s: [50, 255], v: [45, 255]}\n",
+     "h: [168", "vision.hsv.h", "a hue range of 131 of 180 accepts nearly every colour, not "
+     "the marker's (at most 90); [168, 118] wraps through red (lo > hi): a reversed range? "
+     "write [118, 168]"),
+    (TOOL, TOOL + "\nvision:\n  gates:\n    max_rms_px: 1e9\n", "max_rms_px",
+     "vision.gates.max_rms_px", "1e+09 px is not plausible for a fit's RMS residual (0.01-5 px"),
+    (TOOL, TOOL + "\nvision:\n  gates:\n    max_rms_px: 0\n", "max_rms_px",
+     "vision.gates.max_rms_px", "0 refuses every marker"),
+])
+def test_implausible_values_are_refused_with_key_and_line(sim_copy, old, new, mark, key,
+                                                          message):
+    """Issue 19: these passed ``config check`` and the station then never matched a bolt,
+    matched any, or took any blob for the marker."""
+    station = _edit(sim_copy / "station.yaml", old, new)
+    [error] = check_station(station).errors
+    assert (error.line, error.key) == (_line(station, mark), key)
+    assert message in str(error)
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        load_station_config(station)
+
+
+def test_a_narrow_hue_range_through_red_is_still_accepted(sim_copy):
+    station = _edit(sim_copy / "station.yaml", TOOL,
+                    TOOL + "\nvision:\n  hsv: {h: [170, 10], s: [50, 255], v: [45, 255]}\n")
+    assert check_station(station).ok
+    assert load_station_config(station).vision.hsv.h == (170, 10)
 
 
 def test_the_bolt_table_is_checked_with_the_stations_tolerance(sim_copy):
@@ -310,9 +450,9 @@ def test_the_bolt_table_is_checked_with_the_stations_tolerance(sim_copy):
     _edit(station, "tolerance_mm: 8.0", "tolerance_mm: 12.0")
     [error] = check_station(station).errors
     assert error.path == str(bolts) and "twice the matching tolerance of 12 mm" in str(error)
-    _edit(station, "tolerance_mm: 12.0", "tolerance_mm: 0")  # the loader takes 0
+    _edit(station, "tolerance_mm: 12.0", "tolerance_mm: 0")  # refused itself now (issue 19)
     [error] = check_station(station).errors
-    assert error.key == "matching" and "the bolt table cannot be checked" in str(error)
+    assert error.key == "matching.tolerance_mm" and "0 mm is not plausible" in str(error)
 
 
 @pytest.mark.parametrize(("text", "message"), [
@@ -348,7 +488,7 @@ def test_a_bolt_without_pset_on_a_psets_only_controller_is_a_warning(sim_copy):
     ("left: pair2_left", "left: pair1_right", "pairs.pair2.left",
      "camera 'pair1_right' is already the right camera of pair 'pair1'"),
     # two camera names for one device (its options aside)
-    ("pair2_left: {url: 'sim://pair2/left'}", "pair2_left: {url: 'sim://pair1/left?x=1'}",
+    ("pair2_left: {url: 'sim://pair2/left'}", "pair2_left: {url: 'sim://pair1/left?seed=1'}",
      "cameras.pair2_left", "the same camera as 'pair1_left' (sim://pair1/left)"),
 ])
 def test_a_camera_serves_one_side_of_one_pair(sim_copy, old, new, key, message):

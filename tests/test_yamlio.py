@@ -45,3 +45,99 @@ def test_collections_nested_too_deeply_are_one_error_not_a_recursion_crash(tmp_p
     path.write_text("vision: " + "[" * 5000 + "]" * 5000 + "\n")
     with pytest.raises(ConfigError, match="nested too deeply"):
         YamlNode.load(path)
+
+
+# -- issue 19: only regular files are read, and what a file is instead is said -------------
+
+def _load_soon(path, seconds=5.0):
+    """YamlNode.load(path) in a thread: a FIFO used to block it until a writer came."""
+    import threading
+
+    out: list[BaseException | None] = []
+
+    def run():
+        try:
+            YamlNode.load(path)
+            out.append(None)
+        except BaseException as exc:  # handed to the test
+            out.append(exc)
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    t.join(seconds)
+    assert out, f"YamlNode.load({path}) did not return within {seconds} s"
+    return out[0]
+
+
+def test_a_fifo_is_refused_at_once_not_waited_on(tmp_path):
+    import os
+
+    os.mkfifo(tmp_path / "station.yaml")
+    exc = _load_soon(tmp_path / "station.yaml")
+    assert isinstance(exc, ConfigError)
+    assert str(exc) == f"{tmp_path / 'station.yaml'}: a FIFO, not a file (a YAML file was " \
+                       "expected): give the path of a regular file"
+
+
+def test_a_device_is_refused_at_once_not_read_into_memory():
+    exc = _load_soon("/dev/zero")
+    assert isinstance(exc, ConfigError) and "/dev/zero: a device, not a file" in str(exc)
+
+
+def test_a_folder_and_a_huge_file_are_refused(tmp_path):
+    with pytest.raises(ConfigError, match="a folder, not a file"):
+        YamlNode.load(tmp_path)
+    big = tmp_path / "big.yaml"
+    with big.open("wb") as f:
+        f.truncate(17 * 2**20)    # sparse: nothing written, nothing read
+    with pytest.raises(ConfigError, match=r"17825792 bytes: too large for a YAML file \(at most "
+                                          r"16 MB\)"):
+        YamlNode.load(big)
+
+
+@pytest.mark.parametrize(("data", "message"), [
+    (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR", "not a text file: it looks like a PNG image (a "
+                                             "YAML file was expected)"),
+    (b"\xff\xd8\xff\xe0\x00\x10JFIF", "it looks like a JPEG image"),
+    (b"SQLite format 3\x00\x10\x00", "it looks like an SQLite database"),
+    (b"PK\x03\x04\x14\x00", "it looks like a ZIP archive"),
+    ("a: 1\n".encode("utf-16"), "UTF-16 text, not UTF-8"),
+    (b"a: 1\n\x00\x01\x02", "not a text file: binary data"),
+    ("a: 1\nb: caf\u00e9 cr\u00e8me\n".encode("latin-1"),
+     "f.yaml:2: not UTF-8 text (Latin-1 or Windows-1252?): 'b: caf\u00e9 cr\u00e8me'; save the "
+     "file as UTF-8"),
+])
+def test_a_file_that_is_not_utf8_text_says_what_it_looks_like(tmp_path, data, message):
+    """It said ``'utf-8' codec can't decode byte 0x89 in position 0``."""
+    p = tmp_path / "f.yaml"
+    p.write_bytes(data)
+    with pytest.raises(ConfigError) as ei:
+        YamlNode.load(p)
+    assert message in str(ei.value) and "codec" not in str(ei.value)
+
+
+def test_a_byte_order_mark_is_not_an_error(tmp_path):
+    p = tmp_path / "f.yaml"
+    p.write_bytes(b"\xef\xbb\xbfa: 1\n")
+    assert YamlNode.load(p).mapping(["a"])["a"].number() == 1
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("t: {a: 300,5}\n", "f.yaml:1: t.a: 300,5: a decimal comma? write 300.5 (in {...} a comma "
+                        "separates keys)"),
+    ("t:\n  a: 300,5\n", "f.yaml:2: t.a: expected a number, got '300,5': a decimal comma? "
+                         "write 300.5"),
+])
+def test_a_decimal_comma_is_told_as_one(text, message):
+    """``{length_mm: 300,5}`` said ``key 5 is not a string``."""
+    with pytest.raises(ConfigError) as ei:
+        YamlNode.parse(text, "f.yaml").mapping(["t"])["t"].mapping(["a"])["a"].number()
+    assert str(ei.value) == message
+
+
+def test_an_exponent_without_a_dot_is_a_number_but_quoted_text_is_not():
+    """YAML 1.1 (PyYAML) reads ``1e9`` as text: a person means the number."""
+    m = YamlNode.parse("a: 1e9\nb: -2E-3\nc: '1e9'\n", "f.yaml").mapping(["a", "b", "c"])
+    assert m["a"].number() == 1e9 and m["b"].number() == -2e-3
+    with pytest.raises(ConfigError, match="expected a number, got '1e9'"):
+        m["c"].number()

@@ -30,7 +30,7 @@ FORMS = ("aravis://DEVICE-ID[?trigger=software|line0|free&pixel_format=BayerRG8]
          "sim://PAIR/left|right")
 
 __all__ = ["BACKENDS", "FORMS", "CameraDevice", "EndOfStreamError", "Frame", "FrameError",
-           "UnsupportedError", "camera_class", "open_camera"]
+           "UnsupportedError", "camera_class", "check_camera_url", "open_camera"]
 
 
 def camera_class(url: str) -> type[CameraDevice]:
@@ -43,6 +43,17 @@ def camera_class(url: str) -> type[CameraDevice]:
     if cls is None:
         raise UrlError(f"unknown camera scheme {scheme!r}; accepted: {FORMS}", device=url)
     return cls
+
+
+def check_camera_url(url: str) -> None:
+    """Build the camera of ``url`` without opening it: its form and options, with their
+    ranges, are checked (UrlError), nothing is connected and no SDK is loaded (the Aravis
+    backend parses its URL before it ever imports Aravis)."""
+    cls = camera_class(url)
+    try:
+        cls(url).close()
+    except ValueError as exc:  # a backend's own refusal that is not a UrlError yet
+        raise UrlError(str(exc), device=url) from None
 
 
 def open_camera(url: str, **kw: Any) -> CameraDevice:

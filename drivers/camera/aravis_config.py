@@ -17,7 +17,7 @@ from drivers.errors import (
     DeviceError,
     RefusedError,
 )
-from drivers.url import parse_url
+from drivers.url import OptionError, parse_url
 
 FORM = ("aravis://DEVICE-ID?trigger=software|line0|free&pixel_format=" + "|".join(pixels.FORMATS)
         + "&exposure_us=N&gain_db=N&buffers=4&region=full|X,Y,W,H&frame_rate=HZ")
@@ -57,7 +57,30 @@ def _trigger(text: str) -> str:
     low = text.lower()
     if low in ("software", "free") or (low.startswith("line") and low[4:].isdigit()):
         return low
-    raise ValueError(text)
+    raise OptionError("expected software, free or line0, line1... (a hardware trigger input)")
+
+
+#: plausible settings: outside them a number is a typo or another unit, and the camera would
+#: refuse it (or clamp it silently) only once the station runs.  GenICam cameras' analogue
+#: gain goes from 0 to 24-48 dB (a linear factor such as 9000 is not dB); an exposure longer
+#: than a second blurs a moving wrench into nothing and shorter than 1 us is no camera's
+GAIN_DB = (0.0, 48.0)
+EXPOSURE_US = (1.0, 1_000_000.0)
+
+
+def _gain_db(text: str) -> float:
+    value = float(text)
+    if not GAIN_DB[0] <= value <= GAIN_DB[1]:
+        raise OptionError(f"a gain in dB is {GAIN_DB[0]:g}-{GAIN_DB[1]:g}")
+    return value
+
+
+def _exposure_us(text: str) -> float:
+    value = float(text)
+    if not EXPOSURE_US[0] <= value <= EXPOSURE_US[1]:
+        raise OptionError(f"an exposure in microseconds is {EXPOSURE_US[0]:g}-"
+                          f"{EXPOSURE_US[1]:g} (1 s)")
+    return value
 
 
 def _buffers(text: str) -> int:
@@ -73,7 +96,8 @@ def parse_aravis_url(text: str) -> tuple[Settings, dict[str, float | None]]:
     url = parse_url(text)
     opts = url.typed_options({
         "trigger": (_trigger, "software"), "pixel_format": (choice(*pixels.FORMATS), None),
-        "exposure_us": (positive, None), "gain_db": (float, None), "buffers": (_buffers, None),
+        "exposure_us": (_exposure_us, None), "gain_db": (_gain_db, None),
+        "buffers": (_buffers, None),
         "region": (_region, None), "frame_rate": (positive, None),
         "timeout": (positive, None)}, FORM)
     name = unquote(urlsplit(text).netloc)

@@ -22,8 +22,16 @@ BACKENDS: dict[str, str] = {
 FORMS = ("modbus-tcp://HOST[:PORT]?unit=N | "
          "modbus-rtu:///dev/ttyUSB0?baud=19200&parity=E&unit=N | sim://lift[?transport=rtu]")
 
-__all__ = ["BACKENDS", "FORMS", "Lift", "LiftState", "MapError", "RegisterMap", "lift_class",
-           "open_lift"]
+__all__ = ["BACKENDS", "FORMS", "Lift", "LiftState", "MapError", "RegisterMap", "check_lift_url",
+           "lift_class", "open_lift"]
+
+
+#: schemes of the other devices, named when given as the lift's (a URL pasted in the wrong
+#: section says so, not only "unknown scheme")
+OTHER_DEVICES = {"openprotocol": "a tightening controller's URL (wrench.url)",
+                 "openprotocol+serial": "a tightening controller's URL (wrench.url)",
+                 "aravis": "a camera's URL", "opencv": "a camera's URL",
+                 "file": "a camera replay's URL"}
 
 
 def lift_class(url: str) -> type[Lift]:
@@ -31,8 +39,22 @@ def lift_class(url: str) -> type[Lift]:
     scheme = parse_url(url).scheme
     cls: type[Lift] | None = load_backend(BACKENDS, scheme)
     if cls is None:
-        raise UrlError(f"unknown lift scheme {scheme!r}; accepted: {FORMS}", device=url)
+        other = f" ({scheme}:// is {OTHER_DEVICES[scheme]}, not a lift's)" \
+            if scheme in OTHER_DEVICES else ""
+        raise UrlError(f"unknown lift scheme {scheme!r}{other}; accepted: {FORMS}", device=url)
     return cls
+
+
+def check_lift_url(url: str) -> None:
+    """Check ``url`` as the lift's without opening anything: its scheme, form and options
+    with their ranges (UrlError).  Nothing connects, no simulated PLC starts."""
+    cls = lift_class(url)
+    if parse_url(url).scheme == "sim":
+        from drivers.lift.sim import parse_sim_lift_url
+
+        parse_sim_lift_url(url)
+    else:   # a Modbus lift only parses its URL when built
+        cls(url, None)
 
 
 def open_lift(url: str, register_map: RegisterMap | None = None, **kw: Any) -> Lift:

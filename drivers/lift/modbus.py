@@ -21,8 +21,10 @@ from drivers.errors import (
     ConnectionLostError,
     DeviceTimeoutError,
     ProtocolError,
+    UrlError,
 )
 from drivers.lift.base import Lift, RegisterMap
+from drivers.link import baud_rate
 from drivers.modbus_link import (
     EXCEPTION_NAMES,
     RTU_FORM,
@@ -62,6 +64,12 @@ class ModbusLift(Lift):
                  timeout: float | None = None) -> None:
         super().__init__(url, register_map)
         self.spec, opts = parse_modbus_url(url)
+        if self.spec.kind == "rtu":
+            try:
+                baud_rate(self.spec.baud)
+            except ValueError as exc:
+                raise UrlError(f"option baud={self.spec.baud} is not valid: {exc}",
+                               device=url) from None
         self.timeout = opts["timeout"] or timeout or DEFAULT_TIMEOUT
         self._io = threading.Lock()  # one request on the wire at a time; guards the link
         self._link: ModbusLink | None = None

@@ -20,14 +20,15 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
+from typing import Any
 
 from drivers.errors import DeviceError
 from drivers.lift.base import Lift, LiftState, RegisterMap
 from drivers.lift.modbus import ModbusLift
 from drivers.modbus_server import PtyPair, SimServer
-from drivers.url import parse_url
+from drivers.url import OptionError, parse_url
 
-__all__ = ["SIM_FORM", "PtyPair", "SimLift", "SimulatedPlc"]
+__all__ = ["SIM_FORM", "PtyPair", "SimLift", "SimulatedPlc", "parse_sim_lift_url"]
 
 SIM_FORM = "sim://lift?transport=tcp|rtu&unit=1&timeout=1.0"
 
@@ -143,11 +144,7 @@ class SimLift(Lift):
     def __init__(self, url: str = "sim://lift", register_map: RegisterMap | None = None, *,
                  timeout: float | None = None) -> None:
         super().__init__(url, register_map)
-        parsed = parse_url(url)
-        if parsed.scheme != "sim" or parsed.host != "lift" or parsed.path not in ("", "/"):
-            raise parsed.error(f"expected {SIM_FORM}")
-        opts = parsed.typed_options({"transport": (_transport, "tcp"), "unit": (int, 1),
-                                     "timeout": (float, None)}, SIM_FORM)
+        opts = parse_sim_lift_url(url)
         self.transport: str = opts["transport"]
         self.plc = SimulatedPlc(self.register_map, unit=opts["unit"])
         self._timing: dict[str, float | None] = {"timeout": opts["timeout"] or timeout}
@@ -194,5 +191,33 @@ class SimLift(Lift):
 
 def _transport(text: str) -> str:
     if text not in ("tcp", "rtu"):
-        raise ValueError(text)
+        raise OptionError("tcp or rtu")
     return text
+
+
+def _unit(text: str) -> int:
+    value = int(text)
+    if not 0 <= value <= 247:
+        raise OptionError("a Modbus unit id is 0-247")
+    return value
+
+
+def _timeout(text: str) -> float:
+    value = float(text)
+    if not 0 < value < 3600:
+        raise OptionError("seconds, > 0")
+    return value
+
+
+def parse_sim_lift_url(url: str) -> dict[str, Any]:
+    """The options (transport, unit, timeout) of a ``sim://lift`` URL; UrlError otherwise,
+    saying which simulated device a ``sim://`` URL names when it is not the lift."""
+    parsed = parse_url(url)
+    if parsed.scheme == "sim" and parsed.host not in (None, "lift"):
+        other = " (the simulated tightening controller: wrench.url)" \
+            if parsed.host == "wrench" else ""
+        raise parsed.error(f"not the simulated lift{other}; expected {SIM_FORM}")
+    if parsed.scheme != "sim" or parsed.host != "lift" or parsed.path not in ("", "/"):
+        raise parsed.error(f"expected {SIM_FORM}")
+    return parsed.typed_options({"transport": (_transport, "tcp"), "unit": (_unit, 1),
+                                 "timeout": (_timeout, None)}, SIM_FORM)

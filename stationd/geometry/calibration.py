@@ -34,11 +34,13 @@ import numpy as np
 from stationd import progress
 from stationd.errors import ImageError, InputError
 from stationd.geometry.camera import Camera, StereoPair
+from stationd.imageio import decode, read_image_bytes
 
 MIN_PAIRS = 6
 MIN_CORNERS = 6  # common corners a ChArUco view needs (a chessboard has all or none)
 DETECT_MAX_SIDE = 1600  # larger images are searched reduced, then refined at full size
 VIEW_BUDGET_S = 5.0  # per image: larger search sizes are tried only while they fit in this
+MIN_SQUARE_PX = 4  # a board square smaller than this in the image cannot be found
 RETRY_MAX_SIDE = 2 * DETECT_MAX_SIDE  # and never above this (see _search_chessboard)
 CORNER_ZONE = 0.2  # the board "reached" an image corner if a point fell this close (fraction)
 _SPEC_HELP = ("expected chessboard:COLSxROWS:SQUARE_MM (inner corners, e.g. chessboard:9x6:25) "
@@ -172,10 +174,7 @@ def read_grey(path: str | Path) -> np.ndarray:
     """An 8-bit grey image (colour and 16-bit files are converted): calibration needs no
     colour, and many machine-vision cameras save Mono8."""
     p = Path(path)
-    if not p.is_file():
-        raise ImageError(f"{p}: no such file" if not p.exists() else f"{p}: not a file")
-    data = np.fromfile(str(p), dtype=np.uint8)
-    img = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE) if data.size else None
+    img = decode(read_image_bytes(p), cv2.IMREAD_GRAYSCALE)
     if img is None:
         raise ImageError(f"{p}: not a readable image")
     return np.asarray(img)
@@ -184,7 +183,22 @@ def read_grey(path: str | Path) -> np.ndarray:
 def detect_corners(grey: np.ndarray, board: Board, *,
                    budget_s: float = VIEW_BUDGET_S) -> BoardCorners:
     """Find the board in an 8-bit grey image, with sub-pixel corners.  A chessboard search
-    stops at the per-image time bound ``budget_s`` with the reason (module docstring)."""
+    stops at the per-image time bound ``budget_s`` with the reason (module docstring).  An
+    image too small to show the board, or one OpenCV refuses, is a board not found with the
+    reason, never an OpenCV assertion."""
+    squares = max(board.cols, board.rows) + (0 if board.kind == "charuco" else 1)
+    if min(grey.shape[:2]) < MIN_SQUARE_PX * squares:
+        return BoardCorners.missing(
+            f"image of {grey.shape[1]}x{grey.shape[0]} px is too small to show the board "
+            f"(at least {MIN_SQUARE_PX} px per square)")
+    try:
+        return _detect_corners(grey, board, budget_s)
+    except cv2.error as exc:
+        why = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+        return BoardCorners.missing(f"board not found (OpenCV: {why[:120]})")
+
+
+def _detect_corners(grey: np.ndarray, board: Board, budget_s: float) -> BoardCorners:
     if board.kind == "charuco":
         corners, ids, _, marker_ids = _charuco_detector(board).detectBoard(grey)
         if marker_ids is None or len(marker_ids) == 0:

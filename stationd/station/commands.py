@@ -12,7 +12,9 @@ the command needs.
 from __future__ import annotations
 
 import enum
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from stationd.reasons import Reason
 
@@ -65,14 +67,41 @@ class ReleaseBolt:
     comment: str = ""
 
 
-Command = SkipBolt | ReopenVehicle | ReleaseBolt
+@dataclass(frozen=True)
+class TeachStart:
+    """Start teach mode for vehicle model ``model``: the normal cycle is off (the tool stays
+    off, nothing is sent) while an engineer holds the tool on each bolt in turn."""
+
+    model: str
+    comment: str = ""
+
+
+@dataclass(frozen=True)
+class TeachPoint:
+    """Measure the bolt end the tool is on now as ``bolt``'s position: the answer carries the
+    mean of several steady localizations and their dispersion."""
+
+    bolt: str
+    comment: str = ""
+
+
+@dataclass(frozen=True)
+class TeachStop:
+    """End teach mode: the normal cycle resumes."""
+
+    comment: str = ""
+
+
+Command = SkipBolt | ReopenVehicle | ReleaseBolt | TeachStart | TeachPoint | TeachStop
 
 #: the right each command needs
 RIGHT: dict[type[Command], Right] = {SkipBolt: Right.SKIP, ReopenVehicle: Right.REOPEN,
-                                     ReleaseBolt: Right.RELEASE}
+                                     ReleaseBolt: Right.RELEASE, TeachStart: Right.TEACH,
+                                     TeachPoint: Right.TEACH, TeachStop: Right.TEACH}
 #: the name each command has on the wire (HTTP, the command line) and in the records
 KIND: dict[type[Command], str] = {SkipBolt: "skip", ReopenVehicle: "reopen",
-                                  ReleaseBolt: "release"}
+                                  ReleaseBolt: "release", TeachStart: "teach-start",
+                                  TeachPoint: "teach-point", TeachStop: "teach-stop"}
 
 
 def skip_note(user: str, comment: str) -> str:
@@ -88,6 +117,7 @@ class Answer:
     command: Command
     issuer: Issuer
     reason: Reason | None = None
+    result: Mapping[str, Any] | None = None   # what a command measured (a taught point)
 
     @property
     def accepted(self) -> bool:
@@ -95,4 +125,4 @@ class Answer:
 
 
 __all__ = ["KIND", "RIGHT", "Answer", "Command", "Issuer", "ReleaseBolt", "ReopenVehicle",
-           "Right", "SkipBolt", "skip_note"]
+           "Right", "SkipBolt", "TeachPoint", "TeachStart", "TeachStop", "skip_note"]

@@ -41,6 +41,9 @@ from stationd.station.commands import (
     ReleaseBolt,
     ReopenVehicle,
     SkipBolt,
+    TeachPoint,
+    TeachStart,
+    TeachStop,
     skip_note,
 )
 from stationd.station.events import (
@@ -73,10 +76,17 @@ class State(enum.Enum):
     BOLT_SELECTED = "bolt selected"
     TIGHTENING = "tightening"
     FAULT = "fault"
+    TEACHING = "teaching"
 
 
 ON_A_BOLT = (State.BOLT_SELECTED, State.TIGHTENING)
 LOCALIZING = (State.TRACKING, *ON_A_BOLT)
+#: the states in which the cameras are read (teaching measures the wrench, sends nothing)
+CAMERAS_ON = (*LOCALIZING, State.TEACHING)
+#: steady localizations averaged for one taught bolt, and how many may be tried for them
+TEACH_FRAMES, TEACH_TRIES = 10, 60
+#: a taught bolt end whose localizations spread farther than this was not held still, mm
+TEACH_STEADY_MM = 2.0
 
 
 # -- inputs -------------------------------------------------------------------------------------
@@ -359,6 +369,24 @@ Action = (SendParams | EnableTool | DisableTool | SendVin | LoadVehicle | CloseV
 
 
 @dataclass
+class _Teach:
+    """Teach mode: the model, who started it, and the bolt being measured (its command and
+    the steady localizations so far)."""
+
+    model: str
+    user: str
+    measuring: CommandIn | None = None
+    points: list[tuple[float, float, float]] = field(default_factory=list)
+    tries: int = 0
+    since: float = 0.0     # only frames exposed after the engineer asked count
+
+    def reason(self) -> str:
+        doing = f"measuring {self.measuring.command.bolt}" if self.measuring is not None \
+            and isinstance(self.measuring.command, TeachPoint) else "hold the tool on a bolt"
+        return f"teaching {self.model} ({self.user}): {doing}"
+
+
+@dataclass
 class StationCore:
     """One station's rules.  ``rework``: a vehicle whose VIN was closed comes back -> reopen it
     (its history kept) rather than a named fault that clears when the lift lowers."""
@@ -396,6 +424,7 @@ class StationCore:
     _not_before: float = field(default=float("-inf"), repr=False)
     _commands: dict[int, CommandIn] = field(default_factory=dict, repr=False)  # recording
     _noks: dict[str, int] = field(default_factory=dict, repr=False)   # NOKs in a row per bolt
+    _teach: _Teach | None = field(default=None, repr=False)
     _closed_vin: str | None = field(default=None, repr=False)   # a closed VIN at height
 
     # -- the one entry point ---------------------------------------------------------------
@@ -517,6 +546,8 @@ class StationCore:
         return self._fault(ev.t, VEHICLE, "rejected", why)
 
     def _on_LocalizedIn(self, ev: LocalizedIn) -> list[Action]:  # noqa: N802
+        if self._teach is not None:
+            return self._taught(ev, self._teach)
         if self.state not in LOCALIZING or self.matcher is None:
             return []
         if self.state is State.TRACKING and ev.exposure_t <= self._not_before:
@@ -548,6 +579,40 @@ class StationCore:
             self._to(State.BOLT_SELECTED, f"bolt {self.bolt} selected; wrench not confirmed")
         if self._away >= self.leave_frames:
             acts += self._drop(ev.t, State.TRACKING, f"wrench left bolt {self.bolt}", why)
+        return acts
+
+    def _taught(self, ev: LocalizedIn, teach: _Teach) -> list[Action]:
+        """Teach mode: fresh localizations of the bolt being measured are collected; after
+        ``TEACH_FRAMES`` of them its mean and dispersion are the answer."""
+        age = ev.t - ev.exposure_t
+        acts: list[Action] = [Publish(Localized(ev.point_mm, ev.tilt_deg, ev.reason, None,
+                                                None, age * 1e3, (), t=ev.t))]
+        c = teach.measuring
+        if c is None or self.faults:
+            return acts
+        if ev.exposure_t <= teach.since:
+            return acts   # exposed before the engineer asked: the tool may have been moving
+        if ev.point_mm is not None and age <= self.params.max_age_s:
+            teach.points.append(ev.point_mm)
+        else:
+            teach.tries += 1
+        if len(teach.points) >= TEACH_FRAMES:
+            p = np.asarray(teach.points, dtype=np.float64)
+            mean = p.mean(axis=0)
+            spread = float(np.linalg.norm(p - mean, axis=1).max())
+            teach.measuring, teach.points, teach.tries = None, [], 0
+            self.reason = teach.reason()
+            if spread > TEACH_STEADY_MM:   # moved while measured: not a position
+                return [*acts, Reply(Answer(c.request, c.command, c.issuer, Reason(
+                    Why.NOT_STEADY, distance_mm=spread, limit=TEACH_STEADY_MM)))]
+            result = {"position_mm": [float(v) for v in mean], "dispersion_mm": spread,
+                      "frames": TEACH_FRAMES}
+            return [*acts, Reply(Answer(c.request, c.command, c.issuer, result=result))]
+        if teach.tries >= TEACH_TRIES:
+            why = Reason(Why.NOT_STEADY, count=len(teach.points), needed=TEACH_FRAMES)
+            teach.measuring, teach.points, teach.tries = None, [], 0
+            self.reason = teach.reason()
+            return [*acts, Reply(Answer(c.request, c.command, c.issuer, why))]
         return acts
 
     def _track(self, ev: LocalizedIn, m: Match) -> list[Action]:
@@ -653,6 +718,10 @@ class StationCore:
         right = RIGHT[type(cmd)]
         if right not in who.rights:
             return Reason(Why.NO_RIGHT, right=right.value)
+        if isinstance(cmd, TeachStart | TeachPoint | TeachStop):
+            return self._teach_refusal(cmd)
+        if self._teach is not None:
+            return Reason(Why.TEACHING, note=self._teach.reason())
         if isinstance(cmd, ReopenVehicle):
             if cmd.vin == self.vin:
                 return Reason(Why.ALREADY_OPEN, vin=cmd.vin)
@@ -676,6 +745,40 @@ class StationCore:
             return Reason(Why.TOOL_ON_BOLT, bolt=cmd.bolt)
         return None
 
+    def _teach_refusal(self, cmd: TeachStart | TeachPoint | TeachStop) -> Reason | None:
+        t = self._teach
+        if isinstance(cmd, TeachStart):
+            if t is not None:
+                return Reason(Why.TEACHING, note=t.reason())
+            if self.tool_on:
+                return Reason(Why.TOOL_ON_BOLT, bolt=self.bolt)
+            return None
+        if t is None:
+            return Reason(Why.NOT_TEACHING)
+        if isinstance(cmd, TeachPoint) and t.measuring is not None:
+            return Reason(Why.TEACHING, note=t.reason())
+        return None
+
+    def _teach_done(self, t: float, c: CommandIn) -> list[Action]:
+        """A recorded teach command takes effect: the mode on (the tool off, the selection
+        dropped), a bolt's measuring started (answered once measured), or the mode off."""
+        cmd = c.command
+        if isinstance(cmd, TeachStart):
+            acts = self._drop(t, State.TEACHING, "teach mode")
+            self._teach = _Teach(cmd.model, c.issuer.user)
+            self._to(State.TEACHING, self._teach.reason())
+            return [*acts, Reply(Answer(c.request, cmd, c.issuer))]
+        if self._teach is None:
+            return [Reply(Answer(c.request, cmd, c.issuer, Reason(Why.NOT_TEACHING)))]
+        if isinstance(cmd, TeachPoint):
+            self._teach.measuring, self._teach.points, self._teach.tries = c, [], 0
+            self._teach.since = c.t
+            self.reason = self._teach.reason()
+            return []
+        self._teach = None
+        self._to(State.WAITING_VEHICLE, "teach mode ended; waiting for the lift")
+        return [Reply(Answer(c.request, cmd, c.issuer))]
+
     def _on_CommandDone(self, ev: CommandDone) -> list[Action]:  # noqa: N802
         c = self._commands.pop(ev.request, None)
         if c is None:
@@ -684,6 +787,8 @@ class StationCore:
         if ev.reason is not None:
             return [Reply(answer)]
         cmd = c.command
+        if isinstance(cmd, TeachStart | TeachPoint | TeachStop):
+            return self._teach_done(ev.t, c)
         acts: list[Action] = []
         if isinstance(cmd, SkipBolt):
             acts += self._skip(ev.t, cmd, c.issuer)
@@ -820,8 +925,10 @@ class StationCore:
         self._vin_for, self._vin_pending, self._last_refusal = None, False, None
 
     def _to(self, state: State, reason: str) -> None:
-        """The one place the state changes: with any device in fault the state is FAULT, so no
-        rule elsewhere can leave it by accident."""
+        """The one place the state changes: with any device in fault the state is FAULT, and
+        in teach mode TEACHING, so no rule elsewhere can leave them by accident."""
         if self.faults:
             state, reason = State.FAULT, self._fault_reason()
+        elif self._teach is not None:
+            state, reason = State.TEACHING, self._teach.reason()
         self.state, self.reason = state, reason

@@ -16,31 +16,25 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from functools import partial
-from pathlib import Path
 from typing import Any
 
-import cv2
-
 from db.bolts import Parameters
-from db.errors import DataError, DbError, NotFoundError, VehicleClosedError
+from db.errors import DataError, NotFoundError, VehicleClosedError
 from db.report import MISSING
 from db.repository import Repository
 from drivers.camera import open_camera
 from drivers.camera.pair import StereoGrabber, StereoSkewError
-from drivers.errors import DeviceError, DriverError, ProtocolError, RefusedError
+from drivers.errors import DeviceError, ProtocolError, RefusedError
 from drivers.keeper import DeviceKeeper, fault_kind, one_line
 from drivers.lift import open_lift
 from drivers.wrench import open_wrench
-from stationd.boltfile import import_bolts
 from stationd.config import StationConfig
-from stationd.errors import StationError
 from stationd.geometry.tool import BoltEnd
 from stationd.localize import (
     Localization,
@@ -53,11 +47,19 @@ from stationd.localize import (
 )
 from stationd.reasons import Reason, Why
 from stationd.result import Refusal
-from stationd.station.commands import KIND, Answer, Command, Issuer, ReopenVehicle, skip_note
+from stationd.station.commands import (
+    KIND,
+    Answer,
+    Command,
+    Issuer,
+    ReopenVehicle,
+    TeachStart,
+    skip_note,
+)
 from stationd.station.core import (
+    CAMERAS_ON,
     DATABASE,
     LIFT,
-    LOCALIZING,
     WRENCH,
     Acknowledge,
     Action,
@@ -73,7 +75,6 @@ from stationd.station.core import (
     LiftRead,
     LoadVehicle,
     LocalizedIn,
-    Owed,
     ParamsAcked,
     ParamsRefused,
     Publish,
@@ -81,7 +82,6 @@ from stationd.station.core import (
     RecordCommand,
     Reply,
     ResultIn,
-    Selection,
     SendParams,
     SendVin,
     Started,
@@ -111,6 +111,7 @@ from stationd.station.events import (
 )
 from stationd.station.gaps import MAX_FETCH
 from stationd.station.gaps import plan as plan_gaps
+from stationd.station.records import STATION_FAULTS, Records, Unsaved
 from stationd.station.scan import ScanPlan
 from stationd.station.sdnotify import Notifier
 from stationd.words import answer_words, reason_words
@@ -124,9 +125,6 @@ IDLE_S = 0.1                # the vision loop's wait while the core is not track
 PAIR_FRAMES_S = 0.5         # a pair's detection summary is published at most this often
 
 
-#: what a device, the database or the station's own data raise: a fault, never an exit (the
-#: layers below have their own error roots)
-STATION_FAULTS: tuple[type[Exception], ...] = (StationError, DbError, DriverError)
 #: how long the read that proves a (re)connected PLC answers may take, s
 LIFT_CHECK_S = 1.0
 #: and what opening a device may raise besides (a port that does not exist, a bad option)
@@ -146,31 +144,13 @@ class Pair:
 
 
 @dataclass
-class Unsaved:
-    """A result the database has not taken yet, with what its record needs."""
-
-    record: Record
-    images: list[str]
-    result_at: datetime
-    parameters_id: int | None = None
-    enable_id: int | None = None     # the tool enable this result settles
-
-    def describe(self) -> str:
-        """One journal line with every value of the record (the only copy while unsaved)."""
-        a, r = self.record, self.record.result
-        return (f"VIN {a.vin} bolt {a.bolt} tightening {r.tightening_id} "
-                f"{'OK' if r.ok else 'NOK'} torque {float(r.torque_nm):.2f} Nm angle "
-                f"{float(r.angle_deg):.1f} deg pset {r.pset} at {self.result_at.isoformat()}")
-
-
-@dataclass
 class Station:
     """A running station: ``open()``, ``await run(stop)``, ``close()``."""
 
     cfg: StationConfig
     notifier: Notifier = field(default_factory=Notifier)
     device_kw: dict[str, dict[str, Any]] = field(default_factory=dict)
-    repo: Repository | None = None
+    records: Records = field(init=False)
     core: StationCore = field(init=False)
     bus: EventBus = field(default_factory=EventBus)
     # the screens' latest-frame store (stationd.web.LatestFrames): put(pair, side, image,
@@ -182,21 +162,10 @@ class Station:
     _results_pool: ThreadPoolExecutor = field(init=False)
     _lock: asyncio.Lock | None = field(default_factory=asyncio.Lock)
     _pending: list[Event] = field(default_factory=list)    # faults found before run()
-    # results the database refused (a full disk, a lost server): kept here, the database in
-    # fault (nothing more is tightened), written by its keeper before it is called back
-    _unsaved: list[Unsaved] = field(default_factory=list)
-    _saved_late: list[Unsaved] = field(default_factory=list)
-    _unsaved_lock: threading.Lock = field(default_factory=threading.Lock)
-    # the SQLite file opened and its identity (device, inode): a file deleted or replaced under
-    # the daemon is detected before a result is written to a database nobody will read
-    _db_file: tuple[Path, tuple[int, int]] | None = None
     _bad: dict[str, int] = field(default_factory=dict)     # pair -> failed grabs in a row
     keepers: dict[str, DeviceKeeper[Any]] = field(init=False)  # device -> its one keeper
     _next_frames: dict[str, float] = field(default_factory=dict)  # pair -> next PairFrames
     _scan: ScanPlan = field(default_factory=ScanPlan)   # which pairs to localize per cycle
-    # the tool enable the station owes a result to (its selection and its row on disk)
-    _enable: tuple[Selection, int] | None = None
-    _enable_off: bool = False          # its tool-off time is on disk
     # results taken from the controller and not yet through the core (a stop mid-way feeds
     # them before the link closes), and the wait for the next one running in its thread
     _received: list[Any] = field(default_factory=list)
@@ -206,6 +175,7 @@ class Station:
     _answers: dict[int, asyncio.Future[Answer]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        self.records = Records(self.cfg)
         self.core = StationCore(self.cfg.matching, self.cfg.matching.leave_frames,
                                 nok=self.cfg.nok)
         c = self.cfg
@@ -222,7 +192,7 @@ class Station:
         # the database too: opened by ``open`` (a first start that cannot open it exits), then
         # kept like a device: a failed query reports it lost, the keeper probes it with
         # backoff and the core hears it back
-        self.keepers[DATABASE] = self._keeper(DATABASE, self._database, self._probe_database,
+        self.keepers[DATABASE] = self._keeper(DATABASE, self._database, self.records.probe,
                                               close=lambda repo: None)
 
     def _keeper(self, device: str, opener: Callable[[], Any],
@@ -269,19 +239,19 @@ class Station:
     def vin(self) -> str | None:
         return self.core.vin
 
+    @property
+    def repo(self) -> Repository | None:
+        """The station's database once opened."""
+        return self.records.repo
+
     # -- devices -----------------------------------------------------------------------------
     def open(self) -> None:
         """Open the database (and import the bolt table), then try every device once: a
         device that does not open is a fault retried by ``run``, never an exception here."""
-        self.repo = Repository.open(self.cfg.database_url)
-        self._db_file = _sqlite_file(self.cfg.database_url)
-        if self.cfg.bolts_path is not None:
-            r = import_bolts(self.repo, self.cfg.bolts_path,
-                             tolerance_mm=self.cfg.matching.tolerance_mm)
-            log.info("bolt table %s: %d added, %d changed, %d unchanged, %d removed, "
-                     "%d new parameter versions", self.cfg.bolts_path, len(r.added),
-                     len(r.changed), len(r.unchanged), len(r.removed), len(r.new_versions))
-        self._resume()
+        self.records.open()
+        owed = self.records.owed(self.core.late_result_s)
+        if owed is not None:   # its result is recorded to that bolt, not into nothing
+            self.core.resume(owed)
         for device, keeper in self.keepers.items():
             fault = keeper.open_now()
             if fault is not None:
@@ -290,35 +260,11 @@ class Station:
     def carry(self, unsaved: list[Unsaved]) -> None:
         """Results the last station (a reload) received and could not write: this one writes
         them once its database takes them, then acknowledges them (before ``run``)."""
-        with self._unsaved_lock:
-            self._unsaved[:0] = unsaved
+        self.records.carry(unsaved)
 
     def unsaved(self) -> list[Unsaved]:
         """The results this station could not write (after ``close``: for the next one)."""
-        with self._unsaved_lock:
-            return list(self._unsaved)
-
-    def _resume(self) -> None:
-        """The tool enable the last station (a reload, a restart, a kill) left without its
-        result: within the late-result window it is the core's again, so its result is
-        recorded to that bolt, not acknowledged into nothing."""
-        assert self.repo is not None  # noqa: S101 - opened first
-        owed = self.repo.owed_enable()
-        if owed is None:
-            return
-        now = time.time()
-        off = owed.off_at.timestamp() if owed.off_at is not None else now
-        if now - off >= self.core.late_result_s:
-            return
-        j = owed.selection
-        sel = Selection(owed.bolt, owed.pset, _xyz(j["point_mm"]), float(j["tilt_deg"]),
-                        float(j["distance_mm"]), float(j["exposure_t"]), float(j["decided_t"]),
-                        None, owed.vin, owed.parameters_id)
-        self.core.resume(Owed(sel, off))
-        self._enable, self._enable_off = (sel, owed.id), owed.off_at is not None
-        log.info("the tool was enabled for bolt %s of %s (pset %s) when the last station "
-                 "stopped: its result within %.0f s is recorded to it", owed.bolt, owed.vin,
-                 owed.pset, self.core.late_result_s - (now - off))
+        return self.records.unsaved()
 
     def _database(self) -> Repository:
         """The database for its keeper: opened by ``open`` before any device."""
@@ -376,16 +322,15 @@ class Station:
         """Tool off first, then every device, then the database; a failure is logged and the
         shutdown goes on.  Results the database never took are journaled in full, one line
         each: the only copy left (quality re-enters them from the journal)."""
-        with self._unsaved_lock:
-            unsaved = list(self._unsaved)
-        for u in unsaved:
+        for u in self.records.unsaved():
             log.error("UNSAVED at shutdown: %s", u.describe())
         steps: list[tuple[str, Any]] = []
         if self.wrench is not None and self.keepers[WRENCH].up:
             steps.append(("disable tool", self.wrench.disable_tool))
         steps += [(device, keeper.close) for device, keeper in self.keepers.items()]
         if self.repo is not None:
-            steps += [("noting the tool off", self._note_off), ("database", self.repo.close)]
+            steps += [("noting the tool off", self.records.note_off),
+                      ("database", self.repo.close)]
         for what, fn in steps:
             try:
                 fn()
@@ -430,7 +375,7 @@ class Station:
         # RELOADING=1 or STOPPING=1
 
     async def submit(self, command: Command, issuer: Issuer,
-                     timeout: float = 10.0) -> Answer:
+                     timeout: float = 30.0) -> Answer:
         """A person's command into the core, on the path of the devices' events; its answer
         (accepted once recorded, or refused with why).  ``TimeoutError`` when the station
         does not answer in ``timeout`` (a database waiting on a lock)."""
@@ -582,7 +527,7 @@ class Station:
         is its keeper's to bring back)."""
         while not stop.is_set():
             down = [n for n in self._pair_names() if n in self.core.faults]
-            if self.core.state not in LOCALIZING or not self.grabbers or down:
+            if self.core.state not in CAMERAS_ON or not self.grabbers or down:
                 await asyncio.sleep(IDLE_S)
                 continue
             cycle = self._scan.choose(list(self.grabbers))
@@ -656,8 +601,8 @@ class Station:
                 self.bus.publish(ToolDisabled(a.reason, a.bolt, a.why))
                 if self.wrench is not None:
                     await self._call(self.wrench.disable_tool)
-                if self._enable is not None and not self._enable_off:
-                    await self._call(self._note_off)
+                if self.records.owes_off_time:
+                    await self._call(self.records.note_off)
             elif isinstance(a, SendVin):
                 return await self._send_vin(a.vin)
             elif isinstance(a, LoadVehicle):
@@ -703,46 +648,22 @@ class Station:
         the wrench was), then the tool is enabled: a reload or a kill from here on still
         records the result to this bolt.  A database that refuses it is a fault of the
         database and the tool stays off."""
-        repo = self.repo
-        assert repo is not None  # noqa: S101 - opened in open()
-        sel = a.selection
         try:
-            row = await self._call(lambda: repo.note_enable(
-                sel.vin, sel.bolt, sel.pset, sel.parameters_id, _selection_json(sel),
-                datetime.now(UTC)))
+            await self._call(self.records.note_enable, a.selection)
         except STATION_FAULTS as exc:
             self.keepers[DATABASE].lost(DeviceError(one_line(exc)))
             return DeviceFault(time.time(), DATABASE, "down",
                                f"the tool enable not stored: {one_line(exc)}")
-        self._enable, self._enable_off = (sel, row), False
         await self._call(self.wrench.enable_tool)
         self.bus.publish(ToolEnabled(a.bolt))
         return None
 
-    def _note_off(self) -> None:
-        """The owed enable's tool-off time on disk (an executor thread, or ``close``): the
-        next station counts the late-result window from it.  Best effort: without it the
-        next station counts from its own start."""
-        if self._enable is None or self._enable_off or self.repo is None:
-            return
-        try:
-            self.repo.note_tool_off(self._enable[1], datetime.now(UTC))
-            self._enable_off = True
-        except STATION_FAULTS as exc:
-            log.warning("the tool-off time of bolt %s not stored: %s", self._enable[0].bolt,
-                        one_line(exc))
-
     async def _store_unattributed(self, a: StoreUnattributed) -> None:
         """A result no bolt owns: stored, then acknowledged.  A database that refuses it is a
         fault; the result stays with the controller (not acknowledged)."""
-        repo, r = self.repo, a.result
-        assert repo is not None  # noqa: S101 - opened in open()
+        r = a.result
         try:
-            await self._call(lambda: repo.record_unattributed(
-                vin=a.vin, controller_vin=str(r.vin or "").strip() or None,
-                tightening_id=int(r.tightening_id), pset=int(r.pset), ok=bool(r.ok),
-                torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
-                result_at=_aware(r.timestamp), reason=a.reason))
+            await self._call(self.records.store_unattributed, a)
         except STATION_FAULTS as exc:
             log.error("tightening %d (unattributed) NOT stored, left with the controller: %s",
                       r.tightening_id, one_line(exc))
@@ -756,6 +677,12 @@ class Station:
         repo, cmd, who = self.repo, a.command, a.issuer
         assert repo is not None  # noqa: S101 - opened in open()
         at = datetime.fromtimestamp(a.t, UTC)
+        vin = getattr(cmd, "vin", None) or (self.core.vin if not isinstance(
+            cmd, ReopenVehicle) else None)
+        bolt = getattr(cmd, "bolt", None)
+        comment = cmd.comment
+        if isinstance(cmd, TeachStart):   # the model taught is part of the record
+            comment = f"model {cmd.model}" + (f": {comment}" if comment else "")
         try:
             if isinstance(cmd, ReopenVehicle):
                 await self._call(lambda: repo.reopen_vehicle(
@@ -763,12 +690,11 @@ class Station:
             else:
                 await self._call(lambda: repo.ledger.record_command(
                     at=at, user=who.user, source=who.source, kind=KIND[type(cmd)],
-                    vin=cmd.vin, bolt=cmd.bolt, comment=cmd.comment))
+                    vin=vin, bolt=bolt, comment=comment))
         except NotFoundError:
-            return CommandDone(time.time(), a.request, Reason(Why.UNKNOWN_VEHICLE,
-                                                              vin=cmd.vin))
+            return CommandDone(time.time(), a.request, Reason(Why.UNKNOWN_VEHICLE, vin=vin))
         except DataError:
-            return CommandDone(time.time(), a.request, Reason(Why.NOT_CLOSED, vin=cmd.vin))
+            return CommandDone(time.time(), a.request, Reason(Why.NOT_CLOSED, vin=vin))
         except STATION_FAULTS as exc:
             self.keepers[DATABASE].lost(DeviceError(one_line(exc)))
             return CommandDone(time.time(), a.request,
@@ -891,17 +817,11 @@ class Station:
         r, sel = a.result, a.selection
         loc = sel.evidence if sel is not None and isinstance(sel.evidence, Localization) \
             else None
-        images = await self._call(self._save_images, a.vin, a.bolt, int(r.tightening_id), loc)
-        enable = self._enable[1] if self._enable is not None and sel is not None \
-            and self._enable[0] is sel else None
-        if enable is not None:
-            self._enable = None   # settled with the record, in its transaction
-        u = Unsaved(a, images, datetime.now(UTC), sel.parameters_id if sel else None, enable)
+        u = await self._call(self.records.unsaved_result, a, loc)
         try:
-            await self._call(self._write, u)
+            await self._call(self.records.write, u)
         except STATION_FAULTS as exc:
-            with self._unsaved_lock:
-                self._unsaved.append(u)
+            self.records.keep(u)
             log.error("tightening %d of %s NOT stored, kept until the database takes it: "
                       "%s; %s", r.tightening_id, a.bolt, one_line(exc), u.describe())
             self.bus.publish(Notice(f"tightening {r.tightening_id} of {a.bolt} not stored: "
@@ -909,39 +829,6 @@ class Station:
             self.keepers[DATABASE].lost(DeviceError(f"results not stored: {one_line(exc)}"))
             return
         await self._recorded(u)
-
-    def _write(self, u: Unsaved) -> None:
-        """One result into the database (an executor thread); raises what the database
-        raises."""
-        repo = self.repo
-        assert repo is not None  # noqa: S101 - opened in open()
-        self._check_db_file()
-        a = u.record
-        r, sel = a.result, a.selection
-        repo.record_tightening(
-            a.vin, a.bolt, ok=bool(r.ok),
-            position_mm=list(sel.point_mm) if sel else [0.0, 0.0, 0.0],
-            match_distance_mm=sel.distance_mm if sel else 0.0,
-            tilt_deg=sel.tilt_deg if sel else 0.0,
-            torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
-            parameters_id=u.parameters_id,
-            tightening_id=int(r.tightening_id),
-            sent_at=datetime.fromtimestamp(sel.decided_t, UTC) if sel else None,
-            result_at=u.result_at, images=u.images, enable_id=u.enable_id)
-
-    def _check_db_file(self) -> None:
-        """Raise DbError when the SQLite file the daemon opened is gone or was replaced (its
-        open connection would go on writing into the deleted file: results acknowledged,
-        then lost, and the bolts tightened again after a restart)."""
-        if self._db_file is None:
-            return
-        path, ident = self._db_file
-        try:
-            st = path.stat()
-        except OSError:
-            raise DbError(f"the database file {path} was removed") from None
-        if (st.st_dev, st.st_ino) != ident:
-            raise DbError(f"the database file {path} was replaced by another file")
 
     async def _recorded(self, u: Unsaved) -> None:
         a, r = u.record, u.record.result
@@ -951,74 +838,10 @@ class Station:
             float(r.angle_min_deg), float(r.angle_max_deg), a.late, tuple(u.images)))
         await self._acknowledge(r)
 
-    def _probe_database(self, repo: Repository) -> None:
-        """The database's "reconnect" (its keeper's thread): one cheap query (the engine's
-        pool reconnects by itself), then the results it refused, oldest first: it is back
-        only once it has taken them all (a full disk still answers reads).  A failure is a
-        device error, the keeper's kind of failure (another is logged as a crash)."""
-        try:
-            repo.models()
-            self._check_db_file()   # a removed file still answers through its connection
-        except STATION_FAULTS as exc:
-            raise DeviceError(one_line(exc)) from None
-        while True:
-            with self._unsaved_lock:
-                if not self._unsaved:
-                    return
-                u = self._unsaved[0]
-            try:
-                self._write(u)
-            except STATION_FAULTS as exc:
-                raise DeviceError(f"results not stored: {one_line(exc)}") from None
-            with self._unsaved_lock:
-                self._unsaved.pop(0)
-                self._saved_late.append(u)
-            log.info("tightening %d of %s stored late", u.record.result.tightening_id,
-                     u.record.bolt)
-
     async def _recorded_late(self) -> None:
         """The results the keeper wrote on its way back: published and acknowledged."""
-        with self._unsaved_lock:
-            done, self._saved_late = self._saved_late, []
-        for u in done:
+        for u in await self._call(self.records.take_saved_late):
             await self._recorded(u)
-
-    def _save_images(self, vin: str, bolt: str, tightening_id: int,
-                     loc: Localization | None) -> list[str]:
-        """Write the selection's crops beside the records (an executor thread); a failure is
-        logged and the tightening is recorded without them, never lost."""
-        folder = self.cfg.records.images_dir
-        if not self.cfg.records.save_images or folder is None or loc is None:
-            return []
-        out = []
-        for key, img in sorted(loc.crops.items()):
-            path = folder / vin / f"{bolt}-{tightening_id}-{key.replace('/', '-')}.png"
-            try:
-                path.parent.mkdir(parents=True, exist_ok=True)
-                if not cv2.imwrite(str(path), img):
-                    raise OSError("the PNG encoder refused it")
-            except (OSError, cv2.error) as exc:
-                log.warning("image %s not saved: %s", path, exc)
-                continue
-            out.append(str(path))
-        return out
-
-
-def _sqlite_file(url: str) -> tuple[Path, tuple[int, int]] | None:
-    """The file of an SQLite URL and its (device, inode); None for another database or one
-    in memory."""
-    from sqlalchemy.engine import make_url
-
-    u = make_url(url)
-    if u.get_backend_name() != "sqlite" or not u.database or u.database == ":memory:":
-        return None
-    path = Path(u.database).resolve()
-    try:
-        st = path.stat()
-    except OSError:
-        return None
-    return path, (st.st_dev, st.st_ino)
-
 
 def _why(end: BoltEnd | Refusal) -> str:
     return end.reason if isinstance(end, Refusal) else "no failure"
@@ -1026,19 +849,6 @@ def _why(end: BoltEnd | Refusal) -> str:
 
 def _xyz(p: Any) -> tuple[float, float, float]:
     return float(p[0]), float(p[1]), float(p[2])
-
-
-def _selection_json(sel: Selection) -> dict[str, Any]:
-    """Where the wrench was when its bolt was selected, for the record of a result that comes
-    after a reload or restart (the evidence, the marker crops, stays in memory)."""
-    return {"point_mm": [float(v) for v in sel.point_mm], "tilt_deg": float(sel.tilt_deg),
-            "distance_mm": float(sel.distance_mm), "exposure_t": float(sel.exposure_t),
-            "decided_t": float(sel.decided_t)}
-
-
-def _aware(t: datetime | None) -> datetime | None:
-    """The controller's naive local timestamp as an aware one (the database keeps UTC)."""
-    return None if t is None else t.astimezone(UTC)
 
 
 def _reconnect(device: Any) -> None:

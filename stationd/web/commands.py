@@ -43,6 +43,9 @@ from stationd.station.commands import (
     ReleaseBolt,
     ReopenVehicle,
     SkipBolt,
+    TeachPoint,
+    TeachStart,
+    TeachStop,
 )
 from stationd.words import answer_words, reason_words
 
@@ -160,6 +163,8 @@ class CommandRoutes:
                                              ) from None
         out: dict[str, Any] = {"accepted": answer.accepted, "words": answer_words(answer),
                                "kind": KIND[type(command)]}
+        if answer.result is not None:
+            out["result"] = dict(answer.result)
         if answer.reason is not None:
             reason = {k: v for k, v in asdict(answer.reason).items() if v not in (None, ())}
             out["reason"] = {**reason, "kind": answer.reason.kind.value,
@@ -221,6 +226,12 @@ def _command(body: dict[str, Any]) -> Command:
         return ReopenVehicle(_text(body, "vin", limit=32), comment)
     if kind == "release":
         return ReleaseBolt(_text(body, "vin", limit=32), _text(body, "bolt", limit=32), comment)
+    if kind == "teach-start":
+        return TeachStart(_text(body, "model", limit=32), comment)
+    if kind == "teach-point":
+        return TeachPoint(_text(body, "bolt", limit=32), comment)
+    if kind == "teach-stop":
+        return TeachStop(comment)
     raise web.HTTPBadRequest(text=f"kind: one of {', '.join(KIND.values())}\n")
 
 

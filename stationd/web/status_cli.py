@@ -47,6 +47,10 @@ def status_url(url: str) -> str:
         raise InputError(f"--url {url!r}: expected http://host:port/") from None
     if u.scheme not in ("http", "https") or not u.hostname or port == 0:
         raise InputError(f"--url {url!r}: expected http://host:port/")
+    if any(c.isspace() or not c.isprintable() for c in url):
+        # http.client refuses them later with InvalidURL, which is no ValueError
+        raise InputError(f"--url {url!r}: a URL has no spaces or control characters "
+                         "(expected http://host:port/)")
     return urllib.parse.urlunsplit((u.scheme, u.netloc, u.path.rstrip("/") + "/api/status",
                                     "", ""))
 

@@ -1,0 +1,341 @@
+"""The station as an OPC UA server in the joining-system companion model: one ``JoiningSystem``
+(OPC 40450-1) with its identification and the station's state, every recorded rundown fired as
+a result event, the last results for GetLatestResult and GetResultById.
+
+Why this shape: the results feed (:mod:`db.ledger`) is the truth, so the server reads it from
+the last number it published, every second (sooner when the bus says a result was recorded):
+a result stored while no client listened is still there for GetResultById, and nothing is
+published that was not committed.  The server is fed by the station, never a second place
+where rules live: nothing a client does reaches the station (no variable is writable, no
+method changes anything).
+
+The workarounds for asyncua 2.1.0 (``../shared/design/PROTOCOLS.md``), beside those of
+:mod:`stationd.opcua.model`:
+
+5. events reach only monitored items on the emitting node: results are fired on the Server
+   object (where MES clients subscribe) with the JoiningSystem as their SourceNode;
+6. JoiningSystemResultReadyEventType is abstract: a concrete subtype of it,
+   ``StationResultReadyEventType`` in this server's namespace, is fired;
+7. security: asyncua lets everyone write (PermissiveUserManager), its role ruleset lets an
+   anonymous client do nothing, and without a validator it accepts any client certificate.
+   Here: :class:`ReadOnlyRuleset` (browse, read, subscribe, call for everyone; no write and no
+   node management for anyone), :class:`StationUsers` (anonymous, or a configured user with
+   the right password), a trust list for client certificates.
+
+Not done (4): RequestResults / RequestUnacknowledgedResults / AcknowledgeResults.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import socket
+from collections import OrderedDict
+from collections.abc import Callable
+from typing import Any
+
+from asyncua.common.node import Node
+from asyncua.crypto.permission_rules import USER_TYPES, SimpleRoleRuleset, User, UserRole
+from asyncua.crypto.truststore import TrustStore
+from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
+from asyncua.server.server import Server
+from asyncua.server.user_managers import UserManager
+
+from db.ledger import RUNDOWN
+from db.repository import Repository
+from stationd.access import verify_password
+from stationd.opcua.config import OpcUaConfig
+from stationd.opcua.model import DI_URI, IJT_URI, MACHINERY_URI, RESULT_URI, load_model
+from stationd.opcua.results import rundown_result
+from stationd.opcua.uatypes import ua
+from stationd.station.events import EventBus, ResultRecorded, StateChanged, StationEvent
+
+log = logging.getLogger("stationd")
+NAMESPACE = "urn:stationd:opcua"
+POLL_S = 1.0
+MANUFACTURER = "stationd"
+JOINING_SYSTEM_TYPE, RESULT_READY_EVENT_TYPE = 1005, 1007   # in IJT Base
+MACHINES_FOLDER = 1001                                        # in Machinery
+SOFTWARE_VERSION = "0.1.0"
+_NO_ERROR = 0
+
+
+class ReadOnlyRuleset(SimpleRoleRuleset):
+    """Browse, read, subscribe and call the read-only methods, for anonymous clients and users
+    alike; writing a value or changing the address space for nobody."""
+
+    def __init__(self) -> None:
+        super().__init__()  # type: ignore[no-untyped-call]
+        allowed = {ua.NodeId(t) for t in USER_TYPES} - {
+            ua.NodeId(ua.ObjectIds.WriteRequest_Encoding_DefaultBinary)}
+        self._allowed = frozenset(allowed)
+
+    def check_validity(self, user: User, action_type_id: ua.NodeId, body: Any) -> bool:
+        return user.role in (UserRole.Anonymous, UserRole.User) and \
+            action_type_id in self._allowed
+
+
+class StationUsers(UserManager):
+    """Anonymous, or a user of the ``opcua.users`` section with their password."""
+
+    def __init__(self, users: dict[str, str]) -> None:
+        self._users = users
+
+    def get_user(self, iserver: Any, username: str | None = None,
+                 password: str | None = None, certificate: Any = None) -> User | None:
+        if username is None:
+            return User(role=UserRole.Anonymous)
+        stored = self._users.get(username)
+        if stored is None or password is None or not verify_password(password, stored):
+            return None
+        return User(role=UserRole.User, name=username)
+
+
+_POLICIES = {
+    "none": ua.SecurityPolicyType.NoSecurity,
+    "sign": ua.SecurityPolicyType.Basic256Sha256_Sign,
+    "encrypt": ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt,
+}
+
+
+class OpcUaServer:
+    """The OPC UA server of one station: :meth:`start`, then :meth:`run` until its stop
+    event, :meth:`stop` (safe twice)."""
+
+    def __init__(self, cfg: OpcUaConfig, *, bus: EventBus | None = None,
+                 simulated: bool = False) -> None:
+        self.cfg, self.bus, self.simulated = cfg, bus, simulated
+        self.server: Server | None = None
+        self.joining_system: Node | None = None
+        self.published = 0          # result events fired (this process)
+        self.cursor = 0             # the last feed entry read
+        self.db_id = ""
+        self._results: OrderedDict[str, Any] = OrderedDict()   # ResultId -> ResultDataType
+        self._event: Any = None
+        self._state: Node | None = None
+        self._reason: Node | None = None
+        self._wake = asyncio.Event()
+        self._unsubscribe: Callable[[], None] | None = None
+
+    @property
+    def url(self) -> str:
+        return self.cfg.endpoint
+
+    # -- lifecycle ------------------------------------------------------------------------------
+    async def start(self) -> None:
+        """Load the model, build the JoiningSystem and listen.  ``OSError`` for a port in
+        use."""
+        if self.server is not None:
+            return
+        server = Server(user_manager=StationUsers(self.cfg.users))
+        await server.init()
+        server.set_endpoint(self.cfg.endpoint)
+        server.set_server_name(f"stationd {self.cfg.station_id}")
+        await server.set_application_uri(f"urn:stationd:{self.cfg.station_id}")
+        await self._security(server)
+        await load_model(server)
+        idx = await server.register_namespace(NAMESPACE)
+        await self._build(server, idx)
+        await server.start()
+        self.server = server
+        if self.bus is not None:
+            self._unsubscribe = self.bus.subscribe(self._on_event)
+        log.info("OPC UA: %s (%s)", self.cfg.endpoint, ", ".join(self.cfg.security))
+
+    async def stop(self) -> None:
+        server, self.server = self.server, None
+        if self._unsubscribe is not None:
+            self._unsubscribe()
+            self._unsubscribe = None
+        if server is not None:
+            await server.stop()
+
+    async def _security(self, server: Server) -> None:
+        policies = [_POLICIES[s] for s in self.cfg.security]
+        server.set_security_policy(policies, permission_ruleset=ReadOnlyRuleset())
+        tokens: list[type] = [ua.AnonymousIdentityToken]
+        if self.cfg.users:
+            tokens.append(ua.UserNameIdentityToken)
+        server.set_identity_tokens(tokens)
+        if self.cfg.certificates is None:
+            return
+        from asyncua.crypto.cert_gen import setup_self_signed_certificate
+        from cryptography.x509.oid import ExtendedKeyUsageOID
+
+        folder = self.cfg.certificates
+        trusted = folder / "trusted"
+        trusted.mkdir(parents=True, exist_ok=True)
+        key, cert = folder / "server-key.pem", folder / "server-cert.der"
+        host = socket.gethostname()
+        await setup_self_signed_certificate(
+            key, cert, f"urn:stationd:{self.cfg.station_id}", host,
+            [ExtendedKeyUsageOID.CLIENT_AUTH, ExtendedKeyUsageOID.SERVER_AUTH],
+            {"commonName": f"stationd {self.cfg.station_id}", "organizationName": "stationd"})
+        await server.load_certificate(str(cert))
+        await server.load_private_key(str(key))
+        store = TrustStore([trusted], [])
+        await store.load()
+        server.set_certificate_validator(CertificateValidator(
+            CertificateValidatorOptions.TRUSTED_VALIDATION |
+            CertificateValidatorOptions.PEER_CLIENT, store))
+
+    # -- the address space -----------------------------------------------------------------------
+    async def _build(self, server: Server, idx: int) -> None:
+        uris = await server.get_namespace_array()
+        ijt, mach = uris.index(IJT_URI), uris.index(MACHINERY_URI)
+        folder = server.get_node(ua.NodeId(MACHINES_FOLDER, mach))
+        parent = folder if await _exists(folder) else server.nodes.objects
+        sid = self.cfg.station_id
+        js = await parent.add_object(ua.NodeId(f"JoiningSystem.{sid}", idx),
+                                     ua.QualifiedName(sid, idx),
+                                     objecttype=ua.NodeId(JOINING_SYSTEM_TYPE, ijt))
+        self.joining_system = js
+        ident = await js.get_child([f"{uris.index(DI_URI)}:Identification"])
+        for name, value in (("Manufacturer", MANUFACTURER), ("Model", "stationd"),
+                            ("SystemId", sid), ("Name", sid),
+                            ("Description", "vision-guided bolt-tightening station"),
+                            ("JoiningTechnology", "Tightening"),
+                            ("ProductInstanceUri", f"urn:stationd:{sid}")):
+            await _set(ident, name, value, uris)
+        await ident.add_property(uris.index(DI_URI), "SoftwareRevision", SOFTWARE_VERSION,
+                                 ua.VariantType.String)
+        self._state = await js.add_variable(ua.NodeId(f"JoiningSystem.{sid}.State", idx),
+                                            ua.QualifiedName("State", idx), "unknown",
+                                            varianttype=ua.VariantType.String)
+        self._reason = await js.add_variable(ua.NodeId(f"JoiningSystem.{sid}.StateReason", idx),
+                                             ua.QualifiedName("StateReason", idx), "",
+                                             varianttype=ua.VariantType.String)
+        etype = await server.create_custom_event_type(
+            idx, "StationResultReadyEventType", ua.NodeId(RESULT_READY_EVENT_TYPE, ijt))
+        gen = await server.get_event_generator(etype, ua.ObjectIds.Server)
+        gen.event.SourceNode = js.nodeid
+        gen.event.SourceName = sid
+        gen.event.Severity = 100
+        self._event = gen
+        rm = await js.get_child([f"{uris.index(RESULT_URI)}:ResultManagement"])
+        for name, cb in (("GetLatestResult", self._get_latest),
+                         ("GetResultById", self._get_by_id)):
+            server.link_method(await rm.get_child([f"{uris.index(RESULT_URI)}:{name}"]), cb)
+
+    # -- methods (read only) ---------------------------------------------------------------------
+    async def _get_latest(self, parent: ua.NodeId, *args: Any) -> list[ua.Variant]:
+        if not self._results:
+            return _answer(None, 1)
+        return _answer(next(reversed(self._results.values())), _NO_ERROR)
+
+    async def _get_by_id(self, parent: ua.NodeId, result_id: Any, *args: Any) -> \
+            list[ua.Variant]:
+        rid = result_id.Value if isinstance(result_id, ua.Variant) else result_id
+        found = self._results.get(str(rid))
+        return _answer(found, _NO_ERROR if found is not None else 1)
+
+    # -- the station's events and its feed -------------------------------------------------------
+    def _on_event(self, event: StationEvent) -> None:
+        if isinstance(event, ResultRecorded):
+            self._wake.set()
+        elif isinstance(event, StateChanged) and self.server is not None:
+            asyncio.get_running_loop().create_task(self.set_state(event.state, event.reason))
+
+    async def set_state(self, state: str, reason: str = "") -> None:
+        if self._state is not None and self._reason is not None:
+            await self._state.write_value(state)
+            await self._reason.write_value(reason)
+
+    async def run(self, stop: asyncio.Event, repo: Repository) -> None:
+        """Publish every rundown recorded from now on until ``stop``; the last ``keep``
+        recorded before are kept for the methods."""
+        loop = asyncio.get_running_loop()
+        self.db_id = await loop.run_in_executor(None, repo.ledger.db_id)
+        last = await loop.run_in_executor(None, repo.ledger.last_seq)
+        await self._preload(repo, last)
+        self.cursor = last
+        while not stop.is_set():
+            try:
+                entries = await loop.run_in_executor(None, repo.ledger.since, self.cursor)
+            except Exception as exc:   # a database busy or away: tried again, never fatal
+                log.warning("OPC UA: reading the results feed: %s", exc)
+                entries = []
+            for e in entries:
+                self.cursor = e["seq"]
+                if e["kind"] == RUNDOWN:
+                    await self._publish(e)
+            if len(entries) >= 1000:   # behind: read on at once
+                continue
+            self._wake.clear()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(_first(stop, self._wake), POLL_S)
+
+    async def _preload(self, repo: Repository, last: int) -> None:
+        loop = asyncio.get_running_loop()
+        seq = max(0, last - 5 * self.cfg.keep)
+        while seq < last:
+            entries = await loop.run_in_executor(None, repo.ledger.since, seq)
+            if not entries:
+                break
+            for e in entries:
+                seq = e["seq"]
+                if e["kind"] == RUNDOWN and seq <= last:
+                    self._keep(rundown_result(self.db_id, self.cfg.station_id, e,
+                                              simulated=self.simulated))
+
+    def _keep(self, result: Any) -> None:
+        self._results[result.ResultMetaData.ResultId] = result
+        while len(self._results) > self.cfg.keep:
+            self._results.popitem(last=False)
+
+    async def _publish(self, entry: dict[str, Any]) -> None:
+        result = rundown_result(self.db_id, self.cfg.station_id, entry,
+                                simulated=self.simulated)
+        self._keep(result)
+        if self._event is None:
+            return
+        rec = entry["record"]
+        ev = self._event.event
+        ev.add_variable("Result", result, ua.VariantType.ExtensionObject)
+        ev.Message = ua.LocalizedText(f"{rec['vin']} {rec['bolt']}: {rec['status'].upper()}")
+        await self._event.trigger()
+        self.published += 1
+
+
+def _answer(result: Any, error: int) -> list[ua.Variant]:
+    return [ua.Variant(0, ua.VariantType.UInt32),
+            ua.Variant(result, ua.VariantType.ExtensionObject),
+            ua.Variant(error, ua.VariantType.Int32)]
+
+
+async def _first(stop: asyncio.Event, wake: asyncio.Event) -> None:
+    tasks = {asyncio.create_task(stop.wait()), asyncio.create_task(wake.wait())}
+    try:
+        await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        for t in tasks:
+            t.cancel()
+
+
+async def _exists(node: Node) -> bool:
+    try:
+        await node.read_browse_name()
+    except ua.UaError:
+        return False
+    return True
+
+
+async def _set(parent: Node, name: str, value: str, uris: list[str]) -> None:
+    """Write ``value`` to the child ``name`` (any of the model's namespaces) in its data
+    type (LocalizedText or String)."""
+    for ns in (DI_URI, IJT_URI, MACHINERY_URI):
+        try:
+            node = await parent.get_child([f"{uris.index(ns)}:{name}"])
+        except ua.UaError:
+            continue
+        dtype = await node.read_data_type()
+        v = ua.LocalizedText(value) if dtype == ua.NodeId(ua.ObjectIds.LocalizedText) \
+            else value
+        vt = ua.VariantType.LocalizedText if isinstance(v, ua.LocalizedText) \
+            else ua.VariantType.String
+        await node.write_value(ua.DataValue(ua.Variant(v, vt)))
+        return
+
+
+__all__ = ["NAMESPACE", "OpcUaServer", "ReadOnlyRuleset", "StationUsers"]

@@ -1,0 +1,158 @@
+"""``stationd teach``: teach a vehicle model's bolt positions on a real vehicle, through the
+running daemon.
+
+    stationd teach --model SIM-1 --user ed [--from bolts.cad.yaml] --out bolts.taught.yaml
+
+Why through the daemon: teach mode is a command like any other (the ``teach`` right, the
+normal cycle off meanwhile, every step recorded with its user).  The engineer holds the tool
+on each bolt in turn and presses Enter; the station averages several steady localizations
+and answers with the bolt end and its dispersion.  Against a CAD table (``--from``) each
+taught bolt is compared (flagged beyond the matching tolerance), the taught table is checked
+against the spacing rule, and a new file is written with the CAD table's parameters and the
+taught positions: ``stationd db import`` then makes a new parameter version of each bolt
+that moved, never an overwrite.  Answers: Enter (measure), ``s`` (skip this bolt), ``q``
+(stop and write what was taught).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from stationd.command_cli import EXIT_REFUSED, ApiClient, client_args, read_password, say_refused
+from stationd.errors import InputError
+from stationd.station.matching import check_spacing
+
+
+def _cad(path: str, model: str) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """The CAD table's YAML tree and the model's bolt entries (ids, positions, parameters)."""
+    try:
+        doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise InputError(f"--from {path}: not a bolt table ({exc})") from None
+    models = doc.get("models") if isinstance(doc, dict) else None
+    if not isinstance(models, dict) or model not in models:
+        have = ", ".join(models) if isinstance(models, dict) else "none"
+        raise InputError(f"--from {path}: no model {model!r} (models: {have})")
+    bolts = models[model].get("bolts") or []
+    return doc, [b for b in bolts if isinstance(b, dict) and "id" in b]
+
+
+def _ask(bolt: str) -> str:
+    print(f"hold the tool on {bolt}, then press Enter (s: skip, q: stop)", flush=True)
+    line = sys.stdin.readline()
+    return "q" if line == "" else line.strip().lower()
+
+
+def cmd_teach(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    if out.exists():
+        raise InputError(f"--out {out}: exists; a taught table is a new file, never an "
+                         "overwrite (choose another name)")
+    doc, cad = _cad(args.from_, args.model) if args.from_ else ({}, [])
+    ids = [str(b["id"]) for b in cad] if cad else []
+    if args.bolts:
+        wanted = [b.strip() for b in args.bolts.split(",") if b.strip()]
+        unknown = [b for b in wanted if cad and b not in ids]
+        if unknown:
+            raise InputError(f"--bolts: not in {args.from_}: {', '.join(unknown)}")
+        ids = wanted
+    if not ids:
+        raise InputError("which bolts: --from a CAD table, or --bolts B01,B02,...")
+    client = ApiClient(args.url, args.token, args.timeout)
+    status, who = client.call("/api/login", {"user": args.user, "password": read_password(),
+                                             "client": "cli"})
+    if status != 200:
+        return say_refused("login refused", status, who)
+
+    def command(body: dict[str, Any]) -> tuple[int, Any]:
+        st, nonce = client.call("/api/nonce")
+        if st != 200 or not isinstance(nonce, dict):
+            return st, nonce
+        return client.call("/api/commands", {**body, "nonce": nonce["nonce"]})
+
+    status, answer = command({"kind": "teach-start", "model": args.model})
+    if status != 200:
+        print(answer["words"] if isinstance(answer, dict) else answer, file=sys.stderr)
+        return EXIT_REFUSED
+    taught: dict[str, dict[str, Any]] = {}
+    cad_at = {str(b["id"]): b.get("position") for b in cad}
+    try:
+        for bolt in ids:
+            reply = _ask(bolt)
+            if reply == "q":
+                break
+            if reply == "s":
+                continue
+            status, answer = command({"kind": "teach-point", "bolt": bolt})
+            if status != 200 or not isinstance(answer, dict) or "result" not in answer:
+                why = answer.get("reason", {}).get("words") if isinstance(answer, dict) \
+                    else answer
+                print(f"{bolt}: not taught: {why}", flush=True)
+                continue
+            r = answer["result"]
+            taught[bolt] = r
+            x, y, z = r["position_mm"]
+            line = f"{bolt}: {x:.1f} {y:.1f} {z:.1f} mm, dispersion {r['dispersion_mm']:.2f} mm"
+            ref = cad_at.get(bolt)
+            if ref is not None:
+                d = math.dist((x, y), (float(ref[0]), float(ref[1])))
+                flag = "  BEYOND THE TOLERANCE" if d > args.tolerance else ""
+                line += f"; CAD {d:.1f} mm away in X-Y{flag}"
+            print(line, flush=True)
+    finally:
+        command({"kind": "teach-stop"})
+        client.call("/api/logout", {})
+    if not taught:
+        print("nothing taught: no file written", file=sys.stderr)
+        return EXIT_REFUSED
+    positions = {b: r["position_mm"] for b, r in taught.items()}
+    everywhere = {**{k: v for k, v in cad_at.items() if v is not None}, **positions}
+    for problem in check_spacing(everywhere, args.tolerance):
+        print(f"spacing: {problem}", flush=True)
+    _write(out, doc, args.model, taught)
+    print(f"{len(taught)} bolt(s) taught: {out} (import it to make new parameter versions)")
+    return 0
+
+
+def _write(out: Path, doc: dict[str, Any], model: str, taught: dict[str, dict[str, Any]]
+           ) -> None:
+    """The CAD table with the taught positions (or, without one, the positions alone)."""
+    def pos(r: dict[str, Any]) -> list[float]:
+        return [round(float(v), 1) for v in r["position_mm"]]
+
+    if doc:
+        for b in doc["models"][model].get("bolts") or []:
+            if isinstance(b, dict) and str(b.get("id")) in taught:
+                b["position"] = pos(taught[str(b["id"])])
+        body = doc
+    else:
+        body = {"model": model, "bolts": [{"id": b, "position": pos(r), "dispersion_mm":
+                                           round(float(r["dispersion_mm"]), 3)}
+                                          for b, r in taught.items()]}
+    head = (f"# taught by stationd teach for {model}: positions in the vehicle frame, mm\n"
+            + ("" if doc else "# positions only: add each bolt's parameters before import\n"))
+    out.write_text(head + yaml.safe_dump(body, sort_keys=False), encoding="utf-8")
+
+
+def add_teach_parser(sub: Any) -> None:
+    t = sub.add_parser("teach", help="teach a model's bolt positions on a vehicle (through "
+                       "the running daemon, the teach right)")
+    t.add_argument("--model", required=True, help="the vehicle model (its bolt table name)")
+    t.add_argument("--user", required=True, help="who teaches (a user with the teach right)")
+    t.add_argument("--from", dest="from_", metavar="CAD.yaml",
+                   help="the bolt table to teach (ids, parameters, CAD positions)")
+    t.add_argument("--bolts", help="only these bolts, in this order (comma-separated)")
+    t.add_argument("--out", required=True, help="the taught table to write (a new file)")
+    t.add_argument("--tolerance", type=float, default=8.0,
+                   help="flag a bolt farther than this from CAD, mm (default 8)")
+    client_args(t)
+    t.set_defaults(func=cmd_teach)
+
+
+__all__ = ["add_teach_parser", "cmd_teach"]

@@ -1,0 +1,258 @@
+"""The OPC UA server over real OPC UA on loopback, with an asyncua client as an MES would use it."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import socket
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+from asyncua.client.client import Client
+
+from db.repository import Repository
+from stationd.access import hash_password
+from stationd.boltfile import import_bolts
+from stationd.errors import ConfigError
+from stationd.opcua import OpcUaConfig
+from stationd.opcua.model import DI_URI, IJT_URI, MACHINERY_URI, RESULT_URI, load_client_types
+from stationd.opcua.server import NAMESPACE, OpcUaServer
+from stationd.opcua.uatypes import ua
+from stationd.yamlio import YamlNode
+from tests.db.conftest import BASE, record
+
+VIN = "WVWZZZ1JZXW000001"
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture
+def repo(tmp_path: Path):
+    table = tmp_path / "bolts.yaml"
+    table.write_text(BASE)
+    r = Repository.open(f"sqlite:///{tmp_path / 'station.db'}")
+    import_bolts(r, table)
+    r.start_vehicle(VIN, "SEDAN")
+    yield r
+    r.close()
+
+
+def config(**kw: Any) -> OpcUaConfig:
+    return OpcUaConfig(endpoint=f"opc.tcp://127.0.0.1:{free_port()}", station_id="ST-07",
+                       security=("none",), **kw)
+
+
+class Collector:
+    def __init__(self) -> None:
+        self.events: list[Any] = []
+        self.arrived = asyncio.Event()
+
+    def event_notification(self, event: Any) -> None:
+        self.events.append(event)
+        self.arrived.set()
+
+    async def wait_for(self, n: int, timeout: float = 10.0) -> None:
+        async def enough() -> None:
+            while len(self.events) < n:
+                self.arrived.clear()
+                await self.arrived.wait()
+        await asyncio.wait_for(enough(), timeout)
+
+
+async def serving(cfg: OpcUaConfig, repo: Repository):
+    srv = OpcUaServer(cfg)
+    await srv.start()
+    stop = asyncio.Event()
+    task = asyncio.create_task(srv.run(stop, repo))
+    return srv, stop, task
+
+
+async def stopping(srv: OpcUaServer, stop: asyncio.Event, task: asyncio.Task[None]) -> None:
+    stop.set()
+    await task
+    await srv.stop()
+
+
+def test_every_rundown_arrives_as_a_result_event_at_the_server_object(repo):
+    async def scenario() -> list[Any]:
+        srv, stop, task = await serving(config(), repo)
+        try:
+            async with Client(srv.url) as client:
+                await load_client_types(client)
+                uris = await client.get_namespace_array()
+                etype = client.get_node(ua.NodeId(1007, uris.index(IJT_URI)))
+                handler = Collector()
+                sub = await client.create_subscription(50, handler)
+                await sub.subscribe_events(client.nodes.server, etype)
+                await asyncio.sleep(0.3)
+                loop = asyncio.get_running_loop()
+                await loop.run_in_executor(None, lambda: record(repo, VIN, "B1", ok=True))
+                await loop.run_in_executor(None, lambda: record(repo, VIN, "B2", ok=False))
+                await handler.wait_for(2)
+                return handler.events
+        finally:
+            await stopping(srv, stop, task)
+
+    events = asyncio.run(scenario())
+    db_id = repo.ledger.db_id()
+    seqs = [e["seq"] for e in repo.ledger.since(0)]
+    assert [e.SourceName for e in events] == ["ST-07", "ST-07"]
+    assert events[0].SourceNode == ua.NodeId("JoiningSystem.ST-07", events[0].SourceNode
+                                             .NamespaceIndex)
+    for event, seq, ok, bolt in zip(events, seqs, (True, False), ("B1", "B2"), strict=True):
+        meta = event.Result.ResultMetaData
+        assert meta.ResultId == f"{db_id}:{seq}"
+        assert meta.SequenceNumber == seq
+        assert meta.Classification == 1
+        assert int(meta.ResultEvaluation) == (1 if ok else 2)
+        assert meta.CreationTime is not None
+        entities = {(x.EntityType, x.EntityId) for x in meta.AssociatedEntities}
+        assert entities == {(20, VIN), (23, bolt)}
+        content = event.Result.ResultContent[0].Value
+        torque, angle = content.OverallResultValues
+        assert (torque.Name, torque.MeasuredValue) == ("Torque", 50.0 if ok else 30.0)
+        assert (angle.Name, angle.MeasuredValue) == ("Angle", 35.0)
+    b1_torque, b1_angle = events[0].Result.ResultContent[0].Value.OverallResultValues
+    assert (b1_torque.LowLimit, b1_torque.High, b1_torque.TargetValue) == (45.0, 55.0, 50.0)
+    assert (b1_angle.LowLimit, b1_angle.High) == (15.0, 60.0)
+    b2_torque = events[1].Result.ResultContent[0].Value.OverallResultValues[0]
+    assert (b2_torque.LowLimit, b2_torque.High) == (23.0, 27.0)
+    assert b2_torque.EngineeringUnits.DisplayName.Text == "N·m"
+
+
+def test_identification_state_and_the_result_methods(repo):
+    record(repo, VIN, "B1", ok=True)         # before the server: kept for the methods
+    db_id = repo.ledger.db_id()
+
+    async def scenario() -> dict[str, Any]:
+        srv, stop, task = await serving(config(), repo)
+        try:
+            await srv.set_state("tracking", "vehicle at the station")
+            async with Client(srv.url) as client:
+                await load_client_types(client)
+                uris = await client.get_namespace_array()
+                di, mr = uris.index(DI_URI), uris.index(RESULT_URI)
+                machines = await client.nodes.objects.get_child(
+                    [f"{uris.index(MACHINERY_URI)}:Machines"])
+                js = await machines.get_child([f"{uris.index(NAMESPACE)}:ST-07"])
+                ident = await js.get_child([f"{di}:Identification"])
+                out: dict[str, Any] = {}
+                for name in ("Manufacturer", "SystemId", "SoftwareRevision"):
+                    v = await (await ident.get_child([f"{di}:{name}" if name != "SystemId"
+                                                      else f"{uris.index(IJT_URI)}:SystemId"]
+                                                     )).read_value()
+                    out[name] = getattr(v, "Text", v)
+                out["state"] = await (await js.get_child(
+                    [f"{uris.index(NAMESPACE)}:State"])).read_value()
+                rm = await js.get_child([f"{mr}:ResultManagement"])
+                out["latest"] = await rm.call_method(f"{mr}:GetLatestResult", ua.Int32(0))
+                out["by_id"] = await rm.call_method(f"{mr}:GetResultById",
+                                                    f"{db_id}:1", ua.Int32(0))
+                out["unknown"] = await rm.call_method(f"{mr}:GetResultById", "nope",
+                                                      ua.Int32(0))
+                return out
+        finally:
+            await stopping(srv, stop, task)
+
+    out = asyncio.run(scenario())
+    assert out["Manufacturer"] == "stationd"
+    assert out["SystemId"] == "ST-07"
+    assert out["SoftwareRevision"]
+    assert out["state"] == "tracking"
+    _, latest, error = out["latest"]
+    assert error == 0 and latest.ResultMetaData.ResultId == f"{db_id}:1"
+    _, by_id, error = out["by_id"]
+    assert error == 0 and by_id.ResultMetaData.ProductId == VIN
+    assert out["unknown"][2] != 0
+
+
+def test_a_client_in_its_own_process_decodes_the_result(repo):
+    """No class shared with the server: the client builds its own from the definitions the
+    server exposes (complete, with subtyped fields flagged)."""
+    record(repo, VIN, "B2", ok=False)
+    db_id = repo.ledger.db_id()
+
+    async def scenario() -> dict[str, Any]:
+        srv, stop, task = await serving(config(), repo)
+        try:
+            proc = await asyncio.create_subprocess_exec(
+                sys.executable, "-m", "tests.opcua.mes_client", srv.url, "ST-07",
+                cwd=ROOT, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+            out, err = await asyncio.wait_for(proc.communicate(), 60)
+            assert proc.returncode == 0, err.decode()[-2000:]
+            return dict(json.loads(out.decode().strip().splitlines()[-1]))
+        finally:
+            await stopping(srv, stop, task)
+
+    got = asyncio.run(scenario())
+    assert got["error"] == 0 and got["type"] == "JoiningResultMetaDataType"
+    assert got["result_id"] == f"{db_id}:1" and got["seq"] == 1 and got["evaluation"] == 2
+    assert sorted(got["entities"]) == [[20, VIN], [23, "B2"]]
+    assert got["values"] == [["Torque", 30.0, 23.0, 27.0], ["Angle", 35.0, 10.0, 50.0]]
+
+
+def test_anonymous_clients_read_but_never_write_and_users_need_their_password(repo):
+    cfg = config(users={"mes": hash_password("s3cret")})
+
+    async def scenario() -> dict[str, Any]:
+        srv, stop, task = await serving(cfg, repo)
+        out: dict[str, Any] = {}
+        try:
+            async with Client(srv.url) as client:
+                uris = await client.get_namespace_array()
+                state = client.get_node(ua.NodeId("JoiningSystem.ST-07.State",
+                                                  uris.index(NAMESPACE)))
+                out["read"] = await state.read_value()
+                with pytest.raises(ua.UaStatusCodeError) as refused:
+                    await state.write_value("hacked")
+                out["anonymous write"] = type(refused.value).__name__
+            user = Client(srv.url)
+            user.set_user("mes")
+            user.set_password("s3cret")
+            async with user:
+                uris = await user.get_namespace_array()
+                state = user.get_node(ua.NodeId("JoiningSystem.ST-07.State",
+                                                uris.index(NAMESPACE)))
+                with pytest.raises(ua.UaStatusCodeError) as refused:
+                    await state.write_value("hacked")
+                out["user write"] = type(refused.value).__name__
+            wrong = Client(srv.url)
+            wrong.set_user("mes")
+            wrong.set_password("guess")
+            with pytest.raises(ua.UaStatusCodeError) as refused:
+                async with wrong:
+                    pass
+            out["wrong password"] = type(refused.value).__name__
+            return out
+        finally:
+            await stopping(srv, stop, task)
+
+    out = asyncio.run(scenario())
+    assert out["read"] is not None
+    assert out["anonymous write"] == "BadUserAccessDenied"
+    assert out["user write"] == "BadUserAccessDenied"
+    assert out["wrong password"] in ("BadUserAccessDenied", "BadIdentityTokenRejected",
+                                     "BadIdentityTokenInvalid")
+
+
+def test_the_opcua_section_is_checked_with_its_line(tmp_path):
+    ok = OpcUaConfig.from_node(YamlNode.parse(
+        "endpoint: opc.tcp://0.0.0.0:4841\nstation_id: ST-07\ncertificates: pki\n"
+        f"users: {{mes: '{hash_password('x')}'}}\nkeep: 10\n"), base_dir=tmp_path)
+    assert (ok.endpoint, ok.station_id, ok.certificates, ok.keep) == \
+        ("opc.tcp://0.0.0.0:4841", "ST-07", tmp_path / "pki", 10)
+    assert ok.security == ("none", "sign", "encrypt") and set(ok.users) == {"mes"}
+    for text, needle, line in (("endpoint: http://x:1\nsecurity: [none]\n", "OPC UA endpoint", 1),
+                               ("security: [none]\nusers: {mes: plain}\n", "hash", 2),
+                               ("security: [sign]\n", "certificates", 1),
+                               ("security: [none]\nport: 1\n", "unknown key", 2)):
+        with pytest.raises(ConfigError) as err:
+            OpcUaConfig.from_node(YamlNode.parse(text))
+        assert needle in str(err.value) and f":{line}" in str(err.value), str(err.value)

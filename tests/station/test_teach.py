@@ -1,0 +1,88 @@
+"""Teach mode in the pure core: only with the teach right, the normal cycle off (nothing is
+sent, the tool goes off), a bolt end measured from steady frames exposed after the request,
+refused when the wrench moved; stopping it brings the cycle back."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from stationd.reasons import Why
+from stationd.station.commands import Issuer, Right, SkipBolt, TeachPoint, TeachStart, TeachStop
+from stationd.station.core import (
+    TEACH_FRAMES,
+    CommandDone,
+    CommandIn,
+    DisableTool,
+    LocalizedIn,
+    Reply,
+    SendParams,
+    State,
+)
+from tests.station.test_commands import OPERATOR, _answer
+from tests.station.test_core import _on, _ready
+
+ENGINEER = Issuer("ed", frozenset({Right.TEACH}), "cli")
+
+
+def _do(d: Any, request: int, command: Any, who: Issuer = ENGINEER) -> list[Any]:
+    acts: list[Any] = d.core.feed(CommandIn(d.t, request, command, who))
+    if any(type(a).__name__ == "RecordCommand" for a in acts):
+        acts = d.core.feed(CommandDone(d.t, request))
+    return acts
+
+
+def _frames(d: Any, x: float, n: int, jitter: float = 0.05) -> list[Any]:
+    acts: list[Any] = []
+    for k in range(n):
+        d.t += 0.1
+        acts += d.core.feed(LocalizedIn(d.t, d.t - 0.05, (x + jitter * (k % 3), 0.0, 0.0)))
+    return acts
+
+
+def test_teach_mode_turns_the_cycle_off_and_measures_a_steady_bolt_end():
+    d = _ready()
+    _on(d, 2)
+    assert d.core.state.value == "bolt selected"
+    assert _answer(_do(d, 1, TeachStart("M"), OPERATOR)).answer.reason.kind is Why.NO_RIGHT
+    acts = _do(d, 2, TeachStart("M"))
+    assert _answer(acts).answer.accepted and d.core.state is State.TEACHING
+    assert d.core.bolt is None                                   # the selection dropped
+    assert _answer(_do(d, 3, SkipBolt("VIN1", "B1"), OPERATOR)).answer.reason.kind \
+        is Why.TEACHING                                          # other commands wait
+    before = len(d.sends)
+    _on(d, 1, 4)
+    assert len(d.sends) == before                                # nothing is sent
+    assert not any(isinstance(a, SendParams | Reply) for _, acts in d.log[-4:] for a in acts)
+    acts = _do(d, 4, TeachPoint("B7"))
+    assert not any(isinstance(a, Reply) for a in acts)           # answered once measured
+    acts = _frames(d, 500.0, TEACH_FRAMES)
+    [reply] = [a for a in acts if isinstance(a, Reply)]
+    r = reply.answer.result
+    assert reply.answer.accepted and r is not None
+    assert r["position_mm"][0] == pytest.approx(500.05, abs=0.05) and r["dispersion_mm"] < 0.2
+    acts = _do(d, 5, TeachStop())
+    assert _answer(acts).answer.accepted and d.core.state is not State.TEACHING
+
+
+def test_a_wrench_that_moves_while_measured_is_refused_and_frames_before_do_not_count():
+    d = _ready()
+    _do(d, 1, TeachStart("M"))
+    _do(d, 2, TeachPoint("B7"))
+    d.core.feed(LocalizedIn(d.t + 0.01, d.t - 1.0, (9999.0, 0.0, 0.0)))   # exposed before
+    acts = _frames(d, 500.0, TEACH_FRAMES // 2) + _frames(d, 510.0, TEACH_FRAMES // 2)
+    [reply] = [a for a in acts if isinstance(a, Reply)]
+    assert reply.answer.reason is not None and reply.answer.reason.kind is Why.NOT_STEADY
+    assert _answer(_do(d, 3, TeachStop())).answer.accepted
+    assert _answer(_do(d, 4, TeachPoint("B7"))).answer.reason.kind is Why.NOT_TEACHING
+
+
+def test_teach_mode_cannot_start_while_the_tool_is_on():
+    d = _ready()
+    _on(d, 2)
+    d.step(("ack", 0.01, True))
+    _on(d, 2, 1)
+    assert d.tool
+    assert _answer(_do(d, 1, TeachStart("M"))).answer.reason.kind is Why.TOOL_ON_BOLT
+    assert not any(isinstance(a, DisableTool) for _, acts in d.log[-1:] for a in acts)

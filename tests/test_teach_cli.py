@@ -1,0 +1,115 @@
+"""Teach-in end to end in the simulator, with a scripted engineer: `stationd teach` against the
+running daemon (``station_proc.py``: its serve loop, its PLC over Modbus TCP and controller
+over Open Protocol on loopback, the simulated cameras).  The engineer holds the tool on each
+bolt in turn (the simulated wrench is put there) and presses Enter; the station measures the
+bolt end while its normal cycle is off (nothing is sent), and a new bolt table is written with
+the taught positions, compared with the CAD table."""
+
+from __future__ import annotations
+
+import os
+import queue
+import sqlite3
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from drivers.lift.sim import SimulatedPlc
+from drivers.wrench.sim import SimController
+from stationd.access import hash_password
+from stationd.demo.station import _sim_psets
+from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
+
+ROOT = Path(__file__).resolve().parents[1]
+PASSWORD = "teach-me-please"  # noqa: S105 - a test user's
+VIN = "TEACHVIN000000001"
+
+
+def _station(port: int, hashed: str):
+    def edit(text: str) -> str:
+        return text + (f"\nhttp: {{listen: '127.0.0.1:{port}'}}\naccess:\n  users:\n"
+                       f"    ed: {{role: engineer, password: '{hashed}'}}\n"
+                       f"    olga: {{role: operator, password: '{hashed}'}}\n")
+    return edit
+
+
+@pytest.mark.timeout(300)
+def test_an_engineer_teaches_bolts_and_gets_a_new_table_compared_with_cad(tmp_path):
+    lift_port, ctl_port, http_port = _free_port(), _free_port(), _free_port()
+    plc = SimulatedPlc()
+    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=11, nok_rate=0.0)
+    d = Proc(tmp_path, lift_port, ctl_port, edit=_station(http_port, hash_password(PASSWORD)))
+    pose, out = tmp_path / "pose", tmp_path / "taught.yaml"
+    env = {**os.environ, "STATIOND_PASSWORD": PASSWORD, "PYTHONPATH": str(ROOT)}
+    url = f"http://127.0.0.1:{http_port}/"
+    try:
+        at_height(d, plc, ctl, lift_port, ctl_port, VIN)
+        # an operator may not teach
+        got = subprocess.run([sys.executable, "-m", "stationd", "teach", "--model", "SIM-1",
+                              "--user", "olga", "--bolts", "B01", "--out", str(out),
+                              "--url", url], capture_output=True, text=True, env=env,
+                             timeout=60, input="\n", check=False)
+        assert got.returncode == 1 and "right to teach" in got.stderr and not out.exists()
+        p = subprocess.Popen(
+            [sys.executable, "-m", "stationd", "teach", "--model", "SIM-1", "--user", "ed",
+             "--from", str(tmp_path / "bolts.yaml"), "--bolts", "B01,B02,B03",
+             "--out", str(out), "--url", url],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            env=env)
+        lines: queue.Queue[str] = queue.Queue()
+
+        def pump() -> None:
+            assert p.stdout is not None
+            for line in p.stdout:
+                lines.put(line.rstrip("\n"))
+        threading.Thread(target=pump, daemon=True).start()
+
+        def expect(start: str) -> str:
+            while True:
+                line = lines.get(timeout=90)
+                if line.startswith(start):
+                    return line
+
+        assert p.stdin is not None
+        said: dict[str, str] = {}
+        for bolt, answer in (("B01", "\n"), ("B02", "\n"), ("B03", "s\n")):
+            expect(f"hold the tool on {bolt}")
+            pose.write_text(bolt if answer == "\n" else "")
+            d.wait_log("teaching SIM-1 (ed)")
+            time.sleep(0.5)                         # the engineer settles the tool
+            p.stdin.write(answer)
+            p.stdin.flush()
+            if answer == "\n":
+                said[bolt] = expect(f"{bolt}: ")
+        pose.write_text("")
+        expect("2 bolt(s) taught")
+        assert p.wait(timeout=60) == 0
+        assert "tightening bolt" not in d.log() and "selected" not in d.log()
+        d.wait_log("teach mode ended")
+        assert d.stop() == 0
+    finally:
+        d.kill()
+        ctl.close()
+        plc.close()
+    cad = {b["id"]: b for b in yaml.safe_load((tmp_path / "bolts.yaml").read_text())
+           ["models"]["SIM-1"]["bolts"]}
+    new = {b["id"]: b for b in yaml.safe_load(out.read_text())["models"]["SIM-1"]["bolts"]}
+    for bolt in ("B01", "B02"):
+        moved = np.array(new[bolt]["position"]) - np.array(cad[bolt]["position"])
+        assert np.hypot(*moved[:2]) < 2.0, (bolt, moved)            # taught near CAD
+        assert "dispersion" in said[bolt] and "CAD" in said[bolt]
+        assert new[bolt]["pset"] == cad[bolt]["pset"]               # parameters kept
+    assert new["B03"]["position"] == cad["B03"]["position"]         # skipped: as it was
+    con = sqlite3.connect(tmp_path / "station.db")
+    try:
+        rows = list(con.execute("SELECT user, kind, bolt FROM commands ORDER BY id"))
+    finally:
+        con.close()
+    assert rows == [("ed", "teach-start", None), ("ed", "teach-point", "B01"),
+                    ("ed", "teach-point", "B02"), ("ed", "teach-stop", None)]
