@@ -394,6 +394,7 @@ def build_parser() -> argparse.ArgumentParser:
     from stationd.calibrate_cli import add_calibrate_parser
     from stationd.command_cli import add_command_parsers
     from stationd.db_cli import add_config_parser, add_db_parser
+    from stationd.line_cli import add_line_parser
     from stationd.probe import add_probe_parser
     from stationd.teach_cli import add_teach_parser
     from stationd.web.status_cli import add_status_parser
@@ -405,6 +406,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_status_parser(sub)
     add_command_parsers(sub)
     add_teach_parser(sub)
+    add_line_parser(sub)
 
     rn = sub.add_parser("run", help="the station daemon (as systemd runs it)")
     rn.add_argument("--config", required=True, help="station YAML")

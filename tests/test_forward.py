@@ -5,7 +5,11 @@ visible quarantine without blocking the rest."""
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 from datetime import UTC, datetime
+from pathlib import Path
 
 import pytest
 from sqlalchemy import select
@@ -132,3 +136,40 @@ def test_the_line_section_is_checked_with_its_line():
                            "out of range")):
         with pytest.raises(ConfigError, match=message):
             LineConfig.from_node(YamlNode.parse(text, "station.yaml"))
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+    root = Path(__file__).resolve().parents[1]
+    return subprocess.run([sys.executable, "-m", "stationd", *args], capture_output=True,
+                          text=True, cwd=root, timeout=60, check=False)
+
+
+def test_the_line_commands_show_the_backlog_and_retry_or_export_the_quarantine(
+        tmp_path, table, pg_url, pg_server):
+    repo = _station(tmp_path, "st.db", table, "VINL", [(1, "B1")])
+    repo.ledger.record_command(at=AT, user="sam", source="cli", kind="skip", vin="VINL",
+                               bolt="B2", comment="bad\x00comment")
+    repo.close()
+    station = tmp_path / "station.yaml"
+    station.write_text(f"database: {{url: 'sqlite:///{tmp_path / 'st.db'}'}}\n"
+                       f"line: {{url: '{pg_url}', station_id: ST-L}}\n")
+    got = _cli("line", "status", "--config", str(station), "--json")
+    assert got.returncode == 1, got.stderr
+    assert json.loads(got.stdout)["backlog"] == 2
+    with Repository.open(f"sqlite:///{tmp_path / 'st.db'}") as r:
+        Forwarder(r, LineConfig(pg_url, "ST-L")).step()
+    got = _cli("line", "status", "--config", str(station))
+    assert got.returncode == 1 and "0 waiting" in got.stdout and "1 quarantined" in got.stdout
+    got = _cli("line", "quarantine", "--config", str(station))
+    assert got.returncode == 1 and "record 2 (command" in got.stdout
+    out = tmp_path / "quarantine.json"
+    got = _cli("line", "quarantine", "--config", str(station), "--retry", "--export", str(out))
+    assert got.returncode == 1 and "0 taken by the line database, 1 still refused" in got.stdout
+    assert json.loads(out.read_text())[0]["record"]["user"] == "sam"
+    got = _cli("line", "quarantine", "--config", str(station), "--export", str(out))
+    assert got.returncode == 2 and "exists" in got.stderr
+    down = pg_url.replace(f":{pg_server.port}/", ":1/")
+    station.write_text(f"database: {{url: 'sqlite:///{tmp_path / 'st.db'}'}}\n"
+                       f"line: {{url: '{down}', station_id: ST-L}}\n")
+    got = _cli("line", "quarantine", "--config", str(station), "--retry")
+    assert got.returncode == 3 and "unreachable" in got.stderr and "Traceback" not in got.stderr
