@@ -22,9 +22,13 @@ from tests.test_forward import _line_rows
 VIN = "LINEVIN0000000001"
 
 
-def _status(port: int) -> dict[str, Any]:
-    with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/status", timeout=10) as r:
+def _get(port: int, path: str) -> dict[str, Any]:
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}{path}", timeout=10) as r:
         return dict(json.loads(r.read()))
+
+
+def _status(port: int) -> dict[str, Any]:
+    return _get(port, "/api/status")
 
 
 @pytest.mark.timeout(300)
@@ -67,6 +71,10 @@ def test_results_reach_the_line_database_and_wait_while_it_is_down(tmp_path):
                "the status says it is down")
         st = _status(http_port)["line"]
         assert st["backlog"] >= 1 and st["last_error"]
+        # the screens' snapshot carries it too (the operator's devices panel), within a
+        # heartbeat
+        _until(lambda: (_get(http_port, "/api/view").get("line") or {}).get("up") is False,
+               30, "the screens' snapshot says the line database is down")
         d.wait_log("line database: down")
         pg.resume()
         _until(lambda: {first, second} <= {r.record.get("tightening_id")

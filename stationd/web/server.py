@@ -154,6 +154,9 @@ class WebServer:
                 try:
                     event = await asyncio.wait_for(queue.get(), HEARTBEAT_S)
                 except TimeoutError:
+                    # the line forwarder's state changes without station events
+                    with contextlib.suppress(TypeError, ValueError):
+                        self._snapshot = self._encode()
                     for q in list(self._clients):
                         _offer(q, self._snapshot)
                     continue
@@ -185,7 +188,7 @@ class WebServer:
             log.exception("screens: event not shown: %r", event)
 
     def _encode(self) -> bytes:
-        doc = {**self.view.to_json(), "heartbeat_s": HEARTBEAT_S}
+        doc = {**self.view.to_json(), "heartbeat_s": HEARTBEAT_S, "line": self.line()}
         return b"data: " + json.dumps(doc, separators=(",", ":"),
                                       default=_plain).encode() + b"\n\n"
 

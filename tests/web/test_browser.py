@@ -324,3 +324,24 @@ def test_cameras_screen_fetches_again_only_the_frames_in_view(live_server, page)
     p1 = fetched()["p1"]
     page.wait(lambda p: fetched()["p4"] >= 10, 20, "p4 fetched twice more")
     assert fetched()["p1"] == p1           # out of view now
+
+
+def test_the_line_database_down_is_amber_in_the_devices_never_a_station_fault(live_server,
+                                                                              page):
+    """The store-and-forward's state on the operator screen: the records waiting while the
+    line database is down, in the devices panel, never as a fault (the station tightens on)."""
+    srv = live_server()
+    state = {"up": True, "backlog": 0, "alarm": None, "last_error": None,
+             "url": "postgresql+psycopg://stationd@line-db/line"}
+    srv.server.line = lambda: dict(state)
+    srv.publish(opened())
+    page.get(srv.url)
+    page.wait(lambda p: p.text("#devices li[data-device=line]") == "line database: 0 behind",
+              what="the line database forwarding")
+    state.update(up=False, backlog=7, last_error="connection refused")
+    srv.publish(work())                    # any event (or the heartbeat) brings the news
+    page.wait(lambda p: p.text("#devices li[data-device=line]")
+              == "line database down: 7 record(s) wait", what="the line database down")
+    assert page.js("return document.querySelector('#devices li[data-device=line]')"
+                   ".className") == "dev-wait"
+    assert page.js("return document.getElementById('headline').dataset.tone") != "stop"

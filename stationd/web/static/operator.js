@@ -243,9 +243,9 @@ function render(view) {
     `X ${fmt(w.x, 0)}  Y ${fmt(w.y, 0)}  Z ${fmt(w.z, 0)} mm, tilt ${fmt(w.tilt, 1)}\u00B0` +
     (w.candidate ? `, near ${w.candidate} (${fmt(w.distance, 1)} mm)` : ""));
   const results = view.results.slice(0, 6);
-  const rkey = JSON.stringify(results), dkey = JSON.stringify(view.devices);
+  const rkey = JSON.stringify(results), dkey = JSON.stringify([view.devices, lineShown(view.line)]);
   if (rkey !== shownKeys.results) { shownKeys.results = rkey; drawResults(results); }
-  if (dkey !== shownKeys.devices) { shownKeys.devices = dkey; drawDevices(view.devices); }
+  if (dkey !== shownKeys.devices) { shownKeys.devices = dkey; drawDevices(view.devices, view.line); }
 }
 
 // what the tables show now: they are redrawn only when it changed
@@ -270,9 +270,28 @@ function drawResults(results) {
   }
 }
 
-function drawDevices(devices) {
+// The line database (store and forward): never a fault of the station, so never red; amber
+// while it is down or past its bounds, with how many records wait
+function lineShown(line) {
+  if (!line) return null;
+  const text = line.alarm ? `line database: ${line.alarm}` :
+    line.up === false ? `line database down: ${line.backlog} record(s) wait` :
+    `line database: ${line.backlog} behind`;
+  return {text, ok: !line.alarm && line.up !== false, title: line.last_error || line.url};
+}
+
+function drawDevices(devices, line) {
   const ul = $("devices");
   ul.replaceChildren();
+  const l = lineShown(line);
+  if (l) {
+    const li = document.createElement("li");
+    li.className = l.ok ? "dev-ok" : "dev-wait";
+    li.dataset.device = "line";
+    li.textContent = l.text;
+    li.title = l.title || "";
+    ul.appendChild(li);
+  }
   // the faulty first, each on its own lines (a long URL wraps); the healthy on one line
   const devs = Object.entries(devices).sort((a, b) => Number(a[1].ok) - Number(b[1].ok));
   for (const [name, d] of devs) {
