@@ -23,6 +23,7 @@ import platform
 import time
 from collections import Counter
 from collections.abc import Callable
+from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -47,7 +48,8 @@ FLUSH_HZ = 10.0
 #: nothing for three of these knows its stream stalled (a dead link need not break it)
 HEARTBEAT_S = 5.0
 CLIENT_QUEUE = 16
-PAGES = {"/": "operator.html", "/cameras": "cameras.html", "/vehicles": "vehicles.html"}
+PAGES = {"/": "operator.html", "/cameras": "cameras.html", "/vehicles": "vehicles.html",
+         "/quality": "quality.html"}
 
 
 def _versions() -> dict[str, str]:
@@ -213,6 +215,7 @@ class WebServer:
         r.add_get("/api/vehicles/{vin}/export.csv", self._export_csv)
         r.add_get("/api/vehicles/{vin}/export.json", self._export_json)
         r.add_get("/api/vehicles/{vin}", self._vehicle)
+        r.add_get("/api/spc", self._spc)
         r.add_get("/images/{path:.+}", self._image)
         self.commands.add_to(app)
 
@@ -385,6 +388,19 @@ class WebServer:
         if not p.is_relative_to(self.images_dir):
             return None
         return "/images/" + p.relative_to(self.images_dir).as_posix()
+
+    async def _spc(self, request: web.Request) -> web.Response:
+        """Cp/Cpk per bolt and pset on OK results, NOK per day (``?model=``, ``?since=``)."""
+        res = self._need_results()
+        since = None
+        if request.query.get("since"):
+            try:
+                since = datetime.fromisoformat(request.query["since"])
+            except ValueError:
+                raise web.HTTPBadRequest(text="since: an ISO date (2026-11-23)\n") from None
+            since = since if since.tzinfo is not None else since.replace(tzinfo=UTC)
+        doc = await self._db(res.repo.spc, request.query.get("model") or None, since)
+        return web.json_response(doc)
 
     async def _export_json(self, request: web.Request) -> web.Response:
         res = self._need_results()

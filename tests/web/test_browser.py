@@ -345,3 +345,22 @@ def test_the_line_database_down_is_amber_in_the_devices_never_a_station_fault(li
     assert page.js("return document.querySelector('#devices li[data-device=line]')"
                    ".className") == "dev-wait"
     assert page.js("return document.getElementById('headline').dataset.tone") != "stop"
+
+
+def test_the_quality_screen_shows_capability_and_the_nok_trend(live_server, page, tmp_path):
+    repo = results_db(tmp_path)
+    for i, torque in enumerate((49.5, 50.5, 50.0, 49.8, 50.3)):    # five more OK on B1
+        repo.start_vehicle(f"VINQ{i}", "SEDAN")
+        repo.record_tightening(f"VINQ{i}", "B1", ok=True, torque_nm=torque, angle_deg=31.0,
+                               position_mm=(1.0, 1.0, 0.0), match_distance_mm=1.0,
+                               tilt_deg=1.0, tightening_id=200 + i)
+    srv = live_server(results=repo)
+    page.get(srv.url + "quality")
+    page.wait(lambda p: p.count("#spc tbody tr") >= 2, what="the capability table")
+    row = page.js("return [...document.querySelectorAll('#spc tr[data-bolt=B1] td')]"
+                  ".map(td => td.textContent)")
+    assert row[1] == "B1" and row[3] == "6" and row[4] == "0"
+    assert float(row[6]) > 1.33                                      # Cp: a capable bolt
+    trend = page.js("return [...document.querySelectorAll('#trend tbody td')]"
+                    ".map(td => td.textContent)")
+    assert trend[1:4] == ["8", "1", "12.5 %"]                        # 8 results, 1 NOK
