@@ -51,14 +51,21 @@ from stationd.station.events import (
     BoltReleased,
     BoltSelected,
     BoltSkipped,
+    BoltView,
     DeviceHealth,
     Localized,
     Notice,
     ParamsRefusedEvent,
+    ParamsSent,
     Refused,
+    ResultRecorded,
     ResultUnattributed,
     StateChanged,
     StationEvent,
+    ToolDisabled,
+    ToolEnabled,
+    VehicleClosed,
+    VehicleOpened,
 )
 from stationd.station.matching import BoltMatcher, BoltRule, Match, MatchParams
 from stationd.station.policy import NokPolicy
@@ -130,7 +137,12 @@ class LocalizedIn(Input):
 
 @dataclass(frozen=True)
 class ParamsAcked(Input):
+    """The controller took ``bolt``'s parameters (``pset``); ``latency_ms``: the stages from
+    the frames' exposure to this acknowledgement (for the screens and the benchmarks)."""
+
     bolt: str
+    pset: int | None = None
+    latency_ms: Mapping[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -193,6 +205,31 @@ class VehicleLoaded(Input):
     rework: bool = False
     skipped: Mapping[str, str] = field(default_factory=dict)
     noks: Mapping[str, int] = field(default_factory=dict)   # NOKs in a row, since a release
+    status: Mapping[str, str] = field(default_factory=dict)  # bolt -> ok, nok (its records)
+
+@dataclass(frozen=True)
+class ToolOn(Input):
+    """The controller enabled the tool for ``bolt`` (the outcome of :class:`EnableTool`)."""
+
+    bolt: str
+
+
+@dataclass(frozen=True)
+class Written(Input):
+    """The database took ``record`` (with the crops ``images``): it may be acknowledged."""
+
+    record: Record
+    images: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class VehicleEnded(Input):
+    """The database closed ``vin``: the bolts missing and NOK when it left."""
+
+    vin: str
+    missing: tuple[str, ...] = ()
+    nok: tuple[str, ...] = ()
+
 
 @dataclass(frozen=True)
 class VehicleRejected(Input):
@@ -235,7 +272,7 @@ class CommandDone(Input):
 
 Event = (Started | LiftRead | LocalizedIn | ParamsAcked | ParamsRefused | ResultIn
          | DeviceFault | DeviceBack | VehicleLoaded | VehicleRejected | VinSent | Tick
-         | CommandIn | CommandDone)
+         | CommandIn | CommandDone | ToolOn | Written | VehicleEnded)
 
 
 # -- actions ------------------------------------------------------------------------------------
@@ -462,7 +499,7 @@ class StationCore:
         self._to(State.FAULT if self.faults else State.WAITING_VEHICLE,
                  self._fault_reason() if self.faults else "waiting for the lift")
         # the last station may have been killed with the tool on: off until a bolt is confirmed
-        return [DisableTool("station started: the tool stays off until a bolt is confirmed")]
+        return _disable("station started: the tool stays off until a bolt is confirmed", t=ev.t)
 
     def _on_LiftRead(self, ev: LiftRead) -> list[Action]:  # noqa: N802
         acts: list[Action] = []
@@ -516,6 +553,10 @@ class StationCore:
         return None
 
     def _on_VehicleLoaded(self, ev: VehicleLoaded) -> list[Action]:  # noqa: N802
+        opened = VehicleOpened(ev.vin, ev.model, tuple(
+            BoltView(k, *b.position, pset=b.pset, order=b.order, batch=b.batch,
+                     status=ev.status.get(k) or ("skipped" if k in ev.skipped else "pending"))
+            for k, b in ev.bolts.items()), rework=ev.rework, t=ev.t)
         self._loading = False
         self.vin, self.model = ev.vin, ev.model
         self._specs = dict(ev.bolts)
@@ -530,7 +571,7 @@ class StationCore:
                 self.matcher.locked[k] = n
         if self.state is State.WAITING_VEHICLE and self._lift is not None and self._lift.ready:
             self._to(State.TRACKING, "tracking the wrench")
-        return []
+        return [Publish(opened)]
 
     def _on_VehicleRejected(self, ev: VehicleRejected) -> list[Action]:  # noqa: N802
         if ev.closed and self.rework and ev.vin is not None and self._lift is not None:
@@ -640,12 +681,30 @@ class StationCore:
                 SendParams(m.bolt, sel, spec.parameters)]
 
     def _on_ParamsAcked(self, ev: ParamsAcked) -> list[Action]:  # noqa: N802
+        acts: list[Action] = [Publish(ParamsSent(ev.bolt, ev.pset, dict(ev.latency_ms),
+                                                 t=ev.t))]
         if self.state is State.BOLT_SELECTED and ev.bolt == self.bolt and self._acked_at is None:
             self._acked_at = ev.t   # the tool waits for a frame exposed after this
             self.reason = f"bolt {ev.bolt} acknowledged; confirming the wrench is on it"
-            return []
-        return [DisableTool(f"late acknowledgement for {ev.bolt} ignored", ev.bolt),
+            return acts
+        return [*acts, *_disable(f"late acknowledgement for {ev.bolt} ignored", ev.bolt,
+                                 t=ev.t),
                 Publish(Notice(f"late acknowledgement for {ev.bolt} ignored", t=ev.t))]
+
+    def _on_ToolOn(self, ev: ToolOn) -> list[Action]:  # noqa: N802
+        return [Publish(ToolEnabled(ev.bolt, t=ev.t))]
+
+    def _on_Written(self, ev: Written) -> list[Action]:  # noqa: N802
+        """A result on disk: published for the screens, then the controller may forget it."""
+        a, r = ev.record, ev.record.result
+        return [Publish(ResultRecorded(
+            a.vin, a.bolt, bool(r.ok), float(r.torque_nm), float(r.angle_deg),
+            int(r.tightening_id), int(r.pset), float(r.torque_min_nm), float(r.torque_max_nm),
+            float(r.angle_min_deg), float(r.angle_max_deg), a.late, tuple(ev.images), t=ev.t)),
+                Acknowledge(r)]
+
+    def _on_VehicleEnded(self, ev: VehicleEnded) -> list[Action]:  # noqa: N802
+        return [Publish(VehicleClosed(ev.vin, ev.missing, ev.nok, t=ev.t))]
 
     def _on_ParamsRefused(self, ev: ParamsRefused) -> list[Action]:  # noqa: N802
         """The bolt is skipped for this vehicle (reported missing) so that the same refused
@@ -851,8 +910,8 @@ class StationCore:
         acts: list[Action] = []
         if ev.device == WRENCH and WRENCH in self.faults:
             # the DisableTool sent at the fault may never have arrived: off, whatever it did
-            acts.append(DisableTool("controller back: the tool stays off until a bolt is "
-                                    "confirmed"))
+            acts += _disable("controller back: the tool stays off until a bolt is confirmed",
+                             t=ev.t)
         return acts + self._back(ev.t, ev.device)
 
     def _on_VinSent(self, ev: VinSent) -> list[Action]:  # noqa: N802
@@ -905,7 +964,7 @@ class StationCore:
         self.tool_on = False
         if was:
             self._off_at = t
-        return [DisableTool(reason, self.bolt, why)]
+        return _disable(reason, self.bolt, why, t=t)
 
     def _drop(self, t: float, state: State, reason: str,
               why: Reason | None = None) -> list[Action]:
@@ -932,3 +991,9 @@ class StationCore:
         elif self._teach is not None:
             state, reason = State.TEACHING, self._teach.reason()
         self.state, self.reason = state, reason
+
+
+def _disable(reason: str, bolt: str | None = None, why: Reason | None = None, *,
+             t: float) -> list[Action]:
+    """The tool off: said on the bus (the screens, the journal), then done."""
+    return [Publish(ToolDisabled(reason, bolt, why, t=t)), DisableTool(reason, bolt, why)]

@@ -89,25 +89,21 @@ from stationd.station.core import (
     StationCore,
     StoreUnattributed,
     Tick,
+    ToolOn,
+    VehicleEnded,
     VehicleLoaded,
     VehicleRejected,
     VinSent,
+    Written,
 )
 from stationd.station.events import (
-    BoltView,
     DeviceHealth,
     DeviceIdentified,
     EventBus,
     Notice,
     PairFrames,
-    ParamsSent,
     Refused,
-    ResultRecorded,
     StateChanged,
-    ToolDisabled,
-    ToolEnabled,
-    VehicleClosed,
-    VehicleOpened,
 )
 from stationd.station.gaps import MAX_FETCH
 from stationd.station.gaps import plan as plan_gaps
@@ -598,7 +594,6 @@ class Station:
             if isinstance(a, EnableTool):
                 return await self._enable_tool(a)
             if isinstance(a, DisableTool):
-                self.bus.publish(ToolDisabled(a.reason, a.bolt, a.why))
                 if self.wrench is not None:
                     await self._call(self.wrench.disable_tool)
                 if self.records.owes_off_time:
@@ -608,9 +603,9 @@ class Station:
             elif isinstance(a, LoadVehicle):
                 return await self._load(a)
             elif isinstance(a, CloseVehicle):
-                await self._close_vehicle(a.vin)
+                return await self._close_vehicle(a.vin)
             elif isinstance(a, Record):
-                await self._record(a)
+                return await self._record(a)
             elif isinstance(a, Acknowledge):
                 await self._acknowledge(a.result)
             elif isinstance(a, StoreUnattributed):
@@ -655,8 +650,7 @@ class Station:
             return DeviceFault(time.time(), DATABASE, "down",
                                f"the tool enable not stored: {one_line(exc)}")
         await self._call(self.wrench.enable_tool)
-        self.bus.publish(ToolEnabled(a.bolt))
-        return None
+        return ToolOn(time.time(), a.bolt)
 
     async def _store_unattributed(self, a: StoreUnattributed) -> None:
         """A result no bolt owns: stored, then acknowledged.  A database that refuses it is a
@@ -727,8 +721,7 @@ class Station:
                "decide": (t_send - sel.decided_t) * 1e3, "acknowledge": (now - t_send) * 1e3,
                "vision_slowest_pair": loc.timings_ms.get("vision", 0.0) if loc else 0.0,
                "grab_slowest_pair": loc.timings_ms.get("grab", 0.0) if loc else 0.0}
-        self.bus.publish(ParamsSent(a.bolt, params.pset, lat))
-        return ParamsAcked(now, a.bolt)
+        return ParamsAcked(now, a.bolt, params.pset, lat)
 
     def _send_parameters(self, params: Parameters) -> None:
         """The controller takes them its way (a pset, or registers with the targets)."""
@@ -777,26 +770,21 @@ class Station:
         done = frozenset(k for k, s in status.items() if s == "ok")
         specs = {b.bolt_id: BoltSpec(_xyz(b.position), b.parameters.pset, b.order, b.batch,
                                      b.parameters_id, b.parameters) for b in infos}
-        self.bus.publish(VehicleOpened(a.vin, model, tuple(
-            BoltView(b.bolt_id, *_xyz(b.position), pset=b.parameters.pset, order=b.order,
-                     batch=b.batch, status=status.get(b.bolt_id)
-                     or ("skipped" if b.bolt_id in skipped else "pending"))
-            for b in infos), rework=started.rework))
         log.info("vehicle %s (%s) opened%s: %d bolts, %d done", a.vin, model,
                  " for rework" if started.rework else "", len(infos), len(done))
         # a rework resumed after a reload or restart is still one (the database keeps it)
         return VehicleLoaded(time.time(), a.vin, model, specs, done, started.rework,
-                             {b: skip_note(*who) for b, who in skipped.items()}, noks)
+                             {b: skip_note(*who) for b, who in skipped.items()}, noks, status)
 
-    async def _close_vehicle(self, vin: str) -> None:
+    async def _close_vehicle(self, vin: str) -> Event | None:
         assert self.repo is not None  # noqa: S101
         try:
             report = await self._call(self.repo.close_vehicle, vin)
         except STATION_FAULTS as exc:
             log.error("vehicle %s not closed: %s", vin, one_line(exc))
-            return
-        self.bus.publish(VehicleClosed(vin, tuple(report.missing), tuple(report.nok)))
+            return None
         log.info("vehicle %s closed: missing %s, NOK %s", vin, report.missing, report.nok)
+        return VehicleEnded(time.time(), vin, tuple(report.missing), tuple(report.nok))
 
     async def _acknowledge(self, result: Any) -> None:
         """Tell the controller a result is stored; a failure leaves it with the controller
@@ -809,7 +797,7 @@ class Station:
             log.warning("tightening %d stored, not acknowledged: %s", result.tightening_id,
                         one_line(exc))
 
-    async def _record(self, a: Record) -> None:
+    async def _record(self, a: Record) -> Event | None:
         """On disk first, then the controller may forget it.  A database that refuses the
         write (disk full, server gone) is a fault of the database: nothing more is tightened,
         the result is kept in memory and journaled, its keeper writes it when the database
@@ -827,21 +815,14 @@ class Station:
             self.bus.publish(Notice(f"tightening {r.tightening_id} of {a.bolt} not stored: "
                                     f"{one_line(exc)}", "error"))
             self.keepers[DATABASE].lost(DeviceError(f"results not stored: {one_line(exc)}"))
-            return
-        await self._recorded(u)
-
-    async def _recorded(self, u: Unsaved) -> None:
-        a, r = u.record, u.record.result
-        self.bus.publish(ResultRecorded(
-            a.vin, a.bolt, bool(r.ok), float(r.torque_nm), float(r.angle_deg),
-            int(r.tightening_id), int(r.pset), float(r.torque_min_nm), float(r.torque_max_nm),
-            float(r.angle_min_deg), float(r.angle_max_deg), a.late, tuple(u.images)))
-        await self._acknowledge(r)
+            return None
+        return Written(time.time(), a, tuple(u.images))
 
     async def _recorded_late(self) -> None:
-        """The results the keeper wrote on its way back: published and acknowledged."""
+        """The results the keeper wrote on its way back: the core publishes and acknowledges
+        them."""
         for u in await self._call(self.records.take_saved_late):
-            await self._recorded(u)
+            await self.feed(Written(time.time(), u.record, tuple(u.images)))
 
 def _why(end: BoltEnd | Refusal) -> str:
     return end.reason if isinstance(end, Refusal) else "no failure"
