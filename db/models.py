@@ -304,3 +304,27 @@ class ResultGap(Base):
     vin: Mapped[str | None] = mapped_column(String(32))   # the vehicle at height, if any
     reason: Mapped[str] = mapped_column(String(200))
     found_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
+
+
+class TighteningCurve(Base):
+    """One trace of a tightening as the controller sent it (Open Protocol MID 0900): its
+    type (1 angle, 2 torque, ...), unit, sample period and values, with the rundown it
+    belongs to when the station knew it at storing time (``record_id``), always with the
+    controller's tightening id (a curve that came before its result is found by that)."""
+
+    __tablename__ = "curves"
+    __table_args__ = (
+        Index("ix_curves_tightening_id", "tightening_id"),
+        Index("ix_curves_record_id", "record_id"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    record_id: Mapped[int | None] = mapped_column(ForeignKey("tightening_records.id"))
+    tightening_id: Mapped[int]
+    trace_type: Mapped[int]
+    unit: Mapped[str] = mapped_column(String(16))
+    sample_period_s: Mapped[float | None]          # None: ``times_s`` has each sample's time
+    values: Mapped[list[float]] = mapped_column(JSON)
+    times_s: Mapped[list[float] | None] = mapped_column(JSON)
+    result_at: Mapped[datetime | None] = mapped_column(UtcDateTime)   # controller's clock
+    recorded_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)

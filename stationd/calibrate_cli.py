@@ -10,11 +10,10 @@ an :class:`~stationd.errors.InputError` (``stationd`` turns it into one line and
 from __future__ import annotations
 
 import argparse
+import filecmp
 import glob
-import os
 import re
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -22,9 +21,12 @@ import yaml
 
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
-from stationd.outfile import refuse_to_replace
+from stationd.outfile import refuse_to_replace, write_all
 
-EXIT_OK = 0
+EXIT_OK, EXIT_REFUSED = 0, 1
+#: what each output may replace: its own kind of calibration (an earlier run's), nothing else
+PAIR_FILE = ("a stereo pair calibration", ("pair",))
+CAMERA_FILE = ("a camera calibration", ("camera",))
 
 
 def _natural_key(path: str) -> list[Any]:
@@ -50,37 +52,48 @@ def _side_file(out: Path, side: str) -> Path:
     return out.with_name(f"{out.stem}.{side}{out.suffix or '.yaml'}")
 
 
-def write_all(files: list[tuple[Path, str]]) -> None:
-    """Write every file or none: each goes to a temporary file beside it first, and the
-    renames happen only once all are written (a full disk or a missing folder leaves no
-    half-written calibration behind)."""
-    temps: list[tuple[str, Path]] = []
-    try:
-        for path, text in files:
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent or ".")
-            temps.append((tmp, path))
-            with os.fdopen(fd, "w", encoding="utf-8") as f:
-                f.write(text)
-        for tmp, path in temps:
-            os.replace(tmp, path)
-    except OSError as exc:
-        for tmp, _ in temps:
-            Path(tmp).unlink(missing_ok=True)
-        where = exc.filename or (files[len(temps) - 1][0] if temps else files[0][0])
-        raise InputError(f"{where}: cannot write: {exc.strerror}") from None
-
-
-def _check_outputs(paths: list[Path]) -> None:
-    """Before minutes of corner detection: every output's folder exists, no two coincide."""
+def _check_outputs(outputs: list[tuple[Path, tuple[str, tuple[str, ...]]]]) -> None:
+    """Before minutes of corner detection: every output's folder exists, no two coincide,
+    none is a link, and each replaces nothing but an earlier calibration of its own kind
+    (``calibrate camera --out pair.yaml`` overwrote a stereo pair calibration)."""
+    paths = [p for p, _ in outputs]
     if len({p.resolve() for p in paths}) != len(paths):
         raise InputError("the output files must differ: " + ", ".join(map(str, paths)))
-    for p in paths:
+    for p, (writing, may_replace) in outputs:
         if not p.parent.is_dir():
             raise InputError(f"{p}: no such folder {p.parent}")
-        if p.is_dir():
-            raise InputError(f"{p}: is a folder, expected a file name")
-        # an earlier calibration may be replaced; a station file, a database, ... may not
-        refuse_to_replace(p, "a calibration", ("yaml",))
+        refuse_to_replace(p, writing, may_replace)
+
+
+def _refuse_same_images(left: list[str], right: list[str]) -> None:
+    """The i-th left and right images must be two files with two contents: the same images
+    for both cameras calibrate a pair with no baseline (3.5e-9 mm), which triangulates
+    nothing."""
+    if len(left) != len(right):
+        return    # calibrate_stereo says so, with the counts
+    same = [(lp, rp) for lp, rp in zip(left, right, strict=True)
+            if filecmp.cmp(lp, rp, shallow=False)]
+    if same:
+        lp, rp = same[0]
+        which = "all" if len(same) == len(left) else f"{len(same)} of {len(left)}"
+        raise InputError(f"--left and --right give the same images ({which} pairs, e.g. {lp} "
+                         f"and {rp}): each pair needs the left camera's image and the right "
+                         "camera's, taken at one instant")
+
+
+def _implausible_baseline(baseline_mm: float) -> str | None:
+    """Why a calibrated pair's baseline cannot be a station's (the bounds the station file
+    checks a pair calibration against), None when it can."""
+    from stationd.config import BASELINE_MM
+
+    lo, hi = BASELINE_MM
+    if lo <= baseline_mm <= hi:
+        return None
+    cause = ("the left and right images show the board from one place: the same camera "
+             "twice, or copies of one image?" if baseline_mm < lo else
+             "left and right images of different moments, or a wrong --board square size?")
+    return (f"the calibrated baseline is {baseline_mm:.3g} mm, not a plausible stereo "
+            f"baseline ({lo:g}-{hi:g} mm): {cause}")
 
 
 def _yaml(header: str, data: dict[str, Any]) -> str:
@@ -96,10 +109,19 @@ def cmd_calibrate_stereo(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out_left = Path(args.out_left) if args.out_left else _side_file(out, "left")
     out_right = Path(args.out_right) if args.out_right else _side_file(out, "right")
-    _check_outputs([out, out_left, out_right])
+    _check_outputs([(out, PAIR_FILE), (out_left, CAMERA_FILE), (out_right, CAMERA_FILE)])
     left = expand_images(list(args.left), "--left")
     right = expand_images(list(args.right), "--right")
+    _refuse_same_images(left, right)
     report = calibrate_stereo(left, right, board)
+    refused = _implausible_baseline(report.pair.baseline_mm)
+    if refused is not None:
+        if getattr(args, "json", False):
+            sys.stdout.write(strict_json({**report.to_json(), "refused": refused}) + "\n")
+        else:
+            print(report.format())
+        sys.stderr.write(f"stationd: calibrate stereo: {refused}; nothing written\n")
+        return EXIT_REFUSED
     header = (f"# stationd calibrate stereo: {board.describe()}\n"
               f"# {report.used} of {len(report.views)} image pairs used; RMS reprojection error "
               f"pair {report.rms_px:.3f} px, left {report.rms_left_px:.3f} px, right "
@@ -130,7 +152,7 @@ def cmd_calibrate_camera(args: argparse.Namespace) -> int:
 
     board = parse_board(args.board)
     out = Path(args.out)
-    _check_outputs([out])
+    _check_outputs([(out, CAMERA_FILE)])
     images = expand_images(list(args.images), "images")
     report = calibrate_camera(images, board)
     header = (f"# stationd calibrate camera: {board.describe()}\n"
@@ -162,7 +184,11 @@ def add_calibrate_parser(subparsers: Any) -> argparse.ArgumentParser:
                     "numbers in natural order), finds the board in both, calibrates each camera "
                     "and the pair, rejects views whose error is an outlier, prints a report "
                     "and writes the pair YAML and each camera's YAML (PAIR.left.yaml, "
-                    "PAIR.right.yaml beside it unless --out-left / --out-right say otherwise).")
+                    "PAIR.right.yaml beside it unless --out-left / --out-right say otherwise). "
+                    "A pair whose baseline is not 20-2000 mm is refused (exit 1, nothing "
+                    "written), as are the same images for both cameras (exit 2). An output "
+                    "replaces only an earlier calibration of its own kind, never another file "
+                    "or a link.")
     s.add_argument("--left", required=True, nargs="+", metavar="GLOB",
                    help="left images, e.g. 'L*.png' (quoted, or expanded by the shell)")
     s.add_argument("--right", required=True, nargs="+", metavar="GLOB", help="right images")
@@ -178,7 +204,9 @@ def add_calibrate_parser(subparsers: Any) -> argparse.ArgumentParser:
         "camera", help="calibrate one camera (K, dist) from board images",
         description="Finds the board in each image, calibrates the camera, rejects views "
                     "whose error is an outlier, prints a report and writes the camera YAML "
-                    "that detect --camera reads.")
+                    "that detect --camera reads. --out replaces only an earlier camera "
+                    "calibration, never another file (a pair calibration, a station file) "
+                    "or a link.")
     m.add_argument("images", nargs="+", metavar="GLOB",
                    help="board images, e.g. 'cam*.png' (quoted, or expanded by the shell)")
     m.add_argument("--board", required=True, metavar="SPEC", help=BOARD_HELP)

@@ -74,14 +74,14 @@ def cmd_detect(args: argparse.Namespace) -> int:
     from stationd.imageio import read_image
     from stationd.vision.detect import detect
 
+    if args.draw:
+        _check_drawing(args.draw)
     cfg = load_station_config(args.config)
     camera = _detect_camera(args, Camera.load)
     image = read_image(args.image)
     det = detect(image, camera, cfg.vision, cfg.marker)
     if args.draw:
-        from stationd.vision.draw import write_drawing
-
-        write_drawing(args.draw, image, camera, det, cfg.vision, cfg.marker)
+        _write_drawing(Path(args.draw), image, camera, det, cfg)
     if args.json:
         _emit(det.to_json())
     elif det.found:
@@ -91,6 +91,42 @@ def cmd_detect(args: argparse.Namespace) -> int:
     else:
         print(f"not found: {det.reason}")
     return EXIT_OK if det.found else EXIT_NOT_FOUND
+
+
+#: ``detect --draw``: what the drawing may replace (the outputs' rule, stationd.outfile)
+DRAW_HELP = ("write what the detector saw: ROI with edge points used/rejected, ellipses, "
+             "centres, reason; and an overview (PNG).  An existing file is replaced only when "
+             "it is an earlier drawing of detect --draw; any other file, and a link, is "
+             "refused")
+
+
+def _check_drawing(path: str) -> None:
+    """``--draw`` before any work: a ``.png`` name (a PNG in ``out.txt`` would mislead whoever
+    opens it), not a link, nothing there but an earlier drawing (``--draw link.png``,
+    ``link.png`` pointing at the station file, replaced the station file with a PNG)."""
+    from stationd.outfile import refuse_to_replace
+
+    if not path.lower().endswith(".png"):
+        raise InputError(f"--draw {path}: the drawing is a PNG; name the file .png")
+    out = Path(path)
+    if not out.parent.is_dir():
+        raise InputError(f"--draw {path}: no such folder {out.parent}")
+    refuse_to_replace(out, "the drawing", ("drawing",), option="--draw")
+
+
+def _write_drawing(path: Path, image: Any, camera: Any, det: Any, cfg: Any) -> None:
+    """The drawing as a PNG stamped as ``detect --draw``'s own (so the next run may replace
+    it), written whole (a temporary file renamed over it), never through a link."""
+    import cv2
+
+    from stationd.outfile import DRAWING_STAMP, stamp_png, write_atomic
+    from stationd.vision.draw import draw, explain
+
+    picture = draw(image, camera, explain(image, camera, det, cfg.vision, cfg.marker))
+    ok, buf = cv2.imencode(".png", picture)
+    if not ok:
+        raise InputError(f"--draw {path}: PNG encoding failed")
+    write_atomic(path, stamp_png(buf.tobytes(), DRAWING_STAMP))
 
 
 def _detect_camera(args: argparse.Namespace, load_camera: Callable[[str], Any]) -> Any:
@@ -305,8 +341,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --pair: which camera took the image (default left)")
     d.add_argument("--config", help="station YAML (marker, vision)")
     d.add_argument("--json", action="store_true", help="print one JSON object")
-    d.add_argument("--draw", metavar="OUT.png", help="write what the detector saw: ROI with "
-                   "edge points used/rejected, ellipses, centres, reason; and an overview")
+    d.add_argument("--draw", metavar="OUT.png", help=DRAW_HELP)
     d.set_defaults(func=cmd_detect)
 
     lo = sub.add_parser("localize", help="localize the marker in a stereo pair (mm)")

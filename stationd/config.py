@@ -351,7 +351,10 @@ def _database_url(node: YamlNode, base: Path, check: bool = False, checker: bool
             make_engine(url).dispose()
         except DbError as exc:
             raise url_node.error(str(exc)) from None
-        problem = _sqlite_problem(url)
+        # only the checker (its own process) reads the file: the daemon validates a reload
+        # while its connections hold SQLite's locks, and closing any descriptor of that file
+        # drops every POSIX lock the process holds on it (a db import then deleted the WAL)
+        problem = _sqlite_problem(url, read_header=checker)
         if problem is None or (not checker and problem.startswith(NOT_SQLITE)):
             pass
         elif checker and problem == _missing_folder(STATE_DIRECTORY):
@@ -374,7 +377,7 @@ def _missing_folder(folder: Path) -> str:
             "as (or correct the path)")
 
 
-def _sqlite_problem(url: str) -> str | None:
+def _sqlite_problem(url: str, *, read_header: bool = True) -> str | None:
     """Why the SQLite database of ``url`` cannot keep the station's results, in the words of
     what to do; None when it can (or ``url`` is another database, checked when it connects).
 
@@ -404,6 +407,8 @@ def _sqlite_problem(url: str) -> str | None:
         return None   # created at the first start
     if not path.is_file():
         return f"{path} is not a regular file (a FIFO or a device?): name a database file"
+    if not read_header:
+        return None
     try:
         with path.open("rb") as f:
             head = f.read(len(SQLITE_HEADER))

@@ -22,6 +22,7 @@ from db.repository import Repository
 from stationd.config import load_station_config
 from stationd.errors import InputError
 from stationd.forward import Forwarder, LineDown
+from stationd.outfile import write_atomic
 
 EXIT_WAITING, EXIT_UNREACHABLE = 1, 3
 
@@ -56,10 +57,10 @@ def cmd_line_quarantine(args: argparse.Namespace) -> int:
     try:
         if args.export:
             out = Path(args.export)
-            if out.exists():
+            if out.exists() or out.is_symlink():
                 raise InputError(f"--export {out}: exists (a new file is written)")
             rows: list[dict[str, Any]] = fwd.repo.ledger.quarantined()
-            out.write_text(json.dumps(rows, indent=1), encoding="utf-8")
+            write_atomic(out, json.dumps(rows, indent=1))
             print(f"{len(rows)} quarantined record(s) written to {out}")
         if args.retry:
             try:

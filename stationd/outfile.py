@@ -5,13 +5,28 @@ and ``tune-color --out`` the same; an ``--out /dev/full`` said "wrote" (as root 
 even replaced the device node).  Each command names the kinds of file it may replace (its own
 earlier output); anything else that exists there (a database, a station file, a bolt table,
 a calibration, a device) is refused with one line before any work is done.
+
+The rule, for every command that writes a file (issue 19):
+
+- an output is never written through or over a symbolic link: ``detect --draw link.png``,
+  ``link.png`` pointing at the station file, replaced the station file with a PNG;
+- an existing file is replaced only when it is of the kind the command writes (its own
+  earlier output): a calibration of another kind (``calibrate camera --out pair.yaml``), a
+  station file, a bolt table, an image the command did not write is refused, naming its kind;
+- it is written whole or not at all (a temporary file renamed over it) with the mode of the
+  file it replaces, a new one with the umask's mode (never the temporary file's 0600).
+
+A PNG this program writes carries a ``tEXt`` chunk naming the command (:func:`stamp_png`), so
+that its next run may replace it and any other PNG is left alone.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import struct
 import tempfile
+import zlib
 from pathlib import Path
 
 from stationd.errors import ConfigError, InputError
@@ -20,6 +35,12 @@ from stationd.yamlio import YamlNode, file_kind, top_keys
 SQLITE_MAGIC = b"SQLite format 3\x00"
 #: how a results CSV export begins (stationd.web.results.CSV_FIELDS)
 RESULTS_CSV_HEAD = "vin,model,bolt,"
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+#: the ``tEXt`` keyword of :func:`stamp_png` (PNG's registered keyword for the program)
+PNG_STAMP_KEY = b"Software"
+#: what marks a PNG as ``detect --draw``'s own: it may be replaced by the next drawing
+DRAWING_STAMP = "stationd detect --draw"
+_IMAGE_MAGIC = (b"\xff\xd8\xff", b"II*\x00", b"MM\x00*", b"BM", b"GIF8", b"RIFF")
 #: configuration files are small: a larger file is data (an earlier export), not parsed
 PARSE_LIMIT_BYTES = 5 * 2**20
 #: the first bytes read to tell an SQLite database or a results export, at any size
@@ -31,10 +52,16 @@ NAMES = {
     "station": "a station file",
     "bolts": "a bolt table",
     "hsv": "an HSV range file",
-    "yaml": "a YAML settings file (a calibration or registration?)",
+    "pair": "a stereo pair calibration (from calibrate stereo)",
+    "camera": "a camera calibration (from calibrate camera or stereo)",
+    "registration": "a vehicle registration (from calibrate vehicle)",
+    "yaml": "a YAML settings file",
     "json": "a JSON file",
     "results": "an earlier results export",
     "svg": "an SVG drawing",
+    "drawing": "an earlier drawing of detect --draw",
+    "png": "a PNG image that detect --draw did not write",
+    "image": "an image",
     "text": "a text file (not one this command wrote)",
     "data": "a large data file",
     "unreadable": "a file that cannot be read",
@@ -42,8 +69,9 @@ NAMES = {
 
 
 def kind_of(path: Path) -> str | None:
-    """The kind of what is at ``path`` (a key of :data:`NAMES`), None when nothing is."""
-    if not path.exists() and not path.is_symlink():
+    """The kind of what is at ``path`` (a key of :data:`NAMES`; through a link, of its
+    target), None when nothing is (a link to nothing too)."""
+    if not path.exists():
         return None
     if path.is_dir():
         return "folder"
@@ -54,6 +82,10 @@ def kind_of(path: Path) -> str | None:
             head = f.read(HEAD_BYTES)
         if head.startswith(SQLITE_MAGIC):
             return "sqlite"
+        if head.startswith(PNG_MAGIC):
+            return "drawing" if _stamp(DRAWING_STAMP) in head else "png"
+        if head.startswith(_IMAGE_MAGIC):
+            return "image"
         if _results_head(head.decode("utf-8", errors="replace").lstrip()):
             return "results"    # whatever its size: a shift's export passes 5 MB
         if path.stat().st_size > PARSE_LIMIT_BYTES:
@@ -78,7 +110,21 @@ def kind_of(path: Path) -> str | None:
     kind = file_kind(keys)
     if kind is not None:
         return kind
-    return "hsv" if keys == {"hsv"} else "yaml"
+    if keys == {"hsv"}:
+        return "hsv"
+    return _calibration_kind(keys) or "yaml"
+
+
+def _calibration_kind(keys: set[str]) -> str | None:
+    """The kind of calibration file whose top-level keys are ``keys`` (what
+    ``StereoPair``, ``Camera`` and ``Transform`` read), None for another YAML file."""
+    if {"left", "right", "R", "T"} <= keys:
+        return "pair"
+    if {"K", "size"} <= keys:
+        return "camera"
+    if {"A", "t"} <= keys:
+        return "registration"
+    return None
 
 
 def _results_head(start: str) -> bool:
@@ -89,39 +135,79 @@ def _results_head(start: str) -> bool:
     return start.startswith("[") and start[1:].lstrip().startswith('{"vin":')
 
 
-def refuse_to_replace(path: Path, writing: str, may_replace: tuple[str, ...]) -> None:
-    """Raise :class:`InputError` when ``path`` holds something other than the kinds in
-    ``may_replace`` (the command's own earlier output); nothing there is fine."""
+def refuse_to_replace(path: Path, writing: str, may_replace: tuple[str, ...],
+                      option: str = "--out") -> None:
+    """Raise :class:`InputError` when ``path`` is a symbolic link (whatever it points at) or
+    holds something other than the kinds in ``may_replace`` (the command's own earlier
+    output); nothing there is fine.  ``option`` is what the user gave the path with."""
+    if path.is_symlink():
+        target = os.readlink(path)
+        kind = kind_of(path)
+        what = "which does not exist" if kind is None else NAMES[kind]
+        raise InputError(f"{path}: is a symbolic link to {target}, {what}; an output is "
+                         f"never written through or over a link: give {option} the file's "
+                         "own path")
     kind = kind_of(path)
     if kind is None or kind in may_replace:
         return
     if kind == "folder":
-        raise InputError(f"{path}: is a folder; --out takes a file name")
+        raise InputError(f"{path}: is a folder; {option} takes a file name")
     raise InputError(f"{path}: is {NAMES[kind]}; writing {writing} would replace it (give "
-                     "another --out)")
+                     f"another {option})")
 
 
-def write_atomic(path: Path, text: str) -> None:
-    """``text`` into ``path`` via a temporary file in the same folder, flushed to disk and
-    renamed over it: a reader sees the old file or the new one, never half of one; a full
-    disk is an error (one line), not "wrote".  The file keeps the mode of the one it
-    replaces (a new one: the umask's), not the temporary file's 0600."""
+def _stamp(text: str) -> bytes:
+    return PNG_STAMP_KEY + b"\0" + text.encode("latin-1")
+
+
+def stamp_png(png: bytes, text: str) -> bytes:
+    """``png`` with a ``tEXt`` chunk ``Software: text`` right after its header (within the
+    bytes :func:`kind_of` reads), so this program knows the file as its own output."""
+    if not png.startswith(PNG_MAGIC) or png[12:16] != b"IHDR":
+        raise ValueError("not a PNG")
+    end = 8 + 12 + struct.unpack(">I", png[8:12])[0]    # the signature, then IHDR
+    data = _stamp(text)
+    chunk = (struct.pack(">I", len(data)) + b"tEXt" + data
+             + struct.pack(">I", zlib.crc32(b"tEXt" + data)))
+    return png[:end] + chunk + png[end:]
+
+
+def write_atomic(path: Path, data: str | bytes) -> None:
+    """``data`` (text is written as UTF-8) into ``path`` via a temporary file in the same
+    folder, flushed to disk and renamed over it: a reader sees the old file or the new one,
+    never half of one; a full disk is an error (one line), not "wrote".  The file keeps the
+    mode of the one it replaces (a new one: the umask's), not the temporary file's 0600."""
+    write_all([(path, data)])
+
+
+def write_all(files: list[tuple[Path, str | bytes]]) -> None:
+    """Write every file or none (as :func:`write_atomic` each): all are written to temporary
+    files beside them first, and renamed only once all are (a full disk or a missing folder
+    leaves nothing half-written behind, and none of the files replaced)."""
+    temps: list[tuple[str, Path]] = []
+    current = files[0][0] if files else Path()
     try:
-        mode = path.stat().st_mode & 0o7777 if path.is_file() else _default_mode()
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
         try:
-            with os.fdopen(fd, "w", encoding="utf-8") as f:
-                f.write(text)
-                f.flush()
-                os.fsync(f.fileno())
-            os.chmod(tmp, mode)
-            os.replace(tmp, path)
+            for path, data in files:
+                current = path
+                mode = path.stat().st_mode & 0o7777 if path.is_file() else _default_mode()
+                fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+                temps.append((tmp, path))
+                with os.fdopen(fd, "wb") as f:
+                    f.write(data.encode("utf-8") if isinstance(data, str) else data)
+                    f.flush()
+                    os.fsync(f.fileno())
+                os.chmod(tmp, mode)
+            for tmp, path in temps:
+                current = path
+                os.replace(tmp, path)
         except BaseException:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
+            for tmp, _ in temps:
+                with contextlib.suppress(OSError):
+                    os.unlink(tmp)
             raise
     except OSError as exc:
-        raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
+        raise InputError(f"{current}: cannot write: {exc.strerror or exc}") from None
 
 
 def _default_mode() -> int:

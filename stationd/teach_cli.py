@@ -26,6 +26,7 @@ import yaml
 
 from stationd.command_cli import EXIT_REFUSED, ApiClient, client_args, read_password, say_refused
 from stationd.errors import InputError
+from stationd.outfile import write_atomic
 from stationd.station.matching import check_spacing
 
 
@@ -51,7 +52,7 @@ def _ask(bolt: str) -> str:
 
 def cmd_teach(args: argparse.Namespace) -> int:
     out = Path(args.out)
-    if out.exists():
+    if out.exists() or out.is_symlink():   # a link too, dangling or not (outfile's rule)
         raise InputError(f"--out {out}: exists; a taught table is a new file, never an "
                          "overwrite (choose another name)")
     doc, cad = _cad(args.from_, args.model) if args.from_ else ({}, [])
@@ -137,7 +138,7 @@ def _write(out: Path, doc: dict[str, Any], model: str, taught: dict[str, dict[st
                                           for b, r in taught.items()]}
     head = (f"# taught by stationd teach for {model}: positions in the vehicle frame, mm\n"
             + ("" if doc else "# positions only: add each bolt's parameters before import\n"))
-    out.write_text(head + yaml.safe_dump(body, sort_keys=False), encoding="utf-8")
+    write_atomic(out, head + yaml.safe_dump(body, sort_keys=False))
 
 
 def add_teach_parser(sub: Any) -> None:

@@ -15,11 +15,18 @@ with the station's vision, or the pair-frame point itself::
 The fitted transform goes to the pair's ``to_vehicle`` file (never into the hand-written
 station config).  Points also seen by pairs registered earlier are compared in the vehicle
 frame: one vehicle frame for all pairs, or an error.
+
+Refused, with nothing written: two reference points of one name (exit 2), and a fit that is
+not plausible (exit 1, the residuals printed first): an RMS residual above
+:data:`~stationd.geometry.frames.MAX_RMS_MM`, or point sets in two units (pair points typed
+in metres fitted with an RMS of 70.6 mm and were written).  The ``to_vehicle`` file replaces
+only an earlier registration, never another file or a link.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,10 +36,17 @@ import yaml
 from stationd import progress
 from stationd.config import PairConfig, StationConfig, load_station_config
 from stationd.errors import InputError
-from stationd.geometry.frames import KINDS, Transform, fit_transform
+from stationd.geometry.frames import (
+    KINDS,
+    MAX_RMS_MM,
+    Transform,
+    fit_transform,
+    implausible,
+)
+from stationd.outfile import refuse_to_replace, write_atomic
 from stationd.yamlio import YamlNode
 
-EXIT_OK, EXIT_DISAGREE = 0, 1
+EXIT_OK, EXIT_DISAGREE, EXIT_REFUSED = 0, 1, 1
 
 
 @dataclass(frozen=True)
@@ -66,6 +80,16 @@ def read_points(path: Path, cfg: StationConfig) -> tuple[str, list[Observation]]
     kind = root["kind"].text(KINDS) if "kind" in root else "rigid"
     out: list[Observation] = []
     items = root["points"].items()
+    named: dict[str, YamlNode] = {}
+    for item in items:   # before any image is localized
+        m = item.mapping(("name", "vehicle_mm", "seen_by"), required=("vehicle_mm", "seen_by"))
+        if "name" in m:
+            name = m["name"].text()
+            if name in named:
+                raise m["name"].error(f"two reference points are named {name!r} (the first "
+                                      f"at line {named[name].line}): each point needs its "
+                                      "own name")
+            named[name] = m["name"]
     for i, item in enumerate(progress.track(items, "reference points", total=len(items),
                                             unit="point")):
         m = item.mapping(("name", "vehicle_mm", "seen_by"), required=("vehicle_mm", "seen_by"))
@@ -91,6 +115,11 @@ def cmd_calibrate_vehicle(args: argparse.Namespace) -> int:
     if args.pair not in cfg.pairs:
         raise InputError(f"--pair {args.pair}: not in {args.config} "
                          f"(pairs: {', '.join(cfg.pairs) or 'none'})")
+    target = cfg.pairs[args.pair].to_vehicle_path
+    if not target.parent.is_dir():
+        raise InputError(f"{target}: cannot write: no such folder {target.parent}")
+    refuse_to_replace(target, "a vehicle registration", ("registration",),
+                      option=f"pairs.{args.pair}.to_vehicle")
     kind, points = read_points(Path(args.points), cfg)
     kind = args.kind or kind
     mine = [p for p in points if args.pair in p.pair_mm]
@@ -106,14 +135,15 @@ def cmd_calibrate_vehicle(args: argparse.Namespace) -> int:
     if len(mine) == 3:
         print("  note: 3 points fit exactly up to noise; 4 or more let the residuals show a "
               "bad point")
-    target = cfg.pairs[args.pair].to_vehicle_path
+    refused = implausible(fit, src, dst, [p.name for p in mine])
+    if refused is not None:
+        sys.stderr.write(f"stationd: calibrate vehicle: {args.points}: pair {args.pair}: "
+                         f"{refused.reason}; {target} not written\n")
+        return EXIT_REFUSED
     header = (f"# {args.pair} -> vehicle frame, {kind} fit to {len(mine)} points from "
               f"{args.points}; RMS {fit.rms_mm:.3f} mm\n# x_vehicle = A x_pair + t (mm)\n")
-    try:
-        target.write_text(header + yaml.safe_dump(fit.to_dict(), sort_keys=False,
-                                                  default_flow_style=None))
-    except OSError as exc:
-        raise InputError(f"{target}: cannot write: {exc.strerror}") from None
+    write_atomic(target, header + yaml.safe_dump(fit.to_dict(), sort_keys=False,
+                                                 default_flow_style=None))
     print(f"wrote {target}")
     return _cross_check(cfg, args.pair, fit, points)
 
@@ -143,7 +173,14 @@ def _cross_check(cfg: StationConfig, pair: str, fit: Transform,
 
 
 def add_vehicle_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    v = sub.add_parser("vehicle", help="register a stereo pair into the vehicle frame")
+    v = sub.add_parser(
+        "vehicle", help="register a stereo pair into the vehicle frame",
+        description="Fits the pair's frame to the vehicle frame from reference points and "
+                    "writes the pair's to_vehicle file. Refused, nothing written: two points "
+                    "of one name (exit 2); an RMS residual above "
+                    f"{MAX_RMS_MM:g} mm or point sets in two units, e.g. pair points in "
+                    "metres (exit 1). The file replaces only an earlier registration, never "
+                    "another file or a link.")
     v.add_argument("--pair", required=True, help="pair name in the station config")
     v.add_argument("--points", required=True, help="reference points YAML")
     v.add_argument("--config", help="station YAML (pairs, vision)")

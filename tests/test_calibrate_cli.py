@@ -161,3 +161,91 @@ def test_write_all_leaves_nothing_when_one_file_fails(tmp_path):
     assert good.read_text() == "old" and sorted(p.name for p in tmp_path.iterdir()) == [
         "a.yaml"]
     assert yaml.safe_load("k: 1") == {"k": 1}
+
+
+def test_calibrate_camera_never_replaces_a_file_of_another_kind(boards, tmp_path, capsys):
+    """Issue 19: ``calibrate camera --out`` onto a stereo pair calibration overwrote it.  A
+    file of another kind (a pair calibration, a station file, a bolt table, an image) or a
+    link is refused before any image is read, naming its kind; an earlier camera file is
+    still replaced."""
+    import shutil
+    from pathlib import Path
+
+    sim = Path(__file__).resolve().parents[1] / "config" / "sim"
+    for name in ("pair1.yaml", "station.yaml", "bolts.yaml"):
+        shutil.copy(sim / name, tmp_path / name)
+    shutil.copy(boards / "L1.png", tmp_path / "L1.png")
+    (tmp_path / "link.yaml").symlink_to(tmp_path / "pair1.yaml")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    for name, kind in (("pair1.yaml", "a stereo pair calibration"),
+                       ("station.yaml", "a station file"), ("bolts.yaml", "a bolt table"),
+                       ("L1.png", "a PNG image"), ("link.yaml", "a symbolic link to")):
+        code, out, err = _cli(capsys, "calibrate", "camera", str(boards / "L*.png"),
+                              "--board", SPEC, "--out", tmp_path / name)
+        assert code == 2 and out == "" and err.count("\n") == 1, err
+        assert f"{name}: is {kind}" in err, err
+    assert "writing a camera calibration would replace it" in _cli(
+        capsys, "calibrate", "camera", str(boards / "L*.png"), "--board", SPEC, "--out",
+        tmp_path / "pair1.yaml")[2]
+    # the pair's own camera files are no more a pair's than the pair file is a camera's
+    code, _, err = _cli(capsys, "calibrate", "stereo", "--left", str(boards / "L*.png"),
+                        "--right", str(boards / "R*.png"), "--board", SPEC, "--out",
+                        tmp_path / "p.yaml", "--out-left", tmp_path / "pair1.yaml")
+    assert code == 2 and "pair1.yaml: is a stereo pair calibration" in err
+    assert {n: (tmp_path / n).read_bytes() for n in before} == before
+    cam = tmp_path / "cam.yaml"
+    for _ in range(2):
+        assert _cli(capsys, "calibrate", "camera", str(boards / "L*.png"), "--board", SPEC,
+                    "--out", cam)[0] == 0
+
+
+def test_calibrate_stereo_refuses_the_same_images_for_both_cameras(boards, tmp_path, capsys):
+    """Issue 19: the same images for left and right wrote a pair with a 3.5e-9 mm baseline,
+    exit 0.  The same files (or copies of one content) are refused before any work."""
+    import shutil
+
+    for i in (1, 2, 3, 4, 5, 6, 7, 8):
+        shutil.copy(boards / f"L{i}.png", tmp_path / f"C{i}.png")
+    for right in (boards / "L*.png", tmp_path / "C*.png"):
+        code, out, err = _cli(capsys, "calibrate", "stereo", "--left", boards / "L*.png",
+                              "--right", right, "--board", SPEC, "--out", tmp_path / "p.yaml")
+        assert code == 2 and out == "" and err.count("\n") == 1, err
+        assert "--left and --right give the same images (all pairs, e.g." in err
+    assert sorted(p.name for p in tmp_path.iterdir() if p.suffix == ".yaml") == []
+
+
+def test_calibrate_stereo_refuses_an_implausible_baseline(boards, tmp_path, capsys):
+    """Re-encoded copies of the left images (other bytes, the same pixels) pass the same-file
+    check but calibrate a pair with no baseline: refused by the baseline the station file
+    accepts (20-2000 mm), exit 1 with the report and the likely cause, nothing written."""
+    from stationd.config import BASELINE_MM
+
+    for i in range(1, 9):
+        img = cv2.imread(str(boards / f"L{i}.png"))
+        cv2.imwrite(str(tmp_path / f"C{i}.png"), img, [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    code, out, err = _cli(capsys, "calibrate", "stereo", "--left", boards / "L*.png",
+                          "--right", tmp_path / "C*.png", "--board", SPEC, "--out",
+                          tmp_path / "p.yaml", "--json")
+    assert code == 1 and err.count("\n") == 1 and "Traceback" not in err
+    assert f"not a plausible stereo baseline ({BASELINE_MM[0]:g}-{BASELINE_MM[1]:g} mm)" in err
+    assert "the same camera twice, or copies of one image?" in err and "nothing written" in err
+    rep = json.loads(out)
+    assert rep["baseline_mm"] < 1 and rep["refused"] and "out" not in rep
+    assert sorted(p.name for p in tmp_path.iterdir() if p.suffix == ".yaml") == []
+
+
+def test_calibration_files_take_the_umask_mode(boards, tmp_path, capsys):
+    """Issue 19 (small things): calibration files were written 0600 whatever the umask, so
+    written as root the service user could not read them."""
+    import os
+    import stat
+
+    old = os.umask(0o022)
+    try:
+        out = tmp_path / "pair.yaml"
+        assert _cli(capsys, "calibrate", "stereo", "--left", boards / "L*.png", "--right",
+                    boards / "R*.png", "--board", SPEC, "--out", out)[0] == 0
+    finally:
+        os.umask(old)
+    for p in (out, tmp_path / "pair.left.yaml", tmp_path / "pair.right.yaml"):
+        assert stat.S_IMODE(p.stat().st_mode) == 0o644, p

@@ -442,7 +442,7 @@ def test_an_output_never_replaces_a_database_a_calibration_or_a_device(tmp_path,
         (["tune-color", str(tmp_path / "ref.png"), "--out", str(dbfile)],
          "is an SQLite database"),
         (["db", "export", "--results", "--db", db, "--out", str(tmp_path / "pair1.yaml")],
-         "is a YAML settings file"),
+         "is a stereo pair calibration (from calibrate stereo)"),
         (["db", "export", "--results", "--db", db, "--out", "/dev/full"],
          "not a regular file"),
         (["bench", "station", "--out", str(tmp_path / "bolts.yaml")], "is a bolt table"),
@@ -452,7 +452,8 @@ def test_an_output_never_replaces_a_database_a_calibration_or_a_device(tmp_path,
         (["db", "export", "--results", "--db", db, "--out", str(tmp_path / "s.db.lock")],
          "is a text file"),
         (["marker", "--out", str(tmp_path / "station-copy.svg")], "is a bolt table"),
-        (["marker", "--out", str(tmp_path / "link.svg")], "is a YAML settings file"),
+        (["marker", "--out", str(tmp_path / "link.svg")],
+         f"is a symbolic link to {tmp_path / 'pair1.yaml'}, a stereo pair calibration"),
         # third trial: a folder was "not a regular file (a device, a pipe or a socket)"
         (["db", "export", "--db", db, "--out", str(tmp_path)],
          "is a folder; --out takes a file name"),
@@ -522,3 +523,44 @@ def test_a_results_export_larger_than_a_settings_file_is_still_one(tmp_path):
     db = tmp_path / "big.db"
     db.write_bytes(SQLITE_MAGIC + b"\0" * (PARSE_LIMIT_BYTES + 1))
     assert (kind_of(other), kind_of(db)) == ("data", "sqlite")
+
+
+def test_detect_draw_never_writes_through_a_link_or_over_another_file(files, tmp_path, capsys):
+    """Issue 19: ``detect --draw link.png``, ``link.png`` a link to the station file,
+    replaced the station file with a PNG; ``--draw`` replaced any existing PNG.  A link (to
+    anything, a drawing too) and any file but an earlier drawing of ``detect --draw`` are
+    refused before the detection, exit 2 in one line, untouched; an earlier drawing is
+    replaced (the drawing is stamped as detect --draw's own)."""
+    import shutil
+    from pathlib import Path
+
+    from stationd.imageio import read_image
+    from stationd.outfile import kind_of
+
+    d, _, _ = files
+    shutil.copy(Path(__file__).resolve().parents[1] / "config/sim/station.yaml", tmp_path)
+    shutil.copy(d / "one.png", tmp_path / "photo.png")
+    (tmp_path / "notes.png").write_text("not a picture\n")
+    (tmp_path / "link.png").symlink_to(tmp_path / "station.yaml")
+    detect = ["detect", str(d / "one.png"), "--camera", str(d / "cam.yaml"), "--draw"]
+    drawing = tmp_path / "drawing.png"
+    code, out, err = _run(capsys, *detect, str(drawing))
+    assert code == 0 and err == "" and kind_of(drawing) == "drawing"
+    assert read_image(drawing).shape[2] == 3
+    (tmp_path / "link2.png").symlink_to(drawing)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    for name, needle in [
+        ("link.png", f"link.png: is a symbolic link to {tmp_path / 'station.yaml'}, a station "
+                     "file; an output is never written through or over a link: give --draw "
+                     "the file's own path"),
+        ("link2.png", "link2.png: is a symbolic link to"),
+        ("photo.png", "photo.png: is a PNG image that detect --draw did not write; writing "
+                      "the drawing would replace it (give another --draw)"),
+        ("notes.png", "notes.png: is a text file"),
+    ]:
+        code, out, err = _run(capsys, *detect, str(tmp_path / name))
+        assert code == 2 and out == "" and needle in err and err.count("\n") == 1, err
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    assert (tmp_path / "link.png").is_symlink() and (tmp_path / "link2.png").is_symlink()
+    code, out, err = _run(capsys, *detect, str(drawing))
+    assert code == 0 and err == "" and kind_of(drawing) == "drawing"

@@ -278,7 +278,7 @@ def test_a_missing_to_vehicle_file_is_a_warning_not_an_error(sim_copy):
     # stayed down ("unknown option(s) foo"), and a reload onto the file was accepted
     ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'openprotocol://10.0.0.9?foo=1'}",
      "wrench.url",
-     "unknown option(s) foo (accepted: connect_timeout, keepalive, link_ack, timeout"),
+     "unknown option(s) foo (accepted: connect_timeout, curves, keepalive, link_ack, timeout"),
     ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'openprotocol://10.0.0.9?timeout=-5'}",
      "wrench.url", "timeout must be > 0"),
     ("wrench: {url: 'sim://wrench'}",
@@ -507,3 +507,33 @@ def test_a_duplicate_top_level_key_is_the_one_error_not_missing_sections(sim_cop
     station.write_text(station.read_text() + "bolts: bolts.yaml\n")
     errors = check_station(station).errors
     assert len(errors) == 1 and "bolts: duplicate key" in str(errors[0]), errors
+
+
+def test_loading_a_station_never_opens_its_database_file(tmp_path, monkeypatch):
+    """The daemon validates a reload while its SQLite connections hold the file's locks;
+    opening and closing the file in the same process drops those POSIX locks (a `db import`
+    then deleted the daemon's WAL: a newcomer's trial corrupted the database that way).  Only
+    `config check`, in its own process, reads the file's header."""
+    import pathlib
+
+    db = tmp_path / "station.db"
+    db.write_bytes(b"SQLite format 3\x00" + b"\x00" * 100)
+    opened: list[str] = []
+    real = pathlib.Path.open
+
+    def spy(self, *a, **kw):
+        if self.name.startswith("station.db"):
+            opened.append(str(self))
+        return real(self, *a, **kw)
+
+    monkeypatch.setattr(pathlib.Path, "open", spy)
+    station = tmp_path / "station.yaml"
+    station.write_text(f"database: {{url: 'sqlite:///{db}'}}\n")
+    load_station_config(station)
+    from stationd.config import _database_url
+    from stationd.yamlio import YamlNode
+    _database_url(YamlNode.parse(f"url: 'sqlite:///{db}'\n"), tmp_path, check=True)
+    assert opened == []
+    _database_url(YamlNode.parse(f"url: 'sqlite:///{db}'\n"), tmp_path, check=True,
+                  checker=True)
+    assert opened == [str(db)]          # the checker does read it

@@ -174,3 +174,130 @@ def test_a_transform_that_cannot_be_written_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and "pair1.vehicle.yaml: cannot write" in err
     assert err.count("\n") == 1 and "Traceback" not in err
+
+
+def _station_with_pair1(tmp_path):
+    import shutil
+    from pathlib import Path
+
+    shutil.copy(Path(__file__).resolve().parents[1] / "config/sim/pair1.yaml", tmp_path)
+    return _station(tmp_path, "pair1.yaml")
+
+
+def _main(capsys, *argv):
+    from stationd.cli import main
+
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_pair_points_in_metres_are_refused_and_nothing_written(tmp_path, capsys):
+    """Issue 19: the pair points in metres fitted with an RMS of 70.6 mm, the registration
+    was written and the command exited 0 (tens of mm is a wrong bolt).  Refused with the
+    likely cause, exit 1, nothing written; an affine fit, which would absorb the factor 1000
+    with a tiny RMS, too."""
+    cfg = _station_with_pair1(tmp_path)
+    data = yaml.safe_load(_points(tmp_path).read_text())
+    for p in data["points"]:
+        for o in p["seen_by"].values():
+            o["pair_mm"] = [v / 1000 for v in o["pair_mm"]]
+    metres = tmp_path / "metres.yaml"
+    for kind in ("rigid", "affine"):
+        metres.write_text(yaml.safe_dump({**data, "kind": kind}))
+        code, out, err = _main(capsys, "calibrate", "vehicle", "--pair", "pair1", "--points",
+                               metres, "--config", cfg)
+        assert code == 1 and "wrote" not in out and "residual" in out, kind
+        assert "the pair points in metres? give pair_mm in millimetres" in err, err
+        assert "not written" in err and err.count("\n") == 1 and "Traceback" not in err
+        assert not (tmp_path / "pair1.vehicle.yaml").exists()
+
+
+def test_a_registration_with_an_implausible_rms_is_refused_the_earlier_one_kept(tmp_path,
+                                                                                capsys):
+    from stationd.geometry.frames import MAX_RMS_MM
+
+    cfg = _station_with_pair1(tmp_path)
+    assert _main(capsys, "calibrate", "vehicle", "--pair", "pair1", "--points",
+                 _points(tmp_path), "--config", cfg)[0] == 0
+    good = (tmp_path / "pair1.vehicle.yaml").read_bytes()
+    data = yaml.safe_load(_points(tmp_path).read_text())
+    data["points"][7]["seen_by"]["pair1"]["pair_mm"][0] += 30.0   # R8: typed 30 mm off
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump(data))
+    code, out, err = _main(capsys, "calibrate", "vehicle", "--pair", "pair1", "--points",
+                           bad, "--config", cfg)
+    assert code == 1 and "wrote" not in out and err.count("\n") == 1
+    assert f"more than {MAX_RMS_MM:g} mm" in err and "R8 has the largest residual" in err
+    assert (tmp_path / "pair1.vehicle.yaml").read_bytes() == good
+
+
+def test_reference_points_of_one_name_are_refused(tmp_path, capsys):
+    """Issue 19: three reference points all named R1 were accepted."""
+    cfg = _station_with_pair1(tmp_path)
+    data = yaml.safe_load(_points(tmp_path).read_text())
+    for p in data["points"][:3]:
+        p["name"] = "R1"
+    dup = tmp_path / "dup.yaml"
+    dup.write_text(yaml.safe_dump(data))
+    code, out, err = _main(capsys, "calibrate", "vehicle", "--pair", "pair1", "--points", dup,
+                           "--config", cfg)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert "two reference points are named 'R1'" in err and "dup.yaml:" in err
+    assert not (tmp_path / "pair1.vehicle.yaml").exists()
+
+
+def test_config_check_refuses_a_stored_registration_with_an_implausible_rms(tmp_path, capsys):
+    """Issue 19: ``config check`` passed the registration of the metres run (its RMS only in
+    the header comment then): refused with its file and line, as one with ``rms_mm``."""
+    cfg = _station_with_pair1(tmp_path)
+    assert _main(capsys, "calibrate", "vehicle", "--pair", "pair1", "--points",
+                 _points(tmp_path), "--config", cfg)[0] == 0
+    written = (tmp_path / "pair1.vehicle.yaml").read_text()
+    stored = yaml.safe_load(written)
+    assert 0 < stored["rms_mm"] < 0.1
+    code, out, err = _main(capsys, "config", "check", cfg)   # (a partial station: no devices)
+    assert "pair1.vehicle.yaml" not in out + err and "RMS" not in out + err
+    body = {k: stored[k] for k in ("kind", "A", "t")}
+    for text in (
+        # as the command wrote it before rms_mm was a key (issue 19's file)
+        "# pair1 -> vehicle frame, rigid fit to 8 points from m.yaml; RMS 70.600 mm\n"
+        "# x_vehicle = A x_pair + t (mm)\n" + yaml.safe_dump(body),
+        yaml.safe_dump({**body, "rms_mm": 70.6}),
+    ):
+        (tmp_path / "pair1.vehicle.yaml").write_text(text)
+        code, out, err = _main(capsys, "config", "check", cfg)
+        assert code == 2 and "pair1.vehicle.yaml" in out + err
+        assert "RMS residual is 70.6 mm, more than 2 mm" in out + err
+        with pytest.raises(InputError, match=r"RMS residual is 70\.6 mm"):
+            load_station_config(cfg)
+
+
+def test_the_registration_never_replaces_another_file_or_follows_a_link(tmp_path, capsys):
+    """The pair's to_vehicle file is an output like any other: a link (here to the sim's
+    registration of pair1) is refused before any point is localized, neither it nor its
+    target replaced; a station file named there is refused too (the station file's reader
+    stops at it first), untouched."""
+    import shutil
+    from pathlib import Path
+
+    sim = Path(__file__).resolve().parents[1] / "config/sim"
+    shutil.copy(sim / "pair1.yaml", tmp_path)
+    shutil.copy(sim / "pair1.vehicle.yaml", tmp_path / "kept.vehicle.yaml")
+    shutil.copy(sim / "station.yaml", tmp_path / "other.yaml")
+    (tmp_path / "link.yaml").symlink_to(tmp_path / "kept.vehicle.yaml")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    for target, needle in (("link.yaml", "link.yaml: is a symbolic link to "
+                                         f"{tmp_path / 'kept.vehicle.yaml'}, a vehicle "
+                                         "registration (from calibrate vehicle); an output "
+                                         "is never written through or over a link"),
+                           ("other.yaml", "other.yaml:")):
+        cfg = tmp_path / "station.yaml"
+        cfg.write_text(f"pairs:\n  pair1:\n    calibration: pair1.yaml\n"
+                       f"    to_vehicle: {target}\n")
+        code, out, err = _main(capsys, "calibrate", "vehicle", "--pair", "pair1", "--points",
+                               _points(tmp_path), "--config", cfg)
+        assert code == 2 and needle in err and err.count("\n") == 1, err
+        assert "wrote" not in out
+    assert (tmp_path / "link.yaml").is_symlink()
+    assert {n: (tmp_path / n).read_bytes() for n in before} == before

@@ -28,7 +28,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime
 from enum import IntEnum
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from drivers.errors import ConnectionLostError, DeviceError, RefusedError
 from drivers.lifecycle import Openable
@@ -327,6 +327,24 @@ class Wrench(Openable):
         """The controller's stored result ``tightening_id`` (0: its newest), or None when it
         no longer has it.  This controller keeps none (``can_fetch`` is False)."""
         raise DeviceError("this controller keeps no results to fetch", device=self.device)
+
+    #: whether the controller can send tightening curves (Open Protocol's MID 0900 through
+    #: the generic subscription); a register-driven controller sends none
+    can_curves: bool = False
+
+    @property
+    def curves_on(self) -> bool:
+        """Whether curves are subscribed on the current session (never, here)."""
+        return False
+
+    def subscribe_curves(self, timeout: float | None = None) -> bool:
+        """Ask for the tightening curves; False: this controller sends none."""
+        return False
+
+    def wait_curve(self, timeout: float) -> Any:
+        """The next tightening curve (``drivers.wrench.op_curve.Curve``), or None after
+        ``timeout``; this controller sends none (``can_curves`` is False)."""
+        raise DeviceError("this controller sends no curves", device=self.device)
 
     # -- helpers and hooks -----------------------------------------------------------------
     def _timeout(self, timeout: float | None) -> float:

@@ -19,6 +19,17 @@ MID 0004 "revision unsupported" (97, 76 or 74), as integrators' clients do; ``re
 says what was agreed.  ``fetch_result`` asks for an old result (MID 0064 -> 0065) the same
 way.  Link-level acknowledgement (``op_link.py``) is on when the controller's 0002 says it
 supports it (or the URL says ``link_ack=1``).
+
+Tightening curves (``op_curve.py``), optional: ``subscribe_curves()`` (or ``curves=1`` in the
+URL) asks for the angle and torque traces with the generic subscription (MID 0008 for MID
+0900), again at every session start; a controller that refuses it (MID 0004 "unknown MID",
+"subscription on specific data not supported", ...) leaves curves off (``curves_on``,
+``curves_reason``) and nothing else changes.  A curve is read on the same link as the results
+but queued apart (``wait_curve``): it never delays a result.  Each MID 0900 is acknowledged
+with MID 0005 naming it (the generic acknowledgement of subscribed data) unless its header's
+no-ack flag is set, sent by the supervisor without waiting for anyone; ``close()`` stops the
+subscription (MID 0009) before the communication stop.  Curves are binary, so they are asked
+for over TCP only.
 """
 
 from __future__ import annotations
@@ -27,6 +38,7 @@ import dataclasses
 import logging
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -44,6 +56,16 @@ from drivers.url import DeviceUrl, OptionError
 from drivers.wrench import op_link
 from drivers.wrench import openprotocol as op
 from drivers.wrench.base import SupervisedWrench, TighteningResult, check_positive
+from drivers.wrench.op_curve import (
+    CURVE_REFUSALS,
+    MID_DATA_SUBSCRIBE,
+    MID_DATA_UNSUBSCRIBE,
+    MID_TRACE,
+    Curve,
+    parse_curve,
+    subscribe_data,
+    unsubscribe_data,
+)
 from drivers.wrench.op_identity import ControllerIdentity, parse_identity
 from drivers.wrench.openprotocol import Message, SerialFramer, TcpFramer
 
@@ -58,6 +80,8 @@ VIN_LENGTH = 25        # MID 0050 revision 1 carries a 25-character VIN
 START_REVISIONS = (6, 5, 4, 3, 2, 1)
 RESULT_REVISIONS = (7, 6, 5, 4, 3, 2, 1)
 MAX_TIGHTENING_ID = 9_999_999_999            # 10 digits
+CURVE_QUEUE = 64       # curves held for the reader; past that the oldest is dropped (logged)
+CURVE_ACK = Message(op.MID_ACCEPTED, data=f"{MID_TRACE:04d}".encode())   # MID 0005 "0900"
 Spec = dict[str, tuple[Callable[[str], Any], Any]]   # option -> (converter, default)
 
 
@@ -70,9 +94,18 @@ def link_ack_option(text: str) -> str:
     return value
 
 
+def flag_option(text: str) -> bool:
+    """A yes/no option: 1, on, true, yes or 0, off, false, no."""
+    value = {"1": True, "on": True, "true": True, "yes": True, "0": False, "off": False,
+             "false": False, "no": False}.get(text.strip().lower())
+    if value is None:
+        raise OptionError("expected 1 or 0")
+    return value
+
+
 OPTIONS: Spec = {
     "timeout": (float, 2.0), "connect_timeout": (float, 5.0), "keepalive": (float, 10.0),
-    "link_ack": (link_ack_option, "auto"),
+    "link_ack": (link_ack_option, "auto"), "curves": (flag_option, False),
 }
 
 
@@ -109,7 +142,7 @@ class OpenProtocolWrench(SupervisedWrench):
 
     def __init__(self, link: Link | None, *, device: str, timeout: float = 2.0,
                  connect_timeout: float = 5.0, keepalive: float = 10.0,
-                 link_ack: str = "auto") -> None:
+                 link_ack: str = "auto", curves: bool = False) -> None:
         super().__init__(device, timeout=timeout)
         check_positive(connect_timeout=connect_timeout, keepalive=keepalive)
         if link_ack not in ("auto", "on", "off"):
@@ -137,12 +170,20 @@ class OpenProtocolWrench(SupervisedWrench):
         self._revisions: dict[int, int] = {}
         self._last_sent = 0.0
         self._keepalive_sent: float | None = None
+        # curves (guarded by _cond): asked for, subscribed this session, why not
+        self._curves_wanted = curves
+        self._curves_on = False
+        self._curves_reason: str | None = "not asked for" if not curves else None
+        self._curves: deque[Curve] = deque()
+        self._curves_dropped = 0
+        self._owed_curve_acks = 0               # MID 0005 "0900" to send (supervisor)
 
     @classmethod
     def from_url(cls, url: DeviceUrl, **kw: Any) -> OpenProtocolWrench:
         """``openprotocol://HOST[:PORT]`` or ``openprotocol+serial:///dev/ttyUSB1?baud=9600``;
         options (URL query or keywords): timeout, connect_timeout, keepalive (seconds),
-        link_ack (auto, 1, 0), and baud for serial."""
+        link_ack (auto, 1, 0), curves (1: subscribe to the tightening curves at every
+        session start; 0 by default), and baud for serial."""
         link: Link
         if url.scheme == "openprotocol+serial":
             spec: Spec = {**OPTIONS, "baud": (int, 9600)}
@@ -204,6 +245,14 @@ class OpenProtocolWrench(SupervisedWrench):
         self._thread.start()
 
     def _close(self) -> None:
+        with self._cond:
+            curves = self._curves_on
+        if curves:   # the subscription stopped first (0009 -> 0005); best effort, briefly
+            try:
+                self._command(Message(MID_DATA_UNSUBSCRIBE, data=unsubscribe_data()),
+                              "stop the curves", min(self.timeout, 0.5))
+            except DeviceError:
+                pass
         try:    # orderly communication stop (0003 -> 0005); best effort, briefly
             self._command(Message(op.MID_STOP), "communication stop", min(self.timeout, 0.5))
         except DeviceError:
@@ -235,6 +284,7 @@ class OpenProtocolWrench(SupervisedWrench):
         self._last_sent, self._keepalive_sent = time.monotonic(), None
         with self._cond:      # 0001/0002 reset the link level: decided anew below
             self._linking, self._tx_seq, self._owed_acks = False, 0, 0
+            self._owed_curve_acks, self._curves_on = 0, False
         self._rx.reset()
         revisions: dict[int, int] = {}
         try:
@@ -251,6 +301,13 @@ class OpenProtocolWrench(SupervisedWrench):
             except RefusedError as e:
                 if e.code != 9:                 # 09: already subscribed, which is the goal
                     raise
+            with self._cond:
+                curves = self._curves_wanted
+            if curves:
+                try:
+                    self._curves_session(None)
+                except DeviceTimeoutError:
+                    pass        # curves off (logged); the session goes on without them
         except DeviceError as e:
             link.close()
             what = "communication start" if self._ident is None else "session restart"
@@ -266,6 +323,43 @@ class OpenProtocolWrench(SupervisedWrench):
                      "%s, link-level acknowledgement %s", self.device, ident.describe(),
                      ident.revision, revisions.get(op.MID_RESULT_SUBSCRIBE, "?"),
                      "on" if linking else "off")
+
+    def _curves_session(self, epoch: int | None, timeout: float | None = None) -> bool:
+        """MID 0008 for the angle and torque traces on this session: whether curves are on.
+        A refusal that says the controller gives none turns them off, for good; no answer
+        too (a controller that hangs on it must not be asked at every reconnect), and the
+        timeout is raised: the link is then in an unknown state."""
+        if self._link.kind == "serial":
+            self._curves_off("curves are binary messages: asked for over TCP only")
+            return False
+        try:
+            self._transact(Message(MID_DATA_SUBSCRIBE, data=subscribe_data()),
+                           {op.MID_ACCEPTED, op.MID_ERROR}, timeout or self.timeout, epoch)
+        except RefusedError as e:
+            if e.code in CURVE_REFUSALS:
+                self._curves_off(f"the controller gives none (MID 0008 refused: "
+                                 f"{op.refusal_text(e.code or 0)})")
+                return False
+            if e.code != 71:                    # 71: subscription already exists
+                raise
+        except DeviceTimeoutError as e:
+            self._curves_off(f"no answer to the curves' subscription (MID 0008): {e}")
+            raise
+        with self._cond:
+            new = self._curves_reason is not None or not self._curves_on
+            self._curves_on, self._curves_reason = True, None
+        if new:
+            log.info("%s: tightening curves subscribed (MID 0008 for MID 0900: angle and "
+                     "torque traces)", self.device)
+        return True
+
+    def _curves_off(self, why: str) -> None:
+        with self._cond:
+            was = self._curves_reason
+            self._curves_wanted = self._curves_on = False
+            self._curves_reason = why
+        if was != why:
+            log.info("%s: no tightening curves: %s", self.device, why)
 
     def _negotiate(self, mid: int, revisions: Sequence[int], expect: set[int]
                    ) -> tuple[Message, int]:
@@ -354,6 +448,9 @@ class OpenProtocolWrench(SupervisedWrench):
         if msg.mid == op.MID_KEEPALIVE:
             self._keepalive_sent = None
             return
+        if msg.mid == MID_TRACE:
+            self._curve_in(msg)
+            return
         with self._cond:
             slot = self._pending
             if slot is not None and slot.matches(msg):
@@ -362,6 +459,27 @@ class OpenProtocolWrench(SupervisedWrench):
                 return
         log.warning("%s: unexpected MID %04d ignored (data %r)", self.device, msg.mid,
                     msg.data[:40])
+
+    def _curve_in(self, msg: Message) -> None:
+        """A MID 0900: queued apart from the results (bounded: the oldest goes), and its
+        acknowledgement owed (sent by the supervisor, never from here)."""
+        try:
+            curve: Curve | None = parse_curve(msg.raw)
+        except ProtocolError as e:
+            log.warning("%s: unreadable tightening curve, acknowledged anyway: %s",
+                        self.device, e)
+            curve = None
+        with self._cond:
+            if curve is not None:
+                if len(self._curves) >= CURVE_QUEUE:
+                    self._curves.popleft()
+                    self._curves_dropped += 1
+                    log.warning("%s: %d curve(s) dropped: nobody reads them", self.device,
+                                self._curves_dropped)
+                self._curves.append(curve)
+            if not msg.no_ack:
+                self._owed_curve_acks += 1
+            self._cond.notify_all()
 
     def _link_answer(self, msg: Message) -> None:
         """A 9997/9998 from the controller: it answers the outstanding sequenced message."""
@@ -382,11 +500,19 @@ class OpenProtocolWrench(SupervisedWrench):
         while True:
             with self._cond:
                 if not self._owed_acks:
-                    return
+                    break
             if not self._send(Message(op.MID_RESULT_ACK), block=False):
                 return
             with self._cond:
                 self._owed_acks -= 1
+        while True:   # the curves' MID 0005, the same way
+            with self._cond:
+                if not self._owed_curve_acks:
+                    return
+            if not self._send(CURVE_ACK, block=False):
+                return
+            with self._cond:
+                self._owed_curve_acks -= 1
 
     def _keepalive_tick(self) -> None:
         now = time.monotonic()
@@ -552,6 +678,74 @@ class OpenProtocolWrench(SupervisedWrench):
             if not self._connected:
                 raise self._down(what)
             return self._epoch
+
+    # -- tightening curves (MID 0008 -> 0900) ----------------------------------------------
+    can_curves = True
+
+    @property
+    def curves_on(self) -> bool:
+        """Whether this session is subscribed to the tightening curves."""
+        with self._cond:
+            return self._curves_on
+
+    @property
+    def curves_reason(self) -> str | None:
+        """Why curves are off (not asked for, refused by the controller, ...); None when
+        they are on, or asked for and waiting for the link."""
+        with self._cond:
+            return self._curves_reason
+
+    def subscribe_curves(self, timeout: float | None = None) -> bool:
+        """Ask for the angle and torque traces of every tightening from now on (MID 0008
+        for MID 0900), on this session and every later one: True when subscribed; False,
+        with ``curves_reason``, when the controller gives none (MID 0004 error 78, 99, ...)
+        or the link is serial.  Other failures raise as commands do (a timeout resets the
+        link, and curves stay off: a controller that hangs on it is not asked again)."""
+        self._check_open()
+        with self._cond:
+            self._curves_wanted, self._curves_reason = True, None
+        with self._request_lock:
+            try:
+                epoch = self._current_epoch("subscribe to curves")
+            except ConnectionLostError:
+                return False                    # asked at the next session start
+            try:
+                return self._curves_session(epoch, self._timeout(timeout))
+            except RefusedError as e:
+                raise self._surface(e, "subscribe to curves") from None
+            except DeviceError as e:
+                self._fail_link(e, epoch)
+                raise self._surface(e, "subscribe to curves", "; the link is reset and "
+                                    "reconnects") from None
+
+    def unsubscribe_curves(self, timeout: float | None = None) -> None:
+        """Stop the curves (MID 0009), on this session and later ones."""
+        self._check_open()
+        with self._cond:
+            on = self._curves_on
+        self._curves_off("unsubscribed")
+        if on:
+            self._command(Message(MID_DATA_UNSUBSCRIBE, data=unsubscribe_data()),
+                          "stop the curves", self._timeout(timeout))
+
+    def wait_curve(self, timeout: float) -> Curve | None:
+        """The next tightening curve received (oldest first), or None if none came within
+        ``timeout`` seconds.  Never raises for a link that is down (curves received before
+        are still handed out; the results' wait reports the link); raises DeviceError once
+        closed."""
+        if timeout < 0:
+            raise ValueError("timeout must be >= 0")
+        self._check_open()
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while not self._curves:
+                if self._closing:
+                    raise DeviceError("closed", device=self.device)
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return None
+                self._cond.wait(remaining)
+            return self._curves.popleft()
 
     # -- old results (MID 0064 -> 0065) ----------------------------------------------------
     can_fetch = True

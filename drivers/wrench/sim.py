@@ -14,8 +14,14 @@ revisions 1 to 7, except those set to be refused (``refused_revisions``, answere
 Every result is kept (the newest ``store_size``) for MID 0064; an id it no longer has is
 MID 0004 error 15.  ``link_ack=True`` makes it acknowledge at link level (MID 9997/9998,
 ``simserver.py``) and say so in 0002 revision 6+: with an integrator that started at
-revision 6 or later, or that numbers its messages.  ``python -m drivers.wrench.sim`` serves
-it on a TCP port for any integrator (``sim_cli.py``).
+revision 6 or later, or that numbers its messages.  Tightening curves: a session that
+subscribes to MID 0900 with the generic subscription (MID 0008; MID 0009 stops it) gets,
+after each result's 0061, one MID 0900 per trace type it asked for (angle and torque, from
+the rundown model of ``sim_curves.py``); it acknowledges each with MID 0005.  Built with
+``curves=False`` it refuses the 0008 with MID 0004 ``curves_refusal_code`` (78,
+"subscription on specific data not supported", by default), as a controller without curves.
+``python -m drivers.wrench.sim`` serves it on a TCP port for any integrator
+(``sim_cli.py``).
 
 ``SimWrench`` is the real client (``client.OpenProtocolWrench``) plus the lifecycle of an
 in-process controller: ``sim://wrench`` exercises the whole protocol path.
@@ -36,6 +42,7 @@ from typing import Any
 from drivers.link import Link, SerialLink, TcpLink
 from drivers.url import DeviceUrl
 from drivers.wrench.client import OPTIONS, REFUSED, OpenProtocolWrench, Spec, keyword_options
+from drivers.wrench.sim_curves import mid0900
 from drivers.wrench.sim_results import NM_PER, SimRecord, fixed, result_data, text
 from drivers.wrench.simserver import OpenProtocolServer, Received, Session, message
 
@@ -95,7 +102,8 @@ class SimController(OpenProtocolServer):
                  refused_revisions: Mapping[int, Iterable[int]] | None = None,
                  revision_refusal_code: int = 97, store_size: int = 1000,
                  torque_unit: int = 1, software: str = "stationd-sim 1.0",
-                 serial: str = "SIM0000001") -> None:
+                 serial: str = "SIM0000001", curves: bool = True,
+                 curves_refusal_code: int = 78) -> None:
         if not 0.0 <= nok_rate <= 1.0:
             raise ValueError(f"nok_rate must be in [0, 1], not {nok_rate}")
         if silence_timeout <= 0:
@@ -112,6 +120,9 @@ class SimController(OpenProtocolServer):
         self.software, self.serial = software, serial
         self.revision_refusal_code = revision_refusal_code
         self.store_size = store_size
+        self.curves, self.curves_refusal_code = curves, curves_refusal_code
+        self.curves_sent = 0                     # MID 0900 sent
+        self.curve_acks = 0                      # MID 0005 "0900" received
         self._rng = random.Random(seed)  # noqa: S311 - seeded simulation scatter, not security
         self._clock = clock or (lambda: datetime.now().replace(microsecond=0))
         self._refuse_pset: dict[int, int] = dict(refusals or {})
@@ -220,7 +231,7 @@ class SimController(OpenProtocolServer):
             elif s.started and s.kind == "tcp":
                 self._refuse(s, mid, 96)
             else:   # on a serial line a new 0001 starts a new session
-                s.started, s.subscribed = True, False
+                s.started, s.subscribed, s.traces = True, False, ()
                 s.out.clear()
                 s.start_link_level(False)
                 self.reply(s, mid, 2, self._identity(msg.revision), msg.revision)
@@ -236,6 +247,22 @@ class SimController(OpenProtocolServer):
         elif mid == 3:
             self._ok(s, mid)
             s.started = s.subscribed = False
+            s.traces = ()
+        elif mid == 5:    # the generic acknowledgement of subscribed data (MID 0900)
+            if data[:4] == b"0900":
+                self.curve_acks += 1
+            else:
+                self.errors.append(f"MID 0005 acknowledging {data[:4]!r} ignored")
+        elif mid == 8:
+            self._data_subscription(s, data)
+        elif mid == 9:
+            if data[:4] != b"0900":
+                self._refuse(s, mid, 73)
+            elif not s.traces:
+                self._refuse(s, mid, 72)      # subscription does not exist
+            else:
+                s.traces = ()
+                self._ok(s, mid)
         elif mid == 18:
             self._select(s, data)
         elif mid in (42, 43):
@@ -287,6 +314,31 @@ class SimController(OpenProtocolServer):
                 if tid not in s.unacked:
                     self.post(s, self._render(61, s.result_revision, record))
                     s.unacked.append(tid)
+
+    def _data_subscription(self, s: Session, data: bytes) -> None:
+        """MID 0008: subscribed MID 4, its revision 3, extra data length 2, extra data
+        (result id 10, time 19, number of trace types 3, each trace type 3).  Only MID 0900
+        revision 1 is served, angle and torque traces."""
+        if data[:4] != b"0900":
+            self._refuse(s, 8, 73)            # subscribed MID unsupported
+        elif not self.curves:
+            self._refuse(s, 8, self.curves_refusal_code)
+        elif data[4:7].strip(b" ") not in (b"", b"000", b"001"):
+            self._refuse(s, 8, 74)            # subscribed MID revision unsupported
+        elif s.traces:
+            self._refuse(s, 8, 71)            # subscription already exists
+        else:
+            extra = data[9:]
+            count = extra[29:32]
+            kinds = [int(extra[32 + 3 * i:35 + 3 * i]) for i in range(int(count))
+                     if extra[32 + 3 * i:35 + 3 * i].isdigit()] if count.isdigit() else []
+            if not kinds:
+                kinds = [1, 2]
+            if any(k not in (1, 2) for k in kinds):
+                self._refuse(s, 8, 78)        # a trace type this controller does not make
+                return
+            s.traces = tuple(kinds)
+            self._ok(s, 8)
 
     def _old_result(self, s: Session, msg: Received) -> None:
         """MID 0064 (a tightening id, 0 = the newest) -> MID 0065 of its revision, or 0004
@@ -364,6 +416,11 @@ class SimController(OpenProtocolServer):
             if s.started and s.subscribed:
                 self.post(s, self._render(61, s.result_revision, record))
                 s.unacked.append(self._tid)
+        for s in self.sessions():       # the curves after every result: never before one
+            if s.started:
+                for kind in s.traces:
+                    self.post(s, mid0900(record, kind))
+                    self.curves_sent += 1
         return SimTightening(self._tid, pset, ok, t_val / 100, float(a_val), t_stat,
                              a_stat, self.vin, now, self._render(61, 1, record), record)
 

@@ -47,6 +47,11 @@ def parser() -> argparse.ArgumentParser:
                                             "(repeatable), e.g. 1:7,6")
     p.add_argument("--refusal-code", type=int, default=97,
                    help="MID 0004 code for a refused revision (97; some controllers: 76)")
+    p.add_argument("--no-curves", action="store_true",
+                   help="give no tightening curves: refuse MID 0008 for MID 0900 (with MID "
+                        "0004 --curves-refusal-code) as a controller without them")
+    p.add_argument("--curves-refusal-code", type=int, default=78,
+                   help="MID 0004 code refusing the curves' subscription (78; or 99)")
     p.add_argument("--trigger-every", type=float, default=0.0, metavar="SECONDS",
                    help="pull the trigger at this interval when the tool may run (off)")
     return p
@@ -67,7 +72,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         sim = SimController(seed=args.seed, nok_rate=args.nok_rate, name=args.name,
                             link_ack=args.link_ack, refused_revisions=refused,
-                            revision_refusal_code=args.refusal_code)
+                            revision_refusal_code=args.refusal_code,
+                            curves=not args.no_curves,
+                            curves_refusal_code=args.curves_refusal_code)
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -138,6 +138,7 @@ class Session:
         self.result_revision = 1        # the revision of MID 0060, so of the 0061 pushed
         self.last_rx = time.monotonic()
         self.unacked: list[int] = []    # results (tightening ids) sent, awaiting MID 0062
+        self.traces: tuple[int, ...] = ()   # trace types subscribed with MID 0008 (0900)
         # link level: off until the controller says so (after its 0002)
         self.link_level = self.link_capable = False
         self.tx_seq = 0

@@ -4,19 +4,36 @@ The paper maps camera coordinates to the vehicle frame by an affine transformati
 reference points.  A rigid transform (rotation + translation) has 6 parameters instead of 12,
 cannot shear or scale the measurement, and is the default; the affine fit stays available for
 comparison.  Every fit reports per-point residuals so a bad reference point is visible.
+
+A fit is plausible (:func:`implausible`) when its RMS residual is at most :data:`MAX_RMS_MM`
+and the two point sets have one scale: pair points typed in metres fit a rigid motion with
+an RMS of tens of millimetres (a wrong bolt), and an affine fit would absorb the factor 1000
+with a tiny RMS.  The RMS is stored in the registration file (``rms_mm``), and a file whose
+RMS is beyond the bound is refused when read (``config check``, start, reload).
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from stationd.result import Refusal
-from stationd.yamlio import YamlNode
+from stationd.yamlio import MAX_YAML_BYTES, YamlNode, read_text_file
 
 KINDS = ("rigid", "affine")
+#: the largest RMS residual (mm) of a registration: the bolt end is matched within the
+#: matching tolerance (8 mm by default) and a registration off by more than a quarter of it
+#: puts the wrench on a neighbouring bolt; a good fit is a few tenths of a millimetre
+MAX_RMS_MM = 2.0
+#: the spreads of the pair points and the vehicle points (both mm) differ by at most this
+#: factor: a rotation keeps distances, and a real affine fit is within a few per cent of one
+MAX_SCALE = 1.5
+#: the RMS an earlier ``calibrate vehicle`` wrote only in the header comment
+_HEADER_RMS = re.compile(r"^#.*\bRMS ([0-9.]+(?:[eE][+-]?[0-9]+)?) mm", re.MULTILINE)
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,11 +60,25 @@ class Transform:
         return float(np.sqrt(np.mean(r**2))) if r is not None and r.size else float("nan")
 
     def to_dict(self) -> dict[str, Any]:
-        return {"kind": self.kind, "A": self.A.tolist(), "t": self.t.tolist()}
+        """``kind``, ``A``, ``t`` and, for a fit, its RMS residual ``rms_mm`` (checked
+        against :data:`MAX_RMS_MM` when the file is read)."""
+        out: dict[str, Any] = {"kind": self.kind, "A": self.A.tolist(), "t": self.t.tolist()}
+        if self.residuals_mm is not None and self.residuals_mm.size:
+            out["rms_mm"] = round(self.rms_mm, 4)
+        return out
 
     @classmethod
     def from_node(cls, node: YamlNode) -> Transform:
-        m = node.mapping(("kind", "A", "t"), required=("A", "t"))
+        """A registration as ``calibrate vehicle`` writes it; one whose RMS residual
+        (``rms_mm``, or the header comment of a file written before that key) is above
+        :data:`MAX_RMS_MM` is refused: it would select wrong bolts."""
+        m = node.mapping(("kind", "A", "t", "rms_mm"), required=("A", "t"))
+        rms = m["rms_mm"].number(lo=0.0) if "rms_mm" in m else _header_rms(node.path)
+        if rms is not None and rms > MAX_RMS_MM:
+            raise m.get("rms_mm", node).error(
+                f"the registration's RMS residual is {rms:.3g} mm, more than {MAX_RMS_MM:g} "
+                "mm: its reference points do not fit one motion (a point measured or typed "
+                "wrong, or in metres?); run stationd calibrate vehicle again")
         kind = m["kind"].text(KINDS) if "kind" in m else "rigid"
         A = m["A"].matrix(3, 3)
         if kind == "rigid" and (not np.allclose(A @ A.T, np.eye(3), atol=1e-6)
@@ -56,6 +87,51 @@ class Transform:
         if kind == "affine" and abs(np.linalg.det(A)) < 1e-9:
             raise m["A"].error("an affine transform needs an invertible matrix")
         return cls(A=A, t=m["t"].vector([3]), kind=kind)
+
+
+def _header_rms(path: str) -> float | None:
+    """The RMS in the header comment of a registration written before ``rms_mm`` was a key
+    (``# pair1 -> vehicle frame, rigid fit to 8 points from pts.yaml; RMS 0.041 mm``)."""
+    p = Path(path)
+    if not p.is_file():
+        return None    # parsed from text, not read from a file
+    found = _HEADER_RMS.search(read_text_file(p, MAX_YAML_BYTES, "a YAML file")[:4096])
+    return float(found.group(1)) if found else None
+
+
+def spread(points: np.ndarray) -> float:
+    """The RMS distance of ``points`` (N, 3) from their centroid: their extent, in their
+    unit."""
+    p = np.asarray(points, dtype=np.float64)
+    return float(np.sqrt(np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=1))))
+
+
+def implausible(fit: Transform, src: np.ndarray, dst: np.ndarray,
+                names: list[str] | None = None) -> Refusal | None:
+    """Why ``fit`` (from the pair points ``src`` to the vehicle points ``dst``, mm) is not a
+    registration to use, None when it is: the point sets in two units (metres typed for
+    millimetres: the likely cause is said), or an RMS residual above :data:`MAX_RMS_MM`
+    (``names``, the points', name the one with the largest residual)."""
+    s_src, s_dst = spread(src), spread(dst)
+    ratio = s_dst / s_src if s_src > 0 else float("inf")
+    if not 1 / MAX_SCALE <= ratio <= MAX_SCALE:
+        sizes = (f"the pair points spread {s_src:.4g}, the vehicle points {s_dst:.4g}, a "
+                 f"factor {ratio:.3g}")
+        if ratio > 100:
+            cause = "the pair points in metres? give pair_mm in millimetres"
+        elif ratio < 0.01:
+            cause = "the vehicle points in metres? give vehicle_mm in millimetres"
+        else:
+            cause = "two units mixed, or points given the wrong names?"
+        return Refusal(f"the two point sets differ in scale ({sizes}): {cause}")
+    if not fit.rms_mm <= MAX_RMS_MM:
+        r, where = fit.residuals_mm, ""
+        if names is not None and r is not None and len(names) == r.size:
+            where = f": {names[int(np.argmax(r))]} has the largest residual"
+        return Refusal(f"RMS residual {fit.rms_mm:.3g} mm is more than {MAX_RMS_MM:g} mm: the "
+                       "reference points do not fit one motion (a point measured or typed "
+                       f"wrong{where})")
+    return None
 
 
 def _check(src: np.ndarray, dst: np.ndarray,

@@ -25,6 +25,7 @@ from functools import partial
 from typing import Any
 
 from db.bolts import Parameters
+from db.curves import store_curve
 from db.errors import DataError, NotFoundError, VehicleClosedError
 from db.report import MISSING
 from db.repository import Repository
@@ -115,6 +116,8 @@ from stationd.words import answer_words, reason_words
 log = logging.getLogger("stationd")
 NOT_PAIRS = (LIFT, WRENCH, DATABASE)   # the keepers that are not camera pairs
 RESULT_WAIT_S = 0.5         # one blocking wait for pushed results (a condition, not a poll)
+CURVE_WAIT_S = 0.5          # one blocking wait for curves, in their own thread
+CURVE_IDLE_S = 1.0          # the curve loop's wait while the controller sends none
 TICK_S = 0.5
 BAD_GRABS = 3               # a pair failing this many grabs in a row is a fault
 IDLE_S = 0.1                # the vision loop's wait while the core is not tracking
@@ -156,6 +159,7 @@ class Station:
     on_action: Any = None  # called with each action before it is carried out (demo, tests)
     _pool: ThreadPoolExecutor = field(init=False)
     _results_pool: ThreadPoolExecutor = field(init=False)
+    _curves_pool: ThreadPoolExecutor = field(init=False)
     _lock: asyncio.Lock | None = field(default_factory=asyncio.Lock)
     _pending: list[Event] = field(default_factory=list)    # faults found before run()
     _bad: dict[str, int] = field(default_factory=dict)     # pair -> failed grabs in a row
@@ -180,6 +184,8 @@ class Station:
                         for n, pc in c.pairs.items() if pc.calibration is not None}
         self._pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="station")
         self._results_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="results")
+        # the curves' wait and store: a thread of their own, never the results' one
+        self._curves_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="curves")
         self.keepers = {LIFT: self._keeper(LIFT, self._open_lift, _reconnect_lift),
                         WRENCH: self._keeper(WRENCH, self._open_wrench, _reconnect)}
         for name in self._pair_names():
@@ -334,6 +340,7 @@ class Station:
                 log.warning("closing %s: %s", what, one_line(exc))
         self._pool.shutdown(wait=True)
         self._results_pool.shutdown(wait=True)
+        self._curves_pool.shutdown(wait=True)
 
     # -- the loop ----------------------------------------------------------------------------
     async def run(self, stop: asyncio.Event) -> None:
@@ -355,7 +362,8 @@ class Station:
         # (the pairs' and the database's keepers have no ``use``: the vision loop and the
         # database's callers tell them when their device failed or worked)
         tasks = [asyncio.create_task(c) for c in (*keep, self._vision_loop(stop),
-                                                    self._tick_loop(stop))]
+                                                    self._tick_loop(stop),
+                                                    self._curve_loop(stop))]
         try:
             await stop.wait()
         finally:
@@ -429,6 +437,40 @@ class Station:
         if result is not None:
             await self.feed(ResultIn(time.time(), result))
             self._received.remove(result)
+
+    async def _curve_loop(self, stop: asyncio.Event) -> None:
+        """The controller's tightening curves, when it sends them (``?curves=1`` in the
+        wrench's URL): read apart from its results, a blocking wait on the driver's curve
+        queue in a thread of its own (never the results' thread: a curve never delays a
+        result or the next bolt's parameters), each stored with its rundown by tightening id
+        (``db.curves``: a curve stored before its rundown is written is found by that id).
+        A curve not stored is logged, never a fault: the rundown stands without it."""
+        loop = asyncio.get_running_loop()
+        while not stop.is_set():
+            wrench, repo = self.wrench, self.repo
+            if wrench is None or repo is None or not wrench.can_curves \
+                    or not wrench.curves_on:
+                await asyncio.sleep(CURVE_IDLE_S)
+                continue
+            try:
+                curve = await loop.run_in_executor(self._curves_pool, wrench.wait_curve,
+                                                   CURVE_WAIT_S)
+            except (DeviceError, ValueError):     # closed: its keeper opens a new one
+                await asyncio.sleep(CURVE_IDLE_S)
+                continue
+            if curve is None:
+                continue
+            try:
+                await loop.run_in_executor(self._curves_pool, partial(
+                    store_curve, repo, tightening_id=curve.tightening_id,
+                    trace_type=curve.trace_type, unit=curve.unit, values=curve.values,
+                    sample_period_s=curve.time_step_s,
+                    times_s=None if curve.time_step_s is not None else curve.times_s,
+                    result_at=None if curve.timestamp is None
+                    else curve.timestamp.astimezone(UTC)))
+            except STATION_FAULTS as exc:
+                log.warning("curve (%s) of tightening %d not stored: %s", curve.name,
+                            curve.tightening_id, one_line(exc))
 
     def _catch_up_soon(self) -> None:
         """After the controller came (back): what it says it is (the journal, the devices

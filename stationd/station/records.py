@@ -22,6 +22,7 @@ from typing import Any
 
 import cv2
 
+from db.curves import link_curves
 from db.errors import DbError
 from db.repository import Repository
 from drivers.errors import DeviceError, DriverError
@@ -150,7 +151,7 @@ class Records:
         self.check_file()
         a = u.record
         r, sel = a.result, a.selection
-        repo.record_tightening(
+        rid = repo.record_tightening(
             a.vin, a.bolt, ok=bool(r.ok),
             position_mm=list(sel.point_mm) if sel else [0.0, 0.0, 0.0],
             match_distance_mm=sel.distance_mm if sel else 0.0,
@@ -160,6 +161,13 @@ class Records:
             tightening_id=int(r.tightening_id),
             sent_at=datetime.fromtimestamp(sel.decided_t, UTC) if sel else None,
             result_at=u.result_at, images=u.images, enable_id=u.enable_id)
+        # the tightening's curves (stored as they came, usually just before) go with it; the
+        # record stands whatever happens here (reading finds them by tightening id anyway)
+        try:
+            link_curves(repo, int(r.tightening_id), rid)
+        except STATION_FAULTS as exc:
+            log.warning("curves of tightening %d not linked: %s", r.tightening_id,
+                        one_line(exc))
 
     def keep(self, u: Unsaved) -> None:
         """The database refused ``u``: kept until it takes it."""

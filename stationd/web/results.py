@@ -5,6 +5,11 @@ Why beside the repository and not in it: ``db.repository.Repository`` is the dae
 path; the screens only read, and only need two queries the repository does not offer (the
 vehicle list, every record rather than the last).  They go through the repository's engine
 in a session that never commits; the vehicle's status comes from ``vehicle_report``.
+
+Each rundown of the vehicle's page (and of its JSON export) carries its tightening curve when
+the controller sent one (``db.curves``): ``curve`` is None, or the torque and angle traces
+(N m and degrees, one value per sample, the sample period) the page draws as a torque-angle
+plot within that rundown's limits.  The CSV export stays one line per rundown, without it.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from db.curves import curves_of_records
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
 from db.repository import Repository
 
@@ -55,12 +61,18 @@ class Results:
         """The report (last result per bolt) plus every rundown per bolt, oldest first.
         Raises ``NotFoundError`` for an unknown VIN."""
         report = self.repo.vehicle_report(vin).to_json()
-        runs = self.rundowns(vin)
+        rows = self._rows(vin, curves=True)
+        runs = [r for _, r in rows]
         for b in report["bolts"]:
             b["rundowns"] = [r for r in runs if r["bolt"] == b["bolt"]]
         return report
 
     def rundowns(self, vin: str) -> list[dict[str, Any]]:
+        return [r for _, r in self._rows(vin)]
+
+    def _rows(self, vin: str, curves: bool = False) -> list[tuple[int, dict[str, Any]]]:
+        """(record id, rundown) of ``vin``, oldest first; with ``curves`` each rundown has
+        its ``curve`` (None when none was stored)."""
         with Session(self.repo.engine) as s:
             rows = s.execute(
                 select(TighteningRecord, Bolt.code, ProcessParameters, VehicleModel.name)
@@ -70,11 +82,14 @@ class Results:
                 .join(ProcessParameters, TighteningRecord.parameters_id == ProcessParameters.id)
                 .where(Vehicle.vin == vin)
                 .order_by(TighteningRecord.recorded_at, TighteningRecord.id)).all()
-        out: list[dict[str, Any]] = []
+            traces = curves_of_records(
+                s, [(rec.id, rec.tightening_id, rec.recorded_at) for rec, *_ in rows]) \
+                if curves else {}
+        out: list[tuple[int, dict[str, Any]]] = []
         attempts: dict[str, int] = {}
         for rec, code, params, model in rows:
             attempts[code] = attempts.get(code, 0) + 1
-            out.append({
+            run = {
                 "vin": vin, "model": model, "bolt": code, "attempt": attempts[code],
                 "status": rec.status, "torque_nm": rec.torque_nm, "angle_deg": rec.angle_deg,
                 # the limits in force for this rundown (its parameter version), as quality
@@ -86,9 +101,11 @@ class Results:
                 "z_mm": rec.z_mm, "match_distance_mm": rec.match_distance_mm,
                 "tilt_deg": rec.tilt_deg, "sent_at": _iso(rec.sent_at),
                 "result_at": _iso(rec.result_at), "recorded_at": _iso(rec.recorded_at),
-                "images": list(rec.images or [])})
+                "images": list(rec.images or [])}
+            if curves:
+                run["curve"] = plot_curve(traces.get(rec.id, []))
+            out.append((rec.id, run))
         return out
-
 
     def export(self, vin: str) -> list[dict[str, Any]]:
         """The vehicle's rundowns, then one row per bolt with none (status ``missing``, no
@@ -101,6 +118,26 @@ class Results:
              "bolt": b, "attempt": 0, "status": "missing", "images": []}
             for b in report.missing]
         return runs + missing
+
+
+def plot_curve(traces: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """A rundown's stored traces as the page draws them: torque (N m) and angle (degrees),
+    sample by sample (the shorter trace's length), and ``traces``, every trace as stored
+    (without the values of the two plotted: they are above); None when none was stored.
+    ``torque_nm`` and ``angle_deg`` are None without both traces in those units."""
+    if not traces:
+        return None
+    by = {t["name"]: t for t in traces}
+    torque, angle = by.get("torque"), by.get("angle")
+    if torque is None or angle is None or torque["unit"] != "Nm" or angle["unit"] != "deg":
+        return {"torque_nm": None, "angle_deg": None, "sample_period_s": None,
+                "traces": traces}
+    n = min(len(torque["values"]), len(angle["values"]))
+    plotted = (torque["id"], angle["id"])
+    return {"torque_nm": torque["values"][:n], "angle_deg": angle["values"][:n],
+            "sample_period_s": torque["sample_period_s"],
+            "traces": [{k: v for k, v in t.items() if k not in ("values", "times_s")}
+                       if t["id"] in plotted else t for t in traces]}
 
 
 def rundowns_csv(runs: list[dict[str, Any]]) -> str:

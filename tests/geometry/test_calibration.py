@@ -373,14 +373,16 @@ def test_opencv_stereo_sample_images(tmp_path, capsys):
         (tmp_path / name).write_bytes(_read_maybe_gz(src))
     out = tmp_path / "pair.yaml"
     assert _cli(["calibrate", "stereo", "--left", str(tmp_path / "left*.jpg"), "--right",
-                 str(tmp_path / "right*.jpg"), "--board", "chessboard:9x6:1", "--out",
+                 str(tmp_path / "right*.jpg"), "--board", "chessboard:9x6:25", "--out",
                  str(out), "--json"]) == 0
     rep = json.loads(capsys.readouterr().out)
     pair = StereoPair.load(out)
     assert len(rep["views"]) == 13 and sum(not v["rejected"] for v in rep["views"]) >= 12
     assert rep["rms_px"] <= 0.25  # measured 0.199 px
     assert rep["rms_left_px"] <= 0.25 and rep["rms_right_px"] <= 0.25
-    assert abs(pair.baseline_mm / 3.34 - 1) < 0.01  # measured 3.327 squares
+    # the sample does not give its square size: 25 mm is assumed (1 "mm" squares would make
+    # a 3.3 mm baseline, which calibrate stereo refuses as no station's: 20-2000 mm)
+    assert abs(pair.baseline_mm / (3.34 * 25) - 1) < 0.01  # measured 3.327 squares
     assert pair.T[0] / pair.baseline_mm < -0.99  # the right camera is to the right
     assert np.degrees(np.linalg.norm(cv2.Rodrigues(pair.R)[0])) < 2.0
     assert pair.left.size == (640, 480)

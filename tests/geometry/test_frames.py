@@ -88,3 +88,50 @@ def test_fusion_weights_and_refuses_disagreement():
     f = fuse([a, b], [0.1, 0.2], max_spread_mm=1.0)
     assert np.allclose(f.point_mm, [0.06, 0, 0]) and f.spread_mm < 0.3
     assert "disagree" in fuse([a, np.array([5.0, 0, 0])], [0.1, 0.1], 1.0).reason
+
+
+def test_implausible_registrations_are_told_with_their_likely_cause():
+    """Issue 19: pair points in metres fitted (rigid) with an RMS of 70.6 mm and were used;
+    an affine fit absorbs the factor 1000 with a tiny RMS: both refused by the scales of the
+    point sets, with the likely cause; a bad point by the RMS bound."""
+    from stationd.geometry.frames import MAX_RMS_MM, implausible
+
+    rng = np.random.default_rng(3)
+    R, t = _rotation(rng), np.array([1500.0, -900.0, 1400.0])
+    src = rng.uniform(-600, 600, (6, 3))
+    dst = src @ R.T + t + rng.normal(0, 0.05, (6, 3))
+    good = fit_rigid(src, dst)
+    assert isinstance(good, Transform) and implausible(good, src, dst) is None
+    for fit in (fit_rigid, fit_affine):
+        tf = fit(src / 1000, dst)
+        assert isinstance(tf, Transform)
+        refused = implausible(tf, src / 1000, dst)
+        assert refused is not None and "the pair points in metres?" in refused.reason
+    tf = fit_rigid(src, dst / 1000)
+    assert isinstance(tf, Transform)
+    assert "the vehicle points in metres?" in implausible(tf, src, dst / 1000).reason
+    bad = dst.copy()
+    bad[2, 0] += 25.0
+    tf = fit_rigid(src, bad)
+    assert isinstance(tf, Transform) and tf.rms_mm > MAX_RMS_MM
+    assert f"more than {MAX_RMS_MM:g} mm" in implausible(tf, src, bad).reason
+
+
+def test_a_registration_keeps_its_rms_and_one_beyond_the_bound_is_refused():
+    from stationd.errors import ConfigError
+
+    rng = np.random.default_rng(4)
+    src = rng.uniform(-600, 600, (5, 3))
+    tf = fit_rigid(src, src + rng.normal(0, 0.1, (5, 3)))
+    assert isinstance(tf, Transform)
+    d = tf.to_dict()
+    assert set(d) == {"kind", "A", "t", "rms_mm"} and d["rms_mm"] == round(tf.rms_mm, 4)
+    import yaml
+
+    back = Transform.from_node(YamlNode.parse(yaml.safe_dump(d)))
+    assert np.allclose(back.A, tf.A) and np.allclose(back.t, tf.t)
+    with pytest.raises(ConfigError, match=r"<string>:\d+: rms_mm: the registration's RMS "
+                       "residual is 3.5 mm, more than 2 mm"):
+        Transform.from_node(YamlNode.parse(yaml.safe_dump({**d, "rms_mm": 3.5})))
+    with pytest.raises(ConfigError, match="expected a number"):
+        Transform.from_node(YamlNode.parse(yaml.safe_dump({**d, "rms_mm": "small"})))

@@ -46,6 +46,73 @@ async function listVehicles() {
     }
   } catch (e) { q("#error").textContent = e.message; }
 }
+// A rundown's torque over angle as inline SVG: the controller's trace, the limits of that
+// rundown (its parameter version) as a dashed window (lines when it has no angle limits), and
+// the result's final point.
+const SVGNS = "http://www.w3.org/2000/svg";
+function svg(name, attrs, parent, text) {
+  const e = document.createElementNS(SVGNS, name);
+  for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, v);
+  if (text !== undefined) e.textContent = text;
+  if (parent) parent.appendChild(e);
+  return e;
+}
+function niceStep(span) {
+  const raw = span / 4, p = Math.pow(10, Math.floor(Math.log10(raw)));
+  return [1, 2, 5, 10].map((m) => m * p).find((s) => s >= raw) || raw;
+}
+function curvePlot(r) {
+  const c = r.curve, W = 380, H = 210, L = 46, R = 12, T = 12, B = 34;
+  const ang = c.angle_deg, tq = c.torque_nm;
+  const nums = (xs) => xs.filter((v) => v !== null && v !== undefined);
+  const amax = Math.max(...ang, ...nums([r.angle_max_deg, r.angle_deg])) * 1.05 || 1;
+  const tmax = Math.max(...tq, ...nums([r.torque_max_nm, r.torque_nm])) * 1.1 || 1;
+  const amin = Math.min(0, ...ang), tmin = Math.min(0, ...tq);
+  const x = (v) => L + (v - amin) / (amax - amin) * (W - L - R);
+  const y = (v) => H - B - (v - tmin) / (tmax - tmin) * (H - T - B);
+  const nok = r.status === "nok";
+  const root = svg("svg", {viewBox: `0 0 ${W} ${H}`, width: W, height: H, role: "img",
+                           class: "curve-plot", "data-tightening": r.tightening_id ?? ""});
+  svg("title", {}, root, `Torque over angle, ${r.bolt} attempt ${r.attempt}` +
+      (r.tightening_id !== null ? `, tightening ${r.tightening_id}` : ""));
+  // colours that read on the page's dark theme and on a printed export alike
+  root.style.color = "inherit";
+  svg("rect", {x: L, y: T, width: W - L - R, height: H - T - B, fill: "none",
+               stroke: "currentColor", "stroke-opacity": 0.5}, root);
+  for (let v = 0, s = niceStep(amax - amin); v <= amax; v += s) {
+    svg("line", {x1: x(v), x2: x(v), y1: H - B, y2: H - B + 4, stroke: "currentColor"}, root);
+    svg("text", {x: x(v), y: H - B + 15, "font-size": 10, "text-anchor": "middle",
+                 fill: "currentColor"}, root,
+        String(Math.round(v)));
+  }
+  for (let v = 0, s = niceStep(tmax - tmin); v <= tmax; v += s) {
+    svg("line", {x1: L - 4, x2: L, y1: y(v), y2: y(v), stroke: "currentColor"}, root);
+    svg("text", {x: L - 6, y: y(v) + 3, "font-size": 10, "text-anchor": "end",
+                 fill: "currentColor"}, root,
+        String(Math.round(v * 10) / 10));
+  }
+  svg("text", {x: (L + W - R) / 2, y: H - 4, "font-size": 11, "text-anchor": "middle",
+               fill: "currentColor"}, root,
+      "angle (\u00b0)");
+  svg("text", {x: 12, y: (T + H - B) / 2, "font-size": 11, "text-anchor": "middle",
+               fill: "currentColor", transform: `rotate(-90 12 ${(T + H - B) / 2})`}, root, "torque (N\u00b7m)");
+  const lim = {stroke: "#3c9", "stroke-dasharray": "5 3", fill: "none", class: "limits"};
+  if (r.torque_min_nm !== null && r.torque_max_nm !== null) {
+    if (r.angle_min_deg !== null && r.angle_max_deg !== null)
+      svg("rect", {...lim, x: x(r.angle_min_deg), y: y(r.torque_max_nm),
+                   width: x(r.angle_max_deg) - x(r.angle_min_deg),
+                   height: y(r.torque_min_nm) - y(r.torque_max_nm)}, root);
+    else for (const t of [r.torque_min_nm, r.torque_max_nm])
+      svg("line", {...lim, x1: L, x2: W - R, y1: y(t), y2: y(t)}, root);
+  }
+  const pts = ang.map((a, i) => `${x(a).toFixed(1)},${y(tq[i]).toFixed(1)}`).join(" ");
+  svg("polyline", {points: pts, fill: "none", stroke: nok ? "#f66" : "#5ad",
+                   "stroke-width": 1.5, class: "trace"}, root);
+  if (r.angle_deg !== null && r.torque_nm !== null)
+    svg("circle", {cx: x(r.angle_deg), cy: y(r.torque_nm), r: 3.5, class: "final",
+                   fill: nok ? "#f66" : "#5ad"}, root);
+  return root;
+}
 async function showVehicle(vin) {
   const base = "/api/vehicles/" + encodeURIComponent(vin);
   try {
@@ -84,11 +151,22 @@ async function showVehicle(vin) {
           }
         }
         tb.appendChild(tr);
+        if (r && r.curve && r.curve.torque_nm && r.curve.angle_deg) {
+          // the rundown's torque-angle curve, in a row of its own under it
+          const cr = document.createElement("tr");
+          cr.className = "curve";
+          cr.dataset.bolt = b.bolt;
+          const td = cell(cr, "");
+          td.colSpan = 11;
+          td.appendChild(curvePlot(r));
+          tb.appendChild(cr);
+        }
       });
     }
     // crops are saved only with records.save_images (off in config/sim): no empty column
     const crops = v.bolts.some((b) => b.rundowns.some((r) => (r.image_urls || []).length));
     q("#rundowns").classList.toggle("no-crops", !crops);
+    q("#curves-note").hidden = !document.querySelector("tr.curve");
   } catch (e) {
     if (e.status === 404) {
       q("#title").textContent = `no vehicle ${vin}`;
