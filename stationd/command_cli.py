@@ -201,5 +201,6 @@ def add_command_parsers(sub: Any) -> None:
     uh.set_defaults(func=cmd_user_hash)
 
 
-__all__ = ["ApiClient", "add_command_parsers", "client_args", "cmd_command", "cmd_feed",
+__all__ = ["EXIT_REFUSED", "EXIT_UNREACHABLE", "ApiClient", "add_command_parsers", "client_args",
+           "cmd_command", "cmd_feed",
            "cmd_user_hash", "read_password", "say_refused"]

@@ -58,6 +58,7 @@ log = logging.getLogger("stationd")
 BATCH = 200                  # entries per transaction
 POLL_S = 1.0                 # how often the feed is read when nothing is behind
 BACKOFF_S = (1.0, 60.0)      # a line database that is down: first and longest wait
+STATUS_S = 5.0               # the status is refreshed at least this often meanwhile
 CURSOR_KEY = "forwarded_seq"
 
 LINE = MetaData()
@@ -255,15 +256,21 @@ class Forwarder:
             except (SQLAlchemyError, DbError) as exc:   # the local database: its keeper's
                 self.last_error = f"local database: {_reason(exc)}"
                 pause = POLL_S
-            st = await loop.run_in_executor(None, self.status)
-            self.last_status = st
-            if (st["up"], st["alarm"]) != told:
-                told = (st["up"], st["alarm"])
-                on_change(st)
-            try:
-                await asyncio.wait_for(stop.wait(), pause)
-            except TimeoutError:
-                pass
+            # the status (backlog, lag, alarm) stays fresh while a long backoff waits
+            end = loop.time() + pause
+            while True:
+                st = await loop.run_in_executor(None, self.status)
+                self.last_status = st
+                if (st["up"], st["alarm"]) != told:
+                    told = (st["up"], st["alarm"])
+                    on_change(st)
+                left = end - loop.time()
+                if left <= 0 or stop.is_set():
+                    break
+                try:
+                    await asyncio.wait_for(stop.wait(), min(left, STATUS_S))
+                except TimeoutError:
+                    pass
 
 
 __all__ = ["LINE_FEED", "Forwarder", "LineConfig", "LineDb", "LineDown"]

@@ -262,8 +262,10 @@ async def opcua(cfg: StationConfig, bus: EventBus, stop: asyncio.Event) -> None:
     server = OpcUaServer(cfg.opcua, bus=bus)
     try:
         await server.start()
-    except OSError as exc:
+    except Exception as exc:   # a port in use, certificates: never the station's fault
         log.error("OPC UA: not served on %s: %s", cfg.opcua.endpoint, one_line(exc))
+        with contextlib.suppress(Exception):
+            await server.stop()
         await loop.run_in_executor(None, repo.close)
         return
     log.info("OPC UA: serving %s", cfg.opcua.endpoint)

@@ -19,12 +19,20 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import urllib.error
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from stationd.command_cli import EXIT_REFUSED, ApiClient, client_args, read_password, say_refused
+from stationd.command_cli import (
+    EXIT_REFUSED,
+    EXIT_UNREACHABLE,
+    ApiClient,
+    client_args,
+    read_password,
+    say_refused,
+)
 from stationd.errors import InputError
 from stationd.outfile import write_atomic
 from stationd.station.matching import check_spacing
@@ -55,10 +63,16 @@ def cmd_teach(args: argparse.Namespace) -> int:
     if out.exists() or out.is_symlink():   # a link too, dangling or not (outfile's rule)
         raise InputError(f"--out {out}: exists; a taught table is a new file, never an "
                          "overwrite (choose another name)")
+    if not out.parent.is_dir():            # before any teaching: the work would be lost
+        raise InputError(f"--out {out}: the folder {out.parent} does not exist")
+    if not args.tolerance > 0:
+        raise InputError(f"--tolerance {args.tolerance:g}: millimetres, > 0")
     doc, cad = _cad(args.from_, args.model) if args.from_ else ({}, [])
     ids = [str(b["id"]) for b in cad] if cad else []
     if args.bolts:
-        wanted = [b.strip() for b in args.bolts.split(",") if b.strip()]
+        wanted = [b.strip() for b in args.bolts.split(",")]
+        if not all(wanted):
+            raise InputError(f"--bolts {args.bolts!r}: bolt ids separated by commas")
         unknown = [b for b in wanted if cad and b not in ids]
         if unknown:
             raise InputError(f"--bolts: not in {args.from_}: {', '.join(unknown)}")
@@ -66,6 +80,16 @@ def cmd_teach(args: argparse.Namespace) -> int:
     if not ids:
         raise InputError("which bolts: --from a CAD table, or --bolts B01,B02,...")
     client = ApiClient(args.url, args.token, args.timeout)
+    try:
+        return _teach(args, client, out, doc, ids, cad)
+    except (urllib.error.URLError, OSError) as exc:
+        sys.stderr.write(f"stationd: no daemon answers at {args.url}: "
+                         f"{getattr(exc, 'reason', exc)}\n")
+        return EXIT_UNREACHABLE
+
+
+def _teach(args: argparse.Namespace, client: ApiClient, out: Path, doc: dict[str, Any],
+           ids: list[str], cad: list[dict[str, Any]]) -> int:
     status, who = client.call("/api/login", {"user": args.user, "password": read_password(),
                                              "client": "cli"})
     if status != 200:

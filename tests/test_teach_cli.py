@@ -113,3 +113,21 @@ def test_an_engineer_teaches_bolts_and_gets_a_new_table_compared_with_cad(tmp_pa
         con.close()
     assert rows == [("ed", "teach-start", None), ("ed", "teach-point", "B01"),
                     ("ed", "teach-point", "B02"), ("ed", "teach-stop", None)]
+
+
+def test_teach_checks_its_output_first_and_says_when_no_daemon_answers(tmp_path):
+    env = {**os.environ, "STATIOND_PASSWORD": PASSWORD, "PYTHONPATH": str(ROOT)}
+
+    def teach(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "stationd", "teach", "--model", "SIM-1",
+                               "--user", "ed", "--url", f"http://127.0.0.1:{_free_port()}/",
+                               *args], capture_output=True, text=True, env=env, timeout=60,
+                              input="\n", check=False)
+
+    got = teach("--bolts", "B01", "--out", str(tmp_path / "no" / "such" / "t.yaml"))
+    assert got.returncode == 2 and "does not exist" in got.stderr
+    got = teach("--bolts", "B01,,B02", "--out", str(tmp_path / "t.yaml"))
+    assert got.returncode == 2 and "separated by commas" in got.stderr
+    got = teach("--bolts", "B01", "--out", str(tmp_path / "t.yaml"))
+    assert got.returncode == 3 and "no daemon answers" in got.stderr
+    assert "Traceback" not in got.stderr and not (tmp_path / "t.yaml").exists()

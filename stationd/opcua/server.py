@@ -174,6 +174,13 @@ class OpcUaServer:
             {"commonName": f"stationd {self.cfg.station_id}", "organizationName": "stationd"})
         await server.load_certificate(str(cert))
         await server.load_private_key(str(key))
+        if not any(trusted.iterdir()):
+            # nothing trusted yet (a first start): no client certificate is accepted, rather
+            # than every one (asyncua's store cannot be empty)
+            log.warning("OPC UA: no client certificate in %s yet: signed and encrypted "
+                        "sessions are refused until one is placed there", trusted)
+            server.set_certificate_validator(_refuse_every_certificate)
+            return
         store = TrustStore([trusted], [])
         await store.load()
         server.set_certificate_validator(CertificateValidator(
@@ -339,3 +346,8 @@ async def _set(parent: Node, name: str, value: str, uris: list[str]) -> None:
 
 
 __all__ = ["NAMESPACE", "OpcUaServer", "ReadOnlyRuleset", "StationUsers"]
+
+
+async def _refuse_every_certificate(cert: Any, app: Any) -> None:
+    """No client certificate is trusted yet."""
+    raise ua.uaerrors.BadCertificateUntrusted()

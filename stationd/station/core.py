@@ -92,6 +92,8 @@ LOCALIZING = (State.TRACKING, *ON_A_BOLT)
 CAMERAS_ON = (*LOCALIZING, State.TEACHING)
 #: steady localizations averaged for one taught bolt, and how many may be tried for them
 TEACH_FRAMES, TEACH_TRIES = 10, 60
+#: why a bolt is not tightened again after a NOK under the ``skip`` strategy
+NOK_SKIPPED = "NOK, skipped by the NOK policy"
 #: a taught bolt end whose localizations spread farther than this was not held still, mm
 TEACH_STEADY_MM = 2.0
 
@@ -566,9 +568,12 @@ class StationCore:
             self.params, set(ev.done), dict(ev.skipped),
             rules={k: BoltRule(b.order, b.batch) for k, b in ev.bolts.items()})
         self._noks = {k: n for k, n in ev.noks.items() if k in ev.bolts and n > 0}
-        for k, n in self._noks.items():
-            if n >= self.nok.rule(k, ev.bolts[k].pset).max_nok:
+        for k, n in self._noks.items():   # the NOK policy's state comes back with the vehicle
+            rule = self.nok.rule(k, ev.bolts[k].pset)
+            if n >= rule.max_nok:
                 self.matcher.locked[k] = n
+            elif rule.strategy == "skip":
+                self.matcher.skipped.setdefault(k, NOK_SKIPPED)
         if self.state is State.WAITING_VEHICLE and self._lift is not None and self._lift.ready:
             self._to(State.TRACKING, "tracking the wrench")
         return [Publish(opened)]
@@ -887,7 +892,7 @@ class StationCore:
                     Publish(Notice(f"{en.bolt} locked after {n} NOK in a row: a supervisor "
                                    "releases it", "warning", t=t))]
         if rule.strategy == "skip":
-            why = "NOK, skipped by the NOK policy"
+            why = NOK_SKIPPED
             self.matcher.skipped[en.bolt] = why
             return [Publish(BoltSkipped(en.bolt, why, t=t))]
         return []

@@ -256,3 +256,18 @@ def test_the_opcua_section_is_checked_with_its_line(tmp_path):
         with pytest.raises(ConfigError) as err:
             OpcUaConfig.from_node(YamlNode.parse(text))
         assert needle in str(err.value) and f":{line}" in str(err.value), str(err.value)
+
+
+def test_a_first_start_with_certificates_and_nobody_trusted_yet_serves(repo, tmp_path):
+    """The trusted folder is empty on a first start (a newcomer saw the server never start
+    and a traceback at stop): it serves, and no client certificate is accepted meanwhile."""
+    async def main() -> None:
+        srv, stop, task = await serving(config(certificates=tmp_path / "pki"), repo)
+        try:
+            async with Client(srv.cfg.endpoint) as client:
+                assert await client.get_namespace_array()
+        finally:
+            await stopping(srv, stop, task)
+        assert (tmp_path / "pki" / "server-cert.der").exists()
+        assert (tmp_path / "pki" / "trusted").is_dir()
+    asyncio.run(main())

@@ -102,6 +102,11 @@ def test_the_count_comes_back_with_the_vehicle():
     core = StationCore(PARAMS, leave_frames=2, nok=NokPolicy(NokRule(max_nok=3)))
     core.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, noks={"B1": 3, "B2": 2}))
     assert core.matcher is not None and core.matcher.locked == {"B1": 3}
+    # a bolt skipped after its NOK stays skipped after a reload (a newcomer saw it tightened)
+    skip = StationCore(PARAMS, leave_frames=2, nok=NokPolicy(NokRule(3), bolts={
+        "B3": NokRule(3, "skip")}))
+    skip.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, noks={"B3": 1}))
+    assert skip.matcher is not None and "B3" in skip.matcher.skipped
 
 
 def test_the_section_is_checked_with_its_line():
