@@ -353,6 +353,7 @@ def run_daemon(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(levelname)s %(message)s")  # one line per event (journal)
     logging.getLogger("alembic").setLevel(logging.WARNING)
+    logging.getLogger("asyncua").setLevel(logging.WARNING)   # ~1000 lines per start otherwise
     cfg = validate_station(args.config)  # an invalid station at the first start: exit 2
     locks = StationLocks()
     # a second daemon on this database: one line naming the holder, exit 2
