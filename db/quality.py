@@ -57,15 +57,16 @@ def spc(s: Session, model: str | None = None, since: datetime | None = None
         q = q.where(VehicleModel.name == model)
     if since is not None:
         q = q.where(TighteningRecord.recorded_at >= since)
-    groups: dict[tuple[str, str, int | None], dict[str, Any]] = {}
+    # a group per bolt, pset and the limits in force: a parameter change starts a new one
+    groups: dict[tuple[Any, ...], dict[str, Any]] = {}
     days: dict[str, list[int]] = defaultdict(lambda: [0, 0])
     for rec, bolt, mname, p in s.execute(q):
         day = rec.recorded_at.date().isoformat()
         days[day][0] += 1
         days[day][1] += rec.status == "nok"
-        g = groups.setdefault((mname, bolt, p.pset), {
-            "torque": [], "angle": [], "limits": (p.torque_min, p.torque_max, p.angle_min,
-                                                  p.angle_max), "nok": 0})
+        limits = (p.torque_min, p.torque_max, p.angle_min, p.angle_max)
+        g = groups.setdefault((mname, bolt, p.pset, *limits), {
+            "torque": [], "angle": [], "limits": limits, "nok": 0, "version": p.version})
         if rec.status != "ok":
             g["nok"] += 1
             continue
@@ -74,10 +75,12 @@ def spc(s: Session, model: str | None = None, since: datetime | None = None
         if rec.angle_deg is not None:
             g["angle"].append(float(rec.angle_deg))
     rows = []
-    for (mname, bolt, pset), g in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1],
-                                                                         kv[0][2] or 0)):
+    for key, g in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1], kv[0][2] or 0,
+                                                             kv[1]["version"])):
+        mname, bolt, pset = key[:3]
         t_lo, t_hi, a_lo, a_hi = g["limits"]
         rows.append({"model": mname, "bolt": bolt, "pset": pset, "nok": g["nok"],
+                     "parameter_version": g["version"],
                      "torque": capability(g["torque"], t_lo, t_hi),
                      "angle": capability(g["angle"], a_lo, a_hi)})
     trend = [{"day": d, "results": n, "nok": k, "nok_rate": k / n if n else None}

@@ -35,7 +35,7 @@ from drivers.errors import (
     ProtocolError,
     RefusedError,
 )
-from drivers.link import connect_tcp, open_serial
+from drivers.link import baud_rate, connect_tcp, open_serial
 from drivers.url import OptionError, parse_url
 
 # pymodbus journals its own view of a failure (hex frame dumps, "Invalid Modbus protocol id",
@@ -114,7 +114,7 @@ def parse_modbus_url(text: str) -> tuple[LinkSpec, dict[str, float | None]]:
             raise url.error(f"expected a host and optional port, e.g. {TCP_FORM}")
         spec = LinkSpec("tcp", url.host, url.port or 502, opts.pop("unit"))
     elif url.scheme == "modbus-rtu":
-        opts = url.typed_options({"unit": (_unit, 1), "baud": (int, 19200),
+        opts = url.typed_options({"unit": (_unit, 1), "baud": (baud_rate, 19200),
                                   "parity": (_choice("N", "E", "O"), "E"),
                                   "stopbits": (_choice("1", "2"), "1"), **timing}, RTU_FORM)
         if url.host or not url.path.startswith("/"):

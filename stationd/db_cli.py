@@ -224,6 +224,9 @@ def cmd_db_report(args: argparse.Namespace) -> int:
 def cmd_db_spc(args: argparse.Namespace) -> int:
     """Process capability per bolt and pset, and the NOK trend (quality's figures)."""
     with _open(_db_url(args), must_exist=True) as repo:
+        if args.model is not None and args.model not in repo.models():
+            raise InputError(f"--model {args.model}: no such model (models: "
+                             f"{', '.join(repo.models()) or 'none'})")
         doc = repo.spc(args.model, args.since)
     if args.json:
         sys.stdout.write(strict_json(doc) + "\n")

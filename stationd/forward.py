@@ -86,10 +86,13 @@ class LineConfig:
         m = node.mapping(("url", "station_id", "backlog"), required=("url", "station_id"))
         url = m["url"].text()
         try:
-            backend = make_url(url).get_backend_name()
+            parsed = make_url(url)
+            backend, port = parsed.get_backend_name(), parsed.port
         except Exception:
             raise m["url"].error(f"not a database URL: {url!r} (e.g. "
                                  "postgresql+psycopg://stationd@line-db/line)") from None
+        if port is not None and not 1 <= port <= 65535:
+            raise m["url"].error(f"port {port} is not 1-65535")
         if backend not in ("postgresql", "sqlite"):
             raise m["url"].error(f"a PostgreSQL URL (postgresql+psycopg://...), not {backend}")
         sid = m["station_id"].text()

@@ -312,7 +312,7 @@ def test_a_missing_to_vehicle_file_is_a_warning_not_an_error(sim_copy):
     ("lift: {url: 'sim://lift'}", "lift: {url: 'modbus-tcp://10.0.0.1:0'}", "lift.url",
      "the port is not a number in 1-65535"),   # was taken as 502 (``port or 502``)
     ("lift: {url: 'sim://lift'}", "lift: {url: 'modbus-rtu:///dev/ttyUSB0?baud=0'}",
-     "lift.url", "option baud=0 is not valid: a serial speed is 50-4000000 baud"),
+     "lift.url", "option baud='0' is not valid: a serial speed is 50-4000000 baud"),
     ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'openprotocol://10.0.0.9:0'}",
      "wrench.url", "the port is not a number in 1-65535"),
 ])

@@ -133,7 +133,8 @@ def test_the_line_section_is_checked_with_its_line():
                           ("url: 'not a url'\nstation_id: A\n", "not a database URL"),
                           ("url: postgresql://x/y\n", r"missing key\(s\): station_id"),
                           ("url: postgresql://x/y\nstation_id: A\nbacklog: {records: 0}\n",
-                           "out of range")):
+                           "out of range"),
+                          ("url: postgresql://x:99999/y\nstation_id: A\n", "port 99999")):
         with pytest.raises(ConfigError, match=message):
             LineConfig.from_node(YamlNode.parse(text, "station.yaml"))
 

@@ -56,3 +56,23 @@ def test_spc_groups_by_bolt_and_pset_on_ok_results_and_counts_noks(repo, bolts_f
     text = subprocess.run([sys.executable, "-m", "stationd", "db", "spc", "--db", db],
                           capture_output=True, text=True, cwd=ROOT, timeout=60, check=False)
     assert text.returncode == 0 and "B1" in text.stdout and "20.0 %" in text.stdout
+
+
+def test_a_parameter_change_starts_a_new_group_and_an_unknown_model_is_bad_input(
+        repo, bolts_file, tmp_path):
+    from tests.db.conftest import BASE
+
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VINP1", "SEDAN")
+    record(repo, "VINP1", "B1", tightening_id=1, torque_nm=50.0)
+    bolts_file.write_text(BASE.replace("target: 50, min: 45, max: 55",
+                                       "target: 52, min: 47, max: 57"))
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VINP2", "SEDAN")
+    record(repo, "VINP2", "B1", tightening_id=2, torque_nm=52.0)
+    b1 = [r for r in repo.spc()["bolts"] if r["bolt"] == "B1"]
+    assert sorted((r["torque"]["lsl"], r["torque"]["usl"]) for r in b1) == [(45, 55), (47, 57)]
+    out = subprocess.run([sys.executable, "-m", "stationd", "db", "spc", "--db",
+                          url_of(tmp_path / "station.db"), "--model", "NOPE"],
+                         capture_output=True, text=True, cwd=ROOT, timeout=60, check=False)
+    assert out.returncode == 2 and "no such model" in out.stderr

@@ -93,3 +93,8 @@ def test_a_pset_the_controller_does_not_have_is_refused_with_its_reason(
 def test_bad_options_are_a_url_error_naming_them(backend: Backend) -> None:
     with pytest.raises(UrlError, match="timeout must be > 0"):
         open_wrench(backend.url, **{**backend.kw, "timeout": 0})
+
+
+def test_a_serial_speed_out_of_range_is_refused_for_the_register_driven_controller() -> None:
+    with pytest.raises(UrlError, match="serial speed"):
+        open_wrench("modbus-rtu:///dev/ttyUSB0?baud=0&unit=1", connect=False)
