@@ -103,13 +103,13 @@ class AccessConfig:
         roles = dict(DEFAULT_ROLES)
         if "roles" in m:
             roles = {}
-            for name, item in _named(m["roles"]):
+            for name, item in m["roles"].named():
                 rights = set()
                 for r in item.items():
                     rights.add(Right(r.text(tuple(x.value for x in Right))))
                 roles[name] = frozenset(rights)
         users = {}
-        for name, item in _named(m["users"]) if "users" in m else ():
+        for name, item in m["users"].named() if "users" in m else ():
             u = item.mapping(("role", "password"), required=("role", "password"))
             role = u["role"].text(tuple(roles))
             stored = u["password"].text()
@@ -141,13 +141,6 @@ class AccessConfig:
 
 
 _DUMMY = hash_password("no such user", salt=b"stationd-dummy-salt")
-
-
-def _named(node: YamlNode) -> list[tuple[str, YamlNode]]:
-    value = node.value()
-    if not isinstance(value, dict):
-        raise node.error("expected a mapping of names to their settings")
-    return list(node.mapping(tuple(str(k) for k in value)).items())
 
 
 @dataclass

@@ -480,11 +480,10 @@ def _missing(root: YamlNode, key: str) -> None:
 
 def _pair_items(node: YamlNode) -> list[tuple[str, YamlNode]]:
     """A mapping name -> settings (pairs, cameras); any names, the settings are checked."""
-    value = node.value()
-    if not isinstance(value, dict) or not value:
+    items = node.named()
+    if not items:
         raise node.error("expected a mapping of names to their settings")
-    children = node.mapping(tuple(str(k) for k in value))
-    return list(children.items())
+    return items
 
 
 class _Reader:

@@ -42,7 +42,6 @@ from sqlalchemy import (
     Table,
     func,
     make_url,
-    select,
 )
 from sqlalchemy.dialects.postgresql import JSONB
 from sqlalchemy.dialects.postgresql import insert as pg_insert
@@ -144,11 +143,6 @@ class LineDb:
         except (SQLAlchemyError, DbError, OSError) as exc:
             self.dispose()
             raise LineDown(_reason(exc)) from None
-
-    def count(self, station_id: str) -> int:
-        with self._connect().connect() as conn:
-            return int(conn.scalar(select(func.count()).select_from(LINE_FEED).where(
-                LINE_FEED.c.station_id == station_id)) or 0)
 
     def dispose(self) -> None:
         if self._engine is not None:

@@ -178,6 +178,14 @@ class YamlNode:
             raise self.error(f"missing key(s): {', '.join(missing)}")
         return out
 
+    def named(self, what: str = "names to their settings") -> list[tuple[str, YamlNode]]:
+        """The children of a mapping whose keys are names the file chooses (pairs, users,
+        roles, bolts): each with its node; an error "expected a mapping of ``what``"."""
+        value = self.value()
+        if not isinstance(value, dict):
+            raise self.error(f"expected a mapping of {what}")
+        return list(self.mapping(tuple(str(k) for k in value)).items())
+
     def pairs(self) -> list[tuple[object, YamlNode]]:
         """The key/value pairs of a mapping whose keys may be any scalar (pset numbers)."""
         if not isinstance(self._node, yaml.MappingNode):

@@ -49,10 +49,7 @@ class LocalizeConfig:
             else AGREEMENT_MM
         sigmas: dict[str, float] = {}
         if "sigma_mm" in m:
-            value = m["sigma_mm"].value()
-            if not isinstance(value, dict):
-                raise m["sigma_mm"].error("expected a mapping of pair names to millimetres")
-            for name, v in m["sigma_mm"].mapping(tuple(str(k) for k in value)).items():
+            for name, v in m["sigma_mm"].named("pair names to millimetres"):
                 sigmas[name] = v.number(lo=0.01, hi=10.0)
         return cls(agree, sigmas)
 

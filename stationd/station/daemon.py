@@ -108,7 +108,7 @@ from stationd.station.events import (
 )
 from stationd.station.gaps import MAX_FETCH
 from stationd.station.gaps import plan as plan_gaps
-from stationd.station.records import STATION_FAULTS, Records, Unsaved
+from stationd.station.records import STATION_FAULTS, Records, Unsaved, xyz
 from stationd.station.scan import ScanPlan
 from stationd.station.sdnotify import Notifier
 from stationd.words import answer_words, reason_words
@@ -572,7 +572,7 @@ class Station:
             loc = await self._localize(cycle.decide)
             if loc is not None:
                 self.last = loc
-                point = None if loc.point_mm is None else _xyz(loc.point_mm)
+                point = None if loc.point_mm is None else xyz(loc.point_mm)
                 await self.feed(LocalizedIn(time.time(), loc.exposure_t, point, loc.reason,
                                             loc.tilt_deg, loc))
             if cycle.scout and self._scan.watching:   # after the decision, never before it
@@ -810,7 +810,7 @@ class Station:
         # (the screens said "missing" for every bolt of a vehicle just loaded)
         status = {b.bolt_id: b.status for b in report.bolts if b.status != MISSING}
         done = frozenset(k for k, s in status.items() if s == "ok")
-        specs = {b.bolt_id: BoltSpec(_xyz(b.position), b.parameters.pset, b.order, b.batch,
+        specs = {b.bolt_id: BoltSpec(xyz(b.position), b.parameters.pset, b.order, b.batch,
                                      b.parameters_id, b.parameters) for b in infos}
         log.info("vehicle %s (%s) opened%s: %d bolts, %d done", a.vin, model,
                  " for rework" if started.rework else "", len(infos), len(done))
@@ -868,10 +868,6 @@ class Station:
 
 def _why(end: BoltEnd | Refusal) -> str:
     return end.reason if isinstance(end, Refusal) else "no failure"
-
-
-def _xyz(p: Any) -> tuple[float, float, float]:
-    return float(p[0]), float(p[1]), float(p[2])
 
 
 def _reconnect(device: Any) -> None:

@@ -73,15 +73,9 @@ class NokPolicy:
                 raise item.error(f"pset {key!r}: a pset number (1-999)")
             psets[key] = default.merged(item)
         bolts = {key: default.merged(item)
-                 for key, item in (_named(m["bolts"]) if "bolts" in m else ())}
+                 for key, item in (m["bolts"].named("names to their rules")
+                                   if "bolts" in m else ())}
         return cls(default, psets, bolts)
-
-
-def _named(node: YamlNode) -> list[tuple[str, YamlNode]]:
-    value = node.value()
-    if not isinstance(value, dict):
-        raise node.error("expected a mapping of names to their rules")
-    return list(node.mapping(tuple(str(k) for k in value)).items())
 
 
 __all__ = ["NokPolicy", "NokRule"]

@@ -102,7 +102,7 @@ class Records:
         if now - off >= late_result_s:
             return None
         j = owed.selection
-        sel = Selection(owed.bolt, owed.pset, _xyz(j["point_mm"]), float(j["tilt_deg"]),
+        sel = Selection(owed.bolt, owed.pset, xyz(j["point_mm"]), float(j["tilt_deg"]),
                         float(j["distance_mm"]), float(j["exposure_t"]), float(j["decided_t"]),
                         None, owed.vin, owed.parameters_id)
         self._enable, self._enable_off = (sel, owed.id), owed.off_at is not None
@@ -275,7 +275,8 @@ def _sqlite_file(url: str) -> tuple[Path, tuple[int, int]] | None:
     return path, (st.st_dev, st.st_ino)
 
 
-def _xyz(p: Any) -> tuple[float, float, float]:
+def xyz(p: Any) -> tuple[float, float, float]:
+    """Three plain floats from any sequence (NumPy values included)."""
     return float(p[0]), float(p[1]), float(p[2])
 
 
@@ -292,4 +293,4 @@ def _aware(t: datetime | None) -> datetime | None:
     return None if t is None else t.astimezone(UTC)
 
 
-__all__ = ["STATION_FAULTS", "Records", "Unsaved"]
+__all__ = ["STATION_FAULTS", "Records", "Unsaved", "xyz"]
