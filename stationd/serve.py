@@ -29,7 +29,7 @@ from stationd.lock import StationLocks
 from stationd.station.core import DATABASE, LIFT, WRENCH
 from stationd.station.daemon import OPEN_ERRORS, Station
 from stationd.station.events import DeviceHealth, EventBus, StateChanged
-from stationd.station.records import STATION_FAULTS
+from stationd.station.records import STATION_FAULTS, Unsaved
 from stationd.station.sdnotify import Notifier
 
 log = logging.getLogger("stationd")
@@ -291,12 +291,13 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
     ``locks`` holds the one-daemon-per-database lock: a reload onto another database moves
     it, or is refused when another daemon holds that one."""
     loop = asyncio.get_running_loop()
-    carried: list[Any] = []   # results the last station received and could not write
+    carried: list[Unsaved] = []   # results the last station received and could not write
     while True:
         await screens.follow(cfg)
         # the screens forget the last configuration's device reports (a reload)
         bus.publish(StateChanged("starting", "opening the devices"))
-        station = Station(cfg, notifier=notifier, bus=bus, frames=screens.frames)
+        station = Station(cfg, notifier=notifier, bus=bus)
+        station.frames = screens.frames
         station.carry(carried)
         if not await _open(station, notifier, stop):
             await loop.run_in_executor(None, station.close)

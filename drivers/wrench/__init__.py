@@ -52,7 +52,10 @@ def open_wrench(url: str, *, connect: bool = True, **kw: Any) -> Wrench:
     """The backend for ``url``, opened unless ``connect=False``; keywords override the URL's
     options (e.g. ``timeout=0.5``; ``psets=...`` for ``sim://``).  An unknown scheme or
     option is a UrlError that shows the accepted forms."""
-    parsed = parse_url(url)
+    try:
+        parsed = parse_url(url)
+    except UrlError as exc:
+        raise UrlError(f"{exc}; accepted: {FORMS}", device=url) from None
     backend = load_backend(BACKENDS, parsed.scheme)
     if backend is None:
         raise UrlError(f"unknown wrench scheme {parsed.scheme!r} (accepted: {FORMS})",

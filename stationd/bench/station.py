@@ -35,7 +35,7 @@ from stationd import progress
 from stationd.bench.wait import until as _until
 from stationd.boltfile import load_bolts
 from stationd.config import StationConfig, load_station_config
-from stationd.demo.station import SIM_CONFIG, _sim_psets
+from stationd.demo.station import SIM_CONFIG, _sim_psets, simulators
 from stationd.errors import InputError
 from stationd.jsonout import finite, strict_json
 from stationd.serve import Screens
@@ -81,7 +81,7 @@ async def _idle(st: Station, plc: Any) -> dict[str, float]:
 async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]],
                     out: dict[str, Any], on_bolt: Any = None) -> None:
     """The simulated operator through ``plan``; ``on_bolt(i)`` before the i-th bolt."""
-    plc, ctl = st.lift.plc, st.wrench.controller
+    plc, ctl = simulators(st)
     if "idle" not in out:
         out["idle"] = await _idle(st, plc)
     plc.set_vehicle(1, "BENCHVIN000000001")

@@ -1,0 +1,115 @@
+"""The station's devices, opened from its configuration: what each keeper opens, reconnects
+and closes.
+
+Every device comes from :func:`drivers.devices.open_device` (one way for every kind) and is
+typed by its kind (:class:`Lift`, :class:`Wrench`, a :class:`Pair` of cameras), so the
+daemon's joins are checked.  What "up" means is decided here: a PLC is up when it answers a
+read (a peer answering garbage was "back" every few seconds), a pair when it delivers frames
+its calibration describes.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import Any
+
+from drivers.camera import CameraDevice
+from drivers.camera.pair import StereoGrabber
+from drivers.devices import Kind, open_device
+from drivers.errors import ProtocolError
+from drivers.keeper import one_line
+from drivers.lift import Lift
+from drivers.wrench import Wrench
+from stationd.config import StationConfig
+from stationd.localize import size_problem
+
+log = logging.getLogger("stationd")
+
+#: how long the read that proves a (re)connected PLC answers may take, s
+LIFT_CHECK_S = 1.0
+
+
+class Pair:
+    """A stereo pair as the station keeps it: its two cameras and their grabber."""
+
+    def __init__(self, cams: list[CameraDevice], grabber: StereoGrabber) -> None:
+        self.cams = cams
+        self.grabber = grabber
+
+    def close(self) -> None:
+        for cam in self.cams:
+            quiet(cam.close)
+
+
+class Devices:
+    """Opens the station's devices from ``cfg``; ``options`` per kind go to the backends
+    (tests and the demo: a simulated controller's psets, a timeout)."""
+
+    def __init__(self, cfg: StationConfig,
+                 options: dict[str, dict[str, Any]] | None = None) -> None:
+        self.cfg = cfg
+        self.options = options or {}
+
+    def pair_names(self) -> list[str]:
+        """The pairs wired to two cameras."""
+        return [n for n, pc in self.cfg.pairs.items() if pc.left and pc.right]
+
+    def open_lift(self) -> Lift:
+        """The PLC, opened and read once: up when it answers, not when its port accepts."""
+        lift = open_device(Kind.LIFT, self.cfg.lift.url, register_map=self.cfg.lift.registers,
+                           **self.options.get("lift", {}))
+        try:
+            lift.read_state(LIFT_CHECK_S)
+        except BaseException:
+            quiet(lift.close)
+            raise
+        return lift
+
+    def open_wrench(self) -> Wrench:
+        return open_device(Kind.WRENCH, self.cfg.wrench.url, **self.cfg.wrench.open_options(),
+                           **self.options.get("wrench", {}))
+
+    def open_pair(self, name: str) -> Pair:
+        """Both cameras of ``name``, opened once each; the one opened is closed again if the
+        other fails."""
+        pc = self.cfg.pairs[name]
+        if pc.left is None or pc.right is None:
+            raise ValueError(f"pair {name} is not wired to two cameras")
+        cams: list[CameraDevice] = []
+        try:
+            for side in (pc.left, pc.right):
+                cams.append(open_device(Kind.CAMERA, self.cfg.cameras[side]))
+        except BaseException:
+            for cam in cams:
+                quiet(cam.close)
+            raise
+        return Pair(cams, StereoGrabber(cams[0], cams[1], pc.max_skew_s))
+
+    def reconnect_pair(self, name: str, pair: Pair) -> None:
+        """Both cameras back and one grab: back only with frames its calibration describes
+        (a DeviceError or ProtocolError otherwise)."""
+        for cam in pair.cams:
+            cam.reconnect()
+        left, right = pair.grabber.grab(1.0)
+        problem = size_problem(self.cfg.pairs[name].calibration, left.image, right.image)
+        if problem is not None:
+            raise ProtocolError(problem)
+
+
+def reconnect_lift(lift: Lift) -> None:
+    """The PLC's link back, and one read answered: back only on a valid reply."""
+    lift.reconnect()
+    lift.read_state(LIFT_CHECK_S)
+
+
+def close(device: Lift | Wrench | Pair) -> None:
+    device.close()
+
+
+def quiet(fn: Callable[[], None]) -> None:
+    """Run a closing step; a failure is logged and the shutdown goes on."""
+    try:
+        fn()
+    except Exception as exc:
+        log.warning("closing: %s", one_line(exc))
