@@ -29,7 +29,8 @@ from db.importer import ImportReport
 from db.repository import Repository
 from db.spacing import min_spacing_mm, too_close
 from stationd.errors import ConfigError, InputError
-from stationd.yamlio import YamlNode, file_kind, top_keys
+from stationd.filekind import expect
+from stationd.yamlio import YamlNode
 
 DEFAULT_TOLERANCE_MM = 8.0   # the matching tolerance; bolts must be twice as far apart
 TORQUE_MAX_NM = 5000.0
@@ -92,10 +93,10 @@ def load_bolts(path: str | Path, *, tolerance_mm: float = DEFAULT_TOLERANCE_MM) 
 def _check(root: YamlNode, tolerance_mm: float) -> BoltCheck:
     if not (math.isfinite(tolerance_mm) and tolerance_mm > 0):
         raise InputError(f"matching tolerance {tolerance_mm} mm: must be a positive number")
-    if file_kind(top_keys(root)) == "station":
-        # one line, not one "unknown key" per section of the wrong kind of file
-        return BoltCheck(root.path, None, [root.error(
-            "this is a station file, not a bolt table (a bolt table has models: and psets:)")])
+    try:   # one line, not one "unknown key" per section of the wrong kind of file
+        expect(root, "bolts", TOP_KEYS)
+    except ConfigError as exc:
+        return BoltCheck(root.path, None, [exc])
     checker = _Checker(tolerance_mm)
     table = checker.table(root)
     errors = sorted(checker.errors, key=lambda e: e.line or 0)  # stable: same line keeps order

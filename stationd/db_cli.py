@@ -329,6 +329,13 @@ def file_kind(path: str | Path) -> str:
         raise root.error(f"cannot tell a station file (it has {', '.join(station)}) from a bolt "
                          f"table (it has {', '.join(bolts)}): a file is one or the other")
     if not station and not bolts:
+        from stationd.filekind import described, kind_of_keys
+
+        other = kind_of_keys(set(keys))
+        if other is not None:
+            raise root.error(f"this is {described(other)}, not a station file or a bolt "
+                             "table (config check reads those; the station file names its "
+                             "calibrations)")
         found = f"its keys are {', '.join(keys)}" if keys else "it has no keys"
         raise root.error(f"neither a station file nor a bolt table ({found}; a station file "
                          f"has {', '.join(STATION_KEYS)}; a bolt table has "

@@ -9,20 +9,26 @@ by (station id, the local database's id, sequence number): a replay after a cras
 inserts nothing twice, and a station whose local database was replaced (re-commissioned, the
 demo's fresh database) keeps its records apart by the new database's id.  While the line
 database is down the station goes on tightening and the backlog grows; past the configured
-bounds it is an alarm, never a fault.  An entry the line database refuses for good (a value it
-will never take) is quarantined locally with its reason, so it never blocks the rest.
+bounds (records, megabytes, hours) it is an alarm, never a fault.  An entry the line database
+refuses for good (a value it will never take) is quarantined locally with its reason, so it
+never blocks the rest.
+
+The line database is PostgreSQL and nothing else: the same URL that works on a developer's
+SQLite file would take the plant's records into a file nobody queries, so another dialect is a
+configuration error (with its file and line), not a line database that seems to work.
 
 The ``line:`` section of the station file (optional: without it nothing is forwarded)::
 
     line:
       url: postgresql+psycopg://stationd@line-db.plant/line   # a password: PGPASSFILE
       station_id: ST-07
-      backlog: {records: 100000, age_h: 72}                   # an alarm past either
+      backlog: {records: 100000, size_mb: 256, age_h: 72}     # an alarm past any
 """
 
 from __future__ import annotations
 
 import asyncio
+import json
 import logging
 import random
 import time
@@ -45,7 +51,6 @@ from sqlalchemy import (
 )
 from sqlalchemy.dialects.postgresql import JSONB
 from sqlalchemy.dialects.postgresql import insert as pg_insert
-from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.exc import DBAPIError, SQLAlchemyError
 
 from db.engine import make_engine
@@ -58,6 +63,9 @@ BATCH = 200                  # entries per transaction
 POLL_S = 1.0                 # how often the feed is read when nothing is behind
 BACKOFF_S = (1.0, 60.0)      # a line database that is down: first and longest wait
 STATUS_S = 5.0               # the status is refreshed at least this often meanwhile
+MEASURE_S = 0.25             # the most time one status spends measuring new backlog entries
+MEASURE_BATCH = 500          # entries read at once to measure them
+EXAMPLE_URL = "postgresql+psycopg://stationd@line-db/line"
 CURSOR_KEY = "forwarded_seq"
 
 LINE = MetaData()
@@ -79,6 +87,7 @@ class LineConfig:
     station_id: str
     max_records: int = 100_000
     max_age_h: float = 72.0
+    max_mb: float = 256.0        # the records' JSON, as the line database takes them
 
     @classmethod
     def from_node(cls, node: YamlNode) -> LineConfig:
@@ -88,31 +97,86 @@ class LineConfig:
             parsed = make_url(url)
             backend, port = parsed.get_backend_name(), parsed.port
         except Exception:
-            raise m["url"].error(f"not a database URL: {url!r} (e.g. "
-                                 "postgresql+psycopg://stationd@line-db/line)") from None
+            raise m["url"].error(f"not a database URL: {url!r} (e.g. {EXAMPLE_URL})"
+                                 ) from None
         if port is not None and not 1 <= port <= 65535:
             raise m["url"].error(f"port {port} is not 1-65535")
-        if backend not in ("postgresql", "sqlite"):
-            raise m["url"].error(f"a PostgreSQL URL (postgresql+psycopg://...), not {backend}")
+        if backend != "postgresql":
+            raise m["url"].error(
+                f"the line database is PostgreSQL, not {backend}: give a postgresql+psycopg:// "
+                f"URL (e.g. {EXAMPLE_URL}); the station's own records are in database: url")
+        try:   # built, not connected: a driver that is not installed is told now
+            make_engine(url).dispose()
+        except DbError as exc:
+            raise m["url"].error(f"{exc}: the line database's driver is psycopg 3 "
+                                 "(postgresql+psycopg://...)") from None
         sid = m["station_id"].text()
         if not 1 <= len(sid) <= 64 or not sid.isprintable():
             raise m["station_id"].error("1-64 printable characters")
-        records, age = cls.max_records, cls.max_age_h
+        records, age, mb = cls.max_records, cls.max_age_h, cls.max_mb
         if "backlog" in m:
-            b = m["backlog"].mapping(("records", "age_h"))
+            b = m["backlog"].mapping(("records", "size_mb", "age_h"))
             records = b["records"].integer(lo=1, hi=10**9) if "records" in b else records
+            mb = b["size_mb"].number(lo=0.01, hi=10**6) if "size_mb" in b else mb
             age = b["age_h"].number(lo=0.01, hi=24 * 365) if "age_h" in b else age
-        return cls(url, sid, records, age)
+        return cls(url, sid, records, age, mb)
 
 
 class LineDown(Exception):  # noqa: N818 - a state, not a programming error
     """The line database cannot be reached or refuses writes for now: try again later."""
 
 
+def payload_bytes(entry: dict[str, Any]) -> int:
+    """The size of a feed entry's record as the line database takes it: its JSON."""
+    return len(json.dumps(entry["record"], separators=(",", ":"), ensure_ascii=False,
+                          default=str).encode("utf-8"))
+
+
+class BacklogBytes:
+    """The bytes of the records not forwarded yet, kept without reading them all again.
+
+    Why this way: the backlog of a line database that was down for days is tens of thousands
+    of records, each read with a query; sizing them every few seconds would cost more than
+    forwarding them.  Each entry is measured once, when it is read after the last one measured
+    (``head``), and taken off when the forwarder moves past it.  ``total`` is the size of
+    the entries after the cursor up to ``head``; until ``head`` reaches the last record (a
+    large backlog found at start is measured a slice at a time) it is a lower bound, so an
+    alarm on it is never false, only possibly late."""
+
+    def __init__(self, cursor: int) -> None:
+        self.head, self.total = cursor, 0
+
+    def forwarded(self, entries: list[dict[str, Any]], cursor: int) -> None:
+        """The forwarder moved its cursor past ``entries`` (taken or quarantined)."""
+        self.total -= sum(payload_bytes(e) for e in entries if e["seq"] <= self.head)
+        if cursor >= self.head:    # nothing measured is left: exact again
+            self.head, self.total = cursor, 0
+        self.total = max(0, self.total)
+
+    def measure(self, since: Callable[[int, int], list[dict[str, Any]]], last: int,
+                budget_s: float | None) -> bool:
+        """Measure the entries after ``head`` up to ``last``, for at most ``budget_s`` (None:
+        all of them, 0: none); whether ``total`` is now the whole backlog's size."""
+        deadline = None if budget_s is None else time.monotonic() + budget_s
+        while self.head < last and (budget_s is None or budget_s > 0):
+            batch = since(self.head, MEASURE_BATCH)
+            if not batch:
+                break
+            self.total += sum(payload_bytes(e) for e in batch)
+            self.head = int(batch[-1]["seq"])
+            if deadline is not None and time.monotonic() >= deadline:
+                break
+        return self.head >= last
+
+
 class LineDb:
-    """The line database: its table made if missing, entries inserted idempotently."""
+    """The line database (PostgreSQL): its table made if missing, entries inserted
+    idempotently."""
 
     def __init__(self, url: str) -> None:
+        backend = make_url(url).get_backend_name()
+        if backend != "postgresql":   # the config refuses it with its line; this is the code's
+            raise ValueError(f"the line database is PostgreSQL, not {backend}")
         self.url = url
         self._engine: Engine | None = None
 
@@ -128,11 +192,10 @@ class LineDb:
         how many were new.  ``DBAPIError`` for a refused row, ``LineDown`` for the rest."""
         try:
             engine = self._connect()
-            insert = pg_insert if engine.dialect.name == "postgresql" else sqlite_insert
             rows = [{"station_id": station_id, "db_id": db_id, "seq": e["seq"],
                      "kind": e["kind"], "at": datetime.fromisoformat(e["at"]).replace(
                          tzinfo=UTC), "record": e["record"]} for e in entries]
-            stmt = insert(LINE_FEED).on_conflict_do_nothing().returning(LINE_FEED.c.seq)
+            stmt = pg_insert(LINE_FEED).on_conflict_do_nothing().returning(LINE_FEED.c.seq)
             with engine.begin() as conn:
                 return len(conn.execute(stmt, rows).all())   # the rows that were new
         except DBAPIError as exc:
@@ -177,6 +240,7 @@ class Forwarder:
         self.last_error: str | None = None
         self.forwarded = 0                 # entries the line database took (this process)
         self.last_status: dict[str, Any] | None = None   # the latest, for the status API
+        self.size = BacklogBytes(self.cursor)
 
     def step(self) -> int:
         """Forward up to one batch; how many entries were handled.  ``LineDown`` when the
@@ -199,6 +263,7 @@ class Forwarder:
                               "in quarantine", e["seq"], e["kind"], _reason(exc))
         self.cursor = int(entries[-1]["seq"])
         self.repo.ledger.set_meta(CURSOR_KEY, str(self.cursor))
+        self.size.forwarded(entries, self.cursor)
         self.up, self.last_error = True, None
         return len(entries)
 
@@ -216,22 +281,31 @@ class Forwarder:
             taken += 1
         return taken, refused
 
-    def status(self) -> dict[str, Any]:
-        """Backlog, lag and the last error (``/api/status``, systemd's STATUS=, screens)."""
+    def status(self, measure_s: float | None = None) -> dict[str, Any]:
+        """Backlog (records and bytes), lag and the last error (``/api/status``, systemd's
+        STATUS=, screens).  ``measure_s``: the most time spent sizing backlog entries not
+        measured yet (None: all of them; ``backlog_bytes_partial`` says when it stopped
+        short, the bytes then a lower bound)."""
         last = self.repo.ledger.last_seq()
         oldest = self.repo.ledger.since(self.cursor, 1)
         lag = self._clock() - datetime.fromisoformat(oldest[0]["at"]).replace(
             tzinfo=UTC).timestamp() if oldest else 0.0
         backlog = max(0, last - self.cursor)
+        whole = self.size.measure(self.repo.ledger.since, last, measure_s)
+        size = self.size.total if backlog else 0
         alarm = None
         if backlog > self.cfg.max_records:
             alarm = f"{backlog} records not forwarded (bound {self.cfg.max_records})"
+        elif size > self.cfg.max_mb * 1e6:
+            alarm = f"{size / 1e6:.1f} MB of records not forwarded (bound " \
+                    f"{self.cfg.max_mb:g} MB)"
         elif lag > self.cfg.max_age_h * 3600:
             alarm = f"records not forwarded for {lag / 3600:.1f} h (bound " \
                     f"{self.cfg.max_age_h:g} h)"
         return {"url": make_url(self.cfg.url).render_as_string(), "station_id":
                 self.cfg.station_id, "db_id": self.db_id, "up": self.up, "cursor": self.cursor,
-                "last_seq": last, "backlog": backlog, "lag_s": round(lag, 1),
+                "last_seq": last, "backlog": backlog, "backlog_bytes": size,
+                "backlog_bytes_partial": not whole, "lag_s": round(lag, 1),
                 "last_error": self.last_error, "alarm": alarm,
                 "quarantined": len(self.repo.ledger.quarantined())}
 
@@ -253,10 +327,12 @@ class Forwarder:
             except (SQLAlchemyError, DbError) as exc:   # the local database: its keeper's
                 self.last_error = f"local database: {_reason(exc)}"
                 pause = POLL_S
+            # while draining, entries are forwarded, not sized ahead of the forwarding
+            measure = 0.0 if pause == 0.0 else MEASURE_S
             # the status (backlog, lag, alarm) stays fresh while a long backoff waits
             end = loop.time() + pause
             while True:
-                st = await loop.run_in_executor(None, self.status)
+                st = await loop.run_in_executor(None, self.status, measure)
                 self.last_status = st
                 if (st["up"], st["alarm"]) != told:
                     told = (st["up"], st["alarm"])
@@ -270,4 +346,5 @@ class Forwarder:
                     pass
 
 
-__all__ = ["LINE_FEED", "Forwarder", "LineConfig", "LineDb", "LineDown"]
+__all__ = ["LINE_FEED", "BacklogBytes", "Forwarder", "LineConfig", "LineDb", "LineDown",
+           "payload_bytes"]

@@ -46,7 +46,8 @@ def cmd_line_status(args: argparse.Namespace) -> int:
         print(f"line database {st['url']} as station {st['station_id']} "
               f"(local database {st['db_id']})")
         print(f"forwarded up to record {st['cursor']} of {st['last_seq']}: {st['backlog']} "
-              f"waiting, the oldest for {st['lag_s']:.0f} s; {st['quarantined']} quarantined")
+              f"waiting ({st['backlog_bytes'] / 1e6:.2f} MB), the oldest for "
+              f"{st['lag_s']:.0f} s; {st['quarantined']} quarantined")
         if st["alarm"]:
             print(f"ALARM: {st['alarm']}")
     return EXIT_WAITING if st["backlog"] or st["quarantined"] else 0

@@ -17,7 +17,9 @@ The rule, for every command that writes a file (issue 19):
   file it replaces, a new one with the umask's mode (never the temporary file's 0600).
 
 A PNG this program writes carries a ``tEXt`` chunk naming the command (:func:`stamp_png`), so
-that its next run may replace it and any other PNG is left alone.
+that its next run may replace it and any other PNG is left alone (``detect --draw``, ``probe
+camera --save``, ``demo --vision --save``); an image in another format cannot carry the
+stamp, so an existing one is never replaced.
 """
 
 from __future__ import annotations
@@ -30,7 +32,8 @@ import zlib
 from pathlib import Path
 
 from stationd.errors import ConfigError, InputError
-from stationd.yamlio import YamlNode, file_kind, top_keys
+from stationd.filekind import KINDS, described, kind_of_keys
+from stationd.yamlio import YamlNode, top_keys
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
 #: how a results CSV export begins (stationd.web.results.CSV_FIELDS)
@@ -40,6 +43,11 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 PNG_STAMP_KEY = b"Software"
 #: what marks a PNG as ``detect --draw``'s own: it may be replaced by the next drawing
 DRAWING_STAMP = "stationd detect --draw"
+#: ``probe camera --save``'s frames and the images of ``demo --vision --save``, likewise
+FRAME_STAMP = "stationd probe camera --save"
+DEMO_IMAGE_STAMP = "stationd demo --vision --save"
+#: the kind of each stamped PNG (a key of :data:`NAMES`)
+STAMPS = {DRAWING_STAMP: "drawing", FRAME_STAMP: "frame", DEMO_IMAGE_STAMP: "demo-image"}
 _IMAGE_MAGIC = (b"\xff\xd8\xff", b"II*\x00", b"MM\x00*", b"BM", b"GIF8", b"RIFF")
 #: configuration files are small: a larger file is data (an earlier export), not parsed
 PARSE_LIMIT_BYTES = 5 * 2**20
@@ -49,18 +57,15 @@ NAMES = {
     "folder": "a folder",
     "device": "not a regular file (a device, a pipe or a socket)",
     "sqlite": "an SQLite database",
-    "station": "a station file",
-    "bolts": "a bolt table",
-    "hsv": "an HSV range file",
-    "pair": "a stereo pair calibration (from calibrate stereo)",
-    "camera": "a camera calibration (from calibrate camera or stereo)",
-    "registration": "a vehicle registration (from calibrate vehicle)",
+    **{kind: described(kind) for kind in KINDS},   # the station's YAML files
     "yaml": "a YAML settings file",
     "json": "a JSON file",
     "results": "an earlier results export",
     "svg": "an SVG drawing",
     "drawing": "an earlier drawing of detect --draw",
-    "png": "a PNG image that detect --draw did not write",
+    "frame": "an earlier frame of probe camera --save",
+    "demo-image": "an earlier image of demo --vision --save",
+    "png": "a PNG image that this program did not write",
     "image": "an image",
     "text": "a text file (not one this command wrote)",
     "data": "a large data file",
@@ -83,7 +88,8 @@ def kind_of(path: Path) -> str | None:
         if head.startswith(SQLITE_MAGIC):
             return "sqlite"
         if head.startswith(PNG_MAGIC):
-            return "drawing" if _stamp(DRAWING_STAMP) in head else "png"
+            return next((kind for stamp, kind in STAMPS.items() if _stamp(stamp) in head),
+                        "png")
         if head.startswith(_IMAGE_MAGIC):
             return "image"
         if _results_head(head.decode("utf-8", errors="replace").lstrip()):
@@ -106,25 +112,7 @@ def kind_of(path: Path) -> str | None:
         return "text"
     if not isinstance(root.value(), dict):
         return "text"
-    keys = top_keys(root)
-    kind = file_kind(keys)
-    if kind is not None:
-        return kind
-    if keys == {"hsv"}:
-        return "hsv"
-    return _calibration_kind(keys) or "yaml"
-
-
-def _calibration_kind(keys: set[str]) -> str | None:
-    """The kind of calibration file whose top-level keys are ``keys`` (what
-    ``StereoPair``, ``Camera`` and ``Transform`` read), None for another YAML file."""
-    if {"left", "right", "R", "T"} <= keys:
-        return "pair"
-    if {"K", "size"} <= keys:
-        return "camera"
-    if {"A", "t"} <= keys:
-        return "registration"
-    return None
+    return kind_of_keys(top_keys(root)) or "yaml"
 
 
 def _results_head(start: str) -> bool:

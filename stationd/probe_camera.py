@@ -51,6 +51,10 @@ def _check_options(args: argparse.Namespace) -> None:
                              ".bmp or .tif)")
         if not save.parent.is_dir():
             raise InputError(f"--save {save}: no such directory {save.parent}")
+        from stationd.outfile import refuse_to_replace
+
+        # never through a link, never over a file of another kind: only an earlier frame
+        refuse_to_replace(save, "the frame", ("frame",), option="--save")
 
 
 SIM_CONFIG = Path(__file__).resolve().parents[1] / "config" / "sim" / "station.yaml"
@@ -91,6 +95,20 @@ def probe_camera(args: argparse.Namespace) -> int:
             world.close()
 
 
+def _save_frame(path: Path, image: Any) -> None:
+    """The frame written whole (a temporary file renamed over it), a PNG stamped as this
+    command's own so that the next probe may replace it (``outfile``'s rule)."""
+    import cv2
+
+    from stationd.outfile import FRAME_STAMP, PNG_MAGIC, stamp_png, write_atomic
+
+    ok, buf = cv2.imencode(path.suffix, image)
+    if not ok:
+        raise InputError(f"--save {path}: the image could not be encoded")
+    data = buf.tobytes()
+    write_atomic(path, stamp_png(data, FRAME_STAMP) if data.startswith(PNG_MAGIC) else data)
+
+
 def _probe(args: argparse.Namespace) -> int:
     from drivers.camera import open_camera
 
@@ -111,10 +129,7 @@ def _probe(args: argparse.Namespace) -> int:
         return EXIT_NO_FRAME
     saved = None
     if args.save:
-        import cv2
-
-        if not cv2.imwrite(args.save, frame.image):
-            raise InputError(f"--save {args.save}: the image could not be written")
+        _save_frame(Path(args.save), frame.image)
         saved = args.save
     when = dt.datetime.fromtimestamp(frame.timestamp, dt.UTC).isoformat(timespec="milliseconds")
     out = {"device": args.url, "kind": "camera", "ok": True, "identity": identity,

@@ -284,20 +284,7 @@ def _comma_split(previous: yaml.Node, key: yaml.Node, value: yaml.Node) -> bool:
             and previous.end_mark.line == key.start_mark.line)
 
 
-#: top-level sections only a bolt table has, and only a station file has (``stationd.config``)
-BOLT_ONLY = frozenset({"models", "psets"})
-STATION_ONLY = frozenset({"cameras", "pairs", "lift", "wrench", "vision", "marker", "tool"})
-
-
 def top_keys(root: YamlNode) -> set[str]:
     """The top-level keys of a file that is a mapping (empty otherwise)."""
     value = root.value()
     return {k for k in value if isinstance(k, str)} if isinstance(value, dict) else set()
-
-
-def file_kind(keys: set[str]) -> str | None:
-    """``"bolts"`` for top-level keys of a bolt table, ``"station"`` for a station file's,
-    None for anything else: what a file given in the wrong place is said to be."""
-    if keys & BOLT_ONLY:
-        return "bolts"
-    return "station" if keys & STATION_ONLY else None

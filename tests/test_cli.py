@@ -89,7 +89,8 @@ def test_localize_json_and_repeat(files, capsys):
     (lambda d: ["detect", str(d / "one.png"), "--camera", str(d / "bad_k.yaml")],
      "K: expected a 3x3 matrix"),
     (lambda d: ["localize", str(d / "left.png"), str(d / "right.png"), "--pair",
-                str(d / "cam.yaml")], "unknown key"),
+                str(d / "cam.yaml")], "this is a camera calibration (from calibrate camera or "
+     "stereo), not a stereo pair calibration"),
     (lambda d: ["localize", str(d / "left.png"), str(d / "right.png"), "--pair",
                 str(d / "pair.yaml"), "--repeat", "0"], "--repeat"),
     (lambda d: ["detect", str(d / "one.png"), "--camera", str(d / "cam.yaml"), "--config",
@@ -151,7 +152,7 @@ def test_bad_input_exits_2_with_one_line(files, capsys, make_args, needle):
     (["config"], "stationd config: error: a command is missing: stationd config check "
                  "(see --help)\n"),
     (["calibrate"], "stationd calibrate: error: a command is missing: stationd calibrate "
-                    "stereo | camera | vehicle (see --help)\n"),
+                    "stereo | camera | vehicle | check (see --help)\n"),
 ])
 def test_a_command_without_its_subcommand_says_what_to_type(argv, message, capsys):
     """Issue 19: ``stationd config`` said ``required: config_command``."""
@@ -283,6 +284,42 @@ def test_demo_vision_save_refuses_a_file_or_unmakeable_folder_before_rendering(
     code, out, err = _run(capsys, "demo", "--vision", "--cycles", "1", "--save", str(target))
     assert code == 2 and out == "" and "--save" in _one_line(err)
     assert f.read_text() == "keep me" and sorted(p.name for p in tmp_path.iterdir()) == ["taken"]
+
+
+def test_demo_vision_save_writes_by_the_one_output_rule(tmp_path, capsys):
+    """``demo --vision --save DIR`` writes its images stamped as its own and pair.yaml whole;
+    a link among its outputs, or a file of another kind where one goes, is refused before
+    rendering and left as it was (stationd/outfile.py)."""
+    from stationd.demo.vision import _outputs
+    from stationd.outfile import kind_of
+
+    out_dir = tmp_path / "out"
+    code, out, err = _run(capsys, "demo", "--vision", "--cycles", "1", "--save", str(out_dir))
+    assert code == 0, err
+    assert {p.name: kind_of(p) for p in out_dir.iterdir()} == {
+        "pair.yaml": "pair", "left_0.png": "demo-image", "right_0.png": "demo-image"}
+    assert _outputs(out_dir, 1)                  # the demo's own: a next run may replace them
+    station = tmp_path / "station.yaml"
+    station.write_text("cameras: {c1: {url: 'sim://pair1/left'}}\n")
+    cases = [
+        ("left_0.png", lambda p: p.symlink_to(station),
+         f"left_0.png: is a symbolic link to {station}, a station file; an output is never "
+         "written through or over a link"),
+        ("right_0.png", lambda p: p.write_bytes(
+            cv2.imencode(".png", np.zeros((4, 4, 3), np.uint8))[1].tobytes()),
+         "right_0.png: is a PNG image that this program did not write"),
+        ("pair.yaml", lambda p: p.write_text(station.read_text()),
+         "pair.yaml: is a station file; writing the demo's pair calibration would replace it"),
+    ]
+    for name, make, needle in cases:
+        d = tmp_path / f"case-{name}"
+        d.mkdir()
+        make(d / name)
+        before = {p.name: (p.is_symlink(), p.read_bytes()) for p in d.iterdir()}
+        code, out, err = _run(capsys, "demo", "--vision", "--cycles", "1", "--save", str(d))
+        assert code == 2 and out == "" and needle in _one_line(err), err
+        assert {p.name: (p.is_symlink(), p.read_bytes()) for p in d.iterdir()} == before
+    assert station.read_text().startswith("cameras:")
 
 
 def test_detect_takes_one_camera_of_a_pair_file(files, capsys):
@@ -554,7 +591,7 @@ def test_detect_draw_never_writes_through_a_link_or_over_another_file(files, tmp
                      "file; an output is never written through or over a link: give --draw "
                      "the file's own path"),
         ("link2.png", "link2.png: is a symbolic link to"),
-        ("photo.png", "photo.png: is a PNG image that detect --draw did not write; writing "
+        ("photo.png", "photo.png: is a PNG image that this program did not write; writing "
                       "the drawing would replace it (give another --draw)"),
         ("notes.png", "notes.png: is a text file"),
     ]:

@@ -6,20 +6,33 @@ visible quarantine without blocking the rest."""
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 import pytest
 from sqlalchemy import select
 
 from db.repository import Repository
 from stationd.boltfile import import_bolts
+from stationd.config import check_station, load_station_config
 from stationd.errors import ConfigError
-from stationd.forward import LINE_FEED, Forwarder, LineConfig, LineDb, LineDown
+from stationd.forward import (
+    LINE_FEED,
+    BacklogBytes,
+    Forwarder,
+    LineConfig,
+    LineDb,
+    LineDown,
+    payload_bytes,
+)
 from stationd.yamlio import YamlNode
 from tests.db.conftest import BASE, record
+
+ROOT = Path(__file__).resolve().parents[1]
 
 AT = datetime(2026, 11, 27, 8, 0, tzinfo=UTC)
 
@@ -127,9 +140,16 @@ def test_a_record_the_line_database_refuses_is_quarantined_not_blocking(tmp_path
 def test_the_line_section_is_checked_with_its_line():
     cfg = LineConfig.from_node(YamlNode.parse(
         "url: postgresql+psycopg://stationd@line-db/line\nstation_id: ST-07\n"
-        "backlog: {records: 500, age_h: 8}\n"))
-    assert (cfg.station_id, cfg.max_records, cfg.max_age_h) == ("ST-07", 500, 8.0)
-    for text, message in (("url: mysql://x/y\nstation_id: A\n", "PostgreSQL URL"),
+        "backlog: {records: 500, size_mb: 20, age_h: 8}\n"))
+    assert (cfg.station_id, cfg.max_records, cfg.max_mb, cfg.max_age_h) == (
+        "ST-07", 500, 20.0, 8.0)
+    for text, message in (("url: mysql://x/y\nstation_id: A\n", "PostgreSQL, not mysql"),
+                          ("url: 'sqlite:///line.db'\nstation_id: A\n",
+                           "PostgreSQL, not sqlite: give a postgresql[+]psycopg:// URL"),
+                          ("url: postgresql+nosuchdriver://x/y\nstation_id: A\n",
+                           "driver is psycopg 3"),
+                          ("url: postgresql://x/y\nstation_id: A\nbacklog: {size_mb: 0}\n",
+                           "out of range"),
                           ("url: 'not a url'\nstation_id: A\n", "not a database URL"),
                           ("url: postgresql://x/y\n", r"missing key\(s\): station_id"),
                           ("url: postgresql://x/y\nstation_id: A\nbacklog: {records: 0}\n",
@@ -137,6 +157,87 @@ def test_the_line_section_is_checked_with_its_line():
                           ("url: postgresql://x:99999/y\nstation_id: A\n", "port 99999")):
         with pytest.raises(ConfigError, match=message):
             LineConfig.from_node(YamlNode.parse(text, "station.yaml"))
+
+
+def test_a_line_database_that_is_not_postgresql_is_refused_by_the_check_and_the_start(
+        tmp_path):
+    """An SQLite file as the line database would take the plant's records where nobody
+    queries them: refused with the file, the line and what to write instead, by ``config
+    check`` and by the loading a start or a reload does."""
+    for f in (ROOT / "config" / "sim").iterdir():
+        shutil.copy(f, tmp_path)
+    station = tmp_path / "station.yaml"
+    text = station.read_text()
+    station.write_text(text + "line:\n  url: 'sqlite:///line.db'\n  station_id: ST-1\n")
+    line = text.count("\n") + 2
+    [error] = check_station(station).errors
+    assert (error.path, error.line, error.key) == (str(station), line, "line.url")
+    assert "the line database is PostgreSQL, not sqlite" in str(error)
+    with pytest.raises(ConfigError, match=rf"station.yaml:{line}: line.url: the line database "
+                                          "is PostgreSQL"):
+        load_station_config(station, station=True)
+    got = _cli("config", "check", str(station))
+    assert got.returncode == 2 and f"station.yaml:{line}: line.url" in got.stderr + got.stdout
+    assert "Traceback" not in got.stderr
+    with pytest.raises(ValueError, match="PostgreSQL, not sqlite"):
+        LineDb(f"sqlite:///{tmp_path / 'line.db'}")      # nor by code that skips the config
+
+
+def test_the_backlog_in_bytes_is_measured_once_per_entry_and_alarms_past_its_bound(
+        tmp_path, table, pg_url, pg_server):
+    repo = _station(tmp_path, "st.db", table, "VINB", [(1, "B1"), (2, "B2"), (3, "B3")])
+    entries = repo.ledger.since(0)
+    sizes = [payload_bytes(e) for e in entries]
+    assert all(300 < n < 3000 for n in sizes)          # a rundown's JSON: hundreds of bytes
+    down = pg_url.replace(f":{pg_server.port}/", ":1/")
+    bound_mb = (sum(sizes) - 1) / 1e6                  # just under the three records
+    f = Forwarder(repo, LineConfig(down, "ST-B", max_mb=bound_mb))
+    with pytest.raises(LineDown):
+        f.step()
+    st = f.status()
+    assert (st["backlog"], st["backlog_bytes"], st["backlog_bytes_partial"]) == (
+        3, sum(sizes), False)
+    assert "MB of records not forwarded (bound" in (st["alarm"] or "")
+    # each entry is measured once: a status with nothing new reads no entry to size it
+    read: list[int] = []
+    since = repo.ledger.since
+
+    def counting(seq: int, limit: int = 1000) -> list[dict[str, Any]]:
+        got: list[dict[str, Any]] = since(seq, limit)
+        read.extend(e["seq"] for e in got)
+        return got
+
+    assert f.size.measure(counting, repo.ledger.last_seq(), None) and read == []
+    repo.ledger.record_command(at=AT, user="sam", source="cli", kind="skip", vin="VINB",
+                               bolt="B3", comment="the station goes on recording")
+    st = f.status(measure_s=0)                         # no time to measure: a lower bound
+    assert (st["backlog"], st["backlog_bytes"], st["backlog_bytes_partial"]) == (
+        4, sum(sizes), True)
+    assert f.size.measure(counting, repo.ledger.last_seq(), None) and read == [4]
+    fourth = payload_bytes(repo.ledger.since(3)[0])
+    assert f.status()["backlog_bytes"] == sum(sizes) + fourth
+    # the line database back: forwarded entries leave the measure, the alarm goes
+    f.line = LineDb(pg_url)
+    assert f.step() == 4
+    st = f.status()
+    assert (st["backlog"], st["backlog_bytes"], st["alarm"]) == (0, 0, None)
+    f.line.dispose()
+    repo.close()
+
+
+def test_entries_forwarded_leave_the_measured_backlog(tmp_path, table):
+    """Part of the backlog forwarded (a batch): exactly its entries' bytes are taken off."""
+    repo = _station(tmp_path, "st.db", table, "VINP", [(1, "B1"), (2, "B2"), (3, "B3")])
+    entries = repo.ledger.since(0)
+    size = BacklogBytes(0)
+    assert size.measure(repo.ledger.since, 3, budget_s=0) is False and size.total == 0
+    assert size.measure(repo.ledger.since, 3, None)
+    assert size.total == sum(payload_bytes(e) for e in entries)
+    size.forwarded(entries[:1], 1)
+    assert (size.head, size.total) == (3, sum(payload_bytes(e) for e in entries[1:]))
+    size.forwarded(entries[1:], 3)
+    assert (size.head, size.total) == (3, 0)
+    repo.close()
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:
@@ -157,6 +258,11 @@ def test_the_line_commands_show_the_backlog_and_retry_or_export_the_quarantine(
     got = _cli("line", "status", "--config", str(station), "--json")
     assert got.returncode == 1, got.stderr
     assert json.loads(got.stdout)["backlog"] == 2
+    with Repository.open(f"sqlite:///{tmp_path / 'st.db'}") as r:
+        size = sum(payload_bytes(e) for e in r.ledger.since(0))
+    assert json.loads(got.stdout)["backlog_bytes"] == size
+    got = _cli("line", "status", "--config", str(station))
+    assert f"2 waiting ({size / 1e6:.2f} MB)" in got.stdout
     with Repository.open(f"sqlite:///{tmp_path / 'st.db'}") as r:
         Forwarder(r, LineConfig(pg_url, "ST-L")).step()
     got = _cli("line", "status", "--config", str(station))

@@ -71,6 +71,7 @@ def test_results_reach_the_line_database_and_wait_while_it_is_down(tmp_path):
                "the status says it is down")
         st = _status(http_port)["line"]
         assert st["backlog"] >= 1 and st["last_error"]
+        assert st["backlog_bytes"] >= 300 and st["alarm"] is None   # sized, under its bound
         # the screens' snapshot carries it too (the operator's devices panel), within a
         # heartbeat
         _until(lambda: (_get(http_port, "/api/view").get("line") or {}).get("up") is False,

@@ -1,12 +1,19 @@
 """``stationd probe``: real protocols on loopback, exit codes 0 / 1 / 2."""
 
 import json
+import shutil
 import socket
+from pathlib import Path
 
+import cv2
+import numpy as np
 import pytest
 
 from drivers.lift.sim import SimulatedPlc
 from stationd.cli import main
+from stationd.outfile import DRAWING_STAMP, FRAME_STAMP, kind_of, stamp_png
+
+SIM = Path(__file__).resolve().parents[1] / "config" / "sim"
 
 
 def _free_port():
@@ -119,6 +126,42 @@ def test_probe_camera_sim_url_renders_the_simulated_station(capsys, tmp_path):
     assert code == 0 and err == "" and obj["ok"] is True
     assert (obj["width"], obj["height"]) == (5472, 3648) and frame.stat().st_size > 0
     assert registered_worlds() == []  # the probe's world is gone with the probe
+    assert kind_of(frame) == "frame"   # stamped as the probe's own: the next may replace it
+
+
+def test_probe_camera_save_never_writes_through_a_link_or_over_another_file(capsys, tmp_path):
+    """``--save`` by the one output rule (stationd/outfile.py), refused before the camera is
+    opened: a link (to the station file) and a file of another kind are left as they were;
+    an earlier frame of the probe may be replaced."""
+    shutil.copy(SIM / "station.yaml", tmp_path)
+    (tmp_path / "link.png").symlink_to(tmp_path / "station.yaml")
+    png = cv2.imencode(".png", np.zeros((4, 4, 3), np.uint8))[1].tobytes()
+    (tmp_path / "photo.png").write_bytes(png)
+    (tmp_path / "photo.jpg").write_bytes(cv2.imencode(".jpg", np.zeros((4, 4, 3),
+                                                                        np.uint8))[1].tobytes())
+    (tmp_path / "drawing.png").write_bytes(stamp_png(png, DRAWING_STAMP))
+    (tmp_path / "station.png").write_text((SIM / "station.yaml").read_text())
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    for name, needle in [
+        ("link.png", f"link.png: is a symbolic link to {tmp_path / 'station.yaml'}, a station "
+                     "file; an output is never written through or over a link"),
+        ("photo.png", "photo.png: is a PNG image that this program did not write; writing "
+                      "the frame would replace it (give another --save)"),
+        ("photo.jpg", "photo.jpg: is an image; writing the frame would replace it"),
+        ("drawing.png", "drawing.png: is an earlier drawing of detect --draw"),
+        ("station.png", "station.png: is a station file"),
+    ]:
+        code = main(["probe", "camera", "sim://pair1/left", "--save", str(tmp_path / name)])
+        err = capsys.readouterr().err
+        assert code == 2 and needle in err and err.count("\n") == 1, err
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    assert (tmp_path / "link.png").is_symlink()
+    earlier = tmp_path / "frame.png"
+    earlier.write_bytes(stamp_png(png, FRAME_STAMP))
+    # past the --save check: the next refusal is the URL's (a pair the station lacks)
+    code = main(["probe", "camera", "sim://pair9/left", "--save", str(earlier)])
+    err = capsys.readouterr().err
+    assert code == 2 and "pair9" in err and "--save" not in err
 
 
 def test_probe_camera_sim_url_of_an_unknown_pair_exits_2(capsys):

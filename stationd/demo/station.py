@@ -23,7 +23,8 @@ from typing import Any
 import numpy as np
 
 from db.repository import BoltInfo
-from drivers.wrench.sim import SimPset
+from drivers.lift.sim import SimLift, SimulatedPlc
+from drivers.wrench.sim import SimController, SimPset, SimWrench
 from stationd import progress
 from stationd.boltfile import load_bolts
 from stationd.config import RecordsConfig, StationConfig, load_station_config
@@ -58,9 +59,17 @@ def _sim_psets(bolts_path: Path) -> dict[int, SimPset]:
     return out
 
 
+def simulators(st: Station) -> tuple[SimulatedPlc, SimController]:
+    """The simulated PLC and controller behind a simulated station's lift and wrench."""
+    lift, wrench = st.lift, st.wrench
+    if not isinstance(lift, SimLift) or not isinstance(wrench, SimWrench):
+        raise RuntimeError("the simulated operator needs the simulated lift and controller")
+    return lift.plc, wrench.controller
+
+
 async def _operator(st: Station, world: World, rng: np.random.Generator, cycles: int,
                     report: list[dict[str, Any]], say: Any, truth: dict[str, Any]) -> None:
-    plc, ctl = st.lift.plc, st.wrench.controller
+    plc, ctl = simulators(st)
     plc.set_vehicle(truth["model_code"], truth["vin"])
     plc.raise_lift()
     for _ in range(200):
@@ -158,6 +167,12 @@ def run_station_demo(args: argparse.Namespace) -> int:
     if bolts_path is None:
         raise InputError(f"{cfg.path}: the demo needs a bolt table (bolts:)")
     _check_demo_station(cfg)
+    instead = stand_ins(cfg)
+    if instead:
+        print(f"demo: {cfg.path} names real devices ({', '.join(instead)}): the demo runs its "
+              "own simulators instead and never opens them; its records go to a temporary "
+              f"database, not {cfg.database_url}", file=sys.stderr if args.json else sys.stdout,
+              flush=True)
     tmp = tempfile.TemporaryDirectory(prefix="stationd-demo-")
     cfg = simulated(cfg, Path(tmp.name))
     station = Station(cfg, device_kw={"wrench": {"psets": _sim_psets(bolts_path)}})
@@ -226,6 +241,7 @@ def run_station_demo(args: argparse.Namespace) -> int:
         tmp.cleanup()
     cycles = int(truth.get("cycles", cycles))
     summary = _summary(station, report, cycles, truth["wrong"])
+    summary["simulated_instead"] = instead
     if args.json:
         sys.stdout.write(strict_json(summary) + "\n")
     else:
@@ -235,6 +251,10 @@ def run_station_demo(args: argparse.Namespace) -> int:
               f"{_ms(summary['xy_error_mm']['max'], '.3f')} mm, latency from exposure p50 "
               f"{_ms(summary['latency_ms']['p50'], '.0f')} ms p95 "
               f"{_ms(summary['latency_ms']['p95'], '.0f')} ms")
+        if instead:
+            devices = ", ".join(d.rsplit(" ", 1)[0] for d in instead)
+            print(f"simulated, not the station file's devices: {devices} (the records went "
+                  "to a temporary database)")
         print(summary["verdict"])
     return 0 if summary["verdict"].startswith("PASS") else 1
 
@@ -290,6 +310,26 @@ def _check_demo_station(cfg: StationConfig) -> None:
                          f"transforms only; {', '.join(affine)}: to_vehicle is affine (scale or "
                          "shear): run the demo on a rigid registration (kind: rigid in the "
                          "points file of stationd calibrate vehicle)")
+
+
+def stand_ins(cfg: StationConfig) -> list[str]:
+    """The real devices a station file names ("lift modbus-tcp://..."), which the demo
+    replaces by its simulators; none for a simulated station's file.
+
+    Why it runs rather than refuses: a commissioning engineer runs the demo on the station's
+    own file to try its geometry (calibrations, registrations, bolt table) before the devices
+    answer; what must never happen is a PASS that reads as if the lift, the controller and
+    the cameras had been tried.  So the demo says, at its start and in its summary, that its
+    simulators stood in for them and that its records went to a temporary database."""
+    real = [f"camera {name} {url}" for name, url in cfg.cameras.items() if not _sim(url)]
+    real += [f"{what} {url}" for what, url in (("lift", cfg.lift.url),
+                                                ("wrench", cfg.wrench.url)) if not _sim(url)]
+    return real
+
+
+def _sim(url: str) -> bool:
+    scheme = url.split("://", 1)[0].lower()
+    return scheme == "sim" or scheme.startswith("sim+")
 
 
 def simulated(cfg: StationConfig, tmp: Path) -> StationConfig:

@@ -22,6 +22,7 @@ from stationd import progress
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
 from stationd.localize.stereo import localize
+from stationd.outfile import DEMO_IMAGE_STAMP, refuse_to_replace, stamp_png, write_atomic
 from stationd.sim import scenes as sc
 from stationd.sim.render import MarkerPose, Scene, render
 from stationd.vision.marker import MarkerSpec
@@ -49,12 +50,24 @@ def _save_dir(text: str) -> Path:
     return save
 
 
-def _write(path: Path, text: str) -> None:
-    try:
-        path.write_text(text, encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"--save {path.parent}: cannot write {path.name}: "
-                         f"{exc.strerror}") from None
+def _outputs(save: Path, count: int) -> list[Path]:
+    """The files ``--save`` writes, each checked by the one output rule before minutes of
+    rendering: never through a link, never over a file of another kind (an image of the
+    demo's own, a pair calibration for pair.yaml)."""
+    refuse_to_replace(save / "pair.yaml", "the demo's pair calibration", ("pair",),
+                      option="--save")
+    images = [save / f"{side}_{k}.png" for k in range(count) for side in ("left", "right")]
+    for path in images:
+        refuse_to_replace(path, "the demo's image", ("demo-image",), option="--save")
+    return images
+
+
+def _write_image(path: Path, image: np.ndarray) -> None:
+    """A rendered image as a PNG stamped as the demo's own, written whole."""
+    ok, buf = cv2.imencode(".png", image)
+    if not ok:
+        raise InputError(f"--save {path.parent}: {path.name} could not be encoded")
+    write_atomic(path, stamp_png(buf.tobytes(), DEMO_IMAGE_STAMP))
 
 
 def run_demo(args: argparse.Namespace) -> int:
@@ -67,7 +80,8 @@ def run_demo(args: argparse.Namespace) -> int:
     params = VisionParams()
     save = _save_dir(args.save) if getattr(args, "save", None) else None
     if save is not None:
-        _write(save / "pair.yaml", yaml.safe_dump(pair.to_dict(), sort_keys=False))
+        _outputs(save, count)
+        write_atomic(save / "pair.yaml", yaml.safe_dump(pair.to_dict(), sort_keys=False))
     errors, latencies, found = [], [], 0
     for k, pose in enumerate(progress.track(_placements(rng, count), "demo: placements",
                                             total=count, unit="pair")):
@@ -79,8 +93,7 @@ def run_demo(args: argparse.Namespace) -> int:
                        seed=2 * k + 2)
         if save is not None:
             for name, img in ((f"left_{k}.png", left.image), (f"right_{k}.png", right.image)):
-                if not cv2.imwrite(str(save / name), img):
-                    raise InputError(f"--save {save}: {name} could not be written")
+                _write_image(save / name, img)
         res = localize(pair, left.image, right.image, params, spec)
         latencies.append(res.timings_ms["total"])
         if not args.json:

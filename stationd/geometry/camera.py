@@ -19,10 +19,12 @@ from typing import Any
 
 import numpy as np
 
+from stationd.filekind import expect
 from stationd.yamlio import YamlNode
 
 DIST_LENGTHS = (0, 4, 5, 8)
 _CAMERA_KEYS = ("K", "dist", "size")
+PAIR_KEYS = ("left", "right", "R", "T")
 
 
 def _as_points(points: np.ndarray, dim: int) -> np.ndarray:
@@ -72,8 +74,11 @@ class Camera:
 
     @classmethod
     def load(cls, path: str | Path) -> Camera:
-        """Read a camera YAML file (``K``, ``dist``, ``size``)."""
-        return cls.from_node(YamlNode.load(path))
+        """Read a camera YAML file (``K``, ``dist``, ``size``); another kind of file is
+        named for what it is."""
+        node = YamlNode.load(path)
+        expect(node, "camera", _CAMERA_KEYS)
+        return cls.from_node(node)
 
     def to_dict(self) -> dict[str, Any]:
         return {"K": self.K.tolist(), "dist": self.dist.tolist(), "size": list(self.size)}
@@ -187,7 +192,7 @@ class StereoPair:
 
     @classmethod
     def from_node(cls, node: YamlNode) -> StereoPair:
-        m = node.mapping(("left", "right", "R", "T"), required=("left", "right", "R", "T"))
+        m = node.mapping(PAIR_KEYS, required=PAIR_KEYS)
         left = Camera.from_node(m["left"])
         right = Camera.from_node(m["right"])
         R = m["R"].matrix(3, 3)
@@ -199,8 +204,11 @@ class StereoPair:
 
     @classmethod
     def load(cls, path: str | Path) -> StereoPair:
-        """Read a pair YAML file (``left``, ``right``, ``R``, ``T``)."""
-        return cls.from_node(YamlNode.load(path))
+        """Read a pair YAML file (``left``, ``right``, ``R``, ``T``); another kind of file
+        is named for what it is."""
+        node = YamlNode.load(path)
+        expect(node, "pair", PAIR_KEYS)
+        return cls.from_node(node)
 
     def to_dict(self) -> dict[str, Any]:
         return {"left": self.left.to_dict(), "right": self.right.to_dict(),

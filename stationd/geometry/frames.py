@@ -36,6 +36,10 @@ MAX_SCALE = 1.5
 _HEADER_RMS = re.compile(r"^#.*\bRMS ([0-9.]+(?:[eE][+-]?[0-9]+)?) mm", re.MULTILINE)
 
 
+#: the top-level keys of a registration file (``calibrate vehicle`` writes them)
+REGISTRATION_KEYS = ("kind", "A", "t", "rms_mm")
+
+
 @dataclass(frozen=True, eq=False)
 class Transform:
     """``x_vehicle = A @ x_pair + t``; for a rigid transform ``A`` is a rotation."""
@@ -72,7 +76,7 @@ class Transform:
         """A registration as ``calibrate vehicle`` writes it; one whose RMS residual
         (``rms_mm``, or the header comment of a file written before that key) is above
         :data:`MAX_RMS_MM` is refused: it would select wrong bolts."""
-        m = node.mapping(("kind", "A", "t", "rms_mm"), required=("A", "t"))
+        m = node.mapping(REGISTRATION_KEYS, required=("A", "t"))
         rms = m["rms_mm"].number(lo=0.0) if "rms_mm" in m else _header_rms(node.path)
         if rms is not None and rms > MAX_RMS_MM:
             raise m.get("rms_mm", node).error(

@@ -4,6 +4,7 @@ cannot simulate, any station file's geometry on simulated devices."""
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 from types import SimpleNamespace
@@ -12,7 +13,7 @@ import numpy as np
 
 from stationd.cli import main
 from stationd.config import load_station_config
-from stationd.demo.station import SIM_CONFIG, _summary, simulated
+from stationd.demo.station import SIM_CONFIG, _summary, simulated, stand_ins
 from stationd.station.events import EventBus, ParamsSent, ResultRecorded
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "config" / "station.example.yaml"
@@ -72,3 +73,30 @@ def test_an_affine_vehicle_transform_is_one_readable_line_and_exit_2(tmp_path, c
     code = main(["demo", "--config", str(tmp_path / "sim" / "station.yaml"), "--cycles", "1"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and "\n" not in err and "pair1: to_vehicle is affine" in err
+
+
+def test_a_station_file_naming_real_devices_is_run_on_simulators_and_says_so(capsys):
+    """``demo --config`` on the station's own file tries its geometry on simulators: it says
+    so at its start and in its summary (it printed PASS as if the devices had been tried)."""
+    code = main(["demo", "--config", str(EXAMPLE), "--cycles", "1", "--no-http"])
+    out = capsys.readouterr().out.splitlines()
+    assert code == 0 and out[-1].startswith("PASS")
+    start = out[0]
+    assert start.startswith(f"demo: {EXAMPLE} names real devices (camera front_left aravis://")
+    for device in ("lift modbus-tcp://192.168.10.20:502", "wrench openprotocol://192.168.10.30"):
+        assert device in start
+    assert "the demo runs its own simulators instead and never opens them" in start
+    assert "not sqlite:////var/lib/stationd/stationd.db" in start
+    assert out[-2] == ("simulated, not the station file's devices: camera front_left, camera "
+                       "front_right, lift, wrench (the records went to a temporary database)")
+    code = main(["demo", "--config", str(EXAMPLE), "--cycles", "1", "--no-http", "--json"])
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out.splitlines()[-1])
+    assert [d.split(" ")[0] for d in summary["simulated_instead"]] == [
+        "camera", "camera", "lift", "wrench"]
+    assert "wrench openprotocol://192.168.10.30:4545" in summary["simulated_instead"]
+    assert captured.err.startswith(f"demo: {EXAMPLE} names real devices")
+
+
+def test_the_simulated_stations_file_names_no_device_to_stand_in_for():
+    assert stand_ins(load_station_config(SIM_CONFIG)) == []
