@@ -18,6 +18,7 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from db.kinds import TIGHTENING
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
 
 MIN_N = 5    # fewer results than this give no capability figure
@@ -52,6 +53,8 @@ def spc(s: Session, model: str | None = None, since: datetime | None = None
          .join(Vehicle, TighteningRecord.vehicle_id == Vehicle.id)
          .join(VehicleModel, Vehicle.model_id == VehicleModel.id)
          .join(ProcessParameters, TighteningRecord.parameters_id == ProcessParameters.id)
+         # tightenings only: a loosening is judged by its loosen program, not these limits
+         .where(TighteningRecord.kind == TIGHTENING)
          .order_by(TighteningRecord.recorded_at))
     if model is not None:
         q = q.where(VehicleModel.name == model)

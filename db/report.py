@@ -2,8 +2,10 @@
 
 Why the *last* record decides a bolt's status: a bolt tightened OK and then hit again with a
 NOK result (a double hit, a loosened joint) must not pass as OK; rework that ends OK clears a
-NOK.  Bolts retired from the table after the vehicle was tightened still appear, with their
-records, so a report never loses what was done.
+NOK.  A bolt loosened last is not done (``loosened``), nor is one a loosen command reopened
+since its last rundown (``loosen``: the rework ordered is not done yet).  Bolts retired from
+the table after the vehicle was tightened still appear, with their records, so a report never
+loses what was done.
 """
 
 from __future__ import annotations
@@ -15,9 +17,11 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle
+from db.kinds import LOOSENED, LOOSENING, MISSING, NOK, OK, TIGHTENING, TO_LOOSEN
+from db.models import Bolt, CommandRecord, ProcessParameters, TighteningRecord, Vehicle
 
-OK, NOK, MISSING = "ok", "nok", "missing"
+__all__ = ["LOOSENED", "MISSING", "NOK", "OK", "TO_LOOSEN", "BoltResult", "VehicleInfo",
+           "VehicleReport", "build_report"]
 
 
 @dataclass(frozen=True)
@@ -38,7 +42,7 @@ class VehicleInfo:
 class BoltResult:
     bolt_id: str
     name: str
-    status: str                      # ok | nok | missing
+    status: str                      # ok | nok | missing | loosened | loosen (db.kinds)
     attempts: int
     torque_nm: float | None = None   # of the last record
     angle_deg: float | None = None
@@ -46,9 +50,11 @@ class BoltResult:
     recorded_at: datetime | None = None
     version: int | None = None       # the parameter version the last record was tightened with
     retired: bool = False            # no longer in the bolt table
+    kind: str | None = None          # the last record's: tightening or loosening
 
     def to_json(self) -> dict[str, Any]:
         return {"bolt": self.bolt_id, "name": self.name, "status": self.status,
+                "kind": self.kind,
                 "attempts": self.attempts, "torque_nm": self.torque_nm,
                 "angle_deg": self.angle_deg, "tightening_id": self.tightening_id,
                 "recorded_at": _iso(self.recorded_at), "parameter_version": self.version,
@@ -73,9 +79,14 @@ class VehicleReport:
         return [b.bolt_id for b in self.bolts if b.status == OK]
 
     @property
+    def loosen(self) -> list[str]:
+        """Bolts loosened last or to be loosened: to be tightened again."""
+        return [b.bolt_id for b in self.bolts if b.status in (LOOSENED, TO_LOOSEN)]
+
+    @property
     def complete(self) -> bool:
-        """Every bolt of the model tightened, and every last result OK."""
-        return not self.missing and not self.nok
+        """Every bolt of the model tightened, and every last result an OK tightening."""
+        return not self.missing and not self.nok and not self.loosen
 
     def summary(self) -> str:
         v = self.vehicle
@@ -85,6 +96,8 @@ class VehicleReport:
         text += f", {len(self.nok)} NOK ({', '.join(self.nok)})" if self.nok else ", 0 NOK"
         text += f", {len(self.missing)} missing ({', '.join(self.missing)})" if self.missing \
             else ", 0 missing"
+        if self.loosen:
+            text += f", {len(self.loosen)} to tighten again ({', '.join(self.loosen)})"
         return text
 
     def to_json(self) -> dict[str, Any]:
@@ -92,7 +105,7 @@ class VehicleReport:
         return {"vin": v.vin, "model": v.model, "started_at": _iso(v.started_at),
                 "ended_at": _iso(v.ended_at), "reopened_at": _iso(v.reopened_at),
                 "complete": self.complete, "ok": self.ok,
-                "nok": self.nok, "missing": self.missing,
+                "nok": self.nok, "missing": self.missing, "loosen": self.loosen,
                 "bolts": [b.to_json() for b in self.bolts]}
 
 
@@ -111,6 +124,12 @@ def build_report(s: Session, v: Vehicle) -> VehicleReport:
         by_bolt.setdefault(rec.bolt_id, []).append((rec, version))
     bolts = list(s.scalars(select(Bolt).where(Bolt.model_id == v.model_id)
                            .order_by(Bolt.seq, Bolt.code)))
+    loosen_ordered: dict[str, datetime] = {}   # bolt -> its last loosen command
+    for bolt, at in s.execute(select(CommandRecord.bolt, CommandRecord.at).where(
+            CommandRecord.vin == v.vin, CommandRecord.kind == "loosen")
+            .order_by(CommandRecord.id)):
+        if bolt is not None:
+            loosen_ordered[bolt] = at
     results = []
     for b in bolts:
         recs = by_bolt.get(b.id, [])
@@ -120,8 +139,18 @@ def build_report(s: Session, v: Vehicle) -> VehicleReport:
             results.append(BoltResult(b.code, b.name, MISSING, 0))
             continue
         last, version = recs[-1]
-        results.append(BoltResult(b.code, b.name, last.status, len(recs), last.torque_nm,
-                                  last.angle_deg, last.tightening_id, last.recorded_at, version,
-                                  b.removed_at is not None))
+        results.append(BoltResult(b.code, b.name, _status(last, loosen_ordered.get(b.code)),
+                                  len(recs), last.torque_nm, last.angle_deg, last.tightening_id,
+                                  last.recorded_at, version, b.removed_at is not None,
+                                  last.kind or TIGHTENING))
     info = VehicleInfo(v.vin, v.model.name, v.started_at, v.ended_at, v.reopened_at)
     return VehicleReport(info, tuple(results))
+
+
+def _status(last: TighteningRecord, loosen_at: datetime | None) -> str:
+    """A bolt's status from its last rundown and its last loosen command."""
+    if loosen_at is not None and loosen_at >= last.recorded_at:
+        return TO_LOOSEN
+    if last.kind == LOOSENING:
+        return LOOSENED if last.status == OK else NOK
+    return last.status

@@ -26,6 +26,7 @@ from db.bolts import BoltTable, Parameters, dump_bolts
 from db.engine import DEFAULT_URL, make_engine, writer
 from db.errors import DatabaseError, DataError, NotFoundError, VehicleClosedError
 from db.importer import ImportReport, current_version, import_table, parameters_of, read_table
+from db.kinds import LOOSENING, RUNDOWN_KINDS, TIGHTENING
 from db.ledger import GAP, RUNDOWN, UNATTRIBUTED, Ledger, add_command, append
 from db.migrate import current_revision, head_revision, upgrade
 from db.models import (
@@ -221,7 +222,7 @@ class Repository:
         params_sent: Mapping[str, Any] | None = None, acknowledged: bool = True,
         tightening_id: int | None = None, sent_at: datetime | None = None,
         result_at: datetime | None = None, images: Sequence[str] = (),
-        enable_id: int | None = None,
+        enable_id: int | None = None, kind: str = TIGHTENING,
     ) -> int:
         """Record one tightening of ``bolt`` on the open vehicle ``vin``; return its id.
 
@@ -230,10 +231,13 @@ class Repository:
         ``parameters_id`` is the version that was sent (``BoltInfo.parameters_id``); without
         it, the bolt's current version.  ``params_sent`` defaults to that version's pset and
         targets.  ``enable_id`` (:meth:`note_enable`) is settled in the same transaction: the
-        station owes that enable nothing more.
+        station owes that enable nothing more.  ``kind``: ``tightening`` or ``loosening``
+        (a loosening never makes the bolt done).
         """
         if len(position_mm) != 3:
             raise DataError("position_mm: expected x, y, z")
+        if kind not in RUNDOWN_KINDS:
+            raise DataError(f"kind {kind!r}: one of {', '.join(RUNDOWN_KINDS)}")
         for name, t in (("sent_at", sent_at), ("result_at", result_at)):
             if t is not None and t.tzinfo is None:
                 raise DataError(f"{name}: a timestamp with a timezone (UTC) is needed")
@@ -267,7 +271,7 @@ class Repository:
                 angle_deg=_opt_float(angle_deg),
                 tightening_id=None if tightening_id is None else int(tightening_id),
                 sent_at=sent_at, result_at=result_at, recorded_at=utcnow(),
-                images=[str(i) for i in images])
+                images=[str(i) for i in images], kind=kind)
             s.add(rec)
             _settle(s, enable_id)
             s.flush()
@@ -276,11 +280,13 @@ class Repository:
 
     def nok_streaks(self, vin: str, since: datetime | None = None) -> dict[str, int]:
         """Per bolt of ``vin``: its NOKs in a row at the end of its records (since its last OK
-        and its last release command; only records since ``since``, the vehicle's last
-        opening).  What the NOK policy counts, also after a reload or a restart."""
+        tightening and its last release command; only records since ``since``, the
+        vehicle's last opening).  What the NOK policy counts, also after a reload or a
+        restart: a NOK loosening counts, an OK loosening neither counts nor ends the row."""
         with self._session(write=False) as s:
             v = _vehicle(s, vin)
-            q = (select(Bolt.code, TighteningRecord.status, TighteningRecord.recorded_at)
+            q = (select(Bolt.code, TighteningRecord.status, TighteningRecord.recorded_at,
+                        TighteningRecord.kind)
                  .join(Bolt, TighteningRecord.bolt_id == Bolt.id)
                  .where(TighteningRecord.vehicle_id == v.id)
                  .order_by(TighteningRecord.recorded_at, TighteningRecord.id))
@@ -291,9 +297,12 @@ class Repository:
                 if c.kind == "release" and c.bolt is not None:
                     releases[c.bolt] = c.at
             streak: dict[str, int] = {}
-            for code, status, at in s.execute(q):
-                if status == "ok" or (code in releases and at <= releases[code]):
+            for code, status, at, kind in s.execute(q):
+                if (code in releases and at <= releases[code]) or \
+                        (status == "ok" and kind != LOOSENING):
                     streak[code] = 0
+                elif status == "ok":
+                    streak.setdefault(code, 0)
                 else:
                     streak[code] = streak.get(code, 0) + 1
             return {k: n for k, n in streak.items() if n}

@@ -5,6 +5,7 @@ password hashes the station file keeps.
     stationd skip VIN BOLT [--comment TEXT] --user NAME
     stationd reopen VIN [--comment TEXT] --user NAME
     stationd release VIN BOLT [--comment TEXT] --user NAME
+    stationd loosen VIN BOLT [--comment TEXT] --user NAME
     stationd feed [--since N] [--limit M]
     stationd user hash
 
@@ -85,13 +86,17 @@ def say_refused(what: str, status: int, answer: Any) -> int:
     return EXIT_UNREACHABLE
 
 
+#: the commands that name a bolt of the vehicle at the station
+BOLT_COMMANDS = ("skip", "release", "loosen")
+
+
 def _check_command(args: argparse.Namespace) -> None:
     """The command's words, checked before any login (bad input: exit 2)."""
     if not args.user or not args.user.strip():
         raise InputError("--user: the name of a user of the station's access section")
     if not 1 <= len(args.vin.strip()) <= 32 or any(c.isspace() for c in args.vin.strip()):
         raise InputError(f"VIN {args.vin!r}: 1-32 characters without spaces")
-    if args.command in ("skip", "release") and not 1 <= len(args.bolt.strip()) <= 32:
+    if args.command in BOLT_COMMANDS and not 1 <= len(args.bolt.strip()) <= 32:
         raise InputError(f"bolt {args.bolt!r}: 1-32 characters")
     if len(args.comment or "") > 500:
         raise InputError(f"--comment: at most 500 characters ({len(args.comment)} given)")
@@ -104,12 +109,12 @@ def _unreachable(url: str, exc: BaseException) -> int:
 
 
 def cmd_command(args: argparse.Namespace) -> int:
-    """``skip``, ``reopen`` and ``release``: log in, give the command, print the station's
-    answer."""
+    """``skip``, ``reopen``, ``release`` and ``loosen``: log in, give the command, print the
+    station's answer."""
     _check_command(args)
     body: dict[str, Any] = {"kind": args.command, "vin": args.vin.strip(),
                             "comment": args.comment or ""}
-    if args.command in ("skip", "release"):
+    if args.command in BOLT_COMMANDS:
         body["bolt"] = args.bolt.strip()
     client = ApiClient(args.url, args.token, args.timeout)
     try:
@@ -184,7 +189,12 @@ def add_command_parsers(sub: Any) -> None:
                         "command to the running daemon)", epilog=epilog)
     rl.add_argument("vin")
     rl.add_argument("bolt")
-    for p, name in ((sk, "skip"), (ro, "reopen"), (rl, "release")):
+    lo = sub.add_parser("loosen", help="loosen a tightened bolt for rework: it gets its loosen "
+                        "pset next, then its tightening pset (a command to the running "
+                        "daemon; the loosen right)", epilog=epilog)
+    lo.add_argument("vin")
+    lo.add_argument("bolt")
+    for p, name in ((sk, "skip"), (ro, "reopen"), (rl, "release"), (lo, "loosen")):
         p.add_argument("--comment", default="", help="why (kept with the command)")
         p.add_argument("--user", required=True, help="who gives the command")
         client_args(p)

@@ -26,7 +26,7 @@ from db.curves import curves_of_records
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
 from db.repository import Repository
 
-CSV_FIELDS = ("vin", "model", "bolt", "attempt", "status", "torque_nm", "angle_deg",
+CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "torque_nm", "angle_deg",
               "torque_min_nm", "torque_max_nm", "angle_min_deg", "angle_max_deg", "pset",
               "parameter_version", "tightening_id", "x_mm", "y_mm", "z_mm",
               "match_distance_mm", "tilt_deg", "sent_at", "result_at", "recorded_at", "images")
@@ -91,7 +91,8 @@ class Results:
             attempts[code] = attempts.get(code, 0) + 1
             run = {
                 "vin": vin, "model": model, "bolt": code, "attempt": attempts[code],
-                "status": rec.status, "torque_nm": rec.torque_nm, "angle_deg": rec.angle_deg,
+                "rundown": rec.kind, "status": rec.status, "torque_nm": rec.torque_nm,
+                "angle_deg": rec.angle_deg,
                 # the limits in force for this rundown (its parameter version), as quality
                 # judges it
                 "torque_min_nm": params.torque_min, "torque_max_nm": params.torque_max,

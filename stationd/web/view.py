@@ -19,6 +19,7 @@ from stationd.station.events import (
     BoltReleased,
     BoltSelected,
     BoltSkipped,
+    BoltToLoosen,
     DeviceHealth,
     DeviceIdentified,
     Localized,
@@ -41,6 +42,8 @@ BOLT_LABELS = {
     "pending": "to do", "next": "next", "selected": "selected", "tightening": "tighten",
     "ok": "OK", "nok": "NOK", "skipped": "skipped", "blocked": "blocked",
     "missing": "missing",    # a closed vehicle's bolt left untightened (the daemon's report)
+    "loosen": "loosen first",   # its loosen pset goes next (the NOK policy, a loosen command)
+    "loosened": "loosened",  # loosened last: its tightening pset goes next
 }
 # states a bolt can no longer be in once its vehicle closed: nothing is next or selected any
 # more on a vehicle that left (the ones the daemon reports missing become "missing")
@@ -70,13 +73,14 @@ class BoltState:
     torque_nm: float | None = None
     angle_deg: float | None = None
     locked: bool = False        # too many NOKs in a row: a supervisor releases it
+    loosen: bool = False        # its loosen pset goes next, before its tightening pset
 
     def to_json(self) -> dict[str, Any]:
         return {"bolt": self.bolt, "x": self.x_mm, "y": self.y_mm, "pset": self.pset,
                 "order": self.order, "batch": self.batch, "state": self.state,
                 "label": BOLT_LABELS.get(self.state, self.state), "reason": self.reason,
                 "torque_nm": self.torque_nm, "angle_deg": self.angle_deg,
-                "locked": self.locked}
+                "locked": self.locked, "loosen": self.loosen}
 
 
 @dataclass
@@ -142,7 +146,8 @@ class View:
             self._unselect()
             self.selected = e.bolt
             self._refuse("")
-            self._set(e.bolt, "selected", f"pset {e.pset}" if e.pset is not None else "")
+            self._set(e.bolt, "selected", (f"loosen pset {e.pset}: loosen first" if e.loosen
+                                           else f"pset {e.pset}") if e.pset is not None else "")
         elif isinstance(e, ParamsSent):
             self._refuse("")
         elif isinstance(e, ParamsRefusedEvent):
@@ -166,6 +171,10 @@ class View:
             self._set(e.bolt, "blocked" if locked else "pending",
                       f"locked after {e.count} NOK in a row: a supervisor releases it"
                       if isinstance(e, BoltLocked) else "")
+        elif isinstance(e, BoltToLoosen) and e.bolt in self.bolts:
+            self.bolts[e.bolt].loosen = True
+            if not self.bolts[e.bolt].locked:
+                self._set(e.bolt, "loosen", reason_words(e.reason))
         elif isinstance(e, ResultRecorded):
             self._result(e)
         elif isinstance(e, WrongBolt):
@@ -176,7 +185,8 @@ class View:
         self.closed, self.selected, self.wrench, self.refused = None, None, None, ""
         self.results = []
         self.bolts = {b.bolt: BoltState(b.bolt, b.x_mm, b.y_mm, b.pset, b.order, b.batch,
-                                        b.status if b.status in BOLT_LABELS else "pending")
+                                        b.status if b.status in BOLT_LABELS else "pending",
+                                        loosen=b.status == "loosen")
                       for b in e.bolts}
 
     def _close(self, e: VehicleClosed) -> None:
@@ -210,8 +220,14 @@ class View:
 
     def _result(self, e: ResultRecorded) -> None:
         if e.vin == self.vin and e.bolt in self.bolts:
-            self._set(e.bolt, "ok" if e.ok else "nok", "" if e.ok else "NOK: rework")
             b = self.bolts[e.bolt]
+            if e.kind == "loosening":
+                b.loosen = b.loosen and not e.ok
+                self._set(e.bolt, "loosened" if e.ok else "loosen",
+                          "loosened: tighten it again" if e.ok else "loosening NOK")
+            else:
+                b.loosen = b.loosen and not e.ok
+                self._set(e.bolt, "ok" if e.ok else "nok", "" if e.ok else "NOK: rework")
             b.torque_nm, b.angle_deg = e.torque_nm, e.angle_deg
         if self.selected == e.bolt:
             self.selected = None
@@ -219,7 +235,7 @@ class View:
             "t": e.t, "vin": e.vin, "bolt": e.bolt, "ok": e.ok, "pset": e.pset,
             "torque_nm": e.torque_nm, "torque_min": e.torque_min, "torque_max": e.torque_max,
             "angle_deg": e.angle_deg, "angle_min": e.angle_min, "angle_max": e.angle_max,
-            "late": e.late})
+            "late": e.late, "kind": e.kind})
         del self.results[LAST_RESULTS:]
 
     def _refuse(self, words: str, why: Reason | None = None, *, act: bool = False) -> None:
@@ -231,12 +247,14 @@ class View:
     def _set(self, bolt: str, state: str, reason: str = "") -> None:
         b = self.bolts.get(bolt)
         if b is not None:
+            if b.loosen and state == "pending":   # still to be loosened first
+                state, reason = "loosen", reason or "loosen first"
             b.state, b.reason = state, reason
 
     def _unselect(self) -> None:
         for b in self.bolts.values():
             if b.state in ("selected", "tightening"):
-                b.state, b.reason = "pending", ""
+                self._set(b.bolt, "pending")
 
     # -- what the screens read ----------------------------------------------------------
     def counters(self) -> dict[str, int]:

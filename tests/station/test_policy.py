@@ -21,7 +21,7 @@ from stationd.station.core import (
     VehicleLoaded,
 )
 from stationd.station.events import BoltLocked, BoltReleased, BoltSkipped
-from stationd.station.policy import NokPolicy, NokRule
+from stationd.station.policy import NokPolicy, NokRule, table_errors
 from stationd.yamlio import YamlNode
 from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
 from tests.station.test_core import BOLTS, PARAMS, Driver, _on, result
@@ -115,8 +115,44 @@ def test_the_section_is_checked_with_its_line():
         "repeat}}\n"))
     assert p.default == NokRule(2, "skip") and p.psets == {125: NokRule(1, "skip")}
     assert p.bolts == {"B07": NokRule(2, "repeat")}
-    for text, message in (("max_nok: 0\n", "out of range"), ("strategy: loosen\n", "not one of"),
+    for text, message in (("max_nok: 0\n", "out of range"), ("strategy: undo\n", "not one of"),
                           ("psets: {abc: {max_nok: 1}}\n", "a pset number"),
                           ("bolts: [B1]\n", "mapping of names")):
         with pytest.raises(ConfigError, match=message):
             NokPolicy.from_node(YamlNode.parse(text, "station.yaml"))
+
+
+def test_the_loosen_strategy_needs_a_loosen_pset_refused_with_its_line():
+    p = NokPolicy.from_node(YamlNode.parse(
+        "strategy: loosen\nloosen_pset: 90\nbolts: {B07: {loosen_pset: 91}, B08: {strategy: "
+        "repeat}}\n"))
+    assert p.default == NokRule(3, "loosen", 90) and p.bolts["B07"].loosen_pset == 91
+    assert p.rule("B08", None) == NokRule(3, "repeat", 90)   # may still be loosened
+    for text, line, message in (
+            ("max_nok: 2\nstrategy: loosen\n", 2, "loosen needs a loosen_pset"),
+            ("psets:\n  125: {strategy: loosen}\n", 2, "loosen needs a loosen_pset"),
+            ("loosen_pset: 90\npsets:\n  90: {strategy: loosen}\n", 3, "the pset itself"),
+            ("loosen_pset: 0\n", 1, "out of range")):
+        with pytest.raises(ConfigError, match=message) as err:
+            NokPolicy.from_node(YamlNode.parse(text, "station.yaml"))
+        assert (err.value.path, err.value.line) == ("station.yaml", line), text
+
+
+def test_overrides_naming_what_no_bolt_table_has_are_refused_with_their_lines():
+    from db.bolts import BoltSpec as TableBolt
+    from db.bolts import BoltTable, ModelSpec, Parameters, Pset, Window
+
+    w = Window(20.0, 18.0, 22.0)
+    table = BoltTable((ModelSpec("M", (TableBolt("B1", "b", (0, 0, 0), Parameters(1, w)),
+                                       TableBolt("B2", "b", (60, 0, 0), Parameters(2, w)))),),
+                      psets=(Pset(5, None, w),))
+    node = YamlNode.parse("loosen_pset: 90\npsets:\n  2: {max_nok: 1}\n  5: {max_nok: 2}\n"
+                          "  7: {max_nok: 1}\nbolts:\n  B1: {loosen_pset: 2}\n  B9: {}\n",
+                          "station.yaml")
+    NokPolicy.from_node(node)
+    errors = table_errors(node, table, "bolts.yaml")
+    assert [e.line for e in errors] == [5, 8, 7]
+    for e, words in zip(errors, ("pset 7: no bolt of bolts.yaml is tightened with it",
+                                 "bolt B9: no model of bolts.yaml has it",
+                                 "loosen_pset 2 tightens B2 (M) in bolts.yaml"), strict=True):
+        assert words in str(e), e

@@ -1,5 +1,6 @@
 // Commands from the operator screen: log in (a session cookie the server sets), skip a bolt of
-// the vehicle at the station, reopen a closed vehicle.  The station decides: the screen shows
+// the vehicle at the station, release a locked bolt, loosen a tightened one for rework, reopen
+// a closed vehicle.  The station decides: the screen shows
 // its answer (accepted, or refused with the reason in words) and nothing else.
 "use strict";
 (function () {
@@ -15,6 +16,7 @@
     q("skip").hidden = !rights.includes("skip");
     q("reopen").hidden = !rights.includes("reopen");
     q("release").hidden = !rights.includes("release");
+    q("loosen").hidden = !rights.includes("loosen");
   }
 
   function answer(text, ok) {
@@ -68,6 +70,8 @@
   setInterval(() => {
     fill("skip-bolt", (b) => b.state !== "ok" && b.state !== "skipped");
     fill("release-bolt", (b) => b.locked);
+    // a bolt tightened (OK, or NOK last) and not to be loosened already: rework
+    fill("loosen-bolt", (b) => (b.state === "ok" || b.state === "nok") && !b.loosen && !b.locked);
   }, 500);
 
   q("login").addEventListener("submit", async (e) => {
@@ -95,6 +99,13 @@
     if (!view || !view.vehicle) { answer("no vehicle at the station", false); return; }
     if (!q("release-bolt").value) { answer("choose the locked bolt to release", false); return; }
     command({kind: "release", vin: view.vehicle.vin, bolt: q("release-bolt").value, comment: q("release-comment").value});
+  });
+  q("loosen").addEventListener("submit", (e) => {
+    e.preventDefault();
+    const view = window.lastView;
+    if (!view || !view.vehicle) { answer("no vehicle at the station", false); return; }
+    if (!q("loosen-bolt").value) { answer("choose the bolt to loosen", false); return; }
+    command({kind: "loosen", vin: view.vehicle.vin, bolt: q("loosen-bolt").value, comment: q("loosen-comment").value});
   });
   q("reopen").addEventListener("submit", (e) => {
     e.preventDefault();

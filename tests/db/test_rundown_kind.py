@@ -1,0 +1,141 @@
+"""Every rundown says tightening or loosening: in the database (migrated old records are
+tightenings), the vehicle report (a bolt loosened last is not done), the NOK rows the policy
+counts, the feed, the exports and the quality figures; the station's records write the kind
+the core decided and what was sent for a loosening."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from types import SimpleNamespace
+
+import pytest
+from sqlalchemy import create_engine, text
+
+from db.errors import DataError
+from db.kinds import LOOSENED, LOOSENING, NOK, OK, TIGHTENING, TO_LOOSEN
+from db.migrate import upgrade
+from db.repository import Repository
+from stationd.boltfile import import_bolts
+from stationd.config import StationConfig
+from stationd.station.core import Record, Selection
+from stationd.station.records import Records
+from stationd.web.results import Results, rundowns_csv
+from tests.db.conftest import record, url_of
+
+
+@pytest.fixture
+def sedan(repo, bolts_file):
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    return repo
+
+
+def _status(repo: Repository, bolt: str) -> tuple[str, str | None]:
+    b = {b.bolt_id: b for b in repo.vehicle_report("VIN1").bolts}[bolt]
+    return b.status, b.kind
+
+
+def test_a_bolt_loosened_last_is_not_done_and_its_tightening_ends_that(sedan):
+    record(sedan, "VIN1", "B1", ok=False, tightening_id=1)
+    assert _status(sedan, "B1") == (NOK, TIGHTENING)
+    record(sedan, "VIN1", "B1", ok=True, tightening_id=2, kind=LOOSENING)
+    assert _status(sedan, "B1") == (LOOSENED, LOOSENING)
+    for tid, b in ((10, "B2"), (11, "B3")):
+        record(sedan, "VIN1", b, tightening_id=tid)
+    report = sedan.vehicle_report("VIN1")
+    assert not report.complete and report.loosen == ["B1"] and report.nok == []
+    assert report.summary().endswith(", 1 to tighten again (B1)")
+    assert report.to_json()["bolts"][0]["kind"] == LOOSENING
+    record(sedan, "VIN1", "B1", ok=True, tightening_id=3)
+    assert _status(sedan, "B1") == (OK, TIGHTENING) and sedan.vehicle_report("VIN1").complete
+    record(sedan, "VIN1", "B1", ok=False, tightening_id=4, kind=LOOSENING)
+    assert _status(sedan, "B1") == (NOK, LOOSENING)   # a joint that did not come loose
+
+
+def test_a_loosen_command_after_the_last_rundown_reopens_the_bolt(sedan):
+    record(sedan, "VIN1", "B1", tightening_id=1)
+    sedan.ledger.record_command(at=datetime.now(UTC), user="lea",
+                                source="cli", kind="loosen", vin="VIN1", bolt="B1",
+                                comment="rework")
+    assert _status(sedan, "B1") == (TO_LOOSEN, TIGHTENING)
+    assert not sedan.vehicle_report("VIN1").complete
+    record(sedan, "VIN1", "B1", tightening_id=2, kind=LOOSENING)
+    assert _status(sedan, "B1")[0] == LOOSENED
+
+
+def test_the_nok_row_counts_nok_loosenings_and_not_ok_ones(sedan):
+    record(sedan, "VIN1", "B1", ok=False, tightening_id=1)
+    record(sedan, "VIN1", "B1", ok=True, tightening_id=2, kind=LOOSENING)
+    record(sedan, "VIN1", "B1", ok=False, tightening_id=3)
+    assert sedan.nok_streaks("VIN1") == {"B1": 2}
+    record(sedan, "VIN1", "B1", ok=False, tightening_id=4, kind=LOOSENING)
+    assert sedan.nok_streaks("VIN1") == {"B1": 3}
+    record(sedan, "VIN1", "B1", ok=True, tightening_id=5)
+    assert sedan.nok_streaks("VIN1") == {}
+
+
+def test_the_feed_the_exports_and_the_quality_figures_carry_the_kind(sedan):
+    record(sedan, "VIN1", "B1", ok=True, tightening_id=1, torque_nm=50.0)
+    record(sedan, "VIN1", "B1", ok=True, tightening_id=2, kind=LOOSENING, torque_nm=80.0)
+    record(sedan, "VIN1", "B1", ok=True, tightening_id=3, torque_nm=51.0)
+    feed = sedan.ledger.since(0)
+    assert [e["record"]["rundown"] for e in feed if e["kind"] == "rundown"] == [
+        TIGHTENING, LOOSENING, TIGHTENING]
+    runs = Results(sedan).export("VIN1")
+    assert [r["rundown"] for r in runs if r["bolt"] == "B1"] == [TIGHTENING, LOOSENING,
+                                                                 TIGHTENING]
+    csv = rundowns_csv(runs).splitlines()
+    assert csv[0].startswith("vin,model,bolt,attempt,rundown,status,")
+    assert csv[2].split(",")[4] == LOOSENING
+    spc = sedan.spc("SEDAN")
+    [b1] = [g for g in spc["bolts"] if g["bolt"] == "B1"]
+    assert b1["torque"]["n"] == 2 and b1["torque"]["mean"] == pytest.approx(50.5)
+
+
+def test_a_kind_that_is_not_a_rundown_is_refused(sedan):
+    with pytest.raises(DataError, match="kind 'reverse'"):
+        record(sedan, "VIN1", "B1", tightening_id=1, kind="reverse")
+
+
+def test_records_before_the_migration_are_tightenings(tmp_path):
+    url = url_of(tmp_path / "old.db")
+    engine = create_engine(url)
+    upgrade(engine, "0007")
+    with engine.begin() as conn:
+        conn.execute(text("INSERT INTO vehicle_models (id, name, seq) VALUES (1, 'M', 0)"))
+        conn.execute(text("INSERT INTO bolts (id, model_id, code, name, x_mm, y_mm, z_mm, seq)"
+                          " VALUES (1, 1, 'B1', 'one', 0, 0, 0, 0)"))
+        conn.execute(text(
+            "INSERT INTO process_parameters (id, bolt_id, version, pset, torque_target, "
+            "torque_min, torque_max, created_at) VALUES (1, 1, 1, 1, 50, 45, 55, "
+            "'2026-01-01 00:00:00')"))
+        conn.execute(text("INSERT INTO vehicles (id, vin, model_id, started_at) VALUES "
+                          "(1, 'OLD', 1, '2026-01-01 00:00:00')"))
+        conn.execute(text(
+            "INSERT INTO tightening_records (vehicle_id, bolt_id, parameters_id, x_mm, y_mm, "
+            "z_mm, match_distance_mm, tilt_deg, params_sent, acknowledged, status, "
+            "recorded_at, images) VALUES (1, 1, 1, 0, 0, 0, 0, 0, '{}', 1, 'ok', "
+            "'2026-01-01 00:00:01', '[]')"))
+    engine.dispose()
+    with Repository.open(url) as repo:
+        [b1] = repo.vehicle_report("OLD").bolts
+        assert (b1.status, b1.kind) == (OK, TIGHTENING)
+
+
+def test_the_station_records_the_kind_and_the_loosen_pset_it_sent(tmp_path, bolts_file):
+    cfg = StationConfig(database_url=url_of(tmp_path / "st.db"), bolts_path=bolts_file)
+    records = Records(cfg)
+    repo = records.open()
+    repo.start_vehicle("VIN1", "SEDAN")
+    version = repo.bolts_for_model("SEDAN")[0].parameters_id
+    sel = Selection("B1", 90, (0.0, 0.0, 0.0), 1.0, 0.5, 1.0, 1.1, vin="VIN1",
+                    parameters_id=version, loosen=True)
+    result = SimpleNamespace(tightening_id=7, pset=90, ok=True, torque_nm=40.0,
+                             angle_deg=-720.0)
+    records.write(records.unsaved_result(Record("VIN1", "B1", result, sel, kind=LOOSENING),
+                                         None))
+    [entry] = [e["record"] for e in repo.ledger.since(0) if e["kind"] == "rundown"]
+    assert entry["rundown"] == LOOSENING
+    assert entry["params_sent"] == {"pset": 90, "torque": None, "angle": None, "loosen": True}
+    assert _status(repo, "B1") == (LOOSENED, LOOSENING)
+    repo.close()

@@ -1,0 +1,70 @@
+"""The station file's NOK policy against the bolt tables the station loads: `config check`
+lists each override no table has with its line, a start or a reload refuses it (the running
+station kept), the tables of the database are used when the file names no bolt table."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from db.repository import Repository
+from stationd.boltfile import load_bolts
+from stationd.config import check_station, load_station_config
+from stationd.errors import ConfigError
+from tests.test_config import SIM, _line
+
+NOK = ("nok:\n  strategy: loosen\n  loosen_pset: 90\n  psets:\n    7: {max_nok: 1}\n"
+       "  bolts:\n    B01: {max_nok: 2}\n    B99: {strategy: skip}\n")
+
+
+@pytest.fixture
+def station(tmp_path: Path) -> Path:
+    for f in SIM.iterdir():
+        shutil.copy(f, tmp_path)
+    path = tmp_path / "station.yaml"
+    path.write_text(path.read_text() + NOK)
+    return path
+
+
+def test_config_check_names_each_override_no_table_has_with_its_line(station):
+    result = check_station(station)
+    assert not result.ok
+    found = [(e.line, str(e)) for e in result.errors]
+    assert [line for line, _ in found] == [_line(station, "7: {max_nok"),
+                                           _line(station, "B99:")]
+    assert "pset 7: no bolt of" in found[0][1] and "bolt B99: no model of" in found[1][1]
+
+
+def test_a_start_or_reload_refuses_it_and_a_policy_the_table_has_loads(station):
+    with pytest.raises(ConfigError, match="pset 7: no bolt") as err:
+        load_station_config(station, station=True)
+    assert (err.value.path, err.value.line) == (str(station), _line(station, "7: {max_nok"))
+    load_station_config(station)           # a tool reading its vision only: not checked
+    station.write_text(station.read_text().replace("    7: {max_nok: 1}", "    3: {max_nok: 1}")
+                       .replace("    B99: {strategy: skip}\n", ""))
+    cfg = load_station_config(station, station=True)
+    assert cfg.nok.rule("B01", 1).max_nok == 2 and cfg.nok.rule("B03", 3).max_nok == 1
+    assert cfg.nok.default.loosen_pset == 90
+
+
+def test_a_loosen_pset_a_bolt_is_tightened_with_is_refused(station):
+    station.write_text(station.read_text().replace("loosen_pset: 90", "loosen_pset: 2"))
+    result = check_station(station)
+    assert any("loosen_pset 2 tightens B02" in str(e) and e.line == _line(
+        station, "loosen_pset: 2") for e in result.errors), result.errors
+
+
+def test_without_a_bolt_file_the_database_tables_are_checked(station):
+    text = station.read_text()
+    table = load_bolts(station.parent / "bolts.yaml")
+    db = station.parent / "tables.db"
+    with Repository.open(f"sqlite:///{db}") as repo:
+        repo.import_bolts(table)
+    station.write_text(text.replace("bolts: bolts.yaml\n", "").replace(
+        "sqlite:///stationd-sim.db", f"sqlite:///{db}"))
+    result = check_station(station)
+    assert [str(e).split(": ", 1)[1] for e in result.errors] == [
+        f"nok.psets.7: pset 7: no bolt of the database {db} is tightened with it and no table "
+        "there defines it", f"nok.bolts.B99: bolt B99: no model of the database {db} has it"]
