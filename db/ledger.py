@@ -20,10 +20,12 @@ from sqlalchemy.orm import Session
 
 from db.models import (
     Bolt,
+    CalibrationCheck,
     CommandRecord,
     FeedEntry,
     ForwardQuarantine,
     Meta,
+    OpcUaAcknowledged,
     ResultGap,
     TighteningRecord,
     UnattributedResult,
@@ -32,6 +34,7 @@ from db.models import (
 
 #: the kinds of records the feed carries, each in its own table
 RUNDOWN, UNATTRIBUTED, COMMAND, GAP = "rundown", "unattributed", "command", "gap"
+CHECK = "check"   # a camera pair's calibration check (db.checks)
 FEED_LIMIT = 1000
 
 
@@ -153,6 +156,48 @@ class Ledger:
             return [{"seq": e.seq, "kind": e.kind, "at": e.at.isoformat(),
                      "record": _record(s, e.kind, e.ref)} for e in entries]
 
+    # -- acknowledged over OPC UA (AcknowledgeResults / RequestUnacknowledgedResults) ---------
+    def seq_before(self, at: datetime) -> int:
+        """The last sequence number recorded before ``at`` (0: none): where a reader that
+        wants the records from ``at`` on starts."""
+        with self._session(False) as s:
+            return int(s.scalar(select(func.max(FeedEntry.seq)).where(FeedEntry.at < at)) or 0)
+
+    def acknowledge(self, seqs: list[int], by: str) -> set[int]:
+        """Mark the rundowns ``seqs`` acknowledged by ``by`` (already acknowledged ones stay
+        as they were); the ones that are rundowns of this database, acknowledged now or
+        before, are returned, the others are unknown."""
+        wanted = sorted(set(seqs))
+        with self._session(True) as s:
+            known = set(s.scalars(select(FeedEntry.seq).where(FeedEntry.seq.in_(wanted),
+                                                             FeedEntry.kind == RUNDOWN)))
+            done = set(s.scalars(select(OpcUaAcknowledged.seq)
+                                 .where(OpcUaAcknowledged.seq.in_(known))))
+            for seq in sorted(known - done):
+                s.add(OpcUaAcknowledged(seq=seq, acknowledged_by=by[:64]))
+            return known
+
+    def _unacknowledged(self) -> Any:
+        return (select(FeedEntry)
+                .outerjoin(OpcUaAcknowledged, OpcUaAcknowledged.seq == FeedEntry.seq)
+                .where(FeedEntry.kind == RUNDOWN, OpcUaAcknowledged.seq.is_(None)))
+
+    def unacknowledged(self, after: int, limit: int = FEED_LIMIT) -> list[dict[str, Any]]:
+        """The rundowns after ``after`` nobody acknowledged, in order (at most ``limit``),
+        each as :meth:`since` gives it."""
+        limit = max(1, min(int(limit), FEED_LIMIT))
+        with self._session(False) as s:
+            entries = list(s.scalars(self._unacknowledged().where(FeedEntry.seq > after)
+                                     .order_by(FeedEntry.seq).limit(limit)))
+            return [{"seq": e.seq, "kind": e.kind, "at": e.at.isoformat(),
+                     "record": _record(s, e.kind, e.ref)} for e in entries]
+
+    def unacknowledged_count(self) -> int:
+        with self._session(False) as s:
+            sub = self._unacknowledged().subquery()
+            return int(s.scalar(select(func.count()).select_from(sub)) or 0)
+
+
 
 def _command(r: CommandRecord) -> CommandEntry:
     return CommandEntry(r.id, r.at, r.user, r.source, r.kind, r.vin, r.bolt, r.comment)
@@ -171,6 +216,7 @@ def _record(s: Session, kind: str, ref: int) -> dict[str, Any]:
                         .where(TighteningRecord.id == ref)).one()
         rec, vin, bolt = row
         return {"id": rec.id, "vin": vin, "bolt": bolt, "status": rec.status,
+                "rundown": rec.kind,
                 "torque_nm": rec.torque_nm, "angle_deg": rec.angle_deg,
                 "tightening_id": rec.tightening_id, "params_sent": rec.params_sent,
                 "position_mm": [rec.x_mm, rec.y_mm, rec.z_mm],
@@ -188,10 +234,16 @@ def _record(s: Session, kind: str, ref: int) -> dict[str, Any]:
         g = s.get_one(ResultGap, ref)
         return {"id": g.id, "first_id": g.first_id, "last_id": g.last_id, "vin": g.vin,
                 "reason": g.reason, "found_at": _iso(g.found_at)}
+    if kind == CHECK:
+        k = s.get_one(CalibrationCheck, ref)
+        return {"id": k.id, "at": k.at.isoformat(), "pair": k.pair, "verdict": k.verdict,
+                "reference": k.reference, "offset_mm": k.offset_mm,
+                "tolerance_mm": k.tolerance_mm, "reason": k.reason,
+                "references": k.references, "recorded_at": _iso(k.recorded_at)}
     c = _command(s.get_one(CommandRecord, ref))
     return {"id": c.id, "at": c.at.isoformat(), "user": c.user, "source": c.source,
             "kind": c.kind, "vin": c.vin, "bolt": c.bolt, "comment": c.comment}
 
 
-__all__ = ["COMMAND", "GAP", "RUNDOWN", "UNATTRIBUTED", "CommandEntry", "Ledger", "add_command",
-           "append"]
+__all__ = ["CHECK", "COMMAND", "GAP", "RUNDOWN", "UNATTRIBUTED", "CommandEntry", "Ledger",
+           "add_command", "append"]

@@ -166,11 +166,13 @@ class Vehicle(Base):
 
 
 class TighteningRecord(Base):
-    """One tightening: where the wrench was, what was sent, what the controller answered."""
+    """One rundown (a tightening or a loosening): where the wrench was, what was sent, what
+    the controller answered."""
 
     __tablename__ = "tightening_records"
     __table_args__ = (
         CheckConstraint("status IN ('ok', 'nok')", name="status"),
+        CheckConstraint("kind IN ('tightening', 'loosening')", name="kind"),
         Index("ix_tightening_records_vehicle_bolt", "vehicle_id", "bolt_id"),
     )
 
@@ -193,6 +195,10 @@ class TighteningRecord(Base):
     result_at: Mapped[datetime | None] = mapped_column(UtcDateTime)  # controller's timestamp
     recorded_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
     images: Mapped[list[str]] = mapped_column(JSON)  # references (paths/URLs) of the frames
+    #: tightening or loosening (``db.kinds``): the result's type, else what was sent; a
+    #: loosening is never a bolt done
+    kind: Mapped[str] = mapped_column(String(10), default="tightening",
+                                      server_default="tightening")
 
     vehicle: Mapped[Vehicle] = relationship()
     bolt: Mapped[Bolt] = relationship()
@@ -327,4 +333,38 @@ class TighteningCurve(Base):
     values: Mapped[list[float]] = mapped_column(JSON)
     times_s: Mapped[list[float] | None] = mapped_column(JSON)
     result_at: Mapped[datetime | None] = mapped_column(UtcDateTime)   # controller's clock
+    recorded_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
+
+
+class OpcUaAcknowledged(Base):
+    """A rundown (its feed entry) an MES acknowledged over OPC UA (AcknowledgeResults of
+    OPC 40450-1): it is no longer sent by RequestUnacknowledgedResults, also after a
+    restart.  Who acknowledged it is kept beside it."""
+
+    __tablename__ = "opcua_acknowledged"
+
+    seq: Mapped[int] = mapped_column(ForeignKey("feed.seq"), primary_key=True,
+                                     autoincrement=False)
+    acknowledged_by: Mapped[str] = mapped_column(String(64))   # the OPC UA user
+    at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
+
+
+class CalibrationCheck(Base):
+    """A camera pair checked against the reference markers: when, its verdict (ok, moved, not
+    checked), the worst reference and its offset against the tolerance, why it was not
+    checked, and each reference's measurement (``references``: name -> offset_mm,
+    measured_mm, why, note).  Never edited; it joins the results feed."""
+
+    __tablename__ = "calibration_checks"
+    __table_args__ = (Index("ix_calibration_checks_pair", "pair"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    at: Mapped[datetime] = mapped_column(UtcDateTime)
+    pair: Mapped[str] = mapped_column(String(64))
+    verdict: Mapped[str] = mapped_column(String(16))
+    reference: Mapped[str | None] = mapped_column(String(64))
+    offset_mm: Mapped[float | None]
+    tolerance_mm: Mapped[float]
+    reason: Mapped[str | None] = mapped_column(String(200))
+    references: Mapped[dict[str, Any]] = mapped_column(JSON)
     recorded_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)

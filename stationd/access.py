@@ -37,7 +37,7 @@ SCRYPT_N, SCRYPT_R, SCRYPT_P, KEY_BYTES = 2 ** 14, 8, 1, 32
 DEFAULT_ROLES: dict[str, frozenset[Right]] = {
     "operator": frozenset({Right.SKIP}),
     "supervisor": frozenset({Right.SKIP, Right.REOPEN, Right.RELEASE, Right.LOOSEN}),
-    "engineer": frozenset({Right.SKIP, Right.REOPEN, Right.TEACH}),
+    "engineer": frozenset({Right.SKIP, Right.REOPEN, Right.TEACH, Right.CALIBRATE}),
 }
 #: a screen's session ends after this long idle, and after a shift whatever happens, s
 SESSION_IDLE_S, SESSION_MAX_S = 30 * 60.0, 12 * 3600.0

@@ -214,7 +214,9 @@ def add_calibrate_parser(subparsers: Any) -> argparse.ArgumentParser:
                    help="camera YAML to write (default camera.yaml)")
     m.add_argument("--json", action="store_true", help="print the report as one JSON object")
     m.set_defaults(func=cmd_calibrate_camera)
+    from stationd.refcheck_cli import add_check_parser
     from stationd.vehicle_cli import add_vehicle_parser
 
     add_vehicle_parser(csub)
+    add_check_parser(csub)
     return c

@@ -12,7 +12,7 @@ those of the files the config names and its device URLs (``stationd config check
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection, Mapping
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
@@ -20,9 +20,8 @@ from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
 import numpy as np
 
-from drivers import camera as camera_drivers
-from drivers import lift as lift_drivers
-from drivers import wrench as wrench_drivers
+from drivers.devices import Kind
+from drivers.devices import check_url as check_device_url
 from drivers.errors import UrlError
 from drivers.lift.base import RegisterMap
 from drivers.url import parse_url
@@ -30,18 +29,20 @@ from drivers.wrench.modbus_map import WrenchRegisterMap
 from stationd.access import AccessConfig
 from stationd.devicemaps import lift_map, wrench_map
 from stationd.errors import ConfigError, InputError
+from stationd.filekind import expect
 from stationd.forward import LineConfig
 from stationd.geometry.camera import StereoPair
-from stationd.geometry.frames import Transform
+from stationd.geometry.frames import REGISTRATION_KEYS, Transform
 from stationd.geometry.tool import ToolGeometry
 from stationd.localize import LocalizeConfig
+from stationd.localize.references import References
 from stationd.opcua import OpcUaConfig
 from stationd.station.matching import MatchParams
-from stationd.station.policy import NokPolicy
+from stationd.station.policy import NokPolicy, table_errors
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import VisionParams
 from stationd.web.config import HttpConfig
-from stationd.yamlio import YamlNode, file_kind, top_keys
+from stationd.yamlio import YamlNode
 
 if TYPE_CHECKING:
     from stationd.boltfile import BoltCheck
@@ -70,16 +71,8 @@ MAX_RMS_PX = (0.01, 5.0)
 MAX_HUE_SPAN = 90
 STATION_KEYS = ("marker", "vision", "cameras", "pairs", "tool", "lift", "wrench", "matching",
                 "database", "bolts", "records", "http", "access", "localize", "line", "nok",
-                "opcua")
+                "opcua", "references")
 PAIR_KEYS = ("calibration", "to_vehicle", "left", "right", "max_skew_ms")
-
-#: device kind -> (scheme -> backend, the accepted forms): the drivers' own registries, so the
-#: checker knows a scheme exactly when opening would find a backend for it
-DEVICE_REGISTRIES: dict[str, tuple[Mapping[str, str], str]] = {
-    "camera": (camera_drivers.BACKENDS, camera_drivers.FORMS),
-    "lift": (lift_drivers.BACKENDS, lift_drivers.FORMS),
-    "wrench": (wrench_drivers.BACKENDS, wrench_drivers.FORMS),
-}
 
 
 @dataclass(frozen=True)
@@ -206,6 +199,8 @@ class StationConfig:
     line: LineConfig | None = None  # the line's database the records are forwarded to
     nok: NokPolicy = field(default_factory=NokPolicy)  # after a NOK: lock, skip or repeat
     opcua: OpcUaConfig | None = None  # the OPC UA server for the MES; None: not served
+    # the reference markers of the calibration check; None: none (every pair trusted)
+    references: References | None = None
     path: Path | None = None
 
 
@@ -241,35 +236,14 @@ def device_url(node: YamlNode, kind: str, *, check: bool = False) -> str:
     every reload) check; other readers of a station file (tools, benchmarks) do not need to.
     """
     url = node.text()
-    if check and kind in ("camera", "lift"):
-        check_url = camera_drivers.check_camera_url if kind == "camera" \
-            else lift_drivers.check_lift_url
+    if check:
         try:
-            check_url(url)
-        except UrlError as exc:
-            raise node.error(str(exc)) from None
-    elif check:
-        backends, forms = DEVICE_REGISTRIES[kind]
-        try:
-            scheme = parse_url(url).scheme
-        except UrlError as exc:
-            raise node.error(f"{exc}; accepted: {forms}") from None
-        if scheme not in backends:
-            raise node.error(f"unknown {kind} scheme {scheme!r}; accepted: {forms}")
-        if scheme.startswith("modbus-"):   # its options too: pure parsing, nothing opened
-            from drivers.modbus_link import parse_modbus_url
-
-            try:
-                parse_modbus_url(url)
-            except UrlError as exc:
-                raise node.error(str(exc)) from None
-        elif kind == "wrench" and scheme.startswith("openprotocol"):  # built, not opened
-            from drivers.wrench import open_wrench
-
-            try:
-                open_wrench(url, connect=False).close()
-            except UrlError as exc:
-                raise node.error(str(exc)) from None
+            check_device_url(Kind(kind), url)
+        except UrlError as exc:   # the line shows the URL: the message need not repeat it
+            text = str(exc)
+            if exc.device and text.startswith(f"{exc.device}: "):
+                text = text[len(exc.device) + 2:]
+            raise node.error(text) from None
     return url
 
 
@@ -308,6 +282,7 @@ def _load_transform(path: Path) -> Transform:
     """A pair -> vehicle transform; a translation that looks like metres is refused (the pairs
     are a metre or more from the vehicle origin: |t| < 10 can only be metres for millimetres)."""
     node = YamlNode.load(path)
+    expect(node, "registration", REGISTRATION_KEYS)
     tf = Transform.from_node(node)
     norm = float(np.linalg.norm(tf.t))
     if norm < METRES_LIKE_MM:
@@ -524,11 +499,8 @@ class _Reader:
         """The top-level sections.  ``YamlNode.mapping`` stops at the first unknown key; when
         collecting, each unknown key is reported at its own line (the known sections are still
         read) by accepting it and reading the mapping again."""
-        keys = top_keys(root)
-        if file_kind(keys) == "bolts" and not keys & set(STATION_KEYS):
-            # a bolt table given as the station: one line, not one per unknown section
-            raise root.error("this is a bolt table, not a station file (a station file names "
-                             "its cameras, pairs, lift and wrench; it may name a bolts: file)")
+        # another kind of file given as the station: one line, not one per unknown section
+        expect(root, "station", STATION_KEYS)
         unknown: set[str] = set()
         while True:
             try:
@@ -581,6 +553,13 @@ class _Reader:
             nok=self.section("nok", d.nok, NokPolicy.from_node),
             opcua=self.section("opcua", d.opcua, partial(OpcUaConfig.from_node, base_dir=base)),
             path=path)
+        if "references" in self.top:   # projected with the pairs' calibrations: after them
+            refs = self.guard(None, partial(
+                References.from_node, marker=marker,
+                matching_tolerance_mm=config.matching.tolerance_mm,
+                pairs={n: (p.calibration, p.to_vehicle) for n, p in pairs.items()}),
+                self.top["references"])
+            config = replace(config, references=refs)
         # after the sections: a mistake written in the file is told before what is missing
         if self.require_devices and isinstance(root.value(), dict) and not self.unreadable:
             for key in REQUIRED_KEYS:
@@ -701,7 +680,18 @@ def load_station_config(path: str | Path | None, *, station: bool = False) -> St
     if path is None:
         return StationConfig()
     p = Path(path)
-    return _Reader(p.parent, collect=False, require_devices=station).read(p)
+    reader = _Reader(p.parent, collect=False, require_devices=station)
+    cfg = reader.read(p)
+    if station and cfg.bolts_path is not None and "nok" in reader.top:
+        # the NOK policy against the bolt table it applies to: a start or a reload with an
+        # override no table has is refused (the running station kept)
+        from stationd.boltfile import load_bolts
+
+        table = load_bolts(cfg.bolts_path, tolerance_mm=cfg.matching.tolerance_mm)
+        errors = table_errors(reader.top["nok"], table, str(cfg.bolts_path))
+        if errors:
+            raise errors[0]
+    return cfg
 
 
 def check_station(path: str | Path) -> StationCheck:
@@ -730,11 +720,37 @@ def check_station(path: str | Path) -> StationCheck:
         except InputError as exc:  # a tolerance of 0: the loader takes it, the check cannot
             errors.append(reader.top["matching"].error(f"{exc}; the bolt table cannot be "
                                                        "checked"))
+    if "nok" in reader.top:
+        errors += _nok_errors(reader.top["nok"], cfg, bolts)
     if bolts is not None and bolts.table is not None and "wrench" in reader.top:
         warning = _psets_only_warning(cfg.wrench.url, bolts.table, reader.top["wrench"])
         if warning is not None:
             reader.warnings.append(warning)
     return StationCheck(str(p), cfg if not errors else None, errors, reader.warnings, bolts)
+
+
+def _nok_errors(node: YamlNode, cfg: StationConfig, bolts: Any) -> list[ConfigError]:
+    """The NOK policy's overrides against the bolt tables the station loads: its bolt file's
+    (checked), else the tables of its database when that is an SQLite file that exists (read
+    only; a database that does not open is the daemon's to report)."""
+    if cfg.bolts_path is not None:   # a table with errors is told those, not these
+        return [] if bolts is None or bolts.table is None \
+            else table_errors(node, bolts.table, str(cfg.bolts_path))
+    from sqlalchemy.engine import make_url
+
+    from db.errors import DbError
+    from db.repository import Repository
+
+    url = make_url(cfg.database_url)
+    if url.get_backend_name() != "sqlite" or not url.database \
+            or not Path(url.database).is_file():
+        return []
+    try:
+        with Repository.open(cfg.database_url, read_only=True) as repo:
+            table = repo.table()
+    except DbError:
+        return []
+    return table_errors(node, table, f"the database {url.database}")
 
 
 def _psets_only_warning(url: str, table: Any, node: YamlNode) -> ConfigError | None:

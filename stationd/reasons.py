@@ -47,6 +47,18 @@ class Why(enum.Enum):
     TEACHING = "teaching"                # teach mode is on (note: the model, who)
     NOT_TEACHING = "not teaching"        # a teach command while teach mode is off
     NOT_STEADY = "not steady"            # teaching: too few steady localizations (count)
+    # the NOK policy's loosen strategy and the loosen command
+    LOOSEN_FIRST = "loosen first"        # the bolt gets its loosen pset next (bolt, pset, note)
+    NOTHING_TO_LOOSEN = "nothing to loosen"  # a loosen of a bolt not tightened (bolt)
+    NO_LOOSEN_PSET = "no loosen pset"    # a loosen of a bolt no loosen_pset applies to (bolt)
+    UNKNOWN_MODEL = "unknown model"      # a model no bolt table of the station has (note)
+    # the calibration check against the reference markers
+    PAIR_UNCHECKED = "pair unchecked"    # a pair not checked yet, or not measurable (pair, note)
+    PAIR_MOVED = "pair moved"            # a reference off beyond the tolerance (pair,
+                                         # reference, distance_mm, limit)
+    REFERENCE_SEEN = "reference seen"    # a reference marker taken for the wrench (reference,
+                                         # distance_mm from its place)
+    NO_REFERENCES = "no references"      # a calibration check without references configured
 
 
 @dataclass(frozen=True)
@@ -68,12 +80,16 @@ class Reason:
     blocking: tuple[str, ...] = ()
     per_pair: tuple[tuple[str, str], ...] = ()   # (pair, the vision's reason) for each pair
     note: str | None = None             # words from elsewhere (the vision, a device)
+    pset: int | None = None             # the pset that goes next (a loosen pset)
+    pair: str | None = None             # a camera pair (the calibration check)
+    reference: str | None = None        # a reference marker (the calibration check)
 
     def key(self) -> tuple[object, ...]:
         """What makes two refusals the same for the operator: the kind and the bolts, not the
         measurements ("stale (812 ms)" and "stale (790 ms)" are one refusal; "B18 is done" and
         "B01 is done" are two)."""
-        return (self.kind, self.bolt, self.other, self.vin, self.blocking, self.right)
+        return (self.kind, self.bolt, self.other, self.vin, self.blocking, self.right,
+                self.pair, self.reference)
 
 
 __all__ = ["Reason", "Why"]

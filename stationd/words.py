@@ -10,12 +10,14 @@ from stationd.reasons import Reason, Why
 from stationd.station.commands import (
     KIND,
     Answer,
+    LoosenBolt,
     ReleaseBolt,
     ReopenVehicle,
     SkipBolt,
     TeachPoint,
     TeachStart,
 )
+from stationd.station.events import PairChecked
 
 
 def _mm(v: float | None) -> str:
@@ -55,6 +57,21 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.LOCKED: lambda r: (f"{r.bolt} locked after {r.count} NOK in a row: a supervisor "
                            "releases it"),
     Why.NOT_LOCKED: lambda r: f"{r.bolt} is not locked",
+    Why.LOOSEN_FIRST: lambda r: (f"{r.bolt}: loosen first (loosen pset {r.pset}), then "
+                                 "tighten" + (f": {r.note}" if r.note else "")),
+    Why.NOTHING_TO_LOOSEN: lambda r: f"{r.bolt} is not tightened: nothing to loosen",
+    Why.NO_LOOSEN_PSET: lambda r: (f"no loosen pset for {r.bolt}: the station's nok section "
+                                   "gives it no loosen_pset"),
+    Why.UNKNOWN_MODEL: lambda r: f"model {r.note} is not in the station's bolt tables",
+    Why.PAIR_UNCHECKED: lambda r: (f"{r.pair} not checked against the references: {r.note}"
+                                   if r.pair else f"not checked against the references: "
+                                   f"{r.note}"),
+    Why.PAIR_MOVED: lambda r: (f"{r.pair} moved: reference {r.reference} off by "
+                               f"{_mm(r.distance_mm)} mm (> {r.limit or 0:g} mm)"),
+    Why.REFERENCE_SEEN: lambda r: (f"reference marker {r.reference} seen, not the wrench "
+                                   f"({_mm(r.distance_mm)} mm from its place)"),
+    Why.NO_REFERENCES: lambda r: ("no calibration check configured: the station file has no "
+                                  "references"),
     Why.TEACHING: lambda r: f"teach mode is on ({r.note})",
     Why.NOT_TEACHING: lambda r: "teach mode is off: start it first",
     Why.NOT_STEADY: lambda r: (
@@ -79,6 +96,14 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
 }
 
 
+def check_words(ev: PairChecked) -> str:
+    """A pair's calibration check in one line: ``pair2 moved: reference R1 off by 3.4 mm``."""
+    if ev.why is not None:
+        return reason_words(ev.why)
+    return (f"{ev.pair} checked: reference {ev.reference} within {_mm(ev.offset_mm)} mm "
+            f"(<= {ev.tolerance_mm or 0:g} mm)")
+
+
 def reason_words(reason: Reason, *, full: bool = False) -> str:
     """One line an operator reads (``full``: each pair's vision reason, for the journal)."""
     if full and reason.kind is Why.NOT_LOCALIZED:
@@ -90,7 +115,7 @@ def command_words(answer: Answer) -> str:
     """What the command was: ``skip B07 of VIN123 ("no access")``."""
     cmd = answer.command
     what = KIND[type(cmd)]
-    if isinstance(cmd, SkipBolt | ReleaseBolt):
+    if isinstance(cmd, SkipBolt | ReleaseBolt | LoosenBolt):
         what += f" {cmd.bolt} of {cmd.vin}"
     elif isinstance(cmd, ReopenVehicle):
         what += f" {cmd.vin}"
@@ -111,4 +136,4 @@ def answer_words(answer: Answer) -> str:
     return f"{head}: refused: {reason_words(answer.reason)}"
 
 
-__all__ = ["answer_words", "command_words", "reason_words"]
+__all__ = ["answer_words", "check_words", "command_words", "reason_words"]

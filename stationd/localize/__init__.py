@@ -16,7 +16,7 @@ The ``localize:`` section of the station file (optional)::
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import cv2
@@ -25,9 +25,11 @@ import numpy as np
 from stationd.geometry.camera import StereoPair
 from stationd.geometry.frames import Transform
 from stationd.geometry.tool import BoltEnd, ToolGeometry, bolt_end, fuse
+from stationd.localize.references import Reference, exclusions
 from stationd.localize.stereo import localize as localize_stereo
 from stationd.reasons import Reason, Why
 from stationd.result import Refusal
+from stationd.vision.detect import Circle
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import VisionParams
 from stationd.yamlio import YamlNode
@@ -65,6 +67,12 @@ class PairSetup:
     marker: MarkerSpec
     tool: ToolGeometry
     keep_crops: bool = False
+    # the reference markers this pair sees (name, vehicle-frame position): the wrench's
+    # search leaves their image regions alone (``exclude``: circles per image, raw pixels),
+    # and a marker localized within ``exclusion_mm`` of one is that reference, never the wrench
+    references: tuple[tuple[str, tuple[float, float, float]], ...] = ()
+    exclude: tuple[tuple[Circle, ...], tuple[Circle, ...]] = ((), ())
+    exclusion_mm: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -97,6 +105,7 @@ class Localization:
     crops: dict[str, np.ndarray] = field(default_factory=dict)
     done_t: float = 0.0
     timings_ms: dict[str, float] = field(default_factory=dict)
+    pairs: tuple[str, ...] = ()   # the pairs whose bolt ends made ``point_mm``
 
 
 def frame_summary(det: Any) -> dict[str, Any]:
@@ -139,7 +148,8 @@ def localize_pair(name: str, setup: PairSetup, left: np.ndarray, right: np.ndarr
     if problem is not None:
         return PairView(Refusal(problem), exposure_t, failed=True), None
     try:
-        res = localize_stereo(setup.calibration, left, right, setup.vision, setup.marker)
+        res = localize_stereo(setup.calibration, left, right, setup.vision, setup.marker,
+                              exclude=setup.exclude)
     except (cv2.error, ValueError, IndexError, np.linalg.LinAlgError) as exc:
         text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         return PairView(Refusal(f"frames not usable: {text}"), exposure_t, failed=True), None
@@ -154,22 +164,56 @@ def localize_pair(name: str, setup: PairSetup, left: np.ndarray, right: np.ndarr
     if setup.to_vehicle is None:
         return PairView(Refusal("pair not registered into the vehicle frame"), exposure_t,
                         sides=sides), res
-    end = bolt_end(setup.to_vehicle.apply(res.point_mm),
-                   setup.to_vehicle.apply_direction(res.normal), setup.tool)
+    centre = setup.to_vehicle.apply(res.point_mm)
+    ref = reference_at(setup, centre)
+    if ref is not None:
+        return PairView(ref, exposure_t, sides=sides), res
+    end = bolt_end(centre, setup.to_vehicle.apply_direction(res.normal), setup.tool)
     return PairView(end, exposure_t, crops, sides=sides), res
 
 
+def reference_at(setup: PairSetup, centre_mm: np.ndarray) -> Refusal | None:
+    """A marker localized at a reference's place is that reference (seen outside its
+    excluded image region: the pair has moved), never the wrench: refused with its name."""
+    for name, pos in setup.references:
+        d = float(np.linalg.norm(centre_mm - np.asarray(pos)))
+        if d <= setup.exclusion_mm:
+            return Refusal(f"reference marker {name} seen ({d:.1f} mm from its place), not "
+                           "the wrench", Reason(Why.REFERENCE_SEEN, reference=name,
+                                                distance_mm=d))
+    return None
+
+
+def with_references(setup: PairSetup, refs: Sequence[Reference], exclusion_mm: float
+                    ) -> PairSetup:
+    """The pair's setup knowing the references it sees: their image regions excluded from
+    the wrench's search and their places refused as a bolt end."""
+    return replace(setup, references=tuple((r.name, r.position_mm) for r in refs),
+                   exclude=exclusions(setup.calibration, setup.to_vehicle, refs,
+                                      setup.marker),
+                   exclusion_mm=exclusion_mm)
+
+
 def fuse_views(names: Sequence[str], views: Sequence[PairView], cfg: LocalizeConfig,
-               done_t: float) -> Localization | None:
+               done_t: float, untrusted: Mapping[str, Reason] | None = None
+               ) -> Localization | None:
     """One localization from the pairs' views (None when every grab failed: nothing to tell
     the core).  Its ``exposure_t`` is the earliest exposure of the frames it used (its age is
     counted from there).  Pairs that see the bolt end are fused (weighted by their expected
     error, refused when one is farther than ``cfg.agreement_mm`` from the fused point); without
     one, the reason is a pair's typed one (a tilted wrench: the operator acts on it) or each
-    pair's own."""
+    pair's own.  A pair in ``untrusted`` (not checked against the references since the
+    start, or moved: :mod:`stationd.station.trust`) is never fused: a bolt end only such a
+    pair sees is refused with that pair's reason."""
+    untrusted = untrusted or {}
     usable = [(n, v) for n, v in zip(names, views, strict=True) if not v.failed]
     if not usable:
         return None
+    distrusted = [untrusted[n] for n, v in usable
+                  if n in untrusted and isinstance(v.end, BoltEnd)]
+    usable = [(n, v if n not in untrusted or not isinstance(v.end, BoltEnd) else
+               replace(v, end=Refusal("pair not trusted", untrusted[n])))
+              for n, v in usable]
     timings = {k: max((v.timings_ms.get(k, 0.0) for _, v in usable), default=0.0)
                for k in ("grab", "vision")}
     ends = [(n, v, v.end) for n, v in usable if isinstance(v.end, BoltEnd)]
@@ -177,7 +221,7 @@ def fuse_views(names: Sequence[str], views: Sequence[PairView], cfg: LocalizeCon
         [(n, v) for n, v, _ in ends] if ends else usable))
     if not ends:
         refused = [(n, v.end) for n, v in usable if isinstance(v.end, Refusal)]
-        typed = [r.why for _, r in refused if r.why is not None]
+        typed = distrusted + [r.why for _, r in refused if r.why is not None]
         why = typed[0] if typed else Reason(Why.NOT_LOCALIZED, per_pair=tuple(
             (n, r.reason) for n, r in refused))
         return Localization(None, reason=why, exposure_t=exposure, done_t=done_t,
@@ -191,7 +235,7 @@ def fuse_views(names: Sequence[str], views: Sequence[PairView], cfg: LocalizeCon
     crops = {k: c for _, v, _ in ends for k, c in v.crops.items()}
     tilt = float(np.mean([e.tilt_deg for _, _, e in ends]))
     return Localization(fused.point_mm, tilt, exposure_t=exposure, crops=crops, done_t=done_t,
-                        timings_ms=timings)
+                        timings_ms=timings, pairs=tuple(n for n, _, _ in ends))
 
 
 __all__ = [
@@ -204,5 +248,7 @@ __all__ = [
     "frame_summary",
     "fuse_views",
     "localize_pair",
+    "reference_at",
     "size_problem",
+    "with_references",
 ]

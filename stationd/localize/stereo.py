@@ -10,6 +10,7 @@ each view is resolved by the other view (paper Eq. 16), never guessed.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -18,7 +19,7 @@ import numpy as np
 
 from stationd.geometry.camera import StereoPair
 from stationd.vision import centre as cm
-from stationd.vision.detect import Detection, detect
+from stationd.vision.detect import Circle, Detection, detect
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import VisionParams
 
@@ -198,16 +199,18 @@ def localize_detections(pair: StereoPair, left: Detection, right: Detection,
 
 def localize(pair: StereoPair, image_left: np.ndarray, image_right: np.ndarray,
              params: VisionParams | None = None, marker: MarkerSpec | None = None,
-             parallel: bool = True) -> StereoResult:
-    """Detect in both images (in parallel: OpenCV releases the GIL) and combine."""
+             parallel: bool = True,
+             exclude: tuple[Sequence[Circle], Sequence[Circle]] = ((), ())) -> StereoResult:
+    """Detect in both images (in parallel: OpenCV releases the GIL) and combine; ``exclude``:
+    each image's circles where a marker is a reference, never the one looked for."""
     t0 = time.perf_counter()
     if parallel:
-        fl = _pool.submit(detect, image_left, pair.left, params, marker)
-        fr = _pool.submit(detect, image_right, pair.right, params, marker)
+        fl = _pool.submit(detect, image_left, pair.left, params, marker, exclude[0])
+        fr = _pool.submit(detect, image_right, pair.right, params, marker, exclude[1])
         left, right = fl.result(), fr.result()
     else:
-        left = detect(image_left, pair.left, params, marker)
-        right = detect(image_right, pair.right, params, marker)
+        left = detect(image_left, pair.left, params, marker, exclude[0])
+        right = detect(image_right, pair.right, params, marker, exclude[1])
     t1 = time.perf_counter()
     res = localize_detections(pair, left, right, params)
     t2 = time.perf_counter()

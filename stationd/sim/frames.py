@@ -49,12 +49,17 @@ class _Buffer:
 class FrameSource:
     """Frames of one simulated camera for a scene whose only moving thing is the marker."""
 
-    def __init__(self, camera: Camera, scene: Scene, seed: int = 0) -> None:
+    def __init__(self, camera: Camera, scene: Scene, seed: int = 0,
+                 fixed: list[tuple[MarkerPose, MarkerSpec]] | None = None) -> None:
         if scene.markers:
-            raise ValueError("the background scene must not contain markers")
+            raise ValueError("the background scene must not contain markers (fixed ones are "
+                             "passed as ``fixed``)")
         self.camera = camera
         self.scene = scene
         self.seed = seed
+        # markers that never move (the reference markers): part of the background, and of
+        # every window rendered over it (a wrench's window beside one keeps it)
+        self.fixed = list(fixed or [])
         self._background: np.ndarray | None = None
         self._pool: list[_Buffer] = []
         self._pool_lock = threading.Lock()
@@ -66,7 +71,8 @@ class FrameSource:
     @property
     def background(self) -> np.ndarray:
         if self._background is None:
-            image = render(self.camera, self.scene, seed=self.seed).image
+            image = render(self.camera, replace(self.scene, markers=list(self.fixed)),
+                           seed=self.seed).image
             image.setflags(write=False)  # handed out shared: a write would be a bug, loudly
             self._background = image
         return self._background
@@ -91,7 +97,7 @@ class FrameSource:
         spec = spec or MarkerSpec()
         if not self._in_view(pose, spec):
             return None
-        scene = replace(self.scene, markers=[(pose, spec)])
+        scene = replace(self.scene, markers=[*self.fixed, (pose, spec)])
         seed = self.seed if seed is None else seed
         win = marker_window(self.camera, pose, spec, margin_px=48.0)
         if win is None:  # partly out of view: render what is visible, the slow way

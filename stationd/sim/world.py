@@ -60,6 +60,15 @@ def wrench_at(point_v: np.ndarray, rng: np.random.Generator, length_mm: float,
     return WrenchPose(point_v - length_mm * axis, rot, np.asarray(point_v, dtype=np.float64))
 
 
+def reference_pose(position_mm: tuple[float, float, float]) -> WrenchPose:
+    """A reference marker fixed at ``position_mm`` (vehicle frame), facing down at the
+    cameras (as the wrench's marker does)."""
+    n = np.array([0.0, 0.0, -1.0])
+    x = np.array([1.0, 0.0, 0.0])
+    c = np.asarray(position_mm, dtype=np.float64)
+    return WrenchPose(c, np.column_stack([x, np.cross(n, x), n]), c)
+
+
 HISTORY_S = 30.0  # how far back poses are kept; an older trigger is stale for any station
 LIVE_PATCHES = 64  # live-rendered (pose, camera) patches kept: 8 cameras x 8 recent poses
 
@@ -77,17 +86,56 @@ class World:
         self._times: list[float] = [-math.inf]
         self._poses: list[WrenchPose | None] = [None]
         base = scene or Scene(texture=0.15, vignetting=0.3, blur_sigma=0.8, noise_sigma=2.0)
+        self._base, self._seed = base, seed
+        # the reference markers fixed in the cell (the station file's ``references:``), and
+        # each pair's true pose against its calibration (:meth:`move_pair`): pair frame as
+        # calibrated -> where the cameras really are, x_true = R x + t
+        refs = getattr(cfg, "references", None)
+        self.references: list[WrenchPose] = [reference_pose(r.position_mm)
+                                             for r in (refs.markers if refs else ())]
+        self._moved: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._sources: dict[tuple[str, str], FrameSource] = {}
         # (id(pose), pair, side) -> (pose, patches rendered ahead)
         self._ahead: dict[tuple[int, str, str], tuple[WrenchPose, list[Patch]]] = {}
         # the same for poses rendered live, oldest first (a wrench held still is rendered
         # once per camera, then composed: ray-casting a 20 MP window costs about a second)
         self._live: dict[tuple[int, str, str], tuple[WrenchPose | None, Patch]] = {}
-        for k, (name, pc) in enumerate(cfg.pairs.items()):
-            cal = pc.calibration
-            self._sources[(name, "left")] = FrameSource(cal.left, base, seed + 2 * k)
-            self._sources[(name, "right")] = FrameSource(cal.right, base, seed + 2 * k + 1)
+        for name in cfg.pairs:
+            self._make_sources(name)
             register_world(name, self._source_for(name), replace=True)
+
+    def _make_sources(self, name: str) -> None:
+        """The pair's two cameras, their backgrounds showing the references where the pair
+        (as it really stands) sees them."""
+        k = list(self.cfg.pairs).index(name)
+        cal = self.cfg.pairs[name].calibration
+        for j, side in enumerate(("left", "right")):
+            fixed = [(mp, self.spec) for mp in (self._camera_pose(name, side, r)
+                                                for r in self.references) if mp is not None]
+            self._sources[(name, side)] = FrameSource(getattr(cal, side), self._base,
+                                                      self._seed + 2 * k + j, fixed)
+
+    def move_pair(self, name: str, rotation_deg: tuple[float, float, float] = (0, 0, 0),
+                  shift_mm: tuple[float, float, float] = (0, 0, 0)) -> None:
+        """Knock pair ``name`` out of place: its cameras turn by ``rotation_deg`` (about the
+        calibrated left camera's x, y, z axes, in that order) and shift by ``shift_mm``, its
+        calibration and registration unchanged (a test's camera bumped between vehicles).
+        Its frames from now on show the world from there; (0, 0, 0) puts it back."""
+        R = np.eye(3)
+        for axis, deg in enumerate(rotation_deg):
+            a = math.radians(deg)
+            c, s_ = math.cos(a), math.sin(a)
+            i, j = [(1, 2), (2, 0), (0, 1)][axis]
+            m = np.eye(3)
+            m[i, i], m[i, j], m[j, i], m[j, j] = c, -s_, s_, c
+            R = m @ R
+        with self._lock:
+            self._moved[name] = (R, np.asarray(shift_mm, dtype=np.float64))
+            for key in [k for k in self._ahead if k[1] == name]:
+                del self._ahead[key]
+            for key in [k for k in self._live if k[1] == name]:
+                del self._live[key]
+        self._make_sources(name)
 
     def close(self) -> None:
         for name in self.cfg.pairs:
@@ -187,6 +235,9 @@ class World:
         c = np.linalg.solve(tv.A, pose.centre_v - tv.t)
         u, _, vt = np.linalg.svd(np.linalg.solve(tv.A, pose.rotation_v))
         rot = u @ vt
+        if pair in self._moved:   # the pair is not where its calibration says: the truth
+            Rm, tm = self._moved[pair]
+            c, rot = Rm @ c + tm, Rm @ rot
         if side == "right":
             c, rot = pc.calibration.R @ c + pc.calibration.T, pc.calibration.R @ rot
         if c[2] <= 0 or float(rot[:, 2] @ c) >= 0:

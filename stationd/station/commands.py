@@ -27,6 +27,7 @@ class Right(enum.Enum):
     RELEASE = "release"
     LOOSEN = "loosen"
     TEACH = "teach"
+    CALIBRATE = "calibrate"
 
 
 @dataclass(frozen=True)
@@ -68,6 +69,18 @@ class ReleaseBolt:
 
 
 @dataclass(frozen=True)
+class LoosenBolt:
+    """Reopen ``bolt`` of ``vin`` for rework by loosening it: the bolt is no longer done and
+    gets its loosen pset (the NOK policy's ``loosen_pset``) the next time the wrench is on
+    it, then its tightening pset again; ``comment`` says why.  Loosening is a right, not a
+    free reverse switch: a tightened joint undone without it would pass as tightened."""
+
+    vin: str
+    bolt: str
+    comment: str = ""
+
+
+@dataclass(frozen=True)
 class TeachStart:
     """Start teach mode for vehicle model ``model``: the normal cycle is off (the tool stays
     off, nothing is sent) while an engineer holds the tool on each bolt in turn."""
@@ -92,16 +105,29 @@ class TeachStop:
     comment: str = ""
 
 
-Command = SkipBolt | ReopenVehicle | ReleaseBolt | TeachStart | TeachPoint | TeachStop
+@dataclass(frozen=True)
+class CheckCalibration:
+    """Check every pair against the reference markers now (the cameras' calibration check):
+    the answer carries each pair's verdict."""
+
+    comment: str = ""
+
+
+Command = (SkipBolt | ReopenVehicle | ReleaseBolt | LoosenBolt | TeachStart | TeachPoint
+           | TeachStop | CheckCalibration)
 
 #: the right each command needs
 RIGHT: dict[type[Command], Right] = {SkipBolt: Right.SKIP, ReopenVehicle: Right.REOPEN,
-                                     ReleaseBolt: Right.RELEASE, TeachStart: Right.TEACH,
-                                     TeachPoint: Right.TEACH, TeachStop: Right.TEACH}
+                                     ReleaseBolt: Right.RELEASE, LoosenBolt: Right.LOOSEN,
+                                     TeachStart: Right.TEACH,
+                                     TeachPoint: Right.TEACH, TeachStop: Right.TEACH,
+                                     CheckCalibration: Right.CALIBRATE}
 #: the name each command has on the wire (HTTP, the command line) and in the records
 KIND: dict[type[Command], str] = {SkipBolt: "skip", ReopenVehicle: "reopen",
-                                  ReleaseBolt: "release", TeachStart: "teach-start",
-                                  TeachPoint: "teach-point", TeachStop: "teach-stop"}
+                                  ReleaseBolt: "release", LoosenBolt: "loosen",
+                                  TeachStart: "teach-start",
+                                  TeachPoint: "teach-point", TeachStop: "teach-stop",
+                                  CheckCalibration: "calibration-check"}
 
 
 def skip_note(user: str, comment: str) -> str:
@@ -124,5 +150,6 @@ class Answer:
         return self.reason is None
 
 
-__all__ = ["KIND", "RIGHT", "Answer", "Command", "Issuer", "ReleaseBolt", "ReopenVehicle",
-           "Right", "SkipBolt", "TeachPoint", "TeachStart", "TeachStop", "skip_note"]
+__all__ = ["KIND", "RIGHT", "Answer", "CheckCalibration", "Command", "Issuer", "LoosenBolt",
+           "ReleaseBolt", "ReopenVehicle", "Right", "SkipBolt", "TeachPoint", "TeachStart",
+           "TeachStop", "skip_note"]

@@ -19,25 +19,31 @@ The safety rules, each enforced in exactly one place below:
 - every result is recorded once, to the bolt the tool was enabled for (also when it arrives
   within ``late_result_s`` after the tool went off: the trigger was pulled as the wrench left);
   any other result is acknowledged unrecorded (the controller keeps its own record);
-- faults are kept per device; the station leaves FAULT when every faulty device is back.
+- faults are kept per device; the station leaves FAULT when every faulty device is back;
+- with reference markers configured, a bolt end is used only when every pair that made it is
+  trusted: checked against the references since the start and since the vehicle arrived, and
+  not moved (:mod:`stationd.station.trust`).
 """
 
 from __future__ import annotations
 
 import enum
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
-from db.bolts import Parameters
+from db.bolts import Parameters, Window
+from db.kinds import LOOSENING, NOK, TIGHTENING, TO_LOOSEN
 from stationd.reasons import Reason, Why
 from stationd.station.commands import (
     RIGHT,
     Answer,
+    CheckCalibration,
     Command,
     Issuer,
+    LoosenBolt,
     ReleaseBolt,
     ReopenVehicle,
     SkipBolt,
@@ -51,10 +57,12 @@ from stationd.station.events import (
     BoltReleased,
     BoltSelected,
     BoltSkipped,
+    BoltToLoosen,
     BoltView,
     DeviceHealth,
     Localized,
     Notice,
+    PairChecked,
     ParamsRefusedEvent,
     ParamsSent,
     Refused,
@@ -69,6 +77,8 @@ from stationd.station.events import (
 )
 from stationd.station.matching import BoltMatcher, BoltRule, Match, MatchParams
 from stationd.station.policy import NokPolicy
+from stationd.station.trust import MeasureReferences, PairTrust, RecordCheck, ReferencesChecked
+from stationd.station.trust import answer as check_answer
 
 #: a result this long after the tool went off is not the last bolt's late one: the tool cannot
 #: tighten while disabled, and a controller reports within milliseconds
@@ -96,6 +106,11 @@ TEACH_FRAMES, TEACH_TRIES = 10, 60
 NOK_SKIPPED = "NOK, skipped by the NOK policy"
 #: a taught bolt end whose localizations spread farther than this was not held still, mm
 TEACH_STEADY_MM = 2.0
+#: the targets sent with a loosen pset: none of the station's own (a loosen pset is a program
+#: on the controller; a register-driven controller takes 0 as "the pset's own")
+LOOSEN_TARGETS = Window(0.0, 0.0, 0.0)
+#: why a bolt to loosen is not tightened when no loosen pset applies to it (a reload removed it)
+NO_LOOSEN_PSET = "to be loosened, and the NOK policy gives it no loosen_pset"
 
 
 # -- inputs -------------------------------------------------------------------------------------
@@ -135,6 +150,7 @@ class LocalizedIn(Input):
     reason: Reason | None = None
     tilt_deg: float = 0.0
     evidence: Any = None
+    pairs: tuple[str, ...] = ()   # the pairs whose views made the point (the check's rule)
 
 
 @dataclass(frozen=True)
@@ -264,6 +280,13 @@ class CommandIn(Input):
 
 
 @dataclass(frozen=True)
+class ModelsKnown(Input):
+    """The vehicle models of the station's bolt tables (what ``teach start`` may name)."""
+
+    models: frozenset[str]
+
+
+@dataclass(frozen=True)
 class CommandDone(Input):
     """The shell carried out a command's :class:`RecordCommand`: recorded (``reason`` None)
     or refused by the database (an unknown VIN, a vehicle not closed, a failed write)."""
@@ -274,7 +297,8 @@ class CommandDone(Input):
 
 Event = (Started | LiftRead | LocalizedIn | ParamsAcked | ParamsRefused | ResultIn
          | DeviceFault | DeviceBack | VehicleLoaded | VehicleRejected | VinSent | Tick
-         | CommandIn | CommandDone | ToolOn | Written | VehicleEnded)
+         | CommandIn | CommandDone | ToolOn | Written | VehicleEnded | ModelsKnown
+         | ReferencesChecked)
 
 
 # -- actions ------------------------------------------------------------------------------------
@@ -294,6 +318,7 @@ class Selection:
     evidence: Any = None
     vin: str = ""
     parameters_id: int | None = None
+    loosen: bool = False    # ``pset`` is the bolt's loosen pset: a loosening was asked for
 
 
 @dataclass(frozen=True)
@@ -309,11 +334,14 @@ class Owed:
 @dataclass(frozen=True)
 class SendParams:
     """Send ``parameters`` (the bolt's, as the database gave them with the vehicle) for the
-    selected bolt: the shell keeps no bolt table of its own."""
+    selected bolt: the shell keeps no bolt table of its own.  ``loosen``: they are the bolt's
+    loosen pset with :data:`LOOSEN_TARGETS` (the controller's program loosens), sent the same
+    way."""
 
     bolt: str
     selection: Selection
     parameters: Parameters | None = None
+    loosen: bool = False
 
 
 @dataclass(frozen=True)
@@ -361,6 +389,7 @@ class Record:
     result: Any
     selection: Selection | None
     late: bool = False
+    kind: str = TIGHTENING     # or LOOSENING (:func:`rundown_kind`)
 
 
 @dataclass(frozen=True)
@@ -404,7 +433,8 @@ class Reply:
 
 
 Action = (SendParams | EnableTool | DisableTool | SendVin | LoadVehicle | CloseVehicle | Record
-          | Acknowledge | StoreUnattributed | Publish | RecordCommand | Reply)
+          | Acknowledge | StoreUnattributed | Publish | RecordCommand | Reply | MeasureReferences
+          | RecordCheck)
 
 
 @dataclass
@@ -465,6 +495,15 @@ class StationCore:
     _noks: dict[str, int] = field(default_factory=dict, repr=False)   # NOKs in a row per bolt
     _teach: _Teach | None = field(default=None, repr=False)
     _closed_vin: str | None = field(default=None, repr=False)   # a closed VIN at height
+    #: the models of the station's bolt tables (None: not told, teach start not checked)
+    models: frozenset[str] | None = None
+    # bolts that get their loosen pset next (a NOK under ``loosen``, a loosen command), and
+    # those whose last rundown is a NOK tightening (a loosen command may undo them)
+    _loosen: set[str] = field(default_factory=set, repr=False)
+    _nok_last: set[str] = field(default_factory=set, repr=False)
+    #: the calibration check's state (None: no reference markers configured, every pair
+    #: trusted as before): :mod:`stationd.station.trust`
+    trust: PairTrust | None = None
 
     # -- the one entry point ---------------------------------------------------------------
     def feed(self, ev: Event) -> list[Action]:
@@ -501,7 +540,8 @@ class StationCore:
         self._to(State.FAULT if self.faults else State.WAITING_VEHICLE,
                  self._fault_reason() if self.faults else "waiting for the lift")
         # the last station may have been killed with the tool on: off until a bolt is confirmed
-        return _disable("station started: the tool stays off until a bolt is confirmed", t=ev.t)
+        return [*_disable("station started: the tool stays off until a bolt is confirmed",
+                          t=ev.t), *self._check_at_start(ev.t)]
 
     def _on_LiftRead(self, ev: LiftRead) -> list[Action]:  # noqa: N802
         acts: list[Action] = []
@@ -555,10 +595,6 @@ class StationCore:
         return None
 
     def _on_VehicleLoaded(self, ev: VehicleLoaded) -> list[Action]:  # noqa: N802
-        opened = VehicleOpened(ev.vin, ev.model, tuple(
-            BoltView(k, *b.position, pset=b.pset, order=b.order, batch=b.batch,
-                     status=ev.status.get(k) or ("skipped" if k in ev.skipped else "pending"))
-            for k, b in ev.bolts.items()), rework=ev.rework, t=ev.t)
         self._loading = False
         self.vin, self.model = ev.vin, ev.model
         self._specs = dict(ev.bolts)
@@ -574,9 +610,34 @@ class StationCore:
                 self.matcher.locked[k] = n
             elif rule.strategy == "skip":
                 self.matcher.skipped.setdefault(k, NOK_SKIPPED)
+        self._loosen_back(ev)
+        opened = VehicleOpened(ev.vin, ev.model, tuple(
+            BoltView(k, *b.position, pset=b.pset, order=b.order, batch=b.batch,
+                     status=TO_LOOSEN if k in self._loosen else ev.status.get(k)
+                     or ("skipped" if k in ev.skipped else "pending"))
+            for k, b in ev.bolts.items()), rework=ev.rework, t=ev.t)
         if self.state is State.WAITING_VEHICLE and self._lift is not None and self._lift.ready:
             self._to(State.TRACKING, "tracking the wrench")
-        return [Publish(opened)]
+        return [Publish(opened), *self._check_on_arrival(ev.t, ev.vin)]
+
+    def _loosen_back(self, ev: VehicleLoaded) -> None:
+        """The loosen strategy's state comes back with the vehicle: a bolt whose last rundown
+        is a NOK under ``loosen`` (also a NOK loosening), or with a loosen command since its
+        last rundown, gets its loosen pset next; one that no loosen pset applies to any more
+        is skipped (its tightening pset would hit a tightened joint again)."""
+        assert self.matcher is not None  # noqa: S101 - loaded just now
+        self._loosen, self._nok_last = set(), set()
+        for k, status in ev.status.items():
+            if k not in ev.bolts:
+                continue
+            rule = self.nok.rule(k, ev.bolts[k].pset)
+            if status == NOK:
+                self._nok_last.add(k)
+            if status == TO_LOOSEN or (status == NOK and rule.strategy == "loosen"):
+                if rule.loosen_pset is None:
+                    self.matcher.skipped.setdefault(k, NO_LOOSEN_PSET)
+                else:
+                    self._loosen.add(k)
 
     def _on_VehicleRejected(self, ev: VehicleRejected) -> list[Action]:  # noqa: N802
         if ev.closed and self.rework and ev.vin is not None and self._lift is not None:
@@ -592,6 +653,7 @@ class StationCore:
         return self._fault(ev.t, VEHICLE, "rejected", why)
 
     def _on_LocalizedIn(self, ev: LocalizedIn) -> list[Action]:  # noqa: N802
+        ev = self._trusted(ev)
         if self._teach is not None:
             return self._taught(ev, self._teach)
         if self.state not in LOCALIZING or self.matcher is None:
@@ -675,15 +737,23 @@ class StationCore:
             self.matcher.reset()   # never reached: TRACKING implies all of these; belt and braces
             return []
         spec = self._specs[m.bolt]
-        sel = Selection(m.bolt, spec.pset, ev.point_mm, ev.tilt_deg, float(m.distance_mm or 0.0),
-                        ev.exposure_t, ev.t, ev.evidence, self.vin, spec.parameters_id)
+        pset, params, loosen = spec.pset, spec.parameters, m.bolt in self._loosen
+        if loosen:   # the loosen strategy: its loosen pset, never the tightening one, first
+            pset = self.nok.rule(m.bolt, spec.pset).loosen_pset
+            if pset is None:    # never: a bolt is to loosen only with a loosen pset
+                self.matcher.reset()
+                return []
+            params = Parameters(pset, LOOSEN_TARGETS)
+        sel = Selection(m.bolt, pset, ev.point_mm, ev.tilt_deg, float(m.distance_mm or 0.0),
+                        ev.exposure_t, ev.t, ev.evidence, self.vin, spec.parameters_id, loosen)
         self.bolt, self._selection, self._acked_at, self._away = m.bolt, sel, None, 0
         self._last_refusal = None
         self.matcher.reset()
-        self._to(State.BOLT_SELECTED, f"bolt {m.bolt} selected")
-        return [Publish(BoltSelected(m.bolt, spec.pset, ev.point_mm, sel.distance_mm,
-                                     ev.tilt_deg, t=ev.t)),
-                SendParams(m.bolt, sel, spec.parameters)]
+        self._to(State.BOLT_SELECTED, f"bolt {m.bolt} selected" + (
+            f": loosen first (pset {pset})" if loosen else ""))
+        return [Publish(BoltSelected(m.bolt, pset, ev.point_mm, sel.distance_mm,
+                                     ev.tilt_deg, loosen, t=ev.t)),
+                SendParams(m.bolt, sel, params, loosen)]
 
     def _on_ParamsAcked(self, ev: ParamsAcked) -> list[Action]:  # noqa: N802
         acts: list[Action] = [Publish(ParamsSent(ev.bolt, ev.pset, dict(ev.latency_ms),
@@ -705,8 +775,8 @@ class StationCore:
         return [Publish(ResultRecorded(
             a.vin, a.bolt, bool(r.ok), float(r.torque_nm), float(r.angle_deg),
             int(r.tightening_id), int(r.pset), float(r.torque_min_nm), float(r.torque_max_nm),
-            float(r.angle_min_deg), float(r.angle_max_deg), a.late, tuple(ev.images), t=ev.t)),
-                Acknowledge(r)]
+            float(r.angle_min_deg), float(r.angle_max_deg), a.late, tuple(ev.images), a.kind,
+            t=ev.t)), Acknowledge(r)]
 
     def _on_VehicleEnded(self, ev: VehicleEnded) -> list[Action]:  # noqa: N802
         return [Publish(VehicleClosed(ev.vin, ev.missing, ev.nok, t=ev.t))]
@@ -746,27 +816,41 @@ class StationCore:
         the vehicle it was enabled on, also after a reload or restart)."""
         r = ev.result
         late = not self.tool_on
+        kind = rundown_kind(r, en.loosen)
         acts: list[Action] = []
         if self.tool_on:
-            acts += self._tool_off(ev.t, f"bolt {en.bolt} tightened")
-        acts.append(Record(en.vin, en.bolt, r, en, late))
+            acts += self._tool_off(ev.t, f"bolt {en.bolt} " + (
+                "tightened" if kind == TIGHTENING else "loosened"))
+        acts.append(Record(en.vin, en.bolt, r, en, late, kind))
         if late:
             acts.append(Publish(Notice(f"result for {en.bolt} outside a tightening: "
                                        "recorded, not matched", t=ev.t)))
         self._recorded.add(int(r.tightening_id))
         self._enabled = None
         if self.matcher is not None and self.vin == en.vin:
-            if bool(r.ok):
+            if kind == LOOSENING:
+                acts += self._after_loosening(ev.t, en, bool(r.ok))
+            elif bool(r.ok):
+                if en.loosen:
+                    acts.append(Publish(Notice(
+                        f"{en.bolt}: the loosen pset {en.pset} reported a tightening: the "
+                        "bolt counts as tightened; check that pset's program", "warning",
+                        t=ev.t)))
                 self.matcher.mark_done(en.bolt)
                 self._noks.pop(en.bolt, None)
+                self._loosen.discard(en.bolt)
+                self._nok_last.discard(en.bolt)
             else:
+                self._nok_last.add(en.bolt)
                 acts += self._after_nok(ev.t, en)
             self.matcher.reset()     # a new selection: a new streak, from new frames
         self._not_before = max(self._not_before, ev.t)
         if self.bolt == en.bolt:
             self.bolt, self._selection, self._acked_at, self._away = None, None, None, 0
             if self.state in ON_A_BOLT:
-                self._to(State.TRACKING, f"bolt {en.bolt} {'OK' if r.ok else 'NOK'}; tracking")
+                what = "loosening " if kind == LOOSENING else ""
+                self._to(State.TRACKING,
+                         f"bolt {en.bolt} {what}{'OK' if r.ok else 'NOK'}; tracking")
         return acts
 
     def _on_CommandIn(self, ev: CommandIn) -> list[Action]:  # noqa: N802
@@ -782,6 +866,8 @@ class StationCore:
         right = RIGHT[type(cmd)]
         if right not in who.rights:
             return Reason(Why.NO_RIGHT, right=right.value)
+        if isinstance(cmd, CheckCalibration):
+            return None if self.trust is not None else Reason(Why.NO_REFERENCES)
         if isinstance(cmd, TeachStart | TeachPoint | TeachStop):
             return self._teach_refusal(cmd)
         if self._teach is not None:
@@ -798,6 +884,8 @@ class StationCore:
             return Reason(Why.OTHER_VEHICLE, vin=cmd.vin)
         if cmd.bolt not in self.matcher.bolts:
             return Reason(Why.UNKNOWN_BOLT, bolt=cmd.bolt, vin=cmd.vin)
+        if isinstance(cmd, LoosenBolt):
+            return self._loosen_refusal(cmd)
         if isinstance(cmd, ReleaseBolt):
             return None if cmd.bolt in self.matcher.locked else \
                 Reason(Why.NOT_LOCKED, bolt=cmd.bolt)
@@ -809,11 +897,34 @@ class StationCore:
             return Reason(Why.TOOL_ON_BOLT, bolt=cmd.bolt)
         return None
 
+    def _loosen_refusal(self, cmd: LoosenBolt) -> Reason | None:
+        """A loosen is for a bolt tightened (OK, or NOK last) that a loosen pset applies to,
+        not locked, skipped, to be loosened already, or being tightened now."""
+        m = self.matcher
+        assert m is not None  # noqa: S101 - checked by the caller
+        b = cmd.bolt
+        loosen_pset = self.nok.rule(b, self._specs[b].pset).loosen_pset
+        if loosen_pset is None:
+            return Reason(Why.NO_LOOSEN_PSET, bolt=b)
+        if b in self._loosen:
+            return Reason(Why.LOOSEN_FIRST, bolt=b, pset=loosen_pset)
+        if b in m.locked:
+            return Reason(Why.LOCKED, bolt=b, count=m.locked[b])
+        if b in m.skipped:
+            return Reason(Why.SKIPPED, bolt=b, note=m.skipped[b])
+        if self.tool_on and self.bolt == b:
+            return Reason(Why.TOOL_ON_BOLT, bolt=b)
+        if b not in m.done and b not in self._nok_last:
+            return Reason(Why.NOTHING_TO_LOOSEN, bolt=b)
+        return None
+
     def _teach_refusal(self, cmd: TeachStart | TeachPoint | TeachStop) -> Reason | None:
         t = self._teach
         if isinstance(cmd, TeachStart):
             if t is not None:
                 return Reason(Why.TEACHING, note=t.reason())
+            if self.models is not None and cmd.model not in self.models:
+                return Reason(Why.UNKNOWN_MODEL, note=cmd.model)
             if self.tool_on:
                 return Reason(Why.TOOL_ON_BOLT, bolt=self.bolt)
             return None
@@ -851,6 +962,8 @@ class StationCore:
         if ev.reason is not None:
             return [Reply(answer)]
         cmd = c.command
+        if isinstance(cmd, CheckCalibration):
+            return self._check_asked(ev.t, c)
         if isinstance(cmd, TeachStart | TeachPoint | TeachStop):
             return self._teach_done(ev.t, c)
         acts: list[Action] = []
@@ -861,6 +974,10 @@ class StationCore:
                     and self.matcher.locked.pop(cmd.bolt, None) is not None:
                 self._noks.pop(cmd.bolt, None)
                 acts.append(Publish(BoltReleased(cmd.bolt, c.issuer.user, t=ev.t)))
+                if cmd.bolt in self._loosen:   # released, still to be loosened first
+                    acts.append(self._to_loosen(ev.t, cmd.bolt))
+        elif isinstance(cmd, LoosenBolt):
+            acts += self._loosen_ordered(ev.t, cmd, c.issuer)
         elif cmd.vin == self._closed_vin and VEHICLE in self.faults:
             # the closed vehicle at height, reopened: its fault clears and the next lift read
             # loads it (open now)
@@ -880,17 +997,63 @@ class StationCore:
             acts += self._drop(t, State.TRACKING, f"bolt {cmd.bolt} {why}")
         return acts
 
+    def _loosen_ordered(self, t: float, cmd: LoosenBolt, who: Issuer) -> list[Action]:
+        """A recorded loosen command: the bolt is no longer done and gets its loosen pset
+        next; a selection of it ends (its tightening pset may have been sent)."""
+        if self.matcher is None or self.vin != cmd.vin or cmd.bolt not in self.matcher.bolts:
+            return []   # the vehicle left while the command was being recorded
+        self.matcher.done.discard(cmd.bolt)
+        self._loosen.add(cmd.bolt)
+        acts = [self._to_loosen(t, cmd.bolt, who.user, skip_note(who.user, cmd.comment))]
+        if self.bolt == cmd.bolt:
+            acts += self._drop(t, State.TRACKING, f"bolt {cmd.bolt}: loosen first")
+        return acts
+
+    def _to_loosen(self, t: float, bolt: str, user: str | None = None,
+                   note: str | None = None) -> Action:
+        pset = self.nok.rule(bolt, self._specs[bolt].pset).loosen_pset
+        return Publish(BoltToLoosen(bolt, Reason(Why.LOOSEN_FIRST, bolt=bolt, pset=pset,
+                                                 note=note), user, t=t))
+
+    def _after_loosening(self, t: float, en: Selection, ok: bool) -> list[Action]:
+        """A loosening is never the bolt done (it undoes a tightening).  OK: the bolt's
+        tightening pset goes next; NOK: it counts as a NOK of the bolt (the joint did not come
+        loose: ``max_nok`` of them lock it) and a bolt to loosen stays so."""
+        assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
+        self.matcher.done.discard(en.bolt)
+        self._nok_last.discard(en.bolt)
+        if ok:
+            self._loosen.discard(en.bolt)
+            return [Publish(Notice(f"{en.bolt} loosened: its tightening pset goes next",
+                                   t=t))]
+        n = self._noks[en.bolt] = self._noks.get(en.bolt, 0) + 1
+        rule = self.nok.rule(en.bolt, self._specs[en.bolt].pset)
+        if n >= rule.max_nok:
+            return self._lock(t, en.bolt, n)
+        return [Publish(Notice(f"{en.bolt}: loosening NOK ({n} NOK in a row)", "warning",
+                               t=t))]
+
+    def _lock(self, t: float, bolt: str, n: int) -> list[Action]:
+        assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
+        self.matcher.locked[bolt] = n
+        return [Publish(BoltLocked(bolt, n, t=t)),
+                Publish(Notice(f"{bolt} locked after {n} NOK in a row: a supervisor "
+                               "releases it", "warning", t=t))]
+
     def _after_nok(self, t: float, en: Selection) -> list[Action]:
-        """The NOK policy: the bolt locks after ``max_nok`` in a row; with ``skip`` it is
-        marked NOK and skipped for this vehicle; with ``repeat`` it is open again."""
+        """The NOK policy: the bolt locks after ``max_nok`` in a row; with ``loosen`` it gets
+        its loosen pset next (also once released); with ``skip`` it is marked NOK and skipped
+        for this vehicle; with ``repeat`` it is open again."""
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
         n = self._noks[en.bolt] = self._noks.get(en.bolt, 0) + 1
-        rule = self.nok.rule(en.bolt, en.pset)
+        rule = self.nok.rule(en.bolt, self._specs[en.bolt].pset
+                             if en.bolt in self._specs else en.pset)
+        if rule.strategy == "loosen" and rule.loosen_pset is not None:
+            self._loosen.add(en.bolt)
         if n >= rule.max_nok:
-            self.matcher.locked[en.bolt] = n
-            return [Publish(BoltLocked(en.bolt, n, t=t)),
-                    Publish(Notice(f"{en.bolt} locked after {n} NOK in a row: a supervisor "
-                                   "releases it", "warning", t=t))]
+            return self._lock(t, en.bolt, n)
+        if en.bolt in self._loosen:
+            return [self._to_loosen(t, en.bolt)]
         if rule.strategy == "skip":
             why = NOK_SKIPPED
             self.matcher.skipped[en.bolt] = why
@@ -919,6 +1082,10 @@ class StationCore:
                              t=ev.t)
         return acts + self._back(ev.t, ev.device)
 
+    def _on_ModelsKnown(self, ev: ModelsKnown) -> list[Action]:  # noqa: N802
+        self.models = frozenset(ev.models)
+        return []
+
     def _on_VinSent(self, ev: VinSent) -> list[Action]:  # noqa: N802
         self._vin_pending = False
         if ev.vin == self.vin:
@@ -928,7 +1095,77 @@ class StationCore:
     def _on_Tick(self, ev: Tick) -> list[Action]:  # noqa: N802
         if self._off_at is not None and ev.t - self._off_at >= self.late_result_s:
             self._enabled, self._off_at = None, None
+        return self._check_due(ev.t)
+
+    # -- the calibration check (the rules: stationd.station.trust) -------------------------
+    def _measure(self, t: float, why: str, request: int | None = None) -> list[Action]:
+        assert self.trust is not None  # noqa: S101 - only called with references
+        self.trust.asked(t)
+        at_height = self._lift is not None and self._lift.at_height
+        return [MeasureReferences(self.trust.pairs, at_height, why, request)]
+
+    def _check_at_start(self, t: float) -> list[Action]:
+        """No pair is trusted until checked: a check at once (without references: said)."""
+        if self.trust is None:
+            return [Publish(Notice("no calibration check configured (no references in the "
+                                   "station file): every pair is trusted", t=t))]
+        return self._measure(t, "station started")
+
+    def _check_on_arrival(self, t: float, vin: str) -> list[Action]:
+        """A vehicle arrives: its pairs are trusted again only once checked for it."""
+        if self.trust is None:
+            return []
+        self.trust.distrust(f"checking for vehicle {vin}")
+        return self._measure(t, f"vehicle {vin} arrived")
+
+    def _check_due(self, t: float) -> list[Action]:
+        if self.trust is None or self.state is State.STARTING:
+            return []
+        idle = not self.tool_on and self.state not in ON_A_BOLT and self._teach is None
+        if self.trust.due(t, idle=idle, vehicle=self.vin is not None):
+            return self._measure(t, "periodic check")
         return []
+
+    def _check_asked(self, t: float, c: CommandIn) -> list[Action]:
+        """A person asked for a check (recorded): measured now, answered with the verdicts."""
+        assert self.trust is not None  # noqa: S101 - refused without references
+        self.trust.requests.append(c.request)
+        self._commands[c.request] = c   # kept for the answer
+        return self._measure(t, f"asked by {c.issuer.user}", c.request)
+
+    def _trusted(self, ev: LocalizedIn) -> LocalizedIn:
+        """A bolt end made by a pair that is not trusted is a refusal with that pair's reason
+        (the localization leaves such pairs out already: this is the rule itself)."""
+        if self.trust is None or ev.point_mm is None:
+            return ev
+        why = self.trust.refusal(ev.pairs)
+        return ev if why is None else replace(ev, point_mm=None, reason=why)
+
+    def _on_ReferencesChecked(self, ev: ReferencesChecked) -> list[Action]:  # noqa: N802
+        if self.trust is None:
+            return []
+        acts: list[Action] = []
+        for check, before, after in self.trust.answered(ev.t, ev.checks):
+            acts.append(Publish(PairChecked(
+                check.pair, check.verdict.value, check.reference, check.offset_mm,
+                check.tolerance_mm, {m.name: m.offset_mm for m in check.measures},
+                after is None, after, t=ev.t)))
+            acts.append(RecordCheck(check, ev.t))
+            if after is not None and self.bolt is not None and self.tool_on \
+                    and before is None:
+                # the tool stays on only on a confirmed bolt: the next localization decides,
+                # and one made by this pair is refused now
+                acts.append(Publish(Notice(f"{check.pair} no longer trusted while bolt "
+                                           f"{self.bolt} is selected", "warning", t=ev.t)))
+        waiting = [ev.request] if ev.request is not None else []
+        for request in waiting:
+            if request in self.trust.requests:
+                self.trust.requests.remove(request)
+            c = self._commands.pop(request, None)
+            if c is not None:
+                acts.append(Reply(Answer(request, c.command, c.issuer,
+                                         result=check_answer(ev.checks))))
+        return acts
 
     # -- rules shared by the handlers ------------------------------------------------------
     def _vin_due(self) -> list[Action]:
@@ -985,6 +1222,7 @@ class StationCore:
 
     def _forget_vehicle(self) -> None:
         self.vin, self.model, self.matcher, self._specs = None, None, None, {}
+        self._loosen, self._nok_last = set(), set()
         self._loading, self._enabled, self._off_at = False, None, None
         self._vin_for, self._vin_pending, self._last_refusal = None, False, None
 
@@ -996,6 +1234,19 @@ class StationCore:
         elif self._teach is not None:
             state, reason = State.TEACHING, self._teach.reason()
         self.state, self.reason = state, reason
+
+
+def rundown_kind(result: Any, sent_loosen: bool) -> str:
+    """A result's kind: its own type where its revision carries it (Open Protocol MID 0061
+    revision 3+, parameter 49: 1 tightening, 2 loosening), else what the station sent (a
+    loosen pset or the tightening one).  The type wins: a controller reversed by hand reports
+    the loosening it made, whatever was sent."""
+    t = getattr(result, "result_type", None)
+    if t == 2:
+        return LOOSENING
+    if t == 1:
+        return TIGHTENING
+    return LOOSENING if sent_loosen else TIGHTENING
 
 
 def _disable(reason: str, bolt: str | None = None, why: Reason | None = None, *,

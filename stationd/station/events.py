@@ -160,11 +160,15 @@ class Refused(StationEvent):
 
 @dataclass(frozen=True)
 class BoltSelected(StationEvent):
+    """The wrench is taken on ``bolt``: ``pset`` goes to the controller (``loosen``: the
+    bolt's loosen pset, a loosening comes first)."""
+
     bolt: str
     pset: int | None
     point_mm: tuple[float, float, float]
     distance_mm: float
     tilt_deg: float
+    loosen: bool = False
 
 
 @dataclass(frozen=True)
@@ -213,11 +217,38 @@ class BoltLocked(StationEvent):
 
 
 @dataclass(frozen=True)
+class BoltToLoosen(StationEvent):
+    """``bolt`` gets its loosen pset next (``reason``: a LOOSEN_FIRST with the pset, after a
+    NOK under the loosen strategy or a loosen command of ``user``); its tightening pset only
+    after a loosening result."""
+
+    bolt: str
+    reason: Reason
+    user: str | None = None
+
+
+@dataclass(frozen=True)
 class BoltReleased(StationEvent):
     """A locked bolt released by ``user``: it may be tightened again."""
 
     bolt: str
     user: str
+
+
+@dataclass(frozen=True)
+class PairChecked(StationEvent):
+    """A pair checked against the reference markers: its verdict (ok, moved, not checked),
+    the worst reference and its offset (mm) against the tolerance, each reference's offset
+    (None: not measured), and whether the pair is trusted now (``why`` when not)."""
+
+    pair: str
+    verdict: str
+    reference: str | None = None
+    offset_mm: float | None = None
+    tolerance_mm: float | None = None
+    offsets_mm: dict[str, float | None] = field(default_factory=dict)
+    trusted: bool = False
+    why: Reason | None = None
 
 
 # -- results ------------------------------------------------------------------------------------
@@ -238,6 +269,7 @@ class ResultRecorded(StationEvent):
     angle_max: float | None = None
     late: bool = False
     images: tuple[str, ...] = ()
+    kind: str = "tightening"         # or "loosening" (db.kinds): never the bolt done
 
 
 @dataclass(frozen=True)

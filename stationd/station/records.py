@@ -22,16 +22,33 @@ from typing import Any
 
 import cv2
 
-from db.curves import link_curves
-from db.errors import DbError
+from db.checks import record_check
+from db.curves import link_curves, store_curve
+from db.errors import DataError, DbError, NotFoundError, VehicleClosedError
+from db.report import MISSING
 from db.repository import Repository
 from drivers.errors import DeviceError, DriverError
 from drivers.keeper import one_line
+from drivers.wrench.op_curve import Curve
 from stationd.boltfile import import_bolts
 from stationd.config import StationConfig
 from stationd.errors import StationError
 from stationd.localize import Localization
-from stationd.station.core import Owed, Record, Selection, StoreUnattributed
+from stationd.reasons import Reason, Why
+from stationd.station.commands import KIND, ReopenVehicle, TeachStart, skip_note
+from stationd.station.core import (
+    BoltSpec,
+    LoadVehicle,
+    Owed,
+    Record,
+    RecordCommand,
+    Selection,
+    StoreUnattributed,
+    VehicleEnded,
+    VehicleLoaded,
+    VehicleRejected,
+)
+from stationd.station.trust import RecordCheck, summary
 
 log = logging.getLogger("stationd")
 #: what a device, the database or the station's own data raise: a fault, never an exit
@@ -104,7 +121,7 @@ class Records:
         j = owed.selection
         sel = Selection(owed.bolt, owed.pset, xyz(j["point_mm"]), float(j["tilt_deg"]),
                         float(j["distance_mm"]), float(j["exposure_t"]), float(j["decided_t"]),
-                        None, owed.vin, owed.parameters_id)
+                        None, owed.vin, owed.parameters_id, bool(j.get("loosen", False)))
         self._enable, self._enable_off = (sel, owed.id), owed.off_at is not None
         log.info("the tool was enabled for bolt %s of %s (pset %s) when the last station "
                  "stopped: its result within %.0f s is recorded to it", owed.bolt, owed.vin,
@@ -160,7 +177,8 @@ class Records:
             parameters_id=u.parameters_id,
             tightening_id=int(r.tightening_id),
             sent_at=datetime.fromtimestamp(sel.decided_t, UTC) if sel else None,
-            result_at=u.result_at, images=u.images, enable_id=u.enable_id)
+            result_at=u.result_at, images=u.images, enable_id=u.enable_id, kind=a.kind,
+            params_sent=_loosen_sent(sel.pset) if sel is not None and sel.loosen else None)
         # the tightening's curves (stored as they came, usually just before) go with it; the
         # record stands whatever happens here (reading finds them by tightening id anyway)
         try:
@@ -197,6 +215,90 @@ class Records:
             tightening_id=int(r.tightening_id), pset=int(r.pset), ok=bool(r.ok),
             torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
             result_at=_aware(r.timestamp), reason=a.reason)
+
+    # -- vehicles, commands, gaps and curves ---------------------------------------------------
+    def load_vehicle(self, a: LoadVehicle) -> VehicleLoaded | VehicleRejected:
+        """The vehicle at height, from the database: loaded with its bolts, what is done,
+        skipped and NOK so far (a rework resumed after a reload is still one), or rejected
+        (unknown model, a closed VIN, another model's VIN)."""
+        repo = self._repo()
+        model = repo.model_for_code(a.model_code)
+        if model is None:
+            return VehicleRejected(time.time(), a.vin,
+                                   f"unknown vehicle model code {a.model_code}")
+        try:
+            started = repo.start_vehicle(a.vin, model, reopen=a.reopen)
+        except DataError as exc:   # a closed VIN back, another model's VIN
+            return VehicleRejected(time.time(), a.vin, one_line(exc),
+                                   closed=isinstance(exc, VehicleClosedError))
+        infos = repo.bolts_for_model(model)
+        report = repo.vehicle_report(a.vin)
+        since = started.reopened_at or started.started_at
+        skipped = repo.ledger.skipped(a.vin, since)
+        noks = repo.nok_streaks(a.vin, since)
+        # the report's "missing" is "no rundown yet": on an open vehicle the bolt is to do
+        status = {b.bolt_id: b.status for b in report.bolts if b.status != MISSING}
+        done = frozenset(k for k, s in status.items() if s == "ok")
+        specs = {b.bolt_id: BoltSpec(xyz(b.position), b.parameters.pset, b.order, b.batch,
+                                     b.parameters_id, b.parameters) for b in infos}
+        log.info("vehicle %s (%s) opened%s: %d bolts, %d done", a.vin, model,
+                 " for rework" if started.rework else "", len(infos), len(done))
+        return VehicleLoaded(time.time(), a.vin, model, specs, done, started.rework,
+                             {b: skip_note(*who) for b, who in skipped.items()}, noks, status)
+
+    def close_vehicle(self, vin: str) -> VehicleEnded:
+        report = self._repo().close_vehicle(vin)
+        log.info("vehicle %s closed: missing %s, NOK %s", vin, report.missing, report.nok)
+        return VehicleEnded(time.time(), vin, tuple(report.missing), tuple(report.nok))
+
+    def record_command(self, a: RecordCommand, vin_at_height: str | None) -> Reason | None:
+        """An accepted command on disk with its user (a reopen reopens the vehicle in the
+        same transaction); None once recorded, else why not (the database's own faults
+        raise)."""
+        repo, cmd, who = self._repo(), a.command, a.issuer
+        at = datetime.fromtimestamp(a.t, UTC)
+        vin = getattr(cmd, "vin", None) or (
+            vin_at_height if not isinstance(cmd, ReopenVehicle) else None)
+        comment = cmd.comment
+        if isinstance(cmd, TeachStart):   # the model taught is part of the record
+            comment = f"model {cmd.model}" + (f": {comment}" if comment else "")
+        try:
+            if isinstance(cmd, ReopenVehicle):
+                repo.reopen_vehicle(cmd.vin, at=at, user=who.user, source=who.source,
+                                    comment=cmd.comment)
+            else:
+                repo.ledger.record_command(at=at, user=who.user, source=who.source,
+                                           kind=KIND[type(cmd)], vin=vin,
+                                           bolt=getattr(cmd, "bolt", None), comment=comment)
+        except NotFoundError:
+            return Reason(Why.UNKNOWN_VEHICLE, vin=vin)
+        except DataError:
+            return Reason(Why.NOT_CLOSED, vin=vin)
+        return None
+
+    def last_tightening_id(self) -> int | None:
+        return self._repo().last_tightening_id()
+
+    def record_gap(self, first: int, last: int, vin: str | None, reason: str) -> None:
+        self._repo().record_gap(first, last, vin, reason)
+
+    def record_check(self, a: RecordCheck) -> None:
+        """A pair's calibration check, with its feed entry (the line gets it)."""
+        c, s = a.check, summary(a.check)
+        why = None if c.why is None else c.why.value + (f": {c.note}" if c.note else "")
+        record_check(self._repo(), at=datetime.fromtimestamp(a.t, UTC), pair=c.pair,
+                     verdict=c.verdict.value, reference=c.reference, offset_mm=c.offset_mm,
+                     tolerance_mm=c.tolerance_mm, reason=why, references=s["references"])
+
+    def store_curve(self, curve: Curve) -> None:
+        """A tightening curve with its rundown, by tightening id (one stored before its
+        rundown is written is found by that id)."""
+        store_curve(self._repo(), tightening_id=curve.tightening_id,
+                    trace_type=curve.trace_type, unit=curve.unit, values=curve.values,
+                    sample_period_s=curve.time_step_s,
+                    times_s=None if curve.time_step_s is not None else curve.times_s,
+                    result_at=None if curve.timestamp is None
+                    else curve.timestamp.astimezone(UTC))
 
     # -- the database's health -------------------------------------------------------------
     def check_file(self) -> None:
@@ -285,7 +387,14 @@ def _selection_json(sel: Selection) -> dict[str, Any]:
     after a reload or restart (the evidence, the marker crops, stays in memory)."""
     return {"point_mm": [float(v) for v in sel.point_mm], "tilt_deg": float(sel.tilt_deg),
             "distance_mm": float(sel.distance_mm), "exposure_t": float(sel.exposure_t),
-            "decided_t": float(sel.decided_t)}
+            "decided_t": float(sel.decided_t), "loosen": sel.loosen}
+
+
+def _loosen_sent(pset: int | None) -> dict[str, Any]:
+    """What went to the controller for a loosening: its loosen pset, no targets of the
+    station's (the record's parameter version stays the bolt's, the one it is tightened
+    with)."""
+    return {"pset": pset, "torque": None, "angle": None, "loosen": True}
 
 
 def _aware(t: datetime | None) -> datetime | None:

@@ -9,7 +9,9 @@ refusal for ``detect`` (``detect_all`` returns both).
 
 from __future__ import annotations
 
+import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -28,6 +30,7 @@ from stationd.vision.segment import MIN_HOLE_RADIUS_PX, Candidate, search_candid
 from stationd.vision.types import Ellipse
 
 Box = tuple[int, int, int, int]
+Circle = tuple[float, float, float]   # x, y, radius in raw pixels
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,15 +104,24 @@ def reduce(image: np.ndarray, scale: int) -> np.ndarray:
                       interpolation=cv2.INTER_LINEAR)
 
 
+def excluded(cand: Candidate, exclude: Sequence[Circle]) -> bool:
+    """Whether a candidate's hole lies in one of the ``exclude`` circles (raw pixels)."""
+    cx, cy = cand.hole_centre
+    return any(math.hypot(cx - x, cy - y) <= r for x, y, r in exclude)
+
+
 def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = None,
                marker: MarkerSpec | None = None, timings: dict[str, float] | None = None,
-               searched: list[np.ndarray] | None = None
+               searched: list[np.ndarray] | None = None, exclude: Sequence[Circle] = ()
                ) -> tuple[list[Detection], list[str]]:
     """Every marker in the image, and the reasons candidates were refused.
 
     ``timings``, when given, receives the search's stage times (ms), which a refusal for
     want of candidates would otherwise not show; ``searched``, when given, receives the
-    reduced image the search ended on (the last one, after a finer retry).
+    reduced image the search ended on (the last one, after a finer retry).  ``exclude``:
+    circles ``(x, y, r)`` in raw pixels where a marker is not the one looked for (the fixed
+    reference markers, where the wrench's search must never take one for the wrench): a
+    candidate whose hole lies in one is dropped before it is measured.
     """
     params = params or VisionParams()
     marker = marker or MarkerSpec()
@@ -138,20 +150,23 @@ def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = 
         t2 = time.perf_counter()
         timings["reduce"] += (t1 - t0) * 1e3
         timings["segment"] += (t2 - t1) * 1e3
+        kept = [c for c in cands if not excluded(c, exclude)]
+        references = len(kept) < len(cands)
+        cands = kept
         if cands or scale <= 2 or not 0 < purple <= retry_area:
             break
         scale //= 2
     if searched is not None:
         searched.append(small)
     found: list[Detection] = []
-    reasons: list[str] = []
+    reasons: list[str] = ["only a reference marker's place in view"] if references else []
     for cand in cands[: params.max_candidates]:
         det = measure(image, camera, cand, params, marker, dict(timings))
         if det.found:
             found.append(det)
         elif det.reason:
             reasons.append(det.reason)
-    if not cands:
+    if not cands and not reasons:
         reasons.append("no purple region enclosing a ring in view")
     # one marker seen through two candidate regions (e.g. a field split by a glint) counts once
     unique: list[Detection] = []
@@ -164,12 +179,13 @@ def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = 
 
 
 def detect(image: np.ndarray, camera: Camera, params: VisionParams | None = None,
-           marker: MarkerSpec | None = None) -> Detection:
-    """The one marker in view; refused when there is none or more than one."""
+           marker: MarkerSpec | None = None, exclude: Sequence[Circle] = ()) -> Detection:
+    """The one marker in view (outside the ``exclude`` circles); refused when there is none
+    or more than one."""
     t0 = time.perf_counter()
     search: dict[str, float] = {}
     searched: list[np.ndarray] = []
-    found, reasons = detect_all(image, camera, params, marker, search, searched)
+    found, reasons = detect_all(image, camera, params, marker, search, searched, exclude)
     total = (time.perf_counter() - t0) * 1e3
     small = searched[-1] if searched else None
     if len(found) == 1:

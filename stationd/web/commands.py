@@ -9,8 +9,8 @@ session from a user's password, the core's answer), whatever the client; the sta
   a wrong password or an unknown user is 401 and a journal line, nothing else.
 - ``POST /api/logout``; ``GET /api/me``: who is logged in, with their rights.
 - ``GET /api/nonce``: a single-use nonce for the next command (with a session).
-- ``POST /api/commands`` ``{"kind": "skip"|"reopen"|"release", "vin", "bolt", "comment",
-  "nonce"}``:
+- ``POST /api/commands`` ``{"kind": "skip"|"reopen"|"release"|"loosen"|"calibration-check",
+  "vin", "bolt", "comment", "nonce"}`` (and the teach commands):
   with a session; a nonce this server did not issue, an old or a used one is refused (400)
   before the station sees it; the station's answer is 200 (accepted) or 409 (refused, with
   its typed reason and the words).  A session whose user was removed from the station file
@@ -38,8 +38,10 @@ from stationd.access import AccessConfig, LoginThrottle, ReplayGuard, Sessions
 from stationd.station.commands import (
     KIND,
     Answer,
+    CheckCalibration,
     Command,
     Issuer,
+    LoosenBolt,
     ReleaseBolt,
     ReopenVehicle,
     SkipBolt,
@@ -226,12 +228,16 @@ def _command(body: dict[str, Any]) -> Command:
         return ReopenVehicle(_text(body, "vin", limit=32), comment)
     if kind == "release":
         return ReleaseBolt(_text(body, "vin", limit=32), _text(body, "bolt", limit=32), comment)
+    if kind == "loosen":
+        return LoosenBolt(_text(body, "vin", limit=32), _text(body, "bolt", limit=32), comment)
     if kind == "teach-start":
         return TeachStart(_text(body, "model", limit=32), comment)
     if kind == "teach-point":
         return TeachPoint(_text(body, "bolt", limit=32), comment)
     if kind == "teach-stop":
         return TeachStop(comment)
+    if kind == KIND[CheckCalibration]:
+        return CheckCalibration(comment)
     raise web.HTTPBadRequest(text=f"kind: one of {', '.join(KIND.values())}\n")
 
 

@@ -17,7 +17,8 @@ from tests.db.conftest import url_of
 
 TABLES = {"vehicle_models", "psets", "bolts", "process_parameters", "vehicles",
           "tightening_records", "tool_enables", "unattributed_results", "commands", "feed", "meta",
-          "forward_quarantine", "result_gaps", "curves", "alembic_version"}
+          "forward_quarantine", "result_gaps", "curves", "opcua_acknowledged",
+          "calibration_checks", "alembic_version"}
 
 
 def _diff(engine, metadata: MetaData) -> list[Any]:
@@ -32,7 +33,7 @@ def test_migrated_schema_matches_the_models(tmp_path):
     assert set(inspect(engine).get_table_names()) == TABLES
     assert _diff(engine, Base.metadata) == []
     with engine.connect() as conn:
-        assert current_revision(conn) == head_revision() == "0007"
+        assert current_revision(conn) == head_revision() == "0010"
     engine.dispose()
 
 
