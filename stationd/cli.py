@@ -178,7 +178,7 @@ def cmd_localize(args: argparse.Namespace) -> int:
         print(f"found: point {_fmt(res.point_mm)} mm, normal {_fmt(res.normal)}, epipolar "
               f"{res.epipolar_px:.3f} px, {res.timings_ms.get('total', 0):.1f} ms")
     else:
-        print(f"not found: {res.reason}")
+        print(f"not found: {res.said}")
     return EXIT_OK if res.found else EXIT_NOT_FOUND
 
 

@@ -78,7 +78,8 @@ class Reason:
     right: str | None = None
     angle_deg: float | None = None
     blocking: tuple[str, ...] = ()
-    per_pair: tuple[tuple[str, str], ...] = ()   # (pair, the vision's reason) for each pair
+    # (pair, camera side or "", the vision's reason) for each pair
+    per_pair: tuple[tuple[str, str, str], ...] = ()
     note: str | None = None             # words from elsewhere (the vision, a device)
     pset: int | None = None             # the pset that goes next (a loosen pset)
     pair: str | None = None             # a camera pair (the calibration check)

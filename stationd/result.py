@@ -20,6 +20,7 @@ class Refusal:
 
     reason: str
     why: Reason | None = None
+    side: str = ""          # the camera that said it, where one did ("left", "right")
 
     def __bool__(self) -> bool:
         return False

@@ -71,7 +71,7 @@ def _observe(node: YamlNode, pair: PairConfig, cfg: StationConfig, base: Path) -
     right = read_image(base / m["right"].text())
     res = localize(pair.calibration, left, right, cfg.vision, cfg.marker)
     if not res.found or res.point_mm is None:
-        raise node.error(f"marker not localized: {res.reason}")
+        raise node.error(f"marker not localized: {res.said}")
     return res.point_mm
 
 

@@ -29,17 +29,11 @@ def _per_pair(r: Reason, full: bool = False) -> str:
     (the operator's large words; ``full``: every pair's, as the journal keeps it)."""
     if not r.per_pair:
         return r.note or "no localization"
-    said = {_no_side(why) for _, why in r.per_pair}
+    said = {why for _, _, why in r.per_pair}
     if len(said) == 1 and len(r.per_pair) > 1 and not full:
         return f"{said.pop()} (all {len(r.per_pair)} pairs)"
-    return "; ".join(f"{pair}: {why}" for pair, why in r.per_pair)
-
-
-def _no_side(why: str) -> str:
-    """A camera's reason without the side that says it ("left: no purple region")."""
-    while why.startswith(("left: ", "right: ")):
-        why = why.split(": ", 1)[1]
-    return why
+    return "; ".join(f"{pair}: {side}: {why}" if side else f"{pair}: {why}"
+                     for pair, side, why in r.per_pair)
 
 
 _WORDS: dict[Why, Callable[[Reason], str]] = {

@@ -109,7 +109,7 @@ def run_demo(args: argparse.Namespace) -> int:
                       f"{err_mm:.3f} mm, left centre error {err_px:.4f} px, "
                       f"{res.timings_ms['total']:.1f} ms")
         elif not args.json:
-            print(f"{head}\n  refused: {res.reason}")
+            print(f"{head}\n  refused: {res.said}")
     err_mean = float(np.mean(errors)) if errors else float("nan")
     err_max = float(np.max(errors)) if errors else float("nan")
     p50 = float(np.percentile(latencies, 50))

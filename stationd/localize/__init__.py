@@ -155,7 +155,7 @@ def localize_pair(name: str, setup: PairSetup, left: np.ndarray, right: np.ndarr
         return PairView(Refusal(f"frames not usable: {text}"), exposure_t, failed=True), None
     sides = {"left": res.left.to_json(), "right": res.right.to_json()}
     if not res.found or res.point_mm is None or res.normal is None:
-        return PairView(Refusal(str(res.reason)), exposure_t, sides=sides), res
+        return PairView(Refusal(str(res.reason), side=res.side), exposure_t, sides=sides), res
     crops = {}
     if setup.keep_crops:
         crops = {f"{name}/{side}": crop(img, det.roi)
@@ -223,7 +223,7 @@ def fuse_views(names: Sequence[str], views: Sequence[PairView], cfg: LocalizeCon
         refused = [(n, v.end) for n, v in usable if isinstance(v.end, Refusal)]
         typed = distrusted + [r.why for _, r in refused if r.why is not None]
         why = typed[0] if typed else Reason(Why.NOT_LOCALIZED, per_pair=tuple(
-            (n, r.reason) for n, r in refused))
+            (n, r.side, r.reason) for n, r in refused))
         return Localization(None, reason=why, exposure_t=exposure, done_t=done_t,
                             timings_ms=timings)
     fused = fuse([e.point_mm for _, _, e in ends],

@@ -34,6 +34,7 @@ class StereoResult:
     reason: str | None
     left: Detection
     right: Detection
+    side: str = ""          # the camera whose detection failed ("left", "right"), or none
     point_mm: np.ndarray | None = None
     normal: np.ndarray | None = None
     epipolar_px: float | None = None
@@ -41,12 +42,19 @@ class StereoResult:
     radii_mm: dict[str, float] = field(default_factory=dict)
     timings_ms: dict[str, float] = field(default_factory=dict)
 
+    @property
+    def said(self) -> str | None:
+        """The reason as people read it, with the camera that gave it ("left: ...")."""
+        if self.reason is None or not self.side:
+            return self.reason
+        return f"{self.side}: {self.reason}"
+
     def to_json(self) -> dict[str, Any]:
         def vec(a: np.ndarray | None) -> list[float] | None:
             return None if a is None else [float(x) for x in a]
 
         return {
-            "found": self.found, "reason": self.reason,
+            "found": self.found, "reason": self.said, "side": self.side or None,
             "left": self.left.to_json(), "right": self.right.to_json(),
             "point_mm": vec(self.point_mm), "normal": vec(self.normal),
             "epipolar_px": self.epipolar_px, "normal_angle_deg": self.normal_angle_deg,
@@ -123,7 +131,7 @@ def localize_detections(pair: StereoPair, left: Detection, right: Detection,
     if not left.found or not right.found:
         side = "left" if not left.found else "right"
         reason = left.reason if not left.found else right.reason
-        return StereoResult(False, f"{side}: {reason}", left, right)
+        return StereoResult(False, reason, left, right, side=side)
     if left.centre_px is not None and right.centre_px is not None \
             and np.array_equal(left.centre_px, right.centre_px):
         # two real cameras never agree to the last bit of a sub-pixel centre: this is one

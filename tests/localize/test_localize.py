@@ -26,7 +26,7 @@ def test_every_grab_failed_tells_the_core_nothing():
 
 def test_pairs_that_agree_are_fused_by_their_expected_error_and_the_oldest_exposure():
     views = [PairView(_end(100.0), 5.0), PairView(_end(101.0, 4.0), 4.9),
-             PairView(Refusal("left: no purple region"), 4.8)]
+             PairView(Refusal("no purple region", side="left"), 4.8)]
     loc = fuse_views(["p1", "p2", "p3"], views, LocalizeConfig(sigma_mm={"p2": 0.5}), 6.0)
     assert loc is not None and loc.point_mm is not None and loc.reason is None
     # weights 1 and 4: 100.8 mm; the exposure of the frames used, not of the refusing pair
@@ -50,13 +50,14 @@ def test_pairs_that_disagree_refuse_with_the_spread_and_the_limit():
 def test_without_a_bolt_end_the_reason_is_a_typed_one_or_each_pairs():
     tilted = Refusal("wrench tilted 14.0 deg (> 10 deg)",
                      Reason(Why.TILTED, angle_deg=14.0, limit=10.0))
-    views = [PairView(Refusal("left: no purple region"), 1.0), PairView(tilted, 2.0)]
+    views = [PairView(Refusal("no purple region", side="left"), 1.0), PairView(tilted, 2.0)]
     loc = fuse_views(["p1", "p2"], views, LocalizeConfig(), 3.0)
     assert loc is not None and loc.reason == tilted.why and loc.exposure_t == 1.0
-    loc = fuse_views(["p1", "p2"], [views[0], PairView(Refusal("right: ring cut"), 2.0)],
+    loc = fuse_views(["p1", "p2"], [views[0], PairView(Refusal("ring cut", side="right"), 2.0)],
                      LocalizeConfig(), 3.0)
     assert loc is not None and loc.reason == Reason(
-        Why.NOT_LOCALIZED, per_pair=(("p1", "left: no purple region"), ("p2", "right: ring cut")))
+        Why.NOT_LOCALIZED,
+        per_pair=(("p1", "left", "no purple region"), ("p2", "right", "ring cut")))
 
 
 def test_the_section_is_checked_with_its_line():

@@ -63,7 +63,7 @@ def test_a_missing_view_is_a_refusal(station_pair):
     blank = np.full_like(rv.image, 70)
     dr = detect(blank, rv.camera, VisionParams(), SPEC)
     res = localize_detections(sc.crop_pair(station_pair, lv, rv), dl, dr)
-    assert not res.found and res.reason.startswith("right:")
+    assert not res.found and res.side == "right" and res.said.startswith("right: ")
 
 
 def test_one_picture_given_as_both_views_is_refused_not_triangulated(station_pair):

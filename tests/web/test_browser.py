@@ -186,7 +186,7 @@ def test_dense_map_labels_never_overlap_and_between_bolts_is_neutral(live_server
     # the wrench out of view while tracking: a normal state, not a red alarm; the per-pair
     # reasons stay off the operator screen (the cameras screen has them)
     every = Reason(Why.NOT_LOCALIZED, per_pair=tuple(
-        (f"pair{k}", f"{side}: no purple region enclosing a ring in view")
+        (f"pair{k}", side, "no purple region enclosing a ring in view")
         for k in range(1, 5) for side in ("left", "right")))
     srv.publish([Localized(point_mm=None, tilt_deg=None, reason=every, candidate=None,
                            distance_mm=None, age_ms=0.0), Refused(reason=every)])

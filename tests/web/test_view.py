@@ -141,12 +141,12 @@ def test_controller_refusing_parameters_blocks_the_bolt_and_says_why():
 
 def test_the_headline_says_a_refusal_shared_by_every_pair_once():
     every = Reason(Why.NOT_LOCALIZED, per_pair=tuple(
-        (f"pair{k}", "left: no purple region enclosing a ring in view") for k in range(1, 5)))
+        (f"pair{k}", "left", "no purple region enclosing a ring in view") for k in range(1, 5)))
     assert reason_words(every) == "no purple region enclosing a ring in view (all 4 pairs)"
     assert reason_words(every, full=True).startswith(
         "pair1: left: no purple region enclosing a ring in view; pair2: left: ")
-    mixed = Reason(Why.NOT_LOCALIZED, per_pair=(("pair1", "left: no purple region in view"),
-                                                 ("pair2", "right: ring cut by the frame")))
+    mixed = Reason(Why.NOT_LOCALIZED, per_pair=(("pair1", "left", "no purple region in view"),
+                                                 ("pair2", "right", "ring cut by the frame")))
     assert reason_words(mixed) == ("pair1: left: no purple region in view; pair2: right: "
                                    "ring cut by the frame")
     v = fold([*opened(), lost(every), Refused(reason=Reason(Why.DONE, bolt="B18"))])
@@ -154,7 +154,7 @@ def test_the_headline_says_a_refusal_shared_by_every_pair_once():
 
 
 NOT_SEEN = Reason(Why.NOT_LOCALIZED, per_pair=tuple(
-    (f"pair{k}", f"{side}: no purple region enclosing a ring in view")
+    (f"pair{k}", side, "no purple region enclosing a ring in view")
     for k in range(1, 5) for side in ("left", "right")))
 
 
