@@ -20,6 +20,7 @@ import random
 import threading
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any, Generic, TypeVar
 
 from drivers.errors import DeviceError, DeviceTimeoutError, ProtocolError, RefusedError
@@ -30,19 +31,32 @@ T = TypeVar("T")
 log = logging.getLogger(__name__)
 
 
-def fault_kind(exc: BaseException) -> str:
+class FaultKind(StrEnum):
+    """What kind of fault a device has (the screens colour and the journal names it)."""
+
+    TIMEOUT = "timeout"     # it did not answer in time
+    GARBAGE = "garbage"     # it said something that is not the protocol, or does not decode
+    REFUSED = "refused"     # it answered no
+    DOWN = "down"           # refused connection, lost link, no such port, not open
+    # the vehicle's data (the station's "vehicle" device): another car than the one loaded,
+    # or a vehicle the database refuses (an unknown model, a closed VIN)
+    CHANGED = "changed"
+    REJECTED = "rejected"
+
+
+def fault_kind(exc: BaseException) -> FaultKind:
     """What kind of fault ``exc`` is, from the driver's error type: timeout, garbage (the
     device said something that is not the protocol, or the data does not decode), refused,
     down (any other device error: refused connection, lost link, no such port)."""
     if isinstance(exc, DeviceTimeoutError):
-        return "timeout"
+        return FaultKind.TIMEOUT
     if isinstance(exc, ProtocolError):
-        return "garbage"
+        return FaultKind.GARBAGE
     if isinstance(exc, RefusedError):
-        return "refused"
+        return FaultKind.REFUSED
     if isinstance(exc, DeviceError):
-        return "down"
-    return "garbage"
+        return FaultKind.DOWN
+    return FaultKind.GARBAGE
 
 
 def one_line(exc: BaseException) -> str:
@@ -109,7 +123,7 @@ class DeviceKeeper(Generic[D]):
 
     def __init__(self, name: str, *, open: Callable[[], D],
                  reconnect: Callable[[D], None], close: Callable[[D], None],
-                 on_fault: Callable[[str, str], Awaitable[None]],
+                 on_fault: Callable[[FaultKind, str], Awaitable[None]],
                  on_back: Callable[[int], Awaitable[None]], backoff: Backoff | None = None,
                  blocking: Callable[[Callable[[], Any]], Awaitable[Any]] = _to_thread,
                  sleep: Callable[[float], Awaitable[None]] = asyncio.sleep,
@@ -125,7 +139,7 @@ class DeviceKeeper(Generic[D]):
         self._closed = False
         self.up = False
         self.reconnects = 0
-        self._reported: tuple[str, str] | None = None   # the fault last reported
+        self._reported: tuple[FaultKind, str] | None = None   # the fault last reported
         self._told: str | None = None                   # the open failure last logged
         self._lost: BaseException | None = None
         self._wake = asyncio.Event()
@@ -157,7 +171,7 @@ class DeviceKeeper(Generic[D]):
         self._quiet_close(device)
         raise KeeperClosedError("closed while opening", device=self.name)
 
-    def open_now(self) -> tuple[str, str] | None:
+    def open_now(self) -> tuple[FaultKind, str] | None:
         """One blocking attempt to open the device (at start-up, before ``run``): None if it
         opened, else the fault (kind, reason), which ``run`` retries after a backoff."""
         try:
@@ -169,7 +183,7 @@ class DeviceKeeper(Generic[D]):
         self._came_up()
         return None
 
-    def _failed_attempt(self, exc: Exception) -> tuple[str, str]:
+    def _failed_attempt(self, exc: Exception) -> tuple[FaultKind, str]:
         self._waited = False
         if not isinstance(exc, DeviceError | OSError | ValueError):
             self._log.error("%s: an attempt to connect crashed", self.name, exc_info=exc)

@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from drivers.keeper import Backoff, one_line
+from drivers.keeper import Backoff, FaultKind, one_line
 from stationd.boltfile import load_bolts
 from stationd.config import StationConfig, load_station_config
 from stationd.errors import StationError
@@ -66,7 +66,7 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bo
                 told = True
             notifier.status(f"fault: database: {one_line(exc)}")
             # the screens and /healthz say it too (the station's loop is not running yet)
-            station.bus.publish(DeviceHealth(DATABASE, False, "down", one_line(exc)))
+            station.bus.publish(DeviceHealth(DATABASE, False, FaultKind.DOWN, one_line(exc)))
             station.bus.publish(StateChanged("fault", f"database: {one_line(exc)}"))
         try:
             await asyncio.wait_for(stop.wait(), wait)

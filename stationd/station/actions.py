@@ -20,7 +20,7 @@ from typing import Any
 from db.bolts import Parameters
 from db.repository import Repository
 from drivers.errors import DeviceError, RefusedError
-from drivers.keeper import DeviceKeeper, fault_kind, one_line
+from drivers.keeper import DeviceKeeper, FaultKind, fault_kind, one_line
 from drivers.wrench import TighteningResult, Wrench
 from stationd.localize import Localization
 from stationd.reasons import Reason, Why
@@ -99,7 +99,7 @@ class Actions:
     async def _do(self, a: Action) -> Event | None:
         wrench = self._wrench.device
         if isinstance(a, SendParams | SendVin | EnableTool) and wrench is None:
-            return DeviceFault(time.time(), WRENCH, "down", "not connected")
+            return DeviceFault(time.time(), WRENCH, FaultKind.DOWN, "not connected")
         if isinstance(a, SendParams):
             assert wrench is not None  # noqa: S101 - checked above
             return await self._send(wrench, a)
@@ -167,7 +167,7 @@ class Actions:
     def _database_lost(self, exc: Exception, what: str = "") -> DeviceFault:
         """A database fault: its keeper probes it back, with backoff."""
         self._database.lost(DeviceError(one_line(exc)))
-        return DeviceFault(time.time(), DATABASE, "down", f"{what}{one_line(exc)}")
+        return DeviceFault(time.time(), DATABASE, FaultKind.DOWN, f"{what}{one_line(exc)}")
 
     async def _database_step(self, fn: Callable[[Any], Event], arg: Any) -> Event:
         try:

@@ -36,6 +36,8 @@ import numpy as np
 
 from db.bolts import Parameters, Window
 from db.kinds import LOOSENING, NOK, TIGHTENING, TO_LOOSEN
+from drivers.keeper import FaultKind
+from drivers.wrench.base import TighteningResult
 from stationd.reasons import Reason, Why
 from stationd.station.commands import (
     RIGHT,
@@ -83,7 +85,18 @@ from stationd.station.trust import answer as check_answer
 #: a result this long after the tool went off is not the last bolt's late one: the tool cannot
 #: tighten while disabled, and a controller reports within milliseconds
 LATE_RESULT_S = 5.0
-LIFT, WRENCH, VEHICLE, DATABASE = "lift", "wrench", "vehicle", "database"
+
+
+class Device(enum.StrEnum):
+    """The station's devices besides its camera pairs (a pair is named by the station file)."""
+
+    LIFT = "lift"
+    WRENCH = "wrench"
+    VEHICLE = "vehicle"     # the vehicle at height: its data can fault (an unknown model)
+    DATABASE = "database"
+
+
+LIFT, WRENCH, VEHICLE, DATABASE = Device.LIFT, Device.WRENCH, Device.VEHICLE, Device.DATABASE
 
 
 class State(enum.Enum):
@@ -175,7 +188,7 @@ class ResultIn(Input):
     ``tightening_id``), not yet acknowledged; ``fetched``: asked for after a reconnect (the
     station missed it while the link was down)."""
 
-    result: Any
+    result: TighteningResult
     fetched: bool = False
 
 
@@ -185,7 +198,7 @@ class DeviceFault(Input):
     garbage, refused, ...) and a readable ``reason``."""
 
     device: str
-    kind: str
+    kind: FaultKind
     reason: str
 
 
@@ -386,7 +399,7 @@ class Record:
 
     vin: str
     bolt: str
-    result: Any
+    result: TighteningResult
     selection: Selection | None
     late: bool = False
     kind: str = TIGHTENING     # or LOOSENING (:func:`rundown_kind`)
@@ -396,7 +409,7 @@ class Record:
 class Acknowledge:
     """Tell the controller a result already stored may be forgotten (a resent copy)."""
 
-    result: Any
+    result: TighteningResult
 
 
 @dataclass(frozen=True)
@@ -404,7 +417,7 @@ class StoreUnattributed:
     """Store a result no bolt owns (``vin``: the vehicle loaded, if any), then acknowledge it:
     a tightening the controller made is never acknowledged into nothing."""
 
-    result: Any
+    result: TighteningResult
     vin: str | None
     reason: str
 
@@ -560,7 +573,7 @@ class StationCore:
             # the PLC now names another vehicle (or model) with the lift still at height:
             # the loaded bolts are not this car's; nothing more is sent until the lift goes
             # down (which closes the loaded vehicle and clears this fault)
-            acts += self._fault(ev.t, VEHICLE, "changed", changed)
+            acts += self._fault(ev.t, VEHICLE, FaultKind.CHANGED, changed)
         if self.state in (State.STARTING, State.FAULT):
             return acts
         if not ev.ready:
@@ -650,7 +663,7 @@ class StationCore:
         if ev.closed:
             why = f"VIN {ev.vin} already closed: rework needs the vehicle reopened " \
                   f"({ev.reason}); lower the lift to clear"
-        return self._fault(ev.t, VEHICLE, "rejected", why)
+        return self._fault(ev.t, VEHICLE, FaultKind.REJECTED, why)
 
     def _on_LocalizedIn(self, ev: LocalizedIn) -> list[Action]:  # noqa: N802
         ev = self._trusted(ev)
@@ -789,7 +802,7 @@ class StationCore:
         if self.matcher is not None and ev.bolt in self.matcher.bolts:
             self.matcher.skipped[ev.bolt] = why
             acts.append(Publish(BoltSkipped(ev.bolt, why, t=ev.t)))
-        return acts + self._fault(ev.t, WRENCH, "refused",
+        return acts + self._fault(ev.t, WRENCH, FaultKind.REFUSED,
                                   f"controller refused the parameters for {ev.bolt}: "
                                   f"{ev.reason}")
 
@@ -1178,7 +1191,7 @@ class StationCore:
         self._vin_pending = True
         return [SendVin(self.vin)]
 
-    def _fault(self, t: float, device: str, kind: str, reason: str) -> list[Action]:
+    def _fault(self, t: float, device: str, kind: FaultKind, reason: str) -> list[Action]:
         acts: list[Action] = []
         if self.faults.get(device) != (kind, reason):
             acts.append(Publish(DeviceHealth(device, False, kind, reason, t=t)))
@@ -1236,7 +1249,7 @@ class StationCore:
         self.state, self.reason = state, reason
 
 
-def rundown_kind(result: Any, sent_loosen: bool) -> str:
+def rundown_kind(result: TighteningResult, sent_loosen: bool) -> str:
     """A result's kind: its own type where its revision carries it (Open Protocol MID 0061
     revision 3+, parameter 49: 1 tightening, 2 loosening), else what the station sent (a
     loosen pset or the tightening one).  The type wins: a controller reversed by hand reports

@@ -29,7 +29,7 @@ from typing import Any, TypeVar
 
 from db.repository import Repository
 from drivers.errors import DeviceError
-from drivers.keeper import DeviceKeeper, one_line
+from drivers.keeper import DeviceKeeper, FaultKind, one_line
 from drivers.lift import Lift
 from drivers.wrench import Wrench
 from stationd.config import StationConfig
@@ -120,7 +120,7 @@ class Station:
     def _keeper(self, device: str, opener: Callable[[], D], reconnect: Callable[[D], None],
                 close: Callable[[D], None]) -> DeviceKeeper[D]:
         """The device's keeper: its faults and returns go to the core as typed events."""
-        async def on_fault(kind: str, reason: str) -> None:
+        async def on_fault(kind: FaultKind, reason: str) -> None:
             await self.feed(DeviceFault(time.time(), device, kind, reason))
 
         async def on_back(reconnects: int) -> None:

@@ -15,6 +15,7 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from drivers.keeper import FaultKind
 from stationd.reasons import Reason, Why
 from stationd.station.core import (
     Acknowledge,
@@ -150,7 +151,7 @@ class Driver:
             self.feed(ResultIn(self.t, result(tid, pset or 0, op[5])))
         elif kind == "fault":
             self.down.add(op[2])
-            self.feed(DeviceFault(self.t, op[2], "down", f"{op[2]} gone"))
+            self.feed(DeviceFault(self.t, op[2], FaultKind.DOWN, f"{op[2]} gone"))
             assert self.core.state is State.FAULT and not self.tool
         elif kind == "back" and self.down:
             device = sorted(self.down)[op[3] % len(self.down)]
@@ -560,7 +561,7 @@ def test_a_database_fault_during_a_load_loads_the_vehicle_again_once_it_is_back(
     c.feed(Started(1.0))
     first = c.feed(LiftRead(1.1, True, True, 7, "VINDB"))
     assert [a for a in first if isinstance(a, LoadVehicle)]
-    c.feed(DeviceFault(1.2, "database", "down", "disk I/O error"))
+    c.feed(DeviceFault(1.2, "database", FaultKind.DOWN, "disk I/O error"))
     assert c.state is State.FAULT and c.reason == "database: disk I/O error"
     assert not [a for a in c.feed(LiftRead(1.3, True, True, 7, "VINDB"))
                 if isinstance(a, LoadVehicle)]                     # in fault: no load
