@@ -37,7 +37,7 @@ from stationd.geometry.tool import ToolGeometry
 from stationd.localize import LocalizeConfig
 from stationd.localize.references import References
 from stationd.opcua import OpcUaConfig
-from stationd.station.matching import MatchParams
+from stationd.station.matching import MatchingConfig
 from stationd.station.policy import NokPolicy, table_errors
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import VisionParams
@@ -52,62 +52,12 @@ P = ParamSpec("P")
 
 #: what a station file must name: a file without them would run simulated devices unnoticed
 REQUIRED_KEYS = ("cameras", "pairs", "lift", "wrench")
-MAX_AGE_S = (0.05, 5.0)         # plausible staleness limits, seconds
 BASELINE_MM = (20.0, 2000.0)    # plausible stereo baselines, millimetres
 METRES_LIKE_MM = 10.0           # a pair-to-vehicle translation shorter than this is in metres
-# what a person types, bounded to what can work (outside: a typo or another unit):
-# the bolt end is localized to about a millimetre, so a tolerance under 1 mm never matches
-# (0.008 is 8 mm written in metres); above 50 mm the wrench is "on" a bolt 5 cm away, and
-# the bolt table's bolts would have to be 10 cm apart to be told apart
-TOLERANCE_MM = (1.0, 50.0)
-# the marker is on the wrench, beside its axis: a lateral offset beyond 250 mm is no wrench
-# (10000 is a typo, or metres/micrometres mixed up)
-TOOL_OFFSET_MM = 250.0
-# a fit's RMS residual: the default gate is 0.35 px and good fits are ~0.1 px; 0 refuses
-# every detection, and above 5 px the "ellipse" is not the marker's edge (1e9: no gate at all)
-MAX_RMS_PX = (0.01, 5.0)
-# a hue box (OpenCV H, 0-179 = 0-358 deg) wider than half the circle accepts nearly every
-# colour: a reversed range ([168, 118] is "all but purple": lo > hi wraps through red)
-MAX_HUE_SPAN = 90
 STATION_KEYS = ("marker", "vision", "cameras", "pairs", "tool", "lift", "wrench", "matching",
                 "database", "bolts", "records", "http", "access", "localize", "line", "nok",
                 "opcua", "references")
 PAIR_KEYS = ("calibration", "to_vehicle", "left", "right", "max_skew_ms")
-
-
-@dataclass(frozen=True)
-class MatchingConfig(MatchParams):
-    """Which bolt the wrench is on (the matcher's parameters, see stationd.station.matching)
-    and after how many frames off it the wrench has left it."""
-
-    leave_frames: int = 3
-
-    @classmethod
-    def from_node(cls, node: YamlNode) -> MatchingConfig:
-        m = node.mapping(cls.__dataclass_fields__)
-        kw: dict[str, Any] = {}
-        for k, v in m.items():
-            if k in ("stable_frames", "leave_frames"):
-                kw[k] = v.integer(lo=1, hi=100)
-            elif k == "allow_retighten":
-                kw[k] = v.flag()
-            elif k == "tolerance_mm":
-                tol = v.number()
-                if not TOLERANCE_MM[0] <= tol <= TOLERANCE_MM[1]:
-                    raise v.error(f"{tol:g} mm is not plausible: the bolt end must be within "
-                                  f"{TOLERANCE_MM[0]:g}-{TOLERANCE_MM[1]:g} mm of its bolt "
-                                  "(millimetres: 8 for 8 mm, not 0.008)")
-                kw[k] = tol
-            elif k == "max_age_s":
-                age = v.number()
-                if not MAX_AGE_S[0] <= age <= MAX_AGE_S[1]:
-                    raise v.error(f"{age:g} s is not plausible: a localization older than "
-                                  f"{MAX_AGE_S[0]:g}-{MAX_AGE_S[1]:g} s is stale (seconds, "
-                                  "counted from the frames' exposure)")
-                kw[k] = age
-            else:
-                kw[k] = v.number(lo=0.0, hi=1000.0)
-        return replace(cls(), **kw)
 
 
 @dataclass(frozen=True)
@@ -395,52 +345,6 @@ def _sqlite_problem(url: str, *, read_header: bool = True) -> str | None:
     return None
 
 
-def _child(node: YamlNode, *keys: str) -> YamlNode | None:
-    """The node at ``keys`` below ``node`` (a mapping already read), None if not written."""
-    for key in keys:
-        if not isinstance(node.value(), dict):
-            return None
-        found = [child for k, child in node.pairs() if k == key]
-        if not found:
-            return None
-        node = found[0]
-    return node
-
-
-def _tool(node: YamlNode) -> ToolGeometry:
-    tool = ToolGeometry.from_node(node)
-    off = float(np.hypot(*tool.offset_mm))
-    if off > TOOL_OFFSET_MM:
-        where = _child(node, "offset_mm") or node
-        raise where.error(f"an offset of {off:g} mm from the wrench axis is not plausible "
-                          f"(the marker is on the wrench: at most {TOOL_OFFSET_MM:g} mm); "
-                          "offsets are in millimetres")
-    return tool
-
-
-def _vision(node: YamlNode, base: Path) -> VisionParams:
-    vision = VisionParams.from_node(node, base_dir=base)
-    rms = vision.gates.max_rms_px
-    if not MAX_RMS_PX[0] <= rms <= MAX_RMS_PX[1]:
-        where = _child(node, "gates", "max_rms_px") or node
-        raise where.error(f"{rms:g} px is not plausible for a fit's RMS residual "
-                          f"({MAX_RMS_PX[0]:g}-{MAX_RMS_PX[1]:g} px; the default is 0.35): "
-                          "0 refuses every marker, a large value lets anything pass")
-    lo, hi = vision.hsv.h
-    span = hi - lo + 1 if lo <= hi else 180 - lo + hi + 1
-    if span > MAX_HUE_SPAN:
-        hsv = _child(node, "hsv")
-        at: YamlNode | None = _child(hsv, "h") if hsv is not None else None
-        wrap = (f"; [{lo}, {hi}] wraps through red (lo > hi): a reversed range? write "
-                f"[{hi}, {lo}]") if lo > hi else ""
-        from_file = f" (in {hsv.text()})" if hsv is not None and \
-            isinstance(hsv.value(), str) else ""
-        raise (at or hsv or node).error(
-            f"a hue range of {span} of 180 accepts nearly every colour, not the marker's "
-            f"(at most {MAX_HUE_SPAN}){wrap}{from_file}")
-    return vision
-
-
 def _records(node: YamlNode, base: Path) -> RecordsConfig:
     r = node.mapping(("images_dir", "save_images"))
     return RecordsConfig(_path(r["images_dir"], base) if "images_dir" in r else None,
@@ -529,13 +433,13 @@ class _Reader:
         # the daemon runs: a typo is refused at the start and by a reload, never run in fault
         d, base, check = StationConfig(), self.base, self.collect or self.require_devices
         marker = self.section("marker", d.marker, MarkerSpec.from_node)
-        vision = self.section("vision", d.vision, partial(_vision, base=base))
+        vision = self.section("vision", d.vision, partial(VisionParams.from_node, base_dir=base))
         cameras, names = self.cameras(self.top["cameras"]) if "cameras" in self.top \
             else ({}, [])
         pairs = self.pairs(self.top["pairs"], names) if "pairs" in self.top else {}
         config = StationConfig(
             marker=marker, vision=vision, cameras=cameras, pairs=pairs,
-            tool=self.section("tool", d.tool, _tool),
+            tool=self.section("tool", d.tool, ToolGeometry.from_node),
             lift=self.section("lift", d.lift, partial(LiftConfig.from_node, check_url=check)),
             wrench=self.section("wrench", d.wrench,
                                 partial(WrenchConfig.from_node, check_url=check)),

@@ -23,6 +23,10 @@ from stationd.yamlio import YamlNode
 RULES = ("axis", "perpendicular")
 TOOL_LENGTH_MM = (50.0, 1000.0)  # marker to socket tip: a real wrench, in millimetres
 
+# the marker is on the wrench, beside its axis: a lateral offset beyond 250 mm is no wrench
+# (10000 is a typo, or metres/micrometres mixed up)
+TOOL_OFFSET_MM = 250.0
+
 
 @dataclass(frozen=True)
 class ToolGeometry:
@@ -40,6 +44,12 @@ class ToolGeometry:
         m = node.mapping(("length_mm", "offset_mm", "max_tilt_deg", "rule"),
                          required=("length_mm",))
         off = m["offset_mm"].vector([2]) if "offset_mm" in m else np.zeros(2)
+        lateral = float(np.hypot(*off))
+        if lateral > TOOL_OFFSET_MM:
+            raise m["offset_mm"].error(
+                f"an offset of {lateral:g} mm from the wrench axis is not plausible (the "
+                f"marker is on the wrench: at most {TOOL_OFFSET_MM:g} mm); offsets are in "
+                "millimetres")
         length = m["length_mm"].number()
         if not TOOL_LENGTH_MM[0] <= length <= TOOL_LENGTH_MM[1]:
             raise m["length_mm"].error(

@@ -40,12 +40,14 @@ Sequence (``rules``: bolt id -> :class:`BoltRule`, from the bolt table's optiona
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
 from db.spacing import min_spacing_mm, too_close
 from stationd.reasons import Reason, Why
+from stationd.yamlio import YamlNode
 
 
 @dataclass(frozen=True)
@@ -219,3 +221,45 @@ def check_spacing(bolts: Mapping[str, Iterable[float]], tolerance_mm: float) -> 
     return [f"{ids[j]} and {ids[i]} are {d:.1f} mm apart in X-Y "
             f"(< {min_spacing_mm(tolerance_mm):g} = 2 x {tolerance_mm:g})"
             for i, j, d in too_close(pos, tolerance_mm)]
+
+# what a person types, bounded to what can work (outside: a typo or another unit):
+# the bolt end is localized to about a millimetre, so a tolerance under 1 mm never matches
+# (0.008 is 8 mm written in metres); above 50 mm the wrench is "on" a bolt 5 cm away, and
+# the bolt table's bolts would have to be 10 cm apart to be told apart
+TOLERANCE_MM = (1.0, 50.0)
+MAX_AGE_S = (0.05, 5.0)         # plausible staleness limits, seconds
+
+
+@dataclass(frozen=True)
+class MatchingConfig(MatchParams):
+    """Which bolt the wrench is on (the matcher's parameters, see stationd.station.matching)
+    and after how many frames off it the wrench has left it."""
+
+    leave_frames: int = 3
+
+    @classmethod
+    def from_node(cls, node: YamlNode) -> MatchingConfig:
+        m = node.mapping(cls.__dataclass_fields__)
+        kw: dict[str, Any] = {}
+        for k, v in m.items():
+            if k in ("stable_frames", "leave_frames"):
+                kw[k] = v.integer(lo=1, hi=100)
+            elif k == "allow_retighten":
+                kw[k] = v.flag()
+            elif k == "tolerance_mm":
+                tol = v.number()
+                if not TOLERANCE_MM[0] <= tol <= TOLERANCE_MM[1]:
+                    raise v.error(f"{tol:g} mm is not plausible: the bolt end must be within "
+                                  f"{TOLERANCE_MM[0]:g}-{TOLERANCE_MM[1]:g} mm of its bolt "
+                                  "(millimetres: 8 for 8 mm, not 0.008)")
+                kw[k] = tol
+            elif k == "max_age_s":
+                age = v.number()
+                if not MAX_AGE_S[0] <= age <= MAX_AGE_S[1]:
+                    raise v.error(f"{age:g} s is not plausible: a localization older than "
+                                  f"{MAX_AGE_S[0]:g}-{MAX_AGE_S[1]:g} s is stale (seconds, "
+                                  "counted from the frames' exposure)")
+                kw[k] = age
+            else:
+                kw[k] = v.number(lo=0.0, hi=1000.0)
+        return replace(cls(), **kw)

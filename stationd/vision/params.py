@@ -13,6 +13,12 @@ from stationd.vision.segment import HsvRange
 from stationd.yamlio import YamlNode
 
 CENTRE_METHODS = ("paper", "concentric", "ellipse")
+# a fit's RMS residual: good fits are ~0.1 px; 0 refuses every detection, and above 5 px the
+# "ellipse" is not the marker's edge (1e9: no gate at all)
+MAX_RMS_PX = (0.01, 5.0)
+# a hue box (OpenCV H, 0-179 = 0-358 deg) wider than half the circle accepts nearly every
+# colour: a reversed range ([168, 118] is "all but purple": lo > hi wraps through red)
+MAX_HUE_SPAN = 90
 RESIDUALS = ("sampson", "centre")
 
 
@@ -38,6 +44,12 @@ class Gates:
         kw: dict[str, float | int] = {}
         for k, v in m.items():
             kw[k] = v.integer(lo=6, hi=100000) if k == "min_points" else v.number(lo=0.0)
+        rms = kw.get("max_rms_px", cls.max_rms_px)
+        if not MAX_RMS_PX[0] <= rms <= MAX_RMS_PX[1]:
+            raise m["max_rms_px"].error(
+                f"{rms:g} px is not plausible for a fit's RMS residual ({MAX_RMS_PX[0]:g}-"
+                f"{MAX_RMS_PX[1]:g} px; the default is {cls.max_rms_px:g}): 0 refuses every "
+                "marker, a large value lets anything pass")
         return replace(cls(), **kw)  # type: ignore[arg-type]
 
 
@@ -68,6 +80,7 @@ class VisionParams:
             p = replace(p, enhance_params=EnhanceParams.from_node(m["enhancement"]))
         if "hsv" in m:
             p = replace(p, hsv=_hsv_from(m["hsv"], base_dir))
+            _plausible_hues(p.hsv, m["hsv"])
         if "centre_method" in m:
             p = replace(p, centre_method=m["centre_method"].text(CENTRE_METHODS))
         if "leitz" in m:
@@ -79,6 +92,21 @@ class VisionParams:
         if "gates" in m:
             p = replace(p, gates=Gates.from_node(m["gates"]))
         return p
+
+
+def _plausible_hues(hsv: HsvRange, node: YamlNode) -> None:
+    """A hue range that accepts nearly every colour is not the marker's (a reversed range)."""
+    lo, hi = hsv.h
+    span = hi - lo + 1 if lo <= hi else 180 - lo + hi + 1
+    if span <= MAX_HUE_SPAN:
+        return
+    at = [c for k, c in node.pairs() if k == "h"] if isinstance(node.value(), dict) else []
+    wrap = (f"; [{lo}, {hi}] wraps through red (lo > hi): a reversed range? write "
+            f"[{hi}, {lo}]") if lo > hi else ""
+    from_file = f" (in {node.text()})" if isinstance(node.value(), str) else ""
+    raise (at[0] if at else node).error(
+        f"a hue range of {span} of 180 accepts nearly every colour, not the marker's (at "
+        f"most {MAX_HUE_SPAN}){wrap}{from_file}")
 
 
 def _hsv_from(node: YamlNode, base_dir: Path | None) -> HsvRange:
