@@ -49,6 +49,17 @@ def _emit(obj: dict[str, Any]) -> None:
     sys.stdout.write(strict_json(obj) + "\n")
 
 
+def port_arg(text: str) -> int:
+    """A TCP port to listen on: 0 (any free one) to 65535."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port number") from None
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"{value}: a port is 0-65535")
+    return value
+
+
 def seed_arg(text: str) -> int:
     """``--seed``: a non-negative integer (numpy's generators refuse negative seeds, after the
     command has started)."""
@@ -265,6 +276,13 @@ def cmd_tune_color(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# -- bench / demo / sim -------------------------------------------------------------------
+def cmd_sim(args: argparse.Namespace) -> int:
+    from stationd.sim.devices_cli import run
+
+    return run(args)
+
+
 # -- bench / demo -------------------------------------------------------------------------
 def cmd_bench(args: argparse.Namespace) -> int:
     from stationd.bench.vision import run_vision_bench
@@ -292,6 +310,18 @@ def cmd_bench_chain(args: argparse.Namespace) -> int:
     from stationd.bench.chain import run_chain_bench
 
     return run_chain_bench(args)
+
+
+def cmd_bench_linkcut(args: argparse.Namespace) -> int:
+    from stationd.bench.linkcut import run_linkcut_bench
+
+    return run_linkcut_bench(args)
+
+
+def cmd_bench_line(args: argparse.Namespace) -> int:
+    from stationd.bench.line import run_line_bench
+
+    return run_line_bench(args)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -413,6 +443,23 @@ def build_parser() -> argparse.ArgumentParser:
                     "under SCHED_IDLE, as a kiosk unit with CPUSchedulingPolicy=idle (it "
                     "runs only on a core the daemon leaves free)")
     bs.set_defaults(func=cmd_bench_station)
+    bx = bsub.add_parser("linkcut", help="the daemon with its controller on Open Protocol: "
+                         "a link cut during a run of tightenings (none lost), and the cost of "
+                         "curves on the latency")
+    bx.add_argument("--out", default="bench-linkcut.json", type=_results_file,
+                    help="JSON results file")
+    bx.add_argument("--cycles", type=int, default=30,
+                    help="placements of the wrench in each pass (default: %(default)s)")
+    bx.add_argument("--cut-s", type=float, default=10.0, metavar="S",
+                    help="how long the link is cut (default: %(default)s)")
+    bx.add_argument("--pace-s", type=float, default=1.0, metavar="S",
+                    help="seconds per placement while the link is down (default: "
+                    "%(default)s)")
+    bx.add_argument("--passes", type=int, default=1, metavar="K",
+                    help="passes without and with curves, alternating (default: %(default)s)")
+    bx.add_argument("--seed", type=seed_arg, default=1, help="(default: %(default)s)")
+    bx.add_argument("--json", action="store_true", help="print one summary object")
+    bx.set_defaults(func=cmd_bench_linkcut)
     bk = bsub.add_parser("soak", help="the daemon through a long shift: outages, reworks, load")
     bk.add_argument("--bolts", type=int, default=100,
                     help="bolts to tighten in all (default: %(default)s)")
@@ -425,6 +472,22 @@ def build_parser() -> argparse.ArgumentParser:
     bk.add_argument("--seed", type=int, default=1, help="(default: %(default)s)")
     bk.add_argument("--json", action="store_true", help="print one summary object")
     bk.set_defaults(func=cmd_bench_soak)
+    bl = bsub.add_parser("line", help="a line's stations forwarding to one PostgreSQL: "
+                         "throughput, lag, a backlog drained")
+    bl.add_argument("--stations", type=int, default=30, help="(default: %(default)s)")
+    bl.add_argument("--rundowns", type=int, default=20, metavar="N",
+                    help="rundowns per station under normal load (default: %(default)s)")
+    bl.add_argument("--interval", type=float, default=2.0, metavar="S",
+                    help="seconds between a station's rundowns (default: %(default)s)")
+    bl.add_argument("--backlog", type=int, default=10_000, metavar="N",
+                    help="rundowns recorded while the line database is away, drained after "
+                    "(0: none; default: %(default)s)")
+    bl.add_argument("--pg", metavar="URL", help="the line database (postgresql+psycopg://...; "
+                    "default: a throw-away server started for the run); its tables keep the "
+                    "benchmark's rows (station ids BENCH-NN, new database ids)")
+    bl.add_argument("--seed", type=seed_arg, default=1, help="(default: %(default)s)")
+    bl.add_argument("--json", action="store_true", help="print one summary object")
+    bl.set_defaults(func=cmd_bench_line)
 
     from stationd.calibrate_cli import add_calibrate_parser
     from stationd.command_cli import add_command_parsers
@@ -446,6 +509,30 @@ def build_parser() -> argparse.ArgumentParser:
     rn = sub.add_parser("run", help="the station daemon (as systemd runs it)")
     rn.add_argument("--config", required=True, help="station YAML")
     rn.set_defaults(func=cmd_run)
+
+    sm = sub.add_parser("sim", help="the simulated lift PLC or tightening controller on its "
+                        "real protocol, to commission a station or a client against")
+    sim_sub = sm.add_subparsers(dest="sim_device", required=True)
+    plc = sim_sub.add_parser("plc", help="the lift PLC, Modbus TCP on 127.0.0.1")
+    plc.add_argument("--config", help="station file: its lift register map (else defaults)")
+    plc.add_argument("--port", type=port_arg, default=5020, help="TCP port (%(default)s)")
+    plc.add_argument("--model-code", type=int, default=1,
+                     help="the vehicles' model code (%(default)s)")
+    plc.add_argument("--every", type=float, default=0.0, metavar="SECONDS",
+                     help="cycle vehicles, each at working height this long (default: "
+                          "commands on standard input)")
+    ctl = sim_sub.add_parser("controller", help="the tightening controller, Open Protocol")
+    ctl.add_argument("--config", help="station file: the psets of its bolt table")
+    ctl.add_argument("--host", default="127.0.0.1", help="address to listen on (%(default)s)")
+    ctl.add_argument("--port", type=port_arg, default=4545, help="TCP port (%(default)s)")
+    ctl.add_argument("--seed", type=seed_arg, default=0, help="result scatter (%(default)s)")
+    ctl.add_argument("--nok-rate", type=float, default=0.05,
+                     help="share of NOKs (%(default)s)")
+    ctl.add_argument("--link-ack", action="store_true",
+                     help="acknowledge at link level (MID 9997/9998)")
+    ctl.add_argument("--trigger-every", type=float, default=0.0, metavar="SECONDS",
+                     help="pull the trigger at this interval when the tool may run (off)")
+    sm.set_defaults(func=cmd_sim)
 
     dm = sub.add_parser("demo", help="the main job: a simulated run")
     dm.add_argument("--seed", type=seed_arg, default=7, help="(default: %(default)s)")

@@ -1,0 +1,177 @@
+"""``stationd sim plc`` and ``stationd sim controller``: the simulated lift PLC and tightening
+controller on their real protocols, on TCP ports of their own, set up from a station file.
+
+Why: to commission a station (or a third-party client: an HMI, an integrator's Open Protocol
+library) against the devices the tests use, before the real ones answer.  The PLC serves the
+station file's register map; the controller runs the psets of its bolt table.  Both serve
+until SIGINT or SIGTERM.  The PLC takes one command per line on its standard input (``raise``,
+``lower``, ``vehicle CODE [VIN]``, ``next``, ``fault``, ``clear``), or cycles vehicles on its
+own with ``--every SECONDS``: a new VIN, the lift up for that long, down, and again.
+
+    stationd sim plc --config station.yaml --port 5020 --every 60
+    stationd sim controller --config station.yaml --port 4545 --trigger-every 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from types import FrameType
+from typing import TextIO
+
+from drivers.lift.base import RegisterMap
+from drivers.lift.sim import SimulatedPlc
+from drivers.wrench.sim import SimController, SimPset
+from stationd.boltfile import load_bolts
+from stationd.config import load_station_config
+from stationd.errors import StationError
+from stationd.sim.vin import make_vin
+
+HELP = "commands: raise | lower | vehicle CODE [VIN] | next | fault | clear | quit"
+
+
+def psets_of(bolts_path: Path) -> dict[int, SimPset]:
+    """The controller's programs: the psets of a bolt table."""
+    table = load_bolts(bolts_path)
+    out: dict[int, SimPset] = {}
+    for p in [*table.psets, *(q for m in table.models for q in m.psets)]:
+        t, a = p.torque, p.angle
+        out[p.number] = SimPset(t.target, t.min, t.max, a.target if a else 0.0,
+                                a.min if a else 0.0, a.max if a else 0.0)
+    return out
+
+
+def _stop_on_signals() -> threading.Event:
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+    return stop
+
+
+def _station(path: str | None) -> tuple[RegisterMap, Path | None]:
+    if path is None:
+        return RegisterMap(), None
+    cfg = load_station_config(path)
+    return cfg.lift.registers, cfg.bolts_path
+
+
+def plc_command(plc: SimulatedPlc, line: str, code: int, serial: list[int],
+                say: Callable[[str], None]) -> bool:
+    """One command typed to the PLC; False for ``quit``.  A bad command is said, not fatal."""
+    words = line.split()
+    if not words:
+        return True
+    cmd, args = words[0].lower(), words[1:]
+    try:
+        if cmd == "quit":
+            return False
+        if cmd == "raise":
+            plc.raise_lift()
+        elif cmd == "lower":
+            plc.lower_lift()
+        elif cmd == "fault":
+            plc.set_fault(True)
+        elif cmd == "clear":
+            plc.set_fault(False)
+        elif cmd == "next":
+            serial[0] += 1
+            plc.lower_lift()
+            plc.set_vehicle(code, make_vin(serial[0]))
+            plc.raise_lift()
+        elif cmd == "vehicle" and 1 <= len(args) <= 2:
+            plc.set_vehicle(int(args[0]), args[1] if len(args) == 2 else None)
+        else:
+            say(f"not a command: {line.strip()!r}; {HELP}")
+            return True
+    except ValueError as exc:
+        say(f"refused: {exc}")
+        return True
+    s = plc.state()
+    say(f"lift {'at working height' if s.at_working_height else 'not at height'}, vehicle "
+        f"{s.model_code} {s.vin or '-'}{', FAULT' if s.fault else ''}")
+    return True
+
+
+def _serve_plc(args: argparse.Namespace, stop: threading.Event, out: TextIO) -> int:
+    registers, _ = _station(args.config)
+
+    def say(text: str) -> None:
+        print(text, file=out, flush=True)
+
+    serial = [0]
+    with SimulatedPlc(registers) as plc:
+        try:
+            port = plc.start_tcp(args.port)
+        except OSError as exc:
+            print(f"error: cannot listen on 127.0.0.1:{args.port}: {exc.strerror or exc}",
+                  file=sys.stderr)
+            return 1
+        say(f"lift PLC listening on 127.0.0.1:{port} (Modbus TCP, unit {plc.unit})")
+        if args.every > 0:
+            while not stop.is_set():
+                plc_command(plc, "next", args.model_code, serial, say)
+                if stop.wait(args.every):
+                    break
+                plc_command(plc, "lower", args.model_code, serial, say)
+                stop.wait(min(5.0, args.every / 3))
+            return 0
+        say(HELP)
+        reader = threading.Thread(target=_read_commands, daemon=True,
+                                  args=(plc, args.model_code, serial, say, stop))
+        reader.start()
+        stop.wait()
+    return 0
+
+
+def _read_commands(plc: SimulatedPlc, code: int, serial: list[int],
+                   say: Callable[[str], None], stop: threading.Event) -> None:
+    for line in sys.stdin:
+        if not plc_command(plc, line, code, serial, say):
+            break
+    stop.set()
+
+
+def _serve_controller(args: argparse.Namespace, stop: threading.Event, out: TextIO) -> int:
+    _, bolts = _station(args.config)
+    try:
+        sim = SimController(psets_of(bolts) if bolts is not None else None, seed=args.seed,
+                            nok_rate=args.nok_rate, link_ack=args.link_ack)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    with sim:
+        try:
+            port = sim.listen_tcp(args.host, args.port)
+        except OSError as exc:
+            print(f"error: cannot listen on {args.host}:{args.port}: {exc.strerror or exc}",
+                  file=sys.stderr)
+            return 1
+        print(f"controller listening on {args.host}:{port} (Open Protocol; psets "
+              f"{', '.join(str(p) for p in sorted(sim.psets))})", file=out, flush=True)
+        while not stop.wait(args.trigger_every or 0.5):
+            if args.trigger_every:
+                sim.pull_trigger()
+    return 0
+
+
+def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
+    """``stationd sim plc|controller`` (the arguments are ``stationd.cli``'s)."""
+    stop = _stop_on_signals()
+    try:
+        if args.sim_device == "plc":
+            return _serve_plc(args, stop, out)
+        return _serve_controller(args, stop, out)
+    except StationError as exc:   # a station file that does not read
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+__all__ = ["plc_command", "psets_of", "run"]

@@ -1,0 +1,99 @@
+"""``stationd sim plc`` and ``stationd sim controller``: the simulated devices served on their
+real protocols in a process of their own, read by the station's own drivers as a station being
+commissioned would; and the VINs of the simulated line."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from drivers.errors import RefusedError
+from drivers.lift import open_lift
+from drivers.wrench import open_wrench
+from stationd.sim.vin import check_digit, is_valid, make_vin
+
+ROOT = Path(__file__).resolve().parents[2]
+STATION = ROOT / "config" / "sim" / "station.yaml"
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _start(*argv: str) -> tuple[subprocess.Popen[str], str]:
+    """The command, and its first line (where it listens)."""
+    p = subprocess.Popen([sys.executable, "-m", "stationd", "sim", *argv], cwd=ROOT,
+                         stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True,
+                         env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    assert p.stdout is not None
+    return p, p.stdout.readline()
+
+
+def _stop(p: subprocess.Popen[str]) -> int:
+    p.send_signal(signal.SIGTERM)
+    return p.wait(60)
+
+
+def test_the_simulated_plc_is_driven_by_commands_and_read_over_modbus() -> None:
+    port = _free_port()
+    p, first = _start("plc", "--config", str(STATION), "--port", str(port))
+    try:
+        assert f"127.0.0.1:{port}" in first
+        assert p.stdin is not None and p.stdout is not None
+        p.stdout.readline()   # the commands' help
+        with open_lift(f"modbus-tcp://127.0.0.1:{port}?timeout=1") as lift:
+            assert not lift.read_state().at_working_height
+            p.stdin.write("vehicle 1 9SDST0018TL000001\nraise\n")
+            p.stdin.flush()
+            said = p.stdout.readline() + p.stdout.readline()
+            s = lift.read_state()
+            assert s.at_working_height and s.model_code == 1 and s.vin == "9SDST0018TL000001"
+            assert "at working height" in said
+            p.stdin.write("frobnicate\nlower\n")
+            p.stdin.flush()
+            assert "not a command" in p.stdout.readline()
+            p.stdout.readline()
+            assert not lift.read_state().at_working_height
+    finally:
+        assert _stop(p) == 0
+
+
+def test_the_simulated_controller_runs_the_station_files_psets_over_open_protocol() -> None:
+    port = _free_port()
+    p, first = _start("controller", "--config", str(STATION), "--port", str(port))
+    try:
+        assert f"127.0.0.1:{port}" in first and "psets" in first
+        with open_wrench(f"openprotocol://127.0.0.1:{port}", timeout=2.0) as w:
+            w.select_pset(1)
+            with pytest.raises(RefusedError):
+                w.select_pset(99)   # not in the bolt table
+    finally:
+        assert _stop(p) == 0
+
+
+def test_a_port_out_of_range_is_one_line_and_exit_2() -> None:
+    r = subprocess.run([sys.executable, "-m", "stationd", "sim", "plc", "--port", "70000"],
+                       cwd=ROOT, capture_output=True, text=True, timeout=30)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert "0-65535" in r.stderr
+
+
+def test_vins_have_17_characters_of_the_alphabet_and_their_check_digit() -> None:
+    assert check_digit("1M8GDM9AXKP042788") == "X"        # the standard's worked example
+    vins = [make_vin(n) for n in (0, 1, 42, 999_999)]
+    assert all(len(v) == 17 and is_valid(v) for v in vins)
+    assert len(set(vins)) == 4
+    assert not is_valid(vins[1][:8] + ("0" if vins[1][8] != "0" else "1") + vins[1][9:])
+    assert not is_valid("1M8GDM9AXKP04278")      # 16 characters
+    assert not is_valid("IM8GDM9AXKP042788")     # I is not in the alphabet
+    with pytest.raises(ValueError):
+        make_vin(1_000_000)
