@@ -188,11 +188,19 @@ def _aware(t: datetime) -> datetime:
     return t if t.tzinfo is not None else t.replace(tzinfo=UTC)
 
 
+#: what ``db report --json`` gives of each rundown (the export has every field)
+RUNDOWN_KEYS = ("bolt", "attempt", "rundown", "status", "pset", "torque_nm", "angle_deg",
+                "tightening_id", "recorded_at")
+
+
 def cmd_db_report(args: argparse.Namespace) -> int:
     with _open(_db_url(args), must_exist=True) as repo:
         report = repo.vehicle_report(args.vin)
         loose = repo.unattributed(args.vin)   # results made at height that no bolt owns
         commands = repo.ledger.commands(args.vin)   # the audit trail: skips, reopens
+        from stationd.web.results import Results
+
+        runs = Results(repo).rundowns(args.vin)   # every rundown: its kind, result, time
     if args.json:
         out = report.to_json()
         out["unattributed"] = [{**u, "result_at": _iso(u["result_at"]),
@@ -200,6 +208,7 @@ def cmd_db_report(args: argparse.Namespace) -> int:
         out["commands"] = [{"at": _iso(c.at), "user": c.user, "source": c.source,
                             "kind": c.kind, "bolt": c.bolt, "comment": c.comment}
                            for c in commands]
+        out["rundowns"] = [{k: r[k] for k in RUNDOWN_KEYS} for r in runs]
         sys.stdout.write(strict_json(out) + "\n")
     else:
         print(report.summary())
@@ -209,6 +218,12 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                 f"{b.attempts} attempt(s)"
             retired = " (retired)" if b.retired else ""
             print(f"  {b.bolt_id:<12} {b.status.upper():<8} {result}  {b.name}{retired}")
+            if b.attempts > 1:   # reworked: each rundown, so the loosenings show
+                for r in (r for r in runs if r["bolt"] == b.bolt_id):
+                    print(f"    {r['attempt']}. {r['rundown']} {r['status'].upper()} pset "
+                          f"{r['pset'] if r['pset'] is not None else '-'}, "
+                          f"{_num(r['torque_nm'])} N m, {_num(r['angle_deg'])} deg, at "
+                          f"{(r['recorded_at'] or '-')[:19].replace('T', ' ')} UTC")
         for c in commands:
             on = f" {c.bolt}" if c.bolt else ""
             why = f": {c.comment}" if c.comment else ""

@@ -4,7 +4,11 @@ The daemon runs on ``config/sim`` (four pairs, one model with 50 bolts) with its
 Modbus server, its controller as an Open Protocol server and its cameras rendering at full
 resolution; a simulated operator raises the lift and takes the wrench to bolts in a random
 order, with placement noise and tilt, sometimes hovering between two bolts or leaving before
-tightening.  One line per bolt, then a summary; ``--json`` prints it as the last line.
+tightening.  It sometimes tightens NOK (seeded: a joint that fails now and then, and now and
+then a stubborn one that fails until the bolt locks), so the NOK policy runs: the operator
+repeats, loosens first where the policy says so, and a simulated supervisor releases a
+locked bolt through the same command path as the screens' (``Station.submit``).  One line per
+bolt, then a summary; ``--json`` prints it as the last line.
 """
 
 from __future__ import annotations
@@ -34,18 +38,31 @@ from stationd.reasons import Reason, Why
 from stationd.serve import Screens
 from stationd.sim.load import cpu_load
 from stationd.sim.world import World, wrench_at
+from stationd.station.commands import Issuer, ReleaseBolt, Right
 from stationd.station.core import SendParams, State
 from stationd.station.daemon import Station
 from stationd.station.events import (
+    BoltLocked,
+    BoltReleased,
     Localized,
     ParamsSent,
     ResultRecorded,
     WrongBolt,
 )
+from stationd.station.policy import NokPolicy, NokRule
 from stationd.web.config import DEFAULT_LISTEN, HttpConfig, open_bind_problem
 from stationd.words import reason_words
 
 SIM_CONFIG = Path(__file__).resolve().parents[2] / "config" / "sim" / "station.yaml"
+#: a tightening fails now and then; a stubborn joint (a damaged thread) fails until its bolt
+#: locks and the supervisor released it; a loosening always comes loose
+NOK_P, STUBBORN_P = 0.1, 0.1
+#: rundowns the simulated operator makes on one bolt before giving up on it
+MAX_RUNDOWNS = 10
+#: who releases a locked bolt in the demo (the command path is the screens')
+SUPERVISOR = Issuer("supervisor", frozenset({Right.RELEASE}), "demo")
+#: the controller's loosening program for a loosen pset: a joint that comes loose is OK
+LOOSEN_PROGRAM = SimPset(40.0, 5.0, 150.0, 360.0, 90.0, 720.0, name="loosen")
 
 
 def _sim_psets(bolts_path: Path) -> dict[int, SimPset]:
@@ -59,6 +76,34 @@ def _sim_psets(bolts_path: Path) -> dict[int, SimPset]:
     return out
 
 
+def demo_policy(cfg: StationConfig, psets: dict[int, SimPset]) -> NokPolicy | None:
+    """The NOK policy the demo runs with a station file that has none (``cfg.nok`` the
+    default): three NOKs in a row lock a bolt; a NOK bolt of the table's first pset is
+    tightened again, one of any other pset (the larger joints, on config/sim) is loosened
+    first, with a loosen pset no bolt uses; None: the file's own policy runs."""
+    if cfg.nok != NokPolicy() or not psets or max(psets) >= 999:
+        return None
+    rule = NokRule(max_nok=3, strategy="loosen", loosen_pset=max(psets) + 1)
+    return NokPolicy(NokRule(max_nok=3), {n: rule for n in sorted(psets)[1:]})
+
+
+def loosen_programs(policy: NokPolicy) -> dict[int, SimPset]:
+    """The simulated controller's programs for the policy's loosen psets."""
+    rules = [policy.default, *policy.psets.values(), *policy.bolts.values()]
+    return {r.loosen_pset: LOOSEN_PROGRAM for r in rules if r.loosen_pset is not None}
+
+
+def policy_words(policy: NokPolicy) -> str:
+    """The policy in one line, for the demo's start."""
+    d = policy.default
+    parts = [f"max_nok {d.max_nok}, {d.strategy}"]
+    parts += [f"pset {n}: {r.strategy}" + (f" with loosen pset {r.loosen_pset}"
+                                           if r.strategy == "loosen" else "")
+              for n, r in policy.psets.items()]
+    parts += [f"bolt {b}: {r.strategy}" for b, r in policy.bolts.items()]
+    return "; ".join(parts)
+
+
 def simulators(st: Station) -> tuple[SimulatedPlc, SimController]:
     """The simulated PLC and controller behind a simulated station's lift and wrench."""
     lift, wrench = st.lift, st.wrench
@@ -68,7 +113,8 @@ def simulators(st: Station) -> tuple[SimulatedPlc, SimController]:
 
 
 async def _operator(st: Station, world: World, rng: np.random.Generator, cycles: int,
-                    report: list[dict[str, Any]], say: Any, truth: dict[str, Any]) -> None:
+                    report: list[dict[str, Any]], say: Any, truth: dict[str, Any],
+                    nok_rng: np.random.Generator) -> None:
     plc, ctl = simulators(st)
     plc.set_vehicle(truth["model_code"], truth["vin"])
     plc.raise_lift()
@@ -110,16 +156,8 @@ async def _operator(st: Station, world: World, rng: np.random.Generator, cycles:
         world.set_wrench(pose)
         leave = rng.random() < 0.1
         line: dict[str, Any] = {"bolt": b.bolt_id, "pset": b.parameters.pset, "result": None}
-        for _ in range(600):  # up to ~30 s for selection, acknowledgement, tool enabled
-            if st.cycle.state is State.TIGHTENING and st.cycle.bolt == b.bolt_id \
-                    and ctl.tool_enabled:
-                break
-            await asyncio.sleep(0.05)
-        else:
-            seen = [e for e in st.bus.of(Localized) if isinstance(e, Localized)]
-            last = seen[-1].reason if seen else None
-            why = reason_words(last) if last is not None else st.core.reason
-            line["result"] = f"not selected ({why})"
+        if not await _tool_on(st, b.bolt_id):
+            line["result"] = f"not selected ({_why_not(st)})"
         if st.last is not None and st.last.point_mm is not None:
             line["xy_error_mm"] = float(np.hypot(*(st.last.point_mm - pose.socket_v)[:2]))
         if line["result"] is None and leave:
@@ -132,15 +170,7 @@ async def _operator(st: Station, world: World, rng: np.random.Generator, cycles:
             line["result"] = "left before tightening; tool " + \
                 ("disabled" if not ctl.tool_enabled else "STILL ENABLED")
         elif line["result"] is None:
-            n_records = st.bus.count(ResultRecorded)
-            shot = ctl.pull_trigger()
-            for _ in range(100):
-                if st.bus.count(ResultRecorded) > n_records:
-                    break
-                await asyncio.sleep(0.05)
-            line["result"] = "no result" if shot is None else \
-                f"{'OK' if shot.ok else 'NOK'} {shot.torque_nm:.1f} Nm"
-            line["ok"] = bool(shot is not None and shot.ok)
+            await _until_ok(st, b.bolt_id, line, nok_rng, truth["vin"])
         report.append(line)
         say(line)
         truth["bolt"] = None
@@ -148,6 +178,77 @@ async def _operator(st: Station, world: World, rng: np.random.Generator, cycles:
         await asyncio.sleep(0.3)
     plc.lower_lift()
     await asyncio.sleep(0.5)
+
+
+async def _tool_on(st: Station, bolt: str, tries: int = 600) -> bool:
+    """Whether the tool comes on for ``bolt`` (up to ~30 s for selection, acknowledgement,
+    confirmation)."""
+    for _ in range(tries):
+        if st.cycle.state is State.TIGHTENING and st.cycle.bolt == bolt \
+                and simulators(st)[1].tool_enabled:
+            return True
+        await asyncio.sleep(0.05)
+    return False
+
+
+def _why_not(st: Station) -> str:
+    """Why nothing was selected: the last localization's refusal, else the state's words."""
+    seen = [e for e in st.bus.of(Localized) if isinstance(e, Localized)]
+    last = seen[-1].reason if seen else None
+    return reason_words(last) if last is not None else st.core.reason
+
+
+async def _pull(st: Station, loosening: bool, nok: bool) -> tuple[Any, bool]:
+    """The trigger pulled with the tool on: a loosening (it comes loose) or a tightening (NOK
+    when ``nok``); the controller's result and whether the station recorded it."""
+    ctl = simulators(st)[1]
+    n_records = st.bus.count(ResultRecorded)
+    ctl.nok_rate = 1.0 if nok and not loosening else 0.0
+    shot = ctl.pull_trigger(result_type=2 if loosening else 1)
+    for _ in range(100):
+        if st.bus.count(ResultRecorded) > n_records:
+            return shot, True
+        await asyncio.sleep(0.05)
+    return shot, False
+
+
+async def _until_ok(st: Station, bolt: str, line: dict[str, Any],
+                    nok_rng: np.random.Generator, vin: str) -> None:
+    """The operator on ``bolt`` with the tool on, as the NOK policy has it: pull; after a NOK
+    again (its loosen pset first where the policy says so); a locked bolt is released by the
+    supervisor through the command path; until an OK tightening or :data:`MAX_RUNDOWNS`.
+    ``line`` gets the last step as its ``result``, the earlier ones as ``before``, ``ok``
+    and ``rundowns`` (the results the station must record)."""
+    stubborn = nok_rng.random() < STUBBORN_P
+    steps: list[str] = []
+    line["rundowns"] = 0
+    for _ in range(MAX_RUNDOWNS):
+        sel = st.core.selection
+        loosening = sel is not None and sel.loosen
+        shot, _ = await _pull(st, loosening, stubborn or nok_rng.random() < NOK_P)
+        if shot is None:
+            steps.append("no result")
+            line["unfinished"] = True
+            break
+        line["rundowns"] += 1
+        word = "OK" if shot.ok else "NOK"
+        steps.append(f"loosened (pset {shot.pset}) {word}" if loosening else
+                     f"{word} {shot.torque_nm:.1f} Nm")
+        if shot.ok and not loosening:
+            break
+        matcher = st.core.matcher
+        if matcher is not None and bolt in matcher.locked:
+            answer = await st.submit(ReleaseBolt(vin, bolt, "demo: joint checked"),
+                                     SUPERVISOR)
+            steps.append("locked, released by the supervisor" if answer.accepted else
+                         f"locked, release refused ({answer.reason})")
+            stubborn = False    # the supervisor had the thread seen to
+        if not await _tool_on(st, bolt):
+            steps.append(f"not selected again ({_why_not(st)})")
+            line["unfinished"] = True
+            break
+    line["ok"] = bool(steps) and steps[-1].startswith("OK")
+    line["result"], line["before"] = steps[-1], steps[:-1]
 
 
 def run_station_demo(args: argparse.Namespace) -> int:
@@ -175,14 +276,24 @@ def run_station_demo(args: argparse.Namespace) -> int:
               flush=True)
     tmp = tempfile.TemporaryDirectory(prefix="stationd-demo-")
     cfg = simulated(cfg, Path(tmp.name))
-    station = Station(cfg, device_kw={"wrench": {"psets": _sim_psets(bolts_path)}})
+    psets = _sim_psets(bolts_path)
+    policy = demo_policy(cfg, psets)
+    if policy is not None:
+        cfg = replace(cfg, nok=policy)
+    whose = "the demo's, the station file has none" if policy is not None else cfg.path
+    print(f"NOK policy ({whose}): {policy_words(cfg.nok)}",
+          file=sys.stderr if args.json else sys.stdout, flush=True)
+    station = Station(cfg, device_kw={"wrench": {"psets": {**loosen_programs(cfg.nok),
+                                                            **psets}}})
     rng = np.random.default_rng(args.seed)
+    # the NOKs have their own stream: the plan (bolts, placements) is the seed's as before
+    nok_rng = np.random.default_rng([args.seed, 21])
     report: list[dict[str, Any]] = []
     codes = [m.code for m in load_bolts(bolts_path).models if m.code is not None and m.bolts]
     if not codes:
         raise InputError(f"{bolts_path}: the demo needs a model with a lift code and bolts")
     truth: dict[str, Any] = {"bolt": None, "wrong": 0, "model_code": codes[0],
-                             "vin": "SIMVIN0000000001"}
+                             "vin": "SIMVIN0000000001", "locked_sends": 0}
 
     def check(action: Any) -> None:
         """Every parameter send is compared with where the wrench really is, at that moment;
@@ -195,11 +306,19 @@ def run_station_demo(args: argparse.Namespace) -> int:
             print(line, file=sys.stderr, flush=True)
             if not args.json:
                 print(line, flush=True)
+        matcher = station.core.matcher
+        if isinstance(action, SendParams) and matcher is not None \
+                and action.bolt in matcher.locked:
+            truth["locked_sends"] += 1
+            print(f"LOCKED BOLT: parameters for {action.bolt}, locked", file=sys.stderr,
+                  flush=True)
 
     station.on_action = check
 
     def say(line: dict[str, Any]) -> None:
         if not args.json:
+            if line.get("before"):   # the NOK policy at work on this bolt, then its line
+                print(f"  {line['bolt']} first: {'; '.join(line['before'])}", flush=True)
             err = line.get("xy_error_mm")
             print(f"{line['bolt']}: pset {line['pset']}, XY error "
                   f"{'-' if err is None else f'{err:.3f} mm'}, {line['result']}", flush=True)
@@ -218,7 +337,7 @@ def run_station_demo(args: argparse.Namespace) -> int:
         world = World(cfg, seed=args.seed)
         try:
             task = asyncio.create_task(station.run(stop))
-            await _operator(station, world, rng, cycles, report, say, truth)
+            await _operator(station, world, rng, cycles, report, say, truth, nok_rng)
             stop.set()
             await task
             if getattr(args, "hold", False) and screens.server is not None:
@@ -240,7 +359,7 @@ def run_station_demo(args: argparse.Namespace) -> int:
         station.close()
         tmp.cleanup()
     cycles = int(truth.get("cycles", cycles))
-    summary = _summary(station, report, cycles, truth["wrong"])
+    summary = _summary(station, report, cycles, truth["wrong"], truth["locked_sends"])
     summary["simulated_instead"] = instead
     if args.json:
         sys.stdout.write(strict_json(summary) + "\n")
@@ -251,6 +370,9 @@ def run_station_demo(args: argparse.Namespace) -> int:
               f"{_ms(summary['xy_error_mm']['max'], '.3f')} mm, latency from exposure p50 "
               f"{_ms(summary['latency_ms']['p50'], '.0f')} ms p95 "
               f"{_ms(summary['latency_ms']['p95'], '.0f')} ms")
+        n = summary["nok_policy"]
+        print(f"NOK policy: {n['nok']} NOK result(s), {n['loosenings']} loosening(s), "
+              f"{n['locks']} lock(s), {n['releases']} release(s)")
         if instead:
             devices = ", ".join(d.rsplit(" ", 1)[0] for d in instead)
             print(f"simulated, not the station file's devices: {devices} (the records went "
@@ -351,7 +473,7 @@ def simulated(cfg: StationConfig, tmp: Path) -> StationConfig:
 
 
 def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
-             wrong: int) -> dict[str, Any]:
+             wrong: int, locked_sends: int = 0) -> dict[str, Any]:
     """The run in figures, from the station's typed events; ``verdict`` is the last line."""
     refusals: Counter[str] = Counter()
     for e in st.bus.of(Localized):
@@ -360,13 +482,19 @@ def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
             refusals[_kind(e.reason)] += 1
     errs = [r["xy_error_mm"] for r in report if "xy_error_mm" in r]
     lat = [e.latency_ms["total"] for e in st.bus.of(ParamsSent) if isinstance(e, ParamsSent)]
-    recorded = st.bus.count(ResultRecorded)
+    recorded_events = [e for e in st.bus.of(ResultRecorded) if isinstance(e, ResultRecorded)]
+    recorded = len(recorded_events)
     ok = sum(1 for r in report if r.get("ok"))
-    results = sum(1 for r in report if "ok" in r)
-    handled = sum(1 for r in report if r["result"] and not str(r["result"]).startswith("not "))
+    results = sum(int(r.get("rundowns", "ok" in r)) for r in report)
+    # a bolt is handled when the station did its part to the end: selected, and after a NOK
+    # selected again (with its loosen pset where the policy says so, released when locked)
+    handled = sum(1 for r in report if r["result"] and not str(r["result"]).startswith("not ")
+                  and not r.get("unfinished"))
     problems = []
     if wrong:
         problems.append(f"{wrong} parameter send(s) for a wrong bolt")
+    if locked_sends:
+        problems.append(f"{locked_sends} parameter send(s) for a locked bolt")
     if recorded != results:
         problems.append(f"{results - recorded} result(s) not recorded")
     if handled < cycles:
@@ -378,6 +506,11 @@ def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
     return {"bolts": cycles, "ok": ok, "handled": handled,
             "wrong_bolt_sends": wrong, "parameters_sent": len(lat),
             "results": results, "recorded": recorded,
+            "nok_policy": {
+                "nok": sum(1 for e in recorded_events if not e.ok),
+                "loosenings": sum(1 for e in recorded_events if e.kind == "loosening"),
+                "locks": st.bus.count(BoltLocked), "releases": st.bus.count(BoltReleased),
+                "locked_sends": locked_sends},
             "refusals": dict(refusals.most_common(8)),
             "xy_error_mm": {"mean": _num(np.mean(errs)) if errs else None,
                             "max": _num(np.max(errs)) if errs else None},

@@ -1,5 +1,6 @@
 """Read-only results for the results screens and their exports: the vehicles, and every
-rundown of each bolt of a vehicle (OK, NOK, rework), with the saved crops.
+rundown of each bolt of a vehicle (OK, NOK, rework; a tightening or a loosening), with the
+saved crops, and the commands given on the vehicle (its audit trail).
 
 Why beside the repository and not in it: ``db.repository.Repository`` is the daemon's write
 path; the screens only read, and only need two queries the repository does not offer (the
@@ -65,7 +66,14 @@ class Results:
         runs = [r for _, r in rows]
         for b in report["bolts"]:
             b["rundowns"] = [r for r in runs if r["bolt"] == b["bolt"]]
+        report["commands"] = self.commands(vin)
         return report
+
+    def commands(self, vin: str) -> list[dict[str, Any]]:
+        """The vehicle's audit trail: every command given on it (skip, reopen, release,
+        loosen) with its user, where from and when, oldest first."""
+        return [{"at": _iso(c.at), "user": c.user, "source": c.source, "kind": c.kind,
+                 "bolt": c.bolt, "comment": c.comment} for c in self.repo.ledger.commands(vin)]
 
     def rundowns(self, vin: str) -> list[dict[str, Any]]:
         return [r for _, r in self._rows(vin)]

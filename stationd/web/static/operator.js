@@ -3,9 +3,11 @@
 "use strict";
 const NS = "http://www.w3.org/2000/svg";
 const ICONS = {pending: "\u25CB", next: "\u25B6", selected: "\u2691", tightening: "\u21BB",
-  ok: "\u2714", nok: "\u2716", skipped: "\u00BB", blocked: "\u2298", missing: "!"};
+  ok: "\u2714", nok: "\u2716", skipped: "\u00BB", blocked: "\u2298", missing: "!",
+  locked: "\u2297", loosen: "\u21BA", loosened: "\u21B6"};
 const LABELS = {pending: "to do", next: "next", selected: "selected", tightening: "tighten",
-  ok: "OK", nok: "NOK", skipped: "skipped", blocked: "blocked", missing: "missing"};
+  ok: "OK", nok: "NOK", skipped: "skipped", blocked: "blocked", missing: "missing",
+  locked: "locked", loosen: "loosen first", loosened: "loosened"};
 const $ = (id) => document.getElementById(id);
 
 function el(tag, attrs, text) {
@@ -119,7 +121,8 @@ function drawWrench(svg, w, W, H) {
 // above, below, right, left, the diagonals, then farther out.  A label that finds no room is
 // hidden (shown on hover); the bolt keeps its coloured symbol and state icon, so colour is
 // still never the only cue.
-const PRIORITY = {selected: 0, tightening: 0, nok: 1, blocked: 1, next: 2, missing: 2};
+const PRIORITY = {selected: 0, tightening: 0, locked: 1, loosen: 1, nok: 1, blocked: 1, next: 2,
+  missing: 2};
 // A label must read as its own bolt's: it is kept only where its box is nearer its own dot
 // than any other dot by NEARER px (the box's nearest edge to the dot's centre: what the eye
 // pairs), else it is hidden and shown on hover (a label 22 px from B20 and 56 px from B36
@@ -148,9 +151,13 @@ function placeLabels(placed, r, dense, W, H) {
   const gap = dense ? 2 : 5;
   const labels = placed.map(([b, g, x, y]) => {
     let tag = b.label;
-    if (b.state === "selected" && b.pset !== null) tag += ` P${b.pset}`;
+    // the pset that goes to the controller: a bolt to loosen gets its loosen pset first
+    const on = b.state === "selected" || b.state === "tightening";
+    if (on && b.loosen && b.loosen_pset !== null) tag += ` P${b.loosen_pset}`;
+    else if (b.state === "selected" && b.pset !== null) tag += ` P${b.pset}`;
+    if (b.state === "loosen" && b.loosen_pset !== null) tag += ` P${b.loosen_pset}`;
     if ((b.state === "ok" || b.state === "nok") && b.torque_nm !== null) tag += ` ${fmt(b.torque_nm, 1)}`;
-    const matters = ["selected", "tightening", "nok", "blocked"].includes(b.state);
+    const matters = ["selected", "tightening", "nok", "blocked", "locked", "loosen"].includes(b.state);
     if (dense && !matters) tag = null;
     const lbl = el("g", {class: "lbl"});
     lbl.appendChild(el("text", {class: "bolt-id", y: 0}, b.bolt));
@@ -235,6 +242,7 @@ function render(view) {
   h.className = "headline " + (view.tone || "");
   h.dataset.tone = view.tone || "";
   drawMap(view);
+  drawLocks(view);
   const w = view.wrench;
   // the per-pair reasons of a wrench out of view are the commissioning screen's business:
   // here one line, the full text on hover
@@ -248,8 +256,27 @@ function render(view) {
   if (dkey !== shownKeys.devices) { shownKeys.devices = dkey; drawDevices(view.devices, view.line); }
 }
 
+// Locked bolts (too many NOKs in a row), and who may release them: the roles with the
+// release right in the station's access section (the station says, the screen shows)
+function drawLocks(view) {
+  const locks = view.locks || [], by = view.release_by || [];
+  const key = JSON.stringify([locks, by]);
+  if (key === shownKeys.locks) return;
+  shownKeys.locks = key;
+  $("locks").hidden = !locks.length;
+  document.body.classList.toggle("has-locks", locks.length > 0);
+  const ul = $("locks-list");
+  ul.replaceChildren(...locks.map((text) => {
+    const li = document.createElement("li");
+    li.textContent = text;
+    return li;
+  }));
+  setText("release-by", by.length ? `Release: a user with the release right (${by.join(", ")})`
+    : "Release: no role of this station has the release right (access.roles)");
+}
+
 // what the tables show now: they are redrawn only when it changed
-const shownKeys = {results: "", devices: ""};
+const shownKeys = {results: "", devices: "", locks: ""};
 
 function drawResults(results) {
   const tb = $("results");
@@ -292,15 +319,23 @@ function drawDevices(devices, line) {
     li.title = l.title || "";
     ul.appendChild(li);
   }
-  // the faulty first, each on its own lines (a long URL wraps); the healthy on one line
-  const devs = Object.entries(devices).sort((a, b) => Number(a[1].ok) - Number(b[1].ok));
+  // the faulty first, each on its own lines (a long URL wraps); the healthy on one line.  A
+  // pair that is up but not trusted by the calibration check counts as faulty here: moved
+  // (red, with the figure) or not checked yet (neutral, with why); its bolts are refused
+  const fine = (d) => d.ok && (!d.check || d.check.trusted);
+  const devs = Object.entries(devices).sort((a, b) => Number(fine(a[1])) - Number(fine(b[1])));
   for (const [name, d] of devs) {
     const li = document.createElement("li");
-    li.className = d.ok ? "dev-ok" : d.kind === "opening" ? "dev-wait" : "dev-bad";
+    const check = d.ok ? d.check : null;
+    li.className = !d.ok ? (d.kind === "opening" ? "dev-wait" : "dev-bad") :
+      !check || check.trusted ? "dev-ok" : check.verdict === "moved" ? "dev-bad" : "dev-wait";
     li.dataset.device = name;
-    li.textContent = d.ok ? `${name}: ok` : `${name} ${d.kind}: ${d.reason}`;
-    // what the device said it is (the controller's name, versions): on hover
-    if (d.identity) li.title = d.identity;
+    li.dataset.trust = !check ? "" : check.trusted ? "trusted" : check.verdict;
+    li.textContent = !d.ok ? `${name} ${d.kind}: ${d.reason}` :
+      !check ? `${name}: ok` : check.trusted ? `${name}: ok, trusted` : check.words;
+    // what the device said it is (the controller's name, versions), its last check: on hover
+    const title = [d.identity, check && check.trusted ? check.words : ""].filter(Boolean);
+    if (title.length) li.title = title.join("\n");
     ul.appendChild(li);
   }
 }

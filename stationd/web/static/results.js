@@ -113,6 +113,21 @@ function curvePlot(r) {
                    fill: nok ? "#f66" : "#5ad"}, root);
   return root;
 }
+// The vehicle's commands (skip, reopen, release, loosen), oldest first, with who and when
+function showTrail(commands) {
+  const tb = q("#trail tbody");
+  tb.replaceChildren();
+  for (const c of commands) {
+    const tr = document.createElement("tr");
+    tr.className = "command";
+    tr.dataset.kind = c.kind;
+    cell(tr, (c.at || "").slice(0, 19).replace("T", " "));
+    cell(tr, c.kind); cell(tr, c.bolt || "-"); cell(tr, c.user); cell(tr, c.source);
+    cell(tr, c.comment || "");
+    tb.appendChild(tr);
+  }
+  q("#trail").hidden = q("#trail-title").hidden = !commands.length;
+}
 async function showVehicle(vin) {
   const base = "/api/vehicles/" + encodeURIComponent(vin);
   try {
@@ -135,11 +150,13 @@ async function showVehicle(vin) {
         cell(tr, i ? "" : b.bolt);
         cell(tr, i ? "" : b.status.toUpperCase(), "status-" + (b.status === "nok" ? "NOK" : b.status));
         if (!r) {
-          cell(tr, "-"); cell(tr, "not tightened");
+          cell(tr, "-"); cell(tr, "-"); cell(tr, "not tightened");
           for (let k = 0; k < 7; k++) cell(tr, "", k === 6 ? "crops" : "");
         }
         else {
           cell(tr, r.attempt + (r.attempt > 1 ? " (rework)" : ""));
+          // a loosening (the NOK policy's loosen step, a loosen command) undoes a tightening
+          cell(tr, r.rundown || "tightening", "rundown-" + (r.rundown || "tightening"));
           cell(tr, r.status.toUpperCase(), "status-" + (r.status === "nok" ? "NOK" : "ok"));
           cell(tr, fmt(r.torque_nm, 1)); cell(tr, fmt(r.angle_deg, 0)); cell(tr, r.pset ?? "-");
           cell(tr, fmt(r.tilt_deg, 1)); cell(tr, fmt(r.match_distance_mm, 1));
@@ -157,7 +174,7 @@ async function showVehicle(vin) {
           cr.className = "curve";
           cr.dataset.bolt = b.bolt;
           const td = cell(cr, "");
-          td.colSpan = 11;
+          td.colSpan = 12;
           td.appendChild(curvePlot(r));
           tb.appendChild(cr);
         }
@@ -167,6 +184,7 @@ async function showVehicle(vin) {
     const crops = v.bolts.some((b) => b.rundowns.some((r) => (r.image_urls || []).length));
     q("#rundowns").classList.toggle("no-crops", !crops);
     q("#curves-note").hidden = !document.querySelector("tr.curve");
+    showTrail(v.commands || []);
   } catch (e) {
     if (e.status === 404) {
       q("#title").textContent = `no vehicle ${vin}`;
