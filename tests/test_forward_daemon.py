@@ -13,7 +13,7 @@ import pytest
 
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
-from stationd.demo.station import _sim_psets
+from stationd.sim.devices_cli import psets_of
 from tests.pgserver import PgServer
 from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
 from tests.station.test_restart import _until
@@ -40,7 +40,7 @@ def test_results_reach_the_line_database_and_wait_while_it_is_down(tmp_path):
     lift_port, ctl_port, http_port = _free_port(), _free_port(), _free_port()
     url = pg.create("line")
     plc = SimulatedPlc()
-    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=10, nok_rate=0.0)
+    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=10, nok_rate=0.0)
 
     def edit(text: str) -> str:
         return text + (f"\nhttp: {{listen: '127.0.0.1:{http_port}'}}\n"

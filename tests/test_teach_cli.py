@@ -23,7 +23,7 @@ import yaml
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.access import hash_password
-from stationd.demo.station import _sim_psets
+from stationd.sim.devices_cli import psets_of
 from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,7 +43,7 @@ def _station(port: int, hashed: str):
 def test_an_engineer_teaches_bolts_and_gets_a_new_table_compared_with_cad(tmp_path):
     lift_port, ctl_port, http_port = _free_port(), _free_port(), _free_port()
     plc = SimulatedPlc()
-    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=11, nok_rate=0.0)
+    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=11, nok_rate=0.0)
     d = Proc(tmp_path, lift_port, ctl_port, edit=_station(http_port, hash_password(PASSWORD)))
     pose, out = tmp_path / "pose", tmp_path / "taught.yaml"
     env = {**os.environ, "STATIOND_PASSWORD": PASSWORD, "PYTHONPATH": str(ROOT)}

@@ -36,11 +36,12 @@ from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.bench.wait import until as _until
 from stationd.boltfile import load_bolts
-from stationd.demo.station import SIM_CONFIG, _kind, _sim_psets
+from stationd.demo.station import SIM_CONFIG, _kind
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
 from stationd.reasons import Reason
 from stationd.serve import Screens, serve_station, validate_station
+from stationd.sim.devices_cli import psets_of
 from stationd.sim.load import cpu_load
 from stationd.sim.soak import (
     Device,
@@ -296,7 +297,7 @@ def soak_station(plan: list[Step], *, load: int = 0, seed: int = 0) -> SoakTally
     and refused reloads too)."""
     tmp = tempfile.TemporaryDirectory(prefix="stationd-soak-")
     plc = SimulatedPlc()
-    ctl = SimController(psets=_sim_psets(SIM_CONFIG.parent / "bolts.yaml"), seed=seed)
+    ctl = SimController(psets=psets_of(SIM_CONFIG.parent / "bolts.yaml"), seed=seed)
     ctl.start()
     files = StationFiles(Path(tmp.name), plc.start_tcp(_free_port()),
                          ctl.listen_tcp(port=_free_port()))

@@ -35,10 +35,11 @@ from stationd import progress
 from stationd.bench.wait import until as _until
 from stationd.boltfile import load_bolts
 from stationd.config import StationConfig, load_station_config
-from stationd.demo.station import SIM_CONFIG, _sim_psets, simulators
+from stationd.demo.station import SIM_CONFIG, simulators
 from stationd.errors import InputError
 from stationd.jsonout import finite, strict_json
 from stationd.serve import Screens
+from stationd.sim.devices_cli import psets_of
 from stationd.sim.world import World, WrenchPose, wrench_at
 from stationd.station.core import SendParams, State
 from stationd.station.daemon import Station
@@ -212,7 +213,7 @@ def _run_once(cfg: StationConfig, world: World, plan: list[tuple[str, WrenchPose
     are served from the daemon's loop (as ``http:`` in the station file does) and that many
     clients are connected before the first bolt and stay for the whole pass."""
     assert cfg.bolts_path is not None  # noqa: S101 - checked by the caller
-    station = Station(cfg, device_kw={"wrench": {"psets": _sim_psets(cfg.bolts_path)}})
+    station = Station(cfg, device_kw={"wrench": {"psets": psets_of(cfg.bolts_path)}})
     out: dict[str, Any] = {"truth": None, "wrong": 0, "not_selected": []}
     info: dict[str, Any] = {"station": station, "out": out, "browsers": browsers}
 

@@ -36,7 +36,9 @@ from stationd.errors import InputError
 from stationd.jsonout import strict_json
 from stationd.reasons import Reason, Why
 from stationd.serve import Screens
+from stationd.sim.devices_cli import psets_of
 from stationd.sim.load import cpu_load
+from stationd.sim.vin import make_vin
 from stationd.sim.world import World, wrench_at
 from stationd.station.commands import Issuer, ReleaseBolt, Right
 from stationd.station.core import SendParams, State
@@ -63,17 +65,6 @@ MAX_RUNDOWNS = 10
 SUPERVISOR = Issuer("supervisor", frozenset({Right.RELEASE}), "demo")
 #: the controller's loosening program for a loosen pset: a joint that comes loose is OK
 LOOSEN_PROGRAM = SimPset(40.0, 5.0, 150.0, 360.0, 90.0, 720.0, name="loosen")
-
-
-def _sim_psets(bolts_path: Path) -> dict[int, SimPset]:
-    """The controller's programs: the psets of the bolt table."""
-    table = load_bolts(bolts_path)
-    out: dict[int, SimPset] = {}
-    for p in [*table.psets, *(q for m in table.models for q in m.psets)]:
-        t, a = p.torque, p.angle
-        out[p.number] = SimPset(t.target, t.min, t.max, a.target if a else 0.0,
-                            a.min if a else 0.0, a.max if a else 0.0)
-    return out
 
 
 def demo_policy(cfg: StationConfig, psets: dict[int, SimPset]) -> NokPolicy | None:
@@ -276,7 +267,7 @@ def run_station_demo(args: argparse.Namespace) -> int:
               flush=True)
     tmp = tempfile.TemporaryDirectory(prefix="stationd-demo-")
     cfg = simulated(cfg, Path(tmp.name))
-    psets = _sim_psets(bolts_path)
+    psets = psets_of(bolts_path)
     policy = demo_policy(cfg, psets)
     if policy is not None:
         cfg = replace(cfg, nok=policy)
@@ -293,7 +284,7 @@ def run_station_demo(args: argparse.Namespace) -> int:
     if not codes:
         raise InputError(f"{bolts_path}: the demo needs a model with a lift code and bolts")
     truth: dict[str, Any] = {"bolt": None, "wrong": 0, "model_code": codes[0],
-                             "vin": "SIMVIN0000000001", "locked_sends": 0}
+                             "vin": make_vin(1), "locked_sends": 0}
 
     def check(action: Any) -> None:
         """Every parameter send is compared with where the wrench really is, at that moment;

@@ -12,12 +12,12 @@ from stationd.config import load_station_config
 from stationd.demo.station import (
     LOOSEN_PROGRAM,
     SIM_CONFIG,
-    _sim_psets,
     _summary,
     demo_policy,
     loosen_programs,
     policy_words,
 )
+from stationd.sim.devices_cli import psets_of
 from stationd.station.events import BoltLocked, BoltReleased, EventBus, ResultRecorded
 from stationd.station.policy import NokPolicy, NokRule
 
@@ -59,7 +59,7 @@ def test_the_summary_counts_the_nok_policy_and_stays_honest():
 def test_the_demo_runs_its_policy_only_where_the_station_file_has_none():
     cfg = load_station_config(SIM_CONFIG)
     assert cfg.bolts_path is not None
-    psets = _sim_psets(cfg.bolts_path)
+    psets = psets_of(cfg.bolts_path)
     policy = demo_policy(cfg, psets)
     assert policy is not None
     assert policy.default == NokRule(max_nok=3)

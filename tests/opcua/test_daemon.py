@@ -14,7 +14,7 @@ import pytest
 
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
-from stationd.demo.station import _sim_psets
+from stationd.sim.devices_cli import psets_of
 from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
 from tests.station.test_restart import _until
 
@@ -26,7 +26,7 @@ VIN = "OPCUAVIN000000001"
 def test_a_bolt_tightened_at_the_station_is_the_mes_latest_result(tmp_path):
     lift_port, ctl_port, ua_port = _free_port(), _free_port(), _free_port()
     plc = SimulatedPlc()
-    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=12, nok_rate=0.0)
+    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=12, nok_rate=0.0)
 
     def edit(text: str) -> str:
         return text + (f"\nopcua: {{endpoint: 'opc.tcp://127.0.0.1:{ua_port}', "

@@ -24,7 +24,7 @@ from db.repository import Repository
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.access import hash_password
-from stationd.demo.station import _sim_psets
+from stationd.sim.devices_cli import psets_of
 from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
 from tests.station.test_restart import _until
 
@@ -79,7 +79,7 @@ def test_commands_through_the_daemon_are_authenticated_recorded_and_outlive_a_re
     lift_port, ctl_port, http_port = _free_port(), _free_port(), _free_port()
     url = f"http://127.0.0.1:{http_port}/"
     plc = SimulatedPlc()
-    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=6, nok_rate=0.0)
+    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=6, nok_rate=0.0)
     d = Proc(tmp_path, lift_port, ctl_port, edit=_station(http_port))
     try:
         at_height(d, plc, ctl, lift_port, ctl_port, VIN)
@@ -183,7 +183,7 @@ def test_a_bolt_locked_after_three_noks_is_released_by_a_supervisor_from_the_cli
     lift_port, ctl_port, http_port = _free_port(), _free_port(), _free_port()
     url = f"http://127.0.0.1:{http_port}/"
     plc = SimulatedPlc()
-    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=8, nok_rate=1.0)
+    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=8, nok_rate=1.0)
 
     def edit(text: str) -> str:
         return str(_station(http_port)(text)).replace("    supervisor: [skip, reopen]\n",

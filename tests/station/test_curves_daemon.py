@@ -11,7 +11,7 @@ import pytest
 from db.repository import Repository
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
-from stationd.demo.station import _sim_psets
+from stationd.sim.devices_cli import psets_of
 from stationd.web.results import Results
 from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
 from tests.station.test_restart import _until
@@ -21,7 +21,7 @@ from tests.station.test_restart import _until
 def test_the_daemon_stores_each_rundown_with_its_curves(tmp_path):
     lift_port, ctl_port = _free_port(), _free_port()
     plc = SimulatedPlc()
-    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=9, nok_rate=0.0)
+    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=9, nok_rate=0.0)
     url = f"openprotocol://127.0.0.1:{ctl_port}"
     d = Proc(tmp_path, lift_port, ctl_port, edit=lambda t: t.replace(url, url + "?curves=1"))
     pose = tmp_path / "pose"

@@ -20,7 +20,7 @@ import pytest
 
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
-from stationd.demo.station import _sim_psets
+from stationd.sim.devices_cli import psets_of
 from tests.station.notify import NotifyManager
 from tests.test_serve import _recv_until
 
@@ -103,7 +103,7 @@ def test_devices_down_at_boot_are_faults_then_it_recovers_and_a_closed_vin_is_a_
         tmp_path):
     lift_port, ctl_port = _free_port(), _free_port()
     plc = SimulatedPlc()
-    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
+    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
     d = Proc(tmp_path, lift_port, ctl_port)
     try:
         d.status("READY=1")                     # serving, with both devices down
@@ -141,7 +141,7 @@ def test_devices_down_at_boot_are_faults_then_it_recovers_and_a_closed_vin_is_a_
 def test_sighup_with_a_bad_bolt_table_is_refused_and_with_a_down_device_is_a_fault(tmp_path):
     lift_port, ctl_port = _free_port(), _free_port()
     plc = SimulatedPlc()
-    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
+    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
     plc.start_tcp(lift_port)
     ctl.start()
     ctl.listen_tcp(port=ctl_port)
@@ -178,7 +178,7 @@ def test_sighup_with_a_bad_bolt_table_is_refused_and_with_a_down_device_is_a_fau
 def test_a_camera_glob_matching_nothing_is_a_fault_not_an_exit(tmp_path):
     lift_port, ctl_port = _free_port(), _free_port()
     plc = SimulatedPlc()
-    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
+    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
     plc.start_tcp(lift_port)
     ctl.start()
     ctl.listen_tcp(port=ctl_port)

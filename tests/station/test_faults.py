@@ -12,7 +12,8 @@ import pytest
 
 from db.repository import Repository
 from stationd.config import load_station_config
-from stationd.demo.station import SIM_CONFIG, _sim_psets
+from stationd.demo.station import SIM_CONFIG
+from stationd.sim.devices_cli import psets_of
 from stationd.sim.world import World, wrench_at
 from stationd.station.core import State
 from stationd.station.daemon import Station
@@ -64,7 +65,7 @@ def _station(tmp_path, **wrench_kw):
     cfg = load_station_config(SIM_CONFIG)
     cfg = replace(cfg, database_url=f"sqlite:///{tmp_path}/s.db",
                   matching=replace(cfg.matching, max_age_s=WIRING_MAX_AGE_S))
-    st = Station(cfg, device_kw={"wrench": {"psets": _sim_psets(cfg.bolts_path), **wrench_kw}})
+    st = Station(cfg, device_kw={"wrench": {"psets": psets_of(cfg.bolts_path), **wrench_kw}})
     st.open()
     return st, World(cfg, seed=1)
 

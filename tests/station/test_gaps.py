@@ -10,7 +10,7 @@ import pytest
 
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
-from stationd.demo.station import _sim_psets
+from stationd.sim.devices_cli import psets_of
 from stationd.station.gaps import GapPlan, plan
 from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
 from tests.station.test_restart import _until
@@ -29,7 +29,7 @@ def test_the_ids_between_the_last_recorded_and_the_newest_are_fetched():
 def test_results_made_while_the_link_was_cut_are_fetched_or_shown_as_gaps(tmp_path):
     lift_port, ctl_port = _free_port(), _free_port()
     plc = SimulatedPlc()
-    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=9, nok_rate=0.0)
+    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=9, nok_rate=0.0)
     d = Proc(tmp_path, lift_port, ctl_port)
     pose = tmp_path / "pose"
     try:

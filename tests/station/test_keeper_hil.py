@@ -13,7 +13,8 @@ from dataclasses import replace
 import pytest
 
 from stationd.config import load_station_config
-from stationd.demo.station import SIM_CONFIG, _sim_psets
+from stationd.demo.station import SIM_CONFIG
+from stationd.sim.devices_cli import psets_of
 from stationd.station.core import State
 from stationd.station.daemon import Station
 
@@ -60,7 +61,7 @@ def test_a_plc_that_hangs_up_is_a_fault_retried_ever_more_slowly(tmp_path):
     cfg = load_station_config(SIM_CONFIG)
     cfg = replace(cfg, database_url=f"sqlite:///{tmp_path}/s.db",
                   lift=replace(cfg.lift, url=f"modbus-tcp://127.0.0.1:{peer.port}?timeout=0.5"))
-    st = Station(cfg, device_kw={"wrench": {"psets": _sim_psets(cfg.bolts_path)}})
+    st = Station(cfg, device_kw={"wrench": {"psets": psets_of(cfg.bolts_path)}})
     seen: dict[str, object] = {}
 
     async def main() -> None:

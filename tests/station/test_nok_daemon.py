@@ -19,7 +19,7 @@ import pytest
 
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController, SimPset, SimTightening
-from stationd.demo.station import _sim_psets
+from stationd.sim.devices_cli import psets_of
 from tests.station.test_commands_daemon import PASSWORD, Client, _station
 from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
 from tests.station.test_restart import _until
@@ -48,7 +48,7 @@ def nok_station(http_port: int) -> object:
 def controller(seed: int) -> SimController:
     """The simulated controller with the table's psets and the loosen program; every
     tightening NOK until the test says otherwise."""
-    return SimController({**_sim_psets(SIM / "bolts.yaml"), LOOSEN_PSET: LOOSEN}, seed=seed,
+    return SimController({**psets_of(SIM / "bolts.yaml"), LOOSEN_PSET: LOOSEN}, seed=seed,
                          nok_rate=1.0)
 
 

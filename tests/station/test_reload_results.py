@@ -22,7 +22,7 @@ import pytest
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.boltfile import load_bolts
-from stationd.demo.station import _sim_psets
+from stationd.sim.devices_cli import psets_of
 from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
 from tests.station.test_restart import _until
 
@@ -46,7 +46,7 @@ def test_a_reload_at_the_enable_during_a_rundown_and_in_flight_records_each_resu
         tmp_path):
     lift_port, ctl_port = _free_port(), _free_port()
     plc = SimulatedPlc()
-    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=3, nok_rate=0.0,
+    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=3, nok_rate=0.0,
                         resend_unacked=True)
     bolts = [b.bolt_id for b in load_bolts(SIM / "bolts.yaml").models[0].bolts]
     d = Proc(tmp_path, lift_port, ctl_port)

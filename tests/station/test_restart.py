@@ -23,7 +23,7 @@ from db.repository import Repository
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.boltfile import load_bolts
-from stationd.demo.station import _sim_psets
+from stationd.sim.devices_cli import psets_of
 
 SIM = Path(__file__).resolve().parents[2] / "config" / "sim"
 PROC = Path(__file__).with_name("station_proc.py")
@@ -81,7 +81,7 @@ class Daemon:
 def test_sigterm_and_sigkill_mid_vehicle_lose_nothing(tmp_path):
     for f in SIM.iterdir():
         shutil.copy(f, tmp_path)
-    psets = _sim_psets(tmp_path / "bolts.yaml")
+    psets = psets_of(tmp_path / "bolts.yaml")
     bolts = [b.bolt_id for b in load_bolts(tmp_path / "bolts.yaml").models[0].bolts]
     a, b, c = bolts[0], bolts[17], bolts[33]
     plc = SimulatedPlc()

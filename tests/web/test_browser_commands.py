@@ -10,7 +10,7 @@ import pytest
 
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
-from stationd.demo.station import _sim_psets
+from stationd.sim.devices_cli import psets_of
 from tests.station.test_commands_daemon import PASSWORD, _station
 from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
 from tests.web.pages import Page
@@ -41,7 +41,7 @@ def _answer(page: Page, before: str) -> str:
 def test_operator_screen_logs_in_skips_a_bolt_and_shows_a_refusal(page, shots, tmp_path):
     http_port, lift_port, ctl_port = _free_port(), _free_port(), _free_port()
     plc = SimulatedPlc()
-    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=7, nok_rate=0.0)
+    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=7, nok_rate=0.0)
     d = Proc(tmp_path, lift_port, ctl_port, edit=_station(http_port))
     try:
         at_height(d, plc, ctl, lift_port, ctl_port, VIN)

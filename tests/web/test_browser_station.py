@@ -26,13 +26,14 @@ from pathlib import Path
 import pytest
 
 from drivers.wrench.sim import SimController
-from stationd.demo.station import _sim_psets
+from stationd.sim.devices_cli import psets_of
+from stationd.sim.vin import make_vin
 from tests.station.test_daemon_faults import SIM, Proc, _free_port
 from tests.web.pages import Page
 from tests.web.test_browser import check_fits
 
 ROOT = Path(__file__).resolve().parents[2]
-DEMO_VIN = "SIMVIN0000000001"
+DEMO_VIN = make_vin(1)     # the demo's vehicle: a 17-character VIN (ISO 3779)
 CYCLES = 10   # the run must outlast the walk to the cameras screen (a bolt takes ~2 s)
 ICONS = {"OK": "\u2714", "NOK": "\u2716"}          # operator.js: a check mark, a cross
 LINE = re.compile(r"^(B\w+): pset (\d+), XY error [^,]+, (OK|NOK) ([\d.]+) Nm$")
@@ -214,7 +215,7 @@ def test_demo_screens_follow_the_simulated_operator(page, shots, tmp_path):
 @pytest.mark.timeout(240)
 def test_daemon_with_its_lift_down_shows_fault_naming_the_lift(page, shots, tmp_path):
     http_port, lift_port, ctl_port = _free_port(), _free_port(), _free_port()
-    ctl = SimController(_sim_psets(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
+    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
     ctl.start()
     ctl.listen_tcp(port=ctl_port)       # the controller answers; the lift PLC never does
 
