@@ -28,7 +28,13 @@ from stationd.errors import StationError
 from stationd.lock import StationLocks
 from stationd.station.core import DATABASE, LIFT, WRENCH
 from stationd.station.daemon import OPEN_ERRORS, Station
-from stationd.station.events import DeviceHealth, EventBus, StateChanged
+from stationd.station.events import (
+    DeviceHealth,
+    EventBus,
+    ResultRecorded,
+    StateChanged,
+    StationEvent,
+)
 from stationd.station.records import STATION_FAULTS, Unsaved
 from stationd.station.sdnotify import Notifier
 
@@ -215,10 +221,12 @@ async def _reader(cfg: StationConfig, what: str) -> Any:
 
 
 async def forward(cfg: StationConfig, notifier: Notifier, screens: Screens,
-                  stop: asyncio.Event) -> None:
+                  stop: asyncio.Event, bus: EventBus | None = None) -> None:
     """The records to the line's database while this station runs (``cfg.line``; nothing
     without it).  A line database that is down or refuses is never a fault of the station: a
-    journal line (and STATUS=) at each change, the backlog in ``/api/status``."""
+    journal line (and STATUS=) at each change, the backlog in ``/api/status``.  Each result
+    the ``bus`` says was recorded wakes the forwarder (the lag is then the forwarding, not
+    its poll)."""
     if cfg.line is None:
         return
     from stationd.forward import Forwarder
@@ -240,9 +248,18 @@ async def forward(cfg: StationConfig, notifier: Notifier, screens: Screens,
         (log.warning if st["alarm"] or st["up"] is False else log.info)("%s", line)
         notifier.status(line)
 
+    wake = asyncio.Event()
+
+    def heard(event: StationEvent) -> None:   # the publisher's thread: the loop sets it
+        if isinstance(event, ResultRecorded):
+            loop.call_soon_threadsafe(wake.set)
+
+    unsubscribe = bus.subscribe(heard) if bus is not None else None
     try:
-        await fwd.run(stop, told)
+        await fwd.run(stop, told, wake)
     finally:
+        if unsubscribe is not None:
+            unsubscribe()
         screens.line = None
         await loop.run_in_executor(None, fwd.line.dispose)
         await loop.run_in_executor(None, repo.close)
@@ -307,7 +324,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
         inner = asyncio.Event()
         task = asyncio.create_task(station.run(inner))
         screens.attach(station, cfg)
-        line = asyncio.create_task(forward(cfg, notifier, screens, inner))
+        line = asyncio.create_task(forward(cfg, notifier, screens, inner, bus))
         served = asyncio.create_task(opcua(cfg, bus, inner))
         log.info("stationd running: %s", cfg_path)
         new: StationConfig | None = None
@@ -326,6 +343,11 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
                     new = None
                     log.error("reload refused, keeping the running configuration: %s",
                               one_line(exc))
+                    notifier.status(f"reload refused: {one_line(exc)}")
+                except Exception as exc:   # a bug in a reader: still never the running station
+                    new = None
+                    log.exception("reload refused (an error in reading the configuration), "
+                                  "keeping the running configuration: %s", one_line(exc))
                     notifier.status(f"reload refused: {one_line(exc)}")
         if new is not None and not stop.is_set():
             # systemd: reloading until the new station's READY=1 (never STOPPING=1 here)

@@ -98,6 +98,31 @@ def decode_text(data: bytes, where: str, expected: str) -> str:
                           "the file as UTF-8", path=where, line=line) from None
 
 
+#: how deep a file's collections may nest: the station's files nest a few levels; PyYAML and
+#: the readers walk a document recursively, and 300 levels exhausted Python's stack (a
+#: traceback, and a daemon that died on a reload)
+MAX_DEPTH = 64
+
+
+def _too_deep(root: yaml.Node) -> yaml.Node | None:
+    """The first collection nested deeper than :data:`MAX_DEPTH`, or None (walked without
+    recursion)."""
+    todo: list[tuple[yaml.Node, int]] = [(root, 1)]
+    seen: set[int] = set()
+    while todo:
+        node, depth = todo.pop()
+        if not isinstance(node, yaml.CollectionNode) or id(node) in seen:
+            continue            # a scalar nests nothing; an alias is walked once
+        if depth > MAX_DEPTH:
+            return node
+        seen.add(id(node))
+        if isinstance(node, yaml.SequenceNode):
+            todo.extend((child, depth + 1) for child in node.value)
+        else:
+            todo.extend((part, depth + 1) for pair in node.value for part in pair)
+    return None
+
+
 class YamlNode:
     """One node of a YAML document, with its file, line and dotted key path."""
 
@@ -124,10 +149,15 @@ class YamlNode:
             problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
             raise ConfigError(f"malformed YAML: {problem}", path=path, line=line) from None
         except RecursionError:   # PyYAML parses nested collections recursively
-            raise ConfigError("malformed YAML: collections nested too deeply", path=path
-                              ) from None
+            raise ConfigError(f"collections nested more than {MAX_DEPTH} levels deep: not a "
+                              "station's file", path=path) from None
         if node is None:
             raise ConfigError("the file is empty", path=path)
+        deep = _too_deep(node)
+        if deep is not None:   # refused here, before anything walks it recursively
+            raise ConfigError(f"collections nested more than {MAX_DEPTH} levels deep: not a "
+                              "station's file", path=path,
+                              line=int(deep.start_mark.line) + 1)
         return cls(node, path, "")
 
     # -- errors -------------------------------------------------------------------------

@@ -104,7 +104,7 @@ def test_localize_json_and_repeat(files, capsys):
     (lambda d: ["demo", "--hold", "--no-http"], "--no-http with --http or --hold"),
     (lambda d: ["demo", "--save", str(d)], "it goes with --vision"),
     (lambda d: ["bench", "vision", "--only", ""], "--only: unknown section(s) ''"),
-    (lambda d: ["run", "--config", str(d / "deep.yaml")], "nested too deeply"),
+    (lambda d: ["run", "--config", str(d / "deep.yaml")], "nested more than"),
     # issue 19: hangs, tracebacks and messages in the program's words
     (lambda d: ["detect", str(d / "huge.png"), "--camera", str(d / "cam.yaml")],
      "huge.png: the image says it is 100000 x 100000 px: more than 200 MP"),

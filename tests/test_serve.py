@@ -43,6 +43,11 @@ def test_ready_reload_refused_and_clean_stop(tmp_path):
         p.send_signal(signal.SIGHUP)
         _recv_until(sock, "reload refused", 60)
         assert p.poll() is None  # still running on the old configuration
+        # 300 levels of block mappings: a newcomer's reload killed the daemon (RecursionError)
+        (tmp_path / "station.yaml").write_text(_deep_block(300))
+        p.send_signal(signal.SIGHUP)
+        _recv_until(sock, "reload refused", 60)
+        assert p.poll() is None
         shutil.copy(SIM / "station.yaml", tmp_path / "station.yaml")  # a valid one again
         p.send_signal(signal.SIGHUP)
         # a reload is RELOADING=1 then READY=1, never STOPPING=1 (systemd would stop the
@@ -63,11 +68,17 @@ def test_ready_reload_refused_and_clean_stop(tmp_path):
     assert all(len(line) < 400 for line in err.splitlines())  # one readable line per event
 
 
-def test_invalid_config_at_start_is_one_line_and_exit_2(tmp_path):
-    (tmp_path / "bad.yaml").write_text("lift: [\n")
+def _deep_block(levels: int) -> str:
+    return "".join("  " * i + f"k{i}:\n" for i in range(levels)) + "  " * levels + "v: 1\n"
+
+
+@pytest.mark.parametrize(("text", "said"), [("lift: [\n", "malformed YAML"),
+                                            (_deep_block(300), "nested more than")])
+def test_invalid_config_at_start_is_one_line_and_exit_2(tmp_path, text, said):
+    (tmp_path / "bad.yaml").write_text(text)
     r = subprocess.run([sys.executable, "-m", "stationd", "run", "--config",
                         str(tmp_path / "bad.yaml")], capture_output=True, text=True, timeout=60)
-    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "malformed YAML" in r.stderr
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and said in r.stderr
 
 
 @pytest.mark.timeout(180)

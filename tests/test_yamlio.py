@@ -1,7 +1,7 @@
 import pytest
 
 from stationd.errors import ConfigError
-from stationd.yamlio import YamlNode
+from stationd.yamlio import MAX_DEPTH, YamlNode
 
 
 def test_numbers_and_matrix_with_locations():
@@ -43,8 +43,27 @@ def test_collections_nested_too_deeply_are_one_error_not_a_recursion_crash(tmp_p
     (config check, db import, the daemon's reload) with RecursionError."""
     path = tmp_path / "deep.yaml"
     path.write_text("vision: " + "[" * 5000 + "]" * 5000 + "\n")
-    with pytest.raises(ConfigError, match="nested too deeply"):
+    with pytest.raises(ConfigError, match=f"nested more than {MAX_DEPTH} levels"):
         YamlNode.load(path)
+
+
+@pytest.mark.parametrize("levels", [65, 300])
+def test_block_collections_nested_deeper_than_the_limit_are_refused_at_their_line(levels):
+    """Block style composes without recursion trouble, but every reader then walks the
+    document recursively: 300 levels killed a running daemon's reload with RecursionError."""
+    text = "".join("  " * i + f"k{i}:\n" for i in range(levels)) + "  " * levels + "v: 1\n"
+    with pytest.raises(ConfigError, match=f"nested more than {MAX_DEPTH} levels") as err:
+        YamlNode.parse(text, "deep.yaml")
+    assert err.value.line == MAX_DEPTH + 1
+
+
+def test_nesting_up_to_the_limit_reads():
+    levels = MAX_DEPTH - 1
+    text = "".join("  " * i + f"k{i}:\n" for i in range(levels)) + "  " * levels + "v: 1\n"
+    node = YamlNode.parse(text, "ok.yaml")
+    for i in range(levels):
+        node = node.mapping([f"k{i}"])[f"k{i}"]
+    assert node.mapping(["v"])["v"].number() == 1
 
 
 # -- issue 19: only regular files are read, and what a file is instead is said -------------
