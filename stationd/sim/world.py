@@ -95,6 +95,9 @@ class World:
                                              for r in (refs.markers if refs else ())]
         self._moved: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._sources: dict[tuple[str, str], FrameSource] = {}
+        # each camera's source as the pair stands in place: a pair put back gets its frames
+        # (its rendered background) again at once
+        self._home: dict[tuple[str, str], FrameSource] = {}
         # (id(pose), pair, side) -> (pose, patches rendered ahead)
         self._ahead: dict[tuple[int, str, str], tuple[WrenchPose, list[Patch]]] = {}
         # the same for poses rendered live, oldest first (a wrench held still is rendered
@@ -109,11 +112,17 @@ class World:
         (as it really stands) sees them."""
         k = list(self.cfg.pairs).index(name)
         cal = self.cfg.pairs[name].calibration
+        home = name not in self._moved
         for j, side in enumerate(("left", "right")):
+            if home and (name, side) in self._home:
+                self._sources[(name, side)] = self._home[(name, side)]
+                continue
             fixed = [(mp, self.spec) for mp in (self._camera_pose(name, side, r)
                                                 for r in self.references) if mp is not None]
-            self._sources[(name, side)] = FrameSource(getattr(cal, side), self._base,
-                                                      self._seed + 2 * k + j, fixed)
+            src = FrameSource(getattr(cal, side), self._base, self._seed + 2 * k + j, fixed)
+            self._sources[(name, side)] = src
+            if home:
+                self._home[(name, side)] = src
 
     def move_pair(self, name: str, rotation_deg: tuple[float, float, float] = (0, 0, 0),
                   shift_mm: tuple[float, float, float] = (0, 0, 0)) -> None:
@@ -129,8 +138,12 @@ class World:
             m = np.eye(3)
             m[i, i], m[i, j], m[j, i], m[j, j] = c, -s_, s_, c
             R = m @ R
+        shift = np.asarray(shift_mm, dtype=np.float64)
         with self._lock:
-            self._moved[name] = (R, np.asarray(shift_mm, dtype=np.float64))
+            if np.allclose(R, np.eye(3), rtol=0.0, atol=1e-15) and not shift.any():
+                self._moved.pop(name, None)   # back in place: its own frames again
+            else:
+                self._moved[name] = (R, shift)
             for key in [k for k in self._ahead if k[1] == name]:
                 del self._ahead[key]
             for key in [k for k in self._live if k[1] == name]:

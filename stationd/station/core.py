@@ -65,6 +65,7 @@ from stationd.station.events import (
     Localized,
     Notice,
     PairChecked,
+    PairsUnchecked,
     ParamsRefusedEvent,
     ParamsSent,
     Refused,
@@ -1115,21 +1116,28 @@ class StationCore:
         assert self.trust is not None  # noqa: S101 - only called with references
         self.trust.asked(t)
         at_height = self._lift is not None and self._lift.at_height
-        return [MeasureReferences(self.trust.pairs, at_height, why, request)]
+        return [MeasureReferences(self.trust.pairs, at_height, why, request, t)]
 
     def _check_at_start(self, t: float) -> list[Action]:
         """No pair is trusted until checked: a check at once (without references: said)."""
         if self.trust is None:
             return [Publish(Notice("no calibration check configured (no references in the "
                                    "station file): every pair is trusted", t=t))]
-        return self._measure(t, "station started")
+        return [*self._unchecked(t), *self._measure(t, "station started")]
 
     def _check_on_arrival(self, t: float, vin: str) -> list[Action]:
         """A vehicle arrives: its pairs are trusted again only once checked for it."""
         if self.trust is None:
             return []
-        self.trust.distrust(f"checking for vehicle {vin}")
-        return self._measure(t, f"vehicle {vin} arrived")
+        self.trust.distrust(f"checking for vehicle {vin}", t)
+        return [*self._unchecked(t), *self._measure(t, f"vehicle {vin} arrived")]
+
+    def _unchecked(self, t: float) -> list[Action]:
+        """The screens told which pairs wait for a check, and why."""
+        assert self.trust is not None  # noqa: S101 - only called with references
+        reasons = tuple(r for r in self.trust.why.values()
+                        if r is not None and r.kind is Why.PAIR_UNCHECKED)
+        return [Publish(PairsUnchecked(reasons, t=t))] if reasons else []
 
     def _check_due(self, t: float) -> list[Action]:
         if self.trust is None or self.state is State.STARTING:
@@ -1158,7 +1166,7 @@ class StationCore:
         if self.trust is None:
             return []
         acts: list[Action] = []
-        for check, before, after in self.trust.answered(ev.t, ev.checks):
+        for check, before, after in self.trust.answered(ev.t, ev.checks, ev.asked_t):
             acts.append(Publish(PairChecked(
                 check.pair, check.verdict.value, check.reference, check.offset_mm,
                 check.tolerance_mm, {m.name: m.offset_mm for m in check.measures},

@@ -251,6 +251,15 @@ class PairChecked(StationEvent):
     why: Reason | None = None
 
 
+@dataclass(frozen=True)
+class PairsUnchecked(StationEvent):
+    """Pairs no longer trusted until their next check (a start, a reload, a vehicle's
+    arrival): one ``PAIR_UNCHECKED`` reason per pair, with why.  A moved pair is not among
+    them: it stays moved until a check finds it in place."""
+
+    reasons: tuple[Reason, ...]
+
+
 # -- results ------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class ResultRecorded(StationEvent):

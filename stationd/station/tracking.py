@@ -72,7 +72,7 @@ class Tracker:
         if refs is not None:
             self.setups = {n: with_references(s, refs.of(n), refs.exclusion_mm)
                            for n, s in self.setups.items()}
-        self._check: MeasureReferences | None = None   # a calibration check asked for
+        self._checks: list[MeasureReferences] = []   # calibration checks asked for
         self.frames: FrameStore | None = None   # set when the screens are on
         self.last: Localization | None = None
         self._bad: dict[str, int] = {}           # pair -> failed grabs in a row
@@ -89,9 +89,8 @@ class Tracker:
         """Grab and localize while the core tracks and every pair is up (a pair that is down
         is its keeper's to bring back)."""
         while not stop.is_set():
-            if self._check is not None and self.grabbers:
-                check, self._check = self._check, None
-                await self._measure(check)
+            if self._checks:   # answered also with every pair down: "not checked", why
+                await self._measure(self._checks.pop(0))
             down = [n for n in self._keepers if n in self.core.faults]
             if self.core.state not in CAMERAS_ON or not self.grabbers or down:
                 await asyncio.sleep(IDLE_S)
@@ -156,8 +155,16 @@ class Tracker:
     # -- the calibration check ---------------------------------------------------------------
     def request_check(self, a: MeasureReferences) -> None:
         """The core asked for a calibration check: done by this loop, between two
-        localizations (its grabs are the loop's own), then fed back."""
-        self._check = a
+        localizations (its grabs are the loop's own), then fed back.  A check asked while
+        another waits is merged into it (one grab answers both: the newer's pairs and lift,
+        the command's request kept), unless both answer a person's command: then the second
+        is measured after the first, each answered with its own grab."""
+        for i, waiting in enumerate(self._checks):
+            if a.request is None or waiting.request is None:
+                self._checks[i] = replace(a, request=a.request if a.request is not None
+                                          else waiting.request)
+                return
+        self._checks.append(a)
 
     async def _measure(self, a: MeasureReferences) -> None:
         """Grab each pair asked once and check it against its references; a pair that is
@@ -174,7 +181,7 @@ class Tracker:
             return await self._call(self._check_pair, name, grabber, a.lift_at_height)
 
         checks = await asyncio.gather(*(one(n) for n in a.pairs))
-        await self._feed(ReferencesChecked(time.time(), tuple(checks), a.request))
+        await self._feed(ReferencesChecked(time.time(), tuple(checks), a.request, a.t))
 
     def _check_pair(self, name: str, grabber: StereoGrabber, at_height: bool) -> PairCheck:
         refs, pc = self.cfg.references, self.cfg.pairs[name]

@@ -54,6 +54,15 @@ def summary(check: PairCheck) -> dict[str, Any]:
                                     "note": m.note} for m in check.measures}}
 
 
+def from_summary(pair: str, s: Mapping[str, Any]) -> PairCheck:
+    """A check back from :func:`summary`'s plain values (a daemon's answer read by a client):
+    its verdict, worst reference, offset and why (each reference's own measurement is left
+    out)."""
+    return PairCheck(pair, Verdict(s["verdict"]), (), s.get("reference"), s.get("offset_mm"),
+                     float(s.get("tolerance_mm") or 0.0),
+                     RefWhy(s["why"]) if s.get("why") is not None else None, s.get("note"))
+
+
 @dataclass
 class PairTrust:
     """The pairs the check measures and what is known of each: ``None`` trusted, else the
@@ -66,14 +75,20 @@ class PairTrust:
     why: dict[str, Reason | None] = field(default_factory=dict)
     last_t: float | None = None       # when the last check's answer came
     asked_t: float | None = None      # a check asked and not answered yet, since
+    #: the last time every pair was distrusted (a vehicle's arrival): a check asked before
+    #: it measured frames that may predate the new vehicle and trusts no pair again
+    distrusted_t: float = float("-inf")
     requests: list[int] = field(default_factory=list)   # commands waiting for the answer
 
     def __post_init__(self) -> None:
         self.distrust("not checked since the start")
 
-    def distrust(self, note: str) -> None:
-        """Every pair unchecked (a start, a vehicle's arrival): trusted again by a check.  A
-        moved pair stays moved: only a check that finds it in place clears that."""
+    def distrust(self, note: str, t: float | None = None) -> None:
+        """Every pair unchecked (a start, a vehicle's arrival at ``t``): trusted again by a
+        check asked since.  A moved pair stays moved: only a check that finds it in place
+        clears that."""
+        if t is not None:
+            self.distrusted_t = t
         for p in self.pairs:
             if not _moved(self.why.get(p)):
                 self.why[p] = Reason(Why.PAIR_UNCHECKED, pair=p, note=note)
@@ -109,12 +124,16 @@ class PairTrust:
     def asked(self, t: float) -> None:
         self.asked_t = t
 
-    def answered(self, t: float, checks: Iterable[PairCheck]
+    def answered(self, t: float, checks: Iterable[PairCheck], asked_t: float | None = None
                  ) -> list[tuple[PairCheck, Reason | None, Reason | None]]:
         """The checks' verdicts applied: each check with its pair's reason before and after.
         A pair not checked for want of its references (on the lift, away) keeps what it
-        was: nothing was learnt about it."""
-        self.last_t, self.asked_t = t, None
+        was: nothing was learnt about it.  A check asked (``asked_t``) before the last
+        distrust (a vehicle arrived while it was grabbing) trusts no pair: its frames may be
+        older than the vehicle; a pair it found moved is moved all the same."""
+        stale = asked_t is not None and asked_t < self.distrusted_t
+        if not stale:   # a stale answer leaves the newer check asked at the arrival pending
+            self.last_t, self.asked_t = t, None
         out = []
         for c in checks:
             if c.pair not in self.why:
@@ -122,6 +141,8 @@ class PairTrust:
             before = self.why[c.pair]
             after = reason_of(c)
             if c.verdict is Verdict.NOT_CHECKED and c.why is RefWhy.LIFT_AWAY:
+                after = before
+            if stale and (after is None or not _moved(after)):
                 after = before
             self.why[c.pair] = after
             out.append((c, before, after))
@@ -137,6 +158,7 @@ class ReferencesChecked:
     t: float
     checks: tuple[PairCheck, ...]
     request: int | None = None
+    asked_t: float | None = None   # the asking's time (MeasureReferences.t), when known
 
 
 @dataclass(frozen=True)
@@ -149,6 +171,7 @@ class MeasureReferences:
     lift_at_height: bool
     why: str
     request: int | None = None
+    t: float | None = None      # when it was asked (its answer says so back)
 
 
 @dataclass(frozen=True)
@@ -170,4 +193,4 @@ def answer(checks: Iterable[PairCheck]) -> Mapping[str, Any]:
 
 
 __all__ = ["RETRY_S", "WAIT_S", "MeasureReferences", "PairTrust", "RecordCheck",
-           "ReferencesChecked", "answer", "reason_of", "summary"]
+           "ReferencesChecked", "answer", "from_summary", "reason_of", "summary"]

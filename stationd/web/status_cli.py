@@ -76,9 +76,12 @@ def format_status(st: dict[str, Any]) -> str:
                                  f": {c.get('done', 0)}/{c.get('total', 0)} done, "
                                  f"{c.get('nok', 0)} NOK"))
     for name, d in sorted(st.get("devices", {}).items()):
+        check = d.get("check") or {}   # a pair's calibration check: up is not trusted
         lines.append(f"device:   {name}: " + (
             "ok" if d["ok"] else "not opened yet" if d.get("kind") == "opening"
-            else f"{d.get('kind', '')} {d.get('reason', '')}"))
+            else f"{d.get('kind', '')} {d.get('reason', '')}")
+            + (f"; {check['words']}" if d["ok"] and check and not check.get("trusted")
+               else ""))
     vers = st.get("versions", {})
     lines.append("versions: " + ", ".join(f"{k} {x}" for k, x in sorted(vers.items())))
     return "\n".join(lines)

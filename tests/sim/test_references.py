@@ -69,3 +69,24 @@ def test_a_pair_moved_between_vehicles_is_found_moved_and_only_it():
     # 0.25 degrees at about a metre: a few millimetres, beyond the 2 mm tolerance
     assert moved.offset_mm == pytest.approx(np.radians(0.25) * 1000.0, rel=0.5)
     assert moved.offset_mm > refs.tolerance_mm
+
+
+def test_a_pair_put_back_shows_its_own_frames_again_at_once():
+    """(0, 0, 0) puts a knocked pair back: its cameras' sources as they were, the rendered
+    background the very same (nothing rendered again), the other pair untouched."""
+    refs = _refs()
+    cfg = SimpleNamespace(
+        pairs={n: SimpleNamespace(calibration=cal, to_vehicle=tv) for n, (cal, tv) in
+               PAIRS.items()}, marker=MarkerSpec(), references=refs)
+    world = World(cfg, seed=3, scene=Scene(noise_sigma=2.0))
+    try:
+        home = world.background("pair2", "left")
+        other = world.background("pair1", "left")
+        world.move_pair("pair2", rotation_deg=(0.0, 0.25, 0.0))
+        knocked = world.background("pair2", "left")
+        assert knocked is not home and not np.array_equal(knocked, home)
+        world.move_pair("pair2")
+        assert world.background("pair2", "left") is home
+        assert world.background("pair1", "left") is other
+    finally:
+        world.close()

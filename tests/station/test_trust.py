@@ -244,3 +244,22 @@ def test_random_sequences_never_send_for_a_bolt_end_of_an_untrusted_pair():
                     assert all(streak_ok[-PARAMS.stable_frames:]), streak_ok[-3:]
                     sends += 1
     assert sends >= 10   # the rule was exercised, not vacuous
+
+
+def test_a_check_asked_before_the_vehicle_arrived_trusts_no_pair_for_it():
+    """The start check's grabs may still run when a vehicle arrives: their frames may predate
+    the vehicle, so their "in place" trusts nothing; a pair they found moved is moved."""
+    core = _core()
+    (start_ask,) = _kinds(core.feed(Started(1.0)), MeasureReferences)
+    core.feed(LiftRead(2.0, True, True, 7, "VIN1"))
+    acts = core.feed(VehicleLoaded(3.0, "VIN1", "M", BOLTS))
+    (arrival_ask,) = _kinds(acts, MeasureReferences)
+    assert start_ask.t == 1.0 and arrival_ask.t == 3.0
+    acts = core.feed(ReferencesChecked(4.0, (ok("pair1"), moved("pair2")), None, start_ask.t))
+    checked = {e.pair: e for e in _events(acts, PairChecked)}
+    assert not checked["pair1"].trusted and checked["pair1"].why.kind is Why.PAIR_UNCHECKED
+    assert checked["pair2"].why.kind is Why.PAIR_MOVED
+    assert core.trust is not None and core.trust.asked_t == 3.0    # the arrival's still asked
+    acts = core.feed(ReferencesChecked(5.0, (ok("pair1"), ok("pair2")), None, arrival_ask.t))
+    assert all(e.trusted for e in _events(acts, PairChecked))
+    assert not core.trust.untrusted()

@@ -74,3 +74,14 @@ def test_status_refused_for_its_token_is_exit_3_with_the_hint(live_server, capsy
         err = capsys.readouterr().err
         assert "HTTP 401" in err and "--token" in err and err.count("\n") == 1
     assert main(["status", "--url", srv.url, "--token", "s3cret-token"]) == 0
+
+
+def test_status_says_a_pair_that_is_up_but_not_trusted_and_why():
+    from stationd.web.status_cli import format_status
+    moved = {"trusted": False, "verdict": "moved",
+             "words": "pair2 moved: reference R2 off by 5.5 mm (> 2 mm)"}
+    text = format_status({"state": "tracking", "devices": {
+        "pair1": {"ok": True, "check": {"trusted": True, "verdict": "ok", "words": "x"}},
+        "pair2": {"ok": True, "check": moved}}})
+    assert "device:   pair1: ok\n" in text
+    assert "device:   pair2: ok; pair2 moved: reference R2 off by 5.5 mm (> 2 mm)" in text

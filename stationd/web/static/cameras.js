@@ -123,6 +123,17 @@ function healthLine(h) {
   return p;
 }
 
+// the pair's calibration check (with reference markers): trusted, moved with the figure, or
+// not checked with why; a pair that is up but not trusted has its bolts refused
+function trustLine(check) {
+  const p = document.createElement("div");
+  p.className = "pair-trust " + (check.trusted ? "dev-ok" : check.verdict === "moved" ? "dev-bad" : "dev-wait");
+  p.dataset.trust = check.trusted ? "trusted" : check.verdict;
+  p.textContent = check.trusted ? `trusted (${check.words})` : check.words;
+  return p;
+}
+const moved = (h) => !!(h && h.check && h.check.verdict === "moved" && !h.check.trusted);
+
 function openCrop() {
   $("crop").hidden = false;
   $("crop-close").focus();
@@ -153,12 +164,13 @@ async function refresh() {
     const sections = [];
     for (const [name, list] of Object.entries(pairs)) {
       const p = document.createElement("section");
-      p.className = "pair" + (health[name] && !health[name].ok ? " pair-bad" : "");
+      p.className = "pair" + (health[name] && (!health[name].ok || moved(health[name])) ? " pair-bad" : "");
       p.dataset.pair = name;
       p.innerHTML = "<h2></h2>";
       // config/sim names its pairs "pair1"...: not "pair pair1"
       p.firstChild.textContent = /^pair/i.test(name) ? name : `pair ${name}`;
       if (health[name]) p.appendChild(healthLine(health[name]));
+      if (health[name] && health[name].check) p.appendChild(trustLine(health[name].check));
       if (!list.length) {
         const none = document.createElement("div");
         none.className = "no-frames";
