@@ -26,15 +26,19 @@ from db.models import (
     ForwardQuarantine,
     Meta,
     OpcUaAcknowledged,
+    ProcessParameters,
     ResultGap,
+    TighteningCurve,
     TighteningRecord,
     UnattributedResult,
     Vehicle,
+    VehicleModel,
 )
 
 #: the kinds of records the feed carries, each in its own table
 RUNDOWN, UNATTRIBUTED, COMMAND, GAP = "rundown", "unattributed", "command", "gap"
 CHECK = "check"   # a camera pair's calibration check (db.checks)
+CURVE = "curve"   # one trace of a tightening (db.curves), its samples in the record
 FEED_LIMIT = 1000
 
 
@@ -151,10 +155,8 @@ class Ledger:
         """The feed after ``seq``, in order, each entry with its record (at most ``limit``)."""
         limit = max(1, min(int(limit), FEED_LIMIT))
         with self._session(False) as s:
-            entries = list(s.scalars(select(FeedEntry).where(FeedEntry.seq > seq)
-                                     .order_by(FeedEntry.seq).limit(limit)))
-            return [{"seq": e.seq, "kind": e.kind, "at": e.at.isoformat(),
-                     "record": _record(s, e.kind, e.ref)} for e in entries]
+            return _entries(s, list(s.scalars(select(FeedEntry).where(FeedEntry.seq > seq)
+                                              .order_by(FeedEntry.seq).limit(limit))))
 
     # -- acknowledged over OPC UA (AcknowledgeResults / RequestUnacknowledgedResults) ---------
     def seq_before(self, at: datetime) -> int:
@@ -207,22 +209,77 @@ def _iso(t: datetime | None) -> str | None:
     return None if t is None else t.isoformat()
 
 
+def _version(p: ProcessParameters) -> dict[str, Any]:
+    """The parameter version a rundown was tightened with, as plain values: the line keeps
+    them beside the rundown, so two stations' bolts of one code (each its own table, or
+    one table shared by a model) are told apart by what they were tightened to."""
+    def window(target: float | None, lo: float | None, hi: float | None
+               ) -> dict[str, float | None] | None:
+        return None if target is None and lo is None and hi is None else \
+            {"target": target, "min": lo, "max": hi}
+    return {"version": p.version, "pset": p.pset,
+            "torque": window(p.torque_target, p.torque_min, p.torque_max),
+            "angle": window(p.angle_target, p.angle_min, p.angle_max)}
+
+
+def _curve(s: Session, c: TighteningCurve) -> dict[str, Any]:
+    """A curve as the feed carries it: whole (the line database has no other way to its
+    samples), with the rundown it belongs to when that was known when it was stored
+    (``record_id``, the vehicle and bolt); else the tightening id is the link, as for the
+    rundown's own entry, which carries it too."""
+    vin = bolt = None
+    if c.record_id is not None:
+        row = s.execute(select(Vehicle.vin, Bolt.code)
+                        .join(TighteningRecord, TighteningRecord.vehicle_id == Vehicle.id)
+                        .join(Bolt, TighteningRecord.bolt_id == Bolt.id)
+                        .where(TighteningRecord.id == c.record_id)).first()
+        if row is not None:
+            vin, bolt = row
+    return {"id": c.id, "record_id": c.record_id, "tightening_id": c.tightening_id,
+            "vin": vin, "bolt": bolt, "trace_type": c.trace_type, "unit": c.unit,
+            "sample_period_s": c.sample_period_s, "values": list(c.values),
+            "times_s": None if c.times_s is None else list(c.times_s),
+            "result_at": _iso(c.result_at), "recorded_at": _iso(c.recorded_at)}
+
+
+def _rundowns(s: Session, refs: list[int]) -> dict[int, dict[str, Any]]:
+    """The rundowns ``refs`` as plain values, by id, read in one query: a reader catching up
+    (a forwarder draining a backlog) reads hundreds at once, and a query per rundown made
+    the reading, not the line database, what limited the drain."""
+    out: dict[int, dict[str, Any]] = {}
+    if not refs:
+        return out
+    q = (select(TighteningRecord, Vehicle.vin, Bolt.code, VehicleModel.name, ProcessParameters)
+         .join(Vehicle, TighteningRecord.vehicle_id == Vehicle.id)
+         .join(Bolt, TighteningRecord.bolt_id == Bolt.id)
+         .join(VehicleModel, Bolt.model_id == VehicleModel.id)
+         .join(ProcessParameters, TighteningRecord.parameters_id == ProcessParameters.id)
+         .where(TighteningRecord.id.in_(sorted(set(refs)))))
+    for rec, vin, bolt, model, version in s.execute(q):
+        out[rec.id] = {
+            "id": rec.id, "vin": vin, "bolt": bolt, "status": rec.status,
+            "rundown": rec.kind, "model": model, "parameters": _version(version),
+            "torque_nm": rec.torque_nm, "angle_deg": rec.angle_deg,
+            "tightening_id": rec.tightening_id, "params_sent": rec.params_sent,
+            "position_mm": [rec.x_mm, rec.y_mm, rec.z_mm],
+            "match_distance_mm": rec.match_distance_mm, "tilt_deg": rec.tilt_deg,
+            "sent_at": _iso(rec.sent_at), "result_at": _iso(rec.result_at),
+            "recorded_at": _iso(rec.recorded_at)}
+    return out
+
+
+def _entries(s: Session, entries: list[FeedEntry]) -> list[dict[str, Any]]:
+    """Feed entries with their records (the rundowns among them read at once)."""
+    rundowns = _rundowns(s, [e.ref for e in entries if e.kind == RUNDOWN])
+    return [{"seq": e.seq, "kind": e.kind, "at": e.at.isoformat(),
+             "record": rundowns[e.ref] if e.kind == RUNDOWN else _record(s, e.kind, e.ref)}
+            for e in entries]
+
+
 def _record(s: Session, kind: str, ref: int) -> dict[str, Any]:
     """One record of the feed as plain values."""
     if kind == RUNDOWN:
-        row = s.execute(select(TighteningRecord, Vehicle.vin, Bolt.code)
-                        .join(Vehicle, TighteningRecord.vehicle_id == Vehicle.id)
-                        .join(Bolt, TighteningRecord.bolt_id == Bolt.id)
-                        .where(TighteningRecord.id == ref)).one()
-        rec, vin, bolt = row
-        return {"id": rec.id, "vin": vin, "bolt": bolt, "status": rec.status,
-                "rundown": rec.kind,
-                "torque_nm": rec.torque_nm, "angle_deg": rec.angle_deg,
-                "tightening_id": rec.tightening_id, "params_sent": rec.params_sent,
-                "position_mm": [rec.x_mm, rec.y_mm, rec.z_mm],
-                "match_distance_mm": rec.match_distance_mm, "tilt_deg": rec.tilt_deg,
-                "sent_at": _iso(rec.sent_at), "result_at": _iso(rec.result_at),
-                "recorded_at": _iso(rec.recorded_at)}
+        return _rundowns(s, [ref])[ref]
     if kind == UNATTRIBUTED:
         u = s.get_one(UnattributedResult, ref)
         return {"id": u.id, "vin": u.vin, "controller_vin": u.controller_vin,
@@ -234,6 +291,8 @@ def _record(s: Session, kind: str, ref: int) -> dict[str, Any]:
         g = s.get_one(ResultGap, ref)
         return {"id": g.id, "first_id": g.first_id, "last_id": g.last_id, "vin": g.vin,
                 "reason": g.reason, "found_at": _iso(g.found_at)}
+    if kind == CURVE:
+        return _curve(s, s.get_one(TighteningCurve, ref))
     if kind == CHECK:
         k = s.get_one(CalibrationCheck, ref)
         return {"id": k.id, "at": k.at.isoformat(), "pair": k.pair, "verdict": k.verdict,
@@ -245,5 +304,5 @@ def _record(s: Session, kind: str, ref: int) -> dict[str, Any]:
             "kind": c.kind, "vin": c.vin, "bolt": c.bolt, "comment": c.comment}
 
 
-__all__ = ["CHECK", "COMMAND", "GAP", "RUNDOWN", "UNATTRIBUTED", "CommandEntry", "Ledger",
+__all__ = ["CHECK", "COMMAND", "CURVE", "GAP", "RUNDOWN", "UNATTRIBUTED", "CommandEntry", "Ledger",
            "add_command", "append"]

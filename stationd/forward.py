@@ -37,25 +37,14 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
 
-from sqlalchemy import (
-    JSON,
-    BigInteger,
-    Column,
-    DateTime,
-    Engine,
-    MetaData,
-    String,
-    Table,
-    func,
-    make_url,
-)
-from sqlalchemy.dialects.postgresql import JSONB
+from sqlalchemy import Engine, make_url
 from sqlalchemy.dialects.postgresql import insert as pg_insert
 from sqlalchemy.exc import DBAPIError, SQLAlchemyError
 
 from db.engine import make_engine
 from db.errors import DbError
 from db.repository import Repository
+from stationd.linedb import LINE_FEED, LINE_PARAMETERS, create_line_schema, parameter_rows
 from stationd.yamlio import YamlNode
 
 log = logging.getLogger("stationd")
@@ -67,19 +56,6 @@ MEASURE_S = 0.25             # the most time one status spends measuring new bac
 MEASURE_BATCH = 500          # entries read at once to measure them
 EXAMPLE_URL = "postgresql+psycopg://stationd@line-db/line"
 CURSOR_KEY = "forwarded_seq"
-
-LINE = MetaData()
-LINE_FEED = Table(
-    "line_feed", LINE,
-    Column("station_id", String(64), primary_key=True),
-    Column("db_id", String(36), primary_key=True),
-    Column("seq", BigInteger, primary_key=True),
-    Column("kind", String(16), nullable=False),
-    Column("at", DateTime(timezone=True), nullable=False),
-    Column("record", JSON().with_variant(JSONB(), "postgresql"), nullable=False),
-    Column("received_at", DateTime(timezone=True), nullable=False, server_default=func.now()),
-)
-
 
 @dataclass(frozen=True)
 class LineConfig:
@@ -181,9 +157,17 @@ class LineDb:
         self._engine: Engine | None = None
 
     def _connect(self) -> Engine:
+        """The engine, the line's tables made where missing.  Why a failure to make them is
+        ``LineDown`` and never a refused record: it is the line database's state (a role
+        without the right to create them, two stations' first starts racing to make them),
+        the same for every record; as a refusal it would quarantine every record in turn."""
         if self._engine is None:
             engine = make_engine(self.url)
-            LINE.create_all(engine, checkfirst=True)
+            try:
+                create_line_schema(engine)
+            except SQLAlchemyError as exc:
+                engine.dispose()
+                raise LineDown(f"the line tables: {_reason(exc)}") from None
             self._engine = engine
         return self._engine
 
@@ -196,8 +180,13 @@ class LineDb:
                      "kind": e["kind"], "at": datetime.fromisoformat(e["at"]).replace(
                          tzinfo=UTC), "record": e["record"]} for e in entries]
             stmt = pg_insert(LINE_FEED).on_conflict_do_nothing().returning(LINE_FEED.c.seq)
+            versions = parameter_rows(station_id, db_id, entries)
             with engine.begin() as conn:
-                return len(conn.execute(stmt, rows).all())   # the rows that were new
+                new = len(conn.execute(stmt, rows).all())   # the rows that were new
+                if versions:   # the bolt tables the rundowns were tightened with
+                    conn.execute(pg_insert(LINE_PARAMETERS).on_conflict_do_nothing(),
+                                 versions)
+                return new
         except DBAPIError as exc:
             if exc.connection_invalidated or _transient(exc):
                 self.dispose()
@@ -309,15 +298,19 @@ class Forwarder:
                 "last_error": self.last_error, "alarm": alarm,
                 "quarantined": len(self.repo.ledger.quarantined())}
 
-    async def run(self, stop: asyncio.Event, on_change: Callable[[dict[str, Any]], None]
-                  ) -> None:
-        """Forward until ``stop``: at once while behind, every ``POLL_S`` when caught up,
-        with backoff while the line database is down; ``on_change`` hears each change of
-        up/down or alarm (the journal, STATUS=)."""
+    async def run(self, stop: asyncio.Event, on_change: Callable[[dict[str, Any]], None],
+                  wake: asyncio.Event | None = None) -> None:
+        """Forward until ``stop``: at once while behind, every ``POLL_S`` when caught up (at
+        once when ``wake`` is set: the station recorded something; a poll alone would leave
+        a record up to ``POLL_S`` behind), with backoff while the line database is down (a
+        record does not cut a backoff short); ``on_change`` hears each change of up/down or
+        alarm (the journal, STATUS=)."""
         loop = asyncio.get_running_loop()
         rng = random.Random(self.cfg.station_id)  # noqa: S311 - jitter
         wait, told = BACKOFF_S[0], (None, None)
         while not stop.is_set():
+            if wake is not None:
+                wake.clear()     # what is recorded from here on is read by this step or wakes
             try:
                 n = await loop.run_in_executor(None, self.step)
                 wait, pause = BACKOFF_S[0], (0.0 if n >= BATCH else POLL_S)
@@ -329,6 +322,7 @@ class Forwarder:
                 pause = POLL_S
             # while draining, entries are forwarded, not sized ahead of the forwarding
             measure = 0.0 if pause == 0.0 else MEASURE_S
+            woken = wake if self.up and pause == POLL_S else None
             # the status (backlog, lag, alarm) stays fresh while a long backoff waits
             end = loop.time() + pause
             while True:
@@ -338,12 +332,21 @@ class Forwarder:
                     told = (st["up"], st["alarm"])
                     on_change(st)
                 left = end - loop.time()
-                if left <= 0 or stop.is_set():
+                if left <= 0 or stop.is_set() or (woken is not None and woken.is_set()):
                     break
-                try:
-                    await asyncio.wait_for(stop.wait(), min(left, STATUS_S))
-                except TimeoutError:
-                    pass
+                await _first(stop, woken, min(left, STATUS_S))
+
+
+async def _first(stop: asyncio.Event, wake: asyncio.Event | None, timeout: float) -> None:
+    """Until ``stop`` or ``wake`` (when given) is set, or ``timeout`` s."""
+    waits = [asyncio.ensure_future(stop.wait())]
+    if wake is not None:
+        waits.append(asyncio.ensure_future(wake.wait()))
+    try:
+        await asyncio.wait(waits, timeout=timeout, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        for w in waits:
+            w.cancel()
 
 
 __all__ = ["LINE_FEED", "BacklogBytes", "Forwarder", "LineConfig", "LineDb", "LineDown",

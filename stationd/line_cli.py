@@ -3,11 +3,18 @@ station's own files (the daemon need not run).
 
     stationd line status --config STATION.yaml            # backlog, lag, quarantine
     stationd line quarantine --config STATION.yaml [--retry] [--export FILE.json]
+    stationd line results --config STATION.yaml [--vin V] [--station ST]   # the line's
+    stationd line bolts --config STATION.yaml [--model M] [--bolt B]       # tables used
 
 Why on the station's side: the quarantine (records the line database refused for good) lives
 in the station's database; a quality engineer retries it after the line database was fixed,
 or exports it to hand over.  Exit 0: nothing waits; 1: a backlog or a quarantine remains;
 2: bad input; 3: the line database cannot be reached (``--retry``).
+
+``results`` and ``bolts`` read the line database itself (every station's records, as the
+forwarders put them there): a VIN's rundowns at every station, newest first, and the bolt
+tables the stations tightened with.  Exit 0: found; 1: nothing; 3: the line database cannot
+be reached.
 """
 
 from __future__ import annotations
@@ -18,10 +25,16 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from sqlalchemy import Engine, inspect, make_url
+from sqlalchemy.exc import SQLAlchemyError
+
+from db.engine import make_engine
 from db.repository import Repository
 from stationd.config import load_station_config
 from stationd.errors import InputError
 from stationd.forward import Forwarder, LineDown
+from stationd.jsonout import strict_json
+from stationd.linedb import LINE_FEED, LINE_PARAMETERS, bolt_versions, results
 from stationd.outfile import write_atomic
 
 EXIT_WAITING, EXIT_UNREACHABLE = 1, 3
@@ -81,6 +94,105 @@ def cmd_line_quarantine(args: argparse.Namespace) -> int:
     return EXIT_WAITING if left else 0
 
 
+def _line_url(args: argparse.Namespace) -> str:
+    cfg = load_station_config(args.config)
+    if cfg.line is None:
+        raise InputError(f"{args.config}: no line section: no line database to read")
+    return cfg.line.url
+
+
+def _unreachable(url: str, exc: BaseException) -> int:
+    orig = getattr(exc, "orig", None) or exc
+    text = str(orig).strip().splitlines()
+    sys.stderr.write(f"stationd: line database {make_url(url).render_as_string()} "
+                     f"unreachable: {text[0] if text else type(exc).__name__}\n")
+    return EXIT_UNREACHABLE
+
+
+def _has(engine: Engine, table: str) -> bool:
+    return bool(inspect(engine).has_table(table))
+
+
+def _n(v: float | None, digits: int = 1) -> str:
+    return "-" if v is None else f"{v:.{digits}f}"
+
+
+def cmd_line_results(args: argparse.Namespace) -> int:
+    url = _line_url(args)
+    if args.limit < 1:
+        raise InputError(f"--limit {args.limit}: at least 1")
+    engine = make_engine(url)
+    try:
+        rows = results(engine, vin=args.vin, station=args.station, limit=args.limit) \
+            if _has(engine, LINE_FEED.name) else []
+    except SQLAlchemyError as exc:
+        return _unreachable(url, exc)
+    finally:
+        engine.dispose()
+    if args.json:
+        for r in rows:
+            print(strict_json({"station_id": r.station_id, "db_id": r.db_id, "seq": r.seq,
+                               "at": r.at.isoformat(), "vin": r.vin, "model": r.model,
+                               "bolt": r.bolt, "ok": r.ok, "kind": r.kind,
+                               "torque_nm": r.torque_nm, "angle_deg": r.angle_deg,
+                               "parameters_version": r.version,
+                               "received_at": r.received_at.isoformat()}))
+        return 0 if rows else EXIT_WAITING
+    what = " ".join(x for x in (f"VIN {args.vin}" if args.vin else "",
+                                f"station {args.station}" if args.station else "") if x)
+    if not rows:
+        print(f"no rundowns{' of ' + what if what else ''} in the line database")
+        return EXIT_WAITING
+    stations = sorted({r.station_id for r in rows})
+    print(f"{len(rows)} rundown(s){' of ' + what if what else ''} at {len(stations)} "
+          f"station(s), newest first{' (--limit reached)' if len(rows) == args.limit else ''}")
+    head = ("time (UTC)", "station", "VIN", "bolt", "result", "torque Nm", "angle deg",
+            "version")
+    table = [[r.at.strftime("%Y-%m-%d %H:%M:%S"), r.station_id, r.vin, r.bolt,
+              ("OK" if r.ok else "NOK") + (" (loosening)" if r.kind == "loosening" else ""),
+              _n(r.torque_nm), _n(r.angle_deg), "-" if r.version is None else str(r.version)]
+             for r in rows]
+    widths = [max(len(row[i]) for row in [list(head), *table]) for i in range(len(head))]
+    for row in [list(head), *table]:
+        print("  ".join(c.ljust(w) if i < 5 else c.rjust(w)
+                        for i, (c, w) in enumerate(zip(row, widths, strict=True))).rstrip())
+    return 0
+
+
+def _window(t: tuple[float | None, float | None, float | None]) -> str:
+    target, lo, hi = t
+    if target is None and lo is None and hi is None:
+        return "-"
+    return f"{_n(target)} [{_n(lo)}, {_n(hi)}]"
+
+
+def cmd_line_bolts(args: argparse.Namespace) -> int:
+    url = _line_url(args)
+    engine = make_engine(url)
+    try:
+        rows = bolt_versions(engine, model=args.model, bolt=args.bolt, station=args.station) \
+            if _has(engine, LINE_PARAMETERS.name) else []
+    except SQLAlchemyError as exc:
+        return _unreachable(url, exc)
+    finally:
+        engine.dispose()
+    if args.json:
+        for v in rows:
+            print(strict_json({"station_id": v.station_id, "db_id": v.db_id,
+                               "model": v.model, "bolt": v.bolt, "version": v.version,
+                               "pset": v.pset, "torque": list(v.torque),
+                               "angle": list(v.angle)}))
+        return 0 if rows else EXIT_WAITING
+    if not rows:
+        print("no bolt parameters in the line database (none forwarded with a rundown)")
+        return EXIT_WAITING
+    for v in rows:
+        print(f"{v.model} {v.bolt} at {v.station_id} (database {v.db_id[:8]}) version "
+              f"{v.version}: pset {'-' if v.pset is None else v.pset}, torque "
+              f"{_window(v.torque)} Nm, angle {_window(v.angle)} deg")
+    return 0
+
+
 def add_line_parser(sub: Any) -> None:
     ln = sub.add_parser("line", help="the store-and-forward to the line database")
     lsub = ln.add_subparsers(dest="line_command", required=True)
@@ -94,6 +206,25 @@ def add_line_parser(sub: Any) -> None:
     q.add_argument("--retry", action="store_true", help="push them to the line database again")
     q.add_argument("--export", metavar="FILE.json", help="write them to a new JSON file")
     q.set_defaults(func=cmd_line_quarantine)
+    r = lsub.add_parser("results", help="the line's rundowns (every station's, from the line "
+                        "database), newest first")
+    r.add_argument("--config", required=True, metavar="STATION.yaml",
+                   help="a station file of the line (its line.url)")
+    r.add_argument("--vin", help="only this vehicle's rundowns")
+    r.add_argument("--station", metavar="ST", help="only this station's (its station_id)")
+    r.add_argument("--limit", type=int, default=1000, help="at most N (default: %(default)s)")
+    r.add_argument("--json", action="store_true", help="one JSON object per rundown")
+    r.set_defaults(func=cmd_line_results)
+    b = lsub.add_parser("bolts", help="the bolt parameters each station tightened with "
+                        "(from the line database)")
+    b.add_argument("--config", required=True, metavar="STATION.yaml",
+                   help="a station file of the line (its line.url)")
+    b.add_argument("--model", help="only this model's bolts")
+    b.add_argument("--bolt", help="only this bolt (its id in the bolt table)")
+    b.add_argument("--station", metavar="ST", help="only this station's")
+    b.add_argument("--json", action="store_true", help="one JSON object per version")
+    b.set_defaults(func=cmd_line_bolts)
 
 
-__all__ = ["add_line_parser", "cmd_line_quarantine", "cmd_line_status"]
+__all__ = ["add_line_parser", "cmd_line_bolts", "cmd_line_quarantine", "cmd_line_results",
+           "cmd_line_status"]

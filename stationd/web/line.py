@@ -1,0 +1,89 @@
+"""The line page (``/line``): every station's rundowns from the line database, newest first,
+for a VIN or a station; its data at ``/api/line/results?vin=&station=&limit=``.
+
+Why on a station's screens: a quality engineer or a team leader at any station asks where a
+vehicle's bolts were tightened along the line, and the line database (the forwarders' copy of
+every station's records) is the one place that knows.  Read only, as every screen; the line
+database is connected for each request (it is asked by a person, seldom) and never from the
+station's own loop: a line database that is away makes the page say so (503), nothing else.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+from typing import Any
+
+from aiohttp import web
+from sqlalchemy import Engine, create_engine, make_url
+from sqlalchemy.exc import SQLAlchemyError
+from sqlalchemy.pool import NullPool
+
+from stationd.linedb import LINE_FEED, LineResult, results
+
+PAGE = Path(__file__).with_name("static") / "line.html"
+LIMIT = (1, 1000)
+
+
+def _plain(r: LineResult) -> dict[str, Any]:
+    return {"station_id": r.station_id, "db_id": r.db_id, "seq": r.seq,
+            "at": r.at.isoformat(), "vin": r.vin, "model": r.model, "bolt": r.bolt,
+            "ok": r.ok, "kind": r.kind, "torque_nm": r.torque_nm, "angle_deg": r.angle_deg,
+            "parameters_version": r.version, "received_at": r.received_at.isoformat()}
+
+
+class LineRoutes:
+    """``/line`` and ``/api/line/results``; ``url`` is the running configuration's line
+    database (``line.url``; None: the station has no line section, the page says so)."""
+
+    def __init__(self) -> None:
+        self.url: str | None = None
+        self._engine: tuple[str, Engine] | None = None
+
+    def add_to(self, app: web.Application) -> None:
+        app.router.add_get("/line", self._page)
+        app.router.add_get("/api/line/results", self._results)
+
+    async def _page(self, request: web.Request) -> web.FileResponse:
+        return web.FileResponse(PAGE)
+
+    def _engine_for(self, url: str) -> Engine:
+        if self._engine is None or self._engine[0] != url:   # a reload may change it
+            self._engine = (url, create_engine(url, poolclass=NullPool))
+        return self._engine[1]
+
+    def _read(self, url: str, vin: str | None, station: str | None, limit: int
+              ) -> list[dict[str, Any]]:
+        engine = self._engine_for(url)
+        with engine.connect() as c:
+            if not engine.dialect.has_table(c, LINE_FEED.name):
+                return []      # nothing forwarded to it yet
+        return [_plain(r) for r in results(engine, vin=vin, station=station, limit=limit)]
+
+    async def _results(self, request: web.Request) -> web.Response:
+        url = self.url
+        if url is None:
+            raise web.HTTPNotFound(text="no line database: the station file has no line "
+                                        "section\n")
+        q = request.query
+        try:
+            limit = int(q.get("limit") or 200)
+        except ValueError:
+            raise web.HTTPBadRequest(text="limit: a number 1-1000\n") from None
+        if not LIMIT[0] <= limit <= LIMIT[1]:
+            raise web.HTTPBadRequest(text="limit: a number 1-1000\n")
+        vin, station = (q.get("vin") or "").strip() or None, \
+            (q.get("station") or "").strip() or None
+        try:
+            rows = await asyncio.get_running_loop().run_in_executor(
+                None, self._read, url, vin, station, limit)
+        except SQLAlchemyError as exc:
+            orig = str(getattr(exc, "orig", None) or exc).strip().splitlines()
+            raise web.HTTPServiceUnavailable(
+                text=f"line database {make_url(url).render_as_string()} unreachable: "
+                     f"{orig[0] if orig else type(exc).__name__}\n") from None
+        return web.json_response({"line_db": make_url(url).render_as_string(), "vin": vin,
+                                  "station": station, "rundowns": rows})
+
+
+__all__ = ["LineRoutes"]

@@ -1,0 +1,36 @@
+// Line page: every station's rundowns from the line database (/api/line/results), newest first.
+"use strict";
+(function () {
+  const q = (s) => document.querySelector(s);
+  const fmt = (v, d) => v === null || v === undefined ? "-" : Number(v).toFixed(d);
+  function cell(tr, text, cls) {
+    const td = document.createElement("td");
+    td.textContent = text;
+    if (cls) td.className = cls;
+    tr.appendChild(td);
+  }
+  async function show() {
+    const ask = new URLSearchParams(location.search);
+    q("#ask [name=vin]").value = ask.get("vin") || "";
+    q("#ask [name=station]").value = ask.get("station") || "";
+    const r = await fetch("/api/line/results" + location.search);
+    if (!r.ok) { q("#error").textContent = (await r.text()).trim(); return; }
+    const doc = await r.json();
+    const stations = new Set(doc.rundowns.map((x) => x.station_id));
+    q("#what").textContent = doc.rundowns.length + " rundown(s) at " + stations.size +
+      " station(s), " + doc.line_db;
+    for (const x of doc.rundowns) {
+      const tr = document.createElement("tr");
+      tr.dataset.station = x.station_id;
+      cell(tr, x.at.replace("T", " ").slice(0, 19));
+      for (const v of [x.station_id, x.vin, x.bolt]) cell(tr, v);
+      cell(tr, (x.ok ? "OK" : "NOK") + (x.kind === "loosening" ? " (loosening)" : ""),
+           x.ok ? "" : "out");
+      cell(tr, fmt(x.torque_nm, 1));
+      cell(tr, fmt(x.angle_deg, 1));
+      cell(tr, x.parameters_version === null ? "-" : String(x.parameters_version));
+      q("#line tbody").appendChild(tr);
+    }
+  }
+  show();
+})();
