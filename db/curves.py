@@ -10,6 +10,10 @@ recorded when its curves are stored and ``record_id`` is set then; a curve store
 its rundown (or for a result recorded unattributed) keeps ``record_id`` None and is found
 by its tightening id, among those recorded around the same time (a controller's ids start
 again after a reset: the curve closest in time to the rundown wins).
+
+Each curve gets a results-feed entry (kind ``curve``, :mod:`db.ledger`) in the transaction
+that stores it, so the forwarder takes it to the line database like any record, samples
+included, in order with the rundowns.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ from sqlalchemy.orm import Session
 
 from db.engine import writer
 from db.errors import DatabaseError, DataError
+from db.ledger import CURVE, append
 from db.models import TighteningCurve, TighteningRecord, utcnow
 from db.repository import Repository
 
@@ -84,6 +89,7 @@ def _store(repo: Repository, now: datetime, tightening_id: int, trace_type: int,
             result_at=result_at, recorded_at=now)
         s.add(row)
         s.flush()
+        append(s, CURVE, row.id)
         return row.id
 
 

@@ -16,6 +16,7 @@ from typing import Any
 import pytest
 from sqlalchemy import select
 
+from db.curves import store_curve
 from db.repository import Repository
 from stationd.boltfile import import_bolts
 from stationd.config import check_station, load_station_config
@@ -85,6 +86,26 @@ def test_every_record_goes_once_in_order_and_a_replay_inserts_nothing(tmp_path, 
     assert len(_line_rows(pg_url)) == 3
     st = again.status()
     assert (st["up"], st["backlog"], st["cursor"], st["alarm"]) == (True, 0, 3, None)
+    repo.close()
+
+
+def test_a_tightening_curve_goes_to_the_line_with_its_samples(tmp_path, table, pg_url):
+    """The forwarder takes any kind of feed entry: a curve (two traces of tightening 1)
+    arrives after its rundown, samples and all, as JSONB the plant can query."""
+    repo = _station(tmp_path, "st.db", table, "VINC", [(1, "B1")])
+    torque = [0.5, 12.25, 30.0]
+    store_curve(repo, tightening_id=1, trace_type=1, unit="deg", values=[0.0, 45.0, 90.0],
+                sample_period_s=0.002)
+    store_curve(repo, tightening_id=1, trace_type=2, unit="Nm", values=torque,
+                sample_period_s=0.002)
+    f = Forwarder(repo, LineConfig(pg_url, "ST-C"))
+    assert f.step() == 3
+    rows = _line_rows(pg_url, "ST-C")
+    assert [r.kind for r in rows] == ["rundown", "curve", "curve"]
+    curve = rows[2].record
+    assert (curve["tightening_id"], curve["vin"], curve["bolt"], curve["unit"]) == (
+        1, "VINC", "B1", "Nm")
+    assert curve["values"] == pytest.approx(torque)
     repo.close()
 
 

@@ -29,7 +29,10 @@ but queued apart (``wait_curve``): it never delays a result.  Each MID 0900 is a
 with MID 0005 naming it (the generic acknowledgement of subscribed data) unless its header's
 no-ack flag is set, sent by the supervisor without waiting for anyone; ``close()`` stops the
 subscription (MID 0009) before the communication stop.  Curves are binary, so they are asked
-for over TCP only.
+for over TCP only.  A curve longer than one message comes in parts (``op_parts.py``): put
+together before it is read, and acknowledged once, after its last part.  MID 0901 (plot
+parameters) and 0902 (the result database's extent) are not asked for; one that comes anyway
+is read (``op_tracedata.py``), acknowledged and logged, never used (that module says why).
 """
 
 from __future__ import annotations
@@ -62,11 +65,19 @@ from drivers.wrench.op_curve import (
     MID_DATA_UNSUBSCRIBE,
     MID_TRACE,
     Curve,
-    parse_curve,
+    parse_curve_data,
     subscribe_data,
     unsubscribe_data,
 )
 from drivers.wrench.op_identity import ControllerIdentity, parse_identity
+from drivers.wrench.op_parts import BrokenParts, PartAssembler
+from drivers.wrench.op_tracedata import (
+    MID_DB_INFO,
+    MID_PLOT,
+    ResultDbInfo,
+    parse_db_info,
+    parse_plot,
+)
 from drivers.wrench.openprotocol import Message, SerialFramer, TcpFramer
 
 log = logging.getLogger(__name__)
@@ -81,7 +92,8 @@ START_REVISIONS = (6, 5, 4, 3, 2, 1)
 RESULT_REVISIONS = (7, 6, 5, 4, 3, 2, 1)
 MAX_TIGHTENING_ID = 9_999_999_999            # 10 digits
 CURVE_QUEUE = 64       # curves held for the reader; past that the oldest is dropped (logged)
-CURVE_ACK = Message(op.MID_ACCEPTED, data=f"{MID_TRACE:04d}".encode())   # MID 0005 "0900"
+#: subscribed data acknowledged with MID 0005 naming its MID (the generic acknowledgement)
+DATA_MIDS = frozenset({MID_TRACE, MID_PLOT, MID_DB_INFO})
 Spec = dict[str, tuple[Callable[[str], Any], Any]]   # option -> (converter, default)
 
 
@@ -176,7 +188,10 @@ class OpenProtocolWrench(SupervisedWrench):
         self._curves_reason: str | None = "not asked for" if not curves else None
         self._curves: deque[Curve] = deque()
         self._curves_dropped = 0
-        self._owed_curve_acks = 0               # MID 0005 "0900" to send (supervisor)
+        self._owed_data_acks: deque[int] = deque()   # MID 0005 "0900" ... to send (supervisor)
+        self._parts = PartAssembler()           # the reading thread's only
+        self._db_info: ResultDbInfo | None = None
+        self._data_seen: set[int] = set()       # 0901/0902 logged once per session
 
     @classmethod
     def from_url(cls, url: DeviceUrl, **kw: Any) -> OpenProtocolWrench:
@@ -217,6 +232,12 @@ class OpenProtocolWrench(SupervisedWrench):
         once ``fetch_result`` was used)."""
         with self._cond:
             return dict(self._revisions)
+
+    @property
+    def result_db_info(self) -> ResultDbInfo | None:
+        """The last MID 0902 the controller sent of its own accord (never asked for)."""
+        with self._cond:
+            return self._db_info
 
     @property
     def link_level(self) -> bool:
@@ -284,8 +305,11 @@ class OpenProtocolWrench(SupervisedWrench):
         self._last_sent, self._keepalive_sent = time.monotonic(), None
         with self._cond:      # 0001/0002 reset the link level: decided anew below
             self._linking, self._tx_seq, self._owed_acks = False, 0, 0
-            self._owed_curve_acks, self._curves_on = 0, False
+            self._curves_on = False
+            self._owed_data_acks.clear()
         self._rx.reset()
+        self._parts.reset()
+        self._data_seen.clear()
         revisions: dict[int, int] = {}
         try:
             reply, revisions[op.MID_START] = self._negotiate(
@@ -431,6 +455,23 @@ class OpenProtocolWrench(SupervisedWrench):
                 log.warning("%s: MID %04d repeated (sequence %s): acknowledged again, not "
                             "processed twice", self.device, msg.mid, msg.sequence)
                 return
+        for item in self._parts.feed(msg):      # a message in parts: once it is whole
+            if isinstance(item, BrokenParts):
+                self._broken_parts(item)
+            else:
+                self._handle(item)
+
+    def _broken_parts(self, broken: BrokenParts) -> None:
+        """A message in parts that did not add up: lost, logged; subscribed data is still
+        acknowledged (the controller keeps its own record, and waits for the 0005)."""
+        log.warning("%s: MID %04d in parts given up: %s", self.device, broken.mid,
+                    broken.reason)
+        if broken.mid in DATA_MIDS and not broken.no_ack:
+            with self._cond:
+                self._owed_data_acks.append(broken.mid)
+
+    def _handle(self, msg: Message) -> None:
+        """One whole message (its link-level work done)."""
         if msg.mid == op.MID_RESULT:
             try:
                 result = op.parse_result(msg.raw)
@@ -451,6 +492,9 @@ class OpenProtocolWrench(SupervisedWrench):
         if msg.mid == MID_TRACE:
             self._curve_in(msg)
             return
+        if msg.mid in (MID_PLOT, MID_DB_INFO):
+            self._trace_data_in(msg)
+            return
         with self._cond:
             slot = self._pending
             if slot is not None and slot.matches(msg):
@@ -464,7 +508,7 @@ class OpenProtocolWrench(SupervisedWrench):
         """A MID 0900: queued apart from the results (bounded: the oldest goes), and its
         acknowledgement owed (sent by the supervisor, never from here)."""
         try:
-            curve: Curve | None = parse_curve(msg.raw)
+            curve: Curve | None = parse_curve_data(msg.data)
         except ProtocolError as e:
             log.warning("%s: unreadable tightening curve, acknowledged anyway: %s",
                         self.device, e)
@@ -478,8 +522,29 @@ class OpenProtocolWrench(SupervisedWrench):
                                 self._curves_dropped)
                 self._curves.append(curve)
             if not msg.no_ack:
-                self._owed_curve_acks += 1
+                self._owed_data_acks.append(MID_TRACE)
             self._cond.notify_all()
+
+    def _trace_data_in(self, msg: Message) -> None:
+        """A MID 0901 or 0902 nobody asked for: read, logged (once a session at info),
+        acknowledged (by the supervisor), not used."""
+        try:
+            what = (parse_plot(msg.revision, msg.data) if msg.mid == MID_PLOT
+                    else parse_db_info(msg.revision, msg.data))
+        except ProtocolError as e:
+            log.warning("%s: unreadable MID %04d, acknowledged anyway: %s", self.device,
+                        msg.mid, e)
+        else:
+            first = msg.mid not in self._data_seen
+            self._data_seen.add(msg.mid)
+            log.log(logging.INFO if first else logging.DEBUG, "%s: MID %04d received, "
+                    "acknowledged, not used: %s", self.device, msg.mid, what.describe())
+            if isinstance(what, ResultDbInfo):
+                with self._cond:
+                    self._db_info = what
+        if not msg.no_ack:
+            with self._cond:
+                self._owed_data_acks.append(msg.mid)
 
     def _link_answer(self, msg: Message) -> None:
         """A 9997/9998 from the controller: it answers the outstanding sequenced message."""
@@ -505,14 +570,17 @@ class OpenProtocolWrench(SupervisedWrench):
                 return
             with self._cond:
                 self._owed_acks -= 1
-        while True:   # the curves' MID 0005, the same way
+        while True:   # subscribed data's MID 0005 ("0900", ...), the same way
             with self._cond:
-                if not self._owed_curve_acks:
+                if not self._owed_data_acks:
                     return
-            if not self._send(CURVE_ACK, block=False):
+                mid = self._owed_data_acks[0]
+            ack = Message(op.MID_ACCEPTED, data=f"{mid:04d}".encode())
+            if not self._send(ack, block=False):
                 return
             with self._cond:
-                self._owed_curve_acks -= 1
+                if self._owed_data_acks and self._owed_data_acks[0] == mid:
+                    self._owed_data_acks.popleft()
 
     def _keepalive_tick(self) -> None:
         now = time.monotonic()

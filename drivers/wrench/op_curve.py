@@ -27,8 +27,9 @@ Torque traces in a unit this module knows are converted to N m, angle traces in 
 degrees (as ``TighteningResult`` holds N m and degrees); another unit is kept as sent and
 named by its code.
 
-Not read: a message split in parts (header parts > 1; a trace longer than one 9999-byte
-message), MID 0901 (plot limits: the station draws the rundown's own limits) and MID 0902.
+A trace longer than one message (9999 bytes) comes in parts (header "number of parts" > 1):
+``op_parts.py`` puts them together and :func:`parse_curve_data` reads the whole data.  MID
+0901 (plot parameters) and 0902 (the result database's extent) are in ``op_tracedata.py``.
 """
 
 from __future__ import annotations
@@ -116,30 +117,31 @@ def unsubscribe_data() -> bytes:
     return f"{MID_TRACE:04d}00100".encode("ascii")
 
 
-class _Reader:
-    """Reads the ASCII part field by field; every failure is a ProtocolError naming it."""
+class FieldReader:
+    """Reads the ASCII part field by field; every failure is a ProtocolError naming it
+    (and the MID, ``label``)."""
 
-    def __init__(self, data: bytes) -> None:
-        self.data, self.pos = data, 0
+    def __init__(self, data: bytes, label: str = "MID 0900") -> None:
+        self.data, self.pos, self.label = data, 0, label
 
     def take(self, width: int, what: str) -> str:
         raw = self.data[self.pos:self.pos + width]
         if len(raw) != width:
-            raise ProtocolError(f"MID 0900 ends inside {what} (at byte "
+            raise ProtocolError(f"{self.label} ends inside {what} (at byte "
                                 f"{HEADER_LEN + self.pos})")
         if not raw.isascii() or b"\x00" in raw:
-            raise ProtocolError(f"MID 0900 {what} is not ASCII text: {raw!r}")
+            raise ProtocolError(f"{self.label} {what} is not ASCII text: {raw!r}")
         self.pos += width
         return raw.decode("ascii")
 
     def number(self, width: int, what: str) -> int:
         text = self.take(width, what).strip()
         if not text.isdigit():
-            raise ProtocolError(f"MID 0900 {what} {text!r} is not a number")
+            raise ProtocolError(f"{self.label} {what} {text!r} is not a number")
         return int(text)
 
 
-def _fields(r: _Reader, count: int, what: str) -> dict[str, str]:
+def data_fields(r: FieldReader, count: int, what: str) -> dict[str, str]:
     """``count`` data fields: PID -> value text (the first of a PID repeated by steps)."""
     out: dict[str, str] = {}
     for i in range(count):
@@ -162,25 +164,33 @@ def _float(text: str, what: str) -> float:
 
 def parse_curve(raw: bytes) -> Curve:
     """A MID 0900 message (header + data, without the framing NUL) -> :class:`Curve`;
-    anything that does not read is a ProtocolError saying what."""
+    anything that does not read is a ProtocolError saying what.  One part of several is
+    refused: its parts are put together first (``op_parts.py``), then read with
+    :func:`parse_curve_data`."""
     if len(raw) < HEADER_LEN or raw[4:8] != b"0900":
         raise ProtocolError(f"not a MID 0900: {raw[:20]!r}")
     parts = raw[18:19].strip(b" 0")
     if parts not in (b"", b"1"):
-        raise ProtocolError("MID 0900 in several parts (a trace longer than one message) "
-                            "is not read")
-    r = _Reader(raw[HEADER_LEN:])
+        raise ProtocolError("MID 0900 part of several (a trace longer than one message): "
+                            "put its parts together first")
+    return parse_curve_data(raw[HEADER_LEN:])
+
+
+def parse_curve_data(data: bytes) -> Curve:
+    """The data of a MID 0900 revision 1 (after its header; a message's parts joined) ->
+    :class:`Curve`; anything that does not read is a ProtocolError saying what."""
+    r = FieldReader(data)
     tid = r.number(10, "result data identifier")
     stamp = r.take(19, "time stamp")
     try:
         when: datetime | None = datetime.strptime(stamp, TIME_FORMAT)
     except ValueError:
         when = None                      # a curve with an odd clock is still a curve
-    pids = _fields(r, r.number(3, "number of PIDs"), "PID")
+    pids = data_fields(r, r.number(3, "number of PIDs"), "PID")
     trace_type = r.number(2, "trace type")
     r.take(2, "transducer type")
     unit_code = r.number(3, "unit")
-    params = _fields(r, r.number(3, "number of parameter data fields"), "parameter field")
+    params = data_fields(r, r.number(3, "number of parameter data fields"), "parameter field")
     steps: list[tuple[int, float]] = []          # (samples covered, seconds between them)
     for i in range(r.number(3, "number of resolution fields")):
         first = r.number(5, f"resolution field {i + 1} first index")

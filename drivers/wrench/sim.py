@@ -20,6 +20,11 @@ after each result's 0061, one MID 0900 per trace type it asked for (angle and to
 the rundown model of ``sim_curves.py``); it acknowledges each with MID 0005.  Built with
 ``curves=False`` it refuses the 0008 with MID 0004 ``curves_refusal_code`` (78,
 "subscription on specific data not supported", by default), as a controller without curves.
+A trace is ``curve_samples`` long (240); one whose message passes 9999 bytes goes in parts,
+cut every ``part_size`` bytes of data (``sim_curves.in_parts``).  MID 0008 may also subscribe
+to MID 0901 (the plot parameters: one after each result's traces), and MID 0006 asks for MID
+0902 (the result store's extent); each is acknowledged with MID 0005 naming it
+(``data_acks`` counts them by MID).
 ``python -m drivers.wrench.sim`` serves it on a TCP port for any integrator
 (``sim_cli.py``).
 
@@ -42,7 +47,7 @@ from typing import Any
 from drivers.link import Link, SerialLink, TcpLink
 from drivers.url import DeviceUrl
 from drivers.wrench.client import OPTIONS, REFUSED, OpenProtocolWrench, Spec, keyword_options
-from drivers.wrench.sim_curves import mid0900
+from drivers.wrench.sim_curves import PART_SIZE, in_parts, mid0900, mid0901, mid0902
 from drivers.wrench.sim_results import NM_PER, SimRecord, fixed, result_data, text
 from drivers.wrench.simserver import OpenProtocolServer, Received, Session, message
 
@@ -103,7 +108,8 @@ class SimController(OpenProtocolServer):
                  revision_refusal_code: int = 97, store_size: int = 1000,
                  torque_unit: int = 1, software: str = "stationd-sim 1.0",
                  serial: str = "SIM0000001", curves: bool = True,
-                 curves_refusal_code: int = 78) -> None:
+                 curves_refusal_code: int = 78, curve_samples: int = 240,
+                 part_size: int = PART_SIZE) -> None:
         if not 0.0 <= nok_rate <= 1.0:
             raise ValueError(f"nok_rate must be in [0, 1], not {nok_rate}")
         if silence_timeout <= 0:
@@ -112,6 +118,10 @@ class SimController(OpenProtocolServer):
             raise ValueError(f"torque_unit must be one of {sorted(NM_PER)}, not {torque_unit}")
         if store_size < 1:
             raise ValueError("store_size must be >= 1")
+        if not 2 <= curve_samples <= 30_000:
+            raise ValueError(f"curve_samples must be 2-30000, not {curve_samples}")
+        if not 100 <= part_size <= PART_SIZE:
+            raise ValueError(f"part_size must be 100-{PART_SIZE}, not {part_size}")
         super().__init__()
         self.psets = dict(DEFAULT_PSETS if psets is None else psets)
         self.nok_rate, self.name, self.cell, self.channel = nok_rate, name, cell, channel
@@ -121,8 +131,11 @@ class SimController(OpenProtocolServer):
         self.revision_refusal_code = revision_refusal_code
         self.store_size = store_size
         self.curves, self.curves_refusal_code = curves, curves_refusal_code
-        self.curves_sent = 0                     # MID 0900 sent
+        self.curve_samples, self.part_size = curve_samples, part_size
+        self.curves_sent = 0                     # MID 0900 sent (a message in parts: one)
+        self.parts_sent = 0                      # of which parts (messages on the wire)
         self.curve_acks = 0                      # MID 0005 "0900" received
+        self.data_acks: dict[int, int] = {}      # MID 0005 for subscribed data, by MID
         self._rng = random.Random(seed)  # noqa: S311 - seeded simulation scatter, not security
         self._clock = clock or (lambda: datetime.now().replace(microsecond=0))
         self._refuse_pset: dict[int, int] = dict(refusals or {})
@@ -231,7 +244,7 @@ class SimController(OpenProtocolServer):
             elif s.started and s.kind == "tcp":
                 self._refuse(s, mid, 96)
             else:   # on a serial line a new 0001 starts a new session
-                s.started, s.subscribed, s.traces = True, False, ()
+                s.started, s.subscribed, s.traces, s.plot = True, False, (), False
                 s.out.clear()
                 s.start_link_level(False)
                 self.reply(s, mid, 2, self._identity(msg.revision), msg.revision)
@@ -246,19 +259,35 @@ class SimController(OpenProtocolServer):
             pass
         elif mid == 3:
             self._ok(s, mid)
-            s.started = s.subscribed = False
+            s.started = s.subscribed = s.plot = False
             s.traces = ()
-        elif mid == 5:    # the generic acknowledgement of subscribed data (MID 0900)
-            if data[:4] == b"0900":
-                self.curve_acks += 1
+        elif mid == 5:    # the generic acknowledgement of subscribed data (MID 0900-0902)
+            if data[:4] in (b"0900", b"0901", b"0902"):
+                self.data_acks[int(data[:4])] = self.data_acks.get(int(data[:4]), 0) + 1
+                self.curve_acks += data[:4] == b"0900"
             else:
                 self.errors.append(f"MID 0005 acknowledging {data[:4]!r} ignored")
-        elif mid == 8:
-            self._data_subscription(s, data)
-        elif mid == 9:
-            if data[:4] != b"0900":
+        elif mid == 6:    # data message request: MID 0902, the result store's extent
+            if data[:4] != b"0902":
                 self._refuse(s, mid, 73)
-            elif not s.traces:
+            else:
+                self.post(s, mid0902(self.store_size, list(self._store.values())))
+        elif mid == 8:
+            if data[:4] == b"0901":
+                if s.plot:
+                    self._refuse(s, mid, 71)
+                else:
+                    s.plot = True
+                    self._ok(s, mid)
+            else:
+                self._data_subscription(s, data)
+        elif mid == 9:
+            if data[:4] == b"0901" and s.plot:
+                s.plot = False
+                self._ok(s, mid)
+            elif data[:4] not in (b"0900", b"0901"):
+                self._refuse(s, mid, 73)
+            elif data[:4] == b"0901" or not s.traces:
                 self._refuse(s, mid, 72)      # subscription does not exist
             else:
                 s.traces = ()
@@ -419,8 +448,13 @@ class SimController(OpenProtocolServer):
         for s in self.sessions():       # the curves after every result: never before one
             if s.started:
                 for kind in s.traces:
-                    self.post(s, mid0900(record, kind))
+                    for part in in_parts(mid0900(record, kind, self.curve_samples),
+                                         self.part_size):
+                        self.post(s, part)
+                        self.parts_sent += 1
                     self.curves_sent += 1
+                if s.plot:
+                    self.post(s, mid0901(record))
         return SimTightening(self._tid, pset, ok, t_val / 100, float(a_val), t_stat,
                              a_stat, self.vin, now, self._render(61, 1, record), record)
 

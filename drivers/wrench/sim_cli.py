@@ -52,6 +52,12 @@ def parser() -> argparse.ArgumentParser:
                         "0004 --curves-refusal-code) as a controller without them")
     p.add_argument("--curves-refusal-code", type=int, default=78,
                    help="MID 0004 code refusing the curves' subscription (78; or 99)")
+    p.add_argument("--curve-samples", type=int, default=240, metavar="N",
+                   help="samples per trace (240); a trace past one message's 9999 bytes "
+                        "(about 4900 samples) is sent in parts")
+    p.add_argument("--part-size", type=int, default=9979, metavar="BYTES",
+                   help="data bytes per part of a message sent in parts (9979, the most; "
+                        "less sends shorter traces in parts too)")
     p.add_argument("--trigger-every", type=float, default=0.0, metavar="SECONDS",
                    help="pull the trigger at this interval when the tool may run (off)")
     return p
@@ -74,7 +80,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                             link_ack=args.link_ack, refused_revisions=refused,
                             revision_refusal_code=args.refusal_code,
                             curves=not args.no_curves,
-                            curves_refusal_code=args.curves_refusal_code)
+                            curves_refusal_code=args.curves_refusal_code,
+                            curve_samples=args.curve_samples, part_size=args.part_size)
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -99,3 +99,23 @@ def test_bad_curves_are_refused(repo, bolts_file):
         store_curve(repo, tightening_id=1, trace_type=2, unit="Nm", values=[1.0], record_id=5)
     with pytest.raises(ValueError, match="record_id or tightening_id"):
         curves_for(repo)
+
+
+def test_each_curve_is_a_feed_entry_with_its_samples_and_its_rundown(repo, bolts_file):
+    """The results feed (what the forwarder takes to the line database) carries each curve
+    whole, in order after its rundown; one stored before its rundown has the tightening id
+    as its only link."""
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    early = store_curve(repo, tightening_id=43, trace_type=2, unit="Nm", values=TORQUE,
+                        sample_period_s=0.002)
+    rec = record(repo, "VIN1", "B1", tightening_id=41)
+    angle, torque = store_pair(repo, 41)
+    feed = repo.ledger.since(0)
+    assert [(e["kind"], e["record"]["id"]) for e in feed] == [
+        ("curve", early), ("rundown", rec), ("curve", angle), ("curve", torque)]
+    first, _, a, t = (e["record"] for e in feed)
+    assert (t["tightening_id"], t["record_id"], t["vin"], t["bolt"]) == (41, rec, "VIN1", "B1")
+    assert (a["trace_type"], a["unit"], a["values"]) == (1, "deg", ANGLE)
+    assert t["values"] == TORQUE and t["sample_period_s"] == 0.002 and t["times_s"] is None
+    assert (first["tightening_id"], first["record_id"], first["vin"]) == (43, None, None)
