@@ -47,12 +47,39 @@ def make_engine(url: str = DEFAULT_URL, *, read_only: bool = False) -> Engine:
                                 query={"mode": "ro", "uri": "true"})
         engine = create_engine(parsed)
     except (ArgumentError, NoSuchModuleError, ValueError) as exc:
-        raise DataError(f"database URL {url!r}: {exc}") from None
+        raise DataError(f"database URL {url!r}: {_url_mistake(url) or exc}") from None
     except ImportError as exc:
-        raise DataError(f"database URL {url!r}: driver not installed ({exc.name})") from None
+        hint = _url_mistake(url, loaded=True) or f"driver not installed ({exc.name})"
+        raise DataError(f"database URL {url!r}: {hint}") from None
     if engine.dialect.name == "sqlite":
         _setup_sqlite(engine, read_only=read_only)
     return engine
+
+
+#: what a database URL looks like, for a message about one that is not
+URL_FORMS = ("sqlite:///NAME.db: an SQLite file relative to the current folder, "
+             "sqlite:////ABS/PATH.db: an absolute one, postgresql+psycopg://USER@HOST/NAME: "
+             "PostgreSQL")
+#: URL schemes people write that SQLAlchemy does not know (or whose default driver is not
+#: installed: psycopg 3 is, psycopg2 is not), and what they mean
+SCHEMES = {"postgres": "postgresql+psycopg", "postgresql": "postgresql+psycopg",
+           "psql": "postgresql+psycopg", "sqlite3": "sqlite"}
+
+
+def _url_mistake(url: str, *, loaded: bool = False) -> str | None:
+    """What is wrong with a URL SQLAlchemy refused, in the words of what to write: a file
+    name without a scheme, a scheme it does not know (``postgres://``, Heroku's), PostgreSQL
+    without the installed driver.  ``loaded``: the dialect exists (its driver did not
+    import): only a known mistake is told.  None: SQLAlchemy's own message says it."""
+    scheme, sep, rest = url.partition("://")
+    if not sep:
+        return f"not a URL: write sqlite:///{url} for an SQLite file ({URL_FORMS})"
+    fix = SCHEMES.get(scheme.lower())
+    if fix is not None:
+        return f"write {fix}://{rest} ({scheme}:// is not a driver SQLAlchemy has here)"
+    if not loaded and "+" not in scheme:
+        return f"no database kind {scheme!r} ({URL_FORMS})"
+    return None
 
 
 def writer(engine: Engine) -> Engine:

@@ -75,11 +75,12 @@ def open_device(kind: Kind, url: str, **options: Any) -> Openable:
     return device
 
 
-def check_url(kind: Kind, url: str, **options: Any) -> None:
+def check_url(kind: Kind, url: str, *, sources: bool = False, **options: Any) -> None:
     """Check ``url`` as a device of ``kind`` without opening anything (UrlError): its
-    scheme, form and options with their ranges."""
+    scheme, form and options with their ranges; with ``sources`` (``config check``) also
+    what it would read that exists now or never (a camera replay's files)."""
     if kind is Kind.CAMERA:
-        check_camera_url(url)
+        check_camera_url(url, sources=sources)
     elif kind is Kind.LIFT:
         check_lift_url(url)
     else:

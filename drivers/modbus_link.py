@@ -126,16 +126,28 @@ def parse_modbus_url(text: str) -> tuple[LinkSpec, dict[str, float | None]]:
     return spec, opts
 
 
+#: how much of a garbage answer a message shows
+SAMPLE_BYTES = 32
+
+
 class _Heard:
     """Mixed into pymodbus's clients: counts the bytes received.  Its framer drops what it
     cannot parse and then reports "No response", so only the count tells a peer that answered
     garbage (ProtocolError, as on every other protocol) from a silent one (a timeout)."""
 
     heard = 0
+    sample = b""   # the first bytes heard since :meth:`listen` (what garbage looked like)
+
+    def listen(self) -> int:
+        """Start a request: the count so far (what it heard is then ``heard`` minus it)."""
+        self.sample = b""
+        return self.heard
 
     def recv(self, size: int | None) -> bytes:
         data: bytes = super().recv(size)  # type: ignore[misc]  # the client's, after us
         self.heard += len(data)
+        if len(self.sample) < SAMPLE_BYTES:
+            self.sample += data[:SAMPLE_BYTES - len(self.sample)]
         return data
 
 
@@ -200,16 +212,19 @@ class ModbusLink:
         # each keep a copy of the connect parameters, and both time a request.
         client.comm_params.timeout_connect = timeout
         client.transaction.comm_params.timeout_connect = timeout
-        heard = client.heard
+        heard = client.listen()
         try:
             rr = fn(client)
         except ConnectionException as exc:
-            raise self._error(ConnectionLostError, f"link lost {what}: {exc.string}") from None
+            if client.heard > heard:   # it answered, then hung up: not a Modbus device
+                raise self._garbage(client, what) from None
+            said = "the device closed the connection without an answer" \
+                if "closed" in exc.string else exc.string.replace(type(client).__name__,
+                                                                  self._protocol())
+            raise self._error(ConnectionLostError, f"link lost {what}: {said}") from None
         except ModbusIOException as exc:
             if "No response" in exc.string and client.heard > heard:
-                raise self._error(ProtocolError, f"unintelligible answer {what}: "
-                                                 f"{client.heard - heard} bytes that are not "
-                                                 f"a Modbus reply") from None
+                raise self._garbage(client, what) from None
             if "No response" in exc.string:
                 raise self._error(DeviceTimeoutError, no_answer or f"no answer within "
                                                                    f"{timeout:g} s {what}"
@@ -226,6 +241,17 @@ class ModbusLink:
             raise self._error(RefusedError, f"Modbus exception {code} ({name}) {what}"
                                             + (f": {hint}" if hint else ""), code)
         return rr
+
+    def _protocol(self) -> str:
+        return "Modbus TCP" if self.spec.kind == "tcp" else "Modbus RTU"
+
+    def _garbage(self, client: _Heard, what: str) -> DeviceError:
+        """A peer that answered bytes pymodbus could not frame: another protocol (an HTTP
+        server on the port), or a wrong baud rate's noise; what it said, shortened."""
+        more = "..." if client.heard > len(client.sample) else ""
+        return self._error(ProtocolError, f"garbage {what}: the device answered something "
+                                          f"that is not {self._protocol()} "
+                                          f"({client.sample!r}{more})")
 
     def read(self, table: str, start: int, count: int, timeout: float, what: str, *,
              no_answer: str | None = None) -> list[int]:

@@ -325,9 +325,49 @@ def cmd_bench_line(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    """``stationd run``; on a station with ``sim://`` devices, with the simulated world (and,
+    with ``--sim-operator``, its operator) inside the daemon, beside each station it runs."""
+    from stationd.config import load_station_config
     from stationd.serve import run_daemon
 
-    return run_daemon(args)
+    cfg = load_station_config(args.config, station=True)
+    if not args.sim_operator and not _simulated(cfg):
+        return run_daemon(args)
+    # the simulator, loaded by the command line alone (never by the runtime)
+    from stationd.sim.in_daemon import SimulatedStation
+
+    sim = SimulatedStation(cfg, operator=args.sim_operator)
+    try:
+        return run_daemon(args, beside=sim.beside)
+    finally:
+        sim.close()
+
+
+def _simulated(cfg: Any, cameras_only: bool = False) -> bool:
+    """Whether a station names a simulated device (``sim://``, ``sim+...://``): read here,
+    so that a station of real devices never loads the simulator."""
+    urls = [*cfg.cameras.values(), *(() if cameras_only else (cfg.lift.url, cfg.wrench.url))]
+    schemes = [str(u).split("://", 1)[0].lower() for u in urls]
+    return any(s == "sim" or s.startswith("sim+") for s in schemes)
+
+
+def cmd_calibrate_check(args: argparse.Namespace) -> int:
+    """``stationd calibrate check``, with the simulated world in this process when the
+    station's cameras are ``sim://`` (checked here, they would find none)."""
+    from drivers.camera.sim import registered_worlds
+    from stationd.config import load_station_config
+    from stationd.refcheck_cli import cmd_calibrate_check as check
+
+    cfg = load_station_config(args.config, station=True)
+    if not _simulated(cfg, cameras_only=True) or set(cfg.pairs) <= set(registered_worlds()):
+        return check(args)     # real cameras, or a world this process has already (a test's)
+    from stationd.sim.world import World
+
+    world = World(cfg, seed=0)
+    try:
+        return check(args)
+    finally:
+        world.close()
 
 
 def cmd_bench_soak(args: argparse.Namespace) -> int:
@@ -480,8 +520,11 @@ def build_parser() -> argparse.ArgumentParser:
     bl.add_argument("--interval", type=float, default=2.0, metavar="S",
                     help="seconds between a station's rundowns (default: %(default)s)")
     bl.add_argument("--backlog", type=int, default=10_000, metavar="N",
-                    help="rundowns recorded while the line database is away, drained after "
-                    "(0: none; default: %(default)s)")
+                    help="rundowns recorded by the stations between them while the line "
+                    "database is away, drained after (0: none; default: %(default)s)")
+    bl.add_argument("--station-backlog", type=int, default=10_000, metavar="N",
+                    help="then the same for one station alone, its own forwarder draining "
+                    "while it records (0: none; default: %(default)s)")
     bl.add_argument("--pg", metavar="URL", help="the line database (postgresql+psycopg://...; "
                     "default: a throw-away server started for the run); its tables keep the "
                     "benchmark's rows (station ids BENCH-NN, new database ids)")
@@ -498,6 +541,7 @@ def build_parser() -> argparse.ArgumentParser:
     from stationd.web.status_cli import add_status_parser
 
     add_calibrate_parser(sub)
+    _subcommand(sub, "calibrate", "check").set_defaults(func=cmd_calibrate_check)
     add_probe_parser(sub)
     add_db_parser(sub)
     add_config_parser(sub)
@@ -508,6 +552,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     rn = sub.add_parser("run", help="the station daemon (as systemd runs it)")
     rn.add_argument("--config", required=True, help="station YAML")
+    rn.add_argument("--sim-operator", action="store_true",
+                    help="a simulated station (sim:// lift, controller and cameras) with a "
+                    "scripted operator: vehicles arrive, the wrench visits bolts, the "
+                    "controller tightens (now and then NOK); without it the simulated lift "
+                    "stays down (commands on standard input: next, raise, lower, ...)")
     rn.set_defaults(func=cmd_run)
 
     sm = sub.add_parser("sim", help="the simulated lift PLC or tightening controller on its "
@@ -555,6 +604,15 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _subcommand(sub: Any, *names: str) -> argparse.ArgumentParser:
+    """The parser of ``stationd NAME SUBNAME ...`` (to set what it runs from here)."""
+    parser: argparse.ArgumentParser = sub.choices[names[0]]
+    for name in names[1:]:
+        action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+        parser = action.choices[name]
+    return parser
+
+
 def _quiet_everywhere(parser: argparse.ArgumentParser) -> None:
     """``--quiet`` is accepted after the sub-command too (``stationd demo --quiet``), where
     a user types it; SUPPRESS keeps a leaf from resetting the top-level flag."""
@@ -569,7 +627,9 @@ def _quiet_everywhere(parser: argparse.ArgumentParser) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     from stationd import progress
+    from stationd.imageio import quiet_opencv
 
+    quiet_opencv()   # OpenCV's own warnings are no lines of ours (before it loads)
     parser = build_parser()
     args = parser.parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func

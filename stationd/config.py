@@ -3,7 +3,8 @@
 It holds the marker, the vision parameters, the stereo pairs (calibration file, transform to
 the vehicle frame) and the tool geometry; devices, the database and the cycle join it with the
 daemon.  Unknown keys are errors that name file, line and key; relative paths are relative to
-the config file; there are no hidden sources (no environment variables, no merged dotfiles).
+the config file (for a symbolic link, to the file it points to: :func:`station_base`); there
+are no hidden sources (no environment variables, no merged dotfiles).
 
 :func:`load_station_config` raises the first error (the daemon needs a yes or no);
 :func:`check_station` reads the same sections with the same code and lists every error, with
@@ -20,6 +21,7 @@ from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
 import numpy as np
 
+from db.location import NOT_SQLITE, missing_folder, sqlite_problem
 from drivers.devices import Kind
 from drivers.devices import check_url as check_device_url
 from drivers.errors import UrlError
@@ -54,6 +56,9 @@ P = ParamSpec("P")
 REQUIRED_KEYS = ("cameras", "pairs", "lift", "wrench")
 BASELINE_MM = (20.0, 2000.0)    # plausible stereo baselines, millimetres
 METRES_LIKE_MM = 10.0           # a pair-to-vehicle translation shorter than this is in metres
+#: plausible limits of a pair's exposure skew, ms: under 0.1 it is seconds written as ms (or 0,
+#: which no two exposures meet); at 100 ms a wrench moved by hand has moved centimetres
+MAX_SKEW_MS = (0.1, 100.0)
 STATION_KEYS = ("marker", "vision", "cameras", "pairs", "tool", "lift", "wrench", "matching",
                 "database", "bolts", "records", "http", "access", "localize", "line", "nok",
                 "opcua", "references")
@@ -175,7 +180,8 @@ class StationCheck:
         return not self.errors
 
 
-def device_url(node: YamlNode, kind: str, *, check: bool = False) -> str:
+def device_url(node: YamlNode, kind: str, *, check: bool = False, sources: bool = False
+               ) -> str:
     """A device URL of ``kind`` (camera, lift, wrench).
 
     With ``check``, the device is built, not opened: its form and scheme are checked against
@@ -184,11 +190,13 @@ def device_url(node: YamlNode, kind: str, *, check: bool = False) -> str:
     URL that can never work is a configuration error, not a station in fault for good.
     ``stationd config check`` and the daemon's loader (``station=True``: the first start and
     every reload) check; other readers of a station file (tools, benchmarks) do not need to.
+    ``sources`` (the checker only): what a device reads must exist now (a camera replay's
+    files); the daemon starts in fault on it instead, retried as a device that is down.
     """
     url = node.text()
     if check:
         try:
-            check_device_url(Kind(kind), url)
+            check_device_url(Kind(kind), url, sources=sources)
         except UrlError as exc:   # the line shows the URL: the message need not repeat it
             text = str(exc)
             if exc.device and text.startswith(f"{exc.device}: "):
@@ -197,21 +205,56 @@ def device_url(node: YamlNode, kind: str, *, check: bool = False) -> str:
     return url
 
 
+def _max_skew_ms(node: YamlNode) -> float:
+    """A pair's exposure skew limit, in milliseconds: below :data:`MAX_SKEW_MS` it is seconds
+    (0.005 for 5 ms) or 0 (no two exposures are ever that close: the pair never localizes);
+    above, the wrench moves more than a bolt's tolerance between its two images."""
+    skew = node.number()
+    if not MAX_SKEW_MS[0] <= skew <= MAX_SKEW_MS[1]:
+        hint = f"; in seconds? write {skew * 1e3:g} for {skew * 1e3:g} ms" \
+            if 0 < skew < MAX_SKEW_MS[0] <= skew * 1e3 else \
+            "; 0 accepts no pair of frames: the pair would never localize" if skew == 0 else ""
+        raise node.error(f"{skew:g} ms is not plausible: the two exposures of a pair may be "
+                         f"{MAX_SKEW_MS[0]:g}-{MAX_SKEW_MS[1]:g} ms apart (milliseconds, 5 by "
+                         f"default{hint})")
+    return skew
+
+
 def _path(node: YamlNode, base: Path) -> Path:
     p = Path(node.text())
     return p if p.is_absolute() else base / p
 
 
-def _existing(node: YamlNode, base: Path, what: str) -> Path:
-    """A path (relative to the config file) that must name an existing file."""
+def _existing(node: YamlNode, base: Path, what: str, note: str = "") -> Path:
+    """A path (relative to the config file) that must name an existing file; ``note`` is
+    added to the message (where relative paths were read from, for a linked station file)."""
     p = _path(node, base)
     if not p.exists():
-        raise node.error(f"{what} {p} does not exist")
+        raise node.error(f"{what} {p} does not exist{note}")
     return p
 
 
-def _camera_url(node: YamlNode, *, check: bool) -> str:
-    return device_url(node.mapping(("url",), required=("url",))["url"], "camera", check=check)
+def station_base(path: Path) -> Path:
+    """The folder the relative paths of the station file at ``path`` are relative to: its
+    own, or for a symbolic link (``/etc/stationd/station.yaml -> /opt/line/station.yaml``,
+    the natural install) the folder of the file it points to, where its calibrations and
+    bolt table are kept with it (``/opt/line``), wherever the link is."""
+    return path.resolve().parent if path.is_symlink() else path.parent
+
+
+def _link_note(path: Path) -> str:
+    """What a missing relative path's message adds when the station file is a link: both
+    names, and which folder was read."""
+    if not path.is_symlink():
+        return ""
+    target = path.resolve()
+    return (f" (relative paths are read from {target.parent}, the folder of {target}, which "
+            f"the station file {path} links to)")
+
+
+def _camera_url(node: YamlNode, *, check: bool, sources: bool = False) -> str:
+    return device_url(node.mapping(("url",), required=("url",))["url"], "camera", check=check,
+                      sources=sources)
 
 
 def _refuse(error: ConfigError) -> None:
@@ -255,7 +298,7 @@ def _database_url(node: YamlNode, base: Path, check: bool = False, checker: bool
     """The database URL; a relative SQLite path is relative to the station file, like every
     other path in it (not to the daemon's working directory).  With ``check``, the URL must
     parse and name a database whose driver is installed (nothing is connected), and an SQLite
-    one a file that can keep the results (:func:`_sqlite_problem`).
+    one a file that can keep the results (:func:`db.location.sqlite_problem`).
 
     ``checker`` (``config check``) differs from the daemon's start in two cases: a missing
     :data:`STATE_DIRECTORY` is no error there (the check may run before the service is
@@ -279,70 +322,19 @@ def _database_url(node: YamlNode, base: Path, check: bool = False, checker: bool
         # only the checker (its own process) reads the file: the daemon validates a reload
         # while its connections hold SQLite's locks, and closing any descriptor of that file
         # drops every POSIX lock the process holds on it (a db import then deleted the WAL)
-        problem = _sqlite_problem(url, read_header=checker)
+        problem = sqlite_problem(url, read_header=checker)
         if problem is None or (not checker and problem.startswith(NOT_SQLITE)):
             pass
-        elif checker and problem == _missing_folder(STATE_DIRECTORY):
+        elif checker and problem == missing_folder(STATE_DIRECTORY):
             pass
         else:
             raise url_node.error(problem)
     return url
 
 
-#: the first 16 bytes of every SQLite database file (https://sqlite.org/fileformat.html)
-SQLITE_HEADER = b"SQLite format 3\x00"
-NOT_SQLITE = "not an SQLite database: "
 #: the service's own folder (systemd/stationd.service: StateDirectory=stationd), made by
 #: systemd when the service starts
 STATE_DIRECTORY = Path("/var/lib/stationd")
-
-
-def _missing_folder(folder: Path) -> str:
-    return (f"folder {folder} does not exist: create it, owned by the user the station runs "
-            "as (or correct the path)")
-
-
-def _sqlite_problem(url: str, *, read_header: bool = True) -> str | None:
-    """Why the SQLite database of ``url`` cannot keep the station's results, in the words of
-    what to do; None when it can (or ``url`` is another database, checked when it connects).
-
-    Checked without opening anything (opening creates the file, and a FIFO would block): an
-    in-memory database loses every result at exit, a folder or a file that is not an SQLite
-    database cannot be opened (SQLite says "disk I/O error" or retries "unable to open
-    database file" for ever), and a missing folder is a typo or a folder to create, owned by
-    the user the service runs as."""
-    from sqlalchemy.engine import make_url
-
-    parsed = make_url(url)   # it parsed in make_engine already
-    if parsed.get_backend_name() != "sqlite":
-        return None
-    name = parsed.database or ""
-    if name in ("", ":memory:") or "mode=memory" in name:
-        return (f"{url} is a database in memory: every result is lost when the station "
-                "stops (name a file, e.g. sqlite:///stationd.db)")
-    if name.startswith("file:"):   # an SQLite URI: its own options, checked when it opens
-        return None
-    path = Path(name)
-    if path.is_dir():
-        return f"{path} is a folder, not a database file (name a file in it, e.g. " \
-               f"sqlite:///{path / 'stationd.db'})"
-    if not path.parent.is_dir():
-        return _missing_folder(path.parent)
-    if not path.exists():
-        return None   # created at the first start
-    if not path.is_file():
-        return f"{path} is not a regular file (a FIFO or a device?): name a database file"
-    if not read_header:
-        return None
-    try:
-        with path.open("rb") as f:
-            head = f.read(len(SQLITE_HEADER))
-    except OSError as exc:
-        return f"{path} cannot be read: {exc.strerror or exc}"
-    if head and head != SQLITE_HEADER:   # an empty file is a new database
-        return f"{NOT_SQLITE}{path} is another kind of file: name the station's " \
-               "database, or a new file"
-    return None
 
 
 def _records(node: YamlNode, base: Path) -> RecordsConfig:
@@ -376,8 +368,10 @@ class _Reader:
     checks device URLs against the driver registries (see :func:`device_url`).
     """
 
-    def __init__(self, base: Path, *, collect: bool, require_devices: bool = False) -> None:
+    def __init__(self, base: Path, *, collect: bool, require_devices: bool = False,
+                 note: str = "") -> None:
         self.base = base
+        self.note = note   # added where a relative path names nothing (a linked file)
         self.collect = collect
         self.require_devices = require_devices
         self.unreadable = False   # the top-level mapping could not be read (all reported)
@@ -448,7 +442,8 @@ class _Reader:
                                       partial(_database_url, base=base, check=check,
                                               checker=self.collect)),
             bolts_path=self.section("bolts", d.bolts_path,
-                                    partial(_existing, base=base, what="bolt file")),
+                                    partial(_existing, base=base, what="bolt file",
+                                            note=self.note)),
             records=self.section("records", d.records, partial(_records, base=base)),
             http=self.section("http", d.http, HttpConfig.from_node),
             access=self.section("access", d.access, AccessConfig.from_node),
@@ -481,7 +476,8 @@ class _Reader:
         device: dict[str, str] = {}   # the URL without its options -> the camera naming it
         for name, item in items:
             url = self.guard(None, _camera_url, item,
-                             check=self.collect or self.require_devices)
+                             check=self.collect or self.require_devices,
+                             sources=self.collect)
             if url is None:
                 continue
             same = device.setdefault(url.split("?", 1)[0], name)
@@ -551,9 +547,10 @@ class _Reader:
         errors_before = len(self.errors)
         sides = {side: self.guard(None, _camera_ref, m[side], cameras) if side in m else None
                  for side in ("left", "right")}
-        skew_ms = self.guard(None, m["max_skew_ms"].number, lo=0.0, hi=1000.0) \
+        skew_ms = self.guard(None, _max_skew_ms, m["max_skew_ms"]) \
             if "max_skew_ms" in m else 5.0
-        cal_path = self.guard(None, _existing, m["calibration"], self.base, "calibration file")
+        cal_path = self.guard(None, _existing, m["calibration"], self.base, "calibration file",
+                              self.note)
         tv_path = self.guard(None, _path, m["to_vehicle"], self.base) if "to_vehicle" in m \
             else self.base / f"{name}.vehicle.yaml"
         tv = None
@@ -569,7 +566,7 @@ class _Reader:
         if tv is None:  # a pair with errors is told those, not this
             self.warnings.append(m.get("to_vehicle", node).error(
                 f"{tv_path} does not exist: the pair is not registered into the vehicle "
-                "frame yet (stationd calibrate vehicle writes it)"))
+                f"frame yet (stationd calibrate vehicle writes it){self.note}"))
         return PairConfig(name, cal_path, calibration, tv_path, tv, sides["left"],
                           sides["right"], skew_ms / 1e3)
 
@@ -584,7 +581,8 @@ def load_station_config(path: str | Path | None, *, station: bool = False) -> St
     if path is None:
         return StationConfig()
     p = Path(path)
-    reader = _Reader(p.parent, collect=False, require_devices=station)
+    reader = _Reader(station_base(p), collect=False, require_devices=station,
+                     note=_link_note(p))
     cfg = reader.read(p)
     if station and cfg.bolts_path is not None and "nok" in reader.top:
         # the NOK policy against the bolt table it applies to: a start or a reload with an
@@ -608,7 +606,7 @@ def check_station(path: str | Path) -> StationCheck:
     malformed file is one error.
     """
     p = Path(path)
-    reader = _Reader(p.parent, collect=True, require_devices=True)
+    reader = _Reader(station_base(p), collect=True, require_devices=True, note=_link_note(p))
     try:
         cfg = reader.read(p)
     except ConfigError as exc:

@@ -65,19 +65,22 @@ def _print_errors(errors: Sequence[ConfigError]) -> None:
 
 
 def _open(url: str, *, must_exist: bool) -> Repository:
-    """The repository; a read command (``must_exist``) does not create a missing SQLite file
-    and opens it read-only (no migration, no write access needed: the service user's
-    database can be read by the line's engineers)."""
+    """The repository of every ``--db`` (and ``--config``'s database); a read command
+    (``must_exist``) does not create a missing SQLite file and opens it read-only (no
+    migration, no write access needed: the service user's database can be read by the
+    line's engineers).  A URL that is no URL or names no installed driver, and an SQLite
+    database that cannot keep what is written (in memory, a folder, a missing folder, another
+    kind of file) are refused before anything is opened, as ``config check`` refuses them
+    (``db.location``)."""
     from sqlalchemy import make_url
-    from sqlalchemy.exc import ArgumentError
 
+    from db.engine import make_engine
+    from db.location import sqlite_problem
     from db.repository import Repository
 
+    make_engine(url).dispose()   # the URL's form and driver (DataError: what to write)
     if must_exist:
-        try:
-            u = make_url(url)
-        except ArgumentError as exc:
-            raise InputError(f"database URL {url!r}: {exc}") from None
+        u = make_url(url)
         path = u.database
         if u.get_backend_name() == "sqlite" and path and path != ":memory:" \
                 and not path.startswith("file:"):
@@ -88,6 +91,9 @@ def _open(url: str, *, must_exist: bool) -> Repository:
             if not there:
                 raise InputError(f"no database at {path} (import a bolt table first, or give "
                                  "--db or --config STATION.yaml)")
+    problem = sqlite_problem(url, loses="it starts empty and is gone when the command ends")
+    if problem is not None:
+        raise InputError(problem)
     return Repository.open(url, read_only=must_exist)
 
 
@@ -119,9 +125,10 @@ def cmd_db_import(args: argparse.Namespace) -> int:
 
 
 def cmd_db_export(args: argparse.Namespace) -> int:
-    from stationd.outfile import refuse_to_replace
+    from stationd.outfile import need_folder, refuse_to_replace
 
     if args.out is not None:   # before the database is read: a typo costs nothing
+        need_folder(Path(args.out))
         if args.results:       # an earlier export (CSV or JSON) may be replaced, nothing else
             refuse_to_replace(Path(args.out), "results", ("results",))
         else:   # a bolt table may replace a bolt table (export, edit, import)

@@ -7,7 +7,9 @@ would allocate for it or stop with an assertion.
 
 from __future__ import annotations
 
+import os
 import struct
+import sys
 from pathlib import Path
 
 import cv2
@@ -22,6 +24,33 @@ MAX_PIXELS = 200_000_000
 MAX_FILE_BYTES = 2**31
 
 _JPEG_SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
+
+
+def quiet_opencv() -> None:
+    """Keep OpenCV's own log lines (``[ WARN:0@0.02] global grfmt_png.cpp:793 ... PNG input
+    buffer is incomplete``) off stderr: every failure is told as one line of ours.  Called
+    once at startup; ``OPENCV_LOG_LEVEL`` set by the user wins (to debug a camera).  Errors
+    only: OpenCV reads the variable when it loads, and its level once loaded."""
+    os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
+    cv = sys.modules.get("cv2")
+    if cv is not None and os.environ["OPENCV_LOG_LEVEL"] == "ERROR":
+        cv.utils.logging.setLogLevel(cv.utils.logging.LOG_LEVEL_ERROR)
+
+
+def png_complete(data: bytes | np.ndarray) -> bool:
+    """Whether a PNG's chunks run to its IEND within ``data`` (a truncated PNG is told as
+    such before libpng prints its own "PNG input buffer is incomplete" on stderr, which
+    no log level of OpenCV's silences).  True for data that is no PNG."""
+    raw = bytes(data) if isinstance(data, np.ndarray) else data
+    if not raw.startswith(b"\x89PNG\r\n\x1a\n"):
+        return True
+    i = 8
+    while i + 8 <= len(raw):
+        length = int(struct.unpack(">I", raw[i:i + 4])[0])
+        if raw[i + 4:i + 8] == b"IEND":
+            return i + 12 + length <= len(raw)
+        i += 12 + length
+    return False
 
 
 def header_size(data: bytes | np.ndarray) -> tuple[int, int] | None:
@@ -77,8 +106,9 @@ def read_image_bytes(path: str | Path) -> np.ndarray:
 
 def decode(data: np.ndarray, flags: int) -> np.ndarray | None:
     """``cv2.imdecode``, None for an image OpenCV cannot read (its own size limit or a
-    broken file included: never an OpenCV assertion)."""
-    if not data.size:
+    broken file included: never an OpenCV assertion, nor libpng's line on stderr for a
+    truncated PNG)."""
+    if not data.size or not png_complete(data):
         return None
     try:
         img = cv2.imdecode(data, flags)
@@ -87,13 +117,53 @@ def decode(data: np.ndarray, flags: int) -> np.ndarray | None:
     return None if img is None else np.asarray(img)
 
 
+#: the starts of the image files OpenCV reads (PNG, JPEG, BMP, TIFF, WebP, PNM)
+IMAGE_MAGIC = (b"\x89PNG\r\n\x1a\n", b"\xff\xd8\xff", b"BM", b"II*\x00", b"MM\x00*", b"RIFF",
+               b"P5", b"P6")
+#: a text file up to this size is read as YAML to name it (a station file given as an image)
+NAME_TEXT_BYTES = 1 << 20
+
+
+def not_an_image(data: np.ndarray) -> str:
+    """Why bytes OpenCV cannot decode are no image, naming what they are: a broken image
+    (its header is an image's), one of the station's YAML files (``detect station.yaml``: it
+    is a station file, not an image), a text file, or something else."""
+    head = bytes(data[:16])
+    if head.startswith(IMAGE_MAGIC):
+        return "a broken or truncated image (its header is an image's; its data does not " \
+               "decode)"
+    if data.size <= NAME_TEXT_BYTES:
+        try:
+            text = bytes(data).decode("utf-8")
+        except UnicodeDecodeError:
+            text = None
+        if text is not None and "\0" not in text:
+            return _text_kind(text)
+    return "not an image (no PNG, JPEG, BMP or TIFF header)"
+
+
+def _text_kind(text: str) -> str:
+    """What a text file given as an image is: one of the station's YAML files, or text."""
+    from stationd.filekind import KINDS, kind_of_keys
+    from stationd.yamlio import YamlNode, top_keys
+
+    try:
+        kind = kind_of_keys(top_keys(YamlNode.parse(text)))
+    except Exception:
+        kind = None
+    if kind is not None:
+        return f"this is {KINDS[kind].name} (a YAML file), not an image"
+    return "a text file, not an image"
+
+
 def read_image(path: str | Path) -> np.ndarray:
     """An 8-bit BGR image.  An alpha channel is dropped; grey or 16-bit images are refused
     because the marker is found by its colour."""
     p = Path(path)
-    img = decode(read_image_bytes(p), cv2.IMREAD_UNCHANGED)
+    data = read_image_bytes(p)
+    img = decode(data, cv2.IMREAD_UNCHANGED)
     if img is None:
-        raise ImageError(f"{p}: not a readable image")
+        raise ImageError(f"{p}: {not_an_image(data)}")
     if img.dtype != np.uint8:
         raise ImageError(f"{p}: {img.dtype} pixels; an 8-bit colour image is needed")
     if img.ndim == 2 or img.shape[2] == 1:

@@ -194,8 +194,26 @@ def write_all(files: list[tuple[Path, str | bytes]]) -> None:
                 with contextlib.suppress(OSError):
                     os.unlink(tmp)
             raise
+    except FileNotFoundError:
+        if not current.parent.is_dir():
+            raise InputError(folder_missing(current)) from None
+        raise InputError(f"{current}: cannot write: No such file or directory") from None
     except OSError as exc:
         raise InputError(f"{current}: cannot write: {exc.strerror or exc}") from None
+
+
+def folder_missing(path: Path, option: str = "--out") -> str:
+    """The one line for an output whose folder does not exist (nothing creates folders: a
+    typo in a path must not leave a tree of them behind)."""
+    return f"{path}: folder {path.parent} does not exist (create it first, or give another " \
+           f"{option})"
+
+
+def need_folder(path: Path, option: str = "--out") -> None:
+    """Raise :class:`InputError` when ``path``'s folder does not exist: asked before the work
+    (a database read, a computation), so that a typo costs nothing."""
+    if not path.parent.is_dir():
+        raise InputError(folder_missing(path, option))
 
 
 def _default_mode() -> int:

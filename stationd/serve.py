@@ -18,6 +18,7 @@ import logging
 import random
 import signal
 import sys
+from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +41,10 @@ from stationd.station.sdnotify import Notifier
 
 log = logging.getLogger("stationd")
 OPEN_RETRY_S = (1.0, 30.0)   # a database that does not open: first and longest wait
+#: what runs beside each station the loop starts, until that station stops (its configuration,
+#: the station, its stop): ``stationd run``'s simulated world and operator on a ``sim://``
+#: station, handed in by ``stationd.cli`` (the runtime never imports the simulator)
+Beside = Callable[[StationConfig, Station, asyncio.Event], Coroutine[Any, Any, None]]
 
 
 def validate_station(path: str | Path) -> StationConfig:
@@ -82,7 +87,7 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bo
 
 
 async def serve(cfg_path: str, cfg: StationConfig, notifier: Notifier,
-                locks: StationLocks | None = None) -> None:
+                locks: StationLocks | None = None, beside: Beside | None = None) -> None:
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     reload = asyncio.Event()
@@ -93,7 +98,8 @@ async def serve(cfg_path: str, cfg: StationConfig, notifier: Notifier,
     screens = Screens(bus)
     watchdog = asyncio.create_task(keep_watchdog(notifier))
     try:
-        await serve_station(cfg_path, cfg, notifier, bus, screens, stop, reload, locks)
+        await serve_station(cfg_path, cfg, notifier, bus, screens, stop, reload, locks,
+                            beside)
     finally:
         watchdog.cancel()
         with contextlib.suppress(asyncio.CancelledError):
@@ -185,6 +191,7 @@ class Screens:
         self.station = station
         if self.server is not None:
             self.server.line = lambda: None if self.line is None else self.line.last_status
+            self.server.line_results.url = None if cfg.line is None else cfg.line.url
             self.server.commands.access = cfg.access
             self.server.commands.submit = None if station is None else station.submit
 
@@ -299,14 +306,31 @@ def configured_devices(cfg: StationConfig) -> tuple[str, ...]:
     return (LIFT, WRENCH, *(n for n, pc in cfg.pairs.items() if pc.left and pc.right))
 
 
+def locked_devices(cfg: StationConfig) -> list[tuple[str, str]]:
+    """The devices the daemon drives, as ``(what, url)`` for their locks: the lift, the
+    controller and both cameras of every pair wired to two (the ones it opens)."""
+    cams = [(f"camera {cam}", cfg.cameras[cam]) for pc in cfg.pairs.values()
+            if pc.left and pc.right for cam in (pc.left, pc.right) if cam in cfg.cameras]
+    return [("lift", cfg.lift.url), ("wrench", cfg.wrench.url), *cams]
+
+
+def hold_locks(locks: StationLocks, cfg: StationConfig) -> None:
+    """Hold the locks of ``cfg``'s database and devices (one daemon per database and per
+    device); raises LockHeldError, keeping what ``locks`` held, when another daemon has one."""
+    locks.hold(cfg.database_url, cfg.records.images_dir, locked_devices(cfg))
+
+
 async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, bus: EventBus,
                         screens: Screens, stop: asyncio.Event, reload: asyncio.Event,
-                        locks: StationLocks | None = None) -> None:
+                        locks: StationLocks | None = None,
+                        beside: Beside | None = None) -> None:
     """Run the station of ``cfg`` until ``stop``; on ``reload`` validate ``cfg_path`` anew and
     switch to it (closing and reopening every device) or keep the running one.  Separate from
     :func:`serve` (which owns the signals) so that ``bench soak`` drives the same loop.
-    ``locks`` holds the one-daemon-per-database lock: a reload onto another database moves
-    it, or is refused when another daemon holds that one."""
+    ``locks`` holds the one-daemon-per-database and per-device locks: a reload onto another
+    database or device moves them, or is refused when another daemon holds one.  ``beside``
+    runs beside each station, started before it (a simulated world is there for its first
+    grab) and awaited once it stops."""
     loop = asyncio.get_running_loop()
     carried: list[Unsaved] = []   # results the last station received and could not write
     while True:
@@ -322,6 +346,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
             return
         await screens.follow(cfg)   # their results, if the database opened only now
         inner = asyncio.Event()
+        extra = None if beside is None else asyncio.create_task(beside(cfg, station, inner))
         task = asyncio.create_task(station.run(inner))
         screens.attach(station, cfg)
         line = asyncio.create_task(forward(cfg, notifier, screens, inner, bus))
@@ -337,8 +362,8 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
                 reload.clear()
                 try:  # validate first: an invalid station never stops the running one
                     new = await loop.run_in_executor(None, validate_station, cfg_path)
-                    if locks is not None:
-                        locks.hold(new.database_url, new.records.images_dir)
+                    if locks is not None:   # a device another daemon drives: refused
+                        hold_locks(locks, new)
                 except StationError as exc:
                     new = None
                     log.error("reload refused, keeping the running configuration: %s",
@@ -356,6 +381,8 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
         inner.set()
         await line
         await served
+        if extra is not None:
+            await _beside_ended(extra)
         try:
             await task
         except Exception as exc:  # a bug, not a device: logged, the station restarts
@@ -372,17 +399,28 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
             cfg = new
 
 
-def run_daemon(args: argparse.Namespace) -> int:
+async def _beside_ended(task: asyncio.Task[None]) -> None:
+    """What ran beside a station has ended with it; its failure is journaled, never the
+    daemon's."""
+    try:
+        await task
+    except Exception as exc:
+        log.error("beside the station: %s: %s", type(exc).__name__, one_line(exc))
+
+
+def run_daemon(args: argparse.Namespace, beside: Beside | None = None) -> int:
+    """``stationd run``; ``beside``: see :func:`serve_station`."""
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(levelname)s %(message)s")  # one line per event (journal)
     logging.getLogger("alembic").setLevel(logging.WARNING)
     logging.getLogger("asyncua").setLevel(logging.WARNING)   # ~1000 lines per start otherwise
     cfg = validate_station(args.config)  # an invalid station at the first start: exit 2
     locks = StationLocks()
-    # a second daemon on this database: one line naming the holder, exit 2
-    locks.hold(cfg.database_url, cfg.records.images_dir)
+    # a second daemon on this database or on one of its devices: one line naming the holder
+    # and the device, exit 2 (taken before any device is opened)
+    hold_locks(locks, cfg)
     try:
-        asyncio.run(serve(args.config, cfg, Notifier(), locks))
+        asyncio.run(serve(args.config, cfg, Notifier(), locks, beside))
     finally:
         locks.release()
     return 0

@@ -414,6 +414,25 @@ MATCHING = "matching: {tolerance_mm: 8.0,"
      "vision.gates.max_rms_px", "1e+09 px is not plausible for a fit's RMS residual (0.01-5 px"),
     (TOOL, TOOL + "\nvision:\n  gates:\n    max_rms_px: 0\n", "max_rms_px",
      "vision.gates.max_rms_px", "0 refuses every marker"),
+    # a newcomer's values in the wrong unit (issue 19): each with its likely mistake
+    ("margin_mm: 6.0", "margin_mm: 600", "margin_mm", "matching.margin_mm",
+     "a margin of 600 mm is not plausible (1-100 mm): every bolt with another within 600 mm "
+     "would be ambiguous for ever"),
+    ("margin_mm: 6.0", "margin_mm: 0.006", "margin_mm", "matching.margin_mm",
+     "a margin of 0.006 mm is not plausible (1-100 mm)"),
+    ("margin_mm: 6.0", "margin_mm: 0.006", "margin_mm", "matching.margin_mm",
+     "in metres? write 6 for 6 mm"),
+    ("max_skew_ms: 5}", "max_skew_ms: 0.005}", "max_skew_ms: 0.005", "pairs.pair1.max_skew_ms",
+     "0.005 ms is not plausible: the two exposures of a pair may be 0.1-100 ms apart "
+     "(milliseconds, 5 by default; in seconds? write 5 for 5 ms)"),
+    ("max_skew_ms: 5}", "max_skew_ms: 0}", "max_skew_ms: 0}", "pairs.pair1.max_skew_ms",
+     "0 accepts no pair of frames"),
+    (TOOL, "tool: {length_mm: 300.0, max_tilt_deg: 0.17}", "max_tilt_deg", "tool.max_tilt_deg",
+     "a tilt limit of 0.17 degrees is not plausible (2-60 degrees"),
+    (TOOL, "tool: {length_mm: 300.0, max_tilt_deg: 0.17}", "max_tilt_deg", "tool.max_tilt_deg",
+     "in radians? 0.17 rad is 9.74 degrees: write 9.74"),
+    (TOOL, "tool: {length_mm: 300.0, max_tilt_deg: 0}", "max_tilt_deg", "tool.max_tilt_deg",
+     "a tilt limit of 0 degrees is not plausible"),
 ])
 def test_implausible_values_are_refused_with_key_and_line(sim_copy, old, new, mark, key,
                                                           message):
@@ -425,6 +444,62 @@ def test_implausible_values_are_refused_with_key_and_line(sim_copy, old, new, ma
     assert message in str(error)
     with pytest.raises(ConfigError, match=re.escape(message)):
         load_station_config(station)
+
+
+def test_a_replay_camera_matching_no_file_is_refused_by_the_check_not_the_daemon(sim_copy):
+    """``config check`` looks for a replay's files (a typo in the path is told before the
+    start); the daemon starts on it in fault (a folder mounted later is a device that comes
+    back: tests/station/test_daemon_faults.py)."""
+    station = _edit(sim_copy / "station.yaml", "'sim://pair1/left'",
+                    "'file:///nonexist/left*.png'")
+    _edit(station, "'sim://pair1/right'", f"'file://{sim_copy}/right_*.png'")
+    errors = check_station(station).errors
+    assert [(e.line, e.key) for e in errors] == [(_line(station, "nonexist"),
+                                                  "cameras.pair1_left.url"),
+                                                 (_line(station, "right_*"),
+                                                  "cameras.pair1_right.url")]
+    assert str(errors[0]).endswith("no files match /nonexist/left*.png: folder /nonexist does "
+                                   "not exist")
+    assert str(errors[1]).endswith(f"no files match {sim_copy}/right_*.png")
+    (sim_copy / "right_1.png").write_bytes(b"")   # one file: the check is content
+    assert len(check_station(station).errors) == 1
+    assert load_station_config(station, station=True).cameras["pair1_left"].startswith("file:")
+
+
+def test_a_pair_calibration_given_as_the_hsv_file_is_named(sim_copy):
+    """``vision: {hsv: pair1.yaml}`` said ``left: unknown key (accepted: hsv)``."""
+    station = _edit(sim_copy / "station.yaml", TOOL, TOOL + "\nvision: {hsv: pair1.yaml}\n")
+    [error] = check_station(station).errors
+    assert error.path == str(sim_copy / "pair1.yaml")
+    assert str(error).endswith("this is a stereo pair calibration (from calibrate stereo), not "
+                               "an HSV range file (an HSV range file has hsv:)")
+
+
+def test_a_linked_station_file_reads_its_paths_beside_the_file_it_points_to(sim_copy,
+                                                                            tmp_path_factory):
+    """``/etc/stationd/station.yaml -> /opt/line/station.yaml``: the calibrations, the bolt
+    table and the database are the ones kept with the real file; a relative path that names
+    nothing says so, with both names."""
+    etc = tmp_path_factory.mktemp("etc")
+    link = etc / "station.yaml"
+    link.symlink_to(sim_copy / "station.yaml")
+    check = check_station(link)
+    assert check.ok, [str(e) for e in check.errors]
+    cfg = load_station_config(link, station=True)
+    assert cfg.bolts_path == sim_copy / "bolts.yaml"
+    assert cfg.pairs["pair1"].calibration_path == sim_copy / "pair1.yaml"
+    assert cfg.database_url == f"sqlite:///{sim_copy.resolve() / 'stationd-sim.db'}"
+    (sim_copy / "bolts.yaml").unlink()
+    note = (f"(relative paths are read from {sim_copy}, the folder of "
+            f"{sim_copy / 'station.yaml'}, which the station file {link} links to)")
+    [error] = check_station(link).errors
+    assert str(error) == (f"{link}:{_line(link, 'bolts:')}: bolts: bolt file "
+                          f"{sim_copy / 'bolts.yaml'} does not exist {note}")
+    with pytest.raises(ConfigError, match=re.escape(note)):
+        load_station_config(link, station=True)
+    (sim_copy / "station.yaml").unlink()        # a plain file: no note
+    shutil.copy(SIM / "station.yaml", etc / "plain.yaml")
+    assert "links to" not in str(check_station(etc / "plain.yaml").errors[0])
 
 
 def test_a_narrow_hue_range_through_red_is_still_accepted(sim_copy):

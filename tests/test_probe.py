@@ -41,6 +41,35 @@ def test_probe_lift_nothing_listening_exits_1(capsys):
     assert code == 1 and "refused" in err and err.count("\n") == 1
 
 
+def test_probe_lift_at_an_http_server_says_garbage_and_what_it_heard(capsys):
+    """Pointed at a web server that answers and hangs up: it said ``_HeardTcp ... unbounded
+    read``; now as ``probe wrench`` says it."""
+    import threading
+
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+
+    def serve() -> None:
+        conn, _ = server.accept()
+        with conn:
+            conn.recv(256)
+            conn.sendall(b"HTTP/1.0 400 Bad Request\r\nContent-Type: text/html\r\n\r\n")
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    try:
+        code = main(["probe", "lift", f"modbus-tcp://127.0.0.1:{server.getsockname()[1]}",
+                     "--timeout", "1"])
+    finally:
+        thread.join(5.0)
+        server.close()
+    err = capsys.readouterr().err
+    assert code == 1 and err.count("\n") == 1, err
+    assert "garbage reading holding registers 0-11 of unit 1: the device answered something " \
+           "that is not Modbus TCP (b'HTTP/1.0 400 Bad Request\\r\\nConten'...)" in err, err
+
+
 @pytest.mark.parametrize("url,needle", [("bogus://x", "unknown lift scheme"),
                                         ("modbus-tcp://127.0.0.1:502?unti=1", "unknown option")])
 def test_probe_lift_bad_url_exits_2(capsys, url, needle):

@@ -45,15 +45,19 @@ def camera_class(url: str) -> type[CameraDevice]:
     return cls
 
 
-def check_camera_url(url: str) -> None:
+def check_camera_url(url: str, *, sources: bool = False) -> None:
     """Build the camera of ``url`` without opening it: its form and options, with their
     ranges, are checked (UrlError), nothing is connected and no SDK is loaded (the Aravis
-    backend parses its URL before it ever imports Aravis)."""
+    backend parses its URL before it ever imports Aravis).  ``sources``: also check what a
+    backend reads that exists now or never (a replay's files: ``check_source``)."""
     cls = camera_class(url)
     try:
         cls(url).close()
     except ValueError as exc:  # a backend's own refusal that is not a UrlError yet
         raise UrlError(str(exc), device=url) from None
+    check_source = getattr(cls, "check_source", None)
+    if sources and check_source is not None:
+        check_source(url)
 
 
 def open_camera(url: str, **kw: Any) -> CameraDevice:

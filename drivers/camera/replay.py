@@ -70,6 +70,28 @@ def read_frame_image(path: str) -> np.ndarray:
     return np.asarray(img)
 
 
+def replay_files(pattern: str) -> list[str]:
+    """The files a replay of ``pattern`` (a folder or a glob) delivers, in natural order."""
+    p = Path(pattern)
+    if p.is_dir():
+        found = [str(f) for f in p.iterdir()
+                 if f.is_file() and f.suffix.lower() in IMAGE_SUFFIXES]
+    else:
+        found = [f for f in glob.glob(pattern) if Path(f).is_file()]
+    return sorted(found, key=natural_key)
+
+
+def _nothing(pattern: str) -> str:
+    """Why a replay has no frames, naming where a relative pattern was looked for."""
+    p = Path(pattern)
+    what = "no image files in" if p.is_dir() else "no files match"
+    where = "" if p.is_absolute() else f" (relative to the working directory {Path.cwd()})"
+    folder = p if p.is_dir() else p.parent
+    if not p.is_dir() and not folder.is_dir():
+        return f"{what} {pattern}: folder {folder} does not exist{where}"
+    return f"{what} {pattern}{where}"
+
+
 class FileReplayCamera(CameraDevice):
     """Recorded image files as a free-running camera (no exposure, no gain)."""
 
@@ -84,17 +106,21 @@ class FileReplayCamera(CameraDevice):
         loop = "looping" if self.loop else "once"
         return f"file replay {self.pattern}: {len(self.files)} file(s), {loop}"
 
+    @classmethod
+    def check_source(cls, url: str) -> None:
+        """Check that ``url``'s files exist now (UrlError saying which pattern matches
+        nothing): ``config check`` asks it, so that a typo in a recording's path is told
+        before the station starts.  The daemon does not (a folder mounted after it started
+        is a fault until it appears, retried as any device)."""
+        pattern, _ = parse_file_url(url)
+        if not replay_files(pattern):
+            raise parse_url(url).error(_nothing(pattern))
+
     def _open(self) -> None:
-        p = Path(self.pattern)
-        if p.is_dir():
-            found = [str(f) for f in p.iterdir()
-                     if f.is_file() and f.suffix.lower() in IMAGE_SUFFIXES]
-        else:
-            found = [f for f in glob.glob(self.pattern) if Path(f).is_file()]
+        found = replay_files(self.pattern)
         if not found:
-            what = "no image files in" if p.is_dir() else "no files match"
-            raise ConnectError(f"{what} {self.pattern}", device=self.url)
-        self.files = sorted(found, key=natural_key)
+            raise ConnectError(_nothing(self.pattern), device=self.url)
+        self.files = found
         self.position = 0
         self._count = 0
 

@@ -34,7 +34,7 @@ import numpy as np
 from stationd import progress
 from stationd.errors import ImageError, InputError
 from stationd.geometry.camera import Camera, StereoPair
-from stationd.imageio import decode, read_image_bytes
+from stationd.imageio import decode, not_an_image, read_image_bytes
 
 MIN_PAIRS = 6
 MIN_CORNERS = 6  # common corners a ChArUco view needs (a chessboard has all or none)
@@ -174,9 +174,10 @@ def read_grey(path: str | Path) -> np.ndarray:
     """An 8-bit grey image (colour and 16-bit files are converted): calibration needs no
     colour, and many machine-vision cameras save Mono8."""
     p = Path(path)
-    img = decode(read_image_bytes(p), cv2.IMREAD_GRAYSCALE)
+    data = read_image_bytes(p)
+    img = decode(data, cv2.IMREAD_GRAYSCALE)
     if img is None:
-        raise ImageError(f"{p}: not a readable image")
+        raise ImageError(f"{p}: {not_an_image(data)}")
     return np.asarray(img)
 
 

@@ -26,6 +26,9 @@ TOOL_LENGTH_MM = (50.0, 1000.0)  # marker to socket tip: a real wrench, in milli
 # the marker is on the wrench, beside its axis: a lateral offset beyond 250 mm is no wrench
 # (10000 is a typo, or metres/micrometres mixed up)
 TOOL_OFFSET_MM = 250.0
+# a tilt limit under 2 degrees refuses nearly every placement by hand (0.17 is 10 degrees in
+# radians); over 60 the compensation extrapolates the axis far beyond what was checked
+MAX_TILT_DEG = (2.0, 60.0)
 
 
 @dataclass(frozen=True)
@@ -57,9 +60,23 @@ class ToolGeometry:
                 f"{TOOL_LENGTH_MM[0]:g}-{TOOL_LENGTH_MM[1]:g} mm); lengths are in millimetres")
         return cls(length_mm=length,
                    offset_mm=(float(off[0]), float(off[1])),
-                   max_tilt_deg=m["max_tilt_deg"].number(lo=0.0, hi=60.0)
-                   if "max_tilt_deg" in m else 10.0,
+                   max_tilt_deg=_max_tilt(m["max_tilt_deg"]) if "max_tilt_deg" in m
+                   else 10.0,
                    rule=m["rule"].text(RULES) if "rule" in m else "axis")
+
+
+def _max_tilt(node: YamlNode) -> float:
+    """``max_tilt_deg`` within :data:`MAX_TILT_DEG`; a value that is a plausible limit in
+    radians is told so."""
+    tilt = node.number()
+    if MAX_TILT_DEG[0] <= tilt <= MAX_TILT_DEG[1]:
+        return tilt
+    deg = math.degrees(tilt)
+    hint = f"; in radians? {tilt:g} rad is {deg:.3g} degrees: write {deg:.3g}" \
+        if 0 < tilt < MAX_TILT_DEG[0] <= deg <= MAX_TILT_DEG[1] else ""
+    raise node.error(f"a tilt limit of {tilt:g} degrees is not plausible ({MAX_TILT_DEG[0]:g}-"
+                     f"{MAX_TILT_DEG[1]:g} degrees: a wrench held by hand tilts a few degrees; "
+                     f"10 by default){hint}")
 
 
 @dataclass(frozen=True, eq=False)

@@ -228,6 +228,11 @@ def check_spacing(bolts: Mapping[str, Iterable[float]], tolerance_mm: float) -> 
 # the bolt table's bolts would have to be 10 cm apart to be told apart
 TOLERANCE_MM = (1.0, 50.0)
 MAX_AGE_S = (0.05, 5.0)         # plausible staleness limits, seconds
+# the second-nearest bolt must be this much farther than the nearest: under 1 mm (the
+# localization's own scatter) it tells nothing apart (0.006 is 6 mm in metres); above 100 mm
+# every bolt with a neighbour closer than that is ambiguous for ever (600 is no margin, it
+# is a typo or another unit)
+MARGIN_MM = (1.0, 100.0)
 
 
 @dataclass(frozen=True)
@@ -253,6 +258,8 @@ class MatchingConfig(MatchParams):
                                   f"{TOLERANCE_MM[0]:g}-{TOLERANCE_MM[1]:g} mm of its bolt "
                                   "(millimetres: 8 for 8 mm, not 0.008)")
                 kw[k] = tol
+            elif k == "margin_mm":
+                kw[k] = _margin(v)
             elif k == "max_age_s":
                 age = v.number()
                 if not MAX_AGE_S[0] <= age <= MAX_AGE_S[1]:
@@ -263,3 +270,20 @@ class MatchingConfig(MatchParams):
             else:
                 kw[k] = v.number(lo=0.0, hi=1000.0)
         return replace(cls(), **kw)
+
+
+def _margin(node: YamlNode) -> float:
+    """``margin_mm`` within :data:`MARGIN_MM`, its likely unit mistake named."""
+    margin = node.number()
+    if MARGIN_MM[0] <= margin <= MARGIN_MM[1]:
+        return margin
+    if margin < MARGIN_MM[0]:
+        hint = f"in metres? write {margin * 1e3:g} for {margin * 1e3:g} mm" \
+            if MARGIN_MM[0] <= margin * 1e3 <= MARGIN_MM[1] else "6 by default"
+        why = "the nearest bolt must be that much nearer than the next to be told apart"
+    else:
+        hint = "6 by default"
+        why = (f"every bolt with another within {margin:g} mm would be ambiguous for "
+               "ever")
+    raise node.error(f"a margin of {margin:g} mm is not plausible ({MARGIN_MM[0]:g}-"
+                     f"{MARGIN_MM[1]:g} mm): {why} (millimetres: {hint})")

@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from stationd.filekind import expect
 from stationd.vision.enhance import EnhanceParams
 from stationd.vision.segment import HsvRange
 from stationd.yamlio import YamlNode
@@ -117,6 +118,8 @@ def _hsv_from(node: YamlNode, base_dir: Path | None) -> HsvRange:
             path = base_dir / path
         if not path.exists():
             raise node.error(f"HSV file {path} does not exist (write it with stationd tune-color)")
-        doc = YamlNode.load(path).mapping(("hsv",), required=("hsv",))
+        root = YamlNode.load(path)
+        expect(root, "hsv", ("hsv",))   # a pair calibration given here: say what it is
+        doc = root.mapping(("hsv",), required=("hsv",))
         return HsvRange.from_node(doc["hsv"])
     return HsvRange.from_node(node)

@@ -147,11 +147,53 @@ def test_database_errors_are_one_line(run, tmp_path):
     junk = tmp_path / "junk.db"
     junk.write_bytes(b"not a database" * 200)
     code, _, err = run("db", "report", "V", "--db", url_of(junk))
-    assert code == 2 and "cannot open: file is not a database" in _one_line(err)
+    assert code == 2 and f"not an SQLite database: {junk} is another kind of file" \
+        in _one_line(err)
     code, _, err = run("db", "import", EXAMPLE, "--db", "nosuchdriver://x")
     assert code == 2 and _one_line(err).startswith("stationd: error: database URL")
     code, _, err = run("db", "import", EXAMPLE, "--db", url_of(tmp_path / "a" / "b.db"))
-    assert code == 2 and "unable to open database file" in _one_line(err)
+    assert code == 2 and f"folder {tmp_path / 'a'} does not exist" in _one_line(err)
+
+
+@pytest.mark.parametrize(("command", "url", "said"), [
+    # issue 19: "imported" into memory and kept nothing; a folder; a missing folder
+    ("import", "sqlite:///:memory:", "sqlite:///:memory: is a database in memory: it starts "
+                                     "empty and is gone when the command ends"),
+    ("export", "sqlite:///:memory:", "is a database in memory"),
+    ("import", "sqlite:///{tmp}", "{tmp} is a folder, not a database file (name a file in "
+                                  "it, e.g. sqlite:///{tmp}/stationd.db)"),
+    ("report", "sqlite:///{tmp}", "{tmp} is a folder, not a database file"),
+    ("import", "sqlite:///{tmp}/newdir/x.db", "folder {tmp}/newdir does not exist: create "
+                                              "it"),
+    # what a URL looks like, instead of SQLAlchemy's words
+    ("import", "t1.db", "database URL 't1.db': not a URL: write sqlite:///t1.db for an SQLite "
+                        "file"),
+    ("export", "{tmp}/t1.db", "not a URL: write sqlite:///{tmp}/t1.db"),
+    ("import", "postgres://x/y", "database URL 'postgres://x/y': write "
+                                 "postgresql+psycopg://x/y"),
+    ("report", "mongodb://x/y", "no database kind 'mongodb' (sqlite:///NAME.db: an SQLite "
+                                "file relative to the current folder"),
+])
+def test_every_db_url_mistake_is_told_in_the_users_words(run, tmp_path, command, url, said):
+    """``--db`` of every ``db`` command goes through one check, the one ``config check``
+    makes of a station's database (``db.location``); nothing is created."""
+    before = sorted(tmp_path.iterdir())
+    args = {"import": (EXAMPLE,), "export": (), "report": ("V",)}[command]
+    code, out, err = run("db", command, *args, "--db", url.format(tmp=tmp_path))
+    assert code == 2 and out == "", out
+    assert said.format(tmp=tmp_path) in _one_line(err)
+    assert sorted(tmp_path.iterdir()) == before
+
+
+def test_export_into_a_missing_folder_says_so_before_reading(run, db, tmp_path):
+    assert run("db", "import", EXAMPLE, "--db", db)[0] == 0
+    for extra in ((), ("--results",)):
+        out = tmp_path / "nodir" / "x.yaml"
+        code, _, err = run("db", "export", *extra, "--db", db, "--out", out)
+        assert code == 2 and _one_line(err) == (f"stationd: error: {out}: folder {out.parent} "
+                                                "does not exist (create it first, or give "
+                                                "another --out)")
+    assert not (tmp_path / "nodir").exists()
 
 
 def test_default_database_is_stationd_db_in_the_current_directory(run, tmp_path,

@@ -306,7 +306,7 @@ def test_image_refusals(tmp_path):
                                          r"in either image"):
         calibrate_stereo([tmp_path / "L1.png"], [tmp_path / "R1.png"], board)
     (tmp_path / "bad.png").write_text("not an image")
-    with pytest.raises(ImageError, match=r"bad\.png: not a readable image"):
+    with pytest.raises(ImageError, match=r"bad\.png: a text file, not an image"):
         read_grey(tmp_path / "bad.png")
     with pytest.raises(ImageError, match=r"nope\.png: no such file"):
         read_grey(tmp_path / "nope.png")

@@ -137,7 +137,8 @@ def test_garbage_on_the_line_is_a_protocol_error_not_silence():
     thread.start()
     try:
         with lift_for(pty.paths[1]) as lift, pytest.raises(
-                ProtocolError, match=r"unintelligible answer .*bytes that are not a Modbus"):
+                ProtocolError, match=r"garbage reading .*: the device answered something that "
+                                     r"is not Modbus RTU \(b'"):
             lift.read_state(timeout=0.3)
     finally:
         stop.set()

@@ -1,0 +1,67 @@
+"""Can an SQLite URL keep what is written to it?  Checked before anything opens it.
+
+One check for every place a person names a database: the station file's ``database.url``
+(``config check``, the daemon's start and reload) and every command's ``--db`` (``stationd db
+import|export|report|spc``).  SQLite itself answers these mistakes badly or not at all: an
+in-memory database takes an import and keeps nothing, a folder says "unable to open database
+file" (or "disk I/O error"), a missing folder the same, a text file "file is not a database"
+only once something reads it; opening a path also creates the file, and opening a FIFO blocks.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+#: the first 16 bytes of every SQLite database file (https://sqlite.org/fileformat.html)
+SQLITE_HEADER = b"SQLite format 3\x00"
+NOT_SQLITE = "not an SQLite database: "
+#: what an in-memory database loses, in the station's words (a command says its own)
+STATION_LOSES = "every result is lost when the station stops"
+
+
+def missing_folder(folder: Path) -> str:
+    """A database's folder that does not exist: a typo, or a folder to create."""
+    return (f"folder {folder} does not exist: create it, owned by the user the station runs "
+            "as (or correct the path)")
+
+
+def sqlite_problem(url: str, *, read_header: bool = True, loses: str = STATION_LOSES
+                   ) -> str | None:
+    """Why the SQLite database of ``url`` cannot keep what is written, in the words of what
+    to do; None when it can (or ``url`` is another database, checked when it connects).
+    ``url`` has parsed already (``db.engine.make_engine``).  ``read_header``: a file that is
+    there must start as an SQLite database (off where reading the file would drop the
+    caller's own SQLite locks on it: the daemon's reload).  ``loses``: what an in-memory
+    database loses, for the message."""
+    from sqlalchemy.engine import make_url
+
+    parsed = make_url(url)
+    if parsed.get_backend_name() != "sqlite":
+        return None
+    name = parsed.database or ""
+    if name in ("", ":memory:") or "mode=memory" in name:
+        return (f"{url} is a database in memory: {loses} (name a file, e.g. "
+                "sqlite:///stationd.db)")
+    if name.startswith("file:"):   # an SQLite URI: its own options, checked when it opens
+        return None
+    path = Path(name)
+    if path.is_dir():
+        return f"{path} is a folder, not a database file (name a file in it, e.g. " \
+               f"sqlite:///{path / 'stationd.db'})"
+    if not path.parent.is_dir():
+        return missing_folder(path.parent)
+    if not path.exists():
+        return None   # created when first opened
+    if not path.is_file():
+        return f"{path} is not a regular file (a FIFO or a device?): name a database file"
+    if not read_header:
+        return None
+    try:
+        with path.open("rb") as f:
+            head = f.read(len(SQLITE_HEADER))
+    except OSError as exc:
+        return f"{path} cannot be read: {exc.strerror or exc}"
+    if head and head != SQLITE_HEADER:   # an empty file is a new database
+        return f"{NOT_SQLITE}{path} is another kind of file: name the station's " \
+               "database, or a new file"
+    return None

@@ -1,0 +1,58 @@
+"""Which device a URL drives, as its lock's key: one key per endpoint, whatever the text."""
+
+import os
+
+import pytest
+
+from stationd.devicekey import RUN_LOCK_DIR, device_key, key_file, lock_dir
+
+
+@pytest.mark.parametrize(("a", "b"), [
+    ("modbus-tcp://PLC:502?unit=1", "modbus-tcp://plc?unit=1&timeout=2"),
+    ("modbus-tcp://localhost:1502", "modbus-tcp://127.0.0.1:1502?unit=1"),
+    ("openprotocol://10.0.0.5", "openprotocol://10.0.0.5:4545?link_ack=1"),
+    ("openprotocol://[::ffff:10.0.0.5]:4545", "openprotocol://10.0.0.5"),
+    ("aravis://Hik-MV-1?trigger=line0", "aravis://Hik-MV-1"),
+    ("opencv://0?width=640", "opencv:///dev/video0"),
+])
+def test_one_endpoint_one_key(a, b):
+    assert device_key(a) == device_key(b) is not None
+
+
+@pytest.mark.parametrize(("a", "b"), [
+    ("modbus-tcp://plc:502?unit=1", "modbus-tcp://plc:502?unit=2"),  # a gateway's two units
+    ("modbus-tcp://plc:502", "modbus-tcp://plc:1502"),
+    ("aravis://Hik-MV-1", "aravis://hik-mv-1"),   # Aravis ids keep their case
+])
+def test_other_endpoints_other_keys(a, b):
+    assert device_key(a) != device_key(b)
+
+
+def test_a_serial_line_is_one_device_whatever_the_unit_or_the_link(tmp_path):
+    """``/dev/serial/by-id/...`` links to the ``/dev/ttyUSB0`` another daemon may name."""
+    port = tmp_path / "ttyUSB0"
+    port.touch()
+    link = tmp_path / "usb-FTDI-if00"
+    link.symlink_to(port)
+    assert device_key(f"modbus-rtu://{link}?unit=3") == device_key(f"modbus-rtu://{port}?unit=1") \
+        == device_key(f"openprotocol+serial://{port}") == f"serial {port}"
+
+
+@pytest.mark.parametrize("url", ["sim://lift", "sim://wrench", "sim+modbus://wrench",
+                                 "sim://pair1/left", "file:///data/left_*.png",
+                                 "opencv:///data/run.avi"])
+def test_simulated_devices_and_files_need_no_lock(url):
+    assert device_key(url) is None
+
+
+def test_key_files_are_one_readable_name_per_key():
+    names = {key_file(device_key(u) or "") for u in
+             ("modbus-tcp://plc:502?unit=1", "modbus-tcp://plc:502?unit=2",
+              "modbus-rtu:///dev/ttyUSB0", "aravis://A/B")}
+    assert len(names) == 4 and all("/" not in n and n.endswith(".lock") for n in names)
+
+
+def test_the_lock_folder_is_run_lock_when_writable():
+    writable = os.access(RUN_LOCK_DIR if RUN_LOCK_DIR.is_dir() else RUN_LOCK_DIR.parent,
+                         os.W_OK | os.X_OK) and RUN_LOCK_DIR.parent.is_dir()
+    assert (lock_dir() == RUN_LOCK_DIR) == writable
