@@ -47,6 +47,7 @@ class Why(enum.Enum):
     TEACHING = "teaching"                # teach mode is on (note: the model, who)
     NOT_TEACHING = "not teaching"        # a teach command while teach mode is off
     NOT_STEADY = "not steady"            # teaching: too few steady localizations (count)
+    NO_FRAMES = "no frames"              # teaching: no localization at all in `limit` s
     # the NOK policy's loosen strategy and the loosen command
     LOOSEN_FIRST = "loosen first"        # the bolt gets its loosen pset next (bolt, pset, note)
     NOTHING_TO_LOOSEN = "nothing to loosen"  # a loosen of a bolt not tightened (bolt)

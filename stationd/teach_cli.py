@@ -107,6 +107,7 @@ def _teach(args: argparse.Namespace, client: ApiClient, out: Path, doc: dict[str
         return EXIT_REFUSED
     taught: dict[str, dict[str, Any]] = {}
     cad_at = {str(b["id"]): b.get("position") for b in cad}
+    lost = False
     try:
         for bolt in ids:
             reply = _ask(bolt)
@@ -114,7 +115,16 @@ def _teach(args: argparse.Namespace, client: ApiClient, out: Path, doc: dict[str
                 break
             if reply == "s":
                 continue
-            status, answer = command({"kind": "teach-point", "bolt": bolt})
+            try:
+                status, answer = command({"kind": "teach-point", "bolt": bolt})
+            except (urllib.error.URLError, OSError) as exc:
+                # it answered the login and teach start: not "no daemon answers"
+                sys.stderr.write(f"stationd: teach: the daemon at {args.url} did not answer "
+                                 f"the teach point of {bolt} within {args.timeout:g} s "
+                                 f"({getattr(exc, 'reason', exc)}); a larger --timeout, or "
+                                 "see its journal\n")
+                lost = True
+                break
             if status != 200 or not isinstance(answer, dict) or "result" not in answer:
                 why = answer.get("reason", {}).get("words") if isinstance(answer, dict) \
                     else answer
@@ -131,11 +141,10 @@ def _teach(args: argparse.Namespace, client: ApiClient, out: Path, doc: dict[str
                 line += f"; CAD {d:.1f} mm away in X-Y{flag}"
             print(line, flush=True)
     finally:
-        command({"kind": "teach-stop"})
-        client.call("/api/logout", {})
+        _stop(args, command, client)
     if not taught:
         print("nothing taught: no file written", file=sys.stderr)
-        return EXIT_REFUSED
+        return EXIT_UNREACHABLE if lost else EXIT_REFUSED
     positions = {b: r["position_mm"] for b, r in taught.items()}
     everywhere = {**{k: v for k, v in cad_at.items() if v is not None}, **positions}
     for problem in check_spacing(everywhere, args.tolerance):
@@ -143,6 +152,18 @@ def _teach(args: argparse.Namespace, client: ApiClient, out: Path, doc: dict[str
     _write(out, doc, args.model, taught)
     print(f"{len(taught)} bolt(s) taught: {out} (import it to make new parameter versions)")
     return 0
+
+
+def _stop(args: argparse.Namespace, command: Any, client: ApiClient) -> None:
+    """Teach mode off and the session closed; a daemon that no longer answers is said (teach
+    mode then stays on there until stopped), never a traceback."""
+    try:
+        command({"kind": "teach-stop"})
+        client.call("/api/logout", {})
+    except (urllib.error.URLError, OSError) as exc:
+        sys.stderr.write(f"stationd: teach: the daemon at {args.url} did not answer teach "
+                         f"stop ({getattr(exc, 'reason', exc)}): teach mode may still be on "
+                         "there\n")
 
 
 def _write(out: Path, doc: dict[str, Any], model: str, taught: dict[str, dict[str, Any]]

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,6 +48,22 @@ from stationd.outfile import refuse_to_replace, write_atomic
 from stationd.yamlio import YamlNode
 
 EXIT_OK, EXIT_DISAGREE, EXIT_REFUSED = 0, 1, 1
+#: the points file, as ``calibrate vehicle --help`` shows it (and the README)
+POINTS_FORMAT = """\
+the points file (YAML; image paths relative to it):
+
+  kind: rigid                 # rigid (default, 6 dof) or affine (the paper's, 12 dof)
+  points:
+    - name: R1                # each point its own name
+      vehicle_mm: [1200.0, -350.0, 0.0]      # the point in the vehicle frame, mm
+      seen_by:                # per pair: where it was localized
+        pair1: {left: r1_l.png, right: r1_r.png}     # a stereo image pair, or
+        pair2: {pair_mm: [101.2, -20.4, 1310.8]}     # the point in the pair's frame, mm
+    - name: R2
+      ...
+
+the pair must see at least 3 points (affine: 4, not in one plane); more show the
+residuals; a point seen by several pairs compares their registrations in the vehicle frame"""
 
 
 @dataclass(frozen=True)
@@ -175,12 +192,13 @@ def _cross_check(cfg: StationConfig, pair: str, fit: Transform,
 def add_vehicle_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     v = sub.add_parser(
         "vehicle", help="register a stereo pair into the vehicle frame",
-        description="Fits the pair's frame to the vehicle frame from reference points and "
-                    "writes the pair's to_vehicle file. Refused, nothing written: two points "
-                    "of one name (exit 2); an RMS residual above "
-                    f"{MAX_RMS_MM:g} mm or point sets in two units, e.g. pair points in "
-                    "metres (exit 1). The file replaces only an earlier registration, never "
-                    "another file or a link.")
+        formatter_class=argparse.RawDescriptionHelpFormatter, epilog=POINTS_FORMAT,
+        description=textwrap.fill(
+            "Fits the pair's frame to the vehicle frame from reference points and writes the "
+            "pair's to_vehicle file. Refused, nothing written: two points of one name (exit "
+            f"2); an RMS residual above {MAX_RMS_MM:g} mm or point sets in two units, e.g. "
+            "pair points in metres (exit 1). The file replaces only an earlier registration, "
+            "never another file or a link.", 88))
     v.add_argument("--pair", required=True, help="pair name in the station config")
     v.add_argument("--points", required=True, help="reference points YAML")
     v.add_argument("--config", help="station YAML (pairs, vision)")

@@ -73,6 +73,8 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
         "still on the bolt" if r.distance_mm is not None else
         f"the wrench was not seen steadily ({r.count} of {r.needed} localizations): hold it "
         "on the bolt"),
+    Why.NO_FRAMES: lambda r: (f"no localization from the cameras in {r.limit or 0:g} s: are "
+                              "the pairs grabbing? (the cameras screen, stationd status)"),
     Why.NOT_LOCALIZED: lambda r: _per_pair(r),
     Why.TILTED: lambda r: f"wrench tilted {r.angle_deg or 0:.1f} deg (> {r.limit or 0:g} deg)",
     Why.PAIRS_DISAGREE: lambda r: (f"pairs disagree by {r.distance_mm or 0:.2f} mm "

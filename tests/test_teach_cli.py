@@ -131,3 +131,49 @@ def test_teach_checks_its_output_first_and_says_when_no_daemon_answers(tmp_path)
     got = teach("--bolts", "B01", "--out", str(tmp_path / "t.yaml"))
     assert got.returncode == 3 and "no daemon answers" in got.stderr
     assert "Traceback" not in got.stderr and not (tmp_path / "t.yaml").exists()
+
+
+#: the daemon's runtime alone (stationd.serve), without the command line's simulated world:
+#: its sim:// cameras have none, every pair faults at its first grab (a station whose cameras
+#: give nothing)
+WITHOUT_WORLD = ("import argparse, sys; from stationd.serve import run_daemon; "
+                 "sys.exit(run_daemon(argparse.Namespace(config=sys.argv[1])))")
+
+
+@pytest.mark.timeout(120)
+def test_teach_with_every_pair_in_fault_says_so_not_that_no_daemon_answers(tmp_path):
+    """The daemon answers but its pairs give no frames: the teach point is answered with the
+    station's reason (it said 'no daemon answers at URL: timed out')."""
+    http_port = _free_port()
+    for f in SIM.glob("*.yaml"):
+        (tmp_path / f.name).write_text(f.read_text())
+    doc = yaml.safe_load((tmp_path / "station.yaml").read_text())
+    doc["pairs"] = {"pair1": doc["pairs"]["pair1"]}
+    doc["cameras"] = {n: c for n, c in doc["cameras"].items() if n.startswith("pair1_")}
+    doc["database"] = {"url": f"sqlite:///{tmp_path / 'station.db'}"}
+    doc["http"] = {"listen": f"127.0.0.1:{http_port}"}
+    doc["access"] = {"users": {"ed": {"role": "engineer", "password": hash_password(PASSWORD)}}}
+    station = tmp_path / "station.yaml"
+    station.write_text(yaml.safe_dump(doc, sort_keys=False))
+    env = {**os.environ, "STATIOND_PASSWORD": PASSWORD, "PYTHONPATH": str(ROOT)}
+    journal = tmp_path / "daemon.log"
+    with journal.open("w") as err:
+        d = subprocess.Popen([sys.executable, "-c", WITHOUT_WORLD, str(station)], cwd=tmp_path,
+                             stderr=err, env=env)
+    try:
+        end = time.monotonic() + 60
+        while "stationd running" not in journal.read_text() and time.monotonic() < end:
+            assert d.poll() is None, journal.read_text()
+            time.sleep(0.1)
+        got = subprocess.run([sys.executable, "-m", "stationd", "teach", "--model", "SIM-1",
+                              "--user", "ed", "--bolts", "B01", "--out",
+                              str(tmp_path / "t.yaml"), "--url",
+                              f"http://127.0.0.1:{http_port}/"], capture_output=True,
+                             text=True, env=env, timeout=60, input="\n", check=False)
+    finally:
+        d.terminate()
+        d.wait(timeout=60)
+    assert "no daemon answers" not in got.stderr and "Traceback" not in got.stderr
+    assert "B01: not taught: a device is in fault: pair1: " in got.stdout, got
+    assert "no simulated world for pair 'pair1'" in got.stdout
+    assert got.returncode == 1 and not (tmp_path / "t.yaml").exists()

@@ -301,3 +301,16 @@ def test_the_registration_never_replaces_another_file_or_follows_a_link(tmp_path
         assert "wrote" not in out
     assert (tmp_path / "link.yaml").is_symlink()
     assert {n: (tmp_path / n).read_bytes() for n in before} == before
+
+
+def test_the_points_files_format_is_in_the_commands_help(capsys):
+    """The format was documented only in the source: ``calibrate vehicle --help`` shows it."""
+    from stationd.cli import main
+
+    with pytest.raises(SystemExit) as done:
+        main(["calibrate", "vehicle", "--help"])
+    out = capsys.readouterr().out
+    assert done.value.code == 0
+    for key in ("kind: rigid", "points:", "vehicle_mm:", "seen_by:", "{left: r1_l.png, right:",
+                "{pair_mm: ["):
+        assert key in out, key

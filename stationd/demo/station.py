@@ -26,9 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from db.repository import BoltInfo
-from drivers.lift.sim import SimLift, SimulatedPlc
-from drivers.wrench.sim import SimController, SimPset, SimWrench
+from drivers.wrench.sim import SimPset
 from stationd import progress
 from stationd.boltfile import load_bolts
 from stationd.config import RecordsConfig, StationConfig, load_station_config
@@ -38,10 +36,17 @@ from stationd.reasons import Reason, Why
 from stationd.serve import Screens
 from stationd.sim.devices_cli import psets_of
 from stationd.sim.load import cpu_load
+from stationd.sim.operator import (
+    LOOSEN_PROGRAM,
+    SUPERVISOR,
+    loosen_programs,
+    operate,
+    simulators,
+    stand_ins,
+)
 from stationd.sim.vin import make_vin
-from stationd.sim.world import World, wrench_at
-from stationd.station.commands import Issuer, ReleaseBolt, Right
-from stationd.station.core import SendParams, State
+from stationd.sim.world import World
+from stationd.station.core import SendParams
 from stationd.station.daemon import Station
 from stationd.station.events import (
     BoltLocked,
@@ -53,18 +58,11 @@ from stationd.station.events import (
 )
 from stationd.station.policy import NokPolicy, NokRule
 from stationd.web.config import DEFAULT_LISTEN, HttpConfig, open_bind_problem
-from stationd.words import reason_words
 
 SIM_CONFIG = Path(__file__).resolve().parents[2] / "config" / "sim" / "station.yaml"
-#: a tightening fails now and then; a stubborn joint (a damaged thread) fails until its bolt
-#: locks and the supervisor released it; a loosening always comes loose
-NOK_P, STUBBORN_P = 0.1, 0.1
-#: rundowns the simulated operator makes on one bolt before giving up on it
-MAX_RUNDOWNS = 10
-#: who releases a locked bolt in the demo (the command path is the screens')
-SUPERVISOR = Issuer("supervisor", frozenset({Right.RELEASE}), "demo")
-#: the controller's loosening program for a loosen pset: a joint that comes loose is OK
-LOOSEN_PROGRAM = SimPset(40.0, 5.0, 150.0, 360.0, 90.0, 720.0, name="loosen")
+#: shared with ``stationd run --sim-operator`` (:mod:`stationd.sim.operator`), named here as before
+__all__ = ["LOOSEN_PROGRAM", "SIM_CONFIG", "SUPERVISOR", "demo_policy", "loosen_programs",
+           "policy_words", "run_station_demo", "simulated", "simulators", "stand_ins"]
 
 
 def demo_policy(cfg: StationConfig, psets: dict[int, SimPset]) -> NokPolicy | None:
@@ -78,12 +76,6 @@ def demo_policy(cfg: StationConfig, psets: dict[int, SimPset]) -> NokPolicy | No
     return NokPolicy(NokRule(max_nok=3), {n: rule for n in sorted(psets)[1:]})
 
 
-def loosen_programs(policy: NokPolicy) -> dict[int, SimPset]:
-    """The simulated controller's programs for the policy's loosen psets."""
-    rules = [policy.default, *policy.psets.values(), *policy.bolts.values()]
-    return {r.loosen_pset: LOOSEN_PROGRAM for r in rules if r.loosen_pset is not None}
-
-
 def policy_words(policy: NokPolicy) -> str:
     """The policy in one line, for the demo's start."""
     d = policy.default
@@ -93,153 +85,6 @@ def policy_words(policy: NokPolicy) -> str:
               for n, r in policy.psets.items()]
     parts += [f"bolt {b}: {r.strategy}" for b, r in policy.bolts.items()]
     return "; ".join(parts)
-
-
-def simulators(st: Station) -> tuple[SimulatedPlc, SimController]:
-    """The simulated PLC and controller behind a simulated station's lift and wrench."""
-    lift, wrench = st.lift, st.wrench
-    if not isinstance(lift, SimLift) or not isinstance(wrench, SimWrench):
-        raise RuntimeError("the simulated operator needs the simulated lift and controller")
-    return lift.plc, wrench.controller
-
-
-async def _operator(st: Station, world: World, rng: np.random.Generator, cycles: int,
-                    report: list[dict[str, Any]], say: Any, truth: dict[str, Any],
-                    nok_rng: np.random.Generator) -> None:
-    plc, ctl = simulators(st)
-    plc.set_vehicle(truth["model_code"], truth["vin"])
-    plc.raise_lift()
-    for _ in range(200):
-        if st.vin is not None and st.core.model is not None:
-            break
-        await asyncio.sleep(0.05)
-    else:
-        raise InputError(f"the simulated vehicle was not opened: {st.core.reason}")
-    length = st.cfg.tool.length_mm
-    bolts: list[BoltInfo] = []
-    unseen: list[BoltInfo] = []
-    assert st.repo is not None and st.core.model is not None  # noqa: S101 - opened above
-    infos = st.repo.bolts_for_model(st.core.model)   # the simulation's truth, from the table
-    for b in infos:   # a bolt no pair sees cannot be demonstrated: say so
-        pairs = world.seen_by(wrench_at(np.array(b.position), np.random.default_rng(0), length,
-                                       max_tilt_deg=0.0))
-        (bolts if pairs else unseen).append(b)
-    if not bolts:
-        raise InputError(f"no bolt of the vehicle (lift code {truth['model_code']}) is in view "
-                         "of any pair of this station (check the pairs' to_vehicle transforms "
-                         "and the bolt positions)")
-    if unseen:
-        print(f"note: {len(unseen)} of {len(infos)} bolts are in view of no pair and are "
-              f"left out: {', '.join(b.bolt_id for b in unseen[:8])}"
-              f"{' ...' if len(unseen) > 8 else ''}", file=sys.stderr, flush=True)
-    order = rng.permutation(len(bolts))[:cycles]
-    truth["cycles"] = len(order)      # fewer when fewer bolts can be shown
-    for k in order:
-        b = bolts[int(k)]
-        target = np.array(b.position)
-        if rng.random() < 0.2:  # hovers between two bolts first: nothing may be sent
-            other = np.array(bolts[int(rng.integers(len(bolts)))].position)
-            truth["bolt"] = None
-            world.set_wrench(wrench_at(0.5 * (target + other), rng, length))
-            await asyncio.sleep(0.6)
-        pose = wrench_at(target + np.append(rng.normal(0, 0.3, 2), 0.0), rng, length)
-        truth["bolt"] = b.bolt_id
-        world.set_wrench(pose)
-        leave = rng.random() < 0.1
-        line: dict[str, Any] = {"bolt": b.bolt_id, "pset": b.parameters.pset, "result": None}
-        if not await _tool_on(st, b.bolt_id):
-            line["result"] = f"not selected ({_why_not(st)})"
-        if st.last is not None and st.last.point_mm is not None:
-            line["xy_error_mm"] = float(np.hypot(*(st.last.point_mm - pose.socket_v)[:2]))
-        if line["result"] is None and leave:
-            truth["bolt"] = None
-            world.set_wrench(None)  # leaves before tightening: the tool must go off
-            for _ in range(100):
-                if not ctl.tool_enabled:
-                    break
-                await asyncio.sleep(0.05)
-            line["result"] = "left before tightening; tool " + \
-                ("disabled" if not ctl.tool_enabled else "STILL ENABLED")
-        elif line["result"] is None:
-            await _until_ok(st, b.bolt_id, line, nok_rng, truth["vin"])
-        report.append(line)
-        say(line)
-        truth["bolt"] = None
-        world.set_wrench(None)
-        await asyncio.sleep(0.3)
-    plc.lower_lift()
-    await asyncio.sleep(0.5)
-
-
-async def _tool_on(st: Station, bolt: str, tries: int = 600) -> bool:
-    """Whether the tool comes on for ``bolt`` (up to ~30 s for selection, acknowledgement,
-    confirmation)."""
-    for _ in range(tries):
-        if st.cycle.state is State.TIGHTENING and st.cycle.bolt == bolt \
-                and simulators(st)[1].tool_enabled:
-            return True
-        await asyncio.sleep(0.05)
-    return False
-
-
-def _why_not(st: Station) -> str:
-    """Why nothing was selected: the last localization's refusal, else the state's words."""
-    seen = [e for e in st.bus.of(Localized) if isinstance(e, Localized)]
-    last = seen[-1].reason if seen else None
-    return reason_words(last) if last is not None else st.core.reason
-
-
-async def _pull(st: Station, loosening: bool, nok: bool) -> tuple[Any, bool]:
-    """The trigger pulled with the tool on: a loosening (it comes loose) or a tightening (NOK
-    when ``nok``); the controller's result and whether the station recorded it."""
-    ctl = simulators(st)[1]
-    n_records = st.bus.count(ResultRecorded)
-    ctl.nok_rate = 1.0 if nok and not loosening else 0.0
-    shot = ctl.pull_trigger(result_type=2 if loosening else 1)
-    for _ in range(100):
-        if st.bus.count(ResultRecorded) > n_records:
-            return shot, True
-        await asyncio.sleep(0.05)
-    return shot, False
-
-
-async def _until_ok(st: Station, bolt: str, line: dict[str, Any],
-                    nok_rng: np.random.Generator, vin: str) -> None:
-    """The operator on ``bolt`` with the tool on, as the NOK policy has it: pull; after a NOK
-    again (its loosen pset first where the policy says so); a locked bolt is released by the
-    supervisor through the command path; until an OK tightening or :data:`MAX_RUNDOWNS`.
-    ``line`` gets the last step as its ``result``, the earlier ones as ``before``, ``ok``
-    and ``rundowns`` (the results the station must record)."""
-    stubborn = nok_rng.random() < STUBBORN_P
-    steps: list[str] = []
-    line["rundowns"] = 0
-    for _ in range(MAX_RUNDOWNS):
-        sel = st.core.selection
-        loosening = sel is not None and sel.loosen
-        shot, _ = await _pull(st, loosening, stubborn or nok_rng.random() < NOK_P)
-        if shot is None:
-            steps.append("no result")
-            line["unfinished"] = True
-            break
-        line["rundowns"] += 1
-        word = "OK" if shot.ok else "NOK"
-        steps.append(f"loosened (pset {shot.pset}) {word}" if loosening else
-                     f"{word} {shot.torque_nm:.1f} Nm")
-        if shot.ok and not loosening:
-            break
-        matcher = st.core.matcher
-        if matcher is not None and bolt in matcher.locked:
-            answer = await st.submit(ReleaseBolt(vin, bolt, "demo: joint checked"),
-                                     SUPERVISOR)
-            steps.append("locked, released by the supervisor" if answer.accepted else
-                         f"locked, release refused ({answer.reason})")
-            stubborn = False    # the supervisor had the thread seen to
-        if not await _tool_on(st, bolt):
-            steps.append(f"not selected again ({_why_not(st)})")
-            line["unfinished"] = True
-            break
-    line["ok"] = bool(steps) and steps[-1].startswith("OK")
-    line["result"], line["before"] = steps[-1], steps[:-1]
 
 
 def run_station_demo(args: argparse.Namespace) -> int:
@@ -328,12 +173,16 @@ def run_station_demo(args: argparse.Namespace) -> int:
         world = World(cfg, seed=args.seed)
         try:
             task = asyncio.create_task(station.run(stop))
-            await _operator(station, world, rng, cycles, report, say, truth, nok_rng)
-            stop.set()
-            await task
+            # people's commands (the screens, stationd skip|reopen|release|loosen) go to the
+            # demo's station as they go to the daemon's in run, for the run and the hold
+            screens.attach(station, cfg)
+            await operate(station, world, rng, cycles, report, say, truth, nok_rng)
             if getattr(args, "hold", False) and screens.server is not None:
                 await _hold(screens.server.url, report, int(truth.get("cycles", cycles)),
                             truth, args.json)
+            screens.attach(None, cfg)
+            stop.set()
+            await task
         finally:
             world.close()
             await screens.stop()
@@ -374,9 +223,10 @@ def run_station_demo(args: argparse.Namespace) -> int:
 
 async def _hold(url: str, report: list[dict[str, Any]], cycles: int, truth: dict[str, Any],
                 json_out: bool) -> None:
-    """``--hold``: the run is over (station stopped, results recorded); the screens keep
-    serving its results from the run's temporary database until SIGINT or SIGTERM, so they
-    can be browsed (and exported) before the demo's folder is removed."""
+    """``--hold``: the run is over (results recorded); the screens keep serving its results
+    from the run's temporary database until SIGINT or SIGTERM, so they can be browsed (and
+    exported) before the demo's folder is removed, and the station keeps taking people's
+    commands (a skip, a reopen, a release, a loosen) as a daemon would."""
     done = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -423,26 +273,6 @@ def _check_demo_station(cfg: StationConfig) -> None:
                          f"transforms only; {', '.join(affine)}: to_vehicle is affine (scale or "
                          "shear): run the demo on a rigid registration (kind: rigid in the "
                          "points file of stationd calibrate vehicle)")
-
-
-def stand_ins(cfg: StationConfig) -> list[str]:
-    """The real devices a station file names ("lift modbus-tcp://..."), which the demo
-    replaces by its simulators; none for a simulated station's file.
-
-    Why it runs rather than refuses: a commissioning engineer runs the demo on the station's
-    own file to try its geometry (calibrations, registrations, bolt table) before the devices
-    answer; what must never happen is a PASS that reads as if the lift, the controller and
-    the cameras had been tried.  So the demo says, at its start and in its summary, that its
-    simulators stood in for them and that its records went to a temporary database."""
-    real = [f"camera {name} {url}" for name, url in cfg.cameras.items() if not _sim(url)]
-    real += [f"{what} {url}" for what, url in (("lift", cfg.lift.url),
-                                                ("wrench", cfg.wrench.url)) if not _sim(url)]
-    return real
-
-
-def _sim(url: str) -> bool:
-    scheme = url.split("://", 1)[0].lower()
-    return scheme == "sim" or scheme.startswith("sim+")
 
 
 def simulated(cfg: StationConfig, tmp: Path) -> StationConfig:

@@ -120,6 +120,9 @@ TEACH_FRAMES, TEACH_TRIES = 10, 60
 NOK_SKIPPED = "NOK, skipped by the NOK policy"
 #: a taught bolt end whose localizations spread farther than this was not held still, mm
 TEACH_STEADY_MM = 2.0
+#: a teach point is answered within this long, s, measured or not (``stationd teach`` waits
+#: 15 s for an answer: past it, it could only blame the connection)
+TEACH_WAIT_S = 10.0
 #: the targets sent with a loosen pset: none of the station's own (a loosen pset is a program
 #: on the controller; a register-driven controller takes 0 as "the pset's own")
 LOOSEN_TARGETS = Window(0.0, 0.0, 0.0)
@@ -462,6 +465,7 @@ class _Teach:
     points: list[tuple[float, float, float]] = field(default_factory=list)
     tries: int = 0
     since: float = 0.0     # only frames exposed after the engineer asked count
+    frames: int = 0        # localizations heard since (none: the cameras give nothing)
 
     def reason(self) -> str:
         doing = f"measuring {self.measuring.command.bolt}" if self.measuring is not None \
@@ -714,6 +718,7 @@ class StationCore:
             return acts
         if ev.exposure_t <= teach.since:
             return acts   # exposed before the engineer asked: the tool may have been moving
+        teach.frames += 1
         if ev.point_mm is not None and age <= self.params.max_age_s:
             teach.points.append(ev.point_mm)
         else:
@@ -946,6 +951,8 @@ class StationCore:
             return Reason(Why.NOT_TEACHING)
         if isinstance(cmd, TeachPoint) and t.measuring is not None:
             return Reason(Why.TEACHING, note=t.reason())
+        if isinstance(cmd, TeachPoint) and self.faults:   # no frames would come: said now
+            return Reason(Why.DEVICE_FAULT, note=self._fault_reason())
         return None
 
     def _teach_done(self, t: float, c: CommandIn) -> list[Action]:
@@ -961,7 +968,7 @@ class StationCore:
             return [Reply(Answer(c.request, cmd, c.issuer, Reason(Why.NOT_TEACHING)))]
         if isinstance(cmd, TeachPoint):
             self._teach.measuring, self._teach.points, self._teach.tries = c, [], 0
-            self._teach.since = c.t
+            self._teach.since, self._teach.frames = c.t, 0
             self.reason = self._teach.reason()
             return []
         self._teach = None
@@ -1109,7 +1116,27 @@ class StationCore:
     def _on_Tick(self, ev: Tick) -> list[Action]:  # noqa: N802
         if self._off_at is not None and ev.t - self._off_at >= self.late_result_s:
             self._enabled, self._off_at = None, None
-        return self._check_due(ev.t)
+        return self._teach_overdue(ev.t) + self._check_due(ev.t)
+
+    def _teach_overdue(self, t: float) -> list[Action]:
+        """A teach point not measured in :data:`TEACH_WAIT_S` is answered with what happened:
+        no localization at all, or too few steady ones (the engineer is waiting)."""
+        teach = self._teach
+        if teach is None or teach.measuring is None or t - teach.since < TEACH_WAIT_S:
+            return []
+        why = Reason(Why.NO_FRAMES, limit=TEACH_WAIT_S) if teach.frames == 0 else \
+            Reason(Why.NOT_STEADY, count=len(teach.points), needed=TEACH_FRAMES)
+        return self._teach_answered(teach, why)
+
+    def _teach_answered(self, teach: _Teach, why: Reason) -> list[Action]:
+        """The bolt being measured is answered with ``why`` (not taught); teach mode stays."""
+        c = teach.measuring
+        teach.measuring, teach.points, teach.tries, teach.frames = None, [], 0, 0
+        if c is None:
+            return []
+        if self.state is State.TEACHING:
+            self.reason = teach.reason()
+        return [Reply(Answer(c.request, c.command, c.issuer, why))]
 
     # -- the calibration check (the rules: stationd.station.trust) -------------------------
     def _measure(self, t: float, why: str, request: int | None = None) -> list[Action]:
@@ -1205,6 +1232,10 @@ class StationCore:
             acts.append(Publish(DeviceHealth(device, False, kind, reason, t=t)))
         self.faults[device] = (kind, reason)
         acts += self._drop(t, State.FAULT, self._fault_reason())
+        if self._teach is not None and self._teach.measuring is not None:
+            # a bolt being taught is measured only without faults: answered now, with them
+            acts += self._teach_answered(self._teach, Reason(Why.DEVICE_FAULT,
+                                                             note=self._fault_reason()))
         return acts
 
     def _back(self, t: float, device: str) -> list[Action]:

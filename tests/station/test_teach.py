@@ -1,6 +1,7 @@
 """Teach mode in the pure core: only with the teach right, the normal cycle off (nothing is
 sent, the tool goes off), a bolt end measured from steady frames exposed after the request,
-refused when the wrench moved; stopping it brings the cycle back."""
+refused when the wrench moved; stopping it brings the cycle back; a bolt that cannot be
+measured (pairs in fault, no frames) is answered with why, within a bounded time."""
 
 from __future__ import annotations
 
@@ -8,17 +9,21 @@ from typing import Any
 
 import pytest
 
+from drivers.keeper import FaultKind
 from stationd.reasons import Why
 from stationd.station.commands import Issuer, Right, SkipBolt, TeachPoint, TeachStart, TeachStop
 from stationd.station.core import (
     TEACH_FRAMES,
+    TEACH_WAIT_S,
     CommandDone,
     CommandIn,
+    DeviceFault,
     DisableTool,
     LocalizedIn,
     Reply,
     SendParams,
     State,
+    Tick,
 )
 from tests.station.test_commands import OPERATOR, _answer
 from tests.station.test_core import _on, _ready
@@ -86,3 +91,53 @@ def test_teach_mode_cannot_start_while_the_tool_is_on():
     assert d.tool
     assert _answer(_do(d, 1, TeachStart("M"))).answer.reason.kind is Why.TOOL_ON_BOLT
     assert not any(isinstance(a, DisableTool) for _, acts in d.log[-1:] for a in acts)
+
+
+NO_WORLD = "no simulated world for pair 'pair1'"
+
+
+def test_a_teach_point_with_pairs_in_fault_is_refused_with_the_stations_reason():
+    """The cameras give no frames while their pairs are in fault: the point is refused at
+    once with the faults (stationd teach said 'no daemon answers: timed out')."""
+    from stationd.words import reason_words
+
+    d = _ready()
+    _do(d, 1, TeachStart("M"))
+    d.core.feed(DeviceFault(d.t, "pair1", FaultKind.DOWN, NO_WORLD))
+    reply = _answer(_do(d, 2, TeachPoint("B7")))
+    assert reply.answer.reason is not None and reply.answer.reason.kind is Why.DEVICE_FAULT
+    assert reason_words(reply.answer.reason) == f"a device is in fault: pair1: {NO_WORLD}"
+
+
+def test_a_bolt_being_measured_is_answered_when_a_pair_faults():
+    d = _ready()
+    _do(d, 1, TeachStart("M"))
+    assert not any(isinstance(a, Reply) for a in _do(d, 2, TeachPoint("B7")))
+    _frames(d, 500.0, 2)
+    acts = d.core.feed(DeviceFault(d.t, "pair1", FaultKind.DOWN, NO_WORLD))
+    [reply] = [a for a in acts if isinstance(a, Reply)]
+    assert reply.answer.reason is not None and reply.answer.reason.kind is Why.DEVICE_FAULT
+    assert NO_WORLD in (reply.answer.reason.note or "")
+    assert _answer(_do(d, 3, TeachStop())).answer.accepted     # teach mode ends as usual
+
+
+def test_a_bolt_without_frames_is_answered_within_the_wait_with_no_frames_or_not_steady():
+    from stationd.words import reason_words
+
+    d = _ready()
+    _do(d, 1, TeachStart("M"))
+    _do(d, 2, TeachPoint("B7"))
+    asked = d.t
+    assert not any(isinstance(a, Reply) for a in d.core.feed(Tick(asked + TEACH_WAIT_S - 0.5)))
+    [reply] = [a for a in d.core.feed(Tick(asked + TEACH_WAIT_S)) if isinstance(a, Reply)]
+    assert reply.answer.reason is not None and reply.answer.reason.kind is Why.NO_FRAMES
+    assert reason_words(reply.answer.reason).startswith(
+        f"no localization from the cameras in {TEACH_WAIT_S:g} s")
+    d.t = asked + TEACH_WAIT_S + 1.0
+    _do(d, 3, TeachPoint("B7"))                                 # again: a few frames only
+    asked = d.t
+    _frames(d, 500.0, 3)
+    [reply] = [a for a in d.core.feed(Tick(asked + TEACH_WAIT_S)) if isinstance(a, Reply)]
+    assert reply.answer.reason is not None and reply.answer.reason.kind is Why.NOT_STEADY
+    assert (reply.answer.reason.count, reply.answer.reason.needed) == (3, TEACH_FRAMES)
+    assert d.core.state is State.TEACHING

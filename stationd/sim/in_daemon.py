@@ -1,0 +1,244 @@
+"""``stationd run`` on a simulated station: the simulated world inside the daemon.
+
+Why: the ``sim://`` cameras render the world registered in their process
+(:func:`drivers.camera.sim.register_world`), so a daemon on ``config/sim`` without one looked
+healthy until a vehicle came, then every pair faulted.  With this, ``stationd run --config
+config/sim/station.yaml`` serves a station that works without hardware, so the service, the
+screens and people's commands can be tried; ``--sim-operator`` adds the demo's operator
+(:mod:`stationd.sim.operator`), vehicle after vehicle.
+
+The runtime never imports the simulator (an import-linter contract): ``stationd.cli`` builds a
+:class:`SimulatedStation` and hands the serve loop its :meth:`SimulatedStation.beside`, which
+the loop runs beside every station it starts (the first and each reload's).  A reload that
+changes the geometry (pairs, calibrations, registrations, references, the marker) gets a new
+world; the controller gets the bolt table's psets (and the NOK policy's loosen programs).
+
+Without ``--sim-operator`` the operator is idle: the lift stays down, said once in the
+journal, and the simulated PLC takes ``stationd sim plc``'s commands (``next``, ``raise``,
+``lower``, ``vehicle CODE [VIN]``, ``fault``, ``clear``) on the daemon's standard input.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import pickle
+import sys
+import threading
+import time
+from typing import Any, TextIO
+
+import numpy as np
+
+from drivers.lift.sim import SimLift, SimulatedPlc
+from drivers.wrench.sim import SimWrench
+from stationd.boltfile import load_bolts
+from stationd.config import StationConfig
+from stationd.errors import InputError, StationError
+from stationd.sim.devices_cli import HELP, plc_command, psets_of
+from stationd.sim.operator import loosen_programs, operate, simulated_url, stand_ins
+from stationd.sim.vin import make_vin
+from stationd.sim.world import World
+from stationd.station.commands import Issuer, Right
+from stationd.station.daemon import Station
+
+log = logging.getLogger("stationd")
+#: bolts the scripted operator visits on each vehicle, and the wait between two vehicles, s
+BOLTS_PER_VEHICLE, BETWEEN_VEHICLES_S = 5, 3.0
+#: who releases a bolt the scripted operator's NOKs locked (the source says it was simulated)
+SIM_SUPERVISOR = Issuer("supervisor", frozenset({Right.RELEASE}), "sim operator")
+#: the journal's line for an idle simulated lift (said once per daemon)
+IDLE_LINE = ("simulated lift: down, no vehicle; raise it with 'next' (a new vehicle at "
+             "working height) on the daemon's standard input ({help}), or run stationd run "
+             "with --sim-operator for a scripted operator")
+
+
+def needs_world(cfg: StationConfig) -> bool:
+    """Whether a camera of the station is simulated (``sim://PAIR/SIDE``)."""
+    return any(simulated_url(url) for url in cfg.cameras.values())
+
+
+def _geometry(cfg: StationConfig) -> bytes:
+    """What the world is made of: a reload that changes it gets a new world."""
+    return pickle.dumps((cfg.pairs, cfg.marker, cfg.references, cfg.cameras))
+
+
+def _model_code(cfg: StationConfig) -> int:
+    """The lift code of the bolt table's first model with bolts (1 without one)."""
+    if cfg.bolts_path is None:
+        return 1
+    codes = [m.code for m in load_bolts(cfg.bolts_path).models if m.code is not None and m.bolts]
+    return codes[0] if codes else 1
+
+
+class SimulatedStation:
+    """The simulated world (and operator) of a daemon whose station names ``sim://`` devices.
+
+    ``operator``: the scripted operator (refused for a station with real devices: it would
+    raise a real lift); ``stdin``: where an idle station's PLC commands come from."""
+
+    def __init__(self, cfg: StationConfig, *, operator: bool = False, seed: int = 7,
+                 stdin: TextIO | None = None) -> None:
+        if operator:
+            real = stand_ins(cfg)
+            if real:
+                raise InputError(f"{cfg.path}: --sim-operator drives simulated devices only; "
+                                 f"this station names real ones ({', '.join(real)}): run it "
+                                 "without --sim-operator")
+        self.operator, self.seed = operator, seed
+        self.world: World | None = None
+        self._key: bytes | None = None
+        self._stdin = stdin if stdin is not None else sys.stdin
+        self._plc: SimulatedPlc | None = None     # the idle station's, for typed commands
+        self._code = 1
+        self._told = False
+        self._reader: threading.Thread | None = None
+        # the vehicles' serial numbers go on from the clock: a restarted daemon on the same
+        # database does not meet its earlier VINs again (each would come back as a rework)
+        self._serial = [int(time.time()) % 900_000]
+        self._noted: set[str] = set()
+        self._new_world = False    # said in the journal once the daemon's journal is set up
+        self.follow(cfg)
+
+    def follow(self, cfg: StationConfig) -> None:
+        """The world for ``cfg``: built when its cameras are simulated and its geometry is new,
+        closed when none is."""
+        key = _geometry(cfg) if needs_world(cfg) else None
+        if key == self._key:
+            return
+        self.close()
+        self._key = key
+        if key is not None:
+            self.world = World(cfg, seed=self.seed)
+            self._new_world = True
+
+    def close(self) -> None:
+        if self.world is not None:
+            self.world.close()
+        self.world, self._key = None, None
+
+    async def beside(self, cfg: StationConfig, station: Station, stop: asyncio.Event) -> None:
+        """Beside one station of the serve loop, until ``stop``: the world follows its
+        configuration, the simulated controller gets its psets, then the operator works
+        (``--sim-operator``) or waits (the lift down, raised from standard input)."""
+        self.follow(cfg)
+        self._program(cfg, station)
+        try:
+            self._code = _model_code(cfg)
+        except StationError as exc:    # validated before: never, but the daemon stays up
+            log.error("simulated operator: %s", exc)
+        scripted = self.operator and self.world is not None and not stand_ins(cfg)
+        if self.operator and not scripted:
+            log.error("simulated operator: %s names real devices (%s): the operator stays "
+                      "idle", cfg.path, ", ".join(stand_ins(cfg)) or "no sim:// camera")
+        if not scripted:
+            self._idle(station)      # before the journal's lines: typed commands find its PLC
+        if self._new_world:
+            self._new_world = False
+            log.info("simulated world: the sim:// cameras of %d pair(s) render it (operator: "
+                     "%s)", len(cfg.pairs), "scripted" if scripted else "idle")
+        if not scripted and self._plc is not None and not self._told:
+            self._told = True
+            log.info(IDLE_LINE.format(help=HELP.removeprefix("commands: ")
+                                      .removesuffix(" | quit")))
+        try:
+            if scripted:
+                await self._operate(station, stop)
+            else:
+                await stop.wait()
+        finally:
+            self._plc = None
+            if self.world is not None:
+                self.world.set_wrench(None)
+
+    def _program(self, cfg: StationConfig, station: Station) -> None:
+        """The simulated controller runs the bolt table's psets (and the NOK policy's loosen
+        psets), as ``stationd sim controller --config`` does."""
+        wrench = station.wrench
+        if not isinstance(wrench, SimWrench) or cfg.bolts_path is None:
+            return
+        try:
+            wrench.controller.psets = {**loosen_programs(cfg.nok), **psets_of(cfg.bolts_path)}
+        except StationError as exc:
+            log.error("simulated controller: its psets: %s", exc)
+
+    # -- idle: the lift down, commands on standard input ----------------------------------
+    def _idle(self, station: Station) -> None:
+        lift = station.lift
+        if not isinstance(lift, SimLift):
+            return     # a real lift: the vehicles come from the line
+        self._plc = lift.plc
+        if self._reader is None:
+            self._reader = threading.Thread(target=self._read, name="sim-plc-stdin",
+                                            daemon=True)
+            self._reader.start()
+
+    def _read(self) -> None:
+        """The PLC commands typed on standard input, to the running station's PLC."""
+        try:
+            for line in self._stdin:
+                plc = self._plc
+                if plc is None:
+                    log.warning("simulated lift: no idle simulated station (starting, "
+                                "reloading or operated): %r ignored", line.strip()[:80])
+                elif not plc_command(plc, line, self._code, self._serial, _said):
+                    log.info("simulated lift: quit is not a command of the daemon (stop it "
+                             "with Ctrl-C or SIGTERM)")
+        except (OSError, ValueError):    # standard input closed or not text: no commands
+            return
+
+    # -- the scripted operator --------------------------------------------------------------
+    async def _operate(self, station: Station, stop: asyncio.Event) -> None:
+        task = asyncio.create_task(self._vehicles(station))
+        try:
+            await stop.wait()
+        finally:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+
+    async def _vehicles(self, station: Station) -> None:
+        """Vehicle after vehicle: a new VIN raised, a few of its bolts tightened (NOK now and
+        then, as the demo), the lift lowered; a round that fails is journaled, never fatal."""
+        assert self.world is not None  # noqa: S101 - checked by the caller
+        rng = np.random.default_rng(self.seed)
+        nok_rng = np.random.default_rng([self.seed, 21])
+        while True:
+            self._serial[0] = self._serial[0] % 999_999 + 1
+            truth: dict[str, Any] = {"bolt": None, "model_code": self._code,
+                                     "vin": make_vin(self._serial[0])}
+            log.info("simulated operator: vehicle %s (lift code %d) arrives", truth["vin"],
+                     self._code)
+            try:
+                await operate(station, self.world, rng, BOLTS_PER_VEHICLE, [], _bolt_said,
+                              truth, nok_rng, note=self._note, supervisor=SIM_SUPERVISOR)
+            except InputError as exc:
+                log.warning("simulated operator: %s", exc)
+            except (StationError, RuntimeError, OSError) as exc:
+                log.error("simulated operator: %s: %s", type(exc).__name__, exc)
+            finally:
+                self.world.set_wrench(None)
+                lift = station.lift
+                if isinstance(lift, SimLift):
+                    lift.plc.lower_lift()
+            await asyncio.sleep(BETWEEN_VEHICLES_S)
+
+    def _note(self, text: str) -> None:
+        """The operator's notes (bolts no pair sees), each once a daemon, not per vehicle."""
+        if text not in self._noted:
+            self._noted.add(text)
+            log.info("simulated operator: %s", text)
+
+
+def _said(text: str) -> None:
+    log.info("simulated lift: %s", text)
+
+
+def _bolt_said(line: dict[str, Any]) -> None:
+    before = f" (first: {'; '.join(line['before'])})" if line.get("before") else ""
+    log.info("simulated operator: %s: pset %s, %s%s", line["bolt"], line["pset"],
+             line["result"], before)
+
+
+__all__ = ["BOLTS_PER_VEHICLE", "SimulatedStation", "needs_world"]

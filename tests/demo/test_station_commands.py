@@ -1,0 +1,90 @@
+"""People's commands during ``stationd demo``: the demo's screens take them to the demo's
+station as the daemon's take them to its own (``stationd skip|reopen|release|loosen``
+answered "HTTP 503: the station is not serving yet" for the whole run and the hold).  The demo
+runs as a process on one pair of config/sim with an ``access:`` section; the commands go
+through the command line, as a person types them."""
+
+from __future__ import annotations
+
+import os
+import queue
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+import yaml
+
+from stationd.access import hash_password
+from stationd.sim.vin import make_vin
+from tests.station.test_daemon_faults import SIM, _free_port
+
+ROOT = Path(__file__).resolve().parents[2]
+PASSWORD = "supervise-it-well"  # noqa: S105 - a test user's
+
+
+def _station(tmp: Path, port: int) -> Path:
+    for f in SIM.glob("*.yaml"):
+        (tmp / f.name).write_text(f.read_text())
+    doc = yaml.safe_load((tmp / "station.yaml").read_text())
+    doc["pairs"] = {"pair1": doc["pairs"]["pair1"]}
+    doc["cameras"] = {n: c for n, c in doc["cameras"].items() if n.startswith("pair1_")}
+    doc["matching"]["max_age_s"] = 5.0     # a loaded machine renders late: not this test's
+    doc["http"] = {"listen": f"127.0.0.1:{port}"}
+    doc["access"] = {"users": {"sue": {"role": "supervisor",
+                                       "password": hash_password(PASSWORD)}}}
+    path = tmp / "station.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+@pytest.mark.timeout(300)
+def test_commands_reach_the_demos_station_during_the_run_and_the_hold(tmp_path):
+    port = _free_port()
+    station = _station(tmp_path, port)
+    env = {**os.environ, "STATIOND_PASSWORD": PASSWORD, "PYTHONPATH": str(ROOT)}
+    url = f"http://127.0.0.1:{port}/"
+    vin = make_vin(1)     # the demo's vehicle
+    demo = subprocess.Popen([sys.executable, "-m", "stationd", "demo", "--config",
+                             str(station), "--cycles", "1", "--seed", "11", "--hold"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env, cwd=tmp_path)
+    lines: queue.Queue[str] = queue.Queue()
+
+    def pump() -> None:
+        assert demo.stdout is not None
+        for line in demo.stdout:
+            lines.put(line.rstrip("\n"))
+    threading.Thread(target=pump, daemon=True).start()
+
+    def expect(start: str, timeout: float = 180) -> str:
+        while True:
+            line = lines.get(timeout=timeout)
+            if line.startswith(start):
+                return line
+
+    def command(*words: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "stationd", *words, "--user", "sue",
+                               "--url", url], capture_output=True, text=True, env=env,
+                              timeout=60, check=False)
+
+    try:
+        expect("screens: ")
+        # during the run: the station answers (whatever it answers), never 503
+        during = command("reopen", vin)
+        assert during.returncode in (0, 1), during
+        assert "503" not in during.stderr and "not serving" not in during.stderr
+        assert f"command reopen {vin} by sue (cli " in during.stdout
+        expect("run over")
+        # the hold: the vehicle left the lift incomplete (closed): a supervisor reopens it
+        held = command("reopen", vin)
+        assert held.returncode == 0, held
+        assert held.stdout.strip().endswith(": accepted")
+        skip = command("skip", vin, "B01")     # no vehicle on the lift now: the station's no
+        assert skip.returncode == 1 and "no vehicle at the station" in skip.stdout, skip
+    finally:
+        demo.send_signal(signal.SIGINT)
+        demo.wait(timeout=60)
+    assert demo.returncode == 0

@@ -1,0 +1,182 @@
+"""``stationd run`` on the simulated station, as a process: the simulated world runs inside the
+daemon (the ``sim://`` cameras render it), with the scripted operator (``--sim-operator``: a
+vehicle arrives, bolts are tightened and recorded) or idle (the lift down, said once in the
+journal, raised from standard input; no pair fault).  One pair of config/sim (fewer 20 MP
+cameras to render: a faster test), its database in the test's folder, no screens."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from stationd.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+SIM = ROOT / "config" / "sim"
+
+
+def _station(tmp: Path, **extra: object) -> Path:
+    """config/sim with pair1 only, its database in ``tmp``, no screens."""
+    for f in SIM.glob("*.yaml"):
+        (tmp / f.name).write_text(f.read_text())
+    doc = yaml.safe_load((tmp / "station.yaml").read_text())
+    doc["pairs"] = {"pair1": doc["pairs"]["pair1"]}
+    doc["cameras"] = {n: c for n, c in doc["cameras"].items() if n.startswith("pair1_")}
+    doc["database"] = {"url": f"sqlite:///{tmp / 'station.db'}"}
+    doc.pop("http", None)
+    doc.update(extra)
+    path = tmp / "station.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+class Daemon:
+    """``stationd run`` as systemd would start it; its journal (stderr) goes to a file."""
+
+    def __init__(self, tmp: Path, *args: str) -> None:
+        self.log_path = tmp / "daemon.log"
+        self._err = self.log_path.open("w")
+        self.p = subprocess.Popen(
+            [sys.executable, "-m", "stationd", "run", "--config", str(tmp / "station.yaml"),
+             *args], cwd=tmp, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+            stderr=self._err, text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+
+    def log(self) -> str:
+        return self.log_path.read_text()
+
+    def wait(self, pattern: str, timeout: float) -> re.Match[str]:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and self.p.poll() is None:
+            found = re.search(pattern, self.log())
+            if found is not None:
+                return found
+            time.sleep(0.1)
+        raise AssertionError(f"{pattern!r} not in the journal within {timeout} s (exit "
+                             f"{self.p.poll()}): {self.log()[-3000:]}")
+
+    def say(self, line: str) -> None:
+        assert self.p.stdin is not None
+        self.p.stdin.write(line + "\n")
+        self.p.stdin.flush()
+
+    def stop(self) -> int:
+        if self.p.poll() is None:
+            self.p.send_signal(signal.SIGTERM)
+        code = self.p.wait(timeout=60)
+        self._err.close()
+        return code
+
+
+@pytest.mark.timeout(240)
+def test_the_scripted_operator_brings_a_vehicle_and_its_bolt_is_tightened_and_recorded(
+        tmp_path, capsys):
+    station = _station(tmp_path)
+    d = Daemon(tmp_path, "--sim-operator")
+    try:
+        vin = d.wait(r"simulated operator: vehicle (\w{17}) \(lift code 1\) arrives", 60)[1]
+        bolt = d.wait(r"simulated operator: (B\d\d): pset \d, (OK|NOK) ", 150)[1]
+    finally:
+        code = d.stop()
+    journal = d.log()
+    assert code == 0 and "stationd stopped" in journal
+    assert "no simulated world" not in journal and "Traceback" not in journal
+    assert re.search(r"tightening: tightening bolt B\d\d", journal)
+    # the result is in the station's database: stationd db report shows it
+    capsys.readouterr()
+    main(["db", "report", vin, "--config", str(station), "--json"])
+    report = json.loads(capsys.readouterr().out)
+    assert report["vin"] == vin and bolt in report["ok"] + report["nok"], report
+
+
+@pytest.mark.timeout(180)
+def test_without_the_operator_the_lift_waits_says_so_once_and_no_pair_faults(tmp_path):
+    _station(tmp_path)
+    d = Daemon(tmp_path)
+    try:
+        d.wait(r"simulated lift: down, no vehicle; raise it with 'next'", 60)
+        d.say("next")      # the simulated PLC's commands on standard input
+        d.wait(r"vehicle \w{17} \(SIM-1\) opened", 60)
+        d.wait(r"tracking: tracking the wrench", 30)
+        # the cameras render the world: the vision answers (no wrench in view), no fault
+        d.wait(r"no bolt: pair1: .*no purple region", 90)
+        d.say("lower")
+        d.wait(r"simulated lift: lift not at height", 30)
+        # a reload that moves the pair's registration: a new world, the new station's PLC
+        # takes the typed commands
+        vehicle = tmp_path / "pair1.vehicle.yaml"
+        doc = yaml.safe_load(vehicle.read_text())
+        doc["t"][0] += 20.0
+        vehicle.write_text(yaml.safe_dump(doc))
+        d.p.send_signal(signal.SIGHUP)
+        d.wait(r"configuration reloaded[\s\S]*simulated world: ", 60)
+        d.say("next")
+        d.wait(r"opened: 50 bolts[\s\S]*opened: 50 bolts", 60)
+    finally:
+        code = d.stop()
+    journal = d.log()
+    assert code == 0
+    assert journal.count("simulated lift: down, no vehicle") == 1    # said once a daemon
+    assert journal.count("simulated world: the sim:// cameras of 1 pair(s)") == 2
+    assert "fault: pair1" not in journal and "no simulated world" not in journal
+
+
+def test_the_scripted_operator_is_refused_for_a_station_with_real_devices(tmp_path, capsys):
+    station = _station(tmp_path, lift={"url": "modbus-tcp://127.0.0.1:1502"})
+    code = main(["run", "--config", str(station), "--sim-operator"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "\n" not in err
+    assert "--sim-operator drives simulated devices only" in err and "lift modbus-tcp" in err
+
+
+def test_the_world_follows_the_stations_geometry_across_reloads(tmp_path):
+    """A reload with the same geometry keeps the world (its rendered backgrounds); one that
+    moves a pair gets a new one; a station without sim:// cameras has none."""
+    from drivers.camera.sim import registered_worlds
+    from stationd.config import load_station_config
+    from stationd.sim.in_daemon import SimulatedStation
+
+    station = _station(tmp_path)
+    sim = SimulatedStation(load_station_config(station))
+    try:
+        first = sim.world
+        assert first is not None and registered_worlds() == ["pair1"]
+        sim.follow(load_station_config(station))              # the same file again
+        assert sim.world is first
+        vehicle = tmp_path / "pair1.vehicle.yaml"
+        doc = yaml.safe_load(vehicle.read_text())
+        doc["t"][0] += 50.0                                    # the pair registered elsewhere
+        vehicle.write_text(yaml.safe_dump(doc))
+        sim.follow(load_station_config(station))
+        assert sim.world is not None and sim.world is not first
+        assert registered_worlds() == ["pair1"]
+        doc = yaml.safe_load(station.read_text())
+        doc["cameras"] = {n: {"url": f"aravis://Basler-{k}"}
+                          for k, n in enumerate(doc["cameras"])}
+        station.write_text(yaml.safe_dump(doc))
+        sim.follow(load_station_config(station))
+        assert sim.world is None and registered_worlds() == []
+    finally:
+        sim.close()
+    assert registered_worlds() == []
+
+
+@pytest.mark.timeout(120)
+def test_calibrate_check_on_a_simulated_station_measures_its_world(tmp_path, capsys):
+    """``stationd calibrate check`` with no daemon running grabs the sim:// cameras here: the
+    command gives them the world (it printed 'no simulated world' for every pair)."""
+    from tests.station.refstation import station_dir
+
+    station = station_dir(tmp_path, pairs=("pair1",))
+    code = main(["calibrate", "check", "--config", str(station)])
+    out = capsys.readouterr()
+    assert "no simulated world" not in out.out + out.err
+    assert code == 0 and out.out.startswith("pair1 in place: reference R1"), out
