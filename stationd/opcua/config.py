@@ -11,8 +11,9 @@
       keep: 1000                         # results kept for GetLatestResult / GetResultById
 
 Secure by default: anonymous clients may browse, read, subscribe and call the methods that only
-read (GetLatestResult, GetResultById); nobody may write a variable or change the address space;
-a user name is accepted only with its password's hash in this section; with ``sign`` or
+read (GetLatestResult, GetResultById, RequestResults, RequestUnacknowledgedResults); only a user
+of this section may call AcknowledgeResults; nobody may write a variable or change the address
+space; a user name is accepted only with its password's hash in this section; with ``sign`` or
 ``encrypt`` offered, a client's certificate must be in ``certificates/trusted`` (the server's
 own certificate is generated there on first start, one year valid).
 """
@@ -65,8 +66,15 @@ class OpcUaConfig:
             if not certs.is_absolute() and base_dir is not None:
                 certs = base_dir / certs
         if certs is None and security != ("none",):
-            raise node.error("certificates: a folder for the server's certificate and the "
-                             "trusted clients' (sign and encrypt need them)")
+            signed = [x for x in security if x != "none"]
+            given = "security offers" if "security" in m else \
+                "security is not given: the default offers"
+            raise node.error(f"certificates: missing; {given} {' and '.join(signed)}, which "
+                             f"need{'s' if len(signed) == 1 else ''} a folder "
+                             "for the server's certificate (made there on first start) and "
+                             "the trusted clients' (certificates/trusted): add "
+                             "'certificates: /var/lib/stationd/opcua', or 'security: [none]' "
+                             "for no signing or encryption")
         users: dict[str, str] = {}
         if "users" in m:
             for name, value in m["users"].pairs():

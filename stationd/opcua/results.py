@@ -32,6 +32,17 @@ def result_id(db_id: str, seq: int) -> str:
     return f"{db_id}:{seq}"
 
 
+def parse_result_id(db_id: str, text: str) -> int | None:
+    """The feed's sequence number in a ResultId of this database (:func:`result_id`); None
+    for any other (a replaced database's, or not one of this server's)."""
+    head, sep, tail = text.rpartition(":")
+    if not sep or head != db_id or not (tail.isascii() and tail.isdigit()):
+        return None
+    if not 0 < int(tail) < 2**63:
+        return None
+    return int(tail)
+
+
 def _time(text: str | None) -> datetime | None:
     if text is None:
         return None
@@ -94,4 +105,4 @@ def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
 
 
 __all__ = ["CLASSIFICATION_SINGLE", "ENTITY_JOINT", "ENTITY_VEHICLE", "EVALUATION_NOT_OK",
-           "EVALUATION_OK", "result_id", "rundown_result"]
+           "EVALUATION_OK", "parse_result_id", "result_id", "rundown_result"]

@@ -4,25 +4,33 @@ a result event, the last results for GetLatestResult and GetResultById.
 
 Why this shape: the results feed (:mod:`db.ledger`) is the truth, so the server reads it from
 the last number it published, every second (sooner when the bus says a result was recorded):
-a result stored while no client listened is still there for GetResultById, and nothing is
-published that was not committed.  The server is fed by the station, never a second place
-where rules live: nothing a client does reaches the station (no variable is writable, no
-method changes anything).
+a result stored while no client listened is still there for GetResultById, RequestResults and
+RequestUnacknowledgedResults (:mod:`stationd.opcua.catchup`), and nothing is published that was
+not committed.  The server is fed by the station, never a second place where rules live:
+nothing a client does reaches the station (no variable is writable); the one method that
+changes anything, AcknowledgeResults, changes only the MES's own bookkeeping of what it
+stored, and only a configured user may call it.
 
 The workarounds for asyncua 2.1.0 (``../shared/design/PROTOCOLS.md``), beside those of
 :mod:`stationd.opcua.model`:
 
 5. events reach only monitored items on the emitting node: results are fired on the Server
-   object (where MES clients subscribe) with the JoiningSystem as their SourceNode;
+   object (where MES clients subscribe) and on the JoiningSystem's ResultManagement (an event
+   notifier in the model), with the JoiningSystem as their SourceNode;
 6. JoiningSystemResultReadyEventType is abstract: a concrete subtype of it,
    ``StationResultReadyEventType`` in this server's namespace, is fired;
 7. security: asyncua lets everyone write (PermissiveUserManager), its role ruleset lets an
    anonymous client do nothing, and without a validator it accepts any client certificate.
-   Here: :class:`ReadOnlyRuleset` (browse, read, subscribe, call for everyone; no write and no
-   node management for anyone), :class:`StationUsers` (anonymous, or a configured user with
-   the right password), a trust list for client certificates.
+   Here: :class:`ReadOnlyRuleset` (browse, read, subscribe, call for everyone, except the
+   methods that change something, AcknowledgeResults, for users only; no write and no node
+   management for anyone), :class:`StationUsers` (anonymous, or a configured user with the
+   right password), a trust list for client certificates.
 
-Not done (4): RequestResults / RequestUnacknowledgedResults / AcknowledgeResults.
+And (4): the optional methods RequestResults, RequestUnacknowledgedResults (IJT Base) and
+AcknowledgeResults (Machinery Result) are not instantiated with the JoiningSystem: they are
+added to its ResultManagement with the arguments their type declares.  RequestResults and
+RequestUnacknowledgedResults are reads (they send stored results again as events and change
+nothing, like GetResultById): anonymous clients may call them.
 """
 
 from __future__ import annotations
@@ -33,6 +41,7 @@ import logging
 import socket
 from collections import OrderedDict
 from collections.abc import Callable
+from contextvars import ContextVar
 from typing import Any
 
 from asyncua.common.node import Node
@@ -41,10 +50,12 @@ from asyncua.crypto.truststore import TrustStore
 from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
 from asyncua.server.server import Server
 from asyncua.server.user_managers import UserManager
+from asyncua.ua.ua_binary import struct_from_binary
 
 from db.ledger import RUNDOWN
 from db.repository import Repository
 from stationd.access import verify_password
+from stationd.opcua.catchup import CatchUp
 from stationd.opcua.config import OpcUaConfig
 from stationd.opcua.model import DI_URI, IJT_URI, MACHINERY_URI, RESULT_URI, load_model
 from stationd.opcua.results import rundown_result
@@ -56,24 +67,49 @@ NAMESPACE = "urn:stationd:opcua"
 POLL_S = 1.0
 MANUFACTURER = "stationd"
 JOINING_SYSTEM_TYPE, RESULT_READY_EVENT_TYPE = 1005, 1007   # in IJT Base
+REQUESTED_RESULT_EVENT_TYPE = 1035                            # in IJT Base
+REQUEST_RESULTS, REQUEST_UNACKNOWLEDGED = 7074, 7092          # in IJT Base
+ACKNOWLEDGE_RESULTS = 7009                                    # in Machinery Result
 MACHINES_FOLDER = 1001                                        # in Machinery
 SOFTWARE_VERSION = "0.1.0"
 _NO_ERROR = 0
 
 
+#: the user of the request being served: asyncua calls the ruleset, then the method, in the
+#: same task, and tells a method nothing of its caller (kept for the acknowledgements' record)
+CALLER: ContextVar[User | None] = ContextVar("opcua_caller", default=None)
+_CALL = ua.NodeId(ua.ObjectIds.CallRequest_Encoding_DefaultBinary)
+
+
 class ReadOnlyRuleset(SimpleRoleRuleset):
     """Browse, read, subscribe and call the read-only methods, for anonymous clients and users
-    alike; writing a value or changing the address space for nobody."""
+    alike; the methods in :attr:`changing` for users only; writing a value or changing the
+    address space for nobody."""
 
     def __init__(self) -> None:
         super().__init__()  # type: ignore[no-untyped-call]
         allowed = {ua.NodeId(t) for t in USER_TYPES} - {
             ua.NodeId(ua.ObjectIds.WriteRequest_Encoding_DefaultBinary)}
         self._allowed = frozenset(allowed)
+        self.changing: set[ua.NodeId] = set()   # filled when the address space is built
 
     def check_validity(self, user: User, action_type_id: ua.NodeId, body: Any) -> bool:
-        return user.role in (UserRole.Anonymous, UserRole.User) and \
-            action_type_id in self._allowed
+        CALLER.set(user)
+        if user.role not in (UserRole.Anonymous, UserRole.User) or \
+                action_type_id not in self._allowed:
+            return False
+        if action_type_id == _CALL and user.role != UserRole.User and self.changing:
+            return not self._calls_changing(body)
+        return True
+
+    def _calls_changing(self, body: Any) -> bool:
+        """Whether a call request (undecoded: asyncua decodes it after this check) calls a
+        method in :attr:`changing`; one that does not decode is refused here too."""
+        try:
+            params = struct_from_binary(ua.CallParameters, body.copy())
+        except Exception:   # malformed: asyncua would refuse it as well
+            return True
+        return any(m.MethodId in self.changing for m in params.MethodsToCall or [])
 
 
 class StationUsers(UserManager):
@@ -112,7 +148,10 @@ class OpcUaServer:
         self.cursor = 0             # the last feed entry read
         self.db_id = ""
         self._results: OrderedDict[str, Any] = OrderedDict()   # ResultId -> ResultDataType
-        self._event: Any = None
+        self._event: list[Any] = []        # the result event's generators
+        self._requested: list[Any] = []    # the requested results' generators
+        self.ruleset = ReadOnlyRuleset()
+        self.catchup = CatchUp(self._fire_requested)
         self._state: Node | None = None
         self._reason: Node | None = None
         self._wake = asyncio.Event()
@@ -148,12 +187,13 @@ class OpcUaServer:
         if self._unsubscribe is not None:
             self._unsubscribe()
             self._unsubscribe = None
+        await self.catchup.close()
         if server is not None:
             await server.stop()
 
     async def _security(self, server: Server) -> None:
         policies = [_POLICIES[s] for s in self.cfg.security]
-        server.set_security_policy(policies, permission_ruleset=ReadOnlyRuleset())
+        server.set_security_policy(policies, permission_ruleset=self.ruleset)
         tokens: list[type] = [ua.AnonymousIdentityToken]
         if self.cfg.users:
             tokens.append(ua.UserNameIdentityToken)
@@ -183,6 +223,7 @@ class OpcUaServer:
             return
         store = TrustStore([trusted], [])
         await store.load()
+        _one_line(logging.getLogger("asyncuagds.validate"))   # asyncua.crypto.truststore's
         server.set_certificate_validator(CertificateValidator(
             CertificateValidatorOptions.TRUSTED_VALIDATION |
             CertificateValidatorOptions.PEER_CLIENT, store))
@@ -213,17 +254,33 @@ class OpcUaServer:
         self._reason = await js.add_variable(ua.NodeId(f"JoiningSystem.{sid}.StateReason", idx),
                                              ua.QualifiedName("StateReason", idx), "",
                                              varianttype=ua.VariantType.String)
-        etype = await server.create_custom_event_type(
-            idx, "StationResultReadyEventType", ua.NodeId(RESULT_READY_EVENT_TYPE, ijt))
-        gen = await server.get_event_generator(etype, ua.ObjectIds.Server)
-        gen.event.SourceNode = js.nodeid
-        gen.event.SourceName = sid
-        gen.event.Severity = 100
-        self._event = gen
-        rm = await js.get_child([f"{uris.index(RESULT_URI)}:ResultManagement"])
+        mr = uris.index(RESULT_URI)
+        rm = await js.get_child([f"{mr}:ResultManagement"])
+        gens: list[list[Any]] = []
+        for name, base in (("StationResultReadyEventType", RESULT_READY_EVENT_TYPE),
+                           ("StationRequestedResultEventType", REQUESTED_RESULT_EVENT_TYPE)):
+            etype = await server.create_custom_event_type(idx, name, ua.NodeId(base, ijt))
+            gens.append([])
+            # asyncua does not pass events up the notifier hierarchy: fired at the Server
+            # object (where MES clients subscribe) and at the ResultManagement that makes them
+            for emitter in (server.nodes.server.nodeid, rm.nodeid):
+                gen = await server.get_event_generator(etype, emitter)
+                gen.event.SourceNode = js.nodeid
+                gen.event.SourceName = sid
+                gen.event.Severity = 100
+                gens[-1].append(gen)
+        self._event, self._requested = gens
         for name, cb in (("GetLatestResult", self._get_latest),
                          ("GetResultById", self._get_by_id)):
-            server.link_method(await rm.get_child([f"{uris.index(RESULT_URI)}:{name}"]), cb)
+            server.link_method(await rm.get_child([f"{mr}:{name}"]), cb)
+        for declared, cb in ((ua.NodeId(REQUEST_RESULTS, ijt), self.catchup.request_results),
+                             (ua.NodeId(REQUEST_UNACKNOWLEDGED, ijt),
+                              self.catchup.request_unacknowledged),
+                             (ua.NodeId(ACKNOWLEDGE_RESULTS, mr), self._acknowledge)):
+            method = await _add_declared_method(
+                server, rm, (f"JoiningSystem.{sid}.ResultManagement", idx), declared, cb)
+            if declared.Identifier == ACKNOWLEDGE_RESULTS:
+                self.ruleset.changing |= {method.nodeid, declared}
 
     # -- methods (read only) ---------------------------------------------------------------------
     async def _get_latest(self, parent: ua.NodeId, *args: Any) -> list[ua.Variant]:
@@ -236,6 +293,11 @@ class OpcUaServer:
         rid = result_id.Value if isinstance(result_id, ua.Variant) else result_id
         found = self._results.get(str(rid))
         return _answer(found, _NO_ERROR if found is not None else 1)
+
+    async def _acknowledge(self, parent: ua.NodeId, result_ids: Any = None, *args: Any) -> \
+            list[ua.Variant]:
+        user = CALLER.get()
+        return await self.catchup.acknowledge(result_ids, (user.name if user else None) or "?")
 
     # -- the station's events and its feed -------------------------------------------------------
     def _on_event(self, event: StationEvent) -> None:
@@ -254,6 +316,7 @@ class OpcUaServer:
         recorded before are kept for the methods."""
         loop = asyncio.get_running_loop()
         self.db_id = await loop.run_in_executor(None, repo.ledger.db_id)
+        self.catchup.attach(repo, self.db_id)
         last = await loop.run_in_executor(None, repo.ledger.last_seq)
         await self._preload(repo, last)
         self.cursor = last
@@ -295,14 +358,41 @@ class OpcUaServer:
         result = rundown_result(self.db_id, self.cfg.station_id, entry,
                                 simulated=self.simulated)
         self._keep(result)
-        if self._event is None:
+        await _fire(self._event, result, entry)
+        self.published += 1
+
+    async def _fire_requested(self, entry: dict[str, Any]) -> None:
+        """A stored rundown asked for again (RequestResults, RequestUnacknowledgedResults)."""
+        if self.server is None:
             return
-        rec = entry["record"]
-        ev = self._event.event
+        await _fire(self._requested, rundown_result(self.db_id, self.cfg.station_id, entry,
+                                                    simulated=self.simulated), entry)
+
+
+async def _fire(gens: list[Any], result: Any, entry: dict[str, Any]) -> None:
+    rec = entry["record"]
+    for gen in gens:
+        ev = gen.event
         ev.add_variable("Result", result, ua.VariantType.ExtensionObject)
         ev.Message = ua.LocalizedText(f"{rec['vin']} {rec['bolt']}: {rec['status'].upper()}")
-        await self._event.trigger()
-        self.published += 1
+        await gen.trigger()
+
+
+async def _add_declared_method(server: Server, parent: Node, prefix: tuple[str, int],
+                               declared: ua.NodeId, callback: Callable[..., Any]) -> Node:
+    """The optional method ``declared`` (a method of a type) on the instance ``parent``
+    (its NodeId ``prefix.Name`` in namespace ``prefix[1]``), with the browse name and
+    arguments its declaration has, calling ``callback``."""
+    decl = server.get_node(declared)
+    name = await decl.read_browse_name()
+    args: list[list[Any]] = []
+    for prop in ("InputArguments", "OutputArguments"):
+        try:
+            args.append(list(await (await decl.get_child([f"0:{prop}"])).read_value()))
+        except ua.UaError:
+            args.append([])
+    nodeid = ua.NodeId(f"{prefix[0]}.{name.Name}", prefix[1])
+    return await parent.add_method(nodeid, name, callback, args[0], args[1])
 
 
 def _answer(result: Any, error: int) -> list[ua.Variant]:
@@ -346,6 +436,20 @@ async def _set(parent: Node, name: str, value: str, uris: list[str]) -> None:
 
 
 __all__ = ["NAMESPACE", "OpcUaServer", "ReadOnlyRuleset", "StationUsers"]
+
+
+class _NoTraceback(logging.Filter):
+    """asyncua logs a client certificate outside the trust list with a traceback: a client's
+    refusal is the line alone in the station's journal."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        record.exc_info, record.exc_text = None, None
+        return True
+
+
+def _one_line(logger: logging.Logger) -> None:
+    if not any(isinstance(f, _NoTraceback) for f in logger.filters):
+        logger.addFilter(_NoTraceback())
 
 
 async def _refuse_every_certificate(cert: Any, app: Any) -> None:

@@ -258,6 +258,19 @@ def test_the_opcua_section_is_checked_with_its_line(tmp_path):
         assert needle in str(err.value) and f":{line}" in str(err.value), str(err.value)
 
 
+def test_an_opcua_section_without_certificates_says_they_are_missing_and_why():
+    """Sign and encrypt are offered by default: a section without ``certificates`` says what
+    is missing, why, and the two ways out (it read as a definition of the key)."""
+    for text, offered in (("endpoint: opc.tcp://0.0.0.0:4841\n",
+                           "the default offers sign and encrypt, which need a folder"),
+                          ("security: [none, sign]\n", "security offers sign, which needs")):
+        with pytest.raises(ConfigError) as err:
+            OpcUaConfig.from_node(YamlNode.parse(text))
+        said = str(err.value)
+        assert "certificates: missing;" in said and offered in said, said
+        assert "'certificates: /var/lib/stationd/opcua'" in said and "'security: [none]'" in said
+
+
 def test_a_first_start_with_certificates_and_nobody_trusted_yet_serves(repo, tmp_path):
     """The trusted folder is empty on a first start (a newcomer saw the server never start
     and a traceback at stop): it serves, and no client certificate is accepted meanwhile."""
