@@ -33,6 +33,7 @@ from stationd.station.events import (
     DeviceHealth,
     EventBus,
     ResultRecorded,
+    State,
     StateChanged,
     StationEvent,
 )
@@ -78,7 +79,7 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bo
             notifier.status(f"fault: database: {one_line(exc)}")
             # the screens and /healthz say it too (the station's loop is not running yet)
             station.bus.publish(DeviceHealth(DATABASE, False, FaultKind.DOWN, one_line(exc)))
-            station.bus.publish(StateChanged("fault", f"database: {one_line(exc)}"))
+            station.bus.publish(StateChanged(State.FAULT, f"database: {one_line(exc)}"))
         try:
             await asyncio.wait_for(stop.wait(), wait)
         except TimeoutError:
@@ -336,7 +337,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
     while True:
         await screens.follow(cfg)
         # the screens forget the last configuration's device reports (a reload)
-        bus.publish(StateChanged("starting", "opening the devices"))
+        bus.publish(StateChanged(State.STARTING, "opening the devices"))
         station = Station(cfg, notifier=notifier, bus=bus)
         station.frames = screens.frames
         station.carry(carried)

@@ -62,7 +62,10 @@ from stationd.station.events import (
     Refused,
     StateChanged,
     StationEvent,
+    VehicleClosed,
+    VehicleOpened,
 )
+from stationd.station.journal import RefusalJournal
 from stationd.station.records import STATION_FAULTS, Records
 from stationd.station.sdnotify import Notifier
 from stationd.station.trust import MeasureReferences, RecordCheck
@@ -83,6 +86,7 @@ class Actions:
         self._measure = measure
         self._wrench, self._database, self._call = wrench, database, call
         self.answers: dict[int, asyncio.Future[Answer]] = {}   # request -> who waits
+        self.refusals = RefusalJournal()   # each refusal journaled once, then counted
 
     async def do(self, a: Action) -> Event | None:
         """Carry out one action; what came of it, for the core (or None)."""
@@ -144,16 +148,21 @@ class Actions:
     def publish(self, ev: StationEvent) -> None:
         """An event of the core to the screens and feeds, and its journal line."""
         self.bus.publish(ev)
+        if isinstance(ev, StateChanged | VehicleOpened | VehicleClosed):
+            for line in self.refusals.ended(ev.t):   # the refusals' episode ended
+                log.info("%s", line)
         if isinstance(ev, StateChanged):
             self.notifier.status(f"{ev.state}: {ev.reason}")
-            if ev.state == State.FAULT.value:   # each device's own line has the reason
+            if ev.state is State.FAULT:   # each device's own line has the reason
                 log.info("state: fault (%s)", ", ".join(sorted(self.core.faults)))
             else:
                 log.info("%s: %s", ev.state, ev.reason)
         elif isinstance(ev, Notice):
             (log.warning if ev.level == "warning" else log.info)("%s", ev.message)
-        elif isinstance(ev, Refused):   # once per change of reason, not frame after frame
-            log.info("no bolt: %s", reason_words(ev.reason, full=True))
+        elif isinstance(ev, Refused):   # once, then counted (a wrench held between two bolts)
+            said = self.refusals.refused(ev.reason, ev.t)
+            if said is not None:
+                log.info("%s", said)
         elif isinstance(ev, PairChecked):
             (log.info if ev.trusted else log.warning)("%s", check_words(ev))
         elif isinstance(ev, BoltToLoosen):

@@ -78,6 +78,7 @@ from stationd.station.events import (
     VehicleClosed,
     VehicleOpened,
 )
+from stationd.station.events import State as State  # the state lives with its event
 from stationd.station.matching import BoltMatcher, BoltRule, Match, MatchParams
 from stationd.station.policy import NokPolicy
 from stationd.station.trust import MeasureReferences, PairTrust, RecordCheck, ReferencesChecked
@@ -98,16 +99,6 @@ class Device(enum.StrEnum):
 
 
 LIFT, WRENCH, VEHICLE, DATABASE = Device.LIFT, Device.WRENCH, Device.VEHICLE, Device.DATABASE
-
-
-class State(enum.Enum):
-    STARTING = "starting"
-    WAITING_VEHICLE = "waiting for vehicle"
-    TRACKING = "tracking"
-    BOLT_SELECTED = "bolt selected"
-    TIGHTENING = "tightening"
-    FAULT = "fault"
-    TEACHING = "teaching"
 
 
 ON_A_BOLT = (State.BOLT_SELECTED, State.TIGHTENING)
@@ -531,7 +522,7 @@ class StationCore:
         acts: list[Action] = handler(ev)
         acts += self._vin_due()
         if (self.state, self.reason) != before:  # first: follow-ups may change it again
-            acts.insert(0, Publish(StateChanged(self.state.value, self.reason, t=ev.t)))
+            acts.insert(0, Publish(StateChanged(self.state, self.reason, t=ev.t)))
         return acts
 
     @property

@@ -70,12 +70,23 @@ def _jsonable(v: Any) -> Any:
 
 
 # -- the station's state ----------------------------------------------------------------------
+class State(enum.StrEnum):
+    """The station's state (its value is the word the screens and STATUS= show)."""
+
+    STARTING = "starting"
+    WAITING_VEHICLE = "waiting for vehicle"
+    TRACKING = "tracking"
+    BOLT_SELECTED = "bolt selected"
+    TIGHTENING = "tightening"
+    FAULT = "fault"
+    TEACHING = "teaching"
+
+
 @dataclass(frozen=True)
 class StateChanged(StationEvent):
-    """The cycle's state or its reason changed (``state`` is a ``State`` value string:
-    ``waiting for vehicle``, ``tracking``, ``bolt selected``, ``tightening``, ``fault``)."""
+    """The cycle's state or its reason changed."""
 
-    state: str
+    state: State
     reason: str
 
 

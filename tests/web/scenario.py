@@ -16,6 +16,7 @@ from stationd.station.events import (
     ParamsSent,
     Refused,
     ResultRecorded,
+    State,
     StateChanged,
     StationEvent,
     ToolEnabled,
@@ -46,7 +47,7 @@ def opened() -> list[StationEvent]:
                                                   ("B3", 0, 300), ("B4", 400, 300)]))
     return [
         DeviceHealth(device="lift", ok=True), DeviceHealth(device="wrench", ok=True),
-        StateChanged(state="tracking", reason="vehicle at height"),
+        StateChanged(state=State.TRACKING, reason="vehicle at height"),
         VehicleOpened(vin=VIN, model="SEDAN", bolts=bolts),
     ]
 
@@ -82,7 +83,7 @@ def fault() -> list[StationEvent]:
     return [
         DeviceHealth(device="lift", ok=False, kind="timeout",
                      reason="no answer from 10.0.0.7:502 for 2.0 s"),
-        StateChanged(state="fault", reason="lift: no answer from 10.0.0.7:502 for 2.0 s"),
+        StateChanged(state=State.FAULT, reason="lift: no answer from 10.0.0.7:502 for 2.0 s"),
         Refused(reason=Reason(Why.DEVICE_FAULT, note="lift: no answer from 10.0.0.7:502 for "
                                                      "2.0 s")),
     ]
@@ -116,7 +117,7 @@ def long_fault() -> list[StationEvent]:
     ]
     reason = "; ".join(f"{d}: {r}" for d, _, r in faults)
     return [*(DeviceHealth(device=d, ok=False, kind=k, reason=r) for d, k, r in faults),
-            StateChanged(state="fault", reason=reason),
+            StateChanged(state=State.FAULT, reason=reason),
             Refused(reason=Reason(Why.DEVICE_FAULT, note=reason))]
 
 
