@@ -15,7 +15,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TypeVar
 
 from db.bolts import Parameters
 from db.repository import Repository
@@ -72,6 +72,7 @@ from stationd.station.trust import MeasureReferences, RecordCheck
 from stationd.words import answer_words, check_words, reason_words
 
 log = logging.getLogger("stationd")
+A = TypeVar("A")
 #: how long the controller may take to confirm parameters, s
 SEND_TIMEOUT_S = 2.0
 
@@ -178,7 +179,7 @@ class Actions:
         self._database.lost(DeviceError(one_line(exc)))
         return DeviceFault(time.time(), DATABASE, FaultKind.DOWN, f"{what}{one_line(exc)}")
 
-    async def _database_step(self, fn: Callable[[Any], Event], arg: Any) -> Event:
+    async def _database_step(self, fn: Callable[[A], Event], arg: A) -> Event:
         try:
             return await self._call(fn, arg)
         except STATION_FAULTS as exc:

@@ -66,6 +66,10 @@ from stationd.station.trust import PairTrust
 
 log = logging.getLogger("stationd")
 D = TypeVar("D")
+T = TypeVar("T")
+#: any of the station's keepers (the lift's, the wrench's, a pair's, the database's)
+Keeper = (DeviceKeeper[Lift] | DeviceKeeper[Wrench] | DeviceKeeper[Pair]
+          | DeviceKeeper[Repository])
 TICK_S = 0.5
 #: what opening a device may raise besides (a port that does not exist, a bad option)
 OPEN_ERRORS: tuple[type[Exception], ...] = (*STATION_FAULTS, OSError, ValueError)
@@ -136,7 +140,7 @@ class Station:
                             logger=log)
 
     @property
-    def keepers(self) -> dict[str, DeviceKeeper[Any]]:
+    def keepers(self) -> dict[str, Keeper]:
         """Every device's keeper by name: the lift, the wrench, each pair, the database."""
         return {LIFT: self.lift_keeper, WRENCH: self.wrench_keeper, **self.pair_keepers,
                 DATABASE: self.database_keeper}
@@ -284,7 +288,7 @@ class Station:
         finally:
             self.actions.answers.pop(request, None)
 
-    async def _call(self, fn: Callable[[], Any]) -> Any:
+    async def _call(self, fn: Callable[[], T]) -> T:
         return await asyncio.get_running_loop().run_in_executor(self._pool, fn)
 
     async def feed(self, ev: Event) -> None:
