@@ -36,6 +36,7 @@ from stationd.command_cli import (
 from stationd.errors import InputError
 from stationd.outfile import write_atomic
 from stationd.station.matching import check_spacing
+from stationd.taught import table_text
 
 
 def _cad(path: str, model: str) -> tuple[dict[str, Any], list[dict[str, Any]]]:
@@ -168,22 +169,9 @@ def _stop(args: argparse.Namespace, command: Any, client: ApiClient) -> None:
 
 def _write(out: Path, doc: dict[str, Any], model: str, taught: dict[str, dict[str, Any]]
            ) -> None:
-    """The CAD table with the taught positions (or, without one, the positions alone)."""
-    def pos(r: dict[str, Any]) -> list[float]:
-        return [round(float(v), 1) for v in r["position_mm"]]
-
-    if doc:
-        for b in doc["models"][model].get("bolts") or []:
-            if isinstance(b, dict) and str(b.get("id")) in taught:
-                b["position"] = pos(taught[str(b["id"])])
-        body = doc
-    else:
-        body = {"model": model, "bolts": [{"id": b, "position": pos(r), "dispersion_mm":
-                                           round(float(r["dispersion_mm"]), 3)}
-                                          for b, r in taught.items()]}
-    head = (f"# taught by stationd teach for {model}: positions in the vehicle frame, mm\n"
-            + ("" if doc else "# positions only: add each bolt's parameters before import\n"))
-    write_atomic(out, head + yaml.safe_dump(body, sort_keys=False))
+    """The CAD table with the taught positions (or, without one, the positions alone): the
+    same text the commissioning screen downloads (:mod:`stationd.taught`)."""
+    write_atomic(out, table_text(doc, model, taught))
 
 
 def add_teach_parser(sub: Any) -> None:

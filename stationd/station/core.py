@@ -642,6 +642,8 @@ class StationCore:
             rule = self.nok.rule(k, ev.bolts[k].pset)
             if status == NOK:
                 self._nok_last.add(k)
+                if rule.count_in_batch:   # the NOK counts in its batch (the policy's choice)
+                    self.matcher.counted.add(k)
             if status == TO_LOOSEN or (status == NOK and rule.strategy == "loosen"):
                 if rule.loosen_pset is None:
                     self.matcher.skipped.setdefault(k, NO_LOOSEN_PSET)
@@ -723,8 +725,9 @@ class StationCore:
             if spread > TEACH_STEADY_MM:   # moved while measured: not a position
                 return [*acts, Reply(Answer(c.request, c.command, c.issuer, Reason(
                     Why.NOT_STEADY, distance_mm=spread, limit=TEACH_STEADY_MM)))]
+            # the matching tolerance: what the edges compare the taught bolt with CAD against
             result = {"position_mm": [float(v) for v in mean], "dispersion_mm": spread,
-                      "frames": TEACH_FRAMES}
+                      "frames": TEACH_FRAMES, "tolerance_mm": self.params.tolerance_mm}
             return [*acts, Reply(Answer(c.request, c.command, c.issuer, result=result))]
         if teach.tries >= TEACH_TRIES:
             why = Reason(Why.NOT_STEADY, count=len(teach.points), needed=TEACH_FRAMES)
@@ -850,6 +853,7 @@ class StationCore:
                 self._noks.pop(en.bolt, None)
                 self._loosen.discard(en.bolt)
                 self._nok_last.discard(en.bolt)
+                self.matcher.counted.discard(en.bolt)
             else:
                 self._nok_last.add(en.bolt)
                 acts += self._after_nok(ev.t, en)
@@ -1034,6 +1038,7 @@ class StationCore:
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
         self.matcher.done.discard(en.bolt)
         self._nok_last.discard(en.bolt)
+        self.matcher.counted.discard(en.bolt)   # undone: no longer counts in its batch
         if ok:
             self._loosen.discard(en.bolt)
             return [Publish(Notice(f"{en.bolt} loosened: its tightening pset goes next",
@@ -1062,6 +1067,8 @@ class StationCore:
                              if en.bolt in self._specs else en.pset)
         if rule.strategy == "loosen" and rule.loosen_pset is not None:
             self._loosen.add(en.bolt)
+        if rule.count_in_batch:     # the sequence goes on without an OK of this bolt
+            self.matcher.counted.add(en.bolt)
         if n >= rule.max_nok:
             return self._lock(t, en.bolt, n)
         if en.bolt in self._loosen:

@@ -34,6 +34,9 @@ Sequence (``rules``: bolt id -> :class:`BoltRule`, from the bolt table's optiona
   followers, the rest of the world while its batch is open) and the reason says it was skipped
   and why, so that the operator knows what to do: the vehicle then goes out with the blocked
   bolts missing rather than tightened out of sequence.
+- *Counted* (``counted``): bolts not done whose NOK counts in their batch (the NOK policy's
+  ``count_in_batch``): the sequence treats them as done (their batch may close, their order's
+  followers go on), the selection does not (a NOK bolt may still be tightened again).
 - The sequence applies to re-tightening a done bolt too (when allowed): it is a tightening.
 """
 
@@ -97,6 +100,7 @@ class BoltMatcher:
     skipped: dict[str, str] = field(default_factory=dict)  # bolt -> why it is not tightened
     locked: dict[str, int] = field(default_factory=dict)   # bolt -> NOKs in a row (released
     #                                                        only by a supervisor's command)
+    counted: set[str] = field(default_factory=set)  # NOK last, counted done by the sequence
     # id -> order and batch; read once, at construction.  Rules of ids that are not in
     # ``bolts`` are ignored: a bolt the station cannot tighten must not block the others.
     rules: Mapping[str, BoltRule] = field(default_factory=dict)
@@ -145,7 +149,7 @@ class BoltMatcher:
         rule = self._rule.get(bolt, NO_RULE)
         open_batches: dict[str, list[str]] = {}
         for name, members in self._batches.items():
-            rest = [b for b in members if b not in self.done]
+            rest = [b for b in members if b not in self.done and b not in self.counted]
             if rest and len(rest) < len(members):
                 open_batches[name] = rest
         if open_batches and rule.batch not in open_batches:
@@ -153,7 +157,8 @@ class BoltMatcher:
                             for name, rest in open_batches.items())
             waits = [b for r in open_batches.values() for b in r]
         else:
-            waits = [b for b in self._before.get(bolt, ()) if b not in self.done]
+            waits = [b for b in self._before.get(bolt, ())
+                     if b not in self.done and b not in self.counted]
             if not waits:
                 return None
             group = f" in batch {rule.batch}" if rule.batch is not None else ""

@@ -11,6 +11,8 @@ tightens that model.
       strategy: repeat      # repeat: open again; skip: marked NOK and skipped for the vehicle;
                             # loosen: the loosen pset runs first, then the tightening pset
       loosen_pset: 90       # the controller's program that loosens (needed by ``loosen``)
+      count_in_batch: false # a bolt whose last rundown is a NOK counts as tightened for the
+                            # sequence (its batch may close, its order's followers go on)
       psets: {125: {max_nok: 1}}
       bolts: {B07: {strategy: loosen, loosen_pset: 91}}
 
@@ -39,7 +41,7 @@ from stationd.yamlio import YamlNode
 STRATEGIES = ("repeat", "skip", "loosen")
 DEFAULT_MAX_NOK = 3
 PSET_MAX = 999
-RULE_KEYS = ("max_nok", "strategy", "loosen_pset")
+RULE_KEYS = ("max_nok", "strategy", "loosen_pset", "count_in_batch")
 
 
 @dataclass(frozen=True)
@@ -50,6 +52,8 @@ class NokRule:
     max_nok: int = DEFAULT_MAX_NOK
     strategy: str = "repeat"
     loosen_pset: int | None = None
+    #: a NOK counts in the bolt's batch (and order): the sequence goes on without an OK
+    count_in_batch: bool = False
 
     def merged(self, node: YamlNode, keys: tuple[str, ...] = RULE_KEYS) -> NokRule:
         """This rule with what ``node`` overrides (refused with its line when it cannot be
@@ -62,6 +66,8 @@ class NokRule:
             rule = replace(rule, strategy=m["strategy"].text(STRATEGIES))
         if "loosen_pset" in m:
             rule = replace(rule, loosen_pset=m["loosen_pset"].integer(lo=1, hi=PSET_MAX))
+        if "count_in_batch" in m:
+            rule = replace(rule, count_in_batch=m["count_in_batch"].flag())
         if rule.strategy == "loosen" and rule.loosen_pset is None:
             raise m.get("strategy", node).error(
                 "loosen needs a loosen_pset: the controller's program that loosens the bolt "

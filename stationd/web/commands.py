@@ -17,6 +17,8 @@ session from a user's password, the core's answer), whatever the client; the sta
   (a reload) ends; one whose role changed has the new role's rights.
 - ``GET /api/feed?since=N&limit=M``: every record after sequence number N, in order (a
   subscriber that was away catches up from the database, not from the live bus).
+- ``GET /api/teach``, ``GET /api/teach/table``: what teach mode measured, the table to import
+  (:mod:`stationd.web.teach`).
 
 POSTs must be JSON (``Content-Type: application/json``): a cross-site form cannot send that
 without a preflight this server never grants, and the session cookie is SameSite=Strict.
@@ -49,6 +51,7 @@ from stationd.station.commands import (
     TeachStart,
     TeachStop,
 )
+from stationd.web.teach import TeachRoutes
 from stationd.words import answer_words, reason_words
 
 log = logging.getLogger("stationd")
@@ -70,6 +73,8 @@ class CommandRoutes:
         self.replays = ReplayGuard()
         self.throttle = LoginThrottle()
         self._feed = feed   # the results source (None while the database is not open)
+        #: what teach mode measured (every teach answer passes here): the Teach panel's
+        self.teach = TeachRoutes(feed)
 
     def add_to(self, app: web.Application) -> None:
         r = app.router
@@ -79,6 +84,7 @@ class CommandRoutes:
         r.add_get("/api/nonce", self._nonce)
         r.add_post("/api/commands", self._command)
         r.add_get("/api/feed", self._feed_since)
+        self.teach.add_to(app)
 
     # -- sessions ---------------------------------------------------------------------------
     async def _login(self, request: web.Request) -> web.Response:
@@ -163,6 +169,7 @@ class CommandRoutes:
         except TimeoutError:
             raise web.HTTPServiceUnavailable(text="the station did not answer in time\n"
                                              ) from None
+        self.teach.heard(answer)
         out: dict[str, Any] = {"accepted": answer.accepted, "words": answer_words(answer),
                                "kind": KIND[type(command)]}
         if answer.result is not None:

@@ -4,6 +4,7 @@ the count survives a reload (it comes with the vehicle)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import pytest
@@ -23,6 +24,7 @@ from stationd.station.core import (
 from stationd.station.events import BoltLocked, BoltReleased, BoltSkipped
 from stationd.station.policy import NokPolicy, NokRule, table_errors
 from stationd.yamlio import YamlNode
+from tests.station import test_core
 from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
 from tests.station.test_core import BOLTS, PARAMS, Driver, _on, result
 
@@ -156,3 +158,47 @@ def test_overrides_naming_what_no_bolt_table_has_are_refused_with_their_lines():
                                  "bolt B9: no model of bolts.yaml has it",
                                  "loosen_pset 2 tightens B2 (M) in bolts.yaml"), strict=True):
         assert words in str(e), e
+
+
+#: B1 and B2 one batch, B3 another (at B3's place in BOLTS)
+BATCHED = {k: replace(b, batch="A" if k != "B3" else "C") for k, b in BOLTS.items()}
+
+
+def _batched(policy: NokPolicy, monkeypatch: pytest.MonkeyPatch) -> Driver:
+    monkeypatch.setattr(test_core, "BOLTS", BATCHED)   # what the driver's vehicle loads
+    return _driver(policy)
+
+
+@pytest.mark.parametrize("counts", [False, True])
+def test_a_nok_counts_in_its_batch_only_when_the_policy_says_so(counts, monkeypatch):
+    """B1 OK and B2 NOK (skipped for the vehicle): batch A is finished only if a NOK counts
+    in a batch; else B3 (batch C) waits for it, with the reason."""
+    d = _batched(NokPolicy(NokRule(strategy="skip", count_in_batch=counts)), monkeypatch)
+    _tighten(d, 1, 1, ok=True)
+    _tighten(d, 2, 2, ok=False)
+    assert ("B2" in d.core.matcher.counted) is counts
+    sends = len(d.sends)
+    _on(d, 3)
+    if counts:
+        assert d.sends[sends:] == ["B3"]
+    else:
+        assert len(d.sends) == sends
+        assert str(d.core.matcher.why_blocked("B3")).startswith(
+            "finish batch A first: B2 remaining; B2 was skipped")
+    # an OK of the bolt later (a rework) clears it; so does its state coming back with the
+    # vehicle after a restart (its last rundown a NOK)
+    core = StationCore(PARAMS, leave_frames=2, nok=d.core.nok)
+    core.feed(Started(d.t))
+    core.feed(VehicleLoaded(d.t, "VIN1", "M", BATCHED, done=frozenset({"B1"}),
+                            status={"B1": "ok", "B2": "nok"}, noks={"B2": 1}))
+    assert core.matcher is not None
+    assert ("B2" in core.matcher.counted) is counts
+    assert (core.matcher.why_blocked("B3") is None) is counts
+
+
+def test_count_in_batch_is_a_flag_per_rule_refused_with_its_line():
+    p = NokPolicy.from_node(YamlNode.parse("count_in_batch: true\npsets:\n"
+                                           "  2: {count_in_batch: false}\n", "station.yaml"))
+    assert p.rule("B1", 1).count_in_batch and not p.rule("B2", 2).count_in_batch
+    with pytest.raises(ConfigError, match=r"station.yaml:1.*true or false"):
+        NokPolicy.from_node(YamlNode.parse("count_in_batch: sometimes\n", "station.yaml"))

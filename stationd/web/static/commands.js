@@ -1,57 +1,17 @@
-// Commands from the operator screen: log in (a session cookie the server sets), skip a bolt of
+// Commands from the operator screen (logged in through session.js): skip a bolt of
 // the vehicle at the station, release a locked bolt, loosen a tightened one for rework, reopen
 // a closed vehicle.  The station decides: the screen shows
 // its answer (accepted, or refused with the reason in words) and nothing else.
 "use strict";
 (function () {
   const q = (id) => document.getElementById(id);
-  let rights = [];
-
-  function show(who) {
-    const signed = Boolean(who && who.user);
-    rights = signed ? who.rights : [];
-    q("login").hidden = signed;
-    q("signed").hidden = !signed;
-    q("who").textContent = signed ? `${who.user} (${who.rights.join(", ") || "no rights"})` : "";
+  // logging in and out, and each command's nonce and answer: session.js (the Teach panel's too)
+  const {command, answer} = window.StationSession.bind((rights) => {
     q("skip").hidden = !rights.includes("skip");
     q("reopen").hidden = !rights.includes("reopen");
     q("release").hidden = !rights.includes("release");
     q("loosen").hidden = !rights.includes("loosen");
-  }
-
-  function answer(text, ok) {
-    const a = q("cmd-answer");
-    a.textContent = text;
-    a.className = ok ? "cmd-ok" : "cmd-refused";
-    a.dataset.ok = ok ? "1" : "0";
-  }
-
-  async function post(path, body) {
-    const r = await fetch(path, {method: "POST", credentials: "same-origin",
-      headers: {"Content-Type": "application/json"}, body: JSON.stringify(body)});
-    const text = await r.text();
-    let doc = null;
-    try { doc = JSON.parse(text); } catch (e) { doc = null; }
-    return {status: r.status, doc, text: text.trim()};
-  }
-
-  async function command(body) {
-    // a single-use nonce from the station for each command: a captured request cannot be
-    // sent again, and the panel PC's clock does not matter
-    const n = await fetch("/api/nonce", {credentials: "same-origin"});
-    if (!n.ok) {
-      if (n.status === 401) show(null);
-      answer((await n.text()).trim() || `HTTP ${n.status}`, false);
-      return;
-    }
-    const r = await post("/api/commands", {...body, nonce: (await n.json()).nonce});
-    if (r.doc && "accepted" in r.doc) answer(r.doc.accepted ? r.doc.words :
-      `refused: ${r.doc.reason.words}`, r.doc.accepted);
-    else {
-      if (r.status === 401) show(null);
-      answer(r.text || `HTTP ${r.status}`, false);
-    }
-  }
+  });
 
   // the bolts one may skip (those of the vehicle at the station not done yet) and those one
   // may release (locked after too many NOKs)
@@ -74,18 +34,6 @@
     fill("loosen-bolt", (b) => (b.state === "ok" || b.state === "nok") && !b.loosen && !b.locked);
   }, 500);
 
-  q("login").addEventListener("submit", async (e) => {
-    e.preventDefault();
-    const r = await post("/api/login", {user: q("login-user").value, password: q("login-password").value});
-    q("login-password").value = "";
-    if (r.status === 200 && r.doc) { show(r.doc); answer(`logged in as ${r.doc.user}`, true); }
-    else answer(r.text || `HTTP ${r.status}`, false);
-  });
-  q("logout").addEventListener("click", async () => {
-    await post("/api/logout", {});
-    show(null);
-    answer("logged out", true);
-  });
   q("skip").addEventListener("submit", (e) => {
     e.preventDefault();
     const view = window.lastView;
@@ -111,5 +59,4 @@
     e.preventDefault();
     command({kind: "reopen", vin: q("reopen-vin").value, comment: q("reopen-comment").value});
   });
-  fetch("/api/me", {credentials: "same-origin"}).then((r) => r.ok ? r.json() : null).then(show, () => show(null));
 })();

@@ -1,0 +1,75 @@
+// A user's session on a screen, shared by the operator screen's Commands panel and the
+// commissioning screen's Teach panel: log in (a session cookie the server sets), log out, and
+// give a command (a single-use nonce from the station, then the command).  The station decides:
+// a command's answer is what it said (accepted, or refused with the reason in words).
+//
+// A page has one login form: #login (#login-user, #login-password), #signed (#who, #logout) and
+// #cmd-answer; StationSession.bind(onWho) wires them and returns {command, show, answer}.
+"use strict";
+window.StationSession = (function () {
+  const q = (id) => document.getElementById(id);
+
+  async function post(path, body) {
+    const r = await fetch(path, {method: "POST", credentials: "same-origin",
+      headers: {"Content-Type": "application/json"}, body: JSON.stringify(body)});
+    const text = await r.text();
+    let doc = null;
+    try { doc = JSON.parse(text); } catch (e) { doc = null; }
+    return {status: r.status, doc, text: text.trim()};
+  }
+
+  function answer(text, ok) {
+    const a = q("cmd-answer");
+    a.textContent = text;
+    a.className = ok ? "cmd-ok" : "cmd-refused";
+    a.dataset.ok = ok ? "1" : "0";
+  }
+
+  function bind(onWho) {
+    function show(who) {
+      const signed = Boolean(who && who.user);
+      q("login").hidden = signed;
+      q("signed").hidden = !signed;
+      q("who").textContent = signed ? `${who.user} (${who.rights.join(", ") || "no rights"})` : "";
+      onWho(signed ? who.rights : []);
+    }
+
+    // the station's answer, shown; resolves to the answer's JSON (null: no answer from the
+    // station: not logged in, a refused nonce, the station not serving)
+    async function command(body) {
+      // a single-use nonce for each command: a captured request cannot be sent again, and
+      // the panel PC's clock does not matter
+      const n = await fetch("/api/nonce", {credentials: "same-origin"});
+      if (!n.ok) {
+        if (n.status === 401) show(null);
+        answer((await n.text()).trim() || `HTTP ${n.status}`, false);
+        return null;
+      }
+      const r = await post("/api/commands", {...body, nonce: (await n.json()).nonce});
+      if (r.doc && "accepted" in r.doc) {
+        answer(r.doc.accepted ? r.doc.words : `refused: ${r.doc.reason.words}`, r.doc.accepted);
+        return r.doc;
+      }
+      if (r.status === 401) show(null);
+      answer(r.text || `HTTP ${r.status}`, false);
+      return null;
+    }
+
+    q("login").addEventListener("submit", async (e) => {
+      e.preventDefault();
+      const r = await post("/api/login", {user: q("login-user").value, password: q("login-password").value});
+      q("login-password").value = "";
+      if (r.status === 200 && r.doc) { show(r.doc); answer(`logged in as ${r.doc.user}`, true); }
+      else answer(r.text || `HTTP ${r.status}`, false);
+    });
+    q("logout").addEventListener("click", async () => {
+      await post("/api/logout", {});
+      show(null);
+      answer("logged out", true);
+    });
+    fetch("/api/me", {credentials: "same-origin"}).then((r) => r.ok ? r.json() : null).then(show, () => show(null));
+    return {command, show, answer};
+  }
+
+  return {bind, post};
+})();
