@@ -33,11 +33,13 @@ from aiohttp import web
 from db.errors import NotFoundError
 from db.repository import Repository
 from stationd.errors import InputError
+from stationd.station.commands import Right
 from stationd.station.core import LIFT, WRENCH
 from stationd.station.events import EventBus, PairFrames
 from stationd.web.commands import POSTS, CommandRoutes
 from stationd.web.config import HttpConfig, open_bind_problem
 from stationd.web.frames import LatestFrames, sharpness
+from stationd.web.line import LineRoutes
 from stationd.web.results import Results, rundowns_csv
 from stationd.web.view import View, fold
 
@@ -104,6 +106,8 @@ class WebServer:
         self.commands = CommandRoutes(lambda: self.results)
         #: the line forwarder's latest status (backlog, lag, last error), set by the serve loop
         self.line: Callable[[], dict[str, Any] | None] = lambda: None
+        #: the line page (every station's rundowns); the serve loop sets ``line_results.url``
+        self.line_results = LineRoutes()
 
     # -- lifecycle ---------------------------------------------------------------------
     async def start(self) -> None:
@@ -190,9 +194,20 @@ class WebServer:
             log.exception("screens: event not shown: %r", event)
 
     def _encode(self) -> bytes:
-        doc = {**self.view.to_json(), "heartbeat_s": HEARTBEAT_S, "line": self.line()}
+        doc = {**self.view.to_json(), "heartbeat_s": HEARTBEAT_S, "line": self.line(),
+               "release_by": self.release_by()}
         return b"data: " + json.dumps(doc, separators=(",", ":"),
                                       default=_plain).encode() + b"\n\n"
+
+    def release_by(self) -> list[str]:
+        """The roles whose users may release a locked bolt (the running station's
+        ``access``): what the operator screen says beside a lock, so the operator knows whom
+        to call."""
+        access = self.commands.access
+        if access is None:
+            return []
+        return sorted(name for name, rights in access.roles.items()
+                      if Right.RELEASE in rights)
 
     # -- HTTP -----------------------------------------------------------------------------
     def _routes(self, app: web.Application) -> None:
@@ -218,6 +233,7 @@ class WebServer:
         r.add_get("/api/spc", self._spc)
         r.add_get("/images/{path:.+}", self._image)
         self.commands.add_to(app)
+        self.line_results.add_to(app)
 
     @web.middleware
     async def _guard(self, request: web.Request, handler: Any) -> web.StreamResponse:

@@ -9,6 +9,7 @@ same events live.  ``View.apply`` is the only way state changes.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -23,6 +24,8 @@ from stationd.station.events import (
     DeviceHealth,
     DeviceIdentified,
     Localized,
+    PairChecked,
+    PairsUnchecked,
     ParamsRefusedEvent,
     ParamsSent,
     Refused,
@@ -35,7 +38,7 @@ from stationd.station.events import (
     VehicleOpened,
     WrongBolt,
 )
-from stationd.words import reason_words
+from stationd.words import check_words, reason_words
 
 # a bolt's state on the screen; the label is what the operator reads next to the colour
 BOLT_LABELS = {
@@ -44,6 +47,7 @@ BOLT_LABELS = {
     "missing": "missing",    # a closed vehicle's bolt left untightened (the daemon's report)
     "loosen": "loosen first",   # its loosen pset goes next (the NOK policy, a loosen command)
     "loosened": "loosened",  # loosened last: its tightening pset goes next
+    "locked": "locked",      # too many NOKs in a row: refused until a release
 }
 # states a bolt can no longer be in once its vehicle closed: nothing is next or selected any
 # more on a vehicle that left (the ones the daemon reports missing become "missing")
@@ -55,9 +59,21 @@ LAST_RESULTS = 8
 # sequence forbids sending; any other refusal while tracking means the wrench is simply not on
 # a bolt (between bolts, out of view): a normal state, shown neutral, never as an alarm
 ACT_ON = frozenset({Why.STALE, Why.AMBIGUOUS, Why.TILTED, Why.MUST_WAIT, Why.SKIPPED,
-                    Why.DONE})
+                    Why.DONE, Why.LOCKED})
 NOT_AT_A_BOLT = "Bring the wrench to a bolt"
 TRACKING_STATES = tuple(s.value for s in LOCALIZING)   # where a refusal speaks of the wrench
+# refusals that forbid their bolt (drawn "blocked"): the sequence's; a bolt the wrench is
+# settling on ("B21: stable for 1 of 3 frames") is not blocked (it was drawn so beside that
+# headline); skipped and locked bolts have their own states
+BLOCKS = frozenset({Why.MUST_WAIT})
+# how much nearer to the wrench another open bolt must be to take the "next" pointer, mm
+NEXT_HYSTERESIS_MM = 20.0
+# a wrench refused with a position the vision found but will not use: seen, not out of view
+WRENCH_SEEN = frozenset({Why.TILTED, Why.PAIRS_DISAGREE})
+# how long stale frames before any fresh one read as the station starting (the cameras' first
+# frames on their way), not as the stale-frame alarm: seconds of event time
+STARTUP_GRACE_S = 30.0
+STARTING_UP = "Starting: waiting for the cameras' first frames"
 
 
 @dataclass
@@ -74,13 +90,18 @@ class BoltState:
     angle_deg: float | None = None
     locked: bool = False        # too many NOKs in a row: a supervisor releases it
     loosen: bool = False        # its loosen pset goes next, before its tightening pset
+    loosen_pset: int | None = None   # that loosen pset, as the station said it
+    nok_count: int = 0          # NOKs in a row when it locked
 
     def to_json(self) -> dict[str, Any]:
         return {"bolt": self.bolt, "x": self.x_mm, "y": self.y_mm, "pset": self.pset,
                 "order": self.order, "batch": self.batch, "state": self.state,
-                "label": BOLT_LABELS.get(self.state, self.state), "reason": self.reason,
+                # the tool on for its loosen pset: the operator loosens, never "tighten"
+                "label": "loosen" if self.loosen and self.state == "tightening"
+                else BOLT_LABELS.get(self.state, self.state), "reason": self.reason,
                 "torque_nm": self.torque_nm, "angle_deg": self.angle_deg,
-                "locked": self.locked, "loosen": self.loosen}
+                "locked": self.locked, "loosen": self.loosen,
+                "loosen_pset": self.loosen_pset, "nok_count": self.nok_count}
 
 
 @dataclass
@@ -99,8 +120,12 @@ class View:
     refused_why: Reason | None = None
     devices: dict[str, dict[str, Any]] = field(default_factory=dict)
     identities: dict[str, str] = field(default_factory=dict)   # device -> what it said it is
+    # each pair's calibration check (``PairChecked``, ``PairsUnchecked``): trusted or not,
+    # the verdict (ok, moved, not checked) and the words; none without reference markers
+    checks: dict[str, dict[str, Any]] = field(default_factory=dict)
     results: list[dict[str, Any]] = field(default_factory=list)
     selected: str | None = None
+    selected_loosen: int | None = None   # the loosen pset sent for the selected bolt
     closed: dict[str, Any] | None = None
     alarm: str = ""              # a wrong bolt reported by the simulation's checker
     # the devices the station was configured with (lift, wrench, each pair), given by the
@@ -113,6 +138,12 @@ class View:
     # after that; the one state published before, ``run._open``'s "fault: database" while the
     # database does not open, arrives with the database reported down and does not count
     opened: bool = False
+    # fresh frames came since the station started (``_frames_seen``); the event time of the
+    # first stale localization before them and of the last localization
+    fresh: bool = False
+    stale_since: float | None = None
+    last_t: float = 0.0
+    located: Localized | None = None   # the last localization (what "next" is pointed from)
 
     def apply(self, e: StationEvent) -> None:
         """Fold one event in."""
@@ -121,7 +152,8 @@ class View:
             if e.state == "starting":
                 # a station (re)starting on its configuration: the last one's device
                 # reports are not about these devices (a reload kept a fixed wrench "down")
-                self.devices, self.opened = {}, False
+                self.devices, self.opened, self.checks = {}, False, {}
+                self.fresh, self.stale_since = False, None
             if e.state != "starting" and self.devices.get(DATABASE, {}).get("ok", True):
                 self.opened = True
             if e.state not in TRACKING_STATES:
@@ -132,6 +164,14 @@ class View:
             self.identities[e.device] = e.identity
         elif isinstance(e, DeviceHealth):
             self.devices[e.device] = {"ok": e.ok, "kind": e.kind, "reason": e.reason}
+        elif isinstance(e, PairChecked):
+            self.checks[e.pair] = {"trusted": e.trusted, "verdict": e.verdict,
+                                   "words": check_words(e)}
+        elif isinstance(e, PairsUnchecked):
+            for r in e.reasons:
+                if r.pair is not None:
+                    self.checks[r.pair] = {"trusted": False, "verdict": "not checked",
+                                           "words": reason_words(r)}
         elif isinstance(e, VehicleOpened):
             self._open(e)
         elif isinstance(e, VehicleClosed):
@@ -140,14 +180,20 @@ class View:
             self._localized(e)
         elif isinstance(e, Refused):
             self._refuse(reason_words(e.reason), e.reason)
-            if e.bolt in self.bolts and self.bolts[e.bolt].state in ("pending", "next"):
+            if e.bolt in self.bolts and self.bolts[e.bolt].state in ("pending", "next") \
+                    and e.reason.kind in BLOCKS:
                 self._set(e.bolt, "blocked", self.refused)
         elif isinstance(e, BoltSelected):
             self._unselect()
             self.selected = e.bolt
+            self.selected_loosen = e.pset if e.loosen else None
+            if e.loosen and e.bolt in self.bolts:
+                self.bolts[e.bolt].loosen_pset = e.pset
             self._refuse("")
             self._set(e.bolt, "selected", (f"loosen pset {e.pset}: loosen first" if e.loosen
                                            else f"pset {e.pset}") if e.pset is not None else "")
+            if self.located is not None:    # the bolt pointed out was taken: point out another
+                self._point_out_next(self.located)
         elif isinstance(e, ParamsSent):
             self._refuse("")
         elif isinstance(e, ParamsRefusedEvent):
@@ -165,14 +211,20 @@ class View:
                 self._refuse(e.reason)
         elif isinstance(e, BoltSkipped):
             self._set(e.bolt, "skipped", e.reason)
-        elif isinstance(e, BoltLocked | BoltReleased) and e.bolt in self.bolts:
-            locked = isinstance(e, BoltLocked)
-            self.bolts[e.bolt].locked = locked
-            self._set(e.bolt, "blocked" if locked else "pending",
-                      f"locked after {e.count} NOK in a row: a supervisor releases it"
-                      if isinstance(e, BoltLocked) else "")
+        elif isinstance(e, BoltLocked) and e.bolt in self.bolts:
+            b = self.bolts[e.bolt]
+            b.locked, b.nok_count = True, e.count
+            if self.selected == e.bolt:
+                self.selected = None
+            self._set(e.bolt, "locked",
+                      reason_words(Reason(Why.LOCKED, bolt=e.bolt, count=e.count)))
+        elif isinstance(e, BoltReleased) and e.bolt in self.bolts:
+            self.bolts[e.bolt].locked = False
+            self._set(e.bolt, "pending", f"released by {e.user}")
         elif isinstance(e, BoltToLoosen) and e.bolt in self.bolts:
             self.bolts[e.bolt].loosen = True
+            if e.reason.pset is not None:
+                self.bolts[e.bolt].loosen_pset = e.reason.pset
             if not self.bolts[e.bolt].locked:
                 self._set(e.bolt, "loosen", reason_words(e.reason))
         elif isinstance(e, ResultRecorded):
@@ -183,6 +235,7 @@ class View:
     def _open(self, e: VehicleOpened) -> None:
         self.vin, self.model, self.rework = e.vin, e.model, e.rework
         self.closed, self.selected, self.wrench, self.refused = None, None, None, ""
+        self.located = None
         self.results = []
         self.bolts = {b.bolt: BoltState(b.bolt, b.x_mm, b.y_mm, b.pset, b.order, b.batch,
                                         b.status if b.status in BOLT_LABELS else "pending",
@@ -194,29 +247,73 @@ class View:
         self.wrench, self.selected = None, None
         if e.vin != self.vin:
             return
-        missing = set(e.missing)
+        missing, nok = set(e.missing), set(e.nok)
         for b in self.bolts.values():
-            if b.bolt in missing and b.state != "nok":
+            if b.state == "locked":   # its last rundown a NOK: the report's word decides
+                b.state = "nok" if b.bolt in nok or b.bolt not in missing else "missing"
+                b.reason = "locked when the vehicle left"
+            elif b.bolt in missing and b.state != "nok":
                 b.state, b.reason = "missing", "not tightened when the vehicle left"
             elif b.state in LIVE_STATES:
                 b.state, b.reason = "pending", ""
 
     def _localized(self, e: Localized) -> None:
         if e.point_mm is None:
-            self.wrench = None if self.wrench is None else {
-                **self.wrench, "lost": True,
-                "reason": reason_words(e.reason, full=True) if e.reason else ""}
+            # no position: none is drawn (a grey crosshair left where the wrench was last
+            # seen, on B47, was read as the wrench on B47 beside "not in view"); the panel
+            # says whether it is out of view or seen and refused (tilted: the headline's
+            # reason), from the same reason the headline gives
+            seen = e.reason is not None and e.reason.kind in WRENCH_SEEN
+            self.wrench = {"lost": True, "seen": seen,
+                           "reason": reason_words(e.reason, full=True) if e.reason else "",
+                           "words": reason_words(e.reason) if e.reason else ""}
         else:
             self.wrench = {"x": e.point_mm[0], "y": e.point_mm[1], "z": e.point_mm[2],
                            "tilt": e.tilt_deg, "candidate": e.candidate,
                            "distance": e.distance_mm, "age_ms": e.age_ms, "lost": False,
                            "reason": reason_words(e.reason) if e.reason else ""}
+        self._frames_seen(e)
+        self.located = e
+        self._point_out_next(e)
+
+    def _point_out_next(self, e: Localized) -> None:
+        """One open bolt the rules allow now is "next", the others "to do": without an order
+        in the bolt table every open bolt is allowed, and 50 blue "next" bolts point out
+        none.  The one pointed out is the nearest to the wrench while it is in view; while
+        it is not, the one pointed out last (the wrench leaving the view for a frame does not
+        move the pointer), else the table's first.  A bolt blocked by a refusal stays blocked
+        until the rules allow it."""
         allowed = set(e.allowed)
+        shown = ("pending", "next", "blocked")
+        candidates = [b for b in self.bolts.values() if b.state in shown and b.bolt in allowed]
+        pointed: BoltState | None = None
+        last = next((b for b in candidates if b.state == "next"), None)
+        if candidates and e.point_mm is not None:
+            x, y = e.point_mm[0], e.point_mm[1]
+
+            def far(b: BoltState) -> float:
+                return math.hypot(b.x_mm - x, b.y_mm - y)
+            pointed = min(candidates, key=far)
+            # a wrench midway between two bolts does not flip the pointer (and redraw the
+            # map) at every localization: the last one stays until another is clearly nearer
+            if last is not None and far(last) - far(pointed) < NEXT_HYSTERESIS_MM:
+                pointed = last
+        elif candidates:
+            pointed = last or candidates[0]
         for b in self.bolts.values():
-            if b.state in ("pending", "next", "blocked"):
-                want = "next" if b.bolt in allowed else "pending"
-                if b.state != "blocked" or want == "next":
-                    b.state, b.reason = want, ""
+            if b.state not in shown or (b.state == "blocked" and b.bolt not in allowed):
+                continue
+            b.state, b.reason = ("next" if b is pointed else "pending"), ""
+
+    def _frames_seen(self, e: Localized) -> None:
+        """Whether fresh frames came since the station started: until they do, a stale
+        localization is the cameras' first frames on their way (a demo's start: 7.5 s old),
+        not the stale-frame alarm, for at most :data:`STARTUP_GRACE_S`."""
+        if e.reason is None or e.reason.kind is not Why.STALE:
+            self.fresh = True
+        elif not self.fresh and self.stale_since is None:
+            self.stale_since = e.t
+        self.last_t = e.t
 
     def _result(self, e: ResultRecorded) -> None:
         if e.vin == self.vin and e.bolt in self.bolts:
@@ -230,7 +327,7 @@ class View:
                 self._set(e.bolt, "ok" if e.ok else "nok", "" if e.ok else "NOK: rework")
             b.torque_nm, b.angle_deg = e.torque_nm, e.angle_deg
         if self.selected == e.bolt:
-            self.selected = None
+            self.selected, self.selected_loosen = None, None
         self.results.insert(0, {
             "t": e.t, "vin": e.vin, "bolt": e.bolt, "ok": e.ok, "pset": e.pset,
             "torque_nm": e.torque_nm, "torque_min": e.torque_min, "torque_max": e.torque_max,
@@ -259,22 +356,34 @@ class View:
     # -- what the screens read ----------------------------------------------------------
     def counters(self) -> dict[str, int]:
         states = [b.state for b in self.bolts.values()]
-        return {"total": len(states), "done": states.count("ok"), "nok": states.count("nok"),
+        # a locked bolt's last rundown is a NOK: it counts as one
+        return {"total": len(states), "done": states.count("ok"),
+                "nok": states.count("nok") + states.count("locked"),
                 "skipped": states.count("skipped")}
+
+    def locks(self) -> list[str]:
+        """Each locked bolt in the operator's words (the screen adds who may release)."""
+        return [b.reason for b in self.bolts.values() if b.state == "locked"]
 
     def device_health(self) -> dict[str, dict[str, Any]]:
         """Every configured device, then any other that reported: reported health wins; an
         unreported configured device is "opening" ("not opened yet", neutral) until the
-        station has tried its devices (``opened``), "ok" after (one that failed reported)."""
+        station has tried its devices (``opened``), "ok" after (one that failed reported).
+        A pair the calibration check measures carries its trust (``check``: ``trusted``,
+        ``verdict`` ok / moved / not checked, ``words``): a pair can be up and not trusted."""
         up = self.opened
-        out = {d: {"ok": up, "kind": "" if up else "opening",
-                   "reason": "" if up else "not opened yet", "reported": False}
-               for d in self.configured}
+        out: dict[str, dict[str, Any]] = {
+            d: {"ok": up, "kind": "" if up else "opening",
+                "reason": "" if up else "not opened yet", "reported": False}
+            for d in self.configured}
         for d, h in self.devices.items():
             out[d] = {**h, "reported": True}
         for d, who in self.identities.items():
             if d in out:
                 out[d]["identity"] = who
+        for d, check in self.checks.items():   # a pair's trust: beside its health
+            if d in out:
+                out[d]["check"] = dict(check)
         return out
 
     def tone(self) -> str:
@@ -289,7 +398,7 @@ class View:
                                                        for h in self.devices.values()):
             return "stop"
         if self.refused:
-            return "act" if self.act else "idle"
+            return "act" if self.act and not self.starting_up() else "idle"
         if self.selected is not None:
             return "go"
         if self.closed is not None:
@@ -320,15 +429,23 @@ class View:
         if faults:
             return "FAULT: " + cut("; ".join(faults))
         if self.refused:
+            if self.starting_up():
+                age = self.refused_why.age_ms if self.refused_why is not None else None
+                return "Starting: the cameras' first frames are late" + (
+                    f" ({age:.0f} ms old)" if age else "")
             if not self.act and self._not_at_a_bolt():
                 return NOT_AT_A_BOLT
             return self.refused
         if self.selected is not None:
+            if self.selected_loosen is not None:   # the loosen step: never "tighten"
+                return f"{self.selected}: loosen first (loosen pset {self.selected_loosen})"
             b = self.bolts.get(self.selected)
             pset = f" (pset {b.pset})" if b is not None and b.pset is not None else ""
             return f"{self.selected}{pset}: tighten"
         if self.closed is not None:
             return self._closed_line(NAMES_SHOWN)
+        if self.state in TRACKING_STATES and not self.fresh and self.stale_since is None:
+            return STARTING_UP    # tracking, and no frame localized since the start yet
         return self.reason or self.state
 
     def _closed_line(self, shown: int | None) -> str:
@@ -346,6 +463,28 @@ class View:
             return self._closed_line(None)
         return self.headline(full=True)
 
+    def starting_up(self) -> bool:
+        """The refusal is stale frames and no fresh frame came since the station started,
+        for at most :data:`STARTUP_GRACE_S`: the station is starting, not alarming."""
+        why = self.refused_why
+        return (why is not None and why.kind is Why.STALE and not self.fresh
+                and self.stale_since is not None
+                and self.last_t - self.stale_since <= STARTUP_GRACE_S)
+
+    def wrench_line(self) -> str:
+        """The wrench panel's line, from the same localization as the map's crosshair and the
+        headline's reason: out of view (no crosshair), seen and refused (why), or where."""
+        w = self.wrench
+        if w is None:
+            return "not localized"
+        if w.get("lost"):
+            return f"seen, not used: {w['words']}" if w.get("seen") else \
+                "not in view (details: Cameras)"
+        near = f", near {w['candidate']} ({w['distance']:.1f} mm)" \
+            if w.get("candidate") and w.get("distance") is not None else ""
+        tilt = f", tilt {w['tilt']:.1f}\u00b0" if w.get("tilt") is not None else ""
+        return f"X {w['x']:.0f}  Y {w['y']:.0f}  Z {w['z']:.0f} mm{tilt}{near}"
+
     def _not_at_a_bolt(self) -> bool:
         """The wrench is out of view, or seen but near no bolt."""
         w = self.wrench
@@ -362,7 +501,9 @@ class View:
                                                       "rework": self.rework},
             "bolts": [b.to_json() for b in self.bolts.values()],
             "selected": self.selected, "wrench": self.wrench, "counters": self.counters(),
+            "wrench_line": self.wrench_line(),
             "devices": self.device_health(), "results": self.results, "closed": self.closed,
+            "locks": self.locks(),
         }
 
 
@@ -387,7 +528,7 @@ def fold(events: list[StationEvent] | tuple[StationEvent, ...],
 def copy_view(v: View) -> View:
     """A shallow-independent copy (tests compare before/after)."""
     return replace(v, bolts={k: replace(b) for k, b in v.bolts.items()},
-                   devices=dict(v.devices), results=list(v.results))
+                   devices=dict(v.devices), results=list(v.results), checks=dict(v.checks))
 
 
 def _shortened(text: str, limit: int = REASON_SHOWN) -> str:

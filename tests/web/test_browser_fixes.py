@@ -19,6 +19,7 @@ from stationd.station.events import (
     VehicleClosed,
 )
 from stationd.web.server import WebServer
+from tests.web.mapgeo import confusable, map_geometry
 from tests.web.pages import Page
 from tests.web.scenario import opened, sim_vehicle, work
 from tests.web.test_browser import label_overlaps
@@ -54,43 +55,9 @@ def redrawn(page: Page) -> bool:
         " && document.querySelectorAll('#bolts g.lbl').length === 50"))
 
 
-def map_geometry(page: Page) -> dict[str, Any]:
-    """Every dot's screen centre and radius, every shown label's screen box."""
-    got: dict[str, Any] = page.js("""
-        const dots = {}, labels = {};
-        for (const g of document.querySelectorAll('#bolts g.bolt')) {
-            const c = g.querySelector('circle').getBoundingClientRect();
-            dots[g.dataset.bolt] = [(c.left + c.right) / 2, (c.top + c.bottom) / 2,
-                                    parseFloat(g.querySelector('circle').getAttribute('r'))];
-            const l = g.querySelector('g.lbl');
-            if (getComputedStyle(l).visibility !== 'hidden') {
-                const r = l.getBoundingClientRect();
-                labels[g.dataset.bolt] = [r.left, r.top, r.right, r.bottom];
-            }
-        }
-        const m = document.getElementById('map').getBoundingClientRect();
-        return {dots, labels, map: [m.width, m.height]};""")
-    return got
-
-
-def box_dist(box, x, y) -> float:
-    dx = max(box[0] - x, 0.0, x - box[2])
-    dy = max(box[1] - y, 0.0, y - box[3])
-    return float(np.hypot(dx, dy))
-
-
 def misread_labels(geo: dict[str, Any]) -> list[str]:
-    """Each shown label whose box (its nearest edge) is as near another bolt's dot centre as
-    its own, or nearer: what an operator would read as the other bolt's."""
-    out = []
-    for b, box in geo["labels"].items():
-        x, y, _ = geo["dots"][b]
-        own = box_dist(box, x, y)
-        for o, (ox, oy, _) in geo["dots"].items():
-            if o != b and box_dist(box, ox, oy) <= own:
-                out.append(f"{b} label {own:.0f}px from own dot, "
-                           f"{box_dist(box, ox, oy):.0f}px from {o}")
-    return out
+    """Each shown label an operator could read as another bolt's (``tests.web.mapgeo``)."""
+    return confusable(geo)
 
 
 def overlapping_dots(geo: dict[str, Any]) -> list[str]:

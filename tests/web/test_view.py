@@ -28,6 +28,10 @@ def test_opened_vehicle_has_pending_bolts_and_counters():
     assert (v.vin, v.model) == (VIN, "SEDAN")
     assert set(states(v).values()) == {"pending"}
     assert v.counters() == {"total": 4, "done": 0, "nok": 0, "skipped": 0}
+    # no frame localized since the station started: it says so (test_view_agree)
+    assert v.headline() == "Starting: waiting for the cameras' first frames"
+    v.apply(Localized(point_mm=None, tilt_deg=None, reason=NOT_SEEN, candidate=None,
+                      distance_mm=None, age_ms=30.0))
     assert v.headline() == "vehicle at height"
 
 
@@ -57,7 +61,7 @@ def test_device_fault_without_fault_state_still_headlines():
     v = fold([*opened(), DeviceHealth(device="cam-a", ok=False, kind="down", reason="no frames")])
     assert v.headline() == "FAULT: cam-a: no frames"
     v.apply(DeviceHealth(device="cam-a", ok=True))
-    assert v.headline() == "vehicle at height"
+    assert v.headline() == "Starting: waiting for the cameras' first frames"
 
 
 def test_a_long_fault_reason_is_cut_in_the_headline_and_whole_in_its_title():
@@ -94,11 +98,13 @@ def test_refusal_blocks_its_bolt_and_is_the_headline_until_a_selection():
     assert states(v)["B2"] == "next"     # the rule now allows it
 
 
-def test_lost_wrench_keeps_last_position_marked_lost():
+def test_lost_wrench_is_marked_lost_without_a_position():
+    """No crosshair where it was last seen: a grey one left on B47 beside "not in view" was
+    read as the wrench on B47 (the map and the panel say the same)."""
     v = fold(opened() + work())
     v.apply(Localized(point_mm=None, tilt_deg=None, reason=Reason(Why.STALE, age_ms=812.0),
                       candidate=None, distance_mm=None, age_ms=400.0))
-    assert v.wrench is not None and v.wrench["lost"]
+    assert v.wrench is not None and v.wrench["lost"] and "x" not in v.wrench
     assert v.wrench["reason"] == "localization is stale (812 ms old)"
 
 
@@ -158,6 +164,12 @@ NOT_SEEN = Reason(Why.NOT_LOCALIZED, per_pair=tuple(
     for k in range(1, 5) for side in ("left", "right")))
 
 
+def seen_at(x: float, y: float) -> Localized:
+    """A fresh localization near no bolt."""
+    return Localized(point_mm=(x, y, 0.0), tilt_deg=1.0, reason=None, candidate=None,
+                     distance_mm=None, age_ms=30.0)
+
+
 def lost(reason: Reason) -> Localized:
     return Localized(point_mm=None, tilt_deg=None, reason=reason, candidate=None,
                      distance_mm=None, age_ms=0.0)
@@ -183,7 +195,8 @@ def test_refusals_the_operator_resolves_are_amber_with_the_reason():
             (Reason(Why.TILTED, angle_deg=14.2, limit=10.0), "wrench tilted 14.2 deg (> 10 deg)"),
             (Reason(Why.MUST_WAIT, bolt="B4", note="order 2 needs B3 done first"),
              "B4 must wait: order 2 needs B3 done first")):
-        v = fold([*opened(), lost(reason), Refused(reason=reason)])
+        # after fresh frames (before them, stale frames are the station starting)
+        v = fold([*opened(), seen_at(200.0, 150.0), lost(reason), Refused(reason=reason)])
         assert (v.tone(), v.headline()) == ("act", said), said
 
 

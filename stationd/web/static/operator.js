@@ -92,9 +92,12 @@ function buildMap(svg, bolts, W, H) {
   return [X, Y];
 }
 
+// the crosshair only where the wrench is now: out of view (or seen and refused) there is none,
+// as the wrench panel and the headline say (a grey one left where it was last seen, on a
+// bolt, read as the wrench on that bolt)
 function drawWrench(svg, w, W, H) {
   let g = document.getElementById("wrench-mark");
-  if (!toMap || !w || w.x === undefined) {
+  if (!toMap || !w || w.lost || w.x === undefined) {
     if (g) g.remove();
     return;
   }
@@ -111,31 +114,37 @@ function drawWrench(svg, w, W, H) {
   const [X, Y] = toMap;
   // map units are CSS pixels (the view box is the map's own size)
   const x = Math.min(W - 14, Math.max(14, X(w.x))), y = Math.min(H - 14, Math.max(14, Y(w.y)));
-  const cls = "wrench-mark" + (w.lost ? " wrench-lost" : "");
-  if (g.className !== cls) g.className = cls;
+  if (g.className !== "wrench-mark") g.className = "wrench-mark";
   g.style.transform = `translate(${x.toFixed(1)}px,${y.toFixed(1)}px)`;
 }
 
 // Each bolt's label (its id, and its state words when they matter) goes where it collides
 // with no other label and covers no bolt: greedy, the bolts that matter now first, trying
-// above, below, right, left, the diagonals, then farther out.  A label that finds no room is
-// hidden (shown on hover); the bolt keeps its coloured symbol and state icon, so colour is
-// still never the only cue.
-const PRIORITY = {selected: 0, tightening: 0, locked: 1, loosen: 1, nok: 1, blocked: 1, next: 2,
+// above, below, right, left, the diagonals, then farther out; in a cluster, where no place
+// beside its dot reads as its own, farther still with a leader line to its dot.  A label
+// that finds no room is hidden (shown on hover); the bolt keeps its coloured symbol and
+// state icon, so colour is still never the only cue.
+const PRIORITY = {selected: 0, tightening: 0, next: 1, locked: 1, loosen: 1, nok: 1, blocked: 1,
   missing: 2};
-// A label must read as its own bolt's: it is kept only where its box is nearer its own dot
-// than any other dot by NEARER px (the box's nearest edge to the dot's centre: what the eye
-// pairs), else it is hidden and shown on hover (a label 22 px from B20 and 56 px from B36
-// was read as B20's); NEARER covers the box measured here being 3 px larger than drawn
-const NEARER = 4;
+// A label must read as its own bolt's: it is kept only where its own dot is clearly the
+// nearest, by the box's nearest edge (what the eye pairs first) and by its centre (where
+// the eye lands: "B21" 14 px from B21 and 20 px from B25, its centre between the two, was
+// read as B25's), each by a margin that grows with the distance (a label far from its dot
+// needs a clearer lead); else it is hidden and shown on hover.  The margins also cover the
+// box measured here being 3 px larger than drawn.
+const NEARER = 8, CENTRE_NEARER = 6, LEAD = 0.35;
 function boxDist(box, px, py) {
   const dx = Math.max(box[0] - px, 0, px - box[2]), dy = Math.max(box[1] - py, 0, py - box[3]);
   return Math.hypot(dx, dy);
 }
 function readsAsOwn(box, x, y, dots) {
   const own = boxDist(box, x, y);
-  for (const [ox, oy] of dots)
-    if (!(ox === x && oy === y) && boxDist(box, ox, oy) < own + NEARER) return false;
+  const cx = (box[0] + box[2]) / 2, cy = (box[1] + box[3]) / 2, ownC = Math.hypot(cx - x, cy - y);
+  for (const [ox, oy] of dots) {
+    if (ox === x && oy === y) continue;
+    if (boxDist(box, ox, oy) < own * (1 + LEAD) + NEARER) return false;
+    if (Math.hypot(cx - ox, cy - oy) < ownC * (1 + LEAD) + CENTRE_NEARER) return false;
+  }
   return true;
 }
 // The map is redrawn with every snapshot (up to 10 a second, the wrench moving): the
@@ -157,13 +166,15 @@ function placeLabels(placed, r, dense, W, H) {
     else if (b.state === "selected" && b.pset !== null) tag += ` P${b.pset}`;
     if (b.state === "loosen" && b.loosen_pset !== null) tag += ` P${b.loosen_pset}`;
     if ((b.state === "ok" || b.state === "nok") && b.torque_nm !== null) tag += ` ${fmt(b.torque_nm, 1)}`;
-    const matters = ["selected", "tightening", "nok", "blocked", "locked", "loosen"].includes(b.state);
+    // the one bolt pointed out "next" says so (the others are "to do")
+    const matters = ["selected", "tightening", "next", "nok", "blocked", "locked", "loosen"]
+      .includes(b.state);
     if (dense && !matters) tag = null;
     const lbl = el("g", {class: "lbl"});
     lbl.appendChild(el("text", {class: "bolt-id", y: 0}, b.bolt));
     if (tag !== null) lbl.appendChild(el("text", {class: "tag label", y: dense ? 15 : 26}, tag));
     g.appendChild(lbl);
-    return {b, lbl, x, y, text: `${dense}|${b.bolt}|${tag}`};
+    return {b, g, lbl, x, y, text: `${dense}|${b.bolt}|${tag}`};
   });
   const key = `${W}x${H}|${r}|` + labels.map((l) => `${l.text}@${l.x.toFixed(1)},${l.y.toFixed(1)}`).join(";");
   if (key !== lastPlacement.key) {
@@ -202,20 +213,76 @@ function placeLabels(placed, r, dense, W, H) {
         }
         if (best) break;
       }
+      // no place beside its dot in a cluster: farther out, with a leader line to its dot
+      let leader = null;
+      for (const far of best ? [] : LEADER_PX) {
+        for (const [dx, dy] of dirs) {
+          const cx = x + dx * (r + far + w / 2), cy = y + dy * (r + far + h / 2);
+          const box = [cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2];
+          if (box[0] < 0 || box[1] < 0 || box[2] > W || box[3] > H) continue;
+          if (taken.some((t) => hit(t, box))) continue;
+          leader = leaderLine(x, y, r, box, dots, taken);
+          if (leader === null) continue;
+          best = [cx, cy, box];
+          break;
+        }
+        if (best) break;
+      }
       if (best) {
         taken.push(best[2]);
+        if (leader) taken.push(...along(leader));
         at.set(text, [false, `translate(${(best[0] - x - bb.x - bb.width / 2).toFixed(1)},` +
-          `${(best[1] - y - bb.y - bb.height / 2).toFixed(1)})`]);
+          `${(best[1] - y - bb.y - bb.height / 2).toFixed(1)})`,
+          leader && leader.map((v, i) => v - (i % 2 ? y : x))]);
       } else
-        at.set(text, [true, `translate(0,${(-r - gap - bb.y - bb.height).toFixed(1)})`]);
+        at.set(text, [true, `translate(0,${(-r - gap - bb.y - bb.height).toFixed(1)})`, null]);
     }
     lastPlacement = {key, at};
   }
-  for (const {lbl, text} of labels) {
-    const [hidden, transform] = lastPlacement.at.get(text);
+  for (const {g, lbl, text} of labels) {
+    const [hidden, transform, leader] = lastPlacement.at.get(text);
     lbl.setAttribute("transform", transform);
     if (hidden) lbl.setAttribute("class", "lbl hidden");
+    if (leader) g.insertBefore(el("line", {class: "leader", x1: leader[0].toFixed(1),
+      y1: leader[1].toFixed(1), x2: leader[2].toFixed(1), y2: leader[3].toFixed(1)}), g.firstChild);
   }
+}
+
+// A label with a leader line: beyond its dot by one of LEADER_PX (px past the dot's edge);
+// the line runs from the dot's edge to the label's nearest point and passes near no other
+// dot and through no label (each is checked; placed, it takes its room like a label)
+const LEADER_PX = [14, 24, 36];
+function leaderLine(x, y, r, box, dots, taken) {
+  // to the drawn text's box (the box placed is 3 px larger each side: the outline stroke)
+  const px = Math.min(Math.max(x, box[0] + 3), box[2] - 3);
+  const py = Math.min(Math.max(y, box[1] + 3), box[3] - 3);
+  const len = Math.hypot(px - x, py - y);
+  if (len < r + 6) return null;
+  const ux = (px - x) / len, uy = (py - y) / len;
+  const line = [x + ux * (r + 1), y + uy * (r + 1), px, py];
+  for (const [ox, oy] of dots)
+    if (!(ox === x && oy === y) && (segDist(line, ox, oy) < r + 4 || boxDist(box, ox, oy) < r + 6))
+      return null;
+  const inside = (t, [qx, qy]) => qx > t[0] && qx < t[2] && qy > t[1] && qy < t[3];
+  const pts = along(line).map((q) => [q[0] + 1, q[1] + 1]);
+  // its own dot's square (the line starts inside its corner) is no obstacle
+  const own = (t) => t[0] === x - r && t[1] === y - r;
+  if (taken.some((t) => !own(t) && pts.some((q) => inside(t, q)))) return null;
+  return line;
+}
+function segDist([x1, y1, x2, y2], px, py) {
+  const L = (x2 - x1) ** 2 + (y2 - y1) ** 2;
+  const t = L ? Math.max(0, Math.min(1, ((px - x1) * (x2 - x1) + (py - y1) * (y2 - y1)) / L)) : 0;
+  return Math.hypot(px - x1 - t * (x2 - x1), py - y1 - t * (y2 - y1));
+}
+// small boxes along a line, every 4 px: the room it takes from later labels
+function along([x1, y1, x2, y2]) {
+  const n = Math.max(1, Math.ceil(Math.hypot(x2 - x1, y2 - y1) / 4)), out = [];
+  for (let i = 0; i <= n; i++) {
+    const qx = x1 + (x2 - x1) * i / n, qy = y1 + (y2 - y1) * i / n;
+    out.push([qx - 1, qy - 1, qx + 1, qy + 1]);
+  }
+  return out;
 }
 
 // a text is written only when it changed: rewriting the same words still costs the browser
@@ -247,9 +314,8 @@ function render(view) {
   // the per-pair reasons of a wrench out of view are the commissioning screen's business:
   // here one line, the full text on hover
   $("wrench").title = w && w.lost ? w.reason : "";
-  setText("wrench", !w ? "not localized" : w.lost ? "not in view (details: Cameras)" :
-    `X ${fmt(w.x, 0)}  Y ${fmt(w.y, 0)}  Z ${fmt(w.z, 0)} mm, tilt ${fmt(w.tilt, 1)}\u00B0` +
-    (w.candidate ? `, near ${w.candidate} (${fmt(w.distance, 1)} mm)` : ""));
+  $("wrench").dataset.seen = !w ? "none" : !w.lost ? "here" : w.seen ? "refused" : "out";
+  setText("wrench", view.wrench_line);   // the view's words: the headline's reason
   const results = view.results.slice(0, 6);
   const rkey = JSON.stringify(results), dkey = JSON.stringify([view.devices, lineShown(view.line)]);
   if (rkey !== shownKeys.results) { shownKeys.results = rkey; drawResults(results); }
@@ -324,6 +390,7 @@ function drawDevices(devices, line) {
   // (red, with the figure) or not checked yet (neutral, with why); its bolts are refused
   const fine = (d) => d.ok && (!d.check || d.check.trusted);
   const devs = Object.entries(devices).sort((a, b) => Number(fine(a[1])) - Number(fine(b[1])));
+  const rows = [];
   for (const [name, d] of devs) {
     const li = document.createElement("li");
     const check = d.ok ? d.check : null;
@@ -336,8 +403,66 @@ function drawDevices(devices, line) {
     // what the device said it is (the controller's name, versions), its last check: on hover
     const title = [d.identity, check && check.trusted ? check.words : ""].filter(Boolean);
     if (title.length) li.title = title.join("\n");
-    ul.appendChild(li);
+    rows.push([li, name, d]);
   }
+  for (const li of sameReasonOnce(rows)) ul.appendChild(oneLine(li));
+}
+
+// Eight pairs down for the same cause (their reasons alike but for their own names and URLs)
+// are one line with a count, not eight long ones: the devices panel pushed the Commands out
+// of the window.  Each device's whole reason is in the line's title (hover) and opens in
+// place on a click.
+function sameReasonOnce(rows) {
+  const out = [], groups = new Map();
+  for (const [li, name, d] of rows) {
+    if (d.ok || !d.reason) { out.push(li); continue; }
+    const key = `${li.className}|${d.kind}|${d.reason.split(name).join("\u0000")}`;
+    const g = groups.get(key);
+    if (!g) {
+      const first = {li, names: [name], titles: [`${name} ${d.kind}: ${d.reason}`], d};
+      groups.set(key, first);
+      out.push(first);
+      continue;
+    }
+    g.names.push(name);
+    g.titles.push(`${name} ${d.kind}: ${d.reason}`);
+  }
+  return out.map((x) => {
+    if (x instanceof Element) return x;
+    const {li, names, titles, d} = x;
+    if (names.length > 1) {
+      li.dataset.devices = names.join(" ");
+      li.dataset.count = String(names.length);
+      li.textContent = `${namesShort(names)} (${names.length} devices) ${d.kind}: ${d.reason}`;
+      li.title = titles.join("\n");
+    }
+    return li;
+  });
+}
+
+// "pair1-4, pair7": runs of names that differ only by a number, said as a range
+function namesShort(names) {
+  const parts = [];
+  for (const n of names) {
+    const m = /^(.*?)(\d+)$/.exec(n), last = parts[parts.length - 1];
+    if (m && last && last.prefix === m[1] && Number(m[2]) === last.to + 1) last.to += 1;
+    else parts.push(m ? {prefix: m[1], from: Number(m[2]), to: Number(m[2])} : {name: n});
+  }
+  return parts.map((p) => p.name !== undefined ? p.name : p.from === p.to ? `${p.prefix}${p.from}`
+    : `${p.prefix}${p.from}-${p.to}`).join(", ");
+}
+
+// one line, cut with an ellipsis; the whole text on hover, and in place on a click (kept
+// across redraws)
+const openRows = new Set();
+function oneLine(li) {
+  if (!li.title) li.title = li.textContent;
+  const id = li.dataset.devices || li.dataset.device;
+  if (openRows.has(id)) li.classList.add("full");
+  li.addEventListener("click", () => {
+    if (li.classList.toggle("full")) openRows.add(id); else openRows.delete(id);
+  });
+  return li;
 }
 
 // A screen that no longer hears the station must not look live: a green "ok" or a "tighten"
@@ -358,7 +483,7 @@ function notLive() {
   h.dataset.tone = "offline";
   for (const li of $("devices").querySelectorAll("li")) {
     li.className = "dev-unknown";
-    li.textContent = `${li.dataset.device}: unknown`;
+    li.textContent = `${namesShort((li.dataset.devices || li.dataset.device).split(" "))}: unknown`;
   }
   shownKeys.devices = "";   // redrawn from the next snapshot
   setText("state", "not live");
