@@ -6,12 +6,16 @@ records already hold every value and the limits that applied (the parameter vers
 the figures come from one query.  Cp = (USL - LSL) / 6 sigma, Cpk = min(USL - mean, mean -
 LSL) / 3 sigma (sample standard deviation); a group with fewer than ``MIN_N`` results, or no
 spread, has no figure (None), not a misleading one.
+
+Each group also carries its last ``LAST_N`` results, OK and NOK, and the limits in force
+(min, target, max of torque and angle): the screen plots them, because a figure alone hides a
+drift towards a limit or a run of NOKs that the eye sees at once.
 """
 
 from __future__ import annotations
 
 import math
-from collections import defaultdict
+from collections import defaultdict, deque
 from datetime import datetime
 from typing import Any
 
@@ -22,6 +26,7 @@ from db.kinds import TIGHTENING
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
 
 MIN_N = 5    # fewer results than this give no capability figure
+LAST_N = 30  # results per group for the screen's plot
 
 
 def capability(values: list[float], lo: float | None, hi: float | None) -> dict[str, Any]:
@@ -44,10 +49,21 @@ def capability(values: list[float], lo: float | None, hi: float | None) -> dict[
     return out
 
 
-def spc(s: Session, model: str | None = None, since: datetime | None = None
-        ) -> dict[str, Any]:
-    """Per bolt and pset (OK results): torque and angle capability; per day: results and
-    NOK rate."""
+def _limits(lo: float | None, target: float | None, hi: float | None) -> dict[str, Any]:
+    return {"min": lo, "target": target, "max": hi}
+
+
+def _point(rec: TighteningRecord) -> dict[str, Any]:
+    """One result for the plot: its values, OK or not, and when it was recorded (UTC, ISO)."""
+    return {"torque": None if rec.torque_nm is None else float(rec.torque_nm),
+            "angle": None if rec.angle_deg is None else float(rec.angle_deg),
+            "ok": rec.status == "ok", "at": rec.recorded_at.isoformat()}
+
+
+def spc(s: Session, model: str | None = None, since: datetime | None = None,
+        last: int = LAST_N) -> dict[str, Any]:
+    """Per bolt and pset (OK results): torque and angle capability, the group's last ``last``
+    results (OK and NOK, oldest first) and its limits; per day: results and NOK rate."""
     q = (select(TighteningRecord, Bolt.code, VehicleModel.name, ProcessParameters)
          .join(Bolt, TighteningRecord.bolt_id == Bolt.id)
          .join(Vehicle, TighteningRecord.vehicle_id == Vehicle.id)
@@ -55,21 +71,25 @@ def spc(s: Session, model: str | None = None, since: datetime | None = None
          .join(ProcessParameters, TighteningRecord.parameters_id == ProcessParameters.id)
          # tightenings only: a loosening is judged by its loosen program, not these limits
          .where(TighteningRecord.kind == TIGHTENING)
-         .order_by(TighteningRecord.recorded_at))
+         .order_by(TighteningRecord.recorded_at, TighteningRecord.id))
     if model is not None:
         q = q.where(VehicleModel.name == model)
     if since is not None:
         q = q.where(TighteningRecord.recorded_at >= since)
-    # a group per bolt, pset and the limits in force: a parameter change starts a new one
+    # a group per bolt, pset and the limits in force (min, target, max): a parameter change
+    # starts a new one, so a plot never mixes results tightened against different limits
     groups: dict[tuple[Any, ...], dict[str, Any]] = {}
     days: dict[str, list[int]] = defaultdict(lambda: [0, 0])
     for rec, bolt, mname, p in s.execute(q):
         day = rec.recorded_at.date().isoformat()
         days[day][0] += 1
         days[day][1] += rec.status == "nok"
-        limits = (p.torque_min, p.torque_max, p.angle_min, p.angle_max)
+        limits = (p.torque_min, p.torque_target, p.torque_max,
+                  p.angle_min, p.angle_target, p.angle_max)
         g = groups.setdefault((mname, bolt, p.pset, *limits), {
-            "torque": [], "angle": [], "limits": limits, "nok": 0, "version": p.version})
+            "torque": [], "angle": [], "limits": limits, "nok": 0, "version": p.version,
+            "last": deque(maxlen=max(0, last))})
+        g["last"].append(_point(rec))
         if rec.status != "ok":
             g["nok"] += 1
             continue
@@ -81,14 +101,17 @@ def spc(s: Session, model: str | None = None, since: datetime | None = None
     for key, g in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1], kv[0][2] or 0,
                                                              kv[1]["version"])):
         mname, bolt, pset = key[:3]
-        t_lo, t_hi, a_lo, a_hi = g["limits"]
+        t_lo, t_aim, t_hi, a_lo, a_aim, a_hi = g["limits"]
         rows.append({"model": mname, "bolt": bolt, "pset": pset, "nok": g["nok"],
                      "parameter_version": g["version"],
                      "torque": capability(g["torque"], t_lo, t_hi),
-                     "angle": capability(g["angle"], a_lo, a_hi)})
+                     "angle": capability(g["angle"], a_lo, a_hi),
+                     "limits": {"torque": _limits(t_lo, t_aim, t_hi),
+                                "angle": _limits(a_lo, a_aim, a_hi)},
+                     "last": list(g["last"])})
     trend = [{"day": d, "results": n, "nok": k, "nok_rate": k / n if n else None}
              for d, (n, k) in sorted(days.items())]
     return {"bolts": rows, "trend": trend}
 
 
-__all__ = ["MIN_N", "capability", "spc"]
+__all__ = ["LAST_N", "MIN_N", "capability", "spc"]

@@ -361,10 +361,12 @@ class Repository:
             append(s, UNATTRIBUTED, row.id)
             return row.id
 
-    def spc(self, model: str | None = None, since: datetime | None = None) -> dict[str, Any]:
-        """Cp/Cpk of torque and angle per bolt and pset (OK results), NOK rate per day."""
+    def spc(self, model: str | None = None, since: datetime | None = None,
+            last: int = quality.LAST_N) -> dict[str, Any]:
+        """Cp/Cpk of torque and angle per bolt and pset (OK results) with each group's last
+        ``last`` results and limits, NOK rate per day."""
         with self._session(write=False) as s:
-            return quality.spc(s, model, since)
+            return quality.spc(s, model, since, last)
 
     def last_tightening_id(self) -> int | None:
         """The newest controller tightening id the station accounted for (recorded to a

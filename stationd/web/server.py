@@ -31,6 +31,7 @@ from typing import Any
 from aiohttp import web
 
 from db.errors import NotFoundError
+from db.quality import LAST_N
 from db.repository import Repository
 from stationd.errors import InputError
 from stationd.station.commands import Right
@@ -49,6 +50,7 @@ FLUSH_HZ = 10.0
 #: with nothing to tell, the latest snapshot is sent again this often, s: a screen that hears
 #: nothing for three of these knows its stream stalled (a dead link need not break it)
 HEARTBEAT_S = 5.0
+_MAX_LAST = 500   # results per group the quality screen may ask to plot
 CLIENT_QUEUE = 16
 PAGES = {"/": "operator.html", "/cameras": "cameras.html", "/vehicles": "vehicles.html",
          "/quality": "quality.html"}
@@ -406,8 +408,12 @@ class WebServer:
         return "/images/" + p.relative_to(self.images_dir).as_posix()
 
     async def _spc(self, request: web.Request) -> web.Response:
-        """Cp/Cpk per bolt and pset on OK results, NOK per day (``?model=``, ``?since=``)."""
+        """Cp/Cpk per bolt and pset on OK results with the last results and limits for the
+        plot, NOK per day (``?model=``, ``?since=``, ``?last=`` results per group)."""
         res = self._need_results()
+        last = request.query.get("last", "")
+        if last and not (last.isdigit() and 1 <= int(last) <= _MAX_LAST):
+            raise web.HTTPBadRequest(text=f"last: a count of results from 1 to {_MAX_LAST}\n")
         since = None
         if request.query.get("since"):
             try:
@@ -415,7 +421,8 @@ class WebServer:
             except ValueError:
                 raise web.HTTPBadRequest(text="since: an ISO date (2026-11-23)\n") from None
             since = since if since.tzinfo is not None else since.replace(tzinfo=UTC)
-        doc = await self._db(res.repo.spc, request.query.get("model") or None, since)
+        doc = await self._db(res.repo.spc, request.query.get("model") or None, since,
+                             int(last) if last else LAST_N)
         return web.json_response(doc)
 
     async def _export_json(self, request: web.Request) -> web.Response:

@@ -76,3 +76,59 @@ def test_a_parameter_change_starts_a_new_group_and_an_unknown_model_is_bad_input
                           url_of(tmp_path / "station.db"), "--model", "NOPE"],
                          capture_output=True, text=True, cwd=ROOT, timeout=60, check=False)
     assert out.returncode == 2 and "no such model" in out.stderr
+
+
+def test_each_group_carries_its_last_results_ok_and_nok_and_the_limits_of_its_version(
+        repo, bolts_file):
+    from tests.db.conftest import BASE
+
+    import_bolts(repo, bolts_file)
+    rng = np.random.default_rng(21)
+    sent = []                                   # (torque, angle, ok) in the order recorded
+    repo.start_vehicle("VINL1", "SEDAN")
+    for i in range(35):
+        ok = bool(rng.random() > 0.2)
+        torque, angle = float(rng.normal(50, 1.5)), float(rng.normal(35, 4))
+        record(repo, "VINL1", "B1", ok=ok, tightening_id=i, torque_nm=torque, angle_deg=angle)
+        sent.append((torque, angle, ok))
+    record(repo, "VINL1", "B2", ok=False, tightening_id=99, torque_nm=None, angle_deg=None)
+    # version 2: only the target moves (the limits in force differ, so a new group)
+    bolts_file.write_text(BASE.replace("target: 50, min: 45, max: 55",
+                                       "target: 51, min: 45, max: 55"))
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VINL2", "SEDAN")
+    record(repo, "VINL2", "B1", tightening_id=200, torque_nm=51.0, angle_deg=33.0)
+    # version 3: min and max too
+    bolts_file.write_text(BASE.replace("target: 50, min: 45, max: 55",
+                                       "target: 52, min: 47, max: 57"))
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VINL3", "SEDAN")
+    record(repo, "VINL3", "B1", ok=False, tightening_id=300, torque_nm=58.5, angle_deg=70.0)
+    record(repo, "VINL3", "B1", tightening_id=301, torque_nm=52.2, angle_deg=36.0)
+
+    b1 = [r for r in repo.spc()["bolts"] if r["bolt"] == "B1"]
+    assert [r["parameter_version"] for r in b1] == [1, 2, 3]
+    assert [r["limits"]["torque"] for r in b1] == [
+        {"min": 45, "target": 50, "max": 55}, {"min": 45, "target": 51, "max": 55},
+        {"min": 47, "target": 52, "max": 57}]
+    assert all(r["limits"]["angle"] == {"min": 15, "target": 30, "max": 60} for r in b1)
+    # the last 30 of 35, oldest first, NOKs included; the figures still use every OK result
+    v1 = b1[0]
+    assert len(v1["last"]) == 30
+    assert [p["ok"] for p in v1["last"]] == [ok for _, _, ok in sent[-30:]]
+    assert [p["torque"] for p in v1["last"]] == pytest.approx([t for t, _, _ in sent[-30:]])
+    assert [p["angle"] for p in v1["last"]] == pytest.approx([a for _, a, _ in sent[-30:]])
+    assert v1["torque"]["n"] == sum(ok for _, _, ok in sent)
+    assert v1["nok"] == sum(not ok for _, _, ok in sent) > 0
+    ats = [p["at"] for p in v1["last"]]
+    assert ats == sorted(ats) and all("T" in a for a in ats)
+    assert [(p["torque"], p["ok"]) for p in b1[1]["last"]] == [(51.0, True)]
+    assert [(p["torque"], p["angle"], p["ok"]) for p in b1[2]["last"]] == [
+        (58.5, 70.0, False), (52.2, 36.0, True)]
+    # a NOK without values is still a result of the plot; B2's own limits, no pset
+    b2 = next(r for r in repo.spc()["bolts"] if r["bolt"] == "B2")
+    assert b2["pset"] is None and b2["limits"]["torque"] == {"min": 23, "target": 25, "max": 27}
+    assert [(p["torque"], p["ok"]) for p in b2["last"]] == [(None, False)]
+    # fewer asked for: the newest ones
+    short = next(r for r in repo.spc(last=5)["bolts"] if r["bolt"] == "B1")
+    assert [p["torque"] for p in short["last"]] == pytest.approx([t for t, _, _ in sent[-5:]])

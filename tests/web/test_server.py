@@ -254,3 +254,31 @@ def test_a_quiet_station_sends_its_snapshot_again_every_heartbeat(monkeypatch):
             await srv.stop()
 
     asyncio.run(main())
+
+
+def test_spc_serves_each_groups_last_results_and_limits_and_refuses_a_bad_count(tmp_path):
+    repo = results_db(tmp_path)      # B1 OK 50.2; B2 NOK 41.0 then OK 49.7 (pset 1: 45/50/55)
+
+    async def main():
+        srv = serve(EventBus(), results=Results(repo))
+        await srv.start()
+        try:
+            async with ClientSession() as http:
+                async with http.get(srv.url + "api/spc") as r:
+                    doc = await r.json()
+                b2 = next(b for b in doc["bolts"] if b["bolt"] == "B2")
+                assert [(p["torque"], p["ok"]) for p in b2["last"]] == [(41.0, False),
+                                                                        (49.7, True)]
+                assert b2["limits"] == {"torque": {"min": 45, "target": 50, "max": 55},
+                                        "angle": {"min": 15, "target": 30, "max": 60}}
+                async with http.get(srv.url + "api/spc?last=1") as r:
+                    doc = await r.json()
+                b2 = next(b for b in doc["bolts"] if b["bolt"] == "B2")
+                assert [p["torque"] for p in b2["last"]] == [49.7]
+                for bad in ("0", "x", "-3", "100000"):
+                    async with http.get(srv.url + f"api/spc?last={bad}") as r:
+                        assert r.status == 400 and "last:" in await r.text()
+        finally:
+            await srv.stop()
+            repo.close()
+    asyncio.run(main())
