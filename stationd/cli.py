@@ -378,12 +378,21 @@ def cmd_bench_soak(args: argparse.Namespace) -> int:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     # options that contradict each other or do nothing here: said, not silently dropped
-    if args.no_http and (args.http is not None or args.hold):
-        raise InputError("--no-http with --http or --hold: --hold keeps serving the screens")
+    if args.no_http and args.http is not None:
+        raise InputError("--no-http with --http: one or the other")
+    if args.no_opcua and args.opcua is not None:
+        raise InputError("--no-opcua with --opcua: one or the other")
+    if args.hold and args.no_http and args.no_opcua:
+        raise InputError("--hold with --no-http and --no-opcua: --hold keeps serving the "
+                         "screens or the OPC UA endpoint, and neither is served")
     if args.save is not None and not args.vision:
         raise InputError("--save writes the vision demo's images: it goes with --vision")
     if args.vision and (args.http is not None or args.hold):
         raise InputError("--http and --hold serve the station demo's screens, not --vision's")
+    if args.vision and (args.opcua is not None or args.line_db is not None
+                        or args.stations != 1):
+        raise InputError("--opcua, --line-db and --stations go with the station demo, not "
+                         "--vision")
     if args.vision:
         from stationd.demo.vision import run_demo
 
@@ -470,8 +479,16 @@ def build_parser() -> argparse.ArgumentParser:
                     "making the same requests, as browsers on the panel PCs would (the "
                     "daemon's own cost, without browsers rendering beside it)")
     bs.add_argument("--passes", type=int, default=1, metavar="K",
-                    help="with --browsers: alternate K passes with the screens and K without "
-                    "(after a first without), pooled (default: %(default)s)")
+                    help="with --browsers (or --opcua, --line): alternate K passes with the "
+                    "screens (the services) and K without (after a first without), pooled "
+                    "(default: %(default)s)")
+    bs.add_argument("--opcua", action="store_true",
+                    help="run the plan again with the OPC UA server and an MES subscribed in "
+                    "its own process: each result event's delay after the result was stored, "
+                    "and the latency with and without")
+    bs.add_argument("--line", action="store_true",
+                    help="run the plan again forwarding to a throw-away line PostgreSQL (with "
+                    "--opcua: both); the latency with and without")
     bs.add_argument("--paired", action="store_true",
                     help="with --browsers: within each pass with the screens, hold the "
                     "clients (SIGSTOP) on every other bolt and compare the bolts with them "
@@ -596,7 +613,17 @@ def build_parser() -> argparse.ArgumentParser:
                     "station file's http.listen, else 127.0.0.1:8080)")
     dm.add_argument("--no-http", action="store_true", help="do not serve the screens")
     dm.add_argument("--hold", action="store_true", help="after the run, keep serving the "
-                    "screens (results, export) until Ctrl-C")
+                    "screens (results, export) and the OPC UA endpoint until Ctrl-C")
+    dm.add_argument("--opcua", metavar="HOST:PORT", help="serve the station's OPC UA endpoint "
+                    "here (default: 127.0.0.1:4840, or the next free port; port 0: any free "
+                    "one); security none, anonymous read and subscribe")
+    dm.add_argument("--no-opcua", action="store_true", help="do not serve OPC UA")
+    dm.add_argument("--line-db", metavar="URL", help="forward the station's records to this "
+                    "line database (postgresql+psycopg://USER@HOST:PORT/DB)")
+    dm.add_argument("--stations", type=int, default=1, metavar="N",
+                    help="N simulated stations of one line (after the first, light ones, one "
+                    "after another), forwarding to --line-db or, without it, a throw-away "
+                    "PostgreSQL (default: %(default)s)")
     dm.add_argument("--load", type=int, default=0, metavar="N",
                     help="N busy processes beside the station for the run (CPU load)")
     dm.set_defaults(func=cmd_demo)

@@ -140,10 +140,13 @@ def run_station_bench(args: argparse.Namespace) -> int:
     if passes < 1:
         raise InputError("--passes must be at least 1")
     paired = bool(getattr(args, "paired", False))
-    if not browsers and (getattr(args, "clients", "chromium") != "chromium" or passes != 1
-                         or paired):
+    opcua, line = bool(getattr(args, "opcua", False)), bool(getattr(args, "line", False))
+    if browsers and (opcua or line):
+        raise InputError("--browsers and --opcua/--line: one comparison at a time")
+    if not browsers and (getattr(args, "clients", "chromium") != "chromium" or paired
+                         or (passes != 1 and not (opcua or line))):
         raise InputError("--clients, --passes and --paired go with --browsers N (the "
-                         "screens' clients)")
+                         "screens' clients); --passes also with --opcua or --line")
     tmp = tempfile.TemporaryDirectory(prefix="stationd-bench-")
     cfg = replace(load_station_config(SIM_CONFIG),
                   database_url=f"sqlite:///{tmp.name}/stationd.db", http=None)
@@ -163,7 +166,9 @@ def run_station_bench(args: argparse.Namespace) -> int:
     world.prerender([p for _, p in plan])
     prerender_s = time.perf_counter() - t0
     world_mb = float("nan")
+    pg = None
     try:
+        pg = _line_server() if line else None
         base = _run_once(cfg, world, plan, 0, bool(args.json))
         serveds: list[dict[str, Any]] = []
         agains: list[dict[str, Any]] = []
@@ -181,7 +186,19 @@ def run_station_bench(args: argparse.Namespace) -> int:
                 agains.append(_run_once(
                     replace(cfg, database_url=f"sqlite:///{tmp.name}/again{k}.db"), world,
                     plan, 0, bool(args.json)))
+        if opcua or line:
+            # the same plan with the services, then again without, ``passes`` times
+            for k in range(passes):
+                on = _with_services(cfg, opcua, None if pg is None else pg.url(), k)
+                serveds.append(_run_once(
+                    replace(on, database_url=f"sqlite:///{tmp.name}/services{k}.db"), world,
+                    plan, 0, bool(args.json), services=True))
+                agains.append(_run_once(
+                    replace(cfg, database_url=f"sqlite:///{tmp.name}/again{k}.db"), world,
+                    plan, 0, bool(args.json)))
     finally:
+        if pg is not None:
+            pg.stop()
         world_mb = world.buffer_bytes() / 2**20  # with the cameras' frame pools, now filled
         world.close()
         tmp.cleanup()
@@ -191,7 +208,16 @@ def run_station_bench(args: argparse.Namespace) -> int:
                        base["rss_open"], base["rss_end"])
     summary["cpu_pct"] = base["cpu_pct"]
     ok = summary["wrong_bolt_sends"] == 0 and not out["not_selected"]
-    if serveds:
+    if serveds and (opcua or line):
+        from stationd.bench.services import services_summary
+
+        summary["services"] = services_summary(
+            serveds, [base, *agains], opcua, line,
+            p95_delta_interval([x for r in serveds for x in r["by_bolt"]],
+                               [x for b in (base, *agains) for x in b["by_bolt"]]))
+        for run in (*serveds, *agains):
+            ok = ok and run["out"]["wrong"] == 0 and not run["out"]["not_selected"]
+    elif serveds:
         summary["screens"] = _screens_summary([base, *agains], _pooled(serveds), browsers)
         summary["screens"]["passes"] = passes
         if paired:
@@ -203,15 +229,22 @@ def run_station_bench(args: argparse.Namespace) -> int:
         sys.stdout.write(strict_json(summary) + "\n")
     else:
         _print(summary)
+        if "services" in summary:
+            from stationd.bench.services import print_services
+
+            print_services(summary["services"])
     return 0 if ok else 1
 
 
 def _run_once(cfg: StationConfig, world: World, plan: list[tuple[str, WrenchPose]],
               browsers: int, quiet: bool, kind: str = "chromium", nice: int | str = 0,
-              paired: bool = False, pass_index: int = 0) -> dict[str, Any]:
+              paired: bool = False, pass_index: int = 0, services: bool = False
+              ) -> dict[str, Any]:
     """One pass of the plan through a freshly opened daemon; with ``browsers``, the screens
     are served from the daemon's loop (as ``http:`` in the station file does) and that many
-    clients are connected before the first bolt and stay for the whole pass."""
+    clients are connected before the first bolt and stay for the whole pass; with
+    ``services``, the OPC UA server and the forwarder of ``cfg``'s sections run beside it
+    (:mod:`stationd.bench.services`)."""
     assert cfg.bolts_path is not None  # noqa: S101 - checked by the caller
     station = Station(cfg, device_kw={"wrench": {"psets": psets_of(cfg.bolts_path)}})
     out: dict[str, Any] = {"truth": None, "wrong": 0, "not_selected": []}
@@ -257,7 +290,13 @@ def _run_once(cfg: StationConfig, world: World, plan: list[tuple[str, WrenchPose
                     held_from.append((station.bus.count(ParamsSent), held))
                     hold(held)
                     await asyncio.sleep(PAIRED_SETTLE_S)
-            await _operator(station, world, plan, out, on_bolt)
+            if services:
+                from stationd.bench.services import services_on
+
+                async with services_on(cfg, station, info):
+                    await _operator(station, world, plan, out, on_bolt)
+            else:
+                await _operator(station, world, plan, out, on_bolt)
             info["cpu_s"], info["wall_s"] = time.process_time() - c0, time.perf_counter() - w0
             if clients is not None:
                 clients.hold(False)
@@ -295,6 +334,31 @@ def _run_once(cfg: StationConfig, world: World, plan: list[tuple[str, WrenchPose
     if "held_from" in info:
         info["running"], info["held"] = _split_held(info["by_bolt"], info["held_from"])
     return info
+
+
+def _line_server() -> Any:
+    """A throw-away PostgreSQL for ``--line`` (durable: commits on disk, as a plant's)."""
+    from stationd.pgserver import PgServer, PgServerError
+
+    pg = PgServer(durable=True)
+    if pg.missing:
+        raise InputError(f"--line needs a PostgreSQL server: {pg.missing}")
+    try:
+        pg.start()
+    except PgServerError as exc:
+        raise InputError(f"--line: {exc}") from None
+    return pg
+
+
+def _with_services(cfg: StationConfig, opcua: bool, line_url: str | None, k: int
+                   ) -> StationConfig:
+    """``cfg`` with the OPC UA and line sections of pass ``k`` (a free port each pass)."""
+    from stationd.demo.services import Endpoints, demo_opcua, line_config
+
+    ua_cfg = demo_opcua(Endpoints("127.0.0.1", 0, False).take(set())[0], "BENCH") \
+        if opcua else None
+    return replace(cfg, opcua=ua_cfg,
+                   line=None if line_url is None else line_config(line_url, f"BENCH-{k}"))
 
 
 def _split_held(latency: list[T], held_from: list[tuple[int, bool]]) -> tuple[list[T], list[T]]:

@@ -9,6 +9,13 @@ then a stubborn one that fails until the bolt locks), so the NOK policy runs: th
 repeats, loosens first where the policy says so, and a simulated supervisor releases a
 locked bolt through the same command path as the screens' (``Station.submit``).  One line per
 bolt, then a summary; ``--json`` prints it as the last line.
+
+Beside the screens the station serves OPC UA (``--opcua``; security none, IsSimulated true)
+and, with ``--line-db`` or ``--stations N``, forwards its records to a line database.  The
+stations after the first are light: they run one after another once the first is done (one
+simulated world at a time on the machine's cores), each on the same vehicle (it moves down the
+line) with at most ``EXTRA_CYCLES`` bolts, its own station id, database and OPC UA endpoint;
+the line's results are then read back from the line database and printed.
 """
 
 from __future__ import annotations
@@ -30,8 +37,19 @@ from drivers.wrench.sim import SimPset
 from stationd import progress
 from stationd.boltfile import load_bolts
 from stationd.config import RecordsConfig, StationConfig, load_station_config
+from stationd.demo.services import (
+    SECURITY_WORDS,
+    Endpoints,
+    StationServices,
+    demo_opcua,
+    line_config,
+    line_report,
+    own_pairs,
+    shown,
+)
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
+from stationd.pgserver import PgServer, PgServerError
 from stationd.reasons import Reason, Why
 from stationd.serve import Screens
 from stationd.sim.devices_cli import psets_of
@@ -60,6 +78,10 @@ from stationd.station.policy import NokPolicy, NokRule
 from stationd.web.config import DEFAULT_LISTEN, HttpConfig, open_bind_problem
 
 SIM_CONFIG = Path(__file__).resolve().parents[2] / "config" / "sim" / "station.yaml"
+#: bolts each station after the first tightens (``--stations N``): the extra stations are light
+EXTRA_CYCLES = 2
+#: the most stations ``--stations`` runs (each renders its world in turn)
+MAX_STATIONS = 30
 #: shared with ``stationd run --sim-operator`` (:mod:`stationd.sim.operator`), named here as before
 __all__ = ["LOOSEN_PROGRAM", "SIM_CONFIG", "SUPERVISOR", "demo_policy", "loosen_programs",
            "policy_words", "run_station_demo", "simulated", "simulators", "stand_ins"]
@@ -93,34 +115,105 @@ def run_station_demo(args: argparse.Namespace) -> int:
         raise InputError("--cycles must be at least 1")
     if int(getattr(args, "load", 0)) < 0:
         raise InputError("--load must be 0 or more busy processes")
+    n_stations = int(getattr(args, "stations", 1))
+    if not 1 <= n_stations <= MAX_STATIONS:
+        raise InputError(f"--stations must be 1-{MAX_STATIONS}")
     given = getattr(args, "http", None)
     if given is not None:
         problem = open_bind_problem(HttpConfig(str(given)))
         if problem is not None:
             raise InputError(f"--http: {problem}")
+    endpoints = None if getattr(args, "no_opcua", False) else \
+        Endpoints.from_arg(getattr(args, "opcua", None))
+    line_url = getattr(args, "line_db", None)
+    if line_url is not None:
+        line_config(line_url, station_id(1))    # a URL it would refuse: refused now, one line
     logging.basicConfig(level=logging.WARNING, format="%(message)s")
     cfg = load_station_config(args.config or SIM_CONFIG)
     bolts_path = cfg.bolts_path
     if bolts_path is None:
         raise InputError(f"{cfg.path}: the demo needs a bolt table (bolts:)")
     _check_demo_station(cfg)
+    out = sys.stderr if args.json else sys.stdout
     instead = stand_ins(cfg)
     if instead:
         print(f"demo: {cfg.path} names real devices ({', '.join(instead)}): the demo runs its "
               "own simulators instead and never opens them; its records go to a temporary "
-              f"database, not {cfg.database_url}", file=sys.stderr if args.json else sys.stdout,
-              flush=True)
+              f"database, not {cfg.database_url}", file=out, flush=True)
+    pg: PgServer | None = None
+    if line_url is None and n_stations > 1:
+        pg = PgServer()
+        if pg.missing:
+            raise InputError(f"--stations {n_stations} needs a line database: give one with "
+                             f"--line-db URL, or install PostgreSQL's server for a throw-away "
+                             f"one ({pg.missing})")
+        progress.note("demo: starting a throw-away PostgreSQL for the line")
+        try:
+            pg.start()
+        except PgServerError as exc:
+            raise InputError(f"--stations {n_stations}: the throw-away line database did not "
+                             f"start: {exc} (give one with --line-db URL)") from None
+        line_url = pg.url()
     tmp = tempfile.TemporaryDirectory(prefix="stationd-demo-")
-    cfg = simulated(cfg, Path(tmp.name))
+    try:
+        return _run(args, cfg, bolts_path, Path(tmp.name), out, instead, endpoints, line_url,
+                    pg is not None, n_stations, cycles)
+    finally:
+        tmp.cleanup()
+        if pg is not None:
+            pg.stop()
+
+
+def station_id(k: int) -> str:
+    """The demo's k-th station (1-based), as the line database and OPC UA name it."""
+    return f"DEMO-{k}"
+
+
+def _served(cfg: StationConfig, k: int, endpoints: Endpoints | None, taken: set[int],
+            line_url: str | None) -> tuple[StationConfig, str | None]:
+    """``cfg`` with the demo's OPC UA and line sections for station ``k``; and why its
+    endpoint is not the one asked for (None: it is, or none is served)."""
+    sid = station_id(k)
+    ua_cfg, why = None, None
+    if endpoints is not None:
+        endpoint, why = endpoints.take(taken)
+        ua_cfg = demo_opcua(endpoint, sid)
+    line = None if line_url is None else line_config(line_url, sid)
+    return replace(cfg, opcua=ua_cfg, line=line), why
+
+
+def _say_services(cfg: StationConfig, why: str | None, services: StationServices,
+                  out: Any, label: str = "") -> None:
+    if cfg.opcua is not None:
+        if services.opcua is not None:
+            print(f"{label}OPC UA: {cfg.opcua.endpoint} (JoiningSystem {cfg.opcua.station_id}; "
+                  f"{SECURITY_WORDS}{'; ' + why if why else ''})", file=out, flush=True)
+        else:
+            print(f"{label}OPC UA: {services.problem}", file=out, flush=True)
+
+
+def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Path, out: Any,
+         instead: list[str], endpoints: Endpoints | None, line_url: str | None,
+         throwaway: bool, n_stations: int, cycles: int) -> int:
+    taken: set[int] = set()
+    (tmp / "1").mkdir()
+    cfg = simulated(cfg, tmp / "1")
+    cfg, why = _served(cfg, 1, endpoints, taken, line_url)
     psets = psets_of(bolts_path)
     policy = demo_policy(cfg, psets)
     if policy is not None:
         cfg = replace(cfg, nok=policy)
     whose = "the demo's, the station file has none" if policy is not None else cfg.path
-    print(f"NOK policy ({whose}): {policy_words(cfg.nok)}",
-          file=sys.stderr if args.json else sys.stdout, flush=True)
-    station = Station(cfg, device_kw={"wrench": {"psets": {**loosen_programs(cfg.nok),
-                                                            **psets}}})
+    print(f"NOK policy ({whose}): {policy_words(cfg.nok)}", file=out, flush=True)
+    if line_url is not None:
+        kind = "a throw-away PostgreSQL for this run" if throwaway else "--line-db"
+        print(f"line database: {shown(line_url)} ({kind}); {n_stations} station(s), "
+              f"{', '.join(station_id(k) for k in range(1, n_stations + 1))}"
+              + (f" (after {station_id(1)}, each tightens at most "
+                 f"{min(cycles, EXTRA_CYCLES)} bolt(s) of the same vehicle, one station after "
+                 "another)" if n_stations > 1 else ""),
+              file=out, flush=True)
+    station = _station(cfg, psets)
     rng = np.random.default_rng(args.seed)
     # the NOKs have their own stream: the plan (bolts, placements) is the seed's as before
     nok_rng = np.random.default_rng([args.seed, 21])
@@ -130,26 +223,9 @@ def run_station_demo(args: argparse.Namespace) -> int:
         raise InputError(f"{bolts_path}: the demo needs a model with a lift code and bolts")
     truth: dict[str, Any] = {"bolt": None, "wrong": 0, "model_code": codes[0],
                              "vin": make_vin(1), "locked_sends": 0}
-
-    def check(action: Any) -> None:
-        """Every parameter send is compared with where the wrench really is, at that moment;
-        a wrong one is published, counted and printed where it happens."""
-        if isinstance(action, SendParams) and action.bolt != truth["bolt"]:
-            truth["wrong"] += 1
-            station.bus.publish(WrongBolt(action.bolt, truth["bolt"]))
-            line = f"WRONG BOLT: parameters for {action.bolt} while the wrench is on " \
-                   f"{truth['bolt'] or 'no bolt'}"
-            print(line, file=sys.stderr, flush=True)
-            if not args.json:
-                print(line, flush=True)
-        matcher = station.core.matcher
-        if isinstance(action, SendParams) and matcher is not None \
-                and action.bolt in matcher.locked:
-            truth["locked_sends"] += 1
-            print(f"LOCKED BOLT: parameters for {action.bolt}, locked", file=sys.stderr,
-                  flush=True)
-
-    station.on_action = check
+    station.on_action = _checker(station, truth, args.json)
+    extra: list[dict[str, Any]] = []   # the stations after the first: their summaries
+    line: dict[str, Any] = {}
 
     def say(line: dict[str, Any]) -> None:
         if not args.json:
@@ -168,8 +244,12 @@ def run_station_demo(args: argparse.Namespace) -> int:
             station.frames = screens.frames
             if screens.server is not None:
                 print(f"screens: {screens.server.url} (operator), {screens.server.url}cameras, "
-                      f"{screens.server.url}vehicles", file=sys.stderr if args.json else
-                      sys.stdout, flush=True)
+                      f"{screens.server.url}vehicles"
+                      + (f", {screens.server.url}line" if cfg.line is not None else ""),
+                      file=out, flush=True)
+        services = [StationServices(cfg, station.bus, screens)]
+        await services[0].start()
+        _say_services(cfg, why, services[0], out)
         world = World(cfg, seed=args.seed)
         try:
             task = asyncio.create_task(station.run(stop))
@@ -177,14 +257,28 @@ def run_station_demo(args: argparse.Namespace) -> int:
             # demo's station as they go to the daemon's in run, for the run and the hold
             screens.attach(station, cfg)
             await operate(station, world, rng, cycles, report, say, truth, nok_rng)
-            if getattr(args, "hold", False) and screens.server is not None:
-                await _hold(screens.server.url, report, int(truth.get("cycles", cycles)),
-                            truth, args.json)
+            drained = await services[0].drain()
+            if n_stations > 1:
+                for k in range(2, n_stations + 1):
+                    extra.append(await _next_station(args, cfg, k, tmp, taken, endpoints,
+                                                     line_url, psets, truth, out, services))
+                    drained = drained and extra[-1]["drained"]
+            if cfg.line is not None:
+                line.update(await line_report(line_url, services, drained, out,
+                                               None if screens.server is None else
+                                               f"{screens.server.url}line", args.json))
+            if getattr(args, "hold", False) and (screens.server is not None or
+                                                 any(s.opcua for s in services)):
+                await _hold(screens.server.url if screens.server is not None else None,
+                            [s.opcua.url for s in services if s.opcua is not None],
+                            report, int(truth.get("cycles", cycles)), truth, args.json)
             screens.attach(None, cfg)
             stop.set()
             await task
         finally:
             world.close()
+            for s in services:
+                await s.stop()
             await screens.stop()
 
     progress.note("demo: opening the station (database, bolt table, simulated PLC, controller "
@@ -197,10 +291,23 @@ def run_station_demo(args: argparse.Namespace) -> int:
             asyncio.run(main())
     finally:
         station.close()
-        tmp.cleanup()
     cycles = int(truth.get("cycles", cycles))
     summary = _summary(station, report, cycles, truth["wrong"], truth["locked_sends"])
     summary["simulated_instead"] = instead
+    summary["station_id"] = station_id(1)
+    summary["opcua"] = None if cfg.opcua is None else cfg.opcua.endpoint
+    if extra:
+        summary["stations"] = [{k: v for k, v in e.items() if k != "drained"} for e in extra]
+        failed = [f"{e['station_id']}: {e['verdict'][len('FAIL: '):]}" for e in extra
+                  if not e["verdict"].startswith("PASS")]
+        if failed:
+            head = summary["verdict"][len("FAIL: "):] if summary["verdict"].startswith(
+                "FAIL") else ""
+            summary["verdict"] = "FAIL: " + "; ".join(x for x in (head, *failed) if x)
+        elif summary["verdict"].startswith("PASS"):
+            summary["verdict"] += f"; {len(extra)} more station(s) PASS"
+    if line:
+        summary["line"] = line
     if args.json:
         sys.stdout.write(strict_json(summary) + "\n")
     else:
@@ -213,6 +320,9 @@ def run_station_demo(args: argparse.Namespace) -> int:
         n = summary["nok_policy"]
         print(f"NOK policy: {n['nok']} NOK result(s), {n['loosenings']} loosening(s), "
               f"{n['locks']} lock(s), {n['releases']} release(s)")
+        for e in extra:
+            print(f"{e['station_id']}: {e['ok']}/{e['bolts']} bolts OK, parameters sent for "
+                  f"a wrong bolt: {e['wrong_bolt_sends']}, {e['recorded']} result(s) recorded")
         if instead:
             devices = ", ".join(d.rsplit(" ", 1)[0] for d in instead)
             print(f"simulated, not the station file's devices: {devices} (the records went "
@@ -221,20 +331,101 @@ def run_station_demo(args: argparse.Namespace) -> int:
     return 0 if summary["verdict"].startswith("PASS") else 1
 
 
-async def _hold(url: str, report: list[dict[str, Any]], cycles: int, truth: dict[str, Any],
-                json_out: bool) -> None:
+def _station(cfg: StationConfig, psets: dict[int, SimPset]) -> Station:
+    return Station(cfg, device_kw={"wrench": {"psets": {**loosen_programs(cfg.nok), **psets}}})
+
+
+def _checker(station: Station, truth: dict[str, Any], json_out: bool) -> Any:
+    """Every parameter send is compared with where the wrench really is, at that moment;
+    a wrong one is published, counted and printed where it happens."""
+    def check(action: Any) -> None:
+        if isinstance(action, SendParams) and action.bolt != truth["bolt"]:
+            truth["wrong"] += 1
+            station.bus.publish(WrongBolt(action.bolt, truth["bolt"]))
+            line = f"WRONG BOLT: parameters for {action.bolt} while the wrench is on " \
+                   f"{truth['bolt'] or 'no bolt'}"
+            print(line, file=sys.stderr, flush=True)
+            if not json_out:
+                print(line, flush=True)
+        matcher = station.core.matcher
+        if isinstance(action, SendParams) and matcher is not None \
+                and action.bolt in matcher.locked:
+            truth["locked_sends"] += 1
+            print(f"LOCKED BOLT: parameters for {action.bolt}, locked", file=sys.stderr,
+                  flush=True)
+
+    return check
+
+
+async def _next_station(args: argparse.Namespace, first: StationConfig, k: int, tmp: Path,
+                        taken: set[int], endpoints: Endpoints | None, line_url: str | None,
+                        psets: dict[int, SimPset], first_truth: dict[str, Any], out: Any,
+                        services: list[StationServices]) -> dict[str, Any]:
+    """Station ``k`` of the line (after the first is done): the same geometry on its own
+    simulated devices and database, the same vehicle, at most ``EXTRA_CYCLES`` bolts; its
+    OPC UA server joins ``services`` (it serves until the demo ends).  Its summary."""
+    sid = station_id(k)
+    (tmp / str(k)).mkdir()
+    cfg, why = _served(own_pairs(simulated(first, tmp / str(k)), sid), k, endpoints, taken,
+                       line_url)
+    loop = asyncio.get_running_loop()
+    station = _station(cfg, psets)
+    truth = {**first_truth, "bolt": None, "wrong": 0, "locked_sends": 0}
+    cycles = min(int(args.cycles), EXTRA_CYCLES)
+    truth.pop("cycles", None)
+    station.on_action = _checker(station, truth, args.json)
+    await loop.run_in_executor(None, station.open)
+    mine = StationServices(cfg, station.bus)
+    services.append(mine)
+    await mine.start()
+    _say_services(cfg, why, mine, out, f"{sid} ")
+    report: list[dict[str, Any]] = []
+
+    def say(line: dict[str, Any]) -> None:
+        if not args.json:
+            if line.get("before"):
+                print(f"  {sid} {line['bolt']} first: {'; '.join(line['before'])}", flush=True)
+            err = line.get("xy_error_mm")
+            print(f"{sid} {line['bolt']}: pset {line['pset']}, XY error "
+                  f"{'-' if err is None else f'{err:.3f} mm'}, {line['result']}", flush=True)
+
+    stop = asyncio.Event()
+    world = World(cfg, seed=int(args.seed) + k)
+    drained = False
+    try:
+        task = asyncio.create_task(station.run(stop))
+        try:
+            await operate(station, world, np.random.default_rng([args.seed, k]), cycles,
+                          report, say, truth, np.random.default_rng([args.seed, 21, k]))
+            drained = await mine.drain()
+        finally:
+            stop.set()
+            await task
+    finally:
+        world.close()
+        await loop.run_in_executor(None, station.close)
+    n = int(truth.get("cycles", cycles))
+    s = _summary(station, report, n, truth["wrong"], truth["locked_sends"])
+    return {"station_id": sid, "opcua": None if cfg.opcua is None else cfg.opcua.endpoint,
+            "bolts": n, "ok": s["ok"], "wrong_bolt_sends": s["wrong_bolt_sends"],
+            "recorded": s["recorded"], "verdict": s["verdict"], "drained": drained}
+
+
+async def _hold(url: str | None, endpoints: list[str], report: list[dict[str, Any]],
+                cycles: int, truth: dict[str, Any], json_out: bool) -> None:
     """``--hold``: the run is over (results recorded); the screens keep serving its results
-    from the run's temporary database until SIGINT or SIGTERM, so they can be browsed (and
-    exported) before the demo's folder is removed, and the station keeps taking people's
-    commands (a skip, a reopen, a release, a loosen) as a daemon would."""
+    from the run's temporary database, and the OPC UA endpoints theirs, until SIGINT or
+    SIGTERM, so they can be browsed (and exported) before the demo's folder is removed, and
+    the station keeps taking people's commands (a skip, a reopen, a release, a loosen) as a
+    daemon would."""
     done = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, done.set)
     ok = sum(1 for r in report if r.get("ok"))
-    print(f"run over ({ok}/{cycles} bolts OK); still serving {url}vehicles/"
-          f"{truth['vin']} until Ctrl-C (--hold)", file=sys.stderr if json_out else sys.stdout,
-          flush=True)
+    served = ([f"{url}vehicles/{truth['vin']}"] if url is not None else []) + endpoints
+    print(f"run over ({ok}/{cycles} bolts OK); still serving {', '.join(served)} until "
+          "Ctrl-C (--hold)", file=sys.stderr if json_out else sys.stdout, flush=True)
     try:
         await done.wait()
     finally:

@@ -1,0 +1,322 @@
+"""What the demo's stations serve beside tightening: the OPC UA endpoint for an MES and the
+forwarding of their records to a line database.
+
+Why here and not in the serve loop: the demo runs one station after another in one process,
+on temporary databases, and must print where each endpoint listens before the first rundown
+(a port in use moves the default endpoint to the next free port and says so) and, at its end,
+wait until the line database has taken every record before it reads the line's results back.
+The components are the daemon's own (:class:`stationd.opcua.server.OpcUaServer`,
+:func:`stationd.serve.forward`), so what the demo shows is what a station runs; only the
+choices are the demo's: security none (anonymous browse, read and subscribe; no certificates)
+and IsSimulated true in every result.  Also here: the names that keep a later station's
+simulated cameras on its own world (:func:`own_pairs`) and the line's results read back at the
+end (:func:`line_report`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import errno
+import logging
+import socket
+import time
+from dataclasses import dataclass, replace
+from typing import Any
+
+from sqlalchemy import make_url
+from sqlalchemy.exc import SQLAlchemyError
+
+from db.errors import DbError
+from db.repository import Repository
+from stationd.config import StationConfig
+from stationd.errors import ConfigError, InputError
+from stationd.forward import LineConfig
+from stationd.linedb import LINE_FEED, LineResult, results
+from stationd.opcua import OpcUaConfig
+from stationd.serve import Screens, forward
+from stationd.station.events import EventBus
+from stationd.station.sdnotify import Notifier
+from stationd.web.config import split_listen
+from stationd.yamlio import YamlNode
+
+log = logging.getLogger("stationd")
+DEFAULT_OPCUA = "127.0.0.1:4840"
+#: how long the demo waits at its end for the line database to take a station's records, s
+DRAIN_S = 20.0
+#: the demo's security words, printed beside the endpoint
+SECURITY_WORDS = "security none: anonymous clients browse, read and subscribe, no certificates"
+
+
+def _bindable(host: str, port: int) -> bool:
+    """Whether ``host:port`` can be listened on now (as asyncio's server binds: address
+    reuse on, so a port in TIME_WAIT counts as free)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((host, port))
+        except OSError:
+            return False
+    return True
+
+
+def _any_port(host: str) -> int:
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
+
+
+@dataclass(frozen=True)
+class Endpoints:
+    """Where the demo's stations serve OPC UA: ``host`` and the first ``port``; ``given``:
+    the port was asked for (``--opcua``), so the first station takes it or the demo refuses;
+    otherwise a port in use moves on to the next free one."""
+
+    host: str
+    port: int
+    given: bool
+
+    @classmethod
+    def from_arg(cls, text: str | None) -> Endpoints:
+        """``--opcua HOST:PORT`` (port 0: any free port), or the default."""
+        try:
+            host, port = split_listen(text or DEFAULT_OPCUA)
+        except ValueError as exc:
+            raise InputError(f"--opcua: {exc}".replace("listen ", "", 1)) from None
+        return cls(host, port, text is not None and port != 0)
+
+    def take(self, taken: set[int]) -> tuple[str, str | None]:
+        """The next endpoint (``opc.tcp://HOST:PORT``) not in ``taken`` (which it joins),
+        and why it is not the one asked for (None: it is)."""
+        if self.port == 0:
+            port = _any_port(self.host)
+            taken.add(port)
+            return f"opc.tcp://{_url_host(self.host)}:{port}", None
+        if self.given and not taken:
+            if not _bindable(self.host, self.port):
+                raise InputError(f"--opcua {self.host}:{self.port}: the port is in use or the "
+                                 "address is not this machine's (another port, or leave "
+                                 "--opcua out for the next free one)")
+            taken.add(self.port)
+            return f"opc.tcp://{_url_host(self.host)}:{self.port}", None
+        start = max(taken) + 1 if taken else self.port   # the station before took its own
+        port = start
+        while port in taken or not _bindable(self.host, port):
+            port += 1
+            if port > 65535:
+                raise InputError(f"OPC UA: no free port from {start} on {self.host}")
+        taken.add(port)
+        why = None if port == start else f"{start} is in use: the next free port"
+        return f"opc.tcp://{_url_host(self.host)}:{port}", why
+
+
+def _url_host(host: str) -> str:
+    return f"[{host}]" if ":" in host else host
+
+
+def demo_opcua(endpoint: str, station_id: str) -> OpcUaConfig:
+    """The demo's OPC UA section: security none, no certificates, no users (anonymous clients
+    browse, read, subscribe and call the reading methods; nobody writes)."""
+    return OpcUaConfig(endpoint=endpoint, station_id=station_id, security=("none",))
+
+
+def line_config(url: str, station_id: str) -> LineConfig:
+    """``--line-db URL`` as the station file's ``line:`` section would take it (the same
+    checks: PostgreSQL, psycopg 3), refused in one line naming the option."""
+    text = f"url: {_yaml_string(url)}\nstation_id: {_yaml_string(station_id)}\n"
+    try:
+        return LineConfig.from_node(YamlNode.parse(text, "--line-db"))
+    except ConfigError as exc:
+        raise InputError(f"--line-db: {_reason(exc)}") from None
+
+
+def _yaml_string(text: str) -> str:
+    return "'" + text.replace("'", "''") + "'"
+
+
+def _reason(exc: ConfigError) -> str:
+    """The message without the location (the option is the location here)."""
+    words = str(exc)
+    for head in ("--line-db:1: url: ", "--line-db:1: ", "--line-db: "):
+        if words.startswith(head):
+            return words[len(head):]
+    return words
+
+
+class StationServices:
+    """One demo station's OPC UA server and forwarder: :meth:`start` beside the station (the
+    endpoint listens before it returns), :meth:`drain` once its run is over (until the line
+    database has taken every record), :meth:`stop` at the demo's end (both serve the
+    station's records until then, also during ``--hold``: a command taken then is forwarded
+    too)."""
+
+    def __init__(self, cfg: StationConfig, bus: EventBus, screens: Screens | None = None) \
+            -> None:
+        self.cfg, self.bus = cfg, bus
+        self.screens = screens if screens is not None else Screens(bus)
+        self.opcua: Any = None          # the OpcUaServer, once it serves
+        self.problem: str | None = None   # why OPC UA is not served (printed by the demo)
+        self.db_id = ""                   # the station database's id (its line records')
+        self._repo: Repository | None = None
+        self._stop_ua = asyncio.Event()
+        self._stop_line = asyncio.Event()
+        self._tasks: list[asyncio.Task[None]] = []
+        self._line: asyncio.Task[None] | None = None
+
+    async def start(self) -> None:
+        if self.cfg.opcua is None and self.cfg.line is None:
+            return
+        loop = asyncio.get_running_loop()
+        self._repo = await loop.run_in_executor(None, Repository.open, self.cfg.database_url)
+        self.db_id = await loop.run_in_executor(None, self._repo.ledger.db_id)
+        if self.cfg.opcua is not None:
+            await self._start_opcua(self.cfg.opcua)
+        if self.cfg.line is not None:
+            self._line = asyncio.create_task(forward(self.cfg, Notifier({}), self.screens,
+                                                     self._stop_line, self.bus))
+
+    async def _start_opcua(self, ua_cfg: OpcUaConfig) -> None:
+        from stationd.opcua.server import OpcUaServer
+
+        server = OpcUaServer(ua_cfg, bus=self.bus, simulated=True)
+        try:
+            await server.start()
+        except OSError as exc:   # taken between the check and the start: said, not fatal
+            self.problem = f"not served on {ua_cfg.endpoint}: " \
+                f"{errno.errorcode.get(exc.errno or 0, '')} {exc.strerror or exc}".strip()
+            with contextlib.suppress(Exception):
+                await server.stop()
+            return
+        assert self._repo is not None  # noqa: S101 - opened by start()
+        self.opcua = server
+        self._tasks.append(asyncio.create_task(server.run(self._stop_ua, self._repo)))
+
+    async def drain(self, timeout: float = DRAIN_S) -> bool:
+        """Wait until the line database has every record stored so far; False when it had
+        not within ``timeout`` (the rest waits in the station's database: the demo says
+        so)."""
+        if self._line is None:
+            return True
+        loop = asyncio.get_running_loop()
+        end = time.monotonic() + timeout
+        done = False
+        while time.monotonic() < end and not self._line.done():
+            fwd = self.screens.line
+            if fwd is not None:
+                last = await loop.run_in_executor(None, fwd.repo.ledger.last_seq)
+                if fwd.cursor >= last:
+                    done = True
+                    break
+            await asyncio.sleep(0.1)
+        return done
+
+    async def stop(self) -> None:
+        if self._line is not None:
+            self._stop_line.set()
+            await self._line
+            self._line = None
+        self._stop_ua.set()
+        for t in self._tasks:
+            with contextlib.suppress(Exception):
+                await t
+        self._tasks = []
+        if self.opcua is not None:
+            with contextlib.suppress(Exception):
+                await self.opcua.stop()
+            self.opcua = None
+        if self._repo is not None:
+            await asyncio.get_running_loop().run_in_executor(None, self._repo.close)
+            self._repo = None
+
+
+def line_results(url: str, stations: list[str], db_ids: set[str], limit: int = 1000
+                 ) -> list[LineResult]:
+    """The rundowns this demo run forwarded to the line database (its stations' databases:
+    a line database given with ``--line-db`` may hold earlier runs' too, the newest first),
+    oldest first."""
+    from sqlalchemy import inspect
+
+    from db.engine import make_engine
+
+    engine = make_engine(url)
+    try:
+        if not inspect(engine).has_table(LINE_FEED.name):
+            return []
+        rows = [r for sid in stations for r in results(engine, station=sid, limit=limit)]
+    finally:
+        engine.dispose()
+    return sorted((r for r in rows if r.db_id in db_ids), key=lambda r: (r.at, r.station_id))
+
+
+def line_summary(rows: list[LineResult], stations: list[str]) -> dict[str, Any]:
+    """The line's results per station, as the demo prints them and ``--json`` has them."""
+    def empty() -> dict[str, Any]:
+        return {"rundowns": 0, "ok": 0, "nok": 0, "loosenings": 0, "bolts": []}
+
+    per: dict[str, dict[str, Any]] = {s: empty() for s in stations}
+    for r in rows:
+        p = per.setdefault(r.station_id, empty())
+        p["rundowns"] += 1
+        if r.kind == "loosening":
+            p["loosenings"] += 1
+            continue
+        p["ok" if r.ok else "nok"] += 1
+        if r.ok and r.bolt not in p["bolts"]:
+            p["bolts"].append(r.bolt)
+    return {"rundowns": len(rows), "vins": sorted({r.vin for r in rows}), "stations": per}
+
+
+def own_pairs(cfg: StationConfig, prefix: str) -> StationConfig:
+    """``cfg`` (simulated) with its pairs and cameras named ``PREFIX.PAIR``: the first
+    station's world stays registered under the plain names (its station keeps running, for
+    ``--hold``), so each later station's ``sim://`` cameras render its own world.  Without
+    the reference checks (they are the pairs' by name): a light station."""
+    cams: dict[str, str] = {}
+    pairs = {}
+    for name, pc in cfg.pairs.items():
+        own = f"{prefix}.{name}"
+        left, right = f"{own}_left", f"{own}_right"
+        cams[left], cams[right] = f"sim://{own}/left", f"sim://{own}/right"
+        pairs[own] = replace(pc, left=left, right=right)
+    return replace(cfg, cameras=cams, pairs=pairs, references=None)
+
+
+async def line_report(url: str | None, services: list[StationServices], drained: bool,
+                       out: Any, page: str | None, json_out: bool) -> dict[str, Any]:
+    """The line's results, read back from the line database: printed per station (the
+    /line page shows them row by row); the summary's ``line``."""
+    assert url is not None  # noqa: S101 - only called with a line section
+    loop = asyncio.get_running_loop()
+    ids = [s.cfg.line.station_id for s in services if s.cfg.line is not None]
+    db_ids = {s.db_id for s in services if s.db_id}
+    try:
+        rows = await loop.run_in_executor(None, line_results, url, ids, db_ids)
+    except (SQLAlchemyError, DbError) as exc:   # the line database away: said, not a failure
+        print(f"line database: not read back: {type(exc).__name__}: "
+              f"{str(exc).splitlines()[0] if str(exc) else ''}", file=out, flush=True)
+        return {"url": shown(url), "error": str(exc).splitlines()[0] if str(exc) else ""}
+    doc = line_summary(rows, ids)
+    doc["url"] = shown(url)
+    doc["all_forwarded"] = drained
+    if not json_out:
+        print(f"line database: {doc['rundowns']} rundown(s) of "
+              f"{', '.join(doc['vins']) or 'no vehicle'} from {len(ids)} station(s)"
+              + ("" if drained else " (not every record had arrived when the demo read it)"))
+        for sid, p in doc["stations"].items():
+            print(f"  {sid}: {p['rundowns']} rundown(s): {p['ok']} OK, {p['nok']} NOK, "
+                  f"{p['loosenings']} loosening(s); bolts OK: {', '.join(p['bolts']) or '-'}")
+        if page is not None:
+            print(f"  every row: {page} (stationd line results with a station file naming "
+                  "this line database prints them too)")
+    return doc
+
+
+def shown(url: str) -> str:
+    """A database URL as printed (a password hidden)."""
+    return make_url(url).render_as_string()
+
+
+__all__ = ["DEFAULT_OPCUA", "SECURITY_WORDS", "Endpoints", "StationServices", "demo_opcua",
+           "line_config", "line_report", "line_results", "line_summary", "own_pairs", "shown"]
