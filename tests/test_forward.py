@@ -301,3 +301,77 @@ def test_the_line_commands_show_the_backlog_and_retry_or_export_the_quarantine(
                        f"line: {{url: '{down}', station_id: ST-L}}\n")
     got = _cli("line", "quarantine", "--config", str(station), "--retry")
     assert got.returncode == 3 and "unreachable" in got.stderr and "Traceback" not in got.stderr
+
+
+def test_two_hundred_rundowns_made_while_the_server_is_stopped_arrive_once_in_order(
+        tmp_path, table, pg_url, pg_server):
+    repo = _station(tmp_path, "st.db", table, "VIN200", [])
+    f = Forwarder(repo, LineConfig(pg_url, "ST-200"))
+    pg_server.pause()                           # the line's PostgreSQL stopped
+    try:
+        for tid in range(1, 201):              # the station goes on recording
+            record(repo, "VIN200", "B1" if tid % 2 else "B2", ok=tid % 7 != 0,
+                   tightening_id=tid)
+        with pytest.raises(LineDown):
+            f.step()
+        assert f.status()["backlog"] == 200
+    finally:
+        pg_server.resume()
+    while f.step():
+        pass
+    tids = [r.record["tightening_id"] for r in _line_rows(pg_url, "ST-200")]
+    assert tids == list(range(1, 201))          # every one, once, in order
+    repo.close()
+
+
+_FORWARD_SLOWLY = """
+import sys
+import stationd.forward as fw
+from db.repository import Repository
+fw.BATCH = 10                                   # many small transactions: a kill lands mid-way
+f = fw.Forwarder(Repository.open(sys.argv[1]), fw.LineConfig(sys.argv[2], "ST-K"))
+while f.step():
+    pass
+"""
+
+
+def test_a_forwarder_killed_mid_way_loses_and_doubles_nothing(tmp_path, table, pg_url):
+    """kill -9 between two of its transactions (or inside one): the next forwarder starts from
+    what the line database has, and the key (station, db_id, seq) keeps a replay harmless."""
+    repo = _station(tmp_path, "st.db", table, "VINK", [])
+    for tid in range(1, 1001):
+        record(repo, "VINK", "B1" if tid % 2 else "B2", tightening_id=tid)
+    p = subprocess.Popen([sys.executable, "-c", _FORWARD_SLOWLY,
+                          f"sqlite:///{tmp_path / 'st.db'}", pg_url], cwd=ROOT)
+    try:
+        import time
+
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and p.poll() is None:
+            rows = len(_line_rows(pg_url, "ST-K")) if _has_line_table(pg_url) else 0
+            if rows >= 100:
+                break
+            time.sleep(0.01)
+        p.kill()                                # SIGKILL: no cleanup of any kind
+        p.wait(30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    part = len(_line_rows(pg_url, "ST-K"))
+    assert 0 < part < 1000, f"the kill did not land mid-way ({part} forwarded)"
+    f = Forwarder(repo, LineConfig(pg_url, "ST-K"))
+    while f.step():
+        pass
+    tids = [r.record["tightening_id"] for r in _line_rows(pg_url, "ST-K")]
+    assert tids == list(range(1, 1001))
+    repo.close()
+
+
+def _has_line_table(url: str) -> bool:
+    from sqlalchemy import inspect
+
+    line = LineDb(url)
+    try:
+        return bool(inspect(line._connect()).has_table(LINE_FEED.name))
+    finally:
+        line.dispose()
