@@ -242,6 +242,11 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
         if listen is not None:
             await screens.follow(replace(cfg, http=HttpConfig(listen)))
             station.frames = screens.frames
+        # people's commands (the screens, stationd skip|reopen|release|loosen) go to the demo's
+        # station as they go to the daemon's in run, for the run and the hold: attached before
+        # the screens' address is printed, so a command never meets a station not serving yet
+        screens.attach(station, cfg)
+        if listen is not None:
             if screens.server is not None:
                 print(f"screens: {screens.server.url} (operator), {screens.server.url}cameras, "
                       f"{screens.server.url}vehicles"
@@ -253,9 +258,6 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
         world = World(cfg, seed=args.seed)
         try:
             task = asyncio.create_task(station.run(stop))
-            # people's commands (the screens, stationd skip|reopen|release|loosen) go to the
-            # demo's station as they go to the daemon's in run, for the run and the hold
-            screens.attach(station, cfg)
             await operate(station, world, rng, cycles, report, say, truth, nok_rng)
             drained = await services[0].drain()
             if n_stations > 1:

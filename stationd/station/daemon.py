@@ -87,7 +87,8 @@ class Station:
     on_action: Callable[[Action], None] | None = None  # sees each action first (demo, tests)
     records: Records = field(init=False)
     core: StationCore = field(init=False)
-    _lock: asyncio.Lock | None = field(default_factory=asyncio.Lock)
+    #: one event and its actions at a time (commands before run() included)
+    _lock: asyncio.Lock = field(default_factory=asyncio.Lock)
     _pending: list[Event] = field(default_factory=list)    # faults found before run()
     _requests: int = 0                   # commands numbered for their answers
 
@@ -237,7 +238,6 @@ class Station:
     # -- the loop ----------------------------------------------------------------------------
     async def run(self, stop: asyncio.Event) -> None:
         """Serve until ``stop``: READY=1 at once, whatever the devices do."""
-        self._lock = asyncio.Lock()
         pending, self._pending = self._pending, []
         for ev in pending:
             await self.feed(ev)
@@ -293,8 +293,6 @@ class Station:
 
     async def feed(self, ev: Event) -> None:
         """Feed the core one event and carry out its actions (one event at a time)."""
-        if self._lock is None:
-            raise RuntimeError("feed before run()")
         async with self._lock:
             await self._apply(self.core.feed(ev))
 
