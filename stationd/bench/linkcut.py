@@ -188,9 +188,21 @@ async def _main(st: Station, world: World, plan: list[tuple[str, WrenchPose]],
     task = asyncio.create_task(st.run(stop))
     try:
         await _operator(st, world, plan, ctl, proxy, p, pace_s, quiet)
+        await _curves_settled(st.cfg.database_url)
     finally:
         stop.set()
         await task
+
+
+async def _curves_settled(url: str, timeout_s: float = 10.0) -> None:
+    """The curves in flight stored before the station stops: the curve loop stores each
+    apart from its result, so the count is read until it holds still for 1.5 s."""
+    loop = asyncio.get_running_loop()
+    last, still, t0 = -1, 0, time.monotonic()
+    while time.monotonic() - t0 < timeout_s and still < 3:
+        n = (await loop.run_in_executor(None, _read_db, url))["curves"]
+        still, last = (still + 1 if n == last else 0), n
+        await asyncio.sleep(0.5)
 
 
 async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]],

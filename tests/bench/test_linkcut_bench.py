@@ -80,6 +80,9 @@ def test_bench_linkcut_runs_and_loses_nothing(tmp_path, capsys):
     assert cut["recorded"] + cut["gaps"] == cut["made"] == 3
     lat = summary["latency_ms"]     # curves on the 1st and 3rd bolts, off on the 2nd
     assert (lat["with_curves"]["n"], lat["without_curves"]["n"]) == (2, 1)
-    assert summary["curves_stored"] == 4                     # angle and torque, 2 bolts
+    # angle and torque of each bolt with curves on whose result came live: the bolt the cut
+    # lands on is fetched late, and a fetched result carries no curves (MID 0064); which of the
+    # curve bolts the cut meets depends on timing
+    assert summary["curves_stored"] in (2, 4)
     assert 0 < lat["with_curves"]["p50"] <= lat["with_curves"]["p95"]
     assert summary["not_selected"] == []

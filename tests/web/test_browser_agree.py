@@ -230,7 +230,9 @@ def test_pair_faults_fit_the_devices_panel_with_the_commands_in_view(screen, pag
                 f"&trigger=software&packet_size=9000: no frames for 3.0 s (cable, power or "
                 f"the camera's IP configuration)")
     srv.publish(faults(own))
-    page.wait(lambda p: p.count("#devices li.dev-bad") == 8, what="eight lines")
+    # eight lines once seven reasons differ: wait for the eighth pair's own reason too
+    page.wait(lambda p: p.count("#devices li.dev-bad") == 8
+              and "192.168.10.28" in (p.text("#devices") or ""), what="eight lines, each own")
     for w, h in (*SIZES, SHORT):
         page.size(w, h)
         got = check_panel(page, f"{page.name} at {w}x{h}, different")
