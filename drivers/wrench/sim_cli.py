@@ -15,8 +15,9 @@ import argparse
 import signal
 import sys
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from types import FrameType
+from typing import TextIO
 
 from drivers.wrench.sim import SimController
 
@@ -85,15 +86,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    return serve(sim, args.host, args.port, args.trigger_every, stop,
+                 lambda port: f"listening on {args.host}:{port}")
+
+
+def serve(sim: SimController, host: str, port: int, trigger_every: float,
+          stop: threading.Event, said: Callable[[int], str], out: TextIO = sys.stdout) -> int:
+    """Serve ``sim`` on ``host:port`` until ``stop`` (``said(port)`` printed once it listens),
+    pulling the trigger every ``trigger_every`` seconds when set; 1 if it cannot listen."""
     with sim:
         try:
-            port = sim.listen_tcp(args.host, args.port)
+            bound = sim.listen_tcp(host, port)
         except OSError as e:
-            print(f"error: cannot listen on {args.host}:{args.port}: {e.strerror or e}",
-                  file=sys.stderr)
+            print(f"error: cannot listen on {host}:{port}: {e.strerror or e}", file=sys.stderr)
             return 1
-        print(f"listening on {args.host}:{port}", flush=True)
-        while not stop.wait(args.trigger_every or 0.5):
-            if args.trigger_every:
+        print(said(bound), file=out, flush=True)
+        while not stop.wait(trigger_every or 0.5):
+            if trigger_every:
                 sim.pull_trigger()
     return 0

@@ -26,6 +26,7 @@ from typing import TextIO
 from drivers.lift.base import RegisterMap
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController, SimPset
+from drivers.wrench.sim_cli import serve
 from stationd.boltfile import load_bolts
 from stationd.config import load_station_config
 from stationd.errors import StationError
@@ -147,19 +148,9 @@ def _serve_controller(args: argparse.Namespace, stop: threading.Event, out: Text
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    with sim:
-        try:
-            port = sim.listen_tcp(args.host, args.port)
-        except OSError as exc:
-            print(f"error: cannot listen on {args.host}:{args.port}: {exc.strerror or exc}",
-                  file=sys.stderr)
-            return 1
-        print(f"controller listening on {args.host}:{port} (Open Protocol; psets "
-              f"{', '.join(str(p) for p in sorted(sim.psets))})", file=out, flush=True)
-        while not stop.wait(args.trigger_every or 0.5):
-            if args.trigger_every:
-                sim.pull_trigger()
-    return 0
+    return serve(sim, args.host, args.port, args.trigger_every, stop,
+                 lambda port: f"controller listening on {args.host}:{port} (Open Protocol; "
+                              f"psets {', '.join(str(p) for p in sorted(sim.psets))})", out)
 
 
 def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
