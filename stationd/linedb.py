@@ -36,6 +36,7 @@ from sqlalchemy import (
     Table,
     func,
     select,
+    text,
 )
 from sqlalchemy.dialects.postgresql import JSONB
 
@@ -68,11 +69,18 @@ LINE_PARAMETERS = Table(
 )
 
 
+#: the advisory lock that serialises the making of the line's tables (any fixed 64-bit number)
+SCHEMA_LOCK_KEY = 0x5354_4C49_4E45
+
+
 def create_line_schema(engine: Engine) -> None:
     """The line's tables and index, made where missing (a line database made by an earlier
     version gets the new ones too)."""
-    LINE.create_all(engine, checkfirst=True)
-    LINE_FEED_VIN.create(engine, checkfirst=True)
+    with engine.begin() as conn:   # one creator at a time: two first starts (or a reader)
+        # racing on "create if missing" made one fail with "relation already exists"
+        conn.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": SCHEMA_LOCK_KEY})
+        LINE.create_all(conn, checkfirst=True)
+        LINE_FEED_VIN.create(conn, checkfirst=True)
 
 
 def parameter_rows(station_id: str, db_id: str, entries: list[dict[str, Any]]
