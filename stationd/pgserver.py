@@ -6,6 +6,11 @@ line database where nobody gave one, and it must be the same engine the plant ru
 the way the tests start it.  ``initdb`` and ``pg_ctl`` refuse to run as root, so as root the
 cluster belongs to ``nobody``.  Where the server package is not installed, ``missing`` says
 so and nothing is started (the tests skip with that reason, the benchmark asks for ``--pg``).
+
+A throw-away server must not outlive whoever started it: a test run or a demo killed with -9
+never reaches ``stop()``, and its server would go on holding a port, memory and a temp folder.
+So each start also starts a small watcher in its own session that outlives a killed owner: when
+the owner's pid is gone, it stops the server at once and removes its folder.
 """
 
 from __future__ import annotations
@@ -16,7 +21,9 @@ import pwd
 import shutil
 import socket
 import subprocess
+import sys
 import tempfile
+import time
 from pathlib import Path
 
 MISSING = "PostgreSQL's server is not installed (apt-get install postgresql)"
@@ -37,6 +44,26 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
+def watch(owner: int, folder: str, stop_argv: list[str]) -> None:
+    """Wait while ``owner`` lives, then stop the server and remove ``folder`` (the watcher's
+    body, run as ``python -c`` in its own session so that killing the owner spares it)."""
+    while True:
+        try:
+            os.kill(owner, 0)
+        except ProcessLookupError:
+            break
+        except PermissionError:
+            pass                                   # alive, owned by another user
+        time.sleep(1.0)
+    if Path(folder).exists():
+        subprocess.run(stop_argv, check=False, capture_output=True, cwd=folder)  # noqa: S603
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+_WATCH = ("import sys, json; from stationd.pgserver import watch; "
+          "watch(int(sys.argv[1]), sys.argv[2], json.loads(sys.argv[3]))")
+
+
 class PgServer:
     """``PgServer()``: why it cannot start (``missing``), or ``start()`` then ``url(db)``,
     ``create(db)``, ``pause()``/``resume()`` (down and back with its data) and ``stop()``
@@ -50,6 +77,7 @@ class PgServer:
         self.durable = durable
         self.port = 0
         self.dir: Path | None = None
+        self._watcher: subprocess.Popen[bytes] | None = None
 
     def __enter__(self) -> PgServer:
         self.start()
@@ -104,6 +132,22 @@ class PgServer:
             shutil.rmtree(self.dir, ignore_errors=True)
             self.dir = None
             raise
+        self._watch()
+
+    def _stop_argv(self) -> list[str]:
+        pg_ctl, data = self._data()
+        return self._as_user([pg_ctl, "-D", data, "-m", "immediate", "-w", "stop"])
+
+    def _watch(self) -> None:
+        """The watcher that stops this server when its owner dies without ``stop()``."""
+        import json
+
+        self._watcher = subprocess.Popen(  # noqa: S603 - our own interpreter and module
+            [sys.executable, "-c", _WATCH, str(os.getpid()), str(self.dir),
+             json.dumps(self._stop_argv())],
+            start_new_session=True, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL, cwd="/",
+            env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)})
 
     def pause(self) -> None:
         """The server goes down (its data kept): the line database is unreachable."""
@@ -130,11 +174,14 @@ class PgServer:
         """Down at once and removed; safe to call twice."""
         if self.dir is None or self.pg_ctl is None:
             return
-        subprocess.run(self._as_user([self.pg_ctl, "-D", str(self.dir / "data"),  # noqa: S603
-                                      "-m", "immediate", "-w", "stop"]),
-                       check=False, capture_output=True, cwd=self.dir)
+        subprocess.run(self._stop_argv(), check=False, capture_output=True,  # noqa: S603
+                       cwd=self.dir)
         shutil.rmtree(self.dir, ignore_errors=True)
         self.dir = None
+        if self._watcher is not None:
+            self._watcher.kill()
+            self._watcher.wait()
+            self._watcher = None
 
 
 __all__ = ["MISSING", "PgServer", "PgServerError"]
