@@ -35,7 +35,7 @@ from stationd.command_cli import (
 )
 from stationd.errors import InputError
 from stationd.outfile import write_atomic
-from stationd.station.matching import check_spacing
+from stationd.station.matching import MatchParams, check_spacing
 from stationd.taught import table_text
 
 
@@ -66,7 +66,7 @@ def cmd_teach(args: argparse.Namespace) -> int:
                          "overwrite (choose another name)")
     if not out.parent.is_dir():            # before any teaching: the work would be lost
         raise InputError(f"--out {out}: the folder {out.parent} does not exist")
-    if not args.tolerance > 0:
+    if args.tolerance is not None and not args.tolerance > 0:
         raise InputError(f"--tolerance {args.tolerance:g}: millimetres, > 0")
     doc, cad = _cad(args.from_, args.model) if args.from_ else ({}, [])
     ids = [str(b["id"]) for b in cad] if cad else []
@@ -133,6 +133,8 @@ def _teach(args: argparse.Namespace, client: ApiClient, out: Path, doc: dict[str
                 continue
             r = answer["result"]
             taught[bolt] = r
+            if args.tolerance is None:      # the station's own matching tolerance
+                args.tolerance = float(r.get("tolerance_mm", MatchParams().tolerance_mm))
             x, y, z = r["position_mm"]
             line = f"{bolt}: {x:.1f} {y:.1f} {z:.1f} mm, dispersion {r['dispersion_mm']:.2f} mm"
             ref = cad_at.get(bolt)
@@ -183,8 +185,9 @@ def add_teach_parser(sub: Any) -> None:
                    help="the bolt table to teach (ids, parameters, CAD positions)")
     t.add_argument("--bolts", help="only these bolts, in this order (comma-separated)")
     t.add_argument("--out", required=True, help="the taught table to write (a new file)")
-    t.add_argument("--tolerance", type=float, default=8.0,
-                   help="flag a bolt farther than this from CAD, mm (default 8)")
+    t.add_argument("--tolerance", type=float, default=None,
+                   help="flag a bolt farther than this from CAD, mm (default: the station's "
+                        "matching tolerance)")
     client_args(t)
     t.set_defaults(func=cmd_teach)
 
