@@ -11,7 +11,11 @@ Requested results are sent as events of a concrete subtype of RequestedResultEve
 subtype of JoiningSystemResultReadyEventType: a client subscribed to the latter gets both and
 tells them apart by type, as the standard intends), after the method has answered, one after
 the other and at least :data:`MIN_INTERVAL_MS` apart; requests are served one at a time,
-at most :data:`MAX_WAITING` wait, beyond that a request is refused as busy.
+at most :data:`MAX_WAITING` wait, beyond that a request is refused as busy.  Anonymous clients
+may ask (they only get stored results again), so no request may hold the queue for long: the
+interval is revised to at most :data:`MAX_INTERVAL_MS` (an infinite one would hold it for
+ever) and one request sends at most :data:`MAX_PER_REQUEST` results (the client asks again
+from the last sequence number it got).
 
 The methods' ``Status`` (Int64) is 0 when the results are being sent; the standard reserves
 values above 0 and leaves those below 0 to the application: :data:`BAD_ARGUMENTS`,
@@ -36,6 +40,8 @@ from stationd.opcua.uatypes import ua
 log = logging.getLogger("stationd")
 
 MIN_INTERVAL_MS = 5.0      # the shortest time between two requested results
+MAX_INTERVAL_MS = 100.0    # the longest (a request must not hold the queue)
+MAX_PER_REQUEST = 1000     # results one request sends; the client asks again for more
 MAX_WAITING = 4            # requests waiting for the one being served
 OK, BAD_ARGUMENTS, BUSY, NOT_READY = 0, -1, -2, -3
 UNKNOWN_RESULT, NOT_STORED = -1, -2
@@ -130,7 +136,9 @@ class CatchUp:
                     return [_duration(revised), *_status(
                         NOT_READY, "the station's records cannot be read now")]
         self._spawn(self._send_feed(repo, after, stop_seq, stop_at, revised))
-        return [_duration(revised), *_status(OK, f"the results {what} are sent as events")]
+        return [_duration(revised), *_status(
+            OK, f"the results {what} are sent as events (at most {MAX_PER_REQUEST} per "
+            "request: ask again after the last one received)")]
 
     async def _send_feed(self, repo: Repository, after: int, stop_seq: int | None,
                          stop_at: datetime | None, interval_ms: float) -> None:
@@ -170,7 +178,7 @@ class CatchUp:
         if refused is not None or repo is None:
             return [_duration(revised), ua.Variant(count, ua.VariantType.UInt32),
                     *(refused or [])]
-        sending = count if most == 0 else min(most, count)
+        sending = min(count if most == 0 else min(most, count), MAX_PER_REQUEST)
         self._spawn(self._send_unacknowledged(repo, most, revised))
         return [_duration(revised), ua.Variant(count, ua.VariantType.UInt32),
                 *_status(OK, f"{sending} of {count} unacknowledged results are sent as events")]
@@ -245,10 +253,13 @@ class CatchUp:
         task.add_done_callback(self._tasks.discard)
 
     async def _send(self, entries: AsyncIterator[dict[str, Any]], interval_ms: float) -> None:
-        first = True
+        first, sent = True, 0
         async for e in entries:
             if e["kind"] != "rundown":
                 continue
+            if sent >= MAX_PER_REQUEST:
+                return
+            sent += 1
             if not first:
                 await asyncio.sleep(interval_ms / 1000.0)
             first = False
@@ -261,7 +272,9 @@ def _revise(requested: Any) -> float:
         ms = float(_plain(requested) or 0.0)
     except (TypeError, ValueError):
         ms = 0.0
-    return max(ms, MIN_INTERVAL_MS) if ms == ms else MIN_INTERVAL_MS   # NaN: the minimum
+    if ms != ms:   # NaN: the minimum
+        return MIN_INTERVAL_MS
+    return min(max(ms, MIN_INTERVAL_MS), MAX_INTERVAL_MS)   # infinity: the maximum
 
 
 async def _run(fn: Callable[..., Any], *args: Any) -> Any:
@@ -269,5 +282,6 @@ async def _run(fn: Callable[..., Any], *args: Any) -> Any:
     return await asyncio.get_running_loop().run_in_executor(None, fn, *args)
 
 
-__all__ = ["BAD_ARGUMENTS", "BUSY", "MAX_WAITING", "MIN_INTERVAL_MS", "NOT_READY", "NOT_STORED",
+__all__ = ["BAD_ARGUMENTS", "BUSY", "MAX_INTERVAL_MS", "MAX_PER_REQUEST", "MAX_WAITING",
+           "MIN_INTERVAL_MS", "NOT_READY", "NOT_STORED",
            "OK", "UNKNOWN_RESULT", "CatchUp"]

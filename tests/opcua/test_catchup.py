@@ -14,8 +14,14 @@ from asyncua.common.node import Node
 
 from db.repository import Repository
 from stationd.access import hash_password
-from stationd.opcua import OpcUaConfig
-from stationd.opcua.catchup import BAD_ARGUMENTS, MIN_INTERVAL_MS, OK, UNKNOWN_RESULT
+from stationd.opcua import OpcUaConfig, catchup
+from stationd.opcua.catchup import (
+    BAD_ARGUMENTS,
+    MAX_INTERVAL_MS,
+    MIN_INTERVAL_MS,
+    OK,
+    UNKNOWN_RESULT,
+)
 from stationd.opcua.model import IJT_URI, MACHINERY_URI, RESULT_URI, load_client_types
 from stationd.opcua.server import NAMESPACE
 from stationd.opcua.uatypes import ua
@@ -181,6 +187,38 @@ def test_request_results_by_time_and_a_paced_range(repo):
     assert out["paced"][0] == pytest.approx(100.0)
     assert out["range"] == seqs[1:4]
     assert out["took"] >= 0.19             # two gaps of 100 ms between three results
+
+
+def test_no_request_holds_the_queue_for_long(repo, monkeypatch):
+    """An anonymous client asks with an infinite interval: it is revised to the maximum, and
+    a request sends at most MAX_PER_REQUEST results, so the next client is served (an
+    infinite interval held the queue until the server stopped)."""
+    _record(repo, 6)
+    seqs = [e["seq"] for e in repo.ledger.since(0) if e["kind"] == "rundown"]
+    monkeypatch.setattr(catchup, "MAX_PER_REQUEST", 2)
+
+    async def scenario() -> dict[str, Any]:
+        srv, stop, task = await serving_ready(config(), repo)
+        out: dict[str, Any] = {}
+        try:
+            async with Client(srv.url) as hog, Client(srv.url) as client:
+                await load_client_types(hog)
+                greedy = await Mes(hog).open()
+                mes = await Mes(client).open()
+                out["greedy"] = await greedy.request_results(seqs[0], seqs[-1],
+                                                             interval_ms=float("inf"))
+                out["next"] = await mes.request_results(seqs[3], seqs[5])
+                # events go to every subscriber: the greedy request's, then this one's
+                out["got"] = await mes.wait_requested(4, timeout=5.0)
+        finally:
+            await stopping(srv, stop, task)
+        return out
+
+    out = asyncio.run(scenario())
+    assert out["greedy"][0] == pytest.approx(MAX_INTERVAL_MS) and out["greedy"][1] == OK
+    assert "at most 2 per request" in out["greedy"][2].Text
+    assert out["next"][1] == OK
+    assert out["got"] == seqs[0:2] + seqs[3:5]    # no more than the bound each, both served
 
 
 def test_acknowledged_results_are_no_longer_unacknowledged_also_after_a_restart(repo):
