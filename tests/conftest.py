@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
+
 import numpy as np
 import pytest
 
@@ -11,6 +15,25 @@ from stationd.vision.marker import MarkerSpec
 
 SPEC = MarkerSpec()
 NOISE = {"blur_sigma": 0.8, "noise_sigma": 2.0}
+_BACKGROUNDS: list[str] = []   # the folder this process made for the run, removed at its end
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """One folder of rendered simulator backgrounds for the whole run: this process, its
+    xdist workers and every daemon, demo and benchmark they start inherit it (the simulated
+    cameras then render each 20 MP background once per run, not once per process:
+    ``stationd.sim.backgrounds``).  Set ``STATIOND_SIM_BACKGROUNDS=`` (empty) to render every
+    one as before."""
+    from stationd.sim.backgrounds import ENV
+
+    if os.environ.get(ENV) is None:
+        os.environ[ENV] = tempfile.mkdtemp(prefix="stationd-backgrounds-")
+        _BACKGROUNDS.append(os.environ[ENV])
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    for folder in _BACKGROUNDS:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.fixture(scope="session")

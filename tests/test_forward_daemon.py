@@ -15,8 +15,7 @@ from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.sim.devices_cli import psets_of
 from tests.pgserver import PgServer
-from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
-from tests.station.test_restart import _until
+from tests.station.daemons import SIM, Proc, at_height, free_port, until
 from tests.test_forward import _line_rows
 
 VIN = "LINEVIN0000000001"
@@ -37,7 +36,7 @@ def test_results_reach_the_line_database_and_wait_while_it_is_down(tmp_path):
     if pg.missing:
         pytest.skip(pg.missing)
     pg.start()
-    lift_port, ctl_port, http_port = _free_port(), _free_port(), _free_port()
+    lift_port, ctl_port, http_port = free_port(), free_port(), free_port()
     url = pg.create("line")
     plc = SimulatedPlc()
     ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=10, nok_rate=0.0)
@@ -54,34 +53,34 @@ def test_results_reach_the_line_database_and_wait_while_it_is_down(tmp_path):
         def tighten(bolt: str) -> int:
             pose.write_text(bolt)
             d.wait_log(f"tightening bolt {bolt}")
-            _until(lambda: ctl.tool_enabled, 30, "tool enabled")
+            until(lambda: ctl.tool_enabled, 30, "tool enabled")
             shot = ctl.pull_trigger()
             assert shot is not None
-            _until(lambda: shot.tightening_id in ctl.acked_ids, 30, "stored")
+            until(lambda: shot.tightening_id in ctl.acked_ids, 30, "stored")
             pose.write_text("")
             return int(shot.tightening_id)
 
         first = tighten("B05")
-        _until(lambda: any(r.record.get("tightening_id") == first
-                           for r in _line_rows(url, "ST-T1")), 30, "on the line")
+        until(lambda: any(r.record.get("tightening_id") == first
+                          for r in _line_rows(url, "ST-T1")), 30, "on the line")
         assert _status(http_port)["line"]["up"] is True
         pg.pause()                                  # the line database goes away
         second = tighten("B06")                  # the station goes on tightening
-        _until(lambda: (_status(http_port)["line"] or {}).get("up") is False, 60,
-               "the status says it is down")
+        until(lambda: (_status(http_port)["line"] or {}).get("up") is False, 60,
+              "the status says it is down")
         st = _status(http_port)["line"]
         assert st["backlog"] >= 1 and st["last_error"]
         assert st["backlog_bytes"] >= 300 and st["alarm"] is None   # sized, under its bound
         # the screens' snapshot carries it too (the operator's devices panel), within a
         # heartbeat
-        _until(lambda: (_get(http_port, "/api/view").get("line") or {}).get("up") is False,
-               30, "the screens' snapshot says the line database is down")
+        until(lambda: (_get(http_port, "/api/view").get("line") or {}).get("up") is False,
+              30, "the screens' snapshot says the line database is down")
         d.wait_log("line database: down")
         pg.resume()
-        _until(lambda: {first, second} <= {r.record.get("tightening_id")
-                                           for r in _line_rows(url, "ST-T1")}, 120,
-               "the backlog forwarded")
-        _until(lambda: _status(http_port)["line"]["backlog"] == 0, 30, "caught up")
+        until(lambda: {first, second} <= {r.record.get("tightening_id")
+                                          for r in _line_rows(url, "ST-T1")}, 120,
+              "the backlog forwarded")
+        until(lambda: _status(http_port)["line"]["backlog"] == 0, 30, "caught up")
         seqs = [r.seq for r in _line_rows(url, "ST-T1")]
         assert sorted(seqs) == sorted(set(seqs))                  # none twice
         assert d.stop() == 0

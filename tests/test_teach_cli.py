@@ -24,7 +24,7 @@ from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.access import hash_password
 from stationd.sim.devices_cli import psets_of
-from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
+from tests.station.daemons import SIM, Proc, at_height, free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 PASSWORD = "teach-me-please"  # noqa: S105 - a test user's
@@ -41,7 +41,7 @@ def _station(port: int, hashed: str):
 
 @pytest.mark.timeout(300)
 def test_an_engineer_teaches_bolts_and_gets_a_new_table_compared_with_cad(tmp_path):
-    lift_port, ctl_port, http_port = _free_port(), _free_port(), _free_port()
+    lift_port, ctl_port, http_port = free_port(), free_port(), free_port()
     plc = SimulatedPlc()
     ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=11, nok_rate=0.0)
     d = Proc(tmp_path, lift_port, ctl_port, edit=_station(http_port, hash_password(PASSWORD)))
@@ -120,7 +120,7 @@ def test_teach_checks_its_output_first_and_says_when_no_daemon_answers(tmp_path)
 
     def teach(*args: str) -> subprocess.CompletedProcess[str]:
         return subprocess.run([sys.executable, "-m", "stationd", "teach", "--model", "SIM-1",
-                               "--user", "ed", "--url", f"http://127.0.0.1:{_free_port()}/",
+                               "--user", "ed", "--url", f"http://127.0.0.1:{free_port()}/",
                                *args], capture_output=True, text=True, env=env, timeout=60,
                               input="\n", check=False)
 
@@ -144,7 +144,7 @@ WITHOUT_WORLD = ("import argparse, sys; from stationd.serve import run_daemon; "
 def test_teach_with_every_pair_in_fault_says_so_not_that_no_daemon_answers(tmp_path):
     """The daemon answers but its pairs give no frames: the teach point is answered with the
     station's reason (it said 'no daemon answers at URL: timed out')."""
-    http_port = _free_port()
+    http_port = free_port()
     for f in SIM.glob("*.yaml"):
         (tmp_path / f.name).write_text(f.read_text())
     doc = yaml.safe_load((tmp_path / "station.yaml").read_text())

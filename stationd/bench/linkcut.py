@@ -51,14 +51,14 @@ from drivers.wrench.client import OpenProtocolWrench
 from drivers.wrench.sim import SimController
 from stationd import progress
 from stationd.bench.cutproxy import CutProxy
+from stationd.bench.plan import wrench_plan
 from stationd.bench.wait import until as _until
-from stationd.boltfile import load_bolts
 from stationd.config import StationConfig, load_station_config
 from stationd.demo.station import SIM_CONFIG
 from stationd.errors import InputError
 from stationd.jsonout import finite, strict_json
 from stationd.sim.devices_cli import psets_of
-from stationd.sim.world import World, WrenchPose, wrench_at
+from stationd.sim.world import World, WrenchPose
 from stationd.station.core import Record, SendParams, State, StoreUnattributed
 from stationd.station.daemon import Station
 from stationd.station.events import ParamsSent, ResultRecorded
@@ -104,15 +104,9 @@ def run_linkcut_bench(args: argparse.Namespace) -> int:
     tmp = tempfile.TemporaryDirectory(prefix="stationd-linkcut-")
     cfg = replace(load_station_config(SIM_CONFIG), http=None)
     assert cfg.bolts_path is not None  # noqa: S101 - the simulated station names its bolts
-    bolts = load_bolts(cfg.bolts_path).models[0].bolts
-    if cycles > len(bolts):
-        raise InputError(f"--cycles: the simulated vehicle has {len(bolts)} bolts")
-    rng = np.random.default_rng(args.seed)
-    plan = []
-    for k in rng.permutation(len(bolts))[:cycles]:
-        b = bolts[int(k)]
-        target = np.array(b.position) + np.append(rng.normal(0, 0.3, 2), 0.0)
-        plan.append((b.bolt_id, wrench_at(target, rng, cfg.tool.length_mm)))
+    plan = wrench_plan(cfg, args.seed, cycles)
+    if cycles > len(plan):
+        raise InputError(f"--cycles: the simulated vehicle has {len(plan)} bolts")
     if not args.json:
         print(f"rendering {len(plan)} placements ahead for {2 * len(cfg.pairs)} cameras "
               f"(not timed) ...", flush=True)

@@ -32,15 +32,15 @@ from typing import Any, TypeVar
 import numpy as np
 
 from stationd import progress
+from stationd.bench.plan import wrench_plan
 from stationd.bench.wait import until as _until
-from stationd.boltfile import load_bolts
 from stationd.config import StationConfig, load_station_config
 from stationd.demo.station import SIM_CONFIG, simulators
 from stationd.errors import InputError
 from stationd.jsonout import finite, strict_json
 from stationd.serve import Screens
 from stationd.sim.devices_cli import psets_of
-from stationd.sim.world import World, WrenchPose, wrench_at
+from stationd.sim.world import World, WrenchPose
 from stationd.station.core import SendParams, State
 from stationd.station.daemon import Station
 from stationd.station.events import ParamsSent, ResultRecorded
@@ -150,14 +150,7 @@ def run_station_bench(args: argparse.Namespace) -> int:
     tmp = tempfile.TemporaryDirectory(prefix="stationd-bench-")
     cfg = replace(load_station_config(SIM_CONFIG),
                   database_url=f"sqlite:///{tmp.name}/stationd.db", http=None)
-    assert cfg.bolts_path is not None  # noqa: S101 - the simulated station names its bolts
-    rng = np.random.default_rng(args.seed)
-    bolts = load_bolts(cfg.bolts_path).models[0].bolts
-    plan = []
-    for k in rng.permutation(len(bolts))[:cycles]:
-        b = bolts[int(k)]
-        target = np.array(b.position) + np.append(rng.normal(0, 0.3, 2), 0.0)
-        plan.append((b.bolt_id, wrench_at(target, rng, cfg.tool.length_mm)))
+    plan = wrench_plan(cfg, args.seed, cycles)
     if not args.json:
         print(f"rendering {len(plan)} placements ahead for {2 * len(cfg.pairs)} cameras "
               f"(not timed) ...", flush=True)

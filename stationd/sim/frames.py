@@ -2,11 +2,12 @@
 
 A full 20 MP render costs about a second (noise generation dominates), far too slow for a
 station running at frame rate.  The marker covers a small window of the frame: the rest is
-the same background every time.  So each camera renders its background once and each frame
-ray-casts only the window around the marker, pasted into a copy.  The renderer seeds its noise
-by sensor position, so with the same seed the composite equals a full render exactly (tested);
-with a new seed per frame the window's noise is fresh and the background's is frozen, which a
-detector cannot tell apart.
+the same background every time.  So each camera renders its background once (or reads it from
+the folder of :mod:`stationd.sim.backgrounds`, where another process rendered the very same)
+and each frame ray-casts only the window around the marker, pasted into a copy.  The renderer
+seeds its noise by sensor position, so with the same seed the composite equals a full render
+exactly (tested); with a new seed per frame the window's noise is fresh and the background's is
+frozen, which a detector cannot tell apart.
 
 Composing is a camera's buffer pool: a frame is written into a buffer that nobody holds any
 more (the background is copied into it once; afterwards only the last window is put back and
@@ -24,6 +25,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from stationd.geometry.camera import Camera
+from stationd.sim import backgrounds
 from stationd.sim.render import MarkerPose, Scene, render
 from stationd.sim.scenes import marker_window
 from stationd.vision.marker import MarkerSpec
@@ -71,8 +73,8 @@ class FrameSource:
     @property
     def background(self) -> np.ndarray:
         if self._background is None:
-            image = render(self.camera, replace(self.scene, markers=list(self.fixed)),
-                           seed=self.seed).image
+            image = backgrounds.background(
+                self.camera, replace(self.scene, markers=list(self.fixed)), self.seed)
             image.setflags(write=False)  # handed out shared: a write would be a bug, loudly
             self._background = image
         return self._background

@@ -15,8 +15,7 @@ import pytest
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.sim.devices_cli import psets_of
-from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
-from tests.station.test_restart import _until
+from tests.station.daemons import SIM, Proc, at_height, free_port, until
 
 ROOT = Path(__file__).resolve().parents[2]
 VIN = "OPCUAVIN000000001"
@@ -24,7 +23,7 @@ VIN = "OPCUAVIN000000001"
 
 @pytest.mark.timeout(300)
 def test_a_bolt_tightened_at_the_station_is_the_mes_latest_result(tmp_path):
-    lift_port, ctl_port, ua_port = _free_port(), _free_port(), _free_port()
+    lift_port, ctl_port, ua_port = free_port(), free_port(), free_port()
     plc = SimulatedPlc()
     ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=12, nok_rate=0.0)
 
@@ -39,10 +38,10 @@ def test_a_bolt_tightened_at_the_station_is_the_mes_latest_result(tmp_path):
         d.wait_log("OPC UA: serving")
         pose.write_text("B05")
         d.wait_log("tightening bolt B05")
-        _until(lambda: ctl.tool_enabled, 30, "tool enabled")
+        until(lambda: ctl.tool_enabled, 30, "tool enabled")
         shot = ctl.pull_trigger()
         assert shot is not None
-        _until(lambda: shot.tightening_id in ctl.acked_ids, 30, "stored")
+        until(lambda: shot.tightening_id in ctl.acked_ids, 30, "stored")
 
         def latest() -> dict[str, object] | None:
             got = subprocess.run(
@@ -60,7 +59,7 @@ def test_a_bolt_tightened_at_the_station_is_the_mes_latest_result(tmp_path):
                 return True
             return False
 
-        _until(has_it, 90, "the rundown as the latest result")
+        until(has_it, 90, "the rundown as the latest result")
         assert [23, "B05"] in doc["entities"]
         assert doc["evaluation"] == 1
         assert d.stop() == 0

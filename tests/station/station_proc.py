@@ -33,7 +33,7 @@ from stationd.config import load_station_config  # noqa: E402
 from stationd.lock import StationLocks  # noqa: E402
 from stationd.serve import hold_locks, serve  # noqa: E402
 from stationd.sim.render import Scene  # noqa: E402
-from stationd.sim.world import World, wrench_at  # noqa: E402
+from stationd.sim.world import World, WrenchPose, wrench_at  # noqa: E402
 from stationd.station.sdnotify import Notifier  # noqa: E402
 
 
@@ -49,14 +49,23 @@ def main(cfg_path: str, pose_path: str, plain: bool = False, lock: bool = False)
     pose = Path(pose_path)
     knock = pose.with_name("knock")
 
+    # a bolt's placement is drawn once (seeded) and kept: the wrench back on a bolt is where it
+    # was, and the world composes the windows it rendered then instead of ray-casting them
+    # again (each costs a core for about a second: these tests are not about the vision)
+    placed: dict[str, WrenchPose] = {}
+
+    def on(bolt: str) -> WrenchPose:
+        if bolt not in placed:
+            placed[bolt] = wrench_at(bolts[bolt], rng, cfg.tool.length_mm, 3.0)
+        return placed[bolt]
+
     def follow() -> None:
         last, knocked = None, ""
         while True:
             text = pose.read_text().strip() if pose.exists() else ""
             if text != last:
                 last = text
-                world.set_wrench(wrench_at(bolts[text], rng, cfg.tool.length_mm, 3.0)
-                                 if text else None)
+                world.set_wrench(on(text) if text else None)
             moved = knock.read_text().strip() if knock.exists() else ""
             if moved != knocked:
                 turns = dict(line.split() for line in moved.splitlines())

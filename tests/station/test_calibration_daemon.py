@@ -30,6 +30,7 @@ from stationd.station.core import SendParams
 from stationd.station.daemon import Station
 from stationd.station.events import Localized, PairChecked, ResultRecorded, VehicleClosed
 from stationd.station.trust import MeasureReferences
+from tests.station.daemons import running, until_async
 from tests.station.refstation import station_dir
 
 PAIRS = ("pair1", "pair2")
@@ -38,15 +39,6 @@ ENGINEER = Issuer("erik", frozenset({Right.CALIBRATE}), "cli 127.0.0.1")
 #: the simulator renders 20 MP frames on shared cores: old frames are accepted (the wiring is
 #: tested here; freshness is the core's, tested in test_core)
 MAX_AGE_S = 30.0
-
-
-async def _until(pred: Any, timeout: float, what: str = "") -> None:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return
-        await asyncio.sleep(0.05)
-    raise AssertionError(f"not reached in {timeout} s: {what}")
 
 
 class Run:
@@ -92,18 +84,18 @@ class Run:
         """The wrench on ``bolt`` until the tool is on, a trigger pull, the result stored."""
         ctl = simulators(self.st)[1]
         self.on(bolt)
-        await _until(lambda: self.st.core.bolt == bolt and ctl.tool_enabled, 60,
-                     f"tool on for {bolt}: {self.st.core.reason}")
+        await until_async(lambda: self.st.core.bolt == bolt and ctl.tool_enabled, 60,
+                          f"tool on for {bolt}: {self.st.core.reason}")
         n = self.st.bus.count(ResultRecorded)
         assert ctl.pull_trigger() is not None
-        await _until(lambda: self.st.bus.count(ResultRecorded) > n, 30, "result recorded")
+        await until_async(lambda: self.st.bus.count(ResultRecorded) > n, 30, "result recorded")
         self.on(None)
 
     async def arrive(self, vin: str) -> None:
         plc = simulators(self.st)[0]
         plc.set_vehicle(1, vin)
         plc.raise_lift()
-        await _until(lambda: self.st.vin == vin, 30, f"{vin} loaded")
+        await until_async(lambda: self.st.vin == vin, 30, f"{vin} loaded")
 
 
 @pytest.mark.timeout(180)
@@ -122,26 +114,24 @@ def test_a_pair_knocked_between_vehicles_is_found_moved_refused_then_trusted_aga
     assert all(r.kind is Why.PAIR_UNCHECKED for r in st.core.trust.untrusted().values())
 
     async def main() -> None:
-        stop = asyncio.Event()
-        task = asyncio.create_task(st.run(stop))
-        try:
+        async with running(st):
             # vehicle 1: checked at its arrival, then tightened
             await run.arrive("CHECKVIN000000001")
             # (the start's check and the arrival's may be one grab: the loop merges them)
-            await _until(lambda: not st.core.trust.untrusted() and all(
+            await until_async(lambda: not st.core.trust.untrusted() and all(
                 run.checks(p) and run.checks(p)[-1].trusted for p in PAIRS), 60,
                 "the arrival's check")
             assert all(run.checks(p)[-1].verdict == "ok" for p in PAIRS)
             assert run.measures[:2] == ["station started", "vehicle CHECKVIN000000001 arrived"]
             await run.tighten(B2)
             simulators(st)[0].lower_lift()
-            await _until(lambda: st.bus.count(VehicleClosed) == 1, 30, "vehicle 1 closed")
+            await until_async(lambda: st.bus.count(VehicleClosed) == 1, 30, "vehicle 1 closed")
 
             # pair2 knocked (0.3 degrees about its vertical axis) before vehicle 2 arrives
             world.move_pair("pair2", rotation_deg=(0.0, 0.3, 0.0))
             n2 = len(run.checks("pair2"))
             await run.arrive("CHECKVIN000000002")
-            await _until(lambda: len(run.checks("pair2")) > n2, 60, "vehicle 2's check")
+            await until_async(lambda: len(run.checks("pair2")) > n2, 60, "vehicle 2's check")
             moved = run.checks("pair2")[-1]
             assert moved.verdict == "moved" and not moved.trusted and moved.reference == "R2"
             assert moved.why is not None and moved.why.kind is Why.PAIR_MOVED
@@ -153,7 +143,7 @@ def test_a_pair_knocked_between_vehicles_is_found_moved_refused_then_trusted_aga
             sent = len(run.sends)
             t0 = time.time()
             run.on(B2)
-            await _until(lambda: any(
+            await until_async(lambda: any(
                 e.t > t0 and e.reason is not None and e.reason.kind is Why.PAIR_MOVED
                 for e in st.bus.of(Localized)), 30, "B02 refused")
             await asyncio.sleep(1.5)
@@ -174,9 +164,6 @@ def test_a_pair_knocked_between_vehicles_is_found_moved_refused_then_trusted_aga
             assert run.checks("pair2")[-1].trusted
             assert "pair2 checked: reference R2 within" in caplog.text
             await run.tighten(B2)
-        finally:
-            stop.set()
-            await task
 
     try:
         asyncio.run(main())
@@ -192,14 +179,9 @@ def test_a_pair_knocked_between_vehicles_is_found_moved_refused_then_trusted_aga
     again.on(B9)     # the wrench waits on a bolt from the start: sent only once checked
 
     async def restarted() -> None:
-        stop = asyncio.Event()
-        task = asyncio.create_task(st.run(stop))
-        try:
+        async with running(st):
             await again.arrive("CHECKVIN000000002")
-            await _until(lambda: B9 in again.sends, 60, "B09 sent after the restart")
-        finally:
-            stop.set()
-            await task
+            await until_async(lambda: B9 in again.sends, 60, "B09 sent after the restart")
 
     try:
         asyncio.run(restarted())

@@ -25,8 +25,7 @@ from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.access import hash_password
 from stationd.sim.devices_cli import psets_of
-from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
-from tests.station.test_restart import _until
+from tests.station.daemons import SIM, Proc, at_height, free_port, until
 
 ROOT = Path(__file__).resolve().parents[2]
 VIN = "COMMANDVIN0000001"
@@ -76,7 +75,7 @@ class Client:
 @pytest.mark.timeout(300)
 def test_commands_through_the_daemon_are_authenticated_recorded_and_outlive_a_reload(
         tmp_path):
-    lift_port, ctl_port, http_port = _free_port(), _free_port(), _free_port()
+    lift_port, ctl_port, http_port = free_port(), free_port(), free_port()
     url = f"http://127.0.0.1:{http_port}/"
     plc = SimulatedPlc()
     ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=6, nok_rate=0.0)
@@ -166,7 +165,7 @@ def test_commands_through_the_daemon_are_authenticated_recorded_and_outlive_a_re
         assert json.loads(c.get("/api/me"))["user"] is None
         status, _ = c.post("/api/commands", {**body, "bolt": "B10", "nonce": "b" * 24})
         assert status == 401
-        _until(lambda: d.p.poll() is None, 1, "running")
+        until(lambda: d.p.poll() is None, 1, "running")
         assert d.stop() == 0
     finally:
         d.kill()
@@ -180,7 +179,7 @@ def test_a_bolt_locked_after_three_noks_is_released_by_a_supervisor_from_the_cli
     """The NOK policy through the daemon: three NOKs in a row on B05 lock it (the tool is
     refused there with the reason), an operator cannot release it, a supervisor can; then it
     is tightened OK."""
-    lift_port, ctl_port, http_port = _free_port(), _free_port(), _free_port()
+    lift_port, ctl_port, http_port = free_port(), free_port(), free_port()
     url = f"http://127.0.0.1:{http_port}/"
     plc = SimulatedPlc()
     ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=8, nok_rate=1.0)
@@ -196,10 +195,10 @@ def test_a_bolt_locked_after_three_noks_is_released_by_a_supervisor_from_the_cli
         for n in range(1, 4):
             pose.write_text("B05")
             d.wait_log("tightening bolt B05", count=n)
-            _until(lambda: ctl.tool_enabled, 30, "tool enabled")
+            until(lambda: ctl.tool_enabled, 30, "tool enabled")
             shot = ctl.pull_trigger()
             assert shot is not None and not shot.ok
-            _until(lambda s=shot: s.tightening_id in ctl.acked_ids, 30, "NOK recorded")
+            until(lambda s=shot: s.tightening_id in ctl.acked_ids, 30, "NOK recorded")
             pose.write_text("")
             d.wait_log("bolt B05 NOK; tracking", count=n)
         d.wait_log("B05 locked after 3 NOK in a row: a supervisor releases it")
@@ -213,10 +212,10 @@ def test_a_bolt_locked_after_three_noks_is_released_by_a_supervisor_from_the_cli
         assert got.returncode == 0 and "accepted" in got.stdout, got.stdout + got.stderr
         ctl.nok_rate = 0.0
         d.wait_log("tightening bolt B05", count=4)
-        _until(lambda: ctl.tool_enabled, 30, "tool enabled")
+        until(lambda: ctl.tool_enabled, 30, "tool enabled")
         shot = ctl.pull_trigger()
         assert shot is not None and shot.ok
-        _until(lambda: shot.tightening_id in ctl.acked_ids, 30, "OK recorded")
+        until(lambda: shot.tightening_id in ctl.acked_ids, 30, "OK recorded")
         assert d.stop() == 0
     finally:
         d.kill()

@@ -7,101 +7,26 @@ reason in STATUS=, and the daemon recovers when the device is back."""
 
 from __future__ import annotations
 
-import os
-import shutil
 import signal
 import socket
-import subprocess
-import sys
 import time
-from pathlib import Path
 
 import pytest
 
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.sim.devices_cli import psets_of
-from tests.station.notify import NotifyManager
-from tests.test_serve import _recv_until
+from tests.station.daemons import SIM, Proc, at_height, free_port, serve_devices
 
-SIM = Path(__file__).resolve().parents[2] / "config" / "sim"
-PROC = Path(__file__).with_name("station_proc.py")
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-class Proc:
-    """``station_proc.py`` on a copy of config/sim whose lift and controller are on loopback
-    ports (nothing listening until the test says so); the journal goes to a file."""
-
-    def __init__(self, tmp: Path, lift_port: int, ctl_port: int, edit=None) -> None:
-        for f in SIM.iterdir():
-            shutil.copy(f, tmp)
-        text = (tmp / "station.yaml").read_text()
-        for old, new in (("sim://lift", f"modbus-tcp://127.0.0.1:{lift_port}?timeout=0.5"),
-                         ("sim://wrench", f"openprotocol://127.0.0.1:{ctl_port}"),
-                         ("sqlite:///stationd-sim.db", f"sqlite:///{tmp}/station.db"),
-                         ("max_age_s: 0.5", "max_age_s: 5.0"),
-                         ("http: {listen: '127.0.0.1:8080'}", "")):
-            assert old in text
-            text = text.replace(old, new)
-        (tmp / "station.yaml").write_text(edit(text) if edit else text)
-        (tmp / "pose").write_text("")
-        self.tmp = tmp
-        self.sock = NotifyManager(tmp / "notify")
-        self.log_path = tmp / "daemon.log"
-        self._err = self.log_path.open("w")
-        env = {**os.environ, "NOTIFY_SOCKET": str(tmp / "notify"), "PYTHONUNBUFFERED": "1"}
-        self.p = subprocess.Popen([sys.executable, str(PROC), str(tmp / "station.yaml"),
-                                   str(tmp / "pose")], cwd=tmp, stderr=self._err, env=env)
-
-    def status(self, needle: str, timeout: float = 90) -> list[str]:
-        return list(_recv_until(self.sock, needle, timeout))
-
-    def log(self) -> str:
-        return self.log_path.read_text()
-
-    def wait_log(self, needle: str, timeout: float = 90, count: int = 1) -> None:
-        end = time.monotonic() + timeout
-        while (time.monotonic() < end and self.log().count(needle) < count
-               and self.p.poll() is None):
-            time.sleep(0.1)
-        assert self.log().count(needle) >= count, \
-            f"{needle!r} not {count} time(s) in the journal: {self.log()[-3000:]}"
-
-    def stop(self) -> int:
-        self.p.send_signal(signal.SIGTERM)
-        code = self.p.wait(timeout=60)
-        self._err.close()
-        self.sock.close()
-        return code
-
-    def kill(self) -> None:
-        if self.p.poll() is None:
-            self.p.kill()
-            self.p.wait()
-
-
-def at_height(d: Proc, plc: SimulatedPlc, ctl: SimController, lift_port: int, ctl_port: int,
-              vin: str) -> None:
-    """The PLC and the controller serving on their ports, ``vin`` raised to height, the
-    station tracking the wrench."""
-    plc.set_vehicle(1, vin)
-    plc.start_tcp(lift_port)
-    ctl.start()
-    ctl.listen_tcp(port=ctl_port)
-    plc.raise_lift()
-    d.wait_log("tracking: tracking the wrench")
+#: the old places of the harness, for tests that still import it from here
+__all__ = ["SIM", "Proc", "at_height"]
+_free_port = free_port
 
 
 @pytest.mark.timeout(300)
 def test_devices_down_at_boot_are_faults_then_it_recovers_and_a_closed_vin_is_a_rework(
         tmp_path):
-    lift_port, ctl_port = _free_port(), _free_port()
+    lift_port, ctl_port = free_port(), free_port()
     plc = SimulatedPlc()
     ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
     d = Proc(tmp_path, lift_port, ctl_port)
@@ -111,9 +36,7 @@ def test_devices_down_at_boot_are_faults_then_it_recovers_and_a_closed_vin_is_a_
         d.wait_log("fault: wrench")
         assert d.p.poll() is None
         plc.set_vehicle(1, "REWORKVIN00000001")
-        plc.start_tcp(lift_port)
-        ctl.start()
-        ctl.listen_tcp(port=ctl_port)
+        serve_devices(plc, ctl, lift_port, ctl_port)
         d.wait_log("lift: back")
         d.wait_log("wrench: back")
         plc.raise_lift()
@@ -139,12 +62,10 @@ def test_devices_down_at_boot_are_faults_then_it_recovers_and_a_closed_vin_is_a_
 
 @pytest.mark.timeout(300)
 def test_sighup_with_a_bad_bolt_table_is_refused_and_with_a_down_device_is_a_fault(tmp_path):
-    lift_port, ctl_port = _free_port(), _free_port()
+    lift_port, ctl_port = free_port(), free_port()
     plc = SimulatedPlc()
     ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
-    plc.start_tcp(lift_port)
-    ctl.start()
-    ctl.listen_tcp(port=ctl_port)
+    serve_devices(plc, ctl, lift_port, ctl_port)
     d = Proc(tmp_path, lift_port, ctl_port)
     try:
         d.status("READY=1")
@@ -159,7 +80,7 @@ def test_sighup_with_a_bad_bolt_table_is_refused_and_with_a_down_device_is_a_fau
         bolts.write_text(good)
         station = tmp_path / "station.yaml"
         station.write_text(station.read_text().replace(f"127.0.0.1:{lift_port}",
-                                                       f"127.0.0.1:{_free_port()}"))
+                                                       f"127.0.0.1:{free_port()}"))
         d.p.send_signal(signal.SIGHUP)           # valid, but its lift is down: a fault
         d.wait_log("configuration reloaded")
         d.status("fault: lift")
@@ -176,12 +97,10 @@ def test_sighup_with_a_bad_bolt_table_is_refused_and_with_a_down_device_is_a_fau
 
 @pytest.mark.timeout(300)
 def test_a_camera_glob_matching_nothing_is_a_fault_not_an_exit(tmp_path):
-    lift_port, ctl_port = _free_port(), _free_port()
+    lift_port, ctl_port = free_port(), free_port()
     plc = SimulatedPlc()
     ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
-    plc.start_tcp(lift_port)
-    ctl.start()
-    ctl.listen_tcp(port=ctl_port)
+    serve_devices(plc, ctl, lift_port, ctl_port)
     nothing = tmp_path / "nothing"
 
     def cameras(text: str) -> str:
@@ -211,7 +130,7 @@ def test_a_plc_answering_garbage_stays_a_fault_never_back_between_answers(tmp_pa
     import random
     import threading
 
-    lift_port, ctl_port = _free_port(), _free_port()
+    lift_port, ctl_port = free_port(), free_port()
     srv = socket.socket()
     srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     srv.bind(("127.0.0.1", lift_port))

@@ -4,8 +4,6 @@ sends nothing wrong, and resumes when the device is back."""
 import asyncio
 import json
 import time
-from dataclasses import replace
-from typing import Any
 
 import numpy as np
 import pytest
@@ -13,10 +11,8 @@ import pytest
 from db.repository import Repository
 from stationd.config import load_station_config
 from stationd.demo.station import SIM_CONFIG
-from stationd.sim.devices_cli import psets_of
-from stationd.sim.world import World, wrench_at
+from stationd.sim.world import wrench_at
 from stationd.station.core import State
-from stationd.station.daemon import Station
 from stationd.station.events import (
     BoltSelected,
     BoltSkipped,
@@ -26,11 +22,7 @@ from stationd.station.events import (
     ToolEnabled,
     VehicleClosed,
 )
-
-
-def _bolts(st: Any) -> dict[str, Any]:
-    """The loaded vehicle's bolts as the database has them (the test's truth)."""
-    return {b.bolt_id: b for b in st.repo.bolts_for_model(st.core.model)}
+from tests.station.daemons import scenario, until_async, vehicle_bolts
 
 
 def _of(st, *kinds):
@@ -46,60 +38,6 @@ def _back(st, device):
     return any(e.device == device and e.ok for e in _of(st, DeviceHealth))
 
 
-async def _until(pred, timeout):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        await asyncio.sleep(0.05)
-    raise AssertionError("condition not reached in time")
-
-
-# The simulator ray-casts 20 MP frames on the machine's shared cores, seconds after their
-# exposure when the machine is busy; these tests are about the wiring, so they accept old
-# frames (freshness, counted from the exposure, is the core's, tested in test_core).
-WIRING_MAX_AGE_S = 30.0
-
-
-def _station(tmp_path, **wrench_kw):
-    cfg = load_station_config(SIM_CONFIG)
-    cfg = replace(cfg, database_url=f"sqlite:///{tmp_path}/s.db",
-                  matching=replace(cfg.matching, max_age_s=WIRING_MAX_AGE_S))
-    st = Station(cfg, device_kw={"wrench": {"psets": psets_of(cfg.bolts_path), **wrench_kw}})
-    st.open()
-    return st, World(cfg, seed=1)
-
-
-def _scenario(tmp_path, body, vin="FAULTVIN000000001", prepare=None, loaded=True,
-              **wrench_kw):
-    """The daemon running, a vehicle on the lift raised (loaded, unless ``loaded`` is False:
-    a test of a failing load waits for it itself), then ``body``; ``prepare(st)`` runs on
-    the opened station before its loop."""
-    st, world = _station(tmp_path, **wrench_kw)
-    if prepare is not None:
-        prepare(st)
-
-    async def main():
-        stop = asyncio.Event()
-        task = asyncio.create_task(st.run(stop))
-        try:
-            st.lift.plc.set_vehicle(1, vin)
-            st.lift.plc.raise_lift()
-            if loaded:
-                await _until(lambda: st.vin is not None, 30)
-            await body(st, world)
-        finally:
-            stop.set()
-            await task
-
-    try:
-        asyncio.run(main())
-    finally:
-        world.close()
-        st.close()
-    return st
-
-
 @pytest.mark.timeout(240)
 def test_refused_parameters_fault_then_the_bolt_is_skipped(tmp_path):
     cfg = load_station_config(SIM_CONFIG)
@@ -109,7 +47,7 @@ def test_refused_parameters_fault_then_the_bolt_is_skipped(tmp_path):
     async def body(st, world):
         rng = np.random.default_rng(0)
         world.set_wrench(wrench_at(np.array(bolt.position), rng, st.cfg.tool.length_mm))
-        await _until(lambda: _back(st, "wrench"), 60)
+        await until_async(lambda: _back(st, "wrench"), 60)
         assert [e.bolt for e in _of(st, ParamsRefusedEvent)] == [bolt.bolt_id]
         n_sent = len(_sends(st))
         await asyncio.sleep(3.0)  # still on the bolt: nothing is sent again
@@ -118,9 +56,9 @@ def test_refused_parameters_fault_then_the_bolt_is_skipped(tmp_path):
         assert [e.bolt for e in _of(st, BoltSkipped)] == [bolt.bolt_id]
         world.set_wrench(None)
         st.lift.plc.lower_lift()
-        await _until(lambda: _of(st, VehicleClosed), 30)
+        await until_async(lambda: _of(st, VehicleClosed), 30)
 
-    st = _scenario(tmp_path, body, refusals={bolt.parameters.pset: 2})
+    st = scenario(tmp_path, body, refusals={bolt.parameters.pset: 2})
     assert not _of(st, ToolEnabled)
     closed = _of(st, VehicleClosed)
     assert closed and bolt.bolt_id in closed[0].missing  # reported missing
@@ -132,34 +70,34 @@ def test_lift_plc_vanishing_is_a_fault_until_it_returns(tmp_path):
         plc = st.lift.plc
         port = plc.tcp_port
         plc.stop_tcp()
-        await _until(lambda: st.cycle.state is State.FAULT, 30)
+        await until_async(lambda: st.cycle.state is State.FAULT, 30)
         assert st.cycle.reason.startswith("lift:")
-        world.set_wrench(wrench_at(np.array(next(iter(_bolts(st).values())).position),
+        world.set_wrench(wrench_at(np.array(next(iter(vehicle_bolts(st).values())).position),
                                    np.random.default_rng(1), st.cfg.tool.length_mm))
         await asyncio.sleep(1.0)
         assert not _sends(st)  # nothing in fault
         plc.start_tcp(port)
-        await _until(lambda: st.cycle.state is not State.FAULT, 60)
-        await _until(lambda: _sends(st), 60)
+        await until_async(lambda: st.cycle.state is not State.FAULT, 60)
+        await until_async(lambda: _sends(st), 60)
         # the commissioning screen's pair summaries (published at their own, throttled rate:
         # a selection can now come before the next one), JSON as they are (no NaN)
-        await _until(lambda: any(e.sides["left"]["found"] for e in _of(st, PairFrames)), 10)
+        await until_async(lambda: any(e.sides["left"]["found"] for e in _of(st, PairFrames)), 10)
         frames = [e for e in _of(st, PairFrames) if e.sides["left"]["found"]]
         assert frames and {e.pair for e in frames} <= set(st.cfg.pairs)
         json.dumps(frames[-1].to_json(), allow_nan=False)
 
-    _scenario(tmp_path, body)
+    scenario(tmp_path, body)
 
 
 def _first_bolt(st):
-    return next(iter(_bolts(st).values()))
+    return next(iter(vehicle_bolts(st).values()))
 
 
 @pytest.mark.timeout(240)
 def test_a_camera_that_stops_delivering_is_a_fault_until_it_returns(tmp_path):
     async def body(st, world):
         world.cut_cameras("pair2")
-        await _until(lambda: st.cycle.state is State.FAULT, 30)
+        await until_async(lambda: st.cycle.state is State.FAULT, 30)
         assert st.cycle.reason.startswith("pair2:")
         b = _first_bolt(st)
         world.set_wrench(wrench_at(np.array(b.position), np.random.default_rng(2),
@@ -168,11 +106,11 @@ def test_a_camera_that_stops_delivering_is_a_fault_until_it_returns(tmp_path):
         assert st.cycle.state is State.FAULT            # still blind: nothing sent
         assert not _sends(st)
         world.restore_cameras("pair2")
-        await _until(lambda: _sends(st), 60)
+        await until_async(lambda: _sends(st), 60)
         assert _sends(st) == [b.bolt_id]
         assert _back(st, "pair2")
 
-    _scenario(tmp_path, body)
+    scenario(tmp_path, body)
 
 
 @pytest.mark.timeout(240)
@@ -182,27 +120,27 @@ def test_the_controller_dropping_mid_tightening_is_a_fault_then_the_bolt_is_done
 
     async def body(st, world):
         ctl = st.wrench.controller
-        await _until(lambda: ctl.vin == vin, 30)          # the VIN went to the controller
+        await until_async(lambda: ctl.vin == vin, 30)          # the VIN went to the controller
         b = _first_bolt(st)
         world.set_wrench(wrench_at(np.array(b.position), np.random.default_rng(3),
                                    st.cfg.tool.length_mm))
-        await _until(lambda: st.cycle.state is State.TIGHTENING and ctl.tool_enabled, 60)
+        await until_async(lambda: st.cycle.state is State.TIGHTENING and ctl.tool_enabled, 60)
         ctl.power_off()                                    # gone mid-tightening
-        await _until(lambda: st.cycle.state is State.FAULT, 30)
+        await until_async(lambda: st.cycle.state is State.FAULT, 30)
         assert st.cycle.reason.startswith("wrench:")
         sends = len(_sends(st))
         await asyncio.sleep(1.0)
         assert len(_sends(st)) == sends
         ctl.power_on()                                     # back, with its RAM lost
-        await _until(lambda: st.cycle.state is State.TIGHTENING and ctl.tool_enabled, 60)
+        await until_async(lambda: st.cycle.state is State.TIGHTENING and ctl.tool_enabled, 60)
         assert ctl.vin == vin                              # sent again after the reconnect
         shot = ctl.pull_trigger()
         assert shot is not None
-        await _until(lambda: shot.tightening_id in ctl.acked_ids, 30)  # stored, acknowledged
+        await until_async(lambda: shot.tightening_id in ctl.acked_ids, 30)  # stored, acknowledged
         assert set(_sends(st)) == {b.bolt_id}                   # never another bolt's parameters
         seen.update(bolt=b.bolt_id, shot=shot)
 
-    st = _scenario(tmp_path, body)
+    st = scenario(tmp_path, body)
     repo = Repository.open(st.cfg.database_url)
     try:
         rows = {r.bolt_id: r for r in repo.vehicle_report(vin).bolts}
@@ -220,7 +158,7 @@ def test_frames_of_the_wrong_size_are_a_fault_not_an_exit(tmp_path, monkeypatch)
 
     import cv2
 
-    import tests.station.test_faults as harness
+    import tests.station.daemons as harness
 
     dst = tmp_path / "sim"
     shutil.copytree(SIM_CONFIG.parent, dst)
@@ -235,13 +173,13 @@ def test_frames_of_the_wrong_size_are_a_fault_not_an_exit(tmp_path, monkeypatch)
     monkeypatch.setattr(harness, "SIM_CONFIG", dst / "station.yaml")
 
     async def body(st, world):
-        await _until(lambda: st.cycle.state is State.FAULT, 60)
+        await until_async(lambda: st.cycle.state is State.FAULT, 60)
         assert st.cycle.reason.startswith("pair1: left frames are 64x48, the calibration is "
                                           "for 5472x3648")
         await asyncio.sleep(1.0)
         assert st.cycle.state is State.FAULT and not _sends(st)
 
-    _scenario(tmp_path, body)
+    scenario(tmp_path, body)
 
 
 @pytest.mark.timeout(240)
@@ -273,17 +211,17 @@ def test_a_database_failing_at_a_vehicle_is_a_fault_its_keeper_probes_back(tmp_p
         repo.model_for_code, repo.models = model_for_code, models
 
     async def body(st, world):
-        await _until(lambda: "database" in st.cycle.faults, 30)
+        await until_async(lambda: "database" in st.cycle.faults, 30)
         assert st.cycle.state is State.FAULT and "database: disk I/O error" in st.cycle.reason
         assert st.vin is None and not _sends(st)
         await asyncio.sleep(4.0)
         # backoff 0.5 s doubling to 5 s: a handful of probes, not one per tick
         assert 2 <= len(probes) <= 5, probes
         down["on"] = False
-        await _until(lambda: st.vin == "DBFAULTVIN0000001", 30)
+        await until_async(lambda: st.vin == "DBFAULTVIN0000001", 30)
         assert "database" not in st.cycle.faults and _back(st, "database")
         # one fault and one return, the same kind throughout
         health = [(e.ok, e.kind) for e in _of(st, DeviceHealth) if e.device == "database"]
         assert health == [(False, "down"), (True, "")], health
 
-    _scenario(tmp_path, body, vin="DBFAULTVIN0000001", prepare=prepare, loaded=False)
+    scenario(tmp_path, body, vin="DBFAULTVIN0000001", prepare=prepare, loaded=False)

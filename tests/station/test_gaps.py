@@ -8,12 +8,8 @@ import sqlite3
 
 import pytest
 
-from drivers.lift.sim import SimulatedPlc
-from drivers.wrench.sim import SimController
-from stationd.sim.devices_cli import psets_of
 from stationd.station.gaps import GapPlan, plan
-from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
-from tests.station.test_restart import _until
+from tests.station.daemons import tracking, until
 
 
 def test_the_ids_between_the_last_recorded_and_the_newest_are_fetched():
@@ -27,22 +23,17 @@ def test_the_ids_between_the_last_recorded_and_the_newest_are_fetched():
 
 @pytest.mark.timeout(300)
 def test_results_made_while_the_link_was_cut_are_fetched_or_shown_as_gaps(tmp_path):
-    lift_port, ctl_port = _free_port(), _free_port()
-    plc = SimulatedPlc()
-    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=9, nok_rate=0.0)
-    d = Proc(tmp_path, lift_port, ctl_port)
     pose = tmp_path / "pose"
-    try:
-        at_height(d, plc, ctl, lift_port, ctl_port, "GAPVIN00000000001")
+    with tracking(tmp_path, "GAPVIN00000000001") as (d, _, ctl):
         pose.write_text("B05")
         d.wait_log("tightening bolt B05")
-        _until(lambda: ctl.tool_enabled, 30, "tool enabled")
+        until(lambda: ctl.tool_enabled, 30, "tool enabled")
         first = ctl.pull_trigger()
         assert first is not None
-        _until(lambda: first.tightening_id in ctl.acked_ids, 30, "the first result stored")
+        until(lambda: first.tightening_id in ctl.acked_ids, 30, "the first result stored")
         pose.write_text("B06")
         d.wait_log("tightening bolt B06")
-        _until(lambda: ctl.tool_enabled, 30, "tool enabled on B06")
+        until(lambda: ctl.tool_enabled, 30, "tool enabled on B06")
         # the link is cut and stays down (the controller refuses a new session) while the
         # operator goes on: three tightenings nobody hears
         ctl.refuse_mid(1, 99)
@@ -58,10 +49,6 @@ def test_results_made_while_the_link_was_cut_are_fetched_or_shown_as_gaps(tmp_pa
         for tid in (ids[0], ids[2]):
             d.wait_log(f"tightening {tid} fetched after a reconnect")
         assert d.stop() == 0
-    finally:
-        d.kill()
-        ctl.close()
-        plc.close()
     con = sqlite3.connect(tmp_path / "station.db")
     try:
         to_bolts = [r[0] for r in con.execute("SELECT tightening_id FROM tightening_records")]

@@ -10,38 +10,25 @@ import time
 import pytest
 
 from stationd.station.core import State
-from tests.station.test_faults import _station
+from tests.station.daemons import run_station, station, until_async
 
 
 @pytest.mark.timeout(120)
 def test_idle_station_reads_the_plc_at_most_20_times_a_second(tmp_path):
-    st, world = _station(tmp_path)
+    st, world = station(tmp_path)
     plc = st.lift.plc
     figures = {}
 
-    async def main():
-        stop = asyncio.Event()
-        task = asyncio.create_task(st.run(stop))
-        try:
-            plc.set_height(400.0)              # up, not at working height
-            for _ in range(100):
-                if st.core.state is State.WAITING_VEHICLE:
-                    break
-                await asyncio.sleep(0.05)
-            assert st.core.state is State.WAITING_VEHICLE, st.core.reason
-            n0, c0, t0 = plc.requests, time.process_time(), time.monotonic()
-            await asyncio.sleep(3.0)
-            dt = time.monotonic() - t0
-            figures.update(rate=(plc.requests - n0) / dt, cpu=(time.process_time() - c0) / dt)
-        finally:
-            stop.set()
-            await task
+    async def idle(st, world):
+        plc.set_height(400.0)              # up, not at working height
+        await until_async(lambda: st.core.state is State.WAITING_VEHICLE, 5,
+                          lambda: f"waiting for a vehicle: {st.core.reason}")
+        n0, c0, t0 = plc.requests, time.process_time(), time.monotonic()
+        await asyncio.sleep(3.0)
+        dt = time.monotonic() - t0
+        figures.update(rate=(plc.requests - n0) / dt, cpu=(time.process_time() - c0) / dt)
 
-    try:
-        asyncio.run(main())
-    finally:
-        world.close()
-        st.close()
+    run_station(st, world, idle)
     print(f"idle: {figures['rate']:.1f} PLC requests/s, {100 * figures['cpu']:.1f} % of a core "
           "(daemon and simulated PLC together)")
     assert 0 < figures["rate"] <= 20

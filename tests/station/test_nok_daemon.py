@@ -20,9 +20,8 @@ import pytest
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController, SimPset, SimTightening
 from stationd.sim.devices_cli import psets_of
+from tests.station.daemons import SIM, Proc, at_height, free_port, until
 from tests.station.test_commands_daemon import PASSWORD, Client, _station
-from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
-from tests.station.test_restart import _until
 
 ROOT = Path(__file__).resolve().parents[2]
 VIN = "LOOSENVIN00000001"
@@ -58,11 +57,11 @@ def rundown(d: Proc, ctl: SimController, pose: Path, n: int, *, pset: int,
     selected on the controller; the trigger pulled; the result stored (acknowledged)."""
     pose.write_text("B05")
     d.wait_log(TOOL_ON, count=n)
-    _until(lambda: ctl.tool_enabled, 30, "tool enabled")
+    until(lambda: ctl.tool_enabled, 30, "tool enabled")
     assert ctl.pset == pset
     shot = ctl.pull_trigger(result_type=2 if loosening else 1)
     assert shot is not None
-    _until(lambda: shot.tightening_id in ctl.acked_ids, 30, "result stored")
+    until(lambda: shot.tightening_id in ctl.acked_ids, 30, "result stored")
     pose.write_text("")
     return shot
 
@@ -82,7 +81,7 @@ def command(c: Client, kind: str, comment: str = "") -> tuple[int, dict[str, obj
 
 @pytest.mark.timeout(300)
 def test_loosen_strategy_lock_and_release_through_the_daemon(tmp_path):
-    lift_port, ctl_port, http_port = _free_port(), _free_port(), _free_port()
+    lift_port, ctl_port, http_port = free_port(), free_port(), free_port()
     url = f"http://127.0.0.1:{http_port}/"
     plc, ctl = SimulatedPlc(), controller(seed=11)
     d = Proc(tmp_path, lift_port, ctl_port, edit=nok_station(http_port))

@@ -1,7 +1,8 @@
 """What the daemon records, over the real protocols: the marker crops kept with a tightening,
 a result that arrives after the wrench left its bolt (never the next bolt's), and the bolt
-table's order rule.  The harness is test_faults': an in-process station on config/sim (or a
-copy of it), the lift PLC and the controller on loopback, the cameras rendered by a World."""
+table's order rule.  The harness is tests/station/daemons.py's: an in-process station on
+config/sim (or a copy of it), the lift PLC and the controller on loopback, the cameras
+rendered by a World."""
 
 import asyncio
 import re
@@ -15,7 +16,7 @@ import pytest
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-import tests.station.test_faults as harness
+import tests.station.daemons as harness
 from db.models import Bolt, TighteningRecord, Vehicle
 from db.repository import Repository
 from stationd.demo.station import SIM_CONFIG
@@ -23,7 +24,7 @@ from stationd.sim.world import wrench_at
 from stationd.station.core import DisableTool, State
 from stationd.station.events import BoltSelected, Localized, Notice, ResultUnattributed
 from stationd.words import reason_words
-from tests.station.test_faults import _bolts, _scenario, _until
+from tests.station.daemons import scenario, until_async, vehicle_bolts
 
 VIN = "FAULTVIN000000001"  # the harness's vehicle
 FRAME = (3648, 5472)       # the sim cameras' frame, rows x columns
@@ -53,7 +54,7 @@ def _sim_copy(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, *, records: str =
 
 def _on(st, bolt: str, seed: int):
     """The wrench with its socket on ``bolt``."""
-    return wrench_at(np.array(_bolts(st)[bolt].position), np.random.default_rng(seed),
+    return wrench_at(np.array(vehicle_bolts(st)[bolt].position), np.random.default_rng(seed),
                      st.cfg.tool.length_mm)
 
 
@@ -67,10 +68,10 @@ async def _tighten(st, world, bolt: str, seed: int):
     tightening, once the daemon acknowledged it (stored)."""
     ctl = st.wrench.controller
     world.set_wrench(_on(st, bolt, seed))
-    await _until(lambda: _tightening(st, bolt), 60)
+    await until_async(lambda: _tightening(st, bolt), 60)
     shot = ctl.pull_trigger()
     assert shot is not None
-    await _until(lambda: shot.tightening_id in ctl.acked_ids, 30)
+    await until_async(lambda: shot.tightening_id in ctl.acked_ids, 30)
     return shot
 
 
@@ -114,10 +115,10 @@ def test_a_tightening_keeps_the_marker_crops_when_asked(tmp_path, monkeypatch, s
     async def body(st, world):
         assert st.cfg.records.images_dir == images
         assert st.cfg.records.save_images is save
-        bolt = next(iter(_bolts(st)))
+        bolt = next(iter(vehicle_bolts(st)))
         seen.update(bolt=bolt, shot=await _tighten(st, world, bolt, seed=4))
 
-    st = _scenario(tmp_path, body, **NO_NOK)
+    st = scenario(tmp_path, body, **NO_NOK)
     bolt, tid = seen["bolt"], seen["shot"].tightening_id
     [(rec_bolt, rec_tid, paths, _)] = _records(st.cfg.database_url)
     assert (rec_bolt, rec_tid) == (bolt, tid)
@@ -149,7 +150,7 @@ def test_a_tightening_keeps_the_marker_crops_when_asked(tmp_path, monkeypatch, s
 # -- 2. a result after the wrench left its bolt ---------------------------------------------
 def _same_pset_bolts(st) -> tuple[str, str]:
     """Two bolts with the same pset (the pset cannot tell their results apart)."""
-    infos = list(_bolts(st).values())
+    infos = list(vehicle_bolts(st).values())
     a = infos[0]
     b = next(i for i in infos[1:] if i.parameters.pset == a.parameters.pset)
     return a.bolt_id, b.bolt_id
@@ -183,22 +184,22 @@ def test_a_result_after_the_wrench_left_is_its_bolts_never_the_next_ones(tmp_pat
         a, b = _same_pset_bolts(st)
         pulled = _pull_as_the_wrench_leaves(st, world, a, then=_on(st, b, seed=6))
         world.set_wrench(_on(st, a, seed=5))
-        await _until(lambda: _tightening(st, a), 60)
+        await until_async(lambda: _tightening(st, a), 60)
         world.set_wrench(None)               # the operator moves away, pulling the trigger
-        await _until(lambda: "late" in pulled, 30)
+        await until_async(lambda: "late" in pulled, 30)
         late = pulled["late"]
         assert late is not None              # the tool was still on: it tightened
         st.on_action = None
-        await _until(lambda: late.tightening_id in ctl.acked_ids, 30)
+        await until_async(lambda: late.tightening_id in ctl.acked_ids, 30)
         assert any(f"result for {a} outside a tightening" in m for m in _logs(st))
         # meanwhile the wrench is on b: b is selected and tightened with its own result
-        await _until(lambda: _tightening(st, b), 60)
+        await until_async(lambda: _tightening(st, b), 60)
         shot = ctl.pull_trigger()
         assert shot is not None
-        await _until(lambda: shot.tightening_id in ctl.acked_ids, 30)
+        await until_async(lambda: shot.tightening_id in ctl.acked_ids, 30)
         seen.update(a=a, b=b, late=late, shot=shot)
 
-    st = _scenario(tmp_path, body, **NO_NOK)
+    st = scenario(tmp_path, body, **NO_NOK)
     a, b, late, shot = seen["a"], seen["b"], seen["late"], seen["shot"]
     assert late.tightening_id != shot.tightening_id
     assert not list(st.bus.of(ResultUnattributed))
@@ -206,7 +207,7 @@ def test_a_result_after_the_wrench_left_is_its_bolts_never_the_next_ones(tmp_pat
     records = _records(st.cfg.database_url)
     assert [r[:2] for r in records] == [(a, late.tightening_id), (b, shot.tightening_id)]
     for (bolt, *_, xy) in records:            # each with its own selection's position
-        assert np.hypot(*(np.array(xy) - np.array(_bolts(st)[bolt].position[:2]))) < 2.0
+        assert np.hypot(*(np.array(xy) - np.array(vehicle_bolts(st)[bolt].position[:2]))) < 2.0
     repo = Repository.open(st.cfg.database_url)
     try:
         rows = {r.bolt_id: r for r in repo.vehicle_report(VIN).bolts}
@@ -220,27 +221,27 @@ def test_a_result_after_the_wrench_left_is_its_bolts_never_the_next_ones(tmp_pat
 def test_a_bolt_whose_late_result_was_ok_is_done(tmp_path):
     async def body(st, world):
         ctl = st.wrench.controller
-        a = next(iter(_bolts(st)))
+        a = next(iter(vehicle_bolts(st)))
         pulled = _pull_as_the_wrench_leaves(st, world, a)
         world.set_wrench(_on(st, a, seed=5))
-        await _until(lambda: _tightening(st, a), 60)
+        await until_async(lambda: _tightening(st, a), 60)
         world.set_wrench(None)
-        await _until(lambda: "late" in pulled, 30)
+        await until_async(lambda: "late" in pulled, 30)
         late = pulled["late"]
         assert late is not None and late.ok
         st.on_action = None
-        await _until(lambda: late.tightening_id in ctl.acked_ids, 30)
+        await until_async(lambda: late.tightening_id in ctl.acked_ids, 30)
         repo = Repository.open(st.cfg.database_url)
         try:
             assert {r.bolt_id: r.status for r in repo.vehicle_report(VIN).bolts}[a] == "ok"
         finally:
             repo.close()
         world.set_wrench(_on(st, a, seed=7))  # back on the bolt, already tightened OK
-        await _until(lambda: _sends(st).count(a) > 1
-                     or any(f"{a} is already done" in m for m in _logs(st)), 60)
+        await until_async(lambda: _sends(st).count(a) > 1
+                          or any(f"{a} is already done" in m for m in _logs(st)), 60)
         assert _sends(st) == [a], "parameters sent again for a bolt recorded OK"
 
-    _scenario(tmp_path, body, **NO_NOK)
+    scenario(tmp_path, body, **NO_NOK)
 
 
 # -- 3. the order rule --------------------------------------------------------------------
@@ -251,22 +252,22 @@ def test_an_ordered_bolt_waits_for_the_lower_order(tmp_path, monkeypatch):
     seen = {}
 
     async def body(st, world):
-        assert (_bolts(st)[first].order, _bolts(st)[second].order) == (1, 2)
+        assert (vehicle_bolts(st)[first].order, vehicle_bolts(st)[second].order) == (1, 2)
         world.set_wrench(_on(st, second, seed=8))
         wait = f"{second} must wait: order 2 needs {first} done first"
         # more refusals than the stable frames a selection needs: it is the rule, not time
-        await _until(lambda: sum(wait in m for m in _logs(st))
-                     > st.cfg.matching.stable_frames + 1, 60)
+        await until_async(lambda: sum(wait in m for m in _logs(st))
+                          > st.cfg.matching.stable_frames + 1, 60)
         assert _sends(st) == []
         assert st.cycle.state is State.TRACKING
         shot = await _tighten(st, world, first, seed=9)
         assert _sends(st) == [first]
         world.set_wrench(_on(st, second, seed=10))
-        await _until(lambda: _sends(st) == [first, second], 60)
-        await _until(lambda: _tightening(st, second), 30)
+        await until_async(lambda: _sends(st) == [first, second], 60)
+        await until_async(lambda: _tightening(st, second), 30)
         seen.update(shot=shot)
 
-    st = _scenario(tmp_path, body, **NO_NOK)
+    st = scenario(tmp_path, body, **NO_NOK)
     assert [r[:2] for r in _records(st.cfg.database_url)] == [
         (first, seen["shot"].tightening_id)]
 
@@ -300,16 +301,16 @@ def test_a_result_the_database_refuses_is_a_fault_kept_and_stored_when_it_can(tm
 
     async def body(st, world):
         ctl = st.wrench.controller
-        bolts = sorted(_bolts(st))
+        bolts = sorted(vehicle_bolts(st))
         first, second = bolts[0], bolts[1]
         seen[first] = (await _tighten(st, world, first, seed=1)).tightening_id  # had room
         world.set_wrench(_on(st, second, 2))
-        await _until(lambda: _tightening(st, second), 60)
+        await until_async(lambda: _tightening(st, second), 60)
         full["on"] = True
         shot = ctl.pull_trigger()
         assert shot is not None
         seen[second] = shot.tightening_id
-        await _until(lambda: "database" in st.cycle.faults, 30)
+        await until_async(lambda: "database" in st.cycle.faults, 30)
         assert st.cycle.state is State.FAULT
         assert "results not stored" in st.cycle.reason and "disk is full" in st.cycle.reason
         assert not ctl.tool_enabled
@@ -320,15 +321,15 @@ def test_a_result_the_database_refuses_is_a_fault_kept_and_stored_when_it_can(tm
         assert len(_sends(st)) == sent and not ctl.tool_enabled
         assert st.cycle.state is State.FAULT and full["refused"] >= 2   # the keeper retried
         full["on"] = False                                   # room again
-        await _until(lambda: shot.tightening_id in ctl.acked_ids, 30)
-        await _until(lambda: "database" not in st.cycle.faults, 30)
+        await until_async(lambda: shot.tightening_id in ctl.acked_ids, 30)
+        await until_async(lambda: "database" not in st.cycle.faults, 30)
         late = [e for e in st.bus.of(ResultRecorded) if e.tightening_id == shot.tightening_id]
         assert len(late) == 1 and late[0].bolt == second
         health = [(e.ok, e.kind) for e in st.bus.of(DeviceHealth) if e.device == "database"]
         assert health == [(False, "down"), (True, "")], health
-        await _until(lambda: _sends(st)[-1:] == [bolts[2]], 60)   # the station works on
+        await until_async(lambda: _sends(st)[-1:] == [bolts[2]], 60)   # the station works on
 
-    st = _scenario(tmp_path, body, prepare=prepare, **NO_NOK)
+    st = scenario(tmp_path, body, prepare=prepare, **NO_NOK)
     stored = [(bolt, tid) for bolt, tid, _, _ in _records(st.cfg.database_url)]
     assert stored[:2] == list(seen.items())                  # each once, in order
     assert len({tid for _, tid in stored}) == len(stored)
@@ -344,14 +345,14 @@ def test_a_database_file_removed_under_the_daemon_is_a_fault_not_acknowledged(tm
 
     async def body(st, world):
         ctl = st.wrench.controller
-        bolts = sorted(_bolts(st))
+        bolts = sorted(vehicle_bolts(st))
         world.set_wrench(_on(st, bolts[0], 1))
-        await _until(lambda: _tightening(st, bolts[0]), 60)
+        await until_async(lambda: _tightening(st, bolts[0]), 60)
         for f in tmp_path.glob("s.db*"):
             os.unlink(f)
         shot = ctl.pull_trigger()
         assert shot is not None
-        await _until(lambda: "database" in st.cycle.faults, 30)
+        await until_async(lambda: "database" in st.cycle.faults, 30)
         assert "was removed" in st.cycle.reason and st.cycle.state is State.FAULT
         await asyncio.sleep(1.0)
         assert shot.tightening_id not in ctl.acked_ids and not ctl.tool_enabled
@@ -360,4 +361,4 @@ def test_a_database_file_removed_under_the_daemon_is_a_fault_not_acknowledged(tm
         await asyncio.sleep(2.0)
         assert len(_sends(st)) == sent
 
-    _scenario(tmp_path, body, **NO_NOK)
+    scenario(tmp_path, body, **NO_NOK)

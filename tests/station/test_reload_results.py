@@ -23,8 +23,7 @@ from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.boltfile import load_bolts
 from stationd.sim.devices_cli import psets_of
-from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
-from tests.station.test_restart import _until
+from tests.station.daemons import SIM, Proc, at_height, free_port, until
 
 VIN = "RELOADVIN00000001"
 
@@ -44,7 +43,7 @@ def _rows(db: str, sql: str) -> list[tuple[Any, ...]]:
 @pytest.mark.timeout(420)
 def test_a_reload_at_the_enable_during_a_rundown_and_in_flight_records_each_result_once(
         tmp_path):
-    lift_port, ctl_port = _free_port(), _free_port()
+    lift_port, ctl_port = free_port(), free_port()
     plc = SimulatedPlc()
     ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=3, nok_rate=0.0,
                         resend_unacked=True)
@@ -59,7 +58,7 @@ def test_a_reload_at_the_enable_during_a_rundown_and_in_flight_records_each_resu
         def enabled_on(bolt: str) -> None:
             pose.write_text(bolt)
             d.wait_log(f"tightening bolt {bolt}")
-            _until(lambda: ctl.tool_enabled, 30, "tool enabled")
+            until(lambda: ctl.tool_enabled, 30, "tool enabled")
 
         def reload_begins() -> None:
             nonlocal reloads
@@ -68,7 +67,7 @@ def test_a_reload_at_the_enable_during_a_rundown_and_in_flight_records_each_resu
 
         def reloaded() -> None:
             d.wait_log("configuration reloaded", count=reloads)
-            _until(lambda: _subscribed(ctl), 60, "the reloaded station subscribed")
+            until(lambda: _subscribed(ctl), 60, "the reloaded station subscribed")
 
         got: dict[str, int] = {}
         # 1. at the enable: the trigger pulled as the reload begins, the rundown ends while
@@ -97,8 +96,8 @@ def test_a_reload_at_the_enable_during_a_rundown_and_in_flight_records_each_resu
         got[bolts[2]] = shot.tightening_id
         pose.write_text("")
         reloaded()
-        _until(lambda: set(got.values()) <= set(ctl.acked_ids), 60,
-               f"results {sorted(got.values())} acknowledged (acked: {ctl.acked_ids})")
+        until(lambda: set(got.values()) <= set(ctl.acked_ids), 60,
+              f"results {sorted(got.values())} acknowledged (acked: {ctl.acked_ids})")
         assert d.p.poll() is None
         # 4. a restart: killed (-9) during a rundown, its tool left on; the restarted
         # station turns the tool off and records the result to the bolt it was enabled for
@@ -111,9 +110,9 @@ def test_a_reload_at_the_enable_during_a_rundown_and_in_flight_records_each_resu
         pose.write_text("")
         logs.append(d.log())
         d = Proc(tmp_path, lift_port, ctl_port)
-        _until(lambda: _subscribed(ctl), 60, "the restarted station subscribed")
+        until(lambda: _subscribed(ctl), 60, "the restarted station subscribed")
         got[bolts[3]] = ctl.finish_rundown().tightening_id
-        _until(lambda: got[bolts[3]] in ctl.acked_ids, 60, "the result acknowledged")
+        until(lambda: got[bolts[3]] in ctl.acked_ids, 60, "the result acknowledged")
         assert not ctl.tool_enabled
         assert d.stop() == 0
     finally:

@@ -14,7 +14,6 @@ import signal
 import sqlite3
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -24,19 +23,11 @@ from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.boltfile import load_bolts
 from stationd.sim.devices_cli import psets_of
+from tests.station.daemons import PROC, SIM, until
 
-SIM = Path(__file__).resolve().parents[2] / "config" / "sim"
-PROC = Path(__file__).with_name("station_proc.py")
 VIN = "RESTARTVIN0000001"
-
-
-def _until(pred, timeout, what):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"not reached in {timeout} s: {what}")
+#: the old name, for tests that still import it from here (tests.station.daemons has it)
+_until = until
 
 
 def _all_ids(tmp: Path, bolts: bool = False) -> list[int]:
@@ -66,8 +57,8 @@ class Daemon:
         return self.log_path.read_text()
 
     def wait_log(self, needle: str, timeout: float = 90) -> None:
-        _until(lambda: needle in self.log() or self.p.poll() is not None, timeout,
-               f"{needle!r} in the journal")
+        until(lambda: needle in self.log() or self.p.poll() is not None, timeout,
+              f"{needle!r} in the journal")
         assert needle in self.log(), f"exited {self.p.returncode}: {self.log()[-2000:]}"
 
     def stop(self, sig: int) -> int:
@@ -114,15 +105,15 @@ def test_sigterm_and_sigkill_mid_vehicle_lose_nothing(tmp_path):
         def tool_on_for(d: Daemon, bolt: str) -> None:
             pose.write_text(bolt)
             d.wait_log(f"tightening bolt {bolt}")
-            _until(lambda: ctl.tool_enabled, 30, "tool enabled")
+            until(lambda: ctl.tool_enabled, 30, "tool enabled")
 
         def tighten(d: Daemon, bolt: str) -> int:
             tool_on_for(d, bolt)
             shot = ctl.pull_trigger()
             assert shot is not None
-            _until(lambda: shot.tightening_id in ctl.acked_ids, 30, "result acknowledged")
+            until(lambda: shot.tightening_id in ctl.acked_ids, 30, "result acknowledged")
             pose.write_text("")
-            _until(lambda: not ctl.tool_enabled, 30, "tool disabled after the result")
+            until(lambda: not ctl.tool_enabled, 30, "tool disabled after the result")
             return int(shot.tightening_id)
 
         # 1. a bolt tightened, then SIGTERM in the middle of the next one
@@ -161,7 +152,7 @@ def test_sigterm_and_sigkill_mid_vehicle_lose_nothing(tmp_path):
         pose.write_text("")
         d = start()
         d.wait_log("tracking the wrench")
-        _until(lambda: shot.tightening_id in _all_ids(tmp_path), 60, "the last result stored")
+        until(lambda: shot.tightening_id in _all_ids(tmp_path), 60, "the last result stored")
         plc.lower_lift()
         d.wait_log(f"vehicle {VIN} closed")
         assert d.stop(signal.SIGTERM) == 0

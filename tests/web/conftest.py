@@ -72,18 +72,43 @@ def live_server() -> Iterator[Callable[..., LiveServer]]:
         s.close()
 
 
-@pytest.fixture(params=BROWSERS)
-def page(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Page]:
-    """The same test in headless Chromium and in headless Firefox: a browser that is not
-    installed is a skip that names the package, never a silent pass."""
-    why = missing(request.param)
+def _browser(name: str, folder: Path) -> Iterator[Page]:
+    """A page in browser ``name`` (its downloads in ``folder``) for as long as the fixture
+    holds it; a browser that is not installed is a skip that names the package, never a
+    silent pass."""
+    why = missing(name)
     if why is not None:
         pytest.skip(why)
-    p = open_page(request.param, tmp_path)
+    p = open_page(name, folder)
     try:
         yield p
     finally:
         p.close()
+
+
+@pytest.fixture(params=BROWSERS)
+def page(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Page]:
+    """The same test in headless Chromium and in headless Firefox, a fresh browser each."""
+    yield from _browser(request.param, tmp_path)
+
+
+@pytest.fixture(scope="module", params=BROWSERS)
+def module_page(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
+                ) -> Iterator[Page]:
+    """One browser of each kind for a whole module (a browser's start is most of a short
+    browser test's time, Firefox's ten seconds on a busy machine): for tests that each load
+    their own server's page and need nothing an earlier test left (no login: cookies are
+    shared across ports; one download of a name per module)."""
+    yield from _browser(request.param, tmp_path_factory.mktemp(request.param))
+
+
+@pytest.fixture
+def reused_page(module_page: Page) -> Page:
+    """The module's browser as a new one starts: the first size, a blank page (the last
+    test's page no longer polls its stopped server).  A module uses it as its ``page``."""
+    module_page.size(*SIZES[0])
+    module_page.get("about:blank")
+    return module_page
 
 
 @pytest.fixture

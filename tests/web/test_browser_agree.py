@@ -7,7 +7,7 @@ is most of a browser test's time."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +25,7 @@ from stationd.station.events import (
 )
 from tests.web.conftest import SIZES
 from tests.web.mapgeo import confusable, map_geometry
-from tests.web.pages import BROWSERS, Page, missing, open_page
+from tests.web.pages import Page
 from tests.web.scenario import sim_vehicle
 from tests.web.test_browser import label_overlaps
 from tests.web.test_browser_fixes import bolt_states, ok, redrawn
@@ -42,17 +42,10 @@ NOT_SEEN = Reason(Why.NOT_LOCALIZED, per_pair=tuple(
     for side in ("left", "right")))
 
 
-@pytest.fixture(scope="module", params=BROWSERS)
-def page(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
-         ) -> Iterator[Page]:
-    why = missing(request.param)
-    if why is not None:
-        pytest.skip(why)
-    p = open_page(request.param, tmp_path_factory.mktemp(request.param))
-    try:
-        yield p
-    finally:
-        p.close()
+@pytest.fixture
+def page(reused_page: Page) -> Page:
+    """The module's browser (conftest's ``reused_page``): every test loads its own server."""
+    return reused_page
 
 
 @pytest.fixture

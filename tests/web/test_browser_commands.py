@@ -11,8 +11,8 @@ import pytest
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.sim.devices_cli import psets_of
+from tests.station.daemons import SIM, Proc, at_height, free_port
 from tests.station.test_commands_daemon import PASSWORD, _station
-from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
 from tests.web.pages import Page
 from tests.web.test_browser import check_fits
 
@@ -39,7 +39,7 @@ def _answer(page: Page, before: str) -> str:
 
 @pytest.mark.timeout(300)
 def test_operator_screen_logs_in_skips_a_bolt_and_shows_a_refusal(page, shots, tmp_path):
-    http_port, lift_port, ctl_port = _free_port(), _free_port(), _free_port()
+    http_port, lift_port, ctl_port = free_port(), free_port(), free_port()
     plc = SimulatedPlc()
     ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=7, nok_rate=0.0)
     d = Proc(tmp_path, lift_port, ctl_port, edit=_station(http_port))

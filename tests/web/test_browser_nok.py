@@ -12,10 +12,9 @@ from __future__ import annotations
 import pytest
 
 from drivers.lift.sim import SimulatedPlc
+from tests.station.daemons import Proc, at_height, free_port, until
 from tests.station.test_commands_daemon import PASSWORD
-from tests.station.test_daemon_faults import Proc, _free_port, at_height
 from tests.station.test_nok_daemon import LOOSEN_PSET, controller, nok_station, rundown
-from tests.station.test_restart import _until
 from tests.web.pages import Page
 from tests.web.test_browser import check_fits
 from tests.web.test_browser_commands import _answer, _login, _shown
@@ -37,7 +36,7 @@ def _b05(page: Page, what: str) -> str | None:
 @pytest.mark.timeout(300)
 def test_a_third_nok_locks_the_screen_says_who_releases_and_a_supervisor_releases(
         page, shots, tmp_path):
-    http_port, lift_port, ctl_port = _free_port(), _free_port(), _free_port()
+    http_port, lift_port, ctl_port = free_port(), free_port(), free_port()
     plc, ctl = SimulatedPlc(), controller(seed=12)
     d = Proc(tmp_path, lift_port, ctl_port, edit=nok_station(http_port))
     pose = tmp_path / "pose"
@@ -97,7 +96,7 @@ def test_a_third_nok_locks_the_screen_says_who_releases_and_a_supervisor_release
         page.wait(lambda p: _b05(p, "state") == "loosen", 30, "B05 'loosen first' again")
         pose.write_text("B05")
         page.wait(lambda p: p.text("#headline") == LOOSEN_FIRST, 30, "the loosen pset next")
-        _until(lambda: ctl.pset == LOOSEN_PSET and ctl.tool_enabled, 30, "loosen pset, tool on")
+        until(lambda: ctl.pset == LOOSEN_PSET and ctl.tool_enabled, 30, "loosen pset, tool on")
 
         # the vehicle's page: each rundown with its kind, and the release with who and when
         page.get(f"http://127.0.0.1:{http_port}/vehicles/{VIN}")

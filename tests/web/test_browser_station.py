@@ -28,7 +28,7 @@ import pytest
 from drivers.wrench.sim import SimController
 from stationd.sim.devices_cli import psets_of
 from stationd.sim.vin import make_vin
-from tests.station.test_daemon_faults import SIM, Proc, _free_port
+from tests.station.daemons import SIM, Proc, free_port
 from tests.web.pages import Page
 from tests.web.test_browser import check_fits
 
@@ -214,7 +214,7 @@ def test_demo_screens_follow_the_simulated_operator(page, shots, tmp_path):
 
 @pytest.mark.timeout(240)
 def test_daemon_with_its_lift_down_shows_fault_naming_the_lift(page, shots, tmp_path):
-    http_port, lift_port, ctl_port = _free_port(), _free_port(), _free_port()
+    http_port, lift_port, ctl_port = free_port(), free_port(), free_port()
     ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
     ctl.start()
     ctl.listen_tcp(port=ctl_port)       # the controller answers; the lift PLC never does

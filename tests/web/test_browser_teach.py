@@ -18,7 +18,7 @@ from drivers.wrench.sim import SimController
 from stationd.access import hash_password
 from stationd.sim.devices_cli import psets_of
 from stationd.station.core import TEACH_STEADY_MM
-from tests.station.test_daemon_faults import SIM, Proc, _free_port, at_height
+from tests.station.daemons import SIM, Proc, at_height, free_port
 from tests.test_teach_cli import PASSWORD, _station
 from tests.web.pages import Page
 from tests.web.test_browser_commands import _answer, _login, _shown
@@ -39,7 +39,7 @@ def _teach(page: Page, bolt: str) -> str:
 @pytest.mark.timeout(300)
 def test_an_engineer_teaches_two_bolts_from_the_screen_and_downloads_the_table(
         page, shots, tmp_path):
-    http_port, lift_port, ctl_port = _free_port(), _free_port(), _free_port()
+    http_port, lift_port, ctl_port = free_port(), free_port(), free_port()
     plc = SimulatedPlc()
     ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=5, nok_rate=0.0)
     d = Proc(tmp_path, lift_port, ctl_port, edit=_station(http_port, hash_password(PASSWORD)))

@@ -1,0 +1,100 @@
+"""A folder of rendered backgrounds that the simulated cameras of several processes share.
+
+A simulated camera renders its 20 MP background once (a second or more of a core each; eight
+cameras per station), and every station, demo and benchmark does so again in its own process:
+a test run of the whole daemon pays that dozens of times for the same few backgrounds.  With
+``STATIOND_SIM_BACKGROUNDS`` naming a folder, a background is rendered once, written there and
+read back (a fifth of a second) by every later camera that would render the very same one.
+
+"The very same": the key hashes everything the image is made of (the camera, the scene with
+its fixed markers, the seed) and the source of the code that draws it (the renderer, its ray
+caster, the camera model, the marker's colours) with the versions of NumPy and OpenCV, so a
+changed input or a changed renderer is a new file, never a stale image.  The render is
+deterministic in these, so a background read back equals the one the camera would render.
+The test suite points this at a folder of its own for one run; without the variable nothing is
+written anywhere and every camera renders its own, as before.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import os
+import pickle
+import threading
+from functools import cache
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from stationd.geometry import camera as camera_module
+from stationd.geometry.camera import Camera
+from stationd.sim import raycast, render
+from stationd.vision import marker
+
+ENV = "STATIOND_SIM_BACKGROUNDS"
+_writers: list[threading.Thread] = []    # the files being written, this process's
+_lock = threading.Lock()
+
+
+@cache
+def _code_key() -> bytes:
+    """What the drawing code is: its sources and the libraries' versions."""
+    h = hashlib.sha256()
+    for module in (render, raycast, camera_module, marker):
+        h.update(Path(str(module.__file__)).read_bytes())
+    h.update(f"numpy {np.__version__} opencv {cv2.__version__}".encode())
+    return h.digest()
+
+
+def _key(camera: Camera, scene: render.Scene, seed: int) -> str:
+    h = hashlib.sha256(_code_key())
+    h.update(pickle.dumps((camera, scene, seed), protocol=5))
+    return h.hexdigest()[:40]
+
+
+def background(camera: Camera, scene: render.Scene, seed: int) -> np.ndarray:
+    """``render(camera, scene, seed=seed).image``, from the shared folder when it has it (and
+    put there when it did not)."""
+    folder = os.environ.get(ENV)
+    if not folder:
+        return render.render(camera, scene, seed=seed).image
+    path = Path(folder) / f"{_key(camera, scene, seed)}.npy"
+    try:
+        image: np.ndarray = np.load(path, allow_pickle=False)
+        return image
+    except (OSError, ValueError):     # not there yet (or being replaced): render it
+        pass
+    image = render.render(camera, scene, seed=seed).image
+    # written beside the camera's work, not before its first frame (60 MB take a disk a
+    # while); not a daemon thread: a process that ends lets it finish
+    writer = threading.Thread(target=_store, args=(path, image), name="sim-background-store")
+    with _lock:
+        _writers[:] = [w for w in _writers if w.is_alive()]
+        _writers.append(writer)
+    writer.start()
+    return image
+
+
+def wait_stored() -> None:
+    """Wait until the backgrounds this process rendered are in the folder."""
+    with _lock:
+        writers = list(_writers)
+    for w in writers:
+        w.join()
+
+
+def _store(path: Path, image: np.ndarray) -> None:
+    """``image`` written whole under a name of its own, then renamed: a reader in another
+    process sees the complete file or none.  A full disk only costs a later camera its
+    render."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        buf = io.BytesIO()
+        np.save(buf, image, allow_pickle=False)
+        part = path.with_name(f"{path.stem}.{os.getpid()}.{threading.get_ident()}.part")
+        part.write_bytes(buf.getbuffer())
+        os.replace(part, path)
+    except OSError:
+        pass

@@ -1,0 +1,83 @@
+"""The shared folder of rendered backgrounds: a background read back is the one the camera
+would render; anything that changes the image is another file; without the folder nothing is
+written.  (A small camera: the 20 MP ones only cost more time.)"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from stationd.geometry.camera import Camera
+from stationd.sim import backgrounds
+from stationd.sim.frames import FrameSource
+from stationd.sim.render import MarkerPose, Scene, render
+from stationd.vision.marker import MarkerSpec
+
+CAM = Camera(np.array([[600.0, 0, 159.5], [0, 600.0, 119.5], [0, 0, 1]]),
+             np.array([-0.05, 0.02, 0.0, 0.0]), (320, 240))
+SCENE = Scene(texture=0.2, vignetting=0.3, blur_sigma=0.8, noise_sigma=2.0)
+
+
+def test_a_background_is_rendered_once_then_read_back_equal(tmp_path, monkeypatch):
+    monkeypatch.setenv(backgrounds.ENV, str(tmp_path))
+    first = backgrounds.background(CAM, SCENE, 3)
+    backgrounds.wait_stored()          # written beside the camera's work
+    files = list(tmp_path.iterdir())
+    assert len(files) == 1 and files[0].suffix == ".npy"      # written whole, no part left
+    again = backgrounds.background(CAM, SCENE, 3)
+    assert again is not first and np.array_equal(again, first)
+    assert np.array_equal(again, render(CAM, SCENE, seed=3).image)
+    # the frames of a camera on it: the very pixels of a full render
+    pose = MarkerPose.look(np.array([10.0, -5.0, 500.0]), 20, 30, 0)
+    frame = FrameSource(CAM, SCENE, seed=3).frame(pose)
+    full = render(CAM, replace(SCENE, markers=[(pose, MarkerSpec())]), seed=3).image
+    assert np.array_equal(frame, full)
+    backgrounds.wait_stored()
+    assert len(list(tmp_path.iterdir())) == 1
+
+
+@pytest.mark.parametrize("change", ["seed", "scene", "camera", "fixed marker"])
+def test_anything_that_changes_the_image_is_another_file(tmp_path, monkeypatch, change):
+    monkeypatch.setenv(backgrounds.ENV, str(tmp_path))
+    backgrounds.background(CAM, SCENE, 3)
+    backgrounds.wait_stored()
+    cam, scene, seed = CAM, SCENE, 3
+    if change == "seed":
+        seed = 4
+    elif change == "scene":
+        scene = replace(SCENE, noise_sigma=2.5)
+    elif change == "camera":
+        K = CAM.K.copy()
+        K[0, 2] += 0.5
+        cam = Camera(K, CAM.dist, CAM.size)
+    else:
+        pose = MarkerPose.look(np.array([0.0, 0.0, 500.0]), 0, 0, 0)
+        scene = replace(SCENE, markers=[(pose, MarkerSpec())])
+    other = backgrounds.background(cam, scene, seed)
+    backgrounds.wait_stored()
+    assert len(list(tmp_path.iterdir())) == 2
+    assert np.array_equal(other, render(cam, scene, seed=seed).image)
+
+
+def test_without_the_folder_nothing_is_written(tmp_path, monkeypatch):
+    monkeypatch.setenv(backgrounds.ENV, "")
+    monkeypatch.chdir(tmp_path)
+    image = backgrounds.background(CAM, SCENE, 3)
+    backgrounds.wait_stored()
+    assert np.array_equal(image, render(CAM, SCENE, seed=3).image)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_unreadable_file_is_rendered_again(tmp_path, monkeypatch):
+    """A file cut short (a full disk, a killed writer) is not an image: it is rendered and
+    replaced."""
+    monkeypatch.setenv(backgrounds.ENV, str(tmp_path))
+    good = backgrounds.background(CAM, SCENE, 3)
+    backgrounds.wait_stored()
+    (path,) = tmp_path.iterdir()
+    path.write_bytes(path.read_bytes()[:1000])
+    assert np.array_equal(backgrounds.background(CAM, SCENE, 3), good)
+    backgrounds.wait_stored()
+    assert np.array_equal(np.load(path), good)
