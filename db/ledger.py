@@ -99,6 +99,13 @@ class Ledger:
                 q = q.where(CommandRecord.vin == vin)
             return [_command(r) for r in s.scalars(q)]
 
+    def last_of(self, kinds: tuple[str, ...]) -> CommandEntry | None:
+        """The last command of one of ``kinds`` (None: none ever)."""
+        with self._session(False) as s:
+            r = s.scalar(select(CommandRecord).where(CommandRecord.kind.in_(kinds))
+                         .order_by(CommandRecord.id.desc()).limit(1))
+            return None if r is None else _command(r)
+
     def skipped(self, vin: str, since: datetime | None) -> dict[str, tuple[str, str]]:
         """The bolts of ``vin`` skipped by a command since ``since`` (the vehicle's last
         opening: a rework starts afresh), with who skipped it and their comment."""
@@ -264,7 +271,7 @@ def _rundowns(s: Session, refs: list[int]) -> dict[int, dict[str, Any]]:
             "position_mm": [rec.x_mm, rec.y_mm, rec.z_mm],
             "match_distance_mm": rec.match_distance_mm, "tilt_deg": rec.tilt_deg,
             "sent_at": _iso(rec.sent_at), "result_at": _iso(rec.result_at),
-            "recorded_at": _iso(rec.recorded_at)}
+            "recorded_at": _iso(rec.recorded_at), "operator": rec.operator}
     return out
 
 

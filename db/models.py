@@ -199,6 +199,9 @@ class TighteningRecord(Base):
     #: loosening is never a bolt done
     kind: Mapped[str] = mapped_column(String(10), default="tightening",
                                       server_default="tightening")
+    #: the user signed in at the station when the tool was enabled (None: nobody, or a
+    #: record from before operators signed in)
+    operator: Mapped[str | None] = mapped_column(String(64))
 
     vehicle: Mapped[Vehicle] = relationship()
     bolt: Mapped[Bolt] = relationship()

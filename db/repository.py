@@ -222,7 +222,7 @@ class Repository:
         params_sent: Mapping[str, Any] | None = None, acknowledged: bool = True,
         tightening_id: int | None = None, sent_at: datetime | None = None,
         result_at: datetime | None = None, images: Sequence[str] = (),
-        enable_id: int | None = None, kind: str = TIGHTENING,
+        enable_id: int | None = None, kind: str = TIGHTENING, operator: str | None = None,
     ) -> int:
         """Record one tightening of ``bolt`` on the open vehicle ``vin``; return its id.
 
@@ -232,7 +232,8 @@ class Repository:
         it, the bolt's current version.  ``params_sent`` defaults to that version's pset and
         targets.  ``enable_id`` (:meth:`note_enable`) is settled in the same transaction: the
         station owes that enable nothing more.  ``kind``: ``tightening`` or ``loosening``
-        (a loosening never makes the bolt done).
+        (a loosening never makes the bolt done).  ``operator``: the user signed in at the
+        station when the tool was enabled (None: nobody).
         """
         if len(position_mm) != 3:
             raise DataError("position_mm: expected x, y, z")
@@ -271,7 +272,8 @@ class Repository:
                 angle_deg=_opt_float(angle_deg),
                 tightening_id=None if tightening_id is None else int(tightening_id),
                 sent_at=sent_at, result_at=result_at, recorded_at=utcnow(),
-                images=[str(i) for i in images], kind=kind)
+                images=[str(i) for i in images], kind=kind,
+                operator=None if operator is None else str(operator)[:64])
             s.add(rec)
             _settle(s, enable_id)
             s.flush()

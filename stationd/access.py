@@ -14,6 +14,11 @@ The ``access:`` section (optional; without it nobody can give commands)::
         operator: [skip]
         supervisor: [skip, reopen, release, loosen]
         engineer: [skip, reopen, teach]
+      operator_required: false        # true: no pset is sent while nobody is signed in
+      operator_idle_s: 1800           # optional: the operator signed out after this idle
+
+Any user may sign in at the station as its operator (``stationd operator sign-in``, the
+operator screen): every rundown is recorded with the operator signed in.
 
 ``stationd user hash`` prints the hash of a password typed at its prompt: the file never
 holds a password.  scrypt (RFC 7914, Python's ``hashlib``) is a standard key derivation made
@@ -96,10 +101,14 @@ class AccessConfig:
 
     users: Mapping[str, User] = field(default_factory=dict)
     roles: Mapping[str, frozenset[Right]] = field(default_factory=lambda: dict(DEFAULT_ROLES))
+    #: no parameters are sent while nobody is signed in at the station
+    operator_required: bool = False
+    #: the operator is signed out after this long without a selection or a rundown, s
+    operator_idle_s: float | None = None
 
     @classmethod
     def from_node(cls, node: YamlNode) -> AccessConfig:
-        m = node.mapping(("users", "roles"))
+        m = node.mapping(("users", "roles", "operator_required", "operator_idle_s"))
         roles = dict(DEFAULT_ROLES)
         if "roles" in m:
             roles = {}
@@ -120,7 +129,14 @@ class AccessConfig:
                     "not a scrypt hash: the file keeps only the hash of a password "
                     "(`stationd user hash` prints it), never the password") from None
             users[name] = User(name, role, stored)
-        return cls(users, roles)
+        required = m["operator_required"].flag() if "operator_required" in m else False
+        if required and not users:
+            raise m["operator_required"].error(
+                "operator_required: true needs users in access.users (nobody could sign in "
+                "to tighten)")
+        idle = m["operator_idle_s"].number(lo=10.0, hi=24 * 3600.0) \
+            if "operator_idle_s" in m else None
+        return cls(users, roles, required, idle)
 
     def current(self, issuer: Issuer) -> Issuer | None:
         """A logged-in user as this configuration has them now: None when they were removed,

@@ -6,6 +6,9 @@ password hashes the station file keeps.
     stationd reopen VIN [--comment TEXT] --user NAME
     stationd release VIN BOLT [--comment TEXT] --user NAME
     stationd loosen VIN BOLT [--comment TEXT] --user NAME
+    stationd operator sign-in USER [--comment TEXT]   # USER signs in at the station
+    stationd operator sign-out --user NAME [--comment TEXT]
+    stationd operator status
     stationd feed [--since N] [--limit M]
     stationd user hash
 
@@ -116,24 +119,73 @@ def cmd_command(args: argparse.Namespace) -> int:
                             "comment": args.comment or ""}
     if args.command in BOLT_COMMANDS:
         body["bolt"] = args.bolt.strip()
+    return _session_command(args, args.user, body)
+
+
+def _session_command(args: argparse.Namespace, user: str, body: dict[str, Any]) -> int:
+    """Log in as ``user``, give ``body``'s command, print the station's answer."""
     client = ApiClient(args.url, args.token, args.timeout)
     try:
-        status, who = client.call("/api/login", {"user": args.user, "password": read_password(),
+        status, who = client.call("/api/login", {"user": user, "password": read_password(),
                                                  "client": "cli"})
         if status != 200:
             return say_refused("login refused", status, who)
         status, nonce = client.call("/api/nonce")
         if status != 200 or not isinstance(nonce, dict):
-            return say_refused(args.command, status, nonce)
-        status, answer = client.call("/api/commands", {**body, "nonce": nonce["nonce"]})
-        client.call("/api/logout", {})
+            return say_refused(body["kind"], status, nonce)
     except (urllib.error.URLError, OSError) as exc:
         return _unreachable(args.url, exc)
+    try:
+        status, answer = client.call("/api/commands", {**body, "nonce": nonce["nonce"]})
+    except (urllib.error.URLError, OSError) as exc:
+        # the daemon answered the login: the command may well have been taken; giving it
+        # again blind could skip or loosen twice, so say what is known and where to look
+        sys.stderr.write(
+            f"stationd: {body['kind']}: sent to {args.url}, but its answer did not arrive "
+            f"({getattr(exc, 'reason', exc)}); it may have been accepted: check the "
+            "journal or `stationd status` before giving it again\n")
+        return EXIT_UNREACHABLE
+    try:
+        client.call("/api/logout", {})
+    except (urllib.error.URLError, OSError):
+        pass   # the answer is in hand; the session times out by itself
     if status in (200, 409) and isinstance(answer, dict):
         print(answer["words"])
         return 0 if answer["accepted"] else EXIT_REFUSED
-    sys.stderr.write(f"stationd: {args.command}: HTTP {status}: {answer}\n")
+    sys.stderr.write(f"stationd: {body['kind']}: HTTP {status}: {answer}\n")
     return EXIT_UNREACHABLE if status >= 500 else EXIT_REFUSED
+
+
+def cmd_operator(args: argparse.Namespace) -> int:
+    """``operator sign-in USER``: USER signs in at the station (their password); ``sign-out
+    --user NAME``: whoever is signed in is signed out (NAME's password); ``status``: who is
+    signed in (no login: the screens' status)."""
+    if args.operator_command == "status":
+        return _operator_status(args)
+    user = args.user if args.operator_command == "sign-out" else args.name
+    if not user or not user.strip() or len(user) > 64:
+        raise InputError(f"user {user!r}: the name of a user of the station's access section")
+    if len(args.comment or "") > 500:
+        raise InputError(f"--comment: at most 500 characters ({len(args.comment)} given)")
+    return _session_command(args, user.strip(), {"kind": args.operator_command,
+                                                 "comment": args.comment or ""})
+
+
+def _operator_status(args: argparse.Namespace) -> int:
+    client = ApiClient(args.url, args.token, args.timeout)
+    try:
+        status, doc = client.call("/api/status")
+    except (urllib.error.URLError, OSError) as exc:
+        return _unreachable(args.url, exc)
+    if status != 200 or not isinstance(doc, dict):
+        return say_refused("operator status", status, doc)
+    op = doc.get("operator") or {}
+    if op.get("user"):
+        print(f"operator: {op['user']} signed in")
+    else:
+        print("operator: nobody signed in" + (
+            " (the station requires one: sign in to tighten)" if op.get("required") else ""))
+    return 0
 
 
 def cmd_feed(args: argparse.Namespace) -> int:
@@ -199,6 +251,22 @@ def add_command_parsers(sub: Any) -> None:
         p.add_argument("--user", required=True, help="who gives the command")
         client_args(p)
         p.set_defaults(func=cmd_command, command=name)
+    op = sub.add_parser("operator", help="the operator signed in at the station: every "
+                        "rundown is recorded with them (commands to the running daemon)",
+                        epilog=epilog)
+    osub = op.add_subparsers(dest="operator_command", required=True)
+    si = osub.add_parser("sign-in", help="USER signs in at the station as its operator (any "
+                         "user of the access section, with their password)", epilog=epilog)
+    si.add_argument("name", metavar="USER")
+    so = osub.add_parser("sign-out", help="whoever is signed in at the station is signed out",
+                         epilog=epilog)
+    so.add_argument("--user", required=True, help="who gives the command")
+    st = osub.add_parser("status", help="who is signed in at the station")
+    for p in (si, so):
+        p.add_argument("--comment", default="", help="kept with the command")
+    for p in (si, so, st):
+        client_args(p)
+        p.set_defaults(func=cmd_operator)
     fd = sub.add_parser("feed", help="the records after a sequence number, one JSON per line")
     fd.add_argument("--since", type=int, default=0)
     fd.add_argument("--limit", type=int, default=100)
@@ -212,5 +280,5 @@ def add_command_parsers(sub: Any) -> None:
 
 
 __all__ = ["EXIT_REFUSED", "EXIT_UNREACHABLE", "ApiClient", "add_command_parsers", "client_args",
-           "cmd_command", "cmd_feed",
+           "cmd_command", "cmd_feed", "cmd_operator",
            "cmd_user_hash", "read_password", "say_refused"]

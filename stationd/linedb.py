@@ -6,7 +6,9 @@ line's views (``stationd line results``, a line page) read them; the shape is de
 Tables (PostgreSQL, made if missing):
 
 - ``line_feed``: every record of every station, keyed by (station id, the local database's
-  id, sequence number), the record as JSONB;
+  id, sequence number), the record as JSONB; a rundown's ``operator`` (the user signed in at
+  the station, NULL: nobody, or a record from before) also as a column, for the line's
+  queries per operator (added to a line database made before it);
 - ``line_parameters``: the bolt tables each station tightened with, one row per parameter
   version a forwarded rundown carried, keyed by (station id, local database id, model, bolt,
   version).  Why keyed by station: each station imports its own bolt file (a model's table
@@ -50,7 +52,10 @@ LINE_FEED = Table(
     Column("at", DateTime(timezone=True), nullable=False),
     Column("record", JSON().with_variant(JSONB(), "postgresql"), nullable=False),
     Column("received_at", DateTime(timezone=True), nullable=False, server_default=func.now()),
+    Column("operator", String(64)),      # a rundown's operator (NULL: nobody, or older)
 )
+#: the columns added to ``line_feed`` after its first version: added where missing
+LINE_FEED_ADDED = ("ALTER TABLE line_feed ADD COLUMN IF NOT EXISTS operator VARCHAR(64)",)
 #: a vehicle's rundowns at every station: quality's first question
 LINE_FEED_VIN = Index("ix_line_feed_vin", LINE_FEED.c.record["vin"].as_string())
 
@@ -80,7 +85,17 @@ def create_line_schema(engine: Engine) -> None:
         # racing on "create if missing" made one fail with "relation already exists"
         conn.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": SCHEMA_LOCK_KEY})
         LINE.create_all(conn, checkfirst=True)
+        for added in LINE_FEED_ADDED:   # a table made by an earlier version: its new columns
+            conn.execute(text(added))
         LINE_FEED_VIN.create(conn, checkfirst=True)
+
+
+def operator_of(entry: dict[str, Any]) -> str | None:
+    """The ``operator`` column of a feed entry: a rundown's operator, else None."""
+    if entry["kind"] != "rundown":
+        return None
+    op = entry["record"].get("operator")
+    return None if op is None else str(op)[:64]
 
 
 def parameter_rows(station_id: str, db_id: str, entries: list[dict[str, Any]]
@@ -123,6 +138,7 @@ class LineResult:
     angle_deg: float | None
     version: int | None      # the parameter version it was tightened with (None: older)
     received_at: datetime    # when the line database took it
+    operator: str | None = None   # the user signed in at the station (None: nobody, older)
 
 
 def _opt(v: Any) -> float | None:
@@ -133,7 +149,8 @@ def results(engine: Engine, *, vin: str | None = None, station: str | None = Non
             limit: int = 1000) -> list[LineResult]:
     """The line's rundowns, newest first (of ``vin`` / of ``station``; at most ``limit``)."""
     f = LINE_FEED.c
-    q = select(f.station_id, f.db_id, f.seq, f.at, f.record, f.received_at).where(
+    q = select(f.station_id, f.db_id, f.seq, f.at, f.record, f.received_at,
+               f.operator).where(
         f.kind == "rundown")
     if vin is not None:
         q = q.where(f.record["vin"].as_string() == vin)
@@ -150,7 +167,7 @@ def results(engine: Engine, *, vin: str | None = None, station: str | None = Non
                 rec.get("model"), str(rec.get("bolt")), rec.get("status") == "ok",
                 str(rec.get("rundown") or "tightening"), _opt(rec.get("torque_nm")),
                 _opt(rec.get("angle_deg")), None if version is None else int(version),
-                r.received_at.astimezone(UTC)))
+                r.received_at.astimezone(UTC), r.operator))
     return out
 
 
@@ -185,4 +202,4 @@ def bolt_versions(engine: Engine, *, model: str | None = None, bolt: str | None 
 
 
 __all__ = ["LINE", "LINE_FEED", "LINE_PARAMETERS", "BoltVersion", "LineResult",
-           "bolt_versions", "create_line_schema", "parameter_rows", "results"]
+           "bolt_versions", "create_line_schema", "operator_of", "parameter_rows", "results"]

@@ -60,6 +60,10 @@ class Why(enum.Enum):
     REFERENCE_SEEN = "reference seen"    # a reference marker taken for the wrench (reference,
                                          # distance_mm from its place)
     NO_REFERENCES = "no references"      # a calibration check without references configured
+    # the operator signed in at the station (access.operator_required)
+    SIGN_IN = "sign in"                  # nobody signed in and the station requires one
+    NOT_SIGNED_IN = "not signed in"      # a sign-out with nobody signed in
+    SIGNED_IN = "signed in"              # a sign-in of the operator signed in already (user)
 
 
 @dataclass(frozen=True)
@@ -85,6 +89,7 @@ class Reason:
     pset: int | None = None             # the pset that goes next (a loosen pset)
     pair: str | None = None             # a camera pair (the calibration check)
     reference: str | None = None        # a reference marker (the calibration check)
+    user: str | None = None             # a user (the operator signed in)
 
     def key(self) -> tuple[object, ...]:
         """What makes two refusals the same for the operator: the kind and the bolts, not the

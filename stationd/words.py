@@ -13,11 +13,12 @@ from stationd.station.commands import (
     LoosenBolt,
     ReleaseBolt,
     ReopenVehicle,
+    SignOut,
     SkipBolt,
     TeachPoint,
     TeachStart,
 )
-from stationd.station.events import PairChecked
+from stationd.station.events import OperatorChanged, PairChecked
 
 
 def _mm(v: float | None) -> str:
@@ -89,6 +90,9 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.UNKNOWN_VEHICLE: lambda r: f"vehicle {r.vin} is not in the database",
     Why.DEVICE_FAULT: lambda r: f"a device is in fault: {r.note}",
     Why.NOT_RECORDED: lambda r: f"the database did not record it: {r.note}",
+    Why.SIGN_IN: lambda r: "sign in to tighten: nobody is signed in at the station",
+    Why.NOT_SIGNED_IN: lambda r: "nobody is signed in at the station",
+    Why.SIGNED_IN: lambda r: f"{r.user} is signed in already",
 }
 
 
@@ -98,6 +102,20 @@ def check_words(ev: PairChecked) -> str:
         return reason_words(ev.why)
     return (f"{ev.pair} checked: reference {ev.reference} within {_mm(ev.offset_mm)} mm "
             f"(<= {ev.tolerance_mm or 0:g} mm)")
+
+
+def operator_words(ev: OperatorChanged) -> str:
+    """The journal's line for a change of operator: ``operator: olga signed in``."""
+    if ev.user is not None:
+        return f"operator: {ev.user} signed in" + (
+            f" (after {ev.previous})" if ev.previous and ev.previous != ev.user else "") + (
+            " (since before the start)" if ev.how == "still signed in" else "")
+    if ev.previous is None:
+        return "operator: nobody signed in" + (
+            ": sign in to tighten (access.operator_required)" if ev.required else "")
+    how = {"idle": "signed out: idle too long"}.get(ev.how, ev.how)
+    return f"operator: {ev.previous} {how}" + (f" by {ev.by}" if ev.by else "") + (
+        "; sign in to tighten" if ev.required else "")
 
 
 def reason_words(reason: Reason, *, full: bool = False) -> str:
@@ -119,6 +137,8 @@ def command_words(answer: Answer) -> str:
         what += f" {cmd.model}"
     elif isinstance(cmd, TeachPoint):
         what += f" {cmd.bolt}"
+    elif isinstance(cmd, SignOut) and cmd.user is not None:
+        what += f" of {cmd.user}"
     if cmd.comment:
         what += f" ({cmd.comment!r})"
     return what
@@ -132,4 +152,4 @@ def answer_words(answer: Answer) -> str:
     return f"{head}: refused: {reason_words(answer.reason)}"
 
 
-__all__ = ["answer_words", "check_words", "command_words", "reason_words"]
+__all__ = ["answer_words", "check_words", "command_words", "operator_words", "reason_words"]

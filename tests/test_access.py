@@ -65,11 +65,23 @@ def test_custom_roles_replace_the_defaults():
     (f"users:\n  sam: {{password: '{HASH}'}}\n", "missing key(s): role"),
     ("roles:\n  lead: [fly]\n", "'fly' is not one of"),
     ("groups: {}\n", "unknown key"),
+    ("operator_required: yes please\n", "expected true or false"),
+    ("operator_required: true\n", "operator_required: true needs users"),
+    (f"users:\n  sam: {{role: supervisor, password: '{HASH}'}}\noperator_idle_s: 5\n",
+     "operator_idle_s"),
 ])
 def test_a_bad_access_section_names_its_line_and_key(text, message):
     with pytest.raises(ConfigError) as err:
         _access(text)
     assert message in str(err.value) and "station.yaml" in str(err.value)
+
+
+def test_the_operator_options_default_to_tightening_with_nobody_signed_in():
+    a = _access(f"users:\n  olga: {{role: operator, password: '{HASH}'}}\n")
+    assert (a.operator_required, a.operator_idle_s) == (False, None)
+    a = _access(f"users:\n  olga: {{role: operator, password: '{HASH}'}}\n"
+                "operator_required: true\noperator_idle_s: 1800\n")
+    assert (a.operator_required, a.operator_idle_s) == (True, 1800.0)
 
 
 def test_sessions_end_idle_and_after_a_shift_and_on_logout():

@@ -48,6 +48,8 @@ log = logging.getLogger("stationd")
 BOLTS_PER_VEHICLE, BETWEEN_VEHICLES_S = 5, 3.0
 #: who releases a bolt the scripted operator's NOKs locked (the source says it was simulated)
 SIM_SUPERVISOR = Issuer("supervisor", frozenset({Right.RELEASE}), "sim operator")
+#: the scripted operator, signed in at the station (its rundowns carry the name)
+SIM_OPERATOR = Issuer("operator", frozenset(), "sim operator")
 #: the journal's line for an idle simulated lift (said once per daemon)
 IDLE_LINE = ("simulated lift: down, no vehicle; raise it with 'next' (a new vehicle at "
              "working height) on the daemon's standard input ({help}), or run stationd run "
@@ -212,7 +214,8 @@ class SimulatedStation:
                      self._code)
             try:
                 await operate(station, self.world, rng, BOLTS_PER_VEHICLE, [], _bolt_said,
-                              truth, nok_rng, note=self._note, supervisor=SIM_SUPERVISOR)
+                              truth, nok_rng, note=self._note, supervisor=SIM_SUPERVISOR,
+                              operator=SIM_OPERATOR)
             except InputError as exc:
                 log.warning("simulated operator: %s", exc)
             except (StationError, RuntimeError, OSError) as exc:

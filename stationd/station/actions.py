@@ -58,6 +58,7 @@ from stationd.station.events import (
     DeviceHealth,
     EventBus,
     Notice,
+    OperatorChanged,
     PairChecked,
     Refused,
     StateChanged,
@@ -69,7 +70,7 @@ from stationd.station.journal import RefusalJournal
 from stationd.station.records import STATION_FAULTS, Records
 from stationd.station.sdnotify import Notifier
 from stationd.station.trust import MeasureReferences, RecordCheck
-from stationd.words import answer_words, check_words, reason_words
+from stationd.words import answer_words, check_words, operator_words, reason_words
 
 log = logging.getLogger("stationd")
 A = TypeVar("A")
@@ -168,6 +169,8 @@ class Actions:
             (log.info if ev.trusted else log.warning)("%s", check_words(ev))
         elif isinstance(ev, BoltToLoosen):
             log.info("%s: %s", ev.bolt, reason_words(ev.reason, full=True))
+        elif isinstance(ev, OperatorChanged):
+            log.info("%s", operator_words(ev))
         elif isinstance(ev, DeviceHealth):
             if ev.ok:
                 log.info("%s: back", ev.device)

@@ -113,10 +113,29 @@ class CheckCalibration:
     comment: str = ""
 
 
-Command = (SkipBolt | ReopenVehicle | ReleaseBolt | LoosenBolt | TeachStart | TeachPoint
-           | TeachStop | CheckCalibration)
+@dataclass(frozen=True)
+class SignIn:
+    """The issuing user signs in at the station as its operator (the shift's operator: a
+    badge, a login): every rundown from now on is recorded with their name, until they sign
+    out, another operator signs in or the station's idle time-out ends it.  Any configured
+    user may sign themselves in: it grants no right, it says who holds the tool."""
 
-#: the right each command needs
+    comment: str = ""
+
+
+@dataclass(frozen=True)
+class SignOut:
+    """Nobody is signed in at the station any more (whoever was: ``user``, filled in by the
+    core when it accepts the command, so the record names who was signed out)."""
+
+    comment: str = ""
+    user: str | None = None
+
+
+Command = (SkipBolt | ReopenVehicle | ReleaseBolt | LoosenBolt | TeachStart | TeachPoint
+           | TeachStop | CheckCalibration | SignIn | SignOut)
+
+#: the right each command needs (signing in and out need none: any configured user)
 RIGHT: dict[type[Command], Right] = {SkipBolt: Right.SKIP, ReopenVehicle: Right.REOPEN,
                                      ReleaseBolt: Right.RELEASE, LoosenBolt: Right.LOOSEN,
                                      TeachStart: Right.TEACH,
@@ -127,7 +146,8 @@ KIND: dict[type[Command], str] = {SkipBolt: "skip", ReopenVehicle: "reopen",
                                   ReleaseBolt: "release", LoosenBolt: "loosen",
                                   TeachStart: "teach-start",
                                   TeachPoint: "teach-point", TeachStop: "teach-stop",
-                                  CheckCalibration: "calibration-check"}
+                                  CheckCalibration: "calibration-check",
+                                  SignIn: "sign-in", SignOut: "sign-out"}
 
 
 def skip_note(user: str, comment: str) -> str:
@@ -151,5 +171,5 @@ class Answer:
 
 
 __all__ = ["KIND", "RIGHT", "Answer", "CheckCalibration", "Command", "Issuer", "LoosenBolt",
-           "ReleaseBolt", "ReopenVehicle", "Right", "SkipBolt", "TeachPoint", "TeachStart",
-           "TeachStop", "skip_note"]
+           "ReleaseBolt", "ReopenVehicle", "Right", "SignIn", "SignOut", "SkipBolt",
+           "TeachPoint", "TeachStart", "TeachStop", "skip_note"]

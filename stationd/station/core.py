@@ -48,6 +48,8 @@ from stationd.station.commands import (
     LoosenBolt,
     ReleaseBolt,
     ReopenVehicle,
+    SignIn,
+    SignOut,
     SkipBolt,
     TeachPoint,
     TeachStart,
@@ -64,6 +66,7 @@ from stationd.station.events import (
     DeviceHealth,
     Localized,
     Notice,
+    OperatorChanged,
     PairChecked,
     PairsUnchecked,
     ParamsRefusedEvent,
@@ -77,6 +80,7 @@ from stationd.station.events import (
     ToolEnabled,
     VehicleClosed,
     VehicleOpened,
+    VehicleReopened,
 )
 from stationd.station.events import State as State  # the state lives with its event
 from stationd.station.matching import BoltMatcher, BoltRule, Match, MatchParams
@@ -295,6 +299,15 @@ class ModelsKnown(Input):
 
 
 @dataclass(frozen=True)
+class OperatorBack(Input):
+    """At a start or a reload: ``user`` signed in at ``since`` and did not sign out (the
+    commands' records say so), and is still a user of the station file."""
+
+    user: str
+    since: float
+
+
+@dataclass(frozen=True)
 class CommandDone(Input):
     """The shell carried out a command's :class:`RecordCommand`: recorded (``reason`` None)
     or refused by the database (an unknown VIN, a vehicle not closed, a failed write)."""
@@ -306,7 +319,7 @@ class CommandDone(Input):
 Event = (Started | LiftRead | LocalizedIn | ParamsAcked | ParamsRefused | ResultIn
          | DeviceFault | DeviceBack | VehicleLoaded | VehicleRejected | VinSent | Tick
          | CommandIn | CommandDone | ToolOn | Written | VehicleEnded | ModelsKnown
-         | ReferencesChecked)
+         | ReferencesChecked | OperatorBack)
 
 
 # -- actions ------------------------------------------------------------------------------------
@@ -327,6 +340,7 @@ class Selection:
     vin: str = ""
     parameters_id: int | None = None
     loosen: bool = False    # ``pset`` is the bolt's loosen pset: a loosening was asked for
+    operator: str | None = None   # who was signed in at the station (None: nobody)
 
 
 @dataclass(frozen=True)
@@ -513,6 +527,14 @@ class StationCore:
     #: the calibration check's state (None: no reference markers configured, every pair
     #: trusted as before): :mod:`stationd.station.trust`
     trust: PairTrust | None = None
+    #: no parameters are sent while nobody is signed in (``access.operator_required``)
+    operator_required: bool = False
+    #: the operator is signed out after this long without a selection or a rundown, s
+    #: (``access.operator_idle_s``; None: never)
+    operator_idle_s: float | None = None
+    #: who is signed in at the station (None: nobody): every rundown is recorded with them
+    operator: str | None = None
+    _operator_seen: float = field(default=0.0, repr=False)   # their last sign-in or work
 
     # -- the one entry point ---------------------------------------------------------------
     def feed(self, ev: Event) -> list[Action]:
@@ -550,7 +572,10 @@ class StationCore:
                  self._fault_reason() if self.faults else "waiting for the lift")
         # the last station may have been killed with the tool on: off until a bolt is confirmed
         return [*_disable("station started: the tool stays off until a bolt is confirmed",
-                          t=ev.t), *self._check_at_start(ev.t)]
+                          t=ev.t), *self._check_at_start(ev.t),
+                Publish(OperatorChanged(self.operator, self.operator_required,
+                                        how="still signed in" if self.operator else
+                                        "nobody signed in", t=ev.t))]
 
     def _on_LiftRead(self, ev: LiftRead) -> list[Action]:  # noqa: N802
         acts: list[Action] = []
@@ -749,6 +774,14 @@ class StationCore:
                 or self._vin_for != (self.vin, self._wrench_epoch) or ev.point_mm is None:
             self.matcher.reset()   # never reached: TRACKING implies all of these; belt and braces
             return []
+        if self.operator_required and self.operator is None:
+            # the station requires an operator: nothing is sent for anybody's tool (the
+            # streak is kept: a sign-in selects at the next frame of a wrench held still)
+            why = Reason(Why.SIGN_IN, bolt=m.bolt)
+            if why.key() != self._last_refusal:
+                self._last_refusal = why.key()
+                return [Publish(Refused(why, m.bolt, t=ev.t))]
+            return []
         spec = self._specs[m.bolt]
         pset, params, loosen = spec.pset, spec.parameters, m.bolt in self._loosen
         if loosen:   # the loosen strategy: its loosen pset, never the tightening one, first
@@ -758,7 +791,9 @@ class StationCore:
                 return []
             params = Parameters(pset, LOOSEN_TARGETS)
         sel = Selection(m.bolt, pset, ev.point_mm, ev.tilt_deg, float(m.distance_mm or 0.0),
-                        ev.exposure_t, ev.t, ev.evidence, self.vin, spec.parameters_id, loosen)
+                        ev.exposure_t, ev.t, ev.evidence, self.vin, spec.parameters_id, loosen,
+                        self.operator)
+        self._operator_seen = ev.t
         self.bolt, self._selection, self._acked_at, self._away = m.bolt, sel, None, 0
         self._last_refusal = None
         self.matcher.reset()
@@ -789,7 +824,8 @@ class StationCore:
             a.vin, a.bolt, bool(r.ok), float(r.torque_nm), float(r.angle_deg),
             int(r.tightening_id), int(r.pset), float(r.torque_min_nm), float(r.torque_max_nm),
             float(r.angle_min_deg), float(r.angle_max_deg), a.late, tuple(ev.images), a.kind,
-            t=ev.t)), Acknowledge(r)]
+            a.selection.operator if a.selection is not None else None, t=ev.t)),
+            Acknowledge(r)]
 
     def _on_VehicleEnded(self, ev: VehicleEnded) -> list[Action]:  # noqa: N802
         return [Publish(VehicleClosed(ev.vin, ev.missing, ev.nok, t=ev.t))]
@@ -840,6 +876,8 @@ class StationCore:
                                        "recorded, not matched", t=ev.t)))
         self._recorded.add(int(r.tightening_id))
         self._enabled = None
+        if en.operator is not None and en.operator == self.operator:
+            self._operator_seen = max(self._operator_seen, ev.t)
         if self.matcher is not None and self.vin == en.vin:
             if kind == LOOSENING:
                 acts += self._after_loosening(ev.t, en, bool(r.ok))
@@ -872,14 +910,20 @@ class StationCore:
         why = self._refusal(ev.command, ev.issuer)
         if why is not None:
             return [Reply(Answer(ev.request, ev.command, ev.issuer, why))]
+        if isinstance(ev.command, SignOut):   # its record names who is signed out
+            ev = replace(ev, command=replace(ev.command, user=self.operator))
         self._commands[ev.request] = ev
         return [RecordCommand(ev.request, ev.command, ev.issuer, ev.t)]
 
     def _refusal(self, cmd: Command, who: Issuer) -> Reason | None:
         """Why ``cmd`` may not be carried out now, or None."""
-        right = RIGHT[type(cmd)]
-        if right not in who.rights:
+        right = RIGHT.get(type(cmd))
+        if right is not None and right not in who.rights:
             return Reason(Why.NO_RIGHT, right=right.value)
+        if isinstance(cmd, SignIn):
+            return Reason(Why.SIGNED_IN, user=who.user) if self.operator == who.user else None
+        if isinstance(cmd, SignOut):
+            return Reason(Why.NOT_SIGNED_IN) if self.operator is None else None
         if isinstance(cmd, CheckCalibration):
             return None if self.trust is not None else Reason(Why.NO_REFERENCES)
         if isinstance(cmd, TeachStart | TeachPoint | TeachStop):
@@ -982,6 +1026,11 @@ class StationCore:
             return self._check_asked(ev.t, c)
         if isinstance(cmd, TeachStart | TeachPoint | TeachStop):
             return self._teach_done(ev.t, c)
+        if isinstance(cmd, SignIn | SignOut):
+            user = c.issuer.user if isinstance(cmd, SignIn) else None
+            how = "signed in" if user is not None else "signed out"
+            by = c.issuer.user if user is None and c.issuer.user != self.operator else None
+            return [*self._operator_is(ev.t, user, how, by), Reply(answer)]
         acts: list[Action] = []
         if isinstance(cmd, SkipBolt):
             acts += self._skip(ev.t, cmd, c.issuer)
@@ -994,11 +1043,13 @@ class StationCore:
                     acts.append(self._to_loosen(ev.t, cmd.bolt))
         elif isinstance(cmd, LoosenBolt):
             acts += self._loosen_ordered(ev.t, cmd, c.issuer)
-        elif cmd.vin == self._closed_vin and VEHICLE in self.faults:
-            # the closed vehicle at height, reopened: its fault clears and the next lift read
-            # loads it (open now)
-            self._closed_vin, self._loading = None, False
-            acts += self._back(ev.t, VEHICLE)
+        elif isinstance(cmd, ReopenVehicle):
+            acts.append(Publish(VehicleReopened(cmd.vin, c.issuer.user, t=ev.t)))
+            if cmd.vin == self._closed_vin and VEHICLE in self.faults:
+                # the closed vehicle at height, reopened: its fault clears and the next lift
+                # read loads it (open now)
+                self._closed_vin, self._loading = None, False
+                acts += self._back(ev.t, VEHICLE)
         return [*acts, Reply(answer)]
 
     def _skip(self, t: float, cmd: SkipBolt, who: Issuer) -> list[Action]:
@@ -1114,7 +1165,40 @@ class StationCore:
     def _on_Tick(self, ev: Tick) -> list[Action]:  # noqa: N802
         if self._off_at is not None and ev.t - self._off_at >= self.late_result_s:
             self._enabled, self._off_at = None, None
-        return self._teach_overdue(ev.t) + self._check_due(ev.t)
+        return self._teach_overdue(ev.t) + self._check_due(ev.t) + self._operator_idle(ev.t)
+
+    # -- the operator signed in at the station ---------------------------------------------
+    def _on_OperatorBack(self, ev: OperatorBack) -> list[Action]:  # noqa: N802
+        """Signed in before a start or reload: still signed in (said at :class:`Started`),
+        unless idle too long already."""
+        if self.operator_idle_s is not None and ev.t - ev.since >= self.operator_idle_s:
+            return []
+        self.operator, self._operator_seen = ev.user, ev.since
+        return []
+
+    def _operator_is(self, t: float, user: str | None, how: str,
+                     by: str | None = None) -> list[Action]:
+        """``user`` (None: nobody) is the operator from now on.  A bolt selected for the last
+        one is left (the tool off): its rundown would carry the wrong name."""
+        previous, self.operator, self._operator_seen = self.operator, user, t
+        acts: list[Action] = []
+        if previous != user and (self.state in ON_A_BOLT or self.tool_on):
+            acts += self._drop(t, State.TRACKING, f"operator {how}")
+        self._last_refusal = None   # a refusal to nobody is said again to the next one
+        return [*acts, Publish(OperatorChanged(user, self.operator_required, previous, how,
+                                               by, t=t))]
+
+    def _operator_idle(self, t: float) -> list[Action]:
+        """The operator idle for ``operator_idle_s`` (no selection, no rundown) is signed
+        out, and that is recorded as their sign-out by the station (nobody waits for it:
+        request 0)."""
+        idle, user = self.operator_idle_s, self.operator
+        if idle is None or user is None or self.tool_on or self.state in ON_A_BOLT \
+                or t - self._operator_seen < idle:
+            return []
+        out = SignOut(f"idle for {idle:g} s", user)
+        return [*self._operator_is(t, None, "idle"),
+                RecordCommand(0, out, Issuer(user, frozenset(), "station (idle)"), t)]
 
     def _teach_overdue(self, t: float) -> list[Action]:
         """A teach point not measured in :data:`TEACH_WAIT_S` is answered with what happened:

@@ -49,6 +49,7 @@ from stationd.station.core import (
     Event,
     LiftRead,
     ModelsKnown,
+    OperatorBack,
     ResultIn,
     Started,
     State,
@@ -97,7 +98,9 @@ class Station:
         refs = self.cfg.references
         self.core = StationCore(self.cfg.matching, self.cfg.matching.leave_frames,
                                 nok=self.cfg.nok, trust=None if refs is None
-                                else PairTrust(refs.pairs, refs.period_s))
+                                else PairTrust(refs.pairs, refs.period_s),
+                                operator_required=self.cfg.access.operator_required,
+                                operator_idle_s=self.cfg.access.operator_idle_s)
         self._pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="station")
         call = Blocking(self._pool)
         self.devices = Devices(self.cfg, self.device_kw)
@@ -191,6 +194,10 @@ class Station:
         repo = self.records.open()
         # the models the bolt tables name: what a teach-in may name
         self._pending.append(ModelsKnown(time.time(), frozenset(repo.models())))
+        signed = self.records.operator()
+        if signed is not None and signed[0] in self.cfg.access.users:
+            # still signed in (a reload, a restart): their rundowns carry their name on
+            self._pending.append(OperatorBack(time.time(), signed[0], signed[1].timestamp()))
         owed = self.records.owed(self.core.late_result_s)
         if owed is not None:   # its result is recorded to that bolt, not into nothing
             self.core.resume(owed)

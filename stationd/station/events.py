@@ -103,6 +103,18 @@ class DeviceHealth(StationEvent):
 
 
 @dataclass(frozen=True)
+class LineLinkChanged(StationEvent):
+    """The link to the line database went up or down (``up``; ``reason``: the forwarder's
+    last error), or its backlog alarm changed.  Not a :class:`DeviceHealth`: a lost line
+    database is never a fault of the station (the screens would turn red); the OPC UA
+    server shows it as the line asset's health."""
+
+    up: bool
+    reason: str = ""
+    alarm: str | None = None
+
+
+@dataclass(frozen=True)
 class DeviceIdentified(StationEvent):
     """What a device said it is when it (re)connected: the controller's name, cell and
     channel, supplier, software versions (Open Protocol MID 0002)."""
@@ -142,6 +154,15 @@ class VehicleClosed(StationEvent):
     vin: str
     missing: tuple[str, ...]
     nok: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class VehicleReopened(StationEvent):
+    """A closed vehicle reopened for rework by ``user``: it opens (as a rework) when it is
+    at the station at height, at once when it still is."""
+
+    vin: str
+    user: str
 
 
 # -- tracking and selection ----------------------------------------------------------------------
@@ -247,6 +268,20 @@ class BoltReleased(StationEvent):
 
 
 @dataclass(frozen=True)
+class OperatorChanged(StationEvent):
+    """Who is signed in at the station now (``user`` None: nobody), whether the station
+    requires someone to tighten (``access.operator_required``), who was before, and how it
+    changed (``how``: signed in, signed out, idle, restored at a start, or the station's
+    start with nobody)."""
+
+    user: str | None
+    required: bool = False
+    previous: str | None = None
+    how: str = ""
+    by: str | None = None     # who gave the sign-out (another user than ``previous``)
+
+
+@dataclass(frozen=True)
 class PairChecked(StationEvent):
     """A pair checked against the reference markers: its verdict (ok, moved, not checked),
     the worst reference and its offset (mm) against the tolerance, each reference's offset
@@ -290,6 +325,7 @@ class ResultRecorded(StationEvent):
     late: bool = False
     images: tuple[str, ...] = ()
     kind: str = "tightening"         # or "loosening" (db.kinds): never the bolt done
+    operator: str | None = None      # who was signed in at the station (None: nobody)
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,14 @@ from stationd.config import StationConfig
 from stationd.errors import StationError
 from stationd.localize import Localization
 from stationd.reasons import Reason, Why
-from stationd.station.commands import KIND, ReopenVehicle, TeachStart, skip_note
+from stationd.station.commands import (
+    KIND,
+    ReopenVehicle,
+    SignIn,
+    SignOut,
+    TeachStart,
+    skip_note,
+)
 from stationd.station.core import (
     BoltSpec,
     LoadVehicle,
@@ -70,7 +77,9 @@ class Unsaved:
         a, r = self.record, self.record.result
         return (f"VIN {a.vin} bolt {a.bolt} tightening {r.tightening_id} "
                 f"{'OK' if r.ok else 'NOK'} torque {float(r.torque_nm):.2f} Nm angle "
-                f"{float(r.angle_deg):.1f} deg pset {r.pset} at {self.result_at.isoformat()}")
+                f"{float(r.angle_deg):.1f} deg pset {r.pset} at {self.result_at.isoformat()}"
+                + (f" operator {a.selection.operator}" if a.selection is not None
+                   and a.selection.operator else ""))
 
 
 class Records:
@@ -121,7 +130,8 @@ class Records:
         j = owed.selection
         sel = Selection(owed.bolt, owed.pset, xyz(j["point_mm"]), float(j["tilt_deg"]),
                         float(j["distance_mm"]), float(j["exposure_t"]), float(j["decided_t"]),
-                        None, owed.vin, owed.parameters_id, bool(j.get("loosen", False)))
+                        None, owed.vin, owed.parameters_id, bool(j.get("loosen", False)),
+                        j.get("operator"))
         self._enable, self._enable_off = (sel, owed.id), owed.off_at is not None
         log.info("the tool was enabled for bolt %s of %s (pset %s) when the last station "
                  "stopped: its result within %.0f s is recorded to it", owed.bolt, owed.vin,
@@ -178,7 +188,8 @@ class Records:
             tightening_id=int(r.tightening_id),
             sent_at=datetime.fromtimestamp(sel.decided_t, UTC) if sel else None,
             result_at=u.result_at, images=u.images, enable_id=u.enable_id, kind=a.kind,
-            params_sent=_loosen_sent(sel.pset) if sel is not None and sel.loosen else None)
+            params_sent=_loosen_sent(sel.pset) if sel is not None and sel.loosen else None,
+            operator=sel.operator if sel is not None else None)
         # the tightening's curves (stored as they came, usually just before) go with it; the
         # record stands whatever happens here (reading finds them by tightening id anyway)
         try:
@@ -248,8 +259,10 @@ class Records:
 
     def close_vehicle(self, vin: str) -> VehicleEnded:
         report = self._repo().close_vehicle(vin)
-        log.info("vehicle %s closed: missing %s, NOK %s", vin, report.missing, report.nok)
-        return VehicleEnded(time.time(), vin, tuple(report.missing), tuple(report.nok))
+        log.info("vehicle %s closed: missing %s, skipped %s, NOK %s", vin, report.missing,
+                 report.skipped, report.nok)
+        # the screens' "not tightened when the vehicle left": skipped ones too
+        return VehicleEnded(time.time(), vin, tuple(report.untightened), tuple(report.nok))
 
     def record_command(self, a: RecordCommand, vin_at_height: str | None) -> Reason | None:
         """An accepted command on disk with its user (a reopen reopens the vehicle in the
@@ -262,6 +275,8 @@ class Records:
         comment = cmd.comment
         if isinstance(cmd, TeachStart):   # the model taught is part of the record
             comment = f"model {cmd.model}" + (f": {comment}" if comment else "")
+        if isinstance(cmd, SignOut) and cmd.user is not None and cmd.user != who.user:
+            comment = f"{cmd.user} signed out" + (f": {comment}" if comment else "")
         try:
             if isinstance(cmd, ReopenVehicle):
                 repo.reopen_vehicle(cmd.vin, at=at, user=who.user, source=who.source,
@@ -275,6 +290,14 @@ class Records:
         except DataError:
             return Reason(Why.NOT_CLOSED, vin=vin)
         return None
+
+    def operator(self) -> tuple[str, datetime] | None:
+        """Who signed in at the station and has not signed out since, with when (the last
+        sign-in or sign-out command decides; None: nobody)."""
+        last = self._repo().ledger.last_of((KIND[SignIn], KIND[SignOut]))
+        if last is None or last.kind != KIND[SignIn]:
+            return None
+        return last.user, last.at
 
     def last_tightening_id(self) -> int | None:
         return self._repo().last_tightening_id()
@@ -387,7 +410,7 @@ def _selection_json(sel: Selection) -> dict[str, Any]:
     after a reload or restart (the evidence, the marker crops, stays in memory)."""
     return {"point_mm": [float(v) for v in sel.point_mm], "tilt_deg": float(sel.tilt_deg),
             "distance_mm": float(sel.distance_mm), "exposure_t": float(sel.exposure_t),
-            "decided_t": float(sel.decided_t), "loosen": sel.loosen}
+            "decided_t": float(sel.decided_t), "loosen": sel.loosen, "operator": sel.operator}
 
 
 def _loosen_sent(pset: int | None) -> dict[str, Any]:

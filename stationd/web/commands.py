@@ -10,7 +10,9 @@ session from a user's password, the core's answer), whatever the client; the sta
 - ``POST /api/logout``; ``GET /api/me``: who is logged in, with their rights.
 - ``GET /api/nonce``: a single-use nonce for the next command (with a session).
 - ``POST /api/commands`` ``{"kind": "skip"|"reopen"|"release"|"loosen"|"calibration-check",
-  "vin", "bolt", "comment", "nonce"}`` (and the teach commands):
+  "vin", "bolt", "comment", "nonce"}`` (and the teach commands, and ``sign-in`` /
+  ``sign-out``: the session's user signs in at the station as its operator, or whoever is
+  signed in is signed out):
   with a session; a nonce this server did not issue, an old or a used one is refused (400)
   before the station sees it; the station's answer is 200 (accepted) or 409 (refused, with
   its typed reason and the words).  A session whose user was removed from the station file
@@ -46,6 +48,8 @@ from stationd.station.commands import (
     LoosenBolt,
     ReleaseBolt,
     ReopenVehicle,
+    SignIn,
+    SignOut,
     SkipBolt,
     TeachPoint,
     TeachStart,
@@ -245,6 +249,10 @@ def _command(body: dict[str, Any]) -> Command:
         return TeachStop(comment)
     if kind == KIND[CheckCalibration]:
         return CheckCalibration(comment)
+    if kind == KIND[SignIn]:      # the session's user signs in at the station
+        return SignIn(comment)
+    if kind == KIND[SignOut]:
+        return SignOut(comment)
     raise web.HTTPBadRequest(text=f"kind: one of {', '.join(KIND.values())}\n")
 
 

@@ -75,6 +75,9 @@ def format_status(st: dict[str, Any]) -> str:
                                  f"{v['vin']} ({v['model']}{', rework' if v.get('rework') else ''})"
                                  f": {c.get('done', 0)}/{c.get('total', 0)} done, "
                                  f"{c.get('nok', 0)} NOK"))
+    op = st.get("operator") or {}
+    if op.get("user") or op.get("required"):
+        lines.append("operator: " + (op.get("user") or "nobody signed in: sign in to tighten"))
     for name, d in sorted(st.get("devices", {}).items()):
         check = d.get("check") or {}   # a pair's calibration check: up is not trusted
         lines.append(f"device:   {name}: " + (

@@ -24,6 +24,7 @@ from stationd.station.events import (
     DeviceHealth,
     DeviceIdentified,
     Localized,
+    OperatorChanged,
     PairChecked,
     PairsUnchecked,
     ParamsRefusedEvent,
@@ -36,6 +37,7 @@ from stationd.station.events import (
     ToolEnabled,
     VehicleClosed,
     VehicleOpened,
+    VehicleReopened,
     WrongBolt,
 )
 from stationd.words import check_words, reason_words
@@ -59,7 +61,7 @@ LAST_RESULTS = 8
 # sequence forbids sending; any other refusal while tracking means the wrench is simply not on
 # a bolt (between bolts, out of view): a normal state, shown neutral, never as an alarm
 ACT_ON = frozenset({Why.STALE, Why.AMBIGUOUS, Why.TILTED, Why.MUST_WAIT, Why.SKIPPED,
-                    Why.DONE, Why.LOCKED})
+                    Why.DONE, Why.LOCKED, Why.SIGN_IN})
 NOT_AT_A_BOLT = "Bring the wrench to a bolt"
 TRACKING_STATES = tuple(s.value for s in LOCALIZING)   # where a refusal speaks of the wrench
 # refusals that forbid their bolt (drawn "blocked"): the sequence's; a bolt the wrench is
@@ -127,6 +129,7 @@ class View:
     selected: str | None = None
     selected_loosen: int | None = None   # the loosen pset sent for the selected bolt
     closed: dict[str, Any] | None = None
+    reopened: tuple[str, str] | None = None   # (VIN, by whom): reopened, not at the station yet
     alarm: str = ""              # a wrong bolt reported by the simulation's checker
     # the devices the station was configured with (lift, wrench, each pair), given by the
     # server: the daemon reports a device's health only when it faults or comes back, so a
@@ -144,6 +147,9 @@ class View:
     stale_since: float | None = None
     last_t: float = 0.0
     located: Localized | None = None   # the last localization (what "next" is pointed from)
+    # who is signed in at the station (None: nobody) and whether the station requires one
+    operator: str | None = None
+    operator_required: bool = False
 
     def apply(self, e: StationEvent) -> None:
         """Fold one event in."""
@@ -176,6 +182,12 @@ class View:
             self._open(e)
         elif isinstance(e, VehicleClosed):
             self._close(e)
+        elif isinstance(e, VehicleReopened):
+            # no longer "closed": it opens as a rework when raised at the station (then
+            # VehicleOpened says so); until then the headline must not say closed
+            if self.closed is not None and self.closed["vin"] == e.vin:
+                self.closed = None
+            self.reopened = (e.vin, e.user)
         elif isinstance(e, Localized):
             self._localized(e)
         elif isinstance(e, Refused):
@@ -229,12 +241,18 @@ class View:
                 self._set(e.bolt, "loosen", reason_words(e.reason))
         elif isinstance(e, ResultRecorded):
             self._result(e)
+        elif isinstance(e, OperatorChanged):
+            self.operator, self.operator_required = e.user, e.required
+            if e.user is not None and self.refused_why is not None \
+                    and self.refused_why.kind is Why.SIGN_IN:
+                self._refuse("")     # signed in: the next frames decide
         elif isinstance(e, WrongBolt):
             self.alarm = f"parameters sent for {e.bolt} while the wrench was on {e.truth}"
 
     def _open(self, e: VehicleOpened) -> None:
         self.vin, self.model, self.rework = e.vin, e.model, e.rework
         self.closed, self.selected, self.wrench, self.refused = None, None, None, ""
+        self.reopened = None
         self.located = None
         self.results = []
         self.bolts = {b.bolt: BoltState(b.bolt, b.x_mm, b.y_mm, b.pset, b.order, b.batch,
@@ -244,6 +262,7 @@ class View:
 
     def _close(self, e: VehicleClosed) -> None:
         self.closed = {"vin": e.vin, "missing": list(e.missing), "nok": list(e.nok)}
+        self.reopened = None
         self.wrench, self.selected = None, None
         if e.vin != self.vin:
             return
@@ -332,7 +351,7 @@ class View:
             "t": e.t, "vin": e.vin, "bolt": e.bolt, "ok": e.ok, "pset": e.pset,
             "torque_nm": e.torque_nm, "torque_min": e.torque_min, "torque_max": e.torque_max,
             "angle_deg": e.angle_deg, "angle_min": e.angle_min, "angle_max": e.angle_max,
-            "late": e.late, "kind": e.kind})
+            "late": e.late, "kind": e.kind, "operator": e.operator})
         del self.results[LAST_RESULTS:]
 
     def _refuse(self, words: str, why: Reason | None = None, *, act: bool = False) -> None:
@@ -444,6 +463,9 @@ class View:
             return f"{self.selected}{pset}: tighten"
         if self.closed is not None:
             return self._closed_line(NAMES_SHOWN)
+        if self.reopened is not None:
+            vin, user = self.reopened
+            return f"{vin} reopened for rework by {user}: it opens when raised at the station"
         if self.state in TRACKING_STATES and not self.fresh and self.stale_since is None:
             return STARTING_UP    # tracking, and no frame localized since the start yet
         return self.reason or self.state
@@ -504,6 +526,7 @@ class View:
             "wrench_line": self.wrench_line(),
             "devices": self.device_health(), "results": self.results, "closed": self.closed,
             "locks": self.locks(),
+            "operator": {"user": self.operator, "required": self.operator_required},
         }
 
 

@@ -19,7 +19,7 @@ import yaml
 
 from stationd.access import hash_password
 from stationd.sim.vin import make_vin
-from tests.station.test_daemon_faults import SIM, _free_port
+from tests.station.daemons import SIM, free_port
 
 ROOT = Path(__file__).resolve().parents[2]
 PASSWORD = "supervise-it-well"  # noqa: S105 - a test user's
@@ -42,7 +42,7 @@ def _station(tmp: Path, port: int) -> Path:
 
 @pytest.mark.timeout(300)
 def test_commands_reach_the_demos_station_during_the_run_and_the_hold(tmp_path):
-    port = _free_port()
+    port = free_port()
     station = _station(tmp_path, port)
     env = {**os.environ, "STATIOND_PASSWORD": PASSWORD, "PYTHONPATH": str(ROOT)}
     url = f"http://127.0.0.1:{port}/"
@@ -84,7 +84,13 @@ def test_commands_reach_the_demos_station_during_the_run_and_the_hold(tmp_path):
         assert held.stdout.strip().endswith(": accepted")
         skip = command("skip", vin, "B01")     # no vehicle on the lift now: the station's no
         assert skip.returncode == 1 and "no vehicle at the station" in skip.stdout, skip
+        # the simulated operator signed in at the demo's station: its rundowns carry it
+        status = subprocess.run([sys.executable, "-m", "stationd", "operator", "status",
+                                 "--url", url], capture_output=True, text=True, env=env,
+                                timeout=60, check=False)
+        assert status.stdout.strip() == "operator: operator signed in", status
     finally:
         demo.send_signal(signal.SIGINT)
         demo.wait(timeout=60)
     assert demo.returncode == 0
+    expect("rundowns recorded by operator: operator ", timeout=10)

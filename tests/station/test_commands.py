@@ -15,6 +15,7 @@ from stationd.station.core import (
     CommandIn,
     DisableTool,
     LiftRead,
+    Publish,
     RecordCommand,
     Reply,
     State,
@@ -22,7 +23,7 @@ from stationd.station.core import (
     VehicleLoaded,
     VehicleRejected,
 )
-from stationd.station.events import BoltSkipped
+from stationd.station.events import BoltSkipped, VehicleReopened
 from stationd.words import answer_words
 from tests.station.test_core import BOLTS, _on, _ready
 
@@ -125,6 +126,9 @@ def test_a_reopen_of_the_closed_vehicle_at_height_clears_its_fault_and_loads_it(
     assert [type(a).__name__ for a in acts] == ["RecordCommand"]
     acts = core.feed(CommandDone(1.4, 4))
     assert _answer(acts).answer.accepted and "vehicle" not in core.faults
+    reopened = [a.event for a in acts if isinstance(a, Publish)
+                and isinstance(a.event, VehicleReopened)]
+    assert reopened == [VehicleReopened("OLDVIN", "sam", t=1.4)]   # the screens say so
     acts = core.feed(LiftRead(1.5, True, True, 7, "OLDVIN"))
     assert [type(a).__name__ for a in acts if type(a).__name__ == "LoadVehicle"] \
         == ["LoadVehicle"]

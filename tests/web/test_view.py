@@ -12,6 +12,7 @@ from stationd.station.events import (
     StateChanged,
     ToolDisabled,
     VehicleClosed,
+    VehicleReopened,
     WrongBolt,
 )
 from stationd.web.view import View, fold
@@ -258,6 +259,24 @@ def test_a_closed_vehicle_with_missing_or_nok_bolts_is_an_alarm_and_its_bolts_sa
     v = fold(opened())
     v.apply(VehicleClosed(vin=VIN, missing=(), nok=()))
     assert (v.tone(), v.headline()) == ("done", f"{VIN} closed: all bolts OK")
+
+
+def test_a_reopened_vehicle_is_no_longer_said_closed():
+    """A newcomer reopened the closed vehicle (accepted) and `stationd status` still said
+    "VIN closed: 40 missing": reopened, it is said so until it opens at the station."""
+    v = fold(opened())
+    v.apply(VehicleClosed(vin=VIN, missing=("B1",), nok=()))
+    v.apply(StateChanged(state="waiting for vehicle", reason="lift not at working height"))
+    v.apply(VehicleReopened(vin=VIN, user="sam"))
+    assert v.closed is None and v.tone() != "missing"
+    assert v.headline() == f"{VIN} reopened for rework by sam: it opens when raised at the " \
+        "station"
+    v2 = fold([*opened(), VehicleReopened(vin="OTHER", user="sam")])
+    assert v2.reopened == ("OTHER", "sam")
+    v2.apply(VehicleClosed(vin=VIN, missing=(), nok=()))   # another one closes: said closed
+    assert v2.headline() == f"{VIN} closed: all bolts OK"
+    v3 = fold([*opened(), VehicleReopened(vin=VIN, user="sam"), *opened()])
+    assert v3.reopened is None                         # opened: the usual words again
 
 
 def test_many_missing_bolts_are_counted_with_a_few_named_and_all_in_the_title():

@@ -6,7 +6,9 @@
 (function () {
   const q = (id) => document.getElementById(id);
   // logging in and out, and each command's nonce and answer: session.js (the Teach panel's too)
-  const {command, answer} = window.StationSession.bind((rights) => {
+  let me = null;   // the session's user
+  const {command, answer} = window.StationSession.bind((rights, user) => {
+    me = user;
     q("skip").hidden = !rights.includes("skip");
     q("reopen").hidden = !rights.includes("reopen");
     q("release").hidden = !rights.includes("release");
@@ -27,7 +29,19 @@
     sel.replaceChildren(new Option("bolt...", ""), ...bolts.map((b) => new Option(b.bolt, b.bolt)));
     if (bolts.some((b) => b.bolt === keep)) sel.value = keep;
   }
+  // signing in at the station (any user, for themselves) and out: the buttons follow who the
+  // station says is signed in
+  function signButtons() {
+    const view = window.lastView;
+    const op = view && view.operator ? view.operator.user : null;
+    q("sign-in").hidden = Boolean(me) && op === me;
+    q("sign-out").hidden = !op;
+    q("sign-out").textContent = op && op !== me ? `Sign out ${op}` : "Sign out";
+  }
+  q("sign-in").addEventListener("click", () => command({kind: "sign-in", comment: ""}));
+  q("sign-out").addEventListener("click", () => command({kind: "sign-out", comment: ""}));
   setInterval(() => {
+    signButtons();
     fill("skip-bolt", (b) => b.state !== "ok" && b.state !== "skipped");
     fill("release-bolt", (b) => b.locked);
     // a bolt tightened (OK, or NOK last) and not to be loosened already: rework

@@ -297,6 +297,12 @@ function render(view) {
   setText("vin", view.vehicle ? view.vehicle.vin : "no vehicle");
   setText("model", view.vehicle ? view.vehicle.model + (view.vehicle.rework ? " (rework)" : "") : "");
   setText("state", view.state);
+  // who is signed in at the station: their name goes with every rundown
+  const op = view.operator || {user: null, required: false};
+  setText("operator", op.user ? `operator: ${op.user}` :
+    op.required ? "nobody signed in: sign in to tighten" : "nobody signed in");
+  $("operator").dataset.user = op.user || "";
+  $("operator").className = "operator" + (!op.user && op.required ? " needed" : "");
   setText("done", view.counters.done);
   setText("total", view.counters.total);
   setText("nok", view.counters.nok);

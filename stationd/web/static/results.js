@@ -151,7 +151,7 @@ async function showVehicle(vin) {
         cell(tr, i ? "" : b.status.toUpperCase(), "status-" + (b.status === "nok" ? "NOK" : b.status));
         if (!r) {
           cell(tr, "-"); cell(tr, "-"); cell(tr, "not tightened");
-          for (let k = 0; k < 7; k++) cell(tr, "", k === 6 ? "crops" : "");
+          for (let k = 0; k < 8; k++) cell(tr, "", k === 7 ? "crops" : "");
         }
         else {
           cell(tr, r.attempt + (r.attempt > 1 ? " (rework)" : ""));
@@ -161,6 +161,8 @@ async function showVehicle(vin) {
           cell(tr, fmt(r.torque_nm, 1)); cell(tr, fmt(r.angle_deg, 0)); cell(tr, r.pset ?? "-");
           cell(tr, fmt(r.tilt_deg, 1)); cell(tr, fmt(r.match_distance_mm, 1));
           cell(tr, (r.recorded_at || "").slice(0, 19));
+          // who was signed in at the station ("-": nobody, or a record from before)
+          cell(tr, r.operator || "-", "operator");
           const td = cell(tr, "", "crops");
           for (const im of r.image_urls || []) {
             const a = document.createElement("a");
@@ -174,7 +176,7 @@ async function showVehicle(vin) {
           cr.className = "curve";
           cr.dataset.bolt = b.bolt;
           const td = cell(cr, "");
-          td.colSpan = 12;
+          td.colSpan = 13;
           td.appendChild(curvePlot(r));
           tb.appendChild(cr);
         }

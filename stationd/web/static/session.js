@@ -31,7 +31,7 @@ window.StationSession = (function () {
       q("login").hidden = signed;
       q("signed").hidden = !signed;
       q("who").textContent = signed ? `${who.user} (${who.rights.join(", ") || "no rights"})` : "";
-      onWho(signed ? who.rights : []);
+      onWho(signed ? who.rights : [], signed ? who.user : null);
     }
 
     // the station's answer, shown; resolves to the answer's JSON (null: no answer from the

@@ -1,0 +1,89 @@
+"""The command line's commands when the daemon is slow: a command the daemon took but whose
+answer came too late is said as sent and maybe accepted (giving it again blind could skip or
+loosen twice), never as "no daemon answers"; a logout that fails does not lose the answer."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import ClassVar
+
+import pytest
+
+
+class _SlowCommands(BaseHTTPRequestHandler):
+    """Answers the login and the nonce at once; the command after ``delay`` seconds; the
+    logout after ``logout_delay`` (the http layer a slow or loaded daemon shows)."""
+
+    delay = 0.0
+    logout_delay = 0.0
+    commands: ClassVar[list[dict[str, object]]] = []
+
+    def log_message(self, *args: object) -> None:
+        pass
+
+    def _json(self, doc: object) -> None:
+        raw = json.dumps(doc).encode()
+        self.send_response(200)
+        self.send_header("Content-Type", "application/json")
+        self.send_header("Content-Length", str(len(raw)))
+        self.end_headers()
+        self.wfile.write(raw)
+
+    def do_GET(self) -> None:
+        self._json({"nonce": "n1"})
+
+    def do_POST(self) -> None:
+        body = json.loads(self.rfile.read(int(self.headers["Content-Length"])) or b"{}")
+        if self.path == "/api/commands":
+            type(self).commands.append(body)
+            time.sleep(self.delay)
+            self._json({"accepted": True, "words": "skip B03: accepted"})
+        elif self.path == "/api/logout":
+            time.sleep(self.logout_delay)
+            self._json({})
+        else:
+            self._json({"user": body.get("user")})
+
+
+@pytest.fixture
+def slow() -> Iterator[tuple[str, type[_SlowCommands]]]:
+    handler = type("Handler", (_SlowCommands,), {"commands": []})
+    server = ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    server.daemon_threads = True
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        yield f"http://127.0.0.1:{server.server_address[1]}/", handler
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def _skip(url: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "stationd", "skip", "VIN1", "B03", "--user",
+                           "olga", "--url", url, "--timeout", "1"],
+                          input="secret-pw\n", capture_output=True, text=True, timeout=60)
+
+
+def test_a_late_answer_says_sent_and_maybe_accepted(slow) -> None:
+    url, handler = slow
+    handler.delay = 3.0
+    got = _skip(url)
+    assert got.returncode == 3, got
+    assert "no daemon answers" not in got.stderr
+    assert "sent to" in got.stderr and "may have been accepted" in got.stderr
+    assert len(got.stderr.strip().splitlines()) == 1 and "Traceback" not in got.stderr
+    assert [c["kind"] for c in handler.commands] == ["skip"]
+
+
+def test_a_failed_logout_keeps_the_answer(slow) -> None:
+    url, handler = slow
+    handler.logout_delay = 3.0
+    got = _skip(url)
+    assert got.returncode == 0, got
+    assert got.stdout.strip() == "skip B03: accepted"

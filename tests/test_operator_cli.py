@@ -1,0 +1,48 @@
+"""``stationd operator sign-in|sign-out|status`` without a daemon: bad input is one line and
+exit 2 before any login, no daemon answering is one line and exit 3; never a traceback.  (The
+daemon's answers: tests/station/test_operator_daemon.py.)"""
+
+from __future__ import annotations
+
+import socket
+
+import pytest
+
+from stationd.cli import main
+
+
+def _closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["operator", "sign-in", " "], "user ' '"),
+    (["operator", "sign-in", "x" * 65], "the name of a user"),
+    (["operator", "sign-in", "olga", "--comment", "y" * 501], "at most 500 characters"),
+    (["operator", "sign-in", "olga", "--url", "not a url"], "not a url"),
+    (["operator", "status", "--timeout", "-1"], "--timeout"),
+])
+def test_bad_input_is_one_line_and_exit_2(argv, message, capsys, monkeypatch):
+    monkeypatch.setenv("STATIOND_PASSWORD", "whatever-it-is")
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+@pytest.mark.parametrize("argv", [["operator", "sign-in", "olga"],
+                                  ["operator", "sign-out", "--user", "sam"],
+                                  ["operator", "status"]])
+def test_no_daemon_is_one_line_and_exit_3(argv, capsys, monkeypatch):
+    monkeypatch.setenv("STATIOND_PASSWORD", "whatever-it-is")
+    url = f"http://127.0.0.1:{_closed_port()}/"
+    assert main([*argv, "--url", url, "--timeout", "5"]) == 3
+    err = capsys.readouterr().err
+    assert "no daemon answers" in err and len(err.strip().splitlines()) == 1
+
+
+def test_sign_out_names_who_gives_it(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["operator", "sign-out"])
+    assert exit_.value.code == 2 and "--user" in capsys.readouterr().err
