@@ -17,6 +17,9 @@ RUNDOWN_KINDS = (TIGHTENING, LOOSENING)
 #: loosened last (to be tightened again), or to be loosened (a loosen command since its last
 #: rundown: the rework a supervisor ordered is not done yet)
 OK, NOK, MISSING, LOOSENED, TO_LOOSEN = "ok", "nok", "missing", "loosened", "loosen"
+#: never run down because a person skipped it by a command (who and why in the report): not
+#: tightened either, but not forgotten, and an export must not say it was
+SKIPPED = "skipped"
 
-__all__ = ["LOOSENED", "LOOSENING", "MISSING", "NOK", "OK", "RUNDOWN_KINDS", "TIGHTENING",
-           "TO_LOOSEN"]
+__all__ = ["LOOSENED", "LOOSENING", "MISSING", "NOK", "OK", "RUNDOWN_KINDS", "SKIPPED",
+           "TIGHTENING", "TO_LOOSEN"]

@@ -6,6 +6,12 @@ NOK.  A bolt loosened last is not done (``loosened``), nor is one a loosen comma
 since its last rundown (``loosen``: the rework ordered is not done yet).  Bolts retired from
 the table after the vehicle was tightened still appear, with their records, so a report never
 loses what was done.
+
+A bolt never run down that a person skipped by a command since the vehicle's last opening
+(its ``skip`` in the command ledger) is ``skipped``, with who skipped it and their comment,
+not ``missing``: quality reads the export, and a bolt left out on purpose, with a reason and a
+name, is not one forgotten.  Neither is tightened: the vehicle is not complete with either.
+A bolt run down before it was skipped keeps its last rundown's status (a NOK stays a NOK).
 """
 
 from __future__ import annotations
@@ -17,11 +23,11 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from db.kinds import LOOSENED, LOOSENING, MISSING, NOK, OK, TIGHTENING, TO_LOOSEN
+from db.kinds import LOOSENED, LOOSENING, MISSING, NOK, OK, SKIPPED, TIGHTENING, TO_LOOSEN
 from db.models import Bolt, CommandRecord, ProcessParameters, TighteningRecord, Vehicle
 
-__all__ = ["LOOSENED", "MISSING", "NOK", "OK", "TO_LOOSEN", "BoltResult", "VehicleInfo",
-           "VehicleReport", "build_report"]
+__all__ = ["LOOSENED", "MISSING", "NOK", "OK", "SKIPPED", "TO_LOOSEN", "BoltResult",
+           "VehicleInfo", "VehicleReport", "build_report"]
 
 
 @dataclass(frozen=True)
@@ -42,7 +48,7 @@ class VehicleInfo:
 class BoltResult:
     bolt_id: str
     name: str
-    status: str                      # ok | nok | missing | loosened | loosen (db.kinds)
+    status: str                      # ok | nok | missing | skipped | loosened | loosen
     attempts: int
     torque_nm: float | None = None   # of the last record
     angle_deg: float | None = None
@@ -51,10 +57,12 @@ class BoltResult:
     version: int | None = None       # the parameter version the last record was tightened with
     retired: bool = False            # no longer in the bolt table
     kind: str | None = None          # the last record's: tightening or loosening
+    skipped_by: str | None = None    # a skipped bolt's: who skipped it, and why
+    comment: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         return {"bolt": self.bolt_id, "name": self.name, "status": self.status,
-                "kind": self.kind,
+                "kind": self.kind, "skipped_by": self.skipped_by, "comment": self.comment,
                 "attempts": self.attempts, "torque_nm": self.torque_nm,
                 "angle_deg": self.angle_deg, "tightening_id": self.tightening_id,
                 "recorded_at": _iso(self.recorded_at), "parameter_version": self.version,
@@ -69,6 +77,17 @@ class VehicleReport:
     @property
     def missing(self) -> list[str]:
         return [b.bolt_id for b in self.bolts if b.status == MISSING]
+
+    @property
+    def skipped(self) -> list[str]:
+        """Bolts never run down because a person skipped them (module docstring)."""
+        return [b.bolt_id for b in self.bolts if b.status == SKIPPED]
+
+    @property
+    def untightened(self) -> list[str]:
+        """Bolts never run down, skipped or not (in the table's order): what a vehicle
+        leaving now leaves undone."""
+        return [b.bolt_id for b in self.bolts if b.status in (MISSING, SKIPPED)]
 
     @property
     def nok(self) -> list[str]:
@@ -86,7 +105,7 @@ class VehicleReport:
     @property
     def complete(self) -> bool:
         """Every bolt of the model tightened, and every last result an OK tightening."""
-        return not self.missing and not self.nok and not self.loosen
+        return not self.untightened and not self.nok and not self.loosen
 
     def summary(self) -> str:
         v = self.vehicle
@@ -96,6 +115,10 @@ class VehicleReport:
         text += f", {len(self.nok)} NOK ({', '.join(self.nok)})" if self.nok else ", 0 NOK"
         text += f", {len(self.missing)} missing ({', '.join(self.missing)})" if self.missing \
             else ", 0 missing"
+        if self.skipped:
+            who = [f"{b.bolt_id} by {b.skipped_by}" + (f": {b.comment}" if b.comment else "")
+                   for b in self.bolts if b.status == SKIPPED]
+            text += f", {len(who)} skipped ({'; '.join(who)})"
         if self.loosen:
             text += f", {len(self.loosen)} to tighten again ({', '.join(self.loosen)})"
         return text
@@ -105,7 +128,8 @@ class VehicleReport:
         return {"vin": v.vin, "model": v.model, "started_at": _iso(v.started_at),
                 "ended_at": _iso(v.ended_at), "reopened_at": _iso(v.reopened_at),
                 "complete": self.complete, "ok": self.ok,
-                "nok": self.nok, "missing": self.missing, "loosen": self.loosen,
+                "nok": self.nok, "missing": self.missing, "skipped": self.skipped,
+                "loosen": self.loosen,
                 "bolts": [b.to_json() for b in self.bolts]}
 
 
@@ -130,13 +154,23 @@ def build_report(s: Session, v: Vehicle) -> VehicleReport:
             .order_by(CommandRecord.id)):
         if bolt is not None:
             loosen_ordered[bolt] = at
+    skips: dict[str, tuple[str, str]] = {}   # bolt -> who skipped it and why, since opening
+    for bolt, user, comment in s.execute(select(
+            CommandRecord.bolt, CommandRecord.user, CommandRecord.comment).where(
+            CommandRecord.vin == v.vin, CommandRecord.kind == "skip",
+            CommandRecord.at >= (v.reopened_at or v.started_at)).order_by(CommandRecord.id)):
+        if bolt is not None:
+            skips[bolt] = (user, comment)
     results = []
     for b in bolts:
         recs = by_bolt.get(b.id, [])
         if b.removed_at is not None and not recs:
             continue
         if not recs:
-            results.append(BoltResult(b.code, b.name, MISSING, 0))
+            who = skips.get(b.code)
+            results.append(BoltResult(b.code, b.name, MISSING, 0) if who is None else
+                           BoltResult(b.code, b.name, SKIPPED, 0, skipped_by=who[0],
+                                      comment=who[1] or None))
             continue
         last, version = recs[-1]
         results.append(BoltResult(b.code, b.name, _status(last, loosen_ordered.get(b.code)),

@@ -15,13 +15,16 @@ import glob
 import re
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
 from stationd.outfile import refuse_to_replace, write_all
+
+if TYPE_CHECKING:
+    from stationd.geometry.camera import StereoPair
 
 EXIT_OK, EXIT_REFUSED = 0, 1
 #: what each output may replace: its own kind of calibration (an earlier run's), nothing else
@@ -96,6 +99,15 @@ def _implausible_baseline(baseline_mm: float) -> str | None:
             f"baseline ({lo:g}-{hi:g} mm): {cause}")
 
 
+def _swapped(pair: StereoPair) -> str | None:
+    """Why the pair looks calibrated from swapped images (``--left`` given the right
+    camera's), with what to do; None when it does not."""
+    why = pair.swapped()
+    return None if why is None else (f"{why} (--left must be the images of the camera on the "
+                                     "left, seen as the cameras look; give them the other way "
+                                     "round)")
+
+
 def _yaml(header: str, data: dict[str, Any]) -> str:
     return header + yaml.safe_dump(data, sort_keys=False, default_flow_style=None)
 
@@ -114,7 +126,7 @@ def cmd_calibrate_stereo(args: argparse.Namespace) -> int:
     right = expand_images(list(args.right), "--right")
     _refuse_same_images(left, right)
     report = calibrate_stereo(left, right, board)
-    refused = _implausible_baseline(report.pair.baseline_mm)
+    refused = _implausible_baseline(report.pair.baseline_mm) or _swapped(report.pair)
     if refused is not None:
         if getattr(args, "json", False):
             sys.stdout.write(strict_json({**report.to_json(), "refused": refused}) + "\n")
@@ -185,10 +197,11 @@ def add_calibrate_parser(subparsers: Any) -> argparse.ArgumentParser:
                     "and the pair, rejects views whose error is an outlier, prints a report "
                     "and writes the pair YAML and each camera's YAML (PAIR.left.yaml, "
                     "PAIR.right.yaml beside it unless --out-left / --out-right say otherwise). "
-                    "A pair whose baseline is not 20-2000 mm is refused (exit 1, nothing "
-                    "written), as are the same images for both cameras (exit 2). An output "
-                    "replaces only an earlier calibration of its own kind, never another file "
-                    "or a link.")
+                    "A pair whose baseline is not 20-2000 mm, or whose right camera is to the "
+                    "left of its left one (left and right swapped), is refused (exit 1, "
+                    "nothing written), as are the same images for both cameras (exit 2). An "
+                    "output replaces only an earlier calibration of its own kind, never "
+                    "another file or a link.")
     s.add_argument("--left", required=True, nargs="+", metavar="GLOB",
                    help="left images, e.g. 'L*.png' (quoted, or expanded by the shell)")
     s.add_argument("--right", required=True, nargs="+", metavar="GLOB", help="right images")

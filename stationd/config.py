@@ -285,11 +285,16 @@ def _load_transform(path: Path) -> Transform:
 
 
 def _baseline(calibration: StereoPair, node: YamlNode) -> StereoPair:
-    """A pair whose baseline is not 20-2000 mm has a calibration in other units (metres)."""
+    """A pair whose baseline is not 20-2000 mm has a calibration in other units (metres); one
+    whose right camera is to the left of its left one was calibrated from swapped images."""
     b = float(np.linalg.norm(calibration.T))
     if not BASELINE_MM[0] <= b <= BASELINE_MM[1]:
         raise node.error(f"stereo baseline {b:.4g} mm is not plausible "
                          f"({BASELINE_MM[0]:g}-{BASELINE_MM[1]:g} mm): T must be in millimetres")
+    swapped = calibration.swapped()
+    if swapped is not None:
+        raise node.error(f"{swapped} (calibrate the pair again with --left and --right the "
+                         "other way round)")
     return calibration
 
 

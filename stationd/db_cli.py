@@ -64,11 +64,12 @@ def _print_errors(errors: Sequence[ConfigError]) -> None:
         sys.stderr.write(f"{e}\n")
 
 
-def _open(url: str, *, must_exist: bool) -> Repository:
+def open_repository(url: str, *, must_exist: bool, read_only: bool | None = None
+                    ) -> Repository:
     """The repository of every ``--db`` (and ``--config``'s database); a read command
     (``must_exist``) does not create a missing SQLite file and opens it read-only (no
     migration, no write access needed: the service user's database can be read by the
-    line's engineers).  A URL that is no URL or names no installed driver, and an SQLite
+    line's engineers); ``read_only=False``: an existing one that the command writes.  A URL that is no URL or names no installed driver, and an SQLite
     database that cannot keep what is written (in memory, a folder, a missing folder, another
     kind of file) are refused before anything is opened, as ``config check`` refuses them
     (``db.location``)."""
@@ -94,7 +95,7 @@ def _open(url: str, *, must_exist: bool) -> Repository:
     problem = sqlite_problem(url, loses="it starts empty and is gone when the command ends")
     if problem is not None:
         raise InputError(problem)
-    return Repository.open(url, read_only=must_exist)
+    return Repository.open(url, read_only=must_exist if read_only is None else read_only)
 
 
 # -- db import / export / report -------------------------------------------------------------
@@ -115,7 +116,7 @@ def cmd_db_import(args: argparse.Namespace) -> int:
                          "nothing imported\n")
         return EXIT_BAD_INPUT
     assert result.table is not None  # noqa: S101 - a check without errors holds the table
-    with _open(_db_url(args), must_exist=False) as repo:
+    with open_repository(_db_url(args), must_exist=False) as repo:
         report = repo.import_bolts(result.table, where=str(args.file))
     if args.json:
         sys.stdout.write(strict_json({"changes": report.has_changes, **report.to_json()}) + "\n")
@@ -138,7 +139,7 @@ def cmd_db_export(args: argparse.Namespace) -> int:
     if args.vin is not None or args.since is not None or args.format not in (None, "yaml"):
         raise InputError("--vin, --since and --format csv|json go with --results (the bolt "
                          "table is YAML)")
-    with _open(_db_url(args), must_exist=True) as repo:
+    with open_repository(_db_url(args), must_exist=True) as repo:
         text = repo.export_bolts()
         summary = repo.table().summary()
     if args.out is None:
@@ -168,17 +169,17 @@ def _export_results(args: argparse.Namespace) -> int:
     if args.format == "yaml":
         raise InputError("--results are exported as csv (the default) or json, not yaml")
     fmt = args.format or "csv"
-    with _open(_db_url(args), must_exist=True) as repo:
+    with open_repository(_db_url(args), must_exist=True) as repo:
         results = Results(repo)
         vins = [args.vin] if args.vin is not None else \
             [v["vin"] for v in reversed(results.vehicles(limit=1_000_000))]
         # (an unknown --vin: export's report raises NotFoundError, one line, exit 2)
         runs = [r for vin in vins for r in results.export(vin)]
-    if args.since is not None:   # a missing bolt has no time: kept with its vehicle's rundowns
+    if args.since is not None:   # a bolt not run down has no time: kept with its vehicle's
         kept = [r for r in runs if r["recorded_at"] is not None
                 and _aware(datetime.fromisoformat(r["recorded_at"])) >= args.since]
         vins_kept = {r["vin"] for r in kept}
-        runs = [r for r in runs if r in kept or (r["status"] == "missing"
+        runs = [r for r in runs if r in kept or (r["status"] in ("missing", "skipped")
                                                  and r["vin"] in vins_kept)]
     text = rundowns_csv(runs) if fmt == "csv" else strict_json(runs) + "\n"
     if args.out is None:
@@ -186,8 +187,10 @@ def _export_results(args: argparse.Namespace) -> int:
     else:
         write_atomic(Path(args.out), text)
         missing = sum(1 for r in runs if r["status"] == "missing")
-        print(f"wrote {args.out}: {len(runs) - missing} rundown(s) and {missing} missing "
-              f"bolt(s) of {len({r['vin'] for r in runs})} vehicle(s)")
+        skipped = sum(1 for r in runs if r["status"] == "skipped")
+        also = f" (and {skipped} skipped)" if skipped else ""
+        print(f"wrote {args.out}: {len(runs) - missing - skipped} rundown(s) and {missing} "
+              f"missing bolt(s){also} of {len({r['vin'] for r in runs})} vehicle(s)")
     return EXIT_OK
 
 
@@ -197,11 +200,11 @@ def _aware(t: datetime) -> datetime:
 
 #: what ``db report --json`` gives of each rundown (the export has every field)
 RUNDOWN_KEYS = ("bolt", "attempt", "rundown", "status", "pset", "torque_nm", "angle_deg",
-                "tightening_id", "recorded_at")
+                "tightening_id", "recorded_at", "operator")
 
 
 def cmd_db_report(args: argparse.Namespace) -> int:
-    with _open(_db_url(args), must_exist=True) as repo:
+    with open_repository(_db_url(args), must_exist=True) as repo:
         report = repo.vehicle_report(args.vin)
         loose = repo.unattributed(args.vin)   # results made at height that no bolt owns
         commands = repo.ledger.commands(args.vin)   # the audit trail: skips, reopens
@@ -220,9 +223,13 @@ def cmd_db_report(args: argparse.Namespace) -> int:
     else:
         print(report.summary())
         for b in report.bolts:
+            last = [r for r in runs if r["bolt"] == b.bolt_id][-1:]
             result = "-" if b.status == "missing" else \
+                f"by {b.skipped_by}" + (f": {b.comment}" if b.comment else "") \
+                if b.status == "skipped" else \
                 f"{_num(b.torque_nm)} N m, {_num(b.angle_deg)} deg, v{b.version}, " \
-                f"{b.attempts} attempt(s)"
+                f"{b.attempts} attempt(s)" + (f", by {last[0]['operator'] or '-'}"
+                                              if last else "")
             retired = " (retired)" if b.retired else ""
             print(f"  {b.bolt_id:<12} {b.status.upper():<8} {result}  {b.name}{retired}")
             if b.attempts > 1:   # reworked: each rundown, so the loosenings show
@@ -230,7 +237,8 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                     print(f"    {r['attempt']}. {r['rundown']} {r['status'].upper()} pset "
                           f"{r['pset'] if r['pset'] is not None else '-'}, "
                           f"{_num(r['torque_nm'])} N m, {_num(r['angle_deg'])} deg, at "
-                          f"{(r['recorded_at'] or '-')[:19].replace('T', ' ')} UTC")
+                          f"{(r['recorded_at'] or '-')[:19].replace('T', ' ')} UTC, by "
+                          f"{r['operator'] or '-'}")
         for c in commands:
             on = f" {c.bolt}" if c.bolt else ""
             why = f": {c.comment}" if c.comment else ""
@@ -245,7 +253,7 @@ def cmd_db_report(args: argparse.Namespace) -> int:
 
 def cmd_db_spc(args: argparse.Namespace) -> int:
     """Process capability per bolt and pset, and the NOK trend (quality's figures)."""
-    with _open(_db_url(args), must_exist=True) as repo:
+    with open_repository(_db_url(args), must_exist=True) as repo:
         if args.model is not None and args.model not in repo.models():
             raise InputError(f"--model {args.model}: no such model (models: "
                              f"{', '.join(repo.models()) or 'none'})")

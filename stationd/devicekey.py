@@ -9,8 +9,12 @@ key, so the key is the endpoint, not the text: ``modbus-tcp://PLC:502?unit=1&tim
 - TCP: the host (lower case; an IP literal in its canonical form; ``localhost`` as
   127.0.0.1) and the port with the protocol's default (Open Protocol 4545, Modbus 502); a
   Modbus TCP endpoint is one unit of it (a gateway serves several devices, one per unit id).
-  A host name and its address are not told apart (nothing is resolved at start: a name
-  server that does not answer must not hold the daemon).
+  A host name is resolved to its address (:func:`_resolve`), so ``tcp://plc.local:502`` and
+  ``tcp://192.168.0.10:502`` are one lift: a station file written with the name and another
+  with the address would both drive it.  The look-up is bounded (:data:`RESOLVE_TIMEOUT_S`:
+  a name server that does not answer must not hold the daemon's start or a reload), and a
+  name that does not resolve in time keeps the name as its key (those two files are then
+  not told apart, as before the look-up).
 - Serial ports (Modbus RTU, Open Protocol over RS-232): the device path with its links
   resolved (``/dev/serial/by-id/...`` is the ``/dev/ttyUSB0`` it points at); the whole line,
   whatever the unit (two processes on one serial line garble each other's frames).
@@ -26,7 +30,10 @@ from __future__ import annotations
 
 import ipaddress
 import os
+import socket
 import tempfile
+import threading
+import time
 from pathlib import Path
 from urllib.parse import quote, unquote, urlsplit
 
@@ -40,6 +47,12 @@ RUN_LOCK_DIR = Path("/run/lock/stationd")
 DEFAULT_PORTS = {"openprotocol": 4545, "modbus-tcp": 502}
 #: schemes that drive no device of their own (simulated, or files read by anyone)
 UNLOCKED = {"sim", "sim+modbus", "file"}
+#: the longest a host name's look-up may take (a name server that does not answer)
+RESOLVE_TIMEOUT_S = 1.0
+#: how long a look-up's answer is reused: a daemon's start names each device several times,
+#: and a reload hours later looks the name up anew (an address given by DHCP may change)
+RESOLVE_TTL_S = 30.0
+_resolved: dict[str, tuple[float, str | None]] = {}   # name -> (when, its address or None)
 
 
 def lock_dir() -> Path:
@@ -87,17 +100,56 @@ def device_key(url: str) -> str | None:
 
 
 def _host(host: str) -> str:
-    """A host as one text per address: IP literals canonical, names lower case."""
+    """A host as one text per address: IP literals canonical, names resolved to their
+    address (lower case when they do not resolve in time)."""
     host = host.lower()
     if host == "localhost":
         return "127.0.0.1"
+    address = _literal(host)
+    if address is not None:
+        return address
+    return _resolve(host) or host
+
+
+def _literal(host: str) -> str | None:
+    """An IP literal in its canonical form (an IPv4-mapped IPv6 address as the IPv4 one,
+    IPv6 in brackets); None for a name."""
     try:
-        address = ipaddress.ip_address(host)
+        address = ipaddress.ip_address(host.strip("[]"))
     except ValueError:
-        return host
+        return None
     if isinstance(address, ipaddress.IPv6Address) and address.ipv4_mapped is not None:
         return str(address.ipv4_mapped)
     return f"[{address}]" if address.version == 6 else str(address)
+
+
+def _resolve(name: str) -> str | None:
+    """The address ``name`` resolves to, canonical; None when it does not resolve within
+    :data:`RESOLVE_TIMEOUT_S`.  ``getaddrinfo`` has no timeout of its own, so it runs in a
+    daemon thread that is left behind when it takes longer (it ends with the resolver's own
+    timeout).  A name with several addresses is keyed by the lowest, IPv4 first: one key
+    whatever order the name server gives them in."""
+    now = time.monotonic()
+    cached = _resolved.get(name)
+    if cached is not None and now - cached[0] < RESOLVE_TTL_S:
+        return cached[1]
+    found: list[str] = []
+
+    def look_up() -> None:
+        try:
+            infos = socket.getaddrinfo(name, None, type=socket.SOCK_STREAM)
+        except (OSError, UnicodeError):
+            return
+        found.extend(a for a in (_literal(str(info[4][0])) for info in infos) if a)
+
+    worker = threading.Thread(target=look_up, name=f"resolve {name}", daemon=True)
+    worker.start()
+    worker.join(RESOLVE_TIMEOUT_S)
+    if worker.is_alive():
+        return None     # not cached: the next start or reload tries again
+    address = min(found, key=lambda a: (a.startswith("["), a)) if found else None
+    _resolved[name] = (now, address)
+    return address
 
 
 def key_file(key: str) -> str:

@@ -19,7 +19,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from types import TracebackType
 
@@ -74,21 +74,14 @@ class StationLock:
             raise InputError(f"{self.path}: cannot create the station's lock: "
                              f"{exc.strerror or exc} (the daemon's user must be able to write "
                              f"{self.path.parent}: its database lives there)") from None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            pid = _read_pid(fd)
-            os.close(fd)
-            raise LockHeldError(self.path, pid) from None
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        held = _take(fd, f"{os.getpid()}\n")
+        if held is not None:
+            raise LockHeldError(self.path, held[0])
         self._fd = fd
 
     def release(self) -> None:
-        if self._fd is not None:
-            fcntl.flock(self._fd, fcntl.LOCK_UN)
-            os.close(self._fd)
-            self._fd = None
+        _let_go(self._fd)
+        self._fd = None
 
     def __enter__(self) -> StationLock:
         self.acquire()
@@ -99,26 +92,56 @@ class StationLock:
         self.release()
 
 
-def _read_pid(fd: int) -> int | None:
-    """The holder's pid: the lock file's first line."""
+def _take(fd: int, stamp: str | None) -> tuple[int | None, str] | None:
+    """Lock the open lock file ``fd`` without waiting and write ``stamp`` (the pid first,
+    then what holds it) into it; None when taken, else ``fd`` is closed and the holder's pid
+    and its second line (what it holds the lock as) are returned.  One rule for the
+    station's lock and each device's: ``flock`` is per open file, released by the kernel
+    when the holder dies, so the file's text only names the holder."""
     try:
-        text = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = _read_holder(fd)
+        os.close(fd)
+        return holder
+    if stamp is not None:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, stamp.encode(), 0)
+    return None
+
+
+def _let_go(fd: int | None) -> None:
+    """Release a lock :func:`_take` took (nothing when none is held)."""
+    if fd is not None:
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        os.close(fd)
+
+
+def _read_holder(fd: int) -> tuple[int | None, str]:
+    """The holder's pid (the lock file's first line) and what it holds the lock as (its
+    second line, empty when there is none)."""
+    try:
+        text = os.pread(fd, 512, 0).decode("utf-8", "replace")
     except OSError:
-        return None
-    first = text.split("\n", 1)[0].strip()
-    return int(first) if first.isdigit() else None
+        return None, ""
+    first, _, rest = text.partition("\n")
+    first = first.strip()
+    return (int(first) if first.isdigit() else None), rest.partition("\n")[0].strip()
 
 
 class DeviceHeldError(LockHeldError):
     """Another process drives this device (its pid and the device in the message)."""
 
-    def __init__(self, what: str, url: str, path: Path, pid: int | None) -> None:
+    def __init__(self, what: str, url: str, path: Path, pid: int | None,
+                 holder: str = "") -> None:
         who = f"pid {pid}" if pid is not None else "another process"
         InputError.__init__(self, f"{what} {url}: the device is already driven by {who} (one "
                             "daemon per device: stop that daemon, or name another device; "
                             f"its lock: {path})")
         self.pid = pid
         self.device = url
+        #: what the holder took the lock as ("lift modbus-tcp://...", "probe lift ...")
+        self.holder = holder
 
 
 class DeviceLock:
@@ -154,22 +177,46 @@ class DeviceLock:
             raise InputError(f"{self.path}: cannot create the lock of {self.what} {self.url}: "
                              f"{exc.strerror or exc} (the daemon's user must be able to write "
                              f"{folder})") from None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            pid = _read_pid(fd)
-            os.close(fd)
-            raise DeviceHeldError(self.what, self.url, self.path, pid) from None
-        if writable:
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, f"{os.getpid()}\n{self.what} {self.url}\n".encode(), 0)
+        held = _take(fd, f"{os.getpid()}\n{self.what} {self.url}\n" if writable else None)
+        if held is not None:
+            raise DeviceHeldError(self.what, self.url, self.path, *held)
         self._fd = fd
 
     def release(self) -> None:
-        if self._fd is not None:
-            fcntl.flock(self._fd, fcntl.LOCK_UN)
-            os.close(self._fd)
-            self._fd = None
+        _let_go(self._fd)
+        self._fd = None
+
+
+#: what a probe writes in a device's lock (its second line begins with it)
+PROBE = "probe"
+
+
+@contextlib.contextmanager
+def probing(kind: str, url: str, folder: Path | None = None) -> Iterator[None]:
+    """Hold the lock of the device ``url`` while ``stationd probe`` talks to it: a probe
+    beside the daemon driving that device would take the controller's one Open Protocol
+    session, or poll the PLC between the daemon's reads, or trigger a camera out of turn.
+    Never waits: the device a daemon (or another probe) holds is refused, naming its pid, as
+    an :class:`InputError` (one line, exit 2).  Simulated devices and URLs that do not parse
+    take no lock (the probe says what is wrong with the URL itself)."""
+    key = device_key(url)
+    if key is None or key.startswith("url "):
+        yield
+        return
+    lock = DeviceLock(key, f"{PROBE} {kind}", url, folder or lock_dir())
+    try:
+        lock.acquire()
+    except DeviceHeldError as held:
+        who = f"pid {held.pid}" if held.pid is not None else "its pid unknown"
+        if held.holder.startswith(f"{PROBE} "):
+            raise InputError(f"{kind} {url}: another stationd probe ({who}) is using this "
+                             "device; wait for it to end") from None
+        raise InputError(f"{kind} {url}: the station daemon ({who}) is driving this device; "
+                         "stop it or use its screens") from None
+    try:
+        yield
+    finally:
+        lock.release()
 
 
 class StationLocks:

@@ -2,6 +2,8 @@
 
 Connects, prints the device's identity and state, and exits 0 on success, 1 when the device
 refuses or nothing arrives in time, 2 for a bad URL or option, always with one readable line.
+A device a running daemon drives is refused (exit 2) before it is touched: the probe takes
+the daemon's device lock (``stationd.lock.probing``) for as long as it talks to the device.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from typing import Any
 
 from drivers.errors import DeviceError, UrlError
 from stationd.jsonout import strict_json
+from stationd.lock import probing
 
 EXIT_OK, EXIT_NO_ANSWER = 0, 1
 
@@ -54,7 +57,8 @@ def probe_lift(args: argparse.Namespace) -> int:
 
     cfg = load_station_config(args.config)
     try:
-        with open_lift(args.url, cfg.lift.registers, timeout=args.timeout) as lift:
+        with probing("lift", args.url), \
+                open_lift(args.url, cfg.lift.registers, timeout=args.timeout) as lift:
             ident = lift.identity()
             state = lift.read_state(timeout=args.timeout)
     except DeviceError as exc:
@@ -89,7 +93,7 @@ def probe_wrench(args: argparse.Namespace) -> int:
                            "result": None}
     code = EXIT_OK
     try:
-        with open_wrench(args.url, timeout=args.timeout) as w:
+        with probing("wrench", args.url), open_wrench(args.url, timeout=args.timeout) as w:
             out["identity"] = w.identity()
             out["acknowledged"] = args.pset is None  # the session itself was accepted
             if args.pset is not None:

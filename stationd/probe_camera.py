@@ -87,9 +87,12 @@ def _sim_world(url: str) -> Any:
 
 def probe_camera(args: argparse.Namespace) -> int:
     _check_options(args)
+    from stationd.lock import probing
+
     world = _sim_world(args.url)
     try:
-        return _probe(args)
+        with probing("camera", args.url):
+            return _probe(args)
     finally:
         if world is not None:
             world.close()

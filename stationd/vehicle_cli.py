@@ -17,10 +17,12 @@ station config).  Points also seen by pairs registered earlier are compared in t
 frame: one vehicle frame for all pairs, or an error.
 
 Refused, with nothing written: two reference points of one name (exit 2), and a fit that is
-not plausible (exit 1, the residuals printed first): an RMS residual above
-:data:`~stationd.geometry.frames.MAX_RMS_MM`, or point sets in two units (pair points typed
-in metres fitted with an RMS of 70.6 mm and were written).  The ``to_vehicle`` file replaces
-only an earlier registration, never another file or a link.
+not plausible (exit 1, the residuals printed first, :func:`~stationd.geometry.frames.
+implausible`): point sets in two units (pair points typed in metres fitted with an RMS of
+70.6 mm and were written), points of a mirrored frame (one axis's sign flipped), one point
+off by more than :data:`~stationd.geometry.frames.MAX_POINT_MM` (named, with the coordinate
+that looks mistyped) or an RMS residual above :data:`~stationd.geometry.frames.MAX_RMS_MM`.
+The ``to_vehicle`` file replaces only an earlier registration, never another file or a link.
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ from stationd.config import PairConfig, StationConfig, load_station_config
 from stationd.errors import InputError
 from stationd.geometry.frames import (
     KINDS,
+    MAX_POINT_MM,
     MAX_RMS_MM,
     Transform,
     fit_transform,
@@ -196,9 +199,10 @@ def add_vehicle_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore
         description=textwrap.fill(
             "Fits the pair's frame to the vehicle frame from reference points and writes the "
             "pair's to_vehicle file. Refused, nothing written: two points of one name (exit "
-            f"2); an RMS residual above {MAX_RMS_MM:g} mm or point sets in two units, e.g. "
-            "pair points in metres (exit 1). The file replaces only an earlier registration, "
-            "never another file or a link.", 88))
+            "2); point sets in two units, e.g. pair points in metres, points of a mirrored "
+            f"frame (one axis's sign flipped), one point off by more than {MAX_POINT_MM:g} mm "
+            f"(a typo: named) or an RMS residual above {MAX_RMS_MM:g} mm (exit 1). The file "
+            "replaces only an earlier registration, never another file or a link.", 88))
     v.add_argument("--pair", required=True, help="pair name in the station config")
     v.add_argument("--points", required=True, help="reference points YAML")
     v.add_argument("--config", help="station YAML (pairs, vision)")

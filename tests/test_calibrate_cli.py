@@ -249,3 +249,19 @@ def test_calibration_files_take_the_umask_mode(boards, tmp_path, capsys):
         os.umask(old)
     for p in (out, tmp_path / "pair.left.yaml", tmp_path / "pair.right.yaml"):
         assert stat.S_IMODE(p.stat().st_mode) == 0o644, p
+
+
+def test_calibrate_stereo_refuses_left_and_right_swapped(boards, tmp_path, capsys):
+    """Issue 19: the right camera's images given as --left (and the left's as --right)
+    calibrate a good pair with the right camera 60 mm to the left of the left one: each
+    camera's lens model then meets the other camera's images.  Refused with the likely cause,
+    exit 1 with the report, nothing written."""
+    code, out, err = _cli(capsys, "calibrate", "stereo", "--left", boards / "R*.png",
+                          "--right", boards / "L*.png", "--board", SPEC, "--out",
+                          tmp_path / "p.yaml", "--json")
+    assert code == 1 and err.count("\n") == 1 and "Traceback" not in err, err
+    assert "the right camera is 60 mm to the left of the left camera" in err, err
+    assert "left and right swapped?" in err and "nothing written" in err
+    rep = json.loads(out)
+    assert abs(rep["baseline_mm"] - 60.0) < 2 and "swapped" in rep["refused"]
+    assert sorted(p.name for p in tmp_path.iterdir() if p.suffix == ".yaml") == []

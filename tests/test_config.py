@@ -612,3 +612,27 @@ def test_loading_a_station_never_opens_its_database_file(tmp_path, monkeypatch):
     _database_url(YamlNode.parse(f"url: 'sqlite:///{db}'\n"), tmp_path, check=True,
                   checker=True)
     assert opened == [str(db)]          # the checker does read it
+
+
+def test_a_pair_calibrated_with_left_and_right_swapped_is_refused(sim_copy, capsys):
+    """Issue 19: ``config check`` passed a pair calibrated from swapped images (the right
+    camera to the left of the left one: T's x positive); refused with the pair's calibration
+    line and the likely cause, as ``calibrate stereo`` refuses to write it."""
+    from stationd.cli import main
+    from stationd.geometry.camera import StereoPair
+
+    good = StereoPair.load(sim_copy / "pair1.yaml")
+    assert good.swapped() is None and good.right_centre_mm[0] > 390
+    # the same pair seen from its right camera: what swapped images calibrate
+    swapped = StereoPair(good.right, good.left, good.R.T, -good.R.T @ good.T)
+    assert abs(swapped.baseline_mm - good.baseline_mm) < 1e-9
+    import yaml
+
+    (sim_copy / "pair1.yaml").write_text(yaml.safe_dump(swapped.to_dict(), sort_keys=False))
+    [error] = check_station(sim_copy / "station.yaml").errors
+    assert "station.yaml" in str(error) and "pairs.pair1.calibration" in str(error)
+    assert "the right camera is 385 mm to the left of the left camera" in str(error)
+    assert "left and right swapped?" in str(error)
+    code = main(["config", "check", str(sim_copy / "station.yaml")])
+    out, err = capsys.readouterr()
+    assert code == 2 and "left and right swapped?" in out + err

@@ -56,3 +56,49 @@ def test_the_lock_folder_is_run_lock_when_writable():
     writable = os.access(RUN_LOCK_DIR if RUN_LOCK_DIR.is_dir() else RUN_LOCK_DIR.parent,
                          os.W_OK | os.X_OK) and RUN_LOCK_DIR.parent.is_dir()
     assert (lock_dir() == RUN_LOCK_DIR) == writable
+
+
+def test_a_host_name_and_its_address_are_one_device():
+    """``tcp://plc.local:502`` and ``tcp://192.168.0.10:502`` written in two station files
+    reach one PLC: the name is resolved when the key is made (this machine's own name, which
+    resolves without a name server)."""
+    import socket
+
+    name = socket.gethostname()
+    try:
+        address = socket.getaddrinfo(name, None, socket.AF_INET, socket.SOCK_STREAM)[0][4][0]
+    except OSError:
+        pytest.skip(f"this machine's name {name!r} does not resolve")
+    assert device_key(f"modbus-tcp://{name}:1502?unit=1") \
+        == device_key(f"modbus-tcp://{address}:1502") == f"tcp {address}:1502 unit 1"
+    assert device_key(f"openprotocol://{name.upper()}") == f"tcp {address}:4545"
+
+
+def test_a_name_that_does_not_resolve_in_time_keeps_its_name(monkeypatch):
+    """A name server that does not answer must not hold the daemon's start: the look-up is
+    given up after RESOLVE_TIMEOUT_S and the name is the key; a name that does not exist is
+    the key at once."""
+    import socket
+    import threading
+    import time
+
+    from stationd import devicekey
+
+    release = threading.Event()
+    real = socket.getaddrinfo
+
+    def silent(host, *args, **kwargs):
+        if host == "plc.slow":
+            release.wait(10)
+            raise socket.gaierror(socket.EAI_AGAIN, "Temporary failure in name resolution")
+        return real(host, *args, **kwargs)
+
+    monkeypatch.setattr(socket, "getaddrinfo", silent)
+    monkeypatch.setattr(devicekey, "RESOLVE_TIMEOUT_S", 0.3)
+    try:
+        t0 = time.monotonic()
+        assert device_key("modbus-tcp://PLC.slow:502") == "tcp plc.slow:502 unit 1"
+        assert time.monotonic() - t0 < 2.0
+    finally:
+        release.set()
+    assert device_key("openprotocol://no-such-host.invalid") == "tcp no-such-host.invalid:4545"

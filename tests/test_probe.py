@@ -203,3 +203,76 @@ def test_probe_url_that_urllib_cannot_split_exits_2(capsys):
     assert main(["probe", "lift", "modbus-tcp://[::1"]) == 2  # found by tests/test_cli_fuzz
     err = capsys.readouterr().err
     assert "not a valid URL" in err and err.count("\n") == 1
+
+
+def _hold(devices, what=None):
+    """Another process holding device locks in the machine's shared folder, as a running
+    daemon does (``what``: a probe's own lock instead), until its stdin closes."""
+    import subprocess
+    import sys
+    import textwrap
+
+    code = (f"""
+        from stationd.devicekey import device_key, lock_dir
+        from stationd.lock import DeviceLock
+        locks = [DeviceLock(device_key(u), {what!r}, u, lock_dir()) for _, u in {devices!r}]
+        for lock in locks:
+            lock.acquire()""" if what else f"""
+        from stationd.lock import StationLocks
+        locks = StationLocks()
+        locks.hold("sqlite:///:memory:", devices={devices!r})""")
+    holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(code + """
+        import sys
+        print("held", flush=True)
+        sys.stdin.readline()
+        """)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+    return holder
+
+
+def _let_go(holder):
+    holder.stdin.close()
+    holder.wait(10)
+
+
+def test_probe_of_a_device_a_daemon_drives_is_refused_before_touching_it(capsys):
+    """The daemon holds its devices' locks (named by endpoint: ``localhost`` there,
+    127.0.0.1 here); the probe takes the same lock and is refused, naming the daemon's pid,
+    without a word to the PLC; once the daemon is gone the probe reads it."""
+    import uuid
+
+    with SimulatedPlc() as plc:
+        port = plc.start_tcp()
+        plc.set_height(1500.0)
+        tag = uuid.uuid4().hex[:8]
+        holder = _hold([("lift", f"modbus-tcp://localhost:{port}?timeout=2"),
+                        ("wrench", f"openprotocol://127.0.0.1:{_free_port()}"),
+                        ("camera left", f"aravis://Probe-{tag}")])
+        try:
+            url = f"modbus-tcp://127.0.0.1:{port}?unit=1"
+            code = main(["probe", "lift", url])
+            err = capsys.readouterr().err
+            assert code == 2 and err == (f"stationd: error: lift {url}: the station daemon (pid "
+                                         f"{holder.pid}) is driving this device; stop it or "
+                                         "use its screens\n"), err
+            code = main(["probe", "camera", f"aravis://Probe-{tag}?trigger=software"])
+            err = capsys.readouterr().err
+            assert code == 2 and f"the station daemon (pid {holder.pid})" in err, err
+            assert err.count("\n") == 1
+        finally:
+            _let_go(holder)
+        code = main(["probe", "lift", f"modbus-tcp://127.0.0.1:{port}?unit=1", "--json"])
+    obj = json.loads(capsys.readouterr().out)
+    assert code == 0 and abs(obj["state"]["height_mm"] - 1500.0) < 0.1
+
+
+def test_probe_of_a_device_another_probe_holds_says_so(capsys):
+    url = f"openprotocol://127.0.0.1:{_free_port()}"
+    holder = _hold([("wrench", url)], what="probe wrench")
+    try:
+        code = main(["probe", "wrench", url, "--timeout", "0.5"])
+    finally:
+        _let_go(holder)
+    err = capsys.readouterr().err
+    assert code == 2 and err == (f"stationd: error: wrench {url}: another stationd probe (pid "
+                                 f"{holder.pid}) is using this device; wait for it to end\n")

@@ -90,6 +90,12 @@ def test_a_second_daemon_on_the_first_ones_devices_exits_2_naming_pid_and_device
             assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
             assert f"{dev}: the device is already driven by pid {a.pid}" in r.stderr
             assert "Traceback" not in r.stderr
+        # a probe of a device the daemon drives is refused before it touches it
+        r = subprocess.run([sys.executable, "-m", "stationd", "probe", "wrench", wrench,
+                            "--timeout", "1"], capture_output=True, text=True, timeout=60)
+        assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+        assert f"wrench {wrench}: the station daemon (pid {a.pid}) is driving this device; " \
+               "stop it or use its screens" in r.stderr
         assert a.poll() is None                   # the first one is untouched
         a.send_signal(signal.SIGTERM)
         assert a.wait(timeout=30) == 0

@@ -314,3 +314,45 @@ def test_the_points_files_format_is_in_the_commands_help(capsys):
     for key in ("kind: rigid", "points:", "vehicle_mm:", "seen_by:", "{left: r1_l.png, right:",
                 "{pair_mm: ["):
         assert key in out, key
+
+
+def test_one_mistyped_point_under_the_rms_bound_is_named_and_refused(tmp_path, capsys):
+    """Issue 19: one coordinate typed 6 mm off (-606 for -600) hides under the RMS bound of
+    eight points; the point is named with its residual and the coordinate the others give
+    it; nothing is written."""
+    from stationd.geometry.frames import MAX_POINT_MM, MAX_RMS_MM
+
+    cfg = _station_with_pair1(tmp_path)
+    data = yaml.safe_load(_points(tmp_path).read_text())
+    assert data["points"][2]["vehicle_mm"] == [1300.0, -600.0, -30.0]
+    data["points"][2]["vehicle_mm"][1] = -606.0
+    typo = tmp_path / "typo.yaml"
+    typo.write_text(yaml.safe_dump(data))
+    code, out, err = _main(capsys, "calibrate", "vehicle", "--pair", "pair1", "--points", typo,
+                           "--config", cfg)
+    rms = float(out.split("RMS ")[1].split()[0])
+    assert rms <= MAX_RMS_MM, out    # the RMS alone passed it
+    assert code == 1 and "wrote" not in out and err.count("\n") == 1, err
+    residual = float(err.split("R3 has a residual of ")[1].split()[0])
+    assert residual > MAX_POINT_MM and f"more than {MAX_POINT_MM:g} mm for one point" in err
+    assert "R3 is probably mistyped (its vehicle_mm y is -606, the others put it at -600." in err
+    assert not (tmp_path / "pair1.vehicle.yaml").exists()
+
+
+def test_points_of_a_mirrored_frame_are_told_so_not_blamed_on_one_point(tmp_path, capsys):
+    """Issue 19: the vehicle's y axis typed with the wrong sign for every point fits no
+    rotation; the refusal blamed the point with the largest residual.  Rigid and affine."""
+    from stationd.geometry.frames import MIRRORED
+
+    cfg = _station_with_pair1(tmp_path)
+    data = yaml.safe_load(_points(tmp_path).read_text())
+    for p in data["points"]:
+        p["vehicle_mm"][1] = -p["vehicle_mm"][1]
+    mirrored = tmp_path / "mirrored.yaml"
+    for kind in ("rigid", "affine"):
+        mirrored.write_text(yaml.safe_dump({**data, "kind": kind}))
+        code, out, err = _main(capsys, "calibrate", "vehicle", "--pair", "pair1", "--points",
+                               mirrored, "--config", cfg)
+        assert code == 1 and "wrote" not in out and err.count("\n") == 1, kind
+        assert MIRRORED in err and "largest residual" not in err, err
+        assert not (tmp_path / "pair1.vehicle.yaml").exists()

@@ -23,6 +23,9 @@ from stationd.filekind import expect
 from stationd.yamlio import YamlNode
 
 DIST_LENGTHS = (0, 4, 5, 8)
+#: a pair is "swapped" when its right camera lies to the left of its left camera by more than
+#: this fraction of the baseline (cameras one above the other are neither: never said)
+SWAPPED_FRACTION = 0.5
 _CAMERA_KEYS = ("K", "dist", "size")
 PAIR_KEYS = ("left", "right", "R", "T")
 
@@ -217,3 +220,21 @@ class StereoPair:
     @property
     def baseline_mm(self) -> float:
         return float(np.linalg.norm(self.T))
+
+    @property
+    def right_centre_mm(self) -> np.ndarray:
+        """The right camera's centre in the left camera's frame (mm): ``-R.T @ T``."""
+        return np.asarray(-self.R.T @ self.T)
+
+    def swapped(self) -> str | None:
+        """Why the pair looks calibrated with its left and right images swapped, None when it
+        does not: the right camera's centre lies mostly on the left camera's -x side (its x
+        below -:data:`SWAPPED_FRACTION` of the baseline), where a pair's right camera never
+        is (``cv2.stereoCalibrate``'s pairs have it at +x, ``T``'s x negative).  Such a pair
+        triangulates with each camera's lens model on the other camera's images."""
+        c = self.right_centre_mm
+        b = float(np.linalg.norm(c))
+        if not (b > 0 and c[0] < -SWAPPED_FRACTION * b):
+            return None
+        return (f"the right camera is {-c[0]:.0f} mm to the left of the left camera (T's x is "
+                f"{self.T[0]:+.1f} mm, a pair's is negative): left and right swapped?")

@@ -5,11 +5,16 @@ reference points.  A rigid transform (rotation + translation) has 6 parameters i
 cannot shear or scale the measurement, and is the default; the affine fit stays available for
 comparison.  Every fit reports per-point residuals so a bad reference point is visible.
 
-A fit is plausible (:func:`implausible`) when its RMS residual is at most :data:`MAX_RMS_MM`
-and the two point sets have one scale: pair points typed in metres fit a rigid motion with
-an RMS of tens of millimetres (a wrong bolt), and an affine fit would absorb the factor 1000
-with a tiny RMS.  The RMS is stored in the registration file (``rms_mm``), and a file whose
-RMS is beyond the bound is refused when read (``config check``, start, reload).
+A fit is plausible (:func:`implausible`) when the two point sets have one scale (pair points
+typed in metres fit a rigid motion with an RMS of tens of millimetres, a wrong bolt, and an
+affine fit would absorb the factor 1000 with a tiny RMS), describe frames of one handedness
+(one axis's sign flipped for every point fits no rotation: the rigid fit's residuals were
+blamed on one point), no single point is off by more than :data:`MAX_POINT_MM` (one typo
+among eight points hides under the RMS bound) and the RMS residual is at most
+:data:`MAX_RMS_MM`.  A point beyond the bound is named with its residual and, when the others
+fit without it, said to be mistyped, with the coordinate that differs where one does.  The
+RMS is stored in the registration file (``rms_mm``), and a file whose RMS is beyond the bound
+is refused when read (``config check``, start, reload).
 """
 
 from __future__ import annotations
@@ -29,6 +34,15 @@ KINDS = ("rigid", "affine")
 #: matching tolerance (8 mm by default) and a registration off by more than a quarter of it
 #: puts the wrench on a neighbouring bolt; a good fit is a few tenths of a millimetre
 MAX_RMS_MM = 2.0
+#: the largest residual (mm) of one reference point: one point may fit a little worse than
+#: the RMS bound, not by a typo (a digit wrong is millimetres or more; a good point is a few
+#: tenths of a millimetre off)
+MAX_POINT_MM = 1.5 * MAX_RMS_MM
+#: the others "fit" without the worst point when their RMS is within this (good points are
+#: a few tenths of a millimetre off; more is a second bad point, and none is singled out)
+_REST_FITS_MM = 0.5 * MAX_RMS_MM
+#: a coordinate "is" the mistyped one when it carries this fraction of the point's error
+_ONE_AXIS = 0.9
 #: the spreads of the pair points and the vehicle points (both mm) differ by at most this
 #: factor: a rotation keeps distances, and a real affine fit is within a few per cent of one
 MAX_SCALE = 1.5
@@ -90,6 +104,8 @@ class Transform:
             raise m["A"].error("a rigid transform needs a rotation matrix (orthonormal, det +1)")
         if kind == "affine" and abs(np.linalg.det(A)) < 1e-9:
             raise m["A"].error("an affine transform needs an invertible matrix")
+        if kind == "affine" and np.linalg.det(A) < 0:
+            raise m["A"].error(f"{MIRRORED}; run stationd calibrate vehicle again")
         return cls(A=A, t=m["t"].vector([3]), kind=kind)
 
 
@@ -110,12 +126,71 @@ def spread(points: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=1))))
 
 
+MIRRORED = ("the points describe a mirrored frame: one axis has the wrong sign "
+            "(left/right-handed)")
+
+
+def _mirrored(fit: Transform, src: np.ndarray, dst: np.ndarray) -> str | None:
+    """Why the points are a mirror image of each other, None when they are not: an affine
+    fit with a negative determinant, or points a reflection fits within :data:`MAX_RMS_MM`
+    and no rotation does (points in one plane fit both alike: never said of them)."""
+    if fit.kind == "affine":
+        return f"{MIRRORED}: the affine fit mirrors" if np.linalg.det(fit.A) < 0 else None
+    s = np.asarray(src, dtype=np.float64)
+    d = np.asarray(dst, dtype=np.float64)
+    cs, cd = s.mean(axis=0), d.mean(axis=0)
+    U, _, Vt = np.linalg.svd((s - cs).T @ (d - cd))
+    M = Vt.T @ U.T          # the best orthogonal map, a reflection when its det is -1
+    if np.linalg.det(M) > 0:
+        return None
+    mirror = float(np.sqrt(np.mean(np.sum(((s - cs) @ M.T - (d - cd)) ** 2, axis=1))))
+    if not (mirror <= MAX_RMS_MM < fit.rms_mm):
+        return None
+    return (f"{MIRRORED}: no rotation fits them (RMS {fit.rms_mm:.3g} mm), their mirror image "
+            f"fits to {mirror:.2g} mm; check the sign of each axis of vehicle_mm (or of the "
+            "pair points)")
+
+
+def _worst_point(fit: Transform, src: np.ndarray, dst: np.ndarray,
+                 names: list[str]) -> tuple[str, float, str]:
+    """The point with the largest residual: its name, its residual and what the others say
+    of it: refitted without it, if they fit one motion it is probably mistyped, and the
+    coordinate that carries its error (in the vehicle frame or the pair's) is named with the
+    value the others give it."""
+    r = fit.residuals_mm
+    assert r is not None  # noqa: S101 - a fit carries its residuals
+    i = int(np.argmax(r))
+    name = names[i]
+    keep = np.arange(len(r)) != i
+    rest = fit_transform(src[keep], dst[keep], fit.kind) if keep.sum() >= 3 else None
+    if not isinstance(rest, Transform) or not rest.rms_mm <= _REST_FITS_MM:
+        return name, float(r[i]), ""
+    said = (f"; without it the others fit to {rest.rms_mm:.2g} mm RMS: {name} is probably "
+            "mistyped")
+    expected_v = rest.apply(src[i])
+    expected_p = np.linalg.solve(rest.A, dst[i] - rest.t)
+    # the pair's axes are often near the vehicle's (a camera looking down): an error along
+    # one axis may be along one axis in both frames, and then both are named
+    hints = []
+    for key, typed, expected in (("vehicle_mm", dst[i], expected_v),
+                                 ("pair point's", src[i], expected_p)):
+        off = typed - expected
+        axis = int(np.argmax(np.abs(off)))
+        if abs(off[axis]) >= _ONE_AXIS * float(np.linalg.norm(off)):
+            hints.append(f"its {key} {'xyz'[axis]} is {typed[axis]:.6g}, the others put it "
+                         f"at {expected[axis]:.1f}")
+    if hints:
+        said += f" ({' or '.join(hints)})"
+    return name, float(r[i]), said
+
+
 def implausible(fit: Transform, src: np.ndarray, dst: np.ndarray,
                 names: list[str] | None = None) -> Refusal | None:
     """Why ``fit`` (from the pair points ``src`` to the vehicle points ``dst``, mm) is not a
-    registration to use, None when it is: the point sets in two units (metres typed for
-    millimetres: the likely cause is said), or an RMS residual above :data:`MAX_RMS_MM`
-    (``names``, the points', name the one with the largest residual)."""
+    registration to use, None when it is, in this order: the point sets in two units (metres
+    typed for millimetres: the likely cause is said), a mirrored frame, one point beyond
+    :data:`MAX_POINT_MM`, an RMS residual above :data:`MAX_RMS_MM` (``names``, the points',
+    name the one with the largest residual and say whether it is mistyped)."""
     s_src, s_dst = spread(src), spread(dst)
     ratio = s_dst / s_src if s_src > 0 else float("inf")
     if not 1 / MAX_SCALE <= ratio <= MAX_SCALE:
@@ -128,13 +203,25 @@ def implausible(fit: Transform, src: np.ndarray, dst: np.ndarray,
         else:
             cause = "two units mixed, or points given the wrong names?"
         return Refusal(f"the two point sets differ in scale ({sizes}): {cause}")
+    mirrored = _mirrored(fit, src, dst)
+    if mirrored is not None:
+        return Refusal(mirrored)
+    r = fit.residuals_mm
+    if r is None or not r.size:
+        return None
+    if names is None or len(names) != r.size:
+        names = [f"#{k + 1}" for k in range(r.size)]
+    s, d = np.asarray(src, dtype=np.float64), np.asarray(dst, dtype=np.float64)
     if not fit.rms_mm <= MAX_RMS_MM:
-        r, where = fit.residuals_mm, ""
-        if names is not None and r is not None and len(names) == r.size:
-            where = f": {names[int(np.argmax(r))]} has the largest residual"
+        name, _, said = _worst_point(fit, s, d, names)
         return Refusal(f"RMS residual {fit.rms_mm:.3g} mm is more than {MAX_RMS_MM:g} mm: the "
                        "reference points do not fit one motion (a point measured or typed "
-                       f"wrong{where})")
+                       f"wrong: {name} has the largest residual{said})")
+    if float(r.max()) > MAX_POINT_MM:
+        name, residual, said = _worst_point(fit, s, d, names)
+        return Refusal(f"{name} has a residual of {residual:.3g} mm, more than "
+                       f"{MAX_POINT_MM:g} mm for one point (the RMS of {fit.rms_mm:.3g} mm "
+                       f"hides it){said or ': probably mistyped or measured wrong'}")
     return None
 
 

@@ -7,6 +7,9 @@ path; the screens only read, and only need two queries the repository does not o
 vehicle list, every record rather than the last).  They go through the repository's engine
 in a session that never commits; the vehicle's status comes from ``vehicle_report``.
 
+Each rundown carries its ``operator``: the user signed in at the station when its tool was
+enabled (None: nobody was, or the record is older than operators signing in).
+
 Each rundown of the vehicle's page (and of its JSON export) carries its tightening curve when
 the controller sent one (``db.curves``): ``curve`` is None, or the torque and angle traces
 (N m and degrees, one value per sample, the sample period) the page draws as a torque-angle
@@ -24,13 +27,16 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from db.curves import curves_of_records
+from db.kinds import MISSING, SKIPPED
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
 from db.repository import Repository
 
-CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "torque_nm", "angle_deg",
-              "torque_min_nm", "torque_max_nm", "angle_min_deg", "angle_max_deg", "pset",
+CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator", "torque_nm",
+              "angle_deg", "torque_min_nm", "torque_max_nm", "angle_min_deg", "angle_max_deg",
+              "pset",
               "parameter_version", "tightening_id", "x_mm", "y_mm", "z_mm",
-              "match_distance_mm", "tilt_deg", "sent_at", "result_at", "recorded_at", "images")
+              "match_distance_mm", "tilt_deg", "sent_at", "result_at", "recorded_at", "images",
+              "skipped_by", "comment")   # a skipped bolt's row: who skipped it, and why
 
 
 def _iso(t: datetime | None) -> str | None:
@@ -99,7 +105,9 @@ class Results:
             attempts[code] = attempts.get(code, 0) + 1
             run = {
                 "vin": vin, "model": model, "bolt": code, "attempt": attempts[code],
-                "rundown": rec.kind, "status": rec.status, "torque_nm": rec.torque_nm,
+                "rundown": rec.kind, "status": rec.status,
+                # who was signed in at the station (None: nobody, or an older record)
+                "operator": rec.operator, "torque_nm": rec.torque_nm,
                 "angle_deg": rec.angle_deg,
                 # the limits in force for this rundown (its parameter version), as quality
                 # judges it
@@ -117,16 +125,19 @@ class Results:
         return out
 
     def export(self, vin: str) -> list[dict[str, Any]]:
-        """The vehicle's rundowns, then one row per bolt with none (status ``missing``, no
-        values): an export that lists only rundowns reads as a complete vehicle.  Raises
-        ``NotFoundError`` for an unknown VIN."""
+        """The vehicle's rundowns, then one row per bolt with none, no values: status
+        ``missing``, or ``skipped`` with who skipped it and their comment (an export that
+        lists only rundowns reads as a complete vehicle, and one that calls a bolt skipped
+        on purpose missing reads as a bolt forgotten).  Raises ``NotFoundError`` for an
+        unknown VIN."""
         report = self.repo.vehicle_report(vin)
-        runs = self.rundowns(vin)
-        missing: list[dict[str, Any]] = [
+        runs = [{**r, "skipped_by": None, "comment": None} for r in self.rundowns(vin)]
+        none: list[dict[str, Any]] = [
             {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
-             "bolt": b, "attempt": 0, "status": "missing", "images": []}
-            for b in report.missing]
-        return runs + missing
+             "bolt": b.bolt_id, "attempt": 0, "status": b.status, "images": [],
+             "skipped_by": b.skipped_by, "comment": b.comment}
+            for b in report.bolts if b.status in (MISSING, SKIPPED)]
+        return runs + none
 
 
 def plot_curve(traces: list[dict[str, Any]]) -> dict[str, Any] | None:

@@ -419,3 +419,64 @@ def test_reports_and_exports_open_the_database_read_only(tmp_path):
         Repository.open(url_of(old), read_only=True)
     assert old.stat().st_size == 0
     shutil.rmtree(folder, ignore_errors=True)
+
+
+def test_a_bolt_skipped_by_a_command_is_exported_and_reported_skipped_not_missing(run, db,
+                                                                                  tmp_path):
+    """Issue 19: a bolt a person skipped (with a comment) showed as missing in the results
+    export and the report, as a bolt forgotten.  Skipped with who and why, in the CSV, the
+    JSON and the report; the vehicle is not complete with it; a skip given before the
+    vehicle was reopened for rework no longer counts (the rework starts afresh)."""
+    import csv
+    import io
+    from datetime import UTC, datetime
+
+    from db.repository import Repository
+    from stationd.boltfile import import_bolts
+
+    with Repository.open(db) as repo:
+        import_bolts(repo, EXAMPLE)
+        repo.start_vehicle("VIN1", "WAGON-B")
+        record(repo, "VIN1", "SF-FL", ok=True, tightening_id=1)
+        others = sorted(set(repo.vehicle_report("VIN1").missing))
+        skipped = others[0]
+        repo.ledger.record_command(at=datetime.now(UTC), user="sam", source="web",
+                                   kind="skip", vin="VIN1", bolt=skipped,
+                                   comment="no access, fixture in the way")
+    code, out, err = run("db", "export", "--results", "--db", db)
+    rows = {r["bolt"]: r for r in csv.DictReader(io.StringIO(out))}
+    assert code == 0 and err == ""
+    assert (rows[skipped]["status"], rows[skipped]["skipped_by"], rows[skipped]["comment"]) \
+        == ("skipped", "sam", "no access, fixture in the way")
+    assert rows[skipped]["torque_nm"] == "" and rows[skipped]["attempt"] == "0"
+    assert all(rows[b]["status"] == "missing" and rows[b]["skipped_by"] == ""
+               for b in others[1:])
+    assert rows["SF-FL"]["status"] == "ok" and rows["SF-FL"]["skipped_by"] == ""
+    code, out, _ = run("db", "export", "--results", "--format", "json", "--db", db)
+    (row,) = [r for r in json.loads(out) if r["bolt"] == skipped]
+    assert (row["status"], row["skipped_by"], row["comment"]) == (
+        "skipped", "sam", "no access, fixture in the way")
+    target = tmp_path / "results.csv"
+    code, out, _ = run("db", "export", "--results", "--out", str(target), "--db", db)
+    assert f"1 rundown(s) and {len(others) - 1} missing bolt(s) (and 1 skipped) of 1 " \
+           "vehicle(s)" in out
+    code, out, _ = run("db", "report", "VIN1", "--db", db)
+    assert code == 1     # not complete: a skipped bolt is not tightened
+    head = out.splitlines()[0]
+    assert f"{len(others) - 1} missing" in head and skipped not in head.split("missing")[1] \
+        .split("skipped")[0]
+    assert f", 1 skipped ({skipped} by sam: no access, fixture in the way)" in head
+    line = next(ln for ln in out.splitlines() if ln.strip().startswith(skipped + " "))
+    assert "SKIPPED" in line and "by sam: no access, fixture in the way" in line
+    code, out, _ = run("db", "report", "VIN1", "--json", "--db", db)
+    doc = json.loads(out)
+    assert doc["skipped"] == [skipped] and skipped not in doc["missing"]
+    assert doc["complete"] is False
+    (bolt,) = [b for b in doc["bolts"] if b["bolt"] == skipped]
+    assert (bolt["status"], bolt["skipped_by"], bolt["comment"]) == (
+        "skipped", "sam", "no access, fixture in the way")
+    with Repository.open(db) as repo:     # closed, then reopened for rework: afresh
+        repo.close_vehicle("VIN1")
+        repo.start_vehicle("VIN1", "WAGON-B", reopen=True)
+        assert repo.vehicle_report("VIN1").skipped == []
+        assert skipped in repo.vehicle_report("VIN1").missing

@@ -54,3 +54,16 @@ def test_pair_requires_rotation(tmp_path):
     cam = Camera(K)
     with pytest.raises(ValueError, match="rotation"):
         StereoPair(cam, cam, np.diag([1.0, 1.0, -1.0]), np.zeros(3))
+
+
+def test_a_pair_whose_right_camera_is_on_the_left_is_said_swapped():
+    """``x_right = R x_left + T``: the right camera's centre ``-R.T T`` is at +x of the left
+    camera (T's x negative).  At -x the images were given the other way round; a camera
+    above the other is neither."""
+    cam = Camera(K)
+    assert StereoPair(cam, cam, np.eye(3), np.array([-100.0, 2.0, 3.0])).swapped() is None
+    said = StereoPair(cam, cam, np.eye(3), np.array([100.0, 2.0, 3.0])).swapped()
+    assert said is not None and said.startswith("the right camera is 100 mm to the left of "
+                                                "the left camera (T's x is +100.0 mm")
+    assert said.endswith("left and right swapped?")
+    assert StereoPair(cam, cam, np.eye(3), np.array([20.0, -100.0, 0.0])).swapped() is None

@@ -1,4 +1,5 @@
 import math
+import re
 
 import numpy as np
 import pytest
@@ -135,3 +136,67 @@ def test_a_registration_keeps_its_rms_and_one_beyond_the_bound_is_refused():
         Transform.from_node(YamlNode.parse(yaml.safe_dump({**d, "rms_mm": 3.5})))
     with pytest.raises(ConfigError, match="expected a number"):
         Transform.from_node(YamlNode.parse(yaml.safe_dump({**d, "rms_mm": "small"})))
+
+
+def test_a_mirrored_frame_is_told_before_any_point_is_blamed():
+    """Issue 19: one axis's sign flipped for every point fits no rotation; its refusal named
+    the point with the largest residual.  Points in one plane fit a rotation and its mirror
+    image alike: nothing to tell, and they are not refused.  A stored affine registration
+    that mirrors is refused when read."""
+    from stationd.errors import ConfigError
+    from stationd.geometry.frames import MIRRORED, implausible
+
+    rng = np.random.default_rng(11)
+    R, t = _rotation(rng), np.array([1500.0, -900.0, 1400.0])
+    src = rng.uniform(-600, 600, (6, 3))
+    dst = src @ R.T + t + rng.normal(0, 0.05, (6, 3))
+    for axis in range(3):
+        flipped = dst.copy()
+        flipped[:, axis] *= -1
+        for fit in (fit_rigid, fit_affine):
+            tf = fit(src, flipped)
+            assert isinstance(tf, Transform)
+            refused = implausible(tf, src, flipped, [f"R{i}" for i in range(6)])
+            assert refused is not None and refused.reason.startswith(MIRRORED), refused
+            assert "largest residual" not in refused.reason
+    flat = src.copy()
+    flat[:, 2] = 0.0
+    flipped = flat @ R.T + t
+    flipped[:, 1] *= -1
+    tf = fit_rigid(flat, flipped)
+    assert isinstance(tf, Transform) and implausible(tf, flat, flipped) is None
+    mirror = fit_affine(src, dst * np.array([1.0, -1.0, 1.0]))
+    assert isinstance(mirror, Transform)
+    node = YamlNode.parse(f"kind: affine\nA: {mirror.A.tolist()}\nt: {mirror.t.tolist()}\n",
+                          "reg.yaml")
+    with pytest.raises(ConfigError, match=re.escape(f"reg.yaml:2: A: {MIRRORED}; run")):
+        Transform.from_node(node)
+
+
+def test_one_point_beyond_its_bound_is_named_even_under_the_rms_bound():
+    """One coordinate of eight points typed 5 mm off: the RMS stays under MAX_RMS_MM, the
+    point's residual does not; it is named, and the others, refitted without it, give the
+    value it should have.  Two bad points: the worst is named, none is called mistyped."""
+    from stationd.geometry.frames import MAX_POINT_MM, MAX_RMS_MM, implausible
+
+    rng = np.random.default_rng(5)
+    R, t = _rotation(rng), np.array([1500.0, -900.0, 1400.0])
+    src = rng.uniform(-600, 600, (8, 3))
+    dst = src @ R.T + t + rng.normal(0, 0.05, (8, 3))
+    names = [f"R{i + 1}" for i in range(8)]
+    bad = dst.copy()
+    bad[4, 2] += 5.0
+    tf = fit_rigid(src, bad)
+    assert isinstance(tf, Transform) and tf.rms_mm <= MAX_RMS_MM
+    assert tf.residuals_mm is not None and tf.residuals_mm.max() > MAX_POINT_MM
+    refused = implausible(tf, src, bad, names)
+    assert refused is not None and refused.reason.startswith("R5 has a residual of ")
+    assert "R5 is probably mistyped (its vehicle_mm z is" in refused.reason
+    expected = float(refused.reason.split("the others put it at ")[1].split(")")[0].split()[0])
+    assert abs(expected - dst[4, 2]) < 0.3
+    bad[1, 0] -= 5.0
+    tf = fit_rigid(src, bad)
+    assert isinstance(tf, Transform)
+    refused = implausible(tf, src, bad, names)
+    assert refused is not None and "mistyped" not in refused.reason.replace(
+        "probably mistyped or measured wrong", "")
