@@ -44,7 +44,13 @@ from sqlalchemy.exc import DBAPIError, SQLAlchemyError
 from db.engine import make_engine
 from db.errors import DbError
 from db.repository import Repository
-from stationd.linedb import LINE_FEED, LINE_PARAMETERS, create_line_schema, parameter_rows
+from stationd.linedb import (
+    LINE_FEED,
+    LINE_PARAMETERS,
+    create_line_schema,
+    operator_of,
+    parameter_rows,
+)
 from stationd.yamlio import YamlNode
 
 log = logging.getLogger("stationd")
@@ -178,7 +184,8 @@ class LineDb:
             engine = self._connect()
             rows = [{"station_id": station_id, "db_id": db_id, "seq": e["seq"],
                      "kind": e["kind"], "at": datetime.fromisoformat(e["at"]).replace(
-                         tzinfo=UTC), "record": e["record"]} for e in entries]
+                         tzinfo=UTC), "record": e["record"], "operator": operator_of(e)}
+                    for e in entries]
             stmt = pg_insert(LINE_FEED).on_conflict_do_nothing().returning(LINE_FEED.c.seq)
             versions = parameter_rows(station_id, db_id, entries)
             with engine.begin() as conn:
@@ -193,6 +200,16 @@ class LineDb:
                 raise LineDown(_reason(exc)) from None
             raise
         except (SQLAlchemyError, DbError, OSError) as exc:
+            self.dispose()
+            raise LineDown(_reason(exc)) from None
+
+    def reachable(self) -> None:
+        """``LineDown`` when the line database does not answer now (a command says so,
+        also when it has nothing to send)."""
+        try:
+            with self._connect().connect() as conn:
+                conn.exec_driver_sql("SELECT 1")
+        except (SQLAlchemyError, OSError) as exc:
             self.dispose()
             raise LineDown(_reason(exc)) from None
 

@@ -1,6 +1,7 @@
-"""``stationd line status|quarantine``: the store-and-forward to the line database, from the
-station's own files (the daemon need not run).
+"""``stationd line init|status|quarantine|results|bolts``: the line database and the
+store-and-forward to it, from the station's own files (the daemon need not run).
 
+    stationd line init postgresql+psycopg://USER:PASSWORD@HOST:PORT/DATABASE   # the tables
     stationd line status --config STATION.yaml            # backlog, lag, quarantine
     stationd line quarantine --config STATION.yaml [--retry] [--export FILE.json]
     stationd line results --config STATION.yaml [--vin V] [--station ST]   # the line's
@@ -22,11 +23,12 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
-from sqlalchemy import Engine, inspect, make_url
-from sqlalchemy.exc import SQLAlchemyError
+from sqlalchemy import Engine, Table, inspect, make_url
+from sqlalchemy.exc import ArgumentError, SQLAlchemyError
 
 from db.engine import make_engine
 from db.repository import Repository
@@ -34,17 +36,31 @@ from stationd.config import load_station_config
 from stationd.errors import InputError
 from stationd.forward import Forwarder, LineDown
 from stationd.jsonout import strict_json
-from stationd.linedb import LINE_FEED, LINE_PARAMETERS, bolt_versions, results
+from stationd.linedb import (
+    LINE,
+    LINE_FEED,
+    LINE_PARAMETERS,
+    bolt_versions,
+    create_line_schema,
+    results,
+)
 from stationd.outfile import write_atomic
 
 EXIT_WAITING, EXIT_UNREACHABLE = 1, 3
+T = TypeVar("T")
+CONNECT_TIMEOUT_S = 10
 
 
-def _forwarder(args: argparse.Namespace) -> Forwarder:
+def _forwarder(args: argparse.Namespace, *, write: bool = False) -> Forwarder:
+    """The station's forwarder on its existing database: a missing one is said, never made
+    (a wrong path or station file would read as "everything forwarded")."""
+    from stationd.db_cli import open_repository
+
     cfg = load_station_config(args.config)
     if cfg.line is None:
         raise InputError(f"{args.config}: no line section: nothing is forwarded")
-    return Forwarder(Repository.open(cfg.database_url), cfg.line)
+    return Forwarder(open_repository(cfg.database_url, must_exist=True, read_only=not write),
+                     cfg.line)
 
 
 def cmd_line_status(args: argparse.Namespace) -> int:
@@ -67,17 +83,20 @@ def cmd_line_status(args: argparse.Namespace) -> int:
 
 
 def cmd_line_quarantine(args: argparse.Namespace) -> int:
-    fwd = _forwarder(args)
+    if args.export:
+        out = Path(args.export)
+        if out.exists() or out.is_symlink():   # before anything is read
+            raise InputError(f"--export {out}: exists; the export is written to a new file "
+                             "(choose another name)")
+    fwd = _forwarder(args, write=args.retry)
     try:
         if args.export:
-            out = Path(args.export)
-            if out.exists() or out.is_symlink():
-                raise InputError(f"--export {out}: exists (a new file is written)")
             rows: list[dict[str, Any]] = fwd.repo.ledger.quarantined()
             write_atomic(out, json.dumps(rows, indent=1))
             print(f"{len(rows)} quarantined record(s) written to {out}")
         if args.retry:
             try:
+                fwd.line.reachable()   # exit 3 also with nothing to retry
                 taken, refused = fwd.retry_quarantined()
             except LineDown as exc:
                 sys.stderr.write(f"stationd: line database unreachable: {exc}\n")
@@ -91,6 +110,9 @@ def cmd_line_quarantine(args: argparse.Namespace) -> int:
     if not args.export and not args.retry:
         for q in left:
             print(f"record {q['seq']} ({q['kind']}, {q['at']}): {q['reason']}")
+        if not left:
+            print("nothing quarantined: every record was taken by the line database or waits "
+                  "to be forwarded (`stationd line status`)")
     return EXIT_WAITING if left else 0
 
 
@@ -113,6 +135,20 @@ def _has(engine: Engine, table: str) -> bool:
     return bool(inspect(engine).has_table(table))
 
 
+def _read_line(url: str, table: Table, read: Callable[[Engine], list[T]]) -> list[T] | None:
+    """What ``read`` finds in the line database at ``url``: nothing while ``table`` was never
+    made there (no station forwarded yet); None when the database cannot be reached, said in
+    one line on stderr."""
+    engine = make_engine(url)
+    try:
+        return read(engine) if _has(engine, table.name) else []
+    except SQLAlchemyError as exc:
+        _unreachable(url, exc)
+        return None
+    finally:
+        engine.dispose()
+
+
 def _n(v: float | None, digits: int = 1) -> str:
     return "-" if v is None else f"{v:.{digits}f}"
 
@@ -121,21 +157,17 @@ def cmd_line_results(args: argparse.Namespace) -> int:
     url = _line_url(args)
     if args.limit < 1:
         raise InputError(f"--limit {args.limit}: at least 1")
-    engine = make_engine(url)
-    try:
-        rows = results(engine, vin=args.vin, station=args.station, limit=args.limit) \
-            if _has(engine, LINE_FEED.name) else []
-    except SQLAlchemyError as exc:
-        return _unreachable(url, exc)
-    finally:
-        engine.dispose()
+    rows = _read_line(url, LINE_FEED, lambda engine: results(
+        engine, vin=args.vin, station=args.station, limit=args.limit))
+    if rows is None:
+        return EXIT_UNREACHABLE
     if args.json:
         for r in rows:
             print(strict_json({"station_id": r.station_id, "db_id": r.db_id, "seq": r.seq,
                                "at": r.at.isoformat(), "vin": r.vin, "model": r.model,
                                "bolt": r.bolt, "ok": r.ok, "kind": r.kind,
                                "torque_nm": r.torque_nm, "angle_deg": r.angle_deg,
-                               "parameters_version": r.version,
+                               "parameters_version": r.version, "operator": r.operator,
                                "received_at": r.received_at.isoformat()}))
         return 0 if rows else EXIT_WAITING
     what = " ".join(x for x in (f"VIN {args.vin}" if args.vin else "",
@@ -147,14 +179,15 @@ def cmd_line_results(args: argparse.Namespace) -> int:
     print(f"{len(rows)} rundown(s){' of ' + what if what else ''} at {len(stations)} "
           f"station(s), newest first{' (--limit reached)' if len(rows) == args.limit else ''}")
     head = ("time (UTC)", "station", "VIN", "bolt", "result", "torque Nm", "angle deg",
-            "version")
+            "version", "operator")
     table = [[r.at.strftime("%Y-%m-%d %H:%M:%S"), r.station_id, r.vin, r.bolt,
               ("OK" if r.ok else "NOK") + (" (loosening)" if r.kind == "loosening" else ""),
-              _n(r.torque_nm), _n(r.angle_deg), "-" if r.version is None else str(r.version)]
+              _n(r.torque_nm), _n(r.angle_deg), "-" if r.version is None else str(r.version),
+              r.operator or "-"]
              for r in rows]
     widths = [max(len(row[i]) for row in [list(head), *table]) for i in range(len(head))]
     for row in [list(head), *table]:
-        print("  ".join(c.ljust(w) if i < 5 else c.rjust(w)
+        print("  ".join(c.ljust(w) if i < 5 or i == 8 else c.rjust(w)
                         for i, (c, w) in enumerate(zip(row, widths, strict=True))).rstrip())
     return 0
 
@@ -168,14 +201,10 @@ def _window(t: tuple[float | None, float | None, float | None]) -> str:
 
 def cmd_line_bolts(args: argparse.Namespace) -> int:
     url = _line_url(args)
-    engine = make_engine(url)
-    try:
-        rows = bolt_versions(engine, model=args.model, bolt=args.bolt, station=args.station) \
-            if _has(engine, LINE_PARAMETERS.name) else []
-    except SQLAlchemyError as exc:
-        return _unreachable(url, exc)
-    finally:
-        engine.dispose()
+    rows = _read_line(url, LINE_PARAMETERS, lambda engine: bolt_versions(
+        engine, model=args.model, bolt=args.bolt, station=args.station))
+    if rows is None:
+        return EXIT_UNREACHABLE
     if args.json:
         for v in rows:
             print(strict_json({"station_id": v.station_id, "db_id": v.db_id,
@@ -193,9 +222,50 @@ def cmd_line_bolts(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_line_init(args: argparse.Namespace) -> int:
+    """Make the line database's tables where missing (a line engineer prepares the database
+    before any station forwards; a database made by an earlier version gets the new ones):
+    what the forwarders make on their first connection anyway, so running it again, or
+    after stations forwarded, changes nothing."""
+    url = args.url
+    try:
+        parsed = make_url(url)
+    except ArgumentError:
+        raise InputError(f"line init {url!r}: not a database URL (e.g. "
+                         "postgresql+psycopg://stationd:PASSWORD@HOST:5432/line)") from None
+    if parsed.get_backend_name() != "postgresql":
+        raise InputError(f"line init {parsed.render_as_string()}: the line database is "
+                         "PostgreSQL (postgresql+psycopg://USER:PASSWORD@HOST:PORT/DATABASE)")
+    if "connect_timeout" not in parsed.query:   # a host that does not answer: not forever
+        parsed = parsed.update_query_dict({"connect_timeout": str(CONNECT_TIMEOUT_S)})
+    engine = make_engine(parsed.render_as_string(hide_password=False))
+    try:
+        before = set(inspect(engine).get_table_names())
+        create_line_schema(engine)
+        after = set(inspect(engine).get_table_names())
+    except SQLAlchemyError as exc:
+        orig = getattr(exc, "orig", None) or exc
+        text = str(orig).strip().splitlines()
+        raise InputError(f"line database {parsed.render_as_string()}: "
+                         f"{text[0] if text else type(exc).__name__}") from None
+    finally:
+        engine.dispose()
+    ours = sorted(t.name for t in LINE.sorted_tables)
+    made = [t for t in ours if t in after - before]
+    print(f"line database {parsed.render_as_string()}: "
+          + (f"made {', '.join(made)}" if made else "every table there already")
+          + f" ({', '.join(ours)}: ready for the stations' forwarders)")
+    return 0
+
+
 def add_line_parser(sub: Any) -> None:
     ln = sub.add_parser("line", help="the store-and-forward to the line database")
     lsub = ln.add_subparsers(dest="line_command", required=True)
+    i = lsub.add_parser("init", help="make (or upgrade) the line database's tables, before "
+                        "any station forwards")
+    i.add_argument("url", metavar="URL",
+                   help="postgresql+psycopg://USER:PASSWORD@HOST:PORT/DATABASE")
+    i.set_defaults(func=cmd_line_init)
     st = lsub.add_parser("status", help="backlog, lag and quarantine of the forwarding")
     st.add_argument("--config", required=True, metavar="STATION.yaml")
     st.add_argument("--json", action="store_true", help="print one JSON object")
@@ -226,5 +296,5 @@ def add_line_parser(sub: Any) -> None:
     b.set_defaults(func=cmd_line_bolts)
 
 
-__all__ = ["add_line_parser", "cmd_line_bolts", "cmd_line_quarantine", "cmd_line_results",
-           "cmd_line_status"]
+__all__ = ["add_line_parser", "cmd_line_bolts", "cmd_line_init", "cmd_line_quarantine",
+           "cmd_line_results", "cmd_line_status"]

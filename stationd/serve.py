@@ -32,6 +32,7 @@ from stationd.station.daemon import OPEN_ERRORS, Station
 from stationd.station.events import (
     DeviceHealth,
     EventBus,
+    LineLinkChanged,
     ResultRecorded,
     State,
     StateChanged,
@@ -250,11 +251,16 @@ async def forward(cfg: StationConfig, notifier: Notifier, screens: Screens,
         if st["alarm"]:
             line = f"line database: ALARM: {st['alarm']}"
         elif st["up"] is False:
-            line = f"line database: down ({st['last_error']}); {st['backlog']} records wait"
+            n = st["backlog"]
+            line = f"line database: down ({st['last_error']}); " + (
+                "1 record waits" if n == 1 else f"{n} records wait")
         else:
             line = f"line database: forwarding to {st['url']} ({st['backlog']} behind)"
         (log.warning if st["alarm"] or st["up"] is False else log.info)("%s", line)
         notifier.status(line)
+        if bus is not None:   # the line asset's health in OPC UA (never a station fault)
+            bus.publish(LineLinkChanged(st["up"] is not False, st["last_error"] or "",
+                                        st["alarm"]))
 
     wake = asyncio.Event()
 
@@ -284,7 +290,7 @@ async def opcua(cfg: StationConfig, bus: EventBus, stop: asyncio.Event) -> None:
     repo = await _reader(cfg, "OPC UA: not served")
     if repo is None:
         return
-    server = OpcUaServer(cfg.opcua, bus=bus)
+    server = OpcUaServer(cfg.opcua, bus=bus, devices=opcua_devices(cfg))
     try:
         await server.start()
     except Exception as exc:   # a port in use, certificates: never the station's fault
@@ -305,6 +311,15 @@ def configured_devices(cfg: StationConfig) -> tuple[str, ...]:
     """The devices the daemon opens (lift, wrench, each pair with both cameras), by the names
     its DeviceHealth events use: the screens list them before any reports."""
     return (LIFT, WRENCH, *(n for n, pc in cfg.pairs.items() if pc.left and pc.right))
+
+
+def opcua_devices(cfg: StationConfig) -> tuple[str, ...]:
+    """The devices whose health the OPC UA server shows as the JoiningSystem's assets: the
+    configured ones, the station's database and, with a line section, the line database's
+    link (``stationd.opcua.health``)."""
+    from stationd.opcua.health import LINE_LINK
+
+    return (*configured_devices(cfg), DATABASE, *((LINE_LINK,) if cfg.line else ()))
 
 
 def locked_devices(cfg: StationConfig) -> list[tuple[str, str]]:

@@ -303,6 +303,31 @@ def test_the_line_commands_show_the_backlog_and_retry_or_export_the_quarantine(
     assert got.returncode == 3 and "unreachable" in got.stderr and "Traceback" not in got.stderr
 
 
+def test_the_line_commands_never_make_a_station_database_and_say_an_empty_quarantine(
+        tmp_path, table, pg_url, pg_server):
+    """A newcomer's `line status` on a station file whose database did not exist made one and
+    said "0 of 0 waiting" (a wrong path read as everything forwarded); an empty quarantine
+    printed nothing, and its retry with the line database down said exit 0."""
+    station = tmp_path / "station.yaml"
+    missing = tmp_path / "nowhere.db"
+    station.write_text(f"database: {{url: 'sqlite:///{missing}'}}\n"
+                       f"line: {{url: '{pg_url}', station_id: ST-L}}\n")
+    for args in (("status",), ("quarantine",), ("quarantine", "--retry")):
+        got = _cli("line", *args, "--config", str(station))
+        assert got.returncode == 2 and "no database at" in got.stderr, (args, got)
+        assert not missing.exists()
+    _station(tmp_path, "st.db", table, "VINE", [(1, "B1")]).close()
+    station.write_text(f"database: {{url: 'sqlite:///{tmp_path / 'st.db'}'}}\n"
+                       f"line: {{url: '{pg_url}', station_id: ST-L}}\n")
+    got = _cli("line", "quarantine", "--config", str(station))
+    assert got.returncode == 0 and "nothing quarantined" in got.stdout
+    down = pg_url.replace(f":{pg_server.port}/", ":1/")
+    station.write_text(f"database: {{url: 'sqlite:///{tmp_path / 'st.db'}'}}\n"
+                       f"line: {{url: '{down}', station_id: ST-L}}\n")
+    got = _cli("line", "quarantine", "--config", str(station), "--retry")
+    assert got.returncode == 3 and "unreachable" in got.stderr and "Traceback" not in got.stderr
+
+
 def test_two_hundred_rundowns_made_while_the_server_is_stopped_arrive_once_in_order(
         tmp_path, table, pg_url, pg_server):
     repo = _station(tmp_path, "st.db", table, "VIN200", [])

@@ -156,3 +156,69 @@ def test_only_rundowns_carrying_their_version_make_parameter_rows():
     [row] = parameter_rows("ST", "db", entries)
     assert (row["version"], row["pset"], row["torque_max"], row["angle_min"],
             row["first_seq"]) == (3, 7, 55, None, 3)
+
+
+def test_line_init_makes_the_tables_once_and_a_forwarder_uses_them(tmp_path, pg_url, capsys):
+    """A line engineer prepares the line database before any station forwards: ``line init``
+    makes the tables; again, it changes nothing; a station then forwards into them."""
+    code, out, err = _run(capsys, "line", "init", pg_url)
+    assert code == 0 and err == ""
+    assert "made line_feed, line_parameters" in out and "PASSWORD" not in out
+    engine = LineDb(pg_url)._connect()
+    from sqlalchemy import inspect
+    assert {"line_feed", "line_parameters"} <= set(inspect(engine).get_table_names())
+    assert "ix_line_feed_vin" in {i["name"] for i in inspect(engine).get_indexes("line_feed")}
+    engine.dispose()
+    code, out, _ = _run(capsys, "line", "init", pg_url)
+    assert code == 0 and "every table there already" in out
+    a, _ = _station(tmp_path, "a", BASE)
+    a.start_vehicle(VIN, "SEDAN")
+    record(a, VIN, "B1", tightening_id=1)
+    _forward(a, pg_url, "ST-A")
+    code, out, _ = _run(capsys, "line", "init", pg_url)   # after forwarding: nothing lost
+    assert code == 0
+    engine = LineDb(pg_url)._connect()
+    assert [r.bolt for r in results(engine)] == ["B1"]
+    engine.dispose()
+    a.close()
+
+
+def test_line_init_with_a_bad_url_or_the_server_down_is_one_line(pg_url, pg_server, capsys):
+    down = pg_url.replace(f":{pg_server.port}/", ":1/")
+    for url, needle in (("not a url", "not a database URL"),
+                        ("sqlite:///line.db", "the line database is PostgreSQL"),
+                        (down, "line database postgresql+psycopg://")):
+        code, out, err = _run(capsys, "line", "init", url)
+        assert code == 2 and out == "", url
+        assert needle in err and len(err.strip().splitlines()) == 1, err
+        assert "Traceback" not in err
+
+
+def test_a_rundowns_operator_reaches_the_line_also_in_a_table_made_before_it(tmp_path, pg_url,
+                                                                             capsys):
+    """The line keeps each rundown's operator (the user signed in at the station) in the
+    record and as a column; a line database made before that column gets it added."""
+    from sqlalchemy import inspect, text
+
+    engine = LineDb(pg_url)._connect()
+    with engine.begin() as conn:   # a line database made by the version before
+        conn.execute(text("ALTER TABLE line_feed DROP COLUMN operator"))
+    assert "operator" not in {c["name"] for c in inspect(engine).get_columns("line_feed")}
+    engine.dispose()
+    a, _ = _station(tmp_path, "a", BASE)
+    a.start_vehicle(VIN, "SEDAN")
+    record(a, VIN, "B1", tightening_id=1, operator="olga")
+    time.sleep(0.01)
+    record(a, VIN, "B2", tightening_id=2)                     # nobody signed in
+    _forward(a, pg_url, "ST-OP")
+    _forward(a, pg_url, "ST-OP")                              # a second start: unchanged
+    engine = LineDb(pg_url)._connect()
+    got = results(engine, vin=VIN, station="ST-OP")
+    assert [(r.bolt, r.operator) for r in got] == [("B2", None), ("B1", "olga")]
+    engine.dispose()
+    code, out, _ = _run(capsys, "line", "results", "--config",
+                        _config(tmp_path, pg_url, "ST-OP"), "--vin", VIN, "--station",
+                        "ST-OP", "--json")
+    assert code == 0 and [json.loads(ln)["operator"] for ln in out.splitlines()] == [
+        None, "olga"]
+    a.close()

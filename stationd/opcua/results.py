@@ -1,7 +1,21 @@
 """A rundown of the results feed (:meth:`db.ledger.Ledger.since`) as the companion model's
 ResultDataType: JoiningResultMetaDataType + JoiningResultDataType (OPC 40450-1 1.01, the field
 names of the vendored files).  Call after :func:`stationd.opcua.model.load_model`: the classes
-are asyncua's, generated from the loaded definitions."""
+are asyncua's, generated from the loaded definitions.
+
+The curve, where one was kept (the controller's traces, :mod:`db.curves`), is the result
+content's ``Trace`` as the model has it: a JoiningTraceDataType (TraceId, ResultId) whose
+StepTraces each hold traces of one length on one time base (StepTraceContent: a
+TraceContentDataType per quantity, its ``Values`` the samples, its PhysicalQuantity 1 TIME,
+2 TORQUE, 3 ANGLE, 0 OTHER, and its EngineeringUnits; the time trace in seconds first when
+the controller gave a sample period or the sample times; ``SamplingInterval`` in ms).  The
+torque and angle traces of a tightening share their time base, so they are one StepTrace.
+Since the result has no program steps of its own, one StepResult (``StepResults``) stands for
+the rundown, naming that trace: a client that follows StepResultId / StepTraceId finds it.
+The overall values carry their PhysicalQuantity too.  Every field is a plain structure or
+array of the model: the standard's encoding, no workaround (tested with a client that builds
+its classes from the server's definitions).
+"""
 
 from __future__ import annotations
 
@@ -11,6 +25,8 @@ from typing import Any
 from stationd.opcua.uatypes import ua
 
 CLASSIFICATION_SINGLE = 1
+PQ_OTHER, PQ_TIME, PQ_TORQUE, PQ_ANGLE = 0, 1, 2, 3       # IJT Base PhysicalQuantity
+TRACE_ANGLE, TRACE_TORQUE = 1, 2                          # Open Protocol trace types
 EVALUATION_OK, EVALUATION_NOT_OK = 1, 2
 RESULT_STATE_COMPLETED = 1
 ENTITY_VEHICLE, ENTITY_JOINT = 20, 23     # what the working group's clients use
@@ -24,6 +40,18 @@ def _unit(code: str, symbol: str, text: str) -> Any:
         uid = (uid << 8) | ord(c)
     return ua.EUInformation(NamespaceUri=UNECE, UnitId=uid,
                             DisplayName=ua.LocalizedText(symbol),
+                            Description=ua.LocalizedText(text))
+
+
+def _units() -> dict[str, Any]:
+    return {"Nm": _unit("NU", "N·m", "newton metre"), "deg": _unit("DD", "°", "degree"),
+            "s": _unit("SEC", "s", "second")}
+
+
+def _other_unit(text: str) -> Any:
+    """A unit the station has no UNECE code for (a trace kept in the controller's unit):
+    named, UnitId -1 (Part 8: not available)."""
+    return ua.EUInformation(NamespaceUri=UNECE, UnitId=-1, DisplayName=ua.LocalizedText(text),
                             Description=ua.LocalizedText(text))
 
 
@@ -51,11 +79,12 @@ def _time(text: str | None) -> datetime | None:
 
 
 def _value(name: str, measured: float | None, limits: dict[str, float] | None,
-           unit: Any, ok: bool) -> Any:
+           unit: Any, ok: bool, quantity: int) -> Any:
     lim = limits or {}
     return ua.ResultValueDataType(
         MeasuredValue=float(measured) if measured is not None else float("nan"),
         Name=name,
+        PhysicalQuantity=quantity,
         ResultEvaluation=_evaluation(ok),
         LowLimit=None if lim.get("min") is None else float(lim["min"]),
         High=None if lim.get("max") is None else float(lim["max"]),
@@ -68,9 +97,65 @@ def _evaluation(ok: bool) -> Any:
     return enum(EVALUATION_OK if ok else EVALUATION_NOT_OK)
 
 
+def _content(curve: dict[str, Any], units: dict[str, Any]) -> Any:
+    """One trace (a curve of :mod:`db.curves`) as a TraceContentDataType."""
+    kind = int(curve["trace_type"])
+    unit = str(curve.get("unit") or "")
+    if kind == TRACE_TORQUE and unit == "Nm":
+        name, quantity = "Torque", PQ_TORQUE
+    elif kind == TRACE_ANGLE and unit == "deg":
+        name, quantity = "Angle", PQ_ANGLE
+    else:   # current, gradient, ... or a unit not converted: named, quantity OTHER
+        name, quantity = str(curve.get("name") or f"trace {kind}"), PQ_OTHER
+    return ua.TraceContentDataType(
+        Values=[float(v) for v in curve["values"]], Name=name, PhysicalQuantity=quantity,
+        EngineeringUnits=units.get(unit) or _other_unit(unit or "?"))
+
+
+def _time_base(curve: dict[str, Any]) -> tuple[Any, ...]:
+    n = len(curve["values"])
+    if curve.get("times_s") is not None:
+        return (n, "times", tuple(float(t) for t in curve["times_s"]))
+    if curve.get("sample_period_s") is not None:
+        return (n, "period", float(curve["sample_period_s"]))
+    return (n, "none", None)
+
+
+def trace(rid: str, curves: list[dict[str, Any]]) -> tuple[Any, str, str | None]:
+    """The JoiningTraceDataType of the rundown ``rid`` from its ``curves`` (one per trace
+    type), the StepResultId its step traces name and the first StepTraceId (see the
+    module's docstring)."""
+    units = _units()
+    groups: dict[tuple[Any, ...], list[dict[str, Any]]] = {}
+    for c in sorted(curves, key=lambda c: int(c["trace_type"])):
+        groups.setdefault(_time_base(c), []).append(c)
+    step_id = f"{rid}:step:1"
+    steps = []
+    for n, ((points, how, base), group) in enumerate(groups.items(), 1):
+        contents = [_content(c, units) for c in group]
+        period_ms: float | None = None
+        times: list[float] | None = None
+        if how == "period":
+            period_ms = base * 1000.0
+            times = [i * base for i in range(points)]
+        elif how == "times":
+            times = list(base)
+        if times is not None:
+            contents.insert(0, ua.TraceContentDataType(
+                Values=times, Name="Time", PhysicalQuantity=PQ_TIME,
+                EngineeringUnits=units["s"]))
+        steps.append(ua.StepTraceDataType(
+            StepTraceId=f"{rid}:trace:{n}", StepResultId=step_id,
+            NumberOfTracePoints=points, SamplingInterval=period_ms,
+            StepTraceContent=contents))
+    return (ua.JoiningTraceDataType(TraceId=f"{rid}:trace", ResultId=rid, StepTraces=steps),
+            step_id, steps[0].StepTraceId if steps else None)
+
+
 def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
-                   simulated: bool = False) -> Any:
-    """The ResultDataType of the feed ``entry`` of kind ``rundown``."""
+                   simulated: bool = False, curves: list[dict[str, Any]] | None = None) -> Any:
+    """The ResultDataType of the feed ``entry`` of kind ``rundown``, with its ``curves``
+    (:mod:`db.curves`' or the feed's, one per trace type) as its trace when it has any."""
     rec = entry["record"]
     ok = rec["status"] == "ok"
     sent = rec.get("params_sent") or {}
@@ -97,12 +182,19 @@ def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
         ])
     content = ua.JoiningResultDataType(OverallResultValues=[
         _value("Torque", rec.get("torque_nm"), sent.get("torque"),
-               _unit("NU", "N·m", "newton metre"), ok),
+               _unit("NU", "N·m", "newton metre"), ok, PQ_TORQUE),
         _value("Angle", rec.get("angle_deg"), sent.get("angle"),
-               _unit("DD", "°", "degree"), ok),
+               _unit("DD", "°", "degree"), ok, PQ_ANGLE),
     ])
+    if curves:
+        rid = meta.ResultId
+        content.Trace, step_id, trace_id = trace(rid, curves)
+        content.StepResults = [ua.StepResultDataType(
+            StepResultId=step_id, Name="Rundown", ResultEvaluation=_evaluation(ok),
+            StepTraceId=trace_id)]
     return ua.ResultDataType(ResultMetaData=meta, ResultContent=[ua.Variant(content)])
 
 
 __all__ = ["CLASSIFICATION_SINGLE", "ENTITY_JOINT", "ENTITY_VEHICLE", "EVALUATION_NOT_OK",
-           "EVALUATION_OK", "parse_result_id", "result_id", "rundown_result"]
+           "EVALUATION_OK", "PQ_ANGLE", "PQ_OTHER", "PQ_TIME", "PQ_TORQUE", "parse_result_id",
+           "result_id", "rundown_result", "trace"]

@@ -6,17 +6,20 @@ Why this shape: the results feed (:mod:`db.ledger`) is the truth, so the server 
 the last number it published, every second (sooner when the bus says a result was recorded):
 a result stored while no client listened is still there for GetResultById, RequestResults and
 RequestUnacknowledgedResults (:mod:`stationd.opcua.catchup`), and nothing is published that was
-not committed.  The server is fed by the station, never a second place where rules live:
-nothing a client does reaches the station (no variable is writable); the one method that
-changes anything, AcknowledgeResults, changes only the MES's own bookkeeping of what it
-stored, and only a configured user may call it.
+not committed.  A rundown's curves, stored after it, are joined to its result before its event
+goes out (:mod:`stationd.opcua.curves`); the devices' health is the JoiningSystem's assets
+(:mod:`stationd.opcua.health`), written from the station's events as its state is.  The
+server is fed by the station, never a second place where rules live: nothing a client does
+reaches the station (no variable is writable); the one method that changes anything,
+AcknowledgeResults, changes only the MES's own bookkeeping of what it stored, and only a
+configured user may call it.
 
 The workarounds for asyncua 2.1.0 (``../shared/design/PROTOCOLS.md``), beside those of
 :mod:`stationd.opcua.model`:
 
 5. events reach only monitored items on the emitting node: results are fired on the Server
-   object (where MES clients subscribe) and on the JoiningSystem's ResultManagement (an event
-   notifier in the model), with the JoiningSystem as their SourceNode;
+   object (where MES clients subscribe), on the JoiningSystem and on its ResultManagement
+   (event notifiers in the model), with the JoiningSystem as their SourceNode;
 6. JoiningSystemResultReadyEventType is abstract: a concrete subtype of it,
    ``StationResultReadyEventType`` in this server's namespace, is fired;
 7. security: asyncua lets everyone write (PermissiveUserManager), its role ruleset lets an
@@ -40,7 +43,7 @@ import contextlib
 import logging
 import socket
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Coroutine
 from contextvars import ContextVar
 from typing import Any
 
@@ -52,19 +55,31 @@ from asyncua.server.server import Server
 from asyncua.server.user_managers import UserManager
 from asyncua.ua.ua_binary import struct_from_binary
 
+from db.curves import curves_for
 from db.ledger import RUNDOWN
 from db.repository import Repository
 from stationd.access import verify_password
 from stationd.opcua.catchup import CatchUp
 from stationd.opcua.config import OpcUaConfig
+from stationd.opcua.curves import CurveJoin
+from stationd.opcua.health import FAILURE, LINE_LINK, NORMAL, OFF_SPEC, DeviceAssets
 from stationd.opcua.model import DI_URI, IJT_URI, MACHINERY_URI, RESULT_URI, load_model
-from stationd.opcua.results import rundown_result
+from stationd.opcua.results import result_id, rundown_result
 from stationd.opcua.uatypes import ua
-from stationd.station.events import EventBus, ResultRecorded, StateChanged, StationEvent
+from stationd.station.events import (
+    DeviceHealth,
+    DeviceIdentified,
+    EventBus,
+    LineLinkChanged,
+    ResultRecorded,
+    StateChanged,
+    StationEvent,
+)
 
 log = logging.getLogger("stationd")
 NAMESPACE = "urn:stationd:opcua"
 POLL_S = 1.0
+HELD_POLL_S = 0.02           # the feed read while a result waits for its curves
 MANUFACTURER = "stationd"
 JOINING_SYSTEM_TYPE, RESULT_READY_EVENT_TYPE = 1005, 1007   # in IJT Base
 REQUESTED_RESULT_EVENT_TYPE = 1035                            # in IJT Base
@@ -140,8 +155,14 @@ class OpcUaServer:
     event, :meth:`stop` (safe twice)."""
 
     def __init__(self, cfg: OpcUaConfig, *, bus: EventBus | None = None,
-                 simulated: bool = False) -> None:
+                 simulated: bool = False, devices: tuple[str, ...] = ()) -> None:
         self.cfg, self.bus, self.simulated = cfg, bus, simulated
+        self.devices = devices      # assets made at start (others when an event names them)
+        self.join = CurveJoin(cfg.keep)
+        self._repo: Repository | None = None
+        self.assets = DeviceAssets()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._pending: set[asyncio.Task[None]] = set()
         self.server: Server | None = None
         self.joining_system: Node | None = None
         self.published = 0          # result events fired (this process)
@@ -178,6 +199,7 @@ class OpcUaServer:
         await self._build(server, idx)
         await server.start()
         self.server = server
+        self._loop = asyncio.get_running_loop()
         if self.bus is not None:
             self._unsubscribe = self.bus.subscribe(self._on_event)
         log.info("OPC UA: %s (%s)", self.cfg.endpoint, ", ".join(self.cfg.security))
@@ -187,6 +209,8 @@ class OpcUaServer:
         if self._unsubscribe is not None:
             self._unsubscribe()
             self._unsubscribe = None
+        for t in list(self._pending):
+            t.cancel()
         await self.catchup.close()
         if server is not None:
             await server.stop()
@@ -254,6 +278,7 @@ class OpcUaServer:
         self._reason = await js.add_variable(ua.NodeId(f"JoiningSystem.{sid}.StateReason", idx),
                                              ua.QualifiedName("StateReason", idx), "",
                                              varianttype=ua.VariantType.String)
+        await self.assets.build(server, js, idx, f"JoiningSystem.{sid}", self.devices)
         mr = uris.index(RESULT_URI)
         rm = await js.get_child([f"{mr}:ResultManagement"])
         gens: list[list[Any]] = []
@@ -262,8 +287,10 @@ class OpcUaServer:
             etype = await server.create_custom_event_type(idx, name, ua.NodeId(base, ijt))
             gens.append([])
             # asyncua does not pass events up the notifier hierarchy: fired at the Server
-            # object (where MES clients subscribe) and at the ResultManagement that makes them
-            for emitter in (server.nodes.server.nodeid, rm.nodeid):
+            # object (where MES clients subscribe), at the JoiningSystem (an event notifier:
+            # the working group's client checks its SubscribeToEvents bit) and at the
+            # ResultManagement that makes them
+            for emitter in (server.nodes.server.nodeid, js.nodeid, rm.nodeid):
                 gen = await server.get_event_generator(etype, emitter)
                 gen.event.SourceNode = js.nodeid
                 gen.event.SourceName = sid
@@ -301,10 +328,43 @@ class OpcUaServer:
 
     # -- the station's events and its feed -------------------------------------------------------
     def _on_event(self, event: StationEvent) -> None:
+        """The bus's callback (the publisher's thread): the nodes are written in the
+        server's loop, in the order the events came."""
         if isinstance(event, ResultRecorded):
-            self._wake.set()
-        elif isinstance(event, StateChanged) and self.server is not None:
-            asyncio.get_running_loop().create_task(self.set_state(event.state, event.reason))
+            self._soon(self._wake.set)
+        elif isinstance(event, StateChanged):
+            self._soon(self._task, self.set_state(event.state, event.reason))
+        elif isinstance(event, DeviceHealth):
+            self._soon(self._task, self.assets.report(
+                event.device, NORMAL if event.ok else FAILURE, event.reason or event.kind,
+                event.t))
+        elif isinstance(event, LineLinkChanged):
+            health = FAILURE if not event.up else OFF_SPEC if event.alarm else NORMAL
+            self._soon(self._task, self.assets.report(
+                LINE_LINK, health, event.alarm or event.reason, event.t))
+        elif isinstance(event, DeviceIdentified):
+            self._soon(self._task, self.assets.identified(event.device, event.identity))
+
+    def _soon(self, fn: Callable[..., Any], *args: Any) -> None:
+        loop = self._loop
+        if self.server is None or loop is None or loop.is_closed():
+            for a in args:   # never run: not left unawaited
+                if asyncio.iscoroutine(a):
+                    a.close()
+            return
+        loop.call_soon_threadsafe(fn, *args)
+
+    def _task(self, job: Coroutine[Any, Any, None]) -> None:
+        task = asyncio.get_running_loop().create_task(self._quietly(job))
+        self._pending.add(task)
+        task.add_done_callback(self._pending.discard)
+
+    @staticmethod
+    async def _quietly(job: Coroutine[Any, Any, None]) -> None:
+        try:
+            await job
+        except Exception as exc:   # a node not written: journaled, never the station's fault
+            log.warning("OPC UA: updating the address space: %s", exc)
 
     async def set_state(self, state: str, reason: str = "") -> None:
         if self._state is not None and self._reason is not None:
@@ -317,6 +377,7 @@ class OpcUaServer:
         loop = asyncio.get_running_loop()
         self.db_id = await loop.run_in_executor(None, repo.ledger.db_id)
         self.catchup.attach(repo, self.db_id)
+        self._repo = repo
         last = await loop.run_in_executor(None, repo.ledger.last_seq)
         await self._preload(repo, last)
         self.cursor = last
@@ -328,13 +389,37 @@ class OpcUaServer:
                 entries = []
             for e in entries:
                 self.cursor = e["seq"]
-                if e["kind"] == RUNDOWN:
-                    await self._publish(e)
+                self._take(e, loop.time(), hold=True)
+            for e in self.join.ready(loop.time()):
+                await self._publish(e)
             if len(entries) >= 1000:   # behind: read on at once
                 continue
             self._wake.clear()
+            wait = POLL_S
+            deadline = self.join.next_deadline()
+            if deadline is not None:   # a result waits for its curves (they wake nothing)
+                wait = max(0.0, min(HELD_POLL_S, deadline - loop.time()))
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(_first(stop, self._wake), POLL_S)
+                await asyncio.wait_for(_first(stop, self._wake), wait)
+        for e in self.join.ready(float("inf")):   # stopping: no result kept back
+            await self._publish(e)
+
+    def _take(self, entry: dict[str, Any], now: float, *, hold: bool) -> None:
+        """A feed entry: a rundown kept for the methods (and held for its event), a curve
+        joined to its rundown's result (:mod:`stationd.opcua.curves`)."""
+        changed = self.join.take(entry, now, hold=hold)
+        if entry["kind"] == RUNDOWN:
+            self._rebuild(entry)
+        elif changed is not None and \
+                result_id(self.db_id, changed["seq"]) in self._results:   # still kept
+            self._rebuild(changed)
+
+    def _rebuild(self, entry: dict[str, Any]) -> Any:
+        result = rundown_result(self.db_id, self.cfg.station_id, entry,
+                                simulated=self.simulated,
+                                curves=self.join.curves(int(entry["record"]["id"])))
+        self._keep(result)
+        return result
 
     async def _preload(self, repo: Repository, last: int) -> None:
         loop = asyncio.get_running_loop()
@@ -345,9 +430,9 @@ class OpcUaServer:
                 break
             for e in entries:
                 seq = e["seq"]
-                if e["kind"] == RUNDOWN and seq <= last:
-                    self._keep(rundown_result(self.db_id, self.cfg.station_id, e,
-                                              simulated=self.simulated))
+                if seq <= last:
+                    self._take(e, 0.0, hold=False)
+        self.join.settle()
 
     def _keep(self, result: Any) -> None:
         self._results[result.ResultMetaData.ResultId] = result
@@ -355,18 +440,22 @@ class OpcUaServer:
             self._results.popitem(last=False)
 
     async def _publish(self, entry: dict[str, Any]) -> None:
-        result = rundown_result(self.db_id, self.cfg.station_id, entry,
-                                simulated=self.simulated)
-        self._keep(result)
-        await _fire(self._event, result, entry)
+        await _fire(self._event, self._rebuild(entry), entry)
         self.published += 1
 
     async def _fire_requested(self, entry: dict[str, Any]) -> None:
-        """A stored rundown asked for again (RequestResults, RequestUnacknowledgedResults)."""
+        """A stored rundown asked for again (RequestResults, RequestUnacknowledgedResults),
+        with its curves (read from the station's records when it is not among those kept)."""
         if self.server is None:
             return
-        await _fire(self._requested, rundown_result(self.db_id, self.cfg.station_id, entry,
-                                                    simulated=self.simulated), entry)
+        rid = int(entry["record"]["id"])
+        curves = self.join.curves(rid)
+        if curves is None and self._repo is not None:
+            curves = await asyncio.get_running_loop().run_in_executor(
+                None, lambda: curves_for(self._repo, record_id=rid))   # type: ignore[arg-type]
+        await _fire(self._requested, rundown_result(
+            self.db_id, self.cfg.station_id, entry, simulated=self.simulated, curves=curves),
+            entry)
 
 
 async def _fire(gens: list[Any], result: Any, entry: dict[str, Any]) -> None:

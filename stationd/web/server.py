@@ -286,7 +286,7 @@ class WebServer:
         return {"state": v["state"], "reason": v["reason"], "headline": v["headline"],
                 "vehicle": v["vehicle"], "counters": v["counters"], "devices": v["devices"],
                 "versions": _versions(), "uptime_s": round(time.time() - self.started, 1),
-                "clients": self.clients, "line": self.line()}
+                "clients": self.clients, "line": self.line(), "operator": v["operator"]}
 
     async def _status(self, request: web.Request) -> web.Response:
         return web.json_response(self.status(), dumps=lambda o: json.dumps(o, default=_plain))
@@ -421,8 +421,13 @@ class WebServer:
             except ValueError:
                 raise web.HTTPBadRequest(text="since: an ISO date (2026-11-23)\n") from None
             since = since if since.tzinfo is not None else since.replace(tzinfo=UTC)
-        doc = await self._db(res.repo.spc, request.query.get("model") or None, since,
-                             int(last) if last else LAST_N)
+        model = request.query.get("model") or None
+        if model is not None:   # as `db spc --model`: an unknown model is said, not empty
+            models = await self._db(res.repo.models)
+            if model not in models:
+                raise web.HTTPNotFound(text=f"model {model}: no such model (models: "
+                                       f"{', '.join(models) or 'none'})\n")
+        doc = await self._db(res.repo.spc, model, since, int(last) if last else LAST_N)
         return web.json_response(doc)
 
     async def _export_json(self, request: web.Request) -> web.Response:

@@ -24,14 +24,18 @@ async def main(url: str, station: str) -> None:
         rm = await js.get_child([f"{mr}:ResultManagement"])
         _, result, error = await rm.call_method(f"{mr}:GetLatestResult", ua.Int32(0))
         meta = result.ResultMetaData
-        values = result.ResultContent[0].Value.OverallResultValues
+        content = result.ResultContent[0].Value
+        values = content.OverallResultValues
+        steps = content.Trace.StepTraces if content.Trace is not None else []
         print(json.dumps({"error": error, "type": type(meta).__name__,
                           "result_id": meta.ResultId, "seq": meta.SequenceNumber,
                           "evaluation": int(meta.ResultEvaluation),
                           "entities": [[e.EntityType, e.EntityId]
                                        for e in meta.AssociatedEntities],
                           "values": [[v.Name, v.MeasuredValue, v.LowLimit, v.High]
-                                     for v in values]}))
+                                     for v in values],
+                          "trace": [[c.Name, c.PhysicalQuantity, list(c.Values)]
+                                    for step in steps for c in step.StepTraceContent]}))
 
 
 if __name__ == "__main__":

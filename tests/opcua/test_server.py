@@ -284,3 +284,32 @@ def test_a_first_start_with_certificates_and_nobody_trusted_yet_serves(repo, tmp
         assert (tmp_path / "pki" / "server-cert.der").exists()
         assert (tmp_path / "pki" / "trusted").is_dir()
     asyncio.run(main())
+
+
+def test_the_joining_system_is_an_event_notifier_with_the_results(repo):
+    """The working group's conformance client checks the JoiningSystem's SubscribeToEvents
+    bit, and a client subscribed there gets the results too."""
+    async def scenario() -> tuple[int, list[Any]]:
+        srv, stop, task = await serving(config(), repo)
+        try:
+            async with Client(srv.url) as client:
+                await load_client_types(client)
+                uris = await client.get_namespace_array()
+                js = client.get_node(ua.NodeId("JoiningSystem.ST-07", uris.index(NAMESPACE)))
+                notifier = await js.read_attribute(ua.AttributeIds.EventNotifier)
+                handler = Collector()
+                sub = await client.create_subscription(20, handler)
+                await sub.subscribe_events(js, client.get_node(
+                    ua.NodeId(1007, uris.index(IJT_URI))))
+                await asyncio.sleep(0.3)
+                await asyncio.get_running_loop().run_in_executor(
+                    None, lambda: record(repo, VIN, "B1", ok=True))
+                await handler.wait_for(1)
+                await asyncio.sleep(0.3)   # one event, not one per emitter
+                return int(getattr(notifier.Value, "Value", 0)), handler.events
+        finally:
+            await stopping(srv, stop, task)
+
+    bits, events = asyncio.run(scenario())
+    assert bits & 1
+    assert len(events) == 1 and events[0].Result.ResultMetaData.Classification == 1

@@ -278,6 +278,10 @@ def test_spc_serves_each_groups_last_results_and_limits_and_refuses_a_bad_count(
                 for bad in ("0", "x", "-3", "100000"):
                     async with http.get(srv.url + f"api/spc?last={bad}") as r:
                         assert r.status == 400 and "last:" in await r.text()
+                async with http.get(srv.url + "api/spc?model=SEDAN") as r:
+                    assert r.status == 200 and (await r.json())["bolts"]
+                async with http.get(srv.url + "api/spc?model=NOPE") as r:   # as `db spc`
+                    assert r.status == 404 and "no such model (models: SEDAN)" in await r.text()
         finally:
             await srv.stop()
             repo.close()

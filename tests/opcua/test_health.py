@@ -1,0 +1,132 @@
+"""The devices' health in the joining-system model (AssetManagement/Assets, each asset's
+Health.DeviceHealth), read by an asyncua client on loopback while the station's events say a
+device went to fault and came back."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from typing import Any
+
+from asyncua.client.client import Client
+
+from stationd.opcua.health import FAILURE, NORMAL, OFF_SPEC
+from stationd.opcua.model import DI_URI, IJT_URI, MACHINERY_URI
+from stationd.opcua.server import NAMESPACE, OpcUaServer
+from stationd.opcua.uatypes import ua
+from stationd.station.events import DeviceHealth, EventBus, LineLinkChanged
+from tests.opcua.test_server import config, repo, stopping
+
+__all__ = ["repo"]   # the fixture, shared with test_server
+
+DEVICES = ("lift", "wrench", "front", "database", "line")
+
+
+class Changes:
+    """Data changes of the subscribed variables, by node."""
+
+    def __init__(self) -> None:
+        self.seen: list[tuple[Any, Any]] = []
+        self.arrived = asyncio.Event()
+
+    def datachange_notification(self, node: Any, value: Any, data: Any) -> None:
+        self.seen.append((node, value))
+        self.arrived.set()
+
+    async def until(self, node: Any, value: Any, timeout: float = 5.0) -> None:
+        async def seen() -> None:
+            while (node, value) not in self.seen:
+                self.arrived.clear()
+                await self.arrived.wait()
+        await asyncio.wait_for(seen(), timeout)
+
+
+async def _asset(client: Client, folder: str, device: str) -> tuple[Any, Any, Any]:
+    """The DeviceHealth, ErrorMessage and the asset of ``device``, found by browsing from
+    Machines as an MES would."""
+    uris = await client.get_namespace_array()
+    ijt, di, app = uris.index(IJT_URI), uris.index(DI_URI), uris.index(NAMESPACE)
+    asset = await client.nodes.objects.get_child([
+        f"{uris.index(MACHINERY_URI)}:Machines", f"{app}:ST-07", f"{ijt}:AssetManagement",
+        f"{ijt}:Assets", f"{ijt}:{folder}", f"{app}:{device}"])
+    health = await asset.get_child([f"{ijt}:Health", f"{di}:DeviceHealth"])
+    message = await asset.get_child([f"{ijt}:Health", f"{ijt}:ErrorMessage"])
+    return health, message, asset
+
+
+def test_a_client_sees_a_device_go_to_fault_and_back(repo):
+    bus = EventBus()
+
+    async def scenario() -> dict[str, Any]:
+        srv = OpcUaServer(config(), bus=bus, devices=DEVICES)
+        await srv.start()
+        stop = asyncio.Event()
+        task = asyncio.create_task(srv.run(stop, repo))
+        loop = asyncio.get_running_loop()
+        out: dict[str, Any] = {}
+        try:
+            async with Client(srv.url) as client:
+                health, message, _ = await _asset(client, "Controllers", "wrench")
+                out["start"] = await health.read_value()
+                uris = await client.get_namespace_array()
+                out["type"] = await health.read_data_type()
+                out["enum"] = out["type"] == client.get_node(
+                    f"ns={uris.index(DI_URI)};i=6244").nodeid
+                for folder, device in (("Accessories", "lift"), ("Sensors", "front"),
+                                       ("SoftwareComponents", "database"),
+                                       ("SoftwareComponents", "line")):
+                    h, _, asset = await _asset(client, folder, device)
+                    out[device] = await h.read_value()
+                    refs = await asset.get_references(refs=17603)   # HasInterface
+                    out[f"{device} interface"] = [r.NodeId.Identifier for r in refs]
+                changes = Changes()
+                sub = await client.create_subscription(20, changes)
+                await sub.subscribe_data_change(health)
+                # the station publishes from its own threads
+                await loop.run_in_executor(None, bus.publish, DeviceHealth(
+                    "wrench", False, "down", "controller 10.0.0.5:4545: connection refused"))
+                await changes.until(health, FAILURE)
+                out["fault"] = await message.read_value()
+                await loop.run_in_executor(None, bus.publish, DeviceHealth("wrench", True))
+                await changes.until(health, NORMAL)
+                out["back"] = (await health.read_value(), await message.read_value())
+                # a pair first named in an event (a reload added it) gets its asset then
+                await loop.run_in_executor(None, bus.publish, DeviceHealth(
+                    "rear", False, "timeout", "no frame in 2 s"))
+                for _ in range(100):
+                    with contextlib.suppress(ua.UaError):   # not made yet
+                        h, m, _ = await _asset(client, "Sensors", "rear")
+                        if await h.read_value() == FAILURE:
+                            break
+                    await asyncio.sleep(0.05)
+                out["rear"] = (await h.read_value(), (await m.read_value()).Text)
+                line, line_msg, _ = await _asset(client, "SoftwareComponents", "line")
+                await loop.run_in_executor(None, bus.publish, LineLinkChanged(
+                    False, "connection refused"))
+                await _until(line, FAILURE)
+                out["line down"] = (await line_msg.read_value()).Text
+                await loop.run_in_executor(None, bus.publish, LineLinkChanged(
+                    True, "", "12000 records not forwarded (bound 10000)"))
+                await _until(line, OFF_SPEC)
+                await loop.run_in_executor(None, bus.publish, LineLinkChanged(True))
+                await _until(line, NORMAL)
+                return out
+        finally:
+            await stopping(srv, stop, task)
+
+    out = asyncio.run(scenario())
+    assert out["start"] == NORMAL and out["enum"]
+    assert all(out[d] == NORMAL for d in ("lift", "front", "database", "line"))
+    assert out["lift interface"] == [1015] and out["front interface"] == [1011]
+    assert out["line interface"] == [1019]
+    assert "connection refused" in out["fault"].Text
+    assert out["back"][0] == NORMAL and out["back"][1].Text == ""
+    assert out["rear"] == (FAILURE, "no frame in 2 s")
+    assert out["line down"] == "connection refused"
+
+
+async def _until(node: Any, value: int, timeout: float = 5.0) -> None:
+    end = asyncio.get_running_loop().time() + timeout
+    while await node.read_value() != value:
+        assert asyncio.get_running_loop().time() < end, f"never {value}"
+        await asyncio.sleep(0.02)
