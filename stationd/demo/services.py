@@ -21,6 +21,7 @@ import errno
 import logging
 import socket
 import time
+from collections import Counter
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -34,7 +35,7 @@ from stationd.errors import ConfigError, InputError
 from stationd.forward import LineConfig
 from stationd.linedb import LINE_FEED, LineResult, results
 from stationd.opcua import OpcUaConfig
-from stationd.serve import Screens, forward
+from stationd.serve import Screens, forward, opcua_devices
 from stationd.station.events import EventBus
 from stationd.station.sdnotify import Notifier
 from stationd.web.config import split_listen
@@ -44,11 +45,13 @@ log = logging.getLogger("stationd")
 DEFAULT_OPCUA = "127.0.0.1:4840"
 #: how long the demo waits at its end for the line database to take a station's records, s
 DRAIN_S = 20.0
+#: the longest the read-back waits for a line database's host to answer, s
+CONNECT_TIMEOUT_S = 10
 #: the demo's security words, printed beside the endpoint
 SECURITY_WORDS = "security none: anonymous clients browse, read and subscribe, no certificates"
 
 
-def _bindable(host: str, port: int) -> bool:
+def bindable(host: str, port: int) -> bool:
     """Whether ``host:port`` can be listened on now (as asyncio's server binds: address
     reuse on, so a port in TIME_WAIT counts as free)."""
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
@@ -95,7 +98,7 @@ class Endpoints:
             taken.add(port)
             return f"opc.tcp://{_url_host(self.host)}:{port}", None
         if self.given and not taken:
-            if not _bindable(self.host, self.port):
+            if not bindable(self.host, self.port):
                 raise InputError(f"--opcua {self.host}:{self.port}: the port is in use or the "
                                  "address is not this machine's (another port, or leave "
                                  "--opcua out for the next free one)")
@@ -103,7 +106,7 @@ class Endpoints:
             return f"opc.tcp://{_url_host(self.host)}:{self.port}", None
         start = max(taken) + 1 if taken else self.port   # the station before took its own
         port = start
-        while port in taken or not _bindable(self.host, port):
+        while port in taken or not bindable(self.host, port):
             port += 1
             if port > 65535:
                 raise InputError(f"OPC UA: no free port from {start} on {self.host}")
@@ -180,7 +183,8 @@ class StationServices:
     async def _start_opcua(self, ua_cfg: OpcUaConfig) -> None:
         from stationd.opcua.server import OpcUaServer
 
-        server = OpcUaServer(ua_cfg, bus=self.bus, simulated=True)
+        server = OpcUaServer(ua_cfg, bus=self.bus, simulated=True,
+                             devices=opcua_devices(self.cfg))
         try:
             await server.start()
         except OSError as exc:   # taken between the check and the start: said, not fatal
@@ -199,18 +203,60 @@ class StationServices:
         so)."""
         if self._line is None:
             return True
-        loop = asyncio.get_running_loop()
         end = time.monotonic() + timeout
-        done = False
         while time.monotonic() < end and not self._line.done():
-            fwd = self.screens.line
-            if fwd is not None:
-                last = await loop.run_in_executor(None, fwd.repo.ledger.last_seq)
-                if fwd.cursor >= last:
-                    done = True
-                    break
+            if await self.caught_up():
+                return True
             await asyncio.sleep(0.1)
-        return done
+        return False
+
+    async def caught_up(self) -> bool:
+        """Whether the forwarder has handed the line database every record stored so far
+        (True without a line)."""
+        if self._line is None:
+            return True
+        fwd = self.screens.line
+        if fwd is None:
+            return False
+        last = await asyncio.get_running_loop().run_in_executor(None, fwd.repo.ledger.last_seq)
+        return bool(fwd.cursor >= last)
+
+    def never_reached(self) -> bool:
+        """Whether the line database has not taken one record from this station in this
+        run and its last try failed (or the forwarder is not running): waiting longer for
+        it is waiting for nothing."""
+        if self._line is None:
+            return False
+        fwd = self.screens.line
+        return self._line.done() or (fwd is not None and fwd.up is False
+                                     and fwd.forwarded == 0)
+
+    def line_error(self) -> str | None:
+        """The forwarder's last error (None: none, or no forwarder)."""
+        fwd = self.screens.line
+        return None if fwd is None else fwd.last_error
+
+    def forwarded_to(self) -> int:
+        """The last sequence number the forwarder handed the line database (0: none)."""
+        fwd = self.screens.line
+        return 0 if fwd is None else int(fwd.cursor)
+
+    async def records(self, after: int = 0) -> Counter[str]:
+        """The station's records (its feed: rundowns, curves, commands, checks) after
+        sequence number ``after``, by kind."""
+        repo = self._repo
+        if repo is None:
+            return Counter()
+
+        def count() -> Counter[str]:
+            kinds: Counter[str] = Counter()
+            seq = after
+            while batch := repo.ledger.since(seq):
+                kinds.update(str(e["kind"]) for e in batch)
+                seq = int(batch[-1]["seq"])
+            return kinds
+
+        return await asyncio.get_running_loop().run_in_executor(None, count)
 
     async def stop(self) -> None:
         if self._line is not None:
@@ -283,27 +329,136 @@ def own_pairs(cfg: StationConfig, prefix: str) -> StationConfig:
     return replace(cfg, cameras=cams, pairs=pairs, references=None)
 
 
-async def line_report(url: str | None, services: list[StationServices], drained: bool,
-                       out: Any, page: str | None, json_out: bool) -> dict[str, Any]:
-    """The line's results, read back from the line database: printed per station (the
-    /line page shows them row by row); the summary's ``line``."""
+async def drain_all(services: list[StationServices], timeout: float = DRAIN_S) -> None:
+    """Wait until the line database has every station's records, for at most ``timeout``
+    in all; not at all for stations whose records it has not taken once in this run (a line
+    database that did not answer for the whole run will not in the next seconds)."""
+    end = time.monotonic() + timeout
+    while True:
+        behind = [s for s in services if not await s.caught_up()]
+        if not behind or time.monotonic() >= end or all(s.never_reached() for s in behind):
+            return
+        await asyncio.sleep(0.1)
+
+
+def line_counts(url: str, db_ids: set[str]) -> dict[tuple[str, str], Counter[str]]:
+    """The records the line database holds from this run's station databases, by kind, per
+    (station id, database id)."""
+    from sqlalchemy import func, inspect, select
+
+    from db.engine import make_engine
+
+    engine = make_engine(url)
+    try:
+        if not inspect(engine).has_table(LINE_FEED.name):
+            return {}
+        f = LINE_FEED.c
+        q = select(f.station_id, f.db_id, f.kind, func.count()).where(
+            f.db_id.in_(sorted(db_ids))).group_by(f.station_id, f.db_id, f.kind)
+        out: dict[tuple[str, str], Counter[str]] = {}
+        with engine.connect() as c:
+            for sid, db_id, kind, n in c.execute(q):
+                out.setdefault((sid, db_id), Counter())[kind] = int(n)
+        return out
+    finally:
+        engine.dispose()
+
+
+def line_words(url: str, error: str) -> str:
+    """Why the line database was not reached, in the user's words: where it is and what
+    happened, without the driver's class names."""
+    u = make_url(url)
+    where = f"{u.host or 'localhost'}:{u.port or 5432}"
+    low = error.lower()
+    if "connection refused" in low:
+        return f"the line database at {where} does not answer (connection refused)"
+    if "closed the connection" in low:
+        return f"the line database at {where} does not answer (the connection was closed)"
+    if "timeout" in low or "timed out" in low:
+        return f"the line database at {where} does not answer (no answer in time)"
+    if "translate host name" in low or "name or service not known" in low \
+            or "name resolution" in low:
+        return f"the line database at {where}: the host name is not known"
+    if "password authentication failed" in low or "no password supplied" in low:
+        return f"the line database at {where} refused user {u.username} (password)"
+    if "does not exist" in low and "database" in low:
+        return f"the line database at {where} has no database {u.database}"
+    text = error.strip().splitlines()[0] if error.strip() else "no answer"
+    for head in ("connection failed: ", "the line tables: "):
+        text = text.removeprefix(head)
+    return f"the line database at {where}: {text}"
+
+
+def _error_text(exc: BaseException) -> str:
+    orig = getattr(exc, "orig", None)
+    text = str(orig if orig is not None else exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def _read_url(url: str) -> str:
+    """``url`` for the read-back: a host that does not answer fails in seconds, not never."""
+    u = make_url(url)
+    if "connect_timeout" not in u.query:
+        u = u.update_query_dict({"connect_timeout": str(CONNECT_TIMEOUT_S)})
+    return u.render_as_string(hide_password=False)
+
+
+async def line_report(url: str | None, services: list[StationServices], out: Any,
+                      page: str | None, json_out: bool) -> dict[str, Any]:
+    """The line's results, read back from the line database once it has every station's
+    records (or :data:`DRAIN_S` passed): per station, what arrived against what the station
+    recorded (``arrival``), and the rundowns (``stations``; the /line page shows them row by
+    row); the summary's ``line``, whose ``missing`` counts the records that did not reach
+    the line database (they are lost with the demo's temporary databases)."""
     assert url is not None  # noqa: S101 - only called with a line section
     loop = asyncio.get_running_loop()
-    ids = [s.cfg.line.station_id for s in services if s.cfg.line is not None]
-    db_ids = {s.db_id for s in services if s.db_id}
+    await drain_all(services)
+    lined = [s for s in services if s.cfg.line is not None]
+    ids = [s.cfg.line.station_id for s in lined if s.cfg.line is not None]
+    db_ids = {s.db_id for s in lined if s.db_id}
+    recorded = {sid: await s.records() for sid, s in zip(ids, lined, strict=True)}
     try:
-        rows = await loop.run_in_executor(None, line_results, url, ids, db_ids)
-    except (SQLAlchemyError, DbError) as exc:   # the line database away: said, not a failure
-        print(f"line database: not read back: {type(exc).__name__}: "
-              f"{str(exc).splitlines()[0] if str(exc) else ''}", file=out, flush=True)
-        return {"url": shown(url), "error": str(exc).splitlines()[0] if str(exc) else ""}
+        read = _read_url(url)
+        rows = await loop.run_in_executor(None, line_results, read, ids, db_ids)
+        counts = await loop.run_in_executor(None, line_counts, read, db_ids)
+    except (SQLAlchemyError, DbError) as exc:   # the line database away: said, counted
+        words = line_words(url, _error_text(exc))
+        doc: dict[str, Any] = {"url": shown(url), "error": words, "arrival": {}}
+        for sid, s in zip(ids, lined, strict=True):
+            pending = await s.records(after=s.forwarded_to())
+            doc["arrival"][sid] = {"records": sum(recorded[sid].values()), "arrived": None,
+                                   "missing": sum(pending.values()),
+                                   "missing_rundowns": pending["rundown"]}
+        _totals(doc)
+        print(f"line database: not read back: {words}" + (
+            f"; {_missing_words(doc)} did not reach it: they are lost with the demo's "
+            "temporary database when the demo ends" if doc["missing"] else ""),
+            file=out, flush=True)
+        return doc
     doc = line_summary(rows, ids)
     doc["url"] = shown(url)
-    doc["all_forwarded"] = drained
+    doc["arrival"] = {}
+    for sid, s in zip(ids, lined, strict=True):
+        arrived = counts.get((sid, s.db_id), Counter())
+        n, got = sum(recorded[sid].values()), sum(arrived.values())
+        doc["arrival"][sid] = {
+            "records": n, "arrived": got, "missing": max(0, n - got),
+            "missing_rundowns": max(0, recorded[sid]["rundown"] - arrived["rundown"])}
+    _totals(doc)
+    errors = sorted({line_words(s.cfg.line.url, e) for s in lined
+                     if s.cfg.line is not None and (e := s.line_error())})
+    per = ", ".join(f"{sid} {p['arrived']} of {p['records']}"
+                    for sid, p in doc["arrival"].items())
+    if doc["missing"]:
+        arrival = (f"NOT every record arrived ({per} records): {_missing_words(doc)} did "
+                   "not reach it (" + (f"{errors[0]}; " if errors else "")
+                   + "they are lost with the demo's temporary database when the demo ends)")
+    else:
+        arrival = f"every record arrived ({per} records)"
+    print(f"line database: {doc['rundowns']} rundown(s) of "
+          f"{', '.join(doc['vins']) or 'no vehicle'} from {len(ids)} station(s); {arrival}",
+          file=out, flush=True)
     if not json_out:
-        print(f"line database: {doc['rundowns']} rundown(s) of "
-              f"{', '.join(doc['vins']) or 'no vehicle'} from {len(ids)} station(s)"
-              + ("" if drained else " (not every record had arrived when the demo read it)"))
         for sid, p in doc["stations"].items():
             print(f"  {sid}: {p['rundowns']} rundown(s): {p['ok']} OK, {p['nok']} NOK, "
                   f"{p['loosenings']} loosening(s); bolts OK: {', '.join(p['bolts']) or '-'}")
@@ -313,10 +468,25 @@ async def line_report(url: str | None, services: list[StationServices], drained:
     return doc
 
 
+def _totals(doc: dict[str, Any]) -> None:
+    per = doc["arrival"].values()
+    doc["missing"] = sum(p["missing"] for p in per)
+    doc["missing_rundowns"] = sum(p["missing_rundowns"] for p in per)
+    doc["all_forwarded"] = doc["missing"] == 0
+
+
+def _missing_words(doc: dict[str, Any]) -> str:
+    """"12 record(s) (4 rundown(s)) of DEMO-1": the records that did not reach the line."""
+    whose = [sid for sid, p in doc["arrival"].items() if p["missing"]]
+    return (f"{doc['missing']} record(s) ({doc['missing_rundowns']} rundown(s)) of "
+            f"{', '.join(whose)}")
+
+
 def shown(url: str) -> str:
     """A database URL as printed (a password hidden)."""
     return make_url(url).render_as_string()
 
 
-__all__ = ["DEFAULT_OPCUA", "SECURITY_WORDS", "Endpoints", "StationServices", "demo_opcua",
-           "line_config", "line_report", "line_results", "line_summary", "own_pairs", "shown"]
+__all__ = ["DEFAULT_OPCUA", "SECURITY_WORDS", "Endpoints", "StationServices", "bindable",
+           "demo_opcua", "drain_all", "line_config", "line_counts", "line_report",
+           "line_results", "line_summary", "line_words", "own_pairs", "shown"]

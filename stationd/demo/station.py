@@ -14,8 +14,11 @@ Beside the screens the station serves OPC UA (``--opcua``; security none, IsSimu
 and, with ``--line-db`` or ``--stations N``, forwards its records to a line database.  The
 stations after the first are light: they run one after another once the first is done (one
 simulated world at a time on the machine's cores), each on the same vehicle (it moves down the
-line) with at most ``EXTRA_CYCLES`` bolts, its own station id, database and OPC UA endpoint;
-the line's results are then read back from the line database and printed.
+line) with at most ``EXTRA_CYCLES`` bolts, its own station id, database and OPC UA endpoint.
+Each station of a line tightens its own bolts (a share of the bolts in view, as a line's
+stations each have their section of the vehicle).  At the end the line database is checked
+against every station's records and the line's results are read back and printed; records
+that did not reach it make the verdict a FAIL (they go with the demo's temporary folder).
 """
 
 from __future__ import annotations
@@ -37,10 +40,12 @@ from drivers.wrench.sim import SimPset
 from stationd import progress
 from stationd.boltfile import load_bolts
 from stationd.config import RecordsConfig, StationConfig, load_station_config
+from stationd.demo.leftovers import PREFIX, mark, sweep
 from stationd.demo.services import (
     SECURITY_WORDS,
     Endpoints,
     StationServices,
+    bindable,
     demo_opcua,
     line_config,
     line_report,
@@ -56,6 +61,7 @@ from stationd.sim.devices_cli import psets_of
 from stationd.sim.load import cpu_load
 from stationd.sim.operator import (
     LOOSEN_PROGRAM,
+    MAX_RUNDOWNS,
     SUPERVISOR,
     loosen_programs,
     operate,
@@ -75,13 +81,15 @@ from stationd.station.events import (
     WrongBolt,
 )
 from stationd.station.policy import NokPolicy, NokRule
-from stationd.web.config import DEFAULT_LISTEN, HttpConfig, open_bind_problem
+from stationd.web.config import DEFAULT_LISTEN, HttpConfig, open_bind_problem, split_listen
 
 SIM_CONFIG = Path(__file__).resolve().parents[2] / "config" / "sim" / "station.yaml"
 #: bolts each station after the first tightens (``--stations N``): the extra stations are light
 EXTRA_CYCLES = 2
 #: the most stations ``--stations`` runs (each renders its world in turn)
 MAX_STATIONS = 30
+#: a bolt's line when the operator left it before tightening and the tool went off
+LEFT_DISABLED = "left before tightening; tool disabled"
 #: shared with ``stationd run --sim-operator`` (:mod:`stationd.sim.operator`), named here as before
 __all__ = ["LOOSEN_PROGRAM", "SIM_CONFIG", "SUPERVISOR", "demo_policy", "loosen_programs",
            "policy_words", "run_station_demo", "simulated", "simulators", "stand_ins"]
@@ -123,18 +131,26 @@ def run_station_demo(args: argparse.Namespace) -> int:
         problem = open_bind_problem(HttpConfig(str(given)))
         if problem is not None:
             raise InputError(f"--http: {problem}")
+        # chosen by the user: a busy port is refused now, as --opcua's (the daemon's own
+        # screens, and the demo's default, try again every 5 s instead)
+        host, port = split_listen(str(given))
+        if port != 0 and not bindable(host, port):
+            raise InputError(f"--http {given}: the port is in use or the address is not this "
+                             "machine's (another port, or --no-http)")
     endpoints = None if getattr(args, "no_opcua", False) else \
         Endpoints.from_arg(getattr(args, "opcua", None))
     line_url = getattr(args, "line_db", None)
     if line_url is not None:
         line_config(line_url, station_id(1))    # a URL it would refuse: refused now, one line
-    logging.basicConfig(level=logging.WARNING, format="%(message)s")
+    out = sys.stderr if args.json else sys.stdout
+    # the station's notices (a bolt locked, the line database down) on the stream of the
+    # demo's own lines, so they read in the order they happened
+    logging.basicConfig(level=logging.WARNING, format="%(message)s", stream=out)
     cfg = load_station_config(args.config or SIM_CONFIG)
     bolts_path = cfg.bolts_path
     if bolts_path is None:
         raise InputError(f"{cfg.path}: the demo needs a bolt table (bolts:)")
     _check_demo_station(cfg)
-    out = sys.stderr if args.json else sys.stdout
     instead = stand_ins(cfg)
     if instead:
         print(f"demo: {cfg.path} names real devices ({', '.join(instead)}): the demo runs its "
@@ -154,8 +170,10 @@ def run_station_demo(args: argparse.Namespace) -> int:
             raise InputError(f"--stations {n_stations}: the throw-away line database did not "
                              f"start: {exc} (give one with --line-db URL)") from None
         line_url = pg.url()
-    tmp = tempfile.TemporaryDirectory(prefix="stationd-demo-")
+    sweep()      # the folders of demos killed before they could remove them
+    tmp = tempfile.TemporaryDirectory(prefix=PREFIX)
     try:
+        mark(Path(tmp.name))
         return _run(args, cfg, bolts_path, Path(tmp.name), out, instead, endpoints, line_url,
                     pg is not None, n_stations, cycles)
     finally:
@@ -209,9 +227,10 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
         kind = "a throw-away PostgreSQL for this run" if throwaway else "--line-db"
         print(f"line database: {shown(line_url)} ({kind}); {n_stations} station(s), "
               f"{', '.join(station_id(k) for k in range(1, n_stations + 1))}"
-              + (f" (after {station_id(1)}, each tightens at most "
-                 f"{min(cycles, EXTRA_CYCLES)} bolt(s) of the same vehicle, one station after "
-                 "another)" if n_stations > 1 else ""),
+              + (f" (each tightens its own bolts of the same vehicle: the bolts in view split "
+                 f"into {n_stations} runs of the bolt table's order; after {station_id(1)}, "
+                 f"each tightens at most {min(cycles, EXTRA_CYCLES)} of its bolts, one "
+                 "station after another)" if n_stations > 1 else ""),
               file=out, flush=True)
     station = _station(cfg, psets)
     rng = np.random.default_rng(args.seed)
@@ -223,7 +242,7 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
         raise InputError(f"{bolts_path}: the demo needs a model with a lift code and bolts")
     truth: dict[str, Any] = {"bolt": None, "wrong": 0, "model_code": codes[0],
                              "vin": make_vin(1), "locked_sends": 0}
-    station.on_action = _checker(station, truth, args.json)
+    station.on_action = _checker(station, truth, out)
     extra: list[dict[str, Any]] = []   # the stations after the first: their summaries
     line: dict[str, Any] = {}
 
@@ -258,15 +277,15 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
         world = World(cfg, seed=args.seed)
         try:
             task = asyncio.create_task(station.run(stop))
-            await operate(station, world, rng, cycles, report, say, truth, nok_rng)
-            drained = await services[0].drain()
-            if n_stations > 1:
-                for k in range(2, n_stations + 1):
-                    extra.append(await _next_station(args, cfg, k, tmp, taken, endpoints,
-                                                     line_url, psets, truth, out, services))
-                    drained = drained and extra[-1]["drained"]
-            if cfg.line is not None:
-                line.update(await line_report(line_url, services, drained, out,
+            await operate(station, world, rng, cycles, report, say, truth, nok_rng,
+                          note=_noter(out, station_id(1) if n_stations > 1 else ""),
+                          share=(1, n_stations))
+            for k in range(2, n_stations + 1):
+                extra.append(await _next_station(args, cfg, k, tmp, taken, endpoints,
+                                                 line_url, psets, truth, out, services,
+                                                 n_stations))
+            if cfg.line is not None:   # every station's records against the line's
+                line.update(await line_report(line_url, services, out,
                                                None if screens.server is None else
                                                f"{screens.server.url}line", args.json))
             if getattr(args, "hold", False) and (screens.server is not None or
@@ -297,9 +316,10 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
     summary = _summary(station, report, cycles, truth["wrong"], truth["locked_sends"])
     summary["simulated_instead"] = instead
     summary["station_id"] = station_id(1)
+    summary["share"] = truth.get("share", [])
     summary["opcua"] = None if cfg.opcua is None else cfg.opcua.endpoint
     if extra:
-        summary["stations"] = [{k: v for k, v in e.items() if k != "drained"} for e in extra]
+        summary["stations"] = extra
         failed = [f"{e['station_id']}: {e['verdict'][len('FAIL: '):]}" for e in extra
                   if not e["verdict"].startswith("PASS")]
         if failed:
@@ -310,10 +330,17 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
             summary["verdict"] += f"; {len(extra)} more station(s) PASS"
     if line:
         summary["line"] = line
+        if line["missing"]:   # asked for the line and it did not get them: not a PASS
+            why = (f"{line['missing']} record(s) ({line['missing_rundowns']} rundown(s)) did "
+                   "not reach the line database")
+            head = summary["verdict"].split(": ", 1)[1] if summary["verdict"].startswith(
+                "FAIL") else ""
+            summary["verdict"] = "FAIL: " + "; ".join(x for x in (head, why) if x)
     if args.json:
         sys.stdout.write(strict_json(summary) + "\n")
     else:
-        print(f"summary: {summary['ok']}/{cycles} bolts OK, parameters sent for a wrong bolt: "
+        print(f"summary: {summary['ok']}/{cycles} bolts OK{_left_words(summary)}, "
+              "parameters sent for a wrong bolt: "
               f"{summary['wrong_bolt_sends']}, XY error mean "
               f"{_ms(summary['xy_error_mm']['mean'], '.3f')} mm max "
               f"{_ms(summary['xy_error_mm']['max'], '.3f')} mm, latency from exposure p50 "
@@ -322,9 +349,13 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
         n = summary["nok_policy"]
         print(f"NOK policy: {n['nok']} NOK result(s), {n['loosenings']} loosening(s), "
               f"{n['locks']} lock(s), {n['releases']} release(s)")
+        if summary.get("operators"):
+            print("rundowns recorded by operator: " + ", ".join(
+                f"{who} {k}" for who, k in sorted(summary["operators"].items())))
         for e in extra:
-            print(f"{e['station_id']}: {e['ok']}/{e['bolts']} bolts OK, parameters sent for "
-                  f"a wrong bolt: {e['wrong_bolt_sends']}, {e['recorded']} result(s) recorded")
+            print(f"{e['station_id']}: {e['ok']}/{e['bolts']} bolts OK{_left_words(e)}, "
+                  f"parameters sent for a wrong bolt: {e['wrong_bolt_sends']}, "
+                  f"{e['recorded']} result(s) recorded")
         if instead:
             devices = ", ".join(d.rsplit(" ", 1)[0] for d in instead)
             print(f"simulated, not the station file's devices: {devices} (the records went "
@@ -337,35 +368,53 @@ def _station(cfg: StationConfig, psets: dict[int, SimPset]) -> Station:
     return Station(cfg, device_kw={"wrench": {"psets": {**loosen_programs(cfg.nok), **psets}}})
 
 
-def _checker(station: Station, truth: dict[str, Any], json_out: bool) -> Any:
+def _checker(station: Station, truth: dict[str, Any], out: Any) -> Any:
     """Every parameter send is compared with where the wrench really is, at that moment;
-    a wrong one is published, counted and printed where it happens."""
+    a wrong one is published, counted and printed where it happens (among the demo's lines
+    on ``out``, and on stderr too, where a log collector looks)."""
+    def say(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+        if out is not sys.stderr:
+            print(line, file=out, flush=True)
+
     def check(action: Any) -> None:
         if isinstance(action, SendParams) and action.bolt != truth["bolt"]:
             truth["wrong"] += 1
             station.bus.publish(WrongBolt(action.bolt, truth["bolt"]))
-            line = f"WRONG BOLT: parameters for {action.bolt} while the wrench is on " \
-                   f"{truth['bolt'] or 'no bolt'}"
-            print(line, file=sys.stderr, flush=True)
-            if not json_out:
-                print(line, flush=True)
+            say(f"WRONG BOLT: parameters for {action.bolt} while the wrench is on "
+                f"{truth['bolt'] or 'no bolt'}")
         matcher = station.core.matcher
         if isinstance(action, SendParams) and matcher is not None \
                 and action.bolt in matcher.locked:
             truth["locked_sends"] += 1
-            print(f"LOCKED BOLT: parameters for {action.bolt}, locked", file=sys.stderr,
-                  flush=True)
+            say(f"LOCKED BOLT: parameters for {action.bolt}, locked")
 
     return check
+
+
+def _noter(out: Any, label: str) -> Any:
+    """The simulated operator's notes (its share of the bolts, the bolts in view of no
+    pair) among the demo's lines, in order; ``label``: the station's id on a line."""
+    def note(text: str) -> None:
+        print(f"{label} {text}" if label else text, file=out, flush=True)
+
+    return note
+
+
+def _left_words(s: dict[str, Any]) -> str:
+    """", 1 left before tightening (the tool disabled)": the bolts not OK that are no
+    failure, beside the OK count."""
+    return f" ({s['left']} left before tightening, the tool disabled)" if s.get("left") else ""
 
 
 async def _next_station(args: argparse.Namespace, first: StationConfig, k: int, tmp: Path,
                         taken: set[int], endpoints: Endpoints | None, line_url: str | None,
                         psets: dict[int, SimPset], first_truth: dict[str, Any], out: Any,
-                        services: list[StationServices]) -> dict[str, Any]:
+                        services: list[StationServices], n_stations: int) -> dict[str, Any]:
     """Station ``k`` of the line (after the first is done): the same geometry on its own
-    simulated devices and database, the same vehicle, at most ``EXTRA_CYCLES`` bolts; its
-    OPC UA server joins ``services`` (it serves until the demo ends).  Its summary."""
+    simulated devices and database, the same vehicle, at most ``EXTRA_CYCLES`` of its own
+    bolts (the k-th share); its OPC UA server and forwarder join ``services`` (they serve
+    until the demo ends).  Its summary."""
     sid = station_id(k)
     (tmp / str(k)).mkdir()
     cfg, why = _served(own_pairs(simulated(first, tmp / str(k)), sid), k, endpoints, taken,
@@ -375,7 +424,7 @@ async def _next_station(args: argparse.Namespace, first: StationConfig, k: int, 
     truth = {**first_truth, "bolt": None, "wrong": 0, "locked_sends": 0}
     cycles = min(int(args.cycles), EXTRA_CYCLES)
     truth.pop("cycles", None)
-    station.on_action = _checker(station, truth, args.json)
+    station.on_action = _checker(station, truth, out)
     await loop.run_in_executor(None, station.open)
     mine = StationServices(cfg, station.bus)
     services.append(mine)
@@ -393,13 +442,12 @@ async def _next_station(args: argparse.Namespace, first: StationConfig, k: int, 
 
     stop = asyncio.Event()
     world = World(cfg, seed=int(args.seed) + k)
-    drained = False
     try:
         task = asyncio.create_task(station.run(stop))
         try:
             await operate(station, world, np.random.default_rng([args.seed, k]), cycles,
-                          report, say, truth, np.random.default_rng([args.seed, 21, k]))
-            drained = await mine.drain()
+                          report, say, truth, np.random.default_rng([args.seed, 21, k]),
+                          note=_noter(out, sid), share=(k, n_stations))
         finally:
             stop.set()
             await task
@@ -409,8 +457,9 @@ async def _next_station(args: argparse.Namespace, first: StationConfig, k: int, 
     n = int(truth.get("cycles", cycles))
     s = _summary(station, report, n, truth["wrong"], truth["locked_sends"])
     return {"station_id": sid, "opcua": None if cfg.opcua is None else cfg.opcua.endpoint,
-            "bolts": n, "ok": s["ok"], "wrong_bolt_sends": s["wrong_bolt_sends"],
-            "recorded": s["recorded"], "verdict": s["verdict"], "drained": drained}
+            "bolts": n, "ok": s["ok"], "left": s["left"], "handled": s["handled"],
+            "share": truth.get("share", []), "wrong_bolt_sends": s["wrong_bolt_sends"],
+            "recorded": s["recorded"], "verdict": s["verdict"]}
 
 
 async def _hold(url: str | None, endpoints: list[str], report: list[dict[str, Any]],
@@ -504,6 +553,9 @@ def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
     # selected again (with its loosen pset where the policy says so, released when locked)
     handled = sum(1 for r in report if r["result"] and not str(r["result"]).startswith("not ")
                   and not r.get("unfinished"))
+    # the rule: a bolt the operator leaves before tightening is handled when the tool went
+    # off (the station's part: no rundown may start on a wrench that left); said as such
+    left = sum(1 for r in report if str(r["result"]).startswith(LEFT_DISABLED))
     problems = []
     if wrong:
         problems.append(f"{wrong} parameter send(s) for a wrong bolt")
@@ -516,8 +568,9 @@ def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
     if any("STILL ENABLED" in str(r["result"]) for r in report):
         problems.append("the tool stayed enabled after the wrench left")
     verdict = f"FAIL: {'; '.join(problems)}" if problems else \
-        f"PASS: {handled}/{cycles} bolts handled, 0 wrong bolts, every result recorded"
-    return {"bolts": cycles, "ok": ok, "handled": handled,
+        f"PASS: {handled}/{cycles} bolts handled ({_handled_words(ok, left, handled)}), " \
+        "0 wrong bolts, every result recorded"
+    return {"bolts": cycles, "ok": ok, "handled": handled, "left": left,
             "wrong_bolt_sends": wrong, "parameters_sent": len(lat),
             "results": results, "recorded": recorded,
             "nok_policy": {
@@ -525,12 +578,25 @@ def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
                 "loosenings": sum(1 for e in recorded_events if e.kind == "loosening"),
                 "locks": st.bus.count(BoltLocked), "releases": st.bus.count(BoltReleased),
                 "locked_sends": locked_sends},
+            # every rundown recorded with the operator signed in (the simulated one)
+            "operators": dict(Counter(e.operator or "-" for e in recorded_events)),
             "refusals": dict(refusals.most_common(8)),
             "xy_error_mm": {"mean": _num(np.mean(errs)) if errs else None,
                             "max": _num(np.max(errs)) if errs else None},
             "latency_ms": {"p50": _num(np.percentile(lat, 50)) if lat else None,
                            "p95": _num(np.percentile(lat, 95)) if lat else None},
             "verdict": verdict}
+
+
+def _handled_words(ok: int, left: int, handled: int) -> str:
+    """"9 OK, 1 left before tightening with the tool disabled": what the handled bolts
+    are, so the verdict agrees with the counts beside it."""
+    parts = [f"{ok} OK"]
+    if left:
+        parts.append(f"{left} left before tightening by the operator, the tool disabled")
+    if handled - ok - left > 0:
+        parts.append(f"{handled - ok - left} not OK after {MAX_RUNDOWNS} rundowns")
+    return ", ".join(parts)
 
 
 def _num(v: Any) -> float:

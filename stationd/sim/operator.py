@@ -1,6 +1,7 @@
-"""The simulated operator: raises the lift with a vehicle, takes the wrench to its bolts and
-tightens them as the station's NOK policy has it; a simulated supervisor releases a locked
-bolt through the command path the screens use (``Station.submit``).
+"""The simulated operator: signs in at the station (so every rundown is recorded with their
+name), raises the lift with a vehicle, takes the wrench to its bolts and tightens them as the
+station's NOK policy has it; a simulated supervisor releases a locked bolt through the command
+path the screens use (``Station.submit``).
 
 Why here, below the demo: one operator for ``stationd demo`` (a vehicle, then a verdict) and
 for ``stationd run --sim-operator`` (vehicle after vehicle in the daemon, :mod:`stationd.sim.
@@ -22,7 +23,7 @@ from drivers.wrench.sim import SimController, SimPset, SimWrench
 from stationd.config import StationConfig
 from stationd.errors import InputError
 from stationd.sim.world import World, wrench_at
-from stationd.station.commands import Issuer, ReleaseBolt, Right
+from stationd.station.commands import Issuer, ReleaseBolt, Right, SignIn
 from stationd.station.core import State
 from stationd.station.daemon import Station
 from stationd.station.events import Localized, ResultRecorded
@@ -36,6 +37,8 @@ NOK_P, STUBBORN_P = 0.1, 0.1
 MAX_RUNDOWNS = 10
 #: who releases a locked bolt (the command path is the screens')
 SUPERVISOR = Issuer("supervisor", frozenset({Right.RELEASE}), "demo")
+#: who holds the wrench: signed in at the station through the command path (no right needed)
+OPERATOR = Issuer("operator", frozenset(), "demo")
 #: the controller's loosening program for a loosen pset: a joint that comes loose is OK
 LOOSEN_PROGRAM = SimPset(40.0, 5.0, 150.0, 360.0, 90.0, 720.0, name="loosen")
 
@@ -80,14 +83,23 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
                   report: list[dict[str, Any]], say: Callable[[dict[str, Any]], None],
                   truth: dict[str, Any], nok_rng: np.random.Generator,
                   note: Callable[[str], None] | None = None,
-                  supervisor: Issuer = SUPERVISOR) -> None:
+                  supervisor: Issuer = SUPERVISOR, operator: Issuer = OPERATOR,
+                  share: tuple[int, int] = (1, 1)) -> None:
     """One vehicle: ``truth['vin']`` (lift code ``truth['model_code']``) raised, up to
     ``cycles`` of its bolts in view visited in the ``rng``'s order (each line to ``say`` and
     ``report``), tightened as the NOK policy has it (:func:`until_ok`), the lift lowered.
     ``truth['bolt']`` is where the wrench really is, at every moment (the demo checks each
     parameter send against it).  InputError when the vehicle is not opened or no bolt of it
-    is in view."""
+    is in view.  ``operator`` signs in at the station first unless signed in already.
+    ``share`` (k, n): this station is the k-th of a line of n, and its bolts are the k-th of
+    n shares of the bolts in view (:func:`share_of`); ``truth['share']`` gets them."""
     plc, ctl = simulators(st)
+    if st.core.operator != operator.user:
+        answer = await st.submit(SignIn(f"{operator.source}: the simulated operator"),
+                                 operator)
+        if not answer.accepted:
+            (note or _stderr)(f"note: the simulated operator did not sign in: "
+                              f"{reason_words(answer.reason) if answer.reason else '?'}")
     plc.set_vehicle(truth["model_code"], truth["vin"])
     plc.raise_lift()
     for _ in range(200):
@@ -113,6 +125,15 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
         (note or _stderr)(f"note: {len(unseen)} of {len(infos)} bolts are in view of no pair "
                           f"and are left out: {', '.join(b.bolt_id for b in unseen[:8])}"
                           f"{' ...' if len(unseen) > 8 else ''}")
+    if share != (1, 1):
+        mine = share_of([b.bolt_id for b in bolts], *share)
+        if not mine:
+            raise InputError(f"station {share[0]} of {share[1]} has no bolt of its own: "
+                             f"{len(bolts)} bolt(s) in view for {share[1]} stations")
+        (note or _stderr)(f"its own bolts: {len(mine)} of the {len(bolts)} in view: "
+                          f"{', '.join(mine[:12])}{' ...' if len(mine) > 12 else ''}")
+        bolts = [b for b in bolts if b.bolt_id in mine]
+    truth["share"] = [b.bolt_id for b in bolts]
     order = rng.permutation(len(bolts))[:cycles]
     truth["cycles"] = len(order)      # fewer when fewer bolts can be shown
     for k in order:
@@ -150,6 +171,15 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
         await asyncio.sleep(0.3)
     plc.lower_lift()
     await asyncio.sleep(0.5)
+
+
+def share_of(bolts: list[str], k: int, n: int) -> list[str]:
+    """The k-th (1-based) of ``n`` shares of ``bolts``: consecutive runs of the table's
+    order, as a line's stations each have their own section of the vehicle, sizes differing
+    by at most one; no bolt is in two shares."""
+    base, extra = divmod(len(bolts), n)
+    start = (k - 1) * base + min(k - 1, extra)
+    return bolts[start:start + base + (1 if k <= extra else 0)]
 
 
 async def _tool_on(st: Station, bolt: str, tries: int = 600) -> bool:
@@ -224,6 +254,6 @@ async def until_ok(st: Station, bolt: str, line: dict[str, Any],
     line["result"], line["before"] = steps[-1], steps[:-1]
 
 
-__all__ = ["LOOSEN_PROGRAM", "MAX_RUNDOWNS", "NOK_P", "STUBBORN_P", "SUPERVISOR",
-           "loosen_programs", "operate", "simulated_url", "simulators", "stand_ins",
-           "until_ok"]
+__all__ = ["LOOSEN_PROGRAM", "MAX_RUNDOWNS", "NOK_P", "OPERATOR", "STUBBORN_P", "SUPERVISOR",
+           "loosen_programs", "operate", "share_of", "simulated_url", "simulators",
+           "stand_ins", "until_ok"]

@@ -14,6 +14,7 @@ import numpy as np
 from stationd.cli import main
 from stationd.config import load_station_config
 from stationd.demo.station import SIM_CONFIG, _summary, simulated, stand_ins
+from stationd.sim.operator import share_of
 from stationd.station.events import EventBus, ParamsSent, ResultRecorded
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "config" / "station.example.yaml"
@@ -100,3 +101,29 @@ def test_a_station_file_naming_real_devices_is_run_on_simulators_and_says_so(cap
 
 def test_the_simulated_stations_file_names_no_device_to_stand_in_for():
     assert stand_ins(load_station_config(SIM_CONFIG)) == []
+
+
+def test_a_bolt_left_before_tightening_is_handled_only_with_the_tool_off_and_says_so():
+    """DEMO-2 showed "1/2 bolts OK" and "PASS: 2/2 bolts handled": the verdict says what the
+    handled bolts are, so it agrees with the counts beside it."""
+    left = [REPORT[0], {"bolt": "B02", "result": "left before tightening; tool disabled"}]
+    s = _summary(_station(records=1), left, 2, 0)
+    assert (s["ok"], s["left"], s["handled"]) == (1, 1, 2)
+    assert s["verdict"] == ("PASS: 2/2 bolts handled (1 OK, 1 left before tightening by the "
+                            "operator, the tool disabled), 0 wrong bolts, every result "
+                            "recorded")
+    still = [REPORT[0], {"bolt": "B02", "result": "left before tightening; tool STILL ENABLED"}]
+    s = _summary(_station(records=1), still, 2, 0)
+    assert s["left"] == 0 and s["verdict"].startswith("FAIL") and "stayed enabled" in \
+        s["verdict"]
+    assert _summary(_station(), REPORT, 2, 0)["verdict"].startswith(
+        "PASS: 2/2 bolts handled (2 OK), ")
+
+
+def test_a_lines_stations_each_have_their_own_bolts():
+    bolts = [f"B{i:02d}" for i in range(1, 15)]
+    shares = [share_of(bolts, k, 3) for k in (1, 2, 3)]
+    assert [len(s) for s in shares] == [5, 5, 4]
+    assert [b for s in shares for b in s] == bolts   # each bolt at one station, in order
+    assert share_of(bolts, 1, 1) == bolts
+    assert share_of(bolts[:2], 3, 3) == []           # more stations than bolts: none left

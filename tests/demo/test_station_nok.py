@@ -5,8 +5,14 @@ releases, and a parameter send for a locked bolt, or a rundown not recorded, is 
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from dataclasses import replace
+from pathlib import Path
 from types import SimpleNamespace
+
+import pytest
 
 from stationd.config import load_station_config
 from stationd.demo.station import (
@@ -20,6 +26,9 @@ from stationd.demo.station import (
 from stationd.sim.devices_cli import psets_of
 from stationd.station.events import BoltLocked, BoltReleased, EventBus, ResultRecorded
 from stationd.station.policy import NokPolicy, NokRule
+from tests.demo.test_station_services import _one_pair
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _bus() -> SimpleNamespace:
@@ -48,6 +57,7 @@ def test_the_summary_counts_the_nok_policy_and_stays_honest():
     assert (s["results"], s["recorded"]) == (8, 8)
     assert s["nok_policy"] == {"nok": 3, "loosenings": 3, "locks": 1, "releases": 1,
                                "locked_sends": 0}
+    assert s["operators"] == {"-": 8}     # nobody signed in on this bus: said as such
     locked = _summary(_bus(), REPORT, 2, 0, locked_sends=1)
     assert locked["verdict"] == "FAIL: 1 parameter send(s) for a locked bolt"
     lost = _summary(_bus(), [{**REPORT[0], "rundowns": 8}, REPORT[1]], 2, 0)
@@ -70,3 +80,24 @@ def test_the_demo_runs_its_policy_only_where_the_station_file_has_none():
                                     "pset 3: loosen with loosen pset 4")
     own = replace(cfg, nok=NokPolicy(NokRule(max_nok=2, strategy="skip")))
     assert demo_policy(own, psets) is None
+
+
+@pytest.mark.timeout(300)
+def test_the_demos_lines_read_in_the_order_things_happened_on_one_stream(tmp_path):
+    """"B11 locked after 3 NOK ..." came after B11's final OK line: the station's notice on
+    stderr, the bolt's line on stdout.  Seed 7's first bolt is a stubborn joint: it locks,
+    is released, then tightens OK; every line of it on stdout, in that order."""
+    run = subprocess.run(
+        [sys.executable, "-m", "stationd", "demo", "--config", str(_one_pair(tmp_path)),
+         "--cycles", "1", "--seed", "7", "--no-http", "--no-opcua"],
+        capture_output=True, text=True, timeout=240, cwd=tmp_path, check=False,
+        env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert run.returncode == 0, run.stdout + run.stderr
+    lines = run.stdout.splitlines()
+    locked = next(i for i, s in enumerate(lines) if " locked after 3 NOK in a row" in s)
+    bolt = lines[locked].split(" ", 1)[0]
+    before = lines.index(next(s for s in lines if s.startswith(f"  {bolt} first: ")))
+    final = lines.index(next(s for s in lines if s.startswith(f"{bolt}: pset ")))
+    assert locked < before < final and "OK" in lines[final]
+    assert lines.index(next(s for s in lines if "in view of no pair" in s)) < locked
+    assert "locked after" not in run.stderr and "in view of no pair" not in run.stderr

@@ -31,7 +31,7 @@ from stationd.linedb import results
 from stationd.opcua.model import IJT_URI, load_client_types
 from stationd.opcua.uatypes import ua
 from stationd.sim.vin import is_valid, make_vin
-from tests.station.test_daemon_faults import SIM
+from tests.station.daemons import SIM
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -53,14 +53,15 @@ def _one_pair(tmp: Path) -> Path:
 class Demo:
     """``stationd demo ARGS --json`` as a process; its standard error read line by line."""
 
-    def __init__(self, tmp: Path, *args: str) -> None:
+    def __init__(self, tmp: Path, *args: str, env: dict[str, str] | None = None) -> None:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "stationd", "demo", "--config", str(_one_pair(tmp)),
              "--json", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-            env={**os.environ, "PYTHONPATH": str(ROOT)}, cwd=tmp)
+            env={**os.environ, "PYTHONPATH": str(ROOT), **(env or {})}, cwd=tmp)
         self.lines: queue.Queue[str] = queue.Queue()
         self.err: list[str] = []
-        threading.Thread(target=self._pump, daemon=True).start()
+        self.pump = threading.Thread(target=self._pump, daemon=True)
+        self.pump.start()
 
     def _pump(self) -> None:
         assert self.proc.stderr is not None
@@ -75,7 +76,12 @@ class Demo:
                 return found
 
     def summary(self) -> dict[str, Any]:
-        out, _ = self.proc.communicate(timeout=120)
+        """The last line of standard output, once the demo ended and ``err`` has every line
+        of its standard error (read by the pump alone: two readers would split it)."""
+        assert self.proc.stdout is not None
+        out = self.proc.stdout.read()
+        self.proc.wait(timeout=120)
+        self.pump.join(timeout=30)
         return dict(json.loads(out.strip().splitlines()[-1]))
 
 
@@ -138,9 +144,20 @@ def test_two_stations_forward_to_the_line_database_and_the_line_is_read_back(tmp
     (second,) = summary["stations"]
     assert second["station_id"] == "DEMO-2" and second["opcua"] != summary["opcua"]
     line = summary["line"]
-    assert line["all_forwarded"] is True
+    assert line["all_forwarded"] is True and line["missing"] == 0
+    # every station's records against the line's, read back at the end
+    for sid, p in line["arrival"].items():
+        assert p["arrived"] == p["records"] > 0, sid
     assert line["vins"] == [make_vin(1)]          # the vehicle went down the line
     assert line["rundowns"] == summary["recorded"] + second["recorded"]
+    # each station tightened its own bolts: disjoint shares, said at the start
+    assert summary["share"] and second["share"]
+    assert not set(summary["share"]) & set(second["share"])
+    for sid, share in (("DEMO-1", summary["share"]), ("DEMO-2", second["share"])):
+        assert set(line["stations"][sid]["bolts"]) <= set(share)
+    err = "".join(demo.err)
+    assert "each tightens its own bolts of the same vehicle" in err
+    assert re.search(r"^DEMO-2 its own bolts: \d+ of the \d+ in view", err, re.M), err
     engine = create_engine(pg_url, poolclass=NullPool)
     try:
         rows = results(engine)
@@ -181,3 +198,58 @@ def test_the_default_endpoint_moves_to_the_next_free_port_and_says_so():
         assert second != endpoint and len(taken) == 2
         with pytest.raises(InputError, match="in use"):
             Endpoints("127.0.0.1", busy, given=True).take(set())
+
+
+def test_an_explicit_screens_port_in_use_is_refused_at_start(capsys):
+    """``--http`` on a busy port ran without screens ("tried again every 5 s") and exited 0;
+    the user chose that port: refused as ``--opcua``'s is."""
+    import socket
+
+    with socket.socket() as held:
+        held.bind(("127.0.0.1", 0))
+        held.listen()
+        busy = held.getsockname()[1]
+        code = main(["demo", "--http", f"127.0.0.1:{busy}", "--cycles", "1", "--no-opcua"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "\n" not in err
+    assert f"--http 127.0.0.1:{busy}: the port is in use" in err
+
+
+@pytest.mark.timeout(300)
+def test_a_line_database_that_never_answers_is_a_fail_that_counts_the_lost_records(tmp_path):
+    """``--line-db`` on a port where nothing listens: PASS and exit 0 before, the records
+    gone with the demo's temporary database unsaid.  Also: the demo's start removes the
+    folders demos killed with SIGKILL left behind (their process gone), not a live one's."""
+    import socket
+
+    from stationd.demo.leftovers import PID_FILE, PREFIX
+
+    with socket.socket() as s:                   # a port nothing listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    (temp / f"{PREFIX}killed").mkdir()
+    (temp / f"{PREFIX}killed" / PID_FILE).write_text(f"{gone.pid} -\n")
+    (temp / f"{PREFIX}live").mkdir()
+    (temp / f"{PREFIX}live" / PID_FILE).write_text(f"{os.getpid()} -\n")
+    demo = Demo(tmp_path, "--cycles", "1", "--seed", "7", "--no-http", "--no-opcua",
+                "--line-db", f"postgresql+psycopg://line@127.0.0.1:{port}/line",
+                env={"TMPDIR": str(temp)})
+    summary = demo.summary()
+    err = "".join(demo.err)
+    assert demo.proc.returncode == 1, err
+    line = summary["line"]
+    assert line["missing"] == line["arrival"]["DEMO-1"]["missing"] >= summary["recorded"]
+    assert line["missing_rundowns"] == summary["recorded"] >= 1
+    assert summary["verdict"] == (f"FAIL: {line['missing']} record(s) "
+                                  f"({summary['recorded']} rundown(s)) did not reach the "
+                                  "line database")
+    assert line["error"] == f"the line database at 127.0.0.1:{port} does not answer " \
+        "(connection refused)"
+    assert f"line database: not read back: {line['error']}; {line['missing']} record(s)" in err
+    assert "lost with the demo's temporary database" in err
+    assert "OperationalError" not in err and "Traceback" not in err
+    assert sorted(p.name for p in temp.iterdir()) == [f"{PREFIX}live"]
