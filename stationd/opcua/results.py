@@ -30,6 +30,12 @@ TRACE_ANGLE, TRACE_TORQUE = 1, 2                          # Open Protocol trace 
 EVALUATION_OK, EVALUATION_NOT_OK = 1, 2
 RESULT_STATE_COMPLETED = 1
 ENTITY_VEHICLE, ENTITY_JOINT = 20, 23     # what the working group's clients use
+#: the operator signed in at the station: the standard has no entity type for a person, and
+#: keeps the negative ones for applications' own ("EntityType < 0 can be used")
+ENTITY_OPERATOR = -1
+#: AssemblyType (the working group's test client: 1 ASSEMBLED, 2 DISASSEMBLED): a loosening
+#: is told from a tightening by it, never left to read as one more OK joint
+ASSEMBLED, DISASSEMBLED = 1, 2
 UNECE = "http://www.opcfoundation.org/UA/units/un/cefact"
 
 
@@ -158,6 +164,17 @@ def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
     (:mod:`db.curves`' or the feed's, one per trace type) as its trace when it has any."""
     rec = entry["record"]
     ok = rec["status"] == "ok"
+    loosening = rec.get("rundown") == "loosening"
+    entities = [
+        ua.EntityDataType(Name="VIN", EntityId=rec["vin"], EntityType=ENTITY_VEHICLE,
+                          IsExternal=True),
+        ua.EntityDataType(Name="Joint", EntityId=rec["bolt"], EntityType=ENTITY_JOINT,
+                          IsExternal=False),
+    ]
+    if rec.get("operator"):
+        entities.append(ua.EntityDataType(
+            Name="Operator", EntityId=rec["operator"], EntityType=ENTITY_OPERATOR,
+            IsExternal=False, Description="the operator signed in at the station"))
     sent = rec.get("params_sent") or {}
     pset = sent.get("pset")
     created = _time(rec.get("result_at")) or _time(rec.get("recorded_at")) or \
@@ -172,14 +189,13 @@ def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
         ProductId=rec["vin"],
         InternalRecipeId=None if pset is None else str(pset),
         SequenceNumber=int(entry["seq"]),
-        Name=f"{rec['vin']} {rec['bolt']}",
+        Name=f"{rec['vin']} {rec['bolt']}" + (" loosening" if loosening else ""),
+        Description=ua.LocalizedText(f"{'loosening' if loosening else 'tightening'} of "
+                                     f"{rec['bolt']}" + ("" if pset is None else
+                                                         f" with pset {pset}")),
         Classification=CLASSIFICATION_SINGLE,
-        AssociatedEntities=[
-            ua.EntityDataType(Name="VIN", EntityId=rec["vin"], EntityType=ENTITY_VEHICLE,
-                              IsExternal=True),
-            ua.EntityDataType(Name="Joint", EntityId=rec["bolt"], EntityType=ENTITY_JOINT,
-                              IsExternal=False),
-        ])
+        AssemblyType=DISASSEMBLED if loosening else ASSEMBLED,
+        AssociatedEntities=entities)
     content = ua.JoiningResultDataType(OverallResultValues=[
         _value("Torque", rec.get("torque_nm"), sent.get("torque"),
                _unit("NU", "N·m", "newton metre"), ok, PQ_TORQUE),
@@ -195,6 +211,7 @@ def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
     return ua.ResultDataType(ResultMetaData=meta, ResultContent=[ua.Variant(content)])
 
 
-__all__ = ["CLASSIFICATION_SINGLE", "ENTITY_JOINT", "ENTITY_VEHICLE", "EVALUATION_NOT_OK",
+__all__ = ["ASSEMBLED", "CLASSIFICATION_SINGLE", "DISASSEMBLED", "ENTITY_JOINT",
+           "ENTITY_OPERATOR", "ENTITY_VEHICLE", "EVALUATION_NOT_OK",
            "EVALUATION_OK", "PQ_ANGLE", "PQ_OTHER", "PQ_TIME", "PQ_TORQUE", "parse_result_id",
            "result_id", "rundown_result", "trace"]

@@ -95,7 +95,9 @@ def test_every_rundown_arrives_as_a_result_event_at_the_server_object(repo):
                 loop = asyncio.get_running_loop()
                 await loop.run_in_executor(None, lambda: record(repo, VIN, "B1", ok=True))
                 await loop.run_in_executor(None, lambda: record(repo, VIN, "B2", ok=False))
-                await handler.wait_for(2)
+                await loop.run_in_executor(None, lambda: record(
+                    repo, VIN, "B2", ok=True, kind="loosening", operator="olga"))
+                await handler.wait_for(3)
                 return handler.events
         finally:
             await stopping(srv, stop, task)
@@ -103,10 +105,11 @@ def test_every_rundown_arrives_as_a_result_event_at_the_server_object(repo):
     events = asyncio.run(scenario())
     db_id = repo.ledger.db_id()
     seqs = [e["seq"] for e in repo.ledger.since(0)]
-    assert [e.SourceName for e in events] == ["ST-07", "ST-07"]
+    assert [e.SourceName for e in events] == ["ST-07"] * 3
     assert events[0].SourceNode == ua.NodeId("JoiningSystem.ST-07", events[0].SourceNode
                                              .NamespaceIndex)
-    for event, seq, ok, bolt in zip(events, seqs, (True, False), ("B1", "B2"), strict=True):
+    for event, seq, ok, bolt in zip(events[:2], seqs[:2], (True, False), ("B1", "B2"),
+                                    strict=True):
         meta = event.Result.ResultMetaData
         assert meta.ResultId == f"{db_id}:{seq}"
         assert meta.SequenceNumber == seq
@@ -125,6 +128,14 @@ def test_every_rundown_arrives_as_a_result_event_at_the_server_object(repo):
     b2_torque = events[1].Result.ResultContent[0].Value.OverallResultValues[0]
     assert (b2_torque.LowLimit, b2_torque.High) == (23.0, 27.0)
     assert b2_torque.EngineeringUnits.DisplayName.Text == "N·m"
+    # a loosening is told apart (a newcomer's MES saw four "OK" results of one joint), and
+    # the operator signed in at the station is an entity of the result
+    kinds = [e.Result.ResultMetaData.AssemblyType for e in events]
+    assert kinds == [1, 1, 2]                       # ASSEMBLED, ASSEMBLED, DISASSEMBLED
+    loose = events[2].Result.ResultMetaData
+    assert loose.Name.endswith("loosening") and "loosening of B2" in loose.Description.Text
+    assert {(x.EntityType, x.EntityId) for x in loose.AssociatedEntities} == {
+        (20, VIN), (23, "B2"), (-1, "olga")}
 
 
 def test_identification_state_and_the_result_methods(repo):
