@@ -272,6 +272,7 @@ class OpcUaServer:
             await _set(ident, name, value, uris)
         await ident.add_property(uris.index(DI_URI), "SoftwareRevision", SOFTWARE_VERSION,
                                  ua.VariantType.String)
+        await _one_identification(js, ident, uris)
         self._state = await js.add_variable(ua.NodeId(f"JoiningSystem.{sid}.State", idx),
                                             ua.QualifiedName("State", idx), "unknown",
                                             varianttype=ua.VariantType.String)
@@ -523,6 +524,25 @@ async def _set(parent: Node, name: str, value: str, uris: list[str]) -> None:
         await node.write_value(ua.DataValue(ua.Variant(v, vt)))
         return
 
+
+
+async def _one_identification(js: Node, ident: Node, uris: list[str]) -> None:
+    """MachineryBuildingBlocks' Identification is the machine's own (OPC 40001-1: the
+    building block references the same AddIn); asyncua's instantiation made a second, empty
+    copy there (every value None, a newcomer's client read it): removed, and the building
+    block references the one that is filled."""
+    try:
+        blocks = await js.get_child([f"{uris.index(MACHINERY_URI)}:MachineryBuildingBlocks"])
+    except ua.UaError:
+        return   # the type has none: nothing to tell apart
+    try:
+        copy = await blocks.get_child([f"{uris.index(DI_URI)}:Identification"])
+    except ua.UaError:
+        copy = None
+    if copy is not None and copy.nodeid != ident.nodeid:
+        await copy.delete()
+    await blocks.add_reference(ident.nodeid, ua.ObjectIds.HasAddIn, forward=True,
+                               bidirectional=False)
 
 __all__ = ["NAMESPACE", "OpcUaServer", "ReadOnlyRuleset", "StationUsers"]
 

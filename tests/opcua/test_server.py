@@ -162,6 +162,12 @@ def test_identification_state_and_the_result_methods(repo):
                     out[name] = getattr(v, "Text", v)
                 out["state"] = await (await js.get_child(
                     [f"{uris.index(NAMESPACE)}:State"])).read_value()
+                # the building block's Identification is the machine's own, not an empty
+                # copy (a newcomer read every value None there)
+                blocks = await js.get_child(
+                    [f"{uris.index(MACHINERY_URI)}:MachineryBuildingBlocks"])
+                block_ident = await blocks.get_child([f"{di}:Identification"])
+                out["block_ident"] = block_ident.nodeid == ident.nodeid
                 rm = await js.get_child([f"{mr}:ResultManagement"])
                 out["latest"] = await rm.call_method(f"{mr}:GetLatestResult", ua.Int32(0))
                 out["by_id"] = await rm.call_method(f"{mr}:GetResultById",
@@ -174,6 +180,7 @@ def test_identification_state_and_the_result_methods(repo):
 
     out = asyncio.run(scenario())
     assert out["Manufacturer"] == "stationd"
+    assert out["block_ident"]
     assert out["SystemId"] == "ST-07"
     assert out["SoftwareRevision"]
     assert out["state"] == "tracking"
