@@ -633,6 +633,12 @@ def check_station(path: str | Path) -> StationCheck:
         warning = _psets_only_warning(cfg.wrench.url, bolts.table, reader.top["wrench"])
         if warning is not None:
             reader.warnings.append(warning)
+    if cfg.opcua is not None and cfg.opcua.users and cfg.opcua.security == ("none",):
+        # served, but the MES's user passwords would cross the plant network in clear text
+        reader.warnings.append(reader.top["opcua"].error(
+            "users with security [none] only: their passwords cross the network in clear "
+            "text (the client says 'Sending plain-text password'); offer sign or encrypt too "
+            "(with certificates)"))
     return StationCheck(str(p), cfg if not errors else None, errors, reader.warnings, bolts)
 
 

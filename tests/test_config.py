@@ -636,3 +636,22 @@ def test_a_pair_calibrated_with_left_and_right_swapped_is_refused(sim_copy, caps
     code = main(["config", "check", str(sim_copy / "station.yaml")])
     out, err = capsys.readouterr()
     assert code == 2 and "left and right swapped?" in out + err
+
+
+def test_opcua_users_over_security_none_only_are_a_warning(sim_copy):
+    """Served, but the MES's passwords would cross the network in clear text (a newcomer saw
+    asyncua's 'Sending plain-text password' and nothing from config check)."""
+    from stationd.access import hash_password
+
+    station = sim_copy / "station.yaml"
+    section = (f"opcua: {{endpoint: 'opc.tcp://127.0.0.1:4840', security: [none], "
+               f"users: {{mes: '{hash_password('s3cret-pw')}'}}}}\n")
+    station.write_text(station.read_text() + section)
+    result = check_station(station)
+    assert result.ok, result.errors
+    assert any("clear text" in str(w) and w.key == "opcua" for w in result.warnings), \
+        result.warnings
+    no_users = station.read_text().replace(section, "opcua: {endpoint: "
+                                           "'opc.tcp://127.0.0.1:4840', security: [none]}\n")
+    station.write_text(no_users)
+    assert not [w for w in check_station(station).warnings if "clear text" in str(w)]
