@@ -69,7 +69,9 @@ def open_repository(url: str, *, must_exist: bool, read_only: bool | None = None
     """The repository of every ``--db`` (and ``--config``'s database); a read command
     (``must_exist``) does not create a missing SQLite file and opens it read-only (no
     migration, no write access needed: the service user's database can be read by the
-    line's engineers); ``read_only=False``: an existing one that the command writes.  A URL that is no URL or names no installed driver, and an SQLite
+    line's engineers); ``read_only=False``: an existing one that the command writes.
+
+    A URL that is no URL or names no installed driver, and an SQLite
     database that cannot keep what is written (in memory, a folder, a missing folder, another
     kind of file) are refused before anything is opened, as ``config check`` refuses them
     (``db.location``)."""

@@ -31,7 +31,6 @@ from sqlalchemy import Engine, Table, inspect, make_url
 from sqlalchemy.exc import ArgumentError, SQLAlchemyError
 
 from db.engine import make_engine
-from db.repository import Repository
 from stationd.config import load_station_config
 from stationd.errors import InputError
 from stationd.forward import Forwarder, LineDown

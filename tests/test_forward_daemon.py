@@ -63,7 +63,9 @@ def test_results_reach_the_line_database_and_wait_while_it_is_down(tmp_path):
         first = tighten("B05")
         until(lambda: any(r.record.get("tightening_id") == first
                           for r in _line_rows(url, "ST-T1")), 30, "on the line")
-        assert _status(http_port)["line"]["up"] is True
+        # the row is visible at the line's commit, the forwarder's status a moment after
+        until(lambda: (_status(http_port)["line"] or {}).get("up") is True, 10,
+              "the status says it is up")
         pg.pause()                                  # the line database goes away
         second = tighten("B06")                  # the station goes on tightening
         until(lambda: (_status(http_port)["line"] or {}).get("up") is False, 60,
