@@ -374,8 +374,11 @@ class _Reader:
     """
 
     def __init__(self, base: Path, *, collect: bool, require_devices: bool = False,
-                 note: str = "") -> None:
+                 note: str = "", unregistered: str | None = None) -> None:
         self.base = base
+        # a pair whose registration is about to be written anew: not read (a broken one
+        # must not stop `calibrate vehicle` from replacing it)
+        self.unregistered = unregistered
         self.note = note   # added where a relative path names nothing (a linked file)
         self.collect = collect
         self.require_devices = require_devices
@@ -559,7 +562,7 @@ class _Reader:
         tv_path = self.guard(None, _path, m["to_vehicle"], self.base) if "to_vehicle" in m \
             else self.base / f"{name}.vehicle.yaml"
         tv = None
-        if tv_path is not None and tv_path.exists():
+        if tv_path is not None and tv_path.exists() and name != self.unregistered:
             tv = self.guard(None, _load_transform, tv_path)
         calibration = self.guard(None, StereoPair.load, cal_path) \
             if cal_path is not None else None
@@ -576,18 +579,20 @@ class _Reader:
                           sides["right"], skew_ms / 1e3)
 
 
-def load_station_config(path: str | Path | None, *, station: bool = False) -> StationConfig:
+def load_station_config(path: str | Path | None, *, station: bool = False,
+                        unregistered: str | None = None) -> StationConfig:
     """Read a station config; ``None`` gives the built-in defaults.  The first error is raised
     (a :class:`ConfigError` naming file, line and key); :func:`check_station` lists them all.
 
     ``station``: the file runs a station (the daemon), so its devices (``cameras``, ``pairs``,
     ``lift``, ``wrench``) must be written; tools that only read its vision or pairs
-    (``detect``, ``localize``) take a file without them."""
+    (``detect``, ``localize``) take a file without them.  ``unregistered``: a pair whose
+    vehicle registration is not read (``calibrate vehicle`` writing it anew)."""
     if path is None:
         return StationConfig()
     p = Path(path)
     reader = _Reader(station_base(p), collect=False, require_devices=station,
-                     note=_link_note(p))
+                     note=_link_note(p), unregistered=unregistered)
     cfg = reader.read(p)
     if station and cfg.bolts_path is not None and "nok" in reader.top:
         # the NOK policy against the bolt table it applies to: a start or a reload with an

@@ -131,7 +131,8 @@ def read_points(path: Path, cfg: StationConfig) -> tuple[str, list[Observation]]
 def cmd_calibrate_vehicle(args: argparse.Namespace) -> int:
     if not args.config:
         raise InputError("--config STATION.yaml is needed: it names the pairs")
-    cfg = load_station_config(args.config)
+    # this pair's registration is the one being written: a broken one is replaced, not read
+    cfg = load_station_config(args.config, unregistered=args.pair)
     if args.pair not in cfg.pairs:
         raise InputError(f"--pair {args.pair}: not in {args.config} "
                          f"(pairs: {', '.join(cfg.pairs) or 'none'})")

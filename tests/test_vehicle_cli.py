@@ -356,3 +356,27 @@ def test_points_of_a_mirrored_frame_are_told_so_not_blamed_on_one_point(tmp_path
         assert code == 1 and "wrote" not in out and err.count("\n") == 1, kind
         assert MIRRORED in err and "largest residual" not in err, err
         assert not (tmp_path / "pair1.vehicle.yaml").exists()
+
+
+def test_vehicle_points_in_one_plane_are_refused_and_a_broken_registration_is_replaced(
+        tmp_path, capsys):
+    """A sweep: an affine fit to vehicle points all in one plane wrote a singular A (RMS 0),
+    which config check then refused and which blocked every later `calibrate vehicle` too
+    (it read the station's registrations first): refused now, and a broken registration of
+    the pair being calibrated is replaced, not read."""
+    cfg = _station_with_pair1(tmp_path)
+    data = yaml.safe_load(_points(tmp_path).read_text())
+    for p in data["points"]:
+        p["vehicle_mm"][2] = 0.0
+    flat = tmp_path / "flat.yaml"
+    flat.write_text(yaml.safe_dump({**data, "kind": "affine"}))
+    code, out, err = _main(capsys, "calibrate", "vehicle", "--pair", "pair1", "--points", flat,
+                           "--config", cfg)
+    assert code == 2 and "coplanar" in err and "Traceback" not in err, err
+    assert not (tmp_path / "pair1.vehicle.yaml").exists()
+    broken = tmp_path / "pair1.vehicle.yaml"
+    broken.write_text("kind: affine\nA: [[1, 0, 0], [0, 1, 0], [0, 0, 0]]\nt: [0, 0, 0]\n")
+    code, out, err = _main(capsys, "calibrate", "vehicle", "--pair", "pair1", "--points",
+                           _points(tmp_path), "--config", cfg)
+    assert code == 0 and "wrote" in out, err
+    assert "[0, 0, 0]]" not in broken.read_text()

@@ -258,7 +258,7 @@ def fit_rigid(src: np.ndarray, dst: np.ndarray) -> Transform | Refusal:
 
 def fit_affine(src: np.ndarray, dst: np.ndarray) -> Transform | Refusal:
     """Least-squares affine map ``dst ~ A src + t`` (the paper's choice); needs 4 points that
-    are not coplanar."""
+    are not coplanar, in both frames."""
     chk = _check(src, dst, 4)
     if isinstance(chk, Refusal):
         return chk
@@ -266,6 +266,13 @@ def fit_affine(src: np.ndarray, dst: np.ndarray) -> Transform | Refusal:
     X = np.hstack([s, np.ones((len(s), 1))])
     if np.linalg.matrix_rank(X, tol=1e-6 * np.abs(X).max()) < 4:
         return Refusal("reference points are coplanar: an affine map is undetermined")
+    Y = np.hstack([d, np.ones((len(d), 1))])
+    if np.linalg.matrix_rank(Y, tol=1e-6 * np.abs(Y).max()) < 4:
+        # the map would flatten space into their plane (a singular A): a station file that
+        # no check then accepts
+        return Refusal("the vehicle points are coplanar (all in one plane): an affine map "
+                       "would flatten the third axis; give a point out of their plane, or "
+                       "use the rigid fit")
     sol, *_ = np.linalg.lstsq(X, d, rcond=None)
     A, t = sol[:3].T, sol[3]
     res = np.linalg.norm(s @ A.T + t - d, axis=1)

@@ -50,6 +50,8 @@ def test_affine_fit_and_its_limits():
     flat = src.copy()
     flat[:, 2] = 0.0
     assert "coplanar" in fit_affine(flat, flat).reason
+    # the vehicle points in one plane: A would be singular (flatten the third axis)
+    assert "vehicle points are coplanar" in fit_affine(src, flat).reason
     assert "at least 4" in fit_affine(src[:3], src[:3]).reason
 
 
