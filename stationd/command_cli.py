@@ -71,12 +71,21 @@ class ApiClient:
             return status, text.strip()
 
 
+#: the longest password line read from standard input: an endless one (``< /dev/zero``) is
+#: refused, never read for ever
+MAX_PASSWORD = 1024
+
+
 def read_password() -> str:
     if "STATIOND_PASSWORD" in os.environ:
         return os.environ["STATIOND_PASSWORD"]
     if sys.stdin.isatty():
         return getpass.getpass("password: ")
-    return sys.stdin.readline().rstrip("\n")
+    line = sys.stdin.readline(MAX_PASSWORD + 1)
+    if len(line) > MAX_PASSWORD:
+        raise InputError(f"the password on standard input: no end of line within "
+                         f"{MAX_PASSWORD} characters (one line, the password)")
+    return line.rstrip("\n")
 
 
 def say_refused(what: str, status: int, answer: Any) -> int:

@@ -87,3 +87,12 @@ def test_a_failed_logout_keeps_the_answer(slow) -> None:
     got = _skip(url)
     assert got.returncode == 0, got
     assert got.stdout.strip() == "skip B03: accepted"
+
+
+def test_an_endless_password_line_is_refused_not_read_for_ever() -> None:
+    """A sweep: `stationd user hash < /dev/zero` hung (one endless line)."""
+    with open("/dev/zero", "rb") as zero:
+        got = subprocess.run([sys.executable, "-m", "stationd", "user", "hash"], stdin=zero,
+                             capture_output=True, text=True, timeout=60)
+    assert got.returncode == 2 and "no end of line within" in got.stderr, got
+    assert "Traceback" not in got.stderr and got.stdout == ""
