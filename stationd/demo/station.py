@@ -58,7 +58,7 @@ from stationd.pgserver import PgServer, PgServerError
 from stationd.reasons import Reason, Why
 from stationd.serve import Screens
 from stationd.sim.devices_cli import psets_of
-from stationd.sim.load import cpu_load
+from stationd.sim.load import MAX_WORKERS, cpu_load
 from stationd.sim.operator import (
     LOOSEN_PROGRAM,
     MAX_RUNDOWNS,
@@ -121,8 +121,8 @@ def run_station_demo(args: argparse.Namespace) -> int:
     cycles = int(args.cycles)
     if cycles < 1:
         raise InputError("--cycles must be at least 1")
-    if int(getattr(args, "load", 0)) < 0:
-        raise InputError("--load must be 0 or more busy processes")
+    if not 0 <= int(getattr(args, "load", 0)) <= MAX_WORKERS:
+        raise InputError(f"--load must be 0-{MAX_WORKERS} busy processes")
     n_stations = int(getattr(args, "stations", 1))
     if not 1 <= n_stations <= MAX_STATIONS:
         raise InputError(f"--stations must be 1-{MAX_STATIONS}")

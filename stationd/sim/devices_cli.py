@@ -15,6 +15,7 @@ own with ``--every SECONDS``: a new VIN, the lift up for that long, down, and ag
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import sys
 import threading
@@ -29,7 +30,7 @@ from drivers.wrench.sim import SimController, SimPset
 from drivers.wrench.sim_cli import serve
 from stationd.boltfile import load_bolts
 from stationd.config import load_station_config
-from stationd.errors import StationError
+from stationd.errors import InputError, StationError
 from stationd.sim.vin import make_vin
 
 HELP = "commands: raise | lower | vehicle CODE [VIN] | next | fault | clear | quit"
@@ -111,9 +112,9 @@ def _serve_plc(args: argparse.Namespace, stop: threading.Event, out: TextIO) -> 
     with SimulatedPlc(registers) as plc:
         try:
             port = plc.start_tcp(args.port)
-        except OSError as exc:
-            print(f"error: cannot listen on 127.0.0.1:{args.port}: {exc.strerror or exc}",
-                  file=sys.stderr)
+        except (OSError, RuntimeError) as exc:   # pymodbus says a busy port as RuntimeError
+            why = getattr(exc, "strerror", None) or "the port is in use or not allowed"
+            print(f"error: cannot listen on 127.0.0.1:{args.port}: {why}", file=sys.stderr)
             return 1
         say(f"lift PLC listening on 127.0.0.1:{port} (Modbus TCP, unit {plc.unit})")
         if args.every > 0:
@@ -153,8 +154,23 @@ def _serve_controller(args: argparse.Namespace, stop: threading.Event, out: Text
                               f"psets {', '.join(str(p) for p in sorted(sim.psets))})", out)
 
 
+def _check_args(args: argparse.Namespace) -> None:
+    """Numbers that cannot work refused at the start (one line, exit 2), not taken silently
+    or refused at the first vehicle."""
+    every = getattr(args, "every", None)
+    if every is not None and not (math.isfinite(every) and every >= 0):
+        raise InputError(f"--every {every:g}: seconds, 0 (commands typed on stdin) or more")
+    code = getattr(args, "model_code", None)
+    if code is not None and not 0 <= code <= 0xFFFF:
+        raise InputError(f"--model-code {code}: the PLC's register holds 0-65535")
+    trigger = getattr(args, "trigger_every", None)
+    if trigger is not None and not (math.isfinite(trigger) and trigger >= 0):
+        raise InputError(f"--trigger-every {trigger:g}: seconds, 0 (no automatic trigger) or more")
+
+
 def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """``stationd sim plc|controller`` (the arguments are ``stationd.cli``'s)."""
+    _check_args(args)
     stop = _stop_on_signals()
     try:
         if args.sim_device == "plc":

@@ -87,6 +87,35 @@ def test_a_port_out_of_range_is_one_line_and_exit_2() -> None:
     assert "0-65535" in r.stderr
 
 
+@pytest.mark.parametrize(("argv", "words"), [
+    (("plc", "--every", "-1"), "--every -1: seconds"),
+    (("plc", "--every", "nan"), "--every nan: seconds"),
+    (("plc", "--model-code", "70000"), "holds 0-65535"),
+    (("controller", "--trigger-every", "-1"), "--trigger-every -1: seconds"),
+])
+def test_numbers_that_cannot_work_are_refused_at_the_start(argv: tuple[str, ...],
+                                                           words: str) -> None:
+    """A sweep: these were taken silently (a negative period, NaN) or refused only at the
+    first vehicle (a model code that does not fit the register)."""
+    r = subprocess.run([sys.executable, "-m", "stationd", "sim", *argv], cwd=ROOT,
+                       capture_output=True, text=True, timeout=30)
+    assert r.returncode == 2 and words in r.stderr, r
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+
+
+def test_a_busy_port_is_one_line_for_the_plc_as_for_the_controller() -> None:
+    """A sweep: the PLC on a port in use ended in pymodbus's RuntimeError traceback."""
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        r = subprocess.run([sys.executable, "-m", "stationd", "sim", "plc", "--port",
+                            str(port)], cwd=ROOT, capture_output=True, text=True, timeout=60,
+                           stdin=subprocess.DEVNULL)
+    assert r.returncode == 1 and f"cannot listen on 127.0.0.1:{port}" in r.stderr, r
+    assert "Traceback" not in r.stderr
+
+
 def test_vins_have_17_characters_of_the_alphabet_and_their_check_digit() -> None:
     assert check_digit("1M8GDM9AXKP042788") == "X"        # the standard's worked example
     vins = [make_vin(n) for n in (0, 1, 42, 999_999)]
