@@ -52,6 +52,9 @@ class OpcUaConfig:
         if url.scheme != "opc.tcp" or not url.hostname or port is None:
             raise m["endpoint"].error(f"not an OPC UA endpoint: {endpoint!r} "
                                       "(opc.tcp://HOST:PORT, e.g. opc.tcp://0.0.0.0:4840)")
+        if port == 0:   # a port the system picks: no MES could be told where to connect
+            raise m["endpoint"].error(f"{endpoint}: port 0 is any free port, which no MES "
+                                      "can be told: give the port the MES connects to (4840)")
         sid = m["station_id"].text() if "station_id" in m else d.station_id
         if not 1 <= len(sid) <= 64 or not sid.isprintable():
             raise m["station_id"].error("1-64 printable characters")

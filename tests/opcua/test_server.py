@@ -66,8 +66,10 @@ class Collector:
         await asyncio.wait_for(enough(), timeout)
 
 
-async def serving(cfg: OpcUaConfig, repo: Repository):
-    srv = OpcUaServer(cfg)
+async def serving(cfg: OpcUaConfig, repo: Repository, **server: Any):
+    """The server on ``cfg`` (``server`` go to OpcUaServer) started and running on ``repo``
+    (its task has not run yet when this returns: the caller may still set the server up)."""
+    srv = OpcUaServer(cfg, **server)
     await srv.start()
     stop = asyncio.Event()
     task = asyncio.create_task(srv.run(stop, repo))
@@ -191,25 +193,28 @@ def test_identification_state_and_the_result_methods(repo):
     assert out["unknown"][2] != 0
 
 
+async def mes_client_reads(repo: Repository) -> dict[str, Any]:
+    """What ``mes_client.py``, a client in its own process sharing no class with the server,
+    reads of the latest result from a server serving ``repo``."""
+    srv, stop, task = await serving(config(), repo)
+    try:
+        proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "tests.opcua.mes_client", srv.url, "ST-07",
+            cwd=ROOT, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+        out, err = await asyncio.wait_for(proc.communicate(), 60)
+        assert proc.returncode == 0, err.decode()[-2000:]
+        return dict(json.loads(out.decode().strip().splitlines()[-1]))
+    finally:
+        await stopping(srv, stop, task)
+
+
 def test_a_client_in_its_own_process_decodes_the_result(repo):
     """No class shared with the server: the client builds its own from the definitions the
     server exposes (complete, with subtyped fields flagged)."""
     record(repo, VIN, "B2", ok=False)
     db_id = repo.ledger.db_id()
 
-    async def scenario() -> dict[str, Any]:
-        srv, stop, task = await serving(config(), repo)
-        try:
-            proc = await asyncio.create_subprocess_exec(
-                sys.executable, "-m", "tests.opcua.mes_client", srv.url, "ST-07",
-                cwd=ROOT, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
-            out, err = await asyncio.wait_for(proc.communicate(), 60)
-            assert proc.returncode == 0, err.decode()[-2000:]
-            return dict(json.loads(out.decode().strip().splitlines()[-1]))
-        finally:
-            await stopping(srv, stop, task)
-
-    got = asyncio.run(scenario())
+    got = asyncio.run(mes_client_reads(repo))
     assert got["error"] == 0 and got["type"] == "JoiningResultMetaDataType"
     assert got["result_id"] == f"{db_id}:1" and got["seq"] == 1 and got["evaluation"] == 2
     assert sorted(got["entities"]) == [[20, VIN], [23, "B2"]]
@@ -270,7 +275,9 @@ def test_the_opcua_section_is_checked_with_its_line(tmp_path):
     for text, needle, line in (("endpoint: http://x:1\nsecurity: [none]\n", "OPC UA endpoint", 1),
                                ("security: [none]\nusers: {mes: plain}\n", "hash", 2),
                                ("security: [sign]\n", "certificates", 1),
-                               ("security: [none]\nport: 1\n", "unknown key", 2)):
+                               ("security: [none]\nport: 1\n", "unknown key", 2),
+                               ("endpoint: opc.tcp://127.0.0.1:0\nsecurity: [none]\n",
+                                "no MES can be told", 1)):
         with pytest.raises(ConfigError) as err:
             OpcUaConfig.from_node(YamlNode.parse(text))
         assert needle in str(err.value) and f":{line}" in str(err.value), str(err.value)
