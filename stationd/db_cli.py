@@ -64,12 +64,14 @@ def _print_errors(errors: Sequence[ConfigError]) -> None:
         sys.stderr.write(f"{e}\n")
 
 
-def open_repository(url: str, *, must_exist: bool, read_only: bool | None = None
-                    ) -> Repository:
+def open_repository(url: str, *, must_exist: bool, read_only: bool | None = None,
+                    missing: str = "import a bolt table first, or give --db or --config "
+                                   "STATION.yaml") -> Repository:
     """The repository of every ``--db`` (and ``--config``'s database); a read command
     (``must_exist``) does not create a missing SQLite file and opens it read-only (no
     migration, no write access needed: the service user's database can be read by the
-    line's engineers); ``read_only=False``: an existing one that the command writes.
+    line's engineers); ``read_only=False``: an existing one that the command writes;
+    ``missing``: what to do when it does not exist (the command's own options).
 
     A URL that is no URL or names no installed driver, and an SQLite
     database that cannot keep what is written (in memory, a folder, a missing folder, another
@@ -92,8 +94,7 @@ def open_repository(url: str, *, must_exist: bool, read_only: bool | None = None
             except OSError as exc:   # a folder on the way this user may not enter
                 raise InputError(f"{path}: cannot read: {exc.strerror}") from None
             if not there:
-                raise InputError(f"no database at {path} (import a bolt table first, or give "
-                                 "--db or --config STATION.yaml)")
+                raise InputError(f"no database at {path} ({missing})")
     problem = sqlite_problem(url, loses="it starts empty and is gone when the command ends")
     if problem is not None:
         raise InputError(problem)

@@ -58,8 +58,10 @@ def _forwarder(args: argparse.Namespace, *, write: bool = False) -> Forwarder:
     cfg = load_station_config(args.config)
     if cfg.line is None:
         raise InputError(f"{args.config}: no line section: nothing is forwarded")
-    return Forwarder(open_repository(cfg.database_url, must_exist=True, read_only=not write),
-                     cfg.line)
+    missing = (f"the station has recorded nothing yet, or {args.config}'s database.url "
+               "names another file")
+    return Forwarder(open_repository(cfg.database_url, must_exist=True, read_only=not write,
+                                     missing=missing), cfg.line)
 
 
 def cmd_line_status(args: argparse.Namespace) -> int:

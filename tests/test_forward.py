@@ -267,6 +267,20 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
                           text=True, cwd=root, timeout=60, check=False)
 
 
+def _line_file(station: Path, db: Path, line_url: str) -> None:
+    """A station file with only its database and its line."""
+    station.write_text(f"database: {{url: 'sqlite:///{db}'}}\n"
+                       f"line: {{url: '{line_url}', station_id: ST-L}}\n")
+
+
+def _retry_is_unreachable(station: Path, db: Path, pg_url: str, port: int) -> None:
+    """With the line database down (the station file pointing at a port nothing serves), a
+    quarantine retry says so in one readable line, exit 3."""
+    _line_file(station, db, pg_url.replace(f":{port}/", ":1/"))
+    got = _cli("line", "quarantine", "--config", str(station), "--retry")
+    assert got.returncode == 3 and "unreachable" in got.stderr and "Traceback" not in got.stderr
+
+
 def test_the_line_commands_show_the_backlog_and_retry_or_export_the_quarantine(
         tmp_path, table, pg_url, pg_server):
     repo = _station(tmp_path, "st.db", table, "VINL", [(1, "B1")])
@@ -274,8 +288,7 @@ def test_the_line_commands_show_the_backlog_and_retry_or_export_the_quarantine(
                                bolt="B2", comment="bad\x00comment")
     repo.close()
     station = tmp_path / "station.yaml"
-    station.write_text(f"database: {{url: 'sqlite:///{tmp_path / 'st.db'}'}}\n"
-                       f"line: {{url: '{pg_url}', station_id: ST-L}}\n")
+    _line_file(station, tmp_path / "st.db", pg_url)
     got = _cli("line", "status", "--config", str(station), "--json")
     assert got.returncode == 1, got.stderr
     assert json.loads(got.stdout)["backlog"] == 2
@@ -296,11 +309,7 @@ def test_the_line_commands_show_the_backlog_and_retry_or_export_the_quarantine(
     assert json.loads(out.read_text())[0]["record"]["user"] == "sam"
     got = _cli("line", "quarantine", "--config", str(station), "--export", str(out))
     assert got.returncode == 2 and "exists" in got.stderr
-    down = pg_url.replace(f":{pg_server.port}/", ":1/")
-    station.write_text(f"database: {{url: 'sqlite:///{tmp_path / 'st.db'}'}}\n"
-                       f"line: {{url: '{down}', station_id: ST-L}}\n")
-    got = _cli("line", "quarantine", "--config", str(station), "--retry")
-    assert got.returncode == 3 and "unreachable" in got.stderr and "Traceback" not in got.stderr
+    _retry_is_unreachable(station, tmp_path / "st.db", pg_url, pg_server.port)
 
 
 def test_the_line_commands_never_make_a_station_database_and_say_an_empty_quarantine(
@@ -310,22 +319,17 @@ def test_the_line_commands_never_make_a_station_database_and_say_an_empty_quaran
     printed nothing, and its retry with the line database down said exit 0."""
     station = tmp_path / "station.yaml"
     missing = tmp_path / "nowhere.db"
-    station.write_text(f"database: {{url: 'sqlite:///{missing}'}}\n"
-                       f"line: {{url: '{pg_url}', station_id: ST-L}}\n")
+    _line_file(station, missing, pg_url)
     for args in (("status",), ("quarantine",), ("quarantine", "--retry")):
         got = _cli("line", *args, "--config", str(station))
         assert got.returncode == 2 and "no database at" in got.stderr, (args, got)
+        assert "recorded nothing yet" in got.stderr and "--db" not in got.stderr
         assert not missing.exists()
     _station(tmp_path, "st.db", table, "VINE", [(1, "B1")]).close()
-    station.write_text(f"database: {{url: 'sqlite:///{tmp_path / 'st.db'}'}}\n"
-                       f"line: {{url: '{pg_url}', station_id: ST-L}}\n")
+    _line_file(station, tmp_path / "st.db", pg_url)
     got = _cli("line", "quarantine", "--config", str(station))
     assert got.returncode == 0 and "nothing quarantined" in got.stdout
-    down = pg_url.replace(f":{pg_server.port}/", ":1/")
-    station.write_text(f"database: {{url: 'sqlite:///{tmp_path / 'st.db'}'}}\n"
-                       f"line: {{url: '{down}', station_id: ST-L}}\n")
-    got = _cli("line", "quarantine", "--config", str(station), "--retry")
-    assert got.returncode == 3 and "unreachable" in got.stderr and "Traceback" not in got.stderr
+    _retry_is_unreachable(station, tmp_path / "st.db", pg_url, pg_server.port)
 
 
 def test_two_hundred_rundowns_made_while_the_server_is_stopped_arrive_once_in_order(
