@@ -33,16 +33,22 @@ from stationd.command_cli import (
     read_password,
     say_refused,
 )
-from stationd.errors import InputError
+from stationd.errors import ConfigError, InputError
+from stationd.filekind import expect
 from stationd.outfile import write_atomic
 from stationd.station.matching import MatchParams, check_spacing
 from stationd.taught import table_text
+from stationd.yamlio import YamlNode
 
 
 def _cad(path: str, model: str) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """The CAD table's YAML tree and the model's bolt entries (ids, positions, parameters)."""
     try:
+        # the station's reader first: a PNG, a station file, a FIFO are each named as such
+        expect(YamlNode.load(path), "bolts", ("psets", "models"))
         doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except ConfigError as exc:
+        raise InputError(f"--from {exc}") from None
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
         raise InputError(f"--from {path}: not a bolt table ({exc})") from None
     models = doc.get("models") if isinstance(doc, dict) else None

@@ -39,6 +39,7 @@ import yaml
 from stationd import progress
 from stationd.config import PairConfig, StationConfig, load_station_config
 from stationd.errors import InputError
+from stationd.filekind import expect
 from stationd.geometry.frames import (
     KINDS,
     MAX_POINT_MM,
@@ -96,7 +97,9 @@ def _observe(node: YamlNode, pair: PairConfig, cfg: StationConfig, base: Path) -
 
 
 def read_points(path: Path, cfg: StationConfig) -> tuple[str, list[Observation]]:
-    root = YamlNode.load(path).mapping(("kind", "points"), required=("points",))
+    node = YamlNode.load(path)
+    expect(node, "points", ("kind", "points"))   # a station file given here is said so
+    root = node.mapping(("kind", "points"), required=("points",))
     kind = root["kind"].text(KINDS) if "kind" in root else "rigid"
     out: list[Observation] = []
     items = root["points"].items()

@@ -131,6 +131,13 @@ def test_teach_checks_its_output_first_and_says_when_no_daemon_answers(tmp_path)
     got = teach("--bolts", "B01", "--out", str(tmp_path / "t.yaml"))
     assert got.returncode == 3 and "no daemon answers" in got.stderr
     assert "Traceback" not in got.stderr and not (tmp_path / "t.yaml").exists()
+    # a sweep: the wrong kind of file as the CAD table is named as such
+    (tmp_path / "pic.png").write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(64))
+    for given, words in ((ROOT / "config" / "sim" / "station.yaml",
+                          "this is a station file, not a bolt table"),
+                         (tmp_path / "pic.png", "not a text file: it looks like a PNG")):
+        got = teach("--from", str(given), "--out", str(tmp_path / "t.yaml"))
+        assert got.returncode == 2 and words in got.stderr, got
 
 
 #: the daemon's runtime alone (stationd.serve), without the command line's simulated world:

@@ -380,3 +380,15 @@ def test_vehicle_points_in_one_plane_are_refused_and_a_broken_registration_is_re
                            _points(tmp_path), "--config", cfg)
     assert code == 0 and "wrote" in out, err
     assert "[0, 0, 0]]" not in broken.read_text()
+
+
+def test_a_file_of_another_kind_as_the_points_is_named(tmp_path, capsys):
+    """A sweep: a station file or a pair calibration given as --points said "cameras: unknown
+    key (accepted: kind, points)"."""
+    cfg = _station_with_pair1(tmp_path)
+    for given, words in ((cfg, "this is a station file, not a reference points file"),
+                         (tmp_path / "pair1.yaml", "this is a stereo pair calibration")):
+        code, _out, err = _main(capsys, "calibrate", "vehicle", "--pair", "pair1", "--points",
+                               given, "--config", cfg)
+        assert code == 2 and words in err, err
+        assert not (tmp_path / "pair1.vehicle.yaml").exists()
