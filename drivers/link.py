@@ -94,6 +94,18 @@ def open_serial(port: str, *, baudrate: int, parity: str = "N", stopbits: int = 
     return ser
 
 
+def _errnos(exc: BaseException) -> set[int]:
+    """The error numbers of ``exc`` and the exceptions it was raised from or during."""
+    out: set[int] = set()
+    seen: BaseException | None = exc
+    while seen is not None and len(out) < 8:
+        for v in (getattr(seen, "errno", None), *(seen.args[:1] if seen.args else ())):
+            if isinstance(v, int):
+                out.add(v)
+        seen = seen.__cause__ or seen.__context__
+    return out
+
+
 def serial_reason(port: str, settings: str, exc: BaseException) -> str:
     """Why ``port`` did not open, in a person's words."""
     code = getattr(exc, "errno", None)
@@ -103,6 +115,8 @@ def serial_reason(port: str, settings: str, exc: BaseException) -> str:
         return f"permission denied on {port} (is the user in group dialout?)"
     if code == errno.EBUSY or "lock" in str(exc):
         return f"{port} is in use by another program"
+    if errno.ENOTTY in _errnos(exc):   # pyserial wraps it: "Could not configure port"
+        return f"{port} is not a serial port (a terminal device: /dev/ttyUSB0, /dev/ttyS0, ...)"
     if isinstance(exc, termios.error | ValueError):
         pty = "; a pty may refuse parity bits: use parity=N" if "/pts/" in port else ""
         return f"{port} refuses {settings} ({exc}){pty}"

@@ -97,6 +97,15 @@ def test_a_missing_serial_port_is_one_error_type_over_every_protocol(scheme):
     assert "no such serial port /dev/ttyNOSUCH7" in str(info.value)
 
 
+@pytest.mark.parametrize("scheme", ["openprotocol+serial", "modbus-rtu"])
+def test_a_path_that_is_no_serial_port_is_said_so(scheme):
+    """A sweep: /dev/null as the port said pyserial's "(25, 'Inappropriate ioctl for
+    device')"."""
+    with pytest.raises(ConnectError) as info:
+        _use(f"{scheme}:///dev/null")
+    assert "/dev/null is not a serial port" in str(info.value), info.value
+
+
 def test_a_socket_connected_to_itself_is_a_refusal_not_a_link(monkeypatch):
     """TCP simultaneous open: a client can be given the very port it dials when nothing
     listens there, and would read its own requests back.  The kernel makes such a socket
