@@ -10,6 +10,9 @@ only once something reads it; opening a path also creates the file, and opening 
 
 from __future__ import annotations
 
+import getpass
+import os
+import stat
 from pathlib import Path
 
 #: the first 16 bytes of every SQLite database file (https://sqlite.org/fileformat.html)
@@ -25,14 +28,38 @@ def missing_folder(folder: Path) -> str:
             "as (or correct the path)")
 
 
-def sqlite_problem(url: str, *, read_header: bool = True, loses: str = STATION_LOSES
-                   ) -> str | None:
+def unwritable_folder(folder: Path, *, as_writer: bool = True) -> str | None:
+    """Why no database can live in ``folder`` (SQLite creates its journal and the station its
+    lock beside the file), or None.  ``as_writer``: this process is the one that will write
+    (the daemon, a ``db`` command), so its own permission counts; otherwise (``config
+    check``, maybe run by another user than the service's) only a folder nobody may write is
+    refused: a read-only file system, or no write permission for anyone (``/proc``: even
+    root cannot create a file there)."""
+    try:
+        read_only = bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+        mode = folder.stat().st_mode
+    except OSError:
+        return None   # not reachable to look at: what opens it says why
+    if read_only:
+        return f"folder {folder} is on a read-only file system: name a folder that can be " \
+               "written (e.g. /var/lib/stationd)"
+    if not stat.S_IMODE(mode) & 0o222:
+        return f"folder {folder} cannot be written by anyone (no write permission): name " \
+               "a folder that can be written (e.g. /var/lib/stationd)"
+    if as_writer and not os.access(folder, os.W_OK | os.X_OK):
+        return f"folder {folder} cannot be written by user {getpass.getuser()}: give it " \
+               "that user, or name another folder"
+    return None
+
+
+def sqlite_problem(url: str, *, read_header: bool = True, loses: str = STATION_LOSES,
+                   as_writer: bool = True) -> str | None:
     """Why the SQLite database of ``url`` cannot keep what is written, in the words of what
     to do; None when it can (or ``url`` is another database, checked when it connects).
     ``url`` has parsed already (``db.engine.make_engine``).  ``read_header``: a file that is
     there must start as an SQLite database (off where reading the file would drop the
     caller's own SQLite locks on it: the daemon's reload).  ``loses``: what an in-memory
-    database loses, for the message."""
+    database loses, for the message.  ``as_writer``: see :func:`unwritable_folder`."""
     from sqlalchemy.engine import make_url
 
     parsed = make_url(url)
@@ -44,12 +71,18 @@ def sqlite_problem(url: str, *, read_header: bool = True, loses: str = STATION_L
                 "sqlite:///stationd.db)")
     if name.startswith("file:"):   # an SQLite URI: its own options, checked when it opens
         return None
+    if parsed.query:   # SQLAlchemy would make them part of the file's name ("x.db?mode=ro")
+        return (f"{url}: an SQLite file's URL takes no options after '?' "
+                f"({', '.join(sorted(parsed.query))}): write sqlite:///{name}")
     path = Path(name)
     if path.is_dir():
         return f"{path} is a folder, not a database file (name a file in it, e.g. " \
                f"sqlite:///{path / 'stationd.db'})"
     if not path.parent.is_dir():
         return missing_folder(path.parent)
+    unwritable = unwritable_folder(path.parent, as_writer=as_writer)
+    if unwritable is not None:
+        return unwritable
     if not path.exists():
         return None   # created when first opened
     if not path.is_file():

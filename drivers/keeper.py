@@ -59,6 +59,27 @@ def fault_kind(exc: BaseException) -> FaultKind:
     return FaultKind.GARBAGE
 
 
+#: Python's own error types that mean a bug in the station's code (a typo, a wrong index, a
+#: wrong call): their traceback is what a developer needs to fix it, so it is journaled (once
+#: per reason).  Any other error that is not a driver error comes from a library under a
+#: driver (OpenCV's ``cv2.error`` for a camera it cannot open, ...): its message is the whole
+#: story, the traceback only points into the library, and one on every retry buries the
+#: journal, so it is one line (the traceback stays at debug level).
+BUG_TYPES: tuple[type[BaseException], ...] = (
+    AttributeError, NameError, TypeError, LookupError, AssertionError, ArithmeticError,
+    NotImplementedError, RecursionError)
+
+
+def _journal_crash(logger: logging.Logger, name: str, what: str, exc: BaseException) -> None:
+    """Journal an exception from a device that is neither a driver error nor an OSError or
+    ValueError (:data:`BUG_TYPES`: with its traceback, else one line)."""
+    if isinstance(exc, BUG_TYPES):
+        logger.error("%s: %s", name, what, exc_info=exc)
+        return
+    logger.error("%s: %s: %s: %s", name, what, type(exc).__name__, one_line(exc))
+    logger.debug("%s: %s", name, what, exc_info=exc)
+
+
 def one_line(exc: BaseException) -> str:
     """The first line of an error's message (the type's name if it has none): a fault
     reason is one readable line."""
@@ -118,8 +139,8 @@ class DeviceKeeper(Generic[D]):
     of reason while attempts keep failing); ``on_back(reconnects)`` when it works again
     (``reconnects`` counts successful reconnects since the first open: a controller that
     reconnected may have forgotten what it was told).  Every exception from the device is a
-    fault, never an exit; one that is not a driver error is a bug and is logged with its
-    traceback as well."""
+    fault, never an exit; one that is not a driver error is journaled as well, with its
+    traceback when it is a bug (:data:`BUG_TYPES`)."""
 
     def __init__(self, name: str, *, open: Callable[[], D],
                  reconnect: Callable[[D], None], close: Callable[[D], None],
@@ -185,11 +206,11 @@ class DeviceKeeper(Generic[D]):
 
     def _failed_attempt(self, exc: Exception) -> tuple[FaultKind, str]:
         self._waited = False
-        if not isinstance(exc, DeviceError | OSError | ValueError):
-            self._log.error("%s: an attempt to connect crashed", self.name, exc_info=exc)
         fault = (fault_kind(exc), one_line(exc))
         if self._told != fault[1]:    # journaled once per reason, not once per attempt
             self._told = fault[1]
+            if not isinstance(exc, DeviceError | OSError | ValueError):
+                _journal_crash(self._log, self.name, "an attempt to connect crashed", exc)
             verb = "not opened" if self.device is None else "not reconnected"
             # debug: the owner journals the fault it is told (one line per event)
             self._log.debug("%s %s: %s", self.name, verb, fault[1])
@@ -228,7 +249,7 @@ class DeviceKeeper(Generic[D]):
                 except Exception as exc:
                     failure = exc if self._lost is None else self._lost
                     if not isinstance(exc, DeviceError | OSError | ValueError):
-                        self._log.error("%s: using it crashed", self.name, exc_info=exc)
+                        _journal_crash(self._log, self.name, "using it crashed", exc)
             await self._go_down(failure or DeviceError("lost", device=self.name))
 
     @property

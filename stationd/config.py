@@ -29,6 +29,7 @@ from drivers.lift.base import RegisterMap
 from drivers.url import parse_url
 from drivers.wrench.modbus_map import WrenchRegisterMap
 from stationd.access import AccessConfig
+from stationd.devicekey import device_key
 from stationd.devicemaps import lift_map, wrench_map
 from stationd.errors import ConfigError, InputError
 from stationd.filekind import expect
@@ -262,6 +263,24 @@ def _refuse(error: ConfigError) -> None:
     raise error
 
 
+def _one_device_each(lift_url: str, wrench_url: str, wrench: YamlNode) -> None:
+    """The lift and the controller must be two devices (keys of ``stationd.devicekey``: two
+    URLs that reach one endpoint are one device, as for the device locks).  One Modbus
+    endpoint and unit as both would take the controller's registers for the lift's, and the
+    lift's for a bolt's parameters; one serial line opened twice garbles both."""
+    key = device_key(lift_url)
+    if key is None or key != device_key(wrench_url):
+        return
+    where = wrench.mapping(("url", "registers", "poll_ms"))["url"]
+    if key.startswith("serial "):
+        raise where.error(f"the same serial line as lift.url ({key.removeprefix('serial ')}): "
+                          "the lift and the controller would each open it and garble each "
+                          "other's frames (give the controller its own port)")
+    raise where.error(f"the same device as lift.url ({key}): the lift PLC and the tightening "
+                      "controller are two devices (give the controller its own address, "
+                      "port or unit)")
+
+
 def _camera_ref(node: YamlNode, cameras: Collection[str] | None) -> str:
     """A camera name of a pair; ``cameras`` None: the section is unreadable, not checked."""
     cam = node.text()
@@ -327,7 +346,7 @@ def _database_url(node: YamlNode, base: Path, check: bool = False, checker: bool
         # only the checker (its own process) reads the file: the daemon validates a reload
         # while its connections hold SQLite's locks, and closing any descriptor of that file
         # drops every POSIX lock the process holds on it (a db import then deleted the WAL)
-        problem = sqlite_problem(url, read_header=checker)
+        problem = sqlite_problem(url, read_header=checker, as_writer=not checker)
         if problem is None or (not checker and problem.startswith(NOT_SQLITE)):
             pass
         elif checker and problem == missing_folder(STATE_DIRECTORY):
@@ -344,8 +363,12 @@ STATE_DIRECTORY = Path("/var/lib/stationd")
 
 def _records(node: YamlNode, base: Path) -> RecordsConfig:
     r = node.mapping(("images_dir", "save_images"))
-    return RecordsConfig(_path(r["images_dir"], base) if "images_dir" in r else None,
-                         r["save_images"].flag() if "save_images" in r else False)
+    images = _path(r["images_dir"], base) if "images_dir" in r else None
+    if images is not None and images.exists() and not images.is_dir():
+        # issue 19: accepted with SQLite, and then no selection's images could ever be saved
+        raise r["images_dir"].error(f"{images} is a file, not a folder (name the folder the "
+                                    "selections' images go to)")
+    return RecordsConfig(images, r["save_images"].flag() if "save_images" in r else False)
 
 
 def _missing(root: YamlNode, key: str) -> None:
@@ -460,6 +483,9 @@ class _Reader:
             nok=self.section("nok", d.nok, NokPolicy.from_node),
             opcua=self.section("opcua", d.opcua, partial(OpcUaConfig.from_node, base_dir=base)),
             path=path)
+        if check and "lift" in self.top and "wrench" in self.top:
+            self.guard(None, _one_device_each, config.lift.url, config.wrench.url,
+                       self.top["wrench"])
         if "references" in self.top:   # projected with the pairs' calibrations: after them
             refs = self.guard(None, partial(
                 References.from_node, marker=marker,

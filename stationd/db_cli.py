@@ -95,10 +95,12 @@ def open_repository(url: str, *, must_exist: bool, read_only: bool | None = None
                 raise InputError(f"{path}: cannot read: {exc.strerror}") from None
             if not there:
                 raise InputError(f"no database at {path} ({missing})")
-    problem = sqlite_problem(url, loses="it starts empty and is gone when the command ends")
+    reads_only = must_exist if read_only is None else read_only
+    problem = sqlite_problem(url, loses="it starts empty and is gone when the command ends",
+                             as_writer=not reads_only)   # a reader need not write its folder
     if problem is not None:
         raise InputError(problem)
-    return Repository.open(url, read_only=must_exist if read_only is None else read_only)
+    return Repository.open(url, read_only=reads_only)
 
 
 # -- db import / export / report -------------------------------------------------------------

@@ -88,6 +88,11 @@ def test_calibrate_stereo_also_writes_both_camera_files(boards, tmp_path, capsys
       "{t}/c.yaml"], "board 'chessboard:9x6'"),
     (["calibrate", "camera", "{t}/none*.png", "--board", SPEC, "--out", "{t}/c.yaml"],
      "matches no file"),
+    # issue 19: a traceback (74 GiB asked of OpenCV; an overflow into a LinAlgError)
+    (["calibrate", "stereo", "--left", "{d}/L*.png", "--right", "{d}/R*.png", "--board",
+      "chessboard:99999x99999:25", "--out", "{t}/p.yaml"], "at most 200 per side"),
+    (["calibrate", "camera", "{d}/L*.png", "--board", "chessboard:9x6:1e308", "--out",
+      "{t}/c.yaml"], "not plausible (at most 500 mm"),
     (["calibrate", "camera", "{d}/L1.png", "{d}/L2.png", "--board", SPEC, "--out",
       "{t}/c.yaml"], "only 2 usable images out of 2"),
     (["calibrate", "camera", "{d}/L*.png", "--board", SPEC, "--out", "{t}/no/c.yaml"],

@@ -297,6 +297,9 @@ def test_a_missing_to_vehicle_file_is_a_warning_not_an_error(sim_copy):
      "option gain_db='9000' is not valid: a gain in dB is 0-48"),
     ("url: 'sim://pair1/left'", "url: 'opencv://0?width=abc'", "cameras.pair1_left.url",
      "option width='abc' is not valid"),
+    # issue 19: OpenCV crashed on it at every retry of the daemon
+    ("url: 'sim://pair1/left'", "url: 'opencv://99999999999999999999'",
+     "cameras.pair1_left.url", "is not a /dev/videoN number (0-255)"),
     ("url: 'sim://pair1/left'", "url: 'sim://pair9/left'", "cameras.pair1_left.url",
      "shows pair 'pair9', which the simulated world does not have (it renders this file's "
      "pairs: pair1, pair2, pair3, pair4): write sim://pair1/left"),
@@ -336,6 +339,11 @@ DB = "database: {url: 'sqlite:///stationd-sim.db'}"
     ("sqlite://", None, "is a database in memory"),
     ("sqlite:///results", "dir", "results is a folder, not a database file"),
     ("sqlite:///pipe.db", "fifo", "pipe.db is not a regular file"),
+    # issue 19: the options became part of the file's name; the lock could not be made
+    ("sqlite:///r.db?mode=ro&uri=true", None,
+     "an SQLite file's URL takes no options after '?' (mode, uri): write sqlite:///"),
+    ("sqlite:////proc/x.db", None, "folder /proc cannot be written by anyone"),
+    ("sqlite:///ro/r.db", "ro", "ro cannot be written by anyone (no write permission)"),
 ])
 def test_a_database_that_cannot_keep_the_results_is_refused(sim_copy, url, setup, message):
     """Issue 19: these passed the check, then lost every result at exit, said "disk I/O
@@ -349,6 +357,8 @@ def test_a_database_that_cannot_keep_the_results_is_refused(sim_copy, url, setup
         (sim_copy / name).write_text("a note, not a database\n")
     elif setup == "fifo":
         os.mkfifo(sim_copy / name)
+    elif setup == "ro":
+        (sim_copy / "ro").mkdir(mode=0o555)
     station = _edit(sim_copy / "station.yaml", DB, f"database: {{url: '{url}'}}")
     [error] = check_station(station).errors
     assert (error.line, error.key) == (_line(station, url), "database.url")
@@ -573,6 +583,40 @@ def test_a_camera_serves_one_side_of_one_pair(sim_copy, old, new, key, message):
     assert message in str(errors[0])
     with pytest.raises(ConfigError, match=re.escape(message)):
         load_station_config(station, station=True)
+
+
+@pytest.mark.parametrize(("lift", "wrench", "message"), [
+    ("modbus-tcp://127.0.0.1:502?unit=1", "modbus-tcp://LOCALHOST?unit=1&timeout=2",
+     "wrench.url: the same device as lift.url (tcp 127.0.0.1:502 unit 1)"),
+    ("modbus-rtu:///dev/ttyS0?unit=1", "modbus-rtu:///dev/ttyS0?unit=2",
+     "wrench.url: the same serial line as lift.url (/dev/ttyS0)"),
+    ("modbus-tcp://127.0.0.1:502?unit=1", "modbus-tcp://127.0.0.1:502?unit=2", None),
+])
+def test_the_lift_and_the_controller_are_two_devices(sim_copy, lift, wrench, message):
+    """Issue 19: one Modbus endpoint and unit as both passed the check and ran."""
+    station = _edit(sim_copy / "station.yaml", "lift: {url: 'sim://lift'}",
+                    f"lift: {{url: '{lift}'}}")
+    _edit(station, "wrench: {url: 'sim://wrench'}", f"wrench: {{url: '{wrench}'}}")
+    errors = check_station(station).errors
+    if message is None:
+        assert errors == []
+        return
+    [error] = errors
+    assert (error.key, error.line) == ("wrench.url", _line(station, wrench))
+    assert message in str(error)
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        load_station_config(station, station=True)
+
+
+def test_an_images_folder_that_is_a_file_is_refused(sim_copy):
+    """Issue 19: accepted with SQLite; no selection's images could ever be saved."""
+    station = sim_copy / "station.yaml"
+    station.write_text(station.read_text() + "records: {images_dir: bolts.yaml}\n")
+    [error] = check_station(station).errors
+    assert (error.key, error.line) == ("records.images_dir", _line(station, "images_dir"))
+    assert f"{sim_copy / 'bolts.yaml'} is a file, not a folder" in str(error)
+    _edit(station, "images_dir: bolts.yaml", "images_dir: crops")   # made when first needed
+    assert check_station(station).ok
 
 
 def test_a_duplicate_top_level_key_is_the_one_error_not_missing_sections(sim_copy):

@@ -31,6 +31,8 @@ log = logging.getLogger(__name__)
 FORM = "opencv://INDEX[?width=W&height=H&fps=F&fourcc=MJPG&api=v4l2] | opencv:///path/video.avi"
 APIS = {"any": cv2.CAP_ANY, "v4l2": cv2.CAP_V4L2, "ffmpeg": cv2.CAP_FFMPEG,
         "gstreamer": cv2.CAP_GSTREAMER, "images": cv2.CAP_IMAGES}
+#: the highest camera index: Linux numbers video devices /dev/video0-255 (VIDEO_NUM_DEVICES)
+MAX_INDEX = 255
 
 
 def _fourcc(text: str) -> str:
@@ -60,6 +62,9 @@ class OpenCvCamera(CameraDevice):
             self.source: int | str = parsed.path
         elif parsed.host and parsed.host.isdigit() and parsed.path in ("", "/"):
             self.source = int(parsed.host)
+            if self.source > MAX_INDEX:   # OpenCV fails such an index with a C++ exception
+                raise parsed.error(f"the camera index {self.source} is not a /dev/videoN "
+                                   f"number (0-{MAX_INDEX})")
         else:
             raise parsed.error(f"expected a camera index or a file path: {FORM}")
         self.is_file = isinstance(self.source, str)
@@ -89,6 +94,10 @@ class OpenCvCamera(CameraDevice):
             if not cap.isOpened():
                 cap.release()
                 cap = cv2.VideoCapture(self.source, APIS[self.opts["api"]])
+        except cv2.error as exc:    # OpenCV's C++ refusal: a device fault, not a crash
+            why = (exc.err or str(exc)).strip("> \n").splitlines()
+            raise ConnectError(f"OpenCV cannot open {self.source!r}: "
+                               f"{why[0] if why else 'refused'}", device=self.url) from None
         finally:
             cv2.utils.logging.setLogLevel(old)
         if not cap.isOpened():

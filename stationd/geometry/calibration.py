@@ -93,10 +93,16 @@ def parse_board(spec: str) -> Board:
     cols, rows = int(m.group(1)), int(m.group(2))
     if cols < 3 or rows < 3:
         raise InputError(f"board {spec!r}: at least 3x3 needed, got {cols}x{rows}")
+    if cols > MAX_SIDE or rows > MAX_SIDE:   # 99999x99999 asked OpenCV for tens of GiB
+        raise InputError(f"board {spec!r}: at most {MAX_SIDE} per side, got {cols}x{rows} "
+                         "(count the board's inner corners, or squares for ChArUco)")
     square = _positive_mm(spec, "square size", parts[2])
     if square < MIN_SQUARE_MM:
         raise InputError(f"board {spec!r}: a square of {square:g} mm is not plausible (at least "
                          f"{MIN_SQUARE_MM:g} mm; sizes are in millimetres, not metres)")
+    if square > MAX_SQUARE_MM:   # 1e308 overflowed the calibration into a LinAlgError
+        raise InputError(f"board {spec!r}: a square of {square:g} mm is not plausible (at most "
+                         f"{MAX_SQUARE_MM:g} mm; sizes are in millimetres)")
     if kind == "chessboard":
         return Board("chessboard", cols, rows, square)
     marker = _positive_mm(spec, "marker size", parts[3])
@@ -127,6 +133,8 @@ def _outlier(errors: dict[int, float], factor: float, floor_px: float) -> tuple[
     return worst, f"outlier error {errors[worst]:.2f} px > {threshold:.2f} px"
 
 MIN_SQUARE_MM = 1.0  # a printed board's square: below 1 mm it was given in metres
+MAX_SQUARE_MM = 500.0  # a board of 9x6 such squares is already 5 m wide
+MAX_SIDE = 200  # corners (or squares) per side: far above any printed board
 
 
 def _positive_mm(spec: str, what: str, text: str) -> float:

@@ -165,6 +165,11 @@ def test_database_errors_are_one_line(run, tmp_path):
     ("report", "sqlite:///{tmp}", "{tmp} is a folder, not a database file"),
     ("import", "sqlite:///{tmp}/newdir/x.db", "folder {tmp}/newdir does not exist: create "
                                               "it"),
+    # made a file named "imp.db?mode=ro" (the options as part of its name); /proc
+    ("import", "sqlite:///{tmp}/imp.db?mode=ro&uri=true",
+     "an SQLite file's URL takes no options after '?' (mode, uri): write "
+     "sqlite:///{tmp}/imp.db"),
+    ("import", "sqlite:////proc/x.db", "folder /proc cannot be written by anyone"),
     # what a URL looks like, instead of SQLAlchemy's words
     ("import", "t1.db", "database URL 't1.db': not a URL: write sqlite:///t1.db for an SQLite "
                         "file"),

@@ -191,6 +191,36 @@ def test_a_bug_in_the_device_is_a_fault_not_an_exit(caplog):
     assert "using it crashed" in caplog.text
 
 
+class LibraryError(Exception):
+    """What a library under a driver raises (OpenCV's ``cv2.error``): not a driver error."""
+
+
+def test_a_library_error_on_open_is_one_journal_line_once_without_traceback(caplog):
+    """OpenCV refusing a camera is a device fault: one line, not a traceback per retry."""
+    crash = LibraryError("(-5:Bad argument) in function 'VideoCapture'\n> more detail")
+    w = World(opens=[crash, crash, crash, None], reconnects=[], uses=[None])
+    k = w.keeper(backoff=Backoff(0.5, 4.0, jitter=0.0))
+    caplog.set_level("INFO")
+    assert k.open_now() == ("garbage", "(-5:Bad argument) in function 'VideoCapture'")
+    run(w, k)
+    errors = [r for r in caplog.records if r.levelname == "ERROR"]
+    assert [r.getMessage() for r in errors] == [
+        "lift: an attempt to connect crashed: LibraryError: (-5:Bad argument) in function "
+        "'VideoCapture'"]
+    assert errors[0].exc_info is None and "Traceback" not in caplog.text
+    assert k.up
+
+
+def test_a_bug_on_open_keeps_its_traceback_once(caplog):
+    w = World(opens=[KeyError("unit"), KeyError("unit"), None], reconnects=[], uses=[None])
+    k = w.keeper(backoff=Backoff(0.5, 4.0, jitter=0.0))
+    k.open_now()
+    run(w, k)
+    errors = [r for r in caplog.records if r.levelname == "ERROR"]
+    assert len(errors) == 1 and errors[0].exc_info is not None
+    assert "an attempt to connect crashed" in errors[0].getMessage()
+
+
 def test_close_closes_the_device_and_an_attempt_after_close_closes_what_it_opens():
     w = World(opens=[None, None], reconnects=[], uses=[])
     k = w.keeper()

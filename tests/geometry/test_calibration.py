@@ -178,6 +178,11 @@ def test_parse_board():
     ("chessboard:9x6:-5", "must be a positive number"),
     ("chessboard:9x6:0.025", "a square of 0.025 mm is not plausible (at least 1 mm"),
     ("chessboard:9x6:nan", "must be a positive number"),
+    # issue 19: 74 GiB asked of OpenCV; an overflow into a LinAlgError
+    ("chessboard:99999x99999:25", "at most 200 per side, got 99999x99999"),
+    ("chessboard:9x201:25", "at most 200 per side"),
+    ("chessboard:9x6:1e308", "a square of 1e+308 mm is not plausible (at most 500 mm"),
+    ("charuco:11x8:600:15:DICT_5X5_100", "a square of 600 mm is not plausible"),
     ("charuco:11x8:20:15", "expected chessboard:COLSxROWS"),
     ("charuco:11x8:20:25:DICT_5X5_100", "must be smaller than the square"),
     ("charuco:11x8:20:15:DICT_9X9_1", "unknown dictionary"),

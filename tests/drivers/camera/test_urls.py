@@ -30,6 +30,8 @@ def test_registry_imports_lazily():
     ("file:///tmp/x_*.png?fps=3", "unknown option(s) fps"),
     ("opencv://zero", "expected a camera index or a file path"),
     ("opencv://0?width=0", "option width='0' is not valid"),
+    ("opencv://256", "the camera index 256 is not a /dev/videoN number (0-255)"),
+    ("opencv://99999999999999999999", "is not a /dev/videoN number (0-255)"),
     ("aravis://?trigger=software", "expected aravis://DEVICE-ID"),
     ("aravis://cam?trigger=line", "option trigger='line' is not valid"),
     ("aravis://cam?pixel_format=Mono12", "option pixel_format='Mono12' is not valid"),
