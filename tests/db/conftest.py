@@ -3,10 +3,17 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
+from sqlalchemy import Engine, text
 
+from db.migrate import upgrade
 from db.repository import Repository
+from stationd.boltfile import import_bolts
+from stationd.config import StationConfig
+from stationd.station.core import Selection
+from stationd.station.records import Records
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "config" / "bolts.example.yaml"
@@ -72,6 +79,49 @@ def repo(tmp_path: Path):
     r = Repository.open(url_of(tmp_path / "station.db"))
     yield r
     r.close()
+
+
+@pytest.fixture
+def sedan(repo: Repository, bolts_file: Path) -> Repository:
+    """The database with :data:`BASE` imported and vehicle VIN1 (a SEDAN) started."""
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    return repo
+
+
+def old_record(engine: Engine, revision: str) -> None:
+    """The database of ``engine`` migrated only to ``revision``, with one OK rundown (bolt B1 of
+    vehicle OLD) written as the code of that revision wrote it: what a later migration finds."""
+    upgrade(engine, revision)
+    with engine.begin() as conn:
+        conn.execute(text("INSERT INTO vehicle_models (id, name, seq) VALUES (1, 'M', 0)"))
+        conn.execute(text("INSERT INTO bolts (id, model_id, code, name, x_mm, y_mm, z_mm, seq)"
+                          " VALUES (1, 1, 'B1', 'one', 0, 0, 0, 0)"))
+        conn.execute(text(
+            "INSERT INTO process_parameters (id, bolt_id, version, pset, torque_target, "
+            "torque_min, torque_max, created_at) VALUES (1, 1, 1, 1, 50, 45, 55, "
+            "'2026-01-01 00:00:00')"))
+        conn.execute(text("INSERT INTO vehicles (id, vin, model_id, started_at) VALUES "
+                          "(1, 'OLD', 1, '2026-01-01 00:00:00')"))
+        conn.execute(text(
+            "INSERT INTO tightening_records (vehicle_id, bolt_id, parameters_id, x_mm, y_mm, "
+            "z_mm, match_distance_mm, tilt_deg, params_sent, acknowledged, status, "
+            "recorded_at, images) VALUES (1, 1, 1, 0, 0, 0, 0, 0, '{}', 1, 'ok', "
+            "'2026-01-01 00:00:01', '[]')"))
+
+
+def b1_selected(tmp_path: Path, bolts_file: Path, pset: int, **sel: Any
+                ) -> tuple[StationConfig, Records, Repository, Selection]:
+    """The station's records opened (as the station opens them) on a new database of
+    ``bolts_file``, vehicle VIN1 (a SEDAN) started, and B1 selected as the core selects it:
+    with ``pset``, its current parameters version and ``sel`` (more fields)."""
+    cfg = StationConfig(database_url=url_of(tmp_path / "st.db"), bolts_path=bolts_file)
+    records = Records(cfg)
+    repo = records.open()
+    repo.start_vehicle("VIN1", "SEDAN")
+    version = repo.bolts_for_model("SEDAN")[0].parameters_id
+    return cfg, records, repo, Selection("B1", pset, (0.0, 0.0, 0.0), 1.0, 0.5, 1.0, 1.1,
+                                         vin="VIN1", parameters_id=version, **sel)
 
 
 def record(repo: Repository, vin: str, bolt: str, ok: bool = True, **kw):

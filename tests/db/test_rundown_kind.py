@@ -9,25 +9,14 @@ from datetime import UTC, datetime
 from types import SimpleNamespace
 
 import pytest
-from sqlalchemy import create_engine, text
+from sqlalchemy import create_engine
 
 from db.errors import DataError
 from db.kinds import LOOSENED, LOOSENING, NOK, OK, TIGHTENING, TO_LOOSEN
-from db.migrate import upgrade
 from db.repository import Repository
-from stationd.boltfile import import_bolts
-from stationd.config import StationConfig
-from stationd.station.core import Record, Selection
-from stationd.station.records import Records
+from stationd.station.core import Record
 from stationd.web.results import Results, rundowns_csv
-from tests.db.conftest import record, url_of
-
-
-@pytest.fixture
-def sedan(repo, bolts_file):
-    import_bolts(repo, bolts_file)
-    repo.start_vehicle("VIN1", "SEDAN")
-    return repo
+from tests.db.conftest import b1_selected, old_record, record, url_of
 
 
 def _status(repo: Repository, bolt: str) -> tuple[str, str | None]:
@@ -100,22 +89,7 @@ def test_a_kind_that_is_not_a_rundown_is_refused(sedan):
 def test_records_before_the_migration_are_tightenings(tmp_path):
     url = url_of(tmp_path / "old.db")
     engine = create_engine(url)
-    upgrade(engine, "0007")
-    with engine.begin() as conn:
-        conn.execute(text("INSERT INTO vehicle_models (id, name, seq) VALUES (1, 'M', 0)"))
-        conn.execute(text("INSERT INTO bolts (id, model_id, code, name, x_mm, y_mm, z_mm, seq)"
-                          " VALUES (1, 1, 'B1', 'one', 0, 0, 0, 0)"))
-        conn.execute(text(
-            "INSERT INTO process_parameters (id, bolt_id, version, pset, torque_target, "
-            "torque_min, torque_max, created_at) VALUES (1, 1, 1, 1, 50, 45, 55, "
-            "'2026-01-01 00:00:00')"))
-        conn.execute(text("INSERT INTO vehicles (id, vin, model_id, started_at) VALUES "
-                          "(1, 'OLD', 1, '2026-01-01 00:00:00')"))
-        conn.execute(text(
-            "INSERT INTO tightening_records (vehicle_id, bolt_id, parameters_id, x_mm, y_mm, "
-            "z_mm, match_distance_mm, tilt_deg, params_sent, acknowledged, status, "
-            "recorded_at, images) VALUES (1, 1, 1, 0, 0, 0, 0, 0, '{}', 1, 'ok', "
-            "'2026-01-01 00:00:01', '[]')"))
+    old_record(engine, "0007")
     engine.dispose()
     with Repository.open(url) as repo:
         [b1] = repo.vehicle_report("OLD").bolts
@@ -123,13 +97,7 @@ def test_records_before_the_migration_are_tightenings(tmp_path):
 
 
 def test_the_station_records_the_kind_and_the_loosen_pset_it_sent(tmp_path, bolts_file):
-    cfg = StationConfig(database_url=url_of(tmp_path / "st.db"), bolts_path=bolts_file)
-    records = Records(cfg)
-    repo = records.open()
-    repo.start_vehicle("VIN1", "SEDAN")
-    version = repo.bolts_for_model("SEDAN")[0].parameters_id
-    sel = Selection("B1", 90, (0.0, 0.0, 0.0), 1.0, 0.5, 1.0, 1.1, vin="VIN1",
-                    parameters_id=version, loosen=True)
+    _, records, repo, sel = b1_selected(tmp_path, bolts_file, 90, loosen=True)
     result = SimpleNamespace(tightening_id=7, pset=90, ok=True, torque_nm=40.0,
                              angle_deg=-720.0)
     records.write(records.unsaved_result(Record("VIN1", "B1", result, sel, kind=LOOSENING),

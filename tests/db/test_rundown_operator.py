@@ -11,48 +11,23 @@ import json
 from datetime import UTC, datetime, timedelta
 from types import SimpleNamespace
 
-import pytest
-from sqlalchemy import create_engine, inspect, text
+from sqlalchemy import create_engine, inspect
 
-from db.migrate import upgrade
 from db.repository import Repository
-from stationd.boltfile import import_bolts
 from stationd.cli import main
 from stationd.config import StationConfig
-from stationd.station.core import Record, Selection
+from stationd.station.core import Record
 from stationd.station.records import Records
 from stationd.web.results import Results, rundowns_csv
-from tests.db.conftest import record, url_of
-
-
-@pytest.fixture
-def sedan(repo, bolts_file):
-    import_bolts(repo, bolts_file)
-    repo.start_vehicle("VIN1", "SEDAN")
-    return repo
+from tests.db.conftest import b1_selected, old_record, record, url_of
 
 
 def test_a_database_of_the_last_revision_upgrades_and_its_records_have_no_operator(tmp_path):
     url = url_of(tmp_path / "old.db")
     engine = create_engine(url)
-    upgrade(engine, "0010")
+    old_record(engine, "0010")
     assert "operator" not in {c["name"] for c in inspect(engine).get_columns(
         "tightening_records")}
-    with engine.begin() as conn:
-        conn.execute(text("INSERT INTO vehicle_models (id, name, seq) VALUES (1, 'M', 0)"))
-        conn.execute(text("INSERT INTO bolts (id, model_id, code, name, x_mm, y_mm, z_mm, seq)"
-                          " VALUES (1, 1, 'B1', 'one', 0, 0, 0, 0)"))
-        conn.execute(text(
-            "INSERT INTO process_parameters (id, bolt_id, version, pset, torque_target, "
-            "torque_min, torque_max, created_at) VALUES (1, 1, 1, 1, 50, 45, 55, "
-            "'2026-01-01 00:00:00')"))
-        conn.execute(text("INSERT INTO vehicles (id, vin, model_id, started_at) VALUES "
-                          "(1, 'OLD', 1, '2026-01-01 00:00:00')"))
-        conn.execute(text(
-            "INSERT INTO tightening_records (vehicle_id, bolt_id, parameters_id, x_mm, y_mm, "
-            "z_mm, match_distance_mm, tilt_deg, params_sent, acknowledged, status, "
-            "recorded_at, images) VALUES (1, 1, 1, 0, 0, 0, 0, 0, '{}', 1, 'ok', "
-            "'2026-01-01 00:00:01', '[]')"))
     engine.dispose()
     with Repository.open(url) as repo:     # opening migrates to the head
         record(repo, "OLD", "B1", tightening_id=9, operator="olga")
@@ -88,13 +63,7 @@ def test_the_feed_report_and_exports_carry_the_operator_or_none(sedan, tmp_path,
 
 def test_the_station_records_the_selections_operator_also_for_an_owed_enable(tmp_path,
                                                                               bolts_file):
-    cfg = StationConfig(database_url=url_of(tmp_path / "st.db"), bolts_path=bolts_file)
-    records = Records(cfg)
-    repo = records.open()
-    repo.start_vehicle("VIN1", "SEDAN")
-    version = repo.bolts_for_model("SEDAN")[0].parameters_id
-    sel = Selection("B1", 1, (0.0, 0.0, 0.0), 1.0, 0.5, 1.0, 1.1, vin="VIN1",
-                    parameters_id=version, operator="olga")
+    cfg, records, repo, sel = b1_selected(tmp_path, bolts_file, 1, operator="olga")
     records.note_enable(sel)            # the station stops with the tool on
     repo.close()
     again = Records(cfg)

@@ -5,8 +5,6 @@ GetResultById carry the torque and angle traces, decoded by a client in its own 
 from __future__ import annotations
 
 import asyncio
-import json
-import sys
 from typing import Any
 
 import pytest
@@ -16,12 +14,19 @@ from db.curves import store_curve
 from stationd.opcua.curves import CurveJoin
 from stationd.opcua.model import IJT_URI, RESULT_URI, load_client_types
 from stationd.opcua.results import PQ_ANGLE, PQ_TIME, PQ_TORQUE
-from stationd.opcua.server import OpcUaServer
 from stationd.opcua.uatypes import ua
 from stationd.station.events import EventBus, ResultRecorded
 from tests.db.conftest import record
 from tests.opcua.test_catchup import Mes, serving_ready
-from tests.opcua.test_server import ROOT, VIN, Collector, config, repo, stopping
+from tests.opcua.test_server import (
+    VIN,
+    Collector,
+    config,
+    mes_client_reads,
+    repo,
+    serving,
+    stopping,
+)
 
 __all__ = ["repo"]   # the fixture, shared with test_server
 
@@ -91,11 +96,8 @@ def test_a_curve_bolts_event_and_get_result_by_id_carry_its_curve(repo):
 
     async def scenario() -> dict[str, Any]:
         bus = EventBus()   # the station says each result was recorded: read at once
-        srv = OpcUaServer(config(), bus=bus)
-        srv.join.wait_s = 1.0
-        await srv.start()
-        stop = asyncio.Event()
-        task = asyncio.create_task(srv.run(stop, repo))
+        srv, stop, task = await serving(config(), repo, bus=bus)
+        srv.join.wait_s = 1.0   # before the server's task first runs
         loop = asyncio.get_running_loop()
         out: dict[str, Any] = {}
         try:
@@ -156,22 +158,7 @@ def test_a_client_in_its_own_process_decodes_the_curve(repo):
     record(repo, VIN, "B2", tightening_id=7)
     _store(repo, 7)
 
-    async def scenario() -> dict[str, Any]:
-        srv = OpcUaServer(config())
-        await srv.start()
-        stop = asyncio.Event()
-        task = asyncio.create_task(srv.run(stop, repo))
-        try:
-            proc = await asyncio.create_subprocess_exec(
-                sys.executable, "-m", "tests.opcua.mes_client", srv.url, "ST-07",
-                cwd=ROOT, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
-            out, err = await asyncio.wait_for(proc.communicate(), 60)
-            assert proc.returncode == 0, err.decode()[-2000:]
-            return dict(json.loads(out.decode().strip().splitlines()[-1]))
-        finally:
-            await stopping(srv, stop, task)
-
-    got = asyncio.run(scenario())
+    got = asyncio.run(mes_client_reads(repo))
     trace = {pq: (name, values) for name, pq, values in got["trace"]}
     assert trace[PQ_TORQUE][0] == "Torque" and trace[PQ_TORQUE][1] == pytest.approx(TORQUE)
     assert trace[PQ_ANGLE][1] == pytest.approx(ANGLE) and len(trace[PQ_TIME][1]) == N

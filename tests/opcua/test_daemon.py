@@ -12,10 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from drivers.lift.sim import SimulatedPlc
-from drivers.wrench.sim import SimController
-from stationd.sim.devices_cli import psets_of
-from tests.station.daemons import SIM, Proc, at_height, free_port, until
+from tests.station.daemons import free_port, tracking, until
 
 ROOT = Path(__file__).resolve().parents[2]
 VIN = "OPCUAVIN000000001"
@@ -23,18 +20,14 @@ VIN = "OPCUAVIN000000001"
 
 @pytest.mark.timeout(300)
 def test_a_bolt_tightened_at_the_station_is_the_mes_latest_result(tmp_path):
-    lift_port, ctl_port, ua_port = free_port(), free_port(), free_port()
-    plc = SimulatedPlc()
-    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=12, nok_rate=0.0)
+    ua_port = free_port()
 
     def edit(text: str) -> str:
         return text + (f"\nopcua: {{endpoint: 'opc.tcp://127.0.0.1:{ua_port}', "
                        "station_id: ST-UA, security: [none]}\n")
 
-    d = Proc(tmp_path, lift_port, ctl_port, edit=edit)
     pose = tmp_path / "pose"
-    try:
-        at_height(d, plc, ctl, lift_port, ctl_port, VIN)
+    with tracking(tmp_path, VIN, seed=12, edit=edit) as (d, _, ctl):
         d.wait_log("OPC UA: serving")
         pose.write_text("B05")
         d.wait_log("tightening bolt B05")
@@ -62,9 +55,3 @@ def test_a_bolt_tightened_at_the_station_is_the_mes_latest_result(tmp_path):
         until(has_it, 90, "the rundown as the latest result")
         assert [23, "B05"] in doc["entities"]
         assert doc["evaluation"] == 1
-        assert d.stop() == 0
-    finally:
-        d.kill()
-        ctl.close()
-        plc.close()
-    assert "Traceback" not in d.log()

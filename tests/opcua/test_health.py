@@ -12,10 +12,10 @@ from asyncua.client.client import Client
 
 from stationd.opcua.health import FAILURE, NORMAL, OFF_SPEC
 from stationd.opcua.model import DI_URI, IJT_URI, MACHINERY_URI
-from stationd.opcua.server import NAMESPACE, OpcUaServer
+from stationd.opcua.server import NAMESPACE
 from stationd.opcua.uatypes import ua
 from stationd.station.events import DeviceHealth, EventBus, LineLinkChanged
-from tests.opcua.test_server import config, repo, stopping
+from tests.opcua.test_server import config, repo, serving, stopping
 
 __all__ = ["repo"]   # the fixture, shared with test_server
 
@@ -58,10 +58,7 @@ def test_a_client_sees_a_device_go_to_fault_and_back(repo):
     bus = EventBus()
 
     async def scenario() -> dict[str, Any]:
-        srv = OpcUaServer(config(), bus=bus, devices=DEVICES)
-        await srv.start()
-        stop = asyncio.Event()
-        task = asyncio.create_task(srv.run(stop, repo))
+        srv, stop, task = await serving(config(), repo, bus=bus, devices=DEVICES)
         loop = asyncio.get_running_loop()
         out: dict[str, Any] = {}
         try:

@@ -8,9 +8,10 @@ Two harnesses, for two kinds of test:
   ``sim://`` cameras rendered by a :class:`World`; the test drives the world and the devices
   and reads the station's bus.  Waits are :func:`until_async` on the station's loop.
 * as systemd runs it (:class:`Proc`): ``station_proc.py`` (the real ``serve`` with its
-  signals) on a copy of config/sim whose devices are served from the test process
-  (:func:`sim_devices`, :func:`at_height`); the test reads its journal and its notification
-  socket.  Waits are :func:`until`, off any loop.
+  signals) on a copy of config/sim (:func:`sim_station`) whose devices are served from the
+  test process (:func:`serve_devices`, :func:`at_height`, all of it :func:`tracking`); the
+  test reads its journal and its notification socket, and the daemon must stop cleanly after
+  it (:func:`stops_cleanly`).  Waits are :func:`until`, off any loop.
 """
 
 from __future__ import annotations
@@ -148,23 +149,35 @@ def scenario(tmp_path: Path, body: Callable[[Station, World], Awaitable[None]],
 
 
 # -- as systemd runs it ----------------------------------------------------------------------
+def sim_station(tmp: Path, lift_url: str, ctl_port: int,
+                edit: Callable[[str], str] | None = None) -> Path:
+    """config/sim copied into ``tmp``, its station file (returned) on the lift PLC at
+    ``lift_url`` and the controller on loopback ``ctl_port``, its database in ``tmp``, no
+    screens, frames up to 5 s old accepted (the simulator renders 20 MP on shared cores,
+    seconds after the exposure when the machine is busy: freshness is test_core's); ``edit``
+    makes the final text."""
+    for f in SIM.iterdir():
+        shutil.copy(f, tmp)
+    station = tmp / "station.yaml"
+    text = station.read_text()
+    for old, new in (("sim://lift", lift_url),
+                     ("sim://wrench", f"openprotocol://127.0.0.1:{ctl_port}"),
+                     ("sqlite:///stationd-sim.db", f"sqlite:///{tmp}/station.db"),
+                     ("max_age_s: 0.5", "max_age_s: 5.0"),
+                     ("http: {listen: '127.0.0.1:8080'}", "")):
+        assert old in text
+        text = text.replace(old, new)
+    station.write_text(edit(text) if edit else text)
+    return station
+
+
 class Proc:
     """``station_proc.py`` on a copy of config/sim whose lift and controller are on loopback
     ports (nothing listening until the test says so); the journal goes to a file."""
 
     def __init__(self, tmp: Path, lift_port: int, ctl_port: int,
                  edit: Callable[[str], str] | None = None) -> None:
-        for f in SIM.iterdir():
-            shutil.copy(f, tmp)
-        text = (tmp / "station.yaml").read_text()
-        for old, new in (("sim://lift", f"modbus-tcp://127.0.0.1:{lift_port}?timeout=0.5"),
-                         ("sim://wrench", f"openprotocol://127.0.0.1:{ctl_port}"),
-                         ("sqlite:///stationd-sim.db", f"sqlite:///{tmp}/station.db"),
-                         ("max_age_s: 0.5", "max_age_s: 5.0"),
-                         ("http: {listen: '127.0.0.1:8080'}", "")):
-            assert old in text
-            text = text.replace(old, new)
-        (tmp / "station.yaml").write_text(edit(text) if edit else text)
+        sim_station(tmp, f"modbus-tcp://127.0.0.1:{lift_port}?timeout=0.5", ctl_port, edit)
         (tmp / "pose").write_text("")
         self.tmp = tmp
         self.sock = NotifyManager(tmp / "notify")
@@ -220,21 +233,40 @@ def at_height(d: Proc, plc: SimulatedPlc, ctl: SimController, lift_port: int, ct
     d.wait_log("tracking: tracking the wrench")
 
 
+def controller(seed: int, nok_rate: float = 0.0) -> SimController:
+    """The simulated controller with config/sim's psets, seeded ``seed`` (always OK unless
+    ``nok_rate`` says otherwise)."""
+    return SimController(psets_of(SIM / "bolts.yaml"), seed=seed, nok_rate=nok_rate)
+
+
 @contextmanager
-def tracking(tmp: Path, vin: str, seed: int = 9, edit: Callable[[str], str] | None = None
-             ) -> Iterator[tuple[Proc, SimulatedPlc, SimController]]:
-    """A :class:`Proc` on the station file ``edit`` makes (see :class:`Proc`), its devices
-    served (an always-OK controller seeded ``seed``) and ``vin`` at height: the station
-    tracking the wrench.  Killed and closed on the way out whatever happened (a test stops
-    it itself to check its exit code)."""
-    lift_port, ctl_port = free_port(), free_port()
-    plc = SimulatedPlc()
-    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=seed, nok_rate=0.0)
-    d = Proc(tmp, lift_port, ctl_port, edit=edit)
+def stops_cleanly(d: Proc, *close: Callable[[], object]) -> Iterator[Proc]:
+    """The block with the daemon ``d`` running; after the block, the daemon stopped as systemd
+    stops it (SIGTERM) must exit 0 and leave no Traceback in its journal (every daemon test
+    checks both).  Killed, then ``close`` called in order (the devices the test served),
+    whatever happened."""
     try:
-        at_height(d, plc, ctl, lift_port, ctl_port, vin)
-        yield d, plc, ctl
+        yield d
+        assert d.stop() == 0, d.log()[-3000:]
     finally:
         d.kill()
-        ctl.close()
-        plc.close()
+        for c in close:
+            c()
+    assert "Traceback" not in d.log(), d.log()[-3000:]
+
+
+@contextmanager
+def tracking(tmp: Path, vin: str, seed: int = 9, edit: Callable[[str], str] | None = None,
+             ctl: SimController | None = None
+             ) -> Iterator[tuple[Proc, SimulatedPlc, SimController]]:
+    """A :class:`Proc` on the station file ``edit`` makes (see :class:`Proc`), its devices
+    served (``ctl``, default an always-OK controller seeded ``seed``) and ``vin`` at height:
+    the station tracking the wrench.  After the block it stops cleanly (see
+    :func:`stops_cleanly`); killed and closed on the way out whatever happened."""
+    lift_port, ctl_port = free_port(), free_port()
+    plc = SimulatedPlc()
+    wrench = controller(seed) if ctl is None else ctl
+    d = Proc(tmp, lift_port, ctl_port, edit=edit)
+    with stops_cleanly(d, wrench.close, plc.close):
+        at_height(d, plc, wrench, lift_port, ctl_port, vin)
+        yield d, plc, wrench

@@ -21,6 +21,8 @@ from stationd.station.core import (
     Acknowledge,
     BoltSpec,
     CloseVehicle,
+    CommandDone,
+    CommandIn,
     DeviceBack,
     DeviceFault,
     DisableTool,
@@ -33,6 +35,7 @@ from stationd.station.core import (
     ParamsRefused,
     Publish,
     Record,
+    RecordCommand,
     ResultIn,
     Selection,
     SendParams,
@@ -100,6 +103,14 @@ class Driver:
             elif isinstance(a, CloseVehicle):
                 self.closed_vins.add(a.vin)
         return out
+
+    def command(self, request: int, cmd: Any, who: Any) -> list[Any]:
+        """``cmd`` given by ``who``; when accepted, recorded (the shell's CommandDone, which
+        makes it effective and answers it): the actions of both."""
+        acts = self.feed(CommandIn(self.t, request, cmd, who))
+        if any(isinstance(a, RecordCommand) for a in acts):
+            acts += self.feed(CommandDone(self.t, request))
+        return acts
 
     def check(self, a: Any, before: State, ev: Any) -> None:
         c = self.core
@@ -266,8 +277,9 @@ def test_a_busy_operator_gets_bolts_tightened_and_every_result_recorded(places, 
 
 
 # -- the rules one by one -----------------------------------------------------------------------
-def _ready(vin: str = "VIN1") -> Driver:
-    d = Driver()
+def _ready(vin: str = "VIN1", **core: Any) -> Driver:
+    """A driver tracking at height with ``vin`` loaded; ``core`` go to its StationCore."""
+    d = Driver(core=StationCore(PARAMS, leave_frames=2, **core))
     d.feed(Started(d.t))
     d.step(("lift", 0.1, True, True, vin))
     assert d.core.state is State.TRACKING and d.core.vin == vin
@@ -281,6 +293,11 @@ def _on(d: Driver, bolt: int, n: int = 2, age: float = 0.05) -> None:
 
 def _kinds(acts: list[Any]) -> list[str]:
     return [type(a).__name__ for a in acts if not isinstance(a, Publish)]
+
+
+def published(acts: list[Any], kind: type) -> list[Any]:
+    """The events of type ``kind`` the core published among ``acts``."""
+    return [a.event for a in acts if isinstance(a, Publish) and isinstance(a.event, kind)]
 
 
 def test_the_tool_waits_for_a_frame_exposed_after_the_acknowledgement():

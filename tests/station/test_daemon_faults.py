@@ -14,23 +14,15 @@ import time
 import pytest
 
 from drivers.lift.sim import SimulatedPlc
-from drivers.wrench.sim import SimController
-from stationd.sim.devices_cli import psets_of
-from tests.station.daemons import SIM, Proc, at_height, free_port, serve_devices
-
-#: the old places of the harness, for tests that still import it from here
-__all__ = ["SIM", "Proc", "at_height"]
-_free_port = free_port
+from tests.station.daemons import Proc, controller, free_port, serve_devices, stops_cleanly
 
 
 @pytest.mark.timeout(300)
 def test_devices_down_at_boot_are_faults_then_it_recovers_and_a_closed_vin_is_a_rework(
         tmp_path):
     lift_port, ctl_port = free_port(), free_port()
-    plc = SimulatedPlc()
-    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
-    d = Proc(tmp_path, lift_port, ctl_port)
-    try:
+    plc, ctl = SimulatedPlc(), controller(seed=2)
+    with stops_cleanly(Proc(tmp_path, lift_port, ctl_port), ctl.close, plc.close) as d:
         d.status("READY=1")                     # serving, with both devices down
         d.wait_log("fault: lift")
         d.wait_log("fault: wrench")
@@ -52,22 +44,14 @@ def test_devices_down_at_boot_are_faults_then_it_recovers_and_a_closed_vin_is_a_
         d.wait_log("configuration reloaded")
         d.wait_log("vehicle REWORKVIN00000001 (SIM-1) opened for rework", count=2)
         assert d.p.poll() is None
-        assert d.stop() == 0
-    finally:
-        d.kill()
-        ctl.close()
-        plc.close()
-    assert "Traceback" not in d.log()
 
 
 @pytest.mark.timeout(300)
 def test_sighup_with_a_bad_bolt_table_is_refused_and_with_a_down_device_is_a_fault(tmp_path):
     lift_port, ctl_port = free_port(), free_port()
-    plc = SimulatedPlc()
-    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
+    plc, ctl = SimulatedPlc(), controller(seed=2)
     serve_devices(plc, ctl, lift_port, ctl_port)
-    d = Proc(tmp_path, lift_port, ctl_port)
-    try:
+    with stops_cleanly(Proc(tmp_path, lift_port, ctl_port), ctl.close, plc.close) as d:
         d.status("READY=1")
         d.status("waiting for vehicle")
         bolts = tmp_path / "bolts.yaml"
@@ -86,20 +70,13 @@ def test_sighup_with_a_bad_bolt_table_is_refused_and_with_a_down_device_is_a_fau
         d.status("fault: lift")
         time.sleep(2.0)
         assert d.p.poll() is None
-        assert d.stop() == 0
-    finally:
-        d.kill()
-        ctl.close()
-        plc.close()
-    err = d.log()
-    assert "duplicate" in err.lower() and "Traceback" not in err
+    assert "duplicate" in d.log().lower()
 
 
 @pytest.mark.timeout(300)
 def test_a_camera_glob_matching_nothing_is_a_fault_not_an_exit(tmp_path):
     lift_port, ctl_port = free_port(), free_port()
-    plc = SimulatedPlc()
-    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=2, nok_rate=0.0)
+    plc, ctl = SimulatedPlc(), controller(seed=2)
     serve_devices(plc, ctl, lift_port, ctl_port)
     nothing = tmp_path / "nothing"
 
@@ -107,17 +84,11 @@ def test_a_camera_glob_matching_nothing_is_a_fault_not_an_exit(tmp_path):
         return text.replace("'sim://pair1/left'", f"'file://{nothing}/left_*.png'")
 
     d = Proc(tmp_path, lift_port, ctl_port, edit=cameras)
-    try:
+    with stops_cleanly(d, ctl.close, plc.close):
         ready = d.status("READY=1")                 # serving, and saying why not fully
         assert any("fault: pair1: " in m and "no files match" in m for m in ready), ready
         time.sleep(3.0)
         assert d.p.poll() is None
-        assert d.stop() == 0
-    finally:
-        d.kill()
-        ctl.close()
-        plc.close()
-    assert "Traceback" not in d.log()
     assert d.log().count("fault: pair1 (") == 1    # retried quietly, journaled once
 
 
@@ -161,17 +132,10 @@ def test_a_plc_answering_garbage_stays_a_fault_never_back_between_answers(tmp_pa
 
     th = threading.Thread(target=serve, daemon=True)
     th.start()
-    d = Proc(tmp_path, lift_port, ctl_port)
-    try:
+    with stops_cleanly(Proc(tmp_path, lift_port, ctl_port), done.set, lambda: th.join(5),
+                       srv.close) as d:
         d.status("READY=1")
         d.wait_log("fault: lift")
         time.sleep(8.0)      # several reconnect attempts (backoff 0.5 s doubling)
         assert "lift: back" not in d.log(), d.log()[-2000:]
         assert d.p.poll() is None
-        assert d.stop() == 0
-    finally:
-        d.kill()
-        done.set()
-        th.join(5)
-        srv.close()
-    assert "Traceback" not in d.log()

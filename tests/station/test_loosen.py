@@ -30,11 +30,8 @@ from stationd.station.core import (
     ModelsKnown,
     Publish,
     Record,
-    RecordCommand,
-    Reply,
     ResultIn,
     SendParams,
-    Started,
     StationCore,
     StoreUnattributed,
     VehicleLoaded,
@@ -49,8 +46,8 @@ from stationd.station.events import (
 )
 from stationd.station.policy import NokPolicy, NokRule
 from stationd.words import answer_words, reason_words
-from tests.station.test_commands import OPERATOR, SUPERVISOR
-from tests.station.test_core import BOLTS, PARAMS, Driver, _on
+from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
+from tests.station.test_core import BOLTS, PARAMS, Driver, _on, _ready, published
 
 LOOSENER = Issuer("lea", frozenset({Right.LOOSEN}), "screen 10.0.0.9")
 #: B1 and B3 (pset 1) loosen first with pset 90, B2 (pset 2) is skipped after a NOK, B3
@@ -63,15 +60,8 @@ def res(tid: int, pset: int, ok: bool, rtype: int | None = None) -> Any:
     return SimpleNamespace(tightening_id=tid, pset=pset, ok=ok, result_type=rtype)
 
 
-def _published(acts: list[Any], kind: type) -> list[Any]:
-    return [a.event for a in acts if isinstance(a, Publish) and isinstance(a.event, kind)]
-
-
 def _driver(policy: NokPolicy = POLICY) -> Driver:
-    d = Driver(core=StationCore(PARAMS, leave_frames=2, nok=policy))
-    d.feed(Started(d.t))
-    d.step(("lift", 0.1, True, True, "VIN1"))
-    return d
+    return _ready(nok=policy)
 
 
 def _rundown(d: Driver, bolt: int, tid: int, ok: bool, rtype: int | None = None
@@ -88,20 +78,16 @@ def _rundown(d: Driver, bolt: int, tid: int, ok: bool, rtype: int | None = None
     return sent[0], acts
 
 
-def _command(d: Driver, request: int, cmd: Any, who: Issuer) -> Reply:
-    acts = d.feed(CommandIn(d.t, request, cmd, who))
-    if any(isinstance(a, RecordCommand) for a in acts):
-        acts = d.feed(CommandDone(d.t, request))
-    replies = [a for a in acts if isinstance(a, Reply)]
-    assert len(replies) == 1, acts
-    return replies[0]
+def _command(d: Driver, request: int, cmd: Any, who: Issuer) -> Any:
+    """The Reply to ``cmd`` given by ``who`` (recorded first when accepted)."""
+    return _answer(d.command(request, cmd, who))
 
 
 def test_after_a_nok_the_loosen_pset_goes_first_then_the_tightening_pset():
     d = _driver()
     sent, acts = _rundown(d, 1, 1, ok=False)
     assert not sent.loosen and sent.selection.pset == 1
-    [to_loosen] = _published(acts, BoltToLoosen)
+    [to_loosen] = published(acts, BoltToLoosen)
     assert to_loosen.reason == Reason(Why.LOOSEN_FIRST, bolt="B1", pset=90)
     assert reason_words(to_loosen.reason) == "B1: loosen first (loosen pset 90), then tighten"
     assert "B1" in d.core.allowed()             # open: for its loosening
@@ -122,7 +108,7 @@ def test_a_loosening_nok_counts_and_the_bolt_stays_to_be_loosened():
     _rundown(d, 3, 1, ok=False)                 # B3: max_nok 2, loosen pset 91
     sent, acts = _rundown(d, 3, 2, ok=False, rtype=2)
     assert sent.loosen and sent.selection.pset == 91
-    assert [(e.bolt, e.count) for e in _published(acts, BoltLocked)] == [("B3", 2)]
+    assert [(e.bolt, e.count) for e in published(acts, BoltLocked)] == [("B3", 2)]
     sends = len(d.sends)
     _on(d, 3, 4)
     assert len(d.sends) == sends                # locked: nothing sent
@@ -138,7 +124,7 @@ def test_a_loosening_ok_neither_counts_nor_ends_the_nok_row():
         _rundown(d, 1, tid, ok=False)
         _rundown(d, 1, tid + 1, ok=True, rtype=2)
     _, acts = _rundown(d, 1, 5, ok=False)       # the third NOK tightening in a row
-    assert [e.count for e in _published(acts, BoltLocked)] == [3]
+    assert [e.count for e in published(acts, BoltLocked)] == [3]
 
 
 def test_the_result_type_decides_the_kind_else_what_was_sent():
@@ -163,10 +149,10 @@ def test_the_loosen_command_reopens_an_ok_bolt_with_the_right_only():
     acts = d.feed(CommandIn(d.t, 2, cmd, LOOSENER))
     assert [type(a).__name__ for a in acts] == ["RecordCommand"]   # effective once recorded
     acts = d.feed(CommandDone(d.t, 2))
-    [to_loosen] = _published(acts, BoltToLoosen)
+    [to_loosen] = published(acts, BoltToLoosen)
     assert (to_loosen.user, to_loosen.reason.pset) == ("lea", 90)
     assert "B1" not in d.core.matcher.done
-    assert answer_words(next(a for a in acts if isinstance(a, Reply)).answer) == (
+    assert answer_words(_answer(acts).answer) == (
         "command loosen B1 of VIN1 ('rework: washer missing') by lea (screen 10.0.0.9): "
         "accepted")
     sent, _ = _rundown(d, 1, 2, ok=True, rtype=2)
@@ -224,7 +210,7 @@ def test_the_loosen_state_comes_back_with_the_vehicle():
                                    noks={"B1": 1},
                                    status={"B1": NOK, "B2": OK, "B3": TO_LOOSEN}))
     assert core._loosen == {"B1", "B3"}
-    [opened] = _published(acts, VehicleOpened)
+    [opened] = published(acts, VehicleOpened)
     assert {b.bolt: b.status for b in opened.bolts} == {"B1": TO_LOOSEN, "B2": OK,
                                                           "B3": TO_LOOSEN}
     # loosened last: to be tightened (not done); to loosen without a loosen pset: skipped

@@ -17,10 +17,9 @@ from pathlib import Path
 
 import pytest
 
-from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController, SimPset, SimTightening
 from stationd.sim.devices_cli import psets_of
-from tests.station.daemons import SIM, Proc, at_height, free_port, until
+from tests.station.daemons import SIM, Proc, free_port, tracking, until
 from tests.station.test_commands_daemon import PASSWORD, Client, _station
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -81,13 +80,11 @@ def command(c: Client, kind: str, comment: str = "") -> tuple[int, dict[str, obj
 
 @pytest.mark.timeout(300)
 def test_loosen_strategy_lock_and_release_through_the_daemon(tmp_path):
-    lift_port, ctl_port, http_port = free_port(), free_port(), free_port()
+    http_port = free_port()
     url = f"http://127.0.0.1:{http_port}/"
-    plc, ctl = SimulatedPlc(), controller(seed=11)
-    d = Proc(tmp_path, lift_port, ctl_port, edit=nok_station(http_port))
     pose = tmp_path / "pose"
-    try:
-        at_height(d, plc, ctl, lift_port, ctl_port, VIN)
+    with tracking(tmp_path, VIN, edit=nok_station(http_port), ctl=controller(seed=11)
+                  ) as (d, _, ctl):
         # a NOK -> the loosen pset goes next; a loosening OK -> the tightening pset again
         assert not rundown(d, ctl, pose, 1, pset=2).ok
         d.wait_log(f"B05: B05: loosen first (loosen pset {LOOSEN_PSET}), then tighten")
@@ -133,12 +130,6 @@ def test_loosen_strategy_lock_and_release_through_the_daemon(tmp_path):
         assert rundown(d, ctl, pose, 6, pset=2).ok
         d.wait_log("tracking: bolt B05 OK; tracking")
         export = c.get(f"/api/vehicles/{VIN}/export.csv")
-        assert d.stop() == 0
-    finally:
-        d.kill()
-        ctl.close()
-        plc.close()
-    assert "Traceback" not in d.log()
 
     # the records: every rundown with its kind, time and pset; the commands with their user
     runs = [r for r in csv.DictReader(io.StringIO(export)) if r["bolt"] == "B05"]

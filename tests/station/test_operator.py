@@ -21,7 +21,6 @@ from stationd.station.core import (
     Publish,
     Record,
     RecordCommand,
-    Reply,
     ResultIn,
     SendParams,
     Started,
@@ -31,37 +30,20 @@ from stationd.station.core import (
 )
 from stationd.station.events import OperatorChanged, Refused
 from stationd.words import answer_words, operator_words, reason_words
-from tests.station.test_core import PARAMS, Driver, _on, decode, result
+from tests.station.test_commands import _answer
+from tests.station.test_core import PARAMS, Driver, _on, _ready, decode, published, result
 
 OLGA = Issuer("olga", frozenset(), "screen 10.0.0.7")     # an operator: no rights needed
 PIA = Issuer("pia", frozenset({Right.SKIP}), "cli")
 
 
-def _driver(**kw: Any) -> Driver:
-    d = Driver(core=StationCore(PARAMS, leave_frames=2, **kw))
-    d.feed(Started(d.t))
-    d.step(("lift", 0.1, True, True, "VIN1"))
-    assert d.core.state is State.TRACKING
-    return d
-
-
-def _command(d: Driver, request: int, command: Any, who: Issuer) -> list[Any]:
-    """Give ``command``; when accepted, recorded (the shell's CommandDone) and answered."""
-    acts = d.feed(CommandIn(d.t, request, command, who))
-    if any(isinstance(a, RecordCommand) for a in acts):
-        acts += d.feed(CommandDone(d.t, request))
-    return acts
-
-
 def _reply(acts: list[Any]) -> Any:
-    replies = [a.answer for a in acts if isinstance(a, Reply)]
-    assert len(replies) == 1, acts
-    return replies[0]
+    """The command's answer: the one Reply among ``acts``."""
+    return _answer(acts).answer
 
 
 def _changes(acts: list[Any]) -> list[OperatorChanged]:
-    return [a.event for a in acts if isinstance(a, Publish)
-            and isinstance(a.event, OperatorChanged)]
+    return published(acts, OperatorChanged)
 
 
 def _tighten(d: Driver, bolt: int, tid: int, ok: bool = True) -> list[Any]:
@@ -74,7 +56,7 @@ def _tighten(d: Driver, bolt: int, tid: int, ok: bool = True) -> list[Any]:
 
 
 def test_a_sign_in_is_recorded_then_every_rundown_carries_the_operator():
-    d = _driver()
+    d = _ready()
     acts = d.feed(CommandIn(d.t, 1, SignIn(), OLGA))
     assert [type(a).__name__ for a in acts] == ["RecordCommand"] and d.core.operator is None
     acts = d.feed(CommandDone(d.t, 1))           # effective once on disk
@@ -88,19 +70,19 @@ def test_a_sign_in_is_recorded_then_every_rundown_carries_the_operator():
 
 
 def test_nobody_signed_in_records_rundowns_without_a_user_when_not_required():
-    d = _driver()
+    d = _ready()
     recs = [a for a in _tighten(d, 1, 3) if isinstance(a, Record)]
     assert [r.selection.operator for r in recs] == [None]
 
 
 def test_a_sign_out_or_another_operator_ends_it_and_leaves_a_selected_bolt():
-    d = _driver()
-    _command(d, 1, SignIn(), OLGA)
+    d = _ready()
+    d.command(1, SignIn(), OLGA)
     _on(d, 2)
     d.step(("ack", 0.01, True))
     _on(d, 2, 1)
     assert d.tool
-    acts = _command(d, 2, SignIn("shift change"), PIA)     # pia takes over
+    acts = d.command(2, SignIn("shift change"), PIA)     # pia takes over
     assert _reply(acts).accepted and d.core.operator == "pia"
     assert any(isinstance(a, DisableTool) for a in acts) and not d.tool
     assert d.core.state is State.TRACKING and d.core.bolt is None
@@ -117,10 +99,10 @@ def test_a_sign_out_or_another_operator_ends_it_and_leaves_a_selected_bolt():
 
 
 def test_sign_in_and_out_refusals_are_typed_and_change_nothing():
-    d = _driver()
+    d = _ready()
     acts = d.feed(CommandIn(d.t, 1, SignOut(), OLGA))
     assert _reply(acts).reason == Reason(Why.NOT_SIGNED_IN)
-    _command(d, 2, SignIn(), OLGA)
+    d.command(2, SignIn(), OLGA)
     acts = d.feed(CommandIn(d.t, 3, SignIn(), OLGA))
     assert _reply(acts).reason == Reason(Why.SIGNED_IN, user="olga")
     assert not any(isinstance(a, RecordCommand) for a in acts)
@@ -128,7 +110,7 @@ def test_sign_in_and_out_refusals_are_typed_and_change_nothing():
 
 
 def test_operator_required_sends_nothing_with_nobody_signed_in_and_says_why():
-    d = _driver(operator_required=True)
+    d = _ready(operator_required=True)
     before = len(d.log)
     _on(d, 2, 4)
     acts = [a for _, got in d.log[before:] for a in got]
@@ -138,18 +120,18 @@ def test_operator_required_sends_nothing_with_nobody_signed_in_and_says_why():
     signin = [r for r in refusals if r.reason.kind is Why.SIGN_IN]
     assert len(signin) == 1 and refusals[-1] is signin[0]     # said once, where it selected
     assert reason_words(signin[0].reason).startswith("sign in to tighten")
-    _command(d, 1, SignIn(), OLGA)
+    d.command(1, SignIn(), OLGA)
     recs = [a for a in _tighten(d, 2, 7) if isinstance(a, Record)]
     assert d.sends == ["B2"] and recs[0].selection.operator == "olga"
-    _command(d, 2, SignOut(), OLGA)
+    d.command(2, SignOut(), OLGA)
     before = len(d.sends)
     _on(d, 1, 3)
     assert len(d.sends) == before          # signed out: refused again
 
 
 def test_the_idle_time_out_signs_out_and_records_it_never_with_the_tool_on():
-    d = _driver(operator_idle_s=60.0)
-    _command(d, 1, SignIn(), OLGA)
+    d = _ready(operator_idle_s=60.0)
+    d.command(1, SignIn(), OLGA)
     _on(d, 1)
     d.step(("ack", 0.01, True))
     _on(d, 1, 1)
@@ -210,10 +192,7 @@ class OperatorDriver(Driver):
     def person(self, n: int) -> None:
         who = [OLGA, PIA, OLGA, None][n % 4]
         self.requests += 1
-        acts = self.feed(CommandIn(self.t, self.requests,
-                                   SignOut() if who is None else SignIn(), who or PIA))
-        if any(isinstance(a, RecordCommand) for a in acts):
-            self.feed(CommandDone(self.t, self.requests))
+        self.command(self.requests, SignOut() if who is None else SignIn(), who or PIA)
         assert self.core.operator == self.signed
 
 

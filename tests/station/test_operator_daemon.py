@@ -12,10 +12,7 @@ import sqlite3
 
 import pytest
 
-from drivers.lift.sim import SimulatedPlc
-from drivers.wrench.sim import SimController
-from stationd.sim.devices_cli import psets_of
-from tests.station.daemons import SIM, Proc, at_height, free_port, until
+from tests.station.daemons import free_port, tracking, until
 from tests.station.test_commands_daemon import _cli, _station
 
 VIN = "OPERATORVIN000001"
@@ -24,18 +21,14 @@ VIN = "OPERATORVIN000001"
 @pytest.mark.timeout(300)
 def test_a_signed_in_operators_rundown_is_recorded_with_them_and_nobody_tightens_without(
         tmp_path):
-    lift_port, ctl_port, http_port = free_port(), free_port(), free_port()
+    http_port = free_port()
     url = f"http://127.0.0.1:{http_port}/"
-    plc = SimulatedPlc()
-    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=11, nok_rate=0.0)
 
     def edit(text: str) -> str:   # users olga, sam, nina; an operator required to tighten
         return str(_station(http_port)(text)) + "  operator_required: true\n"
 
-    d = Proc(tmp_path, lift_port, ctl_port, edit=edit)
     pose = tmp_path / "pose"
-    try:
-        at_height(d, plc, ctl, lift_port, ctl_port, VIN)
+    with tracking(tmp_path, VIN, seed=11, edit=edit) as (d, _, ctl):
         d.wait_log("operator: nobody signed in: sign in to tighten")
         got = _cli("operator", "status", "--url", url)
         assert got.returncode == 0 and "nobody signed in" in got.stdout, got.stderr
@@ -76,11 +69,6 @@ def test_a_signed_in_operators_rundown_is_recorded_with_them_and_nobody_tightens
         got = _cli("operator", "sign-out", "--user", "sam", "--url", url)
         assert got.returncode == 0 and "accepted" in got.stdout, got.stdout + got.stderr
         d.wait_log("operator: olga signed out by sam")
-        assert d.stop() == 0
-    finally:
-        d.kill()
-        ctl.close()
-        plc.close()
     con = sqlite3.connect(tmp_path / "station.db")
     try:
         runs = list(con.execute("SELECT tightening_id, status, operator "
@@ -90,4 +78,3 @@ def test_a_signed_in_operators_rundown_is_recorded_with_them_and_nobody_tightens
         con.close()
     assert runs == [(shot.tightening_id, "ok", "olga")]
     assert audit == [("olga", "sign-in", "shift 2"), ("sam", "sign-out", "olga signed out")]
-    assert "Traceback" not in d.log()

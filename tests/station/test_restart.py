@@ -9,7 +9,6 @@ its ``sim://`` cameras need)."""
 from __future__ import annotations
 
 import os
-import shutil
 import signal
 import sqlite3
 import subprocess
@@ -23,11 +22,9 @@ from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.boltfile import load_bolts
 from stationd.sim.devices_cli import psets_of
-from tests.station.daemons import PROC, SIM, until
+from tests.station.daemons import PROC, SIM, sim_station, until
 
 VIN = "RESTARTVIN0000001"
-#: the old name, for tests that still import it from here (tests.station.daemons has it)
-_until = until
 
 
 def _all_ids(tmp: Path, bolts: bool = False) -> list[int]:
@@ -70,10 +67,8 @@ class Daemon:
 
 @pytest.mark.timeout(420)
 def test_sigterm_and_sigkill_mid_vehicle_lose_nothing(tmp_path):
-    for f in SIM.iterdir():
-        shutil.copy(f, tmp_path)
-    psets = psets_of(tmp_path / "bolts.yaml")
-    bolts = [b.bolt_id for b in load_bolts(tmp_path / "bolts.yaml").models[0].bolts]
+    psets = psets_of(SIM / "bolts.yaml")
+    bolts = [b.bolt_id for b in load_bolts(SIM / "bolts.yaml").models[0].bolts]
     a, b, c = bolts[0], bolts[17], bolts[33]
     plc = SimulatedPlc()
     ctl = SimController(psets, seed=4, nok_rate=0.0)
@@ -83,17 +78,7 @@ def test_sigterm_and_sigkill_mid_vehicle_lose_nothing(tmp_path):
     daemons: list[Daemon] = []
     try:
         lift_port, ctl_port = plc.start_tcp(), ctl.listen_tcp()
-        station = (tmp_path / "station.yaml").read_text()
-        for old, new in (("sim://lift", f"modbus-tcp://127.0.0.1:{lift_port}"),
-                         ("sim://wrench", f"openprotocol://127.0.0.1:{ctl_port}"),
-                         ("sqlite:///stationd-sim.db", f"sqlite:///{tmp_path}/station.db"),
-                         # the simulator renders 20 MP on shared cores, seconds after the
-                         # exposure when the machine is busy: freshness is test_core's
-                         ("max_age_s: 0.5", "max_age_s: 5.0"),
-                         ("http: {listen: '127.0.0.1:8080'}", "")):
-            assert old in station
-            station = station.replace(old, new)
-        (tmp_path / "station.yaml").write_text(station)
+        sim_station(tmp_path, f"modbus-tcp://127.0.0.1:{lift_port}", ctl_port)
         plc.set_vehicle(1, VIN)
         plc.raise_lift()
 

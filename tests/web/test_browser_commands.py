@@ -8,10 +8,7 @@ from __future__ import annotations
 
 import pytest
 
-from drivers.lift.sim import SimulatedPlc
-from drivers.wrench.sim import SimController
-from stationd.sim.devices_cli import psets_of
-from tests.station.daemons import SIM, Proc, at_height, free_port
+from tests.station.daemons import free_port, tracking
 from tests.station.test_commands_daemon import PASSWORD, _station
 from tests.web.pages import Page
 from tests.web.test_browser import check_fits
@@ -39,12 +36,8 @@ def _answer(page: Page, before: str) -> str:
 
 @pytest.mark.timeout(300)
 def test_operator_screen_logs_in_skips_a_bolt_and_shows_a_refusal(page, shots, tmp_path):
-    http_port, lift_port, ctl_port = free_port(), free_port(), free_port()
-    plc = SimulatedPlc()
-    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=7, nok_rate=0.0)
-    d = Proc(tmp_path, lift_port, ctl_port, edit=_station(http_port))
-    try:
-        at_height(d, plc, ctl, lift_port, ctl_port, VIN)
+    http_port = free_port()
+    with tracking(tmp_path, VIN, seed=7, edit=_station(http_port)) as (d, _, _):
         page.get(f"http://127.0.0.1:{http_port}/")
         page.wait(lambda p: p.text("#vin") == VIN, 60, "the vehicle on the screen")
         assert not _shown(page, "signed") and _shown(page, "login")
@@ -95,9 +88,3 @@ def test_operator_screen_logs_in_skips_a_bolt_and_shows_a_refusal(page, shots, t
         got = _answer(page, shown)
         assert got == f"refused: vehicle {VIN} is open at the station"
         assert page.js("return document.getElementById('cmd-answer').dataset.ok") == "0"
-        assert d.stop() == 0
-    finally:
-        d.kill()
-        ctl.close()
-        plc.close()
-    assert "Traceback" not in d.log()

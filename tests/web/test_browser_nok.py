@@ -11,8 +11,7 @@ from __future__ import annotations
 
 import pytest
 
-from drivers.lift.sim import SimulatedPlc
-from tests.station.daemons import Proc, at_height, free_port, until
+from tests.station.daemons import free_port, tracking, until
 from tests.station.test_commands_daemon import PASSWORD
 from tests.station.test_nok_daemon import LOOSEN_PSET, controller, nok_station, rundown
 from tests.web.pages import Page
@@ -36,12 +35,10 @@ def _b05(page: Page, what: str) -> str | None:
 @pytest.mark.timeout(300)
 def test_a_third_nok_locks_the_screen_says_who_releases_and_a_supervisor_releases(
         page, shots, tmp_path):
-    http_port, lift_port, ctl_port = free_port(), free_port(), free_port()
-    plc, ctl = SimulatedPlc(), controller(seed=12)
-    d = Proc(tmp_path, lift_port, ctl_port, edit=nok_station(http_port))
+    http_port = free_port()
     pose = tmp_path / "pose"
-    try:
-        at_height(d, plc, ctl, lift_port, ctl_port, VIN)
+    with tracking(tmp_path, VIN, edit=nok_station(http_port), ctl=controller(seed=12)
+                  ) as (d, _, ctl):
         page.get(f"http://127.0.0.1:{http_port}/")
         page.wait(lambda p: p.text("#vin") == VIN, 60, "the vehicle on the screen")
         assert not _shown(page, "locks")
@@ -110,9 +107,3 @@ def test_a_third_nok_locks_the_screen_says_who_releases_and_a_supervisor_release
                                            "thread checked"]]
         assert trail[0][0].startswith("20")
         shots("vehicle-loosen")
-        assert d.stop() == 0
-    finally:
-        d.kill()
-        ctl.close()
-        plc.close()
-    assert "Traceback" not in d.log()

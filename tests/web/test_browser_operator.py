@@ -9,10 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-from drivers.lift.sim import SimulatedPlc
-from drivers.wrench.sim import SimController
-from stationd.sim.devices_cli import psets_of
-from tests.station.daemons import SIM, Proc, at_height, free_port, until
+from tests.station.daemons import free_port, tracking, until
 from tests.station.test_commands_daemon import PASSWORD, _station
 from tests.web.test_browser_commands import _answer, _login, _shown
 
@@ -22,17 +19,13 @@ VIN = "SIGNINVIN00000001"
 @pytest.mark.timeout(300)
 def test_an_operator_signs_in_at_the_station_from_the_screen_and_her_rundown_shows_her(
         page, shots, tmp_path):
-    http_port, lift_port, ctl_port = free_port(), free_port(), free_port()
-    plc = SimulatedPlc()
-    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=9, nok_rate=0.0)
+    http_port = free_port()
 
     def edit(text: str) -> str:
         return str(_station(http_port)(text)) + "  operator_required: true\n"
 
-    d = Proc(tmp_path, lift_port, ctl_port, edit=edit)
     url = f"http://127.0.0.1:{http_port}/"
-    try:
-        at_height(d, plc, ctl, lift_port, ctl_port, VIN)
+    with tracking(tmp_path, VIN, seed=9, edit=edit) as (d, _, ctl):
         page.get(url)
         page.wait(lambda p: p.text("#vin") == VIN, 60, "the vehicle on the screen")
         page.wait(lambda p: p.text("#operator") == "nobody signed in: sign in to tighten",
@@ -73,9 +66,3 @@ def test_an_operator_signs_in_at_the_station_from_the_screen_and_her_rundown_sho
         assert _answer(page, shown).endswith(": accepted")
         page.wait(lambda p: p.text("#operator") == "nobody signed in: sign in to tighten",
                   30, "nobody signed in again")
-        assert d.stop() == 0
-    finally:
-        d.kill()
-        ctl.close()
-        plc.close()
-    assert "Traceback" not in d.log()
