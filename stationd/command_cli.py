@@ -92,8 +92,11 @@ def say_refused(what: str, status: int, answer: Any) -> int:
     """A refusal before the station saw the command (the token, the login, the API)."""
     if status == 401 and str(answer).startswith("token required"):
         answer = "the daemon refused the http token (--token or STATIOND_TOKEN)"
-    elif status == 405:
-        answer = "not a stationd daemon's screens at this URL (--url http://HOST:PORT/)"
+    elif status in (404, 405) or not str(answer).strip():
+        # another server on that port (it said nothing a person could use, or has no such
+        # page): said so, never "login refused: " with nothing after it
+        answer = (f"not a stationd daemon's screens at this URL (HTTP {status}; --url "
+                  "http://HOST:PORT/)")
     sys.stderr.write(f"stationd: {what}: {answer}\n")
     return EXIT_UNREACHABLE
 

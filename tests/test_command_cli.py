@@ -96,3 +96,39 @@ def test_an_endless_password_line_is_refused_not_read_for_ever() -> None:
                              capture_output=True, text=True, timeout=60)
     assert got.returncode == 2 and "no end of line within" in got.stderr, got
     assert "Traceback" not in got.stderr and got.stdout == ""
+
+
+class _NotStationd(BaseHTTPRequestHandler):
+    """Another web server on the port: 400 and an empty body to everything."""
+
+    def log_message(self, *args: object) -> None:
+        pass
+
+    def _empty(self) -> None:
+        self.send_response(400)
+        self.send_header("Content-Length", "0")
+        self.end_headers()
+
+    def do_GET(self) -> None:
+        self._empty()
+
+    def do_POST(self) -> None:
+        self._empty()
+
+
+def test_a_server_that_is_not_stationd_is_said_so() -> None:
+    """A sweep: `skip` and `operator status` against a URL that answers HTTP 400 with nothing
+    printed "login refused: " and "operator status: " with nothing after them."""
+    server = ThreadingHTTPServer(("127.0.0.1", 0), _NotStationd)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    url = f"http://127.0.0.1:{server.server_address[1]}/"
+    try:
+        for argv in (("skip", "VIN1", "B03", "--user", "olga"), ("operator", "status")):
+            got = subprocess.run([sys.executable, "-m", "stationd", *argv, "--url", url],
+                                 input="secret-pw\n", capture_output=True, text=True,
+                                 timeout=60)
+            assert got.returncode == 3, got
+            assert "not a stationd daemon's screens at this URL (HTTP 400" in got.stderr, got
+    finally:
+        server.shutdown()
+        server.server_close()
