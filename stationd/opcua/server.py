@@ -197,6 +197,7 @@ class OpcUaServer:
         await load_model(server)
         idx = await server.register_namespace(NAMESPACE)
         await self._build(server, idx)
+        _quiet_start_failure(logging.getLogger("asyncua.server.server"))
         await server.start()
         self.server = server
         self._loop = asyncio.get_running_loop()
@@ -559,6 +560,20 @@ class _NoTraceback(logging.Filter):
 def _one_line(logger: logging.Logger) -> None:
     if not any(isinstance(f, _NoTraceback) for f in logger.filters):
         logger.addFilter(_NoTraceback())
+
+
+class _StartFailure(logging.Filter):
+    """asyncua logs its failure to listen (a port in use) with a traceback before raising it;
+    the station's journal has its own line for it ("OPC UA: not served on ..."), so the
+    library's is dropped (only that one: its other records pass)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not str(record.msg).endswith("error starting server")
+
+
+def _quiet_start_failure(logger: logging.Logger) -> None:
+    if not any(isinstance(f, _StartFailure) for f in logger.filters):
+        logger.addFilter(_StartFailure())
 
 
 async def _refuse_every_certificate(cert: Any, app: Any) -> None:

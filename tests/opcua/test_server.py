@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import socket
 import sys
 from pathlib import Path
@@ -338,3 +339,26 @@ def test_the_joining_system_is_an_event_notifier_with_the_results(repo):
     bits, events = asyncio.run(scenario())
     assert bits & 1
     assert len(events) == 1 and events[0].Result.ResultMetaData.Classification == 1
+
+
+def test_a_port_in_use_is_no_library_traceback_in_the_journal(caplog):
+    """A sweep: an endpoint whose port was taken put asyncua's traceback in the journal before
+    the station's own line; the start fails (the caller says "not served on ..."), and the
+    library's record is not logged."""
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        cfg = OpcUaConfig(endpoint=f"opc.tcp://127.0.0.1:{port}", station_id="ST-07",
+                          security=("none",))
+
+        async def start() -> None:
+            srv = OpcUaServer(cfg)
+            try:
+                await srv.start()
+            finally:
+                await srv.stop()
+
+        with caplog.at_level(logging.DEBUG), pytest.raises(OSError):
+            asyncio.run(start())
+    assert not [r for r in caplog.records if r.exc_info and r.name.startswith("asyncua")]
