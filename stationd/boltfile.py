@@ -57,6 +57,8 @@ class BoltCheck:
     path: str
     table: BoltTable | None
     errors: list[ConfigError] = field(default_factory=list)
+    #: valid, but a station with it tightens nothing (no model, a model without bolts)
+    warnings: list[ConfigError] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -100,7 +102,21 @@ def _check(root: YamlNode, tolerance_mm: float) -> BoltCheck:
     checker = _Checker(tolerance_mm)
     table = checker.table(root)
     errors = sorted(checker.errors, key=lambda e: e.line or 0)  # stable: same line keeps order
-    return BoltCheck(root.path, table if not errors else None, errors)
+    if errors or table is None:
+        return BoltCheck(root.path, None, errors)
+    return BoltCheck(root.path, table, [], _idle(root, table))
+
+
+def _idle(root: YamlNode, table: BoltTable) -> list[ConfigError]:
+    """What a valid table cannot tighten: no model at all, or a model without a bolt."""
+    models = root.mapping(TOP_KEYS).get("models")
+    if not table.models:
+        return [(models or root).error("no vehicle model: a station with this table "
+                                       "tightens nothing")]
+    named = dict(models.named()) if models is not None else {}
+    return [named.get(m.name, models or root).error(
+                f"model {m.name} has no bolt: its vehicles get nothing tightened")
+            for m in table.models if not m.bolts]
 
 
 @dataclass(frozen=True)

@@ -121,6 +121,11 @@ def cmd_db_import(args: argparse.Namespace) -> int:
                          "nothing imported\n")
         return EXIT_BAD_INPUT
     assert result.table is not None  # noqa: S101 - a check without errors holds the table
+    if not result.table.models:   # importing it would retire every model of the station
+        raise InputError(f"{args.file}: no vehicle model: importing it would retire every "
+                         "model of the station; nothing imported")
+    for w in result.warnings:
+        sys.stderr.write(f"warning: {w}\n")
     with open_repository(_db_url(args), must_exist=False) as repo:
         report = repo.import_bolts(result.table, where=str(args.file))
     if args.json:
@@ -325,7 +330,7 @@ def _check_file(name: str, tolerance_mm: float,
         return "", [exc], []
     if kind == "bolts":
         bolts = check_bolts(name, tolerance_mm=tolerance_mm)
-        return (bolts.table.summary() if bolts.table else ""), bolts.errors, []
+        return (bolts.table.summary() if bolts.table else ""), bolts.errors, bolts.warnings
     station = check_station(name)
     summary = ""
     if station.config is not None:
@@ -333,7 +338,8 @@ def _check_file(name: str, tolerance_mm: float,
         summary = f"station: {len(cfg.pairs)} pair(s), {len(cfg.cameras)} camera(s)"
         if station.bolts is not None and station.bolts.table is not None:
             summary += f"; bolts {cfg.bolts_path}: {station.bolts.table.summary()}"
-    return summary, station.errors, station.warnings
+    bolt_warnings = station.bolts.warnings if station.bolts is not None else []
+    return summary, station.errors, [*station.warnings, *bolt_warnings]
 
 
 def file_kind(path: str | Path) -> str:

@@ -234,3 +234,18 @@ def test_a_bolt_table_given_as_a_station_file_is_one_error_saying_so():
         load_station_config(bolts, station=True)
     errors = check_station(bolts).errors
     assert len(errors) == 1 and "this is a bolt table" in str(errors[0])
+
+
+def test_a_table_that_tightens_nothing_is_a_warning():
+    """A sweep: `models: {}` and a model without bolts passed config check as "ok, 0
+    model(s)" with nothing said."""
+    from stationd.boltfile import check_bolts_text
+
+    empty = check_bolts_text("psets: []\nmodels: {}\n")
+    assert empty.ok and [w.line for w in empty.warnings] == [2]
+    assert "tightens nothing" in str(empty.warnings[0])
+    idle = check_bolts_text(
+        "psets:\n  - {id: 1, name: a, torque: {target: 10, min: 9, max: 11},\n"
+        "     angle: {target: 30, min: 15, max: 60}}\nmodels:\n  M1:\n    bolts: []\n")
+    assert idle.ok and len(idle.warnings) == 1 and "model M1 has no bolt" in \
+        str(idle.warnings[0])

@@ -485,3 +485,14 @@ def test_a_bolt_skipped_by_a_command_is_exported_and_reported_skipped_not_missin
         repo.start_vehicle("VIN1", "WAGON-B", reopen=True)
         assert repo.vehicle_report("VIN1").skipped == []
         assert skipped in repo.vehicle_report("VIN1").missing
+
+
+def test_a_table_without_models_is_not_imported_and_an_idle_one_is_warned(run, db, tmp_path):
+    """A sweep: importing `models: {}` retired every model of the station, without a word."""
+    assert run("db", "import", EXAMPLE, "--db", db)[0] == 0
+    empty = tmp_path / "empty.yaml"
+    empty.write_text("psets: []\nmodels: {}\n")
+    code, _, err = run("db", "import", empty, "--db", db)
+    assert code == 2 and "would retire every model of the station; nothing imported" in err
+    code, _, err = run("config", "check", empty)
+    assert code == 0 and "warning:" in err and "tightens nothing" in err
