@@ -17,7 +17,7 @@ import numpy as np
 
 from db.errors import DbError
 from drivers.errors import DriverError
-from stationd.errors import InputError, StationError
+from stationd.errors import InputError, StationError, printable
 from stationd.jsonout import strict_json
 
 EXIT_OK, EXIT_NOT_FOUND, EXIT_BAD_INPUT = 0, 1, 2
@@ -666,7 +666,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
         return code
     except REPORTED as exc:
-        sys.stderr.write(f"stationd: error: {exc}\n")
+        sys.stderr.write(f"stationd: error: {printable(str(exc), keep=chr(10))}\n")
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         sys.stderr.write("stationd: interrupted\n")

@@ -16,6 +16,14 @@ class InputError(StationError):
     """Bad input: a file that is missing, unreadable, malformed or out of range."""
 
 
+def printable(text: str, keep: str = "") -> str:
+    """``text`` with every character a terminal would act on (ESC, BEL, NUL, a bidirectional
+    override...) written as its escape (``\\x1b``), ``keep`` excepted: a key or a file name
+    typed with them must not clear the engineer's screen or reorder the line they read."""
+    return "".join(c if c.isprintable() or c in keep
+                   else c.encode("unicode_escape").decode("ascii") for c in text)
+
+
 class ConfigError(InputError):
     """A configuration or calibration file is invalid; the message names file, line and key."""
 
@@ -26,9 +34,9 @@ class ConfigError(InputError):
         self.key = key
         where = ""
         if path is not None:
-            where = path if line is None else f"{path}:{line}"
+            where = printable(path) if line is None else f"{printable(path)}:{line}"
         prefix = f"{where}: " if where else ""
-        keypart = f"{key}: " if key else ""
+        keypart = f"{printable(key)}: " if key else ""
         super().__init__(f"{prefix}{keypart}{message}")
 
 

@@ -19,7 +19,7 @@ import numpy as np
 import yaml
 from yaml.constructor import SafeConstructor
 
-from stationd.errors import ConfigError
+from stationd.errors import ConfigError, printable
 
 _constructor = SafeConstructor()
 #: numbers YAML 1.1 reads as text: an exponent without a dot or sign (1e9, 2E-3)
@@ -214,7 +214,13 @@ class YamlNode:
         value = self.value()
         if not isinstance(value, dict):
             raise self.error(f"expected a mapping of {what}")
-        return list(self.mapping(tuple(str(k) for k in value)).items())
+        children = list(self.mapping(tuple(str(k) for k in value)).items())
+        for name, node in children:
+            if not name.isprintable():   # a name shows in journals, screens and messages
+                raise node.error(f"the name '{printable(name)}' has a control character "
+                                 "(an escape, a bell, a direction override...): names are "
+                                 "printable text")
+        return children
 
     def pairs(self) -> list[tuple[object, YamlNode]]:
         """The key/value pairs of a mapping whose keys may be any scalar (pset numbers)."""

@@ -699,3 +699,16 @@ def test_opcua_users_over_security_none_only_are_a_warning(sim_copy):
                                            "'opc.tcp://127.0.0.1:4840', security: [none]}\n")
     station.write_text(no_users)
     assert not [w for w in check_station(station).warnings if "clear text" in str(w)]
+
+
+def test_control_characters_in_names_are_refused_and_never_reach_the_terminal(tmp_path):
+    """A sweep: a camera named with ESC[2J and a bell cleared the engineer's screen in the
+    error's key path; names are printable text, and a key path is escaped."""
+    from stationd.errors import ConfigError
+
+    station = tmp_path / "station.yaml"
+    station.write_text('cameras:\n  "cam\\e[2J\\a": {url: "sim://pair1/left"}\n')
+    texts = [str(e) for e in check_station(station).errors]
+    assert any("cam\\x1b[2J\\x07" in t and "control character" in t for t in texts), texts
+    assert not any("\x1b" in t or "\x07" in t for t in texts)
+    assert "\x1b" not in str(ConfigError("bad", path="a\x1bb.yaml", line=1, key="k\u202e"))
