@@ -237,6 +237,10 @@ def cmd_line_init(args: argparse.Namespace) -> int:
     if parsed.get_backend_name() != "postgresql":
         raise InputError(f"line init {parsed.render_as_string()}: the line database is "
                          "PostgreSQL (postgresql+psycopg://USER:PASSWORD@HOST:PORT/DATABASE)")
+    if parsed.port is not None and not 1 <= parsed.port <= 65535:
+        # psycopg takes port 0 as "the default", and the error then names 5432
+        raise InputError(f"line init {parsed.render_as_string()}: port {parsed.port} is not "
+                         "1-65535 (PostgreSQL's is 5432)")
     if "connect_timeout" not in parsed.query:   # a host that does not answer: not forever
         parsed = parsed.update_query_dict({"connect_timeout": str(CONNECT_TIMEOUT_S)})
     engine = make_engine(parsed.render_as_string(hide_password=False))

@@ -187,7 +187,9 @@ def test_line_init_with_a_bad_url_or_the_server_down_is_one_line(pg_url, pg_serv
     down = pg_url.replace(f":{pg_server.port}/", ":1/")
     for url, needle in (("not a url", "not a database URL"),
                         ("sqlite:///line.db", "the line database is PostgreSQL"),
-                        (down, "line database postgresql+psycopg://")):
+                        (down, "line database postgresql+psycopg://"),
+                        # a sweep: psycopg took port 0 as its default and named 5432
+                        ("postgresql+psycopg://u@127.0.0.1:0/line", "port 0 is not 1-65535")):
         code, out, err = _run(capsys, "line", "init", url)
         assert code == 2 and out == "", url
         assert needle in err and len(err.strip().splitlines()) == 1, err
