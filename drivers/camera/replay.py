@@ -84,6 +84,9 @@ def replay_files(pattern: str) -> list[str]:
 def _nothing(pattern: str) -> str:
     """Why a replay has no frames, naming where a relative pattern was looked for."""
     p = Path(pattern)
+    if p.exists() and not p.is_dir() and not p.is_file():   # /dev/zero, a FIFO, a socket
+        return f"{pattern} is a device or a FIFO, not an image file (give image files, or " \
+            "a folder of them)"
     what = "no image files in" if p.is_dir() else "no files match"
     where = "" if p.is_absolute() else f" (relative to the working directory {Path.cwd()})"
     folder = p if p.is_dir() else p.parent

@@ -84,6 +84,13 @@ def test_nothing_to_replay(tmp_path):
         open_camera(f"file://{tmp_path}/none_*.png")
     with pytest.raises(ConnectError, match="no image files in"):
         open_camera(f"file://{tmp_path}/")
+    # a sweep: /dev/zero or a FIFO said "no files match" though the path exists
+    import os
+
+    os.mkfifo(tmp_path / "fifo")
+    for path in ("/dev/zero", str(tmp_path / "fifo")):
+        with pytest.raises(ConnectError, match="is a device or a FIFO, not an image file"):
+            open_camera(f"file://{path}")
 
 
 def test_trigger_time_and_no_exposure(run):
