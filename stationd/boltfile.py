@@ -33,6 +33,7 @@ from stationd.filekind import expect
 from stationd.yamlio import YamlNode
 
 DEFAULT_TOLERANCE_MM = 8.0   # the matching tolerance; bolts must be twice as far apart
+METRES_SPAN_MM = 10.0        # bolts all this near the origin: the table is in metres
 TORQUE_MAX_NM = 5000.0
 ANGLE_MAX_DEG = 3600.0       # ten turns
 POSITION_MAX_MM = 10_000.0   # |x|, |y|, |z| in the vehicle frame
@@ -337,6 +338,14 @@ class _Checker:
         Each bolt is reported once, against the nearest bolt before it in the file."""
         placed = [b for b in bolts if b.position is not None]
         limit = min_spacing_mm(self.tolerance_mm)
+        span = max((abs(v) for b in placed for v in (b.position or ())), default=0.0)
+        if len(placed) >= 2 and 0 < span < METRES_SPAN_MM:
+            # a car's bolts lie hundreds of mm apart: every one within a few mm of the origin
+            # is a table written in metres (each pair would read as "too close" otherwise)
+            self.fail(placed[0].item.keys["position"],
+                      f"every bolt position is within {span:g} mm of the vehicle's origin: "
+                      "positions in metres? the bolt table's positions are in millimetres")
+            return
         for i, j, d in too_close([b.position for b in placed if b.position is not None],
                                  self.tolerance_mm):
             b, a = placed[i], placed[j]

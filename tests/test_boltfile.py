@@ -249,3 +249,17 @@ def test_a_table_that_tightens_nothing_is_a_warning():
         "     angle: {target: 30, min: 15, max: 60}}\nmodels:\n  M1:\n    bolts: []\n")
     assert idle.ok and len(idle.warnings) == 1 and "model M1 has no bolt" in \
         str(idle.warnings[0])
+
+
+def test_bolt_positions_in_metres_are_named_so():
+    """A sweep: a table in metres said "1.0 mm from B01 ... at least 16 mm apart" with none
+    of the unit hints the station file gets."""
+    from stationd.boltfile import check_bolts_text
+
+    got = check_bolts_text(
+        "psets:\n  - {id: 1, name: a, torque: {target: 10, min: 9, max: 11},\n"
+        "     angle: {target: 30, min: 15, max: 60}}\nmodels:\n  M1:\n    bolts:\n"
+        "      - {id: B01, name: a, position: [1.2, 0.4, 0.0], pset: 1}\n"
+        "      - {id: B02, name: b, position: [1.5, 0.4, 0.0], pset: 1}\n")
+    texts = [str(e) for e in got.errors]
+    assert len(texts) == 1 and "positions in metres?" in texts[0], texts
