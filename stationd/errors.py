@@ -32,6 +32,7 @@ class ConfigError(InputError):
         self.path = path
         self.line = line
         self.key = key
+        self.message = message   # without the place: what a caller may re-locate
         where = ""
         if path is not None:
             where = printable(path) if line is None else f"{printable(path)}:{line}"

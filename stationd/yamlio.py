@@ -304,7 +304,11 @@ class YamlNode:
         for i, r in enumerate(row_nodes):
             try:
                 out[i] = r.vector([cols])
-            except ConfigError:
+            except ConfigError as exc:
+                # the element's own reason (NaN, not a number) beats the row's shape
+                if isinstance(r.value(), list) and len(r.value()) == cols:
+                    raise r.error(f"row {i} of the {rows}x{cols} matrix: "
+                                  f"{exc.message}") from None
                 raise r.error(f"expected a {rows}x{cols} matrix: row {i} must have "
                               f"{cols} numbers") from None
         return out

@@ -30,6 +30,11 @@ def test_matrix_shape_error_names_key_and_line():
     n = YamlNode.parse("x: 0\nK: [[1, 2], [3, 4], [5, 6]]\n", "cam.yaml")
     with pytest.raises(ConfigError, match=r"cam.yaml:2: K\[0\]: expected a 3x3 matrix"):
         n.mapping(["x", "K"])["K"].matrix(3, 3)
+    # a row of the right length with a NaN says the NaN, not the shape (a sweep)
+    n = YamlNode.parse("K: [[.nan, 0, 1], [0, 1, 0], [0, 0, 1]]\n", "cam.yaml")
+    with pytest.raises(ConfigError, match=r"K\[0\]: row 0 of the 3x3 matrix: expected a "
+                                          r"finite number"):
+        n.mapping(["K"])["K"].matrix(3, 3)
 
 
 def test_range_check():
