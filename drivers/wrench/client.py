@@ -189,6 +189,10 @@ class OpenProtocolWrench(SupervisedWrench):
         self._curves: deque[Curve] = deque()
         self._curves_dropped = 0
         self._owed_data_acks: deque[int] = deque()   # MID 0005 "0900" ... to send (supervisor)
+        # the communication stop is being sent (closing): subscribed data that arrives after
+        # it (curves in flight) is no longer acknowledged: the session is ending, and a 0005
+        # after the 0003 reaches a controller that has stopped listening to this session
+        self._stopping = False
         self._parts = PartAssembler()           # the reading thread's only
         self._db_info: ResultDbInfo | None = None
         self._data_seen: set[int] = set()       # 0901/0902 logged once per session
@@ -274,6 +278,8 @@ class OpenProtocolWrench(SupervisedWrench):
                               "stop the curves", min(self.timeout, 0.5))
             except DeviceError:
                 pass
+        with self._cond:
+            self._stopping = True
         try:    # orderly communication stop (0003 -> 0005); best effort, briefly
             self._command(Message(op.MID_STOP), "communication stop", min(self.timeout, 0.5))
         except DeviceError:
@@ -572,7 +578,7 @@ class OpenProtocolWrench(SupervisedWrench):
                 self._owed_acks -= 1
         while True:   # subscribed data's MID 0005 ("0900", ...), the same way
             with self._cond:
-                if not self._owed_data_acks:
+                if not self._owed_data_acks or self._stopping:
                     return
                 mid = self._owed_data_acks[0]
             ack = Message(op.MID_ACCEPTED, data=f"{mid:04d}".encode())
