@@ -318,24 +318,21 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
     summary["station_id"] = station_id(1)
     summary["share"] = truth.get("share", [])
     summary["opcua"] = None if cfg.opcua is None else cfg.opcua.endpoint
+    # the line's verdict from each part's reasons (never read back from a verdict's text)
+    problems: list[str] = summary.pop("problems")
     if extra:
         summary["stations"] = extra
-        failed = [f"{e['station_id']}: {e['verdict'][len('FAIL: '):]}" for e in extra
-                  if not e["verdict"].startswith("PASS")]
-        if failed:
-            head = summary["verdict"][len("FAIL: "):] if summary["verdict"].startswith(
-                "FAIL") else ""
-            summary["verdict"] = "FAIL: " + "; ".join(x for x in (head, *failed) if x)
-        elif summary["verdict"].startswith("PASS"):
-            summary["verdict"] += f"; {len(extra)} more station(s) PASS"
+        problems += [f"{e['station_id']}: {'; '.join(p)}"
+                     for e in extra if (p := e.pop("problems"))]
     if line:
         summary["line"] = line
         if line["missing"]:   # asked for the line and it did not get them: not a PASS
-            why = (f"{line['missing']} record(s) ({line['missing_rundowns']} rundown(s)) did "
-                   "not reach the line database")
-            head = summary["verdict"].split(": ", 1)[1] if summary["verdict"].startswith(
-                "FAIL") else ""
-            summary["verdict"] = "FAIL: " + "; ".join(x for x in (head, why) if x)
+            problems.append(f"{line['missing']} record(s) ({line['missing_rundowns']} "
+                            "rundown(s)) did not reach the line database")
+    if problems:
+        summary["verdict"] = "FAIL: " + "; ".join(problems)
+    elif extra:
+        summary["verdict"] += f"; {len(extra)} more station(s) PASS"
     if args.json:
         sys.stdout.write(strict_json(summary) + "\n")
     else:
@@ -459,7 +456,7 @@ async def _next_station(args: argparse.Namespace, first: StationConfig, k: int, 
     return {"station_id": sid, "opcua": None if cfg.opcua is None else cfg.opcua.endpoint,
             "bolts": n, "ok": s["ok"], "left": s["left"], "handled": s["handled"],
             "share": truth.get("share", []), "wrong_bolt_sends": s["wrong_bolt_sends"],
-            "recorded": s["recorded"], "verdict": s["verdict"]}
+            "recorded": s["recorded"], "verdict": s["verdict"], "problems": s["problems"]}
 
 
 async def _hold(url: str | None, endpoints: list[str], report: list[dict[str, Any]],
@@ -537,7 +534,8 @@ def simulated(cfg: StationConfig, tmp: Path) -> StationConfig:
 
 def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
              wrong: int, locked_sends: int = 0) -> dict[str, Any]:
-    """The run in figures, from the station's typed events; ``verdict`` is the last line."""
+    """The run in figures, from the station's typed events; ``verdict`` is the last line,
+    ``problems`` its reasons (none: a PASS)."""
     refusals: Counter[str] = Counter()
     for e in st.bus.of(Localized):
         assert isinstance(e, Localized)  # noqa: S101 - of() filters
@@ -585,7 +583,7 @@ def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
                             "max": _num(np.max(errs)) if errs else None},
             "latency_ms": {"p50": _num(np.percentile(lat, 50)) if lat else None,
                            "p95": _num(np.percentile(lat, 95)) if lat else None},
-            "verdict": verdict}
+            "verdict": verdict, "problems": problems}
 
 
 def _handled_words(ok: int, left: int, handled: int) -> str:
