@@ -45,7 +45,6 @@ class CurveJoin:
         self.expect: frozenset[int] = frozenset()    # the trace types a rundown waits for
         self._curves: OrderedDict[int, dict[int, dict[str, Any]]] = OrderedDict()
         self._entries: dict[int, dict[str, Any]] = {}   # rundown record id -> its entry
-        self._by_tid: OrderedDict[int, int] = OrderedDict()   # tightening id -> record id
         self._loose: OrderedDict[int, dict[int, dict[str, Any]]] = OrderedDict()
         self._held: deque[_Held] = deque()
         self._published: set[int] = set()
@@ -95,16 +94,12 @@ class CurveJoin:
         got: dict[int, dict[str, Any]] = {}
         if tid is not None:
             got.update(self._loose.pop(int(tid), {}))
-            self._by_tid[int(tid)] = rid
-            self._by_tid.move_to_end(int(tid))
         self._curves[rid] = got
         self._entries[rid] = entry
         while len(self._curves) > self.keep:
             old, _ = self._curves.popitem(last=False)
             self._entries.pop(old, None)
             self._published.discard(old)
-        while len(self._by_tid) > self.keep:
-            self._by_tid.popitem(last=False)
         if not hold:
             self._published.add(rid)
             return
