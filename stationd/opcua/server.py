@@ -197,7 +197,7 @@ class OpcUaServer:
         await load_model(server)
         idx = await server.register_namespace(NAMESPACE)
         await self._build(server, idx)
-        _quiet_start_failure(logging.getLogger("asyncua.server.server"))
+        _filtered(logging.getLogger("asyncua.server.server"), _StartFailure)
         await server.start()
         self.server = server
         self._loop = asyncio.get_running_loop()
@@ -248,7 +248,7 @@ class OpcUaServer:
             return
         store = TrustStore([trusted], [])
         await store.load()
-        _one_line(logging.getLogger("asyncuagds.validate"))   # asyncua.crypto.truststore's
+        _filtered(logging.getLogger("asyncuagds.validate"), _NoTraceback)   # truststore's
         server.set_certificate_validator(CertificateValidator(
             CertificateValidatorOptions.TRUSTED_VALIDATION |
             CertificateValidatorOptions.PEER_CLIENT, store))
@@ -442,7 +442,9 @@ class OpcUaServer:
             self._results.popitem(last=False)
 
     async def _publish(self, entry: dict[str, Any]) -> None:
-        await _fire(self._event, self._rebuild(entry), entry)
+        # the result kept when the rundown was taken, rebuilt there as its curves came
+        result = self._results.get(result_id(self.db_id, entry["seq"])) or self._rebuild(entry)
+        await _fire(self._event, result, entry)
         self.published += 1
 
     async def _fire_requested(self, entry: dict[str, Any]) -> None:
@@ -526,7 +528,6 @@ async def _set(parent: Node, name: str, value: str, uris: list[str]) -> None:
         return
 
 
-
 async def _one_identification(js: Node, ident: Node, uris: list[str]) -> None:
     """MachineryBuildingBlocks' Identification is the machine's own (OPC 40001-1: the
     building block references the same AddIn); asyncua's instantiation made a second, empty
@@ -545,6 +546,7 @@ async def _one_identification(js: Node, ident: Node, uris: list[str]) -> None:
     await blocks.add_reference(ident.nodeid, ua.ObjectIds.HasAddIn, forward=True,
                                bidirectional=False)
 
+
 __all__ = ["NAMESPACE", "OpcUaServer", "ReadOnlyRuleset", "StationUsers"]
 
 
@@ -557,9 +559,6 @@ class _NoTraceback(logging.Filter):
         return True
 
 
-def _one_line(logger: logging.Logger) -> None:
-    if not any(isinstance(f, _NoTraceback) for f in logger.filters):
-        logger.addFilter(_NoTraceback())
 
 
 class _StartFailure(logging.Filter):
@@ -571,9 +570,10 @@ class _StartFailure(logging.Filter):
         return not str(record.msg).endswith("error starting server")
 
 
-def _quiet_start_failure(logger: logging.Logger) -> None:
-    if not any(isinstance(f, _StartFailure) for f in logger.filters):
-        logger.addFilter(_StartFailure())
+def _filtered(logger: logging.Logger, kind: type[logging.Filter]) -> None:
+    """``logger`` with a filter of ``kind``, added once (each server's start asks again)."""
+    if not any(isinstance(f, kind) for f in logger.filters):
+        logger.addFilter(kind())
 
 
 async def _refuse_every_certificate(cert: Any, app: Any) -> None:
