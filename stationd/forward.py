@@ -63,6 +63,28 @@ MEASURE_BATCH = 500          # entries read at once to measure them
 EXAMPLE_URL = "postgresql+psycopg://stationd@line-db/line"
 CURSOR_KEY = "forwarded_seq"
 
+def line_url_problem(url: str) -> str | None:
+    """Why ``url`` cannot name the line database, in the words of what to write; None when
+    it can (built, not connected: a server that does not answer is not told here).  One check
+    for the station file's ``line.url`` and ``stationd line init``."""
+    try:
+        parsed = make_url(url)
+        backend, port = parsed.get_backend_name(), parsed.port
+    except Exception:
+        return f"not a database URL: {url!r} (e.g. {EXAMPLE_URL})"
+    if port is not None and not 1 <= port <= 65535:
+        # psycopg takes port 0 as "the default", and its error then names 5432
+        return f"port {port} is not 1-65535"
+    if backend != "postgresql":
+        return (f"the line database is PostgreSQL, not {backend}: give a postgresql+psycopg:// "
+                f"URL (e.g. {EXAMPLE_URL}); the station's own records are in database: url")
+    try:   # a driver that is not installed is told now
+        make_engine(url).dispose()
+    except DbError as exc:
+        return f"{exc}: the line database's driver is psycopg 3 (postgresql+psycopg://...)"
+    return None
+
+
 @dataclass(frozen=True)
 class LineConfig:
     url: str
@@ -75,23 +97,9 @@ class LineConfig:
     def from_node(cls, node: YamlNode) -> LineConfig:
         m = node.mapping(("url", "station_id", "backlog"), required=("url", "station_id"))
         url = m["url"].text()
-        try:
-            parsed = make_url(url)
-            backend, port = parsed.get_backend_name(), parsed.port
-        except Exception:
-            raise m["url"].error(f"not a database URL: {url!r} (e.g. {EXAMPLE_URL})"
-                                 ) from None
-        if port is not None and not 1 <= port <= 65535:
-            raise m["url"].error(f"port {port} is not 1-65535")
-        if backend != "postgresql":
-            raise m["url"].error(
-                f"the line database is PostgreSQL, not {backend}: give a postgresql+psycopg:// "
-                f"URL (e.g. {EXAMPLE_URL}); the station's own records are in database: url")
-        try:   # built, not connected: a driver that is not installed is told now
-            make_engine(url).dispose()
-        except DbError as exc:
-            raise m["url"].error(f"{exc}: the line database's driver is psycopg 3 "
-                                 "(postgresql+psycopg://...)") from None
+        problem = line_url_problem(url)
+        if problem is not None:
+            raise m["url"].error(problem)
         sid = m["station_id"].text()
         if not 1 <= len(sid) <= 64 or not sid.isprintable():
             raise m["station_id"].error("1-64 printable characters")
@@ -173,7 +181,7 @@ class LineDb:
                 create_line_schema(engine)
             except SQLAlchemyError as exc:
                 engine.dispose()
-                raise LineDown(f"the line tables: {_reason(exc)}") from None
+                raise LineDown(f"the line tables: {error_line(exc)}") from None
             self._engine = engine
         return self._engine
 
@@ -197,11 +205,11 @@ class LineDb:
         except DBAPIError as exc:
             if exc.connection_invalidated or _transient(exc):
                 self.dispose()
-                raise LineDown(_reason(exc)) from None
+                raise LineDown(error_line(exc)) from None
             raise
         except (SQLAlchemyError, DbError, OSError) as exc:
             self.dispose()
-            raise LineDown(_reason(exc)) from None
+            raise LineDown(error_line(exc)) from None
 
     def reachable(self) -> None:
         """``LineDown`` when the line database does not answer now (a command says so,
@@ -211,7 +219,7 @@ class LineDb:
                 conn.exec_driver_sql("SELECT 1")
         except (SQLAlchemyError, OSError) as exc:
             self.dispose()
-            raise LineDown(_reason(exc)) from None
+            raise LineDown(error_line(exc)) from None
 
     def dispose(self) -> None:
         if self._engine is not None:
@@ -226,7 +234,9 @@ def _transient(exc: DBAPIError) -> bool:
     return code[:2] in ("08", "53", "57", "58") or code == ""
 
 
-def _reason(exc: BaseException) -> str:
+def error_line(exc: BaseException) -> str:
+    """The first line of a database error in the server's or driver's words (the error
+    SQLAlchemy wraps), or the error's type."""
     orig = getattr(exc, "orig", None)
     text = str(orig if orig is not None else exc).strip()
     return text.splitlines()[0] if text else type(exc).__name__
@@ -264,9 +274,9 @@ class Forwarder:
                 try:
                     self.forwarded += self.line.push(self.cfg.station_id, self.db_id, [e])
                 except DBAPIError as exc:
-                    self.repo.ledger.quarantine(e["seq"], _reason(exc))
+                    self.repo.ledger.quarantine(e["seq"], error_line(exc))
                     log.error("line database refused record %d (%s) for good: %s; kept "
-                              "in quarantine", e["seq"], e["kind"], _reason(exc))
+                              "in quarantine", e["seq"], e["kind"], error_line(exc))
         self.cursor = int(entries[-1]["seq"])
         self.repo.ledger.set_meta(CURSOR_KEY, str(self.cursor))
         self.size.forwarded(entries, self.cursor)
@@ -281,7 +291,7 @@ class Forwarder:
                 self.forwarded += self.line.push(self.cfg.station_id, self.db_id, [e])
             except DBAPIError as exc:
                 refused += 1
-                self.repo.ledger.quarantine(e["seq"], _reason(exc))
+                self.repo.ledger.quarantine(e["seq"], error_line(exc))
                 continue
             self.repo.ledger.release(e["seq"])
             taken += 1
@@ -335,7 +345,7 @@ class Forwarder:
                 pause = wait * (0.8 + 0.4 * rng.random())
                 wait = min(wait * 2, BACKOFF_S[1])
             except (SQLAlchemyError, DbError) as exc:   # the local database: its keeper's
-                self.last_error = f"local database: {_reason(exc)}"
+                self.last_error = f"local database: {error_line(exc)}"
                 pause = POLL_S
             # while draining, entries are forwarded, not sized ahead of the forwarding
             measure = 0.0 if pause == 0.0 else MEASURE_S
@@ -367,4 +377,4 @@ async def _first(stop: asyncio.Event, wake: asyncio.Event | None, timeout: float
 
 
 __all__ = ["LINE_FEED", "BacklogBytes", "Forwarder", "LineConfig", "LineDb", "LineDown",
-           "payload_bytes"]
+           "error_line", "line_url_problem", "payload_bytes"]

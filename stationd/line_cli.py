@@ -28,12 +28,12 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from sqlalchemy import Engine, Table, inspect, make_url
-from sqlalchemy.exc import ArgumentError, SQLAlchemyError
+from sqlalchemy.exc import SQLAlchemyError
 
 from db.engine import make_engine
 from stationd.config import load_station_config
 from stationd.errors import InputError
-from stationd.forward import Forwarder, LineDown
+from stationd.forward import Forwarder, LineDown, error_line, line_url_problem
 from stationd.jsonout import strict_json
 from stationd.linedb import (
     LINE,
@@ -125,10 +125,8 @@ def _line_url(args: argparse.Namespace) -> str:
 
 
 def _unreachable(url: str, exc: BaseException) -> int:
-    orig = getattr(exc, "orig", None) or exc
-    text = str(orig).strip().splitlines()
     sys.stderr.write(f"stationd: line database {make_url(url).render_as_string()} "
-                     f"unreachable: {text[0] if text else type(exc).__name__}\n")
+                     f"unreachable: {error_line(exc)}\n")
     return EXIT_UNREACHABLE
 
 
@@ -228,19 +226,10 @@ def cmd_line_init(args: argparse.Namespace) -> int:
     before any station forwards; a database made by an earlier version gets the new ones):
     what the forwarders make on their first connection anyway, so running it again, or
     after stations forwarded, changes nothing."""
-    url = args.url
-    try:
-        parsed = make_url(url)
-    except ArgumentError:
-        raise InputError(f"line init {url!r}: not a database URL (e.g. "
-                         "postgresql+psycopg://stationd:PASSWORD@HOST:5432/line)") from None
-    if parsed.get_backend_name() != "postgresql":
-        raise InputError(f"line init {parsed.render_as_string()}: the line database is "
-                         "PostgreSQL (postgresql+psycopg://USER:PASSWORD@HOST:PORT/DATABASE)")
-    if parsed.port is not None and not 1 <= parsed.port <= 65535:
-        # psycopg takes port 0 as "the default", and the error then names 5432
-        raise InputError(f"line init {parsed.render_as_string()}: port {parsed.port} is not "
-                         "1-65535 (PostgreSQL's is 5432)")
+    problem = line_url_problem(args.url)   # the station file's line.url check
+    if problem is not None:
+        raise InputError(f"line init: {problem}")
+    parsed = make_url(args.url)
     if "connect_timeout" not in parsed.query:   # a host that does not answer: not forever
         parsed = parsed.update_query_dict({"connect_timeout": str(CONNECT_TIMEOUT_S)})
     engine = make_engine(parsed.render_as_string(hide_password=False))
@@ -249,10 +238,8 @@ def cmd_line_init(args: argparse.Namespace) -> int:
         create_line_schema(engine)
         after = set(inspect(engine).get_table_names())
     except SQLAlchemyError as exc:
-        orig = getattr(exc, "orig", None) or exc
-        text = str(orig).strip().splitlines()
         raise InputError(f"line database {parsed.render_as_string()}: "
-                         f"{text[0] if text else type(exc).__name__}") from None
+                         f"{error_line(exc)}") from None
     finally:
         engine.dispose()
     ours = sorted(t.name for t in LINE.sorted_tables)
