@@ -138,8 +138,7 @@ def _mirrored(fit: Transform, src: np.ndarray, dst: np.ndarray) -> str | None:
         return f"{MIRRORED}: the affine fit mirrors" if np.linalg.det(fit.A) < 0 else None
     s = np.asarray(src, dtype=np.float64)
     d = np.asarray(dst, dtype=np.float64)
-    cs, cd = s.mean(axis=0), d.mean(axis=0)
-    U, _, Vt = np.linalg.svd((s - cs).T @ (d - cd))
+    cs, cd, U, _, Vt = _cross(s, d)
     M = Vt.T @ U.T          # the best orthogonal map, a reflection when its det is -1
     if np.linalg.det(M) > 0:
         return None
@@ -238,15 +237,30 @@ def _check(src: np.ndarray, dst: np.ndarray,
     return s, d
 
 
+def _cross(s: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The centroids and the SVD of the centred point sets' cross-covariance (Kabsch):
+    ``(cs, cd, U, S, Vt)``; the best orthogonal map from ``s`` to ``d`` is ``Vt.T @ U.T``."""
+    cs, cd = s.mean(axis=0), d.mean(axis=0)
+    U, S, Vt = np.linalg.svd((s - cs).T @ (d - cd))
+    return cs, cd, U, S, Vt
+
+
+def _homogeneous(points: np.ndarray) -> np.ndarray:
+    return np.hstack([points, np.ones((len(points), 1))])
+
+
+def _spans_space(X: np.ndarray) -> bool:
+    """Whether the homogeneous points ``X`` are not all in one plane (rank 4)."""
+    return bool(np.linalg.matrix_rank(X, tol=1e-6 * np.abs(X).max()) >= 4)
+
+
 def fit_rigid(src: np.ndarray, dst: np.ndarray) -> Transform | Refusal:
     """Least-squares rotation and translation with ``dst ~ R src + t`` (Kabsch/Umeyama)."""
     chk = _check(src, dst, 3)
     if isinstance(chk, Refusal):
         return chk
     s, d = chk
-    cs, cd = s.mean(axis=0), d.mean(axis=0)
-    H = (s - cs).T @ (d - cd)
-    U, S, Vt = np.linalg.svd(H)
+    cs, cd, U, S, Vt = _cross(s, d)
     if S[1] < 1e-9 * max(S[0], 1e-300):
         return Refusal("reference points are collinear: the rotation is undetermined")
     D = np.diag([1.0, 1.0, float(np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0)])
@@ -263,11 +277,10 @@ def fit_affine(src: np.ndarray, dst: np.ndarray) -> Transform | Refusal:
     if isinstance(chk, Refusal):
         return chk
     s, d = chk
-    X = np.hstack([s, np.ones((len(s), 1))])
-    if np.linalg.matrix_rank(X, tol=1e-6 * np.abs(X).max()) < 4:
+    X = _homogeneous(s)
+    if not _spans_space(X):
         return Refusal("reference points are coplanar: an affine map is undetermined")
-    Y = np.hstack([d, np.ones((len(d), 1))])
-    if np.linalg.matrix_rank(Y, tol=1e-6 * np.abs(Y).max()) < 4:
+    if not _spans_space(_homogeneous(d)):
         # the map would flatten space into their plane (a singular A): a station file that
         # no check then accepts
         return Refusal("the vehicle points are coplanar (all in one plane): an affine map "
