@@ -23,8 +23,6 @@ import urllib.error
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from stationd.command_cli import (
     EXIT_REFUSED,
     EXIT_UNREACHABLE,
@@ -44,13 +42,12 @@ from stationd.yamlio import YamlNode
 def _cad(path: str, model: str) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """The CAD table's YAML tree and the model's bolt entries (ids, positions, parameters)."""
     try:
-        # the station's reader first: a PNG, a station file, a FIFO are each named as such
-        expect(YamlNode.load(path), "bolts", ("psets", "models"))
-        doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+        # the station's reader: a PNG, a station file, a FIFO are each named as such
+        root = YamlNode.load(path)
+        expect(root, "bolts", ("psets", "models"))
+        doc = root.value()
     except ConfigError as exc:
         raise InputError(f"--from {exc}") from None
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise InputError(f"--from {path}: not a bolt table ({exc})") from None
     models = doc.get("models") if isinstance(doc, dict) else None
     if not isinstance(models, dict) or model not in models:
         have = ", ".join(models) if isinstance(models, dict) else "none"
