@@ -113,8 +113,18 @@ def _check_command(args: argparse.Namespace) -> None:
         raise InputError(f"VIN {args.vin!r}: 1-32 characters without spaces")
     if args.command in BOLT_COMMANDS and not 1 <= len(args.bolt.strip()) <= 32:
         raise InputError(f"bolt {args.bolt!r}: 1-32 characters")
-    if len(args.comment or "") > 500:
-        raise InputError(f"--comment: at most 500 characters ({len(args.comment)} given)")
+    check_comment(args.comment)
+
+
+#: the longest comment a command keeps (the screens' limit too)
+MAX_COMMENT = 500
+
+
+def check_comment(comment: str | None) -> None:
+    """A command's ``--comment``, checked before any login (bad input: exit 2)."""
+    if len(comment or "") > MAX_COMMENT:
+        raise InputError(f"--comment: at most {MAX_COMMENT} characters ({len(comment or '')} "
+                         "given)")
 
 
 def _unreachable(url: str, exc: BaseException) -> int:
@@ -177,8 +187,7 @@ def cmd_operator(args: argparse.Namespace) -> int:
     user = args.user if args.operator_command == "sign-out" else args.name
     if not user or not user.strip() or len(user) > 64:
         raise InputError(f"user {user!r}: the name of a user of the station's access section")
-    if len(args.comment or "") > 500:
-        raise InputError(f"--comment: at most 500 characters ({len(args.comment)} given)")
+    check_comment(args.comment)
     return _session_command(args, user.strip(), {"kind": args.operator_command,
                                                  "comment": args.comment or ""})
 
@@ -291,6 +300,6 @@ def add_command_parsers(sub: Any) -> None:
     uh.set_defaults(func=cmd_user_hash)
 
 
-__all__ = ["EXIT_REFUSED", "EXIT_UNREACHABLE", "ApiClient", "add_command_parsers", "client_args",
-           "cmd_command", "cmd_feed", "cmd_operator",
+__all__ = ["EXIT_REFUSED", "EXIT_UNREACHABLE", "ApiClient", "add_command_parsers",
+           "check_comment", "client_args", "cmd_command", "cmd_feed", "cmd_operator",
            "cmd_user_hash", "read_password", "say_refused"]

@@ -89,8 +89,9 @@ def _check_args(args: argparse.Namespace) -> None:
     """The options, checked before anything is opened (bad input: exit 2)."""
     if args.user is not None and not args.user.strip():
         raise InputError("--user: the name of a user of the station's access section")
-    if len(args.comment or "") > 500:
-        raise InputError(f"--comment: at most 500 characters ({len(args.comment)} given)")
+    from stationd.command_cli import check_comment
+
+    check_comment(args.comment)
     if not 0 < args.timeout <= 3600:    # NaN too
         raise InputError(f"--timeout {args.timeout:g}: expected seconds in (0, 3600]")
 
