@@ -56,8 +56,13 @@ def watch(owner: int, folder: str, stop_argv: list[str]) -> None:
             pass                                   # alive, owned by another user
         time.sleep(1.0)
     if Path(folder).exists():
-        subprocess.run(stop_argv, check=False, capture_output=True, cwd=folder)  # noqa: S603
-        shutil.rmtree(folder, ignore_errors=True)
+        _down(stop_argv, folder)
+
+
+def _down(stop_argv: list[str], folder: str | Path) -> None:
+    """The server stopped at once (``pg_ctl stop -m immediate``) and its folder removed."""
+    subprocess.run(stop_argv, check=False, capture_output=True, cwd=folder)  # noqa: S603
+    shutil.rmtree(folder, ignore_errors=True)
 
 
 _WATCH = ("import sys, json; from stationd.pgserver import watch; "
@@ -174,9 +179,7 @@ class PgServer:
         """Down at once and removed; safe to call twice."""
         if self.dir is None or self.pg_ctl is None:
             return
-        subprocess.run(self._stop_argv(), check=False, capture_output=True,  # noqa: S603
-                       cwd=self.dir)
-        shutil.rmtree(self.dir, ignore_errors=True)
+        _down(self._stop_argv(), self.dir)
         self.dir = None
         if self._watcher is not None:
             self._watcher.kill()
