@@ -18,7 +18,7 @@ from stationd.station.commands import (
     TeachPoint,
     TeachStart,
 )
-from stationd.station.events import OperatorChanged, PairChecked
+from stationd.station.events import OperatorChange, OperatorChanged, PairChecked
 
 
 def _mm(v: float | None) -> str:
@@ -109,11 +109,11 @@ def operator_words(ev: OperatorChanged) -> str:
     if ev.user is not None:
         return f"operator: {ev.user} signed in" + (
             f" (after {ev.previous})" if ev.previous and ev.previous != ev.user else "") + (
-            " (since before the start)" if ev.how == "still signed in" else "")
+            " (since before the start)" if ev.how is OperatorChange.STILL_SIGNED_IN else "")
     if ev.previous is None:
         return "operator: nobody signed in" + (
             ": sign in to tighten (access.operator_required)" if ev.required else "")
-    how = {"idle": "signed out: idle too long"}.get(ev.how, ev.how)
+    how = "signed out: idle too long" if ev.how is OperatorChange.IDLE else ev.how
     return f"operator: {ev.previous} {how}" + (f" by {ev.by}" if ev.by else "") + (
         "; sign in to tighten" if ev.required else "")
 

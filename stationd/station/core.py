@@ -66,6 +66,7 @@ from stationd.station.events import (
     DeviceHealth,
     Localized,
     Notice,
+    OperatorChange,
     OperatorChanged,
     PairChecked,
     PairsUnchecked,
@@ -574,8 +575,8 @@ class StationCore:
         return [*_disable("station started: the tool stays off until a bolt is confirmed",
                           t=ev.t), *self._check_at_start(ev.t),
                 Publish(OperatorChanged(self.operator, self.operator_required,
-                                        how="still signed in" if self.operator else
-                                        "nobody signed in", t=ev.t))]
+                                        how=OperatorChange.STILL_SIGNED_IN if self.operator
+                                        else OperatorChange.NOBODY, t=ev.t))]
 
     def _on_LiftRead(self, ev: LiftRead) -> list[Action]:  # noqa: N802
         acts: list[Action] = []
@@ -1028,7 +1029,7 @@ class StationCore:
             return self._teach_done(ev.t, c)
         if isinstance(cmd, SignIn | SignOut):
             user = c.issuer.user if isinstance(cmd, SignIn) else None
-            how = "signed in" if user is not None else "signed out"
+            how = OperatorChange.SIGNED_IN if user is not None else OperatorChange.SIGNED_OUT
             by = c.issuer.user if user is None and c.issuer.user != self.operator else None
             return [*self._operator_is(ev.t, user, how, by), Reply(answer)]
         acts: list[Action] = []
@@ -1176,7 +1177,7 @@ class StationCore:
         self.operator, self._operator_seen = ev.user, ev.since
         return []
 
-    def _operator_is(self, t: float, user: str | None, how: str,
+    def _operator_is(self, t: float, user: str | None, how: OperatorChange,
                      by: str | None = None) -> list[Action]:
         """``user`` (None: nobody) is the operator from now on.  A bolt selected for the last
         one is left (the tool off): its rundown would carry the wrong name."""
@@ -1197,7 +1198,7 @@ class StationCore:
                 or t - self._operator_seen < idle:
             return []
         out = SignOut(f"idle for {idle:g} s", user)
-        return [*self._operator_is(t, None, "idle"),
+        return [*self._operator_is(t, None, OperatorChange.IDLE),
                 RecordCommand(0, out, Issuer(user, frozenset(), "station (idle)"), t)]
 
     def _teach_overdue(self, t: float) -> list[Action]:

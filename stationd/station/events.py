@@ -267,6 +267,17 @@ class BoltReleased(StationEvent):
     user: str
 
 
+class OperatorChange(enum.StrEnum):
+    """How the operator signed in at the station changed (typed: the journal's words are
+    chosen by it, never read back from text)."""
+
+    SIGNED_IN = "signed in"
+    SIGNED_OUT = "signed out"
+    IDLE = "idle"                        # signed out by the station after operator_idle_s
+    STILL_SIGNED_IN = "still signed in"  # at a start or reload, from the commands on disk
+    NOBODY = "nobody signed in"          # at a start, with nobody signed in
+
+
 @dataclass(frozen=True)
 class OperatorChanged(StationEvent):
     """Who is signed in at the station now (``user`` None: nobody), whether the station
@@ -277,7 +288,7 @@ class OperatorChanged(StationEvent):
     user: str | None
     required: bool = False
     previous: str | None = None
-    how: str = ""
+    how: OperatorChange = OperatorChange.NOBODY
     by: str | None = None     # who gave the sign-out (another user than ``previous``)
 
 
