@@ -20,6 +20,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from db.kinds import MISSING, SKIPPED
 from stationd.errors import ConfigError, InputError
 from stationd.jsonout import strict_json
 from stationd.outfile import write_atomic
@@ -189,15 +190,15 @@ def _export_results(args: argparse.Namespace) -> int:
         kept = [r for r in runs if r["recorded_at"] is not None
                 and _aware(datetime.fromisoformat(r["recorded_at"])) >= args.since]
         vins_kept = {r["vin"] for r in kept}
-        runs = [r for r in runs if r in kept or (r["status"] in ("missing", "skipped")
+        runs = [r for r in runs if r in kept or (r["status"] in (MISSING, SKIPPED)
                                                  and r["vin"] in vins_kept)]
     text = rundowns_csv(runs) if fmt == "csv" else strict_json(runs) + "\n"
     if args.out is None:
         sys.stdout.write(text)
     else:
         write_atomic(Path(args.out), text)
-        missing = sum(1 for r in runs if r["status"] == "missing")
-        skipped = sum(1 for r in runs if r["status"] == "skipped")
+        missing = sum(1 for r in runs if r["status"] == MISSING)
+        skipped = sum(1 for r in runs if r["status"] == SKIPPED)
         also = f" (and {skipped} skipped)" if skipped else ""
         print(f"wrote {args.out}: {len(runs) - missing - skipped} rundown(s) and {missing} "
               f"missing bolt(s){also} of {len({r['vin'] for r in runs})} vehicle(s)")
@@ -234,9 +235,9 @@ def cmd_db_report(args: argparse.Namespace) -> int:
         print(report.summary())
         for b in report.bolts:
             last = [r for r in runs if r["bolt"] == b.bolt_id][-1:]
-            result = "-" if b.status == "missing" else \
+            result = "-" if b.status == MISSING else \
                 f"by {b.skipped_by}" + (f": {b.comment}" if b.comment else "") \
-                if b.status == "skipped" else \
+                if b.status == SKIPPED else \
                 f"{_num(b.torque_nm)} N m, {_num(b.angle_deg)} deg, v{b.version}, " \
                 f"{b.attempts} attempt(s)" + (f", by {last[0]['operator'] or '-'}"
                                               if last else "")
