@@ -23,15 +23,20 @@ from drivers.errors import UrlError
 from drivers.url import load_backend, parse_url
 from drivers.wrench.base import (
     LinkStatus,
+    Received,
+    ResultKind,
     ResultType,
     Status,
     TighteningResult,
     TorqueUnit,
+    UnreadableResult,
     Wrench,
+    result_kind,
 )
 
-__all__ = ["BACKENDS", "FORMS", "LinkStatus", "ResultType", "Status", "TighteningResult",
-           "TorqueUnit", "Wrench", "open_wrench"]
+__all__ = ["BACKENDS", "FORMS", "LinkStatus", "Received", "ResultKind", "ResultType", "Status",
+           "TighteningResult", "UnreadableResult",
+           "TorqueUnit", "Wrench", "open_wrench", "result_kind"]
 
 #: scheme -> "module:Class"; the class has ``from_url(url: DeviceUrl, **kw) -> Wrench``.
 BACKENDS: dict[str, str] = {

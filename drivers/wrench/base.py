@@ -27,7 +27,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime
-from enum import IntEnum
+from enum import IntEnum, StrEnum
 from typing import Any, TypeVar
 
 from drivers.errors import ConnectionLostError, DeviceError, RefusedError
@@ -57,6 +57,35 @@ class ResultType(IntEnum):
     ABORT_JOB = 6
     SYNC_TIGHTENING = 7
     REFERENCE_SETUP = 8
+
+    @property
+    def closes_a_bolt(self) -> bool:
+        """Only a tightening (synchronized spindles included) can close a bolt."""
+        return self in (ResultType.TIGHTENING, ResultType.SYNC_TIGHTENING)
+
+
+class ResultKind(StrEnum):
+    """What the station makes of a result, from its type (:func:`result_kind`)."""
+
+    TIGHTENING = "tightening"    # can close a bolt
+    LOOSENING = "loosening"      # recorded as a loosening (may reopen the bolt)
+    EVENT = "event"              # a controller event (batch step, bypass, abort, reference)
+    UNKNOWN = "unknown"          # a type code the specification does not name: never a rundown
+
+
+def result_kind(code: int | None, sent_loosen: bool = False) -> ResultKind:
+    """The kind of a result whose type code is ``code`` (None: the revision carries no type,
+    MID 0061 revisions 1-2 or a register map without one: then what the station sent, a
+    loosen pset or a tightening one, decides)."""
+    if code is None:
+        return ResultKind.LOOSENING if sent_loosen else ResultKind.TIGHTENING
+    try:
+        t = ResultType(code)
+    except ValueError:
+        return ResultKind.UNKNOWN
+    if t.closes_a_bolt:
+        return ResultKind.TIGHTENING
+    return ResultKind.LOOSENING if t is ResultType.LOOSENING else ResultKind.EVENT
 
 
 class TorqueUnit(IntEnum):
@@ -130,6 +159,9 @@ class TighteningResult:
     strategy: int | None = None              # 1 torque control, 2 torque/angle monitoring, ...
     strategy_options: int | None = None      # a bit field, as sent
     result_type: ResultType | None = None
+    #: the type code as sent (revision 3+), also one the specification does not name (then
+    #: ``result_type`` is None): never read a result without a known type as a tightening
+    result_type_code: int | None = None
     pset_name: str = ""
     torque_unit: TorqueUnit | None = None
     rundown_angle_status: Status | None = None
@@ -159,6 +191,31 @@ class TighteningResult:
     customer_error_code: str = ""
     compensated_angle_deg: float | None = None
     angle_decimal_deg: float | None = None     # the final angle with its decimals (rev 7)
+
+
+@dataclass(frozen=True)
+class UnreadableResult:
+    """A result message the driver could not read at any revision: kept whole, so that it is
+    stored (raw text, revision, the parse error) before the controller is told it may forget
+    it, and the bolt it may belong to is held for a person to check on the controller.
+
+    ``tightening_id``, ``pset`` and ``vin`` are what could still be picked out of it (None or
+    empty when not even that).  Handed out by ``wait_result`` like a result and acknowledged
+    the same way (``acknowledge_result``)."""
+
+    raw: str
+    mid: int
+    revision: int
+    error: str
+    tightening_id: int | None = None
+    pset: int | None = None
+    vin: str = ""
+    timestamp: datetime | None = None
+    fetched: bool = False
+
+
+#: what ``wait_result`` hands out: a result, or one that could not be read
+Received = TighteningResult | UnreadableResult
 
 
 @dataclass(frozen=True)
@@ -276,7 +333,7 @@ class Wrench(Openable):
         self._send_vin(vin, self._timeout(timeout))
 
     def wait_result(self, timeout: float, *, acknowledge: bool = True
-                    ) -> TighteningResult | None:
+                    ) -> Received | None:
         """The next tightening result, or None if none came within ``timeout`` seconds.
 
         Results already received are returned even after the link dropped; with none
@@ -299,7 +356,7 @@ class Wrench(Openable):
                 log.warning("%s", e)  # keeps it too, unacknowledged
         return result
 
-    def acknowledge_result(self, result: TighteningResult, timeout: float | None = None) -> None:
+    def acknowledge_result(self, result: Received, timeout: float | None = None) -> None:
         """Tell the controller ``result`` (from ``wait_result(..., acknowledge=False)``) is
         stored.  ValueError for a result that is not awaiting acknowledgement (acknowledged
         twice, or not from this wrench); ConnectionLostError when the link it came on is
@@ -386,10 +443,10 @@ class Wrench(Openable):
     def _send_vin(self, vin: str, timeout: float) -> None: ...
 
     @abstractmethod
-    def _wait_result(self, timeout: float) -> TighteningResult | None: ...
+    def _wait_result(self, timeout: float) -> Received | None: ...
 
     @abstractmethod
-    def _ack_result(self, result: TighteningResult, timeout: float) -> None: ...
+    def _ack_result(self, result: Received, timeout: float) -> None: ...
 
 
 def check_positive(**values: float) -> None:
@@ -415,10 +472,10 @@ class SupervisedWrench(Wrench):
         self._last_error: str | None = None
         self._poll_error: str | None = None
         self._attempts = self._reconnects = 0
-        self._results: deque[TighteningResult | DeviceError] = deque()
+        self._results: deque[Received | DeviceError] = deque()
         # results handed out but not yet acknowledged: id(result) -> (result, the backend's
         # token for the acknowledgement: the link epoch, the result counter)
-        self._unacked: dict[int, tuple[TighteningResult, int]] = {}
+        self._unacked: dict[int, tuple[Received, int]] = {}
         self._ack_wanted: set[int] = set()  # tokens whose acknowledgement failed: retry them
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -431,13 +488,13 @@ class SupervisedWrench(Wrench):
     def _send_ack(self, token: int, timeout: float) -> None:
         """Acknowledge the result received with ``token`` (not called with ``_cond`` held)."""
 
-    def _queue_result(self, result: TighteningResult, token: int) -> None:
+    def _queue_result(self, result: Received, token: int) -> None:
         """Queue a received result; it is acknowledged later with ``token`` (``_cond`` held)."""
         self._results.append(result)
         self._unacked[id(result)] = (result, token)
         self._cond.notify_all()
 
-    def _ack_result(self, result: TighteningResult, timeout: float) -> None:
+    def _ack_result(self, result: Received, timeout: float) -> None:
         with self._cond:
             entry = self._unacked.get(id(result))
             if entry is None or entry[0] is not result:
@@ -512,7 +569,7 @@ class SupervisedWrench(Wrench):
                 self._cond.wait(remaining)
             return self._link_up()
 
-    def _wait_result(self, timeout: float) -> TighteningResult | None:
+    def _wait_result(self, timeout: float) -> Received | None:
         deadline = time.monotonic() + timeout
         with self._cond:
             while True:

@@ -277,6 +277,7 @@ def parse_tightening(mid: int, revision: int, text: str) -> TighteningResult:
         pset_changed=v.get("pset_changed"), raw=text, revision=revision,
         fetched=mid == MID_OLD_RESULT, strategy=v.get("strategy"),
         strategy_options=v.get("strategy_options"), result_type=result_type,
+        result_type_code=v.get("result_type"),
         pset_name=v.get("pset_name") or "", torque_unit=unit,
         rundown_angle_status=v.get("rundown_angle_status"),
         current_monitoring_status=v.get("current_monitoring_status"),
