@@ -253,11 +253,6 @@ class SerialFramer:
 
 
 # -- replies --------------------------------------------------------------------------------
-def accepted_mid(msg: Message) -> int:
-    """The MID a 0005 (command accepted) acknowledges."""
-    return _number(msg.data[:4], "MID 0005 accepted-MID")
-
-
 def refusal(msg: Message) -> tuple[int, int]:
     """(refused MID, error code) of a 0004; the code may be missing on odd controllers (0)."""
     mid = _number(msg.data[:4], "MID 0004 refused-MID")
