@@ -90,10 +90,6 @@ class DeviceAssets:
         for d in devices:
             await self._add(d)
 
-    def node_id(self, device: str) -> ua.NodeId:
-        """The NodeId of ``device``'s DeviceHealth variable (what a client reads)."""
-        return ua.NodeId(f"{self._prefix}.Assets.{device}.Health.DeviceHealth", self._idx)
-
     async def report(self, device: str, health: int, reason: str, at: float) -> None:
         """``device``'s ``health`` (:data:`NORMAL`, :data:`FAILURE`, :data:`OFF_SPEC`) and
         why, since ``at`` (epoch seconds)."""
