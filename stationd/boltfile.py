@@ -75,16 +75,6 @@ def check_bolts(path: str | Path, *, tolerance_mm: float = DEFAULT_TOLERANCE_MM)
     return _check(root, tolerance_mm)
 
 
-def check_bolts_text(text: str, path: str = "<string>", *,
-                     tolerance_mm: float = DEFAULT_TOLERANCE_MM) -> BoltCheck:
-    """As :func:`check_bolts`, for text (``path`` is only used in messages)."""
-    try:
-        root = YamlNode.parse(text, path)
-    except ConfigError as exc:
-        return BoltCheck(path, None, [exc])
-    return _check(root, tolerance_mm)
-
-
 def load_bolts(path: str | Path, *, tolerance_mm: float = DEFAULT_TOLERANCE_MM) -> BoltTable:
     """The validated table of a file; the file's first error is raised as a ConfigError."""
     result = check_bolts(path, tolerance_mm=tolerance_mm)

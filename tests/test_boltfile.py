@@ -5,13 +5,26 @@ from __future__ import annotations
 import pytest
 
 from db.bolts import Parameters, Window, dump_bolts
-from stationd.boltfile import check_bolts, check_bolts_text, load_bolts
+from stationd.boltfile import check_bolts, load_bolts
 from stationd.errors import ConfigError, InputError
 from tests.db.conftest import BASE, EXAMPLE, line_of
 
 B1 = "models.SEDAN.bolts[0]"
 B2 = "models.SEDAN.bolts[1]"
 B3 = "models.SEDAN.bolts[2]"
+
+
+@pytest.fixture
+def check_text(tmp_path, monkeypatch):
+    """``check_text(text, name="b.yaml", **kw)``: the check of a bolt file holding ``text``,
+    named ``name`` in the current folder (a temporary one), so its messages start with
+    ``b.yaml:LINE:`` as an engineer's relative path would."""
+    monkeypatch.chdir(tmp_path)
+
+    def check(text, name="b.yaml", **kw):
+        (tmp_path / name).write_text(text)
+        return check_bolts(name, **kw)
+    return check
 
 # (replace old, by new, the line the error is on (a text on it, after the change), key, message)
 CASES = [
@@ -105,8 +118,8 @@ def _mutate(old: str, new: str) -> str:
     return BASE.replace(old, new)
 
 
-def test_base_and_example_are_valid():
-    result = check_bolts_text(BASE, "b.yaml")
+def test_base_and_example_are_valid(check_text):
+    result = check_text(BASE, "b.yaml")
     assert result.ok and result.table is not None
     sedan = result.table.models[0]
     b1, b2, b3 = sedan.bolts
@@ -120,9 +133,9 @@ def test_base_and_example_are_valid():
 
 @pytest.mark.parametrize(("old", "new", "at", "key", "message"), CASES,
                          ids=[c[4][:40] for c in CASES])
-def test_each_error_names_file_line_key(old, new, at, key, message):
+def test_each_error_names_file_line_key(old, new, at, key, message, check_text):
     text = _mutate(old, new)
-    result = check_bolts_text(text, "b.yaml")
+    result = check_text(text, "b.yaml")
     assert result.table is None
     needle, nth = at if isinstance(at, tuple) else (at, 0)
     want = f"b.yaml:{line_of(text, needle, nth)}: {key}: "
@@ -131,16 +144,16 @@ def test_each_error_names_file_line_key(old, new, at, key, message):
     assert len(texts) == 1, texts
 
 
-def test_tolerance_is_a_parameter_of_the_check():
+def test_tolerance_is_a_parameter_of_the_check(check_text):
     text = BASE.replace("position: [100, 0, 0]", "position: [20, 0, 0]")
-    assert check_bolts_text(text).ok  # 20 mm >= 2 x 8 mm
-    errors = check_bolts_text(text, "b.yaml", tolerance_mm=12).errors
+    assert check_text(text).ok  # 20 mm >= 2 x 8 mm
+    errors = check_text(text, "b.yaml", tolerance_mm=12).errors
     assert [str(e) for e in errors] == [
         f"b.yaml:{line_of(text, '[20, 0, 0]')}: {B2}.position: 20.0 mm from bolt B1 in X-Y "
         "(line 13): bolts must be at least 24 mm apart in X-Y (twice the matching tolerance of "
         "12 mm)"]
     with pytest.raises(InputError, match="tolerance"):
-        check_bolts_text(text, tolerance_mm=0)
+        check_text(text, tolerance_mm=0)
 
 
 def test_all_errors_of_a_file_are_collected_in_line_order_and_load_raises_the_first(tmp_path):
@@ -174,8 +187,8 @@ def test_all_errors_of_a_file_are_collected_in_line_order_and_load_raises_the_fi
     ("models: [A, B]\n", "b.yaml:1: models: expected a mapping of model name -> model"),
     ("models:\n  A:\n    bolts: []\n  A:\n    bolts: []\n", "b.yaml:4: models.A: duplicate key"),
 ])
-def test_file_level_errors(text, needle):
-    errors = check_bolts_text(text, "b.yaml").errors
+def test_file_level_errors(text, needle, check_text):
+    errors = check_text(text, "b.yaml").errors
     assert len(errors) == 1 and str(errors[0]).startswith(needle), errors
 
 
@@ -184,31 +197,32 @@ def test_missing_file_is_one_error(tmp_path):
     assert [str(e) for e in result.errors] == [f"{tmp_path / 'nope.yaml'}: file not found"]
 
 
-def test_bolt_may_repeat_its_psets_program_and_complete_it():
+def test_bolt_may_repeat_its_psets_program_and_complete_it(tmp_path):
     text = BASE.replace("        pset: 21\n",
                         "        pset: 21\n        torque: {target: 120, min: 110, max: 130}\n"
                         "        angle: {target: 10, min: 0, max: 90}\n")
-    table = load_bolts_text(text)
+    table = load_bolts_text(tmp_path, text)
     b3 = table.models[0].bolts[2]
     assert b3.parameters == Parameters(21, Window(120, 110, 130), Window(10, 0, 90))
 
 
-def load_bolts_text(text):
-    result = check_bolts_text(text)
-    assert result.table is not None, result.errors
-    return result.table
+def load_bolts_text(folder, text):
+    """The table of a bolt file holding ``text`` (in ``folder``), as the station loads it."""
+    path = folder / "b.yaml"
+    path.write_text(text)
+    return load_bolts(path)
 
 
-def test_dump_reads_back_equal():
-    for table in (load_bolts_text(BASE), load_bolts(EXAMPLE)):
+def test_dump_reads_back_equal(tmp_path):
+    for table in (load_bolts_text(tmp_path, BASE), load_bolts(EXAMPLE)):
         text = dump_bolts(table, "a header\nof two lines")
         assert text.startswith("# a header\n# of two lines\n")
-        assert load_bolts_text(text) == table
+        assert load_bolts_text(tmp_path, text) == table
 
 
-def test_a_pset_with_an_error_is_reported_once_not_at_every_bolt_using_it():
+def test_a_pset_with_an_error_is_reported_once_not_at_every_bolt_using_it(check_text):
     text = BASE.replace("target: 50, min: 45, max: 55", 'target: "50 Nm", min: 45, max: 55')
-    errors = check_bolts_text(text, "b.yaml").errors
+    errors = check_text(text, "b.yaml").errors
     assert [str(e) for e in errors] == [
         "b.yaml:4: psets[0].torque.target: expected a number in N m, got the string '50 Nm' "
         "(write the number alone: the unit is always N m)"]
@@ -236,27 +250,23 @@ def test_a_bolt_table_given_as_a_station_file_is_one_error_saying_so():
     assert len(errors) == 1 and "this is a bolt table" in str(errors[0])
 
 
-def test_a_table_that_tightens_nothing_is_a_warning():
+def test_a_table_that_tightens_nothing_is_a_warning(check_text):
     """A sweep: `models: {}` and a model without bolts passed config check as "ok, 0
     model(s)" with nothing said."""
-    from stationd.boltfile import check_bolts_text
-
-    empty = check_bolts_text("psets: []\nmodels: {}\n")
+    empty = check_text("psets: []\nmodels: {}\n")
     assert empty.ok and [w.line for w in empty.warnings] == [2]
     assert "tightens nothing" in str(empty.warnings[0])
-    idle = check_bolts_text(
+    idle = check_text(
         "psets:\n  - {id: 1, name: a, torque: {target: 10, min: 9, max: 11},\n"
         "     angle: {target: 30, min: 15, max: 60}}\nmodels:\n  M1:\n    bolts: []\n")
     assert idle.ok and len(idle.warnings) == 1 and "model M1 has no bolt" in \
         str(idle.warnings[0])
 
 
-def test_bolt_positions_in_metres_are_named_so():
+def test_bolt_positions_in_metres_are_named_so(check_text):
     """A sweep: a table in metres said "1.0 mm from B01 ... at least 16 mm apart" with none
     of the unit hints the station file gets."""
-    from stationd.boltfile import check_bolts_text
-
-    got = check_bolts_text(
+    got = check_text(
         "psets:\n  - {id: 1, name: a, torque: {target: 10, min: 9, max: 11},\n"
         "     angle: {target: 30, min: 15, max: 60}}\nmodels:\n  M1:\n    bolts:\n"
         "      - {id: B01, name: a, position: [1.2, 0.4, 0.0], pset: 1}\n"
