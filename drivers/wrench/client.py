@@ -556,13 +556,13 @@ class OpenProtocolWrench(SupervisedWrench):
         """A 9997/9998 from the controller: it answers the outstanding sequenced message."""
         with self._cond:
             wait = self._link_wait
-            if wait is not None and msg.sequence == wait.seq:
+            if wait is not None and op_link.answers(msg.sequence, wait.seq):
                 if msg.mid == op.MID_LINK_ERROR:
                     wait.error_code = op_link.link_error_code(msg)
                 wait.done.set()
                 return
-        log.warning("%s: MID %04d for sequence %s, which is not outstanding, ignored",
-                    self.device, msg.mid, msg.sequence)
+        log.warning("%s: MID %04d expecting sequence %s next, which answers no outstanding "
+                    "message, ignored", self.device, msg.mid, msg.sequence)
 
     def _flush_owed(self) -> None:
         """Send the 0062s owed for unreadable results (supervisor only): never waiting for

@@ -3,7 +3,10 @@
 Why typed: the station logs it at every session start and shows it on the devices panel, so
 that "which controller, which software, does it acknowledge at link level" is answered by
 the controller itself and not by the station's configuration.  ``sequence_number_support``
-(revision 6) is also what switches link-level acknowledgement on.
+(revision 6: the specification R2.8.0's table 16 brings parameters 12-16 together; an
+integrator asking for revision 5 or lower never learns it) is also what switches link-level
+acknowledgement on, as integrators' libraries decide it (node-open-protocol: on when the
+0002 it asked for at revision 6 says 1).
 
 Each revision appends parameters (2-digit tag, fixed width) to the previous one; they are
 read by tag, and a 0002 that does not read (an odd controller) still starts the session:
@@ -24,7 +27,7 @@ IDENTITY_PARAMS: dict[int, tuple[str, int]] = {
     8: ("rbu_type", 24), 9: ("controller_serial", 10),                           # rev 4
     10: ("system_type", 3), 11: ("system_subtype", 3),                           # rev 5
     12: ("sequence_number_support", 1), 13: ("linking_handling_support", 1),     # rev 6
-    14: ("station_id", 10), 15: ("station_name", 25), 16: ("client_id", 1),      # rev 7
+    14: ("station_id", 10), 15: ("station_name", 25), 16: ("client_id", 1),      # rev 6 too
 }
 _INTS = {"cell_id", "channel_id", "system_type", "system_subtype", "client_id"}
 _FLAGS = {"sequence_number_support", "linking_handling_support"}

@@ -12,6 +12,10 @@ what integrators report (PROTOCOLS.md):
   ``RESENDS`` times, then the link is lost (the reconnect mechanism takes over);
 - a message received with the number of the one before is a repeat (our 9997 was lost): it
   is acknowledged again and not processed twice;
+- a 9997 (and a 9998) carries the number the sender of the acknowledgement expects next: the
+  received number + 1 (99 wraps to 1), as the specification's figures show ("MID 0060 seq.
+  01" answered by "MID 9997 seq. 02 next exp seq at Controller = 02") and as integrators'
+  libraries check it (node-open-protocol refuses a 9997 that echoes the number sent);
 - the keep-alive (9999) is answered by its mirror, so it is not sequenced either.
 """
 
@@ -39,8 +43,16 @@ def is_sequenced(mid: int) -> bool:
 
 
 def link_ack(msg: Message) -> Message:
-    """MID 9997 for ``msg``: its MID as data, its sequence number in the header."""
-    return Message(MID_LINK_ACK, data=f"{msg.mid:04d}".encode(), sequence=msg.sequence)
+    """MID 9997 for ``msg``: its MID as data, and in the header the number expected next
+    (``msg``'s + 1, wrapping; none for a message that came without one)."""
+    seq = None if msg.sequence is None else next_seq(msg.sequence)
+    return Message(MID_LINK_ACK, data=f"{msg.mid:04d}".encode(), sequence=seq)
+
+
+def answers(ack_seq: int | None, sent_seq: int) -> bool:
+    """Whether a 9997/9998 numbered ``ack_seq`` answers the message sent as ``sent_seq``: it
+    names the number after it (the one its sender expects next)."""
+    return ack_seq == next_seq(sent_seq)
 
 
 def link_error_code(msg: Message) -> int:

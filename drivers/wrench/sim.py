@@ -318,14 +318,18 @@ class SimController(OpenProtocolServer):
 
     def _identity(self, revision: int) -> bytes:
         """MID 0002 data: revision 1's cell, channel and name, and each later revision's
-        parameters after them (numbered on)."""
+        parameters after them (numbered on).  Revision 6 (specification R2.8.0, table 16)
+        brings parameters 12-16: sequence number support (link-level acknowledgement),
+        linking handling support (messages in parts, which this controller sends: a long
+        trace), station id and name, client id.  R2.8.0 names no revision 7: it is answered
+        with revision 6's parameters."""
         values = [fixed(self.cell, 4), fixed(self.channel, 2), text(self.name, 25)]
         extra = ([text("SIM", 3)],
                  [text("2.8.0", 19), text(self.software, 19), text("sim tool 1.0", 19)],
                  [text("simulated RBU", 24), text(self.serial, 10)],
                  ["000", "000"],
-                 [str(int(self.link_ack)), "0"],
-                 [text("1", 10), text("simulated station", 25), "1"])
+                 [str(int(self.link_ack)), "1", text("1", 10), text("simulated station", 25),
+                  "1"])
         for more in extra[:revision - 1]:
             values += more
         return "".join(f"{tag:02d}{v}" for tag, v in enumerate(values, 1)).encode("ascii")

@@ -17,8 +17,12 @@ Link-level acknowledgement (MID 9997/9998), when the subclass switches it on for
 the controller sends is numbered 1-99 (wrapping) and the next one waits for the integrator's
 9997; no 9997 within ``link_timeout``: resent with the same number, up to 3 times, then the
 connection is dropped.  Every numbered message from the integrator is acknowledged (a 9998
-if it has no number), and one that repeats the last number is acknowledged again but not
-handled twice.  ``link_fault`` spoils this for tests ("ignore_ack", "no_ack", "nak", "deaf").
+if it has no number, or one that is neither the next expected nor a repeat: error 0003),
+and one that repeats the last number is acknowledged again but not handled twice.  A
+9997/9998 carries the number its sender expects next, the received one + 1 (the
+specification's figures: "MID 0060 seq. 01" is answered by "MID 9997 seq. 02"), both ways:
+the integrator's 9997 for message N must say N + 1.  ``link_fault`` spoils this for tests
+("ignore_ack", "no_ack", "nak", "deaf").
 """
 
 from __future__ import annotations
@@ -120,6 +124,11 @@ def parse_message(raw: bytes) -> Received:
 def message(mid: int, data: bytes = b"", revision: int = 1) -> bytes:
     """Header (length, MID, revision, the other fields blank) + data; no NUL."""
     return f"{20 + len(data):04d}{mid:04d}{revision:03d}         ".encode() + data
+
+
+def after(seq: int) -> int:
+    """The sequence number after ``seq`` (1-99, wrapping; 0: none yet, so 1)."""
+    return seq % 99 + 1
 
 
 def numbered(raw: bytes, seq: int) -> bytes:
@@ -374,7 +383,7 @@ class OpenProtocolServer:
     def _next_out(self, s: Session) -> None:
         if s.outstanding is not None or not s.outbox:
             return
-        s.tx_seq = s.tx_seq % 99 + 1
+        s.tx_seq = after(s.tx_seq)
         s.outstanding = numbered(s.outbox.popleft(), s.tx_seq)
         s.resends = 0
         self._send_outstanding(s)
@@ -399,7 +408,7 @@ class OpenProtocolServer:
         """Link-level work on a received message; whether it is to be handled."""
         if msg.mid in (LINK_ACK, LINK_ERROR):
             out = s.outstanding
-            if out is None or msg.sequence != int(out[16:18]):
+            if out is None or msg.sequence != after(int(out[16:18])):
                 self.errors.append(f"MID {msg.mid} for sequence {msg.sequence}, which is "
                                    "not outstanding")
             elif msg.mid == LINK_ERROR:
@@ -416,17 +425,26 @@ class OpenProtocolServer:
         if not s.link_level:
             return True
         ack = message(LINK_ACK, f"{msg.mid:04d}".encode())
-        if msg.sequence is None or self._link_fault("nak", msg.mid):
-            code = 3 if msg.sequence is None else 1
-            self.write(s, s.frame(numbered(message(LINK_ERROR, f"{msg.mid:04d}{code:04d}"
-                                                   .encode()), msg.sequence or 0)))
+        expected = after(s.rx_last or 0)
+        repeat = msg.sequence is not None and msg.sequence == s.rx_last
+        if msg.sequence is None or (not repeat and msg.sequence != expected):
+            self.errors.append(f"MID {msg.mid:04d} with sequence number {msg.sequence}, "
+                               f"expected {expected}")
+            self._nak(s, msg.mid, 3, expected)       # not handled: told what comes next
             return False
-        repeat = msg.sequence == s.rx_last
+        if self._link_fault("nak", msg.mid):
+            self._nak(s, msg.mid, 1, after(msg.sequence))
+            return False
         self.repeats += repeat          # counted before the 9997 is out: whoever sees it
         s.rx_last = msg.sequence        # may look at the count
         if not self._link_fault("no_ack", msg.mid):
-            self.write(s, s.frame(numbered(ack, msg.sequence)))
+            self.write(s, s.frame(numbered(ack, after(msg.sequence))))
         return not repeat
+
+    def _nak(self, s: Session, mid: int, code: int, seq: int) -> None:
+        """MID 9998 refusing ``mid`` with ``code``, numbered ``seq`` (the one expected)."""
+        self.write(s, s.frame(numbered(message(LINK_ERROR, f"{mid:04d}{code:04d}".encode()),
+                                       seq)))
 
     def _resend(self, s: Session) -> None:
         if s.resends >= LINK_RESENDS:

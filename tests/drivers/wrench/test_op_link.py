@@ -13,7 +13,8 @@ from drivers.errors import DeviceTimeoutError, UrlError
 from drivers.url import parse_url
 from drivers.wrench import open_wrench
 from drivers.wrench.client import OpenProtocolWrench
-from drivers.wrench.op_link import RxSequence, next_seq
+from drivers.wrench.op_link import RxSequence, answers, link_ack, next_seq
+from drivers.wrench.openprotocol import Message
 from drivers.wrench.sim import SimController
 
 from .conftest import connect, reconnect_within, wait_until
@@ -38,6 +39,10 @@ def ready(w) -> None:
 
 def test_the_numbering_rules():
     assert [next_seq(s) for s in (0, 1, 98, 99)] == [1, 2, 99, 1]
+    # a 9997 names the number after the one it acknowledges
+    assert [link_ack(Message(61, sequence=s)).sequence for s in (1, 98, 99)] == [2, 99, 1]
+    assert link_ack(Message(61)).sequence is None
+    assert answers(2, 1) and answers(1, 99) and not answers(1, 1) and not answers(None, 1)
     rx = RxSequence()
     assert [rx.is_new(s) for s in (1, 2, 2, 3, None, None, 3)] == [
         True, True, False, True, True, True, False]
@@ -58,9 +63,10 @@ def test_link_level_is_on_when_the_controller_says_so(lsim, transport, tmp_path)
     # 0001 is not numbered; 0060, 0018, 0043, 0062 are 1, 2, 3, 4
     assert seqs(lsim, 1) == [None]
     assert [seqs(lsim, mid) for mid in (60, 18, 43, 62)] == [[1], [2], [3], [4]]
-    # the controller's numbered messages (0005 x3, 0061) each got a 9997 with their number
+    # the controller's numbered messages (0005 x3, 0061: 1-4) each got a 9997 naming the
+    # number expected next (the specification's figures: "MID 9997 seq. 02" for seq. 01)
     acks = [(r.data, r.sequence) for r in lsim.received(9997)]
-    assert acks[:4] == [(b"0005", 1), (b"0005", 2), (b"0005", 3), (b"0061", 4)]
+    assert acks[:4] == [(b"0005", 2), (b"0005", 3), (b"0005", 4), (b"0061", 5)]
     assert lsim.errors == [] and lsim.resent == 0 and lsim.repeats == 0
 
 
@@ -70,8 +76,8 @@ def test_sequence_numbers_wrap_after_99_in_both_directions(lsim, tmp_path):
             w.select_pset(1 + i % 3)
     sent = seqs(lsim, 18)
     assert sent[:3] == [2, 3, 4] and sent[97:100] == [99, 1, 2] and len(sent) == 105
-    answered = [r.sequence for r in lsim.received(9997)]
-    assert answered[97:101] == [98, 99, 1, 2]
+    answered = [r.sequence for r in lsim.received(9997)]   # 0005s numbered 98, 99, 1, 2
+    assert answered[97:101] == [99, 1, 2, 3]
     assert lsim.errors == []
 
 

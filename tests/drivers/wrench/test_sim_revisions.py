@@ -14,7 +14,7 @@ import pytest
 from drivers.wrench import open_wrench
 from drivers.wrench.sim import SimController
 
-from .conftest import FAST, op, read_message
+from .conftest import FAST, op, read_message, wait_until
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -37,11 +37,13 @@ def start(c: socket.socket, rev: str = "001") -> bytes:
 def test_identity_in_revision_6_byte_for_byte(sim):
     with raw_tcp(sim) as c:
         got = start(c, "006")
-    assert got == (b"01790002006         " + b"010001" + b"0201" + b"03"
+    # R2.8.0 table 16: revision 6 brings 12-16; the last byte is 221 (client id)
+    assert got == (b"02210002006         " + b"010001" + b"0201" + b"03"
                    + b"SimController".ljust(25) + b"04SIM" + b"05" + b"2.8.0".ljust(19)
                    + b"06" + b"stationd-sim 1.0".ljust(19) + b"07" + b"sim tool 1.0".ljust(19)
                    + b"08" + b"simulated RBU".ljust(24) + b"09SIM0000001" + b"10000"
-                   + b"11000" + b"120" + b"130" + b"\x00")
+                   + b"11000" + b"120" + b"131" + b"14" + b"1".ljust(10) + b"15"
+                   + b"simulated station".ljust(25) + b"161" + b"\x00")
     assert int(got[:4]) == len(got) - 1
 
 
@@ -84,23 +86,35 @@ def test_old_results_by_id_newest_and_not_found(sim):
 
 
 def test_link_level_byte_for_byte():
+    """Each 9997/9998 names the number its sender expects next: the received one + 1 (the
+    specification's figure 8: "MID 0060 seq. 01" -> "MID 9997 seq. 02")."""
     with SimController(seed=1, nok_rate=0.0, link_ack=True) as sim, raw_tcp(sim) as c:
         ident = start(c, "006")
-        assert ident[-3:] == b"130\x00"[-3:] and b"121" in ident[20:]   # says it does
+        assert ident[-4:] == b"161\x00" and b"121131" in ident[20:]   # says it does
         c.sendall(op(60, rev="007")[:16] + b"01" + op(60, rev="007")[18:])
-        assert read_message(c) == b"00249997001     01  0060\x00"    # its link-level ack
+        assert read_message(c) == b"00249997001     02  0060\x00"    # its link-level ack
         answer = read_message(c)                                     # numbered: 01
         assert answer == b"00240005001     01  0060\x00"
-        c.sendall(b"00249997001     01  0005\x00")                   # our ack of it
+        c.sendall(b"00249997001     02  0005\x00")                   # our ack of it
         # a repeat of our 0060 (same number): acknowledged again, not handled again
         c.sendall(op(60, rev="007")[:16] + b"01" + op(60, rev="007")[18:])
-        assert read_message(c) == b"00249997001     01  0060\x00"
-        # a message without a number: link-level error 0003 (invalid sequence number)
+        assert read_message(c) == b"00249997001     02  0060\x00"
+        # a message without a number: link-level error 0003 (invalid sequence number),
+        # numbered with the one expected
         c.sendall(op(18, b"001"))
-        assert read_message(c) == b"00289998001     00  00180003\x00"
-        assert ask(c, 18, b"001", seq="02") == b"00249997001     02  0018\x00"
+        assert read_message(c) == b"00289998001     02  00180003\x00"
+        # nor a number that is neither the next nor a repeat
+        assert ask(c, 18, b"001", seq="05") == b"00289998001     02  00180003\x00"
+        assert ask(c, 18, b"001", seq="02") == b"00249997001     03  0018\x00"
         assert read_message(c) == b"00240005001     02  0018\x00"
-    assert sim.repeats == 1 and sim.pset == 1
+        # an acknowledgement that echoes the number instead of naming the next is not one
+        c.sendall(b"00249997001     02  0005\x00")
+        assert wait_until(lambda: any("sequence 2, which is not outstanding" in e
+                                      for e in sim.errors))
+        c.sendall(b"00249997001     03  0005\x00")                   # this one is
+        assert ask(c, 18, b"002", seq="03") == b"00249997001     04  0018\x00"
+        assert read_message(c) == b"00240005001     03  0018\x00"    # the next number
+    assert sim.repeats == 1 and sim.pset == 2
 
 
 def test_link_level_resends_then_drops():
