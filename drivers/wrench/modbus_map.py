@@ -212,8 +212,3 @@ class WrenchRegisterMap:
             raise ValueError(f"VIN must be printable ASCII, at most {self.vin.length} "
                              f"characters: {vin!r}")
         return self.vin.pack(vin.encode("ascii"))
-
-    def decode_vin(self, regs: Mapping[int, int]) -> str:
-        if self.vin is None:
-            return ""
-        return self.vin.unpack(regs).rstrip(b"\0 ").decode("ascii", "replace")

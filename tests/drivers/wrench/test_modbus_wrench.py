@@ -42,7 +42,8 @@ def test_full_exchange(ctl, transport):
         w.set_parameters(2, torque_nm=44.0, angle_deg=100.0)
         assert ctl.active == P2 and ctl.history == [P1, P2]
         w.send_vin(VIN)
-        assert ctl.map.decode_vin(ctl.registers()) == VIN
+        regs, vin = ctl.registers(), ctl.map.encode_vin(VIN)      # the controller holds it
+        assert {a: regs[a] for a in vin} == vin
         w.enable_tool()
         assert w.controller_status() == (True, True)
         truth = [ctl.pull_trigger() for _ in range(3)]   # published one at a time
