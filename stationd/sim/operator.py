@@ -186,7 +186,7 @@ async def _tool_on(st: Station, bolt: str, tries: int = 600) -> bool:
     """Whether the tool comes on for ``bolt`` (up to ~30 s for selection, acknowledgement,
     confirmation)."""
     for _ in range(tries):
-        if st.cycle.state is State.TIGHTENING and st.cycle.bolt == bolt \
+        if st.core.state is State.TIGHTENING and st.core.bolt == bolt \
                 and simulators(st)[1].tool_enabled:
             return True
         await asyncio.sleep(0.05)

@@ -52,7 +52,7 @@ def test_refused_parameters_fault_then_the_bolt_is_skipped(tmp_path):
         n_sent = len(_sends(st))
         await asyncio.sleep(3.0)  # still on the bolt: nothing is sent again
         assert len(_sends(st)) == n_sent
-        assert st.cycle.state is State.TRACKING
+        assert st.core.state is State.TRACKING
         assert [e.bolt for e in _of(st, BoltSkipped)] == [bolt.bolt_id]
         world.set_wrench(None)
         st.lift.plc.lower_lift()
@@ -70,14 +70,14 @@ def test_lift_plc_vanishing_is_a_fault_until_it_returns(tmp_path):
         plc = st.lift.plc
         port = plc.tcp_port
         plc.stop_tcp()
-        await until_async(lambda: st.cycle.state is State.FAULT, 30)
-        assert st.cycle.reason.startswith("lift:")
+        await until_async(lambda: st.core.state is State.FAULT, 30)
+        assert st.core.reason.startswith("lift:")
         world.set_wrench(wrench_at(np.array(next(iter(vehicle_bolts(st).values())).position),
                                    np.random.default_rng(1), st.cfg.tool.length_mm))
         await asyncio.sleep(1.0)
         assert not _sends(st)  # nothing in fault
         plc.start_tcp(port)
-        await until_async(lambda: st.cycle.state is not State.FAULT, 60)
+        await until_async(lambda: st.core.state is not State.FAULT, 60)
         await until_async(lambda: _sends(st), 60)
         # the commissioning screen's pair summaries (published at their own, throttled rate:
         # a selection can now come before the next one), JSON as they are (no NaN)
@@ -97,13 +97,13 @@ def _first_bolt(st):
 def test_a_camera_that_stops_delivering_is_a_fault_until_it_returns(tmp_path):
     async def body(st, world):
         world.cut_cameras("pair2")
-        await until_async(lambda: st.cycle.state is State.FAULT, 30)
-        assert st.cycle.reason.startswith("pair2:")
+        await until_async(lambda: st.core.state is State.FAULT, 30)
+        assert st.core.reason.startswith("pair2:")
         b = _first_bolt(st)
         world.set_wrench(wrench_at(np.array(b.position), np.random.default_rng(2),
                                    st.cfg.tool.length_mm))
         await asyncio.sleep(1.5)
-        assert st.cycle.state is State.FAULT            # still blind: nothing sent
+        assert st.core.state is State.FAULT            # still blind: nothing sent
         assert not _sends(st)
         world.restore_cameras("pair2")
         await until_async(lambda: _sends(st), 60)
@@ -124,15 +124,15 @@ def test_the_controller_dropping_mid_tightening_is_a_fault_then_the_bolt_is_done
         b = _first_bolt(st)
         world.set_wrench(wrench_at(np.array(b.position), np.random.default_rng(3),
                                    st.cfg.tool.length_mm))
-        await until_async(lambda: st.cycle.state is State.TIGHTENING and ctl.tool_enabled, 60)
+        await until_async(lambda: st.core.state is State.TIGHTENING and ctl.tool_enabled, 60)
         ctl.power_off()                                    # gone mid-tightening
-        await until_async(lambda: st.cycle.state is State.FAULT, 30)
-        assert st.cycle.reason.startswith("wrench:")
+        await until_async(lambda: st.core.state is State.FAULT, 30)
+        assert st.core.reason.startswith("wrench:")
         sends = len(_sends(st))
         await asyncio.sleep(1.0)
         assert len(_sends(st)) == sends
         ctl.power_on()                                     # back, with its RAM lost
-        await until_async(lambda: st.cycle.state is State.TIGHTENING and ctl.tool_enabled, 60)
+        await until_async(lambda: st.core.state is State.TIGHTENING and ctl.tool_enabled, 60)
         assert ctl.vin == vin                              # sent again after the reconnect
         shot = ctl.pull_trigger()
         assert shot is not None
@@ -173,11 +173,11 @@ def test_frames_of_the_wrong_size_are_a_fault_not_an_exit(tmp_path, monkeypatch)
     monkeypatch.setattr(harness, "SIM_CONFIG", dst / "station.yaml")
 
     async def body(st, world):
-        await until_async(lambda: st.cycle.state is State.FAULT, 60)
-        assert st.cycle.reason.startswith("pair1: left frames are 64x48, the calibration is "
+        await until_async(lambda: st.core.state is State.FAULT, 60)
+        assert st.core.reason.startswith("pair1: left frames are 64x48, the calibration is "
                                           "for 5472x3648")
         await asyncio.sleep(1.0)
-        assert st.cycle.state is State.FAULT and not _sends(st)
+        assert st.core.state is State.FAULT and not _sends(st)
 
     scenario(tmp_path, body)
 
@@ -211,15 +211,15 @@ def test_a_database_failing_at_a_vehicle_is_a_fault_its_keeper_probes_back(tmp_p
         repo.model_for_code, repo.models = model_for_code, models
 
     async def body(st, world):
-        await until_async(lambda: "database" in st.cycle.faults, 30)
-        assert st.cycle.state is State.FAULT and "database: disk I/O error" in st.cycle.reason
+        await until_async(lambda: "database" in st.core.faults, 30)
+        assert st.core.state is State.FAULT and "database: disk I/O error" in st.core.reason
         assert st.vin is None and not _sends(st)
         await asyncio.sleep(4.0)
         # backoff 0.5 s doubling to 5 s: a handful of probes, not one per tick
         assert 2 <= len(probes) <= 5, probes
         down["on"] = False
         await until_async(lambda: st.vin == "DBFAULTVIN0000001", 30)
-        assert "database" not in st.cycle.faults and _back(st, "database")
+        assert "database" not in st.core.faults and _back(st, "database")
         # one fault and one return, the same kind throughout
         health = [(e.ok, e.kind) for e in _of(st, DeviceHealth) if e.device == "database"]
         assert health == [(False, "down"), (True, "")], health

@@ -59,7 +59,7 @@ def _on(st, bolt: str, seed: int):
 
 
 def _tightening(st, bolt: str) -> bool:
-    return (st.cycle.state is State.TIGHTENING and st.cycle.bolt == bolt
+    return (st.core.state is State.TIGHTENING and st.core.bolt == bolt
             and st.wrench.controller.tool_enabled)
 
 
@@ -167,7 +167,7 @@ def _pull_as_the_wrench_leaves(st, world, a: str, then=None) -> dict[str, Any]:
         if isinstance(act, DisableTool) and act.bolt == a \
                 and act.reason == f"wrench not confirmed on bolt {a}" \
                 and "late" not in pulled:
-            assert st.cycle.state is not State.TIGHTENING
+            assert st.core.state is not State.TIGHTENING
             pulled["late"] = st.wrench.controller.pull_trigger()
             world.set_wrench(then)
 
@@ -259,7 +259,7 @@ def test_an_ordered_bolt_waits_for_the_lower_order(tmp_path, monkeypatch):
         await until_async(lambda: sum(wait in m for m in _logs(st))
                           > st.cfg.matching.stable_frames + 1, 60)
         assert _sends(st) == []
-        assert st.cycle.state is State.TRACKING
+        assert st.core.state is State.TRACKING
         shot = await _tighten(st, world, first, seed=9)
         assert _sends(st) == [first]
         world.set_wrench(_on(st, second, seed=10))
@@ -310,19 +310,19 @@ def test_a_result_the_database_refuses_is_a_fault_kept_and_stored_when_it_can(tm
         shot = ctl.pull_trigger()
         assert shot is not None
         seen[second] = shot.tightening_id
-        await until_async(lambda: "database" in st.cycle.faults, 30)
-        assert st.cycle.state is State.FAULT
-        assert "results not stored" in st.cycle.reason and "disk is full" in st.cycle.reason
+        await until_async(lambda: "database" in st.core.faults, 30)
+        assert st.core.state is State.FAULT
+        assert "results not stored" in st.core.reason and "disk is full" in st.core.reason
         assert not ctl.tool_enabled
         assert shot.tightening_id not in ctl.acked_ids
         sent = len(_sends(st))
         world.set_wrench(_on(st, bolts[2], 3))               # the next bolt: nothing sent
         await asyncio.sleep(3.0)
         assert len(_sends(st)) == sent and not ctl.tool_enabled
-        assert st.cycle.state is State.FAULT and full["refused"] >= 2   # the keeper retried
+        assert st.core.state is State.FAULT and full["refused"] >= 2   # the keeper retried
         full["on"] = False                                   # room again
         await until_async(lambda: shot.tightening_id in ctl.acked_ids, 30)
-        await until_async(lambda: "database" not in st.cycle.faults, 30)
+        await until_async(lambda: "database" not in st.core.faults, 30)
         late = [e for e in st.bus.of(ResultRecorded) if e.tightening_id == shot.tightening_id]
         assert len(late) == 1 and late[0].bolt == second
         health = [(e.ok, e.kind) for e in st.bus.of(DeviceHealth) if e.device == "database"]
@@ -352,8 +352,8 @@ def test_a_database_file_removed_under_the_daemon_is_a_fault_not_acknowledged(tm
             os.unlink(f)
         shot = ctl.pull_trigger()
         assert shot is not None
-        await until_async(lambda: "database" in st.cycle.faults, 30)
-        assert "was removed" in st.cycle.reason and st.cycle.state is State.FAULT
+        await until_async(lambda: "database" in st.core.faults, 30)
+        assert "was removed" in st.core.reason and st.core.state is State.FAULT
         await asyncio.sleep(1.0)
         assert shot.tightening_id not in ctl.acked_ids and not ctl.tool_enabled
         sent = len(_sends(st))
