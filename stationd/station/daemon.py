@@ -160,11 +160,6 @@ class Station:
         return self.wrench_keeper.device
 
     @property
-    def cycle(self) -> StationCore:
-        """The core (the name the cycle had)."""
-        return self.core
-
-    @property
     def vin(self) -> str | None:
         return self.core.vin
 
