@@ -38,6 +38,7 @@ from asyncua.common.node import Node
 from asyncua.common.structures104 import make_structure
 from asyncua.server.server import Server
 
+from stationd.opcua import dictionary
 from stationd.opcua.uatypes import ua
 
 NODESETS = Path(__file__).with_name("nodesets")
@@ -87,8 +88,9 @@ def _split(uris: list[str], nodeid: str) -> tuple[str, str]:
                                                                nodeid)
 
 
-async def load_model(server: Server) -> None:
-    """Import the companion models into ``server`` and fix their structures (1-3)."""
+async def load_model(server: Server) -> list[_Struct]:
+    """Import the companion models into ``server`` and fix their structures (1-3); returns
+    them (complete definitions, parents first) for :func:`publish_dictionaries`."""
     subtyped: dict[tuple[str, str], set[str]] = {}
     # the published files have references asyncua cannot place (warned about by the hundred)
     quiet = logging.getLogger("asyncua.common.xmlimporter")
@@ -110,6 +112,24 @@ async def load_model(server: Server) -> None:
         await server.get_node(t.data_type).write_attribute(
             ua.AttributeIds.DataTypeDefinition, ua.DataValue(ua.Variant(t.sdef)))
     _generate(types)
+    return types
+
+
+async def publish_dictionaries(server: Server, types: list[_Struct], idx: int) -> \
+        list[dictionary.Dictionary]:
+    """The OPC Binary dictionaries of ``types`` (:func:`load_model`'s), each structure
+    described as the codec encodes it (:func:`_codec_definition`: the classes of
+    :func:`_generate` are made from the same definitions), under ``OPC Binary`` with NodeIds
+    in namespace ``idx`` (:mod:`stationd.opcua.dictionary` says why and how)."""
+    structures = []
+    for t in types:
+        encoding = await dictionary.default_binary(server, t.data_type)
+        if encoding is not None:   # abstract: nothing is ever encoded as it
+            structures.append(dictionary.Structure(t.data_type, t.name,
+                                                   _codec_definition(t.sdef), encoding))
+    dictionaries = await dictionary.build(server, structures)
+    await dictionary.publish(server, dictionaries, idx)
+    return dictionaries
 
 
 async def load_client_types(client: Client) -> None:
@@ -219,4 +239,4 @@ def _generate(types: list[_Struct]) -> None:
 
 
 __all__ = ["IJT_URI", "MODELS", "RESULT_URI", "load_client_types", "load_model", "nodeset_text",
-           "subtyped_fields"]
+           "publish_dictionaries", "subtyped_fields"]

@@ -37,6 +37,17 @@ ENTITY_OPERATOR = -1
 #: is told from a tightening by it, never left to read as one more OK joint
 ASSEMBLED, DISASSEMBLED = 1, 2
 UNECE = "http://www.opcfoundation.org/UA/units/un/cefact"
+#: the joining technology of every result (the JoiningSystem's Identification says it too)
+JOINING_TECHNOLOGY = "Tightening"
+
+
+def message(rec: dict[str, Any]) -> str:
+    """What a result event's Message says of the rundown ``rec`` (a feed record): its
+    vehicle, bolt, kind and verdict, "WVW... B12: loosening OK".  An MES that reads only the
+    Message (no client decodes the metadata's AssemblyType without the types) must not take
+    a loosening for one more tightened joint."""
+    kind = "loosening" if rec.get("rundown") == "loosening" else "tightening"
+    return f"{rec['vin']} {rec['bolt']}: {kind} {str(rec['status']).upper()}"
 
 
 def _unit(code: str, symbol: str, text: str) -> Any:
@@ -194,6 +205,9 @@ def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
                                      f"{rec['bolt']}" + ("" if pset is None else
                                                          f" with pset {pset}")),
         Classification=CLASSIFICATION_SINGLE,
+        # the technology of the system that made it (its Identification says the same):
+        # mandatory for a joining result in the working group's reading of 40450-1
+        JoiningTechnology=ua.LocalizedText(JOINING_TECHNOLOGY),
         AssemblyType=DISASSEMBLED if loosening else ASSEMBLED,
         AssociatedEntities=entities)
     content = ua.JoiningResultDataType(OverallResultValues=[
@@ -213,5 +227,5 @@ def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
 
 __all__ = ["ASSEMBLED", "CLASSIFICATION_SINGLE", "DISASSEMBLED", "ENTITY_JOINT",
            "ENTITY_OPERATOR", "ENTITY_VEHICLE", "EVALUATION_NOT_OK",
-           "EVALUATION_OK", "PQ_ANGLE", "PQ_OTHER", "PQ_TIME", "PQ_TORQUE", "parse_result_id",
-           "result_id", "rundown_result", "trace"]
+           "EVALUATION_OK", "JOINING_TECHNOLOGY", "PQ_ANGLE", "PQ_OTHER", "PQ_TIME",
+           "PQ_TORQUE", "message", "parse_result_id", "result_id", "rundown_result", "trace"]

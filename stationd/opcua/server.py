@@ -45,8 +45,10 @@ import socket
 from collections import OrderedDict
 from collections.abc import Callable, Coroutine
 from contextvars import ContextVar
+from datetime import UTC, datetime
 from typing import Any
 
+from asyncua.common.instantiate_util import instantiate
 from asyncua.common.node import Node
 from asyncua.crypto.permission_rules import USER_TYPES, SimpleRoleRuleset, User, UserRole
 from asyncua.crypto.truststore import TrustStore
@@ -63,8 +65,15 @@ from stationd.opcua.catchup import CatchUp
 from stationd.opcua.config import OpcUaConfig
 from stationd.opcua.curves import CurveJoin
 from stationd.opcua.health import FAILURE, LINE_LINK, NORMAL, OFF_SPEC, DeviceAssets
-from stationd.opcua.model import DI_URI, IJT_URI, MACHINERY_URI, RESULT_URI, load_model
-from stationd.opcua.results import result_id, rundown_result
+from stationd.opcua.model import (
+    DI_URI,
+    IJT_URI,
+    MACHINERY_URI,
+    RESULT_URI,
+    load_model,
+    publish_dictionaries,
+)
+from stationd.opcua.results import message, result_id, rundown_result
 from stationd.opcua.uatypes import ua
 from stationd.station.events import (
     DeviceHealth,
@@ -85,6 +94,7 @@ JOINING_SYSTEM_TYPE, RESULT_READY_EVENT_TYPE = 1005, 1007   # in IJT Base
 REQUESTED_RESULT_EVENT_TYPE = 1035                            # in IJT Base
 REQUEST_RESULTS, REQUEST_UNACKNOWLEDGED = 7074, 7092          # in IJT Base
 ACKNOWLEDGE_RESULTS = 7009                                    # in Machinery Result
+JOINING_SYSTEM_RESULT_TYPE = 2014                             # in IJT Base
 MACHINES_FOLDER = 1001                                        # in Machinery
 SOFTWARE_VERSION = "0.1.0"
 _NO_ERROR = 0
@@ -174,6 +184,7 @@ class OpcUaServer:
         self.ruleset = ReadOnlyRuleset()
         self.catchup = CatchUp(self._fire_requested)
         self._state: Node | None = None
+        self._requested_result: Node | None = None
         self._reason: Node | None = None
         self._wake = asyncio.Event()
         self._unsubscribe: Callable[[], None] | None = None
@@ -194,8 +205,9 @@ class OpcUaServer:
         server.set_server_name(f"stationd {self.cfg.station_id}")
         await server.set_application_uri(f"urn:stationd:{self.cfg.station_id}")
         await self._security(server)
-        await load_model(server)
+        types = await load_model(server)
         idx = await server.register_namespace(NAMESPACE)
+        await publish_dictionaries(server, types, idx)
         await self._build(server, idx)
         _filtered(logging.getLogger("asyncua.server.server"), _StartFailure)
         await server.start()
@@ -283,6 +295,8 @@ class OpcUaServer:
         await self.assets.build(server, js, idx, f"JoiningSystem.{sid}", self.devices)
         mr = uris.index(RESULT_URI)
         rm = await js.get_child([f"{mr}:ResultManagement"])
+        self._requested_result = await _requested_result_variable(
+            server, rm, (f"JoiningSystem.{sid}.ResultManagement", idx), mr, ijt)
         gens: list[list[Any]] = []
         for name, base in (("StationResultReadyEventType", RESULT_READY_EVENT_TYPE),
                            ("StationRequestedResultEventType", REQUESTED_RESULT_EVENT_TYPE)):
@@ -317,10 +331,16 @@ class OpcUaServer:
             return _answer(None, 1)
         return _answer(next(reversed(self._results.values())), _NO_ERROR)
 
-    async def _get_by_id(self, parent: ua.NodeId, result_id: Any, *args: Any) -> \
+    async def _get_by_id(self, parent: ua.NodeId, result_id: Any = None, *args: Any) -> \
             list[ua.Variant]:
+        """The result kept under ``result_id``; an id that is not one (empty, not text)
+        is refused with BadInvalidArgument, as Part 4 has a method refuse an argument
+        outside its domain; a well-formed id of no kept result answers with Error 1 (the
+        standard's "not found", the call itself good)."""
         rid = result_id.Value if isinstance(result_id, ua.Variant) else result_id
-        found = self._results.get(str(rid))
+        if not isinstance(rid, str) or not rid.strip():
+            raise ua.UaStatusCodeError(ua.StatusCodes.BadInvalidArgument)
+        found = self._results.get(rid)
         return _answer(found, _NO_ERROR if found is not None else 1)
 
     async def _acknowledge(self, parent: ua.NodeId, result_ids: Any = None, *args: Any) -> \
@@ -457,9 +477,11 @@ class OpcUaServer:
         if curves is None and self._repo is not None:
             curves = await asyncio.get_running_loop().run_in_executor(
                 None, lambda: curves_for(self._repo, record_id=rid))   # type: ignore[arg-type]
-        await _fire(self._requested, rundown_result(
-            self.db_id, self.cfg.station_id, entry, simulated=self.simulated, curves=curves),
-            entry)
+        result = rundown_result(self.db_id, self.cfg.station_id, entry,
+                                simulated=self.simulated, curves=curves)
+        if self._requested_result is not None:
+            await _write_result(self._requested_result, result)
+        await _fire(self._requested, result, entry)
 
 
 async def _fire(gens: list[Any], result: Any, entry: dict[str, Any]) -> None:
@@ -467,8 +489,53 @@ async def _fire(gens: list[Any], result: Any, entry: dict[str, Any]) -> None:
     for gen in gens:
         ev = gen.event
         ev.add_variable("Result", result, ua.VariantType.ExtensionObject)
-        ev.Message = ua.LocalizedText(f"{rec['vin']} {rec['bolt']}: {rec['status'].upper()}")
+        ev.Message = ua.LocalizedText(message(rec))
         await gen.trigger()
+
+
+async def _write_result(var: Node, result: Any) -> None:
+    """``result`` into a JoiningSystemResultType variable and its ResultMetaData (the
+    sub-variable the type declares), stamped now."""
+    now = datetime.now(UTC)
+    await var.write_value(ua.DataValue(ua.Variant(result, ua.VariantType.ExtensionObject),
+                                       SourceTimestamp=now))
+    for child in await var.get_children(refs=ua.ObjectIds.HasComponent):
+        if (await child.read_browse_name()).Name == "ResultMetaData":
+            await child.write_value(ua.DataValue(
+                ua.Variant(result.ResultMetaData, ua.VariantType.ExtensionObject),
+                SourceTimestamp=now))
+
+
+async def _requested_result_variable(server: Server, rm: Node, prefix: tuple[str, int],
+                                    mr: int, ijt: int) -> Node:
+    """``Results/RequestedResult`` under the ResultManagement: the result last sent again by
+    RequestResults or RequestUnacknowledgedResults (the working group's reading of the
+    Request Results conformance unit: the client reads it after a request; the 1.01 files
+    declare no such variable, so it is the station's, browse name in IJT Base as that
+    client looks for it), a JoiningSystemResultType as a stored result's variable is.  The
+    Results folder (optional in Machinery Result) is made when the type did not instantiate
+    it."""
+    try:
+        folder = await rm.get_child([f"{mr}:Results"])
+    except ua.UaError:
+        folder = await rm.add_folder(ua.NodeId(f"{prefix[0]}.Results", prefix[1]),
+                                     ua.QualifiedName("Results", mr))
+    # asyncua warns of each attribute a variable type lacks (UserAccessLevel ...) on copying
+    quiet = logging.getLogger("asyncua.common.copy_node_util")
+    level = quiet.level
+    quiet.setLevel(logging.ERROR)
+    try:
+        made = await instantiate(
+            folder, server.get_node(ua.NodeId(JOINING_SYSTEM_RESULT_TYPE, ijt)),
+            nodeid=ua.NodeId(f"{prefix[0]}.Results.RequestedResult", prefix[1]),
+            bname=ua.QualifiedName("RequestedResult", ijt), instantiate_optional=False)
+    finally:
+        quiet.setLevel(level)
+    var = server.get_node(made[0])
+    read = ua.DataValue(ua.Variant(ua.AccessLevel.CurrentRead.mask, ua.VariantType.Byte))
+    await var.write_attribute(ua.AttributeIds.AccessLevel, read)
+    await var.write_attribute(ua.AttributeIds.UserAccessLevel, read)
+    return var
 
 
 async def _add_declared_method(server: Server, parent: Node, prefix: tuple[str, int],

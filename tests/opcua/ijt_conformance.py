@@ -35,7 +35,8 @@ import threading
 from collections import Counter
 from pathlib import Path
 
-from db.repository import Repository
+from db.bolts import Window
+from db.repository import BoltInfo, Repository
 from stationd.access import hash_password
 from stationd.boltfile import import_bolts
 from stationd.opcua import OpcUaConfig
@@ -43,6 +44,7 @@ from stationd.opcua.server import OpcUaServer
 from tests.db.conftest import BASE, record
 
 VIN = "WVWZZZ1JZXW000001"
+MODEL = "SEDAN"
 CLAIMED = ("joining_system_base", "joining_system_identification", "result_management",
            "single_result", "basic_result", "result_event_access", "get_latest_result",
            "get_result_by_id", "joining_result_overall_result_values", "result_content",
@@ -94,16 +96,35 @@ class StationTrigger(ExternalResultTrigger):
 """
 
 
+def _measured(window: Window | None, ok: bool) -> float | None:
+    """A value its ``window`` accepts (its target) for an OK rundown, one beyond its upper
+    limit for a NOK one: a fake rundown whose values disagree with its verdict would make
+    the client's checks of limits against evaluations meaningless."""
+    if window is None:
+        return None
+    return window.target if ok else window.max + (window.max - window.min) / 2 + 1
+
+
+def rundown(repo: Repository, vin: str, bolt: BoltInfo, ok: bool) -> None:
+    """Record a rundown of ``bolt`` whose torque and angle agree with its limits and
+    ``ok`` (an unlimited angle: the pset's default of 35 degrees)."""
+    p = bolt.parameters
+    angle = _measured(p.angle, True) if p.angle is not None else 35.0
+    record(repo, vin, bolt.bolt_id, ok=ok, torque_nm=_measured(p.torque, ok),
+           angle_deg=angle, parameters_id=bolt.parameters_id)
+
+
 class _Rundowns:
     """Rundowns recorded at the station on demand, each returned once its event is out."""
 
     def __init__(self, repo: Repository, srv: OpcUaServer) -> None:
         self.repo, self.srv, self.n = repo, srv, 0
+        self.bolts = repo.bolts_for_model(MODEL)
         self._lock = threading.Lock()
 
     def record(self) -> None:
         with self._lock:
-            record(self.repo, VIN, ("B1", "B2", "B3")[self.n % 3], ok=self.n % 5 != 4)
+            rundown(self.repo, VIN, self.bolts[self.n % len(self.bolts)], ok=self.n % 5 != 4)
             self.n += 1
 
     async def one(self) -> bool:
@@ -133,9 +154,9 @@ async def _run(args: argparse.Namespace) -> int:
     table.write_text(BASE)
     repo = Repository.open(f"sqlite:///{folder / 'station.db'}")
     import_bolts(repo, table)
-    repo.start_vehicle(VIN, "SEDAN")
-    for bolt in ("B1", "B2", "B3"):
-        record(repo, VIN, bolt, ok=True)
+    repo.start_vehicle(VIN, MODEL)
+    for bolt in repo.bolts_for_model(MODEL):
+        rundown(repo, VIN, bolt, ok=True)
     port = _free_port()
     cfg = OpcUaConfig(endpoint=f"opc.tcp://127.0.0.1:{port}", station_id="ST-IJT",
                       security=("none",), users={"mes": hash_password("conformance")})
