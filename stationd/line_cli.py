@@ -4,7 +4,8 @@ store-and-forward to it, from the station's own files (the daemon need not run).
     stationd line init postgresql+psycopg://USER:PASSWORD@HOST:PORT/DATABASE   # the tables
     stationd line status --config STATION.yaml            # backlog, lag, quarantine
     stationd line quarantine --config STATION.yaml [--retry] [--export FILE.json]
-    stationd line results --config STATION.yaml [--vin V] [--station ST]   # the line's
+    stationd line results --config STATION.yaml [--vin V] [--station ST] [--bolt B]
+                          [--since T] [--until T]                        # the line's
     stationd line bolts --config STATION.yaml [--model M] [--bolt B]       # tables used
 
 Why on the station's side: the quarantine (records the line database refused for good) lives
@@ -13,8 +14,9 @@ or exports it to hand over.  Exit 0: nothing waits; 1: a backlog or a quarantine
 2: bad input; 3: the line database cannot be reached (``--retry``).
 
 ``results`` and ``bolts`` read the line database itself (every station's records, as the
-forwarders put them there): a VIN's rundowns at every station, newest first, and the bolt
-tables the stations tightened with.  Exit 0: found; 1: nothing; 3: the line database cannot
+forwarders put them there): a VIN's rundowns at every station (or a bolt's over a shift),
+newest first, from the typed ``line_rundowns``, and the bolt tables the stations tightened
+with.  Exit 0: found; 1: nothing; 3: the line database cannot
 be reached.
 """
 
@@ -24,6 +26,7 @@ import argparse
 import json
 import sys
 from collections.abc import Callable
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -39,6 +42,7 @@ from stationd.linedb import (
     LINE,
     LINE_FEED,
     LINE_PARAMETERS,
+    LINE_RUNDOWNS,
     bolt_versions,
     create_line_schema,
     results,
@@ -137,10 +141,19 @@ def _has(engine: Engine, table: str) -> bool:
 def _read_line(url: str, table: Table, read: Callable[[Engine], list[T]]) -> list[T] | None:
     """What ``read`` finds in the line database at ``url``: nothing while ``table`` was never
     made there (no station forwarded yet); None when the database cannot be reached, said in
-    one line on stderr."""
+    one line on stderr.  A line database with records but without ``table`` was made by an
+    earlier stationd and nothing upgraded it yet: said, with the command that does (a reader
+    makes nothing)."""
     engine = make_engine(url)
     try:
-        return read(engine) if _has(engine, table.name) else []
+        if _has(engine, table.name):
+            return read(engine)
+        if _has(engine, LINE_FEED.name):
+            raise InputError(
+                f"line database {make_url(url).render_as_string()}: no {table.name} (made by "
+                f"an earlier stationd): `stationd line init URL` adds it, filled from "
+                f"{LINE_FEED.name}, as does a forwarder of this version on its next start")
+        return []
     except SQLAlchemyError as exc:
         _unreachable(url, exc)
         return None
@@ -156,8 +169,10 @@ def cmd_line_results(args: argparse.Namespace) -> int:
     url = _line_url(args)
     if args.limit < 1:
         raise InputError(f"--limit {args.limit}: at least 1")
-    rows = _read_line(url, LINE_FEED, lambda engine: results(
-        engine, vin=args.vin, station=args.station, limit=args.limit))
+    since, until = _when(args.since, "--since"), _when(args.until, "--until")
+    rows = _read_line(url, LINE_RUNDOWNS.table, lambda engine: results(
+        engine, vin=args.vin, station=args.station, bolt=args.bolt, since=since, until=until,
+        limit=args.limit))
     if rows is None:
         return EXIT_UNREACHABLE
     if args.json:
@@ -167,10 +182,14 @@ def cmd_line_results(args: argparse.Namespace) -> int:
                                "bolt": r.bolt, "ok": r.ok, "kind": r.kind,
                                "torque_nm": r.torque_nm, "angle_deg": r.angle_deg,
                                "parameters_version": r.version, "operator": r.operator,
-                               "received_at": r.received_at.isoformat()}))
+                               "received_at": r.received_at.isoformat(), "pset": r.pset,
+                               "tightening_id": r.tightening_id,
+                               "torque_window_nm": list(r.torque),
+                               "angle_window_deg": list(r.angle)}))
         return 0 if rows else EXIT_WAITING
     what = " ".join(x for x in (f"VIN {args.vin}" if args.vin else "",
-                                f"station {args.station}" if args.station else "") if x)
+                                f"station {args.station}" if args.station else "",
+                                f"bolt {args.bolt}" if args.bolt else "") if x)
     if not rows:
         print(f"no rundowns{' of ' + what if what else ''} in the line database")
         return EXIT_WAITING
@@ -189,6 +208,18 @@ def cmd_line_results(args: argparse.Namespace) -> int:
         print("  ".join(c.ljust(w) if i < 5 or i == 8 else c.rjust(w)
                         for i, (c, w) in enumerate(zip(row, widths, strict=True))).rstrip())
     return 0
+
+
+def _when(text: str | None, option: str) -> datetime | None:
+    """An ISO time of ``--since``/``--until`` (without an offset: UTC, as the line's times)."""
+    if text is None:
+        return None
+    try:
+        t = datetime.fromisoformat(text)
+    except ValueError:
+        raise InputError(f"{option} {text!r}: an ISO time, e.g. 2026-11-27T06:00 (UTC) or "
+                         "2026-11-27T06:00+01:00") from None
+    return t if t.tzinfo is not None else t.replace(tzinfo=UTC)
 
 
 def _window(t: tuple[float | None, float | None, float | None]) -> str:
@@ -234,19 +265,21 @@ def cmd_line_init(args: argparse.Namespace) -> int:
         parsed = parsed.update_query_dict({"connect_timeout": str(CONNECT_TIMEOUT_S)})
     engine = make_engine(parsed.render_as_string(hide_password=False))
     try:
-        before = set(inspect(engine).get_table_names())
-        create_line_schema(engine)
-        after = set(inspect(engine).get_table_names())
+        change = create_line_schema(engine)
     except SQLAlchemyError as exc:
         raise InputError(f"line database {parsed.render_as_string()}: "
                          f"{error_line(exc)}") from None
     finally:
         engine.dispose()
     ours = sorted(t.name for t in LINE.sorted_tables)
-    made = [t for t in ours if t in after - before]
     print(f"line database {parsed.render_as_string()}: "
-          + (f"made {', '.join(made)}" if made else "every table there already")
+          + (f"made {', '.join(sorted(change.made))}" if change.made
+             else "every table there already")
           + f" ({', '.join(ours)}: ready for the stations' forwarders)")
+    filled = [(name, n) for name, n in change.filled if n]
+    if filled:   # a line database an earlier version made: its records typed once
+        print("filled from line_feed: " + ", ".join(f"{name} {n} row(s)"
+                                                     for name, n in filled))
     return 0
 
 
@@ -274,6 +307,10 @@ def add_line_parser(sub: Any) -> None:
                    help="a station file of the line (its line.url)")
     r.add_argument("--vin", help="only this vehicle's rundowns")
     r.add_argument("--station", metavar="ST", help="only this station's (its station_id)")
+    r.add_argument("--bolt", help="only this bolt's (its id in the bolt table)")
+    r.add_argument("--since", metavar="TIME", help="recorded at or after this ISO time "
+                   "(UTC without an offset), e.g. the start of a shift")
+    r.add_argument("--until", metavar="TIME", help="recorded before this ISO time")
     r.add_argument("--limit", type=int, default=1000, help="at most N (default: %(default)s)")
     r.add_argument("--json", action="store_true", help="one JSON object per rundown")
     r.set_defaults(func=cmd_line_results)

@@ -15,7 +15,26 @@ Tables (PostgreSQL, made if missing):
   may be shared by several stations, or each has its own), and B07 at ST-03 is not B07 at
   ST-11 unless their values say so; the version restarts with a new local database, hence
   its id in the key.  A table shared per model shows as the same values under each station
-  (:func:`bolt_versions` lists them side by side).
+  (:func:`bolt_versions` lists them side by side);
+- the typed tables, one per kind of record a quality engineer queries (``line_rundowns``,
+  ``line_commands``, ``line_gaps``, ``line_calibration_checks``, ``line_unattributed``):
+  real columns with their types, units and comments, indexed for the first questions (a VIN
+  across stations, a bolt over a shift, the NOK rate per station and hour), what Grafana,
+  Power BI or a person's SQL expect instead of ``record->>'torque_nm'``.
+
+Why the typed tables are filled by a trigger on ``line_feed`` and not by the forwarder: the
+row and its typed row are committed in the same transaction whoever inserted the row, so a
+line whose stations are upgraded one at a time (an older forwarder inserts into ``line_feed``
+only) still has every record typed; the trigger is ``SECURITY DEFINER`` so a forwarding role
+granted only ``INSERT`` on ``line_feed`` needs no grant on the typed tables (without it, each
+of its records would be refused and quarantined); and one SQL mapping per kind (:data:`TYPED`)
+fills both the trigger's rows and the backfill of a line database made before a typed table
+existed (``line init`` or a forwarder's first connection: what is missing is made and filled
+from ``line_feed``).  It is a statement trigger over the inserted rows (a batch of 200 is one
+``INSERT ... SELECT`` per kind), and ``ON CONFLICT DO NOTHING`` on ``line_feed`` inserts no
+row twice, so a replay types nothing twice either.  Tables, not views over the JSONB: their
+columns have real types and planner statistics, and the hourly NOK rate reads narrow rows, not
+every record's JSON (curves with their samples share ``line_feed``).
 """
 
 from __future__ import annotations
@@ -36,11 +55,16 @@ from sqlalchemy import (
     MetaData,
     String,
     Table,
+    Text,
     func,
+    inspect,
     select,
     text,
 )
 from sqlalchemy.dialects.postgresql import JSONB
+
+from db.kinds import LOOSENING, NOK, OK, TIGHTENING
+from db.ledger import CHECK, COMMAND, GAP, RUNDOWN, UNATTRIBUTED
 
 LINE = MetaData()
 LINE_FEED = Table(
@@ -54,8 +78,9 @@ LINE_FEED = Table(
     Column("received_at", DateTime(timezone=True), nullable=False, server_default=func.now()),
     Column("operator", String(64)),      # a rundown's operator (NULL: nobody, or older)
 )
-#: the columns added to ``line_feed`` after its first version: added where missing
-LINE_FEED_ADDED = ("ALTER TABLE line_feed ADD COLUMN IF NOT EXISTS operator VARCHAR(64)",)
+#: the columns added to ``line_feed`` after its first version: added where missing (only
+#: there: ``ADD COLUMN IF NOT EXISTS`` too wants the table's owner, and a forwarding role is not)
+LINE_FEED_ADDED = {"operator": "ALTER TABLE line_feed ADD COLUMN operator VARCHAR(64)"}
 #: a vehicle's rundowns at every station: quality's first question
 LINE_FEED_VIN = Index("ix_line_feed_vin", LINE_FEED.c.record["vin"].as_string())
 
@@ -73,26 +98,313 @@ LINE_PARAMETERS = Table(
     Column("received_at", DateTime(timezone=True), nullable=False, server_default=func.now()),
 )
 
+# -- the typed tables ------------------------------------------------------------------------
+# Each column comes with the SQL that computes it from a line_feed row ``f`` (its columns and
+# its JSONB ``f.record``).  Every expression yields NULL for a value of another JSON type
+# than its column's, never an error: a typed row must never make the line refuse a record
+# that line_feed alone would take (it would be quarantined at the station).
+
+TORQUE_UNIT, ANGLE_UNIT = "Nm", "deg"   # the records' torque_nm and angle_deg
+
+
+def _j(*path: str | int) -> str:
+    """The JSONB value at ``path`` in the record (``record->'a'->'b'``, an int an index)."""
+    return "f.record" + "".join(f"->{p}" if isinstance(p, int) else f"->'{p}'" for p in path)
+
+
+def _text(j: str) -> str:
+    return f"CASE WHEN jsonb_typeof({j}) = 'string' THEN {j} #>> '{{}}' END"
+
+
+def _float(j: str) -> str:
+    return f"CASE WHEN jsonb_typeof({j}) = 'number' THEN ({j})::double precision END"
+
+
+def _int(j: str, bits: int = 32) -> str:
+    bound = 2 ** (bits - 1)
+    sql_type = "integer" if bits == 32 else "bigint"
+    return (f"CASE WHEN jsonb_typeof({j}) = 'number' AND abs(({j})::numeric) < {bound} "
+            f"THEN round(({j})::numeric)::{sql_type} END")
+
+
+def _time(j: str) -> str:
+    """An ISO time of the record as a timestamptz: with its offset where it has one, else
+    UTC (the station's times are UTC; the session's time zone must not change them)."""
+    s = f"({j} #>> '{{}}')"
+    return (f"CASE WHEN jsonb_typeof({j}) = 'string' THEN CASE WHEN {s} ~ "
+            f"'[T ].*([+-][0-9][0-9](:?[0-9][0-9])?|Z)$' THEN {s}::timestamptz "
+            f"ELSE {s}::timestamp AT TIME ZONE 'UTC' END END")
+
+
+def _literal(value: str) -> str:
+    if "'" in value or "\\" in value:
+        raise ValueError(f"not a plain SQL literal: {value!r}")
+    return f"'{value}'"
+
+
+def _tz(name: str, comment: str, nullable: bool = True) -> Column[Any]:
+    return Column(name, DateTime(timezone=True), nullable=nullable, comment=comment)
+
+
+def _key() -> list[tuple[Column[Any], str]]:
+    """The columns every typed table starts with: line_feed's key, the station's time and
+    the record's id in the station's own database."""
+    return [
+        (Column("station_id", String(64), primary_key=True,
+                comment="the station (its line.station_id)"), "f.station_id"),
+        (Column("db_id", String(36), primary_key=True,
+                comment="the station's local database (a new one restarts seq and ids)"),
+         "f.db_id"),
+        (Column("seq", BigInteger, primary_key=True,
+                comment="the record's number in the station's results feed (line_feed.seq)"),
+         "f.seq"),
+        (_tz("at", "when the station recorded it (its feed entry's time)", False), "f.at"),
+        (Column("record_id", BigInteger,
+                comment="the record's id in the station's own database"), _int(_j("id"), 64)),
+    ]
+
+
+def _received() -> tuple[Column[Any], str]:
+    return (_tz("received_at", "when the line database took it", False), "f.received_at")
+
+
+@dataclass(frozen=True)
+class Typed:
+    """The typed table of one kind of record: its table and the SQL of each column."""
+
+    kind: str                        # the feed's record kind (db.ledger's constant)
+    table: Table
+    exprs: tuple[str, ...]           # one per column of ``table``, in order
+
+    def fill_sql(self, source: str) -> str:
+        """``INSERT`` into the table the rows of ``source`` (``line_feed`` or the trigger's
+        transition table) of this kind; a row already there is left as it is."""
+        cols = ", ".join(c.name for c in self.table.columns)
+        # the SQL is this module's own (names and constants, _literal-checked), never input
+        select = f"SELECT {', '.join(self.exprs)}\n    FROM {source} f"  # noqa: S608
+        return (f"INSERT INTO {self.table.name} ({cols})\n    {select}"
+                f" WHERE f.kind = {_literal(self.kind)}\n    ON CONFLICT DO NOTHING")
+
+
+def _typed(kind: str, name: str, comment: str, columns: list[tuple[Column[Any], str]],
+           *indexes: Index) -> Typed:
+    cols = [*_key(), *columns, _received()]
+    table = Table(name, LINE, *(c for c, _ in cols), *indexes, comment=comment)
+    return Typed(kind, table, tuple(e for _, e in cols))
+
+
+def _window(what: str, unit: str, key: str) -> list[tuple[Column[Any], str]]:
+    return [(Column(f"{what}_{label}_{unit}", Float,
+                    comment=f"the {what} window's {label} in force ({unit}; NULL: none)"),
+             _float(_j("parameters", what, key)))
+            for label, key in (("target", "target"), ("min", "min"), ("max", "max"))]
+
+
+LINE_RUNDOWNS = _typed(
+    RUNDOWN, "line_rundowns",
+    "Every rundown of every station (a tightening or a loosening), one row per record of "
+    "line_feed of kind rundown, with the limits it was tightened to",
+    [(Column("vin", Text, comment="the vehicle"), _text(_j("vin"))),
+     (Column("model", Text, comment="the vehicle model of the bolt table"),
+      _text(_j("model"))),
+     (Column("bolt", Text, comment="the bolt's id in the model's bolt table"),
+      _text(_j("bolt"))),
+     (Column("kind", Text, comment=f"{TIGHTENING} or {LOOSENING} (a loosening never "
+             "closes a bolt)"),
+      f"COALESCE({_text(_j('rundown'))}, {_literal(TIGHTENING)})"),
+     (Column("status", Text, comment=f"the controller's verdict: {OK} or {NOK}"),
+      _text(_j("status"))),
+     (Column("pset", Integer, comment="the controller's parameter set of the bolt table"),
+      _int(_j("parameters", "pset"))),
+     (Column("parameters_version", Integer,
+             comment="the station's version of the bolt's parameters (see line_parameters)"),
+      _int(_j("parameters", "version"))),
+     (Column("torque_nm", Float, comment="the final torque (Nm)"), _float(_j("torque_nm"))),
+     *_window("torque", "nm", "torque"),
+     (Column("torque_unit", Text, comment="the unit of the torque columns"),
+      _literal(TORQUE_UNIT)),
+     (Column("angle_deg", Float, comment="the final angle (degrees)"),
+      _float(_j("angle_deg"))),
+     *_window("angle", "deg", "angle"),
+     (Column("angle_unit", Text, comment="the unit of the angle columns"),
+      _literal(ANGLE_UNIT)),
+     (Column("operator", Text, comment="the user signed in at the station (NULL: nobody)"),
+      _text(_j("operator"))),
+     (Column("tightening_id", BigInteger, comment="the controller's id of the tightening"),
+      _int(_j("tightening_id"), 64)),
+     (Column("x_mm", Float, comment="the localized bolt end, vehicle frame (mm)"),
+      _float(_j("position_mm", 0))),
+     (Column("y_mm", Float, comment="the localized bolt end, vehicle frame (mm)"),
+      _float(_j("position_mm", 1))),
+     (Column("z_mm", Float, comment="the localized bolt end, vehicle frame (mm)"),
+      _float(_j("position_mm", 2))),
+     (Column("match_distance_mm", Float,
+             comment="the tool's distance to the bolt it was matched to (mm)"),
+      _float(_j("match_distance_mm"))),
+     (Column("tilt_deg", Float, comment="the tool's tilt from the bolt's axis (degrees)"),
+      _float(_j("tilt_deg"))),
+     (_tz("sent_at", "when the parameters were sent to the controller"),
+      _time(_j("sent_at"))),
+     (_tz("result_at", "the controller's time of the result (its clock)"),
+      _time(_j("result_at"))),
+     (_tz("recorded_at", "when the station stored it"), _time(_j("recorded_at")))],
+    # one VIN across stations; one bolt over a shift; one station's rundowns in time; the
+    # NOK rate per station and hour over a period (read from the index alone)
+    Index("ix_line_rundowns_vin", "vin", "at"),
+    Index("ix_line_rundowns_bolt", "bolt", "at"),
+    Index("ix_line_rundowns_station", "station_id", "at"),
+    Index("ix_line_rundowns_at", "at", postgresql_include=["station_id", "kind", "status"]),
+)
+
+LINE_COMMANDS = _typed(
+    COMMAND, "line_commands",
+    "Every command a person gave a station (skip, reopen, release, loosen, sign-in ...), "
+    "with who, from where and why",
+    [(_tz("command_at", "when it was given"), _time(_j("at"))),
+     (Column("user_name", Text, comment="who gave it"), _text(_j("user"))),
+     (Column("source", Text, comment="from where (a screen's address, cli, ...)"),
+      _text(_j("source"))),
+     (Column("kind", Text, comment="the command (skip, reopen, ...)"), _text(_j("kind"))),
+     (Column("vin", Text, comment="the vehicle it was given on (NULL: none)"),
+      _text(_j("vin"))),
+     (Column("bolt", Text, comment="the bolt it was given on (NULL: none)"),
+      _text(_j("bolt"))),
+     (Column("comment", Text, comment="the person's reason"), _text(_j("comment")))],
+    Index("ix_line_commands_vin", "vin", "at"),
+    Index("ix_line_commands_at", "at"),
+)
+
+LINE_GAPS = _typed(
+    GAP, "line_gaps",
+    "Results the controller numbered but the station never received (a gap in the "
+    "controller's tightening ids)",
+    [(Column("first_id", BigInteger, comment="the first tightening id missing"),
+      _int(_j("first_id"), 64)),
+     (Column("last_id", BigInteger, comment="the last tightening id missing"),
+      _int(_j("last_id"), 64)),
+     (Column("vin", Text, comment="the vehicle at height when it was found (NULL: none)"),
+      _text(_j("vin"))),
+     (Column("reason", Text, comment="why it is a gap"), _text(_j("reason"))),
+     (_tz("found_at", "when the station found it"), _time(_j("found_at")))],
+    Index("ix_line_gaps_at", "at"),
+)
+
+LINE_CHECKS = _typed(
+    CHECK, "line_calibration_checks",
+    "Every calibration check of a camera pair against the reference markers",
+    [(_tz("check_at", "when the pair was checked"), _time(_j("at"))),
+     (Column("pair", Text, comment="the camera pair"), _text(_j("pair"))),
+     (Column("verdict", Text, comment="ok, moved or not checked"), _text(_j("verdict"))),
+     (Column("reference", Text, comment="the worst reference marker"),
+      _text(_j("reference"))),
+     (Column("offset_mm", Float, comment="the worst reference's offset (mm)"),
+      _float(_j("offset_mm"))),
+     (Column("tolerance_mm", Float, comment="the tolerance it was held to (mm)"),
+      _float(_j("tolerance_mm"))),
+     (Column("reason", Text, comment="why it was not checked (NULL: it was)"),
+      _text(_j("reason"))),
+     (Column("measurements", JSONB, comment="each reference's measurement (offset_mm, measured_mm, "
+             "why, note)"), _j("references")),
+     (_tz("recorded_at", "when the station stored it"), _time(_j("recorded_at")))],
+    Index("ix_line_calibration_checks_pair", "pair", "at"),
+)
+
+LINE_UNATTRIBUTED = _typed(
+    UNATTRIBUTED, "line_unattributed",
+    "Results the station could not attribute to a bolt of a vehicle (kept, never a bolt "
+    "done)",
+    [(Column("vin", Text, comment="the vehicle at height (NULL: none)"), _text(_j("vin"))),
+     (Column("controller_vin", Text, comment="the VIN as the result carried it"),
+      _text(_j("controller_vin"))),
+     (Column("tightening_id", BigInteger, comment="the controller's id of the tightening"),
+      _int(_j("tightening_id"), 64)),
+     (Column("pset", Integer, comment="the controller's parameter set"), _int(_j("pset"))),
+     (Column("status", Text, comment=f"the controller's verdict: {OK} or {NOK}"),
+      _text(_j("status"))),
+     (Column("torque_nm", Float, comment="the final torque (Nm)"), _float(_j("torque_nm"))),
+     (Column("angle_deg", Float, comment="the final angle (degrees)"),
+      _float(_j("angle_deg"))),
+     (_tz("result_at", "the controller's time of the result"), _time(_j("result_at"))),
+     (_tz("recorded_at", "when the station stored it"), _time(_j("recorded_at"))),
+     (Column("reason", Text, comment="why it was not attributed"), _text(_j("reason")))],
+    Index("ix_line_unattributed_vin", "vin", "at"),
+)
+
+#: every typed table; a new kind of record is one more ``_typed(...)`` here: the next
+#: ``line init`` or forwarder start makes its table, fills it from line_feed and types the
+#: new rows from then on
+TYPED: tuple[Typed, ...] = (LINE_RUNDOWNS, LINE_COMMANDS, LINE_GAPS, LINE_CHECKS,
+                            LINE_UNATTRIBUTED)
+TRIGGER = "line_feed_typed"   # the trigger and its function
+
+
+def trigger_body() -> str:
+    """The trigger function's body: each typed table filled from the statement's new rows."""
+    fills = "".join(f"  {t.fill_sql('new_rows')};\n" for t in TYPED)
+    return f"\nBEGIN\n{fills}  RETURN NULL;\nEND\n"
+
 
 #: the advisory lock that serialises the making of the line's tables (any fixed 64-bit number)
 SCHEMA_LOCK_KEY = 0x5354_4C49_4E45
 
 
-def create_line_schema(engine: Engine) -> None:
-    """The line's tables and index, made where missing (a line database made by an earlier
-    version gets the new ones too)."""
+@dataclass(frozen=True)
+class SchemaChange:
+    """What :func:`create_line_schema` made: tables, and the rows each new typed table took
+    from ``line_feed`` (records forwarded before it existed)."""
+
+    made: tuple[str, ...] = ()
+    filled: tuple[tuple[str, int], ...] = ()
+    trigger: bool = False            # the trigger (or its function) made or brought up to date
+
+
+def create_line_schema(engine: Engine) -> SchemaChange:
+    """The line's tables, indexes and trigger, made where missing (a line database made by an
+    earlier version gets the new ones, its typed tables filled from ``line_feed``).  Nothing
+    is written where nothing is missing, so a forwarding role without the right to create
+    (the owner ran ``line init``) connects through here."""
     with engine.begin() as conn:   # one creator at a time: two first starts (or a reader)
         # racing on "create if missing" made one fail with "relation already exists"
         conn.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": SCHEMA_LOCK_KEY})
+        before = set(inspect(conn).get_table_names())
         LINE.create_all(conn, checkfirst=True)
-        for added in LINE_FEED_ADDED:   # a table made by an earlier version: its new columns
-            conn.execute(text(added))
+        has = {c["name"] for c in inspect(conn).get_columns(LINE_FEED.name)}
+        for column, added in LINE_FEED_ADDED.items():   # a table an earlier version made
+            if column not in has:
+                conn.execute(text(added))
         LINE_FEED_VIN.create(conn, checkfirst=True)
+        made = tuple(t.name for t in LINE.sorted_tables if t.name not in before)
+        body = trigger_body()
+        current = conn.execute(text("SELECT prosrc FROM pg_proc WHERE proname = :n AND "
+                                    "pronamespace = current_schema()::regnamespace"),
+                               {"n": TRIGGER}).scalar()
+        has_trigger = conn.execute(text(
+            "SELECT 1 FROM pg_trigger WHERE tgname = :n AND tgrelid = 'line_feed'::regclass"),
+            {"n": TRIGGER}).first() is not None
+        fill = [t for t in TYPED if not has_trigger or t.table.name in made]
+        if current == body and has_trigger and not fill:
+            return SchemaChange(made)
+        # inserts wait from here until this commits: a row committed meanwhile is either
+        # filled below or typed by the trigger, never neither
+        conn.execute(text("LOCK TABLE line_feed IN SHARE ROW EXCLUSIVE MODE"))
+        if current != body:
+            # SECURITY DEFINER: a forwarding role granted INSERT on line_feed alone types
+            # its rows too; the search path fixed to where the tables are
+            conn.execute(text(
+                f"CREATE OR REPLACE FUNCTION {TRIGGER}() RETURNS trigger LANGUAGE plpgsql "
+                f"SECURITY DEFINER SET search_path FROM CURRENT AS $typed${body}$typed$"))
+        if not has_trigger:
+            conn.execute(text(
+                f"CREATE TRIGGER {TRIGGER} AFTER INSERT ON line_feed REFERENCING NEW TABLE "
+                f"AS new_rows FOR EACH STATEMENT EXECUTE FUNCTION {TRIGGER}()"))
+        filled = tuple((t.table.name, int(conn.execute(text(t.fill_sql("line_feed"))).rowcount))
+                       for t in fill)
+        return SchemaChange(made, filled, True)
 
 
 def operator_of(entry: dict[str, Any]) -> str | None:
     """The ``operator`` column of a feed entry: a rundown's operator, else None."""
-    if entry["kind"] != "rundown":
+    if entry["kind"] != RUNDOWN:
         return None
     op = entry["record"].get("operator")
     return None if op is None else str(op)[:64]
@@ -105,7 +417,7 @@ def parameter_rows(station_id: str, db_id: str, entries: list[dict[str, Any]]
     rows: dict[tuple[str, str, int], dict[str, Any]] = {}
     for e in entries:
         rec = e["record"]
-        p = rec.get("parameters") if e["kind"] == "rundown" else None
+        p = rec.get("parameters") if e["kind"] == RUNDOWN else None
         if not p or rec.get("model") is None:
             continue
         key = (str(rec["model"]), str(rec["bolt"]), int(p["version"]))
@@ -121,9 +433,12 @@ def parameter_rows(station_id: str, db_id: str, entries: list[dict[str, Any]]
     return list(rows.values())
 
 
+Window = tuple[float | None, float | None, float | None]   # target, min, max
+
+
 @dataclass(frozen=True)
 class LineResult:
-    """One rundown as the line database holds it."""
+    """One rundown as the line database holds it (a row of ``line_rundowns``)."""
 
     station_id: str
     db_id: str
@@ -139,36 +454,37 @@ class LineResult:
     version: int | None      # the parameter version it was tightened with (None: older)
     received_at: datetime    # when the line database took it
     operator: str | None = None   # the user signed in at the station (None: nobody, older)
-
-
-def _opt(v: Any) -> float | None:
-    return None if v is None else float(v)
+    pset: int | None = None
+    tightening_id: int | None = None
+    torque: Window = (None, None, None)   # the window in force (Nm)
+    angle: Window = (None, None, None)    # (deg)
 
 
 def results(engine: Engine, *, vin: str | None = None, station: str | None = None,
-            limit: int = 1000) -> list[LineResult]:
-    """The line's rundowns, newest first (of ``vin`` / of ``station``; at most ``limit``)."""
-    f = LINE_FEED.c
-    q = select(f.station_id, f.db_id, f.seq, f.at, f.record, f.received_at,
-               f.operator).where(
-        f.kind == "rundown")
-    if vin is not None:
-        q = q.where(f.record["vin"].as_string() == vin)
-    if station is not None:
-        q = q.where(f.station_id == station)
-    q = q.order_by(f.at.desc(), f.station_id, f.seq.desc()).limit(max(1, int(limit)))
-    out = []
+            bolt: str | None = None, since: datetime | None = None,
+            until: datetime | None = None, limit: int = 1000) -> list[LineResult]:
+    """The line's rundowns, newest first (of ``vin`` / ``station`` / ``bolt``, recorded at
+    or after ``since`` and before ``until``; at most ``limit``), from ``line_rundowns``:
+    each filter is the leading column of one of its indexes."""
+    r = LINE_RUNDOWNS.table.c
+    q = select(LINE_RUNDOWNS.table)
+    for col, want in ((r.vin, vin), (r.station_id, station), (r.bolt, bolt)):
+        if want is not None:
+            q = q.where(col == want)
+    if since is not None:
+        q = q.where(r.at >= since)
+    if until is not None:
+        q = q.where(r.at < until)
+    q = q.order_by(r.at.desc(), r.station_id, r.seq.desc()).limit(max(1, int(limit)))
     with engine.connect() as c:
-        for r in c.execute(q):
-            rec = r.record
-            version = (rec.get("parameters") or {}).get("version")
-            out.append(LineResult(
-                r.station_id, r.db_id, int(r.seq), r.at.astimezone(UTC), str(rec.get("vin")),
-                rec.get("model"), str(rec.get("bolt")), rec.get("status") == "ok",
-                str(rec.get("rundown") or "tightening"), _opt(rec.get("torque_nm")),
-                _opt(rec.get("angle_deg")), None if version is None else int(version),
-                r.received_at.astimezone(UTC), r.operator))
-    return out
+        return [LineResult(
+            row.station_id, row.db_id, int(row.seq), row.at.astimezone(UTC), str(row.vin),
+            row.model, str(row.bolt), row.status == OK, row.kind, row.torque_nm,
+            row.angle_deg, row.parameters_version, row.received_at.astimezone(UTC),
+            row.operator, row.pset, row.tightening_id,
+            (row.torque_target_nm, row.torque_min_nm, row.torque_max_nm),
+            (row.angle_target_deg, row.angle_min_deg, row.angle_max_deg))
+            for row in c.execute(q)]
 
 
 @dataclass(frozen=True)
@@ -201,5 +517,7 @@ def bolt_versions(engine: Engine, *, model: str | None = None, bolt: str | None 
                 for r in c.execute(q)]
 
 
-__all__ = ["LINE", "LINE_FEED", "LINE_PARAMETERS", "BoltVersion", "LineResult",
-           "bolt_versions", "create_line_schema", "operator_of", "parameter_rows", "results"]
+__all__ = ["LINE", "LINE_CHECKS", "LINE_COMMANDS", "LINE_FEED", "LINE_GAPS", "LINE_PARAMETERS",
+           "LINE_RUNDOWNS", "LINE_UNATTRIBUTED", "TYPED", "BoltVersion", "LineResult",
+           "SchemaChange", "Typed", "bolt_versions", "create_line_schema", "operator_of",
+           "parameter_rows", "results", "trigger_body"]

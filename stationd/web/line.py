@@ -1,5 +1,6 @@
 """The line page (``/line``): every station's rundowns from the line database, newest first,
-for a VIN or a station; its data at ``/api/line/results?vin=&station=&limit=``.
+for a VIN, a station or a bolt; its data at ``/api/line/results?vin=&station=&bolt=&limit=``,
+read from the typed ``line_rundowns`` (:mod:`stationd.linedb`).
 
 Why on a station's screens: a quality engineer or a team leader at any station asks where a
 vehicle's bolts were tightened along the line, and the line database (the forwarders' copy of
@@ -19,7 +20,7 @@ from sqlalchemy import Engine, create_engine, make_url
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.pool import NullPool
 
-from stationd.linedb import LINE_FEED, LineResult, results
+from stationd.linedb import LINE_FEED, LINE_RUNDOWNS, LineResult, results
 
 PAGE = Path(__file__).with_name("static") / "line.html"
 LIMIT = (1, 1000)
@@ -29,7 +30,13 @@ def _plain(r: LineResult) -> dict[str, Any]:
     return {"station_id": r.station_id, "db_id": r.db_id, "seq": r.seq,
             "at": r.at.isoformat(), "vin": r.vin, "model": r.model, "bolt": r.bolt,
             "ok": r.ok, "kind": r.kind, "torque_nm": r.torque_nm, "angle_deg": r.angle_deg,
-            "parameters_version": r.version, "received_at": r.received_at.isoformat()}
+            "parameters_version": r.version, "received_at": r.received_at.isoformat(),
+            "operator": r.operator, "pset": r.pset, "tightening_id": r.tightening_id,
+            "torque_window_nm": list(r.torque), "angle_window_deg": list(r.angle)}
+
+
+class NotUpgraded(Exception):  # noqa: N818 - a state of the line database
+    """The line database has records but no typed tables: an earlier stationd made it."""
 
 
 class LineRoutes:
@@ -52,13 +59,16 @@ class LineRoutes:
             self._engine = (url, create_engine(url, poolclass=NullPool))
         return self._engine[1]
 
-    def _read(self, url: str, vin: str | None, station: str | None, limit: int
-              ) -> list[dict[str, Any]]:
+    def _read(self, url: str, vin: str | None, station: str | None, bolt: str | None,
+              limit: int) -> list[dict[str, Any]]:
         engine = self._engine_for(url)
         with engine.connect() as c:
-            if not engine.dialect.has_table(c, LINE_FEED.name):
+            if not engine.dialect.has_table(c, LINE_RUNDOWNS.table.name):
+                if engine.dialect.has_table(c, LINE_FEED.name):
+                    raise NotUpgraded
                 return []      # nothing forwarded to it yet
-        return [_plain(r) for r in results(engine, vin=vin, station=station, limit=limit)]
+        return [_plain(r) for r in results(engine, vin=vin, station=station, bolt=bolt,
+                                           limit=limit)]
 
     async def _results(self, request: web.Request) -> web.Response:
         url = self.url
@@ -72,18 +82,23 @@ class LineRoutes:
             raise web.HTTPBadRequest(text="limit: a number 1-1000\n") from None
         if not LIMIT[0] <= limit <= LIMIT[1]:
             raise web.HTTPBadRequest(text="limit: a number 1-1000\n")
-        vin, station = (q.get("vin") or "").strip() or None, \
-            (q.get("station") or "").strip() or None
+        vin, station, bolt = ((q.get(k) or "").strip() or None
+                              for k in ("vin", "station", "bolt"))
         try:
             rows = await asyncio.get_running_loop().run_in_executor(
-                None, self._read, url, vin, station, limit)
+                None, self._read, url, vin, station, bolt, limit)
+        except NotUpgraded:
+            raise web.HTTPServiceUnavailable(
+                text=f"line database {make_url(url).render_as_string()}: no "
+                     f"{LINE_RUNDOWNS.table.name} (made by an earlier stationd): `stationd "
+                     "line init URL` adds it, as does a forwarder of this version\n") from None
         except SQLAlchemyError as exc:
             orig = str(getattr(exc, "orig", None) or exc).strip().splitlines()
             raise web.HTTPServiceUnavailable(
                 text=f"line database {make_url(url).render_as_string()} unreachable: "
                      f"{orig[0] if orig else type(exc).__name__}\n") from None
         return web.json_response({"line_db": make_url(url).render_as_string(), "vin": vin,
-                                  "station": station, "rundowns": rows})
+                                  "station": station, "bolt": bolt, "rundowns": rows})
 
 
 __all__ = ["LineRoutes"]

@@ -13,6 +13,7 @@
     const ask = new URLSearchParams(location.search);
     q("#ask [name=vin]").value = ask.get("vin") || "";
     q("#ask [name=station]").value = ask.get("station") || "";
+    q("#ask [name=bolt]").value = ask.get("bolt") || "";
     const r = await fetch("/api/line/results" + location.search);
     if (!r.ok) { q("#error").textContent = (await r.text()).trim(); return; }
     const doc = await r.json();
@@ -27,6 +28,8 @@
       cell(tr, (x.ok ? "OK" : "NOK") + (x.kind === "loosening" ? " (loosening)" : ""),
            x.ok ? "" : "out");
       cell(tr, fmt(x.torque_nm, 1));
+      const [, lo, hi] = x.torque_window_nm;   // target, min, max in force
+      cell(tr, lo === null && hi === null ? "-" : fmt(lo, 1) + " - " + fmt(hi, 1));
       cell(tr, fmt(x.angle_deg, 1));
       cell(tr, x.parameters_version === null ? "-" : String(x.parameters_version));
       q("#line tbody").appendChild(tr);
