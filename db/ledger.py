@@ -22,6 +22,7 @@ from db.models import (
     Bolt,
     CalibrationCheck,
     CommandRecord,
+    ControllerEvent,
     FeedEntry,
     ForwardQuarantine,
     Meta,
@@ -31,6 +32,7 @@ from db.models import (
     TighteningCurve,
     TighteningRecord,
     UnattributedResult,
+    UnreadableRecord,
     Vehicle,
     VehicleModel,
 )
@@ -39,6 +41,9 @@ from db.models import (
 RUNDOWN, UNATTRIBUTED, COMMAND, GAP = "rundown", "unattributed", "command", "gap"
 CHECK = "check"   # a camera pair's calibration check (db.checks)
 CURVE = "curve"   # one trace of a tightening (db.curves), its samples in the record
+#: a controller result that is not a rundown (batch step, bypass, abort, reference setup), and
+#: a result message the station could not read (kept whole)
+CONTROLLER_EVENT, UNREADABLE = "controller_event", "unreadable"
 FEED_LIMIT = 1000
 
 
@@ -294,6 +299,20 @@ def _record(s: Session, kind: str, ref: int) -> dict[str, Any]:
                 "torque_nm": u.torque_nm, "angle_deg": u.angle_deg,
                 "result_at": _iso(u.result_at), "recorded_at": _iso(u.recorded_at),
                 "reason": u.reason}
+    if kind == CONTROLLER_EVENT:
+        ev = s.get_one(ControllerEvent, ref)
+        return {"id": ev.id, "result_type": ev.result_type, "what": ev.what, "vin": ev.vin,
+                "bolt": ev.bolt, "controller_vin": ev.controller_vin,
+                "tightening_id": ev.tightening_id, "pset": ev.pset, "status": ev.status,
+                "torque_nm": ev.torque_nm, "angle_deg": ev.angle_deg,
+                "result_at": _iso(ev.result_at), "recorded_at": _iso(ev.recorded_at)}
+    if kind == UNREADABLE:
+        x = s.get_one(UnreadableRecord, ref)
+        return {"id": x.id, "mid": x.mid, "revision": x.revision, "raw": x.raw,
+                "error": x.error, "vin": x.vin, "bolt": x.bolt,
+                "controller_vin": x.controller_vin, "tightening_id": x.tightening_id,
+                "pset": x.pset, "result_at": _iso(x.result_at),
+                "recorded_at": _iso(x.recorded_at)}
     if kind == GAP:
         g = s.get_one(ResultGap, ref)
         return {"id": g.id, "first_id": g.first_id, "last_id": g.last_id, "vin": g.vin,
@@ -311,5 +330,5 @@ def _record(s: Session, kind: str, ref: int) -> dict[str, Any]:
             "kind": c.kind, "vin": c.vin, "bolt": c.bolt, "comment": c.comment}
 
 
-__all__ = ["CHECK", "COMMAND", "CURVE", "GAP", "RUNDOWN", "UNATTRIBUTED", "CommandEntry", "Ledger",
-           "add_command", "append"]
+__all__ = ["CHECK", "COMMAND", "CONTROLLER_EVENT", "CURVE", "GAP", "RUNDOWN", "UNATTRIBUTED",
+           "UNREADABLE", "CommandEntry", "Ledger", "add_command", "append"]

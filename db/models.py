@@ -28,6 +28,7 @@ from sqlalchemy import (
     Integer,
     MetaData,
     String,
+    Text,
     TypeDecorator,
     UniqueConstraint,
 )
@@ -248,6 +249,52 @@ class UnattributedResult(Base):
     result_at: Mapped[datetime | None] = mapped_column(UtcDateTime)   # controller's clock
     recorded_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
     reason: Mapped[str] = mapped_column(String(200))
+
+
+class ControllerEvent(Base):
+    """A result from the controller that is not a rundown (Open Protocol MID 0061 revision 3+
+    result types 3 batch increment, 4 batch decrement, 5 bypass parameter set, 6 abort job,
+    8 reference setup, or a type the specification does not name): it never closes, opens
+    or counts a bolt, and is kept so that quality sees what happened on the controller."""
+
+    __tablename__ = "controller_events"
+    __table_args__ = (CheckConstraint("status IN ('ok', 'nok')", name="status"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    result_type: Mapped[int]                               # the code as the controller sent it
+    what: Mapped[str] = mapped_column(String(32))          # its name ("batch increment")
+    vin: Mapped[str | None] = mapped_column(String(32))    # the vehicle at height, if any
+    bolt: Mapped[str | None] = mapped_column(String(32))   # the tool was enabled for, if any
+    controller_vin: Mapped[str | None] = mapped_column(String(32))
+    tightening_id: Mapped[int | None]
+    pset: Mapped[int | None]
+    status: Mapped[str] = mapped_column(String(3))
+    torque_nm: Mapped[float | None]
+    angle_deg: Mapped[float | None]
+    result_at: Mapped[datetime | None] = mapped_column(UtcDateTime)   # controller's clock
+    recorded_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
+
+
+class UnreadableRecord(Base):
+    """A result message the station could not read: kept whole (its text as received, the
+    revision it said it was, the parse error) before the controller was told it may forget
+    it, with the bolt it may belong to (held until a supervisor checks it on the
+    controller and releases it)."""
+
+    __tablename__ = "unreadable_results"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    mid: Mapped[int]
+    revision: Mapped[int]
+    raw: Mapped[str] = mapped_column(Text)
+    error: Mapped[str] = mapped_column(String(500))
+    vin: Mapped[str | None] = mapped_column(String(32))    # the vehicle at height, if any
+    bolt: Mapped[str | None] = mapped_column(String(32))   # the bolt it may belong to
+    controller_vin: Mapped[str | None] = mapped_column(String(32))
+    tightening_id: Mapped[int | None]                      # as far as it could be read
+    pset: Mapped[int | None]
+    result_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
+    recorded_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
 
 
 class CommandRecord(Base):

@@ -27,15 +27,26 @@ from db.engine import DEFAULT_URL, make_engine, writer
 from db.errors import DatabaseError, DataError, NotFoundError, VehicleClosedError
 from db.importer import ImportReport, current_version, import_table, parameters_of, read_table
 from db.kinds import LOOSENING, RUNDOWN_KINDS, TIGHTENING
-from db.ledger import GAP, RUNDOWN, UNATTRIBUTED, Ledger, add_command, append
+from db.ledger import (
+    CONTROLLER_EVENT,
+    GAP,
+    RUNDOWN,
+    UNATTRIBUTED,
+    UNREADABLE,
+    Ledger,
+    add_command,
+    append,
+)
 from db.migrate import current_revision, head_revision, upgrade
 from db.models import (
     Bolt,
+    ControllerEvent,
     ProcessParameters,
     ResultGap,
     TighteningRecord,
     ToolEnable,
     UnattributedResult,
+    UnreadableRecord,
     Vehicle,
     VehicleModel,
     utcnow,
@@ -363,6 +374,85 @@ class Repository:
             append(s, UNATTRIBUTED, row.id)
             return row.id
 
+    def record_controller_event(self, *, result_type: int, what: str, vin: str | None,
+                                bolt: str | None, controller_vin: str | None,
+                                tightening_id: int | None, pset: int | None, ok: bool,
+                                torque_nm: float | None, angle_deg: float | None,
+                                result_at: datetime | None) -> int | None:
+        """Store a controller result that is not a rundown (a batch step, a bypass, ...);
+        return its id, or None when this very result (same tightening id and type) is
+        stored already (a resent copy)."""
+        with self._session(write=True) as s:
+            if tightening_id is not None:
+                same = s.scalar(select(ControllerEvent.id).where(
+                    ControllerEvent.tightening_id == int(tightening_id),
+                    ControllerEvent.result_type == int(result_type)).limit(1))
+                if same is not None:
+                    return None
+            row = ControllerEvent(
+                result_type=int(result_type), what=what[:32], vin=vin, bolt=bolt,
+                controller_vin=controller_vin, tightening_id=tightening_id, pset=pset,
+                status="ok" if ok else "nok", torque_nm=_opt_float(torque_nm),
+                angle_deg=_opt_float(angle_deg), result_at=result_at, recorded_at=utcnow())
+            s.add(row)
+            s.flush()
+            append(s, CONTROLLER_EVENT, row.id)
+            return row.id
+
+    def record_unreadable(self, *, mid: int, revision: int, raw: str, error: str,
+                          vin: str | None, bolt: str | None, controller_vin: str | None,
+                          tightening_id: int | None, pset: int | None,
+                          result_at: datetime | None, enable_id: int | None = None
+                          ) -> int | None:
+        """Store a result message that could not be read, whole; return its id, or None when
+        the same message is stored already (a resent copy).  ``enable_id``: the tool enable
+        it answers, settled in the same transaction (the station owes it nothing more: the
+        bolt is held for a person instead)."""
+        with self._session(write=True) as s:
+            same = s.scalar(select(UnreadableRecord.id).where(
+                UnreadableRecord.raw == raw, UnreadableRecord.mid == int(mid)).limit(1))
+            if same is not None:
+                _settle(s, enable_id)
+                return None
+            row = UnreadableRecord(
+                mid=int(mid), revision=int(revision), raw=raw, error=error[:500], vin=vin,
+                bolt=bolt, controller_vin=controller_vin, tightening_id=tightening_id,
+                pset=pset, result_at=result_at, recorded_at=utcnow())
+            s.add(row)
+            _settle(s, enable_id)
+            s.flush()
+            append(s, UNREADABLE, row.id)
+            return row.id
+
+    def held_bolts(self, vin: str, since: datetime | None = None) -> dict[str, str]:
+        """Bolts of ``vin`` held by an unreadable result (bolt -> which result: its tightening
+        id, else its MID and revision):
+        one stored for the bolt after its last rundown and its last release command (only
+        those since ``since``, the vehicle's last opening).  A hold outlives a restart."""
+        with self._session(write=False) as s:
+            q = select(UnreadableRecord.bolt, UnreadableRecord.recorded_at,
+                       UnreadableRecord.tightening_id, UnreadableRecord.mid,
+                       UnreadableRecord.revision).where(
+                UnreadableRecord.vin == vin, UnreadableRecord.bolt.is_not(None))
+            if since is not None:
+                q = q.where(UnreadableRecord.recorded_at >= since)
+            held = {str(b): (f"tightening {tid}" if tid is not None
+                             else f"MID {mid:04d} revision {rev}", at)
+                    for b, at, tid, mid, rev in s.execute(q.order_by(UnreadableRecord.id))}
+            if not held:
+                return {}
+            v = _vehicle(s, vin)
+            for code, at in s.execute(
+                    select(Bolt.code, func.max(TighteningRecord.recorded_at))
+                    .join(Bolt, TighteningRecord.bolt_id == Bolt.id)
+                    .where(TighteningRecord.vehicle_id == v.id).group_by(Bolt.code)):
+                if code in held and at is not None and at >= held[code][1]:
+                    del held[code]
+            for c in self.ledger.commands(vin):
+                if c.kind == "release" and c.bolt in held and c.at >= held[c.bolt][1]:
+                    del held[c.bolt]
+            return {b: note for b, (note, _) in held.items()}
+
     def spc(self, model: str | None = None, since: datetime | None = None,
             last: int = quality.LAST_N) -> dict[str, Any]:
         """Cp/Cpk of torque and angle per bolt and pset (OK results) with each group's last
@@ -372,10 +462,13 @@ class Repository:
 
     def last_tightening_id(self) -> int | None:
         """The newest controller tightening id the station accounted for (recorded to a
-        bolt, unattributed, or a gap); None before the first."""
+        bolt, unattributed, a controller event, unreadable, or a gap); None before the
+        first."""
         with self._session(write=False) as s:
             ids = [s.scalar(select(func.max(TighteningRecord.tightening_id))),
                    s.scalar(select(func.max(UnattributedResult.tightening_id))),
+                   s.scalar(select(func.max(ControllerEvent.tightening_id))),
+                   s.scalar(select(func.max(UnreadableRecord.tightening_id))),
                    s.scalar(select(func.max(ResultGap.last_id)))]
             known = [int(i) for i in ids if i is not None]
             return max(known) if known else None

@@ -52,6 +52,8 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.LOCKED: lambda r: (f"{r.bolt} locked after {r.count} NOK in a row: a supervisor "
                            "releases it"),
     Why.NOT_LOCKED: lambda r: f"{r.bolt} is not locked",
+    Why.HELD: lambda r: (f"{r.bolt}: the controller's result could not be read ({r.note}): "
+                         "check it on the controller, then release"),
     Why.LOOSEN_FIRST: lambda r: (f"{r.bolt}: loosen first (loosen pset {r.pset}), then "
                                  "tighten" + (f": {r.note}" if r.note else "")),
     Why.NOTHING_TO_LOOSEN: lambda r: f"{r.bolt} is not tightened: nothing to loosen",

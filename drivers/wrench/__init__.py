@@ -35,8 +35,8 @@ from drivers.wrench.base import (
 )
 
 __all__ = ["BACKENDS", "FORMS", "LinkStatus", "Received", "ResultKind", "ResultType", "Status",
-           "TighteningResult", "UnreadableResult",
-           "TorqueUnit", "Wrench", "open_wrench", "result_kind"]
+           "TighteningResult", "TorqueUnit", "UnreadableResult", "Wrench", "open_wrench",
+           "result_kind"]
 
 #: scheme -> "module:Class"; the class has ``from_url(url: DeviceUrl, **kw) -> Wrench``.
 BACKENDS: dict[str, str] = {

@@ -15,13 +15,13 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from db.bolts import Parameters
 from db.repository import Repository
 from drivers.errors import DeviceError, RefusedError
 from drivers.keeper import DeviceKeeper, FaultKind, fault_kind, one_line
-from drivers.wrench import TighteningResult, Wrench
+from drivers.wrench import Received, Wrench
 from stationd.localize import Localization
 from stationd.reasons import Reason, Why
 from stationd.station.blocking import Blocking
@@ -48,7 +48,9 @@ from stationd.station.core import (
     SendVin,
     State,
     StationCore,
+    StoreControllerEvent,
     StoreUnattributed,
+    StoreUnreadable,
     ToolOn,
     VinSent,
     Written,
@@ -133,6 +135,12 @@ class Actions:
             await self.acknowledge(a.result)
         elif isinstance(a, StoreUnattributed):
             await self._store_unattributed(a)
+        elif isinstance(a, StoreControllerEvent):
+            await self._store_then_ack(self.records.store_controller_event, a, a.result,
+                                       f"{a.what} (a controller event)")
+        elif isinstance(a, StoreUnreadable):
+            await self._store_then_ack(self.records.store_unreadable, a, a.unreadable,
+                                       "an unreadable result")
         elif isinstance(a, RecordCommand):
             return await self._record_command(a)
         elif isinstance(a, Reply):
@@ -261,7 +269,21 @@ class Actions:
             return
         await self.acknowledge(a.result)
 
-    async def acknowledge(self, result: TighteningResult) -> None:
+    async def _store_then_ack(self, store: Callable[[Any], None], a: Any,
+                              result: Received, what: str) -> None:
+        """A controller result stored (``store(a)``), then acknowledged; a database that
+        refuses it is a fault, and the result stays with the controller (not
+        acknowledged: it sends it again)."""
+        try:
+            await self._call(store, a)
+        except STATION_FAULTS as exc:
+            log.error("tightening %s (%s) NOT stored, left with the controller: %s",
+                      result.tightening_id, what, one_line(exc))
+            self._database.lost(DeviceError(f"results not stored: {one_line(exc)}"))
+            return
+        await self.acknowledge(result)
+
+    async def acknowledge(self, result: Received) -> None:
         """Tell the controller a result is stored; a failure leaves it with the controller
         (it is recorded here already, and a resent copy is recognised by its id)."""
         wrench = self._wrench.device

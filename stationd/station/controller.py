@@ -21,9 +21,16 @@ from concurrent.futures import Future, ThreadPoolExecutor
 
 from drivers.errors import DeviceError
 from drivers.keeper import DeviceKeeper, one_line
-from drivers.wrench import TighteningResult, Wrench
+from drivers.wrench import Received, TighteningResult, UnreadableResult, Wrench
 from stationd.station.blocking import Blocking
-from stationd.station.core import WRENCH, DeviceBack, Event, ResultIn, StationCore
+from stationd.station.core import (
+    WRENCH,
+    DeviceBack,
+    Event,
+    ResultIn,
+    StationCore,
+    UnreadableIn,
+)
 from stationd.station.events import DeviceIdentified, EventBus, Notice
 from stationd.station.gaps import MAX_FETCH
 from stationd.station.gaps import plan as plan_gaps
@@ -47,8 +54,8 @@ class ControllerFeed:
         self._results_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="results")
         self._curves_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="curves")
         #: results taken from the controller and not yet through the core
-        self.received: list[TighteningResult] = []
-        self._waiting: Future[TighteningResult | None] | None = None
+        self.received: list[Received] = []
+        self._waiting: Future[Received | None] | None = None
         self.catching_up: asyncio.Task[None] | None = None
 
     def close(self) -> None:
@@ -68,7 +75,7 @@ class ControllerFeed:
             # a refusal is a fault until the controller answers
             await self._feed(DeviceBack(time.time(), WRENCH, self._keeper.reconnects))
         if result is not None:
-            await self._feed(ResultIn(time.time(), result))
+            await self._feed(result_input(time.time(), result))
             self.received.remove(result)
 
     async def curves(self, stop: asyncio.Event) -> None:
@@ -129,14 +136,16 @@ class ControllerFeed:
                 log.info("results: %s", todo.note)
             if todo.gap is not None:
                 await self._gap(*todo.gap, f"more than {MAX_FETCH} results missed")
+            offset = getattr(wrench, "clock_offset_s", None)
             for tid in todo.fetch:
-                got = newest if tid == newest.tightening_id else \
+                got: Received | None = newest if tid == newest.tightening_id else \
                     await self._call(wrench.fetch_result, tid)
                 if got is None:
                     await self._gap(tid, tid, "the controller no longer has it")
                     continue
                 log.info("tightening %d fetched after a reconnect", tid)
-                await self._feed(ResultIn(time.time(), got, fetched=True))
+                await self._feed(result_input(time.time(), got, fetched=True, follows=last,
+                                              offset=offset))
         except (DeviceError, ValueError) as exc:   # the link's keeper reports it
             log.warning("results missed while the link was down not fetched yet: %s",
                         one_line(exc))
@@ -149,7 +158,7 @@ class ControllerFeed:
         log.warning("tightening %s missed while the link was down: a gap (%s)", ids, reason)
         self.bus.publish(Notice(f"tightening {ids} missed: a gap ({reason})", "warning"))
 
-    async def drain(self) -> list[TighteningResult]:
+    async def drain(self) -> list[Received]:
         """At a stop (the station's lock held, its tasks cancelled): the result the wait was
         taking and those the driver still holds, for the core while the link is open (a
         reload lost a result that arrived as it began)."""
@@ -174,6 +183,29 @@ class ControllerFeed:
         return received
 
 
-def _wait_briefly(wrench: Wrench) -> TighteningResult | None:
+def result_input(t: float, got: Received, *, fetched: bool = False, follows: int | None = None,
+                 offset: float | None = None) -> ResultIn | UnreadableIn:
+    """What the controller sent, as the core's input: a result (fetched ones with the last
+    tightening id accounted for before, and the controller's timestamp on the station's
+    clock where its offset is known), or one that could not be read."""
+    if isinstance(got, UnreadableResult):
+        return UnreadableIn(t, got)
+    return ResultIn(t, got, fetched=fetched, follows=follows,
+                    made_at=made_at(got, offset) if fetched else None)
+
+
+def made_at(result: TighteningResult, offset: float | None) -> float | None:
+    """The result's controller timestamp (naive, the controller's local time) on the
+    station's clock (epoch seconds): ``offset`` is the controller's local time minus the
+    station's, measured at connect (None: unknown, and so is the time)."""
+    if offset is None or not isinstance(offset, int | float):
+        return None
+    try:
+        return result.timestamp.timestamp() - float(offset)
+    except (AttributeError, OverflowError, OSError, ValueError):
+        return None
+
+
+def _wait_briefly(wrench: Wrench) -> Received | None:
     """A result the driver holds already, without acknowledging it (the core does)."""
     return wrench.wait_result(0.05, acknowledge=False)

@@ -37,7 +37,13 @@ import numpy as np
 from db.bolts import Parameters, Window
 from db.kinds import LOOSENING, NOK, TIGHTENING, TO_LOOSEN
 from drivers.keeper import FaultKind
-from drivers.wrench.base import TighteningResult
+from drivers.wrench.base import (
+    ResultKind,
+    ResultType,
+    TighteningResult,
+    UnreadableResult,
+    result_kind,
+)
 from stationd.reasons import Reason, Why
 from stationd.station.commands import (
     RIGHT,
@@ -63,6 +69,7 @@ from stationd.station.events import (
     BoltSkipped,
     BoltToLoosen,
     BoltView,
+    ControllerResultEvent,
     DeviceHealth,
     Localized,
     Notice,
@@ -75,6 +82,7 @@ from stationd.station.events import (
     Refused,
     ResultRecorded,
     ResultUnattributed,
+    ResultUnreadable,
     StateChanged,
     StationEvent,
     ToolDisabled,
@@ -92,6 +100,10 @@ from stationd.station.trust import answer as check_answer
 #: a result this long after the tool went off is not the last bolt's late one: the tool cannot
 #: tighten while disabled, and a controller reports within milliseconds
 LATE_RESULT_S = 5.0
+#: the controller stamps its results to the second, and its clock's offset is measured to
+#: the second: a result fetched after a link cut is placed between the enable and the cut
+#: within this much
+CLOCK_SLACK_S = 2.0
 
 
 class Device(enum.StrEnum):
@@ -190,6 +202,19 @@ class ResultIn(Input):
 
     result: TighteningResult
     fetched: bool = False
+    #: fetched: the newest tightening id the station had accounted for when it asked (the
+    #: first result made during a link cut is the one after it)
+    follows: int | None = None
+    #: the controller's timestamp of the result on the station's clock (through the offset
+    #: measured at connect); None when the controller's clock is not known
+    made_at: float | None = None
+
+
+@dataclass(frozen=True)
+class UnreadableIn(Input):
+    """A result message the driver could not read (kept whole), not yet acknowledged."""
+
+    unreadable: UnreadableResult
 
 
 @dataclass(frozen=True)
@@ -236,6 +261,7 @@ class VehicleLoaded(Input):
     rework: bool = False
     skipped: Mapping[str, str] = field(default_factory=dict)
     noks: Mapping[str, int] = field(default_factory=dict)   # NOKs in a row, since a release
+    held: Mapping[str, str] = field(default_factory=dict)   # held by an unreadable result
     status: Mapping[str, str] = field(default_factory=dict)  # bolt -> ok, nok (its records)
 
 @dataclass(frozen=True)
@@ -317,7 +343,7 @@ class CommandDone(Input):
     reason: Reason | None = None
 
 
-Event = (Started | LiftRead | LocalizedIn | ParamsAcked | ParamsRefused | ResultIn
+Event = (Started | LiftRead | LocalizedIn | ParamsAcked | ParamsRefused | ResultIn | UnreadableIn
          | DeviceFault | DeviceBack | VehicleLoaded | VehicleRejected | VinSent | Tick
          | CommandIn | CommandDone | ToolOn | Written | VehicleEnded | ModelsKnown
          | ReferencesChecked | OperatorBack)
@@ -433,6 +459,39 @@ class StoreUnattributed:
 
 
 @dataclass(frozen=True)
+class StoreControllerEvent:
+    """Store a result that is not a rundown (``what``: its type in words; ``bolt``: the one
+    the tool was enabled for, still open), then acknowledge it."""
+
+    result: TighteningResult
+    vin: str | None
+    bolt: str | None
+    what: str
+
+
+@dataclass(frozen=True)
+class StoreUnreadable:
+    """Store an unreadable result whole (``bolt``: the one it may belong to, now held;
+    ``selection``: the enable it answers, settled), then acknowledge it."""
+
+    unreadable: UnreadableResult
+    vin: str | None
+    bolt: str | None
+    selection: Selection | None
+
+
+@dataclass(frozen=True)
+class _Cut:
+    """The link to the controller went down while the tool was enabled for ``selection``
+    (enabled at ``enabled_at``, the cut seen at ``cut_at``): a result fetched after the
+    reconnect that the controller's own data places there is that bolt's."""
+
+    selection: Selection
+    enabled_at: float
+    cut_at: float
+
+
+@dataclass(frozen=True)
 class Publish:
     event: StationEvent
 
@@ -456,8 +515,8 @@ class Reply:
 
 
 Action = (SendParams | EnableTool | DisableTool | SendVin | LoadVehicle | CloseVehicle | Record
-          | Acknowledge | StoreUnattributed | Publish | RecordCommand | Reply | MeasureReferences
-          | RecordCheck)
+          | Acknowledge | StoreUnattributed | StoreControllerEvent | StoreUnreadable | Publish
+          | RecordCommand | Reply | MeasureReferences | RecordCheck)
 
 
 @dataclass
@@ -506,6 +565,11 @@ class StationCore:
     _away: int = field(default=0, repr=False)
     _enabled: Selection | None = field(default=None, repr=False)  # tool last enabled for
     _off_at: float | None = field(default=None, repr=False)
+    _enabled_at: float | None = field(default=None, repr=False)
+    _cut: _Cut | None = field(default=None, repr=False)   # a link cut during an enable
+    # the station's start or the controller's last fault: a result fetched afterwards was
+    # made before it, so never under an enable that came later
+    _link_lost_at: float = field(default=float("-inf"), repr=False)
     _recorded: set[int] = field(default_factory=set, repr=False)
     _wrench_epoch: int = field(default=0, repr=False)
     _wrench_reconnects: int | None = field(default=None, repr=False)
@@ -558,17 +622,18 @@ class StationCore:
         self._enabled, self._off_at = owed.selection, owed.off_at
 
     def allowed(self) -> tuple[str, ...]:
-        """The bolts the sequence allows now (not done, not skipped, not blocked)."""
+        """The bolts the sequence allows now (not done, skipped, locked, held or blocked)."""
         m = self.matcher
         if m is None:
             return ()
         return tuple(b for b in m.bolts if b not in m.done and b not in m.skipped
-                     and b not in m.locked and m.why_blocked(b) is None)
+                     and b not in m.locked and b not in m.held and m.why_blocked(b) is None)
 
     # -- handlers --------------------------------------------------------------------------
     def _on_Started(self, ev: Started) -> list[Action]:  # noqa: N802 - named after the event
         if self.state is not State.STARTING:
             return []
+        self._link_lost_at = ev.t
         self._to(State.FAULT if self.faults else State.WAITING_VEHICLE,
                  self._fault_reason() if self.faults else "waiting for the lift")
         # the last station may have been killed with the tool on: off until a bolt is confirmed
@@ -646,6 +711,7 @@ class StationCore:
             elif rule.strategy == "skip":
                 self.matcher.skipped.setdefault(k, NOK_SKIPPED)
         self._loosen_back(ev)
+        self.matcher.held = {k: note for k, note in ev.held.items() if k in ev.bolts}
         opened = VehicleOpened(ev.vin, ev.model, tuple(
             BoltView(k, *b.position, pset=b.pset, order=b.order, batch=b.batch,
                      status=TO_LOOSEN if k in self._loosen else ev.status.get(k)
@@ -653,7 +719,9 @@ class StationCore:
             for k, b in ev.bolts.items()), rework=ev.rework, t=ev.t)
         if self.state is State.WAITING_VEHICLE and self._lift is not None and self._lift.ready:
             self._to(State.TRACKING, "tracking the wrench")
-        return [Publish(opened), *self._check_on_arrival(ev.t, ev.vin)]
+        held = [Publish(BoltLocked(k, 0, held=note, t=ev.t))
+                for k, note in self.matcher.held.items()]
+        return [Publish(opened), *held, *self._check_on_arrival(ev.t, ev.vin)]
 
     def _loosen_back(self, ev: VehicleLoaded) -> None:
         """The loosen strategy's state comes back with the vehicle: a bolt whose last rundown
@@ -714,6 +782,7 @@ class StationCore:
                 sel = self._selection
                 assert sel is not None  # noqa: S101 - a bolt is selected
                 self.tool_on, self._enabled, self._off_at = True, sel, None
+                self._enabled_at, self._cut = ev.t, None
                 acts.append(EnableTool(self.bolt, sel))
             return acts
         self._away += 1
@@ -844,39 +913,158 @@ class StationCore:
                                   f"{ev.reason}")
 
     def _on_ResultIn(self, ev: ResultIn) -> list[Action]:  # noqa: N802
+        """A result: a controller event (never a rundown) by its type; else recorded to the
+        bolt the tool was enabled for (its pset, while on or within the late-result window,
+        or after a link cut where the controller's own data places it there), else stored
+        unattributed with why."""
         r = ev.result
         tid = int(r.tightening_id)
-        en = self._enabled
-        ours = en is not None and (en.pset is None or int(r.pset) == en.pset)
         if tid in self._recorded:
             return [Acknowledge(r)]   # sent again by the controller: stored once already
+        en = self._enabled
+        kind = result_kind(type_code(r), en is not None and en.loosen)
+        if kind in (ResultKind.EVENT, ResultKind.UNKNOWN):
+            return self._controller_event(ev, kind)
+        ours = en is not None and (en.pset is None or int(r.pset) == en.pset) and not (
+            ev.fetched and self._enabled_at is not None
+            and self._enabled_at > self._link_lost_at)
         if ours and en is not None and en.vin and (
                 self.tool_on or (self._off_at is not None
                                  and ev.t - self._off_at < self.late_result_s)):
             return self._attribute(ev, en)
+        proved, not_proved = self._made_during_cut(ev)
+        if proved is not None:
+            return self._attribute(ev, proved, cut=True)
         why = f"result {tid} (pset {r.pset}) " + (
             "fetched after a reconnect" if ev.fetched else "outside any tightening")
+        if not_proved:
+            why += f" ({not_proved})"
         return [StoreUnattributed(r, self.vin, why),
                 Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
                 Publish(Notice(f"{why}: not attributable to a bolt, stored unattributed",
                                "warning", t=ev.t))]
 
-    def _attribute(self, ev: ResultIn, en: Selection) -> list[Action]:
-        """The result of the tightening the tool was enabled for: recorded to that bolt (of
-        the vehicle it was enabled on, also after a reload or restart)."""
-        r = ev.result
-        late = not self.tool_on
-        kind = rundown_kind(r, en.loosen)
+    def _made_during_cut(self, ev: ResultIn) -> tuple[Selection | None, str]:
+        """The selection a result fetched after a link cut belongs to, when the controller's
+        own data proves it (its pset the one sent, its VIN the one sent where it echoes one,
+        its tightening id the first after the last the station accounted for, its
+        timestamp between the enable and the cut); else None and what did not agree."""
+        cut, r = self._cut, ev.result
+        if not ev.fetched or cut is None:
+            return None, ""
+        en = cut.selection
+        echoed = str(r.vin or "").strip()
+        if en.pset is None or int(r.pset) != en.pset:
+            return None, f"pset {r.pset}, not {en.pset} sent for {en.bolt}"
+        if echoed and echoed != en.vin:
+            return None, f"VIN {echoed}, not {en.vin}"
+        if ev.follows is None or int(r.tightening_id) != ev.follows + 1:
+            return None, (f"not the first tightening after {ev.follows}" if ev.follows
+                          is not None else "the last tightening id accounted for unknown")
+        if ev.made_at is None:
+            return None, "the controller's clock is not known"
+        if not cut.enabled_at - CLOCK_SLACK_S <= ev.made_at <= cut.cut_at + CLOCK_SLACK_S:
+            return None, f"made outside the enable of {en.bolt} and the link cut"
+        return en, ""
+
+    def _controller_event(self, ev: ResultIn, kind: ResultKind) -> list[Action]:
+        """A result that is not a tightening or a loosening (a batch increment a line lead
+        pressed, a bypassed pset, an aborted job, a reference setup, or a type the station
+        does not know): stored as a controller event, said, and nothing else: no bolt is
+        closed, opened or counted, and the tool stays as the station decided."""
+        r, code = ev.result, type_code(ev.result)
+        self._recorded.add(int(r.tightening_id))
+        what = result_type_words(code)
+        bolt = self.bolt if self.tool_on else None
+        note = f"{what} on the controller: not a tightening" + (
+            f", {bolt} still open" if bolt is not None else "")
+        if kind is ResultKind.UNKNOWN:
+            note += "; check the controller's result there"
+        return [StoreControllerEvent(r, self.vin, bolt, what),
+                Publish(ControllerResultEvent(code or 0, what, int(r.tightening_id),
+                                              int(r.pset), bool(r.ok), bolt, t=ev.t)),
+                Publish(Notice(note, "warning" if bolt is not None
+                               or kind is ResultKind.UNKNOWN else "info", t=ev.t))]
+
+    def _on_UnreadableIn(self, ev: UnreadableIn) -> list[Action]:  # noqa: N802
+        """A result the driver could not read: stored whole; the bolt it may belong to (the
+        tool's, while on or within the late-result window, or the one of a link cut for a
+        fetched one; of the same pset where one could be read) is held until a supervisor
+        has checked the result on the controller and releases it."""
+        u = ev.unreadable
+        if u.tightening_id is not None and u.tightening_id in self._recorded:
+            return []     # its copy is stored already (the acknowledgement was owed by it)
+        en = self._enabled if self._enabled is not None and (
+            self.tool_on or (self._off_at is not None
+                             and ev.t - self._off_at < self.late_result_s)) else None
+        if u.fetched:
+            en = self._cut.selection if self._cut is not None else None
+        if en is not None and u.pset is not None and en.pset is not None \
+                and u.pset != en.pset:
+            en = None        # its pset could be read, and it is not the one sent
+        if u.tightening_id is not None:
+            self._recorded.add(u.tightening_id)
+        bolt = en.bolt if en is not None and en.vin else None
         acts: list[Action] = []
-        if self.tool_on:
+        if bolt is not None and self.tool_on:
+            acts += self._tool_off(ev.t, f"bolt {bolt}: its result could not be read")
+        acts.append(StoreUnreadable(u, en.vin if en is not None and bolt else self.vin, bolt,
+                                    en if bolt else None))
+        acts.append(Publish(ResultUnreadable(u.error, u.revision, u.tightening_id, bolt,
+                                             t=ev.t)))
+        if bolt is None or en is None:
+            return [*acts, Publish(Notice(
+                f"a result from the controller could not be read ({u.error}): stored whole; "
+                "no bolt it could belong to", "warning", t=ev.t))]
+        self._enabled = self._enabled if self._enabled is not en else None
+        if self._cut is not None and self._cut.selection is en:
+            self._cut = None
+        if self.matcher is not None and self.vin == en.vin and bolt in self.matcher.bolts:
+            acts += self._hold(ev.t, bolt, f"tightening {u.tightening_id}"
+                               if u.tightening_id is not None
+                               else f"MID {u.mid:04d} revision {u.revision}")
+        if self.bolt == bolt:
+            acts += self._drop(ev.t, State.TRACKING, f"bolt {bolt}: its result could not be "
+                               "read; held for a supervisor")
+        return acts
+
+    def _hold(self, t: float, bolt: str, note: str) -> list[Action]:
+        """``bolt`` is refused until a supervisor releases it: its result is not known."""
+        assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
+        self.matcher.held[bolt] = note
+        self.matcher.reset()
+        return [Publish(BoltLocked(bolt, 0, held=note, t=t)),
+                Publish(Notice(f"{bolt}: the controller's result could not be read ({note}): "
+                               "check it on the controller, then release", "warning", t=t))]
+
+    def _attribute(self, ev: ResultIn, en: Selection, cut: bool = False) -> list[Action]:
+        """The result of the tightening the tool was enabled for: recorded to that bolt (of
+        the vehicle it was enabled on, also after a reload or restart, or fetched after a
+        link cut that the controller's data places it in, ``cut``)."""
+        r = ev.result
+        late = not self.tool_on or cut
+        kind = LOOSENING if result_kind(type_code(r), en.loosen) is ResultKind.LOOSENING \
+            else TIGHTENING
+        acts: list[Action] = []
+        if self.tool_on and not cut:
             acts += self._tool_off(ev.t, f"bolt {en.bolt} " + (
                 "tightened" if kind == TIGHTENING else "loosened"))
         acts.append(Record(en.vin, en.bolt, r, en, late, kind))
-        if late:
+        if cut:
+            acts.append(Publish(Notice(
+                f"tightening {r.tightening_id} made during the link cut, fetched after it: "
+                f"recorded to {en.bolt} (its pset, VIN, tightening id and time agree)",
+                t=ev.t)))
+        elif late:
             acts.append(Publish(Notice(f"result for {en.bolt} outside a tightening: "
                                        "recorded, not matched", t=ev.t)))
         self._recorded.add(int(r.tightening_id))
-        self._enabled = None
+        if cut:
+            self._cut = None
+            if self._enabled is en:
+                self._enabled = None
+        else:
+            self._enabled = None
         if en.operator is not None and en.operator == self.operator:
             self._operator_seen = max(self._operator_seen, ev.t)
         if self.matcher is not None and self.vin == en.vin:
@@ -946,8 +1134,8 @@ class StationCore:
         if isinstance(cmd, LoosenBolt):
             return self._loosen_refusal(cmd)
         if isinstance(cmd, ReleaseBolt):
-            return None if cmd.bolt in self.matcher.locked else \
-                Reason(Why.NOT_LOCKED, bolt=cmd.bolt)
+            return None if cmd.bolt in self.matcher.locked or cmd.bolt in self.matcher.held \
+                else Reason(Why.NOT_LOCKED, bolt=cmd.bolt)
         if cmd.bolt in self.matcher.done:
             return Reason(Why.DONE, bolt=cmd.bolt)
         if cmd.bolt in self.matcher.skipped:
@@ -1036,6 +1224,10 @@ class StationCore:
         if isinstance(cmd, SkipBolt):
             acts += self._skip(ev.t, cmd, c.issuer)
         elif isinstance(cmd, ReleaseBolt):
+            held = self.matcher is not None and self.vin == cmd.vin \
+                and self.matcher.held.pop(cmd.bolt, None) is not None
+            if held:
+                acts.append(Publish(BoltReleased(cmd.bolt, c.issuer.user, t=ev.t)))
             if self.matcher is not None and self.vin == cmd.vin \
                     and self.matcher.locked.pop(cmd.bolt, None) is not None:
                 self._noks.pop(cmd.bolt, None)
@@ -1134,6 +1326,13 @@ class StationCore:
     def _on_DeviceFault(self, ev: DeviceFault) -> list[Action]:  # noqa: N802
         if ev.device == WRENCH:
             self._vin_pending = False
+            self._link_lost_at = ev.t
+            if self._enabled is not None and self._enabled_at is not None and self._cut is None \
+                    and (self.tool_on or (self._off_at is not None
+                                          and ev.t - self._off_at < self.late_result_s)):
+                # the tool's result may come only after the reconnect: where it belongs is
+                # then proved by the controller's own data (:meth:`_made_during_cut`)
+                self._cut = _Cut(self._enabled, self._enabled_at, ev.t)
         if ev.device == DATABASE:
             # the load under way failed (the only database call the core waits for): the
             # vehicle is loaded again once the database is back and the lift still ready
@@ -1356,6 +1555,7 @@ class StationCore:
         return acts
 
     def _forget_vehicle(self) -> None:
+        self._cut = None
         self.vin, self.model, self.matcher, self._specs = None, None, None, {}
         self._loosen, self._nok_last = set(), set()
         self._loading, self._enabled, self._off_at = False, None, None
@@ -1371,17 +1571,39 @@ class StationCore:
         self.state, self.reason = state, reason
 
 
-def rundown_kind(result: TighteningResult, sent_loosen: bool) -> str:
-    """A result's kind: its own type where its revision carries it (Open Protocol MID 0061
-    revision 3+, parameter 49: 1 tightening, 2 loosening), else what the station sent (a
-    loosen pset or the tightening one).  The type wins: a controller reversed by hand reports
-    the loosening it made, whatever was sent."""
+def type_code(result: TighteningResult) -> int | None:
+    """A result's type code as the controller sent it (Open Protocol MID 0061 revision 3+,
+    parameter 49), None where its revision (or the backend) carries none."""
+    code = getattr(result, "result_type_code", None)
+    if code is not None:
+        return int(code)
     t = getattr(result, "result_type", None)
-    if t == 2:
-        return LOOSENING
-    if t == 1:
-        return TIGHTENING
-    return LOOSENING if sent_loosen else TIGHTENING
+    return None if t is None else int(t)
+
+
+def rundown_kind(result: TighteningResult, sent_loosen: bool) -> str:
+    """A rundown's kind (db.kinds): its own type where its revision carries it, else what
+    the station sent (a loosen pset or the tightening one).  The type wins: a controller
+    reversed by hand reports the loosening it made, whatever was sent.  Only for results
+    that are rundowns (:func:`result_kind` says which are not)."""
+    return LOOSENING if result_kind(type_code(result), sent_loosen) is ResultKind.LOOSENING \
+        else TIGHTENING
+
+
+_TYPE_WORDS = {ResultType.BATCH_INCREMENT: "batch increment",
+               ResultType.BATCH_DECREMENT: "batch decrement",
+               ResultType.BYPASS_PSET: "bypass parameter set", ResultType.ABORT_JOB: "abort job",
+               ResultType.REFERENCE_SETUP: "reference setup",
+               ResultType.TIGHTENING: "tightening", ResultType.LOOSENING: "loosening",
+               ResultType.SYNC_TIGHTENING: "synchronized tightening"}
+
+
+def result_type_words(code: int | None) -> str:
+    """A result type as the controller's screen would name it; an unknown code by number."""
+    try:
+        return _TYPE_WORDS[ResultType(code)] if code is not None else "result"
+    except ValueError:
+        return f"result type {code} (unknown)"
 
 
 def _disable(reason: str, bolt: str | None = None, why: Reason | None = None, *,

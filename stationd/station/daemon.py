@@ -37,7 +37,7 @@ from stationd.localize import Localization
 from stationd.station.actions import Actions
 from stationd.station.blocking import Blocking
 from stationd.station.commands import Answer, Command, Issuer
-from stationd.station.controller import ControllerFeed
+from stationd.station.controller import ControllerFeed, result_input
 from stationd.station.core import (
     DATABASE,
     LIFT,
@@ -50,7 +50,6 @@ from stationd.station.core import (
     LiftRead,
     ModelsKnown,
     OperatorBack,
-    ResultIn,
     Started,
     State,
     StationCore,
@@ -269,7 +268,7 @@ class Station:
                     t.cancel()
                 await asyncio.gather(*tasks, return_exceptions=True)
                 for r in await self.controller.drain():
-                    await self._apply(self.core.feed(ResultIn(time.time(), r)))
+                    await self._apply(self.core.feed(result_input(time.time(), r)))
         # no STOPPING=1 here: a reload ends this station too, and STOPPING=1 tells systemd
         # the service is going down (it would kill it at TimeoutStopSec); the serve loop says
         # RELOADING=1 or STOPPING=1

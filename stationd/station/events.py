@@ -242,10 +242,13 @@ class BoltSkipped(StationEvent):
 
 @dataclass(frozen=True)
 class BoltLocked(StationEvent):
-    """``count`` NOKs in a row on ``bolt``: the tool is refused there until a release."""
+    """``count`` NOKs in a row on ``bolt``: the tool is refused there until a release.
+    ``held``: locked instead because its result could not be read (``count`` 0; the note
+    says which result): a supervisor checks it on the controller, then releases it."""
 
     bolt: str
     count: int
+    held: str | None = None
 
 
 @dataclass(frozen=True)
@@ -346,6 +349,32 @@ class ResultUnattributed(StationEvent):
     tightening_id: int
     pset: int | None
     ok: bool
+
+
+@dataclass(frozen=True)
+class ControllerResultEvent(StationEvent):
+    """A result from the controller that is not a rundown (a batch increment or decrement, a
+    bypassed pset, an aborted job, a reference setup, or a type the station does not know):
+    stored as a controller event; no bolt closed, opened or counted.  ``bolt``: the one the
+    tool was enabled for (still open), if any."""
+
+    result_type: int
+    what: str
+    tightening_id: int
+    pset: int | None
+    ok: bool
+    bolt: str | None = None
+
+
+@dataclass(frozen=True)
+class ResultUnreadable(StationEvent):
+    """A result message the station could not read, stored whole; ``bolt``: the one it may
+    belong to (held for a supervisor), if any."""
+
+    error: str
+    revision: int
+    tightening_id: int | None = None
+    bolt: str | None = None
 
 
 # -- the cameras (commissioning screen) ---------------------------------------------------------

@@ -100,6 +100,9 @@ class BoltMatcher:
     skipped: dict[str, str] = field(default_factory=dict)  # bolt -> why it is not tightened
     locked: dict[str, int] = field(default_factory=dict)   # bolt -> NOKs in a row (released
     #                                                        only by a supervisor's command)
+    #: bolt -> why its result is not known (an unreadable result): refused, like a lock,
+    #: until a supervisor has checked it on the controller and released it
+    held: dict[str, str] = field(default_factory=dict)
     counted: set[str] = field(default_factory=set)  # NOK last, counted done by the sequence
     # id -> order and batch; read once, at construction.  Rules of ids that are not in
     # ``bolts`` are ignored: a bolt the station cannot tighten must not block the others.
@@ -193,6 +196,9 @@ class BoltMatcher:
             if second - dist < p.margin_mm:
                 return self.refuse(Reason(Why.AMBIGUOUS, bolt=near, distance_mm=dist,
                                           other=self._ids[int(order[1])], other_mm=second))
+        if near in self.held:
+            self.reset()
+            return Match(None, near, dist, Reason(Why.HELD, bolt=near, note=self.held[near]))
         if near in self.locked:
             self.reset()
             return Match(None, near, dist, Reason(Why.LOCKED, bolt=near,

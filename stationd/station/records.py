@@ -50,10 +50,13 @@ from stationd.station.core import (
     Record,
     RecordCommand,
     Selection,
+    StoreControllerEvent,
     StoreUnattributed,
+    StoreUnreadable,
     VehicleEnded,
     VehicleLoaded,
     VehicleRejected,
+    type_code,
 )
 from stationd.station.trust import RecordCheck, summary
 
@@ -227,6 +230,29 @@ class Records:
             torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
             result_at=_aware(r.timestamp), reason=a.reason)
 
+    def store_controller_event(self, a: StoreControllerEvent) -> None:
+        r = a.result
+        self._repo().record_controller_event(
+            result_type=type_code(r) or 0, what=a.what, vin=a.vin, bolt=a.bolt,
+            controller_vin=str(r.vin or "").strip() or None,
+            tightening_id=int(r.tightening_id), pset=int(r.pset), ok=bool(r.ok),
+            torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
+            result_at=_aware(r.timestamp))
+
+    def store_unreadable(self, a: StoreUnreadable) -> None:
+        """The message whole; the tool enable it answers settled with it (the bolt is held
+        for a person now: no later result is owed to it)."""
+        u, sel = a.unreadable, a.selection
+        enable = self._enable[1] if self._enable is not None and sel is not None \
+            and self._enable[0] is sel else None
+        self._repo().record_unreadable(
+            mid=u.mid, revision=u.revision, raw=u.raw, error=u.error, vin=a.vin, bolt=a.bolt,
+            controller_vin=u.vin.strip() or None, tightening_id=u.tightening_id, pset=u.pset,
+            result_at=_aware(u.timestamp),
+            enable_id=enable)
+        if enable is not None:
+            self._enable = None
+
     # -- vehicles, commands, gaps and curves ---------------------------------------------------
     def load_vehicle(self, a: LoadVehicle) -> VehicleLoaded | VehicleRejected:
         """The vehicle at height, from the database: loaded with its bolts, what is done,
@@ -247,6 +273,7 @@ class Records:
         since = started.reopened_at or started.started_at
         skipped = repo.ledger.skipped(a.vin, since)
         noks = repo.nok_streaks(a.vin, since)
+        held = repo.held_bolts(a.vin, since)
         # the report's "missing" is "no rundown yet": on an open vehicle the bolt is to do
         status = {b.bolt_id: b.status for b in report.bolts if b.status != MISSING}
         done = frozenset(k for k, s in status.items() if s == "ok")
@@ -255,7 +282,8 @@ class Records:
         log.info("vehicle %s (%s) opened%s: %d bolts, %d done", a.vin, model,
                  " for rework" if started.rework else "", len(infos), len(done))
         return VehicleLoaded(time.time(), a.vin, model, specs, done, started.rework,
-                             {b: skip_note(*who) for b, who in skipped.items()}, noks, status)
+                             {b: skip_note(*who) for b, who in skipped.items()}, noks, status,
+                             held)
 
     def close_vehicle(self, vin: str) -> VehicleEnded:
         report = self._repo().close_vehicle(vin)

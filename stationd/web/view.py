@@ -61,7 +61,7 @@ LAST_RESULTS = 8
 # sequence forbids sending; any other refusal while tracking means the wrench is simply not on
 # a bolt (between bolts, out of view): a normal state, shown neutral, never as an alarm
 ACT_ON = frozenset({Why.STALE, Why.AMBIGUOUS, Why.TILTED, Why.MUST_WAIT, Why.SKIPPED,
-                    Why.DONE, Why.LOCKED, Why.SIGN_IN})
+                    Why.DONE, Why.LOCKED, Why.HELD, Why.SIGN_IN})
 NOT_AT_A_BOLT = "Bring the wrench to a bolt"
 TRACKING_STATES = tuple(s.value for s in LOCALIZING)   # where a refusal speaks of the wrench
 # refusals that forbid their bolt (drawn "blocked"): the sequence's; a bolt the wrench is
@@ -228,8 +228,9 @@ class View:
             b.locked, b.nok_count = True, e.count
             if self.selected == e.bolt:
                 self.selected = None
-            self._set(e.bolt, "locked",
-                      reason_words(Reason(Why.LOCKED, bolt=e.bolt, count=e.count)))
+            self._set(e.bolt, "locked", reason_words(
+                Reason(Why.HELD, bolt=e.bolt, note=e.held) if e.held is not None
+                else Reason(Why.LOCKED, bolt=e.bolt, count=e.count)))
         elif isinstance(e, BoltReleased) and e.bolt in self.bolts:
             self.bolts[e.bolt].locked = False
             self._set(e.bolt, "pending", f"released by {e.user}")

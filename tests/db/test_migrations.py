@@ -18,7 +18,7 @@ from tests.db.conftest import url_of
 TABLES = {"vehicle_models", "psets", "bolts", "process_parameters", "vehicles",
           "tightening_records", "tool_enables", "unattributed_results", "commands", "feed", "meta",
           "forward_quarantine", "result_gaps", "curves", "opcua_acknowledged",
-          "calibration_checks", "alembic_version"}
+          "calibration_checks", "controller_events", "unreadable_results", "alembic_version"}
 
 
 def _diff(engine, metadata: MetaData) -> list[Any]:
@@ -33,7 +33,7 @@ def test_migrated_schema_matches_the_models(tmp_path):
     assert set(inspect(engine).get_table_names()) == TABLES
     assert _diff(engine, Base.metadata) == []
     with engine.connect() as conn:
-        assert current_revision(conn) == head_revision() == "0011"
+        assert current_revision(conn) == head_revision() == "0012"
     engine.dispose()
 
 

@@ -15,7 +15,7 @@ from aiohttp import ClientSession
 
 from db.curves import store_curve
 from db.repository import Repository
-from drivers.wrench import open_wrench
+from drivers.wrench import TighteningResult, open_wrench
 from drivers.wrench.op_curve import Curve
 from drivers.wrench.sim import SimController, SimPset
 from stationd.boltfile import import_bolts
@@ -51,7 +51,7 @@ def curves_db(tmp: Path) -> tuple[Repository, Any]:
             w.enable_tool()
             sim.pull_trigger()
             r = w.wait_result(1.0)
-            assert r is not None
+            assert isinstance(r, TighteningResult)
             curves = [w.wait_curve(1.0) for _ in range(2)]
     kw: dict[str, Any] = {"position_mm": (0.0, 0.0, 0.0), "match_distance_mm": 1.0,
                           "tilt_deg": 1.0}

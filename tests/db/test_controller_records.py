@@ -1,0 +1,73 @@
+"""Controller events and unreadable results in the database: each stored once, each a kind of
+its own in the results feed, both counted among the tightening ids the station accounted for,
+and a bolt held by an unreadable result held until a rundown or a release after it."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime, timedelta
+
+from db.ledger import CONTROLLER_EVENT, UNREADABLE
+from stationd.boltfile import import_bolts
+from tests.db.conftest import record
+
+RAW = "02310061007    " + "0100010200SimController" + "\x00garbage"
+
+
+def _event(repo, tid: int, code: int = 3, bolt: str | None = "B1"):
+    return repo.record_controller_event(
+        result_type=code, what="batch increment", vin="VIN1", bolt=bolt, controller_vin=None,
+        tightening_id=tid, pset=1, ok=True, torque_nm=0.0, angle_deg=0.0,
+        result_at=datetime(2026, 11, 29, 8, 0, tzinfo=UTC))
+
+
+def _unreadable(repo, tid: int | None, bolt: str | None = "B1", raw: str = RAW):
+    return repo.record_unreadable(
+        mid=61, revision=7, raw=raw, error="MID 0061 revision 7: parameter 01 missing",
+        vin="VIN1", bolt=bolt, controller_vin=None, tightening_id=tid, pset=1,
+        result_at=None)
+
+
+def test_controller_events_and_unreadable_results_are_stored_once_and_fed(repo, bolts_file):
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    assert _event(repo, 5)
+    assert _event(repo, 5) is None                       # sent again: stored once
+    assert _event(repo, 5, code=4)                       # another type, same id: its own
+    assert _unreadable(repo, 6)
+    assert _unreadable(repo, 6) is None                  # the same message again
+    feed = repo.ledger.since(0)
+    kinds = [e["kind"] for e in feed]
+    assert kinds == [CONTROLLER_EVENT, CONTROLLER_EVENT, UNREADABLE]
+    event = feed[0]["record"]
+    assert (event["result_type"], event["what"], event["bolt"], event["status"]) == \
+        (3, "batch increment", "B1", "ok")
+    unread = feed[2]["record"]
+    assert unread["raw"] == RAW and unread["revision"] == 7 and unread["mid"] == 61
+    assert unread["error"].startswith("MID 0061 revision 7") and unread["tightening_id"] == 6
+    assert repo.last_tightening_id() == 6
+
+
+def test_an_unreadable_result_without_an_id_still_counts_nothing_it_cannot(repo, bolts_file):
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    record(repo, "VIN1", "B2", tightening_id=3)
+    assert _unreadable(repo, None)
+    assert repo.last_tightening_id() == 3
+
+
+def test_a_bolt_is_held_until_a_rundown_or_a_release_after_its_unreadable_result(
+        repo, bolts_file):
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    record(repo, "VIN1", "B1", tightening_id=1)
+    _unreadable(repo, 2, "B1")
+    _unreadable(repo, None, "B2", raw=RAW + "2")
+    _unreadable(repo, 4, None, raw=RAW + "3")            # no bolt: holds nothing
+    assert repo.held_bolts("VIN1") == {"B1": "tightening 2", "B2": "MID 0061 revision 7"}
+    later = datetime.now(UTC) + timedelta(seconds=1)
+    repo.ledger.record_command(at=later, user="sam", source="cli", kind="release",
+                               vin="VIN1", bolt="B1", comment="checked on the controller")
+    record(repo, "VIN1", "B2", tightening_id=5)
+    assert repo.held_bolts("VIN1") == {}
+    # only since the vehicle's last opening
+    assert repo.held_bolts("VIN1", since=datetime.now(UTC) + timedelta(hours=1)) == {}

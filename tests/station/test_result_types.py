@@ -1,0 +1,291 @@
+"""Every result from the controller counted right, in the pure core: only a tightening closes a
+bolt (batch steps, bypasses, aborts, reference setups and unknown types are controller events
+that close, open or count nothing); a result that could not be read is stored whole and holds
+its bolt until a supervisor releases it; a result fetched after a link cut goes to the bolt
+the tool was enabled for only when the controller's own data proves it was made there."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+
+from drivers.keeper import FaultKind
+from drivers.wrench import ResultKind, UnreadableResult, result_kind
+from stationd.reasons import Reason, Why
+from stationd.station.commands import ReleaseBolt
+from stationd.station.core import (
+    DeviceBack,
+    DeviceFault,
+    DisableTool,
+    Record,
+    ResultIn,
+    SendParams,
+    State,
+    StoreControllerEvent,
+    StoreUnattributed,
+    StoreUnreadable,
+    Tick,
+    UnreadableIn,
+    VehicleLoaded,
+    result_type_words,
+)
+from stationd.station.events import (
+    BoltLocked,
+    BoltReleased,
+    ControllerResultEvent,
+    Notice,
+    ResultUnreadable,
+)
+from stationd.words import reason_words
+from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
+from tests.station.test_core import BOLTS, Driver, _on, _ready, published
+
+EVENT_TYPES = (3, 4, 5, 6, 8)
+
+
+def res(tid: int, pset: int, ok: bool = True, code: int | None = None, vin: str = "",
+        when: datetime | None = None) -> Any:
+    return SimpleNamespace(tightening_id=tid, pset=pset, ok=ok, result_type_code=code,
+                           result_type=None, vin=vin, torque_nm=12.0, angle_deg=30.0,
+                           timestamp=when or datetime(2026, 11, 29, 8, 0, 0))
+
+
+def _enabled(d: Driver, bolt: int = 1) -> SendParams:
+    """The wrench on ``bolt`` until the tool is on for it."""
+    n = len(d.log)
+    _on(d, bolt)
+    [sent] = [a for _, acts in d.log[n:] for a in acts if isinstance(a, SendParams)]
+    d.step(("ack", 0.01, True))
+    _on(d, bolt, 1)
+    assert d.tool and d.core.tool_on, d.core.reason
+    return sent
+
+
+def _notices(acts: list[Any]) -> list[str]:
+    return [e.message for e in published(acts, Notice)]
+
+
+def test_the_kind_of_every_type_code():
+    assert result_kind(1) is result_kind(7) is ResultKind.TIGHTENING
+    assert result_kind(2) is ResultKind.LOOSENING
+    assert {result_kind(c) for c in EVENT_TYPES} == {ResultKind.EVENT}
+    assert result_kind(9) is result_kind(0) is result_kind(99) is ResultKind.UNKNOWN
+    # a revision without a type: what the station sent decides
+    assert result_kind(None) is ResultKind.TIGHTENING
+    assert result_kind(None, sent_loosen=True) is ResultKind.LOOSENING
+    assert result_kind(1, sent_loosen=True) is ResultKind.TIGHTENING   # the type wins
+
+
+@pytest.mark.parametrize("code", EVENT_TYPES)
+def test_a_result_that_is_not_a_tightening_never_closes_the_bolt_the_tool_is_on(code):
+    d = _ready()
+    sent = _enabled(d)
+    acts = d.feed(ResultIn(d.t, res(7, sent.selection.pset or 0, True, code)))
+    assert not [a for a in acts if isinstance(a, Record | DisableTool | StoreUnattributed)]
+    [store] = [a for a in acts if isinstance(a, StoreControllerEvent)]
+    assert (store.bolt, store.what, store.vin) == ("B1", result_type_words(code), "VIN1")
+    [ev] = published(acts, ControllerResultEvent)
+    assert (ev.result_type, ev.bolt, ev.tightening_id) == (code, "B1", 7)
+    assert _notices(acts) == [f"{result_type_words(code)} on the controller: not a "
+                              "tightening, B1 still open"]
+    assert "B1" not in d.core.matcher.done and d.core.tool_on      # the tool as it was
+    assert d.core.state is State.TIGHTENING
+    # the real tightening that follows closes it
+    acts = d.feed(ResultIn(d.t, res(8, sent.selection.pset or 0, True, 1)))
+    assert [a.bolt for a in acts if isinstance(a, Record)] == ["B1"]
+    assert "B1" in d.core.matcher.done
+
+
+def test_a_batch_increment_with_the_tool_off_is_a_controller_event_of_no_bolt():
+    d = _ready()
+    acts = d.feed(ResultIn(d.t, res(3, 1, True, 3)))
+    [store] = [a for a in acts if isinstance(a, StoreControllerEvent)]
+    assert store.bolt is None and store.what == "batch increment"
+    assert _notices(acts) == ["batch increment on the controller: not a tightening"]
+    assert not d.core.matcher.done
+
+
+def test_a_type_the_station_does_not_know_is_not_a_tightening():
+    d = _ready()
+    sent = _enabled(d)
+    acts = d.feed(ResultIn(d.t, res(7, sent.selection.pset or 0, True, 9)))
+    assert not [a for a in acts if isinstance(a, Record)]
+    [store] = [a for a in acts if isinstance(a, StoreControllerEvent)]
+    assert store.what == "result type 9 (unknown)"
+    [n] = published(acts, Notice)
+    assert n.level == "warning" and "check the controller's result there" in n.message
+    assert "B1" not in d.core.matcher.done
+
+
+def test_a_synchronized_tightening_closes_the_bolt():
+    d = _ready()
+    sent = _enabled(d)
+    acts = d.feed(ResultIn(d.t, res(7, sent.selection.pset or 0, True, 7)))
+    assert [(a.bolt, a.kind) for a in acts if isinstance(a, Record)] == [("B1", "tightening")]
+    assert "B1" in d.core.matcher.done
+
+
+def test_a_controller_event_sent_again_is_acknowledged_not_stored_twice():
+    d = _ready()
+    d.feed(ResultIn(d.t, res(3, 1, True, 3)))
+    acts = d.feed(ResultIn(d.t, res(3, 1, True, 3)))
+    assert [type(a).__name__ for a in acts] == ["Acknowledge"]
+
+
+# -- results that could not be read -------------------------------------------------------------
+def unreadable(tid: int | None = 7, pset: int | None = 1, fetched: bool = False
+               ) -> UnreadableResult:
+    return UnreadableResult(raw="01230061007    " + "x" * 40, mid=61, revision=7,
+                            error="MID 0061 revision 7: parameter 01 missing",
+                            tightening_id=tid, pset=pset, fetched=fetched)
+
+
+def test_an_unreadable_result_is_stored_whole_and_holds_its_bolt_for_a_supervisor():
+    d = _ready()
+    sent = _enabled(d)
+    assert sent.selection.pset == 1
+    acts = d.feed(UnreadableIn(d.t, unreadable()))
+    [store] = [a for a in acts if isinstance(a, StoreUnreadable)]
+    assert (store.bolt, store.vin, store.selection) == ("B1", "VIN1", sent.selection)
+    assert any(isinstance(a, DisableTool) for a in acts) and not d.core.tool_on
+    [ev] = published(acts, ResultUnreadable)
+    assert (ev.bolt, ev.tightening_id, ev.revision) == ("B1", 7, 7)
+    [lock] = published(acts, BoltLocked)
+    assert (lock.bolt, lock.held) == ("B1", "tightening 7")
+    assert "B1: the controller's result could not be read (tightening 7): check it on the " \
+        "controller, then release" in _notices(acts)
+    assert "B1" not in d.core.matcher.done and d.core.state is State.TRACKING
+    # held: no new enable for it
+    sends = len(d.sends)
+    _on(d, 1, 4)
+    assert len(d.sends) == sends and "B1" not in d.core.allowed()
+    refusal = d.core.matcher.update(d.core.matcher.bolts["B1"], 0.01).reason
+    assert refusal == Reason(Why.HELD, bolt="B1", note="tightening 7")
+    assert reason_words(refusal).startswith("B1: the controller's result could not be read")
+    # an operator may not release it; a supervisor may, and then it is tightened again
+    refused = _answer(d.command(1, ReleaseBolt("VIN1", "B1", "checked"), OPERATOR))
+    assert not refused.answer.accepted
+    acts = d.command(2, ReleaseBolt("VIN1", "B1", "checked: NOK there"), SUPERVISOR)
+    assert _answer(acts).answer.accepted
+    assert [e.bolt for e in published(acts, BoltReleased)] == ["B1"]
+    _enabled(d)
+
+
+def test_an_unreadable_result_of_another_pset_holds_nothing():
+    d = _ready()
+    _enabled(d)
+    acts = d.feed(UnreadableIn(d.t, unreadable(pset=42)))
+    [store] = [a for a in acts if isinstance(a, StoreUnreadable)]
+    assert store.bolt is None and not published(acts, BoltLocked)
+    assert d.core.tool_on and not d.core.matcher.held
+
+
+def test_an_unreadable_result_with_the_tool_off_long_ago_holds_nothing():
+    d = _ready()
+    acts = d.feed(UnreadableIn(d.t, unreadable()))
+    [store] = [a for a in acts if isinstance(a, StoreUnreadable)]
+    assert store.bolt is None
+    assert any("no bolt it could belong to" in m for m in _notices(acts))
+
+
+def test_a_hold_comes_back_with_the_vehicle():
+    d = _ready()
+    acts = d.feed(VehicleLoaded(d.t, "VIN1", "M", BOLTS, held={"B2": "tightening 9"}))
+    assert [(e.bolt, e.held) for e in published(acts, BoltLocked)] == [("B2", "tightening 9")]
+    assert "B2" not in d.core.allowed()
+
+
+# -- attribution after a link cut --------------------------------------------------------------
+CUT_S = 4.0
+
+
+def _cut_during_enable(d: Driver) -> tuple[SendParams, float, float]:
+    """The tool on for B1, then the controller's link down: (what was sent, the enable's
+    time, the cut's time)."""
+    sent = _enabled(d)
+    enabled_at = d.t
+    d.t += 1.0
+    d.feed(DeviceFault(d.t, "wrench", FaultKind.DOWN, "link lost"))
+    cut_at = d.t
+    assert not d.core.tool_on and d.core.state is State.FAULT
+    return sent, enabled_at, cut_at
+
+
+@pytest.mark.parametrize("after_s", [5.0, 30.0, 600.0])
+def test_a_result_made_during_a_cut_is_recorded_to_its_bolt_when_the_controller_proves_it(
+        after_s):
+    d = _ready()
+    sent, enabled_at, cut_at = _cut_during_enable(d)
+    d.t += after_s
+    d.feed(Tick(d.t))                       # long past the late-result window
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    acts = d.feed(ResultIn(d.t, res(41, sent.selection.pset or 0, True, 1, vin="VIN1"),
+                           fetched=True, follows=40, made_at=enabled_at + 0.5))
+    [rec] = [a for a in acts if isinstance(a, Record)]
+    assert (rec.bolt, rec.vin, rec.late, rec.selection) == ("B1", "VIN1", True, sent.selection)
+    assert "B1" in d.core.matcher.done
+    assert any("made during the link cut" in m for m in _notices(acts))
+    # the second result of that cut is not the first after the last one accounted for
+    acts = d.feed(ResultIn(d.t, res(42, sent.selection.pset or 0, True, 1, vin="VIN1"),
+                           fetched=True, follows=40, made_at=cut_at - 0.2))
+    assert [type(a) for a in acts if isinstance(a, Record | StoreUnattributed)] == \
+        [StoreUnattributed]
+
+
+@pytest.mark.parametrize("change, why", [
+    ({"pset": 9}, "pset 9, not 1 sent for B1"),
+    ({"vin": "OTHER"}, "VIN OTHER, not VIN1"),
+    ({"tid": 43}, "not the first tightening after 40"),
+    ({"follows": None}, "the last tightening id accounted for unknown"),
+    ({"made": None}, "the controller's clock is not known"),
+    ({"made": +30.0}, "made outside the enable of B1 and the link cut"),
+    ({"made": -30.0}, "made outside the enable of B1 and the link cut"),
+])
+def test_a_result_fetched_after_a_cut_that_the_data_does_not_place_stays_unattributed(
+        change, why):
+    d = _ready()
+    sent, enabled_at, cut_at = _cut_during_enable(d)
+    d.t += 10.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    made = change.get("made", 0.5)
+    made_at = None if made is None else (cut_at + made if made > 0 else enabled_at + made)
+    r = res(change.get("tid", 41), change.get("pset", sent.selection.pset),
+            True, 1, vin=change.get("vin", ""))
+    acts = d.feed(ResultIn(d.t, r, fetched=True, follows=change.get("follows", 40),
+                           made_at=made_at))
+    assert not [a for a in acts if isinstance(a, Record)]
+    [store] = [a for a in acts if isinstance(a, StoreUnattributed)]
+    assert why in store.reason
+    assert "B1" not in d.core.matcher.done
+
+
+def test_a_pushed_result_after_the_window_is_not_placed_by_a_cut():
+    d = _ready()
+    sent, enabled_at, _ = _cut_during_enable(d)
+    d.t += 10.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    acts = d.feed(ResultIn(d.t, res(41, sent.selection.pset or 0), follows=40,
+                           made_at=enabled_at + 0.5))     # pushed, not fetched
+    assert [type(a) for a in acts if isinstance(a, Record | StoreUnattributed)] == \
+        [StoreUnattributed]
+
+
+def test_a_result_fetched_after_a_cut_never_goes_to_an_enable_made_since():
+    d = _ready()
+    sent, enabled_at, _ = _cut_during_enable(d)
+    d.t += 2.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    d.step(("lift", 0.1, True, True, "VIN1"))
+    d.feed(Tick(d.t + 10))
+    d.t += 10
+    _enabled(d, 3)
+    assert d.core.bolt == "B3" and BOLTS["B3"].pset == sent.selection.pset
+    for made_at in (enabled_at + 0.5, None):     # the controller's clock known, or not
+        acts = d.feed(ResultIn(d.t, res(41, sent.selection.pset or 0, True, 1),
+                               fetched=True, follows=40, made_at=made_at))
+        assert not [a for a in acts if isinstance(a, Record)]    # neither B1's nor B3's
+        assert [type(a) for a in acts if isinstance(a, StoreUnattributed)]
+        assert d.core.tool_on and not d.core.matcher.done
