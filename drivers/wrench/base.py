@@ -191,6 +191,9 @@ class TighteningResult:
     customer_error_code: str = ""
     compensated_angle_deg: float | None = None
     angle_decimal_deg: float | None = None     # the final angle with its decimals (rev 7)
+    #: the revision the header claimed, when the body was laid out as a lower one (read at
+    #: ``revision``: ``drivers.wrench.op_reading``); None when it matched its label
+    header_revision: int | None = None
 
 
 @dataclass(frozen=True)
@@ -380,10 +383,21 @@ class Wrench(Openable):
     can_fetch: bool = False
 
     def fetch_result(self, tightening_id: int, timeout: float | None = None
-                     ) -> TighteningResult | None:
+                     ) -> Received | None:
         """The controller's stored result ``tightening_id`` (0: its newest), or None when it
-        no longer has it.  This controller keeps none (``can_fetch`` is False)."""
+        no longer has it; an :class:`UnreadableResult` (``fetched=True``, nothing to
+        acknowledge) when it answered with one that does not read.  This controller keeps
+        none (``can_fetch`` is False)."""
         raise DeviceError("this controller keeps no results to fetch", device=self.device)
+
+    @property
+    def clock_offset_s(self) -> float | None:
+        """The controller's clock minus the station's, in seconds, as measured at the start
+        of the current (or last) session: a result's ``timestamp`` (the controller's naive
+        local time) minus this is the station's local time it was made at.  None when the
+        controller did not say its time (never asked, refused, no answer), and for a
+        controller without a clock (register-driven: results are stamped by the station)."""
+        return None
 
     #: whether the controller can send tightening curves (Open Protocol's MID 0900 through
     #: the generic subscription); a register-driven controller sends none

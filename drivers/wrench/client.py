@@ -45,6 +45,7 @@ from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from datetime import datetime
 from typing import Any
 
 from drivers.errors import (
@@ -58,7 +59,12 @@ from drivers.link import Link, SerialLink, TcpLink
 from drivers.url import DeviceUrl, OptionError
 from drivers.wrench import op_link
 from drivers.wrench import openprotocol as op
-from drivers.wrench.base import SupervisedWrench, TighteningResult, check_positive
+from drivers.wrench.base import (
+    Received,
+    SupervisedWrench,
+    UnreadableResult,
+    check_positive,
+)
 from drivers.wrench.op_curve import (
     CURVE_REFUSALS,
     MID_DATA_SUBSCRIBE,
@@ -71,6 +77,7 @@ from drivers.wrench.op_curve import (
 )
 from drivers.wrench.op_identity import ControllerIdentity, parse_identity
 from drivers.wrench.op_parts import BrokenParts, PartAssembler
+from drivers.wrench.op_reading import receive
 from drivers.wrench.op_tracedata import (
     MID_DB_INFO,
     MID_PLOT,
@@ -91,6 +98,7 @@ VIN_LENGTH = 25        # MID 0050 revision 1 carries a 25-character VIN
 START_REVISIONS = (6, 5, 4, 3, 2, 1)
 RESULT_REVISIONS = (7, 6, 5, 4, 3, 2, 1)
 MAX_TIGHTENING_ID = 9_999_999_999            # 10 digits
+CLOCK_TIMEOUT = 1.0    # the most MID 0080 (the controller's clock) is waited for at connect
 CURVE_QUEUE = 64       # curves held for the reader; past that the oldest is dropped (logged)
 #: subscribed data acknowledged with MID 0005 naming its MID (the generic acknowledgement)
 DATA_MIDS = frozenset({MID_TRACE, MID_PLOT, MID_DB_INFO})
@@ -177,8 +185,14 @@ class OpenProtocolWrench(SupervisedWrench):
         self._linking = False                   # link-level acknowledgement on this session
         self._tx_seq = 0
         self._rx = op_link.RxSequence()         # the reading thread's only
-        self._owed_acks = 0                     # 0062s for unreadable results, to send
+        # results read at a lower revision than their header's (op_reading): the highest
+        # revision results are subscribed at from then on (this session: renewed by the
+        # supervisor; later sessions: asked for at most), and what was said once
+        self._result_cap = RESULT_REVISIONS[0]
+        self._renew_at: int | None = None       # a renewal owed (guarded by _cond)
+        self._lowered_said: set[tuple[int, int, int]] = set()   # (MID, header, read at)
         self._ident: ControllerIdentity | None = None
+        self._clock_offset: float | None = None   # MID 0081 minus the station's clock
         self._revisions: dict[int, int] = {}
         self._last_sent = 0.0
         self._keepalive_sent: float | None = None
@@ -310,7 +324,8 @@ class OpenProtocolWrench(SupervisedWrench):
         self._framer = SerialFramer() if link.kind == "serial" else TcpFramer()
         self._last_sent, self._keepalive_sent = time.monotonic(), None
         with self._cond:      # 0001/0002 reset the link level: decided anew below
-            self._linking, self._tx_seq, self._owed_acks = False, 0, 0
+            self._linking, self._tx_seq, self._renew_at = False, 0, None
+            cap = self._result_cap
             self._curves_on = False
             self._owed_data_acks.clear()
         self._rx.reset()
@@ -327,7 +342,8 @@ class OpenProtocolWrench(SupervisedWrench):
                 self._linking = linking
             try:
                 _, revisions[op.MID_RESULT_SUBSCRIBE] = self._negotiate(
-                    op.MID_RESULT_SUBSCRIBE, RESULT_REVISIONS, {op.MID_ACCEPTED, op.MID_ERROR})
+                    op.MID_RESULT_SUBSCRIBE, [r for r in RESULT_REVISIONS if r <= cap],
+                    {op.MID_ACCEPTED, op.MID_ERROR})
             except RefusedError as e:
                 if e.code != 9:                 # 09: already subscribed, which is the goal
                     raise
@@ -338,6 +354,7 @@ class OpenProtocolWrench(SupervisedWrench):
                     self._curves_session(None)
                 except DeviceTimeoutError:
                     pass        # curves off (logged); the session goes on without them
+            offset = self._read_clock()
         except DeviceError as e:
             link.close()
             what = "communication start" if self._ident is None else "session restart"
@@ -348,11 +365,36 @@ class OpenProtocolWrench(SupervisedWrench):
         with self._cond:
             new = self._ident != ident
             self._ident, self._revisions = ident, revisions
+            self._clock_offset = offset
         if new:
             log.info("%s: controller %s; MID 0002 revision %d, results as MID 0061 revision "
                      "%s, link-level acknowledgement %s", self.device, ident.describe(),
                      ident.revision, revisions.get(op.MID_RESULT_SUBSCRIBE, "?"),
                      "on" if linking else "off")
+
+    def _read_clock(self) -> float | None:
+        """The controller's clock minus the station's (MID 0080 -> 0081, in the
+        specification since revision 1), measured at the answer, to within a second (the
+        controller says whole seconds); None, logged, when it refuses or does not answer in
+        ``CLOCK_TIMEOUT``: never a reason to fail the session (called holding the reading
+        side, in the session start).  A late 0081 is then an unexpected MID, ignored."""
+        try:
+            reply = self._transact(Message(op.MID_TIME_REQUEST), {op.MID_TIME, op.MID_ERROR},
+                                   min(self.timeout, CLOCK_TIMEOUT))
+            offset = (op.controller_time(reply) - datetime.now()).total_seconds()
+        except (RefusedError, DeviceTimeoutError, ProtocolError) as e:
+            log.info("%s: the controller's clock is not known (MID 0080: %s): results "
+                     "fetched late are placed by their tightening ids only", self.device, e)
+            return None
+        log.info("%s: controller clock %+.0f s from the station's", self.device, offset)
+        return offset
+
+    @property
+    def clock_offset_s(self) -> float | None:
+        """The controller's clock minus the station's in seconds, measured at the start of
+        the current (or last) session (MID 0080/0081); None when it did not say."""
+        with self._cond:
+            return self._clock_offset
 
     def _curves_session(self, epoch: int | None, timeout: float | None = None) -> bool:
         """MID 0008 for the angle and torque traces on this session: whether curves are on.
@@ -417,6 +459,7 @@ class OpenProtocolWrench(SupervisedWrench):
                     try:
                         self._read_once()
                         self._flush_owed()
+                        self._renew_subscription()
                         self._keepalive_tick()
                     except DeviceError as e:
                         self._fail_link(e)
@@ -479,18 +522,7 @@ class OpenProtocolWrench(SupervisedWrench):
     def _handle(self, msg: Message) -> None:
         """One whole message (its link-level work done)."""
         if msg.mid == op.MID_RESULT:
-            try:
-                result = op.parse_result(msg.raw)
-            except ProtocolError as e:
-                with self._cond:
-                    self._results.append(ProtocolError(
-                        f"unreadable tightening result, acknowledged anyway (the controller "
-                        f"keeps its own record): {e}"))
-                    self._owed_acks += 1          # sent by the supervisor, never from here
-                    self._cond.notify_all()
-                return
-            with self._cond:   # acknowledged (0062) when taken, on this same link only
-                self._queue_result(result, self._epoch)
+            self._result_in(msg)
             return
         if msg.mid == op.MID_KEEPALIVE:
             self._keepalive_sent = None
@@ -509,6 +541,76 @@ class OpenProtocolWrench(SupervisedWrench):
                 return
         log.warning("%s: unexpected MID %04d ignored (data %r)", self.device, msg.mid,
                     msg.data[:40])
+
+    def _result_in(self, msg: Message) -> None:
+        """A MID 0061: queued, read or not (``op_reading``), and acknowledged (0062) only
+        when the station has it, on this same link: an unreadable one is stored with its
+        raw text before the controller may forget it.  One read at a lower revision than
+        the one subscribed has its subscription renewed at that revision (by the
+        supervisor: never from here, which may be the thread that has to read the
+        answers)."""
+        item = receive(msg)
+        with self._cond:
+            subscribed = self._revisions.get(op.MID_RESULT_SUBSCRIBE)
+            if isinstance(item, UnreadableResult):
+                log.warning("%s: MID 0061 revision %d does not read at any revision (%s); "
+                            "kept with its raw text for the station (tightening id %s)",
+                            self.device, msg.revision, item.error,
+                            item.tightening_id if item.tightening_id is not None else "?")
+            elif item.header_revision is not None:
+                self._lowered(msg.mid, item.header_revision, item.revision)
+                if subscribed is not None and item.revision < subscribed:
+                    self._result_cap = min(self._result_cap, item.revision)
+                    self._renew_at = self._result_cap
+            self._queue_result(item, self._epoch)
+
+    def _lowered(self, mid: int, header: int, read_at: int) -> None:
+        """Say once (a wrench's life) that ``mid`` labelled ``header`` read as ``read_at``."""
+        if (mid, header, read_at) in self._lowered_said:
+            return
+        self._lowered_said.add((mid, header, read_at))
+        log.warning("%s: MID %04d labelled revision %d is laid out as revision %d (with fields "
+                    "appended): read as revision %d%s", self.device, mid, header, read_at,
+                    read_at, "; results are subscribed at that revision from now on"
+                    if mid == op.MID_RESULT else "")
+
+    def _renew_subscription(self) -> None:
+        """The supervisor's: unsubscribe (0063) and subscribe (0060) at the revision results
+        were last read at, so the next ones read cleanly.  Only when no command is in
+        flight (else at the next turn: a caller waits for this thread to read its answer);
+        this thread holds the reading side, so it reads the answers itself.  A result the
+        controller makes between the two is not pushed: the station's tightening-id gap
+        check fetches it (MID 0064).  A failure resets the link; the next session asks for
+        that revision at most."""
+        with self._cond:
+            rev, epoch = self._renew_at, self._epoch
+            if rev is None or not self._connected:
+                return
+        if not self._request_lock.acquire(blocking=False):
+            return
+        try:
+            with self._cond:
+                if epoch != self._epoch:
+                    return
+                self._renew_at = None
+            expect = {op.MID_ACCEPTED, op.MID_ERROR}
+            try:
+                try:
+                    self._transact(Message(op.MID_RESULT_UNSUBSCRIBE), expect, self.timeout)
+                except RefusedError as e:
+                    if e.code != 10:            # 10: no subscription, which is the goal
+                        raise
+                _, agreed = self._negotiate(op.MID_RESULT_SUBSCRIBE,
+                                            [r for r in RESULT_REVISIONS if r <= rev], expect)
+            except DeviceError as e:
+                self._fail_link(type(e)(f"renewing the result subscription at revision "
+                                        f"{rev}: {e}", code=e.code), epoch)
+                return
+            self._agree(op.MID_RESULT_SUBSCRIBE, agreed)
+            log.info("%s: results subscribed again at MID 0061 revision %d", self.device,
+                     agreed)
+        finally:
+            self._request_lock.release()
 
     def _curve_in(self, msg: Message) -> None:
         """A MID 0900: queued apart from the results (bounded: the oldest goes), and its
@@ -565,18 +667,10 @@ class OpenProtocolWrench(SupervisedWrench):
                     "message, ignored", self.device, msg.mid, msg.sequence)
 
     def _flush_owed(self) -> None:
-        """Send the 0062s owed for unreadable results (supervisor only): never waiting for
-        the one-outstanding slot, which a caller may hold while this thread reads its
-        acknowledgement."""
+        """Send the MID 0005s owed for subscribed data ("0900", ...) (supervisor only):
+        never waiting for the one-outstanding slot, which a caller may hold while this
+        thread reads its acknowledgement."""
         while True:
-            with self._cond:
-                if not self._owed_acks:
-                    break
-            if not self._send(Message(op.MID_RESULT_ACK), block=False):
-                return
-            with self._cond:
-                self._owed_acks -= 1
-        while True:   # subscribed data's MID 0005 ("0900", ...), the same way
             with self._cond:
                 if not self._owed_data_acks or self._stopping:
                     return
@@ -825,13 +919,18 @@ class OpenProtocolWrench(SupervisedWrench):
     can_fetch = True
 
     def fetch_result(self, tightening_id: int, timeout: float | None = None
-                     ) -> TighteningResult | None:
+                     ) -> Received | None:
         """The controller's stored result ``tightening_id`` (0: its newest), or None if it
         answers "tightening id not found" (it no longer has it, or has none yet).
 
         For filling a gap in the tightening ids after a reconnect.  The result is not
-        queued and needs no acknowledgement; it says ``fetched=True``.  Raises as commands
-        do: RefusedError for another refusal, and a timeout or lost link resets the link.
+        queued and needs no acknowledgement; it says ``fetched=True``.  A MID 0065 is read
+        as a pushed result is (``op_reading``): laid out as a lower revision, it is read so
+        and later fetches ask for that revision; one that reads at no revision comes back
+        as an :class:`UnreadableResult` (fetched, its raw text kept), not as an error: it is
+        the controller's record of a tightening, to be stored and looked at like a pushed
+        one.  Raises as commands do: RefusedError for another refusal, a ProtocolError for
+        an answer about another tightening, and a timeout or lost link resets the link.
         """
         if isinstance(tightening_id, bool) or not isinstance(tightening_id, int) \
                 or not 0 <= tightening_id <= MAX_TIGHTENING_ID:
@@ -869,12 +968,16 @@ class OpenProtocolWrench(SupervisedWrench):
         with self._cond:
             self._revisions[mid] = rev
 
-    def _old_result(self, reply: Message, tightening_id: int, what: str) -> TighteningResult:
-        try:
-            result = op.parse_result(reply.raw)
-        except ProtocolError as e:
-            raise self._surface(e, what) from None
-        if tightening_id and result.tightening_id != tightening_id:
+    def _old_result(self, reply: Message, tightening_id: int, what: str) -> Received:
+        result = receive(reply)
+        if isinstance(result, UnreadableResult):
+            log.warning("%s: %s: MID 0065 revision %d does not read at any revision (%s); "
+                        "kept with its raw text", self.device, what, reply.revision,
+                        result.error)
+        elif result.header_revision is not None:
+            self._lowered(reply.mid, result.header_revision, result.revision)
+            self._agree(op.MID_OLD_RESULT_REQUEST, result.revision)   # ask for that one
+        if tightening_id and result.tightening_id not in (tightening_id, None):
             raise ProtocolError(f"{what}: the controller answered with tightening "
                                 f"{result.tightening_id}", device=self.device)
         return result

@@ -29,6 +29,13 @@ MAX_REVISION = 7
 TIME_FORMAT = "%Y-%m-%d:%H:%M:%S"
 
 
+class LayoutError(ProtocolError):
+    """The parameters are not where the revision puts them (a tag missing, unknown, out of
+    place; a length that does not add up; a revision not read here): the body may be laid
+    out as another revision.  Any other ProtocolError is a value that does not read in a
+    body whose layout is right: that message is not read at another revision."""
+
+
 @dataclass(frozen=True)
 class Param:
     """One parameter: its name in TighteningResult terms, width, kind, and the revision that
@@ -125,18 +132,18 @@ def split_fields(mid: int, revision: int, text: str) -> dict[str, str]:
         tag_text = text[pos:pos + 2]
         param = TAGGED.get(int(tag_text)) if tag_text.isdigit() else None
         if param is None:
-            raise ProtocolError(f"{what}: unknown parameter {tag_text!r} at byte {pos + 1}")
+            raise LayoutError(f"{what}: unknown parameter {tag_text!r} at byte {pos + 1}")
         if param.name in out:
-            raise ProtocolError(f"{what}: parameter {tag_text} ({param.name}) twice")
+            raise LayoutError(f"{what}: parameter {tag_text} ({param.name}) twice")
         if pos + 2 + param.width > len(text):
-            raise ProtocolError(f"{what}: parameter {tag_text} ({param.name}) cut short "
+            raise LayoutError(f"{what}: parameter {tag_text} ({param.name}) cut short "
                                 f"at byte {len(text)}")
         out[param.name] = text[pos + 2:pos + 2 + param.width]
         pos += 2 + param.width
     missing = [f"{tag:02d} ({p.name})" for tag, p in TAGGED.items()
                if p.since <= revision and p.name not in out]
     if missing:
-        raise ProtocolError(f"{what}: parameter(s) missing: {', '.join(missing[:4])}"
+        raise LayoutError(f"{what}: parameter(s) missing: {', '.join(missing[:4])}"
                             + (" ..." if len(missing) > 4 else ""))
     return out
 
@@ -144,13 +151,13 @@ def split_fields(mid: int, revision: int, text: str) -> dict[str, str]:
 def _split_fixed(what: str, table: tuple[Param, ...], text: str) -> dict[str, str]:
     length = HEADER_LEN + sum(2 + p.width for p in table)
     if len(text) != length:
-        raise ProtocolError(f"{what} has {length} bytes, got {len(text)}")
+        raise LayoutError(f"{what} has {length} bytes, got {len(text)}")
     out: dict[str, str] = {}
     pos = HEADER_LEN
     for tag, param in enumerate(table, start=1):
         found = text[pos:pos + 2]
         if found != f"{tag:02d}":
-            raise ProtocolError(f"{what}: expected tag {tag:02d} ({param.name}) at byte "
+            raise LayoutError(f"{what}: expected tag {tag:02d} ({param.name}) at byte "
                                 f"{pos + 1}, found {found!r}")
         out[param.name] = text[pos + 2:pos + 2 + param.width]
         pos += 2 + param.width
@@ -237,7 +244,7 @@ def parse_tightening(mid: int, revision: int, text: str) -> TighteningResult:
     if mid not in (MID_RESULT, MID_OLD_RESULT):
         raise ProtocolError(f"MID {mid:04d} is not a tightening result")
     if not 1 <= revision <= MAX_REVISION:
-        raise ProtocolError(f"MID {mid:04d} revision {revision} is not supported (1-"
+        raise LayoutError(f"MID {mid:04d} revision {revision} is not supported (1-"
                             f"{MAX_REVISION})")
     what = f"MID {mid:04d}" if revision == 1 else f"MID {mid:04d} revision {revision}"
     fields = split_fields(mid, revision, text)

@@ -17,6 +17,7 @@ state, so garbage can neither crash nor stall them (property-tested with hypothe
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from datetime import datetime
 
 from drivers.errors import ProtocolError
 from drivers.wrench.base import TighteningResult
@@ -32,6 +33,7 @@ MID_START, MID_START_ACK, MID_STOP, MID_ERROR, MID_ACCEPTED = 1, 2, 3, 4, 5
 MID_PSET_SELECT, MID_TOOL_DISABLE, MID_TOOL_ENABLE, MID_VIN = 18, 42, 43, 50
 MID_RESULT_SUBSCRIBE, MID_RESULT, MID_RESULT_ACK, MID_RESULT_UNSUBSCRIBE = 60, 61, 62, 63
 MID_OLD_RESULT_REQUEST, MID_OLD_RESULT = 64, 65
+MID_TIME_REQUEST, MID_TIME = 80, 81          # read time upload request / reply (revision 1)
 MID_LINK_ACK, MID_LINK_ERROR, MID_KEEPALIVE = 9997, 9998, 9999
 #: MID 0004 codes that mean "not this revision": ask again one lower (integrators' practice)
 REVISION_REFUSALS = frozenset({74, 76, 97})
@@ -262,6 +264,17 @@ def refusal(msg: Message) -> tuple[int, int]:
 
 def refusal_text(code: int) -> str:
     return f"error {code:02d} ({ERROR_TEXT.get(code, 'unknown error code')})"
+
+
+def controller_time(msg: Message) -> datetime:
+    """MID 0081 (revision 1): the controller's clock, ``YYYY-MM-DD:HH:MM:SS``, naive (its
+    local time, as its results' timestamps are)."""
+    text = msg.data[:19].decode("ascii", "replace")
+    try:
+        return datetime.strptime(text, "%Y-%m-%d:%H:%M:%S")
+    except ValueError:
+        raise ProtocolError(f"MID 0081 time {msg.data[:19]!r} is not "
+                            "YYYY-MM-DD:HH:MM:SS") from None
 
 
 def identity(msg: Message) -> str:

@@ -25,6 +25,18 @@ cut every ``part_size`` bytes of data (``sim_curves.in_parts``).  MID 0008 may a
 to MID 0901 (the plot parameters: one after each result's traces), and MID 0006 asks for MID
 0902 (the result store's extent); each is acknowledged with MID 0005 naming it
 (``data_acks`` counts them by MID).
+Results of every type (``pull_trigger(result_type=N)``, 1-8 and codes the specification
+does not name): a tightening, a loosening or a synchronized tightening has a rundown; the
+others (3 batch increment, 4 batch decrement, 5 bypass, 6 abort job, 8 reference setup) are
+controller events: no torque or angle, OK, the batch counter stepped for 3 and 4; each takes
+a tightening id and is stored like any result.  Bodies that do not match their label, for the
+driver's reading rules: ``mislabel=R`` is a controller that claims more than it implements
+(a 0061/0065 asked for above revision R is laid out as revision R with fields appended,
+labelled as asked), ``send_revision=R`` labels every 0061 honestly with revision R whatever
+was subscribed, and ``garble_next_result()`` spoils one body so that it reads at no
+revision.  Results made while no integrator is connected (a link cut) are kept and fetchable
+with MID 0064 like the others.  MID 0080 is answered with its clock (MID 0081; ``clock``, or
+the local clock shifted by ``clock_offset_s``), and any MID can be refused (``refuse_mid``).
 ``python -m drivers.wrench.sim`` serves it on a TCP port for any integrator
 (``sim_cli.py``).
 
@@ -41,18 +53,29 @@ import tempfile
 from collections import OrderedDict
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from datetime import datetime
-from typing import Any
+from datetime import datetime, timedelta
+from typing import Any, Literal
 
 from drivers.link import Link, SerialLink, TcpLink
 from drivers.url import DeviceUrl
 from drivers.wrench.client import OPTIONS, REFUSED, OpenProtocolWrench, Spec, keyword_options
 from drivers.wrench.sim_curves import PART_SIZE, in_parts, mid0900, mid0901, mid0902
-from drivers.wrench.sim_results import NM_PER, SimRecord, fixed, result_data, text
+from drivers.wrench.sim_results import (
+    NM_PER,
+    TIME,
+    SimRecord,
+    fixed,
+    mislabelled_data,
+    result_data,
+    text,
+)
 from drivers.wrench.simserver import OpenProtocolServer, Received, Session, message
 
 VIN_WIDTH = 25
 REVISIONS = range(1, 8)          # of 0001/0002, 0060/0061, 0064/0065 served
+#: result types with a rundown (torque and angle): tightening, loosening, synchronized
+RUNDOWN_TYPES = frozenset({1, 2, 7})
+Garble = Literal["value", "layout"]
 
 
 @dataclass(frozen=True)
@@ -109,7 +132,8 @@ class SimController(OpenProtocolServer):
                  torque_unit: int = 1, software: str = "stationd-sim 1.0",
                  serial: str = "SIM0000001", curves: bool = True,
                  curves_refusal_code: int = 78, curve_samples: int = 240,
-                 part_size: int = PART_SIZE) -> None:
+                 part_size: int = PART_SIZE, mislabel: int | None = None,
+                 send_revision: int | None = None, clock_offset_s: float = 0.0) -> None:
         if not 0.0 <= nok_rate <= 1.0:
             raise ValueError(f"nok_rate must be in [0, 1], not {nok_rate}")
         if silence_timeout <= 0:
@@ -122,6 +146,9 @@ class SimController(OpenProtocolServer):
             raise ValueError(f"curve_samples must be 2-30000, not {curve_samples}")
         if not 100 <= part_size <= PART_SIZE:
             raise ValueError(f"part_size must be 100-{PART_SIZE}, not {part_size}")
+        for option, rev in (("mislabel", mislabel), ("send_revision", send_revision)):
+            if rev is not None and rev not in REVISIONS:
+                raise ValueError(f"{option} must be a revision 1-{REVISIONS[-1]}, not {rev}")
         super().__init__()
         self.psets = dict(DEFAULT_PSETS if psets is None else psets)
         self.nok_rate, self.name, self.cell, self.channel = nok_rate, name, cell, channel
@@ -137,7 +164,10 @@ class SimController(OpenProtocolServer):
         self.curve_acks = 0                      # MID 0005 "0900" received
         self.data_acks: dict[int, int] = {}      # MID 0005 for subscribed data, by MID
         self._rng = random.Random(seed)  # noqa: S311 - seeded simulation scatter, not security
-        self._clock = clock or (lambda: datetime.now().replace(microsecond=0))
+        self.mislabel, self.send_revision = mislabel, send_revision
+        self._garble: Garble | None = None       # the next result's body spoiled so
+        skew = timedelta(seconds=clock_offset_s)
+        self._clock = clock or (lambda: (datetime.now() + skew).replace(microsecond=0))
         self._refuse_pset: dict[int, int] = dict(refusals or {})
         self._refuse_mid: dict[int, int] = {}
         self._refuse_rev: dict[int, set[int]] = {
@@ -167,8 +197,25 @@ class SimController(OpenProtocolServer):
     def pull_trigger(self, result_type: int = 1) -> SimTightening | None:
         """The operator pulls the trigger: a tightening with the selected pset, reported to
         subscribed integrators; None (nothing happens) if the tool is disabled or no pset.
-        ``result_type`` 2 is a loosening (reported as such from MID 0061 revision 3 on)."""
+        ``result_type`` (MID 0061 revision 3+, parameter 49) makes it another kind of
+        result: 2 a loosening, 7 a synchronized tightening (with a rundown too), 3-6 and 8
+        a controller event (see the module docstring), any other code 0-99 a type the
+        specification does not name, with a rundown."""
+        if not 0 <= result_type <= 99:
+            raise ValueError(f"result_type must be a 2-digit code, not {result_type}")
         return self.call(lambda: self._tighten(result_type))
+
+    def garble_next_result(self, how: Garble = "value") -> None:
+        """Spoil the body of the next result message (0061 or 0065) so that it reads at no
+        revision: "value" puts letters in its torque (the layout intact, the tightening id,
+        pset and VIN still readable), "layout" cuts it in the middle of a parameter."""
+        if how not in ("value", "layout"):
+            raise ValueError(f"how must be value or layout, not {how!r}")
+        self.call(lambda: setattr(self, "_garble", how))
+
+    def clock_now(self) -> datetime:
+        """The controller's clock, as MID 0081 and the results say it."""
+        return self._clock()
 
     def start_rundown(self) -> bool:
         """The trigger pulled, the rundown under way (its result comes with
@@ -313,6 +360,8 @@ class SimController(OpenProtocolServer):
                 self._unacked.pop(tid, None)
         elif mid == 64:
             self._old_result(s, msg)
+        elif mid == 80:   # read time request -> MID 0081 YYYY-MM-DD:HH:MM:SS
+            self.reply(s, 80, 81, self._clock().strftime(TIME).encode())
         else:
             self._refuse(s, mid, 99)
 
@@ -387,9 +436,19 @@ class SimController(OpenProtocolServer):
         raw = self._render(65, msg.revision, record)
         self.reply(s, 64, 65, raw[20:], msg.revision)
 
-    @staticmethod
-    def _render(mid: int, revision: int, record: SimRecord) -> bytes:
-        return message(mid, result_data(mid, revision, record), revision)
+    def _render(self, mid: int, revision: int, record: SimRecord) -> bytes:
+        """A result message labelled ``revision``: its body as that revision, or as
+        ``mislabel``'s with fields appended, and spoiled if ``garble_next_result`` said so."""
+        if self.mislabel is not None and revision > self.mislabel:
+            data = mislabelled_data(mid, self.mislabel, record)
+        else:
+            data = result_data(mid, revision, record)
+        how, self._garble = self._garble, None
+        if how == "value":
+            data = _spoil_torque(mid, revision, data)
+        elif how == "layout":
+            data = data[:len(data) // 2 + 1]
+        return message(mid, data, revision)
 
     def _select(self, s: Session, data: bytes) -> None:
         if len(data) != 3 or not data.isdigit():
@@ -427,7 +486,14 @@ class SimController(OpenProtocolServer):
         t_stat = 0 if t_val < t_lo else 2 if t_val > t_hi else 1
         a_stat = 0 if a_val < a_lo else 2 if a_val > a_hi else 1
         ok = t_stat == a_stat == 1
-        self._batch_counter += int(ok)
+        step = int(ok)
+        if result_type not in RUNDOWN_TYPES and result_type in range(3, 9):
+            # a controller event: no rundown; a batch step moves the counter
+            t_val = a_val = 0
+            t_stat = a_stat = 1
+            ok, angle = True, 0.0
+            step = {3: 1, 4: -1}.get(result_type, 0)
+        self._batch_counter = max(self._batch_counter + step, 0)
         self._tid += 1
         now = self._clock()
         record = SimRecord(
@@ -447,7 +513,8 @@ class SimController(OpenProtocolServer):
             self._unacked[self._tid] = record
         for s in self.sessions():
             if s.started and s.subscribed:
-                self.post(s, self._render(61, s.result_revision, record))
+                rev = self.send_revision or s.result_revision
+                self.post(s, self._render(61, rev, record))
                 s.unacked.append(self._tid)
         for s in self.sessions():       # the curves after every result: never before one
             if s.started:
@@ -460,7 +527,30 @@ class SimController(OpenProtocolServer):
                 if s.plot:
                     self.post(s, mid0901(record))
         return SimTightening(self._tid, pset, ok, t_val / 100, float(a_val), t_stat,
-                             a_stat, self.vin, now, self._render(61, 1, record), record)
+                             a_stat, self.vin, now,
+                             message(61, result_data(61, 1, record), 1), record)
+
+
+def _spoil_torque(mid: int, revision: int, data: bytes) -> bytes:
+    """``data`` with letters where its torque's digits are (the layout kept)."""
+    if revision == 1:      # the torque's value at bytes 141-146 (0061) or 82-87 (0065)
+        start = 140 - 20 if mid == 61 else 81 - 20
+    else:                  # parameter 24, found by tag as the body is written
+        start = pos = 0
+        while not start:
+            tag = data[pos:pos + 2]
+            if tag == b"24":
+                start = pos + 2
+            elif tag.isdigit() and int(tag) in _TAG_WIDTHS:
+                pos += 2 + _TAG_WIDTHS[int(tag)]
+            else:
+                raise AssertionError(f"no torque in {data[:40]!r}")
+    return data[:start] + b"TORQUE" + data[start + 6:]
+
+
+#: the widths of MID 0061 revision 2-7 parameters 01-23 (to find parameter 24, the torque)
+_TAG_WIDTHS = dict(enumerate((4, 2, 25, 25, 4, 3, 2, 5, 4, 4, 1, 1, 1, 1, 1, 1, 1, 1, 1, 10,
+                              6, 6, 6), start=1))
 
 
 class SimWrench(OpenProtocolWrench):

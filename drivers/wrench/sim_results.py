@@ -138,3 +138,18 @@ def result_data(mid: int, revision: int, r: SimRecord) -> bytes:
         for extend in _APPENDED[:revision - 2]:
             values += extend(r)
     return "".join(f"{tag:02d}{v}" for tag, v in enumerate(values, 1)).encode("ascii")
+
+
+def mislabelled_data(mid: int, revision: int, r: SimRecord) -> bytes:
+    """The body a controller that claims more than it implements sends when asked for a
+    later revision: ``revision``'s parameters, then fields of its own appended (the field
+    case, PROTOCOLS.md: revision 1 followed by the pset name, torque unit and result type,
+    numbered on from 24 (0061) or 12 (0065); after a tagged revision, one parameter 90 that
+    no revision names).  It is labelled as asked, not as laid out."""
+    body = result_data(mid, revision, r).decode("ascii")
+    if revision > 1:
+        return (body + "900000").encode("ascii")
+    first = 24 if mid == 61 else 12
+    extra = [text(r.pset_name, 25), str(r.torque_unit), f"{r.result_type:02d}"]
+    return (body + "".join(f"{tag:02d}{v}" for tag, v in enumerate(extra, first))
+            ).encode("ascii")

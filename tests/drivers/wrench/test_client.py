@@ -26,8 +26,8 @@ def test_session_start_subscribes_and_introduces_the_controller(sim, transport, 
     with connect(sim, transport, tmp_path) as w:
         assert w.identity().startswith("SimController (cell 0001, channel 01): supplier "
                                        "SIM, Open Protocol 2.8.0, software stationd-sim 1.0")
-        assert [(r.mid, r.revision, r.data) for r in sim.received()] == [(1, 6, b""),
-                                                                         (60, 7, b"")]
+        assert [(r.mid, r.revision, r.data) for r in sim.received()] == [
+            (1, 6, b""), (60, 7, b""), (80, 1, b"")]            # 0080: the controller's clock
         assert w.revisions == {1: 6, 60: 7} and not w.link_level
         assert w.status().connected and w.wait_connected(0.1)
     assert sim.received()[-1].mid == 3                    # communication stop on close

@@ -21,6 +21,7 @@ from drivers.errors import (
 )
 from drivers.link import TcpLink
 from drivers.wrench import open_wrench
+from drivers.wrench.base import UnreadableResult
 from drivers.wrench.client import OpenProtocolWrench
 
 from .conftest import FAST, connect, op, read_message, reconnect_within, wait_until
@@ -130,7 +131,7 @@ def test_the_device_disappears_and_stays_down_until_reconnected(sim):
         w.reconnect()
         assert w.status().connected and w.status().reconnects == 1
         restart = [r.mid for r in sim.received()]
-        assert restart[-2:] == [1, 60] and restart.count(18) == 1   # nothing leaked
+        assert restart[-3:] == [1, 60, 80] and restart.count(18) == 1   # nothing leaked
         assert not sim.tool_enabled                # the station must send its state again
         w.select_pset(2)
         w.enable_tool()
@@ -189,14 +190,19 @@ def test_results_received_before_a_loss_are_still_delivered(sim, tmp_path):
             w.wait_result(0.1)
 
 
-def test_an_unreadable_result_is_reported_and_still_acknowledged(peer):
+def test_an_unreadable_result_is_handed_out_and_acknowledged_when_the_station_says(peer):
+    """A MID 0061 that reads at no revision is not a link fault and not acknowledged on
+    receipt: it is handed out whole (UnreadableResult) and acknowledged once stored."""
     acked = threading.Event()
+    clock = threading.Event()
 
     def script(c):
         read_message(c)
         c.sendall(op(2, b"010001020103" + b"Scripted".ljust(25)))
         read_message(c)
         c.sendall(op(5, b"0060"))
+        clock.set() if read_message(c)[4:8] == b"0080" else None
+        c.sendall(op(4, b"008099"))                        # no clock: the session goes on
         c.sendall(op(61, b"01" + b"x" * 209))              # right length, wrong content
         acked.set() if read_message(c) == op(62) else None
         c.recv(100)
@@ -204,9 +210,14 @@ def test_an_unreadable_result_is_reported_and_still_acknowledged(peer):
     p = peer(script)
     with open_wrench(f"openprotocol://127.0.0.1:{p.port}", **FAST) as w:
         assert w.identity() == "Scripted (cell 0001, channel 01)"
-        with pytest.raises(ProtocolError, match="tightening result: unreadable tightening "
-                                                "result, acknowledged anyway"):
-            w.wait_result(1.0)
+        assert clock.is_set() and w.clock_offset_s is None
+        got = w.wait_result(1.0, acknowledge=False)
+        assert isinstance(got, UnreadableResult)
+        assert (got.mid, got.revision, got.tightening_id, got.pset) == (61, 1, None, None)
+        assert got.raw == op(61, b"01" + b"x" * 209)[:-1].decode()
+        assert "expected tag 02 (channel_id)" in got.error
+        assert next(iter(w._unacked.values()))[0] is got and not acked.is_set()
+        w.acknowledge_result(got)
         assert acked.wait(1.0) and w.status().connected
 
 

@@ -182,6 +182,7 @@ def test_a_controller_that_never_answers_the_subscription_still_works(peer):
         assert read_message(c)[4:8] == b"0060"
         c.sendall(op(5, b"0060"))
         assert read_message(c)[4:8] == b"0008"    # no answer
+        assert read_message(c)[4:8] == b"0080"    # nor to the clock: the session goes on
         assert read_message(c)[4:8] == b"0018"
         c.sendall(op(5, b"0018"))
         c.recv(100)

@@ -60,13 +60,15 @@ def test_link_level_is_on_when_the_controller_says_so(lsim, transport, tmp_path)
         r = w.wait_result(1.0)
         assert r is not None and r.tightening_id == 1
         assert wait_until(lambda: lsim.acks == 1)
-    # 0001 is not numbered; 0060, 0018, 0043, 0062 are 1, 2, 3, 4
+    # 0001 is not numbered; 0060, 0080 (the clock), 0018, 0043, 0062 are 1, 2, 3, 4, 5
     assert seqs(lsim, 1) == [None]
-    assert [seqs(lsim, mid) for mid in (60, 18, 43, 62)] == [[1], [2], [3], [4]]
-    # the controller's numbered messages (0005 x3, 0061: 1-4) each got a 9997 naming the
-    # number expected next (the specification's figures: "MID 9997 seq. 02" for seq. 01)
+    assert [seqs(lsim, mid) for mid in (60, 80, 18, 43, 62)] == [[1], [2], [3], [4], [5]]
+    # the controller's numbered messages (0005, 0081, 0005 x2, 0061: 1-5) each got a 9997
+    # naming the number expected next (the specification's figures: "MID 9997 seq. 02" for
+    # seq. 01)
     acks = [(r.data, r.sequence) for r in lsim.received(9997)]
-    assert acks[:4] == [(b"0005", 2), (b"0005", 3), (b"0005", 4), (b"0061", 5)]
+    assert acks[:5] == [(b"0005", 2), (b"0081", 3), (b"0005", 4), (b"0005", 5),
+                        (b"0061", 6)]
     assert lsim.errors == [] and lsim.resent == 0 and lsim.repeats == 0
 
 
@@ -74,8 +76,8 @@ def test_sequence_numbers_wrap_after_99_in_both_directions(lsim, tmp_path):
     with connect(lsim, "tcp", tmp_path) as w:
         for i in range(105):
             w.select_pset(1 + i % 3)
-    sent = seqs(lsim, 18)
-    assert sent[:3] == [2, 3, 4] and sent[97:100] == [99, 1, 2] and len(sent) == 105
+    sent = seqs(lsim, 18)                         # after 0060 (1) and 0080 (2)
+    assert sent[:3] == [3, 4, 5] and sent[96:99] == [99, 1, 2] and len(sent) == 105
     answered = [r.sequence for r in lsim.received(9997)]   # 0005s numbered 98, 99, 1, 2
     assert answered[97:101] == [99, 1, 2, 3]
     assert lsim.errors == []
@@ -87,7 +89,7 @@ def test_numbering_restarts_with_each_session(lsim, tmp_path):
         lsim.drop_connections()
         assert wait_until(lambda: not w.status().connected) and reconnect_within(w)
         w.select_pset(3)
-    assert seqs(lsim, 60) == [1, 1] and seqs(lsim, 18) == [2, 2]
+    assert seqs(lsim, 60) == [1, 1] and seqs(lsim, 18) == [3, 3]
 
 
 @pytest.mark.parametrize("transport", ["tcp", "serial"])
@@ -120,7 +122,7 @@ def test_a_message_the_controller_did_not_acknowledge_is_resent_and_handled_once
         w.acknowledge_result(r)                    # returns once the resend is acknowledged
         assert lsim.acks == 1 and lsim.acked_ids == [1] and lsim.repeats == 1
     first, second = lsim.received(62)
-    assert first.sequence == second.sequence == 4
+    assert first.sequence == second.sequence == 5
 
 
 def test_a_link_level_error_makes_the_driver_resend(lsim, tmp_path):
@@ -128,7 +130,7 @@ def test_a_link_level_error_makes_the_driver_resend(lsim, tmp_path):
         lsim.link_fault("nak", 18)
         w.select_pset(3)
         assert lsim.pset == 3 and w.status().reconnects == 0
-    assert seqs(lsim, 18) == [2, 2] and lsim.repeats == 0      # the first was refused
+    assert seqs(lsim, 18) == [3, 3] and lsim.repeats == 0      # the first was refused
     assert [r.data for r in lsim.received(9997)][:1] == [b"0005"]
 
 

@@ -182,6 +182,8 @@ def test_an_answer_about_another_tightening_is_refused(peer):
         c.sendall(op(2, b"010001020103" + b"Scripted".ljust(25)))
         read_message(c)
         c.sendall(op(5, b"0060"))
+        assert read_message(c)[4:8] == b"0080"
+        c.sendall(op(4, b"008099"))                         # no clock here: unknown MID
         assert read_message(c)[4:8] == b"0064"
         c.sendall(build(65, 2, REV2) + b"\x00")             # tightening 1234
         c.recv(100)
