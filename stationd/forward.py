@@ -255,6 +255,7 @@ class Forwarder:
         self.up: bool | None = None        # None: not tried yet
         self.last_error: str | None = None
         self.forwarded = 0                 # entries the line database took (this process)
+        self.tries = 0                     # pushes to the line database finished, taken or not
         self.last_status: dict[str, Any] | None = None   # the latest, for the status API
         self.size = BacklogBytes(self.cursor)
 
@@ -268,6 +269,7 @@ class Forwarder:
             self.forwarded += self.line.push(self.cfg.station_id, self.db_id, entries)
         except LineDown as exc:
             self.up, self.last_error = False, str(exc)
+            self.tries += 1
             raise
         except DBAPIError:   # one of them is refused for good: find it, keep the rest moving
             for e in entries:
@@ -281,6 +283,7 @@ class Forwarder:
         self.repo.ledger.set_meta(CURSOR_KEY, str(self.cursor))
         self.size.forwarded(entries, self.cursor)
         self.up, self.last_error = True, None
+        self.tries += 1
         return len(entries)
 
     def retry_quarantined(self) -> tuple[int, int]:

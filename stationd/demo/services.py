@@ -43,8 +43,14 @@ from stationd.yamlio import YamlNode
 
 log = logging.getLogger("stationd")
 DEFAULT_OPCUA = "127.0.0.1:4840"
-#: how long the demo waits at its end for the line database to take a station's records, s
+#: how long one station's services wait for the line database to take its records, s
 DRAIN_S = 20.0
+#: the longest the demo waits at its end for the line database to take every station's
+#: records, s.  It waits for each forwarder's own state, not for a time (:func:`drain_all`):
+#: until it has handed over every record, or the line database is away now.  A forwarder in
+#: backoff tries again within the longest backoff plus its jitter (72 s; later on a busy
+#: machine): this bound only ends the wait on one that neither takes the records nor tries.
+LINE_DRAIN_BOUND_S = 180.0
 #: the longest the read-back waits for a line database's host to answer, s
 CONNECT_TIMEOUT_S = 10
 #: the demo's security words, printed beside the endpoint
@@ -221,15 +227,26 @@ class StationServices:
         last = await asyncio.get_running_loop().run_in_executor(None, fwd.repo.ledger.last_seq)
         return bool(fwd.cursor >= last)
 
-    def never_reached(self) -> bool:
-        """Whether the line database has not taken one record from this station in this
-        run and its last try failed (or the forwarder is not running): waiting longer for
-        it is waiting for nothing."""
+    def tries(self) -> int:
+        """How many pushes to the line database the forwarder has finished (taken or not)."""
+        fwd = self.screens.line
+        return 0 if fwd is None else int(fwd.tries)
+
+    def down(self) -> bool:
+        """Whether the forwarder's last push failed (the line database away then)."""
+        fwd = self.screens.line
+        return fwd is not None and fwd.up is False
+
+    def given_up(self, tries_before: int, away: bool) -> bool:
+        """Whether waiting longer for this station's records is waiting for nothing: its
+        forwarder is not running, or the line database is away now: the forwarder tried
+        again since it had made ``tries_before`` tries and failed, or it is down and
+        ``away`` (the demo found the line database not answering).  A forwarder that
+        failed only before the line database came back is waited for: its backoff ends
+        with a try that takes the records."""
         if self._line is None:
             return False
-        fwd = self.screens.line
-        return self._line.done() or (fwd is not None and fwd.up is False
-                                     and fwd.forwarded == 0)
+        return self._line.done() or (self.down() and (away or self.tries() > tries_before))
 
     def line_error(self) -> str | None:
         """The forwarder's last error (None: none, or no forwarder)."""
@@ -329,16 +346,48 @@ def own_pairs(cfg: StationConfig, prefix: str) -> StationConfig:
     return replace(cfg, cameras=cams, pairs=pairs, references=None)
 
 
-async def drain_all(services: list[StationServices], timeout: float = DRAIN_S) -> None:
-    """Wait until the line database has every station's records, for at most ``timeout``
-    in all; not at all for stations whose records it has not taken once in this run (a line
-    database that did not answer for the whole run will not in the next seconds)."""
+async def drain_all(services: list[StationServices],
+                    timeout: float = LINE_DRAIN_BOUND_S) -> None:
+    """Wait until the line database has every station's records, as each station's forwarder
+    says (not for a fixed time: a forwarder backs off longer on a busy machine): for each
+    station behind, until its forwarder has handed over every record or the line database is
+    away now (:meth:`StationServices.given_up`: a try since this wait began failed, or a
+    station that is down finds the line database not answering the demo either, so a line
+    database down for the whole run is not waited for); at most ``timeout`` in all."""
     end = time.monotonic() + timeout
+    before = [s.tries() for s in services]
+    away: dict[str, bool] = {}      # per line URL: not answering when the wait began
+    loop = asyncio.get_running_loop()
+    for s in services:
+        if s.cfg.line is not None and s.down() and s.cfg.line.url not in away:
+            away[s.cfg.line.url] = await loop.run_in_executor(None, not_answering,
+                                                              s.cfg.line.url)
     while True:
-        behind = [s for s in services if not await s.caught_up()]
-        if not behind or time.monotonic() >= end or all(s.never_reached() for s in behind):
+        behind = [(s, n) for s, n in zip(services, before, strict=True)
+                  if not await s.caught_up()]
+        if not behind or time.monotonic() >= end or all(
+                s.given_up(n, s.cfg.line is not None and away.get(s.cfg.line.url, False))
+                for s, n in behind):
             return
         await asyncio.sleep(0.1)
+
+
+def not_answering(url: str) -> bool:
+    """Whether the database at ``url`` does not answer a query now (within seconds)."""
+    from db.engine import make_engine
+
+    try:
+        engine = make_engine(_read_url(url))
+    except (SQLAlchemyError, DbError):
+        return True
+    try:
+        with engine.connect() as conn:
+            conn.exec_driver_sql("SELECT 1")
+    except (SQLAlchemyError, DbError, OSError):
+        return True
+    finally:
+        engine.dispose()
+    return False
 
 
 def line_counts(url: str, db_ids: set[str]) -> dict[tuple[str, str], Counter[str]]:
@@ -406,10 +455,10 @@ def _read_url(url: str) -> str:
 async def line_report(url: str | None, services: list[StationServices], out: Any,
                       page: str | None, json_out: bool) -> dict[str, Any]:
     """The line's results, read back from the line database once it has every station's
-    records (or :data:`DRAIN_S` passed): per station, what arrived against what the station
-    recorded (``arrival``), and the rundowns (``stations``; the /line page shows them row by
-    row); the summary's ``line``, whose ``missing`` counts the records that did not reach
-    the line database (they are lost with the demo's temporary databases)."""
+    records (or is away now: :func:`drain_all`): per station, what arrived against what the
+    station recorded (``arrival``), and the rundowns (``stations``; the /line page shows them
+    row by row); the summary's ``line``, whose ``missing`` counts the records that did not
+    reach the line database (they are lost with the demo's temporary databases)."""
     assert url is not None  # noqa: S101 - only called with a line section
     loop = asyncio.get_running_loop()
     await drain_all(services)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import io
+import time
 from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
@@ -56,6 +57,13 @@ def test_an_outage_during_the_first_station_is_checked_again_at_the_end(tmp_path
         proxy.cut()                                    # the line database away
         _record(first, 3)
         drained = await one.drain(timeout=1.0)         # the first station's wait: in vain
+        # its forwarder backs off (1, 2, 4 s...): after its third failed try the next one is
+        # seconds away when the line comes back, longer than the second station takes; the
+        # read-back must wait for that try (a wait of a fixed time lost it on a busy machine)
+        end = time.monotonic() + 60
+        while one.tries() < 3 and time.monotonic() < end:
+            await asyncio.sleep(0.05)
+        assert one.tries() >= 3 and one.down()
         proxy.restore()                                # back, before the demo ends
         two = StationServices(second, EventBus())
         await two.start()
