@@ -598,6 +598,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="acknowledge at link level (MID 9997/9998)")
     ctl.add_argument("--trigger-every", type=float, default=0.0, metavar="SECONDS",
                      help="pull the trigger at this interval when the tool may run (off)")
+    from drivers.wrench.sim_cli import add_behaviour_options  # result types, mislabel, clock
+
+    add_behaviour_options(ctl)
     sm.set_defaults(func=cmd_sim)
 
     dm = sub.add_parser("demo", help="the main job: a simulated run")

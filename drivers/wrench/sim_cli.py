@@ -7,6 +7,11 @@ the "operator" pulls the trigger at that interval whenever the tool is enabled a
 selected, so results flow without a test driving it.
 
     python -m drivers.wrench.sim --port 4545 --link-ack --refuse 1:7,6 --trigger-every 2
+    python -m drivers.wrench.sim --trigger-every 1 --result-types 1,1,3,2,9 --mislabel 1
+
+The behaviour options (``add_behaviour_options``: result types, a mislabelled body, the
+clock's offset) are shared with ``stationd sim controller``.  The trigger keeps being pulled
+while no integrator is connected (a link cut): those results are kept for MID 0064.
 """
 
 from __future__ import annotations
@@ -16,8 +21,9 @@ import signal
 import sys
 import threading
 from collections.abc import Callable, Sequence
+from itertools import cycle
 from types import FrameType
-from typing import TextIO
+from typing import Any, TextIO
 
 from drivers.wrench.sim import SimController
 
@@ -30,6 +36,38 @@ def refusal(text: str) -> tuple[int, set[int]]:
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected MID:REV[,REV...], not {text!r}") \
             from None
+
+
+def result_types(text: str) -> list[int]:
+    """``1,3,2`` -> [1, 3, 2]: result type codes (2 digits), pulled in turn."""
+    try:
+        codes = [int(t) for t in text.split(",") if t.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected codes like 1,3,2, not {text!r}") from None
+    if not codes or any(not 0 <= c <= 99 for c in codes):
+        raise argparse.ArgumentTypeError(f"expected codes 0-99 like 1,3,2, not {text!r}")
+    return codes
+
+
+def add_behaviour_options(p: argparse.ArgumentParser) -> None:
+    """The options of what the controller reports (here and in ``stationd sim
+    controller``)."""
+    p.add_argument("--result-types", type=result_types, default=[1], metavar="CODES",
+                   help="result type of each trigger pull, in turn (MID 0061 revision 3+ "
+                        "parameter 49: 1 tightening, 2 loosening, 3 batch increment, 4 batch "
+                        "decrement, 5 bypass, 6 abort job, 7 synchronized, 8 reference "
+                        "setup; others: unknown), e.g. 1,1,1,3 (default 1)")
+    p.add_argument("--mislabel", type=int, choices=range(1, 8), metavar="REV",
+                   help="claim more than it implements: results asked for above revision "
+                        "REV are laid out as REV with fields appended, labelled as asked")
+    p.add_argument("--clock-offset", type=float, default=0.0, metavar="SECONDS",
+                   help="the controller's clock (MID 0081, result timestamps) this far from "
+                        "the local one (0)")
+
+
+def behaviour(args: argparse.Namespace) -> dict[str, Any]:
+    """SimController keywords from ``add_behaviour_options``' arguments."""
+    return {"mislabel": args.mislabel, "clock_offset_s": args.clock_offset}
 
 
 def parser() -> argparse.ArgumentParser:
@@ -61,6 +99,7 @@ def parser() -> argparse.ArgumentParser:
                         "less sends shorter traces in parts too)")
     p.add_argument("--trigger-every", type=float, default=0.0, metavar="SECONDS",
                    help="pull the trigger at this interval when the tool may run (off)")
+    add_behaviour_options(p)
     return p
 
 
@@ -82,18 +121,24 @@ def main(argv: Sequence[str] | None = None) -> int:
                             revision_refusal_code=args.refusal_code,
                             curves=not args.no_curves,
                             curves_refusal_code=args.curves_refusal_code,
-                            curve_samples=args.curve_samples, part_size=args.part_size)
+                            curve_samples=args.curve_samples, part_size=args.part_size,
+                            mislabel=args.mislabel, clock_offset_s=args.clock_offset)
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     return serve(sim, args.host, args.port, args.trigger_every, stop,
-                 lambda port: f"listening on {args.host}:{port}")
+                 lambda port: f"listening on {args.host}:{port}", types=args.result_types)
 
 
 def serve(sim: SimController, host: str, port: int, trigger_every: float,
-          stop: threading.Event, said: Callable[[int], str], out: TextIO = sys.stdout) -> int:
+          stop: threading.Event, said: Callable[[int], str], out: TextIO = sys.stdout,
+          types: Sequence[int] = (1,)) -> int:
     """Serve ``sim`` on ``host:port`` until ``stop`` (``said(port)`` printed once it listens),
-    pulling the trigger every ``trigger_every`` seconds when set; 1 if it cannot listen."""
+    pulling the trigger every ``trigger_every`` seconds when set (a result of each of
+    ``types`` in turn, whenever the tool may run, connected or not); 1 if it cannot
+    listen."""
+    kinds = cycle(types)
+    kind = next(kinds)
     with sim:
         try:
             bound = sim.listen_tcp(host, port)
@@ -102,6 +147,6 @@ def serve(sim: SimController, host: str, port: int, trigger_every: float,
             return 1
         print(said(bound), file=out, flush=True)
         while not stop.wait(trigger_every or 0.5):
-            if trigger_every:
-                sim.pull_trigger()
+            if trigger_every and sim.pull_trigger(kind) is not None:
+                kind = next(kinds)
     return 0

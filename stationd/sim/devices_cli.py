@@ -27,7 +27,7 @@ from typing import TextIO
 from drivers.lift.base import RegisterMap
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController, SimPset
-from drivers.wrench.sim_cli import serve
+from drivers.wrench.sim_cli import behaviour, serve
 from stationd.boltfile import load_bolts
 from stationd.config import load_station_config
 from stationd.errors import InputError, StationError
@@ -145,13 +145,15 @@ def _serve_controller(args: argparse.Namespace, stop: threading.Event, out: Text
     _, bolts = _station(args.config)
     try:
         sim = SimController(psets_of(bolts) if bolts is not None else None, seed=args.seed,
-                            nok_rate=args.nok_rate, link_ack=args.link_ack)
+                            nok_rate=args.nok_rate, link_ack=args.link_ack,
+                            **behaviour(args))
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     return serve(sim, args.host, args.port, args.trigger_every, stop,
                  lambda port: f"controller listening on {args.host}:{port} (Open Protocol; "
-                              f"psets {', '.join(str(p) for p in sorted(sim.psets))})", out)
+                              f"psets {', '.join(str(p) for p in sorted(sim.psets))})", out,
+                 types=args.result_types)
 
 
 def _check_args(args: argparse.Namespace) -> None:
