@@ -1,29 +1,43 @@
 """The ``stationd`` command: one entry point, one sub-command per job.
 
 Exit codes are a contract: 0 success (marker found), 1 not found (the JSON still says why),
-2 bad input, always with one readable line on stderr and never a traceback.
+2 bad input, always with one readable line on stderr and never a traceback; 130 stopped by
+Ctrl-C (SIGINT), 143 by SIGTERM, with one line too, whenever it comes (:func:`main`).
+
+Why this module imports almost nothing at its top: ``.venv/bin/stationd`` imports it before
+:func:`main` can take the signals over, and a Ctrl-C during an import of numpy or SQLAlchemy
+there was a traceback; everything heavy is imported inside :func:`main` or a command.
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
+from types import FrameType
 from typing import Any, NoReturn
 
-import numpy as np
-
-from db.errors import DbError
-from drivers.errors import DriverError
 from stationd.errors import InputError, StationError, printable
-from stationd.jsonout import strict_json
 
 EXIT_OK, EXIT_NOT_FOUND, EXIT_BAD_INPUT = 0, 1, 2
-#: what a command reports as one line (exit 2): the station's errors and those of the layers
-#: below it, which have their own roots (``db`` and ``drivers`` import nothing from stationd)
-REPORTED: tuple[type[Exception], ...] = (StationError, DbError, DriverError)
+#: a command stopped by a signal: the shell's 128 + the signal's number, as if it had been
+#: killed by it (a script tells Ctrl-C and systemd's stop apart as it would for any program)
+EXIT_SIGINT, EXIT_SIGTERM = 128 + signal.SIGINT, 128 + signal.SIGTERM
+
+
+def _reported() -> tuple[type[Exception], ...]:
+    """What a command reports as one line (exit 2): the station's errors and those of the
+    layers below it, which have their own roots (``db`` and ``drivers`` import nothing from
+    stationd).  Imported when asked: ``db.errors`` loads SQLAlchemy's."""
+    from db.errors import DbError
+    from drivers.errors import DriverError
+
+    return (StationError, DbError, DriverError)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -46,6 +60,8 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _emit(obj: dict[str, Any]) -> None:
+    from stationd.jsonout import strict_json
+
     sys.stdout.write(strict_json(obj) + "\n")
 
 
@@ -158,6 +174,8 @@ def _detect_camera(args: argparse.Namespace, load_camera: Callable[[str], Any]) 
 
 # -- localize -----------------------------------------------------------------------------
 def cmd_localize(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from stationd.config import load_station_config
     from stationd.geometry.camera import StereoPair
     from stationd.imageio import read_image
@@ -656,11 +674,118 @@ def _quiet_everywhere(parser: argparse.ArgumentParser) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from stationd import progress
-    from stationd.imageio import quiet_opencv
+    """Run the command of ``argv`` (the process's own arguments when None) and return its
+    exit code.
 
-    quiet_opencv()   # OpenCV's own warnings are no lines of ours (before it loads)
-    parser = build_parser()
+    Why the signals are taken here, once, rather than by each command: a Ctrl-C or a SIGTERM
+    may come at any moment, while a module loads, while the parser is built, while a command
+    waits on a server that does not answer, while a demo starts its simulators; one place
+    turns either into one line and 130 (143) wherever it lands.  Both raise a
+    KeyboardInterrupt in the main thread (an asyncio command's tasks are cancelled by
+    ``asyncio.run`` for either), and whatever a library makes of it on its way up (numpy
+    turns one that lands in its C import into an ImportError) is taken for the signal it
+    was.  A command that takes the signals itself (``stationd run`` stops its station in
+    order, ``demo --hold`` ends its hold) does so inside."""
+    with _signals(restore=argv is not None) as stopped:
+        try:
+            return _main(argv, stopped)
+        except SystemExit:
+            raise
+        except BaseException:
+            if stopped.signal is None:
+                raise
+            return _stopped(stopped)
+
+
+class _Stopped:
+    """The signal that stopped the command (None: none came)."""
+
+    signal: int | None = None
+
+
+#: the signals a command is stopped by
+STOPPING = (signal.SIGINT, signal.SIGTERM)
+
+
+@contextmanager
+def _signals(restore: bool) -> Iterator[_Stopped]:
+    """SIGINT and SIGTERM raise a KeyboardInterrupt in the main thread, remembered in the
+    yielded :class:`_Stopped` (a SIGINT ignored from the start, a background job's, stays
+    ignored).  ``restore``: put the previous handlers back at the end (a caller that goes on,
+    such as a test calling :func:`main`).  Otherwise the process ends after this: both
+    signals get their defaults, so one that comes while the interpreter exits (its output
+    said, its files written or removed) ends it by the signal itself, the shell's 130 or 143,
+    silently, instead of a traceback from ``threading._shutdown`` or a module's finalizer."""
+    stopped = _Stopped()
+    if threading.current_thread() is not threading.main_thread():
+        yield stopped     # signals reach the main thread only: nothing to take over here
+        return
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        if stopped.signal is None:
+            stopped.signal = signum
+        raise KeyboardInterrupt
+
+    before = {s: signal.getsignal(s) for s in STOPPING}
+    for s in STOPPING:
+        if before[s] is not signal.SIG_IGN:
+            signal.signal(s, on_signal)
+    try:
+        yield stopped
+    finally:
+        signal.pthread_sigmask(signal.SIG_BLOCK, STOPPING)   # no signal while they change
+        try:
+            for s, handler in before.items():
+                if not restore and handler is not signal.SIG_IGN:
+                    handler = signal.SIG_DFL
+                # a handler installed outside Python reads as None: the default then
+                signal.signal(s, signal.SIG_DFL if handler is None else handler)
+        finally:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, STOPPING)
+
+
+@contextmanager
+def _held() -> Iterator[None]:
+    """The signals held back (blocked, delivered when the body ends) while the modules load:
+    one that lands in a C extension's import is turned into an ImportError by some (numpy's
+    ``PyCapsule_Import``), or leaves a module half made; held, it stops the command a moment
+    later, between two lines of ours."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, STOPPING)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+
+
+def _stopped(stopped: _Stopped) -> int:
+    """The one line and the code of a command stopped by a signal.  From here on, a second
+    signal ends the process at once (the defaults), silently: the line is said, the files the
+    command was writing are either whole or removed (written beside and renamed,
+    :func:`stationd.outfile.write_all`)."""
+    for s in STOPPING:
+        if signal.getsignal(s) is not signal.SIG_IGN:
+            signal.signal(s, signal.SIG_DFL)
+    term = stopped.signal == signal.SIGTERM
+    try:
+        sys.stderr.write("stationd: stopped by SIGTERM\n" if term else
+                         "stationd: interrupted (Ctrl-C)\n")
+        sys.stderr.flush()
+    except (OSError, ValueError):
+        pass   # stderr closed: the code still says it
+    return EXIT_SIGTERM if term else EXIT_SIGINT
+
+
+def _main(argv: Sequence[str] | None, stopped: _Stopped) -> int:
+    with _held():
+        from stationd import progress
+        from stationd.imageio import quiet_opencv
+
+        quiet_opencv()   # OpenCV's own warnings are no lines of ours (before it loads)
+        parser = build_parser()
+        reported = _reported()
     args = parser.parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func
     progress.configure(quiet=bool(getattr(args, "quiet", False)))
@@ -668,12 +793,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         code = func(args)
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
         return code
-    except REPORTED as exc:
+    except reported as exc:
+        if stopped.signal is not None:   # a library's words for the interruption
+            raise
         sys.stderr.write(f"stationd: error: {printable(str(exc), keep=chr(10))}\n")
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        sys.stderr.write("stationd: interrupted\n")
-        return 130
     except BrokenPipeError:
         # ``stationd db report VIN | head``: the reader has all it wanted.  Point stdout at
         # /dev/null so the interpreter's final flush does not fail a second time.

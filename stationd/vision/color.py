@@ -175,11 +175,11 @@ def write_hsv_yaml(path: str | Path, ranges: HsvRange, *, source: str | None = N
         f"  s: [{ranges.s[0]}, {ranges.s[1]}]\n"
         f"  v: [{ranges.v[0]}, {ranges.v[1]}]\n"
     )
-    p = Path(path)
-    try:
-        p.write_text(text, encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"{p}: cannot write: {exc.strerror}") from None
+    # whole or not at all (beside, then renamed): a Ctrl-C or a full disk in the middle
+    # left a truncated box that the station then read as its colours
+    from stationd.outfile import write_atomic
+
+    write_atomic(Path(path), text)
 
 
 def read_hsv_yaml(path: str | Path) -> HsvRange:
