@@ -119,11 +119,11 @@ def test_the_start_of_the_demo_leaves_no_folder(tmp_path, sig, code, line) -> No
 
 
 @pytest.fixture(scope="module")
-def reference(tmp_path_factory, camera) -> Path:
+def reference(tmp_path_factory: pytest.TempPathFactory, camera: object) -> Path:
     """A rendered image of the marker (tune-color's reference)."""
     from tests.conftest import view
 
-    d = tmp_path_factory.mktemp("tune")
+    d: Path = tmp_path_factory.mktemp("tune")
     v, _ = view(camera, 700, 35, seed=11)
     cv2.imwrite(str(d / "one.png"), v.image)
     return d / "one.png"
