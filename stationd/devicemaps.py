@@ -81,7 +81,8 @@ def lift_map(node: YamlNode) -> RegisterMap:
 
 def wrench_map(node: YamlNode) -> WrenchRegisterMap:
     """A register-driven controller's map; counters take only an address; ``vin: null`` says
-    the controller has no VIN registers."""
+    the controller has no VIN registers; ``result_type: {address: N}`` that it reports each
+    result's type (Open Protocol's codes) there."""
     m = node.mapping([f.name for f in fields(WrenchRegisterMap)])
     default = WrenchRegisterMap()
     kw: dict[str, Any] = {}
@@ -99,6 +100,9 @@ def wrench_map(node: YamlNode) -> WrenchRegisterMap:
     if "vin" in m:
         kw["vin"] = None if m["vin"].value() is None else text_from_node(
             m["vin"], default.vin or Text(0, 25))
+    if "result_type" in m and m["result_type"].value() is not None:   # none by default
+        kw["result_type"] = number_from_node(m["result_type"], Number(0), INTEGER_TYPES,
+                                             ("address",))
     try:
         return WrenchRegisterMap(**kw)
     except MapError as exc:

@@ -22,6 +22,12 @@ block: the station polls registers 6-15 in one read)::
                                               14-15 tightening id (uint32)
 
 Sequence numbers and counters are uint16 and wrap from 65535 to 1; 0 means "never".
+
+``result_type`` (none in the default layout): where a controller reports what a result is,
+a register holding Open Protocol's codes (MID 0061 parameter 49: 1 tightening, 2 loosening,
+3 batch increment, ...), read into ``TighteningResult.result_type_code`` the same way, so
+that a batch step on such a controller never closes a bolt either.  Without it a result
+carries no type (the station then goes by what it sent).
 """
 
 from __future__ import annotations
@@ -34,7 +40,7 @@ from datetime import datetime
 
 from drivers import registers
 from drivers.registers import Bit, MapError, Number, Text, spans
-from drivers.wrench.base import Status, TighteningResult
+from drivers.wrench.base import ResultType, Status, TighteningResult
 
 __all__ = ["ACK_CODES", "Bit", "MapError", "Number", "Text", "WrenchRegisterMap", "spans"]
 
@@ -105,6 +111,7 @@ class WrenchRegisterMap:
     result_angle: Number = field(default=Number(13, scale=0.1))
     result_id: Number = field(default=Number(14, "uint32"))
     vin: Text | None = field(default=Text(16, 25))
+    result_type: Number | None = None  # the result's type code, where the controller has one
 
     def __post_init__(self) -> None:
         self.validate()
@@ -129,6 +136,9 @@ class WrenchRegisterMap:
             raise MapError("parameters_valid", "uses the same bit as tool_enabled")
         if self.vin is not None:
             registers.check_text("vin", self.vin)
+        if self.result_type is not None and (self.result_type.type, self.result_type.scale,
+                                             self.result_type.offset) != ("uint16", 1.0, 0.0):
+            raise MapError("result_type", "must be a plain uint16 (a type code)")
         owner: dict[int, str] = {}
         for name, words in self._registers().items():
             for a in words:
@@ -145,6 +155,8 @@ class WrenchRegisterMap:
                     for b in [getattr(self, name)]})
         if self.vin is not None:
             out["vin"] = range(self.vin.address, self.vin.address + self.vin.words)
+        if self.result_type is not None:
+            out["result_type"] = range(self.result_type.address, self.result_type.address + 1)
         return out
 
     # -- layout ---------------------------------------------------------------------------
@@ -157,8 +169,9 @@ class WrenchRegisterMap:
     def controller_addresses(self) -> set[int]:
         """Registers the controller writes: what the station polls."""
         regs = self._registers()
-        return {a for name in (*CONTROLLER_NUMBERS, "tool_enabled", "parameters_valid")
-                for a in regs[name]}
+        names = (*CONTROLLER_NUMBERS, "tool_enabled", "parameters_valid",
+                 *(("result_type",) if self.result_type else ()))
+        return {a for name in names for a in regs[name]}
 
     def status_spans(self) -> list[tuple[int, int]]:
         return spans(self.controller_addresses())
@@ -193,15 +206,21 @@ class WrenchRegisterMap:
     def result(self, regs: Mapping[int, int], timestamp: datetime) -> TighteningResult:
         """The tightening in the result registers; ValueError for an undefined status.  The
         registers hold no VIN, limits, targets or controller clock: those are "" and 0.0,
-        and ``timestamp`` is when the station read them (its own clock)."""
+        and ``timestamp`` is when the station read them (its own clock).  Its type code is
+        the ``result_type`` register's, where the map has one (else None)."""
         ok, torque_status, angle_status = unpack_status(self.integer("result_status", regs))
+        code = self.integer("result_type", regs) if self.result_type is not None else None
+        try:
+            kind = None if code is None else ResultType(code)
+        except ValueError:
+            kind = None                  # a code the specification does not name: kept
         return TighteningResult(
             ok=ok, torque_nm=self.decode("result_torque", regs),
             angle_deg=self.decode("result_angle", regs), torque_status=Status(torque_status),
             angle_status=Status(angle_status), tightening_id=self.integer("result_id", regs),
             pset=self.integer("result_pset", regs), vin="", timestamp=timestamp,
             torque_min_nm=0.0, torque_max_nm=0.0, torque_target_nm=0.0, angle_min_deg=0.0,
-            angle_max_deg=0.0, angle_target_deg=0.0,
+            angle_max_deg=0.0, angle_target_deg=0.0, result_type=kind, result_type_code=code,
             raw=" ".join(f"{a}={regs[a]}" for a in sorted(regs)))
 
     def encode_vin(self, vin: str) -> dict[int, int]:

@@ -31,7 +31,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Literal, cast
 
 from drivers.modbus_link import LinkSpec
@@ -66,6 +66,7 @@ class SimResult:
     angle_deg: float
     torque_status: int
     angle_status: int
+    result_type: int = 1
 
 
 class SimRegisterController(SimServer):
@@ -102,14 +103,16 @@ class SimRegisterController(SimServer):
             self._refresh()
             return dict(self._regs)
 
-    def pull_trigger(self) -> SimResult | None:
+    def pull_trigger(self, result_type: int = 1) -> SimResult | None:
         """The operator pulls the trigger: a tightening with the active parameters, queued
-        for publication; None (nothing happens) if the tool is disabled or none are active."""
+        for publication; None (nothing happens) if the tool is disabled or none are active.
+        ``result_type`` (Open Protocol's codes) goes to the map's ``result_type`` register,
+        where it has one."""
         with self._lock:
             self._refresh()
             if self.active is None or not self.map.bit("tool_enabled", self._regs):
                 return None
-            result = self._tighten(self.active)
+            result = replace(self._tighten(self.active), result_type=result_type)
             self._queue.append(result)
             self._refresh()
             return result
@@ -213,6 +216,8 @@ class SimRegisterController(SimServer):
                                 ("result_pset", r.pset), ("result_torque", r.torque_nm),
                                 ("result_angle", r.angle_deg), ("result_id", r.tightening_id)):
                 self._set(name, value)
+            if m.result_type is not None:
+                self._set("result_type", r.result_type)
             self._set("result_counter", next_sequence(counter))
 
     def _tighten(self, active: SimParameters) -> SimResult:

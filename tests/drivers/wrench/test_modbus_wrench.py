@@ -15,7 +15,8 @@ import pytest
 
 from drivers.errors import ConnectError, DeviceError, RefusedError, UrlError
 from drivers.wrench import open_wrench
-from drivers.wrench.base import LinkStatus, Status
+from drivers.wrench.base import LinkStatus, ResultType, Status, TighteningResult
+from drivers.wrench.modbus_map import MapError, Number, WrenchRegisterMap
 from drivers.wrench.modbus_sim import SimModbusWrench, SimParameters, SimRegisterController
 
 from .conftest import wait_until
@@ -235,3 +236,30 @@ def test_result_ack_register_is_written_only_once_the_result_is_stored(ctl):
         r2 = w.wait_result(1.0)               # now published; taken and acknowledged
         assert r2 is not None and r2.tightening_id == second.tightening_id
         assert wait_until(lambda: m.integer("result_ack", ctl.registers()) == 2)
+
+
+def test_a_map_with_a_result_type_register_carries_the_type():
+    """Where the controller reports a result's type (Open Protocol's codes, in a register
+    the map names), it reaches ``result_type_code`` as over Open Protocol; without such a
+    register (the default layout) a result has no type."""
+    m = WrenchRegisterMap(result_type=Number(30))
+    assert 30 in m.controller_addresses() and 30 not in WrenchRegisterMap().controller_addresses()
+    with pytest.raises(MapError, match="result_type"):
+        WrenchRegisterMap(result_type=Number(30, scale=0.1))
+    with pytest.raises(MapError, match="register 10 is also used by result_status"):
+        WrenchRegisterMap(result_type=Number(10))
+    with SimRegisterController(m, seed=2, nok_rate=0.0) as c, connect(c, register_map=m) as w:
+        w.select_pset(1)
+        w.enable_tool()
+        for code in (1, 3, 2, 9):
+            assert c.pull_trigger(code) is not None
+        got = [w.wait_result(1.0) for _ in range(4)]
+    assert [g.result_type_code for g in got if isinstance(g, TighteningResult)] == [1, 3, 2, 9]
+    assert [g.result_type for g in got if isinstance(g, TighteningResult)] == [
+        ResultType.TIGHTENING, ResultType.BATCH_INCREMENT, ResultType.LOOSENING, None]
+    with SimRegisterController(seed=2, nok_rate=0.0) as c, connect(c) as w:
+        w.select_pset(1)
+        w.enable_tool()
+        c.pull_trigger(3)                    # the controller knows; its map does not say
+        r = w.wait_result(1.0)
+    assert isinstance(r, TighteningResult) and r.result_type_code is None
