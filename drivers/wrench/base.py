@@ -417,6 +417,13 @@ class Wrench(Openable):
         ``timeout``; this controller sends none (``can_curves`` is False)."""
         raise DeviceError("this controller sends no curves", device=self.device)
 
+    def fetch_curve(self, tightening_id: int, timeout: float | None = None) -> list[Any]:
+        """The curves (``drivers.wrench.op_curve.Curve``, one per trace type) of an earlier
+        tightening, asked for after the fact (a result fetched after a link cut); empty
+        when the controller does not give them (any more).  Not queued for
+        :meth:`wait_curve`.  This controller sends none (``can_curves`` is False)."""
+        raise DeviceError("this controller sends no curves", device=self.device)
+
     # -- helpers and hooks -----------------------------------------------------------------
     def _timeout(self, timeout: float | None) -> float:
         if timeout is None:

@@ -70,8 +70,10 @@ from drivers.wrench.op_curve import (
     MID_DATA_SUBSCRIBE,
     MID_DATA_UNSUBSCRIBE,
     MID_TRACE,
+    STATION_TRACES,
     Curve,
     parse_curve_data,
+    replay_data,
     subscribe_data,
     unsubscribe_data,
 )
@@ -148,6 +150,16 @@ class _Pending:
 
 
 @dataclass
+class _CurveFetch:
+    """The curves of one earlier tightening being asked for (``fetch_curve``)."""
+
+    tightening_id: int
+    wanted: int
+    curves: list[Curve] = field(default_factory=list)
+    done: threading.Event = field(default_factory=threading.Event)
+
+
+@dataclass
 class _LinkWait:
     """The one sequenced message awaiting its link-level acknowledgement (9997/9998)."""
 
@@ -203,6 +215,7 @@ class OpenProtocolWrench(SupervisedWrench):
         self._curves: deque[Curve] = deque()
         self._curves_dropped = 0
         self._owed_data_acks: deque[int] = deque()   # MID 0005 "0900" ... to send (supervisor)
+        self._curve_fetch: _CurveFetch | None = None  # curves asked for after the fact
         # the communication stop is being sent (closing): subscribed data that arrives after
         # it (curves in flight) is no longer acknowledged: the session is ending, and a 0005
         # after the 0003 reaches a controller that has stopped listening to this session
@@ -622,7 +635,13 @@ class OpenProtocolWrench(SupervisedWrench):
                         self.device, e)
             curve = None
         with self._cond:
-            if curve is not None:
+            fetch = self._curve_fetch
+            if curve is not None and fetch is not None \
+                    and curve.tightening_id == fetch.tightening_id:
+                fetch.curves.append(curve)           # asked for: handed to fetch_curve
+                if len(fetch.curves) >= fetch.wanted:
+                    fetch.done.set()
+            elif curve is not None:
                 if len(self._curves) >= CURVE_QUEUE:
                     self._curves.popleft()
                     self._curves_dropped += 1
@@ -914,6 +933,80 @@ class OpenProtocolWrench(SupervisedWrench):
                     return None
                 self._cond.wait(remaining)
             return self._curves.popleft()
+
+    def fetch_curve(self, tightening_id: int, timeout: float | None = None) -> list[Curve]:
+        """The angle and torque curves of an earlier tightening (a result fetched after a
+        link cut), asked for with the generic subscription's "stored data between two
+        indexes" (MID 0008 for MID 0900, send alternative 3, first = last = the tightening
+        id; R2.8.0 table 158): the controller answers 0005 and sends that tightening's
+        traces, then the subscription is stopped (MID 0009).  A live curve subscription
+        (``curves_on``) is stopped for it and made again after (a controller holds one
+        subscription per MID); a curve of a new tightening made in that moment is not
+        sent, the result still is.  Empty, logged, when the controller refuses (it keeps
+        none, or not that one: MID 0004) or its traces do not come within ``timeout``, and
+        over RS-232 (binary samples); the curves are not queued for ``wait_curve``.  Other
+        failures raise as commands do (a timeout or a lost link resets the link)."""
+        if isinstance(tightening_id, bool) or not isinstance(tightening_id, int) \
+                or not 1 <= tightening_id <= MAX_TIGHTENING_ID:
+            raise ValueError(f"tightening_id must be an integer 1-{MAX_TIGHTENING_ID}, not "
+                             f"{tightening_id!r}")
+        self._check_open()
+        timeout = self._timeout(timeout)
+        what = f"fetch the curves of tightening {tightening_id}"
+        if self._link.kind == "serial":
+            return []
+        with self._request_lock:
+            epoch = self._current_epoch(what)
+            fetch = _CurveFetch(tightening_id, len(STATION_TRACES))
+            with self._cond:
+                live, self._curve_fetch = self._curves_on, fetch
+            try:
+                return self._replay_curves(fetch, live, epoch, timeout, what)
+            except RefusedError as e:
+                raise self._surface(e, what) from None
+            except DeviceError as e:
+                self._fail_link(e, epoch)
+                raise self._surface(e, what, "; the link is reset and reconnects") from None
+            finally:
+                with self._cond:
+                    self._curve_fetch = None
+
+    def _replay_curves(self, fetch: _CurveFetch, live: bool, epoch: int, timeout: float,
+                       what: str) -> list[Curve]:
+        """``fetch_curve``'s exchange (holding the request lock)."""
+        expect = {op.MID_ACCEPTED, op.MID_ERROR}
+        stop = Message(MID_DATA_UNSUBSCRIBE, data=unsubscribe_data())
+        if live:
+            self._transact(stop, expect, timeout, epoch)
+        refused: RefusedError | None = None
+        try:
+            self._transact(Message(MID_DATA_SUBSCRIBE, data=replay_data(
+                fetch.tightening_id, fetch.tightening_id)), expect, timeout, epoch)
+        except RefusedError as e:
+            refused = e
+        else:
+            fetch.done.wait(timeout)
+            try:
+                self._transact(stop, expect, timeout, epoch)
+            except RefusedError:
+                pass                     # a controller that ended the replay by itself
+        if live:
+            try:
+                self._transact(Message(MID_DATA_SUBSCRIBE, data=subscribe_data()), expect,
+                               timeout, epoch)
+            except RefusedError as e:
+                if e.code != 71:         # 71: it exists, which is the goal
+                    self._curves_off(f"the curves' subscription was refused again after "
+                                     f"fetching old ones: {op.refusal_text(int(e.code or 0))}")
+        with self._cond:
+            got = list(fetch.curves)
+        if refused is not None:
+            log.info("%s: %s: none (MID 0008 refused: %s)", self.device, what,
+                     op.refusal_text(int(refused.code or 0)))
+        elif len(got) < fetch.wanted:
+            log.warning("%s: %s: %d of %d trace(s) came within %g s", self.device, what,
+                        len(got), fetch.wanted, timeout)
+        return sorted(got, key=lambda c: c.trace_type)
 
     # -- old results (MID 0064 -> 0065) ----------------------------------------------------
     can_fetch = True

@@ -105,10 +105,23 @@ class Curve:
 
 def subscribe_data(traces: Iterable[int] = STATION_TRACES) -> bytes:
     """MID 0008 (revision 1) data subscribing to MID 0900 revision 1: the subscribed MID,
-    its revision, the extra data's length, then the extra data: result id 0 and time 0
-    (from the next tightening on), the number of trace types and each (3 digits)."""
+    its revision, the extra data's length, then the extra data (R2.8.0 table 158): send
+    alternative 0 (new data only), the time stamp and index identifiers (zeros: unused), the
+    number of trace types (2 digits) and each (3 digits)."""
+    return _trace_subscription("0" + "0" * 19 + "0" * 10, traces)
+
+
+def replay_data(first: int, last: int, traces: Iterable[int] = STATION_TRACES) -> bytes:
+    """MID 0008 data asking for the stored traces of the tightenings ``first`` to ``last``
+    (R2.8.0 table 158, send alternative 3, "stored data between two indexes": the index is
+    the result's id, the tightening id MID 0900 carries): the first and last index (10
+    digits each), the number of trace types and each."""
+    return _trace_subscription(f"3{first:010d}{last:010d}", traces)
+
+
+def _trace_subscription(head: str, traces: Iterable[int]) -> bytes:
     kinds = list(traces)
-    extra = "0" * 10 + "0" * 19 + f"{len(kinds):03d}" + "".join(f"{t:03d}" for t in kinds)
+    extra = head + f"{len(kinds):02d}" + "".join(f"{t:03d}" for t in kinds)
     return f"{MID_TRACE:04d}001{len(extra):02d}{extra}".encode("ascii")
 
 

@@ -292,6 +292,7 @@ class SimController(OpenProtocolServer):
                 self._refuse(s, mid, 96)
             else:   # on a serial line a new 0001 starts a new session
                 s.started, s.subscribed, s.traces, s.plot = True, False, (), False
+                s.replaying = False
                 s.out.clear()
                 s.start_link_level(False)
                 self.reply(s, mid, 2, self._identity(msg.revision), msg.revision)
@@ -306,7 +307,7 @@ class SimController(OpenProtocolServer):
             pass
         elif mid == 3:
             self._ok(s, mid)
-            s.started = s.subscribed = s.plot = False
+            s.started = s.subscribed = s.plot = s.replaying = False
             s.traces = ()
         elif mid == 5:    # the generic acknowledgement of subscribed data (MID 0900-0902)
             if data[:4] in (b"0900", b"0901", b"0902"):
@@ -334,10 +335,10 @@ class SimController(OpenProtocolServer):
                 self._ok(s, mid)
             elif data[:4] not in (b"0900", b"0901"):
                 self._refuse(s, mid, 73)
-            elif data[:4] == b"0901" or not s.traces:
+            elif data[:4] == b"0901" or not (s.traces or s.replaying):
                 self._refuse(s, mid, 72)      # subscription does not exist
             else:
-                s.traces = ()
+                s.traces, s.replaying = (), False
                 self._ok(s, mid)
         elif mid == 18:
             self._select(s, data)
@@ -398,29 +399,69 @@ class SimController(OpenProtocolServer):
                     s.unacked.append(tid)
 
     def _data_subscription(self, s: Session, data: bytes) -> None:
-        """MID 0008: subscribed MID 4, its revision 3, extra data length 2, extra data
-        (result id 10, time 19, number of trace types 3, each trace type 3).  Only MID 0900
-        revision 1 is served, angle and torque traces."""
+        """MID 0008: subscribed MID 4, its revision 3, extra data length 2, extra data (R2.8.0
+        table 158 for MID 0900: send alternative 1; for 0-2 the time stamp 19 and index 10
+        identifiers, for 3 the first and last index 10 each; then the number of trace types
+        2 and each trace type 3).  Only MID 0900 revision 1 is served, angle and torque
+        traces, new data (alternative 0, time and index unused) or the stored traces of the
+        tightenings between two indexes (alternative 3: sent at once, after the 0005; the
+        subscription then stays, sending nothing new, until MID 0009); other alternatives
+        are refused with 78, an index range this controller has no result of with 01."""
         if data[:4] != b"0900":
             self._refuse(s, 8, 73)            # subscribed MID unsupported
-        elif not self.curves:
+            return
+        if not self.curves:
             self._refuse(s, 8, self.curves_refusal_code)
-        elif data[4:7].strip(b" ") not in (b"", b"000", b"001"):
+            return
+        if data[4:7].strip(b" ") not in (b"", b"000", b"001"):
             self._refuse(s, 8, 74)            # subscribed MID revision unsupported
-        elif s.traces:
+            return
+        if s.traces or s.replaying:
             self._refuse(s, 8, 71)            # subscription already exists
+            return
+        extra = data[9:]
+        alternative = extra[:1]
+        if alternative == b"3":
+            span, kinds_at = (extra[1:11], extra[11:21]), 21
+        elif alternative == b"0" or not alternative:
+            span, kinds_at = None, 30
         else:
-            extra = data[9:]
-            count = extra[29:32]
-            kinds = [int(extra[32 + 3 * i:35 + 3 * i]) for i in range(int(count))
-                     if extra[32 + 3 * i:35 + 3 * i].isdigit()] if count.isdigit() else []
-            if not kinds:
-                kinds = [1, 2]
-            if any(k not in (1, 2) for k in kinds):
-                self._refuse(s, 8, 78)        # a trace type this controller does not make
-                return
+            self._refuse(s, 8, 78)            # stored data by time: not kept here
+            return
+        count = extra[kinds_at:kinds_at + 2]
+        kinds = [int(extra[kinds_at + 2 + 3 * i:kinds_at + 5 + 3 * i])
+                 for i in range(int(count))
+                 if extra[kinds_at + 2 + 3 * i:kinds_at + 5 + 3 * i].isdigit()] \
+            if count.isdigit() else []
+        if not kinds:
+            kinds = [1, 2]
+        if any(k not in (1, 2) for k in kinds):
+            self._refuse(s, 8, 78)        # a trace type this controller does not make
+            return
+        if span is None:
             s.traces = tuple(kinds)
             self._ok(s, 8)
+            return
+        if not all(i.isdigit() for i in span):
+            self._refuse(s, 8, 1)
+            return
+        first, last = (int(i) for i in span)
+        records = [r for tid, r in self._store.items() if first <= tid <= last]
+        if not records:
+            self._refuse(s, 8, 1)             # no such result (any more)
+            return
+        s.replaying = True
+        self._ok(s, 8)
+        for record in records:
+            self._send_traces(s, record, kinds)
+
+    def _send_traces(self, s: Session, record: SimRecord, kinds: Iterable[int]) -> None:
+        """MID 0900 of ``record`` for each trace type (in parts when long)."""
+        for kind in kinds:
+            for part in in_parts(mid0900(record, kind, self.curve_samples), self.part_size):
+                self.post(s, part)
+                self.parts_sent += 1
+            self.curves_sent += 1
 
     def _old_result(self, s: Session, msg: Received) -> None:
         """MID 0064 (a tightening id, 0 = the newest) -> MID 0065 of its revision, or 0004
@@ -518,12 +559,7 @@ class SimController(OpenProtocolServer):
                 s.unacked.append(self._tid)
         for s in self.sessions():       # the curves after every result: never before one
             if s.started:
-                for kind in s.traces:
-                    for part in in_parts(mid0900(record, kind, self.curve_samples),
-                                         self.part_size):
-                        self.post(s, part)
-                        self.parts_sent += 1
-                    self.curves_sent += 1
+                self._send_traces(s, record, s.traces)
                 if s.plot:
                     self.post(s, mid0901(record))
         return SimTightening(self._tid, pset, ok, t_val / 100, float(a_val), t_stat,

@@ -148,6 +148,7 @@ class Session:
         self.last_rx = time.monotonic()
         self.unacked: list[int] = []    # results (tightening ids) sent, awaiting MID 0062
         self.traces: tuple[int, ...] = ()   # trace types subscribed with MID 0008 (0900)
+        self.replaying = False              # a MID 0008 for stored traces (alternative 3)
         self.plot = False                   # MID 0901 subscribed with MID 0008
         # link level: off until the controller says so (after its 0002)
         self.link_level = self.link_capable = False

@@ -3,15 +3,19 @@ a hand-written integrator on a raw socket (not by our client), and its entry poi
 
 from __future__ import annotations
 
+import io
 import os
+import queue
 import socket
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
 
-from drivers.wrench import open_wrench
+from drivers.wrench import open_wrench, sim_cli
+from drivers.wrench.base import TighteningResult
 from drivers.wrench.sim import SimController
 
 from .conftest import FAST, op, read_message, wait_until
@@ -130,6 +134,7 @@ def test_link_level_resends_then_drops():
     assert (sim.resent, sim.link_drops) == (3, 1)
 
 
+@pytest.mark.system     # another Python process (tests/system.py)
 def test_the_entry_point_serves_an_integrator(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(
@@ -157,6 +162,7 @@ def test_the_entry_point_serves_an_integrator(tmp_path):
     assert proc.returncode == 0, err
 
 
+@pytest.mark.system     # another Python process (tests/system.py)
 def test_the_entry_point_says_what_is_wrong():
     done = subprocess.run([sys.executable, "-m", "drivers.wrench.sim", "--refuse", "x:y"],
                           capture_output=True, text=True, cwd=ROOT, timeout=30, check=False)
@@ -167,3 +173,35 @@ def test_the_entry_point_says_what_is_wrong():
 def test_bad_controller_settings(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):
         SimController(**bad)
+
+
+def test_the_behaviour_options_in_process(tmp_path):
+    """``--result-types``, ``--mislabel`` and ``--clock-offset`` (shared with ``stationd sim
+    controller``), served by ``sim_cli.serve`` in this process."""
+    args = sim_cli.parser().parse_args(["--port", "0", "--nok-rate", "0", "--trigger-every",
+                                        "0.05", "--result-types", "3,1", "--mislabel", "3",
+                                        "--clock-offset", "120"])
+    assert (args.result_types, args.mislabel, args.clock_offset) == ([3, 1], 3, 120.0)
+    sim = SimController(nok_rate=args.nok_rate, **sim_cli.behaviour(args))
+    stop, ports = threading.Event(), queue.SimpleQueue()
+    server = threading.Thread(target=sim_cli.serve, args=(
+        sim, "127.0.0.1", 0, args.trigger_every, stop, lambda p: ports.put(p) or ""),
+        kwargs={"out": io.StringIO(), "types": args.result_types})
+    server.start()
+    try:
+        port = ports.get(timeout=5)
+        with open_wrench(f"openprotocol://127.0.0.1:{port}", **FAST) as w:
+            offset = w.clock_offset_s
+            assert offset is not None and 118 < offset < 122
+            w.select_pset(1)
+            w.enable_tool()
+            got = [w.wait_result(2.0) for _ in range(4)]
+            w.disable_tool()
+    finally:
+        stop.set()
+        server.join(timeout=10)
+    codes = [g.result_type_code for g in got if isinstance(g, TighteningResult)]
+    assert codes == [3, 1, 3, 1]
+    assert all(g is not None and g.revision == 3 for g in got)
+    with pytest.raises(SystemExit):
+        sim_cli.parser().parse_args(["--result-types", "1,100"])
