@@ -202,6 +202,7 @@ class OpenProtocolWrench(SupervisedWrench):
         # supervisor; later sessions: asked for at most), and what was said once
         self._result_cap = RESULT_REVISIONS[0]
         self._renew_at: int | None = None       # a renewal owed (guarded by _cond)
+        self._renewer: threading.Thread | None = None   # the thread doing it
         self._lowered_said: set[tuple[int, int, int]] = set()   # (MID, header, read at)
         self._ident: ControllerIdentity | None = None
         self._clock_offset: float | None = None   # MID 0081 minus the station's clock
@@ -315,6 +316,8 @@ class OpenProtocolWrench(SupervisedWrench):
         self._fail_link(DeviceError("closed"), closing=True)
         if self._thread is not None:
             self._thread.join()
+        if self._renewer is not None:      # its command failed with the link: it ends
+            self._renewer.join()
         with self._write_lock:
             self._link.close()
 
@@ -588,42 +591,56 @@ class OpenProtocolWrench(SupervisedWrench):
                     if mid == op.MID_RESULT else "")
 
     def _renew_subscription(self) -> None:
-        """The supervisor's: unsubscribe (0063) and subscribe (0060) at the revision results
-        were last read at, so the next ones read cleanly.  Only when no command is in
-        flight (else at the next turn: a caller waits for this thread to read its answer);
-        this thread holds the reading side, so it reads the answers itself.  A result the
-        controller makes between the two is not pushed: the station's tightening-id gap
-        check fetches it (MID 0064).  A failure resets the link; the next session asks for
-        that revision at most."""
+        """The supervisor's turn: start the renewal owed (``_result_in``) in a thread of its
+        own, one at a time.  Not on this thread, which reads the link: the renewal waits
+        for the one command in flight to finish (a caller's, whose answer this thread must
+        read) and, at link level, for the one numbered message outstanding (a caller's
+        0062, whose 9997 this thread must read)."""
         with self._cond:
             rev, epoch = self._renew_at, self._epoch
-            if rev is None or not self._connected:
+            busy = self._renewer is not None and self._renewer.is_alive()
+            if rev is None or busy or not self._connected or self._stopping:
                 return
-        if not self._request_lock.acquire(blocking=False):
-            return
-        try:
-            with self._cond:
-                if epoch != self._epoch:
-                    return
-                self._renew_at = None
-            expect = {op.MID_ACCEPTED, op.MID_ERROR}
+            self._renew_at = None
+            self._renewer = threading.Thread(target=self._renew, args=(rev, epoch),
+                                             daemon=True, name=f"wrench-renew {self.device}")
+            self._renewer.start()
+
+    def _renew(self, rev: int, epoch: int) -> None:
+        """Unsubscribe (0063) and subscribe (0060) at revision ``rev`` or lower, as a command
+        (the supervisor dispatches the answers), so the next results read cleanly.  A result
+        the controller makes between the two is not pushed (fetch it by its tightening id,
+        MID 0064).  A failure resets the link; the next session asks for ``rev`` at most."""
+        expect = {op.MID_ACCEPTED, op.MID_ERROR}
+        agreed: int | None = None
+        with self._request_lock:
             try:
                 try:
-                    self._transact(Message(op.MID_RESULT_UNSUBSCRIBE), expect, self.timeout)
+                    self._transact(Message(op.MID_RESULT_UNSUBSCRIBE), expect, self.timeout,
+                                   epoch)
                 except RefusedError as e:
                     if e.code != 10:            # 10: no subscription, which is the goal
                         raise
-                _, agreed = self._negotiate(op.MID_RESULT_SUBSCRIBE,
-                                            [r for r in RESULT_REVISIONS if r <= rev], expect)
+                for r in [r for r in RESULT_REVISIONS if r <= rev]:
+                    try:
+                        self._transact(Message(op.MID_RESULT_SUBSCRIBE, revision=r), expect,
+                                       self.timeout, epoch)
+                    except RefusedError as e:
+                        if e.code not in op.REVISION_REFUSALS or r == 1:
+                            raise
+                        continue
+                    agreed = r
+                    break
             except DeviceError as e:
                 self._fail_link(type(e)(f"renewing the result subscription at revision "
                                         f"{rev}: {e}", code=e.code), epoch)
                 return
-            self._agree(op.MID_RESULT_SUBSCRIBE, agreed)
+        if agreed is not None:
+            with self._cond:
+                if epoch == self._epoch:
+                    self._revisions[op.MID_RESULT_SUBSCRIBE] = agreed
             log.info("%s: results subscribed again at MID 0061 revision %d", self.device,
                      agreed)
-        finally:
-            self._request_lock.release()
 
     def _curve_in(self, msg: Message) -> None:
         """A MID 0900: queued apart from the results (bounded: the oldest goes), and its

@@ -91,13 +91,17 @@ def test_a_result_labelled_another_revision_than_subscribed_is_read_at_its_own(t
         assert sim.received(63) == []
 
 
-def test_a_controller_that_claims_more_than_it_implements(tmp_path, caplog):
+@pytest.mark.parametrize("link_ack", [False, True])
+def test_a_controller_that_claims_more_than_it_implements(link_ack, tmp_path, caplog):
     """The field case: subscribed at 7, revision 1 bodies with fields appended labelled 7.
     The first is read as revision 1 (said once), the subscription is renewed at revision 1
-    (0063, then 0060 revision 1), and the next results come labelled 1 and read cleanly."""
+    (0063, then 0060 revision 1), and the next results come labelled 1 and read cleanly.
+    With link-level acknowledgement too: the renewal waits its turn behind the result's
+    0062 (whose 9997 the reading thread must read)."""
     caplog.set_level(logging.INFO, logger="drivers.wrench.client")
-    with SimController(seed=3, nok_rate=0.0, mislabel=1) as sim, \
+    with SimController(seed=3, nok_rate=0.0, mislabel=1, link_ack=link_ack) as sim, \
             connect(sim, "tcp", tmp_path) as w:
+        assert w.link_level is link_ack
         ready(w)
         truth = sim.pull_trigger()
         got = w.wait_result(1.0)
