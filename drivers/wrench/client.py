@@ -17,8 +17,12 @@ Revisions: the session asks for the highest revision of 0001 (6) and 0060 (7: re
 as MID 0061 revision 7) this driver reads, and one lower each time the controller answers
 MID 0004 "revision unsupported" (97, 76 or 74), as integrators' clients do; ``revisions``
 says what was agreed.  ``fetch_result`` asks for an old result (MID 0064 -> 0065) the same
-way.  Link-level acknowledgement (``op_link.py``) is on when the controller's 0002 says it
-supports it (or the URL says ``link_ack=1``).
+way.  A result is read by its own header's revision (``op_reading.py``): one laid out as a
+lower revision is read so, said once, and the subscription renewed at that revision; one
+that reads at no revision is queued as an ``UnreadableResult``, acknowledged (0062) like a
+result once the station has stored it.  Each session start also asks the controller's clock
+(MID 0080 -> 0081: ``clock_offset_s``).  Link-level acknowledgement (``op_link.py``) is on
+when the controller's 0002 says it supports it (or the URL says ``link_ack=1``).
 
 Tightening curves (``op_curve.py``), optional: ``subscribe_curves()`` (or ``curves=1`` in the
 URL) asks for the angle and torque traces with the generic subscription (MID 0008 for MID
@@ -30,7 +34,8 @@ with MID 0005 naming it (the generic acknowledgement of subscribed data) unless 
 no-ack flag is set, sent by the supervisor without waiting for anyone; ``close()`` stops the
 subscription (MID 0009) before the communication stop.  Curves are binary, so they are asked
 for over TCP only.  A curve longer than one message comes in parts (``op_parts.py``): put
-together before it is read, and acknowledged once, after its last part.  MID 0901 (plot
+together before it is read, and acknowledged once, after its last part.  ``fetch_curve``
+asks for an earlier tightening's traces (MID 0008, send alternative 3).  MID 0901 (plot
 parameters) and 0902 (the result database's extent) are not asked for; one that comes anyway
 is read (``op_tracedata.py``), acknowledged and logged, never used (that module says why).
 """
