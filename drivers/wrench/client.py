@@ -105,6 +105,8 @@ VIN_LENGTH = 25        # MID 0050 revision 1 carries a 25-character VIN
 START_REVISIONS = (6, 5, 4, 3, 2, 1)
 RESULT_REVISIONS = (7, 6, 5, 4, 3, 2, 1)
 MAX_TIGHTENING_ID = 9_999_999_999            # 10 digits
+CATCH_UP = 10          # results fetched after a renewal of the subscription, at most
+NO_ACK = -1            # the acknowledgement token of a fetched result: no 0062 to send
 CLOCK_TIMEOUT = 1.0    # the most MID 0080 (the controller's clock) is waited for at connect
 CURVE_QUEUE = 64       # curves held for the reader; past that the oldest is dropped (logged)
 #: subscribed data acknowledged with MID 0005 naming its MID (the generic acknowledgement)
@@ -208,6 +210,11 @@ class OpenProtocolWrench(SupervisedWrench):
         self._result_cap = RESULT_REVISIONS[0]
         self._renew_at: int | None = None       # a renewal owed (guarded by _cond)
         self._renewer: threading.Thread | None = None   # the thread doing it
+        # the newest tightening id pushed on this link, and those fetched by the renewal's
+        # catch-up (a push of one of them is acknowledged at once, not handed out twice)
+        self._last_pushed: int | None = None
+        self._caught_up: set[int] = set()
+        self._owed_acks = 0                     # 0062s for those pushes, sent by the supervisor
         self._lowered_said: set[tuple[int, int, int]] = set()   # (MID, header, read at)
         self._ident: ControllerIdentity | None = None
         self._clock_offset: float | None = None   # MID 0081 minus the station's clock
@@ -346,6 +353,8 @@ class OpenProtocolWrench(SupervisedWrench):
         self._last_sent, self._keepalive_sent = time.monotonic(), None
         with self._cond:      # 0001/0002 reset the link level: decided anew below
             self._linking, self._tx_seq, self._renew_at = False, 0, None
+            self._last_pushed, self._owed_acks = None, 0
+            self._caught_up.clear()
             cap = self._result_cap
             self._curves_on = False
             self._owed_data_acks.clear()
@@ -572,6 +581,13 @@ class OpenProtocolWrench(SupervisedWrench):
         answers)."""
         item = receive(msg)
         with self._cond:
+            tid = item.tightening_id
+            if tid is not None:
+                if tid in self._caught_up:       # fetched while the subscription was renewed
+                    self._caught_up.discard(tid)
+                    self._owed_acks += 1         # the station has it: acknowledged, not
+                    return                       # handed out again
+                self._last_pushed = max(tid, self._last_pushed or 0)
             subscribed = self._revisions.get(op.MID_RESULT_SUBSCRIBE)
             if isinstance(item, UnreadableResult):
                 log.warning("%s: MID 0061 revision %d does not read at any revision (%s); "
@@ -626,6 +642,8 @@ class OpenProtocolWrench(SupervisedWrench):
                 except RefusedError as e:
                     if e.code != 10:            # 10: no subscription, which is the goal
                         raise
+                with self._cond:                # nothing is pushed after the 0063's answer
+                    before = self._last_pushed
                 for r in [r for r in RESULT_REVISIONS if r <= rev]:
                     try:
                         self._transact(Message(op.MID_RESULT_SUBSCRIBE, revision=r), expect,
@@ -636,6 +654,8 @@ class OpenProtocolWrench(SupervisedWrench):
                         continue
                     agreed = r
                     break
+                if before is not None:
+                    self._catch_up(before, epoch)
             except DeviceError as e:
                 self._fail_link(type(e)(f"renewing the result subscription at revision "
                                         f"{rev}: {e}", code=e.code), epoch)
@@ -646,6 +666,29 @@ class OpenProtocolWrench(SupervisedWrench):
                     self._revisions[op.MID_RESULT_SUBSCRIBE] = agreed
             log.info("%s: results subscribed again at MID 0061 revision %d", self.device,
                      agreed)
+
+    def _catch_up(self, before: int, epoch: int) -> None:
+        """The results made while the subscription was being renewed (after the 0063, before
+        the 0060: never pushed), fetched by tightening id from ``before`` + 1 (MID 0064) and
+        queued as fetched (nothing to acknowledge), up to ``CATCH_UP`` of them; it stops at
+        the first the controller does not have, or that was pushed meanwhile (the ones after
+        it are pushed too).  One fetched and then pushed as well (made just after the 0060)
+        is acknowledged when pushed and not handed out twice.  Called holding the request
+        lock, in the renewal's thread."""
+        for tid in range(before + 1, before + 1 + CATCH_UP):
+            with self._cond:
+                if self._last_pushed is not None and tid <= self._last_pushed:
+                    return
+            result = self._fetch(tid, self.timeout, epoch, f"fetch tightening {tid}")
+            if result is None:
+                return
+            with self._cond:
+                if self._last_pushed is not None and tid <= self._last_pushed:
+                    return                       # pushed while it was being fetched
+                self._caught_up.add(tid)
+                self._queue_result(result, NO_ACK)
+            log.warning("%s: tightening %d made while the result subscription was renewed: "
+                        "fetched (MID 0064)", self.device, tid)
 
     def _curve_in(self, msg: Message) -> None:
         """A MID 0900: queued apart from the results (bounded: the oldest goes), and its
@@ -708,9 +751,18 @@ class OpenProtocolWrench(SupervisedWrench):
                     "message, ignored", self.device, msg.mid, msg.sequence)
 
     def _flush_owed(self) -> None:
-        """Send the MID 0005s owed for subscribed data ("0900", ...) (supervisor only):
-        never waiting for the one-outstanding slot, which a caller may hold while this
-        thread reads its acknowledgement."""
+        """Send the 0062s owed for pushes of results already fetched, and the MID 0005s
+        owed for subscribed data ("0900", ...) (supervisor only): never waiting for the
+        one-outstanding slot, which a caller may hold while this thread reads its
+        acknowledgement."""
+        while True:
+            with self._cond:
+                if not self._owed_acks:
+                    break
+            if not self._send(Message(op.MID_RESULT_ACK), block=False):
+                return
+            with self._cond:
+                self._owed_acks -= 1
         while True:
             with self._cond:
                 if not self._owed_data_acks or self._stopping:
@@ -1054,29 +1106,40 @@ class OpenProtocolWrench(SupervisedWrench):
         self._check_open()
         timeout = self._timeout(timeout)
         what = f"fetch tightening {tightening_id or '(newest)'}"
-        data = f"{tightening_id:010d}".encode()
         with self._request_lock:
             epoch = self._current_epoch(what)
-            with self._cond:
-                agreed = self._revisions.get(op.MID_OLD_RESULT_REQUEST)
-            for rev in (agreed,) if agreed else RESULT_REVISIONS:
-                try:
-                    reply = self._transact(Message(op.MID_OLD_RESULT_REQUEST, revision=rev,
-                                                   data=data),
-                                           {op.MID_OLD_RESULT, op.MID_ERROR}, timeout, epoch)
-                except RefusedError as e:
-                    if e.code in op.REVISION_REFUSALS and rev > 1:
-                        continue
-                    if e.code == op.NOT_FOUND:
-                        self._agree(op.MID_OLD_RESULT_REQUEST, rev)
-                        return None
-                    raise self._surface(e, what) from None
-                except DeviceError as e:
-                    self._fail_link(e, epoch)
-                    raise self._surface(e, what, "; the link is reset and reconnects") \
-                        from None
-                self._agree(op.MID_OLD_RESULT_REQUEST, rev)
-                return self._old_result(reply, tightening_id, what)
+            try:
+                return self._fetch(tightening_id, timeout, epoch, what)
+            except RefusedError as e:
+                raise self._surface(e, what) from None
+            except ProtocolError:
+                raise
+            except DeviceError as e:
+                self._fail_link(e, epoch)
+                raise self._surface(e, what, "; the link is reset and reconnects") from None
+
+    def _fetch(self, tightening_id: int, timeout: float, epoch: int, what: str
+               ) -> Received | None:
+        """MID 0064 -> 0065 at the agreed revision (or the highest not refused), holding the
+        request lock: the result, or None for "not found"; other refusals and failures
+        raise as they come."""
+        data = f"{tightening_id:010d}".encode()
+        with self._cond:
+            agreed = self._revisions.get(op.MID_OLD_RESULT_REQUEST)
+        for rev in (agreed,) if agreed else RESULT_REVISIONS:
+            try:
+                reply = self._transact(Message(op.MID_OLD_RESULT_REQUEST, revision=rev,
+                                               data=data),
+                                       {op.MID_OLD_RESULT, op.MID_ERROR}, timeout, epoch)
+            except RefusedError as e:
+                if e.code in op.REVISION_REFUSALS and rev > 1:
+                    continue
+                if e.code == op.NOT_FOUND:
+                    self._agree(op.MID_OLD_RESULT_REQUEST, rev)
+                    return None
+                raise
+            self._agree(op.MID_OLD_RESULT_REQUEST, rev)
+            return self._old_result(reply, tightening_id, what)
         raise AssertionError("unreachable: revision 1's refusal is raised")
 
     def _agree(self, mid: int, rev: int) -> None:
@@ -1107,7 +1170,10 @@ class OpenProtocolWrench(SupervisedWrench):
 
     def _send_ack(self, token: int, timeout: float) -> None:
         """MID 0062 on the link the result came on: 0062 names no result, so on a new
-        session it would acknowledge whatever that session sent, not this one."""
+        session it would acknowledge whatever that session sent, not this one.  A result
+        fetched by the driver itself (``NO_ACK``) has none."""
+        if token == NO_ACK:
+            return
         self._send(Message(op.MID_RESULT_ACK), epoch=token, timeout=timeout)
 
     def _select_pset(self, pset: int, timeout: float) -> None:

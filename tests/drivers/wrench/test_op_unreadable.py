@@ -178,3 +178,33 @@ def test_fetching_a_result_that_does_not_read(sim, tmp_path):
         again = w.fetch_result(t.tightening_id)
         assert isinstance(again, TighteningResult) and again.header_revision is None
         assert [r.revision for r in sim.received(64)] == [7, 7, 1]
+
+
+class TightensDuringTheRenewal(SimController):
+    """The operator tightens in the moment between the driver's 0063 and its 0060: that
+    result is never pushed (nobody is subscribed when it is made)."""
+
+    def handle(self, s, msg) -> None:
+        super().handle(s, msg)
+        if msg.mid == 63:
+            self.during = self._tighten(1)
+
+
+def test_a_result_made_while_the_subscription_is_renewed_is_fetched(tmp_path, caplog):
+    caplog.set_level(logging.WARNING, logger="drivers.wrench.client")
+    with TightensDuringTheRenewal(seed=3, nok_rate=0.0, mislabel=1) as sim, \
+            connect(sim, "tcp", tmp_path) as w:
+        ready(w)
+        first = sim.pull_trigger()
+        got = [w.wait_result(1.0), w.wait_result(1.0)]
+        assert wait_until(lambda: w.revisions[60] == 1)
+        after = sim.pull_trigger()
+        third = w.wait_result(1.0)
+        assert w.wait_result(0.2) is None                        # nothing twice
+    assert first is not None and after is not None
+    assert [g.tightening_id for g in got if g is not None] == [1, 2]
+    assert [getattr(g, "fetched", None) for g in got] == [False, True]
+    assert sim.during is not None and sim.during.tightening_id == 2
+    assert third is not None and (third.tightening_id, third.fetched) == (3, False)
+    assert sim.acked_ids == [1, 3] and sim.errors == []          # no 0062 for a fetched one
+    assert "tightening 2 made while the result subscription was renewed" in caplog.text
