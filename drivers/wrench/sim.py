@@ -166,8 +166,9 @@ class SimController(OpenProtocolServer):
         self._rng = random.Random(seed)  # noqa: S311 - seeded simulation scatter, not security
         self.mislabel, self.send_revision = mislabel, send_revision
         self._garble: Garble | None = None       # the next result's body spoiled so
-        skew = timedelta(seconds=clock_offset_s)
-        self._clock = clock or (lambda: (datetime.now() + skew).replace(microsecond=0))
+        self.clock_offset_s = clock_offset_s     # read at each tick: may be changed live
+        self._clock = clock or (lambda: (datetime.now() + timedelta(
+            seconds=self.clock_offset_s)).replace(microsecond=0))
         self._refuse_pset: dict[int, int] = dict(refusals or {})
         self._refuse_mid: dict[int, int] = {}
         self._refuse_rev: dict[int, set[int]] = {
@@ -606,12 +607,14 @@ class SimWrench(OpenProtocolWrench):
     @classmethod
     def from_url(cls, url: DeviceUrl, **kw: Any) -> SimWrench:
         """Options: transport, seed, nok_rate and the client's; keywords: those, plus the
-        controller's psets, refusals, clock and silence_timeout."""
+        controller's psets, refusals, clock, silence_timeout, mislabel, send_revision and
+        clock_offset_s."""
         if url.host != "wrench" or url.path not in ("", "/"):
             raise url.error("expected sim://wrench")
         spec: Spec = {**OPTIONS, "transport": (str, "tcp"), "seed": (int, 0),
                       "nok_rate": (float, 0.05)}
-        sim_kw = {k: kw.pop(k) for k in ("psets", "refusals", "clock", "silence_timeout")
+        sim_kw = {k: kw.pop(k) for k in ("psets", "refusals", "clock", "silence_timeout",
+                                         "mislabel", "send_revision", "clock_offset_s")
                   if k in kw}
         opts = url.typed_options(spec, "sim://wrench?transport=serial&seed=1&nok_rate=0.1")
         opts.update(keyword_options(kw, spec))

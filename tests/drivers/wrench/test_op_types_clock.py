@@ -7,8 +7,9 @@ from datetime import datetime
 
 import pytest
 
+from drivers.wrench import open_wrench
 from drivers.wrench.base import ResultKind, ResultType, TighteningResult, result_kind
-from drivers.wrench.sim import SimController
+from drivers.wrench.sim import SimController, SimWrench
 
 from .conftest import connect, reconnect_within, wait_until
 
@@ -99,3 +100,20 @@ def test_results_made_during_a_link_cut_are_kept_and_fetched(sim, tmp_path):
     assert all(isinstance(f, TighteningResult) and f.fetched for f in fetched)
     assert [f.result_type_code for f in fetched if isinstance(f, TighteningResult)] == [1, 2]
     assert newest is not None and newest.tightening_id == 3
+
+
+def test_sim_wrench_takes_the_controllers_behaviour_as_keywords():
+    with open_wrench("sim://wrench?nok_rate=0", mislabel=2, clock_offset_s=30.0,
+                     timeout=0.5) as w:
+        assert isinstance(w, SimWrench)
+        offset = w.clock_offset_s
+        assert offset is not None and 28 < offset < 32
+        w.controller.clock_offset_s = -30.0              # the controller's clock set back
+        w.reconnect()
+        offset = w.clock_offset_s
+        assert offset is not None and -32 < offset < -28
+        ready(w)
+        w.controller.pull_trigger(3)
+        got = w.wait_result(1.0)
+    assert isinstance(got, TighteningResult)
+    assert (got.revision, got.header_revision, got.result_type_code) == (2, 7, None)
