@@ -208,3 +208,16 @@ def test_a_result_made_while_the_subscription_is_renewed_is_fetched(tmp_path, ca
     assert third is not None and (third.tightening_id, third.fetched) == (3, False)
     assert sim.acked_ids == [1, 3] and sim.errors == []          # no 0062 for a fetched one
     assert "tightening 2 made while the result subscription was renewed" in caplog.text
+
+
+def test_a_revision_beyond_those_read_gives_the_ones_it_starts_with(sim, tmp_path):
+    """MID 0061 revision 998 is revision 6 plus the stages (PROTOCOLS.md): it starts with a
+    whole revision 6 body (here a revision 7 one), read so; not taken for a revision it
+    is not."""
+    with connect(sim, "tcp", tmp_path) as w:
+        ready(w)
+        r = record(sim, 5)
+    stages = "5401" + "0" * 30                      # a stage count and one stage, roughly
+    text = message(61, result_data(61, 7, r) + stages.encode(), 998).decode()
+    got = read_result(61, 998, text)
+    assert (got.revision, got.header_revision, got.result_type_code) == (7, 998, 5)
