@@ -573,14 +573,12 @@ def build_parser() -> argparse.ArgumentParser:
     from stationd.line_cli import add_line_parser
     from stationd.probe import add_probe_parser
     from stationd.teach_cli import add_teach_parser
-    from stationd.web.status_cli import add_status_parser
 
     add_calibrate_parser(sub)
     _subcommand(sub, "calibrate", "check").set_defaults(func=cmd_calibrate_check)
     add_probe_parser(sub)
     add_db_parser(sub)
     add_config_parser(sub)
-    add_status_parser(sub)
     add_command_parsers(sub)
     add_teach_parser(sub)
     add_line_parser(sub)

@@ -10,7 +10,16 @@ password hashes the station file keeps.
     stationd operator sign-out --user NAME [--comment TEXT]
     stationd operator status
     stationd feed [--since N] [--limit M]
+    stationd status [--json]
     stationd user hash
+
+Which daemon: the one of the station file (``--config STATION.yaml``, by default
+:data:`DEFAULT_CONFIG`, the file the systemd unit runs), at its screens' address
+(``http.listen``, 127.0.0.1:8080 without one) with its ``http.token``; ``--url`` (and
+``--token``) to say another.  Each command first asks the daemon which station it is
+(``/api/status``), names it in its first line, and with a station file refuses to act when
+another station answers (exit 3): a daemon that could not take its port, with another
+station's daemon on it, must not have that station's bolts skipped in its name.
 
 The password comes from ``STATIOND_PASSWORD``, else a prompt (a terminal), else the first
 line of standard input; it never goes on the command line (``ps`` would show it); the http
@@ -29,13 +38,121 @@ import os
 import sys
 import urllib.error
 import urllib.request
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from stationd.access import hash_password
 from stationd.errors import InputError
-from stationd.web.status_cli import DEFAULT_URL, EXIT_UNREACHABLE, status_url
+from stationd.web.status_cli import (
+    DEFAULT_URL,
+    EXIT_FAULT,
+    EXIT_UNREACHABLE,
+    format_status,
+    status_url,
+)
 
 EXIT_REFUSED = 1
+#: the station file a command reads when given none: the one ``stationd run`` is given by
+#: the systemd unit (systemd/stationd.service), so that on a station PC ``stationd status``
+#: asks that station's daemon
+DEFAULT_CONFIG = Path("/etc/stationd/station.yaml")
+
+
+@dataclass(frozen=True)
+class Target:
+    """The daemon a command talks to: its URL and token, and the station it must be
+    (``expected``: ``stationd.config.station_identity`` of the station file; None with
+    ``--url`` alone: whichever answers there, named)."""
+
+    url: str
+    token: str | None
+    expected: dict[str, str | None] | None
+    config: str | None
+
+
+def daemon_url(cfg: Any) -> str:
+    """Where a station's daemon serves its API: its ``http.listen`` (127.0.0.1:8080 without
+    an ``http:`` section, where the demo serves its screens; the daemon serves none there,
+    and a command then says it found no daemon, or another station).  A daemon bound to
+    every address is asked on loopback (a bind is not a client's target)."""
+    from stationd.web.config import DEFAULT_LISTEN, split_listen
+
+    host, port = split_listen(cfg.http.listen if cfg.http is not None else DEFAULT_LISTEN)
+    host = {"0.0.0.0": "127.0.0.1", "::": "::1"}.get(host, host)  # noqa: S104
+    return f"http://{f'[{host}]' if ':' in host else host}:{port}/"
+
+
+def find_station(args: argparse.Namespace) -> Target:
+    """The daemon of ``--config`` (or :data:`DEFAULT_CONFIG`), or at ``--url``; bad input
+    (exit 2) when neither names one."""
+    timeout = getattr(args, "timeout", 15.0)
+    if not 0 < timeout <= 3600:    # NaN too; before the file is read
+        raise InputError(f"--timeout {timeout:g}: expected seconds in (0, 3600]")
+    config: str | None = getattr(args, "config", None)
+    url: str | None = getattr(args, "url", None)
+    token: str | None = getattr(args, "token", None)
+    if config is None and url is None:
+        if not DEFAULT_CONFIG.exists():
+            raise InputError(f"which station: no {DEFAULT_CONFIG} here (the station file the "
+                             "daemon runs); give --config STATION.yaml, or --url "
+                             "http://HOST:PORT/ of its screens")
+        config = str(DEFAULT_CONFIG)
+    if config is None:
+        assert url is not None  # noqa: S101 - neither given was handled above
+        status_url(url)   # checked before anything is read: bad input is exit 2
+        return Target(url, token, None, None)
+    from stationd.config import load_station_config, station_identity
+
+    cfg = load_station_config(config)
+    if token is None and cfg.http is not None:
+        token = cfg.http.token
+    return Target(url or daemon_url(cfg), token, station_identity(cfg), config)
+
+
+def station_words(url: str, station: Any) -> str:
+    """The station that answered at ``url``, as a command's first line names it."""
+    if not isinstance(station, dict) or (not station.get("config") and not station.get("id")):
+        return f"station at {url}: it does not say which (not a stationd daemon of this " \
+               "version?)"
+    if station.get("id"):
+        return f"station {station['id']} at {url} ({station.get('config') or 'its file unsaid'})"
+    return f"station at {url}: {station.get('config')} (no station id: line.station_id or " \
+           "opcua.station_id)"
+
+
+def same_station(expected: dict[str, str | None], answered: Any) -> bool:
+    """Whether the station that answered is the one the station file names: the same file
+    (resolved), or the same station id (a copy of its file, on another PC)."""
+    if not isinstance(answered, dict):
+        return False
+    if expected.get("config") and answered.get("config") == expected["config"]:
+        return True
+    return bool(expected.get("id")) and answered.get("id") == expected["id"]
+
+
+def identify(client: ApiClient, target: Target, what: str, *, out: Any = None
+             ) -> dict[str, Any] | int:
+    """Ask the daemon which station it is (its ``/api/status``, which is returned), name it
+    on ``out`` (stdout, or stderr for a command whose stdout is JSON); an exit code instead
+    when nothing answers, something else answers, or another station does."""
+    try:
+        status, doc = client.call("/api/status")
+    except (urllib.error.URLError, OSError) as exc:
+        return _unreachable(target.url, exc, what)
+    if status != 200 or not isinstance(doc, dict):
+        return say_refused(what, status, doc)
+    answered = doc.get("station")
+    if target.expected is not None and not same_station(target.expected, answered):
+        want = station_words(target.url, target.expected).split(" at ", 1)[0] \
+            if target.expected.get("id") else f"the station of {target.expected['config']}"
+        sys.stderr.write(
+            f"stationd: {what}: {station_words(target.url, answered)}, not {want} "
+            f"(--config {target.config}): nothing done; is that station's daemon running, "
+            "and serving its screens at its http.listen? (--url to say where)\n")
+        return EXIT_UNREACHABLE
+    print(station_words(target.url, answered), file=out or sys.stdout, flush=True)
+    return doc
 
 
 class ApiClient:
@@ -91,7 +208,8 @@ def read_password() -> str:
 def say_refused(what: str, status: int, answer: Any) -> int:
     """A refusal before the station saw the command (the token, the login, the API)."""
     if status == 401 and str(answer).startswith("token required"):
-        answer = "the daemon refused the http token (--token or STATIOND_TOKEN)"
+        answer = ("the daemon refused the http token (HTTP 401; --token, the station file's "
+                  "http.token, or STATIOND_TOKEN)")
     elif status in (404, 405) or not str(answer).strip():
         # another server on that port (it said nothing a person could use, or has no such
         # page): said so, never "login refused: " with nothing after it
@@ -127,9 +245,10 @@ def check_comment(comment: str | None) -> None:
                          "given)")
 
 
-def _unreachable(url: str, exc: BaseException) -> int:
+def _unreachable(url: str, exc: BaseException, what: str = "") -> int:
     reason = getattr(exc, "reason", exc)
-    sys.stderr.write(f"stationd: no daemon answers at {url}: {reason}\n")
+    sys.stderr.write(f"stationd: {what + ': ' if what else ''}no daemon answers at {url}: "
+                     f"{reason}\n")
     return EXIT_UNREACHABLE
 
 
@@ -145,10 +264,16 @@ def cmd_command(args: argparse.Namespace) -> int:
 
 
 def _session_command(args: argparse.Namespace, user: str, body: dict[str, Any]) -> int:
-    """Log in as ``user``, give ``body``'s command, print the station's answer."""
-    client = ApiClient(args.url, args.token, args.timeout)
+    """Name the station, log in as ``user``, give ``body``'s command, print the station's
+    answer."""
+    target = find_station(args)
+    client = ApiClient(target.url, target.token, args.timeout)
+    known = identify(client, target, body["kind"])   # named before the password is asked
+    if isinstance(known, int):
+        return known
+    password = read_password()
     try:
-        status, who = client.call("/api/login", {"user": user, "password": read_password(),
+        status, who = client.call("/api/login", {"user": user, "password": password,
                                                  "client": "cli"})
         if status != 200:
             return say_refused("login refused", status, who)
@@ -156,14 +281,14 @@ def _session_command(args: argparse.Namespace, user: str, body: dict[str, Any]) 
         if status != 200 or not isinstance(nonce, dict):
             return say_refused(body["kind"], status, nonce)
     except (urllib.error.URLError, OSError) as exc:
-        return _unreachable(args.url, exc)
+        return _unreachable(target.url, exc)
     try:
         status, answer = client.call("/api/commands", {**body, "nonce": nonce["nonce"]})
     except (urllib.error.URLError, OSError) as exc:
         # the daemon answered the login: the command may well have been taken; giving it
         # again blind could skip or loosen twice, so say what is known and where to look
         sys.stderr.write(
-            f"stationd: {body['kind']}: sent to {args.url}, but its answer did not arrive "
+            f"stationd: {body['kind']}: sent to {target.url}, but its answer did not arrive "
             f"({getattr(exc, 'reason', exc)}); it may have been accepted: check the "
             "journal or `stationd status` before giving it again\n")
         return EXIT_UNREACHABLE
@@ -193,13 +318,11 @@ def cmd_operator(args: argparse.Namespace) -> int:
 
 
 def _operator_status(args: argparse.Namespace) -> int:
-    client = ApiClient(args.url, args.token, args.timeout)
-    try:
-        status, doc = client.call("/api/status")
-    except (urllib.error.URLError, OSError) as exc:
-        return _unreachable(args.url, exc)
-    if status != 200 or not isinstance(doc, dict):
-        return say_refused("operator status", status, doc)
+    target = find_station(args)
+    doc = identify(ApiClient(target.url, target.token, args.timeout), target,
+                   "operator status")
+    if isinstance(doc, int):
+        return doc
     op = doc.get("operator") or {}
     if op.get("user"):
         print(f"operator: {op['user']} signed in")
@@ -213,16 +336,35 @@ def cmd_feed(args: argparse.Namespace) -> int:
     """Every record after ``--since``, one JSON object per line (what a forwarder reads)."""
     if args.since < 0 or not 1 <= args.limit <= 1000:
         raise InputError("--since >= 0, --limit 1-1000")
-    client = ApiClient(args.url, args.token, args.timeout)
+    target = find_station(args)
+    client = ApiClient(target.url, target.token, args.timeout)
+    known = identify(client, target, "feed", out=sys.stderr)   # stdout: JSON lines only
+    if isinstance(known, int):
+        return known
     try:
         status, doc = client.call(f"/api/feed?since={args.since}&limit={args.limit}")
     except (urllib.error.URLError, OSError) as exc:
-        return _unreachable(args.url, exc)
+        return _unreachable(target.url, exc)
     if status != 200 or not isinstance(doc, dict):
         return say_refused("feed", status, doc)
     for e in doc["entries"]:
         print(json.dumps({"db_id": doc["db_id"], **e}, separators=(",", ":")))
     return 0
+
+
+def cmd_status(args: argparse.Namespace) -> int:
+    """``stationd status``: the station that answered, then its state (``--json``: the
+    status object, the station's line on stderr).  Exit 0 not in fault, 1 in fault, 3 no
+    status of this station."""
+    if not 0 < args.timeout <= 3600:    # NaN too
+        raise InputError(f"--timeout {args.timeout:g}: expected seconds in (0, 3600]")
+    target = find_station(args)
+    doc = identify(ApiClient(target.url, target.token, args.timeout), target, "status",
+                   out=sys.stderr if args.json else sys.stdout)
+    if isinstance(doc, int):
+        return doc
+    print(json.dumps(doc, indent=1) if args.json else format_status(doc))
+    return EXIT_FAULT if doc.get("state") == "fault" else 0
 
 
 def cmd_user_hash(args: argparse.Namespace) -> int:
@@ -237,12 +379,22 @@ def cmd_user_hash(args: argparse.Namespace) -> int:
     return 0
 
 
-def client_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--url", default=DEFAULT_URL, help=f"the daemon's screens (default "
-                   f"{DEFAULT_URL})")
-    p.add_argument("--token", help="the http token, when the daemon has one (or "
-                   "STATIOND_TOKEN: an argument shows in ps)")
-    p.add_argument("--timeout", type=float, default=15.0, help="seconds (default 15)")
+def client_args(p: argparse.ArgumentParser, timeout: float = 15.0,
+                config: bool = True) -> None:
+    """``--config``, ``--url``, ``--token``, ``--timeout`` of a command to the daemon
+    (``config``: False for a command that has its own ``--config``)."""
+    if config:
+        p.add_argument("--config", metavar="STATION.yaml",
+                       help=f"the station file of the daemon to ask (default {DEFAULT_CONFIG}, "
+                       "the file the systemd unit runs): its http.listen and http.token; "
+                       "a daemon of another station is refused")
+    p.add_argument("--url", help=f"the daemon's screens, http://HOST:PORT/ (default: the "
+                   f"station file's http.listen, else {DEFAULT_URL}); with --config, checked "
+                   "to be that station's")
+    p.add_argument("--token", help="the http token, when the daemon has one (default: the "
+                   "station file's http.token, else STATIOND_TOKEN; an argument shows in ps)")
+    p.add_argument("--timeout", type=float, default=timeout,
+                   help=f"seconds (default {timeout:g})")
 
 
 def add_command_parsers(sub: Any) -> None:
@@ -296,10 +448,26 @@ def add_command_parsers(sub: Any) -> None:
     us = sub.add_parser("user", help="users of the station's access section")
     usub = us.add_subparsers(dest="user_command", required=True)
     uh = usub.add_parser("hash", help="print the scrypt hash of a password for "
-                         "access.users.NAME.password")
+                         "access.users.NAME.password",
+                         description="The password is read from STATIOND_PASSWORD when it "
+                         "is set, else asked twice at a terminal, else the first line of "
+                         "standard input (never an argument: ps would show it); at least 8 "
+                         "characters.  The hash goes to standard output.")
     uh.set_defaults(func=cmd_user_hash)
+    st = sub.add_parser("status", help="a running daemon's state (from its web server)",
+                        description="The first line names the station that answered (its "
+                        "id, station file and URL).  Exit 0: the daemon answers and its "
+                        "station is not in fault; 1: it is in fault (the reason is printed); "
+                        "2: bad input; 3: no status of this station (no daemon answers, it "
+                        "refused the token, or another station's daemon answered).  For "
+                        "monitoring scripts.")
+    st.add_argument("--json", action="store_true", help="print the status object as it is "
+                    "(the station's line on stderr)")
+    client_args(st, timeout=5.0)
+    st.set_defaults(func=cmd_status)
 
 
-__all__ = ["EXIT_REFUSED", "EXIT_UNREACHABLE", "ApiClient", "add_command_parsers",
-           "check_comment", "client_args", "cmd_command", "cmd_feed", "cmd_operator",
-           "cmd_user_hash", "read_password", "say_refused"]
+__all__ = ["DEFAULT_CONFIG", "EXIT_REFUSED", "EXIT_UNREACHABLE", "ApiClient", "Target",
+           "add_command_parsers", "check_comment", "client_args", "cmd_command", "cmd_feed",
+           "cmd_operator", "cmd_status", "cmd_user_hash", "daemon_url", "find_station",
+           "identify", "read_password", "same_station", "say_refused", "station_words"]

@@ -160,6 +160,22 @@ class StationConfig:
     path: Path | None = None
 
 
+def station_identity(cfg: StationConfig) -> dict[str, str | None]:
+    """Which station this is, as its daemon says in ``/api/status`` and a command given the
+    station file checks before it acts (``stationd status --config``...).
+
+    ``id``: the name the plant gives the station, the one its records carry to the line
+    (``line.station_id``), else its OPC UA JoiningSystem's (``opcua.station_id``, when
+    written); None without either.  ``config``: its station file, resolved (a link and its
+    target are one file).  Why both: two stations on one PC without ids are told apart by
+    their files; a copy of a station's file on an engineer's PC names the same station by
+    its id."""
+    sid = cfg.line.station_id if cfg.line is not None else None
+    if sid is None and cfg.opcua is not None and cfg.opcua.station_id != OpcUaConfig.station_id:
+        sid = cfg.opcua.station_id
+    return {"id": sid, "config": None if cfg.path is None else str(Path(cfg.path).resolve())}
+
+
 @dataclass(frozen=True)
 class StationCheck:
     """The outcome of checking a station file: the config when it is valid, else every error.

@@ -96,23 +96,21 @@ def _check_args(args: argparse.Namespace) -> None:
         raise InputError(f"--timeout {args.timeout:g}: expected seconds in (0, 3600]")
 
 
-def _daemon_url(cfg: Any) -> str:
-    """Where the daemon's API is, from its station file's ``http:``."""
-    http = cfg.http
-    if http is None:
-        raise InputError(f"{cfg.path}: the daemon serves no API (no http: section): give "
-                         "--url, or stop the daemon to check with the cameras opened here")
-    # a daemon bound to every address is asked on loopback (not a bind: a client's target)
-    host = {"0.0.0.0": "127.0.0.1", "::": "::1"}.get(http.host, http.host)  # noqa: S104
-    return f"http://{f'[{host}]' if ':' in host else host}:{http.port}/"
-
-
 def _ask_daemon(args: argparse.Namespace, cfg: Any, pid: int | None) -> int:
     """The daemon holds the station: the calibration-check command to it through its API, as
     ``--user``; its answer printed as a check done here would be."""
     import urllib.error
 
-    from stationd.command_cli import EXIT_REFUSED, ApiClient, read_password, say_refused
+    from stationd.command_cli import (
+        EXIT_REFUSED,
+        ApiClient,
+        Target,
+        daemon_url,
+        identify,
+        read_password,
+        say_refused,
+    )
+    from stationd.config import station_identity
     from stationd.web.status_cli import EXIT_UNREACHABLE
 
     who = f"pid {pid}" if pid is not None else "its pid unknown"
@@ -123,9 +121,18 @@ def _ask_daemon(args: argparse.Namespace, cfg: Any, pid: int | None) -> int:
     if args.lift_at_height:
         sys.stderr.write("stationd: calibrate check: --lift-at-height is left to the daemon "
                          "(it reads its lift)\n")
-    url = args.url or _daemon_url(cfg)
+    if args.url is None and cfg.http is None:
+        raise InputError(f"{cfg.path}: the daemon serves no API (no http: section): give "
+                         "--url, or stop the daemon to check with the cameras opened here")
+    url = args.url or daemon_url(cfg)
     token = args.token or (cfg.http.token if cfg.http is not None else None)
     client = ApiClient(url, token, args.timeout)
+    # the daemon holding this station's lock is this station's; the one answering at the
+    # URL must be it too (another station's on that port would check its own pairs)
+    known = identify(client, Target(url, token, station_identity(cfg), str(args.config)),
+                     "calibrate check", out=sys.stderr if args.json else sys.stdout)
+    if isinstance(known, int):
+        return known
     try:
         status, me = client.call("/api/login", {"user": args.user.strip(),
                                                 "password": read_password(), "client": "cli"})

@@ -24,7 +24,7 @@ from typing import Any
 
 from drivers.keeper import Backoff, FaultKind, one_line
 from stationd.boltfile import load_bolts
-from stationd.config import StationConfig, load_station_config
+from stationd.config import StationConfig, load_station_config, station_identity
 from stationd.errors import StationError
 from stationd.lock import StationLocks
 from stationd.station.core import DATABASE, LIFT, WRENCH
@@ -192,6 +192,7 @@ class Screens:
         users of ``cfg``; the status API reads the line forwarder's state."""
         self.station = station
         if self.server is not None:
+            self.server.station = station_identity(cfg)
             self.server.line = lambda: None if self.line is None else self.line.last_status
             self.server.line_results.url = None if cfg.line is None else cfg.line.url
             self.server.commands.access = cfg.access

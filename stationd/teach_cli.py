@@ -28,6 +28,8 @@ from stationd.command_cli import (
     EXIT_UNREACHABLE,
     ApiClient,
     client_args,
+    find_station,
+    identify,
     read_password,
     say_refused,
 )
@@ -83,7 +85,12 @@ def cmd_teach(args: argparse.Namespace) -> int:
         ids = wanted
     if not ids:
         raise InputError("which bolts: --from a CAD table, or --bolts B01,B02,...")
-    client = ApiClient(args.url, args.token, args.timeout)
+    target = find_station(args)
+    args.url = target.url     # the daemon's, said in the messages below
+    client = ApiClient(target.url, target.token, args.timeout)
+    known = identify(client, target, "teach")   # named before anything is asked of it
+    if isinstance(known, int):
+        return known
     try:
         return _teach(args, client, out, doc, ids, cad)
     except (urllib.error.URLError, OSError) as exc:

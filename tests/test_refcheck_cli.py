@@ -129,7 +129,10 @@ def test_while_the_daemon_runs_the_check_is_asked_of_it_through_its_api(
         _wait_log(log, "pair2 checked: reference R2", daemon)   # the start's own check
         check = ["calibrate", "check", "--config", str(path)]
         assert main([*check, "--user", "erik", "--comment", "after the shift"]) == 0
-        out = capsys.readouterr().out.splitlines()
+        named, *out = capsys.readouterr().out.splitlines()
+        # the first line names the station that answered: the station file's own daemon
+        assert named.startswith("station at http://") and named.endswith(
+            f": {path.resolve()} (no station id: line.station_id or opcua.station_id)")
         assert [line.split(":")[0] for line in out] == ["pair1 in place", "pair2 in place"]
         _wait_log(log, "command calibration-check ('after the shift') by erik (cli 127.0.0.1): "
                   "accepted", daemon)

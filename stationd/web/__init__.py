@@ -13,7 +13,7 @@ Wiring (the daemon, ``stationd demo``)::
 
 ``HttpConfig.from_node(node)`` reads the station file's ``http: {listen, token}`` section;
 ``open_bind_problem(cfg)`` is the config checker's test (a non-local bind without a token).
-``stationd.web.status_cli.add_status_parser(subparsers)`` adds ``stationd status [--url]``.
+``stationd.web.status_cli.format_status`` gives ``stationd status`` its lines.
 ``stationd.web.bench.fanout_bench`` measures the live fan-out with two clients.
 
 Importing this package is cheap (``stationd status`` imports its CLI module): the server and

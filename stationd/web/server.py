@@ -91,6 +91,10 @@ class WebServer:
         self.devices = tuple(devices)
         self.view = View(configured=self.devices)
         self.started = time.time()
+        #: which station this is (``stationd.config.station_identity``: its id and station
+        #: file), set by the serve loop; in ``/api/status`` so that a command given a station
+        #: file acts only on that station's daemon
+        self.station: dict[str, Any] | None = None
         self.snapshots = 0           # flushes serialised (the bench reads it)
         self.errors = 0              # events the view could not fold (logged)
         # requests served per route ("/api/events", "/api/cameras/{pair}/{side}/frame.jpg",
@@ -283,7 +287,8 @@ class WebServer:
     def status(self) -> dict[str, Any]:
         """What ``GET /api/status`` and ``stationd status`` show."""
         v = self.view.to_json()
-        return {"state": v["state"], "reason": v["reason"], "headline": v["headline"],
+        return {"station": self.station, "state": v["state"], "reason": v["reason"],
+                "headline": v["headline"],
                 "vehicle": v["vehicle"], "counters": v["counters"], "devices": v["devices"],
                 "versions": _versions(), "uptime_s": round(time.time() - self.started, 1),
                 "clients": self.clients, "line": self.line(), "operator": v["operator"]}

@@ -1,4 +1,6 @@
-"""``stationd status [--url URL] [--token T] [--json]``: ask a running daemon its state.
+"""``stationd status``'s words: a running daemon's ``/api/status`` as a few lines, and the
+form of a daemon's URL (the command itself is :func:`stationd.command_cli.cmd_status`: it
+reads the station file to find the daemon, which this layer, below the configuration, cannot).
 
 Why over HTTP: the daemon already serves ``/api/status`` for its screens; the command is a
 client of it (no second channel into the daemon, nothing it can change).
@@ -6,12 +8,7 @@ client of it (no second channel into the daemon, nothing it can change).
 
 from __future__ import annotations
 
-import argparse
-import json
-import sys
-import urllib.error
 import urllib.parse
-import urllib.request
 from typing import Any
 
 from stationd.errors import InputError
@@ -21,21 +18,6 @@ EXIT_FAULT = 1          # answered, but the station is in fault: not OK for a mo
 # no status at all (no daemon answers, or it refused: a wrong token): another alarm than a
 # station in fault, so a monitoring script can tell them apart
 EXIT_UNREACHABLE = 3
-
-
-def add_status_parser(sub: Any) -> None:
-    """Add the ``status`` sub-command to ``build_parser``'s sub-parsers."""
-    st = sub.add_parser("status", help="a running daemon's state (from its web server)",
-                        description="Exit 0: the daemon answers and its station is not in "
-                                    "fault; 1: it is in fault (the reason is printed); 2: bad "
-                                    "input; 3: no status (no daemon answers, or it refused the "
-                                    "token).  For monitoring scripts.")
-    st.add_argument("--url", default=DEFAULT_URL, help=f"the daemon's screens (default "
-                    f"{DEFAULT_URL})")
-    st.add_argument("--token", help="the http token, when the daemon has one")
-    st.add_argument("--json", action="store_true", help="print the status object as it is")
-    st.add_argument("--timeout", type=float, default=5.0, help="seconds (default 5)")
-    st.set_defaults(func=cmd_status)
 
 
 def status_url(url: str) -> str:
@@ -53,15 +35,6 @@ def status_url(url: str) -> str:
                          "(expected http://host:port/)")
     return urllib.parse.urlunsplit((u.scheme, u.netloc, u.path.rstrip("/") + "/api/status",
                                     "", ""))
-
-
-def fetch_status(url: str, token: str | None = None, timeout: float = 5.0) -> dict[str, Any]:
-    req = urllib.request.Request(status_url(url))  # noqa: S310 - scheme checked: http(s)
-    if token:
-        req.add_header("Authorization", f"Bearer {token}")
-    with urllib.request.urlopen(req, timeout=timeout) as r:  # noqa: S310
-        doc: dict[str, Any] = json.loads(r.read().decode())
-        return doc
 
 
 def format_status(st: dict[str, Any]) -> str:
@@ -88,22 +61,3 @@ def format_status(st: dict[str, Any]) -> str:
     vers = st.get("versions", {})
     lines.append("versions: " + ", ".join(f"{k} {x}" for k, x in sorted(vers.items())))
     return "\n".join(lines)
-
-
-def cmd_status(args: argparse.Namespace) -> int:
-    if not 0 < args.timeout <= 3600:
-        raise InputError(f"--timeout {args.timeout:g}: expected seconds in (0, 3600]")
-    status_url(args.url)   # bad input is exit 2, not "no daemon"
-    try:
-        st = fetch_status(args.url, args.token, args.timeout)
-    except urllib.error.HTTPError as exc:
-        hint = " (the daemon has an http token: --token TOKEN)" if exc.code == 401 else ""
-        sys.stderr.write(f"stationd: status: {args.url}: HTTP {exc.code} {exc.reason}"
-                         f"{hint}\n")
-        return EXIT_UNREACHABLE
-    except (urllib.error.URLError, OSError, ValueError) as exc:
-        reason = getattr(exc, "reason", exc)
-        sys.stderr.write(f"stationd: status: no daemon answers at {args.url}: {reason}\n")
-        return EXIT_UNREACHABLE
-    print(json.dumps(st, indent=1) if args.json else format_status(st))
-    return EXIT_FAULT if st.get("state") == "fault" else 0
