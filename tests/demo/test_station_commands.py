@@ -46,6 +46,7 @@ def test_commands_reach_the_demos_station_during_the_run_and_the_hold(tmp_path):
     station = _station(tmp_path, port)
     env = {**os.environ, "STATIOND_PASSWORD": PASSWORD, "PYTHONPATH": str(ROOT)}
     url = f"http://127.0.0.1:{port}/"
+    named = f"station DEMO-1 at {url} ({station.resolve()})\n"   # each command's first line
     vin = make_vin(1)     # the demo's vehicle
     demo = subprocess.Popen([sys.executable, "-m", "stationd", "demo", "--config",
                              str(station), "--cycles", "1", "--seed", "11", "--hold"],
@@ -66,9 +67,12 @@ def test_commands_reach_the_demos_station_during_the_run_and_the_hold(tmp_path):
                 return line
 
     def command(*words: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run([sys.executable, "-m", "stationd", *words, "--user", "sue",
-                               "--url", url], capture_output=True, text=True, env=env,
-                              timeout=60, check=False)
+        # the demo's station is found by its station file, as a daemon's is
+        got = subprocess.run([sys.executable, "-m", "stationd", *words, "--user", "sue",
+                              "--config", str(station)], capture_output=True, text=True,
+                             env=env, timeout=60, check=False)
+        assert got.stdout.startswith(named), got
+        return got
 
     try:
         expect("screens: ")
@@ -88,7 +92,7 @@ def test_commands_reach_the_demos_station_during_the_run_and_the_hold(tmp_path):
         status = subprocess.run([sys.executable, "-m", "stationd", "operator", "status",
                                  "--url", url], capture_output=True, text=True, env=env,
                                 timeout=60, check=False)
-        assert status.stdout.strip() == "operator: operator signed in", status
+        assert status.stdout == f"{named}operator: operator signed in\n", status
     finally:
         demo.send_signal(signal.SIGINT)
         demo.wait(timeout=60)
