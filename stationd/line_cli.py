@@ -271,11 +271,16 @@ def cmd_line_init(args: argparse.Namespace) -> int:
                          f"{error_line(exc)}") from None
     finally:
         engine.dispose()
+    if change.typed_refused is not None:   # line_feed's part made; the typed part not
+        raise InputError(f"line database {parsed.render_as_string()}: the typed tables: "
+                         f"{change.typed_refused} (run line init as the tables' owner)")
     ours = sorted(t.name for t in LINE.sorted_tables)
     print(f"line database {parsed.render_as_string()}: "
           + (f"made {', '.join(sorted(change.made))}" if change.made
              else "every table there already")
           + f" ({', '.join(ours)}: ready for the stations' forwarders)")
+    if change.trigger and not change.made:   # tables there, the typing of new rows not
+        print("the trigger that types line_feed's new rows: made or brought up to date")
     filled = [(name, n) for name, n in change.filled if n]
     if filled:   # a line database an earlier version made: its records typed once
         print("filled from line_feed: " + ", ".join(f"{name} {n} row(s)"

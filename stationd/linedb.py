@@ -39,7 +39,9 @@ every record's JSON (curves with their samples share ``line_feed``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import logging
+import re
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from typing import Any
 
@@ -47,6 +49,7 @@ from sqlalchemy import (
     JSON,
     BigInteger,
     Column,
+    Connection,
     DateTime,
     Engine,
     Float,
@@ -62,10 +65,12 @@ from sqlalchemy import (
     text,
 )
 from sqlalchemy.dialects.postgresql import JSONB
+from sqlalchemy.exc import DBAPIError
 
 from db.kinds import LOOSENING, NOK, OK, TIGHTENING
 from db.ledger import CHECK, COMMAND, GAP, RUNDOWN, UNATTRIBUTED
 
+log = logging.getLogger("stationd")
 LINE = MetaData()
 LINE_FEED = Table(
     "line_feed", LINE,
@@ -336,12 +341,25 @@ LINE_UNATTRIBUTED = _typed(
 TYPED: tuple[Typed, ...] = (LINE_RUNDOWNS, LINE_COMMANDS, LINE_GAPS, LINE_CHECKS,
                             LINE_UNATTRIBUTED)
 TRIGGER = "line_feed_typed"   # the trigger and its function
+#: the version of the trigger's SQL, one more with each change of :data:`TYPED` (a test holds
+#: the SQL to it).  Why a number and not the SQL compared: on a line whose stations are
+#: upgraded one at a time, an older forwarder would put its older SQL back at each start; it
+#: replaces only an older version.
+TYPED_VERSION = 1
+_VERSION_LINE = re.compile(r"-- stationd typed tables, version (\d+)\n")
 
 
 def trigger_body() -> str:
     """The trigger function's body: each typed table filled from the statement's new rows."""
     fills = "".join(f"  {t.fill_sql('new_rows')};\n" for t in TYPED)
-    return f"\nBEGIN\n{fills}  RETURN NULL;\nEND\n"
+    return (f"\n-- stationd typed tables, version {TYPED_VERSION}\nBEGIN\n{fills}"
+            "  RETURN NULL;\nEND\n")
+
+
+def installed_version(body: str | None) -> int:
+    """The version of a trigger body found in the database (0: none, or not ours)."""
+    m = None if body is None else _VERSION_LINE.search(body)
+    return 0 if m is None else int(m.group(1))
 
 
 #: the advisory lock that serialises the making of the line's tables (any fixed 64-bit number)
@@ -356,50 +374,81 @@ class SchemaChange:
     made: tuple[str, ...] = ()
     filled: tuple[tuple[str, int], ...] = ()
     trigger: bool = False            # the trigger (or its function) made or brought up to date
+    #: why the typed tables or their trigger could not be made by this role (None: they are
+    #: there); line_feed and line_parameters are, and the records go on being forwarded
+    typed_refused: str | None = None
+
+
+#: PostgreSQL's insufficient_privilege (no right to create, not the owner)
+NOT_ALLOWED = "42501"
 
 
 def create_line_schema(engine: Engine) -> SchemaChange:
     """The line's tables, indexes and trigger, made where missing (a line database made by an
     earlier version gets the new ones, its typed tables filled from ``line_feed``).  Nothing
     is written where nothing is missing, so a forwarding role without the right to create
-    (the owner ran ``line init``) connects through here."""
+    (the owner ran ``line init``) connects through here.
+
+    Why a role that may make ``line_feed``'s part but not the typed tables still gets its
+    schema: a station upgraded before its line database must go on forwarding (its records
+    are the line's copy); the typed part is then ``typed_refused`` (a warning), and the
+    owner's ``line init`` makes it later and types every record ``line_feed`` holds."""
     with engine.begin() as conn:   # one creator at a time: two first starts (or a reader)
         # racing on "create if missing" made one fail with "relation already exists"
         conn.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": SCHEMA_LOCK_KEY})
         before = set(inspect(conn).get_table_names())
-        LINE.create_all(conn, checkfirst=True)
+        LINE.create_all(conn, tables=[LINE_FEED, LINE_PARAMETERS], checkfirst=True)
         has = {c["name"] for c in inspect(conn).get_columns(LINE_FEED.name)}
         for column, added in LINE_FEED_ADDED.items():   # a table an earlier version made
             if column not in has:
                 conn.execute(text(added))
         LINE_FEED_VIN.create(conn, checkfirst=True)
-        made = tuple(t.name for t in LINE.sorted_tables if t.name not in before)
-        body = trigger_body()
-        current = conn.execute(text("SELECT prosrc FROM pg_proc WHERE proname = :n AND "
-                                    "pronamespace = current_schema()::regnamespace"),
-                               {"n": TRIGGER}).scalar()
-        has_trigger = conn.execute(text(
-            "SELECT 1 FROM pg_trigger WHERE tgname = :n AND tgrelid = 'line_feed'::regclass"),
-            {"n": TRIGGER}).first() is not None
-        fill = [t for t in TYPED if not has_trigger or t.table.name in made]
-        if current == body and has_trigger and not fill:
-            return SchemaChange(made)
-        # inserts wait from here until this commits: a row committed meanwhile is either
-        # filled below or typed by the trigger, never neither
-        conn.execute(text("LOCK TABLE line_feed IN SHARE ROW EXCLUSIVE MODE"))
-        if current != body:
-            # SECURITY DEFINER: a forwarding role granted INSERT on line_feed alone types
-            # its rows too; the search path fixed to where the tables are
-            conn.execute(text(
-                f"CREATE OR REPLACE FUNCTION {TRIGGER}() RETURNS trigger LANGUAGE plpgsql "
-                f"SECURITY DEFINER SET search_path FROM CURRENT AS $typed${body}$typed$"))
-        if not has_trigger:
-            conn.execute(text(
-                f"CREATE TRIGGER {TRIGGER} AFTER INSERT ON line_feed REFERENCING NEW TABLE "
-                f"AS new_rows FOR EACH STATEMENT EXECUTE FUNCTION {TRIGGER}()"))
-        filled = tuple((t.table.name, int(conn.execute(text(t.fill_sql("line_feed"))).rowcount))
-                       for t in fill)
-        return SchemaChange(made, filled, True)
+        try:
+            with conn.begin_nested():
+                change = _typed_schema(conn, before)
+        except DBAPIError as exc:
+            if getattr(exc.orig, "sqlstate", None) != NOT_ALLOWED:
+                raise
+            reason = str(exc.orig).strip().splitlines()[0]
+            log.warning("line database: the typed tables (line_rundowns ...) cannot be made "
+                        "by this role (%s); records are forwarded to line_feed, and the "
+                        "tables' owner's `stationd line init URL` makes and fills them",
+                        reason)
+            change = SchemaChange(typed_refused=reason)
+        after = set(inspect(conn).get_table_names())
+        return replace(change, made=tuple(t.name for t in LINE.sorted_tables
+                                          if t.name in after - before))
+
+
+def _typed_schema(conn: Connection, before: set[str]) -> SchemaChange:
+    """The typed tables and their trigger, made where missing, each new table filled from
+    ``line_feed`` (also every table when the trigger was missing: rows came in untyped)."""
+    LINE.create_all(conn, tables=[t.table for t in TYPED], checkfirst=True)
+    current = installed_version(conn.execute(text(
+        "SELECT prosrc FROM pg_proc WHERE proname = :n AND "
+        "pronamespace = current_schema()::regnamespace"), {"n": TRIGGER}).scalar())
+    has_trigger = conn.execute(text(
+        "SELECT 1 FROM pg_trigger WHERE tgname = :n AND tgrelid = 'line_feed'::regclass"),
+        {"n": TRIGGER}).first() is not None
+    fill = [t for t in TYPED if not has_trigger or t.table.name not in before]
+    if current >= TYPED_VERSION and has_trigger and not fill:
+        return SchemaChange()
+    # inserts wait from here until this commits: a row committed meanwhile is either filled
+    # below or typed by the trigger, never neither
+    conn.execute(text("LOCK TABLE line_feed IN SHARE ROW EXCLUSIVE MODE"))
+    if current < TYPED_VERSION:
+        # SECURITY DEFINER: a forwarding role granted INSERT on line_feed alone types its
+        # rows too; the search path fixed to where the tables are
+        conn.execute(text(
+            f"CREATE OR REPLACE FUNCTION {TRIGGER}() RETURNS trigger LANGUAGE plpgsql "
+            f"SECURITY DEFINER SET search_path FROM CURRENT AS $typed${trigger_body()}$typed$"))
+    if not has_trigger:
+        conn.execute(text(
+            f"CREATE TRIGGER {TRIGGER} AFTER INSERT ON line_feed REFERENCING NEW TABLE "
+            f"AS new_rows FOR EACH STATEMENT EXECUTE FUNCTION {TRIGGER}()"))
+    filled = tuple((t.table.name, int(conn.execute(text(t.fill_sql("line_feed"))).rowcount))
+                   for t in fill)
+    return SchemaChange(filled=filled, trigger=True)
 
 
 def operator_of(entry: dict[str, Any]) -> str | None:
@@ -518,6 +567,6 @@ def bolt_versions(engine: Engine, *, model: str | None = None, bolt: str | None 
 
 
 __all__ = ["LINE", "LINE_CHECKS", "LINE_COMMANDS", "LINE_FEED", "LINE_GAPS", "LINE_PARAMETERS",
-           "LINE_RUNDOWNS", "LINE_UNATTRIBUTED", "TYPED", "BoltVersion", "LineResult",
-           "SchemaChange", "Typed", "bolt_versions", "create_line_schema", "operator_of",
-           "parameter_rows", "results", "trigger_body"]
+           "LINE_RUNDOWNS", "LINE_UNATTRIBUTED", "TYPED", "TYPED_VERSION", "BoltVersion",
+           "LineResult", "SchemaChange", "Typed", "bolt_versions", "create_line_schema",
+           "installed_version", "operator_of", "parameter_rows", "results", "trigger_body"]

@@ -63,6 +63,18 @@ WHERE kind = 'tightening' AND at >= :since AND at < :until
 GROUP BY station_id, hour
 ORDER BY station_id, hour"""
 
+OUT_OF_WINDOW = """
+SELECT station_id, vin, bolt, at, torque_nm, torque_min_nm, torque_max_nm, status
+FROM line_rundowns
+WHERE kind = 'tightening' AND (torque_nm < torque_min_nm OR torque_nm > torque_max_nm)"""
+VEHICLE_STORY = """
+SELECT at, station_id, 'command' AS what, kind, bolt, user_name AS who, comment
+FROM line_commands WHERE vin = :vin
+UNION ALL
+SELECT at, station_id, 'rundown', kind || ' ' || status, bolt, operator, NULL
+FROM line_rundowns WHERE vin = :vin
+ORDER BY at"""
+
 
 def _station(tmp_path, name):
     table = tmp_path / f"{name}.yaml"
@@ -155,6 +167,13 @@ def test_every_kind_of_record_lands_typed_with_its_columns_units_and_comments(tm
         assert (chk.pair, chk.verdict, chk.reference, chk.offset_mm, chk.tolerance_mm,
                 chk.check_at) == ("pair1", "moved", "R1", 1.5, 0.5, AT)
         assert chk.measurements["R1"]["measured_mm"] == [1.0, 2.0, 3.0]
+        # the README's further queries: out of the window; a vehicle's commands and rundowns
+        assert [(x.bolt, x.torque_nm) for x in c.execute(text(OUT_OF_WINDOW))] == [
+            ("B2", 21.0)]
+        story = c.execute(text(VEHICLE_STORY), {"vin": VIN}).all()
+        assert [(x.what, x.kind, x.who) for x in story] == [
+            ("rundown", "tightening ok", "olga"), ("rundown", "tightening nok", None),
+            ("rundown", "loosening ok", None), ("command", "skip", "sam")]
         un = c.execute(select(LINE_UNATTRIBUTED.table)).one()
         assert (un.vin, un.controller_vin, un.tightening_id, un.pset, un.status,
                 un.reason) == (VIN, "OTHERVIN", 17, 3, OK, "no bolt enabled")
@@ -433,3 +452,81 @@ def test_two_first_starts_make_the_trigger_once(pg_url):
                              "'line_feed_typed'")) == 1
     for e in engines:
         e.dispose()
+
+
+#: the trigger's SQL at TYPED_VERSION: a change of TYPED changes it, and then the version must
+#: go up too (else a line database that has the older SQL keeps it: see TYPED_VERSION)
+TRIGGER_SHA256 = {1: "446e86d6658db69f57ddf73563842e00b690eac87fc392c5a61455dc994d1f49"}
+
+
+def test_the_trigger_version_goes_up_with_its_sql():
+    import hashlib
+
+    from stationd.linedb import TYPED_VERSION, installed_version, trigger_body
+
+    assert hashlib.sha256(trigger_body().encode()).hexdigest() == TRIGGER_SHA256.get(
+        TYPED_VERSION), "TYPED changed: raise TYPED_VERSION and pin the new SQL's hash here"
+    assert installed_version(trigger_body()) == TYPED_VERSION
+    assert installed_version(None) == installed_version("BEGIN RETURN NULL; END") == 0
+
+
+def test_an_older_stationd_never_puts_back_an_older_trigger(pg_url):
+    """A newer version's trigger is left as it is by this version (a line upgraded one
+    station at a time: each older forwarder's start would put its SQL back); an older or
+    unversioned one is replaced."""
+    from stationd.linedb import TYPED_VERSION, installed_version
+
+    engine = make_engine(pg_url)
+    create_line_schema(engine)
+
+    def put(version_line):
+        with engine.begin() as c:
+            c.execute(text("CREATE OR REPLACE FUNCTION line_feed_typed() RETURNS trigger "
+                           f"LANGUAGE plpgsql AS $x${version_line}BEGIN RETURN NULL; END$x$"))
+
+    def installed():
+        with engine.connect() as c:
+            return c.scalar(text("SELECT prosrc FROM pg_proc WHERE proname = "
+                                 "'line_feed_typed'"))
+
+    newer = f"\n-- stationd typed tables, version {TYPED_VERSION + 1}\n"
+    put(newer)
+    assert create_line_schema(engine).trigger is False and newer in installed()
+    put("\n")                                            # not ours, or before versions
+    assert create_line_schema(engine).trigger is True
+    assert installed_version(installed()) == TYPED_VERSION
+    engine.dispose()
+
+
+def test_a_station_upgraded_before_its_line_database_goes_on_forwarding(tmp_path, pg_url,
+                                                                         pg_server, capsys):
+    """The earlier version's line database, its tables owned by the line engineer, the
+    stations forwarding as a role granted SELECT and INSERT on them: a station of this
+    version may not make the typed tables, and forwards to line_feed all the same (a
+    warning, no backlog, nothing quarantined); the owner's ``line init`` then makes them and
+    types every record; ``line init`` as the forwarding role says why it cannot."""
+    _old_line_database(pg_url).dispose()
+    db = pg_url.rsplit("/", 1)[1]
+    with psycopg.connect(f"host=127.0.0.1 port={pg_server.port} user=postgres dbname={db}",
+                         autocommit=True) as c:
+        c.execute("CREATE ROLE station_up LOGIN")
+        c.execute("REVOKE CREATE ON SCHEMA public FROM PUBLIC")
+        c.execute("GRANT SELECT, INSERT ON line_feed, line_parameters TO station_up")
+    role_url = pg_url.replace("postgres@", "station_up@")
+    repo = _station(tmp_path, "a")
+    _every_kind(repo)
+    f = _forward(repo, role_url, "ST-UP")
+    st = f.status()
+    assert (st["up"], st["backlog"], st["quarantined"]) == (True, 0, 0)
+    engine = make_engine(pg_url)
+    assert not inspect(engine).has_table("line_rundowns")
+    assert main(["line", "init", role_url]) == 2
+    assert "the typed tables: permission denied" in capsys.readouterr().err
+    assert main(["line", "init", pg_url]) == 0
+    assert "line_rundowns 3 row(s)" in capsys.readouterr().out
+    record(repo, VIN, "B3", tightening_id=30)            # typed from now on, by the trigger
+    _forward(repo, role_url, "ST-UP")
+    assert _typed_counts(engine) == _feed_counts(engine)
+    assert _count(engine, LINE_RUNDOWNS.table) == 4
+    engine.dispose()
+    repo.close()
