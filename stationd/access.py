@@ -13,7 +13,7 @@ The ``access:`` section (optional; without it nobody can give commands)::
       roles:                          # optional: these are the defaults
         operator: [skip]
         supervisor: [skip, reopen, release, loosen]
-        engineer: [skip, reopen, teach]
+        engineer: [skip, reopen, teach, calibrate]
       operator_required: false        # true: no pset is sent while nobody is signed in
       operator_idle_s: 1800           # optional: the operator signed out after this idle
 

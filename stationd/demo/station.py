@@ -347,8 +347,7 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
         print(f"NOK policy: {n['nok']} NOK result(s), {n['loosenings']} loosening(s), "
               f"{n['locks']} lock(s), {n['releases']} release(s)")
         if summary.get("operators"):
-            print("rundowns recorded by operator: " + ", ".join(
-                f"{who} {k}" for who, k in sorted(summary["operators"].items())))
+            print(operator_words(summary["operators"]))
         for e in extra:
             print(f"{e['station_id']}: {e['ok']}/{e['bolts']} bolts OK{_left_words(e)}, "
                   f"parameters sent for a wrong bolt: {e['wrong_bolt_sends']}, "
@@ -530,6 +529,15 @@ def simulated(cfg: StationConfig, tmp: Path) -> StationConfig:
                    database_url=f"sqlite:///{tmp}/stationd.db",
                    records=RecordsConfig(images_dir=tmp / "images",
                                          save_images=cfg.records.save_images))
+
+
+def operator_words(operators: dict[str, int]) -> str:
+    """The summary's line of who was signed in at each rundown (user name -> rundowns; "-":
+    nobody).  Why the words: "rundowns recorded by operator: operator 23" read as a
+    column heading and a stray word, the demo's user being called ``operator``."""
+    said = [f"{k} with nobody signed in" if who == "-" else f"{k} by user {who!r}"
+            for who, k in sorted(operators.items(), key=lambda wk: (wk[0] == "-", wk[0]))]
+    return "rundowns recorded, by who was signed in at the station: " + ", ".join(said)
 
 
 def _summary(st: Station, report: list[dict[str, Any]], cycles: int,

@@ -97,4 +97,5 @@ def test_commands_reach_the_demos_station_during_the_run_and_the_hold(tmp_path):
         demo.send_signal(signal.SIGINT)
         demo.wait(timeout=60)
     assert demo.returncode == 0
-    expect("rundowns recorded by operator: operator ", timeout=10)
+    said = expect("rundowns recorded, by who was signed in at the station: ", timeout=10)
+    assert "by user 'operator'" in said, said
