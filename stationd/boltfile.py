@@ -34,6 +34,11 @@ from stationd.yamlio import YamlNode
 
 DEFAULT_TOLERANCE_MM = 8.0   # the matching tolerance; bolts must be twice as far apart
 METRES_SPAN_MM = 10.0        # bolts all this near the origin: the table is in metres
+#: the least a model's bolts may spread over (the largest extent of their positions along X, Y
+#: or Z) in millimetres: a car's chassis written in metres spans a few units (a 5 m car: 5),
+#: while two bolts in millimetres are at least twice the matching tolerance apart and a
+#: chassis' bolts spread over hundreds of mm, wherever the vehicle frame's origin is
+METRES_SPREAD_MM = 10.0
 TORQUE_MAX_NM = 5000.0
 ANGLE_MAX_DEG = 3600.0       # ten turns
 POSITION_MAX_MM = 10_000.0   # |x|, |y|, |z| in the vehicle frame
@@ -64,6 +69,13 @@ class BoltCheck:
     @property
     def ok(self) -> bool:
         return not self.errors
+
+
+def _spread(positions: list[tuple[float, float, float]]) -> float:
+    """The largest extent of ``positions`` along X, Y or Z (0 for fewer than two)."""
+    if len(positions) < 2:
+        return 0.0
+    return max(max(p[k] for p in positions) - min(p[k] for p in positions) for k in range(3))
 
 
 def check_bolts(path: str | Path, *, tolerance_mm: float = DEFAULT_TOLERANCE_MM) -> BoltCheck:
@@ -335,6 +347,15 @@ class _Checker:
             self.fail(placed[0].item.keys["position"],
                       f"every bolt position is within {span:g} mm of the vehicle's origin: "
                       "positions in metres? the bolt table's positions are in millimetres")
+            return
+        spread = _spread([b.position for b in placed if b.position is not None])
+        if len(placed) >= 2 and 0 < spread < METRES_SPREAD_MM:
+            # the same wherever the origin is (a vehicle frame at the lift's corner, 12 m
+            # away): what tells metres is how little the bolts spread, not where they are
+            self.fail(placed[0].item.keys["position"],
+                      f"the model's {len(placed)} bolts spread over {spread:g} mm only (a "
+                      f"chassis' bolts in millimetres spread over hundreds): positions in "
+                      "metres? the bolt table's positions are in millimetres")
             return
         for i, j, d in too_close([b.position for b in placed if b.position is not None],
                                  self.tolerance_mm):

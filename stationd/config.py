@@ -64,6 +64,8 @@ STATION_KEYS = ("marker", "vision", "cameras", "pairs", "tool", "lift", "wrench"
                 "database", "bolts", "records", "http", "access", "localize", "line", "nok",
                 "opcua", "references")
 PAIR_KEYS = ("calibration", "to_vehicle", "left", "right", "max_skew_ms")
+#: the most errors told of one section (each found by reading it again without the last)
+MAX_SECTION_ERRORS = 50
 
 
 @dataclass(frozen=True)
@@ -358,7 +360,7 @@ def _database_url(node: YamlNode, base: Path, check: bool = False, checker: bool
         try:
             make_engine(url).dispose()
         except DbError as exc:
-            raise url_node.error(str(exc)) from None
+            raise url_node.error(_station_forms(str(exc), base)) from None
         # only the checker (its own process) reads the file: the daemon validates a reload
         # while its connections hold SQLite's locks, and closing any descriptor of that file
         # drops every POSIX lock the process holds on it (a db import then deleted the WAL)
@@ -370,6 +372,18 @@ def _database_url(node: YamlNode, base: Path, check: bool = False, checker: bool
         else:
             raise url_node.error(problem)
     return url
+
+
+def _station_forms(message: str, base: Path) -> str:
+    """A database URL's message in a station file's terms: the URL forms the db layer gives
+    say an SQLite file name is relative to the current folder, which is true of ``--db``;
+    in a station file it is relative to the station file's folder (:func:`_database_url`),
+    where a daemon under systemd, whose current folder is ``/``, makes it."""
+    from db.engine import URL_FORMS
+
+    said = URL_FORMS.replace("relative to the current folder",
+                             f"relative to the station file's folder ({base.resolve()})")
+    return message.replace(URL_FORMS, said)
 
 
 #: the service's own folder (systemd/stationd.service: StateDirectory=stationd), made by
@@ -391,6 +405,18 @@ def _missing(root: YamlNode, key: str) -> None:
     """A required section is missing: never fall back to simulated devices silently."""
     raise root.error(f"missing section '{key}': a station file names its {key} "
                      "(write sim:// URLs explicitly for a simulated station)")
+
+
+def _left_out(error: ConfigError, told: list[ConfigError]) -> bool:
+    """Whether ``error`` only says that an entry :meth:`_Reader.section` left out (after
+    telling its error) is missing: a required key with a wrong value, not a second error."""
+    prefix = "missing key(s): "
+    if not error.message.startswith(prefix):
+        return False
+    names = error.message[len(prefix):].split(", ")
+    within = f"{error.key}." if error.key else ""
+    return all(any(e.key is not None and (e.key == within + n or e.key.startswith(
+        within + n + ".")) for e in told) for n in names)
 
 
 def _pair_items(node: YamlNode) -> list[tuple[str, YamlNode]]:
@@ -438,7 +464,30 @@ class _Reader:
             return default
 
     def section(self, key: str, default: T, parse: Callable[[YamlNode], T]) -> T:
-        return self.guard(default, parse, self.top[key]) if key in self.top else default
+        """The section ``key`` parsed (``default`` without it).  When collecting, each error
+        is recorded and the section read again without the entry it names, until it reads
+        or an error is the section's own: every error of a section is told, not the first
+        (a typo'd key hid ``max_age_s: 500`` below it), and the default is returned."""
+        if key not in self.top:
+            return default
+        if not self.collect:
+            return parse(self.top[key])
+        node: YamlNode | None = self.top[key]
+        found: list[ConfigError] = []
+        while node is not None and len(found) < MAX_SECTION_ERRORS:
+            try:
+                value = parse(node)
+            except ConfigError as exc:
+                if any(str(exc) == str(e) for e in found) or _left_out(exc, found):
+                    break      # nothing new, or the entry left out was required: stop
+                found.append(exc)
+                node = node.without(exc)
+                continue
+            if not found:
+                return value
+            break
+        self.errors.extend(found)
+        return default
 
     def sections(self, root: YamlNode) -> dict[str, YamlNode]:
         """The top-level sections.  ``YamlNode.mapping`` stops at the first unknown key; when

@@ -174,6 +174,19 @@ class YamlNode:
             return f"{self.key}[{name}]"
         return f"{self.key}.{name}" if self.key else name
 
+    def without(self, error: ConfigError) -> YamlNode | None:
+        """This node with the mapping entry ``error`` is about left out (the entry at its
+        key path, or the one holding it), or None when it is this node's own (a section that
+        is not a mapping, a required key missing from it).
+
+        Why: a checker that reports every error of a section reads it again without the
+        entry it has told (its default then), so that a typo'd key does not hide a value out
+        of range two lines below it (issue 30: ``max_age_s: 500`` under a misspelt key)."""
+        if error.key is None or error.path != self.path:
+            return None
+        kept = _without(self._node, self.key, error.key, error.line)
+        return None if kept is None else YamlNode(kept, self.path, self.key)
+
     # -- containers ---------------------------------------------------------------------
     def mapping(self, allowed: Iterable[str], required: Iterable[str] = ()) -> dict[str, YamlNode]:
         """The children of a mapping; unknown keys and missing required keys are errors."""
@@ -312,6 +325,35 @@ class YamlNode:
                 raise r.error(f"expected a {rows}x{cols} matrix: row {i} must have "
                               f"{cols} numbers") from None
         return out
+
+
+def _without(node: yaml.Node, key: str, target: str, line: int | None) -> yaml.Node | None:
+    """A copy of the mapping ``node`` (at key path ``key``) without the entry at key path
+    ``target`` (where two entries have it, the one at ``line``), descending into the entry
+    that holds it; None when no entry is or holds ``target``."""
+    if not isinstance(node, yaml.MappingNode):
+        return None
+    found: int | None = None
+    for i, (key_node, _) in enumerate(node.value):
+        name = key_node.value if isinstance(key_node, yaml.ScalarNode) else None
+        child = f"{key}.{name}" if key else str(name)
+        if child == target or target.startswith((child + ".", child + "[")):
+            found = i
+            if key_node.start_mark.line + 1 == line:
+                break
+    if found is None:
+        return None
+    key_node, value_node = node.value[found]
+    name = key_node.value
+    child = f"{key}.{name}" if key else str(name)
+    inner = None if child == target else _without(value_node, child, target, line)
+    entries = list(node.value)
+    if inner is None:
+        del entries[found]
+    else:
+        entries[found] = (key_node, inner)
+    return yaml.MappingNode(node.tag, entries, node.start_mark, node.end_mark,
+                            node.flow_style)
 
 
 def _comma_split(previous: yaml.Node, key: yaml.Node, value: yaml.Node) -> bool:

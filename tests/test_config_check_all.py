@@ -1,0 +1,99 @@
+"""``stationd config check`` tells every error of a file (issue 30, item 6): a typo'd key
+hid ``max_age_s: 500`` in the same section; the database hint said an SQLite file name is
+relative to the current folder, while the station makes it beside its station file; bolt
+positions in metres passed without the hint unless every one lay within 10 mm of the origin.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from stationd.boltfile import check_bolts
+from stationd.cli import main
+
+SIM = Path(__file__).resolve().parents[1] / "config" / "sim"
+
+
+@pytest.fixture
+def station(tmp_path: Path) -> Path:
+    """A copy of config/sim's station (its calibrations and bolt table beside it)."""
+    for f in SIM.glob("*.yaml"):
+        shutil.copy(f, tmp_path / f.name)
+    return tmp_path / "station.yaml"
+
+
+def _edit(path: Path, old: str, new: str) -> None:
+    text = path.read_text()
+    assert old in text
+    path.write_text(text.replace(old, new))
+
+
+def _check(capsys: pytest.CaptureFixture[str], path: Path) -> list[str]:
+    assert main(["config", "check", str(path)]) == 2
+    captured = capsys.readouterr()
+    return (captured.out + captured.err).splitlines()
+
+
+def test_every_error_of_a_section_each_with_its_line_and_key(station, capsys) -> None:
+    _edit(station, "matching: {tolerance_mm: 8.0, margin_mm: 6.0, stable_frames: 3, "
+                   "max_age_s: 0.5, leave_frames: 3}",
+          "matching:\n  tolerance_mm: 8.0\n  margn_mm: 6.0\n  stable_frames: 3\n"
+          "  max_age_s: 500\n  leave_frames: 0.5\n")
+    at = {line.split(":")[0].strip(): n
+          for n, line in enumerate(station.read_text().splitlines(), 1)}
+    lines = [line for line in _check(capsys, station) if "matching." in line]
+    assert [line.split(": ")[0:2] for line in lines] == [
+        [f"{station}:{at['margn_mm']}", "matching.margn_mm"],
+        [f"{station}:{at['max_age_s']}", "matching.max_age_s"],
+        [f"{station}:{at['leave_frames']}", "matching.leave_frames"]], lines
+    assert "unknown key" in lines[0] and "500 s is not plausible" in lines[1]
+
+
+def test_a_required_key_with_a_wrong_value_is_told_once(station, capsys) -> None:
+    """Read again without it, the section misses a key it requires: that is not a second
+    error of the file, and is not told."""
+    _edit(station, "tool: {length_mm: 300.0,", "tool: {length_mm: 3000.0,")
+    lines = [line for line in _check(capsys, station) if "tool" in line]
+    assert len(lines) == 1 and "tool.length_mm: a tool length of 3000 mm" in lines[0], lines
+
+
+def test_the_database_hint_says_where_the_station_makes_the_file(station, capsys) -> None:
+    _edit(station, "database: {url: 'sqlite:///stationd-sim.db'}",
+          "database: {url: stationd-sim.db}")
+    lines = [line for line in _check(capsys, station) if "database.url" in line]
+    assert len(lines) == 1, lines
+    assert "write sqlite:///stationd-sim.db for an SQLite file (sqlite:///NAME.db: an SQLite " \
+           f"file relative to the station file's folder ({station.parent.resolve()})" in lines[0]
+    assert "current folder" not in lines[0]
+
+
+BOLTS = ("psets:\n  - {id: 1, name: a, torque: {target: 10, min: 9, max: 11},\n"
+         "     angle: {target: 30, min: 15, max: 60}}\nmodels:\n  M1:\n    bolts:\n")
+
+
+@pytest.mark.parametrize("positions", [
+    [(12.31, 0.42, -1.25), (12.95, -0.38, -1.25), (14.1, 0.35, -1.2)],   # origin 12 m away
+    [(-2.4, 0.8, 0.1), (2.3, -0.75, 0.1), (0.1, 0.9, 0.2)],              # a car, around it
+])
+def test_bolt_positions_in_metres_wherever_the_origin_is(tmp_path, positions) -> None:
+    path = tmp_path / "bolts.yaml"
+    path.write_text(BOLTS + "".join(
+        f"      - {{id: B0{i}, name: b{i}, position: [{x}, {y}, {z}], pset: 1}}\n"
+        for i, (x, y, z) in enumerate(positions, 1)))
+    got = check_bolts(path)
+    texts = [str(e) for e in got.errors]
+    assert len(texts) == 1 and "positions in metres?" in texts[0], texts   # not 3 spacings
+    assert texts[0].startswith(f"{path}:7: models.M1.bolts[0].position:")
+
+
+def test_bolts_in_millimetres_are_not_taken_for_metres(tmp_path) -> None:
+    """Two bolts of a bracket 20 mm apart (the least the spacing rule lets through spreads
+    over 16 mm), and the simulated car's 50 bolts."""
+    path = tmp_path / "bolts.yaml"
+    path.write_text(BOLTS + "      - {id: B01, name: a, position: [1200, 300, 5], pset: 1}\n"
+                            "      - {id: B02, name: b, position: [1220, 300, 5], pset: 1}\n")
+    assert check_bolts(path).ok
+    assert check_bolts(SIM / "bolts.yaml").ok
