@@ -28,6 +28,7 @@ from stationd.geometry.frames import Transform, fit_rigid
 from stationd.geometry.tool import BoltEnd, ToolGeometry, bolt_end, fuse
 from stationd.jsonout import finite
 from stationd.localize.stereo import localize_detections
+from stationd.outfile import write_atomic
 from stationd.result import Refusal
 from stationd.sim import scenes as sc
 from stationd.sim.raycast import Chessboard
@@ -227,7 +228,8 @@ def run_chain_bench(args: argparse.Namespace) -> int:
     res["bolts"] = bench_bolts(rng, station, 12 if quick else 50)
     res["seconds"] = round(time.perf_counter() - t0, 1)
     _print(res)
-    Path(args.out).write_text(json.dumps(finite(res), indent=1, allow_nan=False) + "\n")
+    # whole or not at all: a Ctrl-C or a full disk while writing left half a JSON
+    write_atomic(Path(args.out), json.dumps(finite(res), indent=1, allow_nan=False) + "\n")
     print(f"[bench chain] wrote {args.out}")
     return 0
 

@@ -57,6 +57,7 @@ from stationd.config import StationConfig, load_station_config
 from stationd.demo.station import SIM_CONFIG
 from stationd.errors import InputError
 from stationd.jsonout import finite, strict_json
+from stationd.outfile import write_atomic
 from stationd.sim.devices_cli import psets_of
 from stationd.sim.world import World, WrenchPose
 from stationd.station.core import Record, SendParams, State, StoreUnattributed
@@ -125,7 +126,8 @@ def run_linkcut_bench(args: argparse.Namespace) -> int:
         world.close()
         tmp.cleanup()
     summary = _summary(cut, runs, cycles, cut_s, pace_s)
-    Path(args.out).write_text(json.dumps(finite(summary), indent=2, allow_nan=False) + "\n")
+    # whole or not at all: a Ctrl-C or a full disk while writing left half a JSON
+    write_atomic(Path(args.out), json.dumps(finite(summary), indent=2, allow_nan=False) + "\n")
     if args.json:
         sys.stdout.write(strict_json(summary) + "\n")
     else:

@@ -38,6 +38,7 @@ from stationd.config import StationConfig, load_station_config
 from stationd.demo.station import SIM_CONFIG, simulators
 from stationd.errors import InputError
 from stationd.jsonout import finite, strict_json
+from stationd.outfile import write_atomic
 from stationd.serve import Screens
 from stationd.sim.devices_cli import psets_of
 from stationd.sim.world import World, WrenchPose
@@ -217,7 +218,8 @@ def run_station_bench(args: argparse.Namespace) -> int:
             summary["screens"]["paired"] = _paired_summary(serveds)
         for run in (*serveds, *agains):
             ok = ok and run["out"]["wrong"] == 0 and not run["out"]["not_selected"]
-    Path(args.out).write_text(json.dumps(finite(summary), indent=2, allow_nan=False) + "\n")
+    # whole or not at all: a Ctrl-C or a full disk while writing left half a JSON
+    write_atomic(Path(args.out), json.dumps(finite(summary), indent=2, allow_nan=False) + "\n")
     if args.json:
         sys.stdout.write(strict_json(summary) + "\n")
     else:

@@ -24,6 +24,7 @@ from stationd import progress
 from stationd.geometry.camera import Camera
 from stationd.jsonout import finite
 from stationd.localize.stereo import localize_detections, triangulate
+from stationd.outfile import write_atomic
 from stationd.sim import scenes as sc
 from stationd.sim.render import MarkerPose, default_camera
 from stationd.vision.detect import Detection, detect
@@ -448,6 +449,7 @@ def run_vision_bench(args: argparse.Namespace) -> int:
         from stationd.bench.robustness import print_table
 
         print_table(results["robustness"])
-    Path(args.out).write_text(json.dumps(finite(results), indent=1, allow_nan=False) + "\n")
+    # whole or not at all: a Ctrl-C or a full disk while writing left half a JSON
+    write_atomic(Path(args.out), json.dumps(finite(results), indent=1, allow_nan=False) + "\n")
     print(f"[bench vision] wrote {args.out}")
     return 0

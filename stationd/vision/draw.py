@@ -125,24 +125,3 @@ def _caption(det: Detection) -> list[str]:
     return [f"found: centre ({c[0]:.3f}, {c[1]:.3f}) px [magenta], ellipse centre "
             f"({e[0]:.3f}, {e[1]:.3f}) [blue], outer ring visible {vis}",
             "green: edge points used, red: rejected; inner ellipse cyan, outer yellow"]
-
-
-def write_drawing(path: str, image: np.ndarray, camera: Camera, det: Detection,
-                  params: VisionParams, marker: MarkerSpec) -> None:
-    """Draw ``det`` and write it to ``path`` (PNG); a path that cannot be written is bad
-    input (one line, exit 2), checked by trying; a name that is not ``.png`` too (a PNG
-    written into ``out.txt`` or ``out.jpg`` would mislead whoever opens it)."""
-    from stationd.errors import InputError
-
-    if not path.lower().endswith(".png"):
-        raise InputError(f"--draw {path}: the drawing is a PNG; name the file .png")
-
-    picture = draw(image, camera, explain(image, camera, det, params, marker))
-    try:
-        ok, buf = cv2.imencode(".png", picture)
-        if not ok:
-            raise InputError(f"--draw {path}: PNG encoding failed")
-        with open(path, "wb") as fh:
-            fh.write(buf.tobytes())
-    except OSError as exc:
-        raise InputError(f"--draw {path}: cannot write: {exc.strerror}") from None
