@@ -17,7 +17,8 @@ Tables (PostgreSQL, made if missing):
   its id in the key.  A table shared per model shows as the same values under each station
   (:func:`bolt_versions` lists them side by side);
 - the typed tables, one per kind of record a quality engineer queries (``line_rundowns``,
-  ``line_commands``, ``line_gaps``, ``line_calibration_checks``, ``line_unattributed``):
+  ``line_commands``, ``line_gaps``, ``line_calibration_checks``, ``line_unattributed``,
+  ``line_controller_events``, ``line_unreadable_results``):
   real columns with their types, units and comments, indexed for the first questions (a VIN
   across stations, a bolt over a shift, the NOK rate per station and hour), what Grafana,
   Power BI or a person's SQL expect instead of ``record->>'torque_nm'``.
@@ -68,7 +69,15 @@ from sqlalchemy.dialects.postgresql import JSONB
 from sqlalchemy.exc import DBAPIError
 
 from db.kinds import LOOSENING, NOK, OK, TIGHTENING
-from db.ledger import CHECK, COMMAND, GAP, RUNDOWN, UNATTRIBUTED
+from db.ledger import (
+    CHECK,
+    COMMAND,
+    CONTROLLER_EVENT,
+    GAP,
+    RUNDOWN,
+    UNATTRIBUTED,
+    UNREADABLE,
+)
 
 log = logging.getLogger("stationd")
 LINE = MetaData()
@@ -335,17 +344,70 @@ LINE_UNATTRIBUTED = _typed(
     Index("ix_line_unattributed_vin", "vin", "at"),
 )
 
+LINE_CONTROLLER_EVENTS = _typed(
+    CONTROLLER_EVENT, "line_controller_events",
+    "Results from the controller that are not rundowns (batch increment or decrement, "
+    "bypass of a parameter set, abort job, reference setup, a type not named): never a bolt "
+    "done, kept so that quality sees what happened on the controller",
+    [(Column("result_type", Integer, comment="the result type code the controller sent "
+             "(Open Protocol MID 0061 parameter 49)"), _int(_j("result_type"))),
+     (Column("what", Text, comment="its name (batch increment, bypass, ...)"),
+      _text(_j("what"))),
+     (Column("vin", Text, comment="the vehicle at height (NULL: none)"), _text(_j("vin"))),
+     (Column("bolt", Text, comment="the bolt the tool was enabled for (NULL: none)"),
+      _text(_j("bolt"))),
+     (Column("controller_vin", Text, comment="the VIN as the result carried it"),
+      _text(_j("controller_vin"))),
+     (Column("tightening_id", BigInteger, comment="the controller's id of the result"),
+      _int(_j("tightening_id"), 64)),
+     (Column("pset", Integer, comment="the controller's parameter set"), _int(_j("pset"))),
+     (Column("status", Text, comment=f"the controller's verdict: {OK} or {NOK}"),
+      _text(_j("status"))),
+     (Column("torque_nm", Float, comment="the torque it reported (Nm)"),
+      _float(_j("torque_nm"))),
+     (Column("angle_deg", Float, comment="the angle it reported (degrees)"),
+      _float(_j("angle_deg"))),
+     (_tz("result_at", "the controller's time of the result"), _time(_j("result_at"))),
+     (_tz("recorded_at", "when the station stored it"), _time(_j("recorded_at")))],
+    Index("ix_line_controller_events_vin", "vin", "at"),
+    Index("ix_line_controller_events_at", "at"),
+)
+
+LINE_UNREADABLE = _typed(
+    UNREADABLE, "line_unreadable_results",
+    "Result messages the station could not read, kept whole (the text as received, the "
+    "revision it said it was, the parse error), with the bolt it may belong to",
+    [(Column("mid", Integer, comment="the Open Protocol message id"), _int(_j("mid"))),
+     (Column("revision", Integer, comment="the revision the message said it was"),
+      _int(_j("revision"))),
+     (Column("raw", Text, comment="the message as received"), _text(_j("raw"))),
+     (Column("error", Text, comment="why it could not be read"), _text(_j("error"))),
+     (Column("vin", Text, comment="the vehicle at height (NULL: none)"), _text(_j("vin"))),
+     (Column("bolt", Text, comment="the bolt it may belong to (NULL: none)"),
+      _text(_j("bolt"))),
+     (Column("controller_vin", Text, comment="the VIN, as far as it could be read"),
+      _text(_j("controller_vin"))),
+     (Column("tightening_id", BigInteger, comment="the tightening id, as far as it could be "
+             "read"), _int(_j("tightening_id"), 64)),
+     (Column("pset", Integer, comment="the parameter set, as far as it could be read"),
+      _int(_j("pset"))),
+     (_tz("result_at", "the controller's time, as far as it could be read"),
+      _time(_j("result_at"))),
+     (_tz("recorded_at", "when the station stored it"), _time(_j("recorded_at")))],
+    Index("ix_line_unreadable_results_vin", "vin", "at"),
+)
+
 #: every typed table; a new kind of record is one more ``_typed(...)`` here: the next
 #: ``line init`` or forwarder start makes its table, fills it from line_feed and types the
 #: new rows from then on
 TYPED: tuple[Typed, ...] = (LINE_RUNDOWNS, LINE_COMMANDS, LINE_GAPS, LINE_CHECKS,
-                            LINE_UNATTRIBUTED)
+                            LINE_UNATTRIBUTED, LINE_CONTROLLER_EVENTS, LINE_UNREADABLE)
 TRIGGER = "line_feed_typed"   # the trigger and its function
 #: the version of the trigger's SQL, one more with each change of :data:`TYPED` (a test holds
 #: the SQL to it).  Why a number and not the SQL compared: on a line whose stations are
 #: upgraded one at a time, an older forwarder would put its older SQL back at each start; it
 #: replaces only an older version.
-TYPED_VERSION = 1
+TYPED_VERSION = 2   # 2: line_controller_events, line_unreadable_results
 _VERSION_LINE = re.compile(r"-- stationd typed tables, version (\d+)\n")
 
 
@@ -566,7 +628,8 @@ def bolt_versions(engine: Engine, *, model: str | None = None, bolt: str | None 
                 for r in c.execute(q)]
 
 
-__all__ = ["LINE", "LINE_CHECKS", "LINE_COMMANDS", "LINE_FEED", "LINE_GAPS", "LINE_PARAMETERS",
-           "LINE_RUNDOWNS", "LINE_UNATTRIBUTED", "TYPED", "TYPED_VERSION", "BoltVersion",
-           "LineResult", "SchemaChange", "Typed", "bolt_versions", "create_line_schema",
+__all__ = ["LINE", "LINE_CHECKS", "LINE_COMMANDS", "LINE_CONTROLLER_EVENTS", "LINE_FEED",
+           "LINE_GAPS", "LINE_PARAMETERS", "LINE_RUNDOWNS", "LINE_UNATTRIBUTED",
+           "LINE_UNREADABLE", "TYPED", "TYPED_VERSION", "BoltVersion", "LineResult",
+           "SchemaChange", "Typed", "bolt_versions", "create_line_schema",
            "installed_version", "operator_of", "parameter_rows", "results", "trigger_body"]

@@ -18,7 +18,15 @@ from sqlalchemy.dialects.postgresql import insert as pg_insert
 from db.checks import record_check
 from db.engine import make_engine
 from db.kinds import LOOSENING, NOK, OK, TIGHTENING
-from db.ledger import CHECK, COMMAND, GAP, RUNDOWN, UNATTRIBUTED
+from db.ledger import (
+    CHECK,
+    COMMAND,
+    CONTROLLER_EVENT,
+    GAP,
+    RUNDOWN,
+    UNATTRIBUTED,
+    UNREADABLE,
+)
 from db.repository import Repository
 from stationd.boltfile import import_bolts
 from stationd.cli import main
@@ -26,12 +34,14 @@ from stationd.forward import Forwarder, LineConfig, LineDb
 from stationd.linedb import (
     LINE_CHECKS,
     LINE_COMMANDS,
+    LINE_CONTROLLER_EVENTS,
     LINE_FEED,
     LINE_FEED_VIN,
     LINE_GAPS,
     LINE_PARAMETERS,
     LINE_RUNDOWNS,
     LINE_UNATTRIBUTED,
+    LINE_UNREADABLE,
     TYPED,
     create_line_schema,
     operator_of,
@@ -129,6 +139,12 @@ def _every_kind(repo):
     repo.record_unattributed(vin=VIN, controller_vin="OTHERVIN", tightening_id=17, pset=3,
                              ok=True, torque_nm=24.0, angle_deg=30.0, result_at=AT,
                              reason="no bolt enabled")
+    repo.record_controller_event(result_type=3, what="batch increment", vin=VIN, bolt="B3",
+                                 controller_vin=VIN, tightening_id=18, pset=21, ok=True,
+                                 torque_nm=None, angle_deg=None, result_at=AT)
+    repo.record_unreadable(mid=61, revision=7, raw="00230061007 garbled", error="too short",
+                           vin=VIN, bolt="B3", controller_vin=None, tightening_id=19,
+                           pset=None, result_at=None)
 
 
 def test_every_kind_of_record_lands_typed_with_its_columns_units_and_comments(tmp_path,
@@ -138,7 +154,9 @@ def test_every_kind_of_record_lands_typed_with_its_columns_units_and_comments(tm
     _forward(repo, pg_url, "ST-A")
     engine = _engine(pg_url)
     assert _typed_counts(engine) == {"line_rundowns": 3, "line_commands": 1, "line_gaps": 1,
-                                     "line_calibration_checks": 1, "line_unattributed": 1}
+                                     "line_calibration_checks": 1, "line_unattributed": 1,
+                                     "line_controller_events": 1,
+                                     "line_unreadable_results": 1}
     r = LINE_RUNDOWNS.table.c
     with engine.connect() as c:
         rows = c.execute(select(LINE_RUNDOWNS.table).order_by(r.seq)).all()
@@ -177,6 +195,13 @@ def test_every_kind_of_record_lands_typed_with_its_columns_units_and_comments(tm
         un = c.execute(select(LINE_UNATTRIBUTED.table)).one()
         assert (un.vin, un.controller_vin, un.tightening_id, un.pset, un.status,
                 un.reason) == (VIN, "OTHERVIN", 17, 3, OK, "no bolt enabled")
+        ev = c.execute(select(LINE_CONTROLLER_EVENTS.table)).one()
+        assert (ev.result_type, ev.what, ev.bolt, ev.tightening_id, ev.pset, ev.status,
+                ev.torque_nm, ev.result_at) == (3, "batch increment", "B3", 18, 21, OK, None,
+                                                AT)
+        bad = c.execute(select(LINE_UNREADABLE.table)).one()
+        assert (bad.mid, bad.revision, bad.raw, bad.error, bad.bolt, bad.tightening_id,
+                bad.result_at) == (61, 7, "00230061007 garbled", "too short", "B3", 19, None)
         # real types and a comment on every column, for Grafana, Power BI and people
         types = dict(c.execute(text(
             "SELECT column_name, data_type FROM information_schema.columns "
@@ -257,11 +282,11 @@ def test_a_line_database_made_by_the_earlier_version_is_upgraded_in_place(tmp_pa
 
     assert main(["line", "init", pg_url]) == 0
     out = capsys.readouterr().out
-    assert "made line_calibration_checks, line_commands, line_gaps, line_rundowns, " \
-           "line_unattributed" in out
+    assert "made line_calibration_checks, line_commands, line_controller_events, line_gaps, " \
+           "line_rundowns, line_unattributed, line_unreadable_results" in out
     assert "filled from line_feed: line_rundowns 3 row(s), line_commands 1 row(s), " \
            "line_gaps 1 row(s), line_calibration_checks 1 row(s), line_unattributed 1 " \
-           "row(s)" in out
+           "row(s), line_controller_events 1 row(s), line_unreadable_results 1 row(s)" in out
     assert _typed_counts(old) == _feed_counts(old)
     assert [r.bolt for r in results(old, vin=VIN)] == ["B2", "B2", "B1"]
 
@@ -430,7 +455,8 @@ def test_line_results_filters_a_bolt_over_a_shift(tmp_path, pg_url, capsys):
 def test_the_typed_tables_are_declared_once_for_the_kinds_of_the_feed():
     """Each typed table is one kind of the feed, keyed like line_feed, its SQL one
     expression per column (a new kind: one more entry)."""
-    assert [t.kind for t in TYPED] == [RUNDOWN, COMMAND, GAP, CHECK, UNATTRIBUTED]
+    assert [t.kind for t in TYPED] == [RUNDOWN, COMMAND, GAP, CHECK, UNATTRIBUTED,
+                                       CONTROLLER_EVENT, UNREADABLE]
     for t in TYPED:
         assert [c.name for c in t.table.primary_key] == ["station_id", "db_id", "seq"]
         assert len(t.exprs) == len(t.table.columns)
@@ -456,7 +482,8 @@ def test_two_first_starts_make_the_trigger_once(pg_url):
 
 #: the trigger's SQL at TYPED_VERSION: a change of TYPED changes it, and then the version must
 #: go up too (else a line database that has the older SQL keeps it: see TYPED_VERSION)
-TRIGGER_SHA256 = {1: "446e86d6658db69f57ddf73563842e00b690eac87fc392c5a61455dc994d1f49"}
+TRIGGER_SHA256 = {1: "446e86d6658db69f57ddf73563842e00b690eac87fc392c5a61455dc994d1f49",
+                  2: "eed0f0cfb83562bb0f0303ab2188f6dccda471d004a541bd82df27fe80f4d4e0"}
 
 
 def test_the_trigger_version_goes_up_with_its_sql():

@@ -163,8 +163,9 @@ def test_line_init_makes_the_tables_once_and_a_forwarder_uses_them(tmp_path, pg_
     makes the tables; again, it changes nothing; a station then forwards into them."""
     code, out, err = _run(capsys, "line", "init", pg_url)
     assert code == 0 and err == ""
-    assert "made line_calibration_checks, line_commands, line_feed, line_gaps, " \
-           "line_parameters, line_rundowns, line_unattributed" in out and "PASSWORD" not in out
+    assert "made line_calibration_checks, line_commands, line_controller_events, line_feed, " \
+           "line_gaps, line_parameters, line_rundowns, line_unattributed, " \
+           "line_unreadable_results" in out and "PASSWORD" not in out
     assert "filled" not in out                            # nothing to type yet
     engine = LineDb(pg_url)._connect()
     from sqlalchemy import inspect
