@@ -557,3 +557,35 @@ def test_a_station_upgraded_before_its_line_database_goes_on_forwarding(tmp_path
     assert _count(engine, LINE_RUNDOWNS.table) == 4
     engine.dispose()
     repo.close()
+
+
+def test_a_kind_typed_in_a_later_version_is_filled_from_what_line_feed_holds(tmp_path,
+                                                                             pg_url):
+    """The step a new kind takes: a line database at the version before (no
+    line_controller_events, the trigger's SQL older) with such records already in
+    line_feed; the next schema check makes the table, fills it and types from then on."""
+    engine = make_engine(pg_url)
+    create_line_schema(engine)
+    with engine.begin() as c:
+        c.execute(text("DROP TABLE line_controller_events"))
+        c.execute(text("CREATE OR REPLACE FUNCTION line_feed_typed() RETURNS trigger "
+                       "LANGUAGE plpgsql AS $x$\n-- stationd typed tables, version 1\n"
+                       "BEGIN RETURN NULL; END$x$"))
+    repo = _station(tmp_path, "a")
+    _every_kind(repo)
+    line = LineDb(pg_url)
+    line._engine = engine                                # as a forwarder of version 1 did
+    assert line.push("ST-A", repo.ledger.db_id(), repo.ledger.since(0)) == 9
+    change = create_line_schema(engine)
+    assert change.made == ("line_controller_events",) and change.trigger
+    assert ("line_controller_events", 1) in change.filled
+    repo.record_controller_event(result_type=5, what="bypass", vin=VIN, bolt=None,
+                                 controller_vin=None, tightening_id=40, pset=None, ok=True,
+                                 torque_nm=None, angle_deg=None, result_at=None)
+    _forward(repo, pg_url, "ST-A")
+    with engine.connect() as c:
+        assert c.execute(select(LINE_CONTROLLER_EVENTS.table.c.what).order_by(
+            LINE_CONTROLLER_EVENTS.table.c.seq)).scalars().all() == ["batch increment",
+                                                                     "bypass"]
+    engine.dispose()
+    repo.close()
