@@ -331,15 +331,15 @@ class OpcUaServer:
             return _answer(None, 1)
         return _answer(next(reversed(self._results.values())), _NO_ERROR)
 
-    async def _get_by_id(self, parent: ua.NodeId, result_id: Any = None, *args: Any) -> \
-            list[ua.Variant]:
+    async def _get_by_id(self, parent: ua.NodeId, result_id: Any = None, *args: Any) -> Any:
         """The result kept under ``result_id``; an id that is not one (empty, not text)
-        is refused with BadInvalidArgument, as Part 4 has a method refuse an argument
-        outside its domain; a well-formed id of no kept result answers with Error 1 (the
-        standard's "not found", the call itself good)."""
+        is refused with BadInvalidArgument on the call and on that argument, as Part 4 has
+        a method refuse an argument outside its domain (asyncua turns an exception raised
+        here into BadUnexpectedError, so the status is returned); a well-formed id of no
+        kept result answers with Error 1 (the standard's "not found", the call good)."""
         rid = result_id.Value if isinstance(result_id, ua.Variant) else result_id
         if not isinstance(rid, str) or not rid.strip():
-            raise ua.UaStatusCodeError(ua.StatusCodes.BadInvalidArgument)
+            return _invalid(0, 1 + len(args))
         found = self._results.get(rid)
         return _answer(found, _NO_ERROR if found is not None else 1)
 
@@ -553,6 +553,15 @@ async def _add_declared_method(server: Server, parent: Node, prefix: tuple[str, 
             args.append([])
     nodeid = ua.NodeId(f"{prefix[0]}.{name.Name}", prefix[1])
     return await parent.add_method(nodeid, name, callback, args[0], args[1])
+
+
+def _invalid(index: int, count: int) -> Any:
+    """A call refused for its argument ``index`` (of ``count``): BadInvalidArgument."""
+    bad = ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
+    res = ua.CallMethodResult()
+    res.StatusCode = bad
+    res.InputArgumentResults = [bad if i == index else ua.StatusCode() for i in range(count)]
+    return res
 
 
 def _answer(result: Any, error: int) -> list[ua.Variant]:

@@ -135,6 +135,10 @@ def test_a_client_that_missed_events_catches_up_with_request_results(repo):
                 out["got"] = await mes.wait_requested(5)
                 out["event"] = next(e for e in mes.events.events
                                     if e.EventType in mes.requested_types)
+                # Results/RequestedResult holds the last result sent again
+                requested = await mes.rm.get_child([f"{mes.mr}:Results",
+                                                    f"{mes.ijt}:RequestedResult"])
+                out["variable"] = await requested.read_data_value()
                 out["bad"] = await mes.request_results(5, 2)
                 out["half"] = await mes.request_results(0, 3)
         finally:
@@ -153,6 +157,9 @@ def test_a_client_that_missed_events_catches_up_with_request_results(repo):
     assert {(x.EntityType, x.EntityId) for x in meta.AssociatedEntities} == {(20, VIN),
                                                                             (23, "B1")}
     assert out["bad"][1] == BAD_ARGUMENTS and out["half"][1] == BAD_ARGUMENTS
+    variable = out["variable"]
+    assert variable.Value.Value.ResultMetaData.SequenceNumber == seqs[-1]
+    assert variable.SourceTimestamp is not None
 
 
 def test_request_results_by_time_and_a_paced_range(repo):

@@ -152,6 +152,7 @@ def test_a_curve_bolts_event_and_get_result_by_id_carry_its_curve(repo):
     assert error == 0 and _points(by_id)[PQ_TORQUE][1] == pytest.approx(TORQUE)
 
 
+@pytest.mark.system   # a client in its own process
 def test_a_client_in_its_own_process_decodes_the_curve(repo):
     """The trace is plain structures of the model: a client that builds its classes from the
     server's definitions (the same as for the rest of a result) decodes every point."""

@@ -139,6 +139,10 @@ def test_every_rundown_arrives_as_a_result_event_at_the_server_object(repo):
     assert loose.Name.endswith("loosening") and "loosening of B2" in loose.Description.Text
     assert {(x.EntityType, x.EntityId) for x in loose.AssociatedEntities} == {
         (20, VIN), (23, "B2"), (-1, "olga")}
+    # ... and said so where a client that decodes nothing reads it, the event's Message
+    assert [e.Message.Text for e in events] == [
+        f"{VIN} B1: tightening OK", f"{VIN} B2: tightening NOK", f"{VIN} B2: loosening OK"]
+    assert {e.Result.ResultMetaData.JoiningTechnology.Text for e in events} == {"Tightening"}
 
 
 def test_identification_state_and_the_result_methods(repo):
@@ -177,6 +181,13 @@ def test_identification_state_and_the_result_methods(repo):
                                                     f"{db_id}:1", ua.Int32(0))
                 out["unknown"] = await rm.call_method(f"{mr}:GetResultById", "nope",
                                                       ua.Int32(0))
+                for bad in ("", "  "):   # not an id at all: the call is refused
+                    with pytest.raises(ua.UaStatusCodeError) as refused:
+                        await rm.call_method(f"{mr}:GetResultById", bad, ua.Int32(0))
+                    out.setdefault("empty", []).append(type(refused.value).__name__)
+                requested = await rm.get_child(
+                    [f"{mr}:Results", f"{uris.index(IJT_URI)}:RequestedResult"])
+                out["requested type"] = await requested.read_type_definition()
                 return out
         finally:
             await stopping(srv, stop, task)
@@ -192,6 +203,8 @@ def test_identification_state_and_the_result_methods(repo):
     _, by_id, error = out["by_id"]
     assert error == 0 and by_id.ResultMetaData.ProductId == VIN
     assert out["unknown"][2] != 0
+    assert out["empty"] == ["BadInvalidArgument"] * 2
+    assert out["requested type"].Identifier == 2014   # JoiningSystemResultType
 
 
 async def mes_client_reads(repo: Repository) -> dict[str, Any]:
@@ -209,6 +222,7 @@ async def mes_client_reads(repo: Repository) -> dict[str, Any]:
         await stopping(srv, stop, task)
 
 
+@pytest.mark.system   # a client in its own process
 def test_a_client_in_its_own_process_decodes_the_result(repo):
     """No class shared with the server: the client builds its own from the definitions the
     server exposes (complete, with subtyped fields flagged)."""

@@ -1,0 +1,105 @@
+"""Other client stacks decoding a result event: node-opcua (an independent implementation, run
+from npm where node is present) and stock asyncua.
+
+Why: an MES is built on whatever stack its integrator knows; the station encodes per Part 6
+(held by :mod:`tests.opcua.test_dictionary`), so what a stack misreads is the stack's, and
+is shown here with the client-side fix (/tmp/readme-opcua.md, "MES clients").
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import shutil
+import subprocess
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from db.repository import Repository
+from tests.db.conftest import record
+from tests.opcua.test_server import VIN, config, repo, serving, stopping
+
+__all__ = ["repo"]   # the fixture, shared with test_server
+
+ROOT = Path(__file__).resolve().parents[2]
+NODE = shutil.which("node")
+NPM = shutil.which("npm")
+#: the node-opcua the test installs (a version known here; newer ones may fix the bit order)
+NODE_OPCUA = os.environ.get("STATIOND_NODE_OPCUA", "node-opcua@2.186.4")
+#: where it is installed: beside the repository's venv, never in the repository's files
+CACHE = Path(os.environ.get("STATIOND_NODE_CACHE", ROOT / ".venv" / "node-opcua"))
+
+
+def node_opcua() -> Path:
+    """The folder holding node-opcua (installed with npm on first use)."""
+    marker = CACHE / "node_modules" / "node-opcua" / "package.json"
+    if not marker.is_file():
+        if NPM is None:
+            pytest.skip("npm is not installed")
+        CACHE.mkdir(parents=True, exist_ok=True)
+        done = subprocess.run(
+            [NPM, "install", "--no-audit", "--no-fund", "--prefix", str(CACHE), NODE_OPCUA],
+            capture_output=True, text=True, timeout=600, check=False)
+        if done.returncode != 0:
+            pytest.skip(f"npm could not install {NODE_OPCUA}: {done.stderr[-500:]}")
+    return CACHE
+
+
+def _recorder(repo: Repository, bolt: str, kw: dict[str, Any]) -> Callable[[], object]:
+    return lambda: record(repo, VIN, bolt, **kw)
+
+
+async def node_reads(repo: Repository, bolts: list[tuple[str, dict[str, Any]]],
+                     *flags: str) -> list[dict[str, Any]]:
+    """The events a node-opcua client decodes while ``bolts`` (bolt, record()'s keywords)
+    are recorded."""
+    folder = node_opcua()
+    srv, stop, task = await serving(config(), repo)
+    try:
+        proc = await asyncio.create_subprocess_exec(
+            str(NODE), str(ROOT / "tests" / "opcua" / "node_client.mjs"), srv.url,
+            str(len(bolts)), *flags, cwd=ROOT, env={**os.environ, "NODE_OPCUA_DIR": str(folder)},
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.DEVNULL)
+        assert proc.stdout is not None
+        while (line := await asyncio.wait_for(proc.stdout.readline(), 120)).strip() \
+                != b"ready":   # node-opcua logs to stdout too
+            assert line, "node-opcua's client ended before it subscribed"
+        loop = asyncio.get_running_loop()
+        for bolt, kw in bolts:
+            await loop.run_in_executor(None, _recorder(repo, bolt, kw))
+        out, _ = await asyncio.wait_for(proc.communicate(), 120)
+        assert proc.returncode == 0, out.decode()[-3000:]
+        return [json.loads(x) for x in out.decode().splitlines() if x.startswith("{")]
+    finally:
+        await stopping(srv, stop, task)
+
+
+RUNDOWNS = [("B2", {"ok": False, "torque_nm": 30.0}),
+            ("B2", {"ok": True, "kind": "loosening", "torque_nm": 20.0, "angle_deg": 303.0})]
+
+
+@pytest.mark.system
+@pytest.mark.skipif(NODE is None, reason="node is not installed")
+def test_node_opcua_decodes_a_result_event_with_the_client_side_fix(repo):
+    events = asyncio.run(node_reads(repo, RUNDOWNS, "--fix"))
+    db_id = repo.ledger.db_id()
+    assert [e["message"] for e in events] == [f"{VIN} B2: tightening NOK",
+                                              f"{VIN} B2: loosening OK"]
+    for e, seq, evaluation, assembly in zip(events, (1, 2), (2, 1), (1, 2), strict=True):
+        meta = e["result"]["ResultMetaData"]
+        assert meta["ResultId"] == f"{db_id}:{seq}"
+        assert meta["SequenceNumber"] == seq
+        assert meta["ResultEvaluation"] == evaluation
+        assert meta["JoiningTechnology"] == "Tightening"
+        assert meta["AssemblyType"] == assembly
+        assert sorted([x["EntityType"], x["EntityId"]] for x in meta["AssociatedEntities"]) \
+            == [[20, VIN], [23, "B2"]]
+        values = e["result"]["ResultContent"][0]["OverallResultValues"]
+        assert [v["Name"] for v in values] == ["Torque", "Angle"]
+        assert values[0]["LowLimit"] == 23.0 and values[0]["High"] == 27.0
+    assert [v["MeasuredValue"] for v in
+            events[1]["result"]["ResultContent"][0]["OverallResultValues"]] == [20.0, 303.0]
