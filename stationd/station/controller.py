@@ -131,12 +131,15 @@ class ControllerFeed:
             newest = await self._call(wrench.fetch_result, 0)
             if newest is None:
                 return
+            if newest.tightening_id is None:   # unreadable, its id too: kept, nothing planned
+                await self._feed(result_input(time.time(), newest, fetched=True))
+                return
             todo = plan_gaps(last, int(newest.tightening_id))
             if todo.note:
                 log.info("results: %s", todo.note)
             if todo.gap is not None:
                 await self._gap(*todo.gap, f"more than {MAX_FETCH} results missed")
-            offset = getattr(wrench, "clock_offset_s", None)
+            offset = wrench.clock_offset_s
             for tid in todo.fetch:
                 got: Received | None = newest if tid == newest.tightening_id else \
                     await self._call(wrench.fetch_result, tid)
@@ -146,11 +149,30 @@ class ControllerFeed:
                 log.info("tightening %d fetched after a reconnect", tid)
                 await self._feed(result_input(time.time(), got, fetched=True, follows=last,
                                               offset=offset))
+                if isinstance(got, TighteningResult):
+                    await self._late_curves(wrench, tid)
         except (DeviceError, ValueError) as exc:   # the link's keeper reports it
             log.warning("results missed while the link was down not fetched yet: %s",
                         one_line(exc))
         except STATION_FAULTS as exc:
             log.error("results missed while the link was down not fetched: %s", one_line(exc))
+
+    async def _late_curves(self, wrench: Wrench, tid: int) -> None:
+        """The curves of a result fetched late (MID 0900 asked for by its tightening id),
+        where the controller offers them and the station takes curves; stored like any
+        curve, linked to its rundown by tightening id.  None is never a fault."""
+        if not wrench.can_curves or not wrench.curves_on:
+            return
+        try:
+            curves = await self._call(wrench.fetch_curve, tid)
+            for curve in curves:
+                await self._call(self.records.store_curve, curve)
+        except (DeviceError, ValueError) as exc:
+            log.warning("curves of tightening %d (fetched late) not got: %s", tid,
+                        one_line(exc))
+        except STATION_FAULTS as exc:
+            log.warning("curves of tightening %d (fetched late) not stored: %s", tid,
+                        one_line(exc))
 
     async def _gap(self, first: int, last: int, reason: str) -> None:
         await self._call(self.records.record_gap, first, last, self.core.vin, reason)
