@@ -279,8 +279,13 @@ def test_a_line_database_made_by_the_earlier_version_is_upgraded_in_place(tmp_pa
     assert main(["line", "results", "--config", str(config)]) == 2
     err = capsys.readouterr().err
     assert "no line_rundowns (made by an earlier stationd)" in err and "line init" in err
+    from stationd.web.line import LineRoutes, NotUpgraded
+    page = LineRoutes()                                  # the /line page: the same (503)
+    with pytest.raises(NotUpgraded):
+        page._read(pg_url, VIN, None, None, 10)
 
     assert main(["line", "init", pg_url]) == 0
+    assert [r["bolt"] for r in page._read(pg_url, VIN, None, "B2", 10)] == ["B2", "B2"]
     out = capsys.readouterr().out
     assert "made line_calibration_checks, line_commands, line_controller_events, line_gaps, " \
            "line_rundowns, line_unattributed, line_unreadable_results" in out
