@@ -424,6 +424,32 @@ class Repository:
             append(s, UNREADABLE, row.id)
             return row.id
 
+    def controller_events(self, vin: str | None = None) -> list[dict[str, Any]]:
+        """The controller results that were not rundowns (of ``vin``, or all), oldest first."""
+        with self._session(write=False) as s:
+            q = select(ControllerEvent).order_by(ControllerEvent.id)
+            if vin is not None:
+                q = q.where(ControllerEvent.vin == vin)
+            return [{"result_type": e.result_type, "what": e.what, "vin": e.vin,
+                     "bolt": e.bolt, "controller_vin": e.controller_vin,
+                     "tightening_id": e.tightening_id, "pset": e.pset, "status": e.status,
+                     "torque_nm": e.torque_nm, "angle_deg": e.angle_deg,
+                     "result_at": e.result_at, "recorded_at": e.recorded_at}
+                    for e in s.scalars(q)]
+
+    def unreadable(self, vin: str | None = None) -> list[dict[str, Any]]:
+        """The result messages that could not be read (of ``vin``, or all), oldest first,
+        each whole."""
+        with self._session(write=False) as s:
+            q = select(UnreadableRecord).order_by(UnreadableRecord.id)
+            if vin is not None:
+                q = q.where(UnreadableRecord.vin == vin)
+            return [{"mid": x.mid, "revision": x.revision, "raw": x.raw, "error": x.error,
+                     "vin": x.vin, "bolt": x.bolt, "controller_vin": x.controller_vin,
+                     "tightening_id": x.tightening_id, "pset": x.pset,
+                     "result_at": x.result_at, "recorded_at": x.recorded_at}
+                    for x in s.scalars(q)]
+
     def held_bolts(self, vin: str, since: datetime | None = None) -> dict[str, str]:
         """Bolts of ``vin`` held by an unreadable result (bolt -> which result: its tightening
         id, else its MID and revision):

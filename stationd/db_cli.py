@@ -218,6 +218,8 @@ def cmd_db_report(args: argparse.Namespace) -> int:
     with open_repository(_db_url(args), must_exist=True) as repo:
         report = repo.vehicle_report(args.vin)
         loose = repo.unattributed(args.vin)   # results made at height that no bolt owns
+        events = repo.controller_events(args.vin)   # batch steps, bypasses, ...: no rundown
+        unread = repo.unreadable(args.vin)          # results that could not be read
         commands = repo.ledger.commands(args.vin)   # the audit trail: skips, reopens
         from stationd.web.results import Results
 
@@ -226,6 +228,10 @@ def cmd_db_report(args: argparse.Namespace) -> int:
         out = report.to_json()
         out["unattributed"] = [{**u, "result_at": _iso(u["result_at"]),
                                 "recorded_at": _iso(u["recorded_at"])} for u in loose]
+        out["controller_events"] = [{**e, "result_at": _iso(e["result_at"]),
+                                     "recorded_at": _iso(e["recorded_at"])} for e in events]
+        out["unreadable_results"] = [{**x, "result_at": _iso(x["result_at"]),
+                                      "recorded_at": _iso(x["recorded_at"])} for x in unread]
         out["commands"] = [{"at": _iso(c.at), "user": c.user, "source": c.source,
                             "kind": c.kind, "bolt": c.bolt, "comment": c.comment}
                            for c in commands]
@@ -259,6 +265,14 @@ def cmd_db_report(args: argparse.Namespace) -> int:
             print(f"  unattributed: tightening {u['tightening_id']} pset {u['pset']} "
                   f"{u['status'].upper()} {_num(u['torque_nm'])} N m, "
                   f"{_num(u['angle_deg'])} deg ({u['reason']})")
+        for e in events:
+            on = f" while the tool was on {e['bolt']}" if e["bolt"] else ""
+            print(f"  controller event: {e['what']} (type {e['result_type']}), tightening "
+                  f"{e['tightening_id']} pset {e['pset']}{on}: not a rundown")
+        for x in unread:
+            on = f", {x['bolt']} held" if x["bolt"] else ""
+            print(f"  unreadable result: tightening {x['tightening_id'] or '?'} (MID "
+                  f"{x['mid']:04d} revision {x['revision']}{on}): {x['error']}")
     return EXIT_OK if report.complete else EXIT_INCOMPLETE
 
 

@@ -39,6 +39,15 @@ CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator"
               "skipped_by", "comment")   # a skipped bolt's row: who skipped it, and why
 
 
+#: an export row of a result the station could not read (kept whole in the database)
+UNREADABLE_STATUS = "unreadable"
+
+
+def _isos(row: dict[str, Any]) -> dict[str, Any]:
+    """A row with its times as ISO text."""
+    return {k: _iso(v) if isinstance(v, datetime) else v for k, v in row.items()}
+
+
 def _iso(t: datetime | None) -> str | None:
     return None if t is None else t.isoformat()
 
@@ -73,6 +82,9 @@ class Results:
         for b in report["bolts"]:
             b["rundowns"] = [r for r in runs if r["bolt"] == b["bolt"]]
         report["commands"] = self.commands(vin)
+        # what the controller said that was no rundown, and what could not be read (whole)
+        report["controller_events"] = [_isos(e) for e in self.repo.controller_events(vin)]
+        report["unreadable_results"] = [_isos(x) for x in self.repo.unreadable(vin)]
         return report
 
     def commands(self, vin: str) -> list[dict[str, Any]]:
@@ -137,7 +149,15 @@ class Results:
              "bolt": b.bolt_id, "attempt": 0, "status": b.status, "images": [],
              "skipped_by": b.skipped_by, "comment": b.comment}
             for b in report.bolts if b.status in (MISSING, SKIPPED)]
-        return runs + none
+        # a result that could not be read: its bolt's row says so, with the parse error
+        unread: list[dict[str, Any]] = [
+            {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
+             "bolt": x["bolt"], "attempt": 0, "status": UNREADABLE_STATUS, "images": [],
+             "pset": x["pset"], "tightening_id": x["tightening_id"],
+             "recorded_at": _iso(x["recorded_at"]),
+             "comment": f"MID {x['mid']:04d} revision {x['revision']}: {x['error']}"}
+            for x in self.repo.unreadable(vin)]
+        return runs + none + unread
 
 
 def plot_curve(traces: list[dict[str, Any]]) -> dict[str, Any] | None:

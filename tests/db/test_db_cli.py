@@ -512,3 +512,38 @@ def test_a_table_without_models_is_not_imported_and_an_idle_one_is_warned(run, d
     assert code == 2 and "would retire every model of the station; nothing imported" in err
     code, _, err = run("config", "check", empty)
     assert code == 0 and "warning:" in err and "tightens nothing" in err
+
+
+def test_report_shows_controller_events_and_unreadable_results(run, db):
+    from db.repository import Repository
+    from stationd.web.results import UNREADABLE_STATUS, Results, rundowns_csv
+
+    run("db", "import", EXAMPLE, "--db", db)
+    with Repository.open(db) as repo:
+        repo.start_vehicle("VIN1", "WAGON-B")
+        record(repo, "VIN1", "SF-FL")
+        repo.record_controller_event(
+            result_type=3, what="batch increment", vin="VIN1", bolt="SF-FR",
+            controller_vin=None, tightening_id=8, pset=1, ok=True, torque_nm=0.0,
+            angle_deg=0.0, result_at=None)
+        repo.record_unreadable(
+            mid=61, revision=7, raw="00990061007    garbage", error="parameter 01 missing",
+            vin="VIN1", bolt="TB-C", controller_vin=None, tightening_id=9, pset=2,
+            result_at=None)
+        runs = Results(repo).export("VIN1")
+        doc = Results(repo).vehicle("VIN1")
+    code, out, _ = run("db", "report", "VIN1", "--db", db)
+    assert code == 1
+    assert ("controller event: batch increment (type 3), tightening 8 pset 1 while the tool "
+            "was on SF-FR: not a rundown") in out
+    assert ("unreadable result: tightening 9 (MID 0061 revision 7, TB-C held): parameter 01 "
+            "missing") in out
+    code, out, _ = run("db", "report", "VIN1", "--db", db, "--json")
+    obj = json.loads(out)
+    assert [e["result_type"] for e in obj["controller_events"]] == [3]
+    assert [x["raw"] for x in obj["unreadable_results"]] == ["00990061007    garbage"]
+    [row] = [r for r in runs if r["status"] == UNREADABLE_STATUS]
+    assert (row["bolt"], row["tightening_id"]) == ("TB-C", 9)
+    assert "parameter 01 missing" in rundowns_csv(runs)
+    assert doc["unreadable_results"][0]["bolt"] == "TB-C"
+    assert doc["controller_events"][0]["what"] == "batch increment"
