@@ -348,13 +348,17 @@ def cmd_run(args: argparse.Namespace) -> int:
     from stationd.config import load_station_config
     from stationd.serve import run_daemon
 
+    if args.no_sim_supervisor and not args.sim_operator:
+        raise InputError("--no-sim-supervisor goes with --sim-operator (without it no "
+                         "simulated supervisor runs: every decision is people's already)")
     cfg = load_station_config(args.config, station=True)
     if not args.sim_operator and not _simulated(cfg):
         return run_daemon(args)
     # the simulator, loaded by the command line alone (never by the runtime)
     from stationd.sim.in_daemon import SimulatedStation
 
-    sim = SimulatedStation(cfg, operator=args.sim_operator)
+    sim = SimulatedStation(cfg, operator=args.sim_operator,
+                           supervisor=not args.no_sim_supervisor)
     try:
         return run_daemon(args, beside=sim.beside)
     finally:
@@ -408,9 +412,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if args.vision and (args.http is not None or args.hold):
         raise InputError("--http and --hold serve the station demo's screens, not --vision's")
     if args.vision and (args.opcua is not None or args.line_db is not None
-                        or args.stations != 1):
-        raise InputError("--opcua, --line-db and --stations go with the station demo, not "
-                         "--vision")
+                        or args.stations != 1 or args.no_sim_supervisor):
+        raise InputError("--opcua, --line-db, --stations and --no-sim-supervisor go with the "
+                         "station demo, not --vision")
     if args.vision:
         from stationd.demo.vision import run_demo
 
@@ -590,6 +594,12 @@ def build_parser() -> argparse.ArgumentParser:
                     "scripted operator: vehicles arrive, the wrench visits bolts, the "
                     "controller tightens (now and then NOK); without it the simulated lift "
                     "stays down (commands on standard input: next, raise, lower, ...)")
+    rn.add_argument("--no-sim-supervisor", action="store_true",
+                    help="with --sim-operator: no simulated supervisor; locks (and every "
+                    "supervisor decision) are left to people: the first bolt of each vehicle "
+                    "locks, the operator tightens the others and waits, the vehicle on the "
+                    "lift, until a person releases it (the screens' Release form, stationd "
+                    "release)")
     rn.set_defaults(func=cmd_run)
 
     sm = sub.add_parser("sim", help="the simulated lift PLC or tightening controller on its "
@@ -643,6 +653,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="N simulated stations of one line (after the first, light ones, one "
                     "after another), forwarding to --line-db or, without it, a throw-away "
                     "PostgreSQL (default: %(default)s)")
+    dm.add_argument("--no-sim-supervisor", action="store_true",
+                    help="no simulated supervisor: locks (and every supervisor decision) are "
+                    "left to people: the first bolt locks, the operator tightens the others "
+                    "and waits until a person releases it (the screens' Release form, "
+                    "stationd release); Ctrl-C ends the wait")
     dm.add_argument("--load", type=int, default=0, metavar="N",
                     help="N busy processes beside the station for the run (CPU load)")
     dm.set_defaults(func=cmd_demo)

@@ -70,6 +70,7 @@ from stationd.sim.operator import (
 )
 from stationd.sim.vin import make_vin
 from stationd.sim.world import World
+from stationd.station.commands import Issuer
 from stationd.station.core import SendParams
 from stationd.station.daemon import Station
 from stationd.station.events import (
@@ -279,7 +280,7 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
             task = asyncio.create_task(station.run(stop))
             await operate(station, world, rng, cycles, report, say, truth, nok_rng,
                           note=_noter(out, station_id(1) if n_stations > 1 else ""),
-                          share=(1, n_stations))
+                          share=(1, n_stations), supervisor=_supervisor(args))
             for k in range(2, n_stations + 1):
                 extra.append(await _next_station(args, cfg, k, tmp, taken, endpoints,
                                                  line_url, psets, truth, out, services,
@@ -358,6 +359,11 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
                   "to a temporary database)")
         print(summary["verdict"])
     return 0 if summary["verdict"].startswith("PASS") else 1
+
+
+def _supervisor(args: argparse.Namespace) -> Issuer | None:
+    """The simulated supervisor; None with ``--no-sim-supervisor`` (locks left to people)."""
+    return None if getattr(args, "no_sim_supervisor", False) else SUPERVISOR
 
 
 def _station(cfg: StationConfig, psets: dict[int, SimPset]) -> Station:
@@ -443,7 +449,8 @@ async def _next_station(args: argparse.Namespace, first: StationConfig, k: int, 
         try:
             await operate(station, world, np.random.default_rng([args.seed, k]), cycles,
                           report, say, truth, np.random.default_rng([args.seed, 21, k]),
-                          note=_noter(out, sid), share=(k, n_stations))
+                          note=_noter(out, sid), share=(k, n_stations),
+                          supervisor=_supervisor(args))
         finally:
             stop.set()
             await task

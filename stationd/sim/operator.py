@@ -1,7 +1,13 @@
 """The simulated operator: signs in at the station (so every rundown is recorded with their
 name), raises the lift with a vehicle, takes the wrench to its bolts and tightens them as the
 station's NOK policy has it; a simulated supervisor releases a locked bolt through the command
-path the screens use (``Station.submit``).
+path the screens use (``Station.submit``).  Without one (``supervisor=None``: ``stationd demo
+--no-sim-supervisor``, ``stationd run --sim-operator --no-sim-supervisor``) every supervisor
+decision is left to people: the first bolt of each vehicle is a stubborn joint, so a lock is
+met; the locked (or held) bolt waits, the operator tightens the other bolts, then waits with the
+vehicle on the lift until a person releases it (the screens' Release form, ``stationd
+release``) and tightens it.  Why: training and commissioning need the Locked panel and a
+person's release, which a simulated supervisor answering within a second never let anyone see.
 
 Why here, below the demo: one operator for ``stationd demo`` (a vehicle, then a verdict) and
 for ``stationd run --sim-operator`` (vehicle after vehicle in the daemon, :mod:`stationd.sim.
@@ -83,7 +89,7 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
                   report: list[dict[str, Any]], say: Callable[[dict[str, Any]], None],
                   truth: dict[str, Any], nok_rng: np.random.Generator,
                   note: Callable[[str], None] | None = None,
-                  supervisor: Issuer = SUPERVISOR, operator: Issuer = OPERATOR,
+                  supervisor: Issuer | None = SUPERVISOR, operator: Issuer = OPERATOR,
                   share: tuple[int, int] = (1, 1)) -> None:
     """One vehicle: ``truth['vin']`` (lift code ``truth['model_code']``) raised, up to
     ``cycles`` of its bolts in view visited in the ``rng``'s order (each line to ``say`` and
@@ -92,7 +98,8 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     parameter send against it).  InputError when the vehicle is not opened or no bolt of it
     is in view.  ``operator`` signs in at the station first unless signed in already.
     ``share`` (k, n): this station is the k-th of a line of n, and its bolts are the k-th of
-    n shares of the bolts in view (:func:`share_of`); ``truth['share']`` gets them."""
+    n shares of the bolts in view (:func:`share_of`); ``truth['share']`` gets them.
+    ``supervisor`` None: locks are left to people (:func:`wait_for_people`)."""
     plc, ctl = simulators(st)
     if st.core.operator != operator.user:
         answer = await st.submit(SignIn(f"{operator.source}: the simulated operator"),
@@ -136,7 +143,8 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     truth["share"] = [b.bolt_id for b in bolts]
     order = rng.permutation(len(bolts))[:cycles]
     truth["cycles"] = len(order)      # fewer when fewer bolts can be shown
-    for k in order:
+    waiting: dict[str, tuple[BoltInfo, dict[str, Any]]] = {}   # locked, left to people
+    for n_visit, k in enumerate(order):
         b = bolts[int(k)]
         target = np.array(b.position)
         if rng.random() < 0.2:  # hovers between two bolts first: nothing may be sent
@@ -147,7 +155,8 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
         pose = wrench_at(target + np.append(rng.normal(0, 0.3, 2), 0.0), rng, length)
         truth["bolt"] = b.bolt_id
         world.set_wrench(pose)
-        leave = rng.random() < 0.1
+        # drawn always (the seed's stream); the bolt that locks for people is never left
+        leave = rng.random() < 0.1 and not (supervisor is None and n_visit == 0)
         line: dict[str, Any] = {"bolt": b.bolt_id, "pset": b.parameters.pset, "result": None}
         if not await _tool_on(st, b.bolt_id):
             line["result"] = f"not selected ({_why_not(st)})"
@@ -163,7 +172,33 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
             line["result"] = "left before tightening; tool " + \
                 ("disabled" if not ctl.tool_enabled else "STILL ENABLED")
         elif line["result"] is None:
-            await until_ok(st, b.bolt_id, line, nok_rng, truth["vin"], supervisor)
+            await until_ok(st, b.bolt_id, line, nok_rng, truth["vin"], supervisor,
+                           stubborn=True if supervisor is None and n_visit == 0 else None)
+        if line.get("waits"):
+            waiting[b.bolt_id] = (b, line)      # its line is said once a person released it
+        else:
+            report.append(line)
+            say(line)
+        truth["bolt"] = None
+        world.set_wrench(None)
+        await asyncio.sleep(0.3)
+    for bolt_id, (b, line) in waiting.items():
+        while line.get("waits"):
+            await wait_for_people(st, bolt_id, truth["vin"], note or _stderr)
+            pose = wrench_at(np.array(b.position) + np.append(rng.normal(0, 0.3, 2), 0.0), rng,
+                             length)
+            truth["bolt"] = bolt_id
+            world.set_wrench(pose)
+            before = [*line.get("before", []), line["result"]]
+            rundowns = int(line.get("rundowns", 0))
+            line.pop("waits")
+            if not await _tool_on(st, bolt_id):
+                line["result"] = f"not selected after the release ({_why_not(st)})"
+                line["before"], line["unfinished"] = before, True
+            else:   # a person had the joint seen to: it is no longer stubborn
+                await until_ok(st, bolt_id, line, nok_rng, truth["vin"], None, stubborn=False)
+                line["before"] = [*before, *line["before"]]
+                line["rundowns"] = rundowns + int(line["rundowns"])
         report.append(line)
         say(line)
         truth["bolt"] = None
@@ -214,15 +249,38 @@ async def _pull(st: Station, loosening: bool, nok: bool) -> tuple[Any, bool]:
     return shot, False
 
 
+def stopped(st: Station, bolt: str) -> bool:
+    """Whether ``bolt`` waits for a supervisor: locked after NOKs in a row, or held (its
+    result could not be read)."""
+    matcher = st.core.matcher
+    return matcher is not None and (bolt in matcher.locked or bolt in matcher.held)
+
+
+async def wait_for_people(st: Station, bolt: str, vin: str,
+                          note: Callable[[str], None]) -> None:
+    """The operator waits, the vehicle on the lift, until a person releases ``bolt`` (the
+    screens' Release form, ``stationd release``): said once, and again when released."""
+    note(f"{bolt} of {vin} locked: the operator waits, the vehicle on the lift, for a "
+         "person's release (the screens' Release form, or stationd release)")
+    while stopped(st, bolt):
+        await asyncio.sleep(0.2)
+    note(f"{bolt} of {vin} released: the operator tightens it again")
+
+
 async def until_ok(st: Station, bolt: str, line: dict[str, Any],
-                    nok_rng: np.random.Generator, vin: str,
-                   supervisor: Issuer = SUPERVISOR) -> None:
+                   nok_rng: np.random.Generator, vin: str,
+                   supervisor: Issuer | None = SUPERVISOR, *,
+                   stubborn: bool | None = None) -> None:
     """The operator on ``bolt`` with the tool on, as the NOK policy has it: pull; after a NOK
     again (its loosen pset first where the policy says so); a locked bolt is released by the
     supervisor through the command path; until an OK tightening or :data:`MAX_RUNDOWNS`.
     ``line`` gets the last step as its ``result``, the earlier ones as ``before``, ``ok``
-    and ``rundowns`` (the results the station must record)."""
-    stubborn = nok_rng.random() < STUBBORN_P
+    and ``rundowns`` (the results the station must record).  ``supervisor`` None: a locked
+    bolt is left for people (``line['waits']``); ``stubborn``: the joint fails until it locks
+    (True) or has been seen to (False; None: drawn)."""
+    line.pop("waits", None)
+    drawn = nok_rng.random() < STUBBORN_P     # drawn always: the seed's stream stays the same
+    stubborn = drawn if stubborn is None else stubborn
     steps: list[str] = []
     line["rundowns"] = 0
     for _ in range(MAX_RUNDOWNS):
@@ -239,8 +297,11 @@ async def until_ok(st: Station, bolt: str, line: dict[str, Any],
                      f"{word} {shot.torque_nm:.1f} Nm")
         if shot.ok and not loosening:
             break
-        matcher = st.core.matcher
-        if matcher is not None and bolt in matcher.locked:
+        if stopped(st, bolt) and supervisor is None:
+            steps.append("locked: left for a person's release")
+            line["waits"] = True
+            break
+        if stopped(st, bolt) and supervisor is not None:
             answer = await st.submit(ReleaseBolt(vin, bolt, f"{supervisor.source}: joint "
                                                  "checked"), supervisor)
             steps.append("locked, released by the supervisor" if answer.accepted else
@@ -256,4 +317,4 @@ async def until_ok(st: Station, bolt: str, line: dict[str, Any],
 
 __all__ = ["LOOSEN_PROGRAM", "MAX_RUNDOWNS", "NOK_P", "OPERATOR", "STUBBORN_P", "SUPERVISOR",
            "loosen_programs", "operate", "share_of", "simulated_url", "simulators",
-           "stand_ins", "until_ok"]
+           "stand_ins", "stopped", "until_ok", "wait_for_people"]
