@@ -30,7 +30,7 @@ from __future__ import annotations
 import enum
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, assert_never
 
 import numpy as np
 
@@ -605,12 +605,59 @@ class StationCore:
     def feed(self, ev: Event) -> list[Action]:
         """Everything that happened goes in here; what to do comes out, in order."""
         before = (self.state, self.reason)
-        handler = getattr(self, "_on_" + type(ev).__name__)
-        acts: list[Action] = handler(ev)
+        acts = self._dispatch(ev)
         acts += self._vin_due()
         if (self.state, self.reason) != before:  # first: follow-ups may change it again
             acts.insert(0, Publish(StateChanged(self.state, self.reason, t=ev.t)))
         return acts
+
+    def _dispatch(self, ev: Event) -> list[Action]:
+        """Each input to its handler, spelled out so that the type checker and a reader can
+        follow it (an input of the Event union without a case fails the type check)."""
+        match ev:
+            case Started():
+                return self._on_Started(ev)
+            case LiftRead():
+                return self._on_LiftRead(ev)
+            case VehicleLoaded():
+                return self._on_VehicleLoaded(ev)
+            case VehicleRejected():
+                return self._on_VehicleRejected(ev)
+            case LocalizedIn():
+                return self._on_LocalizedIn(ev)
+            case ParamsAcked():
+                return self._on_ParamsAcked(ev)
+            case ToolOn():
+                return self._on_ToolOn(ev)
+            case Written():
+                return self._on_Written(ev)
+            case VehicleEnded():
+                return self._on_VehicleEnded(ev)
+            case ParamsRefused():
+                return self._on_ParamsRefused(ev)
+            case ResultIn():
+                return self._on_ResultIn(ev)
+            case UnreadableIn():
+                return self._on_UnreadableIn(ev)
+            case CommandIn():
+                return self._on_CommandIn(ev)
+            case CommandDone():
+                return self._on_CommandDone(ev)
+            case DeviceFault():
+                return self._on_DeviceFault(ev)
+            case DeviceBack():
+                return self._on_DeviceBack(ev)
+            case ModelsKnown():
+                return self._on_ModelsKnown(ev)
+            case VinSent():
+                return self._on_VinSent(ev)
+            case Tick():
+                return self._on_Tick(ev)
+            case OperatorBack():
+                return self._on_OperatorBack(ev)
+            case ReferencesChecked():
+                return self._on_ReferencesChecked(ev)
+        assert_never(ev)
 
     @property
     def selection(self) -> Selection | None:
