@@ -33,7 +33,12 @@ And (4): the optional methods RequestResults, RequestUnacknowledgedResults (IJT 
 AcknowledgeResults (Machinery Result) are not instantiated with the JoiningSystem: they are
 added to its ResultManagement with the arguments their type declares.  RequestResults and
 RequestUnacknowledgedResults are reads (they send stored results again as events and change
-nothing, like GetResultById): anonymous clients may call them.
+nothing, like GetResultById): anonymous clients may call them.  The last result they sent is
+also ``Results/RequestedResult``, where the working group's conformance client reads it.
+
+Beside the modern DataTypeDefinitions the server publishes OPC Binary dictionaries generated
+from them (:mod:`stationd.opcua.dictionary`): that client, and MES code built like it, decode
+results only through those.
 """
 
 from __future__ import annotations

@@ -22,8 +22,9 @@ it), its summary per test file::
 The capabilities given to the client claim what this server implements: the base, single
 results, result events, GetLatestResult, GetResultById, RequestResults,
 RequestUnacknowledgedResults, requested-result events and the RequestedResult variable, and
-AcknowledgeResults (for users only: anonymous, its case is refused; :data:`NOT_CLAIMED` says
-what is left out and why).
+AcknowledgeResults (for users only: anonymous, its case is refused), and a result's Trace and
+StepResults (the station has them when its controller sends curves, as the rundowns recorded
+here do); :data:`NOT_CLAIMED` says what is left out and why.
 """
 
 from __future__ import annotations
@@ -40,21 +41,24 @@ from collections import Counter
 from pathlib import Path
 
 from db.bolts import Window
+from db.curves import store_curve
 from db.repository import BoltInfo, Repository
 from stationd.access import hash_password
 from stationd.boltfile import import_bolts
 from stationd.opcua import OpcUaConfig
+from stationd.opcua.results import TRACE_ANGLE, TRACE_TORQUE
 from stationd.opcua.server import OpcUaServer
 from tests.db.conftest import BASE, record
 
 VIN = "WVWZZZ1JZXW000001"
 MODEL = "SEDAN"
+CURVE_POINTS = 50
 CLAIMED = ("joining_system_base", "joining_system_identification", "result_management",
            "single_result", "basic_result", "result_event_access", "get_latest_result",
            "get_result_by_id", "joining_result_overall_result_values", "result_content",
            "request_results", "request_unacknowledged_results",
            "requested_result_event_access", "requested_result_variable_access",
-           "acknowledge_results")
+           "acknowledge_results", "joining_result_trace", "joining_result_step_results")
 #: not claimed, though a result event carries AssociatedEntities: the working group's unit
 #: "IJT Event Payload Associated Entities" is about JoiningSystemEventType (tool connected,
 #: program selected ...), events this station does not fire; claimed, its five cases wait
@@ -114,13 +118,20 @@ def _measured(window: Window | None, ok: bool) -> float | None:
     return window.target if ok else window.max + (window.max - window.min) / 2 + 1
 
 
-def rundown(repo: Repository, vin: str, bolt: BoltInfo, ok: bool) -> None:
+def rundown(repo: Repository, vin: str, bolt: BoltInfo, ok: bool, tightening_id: int) -> None:
     """Record a rundown of ``bolt`` whose torque and angle agree with its limits and
-    ``ok`` (an unlimited angle: the pset's default of 35 degrees)."""
+    ``ok`` (an unlimited angle: the pset's default of 35 degrees), then its torque and angle
+    curves, as a controller that sends curves does (ramps to the final values, 2 ms apart):
+    the station's results then carry a Trace and a StepResult naming it."""
     p = bolt.parameters
-    angle = _measured(p.angle, True) if p.angle is not None else 35.0
-    record(repo, vin, bolt.bolt_id, ok=ok, torque_nm=_measured(p.torque, ok),
-           angle_deg=angle, parameters_id=bolt.parameters_id)
+    angle = _measured(p.angle, True) or 35.0
+    torque = _measured(p.torque, ok) or 0.0   # a torque window is always there
+    record(repo, vin, bolt.bolt_id, ok=ok, torque_nm=torque, angle_deg=angle,
+           parameters_id=bolt.parameters_id, tightening_id=tightening_id)
+    for kind, unit, final in ((TRACE_TORQUE, "Nm", torque), (TRACE_ANGLE, "deg", angle)):
+        store_curve(repo, tightening_id=tightening_id, trace_type=kind, unit=unit,
+                    values=[final * i / (CURVE_POINTS - 1) for i in range(CURVE_POINTS)],
+                    sample_period_s=0.002)
 
 
 class _Rundowns:
@@ -133,7 +144,8 @@ class _Rundowns:
 
     def record(self) -> None:
         with self._lock:
-            rundown(self.repo, VIN, self.bolts[self.n % len(self.bolts)], ok=self.n % 5 != 4)
+            rundown(self.repo, VIN, self.bolts[self.n % len(self.bolts)], ok=self.n % 5 != 4,
+                    tightening_id=1000 + self.n)
             self.n += 1
 
     async def one(self) -> bool:
@@ -164,8 +176,8 @@ async def _run(args: argparse.Namespace) -> int:
     repo = Repository.open(f"sqlite:///{folder / 'station.db'}")
     import_bolts(repo, table)
     repo.start_vehicle(VIN, MODEL)
-    for bolt in repo.bolts_for_model(MODEL):
-        rundown(repo, VIN, bolt, ok=True)
+    for n, bolt in enumerate(repo.bolts_for_model(MODEL)):
+        rundown(repo, VIN, bolt, ok=True, tightening_id=n + 1)
     port = _free_port()
     cfg = OpcUaConfig(endpoint=f"opc.tcp://127.0.0.1:{port}", station_id="ST-IJT",
                       security=("none",), users={"mes": hash_password("conformance")})
