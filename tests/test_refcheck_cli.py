@@ -27,6 +27,7 @@ from stationd.lock import StationLock, lock_path
 from stationd.sim.render import Scene
 from stationd.sim.world import World
 from tests.localize.refscene import PAIR, R1_PAIR, R2_PAIR, TV, vehicle
+from tests.station.daemons import taken, until
 from tests.station.refstation import station_dir
 
 
@@ -139,7 +140,7 @@ def test_while_the_daemon_runs_the_check_is_asked_of_it_through_its_api(
 
         # pair2 knocked: the daemon finds it moved (and refuses its bolts from now on)
         (tmp_path / "knock").write_text("pair2 0.3\n")
-        time.sleep(0.5)
+        until(lambda: taken(tmp_path / "knock", "pair2 0.3"), 60, "the world knocked pair2")
         assert main([*check, "--user", "erik", "--json"]) == 1
         got = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
         assert got["pair1"]["verdict"] == "ok"

@@ -7,6 +7,7 @@ the taught positions, compared with the CAD table."""
 
 from __future__ import annotations
 
+import functools
 import os
 import queue
 import sqlite3
@@ -24,7 +25,7 @@ from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim import SimController
 from stationd.access import hash_password
 from stationd.sim.devices_cli import psets_of
-from tests.station.daemons import SIM, Proc, at_height, free_port
+from tests.station.daemons import SIM, Proc, at_height, free_port, taken, until
 
 ROOT = Path(__file__).resolve().parents[1]
 PASSWORD = "teach-me-please"  # noqa: S105 - a test user's
@@ -80,9 +81,11 @@ def test_an_engineer_teaches_bolts_and_gets_a_new_table_compared_with_cad(tmp_pa
         said: dict[str, str] = {}
         for bolt, answer in (("B01", "\n"), ("B02", "\n"), ("B03", "s\n")):
             expect(f"hold the tool on {bolt}")
-            pose.write_text(bolt if answer == "\n" else "")
+            held = bolt if answer == "\n" else ""
+            pose.write_text(held)
             d.wait_log("teaching SIM-1 (ed)")
-            time.sleep(0.5)                         # the engineer settles the tool
+            # the engineer settles the tool: the world has it there before Enter
+            until(functools.partial(taken, pose, held), 60, f"the tool on {bolt!r}")
             p.stdin.write(answer)
             p.stdin.flush()
             if answer == "\n":

@@ -65,6 +65,13 @@ def until(pred: Callable[[], Any], timeout: float, what: str) -> None:
     raise AssertionError(f"not reached in {timeout} s: {what}")
 
 
+def taken(path: Path, text: str) -> bool:
+    """Whether the world of ``station_proc.py`` has what ``path`` (its POSE file or
+    ``knock``) says, ``text``: it acknowledged it in ``PATH.taken``."""
+    done = path.with_name(path.name + ".taken")
+    return done.exists() and done.read_text() == text.strip()
+
+
 async def until_async(pred: Callable[[], Any], timeout: float,
                       what: str | Callable[[], str] = "condition") -> bool:
     """Poll ``pred`` on the station's loop (the station runs between two polls) until it is

@@ -6,7 +6,9 @@ in this process, so it lives here and puts the wrench where the file POSE says (
 nothing: out of view).  The daemon itself is the real one: ``stationd.serve.serve``,
 with its signal handling, so SIGTERM and SIGKILL hit exactly what systemd would.  A file
 ``knock`` beside POSE knocks pairs out of place (a line ``PAIR DEGREES`` each: turned about
-their vertical axis; a pair no longer named is put back); ``plain`` renders a plain
+their vertical axis; a pair no longer named is put back).  Each change is acknowledged once
+the world has it: ``POSE.taken`` and ``knock.taken`` then hold the text taken (a test waits
+for them, never for a time: ``tests.station.daemons.taken``); ``plain`` renders a plain
 background (no texture, no vignetting: the 20 MP backgrounds render faster); ``lock`` holds
 the station's lock as ``stationd run`` does (one daemon per database: what ``stationd
 calibrate check`` asks to know that a daemon runs).
@@ -66,12 +68,14 @@ def main(cfg_path: str, pose_path: str, plain: bool = False, lock: bool = False)
             if text != last:
                 last = text
                 world.set_wrench(on(text) if text else None)
+                _acknowledge(pose, text)
             moved = knock.read_text().strip() if knock.exists() else ""
             if moved != knocked:
                 turns = dict(line.split() for line in moved.splitlines())
                 for name in cfg.pairs:
                     world.move_pair(name, rotation_deg=(0.0, float(turns.get(name, 0.0)), 0.0))
                 knocked = moved
+                _acknowledge(knock, moved)
             time.sleep(0.02)
 
     threading.Thread(target=follow, daemon=True).start()
@@ -83,6 +87,14 @@ def main(cfg_path: str, pose_path: str, plain: bool = False, lock: bool = False)
     finally:
         if locks is not None:
             locks.release()
+
+
+def _acknowledge(path: Path, text: str) -> None:
+    """``PATH.taken`` holds ``text``: the world has it (written whole: a reader never sees
+    half of it)."""
+    part = path.with_name(path.name + ".taken.part")
+    part.write_text(text)
+    part.replace(path.with_name(path.name + ".taken"))
 
 
 if __name__ == "__main__":

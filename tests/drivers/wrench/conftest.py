@@ -40,7 +40,12 @@ def connect(sim: SimController, transport: str, tmp_path, **kw) -> OpenProtocolW
     return wrench
 
 
-def reconnect_within(w: Any, timeout: float = 2.0) -> bool:
+#: how long a test waits for what a peer thread does before it fails, s: generous, so a busy
+#: machine only makes a test slower, never failed (a wait ends as soon as it holds)
+WAIT_S = 30.0
+
+
+def reconnect_within(w: Any, timeout: float = WAIT_S) -> bool:
     """What the station's keeper (``drivers.keeper``) does, without its backoff: call
     ``reconnect()`` until it works.  False if it never did within ``timeout``."""
     deadline = time.monotonic() + timeout
@@ -54,7 +59,7 @@ def reconnect_within(w: Any, timeout: float = 2.0) -> bool:
             time.sleep(0.02)
 
 
-def wait_until(cond: Callable[[], bool], timeout: float = 2.0) -> bool:
+def wait_until(cond: Callable[[], bool], timeout: float = WAIT_S) -> bool:
     deadline = time.monotonic() + timeout
     while not cond():
         if time.monotonic() > deadline:
