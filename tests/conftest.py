@@ -1,10 +1,12 @@
-"""Shared fixtures: rendered marker views (windows around the marker keep tests fast)."""
+"""Shared fixtures: rendered marker views (windows around the marker keep tests fast); the
+suite's two speeds (the ``system`` marker, tests/system.py)."""
 
 from __future__ import annotations
 
 import os
 import shutil
 import tempfile
+from collections.abc import Generator
 
 import numpy as np
 import pytest
@@ -12,23 +14,62 @@ import pytest
 from stationd.sim import scenes as sc
 from stationd.sim.render import default_camera
 from stationd.vision.marker import MarkerSpec
+from tests.system import MARK_HINT, Guard, check_lists, is_system
 
 SPEC = MarkerSpec()
 NOISE = {"blur_sigma": 0.8, "noise_sigma": 2.0}
 _BACKGROUNDS: list[str] = []   # the folder this process made for the run, removed at its end
 
 
+GUARD = Guard()
+
+
 def pytest_configure(config: pytest.Config) -> None:
-    """One folder of rendered simulator backgrounds for the whole run: this process, its
+    """The ``system`` marker's guard (tests/system.py: the suite's two speeds), and one folder
+    of rendered simulator backgrounds for the whole run: this process, its
     xdist workers and every daemon, demo and benchmark they start inherit it (the simulated
     cameras then render each 20 MP background once per run, not once per process:
     ``stationd.sim.backgrounds``).  Set ``STATIOND_SIM_BACKGROUNDS=`` (empty) to render every
     one as before."""
     from stationd.sim.backgrounds import ENV
 
+    check_lists()
+    GUARD.install()
     if os.environ.get(ENV) is None:
         os.environ[ENV] = tempfile.mkdtemp(prefix="stationd-backgrounds-")
         _BACKGROUNDS.append(os.environ[ENV])
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Each system test marked ``system`` before ``-m`` selects (tests/system.py)."""
+    for item in items:
+        if is_system(item) and item.get_closest_marker("system") is None:
+            item.add_marker(pytest.mark.system)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None
+                            ) -> Generator[None, object, object]:
+    """The guard knows which test runs, its fixtures' setup and teardown included."""
+    GUARD.enter(item)
+    try:
+        return (yield)
+    finally:
+        GUARD.leave()
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]
+                              ) -> Generator[None, pytest.TestReport, pytest.TestReport]:
+    """A test that started what a system test starts fails also where it caught the guard's
+    failure (in a thread, in a broad except)."""
+    report = yield
+    seen = GUARD.seen.get(item.nodeid)
+    if seen and report.passed and report.when in ("setup", "call"):
+        report.outcome = "failed"
+        report.longrepr = f"{item.nodeid} starts {seen[0]}: it is {MARK_HINT} (tests/system.py)"
+    return report
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
