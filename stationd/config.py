@@ -408,15 +408,14 @@ def _missing(root: YamlNode, key: str) -> None:
 
 
 def _left_out(error: ConfigError, told: list[ConfigError]) -> bool:
-    """Whether ``error`` only says that an entry :meth:`_Reader.section` left out (after
-    telling its error) is missing: a required key with a wrong value, not a second error."""
-    prefix = "missing key(s): "
-    if not error.message.startswith(prefix):
+    """Whether ``error`` is about what :meth:`_Reader.section` changed by leaving out the
+    entries it told: it is at one of them or at a mapping holding one (a required key left
+    out is missing; a pair sees no reference once the one it saw, mistyped, is left out),
+    not a second mistake of the file."""
+    if error.key is None:
         return False
-    names = error.message[len(prefix):].split(", ")
-    within = f"{error.key}." if error.key else ""
-    return all(any(e.key is not None and (e.key == within + n or e.key.startswith(
-        within + n + ".")) for e in told) for n in names)
+    return any(e.key is not None and (e.key == error.key or e.key.startswith(
+        (error.key + ".", error.key + "["))) for e in told)
 
 
 def _pair_items(node: YamlNode) -> list[tuple[str, YamlNode]]:
@@ -479,7 +478,7 @@ class _Reader:
                 value = parse(node)
             except ConfigError as exc:
                 if any(str(exc) == str(e) for e in found) or _left_out(exc, found):
-                    break      # nothing new, or the entry left out was required: stop
+                    break      # nothing new, or what leaving an entry out did: stop
                 found.append(exc)
                 node = node.without(exc)
                 continue
@@ -552,11 +551,10 @@ class _Reader:
             self.guard(None, _one_device_each, config.lift.url, config.wrench.url,
                        self.top["wrench"])
         if "references" in self.top:   # projected with the pairs' calibrations: after them
-            refs = self.guard(None, partial(
+            refs = self.section("references", None, partial(
                 References.from_node, marker=marker,
                 matching_tolerance_mm=config.matching.tolerance_mm,
-                pairs={n: (p.calibration, p.to_vehicle) for n, p in pairs.items()}),
-                self.top["references"])
+                pairs={n: (p.calibration, p.to_vehicle) for n, p in pairs.items()}))
             config = replace(config, references=refs)
         # after the sections: a mistake written in the file is told before what is missing
         if self.require_devices and isinstance(root.value(), dict) and not self.unreadable:

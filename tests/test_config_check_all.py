@@ -97,3 +97,13 @@ def test_bolts_in_millimetres_are_not_taken_for_metres(tmp_path) -> None:
                             "      - {id: B02, name: b, position: [1220, 300, 5], pset: 1}\n")
     assert check_bolts(path).ok
     assert check_bolts(SIM / "bolts.yaml").ok
+
+
+def test_every_error_of_the_references(station, capsys) -> None:
+    """The calibration check's section too (read after the pairs, with their calibrations)."""
+    station.write_text(station.read_text() + "references:\n  markers:\n"
+                       "    R1: [680.0, -480.0]\n    R2: {position: [900.0, -300.0, -300.0], "
+                       "mount: crane}\n  period_min: 0\n")
+    lines = [line for line in _check(capsys, station) if "references." in line]
+    assert [line.split(": ")[1] for line in lines] == [
+        "references.markers.R1", "references.markers.R2.mount", "references.period_min"], lines
