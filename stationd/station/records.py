@@ -281,9 +281,11 @@ class Records:
                                      b.parameters_id, b.parameters) for b in infos}
         log.info("vehicle %s (%s) opened%s: %d bolts, %d done", a.vin, model,
                  " for rework" if started.rework else "", len(infos), len(done))
+        # by keyword: held and status are both bolt -> text, and given by position (status
+        # in held's place) every bolt done before a reload or a restart came back held
         return VehicleLoaded(time.time(), a.vin, model, specs, done, started.rework,
-                             {b: skip_note(*who) for b, who in skipped.items()}, noks, status,
-                             held)
+                             skipped={b: skip_note(*who) for b, who in skipped.items()},
+                             noks=noks, held=held, status=status)
 
     def close_vehicle(self, vin: str) -> VehicleEnded:
         report = self._repo().close_vehicle(vin)
