@@ -405,6 +405,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
         except Exception as exc:  # a bug, not a device: logged, the station restarts
             log.error("station loop failed: %s: %s", type(exc).__name__, one_line(exc))
             await asyncio.sleep(1.0)
+        vin = station.vin      # the vehicle on the lift as the station closes
         await loop.run_in_executor(None, station.close)
         carried = station.unsaved()
         if stop.is_set():
@@ -413,7 +414,27 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
             return
         if new is not None:
             log.info("configuration reloaded; reopening the devices")
+            lost = vehicle_lost(vin, cfg, new)
+            if lost is not None:
+                log.warning("%s", lost)
             cfg = new
+
+
+def vehicle_lost(vin: str | None, old: StationConfig, new: StationConfig) -> str | None:
+    """Why a reload cannot keep the vehicle ``vin`` (open as the last station closed) as it
+    was, in one line for the journal; None when it can: the new station reads the lift (a
+    real PLC goes on through a reload; the simulated one is carried over) and the same
+    database, so it reopens the vehicle with what was done.  A lift that reports another
+    vehicle, or a bolt table without its model, is said by the station as it opens.  Why: a
+    reload is taken for one that keeps the vehicle; one that cannot must say so, not leave a
+    vehicle open for good with its bolts "missing"."""
+    if vin is None:
+        return None
+    if new.database_url != old.database_url:
+        return (f"reload: vehicle {vin} cannot go on as it was: its record is in the last "
+                f"database ({old.database_url}); the new one ({new.database_url}) opens it "
+                "anew, without its bolts done so far")
+    return None
 
 
 async def _beside_ended(task: asyncio.Task[None]) -> None:

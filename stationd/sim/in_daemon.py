@@ -31,6 +31,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from drivers.lift.base import LiftState
 from drivers.lift.sim import SimLift, SimulatedPlc
 from drivers.wrench.sim import SimWrench
 from stationd.boltfile import load_bolts
@@ -78,10 +79,11 @@ class SimulatedStation:
     """The simulated world (and operator) of a daemon whose station names ``sim://`` devices.
 
     ``operator``: the scripted operator (refused for a station with real devices: it would
-    raise a real lift); ``stdin``: where an idle station's PLC commands come from."""
+    raise a real lift); ``stdin``: where an idle station's PLC commands come from;
+    ``supervisor`` False: no simulated supervisor, locks wait for a person's release."""
 
     def __init__(self, cfg: StationConfig, *, operator: bool = False, seed: int = 7,
-                 stdin: TextIO | None = None) -> None:
+                 stdin: TextIO | None = None, supervisor: bool = True) -> None:
         if operator:
             real = stand_ins(cfg)
             if real:
@@ -89,6 +91,8 @@ class SimulatedStation:
                                  f"this station names real ones ({', '.join(real)}): run it "
                                  "without --sim-operator")
         self.operator, self.seed = operator, seed
+        #: False (``--no-sim-supervisor``): locks are left to people (the operator waits)
+        self.supervisor = supervisor
         self.world: World | None = None
         self._key: bytes | None = None
         self._stdin = stdin if stdin is not None else sys.stdin
@@ -101,6 +105,9 @@ class SimulatedStation:
         self._serial = [int(time.time()) % 900_000]
         self._noted: set[str] = set()
         self._new_world = False    # said in the journal once the daemon's journal is set up
+        #: the simulated lift as the last station left it (a reload): height, fault, vehicle
+        self._lift: LiftState | None = None
+        self._staying: str | None = None    # its VIN, at working height: the operator goes on
         self.follow(cfg)
 
     def follow(self, cfg: StationConfig) -> None:
@@ -126,6 +133,7 @@ class SimulatedStation:
         (``--sim-operator``) or waits (the lift down, raised from standard input)."""
         self.follow(cfg)
         self._program(cfg, station)
+        self._restore(station)      # before the station's loop first reads the lift
         try:
             self._code = _model_code(cfg)
         except StationError as exc:    # validated before: never, but the daemon stays up
@@ -138,8 +146,10 @@ class SimulatedStation:
             self._idle(station)      # before the journal's lines: typed commands find its PLC
         if self._new_world:
             self._new_world = False
+            who = "idle" if not scripted else "scripted" if self.supervisor else \
+                "scripted, no simulated supervisor: locks wait for a person's release"
             log.info("simulated world: the sim:// cameras of %d pair(s) render it (operator: "
-                     "%s)", len(cfg.pairs), "scripted" if scripted else "idle")
+                     "%s)", len(cfg.pairs), who)
         if not scripted and self._plc is not None and not self._told:
             self._told = True
             log.info(IDLE_LINE.format(help=HELP.removeprefix("commands: ")
@@ -150,9 +160,43 @@ class SimulatedStation:
             else:
                 await stop.wait()
         finally:
+            self._keep(station)
             self._plc = None
             if self.world is not None:
                 self.world.set_wrench(None)
+
+    # -- the lift across a reload ---------------------------------------------------------
+    def _keep(self, station: Station) -> None:
+        """The simulated lift as this station leaves it (before the scripted operator's round
+        is cancelled, which lowers it): the next station's lift starts so, as a real PLC goes
+        on through a daemon's reload."""
+        lift = station.lift
+        self._lift = lift.plc.state() if isinstance(lift, SimLift) else None
+
+    def _restore(self, station: Station) -> None:
+        """The new station's simulated lift as the last one was left: the vehicle on the
+        lift stays (the station reopens it from its database, with what was done).  Why: each
+        station's ``sim://lift`` starts a new PLC, down and empty, so a reload that changed
+        only ``stable_frames`` dropped the vehicle ("lift not at working height")."""
+        kept, self._lift = self._lift, None
+        lift = station.lift
+        if kept is None or not isinstance(lift, SimLift):
+            return
+        plc = lift.plc
+        try:
+            plc.set_vehicle(kept.model_code, kept.vin)
+        except ValueError as exc:     # the new register map cannot hold it
+            log.warning("reload: the simulated vehicle %s leaves the lift: the lift's new "
+                        "registers cannot hold it (%s)", kept.vin, exc)
+            return
+        try:
+            plc.set_height(kept.height_mm)
+        except ValueError:
+            plc.raise_lift() if kept.at_working_height else plc.lower_lift()
+        if kept.fault:
+            plc.set_fault(True)
+        if kept.vin is not None and kept.at_working_height:
+            self._staying = kept.vin
 
     def _program(self, cfg: StationConfig, station: Station) -> None:
         """The simulated controller runs the bolt table's psets (and the NOK policy's loosen
@@ -196,6 +240,7 @@ class SimulatedStation:
         try:
             await stop.wait()
         finally:
+            self._keep(station)     # before the cancelled round lowers the lift
             task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await task
@@ -207,14 +252,21 @@ class SimulatedStation:
         rng = np.random.default_rng(self.seed)
         nok_rng = np.random.default_rng([self.seed, 21])
         while True:
-            self._serial[0] = self._serial[0] % 999_999 + 1
+            staying, self._staying = self._staying, None
+            if staying is None:
+                self._serial[0] = self._serial[0] % 999_999 + 1
             truth: dict[str, Any] = {"bolt": None, "model_code": self._code,
-                                     "vin": make_vin(self._serial[0])}
-            log.info("simulated operator: vehicle %s (lift code %d) arrives", truth["vin"],
-                     self._code)
+                                     "vin": staying or make_vin(self._serial[0])}
+            if staying is not None:
+                log.info("simulated operator: vehicle %s stays on the lift across the reload; "
+                         "its bolts go on", staying)
+            else:
+                log.info("simulated operator: vehicle %s (lift code %d) arrives",
+                         truth["vin"], self._code)
             try:
                 await operate(station, self.world, rng, BOLTS_PER_VEHICLE, [], _bolt_said,
-                              truth, nok_rng, note=self._note, supervisor=SIM_SUPERVISOR,
+                              truth, nok_rng, note=self._note,
+                              supervisor=SIM_SUPERVISOR if self.supervisor else None,
                               operator=SIM_OPERATOR)
             except InputError as exc:
                 log.warning("simulated operator: %s", exc)

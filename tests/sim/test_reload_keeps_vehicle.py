@@ -1,0 +1,129 @@
+"""A reload (SIGHUP) of ``stationd run`` on the simulated station keeps the vehicle on the lift
+and its state (issue 30, item 2), for a reload of each section of the station file; the
+simulated world is rebuilt only when its geometry changes; a change that makes keeping the
+vehicle impossible (another database) says so in one journal line.
+
+Why: each reload started a new simulated PLC, down and empty, so changing only
+``stable_frames`` 3 -> 4 dropped the vehicle ("waiting for vehicle: lift not at working
+height"), which stayed open for good with its bolts missing."""
+
+from __future__ import annotations
+
+import json
+import signal
+import urllib.request
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+from tests.sim.test_in_daemon import Daemon, _station
+from tests.station.daemons import free_port
+from tests.station.test_commands_daemon import HASH, PASSWORD, Client
+
+pytestmark = pytest.mark.system
+
+Edit = Callable[[dict[str, Any], Path], None]
+
+
+def _set(section: str, key: str, value: Any) -> Edit:
+    def edit(doc: dict[str, Any], _tmp: Path) -> None:
+        doc.setdefault(section, {})[key] = value
+    return edit
+
+
+def _move_pair(doc: dict[str, Any], tmp: Path) -> None:
+    """The pair's registration moved by 5 mm: new geometry, a new world."""
+    vehicle = tmp / "pair1.vehicle.yaml"
+    reg = yaml.safe_load(vehicle.read_text())
+    reg["t"][0] += 5.0
+    vehicle.write_text(yaml.safe_dump(reg))
+
+
+def _bolt_moved(doc: dict[str, Any], tmp: Path) -> None:
+    """The bolt table's last bolt moved by 1 mm (its model and code unchanged)."""
+    table = tmp / "bolts.yaml"
+    text = table.read_text()
+    bolts = yaml.safe_load(text)
+    model = next(m for m in bolts["models"].values() if m.get("bolts"))
+    model["bolts"][-1]["position"][0] += 1.0
+    table.write_text(yaml.safe_dump(bolts, sort_keys=False))
+
+
+#: a reload of each section the vehicle survives: what changes, whether the world is rebuilt
+KEEPING: list[tuple[str, Edit, bool]] = [
+    ("matching.stable_frames 3 -> 4", _set("matching", "stable_frames", 4), False),
+    ("tool.max_tilt_deg", _set("tool", "max_tilt_deg", 12.0), False),
+    ("nok", _set("nok", "max_nok", 2), False),
+    ("records", _set("records", "save_images", False), False),
+    ("access", lambda doc, _t: doc["access"]["roles"].update(viewer=[]), False),
+    ("http (same port, a token)", _set("http", "token", "a" * 32), False),
+    ("wrench", _set("wrench", "url", "sim://wrench?seed=1"), False),
+    ("lift", _set("lift", "url", "sim://lift?timeout=2"), False),
+    ("bolts (a bolt moved)", _bolt_moved, False),
+    ("pairs (registration moved)", _move_pair, True),
+]
+
+
+def _view(port: int, token: str | None = None) -> dict[str, Any]:
+    req = urllib.request.Request(f"http://127.0.0.1:{port}/api/view")
+    if token:
+        req.add_header("Authorization", f"Bearer {token}")
+    with urllib.request.urlopen(req, timeout=30) as r:  # noqa: S310 - loopback
+        return dict(json.loads(r.read()))
+
+
+@pytest.mark.timeout(1500)
+def test_a_reload_of_each_section_keeps_the_vehicle_and_its_state(tmp_path):
+    port = free_port()
+    access = {"roles": {"supervisor": ["skip", "reopen", "release"]},
+              "users": {"sam": {"role": "supervisor", "password": HASH}}}
+    station = _station(tmp_path, http={"listen": f"127.0.0.1:{port}"}, access=access)
+    d = Daemon(tmp_path)
+    try:
+        d.wait(r"simulated lift: down, no vehicle", 90)
+        d.say("next")
+        vin = d.wait(r"vehicle (\w{17}) \(SIM-1\) opened: 50 bolts, 0 done", 60)[1]
+        # state: a bolt skipped by a supervisor
+        c = Client(f"http://127.0.0.1:{port}/")
+        assert c.post("/api/login", {"user": "sam", "password": PASSWORD})[0] == 200
+        nonce = json.loads(c.get("/api/nonce"))["nonce"]
+        status, text = c.post("/api/commands", {"kind": "skip", "vin": vin, "bolt": "B05",
+                                                "comment": "bracket", "nonce": nonce})
+        assert status == 200, text
+        worlds = d.log().count("simulated world: ")
+        for n, (what, edit, new_world) in enumerate(KEEPING, start=1):
+            doc = yaml.safe_load(station.read_text())
+            edit(doc, tmp_path)
+            station.write_text(yaml.safe_dump(doc, sort_keys=False))
+            d.p.send_signal(signal.SIGHUP)
+            d.wait(rf"(configuration reloaded[\s\S]*){{{n}}}", 120)
+            d.wait(rf"(vehicle {vin} \(SIM-1\) opened: 50 bolts, 0 done[\s\S]*){{{n + 1}}}",
+                   120)
+            after = d.log().split("configuration reloaded")[n]
+            assert "lift not at working height" not in after, (what, after)
+            assert "reload refused" not in after, (what, after)
+            assert "cannot go on as it was" not in after, (what, after)
+            worlds += new_world
+            assert d.log().count("simulated world: ") == worlds, (what, d.log()[-3000:])
+            token = (doc.get("http") or {}).get("token")
+            view = _view(port, token)
+            assert view["vehicle"]["vin"] == vin, (what, view["vehicle"])
+            states = {b["bolt"]: b["state"] for b in view["bolts"]}
+            assert states["B05"] == "skipped", (what, states["B05"])
+
+        # another database: the vehicle cannot go on as it was, said in one line
+        doc = yaml.safe_load(station.read_text())
+        doc["database"] = {"url": f"sqlite:///{tmp_path / 'other.db'}"}
+        station.write_text(yaml.safe_dump(doc, sort_keys=False))
+        d.p.send_signal(signal.SIGHUP)
+        line = d.wait(rf"reload: vehicle {vin} cannot go on as it was: its record is in the "
+                      r"last database \(sqlite:///\S+station\.db\); the new one "
+                      r"\(sqlite:///\S+other\.db\) opens it anew, without its bolts done so "
+                      r"far\n", 120)[0]
+        assert line.count("\n") == 1
+    finally:
+        code = d.stop()
+    assert code == 0, d.log()[-3000:]
