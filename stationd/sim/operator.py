@@ -25,7 +25,7 @@ import numpy as np
 
 from db.repository import BoltInfo
 from drivers.lift.sim import SimLift, SimulatedPlc
-from drivers.wrench.sim import SimController, SimPset, SimWrench
+from drivers.wrench.sim import SimController, SimPset, SimTightening, SimWrench
 from stationd.config import StationConfig
 from stationd.errors import InputError
 from stationd.sim.world import World, wrench_at
@@ -249,6 +249,32 @@ async def _pull(st: Station, loosening: bool, nok: bool) -> tuple[Any, bool]:
     return shot, False
 
 
+def shot_words(shot: SimTightening) -> str:
+    """A tightening in the demo's words: "OK 25.3 Nm, 31 deg"; a NOK names every quantity
+    that failed with the limit it crossed ("NOK: angle 94 deg > 90 max; torque 50.1 Nm").
+    Why: the line showed the torque alone, so an angle NOK read as a NOK at a good torque."""
+    rec = shot.record
+    torque, angle = f"torque {shot.torque_nm:.1f} Nm", f"angle {shot.angle_deg:.0f} deg"
+    if shot.ok:
+        return f"OK {shot.torque_nm:.1f} Nm, {shot.angle_deg:.0f} deg"
+    failed, passed = [], []
+    for words, status, lo, hi, fmt in (
+            (torque, shot.torque_status, None if rec is None else rec.torque_min / 100,
+             None if rec is None else rec.torque_max / 100, ".1f"),
+            (angle, shot.angle_status, None if rec is None else rec.angle_min,
+             None if rec is None else rec.angle_max, ".0f")):
+        if status == 0:
+            failed.append(words + ("" if lo is None else f" < {lo:{fmt}} min"))
+        elif status == 2:
+            failed.append(words + ("" if hi is None else f" > {hi:{fmt}} max"))
+        else:
+            passed.append(words)
+    if not failed:     # the controller said NOK with both within limits
+        failed.append("the controller's verdict")
+    return f"NOK: {'; '.join(failed)}" + (f" ({', '.join(passed)} within limits)"
+                                           if passed else "")
+
+
 def stopped(st: Station, bolt: str) -> bool:
     """Whether ``bolt`` waits for a supervisor: locked after NOKs in a row, or held (its
     result could not be read)."""
@@ -294,7 +320,7 @@ async def until_ok(st: Station, bolt: str, line: dict[str, Any],
         line["rundowns"] += 1
         word = "OK" if shot.ok else "NOK"
         steps.append(f"loosened (pset {shot.pset}) {word}" if loosening else
-                     f"{word} {shot.torque_nm:.1f} Nm")
+                     shot_words(shot))
         if shot.ok and not loosening:
             break
         if stopped(st, bolt) and supervisor is None:
@@ -316,5 +342,5 @@ async def until_ok(st: Station, bolt: str, line: dict[str, Any],
 
 
 __all__ = ["LOOSEN_PROGRAM", "MAX_RUNDOWNS", "NOK_P", "OPERATOR", "STUBBORN_P", "SUPERVISOR",
-           "loosen_programs", "operate", "share_of", "simulated_url", "simulators",
-           "stand_ins", "stopped", "until_ok", "wait_for_people"]
+           "loosen_programs", "operate", "share_of", "shot_words", "simulated_url",
+           "simulators", "stand_ins", "stopped", "until_ok", "wait_for_people"]

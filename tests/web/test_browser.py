@@ -263,7 +263,7 @@ def test_results_screens_and_csv_download(live_server, page, shots, tmp_path):
         page.wait(lambda p: p.count("tr.rundown") == 5, what="5 rundown rows")
         b2 = page.js("return [...document.querySelectorAll('tr.rundown[data-bolt=B2]')]"
                      ".map(r => r.innerText)")
-        assert "NOK" in b2[0] and "2 (rework)" in b2[1]
+        assert "NOK: torque low" in b2[0] and "2 (repeat)" in b2[1]
         # no image directory, so no crop to show: the column is hidden, not left empty
         crops_shown = ("return getComputedStyle(document.querySelector('#rundowns th.crops'))"
                        ".display !== 'none'")

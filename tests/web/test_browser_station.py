@@ -184,8 +184,8 @@ def test_demo_screens_follow_the_simulated_operator(page, shots, tmp_path):
         # is the printed result
         rows = list({b: t for b, t in rows}.items())
         assert sorted(b for b, _ in rows) == sorted(printed)
-        assert f"{len(printed) - nok} OK, {nok} NOK, {50 - CYCLES} missing" in \
-            (page.text("#summary") or "")
+        assert (f"bolts: {len(printed) - nok} OK, {nok} ending NOK, 0 skipped, "
+                f"{50 - CYCLES} missing") in (page.text("#summary") or "")
         for b, text in rows:
             assert printed[b][3] in text and printed[b][4] in text     # status and torque
         check_fits(page, "#rundowns", long=True)

@@ -307,6 +307,9 @@ function render(view) {
   setText("total", view.counters.total);
   setText("nok", view.counters.nok);
   $("nok-wrap").style.color = view.counters.nok ? "" : "var(--dim)";
+  // skipped bolts are neither OK nor to do: said beside "10 / 50", never left out silently
+  setText("skipped", view.counters.skipped || 0);
+  $("skipped-wrap").hidden = !view.counters.skipped;
   const h = $("headline");
   setText("headline", view.headline);
   h.title = view.headline_title || view.headline;   // a closed vehicle's every bolt
@@ -350,6 +353,21 @@ function drawLocks(view) {
 // what the tables show now: they are redrawn only when it changed
 const shownKeys = {results: "", devices: "", locks: ""};
 
+// A NOK names every quantity out of its limits ("NOK: torque high, angle high"): the value
+// alone, coloured, did not say which one failed to someone who cannot see colours
+function failedWords(t, tLo, tHi, a, aLo, aHi) {
+  const out = [];
+  const side = (name, v, lo, hi) => {
+    if (v === null || v === undefined) return;
+    if (lo !== null && lo !== undefined && v < lo) out.push(`${name} low`);
+    else if (hi !== null && hi !== undefined && v > hi) out.push(`${name} high`);
+  };
+  side("torque", t, tLo, tHi);
+  side("angle", a, aLo, aHi);
+  return out.length ? `: ${out.join(", ")}` : "";
+}
+window.failedWords = failedWords;
+
 function drawResults(results) {
   const tb = $("results");
   tb.replaceChildren();
@@ -362,7 +380,7 @@ function drawResults(results) {
       // a range stays on one line ("[22.0-" / "28.0]" wrapped at 1280 px)
       return `<span class="${out ? "out" : ""}">${fmt(v, d)}</span> <small class="rng">${rng.trim()}</small>`;
     };
-    tr.innerHTML = `<td>${esc(r.bolt)} ${r.ok ? "OK" : "NOK"}</td>` +
+    tr.innerHTML = `<td>${esc(r.bolt)} ${r.ok ? "OK" : "NOK" + failedWords(r.torque_nm, r.torque_min, r.torque_max, r.angle_deg, r.angle_min, r.angle_max)}</td>` +
       `<td>${lim(r.torque_nm, r.torque_min, r.torque_max, 1)}</td>` +
       `<td>${lim(r.angle_deg, r.angle_min, r.angle_max, 0)}</td>`;
     tb.appendChild(tr);

@@ -25,7 +25,7 @@ async function listVehicles() {
     if (!list.length) {
       const tr = document.createElement("tr");
       tr.className = "empty";
-      cell(tr, "No vehicles yet: they appear here once the station opens one.").colSpan = 8;
+      cell(tr, "No vehicles yet: they appear here once the station opens one.").colSpan = 9;
       tb.appendChild(tr);
     }
     for (const v of list) {
@@ -39,6 +39,7 @@ async function listVehicles() {
       cell(tr, v.status + (v.reopened_at ? ", reworked" : ""), "status-" + v.status);
       cell(tr, v.ok.length);
       cell(tr, v.nok.length + (v.nok.length ? " (" + v.nok.join(", ") + ")" : ""), v.nok.length ? "status-NOK" : "");
+      cell(tr, (v.skipped || []).length);
       cell(tr, v.missing.length);
       cell(tr, (v.started_at || "").slice(0, 19));
       cell(tr, (v.ended_at || "open").slice(0, 19));
@@ -128,6 +129,18 @@ function showTrail(commands) {
   }
   q("#trail").hidden = q("#trail-title").hidden = !commands.length;
 }
+// every quantity of a NOK rundown out of its limits (those of its parameter version)
+function nokWords(r) {
+  const out = [];
+  const side = (name, v, lo, hi) => {
+    if (v === null || v === undefined) return;
+    if (lo !== null && lo !== undefined && v < lo) out.push(`${name} low`);
+    else if (hi !== null && hi !== undefined && v > hi) out.push(`${name} high`);
+  };
+  side("torque", r.torque_nm, r.torque_min_nm, r.torque_max_nm);
+  side("angle", r.angle_deg, r.angle_min_deg, r.angle_max_deg);
+  return out.length ? `: ${out.join(", ")}` : "";
+}
 async function showVehicle(vin) {
   const base = "/api/vehicles/" + encodeURIComponent(vin);
   try {
@@ -138,8 +151,14 @@ async function showVehicle(vin) {
     q("#exports").hidden = false;
     q("#rundowns").hidden = false;
     q("#title").textContent = `${v.vin} (${v.model}${v.reopened_at ? ", reworked" : ""})`;
-    q("#summary").textContent = `${v.ok.length} OK, ${v.nok.length} NOK, ${v.missing.length} missing` +
-      (v.complete ? ": complete" : "");
+    // bolts by their last rundown, then the rundowns themselves: "NOK" alone read as either
+    const runs = v.bolts.flatMap((b) => b.rundowns);
+    const tightenings = runs.filter((r) => (r.rundown || "tightening") === "tightening");
+    const nokRuns = tightenings.filter((r) => r.status === "nok").length;
+    q("#summary").textContent = `bolts: ${v.ok.length} OK, ${v.nok.length} ending NOK, ` +
+      `${(v.skipped || []).length} skipped, ${v.missing.length} missing` +
+      (v.complete ? " (complete)" : "") +
+      `; rundowns: ${tightenings.length} tightening(s), ${nokRuns} NOK result(s)`;
     const tb = q("#rundowns tbody");
     for (const b of v.bolts) {
       const runs = b.rundowns.length ? b.rundowns : [null];
@@ -154,10 +173,13 @@ async function showVehicle(vin) {
           for (let k = 0; k < 8; k++) cell(tr, "", k === 7 ? "crops" : "");
         }
         else {
-          cell(tr, r.attempt + (r.attempt > 1 ? " (rework)" : ""));
+          // "rework" is a reopened vehicle's word: a try after a NOK is a repeat
+          const reworked = v.reopened_at && r.recorded_at && r.recorded_at >= v.reopened_at;
+          cell(tr, r.attempt + (reworked ? " (rework)" : r.attempt > 1 ? " (repeat)" : ""));
           // a loosening (the NOK policy's loosen step, a loosen command) undoes a tightening
           cell(tr, r.rundown || "tightening", "rundown-" + (r.rundown || "tightening"));
-          cell(tr, r.status.toUpperCase(), "status-" + (r.status === "nok" ? "NOK" : "ok"));
+          cell(tr, r.status.toUpperCase() + (r.status === "nok" ? nokWords(r) : ""),
+               "status-" + (r.status === "nok" ? "NOK" : "ok"));
           cell(tr, fmt(r.torque_nm, 1)); cell(tr, fmt(r.angle_deg, 0)); cell(tr, r.pset ?? "-");
           cell(tr, fmt(r.tilt_deg, 1)); cell(tr, fmt(r.match_distance_mm, 1));
           cell(tr, (r.recorded_at || "").slice(0, 19));

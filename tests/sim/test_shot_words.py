@@ -1,0 +1,34 @@
+"""The demo's line for a NOK names every quantity that failed, with the limit it crossed
+(issue 30, item 4): it showed the torque alone, so an angle NOK (94 deg > 90) read as a NOK
+at a good torque."""
+
+from __future__ import annotations
+
+from drivers.wrench.sim import SimController, SimPset
+from stationd.sim.operator import shot_words
+
+PSET = SimPset(25.0, 22.0, 28.0, 30.0, 15.0, 90.0)
+
+
+def test_a_nok_line_names_each_failed_quantity_and_an_ok_line_both_values() -> None:
+    ctl = SimController(psets={1: PSET}, nok_rate=1.0, seed=3)
+    seen: dict[tuple[int, int], str] = {}
+    for _ in range(200):
+        shot = ctl._result(1)         # the controller's tightening, its ground truth
+        seen.setdefault((shot.torque_status, shot.angle_status), shot_words(shot))
+        words = shot_words(shot)
+        assert words.startswith("NOK: ")
+        if shot.angle_status == 2:
+            assert f"angle {shot.angle_deg:.0f} deg > 90 max" in words
+            assert f"(torque {shot.torque_nm:.1f} Nm within limits)" in words
+        if shot.angle_status == 0:
+            assert f"angle {shot.angle_deg:.0f} deg < 15 min" in words
+        if shot.torque_status == 2:
+            assert f"torque {shot.torque_nm:.1f} Nm > 28.0 max" in words
+            assert f"(angle {shot.angle_deg:.0f} deg within limits)" in words
+        if shot.torque_status == 0:
+            assert f"torque {shot.torque_nm:.1f} Nm < 22.0 min" in words
+    # every side of both quantities came up
+    assert {(1, 2), (1, 0), (2, 1), (0, 1)} <= set(seen), seen
+    ok = SimController(psets={1: PSET}, nok_rate=0.0, seed=3)._result(1)
+    assert shot_words(ok) == f"OK {ok.torque_nm:.1f} Nm, {ok.angle_deg:.0f} deg"
