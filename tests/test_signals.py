@@ -23,6 +23,9 @@ from pathlib import Path
 import cv2
 import pytest
 
+#: each test runs the real command in a process of its own
+pytestmark = pytest.mark.system
+
 SIGNALS = [(signal.SIGINT, 130, "stationd: interrupted (Ctrl-C)"),
            (signal.SIGTERM, 143, "stationd: stopped by SIGTERM")]
 
@@ -36,11 +39,18 @@ def _caught(pid: int) -> set[int]:
     return set()
 
 
-def _start(argv: list[str], env: dict[str, str] | None = None) -> subprocess.Popen[str]:
+def _ignore_sigint() -> None:
+    """As a shell starts a background job (``stationd status &`` in a script)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _start(argv: list[str], env: dict[str, str] | None = None, *, background: bool = False
+           ) -> subprocess.Popen[str]:
     """``stationd ARGV`` as a user starts it, returned once its entry point holds SIGTERM."""
     p = subprocess.Popen([sys.executable, "-m", "stationd", *argv], stdin=subprocess.DEVNULL,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                         env={**os.environ, **(env or {})})
+                         env={**os.environ, **(env or {})},
+                         preexec_fn=_ignore_sigint if background else None)
     while p.poll() is None:
         try:
             if signal.SIGTERM in _caught(p.pid):
@@ -95,6 +105,16 @@ def test_status_waiting_on_a_silent_server(silent, sig, code, line) -> None:
     p = _start(["status", "--url", url, "--timeout", "600"])
     assert connected.wait(120), "status never connected"
     _stopped(p, sig, code, line)
+
+
+def test_a_background_job_ignores_ctrl_c_and_stops_on_sigterm(silent) -> None:
+    """A job started in the background keeps the Ctrl-C it was told to ignore (the terminal's
+    is not for it), and SIGTERM stops it with its line as any other."""
+    url, connected = silent
+    p = _start(["status", "--url", url, "--timeout", "600"], background=True)
+    assert connected.wait(120), "status never connected"
+    p.send_signal(signal.SIGINT)    # taken, it would be said before the SIGTERM (130)
+    _stopped(p, signal.SIGTERM, 143, "stationd: stopped by SIGTERM")
 
 
 @pytest.mark.parametrize(("sig", "code", "line"), SIGNALS)
