@@ -92,6 +92,9 @@ class Reason:
     pair: str | None = None             # a camera pair (the calibration check)
     reference: str | None = None        # a reference marker (the calibration check)
     user: str | None = None             # a user (the operator signed in)
+    #: the refusal behind this one (a teach point not steady: what the localizations without
+    #: the wrench said, e.g. no frame from a camera)
+    cause: Reason | None = None
 
     def key(self) -> tuple[object, ...]:
         """What makes two refusals the same for the operator: the kind and the bolts, not the

@@ -74,8 +74,9 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.NOT_STEADY: lambda r: (
         f"the wrench moved while measured ({r.distance_mm:.1f} mm > {r.limit:g} mm): hold it "
         "still on the bolt" if r.distance_mm is not None else
+        _unseen(r) if r.cause is not None and not r.count else
         f"the wrench was not seen steadily ({r.count} of {r.needed} localizations): hold it "
-        "on the bolt"),
+        "on the bolt" + _missed(r)),
     Why.NO_FRAMES: lambda r: (f"no localization from the cameras in {r.limit or 0:g} s: are "
                               "the pairs grabbing? (the cameras screen, stationd status)"),
     Why.NOT_LOCALIZED: lambda r: _per_pair(r),
@@ -155,3 +156,21 @@ def answer_words(answer: Answer) -> str:
 
 
 __all__ = ["answer_words", "check_words", "command_words", "operator_words", "reason_words"]
+
+
+def _unseen(r: Reason) -> str:
+    """A teach point with no localization of the wrench at all: what the cameras said first
+    (a camera giving no frame is no reason to hold the tool stiller)."""
+    assert r.cause is not None  # noqa: S101 - the caller's condition
+    return (f"the wrench was not localized ({r.limit or 0:g} localization(s) without it, "
+            f"none of the {r.needed} needed): {reason_words(r.cause)}")
+
+
+def _missed(r: Reason) -> str:
+    """What the localizations without a fresh wrench said (a teach point refused): "0 of 10
+    localizations" alone, while the cameras gave no frame for two minutes, sent the engineer
+    to hold the tool stiller."""
+    if r.cause is None:
+        return ""
+    many = f"{r.limit:g} localization(s)" if r.limit else "the localizations"
+    return f"; {many} without the wrench, the last: {reason_words(r.cause)}"

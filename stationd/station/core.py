@@ -531,6 +531,9 @@ class _Teach:
     tries: int = 0
     since: float = 0.0     # only frames exposed after the engineer asked count
     frames: int = 0        # localizations heard since (none: the cameras give nothing)
+    #: what the last localization without a fresh wrench said (no frame, not in view,
+    #: stale): a refusal with no steady localization names it
+    missed: Reason | None = None
 
     def reason(self) -> str:
         doing = f"measuring {self.measuring.command.bolt}" if self.measuring is not None \
@@ -858,11 +861,13 @@ class StationCore:
             teach.points.append(ev.point_mm)
         else:
             teach.tries += 1
+            teach.missed = ev.reason if ev.reason is not None else \
+                Reason(Why.STALE, age_ms=age * 1e3, limit=self.params.max_age_s * 1e3)
         if len(teach.points) >= TEACH_FRAMES:
             p = np.asarray(teach.points, dtype=np.float64)
             mean = p.mean(axis=0)
             spread = float(np.linalg.norm(p - mean, axis=1).max())
-            teach.measuring, teach.points, teach.tries = None, [], 0
+            teach.measuring, teach.points, teach.tries, teach.missed = None, [], 0, None
             self.reason = teach.reason()
             if spread > TEACH_STEADY_MM:   # moved while measured: not a position
                 return [*acts, Reply(Answer(c.request, c.command, c.issuer, Reason(
@@ -872,8 +877,9 @@ class StationCore:
                       "frames": TEACH_FRAMES, "tolerance_mm": self.params.tolerance_mm}
             return [*acts, Reply(Answer(c.request, c.command, c.issuer, result=result))]
         if teach.tries >= TEACH_TRIES:
-            why = Reason(Why.NOT_STEADY, count=len(teach.points), needed=TEACH_FRAMES)
-            teach.measuring, teach.points, teach.tries = None, [], 0
+            why = Reason(Why.NOT_STEADY, count=len(teach.points), needed=TEACH_FRAMES,
+                         cause=teach.missed, limit=teach.tries)
+            teach.measuring, teach.points, teach.tries, teach.missed = None, [], 0, None
             self.reason = teach.reason()
             return [*acts, Reply(Answer(c.request, c.command, c.issuer, why))]
         return acts
@@ -1454,13 +1460,15 @@ class StationCore:
         if teach is None or teach.measuring is None or t - teach.since < TEACH_WAIT_S:
             return []
         why = Reason(Why.NO_FRAMES, limit=TEACH_WAIT_S) if teach.frames == 0 else \
-            Reason(Why.NOT_STEADY, count=len(teach.points), needed=TEACH_FRAMES)
+            Reason(Why.NOT_STEADY, count=len(teach.points), needed=TEACH_FRAMES,
+                   cause=teach.missed, limit=teach.tries)
         return self._teach_answered(teach, why)
 
     def _teach_answered(self, teach: _Teach, why: Reason) -> list[Action]:
         """The bolt being measured is answered with ``why`` (not taught); teach mode stays."""
         c = teach.measuring
         teach.measuring, teach.points, teach.tries, teach.frames = None, [], 0, 0
+        teach.missed = None
         if c is None:
             return []
         if self.state is State.TEACHING:

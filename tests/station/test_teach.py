@@ -141,3 +141,26 @@ def test_a_bolt_without_frames_is_answered_within_the_wait_with_no_frames_or_not
     assert reply.answer.reason is not None and reply.answer.reason.kind is Why.NOT_STEADY
     assert (reply.answer.reason.count, reply.answer.reason.needed) == (3, TEACH_FRAMES)
     assert d.core.state is State.TEACHING
+
+
+def test_a_teach_point_refused_while_the_cameras_give_no_wrench_names_what_they_said():
+    """Issue 30, item 5: localizations that came without the wrench (a camera delivering no
+    frame) made "not seen steadily (0 of 10 localizations)", which sent the engineer to hold
+    the tool stiller; the refusal now says what the localizations said."""
+    from stationd.reasons import Reason
+    from stationd.words import reason_words
+
+    d = _ready()
+    _do(d, 1, TeachStart("M"))
+    _do(d, 2, TeachPoint("B7"))
+    asked = d.t
+    silent = Reason(Why.NOT_LOCALIZED, per_pair=(("pair1", "left", "no frame for 120 s"),))
+    for _ in range(5):
+        d.t += 0.1
+        d.core.feed(LocalizedIn(d.t, d.t - 0.05, None, reason=silent))
+    [reply] = [a for a in d.core.feed(Tick(asked + TEACH_WAIT_S)) if isinstance(a, Reply)]
+    why = reply.answer.reason
+    assert why is not None and why.kind is Why.NOT_STEADY and why.count == 0
+    assert reason_words(why) == (
+        f"the wrench was not localized (5 localization(s) without it, none of the "
+        f"{TEACH_FRAMES} needed): pair1: left: no frame for 120 s")
