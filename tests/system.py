@@ -4,9 +4,9 @@
 protocol against its simulator on loopback, the screens' server in the test process): a
 minute and a half on two cores.  ``pytest`` runs every test.  A **system test** starts
 
-* a whole daemon: the station's loop (``Station.run``, also the demo's), or ``stationd run``
-  as systemd does,
-* a demo (``stationd demo``, also ``--vision``),
+* a whole daemon: the station's loop (``Station.run``; a station demo runs it too), or
+  ``stationd run`` as systemd does,
+* a demo (``stationd demo``; the vision demo's run, which renders its frames, is named),
 * a browser (Chromium, Firefox) or a server: PostgreSQL, the OPC UA server with a client,
 * another Python process: the commands as a user runs them (``python -m stationd ...``,
   ``stationd ...``), the simulators' processes, the checks of the whole tree (mypy,
@@ -75,7 +75,6 @@ MODULES: tuple[str, ...] = (
 TESTS: tuple[str, ...] = (
     "test_cli.py::test_console_script_usage_error_is_one_line",
     "test_cli.py::test_db_report_into_a_closed_pipe_is_quiet",
-    "test_cli.py::test_demo_vision_save_refuses_a_file_or_unmakeable_folder_before_rendering",
     "test_cli.py::test_demo_vision_save_writes_by_the_one_output_rule",
     "db/test_db_cli.py::test_reports_and_exports_open_the_database_read_only",
     "db/test_quality.py::test_spc_groups_by_bolt_and_pset_on_ok_results_and_counts_noks",
@@ -207,10 +206,6 @@ class Guard:
         subprocess.Popen.__init__ = init  # type: ignore[method-assign]
         after_import("stationd.station.daemon", self._daemon)
         after_import("stationd.opcua.server", self._opcua)
-        after_import("stationd.demo.vision", functools.partial(self._entry, "run_demo",
-                                                               "a demo (demo --vision)"))
-        after_import("stationd.demo.station", functools.partial(
-            self._entry, "run_station_demo", "a demo (the station's)"))
 
     def _daemon(self, module: ModuleType) -> None:
         station = module.Station
@@ -223,17 +218,6 @@ class Guard:
             return await run(self, *a, **kw)
 
         station.run = guarded
-
-    def _entry(self, name: str, what: str, module: ModuleType) -> None:
-        run = getattr(module, name)
-        guard = self
-
-        @functools.wraps(run)
-        def guarded(*a: Any, **kw: Any) -> Any:
-            guard.starting(what)
-            return run(*a, **kw)
-
-        setattr(module, name, guarded)
 
     def _opcua(self, module: ModuleType) -> None:
         server = module.OpcUaServer
