@@ -103,8 +103,8 @@ class _Types:
     """What a field's DataType is in a dictionary (``opc:Int32``, ``ua:EUInformation``,
     ``n1:EntityDataType``), found by walking its supertypes in the server."""
 
-    def __init__(self, server: Server, ours: dict[Any, Structure], uris: list[str]) -> None:
-        self.server, self.ours, self.uris = server, ours, uris
+    def __init__(self, server: Server, ours: dict[Any, Structure]) -> None:
+        self.server, self.ours = server, ours
         self._cache: dict[Any, tuple[str, str]] = {}
 
     async def kind(self, dt: Any) -> tuple[str, str]:
@@ -152,7 +152,7 @@ async def build(server: Server, structures: Iterable[Structure]) -> list[Diction
     them (see the module's docstring)."""
     uris = await server.get_namespace_array()
     ours = {s.data_type: s for s in structures}
-    types = _Types(server, ours, uris)
+    types = _Types(server, ours)
     depth: dict[Any, int] = {}
 
     def depth_of(s: Structure, trail: frozenset[Any]) -> int:
@@ -186,9 +186,9 @@ async def _xml(d: Dictionary, types: _Types, uris: list[str]) -> str:
     for s in sorted(d.structures, key=lambda s: s.name):
         body += [f"  <opc:StructuredType Name={quoteattr(s.name)} "
                  'BaseType="ua:ExtensionObject">']
-        optional = [f for f in s.sdef.Fields if f.IsOptional]
         if s.sdef.StructureType == ua.StructureType.Union:
-            raise ValueError(f"{s.name}: unions are not described")
+            raise ValueError(f"{s.name}: unions are not described")   # the models have none
+        optional = [f for f in s.sdef.Fields if f.IsOptional]
         for f in optional:
             body.append(f'    <opc:Field Name={quoteattr(f.Name + "Specified")} '
                         'TypeName="opc:Bit"/>')
