@@ -78,7 +78,7 @@ from stationd.opcua.model import (
     load_model,
     publish_dictionaries,
 )
-from stationd.opcua.results import message, result_id, rundown_result
+from stationd.opcua.results import JOINING_TECHNOLOGY, message, result_id, rundown_result
 from stationd.opcua.uatypes import ua
 from stationd.station.events import (
     DeviceHealth,
@@ -95,6 +95,9 @@ NAMESPACE = "urn:stationd:opcua"
 POLL_S = 1.0
 HELD_POLL_S = 0.02           # the feed read while a result waits for its curves
 MANUFACTURER = "stationd"
+#: the Identification's ManufacturerUri: instantiated with the type, so served; left empty, a
+#: client reads None where DI says a URI
+MANUFACTURER_URI = "urn:stationd"
 JOINING_SYSTEM_TYPE, RESULT_READY_EVENT_TYPE = 1005, 1007   # in IJT Base
 REQUESTED_RESULT_EVENT_TYPE = 1035                            # in IJT Base
 REQUEST_RESULTS, REQUEST_UNACKNOWLEDGED = 7074, 7092          # in IJT Base
@@ -282,10 +285,11 @@ class OpcUaServer:
                                      objecttype=ua.NodeId(JOINING_SYSTEM_TYPE, ijt))
         self.joining_system = js
         ident = await js.get_child([f"{uris.index(DI_URI)}:Identification"])
-        for name, value in (("Manufacturer", MANUFACTURER), ("Model", "stationd"),
+        for name, value in (("Manufacturer", MANUFACTURER), ("ManufacturerUri", MANUFACTURER_URI),
+                            ("Model", "stationd"),
                             ("SystemId", sid), ("Name", sid),
                             ("Description", "vision-guided bolt-tightening station"),
-                            ("JoiningTechnology", "Tightening"),
+                            ("JoiningTechnology", JOINING_TECHNOLOGY),
                             ("ProductInstanceUri", f"urn:stationd:{sid}")):
             await _set(ident, name, value, uris)
         await ident.add_property(uris.index(DI_URI), "SoftwareRevision", SOFTWARE_VERSION,

@@ -162,7 +162,7 @@ def test_identification_state_and_the_result_methods(repo):
                 js = await machines.get_child([f"{uris.index(NAMESPACE)}:ST-07"])
                 ident = await js.get_child([f"{di}:Identification"])
                 out: dict[str, Any] = {}
-                for name in ("Manufacturer", "SystemId", "SoftwareRevision"):
+                for name in ("Manufacturer", "ManufacturerUri", "SystemId", "SoftwareRevision"):
                     v = await (await ident.get_child([f"{di}:{name}" if name != "SystemId"
                                                       else f"{uris.index(IJT_URI)}:SystemId"]
                                                      )).read_value()
@@ -194,6 +194,7 @@ def test_identification_state_and_the_result_methods(repo):
 
     out = asyncio.run(scenario())
     assert out["Manufacturer"] == "stationd"
+    assert out["ManufacturerUri"] == "urn:stationd"
     assert out["block_ident"]
     assert out["SystemId"] == "ST-07"
     assert out["SoftwareRevision"]
