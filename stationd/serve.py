@@ -27,6 +27,7 @@ from stationd.boltfile import load_bolts
 from stationd.config import StationConfig, load_station_config, station_identity
 from stationd.errors import StationError
 from stationd.lock import StationLocks
+from stationd.logsetup import setup_logging
 from stationd.station.core import DATABASE, LIFT, WRENCH
 from stationd.station.daemon import OPEN_ERRORS, Station
 from stationd.station.events import (
@@ -448,8 +449,8 @@ async def _beside_ended(task: asyncio.Task[None]) -> None:
 
 def run_daemon(args: argparse.Namespace, beside: Beside | None = None) -> int:
     """``stationd run``; ``beside``: see :func:`serve_station`."""
-    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
-                        format="%(levelname)s %(message)s")  # one line per event (journal)
+    # one line per event; stamped unless systemd's journal takes them (it stamps them)
+    setup_logging(logging.INFO, sys.stderr)
     logging.getLogger("alembic").setLevel(logging.WARNING)
     logging.getLogger("asyncua").setLevel(logging.WARNING)   # ~1000 lines per start otherwise
     cfg = validate_station(args.config)  # an invalid station at the first start: exit 2

@@ -54,6 +54,7 @@ from stationd.demo.services import (
 )
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
+from stationd.logsetup import setup_logging
 from stationd.pgserver import PgServer, PgServerError
 from stationd.reasons import Reason, Why
 from stationd.serve import Screens
@@ -146,7 +147,8 @@ def run_station_demo(args: argparse.Namespace) -> int:
     out = sys.stderr if args.json else sys.stdout
     # the station's notices (a bolt locked, the line database down) on the stream of the
     # demo's own lines, so they read in the order they happened
-    logging.basicConfig(level=logging.WARNING, format="%(message)s", stream=out)
+    # every command's line, accepted or refused, as in the daemon's journal
+    setup_logging(logging.WARNING, out, levelname=False, loud=("stationd.commands",))
     cfg = load_station_config(args.config or SIM_CONFIG)
     bolts_path = cfg.bolts_path
     if bolts_path is None:

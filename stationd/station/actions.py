@@ -75,6 +75,22 @@ from stationd.station.trust import MeasureReferences, RecordCheck
 from stationd.words import answer_words, check_words, operator_words, reason_words
 
 log = logging.getLogger("stationd")
+#: every command's line, accepted or refused: its own logger, so a front that journals only
+#: warnings (the demo) still journals the accepted ones, as the daemon does
+commands_log = logging.getLogger("stationd.commands")
+
+
+class _Prefixed(logging.LoggerAdapter):  # type: ignore[type-arg]
+    """A station's journal lines with its name first (see :meth:`Actions.label`)."""
+
+    def process(self, msg: Any, kwargs: Any) -> tuple[Any, Any]:
+        return f"{self.extra['prefix'] if self.extra else ''} {msg}", kwargs
+
+    def __init__(self, logger: logging.Logger, prefix: str) -> None:
+        super().__init__(logger, {"prefix": prefix})
+
+
+Journal = logging.Logger | _Prefixed
 A = TypeVar("A")
 #: how long the controller may take to confirm parameters, s
 SEND_TIMEOUT_S = 2.0
@@ -91,6 +107,15 @@ class Actions:
         self._wrench, self._database, self._call = wrench, database, call
         self.answers: dict[int, asyncio.Future[Answer]] = {}   # request -> who waits
         self.refusals = RefusalJournal()   # each refusal journaled once, then counted
+        self.log: Journal = log
+        self.commands_log: Journal = commands_log
+
+    def label(self, prefix: str) -> None:
+        """Each of this station's journal lines starts with ``prefix`` ("DEMO-2"). Why: the
+        demo runs a line's stations in one process, one output; a notice of station 2 came
+        without its station's name."""
+        self.log = _Prefixed(log, prefix)
+        self.commands_log = _Prefixed(commands_log, prefix)
 
     async def do(self, a: Action) -> Event | None:
         """Carry out one action; what came of it, for the core (or None)."""
@@ -128,7 +153,7 @@ class Actions:
             try:
                 return await self._call(self.records.close_vehicle, a.vin)
             except STATION_FAULTS as exc:
-                log.error("vehicle %s not closed: %s", a.vin, one_line(exc))
+                self.log.error("vehicle %s not closed: %s", a.vin, one_line(exc))
         elif isinstance(a, Record):
             return await self._record(a)
         elif isinstance(a, Acknowledge):
@@ -151,7 +176,7 @@ class Actions:
             try:
                 await self._call(self.records.record_check, a)
             except STATION_FAULTS as exc:
-                log.error("calibration check of %s not recorded: %s", a.check.pair,
+                self.log.error("calibration check of %s not recorded: %s", a.check.pair,
                           one_line(exc))
         return None
 
@@ -160,30 +185,30 @@ class Actions:
         self.bus.publish(ev)
         if isinstance(ev, StateChanged | VehicleOpened | VehicleClosed):
             for line in self.refusals.ended(ev.t):   # the refusals' episode ended
-                log.info("%s", line)
+                self.log.info("%s", line)
         if isinstance(ev, StateChanged):
             self.notifier.status(f"{ev.state}: {ev.reason}")
             if ev.state is State.FAULT:   # each device's own line has the reason
-                log.info("state: fault (%s)", ", ".join(sorted(self.core.faults)))
+                self.log.info("state: fault (%s)", ", ".join(sorted(self.core.faults)))
             else:
-                log.info("%s: %s", ev.state, ev.reason)
+                self.log.info("%s: %s", ev.state, ev.reason)
         elif isinstance(ev, Notice):
-            (log.warning if ev.level == "warning" else log.info)("%s", ev.message)
+            (self.log.warning if ev.level == "warning" else self.log.info)("%s", ev.message)
         elif isinstance(ev, Refused):   # once, then counted (a wrench held between two bolts)
             said = self.refusals.refused(ev.reason, ev.t)
             if said is not None:
-                log.info("%s", said)
+                self.log.info("%s", said)
         elif isinstance(ev, PairChecked):
-            (log.info if ev.trusted else log.warning)("%s", check_words(ev))
+            (self.log.info if ev.trusted else self.log.warning)("%s", check_words(ev))
         elif isinstance(ev, BoltToLoosen):
-            log.info("%s: %s", ev.bolt, reason_words(ev.reason, full=True))
+            self.log.info("%s: %s", ev.bolt, reason_words(ev.reason, full=True))
         elif isinstance(ev, OperatorChanged):
-            log.info("%s", operator_words(ev))
+            self.log.info("%s", operator_words(ev))
         elif isinstance(ev, DeviceHealth):
             if ev.ok:
-                log.info("%s: back", ev.device)
+                self.log.info("%s: back", ev.device)
             else:
-                log.warning("fault: %s (%s): %s", ev.device, ev.kind, ev.reason)
+                self.log.warning("fault: %s (%s): %s", ev.device, ev.kind, ev.reason)
 
     def _database_lost(self, exc: Exception, what: str = "") -> DeviceFault:
         """A database fault: its keeper probes it back, with backoff."""
@@ -231,9 +256,9 @@ class Actions:
         try:
             await self._call(wrench.send_vin, vin)
         except ValueError as exc:   # the controller cannot take it (no VIN registers, length)
-            log.info("VIN %s not sent to the controller: %s", vin, exc)
+            self.log.info("VIN %s not sent to the controller: %s", vin, exc)
         except RefusedError as exc:
-            log.warning("the controller refused VIN %s: %s", vin, one_line(exc))
+            self.log.warning("the controller refused VIN %s: %s", vin, one_line(exc))
         return VinSent(time.time(), vin)
 
     async def _record(self, a: Record) -> Event | None:
@@ -249,7 +274,7 @@ class Actions:
             await self._call(self.records.write, u)
         except STATION_FAULTS as exc:
             self.records.keep(u)
-            log.error("tightening %d of %s NOT stored, kept until the database takes it: "
+            self.log.error("tightening %d of %s NOT stored, kept until the database takes it: "
                       "%s; %s", r.tightening_id, a.bolt, one_line(exc), u.describe())
             self.bus.publish(Notice(f"tightening {r.tightening_id} of {a.bolt} not stored: "
                                     f"{one_line(exc)}", "error"))
@@ -263,7 +288,7 @@ class Actions:
         try:
             await self._call(self.records.store_unattributed, a)
         except STATION_FAULTS as exc:
-            log.error("tightening %d (unattributed) NOT stored, left with the controller: %s",
+            self.log.error("tightening %d (unattributed) NOT stored, left with the controller: %s",
                       a.result.tightening_id, one_line(exc))
             self._database.lost(DeviceError(f"results not stored: {one_line(exc)}"))
             return
@@ -277,7 +302,7 @@ class Actions:
         try:
             await self._call(store, a)
         except STATION_FAULTS as exc:
-            log.error("tightening %s (%s) NOT stored, left with the controller: %s",
+            self.log.error("tightening %s (%s) NOT stored, left with the controller: %s",
                       result.tightening_id, what, one_line(exc))
             self._database.lost(DeviceError(f"results not stored: {one_line(exc)}"))
             return
@@ -292,7 +317,7 @@ class Actions:
         try:
             await self._call(wrench.acknowledge_result, result)
         except (DeviceError, ValueError) as exc:
-            log.warning("tightening %d stored, not acknowledged: %s", result.tightening_id,
+            self.log.warning("tightening %d stored, not acknowledged: %s", result.tightening_id,
                         one_line(exc))
 
     async def _record_command(self, a: RecordCommand) -> Event:
@@ -306,7 +331,8 @@ class Actions:
 
     def _reply(self, answer: Answer) -> None:
         """The journal's line for every command, and the answer to who is waiting for it."""
-        (log.info if answer.accepted else log.warning)("%s", answer_words(answer))
+        (self.commands_log.info if answer.accepted else self.commands_log.warning)(
+            "%s", answer_words(answer))
         waiting = self.answers.get(answer.request)
         if waiting is not None and not waiting.done():
             waiting.set_result(answer)

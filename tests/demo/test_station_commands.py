@@ -6,8 +6,10 @@ through the command line, as a person types them."""
 
 from __future__ import annotations
 
+import json
 import os
 import queue
+import re
 import signal
 import subprocess
 import sys
@@ -20,6 +22,7 @@ import yaml
 from stationd.access import hash_password
 from stationd.sim.vin import make_vin
 from tests.station.daemons import SIM, free_port
+from tests.station.test_commands_daemon import Client
 
 ROOT = Path(__file__).resolve().parents[2]
 PASSWORD = "supervise-it-well"  # noqa: S105 - a test user's
@@ -34,7 +37,9 @@ def _station(tmp: Path, port: int) -> Path:
     doc["matching"]["max_age_s"] = 5.0     # a loaded machine renders late: not this test's
     doc["http"] = {"listen": f"127.0.0.1:{port}"}
     doc["access"] = {"users": {"sue": {"role": "supervisor",
-                                       "password": hash_password(PASSWORD)}}}
+                                       "password": hash_password(PASSWORD)},
+                               "ed": {"role": "engineer",
+                                      "password": hash_password(PASSWORD)}}}
     path = tmp / "station.yaml"
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
     return path
@@ -66,6 +71,12 @@ def test_commands_reach_the_demos_station_during_the_run_and_the_hold(tmp_path):
             if line.startswith(start):
                 return line
 
+    def expect_re(pattern: str, timeout: float = 60) -> str:
+        while True:
+            line = lines.get(timeout=timeout)
+            if re.fullmatch(pattern, line):
+                return line
+
     def command(*words: str) -> subprocess.CompletedProcess[str]:
         # the demo's station is found by its station file, as a daemon's is
         got = subprocess.run([sys.executable, "-m", "stationd", *words, "--user", "sue",
@@ -86,8 +97,25 @@ def test_commands_reach_the_demos_station_during_the_run_and_the_hold(tmp_path):
         held = command("reopen", vin)
         assert held.returncode == 0, held
         assert held.stdout.strip().endswith(": accepted")
+        # journaled in the demo's output as in the daemon's journal: accepted ones too (issue
+        # 30, item 5: a reopen, a teach start and stop left no line), with a time stamp
+        stamp = r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d\.\d{3}[+-]\d{4} "
+        line = expect_re(stamp + rf"command reopen {vin}.* by sue \(cli 127\.0\.0\.1\): "
+                         "accepted$")
         skip = command("skip", vin, "B01")     # no vehicle on the lift now: the station's no
         assert skip.returncode == 1 and "no vehicle at the station" in skip.stdout, skip
+        expect_re(stamp + rf"command skip B01 of {vin}.* by sue \(cli 127\.0\.0\.1\): "
+                  "refused: no vehicle at the station.*")
+        c = Client(url)
+        assert c.post("/api/login", {"user": "ed", "password": PASSWORD})[0] == 200
+        for body in ({"kind": "teach-start", "model": "SIM-1"}, {"kind": "teach-stop"}):
+            nonce = json.loads(c.get("/api/nonce"))["nonce"]
+            status, text = c.post("/api/commands", {**body, "nonce": nonce})
+            assert status == 200, text
+        expect_re(stamp + r"command teach-start SIM-1 by ed \(screen 127\.0\.0\.1\): "
+                  "accepted$")
+        expect_re(stamp + r"command teach-stop by ed \(screen 127\.0\.0\.1\): accepted$")
+        assert line
         # the simulated operator signed in at the demo's station: its rundowns carry it
         status = subprocess.run([sys.executable, "-m", "stationd", "operator", "status",
                                  "--url", url], capture_output=True, text=True, env=env,

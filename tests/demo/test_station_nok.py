@@ -6,6 +6,7 @@ releases, and a parameter send for a locked bolt, or a rundown not recorded, is 
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 from dataclasses import replace
@@ -95,7 +96,10 @@ def test_the_demos_lines_read_in_the_order_things_happened_on_one_stream(tmp_pat
     assert run.returncode == 0, run.stdout + run.stderr
     lines = run.stdout.splitlines()
     locked = next(i for i, s in enumerate(lines) if " locked after 3 NOK in a row" in s)
-    bolt = lines[locked].split(" ", 1)[0]
+    # the station's notice, a journal line: its time stamp first (issue 30, item 5)
+    found = re.search(r"(\S+) locked after 3 NOK in a row", lines[locked])
+    assert found is not None and re.match(r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d", lines[locked])
+    bolt = found[1]
     before = lines.index(next(s for s in lines if s.startswith(f"  {bolt} first: ")))
     final = lines.index(next(s for s in lines if s.startswith(f"{bolt}: pset ")))
     assert locked < before < final and "OK" in lines[final]
