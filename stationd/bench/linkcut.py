@@ -25,7 +25,8 @@ can cut the link.  Three kinds of pass over one plan of placements:
   each result on the same link, queued apart in the driver and stored by a thread of their
   own: the difference is their cost.
 
-Exit 1 if a result was lost or recorded twice, or parameters went to a wrong bolt.
+Exit 1 if a result was lost, recorded twice or recorded to a bolt the wrench was not on, or
+parameters went to a wrong bolt.
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from db.engine import make_engine
-from db.models import ResultGap, TighteningCurve, TighteningRecord, UnattributedResult
+from db.models import Bolt, ResultGap, TighteningCurve, TighteningRecord, UnattributedResult
 from drivers.lift.sim import SimLift
 from drivers.wrench.client import OpenProtocolWrench
 from drivers.wrench.sim import SimController
@@ -79,6 +80,7 @@ class Pass:
     by_bolt: list[tuple[bool, float]] = field(default_factory=list)   # (curves on, ms)
     made: list[int] = field(default_factory=list)          # tightening ids, in order
     made_in_cut: list[int] = field(default_factory=list)
+    made_on: dict[int, str | None] = field(default_factory=dict)   # id -> the wrench's bolt
     fetched: dict[int, bool] = field(default_factory=dict)   # id -> came by MID 0064
     wrong: int = 0
     not_selected: list[str] = field(default_factory=list)
@@ -133,7 +135,8 @@ def run_linkcut_bench(args: argparse.Namespace) -> int:
     else:
         _print(summary)
     ok = (summary["link_cut"]["lost"] == 0 and summary["link_cut"]["recorded_twice"] == 0
-          and summary["wrong_bolt_sends"] == 0)
+          and summary["wrong_bolt_sends"] == 0
+          and not summary["link_cut"]["recorded_to_a_wrong_bolt"])
     return 0 if ok else 1
 
 
@@ -295,6 +298,7 @@ async def _restore(proxy: CutProxy, cut_s: float, p: Pass) -> None:
 def _made(p: Pass, made: Any, cut: bool) -> None:
     if made is not None:
         p.made.append(int(made.tightening_id))
+        p.made_on[int(made.tightening_id)] = p.truth
         if cut:
             p.made_in_cut.append(int(made.tightening_id))
 
@@ -327,15 +331,18 @@ def _read_db(url: str) -> dict[str, Any]:
     engine = make_engine(url)
     try:
         with Session(engine) as s:
-            bolted = [int(t) for t in s.scalars(select(TighteningRecord.tightening_id))
-                      if t is not None]
+            rows = s.execute(select(TighteningRecord.tightening_id, Bolt.code)
+                             .join(Bolt, TighteningRecord.bolt_id == Bolt.id)).all()
+            bolted = [int(t) for t, _ in rows if t is not None]
+            bolt_of = {int(t): str(b) for t, b in rows if t is not None}
             loose = [int(t) for t in s.scalars(select(UnattributedResult.tightening_id))
                      if t is not None]
             curves = len(list(s.scalars(select(TighteningCurve.id))))
         gaps = _gap_rows(engine)
     finally:
         engine.dispose()
-    return {"to_a_bolt": bolted, "unattributed": loose, "gaps": gaps, "curves": curves}
+    return {"to_a_bolt": bolted, "unattributed": loose, "gaps": gaps, "curves": curves,
+            "bolt_of": bolt_of}
 
 
 def _pct(values: list[float], q: float) -> float:
@@ -356,6 +363,10 @@ def accounting(p: Pass) -> dict[str, Any]:
         "fetched_late": len(fetched & set(p.made)),
         "fetched_to_a_bolt": len(fetched & set(bolted)),
         "fetched_unattributed": len(fetched & set(loose)),
+        # recorded to a bolt the wrench was not on when the trigger was pulled (must be 0)
+        "recorded_to_a_wrong_bolt": sorted(
+            t for t, b in p.db.get("bolt_of", {}).items()
+            if t in p.made_on and p.made_on[t] != b),
         "gaps": len(gaps & set(p.made)),
         "recorded_twice": len(everything) - len(recorded),
         "lost": len(set(p.made) - recorded - gaps),
@@ -393,7 +404,8 @@ def _print(s: dict[str, Any]) -> None:
           f"recorded {c['recorded']}: live {c['recorded_live']}, fetched late "
           f"{c['fetched_late']} (to a bolt {c['fetched_to_a_bolt']}, unattributed "
           f"{c['fetched_unattributed']}); gaps {c['gaps']}; recorded twice "
-          f"{c['recorded_twice']}; lost {c['lost']} (must be 0)")
+          f"{c['recorded_twice']}; lost {c['lost']} (must be 0); recorded to a bolt the "
+          f"wrench was not on {len(c['recorded_to_a_wrong_bolt'])} (must be 0)")
     back, done = c["reconnected_after_restore_s"], c["all_accounted_after_restore_s"]
     if back is not None and done is not None:
         print(f"  after the link came back: reconnected in {back:.1f} s, every tightening "

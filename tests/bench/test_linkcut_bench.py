@@ -67,6 +67,15 @@ def test_every_tightening_id_is_counted_once_in_one_column():
     assert accounting(p)["lost"] == 0 and accounting(p)["gaps"] == 1
 
 
+def test_a_result_recorded_to_a_bolt_the_wrench_was_not_on_is_counted():
+    p = Pass(curves=False, cut_s=10.0, made=[1, 2, 3], made_on={1: "B1", 2: "B2", 3: None},
+             db={"to_a_bolt": [1, 2], "unattributed": [3], "gaps": [],
+                 "bolt_of": {1: "B1", 2: "B2"}})
+    assert accounting(p)["recorded_to_a_wrong_bolt"] == []
+    p.db["bolt_of"] = {1: "B1", 2: "B1"}
+    assert accounting(p)["recorded_to_a_wrong_bolt"] == [2]
+
+
 @pytest.mark.timeout(300)
 def test_bench_linkcut_runs_and_loses_nothing(tmp_path, capsys):
     out = tmp_path / "bench-linkcut.json"
@@ -76,13 +85,14 @@ def test_bench_linkcut_runs_and_loses_nothing(tmp_path, capsys):
     assert code == 0 and summary == json.loads(out.read_text())
     cut = summary["link_cut"]
     assert cut["lost"] == 0 and cut["recorded_twice"] == 0 and summary["wrong_bolt_sends"] == 0
+    assert cut["recorded_to_a_wrong_bolt"] == []
     assert cut["made_while_cut"] >= 1 and cut["fetched_late"] >= 1
     assert cut["recorded"] + cut["gaps"] == cut["made"] == 3
     lat = summary["latency_ms"]     # curves on the 1st and 3rd bolts, off on the 2nd
     assert (lat["with_curves"]["n"], lat["without_curves"]["n"]) == (2, 1)
-    # angle and torque of each bolt with curves on whose result came live: the bolt the cut
-    # lands on is fetched late, and a fetched result carries no curves (MID 0064); which of the
-    # curve bolts the cut meets depends on timing
+    # angle and torque of each bolt with curves on: a result fetched late fetches its curves
+    # too (MID 0008 by tightening id), except one made while its curve subscription was being
+    # renewed; which of the curve bolts the cut meets depends on timing
     assert summary["curves_stored"] in (2, 4)
     assert 0 < lat["with_curves"]["p50"] <= lat["with_curves"]["p95"]
     assert summary["not_selected"] == []
