@@ -289,3 +289,59 @@ def test_a_result_fetched_after_a_cut_never_goes_to_an_enable_made_since():
         assert not [a for a in acts if isinstance(a, Record)]    # neither B1's nor B3's
         assert [type(a) for a in acts if isinstance(a, StoreUnattributed)]
         assert d.core.tool_on and not d.core.matcher.done
+
+
+def test_seeded_walks_with_every_result_type_close_bolts_only_by_tightenings():
+    """Walks with the realistic mix of test_core, where a result is of any type and now and
+    then unreadable: the core's invariants hold (test_core's Driver checks them on every
+    action), a bolt is done only after a tightening recorded to it, a held bolt gets no
+    parameters until released, and every result is stored somewhere exactly once."""
+    import numpy as np
+
+    from tests.station.test_core import decode
+    rng = np.random.default_rng(28)
+    kinds = ["lift", "loc", "ack", "result", "fault", "back", "tick"]
+    weights = np.array([0.02, 0.6, 0.25, 0.05, 0.01, 0.04, 0.03])
+    seen = {"event": 0, "unreadable": 0, "record": 0, "held": 0}
+    for _ in range(200):
+        d = _ready()
+        tid = 1000
+        for _ in range(100):
+            raw = (str(rng.choice(kinds, p=weights)), float(rng.choice([0.02, 0.1, 0.2])),
+                   int(rng.integers(256)), float(rng.normal(0, 1.5)),
+                   float(rng.choice([0.05, 0.05, 0.1, 0.3, 0.6])), int(rng.integers(1, 5)))
+            op = decode(raw)
+            if op[0] != "result":
+                before = set(d.core.matcher.held) if d.core.matcher is not None else set()
+                n = len(d.sends)
+                d.step(op)
+                assert not set(d.sends[n:]) & before, "parameters sent for a held bolt"
+                if not d.tool or rng.random() < 0.6:
+                    continue
+                op = ("result", 0.05, True)         # the operator pulls the trigger
+            d.t += op[1]
+            tid += 1
+            pset = BOLTS[d.tool_bolt].pset if d.tool_bolt and op[2] else 9
+            done = set(d.core.matcher.done) if d.core.matcher is not None else set()
+            if rng.random() < 0.1:
+                acts = d.feed(UnreadableIn(d.t, unreadable(tid, pset)))
+                stored = [a for a in acts if isinstance(a, StoreUnreadable)]
+                seen["unreadable"] += 1
+                seen["held"] += bool(published(acts, BoltLocked))
+            else:
+                code = int(rng.choice([1, 1, 1, 2, 3, 4, 5, 6, 7, 8, 9]))
+                acts = d.feed(ResultIn(d.t, res(tid, pset or 0, bool(rng.random() < 0.8),
+                                                code)))
+                stored = [a for a in acts if isinstance(a, Record | StoreUnattributed
+                                                         | StoreControllerEvent)]
+                if result_kind(code) in (ResultKind.EVENT, ResultKind.UNKNOWN):
+                    seen["event"] += 1
+                    assert [type(a) for a in stored] == [StoreControllerEvent]
+                seen["record"] += sum(isinstance(a, Record) for a in stored)
+            assert len(stored) == 1, acts           # stored somewhere, exactly once
+            if d.core.matcher is not None:
+                newly = set(d.core.matcher.done) - done
+                tightened = {a.bolt for a in stored if isinstance(a, Record)
+                             and a.kind == "tightening" and a.result.ok}
+                assert newly <= tightened, (newly, stored)
+    assert min(seen.values()) > 10, seen
