@@ -78,7 +78,12 @@ async def _client(url: str, mode: str, ids: list[str], python: str = sys.executa
     proc = await asyncio.create_subprocess_exec(
         python, str(ROOT / "tests" / "opcua" / "legacy_client.py"), url, mode, *ids,
         cwd=ROOT, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
-    out, err = await asyncio.wait_for(proc.communicate(), 120)
+    try:
+        out, err = await asyncio.wait_for(proc.communicate(), 120)
+    finally:
+        if proc.returncode is None:   # timed out: not left running
+            proc.kill()
+            await proc.wait()
     assert proc.returncode == 0, err.decode()[-3000:]
     return json.loads(out.decode().strip().splitlines()[-1])
 

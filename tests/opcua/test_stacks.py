@@ -65,13 +65,18 @@ async def node_reads(repo: Repository, bolts: list[tuple[str, dict[str, Any]]],
             str(len(bolts)), *flags, cwd=ROOT, env={**os.environ, "NODE_OPCUA_DIR": str(folder)},
             stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.DEVNULL)
         assert proc.stdout is not None
-        while (line := await asyncio.wait_for(proc.stdout.readline(), 120)).strip() \
-                != b"ready":   # node-opcua logs to stdout too
-            assert line, "node-opcua's client ended before it subscribed"
-        loop = asyncio.get_running_loop()
-        for bolt, kw in bolts:
-            await loop.run_in_executor(None, _recorder(repo, bolt, kw))
-        out, _ = await asyncio.wait_for(proc.communicate(), 120)
+        try:
+            while (line := await asyncio.wait_for(proc.stdout.readline(), 120)).strip() \
+                    != b"ready":   # node-opcua logs to stdout too
+                assert line, "node-opcua's client ended before it subscribed"
+            loop = asyncio.get_running_loop()
+            for bolt, kw in bolts:
+                await loop.run_in_executor(None, _recorder(repo, bolt, kw))
+            out, _ = await asyncio.wait_for(proc.communicate(), 120)
+        finally:
+            if proc.returncode is None:   # failed or timed out: not left running
+                proc.kill()
+                await proc.wait()
         assert proc.returncode == 0, out.decode()[-3000:]
         return [json.loads(x) for x in out.decode().splitlines() if x.startswith("{")]
     finally:
