@@ -155,9 +155,6 @@ def answer_words(answer: Answer) -> str:
     return f"{head}: refused: {reason_words(answer.reason)}"
 
 
-__all__ = ["answer_words", "check_words", "command_words", "operator_words", "reason_words"]
-
-
 def _unseen(r: Reason) -> str:
     """A teach point with no localization of the wrench at all: what the cameras said first
     (a camera giving no frame is no reason to hold the tool stiller)."""
@@ -174,3 +171,6 @@ def _missed(r: Reason) -> str:
         return ""
     many = f"{r.limit:g} localization(s)" if r.limit else "the localizations"
     return f"; {many} without the wrench, the last: {reason_words(r.cause)}"
+
+
+__all__ = ["answer_words", "check_words", "command_words", "operator_words", "reason_words"]
