@@ -514,6 +514,9 @@ async def line_report(url: str | None, services: list[StationServices], out: Any
         if page is not None:
             print(f"  every row: {page} (stationd line results with a station file naming "
                   "this line database prints them too)")
+        else:   # the screens end with the demo: the /line page is served only with --hold
+            print("  every row: stationd line results with a station file naming this line "
+                  "database (the screens' /line page: with --hold, while the demo holds)")
     return doc
 
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import logging
+import secrets
 import signal
 import sys
 import tempfile
@@ -185,6 +186,13 @@ def run_station_demo(args: argparse.Namespace) -> int:
             pg.stop()
 
 
+def run_id() -> int:
+    """This run's id, the serial part of its vehicle's VIN: random (not the seed's: two runs
+    with one seed are still two vehicles).  Why: every run used make_vin(1), so four demos
+    against one line database read as one car tightened over and over."""
+    return secrets.randbelow(1_000_000)
+
+
 def station_id(k: int) -> str:
     """The demo's k-th station (1-based), as the line database and OPC UA name it."""
     return f"DEMO-{k}"
@@ -236,6 +244,8 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
                  "station after another)" if n_stations > 1 else ""),
               file=out, flush=True)
     station = _station(cfg, psets)
+    if n_stations > 1:     # one output for the line's stations: each line says whose it is
+        station.actions.label(station_id(1))
     rng = np.random.default_rng(args.seed)
     # the NOKs have their own stream: the plan (bolts, placements) is the seed's as before
     nok_rng = np.random.default_rng([args.seed, 21])
@@ -243,8 +253,11 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
     codes = [m.code for m in load_bolts(bolts_path).models if m.code is not None and m.bolts]
     if not codes:
         raise InputError(f"{bolts_path}: the demo needs a model with a lift code and bolts")
+    run = run_id()
     truth: dict[str, Any] = {"bolt": None, "wrong": 0, "model_code": codes[0],
-                             "vin": make_vin(1), "locked_sends": 0}
+                             "vin": make_vin(run), "locked_sends": 0}
+    print(f"vehicle: {truth['vin']} (this run's own VIN: run id {run:06d} in its serial part, "
+          "so a line database tells the runs apart)", file=out, flush=True)
     station.on_action = _checker(station, truth, out)
     extra: list[dict[str, Any]] = []   # the stations after the first: their summaries
     line: dict[str, Any] = {}
@@ -288,14 +301,18 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
                                                  line_url, psets, truth, out, services,
                                                  n_stations))
             if cfg.line is not None:   # every station's records against the line's
+                # the /line link only where it is served on: the hold (the demo exits next
+                # without it)
+                hold = getattr(args, "hold", False)
                 line.update(await line_report(line_url, services, out,
-                                               None if screens.server is None else
-                                               f"{screens.server.url}line", args.json))
+                                               None if screens.server is None or not hold
+                                               else f"{screens.server.url}line", args.json))
             if getattr(args, "hold", False) and (screens.server is not None or
                                                  any(s.opcua for s in services)):
                 await _hold(screens.server.url if screens.server is not None else None,
                             [s.opcua.url for s in services if s.opcua is not None],
-                            report, int(truth.get("cycles", cycles)), truth, args.json)
+                            report, int(truth.get("cycles", cycles)), truth, args.json,
+                            cfg.line is not None)
             screens.attach(None, cfg)
             stop.set()
             await task
@@ -319,6 +336,7 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
     summary = _summary(station, report, cycles, truth["wrong"], truth["locked_sends"])
     summary["simulated_instead"] = instead
     summary["station_id"] = station_id(1)
+    summary["vin"] = truth["vin"]
     summary["share"] = truth.get("share", [])
     summary["opcua"] = None if cfg.opcua is None else cfg.opcua.endpoint
     # the line's verdict from each part's reasons (never read back from a verdict's text)
@@ -347,14 +365,20 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
               f"{_ms(summary['latency_ms']['p50'], '.0f')} ms p95 "
               f"{_ms(summary['latency_ms']['p95'], '.0f')} ms")
         n = summary["nok_policy"]
-        print(f"NOK policy: {n['nok']} NOK result(s), {n['loosenings']} loosening(s), "
-              f"{n['locks']} lock(s), {n['releases']} release(s)")
+        whose = f" ({station_id(1)})" if extra else ""
+        print(f"NOK policy{whose}: {nok_words(n)}")
         if summary.get("operators"):
             print(operator_words(summary["operators"]))
         for e in extra:
             print(f"{e['station_id']}: {e['ok']}/{e['bolts']} bolts OK{_left_words(e)}, "
                   f"parameters sent for a wrong bolt: {e['wrong_bolt_sends']}, "
-                  f"{e['recorded']} result(s) recorded")
+                  f"{e['recorded']} result(s) recorded; NOK policy: "
+                  f"{nok_words(e['nok_policy'])}")
+        if extra:
+            every = [summary["nok_policy"], *(e["nok_policy"] for e in extra)]
+            total = {k: sum(int(p[k]) for p in every)
+                     for k in ("nok", "loosenings", "locks", "releases")}
+            print(f"NOK policy, all {len(every)} stations: {nok_words(total)}")
         if instead:
             devices = ", ".join(d.rsplit(" ", 1)[0] for d in instead)
             print(f"simulated, not the station file's devices: {devices} (the records went "
@@ -425,6 +449,7 @@ async def _next_station(args: argparse.Namespace, first: StationConfig, k: int, 
                        line_url)
     loop = asyncio.get_running_loop()
     station = _station(cfg, psets)
+    station.actions.label(sid)
     truth = {**first_truth, "bolt": None, "wrong": 0, "locked_sends": 0}
     cycles = min(int(args.cycles), EXTRA_CYCLES)
     truth.pop("cycles", None)
@@ -463,12 +488,14 @@ async def _next_station(args: argparse.Namespace, first: StationConfig, k: int, 
     s = _summary(station, report, n, truth["wrong"], truth["locked_sends"])
     return {"station_id": sid, "opcua": None if cfg.opcua is None else cfg.opcua.endpoint,
             "bolts": n, "ok": s["ok"], "left": s["left"], "handled": s["handled"],
+            "nok_policy": s["nok_policy"],
             "share": truth.get("share", []), "wrong_bolt_sends": s["wrong_bolt_sends"],
             "recorded": s["recorded"], "verdict": s["verdict"], "problems": s["problems"]}
 
 
 async def _hold(url: str | None, endpoints: list[str], report: list[dict[str, Any]],
-                cycles: int, truth: dict[str, Any], json_out: bool) -> None:
+                cycles: int, truth: dict[str, Any], json_out: bool,
+                line: bool = False) -> None:
     """``--hold``: the run is over (results recorded); the screens keep serving its results
     from the run's temporary database, and the OPC UA endpoints theirs, until SIGINT or
     SIGTERM, so they can be browsed (and exported) before the demo's folder is removed, and
@@ -479,7 +506,8 @@ async def _hold(url: str | None, endpoints: list[str], report: list[dict[str, An
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, done.set)
     ok = sum(1 for r in report if r.get("ok"))
-    served = ([f"{url}vehicles/{truth['vin']}"] if url is not None else []) + endpoints
+    served = ([f"{url}vehicles/{truth['vin']}"] if url is not None else []) + \
+        ([f"{url}line"] if url is not None and line else []) + endpoints
     print(f"run over ({ok}/{cycles} bolts OK); still serving {', '.join(served)} until "
           "Ctrl-C (--hold)", file=sys.stderr if json_out else sys.stdout, flush=True)
     try:
@@ -601,6 +629,12 @@ def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
             "latency_ms": {"p50": _num(np.percentile(lat, 50)) if lat else None,
                            "p95": _num(np.percentile(lat, 95)) if lat else None},
             "verdict": verdict, "problems": problems}
+
+
+def nok_words(n: dict[str, Any]) -> str:
+    """The NOK policy's counts of one station (or the line's), in words."""
+    return (f"{n['nok']} NOK result(s), {n['loosenings']} loosening(s), {n['locks']} "
+            f"lock(s), {n['releases']} release(s)")
 
 
 def _handled_words(ok: int, left: int, handled: int) -> str:

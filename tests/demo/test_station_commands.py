@@ -20,7 +20,7 @@ import pytest
 import yaml
 
 from stationd.access import hash_password
-from stationd.sim.vin import make_vin
+from stationd.sim.vin import is_valid
 from tests.station.daemons import SIM, free_port
 from tests.station.test_commands_daemon import Client
 
@@ -52,7 +52,6 @@ def test_commands_reach_the_demos_station_during_the_run_and_the_hold(tmp_path):
     env = {**os.environ, "STATIOND_PASSWORD": PASSWORD, "PYTHONPATH": str(ROOT)}
     url = f"http://127.0.0.1:{port}/"
     named = f"station DEMO-1 at {url} ({station.resolve()})\n"   # each command's first line
-    vin = make_vin(1)     # the demo's vehicle
     demo = subprocess.Popen([sys.executable, "-m", "stationd", "demo", "--config",
                              str(station), "--cycles", "1", "--seed", "11", "--hold"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -86,6 +85,10 @@ def test_commands_reach_the_demos_station_during_the_run_and_the_hold(tmp_path):
         return got
 
     try:
+        # the demo's vehicle: its own VIN, the run's id in its serial part (issue 30, item 7)
+        said = expect("vehicle: ")
+        vin = said.split()[1]
+        assert is_valid(vin) and vin[-6:] == said.split("run id ")[1][:6]
         expect("screens: ")
         # during the run: the station answers (whatever it answers), never 503
         during = command("reopen", vin)

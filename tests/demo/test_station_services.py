@@ -30,7 +30,7 @@ from stationd.errors import InputError
 from stationd.linedb import results
 from stationd.opcua.model import IJT_URI, load_client_types
 from stationd.opcua.uatypes import ua
-from stationd.sim.vin import is_valid, make_vin
+from stationd.sim.vin import is_valid
 from tests.station.daemons import SIM
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -127,7 +127,7 @@ def test_a_client_subscribed_at_the_demos_endpoint_gets_an_event_per_rundown(tmp
         assert event.SourceName == "DEMO-1"
         assert meta.IsSimulated is True
         entities = {x.EntityType: x.EntityId for x in meta.AssociatedEntities}
-        assert entities[20] == make_vin(1) and is_valid(entities[20])
+        assert entities[20] == summary["vin"] and is_valid(entities[20])
         seqs.append(meta.SequenceNumber)
     assert seqs == sorted(set(seqs))
     assert "security none" in "".join(demo.err)
@@ -148,7 +148,7 @@ def test_two_stations_forward_to_the_line_database_and_the_line_is_read_back(tmp
     # every station's records against the line's, read back at the end
     for sid, p in line["arrival"].items():
         assert p["arrived"] == p["records"] > 0, sid
-    assert line["vins"] == [make_vin(1)]          # the vehicle went down the line
+    assert line["vins"] == [summary["vin"]]       # the vehicle went down the line
     assert line["rundowns"] == summary["recorded"] + second["recorded"]
     # each station tightened its own bolts: disjoint shares, said at the start
     assert summary["share"] and second["share"]

@@ -27,16 +27,18 @@ import pytest
 
 from drivers.wrench.sim import SimController
 from stationd.sim.devices_cli import psets_of
-from stationd.sim.vin import make_vin
+from stationd.sim.vin import is_valid, make_vin
 from tests.station.daemons import SIM, Proc, free_port
 from tests.web.pages import Page
 from tests.web.test_browser import check_fits
 
 ROOT = Path(__file__).resolve().parents[2]
-DEMO_VIN = make_vin(1)     # the demo's vehicle: a 17-character VIN (ISO 3779)
+#: the demo's vehicle: a 17-character VIN (ISO 3779), its serial part the run's id
+VEHICLE = r"^vehicle: (\w{17}) \(this run's own VIN: run id (\d{6})"
 CYCLES = 10   # the run must outlast the walk to the cameras screen (a bolt takes ~2 s)
 ICONS = {"OK": "\u2714", "NOK": "\u2716"}          # operator.js: a check mark, a cross
-LINE = re.compile(r"^(B\w+): pset (\d+), XY error [^,]+, (OK|NOK) ([\d.]+) Nm$")
+# the bolt's line: its result, then the torque (a NOK names the quantity that failed first)
+LINE = re.compile(r"^(B\w+): pset (\d+), XY error [^,]+, (OK|NOK)\b.*?([\d.]+) Nm")
 
 
 class Demo:
@@ -106,9 +108,12 @@ def counters(page: Page) -> tuple[int, int, int]:
 def test_demo_screens_follow_the_simulated_operator(page, shots, tmp_path):
     demo = Demo(tmp_path)
     try:
+        found = demo.expect(VEHICLE)
+        vin, run = found[1], found[2]
+        assert is_valid(vin) and vin == make_vin(int(run))
         url = demo.expect(r"^screens: (http://127\.0\.0\.1:\d+/) \(operator\)")[1]
         page.get(url)
-        page.wait(lambda p: p.text("#vin") == DEMO_VIN, 60, "the demo's vehicle")
+        page.wait(lambda p: p.text("#vin") == vin, 60, "the demo's vehicle")
         assert counters(page)[1] == 50                   # config/sim's model: 50 bolts
         # the done counter, sampled as the operator works: it only rises, to the first result
         done_seen = [counters(page)[0]]
@@ -172,7 +177,7 @@ def test_demo_screens_follow_the_simulated_operator(page, shots, tmp_path):
         assert {s for b, (s, _, _) in on_map.items() if b not in printed} == {"missing"}
 
         # the results: the vehicle's page lists the printed rundowns; both exports download
-        page.get(url + f"vehicles/{DEMO_VIN}")
+        page.get(url + f"vehicles/{vin}")
         # a row per rundown, at least one per bolt of the model; those not tightened say so
         page.wait(lambda p: p.js("return new Set([...document.querySelectorAll("
                                  "'tr.rundown')].map(r => r.dataset.bolt)).size") == 50, 30,
@@ -192,7 +197,7 @@ def test_demo_screens_follow_the_simulated_operator(page, shots, tmp_path):
         shots("demo-vehicle")
         page.click("#csv")
         got = list(csv.DictReader(io.StringIO(
-            page.wait_download(f"{DEMO_VIN}.csv").read_text())))
+            page.wait_download(f"{vin}.csv").read_text())))
         done = [r for r in got if r["status"] != "missing"]
         last = list({r["bolt"]: r for r in done}.values())   # each bolt's last rundown
         assert sorted((r["bolt"], r["status"]) for r in last) == \
@@ -203,7 +208,7 @@ def test_demo_screens_follow_the_simulated_operator(page, shots, tmp_path):
         for r in last:
             assert abs(float(r["torque_nm"]) - float(printed[r["bolt"]][4])) < 0.051
         page.click("#json")
-        doc = json.loads(page.wait_download(f"{DEMO_VIN}.json").read_text())
+        doc = json.loads(page.wait_download(f"{vin}.json").read_text())
         runs = {b["bolt"]: b["rundowns"] for b in doc["bolts"] if b["rundowns"]}
         assert set(runs) == set(printed)
         assert all(r[-1]["rundown"] == "tightening" for r in runs.values())
