@@ -18,6 +18,16 @@ exit 0
 """
 
 
+NPM_STUB = """#!/bin/sh
+echo "npm $*" >> "$LOG"
+while [ $# -gt 0 ]; do
+    if [ "$1" = "--prefix" ]; then mkdir -p "$2/node_modules/node-opcua"
+        touch "$2/node_modules/node-opcua/package.json"; fi
+    shift
+done
+"""
+
+
 def _stub(bin_dir: Path, name: str, body: str) -> None:
     path = bin_dir / name
     path.write_text(body)
@@ -41,6 +51,7 @@ def test_bootstrap_prints_a_line_per_step_and_is_idempotent(tmp_path):
     _stub(bin_dir, "apt-get", "#!/bin/sh\necho \"apt-get $*\" >> \"$LOG\"\ntouch \"$STATE\"\n")
     _stub(bin_dir, "pkg-config", "#!/bin/sh\nexit 1\n")
     _stub(bin_dir, "python3", PYTHON_STUB)
+    _stub(bin_dir, "npm", NPM_STUB)
     env = {"PATH": f"{bin_dir}:/usr/bin:/bin", "LOG": str(log),
            "STATE": str(tmp_path / "installed"), "HOME": str(tmp_path),
            "SYSTEM_PYTHON": str(bin_dir / "python3")}   # as root: the system's Python
@@ -51,13 +62,15 @@ def test_bootstrap_prints_a_line_per_step_and_is_idempotent(tmp_path):
     assert steps[2:5] == [f"{bin_dir}/python3 -m venv .venv", "pip install --upgrade pip",
                           "pip install -e .[dev,bench] (numpy, OpenCV, ...: a few minutes the "
                           "first time)"]
-    assert steps[-1] == "ready (.venv)"
+    assert steps[-2].startswith("npm install node-opcua@") and steps[-1] == "ready (.venv)"
     calls = log.read_text()
     assert calls.count("apt-get install") == 1 and calls.count("-m venv .venv") == 1
+    assert calls.count("npm install") == 1
     second = [line.split("] ", 1)[1] for line in _run(tree, env)]
     assert second[0].startswith("apt: all ") and second[1] == "venv: .venv exists"
     assert second[2] == "python packages: as installed for this pyproject.toml (dev,bench)"
     assert second[3] == "ready (.venv)" and len(second) == 4
     calls = log.read_text()
     assert calls.count("apt-get install") == 1 and calls.count("-m venv .venv") == 1
+    assert calls.count("npm install") == 1      # node-opcua is there: not again
     assert os.access(tree / ".venv" / "bin" / "python", os.X_OK)
