@@ -41,6 +41,10 @@ def test_one_navigation_bar_on_every_page(live_server, page, tmp_path):
             page.get(srv.url + path)
             page.wait(lambda p: p.count("nav a") > 0, what=f"/{path}'s navigation bar")
             assert _nav(page) == (NAV, [here]), path
+        # the quality page's NOK columns count results (rundowns), and say so
+        page.get(srv.url + "quality")
+        heads = page.js("return [...document.querySelectorAll('th')].map(t => t.textContent)")
+        assert heads.count("NOK results") == 2 and "NOK" not in heads, heads
     finally:
         repo.close()
 

@@ -1,0 +1,97 @@
+"""``stationd demo --no-sim-supervisor`` (issue 30, item 1): no simulated supervisor; the first
+bolt locks, the operator tightens the others and waits for a person; an operator's release is
+refused, a supervisor's (``stationd release``, as a person types it) accepted; the operator
+tightens the bolt again and the run passes.  Why: the simulated supervisor released every lock
+within 0.6 s, so no person could ever release one in the demo."""
+
+from __future__ import annotations
+
+import os
+import queue
+import re
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+import yaml
+
+from stationd.access import hash_password
+from tests.station.daemons import SIM, free_port
+
+ROOT = Path(__file__).resolve().parents[2]
+PASSWORD = "release-it-with-care"  # noqa: S105 - a test user's
+
+
+def _station(tmp: Path, port: int) -> Path:
+    for f in SIM.glob("*.yaml"):
+        (tmp / f.name).write_text(f.read_text())
+    doc = yaml.safe_load((tmp / "station.yaml").read_text())
+    doc["pairs"] = {"pair1": doc["pairs"]["pair1"]}
+    doc["cameras"] = {n: c for n, c in doc["cameras"].items() if n.startswith("pair1_")}
+    doc["matching"]["max_age_s"] = 5.0     # a loaded machine renders late: not this test's
+    doc["http"] = {"listen": f"127.0.0.1:{port}"}
+    doc["access"] = {"users": {"sue": {"role": "supervisor", "password": hash_password(PASSWORD)},
+                               "olga": {"role": "operator", "password": hash_password(PASSWORD)}}}
+    path = tmp / "station.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+@pytest.mark.timeout(600)
+def test_a_lock_waits_for_a_persons_release_in_the_demo(tmp_path):
+    station = _station(tmp_path, free_port())
+    env = {**os.environ, "STATIOND_PASSWORD": PASSWORD, "PYTHONPATH": str(ROOT)}
+    demo = subprocess.Popen([sys.executable, "-m", "stationd", "demo", "--config",
+                             str(station), "--cycles", "3", "--seed", "11",
+                             "--no-sim-supervisor", "--no-opcua"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env, cwd=tmp_path)
+    lines: queue.Queue[str] = queue.Queue()
+    seen: list[str] = []
+
+    def pump() -> None:
+        assert demo.stdout is not None
+        for line in demo.stdout:
+            lines.put(line.rstrip("\n"))
+    threading.Thread(target=pump, daemon=True).start()
+
+    def expect(pattern: str, timeout: float = 300) -> re.Match[str]:
+        while True:
+            line = lines.get(timeout=timeout)
+            seen.append(line)
+            found = re.search(pattern, line)
+            if found:
+                return found
+
+    def release(user: str, vin: str, bolt: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "stationd", "release", vin, bolt,
+                               "--comment", "thread chased", "--user", user, "--config",
+                               str(station)], capture_output=True, text=True, env=env,
+                              timeout=60, check=False)
+
+    try:
+        found = expect(r"(B\d\d) of (\w{17}) locked: the operator waits, the vehicle on the "
+                       "lift, for a person's release")
+        bolt, vin = found[1], found[2]
+        assert not any("released by the supervisor" in s for s in seen)
+        # the operator tightened the other bolts before waiting: their lines came first
+        assert sum(1 for s in seen if re.match(r"B\d\d: pset \d+, ", s)) >= 1, seen
+        refused = release("olga", vin, bolt)
+        assert refused.returncode == 1 and "refused" in refused.stdout, refused
+        expect(rf"command release {bolt} of {vin} .*by olga \(cli 127\.0\.0\.1\): refused")
+        accepted = release("sue", vin, bolt)
+        assert accepted.returncode == 0 and accepted.stdout.strip().endswith(": accepted"), \
+            accepted
+        expect(rf"command release {bolt} of {vin} .*by sue \(cli 127\.0\.0\.1\): accepted")
+        expect(rf"{bolt} of {vin} released: the operator tightens it again")
+        line = expect(rf"^{bolt}: pset \d+, XY error [^,]+, (.*)$")[1]
+        assert line.startswith("OK"), line
+        verdict = expect(r"^(PASS|FAIL)")
+        assert verdict[1] == "PASS", seen
+        assert demo.wait(timeout=120) == 0, seen     # the demo ends by itself after the run
+    finally:
+        if demo.poll() is None:
+            demo.terminate()
+            demo.wait(timeout=60)
