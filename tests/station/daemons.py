@@ -21,6 +21,7 @@ import os
 import shutil
 import signal
 import socket
+import sqlite3
 import subprocess
 import sys
 import time
@@ -277,3 +278,20 @@ def tracking(tmp: Path, vin: str, seed: int = 9, edit: Callable[[str], str] | No
     with stops_cleanly(d, wrench.close, plc.close):
         at_height(d, plc, wrench, lift_port, ctl_port, vin)
         yield d, plc, wrench
+
+
+def tool_on(d: Proc, ctl: SimController, pose: Path, bolt: str) -> None:
+    """The simulated operator's wrench on ``bolt`` (``pose``: the file the station's
+    simulated cameras read it from) until the controller has the tool enabled for it."""
+    pose.write_text(bolt)
+    d.wait_log(f"tightening bolt {bolt}")
+    until(lambda: ctl.tool_enabled, 30, f"tool enabled on {bolt}")
+
+
+def db_rows(db: Path | str, sql: str) -> list[tuple[Any, ...]]:
+    """The rows ``sql`` reads from the station's SQLite database (read after the daemon)."""
+    con = sqlite3.connect(db)
+    try:
+        return list(con.execute(sql))
+    finally:
+        con.close()

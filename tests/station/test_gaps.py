@@ -9,7 +9,7 @@ import sqlite3
 import pytest
 
 from stationd.station.gaps import GapPlan, plan
-from tests.station.daemons import tracking, until
+from tests.station.daemons import tool_on, tracking, until
 
 
 def test_the_ids_between_the_last_recorded_and_the_newest_are_fetched():
@@ -25,15 +25,11 @@ def test_the_ids_between_the_last_recorded_and_the_newest_are_fetched():
 def test_results_made_while_the_link_was_cut_are_fetched_or_shown_as_gaps(tmp_path):
     pose = tmp_path / "pose"
     with tracking(tmp_path, "GAPVIN00000000001") as (d, _, ctl):
-        pose.write_text("B05")
-        d.wait_log("tightening bolt B05")
-        until(lambda: ctl.tool_enabled, 30, "tool enabled")
+        tool_on(d, ctl, pose, "B05")
         first = ctl.pull_trigger()
         assert first is not None
         until(lambda: first.tightening_id in ctl.acked_ids, 30, "the first result stored")
-        pose.write_text("B06")
-        d.wait_log("tightening bolt B06")
-        until(lambda: ctl.tool_enabled, 30, "tool enabled on B06")
+        tool_on(d, ctl, pose, "B06")
         # the link is cut and stays down (the controller refuses a new session) while the
         # operator goes on: three tightenings nobody hears
         ctl.refuse_mid(1, 99)

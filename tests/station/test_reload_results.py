@@ -13,9 +13,7 @@ independent controller that found the loss did."""
 from __future__ import annotations
 
 import signal
-import sqlite3
 import time
-from typing import Any
 
 import pytest
 
@@ -24,20 +22,13 @@ from drivers.wrench.sim import SimController
 from stationd.boltfile import load_bolts
 from stationd.sim.devices_cli import psets_of
 from tests.station.daemons import SIM, Proc, at_height, free_port, until
+from tests.station.daemons import db_rows as _rows
 
 VIN = "RELOADVIN00000001"
 
 
 def _subscribed(ctl: SimController) -> bool:
     return any(s.started and s.subscribed for s in ctl.call(ctl.sessions))
-
-
-def _rows(db: str, sql: str) -> list[tuple[Any, ...]]:
-    con = sqlite3.connect(db)
-    try:
-        return list(con.execute(sql))
-    finally:
-        con.close()
 
 
 @pytest.mark.timeout(420)

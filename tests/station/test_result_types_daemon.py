@@ -6,25 +6,15 @@ window and recorded to its bolt because the controller's own data places it ther
 
 from __future__ import annotations
 
-import sqlite3
 import time
-from pathlib import Path
-from typing import Any
 
 import pytest
 
 from stationd.station.core import result_type_words
-from tests.station.daemons import tracking, until
+from tests.station.daemons import db_rows as _rows
+from tests.station.daemons import tool_on, tracking, until
 
 pytestmark = pytest.mark.system      # whole daemons
-
-
-def _rows(db: Path, sql: str) -> list[Any]:
-    con = sqlite3.connect(db)
-    try:
-        return list(con.execute(sql))
-    finally:
-        con.close()
 
 
 @pytest.mark.timeout(300)
@@ -32,9 +22,7 @@ def test_only_a_tightening_closes_the_bolt_the_tool_is_on(tmp_path):
     pose = tmp_path / "pose"
     codes = (3, 4, 5, 6, 8, 9)
     with tracking(tmp_path, "TYPEVIN0000000001") as (d, _, ctl):
-        pose.write_text("B05")
-        d.wait_log("tightening bolt B05")
-        until(lambda: ctl.tool_enabled, 30, "tool enabled")
+        tool_on(d, ctl, pose, "B05")
         made = []
         for code in codes:
             m = ctl.pull_trigger(result_type=code)
@@ -61,9 +49,7 @@ def test_only_a_tightening_closes_the_bolt_the_tool_is_on(tmp_path):
 def test_an_unreadable_result_is_stored_whole_and_holds_its_bolt(tmp_path):
     pose = tmp_path / "pose"
     with tracking(tmp_path, "UNREADVIN00000001") as (d, _, ctl):
-        pose.write_text("B05")
-        d.wait_log("tightening bolt B05")
-        until(lambda: ctl.tool_enabled, 30, "tool enabled")
+        tool_on(d, ctl, pose, "B05")
         ctl.garble_next_result("layout")       # a body that reads at no revision
         bad = ctl.pull_trigger()
         assert bad is not None
@@ -71,9 +57,7 @@ def test_an_unreadable_result_is_stored_whole_and_holds_its_bolt(tmp_path):
         until(lambda: bad.tightening_id in ctl.acked_ids, 30, "acknowledged once stored")
         until(lambda: not ctl.tool_enabled, 30, "the tool off")
         # the link is kept and the next bolt goes on as usual; B05 is held
-        pose.write_text("B06")
-        d.wait_log("tightening bolt B06")
-        until(lambda: ctl.tool_enabled, 30, "tool enabled on B06")
+        tool_on(d, ctl, pose, "B06")
         good = ctl.pull_trigger()
         assert good is not None
         until(lambda: good.tightening_id in ctl.acked_ids, 30, "B06 stored")
@@ -91,15 +75,11 @@ def test_an_unreadable_result_is_stored_whole_and_holds_its_bolt(tmp_path):
 def test_a_tightening_made_during_a_link_cut_is_recorded_to_its_bolt(tmp_path):
     pose = tmp_path / "pose"
     with tracking(tmp_path, "CUTVIN00000000001") as (d, _, ctl):
-        pose.write_text("B04")
-        d.wait_log("tightening bolt B04")
-        until(lambda: ctl.tool_enabled, 30, "tool enabled")
+        tool_on(d, ctl, pose, "B04")
         first = ctl.pull_trigger()               # the last result the station accounts for
         assert first is not None
         until(lambda: first.tightening_id in ctl.acked_ids, 30, "the first result stored")
-        pose.write_text("B05")
-        d.wait_log("tightening bolt B05")
-        until(lambda: ctl.tool_enabled, 30, "tool enabled on B05")
+        tool_on(d, ctl, pose, "B05")
         ctl.refuse_revisions(1, range(1, 8))   # the link down, and kept down: no new session
         ctl.drop_connections()
         d.wait_log("fault: wrench")
