@@ -206,6 +206,16 @@ class SimController(OpenProtocolServer):
             raise ValueError(f"result_type must be a 2-digit code, not {result_type}")
         return self.call(lambda: self._tighten(result_type))
 
+    def press(self, result_type: int = 3) -> SimTightening | None:
+        """Someone at the controller's own panel makes a result that is no rundown (3 batch
+        increment, 4 batch decrement, 5 bypass, 6 abort job, 8 reference setup), whether the
+        station has the tool enabled or not, with the pset last selected; None before any
+        pset was selected."""
+        if result_type not in (3, 4, 5, 6, 8):
+            raise ValueError(f"a panel result is of type 3, 4, 5, 6 or 8, not {result_type}")
+        return self.call(lambda: None if self.pset is None
+                         else self._result(self.pset, result_type))
+
     def garble_next_result(self, how: Garble = "value") -> None:
         """Spoil the body of the next result message (0061 or 0065) so that it reads at no
         revision: "value" puts letters in its torque (the layout intact, the tightening id,

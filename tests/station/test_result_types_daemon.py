@@ -35,11 +35,17 @@ def test_only_a_tightening_closes_the_bolt_the_tool_is_on(tmp_path):
         real = ctl.pull_trigger()
         assert real is not None
         until(lambda: real.tightening_id in ctl.acked_ids, 30, "the tightening stored")
+        until(lambda: not ctl.tool_enabled, 30, "the tool off after the tightening")
+        lead = ctl.press(3)                    # a line lead steps the batch on, tool off
+        assert lead is not None
+        d.wait_log("batch increment on the controller: not a tightening")
+        until(lambda: lead.tightening_id in ctl.acked_ids, 30, "stored with no bolt")
     db = tmp_path / "station.db"
     events = _rows(db, "SELECT result_type, tightening_id, bolt, vin FROM controller_events "
                        "ORDER BY id")
-    assert events == [(c, t, "B05", "TYPEVIN0000000001") for c, t in zip(codes, made,
-                                                                         strict=True)]
+    assert events == [*((c, t, "B05", "TYPEVIN0000000001") for c, t in zip(codes, made,
+                                                                           strict=True)),
+                      (3, lead.tightening_id, None, "TYPEVIN0000000001")]
     rundowns = _rows(db, "SELECT tightening_id, kind FROM tightening_records")
     assert rundowns == [(real.tightening_id, "tightening")]
     assert _rows(db, "SELECT count(*) FROM unattributed_results") == [(0,)]
