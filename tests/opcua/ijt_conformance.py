@@ -4,7 +4,8 @@ print which of its result and event test cases pass (issue 22; not part of the t
 Why a script and not a test: the client (umati/UA-for-Industrial-Joining-Technologies,
 ``OPC_UA_Clients/Release2/IJT_Test_Client``) is not vendored (its code stays in its
 repository), asks for Python 3.14 (3.13 runs it), the asyncua commit it pins and its own
-dependencies, and runs for minutes (its set-up: /tmp/readme-opcua.md).  Here: a station
+dependencies, and runs for minutes (its set-up: README.md, "The working group's
+conformance client").  Here: a station
 database in a temporary folder, the server on loopback (anonymous, or the user ``mes`` with the
 password ``conformance``), a rundown recorded whenever the client's result trigger asks (a
 station has no "simulate a result" method: the client's ``OPCUA_TRIGGER_CLASS`` hook gets a

@@ -89,8 +89,8 @@ async def _client(url: str, mode: str, ids: list[str], python: str = sys.executa
 
 
 #: an interpreter with the asyncua the working group's conformance client pins (35a77c6b),
-#: e.g. that client's venv (its set-up: /tmp/readme-opcua.md); its stock legacy loader is
-#: tried too when this is set
+#: e.g. that client's venv (its set-up: README.md, "The working group's conformance
+#: client"); its stock legacy loader is tried too when this is set
 PINNED_PYTHON = os.environ.get("IJT_ASYNCUA_PYTHON")
 
 

@@ -3,7 +3,7 @@ from npm where node is present) and stock asyncua.
 
 Why: an MES is built on whatever stack its integrator knows; the station encodes per Part 6
 (held by :mod:`tests.opcua.test_dictionary`), so what a stack misreads is the stack's, and
-is shown here with the client-side fix (/tmp/readme-opcua.md, "MES clients").
+is shown here with the client-side fix (README.md, "MES clients: which stack decodes what").
 """
 
 from __future__ import annotations
