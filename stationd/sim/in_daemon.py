@@ -160,7 +160,8 @@ class SimulatedStation:
             else:
                 await stop.wait()
         finally:
-            self._keep(station)
+            if not scripted:    # the scripted operator's keeps it before its round ends
+                self._keep(station)
             self._plc = None
             if self.world is not None:
                 self.world.set_wrench(None)

@@ -127,3 +127,27 @@ def test_a_reload_of_each_section_keeps_the_vehicle_and_its_state(tmp_path):
     finally:
         code = d.stop()
     assert code == 0, d.log()[-3000:]
+
+
+@pytest.mark.timeout(600)
+def test_the_scripted_operator_goes_on_with_the_same_vehicle_across_a_reload(tmp_path):
+    station = _station(tmp_path)
+    d = Daemon(tmp_path, "--sim-operator")
+    try:
+        vin = d.wait(r"simulated operator: vehicle (\w{17}) \(lift code 1\) arrives", 120)[1]
+        d.wait(rf"vehicle {vin} \(SIM-1\) opened", 60)
+        d.wait(r"tightening: tightening bolt B\d\d", 300)      # the vehicle at height, worked on
+        doc = yaml.safe_load(station.read_text())
+        doc["matching"]["stable_frames"] = 4
+        station.write_text(yaml.safe_dump(doc, sort_keys=False))
+        d.p.send_signal(signal.SIGHUP)
+        d.wait(rf"configuration reloaded[\s\S]*simulated operator: vehicle {vin} stays on the "
+               r"lift across the reload; its bolts go on", 120)
+        d.wait(rf"configuration reloaded[\s\S]*vehicle {vin} \(SIM-1\) opened", 120)
+        after = d.log().split("configuration reloaded", 1)[1]
+        assert "lift not at working height" not in after.split(f"vehicle {vin} (SIM-1) "
+                                                               "opened")[0], after
+        assert "arrives" not in after.split("stays on the lift")[0], after
+    finally:
+        code = d.stop()
+    assert code == 0, d.log()[-3000:]
