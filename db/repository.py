@@ -238,7 +238,8 @@ class Repository:
         """Record one tightening of ``bolt`` on the open vehicle ``vin``; return its id.
 
         Committed (and on disk) before it returns.  A ``tightening_id`` already recorded for
-        this vehicle (the controller resent a result) returns the existing record.
+        this vehicle with the same torque and angle (the controller resent a result) returns
+        the existing record.
         ``parameters_id`` is the version that was sent (``BoltInfo.parameters_id``); without
         it, the bolt's current version.  ``params_sent`` defaults to that version's pset and
         targets.  ``enable_id`` (:meth:`note_enable`) is settled in the same transaction: the
@@ -256,9 +257,13 @@ class Repository:
         with self._session(write=True) as s:
             v = _vehicle(s, vin)
             if tightening_id is not None:  # a result the controller sent again: stored once
+                # (the same id with other values is another result: a controller whose ids
+                # started again, a new or reset one)
                 known = s.scalar(select(TighteningRecord.id).where(
                     TighteningRecord.vehicle_id == v.id,
-                    TighteningRecord.tightening_id == int(tightening_id)))
+                    TighteningRecord.tightening_id == int(tightening_id),
+                    TighteningRecord.torque_nm == _opt_float(torque_nm),
+                    TighteningRecord.angle_deg == _opt_float(angle_deg)).limit(1))
                 if known is not None:
                     _settle(s, enable_id)
                     return known

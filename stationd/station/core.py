@@ -573,7 +573,9 @@ class StationCore:
     # the station's start or the controller's last fault: a result fetched afterwards was
     # made before it, so never under an enable that came later
     _link_lost_at: float = field(default=float("-inf"), repr=False)
-    _recorded: set[int] = field(default_factory=set, repr=False)
+    # tightening id -> what the result said (a resent copy says the same; a controller whose
+    # ids started again says something else under the same id, and is not a copy)
+    _recorded: dict[int, object] = field(default_factory=dict, repr=False)
     _wrench_epoch: int = field(default=0, repr=False)
     _wrench_reconnects: int | None = field(default=None, repr=False)
     _vin_for: tuple[str, int] | None = field(default=None, repr=False)
@@ -748,7 +750,7 @@ class StationCore:
         self._loading = False
         self.vin, self.model = ev.vin, ev.model
         self._specs = dict(ev.bolts)
-        self._recorded = set()
+        self._recorded = {}
         self.matcher = BoltMatcher(
             {k: np.asarray(b.position, dtype=np.float64) for k, b in ev.bolts.items()},
             self.params, set(ev.done), dict(ev.skipped),
@@ -972,8 +974,15 @@ class StationCore:
         unattributed with why."""
         r = ev.result
         tid = int(r.tightening_id)
-        if tid in self._recorded:
+        if self._recorded.get(tid, None) == _said(r):
             return [Acknowledge(r)]   # sent again by the controller: stored once already
+        again: list[Action] = [] if tid not in self._recorded else [Publish(Notice(
+            f"tightening id {tid} again with other values: the controller's ids started "
+            "again (a new or reset controller?); taken as a new result", "warning", t=ev.t))]
+        return again + self._result_in(ev, tid)
+
+    def _result_in(self, ev: ResultIn, tid: int) -> list[Action]:
+        r = ev.result
         en = self._enabled
         kind = result_kind(type_code(r), en is not None and en.loosen)
         if kind in (ResultKind.EVENT, ResultKind.UNKNOWN):
@@ -1026,7 +1035,7 @@ class StationCore:
         does not know): stored as a controller event, said, and nothing else: no bolt is
         closed, opened or counted, and the tool stays as the station decided."""
         r, code = ev.result, type_code(ev.result)
-        self._recorded.add(int(r.tightening_id))
+        self._recorded[int(r.tightening_id)] = _said(r)
         what = result_type_words(code)
         bolt = self.bolt if self.tool_on else None
         note = f"{what} on the controller: not a tightening" + (
@@ -1045,7 +1054,7 @@ class StationCore:
         fetched one; of the same pset where one could be read) is held until a supervisor
         has checked the result on the controller and releases it."""
         u = ev.unreadable
-        if u.tightening_id is not None and u.tightening_id in self._recorded:
+        if u.tightening_id is not None and self._recorded.get(u.tightening_id) == u.raw:
             return []     # its copy is stored already (the acknowledgement was owed by it)
         en = self._enabled if self._enabled is not None and (
             self.tool_on or (self._off_at is not None
@@ -1056,7 +1065,7 @@ class StationCore:
                 and u.pset != en.pset:
             en = None        # its pset could be read, and it is not the one sent
         if u.tightening_id is not None:
-            self._recorded.add(u.tightening_id)
+            self._recorded[u.tightening_id] = u.raw
         bolt = en.bolt if en is not None and en.vin else None
         acts: list[Action] = []
         if bolt is not None and self.tool_on:
@@ -1111,7 +1120,7 @@ class StationCore:
         elif late:
             acts.append(Publish(Notice(f"result for {en.bolt} outside a tightening: "
                                        "recorded, not matched", t=ev.t)))
-        self._recorded.add(int(r.tightening_id))
+        self._recorded[int(r.tightening_id)] = _said(r)
         if cut:
             self._cut = None
             if self._enabled is en:
@@ -1624,6 +1633,14 @@ class StationCore:
         elif self._teach is not None:
             state, reason = State.TEACHING, self._teach.reason()
         self.state, self.reason = state, reason
+
+
+def _said(result: TighteningResult) -> object:
+    """What a result says besides its id: equal for a copy the controller sends again,
+    different for another result under the same id (a controller whose ids started again)."""
+    return (type_code(result), getattr(result, "pset", None), getattr(result, "ok", None),
+            getattr(result, "torque_nm", None), getattr(result, "angle_deg", None),
+            getattr(result, "timestamp", None))
 
 
 def type_code(result: TighteningResult) -> int | None:

@@ -345,3 +345,19 @@ def test_seeded_walks_with_every_result_type_close_bolts_only_by_tightenings():
                              and a.kind == "tightening" and a.result.ok}
                 assert newly <= tightened, (newly, stored)
     assert min(seen.values()) > 10, seen
+
+
+def test_a_result_under_an_id_seen_before_with_other_values_is_a_new_result():
+    """A controller replaced or reset mid-vehicle numbers its tightenings from 1 again: a
+    result under an id the station has seen, with other values, is not a resent copy."""
+    d = _ready()
+    sent = _enabled(d)
+    first = res(1, sent.selection.pset or 0, True, 1)
+    assert [a.bolt for a in d.feed(ResultIn(d.t, first)) if isinstance(a, Record)] == ["B1"]
+    assert [type(a).__name__ for a in d.feed(ResultIn(d.t, first))] == ["Acknowledge"]
+    sent = _enabled(d, 3)
+    other = SimpleNamespace(**{**vars(first), "torque_nm": 47.5,
+                               "timestamp": datetime(2026, 11, 29, 9, 0, 0)})
+    acts = d.core.feed(ResultIn(d.t, other))   # the Driver's check keys records by id alone
+    assert [a.bolt for a in acts if isinstance(a, Record)] == ["B3"]
+    assert any("ids started again" in m for m in _notices(acts))
