@@ -106,6 +106,7 @@ START_REVISIONS = (6, 5, 4, 3, 2, 1)
 RESULT_REVISIONS = (7, 6, 5, 4, 3, 2, 1)
 MAX_TIGHTENING_ID = 9_999_999_999            # 10 digits
 CATCH_UP = 10          # results fetched after a renewal of the subscription, at most
+TYPED_REVISION = 3     # MID 0061 carries the result type (parameter 49) from this revision on
 NO_ACK = -1            # the acknowledgement token of a fetched result: no 0062 to send
 CLOCK_TIMEOUT = 1.0    # the most MID 0080 (the controller's clock) is waited for at connect
 CURVE_QUEUE = 64       # curves held for the reader; past that the oldest is dropped (logged)
@@ -205,8 +206,10 @@ class OpenProtocolWrench(SupervisedWrench):
         self._tx_seq = 0
         self._rx = op_link.RxSequence()         # the reading thread's only
         # results read at a lower revision than their header's (op_reading): the highest
-        # revision results are subscribed at from then on (this session: renewed by the
-        # supervisor; later sessions: asked for at most), and what was said once
+        # revision results are subscribed at from then on in this session (renewed by the
+        # supervisor); every new session asks for the highest again (the controller on the
+        # other end may be another one, or updated: a revision below 3 carries no result
+        # type, and a batch increment then reads as a tightening), and what was said once
         self._result_cap = RESULT_REVISIONS[0]
         self._renew_at: int | None = None       # a renewal owed (guarded by _cond)
         self._renewer: threading.Thread | None = None   # the thread doing it
@@ -355,7 +358,7 @@ class OpenProtocolWrench(SupervisedWrench):
             self._linking, self._tx_seq, self._renew_at = False, 0, None
             self._last_pushed, self._owed_acks = None, 0
             self._caught_up.clear()
-            cap = self._result_cap
+            self._result_cap = cap = RESULT_REVISIONS[0]
             self._curves_on = False
             self._owed_data_acks.clear()
         self._rx.reset()
@@ -396,11 +399,15 @@ class OpenProtocolWrench(SupervisedWrench):
             new = self._ident != ident
             self._ident, self._revisions = ident, revisions
             self._clock_offset = offset
+        rev = revisions.get(op.MID_RESULT_SUBSCRIBE)
         if new:
             log.info("%s: controller %s; MID 0002 revision %d, results as MID 0061 revision "
                      "%s, link-level acknowledgement %s", self.device, ident.describe(),
-                     ident.revision, revisions.get(op.MID_RESULT_SUBSCRIBE, "?"),
-                     "on" if linking else "off")
+                     ident.revision, "?" if rev is None else rev, "on" if linking else "off")
+        if rev is not None and rev < TYPED_REVISION:
+            log.warning("%s: results subscribed at MID 0061 revision %d, which carries no "
+                        "result type: a batch increment or a bypass at the controller reads "
+                        "as a tightening", self.device, rev)
 
     def _read_clock(self) -> float | None:
         """The controller's clock minus the station's (MID 0080 -> 0081, in the

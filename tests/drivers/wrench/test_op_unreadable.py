@@ -120,11 +120,18 @@ def test_a_controller_that_claims_more_than_it_implements(link_ack, tmp_path, ca
         assert (third.tightening_id, third.revision, third.header_revision) == (
             later.tightening_id, 1, None)
         assert wait_until(lambda: sim.acks == 2) and w.status().reconnects == 0
-        # a reconnect asks for that revision at most
+        # a new session asks for the highest revision again (the controller may be another
+        # one: a revision below 3 carries no result type), and lowers again, not losing one
         sim.drop_connections()
         assert wait_until(lambda: not w.status().connected)
         w.reconnect()
-        assert w.revisions[60] == 1
+        assert w.revisions[60] == 7
+        again = sim.pull_trigger()
+        fourth = w.wait_result(1.0)
+        assert isinstance(fourth, TighteningResult) and again is not None
+        assert (fourth.tightening_id, fourth.revision, fourth.header_revision) == (
+            again.tightening_id, 1, 7)
+        assert wait_until(lambda: w.revisions[60] == 1)
     said = [r for r in caplog.records if "laid out as revision 1" in r.getMessage()]
     assert len(said) == 1 and "subscribed at that revision from now on" in said[0].message
     assert sim.errors == []
@@ -221,3 +228,19 @@ def test_a_revision_beyond_those_read_gives_the_ones_it_starts_with(sim, tmp_pat
     text = message(61, result_data(61, 7, r) + stages.encode(), 998).decode()
     got = read_result(61, 998, text)
     assert (got.revision, got.header_revision, got.result_type_code) == (7, 998, 5)
+
+
+def test_results_subscribed_below_revision_3_are_said_to_carry_no_type(tmp_path, caplog):
+    """A controller that takes MID 0060 only at revisions 1-2: its results carry no result
+    type, so the station cannot tell a batch increment from a tightening: said at every
+    session, as a warning."""
+    caplog.set_level(logging.INFO, logger="drivers.wrench.client")
+    with SimController(seed=3, nok_rate=0.0, refused_revisions={60: range(3, 8)}) as sim, \
+            connect(sim, "tcp", tmp_path) as w:
+        ready(w)
+        assert w.revisions[60] == 2
+        sim.drop_connections()
+        assert wait_until(lambda: not w.status().connected)
+        w.reconnect()
+    said = [r for r in caplog.records if "carries no result type" in r.getMessage()]
+    assert len(said) == 2 and all(r.levelno == logging.WARNING for r in said)
