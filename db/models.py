@@ -193,7 +193,8 @@ class TighteningRecord(Base):
     angle_deg: Mapped[float | None]
     tightening_id: Mapped[int | None]  # the controller's own id of the tightening
     sent_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
-    result_at: Mapped[datetime | None] = mapped_column(UtcDateTime)  # controller's timestamp
+    # when the station took the result (its clock; the controller's is in the feed's others)
+    result_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
     recorded_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
     images: Mapped[list[str]] = mapped_column(JSON)  # references (paths/URLs) of the frames
     #: tightening or loosening (``db.kinds``): the result's type, else what was sent; a

@@ -267,7 +267,8 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                   f"{_num(u['angle_deg'])} deg ({u['reason']})")
         for e in events:
             on = f" while the tool was on {e['bolt']}" if e["bolt"] else ""
-            print(f"  controller event: {e['what']} (type {e['result_type']}), tightening "
+            code = "" if "type" in e["what"] else f" (type {e['result_type']})"
+            print(f"  controller event: {e['what']}{code}, tightening "
                   f"{e['tightening_id']} pset {e['pset']}{on}: not a rundown")
         for x in unread:
             on = f", {x['bolt']} held" if x["bolt"] else ""
