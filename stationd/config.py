@@ -722,7 +722,10 @@ def check_station(path: str | Path) -> StationCheck:
             errors.append(reader.top["matching"].error(f"{exc}; the bolt table cannot be "
                                                        "checked"))
     if "nok" in reader.top:
-        errors += _nok_errors(reader.top["nok"], cfg, bolts)
+        try:
+            errors += _nok_errors(reader.top["nok"], cfg, bolts)
+        except ConfigError:   # the section's own errors are told above (an unknown key hid
+            pass              # every other error of the file): its overrides wait for them
     if bolts is not None and bolts.table is not None and "wrench" in reader.top:
         warning = _psets_only_warning(cfg.wrench.url, bolts.table, reader.top["wrench"])
         if warning is not None:

@@ -107,3 +107,16 @@ def test_every_error_of_the_references(station, capsys) -> None:
     lines = [line for line in _check(capsys, station) if "references." in line]
     assert [line.split(": ")[1] for line in lines] == [
         "references.markers.R1", "references.markers.R2.mount", "references.period_min"], lines
+
+
+def test_an_unknown_key_in_the_nok_section_hides_no_other_error(station, capsys) -> None:
+    """The NOK policy's overrides are checked against the bolt table after the sections: a
+    section that did not read (an unknown key) stopped the whole check there, with none of
+    the other sections' errors (found by a new user)."""
+    _edit(station, "matching: {tolerance_mm: 8.0, margin_mm: 6.0, stable_frames: 3, "
+                   "max_age_s: 0.5, leave_frames: 3}",
+          "matching: {tolerance_mm: 8.0, margin_mm: 6.0, stable_frames: 0, "
+          "max_age_s: 0.5, leave_frames: 3}\nnok: {max_nok: 3, colour: red}")
+    lines = _check(capsys, station)
+    assert any("nok.colour" in line and "unknown key" in line for line in lines), lines
+    assert any("matching.stable_frames" in line for line in lines), lines
