@@ -44,13 +44,20 @@ def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+def _default_sigint() -> None:
+    """As a terminal starts a command: Ctrl-C's default, whatever the test run inherited (a
+    suite started in the background, as CI may, has SIGINT ignored, and so would the
+    command)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _start(argv: list[str], env: dict[str, str] | None = None, *, background: bool = False
            ) -> subprocess.Popen[str]:
     """``stationd ARGV`` as a user starts it, returned once its entry point holds SIGTERM."""
     p = subprocess.Popen([sys.executable, "-m", "stationd", *argv], stdin=subprocess.DEVNULL,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          env={**os.environ, **(env or {})},
-                         preexec_fn=_ignore_sigint if background else None)
+                         preexec_fn=_ignore_sigint if background else _default_sigint)
     while p.poll() is None:
         try:
             if signal.SIGTERM in _caught(p.pid):

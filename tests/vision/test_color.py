@@ -99,7 +99,7 @@ def test_yaml_file_round_trip_and_header(tmp_path):
     assert read_hsv_yaml(path) == r
     write_hsv_yaml(path, r)
     assert "the whole image" in path.read_text(encoding="utf-8")
-    with pytest.raises(InputError, match="cannot write"):
+    with pytest.raises(InputError, match="does not exist"):
         write_hsv_yaml(tmp_path / "missing" / "hsv.yaml", r)
 
 

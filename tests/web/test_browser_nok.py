@@ -100,7 +100,9 @@ def test_a_third_nok_locks_the_screen_says_who_releases_and_a_supervisor_release
         page.wait(lambda p: p.count("tr.rundown[data-bolt=B05]") == 3, 30, "B05's rundowns")
         kinds = page.js("return [...document.querySelectorAll('tr.rundown[data-bolt=B05]')]"
                         ".map(r => r.children[3].textContent + ' ' + r.children[4].textContent)")
-        assert kinds == ["tightening NOK", "loosening NOK", "loosening NOK"]
+        # each NOK names the quantities out of their limits after a colon ("NOK: angle high")
+        assert [k.split(":")[0] for k in kinds] == ["tightening NOK", "loosening NOK",
+                                                    "loosening NOK"], kinds
         trail = page.js("return [...document.querySelectorAll('#trail tr.command')]"
                         ".map(r => [...r.children].map(c => c.textContent))")
         assert [t[1:] for t in trail] == [["release", "B05", "sam", "screen 127.0.0.1",
