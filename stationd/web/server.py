@@ -50,6 +50,7 @@ FLUSH_HZ = 10.0
 #: with nothing to tell, the latest snapshot is sent again this often, s: a screen that hears
 #: nothing for three of these knows its stream stalled (a dead link need not break it)
 HEARTBEAT_S = 5.0
+STOP_RETRY_S = 1.0   # a pump not ended by its cancellation is cancelled again
 _MAX_LAST = 500   # results per group the quality screen may ask to plot
 CLIENT_QUEUE = 16
 PAGES = {"/": "operator.html", "/cameras": "cameras.html", "/vehicles": "vehicles.html",
@@ -136,10 +137,15 @@ class WebServer:
         for q in list(self._clients):
             _offer(q, b"")           # wakes each stream, which then ends
         if self._pump is not None:
-            self._pump.cancel()
+            pump, self._pump = self._pump, None
+            # cancelled again until it ends: Python 3.11's wait_for loses a cancellation that
+            # meets its inner get completing (the pump then ran on, and a daemon's SIGTERM or
+            # a reload that moved the screens waited for it for good, seen under load)
+            while not pump.done():
+                pump.cancel()
+                await asyncio.wait({pump}, timeout=STOP_RETRY_S)
             with contextlib.suppress(asyncio.CancelledError):
-                await self._pump
-            self._pump = None
+                await pump
         if self._runner is not None:
             await self._runner.cleanup()
             self._runner = None

@@ -69,10 +69,19 @@ class Daemon:
         self.p.stdin.flush()
 
     def stop(self) -> int:
+        """SIGTERM, then the daemon's exit code; one that does not stop within two minutes
+        (a busy machine) is killed and its journal's end told."""
         if self.p.poll() is None:
             self.p.send_signal(signal.SIGTERM)
-        code = self.p.wait(timeout=60)
-        self._err.close()
+        try:
+            code = self.p.wait(timeout=120)
+        except subprocess.TimeoutExpired:
+            self.p.kill()
+            self.p.wait()
+            raise AssertionError("the daemon did not stop within 120 s of SIGTERM: "
+                                 f"{self.log()[-3000:]}") from None
+        finally:
+            self._err.close()
         return code
 
 
