@@ -990,9 +990,7 @@ class StationCore:
         ours = en is not None and (en.pset is None or int(r.pset) == en.pset) and not (
             ev.fetched and self._enabled_at is not None
             and self._enabled_at > self._link_lost_at)
-        if ours and en is not None and en.vin and (
-                self.tool_on or (self._off_at is not None
-                                 and ev.t - self._off_at < self.late_result_s)):
+        if ours and en is not None and en.vin and self._result_owed(ev.t):
             return self._attribute(ev, en)
         proved, not_proved = self._made_during_cut(ev)
         if proved is not None:
@@ -1005,6 +1003,12 @@ class StationCore:
                 Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
                 Publish(Notice(f"{why}: not attributable to a bolt, stored unattributed",
                                "warning", t=ev.t))]
+
+    def _result_owed(self, t: float) -> bool:
+        """The tool is on, or went off less than the late-result window before ``t``: its
+        enable's result may still come."""
+        return self.tool_on or (self._off_at is not None
+                                and t - self._off_at < self.late_result_s)
 
     def _made_during_cut(self, ev: ResultIn) -> tuple[Selection | None, str]:
         """The selection a result fetched after a link cut belongs to, when the controller's
@@ -1056,9 +1060,7 @@ class StationCore:
         u = ev.unreadable
         if u.tightening_id is not None and self._recorded.get(u.tightening_id) == u.raw:
             return []     # its copy is stored already (the acknowledgement was owed by it)
-        en = self._enabled if self._enabled is not None and (
-            self.tool_on or (self._off_at is not None
-                             and ev.t - self._off_at < self.late_result_s)) else None
+        en = self._enabled if self._result_owed(ev.t) else None
         if u.fetched:
             en = self._cut.selection if self._cut is not None else None
         if en is not None and u.pset is not None and en.pset is not None \
@@ -1390,8 +1392,7 @@ class StationCore:
             self._vin_pending = False
             self._link_lost_at = ev.t
             if self._enabled is not None and self._enabled_at is not None and self._cut is None \
-                    and (self.tool_on or (self._off_at is not None
-                                          and ev.t - self._off_at < self.late_result_s)):
+                    and self._result_owed(ev.t):
                 # the tool's result may come only after the reconnect: where it belongs is
                 # then proved by the controller's own data (:meth:`_made_during_cut`)
                 self._cut = _Cut(self._enabled, self._enabled_at, ev.t)
