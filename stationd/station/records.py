@@ -169,11 +169,18 @@ class Records:
         and the tool enable it settles (in the record's transaction)."""
         r, sel = a.result, a.selection
         images = self.save_images(a.vin, a.bolt, int(r.tightening_id), loc)
-        enable = self._enable[1] if self._enable is not None and sel is not None \
-            and self._enable[0] is sel else None
-        if enable is not None:
-            self._enable = None
+        enable = self._settles(sel)
         return Unsaved(a, images, datetime.now(UTC), sel.parameters_id if sel else None, enable)
+
+    def _settles(self, sel: Selection | None, take: bool = True) -> int | None:
+        """The noted tool enable a record answering ``sel`` settles, or None; ``take``: the
+        station owes it nothing more from now (else only once the record is written)."""
+        if self._enable is None or sel is None or self._enable[0] is not sel:
+            return None
+        enable = self._enable[1]
+        if take:
+            self._enable = None
+        return enable
 
     def write(self, u: Unsaved) -> None:
         """One result into the database; raises what the database raises."""
@@ -243,15 +250,13 @@ class Records:
         """The message whole; the tool enable it answers settled with it (the bolt is held
         for a person now: no later result is owed to it)."""
         u, sel = a.unreadable, a.selection
-        enable = self._enable[1] if self._enable is not None and sel is not None \
-            and self._enable[0] is sel else None
+        enable = self._settles(sel, take=False)
         self._repo().record_unreadable(
             mid=u.mid, revision=u.revision, raw=u.raw, error=u.error, vin=a.vin, bolt=a.bolt,
             controller_vin=u.vin.strip() or None, tightening_id=u.tightening_id, pset=u.pset,
             result_at=_aware(u.timestamp),
             enable_id=enable)
-        if enable is not None:
-            self._enable = None
+        self._settles(sel)
 
     # -- vehicles, commands, gaps and curves ---------------------------------------------------
     def load_vehicle(self, a: LoadVehicle) -> VehicleLoaded | VehicleRejected:
