@@ -15,6 +15,7 @@ import signal
 import subprocess
 import sys
 import threading
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +29,8 @@ from stationd.cli import main
 from stationd.demo.services import Endpoints, line_summary
 from stationd.errors import InputError
 from stationd.linedb import results
-from stationd.opcua.model import IJT_URI, load_client_types
+from stationd.opcua.model import IJT_URI, MACHINERY_URI, RESULT_URI, load_client_types
+from stationd.opcua.server import NAMESPACE
 from stationd.opcua.uatypes import ua
 from stationd.sim.vin import is_valid
 from tests.station.daemons import SIM
@@ -95,9 +97,13 @@ class Collector:
 
 @pytest.mark.timeout(300)
 def test_a_client_subscribed_at_the_demos_endpoint_gets_an_event_per_rundown(tmp_path):
+    """Live events from the moment the client subscribed (on a loaded machine the run may
+    start before it), and the ones before by RequestResults, as an MES that came late asks:
+    together one event per rundown, none twice, no live one missing after the first."""
     demo = Demo(tmp_path, "--cycles", "2", "--seed", "7", "--no-http",
                 "--opcua", "127.0.0.1:0", "--hold")
     handler = Collector()
+    requested_types: set[Any] = set()
 
     async def scenario() -> None:
         loop = asyncio.get_running_loop()
@@ -105,11 +111,25 @@ def test_a_client_subscribed_at_the_demos_endpoint_gets_an_event_per_rundown(tmp
         async with Client(found.group(1)) as client:   # anonymous, security none
             await load_client_types(client)
             uris = await client.get_namespace_array()
-            etype = client.get_node(ua.NodeId(1007, uris.index(IJT_URI)))
+            ijt = uris.index(IJT_URI)
+            etype = client.get_node(ua.NodeId(1007, ijt))
             sub = await client.create_subscription(50, handler)
             await sub.subscribe_events(client.nodes.server, etype)
             await loop.run_in_executor(None, demo.expect, r"^run over")
             await asyncio.sleep(1.5)        # the last event's publish cycle
+            requested_types.update(c.nodeid for c in await client.get_node(
+                ua.NodeId(1035, ijt)).get_children(refs=ua.ObjectIds.HasSubtype))
+            machines = await client.nodes.objects.get_child(
+                [f"{uris.index(MACHINERY_URI)}:Machines"])
+            station = await machines.get_child([f"{uris.index(NAMESPACE)}:DEMO-1"])
+            rm = await station.get_child([f"{uris.index(RESULT_URI)}:ResultManagement"])
+            null = datetime(1601, 1, 1, tzinfo=UTC)
+            out = await rm.call_method(     # 0, 0 and null times: every result
+                f"{ijt}:RequestResults", ua.Variant(0, ua.VariantType.UInt64),
+                ua.Variant(0, ua.VariantType.UInt64), ua.Variant(null, ua.VariantType.DateTime),
+                ua.Variant(null, ua.VariantType.DateTime), ua.Variant(0.0, ua.VariantType.Double))
+            assert out[1] == 0, out
+            await asyncio.sleep(1.5)        # the requested results, 5 ms apart, and a cycle
 
     try:
         asyncio.run(scenario())
@@ -120,16 +140,21 @@ def test_a_client_subscribed_at_the_demos_endpoint_gets_an_event_per_rundown(tmp
     assert summary["verdict"].startswith("PASS")
     assert summary["opcua"].startswith("opc.tcp://127.0.0.1:")
     assert summary["recorded"] == summary["results"] >= 2
-    assert len(handler.events) == summary["recorded"]
-    seqs = []
+    live = [e for e in handler.events if e.EventType not in requested_types]
+    asked = [e for e in handler.events if e.EventType in requested_types]
     for event in handler.events:
         meta = event.Result.ResultMetaData
         assert event.SourceName == "DEMO-1"
         assert meta.IsSimulated is True
         entities = {x.EntityType: x.EntityId for x in meta.AssociatedEntities}
         assert entities[20] == summary["vin"] and is_valid(entities[20])
-        seqs.append(meta.SequenceNumber)
-    assert seqs == sorted(set(seqs))
+    # every rundown asked for once, and the live ones a tail of them with none missing
+    asked_seqs = [e.Result.ResultMetaData.SequenceNumber for e in asked]
+    live_seqs = [e.Result.ResultMetaData.SequenceNumber for e in live]
+    assert len(asked_seqs) == summary["recorded"] and asked_seqs == sorted(set(asked_seqs))
+    assert live_seqs == asked_seqs[len(asked_seqs) - len(live_seqs):]
+    assert {e.Result.ResultMetaData.ResultId for e in live} <= \
+        {e.Result.ResultMetaData.ResultId for e in asked}
     assert "security none" in "".join(demo.err)
 
 
