@@ -346,7 +346,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     """``stationd run``; on a station with ``sim://`` devices, with the simulated world (and,
     with ``--sim-operator``, its operator) inside the daemon, beside each station it runs."""
     from stationd.config import load_station_config
-    from stationd.serve import run_daemon
+    from stationd.shell.serve import run_daemon
 
     if args.no_sim_supervisor and not args.sim_operator:
         raise InputError("--no-sim-supervisor goes with --sim-operator (without it no "
@@ -624,7 +624,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="acknowledge at link level (MID 9997/9998)")
     ctl.add_argument("--trigger-every", type=float, default=0.0, metavar="SECONDS",
                      help="pull the trigger at this interval when the tool may run (off)")
-    from drivers.wrench.sim_cli import add_behaviour_options  # result types, mislabel, clock
+    from drivers.wrench.sim.cli import add_behaviour_options  # result types, mislabel, clock
 
     add_behaviour_options(ctl)
     sm.set_defaults(func=cmd_sim)

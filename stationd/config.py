@@ -346,7 +346,7 @@ def _database_url(node: YamlNode, base: Path, check: bool = False, checker: bool
     :data:`STATE_DIRECTORY` is no error there (the check may run before the service is
     installed; systemd creates it at the service's start), and a file that is not a database
     is an error there, while the daemon starts in fault on it ("database: file is not a
-    database") and opens it once it is replaced (the disk fixed: tests/test_serve.py)."""
+    database") and opens it once it is replaced (the disk fixed: tests/shell/test_serve.py)."""
     url_node = node.mapping(("url",), required=("url",))["url"]
     url = url_node.text()
     prefix = "sqlite:///"

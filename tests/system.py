@@ -48,16 +48,17 @@ FIXTURES = frozenset({"page", "module_page", "reused_page", "shots", "pg_server"
 #: folders (ending in /) and modules under tests/ whose every test is a system test
 MODULES: tuple[str, ...] = (
     "demo/",                                   # the demos
-    # whole daemons: in the test process (tests/station/daemons.py) or as systemd runs them
-    "station/test_calibration_daemon.py", "station/test_commands_daemon.py",
-    "station/test_curves_daemon.py", "station/test_daemon_faults.py", "station/test_faults.py",
-    "station/test_gaps.py", "station/test_idle.py", "station/test_nok_daemon.py",
-    "station/test_operator_daemon.py", "station/test_records.py",
-    "station/test_reload_results.py", "station/test_restart.py",
-    "station/test_result_types_daemon.py", "station/test_station_sim.py",
-    "station/test_keeper_hil.py", "opcua/test_daemon.py", "sim/test_in_daemon.py",
+    # whole daemons: in the test process (tests/shell/daemons.py) or as systemd runs them
+    "shell/test_calibration_daemon.py", "shell/test_commands_daemon.py",
+    "shell/test_curves_daemon.py", "shell/test_daemon_faults.py", "shell/test_faults.py",
+    "station/test_gaps.py", "shell/test_idle.py", "shell/test_nok_daemon.py",
+    "shell/test_operator_daemon.py", "shell/test_records.py",
+    "shell/test_reload_results.py", "shell/test_restart.py",
+    "shell/test_result_types_daemon.py", "shell/test_station_sim.py",
+    "shell/test_keeper_hil.py", "opcua/test_daemon.py", "sim/test_in_daemon.py",
     "test_forward_daemon.py",
-    "test_serve.py", "test_serve_devicelocks.py", "test_teach_cli.py", "test_refcheck_cli.py",
+    "shell/test_serve.py", "shell/test_serve_devicelocks.py", "test_teach_cli.py",
+    "test_refcheck_cli.py",
     # the OPC UA server on loopback with an MES's client (in this process or its own)
     "opcua/test_server.py", "opcua/test_catchup.py", "opcua/test_curves.py",
     "opcua/test_security.py", "opcua/test_health.py", "opcua/test_dictionary.py",
@@ -90,8 +91,8 @@ TESTS: tuple[str, ...] = (
     "test_lock.py::test_a_reload_takes_the_new_device_first_and_keeps_the_old_when_refused",
     "test_forward.py::test_a_line_database_that_is_not_postgresql_is_refused_by_the_check_and_the_start",
     "test_forward.py::test_the_line_commands_never_make_a_station_database_and_say_an_empty_quarantine",
-    "drivers/wrench/test_sim_revisions.py::test_the_entry_point_serves_an_integrator",
-    "drivers/wrench/test_sim_revisions.py::test_the_entry_point_says_what_is_wrong",
+    "drivers/wrench/sim/test_revisions.py::test_the_entry_point_serves_an_integrator",
+    "drivers/wrench/sim/test_revisions.py::test_the_entry_point_says_what_is_wrong",
     "drivers/camera/test_aravis_modes.py::test_shutdown_order_at_process_end",
     "web/test_bench.py::test_screen_clients_under_sched_idle_run_every_browser_process_so",
 )
@@ -204,7 +205,7 @@ class Guard:
             popen_init(self, args, *a, **kw)
 
         subprocess.Popen.__init__ = init  # type: ignore[method-assign]
-        after_import("stationd.station.daemon", self._daemon)
+        after_import("stationd.shell.daemon", self._daemon)
         after_import("stationd.opcua.server", self._opcua)
 
     def _daemon(self, module: ModuleType) -> None:

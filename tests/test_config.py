@@ -368,7 +368,7 @@ def test_a_database_that_cannot_keep_the_results_is_refused(sim_copy, url, setup
 
 
 def test_a_file_that_is_not_a_database_is_an_error_to_the_check_and_a_fault_at_start(sim_copy):
-    """The daemon starts in fault on it and opens it once replaced (tests/test_serve.py);
+    """The daemon starts in fault on it and opens it once replaced (tests/shell/test_serve.py);
     ``config check`` says what it is."""
     (sim_copy / "notes.txt").write_text("a note, not a database\n")
     station = _edit(sim_copy / "station.yaml", DB, "database: {url: 'sqlite:///notes.txt'}")
@@ -459,7 +459,7 @@ def test_implausible_values_are_refused_with_key_and_line(sim_copy, old, new, ma
 def test_a_replay_camera_matching_no_file_is_refused_by_the_check_not_the_daemon(sim_copy):
     """``config check`` looks for a replay's files (a typo in the path is told before the
     start); the daemon starts on it in fault (a folder mounted later is a device that comes
-    back: tests/station/test_daemon_faults.py)."""
+    back: tests/shell/test_daemon_faults.py)."""
     station = _edit(sim_copy / "station.yaml", "'sim://pair1/left'",
                     "'file:///nonexist/left*.png'")
     _edit(station, "'sim://pair1/right'", f"'file://{sim_copy}/right_*.png'")

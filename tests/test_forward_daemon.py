@@ -12,10 +12,10 @@ from typing import Any
 import pytest
 
 from drivers.lift.sim import SimulatedPlc
-from drivers.wrench.sim import SimController
+from drivers.wrench.sim.controller import SimController
 from stationd.sim.devices_cli import psets_of
 from tests.pgserver import PgServer
-from tests.station.daemons import SIM, Proc, at_height, free_port, until
+from tests.shell.daemons import SIM, Proc, at_height, free_port, until
 from tests.test_forward import _line_rows
 
 VIN = "LINEVIN0000000001"

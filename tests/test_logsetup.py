@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from stationd.logsetup import LibraryWords, StampedFormatter, setup_logging, under_journal
-from tests.station.daemons import free_port
+from tests.shell.daemons import free_port
 
 STAMP = r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d\.\d{3}[+-]\d{4} "
 

@@ -1,6 +1,6 @@
 """``stationd operator sign-in|sign-out|status`` without a daemon: bad input is one line and
 exit 2 before any login, no daemon answering is one line and exit 3; never a traceback.  (The
-daemon's answers: tests/station/test_operator_daemon.py.)"""
+daemon's answers: tests/shell/test_operator_daemon.py.)"""
 
 from __future__ import annotations
 

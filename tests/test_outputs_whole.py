@@ -18,7 +18,7 @@ STATIOND = Path(__file__).resolve().parents[1] / "stationd"
 #: (file, what it writes in place): why that is not a command's output left half-written
 ALLOWED = {
     ("outfile.py", "open"): "the atomic writer itself: a temporary file, renamed once whole",
-    ("station/records.py", "imwrite"): "the daemon's evidence crops, each named in its "
+    ("shell/records.py", "imwrite"): "the daemon's evidence crops, each named in its "
                                       "record only once written",
     ("demo/leftovers.py", "write_text"): "the demo's pid file in its own temporary folder "
                                          "(a pid file that does not read leaves the folder)",

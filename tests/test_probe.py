@@ -95,7 +95,7 @@ def test_station_config_lift_register_map(tmp_path):
 def test_probe_wrench_selects_a_pset_and_reports_one_result(capsys):
     import threading
 
-    from drivers.wrench.sim import SimController
+    from drivers.wrench.sim.controller import SimController
 
     with SimController(seed=3) as ctl:
         port = ctl.listen_tcp()
@@ -122,7 +122,7 @@ def test_probe_wrench_selects_a_pset_and_reports_one_result(capsys):
 
 
 def test_probe_wrench_refused_pset_exits_1_with_the_code(capsys):
-    from drivers.wrench.sim import SimController
+    from drivers.wrench.sim.controller import SimController
 
     with SimController(refusals={5: 2}) as ctl:
         port = ctl.listen_tcp()

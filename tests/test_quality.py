@@ -37,17 +37,19 @@ def test_layers_hold():
     assert r.returncode == 0, r.stdout + r.stderr
 
 
-def test_every_station_module_has_its_place_in_the_component_layers():
-    """The components' layers contract lists the station package module by module (its shell
-    above the configuration, its core below the screens), so it leaves ``station`` out of its
-    exhaustiveness check: a new module of the station must still be placed there."""
+def test_folders_are_layers_every_layers_contract_exhaustive():
+    """Each root package (stationd, drivers, db) has a layers contract over its folders, and
+    every layers contract is exhaustive and ignores nothing: a new module or folder must be
+    given its place, and no folder is split across two layers (no layer names a module
+    inside another package)."""
     import tomllib
 
     contracts = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"][
         "contracts"]
-    (layers,) = [c["layers"] for c in contracts if c.get("containers") == ["stationd"]]
-    placed = {name.strip() for layer in layers for name in layer.replace(":", "|").split("|")}
-    station = ROOT / "stationd" / "station"
-    modules = {f"station.{p.stem}" for p in station.glob("*.py") if p.stem != "__init__"}
-    modules |= {f"station.{p.parent.name}" for p in station.glob("*/__init__.py")}
-    assert modules - placed == set(), "not placed in the stationd layers contract"
+    layered = [c for c in contracts if c["type"] == "layers"]
+    assert {"stationd", "drivers", "db"} <= {c["containers"][0] for c in layered}
+    for c in layered:
+        assert c.get("exhaustive") is True, c["name"]
+        assert not c.get("exhaustive_ignores"), c["name"]
+        names = [n.strip() for layer in c["layers"] for n in layer.split("|")]
+        assert all("." not in n for n in names), c["name"]

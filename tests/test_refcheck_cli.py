@@ -27,8 +27,8 @@ from stationd.lock import StationLock, lock_path
 from stationd.sim.render import Scene
 from stationd.sim.world import World
 from tests.localize.refscene import PAIR, R1_PAIR, R2_PAIR, TV, vehicle
-from tests.station.daemons import taken, until
-from tests.station.refstation import station_dir
+from tests.shell.daemons import taken, until
+from tests.shell.refstation import station_dir
 
 
 def _station(tmp_path, references: bool = True):

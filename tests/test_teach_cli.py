@@ -22,10 +22,10 @@ import pytest
 import yaml
 
 from drivers.lift.sim import SimulatedPlc
-from drivers.wrench.sim import SimController
+from drivers.wrench.sim.controller import SimController
 from stationd.access import hash_password
 from stationd.sim.devices_cli import psets_of
-from tests.station.daemons import SIM, Proc, at_height, free_port, taken, until
+from tests.shell.daemons import SIM, Proc, at_height, free_port, taken, until
 
 ROOT = Path(__file__).resolve().parents[1]
 PASSWORD = "teach-me-please"  # noqa: S105 - a test user's
@@ -143,10 +143,10 @@ def test_teach_checks_its_output_first_and_says_when_no_daemon_answers(tmp_path)
         assert got.returncode == 2 and words in got.stderr, got
 
 
-#: the daemon's runtime alone (stationd.serve), without the command line's simulated world:
+#: the daemon's runtime alone (stationd.shell.serve), without the command line's simulated world:
 #: its sim:// cameras have none, every pair faults at its first grab (a station whose cameras
 #: give nothing)
-WITHOUT_WORLD = ("import argparse, sys; from stationd.serve import run_daemon; "
+WITHOUT_WORLD = ("import argparse, sys; from stationd.shell.serve import run_daemon; "
                  "sys.exit(run_daemon(argparse.Namespace(config=sys.argv[1])))")
 
 

@@ -40,9 +40,9 @@ __all__ = ["BACKENDS", "FORMS", "LinkStatus", "Received", "ResultKind", "ResultT
 
 #: scheme -> "module:Class"; the class has ``from_url(url: DeviceUrl, **kw) -> Wrench``.
 BACKENDS: dict[str, str] = {
-    "openprotocol": "drivers.wrench.client:OpenProtocolWrench",
-    "openprotocol+serial": "drivers.wrench.client:OpenProtocolWrench",
-    "sim": "drivers.wrench.sim:SimWrench",
+    "openprotocol": "drivers.wrench.openprotocol.client:OpenProtocolWrench",
+    "openprotocol+serial": "drivers.wrench.openprotocol.client:OpenProtocolWrench",
+    "sim": "drivers.wrench.sim.controller:SimWrench",
     "modbus-tcp": "drivers.wrench.modbus:ModbusWrench",
     "modbus-rtu": "drivers.wrench.modbus:ModbusWrench",
     "sim+modbus": "drivers.wrench.modbus_sim:SimModbusWrench",

@@ -192,7 +192,7 @@ class TighteningResult:
     compensated_angle_deg: float | None = None
     angle_decimal_deg: float | None = None     # the final angle with its decimals (rev 7)
     #: the revision the header claimed, when the body was laid out as a lower one (read at
-    #: ``revision``: ``drivers.wrench.op_reading``); None when it matched its label
+    #: ``revision``: ``drivers.wrench.openprotocol.reading``); None when it matched its label
     header_revision: int | None = None
 
 
@@ -413,13 +413,13 @@ class Wrench(Openable):
         return False
 
     def wait_curve(self, timeout: float) -> Any:
-        """The next tightening curve (``drivers.wrench.op_curve.Curve``), or None after
+        """The next tightening curve (``drivers.wrench.openprotocol.curve.Curve``), or None after
         ``timeout``; this controller sends none (``can_curves`` is False)."""
         raise DeviceError("this controller sends no curves", device=self.device)
 
     def fetch_curve(self, tightening_id: int, timeout: float | None = None) -> list[Any]:
-        """The curves (``drivers.wrench.op_curve.Curve``, one per trace type) of an earlier
-        tightening, asked for after the fact (a result fetched after a link cut); empty
+        """The curves (``drivers.wrench.openprotocol.curve.Curve``, one per trace type) of an
+        earlier tightening, asked for after the fact (a result fetched after a link cut); empty
         when the controller does not give them (any more).  Not queued for
         :meth:`wait_curve`.  This controller sends none (``can_curves`` is False)."""
         raise DeviceError("this controller sends no curves", device=self.device)

@@ -39,7 +39,7 @@ from drivers.modbus_server import SimServer
 from drivers.url import DeviceUrl
 from drivers.wrench.modbus import KEYWORDS, ModbusWrench
 from drivers.wrench.modbus_map import WrenchRegisterMap, next_sequence, pack_status, spans
-from drivers.wrench.sim import DEFAULT_PSETS, SimPset
+from drivers.wrench.sim.controller import DEFAULT_PSETS, SimPset
 
 Fault = Literal["exception", "drop", "lost_answer"]
 WRITES = (6, 16)        # the function codes the controller accepts besides 3 (read)

@@ -48,8 +48,8 @@ from sqlalchemy.orm import Session
 from db.engine import make_engine
 from db.models import Bolt, ResultGap, TighteningCurve, TighteningRecord, UnattributedResult
 from drivers.lift.sim import SimLift
-from drivers.wrench.client import OpenProtocolWrench
-from drivers.wrench.sim import SimController
+from drivers.wrench.openprotocol.client import OpenProtocolWrench
+from drivers.wrench.sim.controller import SimController
 from stationd import progress
 from stationd.bench.cutproxy import CutProxy
 from stationd.bench.plan import wrench_plan
@@ -59,11 +59,11 @@ from stationd.demo.station import SIM_CONFIG
 from stationd.errors import InputError
 from stationd.jsonout import finite, strict_json
 from stationd.outfile import write_atomic
+from stationd.shell.daemon import Station
 from stationd.sim.devices_cli import psets_of
 from stationd.sim.world import World, WrenchPose
-from stationd.station.core import Record, SendParams, State, StoreUnattributed
-from stationd.station.daemon import Station
-from stationd.station.events import ParamsSent, ResultRecorded
+from stationd.station.actions import Record, SendParams, StoreUnattributed
+from stationd.station.events import ParamsSent, ResultRecorded, State
 
 SELECT_S = 30.0        # the longest wait for a bolt's selection with the link up
 RECORD_S = 10.0        # ... for its result to be recorded

@@ -28,7 +28,7 @@ import numpy as np
 
 from stationd.config import StationConfig
 from stationd.demo.services import StationServices
-from stationd.station.daemon import Station
+from stationd.shell.daemon import Station
 from stationd.station.events import ResultRecorded, StationEvent
 
 #: the client's requested publishing interval, ms (an MES that wants its events at once)

@@ -1,6 +1,6 @@
 """``stationd bench soak --bolts N [--faults] [--load N]``: the daemon through a long shift.
 
-The daemon runs as ``stationd run`` runs it (the serve loop of :mod:`stationd.serve`,
+The daemon runs as ``stationd run`` runs it (the serve loop of :mod:`stationd.shell.serve`,
 one event bus for its life, a station file it reloads), on a copy of config/sim whose lift PLC
 (Modbus TCP) and tightening controller (Open Protocol) are *independent* servers on loopback,
 as on a line: a reload reopens the daemon's connections, not the devices.  Eight 20 MP
@@ -33,14 +33,15 @@ from typing import Any
 import yaml
 
 from drivers.lift.sim import SimulatedPlc
-from drivers.wrench.sim import SimController
+from drivers.wrench.sim.controller import SimController
 from stationd.bench.wait import until as _until
 from stationd.boltfile import load_bolts
 from stationd.demo.station import SIM_CONFIG, _kind
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
 from stationd.reasons import Reason
-from stationd.serve import Screens, serve_station, validate_station
+from stationd.shell.sdnotify import Notifier
+from stationd.shell.serve import Screens, serve_station, validate_station
 from stationd.sim.devices_cli import psets_of
 from stationd.sim.load import cpu_load
 from stationd.sim.soak import (
@@ -67,7 +68,6 @@ from stationd.station.events import (
     ToolEnabled,
     VehicleOpened,
 )
-from stationd.station.sdnotify import Notifier
 
 RELOAD_SETTLE_S = 0.5    # after a reload is taken, before the shift goes on
 LIFT_DOWN_S = 1.5        # how long a station reloaded onto a dead lift runs before it is fixed

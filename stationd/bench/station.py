@@ -39,12 +39,12 @@ from stationd.demo.station import SIM_CONFIG, simulators
 from stationd.errors import InputError
 from stationd.jsonout import finite, strict_json
 from stationd.outfile import write_atomic
-from stationd.serve import Screens
+from stationd.shell.daemon import Station
+from stationd.shell.serve import Screens
 from stationd.sim.devices_cli import psets_of
 from stationd.sim.world import World, WrenchPose
-from stationd.station.core import SendParams, State
-from stationd.station.daemon import Station
-from stationd.station.events import ParamsSent, ResultRecorded
+from stationd.station.actions import SendParams
+from stationd.station.events import ParamsSent, ResultRecorded, State
 from stationd.web.bench import ScreenClients
 from stationd.web.config import HttpConfig
 

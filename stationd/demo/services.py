@@ -6,7 +6,7 @@ on temporary databases, and must print where each endpoint listens before the fi
 (a port in use moves the default endpoint to the next free port and says so) and, at its end,
 wait until the line database has taken every record before it reads the line's results back.
 The components are the daemon's own (:class:`stationd.opcua.server.OpcUaServer`,
-:func:`stationd.serve.forward`), so what the demo shows is what a station runs; only the
+:func:`stationd.shell.serve.forward`), so what the demo shows is what a station runs; only the
 choices are the demo's: security none (anonymous browse, read and subscribe; no certificates)
 and IsSimulated true in every result.  Also here: the names that keep a later station's
 simulated cameras on its own world (:func:`own_pairs`) and the line's results read back at the
@@ -35,9 +35,9 @@ from stationd.errors import ConfigError, InputError
 from stationd.forward import LineConfig
 from stationd.linedb import LINE_FEED, LineResult, results
 from stationd.opcua import OpcUaConfig
-from stationd.serve import Screens, forward, opcua_devices
+from stationd.shell.sdnotify import Notifier
+from stationd.shell.serve import Screens, forward, opcua_devices
 from stationd.station.events import EventBus
-from stationd.station.sdnotify import Notifier
 from stationd.web.config import split_listen
 from stationd.yamlio import YamlNode
 

@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from drivers.wrench.sim import SimPset
+from drivers.wrench.sim.controller import SimPset
 from stationd import progress
 from stationd.boltfile import load_bolts
 from stationd.config import RecordsConfig, StationConfig, load_station_config
@@ -58,7 +58,8 @@ from stationd.jsonout import strict_json
 from stationd.logsetup import setup_logging
 from stationd.pgserver import PgServer, PgServerError
 from stationd.reasons import Reason, Why
-from stationd.serve import Screens
+from stationd.shell.daemon import Station
+from stationd.shell.serve import Screens
 from stationd.sim.devices_cli import psets_of
 from stationd.sim.load import MAX_WORKERS, cpu_load
 from stationd.sim.operator import (
@@ -72,9 +73,8 @@ from stationd.sim.operator import (
 )
 from stationd.sim.vin import make_vin
 from stationd.sim.world import World
+from stationd.station.actions import SendParams
 from stationd.station.commands import Issuer
-from stationd.station.core import SendParams
-from stationd.station.daemon import Station
 from stationd.station.events import (
     BoltLocked,
     BoltReleased,
@@ -245,7 +245,7 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
               file=out, flush=True)
     station = _station(cfg, psets)
     if n_stations > 1:     # one output for the line's stations: each line says whose it is
-        station.actions.label(station_id(1))
+        station.effects.label(station_id(1))
     rng = np.random.default_rng(args.seed)
     # the NOKs have their own stream: the plan (bolts, placements) is the seed's as before
     nok_rng = np.random.default_rng([args.seed, 21])
@@ -449,7 +449,7 @@ async def _next_station(args: argparse.Namespace, first: StationConfig, k: int, 
                        line_url)
     loop = asyncio.get_running_loop()
     station = _station(cfg, psets)
-    station.actions.label(sid)
+    station.effects.label(sid)
     truth = {**first_truth, "bolt": None, "wrong": 0, "locked_sends": 0}
     cycles = min(int(args.cycles), EXTRA_CYCLES)
     truth.pop("cycles", None)

@@ -26,8 +26,8 @@ from typing import TextIO
 
 from drivers.lift.base import RegisterMap
 from drivers.lift.sim import SimulatedPlc
-from drivers.wrench.sim import SimController, SimPset
-from drivers.wrench.sim_cli import behaviour, serve
+from drivers.wrench.sim.cli import behaviour, serve
+from drivers.wrench.sim.controller import SimController, SimPset
 from stationd.boltfile import load_bolts
 from stationd.config import load_station_config
 from stationd.errors import InputError, StationError

@@ -33,16 +33,16 @@ import numpy as np
 
 from drivers.lift.base import LiftState
 from drivers.lift.sim import SimLift, SimulatedPlc
-from drivers.wrench.sim import SimWrench
+from drivers.wrench.sim.controller import SimWrench
 from stationd.boltfile import load_bolts
 from stationd.config import StationConfig
 from stationd.errors import InputError, StationError
+from stationd.shell.daemon import Station
 from stationd.sim.devices_cli import HELP, plc_command, psets_of
 from stationd.sim.operator import loosen_programs, operate, simulated_url, stand_ins
 from stationd.sim.vin import make_vin
 from stationd.sim.world import World
 from stationd.station.commands import Issuer, Right
-from stationd.station.daemon import Station
 
 log = logging.getLogger("stationd")
 #: bolts the scripted operator visits on each vehicle, and the wait between two vehicles, s

@@ -25,14 +25,13 @@ import numpy as np
 
 from db.repository import BoltInfo
 from drivers.lift.sim import SimLift, SimulatedPlc
-from drivers.wrench.sim import SimController, SimPset, SimTightening, SimWrench
+from drivers.wrench.sim.controller import SimController, SimPset, SimTightening, SimWrench
 from stationd.config import StationConfig
 from stationd.errors import InputError
+from stationd.shell.daemon import Station
 from stationd.sim.world import World, wrench_at
 from stationd.station.commands import Issuer, ReleaseBolt, Right, SignIn
-from stationd.station.core import State
-from stationd.station.daemon import Station
-from stationd.station.events import Localized, ResultRecorded
+from stationd.station.events import Localized, ResultRecorded, State
 from stationd.station.policy import NokPolicy
 from stationd.words import reason_words
 

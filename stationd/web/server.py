@@ -35,8 +35,8 @@ from db.quality import LAST_N
 from db.repository import Repository
 from stationd.errors import InputError
 from stationd.station.commands import Right
-from stationd.station.core import LIFT, WRENCH
 from stationd.station.events import EventBus, PairFrames
+from stationd.station.inputs import LIFT, WRENCH
 from stationd.web.commands import POSTS, CommandRoutes
 from stationd.web.config import HttpConfig, open_bind_problem
 from stationd.web.frames import LatestFrames, sharpness

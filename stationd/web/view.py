@@ -14,7 +14,6 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from stationd.reasons import Reason, Why
-from stationd.station.core import DATABASE, LOCALIZING
 from stationd.station.events import (
     BoltLocked,
     BoltReleased,
@@ -40,6 +39,8 @@ from stationd.station.events import (
     VehicleReopened,
     WrongBolt,
 )
+from stationd.station.inputs import DATABASE
+from stationd.station.state import LOCALIZING
 from stationd.words import check_words, reason_words
 
 # a bolt's state on the screen; the label is what the operator reads next to the colour

@@ -12,8 +12,8 @@ from db.migrate import upgrade
 from db.repository import Repository
 from stationd.boltfile import import_bolts
 from stationd.config import StationConfig
-from stationd.station.core import Selection
-from stationd.station.records import Records
+from stationd.shell.records import Records
+from stationd.station.actions import Selection
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "config" / "bolts.example.yaml"

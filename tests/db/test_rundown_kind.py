@@ -14,7 +14,7 @@ from sqlalchemy import create_engine
 from db.errors import DataError
 from db.kinds import LOOSENED, LOOSENING, NOK, OK, TIGHTENING, TO_LOOSEN
 from db.repository import Repository
-from stationd.station.core import Record
+from stationd.station.actions import Record
 from stationd.web.results import Results, rundowns_csv
 from tests.db.conftest import b1_selected, old_record, record, url_of
 

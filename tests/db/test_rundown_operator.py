@@ -16,8 +16,8 @@ from sqlalchemy import create_engine, inspect
 from db.repository import Repository
 from stationd.cli import main
 from stationd.config import StationConfig
-from stationd.station.core import Record
-from stationd.station.records import Records
+from stationd.shell.records import Records
+from stationd.station.actions import Record
 from stationd.web.results import Results, rundowns_csv
 from tests.db.conftest import b1_selected, old_record, record, url_of
 

@@ -21,8 +21,8 @@ import yaml
 
 from stationd.access import hash_password
 from stationd.sim.vin import is_valid
-from tests.station.daemons import SIM, free_port
-from tests.station.test_commands_daemon import Client
+from tests.shell.daemons import SIM, free_port
+from tests.shell.test_commands_daemon import Client
 
 ROOT = Path(__file__).resolve().parents[2]
 PASSWORD = "supervise-it-well"  # noqa: S105 - a test user's

@@ -19,8 +19,8 @@ from pathlib import Path
 import pytest
 
 from stationd.config import load_station_config
+from stationd.shell.daemon import Station
 from stationd.sim.vin import is_valid, make_vin
-from stationd.station.daemon import Station
 from stationd.station.events import Notice
 from tests.demo.test_station_services import ROOT, _one_pair
 
@@ -64,13 +64,13 @@ def test_two_runs_of_a_two_station_line_say_whose_counts_and_have_their_own_vins
 
 
 def test_a_labelled_stations_journal_lines_carry_its_id(caplog):
-    """Each station of the demo's line is labelled (Actions.label): its notices, its state
+    """Each station of the demo's line is labelled (Effects.label): its notices, its state
     lines and its commands' lines start with its id."""
     cfg = load_station_config(ROOT / "config" / "sim" / "station.yaml")
     station = Station(cfg)
-    station.actions.label("DEMO-2")
+    station.effects.label("DEMO-2")
     with caplog.at_level(logging.INFO, logger="stationd"):
-        station.actions.publish(Notice("B12 locked after 3 NOK in a row: a supervisor "
+        station.effects.publish(Notice("B12 locked after 3 NOK in a row: a supervisor "
                                        "checks the joint", "warning"))
     assert [r.getMessage() for r in caplog.records] == [
         "DEMO-2 B12 locked after 3 NOK in a row: a supervisor checks the joint"]

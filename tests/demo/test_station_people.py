@@ -18,7 +18,7 @@ import pytest
 import yaml
 
 from stationd.access import hash_password
-from tests.station.daemons import SIM, free_port
+from tests.shell.daemons import SIM, free_port
 
 ROOT = Path(__file__).resolve().parents[2]
 PASSWORD = "release-it-with-care"  # noqa: S105 - a test user's

@@ -33,7 +33,7 @@ from stationd.opcua.model import IJT_URI, MACHINERY_URI, RESULT_URI, load_client
 from stationd.opcua.server import NAMESPACE
 from stationd.opcua.uatypes import ua
 from stationd.sim.vin import is_valid
-from tests.station.daemons import SIM
+from tests.shell.daemons import SIM
 
 ROOT = Path(__file__).resolve().parents[2]
 

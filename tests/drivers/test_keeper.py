@@ -1,6 +1,6 @@
 """The one reconnect-with-backoff mechanism (``drivers.keeper``), on a fake clock and a fake
 device: what it reports, when it retries, that a fault never ends it.  The real protocols'
-side (a PLC or controller that vanishes and comes back) is in tests/station."""
+side (a PLC or controller that vanishes and comes back) is in tests/shell."""
 
 from __future__ import annotations
 

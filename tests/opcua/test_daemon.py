@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.station.daemons import free_port, tracking, until
+from tests.shell.daemons import free_port, tracking, until
 
 ROOT = Path(__file__).resolve().parents[2]
 VIN = "OPCUAVIN000000001"

@@ -182,7 +182,7 @@ def test_the_world_follows_the_stations_geometry_across_reloads(tmp_path):
 def test_calibrate_check_on_a_simulated_station_measures_its_world(tmp_path, capsys):
     """``stationd calibrate check`` with no daemon running grabs the sim:// cameras here: the
     command gives them the world (it printed 'no simulated world' for every pair)."""
-    from tests.station.refstation import station_dir
+    from tests.shell.refstation import station_dir
 
     station = station_dir(tmp_path, pairs=("pair1",))
     code = main(["calibrate", "check", "--config", str(station)])

@@ -19,9 +19,9 @@ from typing import Any
 import pytest
 import yaml
 
+from tests.shell.daemons import free_port
+from tests.shell.test_commands_daemon import HASH, PASSWORD, Client
 from tests.sim.test_in_daemon import Daemon, _station
-from tests.station.daemons import free_port
-from tests.station.test_commands_daemon import HASH, PASSWORD, Client
 
 pytestmark = pytest.mark.system
 

@@ -4,7 +4,7 @@ at a good torque."""
 
 from __future__ import annotations
 
-from drivers.wrench.sim import SimController, SimPset
+from drivers.wrench.sim.controller import SimController, SimPset
 from stationd.sim.operator import shot_words
 
 PSET = SimPset(25.0, 22.0, 28.0, 30.0, 15.0, 90.0)

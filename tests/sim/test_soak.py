@@ -181,7 +181,7 @@ def test_sim_devices_drive_the_world_the_plc_and_the_controller():
     from drivers.camera import open_camera
     from drivers.errors import DeviceError
     from drivers.lift.sim import SimulatedPlc
-    from drivers.wrench.sim import SimController
+    from drivers.wrench.sim.controller import SimController
     from stationd.sim.soak import SimDevices
 
     from .test_world import LENGTH, _world

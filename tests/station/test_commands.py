@@ -9,21 +9,11 @@ import pytest
 
 from stationd.reasons import Reason, Why
 from stationd.station import core as core_module
+from stationd.station.actions import DisableTool, Publish, RecordCommand, Reply
 from stationd.station.commands import Issuer, ReopenVehicle, Right, SkipBolt
-from stationd.station.core import (
-    CommandDone,
-    CommandIn,
-    DisableTool,
-    LiftRead,
-    Publish,
-    RecordCommand,
-    Reply,
-    State,
-    StationCore,
-    VehicleLoaded,
-    VehicleRejected,
-)
-from stationd.station.events import BoltSkipped, VehicleReopened
+from stationd.station.core import StationCore
+from stationd.station.events import BoltSkipped, State, VehicleReopened
+from stationd.station.inputs import CommandDone, CommandIn, LiftRead, VehicleLoaded, VehicleRejected
 from stationd.words import answer_words
 from tests.station.test_core import BOLTS, _on, _ready
 

@@ -17,39 +17,40 @@ from hypothesis import strategies as st
 
 from drivers.keeper import FaultKind
 from stationd.reasons import Reason, Why
-from stationd.station.core import (
+from stationd.station.actions import (
     Acknowledge,
-    BoltSpec,
     CloseVehicle,
+    DisableTool,
+    EnableTool,
+    LoadVehicle,
+    Owed,
+    Publish,
+    Record,
+    RecordCommand,
+    Selection,
+    SendParams,
+    SendVin,
+    StoreUnattributed,
+)
+from stationd.station.core import StationCore
+from stationd.station.events import DeviceHealth, Refused, ResultUnattributed, State, StateChanged
+from stationd.station.inputs import (
+    BoltSpec,
     CommandDone,
     CommandIn,
     DeviceBack,
     DeviceFault,
-    DisableTool,
-    EnableTool,
     LiftRead,
-    LoadVehicle,
     LocalizedIn,
-    Owed,
     ParamsAcked,
     ParamsRefused,
-    Publish,
-    Record,
-    RecordCommand,
     ResultIn,
-    Selection,
-    SendParams,
-    SendVin,
     Started,
-    State,
-    StationCore,
-    StoreUnattributed,
     Tick,
     VehicleLoaded,
     VehicleRejected,
     VinSent,
 )
-from stationd.station.events import DeviceHealth, Refused, ResultUnattributed, StateChanged
 from stationd.station.matching import MatchParams
 from stationd.words import reason_words
 

@@ -9,7 +9,7 @@ import sqlite3
 import pytest
 
 from stationd.station.gaps import GapPlan, plan
-from tests.station.daemons import tool_on, tracking, until
+from tests.shell.daemons import tool_on, tracking, until
 
 
 def test_the_ids_between_the_last_recorded_and_the_newest_are_fetched():

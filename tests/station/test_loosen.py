@@ -14,6 +14,7 @@ import numpy as np
 
 from db.kinds import LOOSENED, LOOSENING, NOK, OK, TIGHTENING, TO_LOOSEN
 from stationd.reasons import Reason, Why
+from stationd.station.actions import EnableTool, Publish, Record, SendParams, StoreUnattributed
 from stationd.station.commands import (
     Issuer,
     LoosenBolt,
@@ -22,21 +23,7 @@ from stationd.station.commands import (
     SkipBolt,
     TeachStart,
 )
-from stationd.station.core import (
-    LOOSEN_TARGETS,
-    CommandDone,
-    CommandIn,
-    EnableTool,
-    ModelsKnown,
-    Publish,
-    Record,
-    ResultIn,
-    SendParams,
-    StationCore,
-    StoreUnattributed,
-    VehicleLoaded,
-    rundown_kind,
-)
+from stationd.station.core import StationCore
 from stationd.station.events import (
     BoltLocked,
     BoltReleased,
@@ -44,7 +31,10 @@ from stationd.station.events import (
     BoltToLoosen,
     VehicleOpened,
 )
+from stationd.station.inputs import CommandDone, CommandIn, ModelsKnown, ResultIn, VehicleLoaded
 from stationd.station.policy import NokPolicy, NokRule
+from stationd.station.results import rundown_kind
+from stationd.station.state import LOOSEN_TARGETS
 from stationd.words import answer_words, reason_words
 from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
 from tests.station.test_core import BOLTS, PARAMS, Driver, _on, _ready, published

@@ -11,24 +11,18 @@ from typing import Any
 import numpy as np
 
 from stationd.reasons import Reason, Why
-from stationd.station.commands import Issuer, Right, SignIn, SignOut
-from stationd.station.core import (
-    CommandDone,
-    CommandIn,
+from stationd.station.actions import (
     DisableTool,
     EnableTool,
-    OperatorBack,
     Publish,
     Record,
     RecordCommand,
-    ResultIn,
     SendParams,
-    Started,
-    State,
-    StationCore,
-    Tick,
 )
-from stationd.station.events import OperatorChanged, Refused
+from stationd.station.commands import Issuer, Right, SignIn, SignOut
+from stationd.station.core import StationCore
+from stationd.station.events import OperatorChanged, Refused, State
+from stationd.station.inputs import CommandDone, CommandIn, OperatorBack, ResultIn, Started, Tick
 from stationd.words import answer_words, operator_words, reason_words
 from tests.station.test_commands import _answer
 from tests.station.test_core import PARAMS, Driver, _on, _ready, decode, published, result

@@ -11,17 +11,11 @@ import pytest
 
 from stationd.errors import ConfigError
 from stationd.reasons import Reason, Why
+from stationd.station.actions import Record
 from stationd.station.commands import ReleaseBolt
-from stationd.station.core import (
-    CommandDone,
-    CommandIn,
-    Record,
-    ResultIn,
-    Started,
-    StationCore,
-    VehicleLoaded,
-)
+from stationd.station.core import StationCore
 from stationd.station.events import BoltLocked, BoltReleased, BoltSkipped
+from stationd.station.inputs import CommandDone, CommandIn, ResultIn, Started, VehicleLoaded
 from stationd.station.policy import NokPolicy, NokRule, table_errors
 from stationd.yamlio import YamlNode
 from tests.station import test_core

@@ -15,30 +15,32 @@ import pytest
 from drivers.keeper import FaultKind
 from drivers.wrench import ResultKind, UnreadableResult, result_kind
 from stationd.reasons import Reason, Why
-from stationd.station.commands import ReleaseBolt
-from stationd.station.core import (
-    DeviceBack,
-    DeviceFault,
+from stationd.station.actions import (
     DisableTool,
     Record,
-    ResultIn,
     SendParams,
-    State,
     StoreControllerEvent,
     StoreUnattributed,
     StoreUnreadable,
-    Tick,
-    UnreadableIn,
-    VehicleLoaded,
-    result_type_words,
 )
+from stationd.station.commands import ReleaseBolt
 from stationd.station.events import (
     BoltLocked,
     BoltReleased,
     ControllerResultEvent,
     Notice,
     ResultUnreadable,
+    State,
 )
+from stationd.station.inputs import (
+    DeviceBack,
+    DeviceFault,
+    ResultIn,
+    Tick,
+    UnreadableIn,
+    VehicleLoaded,
+)
+from stationd.station.results import result_type_words
 from stationd.words import reason_words
 from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
 from tests.station.test_core import BOLTS, Driver, _on, _ready, published

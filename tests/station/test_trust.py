@@ -12,25 +12,21 @@ import pytest
 
 from stationd.localize.check import PairCheck, RefMeasure, RefWhy, Verdict
 from stationd.reasons import Why
+from stationd.station.actions import LoadVehicle, Publish, RecordCommand, Reply, SendParams
 from stationd.station.commands import CheckCalibration, Issuer, Right
-from stationd.station.core import (
+from stationd.station.core import StationCore
+from stationd.station.events import Localized, Notice, PairChecked
+from stationd.station.inputs import (
     BoltSpec,
     CommandDone,
     CommandIn,
     LiftRead,
-    LoadVehicle,
     LocalizedIn,
-    Publish,
-    RecordCommand,
-    Reply,
-    SendParams,
     Started,
-    StationCore,
     Tick,
     VehicleLoaded,
     VinSent,
 )
-from stationd.station.events import Localized, Notice, PairChecked
 from stationd.station.matching import MatchParams
 from stationd.station.trust import MeasureReferences, PairTrust, RecordCheck, ReferencesChecked
 from stationd.words import check_words, reason_words

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import pytest
 
-from tests.station.daemons import free_port, tracking
-from tests.station.test_commands_daemon import PASSWORD, _station
+from tests.shell.daemons import free_port, tracking
+from tests.shell.test_commands_daemon import PASSWORD, _station
 from tests.web.pages import Page
 from tests.web.test_browser import check_fits
 

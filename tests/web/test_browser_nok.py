@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import pytest
 
-from tests.station.daemons import free_port, tracking, until
-from tests.station.test_commands_daemon import PASSWORD
-from tests.station.test_nok_daemon import LOOSEN_PSET, controller, nok_station, rundown
+from tests.shell.daemons import free_port, tracking, until
+from tests.shell.test_commands_daemon import PASSWORD
+from tests.shell.test_nok_daemon import LOOSEN_PSET, controller, nok_station, rundown
 from tests.web.pages import Page
 from tests.web.test_browser import check_fits
 from tests.web.test_browser_commands import _answer, _login, _shown

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import pytest
 
-from tests.station.daemons import free_port, tracking, until
-from tests.station.test_commands_daemon import PASSWORD, _station
+from tests.shell.daemons import free_port, tracking, until
+from tests.shell.test_commands_daemon import PASSWORD, _station
 from tests.web.test_browser_commands import _answer, _login, _shown
 
 VIN = "SIGNINVIN00000001"

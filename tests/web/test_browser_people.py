@@ -15,9 +15,9 @@ import re
 
 import pytest
 
+from tests.shell.daemons import free_port
+from tests.shell.test_commands_daemon import HASH, PASSWORD
 from tests.sim.test_in_daemon import Daemon, _station
-from tests.station.daemons import free_port
-from tests.station.test_commands_daemon import HASH, PASSWORD
 from tests.web.pages import Page
 from tests.web.test_browser_commands import _answer, _login, _shown
 

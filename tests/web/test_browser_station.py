@@ -4,7 +4,7 @@
 Open Protocol, eight rendering cameras): the operator screen's counters and colours follow the
 simulated operator, the cameras screen shows the simulated cameras' frames with their
 detection overlay, and the vehicle's page lists exactly the rundowns the demo printed, with
-CSV and JSON exports that download them.  Then the daemon (``stationd.serve.serve``, as
+CSV and JSON exports that download them.  Then the daemon (``stationd.shell.serve.serve``, as
 systemd runs it) on a copy of config/sim whose lift PLC is not answering: the operator screen
 says FAULT and names the lift.
 """
@@ -25,10 +25,10 @@ from pathlib import Path
 
 import pytest
 
-from drivers.wrench.sim import SimController
+from drivers.wrench.sim.controller import SimController
 from stationd.sim.devices_cli import psets_of
 from stationd.sim.vin import is_valid, make_vin
-from tests.station.daemons import SIM, Proc, free_port
+from tests.shell.daemons import SIM, Proc, free_port
 from tests.web.pages import Page
 from tests.web.test_browser import check_fits
 

@@ -14,11 +14,11 @@ import pytest
 import yaml
 
 from drivers.lift.sim import SimulatedPlc
-from drivers.wrench.sim import SimController
+from drivers.wrench.sim.controller import SimController
 from stationd.access import hash_password
 from stationd.sim.devices_cli import psets_of
-from stationd.station.core import TEACH_STEADY_MM
-from tests.station.daemons import SIM, Proc, at_height, free_port
+from stationd.station.state import TEACH_STEADY_MM
+from tests.shell.daemons import SIM, Proc, at_height, free_port
 from tests.test_teach_cli import PASSWORD, _station
 from tests.web.pages import Page
 from tests.web.test_browser_commands import _answer, _login, _shown

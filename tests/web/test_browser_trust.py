@@ -7,8 +7,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from stationd.station.core import Publish, Started
+from stationd.station.actions import Publish
 from stationd.station.events import StateChanged, StationEvent
+from stationd.station.inputs import Started
 from stationd.station.trust import ReferencesChecked
 from tests.station.test_trust import _core, _loaded, moved, ok
 from tests.web.test_browser import check_fits

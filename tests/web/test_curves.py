@@ -16,8 +16,8 @@ from aiohttp import ClientSession
 from db.curves import store_curve
 from db.repository import Repository
 from drivers.wrench import TighteningResult, open_wrench
-from drivers.wrench.op_curve import Curve
-from drivers.wrench.sim import SimController, SimPset
+from drivers.wrench.openprotocol.curve import Curve
+from drivers.wrench.sim.controller import SimController, SimPset
 from stationd.boltfile import import_bolts
 from stationd.station.events import EventBus
 from stationd.web.results import CSV_FIELDS, Results

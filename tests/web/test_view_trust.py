@@ -8,8 +8,9 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from stationd.station.core import Publish, Started
+from stationd.station.actions import Publish
 from stationd.station.events import DeviceHealth, PairsUnchecked, State, StateChanged, StationEvent
+from stationd.station.inputs import Started
 from stationd.station.trust import ReferencesChecked
 from stationd.web.view import View, fold
 from tests.station.test_trust import _core, _loaded, moved, ok

@@ -14,8 +14,8 @@ import pytest
 
 from drivers.errors import DeviceError
 from drivers.wrench import open_wrench
-from drivers.wrench.client import OpenProtocolWrench
-from drivers.wrench.sim import SimController
+from drivers.wrench.openprotocol.client import OpenProtocolWrench
+from drivers.wrench.sim.controller import SimController
 
 # short timeouts keep every file well under 10 s
 FAST = {"timeout": 0.5, "connect_timeout": 0.5}

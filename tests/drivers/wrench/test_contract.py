@@ -15,7 +15,7 @@ from drivers.errors import DeviceError, RefusedError, UrlError
 from drivers.wrench import Wrench, open_wrench
 from drivers.wrench.base import TighteningResult
 from drivers.wrench.modbus_sim import SimRegisterController
-from drivers.wrench.sim import SimController
+from drivers.wrench.sim.controller import SimController
 
 KINDS = ["openprotocol", "openprotocol+serial", "modbus-tcp", "modbus-rtu", "sim"]
 

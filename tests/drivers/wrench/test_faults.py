@@ -22,7 +22,7 @@ from drivers.errors import (
 from drivers.link import TcpLink
 from drivers.wrench import open_wrench
 from drivers.wrench.base import UnreadableResult
-from drivers.wrench.client import OpenProtocolWrench
+from drivers.wrench.openprotocol.client import OpenProtocolWrench
 
 from .conftest import FAST, connect, op, read_message, reconnect_within, wait_until
 
@@ -222,7 +222,7 @@ def test_an_unreadable_result_is_handed_out_and_acknowledged_when_the_station_sa
 
 
 def test_a_keepalive_that_is_not_mirrored_resets_the_link(sim, tmp_path, caplog):
-    caplog.set_level(logging.WARNING, logger="drivers.wrench.client")
+    caplog.set_level(logging.WARNING, logger="drivers.wrench.openprotocol.client")
     sim.inject("silent", 9999)
     with connect(sim, "tcp", tmp_path, keepalive=0.1, timeout=0.3) as w:
         assert wait_until(lambda: not w.status().connected)

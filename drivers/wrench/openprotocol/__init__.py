@@ -1,0 +1,7 @@
+"""Open Protocol, the integrator's side: messages and framing (``message.py``), the results,
+identities and curves read from them, the link-level rules, and the driver
+(``client.py``: :class:`~drivers.wrench.openprotocol.client.OpenProtocolWrench`).
+
+Why a package: the protocol is the largest part of the wrench drivers and has layers of its
+own (framing, reading, the client's session) that the register-driven controllers share
+nothing of."""

@@ -1,0 +1,141 @@
+"""Reading a result message whatever its body turns out to be: MID 0061/0065 -> a
+:class:`TighteningResult`, read at its header's revision or, where the body is laid out as a
+lower one, at that one; else an :class:`UnreadableResult` that keeps it whole.  Pure, no I/O.
+
+Why: controllers and emulators in the field accept a subscription at a revision they do not
+implement (one accepts MID 0060 revision 7 and sends revision 1 bodies with fields appended,
+labelled revision 7, PROTOCOLS.md).  Acknowledging such a message and dropping it as garbage
+loses every result of that controller; so the rules, in order:
+
+1. The header's revision is the one read (not the one subscribed: a controller may answer a
+   subscription at one revision and label its messages honestly with another).
+2. A body whose *layout* does not match its revision (a tag missing, unknown or out of place,
+   a length that does not add up: :class:`op_result.LayoutError`) is read as a body of that
+   revision or a lower one followed by fields this driver does not know: the first bytes
+   are that revision's parameters in the specification's order, the rest is ignored.  The
+   highest revision that reads cleanly wins; the result says the revision it was read at
+   (``revision``) and the one its header claimed (``header_revision``).
+3. A body whose layout is right but whose values do not read (a torque of letters, a status
+   of 7) is not read at another revision: its lower revisions' parameters would read and
+   silently drop what the broken one carried (a result type, which decides whether the
+   result may close a bolt).  Nor is a body that reads at no revision: both become an
+   :class:`UnreadableResult` with the raw text, the header's revision, the error at that
+   revision and what could still be picked out of it (tightening id, pset, VIN, timestamp).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from datetime import datetime
+from typing import Any
+
+from drivers.errors import ProtocolError
+from drivers.wrench.base import TighteningResult, UnreadableResult
+from drivers.wrench.openprotocol.message import Message
+from drivers.wrench.openprotocol.result import (
+    HEADER_LEN,
+    MAX_REVISION,
+    MID_RESULT,
+    REV1_0061,
+    REV1_0065,
+    TAGGED,
+    TIME_FORMAT,
+    LayoutError,
+    parse_tightening,
+    tagged_length,
+)
+
+#: the fields picked out of an unreadable body, for the station to say which bolt it may be
+PICKED = ("tightening_id", "pset", "vin", "timestamp")
+
+
+def read_result(mid: int, revision: int, text: str) -> TighteningResult:
+    """``text`` (header + data) of a MID 0061/0065 labelled ``revision``, read by the rules
+    above; raises the error at ``revision`` when it reads at none."""
+    try:
+        return parse_tightening(mid, revision, text)
+    except LayoutError as e:
+        first = e
+    for rev in range(min(revision, MAX_REVISION), 0, -1):
+        length = tagged_length(mid, rev)
+        if len(text) < length or (rev == revision and len(text) == length):
+            continue                   # too short for it, or the whole text (failed above)
+        try:
+            result = parse_tightening(mid, rev, text[:length])
+        except ProtocolError:
+            continue
+        return dataclasses.replace(result, raw=text, header_revision=revision)
+    raise first
+
+
+def receive(msg: Message) -> TighteningResult | UnreadableResult:
+    """A MID 0061/0065 as received: the result, or what is left of one that does not read."""
+    text = msg.raw.decode("ascii", "replace")       # a non-ASCII byte fails its field
+    try:
+        return read_result(msg.mid, msg.revision, text)
+    except ProtocolError as e:
+        picked = pick(msg.mid, msg.revision, text)
+        return UnreadableResult(raw=msg.raw.decode("ascii", "backslashreplace"), mid=msg.mid,
+                                revision=msg.revision, error=str(e),
+                                fetched=msg.mid != MID_RESULT, **picked)
+
+
+def pick(mid: int, revision: int, text: str) -> dict[str, Any]:
+    """The tightening id, pset, VIN and timestamp of a body that does not read, as far as
+    its parameters can be followed from the start (by tag at its header's revision, or at
+    revision 1's fixed places); each None (VIN: empty) where it is not there or not valid."""
+    best: dict[str, Any] = {"tightening_id": None, "pset": None, "vin": "",
+                            "timestamp": None}
+    candidates = [_walk_tagged(text), _walk_fixed(mid, text)]
+    if revision == 1:
+        candidates.reverse()
+    for raw in candidates:
+        got = _values(raw)
+        if got["tightening_id"] is not None:
+            return got
+        for name in PICKED:
+            if best[name] in (None, "") and got[name] not in (None, ""):
+                best[name] = got[name]
+    return best
+
+
+def _walk_tagged(text: str) -> dict[str, str]:
+    """Parameters read by tag from the start until one is unknown, repeated or cut short."""
+    out: dict[str, str] = {}
+    pos = HEADER_LEN
+    while pos + 2 <= len(text):
+        tag = text[pos:pos + 2]
+        param = TAGGED.get(int(tag)) if tag.isdigit() else None
+        if param is None or param.name in out or pos + 2 + param.width > len(text):
+            break
+        out[param.name] = text[pos + 2:pos + 2 + param.width]
+        pos += 2 + param.width
+    return out
+
+
+def _walk_fixed(mid: int, text: str) -> dict[str, str]:
+    """Revision 1's parameters at their fixed places, up to the first tag out of place."""
+    out: dict[str, str] = {}
+    pos = HEADER_LEN
+    for tag, param in enumerate(REV1_0061 if mid == MID_RESULT else REV1_0065, start=1):
+        if text[pos:pos + 2] != f"{tag:02d}" or pos + 2 + param.width > len(text):
+            break
+        out[param.name] = text[pos + 2:pos + 2 + param.width]
+        pos += 2 + param.width
+    return out
+
+
+def _values(raw: dict[str, str]) -> dict[str, Any]:
+    tid, pset = raw.get("tightening_id", ""), raw.get("pset", "")
+    try:
+        stamp: datetime | None = datetime.strptime(raw.get("timestamp", ""), TIME_FORMAT)
+    except ValueError:
+        stamp = None
+    vin = raw.get("vin", "").rstrip()
+    return {"tightening_id": int(tid) if tid.isdigit() else None,
+            "pset": int(pset) if pset.isdigit() else None,
+            "vin": vin if vin.isprintable() and "\ufffd" not in vin else "",
+            "timestamp": stamp}
+
+
+__all__ = ["PICKED", "pick", "read_result", "receive"]

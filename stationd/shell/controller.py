@@ -1,0 +1,227 @@
+"""What comes from the tightening controller on its own clock: the results it pushes, the
+results it made while the link was down, its identity and its curves.
+
+Why apart from the daemon: each of these waits in a thread of its own (a blocking wait on the
+driver's queue, never a poll) and has its own rule against loss.  A pushed result is held in
+:attr:`ControllerFeed.received` until the core has it, so a stop (a reload) feeds it rather
+than dropping it; after every (re)connect the tightening ids between the last one recorded
+and the controller's newest are fetched (Open Protocol MID 0064), each through the core as
+any result, and an id the controller no longer has is recorded as a gap, visibly; a curve is
+read and stored apart from results, so it never delays a result or the next bolt's
+parameters.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Awaitable, Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+
+from drivers.errors import DeviceError
+from drivers.keeper import DeviceKeeper, one_line
+from drivers.wrench import Received, TighteningResult, UnreadableResult, Wrench
+from stationd.shell.blocking import Blocking
+from stationd.shell.records import STATION_FAULTS, Records
+from stationd.station.core import StationCore
+from stationd.station.events import DeviceIdentified, EventBus, Notice
+from stationd.station.gaps import MAX_FETCH
+from stationd.station.gaps import plan as plan_gaps
+from stationd.station.inputs import WRENCH, DeviceBack, Event, ResultIn, UnreadableIn
+
+log = logging.getLogger("stationd")
+RESULT_WAIT_S = 0.5         # one blocking wait for pushed results (a condition, not a poll)
+CURVE_WAIT_S = 0.5          # one blocking wait for curves, in their own thread
+CURVE_IDLE_S = 1.0          # the curve loop's wait while the controller sends none
+
+
+class ControllerFeed:
+    """The controller's results, missed results and curves, fed to the core through
+    ``feed`` (one event at a time, with its actions)."""
+
+    def __init__(self, core: StationCore, records: Records, keeper: DeviceKeeper[Wrench],
+                 bus: EventBus, feed: Callable[[Event], Awaitable[None]],
+                 call: Blocking) -> None:
+        self.core, self.records, self.bus = core, records, bus
+        self._keeper, self._feed, self._call = keeper, feed, call
+        self._results_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="results")
+        self._curves_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="curves")
+        #: results taken from the controller and not yet through the core
+        self.received: list[Received] = []
+        self._waiting: Future[Received | None] | None = None
+        self.catching_up: asyncio.Task[None] | None = None
+
+    def close(self) -> None:
+        self._results_pool.shutdown(wait=True)
+        self._curves_pool.shutdown(wait=True)
+
+    async def results(self, wrench: Wrench) -> None:
+        """The next pushed result (one blocking wait, in the results' thread); a link down
+        raises to the wrench's keeper."""
+        self._waiting = self._results_pool.submit(wrench.wait_result, RESULT_WAIT_S,
+                                                  acknowledge=False)
+        result = await asyncio.wrap_future(self._waiting)
+        self._waiting = None
+        if result is not None:
+            self.received.append(result)
+        if WRENCH in self.core.faults and not self._keeper.losing:
+            # a refusal is a fault until the controller answers
+            await self._feed(DeviceBack(time.time(), WRENCH, self._keeper.reconnects))
+        if result is not None:
+            await self._feed(result_input(time.time(), result))
+            self.received.remove(result)
+
+    async def curves(self, stop: asyncio.Event) -> None:
+        """The controller's tightening curves when it sends them (``?curves=1`` in the
+        wrench's URL), each stored with its rundown by tightening id.  A curve not stored is
+        logged, never a fault: the rundown stands without it."""
+        loop = asyncio.get_running_loop()
+        while not stop.is_set():
+            wrench = self._keeper.device
+            if wrench is None or self.records.repo is None or not wrench.can_curves \
+                    or not wrench.curves_on:
+                await asyncio.sleep(CURVE_IDLE_S)
+                continue
+            try:
+                curve = await loop.run_in_executor(self._curves_pool, wrench.wait_curve,
+                                                   CURVE_WAIT_S)
+            except (DeviceError, ValueError):     # closed: its keeper opens a new one
+                await asyncio.sleep(CURVE_IDLE_S)
+                continue
+            if curve is None:
+                continue
+            try:
+                await loop.run_in_executor(self._curves_pool, self.records.store_curve, curve)
+            except STATION_FAULTS as exc:
+                log.warning("curve (%s) of tightening %d not stored: %s", curve.name,
+                            curve.tightening_id, one_line(exc))
+
+    def came_back(self) -> None:
+        """After the controller came (back): what it says it is (the journal, the devices
+        panel), and the results it made meanwhile, fetched."""
+        wrench = self._keeper.device
+        if wrench is not None:
+            try:
+                who = wrench.identity()
+            except (DeviceError, ValueError):
+                who = ""
+            if who:
+                log.info("wrench: %s", who)
+                self.bus.publish(DeviceIdentified(WRENCH, who))
+        if self.catching_up is None or self.catching_up.done():
+            self.catching_up = asyncio.get_running_loop().create_task(self._catch_up())
+
+    async def _catch_up(self) -> None:
+        """Every tightening id between the last one recorded and the controller's newest,
+        fetched and fed as any result (recorded to its bolt when the station can tell, else
+        unattributed, never to a guessed bolt); one the controller no longer has is a gap.
+        A controller that keeps no results (register-driven) has nothing to fetch."""
+        wrench = self._keeper.device
+        if wrench is None or self.records.repo is None or not wrench.can_fetch:
+            return
+        try:
+            last = await self._call(self.records.last_tightening_id)
+            newest = await self._call(wrench.fetch_result, 0)
+            if newest is None:
+                return
+            if newest.tightening_id is None:   # unreadable, its id too: kept, nothing planned
+                await self._feed(result_input(time.time(), newest, fetched=True))
+                return
+            todo = plan_gaps(last, int(newest.tightening_id))
+            if todo.note:
+                log.info("results: %s", todo.note)
+            if todo.gap is not None:
+                await self._gap(*todo.gap, f"more than {MAX_FETCH} results missed")
+            offset = wrench.clock_offset_s
+            for tid in todo.fetch:
+                got: Received | None = newest if tid == newest.tightening_id else \
+                    await self._call(wrench.fetch_result, tid)
+                if got is None:
+                    await self._gap(tid, tid, "the controller no longer has it")
+                    continue
+                log.info("tightening %d fetched after a reconnect", tid)
+                await self._feed(result_input(time.time(), got, fetched=True, follows=last,
+                                              offset=offset))
+                if isinstance(got, TighteningResult):
+                    await self._late_curves(wrench, tid)
+        except (DeviceError, ValueError) as exc:   # the link's keeper reports it
+            log.warning("results missed while the link was down not fetched yet: %s",
+                        one_line(exc))
+        except STATION_FAULTS as exc:
+            log.error("results missed while the link was down not fetched: %s", one_line(exc))
+
+    async def _late_curves(self, wrench: Wrench, tid: int) -> None:
+        """The curves of a result fetched late (MID 0900 asked for by its tightening id),
+        where the controller offers them and the station takes curves; stored like any
+        curve, linked to its rundown by tightening id.  None is never a fault."""
+        if not wrench.can_curves or not wrench.curves_on:
+            return
+        try:
+            curves = await self._call(wrench.fetch_curve, tid)
+            for curve in curves:
+                await self._call(self.records.store_curve, curve)
+        except (DeviceError, ValueError) as exc:
+            log.warning("curves of tightening %d (fetched late) not got: %s", tid,
+                        one_line(exc))
+        except STATION_FAULTS as exc:
+            log.warning("curves of tightening %d (fetched late) not stored: %s", tid,
+                        one_line(exc))
+
+    async def _gap(self, first: int, last: int, reason: str) -> None:
+        await self._call(self.records.record_gap, first, last, self.core.vin, reason)
+        ids = str(first) if first == last else f"{first}-{last}"
+        log.warning("tightening %s missed while the link was down: a gap (%s)", ids, reason)
+        self.bus.publish(Notice(f"tightening {ids} missed: a gap ({reason})", "warning"))
+
+    async def drain(self) -> list[Received]:
+        """At a stop (the station's lock held, its tasks cancelled): the result the wait was
+        taking and those the driver still holds, for the core while the link is open (a
+        reload lost a result that arrived as it began)."""
+        waiting, self._waiting = self._waiting, None
+        if waiting is not None and not waiting.cancelled():
+            try:
+                got = await asyncio.wrap_future(waiting)
+            except Exception:   # the link went down meanwhile: its keeper's, not ours
+                got = None
+            if got is not None:
+                self.received.append(got)
+        wrench = self._keeper.device
+        while wrench is not None and self._keeper.up:
+            try:
+                more = await self._call(_wait_briefly, wrench)
+            except (DeviceError, ValueError):
+                break
+            if more is None:
+                break
+            self.received.append(more)
+        received, self.received = self.received, []
+        return received
+
+
+def result_input(t: float, got: Received, *, fetched: bool = False, follows: int | None = None,
+                 offset: float | None = None) -> ResultIn | UnreadableIn:
+    """What the controller sent, as the core's input: a result (fetched ones with the last
+    tightening id accounted for before, and the controller's timestamp on the station's
+    clock where its offset is known), or one that could not be read."""
+    if isinstance(got, UnreadableResult):
+        return UnreadableIn(t, got)
+    return ResultIn(t, got, fetched=fetched, follows=follows,
+                    made_at=made_at(got, offset) if fetched else None)
+
+
+def made_at(result: TighteningResult, offset: float | None) -> float | None:
+    """The result's controller timestamp (naive, the controller's local time) on the
+    station's clock (epoch seconds): ``offset`` is the controller's local time minus the
+    station's, measured at connect (None: unknown, and so is the time)."""
+    if offset is None or not isinstance(offset, int | float):
+        return None
+    try:
+        return result.timestamp.timestamp() - float(offset)
+    except (AttributeError, OverflowError, OSError, ValueError):
+        return None
+
+
+def _wait_briefly(wrench: Wrench) -> Received | None:
+    """A result the driver holds already, without acknowledging it (the core does)."""
+    return wrench.wait_result(0.05, acknowledge=False)

@@ -1,0 +1,346 @@
+"""The core's actions carried out: the controller told, the database written, events
+published, answers given; what came of each goes back to the core as an event.
+
+Why apart from the daemon's loops: this is the one place where an action meets a device or
+the database, so what a failure means is decided once.  A controller that drops its link is
+a fault its keeper reconnects (a refusal is the controller's answer, not a lost link); a
+database that refuses a write is a fault its keeper probes back, and the result stays with the
+station (:mod:`stationd.shell.records`) or with the controller (not acknowledged), never
+lost.  Every blocking call runs through ``call`` (the daemon's executor).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+from db.bolts import Parameters
+from db.repository import Repository
+from drivers.errors import DeviceError, RefusedError
+from drivers.keeper import DeviceKeeper, FaultKind, fault_kind, one_line
+from drivers.wrench import Received, Wrench
+from stationd.localize import Localization
+from stationd.reasons import Reason, Why
+from stationd.shell.blocking import Blocking
+from stationd.shell.journal import RefusalJournal
+from stationd.shell.records import STATION_FAULTS, Records
+from stationd.shell.sdnotify import Notifier
+from stationd.station.actions import (
+    Acknowledge,
+    Action,
+    CloseVehicle,
+    DisableTool,
+    EnableTool,
+    LoadVehicle,
+    Publish,
+    Record,
+    RecordCommand,
+    Reply,
+    SendParams,
+    SendVin,
+    StoreControllerEvent,
+    StoreUnattributed,
+    StoreUnreadable,
+)
+from stationd.station.commands import Answer
+from stationd.station.core import StationCore
+from stationd.station.events import (
+    BoltToLoosen,
+    DeviceHealth,
+    EventBus,
+    Notice,
+    OperatorChanged,
+    PairChecked,
+    Refused,
+    State,
+    StateChanged,
+    StationEvent,
+    VehicleClosed,
+    VehicleOpened,
+)
+from stationd.station.inputs import (
+    DATABASE,
+    WRENCH,
+    CommandDone,
+    DeviceFault,
+    Event,
+    ParamsAcked,
+    ParamsRefused,
+    ToolOn,
+    VinSent,
+    Written,
+)
+from stationd.station.trust import MeasureReferences, RecordCheck
+from stationd.words import answer_words, check_words, operator_words, reason_words
+
+log = logging.getLogger("stationd")
+#: every command's line, accepted or refused: its own logger, so a front that journals only
+#: warnings (the demo) still journals the accepted ones, as the daemon does
+commands_log = logging.getLogger("stationd.commands")
+
+
+class _Prefixed(logging.LoggerAdapter):  # type: ignore[type-arg]
+    """A station's journal lines with its name first (see :meth:`Effects.label`)."""
+
+    def process(self, msg: Any, kwargs: Any) -> tuple[Any, Any]:
+        return f"{self.extra['prefix'] if self.extra else ''} {msg}", kwargs
+
+    def __init__(self, logger: logging.Logger, prefix: str) -> None:
+        super().__init__(logger, {"prefix": prefix})
+
+
+Journal = logging.Logger | _Prefixed
+A = TypeVar("A")
+#: how long the controller may take to confirm parameters, s
+SEND_TIMEOUT_S = 2.0
+
+
+class Effects:
+    """Carries out the core's actions; :meth:`do` answers what came of one, for the core."""
+
+    def __init__(self, core: StationCore, records: Records, wrench: DeviceKeeper[Wrench],
+                 database: DeviceKeeper[Repository], bus: EventBus, notifier: Notifier,
+                 call: Blocking, measure: Callable[[MeasureReferences], None]) -> None:
+        self.core, self.records, self.bus, self.notifier = core, records, bus, notifier
+        self._measure = measure
+        self._wrench, self._database, self._call = wrench, database, call
+        self.answers: dict[int, asyncio.Future[Answer]] = {}   # request -> who waits
+        self.refusals = RefusalJournal()   # each refusal journaled once, then counted
+        self.log: Journal = log
+        self.commands_log: Journal = commands_log
+
+    def label(self, prefix: str) -> None:
+        """Each of this station's journal lines starts with ``prefix`` ("DEMO-2"). Why: the
+        demo runs a line's stations in one process, one output; a notice of station 2 came
+        without its station's name."""
+        self.log = _Prefixed(log, prefix)
+        self.commands_log = _Prefixed(commands_log, prefix)
+
+    async def do(self, a: Action) -> Event | None:
+        """Carry out one action; what came of it, for the core (or None)."""
+        if isinstance(a, Publish):
+            self.publish(a.event)
+            return None
+        try:
+            return await self._do(a)
+        except DeviceError as exc:   # the link is reset: its keeper reconnects and reports
+            if not isinstance(exc, RefusedError):
+                self._wrench.lost(exc)
+            return DeviceFault(time.time(), WRENCH, fault_kind(exc), one_line(exc))
+
+    async def _do(self, a: Action) -> Event | None:
+        wrench = self._wrench.device
+        if isinstance(a, SendParams | SendVin | EnableTool) and wrench is None:
+            return DeviceFault(time.time(), WRENCH, FaultKind.DOWN, "not connected")
+        if isinstance(a, SendParams):
+            assert wrench is not None  # noqa: S101 - checked above
+            return await self._send(wrench, a)
+        if isinstance(a, EnableTool):
+            assert wrench is not None  # noqa: S101 - checked above
+            return await self._enable_tool(wrench, a)
+        if isinstance(a, SendVin):
+            assert wrench is not None  # noqa: S101 - checked above
+            return await self._send_vin(wrench, a.vin)
+        if isinstance(a, DisableTool):
+            if wrench is not None:
+                await self._call(wrench.disable_tool)
+            if self.records.owes_off_time:
+                await self._call(self.records.note_off)
+        elif isinstance(a, LoadVehicle):
+            return await self._database_step(self.records.load_vehicle, a)
+        elif isinstance(a, CloseVehicle):
+            try:
+                return await self._call(self.records.close_vehicle, a.vin)
+            except STATION_FAULTS as exc:
+                self.log.error("vehicle %s not closed: %s", a.vin, one_line(exc))
+        elif isinstance(a, Record):
+            return await self._record(a)
+        elif isinstance(a, Acknowledge):
+            await self.acknowledge(a.result)
+        elif isinstance(a, StoreUnattributed):
+            await self._store_unattributed(a)
+        elif isinstance(a, StoreControllerEvent):
+            await self._store_then_ack(self.records.store_controller_event, a, a.result,
+                                       f"{a.what} (a controller event)")
+        elif isinstance(a, StoreUnreadable):
+            await self._store_then_ack(self.records.store_unreadable, a, a.unreadable,
+                                       "an unreadable result")
+        elif isinstance(a, RecordCommand):
+            return await self._record_command(a)
+        elif isinstance(a, Reply):
+            self._reply(a.answer)
+        elif isinstance(a, MeasureReferences):
+            self._measure(a)
+        elif isinstance(a, RecordCheck):
+            try:
+                await self._call(self.records.record_check, a)
+            except STATION_FAULTS as exc:
+                self.log.error("calibration check of %s not recorded: %s", a.check.pair,
+                          one_line(exc))
+        return None
+
+    def publish(self, ev: StationEvent) -> None:
+        """An event of the core to the screens and feeds, and its journal line."""
+        self.bus.publish(ev)
+        if isinstance(ev, StateChanged | VehicleOpened | VehicleClosed):
+            for line in self.refusals.ended(ev.t):   # the refusals' episode ended
+                self.log.info("%s", line)
+        if isinstance(ev, StateChanged):
+            self.notifier.status(f"{ev.state}: {ev.reason}")
+            if ev.state is State.FAULT:   # each device's own line has the reason
+                self.log.info("state: fault (%s)", ", ".join(sorted(self.core.faults)))
+            else:
+                self.log.info("%s: %s", ev.state, ev.reason)
+        elif isinstance(ev, Notice):
+            (self.log.warning if ev.level == "warning" else self.log.info)("%s", ev.message)
+        elif isinstance(ev, Refused):   # once, then counted (a wrench held between two bolts)
+            said = self.refusals.refused(ev.reason, ev.t)
+            if said is not None:
+                self.log.info("%s", said)
+        elif isinstance(ev, PairChecked):
+            (self.log.info if ev.trusted else self.log.warning)("%s", check_words(ev))
+        elif isinstance(ev, BoltToLoosen):
+            self.log.info("%s: %s", ev.bolt, reason_words(ev.reason, full=True))
+        elif isinstance(ev, OperatorChanged):
+            self.log.info("%s", operator_words(ev))
+        elif isinstance(ev, DeviceHealth):
+            if ev.ok:
+                self.log.info("%s: back", ev.device)
+            else:
+                self.log.warning("fault: %s (%s): %s", ev.device, ev.kind, ev.reason)
+
+    def _database_lost(self, exc: Exception, what: str = "") -> DeviceFault:
+        """A database fault: its keeper probes it back, with backoff."""
+        self._database.lost(DeviceError(one_line(exc)))
+        return DeviceFault(time.time(), DATABASE, FaultKind.DOWN, f"{what}{one_line(exc)}")
+
+    async def _database_step(self, fn: Callable[[A], Event], arg: A) -> Event:
+        try:
+            return await self._call(fn, arg)
+        except STATION_FAULTS as exc:
+            return self._database_lost(exc)
+
+    async def _enable_tool(self, wrench: Wrench, a: EnableTool) -> Event:
+        """What the station owes goes to disk first (the bolt, its pset and version, where
+        the wrench was), then the tool is enabled: a reload or a kill from here on still
+        records the result to this bolt.  A database that refuses it is a fault of the
+        database and the tool stays off."""
+        try:
+            await self._call(self.records.note_enable, a.selection)
+        except STATION_FAULTS as exc:
+            return self._database_lost(exc, "the tool enable not stored: ")
+        await self._call(wrench.enable_tool)
+        return ToolOn(time.time(), a.bolt)
+
+    async def _send(self, wrench: Wrench, a: SendParams) -> Event:
+        params = a.parameters
+        if params is None:   # a vehicle loaded without its parameters: never guessed
+            return ParamsRefused(time.time(), a.bolt, "no parameters for this bolt")
+        t_send = time.time()
+        try:
+            await self._call(_send_parameters, wrench, params)
+        except RefusedError as exc:
+            return ParamsRefused(time.time(), a.bolt, one_line(exc))
+        now = time.time()
+        sel = a.selection
+        loc = sel.evidence if isinstance(sel.evidence, Localization) else None
+        lat = {"total": (now - sel.exposure_t) * 1e3,
+               "localize": (sel.decided_t - sel.exposure_t) * 1e3,
+               "decide": (t_send - sel.decided_t) * 1e3, "acknowledge": (now - t_send) * 1e3,
+               "vision_slowest_pair": loc.timings_ms.get("vision", 0.0) if loc else 0.0,
+               "grab_slowest_pair": loc.timings_ms.get("grab", 0.0) if loc else 0.0}
+        return ParamsAcked(now, a.bolt, params.pset, lat)
+
+    async def _send_vin(self, wrench: Wrench, vin: str) -> Event:
+        try:
+            await self._call(wrench.send_vin, vin)
+        except ValueError as exc:   # the controller cannot take it (no VIN registers, length)
+            self.log.info("VIN %s not sent to the controller: %s", vin, exc)
+        except RefusedError as exc:
+            self.log.warning("the controller refused VIN %s: %s", vin, one_line(exc))
+        return VinSent(time.time(), vin)
+
+    async def _record(self, a: Record) -> Event | None:
+        """On disk first, then the controller may forget it.  A database that refuses the
+        write (disk full, server gone) is a fault of the database: nothing more is tightened,
+        the result is kept in memory and journaled, its keeper writes it when the database
+        takes writes again (then it is published and acknowledged, as any other)."""
+        r, sel = a.result, a.selection
+        loc = sel.evidence if sel is not None and isinstance(sel.evidence, Localization) \
+            else None
+        u = await self._call(self.records.unsaved_result, a, loc)
+        try:
+            await self._call(self.records.write, u)
+        except STATION_FAULTS as exc:
+            self.records.keep(u)
+            self.log.error("tightening %d of %s NOT stored, kept until the database takes it: "
+                      "%s; %s", r.tightening_id, a.bolt, one_line(exc), u.describe())
+            self.bus.publish(Notice(f"tightening {r.tightening_id} of {a.bolt} not stored: "
+                                    f"{one_line(exc)}", "error"))
+            self._database.lost(DeviceError(f"results not stored: {one_line(exc)}"))
+            return None
+        return Written(time.time(), a, tuple(u.images))
+
+    async def _store_unattributed(self, a: StoreUnattributed) -> None:
+        """A result no bolt owns: stored, then acknowledged.  A database that refuses it is a
+        fault; the result stays with the controller (not acknowledged)."""
+        try:
+            await self._call(self.records.store_unattributed, a)
+        except STATION_FAULTS as exc:
+            self.log.error("tightening %d (unattributed) NOT stored, left with the controller: %s",
+                      a.result.tightening_id, one_line(exc))
+            self._database.lost(DeviceError(f"results not stored: {one_line(exc)}"))
+            return
+        await self.acknowledge(a.result)
+
+    async def _store_then_ack(self, store: Callable[[Any], None], a: Any,
+                              result: Received, what: str) -> None:
+        """A controller result stored (``store(a)``), then acknowledged; a database that
+        refuses it is a fault, and the result stays with the controller (not
+        acknowledged: it sends it again)."""
+        try:
+            await self._call(store, a)
+        except STATION_FAULTS as exc:
+            self.log.error("tightening %s (%s) NOT stored, left with the controller: %s",
+                      result.tightening_id, what, one_line(exc))
+            self._database.lost(DeviceError(f"results not stored: {one_line(exc)}"))
+            return
+        await self.acknowledge(result)
+
+    async def acknowledge(self, result: Received) -> None:
+        """Tell the controller a result is stored; a failure leaves it with the controller
+        (it is recorded here already, and a resent copy is recognised by its id)."""
+        wrench = self._wrench.device
+        if wrench is None or result.fetched:
+            return   # a fetched result is not awaiting an acknowledgement
+        try:
+            await self._call(wrench.acknowledge_result, result)
+        except (DeviceError, ValueError) as exc:
+            self.log.warning("tightening %d stored, not acknowledged: %s", result.tightening_id,
+                        one_line(exc))
+
+    async def _record_command(self, a: RecordCommand) -> Event:
+        """An accepted command on disk with its user; what the database said, for the core."""
+        try:
+            why = await self._call(self.records.record_command, a, self.core.vin)
+        except STATION_FAULTS as exc:
+            self._database.lost(DeviceError(one_line(exc)))
+            why = Reason(Why.NOT_RECORDED, note=one_line(exc))
+        return CommandDone(time.time(), a.request, why)
+
+    def _reply(self, answer: Answer) -> None:
+        """The journal's line for every command, and the answer to who is waiting for it."""
+        (self.commands_log.info if answer.accepted else self.commands_log.warning)(
+            "%s", answer_words(answer))
+        waiting = self.answers.get(answer.request)
+        if waiting is not None and not waiting.done():
+            waiting.set_result(answer)
+
+
+def _send_parameters(wrench: Wrench, params: Parameters) -> None:
+    """The controller takes them its way (a pset, or registers with the targets)."""
+    wrench.send_parameters(params.pset, params.torque.target,
+                           params.angle.target if params.angle else None, SEND_TIMEOUT_S)

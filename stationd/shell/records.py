@@ -1,0 +1,460 @@
+"""The station's persistence policy, in one place: what is written when, what is kept while
+the database refuses, and what the next station is owed.
+
+Why apart from the daemon: these are rules about records, not I/O and timing.  A result is
+written before the controller is told it is stored; a result the database refuses is kept
+(in memory, journaled in full) and written first when the database is back; the SQLite file
+is checked before each write (a file removed or replaced under the daemon would swallow
+acknowledged results); the tool enable is noted before the tool is enabled, so a reload, a
+restart or a kill still records its result to that bolt.  Every method here blocks (the daemon
+calls them from its executor threads) and raises what the database raises.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import cv2
+
+from db.checks import record_check
+from db.curves import link_curves, store_curve
+from db.errors import DataError, DbError, NotFoundError, VehicleClosedError
+from db.report import MISSING
+from db.repository import Repository
+from drivers.errors import DeviceError, DriverError
+from drivers.keeper import one_line
+from drivers.wrench.openprotocol.curve import Curve
+from stationd.boltfile import import_bolts
+from stationd.config import StationConfig
+from stationd.errors import StationError
+from stationd.localize import Localization
+from stationd.reasons import Reason, Why
+from stationd.station.actions import (
+    LoadVehicle,
+    Owed,
+    Record,
+    RecordCommand,
+    Selection,
+    StoreControllerEvent,
+    StoreUnattributed,
+    StoreUnreadable,
+)
+from stationd.station.commands import (
+    KIND,
+    ReopenVehicle,
+    SignIn,
+    SignOut,
+    TeachStart,
+    skip_note,
+)
+from stationd.station.inputs import BoltSpec, VehicleEnded, VehicleLoaded, VehicleRejected
+from stationd.station.results import type_code
+from stationd.station.trust import RecordCheck, summary
+
+log = logging.getLogger("stationd")
+#: what a device, the database or the station's own data raise: a fault, never an exit
+STATION_FAULTS: tuple[type[Exception], ...] = (StationError, DbError, DriverError)
+
+
+@dataclass
+class Unsaved:
+    """A result the database has not taken yet, with what its record needs."""
+
+    record: Record
+    images: list[str]
+    result_at: datetime
+    parameters_id: int | None = None
+    enable_id: int | None = None     # the tool enable this result settles
+
+    def describe(self) -> str:
+        """One journal line with every value of the record (the only copy while unsaved)."""
+        a, r = self.record, self.record.result
+        return (f"VIN {a.vin} bolt {a.bolt} tightening {r.tightening_id} "
+                f"{'OK' if r.ok else 'NOK'} torque {float(r.torque_nm):.2f} Nm angle "
+                f"{float(r.angle_deg):.1f} deg pset {r.pset} at {self.result_at.isoformat()}"
+                + (f" operator {a.selection.operator}" if a.selection is not None
+                   and a.selection.operator else ""))
+
+
+class Records:
+    """The station's database and its policy: ``open()``, then the daemon's calls."""
+
+    def __init__(self, cfg: StationConfig) -> None:
+        self.cfg = cfg
+        self.repo: Repository | None = None
+        # the SQLite file opened and its identity (device, inode)
+        self._db_file: tuple[Path, tuple[int, int]] | None = None
+        # results the database refused: kept, written by its keeper before it is called back
+        self._unsaved: list[Unsaved] = []
+        self._saved_late: list[Unsaved] = []
+        self._lock = threading.Lock()
+        # the tool enable the station owes a result to (its selection and its row on disk)
+        self._enable: tuple[Selection, int] | None = None
+        self._enable_off = False          # its tool-off time is on disk
+
+    def open(self) -> Repository:
+        """Open (and migrate) the database and import the bolt table."""
+        self.repo = Repository.open(self.cfg.database_url)
+        self._db_file = _sqlite_file(self.cfg.database_url)
+        if self.cfg.bolts_path is not None:
+            r = import_bolts(self.repo, self.cfg.bolts_path,
+                             tolerance_mm=self.cfg.matching.tolerance_mm)
+            log.info("bolt table %s: %d added, %d changed, %d unchanged, %d removed, "
+                     "%d new parameter versions", self.cfg.bolts_path, len(r.added),
+                     len(r.changed), len(r.unchanged), len(r.removed), len(r.new_versions))
+        return self.repo
+
+    def _repo(self) -> Repository:
+        if self.repo is None:
+            raise DeviceError("not open", device="database")
+        return self.repo
+
+    # -- what the last station owed -------------------------------------------------------
+    def owed(self, late_result_s: float) -> Owed | None:
+        """The tool enable the last station (a reload, a restart, a kill) left without its
+        result, while its late-result window lasts (from its tool-off time, or now when it
+        stopped with the tool on)."""
+        owed = self._repo().owed_enable()
+        if owed is None:
+            return None
+        now = time.time()
+        off = owed.off_at.timestamp() if owed.off_at is not None else now
+        if now - off >= late_result_s:
+            return None
+        j = owed.selection
+        sel = Selection(owed.bolt, owed.pset, xyz(j["point_mm"]), float(j["tilt_deg"]),
+                        float(j["distance_mm"]), float(j["exposure_t"]), float(j["decided_t"]),
+                        None, owed.vin, owed.parameters_id, bool(j.get("loosen", False)),
+                        j.get("operator"))
+        self._enable, self._enable_off = (sel, owed.id), owed.off_at is not None
+        log.info("the tool was enabled for bolt %s of %s (pset %s) when the last station "
+                 "stopped: its result within %.0f s is recorded to it", owed.bolt, owed.vin,
+                 owed.pset, late_result_s - (now - off))
+        return Owed(sel, off)
+
+    def note_enable(self, sel: Selection) -> None:
+        """The tool is about to be enabled for ``sel``: noted on disk first."""
+        row = self._repo().note_enable(sel.vin, sel.bolt, sel.pset, sel.parameters_id,
+                                       _selection_json(sel), datetime.now(UTC))
+        self._enable, self._enable_off = (sel, row), False
+
+    def note_off(self) -> None:
+        """The owed enable's tool-off time on disk: the next station counts the late-result
+        window from it.  Best effort: without it the next station counts from its start."""
+        if self._enable is None or self._enable_off or self.repo is None:
+            return
+        try:
+            self.repo.note_tool_off(self._enable[1], datetime.now(UTC))
+            self._enable_off = True
+        except STATION_FAULTS as exc:
+            log.warning("the tool-off time of bolt %s not stored: %s", self._enable[0].bolt,
+                        one_line(exc))
+
+    @property
+    def owes_off_time(self) -> bool:
+        return self._enable is not None and not self._enable_off
+
+    # -- results ---------------------------------------------------------------------------
+    def unsaved_result(self, a: Record, loc: Localization | None) -> Unsaved:
+        """The record to write for ``a``: the selection's crops saved beside the records,
+        and the tool enable it settles (in the record's transaction)."""
+        r, sel = a.result, a.selection
+        images = self.save_images(a.vin, a.bolt, int(r.tightening_id), loc)
+        enable = self._settles(sel)
+        return Unsaved(a, images, datetime.now(UTC), sel.parameters_id if sel else None, enable)
+
+    def _settles(self, sel: Selection | None, take: bool = True) -> int | None:
+        """The noted tool enable a record answering ``sel`` settles, or None; ``take``: the
+        station owes it nothing more from now (else only once the record is written)."""
+        if self._enable is None or sel is None or self._enable[0] is not sel:
+            return None
+        enable = self._enable[1]
+        if take:
+            self._enable = None
+        return enable
+
+    def write(self, u: Unsaved) -> None:
+        """One result into the database; raises what the database raises."""
+        repo = self._repo()
+        self.check_file()
+        a = u.record
+        r, sel = a.result, a.selection
+        rid = repo.record_tightening(
+            a.vin, a.bolt, ok=bool(r.ok),
+            position_mm=list(sel.point_mm) if sel else [0.0, 0.0, 0.0],
+            match_distance_mm=sel.distance_mm if sel else 0.0,
+            tilt_deg=sel.tilt_deg if sel else 0.0,
+            torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
+            parameters_id=u.parameters_id,
+            tightening_id=int(r.tightening_id),
+            sent_at=datetime.fromtimestamp(sel.decided_t, UTC) if sel else None,
+            result_at=u.result_at, images=u.images, enable_id=u.enable_id, kind=a.kind,
+            params_sent=_loosen_sent(sel.pset) if sel is not None and sel.loosen else None,
+            operator=sel.operator if sel is not None else None)
+        # the tightening's curves (stored as they came, usually just before) go with it; the
+        # record stands whatever happens here (reading finds them by tightening id anyway)
+        try:
+            link_curves(repo, int(r.tightening_id), rid)
+        except STATION_FAULTS as exc:
+            log.warning("curves of tightening %d not linked: %s", r.tightening_id,
+                        one_line(exc))
+
+    def keep(self, u: Unsaved) -> None:
+        """The database refused ``u``: kept until it takes it."""
+        with self._lock:
+            self._unsaved.append(u)
+
+    def carry(self, unsaved: list[Unsaved]) -> None:
+        """Results the last station (a reload) could not write: written first."""
+        with self._lock:
+            self._unsaved[:0] = unsaved
+
+    def unsaved(self) -> list[Unsaved]:
+        with self._lock:
+            return list(self._unsaved)
+
+    def take_saved_late(self) -> list[Unsaved]:
+        """The results :meth:`probe` wrote on the database's way back (to publish and
+        acknowledge)."""
+        with self._lock:
+            done, self._saved_late = self._saved_late, []
+        return done
+
+    def store_unattributed(self, a: StoreUnattributed) -> None:
+        r = a.result
+        self._repo().record_unattributed(
+            vin=a.vin, controller_vin=str(r.vin or "").strip() or None,
+            tightening_id=int(r.tightening_id), pset=int(r.pset), ok=bool(r.ok),
+            torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
+            result_at=_aware(r.timestamp), reason=a.reason)
+
+    def store_controller_event(self, a: StoreControllerEvent) -> None:
+        r = a.result
+        self._repo().record_controller_event(
+            result_type=type_code(r) or 0, what=a.what, vin=a.vin, bolt=a.bolt,
+            controller_vin=str(r.vin or "").strip() or None,
+            tightening_id=int(r.tightening_id), pset=int(r.pset), ok=bool(r.ok),
+            torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
+            result_at=_aware(r.timestamp))
+
+    def store_unreadable(self, a: StoreUnreadable) -> None:
+        """The message whole; the tool enable it answers settled with it (the bolt is held
+        for a person now: no later result is owed to it)."""
+        u, sel = a.unreadable, a.selection
+        enable = self._settles(sel, take=False)
+        self._repo().record_unreadable(
+            mid=u.mid, revision=u.revision, raw=u.raw, error=u.error, vin=a.vin, bolt=a.bolt,
+            controller_vin=u.vin.strip() or None, tightening_id=u.tightening_id, pset=u.pset,
+            result_at=_aware(u.timestamp),
+            enable_id=enable)
+        self._settles(sel)
+
+    # -- vehicles, commands, gaps and curves ---------------------------------------------------
+    def load_vehicle(self, a: LoadVehicle) -> VehicleLoaded | VehicleRejected:
+        """The vehicle at height, from the database: loaded with its bolts, what is done,
+        skipped and NOK so far (a rework resumed after a reload is still one), or rejected
+        (unknown model, a closed VIN, another model's VIN)."""
+        repo = self._repo()
+        model = repo.model_for_code(a.model_code)
+        if model is None:
+            return VehicleRejected(time.time(), a.vin,
+                                   f"unknown vehicle model code {a.model_code}")
+        try:
+            started = repo.start_vehicle(a.vin, model, reopen=a.reopen)
+        except DataError as exc:   # a closed VIN back, another model's VIN
+            return VehicleRejected(time.time(), a.vin, one_line(exc),
+                                   closed=isinstance(exc, VehicleClosedError))
+        infos = repo.bolts_for_model(model)
+        report = repo.vehicle_report(a.vin)
+        since = started.reopened_at or started.started_at
+        skipped = repo.ledger.skipped(a.vin, since)
+        noks = repo.nok_streaks(a.vin, since)
+        held = repo.held_bolts(a.vin, since)
+        # the report's "missing" is "no rundown yet": on an open vehicle the bolt is to do
+        status = {b.bolt_id: b.status for b in report.bolts if b.status != MISSING}
+        done = frozenset(k for k, s in status.items() if s == "ok")
+        specs = {b.bolt_id: BoltSpec(xyz(b.position), b.parameters.pset, b.order, b.batch,
+                                     b.parameters_id, b.parameters) for b in infos}
+        log.info("vehicle %s (%s) opened%s: %d bolts, %d done", a.vin, model,
+                 " for rework" if started.rework else "", len(infos), len(done))
+        # by keyword: held and status are both bolt -> text, and given by position (status
+        # in held's place) every bolt done before a reload or a restart came back held
+        return VehicleLoaded(time.time(), a.vin, model, specs, done, started.rework,
+                             skipped={b: skip_note(*who) for b, who in skipped.items()},
+                             noks=noks, held=held, status=status)
+
+    def close_vehicle(self, vin: str) -> VehicleEnded:
+        report = self._repo().close_vehicle(vin)
+        log.info("vehicle %s closed: missing %s, skipped %s, NOK %s", vin, report.missing,
+                 report.skipped, report.nok)
+        # the screens' "not tightened when the vehicle left": skipped ones too
+        return VehicleEnded(time.time(), vin, tuple(report.untightened), tuple(report.nok))
+
+    def record_command(self, a: RecordCommand, vin_at_height: str | None) -> Reason | None:
+        """An accepted command on disk with its user (a reopen reopens the vehicle in the
+        same transaction); None once recorded, else why not (the database's own faults
+        raise)."""
+        repo, cmd, who = self._repo(), a.command, a.issuer
+        at = datetime.fromtimestamp(a.t, UTC)
+        vin = getattr(cmd, "vin", None) or (
+            vin_at_height if not isinstance(cmd, ReopenVehicle) else None)
+        comment = cmd.comment
+        if isinstance(cmd, TeachStart):   # the model taught is part of the record
+            comment = f"model {cmd.model}" + (f": {comment}" if comment else "")
+        if isinstance(cmd, SignOut) and cmd.user is not None and cmd.user != who.user:
+            comment = f"{cmd.user} signed out" + (f": {comment}" if comment else "")
+        try:
+            if isinstance(cmd, ReopenVehicle):
+                repo.reopen_vehicle(cmd.vin, at=at, user=who.user, source=who.source,
+                                    comment=cmd.comment)
+            else:
+                repo.ledger.record_command(at=at, user=who.user, source=who.source,
+                                           kind=KIND[type(cmd)], vin=vin,
+                                           bolt=getattr(cmd, "bolt", None), comment=comment)
+        except NotFoundError:
+            return Reason(Why.UNKNOWN_VEHICLE, vin=vin)
+        except DataError:
+            return Reason(Why.NOT_CLOSED, vin=vin)
+        return None
+
+    def operator(self) -> tuple[str, datetime] | None:
+        """Who signed in at the station and has not signed out since, with when (the last
+        sign-in or sign-out command decides; None: nobody)."""
+        last = self._repo().ledger.last_of((KIND[SignIn], KIND[SignOut]))
+        if last is None or last.kind != KIND[SignIn]:
+            return None
+        return last.user, last.at
+
+    def last_tightening_id(self) -> int | None:
+        return self._repo().last_tightening_id()
+
+    def record_gap(self, first: int, last: int, vin: str | None, reason: str) -> None:
+        self._repo().record_gap(first, last, vin, reason)
+
+    def record_check(self, a: RecordCheck) -> None:
+        """A pair's calibration check, with its feed entry (the line gets it)."""
+        c, s = a.check, summary(a.check)
+        why = None if c.why is None else c.why.value + (f": {c.note}" if c.note else "")
+        record_check(self._repo(), at=datetime.fromtimestamp(a.t, UTC), pair=c.pair,
+                     verdict=c.verdict.value, reference=c.reference, offset_mm=c.offset_mm,
+                     tolerance_mm=c.tolerance_mm, reason=why, references=s["references"])
+
+    def store_curve(self, curve: Curve) -> None:
+        """A tightening curve with its rundown, by tightening id (one stored before its
+        rundown is written is found by that id)."""
+        store_curve(self._repo(), tightening_id=curve.tightening_id,
+                    trace_type=curve.trace_type, unit=curve.unit, values=curve.values,
+                    sample_period_s=curve.time_step_s,
+                    times_s=None if curve.time_step_s is not None else curve.times_s,
+                    result_at=None if curve.timestamp is None
+                    else curve.timestamp.astimezone(UTC))
+
+    # -- the database's health -------------------------------------------------------------
+    def check_file(self) -> None:
+        """Raise DbError when the SQLite file the daemon opened is gone or was replaced (its
+        open connection would go on writing into the deleted file: results acknowledged,
+        then lost, and the bolts tightened again after a restart)."""
+        if self._db_file is None:
+            return
+        path, ident = self._db_file
+        try:
+            st = path.stat()
+        except OSError:
+            raise DbError(f"the database file {path} was removed") from None
+        if (st.st_dev, st.st_ino) != ident:
+            raise DbError(f"the database file {path} was replaced by another file")
+
+    def probe(self, repo: Repository) -> None:
+        """The database's "reconnect" (its keeper's thread): one cheap query (the engine's
+        pool reconnects by itself), then the results it refused, oldest first: it is back
+        only once it has taken them all (a full disk still answers reads).  A failure is a
+        device error, the keeper's kind of failure."""
+        try:
+            repo.models()
+            self.check_file()   # a removed file still answers through its connection
+        except STATION_FAULTS as exc:
+            raise DeviceError(one_line(exc)) from None
+        while True:
+            with self._lock:
+                if not self._unsaved:
+                    return
+                u = self._unsaved[0]
+            try:
+                self.write(u)
+            except STATION_FAULTS as exc:
+                raise DeviceError(f"results not stored: {one_line(exc)}") from None
+            with self._lock:
+                self._unsaved.pop(0)
+                self._saved_late.append(u)
+            log.info("tightening %d of %s stored late", u.record.result.tightening_id,
+                     u.record.bolt)
+
+    def save_images(self, vin: str, bolt: str, tightening_id: int,
+                    loc: Localization | None) -> list[str]:
+        """Write the selection's crops beside the records; a failure is logged and the
+        tightening is recorded without them, never lost."""
+        folder = self.cfg.records.images_dir
+        if not self.cfg.records.save_images or folder is None or loc is None:
+            return []
+        out = []
+        for key, img in sorted(loc.crops.items()):
+            path = folder / vin / f"{bolt}-{tightening_id}-{key.replace('/', '-')}.png"
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                if not cv2.imwrite(str(path), img):
+                    raise OSError("the PNG encoder refused it")
+            except (OSError, cv2.error) as exc:
+                log.warning("image %s not saved: %s", path, exc)
+                continue
+            out.append(str(path))
+        return out
+
+
+def _sqlite_file(url: str) -> tuple[Path, tuple[int, int]] | None:
+    """The file of an SQLite URL and its (device, inode); None for another database or one
+    in memory."""
+    from sqlalchemy.engine import make_url
+
+    u = make_url(url)
+    if u.get_backend_name() != "sqlite" or not u.database or u.database == ":memory:":
+        return None
+    path = Path(u.database).resolve()
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return path, (st.st_dev, st.st_ino)
+
+
+def xyz(p: Any) -> tuple[float, float, float]:
+    """Three plain floats from any sequence (NumPy values included)."""
+    return float(p[0]), float(p[1]), float(p[2])
+
+
+def _selection_json(sel: Selection) -> dict[str, Any]:
+    """Where the wrench was when its bolt was selected, for the record of a result that comes
+    after a reload or restart (the evidence, the marker crops, stays in memory)."""
+    return {"point_mm": [float(v) for v in sel.point_mm], "tilt_deg": float(sel.tilt_deg),
+            "distance_mm": float(sel.distance_mm), "exposure_t": float(sel.exposure_t),
+            "decided_t": float(sel.decided_t), "loosen": sel.loosen, "operator": sel.operator}
+
+
+def _loosen_sent(pset: int | None) -> dict[str, Any]:
+    """What went to the controller for a loosening: its loosen pset, no targets of the
+    station's (the record's parameter version stays the bolt's, the one it is tightened
+    with)."""
+    return {"pset": pset, "torque": None, "angle": None, "loosen": True}
+
+
+def _aware(t: datetime | None) -> datetime | None:
+    """The controller's naive local timestamp as an aware one (the database keeps UTC)."""
+    return None if t is None else t.astimezone(UTC)
+
+
+__all__ = ["STATION_FAULTS", "Records", "Unsaved", "xyz"]

@@ -1,0 +1,465 @@
+"""``stationd run --config station.yaml``: the daemon as systemd runs it.
+
+READY=1 once the station serves, whatever its devices do (a device that is down is a fault with
+its reason in STATUS=, retried with backoff); STATUS= on every state change; WATCHDOG=1 as the
+unit asks.  SIGTERM (and SIGINT) stop the loop, disable the tool and close every device in
+order, then exit 0.  SIGHUP validates the whole new station (the file, every file it names, the
+bolt table) before switching: an invalid one is logged with its reason and the running station
+stays; a valid one whose devices are down runs in fault.  Only a configuration that is invalid
+at the very first start exits (2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import logging
+import random
+import signal
+import sys
+from collections.abc import Callable, Coroutine
+from pathlib import Path
+from typing import Any
+
+from drivers.keeper import Backoff, FaultKind, one_line
+from stationd.boltfile import load_bolts
+from stationd.config import StationConfig, load_station_config, station_identity
+from stationd.errors import StationError
+from stationd.lock import StationLocks
+from stationd.logsetup import setup_logging
+from stationd.shell.daemon import OPEN_ERRORS, Station
+from stationd.shell.records import STATION_FAULTS, Unsaved
+from stationd.shell.sdnotify import Notifier
+from stationd.station.events import (
+    DeviceHealth,
+    EventBus,
+    LineLinkChanged,
+    ResultRecorded,
+    State,
+    StateChanged,
+    StationEvent,
+)
+from stationd.station.inputs import DATABASE, LIFT, WRENCH
+
+log = logging.getLogger("stationd")
+OPEN_RETRY_S = (1.0, 30.0)   # a database that does not open: first and longest wait
+#: what runs beside each station the loop starts, until that station stops (its configuration,
+#: the station, its stop): ``stationd run``'s simulated world and operator on a ``sim://``
+#: station, handed in by ``stationd.cli`` (the runtime never imports the simulator)
+Beside = Callable[[StationConfig, Station, asyncio.Event], Coroutine[Any, Any, None]]
+
+
+def validate_station(path: str | Path) -> StationConfig:
+    """The whole station, checked before it is used: the file and every file it names (the
+    loader reads calibrations and transforms) and the bolt table, with the station's own
+    matching tolerance.  Raises the first error (one line, file and key)."""
+    cfg = load_station_config(path, station=True)
+    if cfg.bolts_path is not None:
+        load_bolts(cfg.bolts_path, tolerance_mm=cfg.matching.tolerance_mm)
+    return cfg
+
+
+async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bool:
+    """Open the station's database (its devices are the station's to retry); a database that
+    does not open is retried with backoff, never an exit.  False if stopped meanwhile."""
+    loop = asyncio.get_running_loop()
+    backoff = Backoff(*OPEN_RETRY_S, rng=random.Random("database"))  # noqa: S311 - jitter
+    told = False
+    while not stop.is_set():
+        try:
+            await loop.run_in_executor(None, station.open)
+            if told:
+                station.bus.publish(DeviceHealth(DATABASE, True))
+            return True
+        except STATION_FAULTS as exc:
+            wait = backoff.next()
+            log.error("fault: database: %s (retrying in %.0f s)", one_line(exc), wait)
+            if not told:
+                notifier.ready(f"fault: database: {one_line(exc)}")
+                told = True
+            notifier.status(f"fault: database: {one_line(exc)}")
+            # the screens and /healthz say it too (the station's loop is not running yet)
+            station.bus.publish(DeviceHealth(DATABASE, False, FaultKind.DOWN, one_line(exc)))
+            station.bus.publish(StateChanged(State.FAULT, f"database: {one_line(exc)}"))
+        try:
+            await asyncio.wait_for(stop.wait(), wait)
+        except TimeoutError:
+            pass
+    return False
+
+
+async def serve(cfg_path: str, cfg: StationConfig, notifier: Notifier,
+                locks: StationLocks | None = None, beside: Beside | None = None) -> None:
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    reload = asyncio.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(sig, stop.set)
+    loop.add_signal_handler(signal.SIGHUP, reload.set)
+    bus = EventBus()    # one for the daemon's life: the screens follow it across reloads
+    screens = Screens(bus)
+    watchdog = asyncio.create_task(keep_watchdog(notifier))
+    try:
+        await serve_station(cfg_path, cfg, notifier, bus, screens, stop, reload, locks,
+                            beside)
+    finally:
+        watchdog.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await watchdog
+        await screens.stop()
+
+
+async def keep_watchdog(notifier: Notifier) -> None:
+    """WATCHDOG=1 every ``watchdog_s`` for the daemon's life, from its event loop: a loop
+    that stops turning (a blocked call, a deadlock) stops the pings and systemd restarts the
+    daemon; a station in fault, a database that does not open at start or one locked for
+    seconds (its calls run in threads) keeps them going (it was killed for those)."""
+    if not notifier.watchdog_s:
+        return
+    while True:
+        notifier.watchdog()
+        await asyncio.sleep(notifier.watchdog_s)
+
+
+#: a screens' port that was in use is tried again after this long, s
+SCREENS_RETRY_S = 5.0
+
+
+class Screens:
+    """The web screens (``stationd.web``) of the running configuration: started when its
+    ``http`` section asks, moved when a reload changes it.  A port in use is a logged fault of
+    the screens, never of the station (the tool keeps working without them)."""
+
+    def __init__(self, bus: EventBus) -> None:
+        self.bus = bus
+        self.server: Any = None
+        self.frames: Any = None
+        self.station: Station | None = None   # whose commands the screens take
+        self.line: Any = None                  # the forwarder to the line database, if any
+        self._for: tuple[Any, str] | None = None
+        self._retry: asyncio.Task[None] | None = None
+        self._failed: str | None = None   # why the screens are not served (logged once)
+
+    async def follow(self, cfg: StationConfig) -> None:
+        """Serve the screens ``cfg`` asks for.  A database that does not open yet serves them
+        without the results pages (the operator and monitoring see the fault); called again
+        once it opens, they get their results."""
+        key = (cfg.http, cfg.database_url)
+        if key == self._for and (cfg.http is None or (self.server is not None
+                                                      and self.server.results is not None)):
+            if self.server is not None:     # a reload may add or remove a pair
+                self.server.set_devices(configured_devices(cfg))
+            return
+        frames = self.frames if key == self._for else None   # the station holds them
+        await self.stop()
+        self._for = key
+        if cfg.http is None:
+            return
+        from db.repository import Repository
+        from stationd.web import LatestFrames, Results, WebServer
+
+        self.frames = frames if frames is not None else LatestFrames()
+        results, results_error = None, None
+        try:
+            results = Results(Repository.open(cfg.database_url))
+        except OPEN_ERRORS as exc:
+            results_error = one_line(exc)
+            log.error("screens served without results until the database opens: %s",
+                      results_error)
+        try:
+            server = WebServer(self.bus, results, self.frames,
+                               listen=cfg.http.listen, token=cfg.http.token,
+                               images_dir=cfg.records.images_dir,
+                               devices=configured_devices(cfg),
+                               results_error=results_error)
+            await server.start()
+            self.server = server   # only once it serves (a retry's start is awaited)
+            self.attach(self.station, cfg)
+        except OPEN_ERRORS as exc:
+            # a port another program holds may be freed: tried again, journaled once
+            if self._failed != one_line(exc):
+                self._failed = one_line(exc)
+                log.error("screens not served on %s: %s (tried again every %.0f s)",
+                          cfg.http.listen, self._failed, SCREENS_RETRY_S)
+            self.server = None
+            self._retry = asyncio.get_running_loop().create_task(self._again(cfg, key))
+            return
+        self._failed = None
+        log.info("screens: %s", self.server.url)
+
+    def attach(self, station: Station | None, cfg: StationConfig) -> None:
+        """People's commands go to ``station`` (None: refused, none is running), with the
+        users of ``cfg``; the status API reads the line forwarder's state."""
+        self.station = station
+        if self.server is not None:
+            self.server.station = station_identity(cfg)
+            self.server.line = lambda: None if self.line is None else self.line.last_status
+            self.server.line_results.url = None if cfg.line is None else cfg.line.url
+            self.server.commands.access = cfg.access
+            self.server.commands.submit = None if station is None else station.submit
+
+    async def _again(self, cfg: StationConfig, key: tuple[Any, str]) -> None:
+        await asyncio.sleep(SCREENS_RETRY_S)
+        if self._for == key and self.server is None:
+            await self.follow(cfg)
+
+    async def stop(self) -> None:
+        retry, self._retry = self._retry, None
+        if retry is not None and retry is not asyncio.current_task():
+            retry.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await retry
+        if self.server is not None:
+            try:
+                await self.server.stop()
+            except Exception as exc:  # stopping the screens never stops the daemon's exit
+                log.warning("stopping the screens: %s", one_line(exc))
+        self.server, self.frames, self._for = None, None, None
+
+
+async def _reader(cfg: StationConfig, what: str) -> Any:
+    """A connection of its own to the station's database for a reader of its records (the
+    forwarder, the OPC UA server); None, journaled, when it does not open."""
+    from db.repository import Repository
+
+    try:
+        return await asyncio.get_running_loop().run_in_executor(None, Repository.open,
+                                                                 cfg.database_url)
+    except OPEN_ERRORS as exc:
+        log.error("%s: the station's database does not open: %s", what, one_line(exc))
+        return None
+
+
+async def forward(cfg: StationConfig, notifier: Notifier, screens: Screens,
+                  stop: asyncio.Event, bus: EventBus | None = None) -> None:
+    """The records to the line's database while this station runs (``cfg.line``; nothing
+    without it).  A line database that is down or refuses is never a fault of the station: a
+    journal line (and STATUS=) at each change, the backlog in ``/api/status``.  Each result
+    the ``bus`` says was recorded wakes the forwarder (the lag is then the forwarding, not
+    its poll)."""
+    if cfg.line is None:
+        return
+    from stationd.forward import Forwarder
+
+    loop = asyncio.get_running_loop()
+    repo = await _reader(cfg, "line database: not forwarding")
+    if repo is None:
+        return
+    fwd = Forwarder(repo, cfg.line)
+    screens.line = fwd
+
+    def told(st: dict[str, Any]) -> None:
+        if st["alarm"]:
+            line = f"line database: ALARM: {st['alarm']}"
+        elif st["up"] is False:
+            n = st["backlog"]
+            line = f"line database: down ({st['last_error']}); " + (
+                "1 record waits" if n == 1 else f"{n} records wait")
+        else:
+            line = f"line database: forwarding to {st['url']} ({st['backlog']} behind)"
+        (log.warning if st["alarm"] or st["up"] is False else log.info)("%s", line)
+        notifier.status(line)
+        if bus is not None:   # the line asset's health in OPC UA (never a station fault)
+            bus.publish(LineLinkChanged(st["up"] is not False, st["last_error"] or "",
+                                        st["alarm"]))
+
+    wake = asyncio.Event()
+
+    def heard(event: StationEvent) -> None:   # the publisher's thread: the loop sets it
+        if isinstance(event, ResultRecorded):
+            loop.call_soon_threadsafe(wake.set)
+
+    unsubscribe = bus.subscribe(heard) if bus is not None else None
+    try:
+        await fwd.run(stop, told, wake)
+    finally:
+        if unsubscribe is not None:
+            unsubscribe()
+        screens.line = None
+        await loop.run_in_executor(None, fwd.line.dispose)
+        await loop.run_in_executor(None, repo.close)
+
+
+async def opcua(cfg: StationConfig, bus: EventBus, stop: asyncio.Event) -> None:
+    """The station's OPC UA server while it runs (``cfg.opcua``; nothing without it).  A port
+    in use or a database that does not open is logged, never a fault of the station."""
+    if cfg.opcua is None:
+        return
+    from stationd.opcua.server import OpcUaServer
+
+    loop = asyncio.get_running_loop()
+    repo = await _reader(cfg, "OPC UA: not served")
+    if repo is None:
+        return
+    server = OpcUaServer(cfg.opcua, bus=bus, devices=opcua_devices(cfg))
+    try:
+        await server.start()
+    except Exception as exc:   # a port in use, certificates: never the station's fault
+        log.error("OPC UA: not served on %s: %s", cfg.opcua.endpoint, one_line(exc))
+        with contextlib.suppress(Exception):
+            await server.stop()
+        await loop.run_in_executor(None, repo.close)
+        return
+    log.info("OPC UA: serving %s", cfg.opcua.endpoint)
+    try:
+        await server.run(stop, repo)
+    finally:
+        await server.stop()
+        await loop.run_in_executor(None, repo.close)
+
+
+def configured_devices(cfg: StationConfig) -> tuple[str, ...]:
+    """The devices the daemon opens (lift, wrench, each pair with both cameras), by the names
+    its DeviceHealth events use: the screens list them before any reports."""
+    return (LIFT, WRENCH, *(n for n, pc in cfg.pairs.items() if pc.left and pc.right))
+
+
+def opcua_devices(cfg: StationConfig) -> tuple[str, ...]:
+    """The devices whose health the OPC UA server shows as the JoiningSystem's assets: the
+    configured ones, the station's database and, with a line section, the line database's
+    link (``stationd.opcua.health``)."""
+    from stationd.opcua.health import LINE_LINK
+
+    return (*configured_devices(cfg), DATABASE, *((LINE_LINK,) if cfg.line else ()))
+
+
+def locked_devices(cfg: StationConfig) -> list[tuple[str, str]]:
+    """The devices the daemon drives, as ``(what, url)`` for their locks: the lift, the
+    controller and both cameras of every pair wired to two (the ones it opens)."""
+    cams = [(f"camera {cam}", cfg.cameras[cam]) for pc in cfg.pairs.values()
+            if pc.left and pc.right for cam in (pc.left, pc.right) if cam in cfg.cameras]
+    return [("lift", cfg.lift.url), ("wrench", cfg.wrench.url), *cams]
+
+
+def hold_locks(locks: StationLocks, cfg: StationConfig) -> None:
+    """Hold the locks of ``cfg``'s database and devices (one daemon per database and per
+    device); raises LockHeldError, keeping what ``locks`` held, when another daemon has one."""
+    locks.hold(cfg.database_url, cfg.records.images_dir, locked_devices(cfg))
+
+
+async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, bus: EventBus,
+                        screens: Screens, stop: asyncio.Event, reload: asyncio.Event,
+                        locks: StationLocks | None = None,
+                        beside: Beside | None = None) -> None:
+    """Run the station of ``cfg`` until ``stop``; on ``reload`` validate ``cfg_path`` anew and
+    switch to it (closing and reopening every device) or keep the running one.  Separate from
+    :func:`serve` (which owns the signals) so that ``bench soak`` drives the same loop.
+    ``locks`` holds the one-daemon-per-database and per-device locks: a reload onto another
+    database or device moves them, or is refused when another daemon holds one.  ``beside``
+    runs beside each station, started before it (a simulated world is there for its first
+    grab) and awaited once it stops."""
+    loop = asyncio.get_running_loop()
+    carried: list[Unsaved] = []   # results the last station received and could not write
+    while True:
+        await screens.follow(cfg)
+        # the screens forget the last configuration's device reports (a reload)
+        bus.publish(StateChanged(State.STARTING, "opening the devices"))
+        station = Station(cfg, notifier=notifier, bus=bus)
+        station.frames = screens.frames
+        station.carry(carried)
+        if not await _open(station, notifier, stop):
+            await loop.run_in_executor(None, station.close)
+            notifier.stopping("stopping")
+            return
+        await screens.follow(cfg)   # their results, if the database opened only now
+        inner = asyncio.Event()
+        extra = None if beside is None else asyncio.create_task(beside(cfg, station, inner))
+        task = asyncio.create_task(station.run(inner))
+        screens.attach(station, cfg)
+        line = asyncio.create_task(forward(cfg, notifier, screens, inner, bus))
+        served = asyncio.create_task(opcua(cfg, bus, inner))
+        log.info("stationd running: %s", cfg_path)
+        new: StationConfig | None = None
+        while new is None and not stop.is_set() and not task.done():
+            waiters = {asyncio.create_task(stop.wait()), asyncio.create_task(reload.wait())}
+            await asyncio.wait({task, *waiters}, return_when=asyncio.FIRST_COMPLETED)
+            for w in waiters:
+                w.cancel()
+            if reload.is_set() and not stop.is_set():
+                reload.clear()
+                try:  # validate first: an invalid station never stops the running one
+                    new = await loop.run_in_executor(None, validate_station, cfg_path)
+                    if locks is not None:   # a device another daemon drives: refused
+                        hold_locks(locks, new)
+                except StationError as exc:
+                    new = None
+                    log.error("reload refused, keeping the running configuration: %s",
+                              one_line(exc))
+                    notifier.status(f"reload refused: {one_line(exc)}")
+                except Exception as exc:   # a bug in a reader: still never the running station
+                    new = None
+                    log.exception("reload refused (an error in reading the configuration), "
+                                  "keeping the running configuration: %s", one_line(exc))
+                    notifier.status(f"reload refused: {one_line(exc)}")
+        if new is not None and not stop.is_set():
+            # systemd: reloading until the new station's READY=1 (never STOPPING=1 here)
+            notifier.reloading("reloading: closing the devices")
+        screens.attach(None, cfg)
+        inner.set()
+        await line
+        await served
+        if extra is not None:
+            await _beside_ended(extra)
+        try:
+            await task
+        except Exception as exc:  # a bug, not a device: logged, the station restarts
+            log.error("station loop failed: %s: %s", type(exc).__name__, one_line(exc))
+            await asyncio.sleep(1.0)
+        vin = station.vin      # the vehicle on the lift as the station closes
+        await loop.run_in_executor(None, station.close)
+        carried = station.unsaved()
+        if stop.is_set():
+            notifier.stopping("closing devices")
+            log.info("stationd stopped")
+            return
+        if new is not None:
+            log.info("configuration reloaded; reopening the devices")
+            lost = vehicle_lost(vin, cfg, new)
+            if lost is not None:
+                log.warning("%s", lost)
+            cfg = new
+
+
+def vehicle_lost(vin: str | None, old: StationConfig, new: StationConfig) -> str | None:
+    """Why a reload cannot keep the vehicle ``vin`` (open as the last station closed) as it
+    was, in one line for the journal; None when it can: the new station reads the lift (a
+    real PLC goes on through a reload; the simulated one is carried over) and the same
+    database, so it reopens the vehicle with what was done.  A lift that reports another
+    vehicle, or a bolt table without its model, is said by the station as it opens.  Why: a
+    reload is taken for one that keeps the vehicle; one that cannot must say so, not leave a
+    vehicle open for good with its bolts "missing"."""
+    if vin is None:
+        return None
+    if new.database_url != old.database_url:
+        return (f"reload: vehicle {vin} cannot go on as it was: its record is in the last "
+                f"database ({old.database_url}); the new one ({new.database_url}) opens it "
+                "anew, without its bolts done so far")
+    return None
+
+
+async def _beside_ended(task: asyncio.Task[None]) -> None:
+    """What ran beside a station has ended with it; its failure is journaled, never the
+    daemon's."""
+    try:
+        await task
+    except Exception as exc:
+        log.error("beside the station: %s: %s", type(exc).__name__, one_line(exc))
+
+
+def run_daemon(args: argparse.Namespace, beside: Beside | None = None) -> int:
+    """``stationd run``; ``beside``: see :func:`serve_station`."""
+    # one line per event; stamped unless systemd's journal takes them (it stamps them)
+    setup_logging(logging.INFO, sys.stderr)
+    logging.getLogger("alembic").setLevel(logging.WARNING)
+    logging.getLogger("asyncua").setLevel(logging.WARNING)   # ~1000 lines per start otherwise
+    cfg = validate_station(args.config)  # an invalid station at the first start: exit 2
+    locks = StationLocks()
+    # a second daemon on this database or on one of its devices: one line naming the holder
+    # and the device, exit 2 (taken before any device is opened)
+    hold_locks(locks, cfg)
+    try:
+        asyncio.run(serve(args.config, cfg, Notifier(), locks, beside))
+    finally:
+        locks.release()
+    return 0

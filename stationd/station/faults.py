@@ -1,0 +1,71 @@
+"""Devices' faults and their return: the station in FAULT while any device is, the tool
+off, a teach point answered; back to waiting or tracking when every device is back."""
+
+from __future__ import annotations
+
+from drivers.keeper import FaultKind
+from stationd.reasons import Reason, Why
+from stationd.station.actions import Action, Publish
+from stationd.station.events import (
+    DeviceHealth,
+    State,
+)
+from stationd.station.inputs import DATABASE, WRENCH, DeviceBack, DeviceFault
+from stationd.station.state import _Cut, _disable
+from stationd.station.teaching import TeachRules
+
+
+class FaultRules(TeachRules):
+    """Devices' faults and their return."""
+
+    def _on_DeviceFault(self, ev: DeviceFault) -> list[Action]:  # noqa: N802
+        if ev.device == WRENCH:
+            self._vin_pending = False
+            self._link_lost_at = ev.t
+            if self._enabled is not None and self._enabled_at is not None and self._cut is None \
+                    and self._result_owed(ev.t):
+                # the tool's result may come only after the reconnect: where it belongs is
+                # then proved by the controller's own data (:meth:`_made_during_cut`)
+                self._cut = _Cut(self._enabled, self._enabled_at, ev.t)
+        if ev.device == DATABASE:
+            # the load under way failed (the only database call the core waits for): the
+            # vehicle is loaded again once the database is back and the lift still ready
+            self._loading = False
+        return self._fault(ev.t, ev.device, ev.kind, ev.reason)
+
+    def _on_DeviceBack(self, ev: DeviceBack) -> list[Action]:  # noqa: N802
+        if ev.device == WRENCH and ev.reconnects is not None \
+                and ev.reconnects != self._wrench_reconnects:
+            if self._wrench_reconnects is not None:
+                self._wrench_epoch += 1   # a reconnected controller may have lost the VIN
+            self._wrench_reconnects = ev.reconnects
+        acts: list[Action] = []
+        if ev.device == WRENCH and WRENCH in self.faults:
+            # the DisableTool sent at the fault may never have arrived: off, whatever it did
+            acts += _disable("controller back: the tool stays off until a bolt is confirmed",
+                             t=ev.t)
+        return acts + self._back(ev.t, ev.device)
+
+    def _fault(self, t: float, device: str, kind: FaultKind, reason: str) -> list[Action]:
+        acts: list[Action] = []
+        if self.faults.get(device) != (kind, reason):
+            acts.append(Publish(DeviceHealth(device, False, kind, reason, t=t)))
+        self.faults[device] = (kind, reason)
+        acts += self._drop(t, State.FAULT, self._fault_reason())
+        if self._teach is not None and self._teach.measuring is not None:
+            # a bolt being taught is measured only without faults: answered now, with them
+            acts += self._teach_answered(self._teach, Reason(Why.DEVICE_FAULT,
+                                                             note=self._fault_reason()))
+        return acts
+
+    def _back(self, t: float, device: str) -> list[Action]:
+        if device not in self.faults:
+            return []
+        del self.faults[device]
+        acts: list[Action] = [Publish(DeviceHealth(device, True, t=t))]
+        if self.state is State.FAULT:
+            if self.faults:
+                self.reason = self._fault_reason()
+            else:
+                self._to(State.WAITING_VEHICLE, "recovered; waiting for the lift")
+        return acts

@@ -1,0 +1,249 @@
+"""The core's inputs: what the shell saw, typed (a lift read, a localization, the controller's
+acknowledgement or result, a device's fault, a command), each with its time ``t``.
+
+Why a module of their own: they are the core's whole vocabulary from the world, read by the
+shell that builds them and by every subject of the rules that handles them."""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from db.bolts import Parameters
+from drivers.keeper import FaultKind
+from drivers.wrench.base import (
+    TighteningResult,
+    UnreadableResult,
+)
+from stationd.reasons import Reason
+from stationd.station.actions import Record
+from stationd.station.commands import (
+    Command,
+    Issuer,
+)
+from stationd.station.trust import ReferencesChecked
+
+
+class Device(enum.StrEnum):
+    """The station's devices besides its camera pairs (a pair is named by the station file)."""
+
+    LIFT = "lift"
+    WRENCH = "wrench"
+    VEHICLE = "vehicle"     # the vehicle at height: its data can fault (an unknown model)
+    DATABASE = "database"
+
+
+LIFT, WRENCH, VEHICLE, DATABASE = Device.LIFT, Device.WRENCH, Device.VEHICLE, Device.DATABASE
+
+
+# -- inputs -------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Input:
+    """Base of every input: ``t`` is when it happened (``time.time()`` scale)."""
+
+    t: float
+
+
+@dataclass(frozen=True)
+class Started(Input):
+    """The daemon is serving (devices may still be down)."""
+
+
+@dataclass(frozen=True)
+class LiftRead(Input):
+    """One successful read of the lift PLC (the read itself proves the PLC is back);
+    ``why`` is what the operator reads while it is not ready (the daemon passes
+    ``LiftState.why_not_ready``: moving, the PLC's fault bit, not at height)."""
+
+    ready: bool
+    at_height: bool
+    model_code: int
+    vin: str | None
+    why: str = "lift not at working height"
+
+
+@dataclass(frozen=True)
+class LocalizedIn(Input):
+    """A localization of the wrench: ``point_mm`` (bolt end, vehicle frame) or ``reason`` why
+    none; ``exposure_t`` is when its frames were exposed (the earliest of those used).
+    ``evidence`` is the daemon's (marker crops), handed back with the selection it decided."""
+
+    exposure_t: float
+    point_mm: tuple[float, float, float] | None
+    reason: Reason | None = None
+    tilt_deg: float = 0.0
+    evidence: Any = None
+    pairs: tuple[str, ...] = ()   # the pairs whose views made the point (the check's rule)
+
+
+@dataclass(frozen=True)
+class ParamsAcked(Input):
+    """The controller took ``bolt``'s parameters (``pset``); ``latency_ms``: the stages from
+    the frames' exposure to this acknowledgement (for the screens and the benchmarks)."""
+
+    bolt: str
+    pset: int | None = None
+    latency_ms: Mapping[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ParamsRefused(Input):
+    bolt: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class ResultIn(Input):
+    """A tightening result from the controller (``result`` has ``ok``, ``pset``,
+    ``tightening_id``), not yet acknowledged; ``fetched``: asked for after a reconnect (the
+    station missed it while the link was down)."""
+
+    result: TighteningResult
+    fetched: bool = False
+    #: fetched: the newest tightening id the station had accounted for when it asked (the
+    #: first result made during a link cut is the one after it)
+    follows: int | None = None
+    #: the controller's timestamp of the result on the station's clock (through the offset
+    #: measured at connect); None when the controller's clock is not known
+    made_at: float | None = None
+
+
+@dataclass(frozen=True)
+class UnreadableIn(Input):
+    """A result message the driver could not read (kept whole), not yet acknowledged."""
+
+    unreadable: UnreadableResult
+
+
+@dataclass(frozen=True)
+class DeviceFault(Input):
+    """``device`` (lift, wrench, database, a pair's name) failed: ``kind`` (down, timeout,
+    garbage, refused, ...) and a readable ``reason``."""
+
+    device: str
+    kind: FaultKind
+    reason: str
+
+
+@dataclass(frozen=True)
+class DeviceBack(Input):
+    """``device`` answers again; for the wrench, ``reconnects`` is its link's reconnect count
+    (a change means a controller that may have forgotten the VIN)."""
+
+    device: str
+    reconnects: int | None = None
+
+
+@dataclass(frozen=True)
+class BoltSpec:
+    """A bolt of the loaded vehicle; ``parameters_id`` is the parameter version the database
+    gave (recorded with the bolt's result: the version actually sent)."""
+
+    position: tuple[float, float, float]
+    pset: int | None
+    order: int | None = None
+    batch: str | None = None
+    parameters_id: int | None = None
+    parameters: Parameters | None = None   # what goes to the controller for this bolt
+
+
+@dataclass(frozen=True)
+class VehicleLoaded(Input):
+    """The database has the vehicle open: its bolts, those already done and those a command
+    skipped since it was (re)opened (bolt -> why)."""
+
+    vin: str
+    model: str
+    bolts: Mapping[str, BoltSpec]
+    done: frozenset[str] = frozenset()
+    rework: bool = False
+    skipped: Mapping[str, str] = field(default_factory=dict)
+    noks: Mapping[str, int] = field(default_factory=dict)   # NOKs in a row, since a release
+    held: Mapping[str, str] = field(default_factory=dict)   # held by an unreadable result
+    status: Mapping[str, str] = field(default_factory=dict)  # bolt -> ok, nok (its records)
+
+@dataclass(frozen=True)
+class ToolOn(Input):
+    """The controller enabled the tool for ``bolt`` (the outcome of :class:`EnableTool`)."""
+
+    bolt: str
+
+
+@dataclass(frozen=True)
+class Written(Input):
+    """The database took ``record`` (with the crops ``images``): it may be acknowledged."""
+
+    record: Record
+    images: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class VehicleEnded(Input):
+    """The database closed ``vin``: the bolts missing and NOK when it left."""
+
+    vin: str
+    missing: tuple[str, ...] = ()
+    nok: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class VehicleRejected(Input):
+    """The vehicle at height cannot be opened: ``closed`` when its VIN was closed before."""
+
+    vin: str | None
+    reason: str
+    closed: bool = False
+
+
+@dataclass(frozen=True)
+class VinSent(Input):
+    """The VIN went to the controller (or the controller cannot take one: nothing to wait for)."""
+
+    vin: str
+
+
+@dataclass(frozen=True)
+class Tick(Input):
+    """Time passes (expires the late-result window)."""
+
+
+@dataclass(frozen=True)
+class CommandIn(Input):
+    """A person's command (``request`` numbers it for the answer)."""
+
+    request: int
+    command: Command
+    issuer: Issuer
+
+
+@dataclass(frozen=True)
+class ModelsKnown(Input):
+    """The vehicle models of the station's bolt tables (what ``teach start`` may name)."""
+
+    models: frozenset[str]
+
+
+@dataclass(frozen=True)
+class OperatorBack(Input):
+    """At a start or a reload: ``user`` signed in at ``since`` and did not sign out (the
+    commands' records say so), and is still a user of the station file."""
+
+    user: str
+    since: float
+
+
+@dataclass(frozen=True)
+class CommandDone(Input):
+    """The shell carried out a command's :class:`RecordCommand`: recorded (``reason`` None)
+    or refused by the database (an unknown VIN, a vehicle not closed, a failed write)."""
+
+    request: int
+    reason: Reason | None = None
+
+
+Event = (Started | LiftRead | LocalizedIn | ParamsAcked | ParamsRefused | ResultIn | UnreadableIn
+         | DeviceFault | DeviceBack | VehicleLoaded | VehicleRejected | VinSent | Tick
+         | CommandIn | CommandDone | ToolOn | Written | VehicleEnded | ModelsKnown
+         | ReferencesChecked | OperatorBack)

@@ -1,0 +1,191 @@
+"""The vehicle and the lift: the station works only at working height with a vehicle
+loaded (its VIN with the controller); a vehicle arrives, is rejected, reopened or ends, and
+the lift's state is followed."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from db.kinds import NOK, TO_LOOSEN
+from drivers.keeper import FaultKind
+from stationd.station.actions import Action, CloseVehicle, LoadVehicle, Publish, SendVin
+from stationd.station.events import (
+    BoltLocked,
+    BoltView,
+    Notice,
+    OperatorChange,
+    OperatorChanged,
+    State,
+    VehicleClosed,
+    VehicleOpened,
+)
+from stationd.station.faults import FaultRules
+from stationd.station.inputs import (
+    LIFT,
+    VEHICLE,
+    WRENCH,
+    LiftRead,
+    ModelsKnown,
+    Started,
+    VehicleEnded,
+    VehicleLoaded,
+    VehicleRejected,
+    VinSent,
+)
+from stationd.station.matching import BoltMatcher, BoltRule
+from stationd.station.state import NO_LOOSEN_PSET, NOK_SKIPPED, ON_A_BOLT, _disable
+
+
+class LiftRules(FaultRules):
+    """The vehicle and lift rules: arrivals, rejections, the lift followed, the VIN sent."""
+
+    def _on_Started(self, ev: Started) -> list[Action]:  # noqa: N802 - named after the event
+        if self.state is not State.STARTING:
+            return []
+        self._link_lost_at = ev.t
+        self._to(State.FAULT if self.faults else State.WAITING_VEHICLE,
+                 self._fault_reason() if self.faults else "waiting for the lift")
+        # the last station may have been killed with the tool on: off until a bolt is confirmed
+        return [*_disable("station started: the tool stays off until a bolt is confirmed",
+                          t=ev.t), *self._check_at_start(ev.t),
+                Publish(OperatorChanged(self.operator, self.operator_required,
+                                        how=OperatorChange.STILL_SIGNED_IN if self.operator
+                                        else OperatorChange.NOBODY, t=ev.t))]
+
+    def _on_LiftRead(self, ev: LiftRead) -> list[Action]:  # noqa: N802
+        acts: list[Action] = []
+        self._lift = ev
+        if LIFT in self.faults:
+            acts += self._back(ev.t, LIFT)
+        if VEHICLE in self.faults and not ev.at_height:
+            self._closed_vin = None
+            acts += self._back(ev.t, VEHICLE)   # a vehicle fault lasts while that vehicle is up
+        if self.vin is not None and not ev.at_height:
+            acts += self._drop(ev.t, State.WAITING_VEHICLE, ev.why)
+            acts.append(CloseVehicle(self.vin))
+            self._forget_vehicle()
+        changed = self._vehicle_changed(ev)
+        if changed is not None and VEHICLE not in self.faults:
+            # the PLC now names another vehicle (or model) with the lift still at height:
+            # the loaded bolts are not this car's; nothing more is sent until the lift goes
+            # down (which closes the loaded vehicle and clears this fault)
+            acts += self._fault(ev.t, VEHICLE, FaultKind.CHANGED, changed)
+        if self.state in (State.STARTING, State.FAULT):
+            return acts
+        if not ev.ready:
+            if self.state in ON_A_BOLT or self.state is State.TRACKING:
+                acts += self._drop(ev.t, State.WAITING_VEHICLE, ev.why)
+            else:
+                self._to(State.WAITING_VEHICLE, ev.why)
+            return acts
+        if self.vin is None:
+            if not self._loading:
+                self._loading = True
+                vin = ev.vin or f"SEQ-{int(ev.t)}"
+                self._load_code = ev.model_code
+                acts.append(LoadVehicle(ev.model_code, vin))
+                self._to(State.WAITING_VEHICLE, f"loading vehicle {vin}")
+            return acts
+        if self.state is State.WAITING_VEHICLE:
+            self._to(State.TRACKING, "tracking the wrench")
+        return acts
+
+    def _vehicle_changed(self, ev: LiftRead) -> str | None:
+        """Why the vehicle at height is not the one loaded (its VIN or model code changed),
+        else None."""
+        if self.vin is None or not ev.at_height:
+            return None
+        if ev.vin and ev.vin != self.vin:
+            return (f"the PLC reports VIN {ev.vin} at height, the station has {self.vin} "
+                    "loaded: lower the lift")
+        if self._load_code is not None and ev.model_code != self._load_code:
+            return (f"the PLC reports model code {ev.model_code} at height, {self.vin} was "
+                    f"loaded as {self._load_code}: lower the lift")
+        return None
+
+    def _on_VehicleLoaded(self, ev: VehicleLoaded) -> list[Action]:  # noqa: N802
+        self._loading = False
+        self.vin, self.model = ev.vin, ev.model
+        self._specs = dict(ev.bolts)
+        self._recorded = {}
+        self.matcher = BoltMatcher(
+            {k: np.asarray(b.position, dtype=np.float64) for k, b in ev.bolts.items()},
+            self.params, set(ev.done), dict(ev.skipped),
+            rules={k: BoltRule(b.order, b.batch) for k, b in ev.bolts.items()})
+        self._noks = {k: n for k, n in ev.noks.items() if k in ev.bolts and n > 0}
+        for k, n in self._noks.items():   # the NOK policy's state comes back with the vehicle
+            rule = self.nok.rule(k, ev.bolts[k].pset)
+            if n >= rule.max_nok:
+                self.matcher.locked[k] = n
+            elif rule.strategy == "skip":
+                self.matcher.skipped.setdefault(k, NOK_SKIPPED)
+        self._loosen_back(ev)
+        self.matcher.held = {k: note for k, note in ev.held.items() if k in ev.bolts}
+        opened = VehicleOpened(ev.vin, ev.model, tuple(
+            BoltView(k, *b.position, pset=b.pset, order=b.order, batch=b.batch,
+                     status=TO_LOOSEN if k in self._loosen else ev.status.get(k)
+                     or ("skipped" if k in ev.skipped else "pending"))
+            for k, b in ev.bolts.items()), rework=ev.rework, t=ev.t)
+        if self.state is State.WAITING_VEHICLE and self._lift is not None and self._lift.ready:
+            self._to(State.TRACKING, "tracking the wrench")
+        held = [Publish(BoltLocked(k, 0, held=note, t=ev.t))
+                for k, note in self.matcher.held.items()]
+        return [Publish(opened), *held, *self._check_on_arrival(ev.t, ev.vin)]
+
+    def _loosen_back(self, ev: VehicleLoaded) -> None:
+        """The loosen strategy's state comes back with the vehicle: a bolt whose last rundown
+        is a NOK under ``loosen`` (also a NOK loosening), or with a loosen command since its
+        last rundown, gets its loosen pset next; one that no loosen pset applies to any more
+        is skipped (its tightening pset would hit a tightened joint again)."""
+        assert self.matcher is not None  # noqa: S101 - loaded just now
+        self._loosen, self._nok_last = set(), set()
+        for k, status in ev.status.items():
+            if k not in ev.bolts:
+                continue
+            rule = self.nok.rule(k, ev.bolts[k].pset)
+            if status == NOK:
+                self._nok_last.add(k)
+                if rule.count_in_batch:   # the NOK counts in its batch (the policy's choice)
+                    self.matcher.counted.add(k)
+            if status == TO_LOOSEN or (status == NOK and rule.strategy == "loosen"):
+                if rule.loosen_pset is None:
+                    self.matcher.skipped.setdefault(k, NO_LOOSEN_PSET)
+                else:
+                    self._loosen.add(k)
+
+    def _on_VehicleRejected(self, ev: VehicleRejected) -> list[Action]:  # noqa: N802
+        if ev.closed and self.rework and ev.vin is not None and self._lift is not None:
+            return [Publish(Notice(f"VIN {ev.vin} already closed: reopened as a rework "
+                                   "(its records kept)", t=ev.t)),
+                    LoadVehicle(self._lift.model_code, ev.vin, reopen=True)]
+        self._loading = False
+        why = ev.reason
+        self._closed_vin = ev.vin if ev.closed else None
+        if ev.closed:
+            why = f"VIN {ev.vin} already closed: rework needs the vehicle reopened " \
+                  f"({ev.reason}); lower the lift to clear"
+        return self._fault(ev.t, VEHICLE, FaultKind.REJECTED, why)
+
+    def _on_VehicleEnded(self, ev: VehicleEnded) -> list[Action]:  # noqa: N802
+        return [Publish(VehicleClosed(ev.vin, ev.missing, ev.nok, t=ev.t))]
+
+    def _on_ModelsKnown(self, ev: ModelsKnown) -> list[Action]:  # noqa: N802
+        self.models = frozenset(ev.models)
+        return []
+
+    def _on_VinSent(self, ev: VinSent) -> list[Action]:  # noqa: N802
+        self._vin_pending = False
+        if ev.vin == self.vin:
+            self._vin_for = (ev.vin, self._wrench_epoch)
+        return []
+
+    # -- the VIN with the controller ------------------------------------------------------
+    def _vin_due(self) -> list[Action]:
+        """The controller tags its results with the VIN: sent once per vehicle and again after
+        the controller reconnected (a power cycle forgets it)."""
+        if self.vin is None or WRENCH in self.faults or self._vin_pending:
+            return []
+        if self._vin_for == (self.vin, self._wrench_epoch):
+            return []
+        self._vin_pending = True
+        return [SendVin(self.vin)]

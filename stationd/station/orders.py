@@ -1,0 +1,219 @@
+"""Commands (people's orders through the screens and ``stationd`` commands): who may give
+which, why one is refused, and what each does (skip, release, reopen, loosen, sign in and
+out, teach, check), with its record and answer."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from stationd.reasons import Reason, Why
+from stationd.station.actions import Action, Publish, RecordCommand, Reply
+from stationd.station.commands import (
+    RIGHT,
+    Answer,
+    CheckCalibration,
+    Command,
+    Issuer,
+    LoosenBolt,
+    ReleaseBolt,
+    ReopenVehicle,
+    SignIn,
+    SignOut,
+    SkipBolt,
+    TeachPoint,
+    TeachStart,
+    TeachStop,
+    skip_note,
+)
+from stationd.station.events import (
+    BoltReleased,
+    BoltSkipped,
+    BoltToLoosen,
+    OperatorChange,
+    OperatorChanged,
+    State,
+    VehicleReopened,
+)
+from stationd.station.faults import FaultRules
+from stationd.station.inputs import VEHICLE, CommandDone, CommandIn, OperatorBack
+from stationd.station.state import ON_A_BOLT
+
+
+class OrderRules(FaultRules):
+    """Commands: who may give which, why one is refused, what each does."""
+
+    def _on_CommandIn(self, ev: CommandIn) -> list[Action]:  # noqa: N802
+        """A command is checked against the rules now and takes effect once recorded."""
+        why = self._refusal(ev.command, ev.issuer)
+        if why is not None:
+            return [Reply(Answer(ev.request, ev.command, ev.issuer, why))]
+        if isinstance(ev.command, SignOut):   # its record names who is signed out
+            ev = replace(ev, command=replace(ev.command, user=self.operator))
+        self._commands[ev.request] = ev
+        return [RecordCommand(ev.request, ev.command, ev.issuer, ev.t)]
+
+    def _refusal(self, cmd: Command, who: Issuer) -> Reason | None:
+        """Why ``cmd`` may not be carried out now, or None."""
+        right = RIGHT.get(type(cmd))
+        if right is not None and right not in who.rights:
+            return Reason(Why.NO_RIGHT, right=right.value)
+        if isinstance(cmd, SignIn):
+            return Reason(Why.SIGNED_IN, user=who.user) if self.operator == who.user else None
+        if isinstance(cmd, SignOut):
+            return Reason(Why.NOT_SIGNED_IN) if self.operator is None else None
+        if isinstance(cmd, CheckCalibration):
+            return None if self.trust is not None else Reason(Why.NO_REFERENCES)
+        if isinstance(cmd, TeachStart | TeachPoint | TeachStop):
+            return self._teach_refusal(cmd)
+        if self._teach is not None:
+            return Reason(Why.TEACHING, note=self._teach.reason())
+        if isinstance(cmd, ReopenVehicle):
+            if cmd.vin == self.vin:
+                return Reason(Why.ALREADY_OPEN, vin=cmd.vin)
+            return None   # the database knows whether it is closed (CommandDone)
+        if self.vin is None or self.matcher is None:
+            # a vehicle raised while a device is in fault is not loaded until it is back
+            return Reason(Why.DEVICE_FAULT, note=self._fault_reason()) if self.faults \
+                else Reason(Why.NO_VEHICLE)
+        if cmd.vin != self.vin:
+            return Reason(Why.OTHER_VEHICLE, vin=cmd.vin)
+        if cmd.bolt not in self.matcher.bolts:
+            return Reason(Why.UNKNOWN_BOLT, bolt=cmd.bolt, vin=cmd.vin)
+        if isinstance(cmd, LoosenBolt):
+            return self._loosen_refusal(cmd)
+        if isinstance(cmd, ReleaseBolt):
+            return None if cmd.bolt in self.matcher.locked or cmd.bolt in self.matcher.held \
+                else Reason(Why.NOT_LOCKED, bolt=cmd.bolt)
+        if cmd.bolt in self.matcher.done:
+            return Reason(Why.DONE, bolt=cmd.bolt)
+        if cmd.bolt in self.matcher.skipped:
+            return Reason(Why.SKIPPED, bolt=cmd.bolt, note=self.matcher.skipped[cmd.bolt])
+        if self.tool_on and self.bolt == cmd.bolt:
+            return Reason(Why.TOOL_ON_BOLT, bolt=cmd.bolt)
+        return None
+
+    def _loosen_refusal(self, cmd: LoosenBolt) -> Reason | None:
+        """A loosen is for a bolt tightened (OK, or NOK last) that a loosen pset applies to,
+        not locked, skipped, to be loosened already, or being tightened now."""
+        m = self.matcher
+        assert m is not None  # noqa: S101 - checked by the caller
+        b = cmd.bolt
+        loosen_pset = self.nok.rule(b, self._specs[b].pset).loosen_pset
+        if loosen_pset is None:
+            return Reason(Why.NO_LOOSEN_PSET, bolt=b)
+        if b in self._loosen:
+            return Reason(Why.LOOSEN_FIRST, bolt=b, pset=loosen_pset)
+        if b in m.locked:
+            return Reason(Why.LOCKED, bolt=b, count=m.locked[b])
+        if b in m.skipped:
+            return Reason(Why.SKIPPED, bolt=b, note=m.skipped[b])
+        if self.tool_on and self.bolt == b:
+            return Reason(Why.TOOL_ON_BOLT, bolt=b)
+        if b not in m.done and b not in self._nok_last:
+            return Reason(Why.NOTHING_TO_LOOSEN, bolt=b)
+        return None
+
+    def _on_CommandDone(self, ev: CommandDone) -> list[Action]:  # noqa: N802
+        c = self._commands.pop(ev.request, None)
+        if c is None:
+            return []
+        answer = Answer(ev.request, c.command, c.issuer, ev.reason)
+        if ev.reason is not None:
+            return [Reply(answer)]
+        cmd = c.command
+        if isinstance(cmd, CheckCalibration):
+            return self._check_asked(ev.t, c)
+        if isinstance(cmd, TeachStart | TeachPoint | TeachStop):
+            return self._teach_done(ev.t, c)
+        if isinstance(cmd, SignIn | SignOut):
+            user = c.issuer.user if isinstance(cmd, SignIn) else None
+            how = OperatorChange.SIGNED_IN if user is not None else OperatorChange.SIGNED_OUT
+            by = c.issuer.user if user is None and c.issuer.user != self.operator else None
+            return [*self._operator_is(ev.t, user, how, by), Reply(answer)]
+        acts: list[Action] = []
+        if isinstance(cmd, SkipBolt):
+            acts += self._skip(ev.t, cmd, c.issuer)
+        elif isinstance(cmd, ReleaseBolt):
+            held = self.matcher is not None and self.vin == cmd.vin \
+                and self.matcher.held.pop(cmd.bolt, None) is not None
+            if held:
+                acts.append(Publish(BoltReleased(cmd.bolt, c.issuer.user, t=ev.t)))
+            if self.matcher is not None and self.vin == cmd.vin \
+                    and self.matcher.locked.pop(cmd.bolt, None) is not None:
+                self._noks.pop(cmd.bolt, None)
+                acts.append(Publish(BoltReleased(cmd.bolt, c.issuer.user, t=ev.t)))
+                if cmd.bolt in self._loosen:   # released, still to be loosened first
+                    acts.append(self._to_loosen(ev.t, cmd.bolt))
+        elif isinstance(cmd, LoosenBolt):
+            acts += self._loosen_ordered(ev.t, cmd, c.issuer)
+        elif isinstance(cmd, ReopenVehicle):
+            acts.append(Publish(VehicleReopened(cmd.vin, c.issuer.user, t=ev.t)))
+            if cmd.vin == self._closed_vin and VEHICLE in self.faults:
+                # the closed vehicle at height, reopened: its fault clears and the next lift
+                # read loads it (open now)
+                self._closed_vin, self._loading = None, False
+                acts += self._back(ev.t, VEHICLE)
+        return [*acts, Reply(answer)]
+
+    def _skip(self, t: float, cmd: SkipBolt, who: Issuer) -> list[Action]:
+        """The bolt is not tightened at this station for this vehicle; a selection of it ends
+        (the tool goes off)."""
+        if self.matcher is None or self.vin != cmd.vin or cmd.bolt not in self.matcher.bolts:
+            return []   # the vehicle left while the command was being recorded
+        why = skip_note(who.user, cmd.comment)
+        self.matcher.skipped[cmd.bolt] = why
+        acts: list[Action] = [Publish(BoltSkipped(cmd.bolt, why, t=t))]
+        if self.bolt == cmd.bolt:
+            acts += self._drop(t, State.TRACKING, f"bolt {cmd.bolt} {why}")
+        return acts
+
+    def _loosen_ordered(self, t: float, cmd: LoosenBolt, who: Issuer) -> list[Action]:
+        """A recorded loosen command: the bolt is no longer done and gets its loosen pset
+        next; a selection of it ends (its tightening pset may have been sent)."""
+        if self.matcher is None or self.vin != cmd.vin or cmd.bolt not in self.matcher.bolts:
+            return []   # the vehicle left while the command was being recorded
+        self.matcher.done.discard(cmd.bolt)
+        self._loosen.add(cmd.bolt)
+        acts = [self._to_loosen(t, cmd.bolt, who.user, skip_note(who.user, cmd.comment))]
+        if self.bolt == cmd.bolt:
+            acts += self._drop(t, State.TRACKING, f"bolt {cmd.bolt}: loosen first")
+        return acts
+
+    def _to_loosen(self, t: float, bolt: str, user: str | None = None,
+                   note: str | None = None) -> Action:
+        pset = self.nok.rule(bolt, self._specs[bolt].pset).loosen_pset
+        return Publish(BoltToLoosen(bolt, Reason(Why.LOOSEN_FIRST, bolt=bolt, pset=pset,
+                                                 note=note), user, t=t))
+
+    # -- the operator signed in at the station ---------------------------------------------
+    def _on_OperatorBack(self, ev: OperatorBack) -> list[Action]:  # noqa: N802
+        """Signed in before a start or reload: still signed in (said at :class:`Started`),
+        unless idle too long already."""
+        if self.operator_idle_s is not None and ev.t - ev.since >= self.operator_idle_s:
+            return []
+        self.operator, self._operator_seen = ev.user, ev.since
+        return []
+
+    def _operator_is(self, t: float, user: str | None, how: OperatorChange,
+                     by: str | None = None) -> list[Action]:
+        """``user`` (None: nobody) is the operator from now on.  A bolt selected for the last
+        one is left (the tool off): its rundown would carry the wrong name."""
+        previous, self.operator, self._operator_seen = self.operator, user, t
+        acts: list[Action] = []
+        if previous != user and (self.state in ON_A_BOLT or self.tool_on):
+            acts += self._drop(t, State.TRACKING, f"operator {how}")
+        self._last_refusal = None   # a refusal to nobody is said again to the next one
+        return [*acts, Publish(OperatorChanged(user, self.operator_required, previous, how,
+                                               by, t=t))]
+
+    def _operator_idle(self, t: float) -> list[Action]:
+        """The operator idle for ``operator_idle_s`` (no selection, no rundown) is signed
+        out, and that is recorded as their sign-out by the station (nobody waits for it:
+        request 0)."""
+        idle, user = self.operator_idle_s, self.operator
+        if idle is None or user is None or self.tool_on or self.state in ON_A_BOLT \
+                or t - self._operator_seen < idle:
+            return []
+        out = SignOut(f"idle for {idle:g} s", user)
+        return [*self._operator_is(t, None, OperatorChange.IDLE),
+                RecordCommand(0, out, Issuer(user, frozenset(), "station (idle)"), t)]

@@ -1,0 +1,299 @@
+"""Results from the controller: which are tightenings, to which enable each belongs (also
+after a link cut), unreadable ones held, the NOK policy after each (retry, lock, loosen,
+skip), and how a result's type is named."""
+
+from __future__ import annotations
+
+from db.kinds import LOOSENING, TIGHTENING
+from drivers.wrench.base import (
+    ResultKind,
+    ResultType,
+    TighteningResult,
+    result_kind,
+)
+from stationd.station.actions import (
+    Acknowledge,
+    Action,
+    Publish,
+    Record,
+    Selection,
+    StoreControllerEvent,
+    StoreUnattributed,
+    StoreUnreadable,
+)
+from stationd.station.events import (
+    BoltSkipped,
+    ControllerResultEvent,
+    Notice,
+    ResultUnattributed,
+    ResultUnreadable,
+    State,
+)
+from stationd.station.inputs import ResultIn, UnreadableIn
+from stationd.station.orders import OrderRules
+from stationd.station.state import CLOCK_SLACK_S, NOK_SKIPPED, ON_A_BOLT
+
+
+def _said(result: TighteningResult) -> object:
+    """What a result says besides its id: equal for a copy the controller sends again,
+    different for another result under the same id (a controller whose ids started again)."""
+    return (type_code(result), getattr(result, "pset", None), getattr(result, "ok", None),
+            getattr(result, "torque_nm", None), getattr(result, "angle_deg", None),
+            getattr(result, "timestamp", None))
+
+
+def type_code(result: TighteningResult) -> int | None:
+    """A result's type code as the controller sent it (Open Protocol MID 0061 revision 3+,
+    parameter 49), None where its revision (or the backend) carries none."""
+    code = getattr(result, "result_type_code", None)
+    if code is not None:
+        return int(code)
+    t = getattr(result, "result_type", None)
+    return None if t is None else int(t)
+
+
+def rundown_kind(result: TighteningResult, sent_loosen: bool) -> str:
+    """A rundown's kind (db.kinds): its own type where its revision carries it, else what
+    the station sent (a loosen pset or the tightening one).  The type wins: a controller
+    reversed by hand reports the loosening it made, whatever was sent.  Only for results
+    that are rundowns (:func:`result_kind` says which are not)."""
+    return LOOSENING if result_kind(type_code(result), sent_loosen) is ResultKind.LOOSENING \
+        else TIGHTENING
+
+
+_TYPE_WORDS = {ResultType.BATCH_INCREMENT: "batch increment",
+               ResultType.BATCH_DECREMENT: "batch decrement",
+               ResultType.BYPASS_PSET: "bypass parameter set", ResultType.ABORT_JOB: "abort job",
+               ResultType.REFERENCE_SETUP: "reference setup",
+               ResultType.TIGHTENING: "tightening", ResultType.LOOSENING: "loosening",
+               ResultType.SYNC_TIGHTENING: "synchronized tightening"}
+
+
+def result_type_words(code: int | None) -> str:
+    """A result type as the controller's screen would name it; an unknown code by number."""
+    try:
+        return _TYPE_WORDS[ResultType(code)] if code is not None else "result"
+    except ValueError:
+        return f"result type {code} (unknown)"
+
+
+class ResultRules(OrderRules):
+    """Results: tightenings closing bolts, controller events, unreadable and late results,
+    the NOK policy after each."""
+
+    def _on_ResultIn(self, ev: ResultIn) -> list[Action]:  # noqa: N802
+        """A result: a controller event (never a rundown) by its type; else recorded to the
+        bolt the tool was enabled for (its pset, while on or within the late-result window,
+        or after a link cut where the controller's own data places it there), else stored
+        unattributed with why."""
+        r = ev.result
+        tid = int(r.tightening_id)
+        if self._recorded.get(tid, None) == _said(r):
+            return [Acknowledge(r)]   # sent again by the controller: stored once already
+        again: list[Action] = [] if tid not in self._recorded else [Publish(Notice(
+            f"tightening id {tid} again with other values: the controller's ids started "
+            "again (a new or reset controller?); taken as a new result", "warning", t=ev.t))]
+        return again + self._result_in(ev, tid)
+
+    def _result_in(self, ev: ResultIn, tid: int) -> list[Action]:
+        r = ev.result
+        en = self._enabled
+        kind = result_kind(type_code(r), en is not None and en.loosen)
+        if kind in (ResultKind.EVENT, ResultKind.UNKNOWN):
+            return self._controller_event(ev, kind)
+        ours = en is not None and (en.pset is None or int(r.pset) == en.pset) and not (
+            ev.fetched and self._enabled_at is not None
+            and self._enabled_at > self._link_lost_at)
+        if ours and en is not None and en.vin and self._result_owed(ev.t):
+            return self._attribute(ev, en)
+        proved, not_proved = self._made_during_cut(ev)
+        if proved is not None:
+            return self._attribute(ev, proved, cut=True)
+        why = f"result {tid} (pset {r.pset}) " + (
+            "fetched after a reconnect" if ev.fetched else "outside any tightening")
+        if not_proved:
+            why += f" ({not_proved})"
+        return [StoreUnattributed(r, self.vin, why),
+                Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
+                Publish(Notice(f"{why}: not attributable to a bolt, stored unattributed",
+                               "warning", t=ev.t))]
+
+    def _made_during_cut(self, ev: ResultIn) -> tuple[Selection | None, str]:
+        """The selection a result fetched after a link cut belongs to, when the controller's
+        own data proves it (its pset the one sent, its VIN the one sent where it echoes one,
+        its tightening id the first after the last the station accounted for, its
+        timestamp between the enable and the cut); else None and what did not agree."""
+        cut, r = self._cut, ev.result
+        if not ev.fetched or cut is None:
+            return None, ""
+        en = cut.selection
+        echoed = str(r.vin or "").strip()
+        if en.pset is None or int(r.pset) != en.pset:
+            return None, f"pset {r.pset}, not {en.pset} sent for {en.bolt}"
+        if echoed and echoed != en.vin:
+            return None, f"VIN {echoed}, not {en.vin}"
+        if ev.follows is None or int(r.tightening_id) != ev.follows + 1:
+            return None, (f"not the first tightening after {ev.follows}" if ev.follows
+                          is not None else "the last tightening id accounted for unknown")
+        if ev.made_at is None:
+            return None, "the controller's clock is not known"
+        if not cut.enabled_at - CLOCK_SLACK_S <= ev.made_at <= cut.cut_at + CLOCK_SLACK_S:
+            return None, f"made outside the enable of {en.bolt} and the link cut"
+        return en, ""
+
+    def _controller_event(self, ev: ResultIn, kind: ResultKind) -> list[Action]:
+        """A result that is not a tightening or a loosening (a batch increment a line lead
+        pressed, a bypassed pset, an aborted job, a reference setup, or a type the station
+        does not know): stored as a controller event, said, and nothing else: no bolt is
+        closed, opened or counted, and the tool stays as the station decided."""
+        r, code = ev.result, type_code(ev.result)
+        self._recorded[int(r.tightening_id)] = _said(r)
+        what = result_type_words(code)
+        bolt = self.bolt if self.tool_on else None
+        note = f"{what} on the controller: not a tightening" + (
+            f", {bolt} still open" if bolt is not None else "")
+        if kind is ResultKind.UNKNOWN:
+            note += "; check the controller's result there"
+        return [StoreControllerEvent(r, self.vin, bolt, what),
+                Publish(ControllerResultEvent(code or 0, what, int(r.tightening_id),
+                                              int(r.pset), bool(r.ok), bolt, t=ev.t)),
+                Publish(Notice(note, "warning" if bolt is not None
+                               or kind is ResultKind.UNKNOWN else "info", t=ev.t))]
+
+    def _on_UnreadableIn(self, ev: UnreadableIn) -> list[Action]:  # noqa: N802
+        """A result the driver could not read: stored whole; the bolt it may belong to (the
+        tool's, while on or within the late-result window, or the one of a link cut for a
+        fetched one; of the same pset where one could be read) is held until a supervisor
+        has checked the result on the controller and releases it."""
+        u = ev.unreadable
+        if u.tightening_id is not None and self._recorded.get(u.tightening_id) == u.raw:
+            return []     # its copy is stored already (the acknowledgement was owed by it)
+        en = self._enabled if self._result_owed(ev.t) else None
+        if u.fetched:
+            en = self._cut.selection if self._cut is not None else None
+        if en is not None and u.pset is not None and en.pset is not None \
+                and u.pset != en.pset:
+            en = None        # its pset could be read, and it is not the one sent
+        if u.tightening_id is not None:
+            self._recorded[u.tightening_id] = u.raw
+        bolt = en.bolt if en is not None and en.vin else None
+        acts: list[Action] = []
+        if bolt is not None and self.tool_on:
+            acts += self._tool_off(ev.t, f"bolt {bolt}: its result could not be read")
+        acts.append(StoreUnreadable(u, en.vin if en is not None and bolt else self.vin, bolt,
+                                    en if bolt else None))
+        acts.append(Publish(ResultUnreadable(u.error, u.revision, u.tightening_id, bolt,
+                                             t=ev.t)))
+        if bolt is None or en is None:
+            return [*acts, Publish(Notice(
+                f"a result from the controller could not be read ({u.error}): stored whole; "
+                "no bolt it could belong to", "warning", t=ev.t))]
+        self._enabled = self._enabled if self._enabled is not en else None
+        if self._cut is not None and self._cut.selection is en:
+            self._cut = None
+        if self.matcher is not None and self.vin == en.vin and bolt in self.matcher.bolts:
+            acts += self._hold(ev.t, bolt, f"tightening {u.tightening_id}"
+                               if u.tightening_id is not None
+                               else f"MID {u.mid:04d} revision {u.revision}")
+        if self.bolt == bolt:
+            acts += self._drop(ev.t, State.TRACKING, f"bolt {bolt}: its result could not be "
+                               "read; held for a supervisor")
+        return acts
+
+    def _attribute(self, ev: ResultIn, en: Selection, cut: bool = False) -> list[Action]:
+        """The result of the tightening the tool was enabled for: recorded to that bolt (of
+        the vehicle it was enabled on, also after a reload or restart, or fetched after a
+        link cut that the controller's data places it in, ``cut``)."""
+        r = ev.result
+        late = not self.tool_on or cut
+        kind = LOOSENING if result_kind(type_code(r), en.loosen) is ResultKind.LOOSENING \
+            else TIGHTENING
+        acts: list[Action] = []
+        if self.tool_on and not cut:
+            acts += self._tool_off(ev.t, f"bolt {en.bolt} " + (
+                "tightened" if kind == TIGHTENING else "loosened"))
+        acts.append(Record(en.vin, en.bolt, r, en, late, kind))
+        if cut:
+            acts.append(Publish(Notice(
+                f"tightening {r.tightening_id} made during the link cut, fetched after it: "
+                f"recorded to {en.bolt} (its pset, VIN, tightening id and time agree)",
+                t=ev.t)))
+        elif late:
+            acts.append(Publish(Notice(f"result for {en.bolt} outside a tightening: "
+                                       "recorded, not matched", t=ev.t)))
+        self._recorded[int(r.tightening_id)] = _said(r)
+        if cut:
+            self._cut = None
+            if self._enabled is en:
+                self._enabled = None
+        else:
+            self._enabled = None
+        if en.operator is not None and en.operator == self.operator:
+            self._operator_seen = max(self._operator_seen, ev.t)
+        if self.matcher is not None and self.vin == en.vin:
+            if kind == LOOSENING:
+                acts += self._after_loosening(ev.t, en, bool(r.ok))
+            elif bool(r.ok):
+                if en.loosen:
+                    acts.append(Publish(Notice(
+                        f"{en.bolt}: the loosen pset {en.pset} reported a tightening: the "
+                        "bolt counts as tightened; check that pset's program", "warning",
+                        t=ev.t)))
+                self.matcher.mark_done(en.bolt)
+                self._noks.pop(en.bolt, None)
+                self._loosen.discard(en.bolt)
+                self._nok_last.discard(en.bolt)
+                self.matcher.counted.discard(en.bolt)
+            else:
+                self._nok_last.add(en.bolt)
+                acts += self._after_nok(ev.t, en)
+            self.matcher.reset()     # a new selection: a new streak, from new frames
+        self._not_before = max(self._not_before, ev.t)
+        if self.bolt == en.bolt:
+            self.bolt, self._selection, self._acked_at, self._away = None, None, None, 0
+            if self.state in ON_A_BOLT:
+                what = "loosening " if kind == LOOSENING else ""
+                self._to(State.TRACKING,
+                         f"bolt {en.bolt} {what}{'OK' if r.ok else 'NOK'}; tracking")
+        return acts
+
+    def _after_loosening(self, t: float, en: Selection, ok: bool) -> list[Action]:
+        """A loosening is never the bolt done (it undoes a tightening).  OK: the bolt's
+        tightening pset goes next; NOK: it counts as a NOK of the bolt (the joint did not come
+        loose: ``max_nok`` of them lock it) and a bolt to loosen stays so."""
+        assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
+        self.matcher.done.discard(en.bolt)
+        self._nok_last.discard(en.bolt)
+        self.matcher.counted.discard(en.bolt)   # undone: no longer counts in its batch
+        if ok:
+            self._loosen.discard(en.bolt)
+            return [Publish(Notice(f"{en.bolt} loosened: its tightening pset goes next",
+                                   t=t))]
+        n = self._noks[en.bolt] = self._noks.get(en.bolt, 0) + 1
+        rule = self.nok.rule(en.bolt, self._specs[en.bolt].pset)
+        if n >= rule.max_nok:
+            return self._lock(t, en.bolt, n)
+        return [Publish(Notice(f"{en.bolt}: loosening NOK ({n} NOK in a row)", "warning",
+                               t=t))]
+
+    def _after_nok(self, t: float, en: Selection) -> list[Action]:
+        """The NOK policy: the bolt locks after ``max_nok`` in a row; with ``loosen`` it gets
+        its loosen pset next (also once released); with ``skip`` it is marked NOK and skipped
+        for this vehicle; with ``repeat`` it is open again."""
+        assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
+        n = self._noks[en.bolt] = self._noks.get(en.bolt, 0) + 1
+        rule = self.nok.rule(en.bolt, self._specs[en.bolt].pset
+                             if en.bolt in self._specs else en.pset)
+        if rule.strategy == "loosen" and rule.loosen_pset is not None:
+            self._loosen.add(en.bolt)
+        if rule.count_in_batch:     # the sequence goes on without an OK of this bolt
+            self.matcher.counted.add(en.bolt)
+        if n >= rule.max_nok:
+            return self._lock(t, en.bolt, n)
+        if en.bolt in self._loosen:
+            return [self._to_loosen(t, en.bolt)]
+        if rule.strategy == "skip":
+            why = NOK_SKIPPED
+            self.matcher.skipped[en.bolt] = why
+            return [Publish(BoltSkipped(en.bolt, why, t=t))]
+        return []

@@ -1,0 +1,240 @@
+"""The core's state and the transitions every subject of its rules shares: the station's
+state and reason, the vehicle, the selection and the tool, the faults, and the constants the
+rules agree on.
+
+Why apart from the rules: each subject (:mod:`~stationd.station.lift`,
+:mod:`~stationd.station.tool`, :mod:`~stationd.station.results`, ...) reads and changes this one
+state; the transitions here (to a state, the tool off, a selection dropped, a bolt held) are
+each written once and used by all."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from db.bolts import Window
+from stationd.reasons import Reason
+from stationd.station.actions import Action, DisableTool, Owed, Publish, Selection
+from stationd.station.commands import (
+    TeachPoint,
+)
+from stationd.station.events import (
+    BoltLocked,
+    Notice,
+    State,
+    ToolDisabled,
+)
+from stationd.station.inputs import BoltSpec, CommandIn, LiftRead
+from stationd.station.matching import BoltMatcher, MatchParams
+from stationd.station.policy import NokPolicy
+from stationd.station.trust import PairTrust
+
+#: a result this long after the tool went off is not the last bolt's late one: the tool cannot
+#: tighten while disabled, and a controller reports within milliseconds
+LATE_RESULT_S = 5.0
+#: the controller stamps its results to the second, and its clock's offset is measured to
+#: the second: a result fetched after a link cut is placed between the enable and the cut
+#: within this much
+CLOCK_SLACK_S = 2.0
+
+
+ON_A_BOLT = (State.BOLT_SELECTED, State.TIGHTENING)
+LOCALIZING = (State.TRACKING, *ON_A_BOLT)
+#: the states in which the cameras are read (teaching measures the wrench, sends nothing)
+CAMERAS_ON = (*LOCALIZING, State.TEACHING)
+#: steady localizations averaged for one taught bolt, and how many may be tried for them
+TEACH_FRAMES, TEACH_TRIES = 10, 60
+#: why a bolt is not tightened again after a NOK under the ``skip`` strategy
+NOK_SKIPPED = "NOK, skipped by the NOK policy"
+#: a taught bolt end whose localizations spread farther than this was not held still, mm
+TEACH_STEADY_MM = 2.0
+#: a teach point is answered within this long, s, measured or not (``stationd teach`` waits
+#: 15 s for an answer: past it, it could only blame the connection)
+TEACH_WAIT_S = 10.0
+#: the targets sent with a loosen pset: none of the station's own (a loosen pset is a program
+#: on the controller; a register-driven controller takes 0 as "the pset's own")
+LOOSEN_TARGETS = Window(0.0, 0.0, 0.0)
+#: why a bolt to loosen is not tightened when no loosen pset applies to it (a reload removed it)
+NO_LOOSEN_PSET = "to be loosened, and the NOK policy gives it no loosen_pset"
+
+
+@dataclass(frozen=True)
+class _Cut:
+    """The link to the controller went down while the tool was enabled for ``selection``
+    (enabled at ``enabled_at``, the cut seen at ``cut_at``): a result fetched after the
+    reconnect that the controller's own data places there is that bolt's."""
+
+    selection: Selection
+    enabled_at: float
+    cut_at: float
+
+
+@dataclass
+class _Teach:
+    """Teach mode: the model, who started it, and the bolt being measured (its command and
+    the steady localizations so far)."""
+
+    model: str
+    user: str
+    measuring: CommandIn | None = None
+    points: list[tuple[float, float, float]] = field(default_factory=list)
+    tries: int = 0
+    since: float = 0.0     # only frames exposed after the engineer asked count
+    frames: int = 0        # localizations heard since (none: the cameras give nothing)
+    #: what the last localization without a fresh wrench said (no frame, not in view,
+    #: stale): a refusal with no steady localization names it
+    missed: Reason | None = None
+
+    def reason(self) -> str:
+        doing = f"measuring {self.measuring.command.bolt}" if self.measuring is not None \
+            and isinstance(self.measuring.command, TeachPoint) else "hold the tool on a bolt"
+        return f"teaching {self.model} ({self.user}): {doing}"
+
+
+def _disable(reason: str, bolt: str | None = None, why: Reason | None = None, *,
+             t: float) -> list[Action]:
+    """The tool off: said on the bus (the screens, the journal), then done."""
+    return [Publish(ToolDisabled(reason, bolt, why, t=t)), DisableTool(reason, bolt, why)]
+
+
+@dataclass
+class CoreState:
+    """One station's state and its shared transitions.  ``rework``: a vehicle whose VIN was
+    closed comes back -> reopen it (its history kept) rather than a named fault that clears
+    when the lift lowers."""
+
+    params: MatchParams = field(default_factory=MatchParams)
+    leave_frames: int = 3
+    rework: bool = True
+    late_result_s: float = LATE_RESULT_S
+    nok: NokPolicy = field(default_factory=NokPolicy)
+    state: State = State.STARTING
+    reason: str = "starting"
+    bolt: str | None = None
+    matcher: BoltMatcher | None = None
+    vin: str | None = None
+    model: str | None = None
+    faults: dict[str, tuple[str, str]] = field(default_factory=dict)  # device -> kind, reason
+    tool_on: bool = False
+    _specs: dict[str, BoltSpec] = field(default_factory=dict, repr=False)
+    _lift: LiftRead | None = field(default=None, repr=False)
+    _loading: bool = field(default=False, repr=False)
+    _load_code: int | None = field(default=None, repr=False)   # the model code loaded
+    _selection: Selection | None = field(default=None, repr=False)
+    _acked_at: float | None = field(default=None, repr=False)
+    _away: int = field(default=0, repr=False)
+    _enabled: Selection | None = field(default=None, repr=False)  # tool last enabled for
+    _off_at: float | None = field(default=None, repr=False)
+    _enabled_at: float | None = field(default=None, repr=False)
+    _cut: _Cut | None = field(default=None, repr=False)   # a link cut during an enable
+    # the station's start or the controller's last fault: a result fetched afterwards was
+    # made before it, so never under an enable that came later
+    _link_lost_at: float = field(default=float("-inf"), repr=False)
+    # tightening id -> what the result said (a resent copy says the same; a controller whose
+    # ids started again says something else under the same id, and is not a copy)
+    _recorded: dict[int, object] = field(default_factory=dict, repr=False)
+    _wrench_epoch: int = field(default=0, repr=False)
+    _wrench_reconnects: int | None = field(default=None, repr=False)
+    _vin_for: tuple[str, int] | None = field(default=None, repr=False)
+    _vin_pending: bool = field(default=False, repr=False)
+    _last_refusal: tuple[object, ...] | None = field(default=None, repr=False)
+    # frames exposed at or before this (a rundown's end) never select: the wrench may have
+    # moved since, and the next bolt's evidence must all come from after it
+    _not_before: float = field(default=float("-inf"), repr=False)
+    _commands: dict[int, CommandIn] = field(default_factory=dict, repr=False)  # recording
+    _noks: dict[str, int] = field(default_factory=dict, repr=False)   # NOKs in a row per bolt
+    _teach: _Teach | None = field(default=None, repr=False)
+    _closed_vin: str | None = field(default=None, repr=False)   # a closed VIN at height
+    #: the models of the station's bolt tables (None: not told, teach start not checked)
+    models: frozenset[str] | None = None
+    # bolts that get their loosen pset next (a NOK under ``loosen``, a loosen command), and
+    # those whose last rundown is a NOK tightening (a loosen command may undo them)
+    _loosen: set[str] = field(default_factory=set, repr=False)
+    _nok_last: set[str] = field(default_factory=set, repr=False)
+    #: the calibration check's state (None: no reference markers configured, every pair
+    #: trusted as before): :mod:`stationd.station.trust`
+    trust: PairTrust | None = None
+    #: no parameters are sent while nobody is signed in (``access.operator_required``)
+    operator_required: bool = False
+    #: the operator is signed out after this long without a selection or a rundown, s
+    #: (``access.operator_idle_s``; None: never)
+    operator_idle_s: float | None = None
+    #: who is signed in at the station (None: nobody): every rundown is recorded with them
+    operator: str | None = None
+    _operator_seen: float = field(default=0.0, repr=False)   # their last sign-in or work
+
+    @property
+    def selection(self) -> Selection | None:
+        return self._selection
+
+    def resume(self, owed: Owed) -> None:
+        """Take over what the last station owed (before :class:`Started`): its result, within
+        the late-result window, is recorded to the bolt the tool was enabled for."""
+        self._enabled, self._off_at = owed.selection, owed.off_at
+
+    def allowed(self) -> tuple[str, ...]:
+        """The bolts the sequence allows now (not done, skipped, locked, held or blocked)."""
+        m = self.matcher
+        if m is None:
+            return ()
+        return tuple(b for b in m.bolts if b not in m.done and b not in m.skipped
+                     and b not in m.locked and b not in m.held and m.why_blocked(b) is None)
+
+    def _result_owed(self, t: float) -> bool:
+        """The tool is on, or went off less than the late-result window before ``t``: its
+        enable's result may still come."""
+        return self.tool_on or (self._off_at is not None
+                                and t - self._off_at < self.late_result_s)
+
+    def _hold(self, t: float, bolt: str, note: str) -> list[Action]:
+        """``bolt`` is refused until a supervisor releases it: its result is not known."""
+        assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
+        self.matcher.held[bolt] = note
+        self.matcher.reset()
+        return [Publish(BoltLocked(bolt, 0, held=note, t=t)),
+                Publish(Notice(f"{bolt}: the controller's result could not be read ({note}): "
+                               "check it on the controller, then release", "warning", t=t))]
+
+    def _lock(self, t: float, bolt: str, n: int) -> list[Action]:
+        assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
+        self.matcher.locked[bolt] = n
+        return [Publish(BoltLocked(bolt, n, t=t)),
+                Publish(Notice(f"{bolt} locked after {n} NOK in a row: a supervisor "
+                               "releases it", "warning", t=t))]
+
+    def _fault_reason(self) -> str:
+        return "; ".join(f"{d}: {r}" for d, (_, r) in self.faults.items())
+
+    def _tool_off(self, t: float, reason: str, why: Reason | None = None) -> list[Action]:
+        was = self.tool_on
+        self.tool_on = False
+        if was:
+            self._off_at = t
+        return _disable(reason, self.bolt, why, t=t)
+
+    def _drop(self, t: float, state: State, reason: str,
+              why: Reason | None = None) -> list[Action]:
+        """Leave a bolt: the tool goes off first, whatever happens next."""
+        acts: list[Action] = []
+        if self.state in ON_A_BOLT or self.tool_on:
+            acts += self._tool_off(t, reason, why)
+        self.bolt, self._selection, self._acked_at, self._away = None, None, None, 0
+        if self.matcher is not None:
+            self.matcher.reset()
+        self._to(state, reason)
+        return acts
+
+    def _forget_vehicle(self) -> None:
+        self._cut = None
+        self.vin, self.model, self.matcher, self._specs = None, None, None, {}
+        self._loosen, self._nok_last = set(), set()
+        self._loading, self._enabled, self._off_at = False, None, None
+        self._vin_for, self._vin_pending, self._last_refusal = None, False, None
+
+    def _to(self, state: State, reason: str) -> None:
+        """The one place the state changes: with any device in fault the state is FAULT, and
+        in teach mode TEACHING, so no rule elsewhere can leave them by accident."""
+        if self.faults:
+            state, reason = State.FAULT, self._fault_reason()
+        elif self._teach is not None:
+            state, reason = State.TEACHING, self._teach.reason()
+        self.state, self.reason = state, reason

@@ -1,0 +1,148 @@
+"""Selection and the tool: a localization selects a bolt, its parameters are sent, the tool
+is enabled only once a localization exposed after the acknowledgement still finds the wrench
+on that bolt, and off at the first one that does not."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from db.bolts import Parameters
+from drivers.keeper import FaultKind
+from stationd.reasons import Reason, Why
+from stationd.station.actions import Acknowledge, Action, EnableTool, Publish, Selection, SendParams
+from stationd.station.events import (
+    BoltSelected,
+    BoltSkipped,
+    Localized,
+    Notice,
+    ParamsRefusedEvent,
+    ParamsSent,
+    Refused,
+    ResultRecorded,
+    State,
+    ToolEnabled,
+)
+from stationd.station.faults import FaultRules
+from stationd.station.inputs import WRENCH, LocalizedIn, ParamsAcked, ParamsRefused, ToolOn, Written
+from stationd.station.matching import Match
+from stationd.station.state import LOCALIZING, LOOSEN_TARGETS, _disable
+
+
+class ToolRules(FaultRules):
+    """Selection and the tool: parameters sent, the tool enabled only on a confirmed bolt."""
+
+    def _on_LocalizedIn(self, ev: LocalizedIn) -> list[Action]:  # noqa: N802
+        ev = self._trusted(ev)
+        if self._teach is not None:
+            return self._taught(ev, self._teach)
+        if self.state not in LOCALIZING or self.matcher is None:
+            return []
+        if self.state is State.TRACKING and ev.exposure_t <= self._not_before:
+            return []   # exposed before the last rundown ended: where the wrench *was*
+        age = ev.t - ev.exposure_t
+        m = self.matcher.update(np.asarray(ev.point_mm), age) if ev.point_mm is not None \
+            else self.matcher.refuse(ev.reason or Reason(Why.NOT_LOCALIZED))
+        acts: list[Action] = [Publish(Localized(
+            ev.point_mm, ev.tilt_deg if ev.point_mm is not None else None, m.reason,
+            m.candidate, m.distance_mm, age * 1e3, self.allowed(), t=ev.t))]
+        if self.state is State.TRACKING:
+            return acts + self._track(ev, m)
+        on_bolt = m.candidate == self.bolt and age <= self.params.max_age_s
+        if on_bolt:
+            self._away = 0
+            if self.state is State.BOLT_SELECTED and self._acked_at is not None \
+                    and ev.exposure_t > self._acked_at and self.bolt is not None:
+                self._to(State.TIGHTENING, f"tightening bolt {self.bolt}")
+                sel = self._selection
+                assert sel is not None  # noqa: S101 - a bolt is selected
+                self.tool_on, self._enabled, self._off_at = True, sel, None
+                self._enabled_at, self._cut = ev.t, None
+                acts.append(EnableTool(self.bolt, sel))
+            return acts
+        self._away += 1
+        # why not on it: the refusal, or the bolt it is on instead (a reason of its own kind)
+        why = m.reason or Reason(Why.ELSEWHERE, bolt=m.candidate)
+        if self.tool_on:
+            acts += self._tool_off(ev.t, f"wrench not confirmed on bolt {self.bolt}", why)
+            self._to(State.BOLT_SELECTED, f"bolt {self.bolt} selected; wrench not confirmed")
+        if self._away >= self.leave_frames:
+            acts += self._drop(ev.t, State.TRACKING, f"wrench left bolt {self.bolt}", why)
+        return acts
+
+    def _track(self, ev: LocalizedIn, m: Match) -> list[Action]:
+        assert self.matcher is not None  # noqa: S101 - tracking has a vehicle
+        if m.bolt is None:
+            # once per change of kind and bolts: "stale (812 ms)" and "(790 ms)" are one
+            if m.reason is not None and m.reason.key() != self._last_refusal:
+                self._last_refusal = m.reason.key()
+                return [Publish(Refused(m.reason, m.candidate, t=ev.t))]
+            return []
+        ready = self._lift is not None and self._lift.ready
+        if self.faults or not ready or self.vin is None \
+                or self._vin_for != (self.vin, self._wrench_epoch) or ev.point_mm is None:
+            self.matcher.reset()   # never reached: TRACKING implies all of these; belt and braces
+            return []
+        if self.operator_required and self.operator is None:
+            # the station requires an operator: nothing is sent for anybody's tool (the
+            # streak is kept: a sign-in selects at the next frame of a wrench held still)
+            why = Reason(Why.SIGN_IN, bolt=m.bolt)
+            if why.key() != self._last_refusal:
+                self._last_refusal = why.key()
+                return [Publish(Refused(why, m.bolt, t=ev.t))]
+            return []
+        spec = self._specs[m.bolt]
+        pset, params, loosen = spec.pset, spec.parameters, m.bolt in self._loosen
+        if loosen:   # the loosen strategy: its loosen pset, never the tightening one, first
+            pset = self.nok.rule(m.bolt, spec.pset).loosen_pset
+            if pset is None:    # never: a bolt is to loosen only with a loosen pset
+                self.matcher.reset()
+                return []
+            params = Parameters(pset, LOOSEN_TARGETS)
+        sel = Selection(m.bolt, pset, ev.point_mm, ev.tilt_deg, float(m.distance_mm or 0.0),
+                        ev.exposure_t, ev.t, ev.evidence, self.vin, spec.parameters_id, loosen,
+                        self.operator)
+        self._operator_seen = ev.t
+        self.bolt, self._selection, self._acked_at, self._away = m.bolt, sel, None, 0
+        self._last_refusal = None
+        self.matcher.reset()
+        self._to(State.BOLT_SELECTED, f"bolt {m.bolt} selected" + (
+            f": loosen first (pset {pset})" if loosen else ""))
+        return [Publish(BoltSelected(m.bolt, pset, ev.point_mm, sel.distance_mm,
+                                     ev.tilt_deg, loosen, t=ev.t)),
+                SendParams(m.bolt, sel, params, loosen)]
+
+    def _on_ParamsAcked(self, ev: ParamsAcked) -> list[Action]:  # noqa: N802
+        acts: list[Action] = [Publish(ParamsSent(ev.bolt, ev.pset, dict(ev.latency_ms),
+                                                 t=ev.t))]
+        if self.state is State.BOLT_SELECTED and ev.bolt == self.bolt and self._acked_at is None:
+            self._acked_at = ev.t   # the tool waits for a frame exposed after this
+            self.reason = f"bolt {ev.bolt} acknowledged; confirming the wrench is on it"
+            return acts
+        return [*acts, *_disable(f"late acknowledgement for {ev.bolt} ignored", ev.bolt,
+                                 t=ev.t),
+                Publish(Notice(f"late acknowledgement for {ev.bolt} ignored", t=ev.t))]
+
+    def _on_ToolOn(self, ev: ToolOn) -> list[Action]:  # noqa: N802
+        return [Publish(ToolEnabled(ev.bolt, t=ev.t))]
+
+    def _on_Written(self, ev: Written) -> list[Action]:  # noqa: N802
+        """A result on disk: published for the screens, then the controller may forget it."""
+        a, r = ev.record, ev.record.result
+        return [Publish(ResultRecorded(
+            a.vin, a.bolt, bool(r.ok), float(r.torque_nm), float(r.angle_deg),
+            int(r.tightening_id), int(r.pset), float(r.torque_min_nm), float(r.torque_max_nm),
+            float(r.angle_min_deg), float(r.angle_max_deg), a.late, tuple(ev.images), a.kind,
+            a.selection.operator if a.selection is not None else None, t=ev.t)),
+            Acknowledge(r)]
+
+    def _on_ParamsRefused(self, ev: ParamsRefused) -> list[Action]:  # noqa: N802
+        """The bolt is skipped for this vehicle (reported missing) so that the same refused
+        parameters are not sent again and again; the controller is in fault until it answers."""
+        why = f"controller refused its parameters ({ev.reason})"
+        acts: list[Action] = [Publish(ParamsRefusedEvent(ev.bolt, ev.reason, t=ev.t))]
+        if self.matcher is not None and ev.bolt in self.matcher.bolts:
+            self.matcher.skipped[ev.bolt] = why
+            acts.append(Publish(BoltSkipped(ev.bolt, why, t=ev.t)))
+        return acts + self._fault(ev.t, WRENCH, FaultKind.REFUSED,
+                                  f"controller refused the parameters for {ev.bolt}: "
+                                  f"{ev.reason}")

@@ -1,0 +1,195 @@
+"""Revisions and old results against the simulated controller over TCP on 127.0.0.1: the
+driver asks for the highest revisions, steps down when refused, reads every revision of MID
+0061 and 0065, and keeps the controller's identity typed."""
+
+from __future__ import annotations
+
+import pytest
+
+from drivers.errors import ConnectionLostError, ProtocolError, RefusedError
+from drivers.wrench import open_wrench
+from drivers.wrench.base import ResultType, Status, TorqueUnit
+from drivers.wrench.sim.controller import SimController, SimPset
+
+from ..conftest import FAST, connect, op, read_message, reconnect_within, wait_until
+from .test_revisions import REV2, build
+
+
+def ready(w) -> None:
+    w.select_pset(1)
+    w.enable_tool()
+
+
+def test_the_highest_revisions_are_asked_and_the_identity_is_typed(sim, tmp_path):
+    with connect(sim, "tcp", tmp_path) as w:
+        assert w.revisions == {1: 6, 60: 7}
+        ident = w.controller_identity
+        assert ident is not None and ident.revision == 6
+        assert (ident.cell_id, ident.channel_id, ident.controller_name) == (
+            1, 1, "SimController")
+        assert (ident.supplier_code, ident.open_protocol_version,
+                ident.controller_software_version, ident.controller_serial) == (
+            "SIM", "2.8.0", "stationd-sim 1.0", "SIM0000001")
+        assert (ident.system_type, ident.sequence_number_support) == (0, False)
+        assert not w.link_level and "link-level ack no" in w.identity()
+        ready(w)
+        truth = sim.pull_trigger(result_type=2)
+        r = w.wait_result(1.0)
+    assert truth is not None and r is not None
+    assert (r.revision, r.result_type, r.pset_name, r.torque_unit, r.strategy) == (
+        7, ResultType.LOOSENING, "pset 1", TorqueUnit.NM, 2)
+    assert (r.tightening_id, r.torque_nm, r.angle_deg) == (1, truth.torque_nm, truth.angle_deg)
+    assert r.rundown_angle_status is Status.OK and r.angle_decimal_deg is not None
+    assert abs(r.angle_decimal_deg - r.angle_deg) <= 0.5
+
+
+@pytest.mark.parametrize("code", [97, 76])
+def test_refused_revisions_are_stepped_down(code, tmp_path):
+    with SimController(seed=1, nok_rate=0.0, revision_refusal_code=code,
+                       refused_revisions={1: {6, 5}, 60: {7, 6, 5, 4}}) as sim, \
+            connect(sim, "tcp", tmp_path) as w:
+        assert [r.revision for r in sim.received(1)] == [6, 5, 4]
+        assert [r.revision for r in sim.received(60)] == [7, 6, 5, 4, 3]
+        assert w.revisions == {1: 4, 60: 3}
+        ident = w.controller_identity
+        assert ident is not None and ident.revision == 4 and ident.system_type is None
+        ready(w)
+        sim.pull_trigger()
+        r = w.wait_result(1.0)
+        assert r is not None and r.revision == 3 and r.pset_name == "pset 1"
+        assert r.identifiers == ()                              # a revision 4 parameter
+
+
+@pytest.mark.parametrize("revision", range(1, 8))
+def test_each_result_revision_over_the_wire(revision, tmp_path):
+    higher = set(range(revision + 1, 8))
+    with SimController({1: SimPset(25.0, 22.5, 27.5, 90.0, 60.0, 120.0, name="M8")},
+                       seed=3, nok_rate=0.0, refused_revisions={60: higher}) as sim, \
+            connect(sim, "tcp", tmp_path) as w:
+        ready(w)
+        truth = [sim.pull_trigger() for _ in range(3)]
+        got = [w.wait_result(1.0) for _ in truth]
+    for t, r in zip(truth, got, strict=True):
+        assert t is not None and r is not None and r.revision == revision
+        assert (r.tightening_id, r.ok, r.torque_nm, r.angle_deg, r.timestamp) == (
+            t.tightening_id, t.ok, t.torque_nm, t.angle_deg, t.timestamp)
+        assert (r.torque_min_nm, r.torque_max_nm, r.angle_target_deg) == (22.5, 27.5, 90.0)
+        assert r.pset_name == ("M8" if revision >= 3 else "")
+        assert (r.strategy is None) == (revision == 1)
+
+
+def test_a_refusal_that_is_not_about_the_revision_is_not_retried(tmp_path):
+    with SimController(seed=1) as sim:
+        sim.refuse_mid(60, 3)
+        with pytest.raises(RefusedError, match=r"open: communication start: .*error 03") as e:
+            connect(sim, "tcp", tmp_path)
+        assert e.value.code == 3 and len(sim.received(60)) == 1
+
+
+def test_a_revision_1_controller_still_works(tmp_path):
+    old = {mid: set(range(2, 8)) for mid in (1, 60, 64)}
+    with SimController(seed=1, nok_rate=0.0, refused_revisions=old) as sim, \
+            connect(sim, "tcp", tmp_path) as w:
+        assert w.revisions == {1: 1, 60: 1}
+        assert w.identity() == "SimController (cell 0001, channel 01)"
+        ready(w)
+        sim.pull_trigger()
+        r = w.wait_result(1.0)
+        assert r is not None and r.revision == 1 and r.result_type is None
+        old_r = w.fetch_result(1)
+        assert old_r is not None and old_r.revision == 1 and old_r.torque_nm == r.torque_nm
+        assert old_r.torque_min_nm == 0.0                       # MID 0065 rev 1: no limits
+        assert w.revisions[64] == 1
+
+
+# -- old results: MID 0064 -> 0065 ----------------------------------------------------------------
+def test_fetch_result_by_id_newest_and_not_found(sim, tmp_path):
+    with connect(sim, "tcp", tmp_path) as w:
+        assert w.fetch_result(0) is None                        # nothing tightened yet
+        ready(w)
+        pushed = []
+        for _ in range(3):
+            sim.pull_trigger()
+            pushed.append(w.wait_result(1.0))
+        second = w.fetch_result(2)
+        newest = w.fetch_result(0)
+        sim.forget_results(1)
+        gone = w.fetch_result(1)
+        assert w.fetch_result(99) is None
+        assert w.revisions[64] == 7
+    assert second is not None and newest is not None and gone is None
+    assert second.fetched and not pushed[1].fetched
+    assert (second.tightening_id, second.torque_nm, second.angle_deg, second.timestamp,
+            second.torque_max_nm) == (2, pushed[1].torque_nm, pushed[1].angle_deg,
+                                      pushed[1].timestamp, pushed[1].torque_max_nm)
+    assert newest.tightening_id == 3
+    assert [r.data for r in sim.received(64)][:3] == [b"0000000000", b"0000000002",
+                                                      b"0000000000"]
+
+
+def test_fetch_result_steps_down_once_and_remembers(tmp_path):
+    with SimController(seed=1, refused_revisions={64: {7, 6}}) as sim, \
+            connect(sim, "tcp", tmp_path) as w:
+        ready(w)
+        sim.pull_trigger()
+        w.wait_result(1.0)
+        first, again = w.fetch_result(1), w.fetch_result(1)
+        assert first is not None and first.revision == 5 and again == first
+        assert [r.revision for r in sim.received(64)] == [7, 6, 5, 5]
+
+
+def test_a_result_made_while_the_link_was_down_is_fetched_after_the_reconnect(sim, tmp_path):
+    """The gap the tightening ids show is filled with MID 0064 (the station's part is to
+    notice it; here the driver's part: the missed result is there to fetch)."""
+    with connect(sim, "tcp", tmp_path) as w:
+        ready(w)
+        sim.pull_trigger()
+        seen = w.wait_result(1.0)
+        sim.drop_connections()
+        assert wait_until(lambda: not w.status().connected)
+        missed = sim.pull_trigger()                  # nobody subscribed: not pushed
+        assert missed is not None
+        assert reconnect_within(w)
+        assert w.wait_result(0.2) is None
+        newest = w.fetch_result(0)
+        assert seen is not None and newest is not None
+        assert newest.tightening_id == seen.tightening_id + 1 == missed.tightening_id
+        assert (newest.torque_nm, newest.ok, newest.fetched) == (missed.torque_nm,
+                                                                 missed.ok, True)
+
+
+def test_fetch_result_checks_its_arguments_and_the_link(sim, tmp_path):
+    with connect(sim, "tcp", tmp_path) as w:
+        for bad in (-1, 10**10, 1.0, True):
+            with pytest.raises(ValueError, match="tightening_id must be an integer"):
+                w.fetch_result(bad)
+        sim.refuse_mid(64, 99)
+        with pytest.raises(RefusedError, match=r"fetch tightening 5: .*error 99") as e:
+            w.fetch_result(5)
+        assert e.value.code == 99 and w.status().connected
+        sim.clear_refusals()
+        sim.power_off()
+        assert wait_until(lambda: not w.status().connected)
+        with pytest.raises(ConnectionLostError, match="fetch tightening 5: link down"):
+            w.fetch_result(5)
+
+
+def test_an_answer_about_another_tightening_is_refused(peer):
+    """A controller that answers MID 0064 with another tightening is wrong: never taken for
+    the one asked."""
+    def script(c):
+        read_message(c)
+        c.sendall(op(2, b"010001020103" + b"Scripted".ljust(25)))
+        read_message(c)
+        c.sendall(op(5, b"0060"))
+        assert read_message(c)[4:8] == b"0080"
+        c.sendall(op(4, b"008099"))                         # no clock here: unknown MID
+        assert read_message(c)[4:8] == b"0064"
+        c.sendall(build(65, 2, REV2) + b"\x00")             # tightening 1234
+        c.recv(100)
+
+    p = peer(script)
+    with open_wrench(f"openprotocol://127.0.0.1:{p.port}", **FAST) as w:
+        with pytest.raises(ProtocolError, match="fetch tightening 7: the controller "
+                                                "answered with tightening 1234"):
+            w.fetch_result(7)

@@ -1,0 +1,246 @@
+"""Result messages that do not match their label, or do not read at all, between the driver
+and the simulated controller over TCP on 127.0.0.1: read at their own header's revision, at
+a lower one they are laid out as (said once, the subscription renewed there), or handed out
+whole as an UnreadableResult, acknowledged only when the station says so."""
+
+from __future__ import annotations
+
+import logging
+
+import pytest
+
+from drivers.errors import ProtocolError
+from drivers.wrench.base import TighteningResult, UnreadableResult
+from drivers.wrench.openprotocol.reading import pick, read_result
+from drivers.wrench.openprotocol.result import parse_tightening
+from drivers.wrench.sim.controller import SimController
+from drivers.wrench.sim.results import mislabelled_data, result_data
+from drivers.wrench.sim.server import message
+
+from ..conftest import connect, wait_until
+
+
+def ready(w) -> None:
+    w.send_vin("WVWZZZ1JZXW000001")
+    w.select_pset(2)
+    w.enable_tool()
+
+
+def record(sim: SimController, result_type: int = 1):
+    t = sim.pull_trigger(result_type)
+    assert t is not None and t.record is not None
+    return t.record
+
+
+# -- the reading rules, on bodies the simulator writes ---------------------------------------
+@pytest.mark.parametrize("mid", [61, 65])
+def test_a_revision_1_body_with_fields_appended_reads_as_revision_1(sim, mid, tmp_path):
+    with connect(sim, "tcp", tmp_path) as w:
+        ready(w)
+        r = record(sim, 3)
+    text = message(mid, mislabelled_data(mid, 1, r), 7).decode()
+    with pytest.raises(ProtocolError):            # not at the revision it is labelled
+        parse_tightening(mid, 7, text)
+    got = read_result(mid, 7, text)
+    assert (got.revision, got.header_revision, got.tightening_id, got.pset, got.vin) == (
+        1, 7, r.tightening_id, 2, "WVWZZZ1JZXW000001")
+    assert got.raw == text and got.result_type_code is None   # revision 1 has no type
+
+
+def test_a_tagged_body_with_a_parameter_of_its_own_reads_at_its_revision(sim, tmp_path):
+    with connect(sim, "tcp", tmp_path) as w:
+        ready(w)
+        r = record(sim, 2)
+    text = message(61, mislabelled_data(61, 3, r), 7).decode()
+    got = read_result(61, 7, text)
+    assert (got.revision, got.header_revision, got.result_type_code) == (3, 7, 2)
+
+
+def test_a_value_that_does_not_read_is_not_read_at_a_lower_revision(sim, tmp_path):
+    """The layout is right, a value is not: reading it as revision 2 would drop its result
+    type (what decides whether it may close a bolt): it reads at no revision."""
+    with connect(sim, "tcp", tmp_path) as w:
+        ready(w)
+        r = record(sim, 3)
+    data = result_data(61, 7, r).decode()
+    bad = data.replace(f"49{3:02d}", "49X3", 1)
+    with pytest.raises(ProtocolError, match="result_type 'X3' is not a number"):
+        read_result(61, 7, message(61, bad.encode(), 7).decode())
+    picked = pick(61, 7, message(61, bad.encode(), 7).decode())
+    assert (picked["tightening_id"], picked["pset"], picked["vin"]) == (
+        r.tightening_id, 2, "WVWZZZ1JZXW000001")
+    assert picked["timestamp"] == r.timestamp
+
+
+def test_what_is_picked_out_of_a_body_cut_short():
+    assert pick(61, 7, "0040006100700000001" + "01") == {
+        "tightening_id": None, "pset": None, "vin": "", "timestamp": None}
+
+
+# -- over the wire ---------------------------------------------------------------------------
+def test_a_result_labelled_another_revision_than_subscribed_is_read_at_its_own(tmp_path):
+    with SimController(seed=3, nok_rate=0.0, send_revision=3) as sim, \
+            connect(sim, "tcp", tmp_path) as w:
+        assert w.revisions[60] == 7
+        ready(w)
+        sim.pull_trigger(4)
+        got = w.wait_result(1.0)
+        assert isinstance(got, TighteningResult)
+        assert (got.revision, got.header_revision, got.result_type_code) == (3, None, 4)
+        assert w.revisions[60] == 7                    # nothing to renew
+        assert sim.received(63) == []
+
+
+@pytest.mark.parametrize("link_ack", [False, True])
+def test_a_controller_that_claims_more_than_it_implements(link_ack, tmp_path, caplog):
+    """The field case: subscribed at 7, revision 1 bodies with fields appended labelled 7.
+    The first is read as revision 1 (said once), the subscription is renewed at revision 1
+    (0063, then 0060 revision 1), and the next results come labelled 1 and read cleanly.
+    With link-level acknowledgement too: the renewal waits its turn behind the result's
+    0062 (whose 9997 the reading thread must read)."""
+    caplog.set_level(logging.INFO, logger="drivers.wrench.openprotocol.client")
+    with SimController(seed=3, nok_rate=0.0, mislabel=1, link_ack=link_ack) as sim, \
+            connect(sim, "tcp", tmp_path) as w:
+        assert w.link_level is link_ack
+        ready(w)
+        truth = sim.pull_trigger()
+        got = w.wait_result(1.0)
+        assert isinstance(got, TighteningResult) and truth is not None
+        assert (got.tightening_id, got.revision, got.header_revision) == (
+            truth.tightening_id, 1, 7)
+        assert got.torque_nm == truth.torque_nm and got.pset == 2
+        # (a result made between the 0063 and the 0060 is not pushed: the station's
+        # tightening-id gap check fetches it, MID 0064)
+        assert wait_until(lambda: w.revisions[60] == 1)
+        assert [r.revision for r in sim.received(60)] == [7, 1]
+        assert len(sim.received(63)) == 1
+        later = sim.pull_trigger()
+        third = w.wait_result(1.0)
+        assert isinstance(third, TighteningResult) and later is not None
+        assert (third.tightening_id, third.revision, third.header_revision) == (
+            later.tightening_id, 1, None)
+        assert wait_until(lambda: sim.acks == 2) and w.status().reconnects == 0
+        # a new session asks for the highest revision again (the controller may be another
+        # one: a revision below 3 carries no result type), and lowers again, not losing one
+        sim.drop_connections()
+        assert wait_until(lambda: not w.status().connected)
+        w.reconnect()
+        assert w.revisions[60] == 7
+        again = sim.pull_trigger()
+        fourth = w.wait_result(1.0)
+        assert isinstance(fourth, TighteningResult) and again is not None
+        assert (fourth.tightening_id, fourth.revision, fourth.header_revision) == (
+            again.tightening_id, 1, 7)
+        assert wait_until(lambda: w.revisions[60] == 1)
+    said = [r for r in caplog.records if "laid out as revision 1" in r.getMessage()]
+    assert len(said) == 1 and "subscribed at that revision from now on" in said[0].message
+    assert sim.errors == []
+
+
+@pytest.mark.parametrize("how", ["value", "layout"])
+def test_a_result_that_reads_at_no_revision_is_kept_and_acknowledged_when_stored(
+        sim, how, tmp_path):
+    with connect(sim, "tcp", tmp_path) as w:
+        ready(w)
+        sim.garble_next_result(how)
+        bad = sim.pull_trigger()
+        good = sim.pull_trigger()
+        first = w.wait_result(1.0, acknowledge=False)
+        assert isinstance(first, UnreadableResult) and bad is not None
+        assert (first.mid, first.revision, first.fetched) == (61, 7, False)
+        assert first.raw.startswith(f"{len(first.raw):04d}0061007")
+        if how == "value":
+            assert "torque 'TORQUE' is not a number" in first.error
+            assert (first.tightening_id, first.pset, first.vin, first.timestamp) == (
+                bad.tightening_id, 2, "WVWZZZ1JZXW000001", bad.timestamp)
+        else:
+            assert "cut short" in first.error or "missing" in first.error
+        assert w.status().connected and sim.acks == 0      # not a fault, not acknowledged
+        # 0062 names no result: the controller takes acknowledgements in order
+        w.acknowledge_result(first)
+        second = w.wait_result(1.0)
+        assert isinstance(second, TighteningResult) and good is not None
+        assert second.tightening_id == good.tightening_id
+        assert wait_until(lambda: sim.acked_ids == [bad.tightening_id, good.tightening_id])
+        assert w.revisions[60] == 7 and w.status().reconnects == 0
+
+
+def test_fetching_a_result_that_does_not_read(sim, tmp_path):
+    """MID 0065 that reads at no revision: an UnreadableResult (fetched), not an error;
+    one laid out as a lower revision is read so, and later fetches ask for that one."""
+    with connect(sim, "tcp", tmp_path) as w:
+        ready(w)
+        t = sim.pull_trigger()
+        assert t is not None and w.wait_result(1.0) is not None
+        sim.garble_next_result("value")
+        got = w.fetch_result(t.tightening_id)
+        assert isinstance(got, UnreadableResult) and got.fetched and got.mid == 65
+        assert (got.tightening_id, got.pset) == (t.tightening_id, 2)
+        sim.mislabel = 1
+        old = w.fetch_result(t.tightening_id)
+        assert isinstance(old, TighteningResult) and old.fetched
+        assert (old.revision, old.header_revision, old.tightening_id) == (
+            1, 7, t.tightening_id)
+        assert w.revisions[64] == 1
+        again = w.fetch_result(t.tightening_id)
+        assert isinstance(again, TighteningResult) and again.header_revision is None
+        assert [r.revision for r in sim.received(64)] == [7, 7, 1]
+
+
+class TightensDuringTheRenewal(SimController):
+    """The operator tightens in the moment between the driver's 0063 and its 0060: that
+    result is never pushed (nobody is subscribed when it is made)."""
+
+    def handle(self, s, msg) -> None:
+        super().handle(s, msg)
+        if msg.mid == 63:
+            self.during = self._tighten(1)
+
+
+def test_a_result_made_while_the_subscription_is_renewed_is_fetched(tmp_path, caplog):
+    caplog.set_level(logging.WARNING, logger="drivers.wrench.openprotocol.client")
+    with TightensDuringTheRenewal(seed=3, nok_rate=0.0, mislabel=1) as sim, \
+            connect(sim, "tcp", tmp_path) as w:
+        ready(w)
+        first = sim.pull_trigger()
+        got = [w.wait_result(1.0), w.wait_result(1.0)]
+        assert wait_until(lambda: w.revisions[60] == 1)
+        after = sim.pull_trigger()
+        third = w.wait_result(1.0)
+        assert w.wait_result(0.2) is None                        # nothing twice
+    assert first is not None and after is not None
+    assert [g.tightening_id for g in got if g is not None] == [1, 2]
+    assert [getattr(g, "fetched", None) for g in got] == [False, True]
+    assert sim.during is not None and sim.during.tightening_id == 2
+    assert third is not None and (third.tightening_id, third.fetched) == (3, False)
+    assert sim.acked_ids == [1, 3] and sim.errors == []          # no 0062 for a fetched one
+    assert "tightening 2 made while the result subscription was renewed" in caplog.text
+
+
+def test_a_revision_beyond_those_read_gives_the_ones_it_starts_with(sim, tmp_path):
+    """MID 0061 revision 998 is revision 6 plus the stages (PROTOCOLS.md): it starts with a
+    whole revision 6 body (here a revision 7 one), read so; not taken for a revision it
+    is not."""
+    with connect(sim, "tcp", tmp_path) as w:
+        ready(w)
+        r = record(sim, 5)
+    stages = "5401" + "0" * 30                      # a stage count and one stage, roughly
+    text = message(61, result_data(61, 7, r) + stages.encode(), 998).decode()
+    got = read_result(61, 998, text)
+    assert (got.revision, got.header_revision, got.result_type_code) == (7, 998, 5)
+
+
+def test_results_subscribed_below_revision_3_are_said_to_carry_no_type(tmp_path, caplog):
+    """A controller that takes MID 0060 only at revisions 1-2: its results carry no result
+    type, so the station cannot tell a batch increment from a tightening: said at every
+    session, as a warning."""
+    caplog.set_level(logging.INFO, logger="drivers.wrench.openprotocol.client")
+    with SimController(seed=3, nok_rate=0.0, refused_revisions={60: range(3, 8)}) as sim, \
+            connect(sim, "tcp", tmp_path) as w:
+        ready(w)
+        assert w.revisions[60] == 2
+        sim.drop_connections()
+        assert wait_until(lambda: not w.status().connected)
+        w.reconnect()
+    said = [r for r in caplog.records if "carries no result type" in r.getMessage()]
+    assert len(said) == 2 and all(r.levelno == logging.WARNING for r in said)

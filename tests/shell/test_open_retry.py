@@ -1,0 +1,66 @@
+"""A database that does not open at start-up is retried with the keeper's backoff (first
+wait 1 s, jittered shorter), READY=1 is sent once with the reason, and the daemon goes on
+once it opens: never an exit."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+from db.errors import DbError
+from stationd.shell.sdnotify import Notifier
+from stationd.shell.serve import _open
+from stationd.station.events import DeviceHealth, EventBus, StateChanged
+
+
+class Recording(Notifier):
+    def __init__(self) -> None:
+        super().__init__({})
+        self.sent: list[dict[str, Any]] = []
+
+    def send(self, **fields: str | int) -> bool:
+        self.sent.append(fields)
+        return True
+
+
+class FlakyStation:
+    """Fails to open twice (the database is on a disk not mounted yet), then opens."""
+
+    def __init__(self) -> None:
+        self.attempts = 0
+        self.bus = EventBus()      # where the daemon tells its screens meanwhile
+
+    def open(self) -> None:
+        self.attempts += 1
+        if self.attempts <= 2:
+            raise DbError("unable to open database file /var/lib/stationd/s.db")
+
+
+def test_a_database_that_does_not_open_is_retried_then_the_daemon_goes_on():
+    station, notifier = FlakyStation(), Recording()
+
+    async def main() -> bool:
+        return await asyncio.wait_for(_open(station, notifier, asyncio.Event()), 30)
+
+    assert asyncio.run(main()) is True
+    assert station.attempts == 3
+    ready = [f for f in notifier.sent if f.get("ready") == 1]
+    assert len(ready) == 1 and "fault: database: unable to open" in str(ready[0]["status"])
+    # the screens heard it (the station's loop is not running yet): faulty, then back
+    health = [(e.ok, e.reason) for e in station.bus.of(DeviceHealth)]
+    assert health[0][0] is False and "unable to open" in health[0][1] and health[-1] == (True, "")
+    assert any(e.state == "fault" for e in station.bus.of(StateChanged))
+
+
+def test_stopping_while_the_database_is_down_ends_the_wait():
+    class Down(FlakyStation):
+        def open(self) -> None:
+            raise DbError("no database")
+
+    stop = asyncio.Event()
+
+    async def main() -> bool:
+        asyncio.get_running_loop().call_later(0.2, stop.set)
+        return await asyncio.wait_for(_open(Down(), Recording(), stop), 10)  # type: ignore[arg-type]
+
+    assert asyncio.run(main()) is False

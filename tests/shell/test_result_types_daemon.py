@@ -1,0 +1,105 @@
+"""Every result from the controller counted right, through the daemon as systemd runs it, with
+the simulated controller over Open Protocol on loopback: a result of each type while the tool
+is on (only a tightening closes the bolt), a result that does not read (stored whole, its bolt
+held, the link kept), and a tightening made during a link cut, fetched after the late-result
+window and recorded to its bolt because the controller's own data places it there."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from stationd.station.results import result_type_words
+from tests.shell.daemons import db_rows as _rows
+from tests.shell.daemons import tool_on, tracking, until
+
+pytestmark = pytest.mark.system      # whole daemons
+
+
+@pytest.mark.timeout(300)
+def test_only_a_tightening_closes_the_bolt_the_tool_is_on(tmp_path):
+    pose = tmp_path / "pose"
+    codes = (3, 4, 5, 6, 8, 9)
+    with tracking(tmp_path, "TYPEVIN0000000001") as (d, _, ctl):
+        tool_on(d, ctl, pose, "B05")
+        made = []
+        for code in codes:
+            m = ctl.pull_trigger(result_type=code)
+            assert m is not None
+            made.append(m.tightening_id)
+            d.wait_log(f"{result_type_words(code)} on the controller: not a tightening, B05 "
+                       "still open")
+            until(lambda m=m: m.tightening_id in ctl.acked_ids, 30, "the event acknowledged")
+            assert ctl.tool_enabled         # the tool as the station left it
+        real = ctl.pull_trigger()
+        assert real is not None
+        until(lambda: real.tightening_id in ctl.acked_ids, 30, "the tightening stored")
+        until(lambda: not ctl.tool_enabled, 30, "the tool off after the tightening")
+        lead = ctl.press(3)                    # a line lead steps the batch on, tool off
+        assert lead is not None
+        d.wait_log("batch increment on the controller: not a tightening")
+        until(lambda: lead.tightening_id in ctl.acked_ids, 30, "stored with no bolt")
+    db = tmp_path / "station.db"
+    events = _rows(db, "SELECT result_type, tightening_id, bolt, vin FROM controller_events "
+                       "ORDER BY id")
+    assert events == [*((c, t, "B05", "TYPEVIN0000000001") for c, t in zip(codes, made,
+                                                                           strict=True)),
+                      (3, lead.tightening_id, None, "TYPEVIN0000000001")]
+    rundowns = _rows(db, "SELECT tightening_id, kind FROM tightening_records")
+    assert rundowns == [(real.tightening_id, "tightening")]
+    assert _rows(db, "SELECT count(*) FROM unattributed_results") == [(0,)]
+
+
+@pytest.mark.timeout(300)
+def test_an_unreadable_result_is_stored_whole_and_holds_its_bolt(tmp_path):
+    pose = tmp_path / "pose"
+    with tracking(tmp_path, "UNREADVIN00000001") as (d, _, ctl):
+        tool_on(d, ctl, pose, "B05")
+        ctl.garble_next_result("layout")       # a body that reads at no revision
+        bad = ctl.pull_trigger()
+        assert bad is not None
+        d.wait_log("B05: the controller's result could not be read")
+        until(lambda: bad.tightening_id in ctl.acked_ids, 30, "acknowledged once stored")
+        until(lambda: not ctl.tool_enabled, 30, "the tool off")
+        # the link is kept and the next bolt goes on as usual; B05 is held
+        tool_on(d, ctl, pose, "B06")
+        good = ctl.pull_trigger()
+        assert good is not None
+        until(lambda: good.tightening_id in ctl.acked_ids, 30, "B06 stored")
+        pose.write_text("B05")
+        d.wait_log("check it on the controller, then release", count=2)
+        assert "fault: wrench" not in d.log()
+    db = tmp_path / "station.db"
+    [(raw, error, bolt, vin)] = _rows(db, "SELECT raw, error, bolt, vin FROM unreadable_results")
+    assert raw.startswith(raw[:4]) and "0061" in raw[4:8] and error
+    assert (bolt, vin) == ("B05", "UNREADVIN00000001")
+    assert _rows(db, "SELECT tightening_id FROM tightening_records") == [(good.tightening_id,)]
+
+
+@pytest.mark.timeout(300)
+def test_a_tightening_made_during_a_link_cut_is_recorded_to_its_bolt(tmp_path):
+    pose = tmp_path / "pose"
+    with tracking(tmp_path, "CUTVIN00000000001") as (d, _, ctl):
+        tool_on(d, ctl, pose, "B04")
+        first = ctl.pull_trigger()               # the last result the station accounts for
+        assert first is not None
+        until(lambda: first.tightening_id in ctl.acked_ids, 30, "the first result stored")
+        tool_on(d, ctl, pose, "B05")
+        ctl.refuse_revisions(1, range(1, 8))   # the link down, and kept down: no new session
+        ctl.drop_connections()
+        d.wait_log("fault: wrench")
+        made = ctl.pull_trigger()              # the operator tightens meanwhile
+        again = ctl.pull_trigger()             # and once more: not provably the same enable
+        assert made is not None and again is not None
+        time.sleep(6.0)                        # past the late-result window (5 s)
+        ctl.clear_refusals()
+        d.wait_log("wrench: back")
+        d.wait_log(f"tightening {made.tightening_id} made during the link cut, fetched after "
+                   "it: recorded to B05")
+        d.wait_log(f"tightening {again.tightening_id} fetched after a reconnect")
+    db = tmp_path / "station.db"
+    assert _rows(db, "SELECT tightening_id, bolt_id IS NOT NULL FROM tightening_records "
+                     "ORDER BY id") == [(first.tightening_id, 1), (made.tightening_id, 1)]
+    [(tid, reason)] = _rows(db, "SELECT tightening_id, reason FROM unattributed_results")
+    assert tid == again.tightening_id and "fetched after a reconnect" in reason

@@ -1,0 +1,58 @@
+"""The daemon's screens follow the running configuration: a port another program holds at
+start is tried again, and the screens come once it is free (newcomer trial: they were never
+served for the daemon's life, one journal line said so)."""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+import urllib.request
+from dataclasses import replace
+
+import pytest
+
+from stationd.config import load_station_config
+from stationd.demo.station import SIM_CONFIG
+from stationd.shell import serve
+from stationd.station.events import EventBus
+from stationd.web.config import HttpConfig
+
+
+def test_a_port_in_use_at_start_is_tried_again_until_the_screens_are_served(
+        tmp_path, monkeypatch, caplog):
+    monkeypatch.setattr(serve, "SCREENS_RETRY_S", 0.2)
+    holder = socket.socket()
+    holder.bind(("127.0.0.1", 0))
+    holder.listen(1)
+    port = holder.getsockname()[1]
+    cfg = replace(load_station_config(SIM_CONFIG),
+                  database_url=f"sqlite:///{tmp_path}/s.db",
+                  http=HttpConfig(f"127.0.0.1:{port}"))
+    screens = serve.Screens(EventBus())
+
+    async def main() -> None:
+        await screens.follow(cfg)
+        assert screens.server is None
+        frames = screens.frames                  # the station holds this store
+        await asyncio.sleep(0.7)                 # a few attempts while the port is held
+        assert screens.server is None
+        holder.close()
+        for _ in range(100):
+            if screens.server is not None:
+                break
+            await asyncio.sleep(0.05)
+        assert screens.server is not None and screens.frames is frames
+        body = await asyncio.to_thread(
+            lambda: urllib.request.urlopen(  # noqa: S310 - the loopback server above
+                screens.server.url + "healthz", timeout=5).read())
+        assert body.strip() in (b"ok", b"fault")
+        await screens.stop()
+
+    try:
+        asyncio.run(main())
+    finally:
+        holder.close()
+    failures = [r for r in caplog.records if "screens not served" in r.getMessage()]
+    assert len(failures) == 1      # journaled once, not at every attempt
+    with pytest.raises(AttributeError):
+        _ = screens.server.url     # stopped
