@@ -34,7 +34,8 @@ def measure(root: Path) -> dict[str, list[tuple[int, str]]]:
 
 def main() -> int:
     for kind, largest in measure(Path(sys.argv[1]) if len(sys.argv) > 1 else ROOT).items():
-        print(f"largest {kind}{'es' if kind == 'class' else 's'}: " + ", ".join(f"{name} {n}" for n, name in largest))
+        plural = "classes" if kind == "class" else f"{kind}s"
+        print(f"largest {plural}: " + ", ".join(f"{name} {n}" for n, name in largest))
     return 0
 
 
