@@ -94,7 +94,7 @@ def test_a_reference_no_pair_sees_is_bad_input_with_its_line(tmp_path, capsys, e
 
 # -- while the daemon runs: the command goes to it ---------------------------------------------
 PASSWORD = "cell-4-password"  # noqa: S105 - a test user's
-PROC = Path(__file__).with_name("station") / "station_proc.py"
+PROC = Path(__file__).parent / "shell" / "station_proc.py"
 
 
 def _free_port() -> int:

@@ -262,7 +262,8 @@ def test_a_reload_onto_another_database_moves_the_lock_or_is_refused(tmp_path):
 
     a = subprocess.Popen([sys.executable, "-m", "stationd", "run", "--config", "station.yaml"],
                          cwd=tmp_path, env=env, stderr=subprocess.PIPE, text=True)
-    b = None
+    b: subprocess.Popen[bytes] | None = None
+    b_sock: NotifyManager | None = None
     try:
         _recv_until(sock, "READY=1", 90)
         station.write_text(a2.read_text())
@@ -271,10 +272,12 @@ def test_a_reload_onto_another_database_moves_the_lock_or_is_refused(tmp_path):
         r = second(a2)
         assert r.returncode == 2 and f"already run by pid {a.pid}" in r.stderr, r.stderr
         # a's first database is free: another daemon runs on it
+        b_sock = NotifyManager(tmp_path / "notify-b")
         b = subprocess.Popen([sys.executable, "-m", "stationd", "run", "--config",
-                              "station.yaml"], cwd=other, env=quiet,
+                              "station.yaml"], cwd=other,
+                             env={**quiet, "NOTIFY_SOCKET": str(tmp_path / "notify-b")},
                              stderr=subprocess.DEVNULL)
-        time.sleep(5.0)
+        _recv_until(b_sock, "READY=1", 90)             # b holds the database now
         assert b.poll() is None
         # a reload of a back onto it is refused: a keeps a2.db and runs on
         station.write_text(text.replace(old_db, first_db))
@@ -294,5 +297,7 @@ def test_a_reload_onto_another_database_moves_the_lock_or_is_refused(tmp_path):
                 except subprocess.TimeoutExpired:
                     p.kill()
         sock.close()
+        if b_sock is not None:
+            b_sock.close()
     err = a.stderr.read() if a.stderr else ""
     assert b is not None and f"already run by pid {b.pid}" in err and "Traceback" not in err
