@@ -214,7 +214,7 @@ async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]
     plc.set_vehicle(1, "BENCHVIN000000001")
     plc.raise_lift()
     if not await _until(lambda: st.vin is not None, 60):
-        raise InputError(f"the station did not start the vehicle: {st.core.reason}")
+        raise InputError(f"the station did not start the vehicle: {st.core.status().reason}")
     cut_index = len(plan) // 3 if p.cut_s is not None else -1
     restoring: asyncio.Task[None] | None = None
     what = "bench linkcut: " + ("link cut" if p.cut_s is not None else
@@ -234,11 +234,11 @@ async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]
             await asyncio.sleep(pace_s / 2)
         else:
             def on_it(b: str = bolt) -> bool:
-                return st.core.state is State.TIGHTENING and st.core.bolt == b \
+                return st.core.status().state is State.TIGHTENING and st.core.status().bolt == b \
                     and bool(ctl.tool_enabled)
 
             if not await _until(on_it, SELECT_S):
-                p.not_selected.append(f"{bolt}: {st.core.reason}")
+                p.not_selected.append(f"{bolt}: {st.core.status().reason}")
             elif i == cut_index and proxy is not None and p.cut_s is not None:
                 proxy.cut()     # the link goes as the operator pulls the trigger
                 p.cut_at = time.monotonic()
@@ -262,7 +262,7 @@ async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]
             p.by_bolt += [(want, e.latency_ms["total"]) for e in new
                           if isinstance(e, ParamsSent)]
         if proxy is None or not proxy.is_cut:
-            await _until(lambda: st.core.state is State.TRACKING, 10)
+            await _until(lambda: st.core.status().state is State.TRACKING, 10)
     if restoring is not None:
         await restoring
         assert p.restored_at is not None  # noqa: S101 - set by _restore

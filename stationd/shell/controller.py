@@ -65,7 +65,7 @@ class ControllerFeed:
         self._waiting = None
         if result is not None:
             self.received.append(result)
-        if WRENCH in self.core.faults and not self._keeper.losing:
+        if WRENCH in self.core.status().faults and not self._keeper.losing:
             # a refusal is a fault until the controller answers
             await self._feed(DeviceBack(time.time(), WRENCH, self._keeper.reconnects))
         if result is not None:
@@ -169,7 +169,8 @@ class ControllerFeed:
                         one_line(exc))
 
     async def _gap(self, first: int, last: int, reason: str) -> None:
-        await self._call(self.records.record_gap, first, last, self.core.vin, reason)
+        await self._call(self.records.record_gap, first, last, self.core.status().vin,
+                         reason)
         ids = str(first) if first == last else f"{first}-{last}"
         log.warning("tightening %s missed while the link was down: a gap (%s)", ids, reason)
         self.bus.publish(Notice(f"tightening {ids} missed: a gap ({reason})", "warning"))

@@ -42,10 +42,10 @@ from stationd.shell.effects import Effects
 from stationd.shell.records import STATION_FAULTS, Records, Unsaved
 from stationd.shell.sdnotify import Notifier
 from stationd.shell.tracking import FrameStore, Tracker
-from stationd.station.actions import Action
+from stationd.station.actions import Action, Publish
 from stationd.station.commands import Answer, Command, Issuer
 from stationd.station.core import StationCore
-from stationd.station.events import EventBus, State
+from stationd.station.events import EventBus, State, StateChanged
 from stationd.station.inputs import (
     DATABASE,
     LIFT,
@@ -159,7 +159,7 @@ class Station:
 
     @property
     def vin(self) -> str | None:
-        return self.core.vin
+        return self.core.status().vin
 
     @property
     def repo(self) -> Repository | None:
@@ -198,6 +198,21 @@ class Station:
             fault = keeper.open_now()
             if fault is not None:
                 self._pending.append(DeviceFault(time.time(), device, *fault))
+
+    def announce(self) -> None:
+        """Publish the core's state as it stands (a new station, before it opens anything:
+        the screens forget the last configuration's device reports)."""
+        now = self.core.status()
+        self.bus.publish(StateChanged(now.state, now.reason))
+
+    def heard_before_run(self, ev: DeviceFault | DeviceBack) -> None:
+        """What the serve loop saw before this station's loop runs (the database not open,
+        then open): the core decides, and what it publishes is published.  Its other actions
+        wait for the loop (nothing is open to carry them out; ``run`` starts with the tool
+        off)."""
+        for a in self.core.feed(ev):
+            if isinstance(a, Publish):
+                self.effects.publish(a.event)
 
     def carry(self, unsaved: list[Unsaved]) -> None:
         """Results the last station (a reload) received and could not write: this one writes
@@ -245,7 +260,8 @@ class Station:
         if self.wrench_keeper.up:   # the reconnect count the core compares from now on
             await self.feed(DeviceBack(time.time(), WRENCH, self.wrench_keeper.reconnects))
             self.controller.came_back()
-        self.notifier.ready(f"{self.core.state.value}: {self.core.reason}")
+        now = self.core.status()
+        self.notifier.ready(f"{now.state.value}: {now.reason}")
         if self.unsaved():   # a reload's: written (then acknowledged) by the database keeper
             self.database_keeper.lost(DeviceError("results received before the reload "
                                                   "not stored yet"))

@@ -191,7 +191,7 @@ class Effects:
         if isinstance(ev, StateChanged):
             self.notifier.status(f"{ev.state}: {ev.reason}")
             if ev.state is State.FAULT:   # each device's own line has the reason
-                self.log.info("state: fault (%s)", ", ".join(sorted(self.core.faults)))
+                self.log.info("state: fault (%s)", ", ".join(sorted(self.core.status().faults)))
             else:
                 self.log.info("%s: %s", ev.state, ev.reason)
         elif isinstance(ev, Notice):
@@ -325,7 +325,8 @@ class Effects:
     async def _record_command(self, a: RecordCommand) -> Event:
         """An accepted command on disk with its user; what the database said, for the core."""
         try:
-            why = await self._call(self.records.record_command, a, self.core.vin)
+            why = await self._call(self.records.record_command, a,
+                                  self.core.status().vin)
         except STATION_FAULTS as exc:
             self._database.lost(DeviceError(one_line(exc)))
             why = Reason(Why.NOT_RECORDED, note=one_line(exc))

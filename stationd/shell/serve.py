@@ -18,6 +18,7 @@ import logging
 import random
 import signal
 import sys
+import time
 from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any
@@ -32,15 +33,12 @@ from stationd.shell.daemon import OPEN_ERRORS, Station
 from stationd.shell.records import STATION_FAULTS, Unsaved
 from stationd.shell.sdnotify import Notifier
 from stationd.station.events import (
-    DeviceHealth,
     EventBus,
     LineLinkChanged,
     ResultRecorded,
-    State,
-    StateChanged,
     StationEvent,
 )
-from stationd.station.inputs import DATABASE, LIFT, WRENCH
+from stationd.station.inputs import DATABASE, LIFT, WRENCH, DeviceBack, DeviceFault
 
 log = logging.getLogger("stationd")
 OPEN_RETRY_S = (1.0, 30.0)   # a database that does not open: first and longest wait
@@ -70,7 +68,7 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bo
         try:
             await loop.run_in_executor(None, station.open)
             if told:
-                station.bus.publish(DeviceHealth(DATABASE, True))
+                station.heard_before_run(DeviceBack(time.time(), DATABASE))
             return True
         except STATION_FAULTS as exc:
             wait = backoff.next()
@@ -78,10 +76,9 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bo
             if not told:
                 notifier.ready(f"fault: database: {one_line(exc)}")
                 told = True
-            notifier.status(f"fault: database: {one_line(exc)}")
-            # the screens and /healthz say it too (the station's loop is not running yet)
-            station.bus.publish(DeviceHealth(DATABASE, False, FaultKind.DOWN, one_line(exc)))
-            station.bus.publish(StateChanged(State.FAULT, f"database: {one_line(exc)}"))
+            # the core decides; the screens and /healthz say it too (before the loop runs)
+            station.heard_before_run(DeviceFault(time.time(), DATABASE, FaultKind.DOWN,
+                                                 one_line(exc)))
         try:
             await asyncio.wait_for(stop.wait(), wait)
         except TimeoutError:
@@ -353,9 +350,8 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
     carried: list[Unsaved] = []   # results the last station received and could not write
     while True:
         await screens.follow(cfg)
-        # the screens forget the last configuration's device reports (a reload)
-        bus.publish(StateChanged(State.STARTING, "opening the devices"))
         station = Station(cfg, notifier=notifier, bus=bus)
+        station.announce()   # the screens forget the last configuration's device reports
         station.frames = screens.frames
         station.carry(carried)
         if not await _open(station, notifier, stop):

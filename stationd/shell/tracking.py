@@ -40,7 +40,6 @@ from stationd.station.core import StationCore
 from stationd.station.events import EventBus, PairFrames
 from stationd.station.inputs import Event, LocalizedIn
 from stationd.station.scan import ScanPlan
-from stationd.station.state import CAMERAS_ON
 from stationd.station.trust import MeasureReferences, ReferencesChecked
 
 BAD_GRABS = 3               # a pair failing this many grabs in a row is a fault
@@ -93,8 +92,9 @@ class Tracker:
         while not stop.is_set():
             if self._checks:   # answered also with every pair down: "not checked", why
                 await self._measure(self._checks.pop(0))
-            down = [n for n in self._keepers if n in self.core.faults]
-            if self.core.state not in CAMERAS_ON or not self.grabbers or down:
+            now = self.core.status()
+            down = [n for n in self._keepers if n in now.faults]
+            if not now.cameras_on or not self.grabbers or down:
                 await asyncio.sleep(IDLE_S)
                 continue
             cycle = self._scan.choose(list(self.grabbers))
@@ -130,9 +130,7 @@ class Tracker:
             if g.sides and time.monotonic() >= self._next_frames.get(n, 0.0):
                 self._next_frames[n] = time.monotonic() + PAIR_FRAMES_S
                 self.bus.publish(PairFrames(n, g.exposure_t, g.sides))
-        trust = self.core.trust
-        return fuse_views(names, got, self.cfg.localize, done,
-                          trust.untrusted() if trust is not None else None)
+        return fuse_views(names, got, self.cfg.localize, done, self.core.status().untrusted)
 
     def _grab(self, name: str, grabber: StereoGrabber) -> PairView:
         """Grab one pair and localize in its frames (an executor thread)."""

@@ -100,7 +100,7 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     n shares of the bolts in view (:func:`share_of`); ``truth['share']`` gets them.
     ``supervisor`` None: locks are left to people (:func:`wait_for_people`)."""
     plc, ctl = simulators(st)
-    if st.core.operator != operator.user:
+    if st.core.status().operator != operator.user:
         answer = await st.submit(SignIn(f"{operator.source}: the simulated operator"),
                                  operator)
         if not answer.accepted:
@@ -113,7 +113,7 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
             break
         await asyncio.sleep(0.05)
     else:
-        raise InputError(f"the simulated vehicle was not opened: {st.core.reason}")
+        raise InputError(f"the simulated vehicle was not opened: {st.core.status().reason}")
     length = st.cfg.tool.length_mm
     bolts: list[BoltInfo] = []
     unseen: list[BoltInfo] = []
@@ -220,7 +220,7 @@ async def _tool_on(st: Station, bolt: str, tries: int = 600) -> bool:
     """Whether the tool comes on for ``bolt`` (up to ~30 s for selection, acknowledgement,
     confirmation)."""
     for _ in range(tries):
-        if st.core.state is State.TIGHTENING and st.core.bolt == bolt \
+        if st.core.status().state is State.TIGHTENING and st.core.status().bolt == bolt \
                 and simulators(st)[1].tool_enabled:
             return True
         await asyncio.sleep(0.05)
@@ -231,7 +231,7 @@ def _why_not(st: Station) -> str:
     """Why nothing was selected: the last localization's refusal, else the state's words."""
     seen = [e for e in st.bus.of(Localized) if isinstance(e, Localized)]
     last = seen[-1].reason if seen else None
-    return reason_words(last) if last is not None else st.core.reason
+    return reason_words(last) if last is not None else st.core.status().reason
 
 
 async def _pull(st: Station, loosening: bool, nok: bool) -> tuple[Any, bool]:

@@ -40,8 +40,9 @@ class LiftRules(FaultRules):
     """The vehicle and lift rules: arrivals, rejections, the lift followed, the VIN sent."""
 
     def _on_Started(self, ev: Started) -> list[Action]:  # noqa: N802 - named after the event
-        if self.state is not State.STARTING:
+        if self._started:   # once: a device's fault may have come first (down at boot)
             return []
+        self._started = True
         self._link_lost_at = ev.t
         self._to(State.FAULT if self.faults else State.WAITING_VEHICLE,
                  self._fault_reason() if self.faults else "waiting for the lift")

@@ -9,7 +9,9 @@ each written once and used by all."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 
 from db.bolts import Window
 from stationd.reasons import Reason
@@ -96,6 +98,28 @@ def _disable(reason: str, bolt: str | None = None, why: Reason | None = None, *,
     return [Publish(ToolDisabled(reason, bolt, why, t=t)), DisableTool(reason, bolt, why)]
 
 
+@dataclass(frozen=True)
+class CoreStatus:
+    """The station as the core decided it, a copy: what the shell and the screens ask for
+    (they never read the core's fields, which only the core writes)."""
+
+    state: State
+    reason: str
+    #: device -> why it is in fault
+    faults: Mapping[str, str]
+    vin: str | None
+    bolt: str | None
+    tool_on: bool
+    operator: str | None
+    #: the pairs the calibration check does not trust now, with why (None: no check)
+    untrusted: Mapping[str, Reason] | None
+
+    @property
+    def cameras_on(self) -> bool:
+        """Whether the cameras are to be read (tracking, on a bolt, teaching)."""
+        return self.state in CAMERAS_ON
+
+
 @dataclass
 class CoreState:
     """One station's state and its shared transitions.  ``rework``: a vehicle whose VIN was
@@ -108,7 +132,8 @@ class CoreState:
     late_result_s: float = LATE_RESULT_S
     nok: NokPolicy = field(default_factory=NokPolicy)
     state: State = State.STARTING
-    reason: str = "starting"
+    reason: str = "opening the devices"
+    _started: bool = field(default=False, repr=False)   # Started heard (once)
     bolt: str | None = None
     matcher: BoltMatcher | None = None
     vin: str | None = None
@@ -161,6 +186,14 @@ class CoreState:
     #: who is signed in at the station (None: nobody): every rundown is recorded with them
     operator: str | None = None
     _operator_seen: float = field(default=0.0, repr=False)   # their last sign-in or work
+
+    def status(self) -> CoreStatus:
+        """A copy of the station's state as decided (see :class:`CoreStatus`)."""
+        return CoreStatus(self.state, self.reason,
+                          MappingProxyType({d: r for d, (_, r) in self.faults.items()}),
+                          self.vin, self.bolt, self.tool_on, self.operator,
+                          None if self.trust is None
+                          else MappingProxyType(self.trust.untrusted()))
 
     @property
     def selection(self) -> Selection | None:

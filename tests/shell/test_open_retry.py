@@ -5,11 +5,14 @@ once it opens: never an exit."""
 from __future__ import annotations
 
 import asyncio
+from types import SimpleNamespace
 from typing import Any
 
 from db.errors import DbError
+from stationd.shell.daemon import Station
 from stationd.shell.sdnotify import Notifier
 from stationd.shell.serve import _open
+from stationd.station.core import StationCore
 from stationd.station.events import DeviceHealth, EventBus, StateChanged
 
 
@@ -24,11 +27,17 @@ class Recording(Notifier):
 
 
 class FlakyStation:
-    """Fails to open twice (the database is on a disk not mounted yet), then opens."""
+    """Fails to open twice (the database is on a disk not mounted yet), then opens.  Its
+    core is a real one, and what the serve loop saw reaches it as the daemon's does (the
+    daemon's own method): the core decides the fault, its events go to the bus."""
+
+    heard_before_run = Station.heard_before_run
 
     def __init__(self) -> None:
         self.attempts = 0
         self.bus = EventBus()      # where the daemon tells its screens meanwhile
+        self.core = StationCore()
+        self.effects = SimpleNamespace(publish=self.bus.publish)
 
     def open(self) -> None:
         self.attempts += 1
@@ -50,6 +59,9 @@ def test_a_database_that_does_not_open_is_retried_then_the_daemon_goes_on():
     health = [(e.ok, e.reason) for e in station.bus.of(DeviceHealth)]
     assert health[0][0] is False and "unable to open" in health[0][1] and health[-1] == (True, "")
     assert any(e.state == "fault" for e in station.bus.of(StateChanged))
+    # the core heard both: no fault left, and its loop's Started still comes once
+    assert station.core.status().faults == {}
+    assert station.core.status().state == "waiting for vehicle"
 
 
 def test_stopping_while_the_database_is_down_ends_the_wait():

@@ -33,8 +33,16 @@ from stationd.station.actions import (
     StoreUnattributed,
 )
 from stationd.station.core import StationCore
-from stationd.station.events import DeviceHealth, Refused, ResultUnattributed, State, StateChanged
+from stationd.station.events import (
+    DeviceHealth,
+    OperatorChanged,
+    Refused,
+    ResultUnattributed,
+    State,
+    StateChanged,
+)
 from stationd.station.inputs import (
+    DATABASE,
     BoltSpec,
     CommandDone,
     CommandIn,
@@ -615,3 +623,21 @@ def test_a_vehicle_that_changes_at_height_is_a_fault_until_the_lift_goes_down():
         up = c.feed(LiftRead(2.5, True, True, changed.model_code, changed.vin))
         assert [(a.model_code, a.vin) for a in up if isinstance(a, LoadVehicle)] == \
             [(changed.model_code, changed.vin)]
+
+
+def test_a_fault_heard_before_the_start_does_not_skip_the_start():
+    """The database down at boot reaches the core before its loop runs (the serve loop's
+    retry): the core is in fault and says so; once it is back and the loop starts, Started
+    still does what a start does (the tool off, who is signed in said), once."""
+    core = StationCore()
+    down = core.feed(DeviceFault(1.0, DATABASE, FaultKind.DOWN, "unable to open database"))
+    assert [e.state for e in published(down, StateChanged)] == [State.FAULT]
+    assert [h.ok for h in published(down, DeviceHealth)] == [False]
+    assert core.status().faults == {DATABASE: "unable to open database"}
+    back = core.feed(DeviceBack(2.0, DATABASE))
+    assert [h.ok for h in published(back, DeviceHealth)] == [True]
+    assert core.status().faults == {} and core.status().state is State.WAITING_VEHICLE
+    start = core.feed(Started(3.0))
+    assert any(isinstance(a, DisableTool) for a in start)
+    assert published(start, OperatorChanged)
+    assert core.feed(Started(4.0)) == []           # once
