@@ -291,8 +291,9 @@ class Records:
 
     def close_vehicle(self, vin: str) -> VehicleEnded:
         report = self._repo().close_vehicle(vin)
-        log.info("vehicle %s closed: missing %s, skipped %s, NOK %s", vin, report.missing,
-                 report.skipped, report.nok)
+        log.info("vehicle %s closed: missing %s, skipped %s, NOK %s", vin,
+                 *(", ".join(bolts) or "none" for bolts in (report.missing, report.skipped,
+                                                            report.nok)))
         # the screens' "not tightened when the vehicle left": skipped ones too
         return VehicleEnded(time.time(), vin, tuple(report.untightened), tuple(report.nok))
 

@@ -56,7 +56,7 @@ def test_the_counters_say_what_they_count(live_server, page):
     page.wait(lambda p: p.text("#skipped") == "1", what="the skipped bolt counted")
     counters = " ".join((page.text(".counters") or "").split())
     # 1 OK of 4, B4 skipped (said, not left out of "1 / 4"), B2's last rundown a NOK
-    assert counters == "1 / 4 bolts OK 1 skipped 1 bolts ending NOK", counters
+    assert counters == "1 / 4 bolts OK 1 skipped 1 bolt ending NOK", counters
     # the NOK's row names the quantity that failed (torque 41.0 below 45.0), not colour alone
     row = page.js("return document.querySelector('#results tr.res-nok').innerText")
     assert "B2 NOK: torque low" in row, row

@@ -423,7 +423,11 @@ class OpenProtocolWrench(SupervisedWrench):
             log.info("%s: the controller's clock is not known (MID 0080: %s): results "
                      "fetched late are placed by their tightening ids only", self.device, e)
             return None
-        log.info("%s: controller clock %+.0f s from the station's", self.device, offset)
+        if round(offset) == 0:
+            log.info("%s: controller clock agrees with the station's (within 1 s)",
+                     self.device)
+        else:
+            log.info("%s: controller clock %+.0f s from the station's", self.device, offset)
         return offset
 
     @property

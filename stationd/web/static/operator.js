@@ -306,6 +306,7 @@ function render(view) {
   setText("done", view.counters.done);
   setText("total", view.counters.total);
   setText("nok", view.counters.nok);
+  setText("nok-unit", view.counters.nok === 1 ? "bolt ending NOK" : "bolts ending NOK");
   $("nok-wrap").style.color = view.counters.nok ? "" : "var(--dim)";
   // skipped bolts are neither OK nor to do: said beside "10 / 50", never left out silently
   setText("skipped", view.counters.skipped || 0);
