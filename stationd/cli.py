@@ -415,6 +415,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
                         or args.stations != 1 or args.no_sim_supervisor):
         raise InputError("--opcua, --line-db, --stations and --no-sim-supervisor go with the "
                          "station demo, not --vision")
+    if args.no_sim_supervisor and args.stations != 1:
+        raise InputError("--no-sim-supervisor with --stations: a person releases the locks at "
+                         "the first station's screens; the others have none, and their locks "
+                         "would wait for good")
     if args.vision:
         from stationd.demo.vision import run_demo
 
