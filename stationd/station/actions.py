@@ -12,19 +12,14 @@ from typing import Any
 
 from db.bolts import Parameters
 from db.kinds import TIGHTENING
-from drivers.wrench.base import (
-    TighteningResult,
-    UnreadableResult,
-)
+from drivers.wrench.base import TighteningResult, UnreadableResult
 from stationd.reasons import Reason
 from stationd.station.commands import (
     Answer,
     Command,
     Issuer,
 )
-from stationd.station.events import (
-    StationEvent,
-)
+from stationd.station.events import StationEvent
 from stationd.station.trust import MeasureReferences, RecordCheck
 
 

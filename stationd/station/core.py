@@ -40,9 +40,7 @@ from typing import assert_never
 
 from stationd.station.actions import Action, Publish
 from stationd.station.events import State as State  # the state lives with its event
-from stationd.station.events import (
-    StateChanged,
-)
+from stationd.station.events import StateChanged
 from stationd.station.inputs import (
     CommandDone,
     CommandIn,

@@ -6,10 +6,7 @@ from __future__ import annotations
 from drivers.keeper import FaultKind
 from stationd.reasons import Reason, Why
 from stationd.station.actions import Action, Publish
-from stationd.station.events import (
-    DeviceHealth,
-    State,
-)
+from stationd.station.events import DeviceHealth, State
 from stationd.station.inputs import DATABASE, WRENCH, DeviceBack, DeviceFault
 from stationd.station.state import _Cut, _disable
 from stationd.station.teaching import TeachRules

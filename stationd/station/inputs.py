@@ -13,16 +13,10 @@ from typing import Any
 
 from db.bolts import Parameters
 from drivers.keeper import FaultKind
-from drivers.wrench.base import (
-    TighteningResult,
-    UnreadableResult,
-)
+from drivers.wrench.base import TighteningResult, UnreadableResult
 from stationd.reasons import Reason
 from stationd.station.actions import Record
-from stationd.station.commands import (
-    Command,
-    Issuer,
-)
+from stationd.station.commands import Command, Issuer
 from stationd.station.trust import ReferencesChecked
 
 

@@ -16,9 +16,7 @@ from types import MappingProxyType
 from db.bolts import Window
 from stationd.reasons import Reason
 from stationd.station.actions import Action, DisableTool, Owed, Publish, Selection
-from stationd.station.commands import (
-    TeachPoint,
-)
+from stationd.station.commands import TeachPoint
 from stationd.station.events import (
     BoltLocked,
     Notice,
