@@ -31,7 +31,7 @@ from stationd.geometry.frames import Transform
 from stationd.localize import size_problem
 from stationd.localize.references import Reference, in_pair
 from stationd.localize.stereo import localize_detections
-from stationd.vision.detect import detect_all
+from stationd.vision.detect import NOTHING_IN_VIEW, detect_all
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import VisionParams
 
@@ -124,7 +124,7 @@ def measure_reference(cal: StereoPair, tv: Transform, left: np.ndarray, right: n
             return RefMeasure(ref.name, why=RefWhy.AMBIGUOUS,
                               note=f"{len(found)} markers around it")
         if not found:
-            vision_refused = [r for r in reasons if not r.startswith("no purple region")]
+            vision_refused = [r for r in reasons if r != NOTHING_IN_VIEW]
             if vision_refused:
                 return RefMeasure(ref.name, why=RefWhy.NOT_MEASURED, note=vision_refused[0])
             return RefMeasure(ref.name, why=RefWhy.NOT_FOUND)

@@ -25,10 +25,10 @@ from drivers.wrench import Received, TighteningResult, UnreadableResult, Wrench
 from stationd.shell.blocking import Blocking
 from stationd.shell.records import STATION_FAULTS, Records
 from stationd.station.core import StationCore
-from stationd.station.events import DeviceIdentified, EventBus, Notice
+from stationd.station.events import DeviceIdentified, EventBus
 from stationd.station.gaps import MAX_FETCH
 from stationd.station.gaps import plan as plan_gaps
-from stationd.station.inputs import WRENCH, DeviceBack, Event, ResultIn, UnreadableIn
+from stationd.station.inputs import WRENCH, DeviceBack, Event, ResultIn, ResultsMissed, UnreadableIn
 
 log = logging.getLogger("stationd")
 RESULT_WAIT_S = 0.5         # one blocking wait for pushed results (a condition, not a poll)
@@ -169,11 +169,8 @@ class ControllerFeed:
                         one_line(exc))
 
     async def _gap(self, first: int, last: int, reason: str) -> None:
-        await self._call(self.records.record_gap, first, last, self.core.status().vin,
-                         reason)
-        ids = str(first) if first == last else f"{first}-{last}"
-        log.warning("tightening %s missed while the link was down: a gap (%s)", ids, reason)
-        self.bus.publish(Notice(f"tightening {ids} missed: a gap ({reason})", "warning"))
+        """What the controller cannot give any more, for the core (it stores and says it)."""
+        await self._feed(ResultsMissed(time.time(), first, last, reason))
 
     async def drain(self) -> list[Received]:
         """At a stop (the station's lock held, its tasks cancelled): the result the wait was

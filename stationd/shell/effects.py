@@ -42,6 +42,7 @@ from stationd.station.actions import (
     SendParams,
     SendVin,
     StoreControllerEvent,
+    StoreGap,
     StoreUnattributed,
     StoreUnreadable,
 )
@@ -67,6 +68,7 @@ from stationd.station.inputs import (
     CommandDone,
     DeviceFault,
     Event,
+    NotStored,
     ParamsAcked,
     ParamsRefused,
     ToolOn,
@@ -162,6 +164,11 @@ class Effects:
             await self.acknowledge(a.result)
         elif isinstance(a, StoreUnattributed):
             await self._store_unattributed(a)
+        elif isinstance(a, StoreGap):
+            try:
+                await self._call(self.records.record_gap, a.first, a.last, a.vin, a.reason)
+            except STATION_FAULTS as exc:
+                self.log.error("gap %d-%d not stored: %s", a.first, a.last, one_line(exc))
         elif isinstance(a, StoreControllerEvent):
             await self._store_then_ack(self.records.store_controller_event, a, a.result,
                                        f"{a.what} (a controller event)")
@@ -278,10 +285,8 @@ class Effects:
             self.records.keep(u)
             self.log.error("tightening %d of %s NOT stored, kept until the database takes it: "
                       "%s; %s", r.tightening_id, a.bolt, one_line(exc), u.describe())
-            self.bus.publish(Notice(f"tightening {r.tightening_id} of {a.bolt} not stored: "
-                                    f"{one_line(exc)}", "error"))
             self._database.lost(DeviceError(f"results not stored: {one_line(exc)}"))
-            return None
+            return NotStored(time.time(), r.tightening_id, a.bolt, one_line(exc))
         return Written(time.time(), a, tuple(u.images))
 
     async def _store_unattributed(self, a: StoreUnattributed) -> None:

@@ -133,6 +133,17 @@ class StoreUnattributed:
 
 
 @dataclass(frozen=True)
+class StoreGap:
+    """Store a gap in the controller's numbering (tightenings ``first``..``last`` missed;
+    ``vin``: the vehicle loaded, if any), for quality to look up on the controller."""
+
+    first: int
+    last: int
+    vin: str | None
+    reason: str
+
+
+@dataclass(frozen=True)
 class StoreControllerEvent:
     """Store a result that is not a rundown (``what``: its type in words; ``bolt``: the one
     the tool was enabled for, still open), then acknowledge it."""
@@ -178,5 +189,6 @@ class Reply:
 
 
 Action = (SendParams | EnableTool | DisableTool | SendVin | LoadVehicle | CloseVehicle | Record
-          | Acknowledge | StoreUnattributed | StoreControllerEvent | StoreUnreadable | Publish
+          | Acknowledge | StoreUnattributed | StoreGap | StoreControllerEvent | StoreUnreadable
+          | Publish
           | RecordCommand | Reply | MeasureReferences | RecordCheck)

@@ -50,10 +50,12 @@ from stationd.station.inputs import (
     LiftRead,
     LocalizedIn,
     ModelsKnown,
+    NotStored,
     OperatorBack,
     ParamsAcked,
     ParamsRefused,
     ResultIn,
+    ResultsMissed,
     Started,
     Tick,
     ToolOn,
@@ -111,6 +113,10 @@ class StationCore(LiftRules, ToolRules, ResultRules):
                 return self._on_ResultIn(ev)
             case UnreadableIn():
                 return self._on_UnreadableIn(ev)
+            case ResultsMissed():
+                return self._on_ResultsMissed(ev)
+            case NotStored():
+                return self._on_NotStored(ev)
             case CommandIn():
                 return self._on_CommandIn(ev)
             case CommandDone():

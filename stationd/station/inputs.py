@@ -112,6 +112,26 @@ class UnreadableIn(Input):
 
 
 @dataclass(frozen=True)
+class ResultsMissed(Input):
+    """Tightenings ``first``..``last`` were made while the link was down and cannot be
+    fetched (``reason``): a gap in the controller's numbering, to be stored and said."""
+
+    first: int
+    last: int
+    reason: str
+
+
+@dataclass(frozen=True)
+class NotStored(Input):
+    """The database refused the record of tightening ``tightening_id`` on ``bolt``
+    (``reason``); the shell keeps it until the database takes it."""
+
+    tightening_id: int
+    bolt: str
+    reason: str
+
+
+@dataclass(frozen=True)
 class DeviceFault(Input):
     """``device`` (lift, wrench, database, a pair's name) failed: ``kind`` (down, timeout,
     garbage, refused, ...) and a readable ``reason``."""
@@ -238,6 +258,7 @@ class CommandDone(Input):
 
 
 Event = (Started | LiftRead | LocalizedIn | ParamsAcked | ParamsRefused | ResultIn | UnreadableIn
+         | ResultsMissed | NotStored
          | DeviceFault | DeviceBack | VehicleLoaded | VehicleRejected | VinSent | Tick
          | CommandIn | CommandDone | ToolOn | Written | VehicleEnded | ModelsKnown
          | ReferencesChecked | OperatorBack)

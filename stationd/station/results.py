@@ -18,6 +18,7 @@ from stationd.station.actions import (
     Record,
     Selection,
     StoreControllerEvent,
+    StoreGap,
     StoreUnattributed,
     StoreUnreadable,
 )
@@ -29,7 +30,7 @@ from stationd.station.events import (
     ResultUnreadable,
     State,
 )
-from stationd.station.inputs import ResultIn, UnreadableIn
+from stationd.station.inputs import NotStored, ResultIn, ResultsMissed, UnreadableIn
 from stationd.station.orders import OrderRules
 from stationd.station.state import CLOCK_SLACK_S, NOK_SKIPPED, ON_A_BOLT
 
@@ -159,6 +160,16 @@ class ResultRules(OrderRules):
                                               int(r.pset), bool(r.ok), bolt, t=ev.t)),
                 Publish(Notice(note, "warning" if bolt is not None
                                or kind is ResultKind.UNKNOWN else "info", t=ev.t))]
+
+    def _on_ResultsMissed(self, ev: ResultsMissed) -> list[Action]:  # noqa: N802
+        ids = str(ev.first) if ev.first == ev.last else f"{ev.first}-{ev.last}"
+        return [StoreGap(ev.first, ev.last, self.vin, ev.reason),
+                Publish(Notice(f"tightening {ids} missed while the link was down: a gap "
+                               f"({ev.reason})", "warning", t=ev.t))]
+
+    def _on_NotStored(self, ev: NotStored) -> list[Action]:  # noqa: N802
+        return [Publish(Notice(f"tightening {ev.tightening_id} of {ev.bolt} not stored: "
+                               f"{ev.reason}", "error", t=ev.t))]
 
     def _on_UnreadableIn(self, ev: UnreadableIn) -> list[Action]:  # noqa: N802
         """A result the driver could not read: stored whole; the bolt it may belong to (the

@@ -110,6 +110,11 @@ def excluded(cand: Candidate, exclude: Sequence[Circle]) -> bool:
     return any(math.hypot(cx - x, cy - y) <= r for x, y, r in exclude)
 
 
+#: the reason :func:`detect_all` gives when no candidate was seen at all (no marker in view:
+#: nothing refused), which callers tell apart from a marker seen and refused by this name
+NOTHING_IN_VIEW = "no purple region enclosing a ring in view"
+
+
 def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = None,
                marker: MarkerSpec | None = None, timings: dict[str, float] | None = None,
                searched: list[np.ndarray] | None = None, exclude: Sequence[Circle] = ()
@@ -167,7 +172,7 @@ def detect_all(image: np.ndarray, camera: Camera, params: VisionParams | None = 
         elif det.reason:
             reasons.append(det.reason)
     if not cands and not reasons:
-        reasons.append("no purple region enclosing a ring in view")
+        reasons.append(NOTHING_IN_VIEW)
     # one marker seen through two candidate regions (e.g. a field split by a glint) counts once
     unique: list[Detection] = []
     for d in found:
