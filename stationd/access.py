@@ -28,6 +28,7 @@ to be slow to brute-force; the parameters travel in the hash, so they can be rai
 from __future__ import annotations
 
 import base64
+import functools
 import hashlib
 import hmac
 import secrets
@@ -150,13 +151,17 @@ class AccessConfig:
         """The user with the rights of their role when the password is theirs, else None
         (an unknown user costs the same time as a wrong password)."""
         u = self.users.get(user)
-        stored = u.password_hash if u is not None else _DUMMY
+        stored = u.password_hash if u is not None else _dummy()
         if not verify_password(password, stored) or u is None:
             return None
         return Issuer(u.name, self.roles.get(u.role, frozenset()), source)
 
 
-_DUMMY = hash_password("no such user", salt=b"stationd-dummy-salt")
+@functools.cache
+def _dummy() -> str:
+    """The hash an unknown user's password is checked against: made at the first login, not
+    at import (a scrypt costs every command that imports this a tenth of a second)."""
+    return hash_password("no such user", salt=b"stationd-dummy-salt")
 
 
 @dataclass

@@ -798,7 +798,7 @@ def _stopped(stopped: _Stopped) -> int:
 def _main(argv: Sequence[str] | None, stopped: _Stopped) -> int:
     with _held():
         from stationd import progress
-        from stationd.imageio import quiet_opencv
+        from stationd.logsetup import quiet_opencv
 
         quiet_opencv()   # OpenCV's own warnings are no lines of ours (before it loads)
         parser = build_parser()

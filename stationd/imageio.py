@@ -7,9 +7,7 @@ would allocate for it or stop with an assertion.
 
 from __future__ import annotations
 
-import os
 import struct
-import sys
 from pathlib import Path
 
 import cv2
@@ -24,17 +22,6 @@ MAX_PIXELS = 200_000_000
 MAX_FILE_BYTES = 2**31
 
 _JPEG_SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
-
-
-def quiet_opencv() -> None:
-    """Keep OpenCV's own log lines (``[ WARN:0@0.02] global grfmt_png.cpp:793 ... PNG input
-    buffer is incomplete``) off stderr: every failure is told as one line of ours.  Called
-    once at startup; ``OPENCV_LOG_LEVEL`` set by the user wins (to debug a camera).  Errors
-    only: OpenCV reads the variable when it loads, and its level once loaded."""
-    os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
-    cv = sys.modules.get("cv2")
-    if cv is not None and os.environ["OPENCV_LOG_LEVEL"] == "ERROR":
-        cv.utils.logging.setLogLevel(cv.utils.logging.LOG_LEVEL_ERROR)
 
 
 def png_complete(data: bytes | np.ndarray) -> bool:

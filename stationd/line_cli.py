@@ -28,26 +28,15 @@ import sys
 from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
-from sqlalchemy import Engine, Table, inspect, make_url
-from sqlalchemy.exc import SQLAlchemyError
-
-from db.engine import make_engine
-from stationd.config import load_station_config
 from stationd.errors import InputError
-from stationd.forward import Forwarder, LineDown, error_line, line_url_problem
-from stationd.jsonout import strict_json
-from stationd.linedb import (
-    LINE,
-    LINE_FEED,
-    LINE_PARAMETERS,
-    LINE_RUNDOWNS,
-    bolt_versions,
-    create_line_schema,
-    results,
-)
-from stationd.outfile import write_atomic
+
+if TYPE_CHECKING:   # each command imports its libraries when run: every command builds this
+    # parser, and SQLAlchemy with the configuration here cost each of them a second
+    from sqlalchemy import Engine, Table
+
+    from stationd.forward import Forwarder
 
 EXIT_WAITING, EXIT_UNREACHABLE = 1, 3
 T = TypeVar("T")
@@ -57,7 +46,9 @@ CONNECT_TIMEOUT_S = 10
 def _forwarder(args: argparse.Namespace, *, write: bool = False) -> Forwarder:
     """The station's forwarder on its existing database: a missing one is said, never made
     (a wrong path or station file would read as "everything forwarded")."""
+    from stationd.config import load_station_config
     from stationd.db_cli import open_repository
+    from stationd.forward import Forwarder
 
     cfg = load_station_config(args.config)
     if cfg.line is None:
@@ -88,6 +79,9 @@ def cmd_line_status(args: argparse.Namespace) -> int:
 
 
 def cmd_line_quarantine(args: argparse.Namespace) -> int:
+    from stationd.forward import LineDown
+    from stationd.outfile import write_atomic
+
     if args.export:
         out = Path(args.export)
         if out.exists() or out.is_symlink():   # before anything is read
@@ -122,6 +116,8 @@ def cmd_line_quarantine(args: argparse.Namespace) -> int:
 
 
 def _line_url(args: argparse.Namespace) -> str:
+    from stationd.config import load_station_config
+
     cfg = load_station_config(args.config)
     if cfg.line is None:
         raise InputError(f"{args.config}: no line section: no line database to read")
@@ -129,12 +125,18 @@ def _line_url(args: argparse.Namespace) -> str:
 
 
 def _unreachable(url: str, exc: BaseException) -> int:
+    from sqlalchemy import make_url
+
+    from stationd.forward import error_line
+
     sys.stderr.write(f"stationd: line database {make_url(url).render_as_string()} "
                      f"unreachable: {error_line(exc)}\n")
     return EXIT_UNREACHABLE
 
 
 def _has(engine: Engine, table: str) -> bool:
+    from sqlalchemy import inspect
+
     return bool(inspect(engine).has_table(table))
 
 
@@ -144,6 +146,12 @@ def _read_line(url: str, table: Table, read: Callable[[Engine], list[T]]) -> lis
     one line on stderr.  A line database with records but without ``table`` was made by an
     earlier stationd and nothing upgraded it yet: said, with the command that does (a reader
     makes nothing)."""
+    from sqlalchemy import make_url
+    from sqlalchemy.exc import SQLAlchemyError
+
+    from db.engine import make_engine
+    from stationd.linedb import LINE_FEED
+
     engine = make_engine(url)
     try:
         if _has(engine, table.name):
@@ -166,6 +174,9 @@ def _n(v: float | None, digits: int = 1) -> str:
 
 
 def cmd_line_results(args: argparse.Namespace) -> int:
+    from stationd.jsonout import strict_json
+    from stationd.linedb import LINE_RUNDOWNS, results
+
     url = _line_url(args)
     if args.limit < 1:
         raise InputError(f"--limit {args.limit}: at least 1")
@@ -230,6 +241,9 @@ def _window(t: tuple[float | None, float | None, float | None]) -> str:
 
 
 def cmd_line_bolts(args: argparse.Namespace) -> int:
+    from stationd.jsonout import strict_json
+    from stationd.linedb import LINE_PARAMETERS, bolt_versions
+
     url = _line_url(args)
     rows = _read_line(url, LINE_PARAMETERS, lambda engine: bolt_versions(
         engine, model=args.model, bolt=args.bolt, station=args.station))
@@ -257,6 +271,13 @@ def cmd_line_init(args: argparse.Namespace) -> int:
     before any station forwards; a database made by an earlier version gets the new ones):
     what the forwarders make on their first connection anyway, so running it again, or
     after stations forwarded, changes nothing."""
+    from sqlalchemy import make_url
+    from sqlalchemy.exc import SQLAlchemyError
+
+    from db.engine import make_engine
+    from stationd.forward import error_line, line_url_problem
+    from stationd.linedb import LINE, create_line_schema
+
     problem = line_url_problem(args.url)   # the station file's line.url check
     if problem is not None:
         raise InputError(f"line init: {problem}")

@@ -145,4 +145,18 @@ def setup_logging(level: int, stream: TextIO, *, levelname: bool = True,
     return handler
 
 
-__all__ = ["LibraryWords", "StampedFormatter", "setup_logging", "under_journal"]
+__all__ = ["LibraryWords", "StampedFormatter", "quiet_opencv", "setup_logging",
+           "under_journal"]
+
+
+def quiet_opencv() -> None:
+    """Keep OpenCV's own log lines (``[ WARN:0@0.02] global grfmt_png.cpp:793 ... PNG input
+    buffer is incomplete``) off stderr: every failure is told as one line of ours.  Called
+    once at startup, before OpenCV loads (this module does not load it, so a command that
+    needs no image does not pay for it); ``OPENCV_LOG_LEVEL`` set by the user wins (to
+    debug a camera).  Errors only: OpenCV reads the variable when it loads, and its level
+    once loaded."""
+    os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
+    cv = sys.modules.get("cv2")
+    if cv is not None and os.environ["OPENCV_LOG_LEVEL"] == "ERROR":
+        cv.utils.logging.setLogLevel(cv.utils.logging.LOG_LEVEL_ERROR)

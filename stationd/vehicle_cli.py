@@ -32,12 +32,12 @@ import sys
 import textwrap
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import yaml
 
 from stationd import progress
-from stationd.config import PairConfig, StationConfig, load_station_config
 from stationd.errors import InputError
 from stationd.filekind import expect
 from stationd.geometry.frames import (
@@ -50,6 +50,9 @@ from stationd.geometry.frames import (
 )
 from stationd.outfile import refuse_to_replace, write_atomic
 from stationd.yamlio import YamlNode
+
+if TYPE_CHECKING:   # the configuration (every component's schema) is read when the command runs
+    from stationd.config import PairConfig, StationConfig
 
 EXIT_OK, EXIT_DISAGREE, EXIT_REFUSED = 0, 1, 1
 #: the points file, as ``calibrate vehicle --help`` shows it (and the README)
@@ -134,6 +137,8 @@ def read_points(path: Path, cfg: StationConfig) -> tuple[str, list[Observation]]
 def cmd_calibrate_vehicle(args: argparse.Namespace) -> int:
     if not args.config:
         raise InputError("--config STATION.yaml is needed: it names the pairs")
+    from stationd.config import load_station_config
+
     # this pair's registration is the one being written: a broken one is replaced, not read
     cfg = load_station_config(args.config, unregistered=args.pair)
     if args.pair not in cfg.pairs:
