@@ -267,7 +267,8 @@ class FirefoxPage(Page):
     def close(self) -> None:
         try:
             if getattr(self, "ws", None) is not None:
-                try:
+                try:   # briefly: Firefox may close the socket without an answer
+                    self.ws.settimeout(2)
                     self.cmd("session.end", {})
                 except Exception:  # noqa: S110 - Firefox may close the socket first
                     pass
@@ -276,7 +277,7 @@ class FirefoxPage(Page):
             if self.proc.poll() is None:
                 self.proc.terminate()
                 try:
-                    self.proc.wait(15)
+                    self.proc.wait(5)
                 except subprocess.TimeoutExpired:
                     self.proc.kill()
                     self.proc.wait()
