@@ -276,7 +276,11 @@ def _rundowns(s: Session, refs: list[int]) -> dict[int, dict[str, Any]]:
             "position_mm": [rec.x_mm, rec.y_mm, rec.z_mm],
             "match_distance_mm": rec.match_distance_mm, "tilt_deg": rec.tilt_deg,
             "sent_at": _iso(rec.sent_at), "result_at": _iso(rec.result_at),
-            "recorded_at": _iso(rec.recorded_at), "operator": rec.operator}
+            "recorded_at": _iso(rec.recorded_at), "operator": rec.operator,
+            # an outcome a person entered from the controller's screen (None: measured):
+            # who, why, and the unreadable result it resolves
+            "entered_by": rec.entered_by, "entered_comment": rec.entered_comment,
+            "unreadable_id": rec.unreadable_id}
     return out
 
 

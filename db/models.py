@@ -204,6 +204,12 @@ class TighteningRecord(Base):
     #: the user signed in at the station when the tool was enabled (None: nobody, or a
     #: record from before operators signed in)
     operator: Mapped[str | None] = mapped_column(String(64))
+    #: an outcome a person entered from the controller's own screen, its result message
+    #: unreadable (None: measured, as the controller sent it): who, their comment, and the
+    #: unreadable result it resolves (``unreadable_results.id``, None if none was stored)
+    entered_by: Mapped[str | None] = mapped_column(String(64))
+    entered_comment: Mapped[str | None] = mapped_column(String(500))
+    unreadable_id: Mapped[int | None]
 
     vehicle: Mapped[Vehicle] = relationship()
     bolt: Mapped[Bolt] = relationship()

@@ -6,6 +6,7 @@ password hashes the station file keeps.
     stationd reopen VIN [--comment TEXT] --user NAME
     stationd release VIN BOLT [--comment TEXT] --user NAME
     stationd loosen VIN BOLT [--comment TEXT] --user NAME
+    stationd enter-outcome VIN BOLT --ok|--nok --torque NM --angle DEG --comment TEXT --user NAME
     stationd operator sign-in USER [--comment TEXT]   # USER signs in at the station
     stationd operator sign-out --user NAME [--comment TEXT]
     stationd operator status
@@ -34,6 +35,7 @@ import argparse
 import getpass
 import http.cookiejar
 import json
+import math
 import os
 import sys
 import urllib.error
@@ -220,7 +222,7 @@ def say_refused(what: str, status: int, answer: Any) -> int:
 
 
 #: the commands that name a bolt of the vehicle at the station
-BOLT_COMMANDS = ("skip", "release", "loosen")
+BOLT_COMMANDS = ("skip", "release", "loosen", "enter-outcome")
 
 
 def _check_command(args: argparse.Namespace) -> None:
@@ -232,6 +234,20 @@ def _check_command(args: argparse.Namespace) -> None:
     if args.command in BOLT_COMMANDS and not 1 <= len(args.bolt.strip()) <= 32:
         raise InputError(f"bolt {args.bolt!r}: 1-32 characters")
     check_comment(args.comment)
+    if args.command == "enter-outcome":
+        _check_outcome(args)
+
+
+def _check_outcome(args: argparse.Namespace) -> None:
+    """An entered outcome's values, as the controller's screen shows them (bad input: exit
+    2): finite numbers, a torque not below 0, and a comment saying what was checked."""
+    for name, v, low in (("--torque", args.torque, 0.0), ("--angle", args.angle, -1e5)):
+        if not math.isfinite(v) or not low <= v <= 1e5:
+            raise InputError(f"{name} {v:g}: a number from {low:g} to 100000, as the "
+                             "controller's screen shows it")
+    if not (args.comment or "").strip():
+        raise InputError("--comment: what was checked on the controller (required for an "
+                         "entered outcome)")
 
 
 #: the longest comment a command keeps (the screens' limit too)
@@ -260,6 +276,8 @@ def cmd_command(args: argparse.Namespace) -> int:
                             "comment": args.comment or ""}
     if args.command in BOLT_COMMANDS:
         body["bolt"] = args.bolt.strip()
+    if args.command == "enter-outcome":
+        body.update(ok=args.ok, torque_nm=args.torque, angle_deg=args.angle)
     return _session_command(args, args.user, body)
 
 
@@ -419,7 +437,23 @@ def add_command_parsers(sub: Any) -> None:
                         "daemon; the loosen right)", epilog=epilog)
     lo.add_argument("vin")
     lo.add_argument("bolt")
-    for p, name in ((sk, "skip"), (ro, "reopen"), (rl, "release"), (lo, "loosen")):
+    eo = sub.add_parser("enter-outcome", help="resolve a held bolt (its result could not be "
+                        "read) with the outcome read on the controller's own screen: recorded "
+                        "as entered by you, OK closes the bolt, NOK counts as a NOK (a command "
+                        "to the running daemon; the release right)", epilog=epilog)
+    eo.add_argument("vin")
+    eo.add_argument("bolt")
+    verdict = eo.add_mutually_exclusive_group(required=True)
+    verdict.add_argument("--ok", dest="ok", action="store_true", default=None,
+                         help="the controller shows the tightening OK")
+    verdict.add_argument("--nok", dest="ok", action="store_false",
+                         help="the controller shows it NOK")
+    eo.add_argument("--torque", type=float, required=True, metavar="NM",
+                    help="the final torque the controller shows, N m")
+    eo.add_argument("--angle", type=float, required=True, metavar="DEG",
+                    help="the final angle the controller shows, degrees")
+    for p, name in ((sk, "skip"), (ro, "reopen"), (rl, "release"), (lo, "loosen"),
+                    (eo, "enter-outcome")):
         p.add_argument("--comment", default="", help="why (kept with the command)")
         p.add_argument("--user", required=True, help="who gives the command")
         client_args(p)

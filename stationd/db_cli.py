@@ -246,7 +246,7 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                 if b.status == SKIPPED else \
                 f"{_num(b.torque_nm)} N m, {_num(b.angle_deg)} deg, v{b.version}, " \
                 f"{b.attempts} attempt(s)" + (f", by {last[0]['operator'] or '-'}"
-                                              if last else "")
+                                              + _entered(last[0]) if last else "")
             retired = " (retired)" if b.retired else ""
             print(f"  {b.bolt_id:<12} {b.status.upper():<8} {result}  {b.name}{retired}")
             if b.attempts > 1:   # reworked: each rundown, so the loosenings show
@@ -255,7 +255,7 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                           f"{r['pset'] if r['pset'] is not None else '-'}, "
                           f"{_num(r['torque_nm'])} N m, {_num(r['angle_deg'])} deg, at "
                           f"{(r['recorded_at'] or '-')[:19].replace('T', ' ')} UTC, by "
-                          f"{r['operator'] or '-'}")
+                          f"{r['operator'] or '-'}" + _entered(r))
         for c in commands:
             on = f" {c.bolt}" if c.bolt else ""
             why = f": {c.comment}" if c.comment else ""
@@ -275,6 +275,15 @@ def cmd_db_report(args: argparse.Namespace) -> int:
             print(f"  unreadable result: tightening {x['tightening_id'] or '?'} (MID "
                   f"{x['mid']:04d} revision {x['revision']}{on}): {x['error']}")
     return EXIT_OK if report.complete else EXIT_INCOMPLETE
+
+
+def _entered(run: dict[str, Any]) -> str:
+    """A rundown a person entered from the controller's screen, said so (a measured one:
+    nothing)."""
+    if not run.get("entered_by"):
+        return ""
+    return f", entered by {run['entered_by']} from the controller's screen, not measured" + (
+        f" ({run['entered_comment']})" if run.get("entered_comment") else "")
 
 
 def cmd_db_spc(args: argparse.Namespace) -> int:

@@ -44,6 +44,7 @@ class Why(enum.Enum):
     DEVICE_FAULT = "device fault"        # a device is in fault (note: the faults)
     NOT_RECORDED = "not recorded"        # the database refused the command's record (note)
     NOT_LOCKED = "not locked"            # a release of a bolt that is not locked (bolt)
+    NOT_HELD = "not held"                # an entered outcome for a bolt not held (bolt)
     HELD = "held"                        # the controller's result could not be read: a
                                          # supervisor checks it there and releases (note)
     TEACHING = "teaching"                # teach mode is on (note: the model, who)

@@ -10,6 +10,7 @@ from stationd.reasons import Reason, Why
 from stationd.station.commands import (
     KIND,
     Answer,
+    EnterOutcome,
     LoosenBolt,
     ReleaseBolt,
     ReopenVehicle,
@@ -52,6 +53,8 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.LOCKED: lambda r: (f"{r.bolt} locked after {r.count} NOK in a row: a supervisor "
                            "releases it"),
     Why.NOT_LOCKED: lambda r: f"{r.bolt} is not locked",
+    Why.NOT_HELD: lambda r: (f"{r.bolt} is not held: an outcome is entered only for a bolt "
+                             "whose result the controller could not send readably"),
     Why.HELD: lambda r: (f"{r.bolt}: the controller's result could not be read ({r.note}): "
                          "check it on the controller, then release"),
     Why.LOOSEN_FIRST: lambda r: (f"{r.bolt}: loosen first (loosen pset {r.pset}), then "
@@ -134,6 +137,8 @@ def command_words(answer: Answer) -> str:
     what = KIND[type(cmd)]
     if isinstance(cmd, SkipBolt | ReleaseBolt | LoosenBolt):
         what += f" {cmd.bolt} of {cmd.vin}"
+    elif isinstance(cmd, EnterOutcome):
+        what += f" {cmd.bolt} of {cmd.vin}: {outcome_words(cmd.ok, cmd.torque_nm, cmd.angle_deg)}"
     elif isinstance(cmd, ReopenVehicle):
         what += f" {cmd.vin}"
     elif isinstance(cmd, TeachStart):
@@ -145,6 +150,11 @@ def command_words(answer: Answer) -> str:
     if cmd.comment:
         what += f" ({cmd.comment!r})"
     return what
+
+
+def outcome_words(ok: bool, torque_nm: float, angle_deg: float) -> str:
+    """An outcome as a person reads it off the controller: ``OK 49.6 Nm, 31.0 deg``."""
+    return f"{'OK' if ok else 'NOK'} {torque_nm:.1f} Nm, {angle_deg:.1f} deg"
 
 
 def answer_words(answer: Answer) -> str:
@@ -173,4 +183,5 @@ def _missed(r: Reason) -> str:
     return f"; {many} without the wrench, the last: {reason_words(r.cause)}"
 
 
-__all__ = ["answer_words", "check_words", "command_words", "operator_words", "reason_words"]
+__all__ = ["answer_words", "check_words", "command_words", "operator_words", "outcome_words",
+           "reason_words"]

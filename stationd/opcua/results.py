@@ -33,6 +33,9 @@ ENTITY_VEHICLE, ENTITY_JOINT = 20, 23     # what the working group's clients use
 #: the operator signed in at the station: the standard has no entity type for a person, and
 #: keeps the negative ones for applications' own ("EntityType < 0 can be used")
 ENTITY_OPERATOR = -1
+#: who entered the result from the controller's own screen (its message could not be read):
+#: present only on an entered result, so an MES tells it from a measured one by it
+ENTITY_ENTERED_BY = -2
 #: AssemblyType (the working group's test client: 1 ASSEMBLED, 2 DISASSEMBLED): a loosening
 #: is told from a tightening by it, never left to read as one more OK joint
 ASSEMBLED, DISASSEMBLED = 1, 2
@@ -45,9 +48,11 @@ def message(rec: dict[str, Any]) -> str:
     """What a result event's Message says of the rundown ``rec`` (a feed record): its
     vehicle, bolt, kind and verdict, "WVW... B12: loosening OK".  An MES that reads only the
     Message (no client decodes the metadata's AssemblyType without the types) must not take
-    a loosening for one more tightened joint."""
+    a loosening for one more tightened joint, nor an outcome a person entered for one the
+    station measured."""
     kind = "loosening" if rec.get("rundown") == "loosening" else "tightening"
-    return f"{rec['vin']} {rec['bolt']}: {kind} {str(rec['status']).upper()}"
+    return f"{rec['vin']} {rec['bolt']}: {kind} {str(rec['status']).upper()}" + (
+        f" (entered by {rec['entered_by']}, not measured)" if rec.get("entered_by") else "")
 
 
 def _unit(code: str, symbol: str, text: str) -> Any:
@@ -186,6 +191,13 @@ def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
         entities.append(ua.EntityDataType(
             Name="Operator", EntityId=rec["operator"], EntityType=ENTITY_OPERATOR,
             IsExternal=False, Description="the operator signed in at the station"))
+    entered = rec.get("entered_by")
+    if entered:
+        entities.append(ua.EntityDataType(
+            Name="EnteredBy", EntityId=entered, EntityType=ENTITY_ENTERED_BY,
+            IsExternal=False, Description="entered from the controller's screen, not "
+            "measured: its result could not be read" + (
+                f" ({rec['entered_comment']})" if rec.get("entered_comment") else "")))
     sent = rec.get("params_sent") or {}
     pset = sent.get("pset")
     created = _time(rec.get("result_at")) or _time(rec.get("recorded_at")) or \
@@ -200,10 +212,13 @@ def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
         ProductId=rec["vin"],
         InternalRecipeId=None if pset is None else str(pset),
         SequenceNumber=int(entry["seq"]),
-        Name=f"{rec['vin']} {rec['bolt']}" + (" loosening" if loosening else ""),
+        Name=f"{rec['vin']} {rec['bolt']}" + (" loosening" if loosening else "")
+        + (" entered" if entered else ""),
         Description=ua.LocalizedText(f"{'loosening' if loosening else 'tightening'} of "
                                      f"{rec['bolt']}" + ("" if pset is None else
-                                                         f" with pset {pset}")),
+                                                         f" with pset {pset}") + (
+            f", entered by {entered} from the controller's screen (not measured)"
+            if entered else "")),
         Classification=CLASSIFICATION_SINGLE,
         # the technology of the system that made it (its Identification says the same):
         # mandatory for a joining result in the working group's reading of 40450-1
@@ -225,7 +240,8 @@ def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
     return ua.ResultDataType(ResultMetaData=meta, ResultContent=[ua.Variant(content)])
 
 
-__all__ = ["ASSEMBLED", "CLASSIFICATION_SINGLE", "DISASSEMBLED", "ENTITY_JOINT",
+__all__ = ["ASSEMBLED", "CLASSIFICATION_SINGLE", "DISASSEMBLED", "ENTITY_ENTERED_BY",
+           "ENTITY_JOINT",
            "ENTITY_OPERATOR", "ENTITY_VEHICLE", "EVALUATION_NOT_OK",
            "EVALUATION_OK", "JOINING_TECHNOLOGY", "PQ_ANGLE", "PQ_OTHER", "PQ_TIME",
            "PQ_TORQUE", "message", "parse_result_id", "result_id", "rundown_result", "trace"]

@@ -24,6 +24,7 @@ import cv2
 
 from db.checks import record_check
 from db.curves import link_curves, store_curve
+from db.entered import record_entered
 from db.errors import DataError, DbError, NotFoundError, VehicleClosedError
 from db.report import MISSING
 from db.repository import Repository
@@ -47,6 +48,7 @@ from stationd.station.actions import (
 )
 from stationd.station.commands import (
     KIND,
+    EnterOutcome,
     ReopenVehicle,
     SignIn,
     SignOut,
@@ -314,13 +316,19 @@ class Records:
             if isinstance(cmd, ReopenVehicle):
                 repo.reopen_vehicle(cmd.vin, at=at, user=who.user, source=who.source,
                                     comment=cmd.comment)
+            elif isinstance(cmd, EnterOutcome):   # the command and its rundown, together
+                record_entered(repo, vin=cmd.vin, bolt=cmd.bolt, ok=cmd.ok,
+                               torque_nm=cmd.torque_nm, angle_deg=cmd.angle_deg, at=at,
+                               user=who.user, source=who.source, comment=cmd.comment)
             else:
                 repo.ledger.record_command(at=at, user=who.user, source=who.source,
                                            kind=KIND[type(cmd)], vin=vin,
                                            bolt=getattr(cmd, "bolt", None), comment=comment)
         except NotFoundError:
             return Reason(Why.UNKNOWN_VEHICLE, vin=vin)
-        except DataError:
+        except DataError as exc:
+            if isinstance(cmd, EnterOutcome):
+                return Reason(Why.NOT_RECORDED, note=one_line(exc))
             return Reason(Why.NOT_CLOSED, vin=vin)
         return None
 

@@ -69,6 +69,23 @@ class ReleaseBolt:
 
 
 @dataclass(frozen=True)
+class EnterOutcome:
+    """Resolve ``bolt`` of ``vin``, held because the controller's result could not be read,
+    with the outcome a person read on the controller's own screen: ``ok`` (else NOK), its
+    ``torque_nm`` and ``angle_deg``.  Recorded as a rundown of its own provenance (entered by
+    the user, not measured by the station); OK closes the bolt, NOK counts as a NOK result
+    under the NOK policy.  Needs the release right: it is the other way to end a hold;
+    ``comment`` says what was checked."""
+
+    vin: str
+    bolt: str
+    ok: bool
+    torque_nm: float
+    angle_deg: float
+    comment: str = ""
+
+
+@dataclass(frozen=True)
 class LoosenBolt:
     """Reopen ``bolt`` of ``vin`` for rework by loosening it: the bolt is no longer done and
     gets its loosen pset (the NOK policy's ``loosen_pset``) the next time the wrench is on
@@ -132,18 +149,20 @@ class SignOut:
     user: str | None = None
 
 
-Command = (SkipBolt | ReopenVehicle | ReleaseBolt | LoosenBolt | TeachStart | TeachPoint
-           | TeachStop | CheckCalibration | SignIn | SignOut)
+Command = (SkipBolt | ReopenVehicle | ReleaseBolt | EnterOutcome | LoosenBolt | TeachStart
+           | TeachPoint | TeachStop | CheckCalibration | SignIn | SignOut)
 
 #: the right each command needs (signing in and out need none: any configured user)
 RIGHT: dict[type[Command], Right] = {SkipBolt: Right.SKIP, ReopenVehicle: Right.REOPEN,
                                      ReleaseBolt: Right.RELEASE, LoosenBolt: Right.LOOSEN,
+                                     EnterOutcome: Right.RELEASE,
                                      TeachStart: Right.TEACH,
                                      TeachPoint: Right.TEACH, TeachStop: Right.TEACH,
                                      CheckCalibration: Right.CALIBRATE}
 #: the name each command has on the wire (HTTP, the command line) and in the records
 KIND: dict[type[Command], str] = {SkipBolt: "skip", ReopenVehicle: "reopen",
                                   ReleaseBolt: "release", LoosenBolt: "loosen",
+                                  EnterOutcome: "enter-outcome",
                                   TeachStart: "teach-start",
                                   TeachPoint: "teach-point", TeachStop: "teach-stop",
                                   CheckCalibration: "calibration-check",
@@ -170,6 +189,7 @@ class Answer:
         return self.reason is None
 
 
-__all__ = ["KIND", "RIGHT", "Answer", "CheckCalibration", "Command", "Issuer", "LoosenBolt",
+__all__ = ["KIND", "RIGHT", "Answer", "CheckCalibration", "Command", "EnterOutcome", "Issuer",
+           "LoosenBolt",
            "ReleaseBolt", "ReopenVehicle", "Right", "SignIn", "SignOut", "SkipBolt",
            "TeachPoint", "TeachStart", "TeachStop", "skip_note"]

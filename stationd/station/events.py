@@ -323,7 +323,9 @@ class PairsUnchecked(StationEvent):
 # -- results ------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class ResultRecorded(StationEvent):
-    """A tightening result stored for ``bolt`` of ``vin`` (then acknowledged)."""
+    """A tightening result stored for ``bolt`` of ``vin`` (then acknowledged), or an outcome a
+    person entered for a held bolt (``entered_by``; ``tightening_id`` 0: the record links the
+    unreadable result)."""
 
     vin: str
     bolt: str
@@ -340,6 +342,9 @@ class ResultRecorded(StationEvent):
     images: tuple[str, ...] = ()
     kind: str = "tightening"         # or "loosening" (db.kinds): never the bolt done
     operator: str | None = None      # who was signed in at the station (None: nobody)
+    #: who entered it from the controller's own screen (its result could not be read; None:
+    #: measured, as the controller sent it)
+    entered_by: str | None = None
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,7 @@ from stationd.station.commands import (
     Answer,
     CheckCalibration,
     Command,
+    EnterOutcome,
     Issuer,
     LoosenBolt,
     ReleaseBolt,
@@ -84,6 +85,9 @@ class OrderRules(FaultRules):
         if isinstance(cmd, ReleaseBolt):
             return None if cmd.bolt in self.matcher.locked or cmd.bolt in self.matcher.held \
                 else Reason(Why.NOT_LOCKED, bolt=cmd.bolt)
+        if isinstance(cmd, EnterOutcome):   # what a person read on the controller's screen
+            return None if cmd.bolt in self.matcher.held \
+                else Reason(Why.NOT_HELD, bolt=cmd.bolt)
         if cmd.bolt in self.matcher.done:
             return Reason(Why.DONE, bolt=cmd.bolt)
         if cmd.bolt in self.matcher.skipped:

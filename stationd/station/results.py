@@ -16,21 +16,24 @@ from stationd.station.actions import (
     Action,
     Publish,
     Record,
+    Reply,
     Selection,
     StoreControllerEvent,
     StoreGap,
     StoreUnattributed,
     StoreUnreadable,
 )
+from stationd.station.commands import Answer, EnterOutcome, Issuer
 from stationd.station.events import (
     BoltSkipped,
     ControllerResultEvent,
     Notice,
+    ResultRecorded,
     ResultUnattributed,
     ResultUnreadable,
     State,
 )
-from stationd.station.inputs import NotStored, ResultIn, ResultsMissed, UnreadableIn
+from stationd.station.inputs import CommandDone, NotStored, ResultIn, ResultsMissed, UnreadableIn
 from stationd.station.orders import OrderRules
 from stationd.station.state import CLOCK_SLACK_S, NOK_SKIPPED, ON_A_BOLT
 
@@ -257,7 +260,7 @@ class ResultRules(OrderRules):
                 self.matcher.counted.discard(en.bolt)
             else:
                 self._nok_last.add(en.bolt)
-                acts += self._after_nok(ev.t, en)
+                acts += self._after_nok(ev.t, en.bolt, en.pset)
             self.matcher.reset()     # a new selection: a new streak, from new frames
         self._not_before = max(self._not_before, ev.t)
         if self.bolt == en.bolt:
@@ -287,24 +290,70 @@ class ResultRules(OrderRules):
         return [Publish(Notice(f"{en.bolt}: loosening NOK ({n} NOK in a row)", "warning",
                                t=t))]
 
-    def _after_nok(self, t: float, en: Selection) -> list[Action]:
+    def _after_nok(self, t: float, bolt: str, pset: int | None) -> list[Action]:
         """The NOK policy: the bolt locks after ``max_nok`` in a row; with ``loosen`` it gets
         its loosen pset next (also once released); with ``skip`` it is marked NOK and skipped
         for this vehicle; with ``repeat`` it is open again."""
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
-        n = self._noks[en.bolt] = self._noks.get(en.bolt, 0) + 1
-        rule = self.nok.rule(en.bolt, self._specs[en.bolt].pset
-                             if en.bolt in self._specs else en.pset)
+        n = self._noks[bolt] = self._noks.get(bolt, 0) + 1
+        rule = self.nok.rule(bolt, self._specs[bolt].pset if bolt in self._specs else pset)
         if rule.strategy == "loosen" and rule.loosen_pset is not None:
-            self._loosen.add(en.bolt)
+            self._loosen.add(bolt)
         if rule.count_in_batch:     # the sequence goes on without an OK of this bolt
-            self.matcher.counted.add(en.bolt)
+            self.matcher.counted.add(bolt)
         if n >= rule.max_nok:
-            return self._lock(t, en.bolt, n)
-        if en.bolt in self._loosen:
-            return [self._to_loosen(t, en.bolt)]
+            return self._lock(t, bolt, n)
+        if bolt in self._loosen:
+            return [self._to_loosen(t, bolt)]
         if rule.strategy == "skip":
             why = NOK_SKIPPED
-            self.matcher.skipped[en.bolt] = why
-            return [Publish(BoltSkipped(en.bolt, why, t=t))]
+            self.matcher.skipped[bolt] = why
+            return [Publish(BoltSkipped(bolt, why, t=t))]
         return []
+
+    # -- an outcome entered by a person for a held bolt -----------------------------------------
+    def _on_CommandDone(self, ev: CommandDone) -> list[Action]:  # noqa: N802
+        """An entered outcome, recorded (with its rundown, in one transaction): a result,
+        so the results' rules apply it; every other command: :mod:`orders`."""
+        c = self._commands.get(ev.request)
+        if c is None or ev.reason is not None or not isinstance(c.command, EnterOutcome):
+            return super()._on_CommandDone(ev)
+        del self._commands[ev.request]
+        return [*self._outcome_entered(ev.t, c.command, c.issuer),
+                Reply(Answer(ev.request, c.command, c.issuer))]
+
+    def _outcome_entered(self, t: float, cmd: EnterOutcome, who: Issuer) -> list[Action]:
+        """The outcome a person read on the controller's screen, now on disk as a rundown
+        entered by them: the hold ends; OK closes the bolt as a measured OK does; NOK is a
+        NOK result under the NOK policy (counted in the row, locked at ``max_nok``, to be
+        loosened, skipped, or open again)."""
+        m = self.matcher
+        if m is None or self.vin != cmd.vin or cmd.bolt not in m.bolts:
+            return []   # the vehicle left while the command was being recorded
+        b, spec = cmd.bolt, self._specs.get(cmd.bolt)
+        held = m.held.pop(b, None)
+        p = spec.parameters if spec is not None else None
+        acts: list[Action] = [Publish(ResultRecorded(
+            cmd.vin, b, cmd.ok, float(cmd.torque_nm), float(cmd.angle_deg), 0,
+            spec.pset if spec is not None else None,
+            p.torque.min if p is not None else None, p.torque.max if p is not None else None,
+            p.angle.min if p is not None and p.angle is not None else None,
+            p.angle.max if p is not None and p.angle is not None else None,
+            kind=TIGHTENING, entered_by=who.user, t=t))]
+        what = (f"{b}: {'OK' if cmd.ok else 'NOK'} {cmd.torque_nm:.1f} Nm, "
+                f"{cmd.angle_deg:.1f} deg entered by {who.user} from the controller's screen"
+                + (f" (the result that could not be read: {held})" if held else ""))
+        if cmd.ok:
+            m.mark_done(b)
+            self._noks.pop(b, None)
+            self._loosen.discard(b)
+            self._nok_last.discard(b)
+            m.counted.discard(b)
+            acts.append(Publish(Notice(f"{what}: {b} done", t=t)))
+        else:
+            self._nok_last.add(b)
+            acts.append(Publish(Notice(f"{what}: a NOK of {b}, the NOK policy applies",
+                                       "warning", t=t)))
+            acts += self._after_nok(t, b, spec.pset if spec is not None else None)
+        m.reset()
+        return acts

@@ -10,7 +10,9 @@ session from a user's password, the core's answer), whatever the client; the sta
 - ``POST /api/logout``; ``GET /api/me``: who is logged in, with their rights.
 - ``GET /api/nonce``: a single-use nonce for the next command (with a session).
 - ``POST /api/commands`` ``{"kind": "skip"|"reopen"|"release"|"loosen"|"calibration-check",
-  "vin", "bolt", "comment", "nonce"}`` (and the teach commands, and ``sign-in`` /
+  "vin", "bolt", "comment", "nonce"}`` (``enter-outcome`` also ``"ok"`` true or false,
+  ``"torque_nm"``, ``"angle_deg"`` and a comment: the outcome of a held bolt read on the
+  controller's screen; and the teach commands, and ``sign-in`` /
   ``sign-out``: the session's user signs in at the station as its operator, or whoever is
   signed in is signed out):
   with a session; a nonce this server did not issue, an old or a used one is refused (400)
@@ -31,6 +33,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import math
 from collections.abc import Awaitable, Callable
 from dataclasses import asdict
 from typing import Any
@@ -44,6 +47,7 @@ from stationd.station.commands import (
     Answer,
     CheckCalibration,
     Command,
+    EnterOutcome,
     Issuer,
     LoosenBolt,
     ReleaseBolt,
@@ -229,6 +233,27 @@ def _text(body: dict[str, Any], key: str, *, limit: int, required: bool = True) 
     return v.strip()
 
 
+#: the widest values an entered outcome may carry (a typing slip, not a joint: refused)
+MAX_TORQUE_NM, MAX_ANGLE_DEG = 100_000.0, 100_000.0
+
+
+def _ok(body: dict[str, Any]) -> bool:
+    v = body.get("ok")
+    if not isinstance(v, bool):
+        raise web.HTTPBadRequest(text="ok: true (OK) or false (NOK), as the controller shows "
+                                      "it\n")
+    return v
+
+
+def _number(body: dict[str, Any], key: str, low: float, high: float) -> float:
+    """A finite number within [low, high]; 400 for anything else (text, NaN, a boolean)."""
+    v = body.get(key)
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) \
+            or not low <= v <= high:
+        raise web.HTTPBadRequest(text=f"{key}: a number from {low:g} to {high:g}\n")
+    return float(v)
+
+
 def _command(body: dict[str, Any]) -> Command:
     """The typed command of a request's body; 400 for anything else."""
     kind = body.get("kind")
@@ -239,6 +264,11 @@ def _command(body: dict[str, Any]) -> Command:
         return ReopenVehicle(_text(body, "vin", limit=32), comment)
     if kind == "release":
         return ReleaseBolt(_text(body, "vin", limit=32), _text(body, "bolt", limit=32), comment)
+    if kind == KIND[EnterOutcome]:
+        return EnterOutcome(_text(body, "vin", limit=32), _text(body, "bolt", limit=32),
+                            _ok(body), _number(body, "torque_nm", 0.0, MAX_TORQUE_NM),
+                            _number(body, "angle_deg", -MAX_ANGLE_DEG, MAX_ANGLE_DEG),
+                            _text(body, "comment", limit=500))
     if kind == "loosen":
         return LoosenBolt(_text(body, "vin", limit=32), _text(body, "bolt", limit=32), comment)
     if kind == "teach-start":

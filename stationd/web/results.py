@@ -36,7 +36,10 @@ CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator"
               "pset",
               "parameter_version", "tightening_id", "x_mm", "y_mm", "z_mm",
               "match_distance_mm", "tilt_deg", "sent_at", "result_at", "recorded_at", "images",
-              "skipped_by", "comment")   # a skipped bolt's row: who skipped it, and why
+              "skipped_by", "comment",   # a skipped bolt's row: who skipped it, and why
+              # an outcome a person entered from the controller's screen (its result could
+              # not be read): who (empty: measured), with their comment in ``comment``
+              "entered_by")
 
 
 #: an export row of a result the station could not read (kept whole in the database)
@@ -130,7 +133,11 @@ class Results:
                 "z_mm": rec.z_mm, "match_distance_mm": rec.match_distance_mm,
                 "tilt_deg": rec.tilt_deg, "sent_at": _iso(rec.sent_at),
                 "result_at": _iso(rec.result_at), "recorded_at": _iso(rec.recorded_at),
-                "images": list(rec.images or [])}
+                "images": list(rec.images or []),
+                # entered by a person from the controller's screen, not measured (None:
+                # measured): who, why, and the unreadable result it resolves
+                "entered_by": rec.entered_by, "entered_comment": rec.entered_comment,
+                "unreadable_id": rec.unreadable_id}
             if curves:
                 run["curve"] = plot_curve(traces.get(rec.id, []))
             out.append((rec.id, run))
@@ -143,7 +150,8 @@ class Results:
         on purpose missing reads as a bolt forgotten).  Raises ``NotFoundError`` for an
         unknown VIN."""
         report = self.repo.vehicle_report(vin)
-        runs = [{**r, "skipped_by": None, "comment": None} for r in self.rundowns(vin)]
+        runs = [{**{k: v for k, v in r.items() if k in CSV_FIELDS}, "skipped_by": None,
+                 "comment": r["entered_comment"]} for r in self.rundowns(vin)]
         none: list[dict[str, Any]] = [
             {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
              "bolt": b.bolt_id, "attempt": 0, "status": b.status, "images": [],

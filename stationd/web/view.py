@@ -95,6 +95,7 @@ class BoltState:
     loosen: bool = False        # its loosen pset goes next, before its tightening pset
     loosen_pset: int | None = None   # that loosen pset, as the station said it
     nok_count: int = 0          # NOKs in a row when it locked
+    held: bool = False          # its result could not be read: an outcome entered, or a release
 
     def to_json(self) -> dict[str, Any]:
         return {"bolt": self.bolt, "x": self.x_mm, "y": self.y_mm, "pset": self.pset,
@@ -104,7 +105,8 @@ class BoltState:
                 else BOLT_LABELS.get(self.state, self.state), "reason": self.reason,
                 "torque_nm": self.torque_nm, "angle_deg": self.angle_deg,
                 "locked": self.locked, "loosen": self.loosen,
-                "loosen_pset": self.loosen_pset, "nok_count": self.nok_count}
+                "loosen_pset": self.loosen_pset, "nok_count": self.nok_count,
+                "held": self.held}
 
 
 @dataclass
@@ -226,14 +228,14 @@ class View:
             self._set(e.bolt, "skipped", e.reason)
         elif isinstance(e, BoltLocked) and e.bolt in self.bolts:
             b = self.bolts[e.bolt]
-            b.locked, b.nok_count = True, e.count
+            b.locked, b.nok_count, b.held = True, e.count, e.held is not None
             if self.selected == e.bolt:
                 self.selected = None
             self._set(e.bolt, "locked", reason_words(
                 Reason(Why.HELD, bolt=e.bolt, note=e.held) if e.held is not None
                 else Reason(Why.LOCKED, bolt=e.bolt, count=e.count)))
         elif isinstance(e, BoltReleased) and e.bolt in self.bolts:
-            self.bolts[e.bolt].locked = False
+            self.bolts[e.bolt].locked = self.bolts[e.bolt].held = False
             self._set(e.bolt, "pending", f"released by {e.user}")
         elif isinstance(e, BoltToLoosen) and e.bolt in self.bolts:
             self.bolts[e.bolt].loosen = True
@@ -339,6 +341,8 @@ class View:
     def _result(self, e: ResultRecorded) -> None:
         if e.vin == self.vin and e.bolt in self.bolts:
             b = self.bolts[e.bolt]
+            if e.entered_by is not None:   # the hold it resolves ends (a NOK may lock it)
+                b.locked = b.held = False
             if e.kind == "loosening":
                 b.loosen = b.loosen and not e.ok
                 self._set(e.bolt, "loosened" if e.ok else "loosen",
@@ -353,7 +357,8 @@ class View:
             "t": e.t, "vin": e.vin, "bolt": e.bolt, "ok": e.ok, "pset": e.pset,
             "torque_nm": e.torque_nm, "torque_min": e.torque_min, "torque_max": e.torque_max,
             "angle_deg": e.angle_deg, "angle_min": e.angle_min, "angle_max": e.angle_max,
-            "late": e.late, "kind": e.kind, "operator": e.operator})
+            "late": e.late, "kind": e.kind, "operator": e.operator,
+            "entered_by": e.entered_by})
         del self.results[LAST_RESULTS:]
 
     def _refuse(self, words: str, why: Reason | None = None, *, act: bool = False) -> None:

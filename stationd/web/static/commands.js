@@ -1,6 +1,7 @@
 // Commands from the operator screen (logged in through session.js): skip a bolt of
-// the vehicle at the station, release a locked bolt, loosen a tightened one for rework, reopen
-// a closed vehicle.  The station decides: the screen shows
+// the vehicle at the station, release a locked bolt, enter the outcome of a held one (its
+// result could not be read: read on the controller's screen), loosen a tightened one for
+// rework, reopen a closed vehicle.  The station decides: the screen shows
 // its answer (accepted, or refused with the reason in words) and nothing else.
 "use strict";
 (function () {
@@ -12,6 +13,7 @@
     q("skip").hidden = !rights.includes("skip");
     q("reopen").hidden = !rights.includes("reopen");
     q("release").hidden = !rights.includes("release");
+    q("enter").hidden = !rights.includes("release");   // the other way to end a hold
     q("loosen").hidden = !rights.includes("loosen");
   });
 
@@ -44,6 +46,7 @@
     signButtons();
     fill("skip-bolt", (b) => b.state !== "ok" && b.state !== "skipped");
     fill("release-bolt", (b) => b.locked);
+    fill("enter-bolt", (b) => b.held);
     // a bolt tightened (OK, or NOK last) and not to be loosened already: rework
     fill("loosen-bolt", (b) => (b.state === "ok" || b.state === "nok") && !b.loosen && !b.locked);
   }, 500);
@@ -61,6 +64,24 @@
     if (!view || !view.vehicle) { answer("no vehicle at the station", false); return; }
     if (!q("release-bolt").value) { answer("choose the locked bolt to release", false); return; }
     command({kind: "release", vin: view.vehicle.vin, bolt: q("release-bolt").value, comment: q("release-comment").value});
+  });
+  q("enter").addEventListener("submit", (e) => {
+    e.preventDefault();
+    const view = window.lastView;
+    if (!view || !view.vehicle) { answer("no vehicle at the station", false); return; }
+    if (!q("enter-bolt").value) { answer("choose the held bolt", false); return; }
+    if (!q("enter-ok").value) { answer("choose OK or NOK, as the controller shows it", false); return; }
+    const torque = Number(q("enter-torque").value), angle = Number(q("enter-angle").value);
+    if (q("enter-torque").value === "" || !Number.isFinite(torque) || torque < 0) {
+      answer("the torque the controller shows, N·m", false); return;
+    }
+    if (q("enter-angle").value === "" || !Number.isFinite(angle)) {
+      answer("the angle the controller shows, degrees", false); return;
+    }
+    if (!q("enter-comment").value.trim()) { answer("say what was checked on the controller", false); return; }
+    command({kind: "enter-outcome", vin: view.vehicle.vin, bolt: q("enter-bolt").value,
+             ok: q("enter-ok").value === "ok", torque_nm: torque, angle_deg: angle,
+             comment: q("enter-comment").value});
   });
   q("loosen").addEventListener("submit", (e) => {
     e.preventDefault();

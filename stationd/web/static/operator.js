@@ -336,7 +336,9 @@ function render(view) {
 // release right in the station's access section (the station says, the screen shows)
 function drawLocks(view) {
   const locks = view.locks || [], by = view.release_by || [];
-  const key = JSON.stringify([locks, by]);
+  // a held bolt (its result could not be read) is also resolved by entering its outcome
+  const held = (view.bolts || []).some((b) => b.held);
+  const key = JSON.stringify([locks, by, held]);
   if (key === shownKeys.locks) return;
   shownKeys.locks = key;
   $("locks").hidden = !locks.length;
@@ -347,7 +349,8 @@ function drawLocks(view) {
     li.textContent = text;
     return li;
   }));
-  setText("release-by", by.length ? `Release: a user with the release right (${by.join(", ")})`
+  const how = held ? "Release, or enter the outcome the controller shows" : "Release";
+  setText("release-by", by.length ? `${how}: a user with the release right (${by.join(", ")})`
     : "Release: no role of this station has the release right (access.roles)");
 }
 

@@ -1,0 +1,102 @@
+"""Outcomes a person entered for a held bolt: the result the controller could not send
+readably, read on the controller's own screen by a supervisor and entered by them.
+
+Why a module of its own: such an outcome is a rundown (it closes the bolt when OK and counts
+as a NOK otherwise, also after a restart: :meth:`Repository.nok_streaks` and
+:meth:`Repository.held_bolts` read it as any rundown), yet it was not measured by the
+station.  It is written with the command that entered it, in one transaction (the command's
+record is the audit trail, the rundown the result), and carries its provenance: who entered
+it (``entered_by``), their comment, and the unreadable result it resolves.  Where the wrench
+was and the parameters sent are those of the tool enable the unreadable result answered
+(none stored: zeros and the bolt's current parameter version).
+"""
+
+from __future__ import annotations
+
+import math
+from datetime import datetime
+
+from sqlalchemy import select
+from sqlalchemy.exc import SQLAlchemyError
+from sqlalchemy.orm import Session
+
+from db.engine import writer
+from db.errors import DatabaseError, DataError, NotFoundError
+from db.importer import current_version, parameters_of
+from db.kinds import TIGHTENING
+from db.ledger import RUNDOWN, add_command, append
+from db.models import (
+    Bolt,
+    ProcessParameters,
+    TighteningRecord,
+    ToolEnable,
+    UnreadableRecord,
+    Vehicle,
+    utcnow,
+)
+from db.repository import Repository, _params_json
+
+#: the command's kind in the records (``stationd.station.commands.KIND``)
+ENTER_OUTCOME = "enter-outcome"
+
+
+def record_entered(repo: Repository, *, vin: str, bolt: str, ok: bool, torque_nm: float,
+                   angle_deg: float, at: datetime, user: str, source: str,
+                   comment: str) -> int:
+    """The command and the rundown it enters for ``bolt`` of the open vehicle ``vin``, with
+    their feed entries, committed together; return the rundown's id.  ``DataError`` for a
+    value that is not a finite number, a naive time or a closed vehicle; ``NotFoundError``
+    for an unknown VIN or bolt; ``DatabaseError`` when the database fails."""
+    if not (math.isfinite(torque_nm) and math.isfinite(angle_deg)):
+        raise DataError("torque and angle: finite numbers")
+    if at.tzinfo is None:
+        raise DataError("at: a timestamp with a timezone (UTC) is needed")
+    try:
+        with Session(writer(repo.engine), expire_on_commit=False) as s, s.begin():
+            v = s.scalar(select(Vehicle).where(Vehicle.vin == vin))
+            if v is None:
+                raise NotFoundError(f"vehicle {vin!r} is not in the database")
+            if v.ended_at is not None:
+                raise DataError(f"vehicle {vin} is closed: an outcome cannot be entered")
+            b = s.scalar(select(Bolt).where(Bolt.model_id == v.model_id, Bolt.code == bolt,
+                                            Bolt.removed_at.is_(None)))
+            if b is None:
+                raise NotFoundError(f"bolt {bolt!r} is not a bolt of model {v.model.name}")
+            add_command(s, at=at, user=user, source=source, kind=ENTER_OUTCOME, vin=vin,
+                        bolt=bolt, comment=comment)
+            held = s.scalar(select(UnreadableRecord).where(
+                UnreadableRecord.vin == vin, UnreadableRecord.bolt == bolt)
+                .order_by(UnreadableRecord.id.desc()).limit(1))
+            # the bolt is held since that result: no tool enable for it came after
+            enable = s.scalar(select(ToolEnable).where(
+                ToolEnable.vin == vin, ToolEnable.bolt == bolt)
+                .order_by(ToolEnable.id.desc()).limit(1))
+            version = s.get(ProcessParameters, enable.parameters_id) \
+                if enable is not None and enable.parameters_id is not None else None
+            if version is None or version.bolt_id != b.id:
+                version = current_version(b)
+            sel = enable.selection if enable is not None else {}
+            x, y, z = (float(c) for c in sel.get("point_mm", (0.0, 0.0, 0.0)))
+            rec = TighteningRecord(
+                vehicle_id=v.id, bolt_id=b.id, parameters_id=version.id, x_mm=x, y_mm=y,
+                z_mm=z, match_distance_mm=float(sel.get("distance_mm", 0.0)),
+                tilt_deg=float(sel.get("tilt_deg", 0.0)),
+                params_sent=_params_json(parameters_of(version)), acknowledged=True,
+                status="ok" if ok else "nok", torque_nm=float(torque_nm),
+                angle_deg=float(angle_deg),
+                tightening_id=held.tightening_id if held is not None else None,
+                sent_at=enable.enabled_at if enable is not None else None,
+                result_at=at, recorded_at=utcnow(), images=[], kind=TIGHTENING,
+                operator=sel.get("operator"), entered_by=user[:64],
+                entered_comment=comment[:500],
+                unreadable_id=held.id if held is not None else None)
+            s.add(rec)
+            s.flush()
+            append(s, RUNDOWN, rec.id)
+            return int(rec.id)
+    except SQLAlchemyError as exc:
+        raise DatabaseError(f"the outcome entered for {bolt} of {vin} not stored: "
+                            f"{str(exc).splitlines()[0]}") from None
+
+
+__all__ = ["ENTER_OUTCOME", "record_entered"]

@@ -1,0 +1,68 @@
+"""The operator screen's Enter outcome form, with the daemon over the real protocols: a bolt
+held (its result could not be read) is in the Locked panel, which says a user with the release
+right releases it or enters the outcome the controller shows; an operator is not offered the
+form, a supervisor is, enters OK with torque, angle and a comment, and the bolt is drawn OK."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.shell.daemons import free_port, tool_on, tracking, until
+from tests.shell.test_commands_daemon import PASSWORD, _station
+from tests.web.test_browser_commands import _answer, _login, _shown
+from tests.web.test_browser_nok import _b05
+
+VIN = "ENTERSCREENVIN001"
+
+
+@pytest.mark.timeout(300)
+def test_a_supervisor_enters_the_outcome_of_a_held_bolt_on_the_screen(page, shots, tmp_path):
+    http_port = free_port()
+    pose = tmp_path / "pose"
+
+    def edit(text: str) -> str:
+        return _station(http_port)(text).replace("    supervisor: [skip, reopen]\n",
+                                                 "    supervisor: [skip, reopen, release]\n")
+
+    with tracking(tmp_path, VIN, edit=edit) as (d, _, ctl):
+        page.get(f"http://127.0.0.1:{http_port}/")
+        page.wait(lambda p: p.text("#vin") == VIN, 60, "the vehicle on the screen")
+        tool_on(d, ctl, pose, "B05")
+        ctl.garble_next_result("layout")
+        bad = ctl.pull_trigger()
+        assert bad is not None
+        until(lambda: not ctl.tool_enabled, 30, "the tool off")
+        pose.write_text("")
+        page.wait(lambda p: _b05(p, "state") == "locked", 30, "B05 drawn held")
+        page.wait(lambda p: _shown(p, "locks"), 30, "the locked panel")
+        assert page.text("#release-by") == ("Release, or enter the outcome the controller "
+                                            "shows: a user with the release right (supervisor)")
+
+        _login(page, "olga", PASSWORD)
+        page.wait(lambda p: (p.text("#who") or "").startswith("olga"), 30, "olga logged in")
+        assert not _shown(page, "enter") and not _shown(page, "release")
+        page.click("#logout")
+        page.wait(lambda p: _shown(p, "login"), 30, "logged out")
+        _login(page, "sam", PASSWORD)
+        page.wait(lambda p: (p.text("#who") or "").startswith("sam"), 30, "sam logged in")
+        assert _shown(page, "enter")
+        page.wait(lambda p: p.js("return [...document.querySelectorAll("
+                                 "'#enter-bolt option')].map(o => o.value)") == ["", "B05"],
+                  30, "B05 offered for an outcome")
+        before = page.text("#cmd-answer") or ""
+        page.js("document.getElementById('enter-bolt').value = 'B05';"
+                "document.querySelector('#enter button').click()")   # no verdict yet
+        got = _answer(page, before)
+        assert got == "choose OK or NOK, as the controller shows it", got
+        page.js("document.getElementById('enter-ok').value = 'ok';"
+                "document.getElementById('enter-torque').value = '49.6';"
+                "document.getElementById('enter-angle').value = '31';"
+                "document.getElementById('enter-comment').value = 'read on the controller';"
+                "document.querySelector('#enter button').click()")
+        got = _answer(page, got)
+        assert got.endswith(": accepted") and "enter-outcome B05" in got, got
+        d.wait_log(f"command enter-outcome B05 of {VIN}: OK 49.6 Nm, 31.0 deg ('read on the "
+                   "controller') by sam (screen 127.0.0.1): accepted")
+        page.wait(lambda p: _b05(p, "state") == "ok", 30, "B05 drawn OK")
+        page.wait(lambda p: not _shown(p, "locks"), 30, "the locked panel gone")
+        shots("operator-outcome-entered")
