@@ -193,6 +193,9 @@ def rundowns_csv(runs: list[dict[str, Any]]) -> str:
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=CSV_FIELDS, lineterminator="\n")
     w.writeheader()
-    for r in runs:
-        w.writerow({**r, "images": ";".join(r["images"])})
+    for r in runs:   # an entered outcome's comment in ``comment``, as a skip's
+        row = {**r, "images": ";".join(r["images"])}
+        if row.get("comment") is None:
+            row["comment"] = r.get("entered_comment")
+        w.writerow({k: row.get(k) for k in CSV_FIELDS})
     return buf.getvalue()
