@@ -27,6 +27,7 @@ from drivers.devices import check_url as check_device_url
 from drivers.errors import UrlError
 from drivers.lift.base import RegisterMap
 from drivers.url import parse_url
+from drivers.wrench import takes_targets
 from drivers.wrench.modbus_map import WrenchRegisterMap
 from stationd.access import AccessConfig
 from stationd.devicekey import device_key
@@ -764,9 +765,10 @@ def _nok_errors(node: YamlNode, cfg: StationConfig, bolts: Any) -> list[ConfigEr
 
 
 def _psets_only_warning(url: str, table: Any, node: YamlNode) -> ConfigError | None:
-    """Bolts with their own torque and no pset, on a controller that selects psets only (Open
-    Protocol, and its simulated twin): the daemon would refuse them at every visit."""
-    if not (url.startswith("openprotocol") or url.startswith("sim://wrench")):
+    """Bolts with their own torque and no pset, on a controller that selects psets only (its
+    driver says: Open Protocol, and its simulated twin): the daemon would refuse them at
+    every visit."""
+    if takes_targets(url):
         return None
     nopset = [f"{b.bolt_id} ({m.name})" for m in table.models for b in m.bolts
               if b.parameters.pset is None]

@@ -36,7 +36,7 @@ from drivers.wrench.base import (
 
 __all__ = ["BACKENDS", "FORMS", "LinkStatus", "Received", "ResultKind", "ResultType", "Status",
            "TighteningResult", "TorqueUnit", "UnreadableResult", "Wrench", "open_wrench",
-           "result_kind"]
+           "result_kind", "takes_targets"]
 
 #: scheme -> "module:Class"; the class has ``from_url(url: DeviceUrl, **kw) -> Wrench``.
 BACKENDS: dict[str, str] = {
@@ -51,6 +51,17 @@ FORMS = ("openprotocol://HOST[:4545], openprotocol+serial:///dev/ttyUSB1?baud=96
          "sim://wrench, modbus-tcp://HOST[:502]?unit=1, "
          "modbus-rtu:///dev/ttyUSB2?baud=19200&parity=E&unit=1, "
          "sim+modbus://wrench[?transport=rtu]")
+
+
+def takes_targets(url: str) -> bool:
+    """Whether the controller at ``url`` takes a bolt's own targets (else psets only): a
+    property of its backend, asked without opening it.  False for a URL that does not parse
+    or names no backend (the URL's own check says why)."""
+    try:
+        backend = load_backend(BACKENDS, parse_url(url).scheme)
+    except UrlError:
+        return False
+    return bool(getattr(backend, "takes_targets", False))
 
 
 def open_wrench(url: str, *, connect: bool = True, **kw: Any) -> Wrench:

@@ -378,6 +378,11 @@ class Wrench(Openable):
                                device=self.device)
         self.select_pset(pset, timeout)
 
+    #: whether :meth:`send_parameters` takes a bolt's own targets (a register-driven
+    #: controller); False: the controller selects psets only (its programs are its own, Open
+    #: Protocol's MID 0018), and a bolt without a pset is refused
+    takes_targets: bool = False
+
     #: whether :meth:`fetch_result` can ask the controller for a stored result (Open
     #: Protocol's MID 0064); a register-driven controller keeps none
     can_fetch: bool = False

@@ -88,6 +88,8 @@ class RegisterLink(ModbusLink):
 
 
 class ModbusWrench(SupervisedWrench):
+    takes_targets = True
+
     """A register-driven tightening controller (see the module docstring for the handshake).
     Beyond the :class:`Wrench` interface: :meth:`set_parameters` (pset with torque and angle
     targets) and :meth:`controller_status` (the last polled status bits)."""

@@ -98,3 +98,17 @@ def test_bad_options_are_a_url_error_naming_them(backend: Backend) -> None:
 def test_a_serial_speed_out_of_range_is_refused_for_the_register_driven_controller() -> None:
     with pytest.raises(UrlError, match="serial speed"):
         open_wrench("modbus-rtu:///dev/ttyUSB0?baud=0&unit=1", connect=False)
+
+
+@pytest.mark.parametrize("url, targets", [
+    ("openprotocol://127.0.0.1:4545", False), ("openprotocol+serial:///dev/ttyUSB1", False),
+    ("sim://wrench", False), ("modbus-tcp://127.0.0.1:502", True),
+    ("modbus-rtu:///dev/ttyUSB2", True), ("sim+modbus://wrench", True),
+    ("nonsense://x", False), ("not a url", False)])
+def test_whether_a_controller_takes_targets_is_its_drivers_to_say(url, targets):
+    """Psets only, or a bolt's own targets: asked of the backend's class, nothing opened
+    (the configuration check warns of bolts without a pset from it)."""
+    from drivers.wrench import BACKENDS, takes_targets
+
+    assert takes_targets(url) is targets
+    assert set(BACKENDS) >= {"openprotocol", "sim", "modbus-tcp", "sim+modbus"}
