@@ -46,6 +46,7 @@ from typing import Any
 
 from stationd.access import hash_password
 from stationd.errors import InputError
+from stationd.station.events import State
 from stationd.web.status_cli import (
     DEFAULT_URL,
     EXIT_FAULT,
@@ -382,7 +383,7 @@ def cmd_status(args: argparse.Namespace) -> int:
     if isinstance(doc, int):
         return doc
     print(json.dumps(doc, indent=1) if args.json else format_status(doc))
-    return EXIT_FAULT if doc.get("state") == "fault" else 0
+    return EXIT_FAULT if doc.get("state") == State.FAULT else 0
 
 
 def cmd_user_hash(args: argparse.Namespace) -> int:

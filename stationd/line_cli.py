@@ -30,6 +30,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from db.kinds import LOOSENING
 from stationd.errors import InputError
 
 if TYPE_CHECKING:   # each command imports its libraries when run: every command builds this
@@ -210,7 +211,7 @@ def cmd_line_results(args: argparse.Namespace) -> int:
     head = ("time (UTC)", "station", "VIN", "bolt", "result", "torque Nm", "angle deg",
             "version", "operator")
     table = [[r.at.strftime("%Y-%m-%d %H:%M:%S"), r.station_id, r.vin, r.bolt,
-              ("OK" if r.ok else "NOK") + (" (loosening)" if r.kind == "loosening" else ""),
+              ("OK" if r.ok else "NOK") + (" (loosening)" if r.kind == LOOSENING else ""),
               _n(r.torque_nm), _n(r.angle_deg), "-" if r.version is None else str(r.version),
               r.operator or "-"]
              for r in rows]

@@ -62,6 +62,7 @@ from stationd.station.events import (
     EventBus,
     Refused,
     ResultRecorded,
+    State,
     StateChanged,
     StationEvent,
     ToolDisabled,
@@ -109,7 +110,7 @@ class Watch:
     def see(self, ev: StationEvent) -> None:
         if isinstance(ev, StateChanged):
             self.state, self.reason = ev.state, ev.reason
-            if ev.state in ("waiting for vehicle", "starting"):
+            if ev.state in (State.WAITING_VEHICLE, State.STARTING):
                 self.vin = None
         elif isinstance(ev, VehicleOpened):
             self.vin = ev.vin
@@ -180,11 +181,11 @@ class DaemonHooks(SimDevices):
 
     async def arrive(self, vin: str, model_code: int) -> None:
         await super().arrive(vin, model_code)
-        await _until(lambda: self.watch.vin == vin and self.watch.state == "tracking", 30)
+        await _until(lambda: self.watch.vin == vin and self.watch.state == State.TRACKING, 30)
 
     async def depart(self) -> None:
         await super().depart()
-        await _until(lambda: self.watch.state == "waiting for vehicle", 30)
+        await _until(lambda: self.watch.state == State.WAITING_VEHICLE, 30)
         t = self.watch.tally    # one line per vehicle on stderr: a long soak is never silent
         print(f"soak: {t.tightened} tightened, {len(t.wrong_sends)} wrong, "
               f"{t.results_made - len(self._recorded)} unrecorded, "
@@ -201,7 +202,7 @@ class DaemonHooks(SimDevices):
 
     async def device_up(self, device: Device) -> None:
         await super().device_up(device)
-        await _until(lambda: self.watch.state in ("tracking", "waiting for vehicle"), 30)
+        await _until(lambda: self.watch.state in (State.TRACKING, State.WAITING_VEHICLE), 30)
 
     async def _reloaded(self) -> None:
         self._reload.set()                  # what SIGHUP sets
@@ -222,7 +223,7 @@ class DaemonHooks(SimDevices):
             await asyncio.sleep(LIFT_DOWN_S)    # the new station runs in fault, lift unreachable
             self.files.lift_url(self.files.good_lift)
             await self._reloaded()
-        await _until(lambda: self.watch.state in ("tracking", "waiting for vehicle"), 30)
+        await _until(lambda: self.watch.state in (State.TRACKING, State.WAITING_VEHICLE), 30)
 
     def recorded(self) -> int:
         return len(self._recorded)

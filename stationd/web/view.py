@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from db.kinds import LOOSENING
 from stationd.reasons import Reason, Why
 from stationd.station.events import (
     BoltLocked,
@@ -30,6 +31,7 @@ from stationd.station.events import (
     ParamsSent,
     Refused,
     ResultRecorded,
+    State,
     StateChanged,
     StationEvent,
     ToolDisabled,
@@ -113,7 +115,7 @@ class BoltState:
 class View:
     """What the operator screen shows, built from the events in order."""
 
-    state: str = "starting"      # until the daemon says otherwise (it publishes no "starting")
+    state: str = State.STARTING   # until the daemon says otherwise
     reason: str = ""
     vin: str | None = None
     model: str | None = None
@@ -158,12 +160,12 @@ class View:
         """Fold one event in."""
         if isinstance(e, StateChanged):
             self.state, self.reason = e.state, e.reason
-            if e.state == "starting":
+            if e.state == State.STARTING:
                 # a station (re)starting on its configuration: the last one's device
                 # reports are not about these devices (a reload kept a fixed wrench "down")
                 self.devices, self.opened, self.checks = {}, False, {}
                 self.fresh, self.stale_since = False, None
-            if e.state != "starting" and self.devices.get(DATABASE, {}).get("ok", True):
+            if e.state != State.STARTING and self.devices.get(DATABASE, {}).get("ok", True):
                 self.opened = True
             if e.state not in TRACKING_STATES:
                 # a refusal is about the wrench while tracking: a station waiting for its
@@ -343,7 +345,7 @@ class View:
             b = self.bolts[e.bolt]
             if e.entered_by is not None:   # the hold it resolves ends (a NOK may lock it)
                 b.locked = b.held = False
-            if e.kind == "loosening":
+            if e.kind == LOOSENING:
                 b.loosen = b.loosen and not e.ok
                 self._set(e.bolt, "loosened" if e.ok else "loosen",
                           "loosened: tighten it again" if e.ok else "loosening NOK")
@@ -420,7 +422,7 @@ class View:
         ones: a joint out of its limits left the station, the worse of the two for quality),
         ``missing`` (amber: it closed with bolts not tightened), ``done`` (vehicle finished),
         else "".  ``nok`` is not ``stop``: the station itself is healthy (/healthz stays ok)."""
-        if self.alarm or self.state == "fault" or any(not h["ok"]
+        if self.alarm or self.state == State.FAULT or any(not h["ok"]
                                                        for h in self.devices.values()):
             return "stop"
         if self.refused:
@@ -445,12 +447,12 @@ class View:
                   for d, h in sorted(self.devices.items()) if not h["ok"]]
         if self.alarm:
             return f"WRONG BOLT: {self.alarm}"
-        if self.state == "fault" and len(faults) > 1:
+        if self.state == State.FAULT and len(faults) > 1:
             # several devices down: the first in large words, the others named (each one's
             # reason is in the devices panel); the whole list would not fit 3 lines
             others = [d for d, h in sorted(self.devices.items()) if not h["ok"]][1:]
             return f"FAULT: {faults[0]} (and {', '.join(others)}: see Devices)"
-        if self.state == "fault":
+        if self.state == State.FAULT:
             return "FAULT: " + (cut(self.reason) or "; ".join(faults) or "see the journal")
         if faults:
             return "FAULT: " + cut("; ".join(faults))
