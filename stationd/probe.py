@@ -52,13 +52,14 @@ def _failed(args: argparse.Namespace, kind: str, exc: DeviceError) -> int:
 
 
 def probe_lift(args: argparse.Namespace) -> int:
-    from drivers.lift import open_lift
+    from drivers.devices import Kind, open_device
     from stationd.config import load_station_config
 
     cfg = load_station_config(args.config)
     try:
         with probing("lift", args.url), \
-                open_lift(args.url, cfg.lift.registers, timeout=args.timeout) as lift:
+                open_device(Kind.LIFT, args.url, register_map=cfg.lift.registers,
+                            timeout=args.timeout) as lift:
             ident = lift.identity()
             state = lift.read_state(timeout=args.timeout)
     except DeviceError as exc:
@@ -83,8 +84,8 @@ def probe_wrench(args: argparse.Namespace) -> int:
     """Session start, optionally a pset selection (acknowledged or refused with the
     controller's code) and one tightening result (the tool is enabled for it, and disabled
     again before the probe ends)."""
+    from drivers.devices import Kind, open_device
     from drivers.errors import RefusedError
-    from drivers.wrench import open_wrench
 
     if args.pset is not None and not 0 <= args.pset <= 999:
         raise UrlError(f"--pset {args.pset}: Open Protocol psets are 0-999")
@@ -93,7 +94,8 @@ def probe_wrench(args: argparse.Namespace) -> int:
                            "result": None}
     code = EXIT_OK
     try:
-        with probing("wrench", args.url), open_wrench(args.url, timeout=args.timeout) as w:
+        with probing("wrench", args.url), open_device(Kind.WRENCH, args.url,
+                                                               timeout=args.timeout) as w:
             out["identity"] = w.identity()
             out["acknowledged"] = args.pset is None  # the session itself was accepted
             if args.pset is not None:

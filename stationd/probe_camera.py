@@ -113,10 +113,10 @@ def _save_frame(path: Path, image: Any) -> None:
 
 
 def _probe(args: argparse.Namespace) -> int:
-    from drivers.camera import open_camera
+    from drivers.devices import Kind, open_device
 
     try:
-        with open_camera(args.url, timeout=args.timeout) as cam:
+        with open_device(Kind.CAMERA, args.url, timeout=args.timeout) as cam:
             identity = cam.identity()
             start = time.monotonic()
             cam.trigger()

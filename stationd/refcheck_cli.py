@@ -33,8 +33,8 @@ EXIT_OK, EXIT_NOT_OK = 0, 1
 
 def _grab(cfg: Any, name: str) -> tuple[Any, Any] | str:
     """One stereo grab of pair ``name`` (its two cameras opened and closed here), or why not."""
-    from drivers.camera import open_camera
     from drivers.camera.pair import StereoGrabber
+    from drivers.devices import Kind, open_device
     from drivers.errors import DriverError
 
     pc = cfg.pairs[name]
@@ -43,7 +43,7 @@ def _grab(cfg: Any, name: str) -> tuple[Any, Any] | str:
     cams: list[Any] = []
     try:
         for cam in (pc.left, pc.right):
-            cams.append(open_camera(cfg.cameras[cam]))
+            cams.append(open_device(Kind.CAMERA, cfg.cameras[cam]))
         left, right = StereoGrabber(cams[0], cams[1], pc.max_skew_s, name=name).grab(5.0)
         return left.image, right.image
     except (DriverError, OSError, ValueError) as exc:

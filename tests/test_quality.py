@@ -53,3 +53,14 @@ def test_folders_are_layers_every_layers_contract_exhaustive():
         assert not c.get("exhaustive_ignores"), c["name"]
         names = [n.strip() for layer in c["layers"] for n in layer.split("|")]
         assert all("." not in n for n in names), c["name"]
+
+
+def test_the_station_opens_every_device_through_the_one_registry():
+    """stationd builds and opens devices only through ``drivers.devices`` (one way for every
+    kind, one lifecycle); the kinds' own openers are for the drivers' tests."""
+    import re
+
+    per_kind = re.compile(r"(?<![.\w])(?<!def )(open_camera|open_lift|open_wrench)\(")
+    found = [f"{p.relative_to(ROOT)}:{n}" for p in sorted((ROOT / "stationd").rglob("*.py"))
+             for n, line in enumerate(p.read_text().splitlines(), 1) if per_kind.search(line)]
+    assert found == []

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.camera import open_camera
 from drivers.camera.pair import StereoGrabber
+from drivers.devices import Kind, open_device
 from stationd.boltfile import load_bolts
 from stationd.config import load_station_config
 from stationd.sim.load import cpu_load
@@ -52,8 +52,8 @@ def measure(frames: int, load: int, hold: int = 5, pair: str = "pair1",
     skews: list[float] = []
     untrue = 0
     try:
-        left = open_camera(cfg.cameras[pc.left])
-        right = open_camera(cfg.cameras[pc.right])
+        left = open_device(Kind.CAMERA, cfg.cameras[pc.left])
+        right = open_device(Kind.CAMERA, cfg.cameras[pc.right])
         grabber = StereoGrabber(left, right, 0.005)
         try:
             # backgrounds are rendered once per camera (about 1 s each): not a frame's cost

@@ -11,7 +11,10 @@ from drivers.errors import DeviceError
 KW = {"timeout": 1.0}  # every backend takes these
 
 
-@pytest.fixture(params=["aravis", "file", "opencv", "sim"])
+KINDS = ["aravis", "file", "opencv", "sim"]
+
+
+@pytest.fixture(params=KINDS)
 def url(request, tmp_path):
     kind = request.param
     if kind == "aravis":
@@ -66,3 +69,10 @@ def test_arguments_are_checked(url):
             cam.set_exposure_us(-1)
         with pytest.raises(ValueError, match="gain must be finite"):
             cam.set_gain_db(float("nan"))
+
+
+def test_every_registered_backend_keeps_the_contract():
+    """A backend registered for a scheme is in this suite (a new one must be added here)."""
+    from drivers.camera import BACKENDS
+
+    assert set(BACKENDS) == set(KINDS)

@@ -21,7 +21,10 @@ class Backend:
         self.url, self.plc = url, plc
 
 
-@pytest.fixture(params=["modbus-tcp", "modbus-rtu", "sim-tcp", "sim-rtu"])
+KINDS = ["modbus-tcp", "modbus-rtu", "sim-tcp", "sim-rtu"]   # sim: over either transport
+
+
+@pytest.fixture(params=KINDS)
 def backend(request: pytest.FixtureRequest) -> Iterator[Backend]:
     kind = request.param
     if kind.startswith("sim"):
@@ -78,3 +81,11 @@ def test_bad_arguments_are_refused(backend: Backend) -> None:
         open_lift(backend.url + ("&" if "?" in backend.url else "?") + "unit=999")
 
 
+
+
+def test_every_registered_backend_keeps_the_contract():
+    """A backend registered for a scheme is in this suite (a new one must be added here)."""
+    from drivers.lift import BACKENDS
+
+    assert set(BACKENDS) == {k.removesuffix("-tcp").removesuffix("-rtu")
+                             if k.startswith("sim") else k for k in KINDS}

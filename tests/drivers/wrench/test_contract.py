@@ -17,7 +17,7 @@ from drivers.wrench.base import TighteningResult
 from drivers.wrench.modbus_sim import SimRegisterController
 from drivers.wrench.sim.controller import SimController
 
-KINDS = ["openprotocol", "openprotocol+serial", "modbus-tcp", "modbus-rtu", "sim"]
+KINDS = ["openprotocol", "openprotocol+serial", "modbus-tcp", "modbus-rtu", "sim", "sim+modbus"]
 
 
 class Backend:
@@ -40,13 +40,15 @@ def backend(request: pytest.FixtureRequest, tmp_path: Any) -> Iterator[Backend]:
             url = f"modbus-tcp://127.0.0.1:{c.start_tcp()}?unit=1" if kind == "modbus-tcp" \
                 else f"modbus-rtu://{c.start_rtu()}?baud=19200&parity=N&unit=1"
             yield Backend(url, c.pull_trigger, 1, timeout=1.0, poll=0.02)
+    elif kind == "sim+modbus":   # as sim: the simulated controller starts with the wrench
+        yield Backend("sim+modbus://wrench", None, 1, timeout=1.0, poll=0.02)
     else:   # the simulated controller starts with the wrench: its trigger is set by _open
         yield Backend("sim://wrench", None, 1, timeout=1.0)
 
 
 def _open(b: Backend) -> Wrench:
     w = open_wrench(b.url, **b.kw)
-    if b.url.startswith("sim://"):
+    if b.url.startswith("sim"):
         b.trigger = w.controller.pull_trigger   # type: ignore[attr-defined]
     return w
 
@@ -112,3 +114,10 @@ def test_whether_a_controller_takes_targets_is_its_drivers_to_say(url, targets):
 
     assert takes_targets(url) is targets
     assert set(BACKENDS) >= {"openprotocol", "sim", "modbus-tcp", "sim+modbus"}
+
+
+def test_every_registered_backend_keeps_the_contract():
+    """A backend registered for a scheme is in this suite (a new one must be added here)."""
+    from drivers.wrench import BACKENDS
+
+    assert set(BACKENDS) == set(KINDS)
