@@ -78,7 +78,13 @@ def test_an_unreadable_result_is_stored_whole_and_holds_its_bolt(tmp_path):
 
 
 @pytest.mark.timeout(300)
-def test_a_tightening_made_during_a_link_cut_is_recorded_to_its_bolt(tmp_path):
+@pytest.mark.parametrize("cut_s, restart", [(6.0, False), (30.0, False), (6.0, True)],
+                         ids=["cut 6 s", "cut 30 s", "controller restarted"])
+def test_a_tightening_made_during_a_link_cut_is_recorded_to_its_bolt(tmp_path, cut_s, restart):
+    """The cut outlasts the late-result window (6 s), or a longer reconnect backoff (30 s),
+    or the controller is power-cycled before the link is back (its results are kept, its
+    volatile state, the tool and the VIN, is not): the result made under the enable is
+    fetched and recorded to its bolt; the second, not provably under it, is not."""
     pose = tmp_path / "pose"
     with tracking(tmp_path, "CUTVIN00000000001") as (d, _, ctl):
         tool_on(d, ctl, pose, "B04")
@@ -92,7 +98,10 @@ def test_a_tightening_made_during_a_link_cut_is_recorded_to_its_bolt(tmp_path):
         made = ctl.pull_trigger()              # the operator tightens meanwhile
         again = ctl.pull_trigger()             # and once more: not provably the same enable
         assert made is not None and again is not None
-        time.sleep(6.0)                        # past the late-result window (5 s)
+        time.sleep(cut_s)                      # past the late-result window (5 s)
+        if restart:
+            ctl.power_off()
+            ctl.power_on()
         ctl.clear_refusals()
         d.wait_log("wrench: back")
         d.wait_log(f"tightening {made.tightening_id} made during the link cut, fetched after "
