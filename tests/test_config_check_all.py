@@ -120,3 +120,36 @@ def test_an_unknown_key_in_the_nok_section_hides_no_other_error(station, capsys)
     lines = _check(capsys, station)
     assert any("nok.colour" in line and "unknown key" in line for line in lines), lines
     assert any("matching.stable_frames" in line for line in lines), lines
+
+
+HASH = "scrypt$16384$8$1$MDEyMzQ1Njc4OWFiY2RlZg==$" + "A" * 43 + "="
+
+
+def test_every_error_of_the_access_section(station, capsys) -> None:
+    """Five bad users and an idle time out of range were told one a run (a user left out
+    after its wrong role was told missed the role, and the check stopped there)."""
+    station.write_text(station.read_text() + (
+        "access:\n  users:\n"
+        f"    sam: {{role: supervisr, password: '{HASH}'}}\n"
+        "    ann: {role: operator, password: hunter22}\n"
+        "    bob: {role: operator}\n"
+        "    cid: {role: engineer, password: 'scrypt$16384$8$1$abc$def'}\n"
+        "    dan: operator\n"
+        f"    eve: {{role: supervisor, password: '{HASH}'}}\n"
+        "  operator_idle_s: 1\n"))
+    lines = [line for line in _check(capsys, station) if "access." in line]
+    assert [line.split(": ")[1] for line in lines] == [
+        "access.users.sam.role", "access.users.ann.password", "access.users.bob",
+        "access.users.cid.password", "access.users.dan", "access.operator_idle_s"], lines
+    assert "'supervisr' is not one of: operator, supervisor, engineer" in lines[0]
+    assert "missing key(s): password" in lines[2]
+
+
+def test_every_error_of_the_tool_section(station, capsys) -> None:
+    """Its required length, wrong, hid the tilt and the rule after it."""
+    _edit(station, "tool: {length_mm: 300.0, max_tilt_deg: 10.0, rule: axis}",
+          "tool: {length_mm: 0.3, max_tilt_deg: 0.17, rule: axes}")
+    lines = [line for line in _check(capsys, station) if "tool." in line]
+    assert sorted(line.split(": ")[1] for line in lines) == [
+        "tool.length_mm", "tool.max_tilt_deg", "tool.rule"], lines
+
