@@ -153,3 +153,17 @@ def test_every_error_of_the_tool_section(station, capsys) -> None:
     assert sorted(line.split(": ")[1] for line in lines) == [
         "tool.length_mm", "tool.max_tilt_deg", "tool.rule"], lines
 
+
+def test_a_wrong_right_of_a_role_hides_neither_the_others_nor_the_roles(station,
+                                                                      capsys) -> None:
+    """``roles: {operator: [skip, fly]}`` left the operator role out of the roles, and a
+    user's wrong role was told "'boss' is not one of: " with nothing after it."""
+    station.write_text(station.read_text() + (
+        "access:\n  roles: {operator: [skip, fly, flew], lead: [release]}\n  users:\n"
+        f"    sam: {{role: boss, password: '{HASH}'}}\n"
+        f"    olga: {{role: operator, password: '{HASH}'}}\n"))
+    lines = [line for line in _check(capsys, station) if "access." in line]
+    assert [line.split(": ")[1] for line in lines] == [
+        "access.roles.operator[1]", "access.roles.operator[2]", "access.users.sam.role"], lines
+    assert "'flew' is not one of" in lines[1]
+    assert lines[2].endswith("'boss' is not one of: operator, supervisor, engineer, lead")
