@@ -193,16 +193,33 @@ class ApiClient:
 MAX_PASSWORD = 1024
 
 
+#: what a command says when it was given no password (bad input, exit 2)
+NO_PASSWORD = ("no password given: set STATIOND_PASSWORD, type it at the prompt, or give it "  # noqa: S105
+               "as the first line of standard input")
+
+
+def prompts() -> bool:
+    """Whether :func:`read_password` asks at a terminal (else it reads without waiting for a
+    person: the environment or standard input)."""
+    return "STATIOND_PASSWORD" not in os.environ and sys.stdin.isatty()
+
+
 def read_password() -> str:
+    """The password (see the module's words); an empty one (standard input empty, ``<
+    /dev/null``) is bad input, said so, never sent as a login a daemon refuses."""
     if "STATIOND_PASSWORD" in os.environ:
-        return os.environ["STATIOND_PASSWORD"]
-    if sys.stdin.isatty():
-        return getpass.getpass("password: ")
-    line = sys.stdin.readline(MAX_PASSWORD + 1)
-    if len(line) > MAX_PASSWORD:
-        raise InputError(f"the password on standard input: no end of line within "
-                         f"{MAX_PASSWORD} characters (one line, the password)")
-    return line.rstrip("\n")
+        password = os.environ["STATIOND_PASSWORD"]
+    elif sys.stdin.isatty():
+        password = getpass.getpass("password: ")
+    else:
+        line = sys.stdin.readline(MAX_PASSWORD + 1)
+        if len(line) > MAX_PASSWORD:
+            raise InputError(f"the password on standard input: no end of line within "
+                             f"{MAX_PASSWORD} characters (one line, the password)")
+        password = line.rstrip("\r\n")
+    if not password:
+        raise InputError(NO_PASSWORD)
+    return password
 
 
 def say_refused(what: str, status: int, answer: Any) -> int:
@@ -268,10 +285,15 @@ def _session_command(args: argparse.Namespace, user: str, body: dict[str, Any]) 
     answer."""
     target = find_station(args)
     client = ApiClient(target.url, target.token, args.timeout)
-    known = identify(client, target, body["kind"])   # named before the password is asked
+    # a password read without a person (the environment, standard input) is read first:
+    # none given is told without asking the daemon; a prompt comes after the station is
+    # named, so that the person knows whose password is asked
+    password = None if prompts() else read_password()
+    known = identify(client, target, body["kind"])
     if isinstance(known, int):
         return known
-    password = read_password()
+    if password is None:
+        password = read_password()
     try:
         status, who = client.call("/api/login", {"user": user, "password": password,
                                                  "client": "cli"})
