@@ -35,6 +35,7 @@ import getpass
 import http.cookiejar
 import json
 import os
+import socket
 import sys
 import urllib.error
 import urllib.request
@@ -262,10 +263,33 @@ def check_comment(comment: str | None) -> None:
                          "given)")
 
 
-def _unreachable(url: str, exc: BaseException, what: str = "") -> int:
+def network_words(exc: BaseException) -> str:
+    """Why a request got no answer, in words ("connection refused", "timed out", "the host
+    name HOST is not known"), not as ``[Errno 111] Connection refused``."""
     reason = getattr(exc, "reason", exc)
-    sys.stderr.write(f"stationd: {what + ': ' if what else ''}no daemon answers at {url}: "
-                     f"{reason}\n")
+    if isinstance(reason, ConnectionRefusedError):
+        return "connection refused"
+    if isinstance(reason, TimeoutError) or "timed out" in str(reason):
+        return "timed out"
+    if isinstance(reason, socket.gaierror):
+        return "the host name is not known"
+    if isinstance(reason, OSError) and reason.strerror:
+        return reason.strerror[0].lower() + reason.strerror[1:]
+    return str(reason) or type(reason).__name__
+
+
+def unreachable_words(url: str, exc: BaseException) -> str:
+    """"no daemon answers at URL (connection refused): is stationd running?" and the like:
+    the URL asked, why in words, and what to look at."""
+    why = network_words(exc)
+    hint = {"connection refused": "is stationd running?",
+            "timed out": "is stationd running there, and not stopped? (a larger --timeout "
+                         "if it is busy)"}.get(why, "is the URL right, and stationd running?")
+    return f"no daemon answers at {url} ({why}): {hint}"
+
+
+def _unreachable(url: str, exc: BaseException, what: str = "") -> int:
+    sys.stderr.write(f"stationd: {what + ': ' if what else ''}{unreachable_words(url, exc)}\n")
     return EXIT_UNREACHABLE
 
 
@@ -311,7 +335,7 @@ def _session_command(args: argparse.Namespace, user: str, body: dict[str, Any]) 
         # again blind could skip or loosen twice, so say what is known and where to look
         sys.stderr.write(
             f"stationd: {body['kind']}: sent to {target.url}, but its answer did not arrive "
-            f"({getattr(exc, 'reason', exc)}); it may have been accepted: check the "
+            f"({network_words(exc)}); it may have been accepted: check the "
             "journal or `stationd status` before giving it again\n")
         return EXIT_UNREACHABLE
     try:
@@ -492,4 +516,5 @@ def add_command_parsers(sub: Any) -> None:
 __all__ = ["DEFAULT_CONFIG", "EXIT_REFUSED", "EXIT_UNREACHABLE", "ApiClient", "Target",
            "add_command_parsers", "check_comment", "client_args", "cmd_command", "cmd_feed",
            "cmd_operator", "cmd_status", "cmd_user_hash", "daemon_url", "find_station",
-           "identify", "read_password", "same_station", "say_refused", "station_words"]
+           "identify", "network_words", "read_password", "same_station", "say_refused",
+           "station_words", "unreachable_words"]
