@@ -272,7 +272,8 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
 
     async def main() -> None:
         stop = asyncio.Event()
-        screens = Screens(station.bus)
+        # named DEMO-1 for the commands' first line, also without OPC UA and a line database
+        screens = Screens(station.bus, name=station_id(1))
         listen = _listen(args, cfg)
         if listen is not None:
             await screens.follow(replace(cfg, http=HttpConfig(listen)))
