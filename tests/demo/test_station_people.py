@@ -91,6 +91,9 @@ def test_a_lock_waits_for_a_persons_release_in_the_demo(tmp_path):
             accepted
         expect(rf"command release {bolt} of {vin} .*by sue \(cli 127\.0\.0\.1\): accepted")
         expect(rf"{bolt} of {vin} released: the operator tightens it again")
+        # its history says who released it (it kept saying "left for a person's release")
+        history = expect(rf"^  {bolt} first: (.*)$")[1]
+        assert "; locked, released by sue" in history and "left for" not in history, history
         line = expect(rf"^{bolt}: pset \d+, XY error [^,]+, (.*)$")[1]
         assert line.startswith("OK"), line
         verdict = expect(r"^(PASS|FAIL)")
