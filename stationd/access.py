@@ -10,7 +10,8 @@ The ``access:`` section (optional; without it nobody can give commands)::
     access:
       users:
         sam: {role: supervisor, password: "scrypt$16384$8$1$<salt>$<key>"}
-      roles:                          # optional: these are the defaults
+      roles:                          # optional: these are the defaults; a role written
+                                      # here gets the rights written, the others keep theirs
         operator: [skip]
         supervisor: [skip, reopen, release, loosen]
         engineer: [skip, reopen, teach, calibrate]
@@ -110,14 +111,16 @@ class AccessConfig:
     @classmethod
     def from_node(cls, node: YamlNode) -> AccessConfig:
         m = node.mapping(("users", "roles", "operator_required", "operator_idle_s"))
+        # the roles written extend the defaults: a default role named there gets the rights
+        # written, the others keep theirs (`roles: {lead: [skip]}` did not take away the
+        # supervisor, and a user's wrong role was told against every role there is)
         roles = dict(DEFAULT_ROLES)
-        if "roles" in m:
-            roles = {}
-            for name, item in m["roles"].named():
-                rights = set()
-                for r in item.items():
-                    rights.add(Right(r.text(tuple(x.value for x in Right))))
-                roles[name] = frozenset(rights)
+        for name, item in m["roles"].named("role names to their rights") \
+                if "roles" in m else ():
+            rights = set()
+            for r in item.items():
+                rights.add(Right(r.text(tuple(x.value for x in Right))))
+            roles[name] = frozenset(rights)
         users = {}
         for name, item in m["users"].named() if "users" in m else ():
             u = item.mapping(("role", "password"), required=("role", "password"))

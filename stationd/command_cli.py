@@ -37,6 +37,7 @@ import http.cookiejar
 import json
 import math
 import os
+import socket
 import sys
 import urllib.error
 import urllib.request
@@ -196,16 +197,33 @@ class ApiClient:
 MAX_PASSWORD = 1024
 
 
+#: what a command says when it was given no password (bad input, exit 2)
+NO_PASSWORD = ("no password given: set STATIOND_PASSWORD, type it at the prompt, or give it "  # noqa: S105
+               "as the first line of standard input")
+
+
+def prompts() -> bool:
+    """Whether :func:`read_password` asks at a terminal (else it reads without waiting for a
+    person: the environment or standard input)."""
+    return "STATIOND_PASSWORD" not in os.environ and sys.stdin.isatty()
+
+
 def read_password() -> str:
+    """The password (see the module's words); an empty one (standard input empty, ``<
+    /dev/null``) is bad input, said so, never sent as a login a daemon refuses."""
     if "STATIOND_PASSWORD" in os.environ:
-        return os.environ["STATIOND_PASSWORD"]
-    if sys.stdin.isatty():
-        return getpass.getpass("password: ")
-    line = sys.stdin.readline(MAX_PASSWORD + 1)
-    if len(line) > MAX_PASSWORD:
-        raise InputError(f"the password on standard input: no end of line within "
-                         f"{MAX_PASSWORD} characters (one line, the password)")
-    return line.rstrip("\n")
+        password = os.environ["STATIOND_PASSWORD"]
+    elif sys.stdin.isatty():
+        password = getpass.getpass("password: ")
+    else:
+        line = sys.stdin.readline(MAX_PASSWORD + 1)
+        if len(line) > MAX_PASSWORD:
+            raise InputError(f"the password on standard input: no end of line within "
+                             f"{MAX_PASSWORD} characters (one line, the password)")
+        password = line.rstrip("\r\n")
+    if not password:
+        raise InputError(NO_PASSWORD)
+    return password
 
 
 def say_refused(what: str, status: int, answer: Any) -> int:
@@ -262,10 +280,33 @@ def check_comment(comment: str | None) -> None:
                          "given)")
 
 
-def _unreachable(url: str, exc: BaseException, what: str = "") -> int:
+def network_words(exc: BaseException) -> str:
+    """Why a request got no answer, in words ("connection refused", "timed out", "the host
+    name HOST is not known"), not as ``[Errno 111] Connection refused``."""
     reason = getattr(exc, "reason", exc)
-    sys.stderr.write(f"stationd: {what + ': ' if what else ''}no daemon answers at {url}: "
-                     f"{reason}\n")
+    if isinstance(reason, ConnectionRefusedError):
+        return "connection refused"
+    if isinstance(reason, TimeoutError) or "timed out" in str(reason):
+        return "timed out"
+    if isinstance(reason, socket.gaierror):
+        return "the host name is not known"
+    if isinstance(reason, OSError) and reason.strerror:
+        return reason.strerror[0].lower() + reason.strerror[1:]
+    return str(reason) or type(reason).__name__
+
+
+def unreachable_words(url: str, exc: BaseException) -> str:
+    """"no daemon answers at URL (connection refused): is stationd running?" and the like:
+    the URL asked, why in words, and what to look at."""
+    why = network_words(exc)
+    hint = {"connection refused": "is stationd running?",
+            "timed out": "is stationd running there, and not stopped? (a larger --timeout "
+                         "if it is busy)"}.get(why, "is the URL right, and stationd running?")
+    return f"no daemon answers at {url} ({why}): {hint}"
+
+
+def _unreachable(url: str, exc: BaseException, what: str = "") -> int:
+    sys.stderr.write(f"stationd: {what + ': ' if what else ''}{unreachable_words(url, exc)}\n")
     return EXIT_UNREACHABLE
 
 
@@ -287,10 +328,15 @@ def _session_command(args: argparse.Namespace, user: str, body: dict[str, Any]) 
     answer."""
     target = find_station(args)
     client = ApiClient(target.url, target.token, args.timeout)
-    known = identify(client, target, body["kind"])   # named before the password is asked
+    # a password read without a person (the environment, standard input) is read first:
+    # none given is told without asking the daemon; a prompt comes after the station is
+    # named, so that the person knows whose password is asked
+    password = None if prompts() else read_password()
+    known = identify(client, target, body["kind"])
     if isinstance(known, int):
         return known
-    password = read_password()
+    if password is None:
+        password = read_password()
     try:
         status, who = client.call("/api/login", {"user": user, "password": password,
                                                  "client": "cli"})
@@ -308,7 +354,7 @@ def _session_command(args: argparse.Namespace, user: str, body: dict[str, Any]) 
         # again blind could skip or loosen twice, so say what is known and where to look
         sys.stderr.write(
             f"stationd: {body['kind']}: sent to {target.url}, but its answer did not arrive "
-            f"({getattr(exc, 'reason', exc)}); it may have been accepted: check the "
+            f"({network_words(exc)}); it may have been accepted: check the "
             "journal or `stationd status` before giving it again\n")
         return EXIT_UNREACHABLE
     try:
@@ -505,4 +551,5 @@ def add_command_parsers(sub: Any) -> None:
 __all__ = ["DEFAULT_CONFIG", "EXIT_REFUSED", "EXIT_UNREACHABLE", "ApiClient", "Target",
            "add_command_parsers", "check_comment", "client_args", "cmd_command", "cmd_feed",
            "cmd_operator", "cmd_status", "cmd_user_hash", "daemon_url", "find_station",
-           "identify", "read_password", "same_station", "say_refused", "station_words"]
+           "identify", "network_words", "read_password", "same_station", "say_refused",
+           "station_words", "unreachable_words"]

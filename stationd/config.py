@@ -478,9 +478,13 @@ class _Reader:
             try:
                 value = parse(node)
             except ConfigError as exc:
-                if any(str(exc) == str(e) for e in found) or _left_out(exc, found):
-                    break      # nothing new, or what leaving an entry out did: stop
-                found.append(exc)
+                if any(str(exc) == str(e) for e in found):
+                    break      # nothing new: stop
+                if not _left_out(exc, found):
+                    found.append(exc)
+                # what leaving an entry out did (a user without the role told wrong misses
+                # it) is not told, and the mapping holding it is left out in turn: the
+                # entries after it are still read (five bad users were told one a run)
                 node = node.without(exc)
                 continue
             if not found:

@@ -107,6 +107,7 @@ def _ask_daemon(args: argparse.Namespace, cfg: Any, pid: int | None) -> int:
         Target,
         daemon_url,
         identify,
+        network_words,
         read_password,
         say_refused,
     )
@@ -146,8 +147,8 @@ def _ask_daemon(args: argparse.Namespace, cfg: Any, pid: int | None) -> int:
             "nonce": nonce["nonce"]})
         client.call("/api/logout", {})
     except (urllib.error.URLError, OSError) as exc:
-        sys.stderr.write(f"stationd: the daemon ({who}) does not answer at {url}: "
-                         f"{getattr(exc, 'reason', exc)}\n")
+        sys.stderr.write(f"stationd: the daemon ({who}) does not answer at {url} "
+                         f"({network_words(exc)})\n")
         return EXIT_UNREACHABLE
     if status == 409 and isinstance(answer, dict):
         print(answer["words"])

@@ -30,8 +30,10 @@ from stationd.command_cli import (
     client_args,
     find_station,
     identify,
+    network_words,
     read_password,
     say_refused,
+    unreachable_words,
 )
 from stationd.errors import ConfigError, InputError
 from stationd.filekind import expect
@@ -94,8 +96,7 @@ def cmd_teach(args: argparse.Namespace) -> int:
     try:
         return _teach(args, client, out, doc, ids, cad)
     except (urllib.error.URLError, OSError) as exc:
-        sys.stderr.write(f"stationd: no daemon answers at {args.url}: "
-                         f"{getattr(exc, 'reason', exc)}\n")
+        sys.stderr.write(f"stationd: teach: {unreachable_words(args.url, exc)}\n")
         return EXIT_UNREACHABLE
 
 
@@ -132,7 +133,7 @@ def _teach(args: argparse.Namespace, client: ApiClient, out: Path, doc: dict[str
                 # it answered the login and teach start: not "no daemon answers"
                 sys.stderr.write(f"stationd: teach: the daemon at {args.url} did not answer "
                                  f"the teach point of {bolt} within {args.timeout:g} s "
-                                 f"({getattr(exc, 'reason', exc)}); a larger --timeout, or "
+                                 f"({network_words(exc)}); a larger --timeout, or "
                                  "see its journal\n")
                 lost = True
                 break
@@ -175,7 +176,7 @@ def _stop(args: argparse.Namespace, command: Any, client: ApiClient) -> None:
         client.call("/api/logout", {})
     except (urllib.error.URLError, OSError) as exc:
         sys.stderr.write(f"stationd: teach: the daemon at {args.url} did not answer teach "
-                         f"stop ({getattr(exc, 'reason', exc)}): teach mode may still be on "
+                         f"stop ({network_words(exc)}): teach mode may still be on "
                          "there\n")
 
 

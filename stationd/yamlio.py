@@ -252,7 +252,8 @@ class YamlNode:
         """The elements of a sequence."""
         if not isinstance(self._node, yaml.SequenceNode):
             raise self.error("expected a list")
-        return [YamlNode(n, self.path, self._child_key(i)) for i, n in enumerate(self._node.value)]
+        return [YamlNode(n, self.path, self._child_key(i)) for i, n in enumerate(self._node.value)
+                if not isinstance(n, _LeftOut)]
 
     # -- scalars ------------------------------------------------------------------------
     def value(self) -> Any:
@@ -290,7 +291,7 @@ class YamlNode:
         if not isinstance(v, str):
             raise self.error(f"expected a string, got {v!r}")
         if choices is not None and v not in choices:
-            raise self.error(f"{v!r} is not one of: {', '.join(choices)}")
+            raise self.error(f"{v!r} is not one of: {', '.join(choices) or '(none given)'}")
         return v
 
     def flag(self) -> bool:
@@ -327,10 +328,30 @@ class YamlNode:
         return out
 
 
+class _LeftOut(yaml.ScalarNode):
+    """The place of a list's element left out by :meth:`YamlNode.without` (a null to the
+    constructor; :meth:`YamlNode.items` skips it)."""
+
+    def __init__(self, element: yaml.Node) -> None:
+        super().__init__("tag:yaml.org,2002:null", "", element.start_mark, element.end_mark)
+
+
 def _without(node: yaml.Node, key: str, target: str, line: int | None) -> yaml.Node | None:
     """A copy of the mapping ``node`` (at key path ``key``) without the entry at key path
     ``target`` (where two entries have it, the one at ``line``), descending into the entry
-    that holds it; None when no entry is or holds ``target``."""
+    that holds it; None when no entry is or holds ``target``.  A list's element is left out
+    of its list (``roles.operator[1]``, a right misspelt: the role keeps its other rights),
+    its place kept: the elements after it keep their index in what is told of them."""
+    if isinstance(node, yaml.SequenceNode):
+        for i, element in enumerate(node.value):
+            child = f"{key}[{i}]"
+            if child == target or target.startswith((child + ".", child + "[")):
+                inner = None if child == target else _without(element, child, target, line)
+                elements = list(node.value)
+                elements[i] = _LeftOut(element) if inner is None else inner
+                return yaml.SequenceNode(node.tag, elements, node.start_mark, node.end_mark,
+                                         node.flow_style)
+        return None
     if not isinstance(node, yaml.MappingNode):
         return None
     found: int | None = None

@@ -52,11 +52,20 @@ def test_users_get_the_rights_of_their_role_and_a_wrong_password_nothing():
     assert a.issuer("nobody", "correct horse", "cli") is None
 
 
-def test_custom_roles_replace_the_defaults():
-    a = _access(f"roles:\n  lead: [skip, teach]\nusers:\n  tom: {{role: lead, password: "
-                f"'{HASH}'}}\n")
+def test_roles_written_extend_the_defaults_and_redefine_those_named():
+    """The README writes the roles "optional; these are the defaults": a role written is
+    added, or redefines the default of its name; the other defaults stay."""
+    a = _access(f"roles:\n  lead: [skip, teach]\n  operator: [skip, reopen]\nusers:\n"
+                f"  tom: {{role: lead, password: '{HASH}'}}\n"
+                f"  sam: {{role: supervisor, password: '{HASH}'}}\n")
     tom = a.issuer("tom", "correct horse", "cli")
     assert tom is not None and tom.rights == {Right.SKIP, Right.TEACH}
+    assert a.roles["operator"] == {Right.SKIP, Right.REOPEN}
+    assert a.roles["supervisor"] == {Right.SKIP, Right.REOPEN, Right.RELEASE, Right.LOOSEN}
+    assert sorted(a.roles) == ["engineer", "lead", "operator", "supervisor"]
+    with pytest.raises(ConfigError) as err:
+        _access(f"roles:\n  lead: [skip]\nusers:\n  tom: {{role: boss, password: '{HASH}'}}\n")
+    assert str(err.value).endswith("'boss' is not one of: operator, supervisor, engineer, lead")
 
 
 @pytest.mark.parametrize(("text", "message"), [

@@ -120,3 +120,50 @@ def test_an_unknown_key_in_the_nok_section_hides_no_other_error(station, capsys)
     lines = _check(capsys, station)
     assert any("nok.colour" in line and "unknown key" in line for line in lines), lines
     assert any("matching.stable_frames" in line for line in lines), lines
+
+
+HASH = "scrypt$16384$8$1$MDEyMzQ1Njc4OWFiY2RlZg==$" + "A" * 43 + "="
+
+
+def test_every_error_of_the_access_section(station, capsys) -> None:
+    """Five bad users and an idle time out of range were told one a run (a user left out
+    after its wrong role was told missed the role, and the check stopped there)."""
+    station.write_text(station.read_text() + (
+        "access:\n  users:\n"
+        f"    sam: {{role: supervisr, password: '{HASH}'}}\n"
+        "    ann: {role: operator, password: hunter22}\n"
+        "    bob: {role: operator}\n"
+        "    cid: {role: engineer, password: 'scrypt$16384$8$1$abc$def'}\n"
+        "    dan: operator\n"
+        f"    eve: {{role: supervisor, password: '{HASH}'}}\n"
+        "  operator_idle_s: 1\n"))
+    lines = [line for line in _check(capsys, station) if "access." in line]
+    assert [line.split(": ")[1] for line in lines] == [
+        "access.users.sam.role", "access.users.ann.password", "access.users.bob",
+        "access.users.cid.password", "access.users.dan", "access.operator_idle_s"], lines
+    assert "'supervisr' is not one of: operator, supervisor, engineer" in lines[0]
+    assert "missing key(s): password" in lines[2]
+
+
+def test_every_error_of_the_tool_section(station, capsys) -> None:
+    """Its required length, wrong, hid the tilt and the rule after it."""
+    _edit(station, "tool: {length_mm: 300.0, max_tilt_deg: 10.0, rule: axis}",
+          "tool: {length_mm: 0.3, max_tilt_deg: 0.17, rule: axes}")
+    lines = [line for line in _check(capsys, station) if "tool." in line]
+    assert sorted(line.split(": ")[1] for line in lines) == [
+        "tool.length_mm", "tool.max_tilt_deg", "tool.rule"], lines
+
+
+def test_a_wrong_right_of_a_role_hides_neither_the_others_nor_the_roles(station,
+                                                                      capsys) -> None:
+    """``roles: {operator: [skip, fly]}`` left the operator role out of the roles, and a
+    user's wrong role was told "'boss' is not one of: " with nothing after it."""
+    station.write_text(station.read_text() + (
+        "access:\n  roles: {operator: [skip, fly, flew], lead: [release]}\n  users:\n"
+        f"    sam: {{role: boss, password: '{HASH}'}}\n"
+        f"    olga: {{role: operator, password: '{HASH}'}}\n"))
+    lines = [line for line in _check(capsys, station) if "access." in line]
+    assert [line.split(": ")[1] for line in lines] == [
+        "access.roles.operator[1]", "access.roles.operator[2]", "access.users.sam.role"], lines
+    assert "'flew' is not one of" in lines[1]
+    assert lines[2].endswith("'boss' is not one of: operator, supervisor, engineer, lead")

@@ -4,7 +4,9 @@ daemon's answers: tests/shell/test_operator_daemon.py.)"""
 
 from __future__ import annotations
 
+import io
 import socket
+import sys
 
 import pytest
 
@@ -39,7 +41,24 @@ def test_no_daemon_is_one_line_and_exit_3(argv, capsys, monkeypatch):
     url = f"http://127.0.0.1:{_closed_port()}/"
     assert main([*argv, "--url", url, "--timeout", "5"]) == 3
     err = capsys.readouterr().err
-    assert "no daemon answers" in err and len(err.strip().splitlines()) == 1
+    assert len(err.strip().splitlines()) == 1 and "Errno" not in err, err
+    assert f"no daemon answers at {url} (connection refused): is stationd running?" in err
+
+
+@pytest.mark.parametrize("argv", [["operator", "sign-in", "olga"],
+                                  ["skip", "VIN1", "B01", "--user", "sam"]])
+def test_no_password_is_said_so_without_asking_the_daemon(argv, capsys, monkeypatch):
+    """Standard input empty (``< /dev/null``) was sent as an empty password, and the daemon's
+    answer said "login refused: wrong user or password". The port is closed: had the daemon
+    been asked, the command would say that nothing answers (exit 3)."""
+    monkeypatch.delenv("STATIOND_PASSWORD", raising=False)
+    monkeypatch.setattr(sys, "stdin", io.StringIO(""))
+    url = f"http://127.0.0.1:{_closed_port()}/"
+    assert main([*argv, "--url", url, "--timeout", "5"]) == 2
+    err = capsys.readouterr().err
+    assert err.strip().splitlines() == [
+        "stationd: error: no password given: set STATIOND_PASSWORD, type it at the prompt, "
+        "or give it as the first line of standard input"], err
 
 
 def test_sign_out_names_who_gives_it(capsys):

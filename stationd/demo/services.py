@@ -22,6 +22,7 @@ import logging
 import socket
 import time
 from collections import Counter
+from collections.abc import Collection
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -70,6 +71,18 @@ def bindable(host: str, port: int) -> bool:
     return True
 
 
+def next_free_port(host: str, start: int, taken: Collection[int] = (),
+                   what: str = "the screens") -> int:
+    """The first port from ``start`` on that is not in ``taken`` and can be listened on at
+    ``host`` now; InputError (``what`` names the service) when none is left."""
+    port = start
+    while port in taken or not bindable(host, port):
+        port += 1
+        if port > 65535:
+            raise InputError(f"{what}: no free port from {start} on {host}")
+    return port
+
+
 def _any_port(host: str) -> int:
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
     with socket.socket(family, socket.SOCK_STREAM) as s:
@@ -111,11 +124,7 @@ class Endpoints:
             taken.add(self.port)
             return f"opc.tcp://{_url_host(self.host)}:{self.port}", None
         start = max(taken) + 1 if taken else self.port   # the station before took its own
-        port = start
-        while port in taken or not bindable(self.host, port):
-            port += 1
-            if port > 65535:
-                raise InputError(f"OPC UA: no free port from {start} on {self.host}")
+        port = next_free_port(self.host, start, taken, "OPC UA")
         taken.add(port)
         why = None if port == start else f"{start} is in use: the next free port"
         return f"opc.tcp://{_url_host(self.host)}:{port}", why
@@ -541,4 +550,5 @@ def shown(url: str) -> str:
 
 __all__ = ["DEFAULT_OPCUA", "SECURITY_WORDS", "Endpoints", "StationServices", "bindable",
            "demo_opcua", "drain_all", "line_config", "line_counts", "line_report",
-           "line_results", "line_summary", "line_words", "own_pairs", "shown"]
+           "line_results", "line_summary", "line_words", "next_free_port", "own_pairs",
+           "shown"]

@@ -50,6 +50,7 @@ from stationd.demo.services import (
     demo_opcua,
     line_config,
     line_report,
+    next_free_port,
     own_pairs,
     shown,
 )
@@ -272,8 +273,9 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
 
     async def main() -> None:
         stop = asyncio.Event()
-        screens = Screens(station.bus)
-        listen = _listen(args, cfg)
+        # named DEMO-1 for the commands' first line, also without OPC UA and a line database
+        screens = Screens(station.bus, name=station_id(1))
+        listen, moved = _listen(args, cfg)
         if listen is not None:
             await screens.follow(replace(cfg, http=HttpConfig(listen)))
             station.frames = screens.frames
@@ -285,7 +287,8 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
             if screens.server is not None:
                 print(f"screens: {screens.server.url} (operator), {screens.server.url}cameras, "
                       f"{screens.server.url}vehicles"
-                      + (f", {screens.server.url}line" if cfg.line is not None else ""),
+                      + (f", {screens.server.url}line" if cfg.line is not None else "")
+                      + (f" ({moved} {screens.server.url})" if moved else ""),
                       file=out, flush=True)
         services = [StationServices(cfg, station.bus, screens)]
         await services[0].start()
@@ -517,15 +520,24 @@ async def _hold(url: str | None, endpoints: list[str], report: list[dict[str, An
             loop.remove_signal_handler(sig)
 
 
-def _listen(args: argparse.Namespace, cfg: StationConfig) -> str | None:
+def _listen(args: argparse.Namespace, cfg: StationConfig) -> tuple[str | None, str | None]:
     """Where the demo serves its screens: ``--http``, else the station file's, else
-    127.0.0.1:8080; None with ``--no-http``."""
+    127.0.0.1:8080; None with ``--no-http``.  And why it is not the one asked for (None: it
+    is): without ``--http`` a port in use moves on to the next free one, as OPC UA's does
+    (the screens were left unserved, "tried again every 5 s", while OPC UA moved on); a
+    port given with ``--http`` is the user's (refused at the start when in use)."""
     if getattr(args, "no_http", False):
-        return None
+        return None, None
     given = getattr(args, "http", None)
     if given is not None:
-        return str(given)
-    return cfg.http.listen if cfg.http is not None else DEFAULT_LISTEN
+        return str(given), None
+    listen = cfg.http.listen if cfg.http is not None else DEFAULT_LISTEN
+    host, port = split_listen(listen)
+    if port == 0 or bindable(host, port):
+        return listen, None
+    free = next_free_port(host, port + 1)
+    return f"{f'[{host}]' if ':' in host else host}:{free}", \
+        f"{port} is in use: the next free port; commands give --url"
 
 
 def _ms(v: float | None, fmt: str) -> str:

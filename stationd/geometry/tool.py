@@ -53,16 +53,17 @@ class ToolGeometry:
                 f"an offset of {lateral:g} mm from the wrench axis is not plausible (the "
                 f"marker is on the wrench: at most {TOOL_OFFSET_MM:g} mm); offsets are in "
                 "millimetres")
+        tilt = _max_tilt(m["max_tilt_deg"]) if "max_tilt_deg" in m else 10.0
+        rule = m["rule"].text(RULES) if "rule" in m else "axis"
+        # the required key last: `config check` reads the section again without each entry
+        # it told, and without this one the section misses it and tells nothing after it
         length = m["length_mm"].number()
         if not TOOL_LENGTH_MM[0] <= length <= TOOL_LENGTH_MM[1]:
             raise m["length_mm"].error(
                 f"a tool length of {length:g} mm is not plausible (marker to socket tip: "
                 f"{TOOL_LENGTH_MM[0]:g}-{TOOL_LENGTH_MM[1]:g} mm); lengths are in millimetres")
-        return cls(length_mm=length,
-                   offset_mm=(float(off[0]), float(off[1])),
-                   max_tilt_deg=_max_tilt(m["max_tilt_deg"]) if "max_tilt_deg" in m
-                   else 10.0,
-                   rule=m["rule"].text(RULES) if "rule" in m else "axis")
+        return cls(length_mm=length, offset_mm=(float(off[0]), float(off[1])),
+                   max_tilt_deg=tilt, rule=rule)
 
 
 def _max_tilt(node: YamlNode) -> float:

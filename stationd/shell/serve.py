@@ -128,8 +128,12 @@ class Screens:
     ``http`` section asks, moved when a reload changes it.  A port in use is a logged fault of
     the screens, never of the station (the tool keeps working without them)."""
 
-    def __init__(self, bus: EventBus) -> None:
+    def __init__(self, bus: EventBus, name: str | None = None) -> None:
         self.bus = bus
+        #: the station's id the screens give (``/api/status``), whatever its file says: the
+        #: demo's DEMO-1, named so with or without its OPC UA and line sections; None: the
+        #: configuration's (``station_identity``)
+        self.name = name
         self.server: Any = None
         self.frames: Any = None
         self.station: Station | None = None   # whose commands the screens take
@@ -190,7 +194,9 @@ class Screens:
         users of ``cfg``; the status API reads the line forwarder's state."""
         self.station = station
         if self.server is not None:
-            self.server.station = station_identity(cfg)
+            identity = station_identity(cfg)
+            self.server.station = identity if self.name is None else {**identity,
+                                                                      "id": self.name}
             self.server.line = lambda: None if self.line is None else self.line.last_status
             self.server.line_results.url = None if cfg.line is None else cfg.line.url
             self.server.commands.access = cfg.access

@@ -31,7 +31,7 @@ from stationd.errors import InputError
 from stationd.shell.daemon import Station
 from stationd.sim.world import World, wrench_at
 from stationd.station.commands import Issuer, ReleaseBolt, Right, SignIn
-from stationd.station.events import Localized, ResultRecorded, State
+from stationd.station.events import BoltReleased, Localized, ResultRecorded, State
 from stationd.station.policy import NokPolicy
 from stationd.words import reason_words
 
@@ -183,12 +183,14 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
         await asyncio.sleep(0.3)
     for bolt_id, (b, line) in waiting.items():
         while line.get("waits"):
-            await wait_for_people(st, bolt_id, truth["vin"], note or _stderr)
+            who = await wait_for_people(st, bolt_id, truth["vin"], note or _stderr)
             pose = wrench_at(np.array(b.position) + np.append(rng.normal(0, 0.3, 2), 0.0), rng,
                              length)
             truth["bolt"] = bolt_id
             world.set_wrench(pose)
-            before = [*line.get("before", []), line["result"]]
+            # its history says who released it, not that it was left to people
+            before = [*line.get("before", []), released_words(who)
+                      if line["result"] == LEFT_FOR_PEOPLE else line["result"]]
             rundowns = int(line.get("rundowns", 0))
             line.pop("waits")
             if not await _tool_on(st, bolt_id):
@@ -281,15 +283,39 @@ def stopped(st: Station, bolt: str) -> bool:
     return matcher is not None and (bolt in matcher.locked or bolt in matcher.held)
 
 
+#: a bolt's step while it waits for a person's release (``until_ok``), and once released
+LEFT_FOR_PEOPLE = "locked: left for a person's release"
+
+
+def released_words(user: str | None) -> str:
+    """The step of a bolt a person released: "locked, released by sam"."""
+    return "locked, released" + (f" by {user}" if user else "")
+
+
+def _releases(st: Station, bolt: str) -> list[str]:
+    """Who released ``bolt``, oldest first (the station's BoltReleased events)."""
+    return [e.user for e in st.bus.of(BoltReleased) if isinstance(e, BoltReleased)
+            and e.bolt == bolt]
+
+
 async def wait_for_people(st: Station, bolt: str, vin: str,
-                          note: Callable[[str], None]) -> None:
+                          note: Callable[[str], None]) -> str | None:
     """The operator waits, the vehicle on the lift, until a person releases ``bolt`` (the
-    screens' Release form, ``stationd release``): said once, and again when released."""
+    screens' Release form, ``stationd release``): said once, and again when released.  Who
+    released it (None: not heard within 2 s of the release)."""
+    before = len(_releases(st, bolt))
     note(f"{bolt} of {vin} locked: the operator waits, the vehicle on the lift, for a "
          "person's release (the screens' Release form, or stationd release)")
     while stopped(st, bolt):
         await asyncio.sleep(0.2)
+    for _ in range(40):     # the release's event follows the lock's end (the core's act)
+        after = _releases(st, bolt)
+        if len(after) > before:
+            break
+        await asyncio.sleep(0.05)
+    who = after[-1] if len(after) > before else None
     note(f"{bolt} of {vin} released: the operator tightens it again")
+    return who
 
 
 async def until_ok(st: Station, bolt: str, line: dict[str, Any],
@@ -323,7 +349,7 @@ async def until_ok(st: Station, bolt: str, line: dict[str, Any],
         if shot.ok and not loosening:
             break
         if stopped(st, bolt) and supervisor is None:
-            steps.append("locked: left for a person's release")
+            steps.append(LEFT_FOR_PEOPLE)
             line["waits"] = True
             break
         if stopped(st, bolt) and supervisor is not None:

@@ -41,7 +41,8 @@ def _station(tmp: Path, port: int) -> Path:
 
 @pytest.mark.timeout(600)
 def test_a_lock_waits_for_a_persons_release_in_the_demo(tmp_path):
-    station = _station(tmp_path, free_port())
+    port = free_port()
+    station = _station(tmp_path, port)
     env = {**os.environ, "STATIOND_PASSWORD": PASSWORD, "PYTHONPATH": str(ROOT)}
     demo = subprocess.Popen([sys.executable, "-m", "stationd", "demo", "--config",
                              str(station), "--cycles", "3", "--seed", "11",
@@ -80,12 +81,19 @@ def test_a_lock_waits_for_a_persons_release_in_the_demo(tmp_path):
         assert sum(1 for s in seen if re.match(r"B\d\d: pset \d+, ", s)) >= 1, seen
         refused = release("olga", vin, bolt)
         assert refused.returncode == 1 and "refused" in refused.stdout, refused
+        # the demo's station is DEMO-1, also without OPC UA and a line database (it said
+        # "(no station id: line.station_id or opcua.station_id)")
+        assert refused.stdout.startswith(f"station DEMO-1 at http://127.0.0.1:{port}/ "
+                                         f"({station.resolve()})\n"), refused
         expect(rf"command release {bolt} of {vin} .*by olga \(cli 127\.0\.0\.1\): refused")
         accepted = release("sue", vin, bolt)
         assert accepted.returncode == 0 and accepted.stdout.strip().endswith(": accepted"), \
             accepted
         expect(rf"command release {bolt} of {vin} .*by sue \(cli 127\.0\.0\.1\): accepted")
         expect(rf"{bolt} of {vin} released: the operator tightens it again")
+        # its history says who released it (it kept saying "left for a person's release")
+        history = expect(rf"^  {bolt} first: (.*)$")[1]
+        assert "; locked, released by sue" in history and "left for" not in history, history
         line = expect(rf"^{bolt}: pset \d+, XY error [^,]+, (.*)$")[1]
         assert line.startswith("OK"), line
         verdict = expect(r"^(PASS|FAIL)")

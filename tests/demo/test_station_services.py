@@ -240,6 +240,32 @@ def test_an_explicit_screens_port_in_use_is_refused_at_start(capsys):
     assert f"--http 127.0.0.1:{busy}: the port is in use" in err
 
 
+def test_the_default_screens_port_in_use_moves_to_the_next_free_one_and_says_so():
+    """Without ``--http`` (the station file's http.listen, config/sim's 127.0.0.1:8080), a
+    port in use left the demo's screens unserved ("tried again every 5 s") while OPC UA moved
+    on: they move on too, and say where; ``--http`` keeps the port it names."""
+    import argparse
+    import socket
+    from dataclasses import replace
+
+    from stationd.config import load_station_config
+    from stationd.demo.station import SIM_CONFIG, _listen
+    from stationd.web.config import HttpConfig
+
+    with socket.socket() as held:
+        held.bind(("127.0.0.1", 0))
+        held.listen()
+        busy = held.getsockname()[1]
+        cfg = replace(load_station_config(SIM_CONFIG), http=HttpConfig(f"127.0.0.1:{busy}"))
+        listen, why = _listen(argparse.Namespace(http=None, no_http=False), cfg)
+        assert listen is not None and listen.startswith("127.0.0.1:")
+        assert int(listen.rpartition(":")[2]) > busy
+        assert why == f"{busy} is in use: the next free port; commands give --url"
+        given = _listen(argparse.Namespace(http=f"127.0.0.1:{busy}", no_http=False), cfg)
+        assert given == (f"127.0.0.1:{busy}", None)
+    assert _listen(argparse.Namespace(http=None, no_http=True), cfg) == (None, None)
+
+
 @pytest.mark.timeout(300)
 def test_a_line_database_that_never_answers_is_a_fail_that_counts_the_lost_records(tmp_path):
     """``--line-db`` on a port where nothing listens: PASS and exit 0 before, the records
