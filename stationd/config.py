@@ -7,7 +7,7 @@ the config file (for a symbolic link, to the file it points to: :func:`station_b
 are no hidden sources (no environment variables, no merged dotfiles).
 
 :func:`load_station_config` raises the first error (the daemon needs a yes or no);
-:func:`check_station` reads the same sections with the same code and lists every error, with
+:func:`read_all` reads the same sections with the same code and lists every error, with
 those of the files the config names and its device URLs (``stationd config check``).
 """
 
@@ -27,12 +27,11 @@ from drivers.devices import check_url as check_device_url
 from drivers.errors import UrlError
 from drivers.lift.base import RegisterMap
 from drivers.url import parse_url
-from drivers.wrench import takes_targets
 from drivers.wrench.modbus_map import WrenchRegisterMap
 from stationd.access import AccessConfig
 from stationd.devicekey import device_key
 from stationd.devicemaps import lift_map, wrench_map
-from stationd.errors import ConfigError, InputError
+from stationd.errors import ConfigError
 from stationd.filekind import expect
 from stationd.forward import LineConfig
 from stationd.geometry.camera import StereoPair
@@ -49,7 +48,7 @@ from stationd.web.config import HttpConfig
 from stationd.yamlio import YamlNode
 
 if TYPE_CHECKING:
-    from stationd.boltfile import BoltCheck
+    pass
 
 T = TypeVar("T")
 P = ParamSpec("P")
@@ -177,27 +176,6 @@ def station_identity(cfg: StationConfig) -> dict[str, str | None]:
     if sid is None and cfg.opcua is not None and cfg.opcua.station_id != OpcUaConfig.station_id:
         sid = cfg.opcua.station_id
     return {"id": sid, "config": None if cfg.path is None else str(Path(cfg.path).resolve())}
-
-
-@dataclass(frozen=True)
-class StationCheck:
-    """The outcome of checking a station file: the config when it is valid, else every error.
-
-    ``warnings`` do not make the file invalid: they are what the daemon accepts but a person
-    setting the station up wants to know (a pair not registered into the vehicle frame yet).
-    ``bolts`` is the check of the bolt table the file names, when it names an existing one;
-    its errors are among ``errors``.
-    """
-
-    path: str
-    config: StationConfig | None
-    errors: list[ConfigError] = field(default_factory=list)
-    warnings: list[ConfigError] = field(default_factory=list)
-    bolts: BoltCheck | None = None
-
-    @property
-    def ok(self) -> bool:
-        return not self.errors
 
 
 def device_url(node: YamlNode, kind: str, *, check: bool = False, sources: bool = False
@@ -431,7 +409,7 @@ class _Reader:
     """Reads the sections of one station file, for the loader and the checker alike.
 
     Why one reader for both: the daemon wants the first error (:func:`load_station_config`), a
-    person checking a file wants all of them (:func:`check_station`).  The sections are parsed
+    person checking a file wants all of them (:func:`read_all`).  The sections are parsed
     by the same code and only what happens to an error differs: with ``collect`` it is recorded
     and reading goes on with the default, each section, camera and pair on its own, so
     independent mistakes are all reported; without, it is raised as before.  Collecting also
@@ -676,7 +654,7 @@ class _Reader:
 def load_station_config(path: str | Path | None, *, station: bool = False,
                         unregistered: str | None = None) -> StationConfig:
     """Read a station config; ``None`` gives the built-in defaults.  The first error is raised
-    (a :class:`ConfigError` naming file, line and key); :func:`check_station` lists them all.
+    (a :class:`ConfigError` naming file, line and key); :func:`read_all` lists them all.
 
     ``station``: the file runs a station (the daemon), so its devices (``cameras``, ``pairs``,
     ``lift``, ``wrench``) must be written; tools that only read its vision or pairs
@@ -700,88 +678,33 @@ def load_station_config(path: str | Path | None, *, station: bool = False,
     return cfg
 
 
-def check_station(path: str | Path) -> StationCheck:
-    """Check a station file and collect all its errors, for ``stationd config check``.
+@dataclass
+class ReadAll:
+    """A station file read with every error collected (see :func:`read_all`)."""
 
-    Each section, camera and pair is checked on its own, so independent mistakes are reported
-    together; so are the files it names (calibration, to_vehicle, HSV, bolt table) and device
-    URLs (form and scheme; no device is opened).  The bolt table is checked with the station's
-    own matching tolerance, the one its bolts must be told apart with.  An unreadable or
-    malformed file is one error.
-    """
+    #: the settings, read with defaults where a section was wrong (None: the file itself
+    #: could not be read; ``errors`` has why)
+    config: StationConfig | None
+    #: in the file's line order, then those of the files it names, in the order found
+    errors: list[ConfigError]
+    #: what the daemon accepts but a person setting the station up wants to know
+    warnings: list[ConfigError]
+    #: the file's top-level sections, for a check to point at
+    sections: dict[str, YamlNode]
+
+
+def read_all(path: str | Path) -> ReadAll:
+    """Read a station file as a person checking it wants it: each section, camera and pair on
+    its own, so independent mistakes are reported together; so are the files it names and
+    its device URLs (form and scheme; no device is opened).  What needs the bolt table, a
+    database or a device is checked by :mod:`stationd.stationcheck`, not here."""
     p = Path(path)
     reader = _Reader(station_base(p), collect=True, require_devices=True, note=_link_note(p))
     try:
         cfg = reader.read(p)
     except ConfigError as exc:
-        return StationCheck(str(p), None, [exc])
-    errors = _in_order(reader.errors, str(p))
-    bolts = None
-    if cfg.bolts_path is not None:
-        from stationd.boltfile import check_bolts
-
-        try:
-            bolts = check_bolts(cfg.bolts_path, tolerance_mm=cfg.matching.tolerance_mm)
-            errors += bolts.errors
-        except InputError as exc:  # a tolerance of 0: the loader takes it, the check cannot
-            errors.append(reader.top["matching"].error(f"{exc}; the bolt table cannot be "
-                                                       "checked"))
-    if "nok" in reader.top:
-        try:
-            errors += _nok_errors(reader.top["nok"], cfg, bolts)
-        except ConfigError:   # the section's own errors are told above (an unknown key hid
-            pass              # every other error of the file): its overrides wait for them
-    if bolts is not None and bolts.table is not None and "wrench" in reader.top:
-        warning = _psets_only_warning(cfg.wrench.url, bolts.table, reader.top["wrench"])
-        if warning is not None:
-            reader.warnings.append(warning)
-    if cfg.opcua is not None and cfg.opcua.users and cfg.opcua.security == ("none",):
-        # served, but the MES's user passwords would cross the plant network in clear text
-        reader.warnings.append(reader.top["opcua"].error(
-            "users with security [none] only: their passwords cross the network in clear "
-            "text (the client says 'Sending plain-text password'); offer sign or encrypt too "
-            "(with certificates)"))
-    return StationCheck(str(p), cfg if not errors else None, errors, reader.warnings, bolts)
-
-
-def _nok_errors(node: YamlNode, cfg: StationConfig, bolts: Any) -> list[ConfigError]:
-    """The NOK policy's overrides against the bolt tables the station loads: its bolt file's
-    (checked), else the tables of its database when that is an SQLite file that exists (read
-    only; a database that does not open is the daemon's to report)."""
-    if cfg.bolts_path is not None:   # a table with errors is told those, not these
-        return [] if bolts is None or bolts.table is None \
-            else table_errors(node, bolts.table, str(cfg.bolts_path))
-    from sqlalchemy.engine import make_url
-
-    from db.errors import DbError
-    from db.repository import Repository
-
-    url = make_url(cfg.database_url)
-    if url.get_backend_name() != "sqlite" or not url.database \
-            or not Path(url.database).is_file():
-        return []
-    try:
-        with Repository.open(cfg.database_url, read_only=True) as repo:
-            table = repo.table()
-    except DbError:
-        return []
-    return table_errors(node, table, f"the database {url.database}")
-
-
-def _psets_only_warning(url: str, table: Any, node: YamlNode) -> ConfigError | None:
-    """Bolts with their own torque and no pset, on a controller that selects psets only (its
-    driver says: Open Protocol, and its simulated twin): the daemon would refuse them at
-    every visit."""
-    if takes_targets(url):
-        return None
-    nopset = [f"{b.bolt_id} ({m.name})" for m in table.models for b in m.bolts
-              if b.parameters.pset is None]
-    if not nopset:
-        return None
-    more = f" and {len(nopset) - 5} more" if len(nopset) > 5 else ""
-    return node.error(f"{', '.join(nopset[:5])}{more}: no pset, and this controller ({url}) "
-                      "selects psets only: they will be refused at the station (give them a "
-                      "pset, or drive the controller over Modbus)")
+        return ReadAll(None, [exc], [], {})
+    return ReadAll(cfg, _in_order(reader.errors, str(p)), reader.warnings, reader.top)
 
 
 def _in_order(errors: list[ConfigError], path: str) -> list[ConfigError]:

@@ -347,7 +347,7 @@ def _check_file(name: str, tolerance_mm: float,
                 ) -> tuple[str, list[ConfigError], list[ConfigError]]:
     """(summary when valid, errors, warnings) of one file, a station file or a bolt table."""
     from stationd.boltfile import check_bolts
-    from stationd.config import check_station
+    from stationd.stationcheck import check_station
 
     try:
         kind = file_kind(name)

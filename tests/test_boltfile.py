@@ -241,7 +241,8 @@ def test_a_station_file_given_as_a_bolt_table_is_one_error_saying_so():
 def test_a_bolt_table_given_as_a_station_file_is_one_error_saying_so():
     from pathlib import Path
 
-    from stationd.config import check_station, load_station_config
+    from stationd.config import load_station_config
+    from stationd.stationcheck import check_station
 
     bolts = Path(__file__).resolve().parents[1] / "config" / "sim" / "bolts.yaml"
     with pytest.raises(ConfigError, match="this is a bolt table, not a station file"):

@@ -5,8 +5,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stationd.config import check_station, load_station_config
+from stationd.config import load_station_config
 from stationd.errors import ConfigError
+from stationd.stationcheck import check_station
 from tests.conftest import SPEC
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]

@@ -11,8 +11,9 @@ import pytest
 
 from db.repository import Repository
 from stationd.boltfile import load_bolts
-from stationd.config import check_station, load_station_config
+from stationd.config import load_station_config
 from stationd.errors import ConfigError
+from stationd.stationcheck import check_station
 from tests.test_config import SIM, _line
 
 NOK = ("nok:\n  strategy: loosen\n  loosen_pset: 90\n  psets:\n    7: {max_nok: 1}\n"

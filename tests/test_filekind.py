@@ -13,12 +13,13 @@ import pytest
 import yaml
 
 from stationd.boltfile import TOP_KEYS, load_bolts
-from stationd.config import STATION_KEYS, check_station, load_station_config
+from stationd.config import STATION_KEYS, load_station_config
 from stationd.errors import ConfigError
 from stationd.filekind import KINDS, described, expect, kind_of_keys
 from stationd.geometry.camera import PAIR_KEYS, Camera, StereoPair
 from stationd.geometry.frames import REGISTRATION_KEYS
 from stationd.outfile import kind_of
+from stationd.stationcheck import check_station
 from stationd.yamlio import YamlNode
 
 ROOT = Path(__file__).resolve().parents[1]

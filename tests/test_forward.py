@@ -19,7 +19,7 @@ from sqlalchemy import select
 from db.curves import store_curve
 from db.repository import Repository
 from stationd.boltfile import import_bolts
-from stationd.config import check_station, load_station_config
+from stationd.config import load_station_config
 from stationd.errors import ConfigError
 from stationd.forward import (
     LINE_FEED,
@@ -30,6 +30,7 @@ from stationd.forward import (
     LineDown,
     payload_bytes,
 )
+from stationd.stationcheck import check_station
 from stationd.yamlio import YamlNode
 from tests.db.conftest import BASE, record
 

@@ -1,0 +1,127 @@
+"""A station file checked as a whole, for ``stationd config check``: every error of the file
+(:func:`stationd.config.read_all`), then what needs more than the file: the bolt table it
+names (with the station's own matching tolerance), the NOK policy's overrides against that
+table or the station's database, bolts without a pset on a controller that takes psets
+only (its driver says), and OPC UA users without security.
+
+Why apart from the configuration reader: the reader turns YAML into typed settings; what
+opens a bolt table or a database is the validation of a station, run where it is validated
+(this check; the daemon's start and reload load the bolt table themselves)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from drivers.wrench import takes_targets
+from stationd.config import StationConfig, read_all
+from stationd.errors import ConfigError, InputError
+from stationd.station.policy import table_errors
+from stationd.yamlio import YamlNode
+
+if TYPE_CHECKING:
+    from stationd.boltfile import BoltCheck
+
+
+@dataclass(frozen=True)
+class StationCheck:
+    """The outcome of checking a station file: the config when it is valid, else every error.
+
+    ``warnings`` do not make the file invalid: they are what the daemon accepts but a person
+    setting the station up wants to know (a pair not registered into the vehicle frame yet).
+    ``bolts`` is the check of the bolt table the file names, when it names an existing one;
+    its errors are among ``errors``.
+    """
+
+    path: str
+    config: StationConfig | None
+    errors: list[ConfigError] = field(default_factory=list)
+    warnings: list[ConfigError] = field(default_factory=list)
+    bolts: BoltCheck | None = None
+
+    @property
+    def ok(self) -> bool:
+        return not self.errors
+
+
+def check_station(path: str | Path) -> StationCheck:
+    """Check a station file and collect all its errors, for ``stationd config check``.
+
+    Each section, camera and pair is checked on its own, so independent mistakes are reported
+    together; so are the files it names (calibration, to_vehicle, HSV, bolt table) and device
+    URLs (form and scheme; no device is opened).  The bolt table is checked with the station's
+    own matching tolerance, the one its bolts must be told apart with.  An unreadable or
+    malformed file is one error.
+    """
+    p = Path(path)
+    read = read_all(p)
+    cfg, errors, warnings, top = read.config, read.errors, read.warnings, read.sections
+    if cfg is None:
+        return StationCheck(str(p), None, errors)
+    bolts = None
+    if cfg.bolts_path is not None:
+        from stationd.boltfile import check_bolts
+
+        try:
+            bolts = check_bolts(cfg.bolts_path, tolerance_mm=cfg.matching.tolerance_mm)
+            errors += bolts.errors
+        except InputError as exc:  # a tolerance of 0: the loader takes it, the check cannot
+            errors.append(top["matching"].error(f"{exc}; the bolt table cannot be "
+                                                       "checked"))
+    if "nok" in top:
+        try:
+            errors += _nok_errors(top["nok"], cfg, bolts)
+        except ConfigError:   # the section's own errors are told above (an unknown key hid
+            pass              # every other error of the file): its overrides wait for them
+    if bolts is not None and bolts.table is not None and "wrench" in top:
+        warning = _psets_only_warning(cfg.wrench.url, bolts.table, top["wrench"])
+        if warning is not None:
+            warnings.append(warning)
+    if cfg.opcua is not None and cfg.opcua.users and cfg.opcua.security == ("none",):
+        # served, but the MES's user passwords would cross the plant network in clear text
+        warnings.append(top["opcua"].error(
+            "users with security [none] only: their passwords cross the network in clear "
+            "text (the client says 'Sending plain-text password'); offer sign or encrypt too "
+            "(with certificates)"))
+    return StationCheck(str(p), cfg if not errors else None, errors, warnings, bolts)
+
+
+def _nok_errors(node: YamlNode, cfg: StationConfig, bolts: Any) -> list[ConfigError]:
+    """The NOK policy's overrides against the bolt tables the station loads: its bolt file's
+    (checked), else the tables of its database when that is an SQLite file that exists (read
+    only; a database that does not open is the daemon's to report)."""
+    if cfg.bolts_path is not None:   # a table with errors is told those, not these
+        return [] if bolts is None or bolts.table is None \
+            else table_errors(node, bolts.table, str(cfg.bolts_path))
+    from sqlalchemy.engine import make_url
+
+    from db.errors import DbError
+    from db.repository import Repository
+
+    url = make_url(cfg.database_url)
+    if url.get_backend_name() != "sqlite" or not url.database \
+            or not Path(url.database).is_file():
+        return []
+    try:
+        with Repository.open(cfg.database_url, read_only=True) as repo:
+            table = repo.table()
+    except DbError:
+        return []
+    return table_errors(node, table, f"the database {url.database}")
+
+
+def _psets_only_warning(url: str, table: Any, node: YamlNode) -> ConfigError | None:
+    """Bolts with their own torque and no pset, on a controller that selects psets only (its
+    driver says: Open Protocol, and its simulated twin): the daemon would refuse them at
+    every visit."""
+    if takes_targets(url):
+        return None
+    nopset = [f"{b.bolt_id} ({m.name})" for m in table.models for b in m.bolts
+              if b.parameters.pset is None]
+    if not nopset:
+        return None
+    more = f" and {len(nopset) - 5} more" if len(nopset) > 5 else ""
+    return node.error(f"{', '.join(nopset[:5])}{more}: no pset, and this controller ({url}) "
+                      "selects psets only: they will be refused at the station (give them a "
+                      "pset, or drive the controller over Modbus)")
