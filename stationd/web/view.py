@@ -157,103 +157,126 @@ class View:
     operator_required: bool = False
 
     def apply(self, e: StationEvent) -> None:
-        """Fold one event in."""
-        if isinstance(e, StateChanged):
-            self.state, self.reason = e.state, e.reason
-            if e.state == State.STARTING:
-                # a station (re)starting on its configuration: the last one's device
-                # reports are not about these devices (a reload kept a fixed wrench "down")
-                self.devices, self.opened, self.checks = {}, False, {}
-                self.fresh, self.stale_since = False, None
-            if e.state != State.STARTING and self.devices.get(DATABASE, {}).get("ok", True):
-                self.opened = True
-            if e.state not in TRACKING_STATES:
-                # a refusal is about the wrench while tracking: a station waiting for its
-                # vehicle (or in fault) says that, not the last vehicle's "bring the wrench"
+        """Fold one event in: each kind to its handler (the others change nothing shown)."""
+        match e:
+            case StateChanged():
+                self._state(e)
+            case DeviceIdentified():
+                self.identities[e.device] = e.identity
+            case DeviceHealth():
+                self.devices[e.device] = {"ok": e.ok, "kind": e.kind, "reason": e.reason}
+            case PairChecked():
+                self.checks[e.pair] = {"trusted": e.trusted, "verdict": e.verdict,
+                                       "words": check_words(e)}
+            case PairsUnchecked():
+                for r in e.reasons:
+                    if r.pair is not None:
+                        self.checks[r.pair] = {"trusted": False, "verdict": "not checked",
+                                               "words": reason_words(r)}
+            case VehicleOpened():
+                self._open(e)
+            case VehicleClosed():
+                self._close(e)
+            case VehicleReopened():
+                self._reopened(e)
+            case Localized():
+                self._localized(e)
+            case Refused():
+                self._refused(e)
+            case BoltSelected():
+                self._selected(e)
+            case ParamsSent():
                 self._refuse("")
-        elif isinstance(e, DeviceIdentified):
-            self.identities[e.device] = e.identity
-        elif isinstance(e, DeviceHealth):
-            self.devices[e.device] = {"ok": e.ok, "kind": e.kind, "reason": e.reason}
-        elif isinstance(e, PairChecked):
-            self.checks[e.pair] = {"trusted": e.trusted, "verdict": e.verdict,
-                                   "words": check_words(e)}
-        elif isinstance(e, PairsUnchecked):
-            for r in e.reasons:
-                if r.pair is not None:
-                    self.checks[r.pair] = {"trusted": False, "verdict": "not checked",
-                                           "words": reason_words(r)}
-        elif isinstance(e, VehicleOpened):
-            self._open(e)
-        elif isinstance(e, VehicleClosed):
-            self._close(e)
-        elif isinstance(e, VehicleReopened):
-            # no longer "closed": it opens as a rework when raised at the station (then
-            # VehicleOpened says so); until then the headline must not say closed
-            if self.closed is not None and self.closed["vin"] == e.vin:
-                self.closed = None
-            self.reopened = (e.vin, e.user)
-        elif isinstance(e, Localized):
-            self._localized(e)
-        elif isinstance(e, Refused):
-            self._refuse(reason_words(e.reason), e.reason)
-            if e.bolt in self.bolts and self.bolts[e.bolt].state in ("pending", "next") \
-                    and e.reason.kind in BLOCKS:
-                self._set(e.bolt, "blocked", self.refused)
-        elif isinstance(e, BoltSelected):
-            self._unselect()
-            self.selected = e.bolt
-            self.selected_loosen = e.pset if e.loosen else None
-            if e.loosen and e.bolt in self.bolts:
-                self.bolts[e.bolt].loosen_pset = e.pset
+            case ParamsRefusedEvent():
+                self._refuse(f"{e.bolt}: controller refused the parameters: {e.reason}",
+                             act=True)
+                self._set(e.bolt, "blocked", e.reason)
+            case ToolEnabled():
+                self._set(e.bolt, "tightening")
+            case ToolDisabled():
+                self._tool_off(e)
+            case BoltSkipped():
+                self._set(e.bolt, "skipped", e.reason)
+            case BoltLocked() if e.bolt in self.bolts:
+                self._locked(e)
+            case BoltReleased() if e.bolt in self.bolts:
+                self.bolts[e.bolt].locked = self.bolts[e.bolt].held = False
+                self._set(e.bolt, "pending", f"released by {e.user}")
+            case BoltToLoosen() if e.bolt in self.bolts:
+                self._to_loosen(e)
+            case ResultRecorded():
+                self._result(e)
+            case OperatorChanged():
+                self.operator, self.operator_required = e.user, e.required
+                if e.user is not None and self.refused_why is not None \
+                        and self.refused_why.kind is Why.SIGN_IN:
+                    self._refuse("")     # signed in: the next frames decide
+            case WrongBolt():
+                self.alarm = f"parameters sent for {e.bolt} while the wrench was on {e.truth}"
+
+    def _state(self, e: StateChanged) -> None:
+        self.state, self.reason = e.state, e.reason
+        if e.state == State.STARTING:
+            # a station (re)starting on its configuration: the last one's device
+            # reports are not about these devices (a reload kept a fixed wrench "down")
+            self.devices, self.opened, self.checks = {}, False, {}
+            self.fresh, self.stale_since = False, None
+        if e.state != State.STARTING and self.devices.get(DATABASE, {}).get("ok", True):
+            self.opened = True
+        if e.state not in TRACKING_STATES:
+            # a refusal is about the wrench while tracking: a station waiting for its
+            # vehicle (or in fault) says that, not the last vehicle's "bring the wrench"
             self._refuse("")
-            self._set(e.bolt, "selected", (f"loosen pset {e.pset}: loosen first" if e.loosen
-                                           else f"pset {e.pset}") if e.pset is not None else "")
-            if self.located is not None:    # the bolt pointed out was taken: point out another
-                self._point_out_next(self.located)
-        elif isinstance(e, ParamsSent):
-            self._refuse("")
-        elif isinstance(e, ParamsRefusedEvent):
-            self._refuse(f"{e.bolt}: controller refused the parameters: {e.reason}", act=True)
-            self._set(e.bolt, "blocked", e.reason)
-        elif isinstance(e, ToolEnabled):
-            self._set(e.bolt, "tightening")
-        elif isinstance(e, ToolDisabled):
-            b = self.bolts.get(e.bolt or self.selected or "")
-            if b is not None and b.state in ("selected", "tightening"):
-                self._set(b.bolt, "pending")
-            if e.why is not None:
-                self._refuse(f"{e.reason} ({reason_words(e.why)})", e.why)
-            elif e.reason:
-                self._refuse(e.reason)
-        elif isinstance(e, BoltSkipped):
-            self._set(e.bolt, "skipped", e.reason)
-        elif isinstance(e, BoltLocked) and e.bolt in self.bolts:
-            b = self.bolts[e.bolt]
-            b.locked, b.nok_count, b.held = True, e.count, e.held is not None
-            if self.selected == e.bolt:
-                self.selected = None
-            self._set(e.bolt, "locked", reason_words(
-                Reason(Why.HELD, bolt=e.bolt, note=e.held) if e.held is not None
-                else Reason(Why.LOCKED, bolt=e.bolt, count=e.count)))
-        elif isinstance(e, BoltReleased) and e.bolt in self.bolts:
-            self.bolts[e.bolt].locked = self.bolts[e.bolt].held = False
-            self._set(e.bolt, "pending", f"released by {e.user}")
-        elif isinstance(e, BoltToLoosen) and e.bolt in self.bolts:
-            self.bolts[e.bolt].loosen = True
-            if e.reason.pset is not None:
-                self.bolts[e.bolt].loosen_pset = e.reason.pset
-            if not self.bolts[e.bolt].locked:
-                self._set(e.bolt, "loosen", reason_words(e.reason))
-        elif isinstance(e, ResultRecorded):
-            self._result(e)
-        elif isinstance(e, OperatorChanged):
-            self.operator, self.operator_required = e.user, e.required
-            if e.user is not None and self.refused_why is not None \
-                    and self.refused_why.kind is Why.SIGN_IN:
-                self._refuse("")     # signed in: the next frames decide
-        elif isinstance(e, WrongBolt):
-            self.alarm = f"parameters sent for {e.bolt} while the wrench was on {e.truth}"
+
+    def _reopened(self, e: VehicleReopened) -> None:
+        # no longer "closed": it opens as a rework when raised at the station (then
+        # VehicleOpened says so); until then the headline must not say closed
+        if self.closed is not None and self.closed["vin"] == e.vin:
+            self.closed = None
+        self.reopened = (e.vin, e.user)
+
+    def _refused(self, e: Refused) -> None:
+        self._refuse(reason_words(e.reason), e.reason)
+        if e.bolt in self.bolts and self.bolts[e.bolt].state in ("pending", "next") \
+                and e.reason.kind in BLOCKS:
+            self._set(e.bolt, "blocked", self.refused)
+
+    def _selected(self, e: BoltSelected) -> None:
+        self._unselect()
+        self.selected = e.bolt
+        self.selected_loosen = e.pset if e.loosen else None
+        if e.loosen and e.bolt in self.bolts:
+            self.bolts[e.bolt].loosen_pset = e.pset
+        self._refuse("")
+        self._set(e.bolt, "selected", (f"loosen pset {e.pset}: loosen first" if e.loosen
+                                       else f"pset {e.pset}") if e.pset is not None else "")
+        if self.located is not None:    # the bolt pointed out was taken: point out another
+            self._point_out_next(self.located)
+
+    def _tool_off(self, e: ToolDisabled) -> None:
+        b = self.bolts.get(e.bolt or self.selected or "")
+        if b is not None and b.state in ("selected", "tightening"):
+            self._set(b.bolt, "pending")
+        if e.why is not None:
+            self._refuse(f"{e.reason} ({reason_words(e.why)})", e.why)
+        elif e.reason:
+            self._refuse(e.reason)
+
+    def _locked(self, e: BoltLocked) -> None:
+        b = self.bolts[e.bolt]
+        b.locked, b.nok_count, b.held = True, e.count, e.held is not None
+        if self.selected == e.bolt:
+            self.selected = None
+        self._set(e.bolt, "locked", reason_words(
+            Reason(Why.HELD, bolt=e.bolt, note=e.held) if e.held is not None
+            else Reason(Why.LOCKED, bolt=e.bolt, count=e.count)))
+
+    def _to_loosen(self, e: BoltToLoosen) -> None:
+        self.bolts[e.bolt].loosen = True
+        if e.reason.pset is not None:
+            self.bolts[e.bolt].loosen_pset = e.reason.pset
+        if not self.bolts[e.bolt].locked:
+            self._set(e.bolt, "loosen", reason_words(e.reason))
 
     def _open(self, e: VehicleOpened) -> None:
         self.vin, self.model, self.rework = e.vin, e.model, e.rework
