@@ -7,12 +7,13 @@ fault).  Every rule lives here, so every rule is testable without a device, a cl
 time comes in with the events (``t``, ``time.time()`` scale; a localization also carries its
 frames' *exposure* instant).
 
-The rules are split by subject, each a layer of one class (the lowest first):
-:mod:`~stationd.station.state` (the state and its shared transitions),
-:mod:`~stationd.station.teaching` (teach-in, the calibration check),
-:mod:`~stationd.station.faults`, :mod:`~stationd.station.orders` (commands),
-:mod:`~stationd.station.results` (results, the NOK policy), :mod:`~stationd.station.lift`
-(the vehicle and the lift) and :mod:`~stationd.station.tool` (selection and the tool);
+The rules are split by subject, each a layer of one class, the lowest first:
+:mod:`~stationd.station.state` (the state and its shared transitions) <
+:mod:`~stationd.station.teaching` (teach-in, the calibration check) <
+:mod:`~stationd.station.faults` < :mod:`~stationd.station.orders` (commands) <
+:mod:`~stationd.station.results` (results, the NOK policy); beside results, also on faults,
+:mod:`~stationd.station.lift` (the vehicle and the lift) and :mod:`~stationd.station.tool`
+(selection and the tool);
 :class:`StationCore` puts them together and dispatches each input (:mod:`~stationd.station.inputs`)
 to its handler, answering actions (:mod:`~stationd.station.actions`).
 
@@ -39,7 +40,6 @@ from __future__ import annotations
 from typing import assert_never
 
 from stationd.station.actions import Action, Publish
-from stationd.station.events import State as State  # the state lives with its event
 from stationd.station.events import StateChanged
 from stationd.station.inputs import (
     CommandDone,

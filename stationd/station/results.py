@@ -35,7 +35,12 @@ from stationd.station.events import (
 )
 from stationd.station.inputs import CommandDone, NotStored, ResultIn, ResultsMissed, UnreadableIn
 from stationd.station.orders import OrderRules
-from stationd.station.state import CLOCK_SLACK_S, NOK_SKIPPED, ON_A_BOLT
+from stationd.station.state import NOK_SKIPPED, ON_A_BOLT
+
+#: the controller stamps its results to the second, and its clock's offset is measured to
+#: the second: a result fetched after a link cut is placed between the enable and the cut
+#: within this much
+CLOCK_SLACK_S = 2.0
 
 
 def _said(result: TighteningResult) -> object:

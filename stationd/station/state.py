@@ -31,25 +31,13 @@ from stationd.station.trust import PairTrust
 #: a result this long after the tool went off is not the last bolt's late one: the tool cannot
 #: tighten while disabled, and a controller reports within milliseconds
 LATE_RESULT_S = 5.0
-#: the controller stamps its results to the second, and its clock's offset is measured to
-#: the second: a result fetched after a link cut is placed between the enable and the cut
-#: within this much
-CLOCK_SLACK_S = 2.0
-
-
+#: the states on a bolt (parameters sent, or the tool on), and those that read the cameras
 ON_A_BOLT = (State.BOLT_SELECTED, State.TIGHTENING)
 LOCALIZING = (State.TRACKING, *ON_A_BOLT)
 #: the states in which the cameras are read (teaching measures the wrench, sends nothing)
 CAMERAS_ON = (*LOCALIZING, State.TEACHING)
-#: steady localizations averaged for one taught bolt, and how many may be tried for them
-TEACH_FRAMES, TEACH_TRIES = 10, 60
 #: why a bolt is not tightened again after a NOK under the ``skip`` strategy
 NOK_SKIPPED = "NOK, skipped by the NOK policy"
-#: a taught bolt end whose localizations spread farther than this was not held still, mm
-TEACH_STEADY_MM = 2.0
-#: a teach point is answered within this long, s, measured or not (``stationd teach`` waits
-#: 15 s for an answer: past it, it could only blame the connection)
-TEACH_WAIT_S = 10.0
 #: the targets sent with a loosen pset: none of the station's own (a loosen pset is a program
 #: on the controller; a register-driven controller takes 0 as "the pset's own")
 LOOSEN_TARGETS = Window(0.0, 0.0, 0.0)

@@ -27,17 +27,17 @@ from stationd.station.events import (
     State,
 )
 from stationd.station.inputs import CommandIn, LocalizedIn
-from stationd.station.state import (
-    ON_A_BOLT,
-    TEACH_FRAMES,
-    TEACH_STEADY_MM,
-    TEACH_TRIES,
-    TEACH_WAIT_S,
-    CoreState,
-    _Teach,
-)
+from stationd.station.state import ON_A_BOLT, CoreState, _Teach
 from stationd.station.trust import MeasureReferences, RecordCheck, ReferencesChecked
 from stationd.station.trust import answer as check_answer
+
+#: steady localizations averaged for one taught bolt, and how many may be tried for them
+TEACH_FRAMES, TEACH_TRIES = 10, 60
+#: a taught bolt end whose localizations spread farther than this was not held still, mm
+TEACH_STEADY_MM = 2.0
+#: a teach point is answered within this long, s, measured or not (``stationd teach`` waits
+#: 15 s for an answer: past it, it could only blame the connection)
+TEACH_WAIT_S = 10.0
 
 
 class TeachRules(CoreState):

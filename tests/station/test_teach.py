@@ -15,7 +15,7 @@ from stationd.station.actions import DisableTool, Reply, SendParams
 from stationd.station.commands import Issuer, Right, SkipBolt, TeachPoint, TeachStart, TeachStop
 from stationd.station.events import State
 from stationd.station.inputs import CommandDone, CommandIn, DeviceFault, LocalizedIn, Tick
-from stationd.station.state import TEACH_FRAMES, TEACH_WAIT_S
+from stationd.station.teaching import TEACH_FRAMES, TEACH_WAIT_S
 from tests.station.test_commands import OPERATOR, _answer
 from tests.station.test_core import _on, _ready
 

@@ -17,7 +17,7 @@ from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim.controller import SimController
 from stationd.access import hash_password
 from stationd.sim.devices_cli import psets_of
-from stationd.station.state import TEACH_STEADY_MM
+from stationd.station.teaching import TEACH_STEADY_MM
 from tests.shell.daemons import SIM, Proc, at_height, free_port
 from tests.test_teach_cli import PASSWORD, _station
 from tests.web.pages import Page
