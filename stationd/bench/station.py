@@ -72,7 +72,7 @@ async def _idle(st: Station, plc: Any) -> dict[str, float]:
     """The station idle (the lift up but not at working height, as between two cars): the
     Modbus requests its PLC serves per second and the process's CPU, over ``IDLE_S``."""
     plc.set_height(400.0)
-    await _until(lambda: st.core.state is State.WAITING_VEHICLE, 30)
+    await _until(lambda: st.core.status().state is State.WAITING_VEHICLE, 30)
     n0, c0, t0 = plc.requests, time.process_time(), time.monotonic()
     await asyncio.sleep(IDLE_S)
     dt = time.monotonic() - t0
@@ -89,7 +89,7 @@ async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]
     plc.set_vehicle(1, "BENCHVIN000000001")
     plc.raise_lift()
     if not await _until(lambda: st.vin is not None, 60):
-        raise RuntimeError(f"the station did not start the vehicle: {st.core.reason}")
+        raise RuntimeError(f"the station did not start the vehicle: {st.core.status().reason}")
     for i, (bolt, pose) in enumerate(progress.track(plan, "bench station: bolts",
                                                     unit="bolt")):
         if on_bolt is not None:
@@ -97,12 +97,12 @@ async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]
         world.set_wrench(pose)
         out["truth"] = bolt
         def on_it(b: str = bolt) -> bool:
-            return st.core.state is State.TIGHTENING and st.core.bolt == b \
+            return st.core.status().state is State.TIGHTENING and st.core.status().bolt == b \
                 and bool(ctl.tool_enabled)
 
         selected = await _until(on_it, 30)
         if not selected:
-            out["not_selected"].append(f"{bolt}: {st.core.reason}")
+            out["not_selected"].append(f"{bolt}: {st.core.status().reason}")
         else:
             n = st.bus.count(ResultRecorded)
             if ctl.pull_trigger() is not None:
@@ -112,7 +112,7 @@ async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]
                 await _until(recorded, 10)
         out["truth"] = None
         world.set_wrench(None)
-        await _until(lambda: st.core.state is State.TRACKING, 10)
+        await _until(lambda: st.core.status().state is State.TRACKING, 10)
     plc.lower_lift()
     await _until(lambda: st.vin is None, 10)
 
