@@ -119,6 +119,8 @@ class StationCore(LiftRules, ToolRules, ResultRules):
                 return self._on_NotStored(ev)
             case CommandIn():
                 return self._on_CommandIn(ev)
+            case CommandDone() if self._is_entered_outcome(ev):
+                return self._on_EnteredOutcomeDone(ev)
             case CommandDone():
                 return self._on_CommandDone(ev)
             case DeviceFault():

@@ -317,13 +317,15 @@ class ResultRules(OrderRules):
         return []
 
     # -- an outcome entered by a person for a held bolt -----------------------------------------
-    def _on_CommandDone(self, ev: CommandDone) -> list[Action]:  # noqa: N802
-        """An entered outcome, recorded (with its rundown, in one transaction): a result,
-        so the results' rules apply it; every other command: :mod:`orders`."""
+    def _is_entered_outcome(self, ev: CommandDone) -> bool:
+        """Whether ``ev`` is an entered outcome recorded (its rundown with it, in one
+        transaction): a result, which the results' rules apply (the dispatch's case)."""
         c = self._commands.get(ev.request)
-        if c is None or ev.reason is not None or not isinstance(c.command, EnterOutcome):
-            return super()._on_CommandDone(ev)
-        del self._commands[ev.request]
+        return c is not None and ev.reason is None and isinstance(c.command, EnterOutcome)
+
+    def _on_EnteredOutcomeDone(self, ev: CommandDone) -> list[Action]:  # noqa: N802
+        c = self._commands.pop(ev.request)
+        assert isinstance(c.command, EnterOutcome)  # noqa: S101 - the dispatch's guard
         return [*self._outcome_entered(ev.t, c.command, c.issuer),
                 Reply(Answer(ev.request, c.command, c.issuer))]
 
