@@ -25,7 +25,6 @@ from stationd.station.inputs import (
     VEHICLE,
     WRENCH,
     LiftRead,
-    ModelsKnown,
     Started,
     VehicleEnded,
     VehicleLoaded,
@@ -169,10 +168,6 @@ class LiftRules(FaultRules):
 
     def _on_VehicleEnded(self, ev: VehicleEnded) -> list[Action]:  # noqa: N802
         return [Publish(VehicleClosed(ev.vin, ev.missing, ev.nok, t=ev.t))]
-
-    def _on_ModelsKnown(self, ev: ModelsKnown) -> list[Action]:  # noqa: N802
-        self.models = frozenset(ev.models)
-        return []
 
     def _on_VinSent(self, ev: VinSent) -> list[Action]:  # noqa: N802
         self._vin_pending = False

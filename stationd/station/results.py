@@ -33,7 +33,14 @@ from stationd.station.events import (
     ResultUnreadable,
     State,
 )
-from stationd.station.inputs import CommandDone, NotStored, ResultIn, ResultsMissed, UnreadableIn
+from stationd.station.inputs import (
+    CommandDone,
+    NotStored,
+    ResultIn,
+    ResultsMissed,
+    UnreadableIn,
+    Written,
+)
 from stationd.station.orders import OrderRules
 from stationd.station.state import NOK_SKIPPED, ON_A_BOLT
 
@@ -168,6 +175,16 @@ class ResultRules(OrderRules):
                                               int(r.pset), bool(r.ok), bolt, t=ev.t)),
                 Publish(Notice(note, "warning" if bolt is not None
                                or kind is ResultKind.UNKNOWN else "info", t=ev.t))]
+
+    def _on_Written(self, ev: Written) -> list[Action]:  # noqa: N802
+        """A result on disk: published for the screens, then the controller may forget it."""
+        a, r = ev.record, ev.record.result
+        return [Publish(ResultRecorded(
+            a.vin, a.bolt, bool(r.ok), float(r.torque_nm), float(r.angle_deg),
+            int(r.tightening_id), int(r.pset), float(r.torque_min_nm), float(r.torque_max_nm),
+            float(r.angle_min_deg), float(r.angle_max_deg), a.late, tuple(ev.images), a.kind,
+            a.selection.operator if a.selection is not None else None, t=ev.t)),
+            Acknowledge(r)]
 
     def _on_ResultsMissed(self, ev: ResultsMissed) -> list[Action]:  # noqa: N802
         ids = str(ev.first) if ev.first == ev.last else f"{ev.first}-{ev.last}"

@@ -26,7 +26,7 @@ from stationd.station.events import (
     PairsUnchecked,
     State,
 )
-from stationd.station.inputs import CommandIn, LocalizedIn
+from stationd.station.inputs import CommandIn, LocalizedIn, ModelsKnown
 from stationd.station.state import ON_A_BOLT, CoreState, _Teach
 from stationd.station.trust import MeasureReferences, RecordCheck, ReferencesChecked
 from stationd.station.trust import answer as check_answer
@@ -42,6 +42,10 @@ TEACH_WAIT_S = 10.0
 
 class TeachRules(CoreState):
     """Teach-in and the calibration check."""
+
+    def _on_ModelsKnown(self, ev: ModelsKnown) -> list[Action]:  # noqa: N802
+        self.models = frozenset(ev.models)
+        return []
 
     def _taught(self, ev: LocalizedIn, teach: _Teach) -> list[Action]:
         """Teach mode: fresh localizations of the bolt being measured are collected; after

@@ -9,7 +9,7 @@ import numpy as np
 from db.bolts import Parameters
 from drivers.keeper import FaultKind
 from stationd.reasons import Reason, Why
-from stationd.station.actions import Acknowledge, Action, EnableTool, Publish, Selection, SendParams
+from stationd.station.actions import Action, EnableTool, Publish, Selection, SendParams
 from stationd.station.events import (
     BoltSelected,
     BoltSkipped,
@@ -18,12 +18,11 @@ from stationd.station.events import (
     ParamsRefusedEvent,
     ParamsSent,
     Refused,
-    ResultRecorded,
     State,
     ToolEnabled,
 )
 from stationd.station.faults import FaultRules
-from stationd.station.inputs import WRENCH, LocalizedIn, ParamsAcked, ParamsRefused, ToolOn, Written
+from stationd.station.inputs import WRENCH, LocalizedIn, ParamsAcked, ParamsRefused, ToolOn
 from stationd.station.matching import Match
 from stationd.station.state import LOCALIZING, LOOSEN_TARGETS, _disable
 
@@ -124,16 +123,6 @@ class ToolRules(FaultRules):
 
     def _on_ToolOn(self, ev: ToolOn) -> list[Action]:  # noqa: N802
         return [Publish(ToolEnabled(ev.bolt, t=ev.t))]
-
-    def _on_Written(self, ev: Written) -> list[Action]:  # noqa: N802
-        """A result on disk: published for the screens, then the controller may forget it."""
-        a, r = ev.record, ev.record.result
-        return [Publish(ResultRecorded(
-            a.vin, a.bolt, bool(r.ok), float(r.torque_nm), float(r.angle_deg),
-            int(r.tightening_id), int(r.pset), float(r.torque_min_nm), float(r.torque_max_nm),
-            float(r.angle_min_deg), float(r.angle_max_deg), a.late, tuple(ev.images), a.kind,
-            a.selection.operator if a.selection is not None else None, t=ev.t)),
-            Acknowledge(r)]
 
     def _on_ParamsRefused(self, ev: ParamsRefused) -> list[Action]:  # noqa: N802
         """The bolt is skipped for this vehicle (reported missing) so that the same refused
