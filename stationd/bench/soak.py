@@ -36,6 +36,7 @@ from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim.controller import SimController
 from stationd.bench.wait import until as _until
 from stationd.boltfile import load_bolts
+from stationd.bus import EventBus
 from stationd.demo.station import SIM_CONFIG, _kind
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
@@ -59,7 +60,6 @@ from stationd.sim.world import World
 from stationd.station.events import (
     BoltSelected,
     DeviceHealth,
-    EventBus,
     Refused,
     ResultRecorded,
     State,

@@ -31,6 +31,7 @@ from sqlalchemy.exc import SQLAlchemyError
 
 from db.errors import DbError
 from db.repository import Repository
+from stationd.bus import EventBus
 from stationd.config import StationConfig
 from stationd.errors import ConfigError, InputError
 from stationd.forward import LineConfig
@@ -38,7 +39,6 @@ from stationd.linedb import LINE_FEED, LineResult, results
 from stationd.opcua import OpcUaConfig
 from stationd.shell.sdnotify import Notifier
 from stationd.shell.serve import Screens, forward, opcua_devices
-from stationd.station.events import EventBus
 from stationd.web.config import split_listen
 from stationd.yamlio import YamlNode
 

@@ -66,6 +66,7 @@ from db.curves import curves_for
 from db.ledger import RUNDOWN
 from db.repository import Repository
 from stationd.access import verify_password
+from stationd.bus import EventBus
 from stationd.opcua.catchup import CatchUp
 from stationd.opcua.config import OpcUaConfig
 from stationd.opcua.curves import CurveJoin
@@ -83,7 +84,6 @@ from stationd.opcua.uatypes import ua
 from stationd.station.events import (
     DeviceHealth,
     DeviceIdentified,
-    EventBus,
     LineLinkChanged,
     ResultRecorded,
     StateChanged,

@@ -22,10 +22,11 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from drivers.errors import DeviceError
 from drivers.keeper import DeviceKeeper, one_line
 from drivers.wrench import Received, TighteningResult, UnreadableResult, Wrench
+from stationd.bus import EventBus
 from stationd.shell.blocking import Blocking
 from stationd.shell.records import STATION_FAULTS, Records
 from stationd.station.core import StationCore
-from stationd.station.events import DeviceIdentified, EventBus
+from stationd.station.events import DeviceIdentified
 from stationd.station.gaps import MAX_FETCH
 from stationd.station.gaps import plan as plan_gaps
 from stationd.station.inputs import WRENCH, DeviceBack, Event, ResultIn, ResultsMissed, UnreadableIn

@@ -32,6 +32,7 @@ from drivers.errors import DeviceError
 from drivers.keeper import DeviceKeeper, FaultKind, one_line
 from drivers.lift import Lift
 from drivers.wrench import Wrench
+from stationd.bus import EventBus
 from stationd.config import StationConfig
 from stationd.localize import Localization
 from stationd.shell.blocking import Blocking
@@ -45,7 +46,7 @@ from stationd.shell.tracking import FrameStore, Tracker
 from stationd.station.actions import Action, Publish
 from stationd.station.commands import Answer, Command, Issuer
 from stationd.station.core import StationCore
-from stationd.station.events import EventBus, State, StateChanged
+from stationd.station.events import State, StateChanged
 from stationd.station.inputs import (
     DATABASE,
     LIFT,

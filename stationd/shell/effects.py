@@ -22,6 +22,7 @@ from db.repository import Repository
 from drivers.errors import DeviceError, RefusedError
 from drivers.keeper import DeviceKeeper, FaultKind, fault_kind, one_line
 from drivers.wrench import Received, Wrench
+from stationd.bus import EventBus
 from stationd.localize import Localization
 from stationd.reasons import Reason, Why
 from stationd.shell.blocking import Blocking
@@ -51,7 +52,6 @@ from stationd.station.core import StationCore
 from stationd.station.events import (
     BoltToLoosen,
     DeviceHealth,
-    EventBus,
     Notice,
     OperatorChanged,
     PairChecked,

@@ -25,6 +25,7 @@ from typing import Any
 
 from drivers.keeper import Backoff, FaultKind, one_line
 from stationd.boltfile import load_bolts
+from stationd.bus import EventBus
 from stationd.config import StationConfig, load_station_config, station_identity
 from stationd.errors import StationError
 from stationd.lock import StationLocks
@@ -32,12 +33,7 @@ from stationd.logsetup import setup_logging
 from stationd.shell.daemon import OPEN_ERRORS, Station
 from stationd.shell.records import STATION_FAULTS, Unsaved
 from stationd.shell.sdnotify import Notifier
-from stationd.station.events import (
-    EventBus,
-    LineLinkChanged,
-    ResultRecorded,
-    StationEvent,
-)
+from stationd.station.events import LineLinkChanged, ResultRecorded, StationEvent
 from stationd.station.inputs import DATABASE, LIFT, WRENCH, DeviceBack, DeviceFault
 
 log = logging.getLogger("stationd")

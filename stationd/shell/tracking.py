@@ -21,6 +21,7 @@ import numpy as np
 from drivers.camera.pair import StereoGrabber, StereoSkewError
 from drivers.errors import DeviceError
 from drivers.keeper import DeviceKeeper, one_line
+from stationd.bus import EventBus
 from stationd.config import StationConfig
 from stationd.localize import (
     Localization,
@@ -37,7 +38,7 @@ from stationd.shell.blocking import Blocking
 from stationd.shell.devices import Pair
 from stationd.shell.records import xyz
 from stationd.station.core import StationCore
-from stationd.station.events import EventBus, PairFrames
+from stationd.station.events import PairFrames
 from stationd.station.inputs import Event, LocalizedIn
 from stationd.station.scan import ScanPlan
 from stationd.station.trust import MeasureReferences, ReferencesChecked

@@ -32,7 +32,8 @@ import time
 import urllib.request
 from typing import Any
 
-from stationd.station.events import BoltView, EventBus, Localized, ResultRecorded, VehicleOpened
+from stationd.bus import EventBus
+from stationd.station.events import BoltView, Localized, ResultRecorded, VehicleOpened
 from stationd.web.server import WebServer
 
 

@@ -33,9 +33,10 @@ from aiohttp import web
 from db.errors import NotFoundError
 from db.quality import LAST_N
 from db.repository import Repository
+from stationd.bus import EventBus
 from stationd.errors import InputError
 from stationd.station.commands import Right
-from stationd.station.events import EventBus, PairFrames
+from stationd.station.events import PairFrames
 from stationd.station.inputs import LIFT, WRENCH
 from stationd.web.commands import POSTS, CommandRoutes
 from stationd.web.config import HttpConfig, open_bind_problem

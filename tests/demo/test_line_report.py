@@ -19,10 +19,10 @@ from sqlalchemy import make_url
 
 from db.repository import Repository
 from stationd.bench.cutproxy import CutProxy
+from stationd.bus import EventBus
 from stationd.config import StationConfig, load_station_config
 from stationd.demo.services import StationServices, line_config, line_report
 from stationd.demo.station import SIM_CONFIG
-from stationd.station.events import EventBus
 
 
 def _station(tmp: Path, k: int, url: str) -> StationConfig:

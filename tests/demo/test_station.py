@@ -11,11 +11,12 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from stationd.bus import EventBus
 from stationd.cli import main
 from stationd.config import load_station_config
 from stationd.demo.station import SIM_CONFIG, _summary, simulated, stand_ins
 from stationd.sim.operator import share_of
-from stationd.station.events import EventBus, ParamsSent, ResultRecorded
+from stationd.station.events import ParamsSent, ResultRecorded
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "config" / "station.example.yaml"
 

@@ -15,6 +15,7 @@ from types import SimpleNamespace
 
 import pytest
 
+from stationd.bus import EventBus
 from stationd.config import load_station_config
 from stationd.demo.station import (
     LOOSEN_PROGRAM,
@@ -25,7 +26,7 @@ from stationd.demo.station import (
     policy_words,
 )
 from stationd.sim.devices_cli import psets_of
-from stationd.station.events import BoltLocked, BoltReleased, EventBus, ResultRecorded
+from stationd.station.events import BoltLocked, BoltReleased, ResultRecorded
 from stationd.station.policy import NokPolicy, NokRule
 from tests.demo.test_station_services import _one_pair
 

@@ -11,11 +11,12 @@ import pytest
 from asyncua.client.client import Client
 
 from db.curves import store_curve
+from stationd.bus import EventBus
 from stationd.opcua.curves import CurveJoin
 from stationd.opcua.model import IJT_URI, RESULT_URI, load_client_types
 from stationd.opcua.results import PQ_ANGLE, PQ_TIME, PQ_TORQUE
 from stationd.opcua.uatypes import ua
-from stationd.station.events import EventBus, ResultRecorded
+from stationd.station.events import ResultRecorded
 from tests.db.conftest import record
 from tests.opcua.test_catchup import Mes, serving_ready
 from tests.opcua.test_server import (

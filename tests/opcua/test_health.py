@@ -10,11 +10,12 @@ from typing import Any
 
 from asyncua.client.client import Client
 
+from stationd.bus import EventBus
 from stationd.opcua.health import FAILURE, NORMAL, OFF_SPEC
 from stationd.opcua.model import DI_URI, IJT_URI, MACHINERY_URI
 from stationd.opcua.server import NAMESPACE
 from stationd.opcua.uatypes import ua
-from stationd.station.events import DeviceHealth, EventBus, LineLinkChanged
+from stationd.station.events import DeviceHealth, LineLinkChanged
 from tests.opcua.test_server import config, repo, serving, stopping
 
 __all__ = ["repo"]   # the fixture, shared with test_server

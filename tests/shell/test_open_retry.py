@@ -9,11 +9,12 @@ from types import SimpleNamespace
 from typing import Any
 
 from db.errors import DbError
+from stationd.bus import EventBus
 from stationd.shell.daemon import Station
 from stationd.shell.sdnotify import Notifier
 from stationd.shell.serve import _open
 from stationd.station.core import StationCore
-from stationd.station.events import DeviceHealth, EventBus, StateChanged
+from stationd.station.events import DeviceHealth, StateChanged
 
 
 class Recording(Notifier):

@@ -11,10 +11,10 @@ from dataclasses import replace
 
 import pytest
 
+from stationd.bus import EventBus
 from stationd.config import load_station_config
 from stationd.demo.station import SIM_CONFIG
 from stationd.shell import serve
-from stationd.station.events import EventBus
 from stationd.web.config import HttpConfig
 
 

@@ -8,12 +8,12 @@ import asyncio
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
+from stationd.bus import EventBus
 from stationd.config import load_station_config
 from stationd.localize.check import RefWhy, Verdict
 from stationd.shell.blocking import Blocking
 from stationd.shell.tracking import Tracker
 from stationd.station.core import StationCore
-from stationd.station.events import EventBus
 from stationd.station.trust import MeasureReferences, PairTrust, ReferencesChecked
 from tests.shell.refstation import station_dir
 

@@ -16,7 +16,8 @@ from typing import Any
 
 import pytest
 
-from stationd.station.events import EventBus, StationEvent
+from stationd.bus import EventBus
+from stationd.station.events import StationEvent
 from stationd.web.frames import LatestFrames
 from stationd.web.server import WebServer
 from tests.web.pages import BROWSERS, Page, missing, open_page

@@ -19,7 +19,7 @@ from drivers.wrench import TighteningResult, open_wrench
 from drivers.wrench.openprotocol.curve import Curve
 from drivers.wrench.sim.controller import SimController, SimPset
 from stationd.boltfile import import_bolts
-from stationd.station.events import EventBus
+from stationd.bus import EventBus
 from stationd.web.results import CSV_FIELDS, Results
 from stationd.web.server import WebServer
 from tests.web.scenario import BOLTS_YAML

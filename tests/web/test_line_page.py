@@ -11,8 +11,8 @@ from aiohttp import ClientSession
 
 from db.repository import Repository
 from stationd.boltfile import import_bolts
+from stationd.bus import EventBus
 from stationd.forward import Forwarder, LineConfig
-from stationd.station.events import EventBus
 from stationd.web.server import WebServer
 from tests.db.conftest import BASE, record
 

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 from aiohttp import ClientSession
 
+from stationd.bus import EventBus
 from stationd.errors import InputError
-from stationd.station.events import EventBus, Localized, PairFrames, StateChanged
+from stationd.station.events import Localized, PairFrames, StateChanged
 from stationd.web.frames import LatestFrames
 from stationd.web.results import Results
 from stationd.web.server import WebServer

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 
 from stationd.access import AccessConfig
+from stationd.bus import EventBus
 from stationd.reasons import Reason, Why
 from stationd.station.commands import Right
 from stationd.station.events import (
@@ -15,7 +16,6 @@ from stationd.station.events import (
     BoltReleased,
     BoltSelected,
     BoltToLoosen,
-    EventBus,
     Localized,
     ParamsSent,
     Refused,
