@@ -90,56 +90,56 @@ class StationCore(LiftRules, ToolRules, ResultRules):
         follow it (an input of the Event union without a case fails the type check)."""
         match ev:
             case Started():
-                return self._on_Started(ev)
+                return self._on_started(ev)
             case LiftRead():
-                return self._on_LiftRead(ev)
+                return self._on_lift_read(ev)
             case VehicleLoaded():
-                return self._on_VehicleLoaded(ev)
+                return self._on_vehicle_loaded(ev)
             case VehicleRejected():
-                return self._on_VehicleRejected(ev)
+                return self._on_vehicle_rejected(ev)
             case LocalizedIn():
-                return self._on_LocalizedIn(ev)
+                return self._on_localized_in(ev)
             case ParamsAcked():
-                return self._on_ParamsAcked(ev)
+                return self._on_params_acked(ev)
             case ToolOn():
-                return self._on_ToolOn(ev)
+                return self._on_tool_on(ev)
             case Written():
-                return self._on_Written(ev)
+                return self._on_written(ev)
             case VehicleEnded():
-                return self._on_VehicleEnded(ev)
+                return self._on_vehicle_ended(ev)
             case ParamsRefused():
-                return self._on_ParamsRefused(ev)
+                return self._on_params_refused(ev)
             case ResultIn():
-                return self._on_ResultIn(ev)
+                return self._on_result_in(ev)
             case UnreadableIn():
-                return self._on_UnreadableIn(ev)
+                return self._on_unreadable_in(ev)
             case ResultsMissed():
-                return self._on_ResultsMissed(ev)
+                return self._on_results_missed(ev)
             case NotStored():
-                return self._on_NotStored(ev)
+                return self._on_not_stored(ev)
             case CommandIn():
-                return self._on_CommandIn(ev)
+                return self._on_command_in(ev)
             case CommandDone() if self._is_entered_outcome(ev):
-                return self._on_EnteredOutcomeDone(ev)
+                return self._on_entered_outcome_done(ev)
             case CommandDone():
-                return self._on_CommandDone(ev)
+                return self._on_command_done(ev)
             case DeviceFault():
-                return self._on_DeviceFault(ev)
+                return self._on_device_fault(ev)
             case DeviceBack():
-                return self._on_DeviceBack(ev)
+                return self._on_device_back(ev)
             case ModelsKnown():
-                return self._on_ModelsKnown(ev)
+                return self._on_models_known(ev)
             case VinSent():
-                return self._on_VinSent(ev)
+                return self._on_vin_sent(ev)
             case Tick():
-                return self._on_Tick(ev)
+                return self._on_tick(ev)
             case OperatorBack():
-                return self._on_OperatorBack(ev)
+                return self._on_operator_back(ev)
             case ReferencesChecked():
-                return self._on_ReferencesChecked(ev)
+                return self._on_references_checked(ev)
         assert_never(ev)
 
-    def _on_Tick(self, ev: Tick) -> list[Action]:  # noqa: N802
+    def _on_tick(self, ev: Tick) -> list[Action]:
         if self._off_at is not None and ev.t - self._off_at >= self.late_result_s:
             self._enabled, self._off_at = None, None
         return self._teach_overdue(ev.t) + self._check_due(ev.t) + self._operator_idle(ev.t)

@@ -15,7 +15,7 @@ from stationd.station.teaching import TeachRules
 class FaultRules(TeachRules):
     """Devices' faults and their return."""
 
-    def _on_DeviceFault(self, ev: DeviceFault) -> list[Action]:  # noqa: N802
+    def _on_device_fault(self, ev: DeviceFault) -> list[Action]:
         if ev.device == WRENCH:
             self._vin_pending = False
             self._link_lost_at = ev.t
@@ -30,7 +30,7 @@ class FaultRules(TeachRules):
             self._loading = False
         return self._fault(ev.t, ev.device, ev.kind, ev.reason)
 
-    def _on_DeviceBack(self, ev: DeviceBack) -> list[Action]:  # noqa: N802
+    def _on_device_back(self, ev: DeviceBack) -> list[Action]:
         if ev.device == WRENCH and ev.reconnects is not None \
                 and ev.reconnects != self._wrench_reconnects:
             if self._wrench_reconnects is not None:

@@ -38,7 +38,7 @@ from stationd.station.state import NO_LOOSEN_PSET, NOK_SKIPPED, ON_A_BOLT, _disa
 class LiftRules(FaultRules):
     """The vehicle and lift rules: arrivals, rejections, the lift followed, the VIN sent."""
 
-    def _on_Started(self, ev: Started) -> list[Action]:  # noqa: N802 - named after the event
+    def _on_started(self, ev: Started) -> list[Action]:
         if self._started:   # once: a device's fault may have come first (down at boot)
             return []
         self._started = True
@@ -52,7 +52,7 @@ class LiftRules(FaultRules):
                                         how=OperatorChange.STILL_SIGNED_IN if self.operator
                                         else OperatorChange.NOBODY, t=ev.t))]
 
-    def _on_LiftRead(self, ev: LiftRead) -> list[Action]:  # noqa: N802
+    def _on_lift_read(self, ev: LiftRead) -> list[Action]:
         acts: list[Action] = []
         self._lift = ev
         if LIFT in self.faults:
@@ -103,7 +103,7 @@ class LiftRules(FaultRules):
                     f"loaded as {self._load_code}: lower the lift")
         return None
 
-    def _on_VehicleLoaded(self, ev: VehicleLoaded) -> list[Action]:  # noqa: N802
+    def _on_vehicle_loaded(self, ev: VehicleLoaded) -> list[Action]:
         self._loading = False
         self.vin, self.model = ev.vin, ev.model
         self._specs = dict(ev.bolts)
@@ -153,7 +153,7 @@ class LiftRules(FaultRules):
                 else:
                     self._loosen.add(k)
 
-    def _on_VehicleRejected(self, ev: VehicleRejected) -> list[Action]:  # noqa: N802
+    def _on_vehicle_rejected(self, ev: VehicleRejected) -> list[Action]:
         if ev.closed and self.rework and ev.vin is not None and self._lift is not None:
             return [Publish(Notice(f"VIN {ev.vin} already closed: reopened as a rework "
                                    "(its records kept)", t=ev.t)),
@@ -166,10 +166,10 @@ class LiftRules(FaultRules):
                   f"({ev.reason}); lower the lift to clear"
         return self._fault(ev.t, VEHICLE, FaultKind.REJECTED, why)
 
-    def _on_VehicleEnded(self, ev: VehicleEnded) -> list[Action]:  # noqa: N802
+    def _on_vehicle_ended(self, ev: VehicleEnded) -> list[Action]:
         return [Publish(VehicleClosed(ev.vin, ev.missing, ev.nok, t=ev.t))]
 
-    def _on_VinSent(self, ev: VinSent) -> list[Action]:  # noqa: N802
+    def _on_vin_sent(self, ev: VinSent) -> list[Action]:
         self._vin_pending = False
         if ev.vin == self.vin:
             self._vin_for = (ev.vin, self._wrench_epoch)

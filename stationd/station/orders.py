@@ -43,7 +43,7 @@ from stationd.station.state import ON_A_BOLT
 class OrderRules(FaultRules):
     """Commands: who may give which, why one is refused, what each does."""
 
-    def _on_CommandIn(self, ev: CommandIn) -> list[Action]:  # noqa: N802
+    def _on_command_in(self, ev: CommandIn) -> list[Action]:
         """A command is checked against the rules now and takes effect once recorded."""
         why = self._refusal(ev.command, ev.issuer)
         if why is not None:
@@ -117,7 +117,7 @@ class OrderRules(FaultRules):
             return Reason(Why.NOTHING_TO_LOOSEN, bolt=b)
         return None
 
-    def _on_CommandDone(self, ev: CommandDone) -> list[Action]:  # noqa: N802
+    def _on_command_done(self, ev: CommandDone) -> list[Action]:
         c = self._commands.pop(ev.request, None)
         if c is None:
             return []
@@ -190,7 +190,7 @@ class OrderRules(FaultRules):
                                                  note=note), user, t=t))
 
     # -- the operator signed in at the station ---------------------------------------------
-    def _on_OperatorBack(self, ev: OperatorBack) -> list[Action]:  # noqa: N802
+    def _on_operator_back(self, ev: OperatorBack) -> list[Action]:
         """Signed in before a start or reload: still signed in (said at :class:`Started`),
         unless idle too long already."""
         if self.operator_idle_s is not None and ev.t - ev.since >= self.operator_idle_s:

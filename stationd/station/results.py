@@ -97,7 +97,7 @@ class ResultRules(OrderRules):
     """Results: tightenings closing bolts, controller events, unreadable and late results,
     the NOK policy after each."""
 
-    def _on_ResultIn(self, ev: ResultIn) -> list[Action]:  # noqa: N802
+    def _on_result_in(self, ev: ResultIn) -> list[Action]:
         """A result: a controller event (never a rundown) by its type; else recorded to the
         bolt the tool was enabled for (its pset, while on or within the late-result window,
         or after a link cut where the controller's own data places it there), else stored
@@ -176,7 +176,7 @@ class ResultRules(OrderRules):
                 Publish(Notice(note, "warning" if bolt is not None
                                or kind is ResultKind.UNKNOWN else "info", t=ev.t))]
 
-    def _on_Written(self, ev: Written) -> list[Action]:  # noqa: N802
+    def _on_written(self, ev: Written) -> list[Action]:
         """A result on disk: published for the screens, then the controller may forget it."""
         a, r = ev.record, ev.record.result
         return [Publish(ResultRecorded(
@@ -186,17 +186,17 @@ class ResultRules(OrderRules):
             a.selection.operator if a.selection is not None else None, t=ev.t)),
             Acknowledge(r)]
 
-    def _on_ResultsMissed(self, ev: ResultsMissed) -> list[Action]:  # noqa: N802
+    def _on_results_missed(self, ev: ResultsMissed) -> list[Action]:
         ids = str(ev.first) if ev.first == ev.last else f"{ev.first}-{ev.last}"
         return [StoreGap(ev.first, ev.last, self.vin, ev.reason),
                 Publish(Notice(f"tightening {ids} missed while the link was down: a gap "
                                f"({ev.reason})", "warning", t=ev.t))]
 
-    def _on_NotStored(self, ev: NotStored) -> list[Action]:  # noqa: N802
+    def _on_not_stored(self, ev: NotStored) -> list[Action]:
         return [Publish(Notice(f"tightening {ev.tightening_id} of {ev.bolt} not stored: "
                                f"{ev.reason}", "error", t=ev.t))]
 
-    def _on_UnreadableIn(self, ev: UnreadableIn) -> list[Action]:  # noqa: N802
+    def _on_unreadable_in(self, ev: UnreadableIn) -> list[Action]:
         """A result the driver could not read: stored whole; the bolt it may belong to (the
         tool's, while on or within the late-result window, or the one of a link cut for a
         fetched one; of the same pset where one could be read) is held until a supervisor
@@ -340,7 +340,7 @@ class ResultRules(OrderRules):
         c = self._commands.get(ev.request)
         return c is not None and ev.reason is None and isinstance(c.command, EnterOutcome)
 
-    def _on_EnteredOutcomeDone(self, ev: CommandDone) -> list[Action]:  # noqa: N802
+    def _on_entered_outcome_done(self, ev: CommandDone) -> list[Action]:
         c = self._commands.pop(ev.request)
         assert isinstance(c.command, EnterOutcome)  # noqa: S101 - the dispatch's guard
         return [*self._outcome_entered(ev.t, c.command, c.issuer),

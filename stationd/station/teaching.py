@@ -43,7 +43,7 @@ TEACH_WAIT_S = 10.0
 class TeachRules(CoreState):
     """Teach-in and the calibration check."""
 
-    def _on_ModelsKnown(self, ev: ModelsKnown) -> list[Action]:  # noqa: N802
+    def _on_models_known(self, ev: ModelsKnown) -> list[Action]:
         self.models = frozenset(ev.models)
         return []
 
@@ -197,7 +197,7 @@ class TeachRules(CoreState):
         why = self.trust.refusal(ev.pairs)
         return ev if why is None else replace(ev, point_mm=None, reason=why)
 
-    def _on_ReferencesChecked(self, ev: ReferencesChecked) -> list[Action]:  # noqa: N802
+    def _on_references_checked(self, ev: ReferencesChecked) -> list[Action]:
         if self.trust is None:
             return []
         acts: list[Action] = []

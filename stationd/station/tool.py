@@ -30,7 +30,7 @@ from stationd.station.state import LOCALIZING, LOOSEN_TARGETS, _disable
 class ToolRules(FaultRules):
     """Selection and the tool: parameters sent, the tool enabled only on a confirmed bolt."""
 
-    def _on_LocalizedIn(self, ev: LocalizedIn) -> list[Action]:  # noqa: N802
+    def _on_localized_in(self, ev: LocalizedIn) -> list[Action]:
         ev = self._trusted(ev)
         if self._teach is not None:
             return self._taught(ev, self._teach)
@@ -110,7 +110,7 @@ class ToolRules(FaultRules):
                                      ev.tilt_deg, loosen, t=ev.t)),
                 SendParams(m.bolt, sel, params, loosen)]
 
-    def _on_ParamsAcked(self, ev: ParamsAcked) -> list[Action]:  # noqa: N802
+    def _on_params_acked(self, ev: ParamsAcked) -> list[Action]:
         acts: list[Action] = [Publish(ParamsSent(ev.bolt, ev.pset, dict(ev.latency_ms),
                                                  t=ev.t))]
         if self.state is State.BOLT_SELECTED and ev.bolt == self.bolt and self._acked_at is None:
@@ -121,10 +121,10 @@ class ToolRules(FaultRules):
                                  t=ev.t),
                 Publish(Notice(f"late acknowledgement for {ev.bolt} ignored", t=ev.t))]
 
-    def _on_ToolOn(self, ev: ToolOn) -> list[Action]:  # noqa: N802
+    def _on_tool_on(self, ev: ToolOn) -> list[Action]:
         return [Publish(ToolEnabled(ev.bolt, t=ev.t))]
 
-    def _on_ParamsRefused(self, ev: ParamsRefused) -> list[Action]:  # noqa: N802
+    def _on_params_refused(self, ev: ParamsRefused) -> list[Action]:
         """The bolt is skipped for this vehicle (reported missing) so that the same refused
         parameters are not sent again and again; the controller is in fault until it answers."""
         why = f"controller refused its parameters ({ev.reason})"

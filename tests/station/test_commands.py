@@ -28,11 +28,17 @@ def _answer(acts: list[typing.Any]) -> Reply:
     return replies[0]
 
 
-def test_every_input_type_has_its_handler():
-    """The core dispatches by the input's class name: each member of ``Event`` must have
-    its ``_on_`` method (a new input without one would raise at run time)."""
+def test_every_input_type_has_its_case_in_the_dispatch():
+    """The core dispatches by one ``match`` over the Event union: each member has its case
+    (mypy's ``assert_never`` checks it too), and each case's handler exists."""
+    import inspect
+    import re
+
+    source = inspect.getsource(StationCore._dispatch)
+    cases = dict(re.findall(r"case (\w+)\(\)[^:]*:\s+return self\.(\w+)\(", source))
     for cls in typing.get_args(core_module.Event):
-        assert callable(getattr(StationCore, f"_on_{cls.__name__}", None)), cls.__name__
+        assert cls.__name__ in cases, cls.__name__
+        assert callable(getattr(StationCore, cases[cls.__name__], None)), cls.__name__
 
 
 def test_a_skip_takes_effect_once_recorded_and_is_answered_accepted():
