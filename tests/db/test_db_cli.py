@@ -110,8 +110,9 @@ def test_report_exit_codes(run, db):
         record(repo, "VIN1", "SF-FR", ok=False)
     code, out, err = run("db", "report", "VIN1", "--db", db)
     assert code == 1 and err == ""
-    assert out.splitlines()[0] == ("VIN1 (WAGON-B, open): 1 ok, 1 NOK (SF-FR), "
-                                   "1 missing (TB-C)")
+    assert out.splitlines()[0] == ("VIN1 (WAGON-B, open): bolts: 1 OK, 1 ending NOK (SF-FR), "
+                                   "0 skipped, 1 missing (TB-C); rundowns: 2 tightening(s), "
+                                   "1 NOK result(s)")
     assert "TB-C" in out.splitlines()[3] and "MISSING" in out.splitlines()[3]
     code, out, _ = run("db", "report", "VIN1", "--db", db, "--json")
     obj = json.loads(out)
@@ -125,7 +126,10 @@ def test_report_exit_codes(run, db):
                                  reason="result 77 (pset 4) outside any tightening")
         repo.close_vehicle("VIN1")
     code, out, _ = run("db", "report", "VIN1", "--db", db)
-    assert code == 0 and "3 ok, 0 NOK, 0 missing" in out
+    # SF-FR tightened again to OK: no bolt ends NOK, its NOK result is still said
+    assert code == 0 and out.splitlines()[0].endswith(
+        ": bolts: 3 OK, 0 ending NOK, 0 skipped, 0 missing; rundowns: 4 tightening(s), "
+        "1 NOK result(s)"), out
     assert "unattributed: tightening 77 pset 4 NOK 9.5 N m" in out
     code, out, _ = run("db", "report", "VIN1", "--db", db, "--json")
     assert [u["tightening_id"] for u in json.loads(out)["unattributed"]] == [77]
