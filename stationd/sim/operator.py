@@ -136,7 +136,10 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
         if not mine:
             raise InputError(f"station {share[0]} of {share[1]} has no bolt of its own: "
                              f"{len(bolts)} bolt(s) in view for {share[1]} stations")
-        (note or _stderr)(f"its own bolts: {len(mine)} of the {len(bolts)} in view: "
+        # said after the station's id ("DEMO-1 tightens its own bolts, 25 of the 50 in
+        # view: ..."; it read "DEMO-1 its own bolts: 25 of the 50")
+        (note or _stderr)(f"{'' if note else 'this station '}tightens its own bolts, "
+                          f"{len(mine)} of the {len(bolts)} in view: "
                           f"{', '.join(mine[:12])}{' ...' if len(mine) > 12 else ''}")
         bolts = [b for b in bolts if b.bolt_id in mine]
     truth["share"] = [b.bolt_id for b in bolts]
