@@ -41,7 +41,7 @@ from drivers.wrench.sim.controller import SimPset
 from stationd import progress
 from stationd.boltfile import load_bolts
 from stationd.config import RecordsConfig, StationConfig, load_station_config
-from stationd.demo.leftovers import PREFIX, mark, sweep
+from stationd.demo.leftovers import DATABASE, PREFIX, mark, sweep
 from stationd.demo.services import (
     SECURITY_WORDS,
     Endpoints,
@@ -178,7 +178,7 @@ def run_station_demo(args: argparse.Namespace) -> int:
     sweep()      # the folders of demos killed before they could remove them
     tmp = tempfile.TemporaryDirectory(prefix=PREFIX)
     try:
-        mark(Path(tmp.name))
+        mark(Path(tmp.name), cfg.path)
         return _run(args, cfg, bolts_path, Path(tmp.name), out, instead, endpoints, line_url,
                     pg is not None, n_stations, cycles)
     finally:
@@ -244,6 +244,11 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
                  f"each tightens at most {min(cycles, EXTRA_CYCLES)} of its bolts, one "
                  "station after another)" if n_stations > 1 else ""),
               file=out, flush=True)
+    # where its results are: not the station file's database (db report --config finds a
+    # running demo's by the station file)
+    print(f"records: {tmp / '1' / DATABASE} (the demo's own temporary database, removed when "
+          f"it ends; meanwhile stationd db report VIN --config {cfg.path} reads it)",
+          file=out, flush=True)
     station = _station(cfg, psets)
     if n_stations > 1:     # one output for the line's stations: each line says whose it is
         station.effects.label(station_id(1))
@@ -594,7 +599,7 @@ def simulated(cfg: StationConfig, tmp: Path) -> StationConfig:
     return replace(cfg, cameras=cams, pairs=pairs,
                    lift=replace(cfg.lift, url="sim://lift"),
                    wrench=replace(cfg.wrench, url="sim://wrench", registers=None),
-                   database_url=f"sqlite:///{tmp}/stationd.db",
+                   database_url=f"sqlite:///{tmp}/{DATABASE}",
                    records=RecordsConfig(images_dir=tmp / "images",
                                          save_images=cfg.records.save_images))
 
