@@ -67,6 +67,7 @@ from stationd.sim.operator import (
     LOOSEN_PROGRAM,
     MAX_RUNDOWNS,
     SUPERVISOR,
+    ended_words,
     loosen_programs,
     operate,
     simulators,
@@ -308,7 +309,8 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
             task = asyncio.create_task(station.run(stop))
             await operate(station, world, rng, cycles, report, say, truth, nok_rng,
                           note=_noter(out, station_id(1) if n_stations > 1 else ""),
-                          share=(1, n_stations), supervisor=_supervisor(args))
+                          share=(1, n_stations), supervisor=_supervisor(args),
+                          interruptible=True)
             for k in range(2, n_stations + 1):
                 extra.append(await _next_station(args, cfg, k, tmp, taken, endpoints,
                                                  line_url, psets, truth, out, services,
@@ -321,8 +323,9 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
                                                None if screens.server is None or not hold
                                                else f"{screens.server.url}line", args.json,
                                                throwaway))
-            if getattr(args, "hold", False) and (screens.server is not None or
-                                                 any(s.opcua for s in services)):
+            # a run ended by Ctrl-C (the people's wait) is not held: its summary follows
+            if getattr(args, "hold", False) and "interrupted" not in truth and (
+                    screens.server is not None or any(s.opcua for s in services)):
                 await _hold(screens.server.url if screens.server is not None else None,
                             [s.opcua.url for s in services if s.opcua is not None],
                             _over_words(report, int(truth.get("cycles", cycles)), extra),
@@ -355,6 +358,12 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
     summary["opcua"] = None if cfg.opcua is None else cfg.opcua.endpoint
     # the line's verdict from each part's reasons (never read back from a verdict's text)
     problems: list[str] = summary.pop("problems")
+    interrupted = truth.get("interrupted")
+    if interrupted is not None:   # Ctrl-C (SIGTERM) ended the people's wait: said first
+        summary["interrupted"] = interrupted
+        locked = ", ".join(interrupted["bolts"]) or "no bolt"
+        problems.insert(0, f"interrupted ({ended_words(truth)}) while the operator waited for "
+                           f"a person's release: {locked} left locked, not released")
     if extra:
         summary["stations"] = extra
         problems += [f"{e['station_id']}: {'; '.join(p)}"
@@ -404,6 +413,8 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
             print(f"simulated, not the station file's devices: {devices} (the records went "
                   "to a temporary database)")
         print(summary["verdict"])
+    if interrupted is not None:   # as a command stopped by the signal: 130 (143)
+        return 128 + signal.Signals[interrupted["signal"]].value
     return 0 if summary["verdict"].startswith("PASS") else 1
 
 
