@@ -73,6 +73,10 @@ class BoltResult:
 class VehicleReport:
     vehicle: VehicleInfo
     bolts: tuple[BoltResult, ...]
+    #: the vehicle's tightening rundowns, and those of them NOK (a loosening is neither): NOK
+    #: results, which a bolt tightened again to OK keeps, beside the bolts ending NOK
+    tightenings: int = 0
+    nok_results: int = 0
 
     @property
     def missing(self) -> list[str]:
@@ -108,20 +112,26 @@ class VehicleReport:
         return not self.untightened and not self.nok and not self.loosen
 
     def summary(self) -> str:
+        """One line in the screens' words (a vehicle's page): the bolts by their last rundown,
+        then the rundowns: "bolts: 5 OK, 0 ending NOK, 0 skipped, 45 missing; rundowns: 8
+        tightening(s), 3 NOK result(s)".  Why both: "5 ok, 0 NOK" for a vehicle with 3 NOK
+        results read as no NOK at all; the bolts ending NOK decide the vehicle, the NOK results
+        are what quality counts."""
         v = self.vehicle
         state = "closed" if v.ended_at is not None else "open"
         state += ", reworked" if v.rework else ""
-        text = f"{v.vin} ({v.model}, {state}): {len(self.ok)} ok"
-        text += f", {len(self.nok)} NOK ({', '.join(self.nok)})" if self.nok else ", 0 NOK"
+        text = f"{v.vin} ({v.model}, {state}): bolts: {len(self.ok)} OK"
+        text += f", {len(self.nok)} ending NOK ({', '.join(self.nok)})" if self.nok \
+            else ", 0 ending NOK"
+        who = [f"{b.bolt_id} by {b.skipped_by}" + (f": {b.comment}" if b.comment else "")
+               for b in self.bolts if b.status == SKIPPED]
+        text += f", {len(who)} skipped ({'; '.join(who)})" if who else ", 0 skipped"
         text += f", {len(self.missing)} missing ({', '.join(self.missing)})" if self.missing \
             else ", 0 missing"
-        if self.skipped:
-            who = [f"{b.bolt_id} by {b.skipped_by}" + (f": {b.comment}" if b.comment else "")
-                   for b in self.bolts if b.status == SKIPPED]
-            text += f", {len(who)} skipped ({'; '.join(who)})"
         if self.loosen:
             text += f", {len(self.loosen)} to tighten again ({', '.join(self.loosen)})"
-        return text
+        return text + (f"; rundowns: {self.tightenings} tightening(s), {self.nok_results} NOK "
+                       "result(s)")
 
     def to_json(self) -> dict[str, Any]:
         v = self.vehicle
@@ -129,7 +139,8 @@ class VehicleReport:
                 "ended_at": _iso(v.ended_at), "reopened_at": _iso(v.reopened_at),
                 "complete": self.complete, "ok": self.ok,
                 "nok": self.nok, "missing": self.missing, "skipped": self.skipped,
-                "loosen": self.loosen,
+                "loosen": self.loosen, "tightenings": self.tightenings,
+                "nok_results": self.nok_results,
                 "bolts": [b.to_json() for b in self.bolts]}
 
 
@@ -178,7 +189,9 @@ def build_report(s: Session, v: Vehicle) -> VehicleReport:
                                   last.recorded_at, version, b.removed_at is not None,
                                   last.kind or TIGHTENING))
     info = VehicleInfo(v.vin, v.model.name, v.started_at, v.ended_at, v.reopened_at)
-    return VehicleReport(info, tuple(results))
+    tightenings = [rec for rec, _ in records if (rec.kind or TIGHTENING) == TIGHTENING]
+    return VehicleReport(info, tuple(results), len(tightenings),
+                         sum(1 for rec in tightenings if rec.status == NOK))
 
 
 def _status(last: TighteningRecord, loosen_at: datetime | None) -> str:

@@ -702,7 +702,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ``asyncio.run`` for either), and whatever a library makes of it on its way up (numpy
     turns one that lands in its C import into an ImportError) is taken for the signal it
     was.  A command that takes the signals itself (``stationd run`` stops its station in
-    order, ``demo --hold`` ends its hold) does so inside."""
+    order, ``demo --hold`` ends its hold, ``demo --no-sim-supervisor`` the people's wait) does
+    so inside."""
     with _signals(restore=argv is not None) as stopped:
         try:
             return _main(argv, stopped)

@@ -50,6 +50,19 @@ def _db_url(args: argparse.Namespace) -> str:
     return args.db or DEFAULT_DB
 
 
+def _missing(args: argparse.Namespace) -> str:
+    """What to do when the database a read command names does not exist, without
+    suggesting the option already given."""
+    config = getattr(args, "config", None)
+    if config:
+        return (f"the database of {config} (database.url): the station's daemon or db import "
+                f"--config {config} makes it; a demo's results are in its own temporary "
+                "database, while it runs")
+    if getattr(args, "db", None):
+        return "import a bolt table first, or give another --db or --config STATION.yaml"
+    return "import a bolt table first, or give --db or --config STATION.yaml"
+
+
 def _tolerance(text: str) -> float:
     try:
         v = float(text)
@@ -150,7 +163,7 @@ def cmd_db_export(args: argparse.Namespace) -> int:
     if args.vin is not None or args.since is not None or args.format not in (None, "yaml"):
         raise InputError("--vin, --since and --format csv|json go with --results (the bolt "
                          "table is YAML)")
-    with open_repository(_db_url(args), must_exist=True) as repo:
+    with open_repository(_db_url(args), must_exist=True, missing=_missing(args)) as repo:
         text = repo.export_bolts()
         summary = repo.table().summary()
     if args.out is None:
@@ -180,7 +193,7 @@ def _export_results(args: argparse.Namespace) -> int:
     if args.format == "yaml":
         raise InputError("--results are exported as csv (the default) or json, not yaml")
     fmt = args.format or "csv"
-    with open_repository(_db_url(args), must_exist=True) as repo:
+    with open_repository(_db_url(args), must_exist=True, missing=_missing(args)) as repo:
         results = Results(repo)
         vins = [args.vin] if args.vin is not None else \
             [v["vin"] for v in reversed(results.vehicles(limit=1_000_000))]
@@ -214,8 +227,52 @@ RUNDOWN_KEYS = ("bolt", "attempt", "rundown", "status", "pset", "torque_nm", "an
                 "tightening_id", "recorded_at", "operator")
 
 
+def _report_url(args: argparse.Namespace) -> str:
+    """The database ``db report VIN`` reads: ``--db``'s, else ``--config``'s station file's;
+    with ``--config``, when that database does not exist or has no such vehicle, a running
+    demo's of that station file that has it (said on stderr).  Why: a demo keeps its records
+    in a temporary database of its own, and during a demo ``db report VIN --config
+    STATION.yaml`` said "no database at .../stationd-sim.db (... or give --db or --config
+    STATION.yaml)", suggesting the option already given."""
+    url = _db_url(args)
+    config = getattr(args, "config", None)
+    if not config:
+        return url
+    from db.errors import DbError, NotFoundError
+    from stationd.demo.leftovers import demo_databases
+
+    hint = (f"the database of {config} (database.url), which the station's daemon makes; a "
+            "demo keeps its results in a temporary database of its own, found by --config "
+            "while the demo runs or holds (--hold), and shown on its screens (/vehicles, "
+            "with their CSV and JSON export)")
+    try:
+        with open_repository(url, must_exist=True, missing=hint) as repo:
+            repo.vehicle_report(args.vin)
+        return url
+    except (InputError, NotFoundError) as exc:
+        demos = demo_databases(Path(config))
+        for sid, path in demos:
+            demo = f"sqlite:///{path}"
+            try:
+                with open_repository(demo, must_exist=True) as repo:
+                    repo.vehicle_report(args.vin)
+            except (InputError, DbError):
+                continue
+            sys.stderr.write(f"stationd: {args.vin} is a running demo's vehicle: reading "
+                             f"that demo's database ({sid}, {path}), not {config}'s\n")
+            return demo
+        nor = "" if not demos else (
+            f"; nor is {args.vin} in the database of the running demo of {config} ("
+            + ", ".join(f"{sid} {path}" for sid, path in demos) + ")")
+        if isinstance(exc, NotFoundError):
+            raise InputError(f"{exc} of {config}{nor}") from None
+        if nor:
+            raise InputError(f"{exc}{nor}") from None
+        raise
+
+
 def cmd_db_report(args: argparse.Namespace) -> int:
-    with open_repository(_db_url(args), must_exist=True) as repo:
+    with open_repository(_report_url(args), must_exist=True) as repo:
         report = repo.vehicle_report(args.vin)
         loose = repo.unattributed(args.vin)   # results made at height that no bolt owns
         events = repo.controller_events(args.vin)   # batch steps, bypasses, ...: no rundown
@@ -288,7 +345,7 @@ def _entered(run: dict[str, Any]) -> str:
 
 def cmd_db_spc(args: argparse.Namespace) -> int:
     """Process capability per bolt and pset, and the NOK trend (quality's figures)."""
-    with open_repository(_db_url(args), must_exist=True) as repo:
+    with open_repository(_db_url(args), must_exist=True, missing=_missing(args)) as repo:
         if args.model is not None and args.model not in repo.models():
             raise InputError(f"--model {args.model}: no such model (models: "
                              f"{', '.join(repo.models()) or 'none'})")

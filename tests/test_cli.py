@@ -106,6 +106,9 @@ def test_localize_json_and_repeat(files, capsys):
     (lambda d: ["demo", "--save", str(d)], "it goes with --vision"),
     (lambda d: ["demo", "--no-sim-supervisor", "--stations", "2"],
      "--no-sim-supervisor with --stations: a person releases the locks at the first"),
+    # issue 30: config/sim has no users: nobody could release the lock the operator waits on
+    (lambda d: ["demo", "--no-sim-supervisor", "--no-http", "--no-opcua"],
+     "--no-sim-supervisor needs access.users in "),
     (lambda d: ["demo", "--no-http", "--load", "1000"], "--load must be 0-64"),   # a sweep
     (lambda d: ["bench", "vision", "--only", ""], "--only: unknown section(s) ''"),
     (lambda d: ["run", "--config", str(d / "deep.yaml")], "nested more than"),

@@ -20,6 +20,11 @@ from pathlib import Path
 
 PREFIX = "stationd-demo-"
 PID_FILE = "demo.pid"
+#: the station file the demo runs, resolved: ``stationd db report VIN --config FILE`` finds a
+#: running demo's database by it (:func:`demo_databases`)
+STATION_FILE = "station"
+#: each station's database in the demo's folder: ``k/stationd.db`` for DEMO-k
+DATABASE = "stationd.db"
 
 
 def _start_time(pid: int) -> str | None:
@@ -33,10 +38,13 @@ def _start_time(pid: int) -> str | None:
     return fields[19] if len(fields) > 19 else None
 
 
-def mark(folder: Path) -> None:
-    """Write this process's pid file into its demo ``folder``."""
+def mark(folder: Path, station: Path | None = None) -> None:
+    """Write this process's pid file into its demo ``folder``, and the ``station`` file it
+    runs (resolved)."""
     pid = os.getpid()
     (folder / PID_FILE).write_text(f"{pid} {_start_time(pid) or '-'}\n")
+    if station is not None:
+        (folder / STATION_FILE).write_text(f"{Path(station).resolve()}\n")
 
 
 def _alive(pid: int, start: str) -> bool:
@@ -65,6 +73,41 @@ def owner_gone(folder: Path) -> bool:
     return not _alive(pid, start)
 
 
+def owner_alive(folder: Path) -> bool:
+    """Whether ``folder``'s pid file names a process that still runs (False without one)."""
+    try:
+        words = (folder / PID_FILE).read_text().split()
+        pid, start = int(words[0]), words[1]
+    except (OSError, ValueError, IndexError):
+        return False
+    return _alive(pid, start)
+
+
+def demo_databases(station: Path, parent: Path | None = None) -> list[tuple[str, Path]]:
+    """The station databases of the running demos of ``station`` (a station file): (station
+    id, database file), the first station's first.  Why: a demo keeps its records in its
+    temporary folder, not in the station file's database, and ``stationd db report VIN
+    --config STATION.yaml`` during a demo said "no database at .../stationd-sim.db"."""
+    root = Path(parent) if parent is not None else Path(tempfile.gettempdir())
+    try:
+        mine = str(Path(station).resolve())
+        found = sorted(root.glob(f"{PREFIX}*"))
+    except (OSError, RuntimeError):
+        return []
+    out: list[tuple[str, Path]] = []
+    for folder in found:
+        try:
+            runs = (folder / STATION_FILE).read_text().strip()
+            if runs != mine or not owner_alive(folder):
+                continue
+            ks = sorted(int(d.name) for d in folder.iterdir() if d.name.isdigit())
+        except (OSError, ValueError):
+            continue
+        out += [(f"DEMO-{k}", folder / str(k) / DATABASE) for k in ks
+                if (folder / str(k) / DATABASE).is_file()]
+    return out
+
+
 def sweep(parent: Path | None = None) -> list[Path]:
     """Remove the demo folders in ``parent`` (the temporary directory) whose demo process
     is gone; the folders removed."""
@@ -82,4 +125,5 @@ def sweep(parent: Path | None = None) -> list[Path]:
     return removed
 
 
-__all__ = ["PID_FILE", "PREFIX", "mark", "owner_gone", "sweep"]
+__all__ = ["DATABASE", "PID_FILE", "PREFIX", "STATION_FILE", "demo_databases", "mark",
+           "owner_alive", "owner_gone", "sweep"]

@@ -462,7 +462,8 @@ def _read_url(url: str) -> str:
 
 
 async def line_report(url: str | None, services: list[StationServices], out: Any,
-                      page: str | None, json_out: bool) -> dict[str, Any]:
+                      page: str | None, json_out: bool,
+                      throwaway: bool = False) -> dict[str, Any]:
     """The line's results, read back from the line database once it has every station's
     records (or is away now: :func:`drain_all`): per station, what arrived against what the
     station recorded (``arrival``), and the rundowns (``stations``; the /line page shows them
@@ -517,16 +518,35 @@ async def line_report(url: str | None, services: list[StationServices], out: Any
           f"{', '.join(doc['vins']) or 'no vehicle'} from {len(ids)} station(s); {arrival}",
           file=out, flush=True)
     if not json_out:
-        for sid, p in doc["stations"].items():
-            print(f"  {sid}: {p['rundowns']} rundown(s): {p['ok']} OK, {p['nok']} NOK, "
-                  f"{p['loosenings']} loosening(s); bolts OK: {', '.join(p['bolts']) or '-'}")
-        if page is not None:
-            print(f"  every row: {page} (stationd line results with a station file naming "
-                  "this line database prints them too)")
-        else:   # the screens end with the demo: the /line page is served only with --hold
-            print("  every row: stationd line results with a station file naming this line "
-                  "database (the screens' /line page: with --hold, while the demo holds)")
+        for text in read_back_words(doc, page, throwaway):
+            print(text)
     return doc
+
+
+def read_back_words(doc: dict[str, Any], page: str | None, throwaway: bool) -> list[str]:
+    """The line's results per station as the demo prints them, and where every row is: the
+    /line ``page`` while it is served (``--hold``); else ``stationd line results`` on a line
+    database that outlives the demo (``--line-db``); a ``throwaway`` one is gone with the
+    demo: said so, with how to keep one.  Why: the end suggested ``stationd line results``
+    for a throw-away database already removed, a command that could not work; and "9 OK,
+    3 NOK" did not say these are results (rundowns), not bolts."""
+    lines = [f"  {sid}: {p['rundowns']} rundown(s): {p['ok']} OK result(s), {p['nok']} NOK "
+             f"result(s), {p['loosenings']} loosening(s); bolts OK: "
+             f"{', '.join(p['bolts']) or '-'}" for sid, p in doc["stations"].items()]
+    if page is not None:
+        lines.append(f"  every row: {page}" + (
+            " (until Ctrl-C: the line database is a throw-away one, gone with the demo)"
+            if throwaway else " (stationd line results with a station file naming this "
+            "line database prints them too)"))
+    elif throwaway:
+        lines.append("  every row: not kept: the line database was a throw-away one, gone "
+                     "when the demo ends (to keep one: --line-db URL, then stationd line "
+                     "results; or --hold, the screens' /line page while the demo holds)")
+    else:   # the screens end with the demo: the /line page is served only with --hold
+        lines.append("  every row: stationd line results with a station file naming this "
+                     "line database (the screens' /line page: with --hold, while the demo "
+                     "holds)")
+    return lines
 
 
 def _totals(doc: dict[str, Any]) -> None:
@@ -551,4 +571,4 @@ def shown(url: str) -> str:
 __all__ = ["DEFAULT_OPCUA", "SECURITY_WORDS", "Endpoints", "StationServices", "bindable",
            "demo_opcua", "drain_all", "line_config", "line_counts", "line_report",
            "line_results", "line_summary", "line_words", "next_free_port", "own_pairs",
-           "shown"]
+           "read_back_words", "shown"]

@@ -41,7 +41,7 @@ from drivers.wrench.sim.controller import SimPset
 from stationd import progress
 from stationd.boltfile import load_bolts
 from stationd.config import RecordsConfig, StationConfig, load_station_config
-from stationd.demo.leftovers import PREFIX, mark, sweep
+from stationd.demo.leftovers import DATABASE, PREFIX, mark, sweep
 from stationd.demo.services import (
     SECURITY_WORDS,
     Endpoints,
@@ -67,6 +67,7 @@ from stationd.sim.operator import (
     LOOSEN_PROGRAM,
     MAX_RUNDOWNS,
     SUPERVISOR,
+    ended_words,
     loosen_programs,
     operate,
     simulators,
@@ -75,7 +76,7 @@ from stationd.sim.operator import (
 from stationd.sim.vin import make_vin
 from stationd.sim.world import World
 from stationd.station.actions import SendParams
-from stationd.station.commands import Issuer
+from stationd.station.commands import Issuer, Right
 from stationd.station.events import (
     BoltLocked,
     BoltReleased,
@@ -156,6 +157,8 @@ def run_station_demo(args: argparse.Namespace) -> int:
     if bolts_path is None:
         raise InputError(f"{cfg.path}: the demo needs a bolt table (bolts:)")
     _check_demo_station(cfg)
+    if getattr(args, "no_sim_supervisor", False):
+        _check_people(cfg)
     instead = stand_ins(cfg)
     if instead:
         print(f"demo: {cfg.path} names real devices ({', '.join(instead)}): the demo runs its "
@@ -178,7 +181,7 @@ def run_station_demo(args: argparse.Namespace) -> int:
     sweep()      # the folders of demos killed before they could remove them
     tmp = tempfile.TemporaryDirectory(prefix=PREFIX)
     try:
-        mark(Path(tmp.name))
+        mark(Path(tmp.name), cfg.path)
         return _run(args, cfg, bolts_path, Path(tmp.name), out, instead, endpoints, line_url,
                     pg is not None, n_stations, cycles)
     finally:
@@ -244,6 +247,11 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
                  f"each tightens at most {min(cycles, EXTRA_CYCLES)} of its bolts, one "
                  "station after another)" if n_stations > 1 else ""),
               file=out, flush=True)
+    # where its results are: not the station file's database (db report --config finds a
+    # running demo's by the station file)
+    print(f"records: {tmp / '1' / DATABASE} (the demo's own temporary database, removed when "
+          f"it ends; meanwhile stationd db report VIN --config {cfg.path} reads it)",
+          file=out, flush=True)
     station = _station(cfg, psets)
     if n_stations > 1:     # one output for the line's stations: each line says whose it is
         station.effects.label(station_id(1))
@@ -263,12 +271,15 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
     extra: list[dict[str, Any]] = []   # the stations after the first: their summaries
     line: dict[str, Any] = {}
 
+    # with a line of stations every line says whose it is, the first station's too
+    me = f"{station_id(1)} " if n_stations > 1 else ""
+
     def say(line: dict[str, Any]) -> None:
         if not args.json:
             if line.get("before"):   # the NOK policy at work on this bolt, then its line
-                print(f"  {line['bolt']} first: {'; '.join(line['before'])}", flush=True)
+                print(f"  {me}{line['bolt']} first: {'; '.join(line['before'])}", flush=True)
             err = line.get("xy_error_mm")
-            print(f"{line['bolt']}: pset {line['pset']}, XY error "
+            print(f"{me}{line['bolt']}: pset {line['pset']}, XY error "
                   f"{'-' if err is None else f'{err:.3f} mm'}, {line['result']}", flush=True)
 
     async def main() -> None:
@@ -298,7 +309,8 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
             task = asyncio.create_task(station.run(stop))
             await operate(station, world, rng, cycles, report, say, truth, nok_rng,
                           note=_noter(out, station_id(1) if n_stations > 1 else ""),
-                          share=(1, n_stations), supervisor=_supervisor(args))
+                          share=(1, n_stations), supervisor=_supervisor(args),
+                          interruptible=True)
             for k in range(2, n_stations + 1):
                 extra.append(await _next_station(args, cfg, k, tmp, taken, endpoints,
                                                  line_url, psets, truth, out, services,
@@ -309,13 +321,15 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
                 hold = getattr(args, "hold", False)
                 line.update(await line_report(line_url, services, out,
                                                None if screens.server is None or not hold
-                                               else f"{screens.server.url}line", args.json))
-            if getattr(args, "hold", False) and (screens.server is not None or
-                                                 any(s.opcua for s in services)):
+                                               else f"{screens.server.url}line", args.json,
+                                               throwaway))
+            # a run ended by Ctrl-C (the people's wait) is not held: its summary follows
+            if getattr(args, "hold", False) and "interrupted" not in truth and (
+                    screens.server is not None or any(s.opcua for s in services)):
                 await _hold(screens.server.url if screens.server is not None else None,
                             [s.opcua.url for s in services if s.opcua is not None],
-                            report, int(truth.get("cycles", cycles)), truth, args.json,
-                            cfg.line is not None)
+                            _over_words(report, int(truth.get("cycles", cycles)), extra),
+                            truth, args.json, cfg.line is not None)
             screens.attach(None, cfg)
             stop.set()
             await task
@@ -344,6 +358,12 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
     summary["opcua"] = None if cfg.opcua is None else cfg.opcua.endpoint
     # the line's verdict from each part's reasons (never read back from a verdict's text)
     problems: list[str] = summary.pop("problems")
+    interrupted = truth.get("interrupted")
+    if interrupted is not None:   # Ctrl-C (SIGTERM) ended the people's wait: said first
+        summary["interrupted"] = interrupted
+        locked = ", ".join(interrupted["bolts"]) or "no bolt"
+        problems.insert(0, f"interrupted ({ended_words(truth)}) while the operator waited for "
+                           f"a person's release: {locked} left locked, not released")
     if extra:
         summary["stations"] = extra
         problems += [f"{e['station_id']}: {'; '.join(p)}"
@@ -353,14 +373,17 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
         if line["missing"]:   # asked for the line and it did not get them: not a PASS
             problems.append(f"{line['missing']} record(s) ({line['missing_rundowns']} "
                             "rundown(s)) did not reach the line database")
+    if extra:   # the line's figures over every station (the keys above stay DEMO-1's)
+        summary["all_stations"] = all_stations(summary, extra)
     if problems:
         summary["verdict"] = "FAIL: " + "; ".join(problems)
     elif extra:
-        summary["verdict"] += f"; {len(extra)} more station(s) PASS"
+        summary["verdict"] = _line_verdict(summary, extra)
     if args.json:
         sys.stdout.write(strict_json(summary) + "\n")
     else:
-        print(f"summary: {summary['ok']}/{cycles} bolts OK{_left_words(summary)}, "
+        me = f"{station_id(1)} " if extra else ""
+        print(f"{me}summary: {summary['ok']}/{cycles} bolts OK{_left_words(summary)}, "
               "parameters sent for a wrong bolt: "
               f"{summary['wrong_bolt_sends']}, XY error mean "
               f"{_ms(summary['xy_error_mm']['mean'], '.3f')} mm max "
@@ -371,22 +394,27 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
         whose = f" ({station_id(1)})" if extra else ""
         print(f"NOK policy{whose}: {nok_words(n)}")
         if summary.get("operators"):
-            print(operator_words(summary["operators"]))
+            print(me + operator_words(summary["operators"]))
         for e in extra:
             print(f"{e['station_id']}: {e['ok']}/{e['bolts']} bolts OK{_left_words(e)}, "
                   f"parameters sent for a wrong bolt: {e['wrong_bolt_sends']}, "
                   f"{e['recorded']} result(s) recorded; NOK policy: "
-                  f"{nok_words(e['nok_policy'])}")
+                  f"{nok_words(e['nok_policy'])}"
+                  + (f"; {operator_words(e['operators'])}" if e.get("operators") else ""))
         if extra:
-            every = [summary["nok_policy"], *(e["nok_policy"] for e in extra)]
-            total = {k: sum(int(p[k]) for p in every)
-                     for k in ("nok", "loosenings", "locks", "releases")}
-            print(f"NOK policy, all {len(every)} stations: {nok_words(total)}")
+            every = summary["all_stations"]
+            print(f"NOK policy, all {len(every['stations'])} stations: "
+                  f"{nok_words(every['nok_policy'])}")
+            print(f"all {len(every['stations'])} stations: {every['ok']}/{every['bolts']} "
+                  f"bolts OK{_left_words(every)}, {every['nok_policy']['nok']} NOK result(s)"
+                  + (f"; {operator_words(every['operators'])}" if every["operators"] else ""))
         if instead:
             devices = ", ".join(d.rsplit(" ", 1)[0] for d in instead)
             print(f"simulated, not the station file's devices: {devices} (the records went "
                   "to a temporary database)")
         print(summary["verdict"])
+    if interrupted is not None:   # as a command stopped by the signal: 130 (143)
+        return 128 + signal.Signals[interrupted["signal"]].value
     return 0 if summary["verdict"].startswith("PASS") else 1
 
 
@@ -491,14 +519,24 @@ async def _next_station(args: argparse.Namespace, first: StationConfig, k: int, 
     s = _summary(station, report, n, truth["wrong"], truth["locked_sends"])
     return {"station_id": sid, "opcua": None if cfg.opcua is None else cfg.opcua.endpoint,
             "bolts": n, "ok": s["ok"], "left": s["left"], "handled": s["handled"],
-            "nok_policy": s["nok_policy"],
+            "nok_policy": s["nok_policy"], "operators": s["operators"],
+            "results": s["results"],
             "share": truth.get("share", []), "wrong_bolt_sends": s["wrong_bolt_sends"],
             "recorded": s["recorded"], "verdict": s["verdict"], "problems": s["problems"]}
 
 
-async def _hold(url: str | None, endpoints: list[str], report: list[dict[str, Any]],
-                cycles: int, truth: dict[str, Any], json_out: bool,
-                line: bool = False) -> None:
+def _over_words(report: list[dict[str, Any]], cycles: int,
+                extra: list[dict[str, Any]]) -> str:
+    """"4/4 bolts OK", or with a line of stations each station's, named."""
+    ok = sum(1 for r in report if r.get("ok"))
+    if not extra:
+        return f"{ok}/{cycles} bolts OK"
+    return "; ".join([f"{station_id(1)} {ok}/{cycles} bolts OK",
+                      *(f"{e['station_id']} {e['ok']}/{e['bolts']}" for e in extra)])
+
+
+async def _hold(url: str | None, endpoints: list[str], over: str, truth: dict[str, Any],
+                json_out: bool, line: bool = False) -> None:
     """``--hold``: the run is over (results recorded); the screens keep serving its results
     from the run's temporary database, and the OPC UA endpoints theirs, until SIGINT or
     SIGTERM, so they can be browsed (and exported) before the demo's folder is removed, and
@@ -508,10 +546,9 @@ async def _hold(url: str | None, endpoints: list[str], report: list[dict[str, An
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, done.set)
-    ok = sum(1 for r in report if r.get("ok"))
     served = ([f"{url}vehicles/{truth['vin']}"] if url is not None else []) + \
         ([f"{url}line"] if url is not None and line else []) + endpoints
-    print(f"run over ({ok}/{cycles} bolts OK); still serving {', '.join(served)} until "
+    print(f"run over ({over}); still serving {', '.join(served)} until "
           "Ctrl-C (--hold)", file=sys.stderr if json_out else sys.stdout, flush=True)
     try:
         await done.wait()
@@ -542,6 +579,19 @@ def _listen(args: argparse.Namespace, cfg: StationConfig) -> tuple[str | None, s
 
 def _ms(v: float | None, fmt: str) -> str:
     return "-" if v is None else format(v, fmt)
+
+
+def _check_people(cfg: StationConfig) -> None:
+    """``--no-sim-supervisor`` leaves each lock to a person's release: the station file needs
+    a user whose role has the release right.  Why: on config/sim (no ``access:``) the operator
+    waited for a release through ``stationd release`` or the screens' Release form, where
+    every login was refused ("no users are configured"), until Ctrl-C."""
+    users = cfg.access.users.values()
+    if not any(Right.RELEASE in cfg.access.roles.get(u.role, frozenset()) for u in users):
+        raise InputError(f"--no-sim-supervisor needs access.users in {cfg.path} with a user "
+                         "holding the release right (a supervisor), or nobody could release "
+                         "a lock: give --config a station file with one (stationd user hash "
+                         "makes a password's hash)")
 
 
 def _check_demo_station(cfg: StationConfig) -> None:
@@ -575,7 +625,7 @@ def simulated(cfg: StationConfig, tmp: Path) -> StationConfig:
     return replace(cfg, cameras=cams, pairs=pairs,
                    lift=replace(cfg.lift, url="sim://lift"),
                    wrench=replace(cfg.wrench, url="sim://wrench", registers=None),
-                   database_url=f"sqlite:///{tmp}/stationd.db",
+                   database_url=f"sqlite:///{tmp}/{DATABASE}",
                    records=RecordsConfig(images_dir=tmp / "images",
                                          save_images=cfg.records.save_images))
 
@@ -641,6 +691,39 @@ def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
             "latency_ms": {"p50": _num(np.percentile(lat, 50)) if lat else None,
                            "p95": _num(np.percentile(lat, 95)) if lat else None},
             "verdict": verdict, "problems": problems}
+
+
+def all_stations(first: dict[str, Any], extra: list[dict[str, Any]]) -> dict[str, Any]:
+    """The line's figures over every station (``--stations N``): bolts, OK, handled, left,
+    results recorded, the NOK policy's counts and the rundowns per operator, summed.  Why:
+    the summary's keys are the first station's (kept so for what reads them); the line's
+    total was nowhere, and the second station's rundowns in no per-operator count."""
+    every = [{**first, "station_id": station_id(1)}, *extra]
+    operators: Counter[str] = Counter()
+    for e in every:
+        operators.update(e.get("operators") or {})
+    return {"stations": [e["station_id"] for e in every],
+            **{k: sum(int(e.get(k) or 0) for e in every)
+               for k in ("bolts", "ok", "handled", "left", "wrong_bolt_sends", "results",
+                         "recorded")},
+            "nok_policy": {k: sum(int(e["nok_policy"][k]) for e in every)
+                           for k in ("nok", "loosenings", "locks", "releases",
+                                     "locked_sends")},
+            "operators": dict(operators)}
+
+
+def _line_verdict(first: dict[str, Any], extra: list[dict[str, Any]]) -> str:
+    """Every station passed: the verdict over all of them, each named ("PASS: all 2
+    stations, 6/6 bolts handled (DEMO-1 4/4: 4 OK; DEMO-2 2/2: 2 OK), ...").  Why: "PASS:
+    4/4 bolts handled ...; 1 more station(s) PASS" gave the first station's figures alone."""
+    every = [{**first, "station_id": station_id(1)}, *extra]
+    total = sum(int(e["bolts"]) for e in every)
+    handled = sum(int(e["handled"]) for e in every)
+    each = "; ".join(f"{e['station_id']} {e['handled']}/{e['bolts']}: "
+                     f"{_handled_words(int(e['ok']), int(e['left']), int(e['handled']))}"
+                     for e in every)
+    return (f"PASS: all {len(every)} stations, {handled}/{total} bolts handled ({each}), "
+            "0 wrong bolts, every result recorded")
 
 
 def nok_words(n: dict[str, Any]) -> str:

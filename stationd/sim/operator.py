@@ -17,8 +17,11 @@ daemon`): the two exercise the same rounds, so what the demo passes the daemon s
 from __future__ import annotations
 
 import asyncio
+import signal
 import sys
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager, nullcontext
 from typing import Any
 
 import numpy as np
@@ -89,7 +92,7 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
                   truth: dict[str, Any], nok_rng: np.random.Generator,
                   note: Callable[[str], None] | None = None,
                   supervisor: Issuer | None = SUPERVISOR, operator: Issuer = OPERATOR,
-                  share: tuple[int, int] = (1, 1)) -> None:
+                  share: tuple[int, int] = (1, 1), interruptible: bool = False) -> None:
     """One vehicle: ``truth['vin']`` (lift code ``truth['model_code']``) raised, up to
     ``cycles`` of its bolts in view visited in the ``rng``'s order (each line to ``say`` and
     ``report``), tightened as the NOK policy has it (:func:`until_ok`), the lift lowered.
@@ -98,7 +101,11 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     is in view.  ``operator`` signs in at the station first unless signed in already.
     ``share`` (k, n): this station is the k-th of a line of n, and its bolts are the k-th of
     n shares of the bolts in view (:func:`share_of`); ``truth['share']`` gets them.
-    ``supervisor`` None: locks are left to people (:func:`wait_for_people`)."""
+    ``supervisor`` None: locks are left to people (:func:`wait_for_people`);
+    ``interruptible``: Ctrl-C or SIGTERM during that wait ends it (the demo's, a command's:
+    not the daemon's, which stops in order): the bolts left locked are said as such
+    (``unfinished``), the vehicle lowered, and ``truth['interrupted']`` names the signal and
+    the bolts."""
     plc, ctl = simulators(st)
     if st.core.status().operator != operator.user:
         answer = await st.submit(SignIn(f"{operator.source}: the simulated operator"),
@@ -136,7 +143,10 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
         if not mine:
             raise InputError(f"station {share[0]} of {share[1]} has no bolt of its own: "
                              f"{len(bolts)} bolt(s) in view for {share[1]} stations")
-        (note or _stderr)(f"its own bolts: {len(mine)} of the {len(bolts)} in view: "
+        # said after the station's id ("DEMO-1 tightens its own bolts, 25 of the 50 in
+        # view: ..."; it read "DEMO-1 its own bolts: 25 of the 50")
+        (note or _stderr)(f"{'' if note else 'this station '}tightens its own bolts, "
+                          f"{len(mine)} of the {len(bolts)} in view: "
                           f"{', '.join(mine[:12])}{' ...' if len(mine) > 12 else ''}")
         bolts = [b for b in bolts if b.bolt_id in mine]
     truth["share"] = [b.bolt_id for b in bolts]
@@ -182,8 +192,13 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
         world.set_wrench(None)
         await asyncio.sleep(0.3)
     for bolt_id, (b, line) in waiting.items():
-        while line.get("waits"):
-            who = await wait_for_people(st, bolt_id, truth["vin"], note or _stderr)
+        while line.get("waits") and "interrupted" not in truth:
+            try:
+                who = await wait_for_people(st, bolt_id, truth["vin"], note or _stderr,
+                                            interruptible)
+            except WaitEnded as ended:
+                truth["interrupted"] = {"signal": ended.signal, "bolts": []}
+                break
             pose = wrench_at(np.array(b.position) + np.append(rng.normal(0, 0.3, 2), 0.0), rng,
                              length)
             truth["bolt"] = bolt_id
@@ -200,6 +215,12 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
                 await until_ok(st, bolt_id, line, nok_rng, truth["vin"], None, stubborn=False)
                 line["before"] = [*before, *line["before"]]
                 line["rundowns"] = rundowns + int(line["rundowns"])
+        if line.get("waits"):   # the wait ended by a signal: still locked, not released
+            line.pop("waits")
+            line["result"] = (f"locked, not released: the wait for a person's release ended "
+                              f"by {ended_words(truth)}")
+            line["unfinished"] = True
+            truth["interrupted"]["bolts"].append(bolt_id)
         report.append(line)
         say(line)
         truth["bolt"] = None
@@ -298,16 +319,66 @@ def _releases(st: Station, bolt: str) -> list[str]:
             and e.bolt == bolt]
 
 
-async def wait_for_people(st: Station, bolt: str, vin: str,
-                          note: Callable[[str], None]) -> str | None:
+class WaitEnded(Exception):  # noqa: N818 - a wait ended, not an error
+    """A signal (Ctrl-C, SIGTERM) ended the wait for a person's release."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signal = signal.Signals(signum).name
+
+
+def ended_words(truth: dict[str, Any]) -> str:
+    """"Ctrl-C" or "SIGTERM": what ended the people's wait."""
+    got = (truth.get("interrupted") or {}).get("signal")
+    return "Ctrl-C" if got == "SIGINT" else str(got)
+
+
+@contextmanager
+def _signals_end(ended: asyncio.Event, got: list[int]) -> Iterator[None]:
+    """While in the body, SIGINT and SIGTERM set ``ended`` (and are put in ``got``) instead
+    of stopping the process; the handlers before are put back after (an ignored signal stays
+    ignored).  In the main thread only: signals reach no other."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    loop = asyncio.get_running_loop()
+
+    def on_signal(signum: int, frame: object) -> None:
+        got.append(signum)
+        loop.call_soon_threadsafe(ended.set)
+
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    for s, handler in before.items():
+        if handler is not signal.SIG_IGN:
+            signal.signal(s, on_signal)
+    try:
+        yield
+    finally:
+        for s, handler in before.items():
+            signal.signal(s, signal.SIG_DFL if handler is None else handler)
+
+
+async def wait_for_people(st: Station, bolt: str, vin: str, note: Callable[[str], None],
+                          interruptible: bool = False) -> str | None:
     """The operator waits, the vehicle on the lift, until a person releases ``bolt`` (the
     screens' Release form, ``stationd release``): said once, and again when released.  Who
-    released it (None: not heard within 2 s of the release)."""
+    released it (None: not heard within 2 s of the release).  ``interruptible``: Ctrl-C or
+    SIGTERM ends the wait (:class:`WaitEnded`), so the demo can still say what was done.
+    Why: Ctrl-C there printed "stationd: interrupted (Ctrl-C)" alone, no summary, although
+    bolts had been tightened."""
     before = len(_releases(st, bolt))
     note(f"{bolt} of {vin} locked: the operator waits, the vehicle on the lift, for a "
-         "person's release (the screens' Release form, or stationd release)")
-    while stopped(st, bolt):
-        await asyncio.sleep(0.2)
+         "person's release (the screens' Release form, or stationd release)"
+         + ("; Ctrl-C ends the wait and the run" if interruptible else ""))
+    ended, got = asyncio.Event(), list[int]()
+    with _signals_end(ended, got) if interruptible else nullcontext():
+        while stopped(st, bolt):
+            if ended.is_set():
+                raise WaitEnded(got[0])
+            try:
+                await asyncio.wait_for(ended.wait(), 0.2)
+            except TimeoutError:
+                pass
     for _ in range(40):     # the release's event follows the lock's end (the core's act)
         after = _releases(st, bolt)
         if len(after) > before:
@@ -367,5 +438,6 @@ async def until_ok(st: Station, bolt: str, line: dict[str, Any],
 
 
 __all__ = ["LOOSEN_PROGRAM", "MAX_RUNDOWNS", "NOK_P", "OPERATOR", "STUBBORN_P", "SUPERVISOR",
-           "loosen_programs", "operate", "share_of", "shot_words", "simulated_url",
-           "simulators", "stand_ins", "stopped", "until_ok", "wait_for_people"]
+           "WaitEnded", "ended_words", "loosen_programs", "operate", "share_of", "shot_words",
+           "simulated_url", "simulators", "stand_ins", "stopped", "until_ok",
+           "wait_for_people"]

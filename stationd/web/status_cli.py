@@ -37,6 +37,18 @@ def status_url(url: str) -> str:
                                     "", ""))
 
 
+def counter_words(c: dict[str, Any]) -> str:
+    """The vehicle's bolts by their state now, in the operator screen's words: "3/50 bolts
+    OK, 1 skipped, 1 bolt ending NOK" (skipped only when there are any).  Why: "3/50 done,
+    1 NOK" left the skipped bolts out and read as 1 NOK result, where it counts the bolts whose
+    last rundown is NOK (a NOK tightened again to OK is not counted)."""
+    nok = int(c.get("nok", 0))
+    words = f"{c.get('done', 0)}/{c.get('total', 0)} bolts OK"
+    if c.get("skipped"):
+        words += f", {c['skipped']} skipped"
+    return words + f", {nok} {'bolt' if nok == 1 else 'bolts'} ending NOK"
+
+
 def format_status(st: dict[str, Any]) -> str:
     """The status as a few readable lines."""
     lines = [f"state:    {st['state']}" + (f" ({st['reason']})" if st.get("reason") else "")]
@@ -46,8 +58,7 @@ def format_status(st: dict[str, Any]) -> str:
     c = st.get("counters", {})
     lines.append("vehicle:  " + ("none" if not v else
                                  f"{v['vin']} ({v['model']}{', rework' if v.get('rework') else ''})"
-                                 f": {c.get('done', 0)}/{c.get('total', 0)} done, "
-                                 f"{c.get('nok', 0)} NOK"))
+                                 f": {counter_words(c)}"))
     op = st.get("operator") or {}
     if op.get("user") or op.get("required"):
         lines.append("operator: " + (op.get("user") or "nobody signed in: sign in to tighten"))

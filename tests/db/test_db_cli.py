@@ -110,8 +110,9 @@ def test_report_exit_codes(run, db):
         record(repo, "VIN1", "SF-FR", ok=False)
     code, out, err = run("db", "report", "VIN1", "--db", db)
     assert code == 1 and err == ""
-    assert out.splitlines()[0] == ("VIN1 (WAGON-B, open): 1 ok, 1 NOK (SF-FR), "
-                                   "1 missing (TB-C)")
+    assert out.splitlines()[0] == ("VIN1 (WAGON-B, open): bolts: 1 OK, 1 ending NOK (SF-FR), "
+                                   "0 skipped, 1 missing (TB-C); rundowns: 2 tightening(s), "
+                                   "1 NOK result(s)")
     assert "TB-C" in out.splitlines()[3] and "MISSING" in out.splitlines()[3]
     code, out, _ = run("db", "report", "VIN1", "--db", db, "--json")
     obj = json.loads(out)
@@ -125,7 +126,10 @@ def test_report_exit_codes(run, db):
                                  reason="result 77 (pset 4) outside any tightening")
         repo.close_vehicle("VIN1")
     code, out, _ = run("db", "report", "VIN1", "--db", db)
-    assert code == 0 and "3 ok, 0 NOK, 0 missing" in out
+    # SF-FR tightened again to OK: no bolt ends NOK, its NOK result is still said
+    assert code == 0 and out.splitlines()[0].endswith(
+        ": bolts: 3 OK, 0 ending NOK, 0 skipped, 0 missing; rundowns: 4 tightening(s), "
+        "1 NOK result(s)"), out
     assert "unattributed: tightening 77 pset 4 NOK 9.5 N m" in out
     code, out, _ = run("db", "report", "VIN1", "--db", db, "--json")
     assert [u["tightening_id"] for u in json.loads(out)["unattributed"]] == [77]
@@ -547,3 +551,64 @@ def test_report_shows_controller_events_and_unreadable_results(run, db):
     assert "parameter 01 missing" in rundowns_csv(runs)
     assert doc["unreadable_results"][0]["bolt"] == "TB-C"
     assert doc["controller_events"][0]["what"] == "batch increment"
+
+
+def _sim_station(tmp_path: Path) -> Path:
+    """A copy of config/sim: its database (stationd-sim.db beside it) not made yet."""
+    station = tmp_path / "sim"
+    station.mkdir()
+    for f in (ROOT / "config" / "sim").glob("*.yaml"):
+        (station / f.name).write_text(f.read_text())
+    return station / "station.yaml"
+
+
+def test_report_with_config_finds_a_running_demos_database(run, tmp_path, monkeypatch):
+    """Issue 30: during a demo, `db report VIN --config STATION.yaml` said "no database at
+    .../stationd-sim.db (import a bolt table first, or give --db or --config STATION.yaml)":
+    the demo keeps its records in its own temporary folder, and the hint suggested the option
+    already given.  A running demo's database is found by its station file now."""
+    import tempfile
+
+    from db.repository import Repository
+    from stationd.demo.leftovers import PREFIX, mark
+
+    station = _sim_station(tmp_path)
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
+    # no database, no demo: the hint names neither option again, and where a demo's are
+    code, out, err = run("db", "report", "VIN1", "--config", station)
+    line = _one_line(err)
+    assert code == 2 and out == "" and f"no database at {station.parent}" in line
+    assert "give --db or --config" not in line and "demo" in line and "/vehicles" in line
+    # a demo of this station file running (this process stands in for it), its vehicle in
+    # its own database
+    folder = temp / f"{PREFIX}abc"
+    (folder / "1").mkdir(parents=True)
+    mark(folder, station)
+    url = url_of(folder / "1" / "stationd.db")
+    assert run("db", "import", EXAMPLE, "--db", url)[0] == 0
+    with Repository.open(url) as repo:
+        repo.start_vehicle("VIN1", "WAGON-B")
+        record(repo, "VIN1", "SF-FL")
+    code, out, err = run("db", "report", "VIN1", "--config", station)
+    assert code == 1 and out.startswith("VIN1 (WAGON-B, open): bolts: 1 OK"), (out, err)
+    assert _one_line(err) == (f"stationd: VIN1 is a running demo's vehicle: reading that "
+                              f"demo's database (DEMO-1, {folder / '1' / 'stationd.db'}), "
+                              f"not {station}'s")
+    # a VIN neither has: said, the demo's database named
+    code, out, err = run("db", "report", "NOPE", "--config", station)
+    assert code == 2 and _one_line(err).endswith(
+        f"; nor is NOPE in the database of the running demo of {station} (DEMO-1 "
+        f"{folder / '1' / 'stationd.db'})")
+    # the station's own database made (it has no such vehicle): the demo's is still found
+    assert run("db", "import", EXAMPLE, "--config", station)[0] == 0
+    assert run("db", "report", "VIN1", "--config", station)[0] == 1
+    code, out, err = run("db", "report", "NOPE", "--config", station)
+    assert code == 2 and _one_line(err).startswith(
+        f"stationd: error: vehicle 'NOPE' is not in the database of {station}; nor is NOPE")
+    (station.parent / "stationd-sim.db").unlink()
+    # the demo gone (its pid file names no live process): its folder is not read
+    (folder / "demo.pid").write_text("999999999 -\n")
+    code, _, err = run("db", "report", "VIN1", "--config", station)
+    assert code == 2 and "no database at" in _one_line(err)

@@ -190,7 +190,11 @@ def test_vehicle_cycle_and_close_summary(repo, bolts_file):
     summary = repo.close_vehicle("WVW1234567890")
     assert summary.missing == ["B3"] and summary.nok == ["B2"] and summary.ok == ["B1"]
     assert not summary.complete and summary.vehicle.ended_at is not None
-    assert "1 ok, 1 NOK (B2), 1 missing (B3)" in summary.summary()
+    # the bolts ending NOK (B2) and the NOK results (B1's first and B2's last): both, named
+    assert summary.summary().endswith(": bolts: 1 OK, 1 ending NOK (B2), 0 skipped, "
+                                      "1 missing (B3); rundowns: 4 tightening(s), 2 NOK "
+                                      "result(s)")
+    assert (summary.to_json()["tightenings"], summary.to_json()["nok_results"]) == (4, 2)
     assert repo.close_vehicle("WVW1234567890").vehicle.ended_at == summary.vehicle.ended_at
     with pytest.raises(DataError, match="is closed"):
         record(repo, "WVW1234567890", "B3")

@@ -119,3 +119,22 @@ def test_records_that_never_reached_the_line_are_counted_per_station(tmp_path, p
     assert "NOT every record arrived (DEMO-1 0 of 4 records): 4 record(s)" in said
     assert f"the line database at 127.0.0.1:{proxy.port} does not answer" in said
     assert "lost with the demo's temporary database" in said
+
+
+def test_the_end_names_no_command_for_a_throw_away_line_database():
+    """Issue 30: after --stations N without --hold and --line-db, the demo suggested
+    `stationd line results` for the throw-away line database, already gone; and "9 OK, 3
+    NOK" did not say these were results."""
+    from stationd.demo.services import read_back_words
+
+    doc = {"stations": {"DEMO-1": {"rundowns": 4, "ok": 2, "nok": 1, "loosenings": 1,
+                                   "bolts": ["B01", "B02"]}}}
+    gone = read_back_words(doc, None, throwaway=True)
+    assert gone[0] == ("  DEMO-1: 4 rundown(s): 2 OK result(s), 1 NOK result(s), "
+                       "1 loosening(s); bolts OK: B01, B02")
+    assert "stationd line results with" not in gone[-1]
+    assert "throw-away" in gone[-1] and "--line-db URL" in gone[-1] and "--hold" in gone[-1]
+    kept = read_back_words(doc, None, throwaway=False)
+    assert kept[-1].startswith("  every row: stationd line results with a station file")
+    held = read_back_words(doc, "http://127.0.0.1:8080/line", throwaway=True)
+    assert held[-1].startswith("  every row: http://127.0.0.1:8080/line (until Ctrl-C")

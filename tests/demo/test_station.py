@@ -14,7 +14,14 @@ import numpy as np
 from stationd.bus import EventBus
 from stationd.cli import main
 from stationd.config import load_station_config
-from stationd.demo.station import SIM_CONFIG, _summary, simulated, stand_ins
+from stationd.demo.station import (
+    SIM_CONFIG,
+    _line_verdict,
+    _summary,
+    all_stations,
+    simulated,
+    stand_ins,
+)
 from stationd.sim.operator import share_of
 from stationd.station.events import ParamsSent, ResultRecorded
 
@@ -46,6 +53,33 @@ def test_the_summary_ends_with_pass_only_when_every_bolt_was_handled_and_none_wr
         missed["verdict"]
     lost = _summary(_station(records=1), REPORT, 2, 0)
     assert "1 result(s) not recorded" in lost["verdict"]
+
+
+def test_a_line_of_stations_has_a_total_and_a_verdict_over_every_station():
+    """Issue 30: with --stations 2 the summary's figures and the PASS were the first
+    station's alone ("PASS: 4/4 bolts handled ...; 1 more station(s) PASS"), the second
+    station's rundowns in no per-operator count."""
+    bus = EventBus()
+    for k, (ok, who) in enumerate([(False, "olga"), (True, "olga"), (True, "olga")]):
+        bus.publish(ResultRecorded("V", f"B0{k}", ok, 20.0, 30.0, k, operator=who))
+    report = [{"bolt": "B00", "result": "OK", "ok": True, "rundowns": 2},
+              {"bolt": "B02", "result": "OK", "ok": True}]
+    first = _summary(SimpleNamespace(bus=bus), report, 2, 0)
+    second_bus = EventBus()
+    second_bus.publish(ResultRecorded("V", "B40", False, 20.0, 30.0, 9, operator="olga"))
+    second_bus.publish(ResultRecorded("V", "B40", True, 20.0, 30.0, 10, operator="-x"))
+    second = _summary(SimpleNamespace(bus=second_bus),
+                      [{"bolt": "B40", "result": "OK", "ok": True, "rundowns": 2}], 1, 0)
+    second["station_id"] = "DEMO-2"
+    total = all_stations(first, [second])
+    assert total["stations"] == ["DEMO-1", "DEMO-2"]
+    assert (total["bolts"], total["ok"], total["handled"], total["recorded"]) == (3, 3, 3, 5)
+    assert total["nok_policy"]["nok"] == 2 and total["operators"] == {"olga": 4, "-x": 1}
+    # the first station's keys are kept as they were
+    assert first["ok"] == 2 and first["operators"] == {"olga": 3}
+    assert _line_verdict(first, [second]) == (
+        "PASS: all 2 stations, 3/3 bolts handled (DEMO-1 2/2: 2 OK; DEMO-2 1/1: 1 OK), "
+        "0 wrong bolts, every result recorded")
 
 
 def test_an_empty_run_has_null_figures_not_nan():

@@ -57,6 +57,21 @@ def test_two_runs_of_a_two_station_line_say_whose_counts_and_have_their_own_vins
         assert re.search(r"^DEMO-2: .* result\(s\) recorded; NOK policy: \d+ NOK result\(s\)",
                          out, re.M), out
         assert re.search(r"^NOK policy, all 2 stations: \d+ NOK result\(s\)", out, re.M), out
+        # the first station's own lines say whose they are too (DEMO-2's always did), and a
+        # total over both stations: bolts OK, NOK results, rundowns per operator
+        assert re.search(r"^DEMO-1 summary: \d+/\d+ bolts OK", out, re.M), out
+        assert re.search(r"^DEMO-1 B\d\d: pset \d+, ", out, re.M), out
+        assert not re.search(r"^(summary: |B\d\d: |  B\d\d first: )", out, re.M), out
+        assert re.search(r"^DEMO-1 rundowns recorded, by who was signed in at the station: "
+                         r"\d+ by user 'operator'$", out, re.M), out
+        assert re.search(r"^DEMO-2: .*; rundowns recorded, by who was signed in at the "
+                         r"station: \d+ by user 'operator'$", out, re.M), out
+        assert re.search(r"^all 2 stations: \d+/2 bolts OK, \d+ NOK result\(s\); rundowns "
+                         r"recorded, by who was signed in at the station: \d+ by user "
+                         r"'operator'$", out, re.M), out
+        assert re.search(r"^PASS: all 2 stations, 2/2 bolts handled \(DEMO-1 1/1: .*; "
+                         r"DEMO-2 1/1: ", out, re.M), out
+        assert "more station(s) PASS" not in out
         # no /line link as the demo exits (it would be dead): where the rows are instead
         assert not re.search(r"https?://\S+/line", out), out
         assert "the screens' /line page: with --hold, while the demo holds" in out

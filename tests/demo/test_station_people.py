@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import queue
 import re
+import signal
 import subprocess
 import sys
 import threading
@@ -103,3 +104,60 @@ def test_a_lock_waits_for_a_persons_release_in_the_demo(tmp_path):
         if demo.poll() is None:
             demo.terminate()
             demo.wait(timeout=60)
+
+
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize(("sig", "code", "words"), [(signal.SIGINT, 130, "Ctrl-C"),
+                                                     (signal.SIGTERM, 143, "SIGTERM")])
+def test_ctrl_c_during_the_peoples_wait_ends_it_with_the_runs_summary(tmp_path, sig, code,
+                                                                       words):
+    """Issue 30: Ctrl-C while the operator waited for a person's release printed only
+    "stationd: interrupted (Ctrl-C)", no summary, although bolts were tightened; and `db
+    report VIN --config STATION.yaml` meanwhile said "no database at ..." (the demo keeps
+    its own).  Now the wait ends, the summary says what was done and which bolt is left
+    locked, exit 130; the report finds the running demo's database by the station file."""
+    port = free_port()
+    station = _station(tmp_path, port)
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    demo = subprocess.Popen([sys.executable, "-m", "stationd", "demo", "--config",
+                             str(station), "--cycles", "2", "--seed", "11",
+                             "--no-sim-supervisor", "--no-opcua", "--hold"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env, cwd=tmp_path)
+    seen: list[str] = []
+    try:
+        assert demo.stdout is not None
+        for line in demo.stdout:
+            seen.append(line.rstrip("\n"))
+            found = re.search(r"(B\d\d) of (\w{17}) locked: the operator waits, ", line)
+            if found:
+                break
+        else:
+            raise AssertionError(seen)
+        bolt, vin = found[1], found[2]
+        assert seen[-1].endswith("; Ctrl-C ends the wait and the run"), seen
+        assert any(s.startswith("records: ") and "stationd db report VIN --config" in s
+                   for s in seen), seen
+        report = subprocess.run([sys.executable, "-m", "stationd", "db", "report", vin,
+                                 "--config", str(station)], capture_output=True, text=True,
+                                env=env, timeout=60, check=False, cwd=tmp_path)
+        assert report.returncode == 1 and report.stdout.startswith(f"{vin} ("), report
+        assert f"{vin} is a running demo's vehicle: reading that demo's database" \
+            in report.stderr, report
+        demo.send_signal(sig)
+        out, err = demo.communicate(timeout=120)
+    finally:
+        if demo.poll() is None:
+            demo.kill()
+            demo.wait(timeout=60)
+    lines = out.splitlines()
+    assert demo.returncode == code, (seen, out, err)
+    assert "Traceback" not in err and "stationd: interrupted" not in err, err
+    assert "stationd: stopped by" not in err, err
+    # the locked bolt's line, the run's summary and a verdict naming the bolt; no hold
+    assert any(re.match(rf"{bolt}: pset \d+, XY error [^,]+, locked, not released: the wait "
+                        rf"for a person's release ended by {words}$", s) for s in lines), lines
+    assert any(s.startswith("summary: ") for s in lines), lines
+    assert lines[-1].startswith(f"FAIL: interrupted ({words}) while the operator waited for a "
+                                f"person's release: {bolt} left locked, not released"), lines
+    assert not any(s.startswith("run over") for s in lines), lines

@@ -18,8 +18,22 @@ def test_status_prints_state_vehicle_and_faulty_device(live_server, capsys):
     assert main(["status", "--url", srv.url]) == 1        # in fault: not OK for a monitor
     out = capsys.readouterr().out
     assert "state:    fault (lift: no answer" in out
-    assert "vehicle:  WVWZZZ1JZ3W386752 (SEDAN): 0/4 done, 0 NOK" in out
+    assert "vehicle:  WVWZZZ1JZ3W386752 (SEDAN): 0/4 bolts OK, 0 bolts ending NOK" in out
     assert "device:   lift: timeout no answer" in out and "versions: aiohttp" in out
+
+
+def test_status_says_what_each_count_counts_and_shows_skipped_bolts():
+    """Issue 30: "3/50 done, 1 NOK" counted bolts ending NOK unlabelled (read as NOK results)
+    and left the skipped bolts out (the API's counters had "skipped": 1)."""
+    from stationd.web.status_cli import format_status
+
+    st = {"state": "idle", "vehicle": {"vin": "VIN1", "model": "SEDAN"},
+          "counters": {"total": 50, "done": 3, "nok": 1, "skipped": 1}}
+    assert "vehicle:  VIN1 (SEDAN): 3/50 bolts OK, 1 skipped, 1 bolt ending NOK" \
+        in format_status(st).splitlines()
+    st["counters"] = {"total": 50, "done": 3, "nok": 2, "skipped": 0}
+    assert "vehicle:  VIN1 (SEDAN): 3/50 bolts OK, 2 bolts ending NOK" \
+        in format_status(st).splitlines()
 
 
 async def _settle(srv):
