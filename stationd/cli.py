@@ -12,6 +12,8 @@ there was a traceback; everything heavy is imported inside :func:`main` or a com
 from __future__ import annotations
 
 import argparse
+import logging
+import os
 import signal
 import sys
 import threading
@@ -712,7 +714,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         except BaseException:
             if stopped.signal is None:
                 raise
-            return _stopped(stopped)
+            code = _stopped(stopped)
+            if argv is None:   # the process's own command: it ends here (see _end)
+                _end(code)
+            return code
+
+
+def _end(code: int) -> NoReturn:
+    """End the process now with ``code``, its line said and its files whole or removed.
+
+    Why not by returning it: a KeyboardInterrupt (our signals' way up) that passed through C
+    code running Python code (an extension's import at the demo's start) leaves CPython's
+    "unhandled KeyboardInterrupt" flag set although the command handled it, and the
+    interpreter then ends itself by SIGINT (-2 to the parent, 130 from a shell) whatever code
+    was returned: a SIGTERM read as a Ctrl-C, 1 start in 5.  What is buffered is flushed
+    first; the command's own cleanup (``finally`` blocks, its temporary folder) has run."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass   # closed: the code still says it
+    logging.shutdown()
+    os._exit(code)
 
 
 class _Stopped:
