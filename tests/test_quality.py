@@ -53,6 +53,15 @@ def test_folders_are_layers_every_layers_contract_exhaustive():
         assert not c.get("exhaustive_ignores"), c["name"]
         names = [n.strip() for layer in c["layers"] for n in layer.split("|")]
         assert all("." not in n for n in names), c["name"]
+    # every folder of more than one module is a layered container of its own (the
+    # migrations excepted: Alembic revisions, each after the one it names)
+    packages = {".".join(d.relative_to(ROOT).parts) for root in ("stationd", "drivers", "db")
+                for d in [ROOT / root, *(ROOT / root).rglob("*")]
+                if d.is_dir() and (d / "__init__.py").exists() and "migrations" not in d.parts
+                and len([m for m in d.iterdir() if m.name != "__init__.py" and
+                         (m.suffix == ".py" or (m / "__init__.py").exists())]) > 1}
+    layered_containers = {name for c in layered for name in c["containers"]}
+    assert sorted(packages - layered_containers) == []
 
 
 def test_the_station_opens_every_device_through_the_one_registry():
