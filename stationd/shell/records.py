@@ -55,7 +55,7 @@ from stationd.station.commands import (
     TeachStart,
     skip_note,
 )
-from stationd.station.inputs import BoltSpec, VehicleEnded, VehicleLoaded, VehicleRejected
+from stationd.station.inputs import LoadedBolt, VehicleEnded, VehicleLoaded, VehicleRejected
 from stationd.station.results import type_code
 from stationd.station.trust import RecordCheck, summary
 
@@ -281,7 +281,7 @@ class Records:
         # the report's "missing" is "no rundown yet": on an open vehicle the bolt is to do
         status = {b.bolt_id: b.status for b in report.bolts if b.status != MISSING}
         done = frozenset(k for k, s in status.items() if s == "ok")
-        specs = {b.bolt_id: BoltSpec(xyz(b.position), b.parameters.pset, b.order, b.batch,
+        specs = {b.bolt_id: LoadedBolt(xyz(b.position), b.parameters.pset, b.order, b.batch,
                                      b.parameters_id, b.parameters) for b in infos}
         log.info("vehicle %s (%s) opened%s: %d bolts, %d done", a.vin, model,
                  " for rework" if started.rework else "", len(infos), len(done))

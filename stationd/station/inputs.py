@@ -151,7 +151,7 @@ class DeviceBack(Input):
 
 
 @dataclass(frozen=True)
-class BoltSpec:
+class LoadedBolt:
     """A bolt of the loaded vehicle; ``parameters_id`` is the parameter version the database
     gave (recorded with the bolt's result: the version actually sent)."""
 
@@ -170,7 +170,7 @@ class VehicleLoaded(Input):
 
     vin: str
     model: str
-    bolts: Mapping[str, BoltSpec]
+    bolts: Mapping[str, LoadedBolt]
     done: frozenset[str] = frozenset()
     rework: bool = False
     skipped: Mapping[str, str] = field(default_factory=dict)

@@ -23,7 +23,7 @@ from stationd.station.events import (
     State,
     ToolDisabled,
 )
-from stationd.station.inputs import BoltSpec, CommandIn, LiftRead
+from stationd.station.inputs import CommandIn, LiftRead, LoadedBolt
 from stationd.station.matching import BoltMatcher, MatchParams
 from stationd.station.policy import NokPolicy
 from stationd.station.trust import PairTrust
@@ -126,7 +126,7 @@ class CoreState:
     model: str | None = None
     faults: dict[str, tuple[str, str]] = field(default_factory=dict)  # device -> kind, reason
     tool_on: bool = False
-    _specs: dict[str, BoltSpec] = field(default_factory=dict, repr=False)
+    _specs: dict[str, LoadedBolt] = field(default_factory=dict, repr=False)
     _lift: LiftRead | None = field(default=None, repr=False)
     _loading: bool = field(default=False, repr=False)
     _load_code: int | None = field(default=None, repr=False)   # the model code loaded

@@ -43,12 +43,12 @@ from stationd.station.events import (
 )
 from stationd.station.inputs import (
     DATABASE,
-    BoltSpec,
     CommandDone,
     CommandIn,
     DeviceBack,
     DeviceFault,
     LiftRead,
+    LoadedBolt,
     LocalizedIn,
     ParamsAcked,
     ParamsRefused,
@@ -62,8 +62,8 @@ from stationd.station.inputs import (
 from stationd.station.matching import MatchParams
 from stationd.words import reason_words
 
-BOLTS = {"B1": BoltSpec((0.0, 0.0, 0.0), 1), "B2": BoltSpec((60.0, 0.0, 0.0), 2),
-         "B3": BoltSpec((0.0, 60.0, 5.0), 1)}
+BOLTS = {"B1": LoadedBolt((0.0, 0.0, 0.0), 1), "B2": LoadedBolt((60.0, 0.0, 0.0), 2),
+         "B3": LoadedBolt((0.0, 60.0, 5.0), 1)}
 PARAMS = MatchParams(tolerance_mm=8.0, margin_mm=6.0, stable_frames=2, max_age_s=0.5)
 
 
@@ -516,7 +516,7 @@ def test_a_resumed_enable_does_not_take_another_pset_or_a_result_after_its_windo
 
 
 def test_the_enable_carries_its_selection_with_vehicle_and_parameter_version():
-    bolts = {k: BoltSpec(b.position, b.pset, parameters_id=40 + i)
+    bolts = {k: LoadedBolt(b.position, b.pset, parameters_id=40 + i)
              for i, (k, b) in enumerate(BOLTS.items())}
     d = _ready()
     d.core.feed(VehicleLoaded(d.t, "VIN1", "M", bolts))

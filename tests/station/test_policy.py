@@ -135,12 +135,11 @@ def test_the_loosen_strategy_needs_a_loosen_pset_refused_with_its_line():
 
 
 def test_overrides_naming_what_no_bolt_table_has_are_refused_with_their_lines():
-    from db.bolts import BoltSpec as TableBolt
-    from db.bolts import BoltTable, ModelSpec, Parameters, Pset, Window
+    from db.bolts import BoltSpec, BoltTable, ModelSpec, Parameters, Pset, Window
 
     w = Window(20.0, 18.0, 22.0)
-    table = BoltTable((ModelSpec("M", (TableBolt("B1", "b", (0, 0, 0), Parameters(1, w)),
-                                       TableBolt("B2", "b", (60, 0, 0), Parameters(2, w)))),),
+    table = BoltTable((ModelSpec("M", (BoltSpec("B1", "b", (0, 0, 0), Parameters(1, w)),
+                                       BoltSpec("B2", "b", (60, 0, 0), Parameters(2, w)))),),
                       psets=(Pset(5, None, w),))
     node = YamlNode.parse("loosen_pset: 90\npsets:\n  2: {max_nok: 1}\n  5: {max_nok: 2}\n"
                           "  7: {max_nok: 1}\nbolts:\n  B1: {loosen_pset: 2}\n  B9: {}\n",

@@ -17,10 +17,10 @@ from stationd.station.commands import CheckCalibration, Issuer, Right
 from stationd.station.core import StationCore
 from stationd.station.events import Localized, Notice, PairChecked
 from stationd.station.inputs import (
-    BoltSpec,
     CommandDone,
     CommandIn,
     LiftRead,
+    LoadedBolt,
     LocalizedIn,
     Started,
     Tick,
@@ -31,7 +31,7 @@ from stationd.station.matching import MatchParams
 from stationd.station.trust import MeasureReferences, PairTrust, RecordCheck, ReferencesChecked
 from stationd.words import check_words, reason_words
 
-BOLTS = {"B1": BoltSpec((0.0, 0.0, 0.0), 1), "B2": BoltSpec((60.0, 0.0, 0.0), 2)}
+BOLTS = {"B1": LoadedBolt((0.0, 0.0, 0.0), 1), "B2": LoadedBolt((60.0, 0.0, 0.0), 2)}
 PARAMS = MatchParams(tolerance_mm=8.0, margin_mm=6.0, stable_frames=2, max_age_s=0.5)
 PAIRS = ("pair1", "pair2")
 ENGINEER = Issuer("eve", frozenset({Right.CALIBRATE}), "cli")
