@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import sys
 import tempfile
 from collections.abc import Generator
 
@@ -15,6 +16,12 @@ from stationd.sim import scenes as sc
 from stationd.sim.render import default_camera
 from stationd.vision.marker import MarkerSpec
 from tests.system import MARK_HINT, Guard, check_lists, is_system
+
+# pytest rewrites each test module's asserts on import and caches the result beside it in
+# __pycache__ (ignored by git), unless bytecode is not to be written (PYTHONDONTWRITEBYTECODE
+# set in the environment): then every collecting process, each xdist worker, rewrites all of
+# them again, about 10 s of CPU each.  The suite writes its cache whatever the environment says.
+sys.dont_write_bytecode = False
 
 SPEC = MarkerSpec()
 NOISE = {"blur_sigma": 0.8, "noise_sigma": 2.0}
