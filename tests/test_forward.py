@@ -142,6 +142,38 @@ def test_a_line_database_that_is_down_keeps_the_backlog_then_catches_up(tmp_path
     repo.close()
 
 
+def test_with_nothing_to_send_the_forwarder_finds_out_whether_the_line_answers(tmp_path,
+                                                                              table):
+    """Issue 30: a station with an empty backlog (a fresh database, the demo's) tried the line
+    database only with its first record: an unreachable one was not known, nor said, until
+    then.  Now a step with nothing to send asks it, and keeps asking while it is down."""
+    repo = Repository.open(f"sqlite:///{tmp_path / 'st.db'}")
+    import_bolts(repo, table)
+    f = Forwarder(repo, LineConfig("postgresql+psycopg://line@127.0.0.1:1/line", "ST-E"))
+    assert f.status()["up"] is None                     # not tried yet
+    for _ in range(2):                                  # down: asked again at the next step
+        with pytest.raises(LineDown, match="Connection refused"):
+            f.step()
+        st = f.status()
+        assert (st["up"], st["backlog"], st["cursor"]) == (False, 0, 0)
+        # a connection that failed is not told as the line's tables' fault
+        assert st["last_error"].startswith("connection failed: ")
+    assert f.tries == 0                                 # no push was made
+    repo.close()
+
+
+def test_with_nothing_to_send_a_line_that_answers_is_up_and_its_tables_made(tmp_path, table,
+                                                                            pg_url):
+    repo = Repository.open(f"sqlite:///{tmp_path / 'st.db'}")
+    import_bolts(repo, table)
+    f = Forwarder(repo, LineConfig(pg_url, "ST-U"))
+    assert f.step() == 0
+    assert f.status()["up"] is True and f.last_error is None
+    assert _line_rows(pg_url, "ST-U") == []             # the line's tables are there, empty
+    f.line.dispose()
+    repo.close()
+
+
 def test_a_record_the_line_database_refuses_is_quarantined_not_blocking(tmp_path, table,
                                                                          pg_url):
     repo = _station(tmp_path, "st.db", table, "VINQ", [(1, "B1")])

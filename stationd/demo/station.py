@@ -49,6 +49,7 @@ from stationd.demo.services import (
     bindable,
     demo_opcua,
     line_config,
+    line_problem,
     line_report,
     next_free_port,
     own_pairs,
@@ -248,6 +249,12 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
                  f"each tightens at most {min(cycles, EXTRA_CYCLES)} of its bolts, one "
                  "station after another)" if n_stations > 1 else ""),
               file=out, flush=True)
+        problem = None if throwaway else line_problem(line_url)
+        if problem is not None:
+            print(f"line database: {problem} at the start; the demo runs and its forwarder "
+                  "keeps trying, but records it has not handed over by the end are lost with "
+                  "the demo's temporary database (verdict FAIL): start the line database, or "
+                  "give another --line-db", file=out, flush=True)
     # where its results are: not the station file's database (db report --config finds a
     # running demo's by the station file)
     print(f"records: {tmp / '1' / DATABASE} (the demo's own temporary database, removed when "

@@ -138,6 +138,29 @@ def test_without_the_operator_the_lift_waits_says_so_once_and_no_pair_faults(tmp
     assert "fault: pair1" not in journal and "no simulated world" not in journal
 
 
+@pytest.mark.timeout(180)
+def test_a_line_database_that_does_not_answer_is_said_at_the_start_and_the_station_runs(
+        tmp_path):
+    """Issue 30: with nothing recorded yet the forwarder did not try the line database, so an
+    unreachable ``line.url`` was said only with the first record.  Now the journal says it
+    at the start, in one line, and the station runs: a vehicle is opened."""
+    _station(tmp_path, line={"url": "postgresql+psycopg://line@127.0.0.1:1/line",
+                             "station_id": "ST-L"})
+    d = Daemon(tmp_path)
+    try:
+        d.wait(r"line database: down \(connection failed: connection to server at "
+               r"\"127\.0\.0\.1\", port 1 failed: Connection refused\); no record waits yet "
+               r"\(the station goes on; its records are forwarded when it answers\)", 60)
+        d.wait(r"simulated lift: down, no vehicle; raise it with 'next'", 60)
+        d.say("next")
+        d.wait(r"vehicle \w{17} \(SIM-1\) opened", 60)
+    finally:
+        code = d.stop()
+    journal = d.log()
+    assert code == 0 and "Traceback" not in journal
+    assert journal.count("line database: down") == 1          # said once, not at each retry
+
+
 def test_the_scripted_operator_is_refused_for_a_station_with_real_devices(tmp_path, capsys):
     station = _station(tmp_path, lift={"url": "modbus-tcp://127.0.0.1:1502"})
     code = main(["run", "--config", str(station), "--sim-operator"])
