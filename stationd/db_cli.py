@@ -301,7 +301,7 @@ def cmd_db_report(args: argparse.Namespace) -> int:
             result = "-" if b.status == MISSING else \
                 f"by {b.skipped_by}" + (f": {b.comment}" if b.comment else "") \
                 if b.status == SKIPPED else \
-                f"{_num(b.torque_nm)} N m, {_num(b.angle_deg)} deg, v{b.version}, " \
+                f"{_num(b.torque_nm)} Nm, {_num(b.angle_deg)} deg, v{b.version}, " \
                 f"{b.attempts} attempt(s)" + (f", by {last[0]['operator'] or '-'}"
                                               + _entered(last[0]) if last else "")
             retired = " (retired)" if b.retired else ""
@@ -310,7 +310,7 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                 for r in (r for r in runs if r["bolt"] == b.bolt_id):
                     print(f"    {r['attempt']}. {r['rundown']} {r['status'].upper()} pset "
                           f"{r['pset'] if r['pset'] is not None else '-'}, "
-                          f"{_num(r['torque_nm'])} N m, {_num(r['angle_deg'])} deg, at "
+                          f"{_num(r['torque_nm'])} Nm, {_num(r['angle_deg'])} deg, at "
                           f"{(r['recorded_at'] or '-')[:19].replace('T', ' ')} UTC, by "
                           f"{r['operator'] or '-'}" + _entered(r))
         for c in commands:
@@ -320,7 +320,7 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                   f"UTC{why}")
         for u in loose:
             print(f"  unattributed: tightening {u['tightening_id']} pset {u['pset']} "
-                  f"{u['status'].upper()} {_num(u['torque_nm'])} N m, "
+                  f"{u['status'].upper()} {_num(u['torque_nm'])} Nm, "
                   f"{_num(u['angle_deg'])} deg ({u['reason']})")
         for e in events:
             on = f" while the tool was on {e['bolt']}" if e["bolt"] else ""
