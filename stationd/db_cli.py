@@ -382,8 +382,12 @@ def _num(v: float | None) -> str:
 def cmd_config_check(args: argparse.Namespace) -> int:
     """Check station files and bolt tables, told apart by their top-level keys; every error of
     every file, then one summary line.  Warnings (a pair not registered yet) do not fail."""
+    files = [*args.files, *args.config_files]
+    if not files:
+        raise InputError("config check: no file to check: stationd config check FILE ... "
+                         "(station files, bolt tables) or --config STATION.yaml")
     failed, errors = 0, 0
-    for name in args.files:
+    for name in files:
         summary, found, warnings = _check_file(name, args.tolerance)
         for w in warnings:
             sys.stderr.write(f"warning: {w}\n")
@@ -395,7 +399,7 @@ def cmd_config_check(args: argparse.Namespace) -> int:
         _print_errors(found)
     if failed:
         sys.stderr.write(f"stationd: error: {errors} error(s) in {failed} of "
-                         f"{len(args.files)} file(s)\n")
+                         f"{len(files)} file(s)\n")
         return EXIT_BAD_INPUT
     return EXIT_OK
 
@@ -524,8 +528,8 @@ def add_config_parser(subparsers: Any) -> argparse.ArgumentParser:
     c: argparse.ArgumentParser = subparsers.add_parser("config", help="check configuration files")
     csub = c.add_subparsers(dest="config_command", required=True, parser_class=type(c))
     ck = csub.add_parser(
-        "check", help="validate station files and bolt tables: the first error of each section, "
-        "camera, pair and file, all at once",
+        "check", help="validate station files and bolt tables: every error of each file, all "
+        "at once",
         description="Checks station files (station.yaml) and bolt tables (bolts.yaml), told "
                     "apart by their top-level keys.  A station file is checked with the files "
                     "it names (calibrations, to_vehicle transforms, the bolt table) and its "
@@ -533,7 +537,11 @@ def add_config_parser(subparsers: Any) -> argparse.ArgumentParser:
                     "printed as file:line: key: message; warnings (a pair not registered into "
                     "the vehicle frame yet) do not fail the check.  Exit 0 when all files are "
                     "valid, 2 otherwise.")
-    ck.add_argument("files", nargs="+", metavar="FILE")
+    ck.add_argument("files", nargs="*", metavar="FILE")
+    # the other commands name the station file with --config: a user types it here too
+    ck.add_argument("--config", dest="config_files", action="append", default=[],
+                    metavar="STATION.yaml", help="a station file, as the other commands take "
+                    "it (the same as giving it as a FILE)")
     ck.add_argument("--tolerance", type=_tolerance, default=8.0, metavar="MM",
                     help="matching tolerance for bolt tables given here: bolts must be twice "
                          "as far apart (default 8); a station file's bolt table is checked "
