@@ -309,9 +309,28 @@ def _line_file(station: Path, db: Path, line_url: str) -> None:
 def _retry_is_unreachable(station: Path, db: Path, pg_url: str, port: int) -> None:
     """With the line database down (the station file pointing at a port nothing serves), a
     quarantine retry says so in one readable line, exit 3."""
-    _line_file(station, db, pg_url.replace(f":{port}/", ":1/"))
+    down = pg_url.replace(f":{port}/", ":1/")
+    _line_file(station, db, down)
     got = _cli("line", "quarantine", "--config", str(station), "--retry")
-    assert got.returncode == 3 and "unreachable" in got.stderr and "Traceback" not in got.stderr
+    assert got.returncode == 3 and "Traceback" not in got.stderr
+    assert got.stderr.startswith(f"stationd: line database {down} unreachable: "), got.stderr
+
+
+def test_a_quarantine_retry_names_the_line_database_it_could_not_reach(tmp_path, table,
+                                                                      capsys):
+    """Issue 30: ``line quarantine --retry`` said "line database unreachable: ..." without
+    which, where ``line results`` and ``line init`` name its URL."""
+    from stationd.cli import main
+
+    _station(tmp_path, "st.db", table, "VINQ", []).close()
+    station = tmp_path / "station.yaml"
+    down = "postgresql+psycopg://line@127.0.0.1:1/line"
+    _line_file(station, tmp_path / "st.db", down)
+    for command in (["quarantine", "--retry"], ["results"]):
+        assert main(["line", *command, "--config", str(station)]) == 3
+        err = capsys.readouterr().err
+        assert err.startswith(f"stationd: line database {down} unreachable: connection "
+                              "failed: ") and err.count("\n") == 1, (command, err)
 
 
 def test_the_line_commands_show_the_backlog_and_retry_or_export_the_quarantine(
