@@ -120,7 +120,13 @@ class VehicleReport:
         v = self.vehicle
         state = "closed" if v.ended_at is not None else "open"
         state += ", reworked" if v.rework else ""
-        text = f"{v.vin} ({v.model}, {state}): bolts: {len(self.ok)} OK"
+        return f"{v.vin} ({v.model}, {state}): {self.counts()}"
+
+    def counts(self) -> str:
+        """The summary's counts alone ("bolts: 5 OK, ...; rundowns: ..."): also the
+        journal's line of a vehicle that closes, so the journal and ``db report`` say one
+        thing in one way."""
+        text = f"bolts: {len(self.ok)} OK"
         text += f", {len(self.nok)} ending NOK ({', '.join(self.nok)})" if self.nok \
             else ", 0 ending NOK"
         who = [f"{b.bolt_id} by {b.skipped_by}" + (f": {b.comment}" if b.comment else "")

@@ -301,7 +301,7 @@ def cmd_db_report(args: argparse.Namespace) -> int:
             result = "-" if b.status == MISSING else \
                 f"by {b.skipped_by}" + (f": {b.comment}" if b.comment else "") \
                 if b.status == SKIPPED else \
-                f"{_num(b.torque_nm)} N m, {_num(b.angle_deg)} deg, v{b.version}, " \
+                f"{_num(b.torque_nm)} Nm, {_num(b.angle_deg)} deg, v{b.version}, " \
                 f"{b.attempts} attempt(s)" + (f", by {last[0]['operator'] or '-'}"
                                               + _entered(last[0]) if last else "")
             retired = " (retired)" if b.retired else ""
@@ -310,7 +310,7 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                 for r in (r for r in runs if r["bolt"] == b.bolt_id):
                     print(f"    {r['attempt']}. {r['rundown']} {r['status'].upper()} pset "
                           f"{r['pset'] if r['pset'] is not None else '-'}, "
-                          f"{_num(r['torque_nm'])} N m, {_num(r['angle_deg'])} deg, at "
+                          f"{_num(r['torque_nm'])} Nm, {_num(r['angle_deg'])} deg, at "
                           f"{(r['recorded_at'] or '-')[:19].replace('T', ' ')} UTC, by "
                           f"{r['operator'] or '-'}" + _entered(r))
         for c in commands:
@@ -320,7 +320,7 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                   f"UTC{why}")
         for u in loose:
             print(f"  unattributed: tightening {u['tightening_id']} pset {u['pset']} "
-                  f"{u['status'].upper()} {_num(u['torque_nm'])} N m, "
+                  f"{u['status'].upper()} {_num(u['torque_nm'])} Nm, "
                   f"{_num(u['angle_deg'])} deg ({u['reason']})")
         for e in events:
             on = f" while the tool was on {e['bolt']}" if e["bolt"] else ""
@@ -382,8 +382,12 @@ def _num(v: float | None) -> str:
 def cmd_config_check(args: argparse.Namespace) -> int:
     """Check station files and bolt tables, told apart by their top-level keys; every error of
     every file, then one summary line.  Warnings (a pair not registered yet) do not fail."""
+    files = [*args.files, *args.config_files]
+    if not files:
+        raise InputError("config check: no file to check: stationd config check FILE ... "
+                         "(station files, bolt tables) or --config STATION.yaml")
     failed, errors = 0, 0
-    for name in args.files:
+    for name in files:
         summary, found, warnings = _check_file(name, args.tolerance)
         for w in warnings:
             sys.stderr.write(f"warning: {w}\n")
@@ -395,7 +399,7 @@ def cmd_config_check(args: argparse.Namespace) -> int:
         _print_errors(found)
     if failed:
         sys.stderr.write(f"stationd: error: {errors} error(s) in {failed} of "
-                         f"{len(args.files)} file(s)\n")
+                         f"{len(files)} file(s)\n")
         return EXIT_BAD_INPUT
     return EXIT_OK
 
@@ -524,8 +528,8 @@ def add_config_parser(subparsers: Any) -> argparse.ArgumentParser:
     c: argparse.ArgumentParser = subparsers.add_parser("config", help="check configuration files")
     csub = c.add_subparsers(dest="config_command", required=True, parser_class=type(c))
     ck = csub.add_parser(
-        "check", help="validate station files and bolt tables: the first error of each section, "
-        "camera, pair and file, all at once",
+        "check", help="validate station files and bolt tables: every error of each file, all "
+        "at once",
         description="Checks station files (station.yaml) and bolt tables (bolts.yaml), told "
                     "apart by their top-level keys.  A station file is checked with the files "
                     "it names (calibrations, to_vehicle transforms, the bolt table) and its "
@@ -533,7 +537,11 @@ def add_config_parser(subparsers: Any) -> argparse.ArgumentParser:
                     "printed as file:line: key: message; warnings (a pair not registered into "
                     "the vehicle frame yet) do not fail the check.  Exit 0 when all files are "
                     "valid, 2 otherwise.")
-    ck.add_argument("files", nargs="+", metavar="FILE")
+    ck.add_argument("files", nargs="*", metavar="FILE")
+    # the other commands name the station file with --config: a user types it here too
+    ck.add_argument("--config", dest="config_files", action="append", default=[],
+                    metavar="STATION.yaml", help="a station file, as the other commands take "
+                    "it (the same as giving it as a FILE)")
     ck.add_argument("--tolerance", type=_tolerance, default=8.0, metavar="MM",
                     help="matching tolerance for bolt tables given here: bolts must be twice "
                          "as far apart (default 8); a station file's bolt table is checked "

@@ -181,6 +181,8 @@ class LineDb:
                 create_line_schema(engine)
             except SQLAlchemyError as exc:
                 engine.dispose()
+                if isinstance(exc, DBAPIError) and _transient(exc):   # no connection at all
+                    raise LineDown(error_line(exc)) from None
                 raise LineDown(f"the line tables: {error_line(exc)}") from None
             self._engine = engine
         return self._engine
@@ -264,6 +266,8 @@ class Forwarder:
         line database is away (nothing is lost: the cursor did not move)."""
         entries = self.repo.ledger.since(self.cursor, BATCH)
         if not entries:
+            if self.up is not True:
+                self._probe()
             return 0
         try:
             self.forwarded += self.line.push(self.cfg.station_id, self.db_id, entries)
@@ -285,6 +289,20 @@ class Forwarder:
         self.up, self.last_error = True, None
         self.tries += 1
         return len(entries)
+
+    def _probe(self) -> None:
+        """Nothing to send, and the line database not known to answer: whether it does
+        (``LineDown`` when not).  Why: a station with nothing in its backlog (a fresh
+        database, the demo's) tried the line database only with its first record, so an
+        unreachable one was said minutes in, or, in the demo, only at its end; now its state
+        is known (the journal, STATUS=, ``/api/status``) from the start, and its return while
+        nothing waits, under the same backoff."""
+        try:
+            self.line.reachable()
+        except LineDown as exc:
+            self.up, self.last_error = False, str(exc)
+            raise
+        self.up, self.last_error = True, None
 
     def retry_quarantined(self) -> tuple[int, int]:
         """Push the quarantined entries again: (taken, still refused)."""

@@ -98,9 +98,8 @@ def cmd_line_quarantine(args: argparse.Namespace) -> int:
             try:
                 fwd.line.reachable()   # exit 3 also with nothing to retry
                 taken, refused = fwd.retry_quarantined()
-            except LineDown as exc:
-                sys.stderr.write(f"stationd: line database unreachable: {exc}\n")
-                return EXIT_UNREACHABLE
+            except LineDown as exc:   # in the words of line results' and line init's
+                return _unreachable(fwd.cfg.url, exc)
             finally:
                 fwd.line.dispose()
             print(f"retried: {taken} taken by the line database, {refused} still refused")

@@ -3,6 +3,7 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -13,6 +14,8 @@ from stationd.cli import main
 from stationd.sim import scenes as sc
 from tests.conftest import NOISE, SPEC, pose_in_pair, view
 
+#: the simulated station's file (no access: section)
+SIM_STATION = Path(__file__).resolve().parents[1] / "config" / "sim" / "station.yaml"
 DETECT_KEYS = {"found", "reason", "centre_px", "ellipse_centre_px", "normal", "inner", "outer",
                "roi", "timings_ms"}
 
@@ -109,6 +112,10 @@ def test_localize_json_and_repeat(files, capsys):
     # issue 30: config/sim has no users: nobody could release the lock the operator waits on
     (lambda d: ["demo", "--no-sim-supervisor", "--no-http", "--no-opcua"],
      "--no-sim-supervisor needs access.users in "),
+    # ... and stationd run with the scripted operator, by the same check (it waited for good)
+    (lambda d: ["run", "--config", str(SIM_STATION), "--sim-operator", "--no-sim-supervisor"],
+     f"--no-sim-supervisor needs access.users in {SIM_STATION} with a user holding the "
+     "release right"),
     (lambda d: ["demo", "--no-http", "--load", "1000"], "--load must be 0-64"),   # a sweep
     (lambda d: ["bench", "vision", "--only", ""], "--only: unknown section(s) ''"),
     (lambda d: ["run", "--config", str(d / "deep.yaml")], "nested more than"),

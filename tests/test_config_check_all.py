@@ -167,3 +167,28 @@ def test_a_wrong_right_of_a_role_hides_neither_the_others_nor_the_roles(station,
         "access.roles.operator[1]", "access.roles.operator[2]", "access.users.sam.role"], lines
     assert "'flew' is not one of" in lines[1]
     assert lines[2].endswith("'boss' is not one of: operator, supervisor, engineer, lead")
+
+
+def test_the_station_file_is_taken_with_config_as_the_other_commands_take_it(station,
+                                                                              capsys) -> None:
+    """Issue 30: ``config check --config STATION.yaml`` (as ``run``, ``status``, ``db
+    report`` take it) was "unrecognized arguments: --config"; none at all says what to give;
+    the help no longer says "the first error of each section"."""
+    from stationd.cli import build_parser
+
+    assert main(["config", "check", "--config", str(station)]) == 0
+    assert capsys.readouterr().out.startswith(f"{station}: ok, station: 4 pair(s)")
+    _edit(station, "max_age_s: 0.5", "max_age_s: 500")
+    assert main(["config", "check", str(station.parent / "bolts.yaml"),
+                 "--config", str(station)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out.startswith(f"{station.parent / 'bolts.yaml'}: ok, ")
+    assert captured.err.endswith("stationd: error: 1 error(s) in 1 of 2 file(s)\n")
+    assert main(["config", "check"]) == 2
+    assert capsys.readouterr().err == ("stationd: error: config check: no file to check: "
+                                       "stationd config check FILE ... (station files, bolt "
+                                       "tables) or --config STATION.yaml\n")
+    commands = next(a for a in build_parser()._actions if a.dest == "command")
+    assert isinstance(commands.choices, dict)
+    config = commands.choices["config"]
+    assert "every error of each file" in " ".join(config.format_help().split())

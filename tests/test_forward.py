@@ -142,6 +142,38 @@ def test_a_line_database_that_is_down_keeps_the_backlog_then_catches_up(tmp_path
     repo.close()
 
 
+def test_with_nothing_to_send_the_forwarder_finds_out_whether_the_line_answers(tmp_path,
+                                                                              table):
+    """Issue 30: a station with an empty backlog (a fresh database, the demo's) tried the line
+    database only with its first record: an unreachable one was not known, nor said, until
+    then.  Now a step with nothing to send asks it, and keeps asking while it is down."""
+    repo = Repository.open(f"sqlite:///{tmp_path / 'st.db'}")
+    import_bolts(repo, table)
+    f = Forwarder(repo, LineConfig("postgresql+psycopg://line@127.0.0.1:1/line", "ST-E"))
+    assert f.status()["up"] is None                     # not tried yet
+    for _ in range(2):                                  # down: asked again at the next step
+        with pytest.raises(LineDown, match="Connection refused"):
+            f.step()
+        st = f.status()
+        assert (st["up"], st["backlog"], st["cursor"]) == (False, 0, 0)
+        # a connection that failed is not told as the line's tables' fault
+        assert st["last_error"].startswith("connection failed: ")
+    assert f.tries == 0                                 # no push was made
+    repo.close()
+
+
+def test_with_nothing_to_send_a_line_that_answers_is_up_and_its_tables_made(tmp_path, table,
+                                                                            pg_url):
+    repo = Repository.open(f"sqlite:///{tmp_path / 'st.db'}")
+    import_bolts(repo, table)
+    f = Forwarder(repo, LineConfig(pg_url, "ST-U"))
+    assert f.step() == 0
+    assert f.status()["up"] is True and f.last_error is None
+    assert _line_rows(pg_url, "ST-U") == []             # the line's tables are there, empty
+    f.line.dispose()
+    repo.close()
+
+
 def test_a_record_the_line_database_refuses_is_quarantined_not_blocking(tmp_path, table,
                                                                          pg_url):
     repo = _station(tmp_path, "st.db", table, "VINQ", [(1, "B1")])
@@ -277,9 +309,28 @@ def _line_file(station: Path, db: Path, line_url: str) -> None:
 def _retry_is_unreachable(station: Path, db: Path, pg_url: str, port: int) -> None:
     """With the line database down (the station file pointing at a port nothing serves), a
     quarantine retry says so in one readable line, exit 3."""
-    _line_file(station, db, pg_url.replace(f":{port}/", ":1/"))
+    down = pg_url.replace(f":{port}/", ":1/")
+    _line_file(station, db, down)
     got = _cli("line", "quarantine", "--config", str(station), "--retry")
-    assert got.returncode == 3 and "unreachable" in got.stderr and "Traceback" not in got.stderr
+    assert got.returncode == 3 and "Traceback" not in got.stderr
+    assert got.stderr.startswith(f"stationd: line database {down} unreachable: "), got.stderr
+
+
+def test_a_quarantine_retry_names_the_line_database_it_could_not_reach(tmp_path, table,
+                                                                      capsys):
+    """Issue 30: ``line quarantine --retry`` said "line database unreachable: ..." without
+    which, where ``line results`` and ``line init`` name its URL."""
+    from stationd.cli import main
+
+    _station(tmp_path, "st.db", table, "VINQ", []).close()
+    station = tmp_path / "station.yaml"
+    down = "postgresql+psycopg://line@127.0.0.1:1/line"
+    _line_file(station, tmp_path / "st.db", down)
+    for command in (["quarantine", "--retry"], ["results"]):
+        assert main(["line", *command, "--config", str(station)]) == 3
+        err = capsys.readouterr().err
+        assert err.startswith(f"stationd: line database {down} unreachable: connection "
+                              "failed: ") and err.count("\n") == 1, (command, err)
 
 
 def test_the_line_commands_show_the_backlog_and_retry_or_export_the_quarantine(

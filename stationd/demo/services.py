@@ -383,20 +383,26 @@ async def drain_all(services: list[StationServices],
 
 def not_answering(url: str) -> bool:
     """Whether the database at ``url`` does not answer a query now (within seconds)."""
+    return line_problem(url) is not None
+
+
+def line_problem(url: str) -> str | None:
+    """Why the line database at ``url`` does not answer a query now (within seconds), in the
+    user's words (:func:`line_words`); None when it answers."""
     from db.engine import make_engine
 
     try:
         engine = make_engine(_read_url(url))
-    except (SQLAlchemyError, DbError):
-        return True
+    except (SQLAlchemyError, DbError) as exc:
+        return line_words(url, _error_text(exc))
     try:
         with engine.connect() as conn:
             conn.exec_driver_sql("SELECT 1")
-    except (SQLAlchemyError, DbError, OSError):
-        return True
+    except (SQLAlchemyError, DbError, OSError) as exc:
+        return line_words(url, _error_text(exc))
     finally:
         engine.dispose()
-    return False
+    return None
 
 
 def line_counts(url: str, db_ids: set[str]) -> dict[tuple[str, str], Counter[str]]:

@@ -49,6 +49,7 @@ from stationd.demo.services import (
     bindable,
     demo_opcua,
     line_config,
+    line_problem,
     line_report,
     next_free_port,
     own_pairs,
@@ -67,6 +68,7 @@ from stationd.sim.operator import (
     LOOSEN_PROGRAM,
     MAX_RUNDOWNS,
     SUPERVISOR,
+    check_people,
     ended_words,
     loosen_programs,
     operate,
@@ -76,7 +78,7 @@ from stationd.sim.operator import (
 from stationd.sim.vin import make_vin
 from stationd.sim.world import World
 from stationd.station.actions import SendParams
-from stationd.station.commands import Issuer, Right
+from stationd.station.commands import Issuer
 from stationd.station.events import (
     BoltLocked,
     BoltReleased,
@@ -158,7 +160,7 @@ def run_station_demo(args: argparse.Namespace) -> int:
         raise InputError(f"{cfg.path}: the demo needs a bolt table (bolts:)")
     _check_demo_station(cfg)
     if getattr(args, "no_sim_supervisor", False):
-        _check_people(cfg)
+        check_people(cfg)
     instead = stand_ins(cfg)
     if instead:
         print(f"demo: {cfg.path} names real devices ({', '.join(instead)}): the demo runs its "
@@ -247,6 +249,12 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
                  f"each tightens at most {min(cycles, EXTRA_CYCLES)} of its bolts, one "
                  "station after another)" if n_stations > 1 else ""),
               file=out, flush=True)
+        problem = None if throwaway else line_problem(line_url)
+        if problem is not None:
+            print(f"line database: {problem} at the start; the demo runs and its forwarder "
+                  "keeps trying, but records it has not handed over by the end are lost with "
+                  "the demo's temporary database (verdict FAIL): start the line database, or "
+                  "give another --line-db", file=out, flush=True)
     # where its results are: not the station file's database (db report --config finds a
     # running demo's by the station file)
     print(f"records: {tmp / '1' / DATABASE} (the demo's own temporary database, removed when "
@@ -579,19 +587,6 @@ def _listen(args: argparse.Namespace, cfg: StationConfig) -> tuple[str | None, s
 
 def _ms(v: float | None, fmt: str) -> str:
     return "-" if v is None else format(v, fmt)
-
-
-def _check_people(cfg: StationConfig) -> None:
-    """``--no-sim-supervisor`` leaves each lock to a person's release: the station file needs
-    a user whose role has the release right.  Why: on config/sim (no ``access:``) the operator
-    waited for a release through ``stationd release`` or the screens' Release form, where
-    every login was refused ("no users are configured"), until Ctrl-C."""
-    users = cfg.access.users.values()
-    if not any(Right.RELEASE in cfg.access.roles.get(u.role, frozenset()) for u in users):
-        raise InputError(f"--no-sim-supervisor needs access.users in {cfg.path} with a user "
-                         "holding the release right (a supervisor), or nobody could release "
-                         "a lock: give --config a station file with one (stationd user hash "
-                         "makes a password's hash)")
 
 
 def _check_demo_station(cfg: StationConfig) -> None:

@@ -293,9 +293,9 @@ class Records:
 
     def close_vehicle(self, vin: str) -> VehicleEnded:
         report = self._repo().close_vehicle(vin)
-        log.info("vehicle %s closed: missing %s, skipped %s, NOK %s", vin,
-                 *(", ".join(bolts) or "none" for bolts in (report.missing, report.skipped,
-                                                            report.nok)))
+        # in db report's words (counted and labelled: "missing B01, ..., B50, skipped none,
+        # NOK none" gave 45 names and no count)
+        log.info("vehicle %s (%s) closed: %s", vin, report.vehicle.model, report.counts())
         # the screens' "not tightened when the vehicle left": skipped ones too
         return VehicleEnded(time.time(), vin, tuple(report.untightened), tuple(report.nok))
 

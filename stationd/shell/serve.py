@@ -254,7 +254,9 @@ async def forward(cfg: StationConfig, notifier: Notifier, screens: Screens,
         elif st["up"] is False:
             n = st["backlog"]
             line = f"line database: down ({st['last_error']}); " + (
-                "1 record waits" if n == 1 else f"{n} records wait")
+                "no record waits yet" if n == 0 else "1 record waits" if n == 1
+                else f"{n} records wait") + " (the station goes on; its records are " \
+                "forwarded when it answers)"
         else:
             line = f"line database: forwarding to {st['url']} ({st['backlog']} behind)"
         (log.warning if st["alarm"] or st["up"] is False else log.info)("%s", line)

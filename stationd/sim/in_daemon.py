@@ -39,7 +39,14 @@ from stationd.config import StationConfig
 from stationd.errors import InputError, StationError
 from stationd.shell.daemon import Station
 from stationd.sim.devices_cli import HELP, plc_command, psets_of
-from stationd.sim.operator import loosen_programs, operate, simulated_url, stand_ins
+from stationd.sim.operator import (
+    check_people,
+    loosen_programs,
+    operate,
+    releasers,
+    simulated_url,
+    stand_ins,
+)
 from stationd.sim.vin import make_vin
 from stationd.sim.world import World
 from stationd.station.commands import Issuer, Right
@@ -90,6 +97,8 @@ class SimulatedStation:
                 raise InputError(f"{cfg.path}: --sim-operator drives simulated devices only; "
                                  f"this station names real ones ({', '.join(real)}): run it "
                                  "without --sim-operator")
+            if not supervisor:
+                check_people(cfg)     # before the world is built: one line, at the start
         self.operator, self.seed = operator, seed
         #: False (``--no-sim-supervisor``): locks are left to people (the operator waits)
         self.supervisor = supervisor
@@ -144,6 +153,10 @@ class SimulatedStation:
                       "idle", cfg.path, ", ".join(stand_ins(cfg)) or "no sim:// camera")
         if not scripted:
             self._idle(station)      # before the journal's lines: typed commands find its PLC
+        elif not self.supervisor and not releasers(cfg):     # a reload took them away
+            log.error("simulated operator: no user of %s holds the release right: a lock "
+                      "waits until the station file gives one a role with it (and the "
+                      "station is reloaded)", cfg.path)
         if self._new_world:
             self._new_world = False
             who = "idle" if not scripted else "scripted" if self.supervisor else \

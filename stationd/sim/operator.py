@@ -75,6 +75,25 @@ def stand_ins(cfg: StationConfig) -> list[str]:
     return real
 
 
+def releasers(cfg: StationConfig) -> list[str]:
+    """The station file's users whose role has the release right (who can release a lock)."""
+    return sorted(name for name, u in cfg.access.users.items()
+                  if Right.RELEASE in cfg.access.roles.get(u.role, frozenset()))
+
+
+def check_people(cfg: StationConfig) -> None:
+    """``--no-sim-supervisor`` (``stationd demo``, ``stationd run --sim-operator``) leaves each
+    lock to a person's release: the station file needs a user whose role has the release
+    right.  Why: on config/sim (no ``access:``) the operator waited for a release through
+    ``stationd release`` or the screens' Release form, where every login was refused ("no
+    users are configured"), until Ctrl-C; one check for both commands, said at the start."""
+    if not releasers(cfg):
+        raise InputError(f"--no-sim-supervisor needs access.users in {cfg.path} with a user "
+                         "holding the release right (a supervisor), or nobody could release "
+                         "a lock: give --config a station file with one (stationd user hash "
+                         "makes a password's hash)")
+
+
 def _stderr(text: str) -> None:
     print(text, file=sys.stderr, flush=True)
 

@@ -298,7 +298,8 @@ class WebServer:
                 "headline": v["headline"],
                 "vehicle": v["vehicle"], "counters": v["counters"], "devices": v["devices"],
                 "versions": _versions(), "uptime_s": round(time.time() - self.started, 1),
-                "clients": self.clients, "line": self.line(), "operator": v["operator"]}
+                "clients": self.clients, "line": self.line(), "operator": v["operator"],
+                "locks": v["locks"], "release_by": self.release_by()}
 
     async def _status(self, request: web.Request) -> web.Response:
         return web.json_response(self.status(), dumps=lambda o: json.dumps(o, default=_plain))

@@ -49,6 +49,24 @@ def counter_words(c: dict[str, Any]) -> str:
     return words + f", {nok} {'bolt' if nok == 1 else 'bolts'} ending NOK"
 
 
+def lock_lines(st: dict[str, Any]) -> list[str]:
+    """Each locked (or held) bolt in the operator screen's words, and who releases it how.
+    Why: the journal said "B11 locked ... the operator waits ... for a person's release",
+    while ``stationd status`` showed only "1 bolt ending NOK" and "Bring the wrench to a
+    bolt": the bolt the station waited on was not in it."""
+    locks = list(st.get("locks") or [])
+    if not locks:
+        return []
+    vin = (st.get("vehicle") or {}).get("vin") or "VIN"
+    by = st.get("release_by")
+    who = "" if by is None else \
+        f" (a user with the release right: {', '.join(by)})" if by else \
+        " (no role of this station has the release right: access.roles)"
+    return [f"locked:   {text}" for text in locks] + [
+        f"release:  stationd release {vin} BOLT --user NAME, or the operator screen's Release "
+        f"form{who}"]
+
+
 def format_status(st: dict[str, Any]) -> str:
     """The status as a few readable lines."""
     lines = [f"state:    {st['state']}" + (f" ({st['reason']})" if st.get("reason") else "")]
@@ -62,6 +80,7 @@ def format_status(st: dict[str, Any]) -> str:
     op = st.get("operator") or {}
     if op.get("user") or op.get("required"):
         lines.append("operator: " + (op.get("user") or "nobody signed in: sign in to tighten"))
+    lines += lock_lines(st)
     for name, d in sorted(st.get("devices", {}).items()):
         check = d.get("check") or {}   # a pair's calibration check: up is not trusted
         lines.append(f"device:   {name}: " + (

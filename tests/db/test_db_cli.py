@@ -130,7 +130,10 @@ def test_report_exit_codes(run, db):
     assert code == 0 and out.splitlines()[0].endswith(
         ": bolts: 3 OK, 0 ending NOK, 0 skipped, 0 missing; rundowns: 4 tightening(s), "
         "1 NOK result(s)"), out
-    assert "unattributed: tightening 77 pset 4 NOK 9.5 N m" in out
+    # torque in the unit the journal, the demo and probe print (it said "N m" alone)
+    assert "unattributed: tightening 77 pset 4 NOK 9.5 Nm" in out
+    assert "OK       50.0 Nm, 35.0 deg, v1, 2 attempt(s)" in out and " N m" not in out
+    assert "2. tightening OK pset 2, 50.0 Nm, 35.0 deg, at " in out
     code, out, _ = run("db", "report", "VIN1", "--db", db, "--json")
     assert [u["tightening_id"] for u in json.loads(out)["unattributed"]] == [77]
     code, out, err = run("db", "report", "NOPE", "--db", db)

@@ -313,3 +313,32 @@ def test_nok_streaks_count_the_noks_in_a_row_since_an_ok_or_a_release(repo, bolt
     assert repo.nok_streaks("VIN1") == {"B1": 1}
     record(repo, "VIN1", "B2", ok=False, tightening_id=8)
     assert repo.nok_streaks("VIN1") == {"B1": 1, "B2": 1}
+
+
+def test_the_journal_line_of_a_closing_vehicle_counts_in_the_reports_words(tmp_path,
+                                                                           bolts_file, caplog):
+    """Issue 30: a vehicle leaving with 45 bolts untouched was journaled as "closed: missing
+    B01, B02, ..., B50, skipped none, NOK none": 45 names, no count, other words than
+    ``db report``'s.  Now the line is the report's counts, labelled."""
+    import logging
+
+    from stationd.config import StationConfig
+    from stationd.shell.records import Records
+
+    records = Records(StationConfig(database_url=url_of(tmp_path / "st.db"),
+                                    bolts_path=bolts_file))
+    repo = records.open()
+    repo.start_vehicle("VIN1", "SEDAN")
+    record(repo, "VIN1", "B1", ok=False)
+    record(repo, "VIN1", "B1", ok=True)
+    record(repo, "VIN1", "B2", ok=False)
+    with caplog.at_level(logging.INFO, logger="stationd"):
+        records.close_vehicle("VIN1")
+    said = [r.getMessage() for r in caplog.records if "closed" in r.getMessage()]
+    report = repo.vehicle_report("VIN1")
+    assert said == [f"vehicle VIN1 (SEDAN) closed: {report.counts()}"]
+    assert report.summary() == f"VIN1 (SEDAN, closed): {report.counts()}"
+    assert said[0].startswith("vehicle VIN1 (SEDAN) closed: bolts: 1 OK, 1 ending NOK (B2), "
+                              "0 skipped, ")
+    assert said[0].endswith("; rundowns: 3 tightening(s), 2 NOK result(s)")
+    repo.close()

@@ -276,8 +276,9 @@ def test_the_default_screens_port_in_use_moves_to_the_next_free_one_and_says_so(
 @pytest.mark.timeout(300)
 def test_a_line_database_that_never_answers_is_a_fail_that_counts_the_lost_records(tmp_path):
     """``--line-db`` on a port where nothing listens: PASS and exit 0 before, the records
-    gone with the demo's temporary database unsaid.  Also: the demo's start removes the
-    folders demos killed with SIGKILL left behind (their process gone), not a live one's."""
+    gone with the demo's temporary database unsaid; said at the start now too.  Also: the
+    demo's start removes the folders demos killed with SIGKILL left behind (their process
+    gone), not a live one's."""
     import socket
 
     from stationd.demo.leftovers import PID_FILE, PREFIX
@@ -308,6 +309,13 @@ def test_a_line_database_that_never_answers_is_a_fail_that_counts_the_lost_recor
     assert line["error"] == f"the line database at 127.0.0.1:{port} does not answer " \
         "(connection refused)"
     assert f"line database: not read back: {line['error']}; {line['missing']} record(s)" in err
+    # ... and said at the start (issue 30), in one line, before the run: what happens and
+    # what to do, not only at the end
+    start = (f"line database: {line['error']} at the start; the demo runs and its forwarder "
+             "keeps trying, but records it has not handed over by the end are lost with the "
+             "demo's temporary database (verdict FAIL): start the line database, or give "
+             "another --line-db\n")
+    assert err.count(start) == 1 and err.index(start) < err.index("vehicle: "), err[:3000]
     assert "lost with the demo's temporary database" in err
     assert "OperationalError" not in err and "Traceback" not in err
     assert sorted(p.name for p in temp.iterdir()) == [f"{PREFIX}live"]

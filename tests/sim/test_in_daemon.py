@@ -138,12 +138,79 @@ def test_without_the_operator_the_lift_waits_says_so_once_and_no_pair_faults(tmp
     assert "fault: pair1" not in journal and "no simulated world" not in journal
 
 
+@pytest.mark.timeout(180)
+def test_a_line_database_that_does_not_answer_is_said_at_the_start_and_the_station_runs(
+        tmp_path):
+    """Issue 30: with nothing recorded yet the forwarder did not try the line database, so an
+    unreachable ``line.url`` was said only with the first record.  Now the journal says it
+    at the start, in one line, and the station runs: a vehicle is opened."""
+    _station(tmp_path, line={"url": "postgresql+psycopg://line@127.0.0.1:1/line",
+                             "station_id": "ST-L"})
+    d = Daemon(tmp_path)
+    try:
+        d.wait(r"line database: down \(connection failed: connection to server at "
+               r"\"127\.0\.0\.1\", port 1 failed: Connection refused\); no record waits yet "
+               r"\(the station goes on; its records are forwarded when it answers\)", 60)
+        d.wait(r"simulated lift: down, no vehicle; raise it with 'next'", 60)
+        d.say("next")
+        d.wait(r"vehicle \w{17} \(SIM-1\) opened", 60)
+    finally:
+        code = d.stop()
+    journal = d.log()
+    assert code == 0 and "Traceback" not in journal
+    assert journal.count("line database: down") == 1          # said once, not at each retry
+
+
 def test_the_scripted_operator_is_refused_for_a_station_with_real_devices(tmp_path, capsys):
     station = _station(tmp_path, lift={"url": "modbus-tcp://127.0.0.1:1502"})
     code = main(["run", "--config", str(station), "--sim-operator"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and "\n" not in err
     assert "--sim-operator drives simulated devices only" in err and "lift modbus-tcp" in err
+
+
+def test_no_sim_supervisor_without_a_user_who_may_release_is_refused_at_the_start(
+        tmp_path, capsys):
+    """Issue 30: ``run --sim-operator --no-sim-supervisor`` on a station whose users cannot
+    release (here an operator only) waited for good for a release nobody could give; refused
+    now at the start, in one line, by the demo's check; no world built, no daemon started."""
+    from tests.shell.test_commands_daemon import HASH
+
+    station = _station(tmp_path, access={"users": {"olga": {"role": "operator",
+                                                            "password": HASH}}})
+    code = main(["run", "--config", str(station), "--sim-operator", "--no-sim-supervisor"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
+    assert err.startswith(f"stationd: error: --no-sim-supervisor needs access.users in {station} "
+                          "with a user holding the release right (a supervisor)"), err
+    assert not (tmp_path / "station.db").exists()
+
+
+@pytest.mark.timeout(300)
+def test_a_reload_that_leaves_nobody_who_may_release_is_said_in_the_journal(tmp_path):
+    """With a supervisor at the start, then a reload whose users cannot release: the daemon
+    goes on (a reload is not refused for it), and the journal says in one line that a lock
+    now waits until the file gives someone the right."""
+    from tests.shell.test_commands_daemon import HASH
+
+    access = {"users": {"olga": {"role": "operator", "password": HASH},
+                        "sam": {"role": "supervisor", "password": HASH}}}
+    station = _station(tmp_path, access=access)
+    d = Daemon(tmp_path, "--sim-operator", "--no-sim-supervisor")
+    try:
+        d.wait(r"operator: scripted, no simulated supervisor", 120)
+        assert "holds the release right" not in d.log()
+        doc = yaml.safe_load(station.read_text())
+        del doc["access"]["users"]["sam"]
+        station.write_text(yaml.safe_dump(doc, sort_keys=False))
+        d.p.send_signal(signal.SIGHUP)
+        path = re.escape(str(station))
+        d.wait(rf"configuration reloaded[\s\S]*simulated operator: no user of {path} holds "
+               r"the release right: a lock waits until the station file gives one a role with "
+               r"it \(and the station is reloaded\)", 120)
+    finally:
+        code = d.stop()
+    assert code == 0, d.log()[-3000:]
 
 
 def test_the_world_follows_the_stations_geometry_across_reloads(tmp_path):

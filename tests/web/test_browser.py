@@ -349,7 +349,14 @@ def test_the_line_database_down_is_amber_in_the_devices_never_a_station_fault(li
     state.update(up=False, backlog=7, last_error="connection refused")
     srv.publish(work())                    # any event (or the heartbeat) brings the news
     page.wait(lambda p: p.text("#devices li[data-device=line]")
-              == "line database down: 7 record(s) wait", what="the line database down")
+              == "line database down: 7 records wait", what="the line database down")
+    # counted in the journal's words (it said "7 record(s) wait", the journal "7 records
+    # wait"), also for one and for none yet (the forwarder asks at its start)
+    for n, words in ((1, "1 record waits"), (0, "no record waits yet")):
+        state.update(backlog=n)
+        srv.publish(work())
+        page.wait(lambda p, w=words: p.text("#devices li[data-device=line]")
+                  == f"line database down: {w}", what=f"the line database down, {words}")
     assert page.js("return document.querySelector('#devices li[data-device=line]')"
                    ".className") == "dev-wait"
     assert page.js("return document.getElementById('headline').dataset.tone") != "stop"

@@ -99,3 +99,41 @@ def test_status_says_a_pair_that_is_up_but_not_trusted_and_why():
         "pair2": {"ok": True, "check": moved}}})
     assert "device:   pair1: ok\n" in text
     assert "device:   pair2: ok; pair2 moved: reference R2 off by 5.5 mm (> 2 mm)" in text
+
+
+def test_status_names_a_locked_bolt_and_who_releases_it_how(live_server, capsys):
+    """Issue 30: with ``run --sim-operator --no-sim-supervisor`` the journal said "B11 ...
+    locked: the operator waits ... for a person's release", and ``stationd status`` showed
+    "1 bolt ending NOK" and "Bring the wrench to a bolt": not the bolt the station waited on,
+    nor what to do.  Now a line per lock, then the command and who may give it."""
+    from stationd.access import AccessConfig
+    from stationd.station.events import BoltLocked
+    from tests.web.scenario import VIN
+
+    srv = live_server()
+    srv.server.commands.access = AccessConfig()      # the default roles: supervisor releases
+    srv.publish([*opened(), BoltLocked("B2", 3)])
+
+    async def locked():
+        import asyncio
+        while not srv.server.view.locks():
+            await asyncio.sleep(0.02)
+    srv.call(locked())
+    assert main(["status", "--url", srv.url]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert "locked:   B2 locked after 3 NOK in a row: a supervisor releases it" in lines
+    assert f"release:  stationd release {VIN} BOLT --user NAME, or the operator screen's " \
+        "Release form (a user with the release right: supervisor)" in lines
+
+
+def test_status_without_a_lock_has_no_lock_lines_and_says_when_nobody_may_release():
+    from stationd.web.status_cli import format_status
+
+    st = {"state": "tracking", "vehicle": {"vin": "VIN1", "model": "SEDAN"}, "locks": []}
+    assert "locked:" not in format_status(st) and "release:" not in format_status(st)
+    st.update(locks=["B1 locked after 3 NOK in a row: a supervisor releases it"],
+              release_by=[])
+    assert format_status(st).splitlines()[2:4] == [
+        "locked:   B1 locked after 3 NOK in a row: a supervisor releases it",
+        "release:  stationd release VIN1 BOLT --user NAME, or the operator screen's Release "
+        "form (no role of this station has the release right: access.roles)"]

@@ -391,12 +391,18 @@ function drawResults(results) {
   }
 }
 
+// How many records wait, in the journal's words ("1 record waits", "7 records wait"; none
+// yet: the forwarder asks the line database at its start, before anything is recorded)
+function recordsWait(n) {
+  return n === 0 ? "no record waits yet" : n === 1 ? "1 record waits" : `${n} records wait`;
+}
+
 // The line database (store and forward): never a fault of the station, so never red; amber
 // while it is down or past its bounds, with how many records wait
 function lineShown(line) {
   if (!line) return null;
   const text = line.alarm ? `line database: ${line.alarm}` :
-    line.up === false ? `line database down: ${line.backlog} record(s) wait` :
+    line.up === false ? `line database down: ${recordsWait(line.backlog)}` :
     `line database: ${line.backlog} behind`;
   return {text, ok: !line.alarm && line.up !== false, title: line.last_error || line.url};
 }
