@@ -62,7 +62,7 @@ MODULES: tuple[str, ...] = (
     # the OPC UA server on loopback with an MES's client (in this process or its own)
     "opcua/test_server.py", "opcua/test_catchup.py", "opcua/test_curves.py",
     "opcua/test_security.py", "opcua/test_health.py", "opcua/test_dictionary.py",
-    "opcua/test_stacks.py",
+    "opcua/test_stacks.py", "opcua/test_model.py",
     # the benchmarks' runs (a daemon, a PostgreSQL, a shift with disturbances)
     "bench/test_bench.py", "bench/test_line_bench.py", "bench/test_linkcut_bench.py",
     "bench/test_services.py", "bench/test_soak.py", "bench/test_station_bench.py",

@@ -36,6 +36,7 @@ from typing import Any
 from asyncua.client.client import Client
 from asyncua.common.node import Node
 from asyncua.common.structures104 import make_structure
+from asyncua.server.address_space import AddressSpace, AttributeValue, NodeData
 from asyncua.server.server import Server
 
 from stationd.opcua import dictionary
@@ -90,7 +91,24 @@ def _split(uris: list[str], nodeid: str) -> tuple[str, str]:
 
 async def load_model(server: Server) -> list[_Struct]:
     """Import the companion models into ``server`` and fix their structures (1-3); returns
-    them (complete definitions, parents first) for :func:`publish_dictionaries`."""
+    them (complete definitions, parents first) for :func:`publish_dictionaries`.
+
+    The import is most of a server's start (seconds): the first server of a process imports,
+    and what the import added to its address space is kept (:class:`_Imported`); a later
+    server of the same process, in the same state before it, takes a copy of that instead."""
+    aspace = server.iserver.aspace
+    namespaces = list(await server.get_namespace_array())   # (the server's own list)
+    if _IMPORTED and await _IMPORTED[0].copy_into(server, namespaces):
+        return _IMPORTED[0].types
+    before = {nid: len(data.references) for nid, data in aspace._nodes.items()}
+    types = await _import(server)
+    if not _IMPORTED:
+        _IMPORTED.append(_Imported.of(aspace, before, namespaces,
+                                      list(await server.get_namespace_array()), types))
+    return types
+
+
+async def _import(server: Server) -> list[_Struct]:
     subtyped: dict[tuple[str, str], set[str]] = {}
     # the published files have references asyncua cannot place (warned about by the hundred)
     quiet = logging.getLogger("asyncua.common.xmlimporter")
@@ -113,6 +131,68 @@ async def load_model(server: Server) -> list[_Struct]:
             ua.AttributeIds.DataTypeDefinition, ua.DataValue(ua.Variant(t.sdef)))
     _generate(types)
     return types
+
+
+@dataclass(frozen=True)
+class _Imported:
+    """What importing the companion models did to a fresh server's address space: the nodes
+    it made, the references it added to nodes that were there, the namespaces it registered
+    (the only attribute of an existing node it changes: the namespace array), and the fixed
+    structures.  Its Python classes are the process's already (:func:`_generate`).
+
+    A copy has attribute holders, reference lists and arrays of its own (asyncua hands out
+    a value's own list, which read-modify-write code then changes in place) and shares the
+    rest, which a server replaces and never changes, so one server's nodes, references and
+    values never reach another's.  asyncua 2.1.0 keeps the nodes in ``AddressSpace._nodes``;
+    a test builds one server each way and compares every node."""
+
+    before: tuple[str, ...]          # the namespace array the import started from
+    after: tuple[str, ...]           # ... and ended with
+    added: dict[ua.NodeId, NodeData]
+    grown: dict[ua.NodeId, list[ua.ReferenceDescription]]
+    types: list[_Struct]
+
+    @classmethod
+    def of(cls, aspace: AddressSpace, before: dict[ua.NodeId, int], ns_before: list[str],
+           ns_after: list[str], types: list[_Struct]) -> _Imported:
+        nodes = aspace._nodes
+        return cls(tuple(ns_before), tuple(ns_after),
+                   {nid: _copy(d) for nid, d in nodes.items() if nid not in before},
+                   {nid: list(d.references[before[nid]:]) for nid, d in nodes.items()
+                    if nid in before and len(d.references) > before[nid]}, types)
+
+    async def copy_into(self, server: Server, namespaces: list[str]) -> bool:
+        """Give ``server`` what the import gave; False (nothing done) unless it is where the
+        import started: as many namespaces, none of the models', none of the nodes."""
+        aspace = server.iserver.aspace
+        if len(namespaces) != len(self.before) or \
+                set(namespaces) & set(self.after[len(self.before):]) or \
+                any(nid in aspace for nid in self.added):
+            return False
+        for uri in self.after[len(self.before):]:
+            await server.register_namespace(uri)
+        for nid, data in self.added.items():
+            aspace[nid] = _copy(data)
+        for nid, refs in self.grown.items():
+            aspace[nid].references.extend(refs)
+        return True
+
+
+def _copy(data: NodeData) -> NodeData:
+    """A node of its own (:class:`_Imported` says what is shared); no callbacks (an
+    imported node has none)."""
+    out = NodeData(data.nodeid)
+    for attr, held in data.attributes.items():
+        value = out.attributes[attr] = AttributeValue(ua.DataValue())
+        dv = held.value
+        if dv is not None and dv.Value is not None and isinstance(dv.Value.Value, list):
+            dv = replace(dv, Value=replace(dv.Value, Value=list(dv.Value.Value)))
+        value.value = dv
+    out.references = list(data.references)
+    return out
+
+
+_IMPORTED: list[_Imported] = []   # this process's first import (at most one)
 
 
 async def publish_dictionaries(server: Server, types: list[_Struct], idx: int) -> \

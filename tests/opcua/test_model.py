@@ -1,0 +1,86 @@
+"""The companion models in a server's address space: imported, or copied from the process's
+first import (:class:`stationd.opcua.model._Imported`), node for node the same."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+import pytest
+from asyncua.server.server import Server
+
+from stationd.opcua import model
+from stationd.opcua.model import MACHINERY_URI
+from stationd.opcua.uatypes import ua
+
+MACHINES_FOLDER = 1001   # Machinery's Machines folder (what the station's JoiningSystem joins)
+
+
+async def _server(app: str) -> tuple[Server, float]:
+    server = Server()
+    await server.init()
+    await server.set_application_uri(app)
+    loop = asyncio.get_running_loop()
+    start = loop.time()
+    await model.load_model(server)
+    return server, loop.time() - start
+
+
+def _nodes(server: Server) -> dict[Any, tuple[dict[Any, str], list[str]]]:
+    """Every node: its attributes' values and its references, as text."""
+    return {nid: ({a: repr(v.value.Value if v.value is not None else None)
+                   for a, v in d.attributes.items()}, sorted(map(repr, d.references)))
+            for nid, d in server.iserver.aspace._nodes.items()}
+
+
+def _differing(a: dict[Any, Any], b: dict[Any, Any]) -> set[Any]:
+    assert set(a) == set(b)
+    return {nid for nid in a if a[nid] != b[nid]}
+
+
+@pytest.fixture
+def first_import(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(model, "_IMPORTED", [])   # this test's servers make the process's first
+
+
+@pytest.mark.usefixtures("first_import")
+def test_a_copied_model_is_the_imported_one_node_for_node_and_apart_from_it():
+    async def scenario() -> None:
+        imported, _ = await _server("urn:a")
+        assert len(model._IMPORTED) == 1
+        copied, _ = await _server("urn:b")
+        # a server's changes stay its own: a node under a shared folder, a namespace, arrays
+        # grown in place
+        uris = await copied.get_namespace_array()
+        folder = copied.get_node(ua.NodeId(MACHINES_FOLDER, uris.index(MACHINERY_URI)))
+        await folder.add_object(ua.NodeId("Mine", 1), ua.QualifiedName("Mine", 1))
+        await copied.register_namespace("urn:one-of-them")
+        grown = 0
+        for nid, data in copied.iserver.aspace._nodes.items():
+            value = data.attributes.get(ua.AttributeIds.Value)
+            if nid.NamespaceIndex > 1 and value is not None and value.value is not None \
+                    and isinstance(value.value.Value.Value, list):
+                value.value.Value.Value.append("changed in place")
+                grown += 1
+        assert grown > 0
+        fresh, _ = await _server("urn:c")
+        f = _nodes(fresh)
+        assert ua.NodeId("Mine", 1) not in f
+        assert "urn:one-of-them" not in await fresh.get_namespace_array()
+        assert "changed in place" not in repr(f)
+        # a server not where the import started (indices would differ) imports itself
+        other = Server()
+        await other.init()
+        await other.set_application_uri("urn:d")
+        await other.register_namespace("urn:an-extra-namespace")
+        await model.load_model(other)
+        assert (await other.get_namespace_array()).index(MACHINERY_URI) == 6
+        # a copy differs from the import only where two imports differ (the application's
+        # URI, the server's start time), and only in standard nodes
+        model._IMPORTED.clear()
+        again, _ = await _server("urn:e")
+        a, b, c = _nodes(imported), _nodes(fresh), _nodes(again)
+        assert _differing(a, b) <= _differing(a, c)
+        assert all(nid.NamespaceIndex == 0 for nid in _differing(a, c))
+
+    asyncio.run(scenario())
