@@ -134,7 +134,9 @@ class ResultRules(OrderRules):
         if proved is not None:
             return self._attribute(ev, proved, cut=True)
         why = f"result {tid} (pset {r.pset}) " + (
-            "fetched after a reconnect" if ev.fetched else "outside any tightening")
+            "outside any tightening" if not ev.fetched else
+            "fetched after a later one came, the link up" if ev.live else
+            "fetched after a reconnect")
         if not_proved:
             why += f" ({not_proved})"
         return [StoreUnattributed(r, self.vin, why),
@@ -197,8 +199,9 @@ class ResultRules(OrderRules):
     def _on_results_missed(self, ev: ResultsMissed) -> list[Action]:
         ids = str(ev.first) if ev.first == ev.last else f"{ev.first}-{ev.last}"
         return [StoreGap(ev.first, ev.last, self.vin, ev.reason),
-                Publish(Notice(f"tightening {ids} missed while the link was down: a gap "
-                               f"({ev.reason})", "warning", t=ev.t))]
+                Publish(Notice(f"tightening {ids} missed "
+                               f"{'with the link up' if ev.live else 'while the link was down'}"
+                               f": a gap ({ev.reason})", "warning", t=ev.t))]
 
     def _on_not_stored(self, ev: NotStored) -> list[Action]:
         return [Publish(Notice(f"tightening {ev.tightening_id} of {ev.bolt} not stored: "
