@@ -31,6 +31,7 @@ from stationd.station.events import DeviceIdentified
 from stationd.station.gaps import MAX_FETCH, GapPlan
 from stationd.station.gaps import plan as plan_gaps
 from stationd.station.inputs import WRENCH, DeviceBack, Event, ResultIn, ResultsMissed, UnreadableIn
+from stationd.station.results import CLOCK_SLACK_S
 
 log = logging.getLogger("stationd")
 RESULT_WAIT_S = 0.5         # one blocking wait for pushed results (a condition, not a poll)
@@ -140,6 +141,9 @@ class ControllerFeed:
             # from here the ids up to the controller's newest are this catch-up's; a pushed
             # result after them that skips one is a live gap (:meth:`_live_gap`)
             self._accounted = nid if self._accounted is None else max(self._accounted, nid)
+            if last is None:
+                await self._first_results(wrench, newest, nid)
+                return
             todo = plan_gaps(last, nid)
             if todo.note:
                 log.info("results: %s", todo.note)
@@ -149,6 +153,48 @@ class ControllerFeed:
                         one_line(exc))
         except STATION_FAULTS as exc:
             log.error("results missed while the link was down not fetched: %s", one_line(exc))
+
+    async def _first_results(self, wrench: Wrench, newest: Received, nid: int) -> None:
+        """No tightening of this controller recorded yet, so no id to count from: the results
+        it made since the station may have missed them (:meth:`StationCore.missed_since`: the
+        enable a link cut came during, else the link lost) are found backwards from its
+        newest by their own timestamps (through the clock offset measured at connect), at
+        most ``MAX_FETCH``, and fed oldest first, each after the id of the last result made
+        before that (the first one after it is what the core's proof of a result made under
+        the cut enable asks for; unknown where the controller no longer has it or its time
+        cannot be read: then nothing is proved, and what was found stays unattributed).
+        What it made before is its history, not this station's: not fetched."""
+        since, offset = self.core.missed_since(), wrench.clock_offset_s
+        found: list[tuple[int, Received]] = []
+        follows: int | None = None
+        got: Received | None = newest
+        tid = nid
+        while since is not None and got is not None and len(found) < MAX_FETCH:
+            at = made_at(got, offset)
+            if at is None:
+                break                  # its time unknown: where the history begins too
+            if at < since - CLOCK_SLACK_S:
+                follows = tid          # made before: the history ends here
+                break
+            found.append((tid, got))
+            if tid <= 1:
+                follows = 0            # the controller's first result: nothing before it
+                break
+            tid -= 1
+            got = await self._call(wrench.fetch_result, tid)
+        if not found:
+            log.info("results: no tightening recorded yet: counting from the controller's "
+                     "newest, %d", nid)
+            return
+        log.info("results: no tightening recorded yet; %d made by the controller since the "
+                 "link was lost%s: fetched", len(found),
+                 "" if follows is not None else " (where its history ends is not known)")
+        for tid, got in reversed(found):
+            log.info("tightening %d fetched after a reconnect", tid)
+            await self._feed(result_input(time.time(), got, fetched=True, follows=follows,
+                                          offset=offset))
+            if isinstance(got, TighteningResult):
+                await self._late_curves(wrench, tid)
 
     async def _live_gap(self, wrench: Wrench, got: Received) -> None:
         """A pushed result whose tightening id skips ahead of the last one accounted for on
@@ -255,11 +301,13 @@ def result_input(t: float, got: Received, *, fetched: bool = False, follows: int
                     made_at=made_at(got, offset) if fetched else None, live=live)
 
 
-def made_at(result: TighteningResult, offset: float | None) -> float | None:
+def made_at(result: Received, offset: float | None) -> float | None:
     """The result's controller timestamp (naive, the controller's local time) on the
     station's clock (epoch seconds): ``offset`` is the controller's local time minus the
     station's, measured at connect (None: unknown, and so is the time)."""
     if offset is None or not isinstance(offset, int | float):
+        return None
+    if result.timestamp is None:     # an unreadable result's, where it could not be read
         return None
     try:
         return result.timestamp.timestamp() - float(offset)

@@ -14,7 +14,7 @@ from db.kinds import NOT_TAKEN
 from drivers.wrench.sim.controller import SimController
 from stationd.sim.devices_cli import psets_of
 from stationd.station.results import result_type_words
-from tests.shell.daemons import SIM, tool_on, tracking, until
+from tests.shell.daemons import SIM, controller, tool_on, tracking, until
 from tests.shell.daemons import db_rows as _rows
 
 pytestmark = pytest.mark.system      # whole daemons
@@ -151,3 +151,47 @@ def test_an_untyped_ok_outside_the_torque_window_holds_its_bolt(tmp_path):
                      "ON b.id = r.bolt_id") == [("B06", good.tightening_id)]
     assert _rows(db, "SELECT bolt, settled_at IS NOT NULL FROM tool_enables ORDER BY id") == [
         ("B05", 1), ("B06", 1)]
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("history", [0, 2], ids=["a new controller", "its own history"])
+def test_a_tightening_made_during_a_cut_before_any_result_was_recorded_goes_to_its_bolt(
+        tmp_path, history):
+    """The station has recorded no result of this controller yet (no tightening id to count
+    from) when the link is cut during its first enable: at the reconnect the results made
+    since that enable are found back from the controller's newest by their timestamps; the
+    first, made under the enable, is recorded to its bolt, the second stays unattributed;
+    what the controller made before the station started (its history) is not fetched."""
+    pose = tmp_path / "pose"
+    ctl = controller(9)
+    ctl.start()
+    old = []
+    if history:      # results made at the controller before the station ran
+        ctl.call(lambda: (setattr(ctl, "pset", 1), setattr(ctl, "tool_enabled", True)))
+        old = [ctl.pull_trigger() for _ in range(history)]
+        ctl.call(lambda: setattr(ctl, "tool_enabled", False))
+        assert all(o is not None for o in old)
+        time.sleep(3.0)                          # beyond the controller clock's slack
+    with tracking(tmp_path, "FIRSTCUTVIN000001", ctl=ctl) as (d, _, ctl):
+        tool_on(d, ctl, pose, "B05")
+        ctl.refuse_revisions(1, range(1, 8))     # the link down, and kept down
+        ctl.drop_connections()
+        d.wait_log("fault: wrench")
+        made = ctl.pull_trigger()
+        again = ctl.pull_trigger()
+        assert made is not None and again is not None
+        assert made.tightening_id == history + 1
+        time.sleep(6.0)                          # past the late-result window (5 s)
+        ctl.clear_refusals()
+        d.wait_log("wrench: back")
+        d.wait_log(f"tightening {made.tightening_id} made during the link cut, fetched after "
+                   "it: recorded to B05")
+        d.wait_log(f"tightening {again.tightening_id} fetched after a reconnect")
+        d.wait_log(f"result {again.tightening_id} (pset {again.pset}) fetched after a "
+                   "reconnect")
+    db = tmp_path / "station.db"
+    assert _rows(db, "SELECT r.tightening_id, b.code FROM tightening_records r JOIN bolts b "
+                     "ON b.id = r.bolt_id") == [(made.tightening_id, "B05")]
+    assert _rows(db, "SELECT tightening_id FROM unattributed_results") == [
+        (again.tightening_id,)]
+    assert _rows(db, "SELECT count(*) FROM result_gaps") == [(0,)]
