@@ -6,9 +6,10 @@ as a NOK otherwise, also after a restart: :meth:`Repository.nok_streaks` and
 :meth:`Repository.held_bolts` read it as any rundown), yet it was not measured by the
 station.  It is written with the command that entered it, in one transaction (the command's
 record is the audit trail, the rundown the result), and carries its provenance: who entered
-it (``entered_by``), their comment, and the unreadable result it resolves.  Where the wrench
-was and the parameters sent are those of the tool enable the unreadable result answered
-(none stored: zeros and the bolt's current parameter version).
+it (``entered_by``), their comment, and the unreadable result it resolves (or, for a bolt
+held by an OK result without a type outside its torque window, that result's tightening id).
+Where the wrench was and the parameters sent are those of the tool enable the held result
+answered (none stored: zeros and the bolt's current parameter version).
 """
 
 from __future__ import annotations
@@ -23,10 +24,11 @@ from sqlalchemy.orm import Session
 from db.engine import writer
 from db.errors import DatabaseError, DataError, NotFoundError
 from db.importer import current_version, parameters_of
-from db.kinds import TIGHTENING
+from db.kinds import NOT_TAKEN, TIGHTENING
 from db.ledger import RUNDOWN, add_command, append
 from db.models import (
     Bolt,
+    ControllerEvent,
     ProcessParameters,
     TighteningRecord,
     ToolEnable,
@@ -67,6 +69,17 @@ def record_entered(repo: Repository, *, vin: str, bolt: str, ok: bool, torque_nm
             held = s.scalar(select(UnreadableRecord).where(
                 UnreadableRecord.vin == vin, UnreadableRecord.bolt == bolt)
                 .order_by(UnreadableRecord.id.desc()).limit(1))
+            # or held by an OK result without a type outside the torque window, read but not
+            # taken for a tightening: its tightening id is the one entered for
+            not_taken = s.scalar(select(ControllerEvent).where(
+                ControllerEvent.vin == vin, ControllerEvent.bolt == bolt,
+                ControllerEvent.what == NOT_TAKEN)
+                .order_by(ControllerEvent.id.desc()).limit(1))
+            if not_taken is not None and (held is None
+                                          or not_taken.recorded_at >= held.recorded_at):
+                held = None
+            tightening_id = held.tightening_id if held is not None else \
+                not_taken.tightening_id if not_taken is not None else None
             # the bolt is held since that result: no tool enable for it came after
             enable = s.scalar(select(ToolEnable).where(
                 ToolEnable.vin == vin, ToolEnable.bolt == bolt)
@@ -84,7 +97,7 @@ def record_entered(repo: Repository, *, vin: str, bolt: str, ok: bool, torque_nm
                 params_sent=_params_json(parameters_of(version)), acknowledged=True,
                 status="ok" if ok else "nok", torque_nm=float(torque_nm),
                 angle_deg=float(angle_deg),
-                tightening_id=held.tightening_id if held is not None else None,
+                tightening_id=tightening_id,
                 sent_at=enable.enabled_at if enable is not None else None,
                 result_at=at, recorded_at=utcnow(), images=[], kind=TIGHTENING,
                 operator=sel.get("operator"), entered_by=user[:64],

@@ -21,5 +21,30 @@ OK, NOK, MISSING, LOOSENED, TO_LOOSEN = "ok", "nok", "missing", "loosened", "loo
 #: tightened either, but not forgotten, and an export must not say it was
 SKIPPED = "skipped"
 
-__all__ = ["LOOSENED", "LOOSENING", "MISSING", "NOK", "OK", "RUNDOWN_KINDS", "SKIPPED",
-           "TIGHTENING", "TO_LOOSEN"]
+#: an OK result without a result type (a controller revision that reports none, or a register
+#: map without one) whose torque lies outside its bolt's torque window: perhaps no tightening
+#: at all (a batch increment reads so at such a revision, an OK of 0 Nm), so never taken for
+#: one.  Stored as a controller event under this name (``what``: 32 characters at most), its
+#: bolt held until a supervisor checked it on the controller (released, or its outcome
+#: entered), also after a restart
+NOT_TAKEN = "untyped OK outside torque window"
+#: how a held bolt's note begins for such a result (the note of a result that could not be
+#: read names that result alone: "tightening 1234", "MID 0061 revision 7")
+NOT_TAKEN_NOTE = "an OK result without a result type"
+
+
+def not_taken_note(torque_nm: float | None, tightening_id: int | None) -> str:
+    """A held bolt's note for an OK result without a type outside its torque window."""
+    torque = "" if torque_nm is None else f", {torque_nm:.1f} Nm"
+    which = "" if tightening_id is None else f" (tightening {tightening_id})"
+    return f"{NOT_TAKEN_NOTE}{torque} outside the bolt's torque window{which}"
+
+
+def is_not_taken_note(note: str | None) -> bool:
+    """Whether a held bolt's note is such a result's (else: a result not read)."""
+    return note is not None and note.startswith(NOT_TAKEN_NOTE)
+
+
+__all__ = ["LOOSENED", "LOOSENING", "MISSING", "NOK", "NOT_TAKEN", "NOT_TAKEN_NOTE", "OK",
+           "RUNDOWN_KINDS", "SKIPPED", "TIGHTENING", "TO_LOOSEN", "is_not_taken_note",
+           "not_taken_note"]

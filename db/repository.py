@@ -26,7 +26,7 @@ from db.bolts import BoltTable, Parameters, dump_bolts
 from db.engine import DEFAULT_URL, make_engine, writer
 from db.errors import DatabaseError, DataError, NotFoundError, VehicleClosedError
 from db.importer import ImportReport, current_version, import_table, parameters_of, read_table
-from db.kinds import LOOSENING, RUNDOWN_KINDS, TIGHTENING
+from db.kinds import LOOSENING, NOT_TAKEN, RUNDOWN_KINDS, TIGHTENING, not_taken_note
 from db.ledger import (
     CONTROLLER_EVENT,
     GAP,
@@ -383,16 +383,20 @@ class Repository:
                                 bolt: str | None, controller_vin: str | None,
                                 tightening_id: int | None, pset: int | None, ok: bool,
                                 torque_nm: float | None, angle_deg: float | None,
-                                result_at: datetime | None) -> int | None:
-        """Store a controller result that is not a rundown (a batch step, a bypass, ...);
-        return its id, or None when this very result (same tightening id and type) is
-        stored already (a resent copy)."""
+                                result_at: datetime | None, enable_id: int | None = None
+                                ) -> int | None:
+        """Store a controller result that is not a rundown (a batch step, a bypass, an OK
+        without a type outside its bolt's torque window, ...); return its id, or None when
+        this very result (same tightening id and type) is stored already (a resent copy).
+        ``enable_id``: the tool enable it answers, settled in the same transaction (its bolt
+        is held for a person instead, :data:`db.kinds.NOT_TAKEN`)."""
         with self._session(write=True) as s:
             if tightening_id is not None:
                 same = s.scalar(select(ControllerEvent.id).where(
                     ControllerEvent.tightening_id == int(tightening_id),
                     ControllerEvent.result_type == int(result_type)).limit(1))
                 if same is not None:
+                    _settle(s, enable_id)
                     return None
             row = ControllerEvent(
                 result_type=int(result_type), what=what[:32], vin=vin, bolt=bolt,
@@ -400,6 +404,7 @@ class Repository:
                 status="ok" if ok else "nok", torque_nm=_opt_float(torque_nm),
                 angle_deg=_opt_float(angle_deg), result_at=result_at, recorded_at=utcnow())
             s.add(row)
+            _settle(s, enable_id)
             s.flush()
             append(s, CONTROLLER_EVENT, row.id)
             return row.id
@@ -457,19 +462,28 @@ class Repository:
 
     def held_bolts(self, vin: str, since: datetime | None = None) -> dict[str, str]:
         """Bolts of ``vin`` held by an unreadable result (bolt -> which result: its tightening
-        id, else its MID and revision):
-        one stored for the bolt after its last rundown and its last release command (only
-        those since ``since``, the vehicle's last opening).  A hold outlives a restart."""
+        id, else its MID and revision), or by an OK result without a type outside the bolt's
+        torque window (:data:`db.kinds.NOT_TAKEN`: bolt -> its note): one stored for the bolt
+        after its last rundown and its last release command (only those since ``since``, the
+        vehicle's last opening).  A hold outlives a restart."""
         with self._session(write=False) as s:
             q = select(UnreadableRecord.bolt, UnreadableRecord.recorded_at,
                        UnreadableRecord.tightening_id, UnreadableRecord.mid,
                        UnreadableRecord.revision).where(
                 UnreadableRecord.vin == vin, UnreadableRecord.bolt.is_not(None))
+            n = select(ControllerEvent.bolt, ControllerEvent.recorded_at,
+                       ControllerEvent.tightening_id, ControllerEvent.torque_nm).where(
+                ControllerEvent.vin == vin, ControllerEvent.bolt.is_not(None),
+                ControllerEvent.what == NOT_TAKEN)
             if since is not None:
                 q = q.where(UnreadableRecord.recorded_at >= since)
-            held = {str(b): (f"tightening {tid}" if tid is not None
-                             else f"MID {mid:04d} revision {rev}", at)
-                    for b, at, tid, mid, rev in s.execute(q.order_by(UnreadableRecord.id))}
+                n = n.where(ControllerEvent.recorded_at >= since)
+            holds = [(at, str(b), f"tightening {tid}" if tid is not None
+                      else f"MID {mid:04d} revision {rev}")
+                     for b, at, tid, mid, rev in s.execute(q.order_by(UnreadableRecord.id))]
+            holds += [(at, str(b), not_taken_note(torque, tid))
+                      for b, at, tid, torque in s.execute(n.order_by(ControllerEvent.id))]
+            held = {b: (note, at) for at, b, note in sorted(holds, key=lambda h: h[0])}
             if not held:
                 return {}
             v = _vehicle(s, vin)

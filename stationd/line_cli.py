@@ -196,7 +196,10 @@ def cmd_line_results(args: argparse.Namespace) -> int:
                                "received_at": r.received_at.isoformat(), "pset": r.pset,
                                "tightening_id": r.tightening_id,
                                "torque_window_nm": list(r.torque),
-                               "angle_window_deg": list(r.angle)}))
+                               "angle_window_deg": list(r.angle),
+                               "entered_by": r.entered_by,
+                               "entered_comment": r.entered_comment,
+                               "unreadable_record_id": r.unreadable_record_id}))
         return 0 if rows else EXIT_WAITING
     what = " ".join(x for x in (f"VIN {args.vin}" if args.vin else "",
                                 f"station {args.station}" if args.station else "",
@@ -210,7 +213,8 @@ def cmd_line_results(args: argparse.Namespace) -> int:
     head = ("time (UTC)", "station", "VIN", "bolt", "result", "torque Nm", "angle deg",
             "version", "operator")
     table = [[r.at.strftime("%Y-%m-%d %H:%M:%S"), r.station_id, r.vin, r.bolt,
-              ("OK" if r.ok else "NOK") + (" (loosening)" if r.kind == LOOSENING else ""),
+              ("OK" if r.ok else "NOK") + (" (loosening)" if r.kind == LOOSENING else "")
+              + (f" (entered by {r.entered_by})" if r.entered_by else ""),
               _n(r.torque_nm), _n(r.angle_deg), "-" if r.version is None else str(r.version),
               r.operator or "-"]
              for r in rows]
@@ -303,6 +307,9 @@ def cmd_line_init(args: argparse.Namespace) -> int:
     if change.trigger and not change.made:   # tables there, the typing of new rows not
         print("the trigger that types line_feed's new rows: made or brought up to date")
     filled = [(name, n) for name, n in change.filled if n]
+    for name, cols, n in change.added:   # a typed table an earlier version made
+        print(f"added to {name}: {', '.join(cols)} ({n} row(s) given their values from "
+              "line_feed)")
     if filled:   # a line database an earlier version made: its records typed once
         print("filled from line_feed: " + ", ".join(f"{name} {n} row(s)"
                                                      for name, n in filled))

@@ -36,6 +36,11 @@ from ``line_feed``).  It is a statement trigger over the inserted rows (a batch 
 row twice, so a replay types nothing twice either.  Tables, not views over the JSONB: their
 columns have real types and planner statistics, and the hourly NOK rate reads narrow rows, not
 every record's JSON (curves with their samples share ``line_feed``).
+
+A column a typed table gained in a later version (:attr:`Typed.added`, e.g. an entered
+outcome's ``entered_by`` in ``line_rundowns``) is added to a table an earlier version made,
+with its comment, and the rows already typed get its value from ``line_feed`` in the same
+transaction that brings the trigger up to date (:data:`TYPED_VERSION`).
 """
 
 from __future__ import annotations
@@ -67,6 +72,7 @@ from sqlalchemy import (
 )
 from sqlalchemy.dialects.postgresql import JSONB
 from sqlalchemy.exc import DBAPIError
+from sqlalchemy.schema import SetColumnComment
 
 from db.kinds import LOOSENING, NOK, OK, TIGHTENING
 from db.ledger import (
@@ -189,6 +195,9 @@ class Typed:
     kind: str                        # the feed's record kind (db.ledger's constant)
     table: Table
     exprs: tuple[str, ...]           # one per column of ``table``, in order
+    #: the columns added after the table's first version (last in ``table``): a table made
+    #: by an earlier version gets them added and filled from ``line_feed``
+    added: tuple[str, ...] = ()
 
     def fill_sql(self, source: str) -> str:
         """``INSERT`` into the table the rows of ``source`` (``line_feed`` or the trigger's
@@ -201,10 +210,14 @@ class Typed:
 
 
 def _typed(kind: str, name: str, comment: str, columns: list[tuple[Column[Any], str]],
-           *indexes: Index) -> Typed:
-    cols = [*_key(), *columns, _received()]
+           *indexes: Index, added: list[tuple[Column[Any], str]] | None = None) -> Typed:
+    """A typed table; ``added``: its columns of later versions, after ``received_at`` as
+    ``ALTER TABLE ... ADD COLUMN`` puts them in a table made before them (one column order
+    whichever version made the table)."""
+    cols = [*_key(), *columns, _received(), *(added or [])]
     table = Table(name, LINE, *(c for c, _ in cols), *indexes, comment=comment)
-    return Typed(kind, table, tuple(e for _, e in cols))
+    return Typed(kind, table, tuple(e for _, e in cols),
+                 tuple(c.name for c, _ in added or []))
 
 
 def _window(what: str, unit: str, key: str) -> list[tuple[Column[Any], str]]:
@@ -268,6 +281,16 @@ LINE_RUNDOWNS = _typed(
     Index("ix_line_rundowns_bolt", "bolt", "at"),
     Index("ix_line_rundowns_station", "station_id", "at"),
     Index("ix_line_rundowns_at", "at", postgresql_include=["station_id", "kind", "status"]),
+    # an outcome a supervisor entered from the controller's screen (its result could not be
+    # read): a rundown all the same, but not measured; who, why, and the result it resolves
+    added=[(Column("entered_by", Text, comment="who entered this outcome from the "
+                   "controller's screen, not measured by the station (NULL: measured)"),
+            _text(_j("entered_by"))),
+           (Column("entered_comment", Text, comment="what the person who entered it said "
+                   "they checked (NULL: measured)"), _text(_j("entered_comment"))),
+           (Column("unreadable_record_id", BigInteger, comment="the unreadable result it "
+                   "resolves: line_unreadable_results.record_id of the same station and "
+                   "db_id (NULL: none)"), _int(_j("unreadable_id"), 64))],
 )
 
 LINE_COMMANDS = _typed(
@@ -407,14 +430,17 @@ TRIGGER = "line_feed_typed"   # the trigger and its function
 #: the SQL to it).  Why a number and not the SQL compared: on a line whose stations are
 #: upgraded one at a time, an older forwarder would put its older SQL back at each start; it
 #: replaces only an older version.
-TYPED_VERSION = 2   # 2: line_controller_events, line_unreadable_results
+TYPED_VERSION = 3   # 2: line_controller_events, line_unreadable_results; 3: line_rundowns'
+#                       entered outcomes (entered_by, entered_comment, unreadable_record_id)
 _VERSION_LINE = re.compile(r"-- stationd typed tables, version (\d+)\n")
 
 
-def trigger_body() -> str:
-    """The trigger function's body: each typed table filled from the statement's new rows."""
-    fills = "".join(f"  {t.fill_sql('new_rows')};\n" for t in TYPED)
-    return (f"\n-- stationd typed tables, version {TYPED_VERSION}\nBEGIN\n{fills}"
+def trigger_body(typed: tuple[Typed, ...] = TYPED, version: int = TYPED_VERSION) -> str:
+    """The trigger function's body: each typed table filled from the statement's new rows
+    (``typed`` and ``version``: those of this version, other ones to make an earlier
+    version's line database in a test)."""
+    fills = "".join(f"  {t.fill_sql('new_rows')};\n" for t in typed)
+    return (f"\n-- stationd typed tables, version {version}\nBEGIN\n{fills}"
             "  RETURN NULL;\nEND\n")
 
 
@@ -435,6 +461,9 @@ class SchemaChange:
 
     made: tuple[str, ...] = ()
     filled: tuple[tuple[str, int], ...] = ()
+    #: columns added to a typed table an earlier version made: (table, its new columns, the
+    #: rows of line_feed that gave them values)
+    added: tuple[tuple[str, tuple[str, ...], int], ...] = ()
     trigger: bool = False            # the trigger (or its function) made or brought up to date
     #: why the typed tables or their trigger could not be made by this role (None: they are
     #: there); line_feed and line_parameters are, and the records go on being forwarded
@@ -493,11 +522,14 @@ def _typed_schema(conn: Connection, before: set[str]) -> SchemaChange:
         "SELECT 1 FROM pg_trigger WHERE tgname = :n AND tgrelid = 'line_feed'::regclass"),
         {"n": TRIGGER}).first() is not None
     fill = [t for t in TYPED if not has_trigger or t.table.name not in before]
-    if current >= TYPED_VERSION and has_trigger and not fill:
+    missing = _missing_columns(conn, before)
+    if current >= TYPED_VERSION and has_trigger and not fill and not missing:
         return SchemaChange()
     # inserts wait from here until this commits: a row committed meanwhile is either filled
     # below or typed by the trigger, never neither
     conn.execute(text("LOCK TABLE line_feed IN SHARE ROW EXCLUSIVE MODE"))
+    added = tuple((t.table.name, tuple(c.name for c in cols), _add_columns(conn, t, cols))
+                  for t, cols in missing)
     if current < TYPED_VERSION:
         # SECURITY DEFINER: a forwarding role granted INSERT on line_feed alone types its
         # rows too; the search path fixed to where the tables are
@@ -510,7 +542,42 @@ def _typed_schema(conn: Connection, before: set[str]) -> SchemaChange:
             f"AS new_rows FOR EACH STATEMENT EXECUTE FUNCTION {TRIGGER}()"))
     filled = tuple((t.table.name, int(conn.execute(text(t.fill_sql("line_feed"))).rowcount))
                    for t in fill)
-    return SchemaChange(filled=filled, trigger=True)
+    return SchemaChange(filled=filled, trigger=True, added=added)
+
+
+def _missing_columns(conn: Connection, before: set[str]
+                     ) -> list[tuple[Typed, list[Column[Any]]]]:
+    """The added columns (:attr:`Typed.added`) a typed table made by an earlier version
+    lacks."""
+    out = []
+    for t in TYPED:
+        if not t.added or t.table.name not in before:
+            continue
+        has = {c["name"] for c in inspect(conn).get_columns(t.table.name)}
+        cols = [t.table.c[name] for name in t.added if name not in has]
+        if cols:
+            out.append((t, cols))
+    return out
+
+
+def _add_columns(conn: Connection, t: Typed, cols: list[Column[Any]]) -> int:
+    """``cols`` added to ``t``'s table with their comments, and given their values in the
+    rows already typed (from ``line_feed``, as the trigger would have); the number of rows
+    that had a value for one of them (the others stay NULL: no row is rewritten for
+    nothing, on a line database of years)."""
+    name = t.table.name
+    for c in cols:
+        conn.execute(text(f"ALTER TABLE {name} ADD COLUMN {c.name} "
+                          f"{c.type.compile(dialect=conn.dialect)}"))
+        conn.execute(SetColumnComment(c))
+    exprs = dict(zip((c.name for c in t.table.columns), t.exprs, strict=True))
+    values = ", ".join(f"{c.name} = {exprs[c.name]}" for c in cols)
+    some = " OR ".join(f"({exprs[c.name]}) IS NOT NULL" for c in cols)
+    # the SQL is this module's own (names and constants, _literal-checked), never input
+    return int(conn.execute(text(
+        f"UPDATE {name} t SET {values} FROM line_feed f WHERE f.station_id = t.station_id "  # noqa: S608
+        f"AND f.db_id = t.db_id AND f.seq = t.seq AND f.kind = {_literal(t.kind)} "
+        f"AND ({some})")).rowcount)
 
 
 def operator_of(entry: dict[str, Any]) -> str | None:
@@ -569,6 +636,11 @@ class LineResult:
     tightening_id: int | None = None
     torque: Window = (None, None, None)   # the window in force (Nm)
     angle: Window = (None, None, None)    # (deg)
+    #: an outcome a person entered from the controller's screen (None: measured): who,
+    #: their comment, and the unreadable result it resolves (its record id at the station)
+    entered_by: str | None = None
+    entered_comment: str | None = None
+    unreadable_record_id: int | None = None
 
 
 def results(engine: Engine, *, vin: str | None = None, station: str | None = None,
@@ -594,7 +666,8 @@ def results(engine: Engine, *, vin: str | None = None, station: str | None = Non
             row.angle_deg, row.parameters_version, row.received_at.astimezone(UTC),
             row.operator, row.pset, row.tightening_id,
             (row.torque_target_nm, row.torque_min_nm, row.torque_max_nm),
-            (row.angle_target_deg, row.angle_min_deg, row.angle_max_deg))
+            (row.angle_target_deg, row.angle_min_deg, row.angle_max_deg),
+            row.entered_by, row.entered_comment, row.unreadable_record_id)
             for row in c.execute(q)]
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from db.kinds import is_not_taken_note
 from stationd.reasons import Reason, Why
 from stationd.station.commands import (
     KIND,
@@ -55,7 +56,9 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.NOT_LOCKED: lambda r: f"{r.bolt} is not locked",
     Why.NOT_HELD: lambda r: (f"{r.bolt} is not held: an outcome is entered only for a bolt "
                              "whose result the controller could not send readably"),
-    Why.HELD: lambda r: (f"{r.bolt}: the controller's result could not be read ({r.note}): "
+    Why.HELD: lambda r: (f"{r.bolt}: {r.note}: not taken as a tightening; check it on the "
+                         "controller, then release" if is_not_taken_note(r.note) else
+                         f"{r.bolt}: the controller's result could not be read ({r.note}): "
                          "check it on the controller, then release"),
     Why.LOOSEN_FIRST: lambda r: (f"{r.bolt}: loosen first (loosen pset {r.pset}), then "
                                  "tighten" + (f": {r.note}" if r.note else "")),

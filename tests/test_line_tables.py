@@ -12,11 +12,12 @@ from datetime import UTC, datetime, timedelta
 
 import psycopg
 import pytest
-from sqlalchemy import Engine, func, inspect, select, text
+from sqlalchemy import Engine, MetaData, Table, func, inspect, select, text
 from sqlalchemy.dialects.postgresql import insert as pg_insert
 
 from db.checks import record_check
 from db.engine import make_engine
+from db.entered import record_entered
 from db.kinds import LOOSENING, NOK, OK, TIGHTENING
 from db.ledger import (
     CHECK,
@@ -43,9 +44,11 @@ from stationd.linedb import (
     LINE_UNATTRIBUTED,
     LINE_UNREADABLE,
     TYPED,
+    Typed,
     create_line_schema,
     operator_of,
     results,
+    trigger_body,
 )
 from tests.db.conftest import BASE, record
 
@@ -488,7 +491,8 @@ def test_two_first_starts_make_the_trigger_once(pg_url):
 #: the trigger's SQL at TYPED_VERSION: a change of TYPED changes it, and then the version must
 #: go up too (else a line database that has the older SQL keeps it: see TYPED_VERSION)
 TRIGGER_SHA256 = {1: "446e86d6658db69f57ddf73563842e00b690eac87fc392c5a61455dc994d1f49",
-                  2: "eed0f0cfb83562bb0f0303ab2188f6dccda471d004a541bd82df27fe80f4d4e0"}
+                  2: "eed0f0cfb83562bb0f0303ab2188f6dccda471d004a541bd82df27fe80f4d4e0",
+                  3: "cc625563ef1638100ca531254b61e304c53501ab1577e943c670e801bf38891c"}
 
 
 def test_the_trigger_version_goes_up_with_its_sql():
@@ -592,5 +596,152 @@ def test_a_kind_typed_in_a_later_version_is_filled_from_what_line_feed_holds(tmp
         assert c.execute(select(LINE_CONTROLLER_EVENTS.table.c.what).order_by(
             LINE_CONTROLLER_EVENTS.table.c.seq)).scalars().all() == ["batch increment",
                                                                      "bypass"]
+    engine.dispose()
+    repo.close()
+
+
+def _version_2() -> tuple[Typed, ...]:
+    """The typed tables as version 2 declared them: ``line_rundowns`` without the entered
+    outcome's columns (each table's :attr:`Typed.added` left out)."""
+    out = []
+    for t in TYPED:
+        keep = [(c, e) for c, e in zip(t.table.columns, t.exprs, strict=True)
+                if c.name not in t.added]
+        table = Table(t.table.name, MetaData(), *(c._copy() for c, _ in keep))
+        out.append(Typed(t.kind, table, tuple(e for _, e in keep)))
+    return tuple(out)
+
+
+def _line_database_at_version_2(url) -> Engine:
+    """A line database as stationd's version 2 of the typed tables left it: its trigger's
+    SQL the one pinned for version 2, ``line_rundowns`` without the entered columns."""
+    import hashlib
+
+    body = trigger_body(_version_2(), 2)
+    assert hashlib.sha256(body.encode()).hexdigest() == TRIGGER_SHA256[2]
+    engine = make_engine(url)
+    create_line_schema(engine)
+    with engine.begin() as c:
+        c.execute(text("ALTER TABLE line_rundowns DROP COLUMN entered_by, DROP COLUMN "
+                       "entered_comment, DROP COLUMN unreadable_record_id"))
+        c.execute(text("CREATE OR REPLACE FUNCTION line_feed_typed() RETURNS trigger "
+                       "LANGUAGE plpgsql SECURITY DEFINER SET search_path FROM CURRENT AS "
+                       f"$typed${body}$typed$"))
+    return engine
+
+
+def _entered(repo, bolt: str, tightening_id: int, comment: str) -> tuple[int, int]:
+    """An unreadable result for ``bolt`` and the outcome sam entered for it: their ids."""
+    uid = repo.record_unreadable(mid=61, revision=7, raw=f"00230061007 garbled {bolt}",
+                                 error="too short", vin=VIN, bolt=bolt, controller_vin=None,
+                                 tightening_id=tightening_id, pset=None, result_at=None)
+    rid = record_entered(repo, vin=VIN, bolt=bolt, ok=True, torque_nm=49.6, angle_deg=31.0,
+                         at=datetime.now(UTC), user="sam", source="cli", comment=comment)
+    return uid, rid
+
+
+def _entered_rows(engine):
+    r = LINE_RUNDOWNS.table.c
+    u = LINE_UNREADABLE.table.c
+    with engine.connect() as c:
+        return c.execute(
+            select(r.bolt, r.tightening_id, r.entered_by, r.entered_comment, u.raw)
+            .select_from(LINE_RUNDOWNS.table.outerjoin(LINE_UNREADABLE.table, (
+                u.station_id == r.station_id) & (u.db_id == r.db_id)
+                & (u.record_id == r.unreadable_record_id)))
+            .order_by(r.seq)).all()
+
+
+def test_an_entered_outcome_has_its_own_columns_in_a_line_database_upgraded_in_place(
+        tmp_path, pg_url, capsys):
+    """A line database of version 2 holding an entered outcome (typed by its trigger, so
+    without who entered it): ``line init`` adds ``entered_by``, ``entered_comment`` and
+    ``unreadable_record_id`` to ``line_rundowns``, fills them from line_feed, brings the
+    trigger up to date; the next entered outcome is typed with them; ``line results`` and the
+    line page's rows say who entered it; a second ``line init`` changes nothing."""
+    old = _line_database_at_version_2(pg_url)
+    repo = _station(tmp_path, "a")
+    repo.start_vehicle(VIN, "SEDAN")
+    record(repo, VIN, "B1", tightening_id=11, operator="olga")
+    _entered(repo, "B2", 12, "read on the controller")
+    line = LineDb(pg_url)
+    line._engine = old                                   # as a forwarder of version 2 did
+    assert line.push("ST-A", repo.ledger.db_id(), repo.ledger.since(0)) == 4
+    assert "entered_by" not in {c["name"] for c in inspect(old).get_columns("line_rundowns")}
+    assert _count(old, LINE_RUNDOWNS.table) == 2
+
+    assert main(["line", "init", pg_url]) == 0
+    out = capsys.readouterr().out
+    assert "added to line_rundowns: entered_by, entered_comment, unreadable_record_id (1 " \
+           "row(s) given their values from line_feed)" in out, out
+    assert "trigger that types line_feed's new rows: made or brought up to date" in out
+    cols = [c["name"] for c in inspect(old).get_columns("line_rundowns")]
+    assert cols == [c.name for c in LINE_RUNDOWNS.table.columns]   # one order, any version
+    assert [tuple(x) for x in _entered_rows(old)] == [
+        ("B1", 11, None, None, None),
+        ("B2", 12, "sam", "read on the controller", "00230061007 garbled B2")]
+
+    _entered(repo, "B3", 13, "torque read on the screen")    # typed by the new trigger
+    _forward(repo, pg_url, "ST-A")
+    assert _entered_rows(old)[-1] == ("B3", 13, "sam", "torque read on the screen",
+                                      "00230061007 garbled B3")
+    assert _typed_counts(old) == _feed_counts(old)
+    with old.connect() as c:                              # its columns commented too
+        assert c.scalar(text("SELECT col_description('line_rundowns'::regclass, "
+                             "(SELECT attnum FROM pg_attribute WHERE attrelid = "
+                             "'line_rundowns'::regclass AND attname = 'entered_by'))"))
+
+    config = tmp_path / "station.yaml"
+    config.write_text(f"database: {{url: 'sqlite:///{tmp_path / 'a.db'}'}}\n"
+                      f"line: {{url: '{pg_url}', station_id: ST-A}}\n")
+    assert main(["line", "results", "--config", str(config), "--vin", VIN, "--json"]) == 0
+    rows = {(r := json.loads(ln))["bolt"]: r for ln in capsys.readouterr().out.splitlines()}
+    assert (rows["B2"]["entered_by"], rows["B2"]["entered_comment"]) == (
+        "sam", "read on the controller")
+    assert rows["B2"]["unreadable_record_id"] is not None
+    assert (rows["B1"]["entered_by"], rows["B1"]["unreadable_record_id"]) == (None, None)
+    assert main(["line", "results", "--config", str(config), "--vin", VIN]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    [b1] = [ln for ln in lines if " B1 " in ln]
+    [b2] = [ln for ln in lines if " B2 " in ln]
+    assert "OK (entered by sam)" in b2 and "entered" not in b1
+    from stationd.web.line import LineRoutes
+    page = {r["bolt"]: r for r in LineRoutes()._read(pg_url, VIN, None, None, 10)}
+    assert (page["B3"]["entered_by"], page["B1"]["entered_by"]) == ("sam", None)
+
+    assert main(["line", "init", pg_url]) == 0
+    out = capsys.readouterr().out
+    assert "every table there already" in out and "added" not in out
+    old.dispose()
+    repo.close()
+
+
+def test_a_forwarding_role_on_a_version_2_line_database_forwards_and_the_owner_upgrades_it(
+        tmp_path, pg_url, pg_server, capsys):
+    """The stations forward as a role granted SELECT and INSERT only: a station of this
+    version may not add the columns, and forwards all the same (its entered outcome typed by
+    the version-2 trigger, without who entered it); the owner's ``line init`` adds them and
+    gives that row its values."""
+    _line_database_at_version_2(pg_url).dispose()
+    db = pg_url.rsplit("/", 1)[1]
+    with psycopg.connect(f"host=127.0.0.1 port={pg_server.port} user=postgres dbname={db}",
+                         autocommit=True) as c:
+        c.execute("CREATE ROLE station_v2 LOGIN")
+        c.execute("REVOKE CREATE ON SCHEMA public FROM PUBLIC")
+        c.execute("GRANT SELECT, INSERT ON line_feed, line_parameters TO station_v2")
+    repo = _station(tmp_path, "a")
+    repo.start_vehicle(VIN, "SEDAN")
+    _entered(repo, "B2", 12, "read on the controller")
+    f = _forward(repo, pg_url.replace("postgres@", "station_v2@"), "ST-R")
+    st = f.status()
+    assert (st["up"], st["backlog"], st["quarantined"]) == (True, 0, 0)
+    engine = make_engine(pg_url)
+    assert "entered_by" not in {c["name"] for c in inspect(engine).get_columns(
+        "line_rundowns")}
+    assert _count(engine, LINE_RUNDOWNS.table) == 1      # typed, by the version-2 trigger
+    assert main(["line", "init", pg_url]) == 0
+    assert "(1 row(s) given their values from line_feed)" in capsys.readouterr().out
+    assert [tuple(x) for x in _entered_rows(engine)] == [
+        ("B2", 12, "sam", "read on the controller", "00230061007 garbled B2")]
     engine.dispose()
     repo.close()

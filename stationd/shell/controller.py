@@ -6,7 +6,8 @@ driver's queue, never a poll) and has its own rule against loss.  A pushed resul
 :attr:`ControllerFeed.received` until the core has it, so a stop (a reload) feeds it rather
 than dropping it; after every (re)connect the tightening ids between the last one recorded
 and the controller's newest are fetched (Open Protocol MID 0064), each through the core as
-any result, and an id the controller no longer has is recorded as a gap, visibly; a curve is
+any result, and so are those a pushed result skips with the link up (a live gap); an id the
+controller no longer has is recorded as a gap, visibly; a curve is
 read and stored apart from results, so it never delays a result or the next bolt's
 parameters.
 """
@@ -27,9 +28,10 @@ from stationd.shell.blocking import Blocking
 from stationd.shell.records import STATION_FAULTS, Records
 from stationd.station.core import StationCore
 from stationd.station.events import DeviceIdentified
-from stationd.station.gaps import MAX_FETCH
+from stationd.station.gaps import MAX_FETCH, GapPlan
 from stationd.station.gaps import plan as plan_gaps
 from stationd.station.inputs import WRENCH, DeviceBack, Event, ResultIn, ResultsMissed, UnreadableIn
+from stationd.station.results import CLOCK_SLACK_S
 
 log = logging.getLogger("stationd")
 RESULT_WAIT_S = 0.5         # one blocking wait for pushed results (a condition, not a poll)
@@ -52,6 +54,10 @@ class ControllerFeed:
         self.received: list[Received] = []
         self._waiting: Future[Received | None] | None = None
         self.catching_up: asyncio.Task[None] | None = None
+        #: the newest tightening id accounted for on this link (a result pushed, or the
+        #: controller's newest when the catch-up asked for it; None: not known yet since the
+        #: last (re)connect): a pushed result further on than the next is a live gap
+        self._accounted: int | None = None
 
     def close(self) -> None:
         self._results_pool.shutdown(wait=True)
@@ -72,6 +78,7 @@ class ControllerFeed:
         if result is not None:
             await self._feed(result_input(time.time(), result))
             self.received.remove(result)
+            await self._live_gap(wrench, result)
 
     async def curves(self, stop: asyncio.Event) -> None:
         """The controller's tightening curves when it sends them (``?curves=1`` in the
@@ -110,6 +117,7 @@ class ControllerFeed:
             if who:
                 log.info("wrench: %s", who)
                 self.bus.publish(DeviceIdentified(WRENCH, who))
+        self._accounted = None     # the catch-up says up to where (a result may come first)
         if self.catching_up is None or self.catching_up.done():
             self.catching_up = asyncio.get_running_loop().create_task(self._catch_up())
 
@@ -129,28 +137,111 @@ class ControllerFeed:
             if newest.tightening_id is None:   # unreadable, its id too: kept, nothing planned
                 await self._feed(result_input(time.time(), newest, fetched=True))
                 return
-            todo = plan_gaps(last, int(newest.tightening_id))
+            nid = int(newest.tightening_id)
+            # from here the ids up to the controller's newest are this catch-up's; a pushed
+            # result after them that skips one is a live gap (:meth:`_live_gap`)
+            self._accounted = nid if self._accounted is None else max(self._accounted, nid)
+            if last is None:
+                await self._first_results(wrench, newest, nid)
+                return
+            todo = plan_gaps(last, nid)
             if todo.note:
                 log.info("results: %s", todo.note)
-            if todo.gap is not None:
-                await self._gap(*todo.gap, f"more than {MAX_FETCH} results missed")
-            offset = wrench.clock_offset_s
-            for tid in todo.fetch:
-                got: Received | None = newest if tid == newest.tightening_id else \
-                    await self._call(wrench.fetch_result, tid)
-                if got is None:
-                    await self._gap(tid, tid, "the controller no longer has it")
-                    continue
-                log.info("tightening %d fetched after a reconnect", tid)
-                await self._feed(result_input(time.time(), got, fetched=True, follows=last,
-                                              offset=offset))
-                if isinstance(got, TighteningResult):
-                    await self._late_curves(wrench, tid)
+            await self._fetch(wrench, todo, last, newest)
         except (DeviceError, ValueError) as exc:   # the link's keeper reports it
             log.warning("results missed while the link was down not fetched yet: %s",
                         one_line(exc))
         except STATION_FAULTS as exc:
             log.error("results missed while the link was down not fetched: %s", one_line(exc))
+
+    async def _first_results(self, wrench: Wrench, newest: Received, nid: int) -> None:
+        """No tightening of this controller recorded yet, so no id to count from: the results
+        it made since the station may have missed them (:meth:`StationCore.missed_since`: the
+        enable a link cut came during, else the link lost) are found backwards from its
+        newest by their own timestamps (through the clock offset measured at connect), at
+        most ``MAX_FETCH``, and fed oldest first, each after the id of the last result made
+        before that (the first one after it is what the core's proof of a result made under
+        the cut enable asks for; unknown where the controller no longer has it or its time
+        cannot be read: then nothing is proved, and what was found stays unattributed).
+        What it made before is its history, not this station's: not fetched."""
+        since, offset = self.core.missed_since(), wrench.clock_offset_s
+        found: list[tuple[int, Received]] = []
+        follows: int | None = None
+        got: Received | None = newest
+        tid = nid
+        while since is not None and got is not None and len(found) < MAX_FETCH:
+            at = made_at(got, offset)
+            if at is None:
+                break                  # its time unknown: where the history begins too
+            if at < since - CLOCK_SLACK_S:
+                follows = tid          # made before: the history ends here
+                break
+            found.append((tid, got))
+            if tid <= 1:
+                follows = 0            # the controller's first result: nothing before it
+                break
+            tid -= 1
+            got = await self._call(wrench.fetch_result, tid)
+        if not found:
+            log.info("results: no tightening recorded yet: counting from the controller's "
+                     "newest, %d", nid)
+            return
+        log.info("results: no tightening recorded yet; %d made by the controller since the "
+                 "link was lost%s: fetched", len(found),
+                 "" if follows is not None else " (where its history ends is not known)")
+        for tid, got in reversed(found):
+            log.info("tightening %d fetched after a reconnect", tid)
+            await self._feed(result_input(time.time(), got, fetched=True, follows=follows,
+                                          offset=offset))
+            if isinstance(got, TighteningResult):
+                await self._late_curves(wrench, tid)
+
+    async def _live_gap(self, wrench: Wrench, got: Received) -> None:
+        """A pushed result whose tightening id skips ahead of the last one accounted for on
+        this link: the ids between were made and never pushed (a push lost with the link
+        up).  They are fetched as after a reconnect, at most ``MAX_FETCH`` (older ones are
+        one gap), and each only once: ids up to the controller's newest at a reconnect are
+        the catch-up's, the pushed result itself is never asked for, and an id at or below
+        the last accounted one (a result sent again) starts nothing."""
+        if got.tightening_id is None:
+            return
+        tid, last = int(got.tightening_id), self._accounted
+        self._accounted = tid if last is None else max(last, tid)
+        if last is None or tid <= last + 1 or not wrench.can_fetch or self.records.repo is None:
+            return
+        todo = plan_gaps(last, tid - 1)
+        ids = str(last + 1) if tid - 1 == last + 1 else f"{last + 1}-{tid - 1}"
+        log.warning("results: tightening %d came after %d: %s not pushed by the controller "
+                    "(the link up), fetched", tid, last, ids)
+        try:
+            await self._fetch(wrench, todo, last, live=True)
+        except (DeviceError, ValueError) as exc:   # the link's keeper reports it
+            log.warning("results missed with the link up (%s) not fetched yet: %s", ids,
+                        one_line(exc))
+        except STATION_FAULTS as exc:
+            log.error("results missed with the link up (%s) not fetched: %s", ids,
+                      one_line(exc))
+
+    async def _fetch(self, wrench: Wrench, todo: GapPlan, last: int | None,
+                     newest: Received | None = None, live: bool = False) -> None:
+        """The ids ``todo`` fetches, each fed as a fetched result (after ``last``, the id
+        accounted for before; ``newest``: one fetched already), with its curves; its gap and
+        each id the controller no longer has recorded as gaps."""
+        if todo.gap is not None:
+            await self._gap(*todo.gap, f"more than {MAX_FETCH} results missed", live)
+        offset = wrench.clock_offset_s
+        for tid in todo.fetch:
+            got: Received | None = newest if newest is not None \
+                and tid == newest.tightening_id else await self._call(wrench.fetch_result, tid)
+            if got is None:
+                await self._gap(tid, tid, "the controller no longer has it", live)
+                continue
+            log.info("tightening %d fetched %s", tid,
+                     "after a later one came (the link up)" if live else "after a reconnect")
+            await self._feed(result_input(time.time(), got, fetched=True, follows=last,
+                                          offset=offset, live=live))
+            if isinstance(got, TighteningResult):
+                await self._late_curves(wrench, tid)
 
     async def _late_curves(self, wrench: Wrench, tid: int) -> None:
         """The curves of a result fetched late (MID 0900 asked for by its tightening id),
@@ -169,9 +260,9 @@ class ControllerFeed:
             log.warning("curves of tightening %d (fetched late) not stored: %s", tid,
                         one_line(exc))
 
-    async def _gap(self, first: int, last: int, reason: str) -> None:
+    async def _gap(self, first: int, last: int, reason: str, live: bool = False) -> None:
         """What the controller cannot give any more, for the core (it stores and says it)."""
-        await self._feed(ResultsMissed(time.time(), first, last, reason))
+        await self._feed(ResultsMissed(time.time(), first, last, reason, live))
 
     async def drain(self) -> list[Received]:
         """At a stop (the station's lock held, its tasks cancelled): the result the wait was
@@ -199,21 +290,24 @@ class ControllerFeed:
 
 
 def result_input(t: float, got: Received, *, fetched: bool = False, follows: int | None = None,
-                 offset: float | None = None) -> ResultIn | UnreadableIn:
+                 offset: float | None = None, live: bool = False) -> ResultIn | UnreadableIn:
     """What the controller sent, as the core's input: a result (fetched ones with the last
     tightening id accounted for before, and the controller's timestamp on the station's
-    clock where its offset is known), or one that could not be read."""
+    clock where its offset is known; ``live``: fetched because a later one came with the
+    link up), or one that could not be read."""
     if isinstance(got, UnreadableResult):
         return UnreadableIn(t, got)
     return ResultIn(t, got, fetched=fetched, follows=follows,
-                    made_at=made_at(got, offset) if fetched else None)
+                    made_at=made_at(got, offset) if fetched else None, live=live)
 
 
-def made_at(result: TighteningResult, offset: float | None) -> float | None:
+def made_at(result: Received, offset: float | None) -> float | None:
     """The result's controller timestamp (naive, the controller's local time) on the
     station's clock (epoch seconds): ``offset`` is the controller's local time minus the
     station's, measured at connect (None: unknown, and so is the time)."""
     if offset is None or not isinstance(offset, int | float):
+        return None
+    if result.timestamp is None:     # an unreadable result's, where it could not be read
         return None
     try:
         return result.timestamp.timestamp() - float(offset)

@@ -237,13 +237,17 @@ class Records:
             result_at=_aware(r.timestamp), reason=a.reason)
 
     def store_controller_event(self, a: StoreControllerEvent) -> None:
+        """The result; the tool enable it answers settled with it, where it does (its bolt
+        held for a person: no later result is owed to it)."""
         r = a.result
+        enable = self._settles(a.selection, take=False)
         self._repo().record_controller_event(
             result_type=type_code(r) or 0, what=a.what, vin=a.vin, bolt=a.bolt,
             controller_vin=str(r.vin or "").strip() or None,
             tightening_id=int(r.tightening_id), pset=int(r.pset), ok=bool(r.ok),
             torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
-            result_at=_aware(r.timestamp))
+            result_at=_aware(r.timestamp), enable_id=enable)
+        self._settles(a.selection)
 
     def store_unreadable(self, a: StoreUnreadable) -> None:
         """The message whole; the tool enable it answers settled with it (the bolt is held

@@ -146,12 +146,15 @@ class StoreGap:
 @dataclass(frozen=True)
 class StoreControllerEvent:
     """Store a result that is not a rundown (``what``: its type in words; ``bolt``: the one
-    the tool was enabled for, still open), then acknowledge it."""
+    the tool was enabled for, still open), then acknowledge it.  ``selection``: the enable
+    it answers, settled with it (an OK without a type outside the bolt's torque window: the
+    bolt is held for a person instead); None: the enable still waits for its result."""
 
     result: TighteningResult
     vin: str | None
     bolt: str | None
     what: str
+    selection: Selection | None = None
 
 
 @dataclass(frozen=True)

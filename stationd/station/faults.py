@@ -30,6 +30,16 @@ class FaultRules(TeachRules):
             self._loading = False
         return self._fault(ev.t, ev.device, ev.kind, ev.reason)
 
+    def missed_since(self) -> float | None:
+        """Since when results the controller made may have been missed with no tightening id
+        to count from (none of this controller's recorded yet): the enable a link cut came
+        during (its result is proved by the controller's data), else the last time the link
+        was lost (the station's start included); None before the station started.  What the
+        controller made before is its history, not this station's."""
+        if self._cut is not None:
+            return min(self._cut.enabled_at, self._link_lost_at)
+        return None if self._link_lost_at == float("-inf") else self._link_lost_at
+
     def _on_device_back(self, ev: DeviceBack) -> list[Action]:
         if ev.device == WRENCH and ev.reconnects is not None \
                 and ev.reconnects != self._wrench_reconnects:

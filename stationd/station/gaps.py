@@ -5,7 +5,8 @@ Why a rule of its own: Open Protocol's tightening id grows by one with every tig
 jump after the link was down is a result the station never heard.  It is fetched (MID
 0064/0065) and recorded late, or, if the controller no longer has it, recorded as a gap:
 visibly, never silently.  A station that never recorded anything takes the controller's
-newest as its starting point (the controller's history before it is not this station's), and
+newest as its starting point (the controller's history before it is not this station's; what
+it made since the link was lost is found back by time instead, in the shell's catch-up), and
 a controller whose ids went backwards (replaced, reset) starts a new count.
 """
 

@@ -102,6 +102,9 @@ class ResultIn(Input):
     #: the controller's timestamp of the result on the station's clock (through the offset
     #: measured at connect); None when the controller's clock is not known
     made_at: float | None = None
+    #: fetched with the link up: a later result came pushed and skipped its id (a push the
+    #: controller, or a device on the way, lost), not after a reconnect
+    live: bool = False
 
 
 @dataclass(frozen=True)
@@ -113,12 +116,14 @@ class UnreadableIn(Input):
 
 @dataclass(frozen=True)
 class ResultsMissed(Input):
-    """Tightenings ``first``..``last`` were made while the link was down and cannot be
-    fetched (``reason``): a gap in the controller's numbering, to be stored and said."""
+    """Tightenings ``first``..``last`` were made while the link was down (``live``: with it
+    up, never pushed) and cannot be fetched (``reason``): a gap in the controller's
+    numbering, to be stored and said."""
 
     first: int
     last: int
     reason: str
+    live: bool = False
 
 
 @dataclass(frozen=True)

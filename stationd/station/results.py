@@ -4,11 +4,19 @@ skip), and how a result's type is named."""
 
 from __future__ import annotations
 
-from db.kinds import LOOSENING, TIGHTENING
+from db.kinds import (
+    LOOSENING,
+    NOT_TAKEN,
+    NOT_TAKEN_NOTE,
+    TIGHTENING,
+    is_not_taken_note,
+    not_taken_note,
+)
 from drivers.wrench.base import (
     ResultKind,
     ResultType,
     TighteningResult,
+    TorqueUnit,
     result_kind,
 )
 from stationd.station.actions import (
@@ -126,7 +134,9 @@ class ResultRules(OrderRules):
         if proved is not None:
             return self._attribute(ev, proved, cut=True)
         why = f"result {tid} (pset {r.pset}) " + (
-            "fetched after a reconnect" if ev.fetched else "outside any tightening")
+            "outside any tightening" if not ev.fetched else
+            "fetched after a later one came, the link up" if ev.live else
+            "fetched after a reconnect")
         if not_proved:
             why += f" ({not_proved})"
         return [StoreUnattributed(r, self.vin, why),
@@ -189,8 +199,9 @@ class ResultRules(OrderRules):
     def _on_results_missed(self, ev: ResultsMissed) -> list[Action]:
         ids = str(ev.first) if ev.first == ev.last else f"{ev.first}-{ev.last}"
         return [StoreGap(ev.first, ev.last, self.vin, ev.reason),
-                Publish(Notice(f"tightening {ids} missed while the link was down: a gap "
-                               f"({ev.reason})", "warning", t=ev.t))]
+                Publish(Notice(f"tightening {ids} missed "
+                               f"{'with the link up' if ev.live else 'while the link was down'}"
+                               f": a gap ({ev.reason})", "warning", t=ev.t))]
 
     def _on_not_stored(self, ev: NotStored) -> list[Action]:
         return [Publish(Notice(f"tightening {ev.tightening_id} of {ev.bolt} not stored: "
@@ -236,11 +247,70 @@ class ResultRules(OrderRules):
                                "read; held for a supervisor")
         return acts
 
+    def _outside_window(self, r: TighteningResult, en: Selection
+                        ) -> tuple[float, float] | None:
+        """The bolt's torque window (min, max of its process parameters) that ``r``, an OK
+        result without a result type answering ``en``'s tightening pset, lies outside of;
+        None for any other result, or where the window or the torque in Nm is not known
+        (then it is taken as today: a revision without types reports tightenings)."""
+        if type_code(r) is not None or not bool(r.ok) or en.loosen:
+            return None
+        if getattr(r, "torque_unit", None) is TorqueUnit.PERCENT:
+            return None      # kept as sent: a percentage of the tool's maximum, not Nm
+        spec = self._specs.get(en.bolt) if en.vin == self.vin else None
+        p = spec.parameters if spec is not None else None
+        if p is None:
+            return None
+        lo, hi = float(p.torque.min), float(p.torque.max)
+        return None if lo <= float(r.torque_nm) <= hi else (lo, hi)
+
+    def _not_taken(self, ev: ResultIn, en: Selection, window: tuple[float, float],
+                   cut: bool) -> list[Action]:
+        """An OK result without a type whose torque is outside its bolt's window: perhaps no
+        tightening at all (at a revision without types, a batch increment or a bypass reads
+        as an OK, of 0 Nm), perhaps one whose limits on the controller are not the station's.
+        Never taken as the bolt done: stored as a controller event (the enable it answers
+        settled with it), the tool off, and the bolt held, as for a result that could not be
+        read, until a supervisor checked it on the controller and released it or entered its
+        outcome (a real tightening counted once, never tightened twice)."""
+        r = ev.result
+        tid = int(r.tightening_id)
+        self._recorded[tid] = _said(r)
+        lo, hi = window
+        said = (f"{en.bolt}: {NOT_TAKEN_NOTE}, {float(r.torque_nm):.1f} Nm outside "
+                f"{lo:.1f}-{hi:.1f} Nm (tightening {tid}): not taken as a tightening; check it "
+                "on the controller, then release or enter its outcome")
+        acts: list[Action] = []
+        if self.tool_on and not cut:
+            acts += self._tool_off(ev.t, f"bolt {en.bolt}: an OK result without a result "
+                                   "type outside its torque window")
+        acts.append(StoreControllerEvent(r, en.vin, en.bolt, NOT_TAKEN, en))
+        acts.append(Publish(ControllerResultEvent(0, NOT_TAKEN, tid, int(r.pset), True,
+                                                  en.bolt, t=ev.t)))
+        if self._enabled is en:
+            self._enabled = None
+        if self._cut is not None and self._cut.selection is en:
+            self._cut = None
+        self._not_before = max(self._not_before, ev.t)
+        if self.matcher is not None and self.vin == en.vin and en.bolt in self.matcher.bolts:
+            acts += self._hold(ev.t, en.bolt, not_taken_note(float(r.torque_nm), tid), said)
+        else:
+            acts.append(Publish(Notice(said, "warning", t=ev.t)))
+        if self.bolt == en.bolt:
+            acts += self._drop(ev.t, State.TRACKING, f"bolt {en.bolt}: an OK result without "
+                               "a result type outside its torque window; held for a "
+                               "supervisor")
+        return acts
+
     def _attribute(self, ev: ResultIn, en: Selection, cut: bool = False) -> list[Action]:
         """The result of the tightening the tool was enabled for: recorded to that bolt (of
         the vehicle it was enabled on, also after a reload or restart, or fetched after a
-        link cut that the controller's data places it in, ``cut``)."""
+        link cut that the controller's data places it in, ``cut``); an OK without a type
+        outside the bolt's torque window is not (:meth:`_not_taken`)."""
         r = ev.result
+        window = self._outside_window(r, en)
+        if window is not None:
+            return self._not_taken(ev, en, window, cut)
         late = not self.tool_on or cut
         kind = LOOSENING if result_kind(type_code(r), en.loosen) is ResultKind.LOOSENING \
             else TIGHTENING
@@ -366,7 +436,9 @@ class ResultRules(OrderRules):
             kind=TIGHTENING, entered_by=who.user, t=t))]
         what = (f"{b}: {'OK' if cmd.ok else 'NOK'} {cmd.torque_nm:.1f} Nm, "
                 f"{cmd.angle_deg:.1f} deg entered by {who.user} from the controller's screen"
-                + (f" (the result that could not be read: {held})" if held else ""))
+                + ("" if not held else f" (the result not taken: {held})"
+                   if is_not_taken_note(held) else
+                   f" (the result that could not be read: {held})"))
         if cmd.ok:
             m.mark_done(b)
             self._noks.pop(b, None)

@@ -14,6 +14,7 @@ import pytest
 
 from db.entered import record_entered
 from db.errors import DataError
+from db.kinds import NOT_TAKEN, is_not_taken_note, not_taken_note
 from db.ledger import COMMAND, RUNDOWN
 from stationd.web.results import Results, rundowns_csv
 from tests.db.conftest import record
@@ -94,3 +95,50 @@ def test_opc_ua_says_an_entered_result_was_entered_and_by_whom():
     assert message(rec) == "VIN1 B1: tightening OK"
     assert message({**rec, "entered_by": "sam"}) == \
         "VIN1 B1: tightening OK (entered by sam, not measured)"
+
+
+def _not_taken(repo, tid: int, bolt: str = "B1", enable_id: int | None = None):
+    """An OK result without a type outside the bolt's torque window, as the station stores
+    it (a controller event, its bolt held)."""
+    return repo.record_controller_event(
+        result_type=0, what=NOT_TAKEN, vin="VIN1", bolt=bolt, controller_vin=None,
+        tightening_id=tid, pset=1, ok=True, torque_nm=0.0, angle_deg=0.0, result_at=None,
+        enable_id=enable_id)
+
+
+def test_an_untyped_ok_outside_the_window_holds_its_bolt_over_a_restart_until_resolved(sedan):
+    """Stored as a controller event: the enable it answered settled (nothing owed to it),
+    the bolt held (what a restart reads), the hold's note its own; an outcome entered for it
+    carries that result's tightening id (no unreadable result), and ends the hold; a
+    release ends the next one."""
+    repo = sedan
+    version = repo.bolts_for_model("SEDAN")[0].parameters_id
+    enable = repo.note_enable("VIN1", "B1", 1, version, {"operator": "olga"},
+                              datetime.now(UTC))
+    assert repo.owed_enable() is not None
+    assert _not_taken(repo, 21, enable_id=enable)
+    assert repo.owed_enable() is None
+    assert repo.held_bolts("VIN1") == {"B1": not_taken_note(0.0, 21)}
+    assert is_not_taken_note(repo.held_bolts("VIN1")["B1"])
+    _enter(repo)
+    assert repo.held_bolts("VIN1") == {}
+    run = repo.ledger.since(0)[-1]["record"]
+    assert (run["tightening_id"], run["unreadable_id"], run["entered_by"], run["operator"]) \
+        == (21, None, "sam", "olga")
+    # an unreadable result before it, then such a result: the later one is entered for
+    _unreadable(repo, 30, "B2")
+    _not_taken(repo, 31, "B2")
+    assert repo.held_bolts("VIN1") == {"B2": not_taken_note(0.0, 31)}
+    _enter(repo, bolt="B2")
+    assert repo.ledger.since(0)[-1]["record"]["tightening_id"] == 31
+    # one released by a supervisor: over too
+    _not_taken(repo, 32, "B3")
+    repo.ledger.record_command(at=datetime.now(UTC) + timedelta(seconds=2), user="sam",
+                               source="cli", kind="release", vin="VIN1", bolt="B3",
+                               comment="a batch increment on the controller")
+    assert repo.held_bolts("VIN1") == {}
+    # a controller event of another kind holds nothing
+    repo.record_controller_event(result_type=3, what="batch increment", vin="VIN1",
+                                 bolt="B1", controller_vin=None, tightening_id=33, pset=1,
+                                 ok=True, torque_nm=0.0, angle_deg=0.0, result_at=None)
+    assert repo.held_bolts("VIN1") == {}

@@ -10,9 +10,12 @@ import time
 
 import pytest
 
+from db.kinds import NOT_TAKEN
+from drivers.wrench.sim.controller import SimController
+from stationd.sim.devices_cli import psets_of
 from stationd.station.results import result_type_words
+from tests.shell.daemons import SIM, controller, tool_on, tracking, until
 from tests.shell.daemons import db_rows as _rows
-from tests.shell.daemons import tool_on, tracking, until
 
 pytestmark = pytest.mark.system      # whole daemons
 
@@ -112,3 +115,83 @@ def test_a_tightening_made_during_a_link_cut_is_recorded_to_its_bolt(tmp_path, c
                      "ORDER BY id") == [(first.tightening_id, 1), (made.tightening_id, 1)]
     [(tid, reason)] = _rows(db, "SELECT tightening_id, reason FROM unattributed_results")
     assert tid == again.tightening_id and "fetched after a reconnect" in reason
+
+
+@pytest.mark.timeout(300)
+def test_an_untyped_ok_outside_the_torque_window_holds_its_bolt(tmp_path):
+    """A controller that serves results at revision 2 (no result type): a batch increment
+    pressed on its panel while the tool is on for B05 reads as an OK of 0 Nm, outside B05's
+    window; it is stored as a controller event, the enable settled, the tool off and B05
+    held (the wrench back on it is refused, with why); a tightening of B06 at the same
+    revision, inside its window, closes B06 as before."""
+    pose = tmp_path / "pose"
+    ctl = SimController(psets_of(SIM / "bolts.yaml"), seed=9, nok_rate=0.0,
+                        refused_revisions={60: range(3, 8)})
+    with tracking(tmp_path, "UNTYPEDVIN0000001", ctl=ctl) as (d, _, ctl):
+        tool_on(d, ctl, pose, "B05")
+        lead = ctl.press(3)
+        assert lead is not None
+        d.wait_log("B05: an OK result without a result type, 0.0 Nm outside ")
+        d.wait_log(f"(tightening {lead.tightening_id}): not taken as a tightening; check it on "
+                   "the controller, then release or enter its outcome")
+        until(lambda: lead.tightening_id in ctl.acked_ids, 30, "acknowledged once stored")
+        until(lambda: not ctl.tool_enabled, 30, "the tool off")
+        tool_on(d, ctl, pose, "B06")
+        good = ctl.pull_trigger()
+        assert good is not None
+        until(lambda: good.tightening_id in ctl.acked_ids, 30, "B06 stored")
+        pose.write_text("B05")
+        d.wait_log("not taken as a tightening; check it on the controller, then release",
+                   count=2)
+        assert not ctl.tool_enabled and "fault: wrench" not in d.log()
+    db = tmp_path / "station.db"
+    assert _rows(db, "SELECT result_type, what, bolt, tightening_id, torque_nm FROM "
+                     "controller_events") == [(0, NOT_TAKEN, "B05", lead.tightening_id, 0.0)]
+    assert _rows(db, "SELECT b.code, r.tightening_id FROM tightening_records r JOIN bolts b "
+                     "ON b.id = r.bolt_id") == [("B06", good.tightening_id)]
+    assert _rows(db, "SELECT bolt, settled_at IS NOT NULL FROM tool_enables ORDER BY id") == [
+        ("B05", 1), ("B06", 1)]
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("history", [0, 2], ids=["a new controller", "its own history"])
+def test_a_tightening_made_during_a_cut_before_any_result_was_recorded_goes_to_its_bolt(
+        tmp_path, history):
+    """The station has recorded no result of this controller yet (no tightening id to count
+    from) when the link is cut during its first enable: at the reconnect the results made
+    since that enable are found back from the controller's newest by their timestamps; the
+    first, made under the enable, is recorded to its bolt, the second stays unattributed;
+    what the controller made before the station started (its history) is not fetched."""
+    pose = tmp_path / "pose"
+    ctl = controller(9)
+    ctl.start()
+    old = []
+    if history:      # results made at the controller before the station ran
+        ctl.call(lambda: (setattr(ctl, "pset", 1), setattr(ctl, "tool_enabled", True)))
+        old = [ctl.pull_trigger() for _ in range(history)]
+        ctl.call(lambda: setattr(ctl, "tool_enabled", False))
+        assert all(o is not None for o in old)
+        time.sleep(3.0)                          # beyond the controller clock's slack
+    with tracking(tmp_path, "FIRSTCUTVIN000001", ctl=ctl) as (d, _, ctl):
+        tool_on(d, ctl, pose, "B05")
+        ctl.refuse_revisions(1, range(1, 8))     # the link down, and kept down
+        ctl.drop_connections()
+        d.wait_log("fault: wrench")
+        made = ctl.pull_trigger()
+        again = ctl.pull_trigger()
+        assert made is not None and again is not None
+        assert made.tightening_id == history + 1
+        time.sleep(6.0)                          # past the late-result window (5 s)
+        ctl.clear_refusals()
+        d.wait_log("wrench: back")
+        d.wait_log(f"tightening {made.tightening_id} made during the link cut, fetched after "
+                   "it: recorded to B05")
+        d.wait_log(f"tightening {again.tightening_id} fetched after a reconnect")
+        d.wait_log(f"result {again.tightening_id} (pset {again.pset}) fetched after a "
+                   "reconnect")
+    db = tmp_path / "station.db"
+    assert _rows(db, "SELECT r.tightening_id, b.code FROM tightening_records r JOIN bolts b "
+                     "ON b.id = r.bolt_id") == [(made.tightening_id, "B05")]
+    assert _rows(db, "SELECT tightening_id FROM unattributed_results") == [
+        (again.tightening_id,)]
+    assert _rows(db, "SELECT count(*) FROM result_gaps") == [(0,)]

@@ -5,6 +5,7 @@ while the link was cut are each recorded exactly once, or shown as a gap)."""
 from __future__ import annotations
 
 import sqlite3
+import time
 
 import pytest
 
@@ -55,3 +56,56 @@ def test_results_made_while_the_link_was_cut_are_fetched_or_shown_as_gaps(tmp_pa
     assert sorted(to_bolts + loose) == sorted({first.tightening_id, ids[0], ids[2]})
     assert gaps == [(ids[1], ids[1])]
     assert first.tightening_id in to_bolts
+
+
+@pytest.mark.timeout(300)
+def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path):
+    """With the link up, the controller loses a push (``lose_next_push``): the station hears
+    nothing and the tool stays on; the operator's next tightening comes pushed, is recorded
+    to the bolt, and the id it skipped is fetched (MID 0064) and stored unattributed, once;
+    two pushes lost, one of them no longer on the controller: one fetched, one a gap."""
+    pose = tmp_path / "pose"
+    with tracking(tmp_path, "LIVEGAPVIN0000001") as (d, _, ctl):
+        tool_on(d, ctl, pose, "B04")
+        first = ctl.pull_trigger()               # the id the station accounts for
+        assert first is not None
+        until(lambda: first.tightening_id in ctl.acked_ids, 30, "the first result stored")
+        tool_on(d, ctl, pose, "B05")
+        ctl.lose_next_push()
+        lost = ctl.pull_trigger()
+        assert lost is not None
+        time.sleep(1.0)
+        assert ctl.tool_enabled                   # the station heard nothing of it
+        pushed = ctl.pull_trigger()
+        assert pushed is not None
+        d.wait_log(f"tightening {pushed.tightening_id} came after {first.tightening_id}: "
+                   f"{lost.tightening_id} not pushed by the controller (the link up), fetched")
+        d.wait_log(f"tightening {lost.tightening_id} fetched after a later one came")
+        d.wait_log(f"result {lost.tightening_id} (pset {lost.pset}) fetched after a later one "
+                   "came, the link up: not attributable to a bolt, stored unattributed")
+        tool_on(d, ctl, pose, "B06")
+        ctl.lose_next_push(2)
+        a, b = ctl.pull_trigger(), ctl.pull_trigger()
+        assert a is not None and b is not None
+        ctl.forget_results(a.tightening_id)
+        c = ctl.pull_trigger()
+        assert c is not None
+        d.wait_log(f"tightening {a.tightening_id} missed with the link up: a gap (the "
+                   "controller no longer has it)")
+        d.wait_log(f"tightening {b.tightening_id} fetched after a later one came")
+        d.wait_log(f"result {b.tightening_id} (pset {b.pset}) fetched after a later one came")
+        assert "fault: wrench" not in d.log()
+    con = sqlite3.connect(tmp_path / "station.db")
+    try:
+        to_bolts = list(con.execute("SELECT r.tightening_id, b.code FROM tightening_records r "
+                                    "JOIN bolts b ON b.id = r.bolt_id ORDER BY r.id"))
+        loose = list(con.execute("SELECT tightening_id, reason FROM unattributed_results "
+                                 "ORDER BY id"))
+        gaps = list(con.execute("SELECT first_id, last_id FROM result_gaps"))
+    finally:
+        con.close()
+    assert to_bolts == [(first.tightening_id, "B04"), (pushed.tightening_id, "B05"),
+                        (c.tightening_id, "B06")]
+    assert [t for t, _ in loose] == [lost.tightening_id, b.tightening_id]
+    assert all("fetched after a later one came, the link up" in why for _, why in loose)
+    assert gaps == [(a.tightening_id, a.tightening_id)]

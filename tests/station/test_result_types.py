@@ -363,3 +363,24 @@ def test_a_result_under_an_id_seen_before_with_other_values_is_a_new_result():
     acts = d.core.feed(ResultIn(d.t, other))   # the Driver's check keys records by id alone
     assert [a.bolt for a in acts if isinstance(a, Record)] == ["B3"]
     assert any("ids started again" in m for m in _notices(acts))
+
+
+def test_since_when_results_may_have_been_missed_with_no_id_to_count_from():
+    """What the shell fetches back from the controller's newest when the station has no
+    tightening id of it recorded: since the enable a cut came during, else the link's loss
+    (the station's start included); nothing before the station started."""
+    from stationd.station.core import StationCore
+    from tests.station.test_core import PARAMS
+
+    assert StationCore(PARAMS).missed_since() is None     # not started: all history
+    d = _ready()
+    assert d.core.missed_since() == 1000.0                 # the start (Driver's clock)
+    sent, enabled_at, cut_at = _cut_during_enable(d)
+    assert d.core.missed_since() == enabled_at < cut_at
+    d.t += 10.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    # the controller's first result ever (nothing before it: follows 0) proves itself
+    acts = d.feed(ResultIn(d.t, res(1, sent.selection.pset or 0, True, 1), fetched=True,
+                           follows=0, made_at=enabled_at + 0.5))
+    assert [a.bolt for a in acts if isinstance(a, Record)] == ["B1"]
+    assert d.core.missed_since() == cut_at                 # the cut resolved: the link's loss

@@ -34,9 +34,11 @@ driver's reading rules: ``mislabel=R`` is a controller that claims more than it 
 (a 0061/0065 asked for above revision R is laid out as revision R with fields appended,
 labelled as asked), ``send_revision=R`` labels every 0061 honestly with revision R whatever
 was subscribed, and ``garble_next_result()`` spoils one body so that it reads at no
-revision.  Results made while no integrator is connected (a link cut) are kept and fetchable
-with MID 0064 like the others.  MID 0080 is answered with its clock (MID 0081; ``clock``, or
-the local clock shifted by ``clock_offset_s``), and any MID can be refused (``refuse_mid``).
+revision; ``lose_next_push()`` keeps a result from its subscribers with the link up (a live
+gap in the tightening ids).  Results made while no integrator is connected (a link cut) are
+kept and fetchable with MID 0064 like the others.  MID 0080 is answered with its clock (MID
+0081; ``clock``, or the local clock shifted by ``clock_offset_s``), and any MID can be
+refused (``refuse_mid``).
 ``python -m drivers.wrench.sim`` serves it on a TCP port for any integrator
 (``cli.py``).
 
@@ -192,6 +194,7 @@ class SimController(OpenProtocolServer):
         self._unacked: dict[int, SimRecord] = {}     # tightening id -> its record
         self._store: OrderedDict[int, SimRecord] = OrderedDict()   # for MID 0064
         self._rundown: int | None = None         # the pset of a rundown under way
+        self._lose_pushes = 0                    # the next results kept but never pushed
 
     def __enter__(self) -> SimController:
         self.start()
@@ -273,6 +276,15 @@ class SimController(OpenProtocolServer):
             self._refuse_mid.clear()
             self._refuse_rev.clear()
         self.call(do)
+
+    def lose_next_push(self, count: int = 1) -> None:
+        """The next ``count`` results are made and kept (MID 0064 gives them, and MID 0900
+        their curves) but neither their MID 0061 nor their curves reach a subscriber, with
+        the link up: a push a controller's firmware or a device on the way lost, which the
+        integrator sees only as a tightening id skipped by the next result."""
+        if count < 1:
+            raise ValueError(f"count must be >= 1, not {count}")
+        self.call(lambda: setattr(self, "_lose_pushes", self._lose_pushes + count))
 
     def forget_results(self, *tightening_ids: int) -> None:
         """The controller no longer has these results (its store is bounded)."""
@@ -567,15 +579,17 @@ class SimController(OpenProtocolServer):
         self._store[self._tid] = record
         while len(self._store) > self.store_size:
             self._store.popitem(last=False)
-        if self.resend_unacked:
+        lost = self._lose_pushes > 0
+        self._lose_pushes -= lost
+        if self.resend_unacked and not lost:
             self._unacked[self._tid] = record
         for s in self.sessions():
-            if s.started and s.subscribed:
+            if s.started and s.subscribed and not lost:
                 rev = self.send_revision or s.result_revision
                 self.post(s, self._render(61, rev, record))
                 s.unacked.append(self._tid)
         for s in self.sessions():       # the curves after every result: never before one
-            if s.started:
+            if s.started and not lost:
                 self._send_traces(s, record, s.traces)
                 if s.plot:
                     self.post(s, mid0901(record))

@@ -25,8 +25,12 @@
       tr.dataset.station = x.station_id;
       cell(tr, x.at.replace("T", " ").slice(0, 19));
       for (const v of [x.station_id, x.vin, x.bolt]) cell(tr, v);
-      cell(tr, (x.ok ? "OK" : "NOK") + (x.kind === "loosening" ? " (loosening)" : ""),
-           x.ok ? "" : "out");
+      cell(tr, (x.ok ? "OK" : "NOK") + (x.kind === "loosening" ? " (loosening)" : "") +
+           (x.entered_by ? " (entered by " + x.entered_by + ")" : ""), x.ok ? "" : "out");
+      if (x.entered_by) {   // read on the controller's screen, not measured: say who and why
+        tr.lastChild.title = "entered from the controller's screen, not measured" +
+          (x.entered_comment ? ": " + x.entered_comment : "");
+      }
       cell(tr, fmt(x.torque_nm, 1));
       const [, lo, hi] = x.torque_window_nm;   // target, min, max in force
       cell(tr, lo === null && hi === null ? "-" : fmt(lo, 1) + " - " + fmt(hi, 1));
