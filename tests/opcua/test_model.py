@@ -57,10 +57,11 @@ def test_a_copied_model_is_the_imported_one_node_for_node_and_apart_from_it():
         await copied.register_namespace("urn:one-of-them")
         grown = 0
         for nid, data in copied.iserver.aspace._nodes.items():
-            value = data.attributes.get(ua.AttributeIds.Value)
-            if nid.NamespaceIndex > 1 and value is not None and value.value is not None \
-                    and isinstance(value.value.Value.Value, list):
-                value.value.Value.Value.append("changed in place")
+            held = data.attributes.get(ua.AttributeIds.Value)
+            variant = held.value.Value if held is not None and held.value is not None else None
+            if nid.NamespaceIndex > 1 and variant is not None and \
+                    isinstance(variant.Value, list):
+                variant.Value.append("changed in place")
                 grown += 1
         assert grown > 0
         fresh, _ = await _server("urn:c")
