@@ -58,13 +58,8 @@ from typing import Any, Literal
 
 from drivers.link import Link, SerialLink, TcpLink
 from drivers.url import DeviceUrl
-from drivers.wrench.openprotocol.client import (
-    OPTIONS,
-    REFUSED,
-    OpenProtocolWrench,
-    Spec,
-    keyword_options,
-)
+from drivers.wrench.openprotocol.client import OpenProtocolWrench
+from drivers.wrench.openprotocol.options import OPTIONS, REFUSED, Spec, keyword_options
 from drivers.wrench.sim.curves import PART_SIZE, in_parts, mid0900, mid0901, mid0902
 from drivers.wrench.sim.results import (
     NM_PER,
