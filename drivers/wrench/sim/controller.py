@@ -643,20 +643,8 @@ class SimWrench(OpenProtocolWrench):
             return SerialLink(self.controller.open_pty(os.path.join(self._pty_dir, "tty")))
         return TcpLink("127.0.0.1", self.controller.listen_tcp(), REFUSED)
 
-    def _open(self) -> None:
-        try:
-            super()._open()
-        except BaseException:
-            self._release()
-            raise
-
-    def _close(self) -> None:
-        try:
-            super()._close()
-        finally:
-            self._release()
-
     def _release(self) -> None:
+        """The controller started by ``_make_link`` and the folder of its pty's link."""
         self.controller.close()
         if self._pty_dir is not None:
             shutil.rmtree(self._pty_dir, ignore_errors=True)
