@@ -258,7 +258,11 @@ class Wrench(Openable):
                 raise DeviceError("closed; open a new one", device=self.device)
             if self._opened:
                 return
-            self._open()
+            try:
+                self._open()
+            except BaseException:
+                self._release()
+                raise
             self._opened = True
 
     def close(self) -> None:
@@ -268,7 +272,10 @@ class Wrench(Openable):
                 return
             self._closed = True
             if self._opened:
-                self._close()
+                try:
+                    self._close()
+                finally:
+                    self._release()
 
     def reconnect(self) -> None:
         """Drop the link (if it is up) and start a new session: one attempt, a DeviceError if
@@ -449,6 +456,11 @@ class Wrench(Openable):
 
     @abstractmethod
     def _close(self) -> None: ...
+
+    def _release(self) -> None:
+        """Release what the wrench owns besides its link (the simulated backends: the
+        controller they started in-process): after an ``open()`` that failed, and after
+        ``close()``, whatever happened in between.  Nothing by default."""
 
     @abstractmethod
     def _identity(self) -> str: ...

@@ -316,21 +316,15 @@ class SimModbusWrench(ModbusWrench):
 
     def _open(self) -> None:
         c = self.controller
-        try:
-            if self.transport == "tcp":
-                self.spec = LinkSpec("tcp", "127.0.0.1", c.start_tcp(), c.unit)
-            else:       # ptys refuse parity bits: 8N1
-                self.spec = LinkSpec("rtu", c.start_rtu(), 0, c.unit, 19200, "N", 1)
-            super()._open()
-        except BaseException:
-            c.close()
-            raise
+        if self.transport == "tcp":
+            self.spec = LinkSpec("tcp", "127.0.0.1", c.start_tcp(), c.unit)
+        else:       # ptys refuse parity bits: 8N1
+            self.spec = LinkSpec("rtu", c.start_rtu(), 0, c.unit, 19200, "N", 1)
+        super()._open()
 
-    def _close(self) -> None:
-        try:
-            super()._close()
-        finally:
-            self.controller.close()
+    def _release(self) -> None:
+        """The controller started at open (its server and pty)."""
+        self.controller.close()
 
     def _identity(self) -> str:
         return f"simulated {super()._identity()}"

@@ -1,7 +1,7 @@
 """Open Protocol messages: header, TCP and serial framing, and the replies the station reads.
 
 Pure functions and small stateful framers, no I/O (pymodbus's protocol/transport split): the
-links are in ``link.py`` and the request/answer rules in ``client.py``.  Everything here is
+links are in ``link.py`` and the request/answer rules in ``channel.py``.  Everything here is
 written from docs/PROTOCOLS.md: a message is a 20-byte ASCII header (length, MID, revision,
 no-ack flag, station, spindle, sequence, parts, part), data, then NUL; over TCP messages follow
 each other; over RS-232 the integrator sends ``BEL HT BEL HT STX message ETX`` and the

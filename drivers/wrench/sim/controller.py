@@ -60,13 +60,8 @@ from typing import Any, Literal
 
 from drivers.link import Link, SerialLink, TcpLink
 from drivers.url import DeviceUrl
-from drivers.wrench.openprotocol.client import (
-    OPTIONS,
-    REFUSED,
-    OpenProtocolWrench,
-    Spec,
-    keyword_options,
-)
+from drivers.wrench.openprotocol.client import OpenProtocolWrench
+from drivers.wrench.openprotocol.options import OPTIONS, REFUSED, Spec, keyword_options
 from drivers.wrench.sim.curves import PART_SIZE, in_parts, mid0900, mid0901, mid0902
 from drivers.wrench.sim.results import (
     NM_PER,
@@ -662,20 +657,8 @@ class SimWrench(OpenProtocolWrench):
             return SerialLink(self.controller.open_pty(os.path.join(self._pty_dir, "tty")))
         return TcpLink("127.0.0.1", self.controller.listen_tcp(), REFUSED)
 
-    def _open(self) -> None:
-        try:
-            super()._open()
-        except BaseException:
-            self._release()
-            raise
-
-    def _close(self) -> None:
-        try:
-            super()._close()
-        finally:
-            self._release()
-
     def _release(self) -> None:
+        """The controller started by ``_make_link`` and the folder of its pty's link."""
         self.controller.close()
         if self._pty_dir is not None:
             shutil.rmtree(self._pty_dir, ignore_errors=True)

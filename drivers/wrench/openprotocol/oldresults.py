@@ -1,0 +1,75 @@
+"""Results asked for after the fact (MID 0064 -> 0065): a gap in the tightening ids filled
+after a reconnect, and the renewal's catch-up.
+
+Why its own revision: a controller may keep its old results at a revision other than the one
+it pushes at.  The first fetch of a session asks for the highest revision and one lower each
+time the controller answers "revision unsupported", and the session keeps the one agreed; a
+MID 0065 laid out as a lower revision than its header says is read at that one (as a pushed
+result is, ``reading.py``) and later fetches ask for it.  One that reads at no revision is
+the controller's record of a tightening all the same: handed back as an ``UnreadableResult``,
+to be stored and looked at, not raised.
+"""
+
+from __future__ import annotations
+
+from drivers.errors import ProtocolError, RefusedError
+from drivers.wrench.base import Received, UnreadableResult
+from drivers.wrench.openprotocol import message as op
+from drivers.wrench.openprotocol.channel import Channel
+from drivers.wrench.openprotocol.message import Message
+from drivers.wrench.openprotocol.reading import receive
+from drivers.wrench.openprotocol.resultfeed import RESULT_REVISIONS, ResultFeed
+
+
+class OldResults:
+    """MID 0064 on one wrench's sessions; ``agreed`` (guarded by the channel's ``cond``) is
+    the revision agreed this session, None before the first fetch."""
+
+    def __init__(self, channel: Channel, feed: ResultFeed) -> None:
+        self._channel = channel
+        self._feed = feed                       # says a lowered revision once, as for pushes
+        self._log = channel.log
+        self.device = channel.device
+        self.agreed: int | None = None
+
+    def fetch(self, tightening_id: int, timeout: float, epoch: int, what: str
+              ) -> Received | None:
+        """MID 0064 -> 0065 at the agreed revision (or the highest not refused), holding the
+        request lock: the result, or None for "not found"; other refusals and failures
+        raise as they come, and a ProtocolError for an answer about another tightening."""
+        data = f"{tightening_id:010d}".encode()
+        with self._channel.cond:
+            agreed = self.agreed
+        for rev in (agreed,) if agreed else RESULT_REVISIONS:
+            try:
+                reply = self._channel.transact(
+                    Message(op.MID_OLD_RESULT_REQUEST, revision=rev, data=data),
+                    {op.MID_OLD_RESULT, op.MID_ERROR}, timeout, epoch)
+            except RefusedError as e:
+                if e.code in op.REVISION_REFUSALS and rev > 1:
+                    continue
+                if e.code == op.NOT_FOUND:
+                    self._agree(rev)
+                    return None
+                raise
+            self._agree(rev)
+            return self._read(reply, tightening_id, what)
+        raise AssertionError("unreachable: revision 1's refusal is raised")
+
+    def _agree(self, rev: int) -> None:
+        with self._channel.cond:
+            self.agreed = rev
+
+    def _read(self, reply: Message, tightening_id: int, what: str) -> Received:
+        result = receive(reply)
+        if isinstance(result, UnreadableResult):
+            self._log.warning("%s: %s: MID 0065 revision %d does not read at any revision "
+                              "(%s); kept with its raw text", self.device, what,
+                              reply.revision, result.error)
+        elif result.header_revision is not None:
+            self._feed.lowered(reply.mid, result.header_revision, result.revision)
+            self._agree(result.revision)                 # ask for that one
+        if tightening_id and result.tightening_id not in (tightening_id, None):
+            raise ProtocolError(f"{what}: the controller answered with tightening "
+                                f"{result.tightening_id}", device=self.device)
+        return result
