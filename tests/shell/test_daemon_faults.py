@@ -34,7 +34,7 @@ def test_devices_down_at_boot_are_faults_then_it_recovers_and_a_closed_vin_is_a_
         plc.raise_lift()
         d.wait_log("tracking: tracking the wrench")
         plc.lower_lift()
-        d.wait_log("vehicle REWORKVIN00000001 closed")
+        d.wait_log("vehicle REWORKVIN00000001 (SIM-1) closed: bolts:")
         plc.raise_lift()                        # the same VIN back: a rework, not an exit
         d.wait_log("VIN REWORKVIN00000001 already closed: reopened as a rework")
         assert d.log().count("tracking: tracking the wrench") >= 2 or \

@@ -139,7 +139,7 @@ def test_sigterm_and_sigkill_mid_vehicle_lose_nothing(tmp_path):
         d.wait_log("tracking the wrench")
         until(lambda: shot.tightening_id in _all_ids(tmp_path), 60, "the last result stored")
         plc.lower_lift()
-        d.wait_log(f"vehicle {VIN} closed")
+        d.wait_log(f"vehicle {VIN} (SIM-1) closed: bolts:")
         assert d.stop(signal.SIGTERM) == 0
     finally:
         for d in daemons:
