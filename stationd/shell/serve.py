@@ -21,7 +21,7 @@ import sys
 import time
 from collections.abc import Callable, Coroutine
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drivers.keeper import Backoff, FaultKind, one_line
 from stationd.boltfile import load_bolts
@@ -35,6 +35,9 @@ from stationd.shell.records import STATION_FAULTS, Unsaved
 from stationd.shell.sdnotify import Notifier
 from stationd.station.events import LineLinkChanged, ResultRecorded, StationEvent
 from stationd.station.inputs import DATABASE, LIFT, WRENCH, DeviceBack, DeviceFault
+
+if TYPE_CHECKING:
+    from stationd.web import Results
 
 log = logging.getLogger("stationd")
 OPEN_RETRY_S = (1.0, 30.0)   # a database that does not open: first and longest wait
@@ -148,22 +151,25 @@ class Screens:
             if self.server is not None:     # a reload may add or remove a pair
                 self.server.set_devices(configured_devices(cfg))
             return
+        if key == self._for and self.server is not None:
+            # the database opened only now: the screens get their results where they are
+            # served (restarted, they were away for a moment: every screen reconnected, and
+            # a client asking then was refused)
+            results, self.server.results_error = self._results(cfg)
+            if results is not None:
+                self.server.results = results
+                log.info("screens: results served from %s", cfg.database_url)
+            self.server.set_devices(configured_devices(cfg))
+            return
         frames = self.frames if key == self._for else None   # the station holds them
         await self.stop()
         self._for = key
         if cfg.http is None:
             return
-        from db.repository import Repository
-        from stationd.web import LatestFrames, Results, WebServer
+        from stationd.web import LatestFrames, WebServer
 
         self.frames = frames if frames is not None else LatestFrames()
-        results, results_error = None, None
-        try:
-            results = Results(Repository.open(cfg.database_url))
-        except OPEN_ERRORS as exc:
-            results_error = one_line(exc)
-            log.error("screens served without results until the database opens: %s",
-                      results_error)
+        results, results_error = self._results(cfg)
         try:
             server = WebServer(self.bus, results, self.frames,
                                listen=cfg.http.listen, token=cfg.http.token,
@@ -184,6 +190,19 @@ class Screens:
             return
         self._failed = None
         log.info("screens: %s", self.server.url)
+
+    @staticmethod
+    def _results(cfg: StationConfig) -> tuple[Results | None, str | None]:
+        """The results pages' database, or why it is not open (journaled)."""
+        from db.repository import Repository
+        from stationd.web import Results
+
+        try:
+            return Results(Repository.open(cfg.database_url)), None
+        except OPEN_ERRORS as exc:
+            log.error("screens served without results until the database opens: %s",
+                      one_line(exc))
+            return None, one_line(exc)
 
     def attach(self, station: Station | None, cfg: StationConfig) -> None:
         """People's commands go to ``station`` (None: refused, none is running), with the
