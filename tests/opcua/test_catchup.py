@@ -97,7 +97,7 @@ class Mes:
         return [e.Result.ResultMetaData.SequenceNumber for e in self.events.events
                 if e.EventType in self.requested_types]
 
-    async def wait_requested(self, n: int, timeout: float = 10.0) -> list[int]:
+    async def wait_requested(self, n: int, timeout: float = 60.0) -> list[int]:
         async def enough() -> None:
             while len(self.requested()) < n:
                 await asyncio.sleep(0.02)

@@ -34,7 +34,7 @@ class Changes:
         self.seen.append((node, value))
         self.arrived.set()
 
-    async def until(self, node: Any, value: Any, timeout: float = 5.0) -> None:
+    async def until(self, node: Any, value: Any, timeout: float = 60.0) -> None:
         async def seen() -> None:
             while (node, value) not in self.seen:
                 self.arrived.clear()

@@ -59,7 +59,7 @@ class Collector:
         self.events.append(event)
         self.arrived.set()
 
-    async def wait_for(self, n: int, timeout: float = 10.0) -> None:
+    async def wait_for(self, n: int, timeout: float = 60.0) -> None:
         async def enough() -> None:
             while len(self.events) < n:
                 self.arrived.clear()
