@@ -450,9 +450,7 @@ def _checker(station: Station, truth: dict[str, Any], out: Any) -> Any:
             station.bus.publish(WrongBolt(action.bolt, truth["bolt"]))
             say(f"WRONG BOLT: parameters for {action.bolt} while the wrench is on "
                 f"{truth['bolt'] or 'no bolt'}")
-        matcher = station.core.matcher
-        if isinstance(action, SendParams) and matcher is not None \
-                and action.bolt in matcher.locked:
+        if isinstance(action, SendParams) and action.bolt in station.core.status().locked:
             truth["locked_sends"] += 1
             say(f"LOCKED BOLT: parameters for {action.bolt}, locked")
 

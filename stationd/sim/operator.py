@@ -135,7 +135,7 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     plc.set_vehicle(truth["model_code"], truth["vin"])
     plc.raise_lift()
     for _ in range(200):
-        if st.vin is not None and st.core.model is not None:
+        if st.vin is not None and st.core.status().model is not None:
             break
         await asyncio.sleep(0.05)
     else:
@@ -143,8 +143,9 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     length = st.cfg.tool.length_mm
     bolts: list[BoltInfo] = []
     unseen: list[BoltInfo] = []
-    assert st.repo is not None and st.core.model is not None  # noqa: S101 - opened above
-    infos = st.repo.bolts_for_model(st.core.model)   # the simulation's truth, from the table
+    model = st.core.status().model
+    assert st.repo is not None and model is not None  # noqa: S101 - opened above
+    infos = st.repo.bolts_for_model(model)   # the simulation's truth, from the table
     for b in infos:   # a bolt no pair sees cannot be demonstrated: say so
         pairs = world.seen_by(wrench_at(np.array(b.position), np.random.default_rng(0), length,
                                        max_tilt_deg=0.0))
@@ -319,8 +320,8 @@ def shot_words(shot: SimTightening) -> str:
 def stopped(st: Station, bolt: str) -> bool:
     """Whether ``bolt`` waits for a supervisor: locked after NOKs in a row, or held (its
     result could not be read)."""
-    matcher = st.core.matcher
-    return matcher is not None and (bolt in matcher.locked or bolt in matcher.held)
+    now = st.core.status()
+    return bolt in now.locked or bolt in now.held
 
 
 #: a bolt's step while it waits for a person's release (``until_ok``), and once released
@@ -425,8 +426,7 @@ async def until_ok(st: Station, bolt: str, line: dict[str, Any],
     steps: list[str] = []
     line["rundowns"] = 0
     for _ in range(MAX_RUNDOWNS):
-        sel = st.core.selection
-        loosening = sel is not None and sel.loosen
+        loosening = st.core.status().loosen
         shot, _ = await _pull(st, loosening, stubborn or nok_rng.random() < NOK_P)
         if shot is None:
             steps.append("no result")

@@ -99,6 +99,14 @@ class CoreStatus:
     operator: str | None
     #: the pairs the calibration check does not trust now, with why (None: no check)
     untrusted: Mapping[str, Reason] | None
+    #: the loaded vehicle's model (None: no vehicle loaded)
+    model: str | None = None
+    #: the loaded vehicle's bolts waiting for a supervisor: locked after NOKs in a row, held
+    #: (their result could not be read)
+    locked: frozenset[str] = frozenset()
+    held: frozenset[str] = frozenset()
+    #: whether the bolt selected now is to be loosened first (the NOK policy)
+    loosen: bool = False
 
     @property
     def cameras_on(self) -> bool:
@@ -179,7 +187,11 @@ class CoreState:
                           MappingProxyType({d: r for d, (_, r) in self.faults.items()}),
                           self.vin, self.bolt, self.tool_on, self.operator,
                           None if self.trust is None
-                          else MappingProxyType(self.trust.untrusted()))
+                          else MappingProxyType(self.trust.untrusted()),
+                          self.model,
+                          frozenset(() if self.matcher is None else self.matcher.locked),
+                          frozenset(() if self.matcher is None else self.matcher.held),
+                          self._selection is not None and self._selection.loosen)
 
     @property
     def selection(self) -> Selection | None:

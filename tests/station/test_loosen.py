@@ -99,13 +99,17 @@ def test_a_loosening_nok_counts_and_the_bolt_stays_to_be_loosened():
     sent, acts = _rundown(d, 3, 2, ok=False, rtype=2)
     assert sent.loosen and sent.selection.pset == 91
     assert [(e.bolt, e.count) for e in published(acts, BoltLocked)] == [("B3", 2)]
+    now = d.core.status()                       # what the simulated operator asks
+    assert (now.model, now.locked, now.held) == ("M", frozenset({"B3"}), frozenset())
     sends = len(d.sends)
     _on(d, 3, 4)
     assert len(d.sends) == sends                # locked: nothing sent
     reply = _command(d, 1, ReleaseBolt("VIN1", "B3", "joint checked"), SUPERVISOR)
     assert reply.answer.accepted
+    assert d.core.status().locked == frozenset()
     sent, _ = _rundown(d, 3, 3, ok=True)        # released: still its loosening first
     assert sent.loosen and sent.selection.pset == 91
+    assert not d.core.status().loosen           # its result came: nothing selected now
 
 
 def test_a_loosening_ok_neither_counts_nor_ends_the_nok_row():
