@@ -46,11 +46,12 @@ from stationd.shell.tracking import FrameStore, Tracker
 from stationd.station.actions import Action, Publish
 from stationd.station.commands import Answer, Command, Issuer
 from stationd.station.core import StationCore
-from stationd.station.events import State, StateChanged
+from stationd.station.events import State
 from stationd.station.inputs import (
     DATABASE,
     LIFT,
     WRENCH,
+    Announce,
     CommandIn,
     DeviceBack,
     DeviceFault,
@@ -201,10 +202,11 @@ class Station:
                 self._pending.append(DeviceFault(time.time(), device, *fault))
 
     def announce(self) -> None:
-        """Publish the core's state as it stands (a new station, before it opens anything:
-        the screens forget the last configuration's device reports)."""
-        now = self.core.status()
-        self.bus.publish(StateChanged(now.state, now.reason))
+        """A new station, before it opens anything: the core tells its state as it stands
+        (the screens forget the last configuration's device reports)."""
+        for a in self.core.feed(Announce(time.time())):
+            if isinstance(a, Publish):
+                self.effects.publish(a.event)
 
     def heard_before_run(self, ev: DeviceFault | DeviceBack) -> None:
         """What the serve loop saw before this station's loop runs (the database not open,

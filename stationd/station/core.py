@@ -42,6 +42,7 @@ from typing import assert_never
 from stationd.station.actions import Action, Publish
 from stationd.station.events import StateChanged
 from stationd.station.inputs import (
+    Announce,
     CommandDone,
     CommandIn,
     DeviceBack,
@@ -91,6 +92,8 @@ class StationCore(LiftRules, ToolRules, ResultRules):
         match ev:
             case Started():
                 return self._on_started(ev)
+            case Announce():
+                return self._on_announce(ev)
             case LiftRead():
                 return self._on_lift_read(ev)
             case VehicleLoaded():
@@ -138,6 +141,9 @@ class StationCore(LiftRules, ToolRules, ResultRules):
             case ReferencesChecked():
                 return self._on_references_checked(ev)
         assert_never(ev)
+
+    def _on_announce(self, ev: Announce) -> list[Action]:
+        return [Publish(StateChanged(self.state, self.reason, t=ev.t))]
 
     def _on_tick(self, ev: Tick) -> list[Action]:
         if self._off_at is not None and ev.t - self._off_at >= self.late_result_s:

@@ -46,6 +46,12 @@ class Started(Input):
 
 
 @dataclass(frozen=True)
+class Announce(Input):
+    """A new station takes over (the daemon's start, a reload) before it opens anything: the
+    core tells its state as it stands, so the screens forget the last one's reports."""
+
+
+@dataclass(frozen=True)
 class LiftRead(Input):
     """One successful read of the lift PLC (the read itself proves the PLC is back);
     ``why`` is what the operator reads while it is not ready (the daemon passes
@@ -262,7 +268,8 @@ class CommandDone(Input):
     reason: Reason | None = None
 
 
-Event = (Started | LiftRead | LocalizedIn | ParamsAcked | ParamsRefused | ResultIn | UnreadableIn
+Event = (Started | Announce | LiftRead | LocalizedIn | ParamsAcked | ParamsRefused | ResultIn
+         | UnreadableIn
          | ResultsMissed | NotStored
          | DeviceFault | DeviceBack | VehicleLoaded | VehicleRejected | VinSent | Tick
          | CommandIn | CommandDone | ToolOn | Written | VehicleEnded | ModelsKnown

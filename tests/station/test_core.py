@@ -43,6 +43,7 @@ from stationd.station.events import (
 )
 from stationd.station.inputs import (
     DATABASE,
+    Announce,
     CommandDone,
     CommandIn,
     DeviceBack,
@@ -662,3 +663,17 @@ def test_what_the_shell_could_not_do_is_said_by_the_core():
     assert said.level == "error" and "tightening 7 of B03 not stored: disk I/O error" == \
         said.message
     assert not [a for a in acts if not isinstance(a, Publish)]
+
+
+def test_a_new_station_announces_its_state_as_the_core_decided_it():
+    """A new station (a start, a reload) tells its state before it opens anything: the core
+    publishes it, once per announcement, and nothing else changes."""
+    core = StationCore()
+    [told] = published(core.feed(Announce(1.0)), StateChanged)
+    assert (told.state, told.reason, told.t) == (State.STARTING, core.status().reason, 1.0)
+    core.feed(DeviceFault(2.0, DATABASE, FaultKind.DOWN, "unable to open database"))
+    acts = core.feed(Announce(3.0))
+    assert [(e.state, e.reason) for e in published(acts, StateChanged)] == \
+        [(State.FAULT, core.status().reason)]
+    assert all(isinstance(a, Publish) for a in acts)
+    assert core.status().faults == {DATABASE: "unable to open database"}
