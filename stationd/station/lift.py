@@ -128,9 +128,12 @@ class LiftRules(FaultRules):
             for k, b in ev.bolts.items()), rework=ev.rework, t=ev.t)
         if self.state is State.WAITING_VEHICLE and self._lift is not None and self._lift.ready:
             self._to(State.TRACKING, "tracking the wrench")
-        held = [Publish(BoltLocked(k, 0, held=note, t=ev.t))
-                for k, note in self.matcher.held.items()]
-        return [Publish(opened), *held, *self._check_on_arrival(ev.t, ev.vin)]
+        # what waits for a supervisor comes back with the vehicle (a restart, a reload): the
+        # screens and status list it again, to be released
+        waiting = [Publish(BoltLocked(k, n, t=ev.t)) for k, n in self.matcher.locked.items()]
+        waiting += [Publish(BoltLocked(k, 0, held=note, t=ev.t))
+                    for k, note in self.matcher.held.items()]
+        return [Publish(opened), *waiting, *self._check_on_arrival(ev.t, ev.vin)]
 
     def _loosen_back(self, ev: VehicleLoaded) -> None:
         """The loosen strategy's state comes back with the vehicle: a bolt whose last rundown

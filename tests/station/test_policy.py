@@ -96,8 +96,12 @@ def test_overrides_per_bolt_win_over_per_pset_over_the_default():
 
 def test_the_count_comes_back_with_the_vehicle():
     core = StationCore(PARAMS, leave_frames=2, nok=NokPolicy(NokRule(max_nok=3)))
-    core.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, noks={"B1": 3, "B2": 2}))
+    acts = core.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, noks={"B1": 3, "B2": 2}))
     assert core.matcher is not None and core.matcher.locked == {"B1": 3}
+    # and is said again: after a restart or a reload the screens and status list the lock,
+    # for a supervisor to release (a newcomer found it gone from status after a reload)
+    assert [(e.bolt, e.count, e.held) for e in _events(acts, BoltLocked)] == [("B1", 3, None)]
+    assert core.status().locked == frozenset({"B1"})
     # a bolt skipped after its NOK stays skipped after a reload (a newcomer saw it tightened)
     skip = StationCore(PARAMS, leave_frames=2, nok=NokPolicy(NokRule(3), bolts={
         "B3": NokRule(3, "skip")}))
