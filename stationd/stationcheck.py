@@ -21,6 +21,7 @@ from stationd.station.policy import table_errors
 from stationd.yamlio import YamlNode
 
 if TYPE_CHECKING:
+    from db.bolts import BoltTable
     from stationd.boltfile import BoltCheck
 
 
@@ -78,6 +79,10 @@ def check_station(path: str | Path) -> StationCheck:
         warning = _psets_only_warning(cfg.wrench.url, bolts.table, top["wrench"])
         if warning is not None:
             warnings.append(warning)
+    if cfg.bolts_path is None:
+        warning = _no_models_warning(cfg, str(p))
+        if warning is not None:
+            warnings.append(warning)
     if cfg.opcua is not None and cfg.opcua.users and cfg.opcua.security == ("none",):
         # served, but the MES's user passwords would cross the plant network in clear text
         warnings.append(top["opcua"].error(
@@ -94,21 +99,45 @@ def _nok_errors(node: YamlNode, cfg: StationConfig, bolts: Any) -> list[ConfigEr
     if cfg.bolts_path is not None:   # a table with errors is told those, not these
         return [] if bolts is None or bolts.table is None \
             else table_errors(node, bolts.table, str(cfg.bolts_path))
+    found = _database_table(cfg)
+    if found is None or isinstance(found, str):
+        return []
+    table, where = found
+    return table_errors(node, table, where)
+
+
+def _database_table(cfg: StationConfig) -> tuple[BoltTable, str] | str | None:
+    """The bolt tables of the station's database and where they are, when it is an SQLite
+    file that opens (read only); where it would be made when it does not exist yet (None:
+    another database, or one that does not open: the daemon's to report)."""
     from sqlalchemy.engine import make_url
 
     from db.errors import DbError
     from db.repository import Repository
 
     url = make_url(cfg.database_url)
-    if url.get_backend_name() != "sqlite" or not url.database \
-            or not Path(url.database).is_file():
-        return []
+    if url.get_backend_name() != "sqlite" or not url.database:
+        return None
+    if not Path(url.database).is_file():
+        return url.database
     try:
         with Repository.open(cfg.database_url, read_only=True) as repo:
-            table = repo.table()
+            return repo.table(), f"the database {url.database}"
     except DbError:
-        return []
-    return table_errors(node, table, f"the database {url.database}")
+        return None
+
+
+def _no_models_warning(cfg: StationConfig, path: str) -> ConfigError | None:
+    """A station without a bolt table whose database knows no vehicle model would refuse
+    every vehicle ("unknown vehicle model code"): said before it runs."""
+    found = _database_table(cfg)
+    if found is None or (not isinstance(found, str) and found[0].models):
+        return None
+    where = f"the database {found} does not exist yet" if isinstance(found, str) \
+        else f"{found[1]} has no vehicle model"
+    return ConfigError(f"no bolt table (bolts:) and {where}: every vehicle would be refused "
+                       "(unknown vehicle model code); name a bolt table, or import one "
+                       f"(stationd db import BOLTS.yaml --config {path})", path=path)
 
 
 def _psets_only_warning(url: str, table: Any, node: YamlNode) -> ConfigError | None:

@@ -69,3 +69,30 @@ def test_without_a_bolt_file_the_database_tables_are_checked(station):
     assert [str(e).split(": ", 1)[1] for e in result.errors] == [
         f"nok.psets.7: pset 7: no bolt of the database {db} is tightened with it and no table "
         "there defines it", f"nok.bolts.B99: bolt B99: no model of the database {db} has it"]
+
+
+def test_without_a_bolt_file_a_database_without_models_is_warned_of(tmp_path):
+    """A station without ``bolts:`` whose database knows no vehicle model refuses every
+    vehicle ("unknown vehicle model code"): ``config check`` says so before it runs (a new
+    user found it said "ok"), and says nothing once the database has the tables."""
+    for f in SIM.iterdir():
+        shutil.copy(f, tmp_path)
+    station = tmp_path / "station.yaml"
+    db = tmp_path / "tables.db"
+    station.write_text(station.read_text().replace("bolts: bolts.yaml\n", "").replace(
+        "sqlite:///stationd-sim.db", f"sqlite:///{db}"))
+
+    def warned() -> list[str]:
+        result = check_station(station)
+        assert result.ok, result.errors
+        return [str(w) for w in result.warnings if "no bolt table" in str(w)]
+
+    [missing] = warned()
+    assert f"the database {db} does not exist yet" in missing
+    assert f"stationd db import BOLTS.yaml --config {station}" in missing
+    Repository.open(f"sqlite:///{db}").close()          # made, empty
+    [empty] = warned()
+    assert f"the database {db} has no vehicle model" in empty
+    with Repository.open(f"sqlite:///{db}") as repo:
+        repo.import_bolts(load_bolts(tmp_path / "bolts.yaml"))
+    assert warned() == []
