@@ -13,6 +13,8 @@ from typing import Any
 
 import yaml
 
+from db.counting import counted
+
 
 @dataclass(frozen=True)
 class Window:
@@ -78,7 +80,8 @@ class BoltTable:
 
     def summary(self) -> str:
         psets = len(self.psets) + sum(len(m.psets) for m in self.models)
-        return f"{len(self.models)} model(s), {self.bolt_count} bolt(s), {psets} pset(s)"
+        return (f"{counted(len(self.models), 'model')}, {counted(self.bolt_count, 'bolt')}, "
+                f"{counted(psets, 'pset')}")
 
 
 # -- YAML output ------------------------------------------------------------------------------

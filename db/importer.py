@@ -18,6 +18,7 @@ from sqlalchemy import exists, func, select
 from sqlalchemy.orm import Session
 
 from db.bolts import BoltSpec, BoltTable, ModelSpec, Parameters, Pset, Window
+from db.counting import counted
 from db.models import (
     Bolt,
     ProcessParameters,
@@ -58,10 +59,10 @@ class ImportReport:
     def lines(self) -> list[str]:
         """One line per kind of change, for the command's output."""
         if not self.has_changes:
-            return [f"no changes ({len(self.unchanged)} bolt(s) unchanged)"]
+            return [f"no changes ({counted(len(self.unchanged), 'bolt')} unchanged)"]
         out = [f"{label}: {', '.join(getattr(self, key))}"
                for key, label in _LABELS.items() if getattr(self, key)]
-        out.append(f"unchanged: {len(self.unchanged)} bolt(s)")
+        out.append(f"unchanged: {counted(len(self.unchanged), 'bolt')}")
         return out
 
     def to_json(self) -> dict[str, list[str]]:
@@ -215,7 +216,8 @@ class _Importer:
             if count:  # never overwrite what records point at: a new version
                 self.add_version(row, spec.parameters, current.version + 1)
                 self.report.new_versions.append(
-                    f"{label} v{current.version + 1} (v{current.version}: {count} record(s))")
+                    f"{label} v{current.version + 1} "
+                    f"(v{current.version}: {counted(count, 'record')})")
             else:
                 self.set_parameters(current, spec.parameters)
         if revived:

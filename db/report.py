@@ -23,6 +23,7 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from db.counting import counted
 from db.kinds import LOOSENED, LOOSENING, MISSING, NOK, OK, SKIPPED, TIGHTENING, TO_LOOSEN
 from db.models import Bolt, CommandRecord, ProcessParameters, TighteningRecord, Vehicle
 
@@ -114,7 +115,7 @@ class VehicleReport:
     def summary(self) -> str:
         """One line in the screens' words (a vehicle's page): the bolts by their last rundown,
         then the rundowns: "bolts: 5 OK, 0 ending NOK, 0 skipped, 45 missing; rundowns: 8
-        tightening(s), 3 NOK result(s)".  Why both: "5 ok, 0 NOK" for a vehicle with 3 NOK
+        tightenings, 3 NOK results".  Why both: "5 ok, 0 NOK" for a vehicle with 3 NOK
         results read as no NOK at all; the bolts ending NOK decide the vehicle, the NOK results
         are what quality counts."""
         v = self.vehicle
@@ -136,8 +137,8 @@ class VehicleReport:
             else ", 0 missing"
         if self.loosen:
             text += f", {len(self.loosen)} to tighten again ({', '.join(self.loosen)})"
-        return text + (f"; rundowns: {self.tightenings} tightening(s), {self.nok_results} NOK "
-                       "result(s)")
+        return text + (f"; rundowns: {counted(self.tightenings, 'tightening')}, "
+                       f"{counted(self.nok_results, 'NOK result')}")
 
     def to_json(self) -> dict[str, Any]:
         v = self.vehicle

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 from urllib.parse import parse_qsl, urlsplit
 
+from drivers.counting import noun
 from drivers.errors import UrlError
 
 
@@ -45,8 +46,8 @@ class DeviceUrl:
         if unknown:
             accepted = ", ".join(sorted(spec)) or "none"
             hint = f"; e.g. {forms}" if forms else ""
-            raise self.error(f"unknown option(s) {', '.join(unknown)} (accepted: {accepted}"
-                             f"{hint})")
+            raise self.error(f"unknown {noun(len(unknown), 'option')} {', '.join(unknown)} "
+                             f"(accepted: {accepted}{hint})")
         out: dict[str, Any] = {}
         for name, (conv, default) in spec.items():
             if name not in self.options:

@@ -28,6 +28,7 @@ from db.bolts import BoltSpec, BoltTable, ModelSpec, Parameters, Pset, Window
 from db.importer import ImportReport
 from db.repository import Repository
 from db.spacing import min_spacing_mm, too_close
+from stationd.counting import counted, noun
 from stationd.errors import ConfigError, InputError
 from stationd.filekind import expect
 from stationd.yamlio import YamlNode
@@ -187,7 +188,7 @@ class _Checker:
                                                key=exc.key))
         missing = [k for k in required if k not in children]
         if missing:
-            self.fail(node, f"missing key(s): {', '.join(missing)}")
+            self.fail(node, f"missing {noun(len(missing), 'key')}: {', '.join(missing)}")
         return {k: v for k, v in children.items() if k not in unknown}
 
     # -- values -----------------------------------------------------------------------------
@@ -253,7 +254,7 @@ class _Checker:
         except ConfigError:
             elems = None
         if elems is None or len(elems) != 3:
-            got = "" if elems is None else f", got {len(elems)} value(s)"
+            got = "" if elems is None else f", got {counted(len(elems), 'value')}"
             self.fail(node, f"expected [x, y, z] in mm (vehicle frame){got}")
             return None
         xyz = [self.quantity(e, "mm", -POSITION_MAX_MM, POSITION_MAX_MM) for e in elems]

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from db.kinds import MISSING, SKIPPED
+from stationd.counting import counted
 from stationd.errors import ConfigError, InputError
 from stationd.jsonout import strict_json
 from stationd.outfile import write_atomic
@@ -131,7 +132,7 @@ def cmd_db_import(args: argparse.Namespace) -> int:
     result = check_bolts(args.file, tolerance_mm=tolerance)
     if result.errors:
         _print_errors(result.errors)
-        sys.stderr.write(f"stationd: error: {args.file}: {len(result.errors)} error(s), "
+        sys.stderr.write(f"stationd: error: {args.file}: {counted(len(result.errors), 'error')}, "
                          "nothing imported\n")
         return EXIT_BAD_INPUT
     assert result.table is not None  # noqa: S101 - a check without errors holds the table
@@ -213,8 +214,9 @@ def _export_results(args: argparse.Namespace) -> int:
         missing = sum(1 for r in runs if r["status"] == MISSING)
         skipped = sum(1 for r in runs if r["status"] == SKIPPED)
         also = f" (and {skipped} skipped)" if skipped else ""
-        print(f"wrote {args.out}: {len(runs) - missing - skipped} rundown(s) and {missing} "
-              f"missing bolt(s){also} of {len({r['vin'] for r in runs})} vehicle(s)")
+        print(f"wrote {args.out}: {counted(len(runs) - missing - skipped, 'rundown')} and "
+              f"{counted(missing, 'missing bolt')}{also} of "
+              f"{counted(len({r['vin'] for r in runs}), 'vehicle')}")
     return EXIT_OK
 
 
@@ -302,7 +304,7 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                 f"by {b.skipped_by}" + (f": {b.comment}" if b.comment else "") \
                 if b.status == SKIPPED else \
                 f"{_num(b.torque_nm)} Nm, {_num(b.angle_deg)} deg, v{b.version}, " \
-                f"{b.attempts} attempt(s)" + (f", by {last[0]['operator'] or '-'}"
+                f"{counted(b.attempts, 'attempt')}" + (f", by {last[0]['operator'] or '-'}"
                                               + _entered(last[0]) if last else "")
             retired = " (retired)" if b.retired else ""
             print(f"  {b.bolt_id:<12} {b.status.upper():<8} {result}  {b.name}{retired}")
@@ -398,8 +400,8 @@ def cmd_config_check(args: argparse.Namespace) -> int:
         errors += len(found)
         _print_errors(found)
     if failed:
-        sys.stderr.write(f"stationd: error: {errors} error(s) in {failed} of "
-                         f"{len(files)} file(s)\n")
+        sys.stderr.write(f"stationd: error: {counted(errors, 'error')} in {failed} of "
+                         f"{counted(len(files), 'file')}\n")
         return EXIT_BAD_INPUT
     return EXIT_OK
 
@@ -421,7 +423,8 @@ def _check_file(name: str, tolerance_mm: float,
     summary = ""
     if station.config is not None:
         cfg = station.config
-        summary = f"station: {len(cfg.pairs)} pair(s), {len(cfg.cameras)} camera(s)"
+        summary = (f"station: {counted(len(cfg.pairs), 'pair')}, "
+                   f"{counted(len(cfg.cameras), 'camera')}")
         if station.bolts is not None and station.bolts.table is not None:
             summary += f"; bolts {cfg.bolts_path}: {station.bolts.table.summary()}"
     bolt_warnings = station.bolts.warnings if station.bolts is not None else []

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from db.kinds import LOOSENING
+from stationd.counting import counted
 from stationd.errors import InputError
 
 if TYPE_CHECKING:   # each command imports its libraries when run: every command builds this
@@ -93,7 +94,7 @@ def cmd_line_quarantine(args: argparse.Namespace) -> int:
         if args.export:
             rows: list[dict[str, Any]] = fwd.repo.ledger.quarantined()
             write_atomic(out, json.dumps(rows, indent=1))
-            print(f"{len(rows)} quarantined record(s) written to {out}")
+            print(f"{counted(len(rows), 'quarantined record')} written to {out}")
         if args.retry:
             try:
                 fwd.line.reachable()   # exit 3 also with nothing to retry
@@ -208,8 +209,9 @@ def cmd_line_results(args: argparse.Namespace) -> int:
         print(f"no rundowns{' of ' + what if what else ''} in the line database")
         return EXIT_WAITING
     stations = sorted({r.station_id for r in rows})
-    print(f"{len(rows)} rundown(s){' of ' + what if what else ''} at {len(stations)} "
-          f"station(s), newest first{' (--limit reached)' if len(rows) == args.limit else ''}")
+    print(f"{counted(len(rows), 'rundown')}{' of ' + what if what else ''} at "
+          f"{counted(len(stations), 'station')}, newest first"
+          f"{' (--limit reached)' if len(rows) == args.limit else ''}")
     head = ("time (UTC)", "station", "VIN", "bolt", "result", "torque Nm", "angle deg",
             "version", "operator")
     table = [[r.at.strftime("%Y-%m-%d %H:%M:%S"), r.station_id, r.vin, r.bolt,
@@ -308,10 +310,10 @@ def cmd_line_init(args: argparse.Namespace) -> int:
         print("the trigger that types line_feed's new rows: made or brought up to date")
     filled = [(name, n) for name, n in change.filled if n]
     for name, cols, n in change.added:   # a typed table an earlier version made
-        print(f"added to {name}: {', '.join(cols)} ({n} row(s) given their values from "
+        print(f"added to {name}: {', '.join(cols)} ({counted(n, 'row')} given their values from "
               "line_feed)")
     if filled:   # a line database an earlier version made: its records typed once
-        print("filled from line_feed: " + ", ".join(f"{name} {n} row(s)"
+        print("filled from line_feed: " + ", ".join(f"{name} {counted(n, 'row')}"
                                                      for name, n in filled))
     return 0
 

@@ -35,6 +35,7 @@ from stationd.command_cli import (
     say_refused,
     unreachable_words,
 )
+from stationd.counting import counted
 from stationd.errors import ConfigError, InputError
 from stationd.filekind import expect
 from stationd.outfile import write_atomic
@@ -164,7 +165,8 @@ def _teach(args: argparse.Namespace, client: ApiClient, out: Path, doc: dict[str
     for problem in check_spacing(everywhere, args.tolerance):
         print(f"spacing: {problem}", flush=True)
     _write(out, doc, args.model, taught)
-    print(f"{len(taught)} bolt(s) taught: {out} (import it to make new parameter versions)")
+    print(f"{counted(len(taught), 'bolt')} taught: {out} (import it to make new parameter "
+          "versions)")
     return 0
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from db.kinds import is_not_taken_note
+from stationd.counting import counted
 from stationd.reasons import Reason, Why
 from stationd.station.commands import (
     KIND,
@@ -172,8 +173,8 @@ def _unseen(r: Reason) -> str:
     """A teach point with no localization of the wrench at all: what the cameras said first
     (a camera giving no frame is no reason to hold the tool stiller)."""
     assert r.cause is not None  # noqa: S101 - the caller's condition
-    return (f"the wrench was not localized ({r.limit or 0:g} localization(s) without it, "
-            f"none of the {r.needed} needed): {reason_words(r.cause)}")
+    return (f"the wrench was not localized ({counted(float(r.limit or 0), 'localization')} "
+            f"without it, none of the {r.needed} needed): {reason_words(r.cause)}")
 
 
 def _missed(r: Reason) -> str:
@@ -182,7 +183,7 @@ def _missed(r: Reason) -> str:
     to hold the tool stiller."""
     if r.cause is None:
         return ""
-    many = f"{r.limit:g} localization(s)" if r.limit else "the localizations"
+    many = counted(float(r.limit), "localization") if r.limit else "the localizations"
     return f"; {many} without the wrench, the last: {reason_words(r.cause)}"
 
 

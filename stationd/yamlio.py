@@ -19,6 +19,7 @@ import numpy as np
 import yaml
 from yaml.constructor import SafeConstructor
 
+from stationd.counting import noun
 from stationd.errors import ConfigError, printable
 
 _constructor = SafeConstructor()
@@ -218,7 +219,7 @@ class YamlNode:
             out[name] = child
         missing = [k for k in required if k not in out]
         if missing:
-            raise self.error(f"missing key(s): {', '.join(missing)}")
+            raise self.error(f"missing {noun(len(missing), 'key')}: {', '.join(missing)}")
         return out
 
     def named(self, what: str = "names to their settings") -> list[tuple[str, YamlNode]]:

@@ -71,7 +71,7 @@ def test_roles_written_extend_the_defaults_and_redefine_those_named():
 @pytest.mark.parametrize(("text", "message"), [
     ("users:\n  sam: {role: supervisor, password: hunter22}\n", "never the password"),
     (f"users:\n  sam: {{role: king, password: '{HASH}'}}\n", "'king' is not one of"),
-    (f"users:\n  sam: {{password: '{HASH}'}}\n", "missing key(s): role"),
+    (f"users:\n  sam: {{password: '{HASH}'}}\n", "missing key: role"),
     ("roles:\n  lead: [fly]\n", "'fly' is not one of"),
     ("groups: {}\n", "unknown key"),
     ("operator_required: yes please\n", "expected true or false"),

@@ -117,7 +117,7 @@ def test_localize_json_and_repeat(files, capsys):
      f"--no-sim-supervisor needs access.users in {SIM_STATION} with a user holding the "
      "release right"),
     (lambda d: ["demo", "--no-http", "--load", "1000"], "--load must be 0-64"),   # a sweep
-    (lambda d: ["bench", "vision", "--only", ""], "--only: unknown section(s) ''"),
+    (lambda d: ["bench", "vision", "--only", ""], "--only: unknown section ''"),
     (lambda d: ["run", "--config", str(d / "deep.yaml")], "nested more than"),
     # issue 19: hangs, tracebacks and messages in the program's words
     (lambda d: ["detect", str(d / "huge.png"), "--camera", str(d / "cam.yaml")],

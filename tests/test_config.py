@@ -135,7 +135,7 @@ def test_shipped_station_files_check_clean():
     assert sim.ok and sim.errors == [] and sim.warnings == []
     assert sim.config is not None and len(sim.config.pairs) == 4 and len(sim.config.cameras) == 8
     assert sim.bolts is not None and sim.bolts.table is not None
-    assert sim.bolts.table.summary() == "1 model(s), 50 bolt(s), 3 pset(s)"
+    assert sim.bolts.table.summary() == "1 model, 50 bolts, 3 psets"
     # the example names the simulated pair's files and the example bolt table
     # its database is in the service's StateDirectory, made by systemd at the service's start
     example = check_station(ROOT / "config" / "station.example.yaml")
@@ -276,10 +276,10 @@ def test_a_missing_to_vehicle_file_is_a_warning_not_an_error(sim_copy):
     ("database: {url: 'sqlite:///stationd-sim.db'}", "database: {url: 'bogus://x'}",
      "database.url", "database URL 'bogus://x'"),
     # a third newcomer trial: Open Protocol's options passed the check, the controller then
-    # stayed down ("unknown option(s) foo"), and a reload onto the file was accepted
+    # stayed down ("unknown option foo"), and a reload onto the file was accepted
     ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'openprotocol://10.0.0.9?foo=1'}",
      "wrench.url",
-     "unknown option(s) foo (accepted: connect_timeout, curves, keepalive, link_ack, timeout"),
+     "unknown option foo (accepted: connect_timeout, curves, keepalive, link_ack, timeout"),
     ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'openprotocol://10.0.0.9?timeout=-5'}",
      "wrench.url", "timeout must be > 0"),
     ("wrench: {url: 'sim://wrench'}",
@@ -293,7 +293,7 @@ def test_a_missing_to_vehicle_file_is_a_warning_not_an_error(sim_copy):
     ("url: 'sim://pair1/left'", "url: 'aravis://X?exposure_us=-1'", "cameras.pair1_left.url",
      "option exposure_us='-1' is not valid: an exposure in microseconds is 1-1e+06"),
     ("url: 'sim://pair1/left'", "url: 'aravis://X?gain=9000'", "cameras.pair1_left.url",
-     "unknown option(s) gain (accepted: buffers, exposure_us, frame_rate, gain_db,"),
+     "unknown option gain (accepted: buffers, exposure_us, frame_rate, gain_db,"),
     ("url: 'sim://pair1/left'", "url: 'aravis://X?gain_db=9000'", "cameras.pair1_left.url",
      "option gain_db='9000' is not valid: a gain in dB is 0-48"),
     ("url: 'sim://pair1/left'", "url: 'opencv://0?width=abc'", "cameras.pair1_left.url",
@@ -305,7 +305,7 @@ def test_a_missing_to_vehicle_file_is_a_warning_not_an_error(sim_copy):
      "shows pair 'pair9', which the simulated world does not have (it renders this file's "
      "pairs: pair1, pair2, pair3, pair4): write sim://pair1/left"),
     ("url: 'sim://pair1/left'", "url: 'sim://pair1/left?sed=1'", "cameras.pair1_left.url",
-     "unknown option(s) sed (accepted: seed"),
+     "unknown option sed (accepted: seed"),
     ("lift: {url: 'sim://lift'}", "lift: {url: 'openprotocol://10.0.0.9:4545'}", "lift.url",
      "unknown lift scheme 'openprotocol' (openprotocol:// is a tightening controller's URL "
      "(wrench.url), not a lift's)"),

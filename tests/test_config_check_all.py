@@ -142,7 +142,7 @@ def test_every_error_of_the_access_section(station, capsys) -> None:
         "access.users.sam.role", "access.users.ann.password", "access.users.bob",
         "access.users.cid.password", "access.users.dan", "access.operator_idle_s"], lines
     assert "'supervisr' is not one of: operator, supervisor, engineer" in lines[0]
-    assert "missing key(s): password" in lines[2]
+    assert "missing key: password" in lines[2]
 
 
 def test_every_error_of_the_tool_section(station, capsys) -> None:
@@ -177,13 +177,13 @@ def test_the_station_file_is_taken_with_config_as_the_other_commands_take_it(sta
     from stationd.cli import build_parser
 
     assert main(["config", "check", "--config", str(station)]) == 0
-    assert capsys.readouterr().out.startswith(f"{station}: ok, station: 4 pair(s)")
+    assert capsys.readouterr().out.startswith(f"{station}: ok, station: 4 pairs")
     _edit(station, "max_age_s: 0.5", "max_age_s: 500")
     assert main(["config", "check", str(station.parent / "bolts.yaml"),
                  "--config", str(station)]) == 2
     captured = capsys.readouterr()
     assert captured.out.startswith(f"{station.parent / 'bolts.yaml'}: ok, ")
-    assert captured.err.endswith("stationd: error: 1 error(s) in 1 of 2 file(s)\n")
+    assert captured.err.endswith("stationd: error: 1 error in 1 of 2 files\n")
     assert main(["config", "check"]) == 2
     assert capsys.readouterr().err == ("stationd: error: config check: no file to check: "
                                        "stationd config check FILE ... (station files, bolt "

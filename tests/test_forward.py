@@ -205,7 +205,7 @@ def test_the_line_section_is_checked_with_its_line():
                           ("url: postgresql://x/y\nstation_id: A\nbacklog: {size_mb: 0}\n",
                            "out of range"),
                           ("url: 'not a url'\nstation_id: A\n", "not a database URL"),
-                          ("url: postgresql://x/y\n", r"missing key\(s\): station_id"),
+                          ("url: postgresql://x/y\n", "missing key: station_id"),
                           ("url: postgresql://x/y\nstation_id: A\nbacklog: {records: 0}\n",
                            "out of range"),
                           ("url: postgresql://x:99999/y\nstation_id: A\n", "port 99999")):

@@ -292,9 +292,9 @@ def test_a_line_database_made_by_the_earlier_version_is_upgraded_in_place(tmp_pa
     out = capsys.readouterr().out
     assert "made line_calibration_checks, line_commands, line_controller_events, line_gaps, " \
            "line_rundowns, line_unattributed, line_unreadable_results" in out
-    assert "filled from line_feed: line_rundowns 3 row(s), line_commands 1 row(s), " \
-           "line_gaps 1 row(s), line_calibration_checks 1 row(s), line_unattributed 1 " \
-           "row(s), line_controller_events 1 row(s), line_unreadable_results 1 row(s)" in out
+    assert "filled from line_feed: line_rundowns 3 rows, line_commands 1 row, " \
+           "line_gaps 1 row, line_calibration_checks 1 row, line_unattributed 1 " \
+           "row, line_controller_events 1 row, line_unreadable_results 1 row" in out
     assert _typed_counts(old) == _feed_counts(old)
     assert [r.bolt for r in results(old, vin=VIN)] == ["B2", "B2", "B1"]
 
@@ -559,7 +559,7 @@ def test_a_station_upgraded_before_its_line_database_goes_on_forwarding(tmp_path
     assert main(["line", "init", role_url]) == 2
     assert "the typed tables: permission denied" in capsys.readouterr().err
     assert main(["line", "init", pg_url]) == 0
-    assert "line_rundowns 3 row(s)" in capsys.readouterr().out
+    assert "line_rundowns 3 rows" in capsys.readouterr().out
     record(repo, VIN, "B3", tightening_id=30)            # typed from now on, by the trigger
     _forward(repo, role_url, "ST-UP")
     assert _typed_counts(engine) == _feed_counts(engine)
@@ -673,7 +673,7 @@ def test_an_entered_outcome_has_its_own_columns_in_a_line_database_upgraded_in_p
     assert main(["line", "init", pg_url]) == 0
     out = capsys.readouterr().out
     assert "added to line_rundowns: entered_by, entered_comment, unreadable_record_id (1 " \
-           "row(s) given their values from line_feed)" in out, out
+           "row given their values from line_feed)" in out, out
     assert "trigger that types line_feed's new rows: made or brought up to date" in out
     cols = [c["name"] for c in inspect(old).get_columns("line_rundowns")]
     assert cols == [c.name for c in LINE_RUNDOWNS.table.columns]   # one order, any version
@@ -740,7 +740,7 @@ def test_a_forwarding_role_on_a_version_2_line_database_forwards_and_the_owner_u
         "line_rundowns")}
     assert _count(engine, LINE_RUNDOWNS.table) == 1      # typed, by the version-2 trigger
     assert main(["line", "init", pg_url]) == 0
-    assert "(1 row(s) given their values from line_feed)" in capsys.readouterr().out
+    assert "(1 row given their values from line_feed)" in capsys.readouterr().out
     assert [tuple(x) for x in _entered_rows(engine)] == [
         ("B2", 12, "sam", "read on the controller", "00230061007 garbled B2")]
     engine.dispose()

@@ -79,7 +79,7 @@ def test_a_vehicles_rundowns_at_every_station_newest_first(tmp_path, pg_url, cap
     code, out, _ = _run(capsys, "line", "results", "--config", config, "--vin", VIN)
     assert code == 0
     lines = out.splitlines()
-    assert "3 rundown(s) of VIN " + VIN + " at 2 station(s)" in lines[0]
+    assert "3 rundowns of VIN " + VIN + " at 2 stations" in lines[0]
     assert ["ST-A", "ST-B", "ST-A"] == [ln.split()[2] for ln in lines[2:]]
     assert "NOK" in lines[3] and "21.0" in lines[3] and "12.5" in lines[3]
     code, out, _ = _run(capsys, "line", "results", "--config", config, "--vin", VIN,

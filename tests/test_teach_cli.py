@@ -91,7 +91,7 @@ def test_an_engineer_teaches_bolts_and_gets_a_new_table_compared_with_cad(tmp_pa
             if answer == "\n":
                 said[bolt] = expect(f"{bolt}: ")
         pose.write_text("")
-        expect("2 bolt(s) taught")
+        expect("2 bolts taught")
         assert p.wait(timeout=60) == 0
         assert "tightening bolt" not in d.log() and "selected" not in d.log()
         d.wait_log("teach mode ended")

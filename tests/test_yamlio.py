@@ -14,7 +14,7 @@ def test_numbers_and_matrix_with_locations():
 @pytest.mark.parametrize("text,needle", [
     ("a: [1,\n", "f.yaml:2: malformed YAML"),
     ("b: 1\n", "f.yaml:1: b: unknown key (accepted: a)"),
-    ("{}\n", "missing key(s): a"),
+    ("{}\n", "missing key: a"),
     ("a: yes\n", "a: expected a number"),
     ("a: .nan\n", "a: expected a finite number"),
     ("a: 1\na: 2\n", "f.yaml:2: a: duplicate key"),

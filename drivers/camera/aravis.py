@@ -55,6 +55,7 @@ from drivers.camera import pixels
 from drivers.camera.aravis_config import Settings, parse_aravis_url, translate
 from drivers.camera.base import CameraDevice, Frame, FrameError, UnsupportedError
 from drivers.camera.clock import ClockMap
+from drivers.counting import counted
 from drivers.errors import (
     ConnectError,
     ConnectionLostError,
@@ -258,7 +259,7 @@ class _Link:
             finally:
                 self.stream.push_buffer(buf)
         self._call("check the camera", self.cam.get_payload)  # ConnectionLostError if gone
-        return f"{len(bad)} broken buffer(s): {', '.join(sorted(set(bad)))}" if bad else ""
+        return f"{counted(len(bad), 'broken buffer')}: {', '.join(sorted(set(bad)))}" if bad else ""
 
     def _frame(self, buf: Any) -> Frame:
         w, h = buf.get_image_width(), buf.get_image_height()
@@ -415,7 +416,7 @@ class AravisCamera(CameraDevice):
     def _trigger(self) -> None:
         dropped = self._use(time.monotonic() + self.timeout, _Link.trigger)
         if dropped:
-            log.debug("%s: dropped %d stale frame(s) at trigger", self.url, dropped)
+            log.debug("%s: dropped %s at trigger", self.url, counted(dropped, "stale frame"))
 
     def _grab(self, timeout: float) -> Frame:
         deadline = time.monotonic() + timeout

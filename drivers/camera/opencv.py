@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from drivers.camera.base import CameraDevice, EndOfStreamError, Frame, choice, positive
+from drivers.counting import counted
 from drivers.errors import ConnectError, ConnectionLostError
 from drivers.url import parse_url
 
@@ -135,7 +136,7 @@ class OpenCvCamera(CameraDevice):
     def _failed(self, what: str) -> NoReturn:
         """End of a file, or a device that stopped: typed error, and forget the capture."""
         if self.is_file:
-            raise EndOfStreamError(f"end of video after {self._count} frame(s)",
+            raise EndOfStreamError(f"end of video after {counted(self._count, 'frame')}",
                                    device=self.url)
         if self._cap is not None:
             self._cap.release()

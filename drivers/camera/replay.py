@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 
 from drivers.camera.base import CameraDevice, EndOfStreamError, Frame, FrameError, flag
+from drivers.counting import counted
 from drivers.errors import ConnectError
 from drivers.url import parse_url
 
@@ -107,7 +108,7 @@ class FileReplayCamera(CameraDevice):
 
     def identity(self) -> str:
         loop = "looping" if self.loop else "once"
-        return f"file replay {self.pattern}: {len(self.files)} file(s), {loop}"
+        return f"file replay {self.pattern}: {counted(len(self.files), 'file')}, {loop}"
 
     @classmethod
     def check_source(cls, url: str) -> None:
@@ -133,7 +134,7 @@ class FileReplayCamera(CameraDevice):
     def _grab(self, timeout: float) -> Frame:
         if self.position >= len(self.files):
             if not self.loop:
-                raise EndOfStreamError(f"replay finished: all {len(self.files)} file(s) "
+                raise EndOfStreamError(f"replay finished: all {counted(len(self.files), 'file')} "
                                        "delivered (add ?loop=1 to start again)",
                                        device=self.url)
             self.position = 0

@@ -22,6 +22,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from drivers import registers
+from drivers.counting import noun
 from drivers.errors import DeviceError, ProtocolError
 from drivers.lifecycle import Device
 from drivers.registers import MAX_READ, NUMBER_TYPES, ORDERS, Bit, MapError, Number, Text, spans
@@ -153,7 +154,9 @@ class RegisterMap:
         height = self.height.unpack(regs, self.word_order) * self.height.scale \
             + self.height.offset
         if not math.isfinite(height):
-            raise ValueError(f"height register(s) at {self.height.address} hold {height}")
+            words = self.height.words
+            raise ValueError(f"height {noun(words, 'register')} at {self.height.address} "
+                             f"{noun(words, 'holds', 'hold')} {height}")
         return LiftState(height_mm=float(height),
                          at_working_height=self.at_working_height.is_set(regs),
                          moving=self.moving.is_set(regs), fault=self.fault.is_set(regs),

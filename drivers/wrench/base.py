@@ -30,6 +30,7 @@ from datetime import datetime
 from enum import IntEnum, StrEnum
 from typing import Any, TypeVar
 
+from drivers.counting import counted
 from drivers.errors import ConnectionLostError, DeviceError, RefusedError
 from drivers.lifecycle import Openable
 
@@ -586,7 +587,7 @@ class SupervisedWrench(Wrench):
         """What a caller sees while the link is down (call with ``_cond`` held)."""
         last = f"; last attempt: {self._last_error}" if self._last_error else ""
         return ConnectionLostError(f"{what}: link down ({self._reason}); "
-                                   f"{self._attempts} failed reconnect(s){last}{note}",
+                                   f"{counted(self._attempts, 'failed reconnect')}{last}{note}",
                                    device=self.device)
 
     def _status(self) -> LinkStatus:

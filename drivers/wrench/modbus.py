@@ -46,6 +46,7 @@ from collections.abc import Callable
 from datetime import datetime
 from typing import Any, TypeVar
 
+from drivers.counting import noun
 from drivers.errors import (
     ConnectionLostError,
     DeviceError,
@@ -116,8 +117,8 @@ class ModbusWrench(SupervisedWrench):
         same timeout, connect_timeout, poll, register_map) override them."""
         unknown = sorted(set(kw) - set(KEYWORDS))
         if unknown:
-            raise TypeError(f"unknown option(s) {', '.join(unknown)} (accepted: "
-                            f"{', '.join(KEYWORDS)})")
+            raise TypeError(f"unknown {noun(len(unknown), 'option')} {', '.join(unknown)} "
+                            f"(accepted: {', '.join(KEYWORDS)})")
         spec, timing = parse_modbus_url(url.text)
         opts: dict[str, Any] = {k: v for k, v in timing.items() if v is not None}
         try:

@@ -34,6 +34,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any, Literal, cast
 
+from drivers.counting import noun
 from drivers.modbus_link import LinkSpec
 from drivers.modbus_server import SimServer
 from drivers.url import DeviceUrl
@@ -305,7 +306,7 @@ class SimModbusWrench(ModbusWrench):
         sim_kw = {k: kw.pop(k) for k in ("psets", "refusals", "register_map") if k in kw}
         unknown = sorted(set(kw) - set(opts))
         if unknown:
-            raise TypeError(f"unknown option(s) {', '.join(unknown)}")
+            raise TypeError(f"unknown {noun(len(unknown), 'option')} {', '.join(unknown)}")
         opts = {k: v for k, v in {**opts, **kw}.items() if v is not None}
         try:
             controller = SimRegisterController(unit=opts.pop("unit"), seed=opts.pop("seed"),

@@ -47,6 +47,7 @@ from db.engine import make_engine
 from db.repository import Repository
 from stationd.bench.wait import until as _until
 from stationd.boltfile import import_bolts
+from stationd.counting import counted
 from stationd.demo.station import SIM_CONFIG
 from stationd.errors import InputError
 from stationd.forward import Forwarder, LineConfig
@@ -372,8 +373,8 @@ def print_line_report(res: dict[str, Any], where: str) -> None:
 def _print_drain(o: dict[str, Any], d: dict[str, Any], normal: dict[str, float]) -> None:
     who = f"{o['stations']} stations" if o["stations"] > 1 else "one station"
     print(f"outage ({who}): {o['rundowns']} rundowns recorded in {o['seconds']:.1f} s while "
-          f"the line database was away ({o['line_db']}; {o['forwarders_down']} forwarder(s) "
-          "saw it down)")
+          f"the line database was away ({o['line_db']}; "
+          f"{counted(o['forwarders_down'], 'forwarder')} saw it down)")
     if d["per_s"] is None:
         print(f"  drain: NOT drained within {DRAIN_TIMEOUT_S:g} s")
     else:

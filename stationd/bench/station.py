@@ -35,6 +35,7 @@ from stationd import progress
 from stationd.bench.plan import wrench_plan
 from stationd.bench.wait import until as _until
 from stationd.config import StationConfig, load_station_config
+from stationd.counting import noun
 from stationd.demo.station import SIM_CONFIG, simulators
 from stationd.errors import InputError
 from stationd.jsonout import finite, strict_json
@@ -408,7 +409,7 @@ async def _connect(server: Any, n: int, info: dict[str, Any], quiet: bool,
     info["why_not_chromium"] = clients.why_not_chromium
     info["pages"] = ["/" + p for p in clients.pages]
     if not quiet:
-        print(f"screens served at {server.url}: {n} {kind} client(s) on "
+        print(f"screens served at {server.url}: {n} {kind} {noun(n, 'client')} on "
               f"{', '.join(info['pages'])}", flush=True)
     return clients
 

@@ -429,12 +429,13 @@ SECTIONS: dict[str, Callable[[np.random.Generator, bool], Result]] = {
 
 def run_vision_bench(args: argparse.Namespace) -> int:
     from stationd.bench.report import print_report
+    from stationd.counting import noun
     from stationd.errors import InputError
 
     names = list(SECTIONS) if args.only is None else [s.strip() for s in args.only.split(",")]
     unknown = [n or "''" for n in names if n not in SECTIONS]   # "" is no section, not all
     if unknown:
-        raise InputError(f"--only: unknown section(s) {', '.join(unknown)} "
+        raise InputError(f"--only: unknown {noun(len(unknown), 'section')} {', '.join(unknown)} "
                          f"(accepted: {', '.join(SECTIONS)})")
     results: Result = {"machine": {"cpus": __import__("os").cpu_count(),
                                    "python": platform.python_version()},

@@ -33,6 +33,7 @@ from db.errors import DbError
 from db.repository import Repository
 from stationd.bus import EventBus
 from stationd.config import StationConfig
+from stationd.counting import counted
 from stationd.errors import ConfigError, InputError
 from stationd.forward import LineConfig
 from stationd.linedb import LINE_FEED, LineResult, results
@@ -520,8 +521,9 @@ async def line_report(url: str | None, services: list[StationServices], out: Any
                    + "they are lost with the demo's temporary database when the demo ends)")
     else:
         arrival = f"every record arrived ({per} records)"
-    print(f"line database: {doc['rundowns']} rundown(s) of "
-          f"{', '.join(doc['vins']) or 'no vehicle'} from {len(ids)} station(s); {arrival}",
+    print(f"line database: {counted(doc['rundowns'], 'rundown')} of "
+          f"{', '.join(doc['vins']) or 'no vehicle'} from {counted(len(ids), 'station')}; "
+          f"{arrival}",
           file=out, flush=True)
     if not json_out:
         for text in read_back_words(doc, page, throwaway):
@@ -536,8 +538,9 @@ def read_back_words(doc: dict[str, Any], page: str | None, throwaway: bool) -> l
     demo: said so, with how to keep one.  Why: the end suggested ``stationd line results``
     for a throw-away database already removed, a command that could not work; and "9 OK,
     3 NOK" did not say these are results (rundowns), not bolts."""
-    lines = [f"  {sid}: {p['rundowns']} rundown(s): {p['ok']} OK result(s), {p['nok']} NOK "
-             f"result(s), {p['loosenings']} loosening(s); bolts OK: "
+    lines = [f"  {sid}: {counted(p['rundowns'], 'rundown')}: {counted(p['ok'], 'OK result')}, "
+             f"{counted(p['nok'], 'NOK result')}, {counted(p['loosenings'], 'loosening')}; "
+             "bolts OK: "
              f"{', '.join(p['bolts']) or '-'}" for sid, p in doc["stations"].items()]
     if page is not None:
         lines.append(f"  every row: {page}" + (
@@ -563,10 +566,10 @@ def _totals(doc: dict[str, Any]) -> None:
 
 
 def _missing_words(doc: dict[str, Any]) -> str:
-    """"12 record(s) (4 rundown(s)) of DEMO-1": the records that did not reach the line."""
+    """"12 records (4 rundowns) of DEMO-1": the records that did not reach the line."""
     whose = [sid for sid, p in doc["arrival"].items() if p["missing"]]
-    return (f"{doc['missing']} record(s) ({doc['missing_rundowns']} rundown(s)) of "
-            f"{', '.join(whose)}")
+    return (f"{counted(doc['missing'], 'record')} "
+            f"({counted(doc['missing_rundowns'], 'rundown')}) of {', '.join(whose)}")
 
 
 def shown(url: str) -> str:

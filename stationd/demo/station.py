@@ -41,6 +41,7 @@ from drivers.wrench.sim.controller import SimPset
 from stationd import progress
 from stationd.boltfile import load_bolts
 from stationd.config import RecordsConfig, StationConfig, load_station_config
+from stationd.counting import counted
 from stationd.demo.leftovers import DATABASE, PREFIX, mark, sweep
 from stationd.demo.services import (
     SECURITY_WORDS,
@@ -242,7 +243,7 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
     print(f"NOK policy ({whose}): {policy_words(cfg.nok)}", file=out, flush=True)
     if line_url is not None:
         kind = "a throw-away PostgreSQL for this run" if throwaway else "--line-db"
-        print(f"line database: {shown(line_url)} ({kind}); {n_stations} station(s), "
+        print(f"line database: {shown(line_url)} ({kind}); {counted(n_stations, 'station')}, "
               f"{', '.join(station_id(k) for k in range(1, n_stations + 1))}"
               + (f" (each tightens its own bolts of the same vehicle: the bolts in view split "
                  f"into {n_stations} runs of the bolt table's order; after {station_id(1)}, "
@@ -379,8 +380,9 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
     if line:
         summary["line"] = line
         if line["missing"]:   # asked for the line and it did not get them: not a PASS
-            problems.append(f"{line['missing']} record(s) ({line['missing_rundowns']} "
-                            "rundown(s)) did not reach the line database")
+            problems.append(f"{counted(line['missing'], 'record')} "
+                            f"({counted(line['missing_rundowns'], 'rundown')}) did not reach "
+                            "the line database")
     if extra:   # the line's figures over every station (the keys above stay DEMO-1's)
         summary["all_stations"] = all_stations(summary, extra)
     if problems:
@@ -406,7 +408,7 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
         for e in extra:
             print(f"{e['station_id']}: {e['ok']}/{e['bolts']} bolts OK{_left_words(e)}, "
                   f"parameters sent for a wrong bolt: {e['wrong_bolt_sends']}, "
-                  f"{e['recorded']} result(s) recorded; NOK policy: "
+                  f"{counted(e['recorded'], 'result')} recorded; NOK policy: "
                   f"{nok_words(e['nok_policy'])}"
                   + (f"; {operator_words(e['operators'])}" if e.get("operators") else ""))
         if extra:
@@ -414,7 +416,8 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
             print(f"NOK policy, all {len(every['stations'])} stations: "
                   f"{nok_words(every['nok_policy'])}")
             print(f"all {len(every['stations'])} stations: {every['ok']}/{every['bolts']} "
-                  f"bolts OK{_left_words(every)}, {every['nok_policy']['nok']} NOK result(s)"
+                  f"bolts OK{_left_words(every)}, "
+                  f"{counted(every['nok_policy']['nok'], 'NOK result')}"
                   + (f"; {operator_words(every['operators'])}" if every["operators"] else ""))
         if instead:
             devices = ", ".join(d.rsplit(" ", 1)[0] for d in instead)
@@ -656,11 +659,11 @@ def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
     left = sum(1 for r in report if str(r["result"]).startswith(LEFT_DISABLED))
     problems = []
     if wrong:
-        problems.append(f"{wrong} parameter send(s) for a wrong bolt")
+        problems.append(f"{counted(wrong, 'parameter send')} for a wrong bolt")
     if locked_sends:
-        problems.append(f"{locked_sends} parameter send(s) for a locked bolt")
+        problems.append(f"{counted(locked_sends, 'parameter send')} for a locked bolt")
     if recorded != results:
-        problems.append(f"{results - recorded} result(s) not recorded")
+        problems.append(f"{counted(results - recorded, 'result')} not recorded")
     if handled < cycles:
         problems.append(f"{cycles - handled} of {cycles} bolts not handled (see their lines)")
     if any("STILL ENABLED" in str(r["result"]) for r in report):
@@ -721,8 +724,8 @@ def _line_verdict(first: dict[str, Any], extra: list[dict[str, Any]]) -> str:
 
 def nok_words(n: dict[str, Any]) -> str:
     """The NOK policy's counts of one station (or the line's), in words."""
-    return (f"{n['nok']} NOK result(s), {n['loosenings']} loosening(s), {n['locks']} "
-            f"lock(s), {n['releases']} release(s)")
+    return (f"{counted(n['nok'], 'NOK result')}, {counted(n['loosenings'], 'loosening')}, "
+            f"{counted(n['locks'], 'lock')}, {counted(n['releases'], 'release')}")
 
 
 def _handled_words(ok: int, left: int, handled: int) -> str:

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from stationd.counting import counted
 from stationd.result import Refusal
 from stationd.yamlio import MAX_YAML_BYTES, YamlNode, read_text_file
 
@@ -231,7 +232,7 @@ def _check(src: np.ndarray, dst: np.ndarray,
     if s.ndim != 2 or s.shape[1] != 3 or s.shape != d.shape:
         return Refusal(f"need two (N, 3) point sets of the same size, got {s.shape} and {d.shape}")
     if len(s) < minimum:
-        return Refusal(f"{len(s)} reference points; at least {minimum} are needed")
+        return Refusal(f"{counted(len(s), 'reference point')}; at least {minimum} are needed")
     if not (np.all(np.isfinite(s)) and np.all(np.isfinite(d))):
         return Refusal("reference points must be finite")
     return s, d

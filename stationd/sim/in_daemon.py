@@ -36,6 +36,7 @@ from drivers.lift.sim import SimLift, SimulatedPlc
 from drivers.wrench.sim.controller import SimWrench
 from stationd.boltfile import load_bolts
 from stationd.config import StationConfig
+from stationd.counting import counted
 from stationd.errors import InputError, StationError
 from stationd.shell.daemon import Station
 from stationd.sim.devices_cli import HELP, plc_command, psets_of
@@ -161,8 +162,8 @@ class SimulatedStation:
             self._new_world = False
             who = "idle" if not scripted else "scripted" if self.supervisor else \
                 "scripted, no simulated supervisor: locks wait for a person's release"
-            log.info("simulated world: the sim:// cameras of %d pair(s) render it (operator: "
-                     "%s)", len(cfg.pairs), who)
+            log.info("simulated world: the sim:// cameras of %s render it (operator: %s)",
+                     counted(len(cfg.pairs), "pair"), who)
         if not scripted and self._plc is not None and not self._told:
             self._told = True
             log.info(IDLE_LINE.format(help=HELP.removeprefix("commands: ")

@@ -30,6 +30,7 @@ from db.repository import BoltInfo
 from drivers.lift.sim import SimLift, SimulatedPlc
 from drivers.wrench.sim.controller import SimController, SimPset, SimTightening, SimWrench
 from stationd.config import StationConfig
+from stationd.counting import counted
 from stationd.errors import InputError
 from stationd.shell.daemon import Station
 from stationd.sim.world import World, wrench_at
@@ -162,7 +163,7 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
         mine = share_of([b.bolt_id for b in bolts], *share)
         if not mine:
             raise InputError(f"station {share[0]} of {share[1]} has no bolt of its own: "
-                             f"{len(bolts)} bolt(s) in view for {share[1]} stations")
+                             f"{counted(len(bolts), 'bolt')} in view for {share[1]} stations")
         # said after the station's id ("DEMO-1 tightens its own bolts, 25 of the 50 in
         # view: ..."; it read "DEMO-1 its own bolts: 25 of the 50")
         (note or _stderr)(f"{'' if note else 'this station '}tightens its own bolts, "

@@ -67,7 +67,7 @@ def test_import_prints_changes_then_no_changes(run, db):
     assert code == 0 and err == ""
     assert "models added: SEDAN-A, WAGON-B" in out and "bolts added: SEDAN-A/SF-FL" in out
     code, out, err = run("db", "import", EXAMPLE, "--db", db)
-    assert (code, out, err) == (0, "no changes (9 bolt(s) unchanged)\n", "")
+    assert (code, out, err) == (0, "no changes (9 bolts unchanged)\n", "")
     code, out, _ = run("db", "import", EXAMPLE, "--db", db, "--json")
     obj = json.loads(out)
     assert code == 0 and obj["changes"] is False and len(obj["unchanged"]) == 9
@@ -83,7 +83,7 @@ def test_import_of_an_invalid_file_lists_every_error_and_changes_nothing(run, db
     assert lines[0].startswith(f"{bad}:17: models.SEDAN.bolts[1].id: duplicate bolt id")
     assert lines[1].startswith(f"{bad}:20: models.SEDAN.bolts[1].torque.target: expected a "
                                "number in N m, got the string '25 Nm'")
-    assert lines[2] == f"stationd: error: {bad}: 2 error(s), nothing imported"
+    assert lines[2] == f"stationd: error: {bad}: 2 errors, nothing imported"
     assert not (tmp_path / "station.db").exists()
     code, _, err = run("db", "import", tmp_path / "missing.yaml", "--db", db)
     assert code == 2 and "missing.yaml: file not found" in err
@@ -93,7 +93,7 @@ def test_export_round_trip_through_the_commands(run, db, tmp_path):
     run("db", "import", EXAMPLE, "--db", db)
     out_file = tmp_path / "out.yaml"
     code, out, err = run("db", "export", "--db", db, "--out", out_file)
-    assert code == 0 and err == "" and out.startswith(f"wrote {out_file}: 2 model(s), 9 bolt(s)")
+    assert code == 0 and err == "" and out.startswith(f"wrote {out_file}: 2 models, 9 bolts")
     code, out, _ = run("db", "import", out_file, "--db", db)
     assert code == 0 and out.startswith("no changes")
     code, out, _ = run("db", "export", "--db", db)
@@ -111,8 +111,8 @@ def test_report_exit_codes(run, db):
     code, out, err = run("db", "report", "VIN1", "--db", db)
     assert code == 1 and err == ""
     assert out.splitlines()[0] == ("VIN1 (WAGON-B, open): bolts: 1 OK, 1 ending NOK (SF-FR), "
-                                   "0 skipped, 1 missing (TB-C); rundowns: 2 tightening(s), "
-                                   "1 NOK result(s)")
+                                   "0 skipped, 1 missing (TB-C); rundowns: 2 tightenings, "
+                                   "1 NOK result")
     assert "TB-C" in out.splitlines()[3] and "MISSING" in out.splitlines()[3]
     code, out, _ = run("db", "report", "VIN1", "--db", db, "--json")
     obj = json.loads(out)
@@ -128,11 +128,11 @@ def test_report_exit_codes(run, db):
     code, out, _ = run("db", "report", "VIN1", "--db", db)
     # SF-FR tightened again to OK: no bolt ends NOK, its NOK result is still said
     assert code == 0 and out.splitlines()[0].endswith(
-        ": bolts: 3 OK, 0 ending NOK, 0 skipped, 0 missing; rundowns: 4 tightening(s), "
-        "1 NOK result(s)"), out
+        ": bolts: 3 OK, 0 ending NOK, 0 skipped, 0 missing; rundowns: 4 tightenings, "
+        "1 NOK result"), out
     # torque in the unit the journal, the demo and probe print (it said "N m" alone)
     assert "unattributed: tightening 77 pset 4 NOK 9.5 Nm" in out
-    assert "OK       50.0 Nm, 35.0 deg, v1, 2 attempt(s)" in out and " N m" not in out
+    assert "OK       50.0 Nm, 35.0 deg, v1, 2 attempts" in out and " N m" not in out
     assert "2. tightening OK pset 2, 50.0 Nm, 35.0 deg, at " in out
     code, out, _ = run("db", "report", "VIN1", "--db", db, "--json")
     assert [u["tightening_id"] for u in json.loads(out)["unattributed"]] == [77]
@@ -223,14 +223,14 @@ def test_config_check(run, tmp_path):
     also_bad.write_text("models: [\n")
     code, out, err = run("config", "check", EXAMPLE)
     assert (code, err) == (0, "")
-    assert out == f"{EXAMPLE}: ok, 2 model(s), 9 bolt(s), 4 pset(s)\n"
+    assert out == f"{EXAMPLE}: ok, 2 models, 9 bolts, 4 psets\n"
     code, out, err = run("config", "check", EXAMPLE, bad, also_bad)
     lines = err.splitlines()
     assert code == 2 and out.startswith(f"{EXAMPLE}: ok")
     assert lines[0].startswith(f"{bad}:9: models.SEDAN.x: unknown key")
     assert lines[1].startswith(f"{bad}:27: models.SEDAN.bolts[2].order: expected an integer")
     assert lines[2].startswith(f"{also_bad}:2: malformed YAML")
-    assert lines[3] == "stationd: error: 3 error(s) in 2 of 3 file(s)"
+    assert lines[3] == "stationd: error: 3 errors in 2 of 3 files"
     code, _, err = run("config", "check", bad, "--tolerance", "-1")
     assert code == 2 and _one_line(err).startswith(
         "stationd config check: error: argument --tolerance: -1 mm")
@@ -242,11 +242,11 @@ def test_config_check_tells_station_files_from_bolt_tables(run, tmp_path):
     code, out, err = run("config", "check", sim / "station.yaml", example, EXAMPLE)
     assert (code, err) == (0, "")
     assert out.splitlines() == [
-        f"{sim / 'station.yaml'}: ok, station: 4 pair(s), 8 camera(s); "
-        f"bolts {sim / 'bolts.yaml'}: 1 model(s), 50 bolt(s), 3 pset(s)",
-        f"{example}: ok, station: 1 pair(s), 2 camera(s); "
-        f"bolts {EXAMPLE}: 2 model(s), 9 bolt(s), 4 pset(s)",
-        f"{EXAMPLE}: ok, 2 model(s), 9 bolt(s), 4 pset(s)",
+        f"{sim / 'station.yaml'}: ok, station: 4 pairs, 8 cameras; "
+        f"bolts {sim / 'bolts.yaml'}: 1 model, 50 bolts, 3 psets",
+        f"{example}: ok, station: 1 pair, 2 cameras; "
+        f"bolts {EXAMPLE}: 2 models, 9 bolts, 4 psets",
+        f"{EXAMPLE}: ok, 2 models, 9 bolts, 4 psets",
     ]
 
 
@@ -279,7 +279,7 @@ def test_config_check_of_a_broken_station_lists_every_error(run, tmp_path):
     assert lines[5].startswith(f"{neither}:1: neither a station file nor a bolt table (it has "
                                "no keys; a station file has marker, vision, cameras")
     assert lines[6] == f"{empty}: the file is empty"
-    assert lines[7:] == ["stationd: error: 7 error(s) in 4 of 4 file(s)"]
+    assert lines[7:] == ["stationd: error: 7 errors in 4 of 4 files"]
 
 
 def test_config_check_warns_of_an_unregistered_pair_but_passes(run, tmp_path):
@@ -289,7 +289,7 @@ def test_config_check_warns_of_an_unregistered_pair_but_passes(run, tmp_path):
         shutil.copy(f, tmp_path)
     (tmp_path / "pair3.vehicle.yaml").unlink()
     code, out, err = run("config", "check", tmp_path / "station.yaml")
-    assert code == 0 and out.startswith(f"{tmp_path / 'station.yaml'}: ok, station: 4 pair(s)")
+    assert code == 0 and out.startswith(f"{tmp_path / 'station.yaml'}: ok, station: 4 pairs")
     assert _one_line(err) == (
         f"warning: {tmp_path / 'station.yaml'}:16: pairs.pair3.to_vehicle: "
         f"{tmp_path / 'pair3.vehicle.yaml'} does not exist: the pair is not registered into "
@@ -338,7 +338,7 @@ def test_export_results_every_rundown_as_csv_or_json(run, db, tmp_path):
     target = tmp_path / "results.csv"
     code, out, _ = run("db", "export", "--results", "--out", str(target), "--db", db)
     assert code == 0 and target.read_text().count("\n") == 1 + 3 + 2 * len(others)
-    assert f"3 rundown(s) and {2 * len(others)} missing bolt(s) of 2 vehicle(s)" in out
+    assert f"3 rundowns and {2 * len(others)} missing bolts of 2 vehicles" in out
     for args, message in ((["--vin", "NOPE"], "NOPE"), (["--since", "yesterday"], "ISO date"),
                           (["--format", "csv"], "go with --results"),
                           (["--results", "--format", "yaml"], "csv (the default) or json")):
@@ -486,8 +486,8 @@ def test_a_bolt_skipped_by_a_command_is_exported_and_reported_skipped_not_missin
         "skipped", "sam", "no access, fixture in the way")
     target = tmp_path / "results.csv"
     code, out, _ = run("db", "export", "--results", "--out", str(target), "--db", db)
-    assert f"1 rundown(s) and {len(others) - 1} missing bolt(s) (and 1 skipped) of 1 " \
-           "vehicle(s)" in out
+    assert len(others) == 2 and "1 rundown and 1 missing bolt (and 1 skipped) of 1 vehicle" \
+        in out
     code, out, _ = run("db", "report", "VIN1", "--db", db)
     assert code == 1     # not complete: a skipped bolt is not tightened
     head = out.splitlines()[0]

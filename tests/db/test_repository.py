@@ -47,7 +47,7 @@ def test_import_reports_and_second_import_changes_nothing(repo, bolts_file):
     assert first.added == ["SEDAN/B1", "SEDAN/B2", "SEDAN/B3", "WAGON/B1"]
     before = _counts(repo)
     second = import_bolts(repo, bolts_file)
-    assert not second.has_changes and second.lines() == ["no changes (4 bolt(s) unchanged)"]
+    assert not second.has_changes and second.lines() == ["no changes (4 bolts unchanged)"]
     assert _counts(repo) == before
     infos = repo.bolts_for_model("SEDAN")
     assert [b.bolt_id for b in infos] == ["B1", "B2", "B3"]
@@ -112,7 +112,7 @@ def test_changed_parameters_of_a_bolt_with_records_become_a_new_version(repo, bo
     bolts_file.write_text(NEW_B1.replace("target: 25, min: 23", "target: 26, min: 23"))
     report = import_bolts(repo, bolts_file)
     assert report.psets_changed == ["pset 1"]
-    assert report.new_versions == ["SEDAN/B1 v2 (v1: 1 record(s))"]  # B1 has a record
+    assert report.new_versions == ["SEDAN/B1 v2 (v1: 1 record)"]  # B1 has a record
     assert sorted(report.changed) == ["SEDAN/B1", "SEDAN/B2", "WAGON/B1"]
     new = {b.bolt_id: b for b in repo.bolts_for_model("SEDAN")}
     assert new["B1"].version == 2 and new["B1"].parameters.torque.target == 52
@@ -192,8 +192,8 @@ def test_vehicle_cycle_and_close_summary(repo, bolts_file):
     assert not summary.complete and summary.vehicle.ended_at is not None
     # the bolts ending NOK (B2) and the NOK results (B1's first and B2's last): both, named
     assert summary.summary().endswith(": bolts: 1 OK, 1 ending NOK (B2), 0 skipped, "
-                                      "1 missing (B3); rundowns: 4 tightening(s), 2 NOK "
-                                      "result(s)")
+                                      "1 missing (B3); rundowns: 4 tightenings, 2 NOK "
+                                      "results")
     assert (summary.to_json()["tightenings"], summary.to_json()["nok_results"]) == (4, 2)
     assert repo.close_vehicle("WVW1234567890").vehicle.ended_at == summary.vehicle.ended_at
     with pytest.raises(DataError, match="is closed"):
@@ -340,5 +340,5 @@ def test_the_journal_line_of_a_closing_vehicle_counts_in_the_reports_words(tmp_p
     assert report.summary() == f"VIN1 (SEDAN, closed): {report.counts()}"
     assert said[0].startswith("vehicle VIN1 (SEDAN) closed: bolts: 1 OK, 1 ending NOK (B2), "
                               "0 skipped, ")
-    assert said[0].endswith("; rundowns: 3 tightening(s), 2 NOK result(s)")
+    assert said[0].endswith("; rundowns: 3 tightenings, 2 NOK results")
     repo.close()

@@ -50,8 +50,8 @@ def test_the_feed_report_and_exports_carry_the_operator_or_none(sedan, tmp_path,
     sedan.close()
     assert main(["db", "report", "VIN1", "--db", url]) != 0    # incomplete: B3 missing
     out = capsys.readouterr().out
-    assert "attempt(s), by pia" in out and "1. tightening NOK" in out and "by olga" in out
-    assert "1 attempt(s), by -" in out                          # nobody: shown as such
+    assert "2 attempts, by pia" in out and "1. tightening NOK" in out and "by olga" in out
+    assert "1 attempt, by -" in out                          # nobody: shown as such
     main(["db", "report", "VIN1", "--db", url, "--json"])
     doc = json.loads(capsys.readouterr().out)
     assert [r["operator"] for r in doc["rundowns"]] == ["olga", "pia", None]

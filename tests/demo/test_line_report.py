@@ -116,7 +116,7 @@ def test_records_that_never_reached_the_line_are_counted_per_station(tmp_path, p
     assert doc["arrival"]["DEMO-1"] == {"records": 4, "arrived": 0, "missing": 4,
                                         "missing_rundowns": 0}
     said = text.getvalue()
-    assert "NOT every record arrived (DEMO-1 0 of 4 records): 4 record(s)" in said
+    assert "NOT every record arrived (DEMO-1 0 of 4 records): 4 records" in said
     assert f"the line database at 127.0.0.1:{proxy.port} does not answer" in said
     assert "lost with the demo's temporary database" in said
 
@@ -130,8 +130,8 @@ def test_the_end_names_no_command_for_a_throw_away_line_database():
     doc = {"stations": {"DEMO-1": {"rundowns": 4, "ok": 2, "nok": 1, "loosenings": 1,
                                    "bolts": ["B01", "B02"]}}}
     gone = read_back_words(doc, None, throwaway=True)
-    assert gone[0] == ("  DEMO-1: 4 rundown(s): 2 OK result(s), 1 NOK result(s), "
-                       "1 loosening(s); bolts OK: B01, B02")
+    assert gone[0] == ("  DEMO-1: 4 rundowns: 2 OK results, 1 NOK result, "
+                       "1 loosening; bolts OK: B01, B02")
     assert "stationd line results with" not in gone[-1]
     assert "throw-away" in gone[-1] and "--line-db URL" in gone[-1] and "--hold" in gone[-1]
     kept = read_back_words(doc, None, throwaway=False)

@@ -46,13 +46,13 @@ def test_the_summary_ends_with_pass_only_when_every_bolt_was_handled_and_none_wr
     assert s["verdict"].startswith("PASS: 2/2 bolts handled")
     assert s["latency_ms"]["p50"] == 150.0
     wrong = _summary(_station(), REPORT, 2, 1)
-    assert wrong["verdict"].startswith("FAIL: 1 parameter send(s) for a wrong bolt")
+    assert wrong["verdict"].startswith("FAIL: 1 parameter send for a wrong bolt")
     missed = _summary(_station(records=1), [*REPORT[:1], {"bolt": "B02",
                                                           "result": "not selected (stale)"}], 2, 0)
     assert missed["verdict"].startswith("FAIL") and "1 of 2 bolts not handled" in \
         missed["verdict"]
     lost = _summary(_station(records=1), REPORT, 2, 0)
-    assert "1 result(s) not recorded" in lost["verdict"]
+    assert "1 result not recorded" in lost["verdict"]
 
 
 def test_a_line_of_stations_has_a_total_and_a_verdict_over_every_station():

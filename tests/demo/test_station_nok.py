@@ -61,9 +61,9 @@ def test_the_summary_counts_the_nok_policy_and_stays_honest():
                                "locked_sends": 0}
     assert s["operators"] == {"-": 8}     # nobody signed in on this bus: said as such
     locked = _summary(_bus(), REPORT, 2, 0, locked_sends=1)
-    assert locked["verdict"] == "FAIL: 1 parameter send(s) for a locked bolt"
+    assert locked["verdict"] == "FAIL: 1 parameter send for a locked bolt"
     lost = _summary(_bus(), [{**REPORT[0], "rundowns": 8}, REPORT[1]], 2, 0)
-    assert "1 result(s) not recorded" in lost["verdict"]
+    assert "1 result not recorded" in lost["verdict"]
     stuck = _summary(_bus(), [{**REPORT[0], "unfinished": True}, REPORT[1]], 2, 0)
     assert "1 of 2 bolts not handled" in stuck["verdict"]
 

@@ -26,6 +26,7 @@ from sqlalchemy import create_engine
 from sqlalchemy.pool import NullPool
 
 from stationd.cli import main
+from stationd.counting import counted
 from stationd.demo.services import Endpoints, line_summary
 from stationd.errors import InputError
 from stationd.linedb import results
@@ -303,12 +304,13 @@ def test_a_line_database_that_never_answers_is_a_fail_that_counts_the_lost_recor
     line = summary["line"]
     assert line["missing"] == line["arrival"]["DEMO-1"]["missing"] >= summary["recorded"]
     assert line["missing_rundowns"] == summary["recorded"] >= 1
-    assert summary["verdict"] == (f"FAIL: {line['missing']} record(s) "
-                                  f"({summary['recorded']} rundown(s)) did not reach the "
-                                  "line database")
+    assert summary["verdict"] == (f"FAIL: {counted(line['missing'], 'record')} "
+                                  f"({counted(summary['recorded'], 'rundown')}) did not "
+                                  "reach the line database")
     assert line["error"] == f"the line database at 127.0.0.1:{port} does not answer " \
         "(connection refused)"
-    assert f"line database: not read back: {line['error']}; {line['missing']} record(s)" in err
+    assert f"line database: not read back: {line['error']}; {counted(line['missing'], 'record')}" \
+        in err
     # ... and said at the start (issue 30), in one line, before the run: what happens and
     # what to do, not only at the end
     start = (f"line database: {line['error']} at the start; the demo runs and its forwarder "

@@ -134,7 +134,7 @@ def test_without_the_operator_the_lift_waits_says_so_once_and_no_pair_faults(tmp
     journal = d.log()
     assert code == 0
     assert journal.count("simulated lift: down, no vehicle") == 1    # said once a daemon
-    assert journal.count("simulated world: the sim:// cameras of 1 pair(s)") == 2
+    assert journal.count("simulated world: the sim:// cameras of 1 pair render") == 2
     assert "fault: pair1" not in journal and "no simulated world" not in journal
 
 

@@ -153,5 +153,5 @@ def test_a_teach_point_refused_while_the_cameras_give_no_wrench_names_what_they_
     why = reply.answer.reason
     assert why is not None and why.kind is Why.NOT_STEADY and why.count == 0
     assert reason_words(why) == (
-        f"the wrench was not localized (5 localization(s) without it, none of the "
+        f"the wrench was not localized (5 localizations without it, none of the "
         f"{TEACH_FRAMES} needed): pair1: left: no frame for 120 s")

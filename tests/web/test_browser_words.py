@@ -76,7 +76,7 @@ def test_the_vehicle_pages_count_bolts_and_results_and_say_rework_only_when_reop
         page.wait(lambda p: p.count("tr.rundown") == 5, what="5 rundown rows")
         summary = page.text("#summary") or ""
         assert summary == ("bolts: 2 OK, 0 ending NOK, 0 skipped, 2 missing; rundowns: 3 "
-                           "tightening(s), 1 NOK result(s)"), summary
+                           "tightenings, 1 NOK result"), summary
         b2 = page.js("return [...document.querySelectorAll('tr.rundown[data-bolt=B2]')]"
                      ".map(r => [...r.cells].map(c => c.innerText))")
         assert b2[0][2] == "1" and b2[0][4] == "NOK: torque low", b2[0]

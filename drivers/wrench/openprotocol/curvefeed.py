@@ -20,6 +20,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from drivers.counting import counted
 from drivers.errors import DeviceError, DeviceTimeoutError, ProtocolError, RefusedError
 from drivers.wrench.openprotocol import message as op
 from drivers.wrench.openprotocol.channel import Channel
@@ -135,8 +136,8 @@ class CurveFeed:
                 if len(self._queue) >= self._queue_size:
                     self._queue.popleft()
                     self._dropped += 1
-                    self._log.warning("%s: %d curve(s) dropped: nobody reads them",
-                                      self.device, self._dropped)
+                    self._log.warning("%s: %s dropped: nobody reads them",
+                                      self.device, counted(self._dropped, "curve"))
                 self._queue.append(curve)
             if not msg.no_ack:
                 self._acks.owe(MID_TRACE)

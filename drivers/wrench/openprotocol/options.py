@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from drivers.counting import noun
 from drivers.link import Link, SerialLink, TcpLink
 from drivers.url import DeviceUrl, OptionError
 
@@ -48,7 +49,7 @@ def keyword_options(kw: dict[str, Any], spec: Spec) -> dict[str, Any]:
     """Keyword overrides of URL options: the same names, already typed."""
     unknown = sorted(set(kw) - set(spec))
     if unknown:
-        raise TypeError(f"unknown option(s) {', '.join(unknown)} (accepted: "
+        raise TypeError(f"unknown {noun(len(unknown), 'option')} {', '.join(unknown)} (accepted: "
                         f"{', '.join(sorted(spec))})")
     return kw
 

@@ -10,6 +10,7 @@ handed back, not queued for ``wait_curve``.
 
 from __future__ import annotations
 
+from drivers.counting import counted
 from drivers.errors import RefusedError
 from drivers.wrench.openprotocol import message as op
 from drivers.wrench.openprotocol.channel import Channel
@@ -97,6 +98,6 @@ class CurveReplay:
             self._log.info("%s: %s: none (MID 0008 refused: %s)", self.device, what,
                            op.refusal_text(int(refused.code or 0)))
         elif len(got) < fetch.wanted:
-            self._log.warning("%s: %s: %d of %d trace(s) came within %g s", self.device, what,
-                              len(got), fetch.wanted, timeout)
+            self._log.warning("%s: %s: %d of %s came within %g s", self.device, what,
+                              len(got), counted(fetch.wanted, "trace"), timeout)
         return sorted(got, key=lambda c: c.trace_type)

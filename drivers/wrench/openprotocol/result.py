@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Any, TypeVar
 
+from drivers.counting import noun
 from drivers.errors import ProtocolError
 from drivers.wrench.base import ResultType, Status, TighteningResult, TorqueUnit
 
@@ -143,8 +144,8 @@ def split_fields(mid: int, revision: int, text: str) -> dict[str, str]:
     missing = [f"{tag:02d} ({p.name})" for tag, p in TAGGED.items()
                if p.since <= revision and p.name not in out]
     if missing:
-        raise LayoutError(f"{what}: parameter(s) missing: {', '.join(missing[:4])}"
-                            + (" ..." if len(missing) > 4 else ""))
+        raise LayoutError(f"{what}: {noun(len(missing), 'parameter')} missing: "
+                          f"{', '.join(missing[:4])}" + (" ..." if len(missing) > 4 else ""))
     return out
 
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from datetime import datetime
 
+from drivers.counting import counted
 from drivers.errors import ProtocolError
 from drivers.wrench.openprotocol.curve import TIME_FORMAT, FieldReader, data_fields
 
@@ -58,7 +59,7 @@ class PlotParameters:
 
     def describe(self) -> str:
         return (f"plot parameters of tightening {self.tightening_id}: "
-                f"{len(self.fields)} field(s)"
+                f"{counted(len(self.fields), 'field')}"
                 + (f" for trace type {self.trace_type}" if self.trace_type else ""))
 
 
@@ -93,7 +94,8 @@ def parse_plot(revision: int, data: bytes) -> PlotParameters:
         trace = r.number(2, "trace type")
     fields = data_fields(r, count, "PID")
     if r.pos != len(data):
-        raise ProtocolError(f"MID 0901: {len(data) - r.pos} byte(s) after its {count} PIDs")
+        raise ProtocolError(f"MID 0901: {counted(len(data) - r.pos, 'byte')} after its "
+                            f"{counted(count, 'PID')}")
     return PlotParameters(tid, when, fields, request, trace)
 
 

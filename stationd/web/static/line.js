@@ -2,6 +2,8 @@
 "use strict";
 (function () {
   const q = (s) => document.querySelector(s);
+  // a count in words, as stationd.counting says it: "1 rundown", "3 rundowns"
+  const counted = (n, word, plural) => `${n} ${n === 1 ? word : plural || word + "s"}`;
   const fmt = (v, d) => v === null || v === undefined ? "-" : Number(v).toFixed(d);
   function cell(tr, text, cls) {
     const td = document.createElement("td");
@@ -18,8 +20,8 @@
     if (!r.ok) { q("#error").textContent = (await r.text()).trim(); return; }
     const doc = await r.json();
     const stations = new Set(doc.rundowns.map((x) => x.station_id));
-    q("#what").textContent = doc.rundowns.length + " rundown(s) at " + stations.size +
-      " station(s), " + doc.line_db;
+    q("#what").textContent = counted(doc.rundowns.length, "rundown") + " at " +
+      counted(stations.size, "station") + ", " + doc.line_db;
     for (const x of doc.rundowns) {
       const tr = document.createElement("tr");
       tr.dataset.station = x.station_id;

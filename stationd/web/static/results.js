@@ -1,6 +1,8 @@
 // Results screens: the vehicles and each vehicle's rundowns, read from the server's API.
 "use strict";
 const q = (s) => document.querySelector(s);
+// A count in words, as stationd.counting says it: "1 tightening", "3 tightenings".
+function counted(n, word, plural) { return `${n} ${n === 1 ? word : plural || word + "s"}`; }
 function fmt(v, d) { return v === null || v === undefined ? "-" : Number(v).toFixed(d); }
 function cell(tr, text, cls) {
   const td = document.createElement("td");
@@ -158,7 +160,7 @@ async function showVehicle(vin) {
     q("#summary").textContent = `bolts: ${v.ok.length} OK, ${v.nok.length} ending NOK, ` +
       `${(v.skipped || []).length} skipped, ${v.missing.length} missing` +
       (v.complete ? " (complete)" : "") +
-      `; rundowns: ${tightenings.length} tightening(s), ${nokRuns} NOK result(s)`;
+      `; rundowns: ${counted(tightenings.length, "tightening")}, ${counted(nokRuns, "NOK result")}`;
     const tb = q("#rundowns tbody");
     for (const b of v.bolts) {
       const runs = b.rundowns.length ? b.rundowns : [null];

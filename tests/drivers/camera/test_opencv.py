@@ -28,7 +28,7 @@ def test_frames_of_a_video_then_the_end(video):
         cam.trigger()  # grab() ... retrieve(): the multi-camera sync pattern
         levels.append(cam.grab())
         levels += [cam.grab() for _ in range(3)]
-        with pytest.raises(EndOfStreamError, match="end of video after 4 frame"):
+        with pytest.raises(EndOfStreamError, match="end of video after 4 frames"):
             cam.grab()
     assert [round(float(f.image.mean()) / 10) for f in levels] == [2, 6, 10, 14]
     assert [f.frame_id for f in levels] == [0, 1, 2, 3]

@@ -158,7 +158,7 @@ def test_registry_and_urls():
 
 
 @pytest.mark.parametrize(("url", "text"), [
-    ("modbus-tcp://10.0.0.1?slave=1", "unknown option(s) slave (accepted: timeout"),
+    ("modbus-tcp://10.0.0.1?slave=1", "unknown option slave (accepted: timeout"),
     ("modbus-tcp://10.0.0.1?unit=300", "option unit='300' is not valid"),
     ("modbus-tcp:///dev/ttyUSB0", "expected a host"),
     ("modbus-rtu://host:502", "expected a serial port path"),

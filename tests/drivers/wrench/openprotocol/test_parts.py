@@ -186,7 +186,7 @@ def test_plot_parameters_read_in_revisions_1_to_3():
     for p in (one, two, three):
         assert p.tightening_id == 4711 and p.fields == {"90001": "2250"}
     assert (one.request_mid, two.request_mid, three.trace_type) == (None, 8, 2)
-    with pytest.raises(ProtocolError, match="after its 1 PIDs"):
+    with pytest.raises(ProtocolError, match=r"4 bytes after its 1 PID$"):
         parse_plot(1, head + fields + b"junk")
     db = parse_db_info(1, b"0000001000" + b"0000000005" + b"2026-11-27:08:00:00"
                        + b"0000000042" + b"2026-11-27:09:00:00" + b"000")

@@ -141,8 +141,8 @@ def test_optional_parameters_may_be_blank_core_ones_not():
 
 
 @pytest.mark.parametrize(("params", "words"), [
-    (REV2[:-1], "parameter(s) missing: 46 (pset_changed)"),
-    (params_for(3)[:-1], "parameter(s) missing: 49 (result_type)"),
+    (REV2[:-1], "parameter missing: 46 (pset_changed)"),
+    (params_for(3)[:-1], "parameter missing: 49 (result_type)"),
     ([*REV2, ("01", "0007")], "parameter 01 (cell_id) twice"),
     ([*REV2, ("58", "x")], "unknown parameter '58'"),
     ([(t, "x" * len(v) if t == "41" else v) for t, v in REV2],
