@@ -1,6 +1,7 @@
 """A count in words, as English says it: ``counted(1, "bolt")`` is "1 bolt", ``counted(3,
-"bolt")`` "3 bolts" (never "3 bolt(s)").  ``drivers`` imports nothing of ``stationd``:
-this is its own copy of :mod:`stationd.counting` (keep the two alike)."""
+"bolt")`` "3 bolts" (never "3 bolt(s)").  The drivers' and the station's (stationd imports it
+from here); db, which imports nothing of drivers, has a copy (:mod:`db.counting`, kept alike:
+tests/test_counting.py runs the same checks on both)."""
 
 from __future__ import annotations
 

@@ -28,7 +28,7 @@ from db.bolts import BoltSpec, BoltTable, ModelSpec, Parameters, Pset, Window
 from db.importer import ImportReport
 from db.repository import Repository
 from db.spacing import min_spacing_mm, too_close
-from stationd.counting import counted, noun
+from drivers.counting import counted, noun
 from stationd.errors import ConfigError, InputError
 from stationd.filekind import expect
 from stationd.yamlio import YamlNode

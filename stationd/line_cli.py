@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from db.kinds import LOOSENING
-from stationd.counting import counted
+from drivers.counting import counted
 from stationd.errors import InputError
 
 if TYPE_CHECKING:   # each command imports its libraries when run: every command builds this

@@ -23,6 +23,7 @@ import urllib.error
 from pathlib import Path
 from typing import Any
 
+from drivers.counting import counted
 from stationd.command_cli import (
     EXIT_REFUSED,
     EXIT_UNREACHABLE,
@@ -35,7 +36,6 @@ from stationd.command_cli import (
     say_refused,
     unreachable_words,
 )
-from stationd.counting import counted
 from stationd.errors import ConfigError, InputError
 from stationd.filekind import expect
 from stationd.outfile import write_atomic

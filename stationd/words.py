@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from db.kinds import is_not_taken_note
-from stationd.counting import counted
+from drivers.counting import counted
 from stationd.reasons import Reason, Why
 from stationd.station.commands import (
     KIND,

@@ -19,7 +19,7 @@ import numpy as np
 import yaml
 from yaml.constructor import SafeConstructor
 
-from stationd.counting import noun
+from drivers.counting import noun
 from stationd.errors import ConfigError, printable
 
 _constructor = SafeConstructor()

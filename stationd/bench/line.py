@@ -45,9 +45,9 @@ from sqlalchemy import func, make_url, select
 
 from db.engine import make_engine
 from db.repository import Repository
+from drivers.counting import counted
 from stationd.bench.wait import until as _until
 from stationd.boltfile import import_bolts
-from stationd.counting import counted
 from stationd.demo.station import SIM_CONFIG
 from stationd.errors import InputError
 from stationd.forward import Forwarder, LineConfig

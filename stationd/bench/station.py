@@ -31,11 +31,11 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from drivers.counting import noun
 from stationd import progress
 from stationd.bench.plan import wrench_plan
 from stationd.bench.wait import until as _until
 from stationd.config import StationConfig, load_station_config
-from stationd.counting import noun
 from stationd.demo.station import SIM_CONFIG, simulators
 from stationd.errors import InputError
 from stationd.jsonout import finite, strict_json

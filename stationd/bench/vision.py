@@ -428,8 +428,8 @@ SECTIONS: dict[str, Callable[[np.random.Generator, bool], Result]] = {
 
 
 def run_vision_bench(args: argparse.Namespace) -> int:
+    from drivers.counting import noun
     from stationd.bench.report import print_report
-    from stationd.counting import noun
     from stationd.errors import InputError
 
     names = list(SECTIONS) if args.only is None else [s.strip() for s in args.only.split(",")]

@@ -31,9 +31,9 @@ from sqlalchemy.exc import SQLAlchemyError
 
 from db.errors import DbError
 from db.repository import Repository
+from drivers.counting import counted
 from stationd.bus import EventBus
 from stationd.config import StationConfig
-from stationd.counting import counted
 from stationd.errors import ConfigError, InputError
 from stationd.forward import LineConfig
 from stationd.linedb import LINE_FEED, LineResult, results

@@ -37,11 +37,11 @@ from typing import Any
 
 import numpy as np
 
+from drivers.counting import counted
 from drivers.wrench.sim.controller import SimPset
 from stationd import progress
 from stationd.boltfile import load_bolts
 from stationd.config import RecordsConfig, StationConfig, load_station_config
-from stationd.counting import counted
 from stationd.demo.leftovers import DATABASE, PREFIX, mark, sweep
 from stationd.demo.services import (
     SECURITY_WORDS,

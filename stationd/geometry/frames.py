@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from stationd.counting import counted
+from drivers.counting import counted
 from stationd.result import Refusal
 from stationd.yamlio import MAX_YAML_BYTES, YamlNode, read_text_file
 

@@ -31,12 +31,12 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from drivers.counting import counted
 from drivers.lift.base import LiftState
 from drivers.lift.sim import SimLift, SimulatedPlc
 from drivers.wrench.sim.controller import SimWrench
 from stationd.boltfile import load_bolts
 from stationd.config import StationConfig
-from stationd.counting import counted
 from stationd.errors import InputError, StationError
 from stationd.shell.daemon import Station
 from stationd.sim.devices_cli import HELP, plc_command, psets_of
