@@ -25,8 +25,8 @@ from asyncua.client.client import Client
 from sqlalchemy import create_engine
 from sqlalchemy.pool import NullPool
 
+from drivers.counting import counted
 from stationd.cli import main
-from stationd.counting import counted
 from stationd.demo.services import Endpoints, line_summary
 from stationd.errors import InputError
 from stationd.linedb import results
