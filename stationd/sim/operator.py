@@ -27,10 +27,10 @@ from typing import Any
 import numpy as np
 
 from db.repository import BoltInfo
+from drivers.counting import counted
 from drivers.lift.sim import SimLift, SimulatedPlc
 from drivers.wrench.sim.controller import SimController, SimPset, SimTightening, SimWrench
 from stationd.config import StationConfig
-from stationd.counting import counted
 from stationd.errors import InputError
 from stationd.shell.daemon import Station
 from stationd.sim.world import World, wrench_at
@@ -118,7 +118,9 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     ``report``), tightened as the NOK policy has it (:func:`until_ok`), the lift lowered.
     ``truth['bolt']`` is where the wrench really is, at every moment (the demo checks each
     parameter send against it).  InputError when the vehicle is not opened or no bolt of it
-    is in view.  ``operator`` signs in at the station first unless signed in already.
+    is in view.  ``operator`` signs in at the station first unless someone is signed in (a
+    person who signed in at the screens stays signed in, across a reload too: the rundowns
+    are theirs).
     ``share`` (k, n): this station is the k-th of a line of n, and its bolts are the k-th of
     n shares of the bolts in view (:func:`share_of`); ``truth['share']`` gets them.
     ``supervisor`` None: locks are left to people (:func:`wait_for_people`);
@@ -127,7 +129,7 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     (``unfinished``), the vehicle lowered, and ``truth['interrupted']`` names the signal and
     the bolts."""
     plc, ctl = simulators(st)
-    if st.core.status().operator != operator.user:
+    if st.core.status().operator is None:
         answer = await st.submit(SignIn(f"{operator.source}: the simulated operator"),
                                  operator)
         if not answer.accepted:

@@ -151,3 +151,35 @@ def test_the_scripted_operator_goes_on_with_the_same_vehicle_across_a_reload(tmp
     finally:
         code = d.stop()
     assert code == 0, d.log()[-3000:]
+
+
+@pytest.mark.timeout(600)
+def test_a_person_signed_in_stays_signed_in_across_a_reload_with_the_scripted_operator(
+        tmp_path):
+    """The scripted operator signs in only where nobody is: a person who signed in at the
+    screens is not replaced at a reload (a newcomer saw 'operator: operator signed in (after
+    olga)', and the rundowns recorded by the simulated user from then on)."""
+    port = free_port()
+    access = {"users": {"olga": {"role": "operator", "password": HASH}}}
+    station = _station(tmp_path, http={"listen": f"127.0.0.1:{port}"}, access=access)
+    d = Daemon(tmp_path, "--sim-operator")
+    try:
+        d.wait(r"operator: operator signed in", 120)
+        c = Client(f"http://127.0.0.1:{port}/")
+        assert c.post("/api/login", {"user": "olga", "password": PASSWORD})[0] == 200
+        nonce = json.loads(c.get("/api/nonce"))["nonce"]
+        status, text = c.post("/api/commands", {"kind": "sign-in", "nonce": nonce})
+        assert status == 200, text
+        d.wait(r"operator: olga signed in", 60)
+        doc = yaml.safe_load(station.read_text())
+        doc["matching"]["stable_frames"] = 4
+        station.write_text(yaml.safe_dump(doc, sort_keys=False))
+        d.p.send_signal(signal.SIGHUP)
+        d.wait(r"configuration reloaded[\s\S]*simulated operator: vehicle \w{17} stays on the "
+               r"lift across the reload", 120)
+        d.wait(r"configuration reloaded[\s\S]*tightening: tightening bolt B\d\d", 300)
+        after = d.log().split("configuration reloaded", 1)[1]
+        assert "operator: operator signed in" not in after, after[-3000:]
+    finally:
+        code = d.stop()
+    assert code == 0, d.log()[-3000:]
