@@ -75,7 +75,8 @@ class Reason:
 
     kind: Why
     bolt: str | None = None
-    other: str | None = None            # the second bolt of an ambiguity
+    other: str | None = None            # the second bolt of an ambiguity; what was meant
+    #                                     (a bolt or VIN typed in another case)
     vin: str | None = None
     distance_mm: float | None = None
     other_mm: float | None = None

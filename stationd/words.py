@@ -92,8 +92,10 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
                                    f"(> {r.limit or 0:g} mm)"),
     Why.NO_RIGHT: lambda r: f"your role does not have the right to {r.right}",
     Why.NO_VEHICLE: lambda r: "no vehicle at the station",
-    Why.OTHER_VEHICLE: lambda r: f"vehicle {r.vin} is not the one at the station",
-    Why.UNKNOWN_BOLT: lambda r: f"{r.bolt} is not a bolt of vehicle {r.vin}",
+    Why.OTHER_VEHICLE: lambda r: f"vehicle {r.vin} is not the one at the station"
+    + (f" (did you mean {r.other}?)" if r.other else ""),
+    Why.UNKNOWN_BOLT: lambda r: f"{r.bolt} is not a bolt of vehicle {r.vin}"
+    + (f" (did you mean {r.other}?)" if r.other else ""),
     Why.TOOL_ON_BOLT: lambda r: f"{r.bolt} is being tightened now",
     Why.ALREADY_OPEN: lambda r: f"vehicle {r.vin} is open at the station",
     Why.NOT_CLOSED: lambda r: f"vehicle {r.vin} is not closed",

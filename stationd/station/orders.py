@@ -77,9 +77,13 @@ class OrderRules(FaultRules):
             return Reason(Why.DEVICE_FAULT, note=self._fault_reason()) if self.faults \
                 else Reason(Why.NO_VEHICLE)
         if cmd.vin != self.vin:
-            return Reason(Why.OTHER_VEHICLE, vin=cmd.vin)
+            # typed in lower case: said, not taken (a command names exactly what it acts on)
+            return Reason(Why.OTHER_VEHICLE, vin=cmd.vin,
+                          other=self.vin if cmd.vin.upper() == self.vin else None)
         if cmd.bolt not in self.matcher.bolts:
-            return Reason(Why.UNKNOWN_BOLT, bolt=cmd.bolt, vin=cmd.vin)
+            alike = [b for b in self.matcher.bolts if b.casefold() == cmd.bolt.casefold()]
+            return Reason(Why.UNKNOWN_BOLT, bolt=cmd.bolt, vin=cmd.vin,
+                          other=alike[0] if alike else None)
         if isinstance(cmd, LoosenBolt):
             return self._loosen_refusal(cmd)
         if isinstance(cmd, ReleaseBolt):

@@ -14,7 +14,7 @@ from stationd.station.commands import Issuer, ReopenVehicle, Right, SkipBolt
 from stationd.station.core import StationCore
 from stationd.station.events import BoltSkipped, State, VehicleReopened
 from stationd.station.inputs import CommandDone, CommandIn, LiftRead, VehicleLoaded, VehicleRejected
-from stationd.words import answer_words
+from stationd.words import answer_words, reason_words
 from tests.station.test_core import BOLTS, _on, _ready
 
 SUPERVISOR = Issuer("sam", frozenset(Right), "screen 10.0.0.7")
@@ -79,6 +79,10 @@ def test_a_skip_of_the_selected_bolt_turns_the_tool_off():
     (ReopenVehicle("VIN9"), OPERATOR, Reason(Why.NO_RIGHT, right="reopen")),
     (SkipBolt("VIN9", "B2"), OPERATOR, Reason(Why.OTHER_VEHICLE, vin="VIN9")),
     (SkipBolt("VIN1", "B9"), OPERATOR, Reason(Why.UNKNOWN_BOLT, bolt="B9", vin="VIN1")),
+    # typed in another case: refused, with what was meant
+    (SkipBolt("vin1", "B2"), OPERATOR, Reason(Why.OTHER_VEHICLE, vin="vin1", other="VIN1")),
+    (SkipBolt("VIN1", "b2"), OPERATOR, Reason(Why.UNKNOWN_BOLT, bolt="b2", vin="VIN1",
+                                              other="B2")),
     (ReopenVehicle("VIN1"), SUPERVISOR, Reason(Why.ALREADY_OPEN, vin="VIN1")),
 ])
 def test_a_command_against_the_rules_is_refused_with_its_reason_and_changes_nothing(
@@ -91,6 +95,15 @@ def test_a_command_against_the_rules_is_refused_with_its_reason_and_changes_noth
     assert not any(isinstance(a, RecordCommand) for a in acts)
     assert d.core.matcher.skipped == before
     assert "refused" in answer_words(reply.answer) and issuer.user in answer_words(reply.answer)
+
+
+def test_a_case_slip_is_refused_in_words_that_say_what_was_meant():
+    assert reason_words(Reason(Why.UNKNOWN_BOLT, bolt="b04", vin="VIN1", other="B04")) == \
+        "b04 is not a bolt of vehicle VIN1 (did you mean B04?)"
+    assert reason_words(Reason(Why.OTHER_VEHICLE, vin="vin1", other="VIN1")) == \
+        "vehicle vin1 is not the one at the station (did you mean VIN1?)"
+    assert reason_words(Reason(Why.UNKNOWN_BOLT, bolt="B9", vin="VIN1")) == \
+        "B9 is not a bolt of vehicle VIN1"
 
 
 def test_a_skip_without_a_vehicle_or_of_a_done_bolt_is_refused():
