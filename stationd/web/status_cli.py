@@ -11,6 +11,7 @@ from __future__ import annotations
 import urllib.parse
 from typing import Any
 
+from drivers.counting import counted
 from stationd.errors import InputError
 
 DEFAULT_URL = "http://127.0.0.1:8080/"
@@ -46,7 +47,7 @@ def counter_words(c: dict[str, Any]) -> str:
     words = f"{c.get('done', 0)}/{c.get('total', 0)} bolts OK"
     if c.get("skipped"):
         words += f", {c['skipped']} skipped"
-    return words + f", {nok} {'bolt' if nok == 1 else 'bolts'} ending NOK"
+    return words + f", {counted(nok, 'bolt')} ending NOK"
 
 
 def lock_lines(st: dict[str, Any]) -> list[str]:
