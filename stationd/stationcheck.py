@@ -70,9 +70,11 @@ def check_station(path: str | Path) -> StationCheck:
         except InputError as exc:  # a tolerance of 0: the loader takes it, the check cannot
             errors.append(top["matching"].error(f"{exc}; the bolt table cannot be "
                                                        "checked"))
+    # without a bolt table, the station's database has its tables (read once, for both)
+    stored = _database_table(cfg) if cfg.bolts_path is None else None
     if "nok" in top:
         try:
-            errors += _nok_errors(top["nok"], cfg, bolts)
+            errors += _nok_errors(top["nok"], cfg, bolts, stored)
         except ConfigError:   # the section's own errors are told above (an unknown key hid
             pass              # every other error of the file): its overrides wait for them
     if bolts is not None and bolts.table is not None and "wrench" in top:
@@ -80,7 +82,7 @@ def check_station(path: str | Path) -> StationCheck:
         if warning is not None:
             warnings.append(warning)
     if cfg.bolts_path is None:
-        warning = _no_models_warning(cfg, str(p))
+        warning = _no_models_warning(stored, str(p))
         if warning is not None:
             warnings.append(warning)
     if cfg.opcua is not None and cfg.opcua.users and cfg.opcua.security == ("none",):
@@ -92,17 +94,16 @@ def check_station(path: str | Path) -> StationCheck:
     return StationCheck(str(p), cfg if not errors else None, errors, warnings, bolts)
 
 
-def _nok_errors(node: YamlNode, cfg: StationConfig, bolts: Any) -> list[ConfigError]:
+def _nok_errors(node: YamlNode, cfg: StationConfig, bolts: Any,
+                stored: tuple[BoltTable, str] | str | None) -> list[ConfigError]:
     """The NOK policy's overrides against the bolt tables the station loads: its bolt file's
-    (checked), else the tables of its database when that is an SQLite file that exists (read
-    only; a database that does not open is the daemon's to report)."""
+    (checked), else the tables of its database (``stored``: :func:`_database_table`'s)."""
     if cfg.bolts_path is not None:   # a table with errors is told those, not these
         return [] if bolts is None or bolts.table is None \
             else table_errors(node, bolts.table, str(cfg.bolts_path))
-    found = _database_table(cfg)
-    if found is None or isinstance(found, str):
+    if stored is None or isinstance(stored, str):
         return []
-    table, where = found
+    table, where = stored
     return table_errors(node, table, where)
 
 
@@ -127,10 +128,11 @@ def _database_table(cfg: StationConfig) -> tuple[BoltTable, str] | str | None:
         return None
 
 
-def _no_models_warning(cfg: StationConfig, path: str) -> ConfigError | None:
-    """A station without a bolt table whose database knows no vehicle model would refuse
-    every vehicle ("unknown vehicle model code"): said before it runs."""
-    found = _database_table(cfg)
+def _no_models_warning(found: tuple[BoltTable, str] | str | None,
+                       path: str) -> ConfigError | None:
+    """A station without a bolt table whose database knows no vehicle model (``found``:
+    :func:`_database_table`'s) would refuse every vehicle ("unknown vehicle model code"):
+    said before it runs."""
     if found is None or (not isinstance(found, str) and found[0].models):
         return None
     where = f"the database {found} does not exist yet" if isinstance(found, str) \
