@@ -190,11 +190,7 @@ class ControllerFeed:
                  "link was lost%s: fetched", len(found),
                  "" if follows is not None else " (where its history ends is not known)")
         for tid, got in reversed(found):
-            log.info("tightening %d fetched after a reconnect", tid)
-            await self._feed(result_input(time.time(), got, fetched=True, follows=follows,
-                                          offset=offset))
-            if isinstance(got, TighteningResult):
-                await self._late_curves(wrench, tid)
+            await self._fetched(wrench, tid, got, follows, offset)
 
     async def _live_gap(self, wrench: Wrench, got: Received) -> None:
         """A pushed result whose tightening id skips ahead of the last one accounted for on
@@ -236,12 +232,18 @@ class ControllerFeed:
             if got is None:
                 await self._gap(tid, tid, "the controller no longer has it", live)
                 continue
-            log.info("tightening %d fetched %s", tid,
-                     "after a later one came (the link up)" if live else "after a reconnect")
-            await self._feed(result_input(time.time(), got, fetched=True, follows=last,
-                                          offset=offset, live=live))
-            if isinstance(got, TighteningResult):
-                await self._late_curves(wrench, tid)
+            await self._fetched(wrench, tid, got, last, offset, live)
+
+    async def _fetched(self, wrench: Wrench, tid: int, got: Received, follows: int | None,
+                       offset: float | None, live: bool = False) -> None:
+        """One result fetched late, through the core as any result (``follows``: the id
+        accounted for before it), then its curves."""
+        log.info("tightening %d fetched %s", tid,
+                 "after a later one came (the link up)" if live else "after a reconnect")
+        await self._feed(result_input(time.time(), got, fetched=True, follows=follows,
+                                      offset=offset, live=live))
+        if isinstance(got, TighteningResult):
+            await self._late_curves(wrench, tid)
 
     async def _late_curves(self, wrench: Wrench, tid: int) -> None:
         """The curves of a result fetched late (MID 0900 asked for by its tightening id),
