@@ -142,6 +142,15 @@ class AccessConfig:
             if "operator_idle_s" in m else None
         return cls(users, roles, required, idle)
 
+    def roles_with(self, right: Right) -> list[str]:
+        """The roles that have ``right`` (whom the screens send an operator to)."""
+        return sorted(name for name, rights in self.roles.items() if right in rights)
+
+    def users_with(self, right: Right) -> list[str]:
+        """The users whose role has ``right`` (whether anyone can give that command)."""
+        return sorted(name for name, u in self.users.items()
+                      if right in self.roles.get(u.role, frozenset()))
+
     def current(self, issuer: Issuer) -> Issuer | None:
         """A logged-in user as this configuration has them now: None when they were removed,
         else with the rights their role has now (a reload changes both)."""

@@ -147,3 +147,15 @@ def test_a_removed_user_or_a_changed_role_is_seen_by_a_session():
     demoted = _access(f"users:\n  sam: {{role: operator, password: '{HASH}'}}\n")
     assert demoted.current(sam) == sam.__class__("sam", frozenset({Right.SKIP}), "cli")
     assert _access("users: {}\n").current(sam) is None
+
+
+def test_who_has_a_right_by_role_and_by_user():
+    """Whom the screens name beside a lock (roles) and whether anyone can release at all
+    (users): the roles' rights as written, extending the defaults."""
+    cfg = AccessConfig.from_node(YamlNode.parse(
+        "roles: {lead: [release]}\nusers:\n"
+        f"  olga: {{role: operator, password: '{hash_password('x')}'}}\n"
+        f"  lee: {{role: lead, password: '{hash_password('x')}'}}\n", "s.yaml"))
+    assert cfg.roles_with(Right.RELEASE) == ["lead", "supervisor"]
+    assert cfg.users_with(Right.RELEASE) == ["lee"]
+    assert cfg.users_with(Right.TEACH) == []

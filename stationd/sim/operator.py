@@ -78,8 +78,7 @@ def stand_ins(cfg: StationConfig) -> list[str]:
 
 def releasers(cfg: StationConfig) -> list[str]:
     """The station file's users whose role has the release right (who can release a lock)."""
-    return sorted(name for name, u in cfg.access.users.items()
-                  if Right.RELEASE in cfg.access.roles.get(u.role, frozenset()))
+    return cfg.access.users_with(Right.RELEASE)
 
 
 def check_people(cfg: StationConfig) -> None:

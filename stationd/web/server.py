@@ -219,8 +219,7 @@ class WebServer:
         access = self.commands.access
         if access is None:
             return []
-        return sorted(name for name, rights in access.roles.items()
-                      if Right.RELEASE in rights)
+        return access.roles_with(Right.RELEASE)
 
     # -- HTTP -----------------------------------------------------------------------------
     def _routes(self, app: web.Application) -> None:
