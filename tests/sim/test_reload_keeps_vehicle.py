@@ -67,6 +67,16 @@ KEEPING: list[tuple[str, Edit, bool]] = [
 ]
 
 
+def _reload(d: Daemon, station: Path, edit: Edit) -> dict[str, Any]:
+    """The station file edited (``edit``, beside it) and the daemon reloaded (SIGHUP); the
+    file as written."""
+    doc = yaml.safe_load(station.read_text())
+    edit(doc, station.parent)
+    station.write_text(yaml.safe_dump(doc, sort_keys=False))
+    d.p.send_signal(signal.SIGHUP)
+    return dict(doc)
+
+
 def _view(port: int, token: str | None = None) -> dict[str, Any]:
     req = urllib.request.Request(f"http://127.0.0.1:{port}/api/view")
     if token:
@@ -95,10 +105,7 @@ def test_a_reload_of_each_section_keeps_the_vehicle_and_its_state(tmp_path):
         assert status == 200, text
         worlds = d.log().count("simulated world: ")
         for n, (what, edit, new_world) in enumerate(KEEPING, start=1):
-            doc = yaml.safe_load(station.read_text())
-            edit(doc, tmp_path)
-            station.write_text(yaml.safe_dump(doc, sort_keys=False))
-            d.p.send_signal(signal.SIGHUP)
+            doc = _reload(d, station, edit)
             d.wait(rf"(configuration reloaded[\s\S]*){{{n}}}", 120)
             d.wait(rf"(vehicle {vin} \(SIM-1\) opened: 50 bolts, 0 done[\s\S]*){{{n + 1}}}",
                    120)
@@ -115,10 +122,8 @@ def test_a_reload_of_each_section_keeps_the_vehicle_and_its_state(tmp_path):
             assert states["B05"] == "skipped", (what, states["B05"])
 
         # another database: the vehicle cannot go on as it was, said in one line
-        doc = yaml.safe_load(station.read_text())
-        doc["database"] = {"url": f"sqlite:///{tmp_path / 'other.db'}"}
-        station.write_text(yaml.safe_dump(doc, sort_keys=False))
-        d.p.send_signal(signal.SIGHUP)
+        _reload(d, station, lambda doc, tmp: doc.update(
+            database={"url": f"sqlite:///{tmp / 'other.db'}"}))
         line = d.wait(rf"reload: vehicle {vin} cannot go on as it was: its record is in the "
                       r"last database \(sqlite:///\S+station\.db\); the new one "
                       r"\(sqlite:///\S+other\.db\) opens it anew, without its bolts done so "
@@ -137,10 +142,7 @@ def test_the_scripted_operator_goes_on_with_the_same_vehicle_across_a_reload(tmp
         vin = d.wait(r"simulated operator: vehicle (\w{17}) \(lift code 1\) arrives", 120)[1]
         d.wait(rf"vehicle {vin} \(SIM-1\) opened", 60)
         d.wait(r"tightening: tightening bolt B\d\d", 300)      # the vehicle at height, worked on
-        doc = yaml.safe_load(station.read_text())
-        doc["matching"]["stable_frames"] = 4
-        station.write_text(yaml.safe_dump(doc, sort_keys=False))
-        d.p.send_signal(signal.SIGHUP)
+        _reload(d, station, _set("matching", "stable_frames", 4))
         d.wait(rf"configuration reloaded[\s\S]*simulated operator: vehicle {vin} stays on the "
                r"lift across the reload; its bolts go on", 120)
         d.wait(rf"configuration reloaded[\s\S]*vehicle {vin} \(SIM-1\) opened", 120)
@@ -171,10 +173,7 @@ def test_a_person_signed_in_stays_signed_in_across_a_reload_with_the_scripted_op
         status, text = c.post("/api/commands", {"kind": "sign-in", "nonce": nonce})
         assert status == 200, text
         d.wait(r"operator: olga signed in", 60)
-        doc = yaml.safe_load(station.read_text())
-        doc["matching"]["stable_frames"] = 4
-        station.write_text(yaml.safe_dump(doc, sort_keys=False))
-        d.p.send_signal(signal.SIGHUP)
+        _reload(d, station, _set("matching", "stable_frames", 4))
         d.wait(r"configuration reloaded[\s\S]*simulated operator: vehicle \w{17} stays on the "
                r"lift across the reload", 120)
         d.wait(r"configuration reloaded[\s\S]*tightening: tightening bolt B\d\d", 300)
