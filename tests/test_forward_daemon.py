@@ -60,6 +60,10 @@ def test_results_reach_the_line_database_and_wait_while_it_is_down(tmp_path):
             pose.write_text("")
             return int(shot.tightening_id)
 
+        # what the controller said it is (MID 0002) reaches the devices panel through the
+        # station's core, as every report of the station's state does
+        until(lambda: "identity" in _get(http_port, "/api/view")["devices"]["wrench"], 30,
+              "the controller's identity on the devices panel")
         first = tighten("B05")
         until(lambda: any(r.record.get("tightening_id") == first
                           for r in _line_rows(url, "ST-T1")), 30, "on the line")

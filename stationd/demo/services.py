@@ -22,7 +22,7 @@ import logging
 import socket
 import time
 from collections import Counter
-from collections.abc import Collection
+from collections.abc import Awaitable, Callable, Collection
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -40,6 +40,7 @@ from stationd.linedb import LINE_FEED, LineResult, results
 from stationd.opcua import OpcUaConfig
 from stationd.shell.sdnotify import Notifier
 from stationd.shell.serve import Screens, forward, opcua_devices
+from stationd.station.inputs import Event
 from stationd.web.config import split_listen
 from stationd.yamlio import YamlNode
 
@@ -169,11 +170,12 @@ class StationServices:
     endpoint listens before it returns), :meth:`drain` once its run is over (until the line
     database has taken every record), :meth:`stop` at the demo's end (both serve the
     station's records until then, also during ``--hold``: a command taken then is forwarded
-    too)."""
+    too).  ``tell`` is the station's feed: the line database's link goes to its core, which
+    tells OPC UA (None: a forwarder without a station, as the line report's tests run it)."""
 
-    def __init__(self, cfg: StationConfig, bus: EventBus, screens: Screens | None = None) \
-            -> None:
-        self.cfg, self.bus = cfg, bus
+    def __init__(self, cfg: StationConfig, bus: EventBus, screens: Screens | None = None,
+                 tell: Callable[[Event], Awaitable[None]] | None = None) -> None:
+        self.cfg, self.bus, self._tell = cfg, bus, tell
         self.screens = screens if screens is not None else Screens(bus)
         self.opcua: Any = None          # the OpcUaServer, once it serves
         self.problem: str | None = None   # why OPC UA is not served (printed by the demo)
@@ -194,7 +196,7 @@ class StationServices:
             await self._start_opcua(self.cfg.opcua)
         if self.cfg.line is not None:
             self._line = asyncio.create_task(forward(self.cfg, Notifier({}), self.screens,
-                                                     self._stop_line, self.bus))
+                                                     self._stop_line, self.bus, self._tell))
 
     async def _start_opcua(self, ua_cfg: OpcUaConfig) -> None:
         from stationd.opcua.server import OpcUaServer

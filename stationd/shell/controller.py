@@ -23,14 +23,20 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from drivers.errors import DeviceError
 from drivers.keeper import DeviceKeeper, one_line
 from drivers.wrench import Received, TighteningResult, UnreadableResult, Wrench
-from stationd.bus import EventBus
 from stationd.shell.blocking import Blocking
 from stationd.shell.records import STATION_FAULTS, Records
 from stationd.station.core import StationCore
-from stationd.station.events import DeviceIdentified
 from stationd.station.gaps import MAX_FETCH, GapPlan
 from stationd.station.gaps import plan as plan_gaps
-from stationd.station.inputs import WRENCH, DeviceBack, Event, ResultIn, ResultsMissed, UnreadableIn
+from stationd.station.inputs import (
+    WRENCH,
+    DeviceBack,
+    DeviceSaid,
+    Event,
+    ResultIn,
+    ResultsMissed,
+    UnreadableIn,
+)
 from stationd.station.results import CLOCK_SLACK_S
 
 log = logging.getLogger("stationd")
@@ -44,9 +50,8 @@ class ControllerFeed:
     ``feed`` (one event at a time, with its actions)."""
 
     def __init__(self, core: StationCore, records: Records, keeper: DeviceKeeper[Wrench],
-                 bus: EventBus, feed: Callable[[Event], Awaitable[None]],
-                 call: Blocking) -> None:
-        self.core, self.records, self.bus = core, records, bus
+                 feed: Callable[[Event], Awaitable[None]], call: Blocking) -> None:
+        self.core, self.records = core, records
         self._keeper, self._feed, self._call = keeper, feed, call
         self._results_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="results")
         self._curves_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="curves")
@@ -58,6 +63,7 @@ class ControllerFeed:
         #: controller's newest when the catch-up asked for it; None: not known yet since the
         #: last (re)connect): a pushed result further on than the next is a live gap
         self._accounted: int | None = None
+        self._told: set[asyncio.Future[None]] = set()   # what the controller said, on its way
 
     def close(self) -> None:
         self._results_pool.shutdown(wait=True)
@@ -116,7 +122,9 @@ class ControllerFeed:
                 who = ""
             if who:
                 log.info("wrench: %s", who)
-                self.bus.publish(DeviceIdentified(WRENCH, who))
+                self._told.add(task := asyncio.ensure_future(
+                    self._feed(DeviceSaid(time.time(), WRENCH, who))))
+                task.add_done_callback(self._told.discard)
         self._accounted = None     # the catch-up says up to where (a result may come first)
         if self.catching_up is None or self.catching_up.done():
             self.catching_up = asyncio.get_running_loop().create_task(self._catch_up())

@@ -122,7 +122,7 @@ class Station:
         self.effects = Effects(self.core, self.records, self.wrench_keeper,
                                self.database_keeper, self.bus, self.notifier, call,
                                self.tracker.request_check)
-        self.controller = ControllerFeed(self.core, self.records, self.wrench_keeper, self.bus,
+        self.controller = ControllerFeed(self.core, self.records, self.wrench_keeper,
                                          self.feed, call)
 
     def _keeper(self, device: str, opener: Callable[[], D], reconnect: Callable[[D], None],

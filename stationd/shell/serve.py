@@ -19,7 +19,7 @@ import random
 import signal
 import sys
 import time
-from collections.abc import Callable, Coroutine
+from collections.abc import Awaitable, Callable, Coroutine
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -33,8 +33,16 @@ from stationd.logsetup import setup_logging
 from stationd.shell.daemon import OPEN_ERRORS, Station
 from stationd.shell.records import STATION_FAULTS, Unsaved
 from stationd.shell.sdnotify import Notifier
-from stationd.station.events import LineLinkChanged, ResultRecorded, StationEvent
-from stationd.station.inputs import DATABASE, LIFT, WRENCH, DeviceBack, DeviceFault
+from stationd.station.events import ResultRecorded, StationEvent
+from stationd.station.inputs import (
+    DATABASE,
+    LIFT,
+    WRENCH,
+    DeviceBack,
+    DeviceFault,
+    Event,
+    LineLinkIn,
+)
 
 if TYPE_CHECKING:
     from stationd.web import Results
@@ -250,12 +258,14 @@ async def _reader(cfg: StationConfig, what: str) -> Any:
 
 
 async def forward(cfg: StationConfig, notifier: Notifier, screens: Screens,
-                  stop: asyncio.Event, bus: EventBus | None = None) -> None:
+                  stop: asyncio.Event, bus: EventBus | None = None,
+                  tell: Callable[[Event], Awaitable[None]] | None = None) -> None:
     """The records to the line's database while this station runs (``cfg.line``; nothing
     without it).  A line database that is down or refuses is never a fault of the station: a
-    journal line (and STATUS=) at each change, the backlog in ``/api/status``.  Each result
-    the ``bus`` says was recorded wakes the forwarder (the lag is then the forwarding, not
-    its poll)."""
+    journal line (and STATUS=) at each change, the backlog in ``/api/status``; the link's
+    state is told to the station's core (``tell``, its feed), which tells OPC UA.  Each
+    result the ``bus`` says was recorded wakes the forwarder (the lag is then the
+    forwarding, not its poll)."""
     if cfg.line is None:
         return
     from stationd.forward import Forwarder
@@ -280,9 +290,12 @@ async def forward(cfg: StationConfig, notifier: Notifier, screens: Screens,
             line = f"line database: forwarding to {st['url']} ({st['backlog']} behind)"
         (log.warning if st["alarm"] or st["up"] is False else log.info)("%s", line)
         notifier.status(line)
-        if bus is not None:   # the line asset's health in OPC UA (never a station fault)
-            bus.publish(LineLinkChanged(st["up"] is not False, st["last_error"] or "",
-                                        st["alarm"]))
+        if tell is not None:   # the line asset's health in OPC UA (never a station fault)
+            told_now.add(task := asyncio.ensure_future(tell(LineLinkIn(
+                time.time(), st["up"] is not False, st["last_error"] or "", st["alarm"]))))
+            task.add_done_callback(told_now.discard)
+
+    told_now: set[asyncio.Future[None]] = set()
 
     wake = asyncio.Event()
 
@@ -386,7 +399,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
         extra = None if beside is None else asyncio.create_task(beside(cfg, station, inner))
         task = asyncio.create_task(station.run(inner))
         screens.attach(station, cfg)
-        line = asyncio.create_task(forward(cfg, notifier, screens, inner, bus))
+        line = asyncio.create_task(forward(cfg, notifier, screens, inner, bus, station.feed))
         served = asyncio.create_task(opcua(cfg, bus, inner))
         log.info("stationd running: %s", cfg_path)
         new: StationConfig | None = None

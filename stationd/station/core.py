@@ -47,8 +47,10 @@ from stationd.station.inputs import (
     CommandIn,
     DeviceBack,
     DeviceFault,
+    DeviceSaid,
     Event,
     LiftRead,
+    LineLinkIn,
     LocalizedIn,
     ModelsKnown,
     NotStored,
@@ -130,6 +132,10 @@ class StationCore(LiftRules, ToolRules, ResultRules):
                 return self._on_device_fault(ev)
             case DeviceBack():
                 return self._on_device_back(ev)
+            case DeviceSaid():
+                return self._on_device_said(ev)
+            case LineLinkIn():
+                return self._on_line_link(ev)
             case ModelsKnown():
                 return self._on_models_known(ev)
             case VinSent():

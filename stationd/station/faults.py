@@ -6,8 +6,15 @@ from __future__ import annotations
 from drivers.keeper import FaultKind
 from stationd.reasons import Reason, Why
 from stationd.station.actions import Action, Publish
-from stationd.station.events import DeviceHealth, State
-from stationd.station.inputs import DATABASE, WRENCH, DeviceBack, DeviceFault
+from stationd.station.events import DeviceHealth, DeviceIdentified, LineLinkChanged, State
+from stationd.station.inputs import (
+    DATABASE,
+    WRENCH,
+    DeviceBack,
+    DeviceFault,
+    DeviceSaid,
+    LineLinkIn,
+)
 from stationd.station.state import _Cut, _disable
 from stationd.station.teaching import TeachRules
 
@@ -52,6 +59,22 @@ class FaultRules(TeachRules):
             acts += _disable("controller back: the tool stays off until a bolt is confirmed",
                              t=ev.t)
         return acts + self._back(ev.t, ev.device)
+
+    def _on_device_said(self, ev: DeviceSaid) -> list[Action]:
+        """What a device said it is, told once per change (a reconnect says it again)."""
+        if self.identities.get(ev.device) == ev.identity:
+            return []
+        self.identities[ev.device] = ev.identity
+        return [Publish(DeviceIdentified(ev.device, ev.identity, t=ev.t))]
+
+    def _on_line_link(self, ev: LineLinkIn) -> list[Action]:
+        """The line database's link, kept and told when it changes; never a fault."""
+        link = LineLinkChanged(ev.up, ev.reason, ev.alarm, t=ev.t)
+        if self.line is not None and (self.line.up, self.line.reason, self.line.alarm) \
+                == (link.up, link.reason, link.alarm):
+            return []
+        self.line = link
+        return [Publish(link)]
 
     def _fault(self, t: float, device: str, kind: FaultKind, reason: str) -> list[Action]:
         acts: list[Action] = []

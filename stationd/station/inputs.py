@@ -162,6 +162,28 @@ class DeviceBack(Input):
 
 
 @dataclass(frozen=True)
+class DeviceSaid(Input):
+    """What a device said it is when it (re)connected (the controller's MID 0002: name, cell
+    and channel, software versions).  The core keeps it and tells it (``DeviceIdentified``):
+    the devices panel and OPC UA show what the core was told, as for every other report."""
+
+    device: str
+    identity: str
+
+
+@dataclass(frozen=True)
+class LineLinkIn(Input):
+    """The line forwarder's link to the line database went up or down (``reason``: its last
+    error), or its backlog alarm changed.  Never a fault of the station (a lost line database
+    stops no tightening): the core keeps it for its status and tells it (``LineLinkChanged``)
+    for the line asset's health in OPC UA."""
+
+    up: bool
+    reason: str = ""
+    alarm: str | None = None
+
+
+@dataclass(frozen=True)
 class LoadedBolt:
     """A bolt of the loaded vehicle; ``parameters_id`` is the parameter version the database
     gave (recorded with the bolt's result: the version actually sent)."""
@@ -271,6 +293,7 @@ class CommandDone(Input):
 Event = (Started | Announce | LiftRead | LocalizedIn | ParamsAcked | ParamsRefused | ResultIn
          | UnreadableIn
          | ResultsMissed | NotStored
-         | DeviceFault | DeviceBack | VehicleLoaded | VehicleRejected | VinSent | Tick
+         | DeviceFault | DeviceBack | DeviceSaid | LineLinkIn
+         | VehicleLoaded | VehicleRejected | VinSent | Tick
          | CommandIn | CommandDone | ToolOn | Written | VehicleEnded | ModelsKnown
          | ReferencesChecked | OperatorBack)

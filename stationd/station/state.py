@@ -19,6 +19,7 @@ from stationd.station.actions import Action, DisableTool, Owed, Publish, Selecti
 from stationd.station.commands import TeachPoint
 from stationd.station.events import (
     BoltLocked,
+    LineLinkChanged,
     Notice,
     State,
     ToolDisabled,
@@ -107,6 +108,10 @@ class CoreStatus:
     held: frozenset[str] = frozenset()
     #: whether the bolt selected now is to be loosened first (the NOK policy)
     loosen: bool = False
+    #: device -> what it said it is when it (re)connected
+    identities: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
+    #: the line database's link as last told (None: no line forwarder, or not told yet)
+    line: LineLinkChanged | None = None
 
     @property
     def cameras_on(self) -> bool:
@@ -133,6 +138,8 @@ class CoreState:
     vin: str | None = None
     model: str | None = None
     faults: dict[str, tuple[str, str]] = field(default_factory=dict)  # device -> kind, reason
+    identities: dict[str, str] = field(default_factory=dict)   # device -> what it said it is
+    line: LineLinkChanged | None = None   # the line database's link as last told
     tool_on: bool = False
     _specs: dict[str, LoadedBolt] = field(default_factory=dict, repr=False)
     _lift: LiftRead | None = field(default=None, repr=False)
@@ -191,7 +198,8 @@ class CoreState:
                           self.model,
                           frozenset(() if self.matcher is None else self.matcher.locked),
                           frozenset(() if self.matcher is None else self.matcher.held),
-                          self._selection is not None and self._selection.loosen)
+                          self._selection is not None and self._selection.loosen,
+                          MappingProxyType(dict(self.identities)), self.line)
 
     @property
     def selection(self) -> Selection | None:
