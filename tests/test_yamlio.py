@@ -165,3 +165,64 @@ def test_an_exponent_without_a_dot_is_a_number_but_quoted_text_is_not():
     assert m["a"].number() == 1e9 and m["b"].number() == -2e-3
     with pytest.raises(ConfigError, match="expected a number, got '1e9'"):
         m["c"].number()
+
+
+# -- the two parsers: libyaml where PyYAML has it, the pure-Python one for errors ------------
+def _graph(node):
+    """A node graph as plain data: kind, tag, value or children, style, line and column
+    (not a collection's flow style: the parsers mark it differently and nothing reads it)."""
+    import yaml
+
+    if isinstance(node, yaml.ScalarNode):
+        return ("scalar", node.tag, node.value, node.style, node.start_mark.line,
+                node.start_mark.column)
+    children = node.value if isinstance(node, yaml.SequenceNode) else \
+        [part for pair in node.value for part in pair]
+    return (type(node).__name__, node.tag, node.start_mark.line,
+            node.start_mark.column, [_graph(c) for c in children])
+
+
+def _station_files():
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / "config"
+    return sorted(root.rglob("*.yaml"))
+
+
+def test_libyaml_and_the_pure_python_parser_read_every_shipped_file_alike(monkeypatch):
+    """Every YAML file under config/ (the stations, pairs, bolt tables) and the forms the
+    readers tell apart (plain, quoted, flow, block, anchors, a decimal comma) read into the
+    same graph with either parser: the station reads the same wherever PyYAML lacks
+    libyaml."""
+    import stationd.yamlio as yamlio
+
+    if yamlio._FAST_LOADER is None:
+        pytest.skip("PyYAML without libyaml here: only one parser to compare")
+    texts = [p.read_text() for p in _station_files()]
+    assert len(texts) >= 10
+    texts += ["a: 1e9\nb: '1e9'\nc: \"x\"\nd: [1, 2.5, -3]\ne: {f: 300,5}\n",
+              "- &x {a: 1}\n- *x\n- |\n  text\n  more\n- >\n  folded\n- ~\n- yes\n"]
+    for text in texts:
+        fast = yamlio._compose(text)
+        monkeypatch.setattr(yamlio, "_FAST_LOADER", None)
+        slow = yamlio._compose(text)
+        monkeypatch.undo()
+        assert _graph(fast) == _graph(slow)
+
+
+@pytest.mark.parametrize("text", [
+    "a: [1, 2\n", "a: b: c\n", "a:\n\t- 1\n", "{a: 1, a: }\n: x\n", "a: 'open\n",
+    "- a\nb: c\n", "a: *nowhere\n",
+])
+def test_a_malformed_file_is_told_in_the_pure_python_parser_s_words(text, monkeypatch):
+    """libyaml's messages differ from PyYAML's own: a file libyaml refuses is parsed again by
+    the pure-Python parser, so the error, its words and its line, is the same either way."""
+    import stationd.yamlio as yamlio
+
+    with pytest.raises(ConfigError) as fast:
+        YamlNode.parse(text, "f.yaml")
+    monkeypatch.setattr(yamlio, "_FAST_LOADER", None)
+    with pytest.raises(ConfigError) as slow:
+        YamlNode.parse(text, "f.yaml")
+    assert str(fast.value) == str(slow.value)
+    assert str(fast.value).startswith("f.yaml:")
