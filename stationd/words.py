@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from db.kinds import is_not_taken_note
+from db.kinds import NOT_TAKEN_NOTE, is_not_taken_note
 from drivers.counting import counted
 from stationd.reasons import Reason, Why
 from stationd.station.commands import (
@@ -21,11 +21,22 @@ from stationd.station.commands import (
     TeachPoint,
     TeachStart,
 )
-from stationd.station.events import OperatorChange, OperatorChanged, PairChecked
+from stationd.station.events import Notice, OperatorChange, OperatorChanged, PairChecked, Said
 
 
 def _mm(v: float | None) -> str:
     return "?" if v is None else f"{v:.1f}"
+
+
+def _locked(bolt: str | None, count: int | None) -> str:
+    """A bolt locked by its NOKs: the refusal and the notice say it alike."""
+    return f"{bolt} locked after {count} NOK in a row: a supervisor releases it"
+
+
+def _unread(bolt: str | None, note: str | None) -> str:
+    """A bolt held for a result that could not be read: the refusal and the notice alike."""
+    return (f"{bolt}: the controller's result could not be read ({note}): check it on the "
+            "controller, then release")
 
 
 def _per_pair(r: Reason, full: bool = False) -> str:
@@ -52,15 +63,13 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.MUST_WAIT: lambda r: f"{r.bolt} must wait: {r.note}",
     Why.NOT_STABLE: lambda r: f"{r.bolt}: stable for {r.count} of {r.needed} frames",
     Why.ELSEWHERE: lambda r: f"nearest {r.bolt}",
-    Why.LOCKED: lambda r: (f"{r.bolt} locked after {r.count} NOK in a row: a supervisor "
-                           "releases it"),
+    Why.LOCKED: lambda r: _locked(r.bolt, r.count),
     Why.NOT_LOCKED: lambda r: f"{r.bolt} is not locked",
     Why.NOT_HELD: lambda r: (f"{r.bolt} is not held: an outcome is entered only for a bolt "
                              "whose result the controller could not send readably"),
     Why.HELD: lambda r: (f"{r.bolt}: {r.note}: not taken as a tightening; check it on the "
                          "controller, then release" if is_not_taken_note(r.note) else
-                         f"{r.bolt}: the controller's result could not be read ({r.note}): "
-                         "check it on the controller, then release"),
+                         _unread(r.bolt, r.note)),
     Why.LOOSEN_FIRST: lambda r: (f"{r.bolt}: loosen first (loosen pset {r.pset}), then "
                                  "tighten" + (f": {r.note}" if r.note else "")),
     Why.NOTHING_TO_LOOSEN: lambda r: f"{r.bolt} is not tightened: nothing to loosen",
@@ -106,6 +115,72 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.NOT_SIGNED_IN: lambda r: "nobody is signed in at the station",
     Why.SIGNED_IN: lambda r: f"{r.user} is signed in already",
 }
+
+
+def _ids(n: Notice) -> str:
+    """A gap's tightening ids: ``70061`` or ``70061-70062``."""
+    first, last = n.tightening_id, n.last_id
+    return str(first) if last is None or first == last else f"{first}-{last}"
+
+
+def _entered(n: Notice) -> str:
+    """An outcome entered for a held bolt, and the hold it ends (which result it replaces)."""
+    held = ("" if not n.note else f" (the result not taken: {n.note})"
+            if is_not_taken_note(n.note) else f" (the result that could not be read: {n.note})")
+    outcome = outcome_words(n.said is Said.ENTERED_OK, n.torque_nm or 0.0, n.angle_deg or 0.0)
+    return f"{n.bolt}: {outcome} entered by {n.user} from the controller's screen{held}"
+
+
+def _controller_event(n: Notice) -> str:
+    """A result that is not a rundown, the bolt still open, what to check for an unknown."""
+    return (f"{n.note} on the controller: not a tightening"
+            + (f", {n.bolt} still open" if n.bolt is not None else "")
+            + ("; check the controller's result there" if n.said is Said.UNKNOWN_TYPE else ""))
+
+
+_SAID: dict[Said, Callable[[Notice], str]] = {
+    Said.NO_REFERENCES: lambda n: ("no calibration check configured (no references in the "
+                                   "station file): every pair is trusted"),
+    Said.PAIR_DISTRUSTED: lambda n: f"{n.pair} no longer trusted while bolt {n.bolt} is selected",
+    Said.IDS_AGAIN: lambda n: (f"tightening id {n.tightening_id} again with other values: the "
+                               "controller's ids started again (a new or reset controller?); "
+                               "taken as a new result"),
+    Said.UNATTRIBUTED: lambda n: f"{n.note}: not attributable to a bolt, stored unattributed",
+    Said.CONTROLLER_EVENT: _controller_event,
+    Said.UNKNOWN_TYPE: _controller_event,
+    Said.GAP: lambda n: (f"tightening {_ids(n)} missed "
+                         f"{'with the link up' if n.link_up else 'while the link was down'}: "
+                         f"a gap ({n.note})"),
+    Said.NOT_STORED: lambda n: f"tightening {n.tightening_id} of {n.bolt} not stored: {n.note}",
+    Said.UNREADABLE: lambda n: (f"a result from the controller could not be read ({n.note}): "
+                                "stored whole; no bolt it could belong to"),
+    Said.HELD: lambda n: _unread(n.bolt, n.note),
+    Said.NOT_TAKEN: lambda n: (f"{n.bolt}: {NOT_TAKEN_NOTE}, {_mm(n.torque_nm)} Nm outside "
+                               f"{_mm(n.torque_min)}-{_mm(n.torque_max)} Nm (tightening "
+                               f"{n.tightening_id}): not taken as a tightening; check it on "
+                               "the controller, then release or enter its outcome"),
+    Said.CUT_RECORDED: lambda n: (f"tightening {n.tightening_id} made during the link cut, "
+                                  f"fetched after it: recorded to {n.bolt} (its pset, VIN, "
+                                  "tightening id and time agree)"),
+    Said.LATE_RESULT: lambda n: f"result for {n.bolt} outside a tightening: recorded, not matched",
+    Said.LOOSEN_PSET_TIGHTENED: lambda n: (f"{n.bolt}: the loosen pset {n.pset} reported a "
+                                           "tightening: the bolt counts as tightened; check "
+                                           "that pset's program"),
+    Said.LOOSENED: lambda n: f"{n.bolt} loosened: its tightening pset goes next",
+    Said.LOOSENING_NOK: lambda n: f"{n.bolt}: loosening NOK ({n.count} NOK in a row)",
+    Said.LOCKED: lambda n: _locked(n.bolt, n.count),
+    Said.ENTERED_OK: lambda n: f"{_entered(n)}: {n.bolt} done",
+    Said.ENTERED_NOK: lambda n: f"{_entered(n)}: a NOK of {n.bolt}, the NOK policy applies",
+    Said.REWORK_REOPENED: lambda n: (f"VIN {n.vin} already closed: reopened as a rework (its "
+                                     "records kept)"),
+    Said.LATE_ACK: lambda n: f"late acknowledgement for {n.bolt} ignored",
+}
+
+
+def notice_words(notice: Notice) -> str:
+    """A notice as the journal and the operator's log say it: ``B03 locked after 3 NOK in a
+    row: a supervisor releases it``."""
+    return _SAID[notice.said](notice)
 
 
 def check_words(ev: PairChecked) -> str:
@@ -189,5 +264,5 @@ def _missed(r: Reason) -> str:
     return f"; {many} without the wrench, the last: {reason_words(r.cause)}"
 
 
-__all__ = ["answer_words", "check_words", "command_words", "operator_words", "outcome_words",
-           "reason_words"]
+__all__ = ["answer_words", "check_words", "command_words", "notice_words", "operator_words",
+           "outcome_words", "reason_words"]

@@ -76,7 +76,13 @@ from stationd.station.inputs import (
     Written,
 )
 from stationd.station.trust import MeasureReferences, RecordCheck
-from stationd.words import answer_words, check_words, operator_words, reason_words
+from stationd.words import (
+    answer_words,
+    check_words,
+    notice_words,
+    operator_words,
+    reason_words,
+)
 
 log = logging.getLogger("stationd")
 #: every command's line, accepted or refused: its own logger, so a front that journals only
@@ -202,7 +208,8 @@ class Effects:
             else:
                 self.log.info("%s: %s", ev.state, ev.reason)
         elif isinstance(ev, Notice):
-            (self.log.warning if ev.level == "warning" else self.log.info)("%s", ev.message)
+            (self.log.warning if ev.level == "warning" else self.log.info)(
+                "%s", notice_words(ev))
         elif isinstance(ev, Refused):   # once, then counted (a wrench held between two bolts)
             said = self.refusals.refused(ev.reason, ev.t)
             if said is not None:

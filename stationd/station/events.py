@@ -391,12 +391,91 @@ class PairFrames(StationEvent):
     sides: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
+class Said(enum.Enum):
+    """What a notice says: its kind (the fields it uses in parentheses).  The words are
+    :func:`stationd.words.notice_words`'s, the level (:attr:`Notice.level`) the kind's.
+    Beside its event, not in :mod:`stationd.reasons`: only the core says notices, while
+    refusals come also from the matcher and the vision below it."""
+
+    # the calibration check
+    NO_REFERENCES = "no references"      # no references configured: every pair trusted
+    PAIR_DISTRUSTED = "pair distrusted"  # a pair no longer trusted on a selected bolt (pair,
+    #                                      bolt)
+    # results from the controller
+    IDS_AGAIN = "ids again"              # a known id with other values (tightening_id)
+    UNATTRIBUTED = "unattributed"        # a result no bolt owns (tightening_id, pset; note:
+    #                                      the reason stored with it)
+    CONTROLLER_EVENT = "controller event"  # not a rundown (note: its type's name; bolt: the
+    #                                        one still open)
+    UNKNOWN_TYPE = "unknown type"        # a result type the station does not know (note,
+    #                                      bolt as above)
+    GAP = "gap"                          # tightenings missed (tightening_id..last_id,
+    #                                      link_up, note: why they cannot be fetched)
+    NOT_STORED = "not stored"            # the database refused a record (tightening_id, bolt,
+    #                                      note: the database's error)
+    UNREADABLE = "unreadable"            # a result no bolt it could belong to could not be
+    #                                      read (note: the driver's error)
+    HELD = "held"                        # a bolt held: its result could not be read (bolt,
+    #                                      note: which result)
+    NOT_TAKEN = "not taken"              # an OK without a type outside the bolt's window
+    #                                      (bolt, torque_nm, torque_min, torque_max,
+    #                                      tightening_id)
+    CUT_RECORDED = "cut recorded"        # made during a link cut, recorded to its bolt
+    #                                      (tightening_id, bolt)
+    LATE_RESULT = "late result"          # recorded outside a tightening (bolt)
+    LOOSEN_PSET_TIGHTENED = "loosen pset tightened"  # (bolt, pset)
+    LOOSENED = "loosened"                # a loosening OK: the tightening pset next (bolt)
+    LOOSENING_NOK = "loosening nok"      # (bolt, count: NOKs in a row)
+    LOCKED = "locked"                    # too many NOKs in a row (bolt, count)
+    ENTERED_OK = "entered ok"            # an outcome entered for a held bolt (bolt,
+    ENTERED_NOK = "entered nok"          # torque_nm, angle_deg, user; note: the hold's)
+    # the vehicle and the tool
+    REWORK_REOPENED = "rework reopened"  # a closed VIN reopened as a rework (vin)
+    LATE_ACK = "late ack"                # an acknowledgement after the selection (bolt)
+
+
+#: the kinds the journal writes as warnings (NOT_STORED as an error; the others as info)
+_WARNINGS = frozenset({
+    Said.PAIR_DISTRUSTED, Said.IDS_AGAIN, Said.UNATTRIBUTED, Said.UNKNOWN_TYPE, Said.GAP,
+    Said.UNREADABLE, Said.HELD, Said.NOT_TAKEN, Said.LOOSEN_PSET_TIGHTENED,
+    Said.LOOSENING_NOK, Said.LOCKED, Said.ENTERED_NOK})
+
+
 @dataclass(frozen=True)
 class Notice(StationEvent):
-    """A line for the journal and the operator's log (warnings included)."""
+    """A line for the journal and the operator's log (warnings included): its kind and the
+    details that apply (the others stay None).  Typed, not words: the core decides what is
+    said, :func:`stationd.words.notice_words` how."""
 
-    message: str
-    level: str = "info"
+    said: Said
+    _: dataclasses.KW_ONLY
+    bolt: str | None = None
+    pair: str | None = None
+    vin: str | None = None
+    user: str | None = None
+    tightening_id: int | None = None
+    last_id: int | None = None          # the last of a range of ids (a gap)
+    link_up: bool = False               # a gap made with the link up (never pushed)
+    pset: int | None = None
+    count: int | None = None
+    torque_nm: float | None = None
+    angle_deg: float | None = None
+    torque_min: float | None = None     # the bolt's torque window (Nm)
+    torque_max: float | None = None
+    note: str | None = None             # words from elsewhere (a device, the database) or a
+    #                                     record's own (a result type's name, a hold's note)
+
+    @property
+    def level(self) -> str:
+        """``info``, ``warning`` or ``error``: the kind's; a controller event is a warning
+        only while a bolt is still open (the operator has to know the tool did not close
+        it)."""
+        if self.said is Said.NOT_STORED:
+            return "error"
+        if self.said in _WARNINGS or (self.said is Said.CONTROLLER_EVENT
+                                      and self.bolt is not None):
+            return "warning"
+        return "info"
 
 
 @dataclass(frozen=True)

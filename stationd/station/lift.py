@@ -15,6 +15,7 @@ from stationd.station.events import (
     Notice,
     OperatorChange,
     OperatorChanged,
+    Said,
     State,
     VehicleClosed,
     VehicleOpened,
@@ -158,8 +159,7 @@ class LiftRules(FaultRules):
 
     def _on_vehicle_rejected(self, ev: VehicleRejected) -> list[Action]:
         if ev.closed and self.rework and ev.vin is not None and self._lift is not None:
-            return [Publish(Notice(f"VIN {ev.vin} already closed: reopened as a rework "
-                                   "(its records kept)", t=ev.t)),
+            return [Publish(Notice(Said.REWORK_REOPENED, vin=ev.vin, t=ev.t)),
                     LoadVehicle(self._lift.model_code, ev.vin, reopen=True)]
         self._loading = False
         why = ev.reason

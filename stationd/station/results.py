@@ -7,9 +7,7 @@ from __future__ import annotations
 from db.kinds import (
     LOOSENING,
     NOT_TAKEN,
-    NOT_TAKEN_NOTE,
     TIGHTENING,
-    is_not_taken_note,
     not_taken_note,
 )
 from drivers.wrench.base import (
@@ -39,6 +37,7 @@ from stationd.station.events import (
     ResultRecorded,
     ResultUnattributed,
     ResultUnreadable,
+    Said,
     State,
 )
 from stationd.station.inputs import (
@@ -114,9 +113,8 @@ class ResultRules(OrderRules):
         tid = int(r.tightening_id)
         if self._recorded.get(tid, None) == _said(r):
             return [Acknowledge(r)]   # sent again by the controller: stored once already
-        again: list[Action] = [] if tid not in self._recorded else [Publish(Notice(
-            f"tightening id {tid} again with other values: the controller's ids started "
-            "again (a new or reset controller?); taken as a new result", "warning", t=ev.t))]
+        again: list[Action] = [] if tid not in self._recorded else [
+            Publish(Notice(Said.IDS_AGAIN, tightening_id=tid, t=ev.t))]
         return again + self._result_in(ev, tid)
 
     def _result_in(self, ev: ResultIn, tid: int) -> list[Action]:
@@ -141,8 +139,8 @@ class ResultRules(OrderRules):
             why += f" ({not_proved})"
         return [StoreUnattributed(r, self.vin, why),
                 Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
-                Publish(Notice(f"{why}: not attributable to a bolt, stored unattributed",
-                               "warning", t=ev.t))]
+                Publish(Notice(Said.UNATTRIBUTED, tightening_id=tid, pset=int(r.pset),
+                               note=why, t=ev.t))]
 
     def _made_during_cut(self, ev: ResultIn) -> tuple[Selection | None, str]:
         """The selection a result fetched after a link cut belongs to, when the controller's
@@ -176,15 +174,11 @@ class ResultRules(OrderRules):
         self._recorded[int(r.tightening_id)] = _said(r)
         what = result_type_words(code)
         bolt = self.bolt if self.tool_on else None
-        note = f"{what} on the controller: not a tightening" + (
-            f", {bolt} still open" if bolt is not None else "")
-        if kind is ResultKind.UNKNOWN:
-            note += "; check the controller's result there"
+        said = Said.UNKNOWN_TYPE if kind is ResultKind.UNKNOWN else Said.CONTROLLER_EVENT
         return [StoreControllerEvent(r, self.vin, bolt, what),
                 Publish(ControllerResultEvent(code or 0, what, int(r.tightening_id),
                                               int(r.pset), bool(r.ok), bolt, t=ev.t)),
-                Publish(Notice(note, "warning" if bolt is not None
-                               or kind is ResultKind.UNKNOWN else "info", t=ev.t))]
+                Publish(Notice(said, bolt=bolt, note=what, t=ev.t))]
 
     def _on_written(self, ev: Written) -> list[Action]:
         """A result on disk: published for the screens, then the controller may forget it."""
@@ -197,15 +191,13 @@ class ResultRules(OrderRules):
             Acknowledge(r)]
 
     def _on_results_missed(self, ev: ResultsMissed) -> list[Action]:
-        ids = str(ev.first) if ev.first == ev.last else f"{ev.first}-{ev.last}"
         return [StoreGap(ev.first, ev.last, self.vin, ev.reason),
-                Publish(Notice(f"tightening {ids} missed "
-                               f"{'with the link up' if ev.live else 'while the link was down'}"
-                               f": a gap ({ev.reason})", "warning", t=ev.t))]
+                Publish(Notice(Said.GAP, tightening_id=ev.first, last_id=ev.last,
+                               link_up=ev.live, note=ev.reason, t=ev.t))]
 
     def _on_not_stored(self, ev: NotStored) -> list[Action]:
-        return [Publish(Notice(f"tightening {ev.tightening_id} of {ev.bolt} not stored: "
-                               f"{ev.reason}", "error", t=ev.t))]
+        return [Publish(Notice(Said.NOT_STORED, tightening_id=ev.tightening_id, bolt=ev.bolt,
+                               note=ev.reason, t=ev.t))]
 
     def _on_unreadable_in(self, ev: UnreadableIn) -> list[Action]:
         """A result the driver could not read: stored whole; the bolt it may belong to (the
@@ -232,9 +224,7 @@ class ResultRules(OrderRules):
         acts.append(Publish(ResultUnreadable(u.error, u.revision, u.tightening_id, bolt,
                                              t=ev.t)))
         if bolt is None or en is None:
-            return [*acts, Publish(Notice(
-                f"a result from the controller could not be read ({u.error}): stored whole; "
-                "no bolt it could belong to", "warning", t=ev.t))]
+            return [*acts, Publish(Notice(Said.UNREADABLE, note=u.error, t=ev.t))]
         self._enabled = self._enabled if self._enabled is not en else None
         if self._cut is not None and self._cut.selection is en:
             self._cut = None
@@ -277,9 +267,8 @@ class ResultRules(OrderRules):
         tid = int(r.tightening_id)
         self._recorded[tid] = _said(r)
         lo, hi = window
-        said = (f"{en.bolt}: {NOT_TAKEN_NOTE}, {float(r.torque_nm):.1f} Nm outside "
-                f"{lo:.1f}-{hi:.1f} Nm (tightening {tid}): not taken as a tightening; check it "
-                "on the controller, then release or enter its outcome")
+        said = Notice(Said.NOT_TAKEN, bolt=en.bolt, torque_nm=float(r.torque_nm),
+                      torque_min=lo, torque_max=hi, tightening_id=tid, t=ev.t)
         acts: list[Action] = []
         if self.tool_on and not cut:
             acts += self._tool_off(ev.t, f"bolt {en.bolt}: an OK result without a result "
@@ -295,7 +284,7 @@ class ResultRules(OrderRules):
         if self.matcher is not None and self.vin == en.vin and en.bolt in self.matcher.bolts:
             acts += self._hold(ev.t, en.bolt, not_taken_note(float(r.torque_nm), tid), said)
         else:
-            acts.append(Publish(Notice(said, "warning", t=ev.t)))
+            acts.append(Publish(said))
         if self.bolt == en.bolt:
             acts += self._drop(ev.t, State.TRACKING, f"bolt {en.bolt}: an OK result without "
                                "a result type outside its torque window; held for a "
@@ -320,13 +309,10 @@ class ResultRules(OrderRules):
                 "tightened" if kind == TIGHTENING else "loosened"))
         acts.append(Record(en.vin, en.bolt, r, en, late, kind))
         if cut:
-            acts.append(Publish(Notice(
-                f"tightening {r.tightening_id} made during the link cut, fetched after it: "
-                f"recorded to {en.bolt} (its pset, VIN, tightening id and time agree)",
-                t=ev.t)))
+            acts.append(Publish(Notice(Said.CUT_RECORDED, tightening_id=int(r.tightening_id),
+                                       bolt=en.bolt, t=ev.t)))
         elif late:
-            acts.append(Publish(Notice(f"result for {en.bolt} outside a tightening: "
-                                       "recorded, not matched", t=ev.t)))
+            acts.append(Publish(Notice(Said.LATE_RESULT, bolt=en.bolt, t=ev.t)))
         self._recorded[int(r.tightening_id)] = _said(r)
         if cut:
             self._cut = None
@@ -341,10 +327,8 @@ class ResultRules(OrderRules):
                 acts += self._after_loosening(ev.t, en, bool(r.ok))
             elif bool(r.ok):
                 if en.loosen:
-                    acts.append(Publish(Notice(
-                        f"{en.bolt}: the loosen pset {en.pset} reported a tightening: the "
-                        "bolt counts as tightened; check that pset's program", "warning",
-                        t=ev.t)))
+                    acts.append(Publish(Notice(Said.LOOSEN_PSET_TIGHTENED, bolt=en.bolt,
+                                               pset=en.pset, t=ev.t)))
                 self.matcher.mark_done(en.bolt)
                 self._noks.pop(en.bolt, None)
                 self._loosen.discard(en.bolt)
@@ -373,14 +357,12 @@ class ResultRules(OrderRules):
         self.matcher.counted.discard(en.bolt)   # undone: no longer counts in its batch
         if ok:
             self._loosen.discard(en.bolt)
-            return [Publish(Notice(f"{en.bolt} loosened: its tightening pset goes next",
-                                   t=t))]
+            return [Publish(Notice(Said.LOOSENED, bolt=en.bolt, t=t))]
         n = self._noks[en.bolt] = self._noks.get(en.bolt, 0) + 1
         rule = self.nok.rule(en.bolt, self._specs[en.bolt].pset)
         if n >= rule.max_nok:
             return self._lock(t, en.bolt, n)
-        return [Publish(Notice(f"{en.bolt}: loosening NOK ({n} NOK in a row)", "warning",
-                               t=t))]
+        return [Publish(Notice(Said.LOOSENING_NOK, bolt=en.bolt, count=n, t=t))]
 
     def _after_nok(self, t: float, bolt: str, pset: int | None) -> list[Action]:
         """The NOK policy: the bolt locks after ``max_nok`` in a row; with ``loosen`` it gets
@@ -434,22 +416,18 @@ class ResultRules(OrderRules):
             p.angle.min if p is not None and p.angle is not None else None,
             p.angle.max if p is not None and p.angle is not None else None,
             kind=TIGHTENING, entered_by=who.user, t=t))]
-        what = (f"{b}: {'OK' if cmd.ok else 'NOK'} {cmd.torque_nm:.1f} Nm, "
-                f"{cmd.angle_deg:.1f} deg entered by {who.user} from the controller's screen"
-                + ("" if not held else f" (the result not taken: {held})"
-                   if is_not_taken_note(held) else
-                   f" (the result that could not be read: {held})"))
+        said = Notice(Said.ENTERED_OK if cmd.ok else Said.ENTERED_NOK, bolt=b,
+                      torque_nm=float(cmd.torque_nm), angle_deg=float(cmd.angle_deg),
+                      user=who.user, note=held or None, t=t)
+        acts.append(Publish(said))
         if cmd.ok:
             m.mark_done(b)
             self._noks.pop(b, None)
             self._loosen.discard(b)
             self._nok_last.discard(b)
             m.counted.discard(b)
-            acts.append(Publish(Notice(f"{what}: {b} done", t=t)))
         else:
             self._nok_last.add(b)
-            acts.append(Publish(Notice(f"{what}: a NOK of {b}, the NOK policy applies",
-                                       "warning", t=t)))
             acts += self._after_nok(t, b, spec.pset if spec is not None else None)
         m.reset()
         return acts

@@ -21,6 +21,7 @@ from stationd.station.events import (
     BoltLocked,
     LineLinkChanged,
     Notice,
+    Said,
     State,
     ToolDisabled,
 )
@@ -224,23 +225,21 @@ class CoreState:
         return self.tool_on or (self._off_at is not None
                                 and t - self._off_at < self.late_result_s)
 
-    def _hold(self, t: float, bolt: str, note: str, said: str | None = None) -> list[Action]:
+    def _hold(self, t: float, bolt: str, note: str,
+              said: Notice | None = None) -> list[Action]:
         """``bolt`` is refused until a supervisor releases it: its result is not known
         (``said``: the notice, where it is not a result that could not be read)."""
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
         self.matcher.held[bolt] = note
         self.matcher.reset()
         return [Publish(BoltLocked(bolt, 0, held=note, t=t)),
-                Publish(Notice(said or f"{bolt}: the controller's result could not be read "
-                               f"({note}): check it on the controller, then release",
-                               "warning", t=t))]
+                Publish(said or Notice(Said.HELD, bolt=bolt, note=note, t=t))]
 
     def _lock(self, t: float, bolt: str, n: int) -> list[Action]:
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
         self.matcher.locked[bolt] = n
         return [Publish(BoltLocked(bolt, n, t=t)),
-                Publish(Notice(f"{bolt} locked after {n} NOK in a row: a supervisor "
-                               "releases it", "warning", t=t))]
+                Publish(Notice(Said.LOCKED, bolt=bolt, count=n, t=t))]
 
     def _fault_reason(self) -> str:
         return "; ".join(f"{d}: {r}" for d, (_, r) in self.faults.items())

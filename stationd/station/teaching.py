@@ -24,6 +24,7 @@ from stationd.station.events import (
     Notice,
     PairChecked,
     PairsUnchecked,
+    Said,
     State,
 )
 from stationd.station.inputs import CommandIn, LocalizedIn, ModelsKnown
@@ -156,8 +157,7 @@ class TeachRules(CoreState):
     def _check_at_start(self, t: float) -> list[Action]:
         """No pair is trusted until checked: a check at once (without references: said)."""
         if self.trust is None:
-            return [Publish(Notice("no calibration check configured (no references in the "
-                                   "station file): every pair is trusted", t=t))]
+            return [Publish(Notice(Said.NO_REFERENCES, t=t))]
         return [*self._unchecked(t), *self._measure(t, "station started")]
 
     def _check_on_arrival(self, t: float, vin: str) -> list[Action]:
@@ -211,8 +211,8 @@ class TeachRules(CoreState):
                     and before is None:
                 # the tool stays on only on a confirmed bolt: the next localization decides,
                 # and one made by this pair is refused now
-                acts.append(Publish(Notice(f"{check.pair} no longer trusted while bolt "
-                                           f"{self.bolt} is selected", "warning", t=ev.t)))
+                acts.append(Publish(Notice(Said.PAIR_DISTRUSTED, pair=check.pair,
+                                           bolt=self.bolt, t=ev.t)))
         waiting = [ev.request] if ev.request is not None else []
         for request in waiting:
             if request in self.trust.requests:

@@ -18,6 +18,7 @@ from stationd.station.events import (
     ParamsRefusedEvent,
     ParamsSent,
     Refused,
+    Said,
     State,
     ToolEnabled,
 )
@@ -119,7 +120,7 @@ class ToolRules(FaultRules):
             return acts
         return [*acts, *_disable(f"late acknowledgement for {ev.bolt} ignored", ev.bolt,
                                  t=ev.t),
-                Publish(Notice(f"late acknowledgement for {ev.bolt} ignored", t=ev.t))]
+                Publish(Notice(Said.LATE_ACK, bolt=ev.bolt, t=ev.t))]
 
     def _on_tool_on(self, ev: ToolOn) -> list[Action]:
         return [Publish(ToolEnabled(ev.bolt, t=ev.t))]

@@ -21,7 +21,7 @@ import pytest
 from stationd.config import load_station_config
 from stationd.shell.daemon import Station
 from stationd.sim.vin import is_valid, make_vin
-from stationd.station.events import Notice
+from stationd.station.events import Notice, Said
 from tests.demo.test_station_services import ROOT, _one_pair
 
 
@@ -92,7 +92,6 @@ def test_a_labelled_stations_journal_lines_carry_its_id(caplog):
     station = Station(cfg)
     station.effects.label("DEMO-2")
     with caplog.at_level(logging.INFO, logger="stationd"):
-        station.effects.publish(Notice("B12 locked after 3 NOK in a row: a supervisor "
-                                       "checks the joint", "warning"))
+        station.effects.publish(Notice(Said.LOCKED, bolt="B12", count=3))
     assert [r.getMessage() for r in caplog.records] == [
-        "DEMO-2 B12 locked after 3 NOK in a row: a supervisor checks the joint"]
+        "DEMO-2 B12 locked after 3 NOK in a row: a supervisor releases it"]

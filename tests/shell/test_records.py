@@ -23,7 +23,7 @@ from stationd.demo.station import SIM_CONFIG
 from stationd.sim.world import wrench_at
 from stationd.station.actions import DisableTool
 from stationd.station.events import BoltSelected, Localized, Notice, ResultUnattributed, State
-from stationd.words import reason_words
+from stationd.words import notice_words, reason_words
 from tests.shell.daemons import scenario, until_async, vehicle_bolts
 
 VIN = "FAULTVIN000000001"  # the harness's vehicle
@@ -99,7 +99,7 @@ def _sends(st) -> list[str]:
 
 def _logs(st) -> list[str]:
     """The operator's log lines and every localization's refusal reason."""
-    return [e.message if isinstance(e, Notice) else reason_words(e.reason)
+    return [notice_words(e) if isinstance(e, Notice) else reason_words(e.reason)
             for e in st.bus.of(Notice, Localized) if getattr(e, "reason", "x") is not None]
 
 

@@ -648,20 +648,24 @@ def test_what_the_shell_could_not_do_is_said_by_the_core():
     """A gap the controller cannot fill and a record the database refused reach the core as
     inputs: it decides what is stored and said (the one writer of the station's notices)."""
     from stationd.station.actions import StoreGap
-    from stationd.station.events import Notice
+    from stationd.station.events import Notice, Said
     from stationd.station.inputs import NotStored, ResultsMissed
+    from stationd.words import notice_words
 
     core = StationCore()
     core.vin = "VIN1"
     acts = core.feed(ResultsMissed(1.0, 70061, 70062, "the controller no longer has it"))
     assert StoreGap(70061, 70062, "VIN1", "the controller no longer has it") in acts
     (said,) = published(acts, Notice)
-    assert said.level == "warning" and said.message.startswith(
+    assert (said.said, said.tightening_id, said.last_id, said.link_up, said.note) == (
+        Said.GAP, 70061, 70062, False, "the controller no longer has it")
+    assert said.level == "warning" and notice_words(said).startswith(
         "tightening 70061-70062 missed while the link was down: a gap")
     acts = core.feed(NotStored(2.0, 7, "B03", "disk I/O error"))
     (said,) = published(acts, Notice)
+    assert (said.said, said.tightening_id, said.bolt) == (Said.NOT_STORED, 7, "B03")
     assert said.level == "error" and "tightening 7 of B03 not stored: disk I/O error" == \
-        said.message
+        notice_words(said)
     assert not [a for a in acts if not isinstance(a, Publish)]
 
 

@@ -9,10 +9,10 @@ from typing import Any
 from stationd.reasons import Reason, Why
 from stationd.station.actions import RecordCommand
 from stationd.station.commands import KIND, RIGHT, EnterOutcome, Issuer, ReleaseBolt, Right
-from stationd.station.events import BoltLocked, BoltToLoosen, Notice, ResultRecorded
+from stationd.station.events import BoltLocked, BoltToLoosen, Notice, ResultRecorded, Said
 from stationd.station.inputs import CommandDone, CommandIn, UnreadableIn
 from stationd.station.policy import NokPolicy, NokRule
-from stationd.words import answer_words, reason_words
+from stationd.words import answer_words, notice_words, reason_words
 from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
 from tests.station.test_core import Driver, _on, _ready, published
 from tests.station.test_result_types import _enabled, unreadable
@@ -37,7 +37,7 @@ def nok(bolt: str = "B1") -> EnterOutcome:
 
 
 def _notices(acts: list[Any]) -> list[str]:
-    return [e.message for e in published(acts, Notice)]
+    return [notice_words(e) for e in published(acts, Notice)]
 
 
 def test_the_command_needs_the_release_right_and_is_named_enter_outcome():
@@ -58,6 +58,9 @@ def test_an_ok_entered_by_a_supervisor_closes_the_held_bolt():
         "B1", True, 49.6, 31.0, "sam", "tightening")
     assert "B1: OK 49.6 Nm, 31.0 deg entered by sam from the controller's screen (the result " \
         "that could not be read: tightening 7): B1 done" in _notices(acts)
+    [said] = published(acts, Notice)
+    assert (said.said, said.bolt, said.torque_nm, said.angle_deg, said.user, said.note) == (
+        Said.ENTERED_OK, "B1", 49.6, 31.0, "sam", "tightening 7") and said.level == "info"
     assert not d.core.matcher.held and "B1" in d.core.matcher.done
     # done: never selected again
     sends = len(d.sends)
@@ -121,6 +124,8 @@ def test_a_nok_entered_is_a_nok_under_the_policy_repeat_opens_the_bolt_again():
     [rec] = published(acts, ResultRecorded)
     assert not rec.ok and rec.entered_by == "sam"
     assert any("a NOK of B1, the NOK policy applies" in m for m in _notices(acts))
+    assert [(n.said, n.level) for n in published(acts, Notice)] == [
+        (Said.ENTERED_NOK, "warning")]
     assert not d.core.matcher.held and "B1" not in d.core.matcher.done
     assert d.core._noks["B1"] == 1
     _enabled(d)     # open again (repeat): tightened again

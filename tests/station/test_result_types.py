@@ -30,6 +30,7 @@ from stationd.station.events import (
     ControllerResultEvent,
     Notice,
     ResultUnreadable,
+    Said,
     State,
 )
 from stationd.station.inputs import (
@@ -41,7 +42,7 @@ from stationd.station.inputs import (
     VehicleLoaded,
 )
 from stationd.station.results import result_type_words
-from stationd.words import reason_words
+from stationd.words import notice_words, reason_words
 from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
 from tests.station.test_core import BOLTS, Driver, _on, _ready, published
 
@@ -67,7 +68,7 @@ def _enabled(d: Driver, bolt: int = 1) -> SendParams:
 
 
 def _notices(acts: list[Any]) -> list[str]:
-    return [e.message for e in published(acts, Notice)]
+    return [notice_words(e) for e in published(acts, Notice)]
 
 
 def test_the_kind_of_every_type_code():
@@ -107,6 +108,8 @@ def test_a_batch_increment_with_the_tool_off_is_a_controller_event_of_no_bolt():
     [store] = [a for a in acts if isinstance(a, StoreControllerEvent)]
     assert store.bolt is None and store.what == "batch increment"
     assert _notices(acts) == ["batch increment on the controller: not a tightening"]
+    [n] = published(acts, Notice)
+    assert (n.said, n.bolt, n.level) == (Said.CONTROLLER_EVENT, None, "info")
     assert not d.core.matcher.done
 
 
@@ -118,7 +121,8 @@ def test_a_type_the_station_does_not_know_is_not_a_tightening():
     [store] = [a for a in acts if isinstance(a, StoreControllerEvent)]
     assert store.what == "result type 9 (unknown)"
     [n] = published(acts, Notice)
-    assert n.level == "warning" and "check the controller's result there" in n.message
+    assert (n.said, n.bolt, n.note) == (Said.UNKNOWN_TYPE, "B1", "result type 9 (unknown)")
+    assert n.level == "warning" and "check the controller's result there" in notice_words(n)
     assert "B1" not in d.core.matcher.done
 
 
@@ -191,6 +195,8 @@ def test_an_unreadable_result_with_the_tool_off_long_ago_holds_nothing():
     [store] = [a for a in acts if isinstance(a, StoreUnreadable)]
     assert store.bolt is None
     assert any("no bolt it could belong to" in m for m in _notices(acts))
+    assert [(n.said, n.note) for n in published(acts, Notice)] == [
+        (Said.UNREADABLE, "MID 0061 revision 7: parameter 01 missing")]
 
 
 def test_a_hold_comes_back_with_the_vehicle():
@@ -230,6 +236,8 @@ def test_a_result_made_during_a_cut_is_recorded_to_its_bolt_when_the_controller_
     assert (rec.bolt, rec.vin, rec.late, rec.selection) == ("B1", "VIN1", True, sent.selection)
     assert "B1" in d.core.matcher.done
     assert any("made during the link cut" in m for m in _notices(acts))
+    assert [(n.said, n.tightening_id, n.bolt) for n in published(acts, Notice)] == [
+        (Said.CUT_RECORDED, 41, "B1")]
     # the second result of that cut is not the first after the last one accounted for
     acts = d.feed(ResultIn(d.t, res(42, sent.selection.pset or 0, True, 1, vin="VIN1"),
                            fetched=True, follows=40, made_at=cut_at - 0.2))
@@ -363,6 +371,8 @@ def test_a_result_under_an_id_seen_before_with_other_values_is_a_new_result():
     acts = d.core.feed(ResultIn(d.t, other))   # the Driver's check keys records by id alone
     assert [a.bolt for a in acts if isinstance(a, Record)] == ["B3"]
     assert any("ids started again" in m for m in _notices(acts))
+    assert [(n.said, n.tightening_id) for n in published(acts, Notice)] == [
+        (Said.IDS_AGAIN, 1)]
 
 
 def test_since_when_results_may_have_been_missed_with_no_id_to_count_from():

@@ -15,7 +15,7 @@ from stationd.reasons import Why
 from stationd.station.actions import LoadVehicle, Publish, RecordCommand, Reply, SendParams
 from stationd.station.commands import CheckCalibration, Issuer, Right
 from stationd.station.core import StationCore
-from stationd.station.events import Localized, Notice, PairChecked
+from stationd.station.events import Localized, Notice, PairChecked, Said
 from stationd.station.inputs import (
     CommandDone,
     CommandIn,
@@ -29,7 +29,7 @@ from stationd.station.inputs import (
 )
 from stationd.station.matching import MatchParams
 from stationd.station.trust import MeasureReferences, PairTrust, RecordCheck, ReferencesChecked
-from stationd.words import check_words, reason_words
+from stationd.words import check_words, notice_words, reason_words
 
 BOLTS = {"B1": LoadedBolt((0.0, 0.0, 0.0), 1), "B2": LoadedBolt((60.0, 0.0, 0.0), 2)}
 PARAMS = MatchParams(tolerance_mm=8.0, margin_mm=6.0, stable_frames=2, max_age_s=0.5)
@@ -186,7 +186,9 @@ def test_without_references_nothing_changes_and_it_is_said():
     core = _core(trust=False)
     acts = core.feed(Started(0.0))
     assert not _kinds(acts, MeasureReferences)
-    assert any("no calibration check configured" in e.message for e in _events(acts, Notice))
+    assert any("no calibration check configured" in notice_words(e)
+               for e in _events(acts, Notice))
+    assert [e.said for e in _events(acts, Notice)] == [Said.NO_REFERENCES]
     core.feed(LiftRead(1.0, True, True, 7, "VIN1"))
     assert not _kinds(core.feed(VehicleLoaded(2.0, "VIN1", "M", BOLTS)), MeasureReferences)
     core.feed(VinSent(2.0, "VIN1"))

@@ -20,9 +20,9 @@ from drivers.wrench import TorqueUnit
 from stationd.reasons import Reason, Why
 from stationd.station.actions import DisableTool, Record, StoreControllerEvent
 from stationd.station.commands import EnterOutcome, ReleaseBolt
-from stationd.station.events import BoltLocked, ControllerResultEvent, Notice, State
+from stationd.station.events import BoltLocked, ControllerResultEvent, Notice, Said, State
 from stationd.station.inputs import DeviceBack, DeviceFault, ResultIn, Tick, VehicleLoaded
-from stationd.words import reason_words
+from stationd.words import notice_words, reason_words
 from tests.station.test_commands import SUPERVISOR, _answer
 from tests.station.test_core import BOLTS, Driver, _on, _ready, published
 from tests.station.test_result_types import _enabled
@@ -48,7 +48,7 @@ def _windowed() -> Driver:
 
 
 def _notices(acts: list[Any]) -> list[str]:
-    return [e.message for e in published(acts, Notice)]
+    return [notice_words(e) for e in published(acts, Notice)]
 
 
 @pytest.mark.parametrize("torque", [0.0, 12.0, 25.5])
@@ -67,6 +67,10 @@ def test_an_untyped_ok_outside_the_torque_window_holds_the_bolt_and_closes_nothi
         f"B1: an OK result without a result type, {torque:.1f} Nm outside 20.0-25.0 Nm "
         "(tightening 7): not taken as a tightening; check it on the controller, then "
         "release or enter its outcome"]
+    [said] = published(acts, Notice)
+    assert (said.said, said.bolt, said.torque_nm, said.torque_min, said.torque_max,
+            said.tightening_id, said.level) == (Said.NOT_TAKEN, "B1", torque, 20.0, 25.0, 7,
+                                                "warning")
     [lock] = published(acts, BoltLocked)
     assert (lock.bolt, lock.held) == ("B1", not_taken_note(torque, 7))
     assert "B1" not in d.core.matcher.done and d.core.state is State.TRACKING

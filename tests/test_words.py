@@ -1,0 +1,118 @@
+"""The station's notices in words (stationd.words.notice_words): each kind's line, word for
+word as the journal wrote it when the core still built the text (daemon tests and people's
+log searches wait for these lines), and each kind's level."""
+
+from __future__ import annotations
+
+import pytest
+
+from db.kinds import not_taken_note
+from stationd.reasons import Reason, Why
+from stationd.station.events import Notice, Said
+from stationd.words import notice_words, reason_words
+
+WORDS = [
+    (Notice(Said.NO_REFERENCES),
+     "no calibration check configured (no references in the station file): every pair is "
+     "trusted"),
+    (Notice(Said.PAIR_DISTRUSTED, pair="pair2", bolt="B03"),
+     "pair2 no longer trusted while bolt B03 is selected"),
+    (Notice(Said.IDS_AGAIN, tightening_id=12),
+     "tightening id 12 again with other values: the controller's ids started again (a new "
+     "or reset controller?); taken as a new result"),
+    (Notice(Said.UNATTRIBUTED, tightening_id=12, pset=3,
+            note="result 12 (pset 3) outside any tightening"),
+     "result 12 (pset 3) outside any tightening: not attributable to a bolt, stored "
+     "unattributed"),
+    (Notice(Said.CONTROLLER_EVENT, note="batch increment"),
+     "batch increment on the controller: not a tightening"),
+    (Notice(Said.CONTROLLER_EVENT, bolt="B1", note="abort job"),
+     "abort job on the controller: not a tightening, B1 still open"),
+    (Notice(Said.UNKNOWN_TYPE, note="result type 9 (unknown)"),
+     "result type 9 (unknown) on the controller: not a tightening; check the controller's "
+     "result there"),
+    (Notice(Said.UNKNOWN_TYPE, bolt="B1", note="result type 9 (unknown)"),
+     "result type 9 (unknown) on the controller: not a tightening, B1 still open; check the "
+     "controller's result there"),
+    (Notice(Said.GAP, tightening_id=70061, last_id=70062, note="the controller no longer has it"),
+     "tightening 70061-70062 missed while the link was down: a gap (the controller no "
+     "longer has it)"),
+    (Notice(Said.GAP, tightening_id=5, last_id=5, link_up=True, note="not sent"),
+     "tightening 5 missed with the link up: a gap (not sent)"),
+    (Notice(Said.NOT_STORED, tightening_id=7, bolt="B03", note="disk I/O error"),
+     "tightening 7 of B03 not stored: disk I/O error"),
+    (Notice(Said.UNREADABLE, note="MID 0061 revision 7: parameter 01 missing"),
+     "a result from the controller could not be read (MID 0061 revision 7: parameter 01 "
+     "missing): stored whole; no bolt it could belong to"),
+    (Notice(Said.HELD, bolt="B1", note="tightening 7"),
+     "B1: the controller's result could not be read (tightening 7): check it on the "
+     "controller, then release"),
+    (Notice(Said.NOT_TAKEN, bolt="B1", torque_nm=0.04, torque_min=20.0, torque_max=25.0,
+            tightening_id=7),
+     "B1: an OK result without a result type, 0.0 Nm outside 20.0-25.0 Nm (tightening 7): "
+     "not taken as a tightening; check it on the controller, then release or enter its "
+     "outcome"),
+    (Notice(Said.CUT_RECORDED, tightening_id=41, bolt="B1"),
+     "tightening 41 made during the link cut, fetched after it: recorded to B1 (its pset, "
+     "VIN, tightening id and time agree)"),
+    (Notice(Said.LATE_RESULT, bolt="B1"),
+     "result for B1 outside a tightening: recorded, not matched"),
+    (Notice(Said.LOOSEN_PSET_TIGHTENED, bolt="B1", pset=9),
+     "B1: the loosen pset 9 reported a tightening: the bolt counts as tightened; check that "
+     "pset's program"),
+    (Notice(Said.LOOSENED, bolt="B1"), "B1 loosened: its tightening pset goes next"),
+    (Notice(Said.LOOSENING_NOK, bolt="B1", count=2), "B1: loosening NOK (2 NOK in a row)"),
+    (Notice(Said.LOCKED, bolt="B12", count=3),
+     "B12 locked after 3 NOK in a row: a supervisor releases it"),
+    (Notice(Said.ENTERED_OK, bolt="B1", torque_nm=49.6, angle_deg=31.0, user="sam"),
+     "B1: OK 49.6 Nm, 31.0 deg entered by sam from the controller's screen: B1 done"),
+    (Notice(Said.ENTERED_OK, bolt="B1", torque_nm=49.6, angle_deg=31.0, user="sam",
+            note="tightening 7"),
+     "B1: OK 49.6 Nm, 31.0 deg entered by sam from the controller's screen (the result that "
+     "could not be read: tightening 7): B1 done"),
+    (Notice(Said.ENTERED_NOK, bolt="B1", torque_nm=12.0, angle_deg=4.5, user="sam",
+            note=not_taken_note(0.0, 7)),
+     "B1: NOK 12.0 Nm, 4.5 deg entered by sam from the controller's screen (the result not "
+     "taken: an OK result without a result type, 0.0 Nm outside the bolt's torque window "
+     "(tightening 7)): a NOK of B1, the NOK policy applies"),
+    (Notice(Said.REWORK_REOPENED, vin="VIN1"),
+     "VIN VIN1 already closed: reopened as a rework (its records kept)"),
+    (Notice(Said.LATE_ACK, bolt="B1"), "late acknowledgement for B1 ignored"),
+]
+
+
+@pytest.mark.parametrize(("notice", "words"), WORDS,
+                         ids=[f"{n.said.name}-{i}" for i, (n, _) in enumerate(WORDS)])
+def test_each_notice_says_what_the_journal_said(notice: Notice, words: str) -> None:
+    assert notice_words(notice) == words
+
+
+def test_every_kind_has_its_words() -> None:
+    assert {n.said for n, _ in WORDS} == set(Said)
+
+
+def test_a_notice_s_level_is_its_kind_s() -> None:
+    errors = {s for s in Said if Notice(s).level == "error"}
+    warnings = {s for s in Said if Notice(s).level == "warning"}
+    assert errors == {Said.NOT_STORED}
+    assert warnings == {
+        Said.PAIR_DISTRUSTED, Said.IDS_AGAIN, Said.UNATTRIBUTED, Said.UNKNOWN_TYPE, Said.GAP,
+        Said.UNREADABLE, Said.HELD, Said.NOT_TAKEN, Said.LOOSEN_PSET_TIGHTENED,
+        Said.LOOSENING_NOK, Said.LOCKED, Said.ENTERED_NOK}
+    # a controller event is a warning only while a bolt is still open
+    assert Notice(Said.CONTROLLER_EVENT, bolt="B1").level == "warning"
+
+
+def test_a_locked_or_held_bolt_is_said_alike_as_a_notice_and_as_a_refusal() -> None:
+    """One bolt, one wording: the journal's notice and the operator's refusal."""
+    assert notice_words(Notice(Said.LOCKED, bolt="B2", count=3)) == \
+        reason_words(Reason(Why.LOCKED, bolt="B2", count=3))
+    assert notice_words(Notice(Said.HELD, bolt="B2", note="tightening 9")) == \
+        reason_words(Reason(Why.HELD, bolt="B2", note="tightening 9"))
+
+
+def test_a_notice_goes_on_the_wire_as_its_kind_and_fields() -> None:
+    """The event's JSON carries the kind and the fields, never words to parse back."""
+    doc = Notice(Said.LOCKED, bolt="B2", count=3, t=1.0).to_json()
+    assert (doc["kind"], doc["said"], doc["bolt"], doc["count"]) == ("notice", "locked", "B2", 3)
+    assert "message" not in doc
