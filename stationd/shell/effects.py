@@ -208,8 +208,8 @@ class Effects:
             else:
                 self.log.info("%s: %s", ev.state, ev.reason)
         elif isinstance(ev, Notice):
-            (self.log.warning if ev.level == "warning" else self.log.info)(
-                "%s", notice_words(ev))
+            {"error": self.log.error, "warning": self.log.warning}.get(
+                ev.level, self.log.info)("%s", notice_words(ev))
         elif isinstance(ev, Refused):   # once, then counted (a wrench held between two bolts)
             said = self.refusals.refused(ev.reason, ev.t)
             if said is not None:
