@@ -236,6 +236,17 @@ def decode(raw: tuple[Any, ...]) -> tuple[Any, ...]:
 OPS = RAW.map(decode)
 
 
+def seeded_steps(rng: np.random.Generator, kinds: list[str], weights: np.ndarray,
+                 n: int) -> list[tuple[Any, ...]]:
+    """``n`` raw steps of a seeded walk (kinds by ``weights``, then :func:`decode`'s fields),
+    drawn at once: one numpy draw per step and field was most of the walks' time."""
+    return list(zip([kinds[k] for k in rng.choice(len(kinds), n, p=weights)],
+                    rng.choice([0.02, 0.1, 0.2], n).tolist(),
+                    rng.integers(256, size=n).tolist(), rng.normal(0, 1.5, n).tolist(),
+                    rng.choice([0.05, 0.05, 0.1, 0.3, 0.6], n).tolist(),
+                    rng.integers(1, 5, size=n).tolist(), strict=True))
+
+
 @settings(max_examples=300, derandomize=True, deadline=None,
           suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(OPS, min_size=5, max_size=80))
@@ -258,10 +269,7 @@ def test_seeded_random_walks_keep_the_safety_invariants_and_get_work_done():
         d = Driver()
         d.feed(Started(d.t))
         d.step(("lift", 0.1, True, True, "VIN1"))
-        for _ in range(60):
-            raw = (str(rng.choice(kinds, p=weights)), float(rng.choice([0.02, 0.1, 0.2])),
-                   int(rng.integers(256)), float(rng.normal(0, 1.5)),
-                   float(rng.choice([0.05, 0.05, 0.1, 0.3, 0.6])), int(rng.integers(1, 5)))
+        for raw in seeded_steps(rng, kinds, weights, 60):
             d.step(decode(raw))
         totals["send"] += len(d.sends)
         totals["record"] += len(d.records)

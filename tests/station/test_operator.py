@@ -25,7 +25,16 @@ from stationd.station.events import OperatorChanged, Refused, State
 from stationd.station.inputs import CommandDone, CommandIn, OperatorBack, ResultIn, Started, Tick
 from stationd.words import answer_words, operator_words, reason_words
 from tests.station.test_commands import _answer
-from tests.station.test_core import PARAMS, Driver, _on, _ready, decode, published, result
+from tests.station.test_core import (
+    PARAMS,
+    Driver,
+    _on,
+    _ready,
+    decode,
+    published,
+    result,
+    seeded_steps,
+)
 
 OLGA = Issuer("olga", frozenset(), "screen 10.0.0.7")     # an operator: no rights needed
 PIA = Issuer("pia", frozenset({Right.SKIP}), "cli")
@@ -201,15 +210,11 @@ def test_seeded_random_sequences_with_people_signing_in_and_out_keep_the_invaria
                                             operator_idle_s=120.0), required=required)
         d.feed(Started(d.t))
         d.step(("lift", 0.1, True, True, "VIN1"))
-        for _ in range(80):
-            kind = str(rng.choice(kinds, p=weights))
-            if kind == "person":
+        for raw in seeded_steps(rng, kinds, weights, 80):
+            if raw[0] == "person":
                 d.t += 0.1
-                d.person(int(rng.integers(256)))
+                d.person(raw[2])
                 continue
-            raw = (kind, float(rng.choice([0.02, 0.1, 0.2])), int(rng.integers(256)),
-                   float(rng.normal(0, 1.5)), float(rng.choice([0.05, 0.05, 0.1, 0.3, 0.6])),
-                   int(rng.integers(1, 5)))
             d.step(decode(raw))
         recorded += d.recorded_by
     # the walks really recorded rundowns, with and without an operator

@@ -308,7 +308,7 @@ def test_seeded_walks_with_every_result_type_close_bolts_only_by_tightenings():
     parameters until released, and every result is stored somewhere exactly once."""
     import numpy as np
 
-    from tests.station.test_core import decode
+    from tests.station.test_core import decode, seeded_steps
     rng = np.random.default_rng(28)
     kinds = ["lift", "loc", "ack", "result", "fault", "back", "tick"]
     weights = np.array([0.02, 0.6, 0.25, 0.05, 0.01, 0.04, 0.03])
@@ -316,10 +316,7 @@ def test_seeded_walks_with_every_result_type_close_bolts_only_by_tightenings():
     for _ in range(200):
         d = _ready()
         tid = 1000
-        for _ in range(100):
-            raw = (str(rng.choice(kinds, p=weights)), float(rng.choice([0.02, 0.1, 0.2])),
-                   int(rng.integers(256)), float(rng.normal(0, 1.5)),
-                   float(rng.choice([0.05, 0.05, 0.1, 0.3, 0.6])), int(rng.integers(1, 5)))
+        for raw in seeded_steps(rng, kinds, weights, 100):
             op = decode(raw)
             if op[0] != "result":
                 before = set(d.core.matcher.held) if d.core.matcher is not None else set()
