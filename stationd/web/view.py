@@ -10,7 +10,7 @@ same events live.  ``View.apply`` is the only way state changes.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 from db.kinds import LOOSENING
@@ -578,12 +578,6 @@ def fold(events: list[StationEvent] | tuple[StationEvent, ...],
     for e in events:
         v.apply(e)
     return v
-
-
-def copy_view(v: View) -> View:
-    """A shallow-independent copy (tests compare before/after)."""
-    return replace(v, bolts={k: replace(b) for k, b in v.bolts.items()},
-                   devices=dict(v.devices), results=list(v.results), checks=dict(v.checks))
 
 
 def _shortened(text: str, limit: int = REASON_SHOWN) -> str:
