@@ -10,16 +10,38 @@ never a bolt done: it undoes what a tightening did.
 
 from __future__ import annotations
 
+from enum import StrEnum
+
 TIGHTENING, LOOSENING = "tightening", "loosening"
 RUNDOWN_KINDS = (TIGHTENING, LOOSENING)
 
-#: a bolt's status in a vehicle's report: its last tightening OK or NOK, never run down,
-#: loosened last (to be tightened again), or to be loosened (a loosen command since its last
-#: rundown: the rework a supervisor ordered is not done yet)
-OK, NOK, MISSING, LOOSENED, TO_LOOSEN = "ok", "nok", "missing", "loosened", "loosen"
-#: never run down because a person skipped it by a command (who and why in the report): not
-#: tightened either, but not forgotten, and an export must not say it was
-SKIPPED = "skipped"
+
+
+class BoltStatus(StrEnum):
+    """A bolt's status: one spelling for the records and reports, the core's events and the
+    screens.  A ``str`` (stored, exported and sent as its value), so a status read back from
+    a file or a column compares equal to its member."""
+
+    #: on the vehicle at the station, not run down yet (the screens' "to do")
+    PENDING = "pending"
+    #: its last tightening OK or NOK
+    OK = "ok"
+    NOK = "nok"
+    #: never run down (a vehicle's report; on an open vehicle the bolt is still to do)
+    MISSING = "missing"
+    #: loosened last: to be tightened again
+    LOOSENED = "loosened"
+    #: to be loosened (a loosen command, or the NOK policy, since its last rundown: the
+    #: rework ordered is not done yet)
+    TO_LOOSEN = "loosen"
+    #: never run down because a person skipped it by a command (who and why in the report):
+    #: not tightened either, but not forgotten, and an export must not say it was
+    SKIPPED = "skipped"
+
+
+OK, NOK, MISSING, LOOSENED, TO_LOOSEN = (BoltStatus.OK, BoltStatus.NOK, BoltStatus.MISSING,
+                                         BoltStatus.LOOSENED, BoltStatus.TO_LOOSEN)
+SKIPPED, PENDING = BoltStatus.SKIPPED, BoltStatus.PENDING
 
 #: an OK result without a result type (a controller revision that reports none, or a register
 #: map without one) whose torque lies outside its bolt's torque window: perhaps no tightening
@@ -46,5 +68,5 @@ def is_not_taken_note(note: str | None) -> bool:
 
 
 __all__ = ["LOOSENED", "LOOSENING", "MISSING", "NOK", "NOT_TAKEN", "NOT_TAKEN_NOTE", "OK",
-           "RUNDOWN_KINDS", "SKIPPED", "TIGHTENING", "TO_LOOSEN", "is_not_taken_note",
-           "not_taken_note"]
+           "PENDING", "RUNDOWN_KINDS", "SKIPPED", "TIGHTENING", "TO_LOOSEN", "BoltStatus",
+           "is_not_taken_note", "not_taken_note"]

@@ -24,7 +24,17 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from db.counting import counted
-from db.kinds import LOOSENED, LOOSENING, MISSING, NOK, OK, SKIPPED, TIGHTENING, TO_LOOSEN
+from db.kinds import (
+    LOOSENED,
+    LOOSENING,
+    MISSING,
+    NOK,
+    OK,
+    SKIPPED,
+    TIGHTENING,
+    TO_LOOSEN,
+    BoltStatus,
+)
 from db.models import Bolt, CommandRecord, ProcessParameters, TighteningRecord, Vehicle
 
 __all__ = ["LOOSENED", "MISSING", "NOK", "OK", "SKIPPED", "TO_LOOSEN", "BoltResult",
@@ -49,7 +59,7 @@ class VehicleInfo:
 class BoltResult:
     bolt_id: str
     name: str
-    status: str                      # ok | nok | missing | skipped | loosened | loosen
+    status: BoltStatus               # ok | nok | missing | skipped | loosened | loosen
     attempts: int
     torque_nm: float | None = None   # of the last record
     angle_deg: float | None = None
@@ -201,10 +211,10 @@ def build_report(s: Session, v: Vehicle) -> VehicleReport:
                          sum(1 for rec in tightenings if rec.status == NOK))
 
 
-def _status(last: TighteningRecord, loosen_at: datetime | None) -> str:
+def _status(last: TighteningRecord, loosen_at: datetime | None) -> BoltStatus:
     """A bolt's status from its last rundown and its last loosen command."""
     if loosen_at is not None and loosen_at >= last.recorded_at:
         return TO_LOOSEN
     if last.kind == LOOSENING:
         return LOOSENED if last.status == OK else NOK
-    return last.status
+    return BoltStatus(last.status)

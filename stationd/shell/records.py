@@ -26,7 +26,7 @@ from db.checks import record_check
 from db.curves import link_curves, store_curve
 from db.entered import record_entered
 from db.errors import DataError, DbError, NotFoundError, VehicleClosedError
-from db.report import MISSING
+from db.kinds import MISSING, OK
 from db.repository import Repository
 from drivers.errors import DeviceError, DriverError
 from drivers.keeper import one_line
@@ -284,7 +284,7 @@ class Records:
         held = repo.held_bolts(a.vin, since)
         # the report's "missing" is "no rundown yet": on an open vehicle the bolt is to do
         status = {b.bolt_id: b.status for b in report.bolts if b.status != MISSING}
-        done = frozenset(k for k, s in status.items() if s == "ok")
+        done = frozenset(k for k, s in status.items() if s is OK)
         specs = {b.bolt_id: LoadedBolt(xyz(b.position), b.parameters.pset, b.order, b.batch,
                                      b.parameters_id, b.parameters) for b in infos}
         log.info("vehicle %s (%s) opened%s: %d bolts, %d done", a.vin, model,

@@ -19,8 +19,9 @@ How it stays exact and fast:
   at most 0.71 px from the centre, i.e. within 0.71 * |J| mm on the plane; the band test marks
   everything within 1.0 * |J| mm, so it cannot miss a boundary unless |J| changes by 40 %
   inside one pixel (it changes by ~1e-4).  (A wider band only supersamples more pixels that
-  all lie in one region: 1.5 rendered the same images a fifth slower.)  The shapes' distance functions are lower
-  bounds of the true distance, which only makes the test more conservative.
+  all lie in one region: 1.5 rendered the same images a fifth slower.)  The shapes' distance
+  functions are lower bounds of the true distance, which only makes the test more
+  conservative.
   Every other pixel gets ``S x S`` samples on a regular grid (box filter).
 """
 

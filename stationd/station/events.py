@@ -21,6 +21,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+from db.kinds import BoltStatus
 from stationd.reasons import Reason
 
 
@@ -132,7 +133,7 @@ class BoltView:
     pset: int | None
     order: int | None = None
     batch: str | None = None
-    status: str = "pending"  # pending | ok | nok | skipped
+    status: BoltStatus = BoltStatus.PENDING   # pending | ok | nok | skipped | loosen | loosened
 
 
 @dataclass(frozen=True)

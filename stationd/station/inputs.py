@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from db.bolts import Parameters
+from db.kinds import BoltStatus
 from drivers.keeper import FaultKind
 from drivers.wrench.base import TighteningResult, UnreadableResult
 from stationd.reasons import Reason
@@ -209,7 +210,7 @@ class VehicleLoaded(Input):
     skipped: Mapping[str, str] = field(default_factory=dict)
     noks: Mapping[str, int] = field(default_factory=dict)   # NOKs in a row, since a release
     held: Mapping[str, str] = field(default_factory=dict)   # held by an unreadable result
-    status: Mapping[str, str] = field(default_factory=dict)  # bolt -> ok, nok (its records)
+    status: Mapping[str, BoltStatus] = field(default_factory=dict)  # bolt -> ok, nok, ...
 
 @dataclass(frozen=True)
 class ToolOn(Input):

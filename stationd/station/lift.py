@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from db.kinds import NOK, TO_LOOSEN
+from db.kinds import NOK, PENDING, SKIPPED, TO_LOOSEN
 from drivers.keeper import FaultKind
 from stationd.station.actions import Action, CloseVehicle, LoadVehicle, Publish, SendVin
 from stationd.station.events import (
@@ -125,7 +125,7 @@ class LiftRules(FaultRules):
         opened = VehicleOpened(ev.vin, ev.model, tuple(
             BoltView(k, *b.position, pset=b.pset, order=b.order, batch=b.batch,
                      status=TO_LOOSEN if k in self._loosen else ev.status.get(k)
-                     or ("skipped" if k in ev.skipped else "pending"))
+                     or (SKIPPED if k in ev.skipped else PENDING))
             for k, b in ev.bolts.items()), rework=ev.rework, t=ev.t)
         if self.state is State.WAITING_VEHICLE and self._lift is not None and self._lift.ready:
             self._to(State.TRACKING, "tracking the wrench")
