@@ -368,11 +368,14 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _simulated(cfg: Any, cameras_only: bool = False) -> bool:
-    """Whether a station names a simulated device (``sim://``, ``sim+...://``): read here,
-    so that a station of real devices never loads the simulator."""
-    urls = [*cfg.cameras.values(), *(() if cameras_only else (cfg.lift.url, cfg.wrench.url))]
-    schemes = [str(u).split("://", 1)[0].lower() for u in urls]
-    return any(s == "sim" or s.startswith("sim+") for s in schemes)
+    """Whether a station has a simulated device (its driver says: ``sim://``,
+    ``sim+modbus://``): asked here, so that a station of real devices never loads the
+    simulator."""
+    from drivers.devices import Kind, simulated
+
+    urls = [*((Kind.CAMERA, u) for u in cfg.cameras.values()),
+            *(() if cameras_only else ((Kind.LIFT, cfg.lift.url), (Kind.WRENCH, cfg.wrench.url)))]
+    return any(simulated(kind, str(url)) for kind, url in urls)
 
 
 def cmd_calibrate_check(args: argparse.Namespace) -> int:

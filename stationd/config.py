@@ -22,11 +22,11 @@ from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 import numpy as np
 
 from db.location import NOT_SQLITE, missing_folder, sqlite_problem
-from drivers.devices import Kind
+from drivers.devices import Kind, world_view
 from drivers.devices import check_url as check_device_url
 from drivers.errors import UrlError
 from drivers.lift.base import RegisterMap
-from drivers.url import parse_url
+from drivers.wrench import takes_register_map
 from drivers.wrench.modbus_map import WrenchRegisterMap
 from stationd.access import AccessConfig
 from stationd.devicekey import device_key
@@ -71,7 +71,8 @@ MAX_SECTION_ERRORS = 50
 @dataclass(frozen=True)
 class WrenchConfig:
     """The tightening controller: its URL, and for a register-driven one (``modbus-tcp://``,
-    ``modbus-rtu://``) its register map (``drivers/wrench/modbus_map.py``; None: defaults)."""
+    ``modbus-rtu://``: its driver says, ``drivers.wrench.takes_register_map``) its register
+    map (``drivers/wrench/modbus_map.py``; None: defaults)."""
 
     url: str = "sim://wrench"
     registers: WrenchRegisterMap | None = None
@@ -82,7 +83,7 @@ class WrenchConfig:
         m = node.mapping(("url", "registers", "poll_ms"))
         url = device_url(m["url"], "wrench", check=check_url) if "url" in m else cls.url
         regs = wrench_map(m["registers"]) if "registers" in m else None
-        if regs is not None and "modbus" not in parse_url(url).scheme:
+        if regs is not None and not takes_register_map(url):
             raise m["registers"].error(f"a register map is for a Modbus controller, not "
                                        f"{url}")
         return cls(url, regs)
@@ -605,13 +606,10 @@ class _Reader:
             if cam is None or cam not in self.camera_urls:
                 continue
             url, url_node = self.camera_urls[cam]
-            if not url.lower().startswith("sim:"):
+            view = world_view(url)   # the URL was checked with the camera
+            if view is None or view == (pair.name, side):
                 continue
-            from drivers.camera.sim import parse_sim_url
-
-            sim_pair, sim_side, _ = parse_sim_url(url)   # checked with the camera
-            if (sim_pair, sim_side) == (pair.name, side):
-                continue
+            sim_pair, sim_side = view
             what = f"the simulated world's {sim_side} view of pair {sim_pair!r}" \
                 if sim_pair in names else \
                 f"pair {sim_pair!r}, which the simulated world does not have (it renders " \
