@@ -10,7 +10,9 @@ the station file (for a symbolic link, to the file it points to); there are no h
 
 :func:`load_station_config` raises the first error (the daemon needs a yes or no);
 :func:`read_all` reads the same sections with the same code and lists every error, with
-those of the files the config names and its device URLs (``stationd config check``).
+those of the files the config names and its device URLs (``stationd config check``).  What
+needs more than the file (its NOK policy against the bolt table it names or the tables of
+its database) is checked where the station is validated: :mod:`stationd.stationcheck`.
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ from stationd.localize import LocalizeConfig
 from stationd.localize.references import References
 from stationd.opcua import OpcUaConfig
 from stationd.station.matching import MatchingConfig
-from stationd.station.policy import NokPolicy, table_errors
+from stationd.station.policy import NokPolicy
 from stationd.vision.marker import MarkerSpec
 from stationd.vision.params import VisionParams
 from stationd.web.config import HttpConfig
@@ -275,22 +277,13 @@ def load_station_config(path: str | Path | None, *, station: bool = False,
 
     ``station``: the file runs a station (the daemon), so its devices (``cameras``, ``pairs``,
     ``lift``, ``wrench``) must be written and their URLs are checked; tools that only read
-    its vision or pairs (``detect``, ``localize``) take a file without them.  ``unregistered``:
-    a pair whose vehicle registration is not read (``calibrate vehicle`` writing it anew)."""
+    its vision or pairs (``detect``, ``localize``) take a file without them.  What needs the
+    bolt table is the station's validation (``stationd.stationcheck.validate_station``: the
+    daemon's start and reload).  ``unregistered``: a pair whose vehicle registration is not
+    read (``calibrate vehicle`` writing it anew)."""
     if path is None:
         return StationConfig()
-    read = read_station(path, station=station, unregistered=unregistered)
-    cfg = read.config
-    if station and cfg.bolts_path is not None and "nok" in read.sections:
-        # the NOK policy against the bolt table it applies to: a start or a reload with an
-        # override no table has is refused (the running station kept)
-        from stationd.boltfile import load_bolts
-
-        table = load_bolts(cfg.bolts_path, tolerance_mm=cfg.matching.tolerance_mm)
-        errors = table_errors(read.sections["nok"], table, str(cfg.bolts_path))
-        if errors:
-            raise errors[0]
-    return cfg
+    return read_station(path, station=station, unregistered=unregistered).config
 
 
 @dataclass
