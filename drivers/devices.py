@@ -4,7 +4,10 @@ Each kind keeps its own registry of backends (``drivers.camera``, ``drivers.lift
 ``drivers.wrench``: a scheme names a backend, imported only when used), but the station asks
 through this one module: :func:`check_url` at ``config check``, start and reload (the device
 is built, never opened: a URL that cannot work is a configuration error with its line),
-:func:`open_device` when a device's keeper opens it.  Every device it returns has the one
+:func:`open_device` when a device's keeper opens it; and what a device is, asked of its
+backend's class rather than read from its scheme's name (:func:`simulated`,
+:func:`world_view`; a controller's abilities: ``drivers.wrench.takes_targets``,
+``takes_register_map``).  Every device it returns has the one
 lifecycle of :class:`drivers.lifecycle.Openable` (``open``, ``reconnect``, ``close``) and
 the typed interface of its kind (:class:`CameraDevice`, :class:`Lift`, :class:`Wrench`), so
 the station's joins are typed, never ``Any``.
@@ -19,7 +22,7 @@ from drivers.camera import CameraDevice, camera_class, check_camera_url
 from drivers.errors import UrlError
 from drivers.lifecycle import Openable
 from drivers.lift import Lift, RegisterMap, check_lift_url, lift_class
-from drivers.wrench import Wrench, open_wrench
+from drivers.wrench import Wrench, open_wrench, wrench_class
 
 
 class Kind(StrEnum):
@@ -51,6 +54,36 @@ def build(kind: Kind, url: str, **options: Any) -> Openable:
         register_map: RegisterMap | None = options.pop("register_map", None)
         return lift_class(url)(url, register_map, **options)
     return open_wrench(url, connect=False, **options)
+
+
+def backend_class(kind: Kind, url: str) -> type[Openable]:
+    """The backend class of ``url`` as a device of ``kind``, imported now and not built
+    (UrlError when the URL names no backend of this kind)."""
+    if kind is Kind.CAMERA:
+        return camera_class(url)
+    if kind is Kind.LIFT:
+        return lift_class(url)
+    return wrench_class(url)
+
+
+def simulated(kind: Kind, url: str) -> bool:
+    """Whether the device of ``url`` is a simulated twin (:attr:`Openable.simulated`), so a
+    simulated world must run beside the station; False for a URL naming no backend."""
+    try:
+        return backend_class(kind, url).simulated
+    except UrlError:
+        return False
+
+
+def world_view(url: str) -> tuple[str, str] | None:
+    """The pair and side of the simulated world the camera at ``url`` shows (None: a camera
+    of the real world, or a URL naming no camera backend; a UrlError for a simulated
+    camera's malformed URL)."""
+    try:
+        cls = camera_class(url)
+    except UrlError:
+        return None
+    return cls.world_view(url)
 
 
 @overload
@@ -90,4 +123,5 @@ def check_url(kind: Kind, url: str, *, sources: bool = False, **options: Any) ->
             raise UrlError(str(exc), device=url) from None
 
 
-__all__ = ["Kind", "build", "check_url", "open_device"]
+__all__ = ["Kind", "backend_class", "build", "check_url", "open_device", "simulated",
+           "world_view"]

@@ -15,11 +15,16 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from types import TracebackType
-from typing import Self
+from typing import ClassVar, Self
 
 
 class Openable(ABC):
     """A device used as a context manager: ``open()`` on enter, ``close()`` on exit."""
+
+    #: a twin that exists only in this process (it serves its own simulated PLC or
+    #: controller on loopback, or shows the simulated world): what starts a station asks
+    #: it whether a simulated world must run beside (``drivers.devices.simulated``)
+    simulated: ClassVar[bool] = False
 
     @abstractmethod
     def open(self) -> None: ...

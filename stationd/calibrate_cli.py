@@ -87,7 +87,7 @@ def _refuse_same_images(left: list[str], right: list[str]) -> None:
 def _implausible_baseline(baseline_mm: float) -> str | None:
     """Why a calibrated pair's baseline cannot be a station's (the bounds the station file
     checks a pair calibration against), None when it can."""
-    from stationd.config import BASELINE_MM
+    from stationd.deviceconfig import BASELINE_MM
 
     lo, hi = BASELINE_MM
     if lo <= baseline_mm <= hi:

@@ -348,13 +348,13 @@ def cmd_bench_line(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     """``stationd run``; on a station with ``sim://`` devices, with the simulated world (and,
     with ``--sim-operator``, its operator) inside the daemon, beside each station it runs."""
-    from stationd.config import load_station_config
     from stationd.shell.serve import run_daemon
+    from stationd.stationcheck import validate_station
 
     if args.no_sim_supervisor and not args.sim_operator:
         raise InputError("--no-sim-supervisor goes with --sim-operator (without it no "
                          "simulated supervisor runs: every decision is people's already)")
-    cfg = load_station_config(args.config, station=True)
+    cfg = validate_station(args.config)   # before a simulated world is built around it
     if not args.sim_operator and not _simulated(cfg):
         return run_daemon(args)
     # the simulator, loaded by the command line alone (never by the runtime)
@@ -369,11 +369,13 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _simulated(cfg: Any, cameras_only: bool = False) -> bool:
-    """Whether a station names a simulated device (``sim://``, ``sim+...://``): read here,
-    so that a station of real devices never loads the simulator."""
-    urls = [*cfg.cameras.values(), *(() if cameras_only else (cfg.lift.url, cfg.wrench.url))]
-    schemes = [str(u).split("://", 1)[0].lower() for u in urls]
-    return any(s == "sim" or s.startswith("sim+") for s in schemes)
+    """Whether a station has a simulated device (its driver says): asked here, so that a
+    station of real devices never loads the simulator."""
+    from drivers.devices import Kind, simulated
+
+    urls = [*((Kind.CAMERA, u) for u in cfg.cameras.values()),
+            *(() if cameras_only else ((Kind.LIFT, cfg.lift.url), (Kind.WRENCH, cfg.wrench.url)))]
+    return any(simulated(kind, str(url)) for kind, url in urls)
 
 
 def cmd_calibrate_check(args: argparse.Namespace) -> int:

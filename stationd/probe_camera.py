@@ -64,11 +64,14 @@ def _sim_world(url: str) -> Any:
     """For ``sim://PAIR/SIDE``: the simulated station's world (config/sim), so the probe
     shows what that camera sees, as ``sim://lift`` starts its own PLC.  ``None`` for other
     URLs, or when a world for the pair is already registered (inside a running demo)."""
-    if not url.lower().startswith("sim://"):
-        return None
-    from drivers.camera.sim import parse_sim_url, registered_worlds
+    from drivers.devices import world_view
 
-    pair, _, _ = parse_sim_url(url)  # a malformed URL is a UrlError: exit 2
+    view = world_view(url)   # its driver says; a malformed sim:// URL is a UrlError: exit 2
+    if view is None:
+        return None
+    from drivers.camera.sim import registered_worlds
+
+    pair = view[0]
     if pair in registered_worlds():
         return None
     from stationd.config import load_station_config

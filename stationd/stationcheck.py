@@ -1,21 +1,26 @@
-"""A station file checked as a whole, for ``stationd config check``: every error of the file
-(:func:`stationd.config.read_all`), then what needs more than the file: the bolt table it
-names (with the station's own matching tolerance), the NOK policy's overrides against that
-table or the station's database, bolts without a pset on a controller that takes psets
-only (its driver says), and OPC UA users without security.
+"""A station validated as a whole: the station file and what it names beyond itself.
+
+Two callers, one set of checks.  ``stationd config check`` (:func:`check_station`) lists
+every error: the file's (:func:`stationd.config.read_all`), the bolt table it names (with
+the station's own matching tolerance), the NOK policy's overrides against that table or the
+station's database, and warns of bolts without a pset on a controller that takes psets only
+(its driver says) and of OPC UA users without security.  The daemon's start and every reload
+(:func:`validate_station`) raise the first: the file, the bolt table, the overrides.
 
 Why apart from the configuration reader: the reader turns YAML into typed settings; what
-opens a bolt table or a database is the validation of a station, run where it is validated
-(this check; the daemon's start and reload load the bolt table themselves)."""
+opens a bolt table or a database is the validation of a station, run where it is
+validated (here), so both callers check the overrides with the same code
+(:func:`table_checks`)."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from drivers.wrench import takes_targets
-from stationd.config import StationConfig, read_all
+from stationd.config import StationConfig, read_all, read_station
 from stationd.errors import ConfigError, InputError
 from stationd.station.policy import table_errors
 from stationd.yamlio import YamlNode
@@ -46,6 +51,35 @@ class StationCheck:
         return not self.errors
 
 
+def validate_station(path: str | Path) -> StationConfig:
+    """The whole station, checked before it is used, for the daemon's first start and every
+    reload: the file and every file it names (the reader loads calibrations and transforms,
+    and checks device URLs), the bolt table with the station's own matching tolerance, and
+    the NOK policy against that table (an override no table has is refused: at a reload,
+    the running station is kept).  Raises the first error (one line, file and key)."""
+    from stationd.boltfile import load_bolts
+
+    read = read_station(path, station=True)
+    cfg = read.config
+    if cfg.bolts_path is not None:
+        table = load_bolts(cfg.bolts_path, tolerance_mm=cfg.matching.tolerance_mm)
+        errors = table_checks(read.sections, table, str(cfg.bolts_path))
+        if errors:
+            raise errors[0]
+    return cfg
+
+
+def table_checks(sections: Mapping[str, YamlNode], table: BoltTable, source: str
+                 ) -> list[ConfigError]:
+    """What the station file's ``sections`` (already read) say that the bolt tables the
+    station runs with (``table``, read from ``source``) contradict: the NOK policy's
+    overrides of a pset or a bolt no table has, a loosen pset a bolt is tightened with
+    (:func:`stationd.station.policy.table_errors`).  Each error has its line."""
+    if "nok" not in sections:
+        return []
+    return table_errors(sections["nok"], table, source)
+
+
 def check_station(path: str | Path) -> StationCheck:
     """Check a station file and collect all its errors, for ``stationd config check``.
 
@@ -74,7 +108,7 @@ def check_station(path: str | Path) -> StationCheck:
     stored = _database_table(cfg) if cfg.bolts_path is None else None
     if "nok" in top:
         try:
-            errors += _nok_errors(top["nok"], cfg, bolts, stored)
+            errors += _nok_errors(top, cfg, bolts, stored)
         except ConfigError:   # the section's own errors are told above (an unknown key hid
             pass              # every other error of the file): its overrides wait for them
     if bolts is not None and bolts.table is not None and "wrench" in top:
@@ -94,17 +128,17 @@ def check_station(path: str | Path) -> StationCheck:
     return StationCheck(str(p), cfg if not errors else None, errors, warnings, bolts)
 
 
-def _nok_errors(node: YamlNode, cfg: StationConfig, bolts: Any,
+def _nok_errors(top: Mapping[str, YamlNode], cfg: StationConfig, bolts: Any,
                 stored: tuple[BoltTable, str] | str | None) -> list[ConfigError]:
     """The NOK policy's overrides against the bolt tables the station loads: its bolt file's
     (checked), else the tables of its database (``stored``: :func:`_database_table`'s)."""
     if cfg.bolts_path is not None:   # a table with errors is told those, not these
         return [] if bolts is None or bolts.table is None \
-            else table_errors(node, bolts.table, str(cfg.bolts_path))
+            else table_checks(top, bolts.table, str(cfg.bolts_path))
     if stored is None or isinstance(stored, str):
         return []
     table, where = stored
-    return table_errors(node, table, where)
+    return table_checks(top, table, where)
 
 
 def _database_table(cfg: StationConfig) -> tuple[BoltTable, str] | str | None:

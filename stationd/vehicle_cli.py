@@ -52,7 +52,8 @@ from stationd.outfile import refuse_to_replace, write_atomic
 from stationd.yamlio import YamlNode
 
 if TYPE_CHECKING:   # the configuration (every component's schema) is read when the command runs
-    from stationd.config import PairConfig, StationConfig
+    from stationd.config import StationConfig
+    from stationd.deviceconfig import PairConfig
 
 EXIT_OK, EXIT_DISAGREE, EXIT_REFUSED = 0, 1, 1
 #: the points file, as ``calibrate vehicle --help`` shows it (and the README)

@@ -223,7 +223,7 @@ def test_calibrate_stereo_refuses_an_implausible_baseline(boards, tmp_path, caps
     """Re-encoded copies of the left images (other bytes, the same pixels) pass the same-file
     check but calibrate a pair with no baseline: refused by the baseline the station file
     accepts (20-2000 mm), exit 1 with the report and the likely cause, nothing written."""
-    from stationd.config import BASELINE_MM
+    from stationd.deviceconfig import BASELINE_MM
 
     for i in range(1, 9):
         img = cv2.imread(str(boards / f"L{i}.png"))

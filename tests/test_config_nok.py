@@ -13,7 +13,7 @@ from db.repository import Repository
 from stationd.boltfile import load_bolts
 from stationd.config import load_station_config
 from stationd.errors import ConfigError
-from stationd.stationcheck import check_station
+from stationd.stationcheck import check_station, validate_station
 from tests.test_config import SIM, _line
 
 NOK = ("nok:\n  strategy: loosen\n  loosen_pset: 90\n  psets:\n    7: {max_nok: 1}\n"
@@ -39,15 +39,30 @@ def test_config_check_names_each_override_no_table_has_with_its_line(station):
 
 
 def test_a_start_or_reload_refuses_it_and_a_policy_the_table_has_loads(station):
+    """The daemon's start and every reload validate the station (``validate_station``);
+    the reader reads the file and opens no bolt table."""
     with pytest.raises(ConfigError, match="pset 7: no bolt") as err:
-        load_station_config(station, station=True)
+        validate_station(station)
     assert (err.value.path, err.value.line) == (str(station), _line(station, "7: {max_nok"))
     load_station_config(station)           # a tool reading its vision only: not checked
+    load_station_config(station, station=True)    # the file alone: read, not against tables
     station.write_text(station.read_text().replace("    7: {max_nok: 1}", "    3: {max_nok: 1}")
                        .replace("    B99: {strategy: skip}\n", ""))
-    cfg = load_station_config(station, station=True)
+    cfg = validate_station(station)
     assert cfg.nok.rule("B01", 1).max_nok == 2 and cfg.nok.rule("B03", 3).max_nok == 1
     assert cfg.nok.default.loosen_pset == 90
+
+
+def test_stationd_run_refuses_it_before_a_world_or_a_daemon_starts(station, capsys):
+    """``stationd run`` validates the station first (the start's ``validate_station``), so a
+    simulated station with an override no table has builds no world and opens no database."""
+    from stationd.cli import main
+
+    code = main(["run", "--config", str(station), "--sim-operator"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
+    assert f"{station}:{_line(station, '7: {max_nok')}: nok.psets.7: pset 7: no bolt" in err
+    assert not (station.parent / "stationd-sim.db").exists()
 
 
 def test_a_loosen_pset_a_bolt_is_tightened_with_is_refused(station):

@@ -137,6 +137,12 @@ class CameraDevice(Device):
         self.timeout = timeout or DEFAULT_TIMEOUT
         self._triggered_at: float | None = None
 
+    @classmethod
+    def world_view(cls, url: str) -> tuple[str, str] | None:
+        """The pair and side of the simulated world a camera of this backend at ``url``
+        shows (None: a camera of the real world, which shows what is there)."""
+        return None
+
     def close(self) -> None:
         """Stop acquisition and background work, release the camera; safe to call twice."""
         self._triggered_at = None  # a pending trigger does not outlive the acquisition

@@ -86,10 +86,18 @@ class SimCamera(CameraDevice):
     instant, which is also their timestamp: a stereo pair triggered together shows no skew
     and no motion between its frames however long rendering takes."""
 
+    simulated = True
+
     def __init__(self, url: str, *, timeout: float | None = None) -> None:
         super().__init__(url, timeout=timeout)
         self.pair, self.side, self.seed = parse_sim_url(url)
         self._count = 0
+
+    @classmethod
+    def world_view(cls, url: str) -> tuple[str, str] | None:
+        """``sim://PAIR/SIDE``'s pair and side (a UrlError when the URL is malformed)."""
+        pair, side, _ = parse_sim_url(url)
+        return pair, side
 
     def identity(self) -> str:
         with _lock:

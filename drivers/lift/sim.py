@@ -141,6 +141,8 @@ class SimLift(Lift):
     """``sim://lift``: starts a :class:`SimulatedPlc` (``self.plc``, for the world to drive)
     and reads it through a real :class:`ModbusLift` over TCP or RTU."""
 
+    simulated = True
+
     def __init__(self, url: str = "sim://lift", register_map: RegisterMap | None = None, *,
                  timeout: float | None = None) -> None:
         super().__init__(url, register_map)

@@ -36,7 +36,7 @@ from drivers.wrench.base import (
 
 __all__ = ["BACKENDS", "FORMS", "LinkStatus", "Received", "ResultKind", "ResultType", "Status",
            "TighteningResult", "TorqueUnit", "UnreadableResult", "Wrench", "open_wrench",
-           "result_kind", "takes_targets"]
+           "result_kind", "takes_register_map", "takes_targets", "wrench_class"]
 
 #: scheme -> "module:Class"; the class has ``from_url(url: DeviceUrl, **kw) -> Wrench``.
 BACKENDS: dict[str, str] = {
@@ -53,30 +53,47 @@ FORMS = ("openprotocol://HOST[:4545], openprotocol+serial:///dev/ttyUSB1?baud=96
          "sim+modbus://wrench[?transport=rtu]")
 
 
-def takes_targets(url: str) -> bool:
-    """Whether the controller at ``url`` takes a bolt's own targets (else psets only): a
-    property of its backend, asked without opening it.  False for a URL that does not parse
-    or names no backend (the URL's own check says why)."""
+def wrench_class(url: str) -> type[Wrench]:
+    """The backend class for ``url``'s scheme, imported now and not built; UrlError showing
+    the accepted forms when the URL does not parse or names no backend."""
     try:
-        backend = load_backend(BACKENDS, parse_url(url).scheme)
+        parsed = parse_url(url)
+    except UrlError as exc:
+        raise UrlError(f"{exc}; accepted: {FORMS}", device=url) from None
+    backend: type[Wrench] | None = load_backend(BACKENDS, parsed.scheme)
+    if backend is None:
+        raise UrlError(f"unknown wrench scheme {parsed.scheme!r} (accepted: {FORMS})",
+                       device=url)
+    return backend
+
+
+def _can(url: str, ability: str) -> bool:
+    """The class attribute ``ability`` of ``url``'s backend, asked without building it;
+    False for a URL that does not parse or names no backend (the URL's own check says why)."""
+    try:
+        return bool(getattr(wrench_class(url), ability))
     except UrlError:
         return False
-    return bool(getattr(backend, "takes_targets", False))
+
+
+def takes_targets(url: str) -> bool:
+    """Whether the controller at ``url`` takes a bolt's own targets (else psets only): a
+    property of its backend (:attr:`Wrench.takes_targets`), asked without opening it."""
+    return _can(url, "takes_targets")
+
+
+def takes_register_map(url: str) -> bool:
+    """Whether the controller at ``url`` is driven through a register map the station file
+    may give (:attr:`Wrench.takes_register_map`): its backend says, not its scheme's name."""
+    return _can(url, "takes_register_map")
 
 
 def open_wrench(url: str, *, connect: bool = True, **kw: Any) -> Wrench:
     """The backend for ``url``, opened unless ``connect=False``; keywords override the URL's
     options (e.g. ``timeout=0.5``; ``psets=...`` for ``sim://``).  An unknown scheme or
     option is a UrlError that shows the accepted forms."""
-    try:
-        parsed = parse_url(url)
-    except UrlError as exc:
-        raise UrlError(f"{exc}; accepted: {FORMS}", device=url) from None
-    backend = load_backend(BACKENDS, parsed.scheme)
-    if backend is None:
-        raise UrlError(f"unknown wrench scheme {parsed.scheme!r} (accepted: {FORMS})",
-                       device=url)
-    wrench: Wrench = backend.from_url(parsed, **kw)
+    backend: Any = wrench_class(url)     # every backend has from_url (BACKENDS' comment)
+    wrench: Wrench = backend.from_url(parse_url(url), **kw)
     if connect:
         try:
             wrench.open()

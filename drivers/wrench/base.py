@@ -391,6 +391,11 @@ class Wrench(Openable):
     #: Protocol's MID 0018), and a bolt without a pset is refused
     takes_targets: bool = False
 
+    #: whether the controller is driven through a register map a station file may give
+    #: (``wrench.registers``, ``drivers/wrench/modbus_map.py``); False: its protocol has no
+    #: registers to map (Open Protocol), and a map given for it is a mistake of the file
+    takes_register_map: bool = False
+
     #: whether :meth:`fetch_result` can ask the controller for a stored result (Open
     #: Protocol's MID 0064); a register-driven controller keeps none
     can_fetch: bool = False

@@ -89,11 +89,12 @@ class RegisterLink(ModbusLink):
 
 
 class ModbusWrench(SupervisedWrench):
-    takes_targets = True
-
     """A register-driven tightening controller (see the module docstring for the handshake).
     Beyond the :class:`Wrench` interface: :meth:`set_parameters` (pset with torque and angle
     targets) and :meth:`controller_status` (the last polled status bits)."""
+
+    takes_targets = True
+    takes_register_map = True
 
     def __init__(self, spec: LinkSpec | None, *, device: str,
                  register_map: WrenchRegisterMap | None = None, timeout: float = 1.0,

@@ -286,6 +286,8 @@ class SimModbusWrench(ModbusWrench):
     """``sim+modbus://wrench``: a :class:`SimRegisterController` (``controller``, for the
     world to drive) behind the real Modbus backend, over TCP or RTU."""
 
+    simulated = True
+
     def __init__(self, controller: SimRegisterController, *, transport: str = "tcp",
                  device: str = "sim+modbus://wrench", **kw: Any) -> None:
         if transport not in ("tcp", "rtu"):

@@ -42,7 +42,7 @@ from stationd.errors import InputError
 from stationd.jsonout import strict_json
 from stationd.reasons import Reason
 from stationd.shell.sdnotify import Notifier
-from stationd.shell.serve import Screens, serve_station, validate_station
+from stationd.shell.serve import Screens, serve_station
 from stationd.sim.devices_cli import psets_of
 from stationd.sim.load import cpu_load
 from stationd.sim.soak import (
@@ -69,6 +69,7 @@ from stationd.station.events import (
     ToolEnabled,
     VehicleOpened,
 )
+from stationd.stationcheck import validate_station
 
 RELOAD_SETTLE_S = 0.5    # after a reload is taken, before the shift goes on
 LIFT_DOWN_S = 1.5        # how long a station reloaded onto a dead lift runs before it is fixed

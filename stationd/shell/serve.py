@@ -20,13 +20,11 @@ import signal
 import sys
 import time
 from collections.abc import Awaitable, Callable, Coroutine
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from drivers.keeper import Backoff, FaultKind, one_line
-from stationd.boltfile import load_bolts
 from stationd.bus import EventBus
-from stationd.config import StationConfig, load_station_config, station_identity
+from stationd.config import StationConfig, station_identity
 from stationd.errors import StationError
 from stationd.lock import StationLocks
 from stationd.logsetup import setup_logging
@@ -43,6 +41,7 @@ from stationd.station.inputs import (
     Event,
     LineLinkIn,
 )
+from stationd.stationcheck import validate_station
 
 if TYPE_CHECKING:
     from stationd.web import Results
@@ -53,16 +52,6 @@ OPEN_RETRY_S = (1.0, 30.0)   # a database that does not open: first and longest 
 #: the station, its stop): ``stationd run``'s simulated world and operator on a ``sim://``
 #: station, handed in by ``stationd.cli`` (the runtime never imports the simulator)
 Beside = Callable[[StationConfig, Station, asyncio.Event], Coroutine[Any, Any, None]]
-
-
-def validate_station(path: str | Path) -> StationConfig:
-    """The whole station, checked before it is used: the file and every file it names (the
-    loader reads calibrations and transforms) and the bolt table, with the station's own
-    matching tolerance.  Raises the first error (one line, file and key)."""
-    cfg = load_station_config(path, station=True)
-    if cfg.bolts_path is not None:
-        load_bolts(cfg.bolts_path, tolerance_mm=cfg.matching.tolerance_mm)
-    return cfg
 
 
 async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bool:

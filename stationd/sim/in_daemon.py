@@ -32,6 +32,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from drivers.counting import counted
+from drivers.devices import Kind, simulated
 from drivers.lift.base import LiftState
 from drivers.lift.sim import SimLift, SimulatedPlc
 from drivers.wrench.sim.controller import SimWrench
@@ -45,7 +46,6 @@ from stationd.sim.operator import (
     loosen_programs,
     operate,
     releasers,
-    simulated_url,
     stand_ins,
 )
 from stationd.sim.vin import make_vin
@@ -66,8 +66,8 @@ IDLE_LINE = ("simulated lift: down, no vehicle; raise it with 'next' (a new vehi
 
 
 def needs_world(cfg: StationConfig) -> bool:
-    """Whether a camera of the station is simulated (``sim://PAIR/SIDE``)."""
-    return any(simulated_url(url) for url in cfg.cameras.values())
+    """Whether a camera of the station is simulated (``sim://PAIR/SIDE``: its driver says)."""
+    return any(simulated(Kind.CAMERA, url) for url in cfg.cameras.values())
 
 
 def _geometry(cfg: StationConfig) -> bytes:

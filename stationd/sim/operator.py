@@ -28,6 +28,7 @@ import numpy as np
 
 from db.repository import BoltInfo
 from drivers.counting import counted
+from drivers.devices import Kind, simulated
 from drivers.lift.sim import SimLift, SimulatedPlc
 from drivers.wrench.sim.controller import SimController, SimPset, SimTightening, SimWrench
 from stationd.config import StationConfig
@@ -58,21 +59,16 @@ def loosen_programs(policy: NokPolicy) -> dict[int, SimPset]:
     return {r.loosen_pset: LOOSEN_PROGRAM for r in rules if r.loosen_pset is not None}
 
 
-def simulated_url(url: str) -> bool:
-    """Whether a device URL is one of the simulator's (``sim://``, ``sim+...://``)."""
-    scheme = url.split("://", 1)[0].lower()
-    return scheme == "sim" or scheme.startswith("sim+")
-
-
 def stand_ins(cfg: StationConfig) -> list[str]:
     """The real devices a station file names ("lift modbus-tcp://..."); none for a simulated
     station's file.  The demo runs its simulators instead of them (and says so); ``stationd run
-    --sim-operator`` refuses such a station (its operator would drive real devices)."""
+    --sim-operator`` refuses such a station (its operator would drive real devices).  Which
+    devices are simulated twins is their drivers' to say (``drivers.devices.simulated``)."""
     real = [f"camera {name} {url}" for name, url in cfg.cameras.items()
-            if not simulated_url(url)]
-    real += [f"{what} {url}" for what, url in (("lift", cfg.lift.url),
-                                                ("wrench", cfg.wrench.url))
-             if not simulated_url(url)]
+            if not simulated(Kind.CAMERA, url)]
+    real += [f"{kind} {url}" for kind, url in ((Kind.LIFT, cfg.lift.url),
+                                                (Kind.WRENCH, cfg.wrench.url))
+             if not simulated(kind, url)]
     return real
 
 
@@ -460,5 +456,4 @@ async def until_ok(st: Station, bolt: str, line: dict[str, Any],
 
 __all__ = ["LOOSEN_PROGRAM", "MAX_RUNDOWNS", "NOK_P", "OPERATOR", "STUBBORN_P", "SUPERVISOR",
            "WaitEnded", "ended_words", "loosen_programs", "operate", "share_of", "shot_words",
-           "simulated_url", "simulators", "stand_ins", "stopped", "until_ok",
-           "wait_for_people"]
+           "simulators", "stand_ins", "stopped", "until_ok", "wait_for_people"]

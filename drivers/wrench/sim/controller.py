@@ -620,6 +620,8 @@ class SimWrench(OpenProtocolWrench):
     in-process and talks to it with the real Open Protocol client.  ``controller`` is the
     simulation's handle on it (pull the trigger, refuse, inject faults, power cycle)."""
 
+    simulated = True
+
     def __init__(self, controller: SimController, *, transport: str = "tcp",
                  device: str = "sim://wrench", **kw: Any) -> None:
         if transport not in ("tcp", "serial"):

@@ -109,10 +109,13 @@ def test_a_serial_speed_out_of_range_is_refused_for_the_register_driven_controll
     ("nonsense://x", False), ("not a url", False)])
 def test_whether_a_controller_takes_targets_is_its_drivers_to_say(url, targets):
     """Psets only, or a bolt's own targets: asked of the backend's class, nothing opened
-    (the configuration check warns of bolts without a pset from it)."""
-    from drivers.wrench import BACKENDS, takes_targets
+    (the configuration check warns of bolts without a pset from it).  So is whether it is
+    driven through a register map (the station file's ``wrench.registers``), not read from
+    "modbus" in its scheme: here the controllers that take targets are those."""
+    from drivers.wrench import BACKENDS, takes_register_map, takes_targets
 
     assert takes_targets(url) is targets
+    assert takes_register_map(url) is targets
     assert set(BACKENDS) >= {"openprotocol", "sim", "modbus-tcp", "sim+modbus"}
 
 
