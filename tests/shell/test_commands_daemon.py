@@ -41,9 +41,13 @@ def _station(port: int) -> Callable[[str], str]:
 
 
 def _cli(*args: str, password: str = PASSWORD) -> subprocess.CompletedProcess[str]:
+    """A command to the daemon as a person types it, waiting for its answer as long as a busy
+    machine needs (the daemon renders eight 20 MP cameras beside it): these tests check the
+    answer, not how fast it comes (15 s, the default, ran out on a loaded machine)."""
     env = {**os.environ, "STATIOND_PASSWORD": password, "PYTHONPATH": str(ROOT)}
-    return subprocess.run([sys.executable, "-m", "stationd", *args], capture_output=True,
-                          text=True, env=env, timeout=60, check=False)
+    wait = () if "--timeout" in args else ("--timeout", "120")   # unless it is the test
+    return subprocess.run([sys.executable, "-m", "stationd", *args, *wait],
+                          capture_output=True, text=True, env=env, timeout=180, check=False)
 
 
 class Client:
