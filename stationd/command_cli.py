@@ -121,8 +121,8 @@ def station_words(url: str, station: Any) -> str:
                "version?)"
     if station.get("id"):
         return f"station {station['id']} at {url} ({station.get('config') or 'its file unsaid'})"
-    return f"station at {url}: {station.get('config')} (no station id: line.station_id or " \
-           "opcua.station_id)"
+    return f"station at {url}: {station.get('config')} (it has no station id: set " \
+           "line.station_id or opcua.station_id in its station file to name it)"
 
 
 def same_station(expected: dict[str, str | None], answered: Any) -> bool:

@@ -127,8 +127,9 @@ def test_a_command_for_station_b_is_refused_by_station_a(two) -> None:
     got = _cli("status", "--config", str(b))
     assert got.returncode == 3 and got.stdout == "", got
     assert got.stderr.splitlines() == [
-        f"stationd: status: station at {url}: {a.resolve()} (no station id: line.station_id "
-        f"or opcua.station_id), not the station of {b.resolve()} (--config {b}): nothing "
+        f"stationd: status: station at {url}: {a.resolve()} (it has no station id: set "
+        "line.station_id or opcua.station_id in its station file to name it), "
+        f"not the station of {b.resolve()} (--config {b}): nothing "
         "done; is that station's daemon running, and serving its screens at its "
         "http.listen? (--url to say where)"]
     got = _cli("skip", "VIN00000000000001", "B01", "--user", "sam", "--config", str(b))
@@ -144,8 +145,8 @@ def test_a_command_for_station_b_is_refused_by_station_a(two) -> None:
     got = _cli("status", "--config", str(a))
     assert got.returncode == 1, got      # its devices do not answer: in fault
     first, *rest = got.stdout.splitlines()
-    assert first == f"station at {url}: {a.resolve()} (no station id: line.station_id or " \
-                    "opcua.station_id)"
+    assert first == f"station at {url}: {a.resolve()} (it has no station id: set " \
+                    "line.station_id or opcua.station_id in its station file to name it)"
     assert rest[0].startswith("state:    fault")
     got = _cli("skip", "VIN00000000000001", "B01", "--user", "sam", "--config", str(a))
     assert got.returncode == 1, got      # taken to the station, which refuses it

@@ -83,7 +83,8 @@ def test_a_lock_waits_for_a_persons_release_in_the_demo(tmp_path):
         refused = release("olga", vin, bolt)
         assert refused.returncode == 1 and "refused" in refused.stdout, refused
         # the demo's station is DEMO-1, also without OPC UA and a line database (it said
-        # "(no station id: line.station_id or opcua.station_id)")
+        # "(it has no station id: set line.station_id or opcua.station_id in its station
+        # file to name it)")
         assert refused.stdout.startswith(f"station DEMO-1 at http://127.0.0.1:{port}/ "
                                          f"({station.resolve()})\n"), refused
         expect(rf"command release {bolt} of {vin} .*by olga \(cli 127\.0\.0\.1\): refused")
