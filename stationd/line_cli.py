@@ -62,9 +62,21 @@ def _forwarder(args: argparse.Namespace, *, write: bool = False) -> Forwarder:
 
 
 def cmd_line_status(args: argparse.Namespace) -> int:
+    """The forwarding as the station's database records it, and whether the line database
+    answers now (asked once: the backlog alone does not say why records wait).  Exit 3 when
+    it does not answer, else 1 while records wait or are quarantined."""
+    from stationd.forward import LineDown
+
     fwd = _forwarder(args)
     try:
         st = fwd.status()
+        try:
+            fwd.line.reachable()
+            st["answers"], st["unreachable"] = True, None
+        except LineDown as exc:
+            st["answers"], st["unreachable"] = False, str(exc)
+        finally:
+            fwd.line.dispose()
     finally:
         fwd.repo.close()
     if args.json:
@@ -72,11 +84,16 @@ def cmd_line_status(args: argparse.Namespace) -> int:
     else:
         print(f"line database {st['url']} as station {st['station_id']} "
               f"(local database {st['db_id']})")
+        print("line database: answers" if st["answers"] else
+              f"line database: does not answer ({st['unreachable']}); the records wait in "
+              "the station's database until it does")
         print(f"forwarded up to record {st['cursor']} of {st['last_seq']}: {st['backlog']} "
               f"waiting ({st['backlog_bytes'] / 1e6:.2f} MB), the oldest for "
               f"{st['lag_s']:.0f} s; {st['quarantined']} quarantined")
         if st["alarm"]:
             print(f"ALARM: {st['alarm']}")
+    if not st["answers"]:
+        return EXIT_UNREACHABLE
     return EXIT_WAITING if st["backlog"] or st["quarantined"] else 0
 
 

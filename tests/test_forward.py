@@ -314,6 +314,16 @@ def _retry_is_unreachable(station: Path, db: Path, pg_url: str, port: int) -> No
     got = _cli("line", "quarantine", "--config", str(station), "--retry")
     assert got.returncode == 3 and "Traceback" not in got.stderr
     assert got.stderr.startswith(f"stationd: line database {down} unreachable: "), got.stderr
+    # the status says so too, beside the backlog it reads from the station's database
+    got = _cli("line", "status", "--config", str(station))
+    assert got.returncode == 3 and got.stderr == "", got
+    said = got.stdout.splitlines()[1]
+    assert said.startswith("line database: does not answer (connection failed: ") and \
+        said.endswith("); the records wait in the station's database until it does"), said
+    assert " waiting (" in got.stdout          # the backlog, read from the station's database
+    got = _cli("line", "status", "--config", str(station), "--json")
+    st = json.loads(got.stdout)
+    assert got.returncode == 3 and st["answers"] is False and st["unreachable"]
 
 
 def test_a_quarantine_retry_names_the_line_database_it_could_not_reach(tmp_path, table,
@@ -349,6 +359,7 @@ def test_the_line_commands_show_the_backlog_and_retry_or_export_the_quarantine(
     assert json.loads(got.stdout)["backlog_bytes"] == size
     got = _cli("line", "status", "--config", str(station))
     assert f"2 waiting ({size / 1e6:.2f} MB)" in got.stdout
+    assert "line database: answers" in got.stdout.splitlines()
     with Repository.open(f"sqlite:///{tmp_path / 'st.db'}") as r:
         Forwarder(r, LineConfig(pg_url, "ST-L")).step()
     got = _cli("line", "status", "--config", str(station))
