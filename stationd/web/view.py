@@ -43,7 +43,7 @@ from stationd.station.events import (
 )
 from stationd.station.inputs import DATABASE
 from stationd.station.state import LOCALIZING
-from stationd.words import check_words, reason_words
+from stationd.words import check_words, reason_words, state_words
 
 # a bolt's state on the screen; the label is what the operator reads next to the colour
 BOLT_LABELS = {
@@ -215,7 +215,7 @@ class View:
                 self.alarm = f"parameters sent for {e.bolt} while the wrench was on {e.truth}"
 
     def _state(self, e: StateChanged) -> None:
-        self.state, self.reason = e.state, e.reason
+        self.state, self.reason = e.state, state_words(e.reason)
         if e.state == State.STARTING:
             # a station (re)starting on its configuration: the last one's device
             # reports are not about these devices (a reload kept a fixed wrench "down")
@@ -257,10 +257,11 @@ class View:
         b = self.bolts.get(e.bolt or self.selected or "")
         if b is not None and b.state in ("selected", "tightening"):
             self._set(b.bolt, "pending")
+        said = state_words(e.reason)
         if e.why is not None:
-            self._refuse(f"{e.reason} ({reason_words(e.why)})", e.why)
-        elif e.reason:
-            self._refuse(e.reason)
+            self._refuse(f"{said} ({reason_words(e.why)})", e.why)
+        elif said:
+            self._refuse(said)
 
     def _locked(self, e: BoltLocked) -> None:
         b = self.bolts[e.bolt]
