@@ -249,9 +249,20 @@ def state_words(reason: StateReason) -> str:
     return _BECAUSE[reason.kind](reason)
 
 
+#: the journal's shorter words for a bolt selected: the state says "bolt selected" already
+_SELECTED_LINE: dict[Because, Callable[[StateReason], str]] = {
+    Because.SELECTED: lambda r: f"{r.bolt}" + (
+        f": loosen first (pset {r.pset})" if r.loosen else ""),
+    Because.SELECTED_UNCONFIRMED: lambda r: f"{r.bolt}; wrench not confirmed",
+}
+
+
 def state_line(state: State, reason: StateReason) -> str:
     """The state and its reason in one line, as the journal and the unit's STATUS= say it:
-    ``tightening: tightening bolt B05``."""
+    ``tightening: tightening bolt B05``.  A bolt selected is named once (``bolt selected:
+    B11``, where the reason alone says ``bolt B11 selected``)."""
+    if state is State.BOLT_SELECTED and reason.kind in _SELECTED_LINE:
+        return f"{state}: {_SELECTED_LINE[reason.kind](reason)}"
     return f"{state}: {state_words(reason)}"
 
 

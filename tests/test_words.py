@@ -18,7 +18,7 @@ from stationd.station.events import (
     StateChanged,
     StateReason,
 )
-from stationd.words import notice_words, reason_words, state_words
+from stationd.words import notice_words, reason_words, state_line, state_words
 
 WORDS = [
     (Notice(Said.NO_REFERENCES),
@@ -187,6 +187,26 @@ def test_each_state_reason_says_what_the_core_said(reason: StateReason, words: s
 
 def test_every_state_reason_kind_has_its_words() -> None:
     assert {r.kind for r, _ in STATE_WORDS} == set(Because)
+
+
+def test_the_journal_line_names_a_selected_bolt_once() -> None:
+    """``bolt selected: bolt B11 selected`` said the state twice; the reason alone (the
+    screens, OPC UA) keeps its words."""
+    assert state_line(State.BOLT_SELECTED, StateReason(Because.SELECTED, bolt="B11", pset=3)) \
+        == "bolt selected: B11"
+    assert state_line(State.BOLT_SELECTED, StateReason(Because.SELECTED, bolt="B05", pset=90,
+                                                       loosen=True)) == \
+        "bolt selected: B05: loosen first (pset 90)"
+    assert state_line(State.BOLT_SELECTED,
+                      StateReason(Because.SELECTED_UNCONFIRMED, bolt="B11")) == \
+        "bolt selected: B11; wrench not confirmed"
+    # every other line is the state and its reason's words, as the daemon's tests wait for
+    assert state_line(State.BOLT_SELECTED, StateReason(Because.ACKNOWLEDGED, bolt="B11")) == \
+        "bolt selected: bolt B11 acknowledged; confirming the wrench is on it"
+    assert state_line(State.TIGHTENING, StateReason(Because.TIGHTENING, bolt="B05")) == \
+        "tightening: tightening bolt B05"
+    assert state_line(State.TRACKING, StateReason(Because.TRACKING)) == \
+        "tracking: tracking the wrench"
 
 
 def test_teach_mode_and_faults_are_said_alike_as_the_state_and_as_a_refusal() -> None:
