@@ -16,6 +16,7 @@ from typing import Any
 from db.kinds import LOOSENING
 from stationd.reasons import Reason, Why
 from stationd.station.events import (
+    Because,
     BoltLocked,
     BoltReleased,
     BoltSelected,
@@ -116,7 +117,9 @@ class View:
     """What the operator screen shows, built from the events in order."""
 
     state: str = State.STARTING   # until the daemon says otherwise
-    reason: str = ""
+    reason: str = ""              # the state's reason in words
+    #: and its kind: a reader that acts on the reason switches on it, never parses words
+    reason_kind: Because | None = None
     vin: str | None = None
     model: str | None = None
     rework: bool = False
@@ -215,7 +218,7 @@ class View:
                 self.alarm = f"parameters sent for {e.bolt} while the wrench was on {e.truth}"
 
     def _state(self, e: StateChanged) -> None:
-        self.state, self.reason = e.state, state_words(e.reason)
+        self.state, self.reason, self.reason_kind = e.state, state_words(e.reason), e.reason.kind
         if e.state == State.STARTING:
             # a station (re)starting on its configuration: the last one's device
             # reports are not about these devices (a reload kept a fixed wrench "down")
@@ -548,7 +551,9 @@ class View:
 
     def to_json(self) -> dict[str, Any]:
         return {
-            "state": self.state, "reason": self.reason, "headline": self.headline(),
+            "state": self.state, "reason": self.reason,
+            "reason_kind": None if self.reason_kind is None else self.reason_kind.value,
+            "headline": self.headline(),
             "headline_title": self.headline_title(),
             "tone": self.tone(),
             "refused": self.refused, "alarm": self.alarm,

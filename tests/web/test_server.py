@@ -63,6 +63,9 @@ def test_status_healthz_and_live_events():
                 async with http.get(srv.url + "api/status") as r:
                     st = await r.json()
                 assert st["state"] == "fault" and st["counters"]["done"] == 1
+                # the reason in words, and its kind beside them for a reader that acts on it
+                assert (st["reason"], st["reason_kind"]) == (
+                    "lift: no answer from 10.0.0.7:502 for 2.0 s", "fault")
                 assert st["devices"]["lift"]["ok"] is False
                 assert {"stationd", "aiohttp", "python"} <= set(st["versions"])
                 async with http.post(srv.url + "api/status") as r:
@@ -197,7 +200,8 @@ def test_numpy_values_and_an_odd_event_do_not_stop_the_live_view():
                     if v["reason"] == "bolt B1 selected":
                         break
                     await asyncio.sleep(0.05)
-            assert v["reason"] == "bolt B1 selected" and srv.errors == 1
+            assert (v["reason"], v["reason_kind"]) == ("bolt B1 selected", "selected")
+            assert srv.errors == 1
             assert abs(v["wrench"]["x"] - 1.5) < 1e-6 and abs(v["wrench"]["tilt"] - 2.5) < 1e-6
         finally:
             await srv.stop()
