@@ -41,13 +41,14 @@ class Why(enum.Enum):
     ALREADY_OPEN = "already open"        # a reopen of a vehicle that is open (vin)
     NOT_CLOSED = "not closed"            # a reopen of a vehicle that is not closed (vin)
     UNKNOWN_VEHICLE = "unknown vehicle"  # a VIN the database does not know (vin)
-    DEVICE_FAULT = "device fault"        # a device is in fault (note: the faults)
+    DEVICE_FAULT = "device fault"        # a device is in fault (faults)
     NOT_RECORDED = "not recorded"        # the database refused the command's record (note)
     NOT_LOCKED = "not locked"            # a release of a bolt that is not locked (bolt)
     NOT_HELD = "not held"                # an entered outcome for a bolt not held (bolt)
     HELD = "held"                        # the controller's result could not be read: a
                                          # supervisor checks it there and releases (note)
-    TEACHING = "teaching"                # teach mode is on (note: the model, who)
+    TEACHING = "teaching"                # teach mode is on (note: the model; user; bolt:
+                                         # the one being measured)
     NOT_TEACHING = "not teaching"        # a teach command while teach mode is off
     NOT_STEADY = "not steady"            # teaching: too few steady localizations (count)
     NO_FRAMES = "no frames"              # teaching: no localization at all in `limit` s
@@ -93,7 +94,9 @@ class Reason:
     pset: int | None = None             # the pset that goes next (a loosen pset)
     pair: str | None = None             # a camera pair (the calibration check)
     reference: str | None = None        # a reference marker (the calibration check)
-    user: str | None = None             # a user (the operator signed in)
+    user: str | None = None             # a user (the operator signed in, who teaches)
+    #: (device, its own words) for each device in fault, in the order they failed
+    faults: tuple[tuple[str, str], ...] = ()
     #: the refusal behind this one (a teach point not steady: what the localizations without
     #: the wrench said, e.g. no frame from a camera)
     cause: Reason | None = None

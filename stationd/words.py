@@ -21,7 +21,16 @@ from stationd.station.commands import (
     TeachPoint,
     TeachStart,
 )
-from stationd.station.events import Notice, OperatorChange, OperatorChanged, PairChecked, Said
+from stationd.station.events import (
+    Because,
+    Notice,
+    OperatorChange,
+    OperatorChanged,
+    PairChecked,
+    Said,
+    State,
+    StateReason,
+)
 
 
 def _mm(v: float | None) -> str:
@@ -37,6 +46,18 @@ def _unread(bolt: str | None, note: str | None) -> str:
     """A bolt held for a result that could not be read: the refusal and the notice alike."""
     return (f"{bolt}: the controller's result could not be read ({note}): check it on the "
             "controller, then release")
+
+
+def _faults(faults: tuple[tuple[str, str], ...]) -> str:
+    """The devices in fault, each with its own words: the state's reason and a refusal
+    alike (``lift: no answer; pair1: no frame``)."""
+    return "; ".join(f"{device}: {words}" for device, words in faults)
+
+
+def _teaching(model: str | None, user: str | None, bolt: str | None) -> str:
+    """Teach mode, as the state's reason and a refusal say it alike."""
+    doing = f"measuring {bolt}" if bolt is not None else "hold the tool on a bolt"
+    return f"teaching {model} ({user}): {doing}"
 
 
 def _per_pair(r: Reason, full: bool = False) -> str:
@@ -85,7 +106,7 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
                                    f"({_mm(r.distance_mm)} mm from its place)"),
     Why.NO_REFERENCES: lambda r: ("no calibration check configured: the station file has no "
                                   "references"),
-    Why.TEACHING: lambda r: f"teach mode is on ({r.note})",
+    Why.TEACHING: lambda r: f"teach mode is on ({_teaching(r.note, r.user, r.bolt)})",
     Why.NOT_TEACHING: lambda r: "teach mode is off: start it first",
     Why.NOT_STEADY: lambda r: (
         f"the wrench moved while measured ({r.distance_mm:.1f} mm > {r.limit:g} mm): hold it "
@@ -109,7 +130,7 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.ALREADY_OPEN: lambda r: f"vehicle {r.vin} is open at the station",
     Why.NOT_CLOSED: lambda r: f"vehicle {r.vin} is not closed",
     Why.UNKNOWN_VEHICLE: lambda r: f"vehicle {r.vin} is not in the database",
-    Why.DEVICE_FAULT: lambda r: f"a device is in fault: {r.note}",
+    Why.DEVICE_FAULT: lambda r: f"a device is in fault: {_faults(r.faults)}",
     Why.NOT_RECORDED: lambda r: f"the database did not record it: {r.note}",
     Why.SIGN_IN: lambda r: "sign in to tighten: nobody is signed in at the station",
     Why.NOT_SIGNED_IN: lambda r: "nobody is signed in at the station",
@@ -181,6 +202,68 @@ def notice_words(notice: Notice) -> str:
     """A notice as the journal and the operator's log say it: ``B03 locked after 3 NOK in a
     row: a supervisor releases it``."""
     return _SAID[notice.said](notice)
+
+
+_BECAUSE: dict[Because, Callable[[StateReason], str]] = {
+    Because.OPENING: lambda r: "opening the devices",
+    Because.FAULT: lambda r: _faults(r.faults),
+    Because.RECOVERED: lambda r: "recovered; waiting for the lift",
+    Because.STARTED: lambda r: "station started: the tool stays off until a bolt is confirmed",
+    Because.CONTROLLER_BACK: lambda r: ("controller back: the tool stays off until a bolt is "
+                                        "confirmed"),
+    Because.WAITING_LIFT: lambda r: "waiting for the lift",
+    Because.LIFT_NOT_READY: lambda r: r.note or "",
+    Because.LOADING: lambda r: f"loading vehicle {r.vin}",
+    Because.TRACKING: lambda r: "tracking the wrench",
+    Because.SELECTED: lambda r: f"bolt {r.bolt} selected" + (
+        f": loosen first (pset {r.pset})" if r.loosen else ""),
+    Because.ACKNOWLEDGED: lambda r: (f"bolt {r.bolt} acknowledged; confirming the wrench is "
+                                     "on it"),
+    Because.TIGHTENING: lambda r: f"tightening bolt {r.bolt}",
+    Because.NOT_CONFIRMED: lambda r: f"wrench not confirmed on bolt {r.bolt}",
+    Because.SELECTED_UNCONFIRMED: lambda r: f"bolt {r.bolt} selected; wrench not confirmed",
+    Because.WRENCH_LEFT: lambda r: f"wrench left bolt {r.bolt}",
+    Because.LATE_ACK: lambda r: f"late acknowledgement for {r.bolt} ignored",
+    Because.RUNDOWN: lambda r: f"bolt {r.bolt} {'loosened' if r.loosen else 'tightened'}",
+    Because.RESULT: lambda r: (f"bolt {r.bolt} {'loosening ' if r.loosen else ''}"
+                               f"{'OK' if r.ok else 'NOK'}; tracking"),
+    Because.UNREADABLE: lambda r: f"bolt {r.bolt}: its result could not be read",
+    Because.UNREADABLE_HELD: lambda r: (f"bolt {r.bolt}: its result could not be read; held "
+                                        "for a supervisor"),
+    Because.NOT_TAKEN: lambda r: (f"bolt {r.bolt}: an OK result without a result type "
+                                  "outside its torque window"),
+    Because.NOT_TAKEN_HELD: lambda r: (f"bolt {r.bolt}: an OK result without a result type "
+                                       "outside its torque window; held for a supervisor"),
+    Because.SKIPPED: lambda r: f"bolt {r.bolt} {r.note}",
+    Because.LOOSEN_ORDERED: lambda r: f"bolt {r.bolt}: loosen first",
+    Because.OPERATOR: lambda r: f"operator {r.how}",
+    Because.TEACH_MODE: lambda r: "teach mode",
+    Because.TEACHING: lambda r: _teaching(r.model, r.user, r.bolt),
+    Because.TEACH_ENDED: lambda r: "teach mode ended; waiting for the lift",
+}
+
+
+def state_words(reason: StateReason) -> str:
+    """Why the station is in its state, or why the tool went off, as the screens, OPC UA and
+    the journal say it: ``tightening bolt B05``, ``lift: no answer from 10.0.0.7:502``."""
+    return _BECAUSE[reason.kind](reason)
+
+
+#: the journal's shorter words for a bolt selected: the state says "bolt selected" already
+_SELECTED_LINE: dict[Because, Callable[[StateReason], str]] = {
+    Because.SELECTED: lambda r: f"{r.bolt}" + (
+        f": loosen first (pset {r.pset})" if r.loosen else ""),
+    Because.SELECTED_UNCONFIRMED: lambda r: f"{r.bolt}; wrench not confirmed",
+}
+
+
+def state_line(state: State, reason: StateReason) -> str:
+    """The state and its reason in one line, as the journal and the unit's STATUS= say it:
+    ``tightening: tightening bolt B05``.  A bolt selected is named once (``bolt selected:
+    B11``, where the reason alone says ``bolt B11 selected``)."""
+    if state is State.BOLT_SELECTED and reason.kind in _SELECTED_LINE:
+        return f"{state}: {_SELECTED_LINE[reason.kind](reason)}"
+    return f"{state}: {state_words(reason)}"
 
 
 def check_words(ev: PairChecked) -> str:
@@ -265,4 +348,4 @@ def _missed(r: Reason) -> str:
 
 
 __all__ = ["answer_words", "check_words", "command_words", "notice_words", "operator_words",
-           "outcome_words", "reason_words"]
+           "outcome_words", "reason_words", "state_line", "state_words"]

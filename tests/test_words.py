@@ -1,6 +1,7 @@
-"""The station's notices in words (stationd.words.notice_words): each kind's line, word for
-word as the journal wrote it when the core still built the text (daemon tests and people's
-log searches wait for these lines), and each kind's level."""
+"""The station's notices and its state's reasons in words (stationd.words.notice_words,
+state_words, state_line): each kind's line, word for word as the journal wrote it when the
+core still built the text (daemon tests and people's log searches wait for these lines), and
+each notice kind's level."""
 
 from __future__ import annotations
 
@@ -8,8 +9,16 @@ import pytest
 
 from db.kinds import not_taken_note
 from stationd.reasons import Reason, Why
-from stationd.station.events import Notice, Said
-from stationd.words import notice_words, reason_words
+from stationd.station.events import (
+    Because,
+    Notice,
+    OperatorChange,
+    Said,
+    State,
+    StateChanged,
+    StateReason,
+)
+from stationd.words import notice_words, reason_words, state_line, state_words
 
 WORDS = [
     (Notice(Said.NO_REFERENCES),
@@ -116,3 +125,105 @@ def test_a_notice_goes_on_the_wire_as_its_kind_and_fields() -> None:
     doc = Notice(Said.LOCKED, bolt="B2", count=3, t=1.0).to_json()
     assert (doc["kind"], doc["said"], doc["bolt"], doc["count"]) == ("notice", "locked", "B2", 3)
     assert "message" not in doc
+
+
+STATE_WORDS = [
+    (StateReason(Because.OPENING), "opening the devices"),
+    (StateReason(Because.FAULT, faults=(("lift", "no answer from 10.0.0.7:502 for 2.0 s"),
+                                         ("pair1", "no frame within 1 s"))),
+     "lift: no answer from 10.0.0.7:502 for 2.0 s; pair1: no frame within 1 s"),
+    (StateReason(Because.RECOVERED), "recovered; waiting for the lift"),
+    (StateReason(Because.STARTED),
+     "station started: the tool stays off until a bolt is confirmed"),
+    (StateReason(Because.CONTROLLER_BACK),
+     "controller back: the tool stays off until a bolt is confirmed"),
+    (StateReason(Because.WAITING_LIFT), "waiting for the lift"),
+    (StateReason(Because.LIFT_NOT_READY, note="lift moving"), "lift moving"),
+    (StateReason(Because.LOADING, vin="VIN1"), "loading vehicle VIN1"),
+    (StateReason(Because.TRACKING), "tracking the wrench"),
+    (StateReason(Because.SELECTED, bolt="B11", pset=3), "bolt B11 selected"),
+    (StateReason(Because.SELECTED, bolt="B11", pset=90, loosen=True),
+     "bolt B11 selected: loosen first (pset 90)"),
+    (StateReason(Because.ACKNOWLEDGED, bolt="B11"),
+     "bolt B11 acknowledged; confirming the wrench is on it"),
+    (StateReason(Because.TIGHTENING, bolt="B11"), "tightening bolt B11"),
+    (StateReason(Because.NOT_CONFIRMED, bolt="B11"), "wrench not confirmed on bolt B11"),
+    (StateReason(Because.SELECTED_UNCONFIRMED, bolt="B11"),
+     "bolt B11 selected; wrench not confirmed"),
+    (StateReason(Because.WRENCH_LEFT, bolt="B11"), "wrench left bolt B11"),
+    (StateReason(Because.LATE_ACK, bolt="B11"), "late acknowledgement for B11 ignored"),
+    (StateReason(Because.RUNDOWN, bolt="B11"), "bolt B11 tightened"),
+    (StateReason(Because.RUNDOWN, bolt="B11", loosen=True), "bolt B11 loosened"),
+    (StateReason(Because.RESULT, bolt="B11", ok=True), "bolt B11 OK; tracking"),
+    (StateReason(Because.RESULT, bolt="B11", ok=False, loosen=True),
+     "bolt B11 loosening NOK; tracking"),
+    (StateReason(Because.UNREADABLE, bolt="B11"), "bolt B11: its result could not be read"),
+    (StateReason(Because.UNREADABLE_HELD, bolt="B11"),
+     "bolt B11: its result could not be read; held for a supervisor"),
+    (StateReason(Because.NOT_TAKEN, bolt="B11"),
+     "bolt B11: an OK result without a result type outside its torque window"),
+    (StateReason(Because.NOT_TAKEN_HELD, bolt="B11"),
+     "bolt B11: an OK result without a result type outside its torque window; held for a "
+     "supervisor"),
+    (StateReason(Because.SKIPPED, bolt="B11", note="sam's command (no access)"),
+     "bolt B11 sam's command (no access)"),
+    (StateReason(Because.LOOSEN_ORDERED, bolt="B11"), "bolt B11: loosen first"),
+    (StateReason(Because.OPERATOR, how=OperatorChange.SIGNED_OUT), "operator signed out"),
+    (StateReason(Because.OPERATOR, how=OperatorChange.IDLE), "operator idle"),
+    (StateReason(Because.TEACH_MODE), "teach mode"),
+    (StateReason(Because.TEACHING, model="M1", user="ed"),
+     "teaching M1 (ed): hold the tool on a bolt"),
+    (StateReason(Because.TEACHING, model="M1", user="ed", bolt="B7"),
+     "teaching M1 (ed): measuring B7"),
+    (StateReason(Because.TEACH_ENDED), "teach mode ended; waiting for the lift"),
+]
+
+
+@pytest.mark.parametrize(("reason", "words"), STATE_WORDS,
+                         ids=[f"{r.kind.name}-{i}" for i, (r, _) in enumerate(STATE_WORDS)])
+def test_each_state_reason_says_what_the_core_said(reason: StateReason, words: str) -> None:
+    assert state_words(reason) == words
+
+
+def test_every_state_reason_kind_has_its_words() -> None:
+    assert {r.kind for r, _ in STATE_WORDS} == set(Because)
+
+
+def test_the_journal_line_names_a_selected_bolt_once() -> None:
+    """``bolt selected: bolt B11 selected`` said the state twice; the reason alone (the
+    screens, OPC UA) keeps its words."""
+    assert state_line(State.BOLT_SELECTED, StateReason(Because.SELECTED, bolt="B11", pset=3)) \
+        == "bolt selected: B11"
+    assert state_line(State.BOLT_SELECTED, StateReason(Because.SELECTED, bolt="B05", pset=90,
+                                                       loosen=True)) == \
+        "bolt selected: B05: loosen first (pset 90)"
+    assert state_line(State.BOLT_SELECTED,
+                      StateReason(Because.SELECTED_UNCONFIRMED, bolt="B11")) == \
+        "bolt selected: B11; wrench not confirmed"
+    # every other line is the state and its reason's words, as the daemon's tests wait for
+    assert state_line(State.BOLT_SELECTED, StateReason(Because.ACKNOWLEDGED, bolt="B11")) == \
+        "bolt selected: bolt B11 acknowledged; confirming the wrench is on it"
+    assert state_line(State.TIGHTENING, StateReason(Because.TIGHTENING, bolt="B05")) == \
+        "tightening: tightening bolt B05"
+    assert state_line(State.TRACKING, StateReason(Because.TRACKING)) == \
+        "tracking: tracking the wrench"
+
+
+def test_teach_mode_and_faults_are_said_alike_as_the_state_and_as_a_refusal() -> None:
+    """A command refused while teaching or in fault names the same as the state's reason."""
+    teaching = state_words(StateReason(Because.TEACHING, model="M1", user="ed", bolt="B7"))
+    assert reason_words(Reason(Why.TEACHING, note="M1", user="ed", bolt="B7")) == \
+        f"teach mode is on ({teaching})"
+    faults = (("lift", "no answer"), ("pair1", "no frame"))
+    assert reason_words(Reason(Why.DEVICE_FAULT, faults=faults)) == \
+        f"a device is in fault: {state_words(StateReason(Because.FAULT, faults=faults))}"
+
+
+def test_a_state_change_goes_on_the_wire_as_its_kind_and_fields() -> None:
+    """The event's JSON carries the reason's kind and fields (the screens' JSON has its words
+    beside the kind: stationd.web.view)."""
+    doc = StateChanged(State.BOLT_SELECTED, StateReason(Because.SELECTED, bolt="B2", pset=4),
+                       t=1.0).to_json()
+    assert (doc["kind"], doc["state"]) == ("state_changed", "bolt selected")
+    assert (doc["reason"]["kind"], doc["reason"]["bolt"], doc["reason"]["pset"]) == (
+        "selected", "B2", 4)

@@ -64,6 +64,7 @@ from stationd.sim.devices_cli import psets_of
 from stationd.sim.world import World, WrenchPose
 from stationd.station.actions import Record, SendParams, StoreUnattributed
 from stationd.station.events import ParamsSent, ResultRecorded, State
+from stationd.words import state_words
 
 SELECT_S = 30.0        # the longest wait for a bolt's selection with the link up
 RECORD_S = 10.0        # ... for its result to be recorded
@@ -214,7 +215,8 @@ async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]
     plc.set_vehicle(1, "BENCHVIN000000001")
     plc.raise_lift()
     if not await _until(lambda: st.vin is not None, 60):
-        raise InputError(f"the station did not start the vehicle: {st.core.status().reason}")
+        raise InputError("the station did not start the vehicle: "
+                         f"{state_words(st.core.status().reason)}")
     cut_index = len(plan) // 3 if p.cut_s is not None else -1
     restoring: asyncio.Task[None] | None = None
     what = "bench linkcut: " + ("link cut" if p.cut_s is not None else
@@ -238,7 +240,7 @@ async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]
                     and bool(ctl.tool_enabled)
 
             if not await _until(on_it, SELECT_S):
-                p.not_selected.append(f"{bolt}: {st.core.status().reason}")
+                p.not_selected.append(f"{bolt}: {state_words(st.core.status().reason)}")
             elif i == cut_index and proxy is not None and p.cut_s is not None:
                 proxy.cut()     # the link goes as the operator pulls the trigger
                 p.cut_at = time.monotonic()

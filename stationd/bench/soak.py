@@ -70,6 +70,7 @@ from stationd.station.events import (
     VehicleOpened,
 )
 from stationd.stationcheck import validate_station
+from stationd.words import state_words
 
 RELOAD_SETTLE_S = 0.5    # after a reload is taken, before the shift goes on
 LIFT_DOWN_S = 1.5        # how long a station reloaded onto a dead lift runs before it is fixed
@@ -110,7 +111,7 @@ class Watch:
 
     def see(self, ev: StationEvent) -> None:
         if isinstance(ev, StateChanged):
-            self.state, self.reason = ev.state, ev.reason
+            self.state, self.reason = ev.state, state_words(ev.reason)
             if ev.state in (State.WAITING_VEHICLE, State.STARTING):
                 self.vin = None
         elif isinstance(ev, VehicleOpened):

@@ -48,6 +48,7 @@ from stationd.station.actions import SendParams
 from stationd.station.events import ParamsSent, ResultRecorded, State
 from stationd.web.bench import ScreenClients
 from stationd.web.config import HttpConfig
+from stationd.words import state_words
 
 FRAME_ROUTE = "/api/cameras/{pair}/{side}/frame.jpg"
 
@@ -90,7 +91,8 @@ async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]
     plc.set_vehicle(1, "BENCHVIN000000001")
     plc.raise_lift()
     if not await _until(lambda: st.vin is not None, 60):
-        raise RuntimeError(f"the station did not start the vehicle: {st.core.status().reason}")
+        raise RuntimeError("the station did not start the vehicle: "
+                           f"{state_words(st.core.status().reason)}")
     for i, (bolt, pose) in enumerate(progress.track(plan, "bench station: bolts",
                                                     unit="bolt")):
         if on_bolt is not None:
@@ -103,7 +105,7 @@ async def _operator(st: Station, world: World, plan: list[tuple[str, WrenchPose]
 
         selected = await _until(on_it, 30)
         if not selected:
-            out["not_selected"].append(f"{bolt}: {st.core.status().reason}")
+            out["not_selected"].append(f"{bolt}: {state_words(st.core.status().reason)}")
         else:
             n = st.bus.count(ResultRecorded)
             if ctl.pull_trigger() is not None:

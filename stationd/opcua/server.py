@@ -89,6 +89,7 @@ from stationd.station.events import (
     StateChanged,
     StationEvent,
 )
+from stationd.words import state_words
 
 log = logging.getLogger("stationd")
 NAMESPACE = "urn:stationd:opcua"
@@ -364,7 +365,7 @@ class OpcUaServer:
         if isinstance(event, ResultRecorded):
             self._soon(self._wake.set)
         elif isinstance(event, StateChanged):
-            self._soon(self._task, self.set_state(event.state, event.reason))
+            self._soon(self._task, self.set_state(event.state, state_words(event.reason)))
         elif isinstance(event, DeviceHealth):
             self._soon(self._task, self.assets.report(
                 event.device, NORMAL if event.ok else FAILURE, event.reason or event.kind,

@@ -64,6 +64,7 @@ from stationd.station.inputs import (
     Written,
 )
 from stationd.station.trust import PairTrust
+from stationd.words import state_line
 
 log = logging.getLogger("stationd")
 D = TypeVar("D")
@@ -264,7 +265,7 @@ class Station:
             await self.feed(DeviceBack(time.time(), WRENCH, self.wrench_keeper.reconnects))
             self.controller.came_back()
         now = self.core.status()
-        self.notifier.ready(f"{now.state.value}: {now.reason}")
+        self.notifier.ready(state_line(now.state, now.reason))
         if self.unsaved():   # a reload's: written (then acknowledged) by the database keeper
             self.database_keeper.lost(DeviceError("results received before the reload "
                                                   "not stored yet"))

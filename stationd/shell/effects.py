@@ -82,6 +82,7 @@ from stationd.words import (
     notice_words,
     operator_words,
     reason_words,
+    state_line,
 )
 
 log = logging.getLogger("stationd")
@@ -202,11 +203,12 @@ class Effects:
             for line in self.refusals.ended(ev.t):   # the refusals' episode ended
                 self.log.info("%s", line)
         if isinstance(ev, StateChanged):
-            self.notifier.status(f"{ev.state}: {ev.reason}")
+            line = state_line(ev.state, ev.reason)
+            self.notifier.status(line)
             if ev.state is State.FAULT:   # each device's own line has the reason
                 self.log.info("state: fault (%s)", ", ".join(sorted(self.core.status().faults)))
             else:
-                self.log.info("%s: %s", ev.state, ev.reason)
+                self.log.info("%s", line)
         elif isinstance(ev, Notice):
             {"error": self.log.error, "warning": self.log.warning}.get(
                 ev.level, self.log.info)("%s", notice_words(ev))

@@ -38,7 +38,7 @@ from stationd.sim.world import World, wrench_at
 from stationd.station.commands import Issuer, ReleaseBolt, Right, SignIn
 from stationd.station.events import BoltReleased, Localized, ResultRecorded, State
 from stationd.station.policy import NokPolicy
-from stationd.words import reason_words
+from stationd.words import reason_words, state_words
 
 #: a tightening fails now and then; a stubborn joint (a damaged thread) fails until its bolt
 #: locks and the supervisor released it; a loosening always comes loose
@@ -137,7 +137,8 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
             break
         await asyncio.sleep(0.05)
     else:
-        raise InputError(f"the simulated vehicle was not opened: {st.core.status().reason}")
+        raise InputError("the simulated vehicle was not opened: "
+                         f"{state_words(st.core.status().reason)}")
     length = st.cfg.tool.length_mm
     bolts: list[BoltInfo] = []
     unseen: list[BoltInfo] = []
@@ -272,7 +273,7 @@ def _why_not(st: Station) -> str:
     """Why nothing was selected: the last localization's refusal, else the state's words."""
     seen = [e for e in st.bus.of(Localized) if isinstance(e, Localized)]
     last = seen[-1].reason if seen else None
-    return reason_words(last) if last is not None else st.core.status().reason
+    return reason_words(last) if last is not None else state_words(st.core.status().reason)
 
 
 async def _pull(st: Station, loosening: bool, nok: bool) -> tuple[Any, bool]:

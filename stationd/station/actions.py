@@ -19,7 +19,7 @@ from stationd.station.commands import (
     Command,
     Issuer,
 )
-from stationd.station.events import StationEvent
+from stationd.station.events import StateReason, StationEvent
 from stationd.station.trust import MeasureReferences, RecordCheck
 
 
@@ -77,9 +77,10 @@ class EnableTool:
 
 @dataclass(frozen=True)
 class DisableTool:
-    """The tool off, with the station's words; ``why`` when a refusal turned it off."""
+    """The tool off, with why (typed as the state's reason, the same as the bus's
+    :class:`~stationd.station.events.ToolDisabled`); ``why`` when a refusal turned it off."""
 
-    reason: str
+    reason: StateReason
     bolt: str | None = None
     why: Reason | None = None
 

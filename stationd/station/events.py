@@ -80,12 +80,81 @@ class State(enum.StrEnum):
     TEACHING = "teaching"
 
 
+class Because(enum.Enum):
+    """Why the station is in its state, or why the tool went off: the kind of a
+    :class:`StateReason` (the fields it uses in parentheses).  The words are
+    :func:`stationd.words.state_words`'s: the journal, STATUS=, the screens and OPC UA say
+    them alike, none reads them back."""
+
+    # the station and its devices
+    OPENING = "opening"                  # starting: the devices being opened
+    FAULT = "fault"                      # devices in fault (faults: each one's own words)
+    RECOVERED = "recovered"              # every device back: waiting for the lift
+    STARTED = "started"                  # the tool off at a start, until a bolt is confirmed
+    CONTROLLER_BACK = "controller back"  # the tool off as the controller is back
+    # the vehicle and the lift
+    WAITING_LIFT = "waiting lift"        # started: waiting for the lift
+    LIFT_NOT_READY = "lift not ready"    # (note: the lift's own words: moving, not at height)
+    LOADING = "loading"                  # a vehicle at height being loaded (vin)
+    TRACKING = "tracking"                # a vehicle loaded: following the wrench
+    # a bolt and the tool
+    SELECTED = "selected"                # parameters sent (bolt, pset; loosen: its loosen
+    #                                      pset, a loosening first)
+    ACKNOWLEDGED = "acknowledged"        # the controller took them: the wrench confirmed next
+    #                                      (bolt)
+    TIGHTENING = "tightening"            # the tool on (bolt)
+    NOT_CONFIRMED = "not confirmed"      # the tool off: the wrench not confirmed on it (bolt)
+    SELECTED_UNCONFIRMED = "selected unconfirmed"  # still selected, tool off (bolt)
+    WRENCH_LEFT = "wrench left"          # the selection dropped (bolt)
+    LATE_ACK = "late ack"                # the tool off: an acknowledgement after the
+    #                                      selection (bolt)
+    # results
+    RUNDOWN = "rundown"                  # the tool off: its result came (bolt; loosen: a
+    #                                      loosening)
+    RESULT = "result"                    # back to tracking after it (bolt, ok, loosen)
+    UNREADABLE = "unreadable"            # the tool off: its result could not be read (bolt)
+    UNREADABLE_HELD = "unreadable held"  # ... and the bolt held, the selection dropped (bolt)
+    NOT_TAKEN = "not taken"              # the tool off: an OK without a type outside the
+    #                                      bolt's torque window (bolt)
+    NOT_TAKEN_HELD = "not taken held"    # ... and the bolt held, the selection dropped (bolt)
+    # commands
+    SKIPPED = "skipped"                  # the bolt selected was skipped (bolt, note: the
+    #                                      skip's note, as the matcher keeps it)
+    LOOSEN_ORDERED = "loosen ordered"    # a loosen command for the bolt selected (bolt)
+    OPERATOR = "operator"                # the operator changed on a bolt (how)
+    # teach-in
+    TEACH_MODE = "teach mode"            # the tool off: teach mode starts
+    TEACHING = "teaching"                # (model, user; bolt: the one being measured)
+    TEACH_ENDED = "teach ended"          # teach mode off: waiting for the lift
+
+
+@dataclass(frozen=True)
+class StateReason:
+    """Why the station is in its state (also why the tool went off): its kind and the
+    details that apply (the others stay None).  Typed, not words: the core decides, and
+    :func:`stationd.words.state_words` says it at the edges."""
+
+    kind: Because
+    _: dataclasses.KW_ONLY
+    bolt: str | None = None
+    vin: str | None = None
+    pset: int | None = None
+    loosen: bool = False                # a loosen pset sent, or a loosening's result
+    ok: bool | None = None              # a result's verdict
+    how: OperatorChange | None = None   # how the operator changed
+    model: str | None = None            # the model taught
+    user: str | None = None             # who teaches
+    #: (device, its own words) for each device in fault, in the order they failed
+    faults: tuple[tuple[str, str], ...] = ()
+    note: str | None = None             # words from elsewhere (the lift, a skip's note)
+
+
 @dataclass(frozen=True)
 class StateChanged(StationEvent):
     """The cycle's state or its reason changed."""
 
     state: State
-    reason: str
+    reason: StateReason
 
 
 @dataclass(frozen=True)
@@ -224,10 +293,10 @@ class ToolEnabled(StationEvent):
 
 @dataclass(frozen=True)
 class ToolDisabled(StationEvent):
-    """The tool went off: ``reason`` (the station's words), ``why`` when a refusal turned it
-    off (the wrench not confirmed on its bolt: stale, elsewhere, ...)."""
+    """The tool went off: ``reason`` (the station's, typed like the state's), ``why`` when a
+    refusal turned it off (the wrench not confirmed on its bolt: stale, elsewhere, ...)."""
 
-    reason: str
+    reason: StateReason
     bolt: str | None = None
     why: Reason | None = None
 

@@ -4,9 +4,15 @@ off, a teach point answered; back to waiting or tracking when every device is ba
 from __future__ import annotations
 
 from drivers.keeper import FaultKind
-from stationd.reasons import Reason, Why
 from stationd.station.actions import Action, Publish
-from stationd.station.events import DeviceHealth, DeviceIdentified, LineLinkChanged, State
+from stationd.station.events import (
+    Because,
+    DeviceHealth,
+    DeviceIdentified,
+    LineLinkChanged,
+    State,
+    StateReason,
+)
 from stationd.station.inputs import (
     DATABASE,
     WRENCH,
@@ -56,8 +62,7 @@ class FaultRules(TeachRules):
         acts: list[Action] = []
         if ev.device == WRENCH and WRENCH in self.faults:
             # the DisableTool sent at the fault may never have arrived: off, whatever it did
-            acts += _disable("controller back: the tool stays off until a bolt is confirmed",
-                             t=ev.t)
+            acts += _disable(StateReason(Because.CONTROLLER_BACK), t=ev.t)
         return acts + self._back(ev.t, ev.device)
 
     def _on_device_said(self, ev: DeviceSaid) -> list[Action]:
@@ -84,8 +89,7 @@ class FaultRules(TeachRules):
         acts += self._drop(t, State.FAULT, self._fault_reason())
         if self._teach is not None and self._teach.measuring is not None:
             # a bolt being taught is measured only without faults: answered now, with them
-            acts += self._teach_answered(self._teach, Reason(Why.DEVICE_FAULT,
-                                                             note=self._fault_reason()))
+            acts += self._teach_answered(self._teach, self._fault_refusal())
         return acts
 
     def _back(self, t: float, device: str) -> list[Action]:
@@ -97,5 +101,5 @@ class FaultRules(TeachRules):
             if self.faults:
                 self.reason = self._fault_reason()
             else:
-                self._to(State.WAITING_VEHICLE, "recovered; waiting for the lift")
+                self._to(State.WAITING_VEHICLE, StateReason(Because.RECOVERED))
         return acts

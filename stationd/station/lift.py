@@ -10,6 +10,7 @@ from db.kinds import NOK, PENDING, SKIPPED, TO_LOOSEN
 from drivers.keeper import FaultKind
 from stationd.station.actions import Action, CloseVehicle, LoadVehicle, Publish, SendVin
 from stationd.station.events import (
+    Because,
     BoltLocked,
     BoltView,
     Notice,
@@ -17,6 +18,7 @@ from stationd.station.events import (
     OperatorChanged,
     Said,
     State,
+    StateReason,
     VehicleClosed,
     VehicleOpened,
 )
@@ -45,10 +47,9 @@ class LiftRules(FaultRules):
         self._started = True
         self._link_lost_at = ev.t
         self._to(State.FAULT if self.faults else State.WAITING_VEHICLE,
-                 self._fault_reason() if self.faults else "waiting for the lift")
+                 self._fault_reason() if self.faults else StateReason(Because.WAITING_LIFT))
         # the last station may have been killed with the tool on: off until a bolt is confirmed
-        return [*_disable("station started: the tool stays off until a bolt is confirmed",
-                          t=ev.t), *self._check_at_start(ev.t),
+        return [*_disable(StateReason(Because.STARTED), t=ev.t), *self._check_at_start(ev.t),
                 Publish(OperatorChanged(self.operator, self.operator_required,
                                         how=OperatorChange.STILL_SIGNED_IN if self.operator
                                         else OperatorChange.NOBODY, t=ev.t))]
@@ -61,8 +62,9 @@ class LiftRules(FaultRules):
         if VEHICLE in self.faults and not ev.at_height:
             self._closed_vin = None
             acts += self._back(ev.t, VEHICLE)   # a vehicle fault lasts while that vehicle is up
+        not_ready = StateReason(Because.LIFT_NOT_READY, note=ev.why)
         if self.vin is not None and not ev.at_height:
-            acts += self._drop(ev.t, State.WAITING_VEHICLE, ev.why)
+            acts += self._drop(ev.t, State.WAITING_VEHICLE, not_ready)
             acts.append(CloseVehicle(self.vin))
             self._forget_vehicle()
         changed = self._vehicle_changed(ev)
@@ -75,9 +77,9 @@ class LiftRules(FaultRules):
             return acts
         if not ev.ready:
             if self.state in ON_A_BOLT or self.state is State.TRACKING:
-                acts += self._drop(ev.t, State.WAITING_VEHICLE, ev.why)
+                acts += self._drop(ev.t, State.WAITING_VEHICLE, not_ready)
             else:
-                self._to(State.WAITING_VEHICLE, ev.why)
+                self._to(State.WAITING_VEHICLE, not_ready)
             return acts
         if self.vin is None:
             if not self._loading:
@@ -85,10 +87,10 @@ class LiftRules(FaultRules):
                 vin = ev.vin or f"SEQ-{int(ev.t)}"
                 self._load_code = ev.model_code
                 acts.append(LoadVehicle(ev.model_code, vin))
-                self._to(State.WAITING_VEHICLE, f"loading vehicle {vin}")
+                self._to(State.WAITING_VEHICLE, StateReason(Because.LOADING, vin=vin))
             return acts
         if self.state is State.WAITING_VEHICLE:
-            self._to(State.TRACKING, "tracking the wrench")
+            self._to(State.TRACKING, StateReason(Because.TRACKING))
         return acts
 
     def _vehicle_changed(self, ev: LiftRead) -> str | None:
@@ -128,7 +130,7 @@ class LiftRules(FaultRules):
                      or (SKIPPED if k in ev.skipped else PENDING))
             for k, b in ev.bolts.items()), rework=ev.rework, t=ev.t)
         if self.state is State.WAITING_VEHICLE and self._lift is not None and self._lift.ready:
-            self._to(State.TRACKING, "tracking the wrench")
+            self._to(State.TRACKING, StateReason(Because.TRACKING))
         # what waits for a supervisor comes back with the vehicle (a restart, a reload): the
         # screens and status list it again, to be released
         waiting = [Publish(BoltLocked(k, n, t=ev.t)) for k, n in self.matcher.locked.items()]

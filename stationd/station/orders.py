@@ -27,12 +27,14 @@ from stationd.station.commands import (
     skip_note,
 )
 from stationd.station.events import (
+    Because,
     BoltReleased,
     BoltSkipped,
     BoltToLoosen,
     OperatorChange,
     OperatorChanged,
     State,
+    StateReason,
     VehicleReopened,
 )
 from stationd.station.faults import FaultRules
@@ -67,15 +69,14 @@ class OrderRules(FaultRules):
         if isinstance(cmd, TeachStart | TeachPoint | TeachStop):
             return self._teach_refusal(cmd)
         if self._teach is not None:
-            return Reason(Why.TEACHING, note=self._teach.reason())
+            return self._teach.refusal()
         if isinstance(cmd, ReopenVehicle):
             if cmd.vin == self.vin:
                 return Reason(Why.ALREADY_OPEN, vin=cmd.vin)
             return None   # the database knows whether it is closed (CommandDone)
         if self.vin is None or self.matcher is None:
             # a vehicle raised while a device is in fault is not loaded until it is back
-            return Reason(Why.DEVICE_FAULT, note=self._fault_reason()) if self.faults \
-                else Reason(Why.NO_VEHICLE)
+            return self._fault_refusal() if self.faults else Reason(Why.NO_VEHICLE)
         if cmd.vin != self.vin:
             # typed in lower case: said, not taken (a command names exactly what it acts on)
             return Reason(Why.OTHER_VEHICLE, vin=cmd.vin,
@@ -172,7 +173,8 @@ class OrderRules(FaultRules):
         self.matcher.skipped[cmd.bolt] = why
         acts: list[Action] = [Publish(BoltSkipped(cmd.bolt, why, t=t))]
         if self.bolt == cmd.bolt:
-            acts += self._drop(t, State.TRACKING, f"bolt {cmd.bolt} {why}")
+            acts += self._drop(t, State.TRACKING,
+                               StateReason(Because.SKIPPED, bolt=cmd.bolt, note=why))
         return acts
 
     def _loosen_ordered(self, t: float, cmd: LoosenBolt, who: Issuer) -> list[Action]:
@@ -184,7 +186,8 @@ class OrderRules(FaultRules):
         self._loosen.add(cmd.bolt)
         acts = [self._to_loosen(t, cmd.bolt, who.user, skip_note(who.user, cmd.comment))]
         if self.bolt == cmd.bolt:
-            acts += self._drop(t, State.TRACKING, f"bolt {cmd.bolt}: loosen first")
+            acts += self._drop(t, State.TRACKING,
+                               StateReason(Because.LOOSEN_ORDERED, bolt=cmd.bolt))
         return acts
 
     def _to_loosen(self, t: float, bolt: str, user: str | None = None,
@@ -209,7 +212,7 @@ class OrderRules(FaultRules):
         previous, self.operator, self._operator_seen = self.operator, user, t
         acts: list[Action] = []
         if previous != user and (self.state in ON_A_BOLT or self.tool_on):
-            acts += self._drop(t, State.TRACKING, f"operator {how}")
+            acts += self._drop(t, State.TRACKING, StateReason(Because.OPERATOR, how=how))
         self._last_refusal = None   # a refusal to nobody is said again to the next one
         return [*acts, Publish(OperatorChanged(user, self.operator_required, previous, how,
                                                by, t=t))]

@@ -31,6 +31,7 @@ from stationd.station.actions import (
 )
 from stationd.station.commands import Answer, EnterOutcome, Issuer
 from stationd.station.events import (
+    Because,
     BoltSkipped,
     ControllerResultEvent,
     Notice,
@@ -39,6 +40,7 @@ from stationd.station.events import (
     ResultUnreadable,
     Said,
     State,
+    StateReason,
 )
 from stationd.station.inputs import (
     CommandDone,
@@ -218,7 +220,7 @@ class ResultRules(OrderRules):
         bolt = en.bolt if en is not None and en.vin else None
         acts: list[Action] = []
         if bolt is not None and self.tool_on:
-            acts += self._tool_off(ev.t, f"bolt {bolt}: its result could not be read")
+            acts += self._tool_off(ev.t, StateReason(Because.UNREADABLE, bolt=bolt))
         acts.append(StoreUnreadable(u, en.vin if en is not None and bolt else self.vin, bolt,
                                     en if bolt else None))
         acts.append(Publish(ResultUnreadable(u.error, u.revision, u.tightening_id, bolt,
@@ -233,8 +235,8 @@ class ResultRules(OrderRules):
                                if u.tightening_id is not None
                                else f"MID {u.mid:04d} revision {u.revision}")
         if self.bolt == bolt:
-            acts += self._drop(ev.t, State.TRACKING, f"bolt {bolt}: its result could not be "
-                               "read; held for a supervisor")
+            acts += self._drop(ev.t, State.TRACKING,
+                               StateReason(Because.UNREADABLE_HELD, bolt=bolt))
         return acts
 
     def _outside_window(self, r: TighteningResult, en: Selection
@@ -271,8 +273,7 @@ class ResultRules(OrderRules):
                       torque_min=lo, torque_max=hi, tightening_id=tid, t=ev.t)
         acts: list[Action] = []
         if self.tool_on and not cut:
-            acts += self._tool_off(ev.t, f"bolt {en.bolt}: an OK result without a result "
-                                   "type outside its torque window")
+            acts += self._tool_off(ev.t, StateReason(Because.NOT_TAKEN, bolt=en.bolt))
         acts.append(StoreControllerEvent(r, en.vin, en.bolt, NOT_TAKEN, en))
         acts.append(Publish(ControllerResultEvent(0, NOT_TAKEN, tid, int(r.pset), True,
                                                   en.bolt, t=ev.t)))
@@ -286,9 +287,8 @@ class ResultRules(OrderRules):
         else:
             acts.append(Publish(said))
         if self.bolt == en.bolt:
-            acts += self._drop(ev.t, State.TRACKING, f"bolt {en.bolt}: an OK result without "
-                               "a result type outside its torque window; held for a "
-                               "supervisor")
+            acts += self._drop(ev.t, State.TRACKING,
+                               StateReason(Because.NOT_TAKEN_HELD, bolt=en.bolt))
         return acts
 
     def _attribute(self, ev: ResultIn, en: Selection, cut: bool = False) -> list[Action]:
@@ -305,8 +305,8 @@ class ResultRules(OrderRules):
             else TIGHTENING
         acts: list[Action] = []
         if self.tool_on and not cut:
-            acts += self._tool_off(ev.t, f"bolt {en.bolt} " + (
-                "tightened" if kind == TIGHTENING else "loosened"))
+            acts += self._tool_off(ev.t, StateReason(Because.RUNDOWN, bolt=en.bolt,
+                                                     loosen=kind == LOOSENING))
         acts.append(Record(en.vin, en.bolt, r, en, late, kind))
         if cut:
             acts.append(Publish(Notice(Said.CUT_RECORDED, tightening_id=int(r.tightening_id),
@@ -342,9 +342,8 @@ class ResultRules(OrderRules):
         if self.bolt == en.bolt:
             self.bolt, self._selection, self._acked_at, self._away = None, None, None, 0
             if self.state in ON_A_BOLT:
-                what = "loosening " if kind == LOOSENING else ""
-                self._to(State.TRACKING,
-                         f"bolt {en.bolt} {what}{'OK' if r.ok else 'NOK'}; tracking")
+                self._to(State.TRACKING, StateReason(Because.RESULT, bolt=en.bolt,
+                                                     ok=bool(r.ok), loosen=kind == LOOSENING))
         return acts
 
     def _after_loosening(self, t: float, en: Selection, ok: bool) -> list[Action]:

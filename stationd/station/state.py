@@ -14,15 +14,17 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 
 from db.bolts import Window
-from stationd.reasons import Reason
+from stationd.reasons import Reason, Why
 from stationd.station.actions import Action, DisableTool, Owed, Publish, Selection
 from stationd.station.commands import TeachPoint
 from stationd.station.events import (
+    Because,
     BoltLocked,
     LineLinkChanged,
     Notice,
     Said,
     State,
+    StateReason,
     ToolDisabled,
 )
 from stationd.station.inputs import CommandIn, LiftRead, LoadedBolt
@@ -40,6 +42,8 @@ LOCALIZING = (State.TRACKING, *ON_A_BOLT)
 CAMERAS_ON = (*LOCALIZING, State.TEACHING)
 #: why a bolt is not tightened again after a NOK under the ``skip`` strategy
 NOK_SKIPPED = "NOK, skipped by the NOK policy"
+#: the station's reason until it started: its devices being opened
+OPENING = StateReason(Because.OPENING)
 #: the targets sent with a loosen pset: none of the station's own (a loosen pset is a program
 #: on the controller; a register-driven controller takes 0 as "the pset's own")
 LOOSEN_TARGETS = Window(0.0, 0.0, 0.0)
@@ -74,13 +78,22 @@ class _Teach:
     #: stale): a refusal with no steady localization names it
     missed: Reason | None = None
 
-    def reason(self) -> str:
-        doing = f"measuring {self.measuring.command.bolt}" if self.measuring is not None \
-            and isinstance(self.measuring.command, TeachPoint) else "hold the tool on a bolt"
-        return f"teaching {self.model} ({self.user}): {doing}"
+    def _bolt(self) -> str | None:
+        """The bolt being measured (None: waiting for a teach point)."""
+        c = self.measuring
+        return c.command.bolt if c is not None and isinstance(c.command, TeachPoint) else None
+
+    def reason(self) -> StateReason:
+        """The station's reason while teaching: the model, who, the bolt being measured."""
+        return StateReason(Because.TEACHING, model=self.model, user=self.user,
+                           bolt=self._bolt())
+
+    def refusal(self) -> Reason:
+        """Why another command waits: teach mode is on (said with the same details)."""
+        return Reason(Why.TEACHING, note=self.model, user=self.user, bolt=self._bolt())
 
 
-def _disable(reason: str, bolt: str | None = None, why: Reason | None = None, *,
+def _disable(reason: StateReason, bolt: str | None = None, why: Reason | None = None, *,
              t: float) -> list[Action]:
     """The tool off: said on the bus (the screens, the journal), then done."""
     return [Publish(ToolDisabled(reason, bolt, why, t=t)), DisableTool(reason, bolt, why)]
@@ -92,7 +105,8 @@ class CoreStatus:
     (they never read the core's fields, which only the core writes)."""
 
     state: State
-    reason: str
+    #: why, typed (its words: :func:`stationd.words.state_words`)
+    reason: StateReason
     #: device -> why it is in fault
     faults: Mapping[str, str]
     vin: str | None
@@ -132,7 +146,7 @@ class CoreState:
     late_result_s: float = LATE_RESULT_S
     nok: NokPolicy = field(default_factory=NokPolicy)
     state: State = State.STARTING
-    reason: str = "opening the devices"
+    reason: StateReason = OPENING
     _started: bool = field(default=False, repr=False)   # Started heard (once)
     bolt: str | None = None
     matcher: BoltMatcher | None = None
@@ -241,17 +255,26 @@ class CoreState:
         return [Publish(BoltLocked(bolt, n, t=t)),
                 Publish(Notice(Said.LOCKED, bolt=bolt, count=n, t=t))]
 
-    def _fault_reason(self) -> str:
-        return "; ".join(f"{d}: {r}" for d, (_, r) in self.faults.items())
+    def _fault_notes(self) -> tuple[tuple[str, str], ...]:
+        """Each device in fault with its own words, in the order they failed."""
+        return tuple((d, r) for d, (_, r) in self.faults.items())
 
-    def _tool_off(self, t: float, reason: str, why: Reason | None = None) -> list[Action]:
+    def _fault_reason(self) -> StateReason:
+        return StateReason(Because.FAULT, faults=self._fault_notes())
+
+    def _fault_refusal(self) -> Reason:
+        """Why a command or a teach point waits: the devices in fault."""
+        return Reason(Why.DEVICE_FAULT, faults=self._fault_notes())
+
+    def _tool_off(self, t: float, reason: StateReason,
+                  why: Reason | None = None) -> list[Action]:
         was = self.tool_on
         self.tool_on = False
         if was:
             self._off_at = t
         return _disable(reason, self.bolt, why, t=t)
 
-    def _drop(self, t: float, state: State, reason: str,
+    def _drop(self, t: float, state: State, reason: StateReason,
               why: Reason | None = None) -> list[Action]:
         """Leave a bolt: the tool goes off first, whatever happens next."""
         acts: list[Action] = []
@@ -270,7 +293,7 @@ class CoreState:
         self._loading, self._enabled, self._off_at = False, None, None
         self._vin_for, self._vin_pending, self._last_refusal = None, False, None
 
-    def _to(self, state: State, reason: str) -> None:
+    def _to(self, state: State, reason: StateReason) -> None:
         """The one place the state changes: with any device in fault the state is FAULT, and
         in teach mode TEACHING, so no rule elsewhere can leave them by accident."""
         if self.faults:

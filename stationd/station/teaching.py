@@ -20,12 +20,14 @@ from stationd.station.commands import (
     TeachStop,
 )
 from stationd.station.events import (
+    Because,
     Localized,
     Notice,
     PairChecked,
     PairsUnchecked,
     Said,
     State,
+    StateReason,
 )
 from stationd.station.inputs import CommandIn, LocalizedIn, ModelsKnown
 from stationd.station.state import ON_A_BOLT, CoreState, _Teach
@@ -91,7 +93,7 @@ class TeachRules(CoreState):
         t = self._teach
         if isinstance(cmd, TeachStart):
             if t is not None:
-                return Reason(Why.TEACHING, note=t.reason())
+                return t.refusal()
             if self.models is not None and cmd.model not in self.models:
                 return Reason(Why.UNKNOWN_MODEL, note=cmd.model)
             if self.tool_on:
@@ -100,9 +102,9 @@ class TeachRules(CoreState):
         if t is None:
             return Reason(Why.NOT_TEACHING)
         if isinstance(cmd, TeachPoint) and t.measuring is not None:
-            return Reason(Why.TEACHING, note=t.reason())
+            return t.refusal()
         if isinstance(cmd, TeachPoint) and self.faults:   # no frames would come: said now
-            return Reason(Why.DEVICE_FAULT, note=self._fault_reason())
+            return self._fault_refusal()
         return None
 
     def _teach_done(self, t: float, c: CommandIn) -> list[Action]:
@@ -110,7 +112,7 @@ class TeachRules(CoreState):
         dropped), a bolt's measuring started (answered once measured), or the mode off."""
         cmd = c.command
         if isinstance(cmd, TeachStart):
-            acts = self._drop(t, State.TEACHING, "teach mode")
+            acts = self._drop(t, State.TEACHING, StateReason(Because.TEACH_MODE))
             self._teach = _Teach(cmd.model, c.issuer.user)
             self._to(State.TEACHING, self._teach.reason())
             return [*acts, Reply(Answer(c.request, cmd, c.issuer))]
@@ -122,7 +124,7 @@ class TeachRules(CoreState):
             self.reason = self._teach.reason()
             return []
         self._teach = None
-        self._to(State.WAITING_VEHICLE, "teach mode ended; waiting for the lift")
+        self._to(State.WAITING_VEHICLE, StateReason(Because.TEACH_ENDED))
         return [Reply(Answer(c.request, cmd, c.issuer))]
 
     def _teach_overdue(self, t: float) -> list[Action]:

@@ -11,6 +11,7 @@ from drivers.keeper import FaultKind
 from stationd.reasons import Reason, Why
 from stationd.station.actions import Action, EnableTool, Publish, Selection, SendParams
 from stationd.station.events import (
+    Because,
     BoltSelected,
     BoltSkipped,
     Localized,
@@ -20,6 +21,7 @@ from stationd.station.events import (
     Refused,
     Said,
     State,
+    StateReason,
     ToolEnabled,
 )
 from stationd.station.faults import FaultRules
@@ -52,7 +54,7 @@ class ToolRules(FaultRules):
             self._away = 0
             if self.state is State.BOLT_SELECTED and self._acked_at is not None \
                     and ev.exposure_t > self._acked_at and self.bolt is not None:
-                self._to(State.TIGHTENING, f"tightening bolt {self.bolt}")
+                self._to(State.TIGHTENING, StateReason(Because.TIGHTENING, bolt=self.bolt))
                 sel = self._selection
                 assert sel is not None  # noqa: S101 - a bolt is selected
                 self.tool_on, self._enabled, self._off_at = True, sel, None
@@ -63,10 +65,12 @@ class ToolRules(FaultRules):
         # why not on it: the refusal, or the bolt it is on instead (a reason of its own kind)
         why = m.reason or Reason(Why.ELSEWHERE, bolt=m.candidate)
         if self.tool_on:
-            acts += self._tool_off(ev.t, f"wrench not confirmed on bolt {self.bolt}", why)
-            self._to(State.BOLT_SELECTED, f"bolt {self.bolt} selected; wrench not confirmed")
+            acts += self._tool_off(ev.t, StateReason(Because.NOT_CONFIRMED, bolt=self.bolt), why)
+            self._to(State.BOLT_SELECTED,
+                     StateReason(Because.SELECTED_UNCONFIRMED, bolt=self.bolt))
         if self._away >= self.leave_frames:
-            acts += self._drop(ev.t, State.TRACKING, f"wrench left bolt {self.bolt}", why)
+            acts += self._drop(ev.t, State.TRACKING,
+                               StateReason(Because.WRENCH_LEFT, bolt=self.bolt), why)
         return acts
 
     def _track(self, ev: LocalizedIn, m: Match) -> list[Action]:
@@ -105,8 +109,8 @@ class ToolRules(FaultRules):
         self.bolt, self._selection, self._acked_at, self._away = m.bolt, sel, None, 0
         self._last_refusal = None
         self.matcher.reset()
-        self._to(State.BOLT_SELECTED, f"bolt {m.bolt} selected" + (
-            f": loosen first (pset {pset})" if loosen else ""))
+        self._to(State.BOLT_SELECTED,
+                 StateReason(Because.SELECTED, bolt=m.bolt, pset=pset, loosen=loosen))
         return [Publish(BoltSelected(m.bolt, pset, ev.point_mm, sel.distance_mm,
                                      ev.tilt_deg, loosen, t=ev.t)),
                 SendParams(m.bolt, sel, params, loosen)]
@@ -116,10 +120,9 @@ class ToolRules(FaultRules):
                                                  t=ev.t))]
         if self.state is State.BOLT_SELECTED and ev.bolt == self.bolt and self._acked_at is None:
             self._acked_at = ev.t   # the tool waits for a frame exposed after this
-            self.reason = f"bolt {ev.bolt} acknowledged; confirming the wrench is on it"
+            self.reason = StateReason(Because.ACKNOWLEDGED, bolt=ev.bolt)
             return acts
-        return [*acts, *_disable(f"late acknowledgement for {ev.bolt} ignored", ev.bolt,
-                                 t=ev.t),
+        return [*acts, *_disable(StateReason(Because.LATE_ACK, bolt=ev.bolt), ev.bolt, t=ev.t),
                 Publish(Notice(Said.LATE_ACK, bolt=ev.bolt, t=ev.t))]
 
     def _on_tool_on(self, ev: ToolOn) -> list[Action]:

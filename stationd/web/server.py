@@ -294,7 +294,7 @@ class WebServer:
         """What ``GET /api/status`` and ``stationd status`` show."""
         v = self.view.to_json()
         return {"station": self.station, "state": v["state"], "reason": v["reason"],
-                "headline": v["headline"],
+                "reason_kind": v["reason_kind"], "headline": v["headline"],
                 "vehicle": v["vehicle"], "counters": v["counters"], "devices": v["devices"],
                 "versions": _versions(), "uptime_s": round(time.time() - self.started, 1),
                 "clients": self.clients, "line": self.line(), "operator": v["operator"],

@@ -16,6 +16,7 @@ from typing import Any
 from db.kinds import LOOSENING
 from stationd.reasons import Reason, Why
 from stationd.station.events import (
+    Because,
     BoltLocked,
     BoltReleased,
     BoltSelected,
@@ -43,7 +44,7 @@ from stationd.station.events import (
 )
 from stationd.station.inputs import DATABASE
 from stationd.station.state import LOCALIZING
-from stationd.words import check_words, reason_words
+from stationd.words import check_words, reason_words, state_words
 
 # a bolt's state on the screen; the label is what the operator reads next to the colour
 BOLT_LABELS = {
@@ -116,7 +117,9 @@ class View:
     """What the operator screen shows, built from the events in order."""
 
     state: str = State.STARTING   # until the daemon says otherwise
-    reason: str = ""
+    reason: str = ""              # the state's reason in words
+    #: and its kind: a reader that acts on the reason switches on it, never parses words
+    reason_kind: Because | None = None
     vin: str | None = None
     model: str | None = None
     rework: bool = False
@@ -215,7 +218,7 @@ class View:
                 self.alarm = f"parameters sent for {e.bolt} while the wrench was on {e.truth}"
 
     def _state(self, e: StateChanged) -> None:
-        self.state, self.reason = e.state, e.reason
+        self.state, self.reason, self.reason_kind = e.state, state_words(e.reason), e.reason.kind
         if e.state == State.STARTING:
             # a station (re)starting on its configuration: the last one's device
             # reports are not about these devices (a reload kept a fixed wrench "down")
@@ -257,10 +260,11 @@ class View:
         b = self.bolts.get(e.bolt or self.selected or "")
         if b is not None and b.state in ("selected", "tightening"):
             self._set(b.bolt, "pending")
+        said = state_words(e.reason)
         if e.why is not None:
-            self._refuse(f"{e.reason} ({reason_words(e.why)})", e.why)
-        elif e.reason:
-            self._refuse(e.reason)
+            self._refuse(f"{said} ({reason_words(e.why)})", e.why)
+        elif said:
+            self._refuse(said)
 
     def _locked(self, e: BoltLocked) -> None:
         b = self.bolts[e.bolt]
@@ -547,7 +551,9 @@ class View:
 
     def to_json(self) -> dict[str, Any]:
         return {
-            "state": self.state, "reason": self.reason, "headline": self.headline(),
+            "state": self.state, "reason": self.reason,
+            "reason_kind": None if self.reason_kind is None else self.reason_kind.value,
+            "headline": self.headline(),
             "headline_title": self.headline_title(),
             "tone": self.tone(),
             "refused": self.refused, "alarm": self.alarm,

@@ -30,6 +30,7 @@ from stationd.station.actions import SendParams
 from stationd.station.commands import CheckCalibration, Issuer, Right
 from stationd.station.events import Localized, PairChecked, ResultRecorded, VehicleClosed
 from stationd.station.trust import MeasureReferences
+from stationd.words import state_words
 from tests.shell.daemons import running, until_async
 from tests.shell.refstation import station_dir
 
@@ -85,7 +86,7 @@ class Run:
         ctl = simulators(self.st)[1]
         self.on(bolt)
         await until_async(lambda: self.st.core.bolt == bolt and ctl.tool_enabled, 60,
-                          f"tool on for {bolt}: {self.st.core.reason}")
+                          f"tool on for {bolt}: {state_words(self.st.core.reason)}")
         n = self.st.bus.count(ResultRecorded)
         assert ctl.pull_trigger() is not None
         await until_async(lambda: self.st.bus.count(ResultRecorded) > n, 30, "result recorded")

@@ -22,6 +22,7 @@ from stationd.station.events import (
     ToolEnabled,
     VehicleClosed,
 )
+from stationd.words import state_words
 from tests.shell.daemons import scenario, until_async, vehicle_bolts
 
 
@@ -71,7 +72,7 @@ def test_lift_plc_vanishing_is_a_fault_until_it_returns(tmp_path):
         port = plc.tcp_port
         plc.stop_tcp()
         await until_async(lambda: st.core.state is State.FAULT, 30)
-        assert st.core.reason.startswith("lift:")
+        assert state_words(st.core.reason).startswith("lift:")
         world.set_wrench(wrench_at(np.array(next(iter(vehicle_bolts(st).values())).position),
                                    np.random.default_rng(1), st.cfg.tool.length_mm))
         await asyncio.sleep(1.0)
@@ -98,7 +99,7 @@ def test_a_camera_that_stops_delivering_is_a_fault_until_it_returns(tmp_path):
     async def body(st, world):
         world.cut_cameras("pair2")
         await until_async(lambda: st.core.state is State.FAULT, 30)
-        assert st.core.reason.startswith("pair2:")
+        assert state_words(st.core.reason).startswith("pair2:")
         b = _first_bolt(st)
         world.set_wrench(wrench_at(np.array(b.position), np.random.default_rng(2),
                                    st.cfg.tool.length_mm))
@@ -127,7 +128,7 @@ def test_the_controller_dropping_mid_tightening_is_a_fault_then_the_bolt_is_done
         await until_async(lambda: st.core.state is State.TIGHTENING and ctl.tool_enabled, 60)
         ctl.power_off()                                    # gone mid-tightening
         await until_async(lambda: st.core.state is State.FAULT, 30)
-        assert st.core.reason.startswith("wrench:")
+        assert state_words(st.core.reason).startswith("wrench:")
         sends = len(_sends(st))
         await asyncio.sleep(1.0)
         assert len(_sends(st)) == sends
@@ -174,8 +175,8 @@ def test_frames_of_the_wrong_size_are_a_fault_not_an_exit(tmp_path, monkeypatch)
 
     async def body(st, world):
         await until_async(lambda: st.core.state is State.FAULT, 60)
-        assert st.core.reason.startswith("pair1: left frames are 64x48, the calibration is "
-                                          "for 5472x3648")
+        assert state_words(st.core.reason).startswith(
+            "pair1: left frames are 64x48, the calibration is for 5472x3648")
         await asyncio.sleep(1.0)
         assert st.core.state is State.FAULT and not _sends(st)
 
@@ -212,7 +213,8 @@ def test_a_database_failing_at_a_vehicle_is_a_fault_its_keeper_probes_back(tmp_p
 
     async def body(st, world):
         await until_async(lambda: "database" in st.core.faults, 30)
-        assert st.core.state is State.FAULT and "database: disk I/O error" in st.core.reason
+        assert st.core.state is State.FAULT
+        assert "database: disk I/O error" in state_words(st.core.reason)
         assert st.vin is None and not _sends(st)
         await asyncio.sleep(4.0)
         # backoff 0.5 s doubling to 5 s: a handful of probes, not one per tick

@@ -10,6 +10,7 @@ import time
 import pytest
 
 from stationd.station.events import State
+from stationd.words import state_words
 from tests.shell.daemons import run_station, station, until_async
 
 
@@ -22,7 +23,7 @@ def test_idle_station_reads_the_plc_at_most_20_times_a_second(tmp_path):
     async def idle(st, world):
         plc.set_height(400.0)              # up, not at working height
         await until_async(lambda: st.core.state is State.WAITING_VEHICLE, 60,
-                          lambda: f"waiting for a vehicle: {st.core.reason}")
+                          lambda: f"waiting for a vehicle: {state_words(st.core.reason)}")
         n0, c0, t0 = plc.requests, time.process_time(), time.monotonic()
         await asyncio.sleep(3.0)
         dt = time.monotonic() - t0

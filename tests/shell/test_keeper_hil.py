@@ -17,6 +17,7 @@ from stationd.demo.station import SIM_CONFIG
 from stationd.shell.daemon import Station
 from stationd.sim.devices_cli import psets_of
 from stationd.station.events import State
+from stationd.words import state_words
 
 WATCH_S = 6.0
 
@@ -68,7 +69,7 @@ def test_a_plc_that_hangs_up_is_a_fault_retried_ever_more_slowly(tmp_path):
         stop = asyncio.Event()
         task = asyncio.create_task(st.run(stop))
         await asyncio.sleep(WATCH_S)
-        seen.update(state=st.core.state, reason=st.core.reason, done=task.done())
+        seen.update(state=st.core.state, reason=state_words(st.core.reason), done=task.done())
         stop.set()
         await task
 

@@ -90,7 +90,7 @@ def test_loosen_strategy_lock_and_release_through_the_daemon(tmp_path):
         d.wait_log(f"B05: B05: loosen first (loosen pset {LOOSEN_PSET}), then tighten")
         ctl.nok_rate = 0.0
         assert rundown(d, ctl, pose, 2, pset=LOOSEN_PSET, loosening=True).ok
-        d.wait_log(f"bolt B05 selected: loosen first (pset {LOOSEN_PSET})")
+        d.wait_log(f"bolt selected: B05: loosen first (pset {LOOSEN_PSET})")
         d.wait_log("B05 loosened: its tightening pset goes next")
         ctl.nok_rate = 1.0
         assert not rundown(d, ctl, pose, 3, pset=2).ok   # NOK 2

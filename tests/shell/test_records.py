@@ -22,8 +22,16 @@ from db.repository import Repository
 from stationd.demo.station import SIM_CONFIG
 from stationd.sim.world import wrench_at
 from stationd.station.actions import DisableTool
-from stationd.station.events import BoltSelected, Localized, Notice, ResultUnattributed, State
-from stationd.words import notice_words, reason_words
+from stationd.station.events import (
+    Because,
+    BoltSelected,
+    Localized,
+    Notice,
+    ResultUnattributed,
+    State,
+    StateReason,
+)
+from stationd.words import notice_words, reason_words, state_words
 from tests.shell.daemons import scenario, until_async, vehicle_bolts
 
 VIN = "FAULTVIN000000001"  # the harness's vehicle
@@ -165,7 +173,7 @@ def _pull_as_the_wrench_leaves(st, world, a: str, then=None) -> dict[str, Any]:
 
     def on_action(act):
         if isinstance(act, DisableTool) and act.bolt == a \
-                and act.reason == f"wrench not confirmed on bolt {a}" \
+                and act.reason == StateReason(Because.NOT_CONFIRMED, bolt=a) \
                 and "late" not in pulled:
             assert st.core.state is not State.TIGHTENING
             pulled["late"] = st.wrench.controller.pull_trigger()
@@ -312,7 +320,8 @@ def test_a_result_the_database_refuses_is_a_fault_kept_and_stored_when_it_can(tm
         seen[second] = shot.tightening_id
         await until_async(lambda: "database" in st.core.faults, 30)
         assert st.core.state is State.FAULT
-        assert "results not stored" in st.core.reason and "disk is full" in st.core.reason
+        said = state_words(st.core.reason)
+        assert "results not stored" in said and "disk is full" in said
         assert not ctl.tool_enabled
         assert shot.tightening_id not in ctl.acked_ids
         sent = len(_sends(st))
@@ -354,7 +363,7 @@ def test_a_database_file_removed_under_the_daemon_is_a_fault_not_acknowledged(tm
         shot = ctl.pull_trigger()
         assert shot is not None
         await until_async(lambda: "database" in st.core.faults, 30)
-        assert "was removed" in st.core.reason and st.core.state is State.FAULT
+        assert "was removed" in state_words(st.core.reason) and st.core.state is State.FAULT
         await asyncio.sleep(1.0)
         assert shot.tightening_id not in ctl.acked_ids and not ctl.tool_enabled
         sent = len(_sends(st))

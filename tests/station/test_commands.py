@@ -12,7 +12,13 @@ from stationd.station import core as core_module
 from stationd.station.actions import DisableTool, Publish, RecordCommand, Reply
 from stationd.station.commands import Issuer, ReopenVehicle, Right, SkipBolt
 from stationd.station.core import StationCore
-from stationd.station.events import BoltSkipped, State, VehicleReopened
+from stationd.station.events import (
+    Because,
+    BoltSkipped,
+    State,
+    StateReason,
+    VehicleReopened,
+)
 from stationd.station.inputs import CommandDone, CommandIn, LiftRead, VehicleLoaded, VehicleRejected
 from stationd.words import answer_words, reason_words
 from tests.station.test_core import BOLTS, _on, _ready
@@ -72,6 +78,8 @@ def test_a_skip_of_the_selected_bolt_turns_the_tool_off():
     assert _answer(acts).answer.accepted
     assert any(isinstance(a, DisableTool) for a in acts)
     assert d.core.state is State.TRACKING and d.core.bolt is None
+    assert d.core.reason == StateReason(Because.SKIPPED, bolt="B2",
+                                        note=f"{SUPERVISOR.user}'s command")
 
 
 @pytest.mark.parametrize(("command", "issuer", "why"), [

@@ -34,12 +34,15 @@ from stationd.station.actions import (
 )
 from stationd.station.core import StationCore
 from stationd.station.events import (
+    Because,
     DeviceHealth,
     OperatorChanged,
     Refused,
     ResultUnattributed,
     State,
     StateChanged,
+    StateReason,
+    ToolDisabled,
 )
 from stationd.station.inputs import (
     DATABASE,
@@ -318,6 +321,55 @@ def published(acts: list[Any], kind: type) -> list[Any]:
     return [a.event for a in acts if isinstance(a, Publish) and isinstance(a.event, kind)]
 
 
+def test_the_state_s_reason_and_the_tool_s_are_kinds_with_their_fields():
+    """Why the station is in its state, and why the tool went off, are told typed (the words
+    are :func:`stationd.words.state_words`'): a start, the lift, a vehicle, a bolt selected,
+    acknowledged, tightened and its result; another one the wrench leaves; a fault, back."""
+    d = Driver()
+    assert d.core.status().reason == StateReason(Because.OPENING)
+    d.feed(Started(d.t))
+    d.step(("lift", 0.1, False, False, None))
+    d.step(("lift", 0.1, True, True, "VIN1"))
+    _on(d, 1)
+    d.step(("ack", 0.1, True))
+    _on(d, 1, 1)
+    d.step(("result", 0.1, True, 500, True, True))
+    _on(d, 2)
+    d.step(("ack", 0.1, True))
+    _on(d, 2, 1)
+    _on(d, 0, 2)                                       # out of view: the tool off, then left
+    d.step(("fault", 0.1, "lift"))
+    d.step(("back", 0.1, "", 0))
+    told = [e for _, acts in d.log for e in published(acts, StateChanged)]
+    assert [(e.state, e.reason) for e in told] == [
+        (State.WAITING_VEHICLE, StateReason(Because.WAITING_LIFT)),
+        (State.WAITING_VEHICLE, StateReason(Because.LIFT_NOT_READY,
+                                            note="lift not at working height")),
+        (State.WAITING_VEHICLE, StateReason(Because.LOADING, vin="VIN1")),
+        (State.TRACKING, StateReason(Because.TRACKING)),
+        (State.BOLT_SELECTED, StateReason(Because.SELECTED, bolt="B1", pset=1)),
+        (State.BOLT_SELECTED, StateReason(Because.ACKNOWLEDGED, bolt="B1")),
+        (State.TIGHTENING, StateReason(Because.TIGHTENING, bolt="B1")),
+        (State.TRACKING, StateReason(Because.RESULT, bolt="B1", ok=True)),
+        (State.BOLT_SELECTED, StateReason(Because.SELECTED, bolt="B2", pset=2)),
+        (State.BOLT_SELECTED, StateReason(Because.ACKNOWLEDGED, bolt="B2")),
+        (State.TIGHTENING, StateReason(Because.TIGHTENING, bolt="B2")),
+        (State.BOLT_SELECTED, StateReason(Because.SELECTED_UNCONFIRMED, bolt="B2")),
+        (State.TRACKING, StateReason(Because.WRENCH_LEFT, bolt="B2")),
+        (State.FAULT, StateReason(Because.FAULT, faults=(("lift", "lift gone"),))),
+        (State.WAITING_VEHICLE, StateReason(Because.RECOVERED)),
+    ]
+    off = [(e.reason, e.bolt, e.why is not None) for _, acts in d.log
+           for e in published(acts, ToolDisabled)]
+    assert off == [(StateReason(Because.STARTED), None, False),
+                   (StateReason(Because.RUNDOWN, bolt="B1"), "B1", False),
+                   (StateReason(Because.NOT_CONFIRMED, bolt="B2"), "B2", True),
+                   (StateReason(Because.WRENCH_LEFT, bolt="B2"), "B2", True)]
+    # the shell is told the same reason with the action
+    assert [a.reason for _, acts in d.log for a in acts if isinstance(a, DisableTool)] == \
+        [r for r, _, _ in off]
+
+
 def test_the_tool_waits_for_a_frame_exposed_after_the_acknowledgement():
     d = _ready()
     _on(d, 1)
@@ -389,10 +441,12 @@ def test_faults_are_per_device_and_the_station_recovers_when_all_are_back():
     d = _ready()
     d.step(("fault", 0.1, "lift"))
     d.step(("fault", 0.1, "pair1"))
-    assert d.core.reason.startswith("lift: ") and "pair1: " in d.core.reason
+    assert d.core.reason.kind is Because.FAULT
+    assert [device for device, _ in d.core.reason.faults] == ["lift", "pair1"]
     d.down.discard("lift")
     d.step(("lift", 0.1, True, True, "VIN1"))       # the lift answers: one fault left
-    assert d.core.state is State.FAULT and d.core.reason.startswith("pair1:")
+    assert d.core.state is State.FAULT
+    assert [device for device, _ in d.core.reason.faults] == ["pair1"]
     d.step(("back", 0.1, "pair1", 0))
     assert d.core.state is State.WAITING_VEHICLE
     d.step(("lift", 0.1, True, True, "VIN1"))
@@ -436,7 +490,8 @@ def test_a_refusal_skips_the_bolt_and_faults_the_controller_until_it_is_back():
     d = _ready()
     _on(d, 1)
     d.step(("ack", 0.01, False))
-    assert d.core.state is State.FAULT and "refused the parameters for B1" in d.core.reason
+    assert d.core.state is State.FAULT
+    assert "refused the parameters for B1" in dict(d.core.reason.faults)["wrench"]
     d.down.add("wrench")
     d.step(("back", 0.1, "wrench", 0))
     d.step(("lift", 0.1, True, True, "VIN1"))
@@ -457,7 +512,8 @@ def test_a_closed_vin_back_is_reopened_as_a_rework_or_a_named_fault():
     d2.closed_vins.add("VINR")
     d2.feed(Started(d2.t))
     d2.step(("lift", 0.1, True, True, "VINR"))
-    assert d2.core.state is State.FAULT and "VIN VINR already closed" in d2.core.reason
+    assert d2.core.state is State.FAULT
+    assert "VIN VINR already closed" in dict(d2.core.reason.faults)["vehicle"]
     d2.step(("lift", 0.1, False, False, None))        # lowering clears it
     assert d2.core.state is State.WAITING_VEHICLE
 
@@ -597,7 +653,8 @@ def test_a_database_fault_during_a_load_loads_the_vehicle_again_once_it_is_back(
     first = c.feed(LiftRead(1.1, True, True, 7, "VINDB"))
     assert [a for a in first if isinstance(a, LoadVehicle)]
     c.feed(DeviceFault(1.2, "database", FaultKind.DOWN, "disk I/O error"))
-    assert c.state is State.FAULT and c.reason == "database: disk I/O error"
+    assert c.state is State.FAULT
+    assert c.reason == StateReason(Because.FAULT, faults=(("database", "disk I/O error"),))
     assert not [a for a in c.feed(LiftRead(1.3, True, True, 7, "VINDB"))
                 if isinstance(a, LoadVehicle)]                     # in fault: no load
     c.feed(DeviceBack(1.4, "database"))
@@ -619,7 +676,7 @@ def test_a_vehicle_that_changes_at_height_is_a_fault_until_the_lift_goes_down():
         c.feed(VehicleLoaded(1.2, "VINA", "M", BOLTS))
         assert c.state is State.TRACKING
         acts = c.feed(changed)
-        assert c.state is State.FAULT and "lower the lift" in c.reason
+        assert c.state is State.FAULT and "lower the lift" in dict(c.reason.faults)["vehicle"]
         assert any(isinstance(a, DisableTool) for a in acts) or not c.tool_on
         pos = np.asarray(BOLTS["B1"].position, dtype=np.float64)
         sends = [a for k in range(6) for a in c.feed(LocalizedIn(1.4 + 0.05 * k,

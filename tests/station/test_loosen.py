@@ -25,10 +25,14 @@ from stationd.station.commands import (
 )
 from stationd.station.core import StationCore
 from stationd.station.events import (
+    Because,
     BoltLocked,
     BoltReleased,
     BoltSelected,
     BoltToLoosen,
+    StateChanged,
+    StateReason,
+    ToolDisabled,
     VehicleOpened,
 )
 from stationd.station.inputs import CommandDone, CommandIn, ModelsKnown, ResultIn, VehicleLoaded
@@ -77,6 +81,7 @@ def test_after_a_nok_the_loosen_pset_goes_first_then_the_tightening_pset():
     d = _driver()
     sent, acts = _rundown(d, 1, 1, ok=False)
     assert not sent.loosen and sent.selection.pset == 1
+    assert d.core.reason == StateReason(Because.RESULT, bolt="B1", ok=False)
     [to_loosen] = published(acts, BoltToLoosen)
     assert to_loosen.reason == Reason(Why.LOOSEN_FIRST, bolt="B1", pset=90)
     assert reason_words(to_loosen.reason) == "B1: loosen first (loosen pset 90), then tighten"
@@ -86,6 +91,11 @@ def test_after_a_nok_the_loosen_pset_goes_first_then_the_tightening_pset():
     assert (sent.parameters.pset, sent.parameters.torque) == (90, LOOSEN_TARGETS)
     [record] = [a for a in acts if isinstance(a, Record)]
     assert (record.bolt, record.kind, record.selection.loosen) == ("B1", LOOSENING, True)
+    told = [e.reason for _, a in d.log for e in published(a, StateChanged)]
+    assert StateReason(Because.SELECTED, bolt="B1", pset=90, loosen=True) in told
+    assert [e.reason for e in published(acts, ToolDisabled)] == [
+        StateReason(Because.RUNDOWN, bolt="B1", loosen=True)]
+    assert d.core.reason == StateReason(Because.RESULT, bolt="B1", ok=True, loosen=True)
     assert "B1" not in d.core.matcher.done      # a loosening is never the bolt done
     sent, acts = _rundown(d, 1, 3, ok=True, rtype=1)
     assert not sent.loosen and sent.selection.pset == 1
@@ -193,6 +203,7 @@ def test_a_loosen_of_the_selected_bolt_ends_its_selection_before_the_tool_comes_
     assert d.core.bolt == "B1" and not d.tool
     reply = _command(d, 1, LoosenBolt("VIN1", "B1"), LOOSENER)
     assert reply.answer.accepted and d.core.bolt is None
+    assert d.core.reason == StateReason(Because.LOOSEN_ORDERED, bolt="B1")
     d.step(("ack", 0.01, True))
     _on(d, 1, 1)
     assert not d.tool                          # the tightening pset's ack enables nothing

@@ -21,7 +21,14 @@ from stationd.station.actions import (
 )
 from stationd.station.commands import Issuer, Right, SignIn, SignOut
 from stationd.station.core import StationCore
-from stationd.station.events import OperatorChanged, Refused, State
+from stationd.station.events import (
+    Because,
+    OperatorChange,
+    OperatorChanged,
+    Refused,
+    State,
+    StateReason,
+)
 from stationd.station.inputs import CommandDone, CommandIn, OperatorBack, ResultIn, Started, Tick
 from stationd.words import answer_words, operator_words, reason_words
 from tests.station.test_commands import _answer
@@ -89,6 +96,7 @@ def test_a_sign_out_or_another_operator_ends_it_and_leaves_a_selected_bolt():
     assert _reply(acts).accepted and d.core.operator == "pia"
     assert any(isinstance(a, DisableTool) for a in acts) and not d.tool
     assert d.core.state is State.TRACKING and d.core.bolt is None
+    assert d.core.reason == StateReason(Because.OPERATOR, how=OperatorChange.SIGNED_IN)
     assert _changes(acts)[0].previous == "olga"
     recs = [a for a in _tighten(d, 2, 6) if isinstance(a, Record)]
     assert [r.selection.operator for r in recs] == ["pia"]

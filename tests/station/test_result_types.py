@@ -25,6 +25,7 @@ from stationd.station.actions import (
 )
 from stationd.station.commands import ReleaseBolt
 from stationd.station.events import (
+    Because,
     BoltLocked,
     BoltReleased,
     ControllerResultEvent,
@@ -32,6 +33,8 @@ from stationd.station.events import (
     ResultUnreadable,
     Said,
     State,
+    StateReason,
+    ToolDisabled,
 )
 from stationd.station.inputs import (
     DeviceBack,
@@ -157,6 +160,9 @@ def test_an_unreadable_result_is_stored_whole_and_holds_its_bolt_for_a_superviso
     [store] = [a for a in acts if isinstance(a, StoreUnreadable)]
     assert (store.bolt, store.vin, store.selection) == ("B1", "VIN1", sent.selection)
     assert any(isinstance(a, DisableTool) for a in acts) and not d.core.tool_on
+    assert [e.reason for e in published(acts, ToolDisabled)] == [
+        StateReason(Because.UNREADABLE, bolt="B1"), StateReason(Because.UNREADABLE_HELD, bolt="B1")]
+    assert d.core.reason == StateReason(Because.UNREADABLE_HELD, bolt="B1")
     [ev] = published(acts, ResultUnreadable)
     assert (ev.bolt, ev.tightening_id, ev.revision) == ("B1", 7, 7)
     [lock] = published(acts, BoltLocked)

@@ -10,10 +10,10 @@ from typing import Any
 import pytest
 
 from drivers.keeper import FaultKind
-from stationd.reasons import Why
+from stationd.reasons import Reason, Why
 from stationd.station.actions import DisableTool, Reply, SendParams
 from stationd.station.commands import Issuer, Right, SkipBolt, TeachPoint, TeachStart, TeachStop
-from stationd.station.events import State
+from stationd.station.events import Because, State, StateReason
 from stationd.station.inputs import CommandDone, CommandIn, DeviceFault, LocalizedIn, Tick
 from stationd.station.teaching import TEACH_FRAMES, TEACH_WAIT_S
 from tests.station.test_commands import OPERATOR, _answer
@@ -45,21 +45,29 @@ def test_teach_mode_turns_the_cycle_off_and_measures_a_steady_bolt_end():
     acts = _do(d, 2, TeachStart("M"))
     assert _answer(acts).answer.accepted and d.core.state is State.TEACHING
     assert d.core.bolt is None                                   # the selection dropped
-    assert _answer(_do(d, 3, SkipBolt("VIN1", "B1"), OPERATOR)).answer.reason.kind \
-        is Why.TEACHING                                          # other commands wait
+    assert [a.reason for a in acts if isinstance(a, DisableTool)] == \
+        [StateReason(Because.TEACH_MODE)]
+    assert d.core.reason == StateReason(Because.TEACHING, model="M", user="ed")
+    assert _answer(_do(d, 3, SkipBolt("VIN1", "B1"), OPERATOR)).answer.reason == \
+        Reason(Why.TEACHING, note="M", user="ed")                # other commands wait
     before = len(d.sends)
     _on(d, 1, 4)
     assert len(d.sends) == before                                # nothing is sent
     assert not any(isinstance(a, SendParams | Reply) for _, acts in d.log[-4:] for a in acts)
     acts = _do(d, 4, TeachPoint("B7"))
     assert not any(isinstance(a, Reply) for a in acts)           # answered once measured
+    assert d.core.reason == StateReason(Because.TEACHING, model="M", user="ed", bolt="B7")
+    assert _answer(_do(d, 6, TeachPoint("B8"))).answer.reason == \
+        Reason(Why.TEACHING, note="M", user="ed", bolt="B7")   # one bolt at a time
     acts = _frames(d, 500.0, TEACH_FRAMES)
     [reply] = [a for a in acts if isinstance(a, Reply)]
     r = reply.answer.result
     assert reply.answer.accepted and r is not None
     assert r["position_mm"][0] == pytest.approx(500.05, abs=0.05) and r["dispersion_mm"] < 0.2
+    assert d.core.reason == StateReason(Because.TEACHING, model="M", user="ed")
     acts = _do(d, 5, TeachStop())
     assert _answer(acts).answer.accepted and d.core.state is not State.TEACHING
+    assert d.core.reason == StateReason(Because.TEACH_ENDED)
 
 
 def test_a_wrench_that_moves_while_measured_is_refused_and_frames_before_do_not_count():
@@ -108,7 +116,7 @@ def test_a_bolt_being_measured_is_answered_when_a_pair_faults():
     acts = d.core.feed(DeviceFault(d.t, "pair1", FaultKind.DOWN, NO_WORLD))
     [reply] = [a for a in acts if isinstance(a, Reply)]
     assert reply.answer.reason is not None and reply.answer.reason.kind is Why.DEVICE_FAULT
-    assert NO_WORLD in (reply.answer.reason.note or "")
+    assert reply.answer.reason.faults == (("pair1", NO_WORLD),)
     assert _answer(_do(d, 3, TeachStop())).answer.accepted     # teach mode ends as usual
 
 

@@ -20,7 +20,16 @@ from drivers.wrench import TorqueUnit
 from stationd.reasons import Reason, Why
 from stationd.station.actions import DisableTool, Record, StoreControllerEvent
 from stationd.station.commands import EnterOutcome, ReleaseBolt
-from stationd.station.events import BoltLocked, ControllerResultEvent, Notice, Said, State
+from stationd.station.events import (
+    Because,
+    BoltLocked,
+    ControllerResultEvent,
+    Notice,
+    Said,
+    State,
+    StateReason,
+    ToolDisabled,
+)
 from stationd.station.inputs import DeviceBack, DeviceFault, ResultIn, Tick, VehicleLoaded
 from stationd.words import notice_words, reason_words
 from tests.station.test_commands import SUPERVISOR, _answer
@@ -63,6 +72,9 @@ def test_an_untyped_ok_outside_the_torque_window_holds_the_bolt_and_closes_nothi
     [ev] = published(acts, ControllerResultEvent)
     assert (ev.result_type, ev.what, ev.bolt, ev.tightening_id) == (0, NOT_TAKEN, "B1", 7)
     assert any(isinstance(a, DisableTool) for a in acts) and not d.core.tool_on
+    assert [e.reason for e in published(acts, ToolDisabled)] == [
+        StateReason(Because.NOT_TAKEN, bolt="B1"), StateReason(Because.NOT_TAKEN_HELD, bolt="B1")]
+    assert d.core.reason == StateReason(Because.NOT_TAKEN_HELD, bolt="B1")
     assert _notices(acts) == [
         f"B1: an OK result without a result type, {torque:.1f} Nm outside 20.0-25.0 Nm "
         "(tightening 7): not taken as a tightening; check it on the controller, then "

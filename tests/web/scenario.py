@@ -9,6 +9,7 @@ from db.repository import Repository
 from stationd.boltfile import import_bolts
 from stationd.reasons import Reason, Why
 from stationd.station.events import (
+    Because,
     BoltSelected,
     BoltView,
     DeviceHealth,
@@ -18,6 +19,7 @@ from stationd.station.events import (
     ResultRecorded,
     State,
     StateChanged,
+    StateReason,
     StationEvent,
     ToolEnabled,
     VehicleOpened,
@@ -47,7 +49,7 @@ def opened() -> list[StationEvent]:
                                                   ("B3", 0, 300), ("B4", 400, 300)]))
     return [
         DeviceHealth(device="lift", ok=True), DeviceHealth(device="wrench", ok=True),
-        StateChanged(state=State.TRACKING, reason="vehicle at height"),
+        StateChanged(state=State.TRACKING, reason=StateReason(Because.TRACKING)),
         VehicleOpened(vin=VIN, model="SEDAN", bolts=bolts),
     ]
 
@@ -79,13 +81,22 @@ def work() -> list[StationEvent]:
     return out
 
 
+LIFT_DOWN = (("lift", "no answer from 10.0.0.7:502 for 2.0 s"),)
+#: the station's reason while the lift is low (the lift's own words)
+LIFT_LOW = StateReason(Because.LIFT_NOT_READY, note="lift not at working height")
+
+
+def fault_state(*faults: tuple[str, str]) -> StateChanged:
+    """The station in fault: each device in fault with its own words, as the core says it."""
+    return StateChanged(state=State.FAULT, reason=StateReason(Because.FAULT, faults=faults))
+
+
 def fault() -> list[StationEvent]:
     return [
         DeviceHealth(device="lift", ok=False, kind="timeout",
                      reason="no answer from 10.0.0.7:502 for 2.0 s"),
-        StateChanged(state=State.FAULT, reason="lift: no answer from 10.0.0.7:502 for 2.0 s"),
-        Refused(reason=Reason(Why.DEVICE_FAULT, note="lift: no answer from 10.0.0.7:502 for "
-                                                     "2.0 s")),
+        fault_state(*LIFT_DOWN),
+        Refused(reason=Reason(Why.DEVICE_FAULT, faults=LIFT_DOWN)),
     ]
 
 
@@ -115,10 +126,10 @@ def long_fault() -> list[StationEvent]:
         ("pair1", "down", f"left camera {cams}: no frames for 3.0 s"),
         ("pair2", "down", f"right camera {cams.replace('.21', '.24')}: no frames for 3.0 s"),
     ]
-    reason = "; ".join(f"{d}: {r}" for d, _, r in faults)
+    each = tuple((d, r) for d, _, r in faults)
     return [*(DeviceHealth(device=d, ok=False, kind=k, reason=r) for d, k, r in faults),
-            StateChanged(state=State.FAULT, reason=reason),
-            Refused(reason=Reason(Why.DEVICE_FAULT, note=reason))]
+            fault_state(*each),
+            Refused(reason=Reason(Why.DEVICE_FAULT, faults=each))]
 
 
 def sim_vehicle() -> VehicleOpened:

@@ -13,7 +13,14 @@ import pytest
 
 from db.repository import Repository
 from stationd.reasons import Reason, Why
-from stationd.station.events import BoltSkipped, Localized, Refused, StateChanged
+from stationd.station.events import (
+    Because,
+    BoltSkipped,
+    Localized,
+    Refused,
+    StateChanged,
+    StateReason,
+)
 from stationd.web.results import Results
 from tests.web.conftest import SIZES
 from tests.web.pages import Page
@@ -172,7 +179,8 @@ def label_overlaps(page: Page) -> list[str]:
 
 def test_dense_map_labels_never_overlap_and_between_bolts_is_neutral(live_server, page, shots):
     srv = live_server(devices=("lift", "wrench", "pair1", "pair2", "pair3", "pair4"))
-    srv.publish([StateChanged(state="tracking", reason="vehicle at height"), sim_vehicle()])
+    srv.publish([StateChanged(state="tracking", reason=StateReason(Because.TRACKING)),
+                 sim_vehicle()])
     page.get(srv.url)
     page.wait(lambda p: p.count("#bolts g.bolt") == 50, what="50 bolts on the map")
     for w, h in SIZES:

@@ -16,11 +16,13 @@ import pytest
 
 from stationd.reasons import Reason, Why
 from stationd.station.events import (
+    Because,
     DeviceHealth,
     Localized,
     Refused,
     State,
     StateChanged,
+    StateReason,
     StationEvent,
 )
 from tests.web.conftest import SIZES
@@ -89,7 +91,7 @@ def lost(reason: Reason) -> Localized:
 
 
 def tracking() -> list[StationEvent]:
-    return [StateChanged(state=State.TRACKING, reason="vehicle at height"), VEHICLE]
+    return [StateChanged(state=State.TRACKING, reason=StateReason(Because.TRACKING)), VEHICLE]
 
 
 def nexts(page: Page) -> list[str]:
@@ -178,7 +180,8 @@ def pair_reason(p: str) -> str:
 
 def faults(reason: Callable[[str], str]) -> list[StationEvent]:
     return [*(DeviceHealth(device=p, ok=False, kind="down", reason=reason(p)) for p in PAIRS),
-            StateChanged(state=State.FAULT, reason="; ".join(f"{p}: {reason(p)}" for p in PAIRS))]
+            StateChanged(state=State.FAULT, reason=StateReason(
+                Because.FAULT, faults=tuple((p, reason(p)) for p in PAIRS)))]
 
 
 PANEL_JS = """
@@ -246,8 +249,8 @@ def test_the_start_up_headline_says_starting_not_stale(screen, page):
     stale = Reason(Why.STALE, age_ms=7524.0, limit=500.0)
     first = Localized(point_mm=(1200.0, -300.0, 0.0), tilt_deg=1.0, reason=stale,
                       candidate=None, distance_mm=None, age_ms=7524.0, allowed=EVERY, t=100.0)
-    srv = screen([StateChanged(state=State.STARTING, reason="opening the devices"), *tracking(),
-                  first, Refused(reason=stale, t=100.0)])
+    srv = screen([StateChanged(state=State.STARTING, reason=StateReason(Because.OPENING)),
+                  *tracking(), first, Refused(reason=stale, t=100.0)])
     page.wait(lambda p: (p.text("#headline") or "").startswith("Starting"), what="starting")
     assert page.text("#headline") == "Starting: the cameras' first frames are late (7524 ms old)"
     assert page.js("return document.getElementById('headline').dataset.tone") == "idle"

@@ -12,17 +12,19 @@ import numpy as np
 import pytest
 
 from stationd.station.events import (
+    Because,
     BoltSelected,
     DeviceHealth,
     Localized,
     ResultRecorded,
     StateChanged,
+    StateReason,
     VehicleClosed,
 )
 from stationd.web.server import WebServer
 from tests.web.mapgeo import confusable, map_geometry
 from tests.web.pages import Page
-from tests.web.scenario import opened, sim_vehicle, work
+from tests.web.scenario import LIFT_LOW, fault_state, opened, sim_vehicle, work
 from tests.web.test_browser import label_overlaps
 
 SIM_VIN = "SIMVIN0000000001"
@@ -78,8 +80,8 @@ def test_bolt_map_labels_read_as_their_own_bolt_and_the_map_keeps_its_size(live_
                                                                             shots):
     srv = live_server(devices=("lift", "wrench", "pair1", "pair2", "pair3", "pair4"))
     allowed = ("B05", "B06", "B07", "B20", "B36")
-    srv.publish([StateChanged(state="tracking", reason="vehicle at height"), sim_vehicle(),
-                 nok("B04"), nok("B13"),
+    srv.publish([StateChanged(state="tracking", reason=StateReason(Because.TRACKING)),
+                 sim_vehicle(), nok("B04"), nok("B13"),
                  Localized(point_mm=(0.0, 0.0, 0.0), tilt_deg=1.0, reason=None, candidate="B41",
                            distance_mm=1.0, age_ms=30.0, allowed=allowed),
                  BoltSelected(bolt="B41", pset=1, point_mm=(0.0, 0.0, 0.0), distance_mm=1.0,
@@ -109,12 +111,13 @@ def test_a_closed_incomplete_vehicle_is_an_alarm_with_missing_bolts(live_server,
     names = [f"B{k:02d}" for k in range(1, 51)]
     done = [b for b in names[:12] if b != "B04"]
     missing = tuple(b for b in names if b not in done and b != "B04")
-    srv.publish([StateChanged(state="tracking", reason="vehicle at height"), sim_vehicle(),
+    srv.publish([StateChanged(state="tracking", reason=StateReason(Because.TRACKING)),
+                 sim_vehicle(),
                  *(ok(b, i) for i, b in enumerate(done)), nok("B04"),
                  Localized(point_mm=(0.0, 0.0, 0.0), tilt_deg=1.0, reason=None, candidate=None,
                            distance_mm=None, age_ms=30.0, allowed=missing),
                  VehicleClosed(vin=SIM_VIN, missing=missing, nok=("B04",)),
-                 StateChanged(state="waiting for vehicle", reason="lift not at working height")])
+                 StateChanged(state="waiting for vehicle", reason=LIFT_LOW)])
     page.get(srv.url)
     page.wait(lambda p: "closed" in (p.text("#headline") or ""), what="the closed headline")
     head = page.text("#headline") or ""
@@ -174,7 +177,7 @@ def test_cameras_show_a_pair_that_is_down_old_frames_and_the_crop_in_view(live_s
     srv = live_server(devices=("lift", "wrench", "pair1", "pair2", "pair3"))
     reason = "left camera file:///nonexist/left_*.png: no such files"
     srv.publish([DeviceHealth(device="pair1", ok=False, kind="down", reason=reason),
-                 StateChanged(state="fault", reason=f"pair1: {reason}")])
+                 fault_state(("pair1", reason))])
     img = np.random.default_rng(5).integers(0, 60, (1200, 1600), dtype=np.uint8)
     now = time.time()
     for k in range(5):      # pair3's last frames 25 s old

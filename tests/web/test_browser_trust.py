@@ -8,7 +8,7 @@ from __future__ import annotations
 from typing import Any
 
 from stationd.station.actions import Publish
-from stationd.station.events import StateChanged, StationEvent
+from stationd.station.events import Because, StateChanged, StateReason, StationEvent
 from stationd.station.inputs import Started
 from stationd.station.trust import ReferencesChecked
 from tests.station.test_trust import _core, _loaded, moved, ok
@@ -29,7 +29,7 @@ def _li(page: Any, device: str, what: str) -> Any:
 def test_pairs_trust_on_the_devices_panel_and_the_cameras_screen(live_server, page, shots):
     srv = live_server(devices=DEVICES)
     core = _core()
-    srv.publish([StateChanged("waiting for vehicle", "waiting for the lift"),
+    srv.publish([StateChanged("waiting for vehicle", StateReason(Because.WAITING_LIFT)),
                  *_published(core.feed(Started(1.0)))])
     page.get(srv.url)
     page.wait(lambda p: _li(p, "pair1", "textContent") == "pair1 not checked against the "

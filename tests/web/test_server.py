@@ -13,7 +13,7 @@ from aiohttp import ClientSession
 
 from stationd.bus import EventBus
 from stationd.errors import InputError
-from stationd.station.events import Localized, PairFrames, StateChanged
+from stationd.station.events import Because, Localized, PairFrames, StateChanged, StateReason
 from stationd.web.frames import LatestFrames
 from stationd.web.results import Results
 from stationd.web.server import WebServer
@@ -63,6 +63,9 @@ def test_status_healthz_and_live_events():
                 async with http.get(srv.url + "api/status") as r:
                     st = await r.json()
                 assert st["state"] == "fault" and st["counters"]["done"] == 1
+                # the reason in words, and its kind beside them for a reader that acts on it
+                assert (st["reason"], st["reason_kind"]) == (
+                    "lift: no answer from 10.0.0.7:502 for 2.0 s", "fault")
                 assert st["devices"]["lift"]["ok"] is False
                 assert {"stationd", "aiohttp", "python"} <= set(st["versions"])
                 async with http.post(srv.url + "api/status") as r:
@@ -188,15 +191,17 @@ def test_numpy_values_and_an_odd_event_do_not_stop_the_live_view():
                                   distance_mm=1.0, age_ms=30.0))
             bus.publish(Localized(point_mm=(1.0,), tilt_deg=None,
                                   reason=None, candidate=None, distance_mm=None, age_ms=1.0))
-            bus.publish(StateChanged(state="tracking", reason="still following"))
+            bus.publish(StateChanged(state="bolt selected",
+                                     reason=StateReason(Because.SELECTED, bolt="B1", pset=1)))
             async with ClientSession() as http:
                 for _ in range(100):
                     async with http.get(srv.url + "api/view") as r:
                         v = await r.json()
-                    if v["reason"] == "still following":
+                    if v["reason"] == "bolt B1 selected":
                         break
                     await asyncio.sleep(0.05)
-            assert v["reason"] == "still following" and srv.errors == 1
+            assert (v["reason"], v["reason_kind"]) == ("bolt B1 selected", "selected")
+            assert srv.errors == 1
             assert abs(v["wrench"]["x"] - 1.5) < 1e-6 and abs(v["wrench"]["tilt"] - 2.5) < 1e-6
         finally:
             await srv.stop()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from stationd.cli import main
-from tests.web.scenario import fault, opened
+from tests.web.scenario import fault, fault_state, opened
 
 
 def test_status_prints_state_vehicle_and_faulty_device(live_server, capsys):
@@ -66,11 +66,11 @@ def test_status_bad_timeout_is_one_line_exit_2_not_no_daemon(timeout, capsys):
 
 def test_status_says_not_opened_yet_while_the_database_keeps_the_devices_closed(live_server,
                                                                                 capsys):
-    from stationd.station.events import DeviceHealth, StateChanged
+    from stationd.station.events import DeviceHealth
 
     srv = live_server(devices=("lift", "wrench"))
     srv.publish([DeviceHealth(device="database", ok=False, kind="down", reason="disk I/O error"),
-                 StateChanged(state="fault", reason="database: disk I/O error")])
+                 fault_state(("database", "disk I/O error"))])
     srv.call(_settle(srv))
     assert main(["status", "--url", srv.url]) == 1
     out = capsys.readouterr().out

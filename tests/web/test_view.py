@@ -4,12 +4,14 @@ from __future__ import annotations
 
 from stationd.reasons import Reason, Why
 from stationd.station.events import (
+    Because,
     BoltSkipped,
     DeviceHealth,
     Localized,
     ParamsRefusedEvent,
     Refused,
     StateChanged,
+    StateReason,
     ToolDisabled,
     VehicleClosed,
     VehicleReopened,
@@ -17,7 +19,7 @@ from stationd.station.events import (
 )
 from stationd.web.view import View, fold
 from stationd.words import reason_words
-from tests.web.scenario import VIN, fault, opened, result, work
+from tests.web.scenario import LIFT_LOW, VIN, fault, fault_state, opened, result, work
 
 
 def states(v: View) -> dict[str, str]:
@@ -33,7 +35,7 @@ def test_opened_vehicle_has_pending_bolts_and_counters():
     assert v.headline() == "Starting: waiting for the cameras' first frames"
     v.apply(Localized(point_mm=None, tilt_deg=None, reason=NOT_SEEN, candidate=None,
                       distance_mm=None, age_ms=30.0))
-    assert v.headline() == "vehicle at height"
+    assert v.headline() == "tracking the wrench"
 
 
 def test_work_marks_ok_nok_selected_tightening_and_next():
@@ -73,8 +75,8 @@ def test_a_long_fault_reason_is_cut_in_the_headline_and_whole_in_its_title():
             "world must call drivers.camera.sim.register_world('pair1', source) first")
     reason = ("stereo sim://pair1/left + sim://pair1/right: no frame from left and right "
               f"within 1 s (left: {side.format('left')}; right: {side.format('right')})")
-    for events in ([StateChanged(state="fault", reason=f"pair1: {reason}")],
-                   [StateChanged(state="fault", reason=f"pair1: {reason}"),
+    for events in ([fault_state(("pair1", reason))],
+                   [fault_state(("pair1", reason)),
                     DeviceHealth(device="wrench", ok=False, kind="down", reason="refused")]):
         v = fold([*opened(), DeviceHealth(device="pair1", ok=False, kind="down",
                                           reason=reason), *events])
@@ -111,9 +113,13 @@ def test_lost_wrench_is_marked_lost_without_a_position():
 
 def test_tool_disabled_returns_selection_to_pending_with_reason():
     v = fold(opened() + work())
-    v.apply(ToolDisabled(reason="wrench left the bolt", bolt="B3"))
+    v.apply(ToolDisabled(reason=StateReason(Because.WRENCH_LEFT, bolt="B3"), bolt="B3"))
     assert states(v)["B3"] == "pending"
-    assert v.headline() == "wrench left the bolt"
+    assert v.headline() == "wrench left bolt B3"
+    v = fold(opened() + work())
+    v.apply(ToolDisabled(reason=StateReason(Because.NOT_CONFIRMED, bolt="B3"), bolt="B3",
+                         why=Reason(Why.STALE, age_ms=812.0)))
+    assert v.headline() == "wrench not confirmed on bolt B3 (localization is stale (812 ms old))"
 
 
 def test_skip_rework_result_close_and_wrong_bolt():
@@ -134,7 +140,7 @@ def test_results_keep_only_the_last_few_and_reopen_resets():
     for i in range(20):
         v.apply(result("B1", i % 2 == 0, i))
     assert len(v.results) == 8 and v.results[0]["t"] >= v.results[-1]["t"]
-    v.apply(StateChanged(state="waiting for vehicle", reason="no vehicle"))
+    v.apply(StateChanged(state="waiting for vehicle", reason=StateReason(Because.WAITING_LIFT)))
     v.apply(opened()[-1])
     assert v.results == [] and states(v)["B1"] == "pending"
 
@@ -208,12 +214,12 @@ def test_fault_is_red_above_any_refusal_and_a_selection_is_go():
 
 
 def test_configured_devices_are_listed_ok_once_started_until_one_reports():
-    v = fold([StateChanged(state="starting", reason="opening devices")],
+    v = fold([StateChanged(state="starting", reason=StateReason(Because.OPENING))],
              configured=("lift", "wrench", "pair1"))
     health = v.device_health()
     assert list(health) == ["lift", "wrench", "pair1"]
     assert not any(h["ok"] for h in health.values())     # not opened yet: not claimed ok
-    v.apply(StateChanged(state="waiting for vehicle", reason="no vehicle"))
+    v.apply(StateChanged(state="waiting for vehicle", reason=StateReason(Because.WAITING_LIFT)))
     assert all(h["ok"] and not h["reported"] for h in v.device_health().values())
     v.apply(DeviceHealth(device="pair1", ok=False, kind="down", reason="camera 3 gone"))
     got = v.to_json()["devices"]
@@ -221,9 +227,9 @@ def test_configured_devices_are_listed_ok_once_started_until_one_reports():
     assert got["lift"]["ok"] and got["wrench"]["ok"]
     # a reload: the station starts again on its (new) configuration; the last one's reports
     # go (a newcomer's fixed wrench stayed "down ...?foo=1" after the reload that fixed it)
-    v.apply(StateChanged(state="starting", reason="opening the devices"))
+    v.apply(StateChanged(state="starting", reason=StateReason(Because.OPENING)))
     assert not any(h["ok"] or h["reported"] for h in v.device_health().values())
-    v.apply(StateChanged(state="waiting for vehicle", reason="no vehicle"))
+    v.apply(StateChanged(state="waiting for vehicle", reason=StateReason(Because.WAITING_LIFT)))
     assert all(h["ok"] and not h["reported"] for h in v.device_health().values())
 
 
@@ -232,13 +238,14 @@ def test_a_station_waiting_for_its_vehicle_says_so_not_the_last_refusal():
     speaks: the headline is the closed vehicle's summary, then the station's own reason (a
     newcomer saw "Bring the wrench to a bolt" under "waiting for vehicle")."""
     v = fold([*opened(), lost(NOT_SEEN), Refused(reason=NOT_SEEN),
-              StateChanged(state="waiting for vehicle", reason="lift not at working height")])
+              StateChanged(state="waiting for vehicle", reason=LIFT_LOW)])
     assert v.headline() == "lift not at working height" and v.tone() == ""
     v = fold([*opened(), Refused(reason=NOT_SEEN),
               VehicleClosed(vin=VIN, missing=("B1",), nok=()),
-              StateChanged(state="waiting for vehicle", reason="lift not at working height")])
+              StateChanged(state="waiting for vehicle", reason=LIFT_LOW)])
     assert v.headline() == f"{VIN} closed: missing B1"
-    v = fold([*opened(), Refused(reason=NOT_SEEN), StateChanged(state="tracking", reason="")])
+    v = fold([*opened(), Refused(reason=NOT_SEEN),
+              StateChanged(state="tracking", reason=StateReason(Because.TRACKING))])
     assert v.headline() == "Bring the wrench to a bolt"      # while tracking it still does
 
 
@@ -251,7 +258,7 @@ def test_a_closed_vehicle_with_missing_or_nok_bolts_is_an_alarm_and_its_bolts_sa
     assert states(v) == {"B1": "ok", "B2": "nok", "B3": "missing", "B4": "missing"}
     assert v.to_json()["bolts"][3]["label"] == "missing"
     assert v.tone() == "nok" and v.headline() == f"{VIN} closed: missing B3, B4; NOK B2"
-    v.apply(StateChanged(state="waiting for vehicle", reason="lift not at working height"))
+    v.apply(StateChanged(state="waiting for vehicle", reason=LIFT_LOW))
     assert v.tone() == "nok"             # the closed vehicle still speaks, still red
     v = fold(opened())
     v.apply(VehicleClosed(vin=VIN, missing=("B1",), nok=()))
@@ -266,7 +273,7 @@ def test_a_reopened_vehicle_is_no_longer_said_closed():
     "VIN closed: 40 missing": reopened, it is said so until it opens at the station."""
     v = fold(opened())
     v.apply(VehicleClosed(vin=VIN, missing=("B1",), nok=()))
-    v.apply(StateChanged(state="waiting for vehicle", reason="lift not at working height"))
+    v.apply(StateChanged(state="waiting for vehicle", reason=LIFT_LOW))
     v.apply(VehicleReopened(vin=VIN, user="sam"))
     assert v.closed is None and v.tone() != "missing"
     assert v.headline() == f"{VIN} reopened for rework by sam: it opens when raised at the " \
@@ -299,7 +306,7 @@ def test_devices_are_not_claimed_ok_while_the_database_keeps_the_station_from_op
     assert {d: h["reason"] for d, h in v.device_health().items()} == {
         d: "not opened yet" for d in cfg}
     down = [DeviceHealth(device="database", ok=False, kind="down", reason="disk I/O error"),
-            StateChanged(state="fault", reason="database: disk I/O error")]
+            fault_state(("database", "disk I/O error"))]
     v = fold(down * 3, configured=cfg)     # retried with backoff
     health = v.device_health()
     assert not any(health[d]["ok"] for d in cfg) and health["database"]["ok"] is False
@@ -308,12 +315,12 @@ def test_devices_are_not_claimed_ok_while_the_database_keeps_the_station_from_op
     # the database opens; the station tries every device: the wrench does not answer
     v.apply(DeviceHealth(device="database", ok=True))
     v.apply(DeviceHealth(device="wrench", ok=False, kind="refused", reason="connection refused"))
-    v.apply(StateChanged(state="fault", reason="wrench: connection refused"))
+    v.apply(fault_state(("wrench", "connection refused")))
     health = v.device_health()
     assert health["lift"]["ok"] and health["pair1"]["ok"] and not health["wrench"]["ok"]
     # a later database outage does not make the opened devices "not opened yet" again
     v.apply(DeviceHealth(device="database", ok=False, kind="down", reason="locked"))
-    v.apply(StateChanged(state="fault", reason="database: locked"))
+    v.apply(fault_state(("database", "locked")))
     assert v.device_health()["lift"]["ok"]
 
 

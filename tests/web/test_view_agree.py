@@ -6,10 +6,12 @@ from __future__ import annotations
 
 from stationd.reasons import Reason, Why
 from stationd.station.events import (
+    Because,
     BoltSelected,
     Localized,
     Refused,
     StateChanged,
+    StateReason,
 )
 from stationd.web.view import STARTUP_GRACE_S, View, fold
 from tests.web.scenario import opened
@@ -93,7 +95,7 @@ STALE = Reason(Why.STALE, age_ms=7524.0, limit=500.0)
 
 
 def test_stale_frames_before_any_fresh_one_say_the_station_is_starting():
-    start = [StateChanged(state="starting", reason="opening the devices"), *opened()]
+    start = [StateChanged(state="starting", reason=StateReason(Because.OPENING)), *opened()]
     assert fold(start).headline() == "Starting: waiting for the cameras' first frames"
     v = fold([*start, at(0.0, 0.0, reason=STALE, t=100.0), Refused(reason=STALE, t=100.0)])
     assert v.headline() == "Starting: the cameras' first frames are late (7524 ms old)"
@@ -108,8 +110,8 @@ def test_stale_frames_before_any_fresh_one_say_the_station_is_starting():
               at(0.0, 0.0, reason=STALE, t=101.0 + STARTUP_GRACE_S)])
     assert (v.headline(), v.tone()) == ("localization is stale (7524 ms old)", "act")
     # a reload starts again: the first frames may be late again
-    v.apply(StateChanged(state="starting", reason="reload"))
-    v.apply(StateChanged(state="tracking", reason="vehicle at height"))
+    v.apply(StateChanged(state="starting", reason=StateReason(Because.OPENING)))
+    v.apply(StateChanged(state="tracking", reason=StateReason(Because.TRACKING)))
     v.apply(at(0.0, 0.0, reason=STALE, t=500.0))
     v.apply(Refused(reason=STALE, t=500.0))
     assert v.headline().startswith("Starting: ")

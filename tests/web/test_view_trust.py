@@ -9,7 +9,15 @@ import json
 from typing import Any
 
 from stationd.station.actions import Publish
-from stationd.station.events import DeviceHealth, PairsUnchecked, State, StateChanged, StationEvent
+from stationd.station.events import (
+    Because,
+    DeviceHealth,
+    PairsUnchecked,
+    State,
+    StateChanged,
+    StateReason,
+    StationEvent,
+)
 from stationd.station.inputs import Started
 from stationd.station.trust import ReferencesChecked
 from stationd.web.view import View, fold
@@ -23,7 +31,7 @@ def _published(acts: list[Any]) -> list[StationEvent]:
 
 
 def _view(events: list[StationEvent]) -> View:
-    return fold([StateChanged(State.WAITING_VEHICLE, "waiting for the lift"), *events],
+    return fold([StateChanged(State.WAITING_VEHICLE, StateReason(Because.WAITING_LIFT)), *events],
                 CONFIGURED)
 
 
@@ -78,10 +86,10 @@ def test_a_pair_down_shows_its_fault_and_a_restart_forgets_the_last_checks():
     assert v.device_health()["pair2"]["ok"] is False
     assert v.tone() == "stop"            # a device down is the station's fault, as before
     # a reload: the new station's checks, not the last one's
-    v.apply(StateChanged(State.STARTING, "reload"))
+    v.apply(StateChanged(State.STARTING, StateReason(Because.OPENING)))
     assert all("check" not in h for h in v.device_health().values())
     # without references nothing is shown: no pair carries a check
-    plain = fold([StateChanged(State.WAITING_VEHICLE, "waiting for the lift"),
+    plain = fold([StateChanged(State.WAITING_VEHICLE, StateReason(Because.WAITING_LIFT)),
                   *_published(_core(trust=False).feed(Started(1.0)))], CONFIGURED)
     assert all("check" not in h for h in plain.device_health().values())
 
