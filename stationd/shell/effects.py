@@ -219,7 +219,7 @@ class Effects:
         elif isinstance(ev, PairChecked):
             (self.log.info if ev.trusted else self.log.warning)("%s", check_words(ev))
         elif isinstance(ev, BoltToLoosen):
-            self.log.info("%s: %s", ev.bolt, reason_words(ev.reason, full=True))
+            self.log.info("%s", reason_words(ev.reason, full=True))   # it names the bolt
         elif isinstance(ev, OperatorChanged):
             self.log.info("%s", operator_words(ev))
         elif isinstance(ev, DeviceHealth):
