@@ -11,9 +11,20 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any
 
-from db.kinds import LOOSENING
+from db.kinds import (
+    LOOSENED,
+    LOOSENING,
+    MISSING,
+    NOK,
+    OK,
+    PENDING,
+    SKIPPED,
+    TO_LOOSEN,
+    BoltStatus,
+)
 from stationd.reasons import Reason, Why
 from stationd.station.events import (
     Because,
@@ -46,18 +57,34 @@ from stationd.station.inputs import DATABASE
 from stationd.station.state import LOCALIZING
 from stationd.words import check_words, reason_words, state_words
 
+
+class Shown(StrEnum):
+    """A bolt's state on the screen beyond its status (:class:`db.kinds.BoltStatus`, which
+    the core, the events and the records share): where the operator's attention goes now."""
+
+    NEXT = "next"               # the open bolt pointed out to go to
+    SELECTED = "selected"       # its parameters sent
+    TIGHTENING = "tightening"   # the tool on for it
+    BLOCKED = "blocked"         # refused by the sequence's rules for now
+    LOCKED = "locked"           # too many NOKs in a row (or held): refused until a release
+
+
+#: what a bolt on the screen is: its status, or where attention goes now
+BoltShown = BoltStatus | Shown
+
 # a bolt's state on the screen; the label is what the operator reads next to the colour
-BOLT_LABELS = {
-    "pending": "to do", "next": "next", "selected": "selected", "tightening": "tighten",
-    "ok": "OK", "nok": "NOK", "skipped": "skipped", "blocked": "blocked",
-    "missing": "missing",    # a closed vehicle's bolt left untightened (the daemon's report)
-    "loosen": "loosen first",   # its loosen pset goes next (the NOK policy, a loosen command)
-    "loosened": "loosened",  # loosened last: its tightening pset goes next
-    "locked": "locked",      # too many NOKs in a row: refused until a release
+BOLT_LABELS: dict[BoltShown, str] = {
+    PENDING: "to do", Shown.NEXT: "next", Shown.SELECTED: "selected",
+    Shown.TIGHTENING: "tighten", OK: "OK", NOK: "NOK", SKIPPED: "skipped",
+    Shown.BLOCKED: "blocked",
+    MISSING: "missing",         # a closed vehicle's bolt left untightened (the daemon's report)
+    TO_LOOSEN: "loosen first",  # its loosen pset goes next (the NOK policy, a loosen command)
+    LOOSENED: "loosened",       # loosened last: its tightening pset goes next
+    Shown.LOCKED: "locked",     # too many NOKs in a row: refused until a release
 }
 # states a bolt can no longer be in once its vehicle closed: nothing is next or selected any
 # more on a vehicle that left (the ones the daemon reports missing become "missing")
-LIVE_STATES = ("next", "selected", "tightening", "blocked")
+LIVE_STATES = (Shown.NEXT, Shown.SELECTED, Shown.TIGHTENING, Shown.BLOCKED)
 NAMES_SHOWN = 3   # bolts named in a closed vehicle's headline; the full list is its title
 REASON_SHOWN = 110  # characters of a fault's reason in the headline (whole in its title)
 LAST_RESULTS = 8
@@ -90,7 +117,7 @@ class BoltState:
     pset: int | None
     order: int | None
     batch: str | None
-    state: str = "pending"
+    state: BoltShown = PENDING
     reason: str = ""
     torque_nm: float | None = None
     angle_deg: float | None = None
@@ -104,7 +131,7 @@ class BoltState:
         return {"bolt": self.bolt, "x": self.x_mm, "y": self.y_mm, "pset": self.pset,
                 "order": self.order, "batch": self.batch, "state": self.state,
                 # the tool on for its loosen pset: the operator loosens, never "tighten"
-                "label": "loosen" if self.loosen and self.state == "tightening"
+                "label": "loosen" if self.loosen and self.state == Shown.TIGHTENING
                 else BOLT_LABELS.get(self.state, self.state), "reason": self.reason,
                 "torque_nm": self.torque_nm, "angle_deg": self.angle_deg,
                 "locked": self.locked, "loosen": self.loosen,
@@ -193,18 +220,18 @@ class View:
             case ParamsRefusedEvent():
                 self._refuse(f"{e.bolt}: controller refused the parameters: {e.reason}",
                              act=True)
-                self._set(e.bolt, "blocked", e.reason)
+                self._set(e.bolt, Shown.BLOCKED, e.reason)
             case ToolEnabled():
-                self._set(e.bolt, "tightening")
+                self._set(e.bolt, Shown.TIGHTENING)
             case ToolDisabled():
                 self._tool_off(e)
             case BoltSkipped():
-                self._set(e.bolt, "skipped", e.reason)
+                self._set(e.bolt, SKIPPED, e.reason)
             case BoltLocked() if e.bolt in self.bolts:
                 self._locked(e)
             case BoltReleased() if e.bolt in self.bolts:
                 self.bolts[e.bolt].locked = self.bolts[e.bolt].held = False
-                self._set(e.bolt, "pending", f"released by {e.user}")
+                self._set(e.bolt, PENDING, f"released by {e.user}")
             case BoltToLoosen() if e.bolt in self.bolts:
                 self._to_loosen(e)
             case ResultRecorded():
@@ -240,9 +267,9 @@ class View:
 
     def _refused(self, e: Refused) -> None:
         self._refuse(reason_words(e.reason), e.reason)
-        if e.bolt in self.bolts and self.bolts[e.bolt].state in ("pending", "next") \
+        if e.bolt in self.bolts and self.bolts[e.bolt].state in (PENDING, Shown.NEXT) \
                 and e.reason.kind in BLOCKS:
-            self._set(e.bolt, "blocked", self.refused)
+            self._set(e.bolt, Shown.BLOCKED, self.refused)
 
     def _selected(self, e: BoltSelected) -> None:
         self._unselect()
@@ -251,15 +278,15 @@ class View:
         if e.loosen and e.bolt in self.bolts:
             self.bolts[e.bolt].loosen_pset = e.pset
         self._refuse("")
-        self._set(e.bolt, "selected", (f"loosen pset {e.pset}: loosen first" if e.loosen
+        self._set(e.bolt, Shown.SELECTED, (f"loosen pset {e.pset}: loosen first" if e.loosen
                                        else f"pset {e.pset}") if e.pset is not None else "")
         if self.located is not None:    # the bolt pointed out was taken: point out another
             self._point_out_next(self.located)
 
     def _tool_off(self, e: ToolDisabled) -> None:
         b = self.bolts.get(e.bolt or self.selected or "")
-        if b is not None and b.state in ("selected", "tightening"):
-            self._set(b.bolt, "pending")
+        if b is not None and b.state in (Shown.SELECTED, Shown.TIGHTENING):
+            self._set(b.bolt, PENDING)
         said = state_words(e.reason)
         if e.why is not None:
             self._refuse(f"{said} ({reason_words(e.why)})", e.why)
@@ -271,7 +298,7 @@ class View:
         b.locked, b.nok_count, b.held = True, e.count, e.held is not None
         if self.selected == e.bolt:
             self.selected = None
-        self._set(e.bolt, "locked", reason_words(
+        self._set(e.bolt, Shown.LOCKED, reason_words(
             Reason(Why.HELD, bolt=e.bolt, note=e.held) if e.held is not None
             else Reason(Why.LOCKED, bolt=e.bolt, count=e.count)))
 
@@ -280,7 +307,7 @@ class View:
         if e.reason.pset is not None:
             self.bolts[e.bolt].loosen_pset = e.reason.pset
         if not self.bolts[e.bolt].locked:
-            self._set(e.bolt, "loosen", reason_words(e.reason))
+            self._set(e.bolt, TO_LOOSEN, reason_words(e.reason))
 
     def _open(self, e: VehicleOpened) -> None:
         self.vin, self.model, self.rework = e.vin, e.model, e.rework
@@ -289,8 +316,8 @@ class View:
         self.located = None
         self.results = []
         self.bolts = {b.bolt: BoltState(b.bolt, b.x_mm, b.y_mm, b.pset, b.order, b.batch,
-                                        b.status if b.status in BOLT_LABELS else "pending",
-                                        loosen=b.status == "loosen")
+                                        b.status if b.status in BOLT_LABELS else PENDING,
+                                        loosen=b.status == TO_LOOSEN)
                       for b in e.bolts}
 
     def _close(self, e: VehicleClosed) -> None:
@@ -301,13 +328,13 @@ class View:
             return
         missing, nok = set(e.missing), set(e.nok)
         for b in self.bolts.values():
-            if b.state == "locked":   # its last rundown a NOK: the report's word decides
-                b.state = "nok" if b.bolt in nok or b.bolt not in missing else "missing"
+            if b.state == Shown.LOCKED:   # its last rundown a NOK: the report's word decides
+                b.state = NOK if b.bolt in nok or b.bolt not in missing else MISSING
                 b.reason = "locked when the vehicle left"
             elif b.bolt in missing and b.state != "nok":
-                b.state, b.reason = "missing", "not tightened when the vehicle left"
+                b.state, b.reason = MISSING, "not tightened when the vehicle left"
             elif b.state in LIVE_STATES:
-                b.state, b.reason = "pending", ""
+                b.state, b.reason = PENDING, ""
 
     def _localized(self, e: Localized) -> None:
         if e.point_mm is None:
@@ -336,10 +363,10 @@ class View:
         move the pointer), else the table's first.  A bolt blocked by a refusal stays blocked
         until the rules allow it."""
         allowed = set(e.allowed)
-        shown = ("pending", "next", "blocked")
+        shown = (PENDING, Shown.NEXT, Shown.BLOCKED)
         candidates = [b for b in self.bolts.values() if b.state in shown and b.bolt in allowed]
         pointed: BoltState | None = None
-        last = next((b for b in candidates if b.state == "next"), None)
+        last = next((b for b in candidates if b.state == Shown.NEXT), None)
         if candidates and e.point_mm is not None:
             x, y = e.point_mm[0], e.point_mm[1]
 
@@ -353,9 +380,9 @@ class View:
         elif candidates:
             pointed = last or candidates[0]
         for b in self.bolts.values():
-            if b.state not in shown or (b.state == "blocked" and b.bolt not in allowed):
+            if b.state not in shown or (b.state == Shown.BLOCKED and b.bolt not in allowed):
                 continue
-            b.state, b.reason = ("next" if b is pointed else "pending"), ""
+            b.state, b.reason = (Shown.NEXT if b is pointed else PENDING), ""
 
     def _frames_seen(self, e: Localized) -> None:
         """Whether fresh frames came since the station started: until they do, a stale
@@ -374,11 +401,11 @@ class View:
                 b.locked = b.held = False
             if e.kind == LOOSENING:
                 b.loosen = b.loosen and not e.ok
-                self._set(e.bolt, "loosened" if e.ok else "loosen",
+                self._set(e.bolt, LOOSENED if e.ok else TO_LOOSEN,
                           "loosened: tighten it again" if e.ok else "loosening NOK")
             else:
                 b.loosen = b.loosen and not e.ok
-                self._set(e.bolt, "ok" if e.ok else "nok", "" if e.ok else "NOK: rework")
+                self._set(e.bolt, OK if e.ok else NOK, "" if e.ok else "NOK: rework")
             b.torque_nm, b.angle_deg = e.torque_nm, e.angle_deg
         if self.selected == e.bolt:
             self.selected, self.selected_loosen = None, None
@@ -396,29 +423,29 @@ class View:
         self.refused, self.refused_why = words, why
         self.act = act or (why is not None and why.kind in ACT_ON)
 
-    def _set(self, bolt: str, state: str, reason: str = "") -> None:
+    def _set(self, bolt: str, state: BoltShown, reason: str = "") -> None:
         b = self.bolts.get(bolt)
         if b is not None:
-            if b.loosen and state == "pending":   # still to be loosened first
-                state, reason = "loosen", reason or "loosen first"
+            if b.loosen and state == PENDING:   # still to be loosened first
+                state, reason = TO_LOOSEN, reason or "loosen first"
             b.state, b.reason = state, reason
 
     def _unselect(self) -> None:
         for b in self.bolts.values():
-            if b.state in ("selected", "tightening"):
-                self._set(b.bolt, "pending")
+            if b.state in (Shown.SELECTED, Shown.TIGHTENING):
+                self._set(b.bolt, PENDING)
 
     # -- what the screens read ----------------------------------------------------------
     def counters(self) -> dict[str, int]:
         states = [b.state for b in self.bolts.values()]
         # a locked bolt's last rundown is a NOK: it counts as one
-        return {"total": len(states), "done": states.count("ok"),
-                "nok": states.count("nok") + states.count("locked"),
-                "skipped": states.count("skipped")}
+        return {"total": len(states), "done": states.count(OK),
+                "nok": states.count(NOK) + states.count(Shown.LOCKED),
+                "skipped": states.count(SKIPPED)}
 
     def locks(self) -> list[str]:
         """Each locked bolt in the operator's words (the screen adds who may release)."""
-        return [b.reason for b in self.bolts.values() if b.state == "locked"]
+        return [b.reason for b in self.bolts.values() if b.state == Shown.LOCKED]
 
     def device_health(self) -> dict[str, dict[str, Any]]:
         """Every configured device, then any other that reported: reported health wins; an
