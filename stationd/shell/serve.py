@@ -18,6 +18,7 @@ import logging
 import random
 import signal
 import sys
+import threading
 import time
 from collections.abc import Awaitable, Callable, Coroutine
 from typing import TYPE_CHECKING, Any
@@ -44,6 +45,7 @@ from stationd.station.inputs import (
 from stationd.stationcheck import validate_station
 
 if TYPE_CHECKING:
+    from stationd.opcua import OpcUaConfig
     from stationd.web import Results
 
 log = logging.getLogger("stationd")
@@ -305,25 +307,59 @@ async def forward(cfg: StationConfig, notifier: Notifier, screens: Screens,
 
 async def opcua(cfg: StationConfig, bus: EventBus, stop: asyncio.Event) -> None:
     """The station's OPC UA server while it runs (``cfg.opcua``; nothing without it).  A port
-    in use or a database that does not open is logged, never a fault of the station."""
+    in use or a database that does not open is logged, never a fault of the station.
+
+    The server runs on an event loop of its own, in a thread of its own: loading the
+    companion models takes seconds (tens on a busy machine), and the daemon's loop, which
+    runs the station and pings systemd's watchdog, must keep turning meanwhile (it stood
+    still for up to 24 s, longer than the unit's WatchdogSec).  The server already writes
+    its nodes from the bus's events through its own loop."""
     if cfg.opcua is None:
         return
-    from stationd.opcua.server import OpcUaServer
-
     loop = asyncio.get_running_loop()
     repo = await _reader(cfg, "OPC UA: not served")
     if repo is None:
         return
-    server = OpcUaServer(cfg.opcua, bus=bus, devices=opcua_devices(cfg))
+    there: list[tuple[asyncio.AbstractEventLoop, asyncio.Event]] = []
+    ready = threading.Event()     # ``there`` holds the server loop and its stop
+
+    ua_cfg, devices = cfg.opcua, opcua_devices(cfg)
+
+    def serve_there() -> None:
+        asyncio.run(_opcua_on_own_loop(ua_cfg, devices, bus, repo, there, ready))
+
+    thread = threading.Thread(target=serve_there, name="opcua", daemon=True)
+    thread.start()
+    try:
+        await stop.wait()
+    finally:
+        await loop.run_in_executor(None, ready.wait)
+        own, own_stop = there[0]
+        with contextlib.suppress(RuntimeError):   # its loop closed: it ended on its own
+            own.call_soon_threadsafe(own_stop.set)
+        await loop.run_in_executor(None, thread.join)
+
+
+async def _opcua_on_own_loop(ua_cfg: OpcUaConfig, devices: tuple[str, ...], bus: EventBus,
+                             repo: Any,
+                             there: list[tuple[asyncio.AbstractEventLoop, asyncio.Event]],
+                             ready: threading.Event) -> None:
+    """:func:`opcua`'s server, on the loop of the thread it runs in, until its stop."""
+    from stationd.opcua.server import OpcUaServer
+
+    loop, stop = asyncio.get_running_loop(), asyncio.Event()
+    there.append((loop, stop))
+    ready.set()
+    server = OpcUaServer(ua_cfg, bus=bus, devices=devices)
     try:
         await server.start()
     except Exception as exc:   # a port in use, certificates: never the station's fault
-        log.error("OPC UA: not served on %s: %s", cfg.opcua.endpoint, one_line(exc))
+        log.error("OPC UA: not served on %s: %s", ua_cfg.endpoint, one_line(exc))
         with contextlib.suppress(Exception):
             await server.stop()
         await loop.run_in_executor(None, repo.close)
         return
-    log.info("OPC UA: serving %s", cfg.opcua.endpoint)
+    log.info("OPC UA: serving %s", ua_cfg.endpoint)
     try:
         await server.run(stop, repo)
     finally:
