@@ -16,6 +16,8 @@ from stationd.reasons import Reason, Why
 from stationd.station.events import (
     Because,
     BoltSkipped,
+    DeviceHealth,
+    DeviceIdentified,
     Localized,
     Refused,
     StateChanged,
@@ -132,6 +134,14 @@ def test_operator_screen_follows_the_work_and_shows_the_fault(live_server, page,
         "const li = document.querySelector('#devices li[data-device=lift]');"
         " return [li.className, li.textContent]")
     assert cls == "dev-bad" and "timeout" in text
+    # a controller that said what it is and then went down: its hover says the fault first
+    down = "openprotocol://10.0.0.5:4545: reconnect: connection refused"
+    srv.publish([DeviceIdentified("wrench", "PF6000 (cell 1, channel 1), software 2.1"),
+                 DeviceHealth("wrench", False, "down", down)])
+    page.wait(lambda p: "wrench down" in (p.text("#devices") or ""), what="wrench down")
+    title = page.js("return document.querySelector('#devices li[data-device=wrench]').title")
+    assert title.splitlines() == [f"wrench down: {down}",
+                                  "PF6000 (cell 1, channel 1), software 2.1"], title
     assert bolts(page)["B4"] == ("skipped", "skipped")
     check_fits(page, "#bolts", "#headline")
     shots("operator-fault")

@@ -434,8 +434,10 @@ function drawDevices(devices, line) {
     li.dataset.trust = !check ? "" : check.trusted ? "trusted" : check.verdict;
     li.textContent = !d.ok ? `${name} ${d.kind}: ${d.reason}` :
       !check ? `${name}: ok` : check.trusted ? `${name}: ok, trusted` : check.words;
-    // what the device said it is (the controller's name, versions), its last check: on hover
-    const title = [d.identity, check && check.trusted ? check.words : ""].filter(Boolean);
+    // on hover: a faulty device's whole reason first (its line may be cut), then what it
+    // said it is (the controller's name, versions) and its last check
+    const title = [!d.ok ? li.textContent : "", d.identity,
+      check && check.trusted ? check.words : ""].filter(Boolean);
     if (title.length) li.title = title.join("\n");
     rows.push([li, name, d]);
   }
