@@ -68,6 +68,22 @@ def lock_lines(st: dict[str, Any]) -> list[str]:
         f"form{who}"]
 
 
+def line_lines(line: dict[str, Any] | None) -> list[str]:
+    """The line database's forwarding in the operator screen's words (never a fault of the
+    station: a status that left it out said nothing while 13 records waited)."""
+    if not line:
+        return []
+    n = int(line.get("backlog") or 0)
+    if line.get("alarm"):
+        return [f"line:     line database: {line['alarm']}"]
+    if line.get("up") is False:
+        waits = "no record waits yet" if n == 0 else f"{counted(n, 'record')} " + (
+            "waits" if n == 1 else "wait")
+        return [f"line:     line database down ({line.get('last_error') or 'no answer'}): "
+                f"{waits} (the station goes on; they are forwarded when it answers)"]
+    return [f"line:     line database: {n} behind"]
+
+
 def format_status(st: dict[str, Any]) -> str:
     """The status as a few readable lines."""
     lines = [f"state:    {st['state']}" + (f" ({st['reason']})" if st.get("reason") else "")]
@@ -89,6 +105,7 @@ def format_status(st: dict[str, Any]) -> str:
             else f"{d.get('kind', '')} {d.get('reason', '')}")
             + (f"; {check['words']}" if d["ok"] and check and not check.get("trusted")
                else ""))
+    lines += line_lines(st.get("line"))
     vers = st.get("versions", {})
     lines.append("versions: " + ", ".join(f"{k} {x}" for k, x in sorted(vers.items())))
     return "\n".join(lines)

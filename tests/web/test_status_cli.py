@@ -137,3 +137,23 @@ def test_status_without_a_lock_has_no_lock_lines_and_says_when_nobody_may_releas
         "locked:   B1 locked after 3 NOK in a row: a supervisor releases it",
         "release:  stationd release VIN1 BOLT --user NAME, or the operator screen's Release "
         "form (no role of this station has the release right: access.roles)"]
+
+
+def test_the_status_says_the_line_database_s_forwarding_in_the_screen_s_words():
+    """`stationd status` said nothing while the line database was down and records waited
+    (the screens and /api/status did): it says it now, never as the station's fault."""
+    from stationd.web.status_cli import format_status
+
+    base = {"state": "tracking", "devices": {}, "versions": {}}
+    down = format_status({**base, "line": {"up": False, "backlog": 13,
+                                           "last_error": "connection refused"}})
+    assert ("line:     line database down (connection refused): 13 records wait (the station "
+            "goes on; they are forwarded when it answers)") in down.splitlines()
+    one = format_status({**base, "line": {"up": False, "backlog": 1, "last_error": "x"}})
+    assert "line database down (x): 1 record waits (" in one
+    assert "line:     line database: 0 behind" in format_status(
+        {**base, "line": {"up": True, "backlog": 0}}).splitlines()
+    alarm = format_status({**base, "line": {"up": True, "backlog": 12000,
+                                            "alarm": "12000 records not forwarded"}})
+    assert "line:     line database: 12000 records not forwarded" in alarm.splitlines()
+    assert not any(x.startswith("line:") for x in format_status(base).splitlines())
