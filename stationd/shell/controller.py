@@ -120,8 +120,7 @@ class ControllerFeed:
                 who = wrench.identity()
             except (DeviceError, ValueError):
                 who = ""
-            if who:
-                log.info("wrench: %s", who)
+            if who:   # the driver's own journal line said it, with its revisions
                 self._told.add(task := asyncio.ensure_future(
                     self._feed(DeviceSaid(time.time(), WRENCH, who))))
                 task.add_done_callback(self._told.discard)

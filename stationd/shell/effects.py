@@ -120,6 +120,7 @@ class Effects:
         self.refusals = RefusalJournal()   # each refusal journaled once, then counted
         self.log: Journal = log
         self.commands_log: Journal = commands_log
+        self._fault_said = ""   # the last "state: fault (...)" journaled: not said twice
 
     def label(self, prefix: str) -> None:
         """Each of this station's journal lines starts with ``prefix`` ("DEMO-2"). Why: the
@@ -206,8 +207,12 @@ class Effects:
             line = state_line(ev.state, ev.reason)
             self.notifier.status(line)
             if ev.state is State.FAULT:   # each device's own line has the reason
-                self.log.info("state: fault (%s)", ", ".join(sorted(self.core.status().faults)))
+                faulty = f"state: fault ({', '.join(sorted(self.core.status().faults))})"
+                if faulty != self._fault_said:   # a reason that changed is the device's line
+                    self.log.info("%s", faulty)
+                self._fault_said = faulty
             else:
+                self._fault_said = ""
                 self.log.info("%s", line)
         elif isinstance(ev, Notice):
             {"error": self.log.error, "warning": self.log.warning}.get(

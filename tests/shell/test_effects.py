@@ -1,0 +1,48 @@
+"""The journal lines the shell writes for the core's events (stationd/shell/effects.py
+``Effects.publish``), fed by the real core: the station's fault line is written when the
+faulty devices change, not again at each new reason of one of them (a reconnect's retries
+changed the reason three times in half a second, and the journal said "state: fault (lift,
+wrench)" three times; each device's own line says its reason)."""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from drivers.keeper import FaultKind
+from stationd.bus import EventBus
+from stationd.shell.effects import Effects
+from stationd.shell.sdnotify import Notifier
+from stationd.station.actions import Publish
+from stationd.station.core import StationCore
+from stationd.station.inputs import DeviceBack, DeviceFault, Started
+from tests.station.test_core import PARAMS
+
+
+def _effects(core: StationCore) -> Effects:
+    none: Any = None    # publishing a core's event needs no device, record or call
+    return Effects(core, none, none, none, EventBus(), Notifier({}), none, none)
+
+
+def test_the_fault_line_is_written_when_the_faulty_devices_change_only(caplog):
+    core = StationCore(PARAMS)
+    effects = _effects(core)
+    inputs = [Started(1.0),
+              DeviceFault(2.0, "lift", FaultKind.DOWN, "connection refused"),
+              DeviceFault(2.1, "wrench", FaultKind.DOWN, "connection refused"),
+              DeviceFault(2.2, "wrench", FaultKind.TIMEOUT, "reconnect: timed out"),
+              DeviceFault(2.3, "lift", FaultKind.DOWN, "reconnect: connection refused"),
+              DeviceBack(3.0, "lift"),
+              DeviceFault(4.0, "lift", FaultKind.DOWN, "connection refused")]
+    with caplog.at_level(logging.INFO, logger="stationd"):
+        for ev in inputs:
+            for a in core.feed(ev):
+                if isinstance(a, Publish):
+                    effects.publish(a.event)
+    said = [r.getMessage() for r in caplog.records if r.getMessage().startswith("state: ")]
+    assert said == ["state: fault (lift)", "state: fault (lift, wrench)",
+                    "state: fault (wrench)", "state: fault (lift, wrench)"], said
+    # each device's own line still says every new reason
+    devices = [r.getMessage() for r in caplog.records if r.getMessage().startswith("fault: ")]
+    assert "fault: wrench (timeout): reconnect: timed out" in devices
+    assert "fault: lift (down): reconnect: connection refused" in devices
