@@ -41,6 +41,8 @@ if TYPE_CHECKING:   # each command imports its libraries when run: every command
     from stationd.forward import Forwarder
 
 EXIT_WAITING, EXIT_UNREACHABLE = 1, 3
+#: said when a filter found nothing: "b07" finds no "B07" (a person takes it for "none at all")
+EXACT = "(names are matched exactly, case included)"
 T = TypeVar("T")
 CONNECT_TIMEOUT_S = 10
 
@@ -199,6 +201,9 @@ def cmd_line_results(args: argparse.Namespace) -> int:
     if args.limit < 1:
         raise InputError(f"--limit {args.limit}: at least 1")
     since, until = _when(args.since, "--since"), _when(args.until, "--until")
+    if since is not None and until is not None and since > until:
+        raise InputError(f"--since {args.since} is after --until {args.until}: no time lies "
+                         "between them (give the earlier one as --since)")
     rows = _read_line(url, LINE_RUNDOWNS.table, lambda engine: results(
         engine, vin=args.vin, station=args.station, bolt=args.bolt, since=since, until=until,
         limit=args.limit))
@@ -223,7 +228,8 @@ def cmd_line_results(args: argparse.Namespace) -> int:
                                 f"station {args.station}" if args.station else "",
                                 f"bolt {args.bolt}" if args.bolt else "") if x)
     if not rows:
-        print(f"no rundowns{' of ' + what if what else ''} in the line database")
+        print(f"no rundowns{' of ' + what if what else ''} in the line database"
+              + (f" {EXACT}" if what else ""))
         return EXIT_WAITING
     stations = sorted({r.station_id for r in rows})
     print(f"{counted(len(rows), 'rundown')}{' of ' + what if what else ''} at "
@@ -280,7 +286,10 @@ def cmd_line_bolts(args: argparse.Namespace) -> int:
                                "angle": list(v.angle)}))
         return 0 if rows else EXIT_WAITING
     if not rows:
-        print("no bolt parameters in the line database (none forwarded with a rundown)")
+        asked = " ".join(f"{what} {value}" for what, value in (
+            ("model", args.model), ("bolt", args.bolt), ("station", args.station)) if value)
+        print(f"no bolt parameters of {asked} in the line database {EXACT}" if asked else
+              "no bolt parameters in the line database (none forwarded with a rundown)")
         return EXIT_WAITING
     for v in rows:
         print(f"{v.model} {v.bolt} at {v.station_id} (database {v.db_id[:8]}) version "

@@ -88,6 +88,17 @@ def test_a_vehicles_rundowns_at_every_station_newest_first(tmp_path, pg_url, cap
     assert code == 0 and (row["bolt"], row["ok"], row["parameters_version"]) == ("B2", False, 1)
     code, out, _ = _run(capsys, "line", "results", "--config", config, "--vin", "NOSUCHVIN")
     assert code == 1 and "no rundowns of VIN NOSUCHVIN" in out
+    # a name in another case finds nothing, and the line says names match exactly
+    code, out, _ = _run(capsys, "line", "results", "--config", config, "--station", "st-b")
+    assert code == 1 and out.strip() == ("no rundowns of station st-b in the line database "
+                                         "(names are matched exactly, case included)")
+    code, out, _ = _run(capsys, "line", "bolts", "--config", config, "--bolt", "b2")
+    assert code == 1 and out.strip() == ("no bolt parameters of bolt b2 in the line database "
+                                         "(names are matched exactly, case included)")
+    code, _, err = _run(capsys, "line", "results", "--config", config,
+                        "--since", "2026-11-29T13:53", "--until", "2026-11-29T13:00")
+    assert code == 2 and err.startswith("stationd: error: --since 2026-11-29T13:53 is after "
+                                        "--until 2026-11-29T13:00"), err
     for repo in (a, b):
         repo.close()
 
