@@ -593,8 +593,15 @@ def _model(s: Session, name: str) -> VehicleModel:
 def _vehicle(s: Session, vin: str) -> Vehicle:
     v = s.scalar(select(Vehicle).where(Vehicle.vin == vin))
     if v is None:
-        raise NotFoundError(f"vehicle {vin!r} is not in the database")
+        raise NotFoundError(f"vehicle {vin!r} is not in the database{_other_case(s, vin)}")
     return v
+
+
+def _other_case(s: Session, vin: str) -> str:
+    """" (did you mean VIN?)" when the database has ``vin`` in another case (a VIN typed in
+    lower case is another VIN: it is matched exactly), else ""."""
+    other = s.scalar(select(Vehicle.vin).where(func.upper(Vehicle.vin) == vin.upper()).limit(1))
+    return f" (did you mean {other}?)" if other is not None and other != vin else ""
 
 
 def _info(model: str, b: Bolt) -> BoltInfo:

@@ -217,8 +217,12 @@ def test_vehicle_cycle_and_close_summary(repo, bolts_file):
         first = c.execute(select(TighteningRecord).order_by(TighteningRecord.id)).first()
         assert first is not None and first.images == ["cam1/0001.png"]
         assert first.result_at == when and first.status == "nok"
-    with pytest.raises(NotFoundError, match="'NOPE' is not in the database"):
+    with pytest.raises(NotFoundError, match="'NOPE' is not in the database$"):
         repo.vehicle_report("NOPE")
+    # a VIN typed in another case is another VIN, and the error says which was meant
+    with pytest.raises(NotFoundError, match=r"'wvw1234567890' is not in the database "
+                                            r"\(did you mean WVW1234567890\?\)$"):
+        repo.vehicle_report("wvw1234567890")
 
 
 def test_open_errors_are_one_line_station_errors(tmp_path):
