@@ -101,13 +101,14 @@ def cmd_line_status(args: argparse.Namespace) -> int:
 
 def cmd_line_quarantine(args: argparse.Namespace) -> int:
     from stationd.forward import LineDown
-    from stationd.outfile import write_atomic
+    from stationd.outfile import need_folder, write_atomic
 
     if args.export:
         out = Path(args.export)
         if out.exists() or out.is_symlink():   # before anything is read
             raise InputError(f"--export {out}: exists; the export is written to a new file "
                              "(choose another name)")
+        need_folder(out, "--export")
     fwd = _forwarder(args, write=args.retry)
     try:
         if args.export:

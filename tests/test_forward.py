@@ -372,6 +372,10 @@ def test_the_line_commands_show_the_backlog_and_retry_or_export_the_quarantine(
     assert json.loads(out.read_text())[0]["record"]["user"] == "sam"
     got = _cli("line", "quarantine", "--config", str(station), "--export", str(out))
     assert got.returncode == 2 and "exists" in got.stderr
+    nowhere = tmp_path / "nodir" / "q.json"
+    got = _cli("line", "quarantine", "--config", str(station), "--export", str(nowhere))
+    assert got.returncode == 2 and got.stderr.strip().endswith(
+        "(create it first, or give another --export)"), got.stderr
     _retry_is_unreachable(station, tmp_path / "st.db", pg_url, pg_server.port)
 
 
