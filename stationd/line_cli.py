@@ -329,10 +329,12 @@ def cmd_line_init(args: argparse.Namespace) -> int:
         raise InputError(f"line database {parsed.render_as_string()}: the typed tables: "
                          f"{change.typed_refused} (run line init as the tables' owner)")
     ours = sorted(t.name for t in LINE.sorted_tables)
+    made = sorted(change.made)
     print(f"line database {parsed.render_as_string()}: "
-          + (f"made {', '.join(sorted(change.made))}" if change.made
-             else "every table there already")
-          + f" ({', '.join(ours)}: ready for the stations' forwarders)")
+          + (f"made {', '.join(made)}" if change.made else "every table there already")
+          # the tables named once: when it made them all, they are the ones ready
+          + (": ready for the stations' forwarders" if made == ours else
+             f" ({', '.join(ours)}: ready for the stations' forwarders)"))
     if change.trigger and not change.made:   # tables there, the typing of new rows not
         print("the trigger that types line_feed's new rows: made or brought up to date")
     filled = [(name, n) for name, n in change.filled if n]

@@ -745,3 +745,14 @@ def test_a_forwarding_role_on_a_version_2_line_database_forwards_and_the_owner_u
         ("B2", 12, "sam", "read on the controller", "00230061007 garbled B2")]
     engine.dispose()
     repo.close()
+
+
+def test_a_first_line_init_names_each_table_once(pg_url, capsys):
+    """A new line database's ``line init`` listed its nine tables twice in one line (made
+    ..., then the same nine "ready"): once now."""
+    from stationd.cli import main
+
+    assert main(["line", "init", pg_url]) == 0
+    [first, *_] = capsys.readouterr().out.splitlines()
+    assert first.count("line_rundowns") == 1, first
+    assert first.endswith(": ready for the stations' forwarders") and " made " in first
