@@ -148,7 +148,7 @@ def _serve_controller(args: argparse.Namespace, stop: threading.Event, out: Text
                             nok_rate=args.nok_rate, link_ack=args.link_ack,
                             **behaviour(args))
     except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"stationd: error: {exc}", file=sys.stderr)
         return 2
     return serve(sim, args.host, args.port, args.trigger_every, stop,
                  lambda port: f"controller listening on {args.host}:{port} (Open Protocol; "
@@ -168,6 +168,10 @@ def _check_args(args: argparse.Namespace) -> None:
     trigger = getattr(args, "trigger_every", None)
     if trigger is not None and not (math.isfinite(trigger) and trigger >= 0):
         raise InputError(f"--trigger-every {trigger:g}: seconds, 0 (no automatic trigger) or more")
+    share = getattr(args, "nok_rate", None)
+    if share is not None and not 0.0 <= share <= 1.0:    # NaN too
+        raise InputError(f"--nok-rate {share:g}: the share of NOK results, 0 to 1 (0.05: one "
+                         "in twenty)")
 
 
 def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
@@ -179,7 +183,7 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             return _serve_plc(args, stop, out)
         return _serve_controller(args, stop, out)
     except StationError as exc:   # a station file that does not read
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"stationd: error: {exc}", file=sys.stderr)
         return 2
 
 

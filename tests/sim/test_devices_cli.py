@@ -92,6 +92,8 @@ def test_a_port_out_of_range_is_one_line_and_exit_2() -> None:
     (("plc", "--every", "nan"), "--every nan: seconds"),
     (("plc", "--model-code", "70000"), "holds 0-65535"),
     (("controller", "--trigger-every", "-1"), "--trigger-every -1: seconds"),
+    (("controller", "--nok-rate", "2"),
+     "stationd: error: --nok-rate 2: the share of NOK results, 0 to 1"),
 ])
 def test_numbers_that_cannot_work_are_refused_at_the_start(argv: tuple[str, ...],
                                                            words: str) -> None:
