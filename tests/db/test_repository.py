@@ -217,7 +217,7 @@ def test_vehicle_cycle_and_close_summary(repo, bolts_file):
         first = c.execute(select(TighteningRecord).order_by(TighteningRecord.id)).first()
         assert first is not None and first.images == ["cam1/0001.png"]
         assert first.result_at == when and first.status == "nok"
-    with pytest.raises(NotFoundError, match="'NOPE' is not in the database$"):
+    with pytest.raises(NotFoundError, match=r"'NOPE' is not in the database$"):
         repo.vehicle_report("NOPE")
     # a VIN typed in another case is another VIN, and the error says which was meant
     with pytest.raises(NotFoundError, match=r"'wvw1234567890' is not in the database "
