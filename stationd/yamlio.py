@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import re
 import stat
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -105,23 +105,29 @@ def decode_text(data: bytes, where: str, expected: str) -> str:
 MAX_DEPTH = 64
 
 
-def _too_deep(root: yaml.Node) -> yaml.Node | None:
-    """The first collection nested deeper than :data:`MAX_DEPTH`, or None (walked without
-    recursion)."""
+def _walk(root: yaml.Node) -> Iterator[tuple[yaml.Node, int]]:
+    """Every node of a document with its depth (the root's: 1), each once (an alias is
+    walked once), without recursion: a document nested deeper than Python's stack must be
+    refused, not crash its reader."""
     todo: list[tuple[yaml.Node, int]] = [(root, 1)]
     seen: set[int] = set()
     while todo:
         node, depth = todo.pop()
-        if not isinstance(node, yaml.CollectionNode) or id(node) in seen:
-            continue            # a scalar nests nothing; an alias is walked once
-        if depth > MAX_DEPTH:
-            return node
+        if id(node) in seen:
+            continue
         seen.add(id(node))
+        yield node, depth
         if isinstance(node, yaml.SequenceNode):
             todo.extend((child, depth + 1) for child in node.value)
-        else:
+        elif isinstance(node, yaml.MappingNode):
             todo.extend((part, depth + 1) for pair in node.value for part in pair)
-    return None
+
+
+def _too_deep(root: yaml.Node) -> yaml.Node | None:
+    """The first collection nested deeper than :data:`MAX_DEPTH`, or None (a scalar nests
+    nothing)."""
+    return next((node for node, depth in _walk(root)
+                 if depth > MAX_DEPTH and isinstance(node, yaml.CollectionNode)), None)
 
 
 #: libyaml's parser (PyYAML's wheels carry it): the same node graph, marks and resolver as the
@@ -147,22 +153,14 @@ def _compose(text: str) -> yaml.Node | None:
 
 def _as_pure(root: yaml.Node | None) -> None:
     """libyaml marks a plain scalar's style ``''`` where the pure-Python parser says None:
-    made None, so that what is plain (a number, not quoted text) reads the same from both
-    (walked without recursion, each node once).  A collection's flow style, which the
-    parsers also mark differently, is read by nothing here."""
-    todo, seen = [root], set()
-    while todo:
-        node = todo.pop()
-        if node is None or id(node) in seen:
-            continue
-        seen.add(id(node))
-        if isinstance(node, yaml.ScalarNode):
-            if node.style == "":
-                node.style = None
-        elif isinstance(node, yaml.SequenceNode):
-            todo.extend(node.value)
-        elif isinstance(node, yaml.MappingNode):
-            todo.extend(part for pair in node.value for part in pair)
+    made None, so that what is plain (a number, not quoted text) reads the same from both.
+    A collection's flow style, which the parsers also mark differently, is read by nothing
+    here."""
+    if root is None:
+        return
+    for node, _ in _walk(root):
+        if isinstance(node, yaml.ScalarNode) and node.style == "":
+            node.style = None
 
 
 class YamlNode:
