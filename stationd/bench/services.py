@@ -99,7 +99,7 @@ async def services_on(cfg: StationConfig, station: Station, info: dict[str, Any]
             stored.append((event.bolt, time.monotonic()))
 
     unsubscribe = station.bus.subscribe(heard)
-    svc = StationServices(cfg, station.bus, tell=station.feed)
+    svc = StationServices(cfg, station.bus, tell=station.tell)
     await svc.start()
     listener = None
     loop = asyncio.get_running_loop()

@@ -22,7 +22,7 @@ import logging
 import socket
 import time
 from collections import Counter
-from collections.abc import Awaitable, Callable, Collection
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -170,11 +170,12 @@ class StationServices:
     endpoint listens before it returns), :meth:`drain` once its run is over (until the line
     database has taken every record), :meth:`stop` at the demo's end (both serve the
     station's records until then, also during ``--hold``: a command taken then is forwarded
-    too).  ``tell`` is the station's feed: the line database's link goes to its core, which
-    tells OPC UA (None: a forwarder without a station, as the line report's tests run it)."""
+    too).  ``tell`` is the station's (:meth:`Station.tell`): the line database's link goes
+    to its core, which tells OPC UA (None: a forwarder without a station, as the line
+    report's tests run it)."""
 
     def __init__(self, cfg: StationConfig, bus: EventBus, screens: Screens | None = None,
-                 tell: Callable[[Event], Awaitable[None]] | None = None) -> None:
+                 tell: Callable[[Event], None] | None = None) -> None:
         self.cfg, self.bus, self._tell = cfg, bus, tell
         self.screens = screens if screens is not None else Screens(bus)
         self.opcua: Any = None          # the OpcUaServer, once it serves

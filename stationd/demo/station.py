@@ -310,7 +310,7 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
                       + (f", {screens.server.url}line" if cfg.line is not None else "")
                       + (f" ({moved} {screens.server.url})" if moved else ""),
                       file=out, flush=True)
-        services = [StationServices(cfg, station.bus, screens, station.feed)]
+        services = [StationServices(cfg, station.bus, screens, station.tell)]
         await services[0].start()
         _say_services(cfg, why, services[0], out)
         world = World(cfg, seed=args.seed)
@@ -495,7 +495,7 @@ async def _next_station(args: argparse.Namespace, first: StationConfig, k: int, 
     truth.pop("cycles", None)
     station.on_action = _checker(station, truth, out)
     await loop.run_in_executor(None, station.open)
-    mine = StationServices(cfg, station.bus, tell=station.feed)
+    mine = StationServices(cfg, station.bus, tell=station.tell)
     services.append(mine)
     await mine.start()
     _say_services(cfg, why, mine, out, f"{sid} ")

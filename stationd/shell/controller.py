@@ -50,9 +50,10 @@ class ControllerFeed:
     ``feed`` (one event at a time, with its actions)."""
 
     def __init__(self, core: StationCore, records: Records, keeper: DeviceKeeper[Wrench],
-                 feed: Callable[[Event], Awaitable[None]], call: Blocking) -> None:
+                 feed: Callable[[Event], Awaitable[None]], tell: Callable[[Event], None],
+                 call: Blocking) -> None:
         self.core, self.records = core, records
-        self._keeper, self._feed, self._call = keeper, feed, call
+        self._keeper, self._feed, self._tell, self._call = keeper, feed, tell, call
         self._results_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="results")
         self._curves_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="curves")
         #: results taken from the controller and not yet through the core
@@ -63,7 +64,6 @@ class ControllerFeed:
         #: controller's newest when the catch-up asked for it; None: not known yet since the
         #: last (re)connect): a pushed result further on than the next is a live gap
         self._accounted: int | None = None
-        self._told: set[asyncio.Future[None]] = set()   # what the controller said, on its way
 
     def close(self) -> None:
         self._results_pool.shutdown(wait=True)
@@ -121,9 +121,7 @@ class ControllerFeed:
             except (DeviceError, ValueError):
                 who = ""
             if who:   # the driver's own journal line said it, with its revisions
-                self._told.add(task := asyncio.ensure_future(
-                    self._feed(DeviceSaid(time.time(), WRENCH, who))))
-                task.add_done_callback(self._told.discard)
+                self._tell(DeviceSaid(time.time(), WRENCH, who))
         self._accounted = None     # the catch-up says up to where (a result may come first)
         if self.catching_up is None or self.catching_up.done():
             self.catching_up = asyncio.get_running_loop().create_task(self._catch_up())

@@ -93,6 +93,7 @@ class Station:
     _lock: asyncio.Lock = field(default_factory=asyncio.Lock)
     _pending: list[Event] = field(default_factory=list)    # faults found before run()
     _requests: int = 0                   # commands numbered for their answers
+    _told: set[asyncio.Future[None]] = field(default_factory=set)   # tell()'s, on their way
 
     def __post_init__(self) -> None:
         self.records = Records(self.cfg)
@@ -124,7 +125,7 @@ class Station:
                                self.database_keeper, self.bus, self.notifier, call,
                                self.tracker.request_check)
         self.controller = ControllerFeed(self.core, self.records, self.wrench_keeper,
-                                         self.feed, call)
+                                         self.feed, self.tell, call)
 
     def _keeper(self, device: str, opener: Callable[[], D], reconnect: Callable[[D], None],
                 close: Callable[[D], None]) -> DeviceKeeper[D]:
@@ -315,6 +316,14 @@ class Station:
         """Feed the core one event and carry out its actions (one event at a time)."""
         async with self._lock:
             await self._apply(self.core.feed(ev))
+
+    def tell(self, ev: Event) -> None:
+        """:meth:`feed` from a callback that cannot wait (what a device said as it came back,
+        the line forwarder's link), on the station's loop: fed in its turn, its task kept
+        until it is."""
+        task = asyncio.ensure_future(self.feed(ev))
+        self._told.add(task)
+        task.add_done_callback(self._told.discard)
 
     async def _apply(self, actions: list[Action]) -> None:
         for a in actions:

@@ -20,7 +20,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Awaitable, Callable, Coroutine
+from collections.abc import Callable, Coroutine
 from typing import TYPE_CHECKING, Any
 
 from drivers.keeper import Backoff, FaultKind, one_line
@@ -250,11 +250,11 @@ async def _reader(cfg: StationConfig, what: str) -> Any:
 
 async def forward(cfg: StationConfig, notifier: Notifier, screens: Screens,
                   stop: asyncio.Event, bus: EventBus | None = None,
-                  tell: Callable[[Event], Awaitable[None]] | None = None) -> None:
+                  tell: Callable[[Event], None] | None = None) -> None:
     """The records to the line's database while this station runs (``cfg.line``; nothing
     without it).  A line database that is down or refuses is never a fault of the station: a
     journal line (and STATUS=) at each change, the backlog in ``/api/status``; the link's
-    state is told to the station's core (``tell``, its feed), which tells OPC UA.  Each
+    state is told to the station's core (``tell``: :meth:`Station.tell`), which tells OPC UA.  Each
     result the ``bus`` says was recorded wakes the forwarder (the lag is then the
     forwarding, not its poll)."""
     if cfg.line is None:
@@ -282,11 +282,8 @@ async def forward(cfg: StationConfig, notifier: Notifier, screens: Screens,
         (log.warning if st["alarm"] or st["up"] is False else log.info)("%s", line)
         notifier.status(line)
         if tell is not None:   # the line asset's health in OPC UA (never a station fault)
-            told_now.add(task := asyncio.ensure_future(tell(LineLinkIn(
-                time.time(), st["up"] is not False, st["last_error"] or "", st["alarm"]))))
-            task.add_done_callback(told_now.discard)
-
-    told_now: set[asyncio.Future[None]] = set()
+            tell(LineLinkIn(time.time(), st["up"] is not False, st["last_error"] or "",
+                            st["alarm"]))
 
     wake = asyncio.Event()
 
@@ -424,7 +421,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
         extra = None if beside is None else asyncio.create_task(beside(cfg, station, inner))
         task = asyncio.create_task(station.run(inner))
         screens.attach(station, cfg)
-        line = asyncio.create_task(forward(cfg, notifier, screens, inner, bus, station.feed))
+        line = asyncio.create_task(forward(cfg, notifier, screens, inner, bus, station.tell))
         served = asyncio.create_task(opcua(cfg, bus, inner))
         log.info("stationd running: %s", cfg_path)
         new: StationConfig | None = None

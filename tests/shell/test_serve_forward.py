@@ -28,7 +28,7 @@ def test_a_line_database_that_refuses_is_told_to_the_core_as_its_link_down(tmp_p
     bus.subscribe(published.append)
     told: list[Event] = []
 
-    async def tell(ev: Event) -> None:
+    def tell(ev: Event) -> None:    # as Station.tell is: from the forwarder's callback
         told.append(ev)
 
     async def main() -> None:
