@@ -21,6 +21,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Coroutine
+from concurrent.futures import Future
 from typing import TYPE_CHECKING, Any
 
 from drivers.keeper import Backoff, FaultKind, one_line
@@ -317,21 +318,18 @@ async def opcua(cfg: StationConfig, bus: EventBus, stop: asyncio.Event) -> None:
     repo = await _reader(cfg, "OPC UA: not served")
     if repo is None:
         return
-    there: list[tuple[asyncio.AbstractEventLoop, asyncio.Event]] = []
-    ready = threading.Event()     # ``there`` holds the server loop and its stop
-
+    there: Future[tuple[asyncio.AbstractEventLoop, asyncio.Event]] = Future()   # its loop, stop
     ua_cfg, devices = cfg.opcua, opcua_devices(cfg)
 
     def serve_there() -> None:
-        asyncio.run(_opcua_on_own_loop(ua_cfg, devices, bus, repo, there, ready))
+        asyncio.run(_opcua_on_own_loop(ua_cfg, devices, bus, repo, there))
 
     thread = threading.Thread(target=serve_there, name="opcua", daemon=True)
     thread.start()
     try:
         await stop.wait()
     finally:
-        await loop.run_in_executor(None, ready.wait)
-        own, own_stop = there[0]
+        own, own_stop = await asyncio.wrap_future(there)
         with contextlib.suppress(RuntimeError):   # its loop closed: it ended on its own
             own.call_soon_threadsafe(own_stop.set)
         await loop.run_in_executor(None, thread.join)
@@ -339,14 +337,14 @@ async def opcua(cfg: StationConfig, bus: EventBus, stop: asyncio.Event) -> None:
 
 async def _opcua_on_own_loop(ua_cfg: OpcUaConfig, devices: tuple[str, ...], bus: EventBus,
                              repo: Any,
-                             there: list[tuple[asyncio.AbstractEventLoop, asyncio.Event]],
-                             ready: threading.Event) -> None:
-    """:func:`opcua`'s server, on the loop of the thread it runs in, until its stop."""
+                             there: Future[tuple[asyncio.AbstractEventLoop, asyncio.Event]]
+                             ) -> None:
+    """:func:`opcua`'s server, on the loop of the thread it runs in, until its stop (``there``
+    gets the loop and the stop, for the daemon's loop to set it)."""
     from stationd.opcua.server import OpcUaServer
 
     loop, stop = asyncio.get_running_loop(), asyncio.Event()
-    there.append((loop, stop))
-    ready.set()
+    there.set_result((loop, stop))
     server = OpcUaServer(ua_cfg, bus=bus, devices=devices)
     try:
         await server.start()
