@@ -60,6 +60,20 @@ def _teaching(model: str | None, user: str | None, bolt: str | None) -> str:
     return f"teaching {model} ({user}): {doing}"
 
 
+def _meant(r: Reason) -> str:
+    """What a name typed in another case meant (`` (did you mean B04?)``), else nothing."""
+    return f" (did you mean {r.other}?)" if r.other else ""
+
+
+def _loosen_first(r: StateReason) -> str:
+    """A bolt selected for its loosen pset: said after the bolt, by the reason and the line."""
+    return f": loosen first (pset {r.pset})" if r.loosen else ""
+
+
+#: a bolt whose result is not known, after why: the selection was dropped for a person
+_HELD_FOR = "; held for a supervisor"
+
+
 def _per_pair(r: Reason, full: bool = False) -> str:
     """Each pair's reason; said once with how many pairs say it when they all say the same
     (the operator's large words; ``full``: every pair's, as the journal keeps it)."""
@@ -122,10 +136,8 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
                                    f"(> {r.limit or 0:g} mm)"),
     Why.NO_RIGHT: lambda r: f"your role does not have the right to {r.right}",
     Why.NO_VEHICLE: lambda r: "no vehicle at the station",
-    Why.OTHER_VEHICLE: lambda r: f"vehicle {r.vin} is not the one at the station"
-    + (f" (did you mean {r.other}?)" if r.other else ""),
-    Why.UNKNOWN_BOLT: lambda r: f"{r.bolt} is not a bolt of vehicle {r.vin}"
-    + (f" (did you mean {r.other}?)" if r.other else ""),
+    Why.OTHER_VEHICLE: lambda r: f"vehicle {r.vin} is not the one at the station{_meant(r)}",
+    Why.UNKNOWN_BOLT: lambda r: f"{r.bolt} is not a bolt of vehicle {r.vin}{_meant(r)}",
     Why.TOOL_ON_BOLT: lambda r: f"{r.bolt} is being tightened now",
     Why.ALREADY_OPEN: lambda r: f"vehicle {r.vin} is open at the station",
     Why.NOT_CLOSED: lambda r: f"vehicle {r.vin} is not closed",
@@ -204,6 +216,14 @@ def notice_words(notice: Notice) -> str:
     return _SAID[notice.said](notice)
 
 
+def _unreadable(r: StateReason) -> str:
+    return f"bolt {r.bolt}: its result could not be read"
+
+
+def _not_taken(r: StateReason) -> str:
+    return f"bolt {r.bolt}: an OK result without a result type outside its torque window"
+
+
 _BECAUSE: dict[Because, Callable[[StateReason], str]] = {
     Because.OPENING: lambda r: "opening the devices",
     Because.FAULT: lambda r: _faults(r.faults),
@@ -215,8 +235,7 @@ _BECAUSE: dict[Because, Callable[[StateReason], str]] = {
     Because.LIFT_NOT_READY: lambda r: r.note or "",
     Because.LOADING: lambda r: f"loading vehicle {r.vin}",
     Because.TRACKING: lambda r: "tracking the wrench",
-    Because.SELECTED: lambda r: f"bolt {r.bolt} selected" + (
-        f": loosen first (pset {r.pset})" if r.loosen else ""),
+    Because.SELECTED: lambda r: f"bolt {r.bolt} selected{_loosen_first(r)}",
     Because.ACKNOWLEDGED: lambda r: (f"bolt {r.bolt} acknowledged; confirming the wrench is "
                                      "on it"),
     Because.TIGHTENING: lambda r: f"tightening bolt {r.bolt}",
@@ -227,13 +246,10 @@ _BECAUSE: dict[Because, Callable[[StateReason], str]] = {
     Because.RUNDOWN: lambda r: f"bolt {r.bolt} {'loosened' if r.loosen else 'tightened'}",
     Because.RESULT: lambda r: (f"bolt {r.bolt} {'loosening ' if r.loosen else ''}"
                                f"{'OK' if r.ok else 'NOK'}; tracking"),
-    Because.UNREADABLE: lambda r: f"bolt {r.bolt}: its result could not be read",
-    Because.UNREADABLE_HELD: lambda r: (f"bolt {r.bolt}: its result could not be read; held "
-                                        "for a supervisor"),
-    Because.NOT_TAKEN: lambda r: (f"bolt {r.bolt}: an OK result without a result type "
-                                  "outside its torque window"),
-    Because.NOT_TAKEN_HELD: lambda r: (f"bolt {r.bolt}: an OK result without a result type "
-                                       "outside its torque window; held for a supervisor"),
+    Because.UNREADABLE: _unreadable,
+    Because.UNREADABLE_HELD: lambda r: _unreadable(r) + _HELD_FOR,
+    Because.NOT_TAKEN: _not_taken,
+    Because.NOT_TAKEN_HELD: lambda r: _not_taken(r) + _HELD_FOR,
     Because.SKIPPED: lambda r: f"bolt {r.bolt} {r.note}",
     Because.LOOSEN_ORDERED: lambda r: f"bolt {r.bolt}: loosen first",
     Because.OPERATOR: lambda r: f"operator {r.how}",
@@ -251,8 +267,7 @@ def state_words(reason: StateReason) -> str:
 
 #: the journal's shorter words for a bolt selected: the state says "bolt selected" already
 _SELECTED_LINE: dict[Because, Callable[[StateReason], str]] = {
-    Because.SELECTED: lambda r: f"{r.bolt}" + (
-        f": loosen first (pset {r.pset})" if r.loosen else ""),
+    Because.SELECTED: lambda r: f"{r.bolt}{_loosen_first(r)}",
     Because.SELECTED_UNCONFIRMED: lambda r: f"{r.bolt}; wrench not confirmed",
 }
 
