@@ -103,6 +103,8 @@ class _Prefixed(logging.LoggerAdapter):  # type: ignore[type-arg]
 
 Journal = logging.Logger | _Prefixed
 A = TypeVar("A")
+#: a notice's level (:attr:`Notice.level`) as the journal's
+NOTICE_LEVELS = {"info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
 #: how long the controller may take to confirm parameters, s
 SEND_TIMEOUT_S = 2.0
 
@@ -215,8 +217,7 @@ class Effects:
                 self._fault_said = ""
                 self.log.info("%s", line)
         elif isinstance(ev, Notice):
-            {"error": self.log.error, "warning": self.log.warning}.get(
-                ev.level, self.log.info)("%s", notice_words(ev))
+            self.log.log(NOTICE_LEVELS[ev.level], "%s", notice_words(ev))
         elif isinstance(ev, Refused):   # once, then counted (a wrench held between two bolts)
             said = self.refusals.refused(ev.reason, ev.t)
             if said is not None:

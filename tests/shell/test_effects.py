@@ -46,3 +46,17 @@ def test_the_fault_line_is_written_when_the_faulty_devices_change_only(caplog):
     devices = [r.getMessage() for r in caplog.records if r.getMessage().startswith("fault: ")]
     assert "fault: wrench (timeout): reconnect: timed out" in devices
     assert "fault: lift (down): reconnect: connection refused" in devices
+
+
+def test_a_notice_goes_to_the_journal_at_its_own_level(caplog):
+    """A result not stored is an error in the journal (it went as info), a lock a warning."""
+    from stationd.station.events import Notice, Said
+
+    effects = _effects(StationCore(PARAMS))
+    with caplog.at_level(logging.INFO, logger="stationd"):
+        effects.publish(Notice(Said.NOT_STORED, bolt="B05", tightening_id=12, note="disk full"))
+        effects.publish(Notice(Said.LOCKED, bolt="B05", count=3))
+        effects.publish(Notice(Said.LOOSENED, bolt="B05"))
+    assert [(r.levelname, r.getMessage()[:28]) for r in caplog.records] == [
+        ("ERROR", "tightening 12 of B05 not sto"), ("WARNING", "B05 locked after 3 NOK in a "),
+        ("INFO", "B05 loosened: its tightening")]
