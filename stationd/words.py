@@ -281,6 +281,13 @@ def state_line(state: State, reason: StateReason) -> str:
     return f"{state}: {state_words(reason)}"
 
 
+def records_waiting(n: int) -> str:
+    """The records a line database that is down keeps waiting, with the verb agreeing:
+    ``no record waits yet``, ``1 record waits``, ``13 records wait``."""
+    return "no record waits yet" if n == 0 else f"{counted(n, 'record')} " + (
+        "waits" if n == 1 else "wait")
+
+
 def check_words(ev: PairChecked) -> str:
     """A pair's calibration check in one line: ``pair2 moved: reference R1 off by 3.4 mm``."""
     if ev.why is not None:
@@ -363,4 +370,4 @@ def _missed(r: Reason) -> str:
 
 
 __all__ = ["answer_words", "check_words", "command_words", "notice_words", "operator_words",
-           "outcome_words", "reason_words", "state_line", "state_words"]
+           "outcome_words", "reason_words", "records_waiting", "state_line", "state_words"]

@@ -227,3 +227,10 @@ def test_a_state_change_goes_on_the_wire_as_its_kind_and_fields() -> None:
     assert (doc["kind"], doc["state"]) == ("state_changed", "bolt selected")
     assert (doc["reason"]["kind"], doc["reason"]["bolt"], doc["reason"]["pset"]) == (
         "selected", "B2", 4)
+
+
+def test_records_waiting_agree_their_verb():
+    from stationd.words import records_waiting
+
+    assert [records_waiting(n) for n in (0, 1, 13)] == [
+        "no record waits yet", "1 record waits", "13 records wait"]

@@ -44,6 +44,7 @@ from stationd.station.inputs import (
     LineLinkIn,
 )
 from stationd.stationcheck import validate_station
+from stationd.words import records_waiting
 
 if TYPE_CHECKING:
     from stationd.opcua import OpcUaConfig
@@ -274,10 +275,8 @@ async def forward(cfg: StationConfig, notifier: Notifier, screens: Screens,
             line = f"line database: ALARM: {st['alarm']}"
         elif st["up"] is False:
             n = st["backlog"]
-            line = f"line database: down ({st['last_error']}); " + (
-                "no record waits yet" if n == 0 else "1 record waits" if n == 1
-                else f"{n} records wait") + " (the station goes on; its records are " \
-                "forwarded when it answers)"
+            line = f"line database: down ({st['last_error']}); {records_waiting(n)} (the " \
+                "station goes on; its records are forwarded when it answers)"
         else:
             line = f"line database: forwarding to {st['url']} ({st['backlog']} behind)"
         (log.warning if st["alarm"] or st["up"] is False else log.info)("%s", line)

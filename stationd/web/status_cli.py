@@ -13,6 +13,7 @@ from typing import Any
 
 from drivers.counting import counted
 from stationd.errors import InputError
+from stationd.words import records_waiting
 
 DEFAULT_URL = "http://127.0.0.1:8080/"
 EXIT_FAULT = 1          # answered, but the station is in fault: not OK for a monitor
@@ -77,10 +78,9 @@ def line_lines(line: dict[str, Any] | None) -> list[str]:
     if line.get("alarm"):
         return [f"line:     line database: {line['alarm']}"]
     if line.get("up") is False:
-        waits = "no record waits yet" if n == 0 else f"{counted(n, 'record')} " + (
-            "waits" if n == 1 else "wait")
         return [f"line:     line database down ({line.get('last_error') or 'no answer'}): "
-                f"{waits} (the station goes on; they are forwarded when it answers)"]
+                f"{records_waiting(n)} (the station goes on; they are forwarded when it "
+                "answers)"]
     return [f"line:     line database: {n} behind"]
 
 
