@@ -70,6 +70,11 @@ def _loosen_first(r: StateReason) -> str:
     return f": loosen first (pset {r.pset})" if r.loosen else ""
 
 
+def _late_ack(bolt: str | None) -> str:
+    """An acknowledgement after its selection: the tool-off reason and the notice alike."""
+    return f"late acknowledgement for {bolt} ignored"
+
+
 #: a bolt whose result is not known, after why: the selection was dropped for a person
 _HELD_FOR = "; held for a supervisor"
 
@@ -206,7 +211,7 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
     Said.ENTERED_NOK: lambda n: f"{_entered(n)}: a NOK of {n.bolt}, the NOK policy applies",
     Said.REWORK_REOPENED: lambda n: (f"VIN {n.vin} already closed: reopened as a rework (its "
                                      "records kept)"),
-    Said.LATE_ACK: lambda n: f"late acknowledgement for {n.bolt} ignored",
+    Said.LATE_ACK: lambda n: _late_ack(n.bolt),
 }
 
 
@@ -242,7 +247,7 @@ _BECAUSE: dict[Because, Callable[[StateReason], str]] = {
     Because.NOT_CONFIRMED: lambda r: f"wrench not confirmed on bolt {r.bolt}",
     Because.SELECTED_UNCONFIRMED: lambda r: f"bolt {r.bolt} selected; wrench not confirmed",
     Because.WRENCH_LEFT: lambda r: f"wrench left bolt {r.bolt}",
-    Because.LATE_ACK: lambda r: f"late acknowledgement for {r.bolt} ignored",
+    Because.LATE_ACK: lambda r: _late_ack(r.bolt),
     Because.RUNDOWN: lambda r: f"bolt {r.bolt} {'loosened' if r.loosen else 'tightened'}",
     Because.RESULT: lambda r: (f"bolt {r.bolt} {'loosening ' if r.loosen else ''}"
                                f"{'OK' if r.ok else 'NOK'}; tracking"),
