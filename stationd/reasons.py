@@ -7,6 +7,9 @@ an MES and translated screens).  Carried as text it had to be parsed back with r
 expressions; carried as a :class:`Reason` each edge reads the kind and the fields, and
 :mod:`stationd.words` turns it into words at the very end.  This module is a leaf: it imports
 nothing of the station.
+
+Beside the refusals, another reason the core decides and edges word that a refusal carries:
+why a bolt is skipped (:class:`Skip`).
 """
 
 from __future__ import annotations
@@ -23,9 +26,10 @@ class Why(enum.Enum):
     NO_BOLTS = "no bolts"                # the vehicle's table has none
     NO_BOLT_NEAR = "no bolt near"        # outside every bolt's tolerance (bolt = nearest)
     AMBIGUOUS = "ambiguous"              # two bolts within the margin (bolt, other)
-    SKIPPED = "skipped"                  # the bolt was skipped (note: why)
+    SKIPPED = "skipped"                  # the bolt was skipped (skip: why)
     DONE = "done"                        # already tightened OK
-    MUST_WAIT = "must wait"              # order or batch (blocking, note)
+    MUST_WAIT = "must wait"              # order or batch (blocking, note; skips: the
+                                         # bolts waited for that were skipped, and why)
     NOT_STABLE = "not stable"            # stable for `count` of `needed` frames
     ELSEWHERE = "elsewhere"              # on another bolt than the one selected (bolt)
     LOCKED = "locked"                    # too many NOKs in a row: a release unlocks (count)
@@ -53,7 +57,8 @@ class Why(enum.Enum):
     NOT_STEADY = "not steady"            # teaching: too few steady localizations (count)
     NO_FRAMES = "no frames"              # teaching: no localization at all in `limit` s
     # the NOK policy's loosen strategy and the loosen command
-    LOOSEN_FIRST = "loosen first"        # the bolt gets its loosen pset next (bolt, pset, note)
+    LOOSEN_FIRST = "loosen first"        # the bolt gets its loosen pset next (bolt, pset;
+                                         # user, note: whose command, and their comment)
     NOTHING_TO_LOOSEN = "nothing to loosen"  # a loosen of a bolt not tightened (bolt)
     NO_LOOSEN_PSET = "no loosen pset"    # a loosen of a bolt no loosen_pset applies to (bolt)
     UNKNOWN_MODEL = "unknown model"      # a model no bolt table of the station has (note)
@@ -68,6 +73,29 @@ class Why(enum.Enum):
     SIGN_IN = "sign in"                  # nobody signed in and the station requires one
     NOT_SIGNED_IN = "not signed in"      # a sign-out with nobody signed in
     SIGNED_IN = "signed in"              # a sign-in of the operator signed in already (user)
+
+
+class SkipKind(enum.StrEnum):
+    """Why a bolt is skipped for the vehicle (not tightened at this station): the kind of a
+    :class:`Skip`."""
+
+    NOK_POLICY = "nok policy"            # a NOK under the NOK policy's ``skip`` strategy
+    NO_LOOSEN_PSET = "no loosen pset"    # to be loosened, and no loosen_pset applies to it
+    REFUSED = "refused"                  # the controller refused its parameters (reason)
+    COMMAND = "command"                  # a person's skip command (user, comment)
+
+
+@dataclass(frozen=True)
+class Skip:
+    """Why a bolt is skipped, as the station decided it: the kind and the details that apply
+    (the others stay None).  Typed, not words: the matcher keeps it, refusals, the state's
+    reason and :class:`~stationd.station.events.BoltSkipped` carry it, and
+    :func:`stationd.words.skip_words` says it at the edges (``olga's command (no access)``)."""
+
+    kind: SkipKind
+    user: str | None = None             # who gave the command (COMMAND)
+    comment: str | None = None          # their comment (COMMAND; empty: none)
+    reason: str | None = None           # the controller's own words (REFUSED)
 
 
 @dataclass(frozen=True)
@@ -97,6 +125,10 @@ class Reason:
     user: str | None = None             # a user (the operator signed in, who teaches)
     #: (device, its own words) for each device in fault, in the order they failed
     faults: tuple[tuple[str, str], ...] = ()
+    skip: Skip | None = None            # why a bolt was skipped (SKIPPED)
+    #: the bolts waited for that were skipped, each with why (MUST_WAIT: waiting for them is
+    #: waiting for something that will not happen on its own)
+    skips: tuple[tuple[str, Skip], ...] = ()
     #: the refusal behind this one (a teach point not steady: what the localizations without
     #: the wrench said, e.g. no frame from a camera)
     cause: Reason | None = None
@@ -109,4 +141,4 @@ class Reason:
                 self.pair, self.reference)
 
 
-__all__ = ["Reason", "Why"]
+__all__ = ["Reason", "Skip", "SkipKind", "Why"]

@@ -5,10 +5,11 @@ the station's rules."""
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 from db.kinds import NOT_TAKEN_NOTE, is_not_taken_note
 from drivers.counting import counted
-from stationd.reasons import Reason, Why
+from stationd.reasons import Reason, Skip, SkipKind, Why
 from stationd.station.commands import (
     KIND,
     Answer,
@@ -23,6 +24,7 @@ from stationd.station.commands import (
 )
 from stationd.station.events import (
     Because,
+    BoltSkipped,
     Notice,
     OperatorChange,
     OperatorChanged,
@@ -30,6 +32,7 @@ from stationd.station.events import (
     Said,
     State,
     StateReason,
+    StationEvent,
 )
 
 
@@ -46,6 +49,37 @@ def _unread(bolt: str | None, note: str | None) -> str:
     """A bolt held for a result that could not be read: the refusal and the notice alike."""
     return (f"{bolt}: the controller's result could not be read ({note}): check it on the "
             "controller, then release")
+
+
+def _command(user: str | None, comment: str | None) -> str:
+    """A person's command, as a skip and a loosen say who ordered it: ``olga's command (no
+    access)``."""
+    return f"{user}'s command" + (f" ({comment})" if comment else "")
+
+
+_SKIP: dict[SkipKind, Callable[[Skip], str]] = {
+    SkipKind.NOK_POLICY: lambda s: "NOK, skipped by the NOK policy",
+    SkipKind.NO_LOOSEN_PSET: lambda s: "to be loosened, and the NOK policy gives it no "
+                                       "loosen_pset",
+    SkipKind.REFUSED: lambda s: f"controller refused its parameters ({s.reason})",
+    SkipKind.COMMAND: lambda s: _command(s.user, s.comment),
+}
+
+
+def skip_words(skip: Skip) -> str:
+    """Why a bolt is skipped, as the screens, the refusals and the state's reason say it:
+    ``olga's command (no access)``, ``NOK, skipped by the NOK policy``."""
+    return _SKIP[skip.kind](skip)
+
+
+def worded(event: StationEvent) -> StationEvent:
+    """The event with its words written from the typed value the core decided (a skip's
+    ``reason`` from its ``skip``): what the shell publishes, so that every reader of the bus
+    (the screens, OPC UA, the journal) reads the same text as before; any other event as it
+    is."""
+    if isinstance(event, BoltSkipped) and event.skip is not None and not event.reason:
+        return replace(event, reason=skip_words(event.skip))
+    return event
 
 
 def _faults(faults: tuple[tuple[str, str], ...]) -> str:
@@ -79,6 +113,11 @@ def _late_ack(bolt: str | None) -> str:
 _HELD_FOR = "; held for a supervisor"
 
 
+def _skipped(skip: Skip | None) -> str:
+    """A skip's words, where a reason may lack it (``None``: never from the core)."""
+    return "None" if skip is None else skip_words(skip)
+
+
 def _per_pair(r: Reason, full: bool = False) -> str:
     """Each pair's reason; said once with how many pairs say it when they all say the same
     (the operator's large words; ``full``: every pair's, as the journal keeps it)."""
@@ -98,9 +137,10 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
                                  f"{_mm(r.distance_mm)} mm)"),
     Why.AMBIGUOUS: lambda r: (f"ambiguous: {r.bolt} at {_mm(r.distance_mm)} mm, {r.other} at "
                               f"{_mm(r.other_mm)} mm"),
-    Why.SKIPPED: lambda r: f"{r.bolt} skipped: {r.note}",
+    Why.SKIPPED: lambda r: f"{r.bolt} skipped: {_skipped(r.skip)}",
     Why.DONE: lambda r: f"{r.bolt} is already done",
-    Why.MUST_WAIT: lambda r: f"{r.bolt} must wait: {r.note}",
+    Why.MUST_WAIT: lambda r: f"{r.bolt} must wait: " + "; ".join(
+        [f"{r.note}", *(f"{b} was skipped: {skip_words(s)}" for b, s in r.skips)]),
     Why.NOT_STABLE: lambda r: f"{r.bolt}: stable for {r.count} of {r.needed} frames",
     Why.ELSEWHERE: lambda r: f"nearest {r.bolt}",
     Why.LOCKED: lambda r: _locked(r.bolt, r.count),
@@ -111,7 +151,8 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
                          "controller, then release" if is_not_taken_note(r.note) else
                          _unread(r.bolt, r.note)),
     Why.LOOSEN_FIRST: lambda r: (f"{r.bolt}: loosen first (loosen pset {r.pset}), then "
-                                 "tighten" + (f": {r.note}" if r.note else "")),
+                                 "tighten" + (f": {_command(r.user, r.note)}"
+                                              if r.user is not None else "")),
     Why.NOTHING_TO_LOOSEN: lambda r: f"{r.bolt} is not tightened: nothing to loosen",
     Why.NO_LOOSEN_PSET: lambda r: (f"no loosen pset for {r.bolt}: the station's nok section "
                                    "gives it no loosen_pset"),
@@ -255,7 +296,7 @@ _BECAUSE: dict[Because, Callable[[StateReason], str]] = {
     Because.UNREADABLE_HELD: lambda r: _unreadable(r) + _HELD_FOR,
     Because.NOT_TAKEN: _not_taken,
     Because.NOT_TAKEN_HELD: lambda r: _not_taken(r) + _HELD_FOR,
-    Because.SKIPPED: lambda r: f"bolt {r.bolt} {r.note}",
+    Because.SKIPPED: lambda r: f"bolt {r.bolt} {_skipped(r.skip)}",
     Because.LOOSEN_ORDERED: lambda r: f"bolt {r.bolt}: loosen first",
     Because.OPERATOR: lambda r: f"operator {r.how}",
     Because.TEACH_MODE: lambda r: "teach mode",
@@ -374,5 +415,6 @@ def _missed(r: Reason) -> str:
     return f"; {many} without the wrench, the last: {reason_words(r.cause)}"
 
 
-__all__ = ["answer_words", "check_words", "command_words", "notice_words", "operator_words",
-           "outcome_words", "reason_words", "records_waiting", "state_line", "state_words"]
+__all__ = ["answer_words", "check_words", "command_words", "notice_words",
+           "operator_words", "outcome_words", "reason_words", "records_waiting", "skip_words",
+           "state_line", "state_words", "worded"]

@@ -1,16 +1,18 @@
 """The station's notices and its state's reasons in words (stationd.words.notice_words,
-state_words, state_line): each kind's line, word for word as the journal wrote it when the
-core still built the text (daemon tests and people's log searches wait for these lines), and
-each notice kind's level."""
+state_words, state_line; skip_words for a skip): each kind's line, word for word as the
+journal wrote it when the core still built the text (daemon tests and people's log searches
+wait for these lines), and each notice kind's level."""
 
 from __future__ import annotations
 
 import pytest
 
 from db.kinds import not_taken_note
-from stationd.reasons import Reason, Why
+from stationd.reasons import Reason, Skip, SkipKind, Why
 from stationd.station.events import (
     Because,
+    BoltSkipped,
+    DeviceHealth,
     Notice,
     OperatorChange,
     Said,
@@ -18,7 +20,14 @@ from stationd.station.events import (
     StateChanged,
     StateReason,
 )
-from stationd.words import notice_words, reason_words, state_line, state_words
+from stationd.words import (
+    notice_words,
+    reason_words,
+    skip_words,
+    state_line,
+    state_words,
+    worded,
+)
 
 WORDS = [
     (Notice(Said.NO_REFERENCES),
@@ -165,7 +174,8 @@ STATE_WORDS = [
     (StateReason(Because.NOT_TAKEN_HELD, bolt="B11"),
      "bolt B11: an OK result without a result type outside its torque window; held for a "
      "supervisor"),
-    (StateReason(Because.SKIPPED, bolt="B11", note="sam's command (no access)"),
+    (StateReason(Because.SKIPPED, bolt="B11",
+                 skip=Skip(SkipKind.COMMAND, user="sam", comment="no access")),
      "bolt B11 sam's command (no access)"),
     (StateReason(Because.LOOSEN_ORDERED, bolt="B11"), "bolt B11: loosen first"),
     (StateReason(Because.OPERATOR, how=OperatorChange.SIGNED_OUT), "operator signed out"),
@@ -234,3 +244,73 @@ def test_records_waiting_agree_their_verb():
 
     assert [records_waiting(n) for n in (0, 1, 13)] == [
         "no record waits yet", "1 record waits", "13 records wait"]
+
+
+#: why a bolt is skipped, word for word as the core wrote it (the screens, the refusals and
+#: the state's reason say it; a daemon test waits for "B05 skipped: olga's command (...)")
+SKIP_WORDS = [
+    (Skip(SkipKind.NOK_POLICY), "NOK, skipped by the NOK policy"),
+    (Skip(SkipKind.NO_LOOSEN_PSET),
+     "to be loosened, and the NOK policy gives it no loosen_pset"),
+    (Skip(SkipKind.REFUSED, reason="pset 2 unknown"),
+     "controller refused its parameters (pset 2 unknown)"),
+    (Skip(SkipKind.COMMAND, user="olga", comment="no access"), "olga's command (no access)"),
+    (Skip(SkipKind.COMMAND, user="sam", comment=""), "sam's command"),
+]
+
+
+@pytest.mark.parametrize(("skip", "words"), SKIP_WORDS,
+                         ids=[f"{s.kind.name}-{i}" for i, (s, _) in enumerate(SKIP_WORDS)])
+def test_each_skip_says_what_the_core_said(skip: Skip, words: str) -> None:
+    assert skip_words(skip) == words
+
+
+def test_every_skip_kind_has_its_words() -> None:
+    assert {s.kind for s, _ in SKIP_WORDS} == set(SkipKind)
+
+
+def test_a_skip_is_said_alike_by_a_refusal_a_wait_and_the_state() -> None:
+    """One skip, one wording: the refusal on the bolt, a bolt waiting for it, the state's
+    reason (as the core wrote them when it kept the skip as text)."""
+    by_olga = Skip(SkipKind.COMMAND, user="olga", comment="no access")
+    refused = Skip(SkipKind.REFUSED, reason="pset 2 unknown")
+    assert reason_words(Reason(Why.SKIPPED, bolt="B05", skip=by_olga)) == \
+        "B05 skipped: olga's command (no access)"
+    assert reason_words(Reason(Why.MUST_WAIT, bolt="A3", blocking=("A1", "A2"),
+                               note="order 2 in batch subframe needs A1, A2 done first",
+                               skips=(("A1", refused),))) == (
+        "A3 must wait: order 2 in batch subframe needs A1, A2 done first; A1 was skipped: "
+        "controller refused its parameters (pset 2 unknown)")
+    assert reason_words(Reason(Why.MUST_WAIT, bolt="B2", note="order 2 needs B1 done first")) \
+        == "B2 must wait: order 2 needs B1 done first"
+    assert state_words(StateReason(Because.SKIPPED, bolt="B05", skip=by_olga)) == \
+        "bolt B05 olga's command (no access)"
+
+
+def test_a_loosen_command_says_whose_it_was() -> None:
+    """A loosen command's reason carries who gave it and their comment, said as a skip's
+    command is; the NOK policy's loosen names nobody."""
+    first = Reason(Why.LOOSEN_FIRST, bolt="B1", pset=90, user="sam", note="cross-threaded")
+    assert reason_words(first) == \
+        "B1: loosen first (loosen pset 90), then tighten: sam's command (cross-threaded)"
+    assert reason_words(Reason(Why.LOOSEN_FIRST, bolt="B1", pset=90, user="sam", note="")) \
+        == "B1: loosen first (loosen pset 90), then tighten: sam's command"
+    assert reason_words(Reason(Why.LOOSEN_FIRST, bolt="B1", pset=90)) == \
+        "B1: loosen first (loosen pset 90), then tighten"
+
+
+def test_the_words_are_written_into_the_event_at_publication() -> None:
+    """The core publishes a skip typed, with no words; ``worded`` (the
+    shell's publication) writes them where every reader read them, and the event's JSON is
+    what it was when the core wrote the text."""
+    skipped = worded(BoltSkipped("B3", skip=Skip(SkipKind.NOK_POLICY), t=1.0))
+    assert isinstance(skipped, BoltSkipped)
+    assert (skipped.reason, skipped.skip) == ("NOK, skipped by the NOK policy",
+                                              Skip(SkipKind.NOK_POLICY))
+    assert skipped.to_json() == {"kind": "bolt_skipped", "t": 1.0, "bolt": "B3",
+                                 "reason": "NOK, skipped by the NOK policy"}
+    # any other event is published as it is
+    own = DeviceHealth("lift", False, "down", "no answer", t=3.0)
+    assert worded(own) is own
+    notice = Notice(Said.LOOSENED, bolt="B1")
+    assert worded(notice) is notice

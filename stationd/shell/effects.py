@@ -83,6 +83,7 @@ from stationd.words import (
     operator_words,
     reason_words,
     state_line,
+    worded,
 )
 
 log = logging.getLogger("stationd")
@@ -200,7 +201,11 @@ class Effects:
         return None
 
     def publish(self, ev: StationEvent) -> None:
-        """An event of the core to the screens and feeds, and its journal line."""
+        """An event of the core to the screens and feeds, and its journal line.  The one path
+        from the core to the bus: the words of what the core decided typed (a skip) are
+        written into the event here (:func:`worded`), so the core
+        says no English and every reader gets the text it read before."""
+        ev = worded(ev)
         self.bus.publish(ev)
         if isinstance(ev, StateChanged | VehicleOpened | VehicleClosed):
             for line in self.refusals.ended(ev.t):   # the refusals' episode ended

@@ -35,7 +35,7 @@ from stationd.boltfile import import_bolts
 from stationd.config import StationConfig
 from stationd.errors import StationError
 from stationd.localize import Localization
-from stationd.reasons import Reason, Why
+from stationd.reasons import Reason, Skip, SkipKind, Why
 from stationd.station.actions import (
     LoadVehicle,
     Owed,
@@ -53,7 +53,6 @@ from stationd.station.commands import (
     SignIn,
     SignOut,
     TeachStart,
-    skip_note,
 )
 from stationd.station.inputs import LoadedBolt, VehicleEnded, VehicleLoaded, VehicleRejected
 from stationd.station.results import type_code
@@ -290,9 +289,12 @@ class Records:
         log.info("vehicle %s (%s) opened%s: %d bolts, %d done", a.vin, model,
                  " for rework" if started.rework else "", len(infos), len(done))
         # by keyword: held and status are both bolt -> text, and given by position (status
-        # in held's place) every bolt done before a reload or a restart came back held
+        # in held's place) every bolt done before a reload or a restart came back held.  A
+        # skip read back from the command ledger is the person's command, typed as the core
+        # decided it then (who and their comment): said as it was before the restart
         return VehicleLoaded(time.time(), a.vin, model, specs, done, started.rework,
-                             skipped={b: skip_note(*who) for b, who in skipped.items()},
+                             skipped={b: Skip(SkipKind.COMMAND, user=user, comment=comment)
+                                      for b, (user, comment) in skipped.items()},
                              noks=noks, held=held, status=status)
 
     def close_vehicle(self, vin: str) -> VehicleEnded:

@@ -169,11 +169,6 @@ KIND: dict[type[Command], str] = {SkipBolt: "skip", ReopenVehicle: "reopen",
                                   SignIn: "sign-in", SignOut: "sign-out"}
 
 
-def skip_note(user: str, comment: str) -> str:
-    """Why a skipped bolt is not tightened, as the matcher keeps it."""
-    return f"{user}'s command" + (f" ({comment})" if comment else "")
-
-
 @dataclass(frozen=True)
 class Answer:
     """The core's answer to one command: accepted (``reason`` None) or refused with why."""
@@ -192,4 +187,4 @@ class Answer:
 __all__ = ["KIND", "RIGHT", "Answer", "CheckCalibration", "Command", "EnterOutcome", "Issuer",
            "LoosenBolt",
            "ReleaseBolt", "ReopenVehicle", "Right", "SignIn", "SignOut", "SkipBolt",
-           "TeachPoint", "TeachStart", "TeachStop", "skip_note"]
+           "TeachPoint", "TeachStart", "TeachStop"]

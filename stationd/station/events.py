@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from db.kinds import BoltStatus
-from stationd.reasons import Reason
+from stationd.reasons import Reason, Skip
 
 
 def _now() -> float:
@@ -43,11 +43,18 @@ class StationEvent:
                        for i, c in enumerate(name))
 
     def to_json(self) -> dict[str, Any]:
-        """A JSON-safe dict: arrays to lists, enums to values, NaN/inf to None."""
+        """A JSON-safe dict: arrays to lists, enums to values, NaN/inf to None.  A field
+        marked :data:`WORDED` is left out: its words are in the event's text field."""
         out: dict[str, Any] = {"kind": self.kind}
         for f in dataclasses.fields(self):
-            out[f.name] = _jsonable(getattr(self, f.name))
+            if not f.metadata.get(WORDED):
+                out[f.name] = _jsonable(getattr(self, f.name))
         return out
+
+
+#: a field's metadata: the typed value the core decided, whose words the shell's publication
+#: writes into the event's text field (:func:`stationd.words.worded`); the JSON keeps the text
+WORDED = "worded"
 
 
 def _jsonable(v: Any) -> Any:
@@ -118,8 +125,8 @@ class Because(enum.Enum):
     #                                      bolt's torque window (bolt)
     NOT_TAKEN_HELD = "not taken held"    # ... and the bolt held, the selection dropped (bolt)
     # commands
-    SKIPPED = "skipped"                  # the bolt selected was skipped (bolt, note: the
-    #                                      skip's note, as the matcher keeps it)
+    SKIPPED = "skipped"                  # the bolt selected was skipped (bolt, skip: why,
+    #                                      as the matcher keeps it)
     LOOSEN_ORDERED = "loosen ordered"    # a loosen command for the bolt selected (bolt)
     OPERATOR = "operator"                # the operator changed on a bolt (how)
     # teach-in
@@ -146,7 +153,8 @@ class StateReason:
     user: str | None = None             # who teaches
     #: (device, its own words) for each device in fault, in the order they failed
     faults: tuple[tuple[str, str], ...] = ()
-    note: str | None = None             # words from elsewhere (the lift, a skip's note)
+    skip: Skip | None = None            # why the bolt selected was skipped
+    note: str | None = None             # words from elsewhere (the lift)
 
 
 @dataclass(frozen=True)
@@ -303,8 +311,19 @@ class ToolDisabled(StationEvent):
 
 @dataclass(frozen=True)
 class BoltSkipped(StationEvent):
+    """``bolt`` is not tightened at this station for this vehicle (reported missing):
+    ``skip``, why, typed as the core decided it (the NOK policy, a loosen pset missing, the
+    controller's refusal, a person's command); ``reason``, the same in words
+    (:func:`stationd.words.skip_words`: ``olga's command (no access)``).
+
+    The core writes no words: it publishes ``skip`` with ``reason`` empty, and the shell's
+    publication (:func:`stationd.words.worded`) writes them.  Why a text field filled at
+    publication rather than the typed value alone: the screens read ``reason`` as before and
+    the event's JSON is unchanged (``skip`` is left out of it)."""
+
     bolt: str
-    reason: str
+    reason: str = ""
+    skip: Skip | None = field(default=None, kw_only=True, metadata={WORDED: True})
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from db.bolts import Parameters
 from db.kinds import BoltStatus
 from drivers.keeper import FaultKind
 from drivers.wrench.base import TighteningResult, UnreadableResult
-from stationd.reasons import Reason
+from stationd.reasons import Reason, Skip
 from stationd.station.actions import Record
 from stationd.station.commands import Command, Issuer
 from stationd.station.trust import ReferencesChecked
@@ -200,14 +200,14 @@ class LoadedBolt:
 @dataclass(frozen=True)
 class VehicleLoaded(Input):
     """The database has the vehicle open: its bolts, those already done and those a command
-    skipped since it was (re)opened (bolt -> why)."""
+    skipped since it was (re)opened (bolt -> why: the person's command, typed)."""
 
     vin: str
     model: str
     bolts: Mapping[str, LoadedBolt]
     done: frozenset[str] = frozenset()
     rework: bool = False
-    skipped: Mapping[str, str] = field(default_factory=dict)
+    skipped: Mapping[str, Skip] = field(default_factory=dict)
     noks: Mapping[str, int] = field(default_factory=dict)   # NOKs in a row, since a release
     held: Mapping[str, str] = field(default_factory=dict)   # held by an unreadable result
     status: Mapping[str, BoltStatus] = field(default_factory=dict)  # bolt -> ok, nok, ...

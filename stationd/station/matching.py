@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from db.spacing import min_spacing_mm, too_close
-from stationd.reasons import Reason, Why
+from stationd.reasons import Reason, Skip, Why
 from stationd.yamlio import YamlNode
 
 
@@ -97,7 +97,7 @@ class BoltMatcher:
     bolts: Mapping[str, np.ndarray]  # id -> position (vehicle frame, mm)
     params: MatchParams = field(default_factory=MatchParams)
     done: set[str] = field(default_factory=set)
-    skipped: dict[str, str] = field(default_factory=dict)  # bolt -> why it is not tightened
+    skipped: dict[str, Skip] = field(default_factory=dict)  # bolt -> why it is not tightened
     locked: dict[str, int] = field(default_factory=dict)   # bolt -> NOKs in a row (released
     #                                                        only by a supervisor's command)
     #: bolt -> why its result is not known (an unreadable result): refused, like a lock,
@@ -145,10 +145,11 @@ class BoltMatcher:
         blocked = self._blocked(bolt)
         return None if blocked is None else blocked[0]
 
-    def _blocked(self, bolt: str) -> tuple[str, tuple[str, ...]] | None:
-        """Why the sequence forbids ``bolt`` (naming the blocking bolts that were skipped:
-        waiting for them is waiting for something that will not happen on its own), and the
-        bolts it waits for; None if it allows it."""
+    def _blocked(self, bolt: str) -> tuple[str, tuple[str, ...], tuple[tuple[str, Skip], ...]] \
+            | None:
+        """Why the sequence forbids ``bolt``, the bolts it waits for, and those of them that
+        were skipped with why (waiting for them is waiting for something that will not happen
+        on its own: the refusal names them); None if it allows it."""
         rule = self._rule.get(bolt, NO_RULE)
         open_batches: dict[str, list[str]] = {}
         for name, members in self._batches.items():
@@ -166,8 +167,8 @@ class BoltMatcher:
                 return None
             group = f" in batch {rule.batch}" if rule.batch is not None else ""
             why = f"order {rule.order}{group} needs {', '.join(waits)} done first"
-        notes = [f"{b} was skipped: {self.skipped[b]}" for b in waits if b in self.skipped]
-        return "; ".join([why, *notes]), tuple(waits)
+        skips = tuple((b, self.skipped[b]) for b in waits if b in self.skipped)
+        return why, tuple(waits), skips
 
     def reset(self) -> None:
         """Forget the streak (after a selection, a refusal, or the wrench leaving)."""
@@ -206,7 +207,7 @@ class BoltMatcher:
         if near in self.skipped:
             self.reset()
             return Match(None, near, dist, Reason(Why.SKIPPED, bolt=near,
-                                                  note=self.skipped[near]))
+                                                  skip=self.skipped[near]))
         if near in self.done and not p.allow_retighten:
             self.reset()
             return Match(None, near, dist, Reason(Why.DONE, bolt=near))
@@ -214,7 +215,7 @@ class BoltMatcher:
         if blocked is not None:
             self.reset()
             return Match(None, near, dist, Reason(Why.MUST_WAIT, bolt=near, note=blocked[0],
-                                                  blocking=blocked[1]))
+                                                  blocking=blocked[1], skips=blocked[2]))
         self._streak = self._streak + 1 if self._streak_bolt == near else 1
         self._streak_bolt = near
         if self._streak < p.stable_frames:

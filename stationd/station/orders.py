@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from stationd.reasons import Reason, Why
+from stationd.reasons import Reason, Skip, SkipKind, Why
 from stationd.station.actions import Action, Publish, RecordCommand, Reply
 from stationd.station.commands import (
     RIGHT,
@@ -24,7 +24,6 @@ from stationd.station.commands import (
     TeachPoint,
     TeachStart,
     TeachStop,
-    skip_note,
 )
 from stationd.station.events import (
     Because,
@@ -96,7 +95,7 @@ class OrderRules(FaultRules):
         if cmd.bolt in self.matcher.done:
             return Reason(Why.DONE, bolt=cmd.bolt)
         if cmd.bolt in self.matcher.skipped:
-            return Reason(Why.SKIPPED, bolt=cmd.bolt, note=self.matcher.skipped[cmd.bolt])
+            return Reason(Why.SKIPPED, bolt=cmd.bolt, skip=self.matcher.skipped[cmd.bolt])
         if self.tool_on and self.bolt == cmd.bolt:
             return Reason(Why.TOOL_ON_BOLT, bolt=cmd.bolt)
         return None
@@ -115,7 +114,7 @@ class OrderRules(FaultRules):
         if b in m.locked:
             return Reason(Why.LOCKED, bolt=b, count=m.locked[b])
         if b in m.skipped:
-            return Reason(Why.SKIPPED, bolt=b, note=m.skipped[b])
+            return Reason(Why.SKIPPED, bolt=b, skip=m.skipped[b])
         if self.tool_on and self.bolt == b:
             return Reason(Why.TOOL_ON_BOLT, bolt=b)
         if b not in m.done and b not in self._nok_last:
@@ -169,12 +168,12 @@ class OrderRules(FaultRules):
         (the tool goes off)."""
         if self.matcher is None or self.vin != cmd.vin or cmd.bolt not in self.matcher.bolts:
             return []   # the vehicle left while the command was being recorded
-        why = skip_note(who.user, cmd.comment)
+        why = Skip(SkipKind.COMMAND, user=who.user, comment=cmd.comment)
         self.matcher.skipped[cmd.bolt] = why
-        acts: list[Action] = [Publish(BoltSkipped(cmd.bolt, why, t=t))]
+        acts: list[Action] = [Publish(BoltSkipped(cmd.bolt, skip=why, t=t))]
         if self.bolt == cmd.bolt:
             acts += self._drop(t, State.TRACKING,
-                               StateReason(Because.SKIPPED, bolt=cmd.bolt, note=why))
+                               StateReason(Because.SKIPPED, bolt=cmd.bolt, skip=why))
         return acts
 
     def _loosen_ordered(self, t: float, cmd: LoosenBolt, who: Issuer) -> list[Action]:
@@ -184,17 +183,20 @@ class OrderRules(FaultRules):
             return []   # the vehicle left while the command was being recorded
         self.matcher.done.discard(cmd.bolt)
         self._loosen.add(cmd.bolt)
-        acts = [self._to_loosen(t, cmd.bolt, who.user, skip_note(who.user, cmd.comment))]
+        acts = [self._to_loosen(t, cmd.bolt, who.user, cmd.comment)]
         if self.bolt == cmd.bolt:
             acts += self._drop(t, State.TRACKING,
                                StateReason(Because.LOOSEN_ORDERED, bolt=cmd.bolt))
         return acts
 
     def _to_loosen(self, t: float, bolt: str, user: str | None = None,
-                   note: str | None = None) -> Action:
+                   comment: str | None = None) -> Action:
+        """``bolt`` gets its loosen pset next: after a NOK (the NOK policy), or by ``user``'s
+        loosen command with their ``comment`` (the reason carries both; its words say whose
+        command it was)."""
         pset = self.nok.rule(bolt, self._specs[bolt].pset).loosen_pset
         return Publish(BoltToLoosen(bolt, Reason(Why.LOOSEN_FIRST, bolt=bolt, pset=pset,
-                                                 note=note), user, t=t))
+                                                 user=user, note=comment), user, t=t))
 
     # -- the operator signed in at the station ---------------------------------------------
     def _on_operator_back(self, ev: OperatorBack) -> list[Action]:

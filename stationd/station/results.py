@@ -381,7 +381,7 @@ class ResultRules(OrderRules):
         if rule.strategy == "skip":
             why = NOK_SKIPPED
             self.matcher.skipped[bolt] = why
-            return [Publish(BoltSkipped(bolt, why, t=t))]
+            return [Publish(BoltSkipped(bolt, skip=why, t=t))]
         return []
 
     # -- an outcome entered by a person for a held bolt -----------------------------------------

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 
 from db.bolts import Window
-from stationd.reasons import Reason, Why
+from stationd.reasons import Reason, Skip, SkipKind, Why
 from stationd.station.actions import Action, DisableTool, Owed, Publish, Selection
 from stationd.station.commands import TeachPoint
 from stationd.station.events import (
@@ -41,14 +41,14 @@ LOCALIZING = (State.TRACKING, *ON_A_BOLT)
 #: the states in which the cameras are read (teaching measures the wrench, sends nothing)
 CAMERAS_ON = (*LOCALIZING, State.TEACHING)
 #: why a bolt is not tightened again after a NOK under the ``skip`` strategy
-NOK_SKIPPED = "NOK, skipped by the NOK policy"
+NOK_SKIPPED = Skip(SkipKind.NOK_POLICY)
 #: the station's reason until it started: its devices being opened
 OPENING = StateReason(Because.OPENING)
 #: the targets sent with a loosen pset: none of the station's own (a loosen pset is a program
 #: on the controller; a register-driven controller takes 0 as "the pset's own")
 LOOSEN_TARGETS = Window(0.0, 0.0, 0.0)
 #: why a bolt to loosen is not tightened when no loosen pset applies to it (a reload removed it)
-NO_LOOSEN_PSET = "to be loosened, and the NOK policy gives it no loosen_pset"
+NO_LOOSEN_PSET = Skip(SkipKind.NO_LOOSEN_PSET)
 
 
 @dataclass(frozen=True)

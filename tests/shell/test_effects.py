@@ -15,8 +15,15 @@ from stationd.shell.effects import Effects
 from stationd.shell.sdnotify import Notifier
 from stationd.station.actions import Publish
 from stationd.station.core import StationCore
-from stationd.station.inputs import DeviceBack, DeviceFault, Started
-from tests.station.test_core import PARAMS
+from stationd.station.inputs import (
+    DeviceBack,
+    DeviceFault,
+    LiftRead,
+    ParamsRefused,
+    Started,
+    VehicleLoaded,
+)
+from tests.station.test_core import BOLTS, PARAMS
 
 
 def _effects(core: StationCore) -> Effects:
@@ -60,3 +67,22 @@ def test_a_notice_goes_to_the_journal_at_its_own_level(caplog):
     assert [(r.levelname, r.getMessage()[:28]) for r in caplog.records] == [
         ("ERROR", "tightening 12 of B05 not sto"), ("WARNING", "B05 locked after 3 NOK in a "),
         ("INFO", "B05 loosened: its tightening")]
+
+
+def test_what_the_core_decided_typed_is_published_in_words(caplog):
+    """A refused parameter set: the core decides the skip typed and says no words; the
+    publication writes them, so the bus (the screens) reads what it read when the core wrote
+    the text."""
+    from stationd.station.events import BoltSkipped
+
+    core = StationCore(PARAMS)
+    effects = _effects(core)
+    inputs = [Started(1.0), LiftRead(1.1, True, True, 7, "VIN1"),
+              VehicleLoaded(1.2, "VIN1", "M", BOLTS), ParamsRefused(1.3, "B1", "pset unknown")]
+    with caplog.at_level(logging.INFO, logger="stationd"):
+        for ev in inputs:
+            for a in core.feed(ev):
+                if isinstance(a, Publish):
+                    effects.publish(a.event)
+    assert [(e.bolt, e.reason) for e in effects.bus.of(BoltSkipped)] == [
+        ("B1", "controller refused its parameters (pset unknown)")]

@@ -7,7 +7,7 @@ import typing
 
 import pytest
 
-from stationd.reasons import Reason, Why
+from stationd.reasons import Reason, Skip, SkipKind, Why
 from stationd.station import core as core_module
 from stationd.station.actions import DisableTool, Publish, RecordCommand, Reply
 from stationd.station.commands import Issuer, ReopenVehicle, Right, SkipBolt
@@ -20,7 +20,7 @@ from stationd.station.events import (
     VehicleReopened,
 )
 from stationd.station.inputs import CommandDone, CommandIn, LiftRead, VehicleLoaded, VehicleRejected
-from stationd.words import answer_words, reason_words
+from stationd.words import answer_words, reason_words, skip_words, state_words
 from tests.station.test_core import BOLTS, _on, _ready
 
 SUPERVISOR = Issuer("sam", frozenset(Right), "screen 10.0.0.7")
@@ -54,7 +54,9 @@ def test_a_skip_takes_effect_once_recorded_and_is_answered_accepted():
     assert "B2" not in d.core.matcher.skipped          # not before it is on disk
     acts = d.core.feed(CommandDone(d.t, 1))
     assert _answer(acts).answer.accepted
-    assert d.core.matcher.skipped["B2"] == "olga's command (no access)"
+    why = Skip(SkipKind.COMMAND, user="olga", comment="no access")
+    assert d.core.matcher.skipped["B2"] == why
+    assert skip_words(why) == "olga's command (no access)"
     assert any(type(a).__name__ == "Publish" and isinstance(a.event, BoltSkipped)
                for a in acts)
     _on(d, 2, 3)
@@ -78,8 +80,9 @@ def test_a_skip_of_the_selected_bolt_turns_the_tool_off():
     assert _answer(acts).answer.accepted
     assert any(isinstance(a, DisableTool) for a in acts)
     assert d.core.state is State.TRACKING and d.core.bolt is None
-    assert d.core.reason == StateReason(Because.SKIPPED, bolt="B2",
-                                        note=f"{SUPERVISOR.user}'s command")
+    assert d.core.reason == StateReason(Because.SKIPPED, bolt="B2", skip=Skip(
+        SkipKind.COMMAND, user=SUPERVISOR.user, comment=""))
+    assert state_words(d.core.reason) == f"bolt B2 {SUPERVISOR.user}'s command"
 
 
 @pytest.mark.parametrize(("command", "issuer", "why"), [
@@ -155,6 +158,7 @@ def test_a_reopen_of_the_closed_vehicle_at_height_clears_its_fault_and_loads_it(
 
 def test_skips_recorded_before_a_reload_come_back_with_the_vehicle():
     d = _ready()
-    d.core.feed(VehicleLoaded(d.t, "VIN1", "M", BOLTS, skipped={"B3": "olga's command"}))
+    d.core.feed(VehicleLoaded(d.t, "VIN1", "M", BOLTS, skipped={
+        "B3": Skip(SkipKind.COMMAND, user="olga", comment="")}))
     _on(d, 3, 3)
     assert d.sends == []

@@ -16,7 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from drivers.keeper import FaultKind
-from stationd.reasons import Reason, Why
+from stationd.reasons import Reason, Skip, SkipKind, Why
 from stationd.station.actions import (
     Acknowledge,
     CloseVehicle,
@@ -35,6 +35,7 @@ from stationd.station.actions import (
 from stationd.station.core import StationCore
 from stationd.station.events import (
     Because,
+    BoltSkipped,
     DeviceHealth,
     OperatorChanged,
     Refused,
@@ -492,6 +493,12 @@ def test_a_refusal_skips_the_bolt_and_faults_the_controller_until_it_is_back():
     d.step(("ack", 0.01, False))
     assert d.core.state is State.FAULT
     assert "refused the parameters for B1" in dict(d.core.reason.faults)["wrench"]
+    # decided typed, with the controller's words; the core writes none of its own (the
+    # shell's publication does: tests/shell/test_effects.py)
+    refused = [a for _, acts in d.log for a in acts]
+    assert [(e.bolt, e.skip, e.reason) for e in published(refused, BoltSkipped)] == [
+        ("B1", Skip(SkipKind.REFUSED, reason="pset unknown"), "")]
+    assert d.core.matcher.skipped == {"B1": Skip(SkipKind.REFUSED, reason="pset unknown")}
     d.down.add("wrench")
     d.step(("back", 0.1, "wrench", 0))
     d.step(("lift", 0.1, True, True, "VIN1"))

@@ -1,5 +1,6 @@
 import numpy as np
 
+from stationd.reasons import Skip, SkipKind
 from stationd.station.matching import BoltMatcher, BoltRule, MatchParams, check_spacing
 from stationd.words import reason_words
 
@@ -140,7 +141,7 @@ def test_batch_lock_in():
 
 def test_a_skipped_bolt_blocks_and_says_so():
     m = _seq()
-    m.skipped["A1"] = "controller refused its parameters (pset 2 unknown)"
+    m.skipped["A1"] = Skip(SkipKind.REFUSED, reason="pset 2 unknown")
     assert _why(m.update(_at("A1"))).startswith("A1 skipped:")  # skipped comes first
     r = m.update(_at("A3"))
     assert r.bolt is None and _why(r) == (
@@ -216,7 +217,7 @@ def test_the_sequence_holds_under_jitter():
                     assert got.bolt == true and got.bolt not in before
                     assert _allowed(got.bolt, rules, before), (got.bolt, rules, before)
                     if rng.random() < 0.1:
-                        m.skipped[got.bolt] = "controller refused its parameters"
+                        m.skipped[got.bolt] = Skip(SkipKind.REFUSED, reason="pset 2 unknown")
                     else:
                         m.mark_done(got.bolt)
                     break

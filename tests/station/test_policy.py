@@ -14,13 +14,14 @@ from stationd.reasons import Reason, Why
 from stationd.station.actions import Record
 from stationd.station.commands import ReleaseBolt
 from stationd.station.core import StationCore
-from stationd.station.events import BoltLocked, BoltReleased, BoltSkipped
+from stationd.station.events import BoltLocked, BoltReleased, BoltSkipped, Refused
 from stationd.station.inputs import CommandDone, CommandIn, ResultIn, Started, VehicleLoaded
 from stationd.station.policy import NokPolicy, NokRule, table_errors
+from stationd.words import reason_words
 from stationd.yamlio import YamlNode
 from tests.station import test_core
 from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
-from tests.station.test_core import BOLTS, PARAMS, Driver, _on, result
+from tests.station.test_core import BOLTS, PARAMS, Driver, _on, published, result
 
 
 def _tighten(d: Driver, bolt: int, tid: int, ok: bool) -> list[Any]:
@@ -180,8 +181,12 @@ def test_a_nok_counts_in_its_batch_only_when_the_policy_says_so(counts, monkeypa
         assert d.sends[sends:] == ["B3"]
     else:
         assert len(d.sends) == sends
-        assert str(d.core.matcher.why_blocked("B3")).startswith(
-            "finish batch A first: B2 remaining; B2 was skipped")
+        # the order rule's own words, and the refusal the operator reads names the skip
+        assert d.core.matcher.why_blocked("B3") == "finish batch A first: B2 remaining"
+        refused = [e.reason for _, acts in d.log for e in published(acts, Refused)]
+        assert reason_words(refused[-1]) == (
+            "B3 must wait: finish batch A first: B2 remaining; B2 was skipped: NOK, skipped "
+            "by the NOK policy")
     # an OK of the bolt later (a rework) clears it; so does its state coming back with the
     # vehicle after a restart (its last rundown a NOK)
     core = StationCore(PARAMS, leave_frames=2, nok=d.core.nok)

@@ -1,0 +1,39 @@
+"""A skip read back from the command ledger (stationd/shell/records.py ``load_vehicle``): the
+vehicle loaded again after a restart or a reload brings each bolt a person skipped as the
+core decided it, a person's command typed (who, their comment), and it is said as it was
+before the restart (a daemon test waits for "B08 skipped: sam's command" after a reload)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from stationd.config import StationConfig
+from stationd.reasons import Skip, SkipKind
+from stationd.shell.records import Records
+from stationd.station.actions import LoadVehicle, RecordCommand
+from stationd.station.commands import Issuer, Right, SkipBolt
+from stationd.station.inputs import VehicleLoaded
+from stationd.words import skip_words
+from tests.db.conftest import BASE, url_of
+
+
+def test_a_skip_comes_back_from_the_ledger_typed_and_said_as_before(tmp_path: Path) -> None:
+    bolts = tmp_path / "bolts.yaml"
+    bolts.write_text(BASE)
+    records = Records(StationConfig(database_url=url_of(tmp_path / "st.db"), bolts_path=bolts))
+    records.open()
+    first = records.load_vehicle(LoadVehicle(12, "VIN1"))
+    assert isinstance(first, VehicleLoaded) and first.skipped == {}
+    for bolt, user, comment in (("B1", "olga", "no access"), ("B2", "sam", "")):
+        why = records.record_command(RecordCommand(
+            0, SkipBolt("VIN1", bolt, comment), Issuer(user, frozenset(Right), "cli"),
+            time.time()), "VIN1")
+        assert why is None
+    again = records.load_vehicle(LoadVehicle(12, "VIN1"))   # as after a restart
+    assert isinstance(again, VehicleLoaded)
+    assert again.skipped["B1"] == Skip(SkipKind.COMMAND, user="olga", comment="no access")
+    assert {b: skip_words(s) for b, s in again.skipped.items()} == {
+        "B1": "olga's command (no access)", "B2": "sam's command"}
+    assert records.repo is not None
+    records.repo.close()
