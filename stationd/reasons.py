@@ -8,14 +8,16 @@ expressions; carried as a :class:`Reason` each edge reads the kind and the field
 :mod:`stationd.words` turns it into words at the very end.  This module is a leaf: it imports
 nothing of the station.
 
-Beside the refusals, another reason the core decides and edges word that a refusal carries:
-why a bolt is skipped (:class:`Skip`).
+Beside the refusals, the other reasons the core decides and edges word that a refusal carries:
+why a bolt is skipped (:class:`Skip`) and a fault of the station's own rules
+(:class:`CoreFault`).
 """
 
 from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+from typing import TypeAlias
 
 
 class Why(enum.Enum):
@@ -98,6 +100,40 @@ class Skip:
     reason: str | None = None           # the controller's own words (REFUSED)
 
 
+class CoreFaultKind(enum.StrEnum):
+    """The station's own faults, decided by its rules (a device's own faults are its words):
+    the kind of a :class:`CoreFault`."""
+
+    VIN_CHANGED = "vin changed"          # the PLC reports another VIN at height (plc_vin, vin)
+    MODEL_CHANGED = "model changed"      # ... another model code (plc_code, code, vin)
+    CLOSED = "closed"                    # the vehicle at height rejected: its VIN closed
+                                         # before, and no rework (vin, note: the rejection's
+                                         # own words)
+    PARAMS_REFUSED = "params refused"    # the controller refused a bolt's parameters (bolt,
+                                         # note: the controller's words)
+
+
+@dataclass(frozen=True)
+class CoreFault:
+    """A fault the station's rules decided (the vehicle at height is not the one loaded, a
+    closed vehicle back without a rework, parameters refused): its kind and the details that
+    apply.  Typed, not words: :func:`stationd.words.fault_words` says it where a device's
+    fault is said (the state's reason, a refusal, the device's health, the journal)."""
+
+    kind: CoreFaultKind
+    vin: str | None = None              # the vehicle loaded (or the closed one)
+    plc_vin: str | None = None          # the VIN the PLC reports at height
+    code: int | None = None             # the model code the vehicle was loaded as
+    plc_code: int | None = None         # the model code the PLC reports at height
+    bolt: str | None = None
+    note: str | None = None             # words from elsewhere (the database, the controller)
+
+
+#: why a device is in fault: its own words (a driver's or the shell's text: a device text,
+#: kept as it came), or a fault of the station's own rules, typed
+FaultWhy: TypeAlias = str | CoreFault
+
+
 @dataclass(frozen=True)
 class Reason:
     """One refusal: its kind and the details that apply (the others stay None)."""
@@ -123,8 +159,9 @@ class Reason:
     pair: str | None = None             # a camera pair (the calibration check)
     reference: str | None = None        # a reference marker (the calibration check)
     user: str | None = None             # a user (the operator signed in, who teaches)
-    #: (device, its own words) for each device in fault, in the order they failed
-    faults: tuple[tuple[str, str], ...] = ()
+    #: (device, why: its own words or the station's typed fault) for each device in fault,
+    #: in the order they failed
+    faults: tuple[tuple[str, FaultWhy], ...] = ()
     skip: Skip | None = None            # why a bolt was skipped (SKIPPED)
     #: the bolts waited for that were skipped, each with why (MUST_WAIT: waiting for them is
     #: waiting for something that will not happen on its own)
@@ -141,4 +178,4 @@ class Reason:
                 self.pair, self.reference)
 
 
-__all__ = ["Reason", "Skip", "SkipKind", "Why"]
+__all__ = ["CoreFault", "CoreFaultKind", "FaultWhy", "Reason", "Skip", "SkipKind", "Why"]

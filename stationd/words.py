@@ -9,7 +9,7 @@ from dataclasses import replace
 
 from db.kinds import NOT_TAKEN_NOTE, is_not_taken_note
 from drivers.counting import counted
-from stationd.reasons import Reason, Skip, SkipKind, Why
+from stationd.reasons import CoreFault, CoreFaultKind, FaultWhy, Reason, Skip, SkipKind, Why
 from stationd.station.commands import (
     KIND,
     Answer,
@@ -25,6 +25,7 @@ from stationd.station.commands import (
 from stationd.station.events import (
     Because,
     BoltSkipped,
+    DeviceHealth,
     Notice,
     OperatorChange,
     OperatorChanged,
@@ -72,20 +73,41 @@ def skip_words(skip: Skip) -> str:
     return _SKIP[skip.kind](skip)
 
 
+_FAULT: dict[CoreFaultKind, Callable[[CoreFault], str]] = {
+    CoreFaultKind.VIN_CHANGED: lambda f: (f"the PLC reports VIN {f.plc_vin} at height, the "
+                                          f"station has {f.vin} loaded: lower the lift"),
+    CoreFaultKind.MODEL_CHANGED: lambda f: (f"the PLC reports model code {f.plc_code} at "
+                                            f"height, {f.vin} was loaded as {f.code}: lower "
+                                            "the lift"),
+    CoreFaultKind.CLOSED: lambda f: (f"VIN {f.vin} already closed: rework needs the vehicle "
+                                     f"reopened ({f.note}); lower the lift to clear"),
+    CoreFaultKind.PARAMS_REFUSED: lambda f: (f"controller refused the parameters for "
+                                             f"{f.bolt}: {f.note}"),
+}
+
+
+def fault_words(why: FaultWhy) -> str:
+    """Why a device is in fault: its own words as they came, or the station's own fault in
+    words (``the PLC reports VIN V2 at height, the station has V1 loaded: lower the lift``)."""
+    return why if isinstance(why, str) else _FAULT[why.kind](why)
+
+
 def worded(event: StationEvent) -> StationEvent:
     """The event with its words written from the typed value the core decided (a skip's
-    ``reason`` from its ``skip``): what the shell publishes, so that every reader of the bus
-    (the screens, OPC UA, the journal) reads the same text as before; any other event as it
-    is."""
+    ``reason`` from its ``skip``, a device's health's ``reason`` from its ``fault``): what
+    the shell publishes, so that every reader of the bus (the screens, OPC UA, the journal)
+    reads the same text as before; any other event as it is."""
     if isinstance(event, BoltSkipped) and event.skip is not None and not event.reason:
         return replace(event, reason=skip_words(event.skip))
+    if isinstance(event, DeviceHealth) and event.fault is not None and not event.reason:
+        return replace(event, reason=fault_words(event.fault))
     return event
 
 
-def _faults(faults: tuple[tuple[str, str], ...]) -> str:
+def _faults(faults: tuple[tuple[str, FaultWhy], ...]) -> str:
     """The devices in fault, each with its own words: the state's reason and a refusal
     alike (``lift: no answer; pair1: no frame``)."""
-    return "; ".join(f"{device}: {words}" for device, words in faults)
+    return "; ".join(f"{device}: {fault_words(why)}" for device, why in faults)
 
 
 def _teaching(model: str | None, user: str | None, bolt: str | None) -> str:
@@ -415,6 +437,6 @@ def _missed(r: Reason) -> str:
     return f"; {many} without the wrench, the last: {reason_words(r.cause)}"
 
 
-__all__ = ["answer_words", "check_words", "command_words", "notice_words",
+__all__ = ["answer_words", "check_words", "command_words", "fault_words", "notice_words",
            "operator_words", "outcome_words", "reason_words", "records_waiting", "skip_words",
            "state_line", "state_words", "worded"]

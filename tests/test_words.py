@@ -1,14 +1,14 @@
 """The station's notices and its state's reasons in words (stationd.words.notice_words,
-state_words, state_line; skip_words for a skip): each kind's line, word for word as the
-journal wrote it when the core still built the text (daemon tests and people's log searches
-wait for these lines), and each notice kind's level."""
+state_words, state_line; skip_words for a skip, fault_words for the station's own faults):
+each kind's line, word for word as the journal wrote it when the core still built the text
+(daemon tests and people's log searches wait for these lines), and each notice kind's level."""
 
 from __future__ import annotations
 
 import pytest
 
 from db.kinds import not_taken_note
-from stationd.reasons import Reason, Skip, SkipKind, Why
+from stationd.reasons import CoreFault, CoreFaultKind, Reason, Skip, SkipKind, Why
 from stationd.station.events import (
     Because,
     BoltSkipped,
@@ -21,6 +21,7 @@ from stationd.station.events import (
     StateReason,
 )
 from stationd.words import (
+    fault_words,
     notice_words,
     reason_words,
     skip_words,
@@ -269,6 +270,36 @@ def test_every_skip_kind_has_its_words() -> None:
     assert {s.kind for s, _ in SKIP_WORDS} == set(SkipKind)
 
 
+#: the station's own faults, word for word as the core wrote them (the state's reason, the
+#: device's health, the journal's fault line)
+FAULT_WORDS = [
+    (CoreFault(CoreFaultKind.VIN_CHANGED, vin="VINA", plc_vin="VINOTHER"),
+     "the PLC reports VIN VINOTHER at height, the station has VINA loaded: lower the lift"),
+    (CoreFault(CoreFaultKind.MODEL_CHANGED, vin="VINA", code=7, plc_code=9),
+     "the PLC reports model code 9 at height, VINA was loaded as 7: lower the lift"),
+    (CoreFault(CoreFaultKind.CLOSED, vin="VINR", note="vehicle VINR is closed"),
+     "VIN VINR already closed: rework needs the vehicle reopened (vehicle VINR is closed); "
+     "lower the lift to clear"),
+    (CoreFault(CoreFaultKind.PARAMS_REFUSED, bolt="B1", note="pset 2 unknown"),
+     "controller refused the parameters for B1: pset 2 unknown"),
+]
+
+
+@pytest.mark.parametrize(("fault", "words"), FAULT_WORDS,
+                         ids=[f"{f.kind.name}-{i}" for i, (f, _) in enumerate(FAULT_WORDS)])
+def test_each_fault_of_the_station_says_what_the_core_said(fault: CoreFault, words: str) -> None:
+    assert fault_words(fault) == words
+
+
+def test_every_fault_kind_has_its_words() -> None:
+    assert {f.kind for f, _ in FAULT_WORDS} == set(CoreFaultKind)
+
+
+def test_a_device_s_own_fault_is_said_as_it_came() -> None:
+    assert fault_words("no answer from 10.0.0.7:502 for 2.0 s") == \
+        "no answer from 10.0.0.7:502 for 2.0 s"
+
+
 def test_a_skip_is_said_alike_by_a_refusal_a_wait_and_the_state() -> None:
     """One skip, one wording: the refusal on the bolt, a bolt waiting for it, the state's
     reason (as the core wrote them when it kept the skip as text)."""
@@ -299,8 +330,16 @@ def test_a_loosen_command_says_whose_it_was() -> None:
         "B1: loosen first (loosen pset 90), then tighten"
 
 
+def test_the_station_s_own_fault_is_said_beside_a_device_s_own() -> None:
+    faults = (("wrench", FAULT_WORDS[3][0]), ("lift", "no answer"))
+    said = "wrench: controller refused the parameters for B1: pset 2 unknown; lift: no answer"
+    assert state_words(StateReason(Because.FAULT, faults=faults)) == said
+    assert reason_words(Reason(Why.DEVICE_FAULT, faults=faults)) == \
+        f"a device is in fault: {said}"
+
+
 def test_the_words_are_written_into_the_event_at_publication() -> None:
-    """The core publishes a skip typed, with no words; ``worded`` (the
+    """The core publishes a skip and its own fault typed, with no words; ``worded`` (the
     shell's publication) writes them where every reader read them, and the event's JSON is
     what it was when the core wrote the text."""
     skipped = worded(BoltSkipped("B3", skip=Skip(SkipKind.NOK_POLICY), t=1.0))
@@ -309,7 +348,12 @@ def test_the_words_are_written_into_the_event_at_publication() -> None:
                                               Skip(SkipKind.NOK_POLICY))
     assert skipped.to_json() == {"kind": "bolt_skipped", "t": 1.0, "bolt": "B3",
                                  "reason": "NOK, skipped by the NOK policy"}
-    # any other event is published as it is
+    fault = FAULT_WORDS[3][0]
+    health = worded(DeviceHealth("wrench", False, "refused", fault=fault, t=2.0))
+    assert isinstance(health, DeviceHealth) and health.fault == fault
+    assert health.to_json() == {"kind": "refused", "t": 2.0, "device": "wrench", "ok": False,
+                                "reason": FAULT_WORDS[3][1]}
+    # a device's own words, and any other event, are published as they are
     own = DeviceHealth("lift", False, "down", "no answer", t=3.0)
     assert worded(own) is own
     notice = Notice(Said.LOOSENED, bolt="B1")

@@ -202,8 +202,8 @@ class Effects:
 
     def publish(self, ev: StationEvent) -> None:
         """An event of the core to the screens and feeds, and its journal line.  The one path
-        from the core to the bus: the words of what the core decided typed (a skip) are
-        written into the event here (:func:`worded`), so the core
+        from the core to the bus: the words of what the core decided typed (a skip, the
+        station's own fault) are written into the event here (:func:`worded`), so the core
         says no English and every reader gets the text it read before."""
         ev = worded(ev)
         self.bus.publish(ev)

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from db.kinds import BoltStatus
-from stationd.reasons import Reason, Skip
+from stationd.reasons import CoreFault, FaultWhy, Reason, Skip
 
 
 def _now() -> float:
@@ -95,7 +95,8 @@ class Because(enum.Enum):
 
     # the station and its devices
     OPENING = "opening"                  # starting: the devices being opened
-    FAULT = "fault"                      # devices in fault (faults: each one's own words)
+    FAULT = "fault"                      # devices in fault (faults: each one's own words,
+    #                                      or the station's own fault, typed)
     RECOVERED = "recovered"              # every device back: waiting for the lift
     STARTED = "started"                  # the tool off at a start, until a bolt is confirmed
     CONTROLLER_BACK = "controller back"  # the tool off as the controller is back
@@ -151,8 +152,9 @@ class StateReason:
     how: OperatorChange | None = None   # how the operator changed
     model: str | None = None            # the model taught
     user: str | None = None             # who teaches
-    #: (device, its own words) for each device in fault, in the order they failed
-    faults: tuple[tuple[str, str], ...] = ()
+    #: (device, why: its own words or the station's typed fault) for each device in fault,
+    #: in the order they failed
+    faults: tuple[tuple[str, FaultWhy], ...] = ()
     skip: Skip | None = None            # why the bolt selected was skipped
     note: str | None = None             # words from elsewhere (the lift)
 
@@ -169,12 +171,22 @@ class StateChanged(StationEvent):
 class DeviceHealth(StationEvent):
     """A device's health changed: ``device`` is ``lift``, ``wrench``, ``database`` or a camera
     pair's name; ``ok`` False with the fault's ``kind`` (``down``, ``timeout``, ``garbage``,
-    ``refused``, ...) and readable ``reason``; ``ok`` True when it answers again."""
+    ``refused``, ...) and readable ``reason``; ``ok`` True when it answers again.
+
+    ``fault``: the station's own fault, typed, as the core decided it (the vehicle at height
+    is not the one loaded, parameters refused).  The core writes no words: it publishes
+    ``fault`` with ``reason`` empty, and the shell's publication (:func:`stationd.words.worded`,
+    the one path to the bus) writes its words into ``reason``.  Why a text field filled at
+    publication rather than the typed value alone: every reader (the journal, the screens,
+    OPC UA's ErrorMessage, ``stationd status``) reads ``reason`` for a device's own fault as
+    for the station's, as before, and the event's JSON is unchanged (``fault`` is left out of
+    it).  A device's own fault (a driver's text) comes in ``reason`` as it was said."""
 
     device: str
     ok: bool
     kind: str = ""
     reason: str = ""
+    fault: CoreFault | None = field(default=None, kw_only=True, metadata={WORDED: True})
 
 
 @dataclass(frozen=True)

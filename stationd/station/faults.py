@@ -4,6 +4,7 @@ off, a teach point answered; back to waiting or tracking when every device is ba
 from __future__ import annotations
 
 from drivers.keeper import FaultKind
+from stationd.reasons import FaultWhy
 from stationd.station.actions import Action, Publish
 from stationd.station.events import (
     Because,
@@ -81,10 +82,15 @@ class FaultRules(TeachRules):
         self.line = link
         return [Publish(link)]
 
-    def _fault(self, t: float, device: str, kind: FaultKind, reason: str) -> list[Action]:
+    def _fault(self, t: float, device: str, kind: FaultKind, reason: FaultWhy) -> list[Action]:
+        """``device`` is in fault for ``reason``: a device's own words (a driver's text, kept
+        as it came), or a fault of the station's own rules, typed (its words are said at the
+        edges: :class:`DeviceHealth` carries it as ``fault``, worded at publication)."""
         acts: list[Action] = []
         if self.faults.get(device) != (kind, reason):
-            acts.append(Publish(DeviceHealth(device, False, kind, reason, t=t)))
+            acts.append(Publish(
+                DeviceHealth(device, False, kind, reason, t=t) if isinstance(reason, str)
+                else DeviceHealth(device, False, kind, fault=reason, t=t)))
         self.faults[device] = (kind, reason)
         acts += self._drop(t, State.FAULT, self._fault_reason())
         if self._teach is not None and self._teach.measuring is not None:

@@ -8,6 +8,7 @@ import numpy as np
 
 from db.kinds import NOK, PENDING, SKIPPED, TO_LOOSEN
 from drivers.keeper import FaultKind
+from stationd.reasons import CoreFault, CoreFaultKind, FaultWhy
 from stationd.station.actions import Action, CloseVehicle, LoadVehicle, Publish, SendVin
 from stationd.station.events import (
     Because,
@@ -93,17 +94,16 @@ class LiftRules(FaultRules):
             self._to(State.TRACKING, StateReason(Because.TRACKING))
         return acts
 
-    def _vehicle_changed(self, ev: LiftRead) -> str | None:
+    def _vehicle_changed(self, ev: LiftRead) -> CoreFault | None:
         """Why the vehicle at height is not the one loaded (its VIN or model code changed),
-        else None."""
+        typed, else None."""
         if self.vin is None or not ev.at_height:
             return None
         if ev.vin and ev.vin != self.vin:
-            return (f"the PLC reports VIN {ev.vin} at height, the station has {self.vin} "
-                    "loaded: lower the lift")
+            return CoreFault(CoreFaultKind.VIN_CHANGED, vin=self.vin, plc_vin=ev.vin)
         if self._load_code is not None and ev.model_code != self._load_code:
-            return (f"the PLC reports model code {ev.model_code} at height, {self.vin} was "
-                    f"loaded as {self._load_code}: lower the lift")
+            return CoreFault(CoreFaultKind.MODEL_CHANGED, vin=self.vin, code=self._load_code,
+                             plc_code=ev.model_code)
         return None
 
     def _on_vehicle_loaded(self, ev: VehicleLoaded) -> list[Action]:
@@ -164,11 +164,10 @@ class LiftRules(FaultRules):
             return [Publish(Notice(Said.REWORK_REOPENED, vin=ev.vin, t=ev.t)),
                     LoadVehicle(self._lift.model_code, ev.vin, reopen=True)]
         self._loading = False
-        why = ev.reason
         self._closed_vin = ev.vin if ev.closed else None
-        if ev.closed:
-            why = f"VIN {ev.vin} already closed: rework needs the vehicle reopened " \
-                  f"({ev.reason}); lower the lift to clear"
+        # why: the shell's own words, or (a closed VIN) the station's rework rule, typed
+        why: FaultWhy = CoreFault(CoreFaultKind.CLOSED, vin=ev.vin, note=ev.reason) \
+            if ev.closed else ev.reason
         return self._fault(ev.t, VEHICLE, FaultKind.REJECTED, why)
 
     def _on_vehicle_ended(self, ev: VehicleEnded) -> list[Action]:

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 
 from db.bolts import Window
-from stationd.reasons import Reason, Skip, SkipKind, Why
+from stationd.reasons import FaultWhy, Reason, Skip, SkipKind, Why
 from stationd.station.actions import Action, DisableTool, Owed, Publish, Selection
 from stationd.station.commands import TeachPoint
 from stationd.station.events import (
@@ -107,8 +107,9 @@ class CoreStatus:
     state: State
     #: why, typed (its words: :func:`stationd.words.state_words`)
     reason: StateReason
-    #: device -> why it is in fault
-    faults: Mapping[str, str]
+    #: device -> why it is in fault: its own words, or the station's own fault, typed (either
+    #: in words: :func:`stationd.words.fault_words`)
+    faults: Mapping[str, FaultWhy]
     vin: str | None
     bolt: str | None
     tool_on: bool
@@ -152,7 +153,8 @@ class CoreState:
     matcher: BoltMatcher | None = None
     vin: str | None = None
     model: str | None = None
-    faults: dict[str, tuple[str, str]] = field(default_factory=dict)  # device -> kind, reason
+    #: device -> the fault's kind, and why (its own words, or the station's own fault, typed)
+    faults: dict[str, tuple[str, FaultWhy]] = field(default_factory=dict)
     identities: dict[str, str] = field(default_factory=dict)   # device -> what it said it is
     line: LineLinkChanged | None = None   # the line database's link as last told
     tool_on: bool = False
@@ -255,8 +257,9 @@ class CoreState:
         return [Publish(BoltLocked(bolt, n, t=t)),
                 Publish(Notice(Said.LOCKED, bolt=bolt, count=n, t=t))]
 
-    def _fault_notes(self) -> tuple[tuple[str, str], ...]:
-        """Each device in fault with its own words, in the order they failed."""
+    def _fault_notes(self) -> tuple[tuple[str, FaultWhy], ...]:
+        """Each device in fault with why (its own words, or the station's own fault), in the
+        order they failed."""
         return tuple((d, r) for d, (_, r) in self.faults.items())
 
     def _fault_reason(self) -> StateReason:

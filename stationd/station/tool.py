@@ -8,7 +8,7 @@ import numpy as np
 
 from db.bolts import Parameters
 from drivers.keeper import FaultKind
-from stationd.reasons import Reason, Skip, SkipKind, Why
+from stationd.reasons import CoreFault, CoreFaultKind, Reason, Skip, SkipKind, Why
 from stationd.station.actions import Action, EnableTool, Publish, Selection, SendParams
 from stationd.station.events import (
     Because,
@@ -131,12 +131,11 @@ class ToolRules(FaultRules):
     def _on_params_refused(self, ev: ParamsRefused) -> list[Action]:
         """The bolt is skipped for this vehicle (reported missing) so that the same refused
         parameters are not sent again and again; the controller is in fault until it answers.
-        The skip is typed, with the controller's own words (:mod:`stationd.words` says it)."""
+        Both typed, with the controller's own words (:mod:`stationd.words` says them)."""
         why = Skip(SkipKind.REFUSED, reason=ev.reason)
         acts: list[Action] = [Publish(ParamsRefusedEvent(ev.bolt, ev.reason, t=ev.t))]
         if self.matcher is not None and ev.bolt in self.matcher.bolts:
             self.matcher.skipped[ev.bolt] = why
             acts.append(Publish(BoltSkipped(ev.bolt, skip=why, t=ev.t)))
-        return acts + self._fault(ev.t, WRENCH, FaultKind.REFUSED,
-                                  f"controller refused the parameters for {ev.bolt}: "
-                                  f"{ev.reason}")
+        return acts + self._fault(ev.t, WRENCH, FaultKind.REFUSED, CoreFault(
+            CoreFaultKind.PARAMS_REFUSED, bolt=ev.bolt, note=ev.reason))

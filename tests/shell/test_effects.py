@@ -70,10 +70,10 @@ def test_a_notice_goes_to_the_journal_at_its_own_level(caplog):
 
 
 def test_what_the_core_decided_typed_is_published_in_words(caplog):
-    """A refused parameter set: the core decides the skip typed and says no words; the
-    publication writes them, so the bus (the screens) reads what it read when the core wrote
-    the text."""
-    from stationd.station.events import BoltSkipped
+    """A refused parameter set: the core decides the skip and its own fault typed and says
+    no words; the publication writes them, so the bus (the screens, OPC UA) and the journal
+    read what they read when the core wrote the text."""
+    from stationd.station.events import BoltSkipped, DeviceHealth
 
     core = StationCore(PARAMS)
     effects = _effects(core)
@@ -86,3 +86,7 @@ def test_what_the_core_decided_typed_is_published_in_words(caplog):
                     effects.publish(a.event)
     assert [(e.bolt, e.reason) for e in effects.bus.of(BoltSkipped)] == [
         ("B1", "controller refused its parameters (pset unknown)")]
+    assert [(e.device, e.reason) for e in effects.bus.of(DeviceHealth)] == [
+        ("wrench", "controller refused the parameters for B1: pset unknown")]
+    assert "fault: wrench (refused): controller refused the parameters for B1: pset unknown" \
+        in [r.getMessage() for r in caplog.records]

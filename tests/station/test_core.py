@@ -16,7 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from drivers.keeper import FaultKind
-from stationd.reasons import Reason, Skip, SkipKind, Why
+from stationd.reasons import CoreFault, CoreFaultKind, Reason, Skip, SkipKind, Why
 from stationd.station.actions import (
     Acknowledge,
     CloseVehicle,
@@ -65,7 +65,7 @@ from stationd.station.inputs import (
     VinSent,
 )
 from stationd.station.matching import MatchParams
-from stationd.words import reason_words
+from stationd.words import fault_words, reason_words
 
 BOLTS = {"B1": LoadedBolt((0.0, 0.0, 0.0), 1), "B2": LoadedBolt((60.0, 0.0, 0.0), 2),
          "B3": LoadedBolt((0.0, 60.0, 5.0), 1)}
@@ -492,13 +492,17 @@ def test_a_refusal_skips_the_bolt_and_faults_the_controller_until_it_is_back():
     _on(d, 1)
     d.step(("ack", 0.01, False))
     assert d.core.state is State.FAULT
-    assert "refused the parameters for B1" in dict(d.core.reason.faults)["wrench"]
+    assert "refused the parameters for B1" in fault_words(dict(d.core.reason.faults)["wrench"])
     # decided typed, with the controller's words; the core writes none of its own (the
     # shell's publication does: tests/shell/test_effects.py)
     refused = [a for _, acts in d.log for a in acts]
     assert [(e.bolt, e.skip, e.reason) for e in published(refused, BoltSkipped)] == [
         ("B1", Skip(SkipKind.REFUSED, reason="pset unknown"), "")]
     assert d.core.matcher.skipped == {"B1": Skip(SkipKind.REFUSED, reason="pset unknown")}
+    fault = CoreFault(CoreFaultKind.PARAMS_REFUSED, bolt="B1", note="pset unknown")
+    assert [(e.device, e.kind, e.fault, e.reason) for e in published(refused, DeviceHealth)] \
+        == [("wrench", FaultKind.REFUSED, fault, "")]
+    assert d.core.status().faults == {"wrench": fault}
     d.down.add("wrench")
     d.step(("back", 0.1, "wrench", 0))
     d.step(("lift", 0.1, True, True, "VIN1"))
@@ -520,7 +524,9 @@ def test_a_closed_vin_back_is_reopened_as_a_rework_or_a_named_fault():
     d2.feed(Started(d2.t))
     d2.step(("lift", 0.1, True, True, "VINR"))
     assert d2.core.state is State.FAULT
-    assert "VIN VINR already closed" in dict(d2.core.reason.faults)["vehicle"]
+    assert "VIN VINR already closed" in fault_words(dict(d2.core.reason.faults)["vehicle"])
+    assert dict(d2.core.reason.faults)["vehicle"] == CoreFault(
+        CoreFaultKind.CLOSED, vin="VINR", note="closed")
     d2.step(("lift", 0.1, False, False, None))        # lowering clears it
     assert d2.core.state is State.WAITING_VEHICLE
 
@@ -683,7 +689,12 @@ def test_a_vehicle_that_changes_at_height_is_a_fault_until_the_lift_goes_down():
         c.feed(VehicleLoaded(1.2, "VINA", "M", BOLTS))
         assert c.state is State.TRACKING
         acts = c.feed(changed)
-        assert c.state is State.FAULT and "lower the lift" in dict(c.reason.faults)["vehicle"]
+        assert c.state is State.FAULT
+        assert "lower the lift" in fault_words(dict(c.reason.faults)["vehicle"])
+        assert dict(c.reason.faults)["vehicle"] == (
+            CoreFault(CoreFaultKind.VIN_CHANGED, vin="VINA", plc_vin="VINOTHER")
+            if changed.vin == "VINOTHER" else
+            CoreFault(CoreFaultKind.MODEL_CHANGED, vin="VINA", code=7, plc_code=9))
         assert any(isinstance(a, DisableTool) for a in acts) or not c.tool_on
         pos = np.asarray(BOLTS["B1"].position, dtype=np.float64)
         sends = [a for k in range(6) for a in c.feed(LocalizedIn(1.4 + 0.05 * k,
