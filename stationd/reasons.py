@@ -9,8 +9,8 @@ expressions; carried as a :class:`Reason` each edge reads the kind and the field
 nothing of the station.
 
 Beside the refusals, the other reasons the core decides and edges word that a refusal carries:
-why a bolt is skipped (:class:`Skip`) and a fault of the station's own rules
-(:class:`CoreFault`).
+why a bolt is skipped (:class:`Skip`), a fault of the station's own rules
+(:class:`CoreFault`) and the sequence's rule a bolt waits for (:class:`Wait`).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ class Why(enum.Enum):
     AMBIGUOUS = "ambiguous"              # two bolts within the margin (bolt, other)
     SKIPPED = "skipped"                  # the bolt was skipped (skip: why)
     DONE = "done"                        # already tightened OK
-    MUST_WAIT = "must wait"              # order or batch (blocking, note; skips: the
+    MUST_WAIT = "must wait"              # order or batch (wait: which rule; skips: the
                                          # bolts waited for that were skipped, and why)
     NOT_STABLE = "not stable"            # stable for `count` of `needed` frames
     ELSEWHERE = "elsewhere"              # on another bolt than the one selected (bolt)
@@ -134,6 +134,28 @@ class CoreFault:
 FaultWhy: TypeAlias = str | CoreFault
 
 
+class WaitKind(enum.StrEnum):
+    """Which rule of the sequence a bolt must wait for: the kind of a :class:`Wait`."""
+
+    BATCH = "batch"                      # other batches begun and not finished (batches)
+    ORDER = "order"                      # bolts before it in its order (order, batch, bolts)
+
+
+@dataclass(frozen=True)
+class Wait:
+    """Why the sequence (order, batch) forbids a bolt now, as the matcher decided it: the
+    rule and the bolts it waits for.  Typed, not words: a ``MUST_WAIT`` refusal carries it
+    and :func:`stationd.words.wait_words` says it (``order 2 in batch subframe needs A1, A2
+    done first``)."""
+
+    kind: WaitKind
+    #: each batch begun and not finished, with its bolts remaining (BATCH), in table order
+    batches: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    order: int | None = None            # the bolt's order (ORDER)
+    batch: str | None = None            # the bolt's batch, if any (ORDER)
+    bolts: tuple[str, ...] = ()         # the bolts before it not done yet (ORDER)
+
+
 @dataclass(frozen=True)
 class Reason:
     """One refusal: its kind and the details that apply (the others stay None)."""
@@ -166,6 +188,7 @@ class Reason:
     #: the bolts waited for that were skipped, each with why (MUST_WAIT: waiting for them is
     #: waiting for something that will not happen on its own)
     skips: tuple[tuple[str, Skip], ...] = ()
+    wait: Wait | None = None            # which rule of the sequence forbids it (MUST_WAIT)
     #: the refusal behind this one (a teach point not steady: what the localizations without
     #: the wrench said, e.g. no frame from a camera)
     cause: Reason | None = None
@@ -178,4 +201,5 @@ class Reason:
                 self.pair, self.reference)
 
 
-__all__ = ["CoreFault", "CoreFaultKind", "FaultWhy", "Reason", "Skip", "SkipKind", "Why"]
+__all__ = ["CoreFault", "CoreFaultKind", "FaultWhy", "Reason", "Skip", "SkipKind", "Wait",
+           "WaitKind", "Why"]

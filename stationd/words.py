@@ -9,7 +9,17 @@ from dataclasses import replace
 
 from db.kinds import NOT_TAKEN_NOTE, is_not_taken_note
 from drivers.counting import counted
-from stationd.reasons import CoreFault, CoreFaultKind, FaultWhy, Reason, Skip, SkipKind, Why
+from stationd.reasons import (
+    CoreFault,
+    CoreFaultKind,
+    FaultWhy,
+    Reason,
+    Skip,
+    SkipKind,
+    Wait,
+    WaitKind,
+    Why,
+)
 from stationd.station.commands import (
     KIND,
     Answer,
@@ -92,6 +102,26 @@ def fault_words(why: FaultWhy) -> str:
     return why if isinstance(why, str) else _FAULT[why.kind](why)
 
 
+_WAIT: dict[WaitKind, Callable[[Wait], str]] = {
+    WaitKind.BATCH: lambda w: "; ".join(f"finish batch {name} first: {', '.join(rest)} "
+                                        "remaining" for name, rest in w.batches),
+    WaitKind.ORDER: lambda w: (f"order {w.order}"
+                               + (f" in batch {w.batch}" if w.batch is not None else "")
+                               + f" needs {', '.join(w.bolts)} done first"),
+}
+
+
+def wait_words(wait: Wait) -> str:
+    """Which rule of the sequence a bolt waits for: ``order 2 in batch subframe needs A1, A2
+    done first``, ``finish batch subframe first: A2, A3 remaining``."""
+    return _WAIT[wait.kind](wait)
+
+
+def _waited(wait: Wait | None) -> str:
+    """A wait's words, where a refusal may lack it (``None``: never from the matcher)."""
+    return "None" if wait is None else wait_words(wait)
+
+
 def worded(event: StationEvent) -> StationEvent:
     """The event with its words written from the typed value the core decided (a skip's
     ``reason`` from its ``skip``, a device's health's ``reason`` from its ``fault``): what
@@ -162,7 +192,7 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.SKIPPED: lambda r: f"{r.bolt} skipped: {_skipped(r.skip)}",
     Why.DONE: lambda r: f"{r.bolt} is already done",
     Why.MUST_WAIT: lambda r: f"{r.bolt} must wait: " + "; ".join(
-        [f"{r.note}", *(f"{b} was skipped: {skip_words(s)}" for b, s in r.skips)]),
+        [_waited(r.wait), *(f"{b} was skipped: {skip_words(s)}" for b, s in r.skips)]),
     Why.NOT_STABLE: lambda r: f"{r.bolt}: stable for {r.count} of {r.needed} frames",
     Why.ELSEWHERE: lambda r: f"nearest {r.bolt}",
     Why.LOCKED: lambda r: _locked(r.bolt, r.count),
@@ -439,4 +469,4 @@ def _missed(r: Reason) -> str:
 
 __all__ = ["answer_words", "check_words", "command_words", "fault_words", "notice_words",
            "operator_words", "outcome_words", "reason_words", "records_waiting", "skip_words",
-           "state_line", "state_words", "worded"]
+           "state_line", "state_words", "wait_words", "worded"]

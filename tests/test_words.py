@@ -1,5 +1,6 @@
 """The station's notices and its state's reasons in words (stationd.words.notice_words,
-state_words, state_line; skip_words for a skip, fault_words for the station's own faults):
+state_words, state_line; skip_words for a skip, fault_words for the station's own faults,
+wait_words for the sequence's rule):
 each kind's line, word for word as the journal wrote it when the core still built the text
 (daemon tests and people's log searches wait for these lines), and each notice kind's level."""
 
@@ -8,7 +9,16 @@ from __future__ import annotations
 import pytest
 
 from db.kinds import not_taken_note
-from stationd.reasons import CoreFault, CoreFaultKind, Reason, Skip, SkipKind, Why
+from stationd.reasons import (
+    CoreFault,
+    CoreFaultKind,
+    Reason,
+    Skip,
+    SkipKind,
+    Wait,
+    WaitKind,
+    Why,
+)
 from stationd.station.events import (
     Because,
     BoltSkipped,
@@ -27,6 +37,7 @@ from stationd.words import (
     skip_words,
     state_line,
     state_words,
+    wait_words,
     worded,
 )
 
@@ -308,11 +319,13 @@ def test_a_skip_is_said_alike_by_a_refusal_a_wait_and_the_state() -> None:
     assert reason_words(Reason(Why.SKIPPED, bolt="B05", skip=by_olga)) == \
         "B05 skipped: olga's command (no access)"
     assert reason_words(Reason(Why.MUST_WAIT, bolt="A3", blocking=("A1", "A2"),
-                               note="order 2 in batch subframe needs A1, A2 done first",
+                               wait=Wait(WaitKind.ORDER, order=2, batch="subframe",
+                                         bolts=("A1", "A2")),
                                skips=(("A1", refused),))) == (
         "A3 must wait: order 2 in batch subframe needs A1, A2 done first; A1 was skipped: "
         "controller refused its parameters (pset 2 unknown)")
-    assert reason_words(Reason(Why.MUST_WAIT, bolt="B2", note="order 2 needs B1 done first")) \
+    assert reason_words(Reason(Why.MUST_WAIT, bolt="B2",
+                               wait=Wait(WaitKind.ORDER, order=2, bolts=("B1",)))) \
         == "B2 must wait: order 2 needs B1 done first"
     assert state_words(StateReason(Because.SKIPPED, bolt="B05", skip=by_olga)) == \
         "bolt B05 olga's command (no access)"
@@ -358,3 +371,27 @@ def test_the_words_are_written_into_the_event_at_publication() -> None:
     assert worded(own) is own
     notice = Notice(Said.LOOSENED, bolt="B1")
     assert worded(notice) is notice
+
+
+#: the sequence's rule a bolt waits for, word for word as the matcher wrote it (the refusal's
+#: words after "must wait: ")
+WAIT_WORDS = [
+    (Wait(WaitKind.ORDER, order=2, bolts=("U1", "U2")), "order 2 needs U1, U2 done first"),
+    (Wait(WaitKind.ORDER, order=2, batch="subframe", bolts=("A1", "A2")),
+     "order 2 in batch subframe needs A1, A2 done first"),
+    (Wait(WaitKind.BATCH, batches=(("subframe", ("A2", "A3")),)),
+     "finish batch subframe first: A2, A3 remaining"),
+    (Wait(WaitKind.BATCH, batches=(("subframe", ("A3",)), ("x", ("F",)))),
+     "finish batch subframe first: A3 remaining; finish batch x first: F remaining"),
+]
+
+
+@pytest.mark.parametrize(("wait", "words"), WAIT_WORDS,
+                         ids=[f"{w.kind.name}-{i}" for i, (w, _) in enumerate(WAIT_WORDS)])
+def test_each_wait_says_what_the_matcher_said(wait: Wait, words: str) -> None:
+    assert wait_words(wait) == words
+    assert reason_words(Reason(Why.MUST_WAIT, bolt="Z9", wait=wait)) == f"Z9 must wait: {words}"
+
+
+def test_every_wait_kind_has_its_words() -> None:
+    assert {w.kind for w, _ in WAIT_WORDS} == set(WaitKind)

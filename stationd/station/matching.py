@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from db.spacing import min_spacing_mm, too_close
-from stationd.reasons import Reason, Skip, Why
+from stationd.reasons import Reason, Skip, Wait, WaitKind, Why
 from stationd.yamlio import YamlNode
 
 
@@ -136,7 +136,7 @@ class BoltMatcher:
         self.done.add(bolt)
         self.reset()
 
-    def why_blocked(self, bolt: str) -> str | None:
+    def why_blocked(self, bolt: str) -> Wait | None:
         """Why the sequence (order, batch) forbids taking ``bolt`` now, or None if it allows it.
 
         Only the sequence: tolerance, done, skipped and stability are :meth:`update`'s.  Done
@@ -145,11 +145,12 @@ class BoltMatcher:
         blocked = self._blocked(bolt)
         return None if blocked is None else blocked[0]
 
-    def _blocked(self, bolt: str) -> tuple[str, tuple[str, ...], tuple[tuple[str, Skip], ...]] \
+    def _blocked(self, bolt: str) -> tuple[Wait, tuple[str, ...], tuple[tuple[str, Skip], ...]] \
             | None:
-        """Why the sequence forbids ``bolt``, the bolts it waits for, and those of them that
-        were skipped with why (waiting for them is waiting for something that will not happen
-        on its own: the refusal names them); None if it allows it."""
+        """Why the sequence forbids ``bolt`` (the rule, typed: words are the edges'), the
+        bolts it waits for, and those of them that were skipped with why (waiting for them is
+        waiting for something that will not happen on its own: the refusal names them); None
+        if it allows it."""
         rule = self._rule.get(bolt, NO_RULE)
         open_batches: dict[str, list[str]] = {}
         for name, members in self._batches.items():
@@ -157,16 +158,15 @@ class BoltMatcher:
             if rest and len(rest) < len(members):
                 open_batches[name] = rest
         if open_batches and rule.batch not in open_batches:
-            why = "; ".join(f"finish batch {name} first: {', '.join(rest)} remaining"
-                            for name, rest in open_batches.items())
+            why = Wait(WaitKind.BATCH, batches=tuple((name, tuple(rest))
+                                                     for name, rest in open_batches.items()))
             waits = [b for r in open_batches.values() for b in r]
         else:
             waits = [b for b in self._before.get(bolt, ())
                      if b not in self.done and b not in self.counted]
             if not waits:
                 return None
-            group = f" in batch {rule.batch}" if rule.batch is not None else ""
-            why = f"order {rule.order}{group} needs {', '.join(waits)} done first"
+            why = Wait(WaitKind.ORDER, order=rule.order, batch=rule.batch, bolts=tuple(waits))
         skips = tuple((b, self.skipped[b]) for b in waits if b in self.skipped)
         return why, tuple(waits), skips
 
@@ -214,7 +214,7 @@ class BoltMatcher:
         blocked = self._blocked(near)
         if blocked is not None:
             self.reset()
-            return Match(None, near, dist, Reason(Why.MUST_WAIT, bolt=near, note=blocked[0],
+            return Match(None, near, dist, Reason(Why.MUST_WAIT, bolt=near, wait=blocked[0],
                                                   blocking=blocked[1], skips=blocked[2]))
         self._streak = self._streak + 1 if self._streak_bolt == near else 1
         self._streak_bolt = near

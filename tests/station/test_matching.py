@@ -1,8 +1,8 @@
 import numpy as np
 
-from stationd.reasons import Skip, SkipKind
+from stationd.reasons import Skip, SkipKind, Wait, WaitKind
 from stationd.station.matching import BoltMatcher, BoltRule, MatchParams, check_spacing
-from stationd.words import reason_words
+from stationd.words import reason_words, wait_words
 
 BOLTS = {"B1": np.array([0.0, 0.0, 0.0]), "B2": np.array([40.0, 0.0, 10.0]),
          "B3": np.array([40.0, 12.0, 0.0])}
@@ -116,7 +116,9 @@ def test_unordered_bolts_are_unconstrained_and_orders_stay_in_their_batch():
     assert m.update(_at("B1")).bolt == "B1"  # a batch, no order
     assert m.why_blocked("U1") is None and m.why_blocked("A1") is None
     # subframe's order 2 waits for subframe's order 1 only, not for the unbatched U1, U2
-    assert m.why_blocked("A3") == "order 2 in batch subframe needs A1, A2 done first"
+    wait = m.why_blocked("A3")
+    assert wait == Wait(WaitKind.ORDER, order=2, batch="subframe", bolts=("A1", "A2"))
+    assert wait_words(wait) == "order 2 in batch subframe needs A1, A2 done first"
     m.mark_done("A1")
     m.mark_done("A2")
     assert m.update(_at("A3")).bolt == "A3"
@@ -164,8 +166,10 @@ def test_resumed_vehicle_counts_what_was_done_before():
     two = BoltMatcher(LINE, MatchParams(stable_frames=1), {"A1", "B1"}, rules={
         **RULES, "B1": BoltRule(None, "x"), "F": BoltRule(None, "x")})
     assert two.update(_at("F")).bolt == "F" and two.update(_at("A2")).bolt == "A2"
-    assert two.why_blocked("U1") == ("finish batch subframe first: A2, A3 "
-                                     "remaining; finish batch x first: F remaining")
+    wait = two.why_blocked("U1")
+    assert wait == Wait(WaitKind.BATCH, batches=(("subframe", ("A2", "A3")), ("x", ("F",))))
+    assert wait is not None and wait_words(wait) == (
+        "finish batch subframe first: A2, A3 remaining; finish batch x first: F remaining")
 
 
 def test_a_blocked_frame_breaks_the_streak():

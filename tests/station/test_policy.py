@@ -10,14 +10,14 @@ from typing import Any
 import pytest
 
 from stationd.errors import ConfigError
-from stationd.reasons import Reason, Why
+from stationd.reasons import Reason, Wait, WaitKind, Why
 from stationd.station.actions import Record
 from stationd.station.commands import ReleaseBolt
 from stationd.station.core import StationCore
 from stationd.station.events import BoltLocked, BoltReleased, BoltSkipped, Refused
 from stationd.station.inputs import CommandDone, CommandIn, ResultIn, Started, VehicleLoaded
 from stationd.station.policy import NokPolicy, NokRule, table_errors
-from stationd.words import reason_words
+from stationd.words import reason_words, wait_words
 from stationd.yamlio import YamlNode
 from tests.station import test_core
 from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
@@ -182,7 +182,9 @@ def test_a_nok_counts_in_its_batch_only_when_the_policy_says_so(counts, monkeypa
     else:
         assert len(d.sends) == sends
         # the order rule's own words, and the refusal the operator reads names the skip
-        assert d.core.matcher.why_blocked("B3") == "finish batch A first: B2 remaining"
+        wait = d.core.matcher.why_blocked("B3")
+        assert wait == Wait(WaitKind.BATCH, batches=(("A", ("B2",)),))
+        assert wait_words(wait) == "finish batch A first: B2 remaining"
         refused = [e.reason for _, acts in d.log for e in published(acts, Refused)]
         assert reason_words(refused[-1]) == (
             "B3 must wait: finish batch A first: B2 remaining; B2 was skipped: NOK, skipped "

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from stationd.reasons import Reason, Why
+from stationd.reasons import Reason, Wait, WaitKind, Why
 from stationd.station.events import (
     Because,
     BoltSkipped,
@@ -91,7 +91,7 @@ def test_a_long_fault_reason_is_cut_in_the_headline_and_whole_in_its_title():
 
 
 def test_refusal_blocks_its_bolt_and_is_the_headline_until_a_selection():
-    wait = Reason(Why.MUST_WAIT, bolt="B2", note="order 2 needs B1 done first")
+    wait = Reason(Why.MUST_WAIT, bolt="B2", wait=Wait(WaitKind.ORDER, order=2, bolts=("B1",)))
     v = fold([*opened(), Refused(reason=wait, bolt="B2")])
     said = "B2 must wait: order 2 needs B1 done first"
     assert states(v)["B2"] == "blocked" and v.bolts["B2"].reason == said
@@ -200,7 +200,7 @@ def test_refusals_the_operator_resolves_are_amber_with_the_reason():
             (Reason(Why.AMBIGUOUS, bolt="B1", distance_mm=3.0, other="B2", other_mm=4.1),
              "ambiguous: B1 at 3.0 mm, B2 at 4.1 mm"),
             (Reason(Why.TILTED, angle_deg=14.2, limit=10.0), "wrench tilted 14.2 deg (> 10 deg)"),
-            (Reason(Why.MUST_WAIT, bolt="B4", note="order 2 needs B3 done first"),
+            (Reason(Why.MUST_WAIT, bolt="B4", wait=Wait(WaitKind.ORDER, order=2, bolts=("B3",))),
              "B4 must wait: order 2 needs B3 done first")):
         # after fresh frames (before them, stale frames are the station starting)
         v = fold([*opened(), seen_at(200.0, 150.0), lost(reason), Refused(reason=reason)])

@@ -4,7 +4,7 @@ headline, and a station starting up says so rather than "stale"."""
 
 from __future__ import annotations
 
-from stationd.reasons import Reason, Why
+from stationd.reasons import Reason, Wait, WaitKind, Why
 from stationd.station.events import (
     Because,
     BoltSelected,
@@ -62,7 +62,7 @@ def test_the_bolt_pointed_out_selected_points_out_another():
 
 
 def test_a_blocked_bolt_stays_blocked_until_allowed_and_is_never_next_before():
-    wait = Reason(Why.MUST_WAIT, bolt="B4", note="order 2 needs B3 done first")
+    wait = Reason(Why.MUST_WAIT, bolt="B4", wait=Wait(WaitKind.ORDER, order=2, bolts=("B3",)))
     v = fold([*opened(), at(399.0, 299.0, allowed=("B1", "B2", "B3")),
               Refused(reason=wait, bolt="B4")])
     assert v.bolts["B4"].state == "blocked"
