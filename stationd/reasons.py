@@ -10,7 +10,8 @@ nothing of the station.
 
 Beside the refusals, the other reasons the core decides and edges word that a refusal carries:
 why a bolt is skipped (:class:`Skip`), a fault of the station's own rules
-(:class:`CoreFault`) and the sequence's rule a bolt waits for (:class:`Wait`).
+(:class:`CoreFault`), the sequence's rule a bolt waits for (:class:`Wait`) and why a pair is
+not checked (:class:`Unchecked`).
 """
 
 from __future__ import annotations
@@ -65,7 +66,8 @@ class Why(enum.Enum):
     NO_LOOSEN_PSET = "no loosen pset"    # a loosen of a bolt no loosen_pset applies to (bolt)
     UNKNOWN_MODEL = "unknown model"      # a model no bolt table of the station has (note)
     # the calibration check against the reference markers
-    PAIR_UNCHECKED = "pair unchecked"    # a pair not checked yet, or not measurable (pair, note)
+    PAIR_UNCHECKED = "pair unchecked"    # a pair not checked yet, or not measurable (pair,
+                                         # unchecked: why)
     PAIR_MOVED = "pair moved"            # a reference off beyond the tolerance (pair,
                                          # reference, distance_mm, limit)
     REFERENCE_SEEN = "reference seen"    # a reference marker taken for the wrench (reference,
@@ -156,6 +158,32 @@ class Wait:
     bolts: tuple[str, ...] = ()         # the bolts before it not done yet (ORDER)
 
 
+class UncheckedKind(enum.StrEnum):
+    """Why a camera pair is not checked against the reference markers (not trusted until it
+    is): the kind of an :class:`Unchecked`."""
+
+    SINCE_START = "since start"          # no check since the start (or a reload)
+    ARRIVAL = "arrival"                  # a vehicle arrived: a check asked for it (vin)
+    PAIRS_UNKNOWN = "pairs unknown"      # which pairs saw the wrench is not known
+    NO_MARKER = "no marker"              # the pair sees no reference marker
+    NOT_MEASURED = "not measured"        # its check measured no reference within reach
+                                         # (reference, measure, note)
+
+
+@dataclass(frozen=True)
+class Unchecked:
+    """Why a pair is not checked, as the trust rules decided it (a ``PAIR_UNCHECKED``
+    refusal carries it; :func:`stationd.words.unchecked_words` says it)."""
+
+    kind: UncheckedKind
+    vin: str | None = None              # the vehicle arrived (ARRIVAL)
+    reference: str | None = None        # the worst reference (NOT_MEASURED), if any
+    #: why that reference was not measured, as the check said it (its ``RefWhy`` value:
+    #: ``not found``; None: nothing measured) (NOT_MEASURED)
+    measure: str | None = None
+    note: str | None = None             # the check's own words (a grab's error, the vision)
+
+
 @dataclass(frozen=True)
 class Reason:
     """One refusal: its kind and the details that apply (the others stay None)."""
@@ -189,6 +217,7 @@ class Reason:
     #: waiting for something that will not happen on its own)
     skips: tuple[tuple[str, Skip], ...] = ()
     wait: Wait | None = None            # which rule of the sequence forbids it (MUST_WAIT)
+    unchecked: Unchecked | None = None  # why a pair is not checked (PAIR_UNCHECKED)
     #: the refusal behind this one (a teach point not steady: what the localizations without
     #: the wrench said, e.g. no frame from a camera)
     cause: Reason | None = None
@@ -201,5 +230,5 @@ class Reason:
                 self.pair, self.reference)
 
 
-__all__ = ["CoreFault", "CoreFaultKind", "FaultWhy", "Reason", "Skip", "SkipKind", "Wait",
-           "WaitKind", "Why"]
+__all__ = ["CoreFault", "CoreFaultKind", "FaultWhy", "Reason", "Skip", "SkipKind",
+           "Unchecked", "UncheckedKind", "Wait", "WaitKind", "Why"]

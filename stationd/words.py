@@ -16,6 +16,8 @@ from stationd.reasons import (
     Reason,
     Skip,
     SkipKind,
+    Unchecked,
+    UncheckedKind,
     Wait,
     WaitKind,
     Why,
@@ -45,6 +47,7 @@ from stationd.station.events import (
     StateReason,
     StationEvent,
 )
+from stationd.station.trust import Asked, CheckAsked
 
 
 def _mm(v: float | None) -> str:
@@ -120,6 +123,48 @@ def wait_words(wait: Wait) -> str:
 def _waited(wait: Wait | None) -> str:
     """A wait's words, where a refusal may lack it (``None``: never from the matcher)."""
     return "None" if wait is None else wait_words(wait)
+
+
+def _not_measured(u: Unchecked) -> str:
+    """A check that measured no reference: the worst one and why, and the check's own
+    words (``reference R1 not found (no frame)``)."""
+    why = u.measure or "nothing measured"
+    return (f"reference {u.reference} {why}" if u.reference else why) + (
+        f" ({u.note})" if u.note else "")
+
+
+_UNCHECKED: dict[UncheckedKind, Callable[[Unchecked], str]] = {
+    UncheckedKind.SINCE_START: lambda u: "not checked since the start",
+    UncheckedKind.ARRIVAL: lambda u: f"checking for vehicle {u.vin}",
+    UncheckedKind.PAIRS_UNKNOWN: lambda u: "which pairs saw the wrench is not known",
+    UncheckedKind.NO_MARKER: lambda u: "it sees no reference marker",
+    UncheckedKind.NOT_MEASURED: _not_measured,
+}
+
+
+def unchecked_words(unchecked: Unchecked) -> str:
+    """Why a pair is not checked against the references: ``checking for vehicle VIN1``,
+    ``reference R1 not found``."""
+    return _UNCHECKED[unchecked.kind](unchecked)
+
+
+def _unchecked(unchecked: Unchecked | None) -> str:
+    """An unchecked pair's why, where a refusal may lack it (``None``: never from the
+    core)."""
+    return "None" if unchecked is None else unchecked_words(unchecked)
+
+
+_ASKED: dict[Asked, Callable[[CheckAsked], str]] = {
+    Asked.STARTED: lambda a: "station started",
+    Asked.ARRIVED: lambda a: f"vehicle {a.vin} arrived",
+    Asked.PERIODIC: lambda a: "periodic check",
+    Asked.COMMAND: lambda a: f"asked by {a.user}",
+}
+
+
+def check_asked_words(asked: CheckAsked) -> str:
+    """Why a calibration check is measured: ``vehicle VIN1 arrived``, ``asked by eve``."""
+    return _ASKED[asked.kind](asked)
 
 
 def worded(event: StationEvent) -> StationEvent:
@@ -209,9 +254,10 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.NO_LOOSEN_PSET: lambda r: (f"no loosen pset for {r.bolt}: the station's nok section "
                                    "gives it no loosen_pset"),
     Why.UNKNOWN_MODEL: lambda r: f"model {r.note} is not in the station's bolt tables",
-    Why.PAIR_UNCHECKED: lambda r: (f"{r.pair} not checked against the references: {r.note}"
-                                   if r.pair else f"not checked against the references: "
-                                   f"{r.note}"),
+    Why.PAIR_UNCHECKED: lambda r: (f"{r.pair} not checked against the references: "
+                                   f"{_unchecked(r.unchecked)}" if r.pair else
+                                   f"not checked against the references: "
+                                   f"{_unchecked(r.unchecked)}"),
     Why.PAIR_MOVED: lambda r: (f"{r.pair} moved: reference {r.reference} off by "
                                f"{_mm(r.distance_mm)} mm (> {r.limit or 0:g} mm)"),
     Why.REFERENCE_SEEN: lambda r: (f"reference marker {r.reference} seen, not the wrench "
@@ -467,6 +513,7 @@ def _missed(r: Reason) -> str:
     return f"; {many} without the wrench, the last: {reason_words(r.cause)}"
 
 
-__all__ = ["answer_words", "check_words", "command_words", "fault_words", "notice_words",
-           "operator_words", "outcome_words", "reason_words", "records_waiting", "skip_words",
-           "state_line", "state_words", "wait_words", "worded"]
+__all__ = ["answer_words", "check_asked_words", "check_words", "command_words",
+           "fault_words", "notice_words", "operator_words", "outcome_words", "reason_words",
+           "records_waiting", "skip_words", "state_line", "state_words", "unchecked_words",
+           "wait_words", "worded"]

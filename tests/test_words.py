@@ -1,6 +1,7 @@
 """The station's notices and its state's reasons in words (stationd.words.notice_words,
 state_words, state_line; skip_words for a skip, fault_words for the station's own faults,
-wait_words for the sequence's rule):
+wait_words for the sequence's rule, unchecked_words for a pair not checked and
+check_asked_words):
 each kind's line, word for word as the journal wrote it when the core still built the text
 (daemon tests and people's log searches wait for these lines), and each notice kind's level."""
 
@@ -15,6 +16,8 @@ from stationd.reasons import (
     Reason,
     Skip,
     SkipKind,
+    Unchecked,
+    UncheckedKind,
     Wait,
     WaitKind,
     Why,
@@ -30,13 +33,16 @@ from stationd.station.events import (
     StateChanged,
     StateReason,
 )
+from stationd.station.trust import Asked, CheckAsked
 from stationd.words import (
+    check_asked_words,
     fault_words,
     notice_words,
     reason_words,
     skip_words,
     state_line,
     state_words,
+    unchecked_words,
     wait_words,
     worded,
 )
@@ -395,3 +401,54 @@ def test_each_wait_says_what_the_matcher_said(wait: Wait, words: str) -> None:
 
 def test_every_wait_kind_has_its_words() -> None:
     assert {w.kind for w, _ in WAIT_WORDS} == set(WaitKind)
+
+
+#: why a pair is not checked, word for word as the trust rules wrote it (the screens'
+#: calibration panel, the refusal of a bolt end only such a pair saw)
+UNCHECKED_WORDS = [
+    (Unchecked(UncheckedKind.SINCE_START), "not checked since the start"),
+    (Unchecked(UncheckedKind.ARRIVAL, vin="VIN1"), "checking for vehicle VIN1"),
+    (Unchecked(UncheckedKind.PAIRS_UNKNOWN), "which pairs saw the wrench is not known"),
+    (Unchecked(UncheckedKind.NO_MARKER), "it sees no reference marker"),
+    (Unchecked(UncheckedKind.NOT_MEASURED, reference="R1", measure="not found"),
+     "reference R1 not found"),
+    (Unchecked(UncheckedKind.NOT_MEASURED, reference="R2", measure="no frames",
+               note="grab timed out"), "reference R2 no frames (grab timed out)"),
+    (Unchecked(UncheckedKind.NOT_MEASURED), "nothing measured"),
+    (Unchecked(UncheckedKind.NOT_MEASURED, note="the pair is down"),
+     "nothing measured (the pair is down)"),
+]
+
+
+@pytest.mark.parametrize(("unchecked", "words"), UNCHECKED_WORDS,
+                         ids=[f"{u.kind.name}-{i}" for i, (u, _) in enumerate(UNCHECKED_WORDS)])
+def test_each_unchecked_pair_says_what_the_trust_rules_said(unchecked: Unchecked,
+                                                            words: str) -> None:
+    assert unchecked_words(unchecked) == words
+    assert reason_words(Reason(Why.PAIR_UNCHECKED, pair="pair1", unchecked=unchecked)) == \
+        f"pair1 not checked against the references: {words}"
+    assert reason_words(Reason(Why.PAIR_UNCHECKED, unchecked=unchecked)) == \
+        f"not checked against the references: {words}"
+
+
+def test_every_unchecked_kind_has_its_words() -> None:
+    assert {u.kind for u, _ in UNCHECKED_WORDS} == set(UncheckedKind)
+
+
+#: why a calibration check is measured, word for word as the core wrote it
+ASKED_WORDS = [
+    (CheckAsked(Asked.STARTED), "station started"),
+    (CheckAsked(Asked.ARRIVED, vin="VIN1"), "vehicle VIN1 arrived"),
+    (CheckAsked(Asked.PERIODIC), "periodic check"),
+    (CheckAsked(Asked.COMMAND, user="eve"), "asked by eve"),
+]
+
+
+@pytest.mark.parametrize(("asked", "words"), ASKED_WORDS,
+                         ids=[a.kind.name for a, _ in ASKED_WORDS])
+def test_each_check_asked_says_what_the_core_said(asked: CheckAsked, words: str) -> None:
+    assert check_asked_words(asked) == words
+
+
+def test_every_asked_kind_has_its_words() -> None:
+    assert {a.kind for a, _ in ASKED_WORDS} == set(Asked)

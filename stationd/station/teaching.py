@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from stationd.reasons import Reason, Why
+from stationd.reasons import Reason, Unchecked, UncheckedKind, Why
 from stationd.station.actions import Action, Publish, Reply
 from stationd.station.commands import (
     Answer,
@@ -31,7 +31,13 @@ from stationd.station.events import (
 )
 from stationd.station.inputs import CommandIn, LocalizedIn, ModelsKnown
 from stationd.station.state import ON_A_BOLT, CoreState, _Teach
-from stationd.station.trust import MeasureReferences, RecordCheck, ReferencesChecked
+from stationd.station.trust import (
+    Asked,
+    CheckAsked,
+    MeasureReferences,
+    RecordCheck,
+    ReferencesChecked,
+)
 from stationd.station.trust import answer as check_answer
 
 #: steady localizations averaged for one taught bolt, and how many may be tried for them
@@ -150,7 +156,7 @@ class TeachRules(CoreState):
         return [Reply(Answer(c.request, c.command, c.issuer, why))]
 
     # -- the calibration check (the rules: stationd.station.trust) -------------------------
-    def _measure(self, t: float, why: str, request: int | None = None) -> list[Action]:
+    def _measure(self, t: float, why: CheckAsked, request: int | None = None) -> list[Action]:
         assert self.trust is not None  # noqa: S101 - only called with references
         self.trust.asked(t)
         at_height = self._lift is not None and self._lift.at_height
@@ -160,14 +166,14 @@ class TeachRules(CoreState):
         """No pair is trusted until checked: a check at once (without references: said)."""
         if self.trust is None:
             return [Publish(Notice(Said.NO_REFERENCES, t=t))]
-        return [*self._unchecked(t), *self._measure(t, "station started")]
+        return [*self._unchecked(t), *self._measure(t, CheckAsked(Asked.STARTED))]
 
     def _check_on_arrival(self, t: float, vin: str) -> list[Action]:
         """A vehicle arrives: its pairs are trusted again only once checked for it."""
         if self.trust is None:
             return []
-        self.trust.distrust(f"checking for vehicle {vin}", t)
-        return [*self._unchecked(t), *self._measure(t, f"vehicle {vin} arrived")]
+        self.trust.distrust(Unchecked(UncheckedKind.ARRIVAL, vin=vin), t)
+        return [*self._unchecked(t), *self._measure(t, CheckAsked(Asked.ARRIVED, vin=vin))]
 
     def _unchecked(self, t: float) -> list[Action]:
         """The screens told which pairs wait for a check, and why."""
@@ -181,7 +187,7 @@ class TeachRules(CoreState):
             return []
         idle = not self.tool_on and self.state not in ON_A_BOLT and self._teach is None
         if self.trust.due(t, idle=idle, vehicle=self.vin is not None):
-            return self._measure(t, "periodic check")
+            return self._measure(t, CheckAsked(Asked.PERIODIC))
         return []
 
     def _check_asked(self, t: float, c: CommandIn) -> list[Action]:
@@ -189,7 +195,7 @@ class TeachRules(CoreState):
         assert self.trust is not None  # noqa: S101 - refused without references
         self.trust.requests.append(c.request)
         self._commands[c.request] = c   # kept for the answer
-        return self._measure(t, f"asked by {c.issuer.user}", c.request)
+        return self._measure(t, CheckAsked(Asked.COMMAND, user=c.issuer.user), c.request)
 
     def _trusted(self, ev: LocalizedIn) -> LocalizedIn:
         """A bolt end made by a pair that is not trusted is a refusal with that pair's reason

@@ -17,12 +17,13 @@ calibration check is configured.  The core (:mod:`stationd.station.core`) owns o
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from stationd.localize.check import PairCheck, RefWhy, Verdict
-from stationd.reasons import Reason, Why
+from stationd.reasons import Reason, Unchecked, UncheckedKind, Why
 
 #: with a vehicle loaded, an unchecked pair is checked again this often, s
 RETRY_S = 10.0
@@ -37,11 +38,10 @@ def reason_of(check: PairCheck) -> Reason | None:
     if check.verdict is Verdict.MOVED:
         return Reason(Why.PAIR_MOVED, pair=check.pair, reference=check.reference,
                       distance_mm=check.offset_mm, limit=check.tolerance_mm)
-    why = check.why.value if check.why is not None else "nothing measured"
-    note = f"reference {check.reference} {why}" if check.reference else why
-    if check.note:
-        note += f" ({check.note})"
-    return Reason(Why.PAIR_UNCHECKED, pair=check.pair, reference=check.reference, note=note)
+    return Reason(Why.PAIR_UNCHECKED, pair=check.pair, reference=check.reference,
+                  unchecked=Unchecked(UncheckedKind.NOT_MEASURED, reference=check.reference,
+                                      measure=check.why.value if check.why is not None
+                                      else None, note=check.note or None))
 
 
 def summary(check: PairCheck) -> dict[str, Any]:
@@ -81,17 +81,17 @@ class PairTrust:
     requests: list[int] = field(default_factory=list)   # commands waiting for the answer
 
     def __post_init__(self) -> None:
-        self.distrust("not checked since the start")
+        self.distrust(Unchecked(UncheckedKind.SINCE_START))
 
-    def distrust(self, note: str, t: float | None = None) -> None:
-        """Every pair unchecked (a start, a vehicle's arrival at ``t``): trusted again by a
-        check asked since.  A moved pair stays moved: only a check that finds it in place
-        clears that."""
+    def distrust(self, why: Unchecked, t: float | None = None) -> None:
+        """Every pair unchecked, with ``why`` (a start, a vehicle's arrival at ``t``): trusted
+        again by a check asked since.  A moved pair stays moved: only a check that finds it in
+        place clears that."""
         if t is not None:
             self.distrusted_t = t
         for p in self.pairs:
             if not _moved(self.why.get(p)):
-                self.why[p] = Reason(Why.PAIR_UNCHECKED, pair=p, note=note)
+                self.why[p] = Reason(Why.PAIR_UNCHECKED, pair=p, unchecked=why)
 
     def untrusted(self) -> dict[str, Reason]:
         """The pairs not trusted now, with why (what the localization leaves out)."""
@@ -101,10 +101,12 @@ class PairTrust:
         """Why a bolt end made by ``pairs`` may not be used, or None: every one of them must
         be trusted (and which pairs made it must be known)."""
         if not pairs:
-            return Reason(Why.PAIR_UNCHECKED, note="which pairs saw the wrench is not known")
+            return Reason(Why.PAIR_UNCHECKED,
+                          unchecked=Unchecked(UncheckedKind.PAIRS_UNKNOWN))
         for p in pairs:
             if p not in self.why:
-                return Reason(Why.PAIR_UNCHECKED, pair=p, note="it sees no reference marker")
+                return Reason(Why.PAIR_UNCHECKED, pair=p,
+                              unchecked=Unchecked(UncheckedKind.NO_MARKER))
             if self.why[p] is not None:
                 return self.why[p]
         return None
@@ -161,15 +163,34 @@ class ReferencesChecked:
     asked_t: float | None = None   # the asking's time (MeasureReferences.t), when known
 
 
+class Asked(enum.StrEnum):
+    """Why a calibration check is asked for: the kind of a :class:`CheckAsked`."""
+
+    STARTED = "started"                  # the station started (or reloaded)
+    ARRIVED = "arrived"                  # a vehicle arrived (vin)
+    PERIODIC = "periodic"                # the idle period passed, or a retry is due
+    COMMAND = "command"                  # a person's command (user)
+
+
+@dataclass(frozen=True)
+class CheckAsked:
+    """Why a check is measured, typed (:func:`stationd.words.check_asked_words` says it:
+    ``vehicle VIN1 arrived``, ``asked by eve``)."""
+
+    kind: Asked
+    vin: str | None = None
+    user: str | None = None
+
+
 @dataclass(frozen=True)
 class MeasureReferences:
     """Action: grab each of ``pairs`` once and check it against its references
     (:func:`stationd.localize.check.check_pair`, references on the lift only with
-    ``lift_at_height``), then feed :class:`ReferencesChecked`; ``why`` for the journal."""
+    ``lift_at_height``), then feed :class:`ReferencesChecked`; ``why`` it is asked, typed."""
 
     pairs: tuple[str, ...]
     lift_at_height: bool
-    why: str
+    why: CheckAsked
     request: int | None = None
     t: float | None = None      # when it was asked (its answer says so back)
 
@@ -192,5 +213,5 @@ def answer(checks: Iterable[PairCheck]) -> Mapping[str, Any]:
     return {c.pair: summary(c) for c in checks}
 
 
-__all__ = ["RETRY_S", "WAIT_S", "MeasureReferences", "PairTrust", "RecordCheck",
-           "ReferencesChecked", "answer", "from_summary", "reason_of", "summary"]
+__all__ = ["RETRY_S", "WAIT_S", "Asked", "CheckAsked", "MeasureReferences", "PairTrust",
+           "RecordCheck", "ReferencesChecked", "answer", "from_summary", "reason_of", "summary"]

@@ -30,7 +30,7 @@ from stationd.station.actions import SendParams
 from stationd.station.commands import CheckCalibration, Issuer, Right
 from stationd.station.events import Localized, PairChecked, ResultRecorded, VehicleClosed
 from stationd.station.trust import MeasureReferences
-from stationd.words import state_words
+from stationd.words import check_asked_words, reason_words, state_words
 from tests.shell.daemons import running, until_async
 from tests.shell.refstation import station_dir
 
@@ -51,7 +51,7 @@ class Run:
         self.st.on_action = self._seen
         self.sends: list[str] = []
         self.untrusted_sends: list[tuple[str, tuple[str, ...], dict[str, Any]]] = []
-        self.measures: list[str] = []
+        self.measures: list[str] = []   # why each check was measured, in words
         self.st.open()
         assert self.st.repo is not None
         self.bolts = {b.bolt_id: np.array(b.position)
@@ -62,7 +62,7 @@ class Run:
         """The test's invariant, at the moment of each send: every pair that made the bolt
         end was trusted."""
         if isinstance(a, MeasureReferences):
-            self.measures.append(a.why)
+            self.measures.append(check_asked_words(a.why))
         if not isinstance(a, SendParams):
             return
         self.sends.append(a.bolt)
@@ -176,7 +176,8 @@ def test_a_pair_knocked_between_vehicles_is_found_moved_refused_then_trusted_aga
     again = Run(cfg, world)
     st = again.st
     assert set(st.core.trust.untrusted()) == set(PAIRS)
-    assert "not checked since the start" in str(st.core.trust.untrusted()["pair1"].note)
+    assert reason_words(st.core.trust.untrusted()["pair1"]) == \
+        "pair1 not checked against the references: not checked since the start"
     again.on(B9)     # the wrench waits on a bolt from the start: sent only once checked
 
     async def restarted() -> None:

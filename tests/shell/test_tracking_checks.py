@@ -14,10 +14,19 @@ from stationd.localize.check import RefWhy, Verdict
 from stationd.shell.blocking import Blocking
 from stationd.shell.tracking import Tracker
 from stationd.station.core import StationCore
-from stationd.station.trust import MeasureReferences, PairTrust, ReferencesChecked
+from stationd.station.trust import (
+    Asked,
+    CheckAsked,
+    MeasureReferences,
+    PairTrust,
+    ReferencesChecked,
+)
 from tests.shell.refstation import station_dir
 
 PAIRS = ("pair1", "pair2")
+
+
+EVE = CheckAsked(Asked.COMMAND, user="eve")   # a check asked by a person
 
 
 def _answers(tmp_path: Any, asked: list[MeasureReferences]) -> list[ReferencesChecked]:
@@ -51,9 +60,10 @@ def _answers(tmp_path: Any, asked: list[MeasureReferences]) -> list[ReferencesCh
 
 
 def test_a_check_asked_while_one_waits_is_merged_and_keeps_the_commands_request(tmp_path):
-    fed = _answers(tmp_path, [MeasureReferences(PAIRS, False, "station started"),
-                              MeasureReferences(PAIRS, True, "asked by eve", request=7),
-                              MeasureReferences(PAIRS, True, "vehicle V1 arrived")])
+    fed = _answers(tmp_path, [MeasureReferences(PAIRS, False, CheckAsked(Asked.STARTED)),
+                              MeasureReferences(PAIRS, True, EVE, request=7),
+                              MeasureReferences(PAIRS, True,
+                                                CheckAsked(Asked.ARRIVED, vin="V1"))])
     assert [f.request for f in fed] == [7]
     (answer,) = fed
     assert [c.pair for c in answer.checks] == list(PAIRS)
@@ -63,6 +73,8 @@ def test_a_check_asked_while_one_waits_is_merged_and_keeps_the_commands_request(
 
 
 def test_two_commands_waiting_are_each_answered(tmp_path):
-    fed = _answers(tmp_path, [MeasureReferences(PAIRS, False, "asked by eve", request=1),
-                              MeasureReferences(PAIRS, False, "asked by max", request=2)])
+    fed = _answers(tmp_path, [MeasureReferences(PAIRS, False, EVE, request=1),
+                              MeasureReferences(PAIRS, False,
+                                                CheckAsked(Asked.COMMAND, user="max"),
+                                                request=2)])
     assert [f.request for f in fed] == [1, 2]

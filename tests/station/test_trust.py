@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from stationd.localize.check import PairCheck, RefMeasure, RefWhy, Verdict
-from stationd.reasons import Why
+from stationd.reasons import Unchecked, UncheckedKind, Why
 from stationd.station.actions import LoadVehicle, Publish, RecordCommand, Reply, SendParams
 from stationd.station.commands import CheckCalibration, Issuer, Right
 from stationd.station.core import StationCore
@@ -28,8 +28,16 @@ from stationd.station.inputs import (
     VinSent,
 )
 from stationd.station.matching import MatchParams
-from stationd.station.trust import MeasureReferences, PairTrust, RecordCheck, ReferencesChecked
-from stationd.words import check_words, notice_words, reason_words
+from stationd.station.trust import (
+    Asked,
+    CheckAsked,
+    MeasureReferences,
+    PairTrust,
+    RecordCheck,
+    ReferencesChecked,
+    reason_of,
+)
+from stationd.words import check_asked_words, check_words, notice_words, reason_words
 
 BOLTS = {"B1": LoadedBolt((0.0, 0.0, 0.0), 1), "B2": LoadedBolt((60.0, 0.0, 0.0), 2)}
 PARAMS = MatchParams(tolerance_mm=8.0, margin_mm=6.0, stable_frames=2, max_age_s=0.5)
@@ -82,7 +90,8 @@ def test_pairs_start_untrusted_and_a_check_is_asked_at_once():
     core = _core()
     acts = core.feed(Started(1.0))
     (ask,) = _kinds(acts, MeasureReferences)
-    assert ask.pairs == PAIRS and ask.why == "station started" and ask.request is None
+    assert ask.pairs == PAIRS and ask.why == CheckAsked(Asked.STARTED) and ask.request is None
+    assert check_asked_words(ask.why) == "station started"
     assert set(core.trust.untrusted()) == set(PAIRS)
     assert all(r.kind is Why.PAIR_UNCHECKED for r in core.trust.untrusted().values())
 
@@ -91,7 +100,9 @@ def test_a_bolt_seen_only_by_an_untrusted_pair_is_refused_with_that_reason():
     core = _core()
     acts = _loaded(core)
     # the vehicle's arrival asks for a check; until it answers nothing is trusted
-    assert _kinds(acts, MeasureReferences)[0].why == "vehicle VIN1 arrived"
+    arrived = _kinds(acts, MeasureReferences)[0].why
+    assert arrived == CheckAsked(Asked.ARRIVED, vin="VIN1")
+    assert check_asked_words(arrived) == "vehicle VIN1 arrived"
     for k in range(4):
         acts = _at(core, 20.0 + k, ("pair1",))
         assert not _kinds(acts, SendParams)
@@ -128,8 +139,10 @@ def test_a_moved_pair_stays_moved_until_a_check_finds_it_in_place():
     _loaded(core)
     core.feed(ReferencesChecked(15.0, (ok("pair1"), moved("pair2"))))
     # the next vehicle's arrival distrusts the others, not the moved one's fault
-    core.trust.distrust("checking for vehicle VIN2")
+    core.trust.distrust(Unchecked(UncheckedKind.ARRIVAL, vin="VIN2"))
     assert core.trust.why["pair2"].kind is Why.PAIR_MOVED
+    assert reason_words(core.trust.why["pair1"]) == \
+        "pair1 not checked against the references: checking for vehicle VIN2"
     # an unchecked result (the reference covered) does not clear it either
     core.feed(ReferencesChecked(16.0, (ok("pair1"), unchecked("pair2"))))
     assert core.trust.why["pair2"].kind is Why.PAIR_UNCHECKED
@@ -153,7 +166,8 @@ def test_checks_are_asked_while_idle_every_period_and_retried_with_a_vehicle():
     core.feed(ReferencesChecked(1.0, (ok("pair1"), ok("pair2"))))
     assert not _kinds(core.feed(Tick(500.0)), MeasureReferences)
     (ask,) = _kinds(core.feed(Tick(601.0)), MeasureReferences)
-    assert ask.why == "periodic check" and ask.lift_at_height is False
+    assert ask.why == CheckAsked(Asked.PERIODIC) and ask.lift_at_height is False
+    assert check_asked_words(ask.why) == "periodic check"
     assert not _kinds(core.feed(Tick(602.0)), MeasureReferences)    # pending
     assert _kinds(core.feed(Tick(700.0)), MeasureReferences)        # lost: asked again
     # with a vehicle, an unchecked pair is checked again every RETRY_S
@@ -174,7 +188,8 @@ def test_a_check_on_command_is_answered_with_each_pairs_verdict():
     acts = core.feed(CommandIn(2.0, 2, CheckCalibration("after the crash"), ENGINEER))
     assert _kinds(acts, RecordCommand)
     (ask,) = _kinds(core.feed(CommandDone(2.1, 2)), MeasureReferences)
-    assert ask.request == 2 and ask.why == "asked by eve"
+    assert ask.request == 2 and ask.why == CheckAsked(Asked.COMMAND, user="eve")
+    assert check_asked_words(ask.why) == "asked by eve"
     acts = core.feed(ReferencesChecked(2.5, (ok("pair1"), moved("pair2", 4.0)), request=2))
     (reply,) = _kinds(acts, Reply)
     assert reply.answer.accepted and reply.answer.result["pair2"]["verdict"] == "moved"
@@ -261,3 +276,15 @@ def test_a_check_asked_before_the_vehicle_arrived_trusts_no_pair_for_it():
     acts = core.feed(ReferencesChecked(5.0, (ok("pair1"), ok("pair2")), None, arrival_ask.t))
     assert all(e.trusted for e in _events(acts, PairChecked))
     assert not core.trust.untrusted()
+
+
+def test_a_pair_not_measured_is_unchecked_with_the_check_s_own_why_typed():
+    """The check's verdict, typed in the refusal (the worst reference, its why as the check
+    said it, the check's own note); its words are the ones the core wrote before."""
+    r = reason_of(unchecked("pair2"))
+    assert r is not None and r.reference == "R1" and r.unchecked == Unchecked(
+        UncheckedKind.NOT_MEASURED, reference="R1", measure="not found")
+    assert reason_words(r) == "pair2 not checked against the references: reference R1 not found"
+    down = PairCheck("pair1", Verdict.NOT_CHECKED, (), None, None, 2.0, None, "the pair is down")
+    assert reason_words(reason_of(down)) == \
+        "pair1 not checked against the references: nothing measured (the pair is down)"
