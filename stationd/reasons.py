@@ -10,8 +10,9 @@ nothing of the station.
 
 Beside the refusals, the other reasons the core decides and edges word that a refusal carries:
 why a bolt is skipped (:class:`Skip`), a fault of the station's own rules
-(:class:`CoreFault`), the sequence's rule a bolt waits for (:class:`Wait`) and why a pair is
-not checked (:class:`Unchecked`).
+(:class:`CoreFault`), the sequence's rule a bolt waits for (:class:`Wait`), why a pair is not
+checked (:class:`Unchecked`); and why a result is stored unattributed (:class:`Unattributed`,
+stored in words by the shell).
 """
 
 from __future__ import annotations
@@ -184,6 +185,55 @@ class Unchecked:
     note: str | None = None             # the check's own words (a grab's error, the vision)
 
 
+class UnprovedKind(enum.StrEnum):
+    """What did not agree when a result fetched after a link cut was checked against the
+    enable the cut came during: the kind of an :class:`Unproved`."""
+
+    PSET = "pset"                        # its pset not the one sent (pset, sent_pset, bolt)
+    VIN = "vin"                          # the VIN it echoes not the one sent (vin, sent_vin)
+    NOT_FIRST = "not first"              # not the first id after the last accounted for
+                                         # (follows)
+    FOLLOWS_UNKNOWN = "follows unknown"  # the last id accounted for unknown
+    CLOCK_UNKNOWN = "clock unknown"      # the controller's clock not known
+    OUTSIDE_CUT = "outside cut"          # made outside the enable and the cut (bolt)
+
+
+@dataclass(frozen=True)
+class Unproved:
+    """Why a result fetched after a link cut is not proved to be the cut enable's: the
+    first of its data that did not agree."""
+
+    kind: UnprovedKind
+    bolt: str | None = None             # the bolt the cut enable was for
+    pset: int | None = None             # the result's pset
+    sent_pset: int | None = None        # the pset sent for that bolt
+    vin: str | None = None              # the VIN the result echoes
+    sent_vin: str | None = None         # the VIN sent
+    follows: int | None = None          # the last tightening id accounted for
+
+
+class UnattributedKind(enum.StrEnum):
+    """Why a result is stored unattributed (no bolt owns it): the kind of an
+    :class:`Unattributed`."""
+
+    OUTSIDE = "outside"                  # pushed outside any tightening
+    FETCHED_LIVE = "fetched live"        # fetched after a later one came, the link up
+    FETCHED = "fetched"                  # fetched after a reconnect
+
+
+@dataclass(frozen=True)
+class Unattributed:
+    """Why a result no bolt owns is stored so, as the core decided it: the result, how it
+    came, and what did not prove it the cut enable's.  Typed, not words: the shell writes
+    :func:`stationd.words.unattributed_words` into the record's reason (the text stored is
+    what the core wrote before), and the journal's notice says the same."""
+
+    kind: UnattributedKind
+    tightening_id: int
+    pset: int | None
+    unproved: Unproved | None = None
+
+
 @dataclass(frozen=True)
 class Reason:
     """One refusal: its kind and the details that apply (the others stay None)."""
@@ -231,4 +281,5 @@ class Reason:
 
 
 __all__ = ["CoreFault", "CoreFaultKind", "FaultWhy", "Reason", "Skip", "SkipKind",
-           "Unchecked", "UncheckedKind", "Wait", "WaitKind", "Why"]
+           "Unattributed", "UnattributedKind", "Unchecked", "UncheckedKind", "Unproved",
+           "UnprovedKind", "Wait", "WaitKind", "Why"]

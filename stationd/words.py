@@ -9,6 +9,7 @@ from dataclasses import replace
 
 from db.kinds import NOT_TAKEN_NOTE, is_not_taken_note
 from drivers.counting import counted
+from drivers.wrench.base import ResultType
 from stationd.reasons import (
     CoreFault,
     CoreFaultKind,
@@ -16,12 +17,17 @@ from stationd.reasons import (
     Reason,
     Skip,
     SkipKind,
+    Unattributed,
+    UnattributedKind,
     Unchecked,
     UncheckedKind,
+    Unproved,
+    UnprovedKind,
     Wait,
     WaitKind,
     Why,
 )
+from stationd.station.actions import StoreControllerEvent
 from stationd.station.commands import (
     KIND,
     Answer,
@@ -37,6 +43,7 @@ from stationd.station.commands import (
 from stationd.station.events import (
     Because,
     BoltSkipped,
+    ControllerResultEvent,
     DeviceHealth,
     Notice,
     OperatorChange,
@@ -47,6 +54,7 @@ from stationd.station.events import (
     StateReason,
     StationEvent,
 )
+from stationd.station.results import type_code
 from stationd.station.trust import Asked, CheckAsked
 
 
@@ -167,15 +175,71 @@ def check_asked_words(asked: CheckAsked) -> str:
     return _ASKED[asked.kind](asked)
 
 
+_UNPROVED: dict[UnprovedKind, Callable[[Unproved], str]] = {
+    UnprovedKind.PSET: lambda u: f"pset {u.pset}, not {u.sent_pset} sent for {u.bolt}",
+    UnprovedKind.VIN: lambda u: f"VIN {u.vin}, not {u.sent_vin}",
+    UnprovedKind.NOT_FIRST: lambda u: f"not the first tightening after {u.follows}",
+    UnprovedKind.FOLLOWS_UNKNOWN: lambda u: "the last tightening id accounted for unknown",
+    UnprovedKind.CLOCK_UNKNOWN: lambda u: "the controller's clock is not known",
+    UnprovedKind.OUTSIDE_CUT: lambda u: f"made outside the enable of {u.bolt} and the link cut",
+}
+
+
+def unproved_words(unproved: Unproved) -> str:
+    """What did not prove a fetched result the cut enable's: ``VIN V9, not V1``."""
+    return _UNPROVED[unproved.kind](unproved)
+
+
+_CAME: dict[UnattributedKind, str] = {
+    UnattributedKind.OUTSIDE: "outside any tightening",
+    UnattributedKind.FETCHED_LIVE: "fetched after a later one came, the link up",
+    UnattributedKind.FETCHED: "fetched after a reconnect",
+}
+
+
+def unattributed_words(why: Unattributed) -> str:
+    """Why a result is stored unattributed, as its record's reason keeps it and the journal
+    says it: ``result 12 (pset 3) fetched after a reconnect (VIN V9, not V1)``."""
+    return f"result {why.tightening_id} (pset {why.pset}) {_CAME[why.kind]}" + (
+        f" ({unproved_words(why.unproved)})" if why.unproved is not None else "")
+
+
+_TYPE_WORDS = {ResultType.BATCH_INCREMENT: "batch increment",
+               ResultType.BATCH_DECREMENT: "batch decrement",
+               ResultType.BYPASS_PSET: "bypass parameter set", ResultType.ABORT_JOB: "abort job",
+               ResultType.REFERENCE_SETUP: "reference setup",
+               ResultType.TIGHTENING: "tightening", ResultType.LOOSENING: "loosening",
+               ResultType.SYNC_TIGHTENING: "synchronized tightening"}
+
+
+def result_type_words(code: int | None) -> str:
+    """A result type as the controller's screen would name it; an unknown code by number.
+    The name a controller event is stored, published and said with."""
+    try:
+        return _TYPE_WORDS[ResultType(code)] if code is not None else "result"
+    except ValueError:
+        return f"result type {code} (unknown)"
+
+
+def stored_what(action: StoreControllerEvent) -> str:
+    """What a controller event is stored as: the station's own kind where the core gave one
+    (``not taken``), else its type's name (``batch increment``)."""
+    return action.what if action.what is not None else result_type_words(
+        type_code(action.result))
+
+
 def worded(event: StationEvent) -> StationEvent:
     """The event with its words written from the typed value the core decided (a skip's
-    ``reason`` from its ``skip``, a device's health's ``reason`` from its ``fault``): what
-    the shell publishes, so that every reader of the bus (the screens, OPC UA, the journal)
-    reads the same text as before; any other event as it is."""
+    ``reason`` from its ``skip``, a device's health's ``reason`` from its ``fault``, a
+    controller event's ``what`` from its type code): what the shell publishes, so that every
+    reader of the bus (the screens, OPC UA, the journal) reads the same text as before; any
+    other event as it is."""
     if isinstance(event, BoltSkipped) and event.skip is not None and not event.reason:
         return replace(event, reason=skip_words(event.skip))
     if isinstance(event, DeviceHealth) and event.fault is not None and not event.reason:
         return replace(event, reason=fault_words(event.fault))
+    if isinstance(event, ControllerResultEvent) and not event.what:
+        return replace(event, what=result_type_words(event.result_type))
     return event
 
 
@@ -308,9 +372,15 @@ def _entered(n: Notice) -> str:
     return f"{n.bolt}: {outcome} entered by {n.user} from the controller's screen{held}"
 
 
+def _unattributed(why: Unattributed | None) -> str:
+    """An unattributed result's why, where a notice may lack it (``None``: never from the
+    core)."""
+    return "None" if why is None else unattributed_words(why)
+
+
 def _controller_event(n: Notice) -> str:
     """A result that is not a rundown, the bolt still open, what to check for an unknown."""
-    return (f"{n.note} on the controller: not a tightening"
+    return (f"{result_type_words(n.result_type)} on the controller: not a tightening"
             + (f", {n.bolt} still open" if n.bolt is not None else "")
             + ("; check the controller's result there" if n.said is Said.UNKNOWN_TYPE else ""))
 
@@ -322,7 +392,8 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
     Said.IDS_AGAIN: lambda n: (f"tightening id {n.tightening_id} again with other values: the "
                                "controller's ids started again (a new or reset controller?); "
                                "taken as a new result"),
-    Said.UNATTRIBUTED: lambda n: f"{n.note}: not attributable to a bolt, stored unattributed",
+    Said.UNATTRIBUTED: lambda n: (f"{_unattributed(n.unattributed)}: not attributable to a "
+                                  "bolt, stored unattributed"),
     Said.CONTROLLER_EVENT: _controller_event,
     Said.UNKNOWN_TYPE: _controller_event,
     Said.GAP: lambda n: (f"tightening {_ids(n)} missed "
@@ -515,5 +586,6 @@ def _missed(r: Reason) -> str:
 
 __all__ = ["answer_words", "check_asked_words", "check_words", "command_words",
            "fault_words", "notice_words", "operator_words", "outcome_words", "reason_words",
-           "records_waiting", "skip_words", "state_line", "state_words", "unchecked_words",
+           "records_waiting", "result_type_words", "skip_words", "state_line", "state_words",
+           "stored_what", "unattributed_words", "unchecked_words", "unproved_words",
            "wait_words", "worded"]

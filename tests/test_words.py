@@ -1,7 +1,7 @@
 """The station's notices and its state's reasons in words (stationd.words.notice_words,
 state_words, state_line; skip_words for a skip, fault_words for the station's own faults,
-wait_words for the sequence's rule, unchecked_words for a pair not checked and
-check_asked_words):
+wait_words for the sequence's rule, unchecked_words for a pair not checked,
+unattributed_words for a result no bolt owns, result_type_words and check_asked_words):
 each kind's line, word for word as the journal wrote it when the core still built the text
 (daemon tests and people's log searches wait for these lines), and each notice kind's level."""
 
@@ -10,14 +10,19 @@ from __future__ import annotations
 import pytest
 
 from db.kinds import not_taken_note
+from drivers.wrench.base import ResultType
 from stationd.reasons import (
     CoreFault,
     CoreFaultKind,
     Reason,
     Skip,
     SkipKind,
+    Unattributed,
+    UnattributedKind,
     Unchecked,
     UncheckedKind,
+    Unproved,
+    UnprovedKind,
     Wait,
     WaitKind,
     Why,
@@ -25,6 +30,7 @@ from stationd.reasons import (
 from stationd.station.events import (
     Because,
     BoltSkipped,
+    ControllerResultEvent,
     DeviceHealth,
     Notice,
     OperatorChange,
@@ -39,10 +45,13 @@ from stationd.words import (
     fault_words,
     notice_words,
     reason_words,
+    result_type_words,
     skip_words,
     state_line,
     state_words,
+    unattributed_words,
     unchecked_words,
+    unproved_words,
     wait_words,
     worded,
 )
@@ -57,17 +66,17 @@ WORDS = [
      "tightening id 12 again with other values: the controller's ids started again (a new "
      "or reset controller?); taken as a new result"),
     (Notice(Said.UNATTRIBUTED, tightening_id=12, pset=3,
-            note="result 12 (pset 3) outside any tightening"),
+            unattributed=Unattributed(UnattributedKind.OUTSIDE, 12, 3)),
      "result 12 (pset 3) outside any tightening: not attributable to a bolt, stored "
      "unattributed"),
-    (Notice(Said.CONTROLLER_EVENT, note="batch increment"),
+    (Notice(Said.CONTROLLER_EVENT, result_type=3),
      "batch increment on the controller: not a tightening"),
-    (Notice(Said.CONTROLLER_EVENT, bolt="B1", note="abort job"),
+    (Notice(Said.CONTROLLER_EVENT, bolt="B1", result_type=6),
      "abort job on the controller: not a tightening, B1 still open"),
-    (Notice(Said.UNKNOWN_TYPE, note="result type 9 (unknown)"),
+    (Notice(Said.UNKNOWN_TYPE, result_type=9),
      "result type 9 (unknown) on the controller: not a tightening; check the controller's "
      "result there"),
-    (Notice(Said.UNKNOWN_TYPE, bolt="B1", note="result type 9 (unknown)"),
+    (Notice(Said.UNKNOWN_TYPE, bolt="B1", result_type=9),
      "result type 9 (unknown) on the controller: not a tightening, B1 still open; check the "
      "controller's result there"),
     (Notice(Said.GAP, tightening_id=70061, last_id=70062, note="the controller no longer has it"),
@@ -452,3 +461,79 @@ def test_each_check_asked_says_what_the_core_said(asked: CheckAsked, words: str)
 
 def test_every_asked_kind_has_its_words() -> None:
     assert {a.kind for a, _ in ASKED_WORDS} == set(Asked)
+
+
+#: what did not prove a fetched result the cut enable's, word for word as the core wrote it
+#: (stored in the unattributed result's reason, between parentheses)
+UNPROVED_WORDS = [
+    (Unproved(UnprovedKind.PSET, bolt="B1", pset=9, sent_pset=1), "pset 9, not 1 sent for B1"),
+    (Unproved(UnprovedKind.VIN, vin="OTHER", sent_vin="VIN1"), "VIN OTHER, not VIN1"),
+    (Unproved(UnprovedKind.NOT_FIRST, follows=40), "not the first tightening after 40"),
+    (Unproved(UnprovedKind.FOLLOWS_UNKNOWN), "the last tightening id accounted for unknown"),
+    (Unproved(UnprovedKind.CLOCK_UNKNOWN), "the controller's clock is not known"),
+    (Unproved(UnprovedKind.OUTSIDE_CUT, bolt="B1"),
+     "made outside the enable of B1 and the link cut"),
+]
+
+
+@pytest.mark.parametrize(("unproved", "words"), UNPROVED_WORDS,
+                         ids=[u.kind.name for u, _ in UNPROVED_WORDS])
+def test_each_unproved_result_says_what_the_core_said(unproved: Unproved, words: str) -> None:
+    assert unproved_words(unproved) == words
+
+
+def test_every_unproved_kind_has_its_words() -> None:
+    assert {u.kind for u, _ in UNPROVED_WORDS} == set(UnprovedKind)
+
+
+#: why a result is stored unattributed: the record's reason, byte for byte as the core wrote
+#: it (the database keeps it; quality reads it)
+UNATTRIBUTED_WORDS = [
+    (Unattributed(UnattributedKind.OUTSIDE, 12, 3), "result 12 (pset 3) outside any tightening"),
+    (Unattributed(UnattributedKind.FETCHED_LIVE, 13, 3),
+     "result 13 (pset 3) fetched after a later one came, the link up"),
+    (Unattributed(UnattributedKind.FETCHED, 41, 9, UNPROVED_WORDS[0][0]),
+     "result 41 (pset 9) fetched after a reconnect (pset 9, not 1 sent for B1)"),
+    (Unattributed(UnattributedKind.FETCHED, 42, 1),
+     "result 42 (pset 1) fetched after a reconnect"),
+]
+
+
+@pytest.mark.parametrize(("why", "words"), UNATTRIBUTED_WORDS,
+                         ids=[f"{u.kind.name}-{i}" for i, (u, _) in enumerate(UNATTRIBUTED_WORDS)])
+def test_each_unattributed_result_says_what_the_core_stored(why: Unattributed,
+                                                             words: str) -> None:
+    assert unattributed_words(why) == words
+    assert notice_words(Notice(Said.UNATTRIBUTED, unattributed=why)) == \
+        f"{words}: not attributable to a bolt, stored unattributed"
+
+
+def test_every_unattributed_kind_has_its_words() -> None:
+    assert {u.kind for u, _ in UNATTRIBUTED_WORDS} == set(UnattributedKind)
+
+
+def test_each_result_type_is_named_as_the_controller_names_it() -> None:
+    """Stored as the controller event's ``what``, published and said: as the core named it."""
+    names = {ResultType.TIGHTENING: "tightening", ResultType.LOOSENING: "loosening",
+             ResultType.BATCH_INCREMENT: "batch increment",
+             ResultType.BATCH_DECREMENT: "batch decrement",
+             ResultType.BYPASS_PSET: "bypass parameter set", ResultType.ABORT_JOB: "abort job",
+             ResultType.SYNC_TIGHTENING: "synchronized tightening",
+             ResultType.REFERENCE_SETUP: "reference setup"}
+    assert set(names) == set(ResultType)
+    assert {t: result_type_words(int(t)) for t in ResultType} == names
+    assert result_type_words(9) == "result type 9 (unknown)"
+    assert result_type_words(None) == "result"
+
+
+def test_a_controller_event_is_named_at_publication() -> None:
+    """The core publishes the type code and no name; the shell's publication writes the name
+    where the event carried it, and the event's JSON is what it was."""
+    ev = worded(ControllerResultEvent(3, "", 7, 1, True, "B1", t=1.0))
+    assert isinstance(ev, ControllerResultEvent) and ev.what == "batch increment"
+    assert ev.to_json() == {"kind": "controller_result_event", "t": 1.0, "result_type": 3,
+                            "what": "batch increment", "tightening_id": 7, "pset": 1,
+                            "ok": True, "bolt": "B1"}
+    own = ControllerResultEvent(0, "not taken", 8, 1, True, "B1", t=2.0)
+    assert worded(own) is own       # the station's own kind, as it is
+

@@ -83,6 +83,7 @@ from stationd.words import (
     operator_words,
     reason_words,
     state_line,
+    stored_what,
     worded,
 )
 
@@ -182,7 +183,7 @@ class Effects:
                 self.log.error("gap %d-%d not stored: %s", a.first, a.last, one_line(exc))
         elif isinstance(a, StoreControllerEvent):
             await self._store_then_ack(self.records.store_controller_event, a, a.result,
-                                       f"{a.what} (a controller event)")
+                                       f"{stored_what(a)} (a controller event)")
         elif isinstance(a, StoreUnreadable):
             await self._store_then_ack(self.records.store_unreadable, a, a.unreadable,
                                        "an unreadable result")

@@ -57,6 +57,7 @@ from stationd.station.commands import (
 from stationd.station.inputs import LoadedBolt, VehicleEnded, VehicleLoaded, VehicleRejected
 from stationd.station.results import type_code
 from stationd.station.trust import RecordCheck, summary
+from stationd.words import stored_what, unattributed_words
 
 log = logging.getLogger("stationd")
 #: what a device, the database or the station's own data raise: a fault, never an exit
@@ -233,7 +234,7 @@ class Records:
             vin=a.vin, controller_vin=str(r.vin or "").strip() or None,
             tightening_id=int(r.tightening_id), pset=int(r.pset), ok=bool(r.ok),
             torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
-            result_at=_aware(r.timestamp), reason=a.reason)
+            result_at=_aware(r.timestamp), reason=unattributed_words(a.why))
 
     def store_controller_event(self, a: StoreControllerEvent) -> None:
         """The result; the tool enable it answers settled with it, where it does (its bolt
@@ -241,7 +242,7 @@ class Records:
         r = a.result
         enable = self._settles(a.selection, take=False)
         self._repo().record_controller_event(
-            result_type=type_code(r) or 0, what=a.what, vin=a.vin, bolt=a.bolt,
+            result_type=type_code(r) or 0, what=stored_what(a), vin=a.vin, bolt=a.bolt,
             controller_vin=str(r.vin or "").strip() or None,
             tightening_id=int(r.tightening_id), pset=int(r.pset), ok=bool(r.ok),
             torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),

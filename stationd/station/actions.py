@@ -13,7 +13,7 @@ from typing import Any
 from db.bolts import Parameters
 from db.kinds import TIGHTENING
 from drivers.wrench.base import TighteningResult, UnreadableResult
-from stationd.reasons import Reason
+from stationd.reasons import Reason, Unattributed
 from stationd.station.commands import (
     Answer,
     Command,
@@ -126,11 +126,13 @@ class Acknowledge:
 @dataclass(frozen=True)
 class StoreUnattributed:
     """Store a result no bolt owns (``vin``: the vehicle loaded, if any), then acknowledge it:
-    a tightening the controller made is never acknowledged into nothing."""
+    a tightening the controller made is never acknowledged into nothing.  ``why`` is typed;
+    the record's reason is its words (:func:`stationd.words.unattributed_words`), written by
+    the shell as it stores it: the text stored is the one the core wrote before."""
 
     result: TighteningResult
     vin: str | None
-    reason: str
+    why: Unattributed
 
 
 @dataclass(frozen=True)
@@ -146,15 +148,19 @@ class StoreGap:
 
 @dataclass(frozen=True)
 class StoreControllerEvent:
-    """Store a result that is not a rundown (``what``: its type in words; ``bolt``: the one
-    the tool was enabled for, still open), then acknowledge it.  ``selection``: the enable
-    it answers, settled with it (an OK without a type outside the bolt's torque window: the
-    bolt is held for a person instead); None: the enable still waits for its result."""
+    """Store a result that is not a rundown (``bolt``: the one the tool was enabled for,
+    still open), then acknowledge it.  ``what``: the station's own kind for it
+    (:data:`db.kinds.NOT_TAKEN`, a stored identifier the database looks up); None: the
+    result's type, named in words by the shell as it stores it
+    (:func:`stationd.words.result_type_words`: the core builds no words).  ``selection``:
+    the enable it answers, settled with it (an OK without a type outside the bolt's torque
+    window: the bolt is held for a person instead); None: the enable still waits for its
+    result."""
 
     result: TighteningResult
     vin: str | None
     bolt: str | None
-    what: str
+    what: str | None = None
     selection: Selection | None = None
 
 

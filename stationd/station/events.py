@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from db.kinds import BoltStatus
-from stationd.reasons import CoreFault, FaultWhy, Reason, Skip
+from stationd.reasons import CoreFault, FaultWhy, Reason, Skip, Unattributed
 
 
 def _now() -> float:
@@ -459,7 +459,12 @@ class ControllerResultEvent(StationEvent):
     """A result from the controller that is not a rundown (a batch increment or decrement, a
     bypassed pset, an aborted job, a reference setup, or a type the station does not know):
     stored as a controller event; no bolt closed, opened or counted.  ``bolt``: the one the
-    tool was enabled for (still open), if any."""
+    tool was enabled for (still open), if any.
+
+    ``what``: the station's own kind (:data:`db.kinds.NOT_TAKEN`), or empty from the core:
+    then the shell's publication (:func:`stationd.words.worded`) writes the name of
+    ``result_type`` in words (``batch increment``, ``result type 9 (unknown)``), so the
+    event reads as before while the core builds no words."""
 
     result_type: int
     what: str
@@ -504,12 +509,12 @@ class Said(enum.Enum):
     #                                      bolt)
     # results from the controller
     IDS_AGAIN = "ids again"              # a known id with other values (tightening_id)
-    UNATTRIBUTED = "unattributed"        # a result no bolt owns (tightening_id, pset; note:
-    #                                      the reason stored with it)
-    CONTROLLER_EVENT = "controller event"  # not a rundown (note: its type's name; bolt: the
-    #                                        one still open)
-    UNKNOWN_TYPE = "unknown type"        # a result type the station does not know (note,
-    #                                      bolt as above)
+    UNATTRIBUTED = "unattributed"        # a result no bolt owns (tightening_id, pset;
+    #                                      unattributed: why, as stored with it)
+    CONTROLLER_EVENT = "controller event"  # not a rundown (result_type: its type code;
+    #                                        bolt: the one still open)
+    UNKNOWN_TYPE = "unknown type"        # a result type the station does not know
+    #                                      (result_type, bolt as above)
     GAP = "gap"                          # tightenings missed (tightening_id..last_id,
     #                                      link_up, note: why they cannot be fetched)
     NOT_STORED = "not stored"            # the database refused a record (tightening_id, bolt,
@@ -564,7 +569,9 @@ class Notice(StationEvent):
     torque_min: float | None = None     # the bolt's torque window (Nm)
     torque_max: float | None = None
     note: str | None = None             # words from elsewhere (a device, the database) or a
-    #                                     record's own (a result type's name, a hold's note)
+    #                                     record's own (a hold's note)
+    result_type: int | None = None      # a controller event's type code
+    unattributed: Unattributed | None = None  # why a result is stored unattributed
 
     @property
     def level(self) -> str:

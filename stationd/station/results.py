@@ -1,6 +1,8 @@
 """Results from the controller: which are tightenings, to which enable each belongs (also
 after a link cut), unreadable ones held, the NOK policy after each (retry, lock, loosen,
-skip), and how a result's type is named."""
+skip).  Typed, not words: a result's type goes out as its code and why a result is
+unattributed as an :class:`~stationd.reasons.Unattributed`; :mod:`stationd.words` names them
+at the edge (the records, the journal, the bus)."""
 
 from __future__ import annotations
 
@@ -12,11 +14,11 @@ from db.kinds import (
 )
 from drivers.wrench.base import (
     ResultKind,
-    ResultType,
     TighteningResult,
     TorqueUnit,
     result_kind,
 )
+from stationd.reasons import Unattributed, UnattributedKind, Unproved, UnprovedKind
 from stationd.station.actions import (
     Acknowledge,
     Action,
@@ -86,22 +88,6 @@ def rundown_kind(result: TighteningResult, sent_loosen: bool) -> str:
         else TIGHTENING
 
 
-_TYPE_WORDS = {ResultType.BATCH_INCREMENT: "batch increment",
-               ResultType.BATCH_DECREMENT: "batch decrement",
-               ResultType.BYPASS_PSET: "bypass parameter set", ResultType.ABORT_JOB: "abort job",
-               ResultType.REFERENCE_SETUP: "reference setup",
-               ResultType.TIGHTENING: "tightening", ResultType.LOOSENING: "loosening",
-               ResultType.SYNC_TIGHTENING: "synchronized tightening"}
-
-
-def result_type_words(code: int | None) -> str:
-    """A result type as the controller's screen would name it; an unknown code by number."""
-    try:
-        return _TYPE_WORDS[ResultType(code)] if code is not None else "result"
-    except ValueError:
-        return f"result type {code} (unknown)"
-
-
 class ResultRules(OrderRules):
     """Results: tightenings closing bolts, controller events, unreadable and late results,
     the NOK policy after each."""
@@ -133,39 +119,39 @@ class ResultRules(OrderRules):
         proved, not_proved = self._made_during_cut(ev)
         if proved is not None:
             return self._attribute(ev, proved, cut=True)
-        why = f"result {tid} (pset {r.pset}) " + (
-            "outside any tightening" if not ev.fetched else
-            "fetched after a later one came, the link up" if ev.live else
-            "fetched after a reconnect")
-        if not_proved:
-            why += f" ({not_proved})"
+        why = Unattributed(UnattributedKind.OUTSIDE if not ev.fetched else
+                           UnattributedKind.FETCHED_LIVE if ev.live else
+                           UnattributedKind.FETCHED, tid, int(r.pset), not_proved)
         return [StoreUnattributed(r, self.vin, why),
                 Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
                 Publish(Notice(Said.UNATTRIBUTED, tightening_id=tid, pset=int(r.pset),
-                               note=why, t=ev.t))]
+                               unattributed=why, t=ev.t))]
 
-    def _made_during_cut(self, ev: ResultIn) -> tuple[Selection | None, str]:
+    def _made_during_cut(self, ev: ResultIn) -> tuple[Selection | None, Unproved | None]:
         """The selection a result fetched after a link cut belongs to, when the controller's
         own data proves it (its pset the one sent, its VIN the one sent where it echoes one,
         its tightening id the first after the last the station accounted for, its
-        timestamp between the enable and the cut); else None and what did not agree."""
+        timestamp between the enable and the cut); else None and what did not agree (None
+        where nothing was to prove: not fetched, or no cut)."""
         cut, r = self._cut, ev.result
         if not ev.fetched or cut is None:
-            return None, ""
+            return None, None
         en = cut.selection
         echoed = str(r.vin or "").strip()
         if en.pset is None or int(r.pset) != en.pset:
-            return None, f"pset {r.pset}, not {en.pset} sent for {en.bolt}"
+            return None, Unproved(UnprovedKind.PSET, bolt=en.bolt, pset=int(r.pset),
+                                  sent_pset=en.pset)
         if echoed and echoed != en.vin:
-            return None, f"VIN {echoed}, not {en.vin}"
-        if ev.follows is None or int(r.tightening_id) != ev.follows + 1:
-            return None, (f"not the first tightening after {ev.follows}" if ev.follows
-                          is not None else "the last tightening id accounted for unknown")
+            return None, Unproved(UnprovedKind.VIN, vin=echoed, sent_vin=en.vin)
+        if ev.follows is None:
+            return None, Unproved(UnprovedKind.FOLLOWS_UNKNOWN)
+        if int(r.tightening_id) != ev.follows + 1:
+            return None, Unproved(UnprovedKind.NOT_FIRST, follows=ev.follows)
         if ev.made_at is None:
-            return None, "the controller's clock is not known"
+            return None, Unproved(UnprovedKind.CLOCK_UNKNOWN)
         if not cut.enabled_at - CLOCK_SLACK_S <= ev.made_at <= cut.cut_at + CLOCK_SLACK_S:
-            return None, f"made outside the enable of {en.bolt} and the link cut"
-        return en, ""
+            return None, Unproved(UnprovedKind.OUTSIDE_CUT, bolt=en.bolt)
+        return en, None
 
     def _controller_event(self, ev: ResultIn, kind: ResultKind) -> list[Action]:
         """A result that is not a tightening or a loosening (a batch increment a line lead
@@ -174,13 +160,14 @@ class ResultRules(OrderRules):
         closed, opened or counted, and the tool stays as the station decided."""
         r, code = ev.result, type_code(ev.result)
         self._recorded[int(r.tightening_id)] = _said(r)
-        what = result_type_words(code)
         bolt = self.bolt if self.tool_on else None
         said = Said.UNKNOWN_TYPE if kind is ResultKind.UNKNOWN else Said.CONTROLLER_EVENT
-        return [StoreControllerEvent(r, self.vin, bolt, what),
-                Publish(ControllerResultEvent(code or 0, what, int(r.tightening_id),
+        # named by its type code: the type's name in words is written by the shell (stored,
+        # published: stationd.words.result_type_words), never built here
+        return [StoreControllerEvent(r, self.vin, bolt),
+                Publish(ControllerResultEvent(code or 0, "", int(r.tightening_id),
                                               int(r.pset), bool(r.ok), bolt, t=ev.t)),
-                Publish(Notice(said, bolt=bolt, note=what, t=ev.t))]
+                Publish(Notice(said, bolt=bolt, result_type=code, t=ev.t))]
 
     def _on_written(self, ev: Written) -> list[Action]:
         """A result on disk: published for the screens, then the controller may forget it."""

@@ -90,3 +90,27 @@ def test_what_the_core_decided_typed_is_published_in_words(caplog):
         ("wrench", "controller refused the parameters for B1: pset unknown")]
     assert "fault: wrench (refused): controller refused the parameters for B1: pset unknown" \
         in [r.getMessage() for r in caplog.records]
+
+
+def test_a_controller_event_is_published_and_said_by_its_type_s_name(caplog):
+    """A batch increment: the core publishes its type code and no name; the bus and the
+    journal read the name the core wrote before ("batch increment")."""
+    from types import SimpleNamespace
+
+    from stationd.station.events import ControllerResultEvent
+    from stationd.station.inputs import ResultIn
+
+    core = StationCore(PARAMS)
+    effects = _effects(core)
+    result = SimpleNamespace(tightening_id=3, pset=1, ok=True, result_type_code=3,
+                             result_type=None, vin="", torque_nm=0.0, angle_deg=0.0,
+                             timestamp=None)
+    with caplog.at_level(logging.INFO, logger="stationd"):
+        for ev in (Started(1.0), ResultIn(1.1, result)):
+            for a in core.feed(ev):
+                if isinstance(a, Publish):
+                    effects.publish(a.event)
+    assert [(e.result_type, e.what) for e in effects.bus.of(ControllerResultEvent)] == [
+        (3, "batch increment")]
+    assert "batch increment on the controller: not a tightening" in \
+        [r.getMessage() for r in caplog.records]

@@ -13,7 +13,7 @@ import pytest
 from db.kinds import NOT_TAKEN
 from drivers.wrench.sim.controller import SimController
 from stationd.sim.devices_cli import psets_of
-from stationd.station.results import result_type_words
+from stationd.words import result_type_words
 from tests.shell.daemons import SIM, controller, tool_on, tracking, until
 from tests.shell.daemons import db_rows as _rows
 

@@ -16,7 +16,16 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from drivers.keeper import FaultKind
-from stationd.reasons import CoreFault, CoreFaultKind, Reason, Skip, SkipKind, Why
+from stationd.reasons import (
+    CoreFault,
+    CoreFaultKind,
+    Reason,
+    Skip,
+    SkipKind,
+    Unattributed,
+    UnattributedKind,
+    Why,
+)
 from stationd.station.actions import (
     Acknowledge,
     CloseVehicle,
@@ -65,7 +74,7 @@ from stationd.station.inputs import (
     VinSent,
 )
 from stationd.station.matching import MatchParams
-from stationd.words import fault_words, reason_words
+from stationd.words import fault_words, reason_words, unattributed_words
 
 BOLTS = {"B1": LoadedBolt((0.0, 0.0, 0.0), 1), "B2": LoadedBolt((60.0, 0.0, 0.0), 2),
          "B3": LoadedBolt((0.0, 60.0, 5.0), 1)}
@@ -558,7 +567,9 @@ def test_unattributed_results_without_a_vehicle_are_stored_then_acknowledged():
     d.feed(Started(d.t))
     acts = d.feed(ResultIn(d.t, result(1, 1)))
     store = [a for a in acts if isinstance(a, StoreUnattributed)]
-    assert len(store) == 1 and store[0].vin is None and "result 1 (pset 1)" in store[0].reason
+    assert len(store) == 1 and store[0].vin is None
+    assert store[0].why == Unattributed(UnattributedKind.OUTSIDE, 1, 1)
+    assert unattributed_words(store[0].why) == "result 1 (pset 1) outside any tightening"
     assert not any(isinstance(a, Record | Acknowledge) for a in acts)
 
 

@@ -14,7 +14,7 @@ import pytest
 
 from drivers.keeper import FaultKind
 from drivers.wrench import ResultKind, UnreadableResult, result_kind
-from stationd.reasons import Reason, Why
+from stationd.reasons import Reason, Unattributed, UnattributedKind, Unproved, UnprovedKind, Why
 from stationd.station.actions import (
     DisableTool,
     Record,
@@ -44,8 +44,14 @@ from stationd.station.inputs import (
     UnreadableIn,
     VehicleLoaded,
 )
-from stationd.station.results import result_type_words
-from stationd.words import notice_words, reason_words
+from stationd.words import (
+    notice_words,
+    reason_words,
+    result_type_words,
+    stored_what,
+    unattributed_words,
+    worded,
+)
 from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
 from tests.station.test_core import BOLTS, Driver, _on, _ready, published
 
@@ -92,9 +98,13 @@ def test_a_result_that_is_not_a_tightening_never_closes_the_bolt_the_tool_is_on(
     acts = d.feed(ResultIn(d.t, res(7, sent.selection.pset or 0, True, code)))
     assert not [a for a in acts if isinstance(a, Record | DisableTool | StoreUnattributed)]
     [store] = [a for a in acts if isinstance(a, StoreControllerEvent)]
-    assert (store.bolt, store.what, store.vin) == ("B1", result_type_words(code), "VIN1")
+    # named by its type: the words are the shell's, as it stores it (the same text as before)
+    assert (store.bolt, store.what, store.vin) == ("B1", None, "VIN1")
+    assert stored_what(store) == result_type_words(code)
     [ev] = published(acts, ControllerResultEvent)
-    assert (ev.result_type, ev.bolt, ev.tightening_id) == (code, "B1", 7)
+    assert (ev.result_type, ev.bolt, ev.tightening_id, ev.what) == (code, "B1", 7, "")
+    said = worded(ev)
+    assert isinstance(said, ControllerResultEvent) and said.what == result_type_words(code)
     assert _notices(acts) == [f"{result_type_words(code)} on the controller: not a "
                               "tightening, B1 still open"]
     assert "B1" not in d.core.matcher.done and d.core.tool_on      # the tool as it was
@@ -109,7 +119,7 @@ def test_a_batch_increment_with_the_tool_off_is_a_controller_event_of_no_bolt():
     d = _ready()
     acts = d.feed(ResultIn(d.t, res(3, 1, True, 3)))
     [store] = [a for a in acts if isinstance(a, StoreControllerEvent)]
-    assert store.bolt is None and store.what == "batch increment"
+    assert store.bolt is None and stored_what(store) == "batch increment"
     assert _notices(acts) == ["batch increment on the controller: not a tightening"]
     [n] = published(acts, Notice)
     assert (n.said, n.bolt, n.level) == (Said.CONTROLLER_EVENT, None, "info")
@@ -122,9 +132,9 @@ def test_a_type_the_station_does_not_know_is_not_a_tightening():
     acts = d.feed(ResultIn(d.t, res(7, sent.selection.pset or 0, True, 9)))
     assert not [a for a in acts if isinstance(a, Record)]
     [store] = [a for a in acts if isinstance(a, StoreControllerEvent)]
-    assert store.what == "result type 9 (unknown)"
+    assert stored_what(store) == "result type 9 (unknown)"
     [n] = published(acts, Notice)
-    assert (n.said, n.bolt, n.note) == (Said.UNKNOWN_TYPE, "B1", "result type 9 (unknown)")
+    assert (n.said, n.bolt, n.result_type) == (Said.UNKNOWN_TYPE, "B1", 9)
     assert n.level == "warning" and "check the controller's result there" in notice_words(n)
     assert "B1" not in d.core.matcher.done
 
@@ -251,17 +261,23 @@ def test_a_result_made_during_a_cut_is_recorded_to_its_bolt_when_the_controller_
         [StoreUnattributed]
 
 
-@pytest.mark.parametrize("change, why", [
-    ({"pset": 9}, "pset 9, not 1 sent for B1"),
-    ({"vin": "OTHER"}, "VIN OTHER, not VIN1"),
-    ({"tid": 43}, "not the first tightening after 40"),
-    ({"follows": None}, "the last tightening id accounted for unknown"),
-    ({"made": None}, "the controller's clock is not known"),
-    ({"made": +30.0}, "made outside the enable of B1 and the link cut"),
-    ({"made": -30.0}, "made outside the enable of B1 and the link cut"),
+@pytest.mark.parametrize("change, unproved, why", [
+    ({"pset": 9}, Unproved(UnprovedKind.PSET, bolt="B1", pset=9, sent_pset=1),
+     "pset 9, not 1 sent for B1"),
+    ({"vin": "OTHER"}, Unproved(UnprovedKind.VIN, vin="OTHER", sent_vin="VIN1"),
+     "VIN OTHER, not VIN1"),
+    ({"tid": 43}, Unproved(UnprovedKind.NOT_FIRST, follows=40),
+     "not the first tightening after 40"),
+    ({"follows": None}, Unproved(UnprovedKind.FOLLOWS_UNKNOWN),
+     "the last tightening id accounted for unknown"),
+    ({"made": None}, Unproved(UnprovedKind.CLOCK_UNKNOWN), "the controller's clock is not known"),
+    ({"made": +30.0}, Unproved(UnprovedKind.OUTSIDE_CUT, bolt="B1"),
+     "made outside the enable of B1 and the link cut"),
+    ({"made": -30.0}, Unproved(UnprovedKind.OUTSIDE_CUT, bolt="B1"),
+     "made outside the enable of B1 and the link cut"),
 ])
 def test_a_result_fetched_after_a_cut_that_the_data_does_not_place_stays_unattributed(
-        change, why):
+        change, unproved, why):
     d = _ready()
     sent, enabled_at, cut_at = _cut_during_enable(d)
     d.t += 10.0
@@ -274,7 +290,11 @@ def test_a_result_fetched_after_a_cut_that_the_data_does_not_place_stays_unattri
                            made_at=made_at))
     assert not [a for a in acts if isinstance(a, Record)]
     [store] = [a for a in acts if isinstance(a, StoreUnattributed)]
-    assert why in store.reason
+    tid = change.get("tid", 41)
+    assert store.why == Unattributed(UnattributedKind.FETCHED, tid, r.pset, unproved)
+    # the record's reason as the shell stores it: the text the core wrote before
+    assert unattributed_words(store.why) == \
+        f"result {tid} (pset {r.pset}) fetched after a reconnect ({why})"
     assert "B1" not in d.core.matcher.done
 
 

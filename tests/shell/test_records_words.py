@@ -1,0 +1,55 @@
+"""What the shell stores for a typed reason of the core (stationd/shell/records.py): an
+unattributed result's reason and a controller event's name are the words of the typed value,
+written as it stores them, byte for byte the text the core wrote before (quality reads these
+columns; a report shows them)."""
+
+from __future__ import annotations
+
+import sqlite3
+from datetime import datetime
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+from db.kinds import NOT_TAKEN
+from stationd.config import StationConfig
+from stationd.reasons import Unattributed, UnattributedKind, Unproved, UnprovedKind
+from stationd.shell.records import Records
+from stationd.station.actions import StoreControllerEvent, StoreUnattributed
+from tests.db.conftest import BASE, url_of
+
+
+def _result(tid: int, code: int | None) -> Any:
+    return SimpleNamespace(tightening_id=tid, pset=3, ok=True, result_type_code=code,
+                           result_type=None, vin="", torque_nm=12.0, angle_deg=30.0,
+                           timestamp=datetime(2026, 11, 29, 8, 0, 0))
+
+
+def _records(tmp_path: Path) -> Records:
+    bolts = tmp_path / "bolts.yaml"
+    bolts.write_text(BASE)
+    records = Records(StationConfig(database_url=url_of(tmp_path / "st.db"), bolts_path=bolts))
+    records.open()
+    return records
+
+
+def test_typed_reasons_are_stored_in_the_words_the_core_wrote(tmp_path: Path) -> None:
+    records = _records(tmp_path)
+    unproved = Unproved(UnprovedKind.VIN, vin="OTHER", sent_vin="VIN1")
+    records.store_unattributed(StoreUnattributed(
+        _result(41, 1), None, Unattributed(UnattributedKind.FETCHED, 41, 3, unproved)))
+    records.store_unattributed(StoreUnattributed(
+        _result(42, 1), None, Unattributed(UnattributedKind.OUTSIDE, 42, 3)))
+    records.store_controller_event(StoreControllerEvent(_result(43, 3), None, None))
+    records.store_controller_event(StoreControllerEvent(_result(44, 9), None, None))
+    records.store_controller_event(StoreControllerEvent(_result(45, None), None, "B1",
+                                                        NOT_TAKEN))
+    assert records.repo is not None
+    records.repo.close()
+    with sqlite3.connect(tmp_path / "st.db") as con:
+        reasons = [r for (r,) in con.execute("SELECT reason FROM unattributed_results "
+                                             "ORDER BY id")]
+        whats = [w for (w,) in con.execute("SELECT what FROM controller_events ORDER BY id")]
+    assert reasons == ["result 41 (pset 3) fetched after a reconnect (VIN OTHER, not VIN1)",
+                       "result 42 (pset 3) outside any tightening"]
+    assert whats == ["batch increment", "result type 9 (unknown)", NOT_TAKEN]
