@@ -31,6 +31,7 @@ from stationd.station.actions import StoreControllerEvent
 from stationd.station.commands import (
     KIND,
     Answer,
+    Command,
     EnterOutcome,
     LoosenBolt,
     ReleaseBolt,
@@ -54,6 +55,7 @@ from stationd.station.events import (
     StateReason,
     StationEvent,
 )
+from stationd.station.gaps import GapPlan, NoFetch
 from stationd.station.results import type_code
 from stationd.station.trust import Asked, CheckAsked
 
@@ -226,6 +228,29 @@ def stored_what(action: StoreControllerEvent) -> str:
     (``not taken``), else its type's name (``batch increment``)."""
     return action.what if action.what is not None else result_type_words(
         type_code(action.result))
+
+
+_NO_FETCH: dict[NoFetch, Callable[[GapPlan], str]] = {
+    NoFetch.NOTHING_RECORDED: lambda p: ("no tightening recorded yet: counting from the "
+                                         f"controller's newest, {p.newest}"),
+    NoFetch.IDS_RESTARTED: lambda p: (f"the controller's newest tightening ({p.newest}) is "
+                                      f"older than the last recorded ({p.last_recorded}): "
+                                      "its ids restarted"),
+}
+
+
+def gap_plan_words(plan: GapPlan) -> str:
+    """Why nothing is fetched after a reconnect, for the journal (empty: something is, or
+    nothing is missing)."""
+    return "" if plan.why is None else _NO_FETCH[plan.why](plan)
+
+
+def comment_words(cmd: Command) -> str:
+    """A command's comment as it is recorded and said: its person's, or for the station's
+    own sign-out of an idle operator, how long they were idle (``idle for 600 s``)."""
+    if isinstance(cmd, SignOut) and cmd.idle_s is not None and not cmd.comment:
+        return f"idle for {cmd.idle_s:g} s"
+    return cmd.comment
 
 
 def worded(event: StationEvent) -> StationEvent:
@@ -548,8 +573,9 @@ def command_words(answer: Answer) -> str:
         what += f" {cmd.bolt}"
     elif isinstance(cmd, SignOut) and cmd.user is not None:
         what += f" of {cmd.user}"
-    if cmd.comment:
-        what += f" ({cmd.comment!r})"
+    comment = comment_words(cmd)
+    if comment:
+        what += f" ({comment!r})"
     return what
 
 
@@ -584,8 +610,8 @@ def _missed(r: Reason) -> str:
     return f"; {many} without the wrench, the last: {reason_words(r.cause)}"
 
 
-__all__ = ["answer_words", "check_asked_words", "check_words", "command_words",
-           "fault_words", "notice_words", "operator_words", "outcome_words", "reason_words",
-           "records_waiting", "result_type_words", "skip_words", "state_line", "state_words",
-           "stored_what", "unattributed_words", "unchecked_words", "unproved_words",
-           "wait_words", "worded"]
+__all__ = ["answer_words", "check_asked_words", "check_words", "command_words", "comment_words",
+           "fault_words", "gap_plan_words", "notice_words", "operator_words", "outcome_words",
+           "reason_words", "records_waiting", "result_type_words", "skip_words", "state_line",
+           "state_words", "stored_what", "unattributed_words", "unchecked_words",
+           "unproved_words", "wait_words", "worded"]

@@ -1,7 +1,8 @@
 """The station's notices and its state's reasons in words (stationd.words.notice_words,
 state_words, state_line; skip_words for a skip, fault_words for the station's own faults,
 wait_words for the sequence's rule, unchecked_words for a pair not checked,
-unattributed_words for a result no bolt owns, result_type_words and check_asked_words):
+unattributed_words for a result no bolt owns, result_type_words, gap_plan_words,
+check_asked_words and comment_words):
 each kind's line, word for word as the journal wrote it when the core still built the text
 (daemon tests and people's log searches wait for these lines), and each notice kind's level."""
 
@@ -27,6 +28,7 @@ from stationd.reasons import (
     WaitKind,
     Why,
 )
+from stationd.station.commands import SignOut
 from stationd.station.events import (
     Because,
     BoltSkipped,
@@ -39,10 +41,13 @@ from stationd.station.events import (
     StateChanged,
     StateReason,
 )
+from stationd.station.gaps import NoFetch, plan
 from stationd.station.trust import Asked, CheckAsked
 from stationd.words import (
     check_asked_words,
+    comment_words,
     fault_words,
+    gap_plan_words,
     notice_words,
     reason_words,
     result_type_words,
@@ -537,3 +542,21 @@ def test_a_controller_event_is_named_at_publication() -> None:
     own = ControllerResultEvent(0, "not taken", 8, 1, True, "B1", t=2.0)
     assert worded(own) is own       # the station's own kind, as it is
 
+
+#: why nothing is fetched after a reconnect, word for word as the journal wrote it
+NO_FETCH_WORDS = [
+    (plan(None, 500), "no tightening recorded yet: counting from the controller's newest, 500"),
+    (plan(800, 12), "the controller's newest tightening (12) is older than the last recorded "
+                    "(800): its ids restarted"),
+]
+
+
+def test_each_reason_not_to_fetch_says_what_the_journal_said() -> None:
+    assert [gap_plan_words(p) for p, _ in NO_FETCH_WORDS] == [w for _, w in NO_FETCH_WORDS]
+    assert {p.why for p, _ in NO_FETCH_WORDS} == set(NoFetch)
+
+
+def test_the_station_s_idle_sign_out_is_recorded_with_its_comment() -> None:
+    assert comment_words(SignOut(user="olga", idle_s=600.0)) == "idle for 600 s"
+    assert comment_words(SignOut(user="olga", idle_s=90.5)) == "idle for 90.5 s"
+    assert comment_words(SignOut("end of shift", "olga")) == "end of shift"

@@ -38,6 +38,7 @@ from stationd.station.inputs import (
     UnreadableIn,
 )
 from stationd.station.results import CLOCK_SLACK_S
+from stationd.words import gap_plan_words
 
 log = logging.getLogger("stationd")
 RESULT_WAIT_S = 0.5         # one blocking wait for pushed results (a condition, not a poll)
@@ -150,8 +151,8 @@ class ControllerFeed:
                 await self._first_results(wrench, newest, nid)
                 return
             todo = plan_gaps(last, nid)
-            if todo.note:
-                log.info("results: %s", todo.note)
+            if todo.why is not None:
+                log.info("results: %s", gap_plan_words(todo))
             await self._fetch(wrench, todo, last, newest)
         except (DeviceError, ValueError) as exc:   # the link's keeper reports it
             log.warning("results missed while the link was down not fetched yet: %s",
@@ -188,8 +189,7 @@ class ControllerFeed:
             tid -= 1
             got = await self._call(wrench.fetch_result, tid)
         if not found:
-            log.info("results: no tightening recorded yet: counting from the controller's "
-                     "newest, %d", nid)
+            log.info("results: %s", gap_plan_words(plan_gaps(None, nid)))
             return
         log.info("results: no tightening recorded yet; %d made by the controller since the "
                  "link was lost%s: fetched", len(found),

@@ -57,7 +57,7 @@ from stationd.station.commands import (
 from stationd.station.inputs import LoadedBolt, VehicleEnded, VehicleLoaded, VehicleRejected
 from stationd.station.results import type_code
 from stationd.station.trust import RecordCheck, summary
-from stationd.words import stored_what, unattributed_words
+from stationd.words import comment_words, stored_what, unattributed_words
 
 log = logging.getLogger("stationd")
 #: what a device, the database or the station's own data raise: a fault, never an exit
@@ -314,7 +314,7 @@ class Records:
         at = datetime.fromtimestamp(a.t, UTC)
         vin = getattr(cmd, "vin", None) or (
             vin_at_height if not isinstance(cmd, ReopenVehicle) else None)
-        comment = cmd.comment
+        comment = comment_words(cmd)      # the station's idle sign-out: in words here
         if isinstance(cmd, TeachStart):   # the model taught is part of the record
             comment = f"model {cmd.model}" + (f": {comment}" if comment else "")
         if isinstance(cmd, SignOut) and cmd.user is not None and cmd.user != who.user:

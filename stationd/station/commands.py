@@ -143,10 +143,13 @@ class SignIn:
 @dataclass(frozen=True)
 class SignOut:
     """Nobody is signed in at the station any more (whoever was: ``user``, filled in by the
-    core when it accepts the command, so the record names who was signed out)."""
+    core when it accepts the command, so the record names who was signed out).  ``idle_s``:
+    the station's own sign-out of an operator idle that long (``comment`` empty: the record's
+    comment is its words, :func:`stationd.words.comment_words`, written by the shell)."""
 
     comment: str = ""
     user: str | None = None
+    idle_s: float | None = None
 
 
 Command = (SkipBolt | ReopenVehicle | ReleaseBolt | EnterOutcome | LoosenBolt | TeachStart

@@ -12,30 +12,43 @@ a controller whose ids went backwards (replaced, reset) starts a new count.
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass
 
 MAX_FETCH = 100   # ids fetched one by one after a reconnect; older ones are one gap
 
 
+class NoFetch(enum.StrEnum):
+    """Why nothing is fetched though the controller's newest is not the last recorded: the
+    kind of a :class:`GapPlan`'s ``why`` (its words: :func:`stationd.words.gap_plan_words`,
+    for the journal)."""
+
+    NOTHING_RECORDED = "nothing recorded"  # no tightening recorded yet: counting from the
+    #                                        controller's newest (newest)
+    IDS_RESTARTED = "ids restarted"        # the newest older than the last recorded (newest,
+    #                                        last_recorded)
+
+
 @dataclass(frozen=True)
 class GapPlan:
     """``fetch``: the ids to ask for, oldest first; ``gap``: an id range given up on
-    (too many missing), or None; ``note``: why nothing is fetched, for the journal."""
+    (too many missing), or None; ``why``: why nothing is fetched, typed (the shell's journal
+    says it), with the ids it was decided from."""
 
     fetch: tuple[int, ...] = ()
     gap: tuple[int, int] | None = None
-    note: str | None = None
+    why: NoFetch | None = None
+    newest: int | None = None           # the controller's newest (with ``why``)
+    last_recorded: int | None = None    # the last id recorded (with ``why``)
 
 
 def plan(last_recorded: int | None, newest: int, most: int = MAX_FETCH) -> GapPlan:
     """What to fetch when the station last recorded ``last_recorded`` and the controller's
     newest tightening is ``newest``."""
     if last_recorded is None:
-        return GapPlan(note=f"no tightening recorded yet: counting from the controller's "
-                            f"newest, {newest}")
+        return GapPlan(why=NoFetch.NOTHING_RECORDED, newest=newest)
     if newest < last_recorded:
-        return GapPlan(note=f"the controller's newest tightening ({newest}) is older than the "
-                            f"last recorded ({last_recorded}): its ids restarted")
+        return GapPlan(why=NoFetch.IDS_RESTARTED, newest=newest, last_recorded=last_recorded)
     missing = newest - last_recorded
     if missing == 0:
         return GapPlan()
@@ -45,4 +58,4 @@ def plan(last_recorded: int | None, newest: int, most: int = MAX_FETCH) -> GapPl
                    (last_recorded + 1, newest - most))
 
 
-__all__ = ["MAX_FETCH", "GapPlan", "plan"]
+__all__ = ["MAX_FETCH", "GapPlan", "NoFetch", "plan"]

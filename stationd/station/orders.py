@@ -227,6 +227,6 @@ class OrderRules(FaultRules):
         if idle is None or user is None or self.tool_on or self.state in ON_A_BOLT \
                 or t - self._operator_seen < idle:
             return []
-        out = SignOut(f"idle for {idle:g} s", user)
+        out = SignOut(user=user, idle_s=idle)
         return [*self._operator_is(t, None, OperatorChange.IDLE),
                 RecordCommand(0, out, Issuer(user, frozenset(), "station (idle)"), t)]

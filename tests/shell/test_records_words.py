@@ -1,11 +1,12 @@
 """What the shell stores for a typed reason of the core (stationd/shell/records.py): an
-unattributed result's reason and a controller event's name are the words of the typed value,
-written as it stores them, byte for byte the text the core wrote before (quality reads these
-columns; a report shows them)."""
+unattributed result's reason, a controller event's name and the station's idle sign-out's
+comment are the words of the typed value, written as it stores them, byte for byte the text
+the core wrote before (quality reads these columns; a report shows them)."""
 
 from __future__ import annotations
 
 import sqlite3
+import time
 from datetime import datetime
 from pathlib import Path
 from types import SimpleNamespace
@@ -15,7 +16,12 @@ from db.kinds import NOT_TAKEN
 from stationd.config import StationConfig
 from stationd.reasons import Unattributed, UnattributedKind, Unproved, UnprovedKind
 from stationd.shell.records import Records
-from stationd.station.actions import StoreControllerEvent, StoreUnattributed
+from stationd.station.actions import (
+    RecordCommand,
+    StoreControllerEvent,
+    StoreUnattributed,
+)
+from stationd.station.commands import Issuer, SignOut
 from tests.db.conftest import BASE, url_of
 
 
@@ -44,12 +50,18 @@ def test_typed_reasons_are_stored_in_the_words_the_core_wrote(tmp_path: Path) ->
     records.store_controller_event(StoreControllerEvent(_result(44, 9), None, None))
     records.store_controller_event(StoreControllerEvent(_result(45, None), None, "B1",
                                                         NOT_TAKEN))
+    why = records.record_command(RecordCommand(
+        0, SignOut(user="olga", idle_s=600.0), Issuer("olga", frozenset(), "station (idle)"),
+        time.time()), None)
+    assert why is None
     assert records.repo is not None
     records.repo.close()
     with sqlite3.connect(tmp_path / "st.db") as con:
         reasons = [r for (r,) in con.execute("SELECT reason FROM unattributed_results "
                                              "ORDER BY id")]
         whats = [w for (w,) in con.execute("SELECT what FROM controller_events ORDER BY id")]
+        comments = [c for (c,) in con.execute("SELECT comment FROM commands ORDER BY id")]
     assert reasons == ["result 41 (pset 3) fetched after a reconnect (VIN OTHER, not VIN1)",
                        "result 42 (pset 3) outside any tightening"]
     assert whats == ["batch increment", "result type 9 (unknown)", NOT_TAKEN]
+    assert comments == ["idle for 600 s"]

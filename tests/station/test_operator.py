@@ -30,7 +30,7 @@ from stationd.station.events import (
     StateReason,
 )
 from stationd.station.inputs import CommandDone, CommandIn, OperatorBack, ResultIn, Started, Tick
-from stationd.words import answer_words, operator_words, reason_words
+from stationd.words import answer_words, comment_words, operator_words, reason_words
 from tests.station.test_commands import _answer
 from tests.station.test_core import (
     PARAMS,
@@ -156,7 +156,8 @@ def test_the_idle_time_out_signs_out_and_records_it_never_with_the_tool_on():
     acts = d.feed(Tick(d.t))
     assert d.core.operator is None and _changes(acts)[0].how == "idle"
     rec = next(a for a in acts if isinstance(a, RecordCommand))
-    assert rec.request == 0 and rec.command == SignOut("idle for 60 s", "olga")
+    assert rec.request == 0 and rec.command == SignOut(user="olga", idle_s=60.0)
+    assert comment_words(rec.command) == "idle for 60 s"       # the comment recorded
     assert rec.issuer.source == "station (idle)"
     assert d.feed(CommandDone(d.t, 0)) == []            # nobody waits for its answer
 
