@@ -478,7 +478,8 @@ _BECAUSE: dict[Because, Callable[[StateReason], str]] = {
     Because.SELECTED: lambda r: f"bolt {r.bolt} selected{_loosen_first(r)}",
     Because.ACKNOWLEDGED: lambda r: (f"bolt {r.bolt} acknowledged; confirming the wrench is "
                                      "on it"),
-    Because.TIGHTENING: lambda r: f"tightening bolt {r.bolt}",
+    # the tool on for a loosen pset: the operator loosens, never "tighten" (as the screens)
+    Because.TIGHTENING: lambda r: f"{'loosening' if r.loosen else 'tightening'} bolt {r.bolt}",
     Because.NOT_CONFIRMED: lambda r: f"wrench not confirmed on bolt {r.bolt}",
     Because.SELECTED_UNCONFIRMED: lambda r: f"bolt {r.bolt} selected; wrench not confirmed",
     Because.WRENCH_LEFT: lambda r: f"wrench left bolt {r.bolt}",

@@ -188,6 +188,7 @@ STATE_WORDS = [
     (StateReason(Because.ACKNOWLEDGED, bolt="B11"),
      "bolt B11 acknowledged; confirming the wrench is on it"),
     (StateReason(Because.TIGHTENING, bolt="B11"), "tightening bolt B11"),
+    (StateReason(Because.TIGHTENING, bolt="B11", loosen=True), "loosening bolt B11"),
     (StateReason(Because.NOT_CONFIRMED, bolt="B11"), "wrench not confirmed on bolt B11"),
     (StateReason(Because.SELECTED_UNCONFIRMED, bolt="B11"),
      "bolt B11 selected; wrench not confirmed"),

@@ -54,9 +54,10 @@ class ToolRules(FaultRules):
             self._away = 0
             if self.state is State.BOLT_SELECTED and self._acked_at is not None \
                     and ev.exposure_t > self._acked_at and self.bolt is not None:
-                self._to(State.TIGHTENING, StateReason(Because.TIGHTENING, bolt=self.bolt))
                 sel = self._selection
                 assert sel is not None  # noqa: S101 - a bolt is selected
+                self._to(State.TIGHTENING, StateReason(Because.TIGHTENING, bolt=self.bolt,
+                                                       loosen=sel.loosen))
                 self.tool_on, self._enabled, self._off_at = True, sel, None
                 self._enabled_at, self._cut = ev.t, None
                 acts.append(EnableTool(self.bolt, sel))

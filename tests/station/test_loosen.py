@@ -93,6 +93,10 @@ def test_after_a_nok_the_loosen_pset_goes_first_then_the_tightening_pset():
     assert (record.bolt, record.kind, record.selection.loosen) == ("B1", LOOSENING, True)
     told = [e.reason for _, a in d.log for e in published(a, StateChanged)]
     assert StateReason(Because.SELECTED, bolt="B1", pset=90, loosen=True) in told
+    # the tool on for the loosen pset: the state says loosening, never "tightening bolt"
+    assert StateReason(Because.TIGHTENING, bolt="B1", loosen=True) in told
+    assert StateReason(Because.TIGHTENING, bolt="B1") not in told[told.index(
+        StateReason(Because.SELECTED, bolt="B1", pset=90, loosen=True)):]
     assert [e.reason for e in published(acts, ToolDisabled)] == [
         StateReason(Because.RUNDOWN, bolt="B1", loosen=True)]
     assert d.core.reason == StateReason(Because.RESULT, bolt="B1", ok=True, loosen=True)
