@@ -24,6 +24,7 @@ from collections.abc import Callable, Coroutine
 from concurrent.futures import Future
 from typing import TYPE_CHECKING, Any
 
+from drivers.devices import Kind, simulated
 from drivers.keeper import Backoff, FaultKind, one_line
 from stationd.bus import EventBus
 from stationd.config import StationConfig, station_identity
@@ -319,9 +320,10 @@ async def opcua(cfg: StationConfig, bus: EventBus, stop: asyncio.Event) -> None:
         return
     there: Future[tuple[asyncio.AbstractEventLoop, asyncio.Event]] = Future()   # its loop, stop
     ua_cfg, devices = cfg.opcua, opcua_devices(cfg)
+    sim = results_simulated(cfg)
 
     def serve_there() -> None:
-        asyncio.run(_opcua_on_own_loop(ua_cfg, devices, bus, repo, there))
+        asyncio.run(_opcua_on_own_loop(ua_cfg, devices, bus, repo, there, sim))
 
     thread = threading.Thread(target=serve_there, name="opcua", daemon=True)
     thread.start()
@@ -336,15 +338,16 @@ async def opcua(cfg: StationConfig, bus: EventBus, stop: asyncio.Event) -> None:
 
 async def _opcua_on_own_loop(ua_cfg: OpcUaConfig, devices: tuple[str, ...], bus: EventBus,
                              repo: Any,
-                             there: Future[tuple[asyncio.AbstractEventLoop, asyncio.Event]]
-                             ) -> None:
+                             there: Future[tuple[asyncio.AbstractEventLoop, asyncio.Event]],
+                             sim: bool = False) -> None:
     """:func:`opcua`'s server, on the loop of the thread it runs in, until its stop (``there``
-    gets the loop and the stop, for the daemon's loop to set it)."""
+    gets the loop and the stop, for the daemon's loop to set it); ``sim``: its results are a
+    simulated controller's."""
     from stationd.opcua.server import OpcUaServer
 
     loop, stop = asyncio.get_running_loop(), asyncio.Event()
     there.set_result((loop, stop))
-    server = OpcUaServer(ua_cfg, bus=bus, devices=devices)
+    server = OpcUaServer(ua_cfg, bus=bus, devices=devices, simulated=sim)
     try:
         await server.start()
     except Exception as exc:   # a port in use, certificates: never the station's fault
@@ -365,6 +368,12 @@ def configured_devices(cfg: StationConfig) -> tuple[str, ...]:
     """The devices the daemon opens (lift, wrench, each pair with both cameras), by the names
     its DeviceHealth events use: the screens list them before any reports."""
     return (LIFT, WRENCH, *(n for n, pc in cfg.pairs.items() if pc.left and pc.right))
+
+
+def results_simulated(cfg: StationConfig) -> bool:
+    """Whether the station's results are a simulated controller's: no tightening of a real
+    joint, which an MES keeps apart by the results' IsSimulated (as the demo's are)."""
+    return simulated(Kind.WRENCH, cfg.wrench.url)
 
 
 def opcua_devices(cfg: StationConfig) -> tuple[str, ...]:

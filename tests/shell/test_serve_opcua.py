@@ -15,6 +15,7 @@ from asyncua.client.client import Client
 from db.repository import Repository
 from stationd.bus import EventBus
 from stationd.config import StationConfig
+from stationd.deviceconfig import WrenchConfig
 from stationd.opcua.server import NAMESPACE, OpcUaServer
 from stationd.opcua.uatypes import ua
 from stationd.shell import serve
@@ -33,6 +34,7 @@ def test_the_server_runs_on_a_loop_of_its_own_and_hears_the_station(tmp_path, mo
     async def start(self: OpcUaServer) -> None:
         started["thread"] = threading.current_thread()
         started["loop"] = asyncio.get_running_loop()
+        started["simulated"] = self.simulated
         await real_start(self)
 
     monkeypatch.setattr(OpcUaServer, "start", start)
@@ -67,3 +69,10 @@ def test_the_server_runs_on_a_loop_of_its_own_and_hears_the_station(tmp_path, mo
     assert started["thread"] is not daemon_thread and started["thread"].name == "opcua"
     assert started["loop"] is not daemon_loop
     assert not started["thread"].is_alive()     # stopped with the station, not left behind
+    assert started["simulated"] is True         # sim://wrench: its results say IsSimulated
+
+
+def test_results_are_simulated_when_the_controller_is():
+    assert serve.results_simulated(StationConfig()) is True      # sim://wrench
+    real = StationConfig(wrench=WrenchConfig("openprotocol://10.0.0.9:4545"))
+    assert serve.results_simulated(real) is False
