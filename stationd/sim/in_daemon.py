@@ -65,6 +65,14 @@ IDLE_LINE = ("simulated lift: down, no vehicle; raise it with 'next' (a new vehi
              "with --sim-operator for a scripted operator")
 
 
+def sim_pairs(cfg: StationConfig) -> list[str]:
+    """The pairs whose two cameras are simulated (the world renders theirs; a pair on real or
+    ``file://`` cameras shows its own frames)."""
+    return [name for name, pc in cfg.pairs.items()
+            if pc.left and pc.right and all(simulated(Kind.CAMERA, cfg.cameras.get(cam, ""))
+                                            for cam in (pc.left, pc.right))]
+
+
 def needs_world(cfg: StationConfig) -> bool:
     """Whether a camera of the station is simulated (``sim://PAIR/SIDE``: its driver says)."""
     return any(simulated(Kind.CAMERA, url) for url in cfg.cameras.values())
@@ -163,7 +171,7 @@ class SimulatedStation:
             who = "idle" if not scripted else "scripted" if self.supervisor else \
                 "scripted, no simulated supervisor: locks wait for a person's release"
             log.info("simulated world: the sim:// cameras of %s render it (operator: %s)",
-                     counted(len(cfg.pairs), "pair"), who)
+                     counted(len(sim_pairs(cfg)), "pair"), who)
         if not scripted and self._plc is not None and not self._told:
             self._told = True
             log.info(IDLE_LINE.format(help=HELP.removeprefix("commands: ")
