@@ -625,7 +625,7 @@ class SupervisedWrench(Wrench):
                 if self._closing:
                     raise DeviceError("closed", device=self.device)
                 if not self._link_up():
-                    raise self._down("waiting for a result")
+                    raise self._down("listening for results")   # the station always does
                 remaining = deadline - time.monotonic()
                 if remaining <= 0:
                     return None
