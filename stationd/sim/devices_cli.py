@@ -89,6 +89,10 @@ def plc_command(plc: SimulatedPlc, line: str, code: int, serial: list[int],
             plc.set_vehicle(code, make_vin(serial[0]))
             plc.raise_lift()
         elif cmd == "vehicle" and 1 <= len(args) <= 2:
+            if not args[0].isdigit():
+                say(f"refused: the model code is a whole number, not {args[0]!r} "
+                    "(vehicle CODE [VIN])")
+                return True
             plc.set_vehicle(int(args[0]), args[1] if len(args) == 2 else None)
         else:
             say(f"not a command: {line.strip()!r}; {HELP}")
