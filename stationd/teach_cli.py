@@ -160,13 +160,30 @@ def _teach(args: argparse.Namespace, client: ApiClient, out: Path, doc: dict[str
     if not taught:
         print("nothing taught: no file written", file=sys.stderr)
         return EXIT_UNREACHABLE if lost else EXIT_REFUSED
+    return finish(out, doc, args.model, taught, cad_at, args.tolerance)
+
+
+def finish(out: Path, doc: dict[str, Any], model: str, taught: dict[str, dict[str, Any]],
+           cad_at: dict[str, Any], tolerance: float | None) -> int:
+    """Write what was taught and say how it goes into use.  A table that breaks the spacing
+    rule is still written (the measurements are the engineer's work, not to be lost) but the
+    command exits 1: ``config check`` and the daemon's reload would refuse it, so it must
+    not read as ready."""
     positions = {b: r["position_mm"] for b, r in taught.items()}
     everywhere = {**{k: v for k, v in cad_at.items() if v is not None}, **positions}
-    for problem in check_spacing(everywhere, args.tolerance):
+    problems = check_spacing(everywhere, MatchParams().tolerance_mm if tolerance is None
+                             else tolerance)
+    for problem in problems:
         print(f"spacing: {problem}", flush=True)
-    _write(out, doc, args.model, taught)
-    print(f"{counted(len(taught), 'bolt')} taught: {out} (import it to make new parameter "
-          "versions)")
+    _write(out, doc, model, taught)
+    if problems:
+        print(f"{counted(len(taught), 'bolt')} taught: {out}, NOT READY: it breaks the "
+              f"spacing rule ({counted(len(problems), 'pair')} above), which the daemon's "
+              "reload and config check refuse; teach those bolts again", file=sys.stderr)
+        return EXIT_REFUSED
+    use = ("review it, put it in place as the station file's bolts: file and reload the "
+           "daemon") if doc else "positions only: merge them into the bolt table by hand"
+    print(f"{counted(len(taught), 'bolt')} taught: {out} ({use})")
     return 0
 
 
