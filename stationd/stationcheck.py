@@ -115,7 +115,9 @@ def check_station(path: str | Path) -> StationCheck:
         warning = _psets_only_warning(cfg.wrench.url, bolts.table, top["wrench"])
         if warning is not None:
             warnings.append(warning)
-    if cfg.bolts_path is None:
+    if cfg.bolts_path is None and not read.errors:
+        # (a file with errors is read in part: a duplicated key drops its sections, and a
+        # station read without its bolts: and database: lines would warn of what it has)
         warning = _no_models_warning(stored, str(p))
         if warning is not None:
             warnings.append(warning)

@@ -627,6 +627,12 @@ def test_a_duplicate_top_level_key_is_the_one_error_not_missing_sections(sim_cop
     station.write_text(station.read_text() + "bolts: bolts.yaml\n")
     errors = check_station(station).errors
     assert len(errors) == 1 and "bolts: duplicate key" in str(errors[0]), errors
+    # nor a made-up warning of a station without its bolt table and database (read in part)
+    tool = next(line for line in station.read_text().splitlines() if line.startswith("tool:"))
+    station.write_text(station.read_text().replace("bolts: bolts.yaml\n", "") + tool + "\n")
+    checked = check_station(station)
+    assert len(checked.errors) == 1 and "tool: duplicate key" in str(checked.errors[0])
+    assert checked.warnings == [], checked.warnings
 
 
 def test_loading_a_station_never_opens_its_database_file(tmp_path, monkeypatch):
