@@ -9,7 +9,7 @@ transaction, so a record and its feed entry are committed together or not at all
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from datetime import datetime
@@ -18,6 +18,7 @@ from typing import Any
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
+from db.kinds import LOOSENING
 from db.models import (
     Bolt,
     CalibrationCheck,
@@ -234,6 +235,14 @@ def _version(p: ProcessParameters) -> dict[str, Any]:
             "angle": window(p.angle_target, p.angle_min, p.angle_max)}
 
 
+def _loosened_with(p: ProcessParameters, sent: Mapping[str, Any] | None) -> dict[str, Any]:
+    """What a loosening ran: the loosen pset sent (the controller's own program: its limits
+    are the controller's, not the bolt's tightening window, which would read a loosening at
+    13 Nm as a NOK of a 45-55 Nm joint) and the bolt's version it belongs to."""
+    return {"version": p.version, "pset": (sent or {}).get("pset"), "torque": None,
+            "angle": None}
+
+
 def _curve(s: Session, c: TighteningCurve) -> dict[str, Any]:
     """A curve as the feed carries it: whole (the line database has no other way to its
     samples), with the rundown it belongs to when that was known when it was stored
@@ -270,7 +279,9 @@ def _rundowns(s: Session, refs: list[int]) -> dict[int, dict[str, Any]]:
     for rec, vin, bolt, model, version in s.execute(q):
         out[rec.id] = {
             "id": rec.id, "vin": vin, "bolt": bolt, "status": rec.status,
-            "rundown": rec.kind, "model": model, "parameters": _version(version),
+            "rundown": rec.kind, "model": model,
+            "parameters": _version(version) if rec.kind != LOOSENING
+            else _loosened_with(version, rec.params_sent),
             "torque_nm": rec.torque_nm, "angle_deg": rec.angle_deg,
             "tightening_id": rec.tightening_id, "params_sent": rec.params_sent,
             "position_mm": [rec.x_mm, rec.y_mm, rec.z_mm],

@@ -20,7 +20,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from db.kinds import MISSING, SKIPPED
+from db.kinds import LOOSENING, MISSING, SKIPPED
 from drivers.counting import counted
 from stationd.errors import ConfigError, InputError
 from stationd.jsonout import strict_json
@@ -299,13 +299,14 @@ def cmd_db_report(args: argparse.Namespace) -> int:
     else:
         print(report.summary())
         for b in report.bolts:
-            last = [r for r in runs if r["bolt"] == b.bolt_id][-1:]
+            mine = [r for r in runs if r["bolt"] == b.bolt_id]
+            last = mine[-1:]
             result = "-" if b.status == MISSING else \
                 f"by {b.skipped_by}" + (f": {b.comment}" if b.comment else "") \
                 if b.status == SKIPPED else \
                 f"{_num(b.torque_nm)} Nm, {_num(b.angle_deg)} deg, v{b.version}, " \
-                f"{counted(b.attempts, 'attempt')}" + (f", by {last[0]['operator'] or '-'}"
-                                              + _entered(last[0]) if last else "")
+                f"{_attempts(b.attempts, mine)}" + (f", by {last[0]['operator'] or '-'}"
+                                                    + _entered(last[0]) if last else "")
             retired = " (retired)" if b.retired else ""
             print(f"  {b.bolt_id:<12} {b.status.upper():<8} {result}  {b.name}{retired}")
             if b.attempts > 1:   # reworked: each rundown, so the loosenings show
@@ -343,6 +344,15 @@ def _entered(run: dict[str, Any]) -> str:
         return ""
     return f", entered by {run['entered_by']} from the controller's screen, not measured" + (
         f" ({run['entered_comment']})" if run.get("entered_comment") else "")
+
+
+def _attempts(n: int, runs: list[dict[str, Any]]) -> str:
+    """How many rundowns a bolt had: ``3 attempts``, or with loosenings among them ``4
+    tightenings, 3 loosenings`` (a loosening is no attempt at the bolt)."""
+    loosenings = sum(r["rundown"] == LOOSENING for r in runs)
+    if not loosenings:
+        return counted(n, "attempt")
+    return f"{counted(n - loosenings, 'tightening')}, {counted(loosenings, 'loosening')}"
 
 
 def cmd_db_spc(args: argparse.Namespace) -> int:

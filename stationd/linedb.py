@@ -241,7 +241,8 @@ LINE_RUNDOWNS = _typed(
       f"COALESCE({_text(_j('rundown'))}, {_literal(TIGHTENING)})"),
      (Column("status", Text, comment=f"the controller's verdict: {OK} or {NOK}"),
       _text(_j("status"))),
-     (Column("pset", Integer, comment="the controller's parameter set of the bolt table"),
+     (Column("pset", Integer, comment="the controller's parameter set run: the bolt "
+             "table's (a loosening: its loosen pset)"),
       _int(_j("parameters", "pset"))),
      (Column("parameters_version", Integer,
              comment="the station's version of the bolt's parameters (see line_parameters)"),
@@ -596,7 +597,8 @@ def parameter_rows(station_id: str, db_id: str, entries: list[dict[str, Any]]
     for e in entries:
         rec = e["record"]
         p = rec.get("parameters") if e["kind"] == RUNDOWN else None
-        if not p or rec.get("model") is None:
+        # a loosening carries its loosen pset, not its version's parameters
+        if not p or rec.get("model") is None or rec.get("rundown") == LOOSENING:
             continue
         key = (str(rec["model"]), str(rec["bolt"]), int(p["version"]))
         if key in rows:

@@ -132,7 +132,8 @@ def _every_kind(repo):
            operator="olga", result_at=AT)
     record(repo, VIN, "B2", ok=False, tightening_id=12, torque_nm=21.0, angle_deg=12.5)
     record(repo, VIN, "B2", tightening_id=13, torque_nm=0.0, angle_deg=320.0,
-           kind=LOOSENING)
+           kind=LOOSENING, params_sent={"pset": 92, "torque": None, "angle": None,
+                                        "loosen": True})
     repo.ledger.record_command(at=AT, user="sam", source="cli", kind="skip", vin=VIN,
                                bolt="B3", comment="no access")
     repo.record_gap(14, 16, VIN, "the controller no longer has them")
@@ -175,6 +176,9 @@ def test_every_kind_of_record_lands_typed_with_its_columns_units_and_comments(tm
         assert (rows[1].torque_min_nm, rows[1].angle_max_deg, rows[1].pset) == (
             23.0, 50.0, None)
         assert (b1.operator, rows[1].operator) == ("olga", None)
+        # a loosening ran its loosen pset, with the controller's own limits: none of the bolt's
+        assert (rows[2].pset, rows[2].parameters_version, rows[2].torque_min_nm,
+                rows[2].torque_max_nm, rows[2].angle_min_deg) == (92, 1, None, None, None)
         assert (b1.x_mm, b1.y_mm, b1.z_mm, b1.match_distance_mm) == (1.0, 2.0, 3.0, 1.5)
         assert b1.result_at == AT and b1.recorded_at.tzinfo is not None
         feed_at = c.scalar(select(LINE_FEED.c.at).where(LINE_FEED.c.seq == b1.seq))

@@ -27,7 +27,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from db.curves import curves_of_records
-from db.kinds import MISSING, SKIPPED
+from db.kinds import LOOSENING, MISSING, SKIPPED
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
 from db.repository import Repository
 
@@ -125,9 +125,9 @@ class Results:
                 "operator": rec.operator, "torque_nm": rec.torque_nm,
                 "angle_deg": rec.angle_deg,
                 # the limits in force for this rundown (its parameter version), as quality
-                # judges it
-                "torque_min_nm": params.torque_min, "torque_max_nm": params.torque_max,
-                "angle_min_deg": params.angle_min, "angle_max_deg": params.angle_max,
+                # judges it; none for a loosening: its loosen pset is the controller's own
+                # program, not the bolt's tightening window
+                **_limits(params, rec.kind),
                 "pset": (rec.params_sent or {}).get("pset"), "parameter_version": params.version,
                 "tightening_id": rec.tightening_id, "x_mm": rec.x_mm, "y_mm": rec.y_mm,
                 "z_mm": rec.z_mm, "match_distance_mm": rec.match_distance_mm,
@@ -186,6 +186,16 @@ def plot_curve(traces: list[dict[str, Any]]) -> dict[str, Any] | None:
             "sample_period_s": torque["sample_period_s"],
             "traces": [{k: v for k, v in t.items() if k not in ("values", "times_s")}
                        if t["id"] in plotted else t for t in traces]}
+
+
+def _limits(params: Any, kind: str) -> dict[str, float | None]:
+    """A rundown's limits columns: its version's window for a tightening, empty for a
+    loosening."""
+    mine = kind != LOOSENING
+    return {"torque_min_nm": params.torque_min if mine else None,
+            "torque_max_nm": params.torque_max if mine else None,
+            "angle_min_deg": params.angle_min if mine else None,
+            "angle_max_deg": params.angle_max if mine else None}
 
 
 def rundowns_csv(runs: list[dict[str, Any]]) -> str:

@@ -615,3 +615,24 @@ def test_report_with_config_finds_a_running_demos_database(run, tmp_path, monkey
     (folder / "demo.pid").write_text("999999999 -\n")
     code, _, err = run("db", "report", "VIN1", "--config", station)
     assert code == 2 and "no database at" in _one_line(err)
+
+
+def test_report_counts_a_bolts_tightenings_and_loosenings_apart(run, db):
+    """A loosening is no attempt at the bolt: a bolt reworked NOK, loosened, OK reads as two
+    tightenings and one loosening (it read "3 attempts")."""
+    from db.kinds import LOOSENING
+    from db.repository import Repository
+
+    run("db", "import", EXAMPLE, "--db", db)
+    with Repository.open(db) as repo:
+        repo.start_vehicle("VIN2", "WAGON-B")
+        record(repo, "VIN2", "SF-FL", ok=False)
+        record(repo, "VIN2", "SF-FL", kind=LOOSENING, torque_nm=12.0)
+        record(repo, "VIN2", "SF-FL")
+        record(repo, "VIN2", "SF-FR")
+        record(repo, "VIN2", "SF-FR")
+    _, out, _ = run("db", "report", "VIN2", "--db", db)
+    [fl] = [line for line in out.splitlines() if line.strip().startswith("SF-FL ")]
+    assert fl.split(", by")[0].endswith("v1, 2 tightenings, 1 loosening"), fl
+    [fr] = [line for line in out.splitlines() if line.strip().startswith("SF-FR ")]
+    assert "v1, 2 attempts" in fr, fr

@@ -67,14 +67,24 @@ def test_the_nok_row_counts_nok_loosenings_and_not_ok_ones(sedan):
 
 def test_the_feed_the_exports_and_the_quality_figures_carry_the_kind(sedan):
     record(sedan, "VIN1", "B1", ok=True, tightening_id=1, torque_nm=50.0)
-    record(sedan, "VIN1", "B1", ok=True, tightening_id=2, kind=LOOSENING, torque_nm=80.0)
+    record(sedan, "VIN1", "B1", ok=True, tightening_id=2, kind=LOOSENING, torque_nm=80.0,
+           params_sent={"pset": 90, "torque": None, "angle": None, "loosen": True})
     record(sedan, "VIN1", "B1", ok=True, tightening_id=3, torque_nm=51.0)
     feed = sedan.ledger.since(0)
     assert [e["record"]["rundown"] for e in feed if e["kind"] == "rundown"] == [
         TIGHTENING, LOOSENING, TIGHTENING]
+    # a loosening ran its loosen pset, judged by the controller's program: not the bolt's
+    # tightening window (in the feed, and so in the line's tables, and in the export)
+    first, loosening = (e["record"]["parameters"] for e in feed[:2])
+    assert first["torque"] is not None and first["pset"] != 90
+    assert loosening == {"version": first["version"], "pset": 90, "torque": None,
+                         "angle": None}
     runs = Results(sedan).export("VIN1")
     assert [r["rundown"] for r in runs if r["bolt"] == "B1"] == [TIGHTENING, LOOSENING,
                                                                  TIGHTENING]
+    assert runs[0]["torque_min_nm"] is not None and runs[2]["torque_min_nm"] is not None
+    assert [runs[1][k] for k in ("pset", "torque_min_nm", "torque_max_nm", "angle_min_deg",
+                                 "angle_max_deg")] == [90, None, None, None, None]
     csv = rundowns_csv(runs).splitlines()
     assert csv[0].startswith("vin,model,bolt,attempt,rundown,status,")
     assert csv[2].split(",")[4] == LOOSENING
