@@ -121,6 +121,9 @@ def check_station(path: str | Path) -> StationCheck:
         warning = _no_models_warning(stored, str(p))
         if warning is not None:
             warnings.append(warning)
+    warning = _not_mine_warning(cfg.database_url, str(p))
+    if warning is not None and not errors:
+        warnings.append(warning)
     if cfg.opcua is not None and cfg.opcua.users and cfg.opcua.security == ("none",):
         # served, but the MES's user passwords would cross the plant network in clear text
         warnings.append(top["opcua"].error(
@@ -162,6 +165,32 @@ def _database_table(cfg: StationConfig) -> tuple[BoltTable, str] | str | None:
             return repo.table(), f"the database {url.database}"
     except DbError:
         return None
+
+
+def _not_mine_warning(url: str, path: str) -> ConfigError | None:
+    """The database's folder cannot be written by the user running the check: not an error
+    (the check may be run by another user than the service's, which the file does not name),
+    but a daemon started by this user would refuse the file, so it is said."""
+    from sqlalchemy.engine import make_url
+    from sqlalchemy.exc import ArgumentError
+
+    from db.location import unwritable_folder
+
+    try:
+        parsed = make_url(url)
+    except ArgumentError:
+        return None
+    if parsed.get_backend_name() != "sqlite" or not parsed.database \
+            or parsed.database.startswith("file:") or parsed.database == ":memory:":
+        return None
+    folder = Path(parsed.database).resolve().parent
+    if unwritable_folder(folder, as_writer=False) is not None:
+        return None     # nobody can write it: an error of the reader's, told already
+    why = unwritable_folder(folder, as_writer=True)
+    if why is None:
+        return None
+    return ConfigError(f"{why} (fine when the service runs as another user, the unit's "
+                       "User=: a daemon started by this user would refuse it)", path=path)
 
 
 def _no_models_warning(found: tuple[BoltTable, str] | str | None,

@@ -719,3 +719,27 @@ def test_control_characters_in_names_are_refused_and_never_reach_the_terminal(tm
     assert any("cam\\x1b[2J\\x07" in t and "control character" in t for t in texts), texts
     assert not any("\x1b" in t or "\x07" in t for t in texts)
     assert "\x1b" not in str(ConfigError("bad", path="a\x1bb.yaml", line=1, key="k\u202e"))
+
+
+def test_a_database_folder_this_user_cannot_write_is_a_warning_not_an_error(sim_copy,
+                                                                            monkeypatch):
+    """``config check`` may be run by another user than the service's: a database folder the
+    checking user cannot write passes, with a warning that a daemon started by this user
+    would refuse it (it passed silently, and ``stationd run`` as that user exited 2)."""
+    import os
+
+    station = sim_copy / "station.yaml"
+    _edit(station, "sqlite:///stationd-sim.db", f"sqlite:///{sim_copy}/station.db")
+    assert check_station(station).warnings == []
+    real = os.access
+
+    def not_mine(path, mode, *a, **kw):   # the folder's owner is another user
+        return False if Path(path) == sim_copy and mode & os.W_OK else real(path, mode, *a,
+                                                                              **kw)
+
+    monkeypatch.setattr(os, "access", not_mine)
+    checked = check_station(station)
+    assert checked.errors == [] and checked.config is not None
+    [warning] = checked.warnings
+    assert f"folder {sim_copy} cannot be written by user" in str(warning)
+    assert "a daemon started by this user would refuse it" in str(warning)
