@@ -595,3 +595,44 @@ def test_for_good_is_a_records_content_never_the_roles_rights_or_a_read_only_ser
     finally:
         owner.dispose()
         role.dispose()
+
+
+def test_line_init_and_status_say_a_role_that_may_not_write_not_ready_or_answers(
+        tmp_path, table, pg_url, capsys):
+    """The trial: with a role that connects but has no privilege on tables another role made,
+    ``line init`` said "every table there already (...: ready for the stations'
+    forwarders)", exit 0, and ``line status`` "answers", exit 0.  Each now says which
+    privilege is missing on which table and the grant, non-zero."""
+    from stationd.cli import main
+
+    other = _as_role(pg_url, "fwd_trial")
+    shown = other                                  # no password: shown as it is
+    assert main(["line", "init", other]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err == (
+        f"stationd: error: line database {shown}?connect_timeout=10: role fwd_trial lacks "
+        "INSERT and SELECT on line_feed, INSERT on line_parameters: the forwarders cannot "
+        "write (as the tables' owner: GRANT SELECT, INSERT ON line_feed, line_parameters "
+        "TO fwd_trial)\n")
+    _station(tmp_path, "st.db", table, "VINT", [(1, "B1")]).close()
+    station = tmp_path / "station.yaml"
+    _line_file(station, tmp_path / "st.db", other)
+    got = _cli("line", "status", "--config", str(station))
+    assert got.returncode == 3 and got.stderr == "", got
+    said = got.stdout.splitlines()[1]
+    assert said == ("line database: the forwarders cannot write (role fwd_trial lacks INSERT "
+                    "and SELECT on line_feed, INSERT on line_parameters: the forwarders cannot "
+                    "write (as the tables' owner: GRANT SELECT, INSERT ON line_feed, "
+                    "line_parameters TO fwd_trial)); the records wait in the station's "
+                    "database until they can"), said
+    assert "answers" not in got.stdout and "1 waiting" in got.stdout
+    st = json.loads(_cli("line", "status", "--config", str(station), "--json").stdout)
+    assert st["cannot_write"].startswith("role fwd_trial lacks ") and st["answers"] is True
+    got = _cli("line", "quarantine", "--config", str(station), "--retry")
+    assert got.returncode == 3 and got.stderr.startswith(
+        f"stationd: line database {shown}: role fwd_trial lacks INSERT"), got.stderr
+    _as_role(pg_url, "fwd_trial", grant=True)                # granted: ready, and it answers
+    assert main(["line", "init", other]) == 0
+    assert "ready for the stations' forwarders" in capsys.readouterr().out
+    got = _cli("line", "status", "--config", str(station))
+    assert got.returncode == 1 and "line database: answers" in got.stdout.splitlines()
