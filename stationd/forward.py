@@ -453,5 +453,6 @@ async def _first(stop: asyncio.Event, wake: asyncio.Event | None, timeout: float
             w.cancel()
 
 
-__all__ = ["LINE_FEED", "BacklogBytes", "Forwarder", "LineConfig", "LineDb", "LineDown",
-           "LineRefuses", "error_line", "line_url_problem", "payload_bytes", "refused_for_good"]
+__all__ = ["CURSOR_KEY", "LINE_FEED", "BacklogBytes", "Forwarder", "LineConfig", "LineDb",
+           "LineDown", "LineRefuses", "error_line", "line_url_problem", "payload_bytes",
+           "refused_for_good"]
