@@ -11,7 +11,9 @@ demo's fresh database) keeps its records apart by the new database's id.  While 
 database is down the station goes on tightening and the backlog grows; past the configured
 bounds (records, megabytes, hours) it is an alarm, never a fault.  An entry the line database
 refuses for good (a value it will never take) is quarantined locally with its reason, so it
-never blocks the rest.
+never blocks the rest; a refusal of the line database's state (no connection, a role without
+the privilege to write, a server that takes no writes) is the line database down, never a
+record's fault (:func:`refused_for_good`).
 
 The line database is PostgreSQL and nothing else: the same URL that works on a developer's
 SQLite file would take the plant's records into a file nobody queries, so another dialect is a
@@ -50,6 +52,7 @@ from stationd.linedb import (
     create_line_schema,
     operator_of,
     parameter_rows,
+    write_problem,
 )
 from stationd.yamlio import YamlNode
 
@@ -116,6 +119,13 @@ class LineDown(Exception):  # noqa: N818 - a state, not a programming error
     """The line database cannot be reached or refuses writes for now: try again later."""
 
 
+class LineRefuses(LineDown):
+    """The line database answers but will not take this role's records now (a privilege it
+    lacks, a server that takes no writes): down for the forwarder all the same (the records
+    wait), said apart from "does not answer" by the commands (a grant fixes it, not the
+    network)."""
+
+
 def payload_bytes(entry: dict[str, Any]) -> int:
     """The size of a feed entry's record as the line database takes it: its JSON."""
     return len(json.dumps(entry["record"], separators=(",", ":"), ensure_ascii=False,
@@ -179,11 +189,16 @@ class LineDb:
             engine = make_engine(self.url)
             try:
                 create_line_schema(engine)
+                with engine.connect() as conn:   # the tables there: may this role write them?
+                    problem = write_problem(conn)
             except SQLAlchemyError as exc:
                 engine.dispose()
                 if isinstance(exc, DBAPIError) and _transient(exc):   # no connection at all
                     raise LineDown(error_line(exc)) from None
                 raise LineDown(f"the line tables: {error_line(exc)}") from None
+            if problem is not None:
+                engine.dispose()
+                raise LineRefuses(problem)
             self._engine = engine
         return self._engine
 
@@ -205,13 +220,26 @@ class LineDb:
                                  versions)
                 return new
         except DBAPIError as exc:
-            if exc.connection_invalidated or _transient(exc):
-                self.dispose()
-                raise LineDown(error_line(exc)) from None
+            if not refused_for_good(exc):
+                raise self._down(exc) from None
             raise
         except (SQLAlchemyError, DbError, OSError) as exc:
             self.dispose()
             raise LineDown(error_line(exc)) from None
+
+    def _down(self, exc: DBAPIError) -> LineDown:
+        """The line database's state that refused a push, as the link says it: a refusal of
+        this role's writes (a grant revoked since the connection was checked) is asked again
+        on a new connection, whose check names the role and the privilege it lacks."""
+        self.dispose()
+        if not _refuses_role(exc):
+            return LineDown(error_line(exc))
+        try:
+            self._connect()
+        except LineDown as down:
+            return down
+        self.dispose()   # the check found nothing: the server's words, with the role
+        return LineRefuses(f"role {make_url(self.url).username}: {error_line(exc)}")
 
     def reachable(self) -> None:
         """``LineDown`` when the line database does not answer now (a command says so,
@@ -229,11 +257,38 @@ class LineDb:
             self._engine = None
 
 
+def _sqlstate(exc: DBAPIError) -> str:
+    return str(getattr(getattr(exc, "orig", None), "sqlstate", None) or "")
+
+
 def _transient(exc: DBAPIError) -> bool:
     """A connection or server problem (try again), not a row the database refuses."""
-    code = getattr(getattr(exc, "orig", None), "sqlstate", None) or ""
+    code = _sqlstate(exc)
     # classes 08 (connection), 53 (resources), 57 (operator intervention), 58 (system)
     return code[:2] in ("08", "53", "57", "58") or code == ""
+
+
+#: refusals of the role, not of a record: class 28 (invalid authorization), 42501
+#: (insufficient_privilege), 25006 (read_only_sql_transaction: a standby, a read-only default)
+ROLE_REFUSED = ("28", "42501", "25006")
+
+
+def _refuses_role(exc: DBAPIError) -> bool:
+    """The server refuses this role's writes (its privileges, or no writes at all)."""
+    code = _sqlstate(exc)
+    return code[:2] == ROLE_REFUSED[0] or code in ROLE_REFUSED[1:]
+
+
+def refused_for_good(exc: DBAPIError) -> bool:
+    """Whether the line database refused a push for the records' own content (quarantine
+    them), not for its own state (keep them in the backlog and try again: the line database
+    down).  The one place the forwarder decides "for good".
+
+    Why a refusal of the role is the state: it is the same for every record, so as "for
+    good" it quarantined each in turn (a role without INSERT on line_feed emptied the
+    backlog into the quarantine, and the demo then removed its station database with them);
+    a grant, or the server taking writes again, lets every waiting record through."""
+    return not (exc.connection_invalidated or _transient(exc) or _refuses_role(exc))
 
 
 def error_line(exc: BaseException) -> str:
@@ -270,19 +325,20 @@ class Forwarder:
                 self._probe()
             return 0
         try:
-            self.forwarded += self.line.push(self.cfg.station_id, self.db_id, entries)
-        except LineDown as exc:
+            try:
+                self.forwarded += self.line.push(self.cfg.station_id, self.db_id, entries)
+            except DBAPIError:   # one is refused for good: find it, keep the rest moving
+                for e in entries:
+                    try:
+                        self.forwarded += self.line.push(self.cfg.station_id, self.db_id, [e])
+                    except DBAPIError as exc:
+                        self.repo.ledger.quarantine(e["seq"], error_line(exc))
+                        log.error("line database refused record %d (%s) for good: %s; kept "
+                                  "in quarantine", e["seq"], e["kind"], error_line(exc))
+        except LineDown as exc:   # also midway through the batch: the cursor did not move
             self.up, self.last_error = False, str(exc)
             self.tries += 1
             raise
-        except DBAPIError:   # one of them is refused for good: find it, keep the rest moving
-            for e in entries:
-                try:
-                    self.forwarded += self.line.push(self.cfg.station_id, self.db_id, [e])
-                except DBAPIError as exc:
-                    self.repo.ledger.quarantine(e["seq"], error_line(exc))
-                    log.error("line database refused record %d (%s) for good: %s; kept "
-                              "in quarantine", e["seq"], e["kind"], error_line(exc))
         self.cursor = int(entries[-1]["seq"])
         self.repo.ledger.set_meta(CURSOR_KEY, str(self.cursor))
         self.size.forwarded(entries, self.cursor)
@@ -397,5 +453,6 @@ async def _first(stop: asyncio.Event, wake: asyncio.Event | None, timeout: float
             w.cancel()
 
 
-__all__ = ["LINE_FEED", "BacklogBytes", "Forwarder", "LineConfig", "LineDb", "LineDown",
-           "error_line", "line_url_problem", "payload_bytes"]
+__all__ = ["CURSOR_KEY", "LINE_FEED", "BacklogBytes", "Forwarder", "LineConfig", "LineDb",
+           "LineDown", "LineRefuses", "error_line", "line_url_problem", "payload_bytes",
+           "refused_for_good"]

@@ -11,7 +11,8 @@ store-and-forward to it, from the station's own files (the daemon need not run).
 Why on the station's side: the quarantine (records the line database refused for good) lives
 in the station's database; a quality engineer retries it after the line database was fixed,
 or exports it to hand over.  Exit 0: nothing waits; 1: a backlog or a quarantine remains;
-2: bad input; 3: the line database cannot be reached (``--retry``).
+2: bad input; 3: the line database cannot be reached (``--retry``), or (``status``) does not
+take the forwarders' writes.
 
 ``results`` and ``bolts`` read the line database itself (every station's records, as the
 forwarders put them there): a VIN's rundowns at every station (or a bolt's over a shift),
@@ -66,15 +67,19 @@ def _forwarder(args: argparse.Namespace, *, write: bool = False) -> Forwarder:
 def cmd_line_status(args: argparse.Namespace) -> int:
     """The forwarding as the station's database records it, and whether the line database
     answers now (asked once: the backlog alone does not say why records wait).  Exit 3 when
-    it does not answer, else 1 while records wait or are quarantined."""
-    from stationd.forward import LineDown
+    it does not answer or will not take the forwarders' writes (a role without the privilege:
+    the records wait all the same), else 1 while records wait or are quarantined."""
+    from stationd.forward import LineDown, LineRefuses
 
     fwd = _forwarder(args)
     try:
         st = fwd.status()
+        st["cannot_write"] = None
         try:
             fwd.line.reachable()
             st["answers"], st["unreachable"] = True, None
+        except LineRefuses as exc:   # it answers, but not as a forwarder needs
+            st["answers"], st["unreachable"], st["cannot_write"] = True, None, str(exc)
         except LineDown as exc:
             st["answers"], st["unreachable"] = False, str(exc)
         finally:
@@ -86,21 +91,25 @@ def cmd_line_status(args: argparse.Namespace) -> int:
     else:
         print(f"line database {st['url']} as station {st['station_id']} "
               f"(local database {st['db_id']})")
-        print("line database: answers" if st["answers"] else
-              f"line database: does not answer ({st['unreachable']}); the records wait in "
-              "the station's database until it does")
+        if st["cannot_write"]:
+            print(f"line database: the forwarders cannot write ({st['cannot_write']}); the "
+                  "records wait in the station's database until they can")
+        else:
+            print("line database: answers" if st["answers"] else
+                  f"line database: does not answer ({st['unreachable']}); the records wait "
+                  "in the station's database until it does")
         print(f"forwarded up to record {st['cursor']} of {st['last_seq']}: {st['backlog']} "
               f"waiting ({st['backlog_bytes'] / 1e6:.2f} MB), the oldest for "
               f"{st['lag_s']:.0f} s; {st['quarantined']} quarantined")
         if st["alarm"]:
             print(f"ALARM: {st['alarm']}")
-    if not st["answers"]:
+    if not st["answers"] or st["cannot_write"]:
         return EXIT_UNREACHABLE
     return EXIT_WAITING if st["backlog"] or st["quarantined"] else 0
 
 
 def cmd_line_quarantine(args: argparse.Namespace) -> int:
-    from stationd.forward import LineDown
+    from stationd.forward import LineDown, LineRefuses
     from stationd.outfile import need_folder, write_atomic
 
     if args.export:
@@ -119,6 +128,9 @@ def cmd_line_quarantine(args: argparse.Namespace) -> int:
             try:
                 fwd.line.reachable()   # exit 3 also with nothing to retry
                 taken, refused = fwd.retry_quarantined()
+            except LineRefuses as exc:   # it answers: not "unreachable"
+                sys.stderr.write(f"stationd: line database {_shown(fwd.cfg.url)}: {exc}\n")
+                return EXIT_UNREACHABLE
             except LineDown as exc:   # in the words of line results' and line init's
                 return _unreachable(fwd.cfg.url, exc)
             finally:
@@ -145,13 +157,17 @@ def _line_url(args: argparse.Namespace) -> str:
     return cfg.line.url
 
 
-def _unreachable(url: str, exc: BaseException) -> int:
+def _shown(url: str) -> str:
     from sqlalchemy import make_url
 
+    return make_url(url).render_as_string()
+
+
+def _unreachable(url: str, exc: BaseException) -> int:
     from stationd.forward import error_line
 
-    sys.stderr.write(f"stationd: line database {make_url(url).render_as_string()} "
-                     f"unreachable: {error_line(exc)}\n")
+    sys.stderr.write(f"stationd: line database {_shown(url)} unreachable: "
+                     f"{error_line(exc)}\n")
     return EXIT_UNREACHABLE
 
 
@@ -309,7 +325,7 @@ def cmd_line_init(args: argparse.Namespace) -> int:
 
     from db.engine import make_engine
     from stationd.forward import error_line, line_url_problem
-    from stationd.linedb import LINE, create_line_schema
+    from stationd.linedb import LINE, create_line_schema, write_problem
 
     problem = line_url_problem(args.url)   # the station file's line.url check
     if problem is not None:
@@ -320,11 +336,17 @@ def cmd_line_init(args: argparse.Namespace) -> int:
     engine = make_engine(parsed.render_as_string(hide_password=False))
     try:
         change = create_line_schema(engine)
+        # tables another role made, that this one may not write: not ready for a forwarder
+        # of this role (each of its records would wait); said with the grant that fixes it
+        with engine.connect() as conn:
+            cannot = write_problem(conn)
     except SQLAlchemyError as exc:
         raise InputError(f"line database {parsed.render_as_string()}: "
                          f"{error_line(exc)}") from None
     finally:
         engine.dispose()
+    if cannot is not None:
+        raise InputError(f"line database {parsed.render_as_string()}: {cannot}")
     if change.typed_refused is not None:   # line_feed's part made; the typed part not
         raise InputError(f"line database {parsed.render_as_string()}: the typed tables: "
                          f"{change.typed_refused} (run line init as the tables' owner)")

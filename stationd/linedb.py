@@ -581,6 +581,46 @@ def _add_columns(conn: Connection, t: Typed, cols: list[Column[Any]]) -> int:
         f"AND ({some})")).rowcount)
 
 
+#: what a forwarder does to the line's tables (:meth:`stationd.forward.LineDb.push`): it
+#: inserts into both, and reads back which of its ``line_feed`` rows were new (``RETURNING``)
+FORWARD_PRIVILEGES: tuple[tuple[str, tuple[str, ...]], ...] = (
+    (LINE_FEED.name, ("INSERT", "SELECT")), (LINE_PARAMETERS.name, ("INSERT",)))
+#: the grant that lets a forwarding role write them (README's "Setting up the line database")
+FORWARD_GRANT = "GRANT SELECT, INSERT ON line_feed, line_parameters TO {role}"
+
+
+def write_problem(conn: Connection) -> str | None:
+    """Why this connection's role cannot forward to the line's tables, in one line: which
+    privilege it lacks on which table, and the grant that fixes it (or a server that takes
+    no writes); None when it can, or while the tables are not made yet (the forwarder's
+    first connection makes them, or says why it cannot).
+
+    Why asked, not found out by the first insert: a role that connects but may not write
+    (the tables made by another role, no grant) answered every query, so ``line init`` said
+    "ready for the stations' forwarders" and ``line status`` "answers", while each forwarded
+    record was refused; asked here, the commands and the forwarder's link say it at once,
+    naming the role and the privilege (the server's "permission denied for table line_feed"
+    names neither the role nor the privilege)."""
+    role, quoted, read_only = conn.execute(text(
+        "SELECT current_user, quote_ident(current_user), "
+        "current_setting('transaction_read_only')")).one()
+    if read_only == "on":
+        return (f"the server takes no writes (read-only: a standby, or "
+                f"default_transaction_read_only): role {role} cannot insert into line_feed")
+    lacks = []
+    for table, privileges in FORWARD_PRIVILEGES:
+        if conn.execute(text("SELECT to_regclass(:t)"), {"t": table}).scalar() is None:
+            continue
+        missing = [p for p in privileges if not conn.execute(
+            text("SELECT has_table_privilege(:t, :p)"), {"t": table, "p": p}).scalar()]
+        if missing:
+            lacks.append(f"{' and '.join(missing)} on {table}")
+    if not lacks:
+        return None
+    return (f"role {role} lacks {', '.join(lacks)}: the forwarders cannot write (as the "
+            f"tables' owner: {FORWARD_GRANT.format(role=quoted)})")
+
+
 def operator_of(entry: dict[str, Any]) -> str | None:
     """The ``operator`` column of a feed entry: a rundown's operator, else None."""
     if entry["kind"] != RUNDOWN:
@@ -703,8 +743,9 @@ def bolt_versions(engine: Engine, *, model: str | None = None, bolt: str | None 
                 for r in c.execute(q)]
 
 
-__all__ = ["LINE", "LINE_CHECKS", "LINE_COMMANDS", "LINE_CONTROLLER_EVENTS", "LINE_FEED",
-           "LINE_GAPS", "LINE_PARAMETERS", "LINE_RUNDOWNS", "LINE_UNATTRIBUTED",
-           "LINE_UNREADABLE", "TYPED", "TYPED_VERSION", "BoltVersion", "LineResult",
-           "SchemaChange", "Typed", "bolt_versions", "create_line_schema",
-           "installed_version", "operator_of", "parameter_rows", "results", "trigger_body"]
+__all__ = ["FORWARD_GRANT", "FORWARD_PRIVILEGES", "LINE", "LINE_CHECKS", "LINE_COMMANDS",
+           "LINE_CONTROLLER_EVENTS", "LINE_FEED", "LINE_GAPS", "LINE_PARAMETERS",
+           "LINE_RUNDOWNS", "LINE_UNATTRIBUTED", "LINE_UNREADABLE", "TYPED", "TYPED_VERSION",
+           "BoltVersion", "LineResult", "SchemaChange", "Typed", "bolt_versions",
+           "create_line_schema", "installed_version", "operator_of", "parameter_rows",
+           "results", "trigger_body", "write_problem"]

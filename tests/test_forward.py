@@ -28,6 +28,7 @@ from stationd.forward import (
     LineConfig,
     LineDb,
     LineDown,
+    LineRefuses,
     payload_bytes,
 )
 from stationd.stationcheck import check_station
@@ -471,3 +472,167 @@ def _has_line_table(url: str) -> bool:
         return bool(inspect(line._connect()).has_table(LINE_FEED.name))
     finally:
         line.dispose()
+
+
+def _as_role(pg_url: str, role: str, grant: bool = False) -> str:
+    """``pg_url``'s database with the line's tables made by its own role (the owner), and
+    the URL of ``role``: a role that may connect but, as in a new user's trial, has no
+    privilege on those tables (``grant``: the README's grant for a forwarding role)."""
+    from sqlalchemy import create_engine, make_url, text
+
+    _has_line_table(pg_url)                     # the owner makes the tables
+    owner = create_engine(pg_url, isolation_level="AUTOCOMMIT")
+    try:
+        with owner.connect() as c:
+            if c.execute(text("SELECT 1 FROM pg_roles WHERE rolname = :r"),
+                         {"r": role}).first() is None:
+                c.execute(text(f'CREATE ROLE "{role}" LOGIN'))
+            if grant:
+                c.execute(text(f'GRANT SELECT, INSERT ON line_feed, line_parameters TO "{role}"'))
+    finally:
+        owner.dispose()
+    return make_url(pg_url).set(username=role).render_as_string(hide_password=False)
+
+
+def _owner_sql(pg_url: str, sql: str) -> None:
+    from sqlalchemy import create_engine, text
+
+    owner = create_engine(pg_url, isolation_level="AUTOCOMMIT")
+    try:
+        with owner.connect() as c:
+            c.execute(text(sql))
+    finally:
+        owner.dispose()
+
+
+def test_a_role_that_may_not_write_keeps_the_records_in_the_backlog_never_quarantined(
+        tmp_path, table, pg_url):
+    """The trial's data loss: a role that connects but has no privilege on the line's tables
+    (another role made them) had every record "refused for good" and quarantined.  It is the
+    line database down for this role: the records wait, the link names the role, the
+    privilege and the grant, and once granted every record arrives, none quarantined."""
+    other = _as_role(pg_url, "fwd_noprivs")
+    repo = _station(tmp_path, "st.db", table, "VINP", [(1, "B1"), (2, "B2")])
+    f = Forwarder(repo, LineConfig(other, "ST-P"))
+    for _ in range(2):                           # retried, never quarantined
+        with pytest.raises(LineRefuses):
+            f.step()
+    st = f.status()
+    assert (st["up"], st["cursor"], st["backlog"], st["quarantined"]) == (False, 0, 2, 0)
+    assert st["last_error"] == (
+        "role fwd_noprivs lacks INSERT and SELECT on line_feed, INSERT on line_parameters: "
+        "the forwarders cannot write (as the tables' owner: GRANT SELECT, INSERT ON "
+        "line_feed, line_parameters TO fwd_noprivs)")
+    assert repo.ledger.quarantined() == []
+    _as_role(pg_url, "fwd_noprivs", grant=True)
+    assert f.step() == 2 and f.status()["up"] is True
+    assert [r.seq for r in _line_rows(pg_url, "ST-P")] == [1, 2]
+    assert repo.ledger.quarantined() == []
+    f.line.dispose()
+    repo.close()
+
+
+def test_a_grant_revoked_while_forwarding_is_the_line_down_not_a_refused_record(
+        tmp_path, table, pg_url):
+    """The privilege goes while the forwarder's connection is up (its check passed): the
+    insert's insufficient_privilege is classified where "for good" is decided, as the line
+    database down; a quarantined record's retry keeps it quarantined, with its own reason."""
+    other = _as_role(pg_url, "fwd_revoked", grant=True)
+    repo = _station(tmp_path, "st.db", table, "VINR", [(1, "B1")])
+    repo.ledger.record_command(at=AT, user="sam", source="cli", kind="skip", vin="VINR",
+                               bolt="B2", comment="bad\x00comment")    # refused for good
+    f = Forwarder(repo, LineConfig(other, "ST-R"))
+    assert f.step() == 2 and [q["seq"] for q in repo.ledger.quarantined()] == [2]
+    _owner_sql(pg_url, 'REVOKE INSERT ON line_feed FROM "fwd_revoked"')
+    record(repo, "VINR", "B3", tightening_id=3)
+    with pytest.raises(LineRefuses, match=r"^role fwd_revoked lacks INSERT on line_feed: "):
+        f.step()
+    assert (f.cursor, f.status()["backlog"], f.up) == (2, 1, False)
+    with pytest.raises(LineRefuses):
+        f.retry_quarantined()
+    [q] = repo.ledger.quarantined()
+    assert q["seq"] == 2 and "Unicode" in q["reason"]           # its own reason kept
+    _owner_sql(pg_url, 'GRANT INSERT ON line_feed TO "fwd_revoked"')
+    assert f.step() == 1 and [r.seq for r in _line_rows(pg_url, "ST-R")] == [1, 3]
+    f.line.dispose()
+    repo.close()
+
+
+def test_for_good_is_a_records_content_never_the_roles_rights_or_a_read_only_server(pg_url):
+    """The one decision, on the server's own errors: a value jsonb does not take is refused
+    for good; a privilege the role lacks (42501), a read-only transaction (25006) and an
+    authorization error (class 28: at a connection, where the server says it) are the line
+    database's state."""
+    from sqlalchemy import create_engine, text
+    from sqlalchemy.exc import DBAPIError
+
+    from stationd.forward import refused_for_good
+
+    other = _as_role(pg_url, "fwd_classify")
+    owner = create_engine(pg_url)
+    role = create_engine(other)
+
+    def error(engine, *sql: str) -> DBAPIError:
+        with engine.connect() as c, pytest.raises(DBAPIError) as got:
+            for s in sql:
+                c.execute(text(s))
+        return got.value
+
+    try:
+        nul = error(owner, "SELECT '\"a\\u0000b\"'::jsonb")
+        denied = error(role, "INSERT INTO line_parameters (station_id, db_id, model, bolt, "
+                       "version, first_seq) VALUES ('S', 'D', 'M', 'B', 1, 1)")
+        read_only = error(owner, "SET TRANSACTION READ ONLY", "CREATE TEMP TABLE t (x int)")
+        assert [e.orig.sqlstate for e in (nul, denied, read_only)] == [
+            "22P05", "42501", "25006"]
+        assert refused_for_good(nul)
+        assert not refused_for_good(denied) and not refused_for_good(read_only)
+
+        class RefusedError(Exception):
+            sqlstate = "28000"     # invalid_authorization_specification
+
+        assert not refused_for_good(DBAPIError("INSERT", None, RefusedError("not permitted")))
+    finally:
+        owner.dispose()
+        role.dispose()
+
+
+def test_line_init_and_status_say_a_role_that_may_not_write_not_ready_or_answers(
+        tmp_path, table, pg_url, capsys):
+    """The trial: with a role that connects but has no privilege on tables another role made,
+    ``line init`` said "every table there already (...: ready for the stations'
+    forwarders)", exit 0, and ``line status`` "answers", exit 0.  Each now says which
+    privilege is missing on which table and the grant, non-zero."""
+    from stationd.cli import main
+
+    other = _as_role(pg_url, "fwd_trial")
+    shown = other                                  # no password: shown as it is
+    assert main(["line", "init", other]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err == (
+        f"stationd: error: line database {shown}?connect_timeout=10: role fwd_trial lacks "
+        "INSERT and SELECT on line_feed, INSERT on line_parameters: the forwarders cannot "
+        "write (as the tables' owner: GRANT SELECT, INSERT ON line_feed, line_parameters "
+        "TO fwd_trial)\n")
+    _station(tmp_path, "st.db", table, "VINT", [(1, "B1")]).close()
+    station = tmp_path / "station.yaml"
+    _line_file(station, tmp_path / "st.db", other)
+    got = _cli("line", "status", "--config", str(station))
+    assert got.returncode == 3 and got.stderr == "", got
+    said = got.stdout.splitlines()[1]
+    assert said == ("line database: the forwarders cannot write (role fwd_trial lacks INSERT "
+                    "and SELECT on line_feed, INSERT on line_parameters: the forwarders cannot "
+                    "write (as the tables' owner: GRANT SELECT, INSERT ON line_feed, "
+                    "line_parameters TO fwd_trial)); the records wait in the station's "
+                    "database until they can"), said
+    assert "answers" not in got.stdout and "1 waiting" in got.stdout
+    st = json.loads(_cli("line", "status", "--config", str(station), "--json").stdout)
+    assert st["cannot_write"].startswith("role fwd_trial lacks ") and st["answers"] is True
+    got = _cli("line", "quarantine", "--config", str(station), "--retry")
+    assert got.returncode == 3 and got.stderr.startswith(
+        f"stationd: line database {shown}: role fwd_trial lacks INSERT"), got.stderr
+    _as_role(pg_url, "fwd_trial", grant=True)                # granted: ready, and it answers
+    assert main(["line", "init", other]) == 0
+    assert "ready for the stations' forwarders" in capsys.readouterr().out
+    got = _cli("line", "status", "--config", str(station))
+    assert got.returncode == 1 and "line database: answers" in got.stdout.splitlines()

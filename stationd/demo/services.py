@@ -24,6 +24,7 @@ import time
 from collections import Counter
 from collections.abc import Callable, Collection
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 from sqlalchemy import make_url
@@ -35,8 +36,8 @@ from drivers.counting import counted
 from stationd.bus import EventBus
 from stationd.config import StationConfig
 from stationd.errors import ConfigError, InputError
-from stationd.forward import LineConfig
-from stationd.linedb import LINE_FEED, LineResult, results
+from stationd.forward import CURSOR_KEY, LineConfig
+from stationd.linedb import LINE_FEED, LineResult, results, write_problem
 from stationd.opcua import OpcUaConfig
 from stationd.shell.sdnotify import Notifier
 from stationd.shell.serve import Screens, forward, opcua_devices
@@ -56,6 +57,8 @@ DRAIN_S = 20.0
 LINE_DRAIN_BOUND_S = 180.0
 #: the longest the read-back waits for a line database's host to answer, s
 CONNECT_TIMEOUT_S = 10
+#: where records that did not reach the line database are (:func:`unforwarded`)
+KEPT = "they stay in the demo's station database, kept when the demo ends"
 #: the demo's security words, printed beside the endpoint
 SECURITY_WORDS = "security none: anonymous clients browse, read and subscribe, no certificates"
 
@@ -271,6 +274,18 @@ class StationServices:
         fwd = self.screens.line
         return 0 if fwd is None else int(fwd.cursor)
 
+    async def quarantined(self) -> Counter[str]:
+        """The station's records the line database refused for good, by kind (behind the
+        forwarder's cursor, yet not in the line database)."""
+        repo = self._repo
+        if repo is None:
+            return Counter()
+
+        def count() -> Counter[str]:
+            return Counter(str(q["kind"]) for q in repo.ledger.quarantined())
+
+        return await asyncio.get_running_loop().run_in_executor(None, count)
+
     async def records(self, after: int = 0) -> Counter[str]:
         """The station's records (its feed: rundowns, curves, commands, checks) after
         sequence number ``after``, by kind."""
@@ -402,11 +417,14 @@ def line_problem(url: str) -> str | None:
     try:
         with engine.connect() as conn:
             conn.exec_driver_sql("SELECT 1")
+            # it answers; a role that may not write its tables is as good as away for the
+            # demo's forwarders (said at the start, and the end's wait is not in vain)
+            cannot = write_problem(conn)
     except (SQLAlchemyError, DbError, OSError) as exc:
         return line_words(url, _error_text(exc))
     finally:
         engine.dispose()
-    return None
+    return None if cannot is None else line_words(url, cannot)
 
 
 def line_counts(url: str, db_ids: set[str]) -> dict[tuple[str, str], Counter[str]]:
@@ -478,7 +496,7 @@ async def line_report(url: str | None, services: list[StationServices], out: Any
     records (or is away now: :func:`drain_all`): per station, what arrived against what the
     station recorded (``arrival``), and the rundowns (``stations``; the /line page shows them
     row by row); the summary's ``line``, whose ``missing`` counts the records that did not
-    reach the line database (they are lost with the demo's temporary databases)."""
+    reach the line database (their station databases are kept: :func:`unforwarded`)."""
     assert url is not None  # noqa: S101 - only called with a line section
     loop = asyncio.get_running_loop()
     await drain_all(services)
@@ -494,14 +512,14 @@ async def line_report(url: str | None, services: list[StationServices], out: Any
         words = line_words(url, _error_text(exc))
         doc: dict[str, Any] = {"url": shown(url), "error": words, "arrival": {}}
         for sid, s in zip(ids, lined, strict=True):
-            pending = await s.records(after=s.forwarded_to())
+            # after the cursor, and behind it those refused for good: neither reached it
+            pending = await s.records(after=s.forwarded_to()) + await s.quarantined()
             doc["arrival"][sid] = {"records": sum(recorded[sid].values()), "arrived": None,
                                    "missing": sum(pending.values()),
                                    "missing_rundowns": pending["rundown"]}
         _totals(doc)
         print(f"line database: not read back: {words}" + (
-            f"; {_missing_words(doc)} did not reach it: they are lost with the demo's "
-            "temporary database when the demo ends" if doc["missing"] else ""),
+            f"; {_missing_words(doc)} did not reach it: {KEPT}" if doc["missing"] else ""),
             file=out, flush=True)
         return doc
     doc = line_summary(rows, ids)
@@ -521,7 +539,7 @@ async def line_report(url: str | None, services: list[StationServices], out: Any
     if doc["missing"]:
         arrival = (f"NOT every record arrived ({per} records): {_missing_words(doc)} did "
                    "not reach it (" + (f"{errors[0]}; " if errors else "")
-                   + "they are lost with the demo's temporary database when the demo ends)")
+                   + f"{KEPT})")
     else:
         arrival = f"every record arrived ({per} records)"
     print(f"line database: {counted(doc['rundowns'], 'rundown')} of "
@@ -575,6 +593,19 @@ def _missing_words(doc: dict[str, Any]) -> str:
             f"({counted(doc['missing_rundowns'], 'rundown')}) of {', '.join(whose)}")
 
 
+def unforwarded(database: Path) -> int:
+    """How many records of a demo station's ``database`` the line database did not take:
+    after its forwarder's cursor, or quarantined (refused for good).  Why asked of the file
+    at the end, not of the run's report: the demo removes its folder then, and must not
+    remove the only copy of a record, whatever ended the run."""
+    repo = Repository.open(f"sqlite:///{database}", read_only=True)
+    try:
+        cursor = int(repo.ledger.get_meta(CURSOR_KEY) or 0)
+        return max(0, repo.ledger.last_seq() - cursor) + len(repo.ledger.quarantined())
+    finally:
+        repo.close()
+
+
 def shown(url: str) -> str:
     """A database URL as printed (a password hidden)."""
     return make_url(url).render_as_string()
@@ -583,4 +614,4 @@ def shown(url: str) -> str:
 __all__ = ["DEFAULT_OPCUA", "SECURITY_WORDS", "Endpoints", "StationServices", "bindable",
            "demo_opcua", "drain_all", "line_config", "line_counts", "line_report",
            "line_results", "line_summary", "line_words", "next_free_port", "own_pairs",
-           "read_back_words", "shown"]
+           "read_back_words", "shown", "unforwarded"]

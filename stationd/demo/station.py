@@ -18,7 +18,8 @@ line) with at most ``EXTRA_CYCLES`` bolts, its own station id, database and OPC 
 Each station of a line tightens its own bolts (a share of the bolts in view, as a line's
 stations each have their section of the vehicle).  At the end the line database is checked
 against every station's records and the line's results are read back and printed; records
-that did not reach it make the verdict a FAIL (they go with the demo's temporary folder).
+that did not reach it make the verdict a FAIL, and their station's database is kept (the
+demo's temporary folder is removed only when every record reached it).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ import argparse
 import asyncio
 import logging
 import secrets
+import shutil
 import signal
 import sys
 import tempfile
@@ -42,7 +44,7 @@ from drivers.wrench.sim.controller import SimPset
 from stationd import progress
 from stationd.boltfile import load_bolts
 from stationd.config import RecordsConfig, StationConfig, load_station_config
-from stationd.demo.leftovers import DATABASE, PREFIX, mark, sweep
+from stationd.demo.leftovers import DATABASE, PID_FILE, PREFIX, mark, sweep
 from stationd.demo.services import (
     SECURITY_WORDS,
     Endpoints,
@@ -55,6 +57,7 @@ from stationd.demo.services import (
     next_free_port,
     own_pairs,
     shown,
+    unforwarded,
 )
 from stationd.errors import InputError
 from stationd.jsonout import strict_json
@@ -94,6 +97,8 @@ from stationd.web.config import DEFAULT_LISTEN, HttpConfig, open_bind_problem, s
 SIM_CONFIG = Path(__file__).resolve().parents[2] / "config" / "sim" / "station.yaml"
 #: bolts each station after the first tightens (``--stations N``): the extra stations are light
 EXTRA_CYCLES = 2
+#: the start's words on the temporary database, with a line database (:func:`keep_unforwarded`)
+KEEP_WORDS = ", unless records in it did not reach the line database: then kept, and said"
 #: the most stations ``--stations`` runs (each renders its world in turn)
 MAX_STATIONS = 30
 #: a bolt's line when the operator left it before tightening and the tool went off
@@ -182,15 +187,43 @@ def run_station_demo(args: argparse.Namespace) -> int:
                              f"start: {exc} (give one with --line-db URL)") from None
         line_url = pg.url()
     sweep()      # the folders of demos killed before they could remove them
-    tmp = tempfile.TemporaryDirectory(prefix=PREFIX)
+    tmp = Path(tempfile.mkdtemp(prefix=PREFIX))
+    said: dict[str, str] = {}
     try:
-        mark(Path(tmp.name), cfg.path)
-        return _run(args, cfg, bolts_path, Path(tmp.name), out, instead, endpoints, line_url,
-                    pg is not None, n_stations, cycles)
+        mark(tmp, cfg.path)
+        return _run(args, cfg, bolts_path, tmp, out, instead, endpoints, line_url,
+                    pg is not None, n_stations, cycles, said)
     finally:
-        tmp.cleanup()
+        kept = said if said or line_url is None else keep_unforwarded(tmp)
+        if kept and not said:   # the run ended before its summary: said here
+            print(kept_words(kept), file=out, flush=True)
+        if not kept:
+            shutil.rmtree(tmp, ignore_errors=True)
         if pg is not None:
             pg.stop()
+
+
+def keep_unforwarded(tmp: Path) -> dict[str, str]:
+    """The station databases in the demo's folder ``tmp`` holding records the line database
+    did not take (station id -> "its file (N records)"); when there are any, the folder is
+    kept: its pid file goes, so no later demo's :func:`sweep` removes it either.  Why: the
+    demo removed its folder whatever the line database had taken, and records it never took
+    (the line down, a role that may not write) went with it, their only copy."""
+    kept: dict[str, str] = {}
+    for db in sorted(tmp.glob(f"*/{DATABASE}")):
+        if db.parent.name.isdigit() and (n := unforwarded(db)):
+            kept[station_id(int(db.parent.name))] = f"{db} ({counted(n, 'record')})"
+    if kept:
+        (tmp / PID_FILE).unlink(missing_ok=True)
+    return kept
+
+
+def kept_words(kept: dict[str, str]) -> str:
+    """Where the records the line database did not take are kept, in one line."""
+    return ("records not forwarded to the line database, kept (the demo's folder is not "
+            "removed): " + ", ".join(f"{sid} {where}" for sid, where in kept.items())
+            + "; a station file whose database.url names one forwards them (stationd line "
+            "status --config FILE says how far), then remove the folder")
 
 
 def run_id() -> int:
@@ -230,7 +263,9 @@ def _say_services(cfg: StationConfig, why: str | None, services: StationServices
 
 def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Path, out: Any,
          instead: list[str], endpoints: Endpoints | None, line_url: str | None,
-         throwaway: bool, n_stations: int, cycles: int) -> int:
+         throwaway: bool, n_stations: int, cycles: int, said: dict[str, str]) -> int:
+    """The demo in ``tmp``; ``said``: filled with the station databases kept (records the
+    line database did not take), once said before the verdict."""
     taken: set[int] = set()
     (tmp / "1").mkdir()
     cfg = simulated(cfg, tmp / "1")
@@ -253,14 +288,15 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
         problem = None if throwaway else line_problem(line_url)
         if problem is not None:
             print(f"line database: {problem} at the start; the demo runs and its forwarder "
-                  "keeps trying, but records it has not handed over by the end are lost with "
-                  "the demo's temporary database (verdict FAIL): start the line database, or "
-                  "give another --line-db", file=out, flush=True)
+                  "keeps trying, but records it has not handed over by the end are not in the "
+                  "line database (verdict FAIL; the demo keeps its station database with "
+                  "them): start the line database, or give another --line-db", file=out,
+                  flush=True)
     # where its results are: not the station file's database (db report --config finds a
     # running demo's by the station file)
     print(f"records: {tmp / '1' / DATABASE} (the demo's own temporary database, removed when "
-          f"it ends; meanwhile stationd db report VIN --config {cfg.path} reads it)",
-          file=out, flush=True)
+          f"it ends{KEEP_WORDS if line_url is not None else ''}; meanwhile stationd db report "
+          f"VIN --config {cfg.path} reads it)", file=out, flush=True)
     station = _station(cfg, psets)
     if n_stations > 1:     # one output for the line's stations: each line says whose it is
         station.effects.label(station_id(1))
@@ -385,11 +421,16 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
                             "the line database")
     if extra:   # the line's figures over every station (the keys above stay DEMO-1's)
         summary["all_stations"] = all_stations(summary, extra)
+    if line_url is not None:   # the station and its services closed: what stays unforwarded
+        said.update(keep_unforwarded(tmp))
+        summary["kept"] = dict(said)
     if problems:
         summary["verdict"] = "FAIL: " + "; ".join(problems)
     elif extra:
         summary["verdict"] = _line_verdict(summary, extra)
     if args.json:
+        if said:
+            print(kept_words(said), file=out, flush=True)
         sys.stdout.write(strict_json(summary) + "\n")
     else:
         me = f"{station_id(1)} " if extra else ""
@@ -423,6 +464,8 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
             devices = ", ".join(d.rsplit(" ", 1)[0] for d in instead)
             print(f"simulated, not the station file's devices: {devices} (the records went "
                   "to a temporary database)")
+        if said:
+            print(kept_words(said))
         print(summary["verdict"])
     if interrupted is not None:   # as a command stopped by the signal: 130 (143)
         return 128 + signal.Signals[interrupted["signal"]].value

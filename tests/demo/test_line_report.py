@@ -91,7 +91,7 @@ def test_an_outage_during_the_first_station_is_checked_again_at_the_end(tmp_path
 @pytest.mark.timeout(120)
 def test_records_that_never_reached_the_line_are_counted_per_station(tmp_path, pg_url):
     """The link is down from the start to the end: the read-back (straight to the database)
-    finds none of the first station's records, and says how many and that they are lost."""
+    finds none of the first station's records, and says how many and where they stay."""
     u = make_url(pg_url)
     proxy = CutProxy((u.host or "127.0.0.1", u.port or 5432))
     proxy.cut()
@@ -118,7 +118,7 @@ def test_records_that_never_reached_the_line_are_counted_per_station(tmp_path, p
     said = text.getvalue()
     assert "NOT every record arrived (DEMO-1 0 of 4 records): 4 records" in said
     assert f"the line database at 127.0.0.1:{proxy.port} does not answer" in said
-    assert "lost with the demo's temporary database" in said
+    assert "they stay in the demo's station database, kept when the demo ends" in said
 
 
 def test_the_end_names_no_command_for_a_throw_away_line_database():

@@ -274,6 +274,25 @@ def test_the_default_screens_port_in_use_moves_to_the_next_free_one_and_says_so(
     assert _listen(argparse.Namespace(http=None, no_http=True), cfg) == (None, None)
 
 
+def _kept(summary: dict[str, Any], err: str, temp: Path, missing: int) -> None:
+    """The demo's folder is kept with its station database, whose unforwarded records are
+    said (``kept``, and one line before the summary) and which no later demo's sweep removes
+    (no pid file); ``summary["kept_folder"]`` set to its name."""
+    from stationd.demo.leftovers import PID_FILE, PREFIX, sweep
+
+    [(sid, where)] = summary["kept"].items()
+    db = Path(where.rsplit(" (", 1)[0])
+    assert sid == "DEMO-1" and where == f"{db} ({counted(missing, 'record')})"
+    assert db.is_file() and db.parent.parent.parent == temp, where
+    folder = db.parent.parent
+    assert folder.name.startswith(PREFIX) and not (folder / PID_FILE).exists()
+    assert (f"records not forwarded to the line database, kept (the demo's folder is not "
+            f"removed): DEMO-1 {where}; ") in err
+    sweep(temp)
+    assert db.is_file()
+    summary["kept_folder"] = folder.name
+
+
 @pytest.mark.timeout(300)
 def test_a_line_database_that_never_answers_is_a_fail_that_counts_the_lost_records(tmp_path):
     """``--line-db`` on a port where nothing listens: PASS and exit 0 before, the records
@@ -314,10 +333,42 @@ def test_a_line_database_that_never_answers_is_a_fail_that_counts_the_lost_recor
     # ... and said at the start (issue 30), in one line, before the run: what happens and
     # what to do, not only at the end
     start = (f"line database: {line['error']} at the start; the demo runs and its forwarder "
-             "keeps trying, but records it has not handed over by the end are lost with the "
-             "demo's temporary database (verdict FAIL): start the line database, or give "
-             "another --line-db\n")
+             "keeps trying, but records it has not handed over by the end are not in the "
+             "line database (verdict FAIL; the demo keeps its station database with them): "
+             "start the line database, or give another --line-db\n")
     assert err.count(start) == 1 and err.index(start) < err.index("vehicle: "), err[:3000]
-    assert "lost with the demo's temporary database" in err
+    assert "they stay in the demo's station database, kept when the demo ends" in err
     assert "OperationalError" not in err and "Traceback" not in err
-    assert sorted(p.name for p in temp.iterdir()) == [f"{PREFIX}live"]
+    # the killed demo's folder removed, the live one's not; this demo's kept with the
+    # records the line database never took (their only copy), said where
+    _kept(summary, err, temp, line["missing"])
+    assert sorted(p.name for p in temp.iterdir() if p.name != summary["kept_folder"]) == [
+        f"{PREFIX}live"]
+
+
+@pytest.mark.timeout(300)
+def test_a_role_that_may_not_write_the_line_is_a_fail_and_keeps_the_records(tmp_path, pg_url):
+    """The trial: a role that connects but has no privilege on the line's tables (made by
+    another role) had every record quarantined, the verdict "PASS ... every result
+    recorded", exit 0, and the station database removed: every record lost.  Now the start
+    says the role cannot write, the records wait, the verdict is FAIL and the station
+    database is kept."""
+    from tests.test_forward import _as_role
+
+    other = _as_role(pg_url, "demo_noprivs")
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    demo = Demo(tmp_path, "--cycles", "2", "--seed", "7", "--no-http", "--no-opcua",
+                "--line-db", other, env={"TMPDIR": str(temp)})
+    summary = demo.summary()
+    err = "".join(demo.err)
+    assert demo.proc.returncode == 1, err
+    assert "for good" not in err and "quarantine" not in err, err
+    line = summary["line"]
+    assert line["missing"] >= summary["recorded"] >= 1
+    assert summary["verdict"].startswith(f"FAIL: {counted(line['missing'], 'record')} ")
+    assert "permission denied" in line["error"]          # the read-back, as this role
+    assert re.search(r"^line database: the line database at \S+: role demo_noprivs lacks "
+                     r"INSERT and SELECT on line_feed, INSERT on line_parameters: .* at the "
+                     r"start; ", err, re.M), err[:3000]
+    _kept(summary, err, temp, line["missing"])
