@@ -264,8 +264,13 @@ def _sqlstate(exc: DBAPIError) -> str:
 def _transient(exc: DBAPIError) -> bool:
     """A connection or server problem (try again), not a row the database refuses."""
     code = _sqlstate(exc)
-    # classes 08 (connection), 53 (resources), 57 (operator intervention), 58 (system)
-    return code[:2] in ("08", "53", "57", "58") or code == ""
+    # classes 08 (connection), 40 (transaction rollback: a deadlock, a serialization
+    # failure, which a retry resolves), 53 (resources), 57 (operator intervention), 58
+    # (system); and the line's own schema not (yet) there or older than this forwarder:
+    # 42P01 undefined table, 42703 undefined column, 42883 undefined function (a trigger's),
+    # the same for every record until ``stationd line init`` has run
+    return code[:2] in ("08", "40", "53", "57", "58") or code == "" \
+        or code in ("42P01", "42703", "42883")
 
 
 #: refusals of the role, not of a record: class 28 (invalid authorization), 42501

@@ -592,6 +592,11 @@ def test_for_good_is_a_records_content_never_the_roles_rights_or_a_read_only_ser
             sqlstate = "28000"     # invalid_authorization_specification
 
         assert not refused_for_good(DBAPIError("INSERT", None, RefusedError("not permitted")))
+        # the line's state, not the record's: a deadlock or serialization failure (a retry
+        # resolves it), the line's tables not made yet (line init)
+        for code in ("40001", "40P01", "42P01", "42703", "42883"):
+            state = type("StateError", (Exception,), {"sqlstate": code})
+            assert not refused_for_good(DBAPIError("INSERT", None, state("later"))), code
     finally:
         owner.dispose()
         role.dispose()
