@@ -19,6 +19,7 @@ import math
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 from types import FrameType
@@ -65,6 +66,13 @@ def _station(path: str | None) -> tuple[RegisterMap, Path | None]:
     return cfg.lift.registers, cfg.bolts_path
 
 
+def first_serial(now: float) -> int:
+    """The serial number a simulated PLC's vehicles go on from: the clock's seconds, so a
+    restarted simulator (or daemon, on the same database) does not bring the closed VINs of
+    its last run back as reworks (its vehicles come at most one a second)."""
+    return int(now) % 900_000
+
+
 def plc_command(plc: SimulatedPlc, line: str, code: int, serial: list[int],
                 say: Callable[[str], None]) -> bool:
     """One command typed to the PLC; False for ``quit``.  A bad command is said, not fatal."""
@@ -84,7 +92,7 @@ def plc_command(plc: SimulatedPlc, line: str, code: int, serial: list[int],
         elif cmd == "clear":
             plc.set_fault(False)
         elif cmd == "next":
-            serial[0] += 1
+            serial[0] = serial[0] % 999_999 + 1
             plc.lower_lift()
             plc.set_vehicle(code, make_vin(serial[0]))
             plc.raise_lift()
@@ -112,7 +120,7 @@ def _serve_plc(args: argparse.Namespace, stop: threading.Event, out: TextIO) -> 
     def say(text: str) -> None:
         print(text, file=out, flush=True)
 
-    serial = [0]
+    serial = [first_serial(time.time())]
     with SimulatedPlc(registers) as plc:
         try:
             port = plc.start_tcp(args.port)

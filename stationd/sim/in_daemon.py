@@ -40,7 +40,7 @@ from stationd.boltfile import load_bolts
 from stationd.config import StationConfig
 from stationd.errors import InputError, StationError
 from stationd.shell.daemon import Station
-from stationd.sim.devices_cli import HELP, plc_command, psets_of
+from stationd.sim.devices_cli import HELP, first_serial, plc_command, psets_of
 from stationd.sim.operator import (
     check_people,
     loosen_programs,
@@ -118,9 +118,7 @@ class SimulatedStation:
         self._code = 1
         self._told = False
         self._reader: threading.Thread | None = None
-        # the vehicles' serial numbers go on from the clock: a restarted daemon on the same
-        # database does not meet its earlier VINs again (each would come back as a rework)
-        self._serial = [int(time.time()) % 900_000]
+        self._serial = [first_serial(time.time())]
         self._noted: set[str] = set()
         self._new_world = False    # said in the journal once the daemon's journal is set up
         #: the simulated lift as the last station left it (a reload): height, fault, vehicle
