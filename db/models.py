@@ -197,6 +197,10 @@ class TighteningRecord(Base):
     result_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
     recorded_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
     images: Mapped[list[str]] = mapped_column(JSON)  # references (paths/URLs) of the frames
+    #: the controller's own time of the tightening (its clock, MID 0061's timestamp): what
+    #: tells a resent copy from another result under the same id (None: not known, a
+    #: controller without a clock, an entered outcome, a record from before revision 0014)
+    controller_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
     #: tightening or loosening (``db.kinds``): the result's type, else what was sent; a
     #: loosening is never a bolt done
     kind: Mapped[str] = mapped_column(String(10), default="tightening",

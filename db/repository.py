@@ -17,7 +17,7 @@ from types import TracebackType
 from typing import Any, Self
 
 from alembic.util import CommandError
-from sqlalchemy import Engine, func, make_url, select
+from sqlalchemy import ColumnElement, Engine, func, make_url, or_, select
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session
 
@@ -58,8 +58,8 @@ EXPORT_HEADER = ("stationd bolt table, exported from the process-parameter datab
 VIN_MAX = 32
 
 
-__all__ = ["BoltInfo", "DataError", "DatabaseError", "NotFoundError", "OwedEnable", "Repository",
-           "VehicleClosedError"]
+__all__ = ["BoltInfo", "DataError", "DatabaseError", "NotFoundError", "OwedEnable", "Recorded",
+           "Repository", "VehicleClosedError"]
 
 
 @dataclass(frozen=True)
@@ -89,6 +89,16 @@ class OwedEnable:
     selection: dict[str, Any]
     enabled_at: datetime
     off_at: datetime | None
+
+
+@dataclass(frozen=True)
+class Recorded:
+    """What :meth:`Repository.record_tightening_once` did: the record's ``id``, and
+    ``again``: True when the result was a copy the controller sent again of one stored
+    already (that record's id; nothing was written)."""
+
+    id: int
+    again: bool = False
 
 
 class Repository:
@@ -234,12 +244,42 @@ class Repository:
         tightening_id: int | None = None, sent_at: datetime | None = None,
         result_at: datetime | None = None, images: Sequence[str] = (),
         enable_id: int | None = None, kind: str = TIGHTENING, operator: str | None = None,
+        controller_at: datetime | None = None,
     ) -> int:
-        """Record one tightening of ``bolt`` on the open vehicle ``vin``; return its id.
+        """Record one tightening; return its id (the stored one for a resent copy).  As
+        :meth:`record_tightening_once`, for callers that need not know whether it was a
+        copy."""
+        return self.record_tightening_once(
+            vin, bolt, ok=ok, position_mm=position_mm, match_distance_mm=match_distance_mm,
+            tilt_deg=tilt_deg, torque_nm=torque_nm, angle_deg=angle_deg,
+            parameters_id=parameters_id, params_sent=params_sent, acknowledged=acknowledged,
+            tightening_id=tightening_id, sent_at=sent_at, result_at=result_at, images=images,
+            enable_id=enable_id, kind=kind, operator=operator,
+            controller_at=controller_at).id
 
-        Committed (and on disk) before it returns.  A ``tightening_id`` already recorded for
-        this vehicle with the same torque and angle (the controller resent a result) returns
-        the existing record.
+    def record_tightening_once(
+        self, vin: str, bolt: str, *, ok: bool, position_mm: Sequence[float],
+        match_distance_mm: float, tilt_deg: float, torque_nm: float | None,
+        angle_deg: float | None, parameters_id: int | None = None,
+        params_sent: Mapping[str, Any] | None = None, acknowledged: bool = True,
+        tightening_id: int | None = None, sent_at: datetime | None = None,
+        result_at: datetime | None = None, images: Sequence[str] = (),
+        enable_id: int | None = None, kind: str = TIGHTENING, operator: str | None = None,
+        controller_at: datetime | None = None,
+    ) -> Recorded:
+        """Record one tightening of ``bolt`` on the open vehicle ``vin``: its id, and whether
+        it was a copy the controller sent again (then nothing is written).
+
+        Committed (and on disk) before it returns.  A resent copy is only the very same
+        tightening: a record of this vehicle with the same ``tightening_id``, torque and
+        angle, and the same controller timestamp (``controller_at``, the
+        controller's own time of the tightening, MID 0061) where both have one
+        (:func:`_same_result`).  Why the timestamp: a controller replaced or reset numbers
+        its tightenings from 1 again, and its torque (to 0.01 N m) and angle (to whole
+        degrees, near the target) can coincide with an earlier result's; taken for a copy,
+        such a result was lost silently.  Where a timestamp is not known (a controller
+        without a clock, a record from before it was kept) the values decide, as before.
+        ``result_at`` is the station's time of taking the result (its clock).
         ``parameters_id`` is the version that was sent (``BoltInfo.parameters_id``); without
         it, the bolt's current version.  ``params_sent`` defaults to that version's pset and
         targets.  ``enable_id`` (:meth:`note_enable`) is settled in the same transaction: the
@@ -251,22 +291,21 @@ class Repository:
             raise DataError("position_mm: expected x, y, z")
         if kind not in RUNDOWN_KINDS:
             raise DataError(f"kind {kind!r}: one of {', '.join(RUNDOWN_KINDS)}")
-        for name, t in (("sent_at", sent_at), ("result_at", result_at)):
+        for name, t in (("sent_at", sent_at), ("result_at", result_at),
+                        ("controller_at", controller_at)):
             if t is not None and t.tzinfo is None:
                 raise DataError(f"{name}: a timestamp with a timezone (UTC) is needed")
         with self._session(write=True) as s:
             v = _vehicle(s, vin)
             if tightening_id is not None:  # a result the controller sent again: stored once
-                # (the same id with other values is another result: a controller whose ids
-                # started again, a new or reset one)
                 known = s.scalar(select(TighteningRecord.id).where(
                     TighteningRecord.vehicle_id == v.id,
-                    TighteningRecord.tightening_id == int(tightening_id),
-                    TighteningRecord.torque_nm == _opt_float(torque_nm),
-                    TighteningRecord.angle_deg == _opt_float(angle_deg)).limit(1))
+                    *_same_result(TighteningRecord, TighteningRecord.controller_at,
+                                  tightening_id, torque_nm, angle_deg, controller_at))
+                    .order_by(TighteningRecord.id).limit(1))
                 if known is not None:
                     _settle(s, enable_id)
-                    return known
+                    return Recorded(known, again=True)
             if v.ended_at is not None:
                 raise DataError(f"vehicle {vin} is closed: a tightening cannot be recorded")
             b = s.scalar(select(Bolt).where(Bolt.model_id == v.model_id, Bolt.code == bolt,
@@ -288,13 +327,14 @@ class Repository:
                 angle_deg=_opt_float(angle_deg),
                 tightening_id=None if tightening_id is None else int(tightening_id),
                 sent_at=sent_at, result_at=result_at, recorded_at=utcnow(),
+                controller_at=controller_at,
                 images=[str(i) for i in images], kind=kind,
                 operator=None if operator is None else str(operator)[:64])
             s.add(rec)
             _settle(s, enable_id)
             s.flush()
             append(s, RUNDOWN, rec.id)
-            return rec.id
+            return Recorded(rec.id)
 
     def nok_streaks(self, vin: str, since: datetime | None = None) -> dict[str, int]:
         """Per bolt of ``vin``: its NOKs in a row at the end of its records (since its last OK
@@ -358,16 +398,17 @@ class Repository:
                             tightening_id: int | None, pset: int | None, ok: bool,
                             torque_nm: float | None, angle_deg: float | None,
                             result_at: datetime | None, reason: str) -> int | None:
-        """Store a result no bolt owns; return its id, or None when this very result (same
-        tightening id, torque and angle) is already stored, attributed or not (a resent
-        copy)."""
+        """Store a result no bolt owns; return its id, or None when this very result is
+        already stored, attributed or not (a resent copy: the same tightening id, torque and
+        angle, and the same controller timestamp ``result_at`` where both have
+        one, :func:`_same_result`)."""
         torque, angle = _opt_float(torque_nm), _opt_float(angle_deg)
         with self._session(write=True) as s:
             if tightening_id is not None:
-                for model in (TighteningRecord, UnattributedResult):
-                    same = s.scalar(select(model.id).where(
-                        model.tightening_id == int(tightening_id), model.torque_nm == torque,
-                        model.angle_deg == angle).limit(1))
+                for model, at in ((TighteningRecord, TighteningRecord.controller_at),
+                                  (UnattributedResult, UnattributedResult.result_at)):
+                    same = s.scalar(select(model.id).where(*_same_result(
+                        model, at, tightening_id, torque, angle, result_at)).limit(1))
                     if same is not None:
                         return None
             row = UnattributedResult(
@@ -387,14 +428,17 @@ class Repository:
                                 ) -> int | None:
         """Store a controller result that is not a rundown (a batch step, a bypass, an OK
         without a type outside its bolt's torque window, ...); return its id, or None when
-        this very result (same tightening id and type) is stored already (a resent copy).
+        this very result is stored already (a resent copy: the same type, and the same
+        tightening id, torque and angle, and controller timestamp ``result_at`` where both
+        have one, :func:`_same_result`).
         ``enable_id``: the tool enable it answers, settled in the same transaction (its bolt
         is held for a person instead, :data:`db.kinds.NOT_TAKEN`)."""
         with self._session(write=True) as s:
             if tightening_id is not None:
                 same = s.scalar(select(ControllerEvent.id).where(
-                    ControllerEvent.tightening_id == int(tightening_id),
-                    ControllerEvent.result_type == int(result_type)).limit(1))
+                    ControllerEvent.result_type == int(result_type),
+                    *_same_result(ControllerEvent, ControllerEvent.result_at, tightening_id,
+                                  torque_nm, angle_deg, result_at)).limit(1))
                 if same is not None:
                     _settle(s, enable_id)
                     return None
@@ -415,9 +459,11 @@ class Repository:
                           result_at: datetime | None, enable_id: int | None = None
                           ) -> int | None:
         """Store a result message that could not be read, whole; return its id, or None when
-        the same message is stored already (a resent copy).  ``enable_id``: the tool enable
-        it answers, settled in the same transaction (the station owes it nothing more: the
-        bolt is held for a person instead)."""
+        the same message is stored already (a resent copy: the very same text, which
+        carries the tightening id, the values and the controller's timestamp as far as they
+        were written: the rule of :func:`_same_result`, on what could not be read apart).
+        ``enable_id``: the tool enable it answers, settled in the same transaction (the
+        station owes it nothing more: the bolt is held for a person instead)."""
         with self._session(write=True) as s:
             same = s.scalar(select(UnreadableRecord.id).where(
                 UnreadableRecord.raw == raw, UnreadableRecord.mid == int(mid)).limit(1))
@@ -561,6 +607,29 @@ class Repository:
 
 
 # -- helpers ------------------------------------------------------------------------------
+def _same_result(model: Any, at: Any, tightening_id: int, torque_nm: float | None,
+                 angle_deg: float | None,
+                 controller_at: datetime | None) -> list[ColumnElement[bool]]:
+    """The conditions under which a stored row of ``model`` (``at``: its column of the
+    controller's timestamp) is the very result given, sent again by the controller: the same
+    tightening id, torque and angle, and the same controller timestamp where both have one.
+
+    Why all of them: a copy the controller resends (unacknowledged before a reload, a link
+    cut) is the same message, every value equal; a controller replaced or reset numbers its
+    tightenings from 1 again, and its values can coincide (torque to 0.01 N m, angle to
+    whole degrees near the target), so the id and values alone took another tightening for
+    a copy and it was lost without a word.  The controller stamps each tightening (MID
+    0061), so a different time is another tightening.  A missing time (a controller without
+    a clock, a row stored before it was kept) agrees with any: there the values decide, as
+    before, rather than storing a true copy twice."""
+    same: list[ColumnElement[bool]] = [
+        model.tightening_id == int(tightening_id), model.torque_nm == _opt_float(torque_nm),
+        model.angle_deg == _opt_float(angle_deg)]
+    if controller_at is not None:
+        same.append(or_(at.is_(None), at == controller_at))
+    return same
+
+
 def _settle(s: Session, enable_id: int | None) -> None:
     if enable_id is not None:
         row = s.get(ToolEnable, enable_id)

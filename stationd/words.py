@@ -417,6 +417,7 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
     Said.IDS_AGAIN: lambda n: (f"tightening id {n.tightening_id} again with other values: the "
                                "controller's ids started again (a new or reset controller?); "
                                "taken as a new result"),
+    Said.SENT_AGAIN: lambda n: sent_again_words(n.tightening_id, n.bolt),
     Said.UNATTRIBUTED: lambda n: (f"{_unattributed(n.unattributed)}: not attributable to a "
                                   "bolt, stored unattributed"),
     Said.CONTROLLER_EVENT: _controller_event,
@@ -448,6 +449,14 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
                                      "records kept)"),
     Said.LATE_ACK: lambda n: _late_ack(n.bolt),
 }
+
+
+def sent_again_words(tightening_id: int | None, bolt: str | None) -> str:
+    """A result the database had already, sent again by the controller: ``result 7 of B11
+    sent again by the controller: stored once`` (the bolt left out for a result no bolt
+    owns)."""
+    return (f"result {tightening_id}{f' of {bolt}' if bolt is not None else ''} sent again "
+            "by the controller: stored once")
 
 
 def notice_words(notice: Notice) -> str:
@@ -613,6 +622,6 @@ def _missed(r: Reason) -> str:
 
 __all__ = ["answer_words", "check_asked_words", "check_words", "command_words", "comment_words",
            "fault_words", "gap_plan_words", "notice_words", "operator_words", "outcome_words",
-           "reason_words", "records_waiting", "result_type_words", "skip_words", "state_line",
-           "state_words", "stored_what", "unattributed_words", "unchecked_words",
-           "unproved_words", "wait_words", "worded"]
+           "reason_words", "records_waiting", "result_type_words", "sent_again_words",
+           "skip_words", "state_line", "state_words", "stored_what", "unattributed_words",
+           "unchecked_words", "unproved_words", "wait_words", "worded"]

@@ -70,6 +70,8 @@ WORDS = [
     (Notice(Said.IDS_AGAIN, tightening_id=12),
      "tightening id 12 again with other values: the controller's ids started again (a new "
      "or reset controller?); taken as a new result"),
+    (Notice(Said.SENT_AGAIN, tightening_id=7, bolt="B11"),
+     "result 7 of B11 sent again by the controller: stored once"),
     (Notice(Said.UNATTRIBUTED, tightening_id=12, pset=3,
             unattributed=Unattributed(UnattributedKind.OUTSIDE, 12, 3)),
      "result 12 (pset 3) outside any tightening: not attributable to a bolt, stored "

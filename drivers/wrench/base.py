@@ -195,6 +195,11 @@ class TighteningResult:
     #: the revision the header claimed, when the body was laid out as a lower one (read at
     #: ``revision``: ``drivers.wrench.openprotocol.reading``); None when it matched its label
     header_revision: int | None = None
+    #: whether ``timestamp`` is the controller's own time of the tightening (False: a
+    #: controller without a clock, register-driven, whose results the station stamps as it
+    #: reads them): only the controller's own time tells a copy it sends again from another
+    #: result under the same id
+    controller_clock: bool = True
 
 
 @dataclass(frozen=True)

@@ -221,7 +221,7 @@ class WrenchRegisterMap:
             pset=self.integer("result_pset", regs), vin="", timestamp=timestamp,
             torque_min_nm=0.0, torque_max_nm=0.0, torque_target_nm=0.0, angle_min_deg=0.0,
             angle_max_deg=0.0, angle_target_deg=0.0, result_type=kind, result_type_code=code,
-            raw=" ".join(f"{a}={regs[a]}" for a in sorted(regs)))
+            raw=" ".join(f"{a}={regs[a]}" for a in sorted(regs)), controller_clock=False)
 
     def encode_vin(self, vin: str) -> dict[int, int]:
         """The VIN registers, NUL-padded; ValueError if there are none or it does not fit."""

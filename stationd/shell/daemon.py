@@ -346,7 +346,7 @@ class Station:
         """The results the keeper wrote on its way back: the core publishes and acknowledges
         them."""
         for u in await self._call(self.records.take_saved_late):
-            await self.feed(Written(time.time(), u.record, tuple(u.images)))
+            await self.feed(Written(time.time(), u.record, tuple(u.images), u.again))
 
     async def _tick_loop(self, stop: asyncio.Event) -> None:
         """Time for the core.  (The systemd watchdog is ``run.keep_watchdog``'s: a feed may

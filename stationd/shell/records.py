@@ -30,6 +30,7 @@ from db.kinds import MISSING, OK
 from db.repository import Repository
 from drivers.errors import DeviceError, DriverError
 from drivers.keeper import one_line
+from drivers.wrench.base import TighteningResult
 from drivers.wrench.openprotocol.curve import Curve
 from stationd.boltfile import import_bolts
 from stationd.config import StationConfig
@@ -57,7 +58,7 @@ from stationd.station.commands import (
 from stationd.station.inputs import LoadedBolt, VehicleEnded, VehicleLoaded, VehicleRejected
 from stationd.station.results import type_code
 from stationd.station.trust import RecordCheck, summary
-from stationd.words import comment_words, stored_what, unattributed_words
+from stationd.words import comment_words, sent_again_words, stored_what, unattributed_words
 
 log = logging.getLogger("stationd")
 #: what a device, the database or the station's own data raise: a fault, never an exit
@@ -73,6 +74,9 @@ class Unsaved:
     result_at: datetime
     parameters_id: int | None = None
     enable_id: int | None = None     # the tool enable this result settles
+    #: written, and found stored already: a copy the controller sent again (the core says
+    #: so and publishes no new result)
+    again: bool = False
 
     def describe(self) -> str:
         """One journal line with every value of the record (the only copy while unsaved)."""
@@ -182,12 +186,15 @@ class Records:
         return enable
 
     def write(self, u: Unsaved) -> None:
-        """One result into the database; raises what the database raises."""
+        """One result into the database; raises what the database raises.  ``u.again`` set
+        when the database has it already (a copy the controller sent again: nothing written;
+        the core says so).  The controller's own time of the result goes with it: what tells
+        such a copy from another result under the same id."""
         repo = self._repo()
         self.check_file()
         a = u.record
         r, sel = a.result, a.selection
-        rid = repo.record_tightening(
+        done = repo.record_tightening_once(
             a.vin, a.bolt, ok=bool(r.ok),
             position_mm=list(sel.point_mm) if sel else [0.0, 0.0, 0.0],
             match_distance_mm=sel.distance_mm if sel else 0.0,
@@ -198,7 +205,12 @@ class Records:
             sent_at=datetime.fromtimestamp(sel.decided_t, UTC) if sel else None,
             result_at=u.result_at, images=u.images, enable_id=u.enable_id, kind=a.kind,
             params_sent=_loosen_sent(sel.pset) if sel is not None and sel.loosen else None,
-            operator=sel.operator if sel is not None else None)
+            operator=sel.operator if sel is not None else None,
+            controller_at=controller_time(r))
+        u.again = done.again
+        if done.again:
+            return
+        rid = done.id
         # the tightening's curves (stored as they came, usually just before) go with it; the
         # record stands whatever happens here (reading finds them by tightening id anyway)
         try:
@@ -229,25 +241,31 @@ class Records:
         return done
 
     def store_unattributed(self, a: StoreUnattributed) -> None:
+        """The result, unless the database has it already (a copy the controller sent
+        again: said in the journal, stored once)."""
         r = a.result
-        self._repo().record_unattributed(
+        row = self._repo().record_unattributed(
             vin=a.vin, controller_vin=str(r.vin or "").strip() or None,
             tightening_id=int(r.tightening_id), pset=int(r.pset), ok=bool(r.ok),
             torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
-            result_at=_aware(r.timestamp), reason=unattributed_words(a.why))
+            result_at=controller_time(r), reason=unattributed_words(a.why))
+        if row is None:
+            log.info("%s", sent_again_words(int(r.tightening_id), None))
 
     def store_controller_event(self, a: StoreControllerEvent) -> None:
         """The result; the tool enable it answers settled with it, where it does (its bolt
         held for a person: no later result is owed to it)."""
         r = a.result
         enable = self._settles(a.selection, take=False)
-        self._repo().record_controller_event(
+        row = self._repo().record_controller_event(
             result_type=type_code(r) or 0, what=stored_what(a), vin=a.vin, bolt=a.bolt,
             controller_vin=str(r.vin or "").strip() or None,
             tightening_id=int(r.tightening_id), pset=int(r.pset), ok=bool(r.ok),
             torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
-            result_at=_aware(r.timestamp), enable_id=enable)
+            result_at=controller_time(r), enable_id=enable)
         self._settles(a.selection)
+        if row is None:
+            log.info("%s", sent_again_words(int(r.tightening_id), a.bolt))
 
     def store_unreadable(self, a: StoreUnreadable) -> None:
         """The message whole; the tool enable it answers settled with it (the bolt is held
@@ -468,9 +486,18 @@ def _loosen_sent(pset: int | None) -> dict[str, Any]:
     return {"pset": pset, "torque": None, "angle": None, "loosen": True}
 
 
+def controller_time(r: TighteningResult) -> datetime | None:
+    """The controller's own time of the result (aware, UTC); None where it has no clock (a
+    register-driven controller: the station stamped it as it read it, and a copy read again
+    after a reload gets another stamp) or none was given."""
+    if not getattr(r, "controller_clock", True):
+        return None
+    return _aware(getattr(r, "timestamp", None))
+
+
 def _aware(t: datetime | None) -> datetime | None:
     """The controller's naive local timestamp as an aware one (the database keeps UTC)."""
     return None if t is None else t.astimezone(UTC)
 
 
-__all__ = ["STATION_FAULTS", "Records", "Unsaved", "xyz"]
+__all__ = ["STATION_FAULTS", "Records", "Unsaved", "controller_time", "xyz"]

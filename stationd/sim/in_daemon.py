@@ -35,7 +35,7 @@ from drivers.counting import counted
 from drivers.devices import Kind, simulated
 from drivers.lift.base import LiftState
 from drivers.lift.sim import SimLift, SimulatedPlc
-from drivers.wrench.sim.controller import SimWrench
+from drivers.wrench.sim.controller import SimController, SimWrench
 from stationd.boltfile import load_bolts
 from stationd.config import StationConfig
 from stationd.errors import InputError, StationError
@@ -124,6 +124,8 @@ class SimulatedStation:
         #: the simulated lift as the last station left it (a reload): height, fault, vehicle
         self._lift: LiftState | None = None
         self._staying: str | None = None    # its VIN, at working height: the operator goes on
+        #: the last station's simulated controller: the next one goes on from it
+        self._controller: SimController | None = None
         self.follow(cfg)
 
     def follow(self, cfg: StationConfig) -> None:
@@ -220,10 +222,26 @@ class SimulatedStation:
             self._staying = kept.vin
 
     def _program(self, cfg: StationConfig, station: Station) -> None:
-        """The simulated controller runs the bolt table's psets (and the NOK policy's loosen
-        psets), as ``stationd sim controller --config`` does."""
+        """The simulated controller goes on from the last station's (its tightening ids, its
+        stored results, its scatter: :meth:`SimController.go_on_from`), and runs the bolt
+        table's psets (and the NOK policy's loosen psets), as ``stationd sim controller
+        --config`` does.
+
+        Why carried: each station opens its own ``sim://wrench``, a new simulator whose ids
+        started at 1 again with the same seed, so after a reload it sent the same (id,
+        torque, angle) results again, which a real controller never does.  Carrying its state
+        (rather than numbering after the newest id in the database) is what a real
+        controller does through a daemon's reload: it is not reset, its ids and its stored
+        results go on whatever the station recorded.  Taken from the last simulator once the
+        last station has closed it (its final state: a result made while it stopped is
+        counted too), before this station's loop starts."""
         wrench = station.wrench
-        if not isinstance(wrench, SimWrench) or cfg.bolts_path is None:
+        if not isinstance(wrench, SimWrench):
+            return
+        before, self._controller = self._controller, wrench.controller
+        if before is not None and before is not wrench.controller:
+            wrench.controller.go_on_from(before)
+        if cfg.bolts_path is None:
             return
         try:
             wrench.controller.psets = {**loosen_programs(cfg.nok), **psets_of(cfg.bolts_path)}

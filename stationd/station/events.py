@@ -509,6 +509,9 @@ class Said(enum.Enum):
     #                                      bolt)
     # results from the controller
     IDS_AGAIN = "ids again"              # a known id with other values (tightening_id)
+    SENT_AGAIN = "sent again"            # a result the database had already: a copy the
+    #                                      controller sent again, stored once
+    #                                      (tightening_id, bolt)
     UNATTRIBUTED = "unattributed"        # a result no bolt owns (tightening_id, pset;
     #                                      unattributed: why, as stored with it)
     CONTROLLER_EVENT = "controller event"  # not a rundown (result_type: its type code;

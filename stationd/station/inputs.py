@@ -221,10 +221,12 @@ class ToolOn(Input):
 
 @dataclass(frozen=True)
 class Written(Input):
-    """The database took ``record`` (with the crops ``images``): it may be acknowledged."""
+    """The database took ``record`` (with the crops ``images``): it may be acknowledged.
+    ``again``: it had it already (a copy the controller sent again, stored once)."""
 
     record: Record
     images: tuple[str, ...] = ()
+    again: bool = False
 
 
 @dataclass(frozen=True)

@@ -170,8 +170,15 @@ class ResultRules(OrderRules):
                 Publish(Notice(said, bolt=bolt, result_type=code, t=ev.t))]
 
     def _on_written(self, ev: Written) -> list[Action]:
-        """A result on disk: published for the screens, then the controller may forget it."""
+        """A result on disk: published for the screens, then the controller may forget it.
+        One the database had already (a copy the controller sent again: this core had not
+        seen it, after a reload or a restart) is said in the journal and acknowledged; no
+        new result is published (none was stored)."""
         a, r = ev.record, ev.record.result
+        if ev.again:
+            return [Publish(Notice(Said.SENT_AGAIN, tightening_id=int(r.tightening_id),
+                                   bolt=a.bolt, t=ev.t)),
+                    Acknowledge(r)]
         return [Publish(ResultRecorded(
             a.vin, a.bolt, bool(r.ok), float(r.torque_nm), float(r.angle_deg),
             int(r.tightening_id), int(r.pset), float(r.torque_min_nm), float(r.torque_max_nm),

@@ -263,6 +263,43 @@ def test_a_result_sent_again_is_recorded_once(repo, bolts_file):
     assert _counts(repo)["tightening_records"] == 2
 
 
+def test_a_resent_copy_is_only_the_same_tightening_by_the_controller_s_time(repo, bolts_file):
+    """A controller reset or replaced (a simulated one built anew at a reload) numbers its
+    tightenings from 1 again, and its torque and angle can coincide with an earlier result's:
+    with another controller timestamp it is another tightening, stored as a new record (it
+    was returned as the stored one, silently lost).  A true resend (same id, values and
+    time) is stored once and said to be a copy."""
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VINDUP", "SEDAN")
+    at = datetime(2026, 12, 1, 8, 0, 0, tzinfo=UTC)
+    kw = {"position_mm": (1.0, 2.0, 3.0), "match_distance_mm": 1.5, "tilt_deg": 2.0,
+          "torque_nm": 30.0, "angle_deg": 35.0, "tightening_id": 7}
+    first = repo.record_tightening_once("VINDUP", "B1", ok=False, controller_at=at, **kw)
+    assert not first.again
+    copy = repo.record_tightening_once("VINDUP", "B1", ok=False, controller_at=at, **kw)
+    assert (copy.id, copy.again) == (first.id, True)                  # sent again: once
+    later = at.replace(minute=5)
+    other = repo.record_tightening_once("VINDUP", "B1", ok=False, controller_at=later, **kw)
+    assert not other.again and other.id != first.id                  # ids started again
+    # a time not known on either side (a controller without a clock): the values decide
+    assert repo.record_tightening_once("VINDUP", "B1", ok=False, **kw).again
+    with repo.engine.connect() as c:
+        rows = c.execute(select(TighteningRecord.id, TighteningRecord.controller_at)
+                         .order_by(TighteningRecord.id)).all()
+    assert [(i, t.replace(tzinfo=UTC)) for i, t in rows] == [(first.id, at), (other.id, later)]
+    # the same rule where a result no bolt owns is stored, and for a controller event
+    un = {"vin": "VINDUP", "controller_vin": None, "pset": 1, "ok": False, "torque_nm": 30.0,
+          "angle_deg": 35.0, "reason": "outside any tightening"}
+    assert repo.record_unattributed(tightening_id=7, result_at=at, **un) is None  # recorded
+    assert repo.record_unattributed(tightening_id=7, result_at=at.replace(minute=9), **un)
+    ev = {"result_type": 3, "what": "batch increment", "vin": "VINDUP", "bolt": None,
+          "controller_vin": None, "tightening_id": 8, "pset": 1, "ok": True, "torque_nm": 0.0,
+          "angle_deg": 0.0}
+    assert repo.record_controller_event(result_at=at, **ev)
+    assert repo.record_controller_event(result_at=at, **ev) is None       # sent again
+    assert repo.record_controller_event(result_at=later, **ev)            # another one
+
+
 def test_the_owed_enable_is_the_latest_unsettled_one_and_its_record_settles_it(repo,
                                                                                bolts_file):
     """What a station owes the next (a reload, a restart): the latest tool enable until a

@@ -297,15 +297,15 @@ def test_a_result_the_database_refuses_is_a_fault_kept_and_stored_when_it_can(tm
 
     def prepare(st):
         repo = st.repo
-        real = repo.record_tightening
+        real = repo.record_tightening_once     # what the station writes a result through
 
-        def record_tightening(*args, **kw):
+        def record_tightening_once(*args, **kw):
             if full["on"]:
                 full["refused"] += 1
                 raise DbError("database write failed: database or disk is full")
             return real(*args, **kw)
 
-        repo.record_tightening = record_tightening
+        repo.record_tightening_once = record_tightening_once
 
     async def body(st, world):
         ctl = st.wrench.controller

@@ -594,6 +594,25 @@ def test_a_resumed_enable_records_its_result_to_its_bolt_and_vehicle_before_any_
     assert _kinds(core.feed(ResultIn(1001.2, result(70060, 2, ok=False)))) == ["Acknowledge"]
 
 
+def test_a_result_the_database_had_already_is_said_a_copy_and_published_as_no_new_result():
+    """A new core (a reload, a restart) does not know the results the last one stored: a copy
+    the controller sends again reaches the database, which had it (stored once).  The
+    journal says so in one line, and no new result is published (none was stored); the
+    controller may forget it."""
+    from stationd.station.events import Notice, ResultRecorded, Said
+    from stationd.station.inputs import Written
+
+    core = StationCore(PARAMS, leave_frames=2)
+    core.resume(Owed(_owed(), off_at=1000.0))
+    core.feed(Started(1000.1))
+    [rec] = [a for a in core.feed(ResultIn(1001.0, result(7, 2, ok=False)))
+             if isinstance(a, Record)]
+    acts = core.feed(Written(1001.1, rec, (), again=True))
+    assert _kinds(acts) == ["Acknowledge"] and not published(acts, ResultRecorded)
+    assert [(n.said, n.tightening_id, n.bolt) for n in published(acts, Notice)] == [
+        (Said.SENT_AGAIN, 7, "B2")]
+
+
 def test_a_resumed_enable_does_not_take_another_pset_or_a_result_after_its_window():
     core = StationCore(PARAMS, leave_frames=2)
     core.resume(Owed(_owed(), off_at=1000.0))

@@ -285,6 +285,32 @@ class SimController(OpenProtocolServer):
         """The controller no longer has these results (its store is bounded)."""
         self.call(lambda: [self._store.pop(t, None) for t in tightening_ids])
 
+    def go_on_from(self, before: SimController) -> None:
+        """Go on where ``before`` (closed: the simulator of the same controller, built by the
+        daemon before a reload) stopped: its tightening ids, its batch counter, the results
+        it keeps for MID 0064 (and those it still resends, where this one resends), and its
+        random scatter.
+
+        Why: a real controller is a box of its own, and a station's reload does not reset it:
+        its ids go on and its next result is a new one.  A simulator built anew at each
+        reload numbered its tightenings from 1 again and, with the same seed, made the same
+        torques and angles: the station took them for copies of results it had stored, and
+        the rundowns were lost.  Its connection, tool and pset are the new station's to set,
+        as they are after a real controller's reconnect."""
+        tid, batch = before._tid, before._batch_counter
+        store, unacked = list(before._store.items()), dict(before._unacked)
+        scatter = before._rng.getstate()
+
+        def take() -> None:
+            self._tid, self._batch_counter = tid, batch
+            self._store = OrderedDict(store[-self.store_size:])
+            self._unacked = unacked if self.resend_unacked else {}
+            self._rng.setstate(scatter)
+        if self._thread is None:
+            take()
+        else:
+            self.call(take)
+
     def on_power_on(self) -> None:
         """Volatile state is lost in a power cycle; the selected pset is kept."""
         self.tool_enabled, self.vin = False, ""

@@ -1,0 +1,58 @@
+"""The in-daemon simulated controller across a reload: as a real controller, it goes on (its
+tightening ids, its stored results, its scatter) rather than starting again at 1 with the
+same results, which the station took for copies it had stored (the results were lost)."""
+
+from __future__ import annotations
+
+import asyncio
+from types import SimpleNamespace
+
+from drivers.devices import Kind, build
+from drivers.wrench.sim.controller import SimController, SimWrench
+from stationd.config import StationConfig
+from stationd.sim.in_daemon import SimulatedStation
+
+
+def _tighten(ctl: SimController, n: int) -> list[tuple[int, float, float]]:
+    """``n`` tightenings with pset 1, the tool on: (id, torque, angle) of each."""
+    ctl.pset, ctl.tool_enabled = 1, True
+    out = []
+    for _ in range(n):
+        t = ctl.pull_trigger()
+        assert t is not None
+        out.append((t.tightening_id, t.torque_nm, t.angle_deg))
+    return out
+
+
+def test_each_reload_s_simulated_controller_goes_on_from_the_last():
+    """Three stations in a row (a start, two reloads), each opening its own ``sim://wrench``
+    with the same seed, as the daemon does: the ids go on (1-3, 4-6, 7-9), no station's
+    results replay an earlier one's, and the results the controller keeps for MID 0064
+    are there after the reload."""
+    cfg = StationConfig()       # no sim:// cameras: no world, only the controller
+    sim = SimulatedStation(cfg)
+    stop = asyncio.Event()
+    stop.set()                  # each station stops at once: only its start matters here
+    made: list[list[tuple[int, float, float]]] = []
+    for _ in range(3):
+        wrench = build(Kind.WRENCH, "sim://wrench?seed=0")
+        assert isinstance(wrench, SimWrench)
+        ctl = wrench.controller
+        ctl.start()
+        try:
+            asyncio.run(sim.beside(cfg, SimpleNamespace(wrench=wrench, lift=None), stop))
+            if made:
+                assert ctl.call(lambda c=ctl: sorted(c._store)) == list(range(1, len(made) * 3 + 1))
+            made.append(_tighten(ctl, 3))
+        finally:
+            ctl.close()
+    assert [[i for i, _, _ in m] for m in made] == [[1, 2, 3], [4, 5, 6], [7, 8, 9]]
+    values = [[(t, a) for _, t, a in m] for m in made]
+    assert values[1] != values[0] and values[2] not in values[:2]
+    # what a controller built anew would have done (the bug): the first series again
+    fresh = SimController(seed=0)
+    fresh.start()
+    try:
+        assert _tighten(fresh, 3) == made[0]
+    finally:
+        fresh.close()
