@@ -236,26 +236,11 @@ class Repository:
             add_command(s, at=at, user=user, source=source, kind="reopen", vin=vin, bolt=None,
                         comment=comment)
 
-    def record_tightening(
-        self, vin: str, bolt: str, *, ok: bool, position_mm: Sequence[float],
-        match_distance_mm: float, tilt_deg: float, torque_nm: float | None,
-        angle_deg: float | None, parameters_id: int | None = None,
-        params_sent: Mapping[str, Any] | None = None, acknowledged: bool = True,
-        tightening_id: int | None = None, sent_at: datetime | None = None,
-        result_at: datetime | None = None, images: Sequence[str] = (),
-        enable_id: int | None = None, kind: str = TIGHTENING, operator: str | None = None,
-        controller_at: datetime | None = None,
-    ) -> int:
+    def record_tightening(self, vin: str, bolt: str, **kw: Any) -> int:
         """Record one tightening; return its id (the stored one for a resent copy).  As
-        :meth:`record_tightening_once`, for callers that need not know whether it was a
-        copy."""
-        return self.record_tightening_once(
-            vin, bolt, ok=ok, position_mm=position_mm, match_distance_mm=match_distance_mm,
-            tilt_deg=tilt_deg, torque_nm=torque_nm, angle_deg=angle_deg,
-            parameters_id=parameters_id, params_sent=params_sent, acknowledged=acknowledged,
-            tightening_id=tightening_id, sent_at=sent_at, result_at=result_at, images=images,
-            enable_id=enable_id, kind=kind, operator=operator,
-            controller_at=controller_at).id
+        :meth:`record_tightening_once` (its keywords), for callers that need not know whether
+        it was a copy."""
+        return self.record_tightening_once(vin, bolt, **kw).id
 
     def record_tightening_once(
         self, vin: str, bolt: str, *, ok: bool, position_mm: Sequence[float],
