@@ -32,6 +32,7 @@ from typing import Any, TypeVar
 
 from drivers.counting import counted
 from drivers.errors import ConnectionLostError, DeviceError, RefusedError
+from drivers.identity import DeviceIdentity
 from drivers.lifecycle import Openable
 
 log = logging.getLogger(__name__)
@@ -306,9 +307,16 @@ class Wrench(Openable):
 
     # -- commands --------------------------------------------------------------------------
     def identity(self) -> str:
-        """The controller's own name (and cell/channel), as it introduced itself."""
+        """The controller's own name (and cell/channel), as it introduced itself: the words
+        of :meth:`identification`."""
+        return self.identification().words
+
+    def identification(self) -> DeviceIdentity:
+        """Who the controller says it is, typed: its words and the nameplate fields the
+        backend knows (manufacturer, model, serial number, software revision), one reading
+        (words and fields of the same session)."""
         self._check_open()
-        return self._identity()
+        return self._identification()
 
     def status(self) -> LinkStatus:
         """Link state for the station's fault display; never raises once opened."""
@@ -474,7 +482,7 @@ class Wrench(Openable):
         ``close()``, whatever happened in between.  Nothing by default."""
 
     @abstractmethod
-    def _identity(self) -> str: ...
+    def _identification(self) -> DeviceIdentity: ...
 
     @abstractmethod
     def _status(self) -> LinkStatus: ...

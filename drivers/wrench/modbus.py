@@ -54,6 +54,7 @@ from drivers.errors import (
     ProtocolError,
     RefusedError,
 )
+from drivers.identity import DeviceIdentity
 from drivers.modbus_link import LinkSpec, ModbusLink, Wording, parse_modbus_url
 from drivers.url import DeviceUrl
 from drivers.wrench.base import SupervisedWrench, check_positive
@@ -397,8 +398,11 @@ class ModbusWrench(SupervisedWrench):
     def _link_up(self) -> bool:
         return self._link is not None
 
-    def _identity(self) -> str:
-        return f"register-driven tightening controller, {self._where().describe()}"
+    def _identification(self) -> DeviceIdentity:
+        """Words only: the register map has no identity registers (no manufacturer, serial
+        or software version to read), and the link's address is no nameplate field."""
+        return DeviceIdentity(f"register-driven tightening controller, "
+                              f"{self._where().describe()}")
 
     def controller_status(self) -> tuple[bool, bool]:
         """(tool enabled, parameters valid) as of the last poll."""

@@ -35,6 +35,7 @@ from dataclasses import dataclass, replace
 from typing import Any, Literal, cast
 
 from drivers.counting import noun
+from drivers.identity import DeviceIdentity
 from drivers.modbus_link import LinkSpec
 from drivers.modbus_server import SimServer
 from drivers.url import DeviceUrl
@@ -329,6 +330,8 @@ class SimModbusWrench(ModbusWrench):
         """The controller started at open (its server and pty)."""
         self.controller.close()
 
-    def _identity(self) -> str:
-        return f"simulated {super()._identity()}"
+    def _identification(self) -> DeviceIdentity:
+        """The real backend's (words only), said to be simulated."""
+        ident = super()._identification()
+        return replace(ident, words=f"simulated {ident.words}")
 

@@ -17,11 +17,21 @@ where it looks for any joining system's.  Where each device goes (the asset fold
 The JoiningSystem is instantiated with its optional children, AssetManagement/Assets and its
 folders among them.  Each asset (browse name: the device's name as the station's screens and
 journal use it, in the server's namespace) holds ``Identification``
-(MachineryComponentIdentificationType: Manufacturer and SerialNumber, mandatory for an asset,
-empty where the station does not know them; the controller's identity from its MID 0002 in
-``Model``) and ``Health`` (DI FunctionalGroupType) with ``DeviceHealth`` (DI
-DeviceHealthEnumeration: NORMAL 0 while the device answers, FAILURE 1 while it is in fault;
-the line link OFF_SPEC 3 while its backlog is past a bound), ``ErrorMessage`` (the station's
+(MachineryComponentIdentificationType) and ``Health`` (DI FunctionalGroupType).  The
+identification is what the device said it is (``DeviceIdentified``: the controller's MID
+0002, mapped by its driver), in DI's nameplate properties: ``Manufacturer`` and
+``SerialNumber`` (mandatory for an asset: empty while the station does not know them),
+``Model`` (the device's model, else its one line of words, as before the fields were typed),
+``SoftwareRevision``, and IJT's ``Description`` (the system-specific description of the
+asset: the device's words, whole).  The type's instantiation makes DI's ones (optional
+ones among them, left empty: the station knows no ManufacturerUri or ProductCode); IJT's
+Description is made when first known, with the module's NodeIds
+(``<asset>.Identification.<name>``).  IJT's ``SupplierCode`` (the user's ERP code for the
+supplier) is not the Open Protocol supplier code and is left out.
+
+``Health`` holds ``DeviceHealth`` (DI DeviceHealthEnumeration: NORMAL 0 while the device
+answers, FAILURE 1 while it is in fault; the line link OFF_SPEC 3 while its backlog is past a
+bound), ``ErrorMessage`` (the station's
 reason, empty when NORMAL) and ``ErrorTimestamp`` (when it last changed).  The line
 database's link down is FAILURE of that asset only: never a fault of the station (its
 ``State`` stays what the station says).  A device first heard of in an event (a pair added
@@ -31,13 +41,14 @@ by a reload) gets its asset then.
 from __future__ import annotations
 
 import asyncio
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
 
 from asyncua.common.node import Node
 from asyncua.server.server import Server
 
+from drivers.identity import DeviceIdentity
 from stationd.opcua.model import DI_URI, IJT_URI, MACHINERY_URI
 from stationd.opcua.uatypes import ua
 
@@ -63,7 +74,9 @@ class _Asset:
     health: Node
     message: Node
     stamp: Node
-    model: Node
+    ident: Node
+    nodeid: str                                  # its Identification's NodeId (a string)
+    plate: dict[str, Node] = field(default_factory=dict)   # property -> node, once made
 
 
 class DeviceAssets:
@@ -102,12 +115,24 @@ class DeviceAssets:
             await asset.stamp.write_value(ua.Variant(datetime.fromtimestamp(at, UTC),
                                                      ua.VariantType.DateTime))
 
-    async def identified(self, device: str, identity: str) -> None:
-        """What the device said it is (the controller's MID 0002), in its ``Model``."""
+    async def identified(self, device: str, identity: DeviceIdentity) -> None:
+        """What the device said it is (the controller's MID 0002), in its Identification's
+        nameplate properties (see the module's docstring); a field no longer said is
+        emptied, never left from an earlier device."""
         async with self._lock:
             asset = self._assets.get(device) or await self._add(device)
-            await asset.model.write_value(ua.Variant(ua.LocalizedText(identity[:200], "en"),
-                                                     ua.VariantType.LocalizedText))
+            for name, value in _nameplate(identity):
+                node = asset.plate.get(name)
+                if node is None and value is None:
+                    continue                     # optional, never said: not made
+                spec = PLATE[name]
+                v = _plate_value(spec.localized, value or "")
+                if node is None:
+                    node = asset.plate[name] = await _property(
+                        asset.ident, f"{asset.nodeid}.{name}", self._idx,
+                        ua.QualifiedName(name, self._uris.index(spec.uri)), v)
+                else:
+                    await node.write_value(v)
 
     async def _add(self, device: str) -> _Asset:
         assert self._server is not None and self._js is not None  # noqa: S101 - built first
@@ -125,10 +150,13 @@ class DeviceAssets:
                                       ua.QualifiedName("Identification", di),
                                       objecttype=ua.NodeId(COMPONENT_IDENTIFICATION_TYPE,
                                                            mach))
-        model = await _variable(ident, f"{base}.Identification.Model", idx,
-                                ua.QualifiedName("Model", di),
-                                ua.Variant(ua.LocalizedText("", "en"),
-                                           ua.VariantType.LocalizedText))
+        plate: dict[str, Node] = {}
+        for name, spec in PLATE.items():   # the mandatory ones, and Model as before
+            if spec.always:
+                plate[name] = await _property(
+                    ident, f"{base}.Identification.{name}", idx,
+                    ua.QualifiedName(name, uris.index(spec.uri)),
+                    _plate_value(spec.localized, ""))
         health = await node.add_object(ua.NodeId(f"{base}.Health", idx),
                                        ua.QualifiedName("Health", ijt),
                                        objecttype=ua.NodeId(FUNCTIONAL_GROUP_TYPE, di))
@@ -144,7 +172,7 @@ class DeviceAssets:
                                 ua.QualifiedName("ErrorTimestamp", ijt),
                                 ua.Variant(datetime.now(UTC), ua.VariantType.DateTime),
                                 ua.NodeId(ua.ObjectIds.UtcTime))
-        asset = _Asset(dh, msg, stamp, model)
+        asset = _Asset(dh, msg, stamp, ident, f"{base}.Identification", plate)
         self._assets[device] = asset
         return asset
 
@@ -167,10 +195,54 @@ class DeviceAssets:
         return node
 
 
+@dataclass(frozen=True)
+class _Plate:
+    """A nameplate property: its model's URI, whether LocalizedText (else String), and
+    whether every asset has it from the start (mandatory, or served before: Model)."""
+
+    uri: str
+    localized: bool
+    always: bool = False
+
+
+#: Identification's properties the station writes, in DI's (and IJT's) names
+PLATE = {"Manufacturer": _Plate(DI_URI, True, True), "SerialNumber": _Plate(DI_URI, False, True),
+         "Model": _Plate(DI_URI, True, True), "SoftwareRevision": _Plate(DI_URI, False),
+         "Description": _Plate(IJT_URI, True)}
+
+
+def _nameplate(identity: DeviceIdentity) -> list[tuple[str, str | None]]:
+    """``identity`` as PLATE's properties (None: not said).  Model falls back to the
+    words: a device that gives no model is still named there, as before the fields."""
+    return [("Manufacturer", identity.manufacturer), ("SerialNumber", identity.serial_number),
+            ("Model", identity.model or identity.words or None),
+            ("SoftwareRevision", identity.software_revision),
+            ("Description", identity.words or None)]
+
+
+def _plate_value(localized: bool, text: str) -> ua.Variant:
+    text = text[:200]    # a controller's odd field does not make a page of a property
+    if localized:
+        return ua.Variant(ua.LocalizedText(text, "en"), ua.VariantType.LocalizedText)
+    return ua.Variant(text, ua.VariantType.String)
+
+
+async def _property(parent: Node, nodeid: str, idx: int, name: Any, value: Any) -> Node:
+    """A property (HasProperty, PropertyType, as the nameplate interfaces declare them)
+    under ``parent``, or the one its type made there (the identification's mandatory
+    ones), written with ``value``."""
+    try:
+        node = await parent.get_child([name.to_string()])
+    except ua.UaError:
+        return await parent.add_property(ua.NodeId(nodeid, idx), name, value)
+    await node.write_value(value)
+    return node
+
+
 async def _variable(parent: Node, nodeid: str, idx: int, name: Any, value: Any,
                     datatype: Any = None) -> Node:
-    """A read-only variable under ``parent``, or the one its type made there (the
-    identification's mandatory ones)."""
+    """A read-only variable under ``parent``, or the one its type made there (the health's
+    DeviceHealth)."""
     try:
         node = await parent.get_child([name.to_string()])
     except ua.UaError:

@@ -65,6 +65,7 @@ from asyncua.ua.ua_binary import struct_from_binary
 from db.curves import curves_for
 from db.ledger import RUNDOWN
 from db.repository import Repository
+from drivers.identity import DeviceIdentity
 from stationd.access import verify_password
 from stationd.bus import EventBus
 from stationd.opcua.catchup import CatchUp
@@ -375,7 +376,8 @@ class OpcUaServer:
             self._soon(self._task, self.assets.report(
                 LINE_LINK, health, event.alarm or event.reason, event.t))
         elif isinstance(event, DeviceIdentified):
-            self._soon(self._task, self.assets.identified(event.device, event.identity))
+            self._soon(self._task, self.assets.identified(
+                event.device, event.identification or DeviceIdentity(event.identity)))
 
     def _soon(self, fn: Callable[..., Any], *args: Any) -> None:
         loop = self._loop

@@ -114,15 +114,16 @@ class ControllerFeed:
 
     def came_back(self) -> None:
         """After the controller came (back): what it says it is (the journal, the devices
-        panel), and the results it made meanwhile, fetched."""
+        panel, OPC UA's Identification: words and fields of one reading), and the results
+        it made meanwhile, fetched."""
         wrench = self._keeper.device
         if wrench is not None:
             try:
-                who = wrench.identity()
+                who = wrench.identification()
             except (DeviceError, ValueError):
-                who = ""
-            if who:   # the driver's own journal line said it, with its revisions
-                self._tell(DeviceSaid(time.time(), WRENCH, who))
+                who = None
+            if who is not None and who.words:   # the driver's own journal line said it
+                self._tell(DeviceSaid.of(time.time(), WRENCH, who))
         self._accounted = None     # the catch-up says up to where (a result may come first)
         if self.catching_up is None or self.catching_up.done():
             self.catching_up = asyncio.get_running_loop().create_task(self._catch_up())

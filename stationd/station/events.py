@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from db.kinds import BoltStatus
+from drivers.identity import DeviceIdentity
 from stationd.reasons import CoreFault, FaultWhy, Reason, Skip, Unattributed
 
 
@@ -204,10 +205,13 @@ class LineLinkChanged(StationEvent):
 @dataclass(frozen=True)
 class DeviceIdentified(StationEvent):
     """What a device said it is when it (re)connected: the controller's name, cell and
-    channel, supplier, software versions (Open Protocol MID 0002)."""
+    channel, supplier, software versions (Open Protocol MID 0002).  ``identity``: its words
+    (the devices panel, the status); ``identification``: the same, typed (OPC UA's
+    Identification: manufacturer, serial number ...); None: words only."""
 
     device: str
     identity: str
+    identification: DeviceIdentity | None = None
 
 
 # -- the vehicle --------------------------------------------------------------------------------

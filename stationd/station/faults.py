@@ -67,11 +67,13 @@ class FaultRules(TeachRules):
         return acts + self._back(ev.t, ev.device)
 
     def _on_device_said(self, ev: DeviceSaid) -> list[Action]:
-        """What a device said it is, told once per change (a reconnect says it again)."""
-        if self.identities.get(ev.device) == ev.identity:
+        """What a device said it is, told once per change (a reconnect says it again; a
+        field that changed under the same words is a change too)."""
+        plate = ev.nameplate
+        if self.identifications.get(ev.device) == plate:
             return []
-        self.identities[ev.device] = ev.identity
-        return [Publish(DeviceIdentified(ev.device, ev.identity, t=ev.t))]
+        self.identifications[ev.device] = plate
+        return [Publish(DeviceIdentified(ev.device, ev.identity, plate, t=ev.t))]
 
     def _on_line_link(self, ev: LineLinkIn) -> list[Action]:
         """The line database's link, kept and told when it changes; never a fault."""

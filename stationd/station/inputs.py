@@ -13,6 +13,7 @@ from typing import Any
 
 from db.bolts import Parameters
 from db.kinds import BoltStatus
+from drivers.identity import DeviceIdentity
 from drivers.keeper import FaultKind
 from drivers.wrench.base import TighteningResult, UnreadableResult
 from stationd.reasons import Reason, Skip
@@ -166,10 +167,31 @@ class DeviceBack(Input):
 class DeviceSaid(Input):
     """What a device said it is when it (re)connected (the controller's MID 0002: name, cell
     and channel, software versions).  The core keeps it and tells it (``DeviceIdentified``):
-    the devices panel and OPC UA show what the core was told, as for every other report."""
+    the devices panel and OPC UA show what the core was told, as for every other report.
+
+    ``identity``: its words (the journal, the devices panel, the status);
+    ``identification``: the same reading typed, its nameplate fields for OPC UA (its
+    ``words`` are ``identity``); None from a device that gives words only."""
 
     device: str
     identity: str
+    identification: DeviceIdentity | None = None
+
+    def __post_init__(self) -> None:
+        # one reading, two views: words that disagree would tell two devices at once
+        if self.identification is not None and self.identification.words != self.identity:
+            raise ValueError(f"{self.device}: identity {self.identity!r} is not its "
+                             f"identification's words {self.identification.words!r}")
+
+    @classmethod
+    def of(cls, t: float, device: str, identification: DeviceIdentity) -> DeviceSaid:
+        """What a driver's typed identity says, words and fields."""
+        return cls(t, device, identification.words, identification)
+
+    @property
+    def nameplate(self) -> DeviceIdentity:
+        """The typed identity, words alone where the device gave no fields."""
+        return self.identification or DeviceIdentity(self.identity)
 
 
 @dataclass(frozen=True)

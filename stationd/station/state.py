@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 
 from db.bolts import Window
+from drivers.identity import DeviceIdentity
 from stationd.reasons import FaultWhy, Reason, Skip, SkipKind, Why
 from stationd.station.actions import Action, DisableTool, Owed, Publish, Selection
 from stationd.station.commands import TeachPoint
@@ -124,10 +125,13 @@ class CoreStatus:
     held: frozenset[str] = frozenset()
     #: whether the bolt selected now is to be loosened first (the NOK policy)
     loosen: bool = False
-    #: device -> what it said it is when it (re)connected
+    #: device -> what it said it is when it (re)connected, in words
     identities: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
     #: the line database's link as last told (None: no line forwarder, or not told yet)
     line: LineLinkChanged | None = None
+    #: device -> the same, typed (its words and nameplate fields: manufacturer, serial ...)
+    identifications: Mapping[str, DeviceIdentity] = field(
+        default_factory=lambda: MappingProxyType({}))
 
     @property
     def cameras_on(self) -> bool:
@@ -155,7 +159,8 @@ class CoreState:
     model: str | None = None
     #: device -> the fault's kind, and why (its own words, or the station's own fault, typed)
     faults: dict[str, tuple[str, FaultWhy]] = field(default_factory=dict)
-    identities: dict[str, str] = field(default_factory=dict)   # device -> what it said it is
+    #: device -> what it said it is (its words: ``identities`` in the status)
+    identifications: dict[str, DeviceIdentity] = field(default_factory=dict)
     line: LineLinkChanged | None = None   # the line database's link as last told
     tool_on: bool = False
     _specs: dict[str, LoadedBolt] = field(default_factory=dict, repr=False)
@@ -216,7 +221,10 @@ class CoreState:
                           frozenset(() if self.matcher is None else self.matcher.locked),
                           frozenset(() if self.matcher is None else self.matcher.held),
                           self._selection is not None and self._selection.loosen,
-                          MappingProxyType(dict(self.identities)), self.line)
+                          MappingProxyType({d: i.words
+                                            for d, i in self.identifications.items()}),
+                          self.line,
+                          MappingProxyType(dict(self.identifications)))
 
     @property
     def selection(self) -> Selection | None:

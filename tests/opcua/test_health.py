@@ -10,12 +10,13 @@ from typing import Any
 
 from asyncua.client.client import Client
 
+from drivers.identity import DeviceIdentity
 from stationd.bus import EventBus
 from stationd.opcua.health import FAILURE, NORMAL, OFF_SPEC
 from stationd.opcua.model import DI_URI, IJT_URI, MACHINERY_URI
 from stationd.opcua.server import NAMESPACE
 from stationd.opcua.uatypes import ua
-from stationd.station.events import DeviceHealth, LineLinkChanged
+from stationd.station.events import DeviceHealth, DeviceIdentified, LineLinkChanged
 from tests.opcua.test_server import config, repo, serving, stopping
 
 __all__ = ["repo"]   # the fixture, shared with test_server
@@ -121,6 +122,67 @@ def test_a_client_sees_a_device_go_to_fault_and_back(repo):
     assert out["back"][0] == NORMAL and out["back"][1].Text == ""
     assert out["rear"] == (FAILURE, "no frame in 2 s")
     assert out["line down"] == "connection refused"
+
+
+def test_a_client_reads_the_controller_s_manufacturer_and_serial_number(repo):
+    """The controller's MID 0002, typed by its driver, on its asset's Identification as a
+    stock asyncua client browses it: Manufacturer and SerialNumber (mandatory, empty until
+    the controller said them), Model, SoftwareRevision, IJT's Description (its words)."""
+    bus = EventBus()
+    plate = DeviceIdentity("PF6000 (cell 0001, channel 01): supplier ACT, serial A123456789",
+                           manufacturer="ACT", model="PF6000 (RBU Premium)",
+                           serial_number="A123456789", software_revision="PF6000 3.4.1")
+
+    async def scenario() -> dict[str, Any]:
+        srv, stop, task = await serving(config(), repo, bus=bus, devices=DEVICES)
+        loop = asyncio.get_running_loop()
+        out: dict[str, Any] = {}
+        try:
+            async with Client(srv.url) as client:
+                uris = await client.get_namespace_array()
+                di, ijt = uris.index(DI_URI), uris.index(IJT_URI)
+                _, _, asset = await _asset(client, "Controllers", "wrench")
+                ident = await asset.get_child([f"{di}:Identification"])
+
+                async def read(name: str, ns: int = di) -> Any:
+                    value = await (await ident.get_child([f"{ns}:{name}"])).read_value()
+                    return value.Text if isinstance(value, ua.LocalizedText) else value
+
+                out["before"] = (await read("Manufacturer"), await read("SerialNumber"))
+                await loop.run_in_executor(None, bus.publish,
+                                           DeviceIdentified("wrench", plate.words, plate))
+                for _ in range(100):
+                    if await read("SerialNumber") == "A123456789":
+                        break
+                    await asyncio.sleep(0.05)
+                out["after"] = {n: await read(n) for n in (
+                    "Manufacturer", "SerialNumber", "Model", "SoftwareRevision")}
+                out["description"] = await read("Description", ijt)
+                refs = await ident.get_references(refs=ua.ObjectIds.HasProperty)
+                out["properties"] = {r.BrowseName.Name for r in refs}
+                # a controller that says less later (words only): no field is left over
+                await loop.run_in_executor(None, bus.publish,
+                                           DeviceIdentified("wrench", "Short (cell 1)"))
+                for _ in range(100):
+                    if await read("Model") == "Short (cell 1)":
+                        break
+                    await asyncio.sleep(0.05)
+                out["less"] = {n: await read(n) for n in (
+                    "Manufacturer", "SerialNumber", "Model", "SoftwareRevision")}
+                return out
+        finally:
+            await stopping(srv, stop, task)
+
+    out = asyncio.run(scenario())
+    assert out["before"] == ("", "")
+    assert out["after"] == {"Manufacturer": "ACT", "SerialNumber": "A123456789",
+                            "Model": "PF6000 (RBU Premium)",
+                            "SoftwareRevision": "PF6000 3.4.1"}
+    assert out["description"] == plate.words
+    assert {"Manufacturer", "SerialNumber", "Model", "SoftwareRevision",
+            "Description"} <= out["properties"]
+    assert out["less"] == {"Manufacturer": "", "SerialNumber": "", "Model": "Short (cell 1)",
+                           "SoftwareRevision": ""}
 
 
 async def _until(node: Any, value: int, timeout: float = 5.0) -> None:

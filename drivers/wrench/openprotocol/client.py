@@ -31,6 +31,7 @@ import threading
 from typing import Any
 
 from drivers.errors import ConnectionLostError, DeviceError, ProtocolError
+from drivers.identity import DeviceIdentity
 from drivers.link import Link, TcpLink
 from drivers.url import DeviceUrl
 from drivers.wrench.base import Received, SupervisedWrench, check_positive
@@ -293,10 +294,12 @@ class OpenProtocolWrench(SupervisedWrench):
     def _link_up(self) -> bool:
         return self._channel.connected
 
-    def _identity(self) -> str:
+    def _identification(self) -> DeviceIdentity:
+        """From the session's MID 0002 (mapping: ``ControllerIdentity.device_identity``);
+        empty words before the first session."""
         with self._cond:
             ident = self._session.identity
-            return ident.describe() if ident is not None else ""
+            return ident.device_identity() if ident is not None else DeviceIdentity("")
 
     def _send_ack(self, token: int, timeout: float) -> None:
         self._feed.acknowledge(token, timeout)

@@ -18,6 +18,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from drivers.identity import DeviceIdentity
+
 #: tag -> (field, width); the revision that brought each one is in the comments.
 IDENTITY_PARAMS: dict[int, tuple[str, int]] = {
     1: ("cell_id", 4), 2: ("channel_id", 2), 3: ("controller_name", 25),        # rev 1
@@ -71,6 +73,31 @@ class ControllerIdentity:
         if self.sequence_number_support is not None:
             extra.append("link-level ack " + ("yes" if self.sequence_number_support else "no"))
         return f"{head}: {', '.join(extra)}" if extra else head
+
+    def device_identity(self) -> DeviceIdentity:
+        """The nameplate fields an MES reads (DI's names), from what this 0002 carries;
+        ``words`` is :meth:`describe`.
+
+        MID 0002 has no manufacturer, model or product code field: what comes nearest is
+        taken, and a revision that does not carry it leaves the field None.
+
+        - manufacturer: the supplier code (parameter 04, three letters, e.g. ``ACT`` for
+          Atlas Copco Tools), the only word of who made the controller.  IJT Base has a
+          ``SupplierCode`` of its own on an asset's Identification, but defined as the
+          SAP or ERP supplier code *of the user*, another thing: the station leaves it
+          empty rather than give the protocol's code for the ERP's;
+        - model: the controller's name (parameter 03: what the controller calls itself),
+          with the RBU type (parameter 08, the controller's function level) after it when
+          the revision gives it;
+        - serial_number: the controller's serial number (parameter 09);
+        - software_revision: the controller's software version (parameter 06); the tool's
+          software and the Open Protocol version stay in the words."""
+        model = self.controller_name or None
+        if self.rbu_type:
+            model = f"{model or 'controller'} (RBU {self.rbu_type})"
+        return DeviceIdentity(self.describe(), manufacturer=self.supplier_code, model=model,
+                              serial_number=self.controller_serial,
+                              software_revision=self.controller_software_version)
 
 
 def parse_identity(revision: int, data: bytes) -> ControllerIdentity:

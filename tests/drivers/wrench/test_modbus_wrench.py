@@ -14,6 +14,7 @@ import time
 import pytest
 
 from drivers.errors import ConnectError, DeviceError, RefusedError, UrlError
+from drivers.identity import DeviceIdentity
 from drivers.wrench import open_wrench
 from drivers.wrench.base import LinkStatus, ResultType, Status, TighteningResult
 from drivers.wrench.modbus_map import MapError, Number, WrenchRegisterMap
@@ -144,6 +145,8 @@ def test_sim_url_over_both_transports():
                          **FAST) as w:
             assert isinstance(w, SimModbusWrench)
             assert w.identity().startswith("simulated register-driven tightening controller")
+            # no identity registers: words only, no nameplate field invented
+            assert w.identification() == DeviceIdentity(w.identity())
             w.select_pset(2)
             w.enable_tool()
             t = w.controller.pull_trigger()

@@ -30,6 +30,12 @@ def test_session_start_subscribes_and_introduces_the_controller(sim, transport, 
             (1, 6, b""), (60, 7, b""), (80, 1, b"")]            # 0080: the controller's clock
         assert w.revisions == {1: 6, 60: 7} and not w.link_level
         assert w.status().connected and w.wait_connected(0.1)
+        # the same MID 0002, typed: the nameplate fields an MES reads over OPC UA
+        plate = w.identification()
+        assert plate.words == w.identity()
+        assert (plate.manufacturer, plate.model, plate.serial_number,
+                plate.software_revision) == ("SIM", "SimController (RBU simulated RBU)",
+                                             "SIM0000001", "stationd-sim 1.0")
     assert sim.received()[-1].mid == 3                    # communication stop on close
 
 

@@ -256,3 +256,21 @@ def test_identity_describes_itself_and_survives_odd_data():
         1, 1, "", "03Short name")
     assert parse_identity(1, b"hello").describe() == "hello"
     assert identity(decode(b"00200002001         ")) == "controller (MID 0002 revision 1)"
+
+
+def test_identity_gives_the_nameplate_fields_an_mes_reads():
+    """MID 0002 revision 4+ -> manufacturer (the supplier code), model (the name, with the
+    RBU type), serial number, software revision; the words are ``describe()``'s, unchanged."""
+    data = "".join(t + v for t, v in IDENT[:13]).encode()
+    ident = parse_identity(6, data)
+    plate = ident.device_identity()
+    assert plate.words == ident.describe()
+    assert (plate.manufacturer, plate.model, plate.serial_number, plate.software_revision) == (
+        "ACT", "PF6000 Line 3 (RBU Premium)", "A123456789", "PF6000 3.4.1")
+    # revision 1 says only its name: the rest is not said (None), never invented
+    first = parse_identity(1, "".join(t + v for t, v in IDENT[:3]).encode()).device_identity()
+    assert (first.manufacturer, first.model, first.serial_number, first.software_revision) == (
+        None, "PF6000 Line 3", None, None)
+    # blank (space-padded) fields are fields not said
+    blank = parse_identity(4, b"010001020103" + b" " * 25 + b"04   ").device_identity()
+    assert blank.manufacturer is None and blank.model is None
