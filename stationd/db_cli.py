@@ -365,7 +365,8 @@ def cmd_db_spc(args: argparse.Namespace) -> int:
     if args.json:
         sys.stdout.write(strict_json(doc) + "\n")
         return EXIT_OK
-    print(f"{'model':<10} {'bolt':<8} {'pset':>4} {'n':>4} {'NOK':>4}  "
+    # OK: the OK results the figures are computed on; NOK: the NOK rundowns (not bolts)
+    print(f"{'model':<10} {'bolt':<8} {'pset':>4} {'OK':>4} {'NOK':>4}  "
           f"{'torque mean':>11} {'Cp':>5} {'Cpk':>5}  {'angle mean':>10} {'Cp':>5} {'Cpk':>5}")
     for r in doc["bolts"]:
         t, a = r["torque"], r["angle"]

@@ -56,6 +56,10 @@ def test_spc_groups_by_bolt_and_pset_on_ok_results_and_counts_noks(repo, bolts_f
     text = subprocess.run([sys.executable, "-m", "stationd", "db", "spc", "--db", db],
                           capture_output=True, text=True, cwd=ROOT, timeout=60, check=False)
     assert text.returncode == 0 and "B1" in text.stdout and "20.0 %" in text.stdout
+    head = text.stdout.splitlines()[0].split()
+    assert head[:5] == ["model", "bolt", "pset", "OK", "NOK"]     # counts named by kind
+    [b2_row] = [line.split() for line in text.stdout.splitlines() if " B2 " in f" {line} "]
+    assert b2_row[3:5] == ["0", "3"]
 
 
 def test_a_parameter_change_starts_a_new_group_and_an_unknown_model_is_bad_input(
