@@ -412,11 +412,14 @@ class Forwarder:
         """Forward until ``stop``: at once while behind, every ``POLL_S`` when caught up (at
         once when ``wake`` is set: the station recorded something; a poll alone would leave
         a record up to ``POLL_S`` behind), with backoff while the line database is down (a
-        record does not cut a backoff short); ``on_change`` hears each change of up/down or
-        alarm (the journal, STATUS=)."""
+        record does not cut a backoff short); ``on_change`` hears each change of up/down,
+        alarm or, while down, of why (the journal, STATUS=, the line asset's ErrorMessage in
+        OPC UA: a line database that answers again but refuses this role must not keep
+        saying "connection refused")."""
         loop = asyncio.get_running_loop()
         rng = random.Random(self.cfg.station_id)  # noqa: S311 - jitter
-        wait, told = BACKOFF_S[0], (None, None)
+        wait = BACKOFF_S[0]
+        told: tuple[Any, ...] = (None, None, None)
         while not stop.is_set():
             if wake is not None:
                 wake.clear()     # what is recorded from here on is read by this step or wakes
@@ -437,8 +440,9 @@ class Forwarder:
             while True:
                 st = await loop.run_in_executor(None, self.status, measure)
                 self.last_status = st
-                if (st["up"], st["alarm"]) != told:
-                    told = (st["up"], st["alarm"])
+                now = (st["up"], st["alarm"], st["last_error"] if st["up"] is False else None)
+                if now != told:
+                    told = now
                     on_change(st)
                 left = end - loop.time()
                 if left <= 0 or stop.is_set() or (woken is not None and woken.is_set()):

@@ -106,3 +106,33 @@ def test_line_tables_that_cannot_be_made_are_the_line_down_not_refused_records(
         f.step()
     st = f.status()
     assert (st["up"], st["backlog"], st["quarantined"]) == (False, 1, 0)
+
+
+def test_a_new_reason_while_down_is_told(repo, monkeypatch):
+    """While the line database stays down, a new reason is told (the journal, STATUS=, the
+    line asset's ErrorMessage): it was told only on up/down changes, so OPC UA kept saying the
+    first reason after the server answered again but refused the role."""
+    monkeypatch.setattr(forward, "BACKOFF_S", (0.01, 0.02))
+    monkeypatch.setattr(forward, "STATUS_S", 0.01)
+    record(repo, VIN, "B1", tightening_id=1)
+    reasons = iter(["connection refused", "connection refused", "role st lacks INSERT"])
+    said: list[tuple[bool | None, str | None]] = []
+
+    async def main() -> None:
+        f = Forwarder(repo, LineConfig("postgresql+psycopg://st@127.0.0.1:1/line", "ST-R"))
+
+        def push(*_: object) -> int:
+            raise forward.LineDown(next(reasons, "role st lacks INSERT"))
+
+        monkeypatch.setattr(f.line, "push", push)
+        stop = asyncio.Event()
+        task = asyncio.create_task(f.run(stop, lambda st: said.append(
+            (st["up"], st["last_error"])), None))
+        await _until(lambda: len(said) >= 2, 20.0)
+        await asyncio.sleep(0.2)           # more tries, the same reason: nothing more told
+        stop.set()
+        await task
+        f.line.dispose()
+
+    asyncio.run(main())
+    assert said == [(False, "connection refused"), (False, "role st lacks INSERT")]
