@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from drivers.counting import counted
 from drivers.wrench import takes_targets
 from stationd.config import StationConfig, read_all, read_station
 from stationd.errors import ConfigError, InputError
@@ -67,6 +68,21 @@ def validate_station(path: str | Path) -> StationConfig:
         if errors:
             raise errors[0]
     return cfg
+
+
+def more_errors(path: str | Path) -> str:
+    """What follows the first error a start or reload refused ``path`` with: ``" (and 2 more
+    errors: stationd config check --config PATH lists them)"``, or "" when it was the only
+    one (or the file cannot be checked at all).  Why: the refusal names one error, and an
+    engineer who fixes it would meet the next at the next reload, one at a time."""
+    try:
+        n = len(check_station(path).errors) - 1
+    except Exception:     # a bug in a checker must not hide the refusal
+        return ""
+    if n <= 0:
+        return ""
+    return f" (and {counted(n, 'more error')}: stationd config check --config {path} lists " \
+        "them)"
 
 
 def table_checks(sections: Mapping[str, YamlNode], table: BoltTable, source: str

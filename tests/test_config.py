@@ -743,3 +743,19 @@ def test_a_database_folder_this_user_cannot_write_is_a_warning_not_an_error(sim_
     [warning] = checked.warnings
     assert f"folder {sim_copy} cannot be written by user" in str(warning)
     assert "a daemon started by this user would refuse it" in str(warning)
+
+
+def test_a_refusal_says_how_many_more_errors_the_check_lists(sim_copy):
+    """A reload refused names its first error; with three errors in the bolt table it said
+    nothing of the other two (met one reload at a time)."""
+    from stationd.stationcheck import more_errors, validate_station
+
+    station, bolts = sim_copy / "station.yaml", sim_copy / "bolts.yaml"
+    assert more_errors(station) == ""
+    bolts.write_text(bolts.read_text().replace("      pset: 1\n", "      pset: 99\n"))
+    with pytest.raises(ConfigError):
+        validate_station(station)
+    n = len(check_station(station).errors)
+    assert n >= 3
+    assert more_errors(station) == (f" (and {n - 1} more errors: stationd config check "
+                                    f"--config {station} lists them)")

@@ -44,7 +44,7 @@ from stationd.station.inputs import (
     Event,
     LineLinkIn,
 )
-from stationd.stationcheck import validate_station
+from stationd.stationcheck import more_errors, validate_station
 from stationd.words import records_waiting
 
 if TYPE_CHECKING:
@@ -444,8 +444,9 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
                         hold_locks(locks, new)
                 except StationError as exc:
                     new = None
-                    log.error("reload refused, keeping the running configuration: %s",
-                              one_line(exc))
+                    more = await loop.run_in_executor(None, more_errors, cfg_path)
+                    log.error("reload refused, keeping the running configuration: %s%s",
+                              one_line(exc), more)
                     notifier.status(f"reload refused: {one_line(exc)}")
                 except Exception as exc:   # a bug in a reader: still never the running station
                     new = None

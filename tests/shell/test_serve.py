@@ -63,6 +63,9 @@ def test_ready_reload_refused_and_clean_stop(tmp_path):
         err = _ended(p)
         sock.close()
     assert "reload refused" in err and "centre_methd: unknown key" in err
+    # the first error, and how many more the check lists (the sections missing too)
+    assert "(and 4 more errors: stationd config check --config station.yaml lists them)" \
+        in err
     assert "configuration reloaded" in err
     assert "Traceback" not in err
     assert all(len(line) < 400 for line in err.splitlines())  # one readable line per event
