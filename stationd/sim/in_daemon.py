@@ -124,6 +124,13 @@ class SimulatedStation:
         #: the simulated lift as the last station left it (a reload): height, fault, vehicle
         self._lift: LiftState | None = None
         self._staying: str | None = None    # its VIN, at working height: the operator goes on
+        #: the vehicle the operator works on (its VIN and plan: ``operate``'s truth), kept
+        #: across a reload: a vehicle that stays keeps its plan
+        self._truth: dict[str, Any] | None = None
+        #: the operator's draws (placement, hovering, NOKs), one stream a daemon: a reload
+        #: goes on with it rather than drawing the first vehicle's again
+        self._rng = np.random.default_rng(seed)
+        self._nok_rng = np.random.default_rng([seed, 21])
         self.follow(cfg)
 
     def follow(self, cfg: StationConfig) -> None:
@@ -270,14 +277,17 @@ class SimulatedStation:
         """Vehicle after vehicle: a new VIN raised, a few of its bolts tightened (NOK now and
         then, as the demo), the lift lowered; a round that fails is journaled, never fatal."""
         assert self.world is not None  # noqa: S101 - checked by the caller
-        rng = np.random.default_rng(self.seed)
-        nok_rng = np.random.default_rng([self.seed, 21])
+        rng, nok_rng = self._rng, self._nok_rng
         while True:
             staying, self._staying = self._staying, None
             if staying is None:
                 self._serial[0] = self._serial[0] % 999_999 + 1
+            kept = self._truth if staying is not None and self._truth is not None \
+                and self._truth["vin"] == staying else None
             truth: dict[str, Any] = {"bolt": None, "model_code": self._code,
-                                     "vin": staying or make_vin(self._serial[0])}
+                                     "vin": staying or make_vin(self._serial[0]),
+                                     "plan": None if kept is None else kept.get("plan")}
+            self._truth = truth
             if staying is not None:
                 log.info("simulated operator: vehicle %s stays on the lift across the reload; "
                          "its bolts go on", staying)

@@ -128,6 +128,10 @@ class CoreStatus:
     identities: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
     #: the line database's link as last told (None: no line forwarder, or not told yet)
     line: LineLinkChanged | None = None
+    #: the loaded vehicle's bolts tightened OK, and those skipped by a person's command (who
+    #: comes back to a vehicle, a simulated operator after a reload, goes on with the rest)
+    done: frozenset[str] = frozenset()
+    skipped: frozenset[str] = frozenset()
 
     @property
     def cameras_on(self) -> bool:
@@ -216,7 +220,9 @@ class CoreState:
                           frozenset(() if self.matcher is None else self.matcher.locked),
                           frozenset(() if self.matcher is None else self.matcher.held),
                           self._selection is not None and self._selection.loosen,
-                          MappingProxyType(dict(self.identities)), self.line)
+                          MappingProxyType(dict(self.identities)), self.line,
+                          frozenset(() if self.matcher is None else self.matcher.done),
+                          frozenset(() if self.matcher is None else self.matcher.skipped))
 
     @property
     def selection(self) -> Selection | None:

@@ -182,3 +182,44 @@ def test_a_person_signed_in_stays_signed_in_across_a_reload_with_the_scripted_op
     finally:
         code = d.stop()
     assert code == 0, d.log()[-3000:]
+
+
+@pytest.mark.timeout(900)
+def test_across_a_reload_the_operator_keeps_its_plan_and_waits_on_its_lock(
+        tmp_path):
+    """A user's trial (--no-sim-supervisor): the first bolt locked, left unreleased, and a
+    reload: the operator went past the lock to other bolts and hovered half a minute on each
+    bolt it had done ("already done": its list started again).  Now after the reload it
+    leaves the bolts done and waits for the person's release of the locked one, then
+    tightens it."""
+    port = free_port()
+    access = {"users": {"olga": {"role": "operator", "password": HASH},
+                        "sam": {"role": "supervisor", "password": HASH}}}
+    station = _station(tmp_path, http={"listen": f"127.0.0.1:{port}"}, access=access,
+                       nok={"loosen_pset": 4, "psets": {2: {"strategy": "loosen"}}})
+    d = Daemon(tmp_path, "--sim-operator", "--no-sim-supervisor")
+    try:
+        found = d.wait(r"simulated operator: (B\d\d) of (\w{17}) locked: the operator waits", 600)
+        bolt, vin = found[1], found[2]
+        _reload(d, station, _set("matching", "stable_frames", 4))
+        d.wait(rf"configuration reloaded[\s\S]*simulated operator: vehicle {vin} stays on the "
+               r"lift", 120)
+        d.wait(rf"configuration reloaded[\s\S]*simulated operator: {vin}: B\d\d.* done "
+               r"already \(the station says so\): the operator goes on with "
+               rf"{bolt}\n", 120)
+        c = Client(f"http://127.0.0.1:{port}/")
+        assert c.post("/api/login", {"user": "sam", "password": PASSWORD})[0] == 200
+        nonce = json.loads(c.get("/api/nonce"))["nonce"]
+        status, text = c.post("/api/commands", {"kind": "release", "vin": vin, "bolt": bolt,
+                                                "comment": "thread chased", "nonce": nonce})
+        assert status == 200, text
+        d.wait(rf"configuration reloaded[\s\S]*simulated operator: {bolt} of {vin} released: "
+               r"the operator tightens it again", 120)
+        d.wait(rf"configuration reloaded[\s\S]*simulated operator: {bolt}: pset \d, OK .*"
+               r"\(first: .*locked, released by sam", 300)
+        after = d.log().split("configuration reloaded", 1)[1]
+        assert "already done" not in after, after[-3000:]       # no bolt done is visited
+        assert "not selected" not in after, after[-3000:]       # nor the lock gone past
+    finally:
+        code = d.stop()
+    assert code == 0, d.log()[-3000:]
