@@ -132,7 +132,7 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
                   report: list[dict[str, Any]], say: Callable[[dict[str, Any]], None],
                   truth: dict[str, Any], nok_rng: np.random.Generator,
                   note: Callable[[str], None] | None = None,
-                  supervisor: Issuer | None = SUPERVISOR, operator: Issuer = OPERATOR,
+                  supervisor: Issuer | None = SUPERVISOR, operator: Issuer | None = OPERATOR,
                   share: tuple[int, int] = (1, 1), interruptible: bool = False) -> None:
     """One vehicle: ``truth['vin']`` (lift code ``truth['model_code']``) raised, up to
     ``cycles`` of its bolts in view visited in the ``rng``'s order (each line to ``say`` and
@@ -144,7 +144,9 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     left out and those it says are locked wait for a release (:func:`plan_of`): a round on a
     vehicle that stays across a reload goes on where the last one was.  ``operator`` signs
     in at the station first unless someone is signed in (a person who signed in at the
-    screens stays signed in, across a reload too: the rundowns are theirs).
+    screens stays signed in, across a reload too: the rundowns are theirs); None: nobody
+    signs in, and on a station that requires sign-in the operator waits, the vehicle on the
+    lift, until a person has signed in.
     ``share`` (k, n): this station is the k-th of a line of n, and its bolts are the k-th of
     n shares of the bolts in view (:func:`share_of`); ``truth['share']`` gets them.
     ``supervisor`` None: locks are left to people (:func:`wait_for_people`);
@@ -153,7 +155,7 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     (``unfinished``), the vehicle lowered, and ``truth['interrupted']`` names the signal and
     the bolts."""
     plc, ctl = simulators(st)
-    if st.core.status().operator is None:
+    if operator is not None and st.core.status().operator is None:
         answer = await st.submit(SignIn(f"{operator.source}: the simulated operator"),
                                  operator)
         if not answer.accepted:
@@ -168,6 +170,9 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     else:
         raise InputError("the simulated vehicle was not opened: "
                          f"{state_words(st.core.status().reason)}")
+    while operator is None and st.cfg.access.operator_required \
+            and st.core.status().operator is None:   # a person signs in (told once before)
+        await asyncio.sleep(0.2)
     length = st.cfg.tool.length_mm
     bolts: list[BoltInfo] = []
     unseen: list[BoltInfo] = []
