@@ -536,6 +536,7 @@ async def _next_station(args: argparse.Namespace, first: StationConfig, k: int, 
     truth = {**first_truth, "bolt": None, "wrong": 0, "locked_sends": 0}
     cycles = min(int(args.cycles), EXTRA_CYCLES)
     truth.pop("cycles", None)
+    truth.pop("plan", None)       # its own bolts: the first station's plan is not its
     station.on_action = _checker(station, truth, out)
     await loop.run_in_executor(None, station.open)
     mine = StationServices(cfg, station.bus, tell=station.tell)

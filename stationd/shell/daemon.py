@@ -210,6 +210,15 @@ class Station:
             if isinstance(a, Publish):
                 self.effects.publish(a.event)
 
+    def still_signed_in(self, user: str, since: float) -> None:
+        """``user`` signed in before this station (a reload) and stays signed in although
+        the station file does not name them (:meth:`open` keeps only its users): the
+        simulated operator's own name (``stationd run --sim-operator`` on a station file
+        without an operator-role user), which the simulation knows it signed in.  Why: it
+        was signed in anew at each reload, a journal line each time, as no person is.
+        Before :meth:`run`."""
+        self._pending.append(OperatorBack(time.time(), user, since))
+
     def heard_before_run(self, ev: DeviceFault | DeviceBack) -> None:
         """What the serve loop saw before this station's loop runs (the database not open,
         then open): the core decides, and what it publishes is published.  Its other actions

@@ -57,8 +57,11 @@ log = logging.getLogger("stationd")
 BOLTS_PER_VEHICLE, BETWEEN_VEHICLES_S = 5, 3.0
 #: who releases a bolt the scripted operator's NOKs locked (the source says it was simulated)
 SIM_SUPERVISOR = Issuer("supervisor", frozenset({Right.RELEASE}), "sim operator")
-#: the scripted operator, signed in at the station (its rundowns carry the name)
+#: the scripted operator's own name, for a station file without a user of the operator role
+#: (:func:`sim_operator`): signed in at the station, its rundowns carry the name
 SIM_OPERATOR = Issuer("operator", frozenset(), "sim operator")
+#: the role whose users hold the tool: the scripted operator signs in as one of them
+OPERATOR_ROLE = "operator"
 #: the journal's line for an idle simulated lift (said once per daemon)
 IDLE_LINE = ("simulated lift: down, no vehicle; raise it with 'next' (a new vehicle at "
              "working height) on the daemon's standard input ({help}), or run stationd run "
@@ -76,6 +79,33 @@ def sim_pairs(cfg: StationConfig) -> list[str]:
 def needs_world(cfg: StationConfig) -> bool:
     """Whether a camera of the station is simulated (``sim://PAIR/SIDE``: its driver says)."""
     return any(simulated(Kind.CAMERA, url) for url in cfg.cameras.values())
+
+
+def sim_operator(cfg: StationConfig) -> tuple[Issuer | None, str | None]:
+    """Whom the scripted operator signs in as, and what the journal says of it once (None:
+    nothing).  The first user (by name) of ``access.users`` whose role is ``operator``: the
+    rundowns are recorded by a person the station knows, as a trainer who set up the file
+    expects (and as its operator screen and ``stationd db report`` then show).  Without one,
+    said once: on a station that does not require sign-in, the simulator's own name
+    ``operator`` (:data:`SIM_OPERATOR`), as before (config/sim has no ``access:``); on one that
+    requires it (``operator_required: true``) nobody: the operator waits, the vehicle on
+    the lift, for a person to sign in.  Why not another user of the file there: a
+    supervisor's name on the simulator's rundowns is what requiring sign-in is to prevent,
+    and a name the file does not give would work around the rule being trained."""
+    access = cfg.access
+    users = sorted(name for name, u in access.users.items() if u.role == OPERATOR_ROLE)
+    if users:
+        return Issuer(users[0], access.roles.get(OPERATOR_ROLE, frozenset()),
+                      "sim operator"), None
+    if not access.operator_required:
+        return SIM_OPERATOR, (f"no user of {cfg.path} has the {OPERATOR_ROLE} role: the "
+                              f"operator signs in as '{SIM_OPERATOR.user}', a name the file "
+                              "does not give (give a user that role in access.users to "
+                              "have the rundowns recorded by them)")
+    return None, (f"{cfg.path} requires a signed-in operator (access.operator_required) and "
+                  f"no user of it has the {OPERATOR_ROLE} role: the operator waits, the "
+                  "vehicle on the lift, for a person to sign in (the operator screen, "
+                  "stationd operator sign-in)")
 
 
 def _geometry(cfg: StationConfig) -> bytes:
@@ -126,6 +156,18 @@ class SimulatedStation:
         self._staying: str | None = None    # its VIN, at working height: the operator goes on
         #: the last station's simulated controller: the next one goes on from it
         self._controller: SimController | None = None
+        #: whom the scripted operator signs in as (:func:`sim_operator`)
+        self._signer: Issuer | None = SIM_OPERATOR
+        #: the simulator's own name, signed in as the last station closed, and since when:
+        #: it stays signed in across a reload as a person of the file does
+        self._signed: tuple[str, float] | None = None
+        #: the vehicle the operator works on (its VIN and plan: ``operate``'s truth), kept
+        #: across a reload: a vehicle that stays keeps its plan
+        self._truth: dict[str, Any] | None = None
+        #: the operator's draws (placement, hovering, NOKs), one stream a daemon: a reload
+        #: goes on with it rather than drawing the first vehicle's again
+        self._rng = np.random.default_rng(seed)
+        self._nok_rng = np.random.default_rng([seed, 21])
         self.follow(cfg)
 
     def follow(self, cfg: StationConfig) -> None:
@@ -160,6 +202,8 @@ class SimulatedStation:
         if self.operator and not scripted:
             log.error("simulated operator: %s names real devices (%s): the operator stays "
                       "idle", cfg.path, ", ".join(stand_ins(cfg)) or "no sim:// camera")
+        if scripted:
+            self._sign_in_as(cfg, station)     # before the station's loop starts
         if not scripted:
             self._idle(station)      # before the journal's lines: typed commands find its PLC
         elif not self.supervisor and not releasers(cfg):     # a reload took them away
@@ -192,9 +236,25 @@ class SimulatedStation:
     def _keep(self, station: Station) -> None:
         """The simulated lift as this station leaves it (before the scripted operator's round
         is cancelled, which lowers it): the next station's lift starts so, as a real PLC goes
-        on through a daemon's reload."""
+        on through a daemon's reload.  And the simulator's own name if it is signed in: the
+        station keeps only the file's users signed in (:meth:`Station.open`)."""
         lift = station.lift
         self._lift = lift.plc.state() if isinstance(lift, SimLift) else None
+        who = station.core.status().operator
+        self._signed = (who, time.time()) if who is not None and who == SIM_OPERATOR.user \
+            and who not in station.cfg.access.users else None
+
+    def _sign_in_as(self, cfg: StationConfig, station: Station) -> None:
+        """Whom the operator signs in as on this station (said once a daemon when not a user
+        of the file); the simulator's own name, signed in before the reload, stays signed in
+        when the new file still has nobody of the operator role (one sign-in a daemon, not
+        one a reload)."""
+        self._signer, said = sim_operator(cfg)
+        if said is not None:
+            self._note(said)
+        signed, self._signed = self._signed, None
+        if signed is not None and self._signer == SIM_OPERATOR:
+            station.still_signed_in(*signed)
 
     def _restore(self, station: Station) -> None:
         """The new station's simulated lift as the last one was left: the vehicle on the
@@ -288,14 +348,17 @@ class SimulatedStation:
         """Vehicle after vehicle: a new VIN raised, a few of its bolts tightened (NOK now and
         then, as the demo), the lift lowered; a round that fails is journaled, never fatal."""
         assert self.world is not None  # noqa: S101 - checked by the caller
-        rng = np.random.default_rng(self.seed)
-        nok_rng = np.random.default_rng([self.seed, 21])
+        rng, nok_rng = self._rng, self._nok_rng
         while True:
             staying, self._staying = self._staying, None
             if staying is None:
                 self._serial[0] = self._serial[0] % 999_999 + 1
+            kept = self._truth if staying is not None and self._truth is not None \
+                and self._truth["vin"] == staying else None
             truth: dict[str, Any] = {"bolt": None, "model_code": self._code,
-                                     "vin": staying or make_vin(self._serial[0])}
+                                     "vin": staying or make_vin(self._serial[0]),
+                                     "plan": None if kept is None else kept.get("plan")}
+            self._truth = truth
             if staying is not None:
                 log.info("simulated operator: vehicle %s stays on the lift across the reload; "
                          "its bolts go on", staying)
@@ -306,7 +369,7 @@ class SimulatedStation:
                 await operate(station, self.world, rng, BOLTS_PER_VEHICLE, [], _bolt_said,
                               truth, nok_rng, note=self._note,
                               supervisor=SIM_SUPERVISOR if self.supervisor else None,
-                              operator=SIM_OPERATOR)
+                              operator=self._signer)
             except InputError as exc:
                 log.warning("simulated operator: %s", exc)
             except (StationError, RuntimeError, OSError) as exc:

@@ -20,8 +20,9 @@ import asyncio
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Collection, Iterator, Sequence
 from contextlib import contextmanager, nullcontext
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -90,6 +91,31 @@ def check_people(cfg: StationConfig) -> None:
                          "makes a password's hash)")
 
 
+@dataclass(frozen=True)
+class Plan:
+    """The operator's bolts on a vehicle as the station has it now: those to go to, in the
+    plan's order; those locked or held, left for a person's release (tightened once
+    released); those done or skipped already, left out."""
+
+    visit: tuple[str, ...]
+    waiting: tuple[str, ...]
+    finished: tuple[str, ...]
+
+
+def plan_of(planned: Sequence[str], finished: Collection[str],
+            stopped_now: Collection[str]) -> Plan:
+    """The vehicle's ``planned`` bolts (the operator's order) against what the station says:
+    ``finished`` (done or skipped) and ``stopped_now`` (locked or held).  Why from the station
+    and not from the operator's memory: a reload starts a new round of the operator on the
+    same vehicle, and the round's own list started again: it hovered half a minute on each
+    bolt already done ("not selected: already done") and went past a lock it had been
+    waiting on.  The station (its database, reopened by the new station) is what a person
+    reads too."""
+    visit = tuple(b for b in planned if b not in finished and b not in stopped_now)
+    waiting = tuple(b for b in planned if b in stopped_now and b not in finished)
+    return Plan(visit, waiting, tuple(b for b in planned if b in finished))
+
+
 def _stderr(text: str) -> None:
     print(text, file=sys.stderr, flush=True)
 
@@ -106,16 +132,21 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
                   report: list[dict[str, Any]], say: Callable[[dict[str, Any]], None],
                   truth: dict[str, Any], nok_rng: np.random.Generator,
                   note: Callable[[str], None] | None = None,
-                  supervisor: Issuer | None = SUPERVISOR, operator: Issuer = OPERATOR,
+                  supervisor: Issuer | None = SUPERVISOR, operator: Issuer | None = OPERATOR,
                   share: tuple[int, int] = (1, 1), interruptible: bool = False) -> None:
     """One vehicle: ``truth['vin']`` (lift code ``truth['model_code']``) raised, up to
     ``cycles`` of its bolts in view visited in the ``rng``'s order (each line to ``say`` and
     ``report``), tightened as the NOK policy has it (:func:`until_ok`), the lift lowered.
     ``truth['bolt']`` is where the wrench really is, at every moment (the demo checks each
     parameter send against it).  InputError when the vehicle is not opened or no bolt of it
-    is in view.  ``operator`` signs in at the station first unless someone is signed in (a
-    person who signed in at the screens stays signed in, across a reload too: the rundowns
-    are theirs).
+    is in view.  ``truth['plan']``: the bolts planned for this vehicle, in order (drawn from
+    the ``rng`` when absent, and set); the bolts the station says are done or skipped are
+    left out and those it says are locked wait for a release (:func:`plan_of`): a round on a
+    vehicle that stays across a reload goes on where the last one was.  ``operator`` signs
+    in at the station first unless someone is signed in (a person who signed in at the
+    screens stays signed in, across a reload too: the rundowns are theirs); None: nobody
+    signs in, and on a station that requires sign-in the operator waits, the vehicle on the
+    lift, until a person has signed in.
     ``share`` (k, n): this station is the k-th of a line of n, and its bolts are the k-th of
     n shares of the bolts in view (:func:`share_of`); ``truth['share']`` gets them.
     ``supervisor`` None: locks are left to people (:func:`wait_for_people`);
@@ -124,7 +155,7 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     (``unfinished``), the vehicle lowered, and ``truth['interrupted']`` names the signal and
     the bolts."""
     plc, ctl = simulators(st)
-    if st.core.status().operator is None:
+    if operator is not None and st.core.status().operator is None:
         answer = await st.submit(SignIn(f"{operator.source}: the simulated operator"),
                                  operator)
         if not answer.accepted:
@@ -139,6 +170,9 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     else:
         raise InputError("the simulated vehicle was not opened: "
                          f"{state_words(st.core.status().reason)}")
+    while operator is None and st.cfg.access.operator_required \
+            and st.core.status().operator is None:   # a person signs in (told once before)
+        await asyncio.sleep(0.2)
     length = st.cfg.tool.length_mm
     bolts: list[BoltInfo] = []
     unseen: list[BoltInfo] = []
@@ -169,11 +203,27 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
                           f"{', '.join(mine[:12])}{' ...' if len(mine) > 12 else ''}")
         bolts = [b for b in bolts if b.bolt_id in mine]
     truth["share"] = [b.bolt_id for b in bolts]
-    order = rng.permutation(len(bolts))[:cycles]
-    truth["cycles"] = len(order)      # fewer when fewer bolts can be shown
-    waiting: dict[str, tuple[BoltInfo, dict[str, Any]]] = {}   # locked, left to people
-    for n_visit, k in enumerate(order):
-        b = bolts[int(k)]
+    by_id = {b.bolt_id: b for b in bolts}
+    if truth.get("plan") is None:
+        truth["plan"] = [bolts[int(k)].bolt_id for k in rng.permutation(len(bolts))[:cycles]]
+    planned = [bolt for bolt in truth["plan"] if bolt in by_id]
+    truth["cycles"] = len(planned)      # fewer when fewer bolts can be shown
+    now = st.core.status()
+    plan = plan_of(planned, now.done | now.skipped, now.locked | now.held)
+    if plan.finished:
+        (note or _stderr)(f"{truth['vin']}: {', '.join(plan.finished)} done already (the "
+                          f"station says so): the operator goes on with "
+                          f"{', '.join([*plan.visit, *plan.waiting]) or 'none'}")
+    # the plan's first bolt is the stubborn joint that locks for people (once released, it
+    # has been seen to)
+    stubborn_bolt = planned[0] if supervisor is None and planned else None
+    waiting: dict[str, tuple[BoltInfo, dict[str, Any]]] = {   # locked, left to people
+        bolt: (by_id[bolt], {"bolt": bolt, "pset": by_id[bolt].parameters.pset,
+                             "result": LEFT_FOR_PEOPLE, "waits": True, "rundowns": 0})
+        for bolt in plan.waiting if supervisor is None}
+    for bolt_id in plan.visit if supervisor is None else \
+            [b for b in planned if b in plan.visit or b in plan.waiting]:
+        b = by_id[bolt_id]
         target = np.array(b.position)
         if rng.random() < 0.2:  # hovers between two bolts first: nothing may be sent
             other = np.array(bolts[int(rng.integers(len(bolts)))].position)
@@ -184,8 +234,14 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
         truth["bolt"] = b.bolt_id
         world.set_wrench(pose)
         # drawn always (the seed's stream); the bolt that locks for people is never left
-        leave = rng.random() < 0.1 and not (supervisor is None and n_visit == 0)
+        leave = rng.random() < 0.1 and b.bolt_id != stubborn_bolt
         line: dict[str, Any] = {"bolt": b.bolt_id, "pset": b.parameters.pset, "result": None}
+        if supervisor is not None and stopped(st, b.bolt_id):   # locked before (a reload)
+            answer = await st.submit(ReleaseBolt(truth["vin"], b.bolt_id,
+                                                 f"{supervisor.source}: joint checked"),
+                                     supervisor)
+            line["before"] = ["locked, released by the supervisor" if answer.accepted else
+                              f"locked, release refused ({answer.reason})"]
         if not await _tool_on(st, b.bolt_id):
             line["result"] = f"not selected ({_why_not(st)})"
         if st.last is not None and st.last.point_mm is not None:
@@ -200,8 +256,10 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
             line["result"] = "left before tightening; tool " + \
                 ("disabled" if not ctl.tool_enabled else "STILL ENABLED")
         elif line["result"] is None:
+            first = line.pop("before", [])
             await until_ok(st, b.bolt_id, line, nok_rng, truth["vin"], supervisor,
-                           stubborn=True if supervisor is None and n_visit == 0 else None)
+                           stubborn=True if b.bolt_id == stubborn_bolt else None)
+            line["before"] = [*first, *line["before"]]
         if line.get("waits"):
             waiting[b.bolt_id] = (b, line)      # its line is said once a person released it
         else:
@@ -456,5 +514,6 @@ async def until_ok(st: Station, bolt: str, line: dict[str, Any],
 
 
 __all__ = ["LOOSEN_PROGRAM", "MAX_RUNDOWNS", "NOK_P", "OPERATOR", "STUBBORN_P", "SUPERVISOR",
-           "WaitEnded", "ended_words", "loosen_programs", "operate", "share_of", "shot_words",
+           "Plan", "WaitEnded", "ended_words", "loosen_programs", "operate", "plan_of",
+           "share_of", "shot_words",
            "simulators", "stand_ins", "stopped", "until_ok", "wait_for_people"]

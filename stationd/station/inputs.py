@@ -300,7 +300,8 @@ class ModelsKnown(Input):
 @dataclass(frozen=True)
 class OperatorBack(Input):
     """At a start or a reload: ``user`` signed in at ``since`` and did not sign out (the
-    commands' records say so), and is still a user of the station file."""
+    commands' records say so), and is still a user of the station file (or the simulated
+    operator, whom the simulation keeps signed in across a reload)."""
 
     user: str
     since: float

@@ -132,6 +132,10 @@ class CoreStatus:
     #: device -> the same, typed (its words and nameplate fields: manufacturer, serial ...)
     identifications: Mapping[str, DeviceIdentity] = field(
         default_factory=lambda: MappingProxyType({}))
+    #: the loaded vehicle's bolts tightened OK, and those skipped by a person's command (who
+    #: comes back to a vehicle, a simulated operator after a reload, goes on with the rest)
+    done: frozenset[str] = frozenset()
+    skipped: frozenset[str] = frozenset()
 
     @property
     def cameras_on(self) -> bool:
@@ -224,7 +228,9 @@ class CoreState:
                           MappingProxyType({d: i.words
                                             for d, i in self.identifications.items()}),
                           self.line,
-                          MappingProxyType(dict(self.identifications)))
+                          MappingProxyType(dict(self.identifications)),
+                          frozenset(() if self.matcher is None else self.matcher.done),
+                          frozenset(() if self.matcher is None else self.matcher.skipped))
 
     @property
     def selection(self) -> Selection | None:

@@ -10,6 +10,7 @@ height"), which stayed open for good with its bolts missing."""
 from __future__ import annotations
 
 import json
+import re
 import signal
 import urllib.request
 from collections.abc import Callable
@@ -150,6 +151,11 @@ def test_the_scripted_operator_goes_on_with_the_same_vehicle_across_a_reload(tmp
         assert "lift not at working height" not in after.split(f"vehicle {vin} (SIM-1) "
                                                                "opened")[0], after
         assert "arrives" not in after.split("stays on the lift")[0], after
+        # config/sim names no user: its own name, said once, signed in once: it stays signed
+        # in across the reload (a sign-in line at each reload before)
+        assert d.log().count("has the operator role: the operator signs in as 'operator'") == 1
+        signed = re.findall(r"operator: operator signed in.*", after)
+        assert signed == ["operator: operator signed in (since before the start)"], signed
     finally:
         code = d.stop()
     assert code == 0, d.log()[-3000:]
@@ -160,25 +166,77 @@ def test_a_person_signed_in_stays_signed_in_across_a_reload_with_the_scripted_op
         tmp_path):
     """The scripted operator signs in only where nobody is: a person who signed in at the
     screens is not replaced at a reload (a newcomer saw 'operator: operator signed in (after
-    olga)', and the rundowns recorded by the simulated user from then on)."""
+    olga)', and the rundowns recorded by the simulated user from then on).  The scripted
+    operator signs in as olga, the file's first operator-role user; ravi takes over."""
     port = free_port()
-    access = {"users": {"olga": {"role": "operator", "password": HASH}}}
+    access = {"users": {"olga": {"role": "operator", "password": HASH},
+                        "ravi": {"role": "operator", "password": HASH}}}
     station = _station(tmp_path, http={"listen": f"127.0.0.1:{port}"}, access=access)
     d = Daemon(tmp_path, "--sim-operator")
     try:
-        d.wait(r"operator: operator signed in", 120)
+        d.wait(r"operator: olga signed in", 120)
         c = Client(f"http://127.0.0.1:{port}/")
-        assert c.post("/api/login", {"user": "olga", "password": PASSWORD})[0] == 200
+        assert c.post("/api/login", {"user": "ravi", "password": PASSWORD})[0] == 200
         nonce = json.loads(c.get("/api/nonce"))["nonce"]
         status, text = c.post("/api/commands", {"kind": "sign-in", "nonce": nonce})
         assert status == 200, text
-        d.wait(r"operator: olga signed in", 60)
+        d.wait(r"operator: ravi signed in \(after olga\)", 60)
         _reload(d, station, _set("matching", "stable_frames", 4))
         d.wait(r"configuration reloaded[\s\S]*simulated operator: vehicle \w{17} stays on the "
                r"lift across the reload", 120)
         d.wait(r"configuration reloaded[\s\S]*tightening: tightening bolt B\d\d", 300)
         after = d.log().split("configuration reloaded", 1)[1]
-        assert "operator: operator signed in" not in after, after[-3000:]
+        assert "operator: olga signed in" not in after, after[-3000:]
+        assert "operator: operator signed in" not in d.log()
+    finally:
+        code = d.stop()
+    assert code == 0, d.log()[-3000:]
+
+
+@pytest.mark.timeout(900)
+def test_across_a_reload_the_operator_keeps_its_plan_waits_on_its_lock_and_stays_signed_in(
+        tmp_path):
+    """A user's trial (--no-sim-supervisor): the first bolt locked, left unreleased, and a
+    reload: the operator went past the lock to other bolts, hovered half a minute on each bolt
+    it had done ("already done": its list started again), and it had signed in as
+    'operator', a user the file does not give.  Now it signs in as the file's operator-role
+    user, who stays signed in; after the reload it leaves the bolts done and waits for the
+    person's release of the locked one, then tightens it."""
+    port = free_port()
+    access = {"users": {"olga": {"role": "operator", "password": HASH},
+                        "sam": {"role": "supervisor", "password": HASH}},
+              "operator_required": True}
+    station = _station(tmp_path, http={"listen": f"127.0.0.1:{port}"}, access=access,
+                       nok={"loosen_pset": 4, "psets": {2: {"strategy": "loosen"}}})
+    d = Daemon(tmp_path, "--sim-operator", "--no-sim-supervisor")
+    try:
+        found = d.wait(r"simulated operator: (B\d\d) of (\w{17}) locked: the operator waits", 600)
+        bolt, vin = found[1], found[2]
+        _reload(d, station, _set("matching", "stable_frames", 4))
+        d.wait(rf"configuration reloaded[\s\S]*simulated operator: vehicle {vin} stays on the "
+               r"lift", 120)
+        d.wait(rf"configuration reloaded[\s\S]*simulated operator: {vin}: B\d\d.* done "
+               r"already \(the station says so\): the operator goes on with "
+               rf"{bolt}\n", 120)
+        c = Client(f"http://127.0.0.1:{port}/")
+        assert c.post("/api/login", {"user": "sam", "password": PASSWORD})[0] == 200
+        nonce = json.loads(c.get("/api/nonce"))["nonce"]
+        status, text = c.post("/api/commands", {"kind": "release", "vin": vin, "bolt": bolt,
+                                                "comment": "thread chased", "nonce": nonce})
+        assert status == 200, text
+        d.wait(rf"configuration reloaded[\s\S]*simulated operator: {bolt} of {vin} released: "
+               r"the operator tightens it again", 120)
+        d.wait(rf"configuration reloaded[\s\S]*simulated operator: {bolt}: pset \d, OK .*"
+               r"\(first: .*locked, released by sam", 300)
+        journal = d.log()
+        after = journal.split("configuration reloaded", 1)[1]
+        assert "already done" not in after, after[-3000:]       # no bolt done is visited
+        assert "not selected" not in after, after[-3000:]       # nor the lock gone past
+        assert "operator: olga signed in" in journal.split("configuration reloaded")[0]
+        assert "operator: operator signed in" not in journal
+        signed = re.findall(r"operator: \w+ signed in.*", after)
+        assert signed == ["operator: olga signed in (since before the start)"], signed
+        assert "has the operator role" not in journal
     finally:
         code = d.stop()
     assert code == 0, d.log()[-3000:]
