@@ -40,7 +40,11 @@ def test_each_reload_s_simulated_controller_goes_on_from_the_last():
         ctl = wrench.controller
         ctl.start()
         try:
-            asyncio.run(sim.beside(cfg, SimpleNamespace(wrench=wrench, lift=None), stop))
+            # the parts of a station the simulator reads at its start and end (its devices,
+            # its file, who is signed in)
+            station = SimpleNamespace(wrench=wrench, lift=None, cfg=cfg, core=SimpleNamespace(
+                status=lambda: SimpleNamespace(operator=None)))
+            asyncio.run(sim.beside(cfg, station, stop))
             if made:
                 assert ctl.call(lambda c=ctl: sorted(c._store)) == list(range(1, len(made) * 3 + 1))
             made.append(_tighten(ctl, 3))
