@@ -15,7 +15,9 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from types import TracebackType
-from typing import ClassVar, Self
+from typing import ClassVar, Self, final
+
+from drivers.endpoint import Endpoint, UrlEndpoint
 
 
 class Openable(ABC):
@@ -25,6 +27,27 @@ class Openable(ABC):
     #: controller on loopback, or shows the simulated world): what starts a station asks
     #: it whether a simulated world must run beside (``drivers.devices.simulated``)
     simulated: ClassVar[bool] = False
+
+    @final
+    @classmethod
+    def endpoint(cls, url: str) -> Endpoint | None:
+        """What a device of this backend at ``url`` drives (``drivers.endpoint``), asked of
+        the class: nothing is built or opened.  None for a simulated twin (it exists only
+        in this process), whatever its real parent backend would say of the URL: a
+        simulated backend is often a real one talking to its own simulator
+        (``sim://wrench`` is the Open Protocol client), so this is not overridden; backends
+        override :meth:`_endpoint`.  A UrlError when the backend refuses the URL."""
+        return None if cls.simulated else cls._endpoint(url)
+
+    @classmethod
+    def _endpoint(cls, url: str) -> Endpoint | None:
+        """What a real device of this backend at ``url`` drives.  By default the URL's
+        text (:class:`UrlEndpoint`): a backend that does not say is still one device per
+        URL, never silently shared (None) and never a failure of whoever asks (an abstract
+        method would break every device double and a backend added without it at the
+        first lock, not at review).  None only for what no other process can take from
+        this one: files read by anyone."""
+        return UrlEndpoint(url)
 
     @abstractmethod
     def open(self) -> None: ...

@@ -28,6 +28,7 @@ from pymodbus import FramerType
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 
+from drivers.endpoint import SerialEndpoint, TcpEndpoint
 from drivers.errors import (
     ConnectionLostError,
     DeviceError,
@@ -43,6 +44,8 @@ from drivers.url import OptionError, parse_url
 # our errors, with the device and its reason.  Its lines are kept for a crash only.
 logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
+#: Modbus TCP's registered port, where a ``modbus-tcp://`` URL without one connects
+DEFAULT_PORT = 502
 TCP_FORM = "modbus-tcp://HOST[:PORT]?unit=1&timeout=1.0"
 RTU_FORM = "modbus-rtu:///dev/ttyUSB0?baud=19200&parity=E&unit=1"
 
@@ -60,7 +63,7 @@ class LinkSpec:
 
     kind: str  # "tcp" | "rtu"
     target: str  # host name or serial port path
-    port: int = 502
+    port: int = DEFAULT_PORT
     unit: int = 1
     baud: int = 19200
     parity: str = "E"
@@ -112,7 +115,7 @@ def parse_modbus_url(text: str) -> tuple[LinkSpec, dict[str, float | None]]:
         opts = url.typed_options({"unit": (_unit, 1), **timing}, TCP_FORM)
         if not url.host or url.path not in ("", "/"):
             raise url.error(f"expected a host and optional port, e.g. {TCP_FORM}")
-        spec = LinkSpec("tcp", url.host, url.port or 502, opts.pop("unit"))
+        spec = LinkSpec("tcp", url.host, url.port or DEFAULT_PORT, opts.pop("unit"))
     elif url.scheme == "modbus-rtu":
         opts = url.typed_options({"unit": (_unit, 1), "baud": (baud_rate, 19200),
                                   "parity": (_choice("N", "E", "O"), "E"),
@@ -124,6 +127,17 @@ def parse_modbus_url(text: str) -> tuple[LinkSpec, dict[str, float | None]]:
     else:
         raise url.error(f"not a Modbus URL; expected {TCP_FORM} or {RTU_FORM}")
     return spec, opts
+
+
+def modbus_endpoint(text: str) -> TcpEndpoint | SerialEndpoint:
+    """What the Modbus URL ``text`` drives, read as the link is (UrlError when it is not
+    one): over TCP, the host and port with one unit of it (a gateway serves several
+    devices, one per unit id); over RTU, the whole serial line, whatever the unit (the
+    lift and a controller on one line are one device to lock)."""
+    spec, _ = parse_modbus_url(text)
+    if spec.kind == "tcp":
+        return TcpEndpoint(spec.target, spec.port, spec.unit)
+    return SerialEndpoint(spec.target)
 
 
 #: how much of a garbage answer a message shows

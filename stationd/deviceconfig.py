@@ -155,8 +155,8 @@ def one_device_each(lift_url: str, wrench_url: str, wrench: YamlNode) -> None:
     URLs that reach one endpoint are one device, as for the device locks).  One Modbus
     endpoint and unit as both would take the controller's registers for the lift's, and the
     lift's for a bolt's parameters; one serial line opened twice garbles both."""
-    key = device_key(lift_url)
-    if key is None or key != device_key(wrench_url):
+    key = device_key(lift_url, Kind.LIFT)
+    if key is None or key != device_key(wrench_url, Kind.WRENCH):
         return
     where = wrench.mapping(("url", "registers", "poll_ms"))["url"]
     if key.startswith("serial "):

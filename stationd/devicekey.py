@@ -6,22 +6,25 @@ daemon's life (``stationd.lock.StationLocks``).  Two URLs that reach one device 
 key, so the key is the endpoint, not the text: ``modbus-tcp://PLC:502?unit=1&timeout=2`` and
 ``modbus-tcp://plc?unit=1`` are one lift.
 
+What a URL reaches is its backend's to say, not its scheme's name
+(``drivers.lifecycle.Openable.endpoint``: the protocol's default port, that a Modbus TCP
+endpoint is one unit of it, that a serial line is one device whatever the unit, that an
+OpenCV camera index is a ``/dev/videoN``, that a simulated twin or a file drives nothing
+another process can share).  What is this machine's is kept here:
+
 - TCP: the host (lower case; an IP literal in its canonical form; ``localhost`` as
-  127.0.0.1) and the port with the protocol's default (Open Protocol 4545, Modbus 502); a
-  Modbus TCP endpoint is one unit of it (a gateway serves several devices, one per unit id).
-  A host name is resolved to its address (:func:`_resolve`), so ``tcp://plc.local:502`` and
+  127.0.0.1) and the backend's port, with the unit when the backend names one.  A host name
+  is resolved to its address (:func:`_resolve`), so ``tcp://plc.local:502`` and
   ``tcp://192.168.0.10:502`` are one lift: a station file written with the name and another
   with the address would both drive it.  The look-up is bounded (:data:`RESOLVE_TIMEOUT_S`:
   a name server that does not answer must not hold the daemon's start or a reload), and a
   name that does not resolve in time keeps the name as its key (those two files are then
   not told apart, as before the look-up).
-- Serial ports (Modbus RTU, Open Protocol over RS-232): the device path with its links
-  resolved (``/dev/serial/by-id/...`` is the ``/dev/ttyUSB0`` it points at); the whole line,
-  whatever the unit (two processes on one serial line garble each other's frames).
-- Cameras: an Aravis device id as written (case kept), an OpenCV camera index as its
-  ``/dev/videoN``, an OpenCV device path resolved.
-- No lock: ``sim://`` and ``sim+modbus://`` (each daemon simulates its own), ``file://``
-  replays and OpenCV video files (read by any number of processes).
+- Serial ports and video devices: the path with its links resolved
+  (``/dev/serial/by-id/...`` is the ``/dev/ttyUSB0`` it points at).
+- Aravis cameras: the device id as the backend reads it.
+- A URL naming no backend, or one its backend refuses, is its own key: ``url {url}`` (the
+  configuration refuses it before any lock is taken).
 
 The locks live in one folder every daemon on the machine shares (:func:`lock_dir`).
 """
@@ -35,18 +38,22 @@ import tempfile
 import threading
 import time
 from pathlib import Path
-from urllib.parse import quote, unquote, urlsplit
+from urllib.parse import quote
 
+from drivers.devices import Kind, backend_class
+from drivers.endpoint import (
+    AravisEndpoint,
+    Endpoint,
+    SerialEndpoint,
+    TcpEndpoint,
+    UrlEndpoint,
+    VideoEndpoint,
+)
 from drivers.errors import UrlError
-from drivers.url import parse_url
 
 #: the shared folder of device locks when it can be written (Debian's /run/lock is 1777;
 #: systemd/stationd.service lets the service write it)
 RUN_LOCK_DIR = Path("/run/lock/stationd")
-#: default ports of the TCP protocols a station speaks
-DEFAULT_PORTS = {"openprotocol": 4545, "modbus-tcp": 502}
-#: schemes that drive no device of their own (simulated, or files read by anyone)
-UNLOCKED = {"sim", "sim+modbus", "file"}
 #: the longest a host name's look-up may take (a name server that does not answer)
 RESOLVE_TIMEOUT_S = 1.0
 #: how long a look-up's answer is reused: a daemon's start names each device several times,
@@ -70,33 +77,47 @@ def lock_dir() -> Path:
     return Path(tempfile.gettempdir()) / "stationd-locks"
 
 
-def device_key(url: str) -> str | None:
-    """The endpoint ``url`` drives, as a lock key (module docstring); None for a device no
-    other process can share (simulated ones, files).  A URL that does not parse is its own
-    key (the configuration refuses it before any lock is taken)."""
-    try:
-        parsed = parse_url(url)
-    except UrlError:
-        return f"url {url}"
-    scheme = parsed.scheme
-    if scheme in UNLOCKED:
-        return None
-    if scheme in ("modbus-rtu", "openprotocol+serial"):
-        return f"serial {os.path.realpath(unquote(parsed.path))}"
-    if scheme in DEFAULT_PORTS:
-        where = f"tcp {_host(parsed.host or '')}:{parsed.port or DEFAULT_PORTS[scheme]}"
-        if scheme == "modbus-tcp":
-            unit = parsed.options.get("unit", "1").strip()
-            where += f" unit {int(unit) if unit.isdigit() else unit}"
-        return where
-    if scheme == "aravis":
-        return f"aravis {unquote(urlsplit(url).netloc)}"
-    if scheme == "opencv":
-        if parsed.host and parsed.host.isdigit():
-            return f"video {os.path.realpath(f'/dev/video{int(parsed.host)}')}"
-        path = unquote(parsed.path)
-        return f"video {os.path.realpath(path)}" if path.startswith("/dev/") else None
+def device_key(url: str, kind: Kind | None = None) -> str | None:
+    """The endpoint ``url`` drives as a device of ``kind``, as a lock key (module
+    docstring); None for a device no other process can share (simulated ones, files).  The
+    backend says what it drives (:meth:`drivers.lifecycle.Openable.endpoint`); a URL naming
+    no backend of ``kind``, or one its backend refuses, is its own key.
+
+    ``kind`` None (a caller holding a URL alone): the first kind with a backend for the
+    URL's scheme answers.  The schemes several kinds share (``sim``, ``modbus-tcp``,
+    ``modbus-rtu``) are one transport in each and name one endpoint in each (the lift and
+    the controller on one Modbus unit are one device: ``deviceconfig.one_device_each``);
+    tests/drivers/test_endpoints.py holds them to it."""
+    kinds = list(Kind) if kind is None else [kind]
+    for each in kinds:
+        try:
+            backend = backend_class(each, url)
+        except UrlError:
+            continue
+        try:
+            return endpoint_key(backend.endpoint(url))
+        except UrlError:
+            break
     return f"url {url}"
+
+
+def endpoint_key(endpoint: Endpoint | None) -> str | None:
+    """The key text of ``endpoint`` as this machine sees it: host names resolved, device
+    links followed (one key per device whatever the text reaching it)."""
+    match endpoint:
+        case None:
+            return None
+        case TcpEndpoint(host, port, unit):
+            where = f"tcp {_host(host)}:{port}"
+            return where if unit is None else f"{where} unit {unit}"
+        case SerialEndpoint(path):
+            return f"serial {os.path.realpath(path)}"
+        case VideoEndpoint(path):
+            return f"video {os.path.realpath(path)}"
+        case AravisEndpoint(device_id):
+            return f"aravis {device_id}"
+        case UrlEndpoint(text):
+            return f"url {text}"
 
 
 def _host(host: str) -> str:

@@ -23,6 +23,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from types import TracebackType
 
+from drivers.devices import Kind
 from stationd.devicekey import device_key, key_file, lock_dir
 from stationd.errors import InputError
 
@@ -199,7 +200,7 @@ def probing(kind: str, url: str, folder: Path | None = None) -> Iterator[None]:
     Never waits: the device a daemon (or another probe) holds is refused, naming its pid, as
     an :class:`InputError` (one line, exit 2).  Simulated devices and URLs that do not parse
     take no lock (the probe says what is wrong with the URL itself)."""
-    key = device_key(url)
+    key = device_key(url, _kind(kind))
     if key is None or key.startswith("url "):
         yield
         return
@@ -217,6 +218,16 @@ def probing(kind: str, url: str, folder: Path | None = None) -> Iterator[None]:
         yield
     finally:
         lock.release()
+
+
+def _kind(what: str) -> Kind | None:
+    """The kind of device ``what`` names ("lift", "wrench", "camera NAME": its first word),
+    whose backend says what the URL drives; None for another name (the URL's scheme then
+    finds its backend in any kind: ``device_key``)."""
+    try:
+        return Kind(what.partition(" ")[0])
+    except ValueError:
+        return None
 
 
 class StationLocks:
@@ -253,7 +264,7 @@ class StationLocks:
                 taken.append(new)
             folder: Path | None = None
             for what, url in devices:
-                key = device_key(url)
+                key = device_key(url, _kind(what))
                 if key is None or key in wanted:   # one device named twice: one lock
                     continue
                 lock = self._devices.get(key)

@@ -4,7 +4,15 @@ import os
 
 import pytest
 
-from stationd.devicekey import RUN_LOCK_DIR, device_key, key_file, lock_dir
+from drivers.devices import Kind
+from drivers.endpoint import (
+    AravisEndpoint,
+    SerialEndpoint,
+    TcpEndpoint,
+    UrlEndpoint,
+    VideoEndpoint,
+)
+from stationd.devicekey import RUN_LOCK_DIR, device_key, endpoint_key, key_file, lock_dir
 
 
 @pytest.mark.parametrize(("a", "b"), [
@@ -102,3 +110,42 @@ def test_a_name_that_does_not_resolve_in_time_keeps_its_name(monkeypatch):
     finally:
         release.set()
     assert device_key("openprotocol://no-such-host.invalid") == "tcp no-such-host.invalid:4545"
+
+
+@pytest.mark.parametrize(("endpoint", "key"), [
+    (TcpEndpoint("PLC.invalid", 502, 1), "tcp plc.invalid:502 unit 1"),
+    (TcpEndpoint("::ffff:10.0.0.5", 4545), "tcp 10.0.0.5:4545"),
+    (TcpEndpoint("::1", 4545), "tcp [::1]:4545"),
+    (TcpEndpoint("localhost", 1502, 0), "tcp 127.0.0.1:1502 unit 0"),
+    (SerialEndpoint("/dev/ttyUSB0"), "serial /dev/ttyUSB0"),
+    (VideoEndpoint("/dev/video0"), "video /dev/video0"),
+    (AravisEndpoint("Hik-MV-1"), "aravis Hik-MV-1"),
+    (UrlEndpoint("x://y"), "url x://y"),
+    (None, None),
+])
+def test_the_key_of_what_a_backend_drives_is_this_machines_view_of_it(endpoint, key):
+    """The backend says what it drives; the key is the text of today's locks, with host
+    names as their addresses (a name that does not resolve: lower case)."""
+    assert endpoint_key(endpoint) == key
+
+
+def test_a_video_devices_key_follows_its_links(tmp_path):
+    device = tmp_path / "video0"
+    device.touch()
+    (tmp_path / "usb-cam").symlink_to(device)
+    assert endpoint_key(VideoEndpoint(str(tmp_path / "usb-cam"))) == f"video {device}"
+
+
+@pytest.mark.parametrize(("url", "kind", "key"), [
+    ("modbus-tcp://127.0.0.1?unit=2", Kind.LIFT, "tcp 127.0.0.1:502 unit 2"),
+    ("modbus-tcp://127.0.0.1?unit=2", Kind.WRENCH, "tcp 127.0.0.1:502 unit 2"),
+    ("openprotocol://127.0.0.1", Kind.WRENCH, "tcp 127.0.0.1:4545"),
+    ("sim://lift", Kind.LIFT, None),
+    # a URL naming no backend of its kind, or one its backend refuses, is its own key
+    ("openprotocol://127.0.0.1", Kind.LIFT, "url openprotocol://127.0.0.1"),
+    ("modbus-tcp://127.0.0.1?unit=300", Kind.LIFT, "url modbus-tcp://127.0.0.1?unit=300"),
+    ("bogus://x", None, "url bogus://x"),
+    ("not a url", Kind.CAMERA, "url not a url"),
+])
+def test_the_key_is_asked_of_the_backend_of_the_devices_kind(url, kind, key):
+    assert device_key(url, kind) == key

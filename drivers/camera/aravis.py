@@ -56,6 +56,7 @@ from drivers.camera.aravis_config import Settings, parse_aravis_url, translate
 from drivers.camera.base import CameraDevice, Frame, FrameError, UnsupportedError
 from drivers.camera.clock import ClockMap
 from drivers.counting import counted
+from drivers.endpoint import AravisEndpoint, Endpoint
 from drivers.errors import (
     ConnectError,
     ConnectionLostError,
@@ -336,6 +337,12 @@ class AravisCamera(CameraDevice):
         self._link: _Link | None = None
         self._failed: _Link | None = None   # lost, released at the next reconnect or close
         self._down = "not connected"
+
+    @classmethod
+    def _endpoint(cls, url: str) -> Endpoint:
+        """The camera by its device id, read as opening it reads it (case kept)."""
+        settings, _ = parse_aravis_url(url)
+        return AravisEndpoint(settings.name)
 
     @property
     def buffer_count(self) -> int:

@@ -25,8 +25,9 @@ import numpy as np
 
 from drivers.camera.base import CameraDevice, EndOfStreamError, Frame, choice, positive
 from drivers.counting import counted
+from drivers.endpoint import Endpoint, VideoEndpoint
 from drivers.errors import ConnectError, ConnectionLostError
-from drivers.url import parse_url
+from drivers.url import DeviceUrl, parse_url
 
 log = logging.getLogger(__name__)
 FORM = "opencv://INDEX[?width=W&height=H&fps=F&fourcc=MJPG&api=v4l2] | opencv:///path/video.avi"
@@ -49,6 +50,20 @@ def _size(text: str) -> int:
     return value
 
 
+def _source(parsed: DeviceUrl) -> int | str:
+    """What VideoCapture opens: a camera index (``opencv://0``) or a path (a video file, or
+    a device such as ``opencv:///dev/video2``); a UrlError for any other form."""
+    if parsed.path and parsed.path != "/" and not parsed.host:
+        return parsed.path
+    if parsed.host and parsed.host.isdigit() and parsed.path in ("", "/"):
+        index = int(parsed.host)
+        if index > MAX_INDEX:   # OpenCV fails such an index with a C++ exception
+            raise parsed.error(f"the camera index {index} is not a /dev/videoN "
+                               f"number (0-{MAX_INDEX})")
+        return index
+    raise parsed.error(f"expected a camera index or a file path: {FORM}")
+
+
 class OpenCvCamera(CameraDevice):
     """A VideoCapture source as a camera: free-running, no exposure or gain control."""
 
@@ -59,21 +74,23 @@ class OpenCvCamera(CameraDevice):
             "fourcc": (_fourcc, None), "api": (choice(*APIS), "any"),
             "timeout": (positive, None)}, FORM)
         super().__init__(url, timeout=opts["timeout"] or timeout)
-        if parsed.path and parsed.path != "/" and not parsed.host:
-            self.source: int | str = parsed.path
-        elif parsed.host and parsed.host.isdigit() and parsed.path in ("", "/"):
-            self.source = int(parsed.host)
-            if self.source > MAX_INDEX:   # OpenCV fails such an index with a C++ exception
-                raise parsed.error(f"the camera index {self.source} is not a /dev/videoN "
-                                   f"number (0-{MAX_INDEX})")
-        else:
-            raise parsed.error(f"expected a camera index or a file path: {FORM}")
+        self.source: int | str = _source(parsed)
         self.is_file = isinstance(self.source, str)
         self.opts = opts
         self._cap: Any = None
         self._grabbed: float | None = None
         self._count = 0
         self._backend = ""
+
+    @classmethod
+    def _endpoint(cls, url: str) -> Endpoint | None:
+        """A camera index is the ``/dev/videoN`` Linux numbers it as (V4L2, what OpenCV opens
+        on Linux), a path under /dev the video device itself; any other path is a video
+        file, read by any number of processes (None)."""
+        source = _source(parse_url(url))
+        if isinstance(source, int):
+            return VideoEndpoint(f"/dev/video{source}")
+        return VideoEndpoint(source) if source.startswith("/dev/") else None
 
     def identity(self) -> str:
         what = f"video file {self.source}" if self.is_file else f"camera index {self.source}"

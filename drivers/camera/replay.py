@@ -106,6 +106,11 @@ class FileReplayCamera(CameraDevice):
         self.position = 0  # index of the next file
         self._count = 0
 
+    @classmethod
+    def _endpoint(cls, url: str) -> None:
+        """Recorded files are read by any number of processes: nothing to keep apart."""
+        return None
+
     def identity(self) -> str:
         loop = "looping" if self.loop else "once"
         return f"file replay {self.pattern}: {counted(len(self.files), 'file')}, {loop}"

@@ -16,6 +16,7 @@ import logging
 import threading
 import time
 
+from drivers.endpoint import Endpoint
 from drivers.errors import (
     ConnectError,
     ConnectionLostError,
@@ -32,6 +33,7 @@ from drivers.modbus_link import (
     LinkSpec,
     ModbusLink,
     Wording,
+    modbus_endpoint,
     parse_modbus_url,
 )
 
@@ -74,6 +76,11 @@ class ModbusLift(Lift):
         self._io = threading.Lock()  # one request on the wire at a time; guards the link
         self._link: ModbusLink | None = None
         self._down = "not connected"   # why the link is down
+
+    @classmethod
+    def _endpoint(cls, url: str) -> Endpoint:
+        """One unit of a Modbus TCP host and port (502 by default), or a whole RTU line."""
+        return modbus_endpoint(url)
 
     def identity(self) -> str:
         return self.spec.describe()

@@ -47,6 +47,7 @@ from datetime import datetime
 from typing import Any, TypeVar
 
 from drivers.counting import noun
+from drivers.endpoint import Endpoint
 from drivers.errors import (
     ConnectionLostError,
     DeviceError,
@@ -55,7 +56,13 @@ from drivers.errors import (
     RefusedError,
 )
 from drivers.identity import DeviceIdentity
-from drivers.modbus_link import LinkSpec, ModbusLink, Wording, parse_modbus_url
+from drivers.modbus_link import (
+    LinkSpec,
+    ModbusLink,
+    Wording,
+    modbus_endpoint,
+    parse_modbus_url,
+)
 from drivers.url import DeviceUrl
 from drivers.wrench.base import SupervisedWrench, check_positive
 from drivers.wrench.modbus_map import ACK_CODES, WrenchRegisterMap, next_sequence, spans
@@ -112,6 +119,11 @@ class ModbusWrench(SupervisedWrench):
         self._request = self._control = self._acked = 0   # images of station registers
         self._regs: dict[int, int] = {}                   # the last status block read
         self._delivered: tuple[int, int] | None = None
+
+    @classmethod
+    def _endpoint(cls, url: str) -> Endpoint:
+        """One unit of a Modbus TCP host and port (502 by default), or a whole RTU line."""
+        return modbus_endpoint(url)
 
     @classmethod
     def from_url(cls, url: DeviceUrl, **kw: Any) -> ModbusWrench:

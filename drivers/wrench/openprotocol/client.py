@@ -30,10 +30,11 @@ import logging
 import threading
 from typing import Any
 
+from drivers.endpoint import Endpoint
 from drivers.errors import ConnectionLostError, DeviceError, ProtocolError
 from drivers.identity import DeviceIdentity
 from drivers.link import Link, TcpLink
-from drivers.url import DeviceUrl
+from drivers.url import DeviceUrl, parse_url
 from drivers.wrench.base import Received, SupervisedWrench, check_positive
 from drivers.wrench.openprotocol import commands
 from drivers.wrench.openprotocol import message as op
@@ -44,7 +45,12 @@ from drivers.wrench.openprotocol.dataacks import DataAcks
 from drivers.wrench.openprotocol.identity import ControllerIdentity
 from drivers.wrench.openprotocol.message import Message
 from drivers.wrench.openprotocol.oldresults import OldResults
-from drivers.wrench.openprotocol.options import DEFAULT_PORT, REFUSED, link_from_url
+from drivers.wrench.openprotocol.options import (
+    DEFAULT_PORT,
+    REFUSED,
+    link_endpoint,
+    link_from_url,
+)
 from drivers.wrench.openprotocol.renewal import Renewal
 from drivers.wrench.openprotocol.replay import CurveReplay
 from drivers.wrench.openprotocol.resultfeed import ResultFeed
@@ -92,6 +98,11 @@ class OpenProtocolWrench(SupervisedWrench):
                                        unasked.reset, alive.reset))
         self._supervisor = Supervisor(channel, self._stop, feed=feed, acks=acks,
                                       renewal=renewal, keepalive=alive)
+
+    @classmethod
+    def _endpoint(cls, url: str) -> Endpoint:
+        """The TCP host and port (4545 by default) or the serial line the URL names."""
+        return link_endpoint(parse_url(url))
 
     @classmethod
     def from_url(cls, url: DeviceUrl, **kw: Any) -> OpenProtocolWrench:

@@ -13,9 +13,11 @@ from collections.abc import Callable
 from typing import Any
 
 from drivers.counting import noun
+from drivers.endpoint import SerialEndpoint, TcpEndpoint
 from drivers.link import Link, SerialLink, TcpLink
 from drivers.url import DeviceUrl, OptionError
 
+#: Open Protocol's port, where an ``openprotocol://`` URL without one connects
 DEFAULT_PORT = 4545
 REFUSED = "controller off, or Open Protocol not enabled on this port?"
 Spec = dict[str, tuple[Callable[[str], Any], Any]]   # option -> (converter, default)
@@ -69,3 +71,15 @@ def link_from_url(url: DeviceUrl, kw: dict[str, Any]) -> tuple[Link, dict[str, A
         raise url.error("expected openprotocol://HOST[:PORT] (port 4545 by default)")
     opts.update(keyword_options(kw, OPTIONS))
     return TcpLink(url.host, url.port or DEFAULT_PORT, REFUSED), opts
+
+
+def link_endpoint(url: DeviceUrl) -> TcpEndpoint | SerialEndpoint:
+    """What ``url`` drives: the link it names (:func:`link_from_url`, so the same rules and
+    refusals) as an endpoint.  The TCP port is the controller (one Open Protocol session
+    per port); an RS-232 line is the controller on it."""
+    link, _ = link_from_url(url, {})
+    if isinstance(link, TcpLink):
+        return TcpEndpoint(link.host, link.port)
+    if isinstance(link, SerialLink):
+        return SerialEndpoint(link.port)
+    raise TypeError(f"link_from_url made a {type(link).__name__}, neither TCP nor serial")
