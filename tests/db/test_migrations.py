@@ -69,3 +69,32 @@ def test_offline_sql_can_be_generated(capsys):
     command.upgrade(alembic_config(url="sqlite:///x.db"), "head", sql=True)
     sql = capsys.readouterr().out
     assert "CREATE TABLE tightening_records" in sql and "0001" in sql
+
+
+def test_the_last_revision_goes_down_with_rows_and_curves_that_refer_to_them(tmp_path):
+    """A downgrade of a working database (a rundown and its curve, which refers to it): the
+    table rebuild of a batch drop was refused by the curve's foreign key."""
+    from sqlalchemy import text
+
+    from stationd.boltfile import import_bolts
+    from tests.db.conftest import BASE, record
+
+    url = url_of(tmp_path / "m.db")
+    table = tmp_path / "bolts.yaml"
+    table.write_text(BASE)
+    with Repository.open(url) as repo:
+        import_bolts(repo, table)
+        repo.start_vehicle("VIN1", "SEDAN")
+        rec = record(repo, "VIN1", "B1", tightening_id=1)
+    engine = make_engine(url)
+    with engine.begin() as conn:
+        conn.execute(text("INSERT INTO curves (record_id, tightening_id, trace_type, unit, "
+                          "sample_period_s, \"values\", recorded_at) VALUES (:r, 1, 'torque', "
+                          "'Nm', 0.01, '[1.0]', '2026-11-29 12:00:00')"), {"r": rec})
+        command.downgrade(alembic_config(connection=conn), "0013")
+    columns = {c["name"] for c in inspect(engine).get_columns("tightening_records")}
+    assert "controller_at" not in columns
+    with engine.connect() as conn:
+        assert conn.execute(text("SELECT count(*) FROM tightening_records")).scalar() == 1
+        assert conn.execute(text("SELECT count(*) FROM curves")).scalar() == 1
+    engine.dispose()

@@ -2,7 +2,7 @@
 
 Revision ID: 0014
 Revises: 0013
-Create Date: 2026-12-01
+Create Date: 2026-11-29
 
 Why: a result the controller sends again (it was not acknowledged before a reload, a link
 cut) is stored once, and telling a copy from another result under the same tightening id
@@ -33,5 +33,6 @@ def upgrade() -> None:
 
 
 def downgrade() -> None:
-    with op.batch_alter_table("tightening_records") as batch:
-        batch.drop_column("controller_at")
+    # one ALTER as well (SQLite 3.35+ drops a column in place): a batch rebuild drops and
+    # copies the table, which the curves' foreign keys to its rows refuse
+    op.drop_column("tightening_records", "controller_at")
