@@ -194,13 +194,20 @@ def run_station_demo(args: argparse.Namespace) -> int:
         return _run(args, cfg, bolts_path, tmp, out, instead, endpoints, line_url,
                     pg is not None, n_stations, cycles, said)
     finally:
-        kept = said if said or line_url is None else keep_unforwarded(tmp)
-        if kept and not said:   # the run ended before its summary: said here
-            print(kept_words(kept), file=out, flush=True)
-        if not kept:
-            shutil.rmtree(tmp, ignore_errors=True)
-        if pg is not None:
-            pg.stop()
+        try:
+            kept = said if said or line_url is None else keep_unforwarded(tmp)
+        except Exception:   # a database that cannot be read (the run's own error is the
+            # one to say): its folder is kept, as unforwarded records would be
+            kept = {"?": f"{tmp} (its databases could not be read)"}
+            (tmp / PID_FILE).unlink(missing_ok=True)
+        try:
+            if kept and not said:   # the run ended before its summary: said here
+                print(kept_words(kept), file=out, flush=True)
+            if not kept:
+                shutil.rmtree(tmp, ignore_errors=True)
+        finally:
+            if pg is not None:
+                pg.stop()
 
 
 def keep_unforwarded(tmp: Path) -> dict[str, str]:
