@@ -50,7 +50,7 @@ def test_a_third_nok_locks_the_screen_says_who_releases_and_a_supervisor_release
         # the loosen step: with its pset on the controller the headline says loosen, not
         # tighten (the trigger pulled only once it did)
         pose.write_text("B05")
-        d.wait_log("tightening: tightening bolt B05", count=2)
+        d.wait_log("tightening: loosening bolt B05")   # the tool on for the loosen pset
         page.wait(lambda p: p.text("#headline") == LOOSEN_FIRST, 30, "the loosen step")
         shots("operator-loosen-first")
         assert not rundown(d, ctl, pose, 2, pset=LOOSEN_PSET, loosening=True).ok
