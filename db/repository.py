@@ -9,7 +9,7 @@ callers see plain values (``BoltInfo``, ``VehicleReport``), never ORM objects ti
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import datetime
@@ -59,7 +59,7 @@ VIN_MAX = 32
 
 
 __all__ = ["BoltInfo", "DataError", "DatabaseError", "NotFoundError", "OwedEnable", "Recorded",
-           "Repository", "VehicleClosedError"]
+           "Repository", "StoredResult", "VehicleClosedError"]
 
 
 @dataclass(frozen=True)
@@ -95,10 +95,25 @@ class OwedEnable:
 class Recorded:
     """What :meth:`Repository.record_tightening_once` did: the record's ``id``, and
     ``again``: True when the result was a copy the controller sent again of one stored
-    already (that record's id; nothing was written)."""
+    already (that record's id; nothing was written).  For a copy, ``vin`` and ``bolt`` are
+    the stored record's: the bolt that tightening was of, which may not be the one the caller
+    attributed it to (a new station, after a reload, took B1's copy for B2's owed enable):
+    the caller must not take the copy as a result of its own bolt."""
 
     id: int
     again: bool = False
+    vin: str | None = None
+    bolt: str | None = None
+
+
+@dataclass(frozen=True)
+class StoredResult:
+    """A tightening record that a result from the controller is the very copy of
+    (:meth:`Repository.stored_result`): its id, and the vehicle and bolt it is of."""
+
+    id: int
+    vin: str
+    bolt: str
 
 
 class Repository:
@@ -256,13 +271,16 @@ class Repository:
         it was a copy the controller sent again (then nothing is written).
 
         Committed (and on disk) before it returns.  A resent copy is only the very same
-        tightening: a record of this vehicle with the same ``tightening_id``, torque and
-        angle, and the same controller timestamp (``controller_at``, the
-        controller's own time of the tightening, MID 0061) where both have one
-        (:func:`_same_result`).  Why the timestamp: a controller replaced or reset numbers
-        its tightenings from 1 again, and its torque (to 0.01 N m) and angle (to whole
-        degrees, near the target) can coincide with an earlier result's; taken for a copy,
-        such a result was lost silently.  Where a timestamp is not known (a controller
+        tightening: a record with the same ``tightening_id``, torque and angle, and the same
+        controller timestamp (``controller_at``, the controller's own time of the
+        tightening, MID 0061): of any vehicle where both have that timestamp, of this
+        vehicle where one lacks it (:func:`_stored_copy`).  The returned :class:`Recorded`
+        names the stored record's vehicle and bolt, and ``enable_id`` is settled only when
+        it is that bolt's own enable (a copy is no result of another bolt).  Why the
+        timestamp: a controller replaced or reset numbers its tightenings from 1 again,
+        and its torque (to 0.01 N m) and angle (to whole degrees, near the target) can
+        coincide with an earlier result's; taken for a copy, such a result was lost
+        silently.  Where a timestamp is not known (a controller
         without a clock, a record from before it was kept) the values decide, as before.
         ``result_at`` is the station's time of taking the result (its clock).
         ``parameters_id`` is the version that was sent (``BoltInfo.parameters_id``); without
@@ -283,14 +301,13 @@ class Repository:
         with self._session(write=True) as s:
             v = _vehicle(s, vin)
             if tightening_id is not None:  # a result the controller sent again: stored once
-                known = s.scalar(select(TighteningRecord.id).where(
-                    TighteningRecord.vehicle_id == v.id,
-                    *_same_result(TighteningRecord, TighteningRecord.controller_at,
-                                  tightening_id, torque_nm, angle_deg, controller_at))
-                    .order_by(TighteningRecord.id).limit(1))
+                known = _stored_copy(s, tightening_id, torque_nm, angle_deg, controller_at,
+                                     (vin,))
                 if known is not None:
-                    _settle(s, enable_id)
-                    return Recorded(known, again=True)
+                    # only the stored record's own bolt's enable: another bolt's enable is
+                    # still owed its tool's own result (the copy answers nothing of it)
+                    _settle(s, enable_id, of=(known.vin, known.bolt))
+                    return Recorded(known.id, again=True, vin=known.vin, bolt=known.bolt)
             if v.ended_at is not None:
                 raise DataError(f"vehicle {vin} is closed: a tightening cannot be recorded")
             b = s.scalar(select(Bolt).where(Bolt.model_id == v.model_id, Bolt.code == bolt,
@@ -349,6 +366,21 @@ class Repository:
                 else:
                     streak[code] = streak.get(code, 0) + 1
             return {k: n for k, n in streak.items() if n}
+
+    def stored_result(self, *, tightening_id: int, torque_nm: float | None,
+                      angle_deg: float | None, controller_at: datetime | None,
+                      vins: Collection[str]) -> StoredResult | None:
+        """The tightening record the given result from the controller is a copy of, if one
+        is stored (the rule of :meth:`record_tightening_once`: the same id, torque and angle;
+        any vehicle's record with the same ``controller_at``, or one of ``vins``, the
+        station's open vehicles, where a timestamp is missing on either side).
+
+        Why a read apart: the station asks it before its core attributes the result, so a
+        copy (a result stored, its acknowledgement lost, sent again after a reload) is never
+        taken for the result of the bolt the tool is enabled for now: it would close, count
+        or settle a bolt that was never tightened."""
+        with self._session(write=False) as s:
+            return _stored_copy(s, tightening_id, torque_nm, angle_deg, controller_at, vins)
 
     # -- what the station owes, results no bolt owns ----------------------------------------
     def note_enable(self, vin: str, bolt: str, pset: int | None, parameters_id: int | None,
@@ -615,11 +647,41 @@ def _same_result(model: Any, at: Any, tightening_id: int, torque_nm: float | Non
     return same
 
 
-def _settle(s: Session, enable_id: int | None) -> None:
+def _settle(s: Session, enable_id: int | None,
+            of: tuple[str, str] | None = None) -> None:
+    """The tool enable ``enable_id`` answered (the station owes it nothing more); with ``of``
+    (vin, bolt), only when it is an enable of that bolt of that vehicle."""
     if enable_id is not None:
         row = s.get(ToolEnable, enable_id)
-        if row is not None and row.settled_at is None:
+        if row is not None and row.settled_at is None and (
+                of is None or (row.vin, row.bolt) == of):
             row.settled_at = utcnow()
+
+
+def _stored_copy(s: Session, tightening_id: int, torque_nm: float | None,
+                 angle_deg: float | None, controller_at: datetime | None,
+                 vins: Collection[str]) -> StoredResult | None:
+    """The tightening record a result is the very copy of: :func:`_same_result`'s id and
+    values, and either the same controller timestamp (both have one: any vehicle's record,
+    the tightening is the controller's, wherever the station put it; a copy resent after
+    the vehicle changed was stored again as the next vehicle's bolt's OK) or, where one of
+    them lacks it, a record of one of ``vins`` (the values alone decide there, as before,
+    and only within the vehicle: a value coincidence across vehicles is not a copy)."""
+    rec = TighteningRecord
+    same: list[ColumnElement[bool]] = [
+        rec.tightening_id == int(tightening_id), rec.torque_nm == _opt_float(torque_nm),
+        rec.angle_deg == _opt_float(angle_deg)]
+    within = Vehicle.vin.in_(list(vins))
+    if controller_at is not None:
+        same.append(or_(rec.controller_at == controller_at,
+                        rec.controller_at.is_(None) & within))
+    else:
+        same.append(within)
+    row = s.execute(select(rec.id, Vehicle.vin, Bolt.code)
+                    .join(Vehicle, rec.vehicle_id == Vehicle.id)
+                    .join(Bolt, rec.bolt_id == Bolt.id)
+                    .where(*same).order_by(rec.id).limit(1)).first()
+    return None if row is None else StoredResult(int(row[0]), str(row[1]), str(row[2]))
 
 
 def _reason(exc: SQLAlchemyError) -> str:

@@ -417,7 +417,7 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
     Said.IDS_AGAIN: lambda n: (f"tightening id {n.tightening_id} again with other values: the "
                                "controller's ids started again (a new or reset controller?); "
                                "taken as a new result"),
-    Said.SENT_AGAIN: lambda n: sent_again_words(n.tightening_id, n.bolt),
+    Said.SENT_AGAIN: lambda n: sent_again_words(n.tightening_id, n.bolt, n.vin),
     Said.UNATTRIBUTED: lambda n: (f"{_unattributed(n.unattributed)}: not attributable to a "
                                   "bolt, stored unattributed"),
     Said.CONTROLLER_EVENT: _controller_event,
@@ -451,12 +451,14 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
 }
 
 
-def sent_again_words(tightening_id: int | None, bolt: str | None) -> str:
+def sent_again_words(tightening_id: int | None, bolt: str | None,
+                     vin: str | None = None) -> str:
     """A result the database had already, sent again by the controller: ``result 7 of B11
-    sent again by the controller: stored once`` (the bolt left out for a result no bolt
-    owns)."""
-    return (f"result {tightening_id}{f' of {bolt}' if bolt is not None else ''} sent again "
-            "by the controller: stored once")
+    sent again by the controller: stored once`` (the bolt it was stored for; left out for a
+    result no bolt owns; ``vin``: its vehicle, where not the one at the station)."""
+    of = f" of {bolt}" if bolt is not None else ""
+    of += f" of VIN {vin}" if vin is not None else ""
+    return f"result {tightening_id}{of} sent again by the controller: stored once"
 
 
 def notice_words(notice: Notice) -> str:

@@ -33,6 +33,7 @@ from stationd.station.inputs import (
     DeviceBack,
     DeviceSaid,
     Event,
+    ResultCopy,
     ResultIn,
     ResultsMissed,
     UnreadableIn,
@@ -83,9 +84,24 @@ class ControllerFeed:
             # a refusal is a fault until the controller answers
             await self._feed(DeviceBack(time.time(), WRENCH, self._keeper.reconnects))
         if result is not None:
-            await self._feed(result_input(time.time(), result))
+            await self._feed(await self.checked(result_input(time.time(), result)))
             self.received.remove(result)
             await self._live_gap(wrench, result)
+
+    async def checked(self, ev: ResultIn | UnreadableIn) -> ResultIn | ResultCopy | UnreadableIn:
+        """``ev`` after asking the database whether it has this result stored already
+        (:meth:`Records.copy_input`): a copy the controller sent again goes to the core as a
+        :class:`ResultCopy`, which it never attributes to a bolt.  A database that cannot
+        answer leaves ``ev`` as it is: the record's own transaction checks again, the last
+        guard (and reports the database's fault)."""
+        if not isinstance(ev, ResultIn) or self.records.repo is None:
+            return ev
+        try:
+            return await self._call(self.records.copy_input, ev, self.core.status().vin)
+        except STATION_FAULTS as exc:
+            log.warning("tightening %s not checked against the stored results: %s",
+                        ev.result.tightening_id, one_line(exc))
+            return ev
 
     async def curves(self, stop: asyncio.Event) -> None:
         """The controller's tightening curves when it sends them (``?curves=1`` in the
@@ -142,7 +158,8 @@ class ControllerFeed:
             if newest is None:
                 return
             if newest.tightening_id is None:   # unreadable, its id too: kept, nothing planned
-                await self._feed(result_input(time.time(), newest, fetched=True))
+                await self._feed(await self.checked(result_input(time.time(), newest,
+                                                                  fetched=True)))
                 return
             nid = int(newest.tightening_id)
             # from here the ids up to the controller's newest are this catch-up's; a pushed
@@ -246,8 +263,8 @@ class ControllerFeed:
         accounted for before it), then its curves."""
         log.info("tightening %d fetched %s", tid,
                  "after a later one came (the link up)" if live else "after a reconnect")
-        await self._feed(result_input(time.time(), got, fetched=True, follows=follows,
-                                      offset=offset, live=live))
+        await self._feed(await self.checked(result_input(
+            time.time(), got, fetched=True, follows=follows, offset=offset, live=live)))
         if isinstance(got, TighteningResult):
             await self._late_curves(wrench, tid)
 

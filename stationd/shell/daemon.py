@@ -297,7 +297,8 @@ class Station:
                     t.cancel()
                 await asyncio.gather(*tasks, return_exceptions=True)
                 for r in await self.controller.drain():
-                    await self._apply(self.core.feed(result_input(time.time(), r)))
+                    ev = await self.controller.checked(result_input(time.time(), r))
+                    await self._apply(self.core.feed(ev))
         # no STOPPING=1 here: a reload ends this station too, and STOPPING=1 tells systemd
         # the service is going down (it would kill it at TimeoutStopSec); the serve loop says
         # RELOADING=1 or STOPPING=1
@@ -355,7 +356,8 @@ class Station:
         """The results the keeper wrote on its way back: the core publishes and acknowledges
         them."""
         for u in await self._call(self.records.take_saved_late):
-            await self.feed(Written(time.time(), u.record, tuple(u.images), u.again))
+            await self.feed(Written(time.time(), u.record, tuple(u.images), u.again,
+                                    u.stored_vin, u.stored_bolt))
 
     async def _tick_loop(self, stop: asyncio.Event) -> None:
         """Time for the core.  (The systemd watchdog is ``run.keep_watchdog``'s: a feed may

@@ -308,7 +308,7 @@ class Effects:
                       "%s; %s", r.tightening_id, a.bolt, one_line(exc), u.describe())
             self._database.lost(DeviceError(f"results not stored: {one_line(exc)}"))
             return NotStored(time.time(), r.tightening_id, a.bolt, one_line(exc))
-        return Written(time.time(), a, tuple(u.images), u.again)
+        return Written(time.time(), a, tuple(u.images), u.again, u.stored_vin, u.stored_bolt)
 
     async def _store_unattributed(self, a: StoreUnattributed) -> None:
         """A result no bolt owns: stored, then acknowledged.  A database that refuses it is a

@@ -55,7 +55,14 @@ from stationd.station.commands import (
     SignOut,
     TeachStart,
 )
-from stationd.station.inputs import LoadedBolt, VehicleEnded, VehicleLoaded, VehicleRejected
+from stationd.station.inputs import (
+    LoadedBolt,
+    ResultCopy,
+    ResultIn,
+    VehicleEnded,
+    VehicleLoaded,
+    VehicleRejected,
+)
 from stationd.station.results import type_code
 from stationd.station.trust import RecordCheck, summary
 from stationd.words import comment_words, sent_again_words, stored_what, unattributed_words
@@ -75,8 +82,10 @@ class Unsaved:
     parameters_id: int | None = None
     enable_id: int | None = None     # the tool enable this result settles
     #: written, and found stored already: a copy the controller sent again (the core says
-    #: so and publishes no new result)
+    #: so and publishes no new result); then the stored record's vehicle and bolt
     again: bool = False
+    stored_vin: str | None = None
+    stored_bolt: str | None = None
 
     def describe(self) -> str:
         """One journal line with every value of the record (the only copy while unsaved)."""
@@ -209,6 +218,7 @@ class Records:
             controller_at=controller_time(r))
         u.again = done.again
         if done.again:
+            u.stored_vin, u.stored_bolt = done.vin, done.bolt
             return
         rid = done.id
         # the tightening's curves (stored as they came, usually just before) go with it; the
@@ -218,6 +228,29 @@ class Records:
         except STATION_FAULTS as exc:
             log.warning("curves of tightening %d not linked: %s", r.tightening_id,
                         one_line(exc))
+
+    def copy_input(self, ev: ResultIn, vin: str | None) -> ResultIn | ResultCopy:
+        """``ev`` as the core is to have it: a :class:`ResultCopy` when the database has
+        this very result stored already (:meth:`Repository.stored_result`: the same id,
+        values and controller time, any vehicle's; without a controller time, of ``vin``,
+        the vehicle at the station, or of the enable the station owes), else ``ev``.
+
+        Why before the core: a copy the controller sends again after a reload (stored, its
+        acknowledgement lost) met a new core that had not seen it, which attributed it to
+        the enable it owes now (another bolt of the same pset): that bolt was taken as done
+        or counted a NOK without being tightened.  Asked here, the core attributes no copy.
+        Blocking (the executor's, as every read)."""
+        r = ev.result
+        if r.tightening_id is None:
+            return ev
+        enable = self._enable
+        vins = {v for v in (vin, enable[0].vin if enable is not None else None) if v}
+        stored = self._repo().stored_result(
+            tightening_id=int(r.tightening_id), torque_nm=float(r.torque_nm),
+            angle_deg=float(r.angle_deg), controller_at=controller_time(r), vins=vins)
+        if stored is None:
+            return ev
+        return ResultCopy(ev.t, r, stored.vin, stored.bolt)
 
     def keep(self, u: Unsaved) -> None:
         """The database refused ``u``: kept until it takes it."""

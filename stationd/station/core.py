@@ -57,6 +57,7 @@ from stationd.station.inputs import (
     OperatorBack,
     ParamsAcked,
     ParamsRefused,
+    ResultCopy,
     ResultIn,
     ResultsMissed,
     Started,
@@ -116,6 +117,8 @@ class StationCore(LiftRules, ToolRules, ResultRules):
                 return self._on_params_refused(ev)
             case ResultIn():
                 return self._on_result_in(ev)
+            case ResultCopy():
+                return self._on_result_copy(ev)
             case UnreadableIn():
                 return self._on_unreadable_in(ev)
             case ResultsMissed():

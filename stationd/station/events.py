@@ -515,7 +515,8 @@ class Said(enum.Enum):
     IDS_AGAIN = "ids again"              # a known id with other values (tightening_id)
     SENT_AGAIN = "sent again"            # a result the database had already: a copy the
     #                                      controller sent again, stored once
-    #                                      (tightening_id, bolt)
+    #                                      (tightening_id; bolt: the one it was stored
+    #                                      for; vin: its vehicle, if not the one here)
     UNATTRIBUTED = "unattributed"        # a result no bolt owns (tightening_id, pset;
     #                                      unattributed: why, as stored with it)
     CONTROLLER_EVENT = "controller event"  # not a rundown (result_type: its type code;

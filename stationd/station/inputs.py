@@ -116,6 +116,20 @@ class ResultIn(Input):
 
 
 @dataclass(frozen=True)
+class ResultCopy(Input):
+    """A result from the controller that the database has stored already (the shell asked it
+    before the core saw the result): a copy the controller sent again, its acknowledgement
+    lost (a reload, a link cut).  ``vin`` and ``bolt``: the vehicle and bolt it was stored
+    for.  Why apart from :class:`ResultIn`: the core must not attribute it: taken for the
+    result of the bolt the tool is enabled for now (a new station's owed enable, same
+    pset), it closed, counted or settled a bolt that was never tightened."""
+
+    result: TighteningResult
+    vin: str
+    bolt: str
+
+
+@dataclass(frozen=True)
 class UnreadableIn(Input):
     """A result message the driver could not read (kept whole), not yet acknowledged."""
 
@@ -244,11 +258,15 @@ class ToolOn(Input):
 @dataclass(frozen=True)
 class Written(Input):
     """The database took ``record`` (with the crops ``images``): it may be acknowledged.
-    ``again``: it had it already (a copy the controller sent again, stored once)."""
+    ``again``: it had it already (a copy the controller sent again, stored once); then
+    ``stored_vin`` and ``stored_bolt`` are the stored record's, which may not be
+    ``record``'s (the copy was attributed to another bolt: the core undoes that)."""
 
     record: Record
     images: tuple[str, ...] = ()
     again: bool = False
+    stored_vin: str | None = None
+    stored_bolt: str | None = None
 
 
 @dataclass(frozen=True)
@@ -317,7 +335,7 @@ class CommandDone(Input):
 
 
 Event = (Started | Announce | LiftRead | LocalizedIn | ParamsAcked | ParamsRefused | ResultIn
-         | UnreadableIn
+         | ResultCopy | UnreadableIn
          | ResultsMissed | NotStored
          | DeviceFault | DeviceBack | DeviceSaid | LineLinkIn
          | VehicleLoaded | VehicleRejected | VinSent | Tick

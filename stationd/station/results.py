@@ -47,6 +47,7 @@ from stationd.station.events import (
 from stationd.station.inputs import (
     CommandDone,
     NotStored,
+    ResultCopy,
     ResultIn,
     ResultsMissed,
     UnreadableIn,
@@ -104,6 +105,22 @@ class ResultRules(OrderRules):
         again: list[Action] = [] if tid not in self._recorded else [
             Publish(Notice(Said.IDS_AGAIN, tightening_id=tid, t=ev.t))]
         return again + self._result_in(ev, tid)
+
+    def _on_result_copy(self, ev: ResultCopy) -> list[Action]:
+        """A result the database had stored already (the shell asked before this core saw
+        it): a copy the controller sent again.  Nothing is attributed: no bolt is closed,
+        counted or reopened, the tool and its enable stay as they are (the enabled bolt's
+        own result may still come), and the copy is said with the bolt it was stored for
+        (and its vehicle, where it is not the one at the station), then acknowledged: the
+        controller may forget it."""
+        r = ev.result
+        tid = int(r.tightening_id)
+        if self._recorded.get(tid, None) == _said(r):
+            return [Acknowledge(r)]   # said already by this core
+        self._recorded[tid] = _said(r)
+        return [Publish(Notice(Said.SENT_AGAIN, tightening_id=tid, bolt=ev.bolt,
+                               vin=ev.vin if ev.vin != self.vin else None, t=ev.t)),
+                Acknowledge(r)]
 
     def _result_in(self, ev: ResultIn, tid: int) -> list[Action]:
         r = ev.result
@@ -172,12 +189,22 @@ class ResultRules(OrderRules):
     def _on_written(self, ev: Written) -> list[Action]:
         """A result on disk: published for the screens, then the controller may forget it.
         One the database had already (a copy the controller sent again: this core had not
-        seen it, after a reload or a restart) is said in the journal and acknowledged; no
-        new result is published (none was stored)."""
+        seen it, after a reload or a restart, and the shell's check before it came in did
+        not find it: a race) is said in the journal with the bolt it was stored for and
+        acknowledged; no new result is published (none was stored).  Where that is another
+        bolt than the one this core attributed it to, that attribution is undone
+        (:meth:`_not_its_copy`)."""
         a, r = ev.record, ev.record.result
         if ev.again:
-            return [Publish(Notice(Said.SENT_AGAIN, tightening_id=int(r.tightening_id),
-                                   bolt=a.bolt, t=ev.t)),
+            stored = (ev.stored_vin or a.vin, ev.stored_bolt or a.bolt)
+            acts: list[Action] = []
+            if stored != (a.vin, a.bolt):
+                acts += self._not_its_copy(ev, stored)
+            return [*acts,
+                    Publish(Notice(Said.SENT_AGAIN, tightening_id=int(r.tightening_id),
+                                   bolt=stored[1],
+                                   vin=stored[0] if stored[0] != self.vin else None,
+                                   t=ev.t)),
                     Acknowledge(r)]
         return [Publish(ResultRecorded(
             a.vin, a.bolt, bool(r.ok), float(r.torque_nm), float(r.angle_deg),
@@ -185,6 +212,31 @@ class ResultRules(OrderRules):
             float(r.angle_min_deg), float(r.angle_max_deg), a.late, tuple(ev.images), a.kind,
             a.selection.operator if a.selection is not None else None, t=ev.t)),
             Acknowledge(r)]
+
+    def _not_its_copy(self, ev: Written, stored: tuple[str, str]) -> list[Action]:
+        """A copy of ``stored``'s (vin, bolt) result that this core had attributed to
+        ``ev.record``'s bolt: that bolt is not done by it, the NOK it counted is taken back
+        (with the skip that NOK made), and the bolt is held for a supervisor, with which
+        result it was.  Why held, not only reopened: the tool was enabled for that bolt, and
+        it may have been tightened with its own result not here (lost, or coming late):
+        open again, it could be tightened twice; a person checks the controller's results
+        and releases it (open again) or enters its outcome.  The enable stays cleared (its
+        tool is off): a late result of its own is stored unattributed, for that person."""
+        a, r = ev.record, ev.record.result
+        m = self.matcher
+        if m is None or self.vin != a.vin or a.bolt not in m.bolts:
+            return []
+        m.done.discard(a.bolt)
+        m.counted.discard(a.bolt)
+        if not bool(r.ok) and self._noks.get(a.bolt, 0) > 0:
+            self._noks[a.bolt] -= 1
+            if not self._noks[a.bolt]:
+                del self._noks[a.bolt]
+            if m.skipped.get(a.bolt) == NOK_SKIPPED:
+                del m.skipped[a.bolt]
+        return self._hold(ev.t, a.bolt, f"tightening {int(r.tightening_id)} was "
+                          f"{stored[1]}'s" + (f" of {stored[0]}" if stored[0] != a.vin else "")
+                          + f" (sent again), not a result of {a.bolt}")
 
     def _on_results_missed(self, ev: ResultsMissed) -> list[Action]:
         return [StoreGap(ev.first, ev.last, self.vin, ev.reason),

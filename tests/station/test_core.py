@@ -594,23 +594,107 @@ def test_a_resumed_enable_records_its_result_to_its_bolt_and_vehicle_before_any_
     assert _kinds(core.feed(ResultIn(1001.2, result(70060, 2, ok=False)))) == ["Acknowledge"]
 
 
+def _reloaded_owing(bolt: str = "B3", done: frozenset[str] = frozenset({"B1"})) -> StationCore:
+    """A new core after a reload: it owes ``bolt``'s enable (B3: the pset of B1, done and
+    stored before the reload) and has VIN1 loaded again."""
+    core = StationCore(PARAMS, leave_frames=2)
+    core.resume(Owed(_owed(bolt), off_at=1000.0))
+    core.feed(Started(1000.1))
+    core.feed(VehicleLoaded(1000.2, "VIN1", "M", BOLTS, done=done))
+    return core
+
+
 def test_a_result_the_database_had_already_is_said_a_copy_and_published_as_no_new_result():
-    """A new core (a reload, a restart) does not know the results the last one stored: a copy
-    the controller sends again reaches the database, which had it (stored once).  The
-    journal says so in one line, and no new result is published (none was stored); the
-    controller may forget it."""
-    from stationd.station.events import Notice, ResultRecorded, Said
+    """The last guard (the shell's check before the core missed it: a race): the copy of
+    B1's result 7 (stored, its acknowledgement lost before a reload) was attributed to B3's
+    owed enable (the same pset), and the database says it had it, as B1's.  Nothing was
+    stored, no new result is published; the journal names B1, the bolt it is of (it said
+    "result 7 of B3"); and B3, never tightened, is not done: it is held for a supervisor
+    with why (the tool was enabled for it: its own result may have been lost, so it is not
+    simply open again to be tightened twice).  The controller may forget the copy."""
+    from stationd.station.events import BoltLocked, Notice, ResultRecorded, Said
     from stationd.station.inputs import Written
 
-    core = StationCore(PARAMS, leave_frames=2)
-    core.resume(Owed(_owed(), off_at=1000.0))
-    core.feed(Started(1000.1))
-    [rec] = [a for a in core.feed(ResultIn(1001.0, result(7, 2, ok=False)))
+    core = _reloaded_owing()
+    [rec] = [a for a in core.feed(ResultIn(1001.0, result(7, 1, ok=True)))
              if isinstance(a, Record)]
-    acts = core.feed(Written(1001.1, rec, (), again=True))
-    assert _kinds(acts) == ["Acknowledge"] and not published(acts, ResultRecorded)
-    assert [(n.said, n.tightening_id, n.bolt) for n in published(acts, Notice)] == [
-        (Said.SENT_AGAIN, 7, "B2")]
+    assert rec.bolt == "B3"
+    acts = core.feed(Written(1001.1, rec, (), again=True, stored_vin="VIN1",
+                             stored_bolt="B1"))
+    assert _kinds(acts)[-1] == "Acknowledge" and not published(acts, ResultRecorded)
+    notices = [(n.said, n.tightening_id, n.bolt, n.vin) for n in published(acts, Notice)]
+    assert (Said.SENT_AGAIN, 7, "B1", None) in notices
+    assert not any(n[0] is Said.SENT_AGAIN and n[2] == "B3" for n in notices)
+    st = core.status()
+    assert "B3" not in st.done and "B3" in st.held and "B3" not in core.allowed()
+    assert [b.bolt for b in published(acts, BoltLocked)] == ["B3"]
+    assert "B1" in st.done
+    # a copy of the bolt it was attributed to (the same bolt): said as before, no hold
+    core2 = _reloaded_owing("B2", frozenset())
+    [rec2] = [a for a in core2.feed(ResultIn(1001.0, result(8, 2, ok=False)))
+              if isinstance(a, Record)]
+    acts2 = core2.feed(Written(1001.1, rec2, (), again=True, stored_vin="VIN1",
+                               stored_bolt="B2"))
+    assert _kinds(acts2) == ["Acknowledge"]
+    assert [(n.said, n.bolt) for n in published(acts2, Notice)] == [(Said.SENT_AGAIN, "B2")]
+
+
+def test_a_nok_copy_attributed_to_another_bolt_is_not_counted_against_it():
+    """The race's NOK: B1's NOK 7 taken for B3's counted a NOK of B3 (``skip`` skipped it
+    for the vehicle, a bolt left untightened); the database's answer takes it back."""
+    from stationd.station.inputs import Written
+    from stationd.station.policy import NokPolicy, NokRule
+
+    core = StationCore(PARAMS, leave_frames=2, nok=NokPolicy(NokRule(3, "skip")))
+    core.resume(Owed(_owed("B3"), off_at=1000.0))
+    core.feed(Started(1000.1))
+    core.feed(VehicleLoaded(1000.2, "VIN1", "M", BOLTS))
+    [rec] = [a for a in core.feed(ResultIn(1001.0, result(7, 1, ok=False)))
+             if isinstance(a, Record)]
+    assert "B3" in core.status().skipped
+    core.feed(Written(1001.1, rec, (), again=True, stored_vin="VIN1", stored_bolt="B1"))
+    st = core.status()
+    assert "B3" not in st.skipped and "B3" not in st.done and "B3" in st.held
+
+
+def test_a_copy_found_before_the_core_is_never_attributed_to_the_owed_enable():
+    """The reviewer's scenario: result 7 of B1 was stored, its acknowledgement lost; B3
+    (B1's pset) was enabled; a reload; the controller sends 7 again.  The shell found it
+    stored (as B1's) before the core saw it: the core attributes nothing.  B3 stays open,
+    its enable still owed (its own result, when it comes, is B3's), the notice names B1, and
+    the controller may forget the copy."""
+    from stationd.station.events import Notice, ResultRecorded, Said
+    from stationd.station.inputs import ResultCopy
+
+    core = _reloaded_owing()
+    acts = core.feed(ResultCopy(1001.0, result(7, 1), "VIN1", "B1"))
+    assert _kinds(acts) == ["Acknowledge"]
+    assert not any(isinstance(a, Record | StoreUnattributed) for a in acts)
+    assert not published(acts, ResultRecorded)
+    assert [(n.said, n.tightening_id, n.bolt, n.vin) for n in published(acts, Notice)] == [
+        (Said.SENT_AGAIN, 7, "B1", None)]
+    st = core.status()
+    assert "B3" not in st.done and "B3" not in st.held and "B3" in core.allowed()
+    # sent again once more: acknowledged, said once
+    assert _kinds(core.feed(ResultCopy(1001.1, result(7, 1), "VIN1", "B1"))) == ["Acknowledge"]
+    # the tool's own result for B3 still comes within the window: B3's
+    [rec] = [a for a in core.feed(ResultIn(1002.0, result(8, 1))) if isinstance(a, Record)]
+    assert (rec.vin, rec.bolt, rec.late) == ("VIN1", "B3", True)
+    assert "B3" in core.status().done
+
+
+def test_a_copy_of_another_vehicle_s_result_names_that_vehicle():
+    from stationd.station.events import Notice, Said
+    from stationd.station.inputs import ResultCopy
+    from stationd.words import notice_words
+
+    core = _reloaded_owing()
+    acts = core.feed(ResultCopy(1001.0, result(7, 1), "VIN0", "B1"))
+    [n] = published(acts, Notice)
+    assert (n.said, n.bolt, n.vin) == (Said.SENT_AGAIN, "B1", "VIN0")
+    assert notice_words(n) == ("result 7 of B1 of VIN VIN0 sent again by the controller: "
+                               "stored once")
+    assert "B1" in core.status().done and "B3" not in core.status().done
 
 
 def test_a_resumed_enable_does_not_take_another_pset_or_a_result_after_its_window():
