@@ -108,12 +108,14 @@ class Recorded:
 
 @dataclass(frozen=True)
 class StoredResult:
-    """A tightening record that a result from the controller is the very copy of
-    (:meth:`Repository.stored_result`): its id, and the vehicle and bolt it is of."""
+    """A stored result that a result from the controller is the very copy of
+    (:meth:`Repository.stored_result`): its id, and the vehicle and bolt it is of (None: a
+    result no bolt owns, stored unattributed, or a controller event of no bolt; ``vin`` None
+    where no vehicle was at height)."""
 
     id: int
-    vin: str
-    bolt: str
+    vin: str | None
+    bolt: str | None
 
 
 class Repository:
@@ -302,7 +304,7 @@ class Repository:
             v = _vehicle(s, vin)
             if tightening_id is not None:  # a result the controller sent again: stored once
                 known = _stored_copy(s, tightening_id, torque_nm, angle_deg, controller_at,
-                                     (vin,))
+                                     (vin,), others=False)
                 if known is not None:
                     # only the stored record's own bolt's enable: another bolt's enable is
                     # still owed its tool's own result (the copy answers nothing of it)
@@ -648,7 +650,7 @@ def _same_result(model: Any, at: Any, tightening_id: int, torque_nm: float | Non
 
 
 def _settle(s: Session, enable_id: int | None,
-            of: tuple[str, str] | None = None) -> None:
+            of: tuple[str | None, str | None] | None = None) -> None:
     """The tool enable ``enable_id`` answered (the station owes it nothing more); with ``of``
     (vin, bolt), only when it is an enable of that bolt of that vehicle."""
     if enable_id is not None:
@@ -660,13 +662,16 @@ def _settle(s: Session, enable_id: int | None,
 
 def _stored_copy(s: Session, tightening_id: int, torque_nm: float | None,
                  angle_deg: float | None, controller_at: datetime | None,
-                 vins: Collection[str]) -> StoredResult | None:
+                 vins: Collection[str], *, others: bool = True) -> StoredResult | None:
     """The tightening record a result is the very copy of: :func:`_same_result`'s id and
     values, and either the same controller timestamp (both have one: any vehicle's record,
     the tightening is the controller's, wherever the station put it; a copy resent after
     the vehicle changed was stored again as the next vehicle's bolt's OK) or, where one of
     them lacks it, a record of one of ``vins`` (the values alone decide there, as before,
-    and only within the vehicle: a value coincidence across vehicles is not a copy)."""
+    and only within the vehicle: a value coincidence across vehicles is not a copy).  Then,
+    with ``others``, the same among the results stored unattributed and the controller
+    events (the rundowns' own write asks the rundowns only: those are checked as they are
+    stored, each in its own table)."""
     rec = TighteningRecord
     same: list[ColumnElement[bool]] = [
         rec.tightening_id == int(tightening_id), rec.torque_nm == _opt_float(torque_nm),
@@ -681,7 +686,26 @@ def _stored_copy(s: Session, tightening_id: int, torque_nm: float | None,
                     .join(Vehicle, rec.vehicle_id == Vehicle.id)
                     .join(Bolt, rec.bolt_id == Bolt.id)
                     .where(*same).order_by(rec.id).limit(1)).first()
-    return None if row is None else StoredResult(int(row[0]), str(row[1]), str(row[2]))
+    if row is not None:
+        return StoredResult(int(row[0]), str(row[1]), str(row[2]))
+    if not others:
+        return None
+    # stored as a result no bolt owns, or as a controller event: a copy of one, taken for
+    # the owed enable's result, would close that bolt as well
+    for model, bolt in ((UnattributedResult, None), (ControllerEvent, ControllerEvent.bolt)):
+        where: list[ColumnElement[bool]] = [
+            model.tightening_id == int(tightening_id), model.torque_nm == _opt_float(torque_nm),
+            model.angle_deg == _opt_float(angle_deg)]
+        mine = model.vin.in_(list(vins))
+        where.append(or_(model.result_at == controller_at, model.result_at.is_(None) & mine)
+                     if controller_at is not None else mine)
+        found = s.execute(select(model.id, model.vin, bolt if bolt is not None
+                                 else model.vin).where(*where).order_by(model.id).limit(1)
+                          ).first()
+        if found is not None:
+            return StoredResult(int(found[0]), None if found[1] is None else str(found[1]),
+                                None if bolt is None or found[2] is None else str(found[2]))
+    return None
 
 
 def _reason(exc: SQLAlchemyError) -> str:

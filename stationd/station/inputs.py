@@ -120,13 +120,14 @@ class ResultCopy(Input):
     """A result from the controller that the database has stored already (the shell asked it
     before the core saw the result): a copy the controller sent again, its acknowledgement
     lost (a reload, a link cut).  ``vin`` and ``bolt``: the vehicle and bolt it was stored
-    for.  Why apart from :class:`ResultIn`: the core must not attribute it: taken for the
-    result of the bolt the tool is enabled for now (a new station's owed enable, same
-    pset), it closed, counted or settled a bolt that was never tightened."""
+    for (None: stored as a result no bolt owns, or with no vehicle at height).  Why apart
+    from :class:`ResultIn`: the core must not attribute it: taken for the result of the
+    bolt the tool is enabled for now (a new station's owed enable, same pset), it closed,
+    counted or settled a bolt that was never tightened."""
 
     result: TighteningResult
-    vin: str
-    bolt: str
+    vin: str | None
+    bolt: str | None
 
 
 @dataclass(frozen=True)

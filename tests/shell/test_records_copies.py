@@ -10,6 +10,7 @@ enable and names the stored record's bolt."""
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from datetime import datetime
 from pathlib import Path
@@ -155,4 +156,36 @@ def test_the_same_tightening_after_the_vehicle_changed_is_a_copy_not_the_next_on
     records.note_enable(_sel("B1", "VIN2"))   # VIN2's B1 enabled: no enable of VIN1 owed
     no_clock = ResultIn(time.time(), _result(clock=False))
     assert records.copy_input(no_clock, "VIN2") is no_clock
+    repo.close()
+
+
+def test_a_copy_of_a_result_stored_unattributed_is_no_owed_bolts_result(tmp_path: Path) -> None:
+    """A result stored as no bolt's (made during a link cut on a bolt never selected), its
+    acknowledgement lost, sent again after a reload while B2's enable is owed: a copy, said
+    as no bolt's; B2 stays open, its enable owed.  A controller event the same, naming its
+    bolt."""
+    records, core, _ = _stored_then_reloaded(tmp_path)
+    repo = records.repo
+    assert repo is not None
+    stored = repo.record_unattributed(
+        vin="VIN1", controller_vin=None, tightening_id=9, pset=1, ok=True, torque_nm=50.0,
+        angle_deg=30.0, result_at=AT.astimezone(), reason="made during a link cut")
+    assert stored is not None
+    ev = records.copy_input(ResultIn(time.time(), _result(9)), core.status().vin)
+    assert ev == ResultCopy(ev.t, _result(9), "VIN1", None)
+    acts = core.feed(ev)
+    [n] = [a.event for a in acts if isinstance(a, Publish)]
+    assert isinstance(n, Notice) and (n.said, n.bolt) == (Said.SENT_AGAIN, None)
+    assert "B2" not in core.status().done and "B2" in core.allowed()
+    assert repo.owed_enable() is not None
+    event = repo.record_controller_event(
+        result_type=3, what="batch increment", vin="VIN1", bolt="B1", controller_vin=None,
+        tightening_id=10, pset=1, ok=True, torque_nm=50.0, angle_deg=30.0,
+        result_at=AT.astimezone())
+    assert event is not None
+    ev = records.copy_input(ResultIn(time.time(), _result(10)), "VIN1")
+    assert isinstance(ev, ResultCopy) and (ev.vin, ev.bolt) == ("VIN1", "B1")
+    # the same id and values at another controller time: another result, not a copy
+    later = ResultIn(time.time(), dataclasses.replace(_result(9), timestamp=AT.replace(hour=9)))
+    assert records.copy_input(later, "VIN1") is later
     repo.close()
