@@ -17,7 +17,7 @@ from types import TracebackType
 from typing import Any, Self
 
 from alembic.util import CommandError
-from sqlalchemy import ColumnElement, Engine, func, make_url, or_, select
+from sqlalchemy import ColumnElement, Engine, func, make_url, null, or_, select
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session
 
@@ -454,12 +454,13 @@ class Repository:
         is held for a person instead, :data:`db.kinds.NOT_TAKEN`)."""
         with self._session(write=True) as s:
             if tightening_id is not None:
-                same = s.scalar(select(ControllerEvent.id).where(
+                same = s.execute(select(ControllerEvent.vin, ControllerEvent.bolt).where(
                     ControllerEvent.result_type == int(result_type),
                     *_same_result(ControllerEvent, ControllerEvent.result_at, tightening_id,
-                                  torque_nm, angle_deg, result_at)).limit(1))
+                                  torque_nm, angle_deg, result_at)).limit(1)).first()
                 if same is not None:
-                    _settle(s, enable_id)
+                    # only its own bolt's enable: another bolt's is still owed (as a rundown)
+                    _settle(s, enable_id, of=(same[0], same[1]))
                     return None
             row = ControllerEvent(
                 result_type=int(result_type), what=what[:32], vin=vin, bolt=bolt,
@@ -641,12 +642,30 @@ def _same_result(model: Any, at: Any, tightening_id: int, torque_nm: float | Non
     0061), so a different time is another tightening.  A missing time (a controller without
     a clock, a row stored before it was kept) agrees with any: there the values decide, as
     before, rather than storing a true copy twice."""
-    same: list[ColumnElement[bool]] = [
-        model.tightening_id == int(tightening_id), model.torque_nm == _opt_float(torque_nm),
-        model.angle_deg == _opt_float(angle_deg)]
+    same = _same_values(model, tightening_id, torque_nm, angle_deg)
     if controller_at is not None:
         same.append(or_(at.is_(None), at == controller_at))
     return same
+
+
+def _same_values(model: Any, tightening_id: int, torque_nm: float | None,
+                 angle_deg: float | None) -> list[ColumnElement[bool]]:
+    """A stored row of ``model`` with the given tightening id, torque and angle (what every
+    copy rule starts from)."""
+    return [model.tightening_id == int(tightening_id), model.torque_nm == _opt_float(torque_nm),
+            model.angle_deg == _opt_float(angle_deg)]
+
+
+def _copy_of(model: Any, at: Any, vin: Any, tightening_id: int, torque_nm: float | None,
+             angle_deg: float | None, controller_at: datetime | None,
+             vins: Collection[str]) -> list[ColumnElement[bool]]:
+    """:func:`_stored_copy`'s rule on a row of ``model`` (``at``: its column of the
+    controller's timestamp, ``vin``: of its vehicle): the same values, and the same
+    timestamp on any vehicle, or where either lacks one, a vehicle of ``vins``."""
+    within = vin.in_(list(vins))
+    return [*_same_values(model, tightening_id, torque_nm, angle_deg),
+            or_(at == controller_at, at.is_(None) & within) if controller_at is not None
+            else within]
 
 
 def _settle(s: Session, enable_id: int | None,
@@ -673,38 +692,24 @@ def _stored_copy(s: Session, tightening_id: int, torque_nm: float | None,
     events (the rundowns' own write asks the rundowns only: those are checked as they are
     stored, each in its own table)."""
     rec = TighteningRecord
-    same: list[ColumnElement[bool]] = [
-        rec.tightening_id == int(tightening_id), rec.torque_nm == _opt_float(torque_nm),
-        rec.angle_deg == _opt_float(angle_deg)]
-    within = Vehicle.vin.in_(list(vins))
-    if controller_at is not None:
-        same.append(or_(rec.controller_at == controller_at,
-                        rec.controller_at.is_(None) & within))
-    else:
-        same.append(within)
     row = s.execute(select(rec.id, Vehicle.vin, Bolt.code)
                     .join(Vehicle, rec.vehicle_id == Vehicle.id)
                     .join(Bolt, rec.bolt_id == Bolt.id)
-                    .where(*same).order_by(rec.id).limit(1)).first()
+                    .where(*_copy_of(rec, rec.controller_at, Vehicle.vin, tightening_id,
+                                     torque_nm, angle_deg, controller_at, vins))
+                    .order_by(rec.id).limit(1)).first()
     if row is not None:
         return StoredResult(int(row[0]), str(row[1]), str(row[2]))
     if not others:
         return None
     # stored as a result no bolt owns, or as a controller event: a copy of one, taken for
     # the owed enable's result, would close that bolt as well
-    for model, bolt in ((UnattributedResult, None), (ControllerEvent, ControllerEvent.bolt)):
-        where: list[ColumnElement[bool]] = [
-            model.tightening_id == int(tightening_id), model.torque_nm == _opt_float(torque_nm),
-            model.angle_deg == _opt_float(angle_deg)]
-        mine = model.vin.in_(list(vins))
-        where.append(or_(model.result_at == controller_at, model.result_at.is_(None) & mine)
-                     if controller_at is not None else mine)
-        found = s.execute(select(model.id, model.vin, bolt if bolt is not None
-                                 else model.vin).where(*where).order_by(model.id).limit(1)
-                          ).first()
+    for model, bolt in ((UnattributedResult, null()), (ControllerEvent, ControllerEvent.bolt)):
+        found = s.execute(select(model.id, model.vin, bolt).where(*_copy_of(
+            model, model.result_at, model.vin, tightening_id, torque_nm, angle_deg,
+            controller_at, vins)).order_by(model.id).limit(1)).first()
         if found is not None:
-            return StoredResult(int(found[0]), None if found[1] is None else str(found[1]),
-                                None if bolt is None or found[2] is None else str(found[2]))
+            return StoredResult(int(found[0]), found[1], found[2])
     return None
 
 

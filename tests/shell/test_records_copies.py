@@ -189,3 +189,24 @@ def test_a_copy_of_a_result_stored_unattributed_is_no_owed_bolts_result(tmp_path
     later = ResultIn(time.time(), dataclasses.replace(_result(9), timestamp=AT.replace(hour=9)))
     assert records.copy_input(later, "VIN1") is later
     repo.close()
+
+
+def test_a_controller_event_copy_settles_no_other_bolt_s_enable(tmp_path: Path) -> None:
+    """The repository's last guard for a controller event, as for a rundown: a copy of B1's
+    event written against B2's owed enable writes nothing and leaves B2's enable owed."""
+    records, _, _ = _stored_then_reloaded(tmp_path)
+    repo = records.repo
+    assert repo is not None
+    owed = repo.owed_enable()
+    assert owed is not None and owed.bolt == "B2"
+
+    def event(bolt: str, enable_id: int | None) -> int | None:
+        return repo.record_controller_event(
+            result_type=3, what="batch increment", vin="VIN1", bolt=bolt, controller_vin=None,
+            tightening_id=11, pset=1, ok=True, torque_nm=50.0, angle_deg=30.0,
+            result_at=AT.astimezone(), enable_id=enable_id)
+
+    assert event("B1", None) is not None
+    assert event("B2", owed.id) is None                  # a copy of B1's: stored once
+    assert repo.owed_enable() is not None                # B2's enable not settled
+    repo.close()
