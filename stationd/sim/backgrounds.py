@@ -1,16 +1,19 @@
-"""A folder of rendered backgrounds that the simulated cameras of several processes share.
+"""A folder of rendered images that the simulated cameras of several processes share.
 
 A simulated camera renders its 20 MP background once (a second or more of a core each; eight
 cameras per station), and every station, demo and benchmark does so again in its own process:
-a test run of the whole daemon pays that dozens of times for the same few backgrounds.  With
-``STATIOND_SIM_BACKGROUNDS`` naming a folder, a background is rendered once, written there and
-read back (a fifth of a second) by every later camera that would render the very same one.
+a test run of the whole daemon pays that dozens of times for the same few backgrounds.  The
+window around a wrench's marker is the same story at a smaller scale: a third of a second of
+ray-casting per camera each time the wrench is put on a bolt, for the very same placements in
+test after test.  With ``STATIOND_SIM_BACKGROUNDS`` naming a folder, an image (a background,
+or a marker's window) is rendered once, written there and read back (a background in a fifth
+of a second, a window in a millisecond) by every later camera that would render the very same.
 
 "The very same": the key hashes everything the image is made of (the camera, the scene with
-its fixed markers, the seed) and the source of the code that draws it (the renderer, its ray
-caster, the camera model, the marker's colours) with the versions of NumPy and OpenCV, so a
-changed input or a changed renderer is a new file, never a stale image.  The render is
-deterministic in these, so a background read back equals the one the camera would render.
+its markers, the window, the seed) and the source of the code that draws it (the renderer,
+its ray caster, the camera model, the marker's colours) with the versions of NumPy and OpenCV,
+so a changed input or a changed renderer is a new file, never a stale image.  The render is
+deterministic in these, so an image read back equals the one the camera would render.
 The test suite points this at a folder of its own for one run; without the variable nothing is
 written anywhere and every camera renders its own, as before.
 """
@@ -48,25 +51,33 @@ def _code_key() -> bytes:
     return h.digest()
 
 
-def _key(camera: Camera, scene: render.Scene, seed: int) -> str:
+def _key(camera: Camera, scene: render.Scene, seed: int,
+         window: render.Window | None) -> str:
     h = hashlib.sha256(_code_key())
-    h.update(pickle.dumps((camera, scene, seed), protocol=5))
+    h.update(pickle.dumps((camera, scene, seed, window), protocol=5))
     return h.hexdigest()[:40]
 
 
 def background(camera: Camera, scene: render.Scene, seed: int) -> np.ndarray:
     """``render(camera, scene, seed=seed).image``, from the shared folder when it has it (and
     put there when it did not)."""
+    return rendered(camera, scene, seed)
+
+
+def rendered(camera: Camera, scene: render.Scene, seed: int,
+             window: render.Window | None = None) -> np.ndarray:
+    """``render(camera, scene, window=window, seed=seed).image``, from the shared folder when
+    it has it (and put there when it did not)."""
     folder = os.environ.get(ENV)
     if not folder:
-        return render.render(camera, scene, seed=seed).image
-    path = Path(folder) / f"{_key(camera, scene, seed)}.npy"
+        return render.render(camera, scene, window=window, seed=seed).image
+    path = Path(folder) / f"{_key(camera, scene, seed, window)}.npy"
     try:
         image: np.ndarray = np.load(path, allow_pickle=False)
         return image
     except (OSError, ValueError):     # not there yet (or being replaced): render it
         pass
-    image = render.render(camera, scene, seed=seed).image
+    image = render.render(camera, scene, window=window, seed=seed).image
     # written beside the camera's work, not before its first frame (60 MB take a disk a
     # while); not a daemon thread: a process that ends lets it finish
     writer = threading.Thread(target=_store, args=(path, image), name="sim-background-store")

@@ -4,7 +4,8 @@ A full 20 MP render costs about a second (noise generation dominates), far too s
 station running at frame rate.  The marker covers a small window of the frame: the rest is
 the same background every time.  So each camera renders its background once (or reads it from
 the folder of :mod:`stationd.sim.backgrounds`, where another process rendered the very same)
-and each frame ray-casts only the window around the marker, pasted into a copy.  The renderer
+and each frame ray-casts only the window around the marker (or reads it from that folder
+too), pasted into a copy.  The renderer
 seeds its noise by sensor position, so with the same seed the composite equals a full render
 exactly (tested); with a new seed per frame the window's noise is fresh and the background's is
 frozen, which a detector cannot tell apart.
@@ -102,9 +103,9 @@ class FrameSource:
         scene = replace(self.scene, markers=[*self.fixed, (pose, spec)])
         seed = self.seed if seed is None else seed
         win = marker_window(self.camera, pose, spec, margin_px=48.0)
-        if win is None:  # partly out of view: render what is visible, the slow way
-            return render(self.camera, scene, seed=seed).image
-        return win, render(self.camera, scene, window=win, seed=seed).image
+        if win is None:  # partly out of view: render what is visible, the slow way (a
+            return render(self.camera, scene, seed=seed).image   # whole frame: not kept)
+        return win, backgrounds.rendered(self.camera, scene, seed, win)
 
     def compose(self, patch: Patch) -> np.ndarray:
         """A frame from a :meth:`patch`: the background itself when nothing changes (shared,

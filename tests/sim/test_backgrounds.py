@@ -35,7 +35,7 @@ def test_a_background_is_rendered_once_then_read_back_equal(tmp_path, monkeypatc
     full = render(CAM, replace(SCENE, markers=[(pose, MarkerSpec())]), seed=3).image
     assert np.array_equal(frame, full)
     backgrounds.wait_stored()
-    assert len(list(tmp_path.iterdir())) == 1
+    assert len(list(tmp_path.iterdir())) == 2           # the background, the marker's window
 
 
 @pytest.mark.parametrize("change", ["seed", "scene", "camera", "fixed marker"])
@@ -81,3 +81,26 @@ def test_an_unreadable_file_is_rendered_again(tmp_path, monkeypatch):
     assert np.array_equal(backgrounds.background(CAM, SCENE, 3), good)
     backgrounds.wait_stored()
     assert np.array_equal(np.load(path), good)
+
+
+def test_a_markers_window_is_rendered_once_then_read_back_equal(tmp_path, monkeypatch):
+    """The window around a marker (a wrench put on a bolt) is kept as a background is: read
+    back, it is the window the camera renders, and the frame composed from it the full
+    render's; another pose is another file."""
+    monkeypatch.setenv(backgrounds.ENV, str(tmp_path))
+    pose = MarkerPose.look(np.array([10.0, -5.0, 500.0]), 20, 30, 0)
+    src = FrameSource(CAM, SCENE, seed=3)
+    first = src.patch(pose, seed=5)
+    backgrounds.wait_stored()
+    assert isinstance(first, tuple)
+    (win, pixels), files = first, set(tmp_path.iterdir())
+    assert len(files) == 1
+    again = FrameSource(CAM, SCENE, seed=3).patch(pose, seed=5)
+    assert isinstance(again, tuple) and again[0] == win
+    assert again[1] is not pixels and np.array_equal(again[1], pixels)
+    scene = replace(SCENE, markers=[(pose, MarkerSpec())])
+    assert np.array_equal(again[1], render(CAM, scene, window=win, seed=5).image)
+    moved = MarkerPose.look(np.array([12.0, -5.0, 500.0]), 20, 30, 0)
+    src.patch(moved, seed=5)
+    backgrounds.wait_stored()
+    assert len(set(tmp_path.iterdir()) - files) == 1
