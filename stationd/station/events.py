@@ -49,7 +49,7 @@ class StationEvent:
         out: dict[str, Any] = {"kind": self.kind}
         for f in dataclasses.fields(self):
             if not f.metadata.get(WORDED):
-                out[f.name] = _jsonable(getattr(self, f.name))
+                out[f.name] = jsonable(getattr(self, f.name))
         return out
 
 
@@ -58,20 +58,22 @@ class StationEvent:
 WORDED = "worded"
 
 
-def _jsonable(v: Any) -> Any:
+def jsonable(v: Any) -> Any:
+    """``v`` as JSON can carry it: enums to their values, NaN and inf to None, tuples and
+    sets to lists, arrays to lists, dataclasses (a reason and the reasons in it) to dicts."""
     if isinstance(v, enum.Enum):
         return v.value
     if isinstance(v, float):
         return v if math.isfinite(v) else None
     if isinstance(v, dict):
-        return {str(k): _jsonable(x) for k, x in v.items()}
+        return {str(k): jsonable(x) for k, x in v.items()}
     if isinstance(v, list | tuple | set | frozenset):
         items = sorted(v) if isinstance(v, set | frozenset) else v
-        return [_jsonable(x) for x in items]
+        return [jsonable(x) for x in items]
     if hasattr(v, "tolist"):  # numpy arrays and scalars
-        return _jsonable(v.tolist())
+        return jsonable(v.tolist())
     if dataclasses.is_dataclass(v) and not isinstance(v, type):
-        return {f.name: _jsonable(getattr(v, f.name)) for f in dataclasses.fields(v)}
+        return {f.name: jsonable(getattr(v, f.name)) for f in dataclasses.fields(v)}
     return v
 
 

@@ -35,13 +35,13 @@ import json
 import logging
 import math
 from collections.abc import Awaitable, Callable
-from dataclasses import asdict
 from typing import Any
 
 from aiohttp import web
 
 from db.ledger import FEED_LIMIT
 from stationd.access import AccessConfig, LoginThrottle, ReplayGuard, Sessions
+from stationd.reasons import Reason
 from stationd.station.commands import (
     KIND,
     Answer,
@@ -59,6 +59,7 @@ from stationd.station.commands import (
     TeachStart,
     TeachStop,
 )
+from stationd.station.events import jsonable
 from stationd.web.teach import TeachRoutes
 from stationd.words import answer_words, reason_words
 
@@ -183,9 +184,7 @@ class CommandRoutes:
         if answer.result is not None:
             out["result"] = dict(answer.result)
         if answer.reason is not None:
-            reason = {k: v for k, v in asdict(answer.reason).items() if v not in (None, ())}
-            out["reason"] = {**reason, "kind": answer.reason.kind.value,
-                             "words": reason_words(answer.reason)}
+            out["reason"] = reason_json(answer.reason)
         return web.json_response(out, status=200 if answer.accepted else 409)
 
     # -- the feed ---------------------------------------------------------------------------
@@ -206,6 +205,14 @@ class CommandRoutes:
         last = await loop.run_in_executor(None, ledger.last_seq)
         db_id = await loop.run_in_executor(None, ledger.db_id)
         return web.json_response({"db_id": db_id, "last_seq": last, "entries": entries})
+
+
+def reason_json(reason: Reason) -> dict[str, Any]:
+    """A refusal as the command's answer carries it: its kind, the details that apply (JSON
+    values: a reason inside it, such as what a teach point missed, with its kind's value) and
+    its words."""
+    details = {k: v for k, v in jsonable(reason).items() if v not in (None, [])}
+    return {**details, "kind": reason.kind.value, "words": reason_words(reason)}
 
 
 def _who(issuer: Issuer) -> dict[str, Any]:
@@ -286,4 +293,4 @@ def _command(body: dict[str, Any]) -> Command:
     raise web.HTTPBadRequest(text=f"kind: one of {', '.join(KIND.values())}\n")
 
 
-__all__ = ["COOKIE", "POSTS", "CommandRoutes", "Submit"]
+__all__ = ["COOKIE", "POSTS", "CommandRoutes", "Submit", "reason_json"]

@@ -1,0 +1,67 @@
+"""The command route's answers over real HTTP on loopback (the screens' server in this
+process): a refusal carrying a reason inside it reaches the person whole, as JSON."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from typing import Any
+
+from aiohttp import ClientSession, CookieJar
+
+from stationd.access import AccessConfig, hash_password
+from stationd.bus import EventBus
+from stationd.reasons import Reason, Why
+from stationd.station.commands import Answer, Command, Issuer, TeachPoint
+from stationd.web.commands import reason_json
+from stationd.web.server import WebServer
+from stationd.yamlio import YamlNode
+
+#: what the core answers a teach point whose localizations were too few to be steady: the
+#: reason carries, inside it, what the vision missed (as ``stationd.station.teaching`` does)
+MISSED = Reason(Why.NOT_LOCALIZED, per_pair=(("pair1", "left", "no purple region"),))
+NOT_STEADY = Reason(Why.NOT_STEADY, count=2, needed=10, cause=MISSED, limit=40)
+
+
+def test_a_reason_inside_a_reason_is_json_with_its_kind_and_words() -> None:
+    got = reason_json(NOT_STEADY)
+    assert json.loads(json.dumps(got)) == got
+    assert got["kind"] == "not steady" and got["cause"]["kind"] == "not localized"
+    assert got["cause"]["per_pair"] == [["pair1", "left", "no purple region"]]
+    assert "no purple region" in got["words"] and "10" in got["words"]
+
+
+def test_a_refused_teach_point_is_answered_409_with_its_reason_not_a_server_error() -> None:
+    """A newcomer's teach points were all "500 Internal Server Error": the answer's reason
+    held a reason with an enum inside, which the JSON encoder refused."""
+    access = AccessConfig.from_node(YamlNode.parse(
+        f"users:\n  ed: {{role: engineer, password: '{hash_password('pw-of-ed')}'}}\n",
+        "station.yaml"))
+
+    async def submit(command: Command, issuer: Issuer) -> Answer:
+        return Answer(1, command, issuer, NOT_STEADY)
+
+    async def main() -> tuple[int, dict[str, Any]]:
+        srv = WebServer(EventBus(), listen="127.0.0.1:0")
+        srv.commands.access, srv.commands.submit = access, submit
+        await srv.start()
+        try:
+            # the session's cookie kept for a loopback address (aiohttp keeps none by default)
+            async with ClientSession(cookie_jar=CookieJar(unsafe=True)) as http:
+                async with http.post(srv.url + "api/login",
+                                     json={"user": "ed", "password": "pw-of-ed"}) as r:
+                    assert r.status == 200
+                async with http.get(srv.url + "api/nonce") as r:
+                    nonce = (await r.json())["nonce"]
+                async with http.post(srv.url + "api/commands", json={
+                        "nonce": nonce, "kind": "teach-point", "bolt": "B11"}) as r:
+                    return r.status, await r.json()
+        finally:
+            await srv.stop()
+
+    status, body = asyncio.run(main())
+    assert status == 409 and body["accepted"] is False, body
+    assert body["reason"]["kind"] == "not steady"
+    assert body["reason"]["cause"]["kind"] == "not localized"
+    assert "no purple region" in body["words"]
+    assert isinstance(TeachPoint("B11"), Command)
