@@ -56,6 +56,9 @@ from db.report import VehicleInfo, VehicleReport, build_report
 EXPORT_HEADER = ("stationd bolt table, exported from the process-parameter database.\n"
                  "Units: positions mm (vehicle frame), torque N m, angle degrees.")
 VIN_MAX = 32
+#: the commands that end a bolt's lock (its NOKs in a row) or its hold: a release, and a skip
+#: (the station takes a skip of a locked or held bolt only from a user who may release it)
+ENDS_A_HOLD = frozenset({"release", "skip"})
 
 
 __all__ = ["BoltInfo", "DataError", "DatabaseError", "NotFoundError", "OwedEnable", "Recorded",
@@ -342,7 +345,7 @@ class Repository:
 
     def nok_streaks(self, vin: str, since: datetime | None = None) -> dict[str, int]:
         """Per bolt of ``vin``: its NOKs in a row at the end of its records (since its last OK
-        tightening and its last release command; only records since ``since``, the
+        tightening and its last release or skip command; only records since ``since``, the
         vehicle's last opening).  What the NOK policy counts, also after a reload or a
         restart: a NOK loosening counts, an OK loosening neither counts nor ends the row."""
         with self._session(write=False) as s:
@@ -356,7 +359,7 @@ class Repository:
                 q = q.where(TighteningRecord.recorded_at >= since)
             releases: dict[str, datetime] = {}
             for c in self.ledger.commands(vin):
-                if c.kind == "release" and c.bolt is not None:
+                if c.kind in ENDS_A_HOLD and c.bolt is not None:
                     releases[c.bolt] = c.at
             streak: dict[str, int] = {}
             for code, status, at, kind in s.execute(q):
@@ -559,8 +562,9 @@ class Repository:
                     .where(TighteningRecord.vehicle_id == v.id).group_by(Bolt.code)):
                 if code in held and at is not None and at >= held[code][1]:
                     del held[code]
-            for c in self.ledger.commands(vin):
-                if c.kind == "release" and c.bolt in held and c.at >= held[c.bolt][1]:
+            for c in self.ledger.commands(vin):   # a release ends it, as does a skip (only
+                # a user who may release may skip a held bolt)
+                if c.kind in ENDS_A_HOLD and c.bolt in held and c.at >= held[c.bolt][1]:
                     del held[c.bolt]
             return {b: note for b, (note, _) in held.items()}
 

@@ -37,9 +37,9 @@ from stationd.errors import InputError
 from stationd.shell.daemon import Station
 from stationd.sim.world import World, wrench_at
 from stationd.station.commands import Issuer, ReleaseBolt, Right, SignIn
-from stationd.station.events import BoltReleased, Localized, ResultRecorded, State
+from stationd.station.events import BoltReleased, BoltSkipped, Localized, ResultRecorded, State
 from stationd.station.policy import NokPolicy
-from stationd.words import reason_words, state_words
+from stationd.words import reason_words, skip_words, state_words
 
 #: a tightening fails now and then; a stubborn joint (a damaged thread) fails until its bolt
 #: locks and the supervisor released it; a loosening always comes loose
@@ -276,6 +276,12 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
             except WaitEnded as ended:
                 truth["interrupted"] = {"signal": ended.signal, "bolts": []}
                 break
+            skip = _skipped_by(st, bolt_id)
+            if skip is not None:     # skipped by a person who may release: the station's
+                line.pop("waits")    # part done (locked, then a person's decision)
+                line["before"] = [*line.get("before", []), "locked"]
+                line["result"] = f"skipped ({skip})"
+                break
             pose = wrench_at(np.array(b.position) + np.append(rng.normal(0, 0.3, 2), 0.0), rng,
                              length)
             truth["bolt"] = bolt_id
@@ -396,6 +402,16 @@ def _releases(st: Station, bolt: str) -> list[str]:
             and e.bolt == bolt]
 
 
+def _skipped_by(st: Station, bolt: str) -> str | None:
+    """Why ``bolt`` is skipped, in the station's words (``sam's command (to rework)``), or
+    None: not skipped (a person with the release right may skip a locked bolt instead)."""
+    if bolt not in st.core.status().skipped:
+        return None
+    skips = [e.skip for e in st.bus.of(BoltSkipped)
+             if isinstance(e, BoltSkipped) and e.bolt == bolt and e.skip is not None]
+    return skip_words(skips[-1]) if skips else "skipped"
+
+
 class WaitEnded(Exception):  # noqa: N818 - a wait ended, not an error
     """A signal (Ctrl-C, SIGTERM) ended the wait for a person's release."""
 
@@ -456,6 +472,10 @@ async def wait_for_people(st: Station, bolt: str, vin: str, note: Callable[[str]
                 await asyncio.wait_for(ended.wait(), 0.2)
             except TimeoutError:
                 pass
+    skip = _skipped_by(st, bolt)
+    if skip is not None:    # a person with the release right skipped it instead
+        note(f"{bolt} of {vin} skipped ({skip}): the operator leaves it")
+        return None
     for _ in range(40):     # the release's event follows the lock's end (the core's act)
         after = _releases(st, bolt)
         if len(after) > before:

@@ -18,6 +18,7 @@ from stationd.station.commands import (
     LoosenBolt,
     ReleaseBolt,
     ReopenVehicle,
+    Right,
     SignIn,
     SignOut,
     SkipBolt,
@@ -96,6 +97,13 @@ class OrderRules(FaultRules):
             return Reason(Why.DONE, bolt=cmd.bolt)
         if cmd.bolt in self.matcher.skipped:
             return Reason(Why.SKIPPED, bolt=cmd.bolt, skip=self.matcher.skipped[cmd.bolt])
+        if isinstance(cmd, SkipBolt) and Right.RELEASE not in who.rights:
+            # a skip ends a lock or a hold: only who may release it may (an operator's skip
+            # took the lock away, the supervisor never asked)
+            if cmd.bolt in self.matcher.held:
+                return Reason(Why.HELD, bolt=cmd.bolt, note=self.matcher.held[cmd.bolt])
+            if cmd.bolt in self.matcher.locked:
+                return Reason(Why.LOCKED, bolt=cmd.bolt, count=self.matcher.locked[cmd.bolt])
         if self.tool_on and self.bolt == cmd.bolt:
             return Reason(Why.TOOL_ON_BOLT, bolt=cmd.bolt)
         return None
@@ -170,6 +178,10 @@ class OrderRules(FaultRules):
             return []   # the vehicle left while the command was being recorded
         why = Skip(SkipKind.COMMAND, user=who.user, comment=cmd.comment)
         self.matcher.skipped[cmd.bolt] = why
+        # a lock or a hold ends with the skip (a user with the release right gave it)
+        self.matcher.locked.pop(cmd.bolt, None)
+        self.matcher.held.pop(cmd.bolt, None)
+        self._noks.pop(cmd.bolt, None)
         acts: list[Action] = [Publish(BoltSkipped(cmd.bolt, skip=why, t=t))]
         if self.bolt == cmd.bolt:
             acts += self._drop(t, State.TRACKING,

@@ -126,6 +126,9 @@ class BoltState:
     loosen_pset: int | None = None   # that loosen pset, as the station said it
     nok_count: int = 0          # NOKs in a row when it locked
     held: bool = False          # its result could not be read: an outcome entered, or a release
+    #: its last rundown a NOK, as the vehicle's report says it (a release, a skip, a lock do
+    #: not change it; the next rundown does, and a person's loosen command)
+    ends_nok: bool = False
 
     def to_json(self) -> dict[str, Any]:
         return {"bolt": self.bolt, "x": self.x_mm, "y": self.y_mm, "pset": self.pset,
@@ -304,6 +307,8 @@ class View:
 
     def _to_loosen(self, e: BoltToLoosen) -> None:
         self.bolts[e.bolt].loosen = True
+        if e.user is not None:   # a person's loosen command: the report says "loosen first"
+            self.bolts[e.bolt].ends_nok = False
         if e.reason.pset is not None:
             self.bolts[e.bolt].loosen_pset = e.reason.pset
         if not self.bolts[e.bolt].locked:
@@ -317,7 +322,7 @@ class View:
         self.results = []
         self.bolts = {b.bolt: BoltState(b.bolt, b.x_mm, b.y_mm, b.pset, b.order, b.batch,
                                         b.status if b.status in BOLT_LABELS else PENDING,
-                                        loosen=b.status == TO_LOOSEN)
+                                        loosen=b.status == TO_LOOSEN, ends_nok=b.status == NOK)
                       for b in e.bolts}
 
     def _close(self, e: VehicleClosed) -> None:
@@ -407,6 +412,7 @@ class View:
                 b.loosen = b.loosen and not e.ok
                 self._set(e.bolt, OK if e.ok else NOK, "" if e.ok else "NOK: rework")
             b.torque_nm, b.angle_deg = e.torque_nm, e.angle_deg
+            b.ends_nok = not e.ok
         if self.selected == e.bolt:
             self.selected, self.selected_loosen = None, None
         self.results.insert(0, {
@@ -437,11 +443,13 @@ class View:
 
     # -- what the screens read ----------------------------------------------------------
     def counters(self) -> dict[str, int]:
-        states = [b.state for b in self.bolts.values()]
-        # a locked bolt's last rundown is a NOK: it counts as one
-        return {"total": len(states), "done": states.count(OK),
-                "nok": states.count(NOK) + states.count(Shown.LOCKED),
-                "skipped": states.count(SKIPPED)}
+        """The header's counts as the vehicle's report counts its bolts: done (OK), ending
+        NOK (the last rundown a NOK, whether the bolt is locked, released or skipped since),
+        skipped (and not ending NOK)."""
+        bolts = self.bolts.values()
+        return {"total": len(bolts), "done": sum(b.state == OK for b in bolts),
+                "nok": sum(b.ends_nok for b in bolts),
+                "skipped": sum(b.state == SKIPPED and not b.ends_nok for b in bolts)}
 
     def locks(self) -> list[str]:
         """Each locked bolt in the operator's words (the screen adds who may release)."""

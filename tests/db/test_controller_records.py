@@ -69,5 +69,11 @@ def test_a_bolt_is_held_until_a_rundown_or_a_release_after_its_unreadable_result
                                vin="VIN1", bolt="B1", comment="checked on the controller")
     record(repo, "VIN1", "B2", tightening_id=5)
     assert repo.held_bolts("VIN1") == {}
+    # a skip ends a hold as a release does
+    _unreadable(repo, 6, "B3", raw=RAW + "6")
+    assert repo.held_bolts("VIN1") == {"B3": "tightening 6"}
+    repo.ledger.record_command(at=datetime.now(UTC) + timedelta(seconds=2), user="sam",
+                               source="cli", kind="skip", vin="VIN1", bolt="B3", comment="")
+    assert repo.held_bolts("VIN1") == {}
     # only since the vehicle's last opening
     assert repo.held_bolts("VIN1", since=datetime.now(UTC) + timedelta(hours=1)) == {}

@@ -354,6 +354,11 @@ def test_nok_streaks_count_the_noks_in_a_row_since_an_ok_or_a_release(repo, bolt
     assert repo.nok_streaks("VIN1") == {"B1": 1}
     record(repo, "VIN1", "B2", ok=False, tightening_id=8)
     assert repo.nok_streaks("VIN1") == {"B1": 1, "B2": 1}
+    # a skip ends the row too (the station takes it only from who may release): the lock
+    # does not come back with the vehicle after a restart
+    repo.ledger.record_command(at=datetime.now(UTC), user="sam", source="cli", kind="skip",
+                               vin="VIN1", bolt="B2", comment="to rework")
+    assert repo.nok_streaks("VIN1") == {"B1": 1}
 
 
 def test_the_journal_line_of_a_closing_vehicle_counts_in_the_reports_words(tmp_path,

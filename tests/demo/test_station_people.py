@@ -88,6 +88,13 @@ def test_a_lock_waits_for_a_persons_release_in_the_demo(tmp_path):
         assert refused.stdout.startswith(f"station DEMO-1 at http://127.0.0.1:{port}/ "
                                          f"({station.resolve()})\n"), refused
         expect(rf"command release {bolt} of {vin} .*by olga \(cli 127\.0\.0\.1\): refused")
+        # nor may she skip it: a skip would end the lock no supervisor has seen (a newcomer's
+        # operator did so, and the screens then hid the NOK)
+        skip = subprocess.run([sys.executable, "-m", "stationd", "skip", vin, bolt, "--comment",
+                               "stuck", "--user", "olga", "--config", str(station)],
+                              capture_output=True, text=True, env=env, timeout=60, check=False)
+        assert skip.returncode == 1 and "refused" in skip.stdout, skip
+        assert "locked after" in skip.stdout and "supervisor releases it" in skip.stdout, skip
         accepted = release("sue", vin, bolt)
         assert accepted.returncode == 0 and accepted.stdout.strip().endswith(": accepted"), \
             accepted

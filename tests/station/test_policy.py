@@ -12,7 +12,7 @@ import pytest
 from stationd.errors import ConfigError
 from stationd.reasons import Reason, Wait, WaitKind, Why
 from stationd.station.actions import Record
-from stationd.station.commands import ReleaseBolt
+from stationd.station.commands import ReleaseBolt, SkipBolt
 from stationd.station.core import StationCore
 from stationd.station.events import BoltLocked, BoltReleased, BoltSkipped, Refused
 from stationd.station.inputs import CommandDone, CommandIn, ResultIn, Started, VehicleLoaded
@@ -67,6 +67,41 @@ def test_a_bolt_locks_after_max_nok_in_a_row_and_a_release_unlocks_it():
     assert _answer(acts).answer.reason == Reason(Why.NOT_LOCKED, bolt="B2")
     _tighten(d, 2, 4, ok=True)                           # the count starts again
     assert "B2" in d.core.matcher.done
+
+
+def test_a_locked_bolt_is_skipped_only_by_who_may_release_it_and_the_skip_ends_the_lock():
+    """A newcomer's operator skipped a bolt locked after 3 NOK: the lock was gone, nobody
+    with the release right had seen it.  An operator's skip is refused as the lock's words
+    say; a supervisor's is taken and ends the lock (the bolt skipped, not locked)."""
+    d = _driver(NokPolicy(NokRule(max_nok=2)))
+    _tighten(d, 2, 1, ok=False)
+    _tighten(d, 2, 2, ok=False)
+    assert d.core.matcher is not None and d.core.matcher.locked == {"B2": 2}
+    acts = d.core.feed(CommandIn(d.t, 1, SkipBolt("VIN1", "B2", "stuck"), OPERATOR))
+    refused = _answer(acts).answer.reason
+    assert refused == Reason(Why.LOCKED, bolt="B2", count=2)
+    assert "supervisor" in reason_words(refused)
+    assert d.core.matcher.locked == {"B2": 2} and "B2" not in d.core.matcher.skipped
+    d.core.feed(CommandIn(d.t, 2, SkipBolt("VIN1", "B2", "to rework"), SUPERVISOR))
+    acts = d.core.feed(CommandDone(d.t, 2))
+    assert _answer(acts).answer.accepted
+    assert [e.bolt for e in _events(acts, BoltSkipped)] == ["B2"]
+    assert d.core.matcher.locked == {} and "B2" in d.core.matcher.skipped
+    assert d.core.status().locked == frozenset()
+    sends = len(d.sends)
+    _on(d, 2, 3)
+    assert len(d.sends) == sends                         # skipped: never sent
+
+
+def test_a_held_bolt_is_skipped_only_by_who_may_release_it():
+    d = _driver(NokPolicy(NokRule(max_nok=3)))
+    assert d.core.matcher is not None
+    d.core.matcher.held["B3"] = "tightening 7"           # its result could not be read
+    acts = d.core.feed(CommandIn(d.t, 1, SkipBolt("VIN1", "B3"), OPERATOR))
+    assert _answer(acts).answer.reason == Reason(Why.HELD, bolt="B3", note="tightening 7")
+    d.core.feed(CommandIn(d.t, 2, SkipBolt("VIN1", "B3"), SUPERVISOR))
+    assert _answer(d.core.feed(CommandDone(d.t, 2))).answer.accepted
+    assert "B3" not in d.core.matcher.held and "B3" in d.core.matcher.skipped
 
 
 def test_an_ok_resets_the_count():

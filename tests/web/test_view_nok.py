@@ -110,3 +110,54 @@ def test_the_snapshot_names_the_roles_that_may_release():
     assert server.release_by() == ["lead", "quality"]
     doc = json.loads(server._encode()[len(b"data: "):])
     assert doc["release_by"] == ["lead", "quality"] and doc["locks"] == []
+
+
+def test_the_headers_counts_are_the_vehicle_reports_through_release_skip_and_loosen(
+        tmp_path):
+    """The operator header's "ending NOK" is the report's: a released bolt whose last rundown
+    is a NOK still ends NOK (it dropped to 0 at the release), a bolt skipped after a NOK ends
+    NOK and is not counted skipped (the screen said skipped, the report NOK), a person's
+    loosen command makes it "loosen first" (neither).  Checked against the report of a real
+    database holding the same history."""
+    from datetime import UTC, datetime, timedelta
+
+    from db.repository import Repository
+    from stationd.boltfile import import_bolts
+    from stationd.reasons import Skip, SkipKind
+    from stationd.station.events import BoltSkipped
+    from tests.web.scenario import BOLTS_YAML
+
+    (tmp_path / "bolts.yaml").write_text(BOLTS_YAML)
+    repo = Repository.open(f"sqlite:///{tmp_path / 'station.db'}")
+    import_bolts(repo, tmp_path / "bolts.yaml")
+    repo.start_vehicle(VIN, "SEDAN")
+    kw = {"position_mm": (1.0, 1.0, 0.0), "match_distance_mm": 1.0, "tilt_deg": 1.0,
+          "angle_deg": 31.0}
+    at = datetime.now(UTC)
+
+    def rundown(bolt: str, ok: bool, tid: int) -> ResultRecorded:
+        repo.record_tightening(VIN, bolt, ok=ok, torque_nm=50.2 if ok else 41.0,
+                               tightening_id=tid, **kw)
+        return result(bolt, ok, tid)
+
+    def command(kind: str, bolt: str, n: int) -> None:
+        repo.ledger.record_command(at=at + timedelta(seconds=n), user="sam", source="cli",
+                                   kind=kind, vin=VIN, bolt=bolt, comment="")
+
+    events: list[StationEvent] = [*opened(), rundown("B1", True, 1)]
+    events += [rundown("B2", False, t) for t in (2, 3, 4)] + [BoltLocked("B2", 3)]
+    command("release", "B2", 10)
+    events.append(BoltReleased("B2", "sam"))
+    events.append(rundown("B3", False, 5))
+    command("skip", "B3", 11)
+    events.append(BoltSkipped("B3", skip=Skip(SkipKind.COMMAND, user="sam", comment="")))
+    events.append(rundown("B4", False, 6))
+    command("loosen", "B4", 12)
+    events.append(BoltToLoosen("B4", Reason(Why.LOOSEN_FIRST, bolt="B4", pset=90), "sam"))
+    report = repo.vehicle_report(VIN)
+    repo.close()
+    counts = fold(events).counters()
+    assert (report.nok, report.skipped) == (["B2", "B3"], [])
+    assert counts == {"total": 4, "done": len([b for b in report.bolts if b.status == "ok"]),
+                      "nok": len(report.nok), "skipped": len(report.skipped)}
+    assert counts["nok"] == 2 and counts["done"] == 1
