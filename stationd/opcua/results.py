@@ -46,12 +46,15 @@ JOINING_TECHNOLOGY = "Tightening"
 
 def message(rec: dict[str, Any]) -> str:
     """What a result event's Message says of the rundown ``rec`` (a feed record): its
-    vehicle, bolt, kind and verdict, "WVW... B12: loosening OK".  An MES that reads only the
-    Message (no client decodes the metadata's AssemblyType without the types) must not take
-    a loosening for one more tightened joint, nor an outcome a person entered for one the
-    station measured."""
+    vehicle, bolt, kind and verdict, and the controller's tightening id, "WVW... B12:
+    loosening OK, tightening id 17".  An MES that reads only the Message (no client decodes
+    the metadata's AssemblyType without the types) must not take a loosening for one more
+    tightened joint, nor an outcome a person entered for one the station measured, and finds
+    the rundown on the controller by its id."""
     kind = "loosening" if rec.get("rundown") == "loosening" else "tightening"
+    tid = rec.get("tightening_id")
     return f"{rec['vin']} {rec['bolt']}: {kind} {str(rec['status']).upper()}" + (
+        f", tightening id {tid}" if tid is not None else "") + (
         f" (entered by {rec['entered_by']}, not measured)" if rec.get("entered_by") else "")
 
 
@@ -174,6 +177,21 @@ def trace(rid: str, curves: list[dict[str, Any]]) -> tuple[Any, str, str | None]
             step_id, steps[0].StepTraceId if steps else None)
 
 
+#: the ExtendedMetaData key of the controller's own number of the rundown (Open Protocol's
+#: tightening id): what an MES matches against the controller's records
+TIGHTENING_ID = "TighteningId"
+
+
+def _extended(rec: dict[str, Any]) -> list[Any] | None:
+    """The metadata no field of the result has: the controller's tightening id (a UInt32,
+    as Open Protocol numbers them; none for an outcome entered by a person without one)."""
+    tid = rec.get("tightening_id")
+    if tid is None:
+        return None
+    return [ua.KeyValueDataType(Key=TIGHTENING_ID,
+                                Value=ua.Variant(int(tid), ua.VariantType.UInt32))]
+
+
 def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
                    simulated: bool = False, curves: list[dict[str, Any]] | None = None) -> Any:
     """The ResultDataType of the feed ``entry`` of kind ``rundown``, with its ``curves``
@@ -224,7 +242,8 @@ def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
         # mandatory for a joining result in the working group's reading of 40450-1
         JoiningTechnology=ua.LocalizedText(JOINING_TECHNOLOGY),
         AssemblyType=DISASSEMBLED if loosening else ASSEMBLED,
-        AssociatedEntities=entities)
+        AssociatedEntities=entities,
+        ExtendedMetaData=_extended(rec))
     content = ua.JoiningResultDataType(OverallResultValues=[
         _value("Torque", rec.get("torque_nm"), sent.get("torque"),
                _unit("NU", "N·m", "newton metre"), ok, PQ_TORQUE),
@@ -244,4 +263,5 @@ __all__ = ["ASSEMBLED", "CLASSIFICATION_SINGLE", "DISASSEMBLED", "ENTITY_ENTERED
            "ENTITY_JOINT",
            "ENTITY_OPERATOR", "ENTITY_VEHICLE", "EVALUATION_NOT_OK",
            "EVALUATION_OK", "JOINING_TECHNOLOGY", "PQ_ANGLE", "PQ_OTHER", "PQ_TIME",
-           "PQ_TORQUE", "message", "parse_result_id", "result_id", "rundown_result", "trace"]
+           "PQ_TORQUE", "TIGHTENING_ID", "message", "parse_result_id", "result_id",
+           "rundown_result", "trace"]

@@ -164,6 +164,9 @@ def test_every_result_shape_round_trips_through_the_legacy_loader_and_part_6(rep
         assert meta["ResultEvaluation"] == w["evaluation"]
         assert sorted([e["EntityType"], e["EntityId"]]
                       for e in meta["AssociatedEntities"]) == w["entities"]
+        # the controller's tightening id, where the rundown has one (the first: 101)
+        assert [kv["Key"] for kv in meta.get("ExtendedMetaData") or []] == (
+            ["TighteningId"] if w["trace"] else [])
         values = result["ResultContent"][0]["OverallResultValues"]
         assert [[v["Name"], None if math.isnan(v["MeasuredValue"]) else v["MeasuredValue"],
                  v.get("LowLimit"), v.get("High"), v["EngineeringUnits"]["UnitId"]]

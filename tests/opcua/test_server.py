@@ -84,6 +84,8 @@ async def stopping(srv: OpcUaServer, stop: asyncio.Event, task: asyncio.Task[Non
 
 
 def test_every_rundown_arrives_as_a_result_event_at_the_server_object(repo):
+    tids = {"B1": 41, "B2": 42}          # the controller's numbers of the two tightenings
+
     async def scenario() -> list[Any]:
         srv, stop, task = await serving(config(), repo)
         try:
@@ -96,8 +98,10 @@ def test_every_rundown_arrives_as_a_result_event_at_the_server_object(repo):
                 await sub.subscribe_events(client.nodes.server, etype)
                 await asyncio.sleep(0.3)
                 loop = asyncio.get_running_loop()
-                await loop.run_in_executor(None, lambda: record(repo, VIN, "B1", ok=True))
-                await loop.run_in_executor(None, lambda: record(repo, VIN, "B2", ok=False))
+                await loop.run_in_executor(None, lambda: record(repo, VIN, "B1", ok=True,
+                                                                tightening_id=tids["B1"]))
+                await loop.run_in_executor(None, lambda: record(repo, VIN, "B2", ok=False,
+                                                                tightening_id=tids["B2"]))
                 await loop.run_in_executor(None, lambda: record(
                     repo, VIN, "B2", ok=True, kind="loosening", operator="olga"))
                 await handler.wait_for(3)
@@ -121,6 +125,10 @@ def test_every_rundown_arrives_as_a_result_event_at_the_server_object(repo):
         assert meta.CreationTime is not None
         entities = {(x.EntityType, x.EntityId) for x in meta.AssociatedEntities}
         assert entities == {(20, VIN), (23, bolt)}
+        # the controller's own number of the rundown, for an MES matching its records (the
+        # result carried none: a newcomer's MES could not find it on the controller)
+        assert [(kv.Key, kv.Value.Value) for kv in meta.ExtendedMetaData] == [
+            ("TighteningId", tids[bolt])]
         content = event.Result.ResultContent[0].Value
         torque, angle = content.OverallResultValues
         assert (torque.Name, torque.MeasuredValue) == ("Torque", 50.0 if ok else 30.0)
@@ -141,7 +149,8 @@ def test_every_rundown_arrives_as_a_result_event_at_the_server_object(repo):
         (20, VIN), (23, "B2"), (-1, "olga")}
     # ... and said so where a client that decodes nothing reads it, the event's Message
     assert [e.Message.Text for e in events] == [
-        f"{VIN} B1: tightening OK", f"{VIN} B2: tightening NOK", f"{VIN} B2: loosening OK"]
+        f"{VIN} B1: tightening OK, tightening id 41",
+        f"{VIN} B2: tightening NOK, tightening id 42", f"{VIN} B2: loosening OK"]
     assert {e.Result.ResultMetaData.JoiningTechnology.Text for e in events} == {"Tightening"}
 
 

@@ -83,8 +83,9 @@ async def node_reads(repo: Repository, bolts: list[tuple[str, dict[str, Any]]],
         await stopping(srv, stop, task)
 
 
-RUNDOWNS = [("B2", {"ok": False, "torque_nm": 30.0}),
-            ("B2", {"ok": True, "kind": "loosening", "torque_nm": 20.0, "angle_deg": 303.0})]
+RUNDOWNS = [("B2", {"ok": False, "torque_nm": 30.0, "tightening_id": 71}),
+            ("B2", {"ok": True, "kind": "loosening", "torque_nm": 20.0, "angle_deg": 303.0,
+                    "tightening_id": 72})]
 
 
 @pytest.mark.system
@@ -92,9 +93,12 @@ RUNDOWNS = [("B2", {"ok": False, "torque_nm": 30.0}),
 def test_node_opcua_decodes_a_result_event_with_the_client_side_fix(repo):
     events = asyncio.run(node_reads(repo, RUNDOWNS, "--fix"))
     db_id = repo.ledger.db_id()
-    assert [e["message"] for e in events] == [f"{VIN} B2: tightening NOK",
-                                              f"{VIN} B2: loosening OK"]
-    for e, seq, evaluation, assembly in zip(events, (1, 2), (2, 1), (1, 2), strict=True):
+    assert [e["message"] for e in events] == [f"{VIN} B2: tightening NOK, tightening id 71",
+                                              f"{VIN} B2: loosening OK, tightening id 72"]
+    for e, seq, evaluation, assembly, tid in zip(events, (1, 2), (2, 1), (1, 2), (71, 72),
+                                                 strict=True):
+        assert [(kv["Key"], kv["Value"]) for kv in
+                e["result"]["ResultMetaData"]["ExtendedMetaData"]] == [("TighteningId", tid)]
         meta = e["result"]["ResultMetaData"]
         assert meta["ResultId"] == f"{db_id}:{seq}"
         assert meta["SequenceNumber"] == seq
