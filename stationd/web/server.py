@@ -42,7 +42,7 @@ from stationd.web.commands import POSTS, CommandRoutes
 from stationd.web.config import HttpConfig, open_bind_problem
 from stationd.web.frames import LatestFrames, sharpness
 from stationd.web.line import LineRoutes
-from stationd.web.results import Results, rundowns_csv
+from stationd.web.results import Results, attempt_words, rundowns_csv
 from stationd.web.view import View, fold
 
 log = logging.getLogger(__name__)
@@ -407,6 +407,7 @@ class WebServer:
         for b in doc["bolts"]:
             for r in b["rundowns"]:
                 r["image_urls"] = [u for u in map(self._image_url, r["images"]) if u]
+                r["attempt_words"] = attempt_words(r, doc.get("reopened_at"))
         return web.json_response(doc)
 
     def _image_url(self, path: str) -> str | None:
