@@ -295,6 +295,9 @@ class WebServer:
         v = self.view.to_json()
         return {"station": self.station, "state": v["state"], "reason": v["reason"],
                 "reason_kind": v["reason_kind"], "headline": v["headline"],
+                # the headline in full (the screen's hover title): ``headline`` cuts a
+                # fault's reason for large type, which a command's line need not
+                "headline_title": v["headline_title"],
                 "vehicle": v["vehicle"], "counters": v["counters"], "devices": v["devices"],
                 "versions": _versions(), "uptime_s": round(time.time() - self.started, 1),
                 "clients": self.clients, "line": self.line(), "operator": v["operator"],
