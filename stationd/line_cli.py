@@ -366,6 +366,8 @@ def cmd_line_init(args: argparse.Namespace) -> int:
     if filled:   # a line database an earlier version made: its records typed once
         print("filled from line_feed: " + ", ".join(f"{name} {counted(n, 'row')}"
                                                      for name, n in filled))
+    if change.comments:   # an earlier version's words for what a column holds
+        print("comments brought up to date: " + ", ".join(change.comments))
     return 0
 
 

@@ -72,7 +72,7 @@ from sqlalchemy import (
 )
 from sqlalchemy.dialects.postgresql import JSONB
 from sqlalchemy.exc import DBAPIError
-from sqlalchemy.schema import SetColumnComment
+from sqlalchemy.schema import SetColumnComment, SetTableComment
 
 from db.kinds import LOOSENING, NOK, OK, TIGHTENING
 from db.ledger import (
@@ -220,8 +220,11 @@ def _typed(kind: str, name: str, comment: str, columns: list[tuple[Column[Any], 
                  tuple(c.name for c, _ in added or []))
 
 
-def _window(what: str, unit: str, key: str) -> list[tuple[Column[Any], str]]:
-    return [(Column(f"{what}_{label}_{unit}", Float,
+def _window(what: str, suffix: str, unit: str, key: str) -> list[tuple[Column[Any], str]]:
+    """The target, min and max columns of a window: ``suffix`` ends their names (``nm``,
+    lower case as SQL names are), ``unit`` is said in their comments (``Nm``: "nm" reads as
+    nanometres)."""
+    return [(Column(f"{what}_{label}_{suffix}", Float,
                     comment=f"the {what} window's {label} in force ({unit}; NULL: none)"),
              _float(_j("parameters", what, key)))
             for label, key in (("target", "target"), ("min", "min"), ("max", "max"))]
@@ -248,12 +251,12 @@ LINE_RUNDOWNS = _typed(
              comment="the station's version of the bolt's parameters (see line_parameters)"),
       _int(_j("parameters", "version"))),
      (Column("torque_nm", Float, comment="the final torque (Nm)"), _float(_j("torque_nm"))),
-     *_window("torque", "nm", "torque"),
+     *_window("torque", "nm", TORQUE_UNIT, "torque"),
      (Column("torque_unit", Text, comment="the unit of the torque columns"),
       _literal(TORQUE_UNIT)),
      (Column("angle_deg", Float, comment="the final angle (degrees)"),
       _float(_j("angle_deg"))),
-     *_window("angle", "deg", "angle"),
+     *_window("angle", "deg", "degrees", "angle"),
      (Column("angle_unit", Text, comment="the unit of the angle columns"),
       _literal(ANGLE_UNIT)),
      (Column("operator", Text, comment="the user signed in at the station (NULL: nobody)"),
@@ -273,7 +276,11 @@ LINE_RUNDOWNS = _typed(
       _float(_j("tilt_deg"))),
      (_tz("sent_at", "when the parameters were sent to the controller"),
       _time(_j("sent_at"))),
-     (_tz("result_at", "the controller's time of the result (its clock)"),
+     # the station's clock, not the controller's: the controller's own time of the
+     # tightening is kept at the station (tightening_records.controller_at) and not forwarded
+     (_tz("result_at", "when the station took the result, on its clock (an outcome entered "
+          "from the controller's screen: when it was entered); not the controller's time, "
+          "which the line database does not have"),
       _time(_j("result_at"))),
      (_tz("recorded_at", "when the station stored it"), _time(_j("recorded_at")))],
     # one VIN across stations; one bolt over a shift; one station's rundowns in time; the
@@ -362,7 +369,8 @@ LINE_UNATTRIBUTED = _typed(
      (Column("torque_nm", Float, comment="the final torque (Nm)"), _float(_j("torque_nm"))),
      (Column("angle_deg", Float, comment="the final angle (degrees)"),
       _float(_j("angle_deg"))),
-     (_tz("result_at", "the controller's time of the result"), _time(_j("result_at"))),
+     (_tz("result_at", "the controller's time of the result, on its clock (NULL: a "
+          "controller without a clock, or none given)"), _time(_j("result_at"))),
      (_tz("recorded_at", "when the station stored it"), _time(_j("recorded_at"))),
      (Column("reason", Text, comment="why it was not attributed"), _text(_j("reason")))],
     Index("ix_line_unattributed_vin", "vin", "at"),
@@ -391,7 +399,8 @@ LINE_CONTROLLER_EVENTS = _typed(
       _float(_j("torque_nm"))),
      (Column("angle_deg", Float, comment="the angle it reported (degrees)"),
       _float(_j("angle_deg"))),
-     (_tz("result_at", "the controller's time of the result"), _time(_j("result_at"))),
+     (_tz("result_at", "the controller's time of the result, on its clock (NULL: a "
+          "controller without a clock, or none given)"), _time(_j("result_at"))),
      (_tz("recorded_at", "when the station stored it"), _time(_j("recorded_at")))],
     Index("ix_line_controller_events_vin", "vin", "at"),
     Index("ix_line_controller_events_at", "at"),
@@ -415,7 +424,8 @@ LINE_UNREADABLE = _typed(
              "read"), _int(_j("tightening_id"), 64)),
      (Column("pset", Integer, comment="the parameter set, as far as it could be read"),
       _int(_j("pset"))),
-     (_tz("result_at", "the controller's time, as far as it could be read"),
+     (_tz("result_at", "the controller's time of the result, on its clock, as far as it "
+          "could be read (NULL: not read)"),
       _time(_j("result_at"))),
      (_tz("recorded_at", "when the station stored it"), _time(_j("recorded_at")))],
     Index("ix_line_unreadable_results_vin", "vin", "at"),
@@ -469,6 +479,9 @@ class SchemaChange:
     #: why the typed tables or their trigger could not be made by this role (None: they are
     #: there); line_feed and line_parameters are, and the records go on being forwarded
     typed_refused: str | None = None
+    #: the comments (``table`` or ``table.column``) an earlier version wrote otherwise,
+    #: brought up to date
+    comments: tuple[str, ...] = ()
 
 
 #: PostgreSQL's insufficient_privilege (no right to create, not the owner)
@@ -507,6 +520,8 @@ def create_line_schema(engine: Engine) -> SchemaChange:
                         "tables' owner's `stationd line init URL` makes and fills them",
                         reason)
             change = SchemaChange(typed_refused=reason)
+        else:
+            change = replace(change, comments=_comments_updated(conn))
         after = set(inspect(conn).get_table_names())
         return replace(change, made=tuple(t.name for t in LINE.sorted_tables
                                           if t.name in after - before))
@@ -544,6 +559,51 @@ def _typed_schema(conn: Connection, before: set[str]) -> SchemaChange:
     filled = tuple((t.table.name, int(conn.execute(text(t.fill_sql("line_feed"))).rowcount))
                    for t in fill)
     return SchemaChange(filled=filled, trigger=True, added=added)
+
+
+def _comments_updated(conn: Connection) -> tuple[str, ...]:
+    """The typed tables' comments and their columns' made what this version declares where
+    an earlier version wrote them otherwise (none written where they agree); the ones
+    changed, ``table`` or ``table.column``.
+
+    Why: a comment is what ``\\d+``, Grafana and Power BI show as the column's meaning, and
+    a wrong one outlived the version that wrote it (``create_all`` leaves a table that is
+    there as it is): ``line_rundowns.result_at`` said the controller's clock where it holds
+    the station's, the torque windows "nm".  Only the tables' owner may comment on them: a
+    forwarding role that is not leaves them (said in its log), the owner's ``line init``
+    writes them."""
+    names = [t.table.name for t in TYPED]
+    found: dict[tuple[str, str | None], str | None] = {}
+    for table, column, comment in conn.execute(text(
+            "SELECT c.relname, a.attname, col_description(c.oid, a.attnum) FROM pg_class c "
+            "JOIN pg_attribute a ON a.attrelid = c.oid AND a.attnum > 0 AND NOT "
+            "a.attisdropped WHERE c.relname = ANY(:names) AND c.relnamespace = "
+            "current_schema()::regnamespace "
+            "UNION ALL SELECT c.relname, NULL, obj_description(c.oid, 'pg_class') "
+            "FROM pg_class c WHERE c.relname = ANY(:names) AND c.relnamespace = "
+            "current_schema()::regnamespace"), {"names": names}):
+        found[(table, column)] = comment
+    stale: list[tuple[str, Any]] = []
+    for t in TYPED:
+        if (t.table.name, None) in found and found[(t.table.name, None)] != t.table.comment:
+            stale.append((t.table.name, SetTableComment(t.table)))
+        stale += [(f"{t.table.name}.{c.name}", SetColumnComment(c)) for c in t.table.columns
+                  if (t.table.name, c.name) in found
+                  and found[(t.table.name, c.name)] != c.comment]
+    if not stale:
+        return ()
+    try:
+        with conn.begin_nested():
+            for _, ddl in stale:
+                conn.execute(ddl)
+    except DBAPIError as exc:
+        if getattr(exc.orig, "sqlstate", None) != NOT_ALLOWED:
+            raise
+        log.info("line database: %d comments of the typed tables are an earlier version's "
+                 "(%s ...); this role may not write them, the tables' owner's `stationd line "
+                 "init URL` does", len(stale), stale[0][0])
+        return ()
+    return tuple(name for name, _ in stale)
 
 
 def _missing_columns(conn: Connection, before: set[str]

@@ -32,10 +32,16 @@ supplier) is not the Open Protocol supplier code and is left out.
 ``Health`` holds ``DeviceHealth`` (DI DeviceHealthEnumeration: NORMAL 0 while the device
 answers, FAILURE 1 while it is in fault; the line link OFF_SPEC 3 while its backlog is past a
 bound), ``ErrorMessage`` (the station's
-reason, empty when NORMAL) and ``ErrorTimestamp`` (when it last changed).  The line
-database's link down is FAILURE of that asset only: never a fault of the station (its
-``State`` stays what the station says).  A device first heard of in an event (a pair added
-by a reload) gets its asset then.
+reason, empty when NORMAL) and ``ErrorTimestamp``: when the error occurred (IJT: "the
+timestamp when the error occurred in the given asset"), i.e. when the device went to that
+health (the same health said again with other words keeps it), and OPC UA's null DateTime
+while there is none (:data:`NO_ERROR`, DateTime.MinValue, 0 on the wire: Part 6 5.1.2).  Why
+null and not the time of the last change: a client that reads ErrorTimestamp without
+DeviceHealth took a device that came back, or never failed (stamped at the server's start),
+for one with an error.  Why MinValue and not a Null Variant: the variable stays of its type
+(UtcTime) for the clients that check it.  The line database's link down is FAILURE of
+that asset only: never a fault of the station (its ``State`` stays what the station says).
+A device first heard of in an event (a pair added by a reload) gets its asset then.
 """
 
 from __future__ import annotations
@@ -58,6 +64,8 @@ FUNCTIONAL_GROUP_TYPE = 1005                 # in DI
 COMPONENT_IDENTIFICATION_TYPE = 1005         # MachineryComponentIdentificationType
 HAS_INTERFACE = 17603
 LINE_LINK, STATION_DATABASE = "line", "database"
+#: ErrorTimestamp with no error: DateTime.MinValue, OPC UA's null DateTime (encoded as 0)
+NO_ERROR = datetime(1601, 1, 1, tzinfo=UTC)
 
 #: device name -> (asset folder, interface in IJT Base); a camera pair: :data:`PAIR`
 KNOWN = {"wrench": ("Controllers", 1003), "lift": ("Accessories", 1015),
@@ -77,6 +85,7 @@ class _Asset:
     ident: Node
     nodeid: str                                  # its Identification's NodeId (a string)
     plate: dict[str, Node] = field(default_factory=dict)   # property -> node, once made
+    error: int = NORMAL                          # the health its ErrorTimestamp is of
 
 
 class DeviceAssets:
@@ -105,15 +114,18 @@ class DeviceAssets:
 
     async def report(self, device: str, health: int, reason: str, at: float) -> None:
         """``device``'s ``health`` (:data:`NORMAL`, :data:`FAILURE`, :data:`OFF_SPEC`) and
-        why, since ``at`` (epoch seconds)."""
+        why, since ``at`` (epoch seconds): its ErrorTimestamp ``at`` when it goes to a health
+        that is an error, null when it is NORMAL (see the module's docstring)."""
         async with self._lock:
             asset = self._assets.get(device) or await self._add(device)
             await asset.health.write_value(ua.Variant(health, ua.VariantType.Int32))
             await asset.message.write_value(ua.Variant(
                 ua.LocalizedText("" if health == NORMAL else reason or "fault", "en"),
                 ua.VariantType.LocalizedText))
-            await asset.stamp.write_value(ua.Variant(datetime.fromtimestamp(at, UTC),
-                                                     ua.VariantType.DateTime))
+            if health != asset.error:
+                stamp = NO_ERROR if health == NORMAL else datetime.fromtimestamp(at, UTC)
+                await asset.stamp.write_value(ua.Variant(stamp, ua.VariantType.DateTime))
+                asset.error = health
 
     async def identified(self, device: str, identity: DeviceIdentity) -> None:
         """What the device said it is (the controller's MID 0002), in its Identification's
@@ -170,7 +182,7 @@ class DeviceAssets:
                                          ua.VariantType.LocalizedText))
         stamp = await _variable(health, f"{base}.Health.ErrorTimestamp", idx,
                                 ua.QualifiedName("ErrorTimestamp", ijt),
-                                ua.Variant(datetime.now(UTC), ua.VariantType.DateTime),
+                                ua.Variant(NO_ERROR, ua.VariantType.DateTime),
                                 ua.NodeId(ua.ObjectIds.UtcTime))
         asset = _Asset(dh, msg, stamp, ident, f"{base}.Identification", plate)
         self._assets[device] = asset
@@ -252,4 +264,5 @@ async def _variable(parent: Node, nodeid: str, idx: int, name: Any, value: Any,
     return node
 
 
-__all__ = ["FAILURE", "LINE_LINK", "NORMAL", "OFF_SPEC", "STATION_DATABASE", "DeviceAssets"]
+__all__ = ["FAILURE", "LINE_LINK", "NORMAL", "NO_ERROR", "OFF_SPEC", "STATION_DATABASE",
+           "DeviceAssets"]

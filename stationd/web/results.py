@@ -168,6 +168,26 @@ class Results:
         return runs + none + unread
 
 
+def attempt_words(run: dict[str, Any], reopened_at: str | None) -> str:
+    """A rundown's Attempt cell on the vehicle's page: its number among its bolt's rundowns
+    (``attempt``), and what it was: ``2 (loosen pset 92)`` a loosening (the NOK policy's
+    loosen step, a loosen command), in the operator screen's words for the loosen pset;
+    ``1 (rework)`` a tightening after the vehicle was reopened (``reopened_at``, ISO);
+    ``3 (repeat)`` a tightening again after an earlier rundown of the bolt.
+
+    Why here and not in the page's script: a loosening was labelled a repeat tightening
+    ("2 (repeat)", its number alone deciding), and words worked out in the script could only
+    be checked in a browser; the page shows these as they are."""
+    n = str(run["attempt"])
+    if run.get("rundown") == LOOSENING:
+        pset = run.get("pset")
+        return f"{n} (loosen pset {pset})" if pset is not None else f"{n} (loosening)"
+    at = run.get("recorded_at")
+    if reopened_at and at and datetime.fromisoformat(at) >= datetime.fromisoformat(reopened_at):
+        return f"{n} (rework)"    # a reopened vehicle's word: a try after a NOK is a repeat
+    return f"{n} (repeat)" if run["attempt"] > 1 else n
+
+
 def plot_curve(traces: list[dict[str, Any]]) -> dict[str, Any] | None:
     """A rundown's stored traces as the page draws them: torque (N m) and angle (degrees),
     sample by sample (the shorter trace's length), and ``traces``, every trace as stored

@@ -42,7 +42,7 @@ from stationd.web.commands import POSTS, CommandRoutes
 from stationd.web.config import HttpConfig, open_bind_problem
 from stationd.web.frames import LatestFrames, sharpness
 from stationd.web.line import LineRoutes
-from stationd.web.results import Results, rundowns_csv
+from stationd.web.results import Results, attempt_words, rundowns_csv
 from stationd.web.view import View, fold
 
 log = logging.getLogger(__name__)
@@ -295,6 +295,9 @@ class WebServer:
         v = self.view.to_json()
         return {"station": self.station, "state": v["state"], "reason": v["reason"],
                 "reason_kind": v["reason_kind"], "headline": v["headline"],
+                # the headline in full (the screen's hover title): ``headline`` cuts a
+                # fault's reason for large type, which a command's line need not
+                "headline_title": v["headline_title"],
                 "vehicle": v["vehicle"], "counters": v["counters"], "devices": v["devices"],
                 "versions": _versions(), "uptime_s": round(time.time() - self.started, 1),
                 "clients": self.clients, "line": self.line(), "operator": v["operator"],
@@ -407,6 +410,7 @@ class WebServer:
         for b in doc["bolts"]:
             for r in b["rundowns"]:
                 r["image_urls"] = [u for u in map(self._image_url, r["images"]) if u]
+                r["attempt_words"] = attempt_words(r, doc.get("reopened_at"))
         return web.json_response(doc)
 
     def _image_url(self, path: str) -> str | None:

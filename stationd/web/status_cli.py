@@ -84,11 +84,28 @@ def line_lines(line: dict[str, Any] | None) -> list[str]:
     return [f"line:     line database: {n} behind"]
 
 
+def now_line(st: dict[str, Any]) -> str | None:
+    """The ``now:`` line: the operator screen's headline in full, or None where it says the
+    state line's words again (the state, its reason, or a fault's "FAULT: " and its reason).
+
+    Why in full (``headline_title``, the screen's hover title; ``headline`` from a daemon of
+    an earlier version): ``headline`` cuts a fault's reason to a panel's large type, with
+    "…", and the status printed it so, under a state line that had the reason whole, in a
+    terminal that wraps and a monitoring script's log that keeps every character.  Never cut
+    here, in a terminal or not: the device lines are not either."""
+    head = st.get("headline_title") or st.get("headline")
+    reason = st.get("reason")
+    if not head or head in (st["state"], reason) or (reason and head == f"FAULT: {reason}"):
+        return None
+    return f"now:      {head}"
+
+
 def format_status(st: dict[str, Any]) -> str:
     """The status as a few readable lines."""
     lines = [f"state:    {st['state']}" + (f" ({st['reason']})" if st.get("reason") else "")]
-    if st.get("headline") and st["headline"] not in (st["state"], st.get("reason")):
-        lines.append(f"now:      {st['headline']}")
+    now = now_line(st)
+    if now is not None:
+        lines.append(now)
     v = st.get("vehicle")
     c = st.get("counters", {})
     lines.append("vehicle:  " + ("none" if not v else

@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+from datetime import UTC, datetime
 from typing import Any
 
 from asyncua.client.client import Client
 
 from drivers.identity import DeviceIdentity
 from stationd.bus import EventBus
-from stationd.opcua.health import FAILURE, NORMAL, OFF_SPEC
+from stationd.opcua.health import FAILURE, NO_ERROR, NORMAL, OFF_SPEC
 from stationd.opcua.model import DI_URI, IJT_URI, MACHINERY_URI
 from stationd.opcua.server import NAMESPACE
 from stationd.opcua.uatypes import ua
@@ -122,6 +123,73 @@ def test_a_client_sees_a_device_go_to_fault_and_back(repo):
     assert out["back"][0] == NORMAL and out["back"][1].Text == ""
     assert out["rear"] == (FAILURE, "no frame in 2 s")
     assert out["line down"] == "connection refused"
+
+
+def test_error_timestamp_is_null_without_an_error_and_when_the_error_occurred_with_one(repo):
+    """A trial's MES read ErrorTimestamp set on every asset though none had an error (the
+    server's start, or the time the device came back): null (DateTime.MinValue, OPC UA's
+    null DateTime) while DeviceHealth is NORMAL; the time of the event that put the device
+    in error while it is, kept when the same error is said again in other words, moved by
+    another health (the line link's backlog alarm after it was down)."""
+    bus = EventBus()
+    t_down, t_again, t_line, t_alarm = 1_800_000_000.0, 1_800_000_060.0, 1_800_000_100.0, \
+        1_800_000_200.0
+
+    async def scenario() -> dict[str, Any]:
+        srv, stop, task = await serving(config(), repo, bus=bus, devices=DEVICES)
+        loop = asyncio.get_running_loop()
+        out: dict[str, Any] = {}
+        try:
+            async with Client(srv.url) as client:
+                ijt = (await client.get_namespace_array()).index(IJT_URI)
+
+                async def stamp(folder: str, device: str) -> Any:
+                    _, _, asset = await _asset(client, folder, device)
+                    node = await asset.get_child([f"{ijt}:Health", f"{ijt}:ErrorTimestamp"])
+                    return await node.read_value()
+
+                out["start"] = {d: await stamp(f, d) for f, d in (
+                    ("Controllers", "wrench"), ("Accessories", "lift"),
+                    ("SoftwareComponents", "line"))}
+                health, message, _ = await _asset(client, "Controllers", "wrench")
+                await loop.run_in_executor(None, bus.publish, DeviceHealth(
+                    "wrench", False, "down", "connection refused", t=t_down))
+                await _until(health, FAILURE)
+                out["down"] = await stamp("Controllers", "wrench")
+                await loop.run_in_executor(None, bus.publish, DeviceHealth(
+                    "wrench", False, "timeout", "no answer in 10 s", t=t_again))
+                for _ in range(250):
+                    if (await message.read_value()).Text == "no answer in 10 s":
+                        break
+                    await asyncio.sleep(0.02)
+                out["again"] = await stamp("Controllers", "wrench")
+                await loop.run_in_executor(None, bus.publish, DeviceHealth("wrench", True))
+                await _until(health, NORMAL)
+                out["back"] = await stamp("Controllers", "wrench")
+                line, _, _ = await _asset(client, "SoftwareComponents", "line")
+                await loop.run_in_executor(None, bus.publish, LineLinkChanged(
+                    False, "connection refused", t=t_line))
+                await _until(line, FAILURE)
+                out["line down"] = await stamp("SoftwareComponents", "line")
+                await loop.run_in_executor(None, bus.publish, LineLinkChanged(
+                    True, "", "12000 records not forwarded (bound 10000)", t=t_alarm))
+                await _until(line, OFF_SPEC)
+                out["line alarm"] = await stamp("SoftwareComponents", "line")
+                await loop.run_in_executor(None, bus.publish, LineLinkChanged(True))
+                await _until(line, NORMAL)
+                out["line back"] = await stamp("SoftwareComponents", "line")
+                return out
+        finally:
+            await stopping(srv, stop, task)
+
+    out = asyncio.run(scenario())
+    assert out["start"] == {"wrench": NO_ERROR, "lift": NO_ERROR, "line": NO_ERROR}
+    assert out["down"] == datetime.fromtimestamp(t_down, UTC)
+    assert out["again"] == out["down"]              # the same error, other words
+    assert out["back"] == NO_ERROR
+    assert out["line down"] == datetime.fromtimestamp(t_line, UTC)
+    assert out["line alarm"] == datetime.fromtimestamp(t_alarm, UTC)
+    assert out["line back"] == NO_ERROR
 
 
 def test_a_client_reads_the_controller_s_manufacturer_and_serial_number(repo):

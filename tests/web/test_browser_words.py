@@ -97,5 +97,16 @@ def test_the_vehicle_pages_count_bolts_and_results_and_say_rework_only_when_reop
         b2 = page.js("return [...document.querySelectorAll('tr.rundown[data-bolt=B2]')]"
                      ".map(r => r.cells[2].innerText)")
         assert b2 == ["1", "2 (repeat)"], b2
+
+        # a loosening (a loosen command) is no try at the bolt: never "(repeat)"/"(rework)"
+        repo.record_tightening(VIN, "B2", ok=True, torque_nm=0.0, tightening_id=104,
+                               kind="loosening", params_sent={"pset": 92, "torque": None,
+                                                              "angle": None, "loosen": True},
+                               **kw)
+        page.get(srv.url + f"vehicles/{VIN}")
+        page.wait(lambda p: p.count("tr.rundown[data-bolt=B2]") == 3, what="B2's loosening")
+        b2 = page.js("return [...document.querySelectorAll('tr.rundown[data-bolt=B2]')]"
+                     ".map(r => [r.cells[2].innerText, r.cells[3].innerText])")
+        assert b2[2] == ["3 (loosen pset 92)", "loosening"], b2
     finally:
         repo.close()

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from aiohttp import ClientSession
 
+from db.kinds import LOOSENING
 from stationd.bus import EventBus
 from stationd.errors import InputError
 from stationd.station.events import Because, Localized, PairFrames, StateChanged, StateReason
@@ -176,6 +177,44 @@ def test_results_and_exports_from_a_real_database(tmp_path):
             await srv.stop()
             repo.close()
     asyncio.run(main())
+
+
+def test_the_vehicle_page_labels_a_loosening_with_its_loosen_pset_not_as_a_repeat(tmp_path):
+    """A trial's vehicle page showed B2's loosening (the NOK policy's loosen step) as "3
+    (repeat)", a repeat tightening: the page's Attempt words say a loosening with its loosen
+    pset; the tightenings around it stay a first try and repeats, and after the vehicle is
+    reopened a tightening is a rework but a loosening still a loosening."""
+    repo = results_db(tmp_path)      # B1 OK; B2 NOK then OK
+    kw = {"position_mm": (1.0, 1.0, 0.0), "match_distance_mm": 1.4, "tilt_deg": 2.0,
+          "angle_deg": 320.0}
+    loosen = {"pset": 92, "torque": None, "angle": None, "loosen": True}
+    repo.record_tightening(VIN, "B2", ok=True, torque_nm=0.0, tightening_id=103,
+                           kind=LOOSENING, params_sent=loosen, **kw)
+    repo.record_tightening(VIN, "B2", ok=True, torque_nm=50.0, tightening_id=104, **kw)
+
+    async def words() -> dict[str, list[str]]:
+        srv = serve(EventBus(), results=Results(repo))
+        await srv.start()
+        try:
+            async with ClientSession() as http:
+                async with http.get(srv.url + f"api/vehicles/{VIN}") as r:
+                    doc = await r.json()
+            return {b["bolt"]: [x["attempt_words"] for x in b["rundowns"]]
+                    for b in doc["bolts"] if b["rundowns"]}
+        finally:
+            await srv.stop()
+
+    try:
+        assert asyncio.run(words()) == {
+            "B1": ["1"], "B2": ["1", "2 (repeat)", "3 (loosen pset 92)", "4 (repeat)"]}
+        repo.close_vehicle(VIN)                 # closed, then back for rework
+        repo.start_vehicle(VIN, "SEDAN", reopen=True)
+        repo.record_tightening(VIN, "B1", ok=True, torque_nm=0.0, tightening_id=105,
+                               kind=LOOSENING, params_sent=loosen, **kw)
+        repo.record_tightening(VIN, "B1", ok=True, torque_nm=50.0, tightening_id=106, **kw)
+        assert asyncio.run(words())["B1"] == ["1", "2 (loosen pset 92)", "3 (rework)"]
+    finally:
+        repo.close()
 
 
 def test_numpy_values_and_an_odd_event_do_not_stop_the_live_view():

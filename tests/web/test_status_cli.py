@@ -157,3 +157,38 @@ def test_the_status_says_the_line_database_s_forwarding_in_the_screen_s_words():
                                             "alarm": "12000 records not forwarded"}})
     assert "line:     line database: 12000 records not forwarded" in alarm.splitlines()
     assert not any(x.startswith("line:") for x in format_status(base).splitlines())
+
+
+#: a camera's reason as a real pair gives it: longer than the headline's 110 characters
+LONG = ("no frames for 3.0 s from gige://192.168.10.21/?exposure_us=800&gain_db=0.0&trigger="
+        "software&packet_size=9000 (the camera answers ping; its stream stopped)")
+
+
+def test_status_prints_the_now_line_whole_not_the_screen_s_cut_headline(live_server, capsys):
+    """A trial's ``stationd status`` printed ``now:`` cut with "…" (the operator screen's
+    headline, cut for large type) under a state line that had the reason whole: whole now,
+    in a pipe as in a terminal; and not at all where it would only say the state line again
+    (one device in fault: "FAULT: " and the state's reason)."""
+    from stationd.station.events import DeviceHealth
+
+    srv = live_server()
+    srv.publish([*opened(), DeviceHealth("front", False, "down", LONG),
+                 DeviceHealth("wrench", False, "refused", "connection refused"),
+                 fault_state(("front", LONG), ("wrench", "connection refused"))])
+    srv.call(_settle(srv))
+    assert main(["status", "--url", srv.url]) == 1
+    lines = capsys.readouterr().out.splitlines()
+    [now] = [ln for ln in lines if ln.startswith("now:")]
+    assert now == f"now:      FAULT: front: {LONG} (and wrench: see Devices)", now
+    assert not any("\u2026" in ln for ln in lines), lines
+
+
+def test_the_now_line_is_left_out_where_it_repeats_the_state_line():
+    from stationd.web.status_cli import format_status
+
+    st = {"state": "fault", "reason": f"front: {LONG}", "headline": f"FAULT: front: {LONG[:90]}…",
+          "headline_title": f"FAULT: front: {LONG}"}
+    assert not any(ln.startswith("now:") for ln in format_status(st).splitlines())
+    # a daemon of an earlier version gives the cut headline only: shown, as before
+    st = {"state": "idle", "reason": "waiting for a vehicle", "headline": "Raise the vehicle"}
+    assert "now:      Raise the vehicle" in format_status(st).splitlines()

@@ -175,9 +175,8 @@ async function showVehicle(vin) {
           for (let k = 0; k < 8; k++) cell(tr, "", k === 7 ? "crops" : "");
         }
         else {
-          // "rework" is a reopened vehicle's word: a try after a NOK is a repeat
-          const reworked = v.reopened_at && r.recorded_at && r.recorded_at >= v.reopened_at;
-          cell(tr, r.attempt + (reworked ? " (rework)" : r.attempt > 1 ? " (repeat)" : ""));
+          // the server's words: a repeat, a rework, a loosening with its loosen pset
+          cell(tr, r.attempt_words ?? String(r.attempt));
           // a loosening (the NOK policy's loosen step, a loosen command) undoes a tightening
           cell(tr, r.rundown || "tightening", "rundown-" + (r.rundown || "tightening"));
           cell(tr, r.status.toUpperCase() + (r.status === "nok" ? nokWords(r) : ""),
