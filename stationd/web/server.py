@@ -301,7 +301,9 @@ class WebServer:
                 "vehicle": v["vehicle"], "counters": v["counters"], "devices": v["devices"],
                 "versions": _versions(), "uptime_s": round(time.time() - self.started, 1),
                 "clients": self.clients, "line": self.line(), "operator": v["operator"],
-                "locks": v["locks"], "release_by": self.release_by()}
+                "locks": v["locks"], "release_by": self.release_by(),
+                # the bolts those locks are on (the release command names one)
+                "locked_bolts": [b["bolt"] for b in v["bolts"] if b["state"] == "locked"]}
 
     async def _status(self, request: web.Request) -> web.Response:
         return web.json_response(self.status(), dumps=lambda o: json.dumps(o, default=_plain))

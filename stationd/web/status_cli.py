@@ -64,9 +64,12 @@ def lock_lines(st: dict[str, Any]) -> list[str]:
     who = "" if by is None else \
         f" (a user with the release right: {', '.join(by)})" if by else \
         " (no role of this station has the release right: access.roles)"
+    # the bolt named where one is locked (a newcomer read BOLT for the only one there was)
+    named = list(st.get("locked_bolts") or [])
+    bolt = str(named[0]) if len(named) == 1 and len(locks) == 1 else "BOLT"
     return [f"locked:   {text}" for text in locks] + [
-        f"release:  stationd release {vin} BOLT --user NAME, or the operator screen's Release "
-        f"form{who}"]
+        f"release:  stationd release {vin} {bolt} --user NAME, or the operator screen's "
+        f"Release form{who}"]
 
 
 def line_lines(line: dict[str, Any] | None) -> list[str]:

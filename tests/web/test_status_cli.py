@@ -122,7 +122,8 @@ def test_status_names_a_locked_bolt_and_who_releases_it_how(live_server, capsys)
     assert main(["status", "--url", srv.url]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert "locked:   B2 locked after 3 NOK in a row: a supervisor releases it" in lines
-    assert f"release:  stationd release {VIN} BOLT --user NAME, or the operator screen's " \
+    # the one locked bolt named in the command (a newcomer read BOLT for it)
+    assert f"release:  stationd release {VIN} B2 --user NAME, or the operator screen's " \
         "Release form (a user with the release right: supervisor)" in lines
 
 
