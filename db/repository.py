@@ -41,6 +41,7 @@ from db.migrate import current_revision, head_revision, upgrade
 from db.models import (
     Bolt,
     ControllerEvent,
+    Meta,
     ProcessParameters,
     ResultGap,
     TighteningRecord,
@@ -56,6 +57,8 @@ from db.report import VehicleInfo, VehicleReport, build_report
 EXPORT_HEADER = ("stationd bolt table, exported from the process-parameter database.\n"
                  "Units: positions mm (vehicle frame), torque N m, angle degrees.")
 VIN_MAX = 32
+#: the meta key of the vehicle loaded at the station now ("": none), for :meth:`left_unseen`
+AT_STATION = "at_station"
 #: the commands that end a bolt's lock (its NOKs in a row) or its hold: a release, and a skip
 #: (the station takes a skip of a locked or held bolt only from a user who may release it)
 ENDS_A_HOLD = frozenset({"release", "skip"})
@@ -222,9 +225,11 @@ class Repository:
 
     # -- vehicles -------------------------------------------------------------------------
     def start_vehicle(self, vin: str, model: str, *, reopen: bool = False) -> VehicleInfo:
-        """Start (or, after a daemon restart, resume) a vehicle; ``reopen`` a closed one."""
+        """Start (or, after a daemon restart, resume) a vehicle; ``reopen`` a closed one.  It
+        is the vehicle at the station from now on (:meth:`left_unseen`)."""
         _check_vin(vin)
         with self._session(write=True) as s:
+            _set_meta(s, AT_STATION, vin)
             m = _model(s, model)
             v = s.scalar(select(Vehicle).where(Vehicle.vin == vin))
             if v is None:
@@ -251,7 +256,11 @@ class Repository:
         with self._session(write=True) as s:
             v = _vehicle(s, vin)
             if v.ended_at is None:
-                raise DataError(f"vehicle {vin} is not closed")
+                here = s.get(Meta, AT_STATION)
+                waits = v.reopened_at is not None and (here is None or here.value != vin)
+                raise DataError(f"vehicle {vin} is not closed" + (
+                    f": reopened for rework at {v.reopened_at:%Y-%m-%d %H:%M:%S} UTC, not "
+                    "back at the station yet" if waits else ""))
             v.ended_at, v.reopened_at = None, at
             add_command(s, at=at, user=user, source=source, kind="reopen", vin=vin, bolt=None,
                         comment=comment)
@@ -617,11 +626,33 @@ class Repository:
 
     def close_vehicle(self, vin: str) -> VehicleReport:
         """End the vehicle (once; closing again keeps the first end) and return its summary:
-        the bolts still missing and those whose last result is NOK."""
+        the bolts still missing and those whose last result is NOK.  No vehicle is at the
+        station any more."""
         with self._session(write=True) as s:
             v = _vehicle(s, vin)
             if v.ended_at is None:
                 v.ended_at = utcnow()
+            here = s.get(Meta, AT_STATION)
+            if here is not None and here.value == vin:
+                here.value = ""
+            s.flush()
+            return build_report(s, v)
+
+    def left_unseen(self, vin: str) -> VehicleReport | None:
+        """Close the vehicle the station loaded last, if it is not ``vin`` and still open, and
+        return its summary (None: nothing to close).  Why: the lift going down closes a
+        vehicle; a station down then (killed, restarted, its PLC unreachable) never saw it
+        go, and the vehicle stayed open for good beside the next one.  A vehicle reopened
+        for rework and not back yet was not loaded since: it stays open."""
+        with self._session(write=True) as s:
+            row = s.get(Meta, AT_STATION)
+            if row is None or not row.value or row.value == vin:
+                return None
+            v = s.scalar(select(Vehicle).where(Vehicle.vin == row.value))
+            row.value = ""
+            if v is None or v.ended_at is not None:
+                return None
+            v.ended_at = utcnow()
             s.flush()
             return build_report(s, v)
 
@@ -631,6 +662,14 @@ class Repository:
 
 
 # -- helpers ------------------------------------------------------------------------------
+def _set_meta(s: Session, key: str, value: str) -> None:
+    row = s.get(Meta, key)
+    if row is None:
+        s.add(Meta(key=key, value=value))
+    else:
+        row.value = value
+
+
 def _same_result(model: Any, at: Any, tightening_id: int, torque_nm: float | None,
                  angle_deg: float | None,
                  controller_at: datetime | None) -> list[ColumnElement[bool]]:

@@ -318,6 +318,10 @@ class Records:
         skipped and NOK so far (a rework resumed after a reload is still one), or rejected
         (unknown model, a closed VIN, another model's VIN)."""
         repo = self._repo()
+        gone = repo.left_unseen(a.vin)
+        if gone is not None:   # the lowering that closes it was not seen (station down then)
+            log.info("vehicle %s (%s) closed: it left while the station did not see it go; "
+                     "%s", gone.vehicle.vin, gone.vehicle.model, gone.counts())
         model = repo.model_for_code(a.model_code)
         if model is None:
             return VehicleRejected(time.time(), a.vin,

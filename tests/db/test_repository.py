@@ -388,3 +388,29 @@ def test_the_journal_line_of_a_closing_vehicle_counts_in_the_reports_words(tmp_p
                               "0 skipped, ")
     assert said[0].endswith("; rundowns: 3 tightenings, 2 NOK results")
     repo.close()
+
+
+def test_a_vehicle_that_left_unseen_is_closed_when_the_next_one_is_loaded(repo, bolts_file):
+    """A station killed while its vehicle was lowered never saw it go: it stayed open for
+    good beside the next one (a newcomer's Results list).  The next vehicle loaded closes it;
+    the same vehicle back (a restart at height) does not, nor does a vehicle reopened for
+    rework and not back yet."""
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    record(repo, "VIN1", "B1", tightening_id=1)
+    assert repo.left_unseen("VIN1") is None              # the same vehicle, resumed
+    repo.start_vehicle("VIN1", "SEDAN")
+    gone = repo.left_unseen("VIN2")                        # the station down as VIN1 left
+    assert gone is not None and gone.vehicle.vin == "VIN1" and gone.vehicle.ended_at
+    assert gone.ok == ["B1"]
+    assert repo.left_unseen("VIN2") is None                # once
+    repo.start_vehicle("VIN2", "SEDAN")
+    repo.close_vehicle("VIN2")                             # lowered, seen: none at the station
+    repo.reopen_vehicle("VIN1", at=datetime.now(UTC), user="sam", source="cli",
+                        comment="rework")
+    assert repo.left_unseen("VIN3") is None                # VIN1 reopened, not loaded since
+    with pytest.raises(DataError, match=r"reopened for rework at .* not back at the station"):
+        repo.reopen_vehicle("VIN1", at=datetime.now(UTC), user="sam", source="cli",
+                            comment="again")
+    repo.start_vehicle("VIN3", "SEDAN")
+    assert repo.vehicle_report("VIN1").vehicle.ended_at is None

@@ -210,3 +210,24 @@ def test_a_controller_event_copy_settles_no_other_bolt_s_enable(tmp_path: Path) 
     assert event("B2", owed.id) is None                  # a copy of B1's: stored once
     assert repo.owed_enable() is not None                # B2's enable not settled
     repo.close()
+
+
+def test_a_vehicle_the_station_did_not_see_leave_is_closed_as_the_next_one_loads(tmp_path,
+                                                                               caplog):
+    """The station killed while VIN1 was lowered: started again with VIN2 at height, VIN1 is
+    closed (it stayed open for good) and the journal says so in the report's words."""
+    first = _records(tmp_path)
+    assert isinstance(first.load_vehicle(LoadVehicle(12, "VIN1")), VehicleLoaded)
+    assert first.repo is not None
+    first.repo.close()                   # killed, VIN1 never closed
+    records = _records(tmp_path)
+    with caplog.at_level("INFO", logger="stationd"):
+        assert isinstance(records.load_vehicle(LoadVehicle(12, "VIN2")), VehicleLoaded)
+    assert records.repo is not None
+    assert records.repo.vehicle_report("VIN1").vehicle.ended_at is not None
+    assert records.repo.vehicle_report("VIN2").vehicle.ended_at is None
+    said = [r.getMessage() for r in caplog.records if "left while the station" in
+            r.getMessage()]
+    assert said == ["vehicle VIN1 (SEDAN) closed: it left while the station did not see it "
+                    "go; bolts: 0 OK, 0 ending NOK, 0 skipped, 2 missing (B1, B2); rundowns: "
+                    "0 tightenings, 0 NOK results"], said
