@@ -12,7 +12,9 @@ the default, each section (and each entry a caller guards) on its own, so indepe
 mistakes are all reported; without, it is raised as it is found.
 
 Relative paths in a file are relative to the file (for a symbolic link, to the file it points
-to: :func:`base_folder`); there are no hidden sources.
+to: :func:`base_folder`); there are no hidden sources.  A path it names that cannot be looked
+at (a folder closed to the service's user, a file where a folder was meant, any error of the
+system's) is an error at its key, like any other (:func:`present`), never a traceback.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import ParamSpec, TypeVar
 
+from db.reach import unreachable
 from stationd.errors import ConfigError
 from stationd.filekind import expect
 from stationd.yamlio import YamlNode
@@ -147,14 +150,22 @@ def base_folder(path: Path) -> Path:
     """The folder the relative paths of the file at ``path`` are relative to: its own, or
     for a symbolic link (``/etc/stationd/station.yaml -> /opt/line/station.yaml``, the
     natural install) the folder of the file it points to, where the files it names are kept
-    with it (``/opt/line``), wherever the link is."""
-    return path.resolve().parent if path.is_symlink() else path.parent
+    with it (``/opt/line``), wherever the link is.  A file that cannot be looked at is taken
+    as no link: reading it says why."""
+    return path.resolve().parent if _is_link(path) else path.parent
+
+
+def _is_link(path: Path) -> bool:
+    try:
+        return path.is_symlink()
+    except OSError:   # a folder on the way closed to this user: the file's read says so
+        return False
 
 
 def link_note(path: Path, what: str) -> str:
     """What a missing relative path's message adds when the file at ``path`` (``what``: "the
     station file") is a link: both names, and which folder was read."""
-    if not path.is_symlink():
+    if not _is_link(path):
         return ""
     target = path.resolve()
     return (f" (relative paths are read from {target.parent}, the folder of {target}, which "
@@ -167,11 +178,26 @@ def relative_path(node: YamlNode, base: Path) -> Path:
     return p if p.is_absolute() else base / p
 
 
+def present(node: YamlNode, path: Path, what: str) -> bool:
+    """Whether ``path`` (named at ``node``) is there; a path that cannot be looked at is the
+    node's error, naming ``what`` it is and why (:func:`db.reach.unreachable`): Python's
+    ``Path.exists`` raises a PermissionError for a folder closed to this user (a traceback,
+    exit 1) and answers False for a file where a folder was meant ("does not exist")."""
+    try:
+        path.stat()
+    except FileNotFoundError:
+        return False
+    except OSError as exc:
+        raise node.error(f"{what} {path}: {unreachable(path, exc)}") from None
+    return True
+
+
 def existing_file(node: YamlNode, base: Path, what: str, note: str = "") -> Path:
     """A path (relative to ``base``) that must name an existing file; ``note`` is added to
-    the message (where relative paths were read from, for a linked file: :func:`link_note`)."""
+    the message (where relative paths were read from, for a linked file: :func:`link_note`).
+    One that cannot be looked at is refused saying why (:func:`present`)."""
     p = relative_path(node, base)
-    if not p.exists():
+    if not present(node, p, what):
         raise node.error(f"{what} {p} does not exist{note}")
     return p
 
@@ -186,4 +212,4 @@ def named_items(node: YamlNode) -> list[tuple[str, YamlNode]]:
 
 
 __all__ = ["MAX_SECTION_ERRORS", "SectionReader", "base_folder", "existing_file", "in_order",
-           "left_out", "link_note", "named_items", "relative_path"]
+           "left_out", "link_note", "named_items", "present", "relative_path"]
