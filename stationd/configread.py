@@ -26,7 +26,7 @@ from typing import ParamSpec, TypeVar
 from db.reach import unreachable
 from stationd.errors import ConfigError
 from stationd.filekind import expect
-from stationd.yamlio import YamlNode
+from stationd.yamlio import YamlNode, missing_keys
 
 T = TypeVar("T")
 P = ParamSpec("P")
@@ -83,7 +83,13 @@ class SectionReader:
             except ConfigError as exc:
                 if any(str(exc) == str(e) for e in found):
                     break      # nothing new: stop
-                if not left_out(exc, found):
+                if exc.missing:
+                    # a key missing because it was left out is not told, one missing as
+                    # written is: a user told its wrong role lacks its password too
+                    really = missing_as_written(exc, found)
+                    if really is not None:
+                        found.append(really)
+                elif not left_out(exc, found):
                     found.append(exc)
                 # what leaving an entry out did (a user without the role told wrong misses
                 # it) is not told, and the mapping holding it is left out in turn: the
@@ -137,6 +143,21 @@ def left_out(error: ConfigError, told: list[ConfigError]) -> bool:
         return False
     return any(e.key is not None and (e.key == error.key or e.key.startswith(
         (error.key + ".", error.key + "["))) for e in told)
+
+
+def missing_as_written(error: ConfigError, told: list[ConfigError]) -> ConfigError | None:
+    """A "missing key" ``error`` with only the keys that are missing as the file is written:
+    those :meth:`SectionReader.section` left out, having told them (``told``), are not; None
+    when no other is missing."""
+    prefix = f"{error.key}." if error.key else ""
+    kept = [k for k in error.missing
+            if not any(e.key is not None and (e.key == prefix + k or e.key.startswith(
+                (prefix + k + ".", prefix + k + "["))) for e in told)]
+    if not kept:
+        return None
+    if len(kept) == len(error.missing):
+        return error
+    return missing_keys(kept, path=error.path, line=error.line, key=error.key)
 
 
 def in_order(errors: list[ConfigError], path: str) -> list[ConfigError]:
@@ -212,4 +233,4 @@ def named_items(node: YamlNode) -> list[tuple[str, YamlNode]]:
 
 
 __all__ = ["MAX_SECTION_ERRORS", "SectionReader", "base_folder", "existing_file", "in_order",
-           "left_out", "link_note", "named_items", "present", "relative_path"]
+           "left_out", "link_note", "missing_as_written", "named_items", "present", "relative_path"]

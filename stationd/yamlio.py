@@ -101,6 +101,14 @@ def decode_text(data: bytes, where: str, expected: str) -> str:
                           "the file as UTF-8", path=where, line=line) from None
 
 
+def missing_keys(keys: Sequence[str], *, path: str | None, line: int | None,
+                 key: str | None) -> ConfigError:
+    """The error of a mapping (at ``path``, ``line``, ``key``) without the required
+    ``keys``: "missing key: role", "missing keys: role, password"."""
+    return ConfigError(f"missing {noun(len(keys), 'key')}: {', '.join(keys)}", path=path,
+                       line=line, key=key, missing=tuple(keys))
+
+
 #: how deep a file's collections may nest: the station's files nest a few levels; PyYAML and
 #: the readers walk a document recursively, and 300 levels exhausted Python's stack (a
 #: traceback, and a daemon that died on a reload)
@@ -260,7 +268,7 @@ class YamlNode:
             out[name] = child
         missing = [k for k in required if k not in out]
         if missing:
-            raise self.error(f"missing {noun(len(missing), 'key')}: {', '.join(missing)}")
+            raise missing_keys(missing, path=self.path, line=self.line, key=self.key or None)
         return out
 
     def named(self, what: str = "names to their settings") -> list[tuple[str, YamlNode]]:
