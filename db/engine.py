@@ -66,17 +66,30 @@ SCHEMES = {"postgres": "postgresql+psycopg", "postgresql": "postgresql+psycopg",
            "psql": "postgresql+psycopg", "sqlite3": "sqlite"}
 
 
+def scheme_mistake(url: str, kind: str | None = None) -> str | None:
+    """``url`` written with a scheme people write that SQLAlchemy has no driver for here
+    (:data:`SCHEMES`: ``postgres://``, Heroku's), in the words of what to write: "write
+    postgresql+psycopg://... (postgres:// is not a driver SQLAlchemy has here)"; None for
+    any other URL.  ``kind``: only a scheme meaning that kind of database ("postgresql": a
+    caller that takes PostgreSQL alone, the line database)."""
+    scheme, sep, rest = url.partition("://")
+    fix = SCHEMES.get(scheme.lower()) if sep else None
+    if fix is None or (kind is not None and fix.partition("+")[0] != kind):
+        return None
+    return f"write {fix}://{rest} ({scheme}:// is not a driver SQLAlchemy has here)"
+
+
 def _url_mistake(url: str, *, loaded: bool = False) -> str | None:
     """What is wrong with a URL SQLAlchemy refused, in the words of what to write: a file
     name without a scheme, a scheme it does not know (``postgres://``, Heroku's), PostgreSQL
     without the installed driver.  ``loaded``: the dialect exists (its driver did not
     import): only a known mistake is told.  None: SQLAlchemy's own message says it."""
-    scheme, sep, rest = url.partition("://")
+    scheme, sep, _ = url.partition("://")
     if not sep:
         return f"not a URL: write sqlite:///{url} for an SQLite file ({URL_FORMS})"
-    fix = SCHEMES.get(scheme.lower())
+    fix = scheme_mistake(url)
     if fix is not None:
-        return f"write {fix}://{rest} ({scheme}:// is not a driver SQLAlchemy has here)"
+        return fix
     if not loaded and "+" not in scheme:
         return f"no database kind {scheme!r} ({URL_FORMS})"
     return None

@@ -6,14 +6,18 @@ import|export|report|spc``).  SQLite itself answers these mistakes badly or not 
 in-memory database takes an import and keeps nothing, a folder says "unable to open database
 file" (or "disk I/O error"), a missing folder the same, a text file "file is not a database"
 only once something reads it; opening a path also creates the file, and opening a FIFO blocks.
+A folder on the way that the user cannot enter, or that is a file, or any other error of the
+system's in looking at the path, is one line too (:mod:`db.reach`): Python's answer was a
+traceback, and exit 1, which systemd restarts forever.
 """
 
 from __future__ import annotations
 
-import getpass
 import os
 import stat
 from pathlib import Path
+
+from db.reach import file_above, not_a_folder, unreachable, user_name
 
 #: the first 16 bytes of every SQLite database file (https://sqlite.org/fileformat.html)
 SQLITE_HEADER = b"SQLite format 3\x00"
@@ -47,7 +51,7 @@ def unwritable_folder(folder: Path, *, as_writer: bool = True) -> str | None:
         return f"folder {folder} cannot be written by anyone (no write permission): name " \
                "a folder that can be written (e.g. /var/lib/stationd)"
     if as_writer and not os.access(folder, os.W_OK | os.X_OK):
-        return f"folder {folder} cannot be written by user {getpass.getuser()}: give it " \
+        return f"folder {folder} cannot be written by user {user_name()}: give it " \
                "that user, or name another folder"
     return None
 
@@ -75,10 +79,21 @@ def sqlite_problem(url: str, *, read_header: bool = True, loses: str = STATION_L
         return (f"{url}: an SQLite file's URL takes no options after '?' "
                 f"({', '.join(sorted(parsed.query))}): write sqlite:///{name}")
     path = Path(name)
+    try:
+        return _file_problem(path, read_header=read_header, as_writer=as_writer)
+    except OSError as exc:   # a folder closed to this user, a name too long...
+        return f"database {path}: {unreachable(path, exc, 'opened')}"
+
+
+def _file_problem(path: Path, *, read_header: bool, as_writer: bool) -> str | None:
+    """:func:`sqlite_problem` of the file at ``path``; an OSError in looking is raised."""
     if path.is_dir():
         return f"{path} is a folder, not a database file (name a file in it, e.g. " \
                f"sqlite:///{path / 'stationd.db'})"
     if not path.parent.is_dir():
+        above = file_above(path)
+        if above is not None:   # "does not exist: create it" would mislead
+            return f"database {path}: {not_a_folder(path, above)}"
         return missing_folder(path.parent)
     unwritable = unwritable_folder(path.parent, as_writer=as_writer)
     if unwritable is not None:
@@ -89,11 +104,8 @@ def sqlite_problem(url: str, *, read_header: bool = True, loses: str = STATION_L
         return f"{path} is not a regular file (a FIFO or a device?): name a database file"
     if not read_header:
         return None
-    try:
-        with path.open("rb") as f:
-            head = f.read(len(SQLITE_HEADER))
-    except OSError as exc:
-        return f"{path} cannot be read: {exc.strerror or exc}"
+    with path.open("rb") as f:
+        head = f.read(len(SQLITE_HEADER))
     if head and head != SQLITE_HEADER:   # an empty file is a new database
         return f"{NOT_SQLITE}{path} is another kind of file: name the station's " \
                "database, or a new file"

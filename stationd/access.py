@@ -121,18 +121,8 @@ class AccessConfig:
             for r in item.items():
                 rights.add(Right(r.text(tuple(x.value for x in Right))))
             roles[name] = frozenset(rights)
-        users = {}
-        for name, item in m["users"].named() if "users" in m else ():
-            u = item.mapping(("role", "password"), required=("role", "password"))
-            role = u["role"].text(tuple(roles))
-            stored = u["password"].text()
-            try:
-                parse_hash(stored)
-            except ValueError:
-                raise u["password"].error(
-                    "not a scrypt hash: the file keeps only the hash of a password "
-                    "(`stationd user hash` prints it), never the password") from None
-            users[name] = User(name, role, stored)
+        users = {name: _user(name, item, roles)
+                 for name, item in (m["users"].named() if "users" in m else ())}
         required = m["operator_required"].flag() if "operator_required" in m else False
         if required and not users:
             raise m["operator_required"].error(
@@ -167,6 +157,32 @@ class AccessConfig:
         if not verify_password(password, stored) or u is None:
             return None
         return Issuer(u.name, self.roles.get(u.role, frozenset()), source)
+
+
+#: what a user of ``access.users`` is written with, both required
+USER_KEYS = ("role", "password")
+
+
+def _user(name: str, item: YamlNode, roles: Mapping[str, frozenset[Right]]) -> User:
+    """One user of ``access.users``.  Its role and its password are each checked before
+    either is required: ``config check`` reads a section again without the entry it told, and
+    a key left out that way is missing, which it does not tell (the user is then left out as
+    a whole).  Required first, a user written ``{role: boss, password: hunter22}`` was told
+    its role only, its plain-text password at the next check."""
+    u = item.mapping(USER_KEYS)
+    role = u["role"].text(tuple(roles)) if "role" in u else None
+    stored = u["password"].text() if "password" in u else None
+    if stored is not None:
+        try:
+            parse_hash(stored)
+        except ValueError:
+            raise u["password"].error(
+                "not a scrypt hash: the file keeps only the hash of a password "
+                "(`stationd user hash` prints it), never the password") from None
+    if role is None or stored is None:
+        item.mapping(USER_KEYS, required=USER_KEYS)   # says which key is missing
+    assert role is not None and stored is not None  # noqa: S101 - raised above otherwise
+    return User(name, role, stored)
 
 
 @functools.cache

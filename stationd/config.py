@@ -29,6 +29,7 @@ from stationd.configread import (
     existing_file,
     in_order,
     link_note,
+    present,
     relative_path,
 )
 from stationd.deviceconfig import (
@@ -168,7 +169,8 @@ STATE_DIRECTORY = Path("/var/lib/stationd")
 def _records(node: YamlNode, base: Path) -> RecordsConfig:
     r = node.mapping(("images_dir", "save_images"))
     images = relative_path(r["images_dir"], base) if "images_dir" in r else None
-    if images is not None and images.exists() and not images.is_dir():
+    if images is not None and present(r["images_dir"], images, "folder") \
+            and not images.is_dir():
         # issue 19: accepted with SQLite, and then no selection's images could ever be saved
         raise r["images_dir"].error(f"{images} is a file, not a folder (name the folder the "
                                     "selections' images go to)")

@@ -12,7 +12,9 @@ the default, each section (and each entry a caller guards) on its own, so indepe
 mistakes are all reported; without, it is raised as it is found.
 
 Relative paths in a file are relative to the file (for a symbolic link, to the file it points
-to: :func:`base_folder`); there are no hidden sources.
+to: :func:`base_folder`); there are no hidden sources.  A path it names that cannot be looked
+at (a folder closed to the service's user, a file where a folder was meant, any error of the
+system's) is an error at its key, like any other (:func:`present`), never a traceback.
 """
 
 from __future__ import annotations
@@ -21,9 +23,10 @@ from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import ParamSpec, TypeVar
 
+from db.reach import unreachable
 from stationd.errors import ConfigError
 from stationd.filekind import expect
-from stationd.yamlio import YamlNode
+from stationd.yamlio import YamlNode, missing_keys
 
 T = TypeVar("T")
 P = ParamSpec("P")
@@ -80,7 +83,13 @@ class SectionReader:
             except ConfigError as exc:
                 if any(str(exc) == str(e) for e in found):
                     break      # nothing new: stop
-                if not left_out(exc, found):
+                if exc.missing:
+                    # a key missing because it was left out is not told, one missing as
+                    # written is: a user told its wrong role lacks its password too
+                    really = missing_as_written(exc, found)
+                    if really is not None:
+                        found.append(really)
+                elif not left_out(exc, found):
                     found.append(exc)
                 # what leaving an entry out did (a user without the role told wrong misses
                 # it) is not told, and the mapping holding it is left out in turn: the
@@ -136,6 +145,21 @@ def left_out(error: ConfigError, told: list[ConfigError]) -> bool:
         (error.key + ".", error.key + "["))) for e in told)
 
 
+def missing_as_written(error: ConfigError, told: list[ConfigError]) -> ConfigError | None:
+    """A "missing key" ``error`` with only the keys that are missing as the file is written:
+    those :meth:`SectionReader.section` left out, having told them (``told``), are not; None
+    when no other is missing."""
+    prefix = f"{error.key}." if error.key else ""
+    kept = [k for k in error.missing
+            if not any(e.key is not None and (e.key == prefix + k or e.key.startswith(
+                (prefix + k + ".", prefix + k + "["))) for e in told)]
+    if not kept:
+        return None
+    if len(kept) == len(error.missing):
+        return error
+    return missing_keys(kept, path=error.path, line=error.line, key=error.key)
+
+
 def in_order(errors: list[ConfigError], path: str) -> list[ConfigError]:
     """The errors of the file at ``path`` in line order (its sections are read in a fixed
     order, not the file's), then those of the files it names, in the order found."""
@@ -147,14 +171,22 @@ def base_folder(path: Path) -> Path:
     """The folder the relative paths of the file at ``path`` are relative to: its own, or
     for a symbolic link (``/etc/stationd/station.yaml -> /opt/line/station.yaml``, the
     natural install) the folder of the file it points to, where the files it names are kept
-    with it (``/opt/line``), wherever the link is."""
-    return path.resolve().parent if path.is_symlink() else path.parent
+    with it (``/opt/line``), wherever the link is.  A file that cannot be looked at is taken
+    as no link: reading it says why."""
+    return path.resolve().parent if _is_link(path) else path.parent
+
+
+def _is_link(path: Path) -> bool:
+    try:
+        return path.is_symlink()
+    except OSError:   # a folder on the way closed to this user: the file's read says so
+        return False
 
 
 def link_note(path: Path, what: str) -> str:
     """What a missing relative path's message adds when the file at ``path`` (``what``: "the
     station file") is a link: both names, and which folder was read."""
-    if not path.is_symlink():
+    if not _is_link(path):
         return ""
     target = path.resolve()
     return (f" (relative paths are read from {target.parent}, the folder of {target}, which "
@@ -167,11 +199,26 @@ def relative_path(node: YamlNode, base: Path) -> Path:
     return p if p.is_absolute() else base / p
 
 
+def present(node: YamlNode, path: Path, what: str) -> bool:
+    """Whether ``path`` (named at ``node``) is there; a path that cannot be looked at is the
+    node's error, naming ``what`` it is and why (:func:`db.reach.unreachable`): Python's
+    ``Path.exists`` raises a PermissionError for a folder closed to this user (a traceback,
+    exit 1) and answers False for a file where a folder was meant ("does not exist")."""
+    try:
+        path.stat()
+    except FileNotFoundError:
+        return False
+    except OSError as exc:
+        raise node.error(f"{what} {path}: {unreachable(path, exc)}") from None
+    return True
+
+
 def existing_file(node: YamlNode, base: Path, what: str, note: str = "") -> Path:
     """A path (relative to ``base``) that must name an existing file; ``note`` is added to
-    the message (where relative paths were read from, for a linked file: :func:`link_note`)."""
+    the message (where relative paths were read from, for a linked file: :func:`link_note`).
+    One that cannot be looked at is refused saying why (:func:`present`)."""
     p = relative_path(node, base)
-    if not p.exists():
+    if not present(node, p, what):
         raise node.error(f"{what} {p} does not exist{note}")
     return p
 
@@ -186,4 +233,4 @@ def named_items(node: YamlNode) -> list[tuple[str, YamlNode]]:
 
 
 __all__ = ["MAX_SECTION_ERRORS", "SectionReader", "base_folder", "existing_file", "in_order",
-           "left_out", "link_note", "named_items", "relative_path"]
+           "left_out", "link_note", "missing_as_written", "named_items", "present", "relative_path"]

@@ -96,6 +96,7 @@ def open_repository(url: str, *, must_exist: bool, read_only: bool | None = None
 
     from db.engine import make_engine
     from db.location import sqlite_problem
+    from db.reach import unreachable
     from db.repository import Repository
 
     make_engine(url).dispose()   # the URL's form and driver (DataError: what to write)
@@ -107,7 +108,7 @@ def open_repository(url: str, *, must_exist: bool, read_only: bool | None = None
             try:
                 there = Path(path).exists()
             except OSError as exc:   # a folder on the way this user may not enter
-                raise InputError(f"{path}: cannot read: {exc.strerror}") from None
+                raise InputError(f"database {path}: {unreachable(Path(path), exc)}") from None
             if not there:
                 raise InputError(f"no database at {path} ({missing})")
     reads_only = must_exist if read_only is None else read_only

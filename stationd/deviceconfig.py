@@ -26,7 +26,13 @@ from drivers.errors import UrlError
 from drivers.lift.base import RegisterMap
 from drivers.wrench import takes_register_map
 from drivers.wrench.modbus_map import WrenchRegisterMap
-from stationd.configread import SectionReader, existing_file, named_items, relative_path
+from stationd.configread import (
+    SectionReader,
+    existing_file,
+    named_items,
+    present,
+    relative_path,
+)
 from stationd.devicekey import device_key
 from stationd.devicemaps import lift_map, wrench_map
 from stationd.filekind import expect
@@ -313,8 +319,13 @@ class DeviceSections:
             if "to_vehicle" in m \
             else self.base / f"{name}.vehicle.yaml"
         tv = None
-        if tv_path is not None and tv_path.exists() and name != self.unregistered:
-            tv = self.reader.guard(None, _load_transform, tv_path)
+        if tv_path is not None:
+            there = self.reader.guard(None, present, m.get("to_vehicle", node), tv_path,
+                                      "vehicle registration file")
+            if there is None:
+                tv_path = None   # cannot be looked at: told
+            elif there and name != self.unregistered:
+                tv = self.reader.guard(None, _load_transform, tv_path)
         calibration = self.reader.guard(None, StereoPair.load, cal_path) \
             if cal_path is not None else None
         if calibration is not None:

@@ -25,13 +25,16 @@ def printable(text: str, keep: str = "") -> str:
 
 
 class ConfigError(InputError):
-    """A configuration or calibration file is invalid; the message names file, line and key."""
+    """A configuration or calibration file is invalid; the message names file, line and key.
+    ``missing``: the required keys a mapping lacks, when that is the error (a checker that
+    left some entries out tells only the others: ``stationd.configread``)."""
 
     def __init__(self, message: str, *, path: str | None = None, line: int | None = None,
-                 key: str | None = None) -> None:
+                 key: str | None = None, missing: tuple[str, ...] = ()) -> None:
         self.path = path
         self.line = line
         self.key = key
+        self.missing = missing
         self.message = message   # without the place: what a caller may re-locate
         where = ""
         if path is not None:

@@ -43,7 +43,7 @@ from sqlalchemy import Engine, make_url
 from sqlalchemy.dialects.postgresql import insert as pg_insert
 from sqlalchemy.exc import DBAPIError, SQLAlchemyError
 
-from db.engine import make_engine
+from db.engine import make_engine, scheme_mistake
 from db.errors import DbError
 from db.repository import Repository
 from stationd.linedb import (
@@ -66,6 +66,20 @@ MEASURE_BATCH = 500          # entries read at once to measure them
 EXAMPLE_URL = "postgresql+psycopg://stationd@line-db/line"
 CURSOR_KEY = "forwarded_seq"
 
+
+def not_postgresql(url: str, backend: str) -> str:
+    """Why ``url``, whose SQLAlchemy backend is ``backend`` (not PostgreSQL), cannot name the
+    line database, in the words of what to write.  PostgreSQL under a scheme SQLAlchemy does
+    not know (``postgres://``) is told as the station's database URLs are
+    (:func:`db.engine.scheme_mistake`): "the line database is PostgreSQL, not postgres"
+    read as a contradiction."""
+    fix = scheme_mistake(url, "postgresql")
+    if fix is not None:
+        return fix
+    return (f"the line database is PostgreSQL, not {backend}: give a postgresql+psycopg:// "
+            f"URL (e.g. {EXAMPLE_URL}); the station's own records are in database: url")
+
+
 def line_url_problem(url: str) -> str | None:
     """Why ``url`` cannot name the line database, in the words of what to write; None when
     it can (built, not connected: a server that does not answer is not told here).  One check
@@ -79,8 +93,7 @@ def line_url_problem(url: str) -> str | None:
         # psycopg takes port 0 as "the default", and its error then names 5432
         return f"port {port} is not 1-65535"
     if backend != "postgresql":
-        return (f"the line database is PostgreSQL, not {backend}: give a postgresql+psycopg:// "
-                f"URL (e.g. {EXAMPLE_URL}); the station's own records are in database: url")
+        return not_postgresql(url, backend)
     try:   # a driver that is not installed is told now
         make_engine(url).dispose()
     except DbError as exc:
@@ -176,7 +189,7 @@ class LineDb:
     def __init__(self, url: str) -> None:
         backend = make_url(url).get_backend_name()
         if backend != "postgresql":   # the config refuses it with its line; this is the code's
-            raise ValueError(f"the line database is PostgreSQL, not {backend}")
+            raise ValueError(not_postgresql(url, backend))
         self.url = url
         self._engine: Engine | None = None
 
@@ -463,5 +476,5 @@ async def _first(stop: asyncio.Event, wake: asyncio.Event | None, timeout: float
 
 
 __all__ = ["CURSOR_KEY", "LINE_FEED", "BacklogBytes", "Forwarder", "LineConfig", "LineDb",
-           "LineDown", "LineRefuses", "error_line", "line_url_problem", "payload_bytes",
-           "refused_for_good"]
+           "LineDown", "LineRefuses", "error_line", "line_url_problem", "not_postgresql",
+           "payload_bytes", "refused_for_good"]

@@ -174,8 +174,11 @@ def _database_table(cfg: StationConfig) -> tuple[BoltTable, str] | str | None:
     url = make_url(cfg.database_url)
     if url.get_backend_name() != "sqlite" or not url.database:
         return None
-    if not Path(url.database).is_file():
-        return url.database
+    try:
+        if not Path(url.database).is_file():
+            return url.database
+    except OSError:   # cannot be looked at: the file's check says why
+        return None
     try:
         with Repository.open(cfg.database_url, read_only=True) as repo:
             return repo.table(), f"the database {url.database}"

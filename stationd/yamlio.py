@@ -19,6 +19,7 @@ import numpy as np
 import yaml
 from yaml.constructor import SafeConstructor
 
+from db.reach import unreachable
 from drivers.counting import noun
 from stationd.errors import ConfigError, printable
 
@@ -47,14 +48,15 @@ def read_text_file(path: Path, max_bytes: int, expected: str) -> str:
     words otherwise, at once: a FIFO or a device is never opened (a FIFO would block until a
     writer comes, /dev/zero would fill memory), a file over ``max_bytes`` is not read, and a
     file that is not UTF-8 text is told by the kind of file it looks like (``expected``: what
-    was expected, e.g. "a YAML file")."""
+    was expected, e.g. "a YAML file").  A folder on the way closed to this user, or any other
+    error of the system's, is said in words (:func:`db.reach.unreachable`), never raised."""
     where = str(path)
     try:
         st = path.stat()
     except FileNotFoundError:
         raise ConfigError("file not found", path=where) from None
     except OSError as exc:
-        raise ConfigError(f"cannot read: {exc.strerror or exc}", path=where) from None
+        raise ConfigError(unreachable(path, exc), path=where) from None
     if stat.S_ISDIR(st.st_mode):
         raise ConfigError(f"a folder, not a file ({expected} was expected)", path=where)
     if not stat.S_ISREG(st.st_mode):
@@ -70,7 +72,7 @@ def read_text_file(path: Path, max_bytes: int, expected: str) -> str:
         with path.open("rb") as f:
             data = f.read(max_bytes + 1)
     except OSError as exc:
-        raise ConfigError(f"cannot read: {exc.strerror or exc}", path=where) from None
+        raise ConfigError(unreachable(path, exc), path=where) from None
     if len(data) > max_bytes:   # grew, or a special file that says size 0
         raise ConfigError(f"too large for {expected} (more than {max_bytes // 2**20} MB)",
                           path=where)
@@ -97,6 +99,14 @@ def decode_text(data: bytes, where: str, expected: str) -> str:
         shown = data[start:end if end >= 0 else len(data)].decode("cp1252", "replace").strip()
         raise ConfigError(f"not UTF-8 text (Latin-1 or Windows-1252?): {shown[:60]!r}; save "
                           "the file as UTF-8", path=where, line=line) from None
+
+
+def missing_keys(keys: Sequence[str], *, path: str | None, line: int | None,
+                 key: str | None) -> ConfigError:
+    """The error of a mapping (at ``path``, ``line``, ``key``) without the required
+    ``keys``: "missing key: role", "missing keys: role, password"."""
+    return ConfigError(f"missing {noun(len(keys), 'key')}: {', '.join(keys)}", path=path,
+                       line=line, key=key, missing=tuple(keys))
 
 
 #: how deep a file's collections may nest: the station's files nest a few levels; PyYAML and
@@ -258,7 +268,7 @@ class YamlNode:
             out[name] = child
         missing = [k for k in required if k not in out]
         if missing:
-            raise self.error(f"missing {noun(len(missing), 'key')}: {', '.join(missing)}")
+            raise missing_keys(missing, path=self.path, line=self.line, key=self.key or None)
         return out
 
     def named(self, what: str = "names to their settings") -> list[tuple[str, YamlNode]]:

@@ -145,6 +145,23 @@ def test_every_error_of_the_access_section(station, capsys) -> None:
     assert "missing key: password" in lines[2]
 
 
+def test_every_error_of_one_user_at_once(station, capsys) -> None:
+    """A new user's trial: ``{role: boss, password: "hunter22"}`` was told its role only, the
+    plain-text password once the role was fixed; a user without a password the same."""
+    station.write_text(station.read_text() + (
+        "access:\n  users:\n"
+        '    bob: {role: boss, password: "hunter22"}\n'
+        "    cid: {role: boss}\n"))
+    lines = [line for line in _check(capsys, station) if "access." in line]
+    assert [line.split(": ", 2)[1:] for line in lines] == [
+        ["access.users.bob.role", "'boss' is not one of: operator, supervisor, engineer"],
+        ["access.users.bob.password", "not a scrypt hash: the file keeps only the hash of a "
+                                      "password (`stationd user hash` prints it), never the "
+                                      "password"],
+        ["access.users.cid.role", "'boss' is not one of: operator, supervisor, engineer"],
+        ["access.users.cid", "missing key: password"]], lines
+
+
 def test_every_error_of_the_tool_section(station, capsys) -> None:
     """Its required length, wrong, hid the tilt and the rule after it."""
     _edit(station, "tool: {length_mm: 300.0, max_tilt_deg: 10.0, rule: axis}",

@@ -16,6 +16,7 @@ from stationd.configread import (
     in_order,
     left_out,
     link_note,
+    missing_as_written,
     named_items,
     relative_path,
 )
@@ -111,6 +112,51 @@ def test_an_error_at_an_entry_left_out_is_not_a_second_mistake():
     assert left_out(ConfigError("y", key="access.users.ann"), told)
     assert not left_out(ConfigError("y", key="access.roles"), told)
     assert not left_out(ConfigError("y"), told)
+
+
+@dataclass(frozen=True)
+class Person:
+    """A component's entry with two required keys, each value checked before either is
+    required (``stationd.access``'s users are read so)."""
+
+    role: str
+    pin: float
+
+    @classmethod
+    def from_node(cls, node: YamlNode) -> Person:
+        m = node.mapping(("role", "pin"))
+        role = m["role"].text(("operator", "supervisor")) if "role" in m else None
+        pin = m["pin"].number() if "pin" in m else None
+        if role is None or pin is None:
+            node.mapping(("role", "pin"), required=("role", "pin"))
+        return cls(str(role), float(pin or 0))
+
+
+def _people(text: str) -> list[str]:
+    reader = SectionReader(collect=True)
+    reader.sections(YamlNode.parse(text, "s.yaml"), "station", KEYS)
+    reader.section("matching", None, Person.from_node)
+    return [str(e) for e in reader.errors]
+
+
+def test_a_key_missing_as_written_is_told_beside_one_left_out():
+    """A user told its wrong role was read again without it, and "missing keys: role, pin"
+    was taken for what leaving the role out did: the pin it also lacks was told only once the
+    role was fixed."""
+    assert _people("matching: {role: boss}\n") == [
+        "s.yaml:1: matching.role: 'boss' is not one of: operator, supervisor",
+        "s.yaml:1: matching: missing key: pin"]
+    assert _people("matching: {role: boss, pin: x}\n") == [
+        "s.yaml:1: matching.role: 'boss' is not one of: operator, supervisor",
+        "s.yaml:1: matching.pin: expected a number, got 'x'"]
+    assert _people("matching: {pin: 1}\n") == ["s.yaml:1: matching: missing key: role"]
+    told = [ConfigError("x", key="access.users.ann.role")]
+    both = ConfigError("m", key="access.users.ann", missing=("role", "password"))
+    assert str(missing_as_written(both, told)) == "access.users.ann: missing key: password"
+    assert missing_as_written(ConfigError("m", key="access.users.ann", missing=("role",)),
+                              told) is None
+    other = ConfigError("m", key="access.users.bob", missing=("role",))
+    assert missing_as_written(other, told) is other
 
 
 def test_errors_in_line_order_then_those_of_the_files_named():

@@ -203,6 +203,11 @@ def test_the_line_section_is_checked_with_its_line():
                            "PostgreSQL, not sqlite: give a postgresql[+]psycopg:// URL"),
                           ("url: postgresql+nosuchdriver://x/y\nstation_id: A\n",
                            "driver is psycopg 3"),
+                          # Heroku's scheme: said "the line database is PostgreSQL, not
+                          # postgres", which reads as a contradiction
+                          ("url: postgres://x/y\nstation_id: A\n",
+                           r"url: write postgresql\+psycopg://x/y \(postgres:// is not a "
+                           r"driver SQLAlchemy has here\)$"),
                           ("url: postgresql://x/y\nstation_id: A\nbacklog: {size_mb: 0}\n",
                            "out of range"),
                           ("url: 'not a url'\nstation_id: A\n", "not a database URL"),

@@ -210,6 +210,16 @@ def test_line_init_with_a_bad_url_or_the_server_down_is_one_line(pg_url, pg_serv
         assert "Traceback" not in err
 
 
+@pytest.mark.parametrize("scheme", ["postgres", "psql"])
+def test_line_init_with_postgresql_under_another_scheme_says_what_to_write(capsys, scheme):
+    """``postgres://`` (Heroku's) was answered "the line database is PostgreSQL, not
+    postgres": what to write, as ``--db`` and ``database: url`` say it."""
+    code, out, err = _run(capsys, "line", "init", f"{scheme}://stationd@line-db/line")
+    assert code == 2 and out == ""
+    assert err == (f"stationd: error: line init: write postgresql+psycopg://stationd@line-db/"
+                   f"line ({scheme}:// is not a driver SQLAlchemy has here)\n")
+
+
 def test_a_rundowns_operator_reaches_the_line_also_in_a_table_made_before_it(tmp_path, pg_url,
                                                                              capsys):
     """The line keeps each rundown's operator (the user signed in at the station) in the

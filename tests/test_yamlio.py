@@ -119,6 +119,19 @@ def test_a_folder_and_a_huge_file_are_refused(tmp_path):
         YamlNode.load(big)
 
 
+def test_a_file_under_a_file_or_with_a_name_too_long_is_said_in_words(tmp_path):
+    """The system's words were passed on ("cannot read: Not a directory"): which of the
+    folders is a file is what to fix."""
+    (tmp_path / "afile").write_text("x\n")
+    with pytest.raises(ConfigError) as ei:
+        YamlNode.load(tmp_path / "afile" / "pair1.yaml")
+    assert str(ei.value) == f"{tmp_path / 'afile' / 'pair1.yaml'}: {tmp_path / 'afile'} is a " \
+                            "file, not a folder"
+    with pytest.raises(ConfigError, match=r"a{300}.yaml: cannot be reached \(file name too "
+                                          r"long\)$"):
+        YamlNode.load(tmp_path / ("a" * 300 + ".yaml"))
+
+
 @pytest.mark.parametrize(("data", "message"), [
     (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR", "not a text file: it looks like a PNG image (a "
                                              "YAML file was expected)"),

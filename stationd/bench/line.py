@@ -50,7 +50,7 @@ from stationd.bench.wait import until as _until
 from stationd.boltfile import import_bolts
 from stationd.demo.station import SIM_CONFIG
 from stationd.errors import InputError
-from stationd.forward import Forwarder, LineConfig
+from stationd.forward import Forwarder, LineConfig, not_postgresql
 from stationd.jsonout import strict_json
 from stationd.linedb import LINE_FEED, create_line_schema
 from stationd.pgserver import PgServer, PgServerError
@@ -134,7 +134,7 @@ def _check(args: argparse.Namespace) -> None:
             raise InputError(f"--pg {args.pg!r}: not a database URL (e.g. "
                              "postgresql+psycopg://user@host/line)") from None
         if backend != "postgresql":
-            raise InputError(f"--pg: the line database is PostgreSQL, not {backend}")
+            raise InputError(f"--pg: {not_postgresql(args.pg, backend)}")
 
 
 def _stations(folder: Path, n: int, seed: int) -> list[Station]:

@@ -27,7 +27,7 @@ from typing import TextIO
 
 from drivers.lift.base import RegisterMap
 from drivers.lift.sim import SimulatedPlc
-from drivers.wrench.sim.cli import behaviour, serve
+from drivers.wrench.sim.cli import ListenError, behaviour, serve
 from drivers.wrench.sim.controller import SimController, SimPset
 from stationd.boltfile import load_bolts
 from stationd.config import load_station_config
@@ -126,8 +126,7 @@ def _serve_plc(args: argparse.Namespace, stop: threading.Event, out: TextIO) -> 
             port = plc.start_tcp(args.port)
         except (OSError, RuntimeError) as exc:   # pymodbus says a busy port as RuntimeError
             why = getattr(exc, "strerror", None) or "the port is in use or not allowed"
-            print(f"error: cannot listen on 127.0.0.1:{args.port}: {why}", file=sys.stderr)
-            return 1
+            raise InputError(f"cannot listen on 127.0.0.1:{args.port}: {why}") from None
         say(f"lift PLC listening on 127.0.0.1:{port} (Modbus TCP, unit {plc.unit})")
         if args.every > 0:
             while not stop.is_set():
@@ -162,10 +161,13 @@ def _serve_controller(args: argparse.Namespace, stop: threading.Event, out: Text
     except ValueError as exc:
         print(f"stationd: error: {exc}", file=sys.stderr)
         return 2
-    return serve(sim, args.host, args.port, args.trigger_every, stop,
-                 lambda port: f"controller listening on {args.host}:{port} (Open Protocol; "
-                              f"psets {', '.join(str(p) for p in sorted(sim.psets))})", out,
-                 types=args.result_types)
+    psets = ", ".join(str(p) for p in sorted(sim.psets))
+    try:
+        return serve(sim, args.host, args.port, args.trigger_every, stop,
+                     lambda port: f"controller listening on {args.host}:{port} (Open "
+                                  f"Protocol; psets {psets})", out, types=args.result_types)
+    except ListenError as exc:   # a port in use: the station's words, exit 2
+        raise InputError(str(exc)) from None
 
 
 def _check_args(args: argparse.Namespace) -> None:
@@ -194,7 +196,7 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         if args.sim_device == "plc":
             return _serve_plc(args, stop, out)
         return _serve_controller(args, stop, out)
-    except StationError as exc:   # a station file that does not read
+    except StationError as exc:   # a station file that does not read, a port in use
         print(f"stationd: error: {exc}", file=sys.stderr)
         return 2
 

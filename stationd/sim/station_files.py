@@ -8,8 +8,10 @@ config/sim`` rewrites them; a test checks the committed files match.
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 import yaml
@@ -88,8 +90,29 @@ def files() -> dict[str, str]:
     return out
 
 
+class _Parser(argparse.ArgumentParser):
+    """A usage error in one line and exit 2, as stationd's commands say theirs."""
+
+    def error(self, message: str) -> NoReturn:
+        sys.stderr.write(f"{self.prog}: error: {message} (see --help)\n")
+        raise SystemExit(2)
+
+
+def parser() -> argparse.ArgumentParser:
+    """The options.  Why a parser for one argument: the folder was taken as it came, so
+    ``--help`` wrote the ten files into a folder named ``--help``."""
+    p = _Parser(prog="python -m stationd.sim.station_files",
+                description="Write the simulated station's configuration files (station.yaml, "
+                            "the pairs' calibrations and vehicle transforms, bolts.yaml), "
+                            "generated from one seed, into FOLDER (made if missing; files "
+                            "of the same names are replaced).")
+    p.add_argument("folder", nargs="?", default="config/sim", metavar="FOLDER",
+                   help="where to write them (config/sim)")
+    return p
+
+
 def main(argv: list[str]) -> int:
-    target = Path(argv[0]) if argv else Path("config/sim")
+    target = Path(parser().parse_args(argv).folder)
     target.mkdir(parents=True, exist_ok=True)
     for name, text in files().items():
         (target / name).write_text(text)

@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from stationd.configread import present
 from stationd.filekind import expect
 from stationd.vision.enhance import EnhanceParams
 from stationd.vision.segment import HsvRange
@@ -116,7 +117,7 @@ def _hsv_from(node: YamlNode, base_dir: Path | None) -> HsvRange:
         path = Path(node.text())
         if not path.is_absolute() and base_dir is not None:
             path = base_dir / path
-        if not path.exists():
+        if not present(node, path, "HSV file"):
             raise node.error(f"HSV file {path} does not exist (write it with stationd tune-color)")
         root = YamlNode.load(path)
         expect(root, "hsv", ("hsv",))   # a pair calibration given here: say what it is

@@ -105,17 +105,21 @@ def test_numbers_that_cannot_work_are_refused_at_the_start(argv: tuple[str, ...]
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
 
 
-def test_a_busy_port_is_one_line_for_the_plc_as_for_the_controller() -> None:
-    """A sweep: the PLC on a port in use ended in pymodbus's RuntimeError traceback."""
+@pytest.mark.parametrize("device", ["plc", "controller"])
+def test_a_busy_port_is_one_line_for_the_plc_as_for_the_controller(device: str) -> None:
+    """A sweep: the PLC on a port in use ended in pymodbus's RuntimeError traceback; then
+    both said ``error: cannot listen ...`` with exit 1, not as the station's other commands
+    say their errors (``stationd: error: ...``, exit 2)."""
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
-        r = subprocess.run([sys.executable, "-m", "stationd", "sim", "plc", "--port",
+        r = subprocess.run([sys.executable, "-m", "stationd", "sim", device, "--port",
                             str(port)], cwd=ROOT, capture_output=True, text=True, timeout=60,
                            stdin=subprocess.DEVNULL)
-    assert r.returncode == 1 and f"cannot listen on 127.0.0.1:{port}" in r.stderr, r
-    assert "Traceback" not in r.stderr
+    assert r.returncode == 2, r
+    assert r.stderr.startswith(f"stationd: error: cannot listen on 127.0.0.1:{port}: "), r
+    assert r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
 
 
 def test_vins_have_17_characters_of_the_alphabet_and_their_check_digit() -> None:

@@ -25,7 +25,14 @@ from itertools import cycle
 from types import FrameType
 from typing import Any, TextIO
 
+from drivers.errors import DriverError
 from drivers.wrench.sim.controller import SimController
+
+
+class ListenError(DriverError):
+    """The simulator cannot listen on its port (in use, not allowed): each command says it
+    in one line of its own words, exit 2 (``stationd sim controller``: ``stationd: error:
+    cannot listen on 127.0.0.1:4545: Address already in use``)."""
 
 
 def refusal(text: str) -> tuple[int, set[int]]:
@@ -123,11 +130,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                             curves_refusal_code=args.curves_refusal_code,
                             curve_samples=args.curve_samples, part_size=args.part_size,
                             mislabel=args.mislabel, clock_offset_s=args.clock_offset)
-    except ValueError as e:
+        return serve(sim, args.host, args.port, args.trigger_every, stop,
+                     lambda port: f"listening on {args.host}:{port}", types=args.result_types)
+    except (ValueError, ListenError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    return serve(sim, args.host, args.port, args.trigger_every, stop,
-                 lambda port: f"listening on {args.host}:{port}", types=args.result_types)
 
 
 def serve(sim: SimController, host: str, port: int, trigger_every: float,
@@ -135,16 +142,15 @@ def serve(sim: SimController, host: str, port: int, trigger_every: float,
           types: Sequence[int] = (1,)) -> int:
     """Serve ``sim`` on ``host:port`` until ``stop`` (``said(port)`` printed once it listens),
     pulling the trigger every ``trigger_every`` seconds when set (a result of each of
-    ``types`` in turn, whenever the tool may run, connected or not); 1 if it cannot
-    listen."""
+    ``types`` in turn, whenever the tool may run, connected or not); :class:`ListenError`
+    if it cannot listen."""
     kinds = cycle(types)
     kind = next(kinds)
     with sim:
         try:
             bound = sim.listen_tcp(host, port)
         except OSError as e:
-            print(f"error: cannot listen on {host}:{port}: {e.strerror or e}", file=sys.stderr)
-            return 1
+            raise ListenError(f"cannot listen on {host}:{port}: {e.strerror or e}") from None
         print(said(bound), file=out, flush=True)
         while not stop.wait(trigger_every or 0.5):
             if trigger_every and sim.pull_trigger(kind) is not None:

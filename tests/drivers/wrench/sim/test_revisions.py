@@ -170,6 +170,20 @@ def test_the_entry_point_says_what_is_wrong():
     assert done.returncode == 2 and "expected MID:REV[,REV...], not 'x:y'" in done.stderr
 
 
+def test_a_busy_port_is_a_listen_error_for_its_command_to_say():
+    """``serve`` printed its own "error: cannot listen" and returned 1: ``stationd sim
+    controller`` could not say it in the station's words (``stationd: error:``, exit 2)."""
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        out = io.StringIO()
+        with pytest.raises(sim_cli.ListenError, match=rf"^cannot listen on 127\.0\.0\.1:{port}: "):
+            sim_cli.serve(SimController(), "127.0.0.1", port, 0.0, threading.Event(),
+                          lambda p: f"listening on {p}", out=out)
+    assert out.getvalue() == ""
+
+
 @pytest.mark.parametrize("bad", [{"torque_unit": 9}, {"store_size": 0}])
 def test_bad_controller_settings(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):

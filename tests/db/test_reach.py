@@ -1,0 +1,68 @@
+"""Why a path cannot be reached, in words (``db.reach``), and the database's check that says
+it (``db.location.sqlite_problem``): a folder closed to this user, a file where a folder was
+meant, any other error of the system's, one line each where a traceback was."""
+
+from __future__ import annotations
+
+import os
+import pwd
+from pathlib import Path
+
+import pytest
+
+from db.location import sqlite_problem, unwritable_folder
+from db.reach import file_above, unreachable, user_name
+
+
+def _error(path: Path) -> OSError:
+    """The error the system gives for looking at ``path``."""
+    with pytest.raises(OSError) as ei:
+        os.stat(path)
+    return ei.value
+
+
+def test_a_file_where_a_folder_is_meant_is_named(tmp_path):
+    afile = tmp_path / "afile"
+    afile.write_text("x\n")
+    below = afile / "x.db"
+    assert file_above(below) == afile
+    assert unreachable(below, _error(below)) == f"{afile} is a file, not a folder"
+    deeper = afile / "sub" / "x.db"
+    assert unreachable(deeper, _error(deeper)) == \
+        f"folder {afile / 'sub'} cannot be reached: {afile} is a file, not a folder"
+    assert file_above(tmp_path / "gone" / "x.db") is None   # missing is not this
+
+
+def test_any_other_error_is_the_systems_words_in_one_phrase(tmp_path):
+    long = tmp_path / ("a" * 300) / "x.db"
+    assert unreachable(long, _error(long)) == "cannot be reached (file name too long)"
+
+
+def test_the_user_named_is_the_process_s_not_the_environment_s(monkeypatch, tmp_path):
+    """``$USER`` is inherited by a process started as another user (``runuser``, a test's
+    ``subprocess.run(user=...)``): the folder is closed to the user the process runs as."""
+    me = pwd.getpwuid(os.geteuid()).pw_name
+    monkeypatch.setenv("USER", "someone-else")
+    monkeypatch.setenv("LOGNAME", "someone-else")
+    assert user_name() == me
+    real = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode, *a, **kw: False if Path(p) == tmp_path
+                        and mode & os.W_OK else real(p, mode, *a, **kw))
+    assert unwritable_folder(tmp_path) == (f"folder {tmp_path} cannot be written by user {me}: "
+                                           "give it that user, or name another folder")
+
+
+def test_the_database_s_check_says_it_in_one_line(tmp_path):
+    """``sqlite_problem`` raised the OSError of ``Path.is_dir`` (a traceback from ``config
+    check``, ``stationd run``, ``db import``), and took a file where a folder was meant for a
+    folder to create."""
+    afile = tmp_path / "afile"
+    afile.write_text("x\n")
+    assert sqlite_problem(f"sqlite:///{afile}/x.db") == \
+        f"database {afile}/x.db: {afile} is a file, not a folder"
+    long = tmp_path / ("a" * 300)
+    assert sqlite_problem(f"sqlite:///{long}/x.db") == \
+        f"database {long}/x.db: cannot be reached (file name too long)"
+    # a missing folder is still one to create
+    assert sqlite_problem(f"sqlite:///{tmp_path}/gone/x.db").startswith(
+        f"folder {tmp_path}/gone does not exist: create it")
