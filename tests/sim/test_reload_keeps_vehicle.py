@@ -230,7 +230,14 @@ def test_across_a_reload_the_operator_keeps_its_plan_waits_on_its_lock_and_stays
                r"\(first: .*locked, released by sam", 300)
         journal = d.log()
         after = journal.split("configuration reloaded", 1)[1]
-        assert "already done" not in after, after[-3000:]       # no bolt done is visited
+        # no bolt done before is visited (the frames just after a bolt's OK, the wrench
+        # still on it as the operator lifts it, may say that one is done)
+        last = None
+        for line in after.splitlines():
+            said = re.search(r"simulated operator: (B\d\d): pset \d", line)
+            last = said[1] if said else last
+            done = re.search(r"no bolt: (B\d\d) is already done", line)
+            assert done is None or done[1] == last, after[-3000:]
         assert "not selected" not in after, after[-3000:]       # nor the lock gone past
         assert "operator: olga signed in" in journal.split("configuration reloaded")[0]
         assert "operator: operator signed in" not in journal
