@@ -47,14 +47,17 @@ JOINING_TECHNOLOGY = "Tightening"
 def message(rec: dict[str, Any]) -> str:
     """What a result event's Message says of the rundown ``rec`` (a feed record): its
     vehicle, bolt, kind and verdict, and the controller's tightening id, "WVW... B12:
-    loosening OK, tightening id 17".  An MES that reads only the Message (no client decodes
+    loosening OK (controller id 17)".  An MES that reads only the Message (no client decodes
     the metadata's AssemblyType without the types) must not take a loosening for one more
     tightened joint, nor an outcome a person entered for one the station measured, and finds
     the rundown on the controller by its id."""
     kind = "loosening" if rec.get("rundown") == "loosening" else "tightening"
     tid = rec.get("tightening_id")
+    # the id after the verdict, in parentheses, in words without "tightening" (an MES that
+    # looks for the word must not take a loosening for one; split on blanks the verdict
+    # stays a word of its own)
     return f"{rec['vin']} {rec['bolt']}: {kind} {str(rec['status']).upper()}" + (
-        f", tightening id {tid}" if tid is not None else "") + (
+        f" (controller id {tid})" if tid is not None else "") + (
         f" (entered by {rec['entered_by']}, not measured)" if rec.get("entered_by") else "")
 
 
@@ -182,11 +185,18 @@ def trace(rid: str, curves: list[dict[str, Any]]) -> tuple[Any, str, str | None]
 TIGHTENING_ID = "TighteningId"
 
 
+#: the largest UInt32 (Open Protocol's tightening ids are 10 digits, a Modbus map may read
+#: a signed register: a value outside 0..2^32-1 is not sent as one)
+UINT32_MAX = 2 ** 32 - 1
+
+
 def _extended(rec: dict[str, Any]) -> list[Any] | None:
     """The metadata no field of the result has: the controller's tightening id (a UInt32,
-    as Open Protocol numbers them; none for an outcome entered by a person without one)."""
+    as Open Protocol numbers them; none for an outcome entered by a person without one, nor
+    for an id no UInt32 holds: encoding it failed the whole publish, and an MES's
+    subscription stopped getting results)."""
     tid = rec.get("tightening_id")
-    if tid is None:
+    if tid is None or not 0 <= int(tid) <= UINT32_MAX:
         return None
     return [ua.KeyValueDataType(Key=TIGHTENING_ID,
                                 Value=ua.Variant(int(tid), ua.VariantType.UInt32))]

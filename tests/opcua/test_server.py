@@ -102,9 +102,14 @@ def test_every_rundown_arrives_as_a_result_event_at_the_server_object(repo):
                                                                 tightening_id=tids["B1"]))
                 await loop.run_in_executor(None, lambda: record(repo, VIN, "B2", ok=False,
                                                                 tightening_id=tids["B2"]))
+                # an id no UInt32 holds (a Modbus map's signed register, a 10-digit Open
+                # Protocol id): its encoding stopped the subscription, no result came after
                 await loop.run_in_executor(None, lambda: record(
-                    repo, VIN, "B2", ok=True, kind="loosening", operator="olga"))
-                await handler.wait_for(3)
+                    repo, VIN, "B2", ok=True, kind="loosening", operator="olga",
+                    tightening_id=2 ** 32 + 5))
+                await loop.run_in_executor(None, lambda: record(repo, VIN, "B3", ok=True,
+                                                                tightening_id=44))
+                await handler.wait_for(4)
                 return handler.events
         finally:
             await stopping(srv, stop, task)
@@ -112,7 +117,7 @@ def test_every_rundown_arrives_as_a_result_event_at_the_server_object(repo):
     events = asyncio.run(scenario())
     db_id = repo.ledger.db_id()
     seqs = [e["seq"] for e in repo.ledger.since(0)]
-    assert [e.SourceName for e in events] == ["ST-07"] * 3
+    assert [e.SourceName for e in events] == ["ST-07"] * 4
     assert events[0].SourceNode == ua.NodeId("JoiningSystem.ST-07", events[0].SourceNode
                                              .NamespaceIndex)
     for event, seq, ok, bolt in zip(events[:2], seqs[:2], (True, False), ("B1", "B2"),
@@ -142,15 +147,20 @@ def test_every_rundown_arrives_as_a_result_event_at_the_server_object(repo):
     # a loosening is told apart (a newcomer's MES saw four "OK" results of one joint), and
     # the operator signed in at the station is an entity of the result
     kinds = [e.Result.ResultMetaData.AssemblyType for e in events]
-    assert kinds == [1, 1, 2]                       # ASSEMBLED, ASSEMBLED, DISASSEMBLED
+    assert kinds == [1, 1, 2, 1]                    # ASSEMBLED, ..., DISASSEMBLED, ...
     loose = events[2].Result.ResultMetaData
     assert loose.Name.endswith("loosening") and "loosening of B2" in loose.Description.Text
     assert {(x.EntityType, x.EntityId) for x in loose.AssociatedEntities} == {
         (20, VIN), (23, "B2"), (-1, "olga")}
     # ... and said so where a client that decodes nothing reads it, the event's Message
     assert [e.Message.Text for e in events] == [
-        f"{VIN} B1: tightening OK, tightening id 41",
-        f"{VIN} B2: tightening NOK, tightening id 42", f"{VIN} B2: loosening OK"]
+        f"{VIN} B1: tightening OK (controller id 41)",
+        f"{VIN} B2: tightening NOK (controller id 42)",
+        f"{VIN} B2: loosening OK (controller id {2 ** 32 + 5})",
+        f"{VIN} B3: tightening OK (controller id 44)"]
+    assert events[2].Result.ResultMetaData.ExtendedMetaData is None     # not a UInt32
+    assert [(kv.Key, kv.Value.Value) for kv in events[3].Result.ResultMetaData
+            .ExtendedMetaData] == [("TighteningId", 44)]
     assert {e.Result.ResultMetaData.JoiningTechnology.Text for e in events} == {"Tightening"}
 
 

@@ -93,8 +93,8 @@ RUNDOWNS = [("B2", {"ok": False, "torque_nm": 30.0, "tightening_id": 71}),
 def test_node_opcua_decodes_a_result_event_with_the_client_side_fix(repo):
     events = asyncio.run(node_reads(repo, RUNDOWNS, "--fix"))
     db_id = repo.ledger.db_id()
-    assert [e["message"] for e in events] == [f"{VIN} B2: tightening NOK, tightening id 71",
-                                              f"{VIN} B2: loosening OK, tightening id 72"]
+    assert [e["message"] for e in events] == [f"{VIN} B2: tightening NOK (controller id 71)",
+                                              f"{VIN} B2: loosening OK (controller id 72)"]
     for e, seq, evaluation, assembly, tid in zip(events, (1, 2), (2, 1), (1, 2), (71, 72),
                                                  strict=True):
         assert [(kv["Key"], kv["Value"]) for kv in
