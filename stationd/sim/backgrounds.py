@@ -100,12 +100,12 @@ def _store(path: Path, image: np.ndarray) -> None:
     """``image`` written whole under a name of its own, then renamed: a reader in another
     process sees the complete file or none.  A full disk only costs a later camera its
     render."""
+    part = path.with_name(f"{path.stem}.{os.getpid()}.{threading.get_ident()}.part")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         buf = io.BytesIO()
         np.save(buf, image, allow_pickle=False)
-        part = path.with_name(f"{path.stem}.{os.getpid()}.{threading.get_ident()}.part")
         part.write_bytes(buf.getbuffer())
         os.replace(part, path)
     except OSError:
-        pass
+        part.unlink(missing_ok=True)    # a full disk: no half file left behind

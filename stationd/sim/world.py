@@ -270,7 +270,10 @@ class World:
             if live is not None and live[0] is pose:
                 return src.compose(live[1])
             mp = None if pose is None else self._camera_pose(pair, side, pose)
-            patch = src.patch(mp, self.spec, seed=seed + 1000)
+            # rendered once per pose and camera (then composed): its noise seeded by the
+            # camera, not by the frame that first saw the pose, so the same placement is the
+            # same window in every process (read back from the shared render folder)
+            patch = src.patch(mp, self.spec, seed=src.seed + 1000)
             with self._lock:
                 self._live[key] = (pose, patch)
                 while len(self._live) > LIVE_PATCHES:
