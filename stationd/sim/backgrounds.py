@@ -20,6 +20,7 @@ written anywhere and every camera renders its own, as before.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import os
@@ -108,4 +109,5 @@ def _store(path: Path, image: np.ndarray) -> None:
         part.write_bytes(buf.getbuffer())
         os.replace(part, path)
     except OSError:
-        part.unlink(missing_ok=True)    # a full disk: no half file left behind
+        with contextlib.suppress(OSError):   # a full disk: no half file left behind
+            part.unlink(missing_ok=True)
