@@ -26,7 +26,7 @@ from db.checks import record_check
 from db.curves import link_curves, store_curve
 from db.entered import record_entered
 from db.errors import DataError, DbError, NotFoundError, VehicleClosedError
-from db.kinds import MISSING, OK
+from db.kinds import LOOSENING, MISSING, NOK, OK
 from db.repository import Repository
 from drivers.errors import DeviceError, DriverError
 from drivers.keeper import one_line
@@ -351,7 +351,9 @@ class Records:
         return VehicleLoaded(time.time(), a.vin, model, specs, done, started.rework,
                              skipped={b: Skip(SkipKind.COMMAND, user=user, comment=comment)
                                       for b, (user, comment) in skipped.items()},
-                             noks=noks, held=held, status=status)
+                             noks=noks, held=held, status=status,
+                             loosen_nok=frozenset(b.bolt_id for b in report.bolts
+                                                  if b.status is NOK and b.kind == LOOSENING))
 
     def close_vehicle(self, vin: str) -> VehicleEnded:
         report = self._repo().close_vehicle(vin)

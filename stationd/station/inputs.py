@@ -248,6 +248,9 @@ class VehicleLoaded(Input):
     noks: Mapping[str, int] = field(default_factory=dict)   # NOKs in a row, since a release
     held: Mapping[str, str] = field(default_factory=dict)   # held by an unreadable result
     status: Mapping[str, BoltStatus] = field(default_factory=dict)  # bolt -> ok, nok, ...
+    #: the bolts whose last rundown is a NOK loosening (the report says nok: the joint did
+    #: not come loose, its loosen pset goes again whatever the strategy)
+    loosen_nok: frozenset[str] = frozenset()
 
 @dataclass(frozen=True)
 class ToolOn(Input):

@@ -153,7 +153,12 @@ class LiftRules(FaultRules):
                 self._nok_last.add(k)
                 if rule.count_in_batch:   # the NOK counts in its batch (the policy's choice)
                     self.matcher.counted.add(k)
-            if status == TO_LOOSEN or (status == NOK and rule.strategy == "loosen"):
+            # to be loosened: a loosen command since its last rundown, a NOK under the loosen
+            # strategy, or a loosening that did not come loose under any strategy (a loosen
+            # command's: live, its loosen pset goes again; after a reload its tightening pset
+            # went onto a joint still tight)
+            if status == TO_LOOSEN or (status == NOK and (rule.strategy == "loosen"
+                                                          or k in ev.loosen_nok)):
                 if rule.loosen_pset is None:
                     self.matcher.skipped.setdefault(k, NO_LOOSEN_PSET)
                 else:

@@ -230,6 +230,29 @@ def test_the_loosen_state_comes_back_with_the_vehicle():
     assert "B1" not in plain.matcher.done and "B3" in plain.matcher.skipped
 
 
+def test_a_loosening_that_did_not_come_loose_is_loosened_again_after_a_reload():
+    """A reviewer's case: strategy repeat with a loosen pset for loosen commands; B1 OK, a
+    person's loosen command, the loosening NOK (the joint still tight).  Live, its loosen
+    pset goes again; after a reload its tightening pset went (the report says nok, and only
+    the loosen strategy put a NOK back on the list)."""
+    policy = NokPolicy(NokRule(3, "repeat", 90))
+    live = _driver(policy)
+    _rundown(live, 1, 1, ok=True, rtype=1)
+    assert _command(live, 1, LoosenBolt("VIN1", "B1", "rework"), LOOSENER).answer.accepted
+    sent, _ = _rundown(live, 1, 2, ok=False, rtype=2)
+    assert sent.loosen and "B1" in live.core._loosen          # live: loosen again
+    again = StationCore(PARAMS, leave_frames=2, nok=policy)
+    acts = again.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, noks={"B1": 1},
+                                    status={"B1": NOK}, loosen_nok=frozenset({"B1"})))
+    assert again._loosen == {"B1"}                             # reloaded: the same
+    [opened] = published(acts, VehicleOpened)
+    assert {b.bolt: b.status for b in opened.bolts}["B1"] == TO_LOOSEN
+    # a NOK tightening under repeat stays a tightening after a reload
+    plain = StationCore(PARAMS, leave_frames=2, nok=policy)
+    plain.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, noks={"B1": 1}, status={"B1": NOK}))
+    assert plain._loosen == set()
+
+
 def test_teach_start_of_a_model_no_table_has_is_refused():
     d = _driver()
     d.feed(ModelsKnown(d.t, frozenset({"SIM-1"})))
