@@ -229,6 +229,11 @@ class BoltView:
     order: int | None = None
     batch: str | None = None
     status: BoltStatus = BoltStatus.PENDING   # pending | ok | nok | skipped | loosen | loosened
+    #: its last rundown a NOK, as the vehicle's report counts it ("ending NOK"), whatever it
+    #: is drawn as now (to be loosened first, skipped, locked)
+    last_nok: bool = False
+    #: it has a rundown (the report counts a skipped bolt as skipped only without one)
+    ran: bool = False
 
 
 @dataclass(frozen=True)

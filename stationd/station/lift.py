@@ -124,10 +124,15 @@ class LiftRules(FaultRules):
                 self.matcher.skipped.setdefault(k, NOK_SKIPPED)
         self._loosen_back(ev)
         self.matcher.held = {k: note for k, note in ev.held.items() if k in ev.bolts}
+        # drawn as the station treats it now: skipped (refused as such), to be loosened
+        # first, else its last rundown's status; with what the report counts beside it
+        skipped = self.matcher.skipped
         opened = VehicleOpened(ev.vin, ev.model, tuple(
             BoltView(k, *b.position, pset=b.pset, order=b.order, batch=b.batch,
-                     status=TO_LOOSEN if k in self._loosen else ev.status.get(k)
-                     or (SKIPPED if k in ev.skipped else PENDING))
+                     status=SKIPPED if k in skipped else TO_LOOSEN if k in self._loosen
+                     else ev.status.get(k) or PENDING,
+                     last_nok=ev.status.get(k) == NOK,
+                     ran=ev.status.get(k) not in (None, SKIPPED))
             for k, b in ev.bolts.items()), rework=ev.rework, t=ev.t)
         if self.state is State.WAITING_VEHICLE and self._lift is not None and self._lift.ready:
             self._to(State.TRACKING, StateReason(Because.TRACKING))

@@ -129,6 +129,8 @@ class BoltState:
     #: its last rundown a NOK, as the vehicle's report says it (a release, a skip, a lock do
     #: not change it; the next rundown does, and a person's loosen command)
     ends_nok: bool = False
+    #: it has a rundown: skipped, it is counted by its last rundown, not as skipped
+    ran: bool = False
 
     def to_json(self) -> dict[str, Any]:
         return {"bolt": self.bolt, "x": self.x_mm, "y": self.y_mm, "pset": self.pset,
@@ -229,6 +231,8 @@ class View:
             case ToolDisabled():
                 self._tool_off(e)
             case BoltSkipped():
+                if e.bolt in self.bolts:   # a skip ends a lock or a hold (the core's rule)
+                    self.bolts[e.bolt].locked = self.bolts[e.bolt].held = False
                 self._set(e.bolt, SKIPPED, e.reason)
             case BoltLocked() if e.bolt in self.bolts:
                 self._locked(e)
@@ -322,7 +326,9 @@ class View:
         self.results = []
         self.bolts = {b.bolt: BoltState(b.bolt, b.x_mm, b.y_mm, b.pset, b.order, b.batch,
                                         b.status if b.status in BOLT_LABELS else PENDING,
-                                        loosen=b.status == TO_LOOSEN, ends_nok=b.status == NOK)
+                                        loosen=b.status == TO_LOOSEN,
+                                        ends_nok=b.status == NOK or b.last_nok,
+                                        ran=b.ran or b.status not in (PENDING, SKIPPED, MISSING))
                       for b in e.bolts}
 
     def _close(self, e: VehicleClosed) -> None:
@@ -336,7 +342,7 @@ class View:
             if b.state == Shown.LOCKED:   # its last rundown a NOK: the report's word decides
                 b.state = NOK if b.bolt in nok or b.bolt not in missing else MISSING
                 b.reason = "locked when the vehicle left"
-            elif b.bolt in missing and b.state != "nok":
+            elif b.bolt in missing and b.state not in (NOK, SKIPPED):   # skipped: said so
                 b.state, b.reason = MISSING, "not tightened when the vehicle left"
             elif b.state in LIVE_STATES:
                 b.state, b.reason = PENDING, ""
@@ -412,7 +418,7 @@ class View:
                 b.loosen = b.loosen and not e.ok
                 self._set(e.bolt, OK if e.ok else NOK, "" if e.ok else "NOK: rework")
             b.torque_nm, b.angle_deg = e.torque_nm, e.angle_deg
-            b.ends_nok = not e.ok
+            b.ends_nok, b.ran = not e.ok, True
         if self.selected == e.bolt:
             self.selected, self.selected_loosen = None, None
         self.results.insert(0, {
@@ -445,11 +451,11 @@ class View:
     def counters(self) -> dict[str, int]:
         """The header's counts as the vehicle's report counts its bolts: done (OK), ending
         NOK (the last rundown a NOK, whether the bolt is locked, released or skipped since),
-        skipped (and not ending NOK)."""
+        skipped (without a rundown: one with is counted by its last)."""
         bolts = self.bolts.values()
         return {"total": len(bolts), "done": sum(b.state == OK for b in bolts),
                 "nok": sum(b.ends_nok for b in bolts),
-                "skipped": sum(b.state == SKIPPED and not b.ends_nok for b in bolts)}
+                "skipped": sum(b.state == SKIPPED and not b.ran for b in bolts)}
 
     def locks(self) -> list[str]:
         """Each locked bolt in the operator's words (the screen adds who may release)."""

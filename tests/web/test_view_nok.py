@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 
+from db.kinds import BoltStatus
 from stationd.access import AccessConfig
 from stationd.bus import EventBus
 from stationd.reasons import Reason, Why
@@ -29,6 +30,7 @@ from stationd.web.view import View, fold
 from tests.web.scenario import VIN, opened, result
 
 LOCKED = "B2 locked after 3 NOK in a row: a supervisor releases it"
+TO_LOOSEN_STATUS = BoltStatus.TO_LOOSEN
 
 
 def _loosen(bolt: str = "B2", pset: int = 90) -> BoltToLoosen:
@@ -161,3 +163,33 @@ def test_the_headers_counts_are_the_vehicle_reports_through_release_skip_and_loo
     assert counts == {"total": 4, "done": len([b for b in report.bolts if b.status == "ok"]),
                       "nok": len(report.nok), "skipped": len(report.skipped)}
     assert counts["nok"] == 2 and counts["done"] == 1
+
+
+def test_after_a_reload_and_through_skips_and_a_close_the_counts_stay_the_reports():
+    """A reviewer's cases: a NOK under the loosen strategy reloaded (drawn "loosen first",
+    its last rundown still a NOK: it dropped from the count); a bolt skipped after a loosen
+    command (it has rundowns: the report counts it by its last, not as skipped); a skip ends
+    a lock on the screen too; a vehicle closing keeps its skipped bolts skipped."""
+    from stationd.reasons import Skip, SkipKind
+    from stationd.station.events import BoltSkipped, BoltView, VehicleOpened
+
+    def bolts(**kw: BoltView) -> tuple[BoltView, ...]:
+        plain = {b: BoltView(b, x, 0.0, 0.0, 1) for b, x in (("B1", 0.0), ("B2", 400.0),
+                                                               ("B3", 0.0), ("B4", 400.0))}
+        return tuple({**plain, **kw}.values())
+
+    skip = Skip(SkipKind.COMMAND, user="sam", comment="")
+    v = fold([VehicleOpened(vin=VIN, model="SEDAN", bolts=bolts(
+        B2=BoltView("B2", 400.0, 0.0, 0.0, 1, status=TO_LOOSEN_STATUS, last_nok=True,
+                    ran=True)))])
+    assert v.counters() == {"total": 4, "done": 0, "nok": 1, "skipped": 0}
+    v = fold([*opened(), result("B3", True, 1), _loosen("B3"),
+              BoltToLoosen("B3", Reason(Why.LOOSEN_FIRST, bolt="B3", pset=90), "sam"),
+              BoltSkipped("B3", skip=skip)])
+    assert v.counters()["skipped"] == 0 and v.bolts["B3"].state == "skipped"
+    v = _locked()
+    v.apply(BoltSkipped("B2", skip=skip))
+    assert (v.bolts["B2"].locked, v.bolts["B2"].held, v.locks()) == (False, False, [])
+    v = fold([*opened(), BoltSkipped("B4", skip=skip)])
+    v.apply(VehicleClosed(VIN, ("B1", "B2", "B3", "B4"), ()))
+    assert v.bolts["B4"].state == "skipped" and v.counters()["skipped"] == 1
