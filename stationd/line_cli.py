@@ -335,7 +335,7 @@ def cmd_line_init(args: argparse.Namespace) -> int:
         parsed = parsed.update_query_dict({"connect_timeout": str(CONNECT_TIMEOUT_S)})
     engine = make_engine(parsed.render_as_string(hide_password=False))
     try:
-        change = create_line_schema(engine)
+        change = create_line_schema(engine, comments=True)
         # tables another role made, that this one may not write: not ready for a forwarder
         # of this role (each of its records would wait); said with the grant that fixes it
         with engine.connect() as conn:

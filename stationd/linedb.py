@@ -488,7 +488,7 @@ class SchemaChange:
 NOT_ALLOWED = "42501"
 
 
-def create_line_schema(engine: Engine) -> SchemaChange:
+def create_line_schema(engine: Engine, *, comments: bool = False) -> SchemaChange:
     """The line's tables, indexes and trigger, made where missing (a line database made by an
     earlier version gets the new ones, its typed tables filled from ``line_feed``).  Nothing
     is written where nothing is missing, so a forwarding role without the right to create
@@ -521,7 +521,11 @@ def create_line_schema(engine: Engine) -> SchemaChange:
                         reason)
             change = SchemaChange(typed_refused=reason)
         else:
-            change = replace(change, comments=_comments_updated(conn))
+            # ``comments``: brought up to this version's words, by ``line init`` alone (a
+            # forwarder at every start wrote back over a DBA's own words, and an older
+            # version's station over a newer one's)
+            if comments:
+                change = replace(change, comments=_comments_updated(conn))
         after = set(inspect(conn).get_table_names())
         return replace(change, made=tuple(t.name for t in LINE.sorted_tables
                                           if t.name in after - before))

@@ -68,8 +68,8 @@ def test_line_init_brings_an_earlier_versions_comments_up_to_date(tmp_path, pg_u
                                                                    pg_server, capsys):
     """A line database an earlier version made, with its wrong comments; the stations
     forward as a role granted SELECT and INSERT only: the forwarder leaves the comments (it
-    may not write them) and forwards all the same; the owner's ``line init`` corrects them
-    and says which; a second one changes nothing."""
+    may not write them) and forwards all the same, as does one that owns the tables; the
+    owner's ``line init`` corrects them and says which; a second one changes nothing."""
     assert main(["line", "init", pg_url]) == 0
     _write_old(pg_url)
     db = pg_url.rsplit("/", 1)[1]
@@ -85,6 +85,12 @@ def test_line_init_brings_an_earlier_versions_comments_up_to_date(tmp_path, pg_u
     assert (st["up"], st["backlog"], st["quarantined"]) == (True, 0, 0)
     engine = make_engine(pg_url)
     assert _count(engine, LINE_RUNDOWNS.table) == 3      # typed, by the owner's trigger
+    assert _comments(engine)[("line_rundowns", "result_at")] == OLD["result_at"]
+    # nor does a forwarder that owns the tables: only line init writes them (a forwarder at
+    # every start wrote back over a DBA's words, an older station over a newer one's)
+    owner = _station(tmp_path, "b")
+    _forward(owner, pg_url, "ST-O")
+    owner.close()
     assert _comments(engine)[("line_rundowns", "result_at")] == OLD["result_at"]
     capsys.readouterr()
 
