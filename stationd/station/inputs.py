@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from db.bolts import Parameters
-from db.kinds import BoltStatus
+from db.kinds import BoltStatus, HeldUnder
 from drivers.identity import DeviceIdentity
 from drivers.keeper import FaultKind
 from drivers.wrench.base import TighteningResult, UnreadableResult
@@ -248,6 +248,9 @@ class VehicleLoaded(Input):
     noks: Mapping[str, int] = field(default_factory=dict)   # NOKs in a row, since a release
     held: Mapping[str, str] = field(default_factory=dict)   # held by an unreadable result
     status: Mapping[str, BoltStatus] = field(default_factory=dict)  # bolt -> ok, nok, ...
+    #: held bolt -> what its result came under, as the records tell it (a held bolt without
+    #: one: not known, the core decides as for an enable not found)
+    held_under: Mapping[str, HeldUnder] = field(default_factory=dict)
 
 @dataclass(frozen=True)
 class ToolOn(Input):
