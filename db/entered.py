@@ -9,7 +9,10 @@ record is the audit trail, the rundown the result), and carries its provenance: 
 it (``entered_by``), their comment, and the unreadable result it resolves (or, for a bolt
 held by an OK result without a type outside its torque window, that result's tightening id).
 Where the wrench was and the parameters sent are those of the tool enable the held result
-answered (none stored: zeros and the bolt's current parameter version).
+answered (none stored: zeros and the bolt's current parameter version).  Its ``kind`` is the
+held result's: a loosening where the bolt's loosen pset ran (the station knows which: the
+selection it held the bolt under), so that an OK entered for it is the bolt loosened, to be
+tightened again, in the records, the reports and the line database, never a tightening.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ from sqlalchemy.orm import Session
 from db.engine import writer
 from db.errors import DatabaseError, DataError, NotFoundError
 from db.importer import current_version, parameters_of
-from db.kinds import NOT_TAKEN, TIGHTENING
+from db.kinds import LOOSENING, NOT_TAKEN, RUNDOWN_KINDS, TIGHTENING
 from db.ledger import RUNDOWN, add_command, append
 from db.models import (
     Bolt,
@@ -44,13 +47,18 @@ ENTER_OUTCOME = "enter-outcome"
 
 def record_entered(repo: Repository, *, vin: str, bolt: str, ok: bool, torque_nm: float,
                    angle_deg: float, at: datetime, user: str, source: str,
-                   comment: str) -> int:
+                   comment: str, kind: str = TIGHTENING, pset: int | None = None) -> int:
     """The command and the rundown it enters for ``bolt`` of the open vehicle ``vin``, with
-    their feed entries, committed together; return the rundown's id.  ``DataError`` for a
-    value that is not a finite number, a naive time or a closed vehicle; ``NotFoundError``
-    for an unknown VIN or bolt; ``DatabaseError`` when the database fails."""
+    their feed entries, committed together; return the rundown's id.  ``kind``: the held
+    result's, ``tightening`` or ``loosening``; a loosening is stored as a measured one is,
+    with what was sent: its loosen pset (``pset``, else the enable's), no targets of the
+    station's.  ``DataError`` for a value that is not a finite number, an unknown kind, a
+    naive time or a closed vehicle; ``NotFoundError`` for an unknown VIN or bolt;
+    ``DatabaseError`` when the database fails."""
     if not (math.isfinite(torque_nm) and math.isfinite(angle_deg)):
         raise DataError("torque and angle: finite numbers")
+    if kind not in RUNDOWN_KINDS:
+        raise DataError(f"kind {kind!r}: one of {', '.join(RUNDOWN_KINDS)}")
     if at.tzinfo is None:
         raise DataError("at: a timestamp with a timezone (UTC) is needed")
     try:
@@ -89,17 +97,22 @@ def record_entered(repo: Repository, *, vin: str, bolt: str, ok: bool, torque_nm
             if version is None or version.bolt_id != b.id:
                 version = current_version(b)
             sel = enable.selection if enable is not None else {}
+            # a loosening ran its loosen pset: the controller's program, not the bolt's targets
+            # (the shape the station stores with a measured loosening)
+            sent = _params_json(parameters_of(version)) if kind != LOOSENING else {
+                "pset": pset if pset is not None or enable is None else enable.pset,
+                "torque": None, "angle": None, "loosen": True}
             x, y, z = (float(c) for c in sel.get("point_mm", (0.0, 0.0, 0.0)))
             rec = TighteningRecord(
                 vehicle_id=v.id, bolt_id=b.id, parameters_id=version.id, x_mm=x, y_mm=y,
                 z_mm=z, match_distance_mm=float(sel.get("distance_mm", 0.0)),
                 tilt_deg=float(sel.get("tilt_deg", 0.0)),
-                params_sent=_params_json(parameters_of(version)), acknowledged=True,
+                params_sent=sent, acknowledged=True,
                 status="ok" if ok else "nok", torque_nm=float(torque_nm),
                 angle_deg=float(angle_deg),
                 tightening_id=tightening_id,
                 sent_at=enable.enabled_at if enable is not None else None,
-                result_at=at, recorded_at=utcnow(), images=[], kind=TIGHTENING,
+                result_at=at, recorded_at=utcnow(), images=[], kind=kind,
                 operator=sel.get("operator"), entered_by=user[:64],
                 entered_comment=comment[:500],
                 unreadable_id=held.id if held is not None else None)

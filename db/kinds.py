@@ -10,6 +10,7 @@ never a bolt done: it undoes what a tightening did.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from enum import StrEnum
 
 TIGHTENING, LOOSENING = "tightening", "loosening"
@@ -62,6 +63,36 @@ def not_taken_note(torque_nm: float | None, tightening_id: int | None) -> str:
     return f"{NOT_TAKEN_NOTE}{torque} outside the bolt's torque window{which}"
 
 
+def unreadable_note(tightening_id: int | None, mid: int, revision: int) -> str:
+    """A held bolt's note for a result that could not be read: which result, by its
+    tightening id (the controller's number for every rundown, a loosening's too), else by
+    its MID and revision."""
+    return f"tightening {tightening_id}" if tightening_id is not None \
+        else f"MID {mid:04d} revision {revision}"
+
+
+def loosening_note(note: str, pset: int | None) -> str:
+    """A held bolt's note (``note``: which result) where that result came under the bolt's
+    loosen pset: the person who reads it on the controller and enters its outcome is told it
+    was a loosening (an OK of it is the bolt loosened, never tightened)."""
+    return f"{note}, a loosening" + (f" with loosen pset {pset}" if pset is not None else "")
+
+
+@dataclass(frozen=True)
+class HeldUnder:
+    """What a held bolt's result came under, as the records tell it after a reload or a
+    restart.  ``loosen``: the tool enable it answered was the bolt's loosen pset (the
+    selection stored with the enable says so; None: no enable found for it).  ``pset``: that
+    enable's pset, else the result's own as far as it could be read (None: neither).
+
+    Why: an outcome a person enters for the bolt is that result's, a loosening's where the
+    loosen pset ran: entered as a tightening, an OK would close a bolt that was only
+    loosened."""
+
+    loosen: bool | None = None
+    pset: int | None = None
+
+
 def is_not_taken_note(note: str | None) -> bool:
     """Whether a held bolt's note is such a result's (else: a result not read)."""
     return note is not None and note.startswith(NOT_TAKEN_NOTE)
@@ -69,4 +100,4 @@ def is_not_taken_note(note: str | None) -> bool:
 
 __all__ = ["LOOSENED", "LOOSENING", "MISSING", "NOK", "NOT_TAKEN", "NOT_TAKEN_NOTE", "OK",
            "PENDING", "RUNDOWN_KINDS", "SKIPPED", "TIGHTENING", "TO_LOOSEN", "BoltStatus",
-           "is_not_taken_note", "not_taken_note"]
+           "HeldUnder", "is_not_taken_note", "loosening_note", "not_taken_note", "unreadable_note"]

@@ -26,7 +26,15 @@ from db.bolts import BoltTable, Parameters, dump_bolts
 from db.engine import DEFAULT_URL, make_engine, writer
 from db.errors import DatabaseError, DataError, NotFoundError, VehicleClosedError
 from db.importer import ImportReport, current_version, import_table, parameters_of, read_table
-from db.kinds import LOOSENING, NOT_TAKEN, RUNDOWN_KINDS, TIGHTENING, not_taken_note
+from db.kinds import (
+    LOOSENING,
+    NOT_TAKEN,
+    RUNDOWN_KINDS,
+    TIGHTENING,
+    HeldUnder,
+    not_taken_note,
+    unreadable_note,
+)
 from db.ledger import (
     CONTROLLER_EVENT,
     GAP,
@@ -544,24 +552,37 @@ class Repository:
         torque window (:data:`db.kinds.NOT_TAKEN`: bolt -> its note): one stored for the bolt
         after its last rundown and its last release command (only those since ``since``, the
         vehicle's last opening).  A hold outlives a restart."""
+        return {b: note for b, (note, _) in self.holds(vin, since).items()}
+
+    def holds(self, vin: str, since: datetime | None = None
+              ) -> dict[str, tuple[str, HeldUnder]]:
+        """:meth:`held_bolts`, each with what its result came under (:class:`HeldUnder`): for
+        an unreadable result, the tool enable it answered, the latest of its bolt noted
+        before the result was stored (a held bolt gets no enable until its hold ends; the
+        selection stored with every enable says whether it was the loosen pset); no enable
+        found: the result's own pset as far as read, ``loosen`` None (not known here: the
+        station decides).  An OK result without a type outside the window came under the
+        tightening pset (never taken so under a loosen pset)."""
         with self._session(write=False) as s:
             q = select(UnreadableRecord.bolt, UnreadableRecord.recorded_at,
                        UnreadableRecord.tightening_id, UnreadableRecord.mid,
-                       UnreadableRecord.revision).where(
+                       UnreadableRecord.revision, UnreadableRecord.pset).where(
                 UnreadableRecord.vin == vin, UnreadableRecord.bolt.is_not(None))
             n = select(ControllerEvent.bolt, ControllerEvent.recorded_at,
-                       ControllerEvent.tightening_id, ControllerEvent.torque_nm).where(
+                       ControllerEvent.tightening_id, ControllerEvent.torque_nm,
+                       ControllerEvent.pset).where(
                 ControllerEvent.vin == vin, ControllerEvent.bolt.is_not(None),
                 ControllerEvent.what == NOT_TAKEN)
             if since is not None:
                 q = q.where(UnreadableRecord.recorded_at >= since)
                 n = n.where(ControllerEvent.recorded_at >= since)
-            holds = [(at, str(b), f"tightening {tid}" if tid is not None
-                      else f"MID {mid:04d} revision {rev}")
-                     for b, at, tid, mid, rev in s.execute(q.order_by(UnreadableRecord.id))]
-            holds += [(at, str(b), not_taken_note(torque, tid))
-                      for b, at, tid, torque in s.execute(n.order_by(ControllerEvent.id))]
-            held = {b: (note, at) for at, b, note in sorted(holds, key=lambda h: h[0])}
+            # (at, bolt, note, pset, whether the pset is an enable's to look up)
+            holds = [(at, str(b), unreadable_note(tid, mid, rev), pset, True)
+                     for b, at, tid, mid, rev, pset in s.execute(q.order_by(UnreadableRecord.id))]
+            holds += [(at, str(b), not_taken_note(torque, tid), pset, False)
+                      for b, at, tid, torque, pset in s.execute(n.order_by(ControllerEvent.id))]
+            held = {b: (note, at, pset, unreadable)
+                    for at, b, note, pset, unreadable in sorted(holds, key=lambda h: h[0])}
             if not held:
                 return {}
             v = _vehicle(s, vin)
@@ -575,7 +596,9 @@ class Repository:
                 # a user who may release may skip a held bolt)
                 if c.kind in ENDS_A_HOLD and c.bolt in held and c.at >= held[c.bolt][1]:
                     del held[c.bolt]
-            return {b: note for b, (note, _) in held.items()}
+            return {b: (note, _held_under(s, vin, b, at, pset) if unreadable
+                        else HeldUnder(False, pset))
+                    for b, (note, at, pset, unreadable) in held.items()}
 
     def spc(self, model: str | None = None, since: datetime | None = None,
             last: int = quality.LAST_N) -> dict[str, Any]:
@@ -709,6 +732,21 @@ def _copy_of(model: Any, at: Any, vin: Any, tightening_id: int, torque_nm: float
     return [*_same_values(model, tightening_id, torque_nm, angle_deg),
             or_(at == controller_at, at.is_(None) & within) if controller_at is not None
             else within]
+
+
+def _held_under(s: Session, vin: str, bolt: str, at: datetime, pset: int | None
+                ) -> HeldUnder:
+    """What an unreadable result stored at ``at`` for ``bolt`` of ``vin`` came under: the
+    latest tool enable of that bolt noted before it (its selection says whether it was the
+    loosen pset: stored with every enable since loosen psets exist, so one without the flag
+    was a tightening's); none: ``loosen`` unknown, the result's own ``pset``."""
+    enable = s.scalar(select(ToolEnable).where(
+        ToolEnable.vin == vin, ToolEnable.bolt == bolt, ToolEnable.enabled_at <= at)
+        .order_by(ToolEnable.enabled_at.desc(), ToolEnable.id.desc()).limit(1))
+    if enable is None:
+        return HeldUnder(None, pset)
+    return HeldUnder(bool((enable.selection or {}).get("loosen", False)),
+                     enable.pset if enable.pset is not None else pset)
 
 
 def _settle(s: Session, enable_id: int | None,

@@ -390,10 +390,14 @@ def _ids(n: Notice) -> str:
 
 
 def _entered(n: Notice) -> str:
-    """An outcome entered for a held bolt, and the hold it ends (which result it replaces)."""
+    """An outcome entered for a held bolt, and the hold it ends (which result it replaces);
+    a loosening's says so first (its OK is the bolt loosened, not tightened)."""
     held = ("" if not n.note else f" (the result not taken: {n.note})"
             if is_not_taken_note(n.note) else f" (the result that could not be read: {n.note})")
-    outcome = outcome_words(n.said is Said.ENTERED_OK, n.torque_nm or 0.0, n.angle_deg or 0.0)
+    ok = n.said in (Said.ENTERED_OK, Said.ENTERED_LOOSENING_OK)
+    outcome = outcome_words(ok, n.torque_nm or 0.0, n.angle_deg or 0.0)
+    if n.said in (Said.ENTERED_LOOSENING_OK, Said.ENTERED_LOOSENING_NOK):
+        outcome = "loosening " + outcome
     return f"{n.bolt}: {outcome} entered by {n.user} from the controller's screen{held}"
 
 
@@ -445,6 +449,10 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
     Said.LOCKED: lambda n: _locked(n.bolt, n.count),
     Said.ENTERED_OK: lambda n: f"{_entered(n)}: {n.bolt} done",
     Said.ENTERED_NOK: lambda n: f"{_entered(n)}: a NOK of {n.bolt}, the NOK policy applies",
+    Said.ENTERED_LOOSENING_OK: lambda n: (f"{_entered(n)}: a loosening, not a tightening: "
+                                          f"{n.bolt} not done"),
+    Said.ENTERED_LOOSENING_NOK: lambda n: (f"{_entered(n)}: a loosening NOK of {n.bolt}, the "
+                                           "NOK policy applies"),
     Said.REWORK_REOPENED: lambda n: (f"VIN {n.vin} already closed: reopened as a rework (its "
                                      "records kept)"),
     Said.LATE_ACK: lambda n: _late_ack(n.bolt),
@@ -468,7 +476,9 @@ def notice_words(notice: Notice) -> str:
 
 
 def _unreadable(r: StateReason) -> str:
-    return f"bolt {r.bolt}: its result could not be read"
+    """A result not read; a loosening's says so (the outcome to enter is a loosening's)."""
+    whose = "loosening's " if r.loosen else ""
+    return f"bolt {r.bolt}: its {whose}result could not be read"
 
 
 def _not_taken(r: StateReason) -> str:
@@ -575,8 +585,9 @@ def command_words(answer: Answer) -> str:
     what = KIND[type(cmd)]
     if isinstance(cmd, SkipBolt | ReleaseBolt | LoosenBolt):
         what += f" {cmd.bolt} of {cmd.vin}"
-    elif isinstance(cmd, EnterOutcome):
-        what += f" {cmd.bolt} of {cmd.vin}: {outcome_words(cmd.ok, cmd.torque_nm, cmd.angle_deg)}"
+    elif isinstance(cmd, EnterOutcome):   # a held loosening's outcome: said to be one
+        what += f" {cmd.bolt} of {cmd.vin}: " + ("loosening " if cmd.loosening else "") \
+            + outcome_words(cmd.ok, cmd.torque_nm, cmd.angle_deg)
     elif isinstance(cmd, ReopenVehicle):
         what += f" {cmd.vin}"
     elif isinstance(cmd, TeachStart):

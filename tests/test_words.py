@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import pytest
 
-from db.kinds import not_taken_note
+from db.kinds import loosening_note, not_taken_note
 from drivers.wrench.base import ResultType
 from stationd.reasons import (
     CoreFault,
@@ -127,6 +127,17 @@ WORDS = [
      "B1: NOK 12.0 Nm, 4.5 deg entered by sam from the controller's screen (the result not "
      "taken: an OK result without a result type, 0.0 Nm outside the bolt's torque window "
      "(tightening 7)): a NOK of B1, the NOK policy applies"),
+    # a held loosening's outcome: said to be a loosening, never the bolt done
+    (Notice(Said.ENTERED_LOOSENING_OK, bolt="B1", torque_nm=8.0, angle_deg=400.0, user="sam",
+            note=loosening_note("tightening 7", 90), pset=90),
+     "B1: loosening OK 8.0 Nm, 400.0 deg entered by sam from the controller's screen (the "
+     "result that could not be read: tightening 7, a loosening with loosen pset 90): a "
+     "loosening, not a tightening: B1 not done"),
+    (Notice(Said.ENTERED_LOOSENING_NOK, bolt="B1", torque_nm=60.0, angle_deg=2.0, user="sam",
+            note=loosening_note("tightening 7", 90), pset=90),
+     "B1: loosening NOK 60.0 Nm, 2.0 deg entered by sam from the controller's screen (the "
+     "result that could not be read: tightening 7, a loosening with loosen pset 90): a "
+     "loosening NOK of B1, the NOK policy applies"),
     (Notice(Said.REWORK_REOPENED, vin="VIN1"),
      "VIN VIN1 already closed: reopened as a rework (its records kept)"),
     (Notice(Said.LATE_ACK, bolt="B1"), "late acknowledgement for B1 ignored"),
@@ -150,7 +161,7 @@ def test_a_notice_s_level_is_its_kind_s() -> None:
     assert warnings == {
         Said.PAIR_DISTRUSTED, Said.IDS_AGAIN, Said.UNATTRIBUTED, Said.UNKNOWN_TYPE, Said.GAP,
         Said.UNREADABLE, Said.HELD, Said.NOT_TAKEN, Said.LOOSEN_PSET_TIGHTENED,
-        Said.LOOSENING_NOK, Said.LOCKED, Said.ENTERED_NOK}
+        Said.LOOSENING_NOK, Said.LOCKED, Said.ENTERED_NOK, Said.ENTERED_LOOSENING_NOK}
     # a controller event is a warning only while a bolt is still open
     assert Notice(Said.CONTROLLER_EVENT, bolt="B1").level == "warning"
 
@@ -204,6 +215,11 @@ STATE_WORDS = [
     (StateReason(Because.UNREADABLE, bolt="B11"), "bolt B11: its result could not be read"),
     (StateReason(Because.UNREADABLE_HELD, bolt="B11"),
      "bolt B11: its result could not be read; held for a supervisor"),
+    # under its loosen pset: the outcome to enter is a loosening's
+    (StateReason(Because.UNREADABLE, bolt="B11", loosen=True),
+     "bolt B11: its loosening's result could not be read"),
+    (StateReason(Because.UNREADABLE_HELD, bolt="B11", loosen=True),
+     "bolt B11: its loosening's result could not be read; held for a supervisor"),
     (StateReason(Because.NOT_TAKEN, bolt="B11"),
      "bolt B11: an OK result without a result type outside its torque window"),
     (StateReason(Because.NOT_TAKEN_HELD, bolt="B11"),

@@ -26,7 +26,7 @@ from db.checks import record_check
 from db.curves import link_curves, store_curve
 from db.entered import record_entered
 from db.errors import DataError, DbError, NotFoundError, VehicleClosedError
-from db.kinds import LOOSENING, MISSING, NOK, OK
+from db.kinds import LOOSENING, MISSING, NOK, OK, TIGHTENING
 from db.repository import Repository
 from drivers.errors import DeviceError, DriverError
 from drivers.keeper import one_line
@@ -336,7 +336,7 @@ class Records:
         since = started.reopened_at or started.started_at
         skipped = repo.ledger.skipped(a.vin, since)
         noks = repo.nok_streaks(a.vin, since)
-        held = repo.held_bolts(a.vin, since)
+        holds = repo.holds(a.vin, since)   # each with what its result came under
         # the report's "missing" is "no rundown yet": on an open vehicle the bolt is to do
         status = {b.bolt_id: b.status for b in report.bolts if b.status != MISSING}
         done = frozenset(k for k, s in status.items() if s is OK)
@@ -351,7 +351,9 @@ class Records:
         return VehicleLoaded(time.time(), a.vin, model, specs, done, started.rework,
                              skipped={b: Skip(SkipKind.COMMAND, user=user, comment=comment)
                                       for b, (user, comment) in skipped.items()},
-                             noks=noks, held=held, status=status,
+                             noks=noks, held={b: note for b, (note, _) in holds.items()},
+                             status=status,
+                             held_under={b: under for b, (_, under) in holds.items()},
                              loosen_nok=frozenset(b.bolt_id for b in report.bolts
                                                   if b.status is NOK and b.kind == LOOSENING))
 
@@ -381,9 +383,12 @@ class Records:
                 repo.reopen_vehicle(cmd.vin, at=at, user=who.user, source=who.source,
                                     comment=cmd.comment)
             elif isinstance(cmd, EnterOutcome):   # the command and its rundown, together
+                # of the kind the core decided: a held loosening's outcome is a loosening
                 record_entered(repo, vin=cmd.vin, bolt=cmd.bolt, ok=cmd.ok,
                                torque_nm=cmd.torque_nm, angle_deg=cmd.angle_deg, at=at,
-                               user=who.user, source=who.source, comment=cmd.comment)
+                               user=who.user, source=who.source, comment=cmd.comment,
+                               kind=LOOSENING if cmd.loosening else TIGHTENING,
+                               pset=cmd.loosen_pset)
             else:
                 repo.ledger.record_command(at=at, user=who.user, source=who.source,
                                            kind=KIND[type(cmd)], vin=vin,

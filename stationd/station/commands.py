@@ -75,7 +75,11 @@ class EnterOutcome:
     ``torque_nm`` and ``angle_deg``.  Recorded as a rundown of its own provenance (entered by
     the user, not measured by the station); OK closes the bolt, NOK counts as a NOK result
     under the NOK policy.  Needs the release right: it is the other way to end a hold;
-    ``comment`` says what was checked."""
+    ``comment`` says what was checked.  ``loosening`` and ``loosen_pset``: filled in by the
+    core when it accepts the command, where the held result came under the bolt's loosen
+    pset (that pset, where known): the outcome is then a loosening's, recorded as one (an OK
+    loosens the bolt, its tightening pset goes next; a NOK counts as a loosening NOK), never
+    a tightening's."""
 
     vin: str
     bolt: str
@@ -83,6 +87,8 @@ class EnterOutcome:
     torque_nm: float
     angle_deg: float
     comment: str = ""
+    loosening: bool = False
+    loosen_pset: int | None = None
 
 
 @dataclass(frozen=True)

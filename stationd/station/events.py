@@ -550,6 +550,9 @@ class Said(enum.Enum):
     LOCKED = "locked"                    # too many NOKs in a row (bolt, count)
     ENTERED_OK = "entered ok"            # an outcome entered for a held bolt (bolt,
     ENTERED_NOK = "entered nok"          # torque_nm, angle_deg, user; note: the hold's)
+    ENTERED_LOOSENING_OK = "entered loosening ok"    # the same for a held loosening (its
+    ENTERED_LOOSENING_NOK = "entered loosening nok"  # result came under the loosen pset,
+    #                                                  pset): never the bolt done
     # the vehicle and the tool
     REWORK_REOPENED = "rework reopened"  # a closed VIN reopened as a rework (vin)
     LATE_ACK = "late ack"                # an acknowledgement after the selection (bolt)
@@ -559,7 +562,7 @@ class Said(enum.Enum):
 _WARNINGS = frozenset({
     Said.PAIR_DISTRUSTED, Said.IDS_AGAIN, Said.UNATTRIBUTED, Said.UNKNOWN_TYPE, Said.GAP,
     Said.UNREADABLE, Said.HELD, Said.NOT_TAKEN, Said.LOOSEN_PSET_TIGHTENED,
-    Said.LOOSENING_NOK, Said.LOCKED, Said.ENTERED_NOK})
+    Said.LOOSENING_NOK, Said.LOCKED, Said.ENTERED_NOK, Said.ENTERED_LOOSENING_NOK})
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from db.bolts import Parameters
-from db.kinds import BoltStatus
+from db.kinds import BoltStatus, HeldUnder
 from drivers.identity import DeviceIdentity
 from drivers.keeper import FaultKind
 from drivers.wrench.base import TighteningResult, UnreadableResult
@@ -251,6 +251,9 @@ class VehicleLoaded(Input):
     #: the bolts whose last rundown is a NOK loosening (the report says nok: the joint did
     #: not come loose, its loosen pset goes again whatever the strategy)
     loosen_nok: frozenset[str] = frozenset()
+    #: held bolt -> what its result came under, as the records tell it (a held bolt without
+    #: one: not known, the core decides as for an enable not found)
+    held_under: Mapping[str, HeldUnder] = field(default_factory=dict)
 
 @dataclass(frozen=True)
 class ToolOn(Input):

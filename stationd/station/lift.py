@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from db.kinds import NOK, PENDING, SKIPPED, TO_LOOSEN
+from db.kinds import NOK, PENDING, SKIPPED, TO_LOOSEN, HeldUnder, loosening_note
 from drivers.keeper import FaultKind
 from stationd.reasons import CoreFault, CoreFaultKind, FaultWhy
 from stationd.station.actions import Action, CloseVehicle, LoadVehicle, Publish, SendVin
@@ -123,7 +123,7 @@ class LiftRules(FaultRules):
             elif rule.strategy == "skip":
                 self.matcher.skipped.setdefault(k, NOK_SKIPPED)
         self._loosen_back(ev)
-        self.matcher.held = {k: note for k, note in ev.held.items() if k in ev.bolts}
+        self._holds_back(ev)
         # drawn as the station treats it now: skipped (refused as such), to be loosened
         # first, else its last rundown's status; with what the report counts beside it
         skipped = self.matcher.skipped
@@ -142,6 +142,24 @@ class LiftRules(FaultRules):
         waiting += [Publish(BoltLocked(k, 0, held=note, t=ev.t))
                     for k, note in self.matcher.held.items()]
         return [Publish(opened), *waiting, *self._check_on_arrival(ev.t, ev.vin)]
+
+    def _holds_back(self, ev: VehicleLoaded) -> None:
+        """The holds come back with the vehicle, each a loosening's where its result came
+        under the bolt's loosen pset (:func:`held_a_loosening`): its note says so, and an
+        outcome entered for it is a loosening's.  After :meth:`_loosen_back`."""
+        assert self.matcher is not None  # noqa: S101 - loaded just now
+        self._held_loosening = {}
+        self.matcher.held = {}
+        for k, note in ev.held.items():
+            if k not in ev.bolts:
+                continue
+            under, pset = ev.held_under.get(k, HeldUnder()), ev.bolts[k].pset
+            if held_a_loosening(under, pset, k in self._loosen):
+                sent = under.pset if under.pset is not None \
+                    else self.nok.rule(k, pset).loosen_pset
+                self._held_loosening[k] = sent
+                note = loosening_note(note, sent)
+            self.matcher.held[k] = note
 
     def _loosen_back(self, ev: VehicleLoaded) -> None:
         """The loosen strategy's state comes back with the vehicle: a bolt whose last rundown
@@ -199,3 +217,20 @@ class LiftRules(FaultRules):
             return []
         self._vin_pending = True
         return [SendVin(self.vin)]
+
+
+def held_a_loosening(under: HeldUnder, pset: int | None, to_loosen: bool) -> bool:
+    """Whether a hold read back from the records (a reload, a restart) is a loosening's: its
+    result came under the bolt's loosen pset.  The records tell it where they have the tool
+    enable it answered (``under.loosen``).  Where they cannot (no enable found): a pset it
+    came under that is not the bolt's tightening pset ``pset`` cannot have tightened it, and
+    is taken for a loosening (in doubt a loosening: its entered OK only sends the bolt to its
+    tightening pset again, where a tightening's would close a bolt perhaps only loosened);
+    with no pset known, the pset the station would send the bolt now decides, as it decided
+    the selection then (``to_loosen``: its loosen pset first, the NOK policy's state read
+    back from the same records)."""
+    if under.loosen is not None:
+        return under.loosen
+    if under.pset is not None and pset is not None:
+        return under.pset != pset
+    return to_loosen

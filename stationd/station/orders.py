@@ -52,6 +52,11 @@ class OrderRules(FaultRules):
             return [Reply(Answer(ev.request, ev.command, ev.issuer, why))]
         if isinstance(ev.command, SignOut):   # its record names who is signed out
             ev = replace(ev, command=replace(ev.command, user=self.operator))
+        if isinstance(ev.command, EnterOutcome):   # its record is the held result's kind
+            b = ev.command.bolt
+            ev = replace(ev, command=replace(
+                ev.command, loosening=b in self._held_loosening,
+                loosen_pset=self._held_loosening.get(b)))
         self._commands[ev.request] = ev
         return [RecordCommand(ev.request, ev.command, ev.issuer, ev.t)]
 
@@ -151,7 +156,7 @@ class OrderRules(FaultRules):
             acts += self._skip(ev.t, cmd, c.issuer)
         elif isinstance(cmd, ReleaseBolt):
             held = self.matcher is not None and self.vin == cmd.vin \
-                and self.matcher.held.pop(cmd.bolt, None) is not None
+                and self._unhold(cmd.bolt) is not None
             if held:
                 acts.append(Publish(BoltReleased(cmd.bolt, c.issuer.user, t=ev.t)))
             if self.matcher is not None and self.vin == cmd.vin \
@@ -180,7 +185,7 @@ class OrderRules(FaultRules):
         self.matcher.skipped[cmd.bolt] = why
         # a lock or a hold ends with the skip (a user with the release right gave it)
         self.matcher.locked.pop(cmd.bolt, None)
-        self.matcher.held.pop(cmd.bolt, None)
+        self._unhold(cmd.bolt)
         self._noks.pop(cmd.bolt, None)
         acts: list[Action] = [Publish(BoltSkipped(cmd.bolt, skip=why, t=t))]
         if self.bolt == cmd.bolt:

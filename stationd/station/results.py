@@ -11,6 +11,7 @@ from db.kinds import (
     NOT_TAKEN,
     TIGHTENING,
     not_taken_note,
+    unreadable_note,
 )
 from drivers.wrench.base import (
     ResultKind,
@@ -236,7 +237,7 @@ class ResultRules(OrderRules):
                 del m.skipped[a.bolt]
         return self._hold(ev.t, a.bolt, f"tightening {int(r.tightening_id)} was "
                           f"{stored[1]}'s" + (f" of {stored[0]}" if stored[0] != a.vin else "")
-                          + f" (sent again), not a result of {a.bolt}")
+                          + f" (sent again), not a result of {a.bolt}", under=a.selection)
 
     def _on_results_missed(self, ev: ResultsMissed) -> list[Action]:
         return [StoreGap(ev.first, ev.last, self.vin, ev.reason),
@@ -265,8 +266,11 @@ class ResultRules(OrderRules):
             self._recorded[u.tightening_id] = u.raw
         bolt = en.bolt if en is not None and en.vin else None
         acts: list[Action] = []
+        # the selection it came under: its loosen pset's result is a loosening's
+        loosen = en is not None and en.loosen
         if bolt is not None and self.tool_on:
-            acts += self._tool_off(ev.t, StateReason(Because.UNREADABLE, bolt=bolt))
+            acts += self._tool_off(ev.t, StateReason(Because.UNREADABLE, bolt=bolt,
+                                                     loosen=loosen))
         acts.append(StoreUnreadable(u, en.vin if en is not None and bolt else self.vin, bolt,
                                     en if bolt else None))
         acts.append(Publish(ResultUnreadable(u.error, u.revision, u.tightening_id, bolt,
@@ -277,12 +281,11 @@ class ResultRules(OrderRules):
         if self._cut is not None and self._cut.selection is en:
             self._cut = None
         if self.matcher is not None and self.vin == en.vin and bolt in self.matcher.bolts:
-            acts += self._hold(ev.t, bolt, f"tightening {u.tightening_id}"
-                               if u.tightening_id is not None
-                               else f"MID {u.mid:04d} revision {u.revision}")
+            acts += self._hold(ev.t, bolt, unreadable_note(u.tightening_id, u.mid, u.revision),
+                               under=en)
         if self.bolt == bolt:
             acts += self._drop(ev.t, State.TRACKING,
-                               StateReason(Because.UNREADABLE_HELD, bolt=bolt))
+                               StateReason(Because.UNREADABLE_HELD, bolt=bolt, loosen=loosen))
         return acts
 
     def _outside_window(self, r: TighteningResult, en: Selection
@@ -370,7 +373,7 @@ class ResultRules(OrderRules):
             self._operator_seen = max(self._operator_seen, ev.t)
         if self.matcher is not None and self.vin == en.vin:
             if kind == LOOSENING:
-                acts += self._after_loosening(ev.t, en, bool(r.ok))
+                acts += self._after_loosening(ev.t, en.bolt, bool(r.ok))
             elif bool(r.ok):
                 if en.loosen:
                     acts.append(Publish(Notice(Said.LOOSEN_PSET_TIGHTENED, bolt=en.bolt,
@@ -392,22 +395,23 @@ class ResultRules(OrderRules):
                                                      ok=bool(r.ok), loosen=kind == LOOSENING))
         return acts
 
-    def _after_loosening(self, t: float, en: Selection, ok: bool) -> list[Action]:
-        """A loosening is never the bolt done (it undoes a tightening).  OK: the bolt's
-        tightening pset goes next; NOK: it counts as a NOK of the bolt (the joint did not come
-        loose: ``max_nok`` of them lock it) and a bolt to loosen stays so."""
+    def _after_loosening(self, t: float, bolt: str, ok: bool) -> list[Action]:
+        """A loosening (measured, or its outcome entered by a person) is never the bolt done
+        (it undoes a tightening).  OK: the bolt's tightening pset goes next; NOK: it counts as
+        a NOK of the bolt (the joint did not come loose: ``max_nok`` of them lock it) and a
+        bolt to loosen stays so."""
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
-        self.matcher.done.discard(en.bolt)
-        self._nok_last.discard(en.bolt)
-        self.matcher.counted.discard(en.bolt)   # undone: no longer counts in its batch
+        self.matcher.done.discard(bolt)
+        self._nok_last.discard(bolt)
+        self.matcher.counted.discard(bolt)   # undone: no longer counts in its batch
         if ok:
-            self._loosen.discard(en.bolt)
-            return [Publish(Notice(Said.LOOSENED, bolt=en.bolt, t=t))]
-        n = self._noks[en.bolt] = self._noks.get(en.bolt, 0) + 1
-        rule = self.nok.rule(en.bolt, self._specs[en.bolt].pset)
+            self._loosen.discard(bolt)
+            return [Publish(Notice(Said.LOOSENED, bolt=bolt, t=t))]
+        n = self._noks[bolt] = self._noks.get(bolt, 0) + 1
+        rule = self.nok.rule(bolt, self._specs[bolt].pset)
         if n >= rule.max_nok:
-            return self._lock(t, en.bolt, n)
-        return [Publish(Notice(Said.LOOSENING_NOK, bolt=en.bolt, count=n, t=t))]
+            return self._lock(t, bolt, n)
+        return [Publish(Notice(Said.LOOSENING_NOK, bolt=bolt, count=n, t=t))]
 
     def _after_nok(self, t: float, bolt: str, pset: int | None) -> list[Action]:
         """The NOK policy: the bolt locks after ``max_nok`` in a row; with ``loosen`` it gets
@@ -445,27 +449,32 @@ class ResultRules(OrderRules):
 
     def _outcome_entered(self, t: float, cmd: EnterOutcome, who: Issuer) -> list[Action]:
         """The outcome a person read on the controller's screen, now on disk as a rundown
-        entered by them: the hold ends; OK closes the bolt as a measured OK does; NOK is a
-        NOK result under the NOK policy (counted in the row, locked at ``max_nok``, to be
-        loosened, skipped, or open again)."""
+        entered by them: the hold ends.  Of a tightening: OK closes the bolt as a measured
+        OK does; NOK is a NOK result under the NOK policy (counted in the row, locked at
+        ``max_nok``, to be loosened, skipped, or open again).  Of a loosening (the hold's
+        result came under the bolt's loosen pset, ``cmd.loosening``): as a measured
+        loosening, never the bolt done: OK, its tightening pset goes next; NOK counts."""
         m = self.matcher
         if m is None or self.vin != cmd.vin or cmd.bolt not in m.bolts:
             return []   # the vehicle left while the command was being recorded
         b, spec = cmd.bolt, self._specs.get(cmd.bolt)
-        held = m.held.pop(b, None)
-        p = spec.parameters if spec is not None else None
+        held = self._unhold(b)
+        p = spec.parameters if spec is not None and not cmd.loosening else None
         acts: list[Action] = [Publish(ResultRecorded(
             cmd.vin, b, cmd.ok, float(cmd.torque_nm), float(cmd.angle_deg), 0,
-            spec.pset if spec is not None else None,
+            cmd.loosen_pset if cmd.loosening else spec.pset if spec is not None else None,
             p.torque.min if p is not None else None, p.torque.max if p is not None else None,
             p.angle.min if p is not None and p.angle is not None else None,
             p.angle.max if p is not None and p.angle is not None else None,
-            kind=TIGHTENING, entered_by=who.user, t=t))]
-        said = Notice(Said.ENTERED_OK if cmd.ok else Said.ENTERED_NOK, bolt=b,
-                      torque_nm=float(cmd.torque_nm), angle_deg=float(cmd.angle_deg),
-                      user=who.user, note=held or None, t=t)
-        acts.append(Publish(said))
-        if cmd.ok:
+            kind=LOOSENING if cmd.loosening else TIGHTENING, entered_by=who.user, t=t))]
+        said = (Said.ENTERED_LOOSENING_OK if cmd.ok else Said.ENTERED_LOOSENING_NOK) \
+            if cmd.loosening else Said.ENTERED_OK if cmd.ok else Said.ENTERED_NOK
+        acts.append(Publish(Notice(said, bolt=b, torque_nm=float(cmd.torque_nm),
+                                   angle_deg=float(cmd.angle_deg), user=who.user,
+                                   note=held or None, pset=cmd.loosen_pset, t=t)))
+        if cmd.loosening:
+            acts += self._after_loosening(t, b, cmd.ok)
+        elif cmd.ok:
             m.mark_done(b)
             self._noks.pop(b, None)
             self._loosen.discard(b)

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 
 from db.bolts import Window
+from db.kinds import loosening_note
 from drivers.identity import DeviceIdentity
 from stationd.reasons import FaultWhy, Reason, Skip, SkipKind, Why
 from stationd.station.actions import Action, DisableTool, Owed, Publish, Selection
@@ -202,6 +203,9 @@ class CoreState:
     # those whose last rundown is a NOK tightening (a loosen command may undo them)
     _loosen: set[str] = field(default_factory=set, repr=False)
     _nok_last: set[str] = field(default_factory=set, repr=False)
+    # held bolts whose result came under their loosen pset -> that pset (None: not known):
+    # an outcome entered for one is a loosening's, never a tightening's
+    _held_loosening: dict[str, int | None] = field(default_factory=dict, repr=False)
     #: the calibration check's state (None: no reference markers configured, every pair
     #: trusted as before): :mod:`stationd.station.trust`
     trust: PairTrust | None = None
@@ -255,15 +259,29 @@ class CoreState:
         return self.tool_on or (self._off_at is not None
                                 and t - self._off_at < self.late_result_s)
 
-    def _hold(self, t: float, bolt: str, note: str,
-              said: Notice | None = None) -> list[Action]:
+    def _hold(self, t: float, bolt: str, note: str, said: Notice | None = None,
+              under: Selection | None = None) -> list[Action]:
         """``bolt`` is refused until a supervisor releases it: its result is not known
-        (``said``: the notice, where it is not a result that could not be read)."""
+        (``said``: the notice, where it is not a result that could not be read).  ``under``:
+        the selection the result came under; where it was the bolt's loosen pset, the hold
+        is a loosening's (its note says so, and an outcome entered for it is one)."""
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
+        if under is not None and under.loosen:
+            self._held_loosening[bolt] = under.pset
+            note = loosening_note(note, under.pset)
+        else:
+            self._held_loosening.pop(bolt, None)
         self.matcher.held[bolt] = note
         self.matcher.reset()
         return [Publish(BoltLocked(bolt, 0, held=note, t=t)),
                 Publish(said or Notice(Said.HELD, bolt=bolt, note=note, t=t))]
+
+    def _unhold(self, bolt: str) -> str | None:
+        """``bolt``'s hold ends (released, skipped, its outcome entered): its note, None
+        where it was not held."""
+        assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
+        self._held_loosening.pop(bolt, None)
+        return self.matcher.held.pop(bolt, None)
 
     def _lock(self, t: float, bolt: str, n: int) -> list[Action]:
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded

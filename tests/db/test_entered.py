@@ -14,8 +14,17 @@ import pytest
 
 from db.entered import record_entered
 from db.errors import DataError
-from db.kinds import NOT_TAKEN, is_not_taken_note, not_taken_note
+from db.kinds import (
+    LOOSENED,
+    LOOSENING,
+    NOT_TAKEN,
+    TIGHTENING,
+    HeldUnder,
+    is_not_taken_note,
+    not_taken_note,
+)
 from db.ledger import COMMAND, RUNDOWN
+from db.repository import Repository
 from stationd.web.results import Results, rundowns_csv
 from tests.db.conftest import record
 from tests.db.test_controller_records import _unreadable
@@ -142,3 +151,104 @@ def test_an_untyped_ok_outside_the_window_holds_its_bolt_over_a_restart_until_re
                                  bolt="B1", controller_vin=None, tightening_id=33, pset=1,
                                  ok=True, torque_nm=0.0, angle_deg=0.0, result_at=None)
     assert repo.held_bolts("VIN1") == {}
+
+
+# -- an outcome entered for a held loosening: a loosening in the records --------------------------
+LOOSEN_SEL = {"point_mm": [1.0, 2.0, 3.0], "tilt_deg": 2.5, "distance_mm": 0.7,
+              "exposure_t": 1.0, "decided_t": 1.1, "loosen": True, "operator": "olga"}
+
+
+def _held_loosening(repo: Repository, tid: int = 2) -> int | None:
+    """B1 NOK, then its loosen pset 90 enabled and that result unreadable (as the station
+    notes and stores them): the unreadable record's id."""
+    record(repo, "VIN1", "B1", ok=False, tightening_id=tid - 1)
+    version = repo.bolts_for_model("SEDAN")[0].parameters_id
+    repo.note_enable("VIN1", "B1", 90, version, LOOSEN_SEL, datetime.now(UTC))
+    return repo.record_unreadable(
+        mid=61, revision=7, raw=f"unreadable loosening {tid}", error="parameter 01 missing",
+        vin="VIN1", bolt="B1", controller_vin=None, tightening_id=tid, pset=90,
+        result_at=None)
+
+
+def test_an_ok_entered_for_a_held_loosening_is_stored_and_reported_as_a_loosening(
+        sedan, tmp_path, capsys):
+    """The reviewer's case in the records: the held loosening's OK, entered, is a loosening
+    OK (the bolt loosened, to be tightened again) in the report, the export, the feed the
+    line database takes and ``db report``; never an OK tightening."""
+    from stationd import cli
+
+    repo = sedan
+    uid = _held_loosening(repo)
+    # what a restart reads: held, under the loosen pset (the enable it answered)
+    assert repo.holds("VIN1") == {"B1": ("tightening 2", HeldUnder(True, 90))}
+    _enter(repo, torque_nm=8.0, angle_deg=400.0, kind=LOOSENING, pset=90)
+    assert repo.held_bolts("VIN1") == {}
+    [b1] = [b for b in repo.vehicle_report("VIN1").bolts if b.bolt_id == "B1"]
+    assert (b1.status, b1.kind, b1.attempts) == (LOOSENED, LOOSENING, 2)
+    assert "B1" not in repo.vehicle_report("VIN1").ok and "B1" in repo.vehicle_report(
+        "VIN1").loosen
+    # an OK loosening neither counts nor ends the NOK row (as a measured one)
+    assert repo.nok_streaks("VIN1") == {"B1": 1}
+    run = repo.ledger.since(0)[-1]["record"]            # what the line database gets
+    assert (run["rundown"], run["status"], run["entered_by"], run["unreadable_id"]) == (
+        LOOSENING, "ok", "sam", uid)
+    assert run["params_sent"] == {"pset": 90, "torque": None, "angle": None, "loosen": True}
+    assert (run["parameters"]["pset"], run["parameters"]["torque"]) == (90, None)
+    [last] = [r for r in Results(repo).rundowns("VIN1") if r["bolt"] == "B1"][-1:]
+    assert (last["rundown"], last["pset"], last["entered_by"]) == (LOOSENING, 90, "sam")
+    capsys.readouterr()
+    code = cli.main(["db", "report", "VIN1", "--db", f"sqlite:///{tmp_path / 'station.db'}"])
+    out = capsys.readouterr().out
+    assert code == 1                                  # not complete: B1 only loosened
+    [line] = [ln for ln in out.splitlines() if ln.strip().startswith("B1 ")]
+    assert "LOOSENED" in line and "entered by sam" in line
+    assert "2. loosening OK pset 90, 8.0 Nm, 400.0 deg" in out
+
+
+def test_a_nok_entered_for_a_held_loosening_is_a_loosening_nok_counted_in_the_row(sedan):
+    repo = sedan
+    _held_loosening(repo)
+    _enter(repo, ok=False, torque_nm=60.0, angle_deg=2.0, kind=LOOSENING, pset=90)
+    [b1] = [b for b in repo.vehicle_report("VIN1").bolts if b.bolt_id == "B1"]
+    assert (b1.status, b1.kind) == ("nok", LOOSENING)
+    assert repo.nok_streaks("VIN1") == {"B1": 2}
+    assert repo.ledger.since(0)[-1]["record"]["rundown"] == LOOSENING
+
+
+def test_a_held_tightening_is_entered_as_one_and_a_kind_must_be_a_rundown_s(sedan):
+    repo = sedan
+    _unreadable(repo, 12, "B1")
+    with pytest.raises(DataError, match="kind"):
+        _enter(repo, kind="rundown")
+    assert repo.held_bolts("VIN1") == {"B1": "tightening 12"}   # nothing written
+    _enter(repo)
+    run = repo.ledger.since(0)[-1]["record"]
+    assert run["rundown"] == TIGHTENING and run["params_sent"]["pset"] == 1
+
+
+def test_what_a_held_result_came_under_is_read_from_the_enable_it_answered(sedan):
+    """A restart rebuilds each hold with what its result came under: the latest enable of
+    its bolt before it (the selection's loosen flag, its pset); none found: the result's own
+    pset and ``loosen`` not known (the station decides); an untyped OK outside the window:
+    a tightening's."""
+    repo = sedan
+    version = repo.bolts_for_model("SEDAN")[1].parameters_id
+    # B2: no enable at all; its unreadable result's own pset as far as read
+    repo.record_unreadable(mid=61, revision=7, raw="no enable", error="x", vin="VIN1",
+                           bolt="B2", controller_vin=None, tightening_id=None, pset=77,
+                           result_at=None)
+    # B3: a loosening enabled first, then a tightening: the latest before the result decides
+    sel = {**LOOSEN_SEL}
+    repo.note_enable("VIN1", "B3", 90, None, sel, datetime.now(UTC) - timedelta(seconds=5))
+    repo.note_enable("VIN1", "B3", 21, None, {**sel, "loosen": False},
+                     datetime.now(UTC) - timedelta(seconds=1))
+    repo.record_unreadable(mid=61, revision=7, raw="b3", error="x", vin="VIN1", bolt="B3",
+                           controller_vin=None, tightening_id=40, pset=None, result_at=None)
+    # B1: an enable from before loosen psets existed (no flag): a tightening's
+    repo.note_enable("VIN1", "B1", 1, version, {"point_mm": [0, 0, 0]}, datetime.now(UTC))
+    _not_taken(repo, 41, "B1")
+    assert repo.holds("VIN1") == {
+        "B2": ("MID 0061 revision 7", HeldUnder(None, 77)),
+        "B3": ("tightening 40", HeldUnder(False, 21)),
+        "B1": (not_taken_note(0.0, 41), HeldUnder(False, 1))}
+    assert repo.held_bolts("VIN1") == {b: note for b, (note, _) in repo.holds("VIN1").items()}

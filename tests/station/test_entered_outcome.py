@@ -6,15 +6,26 @@ from __future__ import annotations
 
 from typing import Any
 
+from db.kinds import LOOSENING, NOK, OK, TIGHTENING, HeldUnder
 from stationd.reasons import Reason, Why
 from stationd.station.actions import RecordCommand
 from stationd.station.commands import KIND, RIGHT, EnterOutcome, Issuer, ReleaseBolt, Right
-from stationd.station.events import BoltLocked, BoltToLoosen, Notice, ResultRecorded, Said
-from stationd.station.inputs import CommandDone, CommandIn, UnreadableIn
+from stationd.station.core import StationCore
+from stationd.station.events import (
+    BoltLocked,
+    BoltToLoosen,
+    Notice,
+    ResultRecorded,
+    Said,
+    ToolDisabled,
+)
+from stationd.station.inputs import CommandDone, CommandIn, UnreadableIn, VehicleLoaded
+from stationd.station.lift import held_a_loosening
 from stationd.station.policy import NokPolicy, NokRule
-from stationd.words import answer_words, notice_words, reason_words
+from stationd.words import answer_words, notice_words, reason_words, state_words
 from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
-from tests.station.test_core import Driver, _on, _ready, published
+from tests.station.test_core import BOLTS, PARAMS, Driver, _on, _ready, published
+from tests.station.test_loosen import _rundown
 from tests.station.test_result_types import _enabled, unreadable
 
 #: a role with the release right and nothing else
@@ -160,3 +171,156 @@ def test_an_entered_ok_ends_a_nok_row():
     _held(d, tid=8)
     d.command(2, ok(), SUPERVISOR)
     assert "B1" not in d.core._noks and "B1" in d.core.matcher.done
+
+
+# -- a held loosening: the outcome entered is a loosening's -------------------------------------
+LOOSEN = NokPolicy(NokRule(3, "loosen", 90))
+
+
+def _held_loosening(d: Driver, tid: int = 2) -> list[Any]:
+    """B1 NOK under ``loosen``, then its loosen pset (90) enabled and its result unreadable:
+    B1 held for a loosening's result; the actions of the unreadable result."""
+    _rundown(d, 1, 1, ok=False)
+    sent = _enabled(d)
+    assert sent.loosen and sent.selection.pset == 90
+    acts = d.feed(UnreadableIn(d.t, unreadable(tid=tid, pset=90)))
+    assert d.core.matcher is not None and "B1" in d.core.matcher.held
+    return acts
+
+
+def test_a_loosening_held_says_it_is_a_loosening_s_result():
+    d = _ready(nok=LOOSEN)
+    acts = _held_loosening(d)
+    [lock] = published(acts, BoltLocked)
+    assert lock.held == "tightening 2, a loosening with loosen pset 90"
+    assert "B1: the controller's result could not be read (tightening 2, a loosening with " \
+        "loosen pset 90): check it on the controller, then release" in _notices(acts)
+    assert [state_words(e.reason) for e in published(acts, ToolDisabled)] == [
+        "bolt B1: its loosening's result could not be read",
+        "bolt B1: its loosening's result could not be read; held for a supervisor"]
+    # the refusal on the bolt says the same
+    assert reason_words(Reason(Why.HELD, bolt="B1", note=d.core.matcher.held["B1"])) == (
+        "B1: the controller's result could not be read (tightening 2, a loosening with "
+        "loosen pset 90): check it on the controller, then release")
+
+
+def test_an_ok_entered_for_a_held_loosening_loosens_the_bolt_never_closes_it():
+    """The reviewer's case: the OK the controller shows for the loosen pset is the joint come
+    loose; recorded as a loosening, the bolt then gets its tightening pset (it closed the bolt
+    as an OK tightening, and dropped it off the loosen-first list)."""
+    d = _ready(nok=LOOSEN)
+    _held_loosening(d)
+    acts = d.command(1, EnterOutcome("VIN1", "B1", True, 8.0, 400.0, "controller: OK"),
+                     SUPERVISOR)
+    [recorded] = [a for a in acts if isinstance(a, RecordCommand)]
+    assert isinstance(recorded.command, EnterOutcome)
+    assert (recorded.command.loosening, recorded.command.loosen_pset) == (True, 90)
+    assert answer_words(_answer(acts).answer) == (
+        "command enter-outcome B1 of VIN1: loosening OK 8.0 Nm, 400.0 deg ('controller: OK') "
+        "by sam (screen 10.0.0.7): accepted")
+    [rec] = published(acts, ResultRecorded)
+    assert (rec.bolt, rec.ok, rec.kind, rec.pset, rec.entered_by) == (
+        "B1", True, LOOSENING, 90, "sam")
+    # the loosen pset's limits are the controller's, not the bolt's tightening window
+    assert (rec.torque_min, rec.torque_max, rec.angle_min, rec.angle_max) == (None,) * 4
+    assert [n.said for n in published(acts, Notice)] == [Said.ENTERED_LOOSENING_OK,
+                                                         Said.LOOSENED]
+    assert _notices(acts) == [
+        "B1: loosening OK 8.0 Nm, 400.0 deg entered by sam from the controller's screen (the "
+        "result that could not be read: tightening 2, a loosening with loosen pset 90): a "
+        "loosening, not a tightening: B1 not done",
+        "B1 loosened: its tightening pset goes next"]
+    m = d.core.matcher
+    assert "B1" not in m.done and not m.held and "B1" not in d.core._held_loosening
+    assert d.core._noks == {"B1": 1}            # a loosening OK neither counts nor ends the row
+    # its tightening pset goes next, and only that tightening closes the bolt
+    sent, acts = _rundown(d, 1, 3, ok=True, rtype=1)
+    assert not sent.loosen and sent.selection.pset == 1
+    assert "B1" in m.done and "B1" not in d.core._noks
+
+
+def test_a_nok_entered_for_a_held_loosening_counts_as_a_loosening_nok():
+    d = _ready(nok=LOOSEN)
+    _held_loosening(d)
+    acts = d.command(1, EnterOutcome("VIN1", "B1", False, 60.0, 2.0, "did not come loose"),
+                     SUPERVISOR)
+    [rec] = published(acts, ResultRecorded)
+    assert (rec.ok, rec.kind, rec.pset) == (False, LOOSENING, 90)
+    assert [(n.said, n.count, n.level) for n in published(acts, Notice)] == [
+        (Said.ENTERED_LOOSENING_NOK, None, "warning"), (Said.LOOSENING_NOK, 2, "warning")]
+    assert "a loosening NOK of B1, the NOK policy applies" in _notices(acts)[0]
+    assert d.core._noks == {"B1": 2} and "B1" in d.core._loosen   # still to be loosened
+    assert "B1" not in d.core.matcher.done
+    sent = _enabled(d)                           # the loosen pset again
+    assert sent.loosen and sent.selection.pset == 90
+
+
+def test_a_nok_entered_for_a_held_loosening_locks_at_max_nok_as_a_measured_one():
+    d = _ready(nok=NokPolicy(NokRule(2, "loosen", 90)))
+    _held_loosening(d)
+    acts = d.command(1, EnterOutcome("VIN1", "B1", False, 60.0, 2.0, "stuck"), SUPERVISOR)
+    [lock] = published(acts, BoltLocked)
+    assert (lock.bolt, lock.count, lock.held) == ("B1", 2, None)
+    assert "B1" in d.core.matcher.locked and "B1" in d.core._loosen
+    # released: still to be loosened first
+    acts = d.command(2, ReleaseBolt("VIN1", "B1", "joint checked"), SUPERVISOR)
+    [to_loosen] = published(acts, BoltToLoosen)
+    assert to_loosen.reason.pset == 90
+
+
+def test_a_hold_s_loosening_ends_with_it_the_next_hold_is_its_own():
+    """Released, then loosened and tightened under a new hold: the entered OK is the
+    tightening's (a loosening remembered from the first hold would leave the bolt open)."""
+    d = _ready(nok=LOOSEN)
+    _held_loosening(d)
+    assert _answer(d.command(1, ReleaseBolt("VIN1", "B1", "looked"), SUPERVISOR)).answer.accepted
+    assert not d.core._held_loosening
+    sent, _ = _rundown(d, 1, 3, ok=True, rtype=2)        # loosened, measured
+    assert sent.loosen
+    _held(d, tid=4)                                      # its tightening pset, unreadable
+    assert d.core.matcher.held["B1"] == "tightening 4"
+    acts = d.command(2, ok(), SUPERVISOR)
+    [rec] = published(acts, ResultRecorded)
+    assert (rec.kind, rec.pset) == (TIGHTENING, 1) and "B1" in d.core.matcher.done
+
+
+def test_a_held_loosening_comes_back_with_the_vehicle_from_its_enable():
+    """After a reload or a restart the records say what the held result came under (the
+    tool enable it answered): an OK entered then is still a loosening."""
+    core = StationCore(PARAMS, leave_frames=2, nok=LOOSEN)
+    acts = core.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, noks={"B1": 1},
+                                   held={"B1": "tightening 2", "B3": "tightening 5"},
+                                   status={"B1": NOK, "B3": NOK},
+                                   held_under={"B1": HeldUnder(True, 90),
+                                               "B3": HeldUnder(False, 1)}))
+    assert core.matcher is not None
+    assert core.matcher.held == {"B1": "tightening 2, a loosening with loosen pset 90",
+                                 "B3": "tightening 5"}
+    assert {e.bolt: e.held for e in published(acts, BoltLocked)} == core.matcher.held
+    assert core._held_loosening == {"B1": 90}
+    for request, bolt, kind in ((1, "B1", LOOSENING), (2, "B3", TIGHTENING)):
+        core.feed(CommandIn(2.0, request, ok(bolt), SUPERVISOR))
+        [rec] = published(core.feed(CommandDone(2.0, request)), ResultRecorded)
+        assert rec.kind == kind, bolt
+    assert "B1" not in core.matcher.done and "B3" in core.matcher.done
+
+
+def test_where_the_records_cannot_tell_a_hold_s_kind_it_leans_to_a_loosening():
+    """No enable found for a held result (``loosen`` None): a pset it came under that is not
+    the bolt's tightening pset is a loosening's; no pset known, what the station would send
+    the bolt now decides (its loosen pset where it is to be loosened first)."""
+    assert held_a_loosening(HeldUnder(True, 90), 1, to_loosen=False)
+    assert not held_a_loosening(HeldUnder(False, 90), 1, to_loosen=True)   # the enable's word
+    assert held_a_loosening(HeldUnder(None, 90), 1, to_loosen=False)
+    assert held_a_loosening(HeldUnder(None, 77), 1, to_loosen=False)   # neither: in doubt
+    assert not held_a_loosening(HeldUnder(None, 1), 1, to_loosen=True)
+    assert held_a_loosening(HeldUnder(None, None), 1, to_loosen=True)
+    assert not held_a_loosening(HeldUnder(None, None), 1, to_loosen=False)
+    # through a load: B1 NOK under loosen (to be loosened), B3 OK last; neither enable known
+    core = StationCore(PARAMS, leave_frames=2, nok=LOOSEN)
+    core.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, held={"B1": "MID 0061 revision 7",
+                                                           "B3": "tightening 5"},
+                            status={"B1": NOK, "B3": OK}))
+    assert core._held_loosening == {"B1": 90}
+    assert core.matcher is not None and core.matcher.held == {
+        "B1": "MID 0061 revision 7, a loosening with loosen pset 90", "B3": "tightening 5"}
