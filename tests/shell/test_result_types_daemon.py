@@ -110,11 +110,12 @@ def test_a_tightening_made_during_a_link_cut_is_recorded_to_its_bolt(tmp_path, c
         d.wait_log(f"tightening {made.tightening_id} made during the link cut, fetched after "
                    "it: recorded to B05")
         d.wait_log(f"tightening {again.tightening_id} fetched after a reconnect")
-        # said as they are decided; stored, then acknowledged: the rows are there once both
-        # are acknowledged
-        until(lambda: {made.tightening_id, again.tightening_id} <= set(ctl.acked_ids), 30,
+        # said as they are decided, stored after: the rows are waited for (fetched results
+        # are not acknowledged as pushed ones are)
+        db = tmp_path / "station.db"
+        until(lambda: len(_rows(db, "SELECT id FROM tightening_records")) == 2 and
+              len(_rows(db, "SELECT id FROM unattributed_results")) == 1, 30,
               "both results stored")
-    db = tmp_path / "station.db"
     assert _rows(db, "SELECT tightening_id, bolt_id IS NOT NULL FROM tightening_records "
                      "ORDER BY id") == [(first.tightening_id, 1), (made.tightening_id, 1)]
     [(tid, reason)] = _rows(db, "SELECT tightening_id, reason FROM unattributed_results")

@@ -61,9 +61,11 @@ def test_a_third_nok_locks_the_screen_says_who_releases_and_a_supervisor_release
         assert page.text("#locks-list") == LOCKED
         assert page.text("#release-by") == \
             "Release: a user with the release right (supervisor)"
-        pose.write_text("B05")   # the wrench on it: refused, amber, with the reason
-        page.wait(lambda p: p.text("#headline") == LOCKED, 30, "the refusal")
-        assert page.js("return document.getElementById('headline').dataset.tone") == "act"
+        pose.write_text("B05")   # the wrench on it: refused, amber, with the reason (the
+        # headline says the lock before the wrench is on it, neutral: both are waited for)
+        page.wait(lambda p: p.text("#headline") == LOCKED and p.js(
+            "return document.getElementById('headline').dataset.tone") == "act", 30,
+            "the refusal, amber")
         check_fits(page, "#bolts", "#headline", "#commands", "#locks")
         shots("operator-locked")
 
