@@ -9,13 +9,12 @@ from __future__ import annotations
 
 import re
 
-import psycopg
 from sqlalchemy import Engine, text
 
 from db.engine import make_engine
 from stationd.cli import main
 from stationd.linedb import LINE_RUNDOWNS, TYPED
-from tests.test_line_tables import _count, _every_kind, _forward, _station
+from tests.test_line_tables import _count, _every_kind, _forward, _station, forwarding_role
 
 #: what an earlier version wrote on line_rundowns (the trial user's ``\d+``)
 OLD = {"result_at": "the controller's time of the result (its clock)",
@@ -72,12 +71,7 @@ def test_line_init_brings_an_earlier_versions_comments_up_to_date(tmp_path, pg_u
     owner's ``line init`` corrects them and says which; a second one changes nothing."""
     assert main(["line", "init", pg_url]) == 0
     _write_old(pg_url)
-    db = pg_url.rsplit("/", 1)[1]
-    with psycopg.connect(f"host=127.0.0.1 port={pg_server.port} user=postgres dbname={db}",
-                         autocommit=True) as c:
-        c.execute("CREATE ROLE station_cm LOGIN")
-        c.execute("REVOKE CREATE ON SCHEMA public FROM PUBLIC")
-        c.execute("GRANT SELECT, INSERT ON line_feed, line_parameters TO station_cm")
+    forwarding_role(pg_url, pg_server.port, "station_cm")
     repo = _station(tmp_path, "a")
     _every_kind(repo)
     f = _forward(repo, pg_url.replace("postgres@", "station_cm@"), "ST-C")

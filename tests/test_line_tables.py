@@ -97,6 +97,17 @@ def _station(tmp_path, name):
     return repo
 
 
+def forwarding_role(pg_url: str, port: int, role: str) -> None:
+    """A login ``role`` granted what the README gives the stations' forwarding role: SELECT
+    and INSERT on line_feed and line_parameters, no right to create."""
+    db = pg_url.rsplit("/", 1)[1]
+    with psycopg.connect(f"host=127.0.0.1 port={port} user=postgres dbname={db}",
+                         autocommit=True) as c:
+        c.execute(f"CREATE ROLE {role} LOGIN")
+        c.execute("REVOKE CREATE ON SCHEMA public FROM PUBLIC")
+        c.execute(f"GRANT SELECT, INSERT ON line_feed, line_parameters TO {role}")
+
+
 def _forward(repo, url, sid):
     f = Forwarder(repo, LineConfig(url, sid))
     while f.step():
@@ -342,12 +353,7 @@ def test_a_role_granted_insert_on_line_feed_alone_has_its_records_typed(tmp_path
     SELECT and INSERT on line_feed and line_parameters, as the README says: the trigger
     types their rows with the owner's rights, none is refused or quarantined."""
     assert main(["line", "init", pg_url]) == 0
-    db = pg_url.rsplit("/", 1)[1]
-    with psycopg.connect(f"host=127.0.0.1 port={pg_server.port} user=postgres dbname={db}",
-                         autocommit=True) as c:
-        c.execute("CREATE ROLE station_fw LOGIN")
-        c.execute("REVOKE CREATE ON SCHEMA public FROM PUBLIC")
-        c.execute("GRANT SELECT, INSERT ON line_feed, line_parameters TO station_fw")
+    forwarding_role(pg_url, pg_server.port, "station_fw")
     repo = _station(tmp_path, "a")
     _every_kind(repo)
     f = _forward(repo, pg_url.replace("postgres@", "station_fw@"), "ST-R")
