@@ -194,8 +194,13 @@ def link_note(path: Path, what: str) -> str:
 
 
 def relative_path(node: YamlNode, base: Path) -> Path:
-    """The path a node names, relative to ``base`` (:func:`base_folder`) unless absolute."""
-    p = Path(node.text())
+    """The path a node names, relative to ``base`` (:func:`base_folder`) unless absolute.  A
+    NUL character is the node's error (no file system takes one: Python's ValueError was a
+    traceback)."""
+    text = node.text()
+    if "\0" in text:
+        raise node.error("a path cannot contain a NUL character (\\0)")
+    p = Path(text)
     return p if p.is_absolute() else base / p
 
 

@@ -169,3 +169,16 @@ def test_paths_the_user_cannot_reach_are_one_line_each_and_exit_2(open_folder):
     assert run.stderr.count("\n") == 1 and run.stderr.startswith("stationd: error: "), \
         run.stderr
     assert said in run.stderr
+
+
+@pytest.mark.parametrize("which", ["bolts", "calibration"])
+def test_a_nul_character_in_a_path_is_one_line_not_a_traceback(tmp_path, which):
+    """A path written with a NUL (``"\\0"`` in YAML) was a ValueError out of ``Path.stat``: a
+    traceback from ``config check``."""
+    station = _station(tmp_path, **{which: f'"{tmp_path}/a\\0b.yaml"'})
+    key = {"bolts": BOLTS, "calibration": CALIBRATION}[which][1]
+    errors = _errors_by_key(station)
+    assert list(errors) == [key], errors
+    assert "NUL" in errors[key] and "\n" not in errors[key]
+    with pytest.raises(ConfigError, match="NUL"):
+        load_station_config(station, station=True)
