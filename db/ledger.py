@@ -65,6 +65,15 @@ def add_command(s: Session, *, at: datetime, user: str, source: str, kind: str,
     return row.id
 
 
+def put_meta(s: Session, key: str, value: str) -> None:
+    """The database's fact ``key`` set to ``value``, in the caller's transaction."""
+    row = s.get(Meta, key)
+    if row is None:
+        s.add(Meta(key=key, value=value))
+    else:
+        row.value = value
+
+
 @dataclass(frozen=True)
 class CommandEntry:
     """An accepted command as recorded."""
@@ -129,11 +138,7 @@ class Ledger:
 
     def set_meta(self, key: str, value: str) -> None:
         with self._session(True) as s:
-            row = s.get(Meta, key)
-            if row is None:
-                s.add(Meta(key=key, value=value))
-            else:
-                row.value = value
+            put_meta(s, key, value)
 
     def quarantine(self, seq: int, reason: str) -> None:
         """Keep feed entry ``seq`` aside: the line database refused it for good."""
@@ -346,4 +351,4 @@ def _record(s: Session, kind: str, ref: int) -> dict[str, Any]:
 
 
 __all__ = ["CHECK", "COMMAND", "CONTROLLER_EVENT", "CURVE", "GAP", "RUNDOWN", "UNATTRIBUTED",
-           "UNREADABLE", "CommandEntry", "Ledger", "add_command", "append"]
+           "UNREADABLE", "CommandEntry", "Ledger", "add_command", "append", "put_meta"]

@@ -44,6 +44,7 @@ from db.ledger import (
     Ledger,
     add_command,
     append,
+    put_meta,
 )
 from db.migrate import current_revision, head_revision, upgrade
 from db.models import (
@@ -237,7 +238,7 @@ class Repository:
         is the vehicle at the station from now on (:meth:`left_unseen`)."""
         _check_vin(vin)
         with self._session(write=True) as s:
-            _set_meta(s, AT_STATION, vin)
+            put_meta(s, AT_STATION, vin)
             m = _model(s, model)
             v = s.scalar(select(Vehicle).where(Vehicle.vin == vin))
             if v is None:
@@ -685,14 +686,6 @@ class Repository:
 
 
 # -- helpers ------------------------------------------------------------------------------
-def _set_meta(s: Session, key: str, value: str) -> None:
-    row = s.get(Meta, key)
-    if row is None:
-        s.add(Meta(key=key, value=value))
-    else:
-        row.value = value
-
-
 def _same_result(model: Any, at: Any, tightening_id: int, torque_nm: float | None,
                  angle_deg: float | None,
                  controller_at: datetime | None) -> list[ColumnElement[bool]]:

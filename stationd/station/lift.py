@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from db.kinds import NOK, PENDING, SKIPPED, TO_LOOSEN, HeldUnder, loosening_note
+from db.kinds import NOK, PENDING, SKIPPED, TO_LOOSEN, HeldUnder
 from drivers.keeper import FaultKind
 from stationd.reasons import CoreFault, CoreFaultKind, FaultWhy
 from stationd.station.actions import Action, CloseVehicle, LoadVehicle, Publish, SendVin
@@ -154,12 +154,9 @@ class LiftRules(FaultRules):
             if k not in ev.bolts:
                 continue
             under, pset = ev.held_under.get(k, HeldUnder()), ev.bolts[k].pset
-            if held_a_loosening(under, pset, k in self._loosen):
-                sent = under.pset if under.pset is not None \
-                    else self.nok.rule(k, pset).loosen_pset
-                self._held_loosening[k] = sent
-                note = loosening_note(note, sent)
-            self.matcher.held[k] = note
+            loosening = held_a_loosening(under, pset, k in self._loosen)
+            sent = under.pset if under.pset is not None else self.nok.rule(k, pset).loosen_pset
+            self._held(k, note, loosening, sent)
 
     def _loosen_back(self, ev: VehicleLoaded) -> None:
         """The loosen strategy's state comes back with the vehicle: a bolt whose last rundown

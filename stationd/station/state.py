@@ -265,16 +265,25 @@ class CoreState:
         (``said``: the notice, where it is not a result that could not be read).  ``under``:
         the selection the result came under; where it was the bolt's loosen pset, the hold
         is a loosening's (its note says so, and an outcome entered for it is one)."""
+        loosening = under is not None and under.loosen
+        note = self._held(bolt, note, loosening, under.pset if under is not None else None)
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
-        if under is not None and under.loosen:
-            self._held_loosening[bolt] = under.pset
-            note = loosening_note(note, under.pset)
-        else:
-            self._held_loosening.pop(bolt, None)
-        self.matcher.held[bolt] = note
         self.matcher.reset()
         return [Publish(BoltLocked(bolt, 0, held=note, t=t)),
                 Publish(said or Notice(Said.HELD, bolt=bolt, note=note, t=t))]
+
+    def _held(self, bolt: str, note: str, loosening: bool, pset: int | None) -> str:
+        """``bolt`` held with ``note`` (which result); ``loosening``: that result came under
+        its loosen pset ``pset`` (None: not known), the note says so and an outcome entered
+        for it is a loosening's.  The note as held."""
+        assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
+        if loosening:
+            self._held_loosening[bolt] = pset
+            note = loosening_note(note, pset)
+        else:
+            self._held_loosening.pop(bolt, None)
+        self.matcher.held[bolt] = note
+        return note
 
     def _unhold(self, bolt: str) -> str | None:
         """``bolt``'s hold ends (released, skipped, its outcome entered): its note, None
