@@ -7,7 +7,8 @@ window around a wrench's marker is the same story at a smaller scale: a third of
 ray-casting per camera each time the wrench is put on a bolt, for the very same placements in
 test after test.  With ``STATIOND_SIM_BACKGROUNDS`` naming a folder, an image (a background,
 or a marker's window) is rendered once, written there and read back (a background in a fifth
-of a second, a window in a millisecond) by every later camera that would render the very same.
+of a second, a window in a millisecond) by every later camera that would render the very same,
+and cameras that ask for it at once wait for the one render (a lock file beside the image).
 
 "The very same": the key hashes everything the image is made of (the camera, the scene with
 its markers, the window, the seed) and the source of the code that draws it (the renderer,
@@ -21,6 +22,7 @@ written anywhere and every camera renders its own, as before.
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import hashlib
 import io
 import os
@@ -73,15 +75,28 @@ def rendered(camera: Camera, scene: render.Scene, seed: int,
     if not folder:
         return render.render(camera, scene, window=window, seed=seed).image
     path = Path(folder) / f"{_key(camera, scene, seed, window)}.npy"
-    try:
+    with contextlib.suppress(OSError, ValueError):   # not there yet (or being replaced)
         image: np.ndarray = np.load(path, allow_pickle=False)
         return image
-    except (OSError, ValueError):     # not there yet (or being replaced): render it
+    # One process renders it, the others wait for its file: at the start of a test run both
+    # workers' first stations asked for the same eight backgrounds at once, each rendering all.
+    lock = _take(path)
+    try:
+        image = np.load(path, allow_pickle=False)   # rendered while this one waited
+        _release(lock)
+        return image
+    except (OSError, ValueError):
         pass
-    image = render.render(camera, scene, window=window, seed=seed).image
+    try:
+        image = render.render(camera, scene, window=window, seed=seed).image
+    except BaseException:
+        _release(lock)
+        raise
     # written beside the camera's work, not before its first frame (60 MB take a disk a
-    # while); not a daemon thread: a process that ends lets it finish
-    writer = threading.Thread(target=_store, args=(path, image), name="sim-background-store")
+    # while), the lock let go once it is there; not a daemon thread: a process that ends
+    # lets it finish
+    writer = threading.Thread(target=_store, args=(path, image, lock),
+                              name="sim-background-store")
     with _lock:
         _writers[:] = [w for w in _writers if w.is_alive()]
         _writers.append(writer)
@@ -97,10 +112,31 @@ def wait_stored() -> None:
         w.join()
 
 
-def _store(path: Path, image: np.ndarray) -> None:
+def _take(path: Path) -> int | None:
+    """The image's lock (``NAME.lock`` beside it), waited for: held by whoever renders it
+    until its file is there.  None where no lock can be had (the image is rendered anyway)."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(path.with_suffix(".lock"), os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+    except OSError:
+        os.close(fd)
+        return None
+    return fd
+
+
+def _release(lock: int | None) -> None:
+    if lock is not None:
+        os.close(lock)    # closing the descriptor lets the lock go
+
+
+def _store(path: Path, image: np.ndarray, lock: int | None = None) -> None:
     """``image`` written whole under a name of its own, then renamed: a reader in another
-    process sees the complete file or none.  A full disk only costs a later camera its
-    render."""
+    process sees the complete file or none; then ``lock`` is let go.  A full disk only costs
+    a later camera its render."""
     part = path.with_name(f"{path.stem}.{os.getpid()}.{threading.get_ident()}.part")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -111,3 +147,5 @@ def _store(path: Path, image: np.ndarray) -> None:
     except OSError:
         with contextlib.suppress(OSError):   # a full disk: no half file left behind
             part.unlink(missing_ok=True)
+    finally:
+        _release(lock)

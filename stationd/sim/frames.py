@@ -102,9 +102,11 @@ class FrameSource:
             return None
         scene = replace(self.scene, markers=[*self.fixed, (pose, spec)])
         seed = self.seed if seed is None else seed
-        win = marker_window(self.camera, pose, spec, margin_px=48.0)
-        if win is None:  # partly out of view: render what is visible, the slow way (a
-            return render(self.camera, scene, seed=seed).image   # whole frame: not kept)
+        # partly out of view: the part of the window on the sensor (a whole 20 MP frame
+        # ray-cast for a marker at the edge cost seconds a grab)
+        win = marker_window(self.camera, pose, spec, margin_px=48.0, clip=True)
+        if win is None:  # straddles the camera plane: the whole frame, the slow way (not kept)
+            return render(self.camera, scene, seed=seed).image
         return win, backgrounds.rendered(self.camera, scene, seed, win)
 
     def compose(self, patch: Patch) -> np.ndarray:

@@ -44,15 +44,27 @@ def to_right(pair: StereoPair, pose: MarkerPose) -> MarkerPose:
 
 
 def marker_window(camera: Camera, pose: MarkerPose, spec: MarkerSpec,
-                  margin_px: float = 48.0) -> Window | None:
-    """Sensor window around the marker's purple field (None when it leaves the sensor)."""
+                  margin_px: float = 48.0, *, clip: bool = False) -> Window | None:
+    """Sensor window around the marker's purple field (None when it leaves the sensor).
+
+    ``clip``: a marker partly out of the sensor gets the part of its window on the sensor
+    (what a frame can show of it; a window render equals that region of the whole frame),
+    None only when nothing of it is on the sensor or a corner is not in front of the camera
+    (its projection means nothing: the caller renders the whole frame)."""
     f = spec.field_mm
     corners = np.array([[-f, -f, 0], [f, -f, 0], [f, f, 0], [-f, f, 0]], dtype=np.float64)
-    pts = camera.project(pose.centre_mm + corners @ pose.rotation.T)
+    pts_mm = pose.centre_mm + corners @ pose.rotation.T
+    if clip and np.any(pts_mm[:, 2] <= 1e-6):
+        return None
+    pts = camera.project(pts_mm)
     lo = np.floor(pts.min(axis=0) - margin_px)
     hi = np.ceil(pts.max(axis=0) + margin_px)
     w, h = camera.size
-    if lo[0] < 0 or lo[1] < 0 or hi[0] > w - 1 or hi[1] > h - 1:
+    if clip:
+        lo, hi = np.maximum(lo, 0.0), np.minimum(hi, [w - 1.0, h - 1.0])
+        if lo[0] > hi[0] or lo[1] > hi[1]:
+            return None
+    elif lo[0] < 0 or lo[1] < 0 or hi[0] > w - 1 or hi[1] > h - 1:
         return None
     return int(lo[0]), int(lo[1]), int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1)
 

@@ -4,7 +4,10 @@ written.  (A small camera: the 20 MP ones only cost more time.)"""
 
 from __future__ import annotations
 
+import threading
+import time
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,12 +23,17 @@ CAM = Camera(np.array([[600.0, 0, 159.5], [0, 600.0, 119.5], [0, 0, 1]]),
 SCENE = Scene(texture=0.2, vignetting=0.3, blur_sigma=0.8, noise_sigma=2.0)
 
 
+def _images(folder: Path) -> list[Path]:
+    """The images in the folder (beside them: each one's lock)."""
+    return sorted(folder.glob("*.npy"))
+
+
 def test_a_background_is_rendered_once_then_read_back_equal(tmp_path, monkeypatch):
     monkeypatch.setenv(backgrounds.ENV, str(tmp_path))
     first = backgrounds.background(CAM, SCENE, 3)
     backgrounds.wait_stored()          # written beside the camera's work
-    files = list(tmp_path.iterdir())
-    assert len(files) == 1 and files[0].suffix == ".npy"      # written whole, no part left
+    files = _images(tmp_path)
+    assert len(files) == 1 and not list(tmp_path.glob("*.part"))   # written whole
     again = backgrounds.background(CAM, SCENE, 3)
     assert again is not first and np.array_equal(again, first)
     assert np.array_equal(again, render(CAM, SCENE, seed=3).image)
@@ -35,7 +43,7 @@ def test_a_background_is_rendered_once_then_read_back_equal(tmp_path, monkeypatc
     full = render(CAM, replace(SCENE, markers=[(pose, MarkerSpec())]), seed=3).image
     assert np.array_equal(frame, full)
     backgrounds.wait_stored()
-    assert len(list(tmp_path.iterdir())) == 2           # the background, the marker's window
+    assert len(_images(tmp_path)) == 2           # the background, the marker's window
 
 
 @pytest.mark.parametrize("change", ["seed", "scene", "camera", "fixed marker"])
@@ -57,7 +65,7 @@ def test_anything_that_changes_the_image_is_another_file(tmp_path, monkeypatch, 
         scene = replace(SCENE, markers=[(pose, MarkerSpec())])
     other = backgrounds.background(cam, scene, seed)
     backgrounds.wait_stored()
-    assert len(list(tmp_path.iterdir())) == 2
+    assert len(_images(tmp_path)) == 2
     assert np.array_equal(other, render(cam, scene, seed=seed).image)
 
 
@@ -76,7 +84,7 @@ def test_an_unreadable_file_is_rendered_again(tmp_path, monkeypatch):
     monkeypatch.setenv(backgrounds.ENV, str(tmp_path))
     good = backgrounds.background(CAM, SCENE, 3)
     backgrounds.wait_stored()
-    (path,) = tmp_path.iterdir()
+    (path,) = _images(tmp_path)
     path.write_bytes(path.read_bytes()[:1000])
     assert np.array_equal(backgrounds.background(CAM, SCENE, 3), good)
     backgrounds.wait_stored()
@@ -93,7 +101,7 @@ def test_a_markers_window_is_rendered_once_then_read_back_equal(tmp_path, monkey
     first = src.patch(pose, seed=5)
     backgrounds.wait_stored()
     assert isinstance(first, tuple)
-    (win, pixels), files = first, set(tmp_path.iterdir())
+    (win, pixels), files = first, set(_images(tmp_path))
     assert len(files) == 1
     again = FrameSource(CAM, SCENE, seed=3).patch(pose, seed=5)
     assert isinstance(again, tuple) and again[0] == win
@@ -103,4 +111,30 @@ def test_a_markers_window_is_rendered_once_then_read_back_equal(tmp_path, monkey
     moved = MarkerPose.look(np.array([12.0, -5.0, 500.0]), 20, 30, 0)
     src.patch(moved, seed=5)
     backgrounds.wait_stored()
-    assert len(set(tmp_path.iterdir()) - files) == 1
+    assert len(set(_images(tmp_path)) - files) == 1
+
+
+def test_cameras_asking_at_once_wait_for_one_render(tmp_path, monkeypatch):
+    """Cameras that ask for the same image at once (the test run's first stations, one per
+    worker) get it from one render: the others wait for its file."""
+    monkeypatch.setenv(backgrounds.ENV, str(tmp_path))
+    renders: list[int] = []
+    real = backgrounds.render.render
+
+    def slow(*args, **kw):      # a render that takes a while, counted
+        renders.append(1)
+        time.sleep(0.3)
+        return real(*args, **kw)
+
+    monkeypatch.setattr(backgrounds.render, "render", slow)
+    got: list[np.ndarray] = []
+    threads = [threading.Thread(target=lambda: got.append(backgrounds.background(CAM, SCENE, 3)))
+               for _ in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    backgrounds.wait_stored()
+    assert len(got) == 3 and len(renders) == 1
+    assert all(np.array_equal(g, got[0]) for g in got)
+    assert np.array_equal(got[0], real(CAM, SCENE, seed=3).image)

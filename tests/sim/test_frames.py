@@ -26,11 +26,21 @@ def test_no_marker_gives_the_background_and_the_cache_is_not_modified():
     assert np.array_equal(src.frame(None), bg)
 
 
-def test_a_marker_partly_out_of_view_falls_back_to_a_full_render():
+def test_a_marker_partly_out_of_view_is_the_part_of_its_window_on_the_sensor():
+    """A marker at the edge changes only the part of its window on the sensor: that window is
+    rendered (not the whole frame), and the frame equals the whole frame rendered."""
     src = FrameSource(CAM, SCENE, seed=2)
-    pose = MarkerPose.look(np.array([-390.0, 0.0, 700.0]), 10, 0, 0)  # at the left edge
-    img = src.frame(pose)
-    assert img.shape == (1200, 1600, 3) and not np.array_equal(img, src.frame(None))
+    for centre in ([-390.0, 0.0, 700.0], [380.0, 270.0, 700.0]):  # left edge; bottom right
+        pose = MarkerPose.look(np.array(centre), 10, 0, 0)
+        patch = src.patch(pose)
+        assert isinstance(patch, tuple), "a window, not a whole frame"
+        (x, y, w, h), _ = patch
+        assert 0 <= x and 0 <= y and x + w <= 1600 and y + h <= 1200 and w * h < 1600 * 1200 / 4
+        assert (x == 0 or x + w == 1600 or y == 0 or y + h == 1200), "clipped at an edge"
+        full = render(CAM, Scene(**{**SCENE.__dict__, "markers": [(pose, MarkerSpec())]}),
+                      seed=2).image
+        img = src.compose(patch)
+        assert np.array_equal(img, full) and not np.array_equal(img, src.frame(None))
 
 
 def test_a_marker_wholly_out_of_view_is_just_the_background():
