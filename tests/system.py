@@ -43,7 +43,7 @@ HERE = Path(__file__).resolve().parent
 
 #: fixtures that make a test a system test: a browser (``tests/web/conftest.py``), the test
 #: process's PostgreSQL server (``tests/conftest.py``)
-FIXTURES = frozenset({"page", "module_page", "reused_page", "shots", "pg_server", "pg_url"})
+FIXTURES = frozenset({"page", "browsers", "shots", "pg_server", "pg_url"})
 
 #: folders (ending in /) and modules under tests/ whose every test is a system test
 MODULES: tuple[str, ...] = (

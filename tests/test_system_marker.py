@@ -32,7 +32,7 @@ def test_a_script_run_by_python_is_another_python_process(tmp_path):
 
 def test_the_lists_name_what_exists():
     check_lists()
-    assert {"page", "module_page", "reused_page", "pg_server", "pg_url"} <= FIXTURES
+    assert {"page", "browsers", "pg_server", "pg_url"} <= FIXTURES
 
 
 @pytest.mark.system

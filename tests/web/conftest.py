@@ -73,43 +73,49 @@ def live_server() -> Iterator[Callable[..., LiveServer]]:
         s.close()
 
 
-def _browser(name: str, folder: Path) -> Iterator[Page]:
-    """A page in browser ``name`` (its downloads in ``folder``) for as long as the fixture
-    holds it; a browser that is not installed is a skip that names the package, never a
-    silent pass."""
-    why = missing(name)
-    if why is not None:
-        pytest.skip(why)
-    p = open_page(name, folder)
-    try:
-        yield p
-    finally:
-        p.close()
+class Browsers:
+    """This worker's browsers, one of each kind, started when a test first needs it and kept
+    for the session (a browser's start was most of a short browser test's time: Chromium's
+    three seconds, Firefox's six, each test again); each test gets it :meth:`Page.fresh`, as
+    a new one would be.  One that stopped answering is started again."""
+
+    def __init__(self, folder: Path) -> None:
+        self.folder = folder
+        self.open: dict[str, Page] = {}
+
+    def page(self, name: str) -> Page:
+        why = missing(name)
+        if why is not None:      # a browser not installed is a skip naming the package,
+            pytest.skip(why)     # never a silent pass
+        p = self.open.get(name)
+        if p is not None and not p.alive():
+            self.open.pop(name).close()
+            p = None
+        if p is None:
+            folder = self.folder / name
+            folder.mkdir(exist_ok=True)
+            p = self.open[name] = open_page(name, folder)
+        p.fresh()
+        return p
+
+    def close(self) -> None:
+        for p in self.open.values():
+            p.close()
+
+
+@pytest.fixture(scope="session")
+def browsers(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Browsers]:
+    b = Browsers(tmp_path_factory.mktemp("browsers"))
+    yield b
+    b.close()
 
 
 @pytest.fixture(params=BROWSERS)
-def page(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Page]:
-    """The same test in headless Chromium and in headless Firefox, a fresh browser each."""
-    yield from _browser(request.param, tmp_path)
-
-
-@pytest.fixture(scope="module", params=BROWSERS)
-def module_page(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
-                ) -> Iterator[Page]:
-    """One browser of each kind for a whole module (a browser's start is most of a short
-    browser test's time, Firefox's ten seconds on a busy machine): for tests that each load
-    their own server's page and need nothing an earlier test left (no login: cookies are
-    shared across ports; one download of a name per module)."""
-    yield from _browser(request.param, tmp_path_factory.mktemp(request.param))
-
-
-@pytest.fixture
-def reused_page(module_page: Page) -> Page:
-    """The module's browser as a new one starts: the first size, a blank page (the last
-    test's page no longer polls its stopped server).  A module uses it as its ``page``."""
-    module_page.size(*SIZES[0])
-    module_page.get("about:blank")
-    return module_page
+def page(request: pytest.FixtureRequest, browsers: Browsers) -> Page:
+    """The same test in headless Chromium and in headless Firefox, each as a new browser is:
+    no cookie (nobody signed in), nothing cached, a blank page at the first size, an empty
+    downloads folder (:meth:`Page.fresh`)."""
+    return browsers.page(str(request.param))
 
 
 @pytest.fixture

@@ -59,6 +59,28 @@ class Page:
     def close(self) -> None:
         raise NotImplementedError
 
+    def forget(self) -> None:
+        """Forget every cookie and cached response (a sign-in is a cookie of 127.0.0.1, which
+        every port shares)."""
+        raise NotImplementedError
+
+    def fresh(self) -> None:
+        """The browser as a newly started one is for a test: a blank page (the last test's
+        page no longer polls its stopped server), no cookie, nothing cached, the first size,
+        an empty downloads folder."""
+        self.get("about:blank")
+        self.forget()
+        for f in self.downloads.iterdir():
+            f.unlink()
+        self.size(1920, 1080)
+
+    def alive(self) -> bool:
+        """Whether the browser still answers (a test may have left it broken)."""
+        try:
+            return bool(self.js("return 1 + 1 === 2"))
+        except Exception:
+            return False
+
     # -- built on js() -----------------------------------------------------------------------
     def wait(self, cond: Callable[[Page], Any], timeout: float = 15.0, what: str = "") -> Any:
         """Poll ``cond(page)`` until it is truthy (its value is returned); no fixed sleeps in
@@ -146,6 +168,10 @@ class ChromiumPage(Page):
 
     def close(self) -> None:
         self.driver.quit()
+
+    def forget(self) -> None:
+        self.driver.execute_cdp_cmd("Network.clearBrowserCookies", {})
+        self.driver.execute_cdp_cmd("Network.clearBrowserCache", {})
 
 
 FIREFOX_PREFS = {
@@ -263,6 +289,11 @@ class FirefoxPage(Page):
     def screenshot(self, path: Path) -> None:
         data = self.cmd("browsingContext.captureScreenshot", {"context": self.context})["data"]
         path.write_bytes(base64.b64decode(data))
+
+    def forget(self) -> None:
+        # the cookies of every site; Firefox keeps no cache between the tests' pages (the
+        # screens' responses are no-cache or no-store)
+        self.cmd("storage.deleteCookies", {})
 
     def close(self) -> None:
         try:

@@ -9,7 +9,6 @@ import io
 import re
 
 import numpy as np
-import pytest
 
 from db.repository import Repository
 from stationd.reasons import Reason, Why
@@ -35,13 +34,6 @@ from tests.web.scenario import (
     sim_vehicle,
     work,
 )
-
-
-@pytest.fixture
-def page(reused_page: Page) -> Page:
-    """One browser of each kind for the module (conftest's ``reused_page``): every test
-    loads its own server's page."""
-    return reused_page
 
 
 def bolts(page: Page) -> dict[str, tuple[str, str]]:

@@ -45,12 +45,6 @@ NOT_SEEN = Reason(Why.NOT_LOCALIZED, per_pair=tuple(
 
 
 @pytest.fixture
-def page(reused_page: Page) -> Page:
-    """The module's browser (conftest's ``reused_page``): every test loads its own server."""
-    return reused_page
-
-
-@pytest.fixture
 def shots(request: pytest.FixtureRequest, page: Page) -> Callable[[str], None]:
     out = request.config.getoption("--screenshots")
 

@@ -9,7 +9,6 @@ import time
 from typing import Any
 
 import numpy as np
-import pytest
 
 from stationd.station.events import (
     Because,
@@ -29,13 +28,6 @@ from tests.web.test_browser import label_overlaps
 
 SIM_VIN = "SIMVIN0000000001"
 SHORT = ((1280, 800), (1280, 657))   # a panel PC; a real 1280x800 window's viewport
-
-
-@pytest.fixture
-def page(reused_page: Page) -> Page:
-    """One browser of each kind for the module (conftest's ``reused_page``): every test
-    loads its own server's page."""
-    return reused_page
 
 
 def bolt_states(page: Page) -> dict[str, str]:

@@ -10,8 +10,6 @@ Quality or Line on a vehicle's page)."""
 
 from __future__ import annotations
 
-import pytest
-
 from stationd.station.events import BoltSkipped
 from stationd.web.results import Results
 from tests.web.pages import Page
@@ -20,11 +18,6 @@ from tests.web.scenario import VIN, opened, results_db, work
 NAV = ["Operator", "Cameras", "Results", "Quality", "Line"]
 PAGES = {"": "Operator", "cameras": "Cameras", "vehicles": "Results",
          f"vehicles/{VIN}": "Results", "quality": "Quality", "line": "Line"}
-
-
-@pytest.fixture
-def page(reused_page: Page) -> Page:
-    return reused_page
 
 
 def _nav(page: Page) -> tuple[list[str], list[str]]:
