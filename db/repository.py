@@ -331,7 +331,10 @@ class Repository:
                     # still owed its tool's own result (the copy answers nothing of it)
                     _settle(s, enable_id, of=(known.vin, known.bolt))
                     return Recorded(known.id, again=True, vin=known.vin, bolt=known.bolt)
-            if v.ended_at is not None:
+            # a result taken while the vehicle was open is its result, also stored after the
+            # close (the database was away meanwhile: the lift went down with the result kept
+            # in memory; refused, it held the station in fault until someone reopened it)
+            if v.ended_at is not None and (result_at is None or result_at > v.ended_at):
                 raise DataError(f"vehicle {vin} is closed: a tightening cannot be recorded")
             b = s.scalar(select(Bolt).where(Bolt.model_id == v.model_id, Bolt.code == bolt,
                                             Bolt.removed_at.is_(None)))

@@ -225,6 +225,23 @@ def test_vehicle_cycle_and_close_summary(repo, bolts_file):
         repo.vehicle_report("wvw1234567890")
 
 
+def test_a_result_taken_before_the_close_is_recorded_after_it(repo, bolts_file):
+    """The database away while a bolt was tightened and the vehicle then closed (the result
+    kept in memory meanwhile): stored later, the result is its vehicle's, taken while open.
+    A result taken after the close, or of unknown time, is still refused."""
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("WVW1234567890", "SEDAN")
+    taken = datetime.now(UTC)
+    summary = repo.close_vehicle("WVW1234567890")
+    assert summary.missing == ["B1", "B2", "B3"]
+    record(repo, "WVW1234567890", "B1", ok=True, tightening_id=8, result_at=taken)
+    assert repo.vehicle_report("WVW1234567890").ok == ["B1"]
+    assert repo.vehicle_report("WVW1234567890").vehicle.ended_at == summary.vehicle.ended_at
+    for late in (datetime.now(UTC), None):
+        with pytest.raises(DataError, match="is closed"):
+            record(repo, "WVW1234567890", "B2", result_at=late)
+
+
 def test_open_errors_are_one_line_station_errors(tmp_path):
     with pytest.raises(DatabaseError, match="cannot open"):
         Repository.open(url_of(tmp_path / "no" / "such" / "dir.db"))
