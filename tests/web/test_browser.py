@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import io
 import re
+from datetime import UTC, datetime
 
 import numpy as np
 
@@ -260,6 +261,8 @@ def test_cameras_screen_shows_frames_overlay_and_refusal(live_server, page, shot
 
 def test_results_screens_and_csv_download(live_server, page, shots, tmp_path):
     repo = results_db(tmp_path)
+    repo.ledger.record_command(at=datetime.now(UTC), user="sam", source="screen", kind="skip",
+                               vin=VIN, bolt="B4", comment="thread damaged")
     try:
         srv = live_server(results=Results(repo))
         page.get(srv.url + "vehicles")
@@ -274,6 +277,10 @@ def test_results_screens_and_csv_download(live_server, page, shots, tmp_path):
         b2 = page.js("return [...document.querySelectorAll('tr.rundown[data-bolt=B2]')]"
                      ".map(r => r.innerText)")
         assert "NOK: torque low" in b2[0] and "2 (repeat)" in b2[1]
+        # a bolt never run down: missing, or skipped by whom and why
+        assert "not tightened" in (page.text("tr.rundown[data-bolt=B3]") or "")
+        b4 = page.text("tr.rundown[data-bolt=B4]") or ""
+        assert "SKIPPED" in b4 and "skipped by sam: thread damaged" in b4
         # no image directory, so no crop to show: the column is hidden, not left empty
         crops_shown = ("return getComputedStyle(document.querySelector('#rundowns th.crops'))"
                        ".display !== 'none'")
@@ -282,11 +289,11 @@ def test_results_screens_and_csv_download(live_server, page, shots, tmp_path):
         shots("vehicle")
         page.click("#csv")
         rows = list(csv.DictReader(io.StringIO(page.wait_download(f"{VIN}.csv").read_text())))
-        # the rundowns, then the bolts without any (4 rows on the page: B3 and B4 say "not
-        # tightened")
+        # the rundowns, then the bolts without any (B3 missing, B4 skipped)
         assert [(r["bolt"], r["status"]) for r in rows] == [("B1", "ok"), ("B2", "nok"),
                                                            ("B2", "ok"), ("B3", "missing"),
-                                                           ("B4", "missing")]
+                                                           ("B4", "skipped")]
+        assert (rows[-1]["skipped_by"], rows[-1]["comment"]) == ("sam", "thread damaged")
         # with the records' image directory, B2's saved crop is linked in its column
         srv = live_server(results=Results(repo), images_dir=tmp_path)
         page.get(srv.url + f"vehicles/{VIN}")

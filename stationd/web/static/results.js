@@ -171,7 +171,11 @@ async function showVehicle(vin) {
         cell(tr, i ? "" : b.bolt);
         cell(tr, i ? "" : b.status.toUpperCase(), "status-" + (b.status === "nok" ? "NOK" : b.status));
         if (!r) {
-          cell(tr, "-"); cell(tr, "-"); cell(tr, "not tightened");
+          // a skip names who skipped it and why (the exports' skipped_by and comment)
+          const none = b.status === "skipped"
+            ? `skipped by ${b.skipped_by || "?"}` + (b.comment ? `: ${b.comment}` : "")
+            : "not tightened";
+          cell(tr, "-"); cell(tr, "-"); cell(tr, none);
           for (let k = 0; k < 8; k++) cell(tr, "", k === 7 ? "crops" : "");
         }
         else {
