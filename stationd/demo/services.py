@@ -26,6 +26,7 @@ from collections.abc import Callable, Collection
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
+from urllib.parse import urlsplit
 
 from sqlalchemy import make_url
 from sqlalchemy.exc import SQLAlchemyError
@@ -183,6 +184,7 @@ class StationServices:
         self.screens = screens if screens is not None else Screens(bus)
         self.opcua: Any = None          # the OpcUaServer, once it serves
         self.problem: str | None = None   # why OPC UA is not served (printed by the demo)
+        self.moved: str | None = None     # why it is served on another port than configured
         self.db_id = ""                   # the station database's id (its line records')
         self._repo: Repository | None = None
         self._stop_ua = asyncio.Event()
@@ -205,15 +207,31 @@ class StationServices:
     async def _start_opcua(self, ua_cfg: OpcUaConfig) -> None:
         from stationd.opcua.server import OpcUaServer
 
-        server = OpcUaServer(ua_cfg, bus=self.bus, simulated=True,
-                             devices=opcua_devices(self.cfg))
-        try:
-            await server.start()
-        except OSError as exc:   # taken between the check and the start: said, not fatal
-            self.problem = f"not served on {ua_cfg.endpoint}: " \
-                f"{errno.errorcode.get(exc.errno or 0, '')} {exc.strerror or exc}".strip()
-            with contextlib.suppress(Exception):
-                await server.stop()
+        first = ua_cfg.endpoint
+        for _ in range(5):
+            server = OpcUaServer(ua_cfg, bus=self.bus, simulated=True,
+                                 devices=opcua_devices(self.cfg))
+            try:
+                await server.start()
+                break
+            except OSError as exc:   # taken between the check and the start
+                with contextlib.suppress(Exception):
+                    await server.stop()
+                if exc.errno != errno.EADDRINUSE:
+                    self.problem = f"not served on {ua_cfg.endpoint}: " \
+                        f"{errno.errorcode.get(exc.errno or 0, '')} " \
+                        f"{exc.strerror or exc}".strip()
+                    return
+                # another program took the port after it was found free (the demo's
+                # station then ran with no endpoint and a PASS that did not say so): the
+                # next free one, said
+                url = urlsplit(ua_cfg.endpoint)
+                host, port = url.hostname or "127.0.0.1", url.port or 4840
+                free = next_free_port(host, port + 1, what="OPC UA")
+                ua_cfg = replace(ua_cfg, endpoint=f"opc.tcp://{_url_host(host)}:{free}")
+                self.moved = f"{first} was taken after it was found free: the next free port"
+        else:
+            self.problem = f"not served on {first}: every port tried was taken meanwhile"
             return
         assert self._repo is not None  # noqa: S101 - opened by start()
         self.opcua = server

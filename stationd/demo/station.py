@@ -262,8 +262,10 @@ def _say_services(cfg: StationConfig, why: str | None, services: StationServices
                   out: Any, label: str = "") -> None:
     if cfg.opcua is not None:
         if services.opcua is not None:
-            print(f"{label}OPC UA: {cfg.opcua.endpoint} (JoiningSystem {cfg.opcua.station_id}; "
-                  f"{SECURITY_WORDS}{'; ' + why if why else ''})", file=out, flush=True)
+            why = services.moved or why
+            print(f"{label}OPC UA: {services.opcua.url} (JoiningSystem "
+                  f"{cfg.opcua.station_id}; {SECURITY_WORDS}{'; ' + why if why else ''})",
+                  file=out, flush=True)
         else:
             print(f"{label}OPC UA: {services.problem}", file=out, flush=True)
 
