@@ -32,6 +32,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import math
 import random
 import time
 from collections.abc import Callable
@@ -61,6 +62,7 @@ BATCH = 200                  # entries per transaction
 POLL_S = 1.0                 # how often the feed is read when nothing is behind
 BACKOFF_S = (1.0, 60.0)      # a line database that is down: first and longest wait
 STATUS_S = 5.0               # the status is refreshed at least this often meanwhile
+HEARTBEAT_S = 10.0           # with nothing to send, the line database is asked this often
 MEASURE_S = 0.25             # the most time one status spends measuring new backlog entries
 MEASURE_BATCH = 500          # entries read at once to measure them
 EXAMPLE_URL = "postgresql+psycopg://stationd@line-db/line"
@@ -333,13 +335,17 @@ class Forwarder:
         self.tries = 0                     # pushes to the line database finished, taken or not
         self.last_status: dict[str, Any] | None = None   # the latest, for the status API
         self.size = BacklogBytes(self.cursor)
+        self._heard = -math.inf            # when the line database last answered (clock)
 
     def step(self) -> int:
         """Forward up to one batch; how many entries were handled.  ``LineDown`` when the
         line database is away (nothing is lost: the cursor did not move)."""
         entries = self.repo.ledger.since(self.cursor, BATCH)
         if not entries:
-            if self.up is not True:
+            # not known to answer, or not heard from for HEARTBEAT_S: asked (a station
+            # with nothing to send said the line database "up" for as long as it was
+            # stopped, until its next record)
+            if self.up is not True or self._clock() - self._heard >= HEARTBEAT_S:
                 self._probe()
             return 0
         try:
@@ -360,7 +366,7 @@ class Forwarder:
         self.cursor = int(entries[-1]["seq"])
         self.repo.ledger.set_meta(CURSOR_KEY, str(self.cursor))
         self.size.forwarded(entries, self.cursor)
-        self.up, self.last_error = True, None
+        self.up, self.last_error, self._heard = True, None, self._clock()
         self.tries += 1
         return len(entries)
 
@@ -376,7 +382,7 @@ class Forwarder:
         except LineDown as exc:
             self.up, self.last_error = False, str(exc)
             raise
-        self.up, self.last_error = True, None
+        self.up, self.last_error, self._heard = True, None, self._clock()
 
     def retry_quarantined(self) -> tuple[int, int]:
         """Push the quarantined entries again: (taken, still refused)."""

@@ -13,8 +13,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+import psycopg
 import pytest
-from sqlalchemy import select
+from sqlalchemy import make_url, select
 
 from db.curves import store_curve
 from db.repository import Repository
@@ -22,6 +23,7 @@ from stationd.boltfile import import_bolts
 from stationd.config import load_station_config
 from stationd.errors import ConfigError
 from stationd.forward import (
+    HEARTBEAT_S,
     LINE_FEED,
     BacklogBytes,
     Forwarder,
@@ -171,6 +173,32 @@ def test_with_nothing_to_send_a_line_that_answers_is_up_and_its_tables_made(tmp_
     assert f.step() == 0
     assert f.status()["up"] is True and f.last_error is None
     assert _line_rows(pg_url, "ST-U") == []             # the line's tables are there, empty
+    f.line.dispose()
+    repo.close()
+
+
+def test_with_nothing_to_send_a_line_database_gone_is_found_within_a_heartbeat(
+        tmp_path, table, pg_url, pg_server):
+    """A station with nothing to send said the line database "up" for as long as it was
+    stopped (a trial: 70 s, until the next record): it is asked every HEARTBEAT_S."""
+    now = [1000.0]
+    repo = Repository.open(f"sqlite:///{tmp_path / 'st.db'}")
+    import_bolts(repo, table)
+    f = Forwarder(repo, LineConfig(pg_url, "ST-H"), clock=lambda: now[0])
+    assert f.step() == 0 and f.status()["up"] is True
+    name = make_url(pg_url).database
+    with psycopg.connect(f"host=127.0.0.1 port={pg_server.port} user=postgres "
+                         "dbname=postgres", autocommit=True) as c:   # the line database gone
+        c.execute("SELECT pg_terminate_backend(pid) FROM pg_stat_activity "
+                  "WHERE datname = %s", (name,))
+        c.execute(f'DROP DATABASE "{name}"')
+    now[0] += HEARTBEAT_S / 2
+    assert f.step() == 0 and f.status()["up"] is True     # not asked again yet
+    now[0] += HEARTBEAT_S / 2
+    with pytest.raises(LineDown):
+        f.step()
+    st = f.status()
+    assert st["up"] is False and st["last_error"]
     f.line.dispose()
     repo.close()
 
