@@ -314,6 +314,7 @@ def test_export_results_every_rundown_as_csv_or_json(run, db, tmp_path):
         repo.start_vehicle("VIN2", "WAGON-B")
         record(repo, "VIN2", "SF-FL", ok=True, tightening_id=3)
         others = sorted(set(repo.vehicle_report("VIN1").missing))
+        repo.close_vehicle("VIN1")          # VIN1 left the station; VIN2 is still on the lift
     code, out, err = run("db", "export", "--results", "--db", db)
     rows = list(csv.DictReader(io.StringIO(out)))
     assert code == 0 and err == ""
@@ -338,7 +339,10 @@ def test_export_results_every_rundown_as_csv_or_json(run, db, tmp_path):
     target = tmp_path / "results.csv"
     code, out, _ = run("db", "export", "--results", "--out", str(target), "--db", db)
     assert code == 0 and target.read_text().count("\n") == 1 + 3 + 2 * len(others)
-    assert f"3 rundowns and {2 * len(others)} missing bolts of 2 vehicles" in out
+    # the open vehicle's bolts are not run down yet, not missing (a trial read the vehicle
+    # on the lift as its bolts forgotten)
+    assert len(others) == 2 and "3 rundowns and 2 missing bolts (and 2 not run down yet on 1 " \
+        "open vehicle) of 2 vehicles" in out
     for args, message in ((["--vin", "NOPE"], "NOPE"), (["--since", "yesterday"], "ISO date"),
                           (["--format", "csv"], "go with --results"),
                           (["--results", "--format", "yaml"], "csv (the default) or json")):
@@ -486,8 +490,8 @@ def test_a_bolt_skipped_by_a_command_is_exported_and_reported_skipped_not_missin
         "skipped", "sam", "no access, fixture in the way")
     target = tmp_path / "results.csv"
     code, out, _ = run("db", "export", "--results", "--out", str(target), "--db", db)
-    assert len(others) == 2 and "1 rundown and 1 missing bolt (and 1 skipped) of 1 vehicle" \
-        in out
+    assert len(others) == 2 and "1 rundown and 0 missing bolts (and 1 skipped, 1 not run " \
+        "down yet on 1 open vehicle) of 1 vehicle" in out
     code, out, _ = run("db", "report", "VIN1", "--db", db)
     assert code == 1     # not complete: a skipped bolt is not tightened
     head = out.splitlines()[0]
