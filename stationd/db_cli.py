@@ -380,13 +380,18 @@ def cmd_db_spc(args: argparse.Namespace) -> int:
     if args.json:
         sys.stdout.write(strict_json(doc) + "\n")
         return EXIT_OK
-    # OK: the OK results the figures are computed on; NOK: the NOK rundowns (not bolts)
-    print(f"{'model':<10} {'bolt':<8} {'pset':>4} {'OK':>4} {'NOK':>4}  "
-          f"{'torque mean':>11} {'Cp':>5} {'Cpk':>5}  {'angle mean':>10} {'Cp':>5} {'Cpk':>5}")
+    # OK: the OK results the figures are computed on; NOK: the NOK rundowns (not bolts); a
+    # change of limits starts a new row: its parameter version (v) and torque limits tell
+    # the rows of one bolt and pset apart
+    print(f"{'model':<10} {'bolt':<8} {'pset':>4} {'OK':>4} {'NOK':>4} {'v':>3} "
+          f"{'torque Nm':>11}  {'mean':>6} {'Cp':>5} {'Cpk':>5}  {'angle mean':>10} "
+          f"{'Cp':>5} {'Cpk':>5}")
     for r in doc["bolts"]:
         t, a = r["torque"], r["angle"]
+        window = f"{_num(t['lsl'])}-{_num(t['usl'])}"
         print(f"{r['model']:<10} {r['bolt']:<8} {r['pset'] or '-':>4} {t['n']:>4} "
-              f"{r['nok']:>4}  {_num(t['mean']):>11} {_fig(t['cp']):>5} {_fig(t['cpk']):>5}  "
+              f"{r['nok']:>4} {r['parameter_version'] or '-':>3} {window:>11}  "
+              f"{_num(t['mean']):>6} {_fig(t['cp']):>5} {_fig(t['cpk']):>5}  "
               f"{_num(a['mean']):>10} {_fig(a['cp']):>5} {_fig(a['cpk']):>5}")
     for d in doc["trend"]:
         print(f"{d['day']}: {d['results']} results, {d['nok']} NOK "

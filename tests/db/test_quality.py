@@ -76,6 +76,13 @@ def test_a_parameter_change_starts_a_new_group_and_an_unknown_model_is_bad_input
     record(repo, "VINP2", "B1", tightening_id=2, torque_nm=52.0)
     b1 = [r for r in repo.spc()["bolts"] if r["bolt"] == "B1"]
     assert sorted((r["torque"]["lsl"], r["torque"]["usl"]) for r in b1) == [(45, 55), (47, 57)]
+    # the text's two rows of B1 are told apart: the version and the torque limits
+    text = subprocess.run([sys.executable, "-m", "stationd", "db", "spc", "--db",
+                           url_of(tmp_path / "station.db")],
+                          capture_output=True, text=True, cwd=ROOT, timeout=60, check=False)
+    rows = [line.split() for line in text.stdout.splitlines() if " B1 " in f" {line} "]
+    assert text.stdout.splitlines()[0].split()[5:7] == ["v", "torque"]
+    assert sorted((r[5], r[6]) for r in rows) == [("1", "45.0-55.0"), ("2", "47.0-57.0")]
     out = subprocess.run([sys.executable, "-m", "stationd", "db", "spc", "--db",
                           url_of(tmp_path / "station.db"), "--model", "NOPE"],
                          capture_output=True, text=True, cwd=ROOT, timeout=60, check=False)
