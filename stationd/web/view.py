@@ -540,7 +540,9 @@ class View:
             return f"{self.selected}{pset}: tighten"
         if self.closed is not None:
             return self._closed_line(NAMES_SHOWN)
-        if self.reopened is not None:
+        # a vehicle reopened: said unless another one is on the lift (that one, its locked
+        # bolts, come first: another's rework notice hid them from the operator)
+        if self.reopened is not None and self.vin in (None, self.reopened[0]):
             vin, user = self.reopened
             return f"{vin} reopened for rework by {user}: it opens when raised at the station"
         if self.state in TRACKING_STATES and not self.fresh and self.stale_since is None:

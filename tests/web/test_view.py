@@ -280,6 +280,8 @@ def test_a_reopened_vehicle_is_no_longer_said_closed():
         "station"
     v2 = fold([*opened(), VehicleReopened(vin="OTHER", user="sam")])
     assert v2.reopened == ("OTHER", "sam")
+    # the vehicle on the lift comes first: another one's rework is not its headline
+    assert "OTHER" not in v2.headline()
     v2.apply(VehicleClosed(vin=VIN, missing=(), nok=()))   # another one closes: said closed
     assert v2.headline() == f"{VIN} closed: all bolts OK"
     v3 = fold([*opened(), VehicleReopened(vin=VIN, user="sam"), *opened()])
