@@ -153,6 +153,7 @@ class View:
     #: and its kind: a reader that acts on the reason switches on it, never parses words
     reason_kind: Because | None = None
     vin: str | None = None
+    loaded: bool = False          # ``vin`` is open at the station (opened, not closed since)
     model: str | None = None
     rework: bool = False
     bolts: dict[str, BoltState] = field(default_factory=dict)
@@ -319,7 +320,7 @@ class View:
             self._set(e.bolt, TO_LOOSEN, reason_words(e.reason))
 
     def _open(self, e: VehicleOpened) -> None:
-        self.vin, self.model, self.rework = e.vin, e.model, e.rework
+        self.vin, self.model, self.rework, self.loaded = e.vin, e.model, e.rework, True
         self.closed, self.selected, self.wrench, self.refused = None, None, None, ""
         self.reopened = None
         self.located = None
@@ -333,6 +334,8 @@ class View:
 
     def _close(self, e: VehicleClosed) -> None:
         self.closed = {"vin": e.vin, "missing": list(e.missing), "nok": list(e.nok)}
+        if e.vin == self.vin:
+            self.loaded = False
         self.reopened = None
         self.wrench, self.selected = None, None
         if e.vin != self.vin:
@@ -419,8 +422,12 @@ class View:
                 self._set(e.bolt, OK if e.ok else NOK, "" if e.ok else "NOK: rework")
             b.torque_nm, b.angle_deg = e.torque_nm, e.angle_deg
             b.ends_nok, b.ran = not e.ok, True
-        if self.selected == e.bolt:
-            self.selected, self.selected_loosen = None, None
+        if e.vin == self.vin and self.selected == e.bolt:   # a late result of a closed
+            self.selected, self.selected_loosen = None, None  # vehicle: not this one's
+        c = self.closed
+        if c is not None and c["vin"] == e.vin and e.kind != LOOSENING:   # stored late:
+            c["missing"] = [b for b in c["missing"] if b != e.bolt]       # its close line
+            c["nok"] = [b for b in c["nok"] if b != e.bolt] + ([] if e.ok else [e.bolt])
         self.results.insert(0, {
             "t": e.t, "vin": e.vin, "bolt": e.bolt, "ok": e.ok, "pset": e.pset,
             "torque_nm": e.torque_nm, "torque_min": e.torque_min, "torque_max": e.torque_max,
@@ -540,9 +547,9 @@ class View:
             return f"{self.selected}{pset}: tighten"
         if self.closed is not None:
             return self._closed_line(NAMES_SHOWN)
-        # a vehicle reopened: said unless another one is on the lift (that one, its locked
-        # bolts, come first: another's rework notice hid them from the operator)
-        if self.reopened is not None and self.vin in (None, self.reopened[0]):
+        # a vehicle reopened: said unless another one is open on the lift (that one, its
+        # locked bolts, come first: another's rework notice hid them from the operator)
+        if self.reopened is not None and (not self.loaded or self.vin == self.reopened[0]):
             vin, user = self.reopened
             return f"{vin} reopened for rework by {user}: it opens when raised at the station"
         if self.state in TRACKING_STATES and not self.fresh and self.stale_since is None:

@@ -14,6 +14,7 @@ from stationd.station.events import (
     StateReason,
     ToolDisabled,
     VehicleClosed,
+    VehicleOpened,
     VehicleReopened,
     WrongBolt,
 )
@@ -282,6 +283,10 @@ def test_a_reopened_vehicle_is_no_longer_said_closed():
     assert v2.reopened == ("OTHER", "sam")
     # the vehicle on the lift comes first: another one's rework is not its headline
     assert "OTHER" not in v2.headline()
+    # none open on the lift (closed, then reopened, then another reopened): said
+    v4 = fold([*opened(), VehicleClosed(vin=VIN, missing=(), nok=()),
+               VehicleReopened(vin=VIN, user="sam"), VehicleReopened(vin="OTHER", user="kim")])
+    assert v4.headline().startswith("OTHER reopened for rework by kim")
     v2.apply(VehicleClosed(vin=VIN, missing=(), nok=()))   # another one closes: said closed
     assert v2.headline() == f"{VIN} closed: all bolts OK"
     v3 = fold([*opened(), VehicleReopened(vin=VIN, user="sam"), *opened()])
@@ -333,3 +338,23 @@ def test_what_a_device_said_it_is_goes_with_its_health():
                                           "channel 1), software 1.2")])
     assert v.device_health()["wrench"]["identity"].startswith("PF6000")
     assert "identity" not in v.device_health().get("lift", {})
+
+
+def test_a_late_result_of_a_closed_vehicle_leaves_the_next_ones_selection():
+    """A result stored late (the database away while the lift went down) of the vehicle that
+    left: the next vehicle's selected bolt of the same name stays selected, and the closed
+    vehicle's line no longer counts the bolt missing."""
+    from dataclasses import replace as _replace
+
+    v = fold(opened())
+    v.apply(VehicleClosed(vin=VIN, missing=("B1", "B2"), nok=()))
+    assert v.closed is not None and v.closed["missing"] == ["B1", "B2"]
+    v.apply(result("B1", True, 7))
+    assert v.closed["missing"] == ["B2"] and v.closed["nok"] == []
+    nxt = [_replace(e, vin="NEXTVIN0000000001") if isinstance(e, VehicleOpened) else e
+           for e in opened()]
+    w = fold(nxt + [e for e in work() if type(e).__name__ == "BoltSelected"][-1:])
+    assert w.selected == "B3"
+    w.apply(result("B3", True, 8))            # the vehicle that left, its B3
+    assert w.selected == "B3" and w.headline().startswith("B3")
+
