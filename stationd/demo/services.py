@@ -179,8 +179,12 @@ class StationServices:
     report's tests run it)."""
 
     def __init__(self, cfg: StationConfig, bus: EventBus, screens: Screens | None = None,
-                 tell: Callable[[Event], None] | None = None) -> None:
+                 tell: Callable[[Event], None] | None = None, *,
+                 movable: bool = True) -> None:
         self.cfg, self.bus, self._tell = cfg, bus, tell
+        #: an OPC UA port taken meanwhile moves to the next free one (not a port asked for)
+        self.movable = movable
+        self.endpoint: str | None = None   # where OPC UA is served (once it is)
         self.screens = screens if screens is not None else Screens(bus)
         self.opcua: Any = None          # the OpcUaServer, once it serves
         self.problem: str | None = None   # why OPC UA is not served (printed by the demo)
@@ -217,7 +221,7 @@ class StationServices:
             except OSError as exc:   # taken between the check and the start
                 with contextlib.suppress(Exception):
                     await server.stop()
-                if exc.errno != errno.EADDRINUSE:
+                if exc.errno != errno.EADDRINUSE or not self.movable:
                     self.problem = f"not served on {ua_cfg.endpoint}: " \
                         f"{errno.errorcode.get(exc.errno or 0, '')} " \
                         f"{exc.strerror or exc}".strip()
@@ -234,7 +238,7 @@ class StationServices:
             self.problem = f"not served on {first}: every port tried was taken meanwhile"
             return
         assert self._repo is not None  # noqa: S101 - opened by start()
-        self.opcua = server
+        self.opcua, self.endpoint = server, ua_cfg.endpoint
         self._tasks.append(asyncio.create_task(server.run(self._stop_ua, self._repo)))
 
     async def drain(self, timeout: float = DRAIN_S) -> bool:

@@ -355,8 +355,10 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
                       + (f", {screens.server.url}line" if cfg.line is not None else "")
                       + (f" ({moved} {screens.server.url})" if moved else ""),
                       file=out, flush=True)
-        services = [StationServices(cfg, station.bus, screens, station.tell)]
+        services = [StationServices(cfg, station.bus, screens, station.tell,
+                                    movable=endpoints is None or not endpoints.given)]
         await services[0].start()
+        truth["opcua"] = services[0].endpoint      # where it is served (the summary's)
         _say_services(cfg, why, services[0], out)
         world = World(cfg, seed=args.seed)
         try:
@@ -409,7 +411,7 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
     summary["station_id"] = station_id(1)
     summary["vin"] = truth["vin"]
     summary["share"] = truth.get("share", [])
-    summary["opcua"] = None if cfg.opcua is None else cfg.opcua.endpoint
+    summary["opcua"] = truth.get("opcua")
     # the line's verdict from each part's reasons (never read back from a verdict's text)
     problems: list[str] = summary.pop("problems")
     interrupted = truth.get("interrupted")
@@ -579,7 +581,7 @@ async def _next_station(args: argparse.Namespace, first: StationConfig, k: int, 
         await loop.run_in_executor(None, station.close)
     n = int(truth.get("cycles", cycles))
     s = _summary(station, report, n, truth["wrong"], truth["locked_sends"])
-    return {"station_id": sid, "opcua": None if cfg.opcua is None else cfg.opcua.endpoint,
+    return {"station_id": sid, "opcua": mine.endpoint,
             "bolts": n, "ok": s["ok"], "left": s["left"], "handled": s["handled"],
             "nok_policy": s["nok_policy"], "operators": s["operators"],
             "results": s["results"],

@@ -24,16 +24,21 @@ def test_a_port_taken_after_it_was_found_free_moves_to_the_next_free_one(tmp_pat
         cfg = replace(load_station_config(SIM_CONFIG), opcua=demo_opcua(endpoint, "DEMO-2"),
                       database_url=f"sqlite:///{tmp_path / 's.db'}", line=None)
 
-        async def main() -> tuple[str | None, str | None, str | None]:
-            services = StationServices(cfg, EventBus())
+        async def main(movable: bool) -> tuple[str | None, str | None, str | None]:
+            services = StationServices(cfg, EventBus(), movable=movable)
             await services.start()
             try:
                 url = services.opcua.url if services.opcua is not None else None
+                assert services.endpoint == url
                 return url, services.moved, services.problem
             finally:
                 await services.stop()
 
-        url, moved, problem = asyncio.run(main())
+        url, moved, problem = asyncio.run(main(True))
+        # a port asked for (--opcua HOST:PORT) is never moved: an MES is told that one
+        pinned = asyncio.run(main(False))
     assert problem is None and url is not None and url != endpoint
     assert url.startswith("opc.tcp://127.0.0.1:") and int(url.rsplit(":", 1)[1]) > taken
     assert moved == f"{endpoint} was taken after it was found free: the next free port"
+    assert pinned[0] is None and pinned[1] is None
+    assert pinned[2] is not None and pinned[2].startswith(f"not served on {endpoint}: EADDRINUSE")
