@@ -323,10 +323,12 @@ class Forwarder:
     """Forwards the local feed to the line database, in order, from where it stopped."""
 
     def __init__(self, repo: Repository, cfg: LineConfig, line: LineDb | None = None,
-                 clock: Callable[[], float] = time.time) -> None:
+                 clock: Callable[[], float] = time.time,
+                 ticks: Callable[[], float] = time.monotonic) -> None:
         self.repo, self.cfg = repo, cfg
         self.line = line or LineDb(cfg.url)
-        self._clock = clock
+        self._clock = clock      # the records' time (their lag)
+        self._ticks = ticks      # intervals (a clock stepped back stops no heartbeat)
         self.cursor = int(repo.ledger.get_meta(CURSOR_KEY) or 0)
         self.db_id = repo.ledger.db_id()
         self.up: bool | None = None        # None: not tried yet
@@ -335,7 +337,7 @@ class Forwarder:
         self.tries = 0                     # pushes to the line database finished, taken or not
         self.last_status: dict[str, Any] | None = None   # the latest, for the status API
         self.size = BacklogBytes(self.cursor)
-        self._heard = -math.inf            # when the line database last answered (clock)
+        self._heard = -math.inf            # when the line database last answered (ticks)
 
     def step(self) -> int:
         """Forward up to one batch; how many entries were handled.  ``LineDown`` when the
@@ -345,7 +347,7 @@ class Forwarder:
             # not known to answer, or not heard from for HEARTBEAT_S: asked (a station
             # with nothing to send said the line database "up" for as long as it was
             # stopped, until its next record)
-            if self.up is not True or self._clock() - self._heard >= HEARTBEAT_S:
+            if self.up is not True or self._ticks() - self._heard >= HEARTBEAT_S:
                 self._probe()
             return 0
         try:
@@ -366,7 +368,7 @@ class Forwarder:
         self.cursor = int(entries[-1]["seq"])
         self.repo.ledger.set_meta(CURSOR_KEY, str(self.cursor))
         self.size.forwarded(entries, self.cursor)
-        self.up, self.last_error, self._heard = True, None, self._clock()
+        self.up, self.last_error, self._heard = True, None, self._ticks()
         self.tries += 1
         return len(entries)
 
@@ -382,7 +384,7 @@ class Forwarder:
         except LineDown as exc:
             self.up, self.last_error = False, str(exc)
             raise
-        self.up, self.last_error, self._heard = True, None, self._clock()
+        self.up, self.last_error, self._heard = True, None, self._ticks()
 
     def retry_quarantined(self) -> tuple[int, int]:
         """Push the quarantined entries again: (taken, still refused)."""

@@ -184,7 +184,7 @@ def test_with_nothing_to_send_a_line_database_gone_is_found_within_a_heartbeat(
     now = [1000.0]
     repo = Repository.open(f"sqlite:///{tmp_path / 'st.db'}")
     import_bolts(repo, table)
-    f = Forwarder(repo, LineConfig(pg_url, "ST-H"), clock=lambda: now[0])
+    f = Forwarder(repo, LineConfig(pg_url, "ST-H"), ticks=lambda: now[0])
     assert f.step() == 0 and f.status()["up"] is True
     name = make_url(pg_url).database
     with psycopg.connect(f"host=127.0.0.1 port={pg_server.port} user=postgres "
