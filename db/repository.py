@@ -331,10 +331,13 @@ class Repository:
                     # still owed its tool's own result (the copy answers nothing of it)
                     _settle(s, enable_id, of=(known.vin, known.bolt))
                     return Recorded(known.id, again=True, vin=known.vin, bolt=known.bolt)
-            # a result taken while the vehicle was open is its result, also stored after the
-            # close (the database was away meanwhile: the lift went down with the result kept
-            # in memory; refused, it held the station in fault until someone reopened it)
-            if v.ended_at is not None and (result_at is None or result_at > v.ended_at):
+            # a result of a tool enabled (or a result taken) while the vehicle was open is its
+            # result, also stored after the close (the database away meanwhile, the lift went
+            # down with the result kept in memory; or a result owed across a restart, fetched
+            # after the next vehicle closed this one): refused, it held the station in fault
+            # until someone reopened the vehicle
+            times = [t for t in (sent_at, result_at) if t is not None]
+            if v.ended_at is not None and (not times or min(times) > v.ended_at):
                 raise DataError(f"vehicle {vin} is closed: a tightening cannot be recorded")
             b = s.scalar(select(Bolt).where(Bolt.model_id == v.model_id, Bolt.code == bolt,
                                             Bolt.removed_at.is_(None)))

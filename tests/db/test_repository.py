@@ -237,9 +237,14 @@ def test_a_result_taken_before_the_close_is_recorded_after_it(repo, bolts_file):
     record(repo, "WVW1234567890", "B1", ok=True, tightening_id=8, result_at=taken)
     assert repo.vehicle_report("WVW1234567890").ok == ["B1"]
     assert repo.vehicle_report("WVW1234567890").vehicle.ended_at == summary.vehicle.ended_at
+    # a result owed to a tool enabled before the close, taken after it (fetched after a
+    # restart): the vehicle's too
+    record(repo, "WVW1234567890", "B3", ok=True, tightening_id=9, sent_at=taken,
+           result_at=datetime.now(UTC))
+    assert repo.vehicle_report("WVW1234567890").ok == ["B1", "B3"]
     for late in (datetime.now(UTC), None):
         with pytest.raises(DataError, match="is closed"):
-            record(repo, "WVW1234567890", "B2", result_at=late)
+            record(repo, "WVW1234567890", "B2", result_at=late, sent_at=late)
 
 
 def test_open_errors_are_one_line_station_errors(tmp_path):
