@@ -75,7 +75,8 @@ def rendered(camera: Camera, scene: render.Scene, seed: int,
     if not folder:
         return render.render(camera, scene, window=window, seed=seed).image
     path = Path(folder) / f"{_key(camera, scene, seed, window)}.npy"
-    with contextlib.suppress(OSError, ValueError):   # not there yet (or being replaced)
+    # not there yet, being replaced, or cut short (a zero-length file: EOFError)
+    with contextlib.suppress(OSError, ValueError, EOFError):
         image: np.ndarray = np.load(path, allow_pickle=False)
         return image
     # One process renders it, the others wait for its file: at the start of a test run both
@@ -85,7 +86,7 @@ def rendered(camera: Camera, scene: render.Scene, seed: int,
         image = np.load(path, allow_pickle=False)   # rendered while this one waited
         _release(lock)
         return image
-    except (OSError, ValueError):
+    except (OSError, ValueError, EOFError):
         pass
     try:
         image = render.render(camera, scene, window=window, seed=seed).image
@@ -97,10 +98,14 @@ def rendered(camera: Camera, scene: render.Scene, seed: int,
     # lets it finish
     writer = threading.Thread(target=_store, args=(path, image, lock),
                               name="sim-background-store")
+    try:
+        writer.start()
+    except RuntimeError:       # no thread to be had (shutting down): not kept, lock let go
+        _release(lock)
+        return image
     with _lock:
         _writers[:] = [w for w in _writers if w.is_alive()]
         _writers.append(writer)
-    writer.start()
     return image
 
 

@@ -8,6 +8,7 @@ real browser (headless Chromium through Selenium, headless Firefox through WebDr
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import threading
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
@@ -77,7 +78,8 @@ class Browsers:
     """This worker's browsers, one of each kind, started when a test first needs it and kept
     for the session (a browser's start was most of a short browser test's time: Chromium's
     three seconds, Firefox's six, each test again); each test gets it :meth:`Page.fresh`, as
-    a new one would be.  One that stopped answering is started again."""
+    a new one would be.  One that cannot be made fresh (a test left it broken) is started
+    again."""
 
     def __init__(self, folder: Path) -> None:
         self.folder = folder
@@ -88,19 +90,26 @@ class Browsers:
         if why is not None:      # a browser not installed is a skip naming the package,
             pytest.skip(why)     # never a silent pass
         p = self.open.get(name)
-        if p is not None and not p.alive():
-            self.open.pop(name).close()
-            p = None
-        if p is None:
-            folder = self.folder / name
-            folder.mkdir(exist_ok=True)
-            p = self.open[name] = open_page(name, folder)
+        if p is not None:
+            try:
+                p.fresh()
+                return p
+            except Exception:         # left broken by the last test: a new one
+                self._drop(name)
+        folder = self.folder / name
+        folder.mkdir(exist_ok=True)
+        p = self.open[name] = open_page(name, folder)
         p.fresh()
         return p
 
-    def close(self) -> None:
-        for p in self.open.values():
+    def _drop(self, name: str) -> None:
+        p = self.open.pop(name)
+        with contextlib.suppress(Exception):   # a browser that died may not close cleanly
             p.close()
+
+    def close(self) -> None:
+        for name in list(self.open):
+            self._drop(name)
 
 
 @pytest.fixture(scope="session")

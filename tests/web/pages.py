@@ -66,20 +66,15 @@ class Page:
 
     def fresh(self) -> None:
         """The browser as a newly started one is for a test: a blank page (the last test's
-        page no longer polls its stopped server), no cookie, nothing cached, the first size,
-        an empty downloads folder."""
+        page no longer polls its stopped server), no cookie, no cached response to reuse
+        unasked (Chromium's cache emptied; the screens' responses are no-cache or no-store),
+        the first size, an empty downloads folder (the screens keep nothing in the
+        browser's storage).  Raises when the browser does not answer."""
         self.get("about:blank")
         self.forget()
         for f in self.downloads.iterdir():
             f.unlink()
         self.size(1920, 1080)
-
-    def alive(self) -> bool:
-        """Whether the browser still answers (a test may have left it broken)."""
-        try:
-            return bool(self.js("return 1 + 1 === 2"))
-        except Exception:
-            return False
 
     # -- built on js() -----------------------------------------------------------------------
     def wait(self, cond: Callable[[Page], Any], timeout: float = 15.0, what: str = "") -> Any:
