@@ -75,19 +75,16 @@ def rendered(camera: Camera, scene: render.Scene, seed: int,
     if not folder:
         return render.render(camera, scene, window=window, seed=seed).image
     path = Path(folder) / f"{_key(camera, scene, seed, window)}.npy"
-    # not there yet, being replaced, or cut short (a zero-length file: EOFError)
-    with contextlib.suppress(OSError, ValueError, EOFError):
-        image: np.ndarray = np.load(path, allow_pickle=False)
+    image = _read(path)
+    if image is not None:
         return image
     # One process renders it, the others wait for its file: at the start of a test run both
     # workers' first stations asked for the same eight backgrounds at once, each rendering all.
     lock = _take(path)
-    try:
-        image = np.load(path, allow_pickle=False)   # rendered while this one waited
+    image = _read(path)             # rendered while this one waited
+    if image is not None:
         _release(lock)
         return image
-    except (OSError, ValueError, EOFError):
-        pass
     try:
         image = render.render(camera, scene, window=window, seed=seed).image
     except BaseException:
@@ -115,6 +112,15 @@ def wait_stored() -> None:
         writers = list(_writers)
     for w in writers:
         w.join()
+
+
+def _read(path: Path) -> np.ndarray | None:
+    """The image kept at ``path``; None when it is not there yet, is being replaced or was
+    cut short (a zero-length file: EOFError)."""
+    with contextlib.suppress(OSError, ValueError, EOFError):
+        image: np.ndarray = np.load(path, allow_pickle=False)
+        return image
+    return None
 
 
 def _take(path: Path) -> int | None:
