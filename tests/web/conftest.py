@@ -21,9 +21,9 @@ from stationd.bus import EventBus
 from stationd.station.events import StationEvent
 from stationd.web.frames import LatestFrames
 from stationd.web.server import WebServer
-from tests.web.pages import BROWSERS, Page, missing, open_page
+from tests.web.pages import BROWSERS, FIRST_SIZE, Page, missing, open_page
 
-SIZES = ((1920, 1080), (1280, 800))
+SIZES = (FIRST_SIZE, (1280, 800))
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

@@ -32,6 +32,10 @@ FIREFOX = shutil.which("firefox-esr") or shutil.which("firefox")
 BROWSERS = ("chromium", "firefox")
 
 
+#: the viewport a browser starts with (a panel PC's 1280x800 is the screenshots' second)
+FIRST_SIZE = (1920, 1080)
+
+
 class PageTimeoutError(AssertionError):
     """A condition the page never reached: the test fails with what was last seen."""
 
@@ -60,8 +64,8 @@ class Page:
         raise NotImplementedError
 
     def forget(self) -> None:
-        """Forget every cookie and cached response (a sign-in is a cookie of 127.0.0.1, which
-        every port shares)."""
+        """Forget every cookie (a sign-in is a cookie of 127.0.0.1, which every port shares)
+        and, where the browser lets one, its cached responses."""
         raise NotImplementedError
 
     def fresh(self) -> None:
@@ -74,7 +78,7 @@ class Page:
         self.forget()
         for f in self.downloads.iterdir():
             f.unlink()
-        self.size(1920, 1080)
+        self.size(*FIRST_SIZE)
 
     # -- built on js() -----------------------------------------------------------------------
     def wait(self, cond: Callable[[Page], Any], timeout: float = 15.0, what: str = "") -> Any:
