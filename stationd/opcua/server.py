@@ -77,6 +77,7 @@ from stationd.opcua.model import (
     IJT_URI,
     MACHINERY_URI,
     RESULT_URI,
+    init_server,
     load_model,
     publish_dictionaries,
 )
@@ -210,7 +211,7 @@ class OpcUaServer:
         if self.server is not None:
             return
         server = Server(user_manager=StationUsers(self.cfg.users))
-        await server.init()
+        await init_server(server)
         server.set_endpoint(self.cfg.endpoint)
         server.set_server_name(f"stationd {self.cfg.station_id}")
         await server.set_application_uri(f"urn:stationd:{self.cfg.station_id}")
