@@ -222,6 +222,9 @@ class UnreadableResult:
     vin: str = ""
     timestamp: datetime | None = None
     fetched: bool = False
+    #: the lower revision its body read as, had that revision carried a result type (its
+    #: header's does, 3+; a result without its type may be a loosening): None otherwise
+    laid_out_as: int | None = None
 
 
 #: what ``wait_result`` hands out: a result, or one that could not be read

@@ -288,7 +288,8 @@ class OpenProtocolWrench(SupervisedWrench):
         For filling a gap in the tightening ids after a reconnect.  The result is not
         queued and needs no acknowledgement; it says ``fetched=True``.  A MID 0065 is read
         as a pushed result is (``oldresults.py``): laid out as a lower revision, it is read
-        so and later fetches ask for that revision; one that reads at no revision comes
+        so and later fetches ask for that revision (one without a result type is held as
+        unreadable, twice before that); one that reads at no revision comes
         back as an :class:`UnreadableResult` (fetched, its raw text kept), not as an error.
         Raises as commands do: RefusedError for another refusal, a ProtocolError for an
         answer about another tightening, and a timeout or lost link resets the link.

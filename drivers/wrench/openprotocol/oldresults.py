@@ -5,7 +5,9 @@ Why its own revision: a controller may keep its old results at a revision other 
 it pushes at.  The first fetch of a session asks for the highest revision and one lower each
 time the controller answers "revision unsupported", and the session keeps the one agreed; a
 MID 0065 laid out as a lower revision than its header says is read at that one (as a pushed
-result is, ``reading.py``) and later fetches ask for it.  One that reads at no revision is
+result is, ``reading.py``) and later fetches ask for it; where that lower revision carries
+no result type and the header's does, only after two such answers in a row (the first held
+as unreadable: it may be a loosening).  One that reads at no revision is
 the controller's record of a tightening all the same: handed back as an ``UnreadableResult``,
 to be stored and looked at, not raised.
 """
@@ -31,6 +33,11 @@ class OldResults:
         self._log = channel.log
         self.device = channel.device
         self.agreed: int | None = None
+        self._untyped: tuple[int, int] | None = None   # the last answer, laid out untyped
+
+    def new_session(self) -> None:
+        """Nothing agreed yet (``cond`` held): the controller may be another one."""
+        self.agreed, self._untyped = None, None
 
     def fetch(self, tightening_id: int, timeout: float, epoch: int, what: str
               ) -> Received | None:
@@ -62,7 +69,16 @@ class OldResults:
 
     def _read(self, reply: Message, tightening_id: int, what: str) -> Received:
         result = receive(reply)
-        if isinstance(result, UnreadableResult):
+        untyped, self._untyped = self._untyped, None
+        if isinstance(result, UnreadableResult) and result.laid_out_as is not None:
+            self._untyped = (reply.revision, result.laid_out_as)
+            self._log.warning("%s: %s: MID 0065 revision %d is laid out as revision %d, "
+                              "which carries no result type; kept with its raw text",
+                              self.device, what, reply.revision, result.laid_out_as)
+            if untyped == self._untyped:        # twice in a row: the controller's habit
+                self._feed.lowered(reply.mid, reply.revision, result.laid_out_as)
+                self._agree(result.laid_out_as)
+        elif isinstance(result, UnreadableResult):
             self._log.warning("%s: %s: MID 0065 revision %d does not read at any revision "
                               "(%s); kept with its raw text", self.device, what,
                               reply.revision, result.error)

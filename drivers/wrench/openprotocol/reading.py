@@ -14,7 +14,12 @@ loses every result of that controller; so the rules, in order:
    revision or a lower one followed by fields this driver does not know: the first bytes
    are that revision's parameters in the specification's order, the rest is ignored.  The
    highest revision that reads cleanly wins; the result says the revision it was read at
-   (``revision``) and the one its header claimed (``header_revision``).
+   (``revision``) and the one its header claimed (``header_revision``).  Where the header's
+   revision carries a result type (3+) and the one read does not, the result is not handed
+   out as read: one byte lost in the type's tag reads that way too, and a loosening read
+   without its type would close its bolt.  It is an :class:`UnreadableResult` (rule 3) that
+   says the revision it read as (``laid_out_as``): the feed renews its subscription there
+   only when the next result reads so too (``resultfeed``).
 3. A body whose layout is right but whose values do not read (a torque of letters, a status
    of 7) is not read at another revision: its lower revisions' parameters would read and
    silently drop what the broken one carried (a result type, which decides whether the
@@ -47,6 +52,19 @@ from drivers.wrench.openprotocol.result import (
 
 #: the fields picked out of an unreadable body, for the station to say which bolt it may be
 PICKED = ("tightening_id", "pset", "vin", "timestamp")
+#: the first revision whose results say their type (parameter 49): whether one may close a bolt
+TYPED_FROM = 3
+
+
+class TypeLostError(ProtocolError):
+    """A body labelled with a revision that carries a result type, laid out as one that does
+    not: ``result`` is what it reads as (without its type)."""
+
+    def __init__(self, result: TighteningResult, header: int) -> None:
+        super().__init__(f"labelled revision {header} but laid out as revision "
+                         f"{result.revision}, which carries no result type: whether it is a "
+                         "tightening is not known")
+        self.result = result
 
 
 def read_result(mid: int, revision: int, text: str) -> TighteningResult:
@@ -64,7 +82,10 @@ def read_result(mid: int, revision: int, text: str) -> TighteningResult:
             result = parse_tightening(mid, rev, text[:length])
         except ProtocolError:
             continue
-        return dataclasses.replace(result, raw=text, header_revision=revision)
+        result = dataclasses.replace(result, raw=text, header_revision=revision)
+        if rev < TYPED_FROM <= revision:
+            raise TypeLostError(result, revision)
+        return result
     raise first
 
 
@@ -73,11 +94,22 @@ def receive(msg: Message) -> TighteningResult | UnreadableResult:
     text = msg.raw.decode("ascii", "replace")       # a non-ASCII byte fails its field
     try:
         return read_result(msg.mid, msg.revision, text)
+    except TypeLostError as e:
+        r = e.result
+        return _unreadable(msg, str(e), r.tightening_id, r.pset, r.vin, r.timestamp, r.revision)
     except ProtocolError as e:
         picked = pick(msg.mid, msg.revision, text)
-        return UnreadableResult(raw=msg.raw.decode("ascii", "backslashreplace"), mid=msg.mid,
-                                revision=msg.revision, error=str(e),
-                                fetched=msg.mid != MID_RESULT, **picked)
+        return _unreadable(msg, str(e), picked["tightening_id"], picked["pset"], picked["vin"],
+                           picked["timestamp"])
+
+
+def _unreadable(msg: Message, error: str, tightening_id: int | None, pset: int | None,
+                vin: str, timestamp: datetime | None,
+                laid_out_as: int | None = None) -> UnreadableResult:
+    return UnreadableResult(raw=msg.raw.decode("ascii", "backslashreplace"), mid=msg.mid,
+                            revision=msg.revision, error=error, tightening_id=tightening_id,
+                            pset=pset, vin=vin, timestamp=timestamp,
+                            fetched=msg.mid != MID_RESULT, laid_out_as=laid_out_as)
 
 
 def pick(mid: int, revision: int, text: str) -> dict[str, Any]:
@@ -138,4 +170,4 @@ def _values(raw: dict[str, str]) -> dict[str, Any]:
             "timestamp": stamp}
 
 
-__all__ = ["PICKED", "pick", "read_result", "receive"]
+__all__ = ["PICKED", "TYPED_FROM", "TypeLostError", "pick", "read_result", "receive"]

@@ -103,7 +103,7 @@ TAGGED: dict[int, Param] = dict(enumerate((
     _p("sync_tightening_id", 5, "int"), _p("tool_serial", 14, "str"),
     _p("timestamp", 19, "time", core=True), _p("pset_changed", 19, "time"),
     _p("pset_name", 25, "str", 3), _p("torque_unit", 1, "int", 3),
-    _p("result_type", 2, "int", 3),
+    _p("result_type", 2, "int", 3, core=True),   # blank: whether it may close a bolt unknown
     _p("identifier2", 25, "str", 4), _p("identifier3", 25, "str", 4),
     _p("identifier4", 25, "str", 4),
     _p("customer_error_code", 4, "str", 5),

@@ -10,7 +10,10 @@ A result is read by its own header's revision (``reading.py``): one laid out as 
 revision is read so, said once, and its subscription is owed a renewal at that revision
 (``renewal.py`` does it; never from here, the reading thread, which has to read the
 renewal's answers).  One that reads at no revision is queued as an ``UnreadableResult`` with
-its raw text and acknowledged like a result once the station has stored it.
+its raw text and acknowledged like a result once the station has stored it.  So is one laid
+out as a revision without a result type (below 3) under a header whose revision has one:
+and the subscription is renewed there only after two such results in a row, the controller's
+habit, not a byte lost on the line (a session renewed below 3 reads no result's type).
 """
 
 from __future__ import annotations
@@ -56,12 +59,16 @@ class ResultFeed:
         self.caught_up: set[int] = set()
         self._owed = 0                          # 0062s for those pushes, sent by the supervisor
         self._lowered_said: set[tuple[int, int, int]] = set()   # (MID, header, read at)
+        # the last result pushed, when it was laid out as a revision without a type: (its
+        # header's revision, the one it read as)
+        self._untyped: tuple[int, int] | None = None
         channel.route(op.MID_RESULT, self.received)
 
     def reset(self) -> None:
         """A new session: nothing pushed or owed yet, the highest revision again."""
         with self._cond:
             self.renew_at, self.last_pushed, self._owed = None, None, 0
+            self._untyped = None
             self.caught_up.clear()
             self.cap = RESULT_REVISIONS[0]
 
@@ -78,19 +85,34 @@ class ResultFeed:
                     self._owed += 1              # the station has it: acknowledged, not
                     return                       # handed out again
                 self.last_pushed = max(tid, self.last_pushed or 0)
-            subscribed = self.subscribed
-            if isinstance(item, UnreadableResult):
+            untyped, self._untyped = self._untyped, None
+            if isinstance(item, UnreadableResult) and item.laid_out_as is not None:
+                self._untyped = (msg.revision, item.laid_out_as)
+                self._log.warning(
+                    "%s: MID 0061 revision %d is laid out as revision %d, which carries no "
+                    "result type; kept with its raw text for the station (tightening id "
+                    "%s), its bolt held: it may be a loosening", self.device, msg.revision,
+                    item.laid_out_as,
+                    item.tightening_id if item.tightening_id is not None else "?")
+                if untyped == self._untyped:   # twice in a row: the controller's habit
+                    self._lower(msg.mid, msg.revision, item.laid_out_as)
+            elif isinstance(item, UnreadableResult):
                 self._log.warning(
                     "%s: MID 0061 revision %d does not read at any revision (%s); kept with "
                     "its raw text for the station (tightening id %s)", self.device,
                     msg.revision, item.error,
                     item.tightening_id if item.tightening_id is not None else "?")
             elif item.header_revision is not None:
-                self.lowered(msg.mid, item.header_revision, item.revision)
-                if subscribed is not None and item.revision < subscribed:
-                    self.cap = min(self.cap, item.revision)
-                    self.renew_at = self.cap
+                self._lower(msg.mid, item.header_revision, item.revision)
             self._queue(item, self._channel.epoch)
+
+    def _lower(self, mid: int, header: int, read_at: int) -> None:
+        """Results labelled ``header`` are laid out as ``read_at``: said once, and the
+        subscription renewed there (``cond`` held)."""
+        self.lowered(mid, header, read_at)
+        if self.subscribed is not None and read_at < self.subscribed:
+            self.cap = min(self.cap, read_at)
+            self.renew_at = self.cap
 
     def lowered(self, mid: int, header: int, read_at: int) -> None:
         """Say once (a wrench's life) that ``mid`` labelled ``header`` read as ``read_at``."""
@@ -99,7 +121,7 @@ class ResultFeed:
         self._lowered_said.add((mid, header, read_at))
         self._log.warning(
             "%s: MID %04d labelled revision %d is laid out as revision %d (with fields "
-            "appended): read as revision %d%s", self.device, mid, header, read_at, read_at,
+            "appended)%s", self.device, mid, header, read_at,
             "; results are subscribed at that revision from now on"
             if mid == op.MID_RESULT else "")
 

@@ -78,7 +78,8 @@ class Session:
         with channel.cond:
             new = self.identity != ident
             self.identity, self.revision, self.clock_offset = ident, start_rev, offset
-            self._feed.subscribed, self._old.agreed = result_rev, None
+            self._feed.subscribed = result_rev
+            self._old.new_session()
             linking = channel.links.on
         if new:
             self._log.info("%s: controller %s; MID 0002 revision %d, results as MID 0061 "

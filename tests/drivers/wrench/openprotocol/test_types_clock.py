@@ -8,7 +8,13 @@ from datetime import datetime
 import pytest
 
 from drivers.wrench import open_wrench
-from drivers.wrench.base import ResultKind, ResultType, TighteningResult, result_kind
+from drivers.wrench.base import (
+    ResultKind,
+    ResultType,
+    TighteningResult,
+    UnreadableResult,
+    result_kind,
+)
 from drivers.wrench.sim.controller import SimController, SimWrench
 
 from ..conftest import connect, reconnect_within, wait_until
@@ -115,5 +121,5 @@ def test_sim_wrench_takes_the_controllers_behaviour_as_keywords():
         ready(w)
         w.controller.pull_trigger(3)
         got = w.wait_result(1.0)
-    assert isinstance(got, TighteningResult)
-    assert (got.revision, got.header_revision, got.result_type_code) == (2, 7, None)
+    assert isinstance(got, UnreadableResult)   # revision 2 carries no type: held
+    assert (got.revision, got.laid_out_as, got.pset) == (7, 2, 1)

@@ -11,7 +11,8 @@ import pytest
 
 from drivers.errors import ProtocolError
 from drivers.wrench.base import TighteningResult, UnreadableResult
-from drivers.wrench.openprotocol.reading import pick, read_result
+from drivers.wrench.openprotocol.message import decode
+from drivers.wrench.openprotocol.reading import TypeLostError, pick, read_result, receive
 from drivers.wrench.openprotocol.result import parse_tightening
 from drivers.wrench.sim.controller import SimController
 from drivers.wrench.sim.results import mislabelled_data, result_data
@@ -34,17 +35,43 @@ def record(sim: SimController, result_type: int = 1):
 
 # -- the reading rules, on bodies the simulator writes ---------------------------------------
 @pytest.mark.parametrize("mid", [61, 65])
-def test_a_revision_1_body_with_fields_appended_reads_as_revision_1(sim, mid, tmp_path):
+def test_a_revision_1_body_with_fields_appended_is_held_without_its_type(sim, mid, tmp_path):
+    """Labelled 7, laid out as revision 1 (which carries no result type): what it reads as is
+    kept, and it is unreadable: read without its type, a loosening would close its bolt."""
     with connect(sim, "tcp", tmp_path) as w:
         ready(w)
-        r = record(sim, 3)
+        r = record(sim, 2)                        # a loosening
     text = message(mid, mislabelled_data(mid, 1, r), 7).decode()
     with pytest.raises(ProtocolError):            # not at the revision it is labelled
         parse_tightening(mid, 7, text)
-    got = read_result(mid, 7, text)
+    with pytest.raises(TypeLostError, match="laid out as revision 1, which carries no result type"
+                       ) as lost:
+        read_result(mid, 7, text)
+    got = lost.value.result
     assert (got.revision, got.header_revision, got.tightening_id, got.pset, got.vin) == (
         1, 7, r.tightening_id, 2, "WVWZZZ1JZXW000001")
     assert got.raw == text and got.result_type_code is None   # revision 1 has no type
+    held = receive(decode(text.encode()))
+    assert isinstance(held, UnreadableResult)
+    assert (held.revision, held.laid_out_as, held.tightening_id, held.pset, held.vin,
+            held.timestamp) == (7, 1, r.tightening_id, 2, "WVWZZZ1JZXW000001", got.timestamp)
+    assert held.raw == text and held.fetched is (mid == 65)
+
+
+@pytest.mark.parametrize("cut", ["tag", "blank"])
+def test_a_result_type_lost_on_the_line_is_no_tightening(sim, cut, tmp_path):
+    """One byte of parameter 49's tag lost or garbled (the body then reads as revision 2,
+    with fields appended), or the type sent as spaces: unreadable, never a tightening."""
+    with connect(sim, "tcp", tmp_path) as w:
+        ready(w)
+        r = record(sim, 2)                        # a loosening
+    data = result_data(61, 7, r).decode()
+    bad = data.replace("4902", "4?02" if cut == "tag" else "49  ", 1)
+    assert bad != data
+    held = receive(decode(message(61, bad.encode(), 7)))
+    assert isinstance(held, UnreadableResult)
+    assert (held.tightening_id, held.pset) == (r.tightening_id, 2)
+    assert held.laid_out_as == (2 if cut == "tag" else None)
 
 
 def test_a_tagged_body_with_a_parameter_of_its_own_reads_at_its_revision(sim, tmp_path):
@@ -94,21 +121,27 @@ def test_a_result_labelled_another_revision_than_subscribed_is_read_at_its_own(t
 @pytest.mark.parametrize("link_ack", [False, True])
 def test_a_controller_that_claims_more_than_it_implements(link_ack, tmp_path, caplog):
     """The field case: subscribed at 7, revision 1 bodies with fields appended labelled 7.
-    The first is read as revision 1 (said once), the subscription is renewed at revision 1
-    (0063, then 0060 revision 1), and the next results come labelled 1 and read cleanly.
-    With link-level acknowledgement too: the renewal waits its turn behind the result's
-    0062 (whose 9997 the reading thread must read)."""
+    Revision 1 carries no result type: each is held as unreadable (the first here is a
+    loosening), and after two in a row (the controller's habit, not a byte lost on the
+    line) the subscription is renewed at revision 1 (0063, then 0060 revision 1), said
+    once; the next results come labelled 1 and read cleanly.  With link-level
+    acknowledgement too: the renewal waits its turn behind the result's 0062 (whose 9997
+    the reading thread must read)."""
     caplog.set_level(logging.INFO, logger="drivers.wrench.openprotocol.client")
     with SimController(seed=3, nok_rate=0.0, mislabel=1, link_ack=link_ack) as sim, \
             connect(sim, "tcp", tmp_path) as w:
         assert w.link_level is link_ack
         ready(w)
-        truth = sim.pull_trigger()
-        got = w.wait_result(1.0)
-        assert isinstance(got, TighteningResult) and truth is not None
-        assert (got.tightening_id, got.revision, got.header_revision) == (
-            truth.tightening_id, 1, 7)
-        assert got.torque_nm == truth.torque_nm and got.pset == 2
+        first = sim.pull_trigger(2)
+        held = w.wait_result(1.0)
+        assert isinstance(held, UnreadableResult) and first is not None
+        assert (held.tightening_id, held.revision, held.laid_out_as) == (
+            first.tightening_id, 7, 1)
+        assert w.revisions[60] == 7                     # once may be the line's
+        second = sim.pull_trigger()
+        again = w.wait_result(1.0)
+        assert isinstance(again, UnreadableResult) and second is not None
+        assert (again.tightening_id, again.laid_out_as) == (second.tightening_id, 1)
         # (a result made between the 0063 and the 0060 is not pushed: the station's
         # tightening-id gap check fetches it, MID 0064)
         assert wait_until(lambda: w.revisions[60] == 1)
@@ -119,21 +152,24 @@ def test_a_controller_that_claims_more_than_it_implements(link_ack, tmp_path, ca
         assert isinstance(third, TighteningResult) and later is not None
         assert (third.tightening_id, third.revision, third.header_revision) == (
             later.tightening_id, 1, None)
-        assert wait_until(lambda: sim.acks == 2) and w.status().reconnects == 0
+        assert third.torque_nm == later.torque_nm and third.pset == 2
+        assert wait_until(lambda: sim.acks == 3) and w.status().reconnects == 0
         # a new session asks for the highest revision again (the controller may be another
         # one: a revision below 3 carries no result type), and lowers again, not losing one
         sim.drop_connections()
         assert wait_until(lambda: not w.status().connected)
         w.reconnect()
         assert w.revisions[60] == 7
-        again = sim.pull_trigger()
-        fourth = w.wait_result(1.0)
-        assert isinstance(fourth, TighteningResult) and again is not None
-        assert (fourth.tightening_id, fourth.revision, fourth.header_revision) == (
-            again.tightening_id, 1, 7)
+        made = [sim.pull_trigger(), sim.pull_trigger()]
+        got = [w.wait_result(1.0), w.wait_result(1.0)]
+        assert [(g.tightening_id, g.laid_out_as) for g in got
+                if isinstance(g, UnreadableResult)] == [
+            (m.tightening_id, 1) for m in made if m is not None]
         assert wait_until(lambda: w.revisions[60] == 1)
-    said = [r for r in caplog.records if "laid out as revision 1" in r.getMessage()]
-    assert len(said) == 1 and "subscribed at that revision from now on" in said[0].message
+    said = [r for r in caplog.records if "subscribed at that revision from now on"
+            in r.getMessage()]
+    assert len(said) == 1 and "laid out as revision 1" in said[0].message
+    assert len([r for r in caplog.records if "its bolt held" in r.getMessage()]) == 4
     assert sim.errors == []
 
 
@@ -167,7 +203,8 @@ def test_a_result_that_reads_at_no_revision_is_kept_and_acknowledged_when_stored
 
 def test_fetching_a_result_that_does_not_read(sim, tmp_path):
     """MID 0065 that reads at no revision: an UnreadableResult (fetched), not an error;
-    one laid out as a lower revision is read so, and later fetches ask for that one."""
+    one laid out as a lower revision without a result type is held so too, and after two
+    such answers later fetches ask for that revision."""
     with connect(sim, "tcp", tmp_path) as w:
         ready(w)
         t = sim.pull_trigger()
@@ -177,14 +214,14 @@ def test_fetching_a_result_that_does_not_read(sim, tmp_path):
         assert isinstance(got, UnreadableResult) and got.fetched and got.mid == 65
         assert (got.tightening_id, got.pset) == (t.tightening_id, 2)
         sim.mislabel = 1
-        old = w.fetch_result(t.tightening_id)
-        assert isinstance(old, TighteningResult) and old.fetched
-        assert (old.revision, old.header_revision, old.tightening_id) == (
-            1, 7, t.tightening_id)
+        old = [w.fetch_result(t.tightening_id), w.fetch_result(t.tightening_id)]
+        assert all(isinstance(o, UnreadableResult) and o.fetched and o.laid_out_as == 1
+                   and o.tightening_id == t.tightening_id for o in old)
         assert w.revisions[64] == 1
         again = w.fetch_result(t.tightening_id)
         assert isinstance(again, TighteningResult) and again.header_revision is None
-        assert [r.revision for r in sim.received(64)] == [7, 7, 1]
+        assert (again.revision, again.tightening_id) == (1, t.tightening_id)
+        assert [r.revision for r in sim.received(64)] == [7, 7, 7, 1]
 
 
 class TightensDuringTheRenewal(SimController):
@@ -202,19 +239,19 @@ def test_a_result_made_while_the_subscription_is_renewed_is_fetched(tmp_path, ca
     with TightensDuringTheRenewal(seed=3, nok_rate=0.0, mislabel=1) as sim, \
             connect(sim, "tcp", tmp_path) as w:
         ready(w)
-        first = sim.pull_trigger()
-        got = [w.wait_result(1.0), w.wait_result(1.0)]
+        made = [sim.pull_trigger(), sim.pull_trigger()]     # held twice: renewed at 1
+        got = [w.wait_result(1.0), w.wait_result(1.0), w.wait_result(1.0)]
         assert wait_until(lambda: w.revisions[60] == 1)
         after = sim.pull_trigger()
-        third = w.wait_result(1.0)
+        fourth = w.wait_result(1.0)
         assert w.wait_result(0.2) is None                        # nothing twice
-    assert first is not None and after is not None
-    assert [g.tightening_id for g in got if g is not None] == [1, 2]
-    assert [getattr(g, "fetched", None) for g in got] == [False, True]
-    assert sim.during is not None and sim.during.tightening_id == 2
-    assert third is not None and (third.tightening_id, third.fetched) == (3, False)
-    assert sim.acked_ids == [1, 3] and sim.errors == []          # no 0062 for a fetched one
-    assert "tightening 2 made while the result subscription was renewed" in caplog.text
+    assert all(m is not None for m in made) and after is not None
+    assert [g.tightening_id for g in got if g is not None] == [1, 2, 3]
+    assert [getattr(g, "fetched", None) for g in got] == [False, False, True]
+    assert sim.during is not None and sim.during.tightening_id == 3
+    assert fourth is not None and (fourth.tightening_id, fourth.fetched) == (4, False)
+    assert sim.acked_ids == [1, 2, 4] and sim.errors == []      # no 0062 for a fetched one
+    assert "tightening 3 made while the result subscription was renewed" in caplog.text
 
 
 def test_a_revision_beyond_those_read_gives_the_ones_it_starts_with(sim, tmp_path):
