@@ -466,7 +466,8 @@ def sent_again_words(tightening_id: int | None, bolt: str | None,
     result no bolt owns; ``vin``: its vehicle, where not the one at the station)."""
     of = f" of {bolt}" if bolt is not None else ""
     of += f" of VIN {vin}" if vin is not None else ""
-    return f"result {tightening_id}{of} sent again by the controller: stored once"
+    what = f"result {tightening_id}" if tightening_id is not None else "a result"
+    return f"{what}{of} sent again by the controller: stored once"
 
 
 def notice_words(notice: Notice) -> str:
@@ -499,6 +500,8 @@ _BECAUSE: dict[Because, Callable[[StateReason], str]] = {
     Because.SELECTED: lambda r: f"bolt {r.bolt} selected{_loosen_first(r)}",
     Because.ACKNOWLEDGED: lambda r: (f"bolt {r.bolt} acknowledged; confirming the wrench is "
                                      "on it"),
+    Because.RESULT_OWED: lambda r: (f"bolt {r.bolt}: the tool stays off until bolt {r.owed}'s "
+                                    "result is in, or can no longer come"),
     # the tool on for a loosen pset: the operator loosens, never "tighten" (as the screens)
     Because.TIGHTENING: lambda r: f"{'loosening' if r.loosen else 'tightening'} bolt {r.bolt}",
     Because.NOT_CONFIRMED: lambda r: f"wrench not confirmed on bolt {r.bolt}",

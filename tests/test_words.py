@@ -200,6 +200,8 @@ STATE_WORDS = [
      "bolt B11 selected: loosen first (pset 90)"),
     (StateReason(Because.ACKNOWLEDGED, bolt="B11"),
      "bolt B11 acknowledged; confirming the wrench is on it"),
+    (StateReason(Because.RESULT_OWED, bolt="B08", owed="B05"),
+     "bolt B08: the tool stays off until bolt B05's result is in, or can no longer come"),
     (StateReason(Because.TIGHTENING, bolt="B11"), "tightening bolt B11"),
     (StateReason(Because.TIGHTENING, bolt="B11", loosen=True), "loosening bolt B11"),
     (StateReason(Because.NOT_CONFIRMED, bolt="B11"), "wrench not confirmed on bolt B11"),

@@ -113,6 +113,8 @@ class Because(enum.Enum):
     #                                      pset, a loosening first)
     ACKNOWLEDGED = "acknowledged"        # the controller took them: the wrench confirmed next
     #                                      (bolt)
+    RESULT_OWED = "result owed"          # confirmed, the tool kept off: another bolt's result
+    #                                      may still come (bolt; owed: that bolt)
     TIGHTENING = "tightening"            # the tool on (bolt)
     NOT_CONFIRMED = "not confirmed"      # the tool off: the wrench not confirmed on it (bolt)
     SELECTED_UNCONFIRMED = "selected unconfirmed"  # still selected, tool off (bolt)
@@ -159,6 +161,7 @@ class StateReason:
     #: in the order they failed
     faults: tuple[tuple[str, FaultWhy], ...] = ()
     skip: Skip | None = None            # why the bolt selected was skipped
+    owed: str | None = None             # the bolt whose result may still come
     note: str | None = None             # words from elsewhere (the lift)
 
 

@@ -56,6 +56,10 @@ class ToolRules(FaultRules):
                     and ev.exposure_t > self._acked_at and self.bolt is not None:
                 sel = self._selection
                 assert sel is not None  # noqa: S101 - a bolt is selected
+                owed = self._owed_elsewhere(ev.t)
+                if owed is not None:
+                    self.reason = StateReason(Because.RESULT_OWED, bolt=self.bolt, owed=owed)
+                    return acts
                 self._to(State.TIGHTENING, StateReason(Because.TIGHTENING, bolt=self.bolt,
                                                        loosen=sel.loosen))
                 self.tool_on, self._enabled, self._off_at = True, sel, None
@@ -115,6 +119,18 @@ class ToolRules(FaultRules):
         return [Publish(BoltSelected(m.bolt, pset, ev.point_mm, sel.distance_mm,
                                      ev.tilt_deg, loosen, t=ev.t)),
                 SendParams(m.bolt, sel, params, loosen)]
+
+    def _owed_elsewhere(self, t: float) -> str | None:
+        """The bolt whose result may still come (its tool went off less than the late-result
+        window ago, and its result is not in) where it is another bolt than the one selected;
+        else None.  The tool is not enabled for the selected bolt meanwhile: a result is
+        placed by the enable it came under, and a late one of that bolt would otherwise be
+        taken for this one's (the same pset), or lost to its own (another pset)."""
+        en = self._enabled
+        if en is None or en.bolt == self.bolt or en.vin != self.vin \
+                or not self._result_owed(t):
+            return None
+        return en.bolt
 
     def _on_params_acked(self, ev: ParamsAcked) -> list[Action]:
         acts: list[Action] = [Publish(ParamsSent(ev.bolt, ev.pset, dict(ev.latency_ms),

@@ -12,6 +12,7 @@ from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -74,7 +75,8 @@ from stationd.station.inputs import (
     VinSent,
 )
 from stationd.station.matching import MatchParams
-from stationd.words import fault_words, reason_words, unattributed_words
+from stationd.station.state import LATE_RESULT_S
+from stationd.words import fault_words, reason_words, state_words, unattributed_words
 
 BOLTS = {"B1": LoadedBolt((0.0, 0.0, 0.0), 1), "B2": LoadedBolt((60.0, 0.0, 0.0), 2),
          "B3": LoadedBolt((0.0, 60.0, 5.0), 1)}
@@ -435,6 +437,48 @@ def test_a_late_result_goes_to_the_bolt_the_tool_was_on_within_the_window_only()
     assert _kinds(acts) == ["StoreUnattributed"]
     assert any(isinstance(a, Publish) and isinstance(a.event, ResultUnattributed)
                for a in acts)
+
+
+@pytest.mark.parametrize("nxt", [3, 2], ids=["same pset", "another pset"])
+def test_the_tool_waits_while_the_bolt_it_left_may_still_send_its_result(nxt):
+    """B1's tool went off as the wrench left for another bolt, its result not in: that bolt
+    is selected and acknowledged, but its tool stays off until B1's result is in (then
+    recorded to B1, never to the bolt the wrench is on now) or can no longer come."""
+    d = _ready()
+    _on(d, 1)
+    d.step(("ack", 0.01, True))
+    _on(d, 1, 1)
+    assert d.tool and d.tool_bolt == "B1"
+    _on(d, nxt, 4)                                 # left B1: selected, parameters sent
+    name = f"B{nxt}"
+    assert d.pending == name
+    d.step(("ack", 0.01, True))
+    _on(d, nxt, 2)                                 # confirmed: the tool would go on
+    assert not d.tool and d.core.state is State.BOLT_SELECTED
+    assert d.core.reason == StateReason(Because.RESULT_OWED, bolt=name, owed="B1")
+    assert state_words(d.core.reason) == (
+        f"bolt {name}: the tool stays off until bolt B1's result is in, or can no longer come")
+    d.tool_bolt = "B1"
+    acts = d.feed(ResultIn(d.t + 0.3, result(8, 1)))
+    assert [a.bolt for a in acts if isinstance(a, Record)] == ["B1"]
+    assert d.records == {8: "B1"}
+    _on(d, nxt, 1)
+    assert d.tool and d.tool_bolt == name and d.core.state is State.TIGHTENING
+
+
+def test_the_tool_goes_on_once_the_result_of_the_bolt_left_can_no_longer_come():
+    d = _ready()
+    _on(d, 1)
+    d.step(("ack", 0.01, True))
+    _on(d, 1, 1)
+    _on(d, 3, 4)
+    d.step(("ack", 0.01, True))
+    _on(d, 3, 2)
+    assert not d.tool and d.core.reason.kind is Because.RESULT_OWED
+    d.step(("loc", LATE_RESULT_S, 3, 0.05, 0.3))   # the late-result window passed
+    assert d.tool and d.tool_bolt == "B3"
+    acts = d.feed(ResultIn(d.t + 0.3, result(8, 1)))
+    assert [a.bolt for a in acts if isinstance(a, Record)] == ["B3"]
 
 
 def test_a_result_after_the_window_is_not_attributed():
