@@ -503,19 +503,15 @@ class Repository:
     def record_unreadable(self, *, mid: int, revision: int, raw: str, error: str,
                           vin: str | None, bolt: str | None, controller_vin: str | None,
                           tightening_id: int | None, pset: int | None,
-                          result_at: datetime | None, enable_id: int | None = None
-                          ) -> int | None:
+                          result_at: datetime | None, enable_id: int | None = None,
+                          header_len: int = 0) -> int | None:
         """Store a result message that could not be read, whole; return its id, or None when
-        the same message is stored already (a resent copy: the very same text, which
-        carries the tightening id, the values and the controller's timestamp as far as they
-        were written: the rule of :func:`_same_result`, on what could not be read apart).
-        ``enable_id``: the tool enable it answers, settled in the same transaction (the
-        station owes it nothing more: the bolt is held for a person instead)."""
+        the same message is stored already (:meth:`stored_unreadable`: a resent copy; no
+        enable is settled by it: it answers none).  ``enable_id``: the tool enable it
+        answers, settled in the same transaction (the station owes it nothing more: the
+        bolt is held for a person instead)."""
         with self._session(write=True) as s:
-            same = s.scalar(select(UnreadableRecord.id).where(
-                UnreadableRecord.raw == raw, UnreadableRecord.mid == int(mid)).limit(1))
-            if same is not None:
-                _settle(s, enable_id)
+            if _unreadable_copy(s, mid, raw, header_len) is not None:
                 return None
             row = UnreadableRecord(
                 mid=int(mid), revision=int(revision), raw=raw, error=error[:500], vin=vin,
@@ -526,6 +522,18 @@ class Repository:
             s.flush()
             append(s, UNREADABLE, row.id)
             return row.id
+
+    def stored_unreadable(self, *, mid: int, raw: str, header_len: int = 0
+                          ) -> tuple[str | None, str | None] | None:
+        """The vehicle and bolt a stored unreadable message was stored for, where the same
+        message is stored already (a copy the controller sent again: the same text after
+        its first ``header_len`` characters, its header, whose sequence number a resend
+        changes; the text carries the tightening id, the values and the controller's
+        timestamp as far as they were written), else None.  Asked before the station's
+        core sees the message, so a copy is never held against the bolt enabled now."""
+        with self._session(write=False) as s:
+            row = _unreadable_copy(s, mid, raw, header_len)
+            return None if row is None else (row.vin, row.bolt)
 
     def controller_events(self, vin: str | None = None) -> list[dict[str, Any]]:
         """The controller results that were not rundowns (of ``vin``, or all), oldest first."""
@@ -746,6 +754,19 @@ def _held_under(s: Session, vin: str, bolt: str, at: datetime, pset: int | None
         return HeldUnder(None, pset)
     return HeldUnder(bool((enable.selection or {}).get("loosen", False)),
                      enable.pset if enable.pset is not None else pset)
+
+
+def _unreadable_copy(s: Session, mid: int, raw: str, header_len: int
+                     ) -> UnreadableRecord | None:
+    """The stored unreadable message ``raw`` is a copy of: the same MID and the same text
+    after its header (``header_len`` characters).  Compared here, not in SQL: SQLite's text
+    functions stop at a NUL, which a garbled message may hold."""
+    body = raw[header_len:]
+    for row in s.scalars(select(UnreadableRecord).where(UnreadableRecord.mid == int(mid))
+                         .order_by(UnreadableRecord.id)):
+        if row.raw[header_len:] == body:
+            return row
+    return None
 
 
 def _settle(s: Session, enable_id: int | None,

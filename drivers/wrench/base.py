@@ -225,6 +225,14 @@ class UnreadableResult:
     #: the lower revision its body read as, had that revision carried a result type (its
     #: header's does, 3+; a result without its type may be a loosening): None otherwise
     laid_out_as: int | None = None
+    #: how many of ``raw``'s first characters are the message's header (Open Protocol's 20,
+    #: a sequence number among them): the same message sent again has the same ``body``
+    header_len: int = 0
+
+    @property
+    def body(self) -> str:
+        """The message without its header: what a copy the controller sends again repeats."""
+        return self.raw[self.header_len:]
 
 
 #: what ``wait_result`` hands out: a result, or one that could not be read

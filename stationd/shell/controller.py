@@ -26,7 +26,7 @@ from drivers.wrench import Received, TighteningResult, UnreadableResult, Wrench
 from stationd.shell.blocking import Blocking
 from stationd.shell.records import STATION_FAULTS, Records
 from stationd.station.core import StationCore
-from stationd.station.gaps import MAX_FETCH, GapPlan
+from stationd.station.gaps import MAX_FETCH, GapPlan, NoFetch
 from stationd.station.gaps import plan as plan_gaps
 from stationd.station.inputs import (
     WRENCH,
@@ -94,13 +94,17 @@ class ControllerFeed:
         :class:`ResultCopy`, which it never attributes to a bolt.  A database that cannot
         answer leaves ``ev`` as it is: the record's own transaction checks again, the last
         guard (and reports the database's fault)."""
-        if not isinstance(ev, ResultIn) or self.records.repo is None:
+        if self.records.repo is None:
             return ev
         try:
+            if isinstance(ev, UnreadableIn):
+                return await self._call(self.records.unreadable_input, ev)
             return await self._call(self.records.copy_input, ev, self.core.status().vin)
         except STATION_FAULTS as exc:
+            tid = ev.unreadable.tightening_id if isinstance(ev, UnreadableIn) \
+                else ev.result.tightening_id
             log.warning("tightening %s not checked against the stored results: %s",
-                        ev.result.tightening_id, one_line(exc))
+                        "?" if tid is None else tid, one_line(exc))
             return ev
 
     async def curves(self, stop: asyncio.Event) -> None:
@@ -171,6 +175,13 @@ class ControllerFeed:
             todo = plan_gaps(last, nid)
             if todo.why is not None:
                 log.info("results: %s", gap_plan_words(todo))
+            elif await self._count_restarted(wrench, last, newest):
+                log.info("results: the controller's tightening %d is not the one recorded "
+                         "under that id: its ids restarted", last)
+                todo = GapPlan(why=NoFetch.IDS_RESTARTED, newest=nid, last_recorded=last)
+            if todo.why is NoFetch.IDS_RESTARTED:   # a new count: no id to count from
+                await self._first_results(wrench, newest, nid, restarted=True)
+                return
             await self._fetch(wrench, todo, last, newest)
         except (DeviceError, ValueError) as exc:   # the link's keeper reports it
             log.warning("results missed while the link was down not fetched yet: %s",
@@ -178,8 +189,35 @@ class ControllerFeed:
         except STATION_FAULTS as exc:
             log.error("results missed while the link was down not fetched: %s", one_line(exc))
 
-    async def _first_results(self, wrench: Wrench, newest: Received, nid: int) -> None:
-        """No tightening of this controller recorded yet, so no id to count from: the results
+    async def _count_restarted(self, wrench: Wrench, last: int, newest: Received) -> bool:
+        """Whether the controller's ids started again though its newest is not below
+        ``last``, the last id recorded (reset or replaced, it made as many results since):
+        its result ``last`` is not the one stored under that id.  Counting on from ``last``
+        would fetch only the ids above it, and take the first of them for the first result
+        made after it.  Unknown (the controller no longer has it, or it does not read) is
+        counted on as before, and so is a result without the controller's own time (only
+        that tells another result under the same id from the one stored)."""
+        got = newest if newest.tightening_id == last else \
+            await self._call(wrench.fetch_result, last)
+        if not isinstance(got, TighteningResult) or not got.controller_clock \
+                or got.timestamp is None or self.records.repo is None:
+            return False
+        ev = result_input(time.time(), got, fetched=True)
+        if not isinstance(ev, ResultIn):
+            return False
+        try:
+            asked = await self._call(self.records.copy_input, ev, self.core.status().vin)
+        except STATION_FAULTS as exc:
+            log.warning("tightening %d not checked against the one recorded: %s", last,
+                        one_line(exc))
+            return False
+        return isinstance(asked, ResultIn)
+
+    async def _first_results(self, wrench: Wrench, newest: Received, nid: int,
+                             restarted: bool = False) -> None:
+        """No tightening of this controller recorded yet (or ``restarted``: its ids started
+        again, reset or replaced, so the last one recorded says nothing of its new count), so
+        no id to count from: the results
         it made since the station may have missed them (:meth:`StationCore.missed_since`: the
         enable a link cut came during, else the link lost) are found backwards from its
         newest by their own timestamps (through the clock offset measured at connect), at
@@ -207,10 +245,12 @@ class ControllerFeed:
             tid -= 1
             got = await self._call(wrench.fetch_result, tid)
         if not found:
-            log.info("results: %s", gap_plan_words(plan_gaps(None, nid)))
+            if not restarted:
+                log.info("results: %s", gap_plan_words(plan_gaps(None, nid)))
             return
-        log.info("results: no tightening recorded yet; %d made by the controller since the "
-                 "link was lost%s: fetched", len(found),
+        log.info("results: %s; %d made by the controller since the link was lost%s: fetched",
+                 "its tightening ids started again" if restarted else
+                 "no tightening recorded yet", len(found),
                  "" if follows is not None else " (where its history ends is not known)")
         for tid, got in reversed(found):
             await self._fetched(wrench, tid, got, follows, offset)

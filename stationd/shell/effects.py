@@ -345,8 +345,9 @@ class Effects:
         try:
             await self._call(wrench.acknowledge_result, result)
         except (DeviceError, ValueError) as exc:
-            self.log.warning("tightening %d stored, not acknowledged: %s", result.tightening_id,
-                        one_line(exc))
+            self.log.warning("tightening %s stored, not acknowledged: %s",
+                             "?" if result.tightening_id is None else result.tightening_id,
+                             one_line(exc))
 
     async def _record_command(self, a: RecordCommand) -> Event:
         """An accepted command on disk with its user; what the database said, for the core."""

@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -59,6 +59,7 @@ from stationd.station.inputs import (
     LoadedBolt,
     ResultCopy,
     ResultIn,
+    UnreadableIn,
     VehicleEnded,
     VehicleLoaded,
     VehicleRejected,
@@ -252,6 +253,15 @@ class Records:
             return ev
         return ResultCopy(ev.t, r, stored.vin, stored.bolt)
 
+    def unreadable_input(self, ev: UnreadableIn) -> UnreadableIn:
+        """``ev`` as the core is to have it: saying where it was stored when the database has
+        this very message already (:meth:`Repository.stored_unreadable`: a copy the
+        controller sent again, after a reload or a restart), which the core then attributes
+        to no bolt.  Blocking (the executor's, as every read)."""
+        u = ev.unreadable
+        stored = self._repo().stored_unreadable(mid=u.mid, raw=u.raw, header_len=u.header_len)
+        return ev if stored is None else replace(ev, stored=stored)
+
     def keep(self, u: Unsaved) -> None:
         """The database refused ``u``: kept until it takes it."""
         with self._lock:
@@ -309,7 +319,7 @@ class Records:
             mid=u.mid, revision=u.revision, raw=u.raw, error=u.error, vin=a.vin, bolt=a.bolt,
             controller_vin=u.vin.strip() or None, tightening_id=u.tightening_id, pset=u.pset,
             result_at=_aware(u.timestamp),
-            enable_id=enable)
+            enable_id=enable, header_len=u.header_len)
         self._settles(sel)
 
     # -- vehicles, commands, gaps and curves ---------------------------------------------------

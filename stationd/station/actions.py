@@ -12,7 +12,7 @@ from typing import Any
 
 from db.bolts import Parameters
 from db.kinds import TIGHTENING
-from drivers.wrench.base import TighteningResult, UnreadableResult
+from drivers.wrench.base import Received, TighteningResult, UnreadableResult
 from stationd.reasons import Reason, Unattributed
 from stationd.station.commands import (
     Answer,
@@ -120,7 +120,7 @@ class Record:
 class Acknowledge:
     """Tell the controller a result already stored may be forgotten (a resent copy)."""
 
-    result: TighteningResult
+    result: Received
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,8 @@ jump after the link was down is a result the station never heard.  It is fetched
 visibly, never silently.  A station that never recorded anything takes the controller's
 newest as its starting point (the controller's history before it is not this station's; what
 it made since the link was lost is found back by time instead, in the shell's catch-up), and
-a controller whose ids went backwards (replaced, reset) starts a new count.
+so does a controller whose ids went backwards (replaced, reset): its new count is not the one
+the last recorded id belongs to.
 """
 
 from __future__ import annotations

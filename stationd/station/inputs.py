@@ -132,9 +132,12 @@ class ResultCopy(Input):
 
 @dataclass(frozen=True)
 class UnreadableIn(Input):
-    """A result message the driver could not read (kept whole), not yet acknowledged."""
+    """A result message the driver could not read (kept whole), not yet acknowledged;
+    ``stored``: the vehicle and bolt the database has the same message stored for already
+    (a copy the controller sent again; None: not stored)."""
 
     unreadable: UnreadableResult
+    stored: tuple[str | None, str | None] | None = None
 
 
 @dataclass(frozen=True)

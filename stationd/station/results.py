@@ -254,8 +254,15 @@ class ResultRules(OrderRules):
         fetched one; of the same pset where one could be read) is held until a supervisor
         has checked the result on the controller and releases it."""
         u = ev.unreadable
-        if u.tightening_id is not None and self._recorded.get(u.tightening_id) == u.raw:
-            return []     # its copy is stored already (the acknowledgement was owed by it)
+        if ev.stored is not None or (u.mid, u.body) in self._unreadable_seen:
+            # a copy the controller sent again (its acknowledgement lost, or not sent yet):
+            # stored once, held against no bolt (that of the enable owed now is another
+            # one's), acknowledged: the controller may forget it
+            vin, bolt = ev.stored if ev.stored is not None else (
+                None, self._unreadable_seen[(u.mid, u.body)])
+            return [Publish(Notice(Said.SENT_AGAIN, tightening_id=u.tightening_id, bolt=bolt,
+                                   vin=vin if vin != self.vin else None, t=ev.t)),
+                    Acknowledge(u)]
         en = self._enabled if self._result_owed(ev.t) else None
         if u.fetched:
             en = self._cut.selection if self._cut is not None else None
@@ -265,6 +272,7 @@ class ResultRules(OrderRules):
         if u.tightening_id is not None:
             self._recorded[u.tightening_id] = u.raw
         bolt = en.bolt if en is not None and en.vin else None
+        self._unreadable_seen[(u.mid, u.body)] = bolt
         acts: list[Action] = []
         # the selection it came under: its loosen pset's result is a loosening's
         loosen = en is not None and en.loosen

@@ -185,6 +185,10 @@ class CoreState:
     # tightening id -> what the result said (a resent copy says the same; a controller whose
     # ids started again says something else under the same id, and is not a copy)
     _recorded: dict[int, object] = field(default_factory=dict, repr=False)
+    # unreadable messages taken (MID, the text after the header): one sent again is a copy
+    # -> the bolt it was held against (None: none)
+    _unreadable_seen: dict[tuple[int, str], str | None] = field(default_factory=dict,
+                                                                 repr=False)
     _wrench_epoch: int = field(default=0, repr=False)
     _wrench_reconnects: int | None = field(default=None, repr=False)
     _vin_for: tuple[str, int] | None = field(default=None, repr=False)

@@ -47,6 +47,28 @@ def test_controller_events_and_unreadable_results_are_stored_once_and_fed(repo, 
     assert repo.last_tightening_id() == 6
 
 
+def test_an_unreadable_message_sent_again_under_another_header_is_the_stored_one(
+        repo, bolts_file):
+    """A copy the controller sends again carries another sequence number in its header: the
+    same text after the header is the same message, said with where it was stored, and
+    stored once; another text is another message."""
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    assert repo.stored_unreadable(mid=61, raw=RAW, header_len=20) is None
+    assert repo.record_unreadable(
+        mid=61, revision=7, raw=RAW, error="x", vin="VIN1", bolt="B1", controller_vin=None,
+        tightening_id=None, pset=1, result_at=None, header_len=20)
+    resent = RAW[:16] + "07" + RAW[18:]
+    assert resent != RAW
+    assert repo.stored_unreadable(mid=61, raw=resent, header_len=20) == ("VIN1", "B1")
+    assert repo.stored_unreadable(mid=65, raw=resent, header_len=20) is None
+    assert repo.stored_unreadable(mid=61, raw=resent[:-1] + "?", header_len=20) is None
+    assert repo.record_unreadable(
+        mid=61, revision=7, raw=resent, error="x", vin="VIN1", bolt="B3", controller_vin=None,
+        tightening_id=None, pset=1, result_at=None, header_len=20) is None
+    assert [u["bolt"] for u in repo.unreadable()] == ["B1"]
+
+
 def test_an_unreadable_result_without_an_id_still_counts_nothing_it_cannot(repo, bolts_file):
     import_bolts(repo, bolts_file)
     repo.start_vehicle("VIN1", "SEDAN")

@@ -81,13 +81,16 @@ def test_an_unreadable_result_is_stored_whole_and_holds_its_bolt(tmp_path):
 
 
 @pytest.mark.timeout(300)
-@pytest.mark.parametrize("cut_s, restart", [(6.0, False), (30.0, False), (6.0, True)],
-                         ids=["cut 6 s", "cut 30 s", "controller restarted"])
+@pytest.mark.parametrize("cut_s, restart", [(6.0, ""), (30.0, ""), (6.0, "power"),
+                                             (6.0, "ids")],
+                         ids=["cut 6 s", "cut 30 s", "controller restarted", "ids restarted"])
 def test_a_tightening_made_during_a_link_cut_is_recorded_to_its_bolt(tmp_path, cut_s, restart):
     """The cut outlasts the late-result window (6 s), or a longer reconnect backoff (30 s),
     or the controller is power-cycled before the link is back (its results are kept, its
-    volatile state, the tool and the VIN, is not): the result made under the enable is
-    fetched and recorded to its bolt; the second, not provably under it, is not."""
+    volatile state, the tool and the VIN, is not), or its results are cleared as the cut
+    begins (reset or replaced: its ids start again, the next one the id of the result the
+    station recorded last): the result made under the enable is fetched and recorded to
+    its bolt; the second, not provably under it, is not."""
     pose = tmp_path / "pose"
     with tracking(tmp_path, "CUTVIN00000000001") as (d, _, ctl):
         tool_on(d, ctl, pose, "B04")
@@ -98,11 +101,15 @@ def test_a_tightening_made_during_a_link_cut_is_recorded_to_its_bolt(tmp_path, c
         ctl.refuse_revisions(1, range(1, 8))   # the link down, and kept down: no new session
         ctl.drop_connections()
         d.wait_log("fault: wrench")
+        if restart == "ids":
+            ctl.clear_results()
         made = ctl.pull_trigger()              # the operator tightens meanwhile
         again = ctl.pull_trigger()             # and once more: not provably the same enable
         assert made is not None and again is not None
+        if restart == "ids":
+            assert made.tightening_id == first.tightening_id
         time.sleep(cut_s)                      # past the late-result window (5 s)
-        if restart:
+        if restart == "power":
             ctl.power_off()
             ctl.power_on()
         ctl.clear_refusals()

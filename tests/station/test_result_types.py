@@ -6,6 +6,7 @@ the tool was enabled for only when the controller's own data proves it was made 
 
 from __future__ import annotations
 
+from dataclasses import replace
 from datetime import datetime
 from types import SimpleNamespace
 from typing import Any
@@ -53,7 +54,7 @@ from stationd.words import (
     worded,
 )
 from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
-from tests.station.test_core import BOLTS, Driver, _on, _ready, published
+from tests.station.test_core import BOLTS, Driver, _kinds, _on, _ready, published
 
 EVENT_TYPES = (3, 4, 5, 6, 8)
 
@@ -157,7 +158,8 @@ def test_a_controller_event_sent_again_is_acknowledged_not_stored_twice():
 # -- results that could not be read -------------------------------------------------------------
 def unreadable(tid: int | None = 7, pset: int | None = 1, fetched: bool = False
                ) -> UnreadableResult:
-    return UnreadableResult(raw="01230061007    " + "x" * 40, mid=61, revision=7,
+    # its text says its id and pset (another result's message is another text)
+    return UnreadableResult(raw=f"01230061007    {tid}/{pset}" + "x" * 40, mid=61, revision=7,
                             error="MID 0061 revision 7: parameter 01 missing",
                             tightening_id=tid, pset=pset, fetched=fetched)
 
@@ -194,6 +196,38 @@ def test_an_unreadable_result_is_stored_whole_and_holds_its_bolt_for_a_superviso
     assert _answer(acts).answer.accepted
     assert [e.bolt for e in published(acts, BoltReleased)] == ["B1"]
     _enabled(d)
+
+
+@pytest.mark.parametrize("tid", [7, None], ids=["its id read", "no id read"])
+def test_an_unreadable_result_sent_again_holds_no_other_bolt(tid):
+    """The controller sends the same unreadable message again (its acknowledgement lost, or
+    resent unacknowledged; another sequence number in its header) while another bolt of
+    the same pset is enabled: acknowledged and said, stored and held against no other bolt;
+    that bolt's own result still comes.  One the database has stored (after a reload) is
+    taken so too."""
+    d = _ready()
+    _enabled(d, 1)
+    first = replace(unreadable(tid), header_len=20)
+    d.feed(UnreadableIn(d.t, first))
+    assert list(d.core.matcher.held) == ["B1"]
+    _enabled(d, 3)
+    again = replace(first, raw=first.raw[:16] + "02" + first.raw[18:])
+    assert again.raw != first.raw and again.body == first.body
+    acts = d.feed(UnreadableIn(d.t, again))
+    assert _kinds(acts) == ["Acknowledge"] and d.core.tool_on
+    said = "result 7" if tid is not None else "a result"
+    assert _notices(acts) == [f"{said} of B1 sent again by the controller: stored once"]
+    assert list(d.core.matcher.held) == ["B1"]
+    d.tool_bolt = "B3"
+    acts = d.feed(ResultIn(d.t, res(8, 1)))
+    assert [a.bolt for a in acts if isinstance(a, Record)] == ["B3"]
+    # stored by an earlier station (the shell asked the database before this core saw it)
+    d2 = _ready()
+    _enabled(d2, 3)
+    acts = d2.feed(UnreadableIn(d2.t, again, stored=("VIN0", "B1")))
+    assert _kinds(acts) == ["Acknowledge"] and d2.core.tool_on and not d2.core.matcher.held
+    assert _notices(acts) == [f"{said} of B1 of VIN VIN0 sent again by the controller: "
+                              "stored once"]
 
 
 def test_an_unreadable_result_of_another_pset_holds_nothing():

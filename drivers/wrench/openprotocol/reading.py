@@ -109,7 +109,8 @@ def _unreadable(msg: Message, error: str, tightening_id: int | None, pset: int |
     return UnreadableResult(raw=msg.raw.decode("ascii", "backslashreplace"), mid=msg.mid,
                             revision=msg.revision, error=error, tightening_id=tightening_id,
                             pset=pset, vin=vin, timestamp=timestamp,
-                            fetched=msg.mid != MID_RESULT, laid_out_as=laid_out_as)
+                            fetched=msg.mid != MID_RESULT, laid_out_as=laid_out_as,
+                            header_len=HEADER_LEN)
 
 
 def pick(mid: int, revision: int, text: str) -> dict[str, Any]:

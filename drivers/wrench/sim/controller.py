@@ -285,6 +285,13 @@ class SimController(OpenProtocolServer):
         """The controller no longer has these results (its store is bounded)."""
         self.call(lambda: [self._store.pop(t, None) for t in tightening_ids])
 
+    def clear_results(self) -> None:
+        """The controller's result database cleared (a reset, or another controller put in
+        its place): its tightening ids start again from 1, and it keeps no results."""
+        def clear() -> None:
+            self._tid, self._store, self._unacked = 0, OrderedDict(), {}
+        self.call(clear)
+
     def go_on_from(self, before: SimController) -> None:
         """Go on where ``before`` (closed: the simulator of the same controller, built by the
         daemon before a reload) stopped: its tightening ids, its batch counter, the results
