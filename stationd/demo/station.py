@@ -350,6 +350,7 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
         screens.attach(station, cfg)
         if listen is not None:
             if screens.server is not None:
+                truth["screens"] = screens.server.url     # the release command says it
                 print(f"screens: {screens.server.url} (operator), {screens.server.url}cameras, "
                       f"{screens.server.url}vehicles"
                       + (f", {screens.server.url}line" if cfg.line is not None else "")

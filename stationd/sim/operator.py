@@ -272,7 +272,7 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
         while line.get("waits") and "interrupted" not in truth:
             try:
                 who = await wait_for_people(st, bolt_id, truth["vin"], note or _stderr,
-                                            interruptible)
+                                            interruptible, truth.get("screens"))
             except WaitEnded as ended:
                 truth["interrupted"] = {"signal": ended.signal, "bolts": []}
                 break
@@ -452,16 +452,20 @@ def _signals_end(ended: asyncio.Event, got: list[int]) -> Iterator[None]:
 
 
 async def wait_for_people(st: Station, bolt: str, vin: str, note: Callable[[str], None],
-                          interruptible: bool = False) -> str | None:
+                          interruptible: bool = False, url: str | None = None) -> str | None:
     """The operator waits, the vehicle on the lift, until a person releases ``bolt`` (the
     screens' Release form, ``stationd release``): said once, and again when released.  Who
     released it (None: not heard within 2 s of the release).  ``interruptible``: Ctrl-C or
     SIGTERM ends the wait (:class:`WaitEnded`), so the demo can still say what was done.
+    ``url``: the screens the station serves: the release command is said with it (without,
+    ``stationd release`` asks the default station's address, not the demo's).
     Why: Ctrl-C there printed "stationd: interrupted (Ctrl-C)" alone, no summary, although
     bolts had been tightened."""
     before = len(_releases(st, bolt))
+    command = f"stationd release {vin} {bolt}" + (f" --url {url}" if url else "") + \
+        " --user NAME"
     note(f"{bolt} of {vin} locked: the operator waits, the vehicle on the lift, for a "
-         "person's release (the screens' Release form, or stationd release)"
+         f"person's release (the screens' Release form, or {command})"
          + ("; Ctrl-C ends the wait and the run" if interruptible else ""))
     ended, got = asyncio.Event(), list[int]()
     with _signals_end(ended, got) if interruptible else nullcontext():
