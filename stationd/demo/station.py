@@ -450,9 +450,8 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
               "parameters sent for a wrong bolt: "
               f"{summary['wrong_bolt_sends']}, XY error mean "
               f"{_ms(summary['xy_error_mm']['mean'], '.3f')} mm max "
-              f"{_ms(summary['xy_error_mm']['max'], '.3f')} mm, latency from exposure p50 "
-              f"{_ms(summary['latency_ms']['p50'], '.0f')} ms p95 "
-              f"{_ms(summary['latency_ms']['p95'], '.0f')} ms")
+              f"{_ms(summary['xy_error_mm']['max'], '.3f')} mm, "
+              f"{latency_words(summary['latency_ms'])}")
         n = summary["nok_policy"]
         whose = f" ({station_id(1)})" if extra else ""
         print(f"NOK policy{whose}: {nok_words(n)}")
@@ -644,6 +643,22 @@ def _listen(args: argparse.Namespace, cfg: StationConfig) -> tuple[str | None, s
 
 def _ms(v: float | None, fmt: str) -> str:
     return "-" if v is None else format(v, fmt)
+
+
+#: the demo's latency target, from the frames' exposure to the parameters acknowledged (the
+#: README's): a run above it still passes (its safety and results hold) but says so
+LATENCY_P95_TARGET_MS = 300.0
+
+
+def latency_words(latency: dict[str, float | None]) -> str:
+    """``latency from exposure p50 59 ms p95 74 ms``, and where p95 is above the target,
+    that it is (a PASS on a machine busy with other work did not say so)."""
+    p95 = latency.get("p95")
+    above = "" if p95 is None or p95 <= LATENCY_P95_TARGET_MS else (
+        f" (above the target p95 <= {LATENCY_P95_TARGET_MS:.0f} ms: other work on this "
+        "machine?)")
+    return (f"latency from exposure p50 {_ms(latency.get('p50'), '.0f')} ms p95 "
+            f"{_ms(p95, '.0f')} ms{above}")
 
 
 def _check_demo_station(cfg: StationConfig) -> None:

@@ -19,6 +19,7 @@ from stationd.demo.station import (
     _line_verdict,
     _summary,
     all_stations,
+    latency_words,
     simulated,
     stand_ins,
 )
@@ -162,3 +163,15 @@ def test_a_lines_stations_each_have_their_own_bolts():
     assert [b for s in shares for b in s] == bolts   # each bolt at one station, in order
     assert share_of(bolts, 1, 1) == bolts
     assert share_of(bolts[:2], 3, 3) == []           # more stations than bolts: none left
+
+
+def test_the_summary_says_a_latency_above_the_target():
+    """A PASS on a machine busy with other work (p95 338 ms at load 18) did not say its
+    latency was above the README's target."""
+    assert latency_words({"p50": 59.2, "p95": 74.4}) == \
+        "latency from exposure p50 59 ms p95 74 ms"
+    assert latency_words({"p50": 120.0, "p95": 338.0}) == (
+        "latency from exposure p50 120 ms p95 338 ms (above the target p95 <= 300 ms: other "
+        "work on this machine?)")
+    assert latency_words({"p50": None, "p95": None}) == \
+        "latency from exposure p50 - ms p95 - ms"
