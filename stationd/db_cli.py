@@ -20,7 +20,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from db.kinds import LOOSENING, MISSING, SKIPPED
+from db.kinds import LOOSENING, MISSING, PENDING, SKIPPED
 from drivers.counting import counted
 from stationd.errors import ConfigError, InputError
 from stationd.jsonout import strict_json
@@ -197,38 +197,33 @@ def _export_results(args: argparse.Namespace) -> int:
     fmt = args.format or "csv"
     with open_repository(_db_url(args), must_exist=True, missing=_missing(args)) as repo:
         results = Results(repo)
-        if args.vin is not None:
-            vins = [args.vin]
-            # (an unknown --vin: the report raises NotFoundError, one line, exit 2)
-            unended = {args.vin} if repo.vehicle_report(args.vin).vehicle.ended_at is None \
-                else set()
-        else:
-            every = list(reversed(results.vehicles(limit=1_000_000)))
-            vins = [v["vin"] for v in every]
-            unended = {v["vin"] for v in every if v["ended_at"] is None}
+        # (an unknown --vin: the report raises NotFoundError, one line, exit 2)
+        vins = [args.vin] if args.vin is not None else [
+            v["vin"] for v in reversed(results.vehicles(limit=1_000_000))]
         runs = [r for vin in vins for r in results.export(vin)]
     if args.since is not None:   # a bolt not run down has no time: kept with its vehicle's
         kept = [r for r in runs if r["recorded_at"] is not None
                 and _aware(datetime.fromisoformat(r["recorded_at"])) >= args.since]
         vins_kept = {r["vin"] for r in kept}
-        runs = [r for r in runs if r in kept or (r["status"] in (MISSING, SKIPPED)
+        runs = [r for r in runs if r in kept or (r["status"] in (MISSING, PENDING, SKIPPED)
                                                  and r["vin"] in vins_kept)]
     text = rundowns_csv(runs) if fmt == "csv" else strict_json(runs) + "\n"
     if args.out is None:
         sys.stdout.write(text)
     else:
         write_atomic(Path(args.out), text)
-        none = [r for r in runs if r["status"] == MISSING]
+        missing = sum(1 for r in runs if r["status"] == MISSING)
         # a bolt of a vehicle still open (at the station, or reopened) is not run down yet,
-        # not missing: quality read the vehicle on the lift as 45 bolts forgotten
-        to_do = sum(1 for r in none if r["vin"] in unended)
-        missing = len(none) - to_do
+        # not missing (its row says pending): quality read the vehicle on the lift as 45
+        # bolts forgotten
+        to_do = [r for r in runs if r["status"] == PENDING]
         skipped = sum(1 for r in runs if r["status"] == SKIPPED)
         also = [counted(skipped, "skipped")] if skipped else []
         if to_do:
-            on = len({r["vin"] for r in none if r["vin"] in unended})
-            also.append(f"{to_do} not run down yet on {counted(on, 'open vehicle')}")
-        print(f"wrote {args.out}: {counted(len(runs) - len(none) - skipped, 'rundown')} and "
+            on = len({r["vin"] for r in to_do})
+            also.append(f"{len(to_do)} not run down yet on {counted(on, 'open vehicle')}")
+        rundowns = len(runs) - missing - len(to_do) - skipped
+        print(f"wrote {args.out}: {counted(rundowns, 'rundown')} and "
               f"{counted(missing, 'missing bolt')}"
               + (f" (and {', '.join(also)})" if also else "")
               + f" of {counted(len({r['vin'] for r in runs}), 'vehicle')}")

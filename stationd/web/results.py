@@ -27,7 +27,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from db.curves import curves_of_records
-from db.kinds import LOOSENING, MISSING, SKIPPED
+from db.kinds import LOOSENING, MISSING, PENDING, SKIPPED
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
 from db.repository import Repository
 
@@ -145,16 +145,20 @@ class Results:
 
     def export(self, vin: str) -> list[dict[str, Any]]:
         """The vehicle's rundowns, then one row per bolt with none, no values: status
-        ``missing``, or ``skipped`` with who skipped it and their comment (an export that
-        lists only rundowns reads as a complete vehicle, and one that calls a bolt skipped
-        on purpose missing reads as a bolt forgotten).  Raises ``NotFoundError`` for an
-        unknown VIN."""
+        ``missing`` (``pending`` while the vehicle is open: at the station, or reopened, its
+        bolt is still to do, not forgotten), or ``skipped`` with who skipped it and their
+        comment (an export that lists only rundowns reads as a complete vehicle, and one that
+        calls a bolt skipped on purpose missing reads as a bolt forgotten).  Raises
+        ``NotFoundError`` for an unknown VIN."""
         report = self.repo.vehicle_report(vin)
+        still_open = report.vehicle.ended_at is None
         runs = [{**{k: v for k, v in r.items() if k in CSV_FIELDS}, "skipped_by": None,
                  "comment": r["entered_comment"]} for r in self.rundowns(vin)]
         none: list[dict[str, Any]] = [
             {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
-             "bolt": b.bolt_id, "attempt": 0, "status": b.status, "images": [],
+             "bolt": b.bolt_id, "attempt": 0,
+             "status": PENDING if still_open and b.status == MISSING else b.status,
+             "images": [],
              "skipped_by": b.skipped_by, "comment": b.comment}
             for b in report.bolts if b.status in (MISSING, SKIPPED)]
         # a result that could not be read: its bolt's row says so, with the parse error

@@ -169,7 +169,7 @@ def test_results_and_exports_from_a_real_database(tmp_path):
                     rows = list(csv.DictReader(io.StringIO(await r.text())))
                 assert [(x["bolt"], x["status"], x["attempt"]) for x in rows] == [
                     ("B1", "ok", "1"), ("B2", "nok", "1"), ("B2", "ok", "2"),
-                    *((b, "missing", "0") for b in doc["missing"])]
+                    *((b, "pending", "0") for b in doc["missing"])]   # open: to do
                 assert all(x["torque_min_nm"] and x["torque_max_nm"] for x in rows[:3])
                 async with http.get(srv.url + "api/vehicles/NOPE/export.csv") as r:
                     assert r.status == 404
