@@ -113,11 +113,23 @@ def _value(name: str, measured: float | None, limits: dict[str, float] | None,
         MeasuredValue=float(measured) if measured is not None else float("nan"),
         Name=name,
         PhysicalQuantity=quantity,
-        ResultEvaluation=_evaluation(ok),
+        ResultEvaluation=_evaluation(value_ok(measured, lim, ok)),
         LowLimit=None if lim.get("min") is None else float(lim["min"]),
         High=None if lim.get("max") is None else float(lim["max"]),
         TargetValue=None if lim.get("target") is None else float(lim["target"]),
         EngineeringUnits=unit)
+
+
+def value_ok(measured: float | None, limits: dict[str, float], ok: bool) -> bool:
+    """One value's own evaluation: within its limits (those sent with the parameters), or,
+    where the value or both its limits are not known, the result's ``ok``.  Why: a NOK for
+    an angle below its minimum gave the torque within its limits NotOK as well, and an MES
+    counting torque failures counted it."""
+    lo, hi = limits.get("min"), limits.get("max")
+    if measured is None or (lo is None and hi is None):
+        return ok
+    return (lo is None or float(measured) >= float(lo)) and \
+        (hi is None or float(measured) <= float(hi))
 
 
 def _evaluation(ok: bool) -> Any:
@@ -274,4 +286,4 @@ __all__ = ["ASSEMBLED", "CLASSIFICATION_SINGLE", "DISASSEMBLED", "ENTITY_ENTERED
            "ENTITY_OPERATOR", "ENTITY_VEHICLE", "EVALUATION_NOT_OK",
            "EVALUATION_OK", "JOINING_TECHNOLOGY", "PQ_ANGLE", "PQ_OTHER", "PQ_TIME",
            "PQ_TORQUE", "TIGHTENING_ID", "message", "parse_result_id", "result_id",
-           "rundown_result", "trace"]
+           "rundown_result", "trace", "value_ok"]

@@ -141,8 +141,12 @@ def test_every_rundown_arrives_as_a_result_event_at_the_server_object(repo):
     b1_torque, b1_angle = events[0].Result.ResultContent[0].Value.OverallResultValues
     assert (b1_torque.LowLimit, b1_torque.High, b1_torque.TargetValue) == (45.0, 55.0, 50.0)
     assert (b1_angle.LowLimit, b1_angle.High) == (15.0, 60.0)
-    b2_torque = events[1].Result.ResultContent[0].Value.OverallResultValues[0]
+    b2_torque, b2_angle = events[1].Result.ResultContent[0].Value.OverallResultValues
     assert (b2_torque.LowLimit, b2_torque.High) == (23.0, 27.0)
+    # each value judged against its own limits: B2's NOK is its torque's, not its angle's
+    assert [int(v.ResultEvaluation) for v in (b1_torque, b1_angle, b2_torque)] == [1, 1, 2]
+    assert int(b2_angle.ResultEvaluation) == (
+        1 if b2_angle.LowLimit <= b2_angle.MeasuredValue <= b2_angle.High else 2)
     assert b2_torque.EngineeringUnits.DisplayName.Text == "N·m"
     # a loosening is told apart (a newcomer's MES saw four "OK" results of one joint), and
     # the operator signed in at the station is an entity of the result
