@@ -68,7 +68,9 @@ class BoltResult:
     version: int | None = None       # the parameter version the last record was tightened with
     retired: bool = False            # no longer in the bolt table
     kind: str | None = None          # the last record's: tightening or loosening
-    skipped_by: str | None = None    # a skipped bolt's: who skipped it, and why
+    #: a skipped bolt's (or one skipped after its last rundown, its status that rundown's):
+    #: who skipped it, and why
+    skipped_by: str | None = None
     comment: str | None = None
 
     def to_json(self) -> dict[str, Any]:
@@ -138,8 +140,9 @@ class VehicleReport:
         journal's line of a vehicle that closes, so the journal and ``db report`` say one
         thing in one way."""
         text = f"bolts: {len(self.ok)} OK"
-        text += f", {len(self.nok)} ending NOK ({', '.join(self.nok)})" if self.nok \
-            else ", 0 ending NOK"
+        nok = [b.bolt_id + (f" skipped by {b.skipped_by}" if b.skipped_by else "")
+               for b in self.bolts if b.status == NOK]
+        text += f", {len(nok)} ending NOK ({', '.join(nok)})" if nok else ", 0 ending NOK"
         who = [f"{b.bolt_id} by {b.skipped_by}" + (f": {b.comment}" if b.comment else "")
                for b in self.bolts if b.status == SKIPPED]
         text += f", {len(who)} skipped ({'; '.join(who)})" if who else ", 0 skipped"
@@ -182,13 +185,15 @@ def build_report(s: Session, v: Vehicle) -> VehicleReport:
             .order_by(CommandRecord.id)):
         if bolt is not None:
             loosen_ordered[bolt] = at
-    skips: dict[str, tuple[str, str]] = {}   # bolt -> who skipped it and why, since opening
-    for bolt, user, comment in s.execute(select(
-            CommandRecord.bolt, CommandRecord.user, CommandRecord.comment).where(
-            CommandRecord.vin == v.vin, CommandRecord.kind == "skip",
-            CommandRecord.at >= (v.reopened_at or v.started_at)).order_by(CommandRecord.id)):
+    # bolt -> who skipped it, why and when, since opening
+    skips: dict[str, tuple[str, str, datetime]] = {}
+    for bolt, user, comment, at in s.execute(select(
+            CommandRecord.bolt, CommandRecord.user, CommandRecord.comment, CommandRecord.at)
+            .where(CommandRecord.vin == v.vin, CommandRecord.kind == "skip",
+                   CommandRecord.at >= (v.reopened_at or v.started_at))
+            .order_by(CommandRecord.id)):
         if bolt is not None:
-            skips[bolt] = (user, comment)
+            skips[bolt] = (user, comment, at)
     results = []
     for b in bolts:
         recs = by_bolt.get(b.id, [])
@@ -201,10 +206,18 @@ def build_report(s: Session, v: Vehicle) -> VehicleReport:
                                       comment=who[1] or None))
             continue
         last, version = recs[-1]
+        # skipped by a person after its last rundown (a bolt locked after its NOKs, a
+        # supervisor deciding it is not to be tightened here): its status stays its last
+        # rundown's (the joint is NOK, not untouched), with who skipped it and why (the
+        # decision was only in the command list)
+        who = skips.get(b.code)
+        skipped = who is not None and who[2] >= last.recorded_at
         results.append(BoltResult(b.code, b.name, _status(last, loosen_ordered.get(b.code)),
                                   len(recs), last.torque_nm, last.angle_deg, last.tightening_id,
                                   last.recorded_at, version, b.removed_at is not None,
-                                  last.kind or TIGHTENING))
+                                  last.kind or TIGHTENING,
+                                  skipped_by=who[0] if skipped and who else None,
+                                  comment=(who[1] or None) if skipped and who else None))
     info = VehicleInfo(v.vin, v.model.name, v.started_at, v.ended_at, v.reopened_at)
     tightenings = [rec for rec, _ in records if (rec.kind or TIGHTENING) == TIGHTENING]
     return VehicleReport(info, tuple(results), len(tightenings),

@@ -311,12 +311,12 @@ def cmd_db_report(args: argparse.Namespace) -> int:
         for b in report.bolts:
             mine = [r for r in runs if r["bolt"] == b.bolt_id]
             last = mine[-1:]
-            result = "-" if b.status == MISSING else \
-                f"by {b.skipped_by}" + (f": {b.comment}" if b.comment else "") \
-                if b.status == SKIPPED else \
+            skipped = f"by {b.skipped_by}" + (f": {b.comment}" if b.comment else "")
+            result = "-" if b.status == MISSING else skipped if b.status == SKIPPED else \
                 f"{_num(b.torque_nm)} Nm, {_num(b.angle_deg)} deg, v{b.version}, " \
                 f"{_attempts(b.attempts, mine)}" + (f", by {last[0]['operator'] or '-'}"
-                                                    + _entered(last[0]) if last else "")
+                                                    + _entered(last[0]) if last else "") \
+                + (f"; then skipped {skipped}" if b.skipped_by else "")
             retired = " (retired)" if b.retired else ""
             print(f"  {b.bolt_id:<12} {b.status.upper():<8} {result}  {b.name}{retired}")
             if b.attempts > 1:   # reworked: each rundown, so the loosenings show

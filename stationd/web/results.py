@@ -157,10 +157,11 @@ class Results:
         none: list[dict[str, Any]] = [
             {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
              "bolt": b.bolt_id, "attempt": 0,
-             "status": PENDING if still_open and b.status == MISSING else b.status,
+             "status": PENDING if still_open and b.status == MISSING else
+             SKIPPED if b.skipped_by else b.status,
              "images": [],
              "skipped_by": b.skipped_by, "comment": b.comment}
-            for b in report.bolts if b.status in (MISSING, SKIPPED)]
+            for b in report.bolts if b.status in (MISSING, SKIPPED) or b.skipped_by]
         # a result that could not be read: its bolt's row says so, with the parse error
         unread: list[dict[str, Any]] = [
             {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,

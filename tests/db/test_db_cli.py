@@ -454,6 +454,49 @@ def _unreachable_as_nobody() -> str | None:
     return None
 
 
+def test_a_bolt_skipped_after_its_noks_is_reported_and_exported_skipped_with_who(run, db):
+    """A bolt locked after its NOKs, then skipped by a supervisor: the report and the
+    exports named no one (the decision only in the command list).  It still ends NOK (the
+    joint is NOK, not untouched), said skipped by whom and why, its rundowns kept; a rundown
+    after the skip counts as before."""
+    import csv
+    import io
+    import time
+    from datetime import UTC, datetime
+
+    from db.repository import Repository
+    from stationd.boltfile import import_bolts
+
+    with Repository.open(db) as repo:
+        import_bolts(repo, EXAMPLE)
+        repo.start_vehicle("VIN1", "WAGON-B")
+        for tid in (1, 2, 3):
+            record(repo, "VIN1", "SF-FL", ok=False, tightening_id=tid)
+        record(repo, "VIN1", "SF-FR", ok=False, tightening_id=4)
+        time.sleep(0.01)
+        for bolt in ("SF-FL", "SF-FR"):
+            repo.ledger.record_command(at=datetime.now(UTC), user="sam", source="cli",
+                                       kind="skip", vin="VIN1", bolt=bolt,
+                                       comment="thread damaged")
+        time.sleep(0.01)
+        record(repo, "VIN1", "SF-FR", ok=True, tightening_id=5)   # tightened after all
+    code, out, _ = run("db", "report", "VIN1", "--db", db)
+    lines = out.splitlines()
+    assert code == 1 and "1 ending NOK (SF-FL skipped by sam), 0 skipped" in lines[0], \
+        lines[0]
+    fl = next(x for x in lines if x.strip().startswith("SF-FL"))
+    assert fl.split()[1] == "NOK"                   # its status: its last rundown's
+    assert "; then skipped by sam: thread damaged" in fl, fl
+    assert any(x.strip().startswith("1. tightening NOK") for x in lines)   # its rundowns kept
+    fr = next(x for x in lines if x.strip().startswith("SF-FR"))
+    assert fr.split()[1] == "OK" and "skipped" not in fr
+    code, out, _ = run("db", "export", "--results", "--vin", "VIN1", "--db", db)
+    rows = [r for r in csv.DictReader(io.StringIO(out)) if r["bolt"] == "SF-FL"]
+    assert [(r["status"], r["skipped_by"], r["comment"]) for r in rows] == [
+        ("nok", "", ""), ("nok", "", ""), ("nok", "", ""),
+        ("skipped", "sam", "thread damaged")]
+
+
 def test_a_bolt_skipped_by_a_command_is_exported_and_reported_skipped_not_missing(run, db,
                                                                                   tmp_path):
     """Issue 19: a bolt a person skipped (with a comment) showed as missing in the results

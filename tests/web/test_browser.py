@@ -303,6 +303,17 @@ def test_results_screens_and_csv_download(live_server, page, shots, tmp_path):
         assert page.js("return [...document.querySelectorAll('td.crops a')]"
                        ".map(a => a.getAttribute('href'))") == ["/images/img/B2-left.jpg"]
         assert "reworked" not in (page.text("#title") or "")
+        # a bolt skipped after a NOK ends NOK, and says who skipped it and why
+        repo.record_tightening(VIN, "B3", ok=False, position_mm=(1.0, 1.0, 0.0),
+                               match_distance_mm=1.0, tilt_deg=1.0, torque_nm=20.0,
+                               angle_deg=30.0, tightening_id=99)
+        repo.ledger.record_command(at=datetime.now(UTC), user="sam", source="screen",
+                                   kind="skip", vin=VIN, bolt="B3", comment="stripped")
+        page.get(srv.url + f"vehicles/{VIN}")
+        page.wait(lambda p: "then skipped" in (p.text("tr.rundown[data-bolt=B3]") or ""),
+                  what="B3 skipped after its NOK")
+        assert "NOK, then skipped by sam: stripped" in (
+            page.text("tr.rundown[data-bolt=B3]") or "")
         repo.close_vehicle(VIN)                 # closed, then back for rework
         repo.start_vehicle(VIN, "SEDAN", reopen=True)
         page.get(srv.url + f"vehicles/{VIN}")

@@ -169,7 +169,12 @@ async function showVehicle(vin) {
         tr.className = "rundown";
         tr.dataset.bolt = b.bolt;
         cell(tr, i ? "" : b.bolt);
-        cell(tr, i ? "" : b.status.toUpperCase(), "status-" + (b.status === "nok" ? "NOK" : b.status));
+        // a bolt skipped after its last rundown (locked after NOKs) keeps that rundown's
+        // status, and says who skipped it and why
+        const then = b.skipped_by && b.status !== "skipped"
+          ? `, then skipped by ${b.skipped_by}` + (b.comment ? `: ${b.comment}` : "") : "";
+        cell(tr, i ? "" : b.status.toUpperCase() + then,
+             "status-" + (b.status === "nok" ? "NOK" : b.status));
         if (!r) {
           // a skip names who skipped it and why (the exports' skipped_by and comment)
           const none = b.status === "skipped"
