@@ -728,6 +728,9 @@ def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
     # the rule: a bolt the operator leaves before tightening is handled when the tool went
     # off (the station's part: no rundown may start on a wrench that left); said as such
     left = sum(1 for r in report if str(r["result"]).startswith(LEFT_DISABLED))
+    # skipped by a person (a lock's decision, the screens or stationd skip): its line says
+    # by whom and why
+    skipped = sum(1 for r in report if str(r["result"]).startswith("skipped ("))
     problems = []
     if wrong:
         problems.append(f"{counted(wrong, 'parameter send')} for a wrong bolt")
@@ -740,9 +743,9 @@ def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
     if any("STILL ENABLED" in str(r["result"]) for r in report):
         problems.append("the tool stayed enabled after the wrench left")
     verdict = f"FAIL: {'; '.join(problems)}" if problems else \
-        f"PASS: {handled}/{cycles} bolts handled ({_handled_words(ok, left, handled)}), " \
-        "0 wrong bolts, every result recorded"
-    return {"bolts": cycles, "ok": ok, "handled": handled, "left": left,
+        f"PASS: {handled}/{cycles} bolts handled " \
+        f"({_handled_words(ok, left, handled, skipped)}), 0 wrong bolts, every result recorded"
+    return {"bolts": cycles, "ok": ok, "handled": handled, "left": left, "skipped": skipped,
             "wrong_bolt_sends": wrong, "parameters_sent": len(lat),
             "results": results, "recorded": recorded,
             "nok_policy": {
@@ -771,8 +774,8 @@ def all_stations(first: dict[str, Any], extra: list[dict[str, Any]]) -> dict[str
         operators.update(e.get("operators") or {})
     return {"stations": [e["station_id"] for e in every],
             **{k: sum(int(e.get(k) or 0) for e in every)
-               for k in ("bolts", "ok", "handled", "left", "wrong_bolt_sends", "results",
-                         "recorded")},
+               for k in ("bolts", "ok", "handled", "left", "skipped", "wrong_bolt_sends",
+                         "results", "recorded")},
             "nok_policy": {k: sum(int(e["nok_policy"][k]) for e in every)
                            for k in ("nok", "loosenings", "locks", "releases",
                                      "locked_sends")},
@@ -787,7 +790,8 @@ def _line_verdict(first: dict[str, Any], extra: list[dict[str, Any]]) -> str:
     total = sum(int(e["bolts"]) for e in every)
     handled = sum(int(e["handled"]) for e in every)
     each = "; ".join(f"{e['station_id']} {e['handled']}/{e['bolts']}: "
-                     f"{_handled_words(int(e['ok']), int(e['left']), int(e['handled']))}"
+                     + _handled_words(int(e["ok"]), int(e["left"]), int(e["handled"]),
+                                      int(e.get("skipped") or 0))
                      for e in every)
     return (f"PASS: all {len(every)} stations, {handled}/{total} bolts handled ({each}), "
             "0 wrong bolts, every result recorded")
@@ -799,14 +803,18 @@ def nok_words(n: dict[str, Any]) -> str:
             f"{counted(n['locks'], 'lock')}, {counted(n['releases'], 'release')}")
 
 
-def _handled_words(ok: int, left: int, handled: int) -> str:
+def _handled_words(ok: int, left: int, handled: int, skipped: int = 0) -> str:
     """"9 OK, 1 left before tightening with the tool disabled": what the handled bolts
-    are, so the verdict agrees with the counts beside it."""
+    are, so the verdict agrees with the counts beside it.  ``skipped``: bolts a person
+    skipped (locked after their NOKs: "1 not OK after 10 rundowns" said of one skipped after
+    five)."""
     parts = [f"{ok} OK"]
     if left:
         parts.append(f"{left} left before tightening by the operator, the tool disabled")
-    if handled - ok - left > 0:
-        parts.append(f"{handled - ok - left} not OK after {MAX_RUNDOWNS} rundowns")
+    if skipped:
+        parts.append(f"{skipped} skipped by a person (see its line)")
+    if handled - ok - left - skipped > 0:
+        parts.append(f"{handled - ok - left - skipped} not OK after {MAX_RUNDOWNS} rundowns")
     return ", ".join(parts)
 
 

@@ -156,6 +156,18 @@ def test_a_bolt_left_before_tightening_is_handled_only_with_the_tool_off_and_say
         "PASS: 2/2 bolts handled (2 OK), ")
 
 
+def test_a_bolt_a_person_skipped_is_said_skipped_not_not_ok_after_ten_rundowns():
+    """A bolt locked after its NOKs and skipped by a supervisor (--no-sim-supervisor): the
+    verdict said "1 not OK after 10 rundowns" of one skipped after five."""
+    skipped = [REPORT[0], {"bolt": "B02", "result": "skipped (by sam: damaged)",
+                           "rundowns": 5}]
+    bus = _station(records=6).bus
+    s = _summary(SimpleNamespace(bus=bus), skipped, 2, 0)
+    assert (s["ok"], s["skipped"], s["handled"]) == (1, 1, 2)
+    assert s["verdict"] == ("PASS: 2/2 bolts handled (1 OK, 1 skipped by a person (see its "
+                            "line)), 0 wrong bolts, every result recorded")
+
+
 def test_a_lines_stations_each_have_their_own_bolts():
     bolts = [f"B{i:02d}" for i in range(1, 15)]
     shares = [share_of(bolts, k, 3) for k in (1, 2, 3)]
