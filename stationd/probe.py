@@ -75,9 +75,41 @@ def probe_lift(args: argparse.Namespace) -> int:
 
 
 def _result_json(r: Any) -> dict[str, Any]:
+    from stationd.station.results import type_code
+    from stationd.words import result_type_words
+
+    code = type_code(r)
     return {"torque_nm": r.torque_nm, "angle_deg": r.angle_deg, "ok": r.ok,
             "torque_status": r.torque_status.name, "angle_status": r.angle_status.name,
-            "tightening_id": r.tightening_id, "pset": r.pset, "vin": r.vin}
+            "tightening_id": r.tightening_id, "pset": r.pset, "vin": r.vin,
+            "result_type": code, "what": result_type_words(code) if code is not None
+            else "result without a type (its revision carries none)"}
+
+
+def _wait_tightening(w: Any, seconds: float) -> tuple[Any, list[dict[str, Any]]]:
+    """The first tightening within ``seconds`` (None: none), and what else came before it:
+    a loosening, a batch increment, a type the station does not know or a message that
+    could not be read is said as what it is, never as a tightening (the station closes no
+    bolt with one), and the wait goes on."""
+    import time
+
+    from drivers.wrench import ResultKind, UnreadableResult, result_kind
+    from stationd.station.results import type_code
+
+    others: list[dict[str, Any]] = []
+    deadline = time.monotonic() + seconds
+    while (left := deadline - time.monotonic()) > 0:
+        r = w.wait_result(left)
+        if r is None:
+            break
+        if isinstance(r, UnreadableResult):
+            others.append({"what": "a result that could not be read", "error": r.error,
+                           "tightening_id": r.tightening_id, "pset": r.pset})
+        elif result_kind(type_code(r)) is ResultKind.TIGHTENING:
+            return r, others
+        else:
+            others.append(_result_json(r))
+    return None, others
 
 
 def probe_wrench(args: argparse.Namespace) -> int:
@@ -108,7 +140,7 @@ def probe_wrench(args: argparse.Namespace) -> int:
             if code == EXIT_OK and args.wait_result:
                 w.enable_tool()
                 try:
-                    r = w.wait_result(args.wait_result)
+                    r, out["not_tightenings"] = _wait_tightening(w, args.wait_result)
                 finally:
                     w.disable_tool()
                 if r is None:
@@ -126,11 +158,16 @@ def probe_wrench(args: argparse.Namespace) -> int:
         if args.pset is not None:
             print(f"  pset {args.pset}: " + ("acknowledged" if out["acknowledged"] else
                                              f"REFUSED ({out['error']['text']})"))
+        for o in out.get("not_tightenings") or ():
+            said = f": {o['error']}" if "error" in o else \
+                f", {'OK' if o['ok'] else 'NOK'} torque {o['torque_nm']:.2f} Nm"
+            print(f"  not a tightening: {o['what']}{said} (id {o['tightening_id']}); "
+                  "still waiting for a tightening")
         if out["result"]:
             r = out["result"]
-            print(f"  result: {'OK' if r['ok'] else 'NOK'} torque {r['torque_nm']:.2f} Nm "
-                  f"({r['torque_status']}), angle {r['angle_deg']:.0f} deg "
-                  f"({r['angle_status']}), id {r['tightening_id']}")
+            print(f"  result: {r['what']} {'OK' if r['ok'] else 'NOK'} torque "
+                  f"{r['torque_nm']:.2f} Nm ({r['torque_status']}), angle "
+                  f"{r['angle_deg']:.0f} deg ({r['angle_status']}), id {r['tightening_id']}")
         elif out["error"] and code and args.wait_result and out["acknowledged"]:
             print(f"  {out['error']['text']}")
     if code and not args.json:

@@ -121,6 +121,47 @@ def test_probe_wrench_selects_a_pset_and_reports_one_result(capsys):
     assert {"angle_deg", "torque_status", "angle_status", "tightening_id", "vin"} <= set(r)
 
 
+def test_probe_wrench_says_what_is_not_a_tightening_and_waits_for_one(capsys):
+    """A batch increment, a loosening, a type nobody knows and a message that does not read
+    came before the tightening: each printed as what it is (they printed as "result: OK
+    torque 0.00 Nm"), the tightening last, with its type."""
+    import threading
+
+    from drivers.wrench.sim.controller import SimController
+
+    with SimController(seed=3) as ctl:
+        port = ctl.listen_tcp()
+
+        def operator():
+            import time
+            for _ in range(300):
+                if ctl.tool_enabled and ctl.pset == 1:
+                    ctl.press(3)
+                    ctl.pull_trigger(2)
+                    ctl.pull_trigger(9)
+                    ctl.garble_next_result("value")
+                    ctl.pull_trigger()
+                    ctl.pull_trigger()
+                    return
+                time.sleep(0.01)
+
+        t = threading.Thread(target=operator)
+        t.start()
+        code = main(["probe", "wrench", f"openprotocol://127.0.0.1:{port}", "--pset", "1",
+                     "--wait-result", "5"])
+        t.join()
+    out = capsys.readouterr().out
+    lines = [x.strip() for x in out.splitlines()]
+    assert code == 0
+    said = [x for x in lines if x.startswith("not a tightening: ")]
+    assert [x.split(":")[1].split(",")[0].strip() for x in said] == [
+        "batch increment", "loosening", "result type 9 (unknown)",
+        "a result that could not be read"], said
+    assert all(x.endswith("still waiting for a tightening") for x in said)
+    [result] = [x for x in lines if x.startswith("result: ")]
+    assert result.startswith("result: tightening OK") or result.startswith("result: tightening NOK")
+
+
 def test_probe_wrench_refused_pset_exits_1_with_the_code(capsys):
     from drivers.wrench.sim.controller import SimController
 
