@@ -111,9 +111,13 @@ class SectionReader:
         expect(root, kind, keys)
         unknown: set[str] = set()
         while True:
+            duplicates: list[ConfigError] | None = [] if self.collect else None
             try:
-                m = root.mapping((*keys, *unknown))
+                m = root.mapping((*keys, *unknown), duplicates=duplicates)
                 self.top = {k: v for k, v in m.items() if k not in unknown}
+                # a section written twice: told, the first one read on (the others' errors
+                # too: a duplicate hid every other error of the file)
+                self.errors.extend(duplicates or ())
                 return self.top
             except ConfigError as exc:
                 if not self.collect:

@@ -238,8 +238,11 @@ class YamlNode:
         return None if kept is None else YamlNode(kept, self.path, self.key)
 
     # -- containers ---------------------------------------------------------------------
-    def mapping(self, allowed: Iterable[str], required: Iterable[str] = ()) -> dict[str, YamlNode]:
-        """The children of a mapping; unknown keys and missing required keys are errors."""
+    def mapping(self, allowed: Iterable[str], required: Iterable[str] = (),
+                duplicates: list[ConfigError] | None = None) -> dict[str, YamlNode]:
+        """The children of a mapping; unknown keys and missing required keys are errors.  A
+        duplicate key is one too; with ``duplicates`` it is added there instead and the
+        first one kept (a checker reporting every error reads on)."""
         if not isinstance(self._node, yaml.MappingNode):
             raise self.error("expected a mapping (key: value)")
         allowed_set = set(allowed)
@@ -264,7 +267,11 @@ class YamlNode:
                 raise YamlNode(key_node, self.path, child.key).error(
                     f"unknown key (accepted: {accepted})")
             if name in out:
-                raise YamlNode(key_node, self.path, child.key).error("duplicate key")
+                error = YamlNode(key_node, self.path, child.key).error("duplicate key")
+                if duplicates is None:
+                    raise error
+                duplicates.append(error)
+                continue
             out[name] = child
         missing = [k for k in required if k not in out]
         if missing:

@@ -122,6 +122,19 @@ def test_an_unknown_key_in_the_nok_section_hides_no_other_error(station, capsys)
     assert any("matching.stable_frames" in line for line in lines), lines
 
 
+def test_a_section_written_twice_hides_no_other_error(station, capsys) -> None:
+    """A second ``matching:`` appended (a new user's edit) was the only error told: a typo
+    elsewhere in the file was not.  The duplicate is told, the first one read on."""
+    _edit(station, "matching: {tolerance_mm: 8.0, margin_mm: 6.0, stable_frames: 3, "
+                   "max_age_s: 0.5, leave_frames: 3}",
+          "matching: {tolerance_mm: 8.0, margin_mm: 6.0, stable_frames: 0, "
+          "max_age_s: 0.5, leave_frames: 3}")
+    station.write_text(station.read_text() + "matching: {tolerance_mm: 9.0}\n")
+    lines = _check(capsys, station)
+    assert any("matching" in line and "duplicate key" in line for line in lines), lines
+    assert any("matching.stable_frames" in line for line in lines), lines
+
+
 HASH = "scrypt$16384$8$1$MDEyMzQ1Njc4OWFiY2RlZg==$" + "A" * 43 + "="
 
 
