@@ -146,10 +146,15 @@ def _serve_plc(args: argparse.Namespace, stop: threading.Event, out: TextIO) -> 
 
 def _read_commands(plc: SimulatedPlc, code: int, serial: list[int],
                    say: Callable[[str], None], stop: threading.Event) -> None:
+    """Commands typed on stdin until ``quit``.  Where stdin ends (``</dev/null``, nohup, a
+    service) the PLC serves on as it stands: it ended silently, and the station only saw
+    "connection refused"."""
     for line in sys.stdin:
         if not plc_command(plc, line, code, serial, say):
-            break
-    stop.set()
+            stop.set()
+            return
+    say("stdin closed: the PLC serves on as it stands until stopped (SIGTERM, Ctrl-C); "
+        "--every N raises and lowers the lift by itself")
 
 
 def _serve_controller(args: argparse.Namespace, stop: threading.Event, out: TextIO) -> int:

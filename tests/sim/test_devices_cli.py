@@ -67,6 +67,23 @@ def test_the_simulated_plc_is_driven_by_commands_and_read_over_modbus() -> None:
         assert _stop(p) == 0
 
 
+def test_the_simulated_plc_serves_on_when_its_stdin_ends() -> None:
+    """``stationd sim plc </dev/null`` (nohup, a service) ended silently: the station saw
+    only "connection refused"."""
+    port = _free_port()
+    p, first = _start("plc", "--config", str(STATION), "--port", str(port))
+    try:
+        assert p.stdin is not None and p.stdout is not None
+        p.stdin.close()
+        p.stdout.readline()   # the commands' help
+        assert p.stdout.readline().startswith("stdin closed: the PLC serves on")
+        with open_lift(f"modbus-tcp://127.0.0.1:{port}?timeout=2") as lift:
+            assert not lift.read_state().at_working_height
+        assert p.poll() is None
+    finally:
+        assert _stop(p) == 0
+
+
 def test_the_simulated_controller_runs_the_station_files_psets_over_open_protocol() -> None:
     port = _free_port()
     p, first = _start("controller", "--config", str(STATION), "--port", str(port))
