@@ -214,12 +214,14 @@ class WebServer:
 
     def release_by(self) -> list[str]:
         """The roles whose users may release a locked bolt (the running station's
-        ``access``): what the operator screen says beside a lock, so the operator knows whom
-        to call."""
+        ``access``), of those some user has: what the operator screen says beside a lock,
+        so the operator knows whom to call (a role nobody holds, after a reload that removed
+        its users, sent them to nobody)."""
         access = self.commands.access
         if access is None:
             return []
-        return access.roles_with(Right.RELEASE)
+        held = {u.role for u in access.users.values()}
+        return [r for r in access.roles_with(Right.RELEASE) if r in held]
 
     # -- HTTP -----------------------------------------------------------------------------
     def _routes(self, app: web.Application) -> None:

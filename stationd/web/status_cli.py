@@ -63,7 +63,7 @@ def lock_lines(st: dict[str, Any]) -> list[str]:
     by = st.get("release_by")
     who = "" if by is None else \
         f" (a user with the release right: {', '.join(by)})" if by else \
-        " (no role of this station has the release right: access.roles)"
+        " (no user of this station has the release right: access.users and access.roles)"
     # the bolt named where one is locked (a newcomer read BOLT for the only one there was)
     named = list(st.get("locked_bolts") or [])
     bolt = str(named[0]) if len(named) == 1 and len(locks) == 1 else "BOLT"

@@ -73,7 +73,7 @@ def test_the_simulated_plc_serves_on_when_its_stdin_ends() -> None:
     port = _free_port()
     p, first = _start("plc", "--config", str(STATION), "--port", str(port))
     try:
-        assert p.stdin is not None and p.stdout is not None
+        assert p.stdin is not None and p.stdout is not None and f"127.0.0.1:{port}" in first
         p.stdin.close()
         p.stdout.readline()   # the commands' help
         assert p.stdout.readline().startswith("stdin closed: the PLC serves on")

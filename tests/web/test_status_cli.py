@@ -106,12 +106,13 @@ def test_status_names_a_locked_bolt_and_who_releases_it_how(live_server, capsys)
     locked: the operator waits ... for a person's release", and ``stationd status`` showed
     "1 bolt ending NOK" and "Bring the wrench to a bolt": not the bolt the station waited on,
     nor what to do.  Now a line per lock, then the command and who may give it."""
-    from stationd.access import AccessConfig
+    from stationd.access import AccessConfig, User
     from stationd.station.events import BoltLocked
     from tests.web.scenario import VIN
 
     srv = live_server()
-    srv.server.commands.access = AccessConfig()      # the default roles: supervisor releases
+    srv.server.commands.access = AccessConfig(        # the default roles: supervisor
+        users={"sue": User("sue", "supervisor", "x")})  # releases, and sue is one
     srv.publish([*opened(), BoltLocked("B2", 3)])
 
     async def locked():
@@ -137,7 +138,8 @@ def test_status_without_a_lock_has_no_lock_lines_and_says_when_nobody_may_releas
     assert format_status(st).splitlines()[2:4] == [
         "locked:   B1 locked after 3 NOK in a row: a supervisor releases it",
         "release:  stationd release VIN1 BOLT --user NAME, or the operator screen's Release "
-        "form (no role of this station has the release right: access.roles)"]
+        "form (no user of this station has the release right: access.users and "
+        "access.roles)"]
 
 
 def test_the_status_says_the_line_database_s_forwarding_in_the_screen_s_words():

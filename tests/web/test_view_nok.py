@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 
 from db.kinds import BoltStatus
-from stationd.access import AccessConfig
+from stationd.access import AccessConfig, User
 from stationd.bus import EventBus
 from stationd.reasons import Reason, Why
 from stationd.station.commands import Right
@@ -102,13 +102,20 @@ def test_a_vehicle_that_leaves_with_a_locked_bolt_shows_it_nok():
 
 
 def test_the_snapshot_names_the_roles_that_may_release():
+    """The roles with the release right that some user holds (after a reload that removed
+    every supervisor, ``stationd status`` still sent the operator to one)."""
     server = WebServer(EventBus(), listen="127.0.0.1:0")
     assert server.release_by() == []           # no station running: nobody configured
-    server.commands.access = AccessConfig()    # the default roles
+    sue = {"sue": User("sue", "supervisor", "x")}
+    server.commands.access = AccessConfig(users=sue)    # the default roles
     assert server.release_by() == ["supervisor"]
+    server.commands.access = AccessConfig()    # nobody holds one
+    assert server.release_by() == []
     server.commands.access = AccessConfig(roles={
         "operator": frozenset({Right.SKIP}), "lead": frozenset({Right.RELEASE}),
-        "quality": frozenset({Right.RELEASE, Right.LOOSEN})})
+        "quality": frozenset({Right.RELEASE, Right.LOOSEN})}, users={
+        "lea": User("lea", "lead", "x"), "quinn": User("quinn", "quality", "x"),
+        "olga": User("olga", "operator", "x")})
     assert server.release_by() == ["lead", "quality"]
     doc = json.loads(server._encode()[len(b"data: "):])
     assert doc["release_by"] == ["lead", "quality"] and doc["locks"] == []

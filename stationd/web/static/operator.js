@@ -351,7 +351,7 @@ function drawLocks(view) {
   }));
   const how = held ? "Release, or enter the outcome the controller shows" : "Release";
   setText("release-by", by.length ? `${how}: a user with the release right (${by.join(", ")})`
-    : "Release: no role of this station has the release right (access.roles)");
+    : "Release: no user of this station has the release right (access.users and access.roles)");
 }
 
 // what the tables show now: they are redrawn only when it changed
