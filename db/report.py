@@ -90,6 +90,7 @@ class VehicleReport:
     #: results, which a bolt tightened again to OK keeps, beside the bolts ending NOK
     tightenings: int = 0
     nok_results: int = 0
+    loosenings: int = 0
 
     @property
     def missing(self) -> list[str]:
@@ -150,8 +151,11 @@ class VehicleReport:
             else ", 0 missing"
         if self.loosen:
             text += f", {len(self.loosen)} to tighten again ({', '.join(self.loosen)})"
+        # the loosenings too, where there were any: the demo's line read-back counted them
+        # beside the tightenings and a reader could not reconcile the two
         return text + (f"; rundowns: {counted(self.tightenings, 'tightening')}, "
-                       f"{counted(self.nok_results, 'NOK result')}")
+                       f"{counted(self.nok_results, 'NOK result')}") + (
+            f", {counted(self.loosenings, 'loosening')}" if self.loosenings else "")
 
     def to_json(self) -> dict[str, Any]:
         v = self.vehicle
@@ -160,7 +164,7 @@ class VehicleReport:
                 "complete": self.complete, "ok": self.ok,
                 "nok": self.nok, "missing": self.missing, "skipped": self.skipped,
                 "loosen": self.loosen, "tightenings": self.tightenings,
-                "nok_results": self.nok_results,
+                "nok_results": self.nok_results, "loosenings": self.loosenings,
                 "bolts": [b.to_json() for b in self.bolts]}
 
 
@@ -221,7 +225,8 @@ def build_report(s: Session, v: Vehicle) -> VehicleReport:
     info = VehicleInfo(v.vin, v.model.name, v.started_at, v.ended_at, v.reopened_at)
     tightenings = [rec for rec, _ in records if (rec.kind or TIGHTENING) == TIGHTENING]
     return VehicleReport(info, tuple(results), len(tightenings),
-                         sum(1 for rec in tightenings if rec.status == NOK))
+                         sum(1 for rec in tightenings if rec.status == NOK),
+                         len(records) - len(tightenings))
 
 
 #: missing bolts named in a vehicle's line; the rest are counted (the report lists each

@@ -35,7 +35,7 @@ def test_a_bolt_loosened_last_is_not_done_and_its_tightening_ends_that(sedan):
     assert not report.complete and report.loosen == ["B1"] and report.nok == []
     # a loosening is no tightening: 3 tightenings, the first NOK
     assert report.summary().endswith(", 1 to tighten again (B1); rundowns: 3 tightenings, "
-                                     "1 NOK result")
+                                     "1 NOK result, 1 loosening")
     assert report.to_json()["bolts"][0]["kind"] == LOOSENING
     record(sedan, "VIN1", "B1", ok=True, tightening_id=3)
     assert _status(sedan, "B1") == (OK, TIGHTENING) and sedan.vehicle_report("VIN1").complete

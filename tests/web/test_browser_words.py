@@ -101,5 +101,8 @@ def test_the_vehicle_pages_count_bolts_and_results_and_say_rework_only_when_reop
         b2 = page.js("return [...document.querySelectorAll('tr.rundown[data-bolt=B2]')]"
                      ".map(r => [r.cells[2].innerText, r.cells[3].innerText])")
         assert b2[2] == ["3 (loosen pset 92)", "loosening"], b2
+        # counted as db report counts it, beside the tightenings
+        assert (page.text("#summary") or "").endswith(
+            "; rundowns: 4 tightenings, 1 NOK result, 1 loosening")
     finally:
         repo.close()

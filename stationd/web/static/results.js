@@ -160,7 +160,10 @@ async function showVehicle(vin) {
     q("#summary").textContent = `bolts: ${v.ok.length} OK, ${v.nok.length} ending NOK, ` +
       `${(v.skipped || []).length} skipped, ${v.missing.length} missing` +
       (v.complete ? " (complete)" : "") +
-      `; rundowns: ${counted(tightenings.length, "tightening")}, ${counted(nokRuns, "NOK result")}`;
+      `; rundowns: ${counted(tightenings.length, "tightening")}, ${counted(nokRuns, "NOK result")}` +
+      // the loosenings too, as db report counts them
+      (runs.length > tightenings.length
+        ? `, ${counted(runs.length - tightenings.length, "loosening")}` : "");
     const tb = q("#rundowns tbody");
     for (const b of v.bolts) {
       const runs = b.rundowns.length ? b.rundowns : [null];
