@@ -228,10 +228,6 @@ class SimController(OpenProtocolServer):
             raise ValueError(f"how must be value or layout, not {how!r}")
         self.call(lambda: setattr(self, "_garble", how))
 
-    def clock_now(self) -> datetime:
-        """The controller's clock, as MID 0081 and the results say it."""
-        return self._clock()
-
     def start_rundown(self) -> bool:
         """The trigger pulled, the rundown under way (its result comes with
         :meth:`finish_rundown`, whatever happens to the tool meanwhile: a rundown started
