@@ -140,7 +140,10 @@ def _serve_plc(args: argparse.Namespace, stop: threading.Event, out: TextIO) -> 
         reader = threading.Thread(target=_read_commands, daemon=True,
                                   args=(plc, args.model_code, serial, say, stop))
         reader.start()
-        stop.wait()
+        # woken now and then: a SIGTERM taken by another thread (the PLC's server) sets the
+        # main thread's flag without waking a wait with no end (a run in CI waited 60 s)
+        while not stop.wait(0.5):
+            pass
     return 0
 
 
