@@ -19,7 +19,7 @@ MACHINES_FOLDER = 1001   # Machinery's Machines folder (what the station's Joini
 
 async def _server(app: str) -> tuple[Server, float]:
     server = Server()
-    await server.init()
+    await model.init_server(server)     # the standard nodes copied (tested below)
     await server.set_application_uri(app)
     loop = asyncio.get_running_loop()
     start = loop.time()
@@ -72,7 +72,7 @@ def test_a_copied_model_is_the_imported_one_node_for_node_and_apart_from_it():
         assert "changed in place" not in repr(f)
         # a server not where the import started (indices would differ) imports itself
         other = Server()
-        await other.init()
+        await model.init_server(other)
         await other.set_application_uri("urn:d")
         await other.register_namespace("urn:an-extra-namespace")
         await model.load_model(other)
