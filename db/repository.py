@@ -535,6 +535,20 @@ class Repository:
             row = _unreadable_copy(s, mid, raw, header_len)
             return None if row is None else (row.vin, row.bolt)
 
+    def unreadable_of(self, *, tightening_id: int, pset: int | None, at: datetime | None
+                      ) -> tuple[str | None, str | None] | None:
+        """The vehicle and bolt of a stored unreadable message a readable result is the
+        copy of: its tightening id, and its pset and controller time where they could be
+        picked out of it (and the result has one); else None."""
+        with self._session(write=False) as s:
+            for row in s.scalars(select(UnreadableRecord).where(
+                    UnreadableRecord.tightening_id == tightening_id)
+                    .order_by(UnreadableRecord.id)):
+                if (row.pset is None or pset is None or row.pset == pset) and \
+                        (row.result_at is None or at is None or row.result_at == at):
+                    return row.vin, row.bolt
+            return None
+
     def controller_events(self, vin: str | None = None) -> list[dict[str, Any]]:
         """The controller results that were not rundowns (of ``vin``, or all), oldest first."""
         with self._session(write=False) as s:
@@ -634,6 +648,20 @@ class Repository:
                    s.scalar(select(func.max(ResultGap.last_id)))]
             known = [int(i) for i in ids if i is not None]
             return max(known) if known else None
+
+    def read_result_stored(self, tightening_id: int) -> bool:
+        """Whether a result read from the controller is stored under ``tightening_id`` (a
+        rundown it measured, not one a person entered; one unattributed; a controller
+        event): one the controller gives under that id now can be compared with it.  Not
+        an unreadable message or a gap: the id is accounted for, but nothing read is
+        there to compare."""
+        with self._session(write=False) as s:
+            return any(s.scalar(q.limit(1)) is not None for q in (
+                select(TighteningRecord.id).where(TighteningRecord.tightening_id == tightening_id,
+                                                  TighteningRecord.entered_by.is_(None)),
+                select(UnattributedResult.id).where(
+                    UnattributedResult.tightening_id == tightening_id),
+                select(ControllerEvent.id).where(ControllerEvent.tightening_id == tightening_id)))
 
     def record_gap(self, first_id: int, last_id: int, vin: str | None, reason: str) -> int:
         """Tightening ids the station could not get (the controller no longer has them)."""

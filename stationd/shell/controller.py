@@ -196,11 +196,23 @@ class ControllerFeed:
         would fetch only the ids above it, and take the first of them for the first result
         made after it.  Unknown (the controller no longer has it, or it does not read) is
         counted on as before, and so is a result without the controller's own time (only
-        that tells another result under the same id from the one stored)."""
+        that tells another result under the same id from the one stored), and an id under
+        which nothing read is stored (an unreadable message, a gap's end, an outcome a
+        person entered: nothing to compare)."""
+        repo = self.records.repo
+        if repo is None:
+            return False
+        try:
+            if not await self._call(repo.read_result_stored, last):
+                return False
+        except STATION_FAULTS as exc:
+            log.warning("tightening %d not checked against the one recorded: %s", last,
+                        one_line(exc))
+            return False
         got = newest if newest.tightening_id == last else \
             await self._call(wrench.fetch_result, last)
         if not isinstance(got, TighteningResult) or not got.controller_clock \
-                or got.timestamp is None or self.records.repo is None:
+                or got.timestamp is None:
             return False
         ev = result_input(time.time(), got, fetched=True)
         if not isinstance(ev, ResultIn):

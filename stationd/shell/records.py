@@ -249,9 +249,13 @@ class Records:
         stored = self._repo().stored_result(
             tightening_id=int(r.tightening_id), torque_nm=float(r.torque_nm),
             angle_deg=float(r.angle_deg), controller_at=controller_time(r), vins=vins)
-        if stored is None:
-            return ev
-        return ResultCopy(ev.t, r, stored.vin, stored.bolt)
+        if stored is not None:
+            return ResultCopy(ev.t, r, stored.vin, stored.bolt)
+        # a copy that reads of a message stored unreadable (garbled on the line the first
+        # time): that result, held for a person, never the enable owed now
+        held = self._repo().unreadable_of(tightening_id=int(r.tightening_id),
+                                          pset=int(r.pset), at=controller_time(r))
+        return ev if held is None else ResultCopy(ev.t, r, held[0], held[1])
 
     def unreadable_input(self, ev: UnreadableIn) -> UnreadableIn:
         """``ev`` as the core is to have it: saying where it was stored when the database has
@@ -259,6 +263,8 @@ class Records:
         controller sent again, after a reload or a restart), which the core then attributes
         to no bolt.  Blocking (the executor's, as every read)."""
         u = ev.unreadable
+        if u.tightening_id is None and u.timestamp is None:
+            return ev       # it says nothing of itself: the same text is no proof of a copy
         stored = self._repo().stored_unreadable(mid=u.mid, raw=u.raw, header_len=u.header_len)
         return ev if stored is None else replace(ev, stored=stored)
 

@@ -6,6 +6,8 @@ at the edge (the records, the journal, the bus)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from db.kinds import (
     LOOSENING,
     NOT_TAKEN,
@@ -90,6 +92,23 @@ def rundown_kind(result: TighteningResult, sent_loosen: bool) -> str:
         else TIGHTENING
 
 
+@dataclass(frozen=True)
+class _Unread:
+    """What the core took of an unreadable message with its tightening id: a readable copy
+    the controller sends again (its first copy garbled on the line) is that result, never
+    another bolt's."""
+
+    pset: int | None
+    timestamp: object
+    bolt: str | None
+
+    def same(self, r: TighteningResult) -> bool:
+        """``r`` says what could be picked out of the unreadable one (pset, time)."""
+        when = getattr(r, "timestamp", None)
+        return (self.pset is None or int(r.pset) == self.pset) and \
+            (self.timestamp is None or when is None or when == self.timestamp)
+
+
 class ResultRules(OrderRules):
     """Results: tightenings closing bolts, controller events, unreadable and late results,
     the NOK policy after each."""
@@ -103,6 +122,12 @@ class ResultRules(OrderRules):
         tid = int(r.tightening_id)
         if self._recorded.get(tid, None) == _said(r):
             return [Acknowledge(r)]   # sent again by the controller: stored once already
+        seen = self._recorded.get(tid)
+        if isinstance(seen, _Unread) and seen.same(r):
+            # an unreadable message's copy that reads: stored (whole) once, its bolt held;
+            # taken for the enable owed now, it closed a bolt never tightened
+            return [Publish(Notice(Said.SENT_AGAIN, tightening_id=tid, bolt=seen.bolt,
+                                   t=ev.t)), Acknowledge(r)]
         again: list[Action] = [] if tid not in self._recorded else [
             Publish(Notice(Said.IDS_AGAIN, tightening_id=tid, t=ev.t))]
         return again + self._result_in(ev, tid)
@@ -254,7 +279,10 @@ class ResultRules(OrderRules):
         fetched one; of the same pset where one could be read) is held until a supervisor
         has checked the result on the controller and releases it."""
         u = ev.unreadable
-        if ev.stored is not None or (u.mid, u.body) in self._unreadable_seen:
+        # a copy by its text after the header, where that text says which result it is (an
+        # id or a time picked out): two results cut short the same way are not one
+        known = u.tightening_id is not None or u.timestamp is not None
+        if ev.stored is not None or (known and (u.mid, u.body) in self._unreadable_seen):
             # a copy the controller sent again (its acknowledgement lost, or not sent yet):
             # stored once, held against no bolt (that of the enable owed now is another
             # one's), acknowledged: the controller may forget it
@@ -269,10 +297,11 @@ class ResultRules(OrderRules):
         if en is not None and u.pset is not None and en.pset is not None \
                 and u.pset != en.pset:
             en = None        # its pset could be read, and it is not the one sent
-        if u.tightening_id is not None:
-            self._recorded[u.tightening_id] = u.raw
         bolt = en.bolt if en is not None and en.vin else None
-        self._unreadable_seen[(u.mid, u.body)] = bolt
+        if u.tightening_id is not None:
+            self._recorded[u.tightening_id] = _Unread(u.pset, u.timestamp, bolt)
+        if known:
+            self._unreadable_seen[(u.mid, u.body)] = bolt
         acts: list[Action] = []
         # the selection it came under: its loosen pset's result is a loosening's
         loosen = en is not None and en.loosen

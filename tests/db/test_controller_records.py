@@ -69,6 +69,42 @@ def test_an_unreadable_message_sent_again_under_another_header_is_the_stored_one
     assert [u["bolt"] for u in repo.unreadable()] == ["B1"]
 
 
+def test_an_id_holds_a_read_result_only_where_one_the_controller_sent_is_stored(
+        repo, bolts_file):
+    """What a reconnect compares the controller's result under the last id with: a rundown
+    measured, one unattributed or a controller event; not an unreadable message or a gap's
+    end (a reviewer: those took a controller's ids for restarted, and the results made
+    before the cut was noticed were not fetched)."""
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    record(repo, "VIN1", "B2", tightening_id=3)
+    _event(repo, 4)
+    repo.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=5, pset=1,
+                             ok=True, torque_nm=1.0, angle_deg=2.0, result_at=None,
+                             reason="outside")
+    _unreadable(repo, 7)
+    repo.record_gap(8, 9, "VIN1", "the controller no longer has it")
+    assert [repo.read_result_stored(t) for t in (3, 4, 5, 6, 7, 8, 9)] == [
+        True, True, True, False, False, False, False]
+    assert repo.last_tightening_id() == 9
+
+
+def test_a_readable_copy_of_an_unreadable_message_finds_it(repo, bolts_file):
+    """After a reload the database is asked: a result that reads, whose first copy did not,
+    is found by its id, and by its pset and time where they were picked out."""
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    at = datetime(2026, 11, 29, 8, 0, tzinfo=UTC)
+    repo.record_unreadable(mid=61, revision=7, raw=RAW, error="x", vin="VIN1", bolt="B1",
+                           controller_vin=None, tightening_id=7, pset=1, result_at=at)
+    assert repo.unreadable_of(tightening_id=7, pset=1, at=at) == ("VIN1", "B1")
+    assert repo.unreadable_of(tightening_id=7, pset=None, at=None) == ("VIN1", "B1")
+    assert repo.unreadable_of(tightening_id=7, pset=2, at=at) is None      # another pset
+    assert repo.unreadable_of(tightening_id=7, pset=1,
+                              at=datetime(2026, 11, 29, 9, 0, tzinfo=UTC)) is None
+    assert repo.unreadable_of(tightening_id=8, pset=1, at=at) is None
+
+
 def test_an_unreadable_result_without_an_id_still_counts_nothing_it_cannot(repo, bolts_file):
     import_bolts(repo, bolts_file)
     repo.start_vehicle("VIN1", "SEDAN")

@@ -198,7 +198,7 @@ def test_an_unreadable_result_is_stored_whole_and_holds_its_bolt_for_a_superviso
     _enabled(d)
 
 
-@pytest.mark.parametrize("tid", [7, None], ids=["its id read", "no id read"])
+@pytest.mark.parametrize("tid", [7, None], ids=["its id read", "its time read"])
 def test_an_unreadable_result_sent_again_holds_no_other_bolt(tid):
     """The controller sends the same unreadable message again (its acknowledgement lost, or
     resent unacknowledged; another sequence number in its header) while another bolt of
@@ -207,7 +207,8 @@ def test_an_unreadable_result_sent_again_holds_no_other_bolt(tid):
     taken so too."""
     d = _ready()
     _enabled(d, 1)
-    first = replace(unreadable(tid), header_len=20)
+    first = replace(unreadable(tid), header_len=20,
+                    timestamp=None if tid is not None else datetime(2026, 11, 29, 8, 0, 0))
     d.feed(UnreadableIn(d.t, first))
     assert list(d.core.matcher.held) == ["B1"]
     _enabled(d, 3)
@@ -228,6 +229,33 @@ def test_an_unreadable_result_sent_again_holds_no_other_bolt(tid):
     assert _kinds(acts) == ["Acknowledge"] and d2.core.tool_on and not d2.core.matcher.held
     assert _notices(acts) == [f"{said} of B1 of VIN VIN0 sent again by the controller: "
                               "stored once"]
+
+
+def test_two_unreadable_results_that_say_nothing_of_themselves_are_two():
+    """Neither an id nor a time could be picked out (both cut short after the header): the
+    same text is no proof of a copy, and the second holds its own bolt (a reviewer: taken for
+    the first's copy, it was acknowledged and forgotten, its bolt left open)."""
+    d = _ready()
+    _enabled(d, 1)
+    cut = replace(unreadable(None), header_len=20)
+    d.feed(UnreadableIn(d.t, cut))
+    _enabled(d, 3)
+    acts = d.feed(UnreadableIn(d.t, cut))
+    assert "StoreUnreadable" in _kinds(acts) and sorted(d.core.matcher.held) == ["B1", "B3"]
+
+
+def test_a_readable_copy_of_an_unreadable_result_closes_no_other_bolt():
+    """The controller sends again a result whose first copy was garbled on the line: it reads
+    this time, under the id picked out of the first.  It is that result (stored whole, its
+    bolt held), never the result of the bolt enabled since (a reviewer: recorded to B3)."""
+    d = _ready()
+    _enabled(d, 1)
+    d.feed(UnreadableIn(d.t, unreadable(7, 1)))
+    _enabled(d, 3)
+    acts = d.feed(ResultIn(d.t, res(7, 1)))
+    assert _kinds(acts) == ["Acknowledge"] and d.core.tool_on
+    assert _notices(acts) == ["result 7 of B1 sent again by the controller: stored once"]
+    assert list(d.core.matcher.held) == ["B1"] and "B3" not in d.core.matcher.done
 
 
 def test_an_unreadable_result_of_another_pset_holds_nothing():
