@@ -64,6 +64,47 @@ def _forwarder(args: argparse.Namespace, *, write: bool = False) -> Forwarder:
                                      missing=missing), cfg.line)
 
 
+def _not_made_yet(args: argparse.Namespace) -> int | None:
+    """A station whose SQLite database is not there yet (nothing recorded): said, and the
+    line database asked all the same (it said only "no database at ...", exit 2, nothing of
+    whether the line answers: what a person setting the line up wants to know first).  Exit
+    3 when the line does not answer or take the forwarders' writes, else 0 (nothing waits);
+    None where the database is there (or is not a file)."""
+    from sqlalchemy import make_url
+
+    from stationd.config import load_station_config
+    from stationd.forward import LineDb, LineDown, LineRefuses
+
+    cfg = load_station_config(args.config)
+    if cfg.line is None:
+        return None                     # said by _forwarder, as before
+    u = make_url(cfg.database_url)
+    path = u.database
+    if u.get_backend_name() != "sqlite" or not path or path == ":memory:" \
+            or path.startswith("file:") or Path(path).exists():
+        return None
+    line = LineDb(cfg.line.url)
+    why = ""
+    try:
+        line.reachable()
+        answers = True
+    except LineRefuses as exc:
+        answers, why = False, f"the forwarders cannot write ({exc})"
+    except LineDown as exc:
+        answers, why = False, f"does not answer ({exc})"
+    finally:
+        line.dispose()
+    if args.json:
+        print(json.dumps({"url": _shown(cfg.line.url), "station_id": cfg.line.station_id,
+                          "db_id": None, "answers": answers, "unreachable": why or None,
+                          "backlog": 0, "quarantined": 0, "recorded": False}))
+    else:
+        print(f"no database at {path} yet: the station has recorded nothing, so nothing "
+              f"waits (or {args.config}'s database.url names another file)")
+        print(f"line database {_shown(cfg.line.url)}: " + ("answers" if answers else why))
+    return 0 if answers else EXIT_UNREACHABLE
+
+
 def cmd_line_status(args: argparse.Namespace) -> int:
     """The forwarding as the station's database records it, and whether the line database
     answers now (asked once: the backlog alone does not say why records wait).  Exit 3 when
@@ -71,6 +112,9 @@ def cmd_line_status(args: argparse.Namespace) -> int:
     the records wait all the same), else 1 while records wait or are quarantined."""
     from stationd.forward import LineDown, LineRefuses
 
+    unmade = _not_made_yet(args)
+    if unmade is not None:
+        return unmade
     fwd = _forwarder(args)
     try:
         st = fwd.status()

@@ -766,3 +766,24 @@ def test_a_first_line_init_names_each_table_once(pg_url, capsys):
     [first, *_] = capsys.readouterr().out.splitlines()
     assert first.count("line_rundowns") == 1, first
     assert first.endswith(": ready for the stations' forwarders") and " made " in first
+
+
+def test_line_status_before_the_station_recorded_anything_still_asks_the_line(tmp_path,
+                                                                               capsys):
+    """A station with no database yet (nothing recorded): ``line status`` said only "no
+    database at ...", exit 2, nothing of whether the line database answers (a trial)."""
+    from stationd.cli import main
+
+    station = tmp_path / "station.yaml"
+    station.write_text(f"database: {{url: 'sqlite:///{tmp_path / 'none.db'}'}}\n"
+                       "line: {url: 'postgresql+psycopg://u@127.0.0.1:1/line', "
+                       "station_id: ST-L}\n")
+    code = main(["line", "status", "--config", str(station)])
+    out, err = capsys.readouterr()
+    lines = out.splitlines()
+    assert code == 3 and err == "", (out, err)
+    assert lines[0].startswith(f"no database at {tmp_path / 'none.db'} yet: the station has "
+                               "recorded nothing, so nothing waits")
+    assert lines[1].startswith("line database postgresql+psycopg://u@127.0.0.1:1/line"), lines
+    assert "does not answer (" in lines[1]
+    assert not (tmp_path / "none.db").exists()          # looked at, never made
