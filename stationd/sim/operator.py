@@ -217,9 +217,13 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     # the plan's first bolt is the stubborn joint that locks for people (once released, it
     # has been seen to)
     stubborn_bolt = planned[0] if supervisor is None and planned else None
+    # a bolt locked before a reload: its NOKs were the last round's, said in its line all
+    # the same (its line began with the release, the NOKs that locked it left out)
+    streaks = st.repo.nok_streaks(truth["vin"]) if plan.waiting else {}
     waiting: dict[str, tuple[BoltInfo, dict[str, Any]]] = {   # locked, left to people
         bolt: (by_id[bolt], {"bolt": bolt, "pset": by_id[bolt].parameters.pset,
-                             "result": LEFT_FOR_PEOPLE, "waits": True, "rundowns": 0})
+                             "result": LEFT_FOR_PEOPLE, "waits": True, "rundowns": 0,
+                             "before": noks_before(streaks.get(bolt, 0))})
         for bolt in plan.waiting if supervisor is None}
     for bolt_id in plan.visit if supervisor is None else \
             [b for b in planned if b in plan.visit or b in plan.waiting]:
@@ -237,11 +241,12 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
         leave = rng.random() < 0.1 and b.bolt_id != stubborn_bolt
         line: dict[str, Any] = {"bolt": b.bolt_id, "pset": b.parameters.pset, "result": None}
         if supervisor is not None and stopped(st, b.bolt_id):   # locked before (a reload)
+            noks = noks_before(st.repo.nok_streaks(truth["vin"]).get(b.bolt_id, 0))
             answer = await st.submit(ReleaseBolt(truth["vin"], b.bolt_id,
                                                  f"{supervisor.source}: joint checked"),
                                      supervisor)
-            line["before"] = ["locked, released by the supervisor" if answer.accepted else
-                              f"locked, release refused ({answer.reason})"]
+            line["before"] = [*noks, "locked, released by the supervisor" if answer.accepted
+                              else f"locked, release refused ({answer.reason})"]
         if not await _tool_on(st, b.bolt_id):
             line["result"] = f"not selected ({_why_not(st)})"
         if st.last is not None and st.last.point_mm is not None:
@@ -389,6 +394,11 @@ def stopped(st: Station, bolt: str) -> bool:
 
 #: a bolt's step while it waits for a person's release (``until_ok``), and once released
 LEFT_FOR_PEOPLE = "locked: left for a person's release"
+
+
+def noks_before(n: int) -> list[str]:
+    """A bolt's NOKs in a row from before a reload, as its line's first step."""
+    return [f"{n} NOK before the reload"] if n else []
 
 
 def released_words(user: str | None) -> str:
