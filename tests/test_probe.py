@@ -92,27 +92,34 @@ def test_station_config_lift_register_map(tmp_path):
         load_station_config(cfg)
 
 
-def test_probe_wrench_selects_a_pset_and_reports_one_result(capsys):
+def _probe_while_pulling(ctl, pulls, *probe_args: str) -> int:
+    """``stationd probe wrench`` on ``ctl`` (pset 1) while an operator thread, once the
+    probe has enabled the tool, calls ``pulls()``: the probe's exit code."""
     import threading
+    import time
 
+    port = ctl.listen_tcp()
+
+    def operator():
+        for _ in range(300):
+            if ctl.tool_enabled and ctl.pset == 1:
+                pulls()
+                return
+            time.sleep(0.01)
+
+    t = threading.Thread(target=operator)
+    t.start()
+    code = main(["probe", "wrench", f"openprotocol://127.0.0.1:{port}", "--pset", "1",
+                 *probe_args])
+    t.join()
+    return code
+
+
+def test_probe_wrench_selects_a_pset_and_reports_one_result(capsys):
     from drivers.wrench.sim.controller import SimController
 
     with SimController(seed=3) as ctl:
-        port = ctl.listen_tcp()
-
-        def operator():  # pulls the trigger once the probe has enabled the tool
-            import time
-            for _ in range(200):
-                if ctl.tool_enabled and ctl.pset == 1:
-                    ctl.pull_trigger()
-                    return
-                time.sleep(0.01)
-
-        t = threading.Thread(target=operator)
-        t.start()
-        code = main(["probe", "wrench", f"openprotocol://127.0.0.1:{port}", "--pset", "1",
-                     "--wait-result", "3", "--json"])
-        t.join()
+        code = _probe_while_pulling(ctl, ctl.pull_trigger, "--wait-result", "3", "--json")
         assert not ctl.tool_enabled  # the probe leaves the tool disabled
     obj = json.loads(capsys.readouterr().out)
     assert code == 0 and obj["acknowledged"] is True and obj["error"] is None
@@ -125,31 +132,17 @@ def test_probe_wrench_says_what_is_not_a_tightening_and_waits_for_one(capsys):
     """A batch increment, a loosening, a type nobody knows and a message that does not read
     came before the tightening: each printed as what it is (they printed as "result: OK
     torque 0.00 Nm"), the tightening last, with its type."""
-    import threading
-
     from drivers.wrench.sim.controller import SimController
 
     with SimController(seed=3) as ctl:
-        port = ctl.listen_tcp()
-
-        def operator():
-            import time
-            for _ in range(300):
-                if ctl.tool_enabled and ctl.pset == 1:
-                    ctl.press(3)
-                    ctl.pull_trigger(2)
-                    ctl.pull_trigger(9)
-                    ctl.garble_next_result("value")
-                    ctl.pull_trigger()
-                    ctl.pull_trigger()
-                    return
-                time.sleep(0.01)
-
-        t = threading.Thread(target=operator)
-        t.start()
-        code = main(["probe", "wrench", f"openprotocol://127.0.0.1:{port}", "--pset", "1",
-                     "--wait-result", "5"])
-        t.join()
+        def pulls():
+            ctl.press(3)
+            ctl.pull_trigger(2)
+            ctl.pull_trigger(9)
+            ctl.garble_next_result("value")
+            ctl.pull_trigger()
+            ctl.pull_trigger()
+        code = _probe_while_pulling(ctl, pulls, "--wait-result", "5")
     out = capsys.readouterr().out
     lines = [x.strip() for x in out.splitlines()]
     assert code == 0
