@@ -417,11 +417,18 @@ def test_the_line_commands_never_make_a_station_database_and_say_an_empty_quaran
         tmp_path, table, pg_url, pg_server):
     """A newcomer's `line status` on a station file whose database did not exist made one and
     said "0 of 0 waiting" (a wrong path read as everything forwarded); an empty quarantine
-    printed nothing, and its retry with the line database down said exit 0."""
+    printed nothing, and its retry with the line database down said exit 0.  The status says
+    the station recorded nothing yet (or names another file) and asks the line database."""
     station = tmp_path / "station.yaml"
     missing = tmp_path / "nowhere.db"
     _line_file(station, missing, pg_url)
-    for args in (("status",), ("quarantine",), ("quarantine", "--retry")):
+    got = _cli("line", "status", "--config", str(station))
+    said = got.stdout.splitlines()
+    assert got.returncode == 0 and got.stderr == "", got
+    assert said[0] == (f"no database at {missing} yet: the station has recorded nothing, so "
+                       f"nothing waits (or {station}'s database.url names another file)")
+    assert said[1].endswith(": answers") and not missing.exists()
+    for args in (("quarantine",), ("quarantine", "--retry")):
         got = _cli("line", *args, "--config", str(station))
         assert got.returncode == 2 and "no database at" in got.stderr, (args, got)
         assert "recorded nothing yet" in got.stderr and "--db" not in got.stderr
