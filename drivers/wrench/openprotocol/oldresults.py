@@ -19,7 +19,7 @@ from drivers.wrench.base import Received, UnreadableResult
 from drivers.wrench.openprotocol import message as op
 from drivers.wrench.openprotocol.channel import Channel
 from drivers.wrench.openprotocol.message import Message
-from drivers.wrench.openprotocol.reading import receive
+from drivers.wrench.openprotocol.reading import UntypedInARow, receive
 from drivers.wrench.openprotocol.resultfeed import RESULT_REVISIONS, ResultFeed
 
 
@@ -33,11 +33,12 @@ class OldResults:
         self._log = channel.log
         self.device = channel.device
         self.agreed: int | None = None
-        self._untyped: tuple[int, int] | None = None   # the last answer, laid out untyped
+        self._untyped = UntypedInARow()   # answers laid out without a type, in a row
 
     def new_session(self) -> None:
         """Nothing agreed yet (``cond`` held): the controller may be another one."""
-        self.agreed, self._untyped = None, None
+        self.agreed = None
+        self._untyped.reset()
 
     def fetch(self, tightening_id: int, timeout: float, epoch: int, what: str
               ) -> Received | None:
@@ -69,13 +70,12 @@ class OldResults:
 
     def _read(self, reply: Message, tightening_id: int, what: str) -> Received:
         result = receive(reply)
-        untyped, self._untyped = self._untyped, None
+        habit = self._untyped.habit(result, reply.revision)
         if isinstance(result, UnreadableResult) and result.laid_out_as is not None:
-            self._untyped = (reply.revision, result.laid_out_as)
             self._log.warning("%s: %s: MID 0065 revision %d is laid out as revision %d, "
                               "which carries no result type; kept with its raw text",
                               self.device, what, reply.revision, result.laid_out_as)
-            if untyped == self._untyped:        # twice in a row: the controller's habit
+            if habit:
                 self._feed.lowered(reply.mid, reply.revision, result.laid_out_as)
                 self._agree(result.laid_out_as)
         elif isinstance(result, UnreadableResult):

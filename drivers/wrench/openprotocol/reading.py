@@ -89,6 +89,26 @@ def read_result(mid: int, revision: int, text: str) -> TighteningResult:
     raise first
 
 
+class UntypedInARow:
+    """Results laid out as a revision without a result type under a header whose revision
+    has one (:class:`TypeLostError`), as they come: the second in a row with the same
+    header and layout is the controller's habit, not a byte lost on the line.  One per
+    stream (the pushed results, the fetched ones), reset at a new session."""
+
+    def __init__(self) -> None:
+        self._last: tuple[int, int] | None = None   # the last one's (header, layout)
+
+    def habit(self, item: TighteningResult | UnreadableResult, header: int) -> bool:
+        """``item``, received labelled ``header``, is the second such result in a row."""
+        last, self._last = self._last, None
+        if isinstance(item, UnreadableResult) and item.laid_out_as is not None:
+            self._last = (header, item.laid_out_as)
+        return self._last is not None and last == self._last
+
+    def reset(self) -> None:
+        self._last = None
+
+
 def receive(msg: Message) -> TighteningResult | UnreadableResult:
     """A MID 0061/0065 as received: the result, or what is left of one that does not read."""
     text = msg.raw.decode("ascii", "replace")       # a non-ASCII byte fails its field
@@ -171,4 +191,5 @@ def _values(raw: dict[str, str]) -> dict[str, Any]:
             "timestamp": stamp}
 
 
-__all__ = ["PICKED", "TYPED_FROM", "TypeLostError", "pick", "read_result", "receive"]
+__all__ = ["PICKED", "TYPED_FROM", "TypeLostError", "UntypedInARow", "pick", "read_result",
+           "receive"]

@@ -25,7 +25,7 @@ from drivers.wrench.base import Received, UnreadableResult
 from drivers.wrench.openprotocol import message as op
 from drivers.wrench.openprotocol.channel import Channel
 from drivers.wrench.openprotocol.message import Message
-from drivers.wrench.openprotocol.reading import receive
+from drivers.wrench.openprotocol.reading import UntypedInARow, receive
 
 #: MID 0060/0061 and 0064/0065 revisions asked for, highest first: all that ``result.py``
 #: reads
@@ -59,16 +59,15 @@ class ResultFeed:
         self.caught_up: set[int] = set()
         self._owed = 0                          # 0062s for those pushes, sent by the supervisor
         self._lowered_said: set[tuple[int, int, int]] = set()   # (MID, header, read at)
-        # the last result pushed, when it was laid out as a revision without a type: (its
-        # header's revision, the one it read as)
-        self._untyped: tuple[int, int] | None = None
+        # pushed results laid out as a revision without a type, in a row
+        self._untyped = UntypedInARow()
         channel.route(op.MID_RESULT, self.received)
 
     def reset(self) -> None:
         """A new session: nothing pushed or owed yet, the highest revision again."""
         with self._cond:
             self.renew_at, self.last_pushed, self._owed = None, None, 0
-            self._untyped = None
+            self._untyped.reset()
             self.caught_up.clear()
             self.cap = RESULT_REVISIONS[0]
 
@@ -85,16 +84,15 @@ class ResultFeed:
                     self._owed += 1              # the station has it: acknowledged, not
                     return                       # handed out again
                 self.last_pushed = max(tid, self.last_pushed or 0)
-            untyped, self._untyped = self._untyped, None
+            habit = self._untyped.habit(item, msg.revision)
             if isinstance(item, UnreadableResult) and item.laid_out_as is not None:
-                self._untyped = (msg.revision, item.laid_out_as)
                 self._log.warning(
                     "%s: MID 0061 revision %d is laid out as revision %d, which carries no "
                     "result type; kept with its raw text for the station (tightening id "
                     "%s), its bolt held: it may be a loosening", self.device, msg.revision,
                     item.laid_out_as,
                     item.tightening_id if item.tightening_id is not None else "?")
-                if untyped == self._untyped:   # twice in a row: the controller's habit
+                if habit:
                     self._lower(msg.mid, msg.revision, item.laid_out_as)
             elif isinstance(item, UnreadableResult):
                 self._log.warning(
