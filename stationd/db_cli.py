@@ -79,6 +79,20 @@ def _print_errors(errors: Sequence[ConfigError]) -> None:
         sys.stderr.write(f"{e}\n")
 
 
+def absent_sqlite_file(url: str) -> str | None:
+    """The path of the SQLite file ``url`` names where there is none (None: it is there, or
+    the URL names no file: another database, one in memory, a ``file:`` URI).  OSError
+    where a folder on the way cannot be entered."""
+    from sqlalchemy import make_url
+
+    u = make_url(url)
+    path = u.database
+    if u.get_backend_name() == "sqlite" and path and path != ":memory:" \
+            and not path.startswith("file:") and not Path(path).exists():
+        return path
+    return None
+
+
 def open_repository(url: str, *, must_exist: bool, read_only: bool | None = None,
                     missing: str = "import a bolt table first, or give --db or --config "
                                    "STATION.yaml") -> Repository:
@@ -101,16 +115,13 @@ def open_repository(url: str, *, must_exist: bool, read_only: bool | None = None
 
     make_engine(url).dispose()   # the URL's form and driver (DataError: what to write)
     if must_exist:
-        u = make_url(url)
-        path = u.database
-        if u.get_backend_name() == "sqlite" and path and path != ":memory:" \
-                and not path.startswith("file:"):
-            try:
-                there = Path(path).exists()
-            except OSError as exc:   # a folder on the way this user may not enter
-                raise InputError(f"database {path}: {unreachable(Path(path), exc)}") from None
-            if not there:
-                raise InputError(f"no database at {path} ({missing})")
+        try:
+            absent = absent_sqlite_file(url)
+        except OSError as exc:   # a folder on the way this user may not enter
+            path = str(make_url(url).database)
+            raise InputError(f"database {path}: {unreachable(Path(path), exc)}") from None
+        if absent is not None:
+            raise InputError(f"no database at {absent} ({missing})")
     reads_only = must_exist if read_only is None else read_only
     problem = sqlite_problem(url, loses="it starts empty and is gone when the command ends",
                              as_writer=not reads_only)   # a reader need not write its folder

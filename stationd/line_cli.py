@@ -39,7 +39,8 @@ if TYPE_CHECKING:   # each command imports its libraries when run: every command
     # parser, and SQLAlchemy with the configuration here cost each of them a second
     from sqlalchemy import Engine, Table
 
-    from stationd.forward import Forwarder
+    from stationd.config import StationConfig
+    from stationd.forward import Forwarder, LineDb
 
 EXIT_WAITING, EXIT_UNREACHABLE = 1, 3
 #: said when a filter found nothing: "b07" finds no "B07" (a person takes it for "none at all")
@@ -48,14 +49,16 @@ T = TypeVar("T")
 CONNECT_TIMEOUT_S = 10
 
 
-def _forwarder(args: argparse.Namespace, *, write: bool = False) -> Forwarder:
+def _forwarder(args: argparse.Namespace, *, write: bool = False,
+               cfg: StationConfig | None = None) -> Forwarder:
     """The station's forwarder on its existing database: a missing one is said, never made
-    (a wrong path or station file would read as "everything forwarded")."""
+    (a wrong path or station file would read as "everything forwarded").  ``cfg``: the
+    station file as read already."""
     from stationd.config import load_station_config
     from stationd.db_cli import open_repository
     from stationd.forward import Forwarder
 
-    cfg = load_station_config(args.config)
+    cfg = cfg if cfg is not None else load_station_config(args.config)
     if cfg.line is None:
         raise InputError(f"{args.config}: no line section: nothing is forwarded")
     missing = (f"the station has recorded nothing yet, or {args.config}'s database.url "
@@ -64,45 +67,52 @@ def _forwarder(args: argparse.Namespace, *, write: bool = False) -> Forwarder:
                                      missing=missing), cfg.line)
 
 
-def _not_made_yet(args: argparse.Namespace) -> int | None:
+def _asked(line: LineDb) -> dict[str, Any]:
+    """Whether the line database answers now (``answers``, else why not: ``unreachable``)
+    and takes the forwarders' writes (else why not: ``cannot_write``); asked once, then
+    let go."""
+    from stationd.forward import LineDown, LineRefuses
+
+    try:
+        line.reachable()
+        return {"answers": True, "unreachable": None, "cannot_write": None}
+    except LineRefuses as exc:   # it answers, but not as a forwarder needs
+        return {"answers": True, "unreachable": None, "cannot_write": str(exc)}
+    except LineDown as exc:
+        return {"answers": False, "unreachable": str(exc), "cannot_write": None}
+    finally:
+        line.dispose()
+
+
+def _not_made_yet(args: argparse.Namespace, cfg: StationConfig) -> int | None:
     """A station whose SQLite database is not there yet (nothing recorded): said, and the
     line database asked all the same (it said only "no database at ...", exit 2, nothing of
     whether the line answers: what a person setting the line up wants to know first).  Exit
     3 when the line does not answer or take the forwarders' writes, else 0 (nothing waits);
-    None where the database is there (or is not a file)."""
-    from sqlalchemy import make_url
+    None where the database is there (or is not a file, or cannot be looked at: the
+    forwarder says why)."""
+    from stationd.db_cli import absent_sqlite_file
+    from stationd.forward import LineDb
 
-    from stationd.config import load_station_config
-    from stationd.forward import LineDb, LineDown, LineRefuses
-
-    cfg = load_station_config(args.config)
     if cfg.line is None:
         return None                     # said by _forwarder, as before
-    u = make_url(cfg.database_url)
-    path = u.database
-    if u.get_backend_name() != "sqlite" or not path or path == ":memory:" \
-            or path.startswith("file:") or Path(path).exists():
-        return None
-    line = LineDb(cfg.line.url)
-    why = ""
     try:
-        line.reachable()
-        answers = True
-    except LineRefuses as exc:
-        answers, why = False, f"the forwarders cannot write ({exc})"
-    except LineDown as exc:
-        answers, why = False, f"does not answer ({exc})"
-    finally:
-        line.dispose()
+        path = absent_sqlite_file(cfg.database_url)
+    except OSError:
+        return None
+    if path is None:
+        return None
+    st = {"url": _shown(cfg.line.url), "station_id": cfg.line.station_id, "db_id": None,
+          **_asked(LineDb(cfg.line.url)), "backlog": 0, "quarantined": 0, "recorded": False}
     if args.json:
-        print(json.dumps({"url": _shown(cfg.line.url), "station_id": cfg.line.station_id,
-                          "db_id": None, "answers": answers, "unreachable": why or None,
-                          "backlog": 0, "quarantined": 0, "recorded": False}))
+        print(json.dumps(st))
     else:
         print(f"no database at {path} yet: the station has recorded nothing, so nothing "
               f"waits (or {args.config}'s database.url names another file)")
-        print(f"line database {_shown(cfg.line.url)}: " + ("answers" if answers else why))
-    return 0 if answers else EXIT_UNREACHABLE
+        print(f"line database {st['url']}: " + (
+            f"the forwarders cannot write ({st['cannot_write']})" if st["cannot_write"] else
+            "answers" if st["answers"] else f"does not answer ({st['unreachable']})"))
+    return EXIT_UNREACHABLE if not st["answers"] or st["cannot_write"] else 0
 
 
 def cmd_line_status(args: argparse.Namespace) -> int:
@@ -110,24 +120,15 @@ def cmd_line_status(args: argparse.Namespace) -> int:
     answers now (asked once: the backlog alone does not say why records wait).  Exit 3 when
     it does not answer or will not take the forwarders' writes (a role without the privilege:
     the records wait all the same), else 1 while records wait or are quarantined."""
-    from stationd.forward import LineDown, LineRefuses
+    from stationd.config import load_station_config
 
-    unmade = _not_made_yet(args)
+    cfg = load_station_config(args.config)
+    unmade = _not_made_yet(args, cfg)
     if unmade is not None:
         return unmade
-    fwd = _forwarder(args)
+    fwd = _forwarder(args, cfg=cfg)
     try:
-        st = fwd.status()
-        st["cannot_write"] = None
-        try:
-            fwd.line.reachable()
-            st["answers"], st["unreachable"] = True, None
-        except LineRefuses as exc:   # it answers, but not as a forwarder needs
-            st["answers"], st["unreachable"], st["cannot_write"] = True, None, str(exc)
-        except LineDown as exc:
-            st["answers"], st["unreachable"] = False, str(exc)
-        finally:
-            fwd.line.dispose()
+        st = {**fwd.status(), **_asked(fwd.line)}
     finally:
         fwd.repo.close()
     if args.json:
