@@ -12,7 +12,8 @@ through importlib and typed ``Any``, when the first ``aravis://`` camera opens.
   the camera's current one if supported, else the first of those it offers.
 - ``buffers``: the stream's pool, each buffer the camera's own payload (20 MB for 5472x3648
   Bayer8, 60 MB for RGB8), allocated once per connection.  ``region``: ``full`` or X,Y,W,H.
-  ``frame_rate``: the free-running rate in Hz.
+  ``frame_rate``: the free-running rate in Hz.  ``heartbeat_ms``: a GigE Vision camera's
+  heartbeat timeout (default the camera's own, 3000 ms in the standard).
 - A frame's timestamp is its exposure instant on the host's ``time.time()`` scale: the
   buffer's own timestamp (the camera's clock at the start of the frame) mapped onto host
   time by ``clock.ClockMap`` from the buffer's system timestamp (host time of its first
@@ -35,6 +36,12 @@ Aravis quirks handled here:
   good.  Loss is seen in the errors of ``trigger()`` and of a register read after a grab
   times out; the link then stays down (calls say so at once) and the failed link is released
   by the next ``reconnect()`` (the station keeper's thread), not by the caller that saw it.
+- A GigE camera that heard no heartbeat within its timeout (the host stalled that long, or
+  another program took the camera) drops the station's control: it still answers reads but
+  ignores commands, and no frame comes again.  Aravis's heartbeat thread notices within a
+  second; ``trigger()`` and a grab that timed out then say so as a lost link, which the
+  keeper's ``reconnect()`` takes back, rather than timing out for good.  A camera another
+  program controls at opening is refused at once with that reason.
 - Shutdown order: stream, then camera, then ``Aravis.shutdown()``, the last only at process
   end (``shutdown()`` below is registered with atexit when Aravis is first loaded).
 """
@@ -67,6 +74,7 @@ from drivers.errors import (
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
+HEARTBEAT_TIMEOUT_REGISTER = 0x0938  # GigE Vision bootstrap register, in milliseconds
 _load_lock = threading.Lock()
 _system_lock = threading.Lock()  # Aravis's device list is one per process
 _modules: tuple[Any, Any] | None = None
@@ -148,14 +156,36 @@ class _Link:
                 raise ConnectError(f"cannot open camera {name!r}: {exc.message} (cameras "
                                    f"found: {found})", device=self.device) from None
         try:
+            if not self.in_control():
+                raise ConnectError(f"another program controls camera {name!r} (its GigE "
+                                   "control channel is taken): close that program, or wait "
+                                   "for its heartbeat timeout", device=self.device)
             self._configure()
         except BaseException:
             self.close(lost=True)
             raise
 
+    def in_control(self) -> bool:
+        """Whether the station still controls the camera: a GigE camera drops a controller
+        whose heartbeat it missed (Aravis notices at its next heartbeat, within a second);
+        USB3 Vision has no such channel."""
+        return not self.cam.is_gv_device() or bool(self.cam.get_device().is_controller())
+
+    def _check_control(self) -> None:
+        if not self.in_control():
+            raise ConnectionLostError(
+                "control of the camera lost: it heard no heartbeat within its timeout (the "
+                "host stalled that long) or another program took it", device=self.device)
+
     def _configure(self) -> None:
         s, cam, call = self.settings, self.cam, self._call
         call("stop acquisition", cam.stop_acquisition)  # a crashed run may have left it on
+        if s.heartbeat_ms is not None:
+            if not cam.is_gv_device():
+                raise UnsupportedError("heartbeat_ms is for GigE Vision cameras (USB3 Vision "
+                                       "has no heartbeat)", device=self.device)
+            call(f"set heartbeat timeout {s.heartbeat_ms} ms", cam.get_device().write_register,
+                 HEARTBEAT_TIMEOUT_REGISTER, s.heartbeat_ms)
         available = call("list pixel formats", cam.dup_available_pixel_formats_as_strings)
         current = call("read pixel format", cam.get_pixel_format_as_string)
         pf = s.pixel_format or (current if current in pixels.FORMATS else next(
@@ -239,6 +269,7 @@ class _Link:
         while (buf := self.stream.try_pop_buffer()) is not None:
             self.stream.push_buffer(buf)
             dropped += 1
+        self._check_control()
         if self.settings.trigger == "software":
             self.triggered_at = time.time()  # the exposure cannot start before this
             self._call("software trigger", self.cam.software_trigger)
@@ -248,9 +279,12 @@ class _Link:
         """The next good frame before ``deadline`` (monotonic), else why not (a string)."""
         bad: list[str] = []
         while (left := deadline - time.monotonic()) > 0:
-            buf = self.stream.timeout_pop_buffer(max(1, int(left * 1e6)))
+            # in slices of a heartbeat period: a camera that dropped the station is said
+            # within a second, not at the end of a long timeout
+            buf = self.stream.timeout_pop_buffer(max(1, int(min(left, 1.0) * 1e6)))
             if buf is None:
-                break
+                self._check_control()
+                continue
             try:
                 status = buf.get_status()
                 if status != self.arv.BufferStatus.SUCCESS:
@@ -260,6 +294,7 @@ class _Link:
             finally:
                 self.stream.push_buffer(buf)
         self._call("check the camera", self.cam.get_payload)  # ConnectionLostError if gone
+        self._check_control()
         return f"{counted(len(bad), 'broken buffer')}: {', '.join(sorted(set(bad)))}" if bad else ""
 
     def _frame(self, buf: Any) -> Frame:

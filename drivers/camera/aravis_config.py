@@ -20,7 +20,7 @@ from drivers.errors import (
 from drivers.url import OptionError, parse_url
 
 FORM = ("aravis://DEVICE-ID?trigger=software|line0|free&pixel_format=" + "|".join(pixels.FORMATS)
-        + "&exposure_us=N&gain_db=N&buffers=4&region=full|X,Y,W,H&frame_rate=HZ")
+        + "&exposure_us=N&gain_db=N&buffers=4&region=full|X,Y,W,H&frame_rate=HZ&heartbeat_ms=N")
 DEFAULT_BUFFERS = 4
 # ArvDeviceError codes meaning "the camera is gone": not connected, protocol error, transfer
 # error, timeout, not found; and the ones meaning "someone else controls it"
@@ -42,6 +42,7 @@ class Settings:
     buffers: int = DEFAULT_BUFFERS
     region: tuple[int, int, int, int] | str | None = None
     frame_rate: float | None = None
+    heartbeat_ms: int | None = None
 
 
 def _region(text: str) -> tuple[int, int, int, int] | str:
@@ -83,6 +84,20 @@ def _exposure_us(text: str) -> float:
     return value
 
 
+#: a GigE Vision camera's heartbeat timeout (bootstrap register 0x0938): below Aravis's
+#: heartbeat period (1 s) the camera would drop the station at once; above 10 minutes a
+#: station that died would keep its camera locked for that long
+HEARTBEAT_MS = (1500, 600_000)
+
+
+def _heartbeat_ms(text: str) -> int:
+    value = int(text)
+    if not HEARTBEAT_MS[0] <= value <= HEARTBEAT_MS[1]:
+        raise OptionError(f"a heartbeat timeout in milliseconds is {HEARTBEAT_MS[0]}-"
+                          f"{HEARTBEAT_MS[1]} (Aravis sends one each second)")
+    return value
+
+
 def _buffers(text: str) -> int:
     n = int(text)
     if not 1 <= n <= 64:
@@ -99,14 +114,14 @@ def parse_aravis_url(text: str) -> tuple[Settings, dict[str, float | None]]:
         "exposure_us": (_exposure_us, None), "gain_db": (_gain_db, None),
         "buffers": (_buffers, None),
         "region": (_region, None), "frame_rate": (positive, None),
-        "timeout": (positive, None)}, FORM)
+        "heartbeat_ms": (_heartbeat_ms, None), "timeout": (positive, None)}, FORM)
     name = unquote(urlsplit(text).netloc)
     if url.scheme != "aravis" or not name or url.path not in ("", "/"):
         raise url.error(f"expected {FORM} (the device id is VENDOR-MODEL-SERIAL, as Aravis "
                         "lists it)")
     settings = Settings(name, opts["trigger"], opts["pixel_format"], opts["exposure_us"],
                         opts["gain_db"], opts["buffers"] or DEFAULT_BUFFERS, opts["region"],
-                        opts["frame_rate"])
+                        opts["frame_rate"], opts["heartbeat_ms"])
     return settings, {"timeout": opts["timeout"]}
 
 

@@ -15,10 +15,16 @@ import pytest
 from drivers.camera import sim
 
 SERIAL = "STATIOND1"
+HEARTBEAT_REGISTER = 0x0938  # GigE Vision bootstrap: heartbeat timeout in ms
 FAKE_NAME = "Aravis-Fake-" + SERIAL
 #: how long a grab waits for a frame the test asked for: generous on a busy machine (it ends
 #: with the frame; a test that expects none gives its own short wait)
 FAST = "timeout=30"
+#: the fake camera's heartbeat timeout: its GigE standard 3 s is shorter than a loaded test
+#: machine may stall (the fake then drops the test's camera for good, as a real one would);
+#: the camera and the test share this host, so a long timeout locks nothing.  Losing control
+#: is tested on its own (``test_aravis_reconnect.py``).
+PATIENT = "heartbeat_ms=60000"
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -72,7 +78,20 @@ class FakeGigE:
         gc.collect()
 
     def url(self, options=""):
-        return f"aravis://{FAKE_NAME}?{FAST}" + (f"&{options}" if options else "")
+        extra = "" if "heartbeat_ms=" in options else f"&{PATIENT}"
+        return f"aravis://{FAKE_NAME}?{FAST}{extra}" + (f"&{options}" if options else "")
+
+    def heartbeat_ms(self):
+        """The fake camera's heartbeat timeout, as the station's camera set it."""
+        ok, value = self.fake.get_fake_camera().read_register(HEARTBEAT_REGISTER)
+        assert ok
+        return value
+
+    def drop_controllers_after(self, ms):
+        """The camera's heartbeat timeout set behind the station's back (from the camera's
+        side): below Aravis's 1 s heartbeat period, the camera drops its controller at the
+        next heartbeat, as after a host stall of that length."""
+        assert self.fake.get_fake_camera().write_register(HEARTBEAT_REGISTER, ms)
 
     def set_trigger_frequency(self, hz):
         self.fake.get_fake_camera().set_trigger_frequency(hz)

@@ -88,3 +88,10 @@ def test_shutdown_order_at_process_end(aravis_port):
     """)
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=30)
     assert r.returncode == 0 and r.stdout.strip() == "(48, 64, 3)", r.stderr
+
+
+def test_a_heartbeat_is_for_gige_cameras():
+    """Aravis's in-process fake ("Fake_1") is no GigE camera: it has no heartbeat to set."""
+    aravis_or_skip().enable_interface("Fake")
+    with pytest.raises(UnsupportedError, match=r"heartbeat_ms is for GigE Vision cameras"):
+        open_camera("aravis://Fake_1?heartbeat_ms=5000&region=0,0,64,48")

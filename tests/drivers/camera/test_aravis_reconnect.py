@@ -61,3 +61,36 @@ def test_close_while_the_link_is_down_releases_it(fake):
     assert time.monotonic() - start < 5.0
     with pytest.raises(DeviceError, match="not open"):
         cam.grab()
+
+
+def test_a_camera_that_dropped_the_station_is_a_lost_link_until_reconnected(fake):
+    """A GigE camera that missed the station's heartbeat (a stall of the host longer than its
+    heartbeat timeout) ignores the station's commands: no frame would ever come.  The driver
+    says so as a lost link, and ``reconnect()`` takes the camera back."""
+    with open_camera(fake.url(SETTINGS)) as cam:
+        assert fake.heartbeat_ms() == 60000  # as the URL set it
+        cam.trigger()
+        cam.grab()
+        fake.drop_controllers_after(500)
+        deadline = time.monotonic() + 15.0
+        with pytest.raises(ConnectionLostError, match=r"control of the camera lost: it heard no "
+                                                      r"heartbeat .*or another program took it"):
+            while time.monotonic() < deadline:  # Aravis notices within its next heartbeats
+                cam.trigger()
+                cam.grab()
+                time.sleep(0.2)
+        t0 = time.monotonic()
+        with pytest.raises(ConnectionLostError, match=r"link down \(control of the camera lost"):
+            cam.grab(5.0)
+        assert time.monotonic() - t0 < 1.0  # said at once
+        cam.reconnect()
+        assert fake.heartbeat_ms() == 60000  # set again
+        cam.trigger()
+        assert cam.grab().image.shape == (48, 64, 3)
+
+
+def test_a_camera_another_program_controls_is_refused_at_opening(fake):
+    with open_camera(fake.url(SETTINGS)):
+        with pytest.raises(DeviceError, match=r"another program controls camera "
+                                              r"'Aravis-Fake-STATIOND1'"):
+            open_camera(fake.url(SETTINGS))
