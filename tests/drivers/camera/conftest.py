@@ -59,6 +59,19 @@ def aravis_or_skip():
     return aravis.load()[0]
 
 
+def _assert_gvcp_port_free():
+    """A fake camera whose GVCP port is taken still says it runs (Aravis logs the failed
+    bind and goes on), and the test's camera then talks to the other program's fake."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.bind(("127.0.0.1", 3956))
+        except OSError as exc:
+            pytest.fail(f"UDP 127.0.0.1:3956 is taken ({exc}): another program runs a GigE "
+                        "camera or fake camera here")
+
+
 class FakeGigE:
     """Aravis's fake GigE Vision camera on 127.0.0.1; ``stop()`` is the cable being pulled,
     ``start()`` plugging it back (a fresh camera with the same serial, default settings)."""
@@ -70,8 +83,9 @@ class FakeGigE:
 
     def start(self):
         assert self.fake is None, "one fake camera at a time"
+        _assert_gvcp_port_free()
         self.fake = self.arv.GvFakeCamera.new("127.0.0.1", SERIAL)
-        assert self.fake.is_running(), "the fake GigE camera did not start (UDP 3956 busy?)"
+        assert self.fake.is_running(), "the fake GigE camera did not start"
 
     def stop(self):
         self.fake = None
