@@ -54,6 +54,10 @@ NOT_TAKEN = "untyped OK outside torque window"
 #: how a held bolt's note begins for such a result (the note of a result that could not be
 #: read names that result alone: "tightening 1234", "MID 0061 revision 7")
 NOT_TAKEN_NOTE = "an OK result without a result type"
+#: the link to the controller went down with the tool enabled for a bolt, and what the
+#: controller did meanwhile is not known: stored as a controller event under this name
+#: without a result (its note says why), the bolt held until a person checked it
+CUT_UNKNOWN = "result unknown after a link cut"
 
 
 def not_taken_note(torque_nm: float | None, tightening_id: int | None) -> str:
@@ -69,6 +73,12 @@ def unreadable_note(tightening_id: int | None, mid: int, revision: int) -> str:
     its MID and revision."""
     return f"tightening {tightening_id}" if tightening_id is not None \
         else f"MID {mid:04d} revision {revision}"
+
+
+def cut_unknown_note(why: str) -> str:
+    """A held bolt's note where the tool was enabled for it when the link to the controller
+    went down, and what the controller did meanwhile is not known (``why``)."""
+    return f"its result during the link cut not known: {why}"
 
 
 def loosening_note(note: str, pset: int | None) -> str:
@@ -98,6 +108,7 @@ def is_not_taken_note(note: str | None) -> bool:
     return note is not None and note.startswith(NOT_TAKEN_NOTE)
 
 
-__all__ = ["LOOSENED", "LOOSENING", "MISSING", "NOK", "NOT_TAKEN", "NOT_TAKEN_NOTE", "OK",
-           "PENDING", "RUNDOWN_KINDS", "SKIPPED", "TIGHTENING", "TO_LOOSEN", "BoltStatus",
-           "HeldUnder", "is_not_taken_note", "loosening_note", "not_taken_note", "unreadable_note"]
+__all__ = ["CUT_UNKNOWN", "LOOSENED", "LOOSENING", "MISSING", "NOK", "NOT_TAKEN",
+           "NOT_TAKEN_NOTE", "OK", "PENDING", "RUNDOWN_KINDS", "SKIPPED", "TIGHTENING",
+           "TO_LOOSEN", "BoltStatus", "HeldUnder", "cut_unknown_note", "is_not_taken_note",
+           "loosening_note", "not_taken_note", "unreadable_note"]

@@ -284,6 +284,8 @@ class ControllerEvent(Base):
     angle_deg: Mapped[float | None]
     result_at: Mapped[datetime | None] = mapped_column(UtcDateTime)   # controller's clock
     recorded_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
+    # why a bolt is held where no result says it (:data:`db.kinds.CUT_UNKNOWN`)
+    note: Mapped[str | None] = mapped_column(String(500))
 
 
 class UnreadableRecord(Base):

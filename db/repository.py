@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
-from datetime import datetime
+from datetime import datetime, timedelta
 from types import TracebackType
 from typing import Any, Self
 
@@ -27,6 +27,7 @@ from db.engine import DEFAULT_URL, make_engine, writer
 from db.errors import DatabaseError, DataError, NotFoundError, VehicleClosedError
 from db.importer import ImportReport, current_version, import_table, parameters_of, read_table
 from db.kinds import (
+    CUT_UNKNOWN,
     LOOSENING,
     NOT_TAKEN,
     RUNDOWN_KINDS,
@@ -71,6 +72,10 @@ AT_STATION = "at_station"
 #: the commands that end a bolt's lock (its NOKs in a row) or its hold: a release, and a skip
 #: (the station takes a skip of a locked or held bolt only from a user who may release it)
 ENDS_A_HOLD = frozenset({"release", "skip"})
+
+#: the controller stamps its results to the second, its clock's offset measured to the
+#: second: a result made within this much of an unreadable message's arrival may be its copy
+COPY_SLACK = timedelta(seconds=2)
 
 
 __all__ = ["BoltInfo", "DataError", "DatabaseError", "NotFoundError", "OwedEnable", "Recorded",
@@ -470,15 +475,16 @@ class Repository:
                                 bolt: str | None, controller_vin: str | None,
                                 tightening_id: int | None, pset: int | None, ok: bool,
                                 torque_nm: float | None, angle_deg: float | None,
-                                result_at: datetime | None, enable_id: int | None = None
-                                ) -> int | None:
+                                result_at: datetime | None, enable_id: int | None = None,
+                                note: str | None = None) -> int | None:
         """Store a controller result that is not a rundown (a batch step, a bypass, an OK
         without a type outside its bolt's torque window, ...); return its id, or None when
         this very result is stored already (a resent copy: the same type, and the same
         tightening id, torque and angle, and controller timestamp ``result_at`` where both
         have one, :func:`_same_result`).
         ``enable_id``: the tool enable it answers, settled in the same transaction (its bolt
-        is held for a person instead, :data:`db.kinds.NOT_TAKEN`)."""
+        is held for a person instead, :data:`db.kinds.NOT_TAKEN`).  ``note``: why a bolt is
+        held where there is no result (:data:`db.kinds.CUT_UNKNOWN`)."""
         with self._session(write=True) as s:
             if tightening_id is not None:
                 same = s.execute(select(ControllerEvent.vin, ControllerEvent.bolt).where(
@@ -493,7 +499,8 @@ class Repository:
                 result_type=int(result_type), what=what[:32], vin=vin, bolt=bolt,
                 controller_vin=controller_vin, tightening_id=tightening_id, pset=pset,
                 status="ok" if ok else "nok", torque_nm=_opt_float(torque_nm),
-                angle_deg=_opt_float(angle_deg), result_at=result_at, recorded_at=utcnow())
+                angle_deg=_opt_float(angle_deg), result_at=result_at, recorded_at=utcnow(),
+                note=None if note is None else note[:500])
             s.add(row)
             _settle(s, enable_id)
             s.flush()
@@ -535,17 +542,25 @@ class Repository:
             row = _unreadable_copy(s, mid, raw, header_len)
             return None if row is None else (row.vin, row.bolt)
 
-    def unreadable_of(self, *, tightening_id: int, pset: int | None, at: datetime | None
-                      ) -> tuple[str | None, str | None] | None:
+    def unreadable_of(self, *, tightening_id: int, pset: int | None, at: datetime | None,
+                      made: datetime | None = None) -> tuple[str | None, str | None] | None:
         """The vehicle and bolt of a stored unreadable message a readable result is the
         copy of: its tightening id, and its pset and controller time where they could be
-        picked out of it (and the result has one); else None."""
+        picked out of it (and the result has one); else None.  Where a controller time is
+        missing on either side, a result ``made`` (on the station's clock, where the
+        controller's is known) after the message was stored is not its copy: another
+        result under the same id, from a controller whose ids started again."""
         with self._session(write=False) as s:
             for row in s.scalars(select(UnreadableRecord).where(
                     UnreadableRecord.tightening_id == tightening_id)
                     .order_by(UnreadableRecord.id)):
-                if (row.pset is None or pset is None or row.pset == pset) and \
-                        (row.result_at is None or at is None or row.result_at == at):
+                if row.pset is not None and pset is not None and row.pset != pset:
+                    continue
+                if row.result_at is not None and at is not None:
+                    if row.result_at == at:
+                        return row.vin, row.bolt
+                    continue
+                if made is None or made <= row.recorded_at + COPY_SLACK:
                     return row.vin, row.bolt
             return None
 
@@ -578,7 +593,9 @@ class Repository:
     def held_bolts(self, vin: str, since: datetime | None = None) -> dict[str, str]:
         """Bolts of ``vin`` held by an unreadable result (bolt -> which result: its tightening
         id, else its MID and revision), or by an OK result without a type outside the bolt's
-        torque window (:data:`db.kinds.NOT_TAKEN`: bolt -> its note): one stored for the bolt
+        torque window (:data:`db.kinds.NOT_TAKEN`: bolt -> its note), or by a link cut during
+        its enable that left its result unknown (:data:`db.kinds.CUT_UNKNOWN`, its note): one
+        stored for the bolt
         after its last rundown and its last release command (only those since ``since``, the
         vehicle's last opening).  A hold outlives a restart."""
         return {b: note for b, (note, _) in self.holds(vin, since).items()}
@@ -599,17 +616,20 @@ class Repository:
                 UnreadableRecord.vin == vin, UnreadableRecord.bolt.is_not(None))
             n = select(ControllerEvent.bolt, ControllerEvent.recorded_at,
                        ControllerEvent.tightening_id, ControllerEvent.torque_nm,
-                       ControllerEvent.pset).where(
+                       ControllerEvent.pset, ControllerEvent.what, ControllerEvent.note).where(
                 ControllerEvent.vin == vin, ControllerEvent.bolt.is_not(None),
-                ControllerEvent.what == NOT_TAKEN)
+                ControllerEvent.what.in_((NOT_TAKEN, CUT_UNKNOWN)))
             if since is not None:
                 q = q.where(UnreadableRecord.recorded_at >= since)
                 n = n.where(ControllerEvent.recorded_at >= since)
             # (at, bolt, note, pset, whether the pset is an enable's to look up)
             holds = [(at, str(b), unreadable_note(tid, mid, rev), pset, True)
                      for b, at, tid, mid, rev, pset in s.execute(q.order_by(UnreadableRecord.id))]
+            # an untyped OK came under the tightening pset; a link cut's enable is looked up
             holds += [(at, str(b), not_taken_note(torque, tid), pset, False)
-                      for b, at, tid, torque, pset in s.execute(n.order_by(ControllerEvent.id))]
+                      if what == NOT_TAKEN else (at, str(b), note or CUT_UNKNOWN, pset, True)
+                      for b, at, tid, torque, pset, what, note
+                      in s.execute(n.order_by(ControllerEvent.id))]
             held = {b: (note, at, pset, unreadable)
                     for at, b, note, pset, unreadable in sorted(holds, key=lambda h: h[0])}
             if not held:

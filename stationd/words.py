@@ -440,6 +440,10 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
     Said.CUT_RECORDED: lambda n: (f"tightening {n.tightening_id} made during the link cut, "
                                   f"fetched after it: recorded to {n.bolt} (its pset, VIN, "
                                   "tightening id and time agree)"),
+    Said.CUT_NOTHING: lambda n: (f"no tightening made during the link cut (every result "
+                                 f"since fetched): {n.bolt} open as before"),
+    Said.CUT_UNKNOWN: lambda n: (f"{n.bolt}: {n.note}: check it on the controller, then "
+                                 "release or enter its outcome"),
     Said.LATE_RESULT: lambda n: f"result for {n.bolt} outside a tightening: recorded, not matched",
     Said.LOOSEN_PSET_TIGHTENED: lambda n: (f"{n.bolt}: the loosen pset {n.pset} reported a "
                                            "tightening: the bolt counts as tightened; check "
@@ -502,6 +506,9 @@ _BECAUSE: dict[Because, Callable[[StateReason], str]] = {
                                      "on it"),
     Because.RESULT_OWED: lambda r: (f"bolt {r.bolt}: the tool stays off until bolt {r.owed}'s "
                                     "result is in, or can no longer come"),
+    Because.CUT_OWED: lambda r: (f"bolt {r.bolt}: the tool stays off until the controller's "
+                                 f"results made during the link cut are fetched (bolt "
+                                 f"{r.owed} was enabled)"),
     # the tool on for a loosen pset: the operator loosens, never "tighten" (as the screens)
     Because.TIGHTENING: lambda r: f"{'loosening' if r.loosen else 'tightening'} bolt {r.bolt}",
     Because.NOT_CONFIRMED: lambda r: f"wrench not confirmed on bolt {r.bolt}",

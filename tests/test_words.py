@@ -107,6 +107,12 @@ WORDS = [
     (Notice(Said.CUT_RECORDED, tightening_id=41, bolt="B1"),
      "tightening 41 made during the link cut, fetched after it: recorded to B1 (its pset, "
      "VIN, tightening id and time agree)"),
+    (Notice(Said.CUT_NOTHING, bolt="B1"),
+     "no tightening made during the link cut (every result since fetched): B1 open as before"),
+    (Notice(Said.CUT_UNKNOWN, bolt="B1",
+            note="its result during the link cut not known: the controller refused MID 0064"),
+     "B1: its result during the link cut not known: the controller refused MID 0064: check it "
+     "on the controller, then release or enter its outcome"),
     (Notice(Said.LATE_RESULT, bolt="B1"),
      "result for B1 outside a tightening: recorded, not matched"),
     (Notice(Said.LOOSEN_PSET_TIGHTENED, bolt="B1", pset=9),
@@ -160,7 +166,7 @@ def test_a_notice_s_level_is_its_kind_s() -> None:
     assert errors == {Said.NOT_STORED}
     assert warnings == {
         Said.PAIR_DISTRUSTED, Said.IDS_AGAIN, Said.UNATTRIBUTED, Said.UNKNOWN_TYPE, Said.GAP,
-        Said.UNREADABLE, Said.HELD, Said.NOT_TAKEN, Said.LOOSEN_PSET_TIGHTENED,
+        Said.UNREADABLE, Said.HELD, Said.CUT_UNKNOWN, Said.NOT_TAKEN, Said.LOOSEN_PSET_TIGHTENED,
         Said.LOOSENING_NOK, Said.LOCKED, Said.ENTERED_NOK, Said.ENTERED_LOOSENING_NOK}
     # a controller event is a warning only while a bolt is still open
     assert Notice(Said.CONTROLLER_EVENT, bolt="B1").level == "warning"
@@ -202,6 +208,9 @@ STATE_WORDS = [
      "bolt B11 acknowledged; confirming the wrench is on it"),
     (StateReason(Because.RESULT_OWED, bolt="B08", owed="B05"),
      "bolt B08: the tool stays off until bolt B05's result is in, or can no longer come"),
+    (StateReason(Because.CUT_OWED, bolt="B08", owed="B05"),
+     "bolt B08: the tool stays off until the controller's results made during the link cut "
+     "are fetched (bolt B05 was enabled)"),
     (StateReason(Because.TIGHTENING, bolt="B11"), "tightening bolt B11"),
     (StateReason(Because.TIGHTENING, bolt="B11", loosen=True), "loosening bolt B11"),
     (StateReason(Because.NOT_CONFIRMED, bolt="B11"), "wrench not confirmed on bolt B11"),

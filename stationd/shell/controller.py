@@ -20,7 +20,7 @@ import time
 from collections.abc import Awaitable, Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 
-from drivers.errors import DeviceError
+from drivers.errors import DeviceError, RefusedError
 from drivers.keeper import DeviceKeeper, one_line
 from drivers.wrench import Received, TighteningResult, UnreadableResult, Wrench
 from stationd.shell.blocking import Blocking
@@ -30,6 +30,7 @@ from stationd.station.gaps import MAX_FETCH, GapPlan, NoFetch
 from stationd.station.gaps import plan as plan_gaps
 from stationd.station.inputs import (
     WRENCH,
+    CaughtUp,
     DeviceBack,
     DeviceSaid,
     Event,
@@ -84,7 +85,8 @@ class ControllerFeed:
             # a refusal is a fault until the controller answers
             await self._feed(DeviceBack(time.time(), WRENCH, self._keeper.reconnects))
         if result is not None:
-            await self._feed(await self.checked(result_input(time.time(), result)))
+            await self._feed(await self.checked(
+                result_input(time.time(), result, offset=wrench.clock_offset_s)))
             self.received.remove(result)
             await self._live_gap(wrench, result)
 
@@ -152,42 +154,59 @@ class ControllerFeed:
         """Every tightening id between the last one recorded and the controller's newest,
         fetched and fed as any result (recorded to its bolt when the station can tell, else
         unattributed, never to a guessed bolt); one the controller no longer has is a gap.
-        A controller that keeps no results (register-driven) has nothing to fetch."""
+        A controller that keeps no results (register-driven) has nothing to fetch.  The core
+        is told how it ended (:class:`CaughtUp`: complete, or why not), which ends what a
+        link cut during an enable left open; a link lost again meanwhile tells nothing (the
+        next reconnect's catch-up will)."""
         wrench = self._keeper.device
-        if wrench is None or self.records.repo is None or not wrench.can_fetch:
+        if wrench is None:
             return
         try:
-            last = await self._call(self.records.last_tightening_id)
-            newest = await self._call(wrench.fetch_result, 0)
-            if newest is None:
-                return
-            if newest.tightening_id is None:   # unreadable, its id too: kept, nothing planned
-                await self._feed(await self.checked(result_input(time.time(), newest,
-                                                                  fetched=True)))
-                return
-            nid = int(newest.tightening_id)
-            # from here the ids up to the controller's newest are this catch-up's; a pushed
-            # result after them that skips one is a live gap (:meth:`_live_gap`)
-            self._accounted = nid if self._accounted is None else max(self._accounted, nid)
-            if last is None:
-                await self._first_results(wrench, newest, nid)
-                return
-            todo = plan_gaps(last, nid)
-            if todo.why is not None:
-                log.info("results: %s", gap_plan_words(todo))
-            elif await self._count_restarted(wrench, last, newest):
-                log.info("results: the controller's tightening %d is not the one recorded "
-                         "under that id: its ids restarted", last)
-                todo = GapPlan(why=NoFetch.IDS_RESTARTED, newest=nid, last_recorded=last)
-            if todo.why is NoFetch.IDS_RESTARTED:   # a new count: no id to count from
-                await self._first_results(wrench, newest, nid, restarted=True)
-                return
-            await self._fetch(wrench, todo, last, newest)
+            why = await self._caught_up(wrench)
+        except RefusedError as exc:     # the controller said no: asking again will not help
+            log.warning("results missed while the link was down not fetched: %s",
+                        one_line(exc))
+            why = f"the controller refused to give them ({one_line(exc)})"
         except (DeviceError, ValueError) as exc:   # the link's keeper reports it
             log.warning("results missed while the link was down not fetched yet: %s",
                         one_line(exc))
+            return
         except STATION_FAULTS as exc:
             log.error("results missed while the link was down not fetched: %s", one_line(exc))
+            why = f"the station's database failed ({one_line(exc)})"
+        await self._feed(CaughtUp(time.time(), why is None, why or ""))
+
+    async def _caught_up(self, wrench: Wrench) -> str | None:
+        """The catch-up's work: None where every result since the link was lost went
+        through the core, else why not."""
+        if self.records.repo is None:
+            return "no database to count the results from"
+        if not wrench.can_fetch:
+            return "this controller keeps no results to fetch"
+        last = await self._call(self.records.last_tightening_id)
+        newest = await self._call(wrench.fetch_result, 0)
+        if newest is None:
+            return None                        # the controller has made none
+        if newest.tightening_id is None:   # unreadable, its id too: kept, nothing planned
+            await self._feed(await self.checked(result_input(time.time(), newest,
+                                                              fetched=True)))
+            return "the controller's newest result could not be read"
+        nid = int(newest.tightening_id)
+        # from here the ids up to the controller's newest are this catch-up's; a pushed
+        # result after them that skips one is a live gap (:meth:`_live_gap`)
+        self._accounted = nid if self._accounted is None else max(self._accounted, nid)
+        if last is None:
+            return await self._first_results(wrench, newest, nid)
+        todo = plan_gaps(last, nid)
+        if todo.why is not None:
+            log.info("results: %s", gap_plan_words(todo))
+        elif await self._count_restarted(wrench, last, newest):
+            log.info("results: the controller's tightening %d is not the one recorded "
+                     "under that id: its ids restarted", last)
+            todo = GapPlan(why=NoFetch.IDS_RESTARTED, newest=nid, last_recorded=last)
+        if todo.why is NoFetch.IDS_RESTARTED:   # a new count: no id to count from
+            return await self._first_results(wrench, newest, nid, restarted=True)
+        return await self._fetch(wrench, todo, last, newest)
 
     async def _count_restarted(self, wrench: Wrench, last: int, newest: Received) -> bool:
         """Whether the controller's ids started again though its newest is not below
@@ -226,7 +245,7 @@ class ControllerFeed:
         return isinstance(asked, ResultIn)
 
     async def _first_results(self, wrench: Wrench, newest: Received, nid: int,
-                             restarted: bool = False) -> None:
+                             restarted: bool = False) -> str | None:
         """No tightening of this controller recorded yet (or ``restarted``: its ids started
         again, reset or replaced, so the last one recorded says nothing of its new count), so
         no id to count from: the results
@@ -237,16 +256,21 @@ class ControllerFeed:
         before that (the first one after it is what the core's proof of a result made under
         the cut enable asks for; unknown where the controller no longer has it or its time
         cannot be read: then nothing is proved, and what was found stays unattributed).
-        What it made before is its history, not this station's: not fetched."""
+        What it made before is its history, not this station's: not fetched.  None where
+        every result since was found, else why not."""
         since, offset = self.core.missed_since(), wrench.clock_offset_s
         found: list[tuple[int, Received]] = []
         follows: int | None = None
         got: Received | None = newest
         tid = nid
+        unknown: str | None = None
         while since is not None and got is not None and len(found) < MAX_FETCH:
             at = made_at(got, offset)
             if at is None:
-                break                  # its time unknown: where the history begins too
+                # its time unknown: where the history begins too
+                unknown = "the controller's clock is not known: its results cannot be " \
+                          "placed before or after the link was lost"
+                break
             if at < since - CLOCK_SLACK_S:
                 follows = tid          # made before: the history ends here
                 break
@@ -256,16 +280,23 @@ class ControllerFeed:
                 break
             tid -= 1
             got = await self._call(wrench.fetch_result, tid)
+        if since is not None and unknown is None and follows is None:
+            unknown = f"the controller no longer has tightening {tid}" if got is None \
+                else f"more than {MAX_FETCH} results made since the link was lost"
+        if unknown is not None:
+            log.warning("results: %s%s", "its tightening ids started again; " if restarted
+                        else "", unknown)
         if not found:
             if not restarted:
                 log.info("results: %s", gap_plan_words(plan_gaps(None, nid)))
-            return
+            return unknown
         log.info("results: %s; %d made by the controller since the link was lost%s: fetched",
                  "its tightening ids started again" if restarted else
                  "no tightening recorded yet", len(found),
                  "" if follows is not None else " (where its history ends is not known)")
         for tid, got in reversed(found):
             await self._fetched(wrench, tid, got, follows, offset)
+        return unknown
 
     async def _live_gap(self, wrench: Wrench, got: Received) -> None:
         """A pushed result whose tightening id skips ahead of the last one accounted for on
@@ -294,20 +325,25 @@ class ControllerFeed:
                       one_line(exc))
 
     async def _fetch(self, wrench: Wrench, todo: GapPlan, last: int | None,
-                     newest: Received | None = None, live: bool = False) -> None:
+                     newest: Received | None = None, live: bool = False) -> str | None:
         """The ids ``todo`` fetches, each fed as a fetched result (after ``last``, the id
         accounted for before; ``newest``: one fetched already), with its curves; its gap and
-        each id the controller no longer has recorded as gaps."""
+        each id the controller no longer has recorded as gaps.  None where none was missed,
+        else why some were."""
+        missed: str | None = None
         if todo.gap is not None:
-            await self._gap(*todo.gap, f"more than {MAX_FETCH} results missed", live)
+            missed = f"more than {MAX_FETCH} results missed"
+            await self._gap(*todo.gap, missed, live)
         offset = wrench.clock_offset_s
         for tid in todo.fetch:
             got: Received | None = newest if newest is not None \
                 and tid == newest.tightening_id else await self._call(wrench.fetch_result, tid)
             if got is None:
+                missed = f"tightening {tid} no longer on the controller"
                 await self._gap(tid, tid, "the controller no longer has it", live)
                 continue
             await self._fetched(wrench, tid, got, last, offset, live)
+        return missed
 
     async def _fetched(self, wrench: Wrench, tid: int, got: Received, follows: int | None,
                        offset: float | None, live: bool = False) -> None:
@@ -375,7 +411,7 @@ def result_input(t: float, got: Received, *, fetched: bool = False, follows: int
     if isinstance(got, UnreadableResult):
         return UnreadableIn(t, got)
     return ResultIn(t, got, fetched=fetched, follows=follows,
-                    made_at=made_at(got, offset) if fetched else None, live=live)
+                    made_at=made_at(got, offset), live=live)
 
 
 def made_at(result: Received, offset: float | None) -> float | None:

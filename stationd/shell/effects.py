@@ -43,6 +43,7 @@ from stationd.station.actions import (
     SendParams,
     SendVin,
     StoreControllerEvent,
+    StoreCutUnknown,
     StoreGap,
     StoreUnattributed,
     StoreUnreadable,
@@ -184,6 +185,12 @@ class Effects:
         elif isinstance(a, StoreControllerEvent):
             await self._store_then_ack(self.records.store_controller_event, a, a.result,
                                        f"{stored_what(a)} (a controller event)")
+        elif isinstance(a, StoreCutUnknown):
+            try:
+                await self._call(self.records.store_cut_unknown, a)
+            except STATION_FAULTS as exc:
+                self.log.error("the hold of %s after the link cut not stored (held until a "
+                               "restart): %s", a.bolt, one_line(exc))
         elif isinstance(a, StoreUnreadable):
             await self._store_then_ack(self.records.store_unreadable, a, a.unreadable,
                                        "an unreadable result")

@@ -26,7 +26,7 @@ from db.checks import record_check
 from db.curves import link_curves, store_curve
 from db.entered import record_entered
 from db.errors import DataError, DbError, NotFoundError, VehicleClosedError
-from db.kinds import LOOSENING, MISSING, NOK, OK, TIGHTENING
+from db.kinds import CUT_UNKNOWN, LOOSENING, MISSING, NOK, OK, TIGHTENING
 from db.repository import Repository
 from drivers.errors import DeviceError, DriverError
 from drivers.keeper import one_line
@@ -44,6 +44,7 @@ from stationd.station.actions import (
     RecordCommand,
     Selection,
     StoreControllerEvent,
+    StoreCutUnknown,
     StoreUnattributed,
     StoreUnreadable,
 )
@@ -253,8 +254,9 @@ class Records:
             return ResultCopy(ev.t, r, stored.vin, stored.bolt)
         # a copy that reads of a message stored unreadable (garbled on the line the first
         # time): that result, held for a person, never the enable owed now
+        made = None if ev.made_at is None else datetime.fromtimestamp(ev.made_at, UTC)
         held = self._repo().unreadable_of(tightening_id=int(r.tightening_id),
-                                          pset=int(r.pset), at=controller_time(r))
+                                          pset=int(r.pset), at=controller_time(r), made=made)
         return ev if held is None else ResultCopy(ev.t, r, held[0], held[1])
 
     def unreadable_input(self, ev: UnreadableIn) -> UnreadableIn:
@@ -315,6 +317,16 @@ class Records:
         self._settles(a.selection)
         if row is None:
             log.info("%s", sent_again_words(int(r.tightening_id), a.bolt))
+
+    def store_cut_unknown(self, a: StoreCutUnknown) -> None:
+        """A bolt held after a link cut left its result unknown: a controller event of the
+        station's own kind without a result (its note, why), the enable settled with it."""
+        enable = self._settles(a.selection, take=False)
+        self._repo().record_controller_event(
+            result_type=0, what=CUT_UNKNOWN, vin=a.vin, bolt=a.bolt, controller_vin=None,
+            tightening_id=None, pset=a.selection.pset, ok=False, torque_nm=None,
+            angle_deg=None, result_at=None, enable_id=enable, note=a.note)
+        self._settles(a.selection)
 
     def store_unreadable(self, a: StoreUnreadable) -> None:
         """The message whole; the tool enable it answers settled with it (the bolt is held

@@ -192,6 +192,19 @@ class RecordCommand:
 
 
 @dataclass(frozen=True)
+class StoreCutUnknown:
+    """Store that ``bolt`` of ``vin`` is held because the link to the controller went down
+    while the tool was enabled for it (``selection``, settled with it) and what the controller
+    did meanwhile is not known (``note``, the hold's): no result says it, and a hold outlives
+    a restart."""
+
+    vin: str
+    bolt: str
+    note: str
+    selection: Selection
+
+
+@dataclass(frozen=True)
 class Reply:
     """The answer goes back to who gave the command (and to the journal)."""
 
@@ -200,5 +213,5 @@ class Reply:
 
 Action = (SendParams | EnableTool | DisableTool | SendVin | LoadVehicle | CloseVehicle | Record
           | Acknowledge | StoreUnattributed | StoreGap | StoreControllerEvent | StoreUnreadable
-          | Publish
+          | StoreCutUnknown | Publish
           | RecordCommand | Reply | MeasureReferences | RecordCheck)

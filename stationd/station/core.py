@@ -43,6 +43,7 @@ from stationd.station.actions import Action, Publish
 from stationd.station.events import StateChanged
 from stationd.station.inputs import (
     Announce,
+    CaughtUp,
     CommandDone,
     CommandIn,
     DeviceBack,
@@ -121,6 +122,8 @@ class StationCore(LiftRules, ToolRules, ResultRules):
                 return self._on_result_copy(ev)
             case UnreadableIn():
                 return self._on_unreadable_in(ev)
+            case CaughtUp():
+                return self._on_caught_up(ev)
             case ResultsMissed():
                 return self._on_results_missed(ev)
             case NotStored():

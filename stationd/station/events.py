@@ -115,6 +115,9 @@ class Because(enum.Enum):
     #                                      (bolt)
     RESULT_OWED = "result owed"          # confirmed, the tool kept off: another bolt's result
     #                                      may still come (bolt; owed: that bolt)
+    CUT_OWED = "cut owed"                # confirmed, the tool kept off: the results made
+    #                                      during a link cut not fetched yet (bolt; owed:
+    #                                      the bolt enabled when the link went down)
     TIGHTENING = "tightening"            # the tool on (bolt)
     NOT_CONFIRMED = "not confirmed"      # the tool off: the wrench not confirmed on it (bolt)
     SELECTED_UNCONFIRMED = "selected unconfirmed"  # still selected, tool off (bolt)
@@ -546,6 +549,10 @@ class Said(enum.Enum):
     #                                      tightening_id)
     CUT_RECORDED = "cut recorded"        # made during a link cut, recorded to its bolt
     #                                      (tightening_id, bolt)
+    CUT_NOTHING = "cut nothing"          # none made during the link cut: every result since
+    #                                      fetched (bolt: the one enabled then)
+    CUT_UNKNOWN = "cut unknown"          # the bolt enabled during a link cut held: what the
+    #                                      controller did then is not known (bolt, note)
     LATE_RESULT = "late result"          # recorded outside a tightening (bolt)
     LOOSEN_PSET_TIGHTENED = "loosen pset tightened"  # (bolt, pset)
     LOOSENED = "loosened"                # a loosening OK: the tightening pset next (bolt)
@@ -564,7 +571,7 @@ class Said(enum.Enum):
 #: the kinds the journal writes as warnings (NOT_STORED as an error; the others as info)
 _WARNINGS = frozenset({
     Said.PAIR_DISTRUSTED, Said.IDS_AGAIN, Said.UNATTRIBUTED, Said.UNKNOWN_TYPE, Said.GAP,
-    Said.UNREADABLE, Said.HELD, Said.NOT_TAKEN, Said.LOOSEN_PSET_TIGHTENED,
+    Said.UNREADABLE, Said.HELD, Said.CUT_UNKNOWN, Said.NOT_TAKEN, Said.LOOSEN_PSET_TIGHTENED,
     Said.LOOSENING_NOK, Said.LOCKED, Said.ENTERED_NOK, Said.ENTERED_LOOSENING_NOK})
 
 

@@ -108,7 +108,7 @@ class ResultIn(Input):
     #: first result made during a link cut is the one after it)
     follows: int | None = None
     #: the controller's timestamp of the result on the station's clock (through the offset
-    #: measured at connect); None when the controller's clock is not known
+    #: measured at connect), pushed or fetched; None when the controller's clock is not known
     made_at: float | None = None
     #: fetched with the link up: a later result came pushed and skipped its id (a push the
     #: controller, or a device on the way, lost), not after a reconnect
@@ -138,6 +138,18 @@ class UnreadableIn(Input):
 
     unreadable: UnreadableResult
     stored: tuple[str | None, str | None] | None = None
+
+
+@dataclass(frozen=True)
+class CaughtUp(Input):
+    """The results the controller made while its link was down were fetched after the
+    reconnect (``complete``: every one since the link was lost went through the core), or
+    could not all be (``reason``: why not, in the shell's words).  Ends what a link cut during
+    an enable left open: its result proved and recorded, or, not found among a complete
+    catch-up, none made; else unknown, and its bolt held for a person."""
+
+    complete: bool
+    reason: str = ""
 
 
 @dataclass(frozen=True)
@@ -346,7 +358,7 @@ class CommandDone(Input):
 
 Event = (Started | Announce | LiftRead | LocalizedIn | ParamsAcked | ParamsRefused | ResultIn
          | ResultCopy | UnreadableIn
-         | ResultsMissed | NotStored
+         | ResultsMissed | CaughtUp | NotStored
          | DeviceFault | DeviceBack | DeviceSaid | LineLinkIn
          | VehicleLoaded | VehicleRejected | VinSent | Tick
          | CommandIn | CommandDone | ToolOn | Written | VehicleEnded | ModelsKnown

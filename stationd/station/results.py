@@ -12,6 +12,7 @@ from db.kinds import (
     LOOSENING,
     NOT_TAKEN,
     TIGHTENING,
+    cut_unknown_note,
     not_taken_note,
     unreadable_note,
 )
@@ -30,6 +31,7 @@ from stationd.station.actions import (
     Reply,
     Selection,
     StoreControllerEvent,
+    StoreCutUnknown,
     StoreGap,
     StoreUnattributed,
     StoreUnreadable,
@@ -48,6 +50,7 @@ from stationd.station.events import (
     StateReason,
 )
 from stationd.station.inputs import (
+    CaughtUp,
     CommandDone,
     NotStored,
     ResultCopy,
@@ -101,12 +104,22 @@ class _Unread:
     pset: int | None
     timestamp: object
     bolt: str | None
+    seen_at: float          # when it came (the station's clock)
 
-    def same(self, r: TighteningResult) -> bool:
-        """``r`` says what could be picked out of the unreadable one (pset, time)."""
+    def same(self, r: TighteningResult, made_at: float | None) -> bool:
+        """``r`` says what could be picked out of the unreadable one (pset, time).  Where the
+        controller's time is missing on either side, a result made after the unreadable one
+        came (``made_at``: its time on the station's clock, where the controller's clock is
+        known) is another one under the same id (a controller whose ids started again):
+        taken for a copy, it was lost and its bolt left open with the tool on.  With no time
+        to tell, it is taken for the copy: recorded to the bolt enabled now, it would close a
+        bolt perhaps never tightened."""
         when = getattr(r, "timestamp", None)
-        return (self.pset is None or int(r.pset) == self.pset) and \
-            (self.timestamp is None or when is None or when == self.timestamp)
+        if self.pset is not None and int(r.pset) != self.pset:
+            return False
+        if self.timestamp is not None and when is not None:
+            return bool(when == self.timestamp)
+        return made_at is None or made_at <= self.seen_at + CLOCK_SLACK_S
 
 
 class ResultRules(OrderRules):
@@ -123,7 +136,7 @@ class ResultRules(OrderRules):
         if self._recorded.get(tid, None) == _said(r):
             return [Acknowledge(r)]   # sent again by the controller: stored once already
         seen = self._recorded.get(tid)
-        if isinstance(seen, _Unread) and seen.same(r):
+        if isinstance(seen, _Unread) and seen.same(r, ev.made_at):
             # an unreadable message's copy that reads: stored (whole) once, its bolt held;
             # taken for the enable owed now, it closed a bolt never tightened
             return [Publish(Notice(Said.SENT_AGAIN, tightening_id=tid, bolt=seen.bolt,
@@ -168,7 +181,48 @@ class ResultRules(OrderRules):
         return [StoreUnattributed(r, self.vin, why),
                 Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
                 Publish(Notice(Said.UNATTRIBUTED, tightening_id=tid, pset=int(r.pset),
-                               unattributed=why, t=ev.t))]
+                               unattributed=why, t=ev.t)),
+                *self._cut_in_doubt(ev)]
+
+    def _cut_in_doubt(self, ev: ResultIn) -> list[Action]:
+        """A result stored unattributed while a link cut's result is owed, of the pset sent
+        then (pushed again by the controller after the reconnect, or fetched and not proved
+        by its data): it may be that bolt's, or not.  Never taken for it, and never left
+        open either (it may be tightened): the bolt is held for a person."""
+        cut, r = self._cut, ev.result
+        if cut is None or cut.selection.pset is None or int(r.pset) != cut.selection.pset:
+            return []
+        return self._cut_unknown(ev.t, f"tightening {int(r.tightening_id)} may be its own "
+                                       "(not proved by the controller's data)")
+
+    def _on_caught_up(self, ev: CaughtUp) -> list[Action]:
+        """The catch-up after a reconnect ended.  A link cut's result still owed was not among
+        the results fetched: where they are all of them, none was made (the bolt open as
+        before); else what the controller did is not known, and the bolt is held."""
+        cut = self._cut
+        if cut is None:
+            return []
+        if ev.complete:
+            self._cut = None
+            if self._enabled is cut.selection:
+                self._enabled = None
+            return [Publish(Notice(Said.CUT_NOTHING, bolt=cut.selection.bolt, t=ev.t))]
+        return self._cut_unknown(ev.t, ev.reason or "its results not fetched")
+
+    def _cut_unknown(self, t: float, why: str) -> list[Action]:
+        """The link cut's bolt held (its result not known: ``why``); the cut ends."""
+        cut = self._cut
+        assert cut is not None  # noqa: S101 - the callers' guard
+        self._cut = None
+        en = cut.selection
+        if self._enabled is en:
+            self._enabled = None
+        note = cut_unknown_note(why)
+        said = Notice(Said.CUT_UNKNOWN, bolt=en.bolt, note=note, t=t)
+        if self.matcher is None or self.vin != en.vin or en.bolt not in self.matcher.bolts:
+            return [Publish(said)]
+        return [StoreCutUnknown(en.vin, en.bolt, note, en),
+                *self._hold(t, en.bolt, note, said, under=en)]
 
     def _made_during_cut(self, ev: ResultIn) -> tuple[Selection | None, Unproved | None]:
         """The selection a result fetched after a link cut belongs to, when the controller's
@@ -292,14 +346,14 @@ class ResultRules(OrderRules):
                                    vin=vin if vin != self.vin else None, t=ev.t)),
                     Acknowledge(u)]
         en = self._enabled if self._result_owed(ev.t) else None
-        if u.fetched:
-            en = self._cut.selection if self._cut is not None else None
+        if u.fetched and self._cut is not None:
+            en = self._cut.selection
         if en is not None and u.pset is not None and en.pset is not None \
                 and u.pset != en.pset:
             en = None        # its pset could be read, and it is not the one sent
         bolt = en.bolt if en is not None and en.vin else None
         if u.tightening_id is not None:
-            self._recorded[u.tightening_id] = _Unread(u.pset, u.timestamp, bolt)
+            self._recorded[u.tightening_id] = _Unread(u.pset, u.timestamp, bolt, ev.t)
         if known:
             self._unreadable_seen[(u.mid, u.body)] = bolt
         acts: list[Action] = []
@@ -400,11 +454,9 @@ class ResultRules(OrderRules):
         elif late:
             acts.append(Publish(Notice(Said.LATE_RESULT, bolt=en.bolt, t=ev.t)))
         self._recorded[int(r.tightening_id)] = _said(r)
-        if cut:
-            self._cut = None
-            if self._enabled is en:
-                self._enabled = None
-        else:
+        if cut or (self._cut is not None and self._cut.selection is en):
+            self._cut = None        # the cut's result is in (fetched, or pushed late)
+        if not cut or self._enabled is en:
             self._enabled = None
         if en.operator is not None and en.operator == self.operator:
             self._operator_seen = max(self._operator_seen, ev.t)

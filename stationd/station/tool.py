@@ -56,6 +56,10 @@ class ToolRules(FaultRules):
                     and ev.exposure_t > self._acked_at and self.bolt is not None:
                 sel = self._selection
                 assert sel is not None  # noqa: S101 - a bolt is selected
+                if self._cut is not None:
+                    self.reason = StateReason(Because.CUT_OWED, bolt=self.bolt,
+                                              owed=self._cut.selection.bolt)
+                    return acts
                 owed = self._owed_elsewhere(ev.t)
                 if owed is not None:
                     self.reason = StateReason(Because.RESULT_OWED, bolt=self.bolt, owed=owed)
@@ -63,7 +67,7 @@ class ToolRules(FaultRules):
                 self._to(State.TIGHTENING, StateReason(Because.TIGHTENING, bolt=self.bolt,
                                                        loosen=sel.loosen))
                 self.tool_on, self._enabled, self._off_at = True, sel, None
-                self._enabled_at, self._cut = ev.t, None
+                self._enabled_at = ev.t
                 acts.append(EnableTool(self.bolt, sel))
             return acts
         self._away += 1
@@ -119,6 +123,12 @@ class ToolRules(FaultRules):
         return [Publish(BoltSelected(m.bolt, pset, ev.point_mm, sel.distance_mm,
                                      ev.tilt_deg, loosen, t=ev.t)),
                 SendParams(m.bolt, sel, params, loosen)]
+
+    # A link cut during an enable (``_cut``) keeps the tool off for every bolt, its own
+    # included, until the catch-up has ended it (:meth:`_on_caught_up`): that bolt may have
+    # been tightened meanwhile, and its result, fetched later, is placed only by the
+    # controller's data -- an enable made before it comes would take it, or tighten the bolt
+    # twice.
 
     def _owed_elsewhere(self, t: float) -> str | None:
         """The bolt whose result may still come (its tool went off less than the late-result

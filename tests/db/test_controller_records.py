@@ -105,6 +105,20 @@ def test_a_readable_copy_of_an_unreadable_message_finds_it(repo, bolts_file):
     assert repo.unreadable_of(tightening_id=8, pset=1, at=at) is None
 
 
+def test_a_result_made_after_a_timeless_unreadable_one_under_its_id_is_not_its_copy(repo):
+    """A controller whose ids started again: tightening 7 again, made (on the station's
+    clock) after the unreadable 7 without a time was stored, is another result."""
+    repo.record_unreadable(mid=61, revision=7, raw=RAW, error="x", vin="VIN1", bolt="B1",
+                           controller_vin=None, tightening_id=7, pset=1, result_at=None)
+    stored = datetime.now(UTC)
+    at = datetime(2026, 11, 29, 8, 0, tzinfo=UTC)
+    assert repo.unreadable_of(tightening_id=7, pset=1, at=at) == ("VIN1", "B1")
+    assert repo.unreadable_of(tightening_id=7, pset=1, at=at,
+                              made=stored - timedelta(minutes=5)) == ("VIN1", "B1")
+    assert repo.unreadable_of(tightening_id=7, pset=1, at=at,
+                              made=stored + timedelta(minutes=5)) is None
+
+
 def test_an_unreadable_result_without_an_id_still_counts_nothing_it_cannot(repo, bolts_file):
     import_bolts(repo, bolts_file)
     repo.start_vehicle("VIN1", "SEDAN")

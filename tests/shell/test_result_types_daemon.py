@@ -10,7 +10,8 @@ import time
 
 import pytest
 
-from db.kinds import NOT_TAKEN
+from db.kinds import CUT_UNKNOWN, NOT_TAKEN
+from db.repository import Repository
 from drivers.wrench.sim.controller import SimController
 from stationd.sim.devices_cli import psets_of
 from stationd.words import result_type_words
@@ -78,6 +79,40 @@ def test_an_unreadable_result_is_stored_whole_and_holds_its_bolt(tmp_path):
     assert raw.startswith(raw[:4]) and "0061" in raw[4:8] and error
     assert (bolt, vin) == ("B05", "UNREADVIN00000001")
     assert _rows(db, "SELECT tightening_id FROM tightening_records") == [(good.tightening_id,)]
+
+
+@pytest.mark.timeout(300)
+def test_a_link_cut_during_an_enable_ends_with_the_catch_up_open_or_held(tmp_path):
+    """A cut with the tool on for B05 and nothing tightened: the catch-up fetched every
+    result since, none was made, and B05 is open as before (the tool goes on again).  A
+    second cut, after which the controller refuses to give its results (MID 0064): what it
+    did is not known, and B05 is held for a person, not left open to be tightened twice."""
+    pose = tmp_path / "pose"
+    with tracking(tmp_path, "CUTVIN00000000002") as (d, _, ctl):
+        tool_on(d, ctl, pose, "B05")
+        ctl.drop_connections()
+        d.wait_log("fault: wrench")
+        d.wait_log("wrench: back")
+        d.wait_log("no tightening made during the link cut (every result since fetched): "
+                   "B05 open as before")
+        until(lambda: ctl.tool_enabled, 30, "the tool on again for B05")
+        ctl.refuse_mid(64, 99)
+        ctl.drop_connections()
+        d.wait_log("fault: wrench")
+        d.wait_log("B05: its result during the link cut not known: the controller refused to "
+                   "give them")
+        until(lambda: not ctl.tool_enabled, 30, "the tool off")
+    # the hold is stored (it outlives a restart): no result says it, its note does
+    [(what, bolt, tid, note)] = _rows(tmp_path / "station.db",
+                                      "SELECT what, bolt, tightening_id, note FROM "
+                                      "controller_events")
+    assert (what, bolt, tid) == (CUT_UNKNOWN, "B05", None)
+    assert note.startswith("its result during the link cut not known: the controller refused")
+    repo = Repository.open(f"sqlite:///{tmp_path / 'station.db'}")
+    try:
+        assert list(repo.held_bolts("CUTVIN00000000002")) == ["B05"]
+    finally:
+        repo.close()
 
 
 @pytest.mark.timeout(300)

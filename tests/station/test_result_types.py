@@ -38,6 +38,7 @@ from stationd.station.events import (
     ToolDisabled,
 )
 from stationd.station.inputs import (
+    CaughtUp,
     DeviceBack,
     DeviceFault,
     ResultIn,
@@ -49,6 +50,7 @@ from stationd.words import (
     notice_words,
     reason_words,
     result_type_words,
+    state_words,
     stored_what,
     unattributed_words,
     worded,
@@ -358,6 +360,108 @@ def test_a_result_fetched_after_a_cut_that_the_data_does_not_place_stays_unattri
     assert unattributed_words(store.why) == \
         f"result {tid} (pset {r.pset}) fetched after a reconnect ({why})"
     assert "B1" not in d.core.matcher.done
+    # of the pset sent for B1, it may be B1's: B1 is held for a person, never left open;
+    # of another pset it is not, and B1's own result is still owed (the tool stays off)
+    if r.pset == sent.selection.pset:
+        assert d.core.matcher.held["B1"] == (f"its result during the link cut not known: "
+                                             f"tightening {tid} may be its own (not proved "
+                                             "by the controller's data)")
+        assert d.core.missed_since() is not None and "B1" not in d.core.allowed()
+    else:
+        assert not d.core.matcher.held and "B1" in d.core.allowed()
+
+
+def _back_after_a_cut(d: Driver) -> SendParams:
+    sent, _, _ = _cut_during_enable(d)
+    d.t += 10.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    d.step(("lift", 0.1, True, True, "VIN1"))
+    d.feed(Tick(d.t))
+    return sent
+
+
+@pytest.mark.parametrize("bolt", [2, 1])
+def test_while_a_cut_result_is_owed_the_tool_stays_off_for_every_bolt(bolt):
+    """The link went down with the tool on for B1: B1 may have been tightened meanwhile, its
+    result comes only with the catch-up.  Until then no bolt gets the tool, B1 included (a
+    reviewer: B2 enabled first, B1's fetched result then had no enable to prove it against,
+    and B1 was tightened again)."""
+    d = _ready()
+    _back_after_a_cut(d)
+    _on(d, bolt)
+    d.step(("ack", 0.01, True))
+    _on(d, bolt, 3)
+    assert not d.tool and not d.core.tool_on
+    assert d.core.reason == StateReason(Because.CUT_OWED, bolt=f"B{bolt}", owed="B1")
+    assert state_words(d.core.reason) == (
+        f"bolt B{bolt}: the tool stays off until the controller's results made during the "
+        "link cut are fetched (bolt B1 was enabled)")
+    acts = d.feed(CaughtUp(d.t, complete=False, reason="the controller refused MID 0064"))
+    assert d.core.matcher.held == {"B1": "its result during the link cut not known: the "
+                                         "controller refused MID 0064"}
+    assert [notice_words(n) for n in published(acts, Notice)] == [
+        "B1: its result during the link cut not known: the controller refused MID 0064: "
+        "check it on the controller, then release or enter its outcome"]
+    assert [(e.bolt, e.held) for e in published(acts, BoltLocked)] == [
+        ("B1", "its result during the link cut not known: the controller refused MID 0064")]
+    if bolt != 1:
+        _on(d, bolt, 2)     # the others go on
+        assert d.tool and d.core.tool_on and d.core.bolt == f"B{bolt}"
+
+
+def test_a_complete_catch_up_without_the_cut_result_leaves_its_bolt_open_as_before():
+    d = _ready()
+    _back_after_a_cut(d)
+    acts = d.feed(CaughtUp(d.t, complete=True))
+    assert [notice_words(n) for n in published(acts, Notice)] == [
+        "no tightening made during the link cut (every result since fetched): B1 open as "
+        "before"]
+    assert not d.core.matcher.held and "B1" in d.core.allowed()
+    assert d.core.missed_since() is not None
+    _enabled(d, 1)
+    assert not d.feed(CaughtUp(d.t, complete=False, reason="late"))  # no cut: nothing
+
+
+def test_a_cut_result_the_controller_pushes_again_holds_its_bolt():
+    """A controller that sends unacknowledged results again after the reconnect: B1's
+    result, made during the cut, comes pushed, not fetched (nothing proves it B1's, and the
+    catch-up then counts it as had): B1 is held, not left open to be tightened twice."""
+    d = _ready()
+    sent = _back_after_a_cut(d)
+    acts = d.feed(ResultIn(d.t, res(41, sent.selection.pset or 0, True, 1, vin="VIN1")))
+    assert [type(a) for a in acts if isinstance(a, Record | StoreUnattributed)] == \
+        [StoreUnattributed]
+    assert list(d.core.matcher.held) == ["B1"] and "B1" not in d.core.matcher.done
+    assert not d.feed(CaughtUp(d.t, complete=True))   # the cut ended with the hold
+
+
+def test_an_unreadable_result_fetched_while_the_tool_is_on_holds_the_enabled_bolt():
+    """A result made while the subscription was renewed comes fetched (MID 0065) with the
+    link up and the tool on: unreadable, it holds the bolt enabled (a reviewer: held against
+    no bolt, the tool left on)."""
+    d = _ready()
+    _enabled(d, 1)
+    acts = d.feed(UnreadableIn(d.t, unreadable(fetched=True)))
+    [store] = [a for a in acts if isinstance(a, StoreUnreadable)]
+    assert store.bolt == "B1" and not d.core.tool_on and list(d.core.matcher.held) == ["B1"]
+
+
+def test_a_result_made_after_an_unreadable_one_under_its_id_is_not_its_copy():
+    """A controller whose ids started again: a new result reuses the id of an unreadable one
+    that carried no time.  Made after that one came (the controller's clock known), it is
+    the result of the bolt enabled now (a reviewer: only acknowledged, lost, its bolt left
+    open with the tool on)."""
+    d = _ready()
+    _enabled(d, 1)
+    d.feed(UnreadableIn(d.t, unreadable(7, 1)))
+    seen_at = d.t
+    d.t += 30.0
+    d.feed(Tick(d.t))
+    _enabled(d, 3)
+    acts = d.feed(ResultIn(d.t, res(7, 1), made_at=d.t - 0.5))
+    [rec] = [a for a in acts if isinstance(a, Record)]
+    assert rec.bolt == "B3" and "B3" in d.core.matcher.done and not d.core.tool_on
+    assert d.t - 0.5 > seen_at
 
 
 def test_a_pushed_result_after_the_window_is_not_placed_by_a_cut():
@@ -376,14 +480,16 @@ def test_a_result_fetched_after_a_cut_never_goes_to_an_enable_made_since():
     sent, enabled_at, _ = _cut_during_enable(d)
     d.t += 2.0
     d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    d.feed(CaughtUp(d.t, complete=True))     # nothing made during the cut
     d.step(("lift", 0.1, True, True, "VIN1"))
     d.feed(Tick(d.t + 10))
     d.t += 10
     _enabled(d, 3)
     assert d.core.bolt == "B3" and BOLTS["B3"].pset == sent.selection.pset
     for made_at in (enabled_at + 0.5, None):     # the controller's clock known, or not
+        # fetched later all the same (a push the controller lost, with the link up)
         acts = d.feed(ResultIn(d.t, res(41, sent.selection.pset or 0, True, 1),
-                               fetched=True, follows=40, made_at=made_at))
+                               fetched=True, follows=40, made_at=made_at, live=True))
         assert not [a for a in acts if isinstance(a, Record)]    # neither B1's nor B3's
         assert [type(a) for a in acts if isinstance(a, StoreUnattributed)]
         assert d.core.tool_on and not d.core.matcher.done
@@ -479,3 +585,19 @@ def test_since_when_results_may_have_been_missed_with_no_id_to_count_from():
                            follows=0, made_at=enabled_at + 0.5))
     assert [a.bolt for a in acts if isinstance(a, Record)] == ["B1"]
     assert d.core.missed_since() == cut_at                 # the cut resolved: the link's loss
+
+
+def test_a_cut_result_pushed_within_the_late_result_window_ends_the_cut():
+    """The link is back within the late-result window and the controller pushes the result
+    made during the cut: it is the enable's own (late), and the cut ends with it (the tool
+    is not kept off for a catch-up that has nothing more to say)."""
+    d = _ready()
+    sent, _, _ = _cut_during_enable(d)
+    d.t += 2.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    acts = d.feed(ResultIn(d.t, res(41, sent.selection.pset or 0, True, 1)))
+    [rec] = [a for a in acts if isinstance(a, Record)]
+    assert rec.bolt == "B1" and rec.late and "B1" in d.core.matcher.done
+    assert not d.feed(CaughtUp(d.t, complete=True))      # nothing said: the cut had ended
+    d.step(("lift", 0.1, True, True, "VIN1"))
+    _enabled(d, 2)
