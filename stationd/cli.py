@@ -31,6 +31,9 @@ EXIT_OK, EXIT_NOT_FOUND, EXIT_BAD_INPUT = 0, 1, 2
 #: a command stopped by a signal: the shell's 128 + the signal's number, as if it had been
 #: killed by it (a script tells Ctrl-C and systemd's stop apart as it would for any program)
 EXIT_SIGINT, EXIT_SIGTERM = 128 + signal.SIGINT, 128 + signal.SIGTERM
+#: the reader of the output went away (``| head``) before the command finished: the code a
+#: program killed by SIGPIPE exits with, never 0 (``status | true`` passed a station in fault)
+EXIT_SIGPIPE = 128 + signal.SIGPIPE
 
 
 def _reported() -> tuple[type[Exception], ...]:
@@ -850,10 +853,11 @@ def _main(argv: Sequence[str] | None, stopped: _Stopped) -> int:
         sys.stderr.write(f"stationd: error: {printable(str(exc), keep=chr(10))}\n")
         return EXIT_BAD_INPUT
     except BrokenPipeError:
-        # ``stationd db report VIN | head``: the reader has all it wanted.  Point stdout at
+        # ``stationd db report VIN | head``: the reader has all it wanted, quietly; but the
+        # command's own answer was not given, so no success either.  Point stdout at
         # /dev/null so the interpreter's final flush does not fail a second time.
         _silence_stdout()
-        return EXIT_OK
+        return EXIT_SIGPIPE
 
 
 def _silence_stdout() -> None:

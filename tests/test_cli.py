@@ -377,7 +377,9 @@ def test_db_report_into_a_closed_pipe_is_quiet(tmp_path):
     assert p.stdout is not None and p.stderr is not None
     p.stdout.close()
     err = p.stderr.read().decode()
-    assert p.wait(timeout=60) in (0, 1)
+    # its own code (1: the vehicle is still open) when it wrote all before the reader left,
+    # else SIGPIPE's, as a program killed by it (never 0: ``status | true`` passed a fault)
+    assert p.wait(timeout=60) in (1, 141)
     assert "Traceback" not in err and "BrokenPipe" not in err and err == ""
 
 
