@@ -428,7 +428,9 @@ def cmd_status(args: argparse.Namespace) -> int:
                    out=sys.stderr if args.json else sys.stdout)
     if isinstance(doc, int):
         return doc
-    print(json.dumps(doc, indent=1) if args.json else format_status(doc))
+    via = "" if target.config == str(DEFAULT_CONFIG) else \
+        f" --config {target.config}" if target.config is not None else f" --url {target.url}"
+    print(json.dumps(doc, indent=1) if args.json else format_status(doc, via))
     return EXIT_FAULT if doc.get("state") == State.FAULT else 0
 
 

@@ -51,7 +51,7 @@ def counter_words(c: dict[str, Any]) -> str:
     return words + f", {counted(nok, 'bolt')} ending NOK"
 
 
-def lock_lines(st: dict[str, Any]) -> list[str]:
+def lock_lines(st: dict[str, Any], via: str = "") -> list[str]:
     """Each locked (or held) bolt in the operator screen's words, and who releases it how.
     Why: the journal said "B11 locked ... the operator waits ... for a person's release",
     while ``stationd status`` showed only "1 bolt ending NOK" and "Bring the wrench to a
@@ -68,7 +68,7 @@ def lock_lines(st: dict[str, Any]) -> list[str]:
     named = list(st.get("locked_bolts") or [])
     bolt = str(named[0]) if len(named) == 1 and len(locks) == 1 else "BOLT"
     return [f"locked:   {text}" for text in locks] + [
-        f"release:  stationd release {vin} {bolt} --user NAME, or the operator screen's "
+        f"release:  stationd release {vin} {bolt}{via} --user NAME, or the operator screen's "
         f"Release form{who}"]
 
 
@@ -103,8 +103,10 @@ def now_line(st: dict[str, Any]) -> str | None:
     return f"now:      {head}"
 
 
-def format_status(st: dict[str, Any]) -> str:
-    """The status as a few readable lines."""
+def format_status(st: dict[str, Any], via: str = "") -> str:
+    """The status as a few readable lines; ``via``: how the command that asked reached the
+    station (`` --config FILE``, `` --url URL``; "" for the default station file), given
+    again in the commands it suggests (run as printed, they reach the same station)."""
     lines = [f"state:    {st['state']}" + (f" ({st['reason']})" if st.get("reason") else "")]
     now = now_line(st)
     if now is not None:
@@ -117,7 +119,7 @@ def format_status(st: dict[str, Any]) -> str:
     op = st.get("operator") or {}
     if op.get("user") or op.get("required"):
         lines.append("operator: " + (op.get("user") or "nobody signed in: sign in to tighten"))
-    lines += lock_lines(st)
+    lines += lock_lines(st, via)
     for name, d in sorted(st.get("devices", {}).items()):
         check = d.get("check") or {}   # a pair's calibration check: up is not trusted
         lines.append(f"device:   {name}: " + (

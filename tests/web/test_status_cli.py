@@ -123,9 +123,10 @@ def test_status_names_a_locked_bolt_and_who_releases_it_how(live_server, capsys)
     assert main(["status", "--url", srv.url]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert "locked:   B2 locked after 3 NOK in a row: a supervisor releases it" in lines
-    # the one locked bolt named in the command (a newcomer read BOLT for it)
-    assert f"release:  stationd release {VIN} B2 --user NAME, or the operator screen's " \
-        "Release form (a user with the release right: supervisor)" in lines
+    # the one locked bolt named in the command (a newcomer read BOLT for it), and the
+    # station as this status reached it: run as printed, the command reaches it too
+    assert f"release:  stationd release {VIN} B2 --url {srv.url} --user NAME, or the " \
+        "operator screen's Release form (a user with the release right: supervisor)" in lines
 
 
 def test_status_without_a_lock_has_no_lock_lines_and_says_when_nobody_may_release():
@@ -140,6 +141,8 @@ def test_status_without_a_lock_has_no_lock_lines_and_says_when_nobody_may_releas
         "release:  stationd release VIN1 BOLT --user NAME, or the operator screen's Release "
         "form (no user of this station has the release right: access.users and "
         "access.roles)"]
+    assert "release:  stationd release VIN1 BOLT --config /srv/line/station.yaml --user NAME" \
+        in format_status(st, " --config /srv/line/station.yaml")
 
 
 def test_the_status_says_the_line_database_s_forwarding_in_the_screen_s_words():
