@@ -68,6 +68,11 @@ def _versions() -> dict[str, str]:
             "python": platform.python_version()}
 
 
+#: what a request without the token is answered (a browser shows it as the page)
+UNAUTHORIZED_PAGE = ("token required: open the screens once as /?token=TOKEN (the station "
+                  "file's http.token); this browser then keeps it\n")
+
+
 class WebServer:
     """``WebServer(bus, results, frames, listen="127.0.0.1:8080", token=None)``; then
     ``await start()`` on the daemon's loop and ``await stop()`` at shutdown.  ``results``: a
@@ -268,7 +273,8 @@ class WebServer:
             given = request.headers.get("Authorization", "").removeprefix("Bearer ").strip() \
                 or request.cookies.get("token", "") or request.query.get("token", "")
             if not hmac.compare_digest(given.encode(), token.encode()):
-                return web.Response(status=401, text="token required\n")
+                # a browser shows this text: how to get in (the token itself never said)
+                return web.Response(status=401, text=UNAUTHORIZED_PAGE)
             set_cookie = request.query.get("token") == token
         resp: web.StreamResponse = await handler(request)
         if set_cookie and token and not resp.prepared:

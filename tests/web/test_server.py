@@ -84,6 +84,10 @@ def test_token_guards_every_page_when_configured():
             async with ClientSession() as http:
                 async with http.get(srv.url + "api/status") as r:
                     assert r.status == 401
+                async with http.get(srv.url) as r:    # what a browser shows: how to get in
+                    text = await r.text()
+                    assert r.status == 401 and "/?token=TOKEN" in text
+                    assert "a-long-token" not in text
                 async with http.get(srv.url + "api/status",
                                     headers={"Authorization": "Bearer a-long-token"}) as r:
                     assert r.status == 200
