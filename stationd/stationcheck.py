@@ -127,6 +127,10 @@ def check_station(path: str | Path) -> StationCheck:
             errors += _nok_errors(top, cfg, bolts, stored)
         except ConfigError:   # the section's own errors are told above (an unknown key hid
             pass              # every other error of the file): its overrides wait for them
+    if "nok" in top and not errors:
+        from stationd.station.policy import unused_loosen_psets
+
+        warnings += unused_loosen_psets(top["nok"], cfg.nok)
     if bolts is not None and bolts.table is not None and "wrench" in top:
         warning = _psets_only_warning(cfg.wrench.url, bolts.table, top["wrench"])
         if warning is not None:

@@ -111,3 +111,27 @@ def test_without_a_bolt_file_a_database_without_models_is_warned_of(tmp_path):
     with Repository.open(f"sqlite:///{db}") as repo:
         repo.import_bolts(load_bolts(tmp_path / "bolts.yaml"))
     assert warned() == []
+
+
+def test_a_loosen_pset_no_rule_uses_is_warned_of_with_its_line(tmp_path):
+    """``loosen_pset`` under the default ``repeat``: the station tightens a NOK bolt again
+    without loosening it, whatever the engineer meant by it (a new user's trial).  Warned of
+    (the file stays valid); where an override below takes it with ``loosen``, it is used."""
+    for f in SIM.iterdir():
+        shutil.copy(f, tmp_path)
+    path = tmp_path / "station.yaml"
+    base = path.read_text()
+    path.write_text(base + "nok:\n  max_nok: 3\n  loosen_pset: 90\n")
+    result = check_station(path)
+    assert result.ok
+    [w] = [w for w in result.warnings if "loosen_pset" in str(w)]
+    assert w.line == _line(path, "loosen_pset: 90")
+    assert "loosen_pset 90 is not used: strategy repeat tightens the bolt again after a NOK " \
+           "without loosening it (strategy: loosen loosens it first)" in str(w)
+    path.write_text(base + "nok:\n  loosen_pset: 90\n  bolts:\n    B01: {strategy: loosen}\n"
+                    "    B02: {strategy: skip, loosen_pset: 91}\n")
+    result = check_station(path)
+    assert result.ok
+    assert [str(w).split(": ", 2)[-1] for w in result.warnings if "loosen_pset" in str(w)] \
+        == ["loosen_pset 91 is not used: strategy skip skips the bolt after a NOK (strategy: "
+            "loosen loosens it first)"]

@@ -153,4 +153,31 @@ def table_errors(node: YamlNode, table: BoltTable, source: str) -> list[ConfigEr
     return errors
 
 
-__all__ = ["STRATEGIES", "NokPolicy", "NokRule", "table_errors"]
+def unused_loosen_psets(node: YamlNode, policy: NokPolicy) -> list[ConfigError]:
+    """Warnings (the daemon takes the file) for each ``loosen_pset`` that no bolt's rule
+    uses: given where the strategy is ``repeat`` or ``skip`` and no override below takes it
+    with ``loosen``.  Why: a line engineer who wrote ``loosen_pset`` under the default
+    ``repeat`` read it as "loosen, then tighten again", while the station tightened an
+    over-torqued bolt again without loosening it."""
+    m = node.mapping((*RULE_KEYS, "psets", "bolts"))
+    below = [*policy.psets.values(), *policy.bolts.values()]
+    levels: list[tuple[YamlNode, NokRule, list[NokRule]]] = [(node, policy.default, below)]
+    levels += [(item, policy.psets[key], []) for key, item in _pset_items(m)]
+    levels += [(item, policy.bolts[key], []) for key, item in _bolt_items(m)]
+    warnings = []
+    for where, rule, inherit in levels:
+        given = where.mapping((*RULE_KEYS, "psets", "bolts")) if where is node \
+            else where.mapping(RULE_KEYS)
+        if "loosen_pset" not in given or rule.strategy == "loosen":
+            continue
+        if any(r.strategy == "loosen" and r.loosen_pset == rule.loosen_pset for r in inherit):
+            continue
+        warnings.append(given["loosen_pset"].error(
+            f"loosen_pset {rule.loosen_pset} is not used: strategy {rule.strategy} "
+            + ("tightens the bolt again after a NOK without loosening it"
+               if rule.strategy == "repeat" else "skips the bolt after a NOK")
+            + " (strategy: loosen loosens it first)"))
+    return warnings
+
+
+__all__ = ["STRATEGIES", "NokPolicy", "NokRule", "table_errors", "unused_loosen_psets"]
