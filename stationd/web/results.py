@@ -39,7 +39,13 @@ CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator"
               "skipped_by", "comment",   # a skipped bolt's row: who skipped it, and why
               # an outcome a person entered from the controller's screen (its result could
               # not be read): who (empty: measured), with their comment in ``comment``
-              "entered_by")
+              "entered_by",
+              # a bolt locked after its NOKs, or held, released by a person: a row of its own
+              # (status ``released``, the time, their comment) between its rundowns
+              "released_by")
+
+#: an export row of a person's release of a locked or held bolt
+RELEASED_STATUS = "released"
 
 
 #: an export row of a result the station could not read (kept whole in the database)
@@ -148,8 +154,10 @@ class Results:
         ``missing`` (``pending`` while the vehicle is open: at the station, or reopened, its
         bolt is still to do, not forgotten), or ``skipped`` with who skipped it and their
         comment (an export that lists only rundowns reads as a complete vehicle, and one that
-        calls a bolt skipped on purpose missing reads as a bolt forgotten).  Raises
-        ``NotFoundError`` for an unknown VIN."""
+        calls a bolt skipped on purpose missing reads as a bolt forgotten).  Each release of
+        a locked or held bolt is a row (status ``released``, who, when, why): three NOKs then
+        an OK read as a bolt that simply took four tries, where a person decided it may be
+        tightened again.  Raises ``NotFoundError`` for an unknown VIN."""
         report = self.repo.vehicle_report(vin)
         still_open = report.vehicle.ended_at is None
         runs = [{**{k: v for k, v in r.items() if k in CSV_FIELDS}, "skipped_by": None,
@@ -170,7 +178,12 @@ class Results:
              "recorded_at": _iso(x["recorded_at"]),
              "comment": f"MID {x['mid']:04d} revision {x['revision']}: {x['error']}"}
             for x in self.repo.unreadable(vin)]
-        return runs + none + unread
+        released: list[dict[str, Any]] = [
+            {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
+             "bolt": c.bolt, "attempt": 0, "status": RELEASED_STATUS, "images": [],
+             "recorded_at": _iso(c.at), "released_by": c.user, "comment": c.comment}
+            for c in self.repo.ledger.commands(vin) if c.kind == "release" and c.bolt]
+        return runs + none + unread + released
 
 
 def attempt_words(run: dict[str, Any], reopened_at: str | None) -> str:

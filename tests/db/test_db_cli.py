@@ -497,6 +497,45 @@ def test_a_bolt_skipped_after_its_noks_is_reported_and_exported_skipped_with_who
         ("skipped", "sam", "thread damaged")]
 
 
+def test_a_release_of_a_locked_bolt_is_a_row_of_the_results_export(run, db):
+    """Three NOKs, a supervisor's release, an OK: the export read as a bolt that took four
+    tries (a new user's trial found the release only in the screen's command list)."""
+    import csv
+    import io
+    import json
+    import time
+    from datetime import UTC, datetime
+
+    from db.repository import Repository
+    from stationd.boltfile import import_bolts
+
+    with Repository.open(db) as repo:
+        import_bolts(repo, EXAMPLE)
+        repo.start_vehicle("VIN1", "WAGON-B")
+        for tid in (1, 2, 3):
+            record(repo, "VIN1", "SF-FL", ok=False, tightening_id=tid)
+        time.sleep(0.01)
+        repo.ledger.record_command(at=datetime.now(UTC), user="sam", source="cli",
+                                   kind="release", vin="VIN1", bolt="SF-FL",
+                                   comment="joint cleaned")
+        time.sleep(0.01)
+        record(repo, "VIN1", "SF-FL", ok=True, tightening_id=4)
+    code, out, _ = run("db", "export", "--results", "--vin", "VIN1", "--db", db)
+    rows = sorted((r for r in csv.DictReader(io.StringIO(out)) if r["bolt"] == "SF-FL"),
+                  key=lambda r: r["recorded_at"])
+    assert [(r["status"], r["released_by"], r["comment"]) for r in rows] == [
+        ("nok", "", ""), ("nok", "", ""), ("nok", "", ""),
+        ("released", "sam", "joint cleaned"), ("ok", "", "")]
+    code, out, _ = run("db", "export", "--results", "--vin", "VIN1", "--format", "json",
+                       "--db", db)
+    [rel] = [r for r in json.loads(out) if r["status"] == "released"]
+    assert (rel["bolt"], rel["released_by"]) == ("SF-FL", "sam")
+    out_file = db.removeprefix("sqlite:///") + ".csv"
+    code, out, _ = run("db", "export", "--results", "--vin", "VIN1", "--out", out_file,
+                       "--db", db)
+    assert code == 0 and "4 rundowns" in out and "1 release" in out, out
+
+
 def test_a_bolt_skipped_by_a_command_is_exported_and_reported_skipped_not_missing(run, db,
                                                                                   tmp_path):
     """Issue 19: a bolt a person skipped (with a comment) showed as missing in the results
