@@ -206,7 +206,7 @@ def _export_results(args: argparse.Namespace) -> int:
     if args.format == "yaml":
         raise InputError("--results are exported as csv (the default) or json, not yaml")
     fmt = args.format or "csv"
-    with open_repository(_db_url(args), must_exist=True, missing=_missing(args)) as repo:
+    with open_repository(_read_url(args), must_exist=True, missing=_missing(args)) as repo:
         results = Results(repo)
         # (an unknown --vin: the report raises NotFoundError, one line, exit 2)
         vins = [args.vin] if args.vin is not None else [
@@ -297,6 +297,35 @@ def _report_url(args: argparse.Namespace) -> str:
         raise
 
 
+def _read_url(args: argparse.Namespace) -> str:
+    """The database a read of every vehicle (``db export --results``, ``db spc``) reads:
+    ``--db``'s, else ``--config``'s; where that station file's database does not exist and
+    one demo of it runs, that demo's (said on stderr); several: which they are, and --db to
+    choose.  Why: during a demo, ``db report --config`` found the demo's records while the
+    export and the figures said only "no database at .../stationd-sim.db"."""
+    url = _db_url(args)
+    config: str | None = getattr(args, "config", None)
+    try:
+        absent = absent_sqlite_file(url) if config else None
+    except OSError:
+        absent = None
+    if absent is None or config is None:
+        return url
+    from stationd.demo.leftovers import demo_databases
+
+    demos = demo_databases(Path(config))
+    if len(demos) == 1:
+        sid, path = demos[0]
+        sys.stderr.write(f"stationd: {config}'s database {absent} is not there yet: reading "
+                         f"the running demo's ({sid}, {path})\n")
+        return f"sqlite:///{path}"
+    if demos:
+        raise InputError(f"no database at {absent} ({config}'s); the running demos of it keep "
+                         "theirs: " + ", ".join(f"{sid} --db sqlite:///{path}"
+                                                for sid, path in demos))
+    return url
+
+
 def cmd_db_report(args: argparse.Namespace) -> int:
     with open_repository(_report_url(args), must_exist=True) as repo:
         report = repo.vehicle_report(args.vin)
@@ -381,7 +410,7 @@ def _attempts(n: int, runs: list[dict[str, Any]]) -> str:
 
 def cmd_db_spc(args: argparse.Namespace) -> int:
     """Process capability per bolt and pset, and the NOK trend (quality's figures)."""
-    with open_repository(_db_url(args), must_exist=True, missing=_missing(args)) as repo:
+    with open_repository(_read_url(args), must_exist=True, missing=_missing(args)) as repo:
         if args.model is not None and args.model not in repo.models():
             raise InputError(f"--model {args.model}: no such model (models: "
                              f"{', '.join(repo.models()) or 'none'})")

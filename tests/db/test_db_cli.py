@@ -704,6 +704,44 @@ def test_report_with_config_finds_a_running_demos_database(run, tmp_path, monkey
     assert code == 2 and "no database at" in _one_line(err)
 
 
+def test_export_and_figures_with_config_read_a_running_demos_database(run, tmp_path,
+                                                                      monkeypatch):
+    """During a demo, ``db report --config`` found the demo's records while ``db export
+    --results`` and ``db spc`` with the same --config said only "no database at" (a new
+    user's trial): they read the running demo's database too, saying so."""
+    import tempfile
+
+    from db.repository import Repository
+    from stationd.demo.leftovers import PREFIX, mark
+
+    station = _sim_station(tmp_path)
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
+    folder = temp / f"{PREFIX}abc"
+    (folder / "1").mkdir(parents=True)
+    mark(folder, station)
+    url = url_of(folder / "1" / "stationd.db")
+    assert run("db", "import", EXAMPLE, "--db", url)[0] == 0
+    with Repository.open(url) as repo:
+        repo.start_vehicle("VIN1", "WAGON-B")
+        record(repo, "VIN1", "SF-FL")
+    said = (f"stationd: {station}'s database {station.parent / 'stationd-sim.db'} is not "
+            f"there yet: reading the running demo's (DEMO-1, {folder / '1' / 'stationd.db'})")
+    code, out, err = run("db", "export", "--results", "--config", station)
+    assert code == 0 and "VIN1,WAGON-B,SF-FL" in out and _one_line(err) == said
+    code, out, err = run("db", "spc", "--config", station)
+    assert code == 0 and "SF-FL" in out and _one_line(err) == said
+    # two demos of it: which to read is asked, each with its --db
+    other = temp / f"{PREFIX}def"
+    (other / "1").mkdir(parents=True)
+    mark(other, station)
+    assert run("db", "import", EXAMPLE, "--db", url_of(other / "1" / "stationd.db"))[0] == 0
+    code, out, err = run("db", "spc", "--config", station)
+    assert code == 2 and out == "" and "the running demos of it keep theirs: DEMO-1 --db " \
+        f"sqlite:///{folder / '1' / 'stationd.db'}" in _one_line(err)
+
+
 def test_report_counts_a_bolts_tightenings_and_loosenings_apart(run, db):
     """A loosening is no attempt at the bolt: a bolt reworked NOK, loosened, OK reads as two
     tightenings and one loosening (it read "3 attempts")."""
