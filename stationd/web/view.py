@@ -10,6 +10,7 @@ same events live.  ``View.apply`` is the only way state changes.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
@@ -517,7 +518,7 @@ class View:
         to :data:`REASON_SHOWN` characters (``full``: not; the hover title and the devices
         panel have it whole): a pair's reason carries both cameras' URLs and errors, 400
         characters, nine lines of large type over the bolt map on a panel PC."""
-        cut = (lambda s: s) if full else _shortened
+        cut = (lambda s: s) if full else _for_panel
         faults = [f"{d}: {cut(h['reason'] or h['kind'])}"
                   for d, h in sorted(self.devices.items()) if not h["ok"]]
         if self.alarm:
@@ -634,6 +635,18 @@ def fold(events: list[StationEvent] | tuple[StationEvent, ...],
     for e in events:
         v.apply(e)
     return v
+
+
+#: a device's URL where its reason begins ("wrench: openprotocol://10.0.0.5:4545: ..."):
+#: the devices panel shows it; in the headline's large type it took the room of the words
+#: an operator acts on ("connection refused ... (controller off, or ...")
+_URL_LEAD = re.compile(r"^((?:[\w.-]+: )?)[a-z][a-z0-9+.-]*://[^\s]*?: ")
+
+
+def _for_panel(text: str) -> str:
+    """A fault's reason as the headline's large type shows it: without the device's URL
+    where it begins, then cut (:func:`_shortened`)."""
+    return _shortened(_URL_LEAD.sub(r"\1", text, count=1))
 
 
 def _shortened(text: str, limit: int = REASON_SHOWN) -> str:

@@ -358,3 +358,19 @@ def test_a_late_result_of_a_closed_vehicle_leaves_the_next_ones_selection():
     w.apply(result("B3", True, 8))            # the vehicle that left, its B3
     assert w.selected == "B3" and w.headline().startswith("B3")
 
+
+
+def test_a_fault_headline_leaves_the_device_s_url_to_the_devices_panel():
+    """An operator read "FAULT: wrench: openprotocol://127.0.0.1:14599: reconnect: connection
+    refused by 127.0.0.1:14599 (controller off, or…": the URL took the room of the words to
+    act on.  The large type leaves it out; the hover title and the devices panel keep it."""
+    from stationd.station.events import DeviceHealth
+
+    reason = ("openprotocol://127.0.0.1:14599: reconnect: connection refused by "
+              "127.0.0.1:14599 (controller off, or not listening on that port?)")
+    v = View()
+    v.apply(DeviceHealth("wrench", False, "down", reason))
+    assert v.headline() == ("FAULT: wrench: reconnect: connection refused by 127.0.0.1:14599 "
+                            "(controller off, or not listening on that port?)")
+    assert v.headline_title() == f"FAULT: wrench: {reason}"
+    assert v.device_health()["wrench"]["reason"] == reason
