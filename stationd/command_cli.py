@@ -107,11 +107,47 @@ def find_station(args: argparse.Namespace) -> Target:
         status_url(url)   # checked before anything is read: bad input is exit 2
         return Target(url, token, None, None)
     from stationd.config import load_station_config, station_identity
+    from stationd.errors import ConfigError
 
-    cfg = load_station_config(config)
+    try:
+        cfg = load_station_config(config)
+    except ConfigError as exc:
+        # a reload of this file was refused, perhaps: the daemon runs on what it loaded
+        # before, and answers at the address the file's http section still says
+        http = _http_section(config)
+        if http is None:
+            raise
+        sys.stderr.write(f"stationd: {config} does not read ({exc}); asking the daemon at "
+                         f"its http section's address (a refused reload leaves it running "
+                         f"on the file it read before)\n")
+        return Target(url or daemon_url(http), token or getattr(http.http, "token", None), None,
+                      config)
     if token is None and cfg.http is not None:
         token = cfg.http.token
     return Target(url or daemon_url(cfg), token, station_identity(cfg), config)
+
+
+def _http_section(path: str) -> Any:
+    """The ``http:`` section of a station file that does not read as a whole, read alone
+    (an object with ``http``, as :func:`daemon_url` takes it); None where that section does
+    not read either, or the file is not YAML."""
+    from types import SimpleNamespace
+
+    import yaml
+
+    from stationd.web.config import HttpConfig
+
+    try:
+        doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+        http = doc.get("http") if isinstance(doc, dict) else None
+        if http is None:
+            return SimpleNamespace(http=None)
+        listen, token = http.get("listen"), http.get("token")
+        if not isinstance(listen, str) or not (token is None or isinstance(token, str)):
+            return None
+        return SimpleNamespace(http=HttpConfig(listen, token))
+    except (OSError, UnicodeError, yaml.YAMLError, AttributeError, RecursionError):
+        return None
 
 
 def station_words(url: str, station: Any) -> str:

@@ -211,6 +211,8 @@ class Screens:
         users of ``cfg``; the status API reads the line forwarder's state."""
         self.station = station
         if self.server is not None:
+            if station is not None:     # a station on this configuration runs: the file read
+                self.server.reload_refused = None
             identity = station_identity(cfg)
             self.server.station = identity if self.name is None else {**identity,
                                                                       "id": self.name}
@@ -218,6 +220,13 @@ class Screens:
             self.server.line_results.url = None if cfg.line is None else cfg.line.url
             self.server.commands.access = cfg.access
             self.server.commands.submit = None if station is None else station.submit
+
+    def refused(self, why: str) -> None:
+        """A reload was refused (``why``): the status says so until a station runs on a
+        file that reads (``stationd status`` and /api/status said nothing of it, and a
+        person saw only the file's error from the command that read it)."""
+        if self.server is not None:
+            self.server.reload_refused = why
 
     async def _again(self, cfg: StationConfig, key: tuple[Any, str]) -> None:
         await asyncio.sleep(SCREENS_RETRY_S)
@@ -448,11 +457,13 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
                     log.error("reload refused, keeping the running configuration: %s%s",
                               one_line(exc), more)
                     notifier.status(f"reload refused: {one_line(exc)}")
+                    screens.refused(one_line(exc))
                 except Exception as exc:   # a bug in a reader: still never the running station
                     new = None
                     log.exception("reload refused (an error in reading the configuration), "
                                   "keeping the running configuration: %s", one_line(exc))
                     notifier.status(f"reload refused: {one_line(exc)}")
+                    screens.refused(one_line(exc))
         if new is not None and not stop.is_set():
             # systemd: reloading until the new station's READY=1 (never STOPPING=1 here)
             notifier.reloading("reloading: closing the devices")

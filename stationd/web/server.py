@@ -94,6 +94,8 @@ class WebServer:
         self.results_error = results_error
         self.frames = frames if frames is not None else LatestFrames()
         self.config = HttpConfig(listen, token)
+        #: why the last reload was refused, until a station runs on a file that reads
+        self.reload_refused: str | None = None
         self.images_dir = None if images_dir is None else images_dir.resolve()
         self.devices = tuple(devices)
         self.view = View(configured=self.devices)
@@ -311,7 +313,10 @@ class WebServer:
                 "clients": self.clients, "line": self.line(), "operator": v["operator"],
                 "locks": v["locks"], "release_by": self.release_by(),
                 # the bolts those locks are on (the release command names one)
-                "locked_bolts": [b["bolt"] for b in v["bolts"] if b["state"] == "locked"]}
+                "locked_bolts": [b["bolt"] for b in v["bolts"] if b["state"] == "locked"],
+                # the last reload's refusal (the file on disk does not read): the station
+                # runs on the configuration it loaded before (None: it runs on the file)
+                "reload_refused": self.reload_refused}
 
     async def _status(self, request: web.Request) -> web.Response:
         return web.json_response(self.status(), dumps=lambda o: json.dumps(o, default=_plain))

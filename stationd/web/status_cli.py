@@ -120,6 +120,9 @@ def format_status(st: dict[str, Any], via: str = "") -> str:
     if op.get("user") or op.get("required"):
         lines.append("operator: " + (op.get("user") or "nobody signed in: sign in to tighten"))
     lines += lock_lines(st, via)
+    if st.get("reload_refused"):
+        lines.append(f"config:   reload refused ({st['reload_refused']}): the station runs on "
+                     "the configuration it loaded before")
     for name, d in sorted(st.get("devices", {}).items()):
         check = d.get("check") or {}   # a pair's calibration check: up is not trusted
         lines.append(f"device:   {name}: " + (

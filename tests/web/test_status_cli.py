@@ -198,3 +198,42 @@ def test_the_now_line_is_left_out_where_it_repeats_the_state_line():
     # a daemon of an earlier version gives the cut headline only: shown, as before
     st = {"state": "idle", "reason": "waiting for a vehicle", "headline": "Raise the vehicle"}
     assert "now:      Raise the vehicle" in format_status(st).splitlines()
+
+
+def test_a_refused_reload_is_said_until_a_station_runs_on_a_file_that_reads():
+    """After a refused reload, ``stationd status`` and /api/status said nothing of it: the
+    station runs on the configuration it loaded before, and the file on disk does not read."""
+    from stationd.bus import EventBus
+    from stationd.web.server import WebServer
+    from stationd.web.status_cli import format_status
+
+    srv = WebServer(EventBus(), None, None)
+    assert srv.status()["reload_refused"] is None
+    srv.reload_refused = "station.yaml:3: vision.centre_methd: unknown key"
+    st = srv.status()
+    assert "config:   reload refused (station.yaml:3: vision.centre_methd: unknown key): the " \
+        "station runs on the configuration it loaded before" in format_status(st).splitlines()
+    assert not any(ln.startswith("config:") for ln in format_status(
+        {**st, "reload_refused": None}).splitlines())
+
+
+def test_status_with_a_station_file_that_no_longer_reads_still_asks_its_daemon(
+        live_server, capsys, tmp_path):
+    """A reload of a mistyped file was refused and the daemon runs on: ``status --config``
+    of that file said only the file's error (exit 2), and the commands with it.  The file's
+    http section still says where the daemon answers: asked there, the error said first."""
+    from stationd.cli import main
+
+    srv = live_server()
+    srv.publish(opened())
+    listen = srv.url.removeprefix("http://").rstrip("/")
+    bad = tmp_path / "station.yaml"
+    bad.write_text(f"http:\n  listen: '{listen}'\nvision:\n  tolerance_mn: 3\n")
+    assert main(["status", "--config", str(bad)]) == 0
+    out, err = capsys.readouterr()
+    assert err.startswith(f"stationd: {bad} does not read (") and "tolerance_mn" in err
+    assert "asking the daemon at its http section's address" in err
+    assert out.splitlines()[1].startswith("state:    ")
+    # a file that is no YAML at all: its error alone, as before
+    bad.write_text("http: [\n")
+    assert main(["status", "--config", str(bad)]) == 2
