@@ -89,6 +89,7 @@ from stationd.station.events import (
     Localized,
     ParamsSent,
     ResultRecorded,
+    VehicleClosed,
     WrongBolt,
 )
 from stationd.station.policy import NokPolicy, NokRule
@@ -477,6 +478,11 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
                   "to a temporary database)")
         if said:
             print(kept_words(said))
+        for v in summary.get("vehicles_closed") or ():
+            if v["missing"]:
+                print(f"vehicle {v['vin']} closed with {counted(v['missing'], 'bolt')} not "
+                      f"worked (the demo works {cycles} of its bolts, then lowers the lift): "
+                      "its report lists them missing; the verdict is the station's part")
         print(summary["verdict"])
     if interrupted is not None:   # as a command stopped by the signal: 130 (143)
         return 128 + signal.Signals[interrupted["signal"]].value
@@ -755,6 +761,11 @@ def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
                 "locked_sends": locked_sends},
             # every rundown recorded with the operator signed in (the simulated one)
             "operators": dict(Counter(e.operator or "-" for e in recorded_events)),
+            # each vehicle as the station closed it: the bolts no one worked on (the demo
+            # works ``cycles`` of them) are missing on its report, whatever the verdict
+            "vehicles_closed": [{"vin": e.vin, "missing": len(e.missing), "nok": len(e.nok)}
+                                for e in st.bus.of(VehicleClosed)
+                                if isinstance(e, VehicleClosed)],
             "refusals": dict(refusals.most_common(8)),
             "xy_error_mm": {"mean": _num(np.mean(errs)) if errs else None,
                             "max": _num(np.max(errs)) if errs else None},

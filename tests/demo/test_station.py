@@ -187,3 +187,16 @@ def test_the_summary_says_a_latency_above_the_target():
         "work on this machine?)")
     assert latency_words({"p50": None, "p95": None}) == \
         "latency from exposure p50 - ms p95 - ms"
+
+
+def test_the_summary_counts_the_bolts_its_vehicle_left_with_not_worked():
+    """A new user read "PASS: 10/10 bolts handled" for a vehicle that closed with 40 of 50
+    bolts missing: the summary keeps what the station closed it with (the line before the
+    verdict says it; the verdict stays the station's part)."""
+    from stationd.station.events import VehicleClosed
+
+    st = _station()
+    st.bus.publish(VehicleClosed("V", ("B03", "B04", "B05"), ()))
+    s = _summary(st, REPORT, 2, 0)
+    assert s["vehicles_closed"] == [{"vin": "V", "missing": 3, "nok": 0}]
+    assert s["verdict"].startswith("PASS: 2/2 bolts handled")
