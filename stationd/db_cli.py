@@ -292,7 +292,14 @@ def _report_url(args: argparse.Namespace) -> str:
             + ", ".join(f"{sid} {path}" for sid, path in demos) + ")")
         if isinstance(exc, NotFoundError):
             raise InputError(f"{exc} of {config}{nor}") from None
-        if nor:
+        if nor:     # in short: the long hint on where a demo keeps its records is moot here
+            try:
+                absent = absent_sqlite_file(url)
+            except OSError:
+                absent = None
+            if absent is not None:
+                raise InputError(f"vehicle {args.vin!r} is in no database of {config}: none "
+                                 f"at {absent} yet{nor}") from None
             raise InputError(f"{exc}{nor}") from None
         raise
 

@@ -688,9 +688,10 @@ def test_report_with_config_finds_a_running_demos_database(run, tmp_path, monkey
                               f"not {station}'s")
     # a VIN neither has: said, the demo's database named
     code, out, err = run("db", "report", "NOPE", "--config", station)
-    assert code == 2 and _one_line(err).endswith(
-        f"; nor is NOPE in the database of the running demo of {station} (DEMO-1 "
-        f"{folder / '1' / 'stationd.db'})")
+    assert code == 2 and _one_line(err) == (
+        f"stationd: error: vehicle 'NOPE' is in no database of {station}: none at "
+        f"{station.parent / 'stationd-sim.db'} yet; nor is NOPE in the database of the running "
+        f"demo of {station} (DEMO-1 {folder / '1' / 'stationd.db'})")
     # the station's own database made (it has no such vehicle): the demo's is still found
     assert run("db", "import", EXAMPLE, "--config", station)[0] == 0
     assert run("db", "report", "VIN1", "--config", station)[0] == 1
