@@ -23,7 +23,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from types import FrameType
-from typing import Any, NoReturn
+from typing import Any, ClassVar, NoReturn
 
 from stationd.errors import InputError, StationError, printable
 
@@ -49,10 +49,38 @@ def _reported() -> tuple[type[Exception], ...]:
 class _Parser(argparse.ArgumentParser):
     """argparse, but a usage error is one line and exit code 2."""
 
+    #: the command line being read (set by :func:`_main`): a mistyped option is named
+    argv: Sequence[str] = ()
+    #: every parser made (the command's and its subcommands'): an option unknown to the
+    #: one that reports it may be a subcommand's, mistyped
+    made: ClassVar[list[argparse.ArgumentParser]] = []
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        _Parser.made.append(self)
+
     def error(self, message: str) -> NoReturn:
-        sys.stderr.write(f"{self.prog}: error: {self._missing_command(message) or message} "
+        said = self._missing_command(message) or message
+        typo = self._mistyped()
+        sys.stderr.write(f"{self.prog}: error: {typo + '; ' if typo else ''}{said} "
                          "(see --help)\n")
         raise SystemExit(EXIT_BAD_INPUT)
+
+    def _mistyped(self) -> str | None:
+        """The first option given that this command does not have, with the one it is
+        likely a typo of: ``run --confg X`` said only that --config is required."""
+        import difflib
+
+        mine = {o for p in (self, *_Parser.made) if p.prog.startswith(self.prog)
+                for o in p._option_string_actions if o.startswith("--")}
+        known = sorted(mine)
+        for token in _Parser.argv:
+            name = token.split("=", 1)[0]
+            if name.startswith("--") and name not in mine:
+                close = difflib.get_close_matches(name, known, n=1, cutoff=0.7)
+                if close:
+                    return f"no option {name} (did you mean {close[0]}?)"
+        return None
 
     def _missing_command(self, message: str) -> str | None:
         """A command given without its subcommand (``stationd config``) is told what to
@@ -840,6 +868,7 @@ def _main(argv: Sequence[str] | None, stopped: _Stopped) -> int:
         quiet_opencv()   # OpenCV's own warnings are no lines of ours (before it loads)
         parser = _parser()
         reported = _reported()
+    _Parser.argv = list(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func
     progress.configure(quiet=bool(getattr(args, "quiet", False)))

@@ -617,3 +617,16 @@ def test_detect_draw_never_writes_through_a_link_or_over_another_file(files, tmp
     assert (tmp_path / "link.png").is_symlink() and (tmp_path / "link2.png").is_symlink()
     code, out, err = _run(capsys, *detect, str(drawing))
     assert code == 0 and err == "" and kind_of(drawing) == "drawing"
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["run", "--confg", "x.yaml"], "no option --confg (did you mean --config?); the following "
+                                   "arguments are required: --config"),
+    (["status", "--jsn"], "no option --jsn (did you mean --json?); unrecognized arguments: "
+                          "--jsn"),
+    (["status", "--zzz"], "unrecognized arguments: --zzz"),
+])
+def test_a_mistyped_option_is_named_with_the_one_meant(capsys, argv, said):
+    """``run --confg X`` said only that --config is required (a new user's trial)."""
+    code, _, err = _usage_error(capsys, *argv)
+    assert code == 2 and f"error: {said} (see --help)" in _one_line(err), err
