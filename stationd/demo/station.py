@@ -78,6 +78,7 @@ from stationd.sim.operator import (
     operate,
     simulators,
     stand_ins,
+    supervisor_of,
 )
 from stationd.sim.vin import make_vin
 from stationd.sim.world import World
@@ -367,7 +368,7 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
             task = asyncio.create_task(station.run(stop))
             await operate(station, world, rng, cycles, report, say, truth, nok_rng,
                           note=_noter(out, station_id(1) if n_stations > 1 else ""),
-                          share=(1, n_stations), supervisor=_supervisor(args),
+                          share=(1, n_stations), supervisor=_supervisor(args, cfg),
                           interruptible=True)
             for k in range(2, n_stations + 1):
                 extra.append(await _next_station(args, cfg, k, tmp, taken, endpoints,
@@ -489,9 +490,11 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
     return 0 if summary["verdict"].startswith("PASS") else 1
 
 
-def _supervisor(args: argparse.Namespace) -> Issuer | None:
-    """The simulated supervisor; None with ``--no-sim-supervisor`` (locks left to people)."""
-    return None if getattr(args, "no_sim_supervisor", False) else SUPERVISOR
+def _supervisor(args: argparse.Namespace, cfg: StationConfig) -> Issuer | None:
+    """The simulated supervisor (a releaser of the station file where it has one); None with
+    ``--no-sim-supervisor`` (locks left to people)."""
+    return None if getattr(args, "no_sim_supervisor", False) else \
+        supervisor_of(cfg, SUPERVISOR.source)
 
 
 def _station(cfg: StationConfig, psets: dict[int, SimPset]) -> Station:
@@ -578,7 +581,7 @@ async def _next_station(args: argparse.Namespace, first: StationConfig, k: int, 
             await operate(station, world, np.random.default_rng([args.seed, k]), cycles,
                           report, say, truth, np.random.default_rng([args.seed, 21, k]),
                           note=_noter(out, sid), share=(k, n_stations),
-                          supervisor=_supervisor(args))
+                          supervisor=_supervisor(args, cfg))
         finally:
             stop.set()
             await task

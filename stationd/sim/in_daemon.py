@@ -47,6 +47,7 @@ from stationd.sim.operator import (
     operate,
     releasers,
     stand_ins,
+    supervisor_of,
 )
 from stationd.sim.vin import make_vin
 from stationd.sim.world import World
@@ -368,7 +369,8 @@ class SimulatedStation:
             try:
                 await operate(station, self.world, rng, BOLTS_PER_VEHICLE, [], _bolt_said,
                               truth, nok_rng, note=self._note,
-                              supervisor=SIM_SUPERVISOR if self.supervisor else None,
+                              supervisor=supervisor_of(station.cfg, SIM_SUPERVISOR.source)
+                              if self.supervisor else None,
                               operator=self._signer)
             except InputError as exc:
                 log.warning("simulated operator: %s", exc)

@@ -78,6 +78,19 @@ def releasers(cfg: StationConfig) -> list[str]:
     return cfg.access.users_with(Right.RELEASE)
 
 
+def supervisor_of(cfg: StationConfig, source: str) -> Issuer:
+    """Whom the simulated supervisor releases locks as: the first user (by name) of the
+    station file whose role has the release right, with that role's rights; where none has,
+    the simulator's own ``supervisor``.  Why: releases were recorded by ``supervisor``, no
+    user of a file that names its supervisors (a new user's trial), where the operator
+    already signs in as the file's own operator."""
+    names = releasers(cfg)
+    if not names:
+        return Issuer(SUPERVISOR.user, SUPERVISOR.rights, source)
+    role = cfg.access.users[names[0]].role
+    return Issuer(names[0], cfg.access.roles.get(role, frozenset()), source)
+
+
 def check_people(cfg: StationConfig) -> None:
     """``--no-sim-supervisor`` (``stationd demo``, ``stationd run --sim-operator``) leaves each
     lock to a person's release: the station file needs a user whose role has the release
@@ -547,7 +560,25 @@ async def until_ok(st: Station, bolt: str, line: dict[str, Any],
     line["result"], line["before"] = steps[-1], steps[:-1]
 
 
-__all__ = ["LOOSEN_PROGRAM", "MAX_RUNDOWNS", "NOK_P", "OPERATOR", "STUBBORN_P", "SUPERVISOR",
-           "Plan", "WaitEnded", "ended_words", "loosen_programs", "operate", "plan_of",
-           "share_of", "shot_words",
-           "simulators", "stand_ins", "stopped", "until_ok", "wait_for_people"]
+__all__ = [
+    "LOOSEN_PROGRAM",
+    "MAX_RUNDOWNS",
+    "NOK_P",
+    "OPERATOR",
+    "STUBBORN_P",
+    "SUPERVISOR",
+    "Plan",
+    "WaitEnded",
+    "ended_words",
+    "loosen_programs",
+    "operate",
+    "plan_of",
+    "share_of",
+    "shot_words",
+    "simulators",
+    "stand_ins",
+    "stopped",
+    "supervisor_of",
+    "until_ok",
+    "wait_for_people",
+]

@@ -60,3 +60,18 @@ def test_without_an_operator_user_its_own_name_unless_sign_in_is_required(tmp_pa
     who, said = sim_operator(_cfg(tmp_path, {**supervisor, "operator_required": True}))
     assert who is None and said is not None        # not the supervisor's name on rundowns
     assert "requires a signed-in operator" in said and "for a person to sign in" in said
+
+
+def test_the_simulated_supervisor_releases_as_a_releaser_of_the_file(tmp_path):
+    """Releases were recorded by 'supervisor', no user of a file that names its supervisors
+    (a new user's trial), while the operator signed in as the file's own."""
+    from stationd.sim.operator import SUPERVISOR, supervisor_of
+
+    users = {"zed": {"role": "supervisor", "password": HASH},
+             "sam": {"role": "supervisor", "password": HASH},
+             "olga": {"role": "operator", "password": HASH}}
+    who = supervisor_of(_cfg(tmp_path, {"users": users}), "demo")
+    assert (who.user, who.source) == ("sam", "demo") and Right.RELEASE in who.rights
+    alone = supervisor_of(_cfg(tmp_path, None), "sim operator")   # config/sim: no access
+    assert (alone.user, alone.rights, alone.source) == (SUPERVISOR.user, SUPERVISOR.rights,
+                                                        "sim operator")
