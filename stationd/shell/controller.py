@@ -67,6 +67,15 @@ class ControllerFeed:
         #: controller's newest when the catch-up asked for it; None: not known yet since the
         #: last (re)connect): a pushed result further on than the next is a live gap
         self._accounted: int | None = None
+        self._again = False     # a reconnect came while a catch-up ran: one more after it
+        self._reads = 0         # the results' loop's reads of the controller so far
+
+    async def _read_since(self, reads: int, timeout: float = 10 * RESULT_WAIT_S) -> None:
+        """Until the results' loop has read the controller once more than ``reads`` (its
+        count then), or ``timeout``."""
+        end = time.monotonic() + timeout
+        while self._reads <= reads and time.monotonic() < end:
+            await asyncio.sleep(RESULT_WAIT_S / 5)
 
     def close(self) -> None:
         self._results_pool.shutdown(wait=True)
@@ -89,6 +98,7 @@ class ControllerFeed:
                 result_input(time.time(), result, offset=wrench.clock_offset_s)))
             self.received.remove(result)
             await self._live_gap(wrench, result)
+        self._reads += 1
 
     async def checked(self, ev: ResultIn | UnreadableIn) -> ResultIn | ResultCopy | UnreadableIn:
         """``ev`` after asking the database whether it has this result stored already
@@ -148,7 +158,18 @@ class ControllerFeed:
                 self._tell(DeviceSaid.of(time.time(), WRENCH, who))
         self._accounted = None     # the catch-up says up to where (a result may come first)
         if self.catching_up is None or self.catching_up.done():
-            self.catching_up = asyncio.get_running_loop().create_task(self._catch_up())
+            self.catching_up = asyncio.get_running_loop().create_task(self._catch_ups())
+        else:   # one of an earlier connection still runs: this one's follows it
+            self._again = True
+
+    async def _catch_ups(self) -> None:
+        """The catch-up, again for each reconnect that came while one ran (its own
+        connection's results, told as that connection's)."""
+        while True:
+            self._again = False
+            await self._catch_up()
+            if not self._again:
+                return
 
     async def _catch_up(self) -> None:
         """Every tightening id between the last one recorded and the controller's newest,
@@ -161,20 +182,26 @@ class ControllerFeed:
         wrench = self._keeper.device
         if wrench is None:
             return
+        connection = self._keeper.reconnects
         try:
             why = await self._caught_up(wrench)
         except RefusedError as exc:     # the controller said no: asking again will not help
             log.warning("results missed while the link was down not fetched: %s",
                         one_line(exc))
             why = f"the controller refused to give them ({one_line(exc)})"
-        except (DeviceError, ValueError) as exc:   # the link's keeper reports it
-            log.warning("results missed while the link was down not fetched yet: %s",
+        except (DeviceError, ValueError) as exc:
+            if self._keeper.losing or not self._keeper.up:
+                # the link went down again: the next reconnect's catch-up tells
+                log.warning("results missed while the link was down not fetched yet: %s",
+                            one_line(exc))
+                return
+            log.warning("results missed while the link was down not fetched: %s",
                         one_line(exc))
-            return
+            why = f"fetching them failed ({one_line(exc)})"
         except STATION_FAULTS as exc:
             log.error("results missed while the link was down not fetched: %s", one_line(exc))
             why = f"the station's database failed ({one_line(exc)})"
-        await self._feed(CaughtUp(time.time(), why is None, why or ""))
+        await self._feed(CaughtUp(time.time(), why is None, why or "", connection))
 
     async def _caught_up(self, wrench: Wrench) -> str | None:
         """The catch-up's work: None where every result since the link was lost went
@@ -182,6 +209,10 @@ class ControllerFeed:
         if self.records.repo is None:
             return "no database to count the results from"
         if not wrench.can_fetch:
+            # a register-driven controller keeps its last result in its registers: read by
+            # the results' loop after the reconnect (recorded late, where it is the cut's)
+            # before this is told
+            await self._read_since(self._reads)
             return "this controller keeps no results to fetch"
         last = await self._call(self.records.last_tightening_id)
         newest = await self._call(wrench.fetch_result, 0)

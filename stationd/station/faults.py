@@ -34,10 +34,11 @@ class FaultRules(TeachRules):
             self._vin_pending = False
             self._link_lost_at = ev.t
             if self._enabled is not None and self._enabled_at is not None and self._cut is None \
-                    and self._result_owed(ev.t):
+                    and self._result_owed(ev.t) and ev.kind is not FaultKind.REFUSED:
                 # the tool's result may come only after the reconnect: where it belongs is
-                # then proved by the controller's own data (:meth:`_made_during_cut`)
-                self._cut = _Cut(self._enabled, self._enabled_at, ev.t)
+                # then proved by the controller's own data (:meth:`_made_during_cut`).  A
+                # refusal keeps the link (no reconnect, no catch-up): its results come pushed
+                self._cut = _Cut(self._enabled, self._enabled_at, ev.t, self._wrench_reconnects)
         if ev.device == DATABASE:
             # the load under way failed (the only database call the core waits for): the
             # vehicle is loaded again once the database is back and the lift still ready

@@ -150,6 +150,9 @@ class CaughtUp(Input):
 
     complete: bool
     reason: str = ""
+    #: the controller's connection it caught up on (its reconnect count, as DeviceBack's;
+    #: None: not known): one of the connection that was cut, or earlier, is stale
+    reconnects: int | None = None
 
 
 @dataclass(frozen=True)

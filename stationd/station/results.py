@@ -202,6 +202,9 @@ class ResultRules(OrderRules):
         cut = self._cut
         if cut is None:
             return []
+        if cut.reconnects is not None and ev.reconnects is not None \
+                and ev.reconnects <= cut.reconnects:
+            return []       # a catch-up of the connection that was cut, or of an earlier one
         if ev.complete:
             self._cut = None
             if self._enabled is cut.selection:
@@ -346,8 +349,8 @@ class ResultRules(OrderRules):
                                    vin=vin if vin != self.vin else None, t=ev.t)),
                     Acknowledge(u)]
         en = self._enabled if self._result_owed(ev.t) else None
-        if u.fetched and self._cut is not None:
-            en = self._cut.selection
+        if u.fetched:   # after a reconnect (a renewal's catch-up hands its results as pushed)
+            en = self._cut.selection if self._cut is not None else None
         if en is not None and u.pset is not None and en.pset is not None \
                 and u.pset != en.pset:
             en = None        # its pset could be read, and it is not the one sent

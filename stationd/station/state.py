@@ -62,6 +62,9 @@ class _Cut:
     selection: Selection
     enabled_at: float
     cut_at: float
+    #: the controller's connection that was cut (its reconnect count; None: not known): a
+    #: catch-up of that connection or an earlier one says nothing of this cut
+    reconnects: int | None = None
 
 
 @dataclass

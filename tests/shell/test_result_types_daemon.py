@@ -82,6 +82,24 @@ def test_an_unreadable_result_is_stored_whole_and_holds_its_bolt(tmp_path):
 
 
 @pytest.mark.timeout(300)
+def test_a_refused_tool_enable_keeps_the_link_and_the_tool_goes_on_after_it(tmp_path):
+    """The controller refuses the enable once (MID 0043 answered 0004): a fault of the
+    controller with its link kept, no reconnect and no catch-up.  It was taken for a link
+    cut that only a catch-up ends, and the tool stayed off for every bolt (a reviewer)."""
+    pose = tmp_path / "pose"
+    with tracking(tmp_path, "REFVIN00000000001") as (d, _, ctl):
+        ctl.refuse_mid(43, 1)
+        pose.write_text("B05")
+        d.wait_log("tightening bolt B05")
+        d.wait_log("fault: wrench")
+        d.wait_log("wrench: back", timeout=60)
+        ctl.clear_refusals()
+        pose.write_text("B06")
+        until(lambda: ctl.tool_enabled, 60, "the tool on for B06")
+        assert "results made during the link cut" not in d.log()
+
+
+@pytest.mark.timeout(300)
 def test_a_link_cut_during_an_enable_ends_with_the_catch_up_open_or_held(tmp_path):
     """A cut with the tool on for B05 and nothing tightened: the catch-up fetched every
     result since, none was made, and B05 is open as before (the tool goes on again).  A

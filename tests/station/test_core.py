@@ -58,6 +58,7 @@ from stationd.station.events import (
 from stationd.station.inputs import (
     DATABASE,
     Announce,
+    CaughtUp,
     CommandDone,
     CommandIn,
     DeviceBack,
@@ -106,6 +107,7 @@ class Driver:
     records: dict[int, str] = field(default_factory=dict)
     closed_vins: set[str] = field(default_factory=set)
     vin_seq: int = 0
+    reconnects: int = 0               # the controller's connections so far (DeviceBack's)
     log: list[Any] = field(default_factory=list)
 
     def feed(self, ev: Any) -> list[Any]:
@@ -151,6 +153,7 @@ class Driver:
             assert a.bolt == self.where == c.bolt and self.fresh
             assert a.bolt in self.acked and ev.exposure_t > self.acked[a.bolt]
             assert self.ready and not self.down
+            assert c._cut is None, "the tool enabled while a link cut's result is owed"
             self.tool, self.tool_bolt = True, a.bolt
         elif isinstance(a, DisableTool):
             self.tool = False
@@ -192,7 +195,13 @@ class Driver:
         elif kind == "back" and self.down:
             device = sorted(self.down)[op[3] % len(self.down)]
             self.down.discard(device)
-            self.feed(DeviceBack(self.t, device, reconnects=op[3]))
+            if device != "wrench":
+                self.feed(DeviceBack(self.t, device, reconnects=op[3]))
+            else:
+                self.reconnects += 1
+                self.feed(DeviceBack(self.t, device, reconnects=self.reconnects))
+                # the shell's catch-up then ends (complete now and then not: a refusal)
+                self.feed(CaughtUp(self.t, op[3] != 2, "refused", self.reconnects))
         elif kind == "tick":
             self.feed(Tick(self.t))
         if self.down:

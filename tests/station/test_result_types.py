@@ -435,15 +435,20 @@ def test_a_cut_result_the_controller_pushes_again_holds_its_bolt():
     assert not d.feed(CaughtUp(d.t, complete=True))   # the cut ended with the hold
 
 
-def test_an_unreadable_result_fetched_while_the_tool_is_on_holds_the_enabled_bolt():
-    """A result made while the subscription was renewed comes fetched (MID 0065) with the
-    link up and the tool on: unreadable, it holds the bolt enabled (a reviewer: held against
-    no bolt, the tool left on)."""
+def test_an_unreadable_result_fetched_after_a_reconnect_is_no_enable_s_made_since():
+    """The link was lost with the tool off (no cut), B2 enabled since: an unreadable result
+    the catch-up fetched was made before, never B2's (a reviewer: held against B2, its tool
+    switched off).  One the renewal of the subscription fetched comes as pushed (the driver's
+    ``ResultFeed.caught``): the enabled bolt's."""
     d = _ready()
-    _enabled(d, 1)
-    acts = d.feed(UnreadableIn(d.t, unreadable(fetched=True)))
+    d.feed(DeviceFault(d.t, "wrench", FaultKind.DOWN, "link lost"))
+    d.t += 1.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    d.step(("lift", 0.1, True, True, "VIN1"))
+    _enabled(d, 2)
+    acts = d.feed(UnreadableIn(d.t, unreadable(pset=2, fetched=True)))
     [store] = [a for a in acts if isinstance(a, StoreUnreadable)]
-    assert store.bolt == "B1" and not d.core.tool_on and list(d.core.matcher.held) == ["B1"]
+    assert store.bolt is None and d.core.tool_on and not d.core.matcher.held
 
 
 def test_a_result_made_after_an_unreadable_one_under_its_id_is_not_its_copy():
@@ -601,3 +606,37 @@ def test_a_cut_result_pushed_within_the_late_result_window_ends_the_cut():
     assert not d.feed(CaughtUp(d.t, complete=True))      # nothing said: the cut had ended
     d.step(("lift", 0.1, True, True, "VIN1"))
     _enabled(d, 2)
+
+
+def test_a_refused_command_keeps_the_link_and_makes_no_cut():
+    """The controller refuses a command (its link kept: no reconnect, no catch-up) while a
+    result is owed: no cut waits for a catch-up that never comes (a reviewer: the tool off
+    for every bolt until the vehicle left)."""
+    d = _ready()
+    _enabled(d, 1)
+    d.feed(DeviceFault(d.t, "wrench", FaultKind.REFUSED, "MID 0043 refused"))
+    assert d.core.missed_since() is not None and d.core._cut is None
+    d.t += 1.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=0))
+    d.step(("lift", 0.1, True, True, "VIN1"))
+    d.feed(Tick(d.t + 6))
+    d.t += 6
+    _enabled(d, 2)
+
+
+def test_a_catch_up_of_the_connection_that_was_cut_says_nothing_of_the_cut():
+    """A catch-up of an earlier connection, still feeding when a later cut came, ends with
+    "complete": it says nothing of that cut, whose result the next connection's catch-up
+    fetches (a reviewer: the cut ended as "none made", its result then unattributed)."""
+    d = _ready()
+    d.feed(DeviceBack(d.t, "wrench", reconnects=3))     # connection 3, its catch-up running
+    sent = _enabled(d, 1)
+    d.t += 1.0
+    d.feed(DeviceFault(d.t, "wrench", FaultKind.DOWN, "link lost"))
+    assert not d.feed(CaughtUp(d.t, complete=True, reconnects=3))   # stale: nothing said
+    d.t += 10.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=4))
+    acts = d.feed(ResultIn(d.t, res(41, sent.selection.pset or 0, True, 1, vin="VIN1"),
+                           fetched=True, follows=40, made_at=d.t - 10.5))
+    assert [a.bolt for a in acts if isinstance(a, Record)] == ["B1"]
+    assert not d.feed(CaughtUp(d.t, complete=True, reconnects=4))   # the cut had ended

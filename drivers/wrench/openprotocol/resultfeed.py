@@ -18,6 +18,7 @@ habit, not a byte lost on the line (a session renewed below 3 reads no result's 
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 from collections.abc import Callable
 
@@ -130,7 +131,11 @@ class ResultFeed:
 
     def caught(self, tid: int, result: Received) -> bool:
         """Queue ``result``, fetched by the renewal's catch-up (nothing to acknowledge),
-        unless it was pushed meanwhile: whether it was queued."""
+        unless it was pushed meanwhile: whether it was queued.  Handed out as pushed (an
+        unreadable one not ``fetched``): made with the link up, while the subscription was
+        renewed, it is the result of the enable owed now, not one made during a link cut."""
+        if isinstance(result, UnreadableResult) and result.fetched:
+            result = dataclasses.replace(result, fetched=False)
         with self._cond:
             if self.pushed(tid):
                 return False

@@ -1,0 +1,161 @@
+"""How the shell's catch-up after a reconnect ends, for the core (``CaughtUp``): complete, or
+why not, and on which connection.  Every way it can end tells the core, unless the link went
+down again (the next reconnect's catch-up tells), so that a link cut during an enable is
+never left open with the tool off for good; and a catch-up of an earlier connection is told
+as that connection's (the core then says nothing of a later cut with it).
+
+The controller and the records are stand-ins answering as the driver and the repository do
+(the daemon-level tests drive the simulated controller over Open Protocol:
+``test_result_types_daemon.py``)."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from concurrent.futures import ThreadPoolExecutor
+from datetime import datetime
+from types import SimpleNamespace
+from typing import Any
+
+from drivers.errors import ConnectionLostError, ProtocolError
+from stationd.shell.blocking import Blocking
+from stationd.shell.controller import ControllerFeed
+from stationd.station.inputs import CaughtUp, ResultIn
+
+
+class Controller:
+    """A controller's fetches: ``answers`` by tightening id (0: its newest), an exception
+    raised as the driver raises it."""
+
+    can_curves, curves_on, clock_offset_s = False, False, 0.0
+
+    def __init__(self, answers: dict[int, Any], can_fetch: bool = True) -> None:
+        self.answers, self.can_fetch = answers, can_fetch
+
+    def fetch_result(self, tid: int, timeout: float | None = None) -> Any:
+        got = self.answers.get(tid)
+        if isinstance(got, Exception):
+            raise got
+        return got
+
+    def wait_result(self, timeout: float, acknowledge: bool = False) -> Any:
+        time.sleep(0.05)
+        return None
+
+    def identification(self) -> None:
+        return None
+
+
+def res(tid: int) -> Any:
+    return SimpleNamespace(tightening_id=tid, pset=1, ok=True, result_type_code=1,
+                           result_type=None, vin="", torque_nm=12.0, angle_deg=30.0,
+                           timestamp=datetime(2026, 11, 29, 8, 0, 0), controller_clock=True)
+
+
+def catch_up(controller: Controller, last: int | None = 40, comebacks: int = 1,
+             on_feed: Any = None, reading: bool = False) -> list[Any]:
+    """What the catch-up fed the core after ``comebacks`` reconnects in a row (each while
+    the last one's catch-up ran); ``reading``: the results' loop runs beside it."""
+    fed: list[Any] = []
+    keeper = SimpleNamespace(device=controller, reconnects=1, losing=False, up=True,
+                             lost=lambda exc: None)
+    records = SimpleNamespace(repo=SimpleNamespace(read_result_stored=lambda t: False),
+                              last_tightening_id=lambda: last,
+                              copy_input=lambda ev, vin: ev)
+    core = SimpleNamespace(missed_since=lambda: time.time() - 60,
+                           status=lambda: SimpleNamespace(vin="V", faults={}))
+
+    async def feed(ev: Any) -> None:
+        fed.append(ev)
+        if on_feed is not None:
+            on_feed(ev, keeper)
+
+    async def main() -> None:
+        pool = ThreadPoolExecutor(2)
+        feed_ = ControllerFeed(core, records, keeper, feed, lambda ev: None,  # type: ignore[arg-type]
+                               Blocking(pool))
+        loop = None
+        if reading:
+            loop = asyncio.create_task(_read_forever(feed_, controller))
+        feed_.came_back()
+        for n in range(2, comebacks + 1):
+            await asyncio.sleep(0)      # the running one has started on its connection
+            keeper.reconnects = n
+            feed_.came_back()
+        assert feed_.catching_up is not None
+        await feed_.catching_up
+        if loop is not None:
+            loop.cancel()
+        pool.shutdown()
+        feed_.close()
+
+    asyncio.run(main())
+    return fed
+
+
+async def _read_forever(feed: ControllerFeed, controller: Controller) -> None:
+    while True:
+        await feed.results(controller)  # type: ignore[arg-type]
+
+
+def _ends(fed: list[Any]) -> list[tuple[bool, str, int | None]]:
+    return [(e.complete, e.reason, e.reconnects) for e in fed if isinstance(e, CaughtUp)]
+
+
+def test_every_result_since_fetched_is_complete_on_its_connection():
+    fed = catch_up(Controller({0: res(42), 41: res(41), 42: res(42)}))
+    assert [e.result.tightening_id for e in fed if isinstance(e, ResultIn)] == [41, 42]
+    assert _ends(fed) == [(True, "", 1)]
+
+
+def test_a_fetch_that_fails_with_the_link_up_ends_it_incomplete():
+    """MID 0064 for 41 answered about tightening 43 (a ProtocolError, the link kept): it
+    ended without a word, and the cut it was to end held the tool off for good (a
+    reviewer)."""
+    fed = catch_up(Controller({0: res(43), 41: ProtocolError(
+        "fetch tightening 41: the controller answered with tightening 43")}))
+    assert _ends(fed) == [(False, "fetching them failed (fetch tightening 41: the controller "
+                                  "answered with tightening 43)", 1)]
+
+
+def test_a_link_lost_again_tells_nothing():
+    def lose(ev: Any, keeper: Any) -> None:
+        keeper.up = False
+
+    fed = catch_up(Controller({0: res(43), 41: res(41), 42: ConnectionLostError("gone")}),
+                   on_feed=lose)
+    assert not _ends(fed)       # the next reconnect's catch-up tells
+
+
+def test_results_missing_on_the_controller_end_it_incomplete():
+    fed = catch_up(Controller({0: res(42), 42: res(42)}))      # 41: no longer there
+    assert _ends(fed) == [(False, "tightening 41 no longer on the controller", 1)]
+
+
+def test_a_reconnect_while_a_catch_up_runs_gets_its_own_after_it():
+    """The catch-up of connection 1 still ran when the link came back as connection 2: one
+    for connection 2 follows, each told as its own (the core takes the first for stale
+    against a cut made on connection 1)."""
+    fed = catch_up(Controller({0: res(41), 41: res(41)}), comebacks=2)
+    assert [r for *_, r in _ends(fed)] == [1, 2]
+
+
+def test_a_register_driven_controller_is_read_once_before_it_is_told():
+    """A controller that keeps no results to fetch keeps its last one in its registers: the
+    results' loop reads it after the reconnect before the catch-up says it is incomplete
+    (a reviewer: told first, the cut's own result, read a moment later, was held)."""
+    reads: list[float] = []
+    controller = Controller({}, can_fetch=False)
+    original = controller.wait_result
+
+    def wait_result(timeout: float, acknowledge: bool = False) -> Any:
+        reads.append(time.monotonic())
+        return original(timeout, acknowledge)
+
+    controller.wait_result = wait_result
+    told: list[float] = []
+    fed = catch_up(controller, reading=True,
+                   on_feed=lambda ev, k: told.append(time.monotonic())
+                   if isinstance(ev, CaughtUp) else None)
+    assert _ends(fed) == [(False, "this controller keeps no results to fetch", 1)]
+    assert reads and reads[0] < told[0]
