@@ -178,12 +178,26 @@ class Results:
              "recorded_at": _iso(x["recorded_at"]),
              "comment": f"MID {x['mid']:04d} revision {x['revision']}: {x['error']}"}
             for x in self.repo.unreadable(vin)]
-        released: list[dict[str, Any]] = [
-            {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
-             "bolt": c.bolt, "attempt": 0, "status": RELEASED_STATUS, "images": [],
-             "recorded_at": _iso(c.at), "released_by": c.user, "comment": c.comment}
-            for c in self.repo.ledger.commands(vin) if c.kind == "release" and c.bolt]
-        return runs + none + unread + released
+        for c in self.repo.ledger.commands(vin):
+            if c.kind == "release" and c.bolt:      # among the rundowns, where it was given
+                at = c.at.isoformat()
+                runs.insert(_after(runs, at), {
+                    **dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
+                    "bolt": c.bolt, "attempt": 0, "status": RELEASED_STATUS, "images": [],
+                    "recorded_at": at, "released_by": c.user, "comment": c.comment})
+        return runs + none + unread
+
+
+def _after(rows: list[dict[str, Any]], at: str) -> int:
+    """The place of a row made at ``at`` (ISO) among ``rows`` in the order they were made:
+    after the last one recorded at or before it."""
+    when = datetime.fromisoformat(at)
+    place = 0
+    for k, r in enumerate(rows):
+        t = r.get("recorded_at")
+        if t is not None and datetime.fromisoformat(t) <= when:
+            place = k + 1
+    return place
 
 
 def attempt_words(run: dict[str, Any], reopened_at: str | None) -> str:

@@ -28,6 +28,14 @@ def test_the_ids_between_the_last_recorded_and_the_newest_are_fetched():
     assert far.fetch == (996, 997, 998, 999, 1000) and far.gap == (11, 995)
 
 
+def _count(db, sql: str) -> int:
+    con = sqlite3.connect(db)
+    try:
+        return int(con.execute(sql).fetchone()[0])
+    finally:
+        con.close()
+
+
 @pytest.mark.timeout(300)
 def test_results_made_while_the_link_was_cut_are_fetched_or_shown_as_gaps(tmp_path):
     pose = tmp_path / "pose"
@@ -51,6 +59,11 @@ def test_results_made_while_the_link_was_cut_are_fetched_or_shown_as_gaps(tmp_pa
         d.wait_log(f"tightening {ids[1]} missed while the link was down: a gap")
         for tid in (ids[0], ids[2]):
             d.wait_log(f"tightening {tid} fetched after a reconnect")
+        # said as they are fetched, stored after: the rows are waited for (stopping the
+        # daemon at the journal's last word lost the last row under load)
+        db = tmp_path / "station.db"
+        until(lambda: _count(db, "SELECT count(*) FROM tightening_records") + _count(
+            db, "SELECT count(*) FROM unattributed_results") == 3, 30, "all three stored")
     con = sqlite3.connect(tmp_path / "station.db")
     try:
         to_bolts = [r[0] for r in con.execute("SELECT tightening_id FROM tightening_records")]
