@@ -27,7 +27,7 @@ from sqlalchemy.orm import Session
 from db.engine import writer
 from db.errors import DatabaseError, DataError, NotFoundError
 from db.importer import current_version, parameters_of
-from db.kinds import LOOSENING, NOT_TAKEN, RUNDOWN_KINDS, TIGHTENING
+from db.kinds import CUT_UNKNOWN, LOOSENING, NOT_TAKEN, RUNDOWN_KINDS, TIGHTENING
 from db.ledger import RUNDOWN, add_command, append
 from db.models import (
     Bolt,
@@ -78,10 +78,11 @@ def record_entered(repo: Repository, *, vin: str, bolt: str, ok: bool, torque_nm
                 UnreadableRecord.vin == vin, UnreadableRecord.bolt == bolt)
                 .order_by(UnreadableRecord.id.desc()).limit(1))
             # or held by an OK result without a type outside the torque window, read but not
-            # taken for a tightening: its tightening id is the one entered for
+            # taken for a tightening: its tightening id is the one entered for; or by a link
+            # cut during its enable that left its result unknown (no id: none was read)
             not_taken = s.scalar(select(ControllerEvent).where(
                 ControllerEvent.vin == vin, ControllerEvent.bolt == bolt,
-                ControllerEvent.what == NOT_TAKEN)
+                ControllerEvent.what.in_((NOT_TAKEN, CUT_UNKNOWN)))
                 .order_by(ControllerEvent.id.desc()).limit(1))
             if not_taken is not None and (held is None
                                           or not_taken.recorded_at >= held.recorded_at):

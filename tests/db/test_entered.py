@@ -252,3 +252,25 @@ def test_what_a_held_result_came_under_is_read_from_the_enable_it_answered(sedan
         "B3": ("tightening 40", HeldUnder(False, 21)),
         "B1": (not_taken_note(0.0, 41), HeldUnder(False, 1))}
     assert repo.held_bolts("VIN1") == {b: note for b, (note, _) in repo.holds("VIN1").items()}
+
+
+def test_an_outcome_entered_for_a_bolt_held_after_a_link_cut_names_no_older_result(sedan):
+    """A bolt held once for an unreadable result (released since), then held after a link
+    cut left its result unknown: the outcome entered is for the cut's (no tightening id read),
+    not the older unreadable one's (a reviewer)."""
+    from db.kinds import CUT_UNKNOWN, cut_unknown_note
+
+    repo = sedan
+    _unreadable(repo, 12, "B1")
+    repo.ledger.record_command(at=datetime.now(UTC), user="sam", source="cli", kind="release",
+                               vin="VIN1", bolt="B1", comment="checked")
+    note = cut_unknown_note("the controller refused to give them")
+    repo.record_controller_event(result_type=0, what=CUT_UNKNOWN, vin="VIN1", bolt="B1",
+                                 controller_vin=None, tightening_id=None, pset=1, ok=False,
+                                 torque_nm=None, angle_deg=None, result_at=None, note=note)
+    assert repo.held_bolts("VIN1") == {"B1": note}
+    rid = _enter(repo)
+    run = next(e["record"] for e in repo.ledger.since(0) if e["kind"] == RUNDOWN
+               and e["record"]["id"] == rid)
+    assert (run["tightening_id"], run["unreadable_id"]) == (None, None)
+    assert repo.held_bolts("VIN1") == {}
