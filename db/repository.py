@@ -428,6 +428,12 @@ class Repository:
             s.flush()
             return row.id
 
+    def settle_enable(self, enable_id: int) -> None:
+        """The station owes tool enable ``enable_id`` nothing more without a record of it:
+        every result the controller made since was fetched, and none was its."""
+        with self._session(write=True) as s:
+            _settle(s, enable_id)
+
     def note_tool_off(self, enable_id: int, at: datetime) -> None:
         """The tool went off (the first time counts: the late-result window starts there)."""
         with self._session(write=True) as s:

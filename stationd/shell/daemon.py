@@ -23,11 +23,12 @@ import logging
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any, TypeVar
 
 from db.repository import Repository
+from drivers.devices import Kind, backend_class
 from drivers.errors import DeviceError
 from drivers.keeper import DeviceKeeper, FaultKind, one_line
 from drivers.lift import Lift
@@ -197,7 +198,12 @@ class Station:
             self._pending.append(OperatorBack(time.time(), signed[0], signed[1].timestamp()))
         owed = self.records.owed(self.core.late_result_s)
         if owed is not None:   # its result is recorded to that bolt, not into nothing
-            self.core.resume(owed)
+            if not _fetches(self.cfg.wrench.url):
+                # a controller that keeps no results to fetch: nothing to catch up on after
+                # the restart, its result (within the window) only as it is read
+                owed = replace(owed, enabled_at=None)
+            if owed.in_window or owed.enabled_at is not None:
+                self.core.resume(owed)
         for device, keeper in self.keepers.items():
             fault = keeper.open_now()
             if fault is not None:
@@ -376,3 +382,12 @@ def _leave_open(repo: Repository) -> None:
 
 
 __all__ = ["Localization", "State", "Station"]
+
+
+def _fetches(url: str) -> bool:
+    """Whether the controller at ``url`` keeps its results for the station to fetch (its
+    driver says: ``Wrench.can_fetch``)."""
+    try:
+        return bool(getattr(backend_class(Kind.WRENCH, url), "can_fetch", False))
+    except (DeviceError, ValueError):
+        return False

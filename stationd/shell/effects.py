@@ -42,6 +42,7 @@ from stationd.station.actions import (
     Reply,
     SendParams,
     SendVin,
+    SettleEnable,
     StoreControllerEvent,
     StoreCutUnknown,
     StoreGap,
@@ -185,6 +186,12 @@ class Effects:
         elif isinstance(a, StoreControllerEvent):
             await self._store_then_ack(self.records.store_controller_event, a, a.result,
                                        f"{stored_what(a)} (a controller event)")
+        elif isinstance(a, SettleEnable):
+            try:
+                await self._call(self.records.settle, a.selection)
+            except STATION_FAULTS as exc:
+                self.log.warning("the tool enable for %s not settled: %s", a.selection.bolt,
+                                 one_line(exc))
         elif isinstance(a, StoreCutUnknown):
             try:
                 await self._call(self.records.store_cut_unknown, a)

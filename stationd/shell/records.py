@@ -135,25 +135,37 @@ class Records:
     # -- what the last station owed -------------------------------------------------------
     def owed(self, late_result_s: float) -> Owed | None:
         """The tool enable the last station (a reload, a restart, a kill) left without its
-        result, while its late-result window lasts (from its tool-off time, or now when it
-        stopped with the tool on)."""
+        result: the new station takes it as a link cut during it (its result, made meanwhile,
+        fetched and proved; its tool kept off until then), and within its late-result window
+        (from its tool-off time, or now when it stopped with the tool on) a result of its
+        pset pushed now as its own."""
         owed = self._repo().owed_enable()
         if owed is None:
             return None
         now = time.time()
         off = owed.off_at.timestamp() if owed.off_at is not None else now
-        if now - off >= late_result_s:
-            return None
+        in_window = now - off < late_result_s
         j = owed.selection
         sel = Selection(owed.bolt, owed.pset, xyz(j["point_mm"]), float(j["tilt_deg"]),
                         float(j["distance_mm"]), float(j["exposure_t"]), float(j["decided_t"]),
                         None, owed.vin, owed.parameters_id, bool(j.get("loosen", False)),
                         j.get("operator"))
         self._enable, self._enable_off = (sel, owed.id), owed.off_at is not None
-        log.info("the tool was enabled for bolt %s of %s (pset %s) when the last station "
-                 "stopped: its result within %.0f s is recorded to it", owed.bolt, owed.vin,
-                 owed.pset, late_result_s - (now - off))
-        return Owed(sel, off)
+        if in_window:
+            log.info("the tool was enabled for bolt %s of %s (pset %s) when the last station "
+                     "stopped: its result within %.0f s is recorded to it", owed.bolt,
+                     owed.vin, owed.pset, late_result_s - (now - off))
+        else:
+            log.info("the tool was enabled for bolt %s of %s (pset %s), its result not "
+                     "recorded: the controller's results since are fetched for it", owed.bolt,
+                     owed.vin, owed.pset)
+        return Owed(sel, off, owed.enabled_at.timestamp(), in_window)
+
+    def settle(self, sel: Selection) -> None:
+        """The enable for ``sel`` is owed nothing more (:class:`SettleEnable`)."""
+        enable = self._settles(sel)
+        if enable is not None:
+            self._repo().settle_enable(enable)
 
     def note_enable(self, sel: Selection) -> None:
         """The tool is about to be enabled for ``sel``: noted on disk first."""

@@ -52,6 +52,10 @@ class Owed:
 
     selection: Selection
     off_at: float
+    #: when the tool was enabled (noted just before), on the station's clock
+    enabled_at: float | None = None
+    #: its late-result window still runs: a result of its pset pushed now is its own
+    in_window: bool = True
 
 
 @dataclass(frozen=True)
@@ -192,6 +196,14 @@ class RecordCommand:
 
 
 @dataclass(frozen=True)
+class SettleEnable:
+    """The tool enable for ``selection`` is owed nothing more, without a record: every result
+    the controller made since was fetched after a link cut, and none was its."""
+
+    selection: Selection
+
+
+@dataclass(frozen=True)
 class StoreCutUnknown:
     """Store that ``bolt`` of ``vin`` is held because the link to the controller went down
     while the tool was enabled for it (``selection``, settled with it) and what the controller
@@ -213,5 +225,5 @@ class Reply:
 
 Action = (SendParams | EnableTool | DisableTool | SendVin | LoadVehicle | CloseVehicle | Record
           | Acknowledge | StoreUnattributed | StoreGap | StoreControllerEvent | StoreUnreadable
-          | StoreCutUnknown | Publish
+          | StoreCutUnknown | SettleEnable | Publish
           | RecordCommand | Reply | MeasureReferences | RecordCheck)

@@ -30,6 +30,7 @@ from stationd.station.actions import (
     Record,
     Reply,
     Selection,
+    SettleEnable,
     StoreControllerEvent,
     StoreCutUnknown,
     StoreGap,
@@ -206,10 +207,15 @@ class ResultRules(OrderRules):
                 and ev.reconnects <= cut.reconnects:
             return []       # a catch-up of the connection that was cut, or of an earlier one
         if ev.complete:
+            # none made so far; its late-result window, where it still runs, still takes
+            # one pushed now (a restart during a rundown: the result comes after the catch-up)
             self._cut = None
+            if self._result_owed(ev.t) and self._enabled is cut.selection:
+                return [Publish(Notice(Said.CUT_NOTHING, bolt=cut.selection.bolt, t=ev.t))]
             if self._enabled is cut.selection:
                 self._enabled = None
-            return [Publish(Notice(Said.CUT_NOTHING, bolt=cut.selection.bolt, t=ev.t))]
+            return [SettleEnable(cut.selection),
+                    Publish(Notice(Said.CUT_NOTHING, bolt=cut.selection.bolt, t=ev.t))]
         return self._cut_unknown(ev.t, ev.reason or "its results not fetched")
 
     def _cut_unknown(self, t: float, why: str) -> list[Action]:
@@ -222,10 +228,10 @@ class ResultRules(OrderRules):
             self._enabled = None
         note = cut_unknown_note(why)
         said = Notice(Said.CUT_UNKNOWN, bolt=en.bolt, note=note, t=t)
+        stored = StoreCutUnknown(en.vin, en.bolt, note, en)
         if self.matcher is None or self.vin != en.vin or en.bolt not in self.matcher.bolts:
-            return [Publish(said)]
-        return [StoreCutUnknown(en.vin, en.bolt, note, en),
-                *self._hold(t, en.bolt, note, said, under=en)]
+            return [stored, Publish(said)]    # held when that vehicle is at the station
+        return [stored, *self._hold(t, en.bolt, note, said, under=en)]
 
     def _made_during_cut(self, ev: ResultIn) -> tuple[Selection | None, Unproved | None]:
         """The selection a result fetched after a link cut belongs to, when the controller's

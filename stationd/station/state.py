@@ -249,8 +249,14 @@ class CoreState:
 
     def resume(self, owed: Owed) -> None:
         """Take over what the last station owed (before :class:`Started`): its result, within
-        the late-result window, is recorded to the bolt the tool was enabled for."""
-        self._enabled, self._off_at = owed.selection, owed.off_at
+        the late-result window, is recorded to the bolt the tool was enabled for; and, as
+        after a link cut during that enable (the controller's link was closed and opened
+        again), one fetched after it is placed by the controller's data, the tool kept off
+        until the catch-up has ended it."""
+        if owed.in_window:
+            self._enabled, self._off_at = owed.selection, owed.off_at
+        if owed.enabled_at is not None:
+            self._cut = _Cut(owed.selection, owed.enabled_at, owed.off_at)
 
     def allowed(self) -> tuple[str, ...]:
         """The bolts the sequence allows now (not done, skipped, locked, held or blocked)."""

@@ -56,7 +56,7 @@ class ToolRules(FaultRules):
                     and ev.exposure_t > self._acked_at and self.bolt is not None:
                 sel = self._selection
                 assert sel is not None  # noqa: S101 - a bolt is selected
-                if self._cut is not None:
+                if self._cut is not None and self._cut.selection.vin == self.vin:
                     self.reason = StateReason(Because.CUT_OWED, bolt=self.bolt,
                                               owed=self._cut.selection.bolt)
                     return acts

@@ -647,6 +647,32 @@ def test_a_resumed_enable_records_its_result_to_its_bolt_and_vehicle_before_any_
     assert _kinds(core.feed(ResultIn(1001.2, result(70060, 2, ok=False)))) == ["Acknowledge"]
 
 
+def test_a_resumed_enable_is_a_link_cut_the_catch_up_ends():
+    """A reload or restart closes and opens the controller's link: the enable the last
+    station owed, past its late-result window too, is taken as a cut during it.  Its result
+    fetched after the restart is placed by the controller's data; until the catch-up has
+    ended it no bolt of that vehicle gets the tool; a complete catch-up without it settles
+    the enable (a reviewer: the cut was lost on a reload, another bolt enabled meanwhile)."""
+    from stationd.station.actions import SettleEnable
+    from stationd.station.inputs import CaughtUp
+
+    core = StationCore(PARAMS, leave_frames=2)
+    sel = _owed("B2")
+    core.resume(Owed(sel, off_at=1000.0, enabled_at=995.0, in_window=False))
+    core.feed(Started(1100.0))
+    assert core.missed_since() == 995.0
+    fetched = SimpleNamespace(tightening_id=70061, pset=2, ok=True, vin="VIN1")
+    acts = core.feed(ResultIn(1101.0, fetched, fetched=True, follows=70060, made_at=998.0))
+    assert [(a.bolt, a.late) for a in acts if isinstance(a, Record)] == [("B2", True)]
+    assert not core.feed(CaughtUp(1102.0, complete=True))     # the cut had ended
+    core = StationCore(PARAMS, leave_frames=2)
+    core.resume(Owed(sel, off_at=1000.0, enabled_at=995.0, in_window=False))
+    core.feed(Started(1100.0))
+    acts = core.feed(CaughtUp(1101.0, complete=True))
+    assert [a.selection for a in acts if isinstance(a, SettleEnable)] == [sel]
+    assert core.missed_since() == 1100.0
+
+
 def _reloaded_owing(bolt: str = "B3", done: frozenset[str] = frozenset({"B1"})) -> StationCore:
     """A new core after a reload: it owes ``bolt``'s enable (B3: the pset of B1, done and
     stored before the reload) and has VIN1 loaded again."""

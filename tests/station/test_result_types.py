@@ -640,3 +640,17 @@ def test_a_catch_up_of_the_connection_that_was_cut_says_nothing_of_the_cut():
                            fetched=True, follows=40, made_at=d.t - 10.5))
     assert [a.bolt for a in acts if isinstance(a, Record)] == ["B1"]
     assert not d.feed(CaughtUp(d.t, complete=True, reconnects=4))   # the cut had ended
+
+
+def test_a_complete_catch_up_within_the_late_result_window_still_takes_the_pushed_result():
+    """A restart during a rundown: the catch-up at the start finds nothing (the rundown was
+    not over), then the result comes pushed within the late-result window: it is the enable's
+    (a CI run: stored unattributed, the catch-up having cleared the enable)."""
+    d = _ready()
+    sent, _, _ = _cut_during_enable(d)
+    d.t += 1.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    acts = d.feed(CaughtUp(d.t, complete=True))
+    assert not [a for a in acts if type(a).__name__ == "SettleEnable"]   # still owed
+    acts = d.feed(ResultIn(d.t + 0.5, res(41, sent.selection.pset or 0, True, 1)))
+    assert [(a.bolt, a.late) for a in acts if isinstance(a, Record)] == [("B1", True)]
