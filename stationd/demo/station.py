@@ -473,17 +473,17 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
                   f"bolts OK{_left_words(every)}, "
                   f"{counted(every['nok_policy']['nok'], 'NOK result')}"
                   + (f"; {operator_words(every['operators'])}" if every["operators"] else ""))
+        for v in summary.get("vehicles_closed") or ():
+            if v["missing"]:
+                print(f"vehicle {v['vin']} closed with {counted(v['missing'], 'bolt')} not "
+                      f"worked (the demo works {cycles} of its bolts, then lowers the lift): "
+                      "its report lists them missing; the verdict is the station's part")
         if instead:
             devices = ", ".join(d.rsplit(" ", 1)[0] for d in instead)
             print(f"simulated, not the station file's devices: {devices} (the records went "
                   "to a temporary database)")
         if said:
             print(kept_words(said))
-        for v in summary.get("vehicles_closed") or ():
-            if v["missing"]:
-                print(f"vehicle {v['vin']} closed with {counted(v['missing'], 'bolt')} not "
-                      f"worked (the demo works {cycles} of its bolts, then lowers the lift): "
-                      "its report lists them missing; the verdict is the station's part")
         print(summary["verdict"])
     if interrupted is not None:   # as a command stopped by the signal: 130 (143)
         return 128 + signal.Signals[interrupted["signal"]].value
