@@ -5,8 +5,9 @@ Kept apart from ``aravis.py`` because none of it needs Aravis: it is tested with
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 from urllib.parse import unquote, urlsplit
 
 from drivers.camera import pixels
@@ -19,6 +20,7 @@ from drivers.errors import (
 )
 from drivers.url import OptionError, parse_url
 
+N = TypeVar("N", int, float)
 FORM = ("aravis://DEVICE-ID?trigger=software|line0|free&pixel_format=" + "|".join(pixels.FORMATS)
         + "&exposure_us=N&gain_db=N&buffers=4&region=full|X,Y,W,H&frame_rate=HZ&heartbeat_ms=N")
 DEFAULT_BUFFERS = 4
@@ -69,33 +71,28 @@ GAIN_DB = (0.0, 48.0)
 EXPOSURE_US = (1.0, 1_000_000.0)
 
 
-def _gain_db(text: str) -> float:
-    value = float(text)
-    if not GAIN_DB[0] <= value <= GAIN_DB[1]:
-        raise OptionError(f"a gain in dB is {GAIN_DB[0]:g}-{GAIN_DB[1]:g}")
-    return value
-
-
-def _exposure_us(text: str) -> float:
-    value = float(text)
-    if not EXPOSURE_US[0] <= value <= EXPOSURE_US[1]:
-        raise OptionError(f"an exposure in microseconds is {EXPOSURE_US[0]:g}-"
-                          f"{EXPOSURE_US[1]:g} (1 s)")
-    return value
-
-
 #: a GigE Vision camera's heartbeat timeout (bootstrap register 0x0938): below Aravis's
 #: heartbeat period (1 s) the camera would drop the station at once; above 10 minutes a
 #: station that died would keep its camera locked for that long
 HEARTBEAT_MS = (1500, 600_000)
 
 
-def _heartbeat_ms(text: str) -> int:
-    value = int(text)
-    if not HEARTBEAT_MS[0] <= value <= HEARTBEAT_MS[1]:
-        raise OptionError(f"a heartbeat timeout in milliseconds is {HEARTBEAT_MS[0]}-"
-                          f"{HEARTBEAT_MS[1]} (Aravis sends one each second)")
-    return value
+def _bounded(convert: Callable[[str], N], bounds: tuple[N, N], what: str,
+             unit: str = "") -> Callable[[str], N]:
+    """An option's reader: ``convert`` the text, refused outside ``bounds`` with what a
+    value of it is (``what`` LO-HI, ``unit``)."""
+    def read(text: str) -> N:
+        value = convert(text)
+        if not bounds[0] <= value <= bounds[1]:
+            raise OptionError(f"{what} is {bounds[0]:g}-{bounds[1]:g}{unit}")
+        return value
+    return read
+
+
+_gain_db = _bounded(float, GAIN_DB, "a gain in dB")
+_exposure_us = _bounded(float, EXPOSURE_US, "an exposure in microseconds", " (1 s)")
+_heartbeat_ms = _bounded(int, HEARTBEAT_MS, "a heartbeat timeout in milliseconds",
+                         " (Aravis sends one each second)")
 
 
 def _buffers(text: str) -> int:

@@ -652,15 +652,29 @@ def _sim_station(tmp_path: Path) -> Path:
     return station / "station.yaml"
 
 
+def _demo_database(run, temp: Path, station: Path, name: str = "abc") -> Path:
+    """A running demo of ``station`` (this process stands in for it: its pid file) whose
+    own database, in ``temp``, has VIN1 with one rundown: that database's file."""
+    from db.repository import Repository
+    from stationd.demo.leftovers import PREFIX, mark
+
+    folder = temp / f"{PREFIX}{name}"
+    (folder / "1").mkdir(parents=True)
+    mark(folder, station)
+    path = folder / "1" / "stationd.db"
+    assert run("db", "import", EXAMPLE, "--db", url_of(path))[0] == 0
+    with Repository.open(url_of(path)) as repo:
+        repo.start_vehicle("VIN1", "WAGON-B")
+        record(repo, "VIN1", "SF-FL")
+    return path
+
+
 def test_report_with_config_finds_a_running_demos_database(run, tmp_path, monkeypatch):
     """Issue 30: during a demo, `db report VIN --config STATION.yaml` said "no database at
     .../stationd-sim.db (import a bolt table first, or give --db or --config STATION.yaml)":
     the demo keeps its records in its own temporary folder, and the hint suggested the option
     already given.  A running demo's database is found by its station file now."""
     import tempfile
-
-    from db.repository import Repository
-    from stationd.demo.leftovers import PREFIX, mark
 
     station = _sim_station(tmp_path)
     temp = tmp_path / "temp"
@@ -671,16 +685,8 @@ def test_report_with_config_finds_a_running_demos_database(run, tmp_path, monkey
     line = _one_line(err)
     assert code == 2 and out == "" and f"no database at {station.parent}" in line
     assert "give --db or --config" not in line and "demo" in line and "/vehicles" in line
-    # a demo of this station file running (this process stands in for it), its vehicle in
-    # its own database
-    folder = temp / f"{PREFIX}abc"
-    (folder / "1").mkdir(parents=True)
-    mark(folder, station)
-    url = url_of(folder / "1" / "stationd.db")
-    assert run("db", "import", EXAMPLE, "--db", url)[0] == 0
-    with Repository.open(url) as repo:
-        repo.start_vehicle("VIN1", "WAGON-B")
-        record(repo, "VIN1", "SF-FL")
+    # a demo of this station file running, its vehicle in its own database
+    folder = _demo_database(run, temp, station).parents[1]
     code, out, err = run("db", "report", "VIN1", "--config", station)
     assert code == 1 and out.startswith("VIN1 (WAGON-B, open): bolts: 1 OK"), (out, err)
     assert _one_line(err) == (f"stationd: VIN1 is a running demo's vehicle: reading that "
@@ -712,21 +718,11 @@ def test_export_and_figures_with_config_read_a_running_demos_database(run, tmp_p
     user's trial): they read the running demo's database too, saying so."""
     import tempfile
 
-    from db.repository import Repository
-    from stationd.demo.leftovers import PREFIX, mark
-
     station = _sim_station(tmp_path)
     temp = tmp_path / "temp"
     temp.mkdir()
     monkeypatch.setattr(tempfile, "tempdir", str(temp))
-    folder = temp / f"{PREFIX}abc"
-    (folder / "1").mkdir(parents=True)
-    mark(folder, station)
-    url = url_of(folder / "1" / "stationd.db")
-    assert run("db", "import", EXAMPLE, "--db", url)[0] == 0
-    with Repository.open(url) as repo:
-        repo.start_vehicle("VIN1", "WAGON-B")
-        record(repo, "VIN1", "SF-FL")
+    folder = _demo_database(run, temp, station).parents[1]
     said = (f"stationd: {station}'s database {station.parent / 'stationd-sim.db'} is not "
             f"there yet: reading the running demo's (DEMO-1, {folder / '1' / 'stationd.db'})")
     code, out, err = run("db", "export", "--results", "--config", station)
@@ -734,10 +730,7 @@ def test_export_and_figures_with_config_read_a_running_demos_database(run, tmp_p
     code, out, err = run("db", "spc", "--config", station)
     assert code == 0 and "SF-FL" in out and _one_line(err) == said
     # two demos of it: which to read is asked, each with its --db
-    other = temp / f"{PREFIX}def"
-    (other / "1").mkdir(parents=True)
-    mark(other, station)
-    assert run("db", "import", EXAMPLE, "--db", url_of(other / "1" / "stationd.db"))[0] == 0
+    _demo_database(run, temp, station, "def")
     code, out, err = run("db", "spc", "--config", station)
     assert code == 2 and out == "" and "the running demos of it keep theirs: DEMO-1 --db " \
         f"sqlite:///{folder / '1' / 'stationd.db'}" in _one_line(err)
