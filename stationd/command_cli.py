@@ -128,25 +128,23 @@ def find_station(args: argparse.Namespace) -> Target:
 
 
 def _http_section(path: str) -> Any:
-    """The ``http:`` section of a station file that does not read as a whole, read alone
-    (an object with ``http``, as :func:`daemon_url` takes it); None where that section does
-    not read either, or the file is not YAML."""
+    """The ``http:`` section of a station file that does not read as a whole, read alone by
+    its own reader (an object with ``http``, as :func:`daemon_url` takes it); None where that
+    section does not read either, or the file's sections cannot be read at all."""
     from types import SimpleNamespace
 
-    import yaml
-
+    from stationd.config import read_all
+    from stationd.errors import ConfigError
     from stationd.web.config import HttpConfig
 
+    top = read_all(path).sections
+    if not top:
+        return None
+    if "http" not in top:
+        return SimpleNamespace(http=None)
     try:
-        doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-        http = doc.get("http") if isinstance(doc, dict) else None
-        if http is None:
-            return SimpleNamespace(http=None)
-        listen, token = http.get("listen"), http.get("token")
-        if not isinstance(listen, str) or not (token is None or isinstance(token, str)):
-            return None
-        return SimpleNamespace(http=HttpConfig(listen, token))
-    except (OSError, UnicodeError, yaml.YAMLError, AttributeError, RecursionError):
+        return SimpleNamespace(http=HttpConfig.from_node(top["http"]))
+    except ConfigError:
         return None
 
 

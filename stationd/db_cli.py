@@ -293,15 +293,21 @@ def _report_url(args: argparse.Namespace) -> str:
         if isinstance(exc, NotFoundError):
             raise InputError(f"{exc} of {config}{nor}") from None
         if nor:     # in short: the long hint on where a demo keeps its records is moot here
-            try:
-                absent = absent_sqlite_file(url)
-            except OSError:
-                absent = None
+            absent = _not_there(url)
             if absent is not None:
                 raise InputError(f"vehicle {args.vin!r} is in no database of {config}: none "
                                  f"at {absent} yet{nor}") from None
             raise InputError(f"{exc}{nor}") from None
         raise
+
+
+def _not_there(url: str) -> str | None:
+    """:func:`absent_sqlite_file`, where a folder that cannot be entered counts as there
+    (opening the database then says why it cannot be reached)."""
+    try:
+        return absent_sqlite_file(url)
+    except OSError:
+        return None
 
 
 def _read_url(args: argparse.Namespace) -> str:
@@ -312,10 +318,7 @@ def _read_url(args: argparse.Namespace) -> str:
     export and the figures said only "no database at .../stationd-sim.db"."""
     url = _db_url(args)
     config: str | None = getattr(args, "config", None)
-    try:
-        absent = absent_sqlite_file(url) if config else None
-    except OSError:
-        absent = None
+    absent = _not_there(url) if config else None
     if absent is None or config is None:
         return url
     from stationd.demo.leftovers import demo_databases

@@ -23,7 +23,7 @@ import logging
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import partial
 from typing import Any, TypeVar
 
@@ -196,14 +196,11 @@ class Station:
         if signed is not None and signed[0] in self.cfg.access.users:
             # still signed in (a reload, a restart): their rundowns carry their name on
             self._pending.append(OperatorBack(time.time(), signed[0], signed[1].timestamp()))
-        owed = self.records.owed(self.core.late_result_s)
+        # a controller that keeps no results to fetch: nothing to catch up on after the
+        # restart, its result (within the window) only as it is read
+        owed = self.records.owed(self.core.late_result_s, cut=_fetches(self.cfg.wrench.url))
         if owed is not None:   # its result is recorded to that bolt, not into nothing
-            if not _fetches(self.cfg.wrench.url):
-                # a controller that keeps no results to fetch: nothing to catch up on after
-                # the restart, its result (within the window) only as it is read
-                owed = replace(owed, enabled_at=None)
-            if owed.in_window or owed.enabled_at is not None:
-                self.core.resume(owed)
+            self.core.resume(owed)
         for device, keeper in self.keepers.items():
             fault = keeper.open_now()
             if fault is not None:

@@ -133,18 +133,21 @@ class Records:
         return self.repo
 
     # -- what the last station owed -------------------------------------------------------
-    def owed(self, late_result_s: float) -> Owed | None:
+    def owed(self, late_result_s: float, cut: bool = True) -> Owed | None:
         """The tool enable the last station (a reload, a restart, a kill) left without its
-        result: the new station takes it as a link cut during it (its result, made meanwhile,
-        fetched and proved; its tool kept off until then), and within its late-result window
-        (from its tool-off time, or now when it stopped with the tool on) a result of its
-        pset pushed now as its own."""
+        result: within its late-result window (from its tool-off time, or now when it
+        stopped with the tool on) a result of its pset pushed now is its own; and, with
+        ``cut`` (a controller that keeps its results to fetch), the new station takes it as a
+        link cut during it (its result, made meanwhile, fetched and proved; its tool kept off
+        until then).  None where neither applies."""
         owed = self._repo().owed_enable()
         if owed is None:
             return None
         now = time.time()
         off = owed.off_at.timestamp() if owed.off_at is not None else now
         in_window = now - off < late_result_s
+        if not in_window and not cut:
+            return None
         j = owed.selection
         sel = Selection(owed.bolt, owed.pset, xyz(j["point_mm"]), float(j["tilt_deg"]),
                         float(j["distance_mm"]), float(j["exposure_t"]), float(j["decided_t"]),
@@ -159,7 +162,7 @@ class Records:
             log.info("the tool was enabled for bolt %s of %s (pset %s), its result not "
                      "recorded: the controller's results since are fetched for it", owed.bolt,
                      owed.vin, owed.pset)
-        return Owed(sel, off, owed.enabled_at.timestamp(), in_window)
+        return Owed(sel, off, owed.enabled_at.timestamp() if cut else None, in_window)
 
     def settle(self, sel: Selection) -> None:
         """The enable for ``sel`` is owed nothing more (:class:`SettleEnable`)."""

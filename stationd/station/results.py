@@ -206,32 +206,38 @@ class ResultRules(OrderRules):
         if cut.reconnects is not None and ev.reconnects is not None \
                 and ev.reconnects <= cut.reconnects:
             return []       # a catch-up of the connection that was cut, or of an earlier one
-        if ev.complete:
-            # none made so far; its late-result window, where it still runs, still takes
-            # one pushed now (a restart during a rundown: the result comes after the catch-up)
-            self._cut = None
-            if self._result_owed(ev.t) and self._enabled is cut.selection:
-                return [Publish(Notice(Said.CUT_NOTHING, bolt=cut.selection.bolt, t=ev.t))]
-            if self._enabled is cut.selection:
-                self._enabled = None
-            return [SettleEnable(cut.selection),
-                    Publish(Notice(Said.CUT_NOTHING, bolt=cut.selection.bolt, t=ev.t))]
-        return self._cut_unknown(ev.t, ev.reason or "its results not fetched")
+        if not ev.complete:
+            return self._cut_unknown(ev.t, ev.reason or "its results not fetched")
+        # none made so far; its late-result window, where it still runs, still takes one
+        # pushed now (a restart during a rundown: the result comes after the catch-up)
+        self._cut = None
+        said = Publish(Notice(Said.CUT_NOTHING, bolt=cut.selection.bolt, t=ev.t))
+        if self._enabled is cut.selection:
+            if self._result_owed(ev.t):
+                return [said]
+            self._enabled = None
+        return [SettleEnable(cut.selection), said]
 
     def _cut_unknown(self, t: float, why: str) -> list[Action]:
         """The link cut's bolt held (its result not known: ``why``); the cut ends."""
         cut = self._cut
         assert cut is not None  # noqa: S101 - the callers' guard
-        self._cut = None
         en = cut.selection
-        if self._enabled is en:
-            self._enabled = None
+        self._answered(en)
         note = cut_unknown_note(why)
         said = Notice(Said.CUT_UNKNOWN, bolt=en.bolt, note=note, t=t)
         stored = StoreCutUnknown(en.vin, en.bolt, note, en)
         if self.matcher is None or self.vin != en.vin or en.bolt not in self.matcher.bolts:
             return [stored, Publish(said)]    # held when that vehicle is at the station
         return [stored, *self._hold(t, en.bolt, note, said, under=en)]
+
+    def _answered(self, en: Selection) -> None:
+        """``en``'s result is in, or settled for a person (held): its enable is owed nothing
+        more, and a link cut during it is over."""
+        if self._enabled is en:
+            self._enabled = None
+        if self._cut is not None and self._cut.selection is en:
+            self._cut = None
 
     def _made_during_cut(self, ev: ResultIn) -> tuple[Selection | None, Unproved | None]:
         """The selection a result fetched after a link cut belongs to, when the controller's
@@ -377,9 +383,7 @@ class ResultRules(OrderRules):
                                              t=ev.t)))
         if bolt is None or en is None:
             return [*acts, Publish(Notice(Said.UNREADABLE, note=u.error, t=ev.t))]
-        self._enabled = self._enabled if self._enabled is not en else None
-        if self._cut is not None and self._cut.selection is en:
-            self._cut = None
+        self._answered(en)
         if self.matcher is not None and self.vin == en.vin and bolt in self.matcher.bolts:
             acts += self._hold(ev.t, bolt, unreadable_note(u.tightening_id, u.mid, u.revision),
                                under=en)
@@ -426,10 +430,7 @@ class ResultRules(OrderRules):
         acts.append(StoreControllerEvent(r, en.vin, en.bolt, NOT_TAKEN, en))
         acts.append(Publish(ControllerResultEvent(0, NOT_TAKEN, tid, int(r.pset), True,
                                                   en.bolt, t=ev.t)))
-        if self._enabled is en:
-            self._enabled = None
-        if self._cut is not None and self._cut.selection is en:
-            self._cut = None
+        self._answered(en)
         self._not_before = max(self._not_before, ev.t)
         if self.matcher is not None and self.vin == en.vin and en.bolt in self.matcher.bolts:
             acts += self._hold(ev.t, en.bolt, not_taken_note(float(r.torque_nm), tid), said)
@@ -463,10 +464,9 @@ class ResultRules(OrderRules):
         elif late:
             acts.append(Publish(Notice(Said.LATE_RESULT, bolt=en.bolt, t=ev.t)))
         self._recorded[int(r.tightening_id)] = _said(r)
-        if cut or (self._cut is not None and self._cut.selection is en):
-            self._cut = None        # the cut's result is in (fetched, or pushed late)
-        if not cut or self._enabled is en:
-            self._enabled = None
+        if not cut:
+            self._enabled = None    # (a cut's result leaves an enable made since owed)
+        self._answered(en)          # the cut's result is in too (fetched, or pushed late)
         if en.operator is not None and en.operator == self.operator:
             self._operator_seen = max(self._operator_seen, ev.t)
         if self.matcher is not None and self.vin == en.vin:
