@@ -317,7 +317,8 @@ def _per_pair(r: Reason, full: bool = False) -> str:
 
 
 _WORDS: dict[Why, Callable[[Reason], str]] = {
-    Why.STALE: lambda r: f"localization is stale ({r.age_ms or 0:.0f} ms old)",
+    Why.STALE: lambda r: (f"camera frames too old ({r.age_ms or 0:.0f} ms): the cameras or "
+                           "the station's computer fall behind"),
     Why.NO_BOLTS: lambda r: "this vehicle has no bolts",
     Why.NO_BOLT_NEAR: lambda r: (f"no bolt within {r.limit or 0:g} mm (nearest {r.bolt} at "
                                  f"{_mm(r.distance_mm)} mm)"),
@@ -327,7 +328,8 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.DONE: lambda r: f"{r.bolt} is already done",
     Why.MUST_WAIT: lambda r: f"{r.bolt} must wait: " + "; ".join(
         [_waited(r.wait), *(f"{b} was skipped: {skip_words(s)}" for b, s in r.skips)]),
-    Why.NOT_STABLE: lambda r: f"{r.bolt}: stable for {r.count} of {r.needed} frames",
+    Why.NOT_STABLE: lambda r: (f"{r.bolt}: hold the wrench still on it ({r.count} of "
+                                f"{r.needed} frames)"),
     Why.ELSEWHERE: lambda r: f"nearest {r.bolt}",
     Why.LOCKED: lambda r: _locked(r.bolt, r.count),
     Why.NOT_LOCKED: lambda r: f"{r.bolt} is not locked",

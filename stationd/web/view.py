@@ -97,8 +97,8 @@ ACT_ON = frozenset({Why.STALE, Why.AMBIGUOUS, Why.TILTED, Why.MUST_WAIT, Why.SKI
 NOT_AT_A_BOLT = "Bring the wrench to a bolt"
 TRACKING_STATES = tuple(s.value for s in LOCALIZING)   # where a refusal speaks of the wrench
 # refusals that forbid their bolt (drawn "blocked"): the sequence's; a bolt the wrench is
-# settling on ("B21: stable for 1 of 3 frames") is not blocked (it was drawn so beside that
-# headline); skipped and locked bolts have their own states
+# settling on ("B21: hold the wrench still on it (1 of 3 frames)") is not blocked (it was
+# drawn so beside that headline); skipped and locked bolts have their own states
 BLOCKS = frozenset({Why.MUST_WAIT})
 # how much nearer to the wrench another open bolt must be to take the "next" pointer, mm
 NEXT_HYSTERESIS_MM = 20.0

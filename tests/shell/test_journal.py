@@ -15,11 +15,11 @@ def test_two_refusals_alternating_are_written_once_each_then_counted():
     lines = [j.refused(TILTED if k % 2 == 0 else UNSTABLE, 100.0 + k) for k in range(40)]
     written = [x for x in lines if x is not None]
     assert written == ["no bolt: wrench tilted 12.5 deg (> 10 deg)",
-                       "no bolt: B21: stable for 1 of 3 frames"]
+                       "no bolt: B21: hold the wrench still on it (1 of 3 frames)"]
     # a bolt selected (a change of state): the episode's counts, one line each
     assert j.ended(140.0) == [
         "no bolt: wrench tilted 12.5 deg (> 10 deg): again 19 times in 40 s",
-        "no bolt: B21: stable for 1 of 3 frames: again 19 times in 39 s"]
+        "no bolt: B21: hold the wrench still on it (1 of 3 frames): again 19 times in 39 s"]
     assert j.ended(141.0) == []                       # said once
     assert j.refused(TILTED, 142.0) == "no bolt: wrench tilted 12.5 deg (> 10 deg)"
 

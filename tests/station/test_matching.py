@@ -21,7 +21,7 @@ def test_taken_only_after_stable_frames():
     m = _m(stable_frames=3)
     got = [m.update(np.array([1.0, -1.0, 300.0])) for _ in range(3)]
     assert [g.bolt for g in got] == [None, None, "B1"]
-    assert "stable for 1 of 3" in _why(got[0])
+    assert "hold the wrench still on it (1 of 3" in _why(got[0])
 
 
 def test_refusal_breaks_the_streak():
@@ -44,7 +44,7 @@ def test_out_of_tolerance_ambiguous_stale_done():
     assert "no bolt within" in _why(m.update(np.array([20.0, 0, 0])))
     r = m.update(np.array([40.0, 6.0, 0]))  # between B2 and B3
     assert r.bolt is None and "ambiguous" in _why(r)
-    assert "stale" in _why(m.update(np.array([0.0, 0, 0]), age_s=2.0))
+    assert "too old" in _why(m.update(np.array([0.0, 0, 0]), age_s=2.0))
     assert m.update(np.array([0.0, 0, 0])).bolt == "B1"
     m.mark_done("B1")
     r = m.update(np.array([0.0, 0, 0]))

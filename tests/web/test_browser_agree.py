@@ -254,6 +254,7 @@ def test_the_start_up_headline_says_starting_not_stale(screen, page):
                  Localized(point_mm=(1200.0, -300.0, 0.0), tilt_deg=1.0, reason=again,
                            candidate=None, distance_mm=None, age_ms=812.0, allowed=EVERY),
                  Refused(reason=again)])
-    page.wait(lambda p: p.text("#headline") == "localization is stale (812 ms old)",
+    page.wait(lambda p: p.text("#headline") == ("camera frames too old (812 ms): the cameras "
+                                               "or the station's computer fall behind"),
               what="the stale alarm")
     assert page.js("return document.getElementById('headline').dataset.tone") == "act"

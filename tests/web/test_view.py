@@ -22,6 +22,10 @@ from stationd.web.view import View, fold
 from stationd.words import reason_words
 from tests.web.scenario import LIFT_LOW, VIN, fault, fault_state, opened, result, work
 
+#: the stale-frames refusal as the operator reads it
+STALE_812 = ("camera frames too old (812 ms): the cameras or the station's computer fall "
+             "behind")
+
 
 def states(v: View) -> dict[str, str]:
     return {b.bolt: b.state for b in v.bolts.values()}
@@ -109,7 +113,7 @@ def test_lost_wrench_is_marked_lost_without_a_position():
     v.apply(Localized(point_mm=None, tilt_deg=None, reason=Reason(Why.STALE, age_ms=812.0),
                       candidate=None, distance_mm=None, age_ms=400.0))
     assert v.wrench is not None and v.wrench["lost"] and "x" not in v.wrench
-    assert v.wrench["reason"] == "localization is stale (812 ms old)"
+    assert v.wrench["reason"] == STALE_812
 
 
 def test_tool_disabled_returns_selection_to_pending_with_reason():
@@ -120,7 +124,7 @@ def test_tool_disabled_returns_selection_to_pending_with_reason():
     v = fold(opened() + work())
     v.apply(ToolDisabled(reason=StateReason(Because.NOT_CONFIRMED, bolt="B3"), bolt="B3",
                          why=Reason(Why.STALE, age_ms=812.0)))
-    assert v.headline() == "wrench not confirmed on bolt B3 (localization is stale (812 ms old))"
+    assert v.headline() == f"wrench not confirmed on bolt B3 ({STALE_812})"
 
 
 def test_skip_rework_result_close_and_wrong_bolt():
@@ -197,7 +201,7 @@ def test_wrench_between_bolts_is_neutral_not_an_alarm():
 
 def test_refusals_the_operator_resolves_are_amber_with_the_reason():
     for reason, said in (
-            (Reason(Why.STALE, age_ms=812.0), "localization is stale (812 ms old)"),
+            (Reason(Why.STALE, age_ms=812.0), STALE_812),
             (Reason(Why.AMBIGUOUS, bolt="B1", distance_mm=3.0, other="B2", other_mm=4.1),
              "ambiguous: B1 at 3.0 mm, B2 at 4.1 mm"),
             (Reason(Why.TILTED, angle_deg=14.2, limit=10.0), "wrench tilted 14.2 deg (> 10 deg)"),

@@ -16,6 +16,10 @@ from stationd.station.events import (
 from stationd.web.view import STARTUP_GRACE_S, View, fold
 from tests.web.scenario import opened
 
+#: the stale-frames refusal as the operator reads it
+STALE_7524 = ("camera frames too old (7524 ms): the cameras or the station's computer fall "
+              "behind")
+
 EVERY = ("B1", "B2", "B3", "B4")     # no order: every open bolt is allowed
 NOT_SEEN = Reason(Why.NOT_LOCALIZED, note="no purple region in view")
 
@@ -104,11 +108,11 @@ def test_stale_frames_before_any_fresh_one_say_the_station_is_starting():
     v.apply(at(200.0, 150.0, t=101.0))
     v.apply(at(0.0, 0.0, reason=STALE, t=102.0))
     v.apply(Refused(reason=STALE, t=102.0))
-    assert (v.headline(), v.tone()) == ("localization is stale (7524 ms old)", "act")
+    assert (v.headline(), v.tone()) == (STALE_7524, "act")
     # a station that never gets a fresh frame says stale after the grace
     v = fold([*start, at(0.0, 0.0, reason=STALE, t=100.0), Refused(reason=STALE, t=100.0),
               at(0.0, 0.0, reason=STALE, t=101.0 + STARTUP_GRACE_S)])
-    assert (v.headline(), v.tone()) == ("localization is stale (7524 ms old)", "act")
+    assert (v.headline(), v.tone()) == (STALE_7524, "act")
     # a reload starts again: the first frames may be late again
     v.apply(StateChanged(state="starting", reason=StateReason(Because.OPENING)))
     v.apply(StateChanged(state="tracking", reason=StateReason(Because.TRACKING)))
@@ -118,11 +122,13 @@ def test_stale_frames_before_any_fresh_one_say_the_station_is_starting():
 
 
 def test_a_bolt_the_wrench_settles_on_is_not_drawn_blocked():
-    """"B21: stable for 1 of 3 frames" in the headline while B21 was drawn "blocked": the
-    bolt the wrench settles on stays the one pointed out; only the sequence blocks a bolt."""
+    """"B21: hold the wrench still on it (1 of 3 frames)" in the headline while B21 was drawn
+    "blocked": the bolt the wrench settles on stays the one pointed out; only the sequence
+    blocks a bolt."""
     settling = Reason(Why.NOT_STABLE, bolt="B4", count=1, needed=3)
     v = fold([*opened(), at(399.0, 299.0), Refused(reason=settling, bolt="B4")])
-    assert v.bolts["B4"].state == "next" and v.headline() == "B4: stable for 1 of 3 frames"
+    assert v.bolts["B4"].state == "next"
+    assert v.headline() == "B4: hold the wrench still on it (1 of 3 frames)"
     assert v.tone() == "idle"
 
 
