@@ -101,15 +101,25 @@ class Renewal:
         the 0060: never pushed), fetched by tightening id from ``before`` + 1 and queued as
         fetched (nothing to acknowledge), up to ``CATCH_UP`` of them; it stops at the first
         the controller does not have, or that was pushed meanwhile (the ones after it are
-        pushed too).  One fetched and then pushed as well (made just after the 0060) is
-        acknowledged when pushed and not handed out twice.  Called holding the request
-        lock."""
+        pushed too), or at a refusal of MID 0064.  One fetched and then pushed as well (made
+        just after the 0060) is acknowledged when pushed and not handed out twice.  Called
+        holding the request lock."""
         for tid in range(before + 1, before + 1 + CATCH_UP):
             with self._channel.cond:
                 if self._feed.pushed(tid):
                     return
-            result = self._old.fetch(tid, self._channel.timeout, epoch,
-                                     f"fetch tightening {tid}")
+            try:
+                result = self._old.fetch(tid, self._channel.timeout, epoch,
+                                         f"fetch tightening {tid}")
+            except RefusedError as e:
+                # a controller without MID 0064 (or refusing it now): the renewal stands and
+                # the link with it; a result made in between skips its id, which the
+                # station's gap check says (dropping the link would lose the subscription
+                # and renew it again at every session)
+                self._log.warning("%s: results made while the result subscription was "
+                                  "renewed cannot be fetched (MID 0064: %s); a tightening id "
+                                  "skipped is a gap", self.device, e)
+                return
             if result is None or not self._feed.caught(tid, result):
                 return                       # not kept, or pushed while it was fetched
             self._log.warning("%s: tightening %d made while the result subscription was "

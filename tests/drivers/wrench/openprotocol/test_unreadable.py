@@ -258,6 +258,30 @@ def test_a_result_made_while_the_subscription_is_renewed_is_fetched(tmp_path, ca
     assert "tightening 3 made while the result subscription was renewed" in caplog.text
 
 
+def test_a_controller_without_mid_0064_keeps_the_renewed_subscription_and_the_link(
+        tmp_path, caplog):
+    """A controller that mislabels its results and answers MID 0064 with error 99 (unknown
+    MID), as an independent emulator does: the renewal at revision 1 stands, its catch-up
+    is said impossible, and the link stays up (a link dropped there renewed the subscription
+    at every session, two held bolts each time); the next result reads cleanly."""
+    caplog.set_level(logging.WARNING, logger="drivers.wrench.openprotocol.client")
+    with SimController(seed=3, nok_rate=0.0, mislabel=1) as sim, \
+            connect(sim, "tcp", tmp_path) as w:
+        sim.refuse_mid(64, 99)
+        ready(w)
+        made = [sim.pull_trigger(), sim.pull_trigger()]     # held twice: renewed at 1
+        got = [w.wait_result(1.0), w.wait_result(1.0)]
+        assert all(isinstance(g, UnreadableResult) for g in got) and None not in made
+        assert wait_until(lambda: w.revisions[60] == 1)
+        assert wait_until(lambda: "cannot be fetched (MID 0064" in caplog.text)
+        later = sim.pull_trigger()
+        third = w.wait_result(1.0)
+        assert isinstance(third, TighteningResult) and later is not None
+        assert third.tightening_id == later.tightening_id
+        assert w.status().connected and w.status().reconnects == 0
+    assert "error 99" in caplog.text and "link lost" not in caplog.text
+
+
 def test_a_revision_beyond_those_read_gives_the_ones_it_starts_with(sim, tmp_path):
     """MID 0061 revision 998 is revision 6 plus the stages (PROTOCOLS.md): it starts with a
     whole revision 6 body (here a revision 7 one), read so; not taken for a revision it
