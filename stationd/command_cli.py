@@ -37,12 +37,14 @@ import http.cookiejar
 import json
 import math
 import os
+import re
 import socket
 import sys
 import urllib.error
 import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 from stationd.access import hash_password
@@ -73,6 +75,9 @@ class Target:
     token: str | None
     expected: dict[str, str | None] | None
     config: str | None
+    #: the station file has no ``http:`` section: its daemon serves no API (a command that
+    #: finds nothing says so, not "is stationd running?" of a daemon that runs)
+    no_api: bool = False
 
 
 def daemon_url(cfg: Any) -> str:
@@ -115,8 +120,12 @@ def find_station(args: argparse.Namespace) -> Target:
         # a reload of this file was refused, perhaps: the daemon runs on what it loaded
         # before, and answers at the address the file's http section still says
         http = _http_section(config)
+        if http is None and url is not None:
+            http = SimpleNamespace(http=None)   # the daemon's address given: asked there
         if http is None:
-            raise
+            raise InputError(f"{exc}; a daemon running on this file before it broke keeps "
+                             "its configuration: give --url http://HOST:PORT/ of its "
+                             "screens to reach it") from None
         sys.stderr.write(f"stationd: {config} does not read ({exc}); asking the daemon at "
                          f"its http section's address (a refused reload leaves it running "
                          f"on the file it read before)\n")
@@ -124,26 +133,54 @@ def find_station(args: argparse.Namespace) -> Target:
                       config)
     if token is None and cfg.http is not None:
         token = cfg.http.token
-    return Target(url or daemon_url(cfg), token, station_identity(cfg), config)
+    return Target(url or daemon_url(cfg), token, station_identity(cfg), config,
+                  no_api=url is None and cfg.http is None)
 
 
 def _http_section(path: str) -> Any:
     """The ``http:`` section of a station file that does not read as a whole, read alone by
     its own reader (an object with ``http``, as :func:`daemon_url` takes it); None where that
     section does not read either, or the file's sections cannot be read at all."""
-    from types import SimpleNamespace
-
     from stationd.config import read_all
     from stationd.errors import ConfigError
     from stationd.web.config import HttpConfig
 
     top = read_all(path).sections
-    if not top:
-        return None
-    if "http" not in top:
+    node = top.get("http") if top else _http_alone(path)
+    if top and node is None:
         return SimpleNamespace(http=None)
+    if node is None:
+        return None
     try:
-        return SimpleNamespace(http=HttpConfig.from_node(top["http"]))
+        return SimpleNamespace(http=HttpConfig.from_node(node))
+    except ConfigError:
+        return None
+
+
+#: the first line of a station file's ``http:`` section (a top-level key)
+_HTTP_LINE = re.compile(r"^http\s*:")
+
+
+def _http_alone(path: str) -> Any:
+    """The ``http:`` section of a file that does not parse as YAML at all (a bad indent
+    elsewhere, a bracket left open): its lines alone, parsed at their own line numbers;
+    None where there is none or it does not parse either.  The most common bad edit must
+    not keep a supervisor's release from the daemon still running on the file it read."""
+    from stationd.errors import ConfigError
+    from stationd.yamlio import MAX_YAML_BYTES, YamlNode, read_text_file
+
+    try:
+        lines = read_text_file(Path(path), MAX_YAML_BYTES, "a YAML file").splitlines()
+    except ConfigError:
+        return None
+    start = next((i for i, line in enumerate(lines) if _HTTP_LINE.match(line)), None)
+    if start is None:
+        return None
+    end = next((i for i in range(start + 1, len(lines))
+                if lines[i][:1] not in ("", " ", "\t", "#")), len(lines))
+    try:
+        root = YamlNode.parse("\n" * start + "\n".join(lines[start:end]), path)
+        return root.mapping(("http",)).get("http")
     except ConfigError:
         return None
 
@@ -177,7 +214,7 @@ def identify(client: ApiClient, target: Target, what: str, *, out: Any = None
     try:
         status, doc = client.call("/api/status")
     except (urllib.error.URLError, OSError) as exc:
-        return _unreachable(target.url, exc, what)
+        return _unreachable(target, exc, what)
     if status != 200 or not isinstance(doc, dict):
         return say_refused(what, status, doc)
     answered = doc.get("station")
@@ -339,8 +376,13 @@ def unreachable_words(url: str, exc: BaseException) -> str:
     return f"no daemon answers at {url} ({why}): {hint}"
 
 
-def _unreachable(url: str, exc: BaseException, what: str = "") -> int:
-    sys.stderr.write(f"stationd: {what + ': ' if what else ''}{unreachable_words(url, exc)}\n")
+def _unreachable(target: Target, exc: BaseException, what: str = "") -> int:
+    said = unreachable_words(target.url, exc)
+    if target.no_api:
+        said = (f"{said.split(': ', 1)[0]}: {target.config} has no http: section, so its "
+                "daemon serves no API for stationd status and the commands: add one (http: "
+                "{listen: '127.0.0.1:8080'}) and reload, or give --url")
+    sys.stderr.write(f"stationd: {what + ': ' if what else ''}{said}\n")
     return EXIT_UNREACHABLE
 
 
@@ -380,7 +422,7 @@ def _session_command(args: argparse.Namespace, user: str, body: dict[str, Any]) 
         if status != 200 or not isinstance(nonce, dict):
             return say_refused(body["kind"], status, nonce)
     except (urllib.error.URLError, OSError) as exc:
-        return _unreachable(target.url, exc)
+        return _unreachable(target, exc)
     try:
         status, answer = client.call("/api/commands", {**body, "nonce": nonce["nonce"]})
     except (urllib.error.URLError, OSError) as exc:
@@ -443,7 +485,7 @@ def cmd_feed(args: argparse.Namespace) -> int:
     try:
         status, doc = client.call(f"/api/feed?since={args.since}&limit={args.limit}")
     except (urllib.error.URLError, OSError) as exc:
-        return _unreachable(target.url, exc)
+        return _unreachable(target, exc)
     if status != 200 or not isinstance(doc, dict):
         return say_refused("feed", status, doc)
     for e in doc["entries"]:

@@ -49,6 +49,39 @@ def test_status_without_daemon_is_one_line_exit_3(capsys):
     assert err.startswith("stationd: status: no daemon answers at") and err.count("\n") == 1
 
 
+def test_a_station_file_without_an_http_section_is_said_to_serve_no_api(tmp_path, capsys):
+    """A daemon runs on a station file without ``http:``: ``status --config`` said "no daemon
+    answers ...: is stationd running?" of a daemon that runs (it serves no API).  The file
+    is named, and what to do."""
+    import argparse
+    import shutil
+    from pathlib import Path
+
+    from stationd.command_cli import _unreachable, find_station
+
+    for f in (Path(__file__).parents[2] / "config" / "sim").iterdir():
+        shutil.copy(f, tmp_path)
+    station = tmp_path / "station.yaml"
+    text = station.read_text()
+    assert "http: {listen: '127.0.0.1:8080'}\n" in text
+    station.write_text(text.replace("http: {listen: '127.0.0.1:8080'}\n", ""))
+    target = find_station(argparse.Namespace(config=str(station), url=None, token=None))
+    assert target.no_api
+    assert _unreachable(target, ConnectionRefusedError(), "status") == 3
+    err = capsys.readouterr().err
+    assert err == (f"stationd: status: no daemon answers at {target.url} (connection "
+                   f"refused): {station} has no http: section, so its daemon serves no API "
+                   "for stationd status and the commands: add one (http: {listen: "
+                   "'127.0.0.1:8080'}) and reload, or give --url\n")
+    given = find_station(argparse.Namespace(config=str(station), url="http://127.0.0.1:9/",
+                                            token=None))
+    assert not given.no_api     # the daemon's address given: said as before
+    with_http = find_station(argparse.Namespace(
+        config=str(Path(__file__).parents[2] / "config" / "sim" / "station.yaml"), url=None,
+        token=None))
+    assert not with_http.no_api
+
+
 @pytest.mark.parametrize("url", ["ftp://x/", "localhost:8080", "http://[::1",
                                  "http://127.0.0.1:99999/"])
 def test_status_bad_url_is_one_line_exit_2(url, capsys):
@@ -234,6 +267,21 @@ def test_status_with_a_station_file_that_no_longer_reads_still_asks_its_daemon(
     assert err.startswith(f"stationd: {bad} does not read (") and "tolerance_mn" in err
     assert "asking the daemon at its http section's address" in err
     assert out.splitlines()[1].startswith("state:    ")
-    # a file that is no YAML at all: its error alone, as before
+    # the commonest bad edit: a bracket left open after the http section, so the file is no
+    # YAML at all (a new user's lock-out: no release without --url); its http section
+    # alone still says where the daemon answers
+    bad.write_text(f"http:\n  listen: '{listen}'\naccess:\n  users:\n"
+                   f"    bob: {{role: operator, password: \"x\"\n")
+    assert main(["status", "--config", str(bad)]) == 0
+    out, err = capsys.readouterr()
+    assert "malformed YAML" in err and "asking the daemon at its http section" in err
+    assert out.splitlines()[1].startswith("state:    ")
+    # a file whose http section does not parse either: its error, and how to reach the
+    # daemon all the same; given that way, it is asked
     bad.write_text("http: [\n")
     assert main(["status", "--config", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "malformed YAML" in err and "give --url http://HOST:PORT/" in err
+    assert len(err.strip().splitlines()) == 1
+    assert main(["status", "--config", str(bad), "--url", srv.url]) == 0
+    assert capsys.readouterr().out.splitlines()[1].startswith("state:    ")
