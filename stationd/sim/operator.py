@@ -481,12 +481,13 @@ async def wait_for_people(st: Station, bolt: str, vin: str, note: Callable[[str]
     released it (None: not heard within 2 s of the release).  ``interruptible``: Ctrl-C or
     SIGTERM ends the wait (:class:`WaitEnded`), so the demo can still say what was done.
     ``url``: the screens the station serves: the release command is said with it (without,
-    ``stationd release`` asks the default station's address, not the demo's).
+    with the station's file: ``stationd release`` alone asks the default station's).
     Why: Ctrl-C there printed "stationd: interrupted (Ctrl-C)" alone, no summary, although
     bolts had been tightened."""
     before = len(_releases(st, bolt))
-    command = f"stationd release {vin} {bolt}" + (f" --url {url}" if url else "") + \
-        " --user NAME"
+    path = getattr(st.cfg, "path", None)
+    where = f" --url {url}" if url else f" --config {path}" if path else ""
+    command = f"stationd release {vin} {bolt}{where} --user NAME"
     note(f"{bolt} of {vin} locked: the operator waits, the vehicle on the lift, for a "
          f"person's release (the screens' Release form, or {command})"
          + ("; Ctrl-C ends the wait and the run" if interruptible else ""))
