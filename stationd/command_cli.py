@@ -47,6 +47,7 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
+from drivers.counting import counted
 from stationd.access import hash_password
 from stationd.errors import InputError
 from stationd.station.events import State
@@ -488,8 +489,15 @@ def cmd_feed(args: argparse.Namespace) -> int:
         return _unreachable(target, exc)
     if status != 200 or not isinstance(doc, dict):
         return say_refused("feed", status, doc)
-    for e in doc["entries"]:
+    entries = doc["entries"]
+    for e in entries:
         print(json.dumps({"db_id": doc["db_id"], **e}, separators=(",", ":")))
+    last = doc.get("last_seq")
+    if entries and isinstance(last, int) and last > entries[-1]["seq"]:
+        # a reader that stops at --limit without a word takes the page for the whole
+        sys.stderr.write(f"stationd: feed: {counted(len(entries), 'record')} up to seq "
+                         f"{entries[-1]['seq']}; more up to seq {last}: give --since "
+                         f"{entries[-1]['seq']}\n")
     return 0
 
 
@@ -600,8 +608,10 @@ def add_command_parsers(sub: Any) -> None:
         client_args(p)
         p.set_defaults(func=cmd_operator)
     fd = sub.add_parser("feed", help="the records after a sequence number, one JSON per line")
-    fd.add_argument("--since", type=int, default=0)
-    fd.add_argument("--limit", type=int, default=100)
+    fd.add_argument("--since", type=int, default=0,
+                    help="the last sequence number already read (default: 0, from the first)")
+    fd.add_argument("--limit", type=int, default=100,
+                    help="records at most, 1-1000 (default: 100; more are said on stderr)")
     client_args(fd)
     fd.set_defaults(func=cmd_feed)
     us = sub.add_parser("user", help="users of the station's access section")

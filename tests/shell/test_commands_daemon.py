@@ -147,6 +147,11 @@ def test_commands_through_the_daemon_are_authenticated_recorded_and_outlive_a_re
                                                                     ("command", "B08")]
         assert feed[0]["seq"] < feed[1]["seq"] and len({e["db_id"] for e in feed}) == 1
         assert _cli("feed", "--url", url, "--since", str(feed[-1]["seq"])).stdout == ""
+        # a page shorter than the records says the rest is there (100 lines stopped silently)
+        page = _cli("feed", "--url", url, "--limit", "1")
+        assert page.returncode == 0 and len(page.stdout.splitlines()) == 1
+        assert f"stationd: feed: 1 record up to seq {feed[0]['seq']}; more up to seq " \
+            f"{feed[-1]['seq']}: give --since {feed[0]['seq']}" in page.stderr
 
         # a reload that removes sam: his open session ends, his commands are refused
         assert json.loads(c.get("/api/me"))["user"] == "sam"
