@@ -467,6 +467,12 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
         if new is not None and not stop.is_set():
             # systemd: reloading until the new station's READY=1 (never STOPPING=1 here)
             notifier.reloading("reloading: closing the devices")
+        elif stop.is_set():
+            # said at once: under load the station's last cycle, the forwarder and the
+            # devices take seconds to end, and a silent journal read as a hang
+            notifier.stopping("stopping: ending the station's work, then closing devices")
+            log.info("stopping: the station's last cycle, the line forwarder and OPC UA end, "
+                     "then the devices close")
         screens.attach(None, cfg)
         inner.set()
         await line

@@ -97,6 +97,9 @@ def test_the_scripted_operator_brings_a_vehicle_and_its_bolt_is_tightened_and_re
         code = d.stop()
     journal = d.log()
     assert code == 0 and "stationd stopped" in journal
+    # the stop is said as it begins (seconds under load before "stopped": read as a hang)
+    assert -1 < journal.find("stopping: the station's last cycle") < journal.index(
+        "stationd stopped")
     assert "no simulated world" not in journal and "Traceback" not in journal
     assert re.search(r"tightening: tightening bolt B\d\d", journal)
     # the result is in the station's database: stationd db report shows it
