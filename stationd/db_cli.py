@@ -206,7 +206,9 @@ def _export_results(args: argparse.Namespace) -> int:
     if args.format == "yaml":
         raise InputError("--results are exported as csv (the default) or json, not yaml")
     fmt = args.format or "csv"
-    with open_repository(_read_url(args), must_exist=True, missing=_missing(args)) as repo:
+    # one vehicle: found where ``db report`` finds it (a running demo's database too)
+    url = _report_url(args) if args.vin is not None else _read_url(args)
+    with open_repository(url, must_exist=True, missing=_missing(args)) as repo:
         results = Results(repo)
         # (an unknown --vin: the report raises NotFoundError, one line, exit 2)
         vins = [args.vin] if args.vin is not None else [

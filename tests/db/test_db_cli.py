@@ -729,6 +729,15 @@ def test_export_and_figures_with_config_read_a_running_demos_database(run, tmp_p
     assert code == 0 and "VIN1,WAGON-B,SF-FL" in out and _one_line(err) == said
     code, out, err = run("db", "spc", "--config", station)
     assert code == 0 and "SF-FL" in out and _one_line(err) == said
+    # one vehicle's export finds it where the report does: the station's own database made
+    # (without VIN1), the demo's is read for it (it said "not in the database")
+    assert run("db", "import", EXAMPLE, "--config", station)[0] == 0
+    code, out, err = run("db", "export", "--results", "--config", station, "--vin", "VIN1")
+    assert code == 0 and "VIN1,WAGON-B,SF-FL" in out, (out, err)
+    assert _one_line(err) == (f"stationd: VIN1 is a running demo's vehicle: reading that "
+                              f"demo's database (DEMO-1, {folder / '1' / 'stationd.db'}), "
+                              f"not {station}'s")
+    (station.parent / "stationd-sim.db").unlink()
     # two demos of it: which to read is asked, each with its --db
     _demo_database(run, temp, station, "def")
     code, out, err = run("db", "spc", "--config", station)
