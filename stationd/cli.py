@@ -60,11 +60,40 @@ class _Parser(argparse.ArgumentParser):
         _Parser.made.append(self)
 
     def error(self, message: str) -> NoReturn:
-        said = self._missing_command(message) or message
+        said = self._missing_command(message) or self._no_such_command(message) or message
         typo = self._mistyped()
-        sys.stderr.write(f"{self.prog}: error: {typo + '; ' if typo else ''}{said} "
-                         "(see --help)\n")
+        if typo is not None and message.startswith("unrecognized arguments"):
+            # the option's typo is the whole story (its value was listed as unrecognized
+            # too), said by the command it was given to
+            sys.stderr.write(f"{self._command_prog()}: error: {typo} (see --help)\n")
+        else:
+            sys.stderr.write(f"{self.prog}: error: {typo + '; ' if typo else ''}{said} "
+                             "(see --help)\n")
         raise SystemExit(EXIT_BAD_INPUT)
+
+    def _command_prog(self) -> str:
+        """The prog of the deepest command the command line names (``stationd demo``), where
+        an unrecognized option is reported by the top parser (``stationd``)."""
+        words = [t for t in _Parser.argv if not t.startswith("-")]
+        best = self.prog
+        for p in _Parser.made:
+            named = p.prog.split()[1:]
+            if named and words[:len(named)] == named and len(p.prog) > len(best):
+                best = p.prog
+        return best
+
+    def _no_such_command(self, message: str) -> str | None:
+        """``stationd stauts``: the command it is likely a typo of, not only the choices."""
+        import difflib
+        import re
+
+        m = re.match(r"argument \S+: invalid choice: '([^']*)' \(choose from (.*)\)$", message)
+        if m is None:
+            return None
+        choices = [c.strip().strip("'") for c in m.group(2).split(",")]
+        close = difflib.get_close_matches(m.group(1), choices, n=1, cutoff=0.6)
+        return None if not close else \
+            f"no command {m.group(1)!r} (did you mean {close[0]}?)"
 
     def _mistyped(self) -> str | None:
         """The first option given that this command does not have, with the one it is

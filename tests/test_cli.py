@@ -622,11 +622,18 @@ def test_detect_draw_never_writes_through_a_link_or_over_another_file(files, tmp
 @pytest.mark.parametrize("argv, said", [
     (["run", "--confg", "x.yaml"], "no option --confg (did you mean --config?); the following "
                                    "arguments are required: --config"),
-    (["status", "--jsn"], "no option --jsn (did you mean --json?); unrecognized arguments: "
-                          "--jsn"),
+    (["status", "--jsn"], "stationd status: error: no option --jsn (did you mean --json?)"),
+    # its value is no second unrecognized argument, and the command it was given says it
+    (["demo", "--cycels", "3"], "stationd demo: error: no option --cycels (did you mean "
+                                "--cycles?)"),
     (["status", "--zzz"], "unrecognized arguments: --zzz"),
+    (["stauts"], "stationd: error: no command 'stauts' (did you mean status?)"),
+    (["db", "exprot"], "stationd db: error: no command 'exprot' (did you mean export?)"),
+    (["frobnicate"], "invalid choice: 'frobnicate' (choose from 'detect', "),
 ])
 def test_a_mistyped_option_is_named_with_the_one_meant(capsys, argv, said):
-    """``run --confg X`` said only that --config is required (a new user's trial)."""
+    """``run --confg X`` said only that --config is required; ``stauts`` only the commands
+    there are (a new user's trial)."""
     code, _, err = _usage_error(capsys, *argv)
-    assert code == 2 and f"error: {said} (see --help)" in _one_line(err), err
+    assert code == 2 and said in _one_line(err) and _one_line(err).rstrip("\n").endswith(
+        " (see --help)"), err
