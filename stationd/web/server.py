@@ -377,9 +377,21 @@ class WebServer:
         pairs = [n for n in self.devices if n not in (LIFT, WRENCH)]
         return web.json_response([{"pair": n, **health[n]} for n in pairs if n in health])
 
+    def _known_camera(self, pair: str, side: str) -> None:
+        """A pair the station was configured with, and a side it has: a typo in a URL is said
+        as such, not as "no frame yet" of a camera that never will have one.  (A server
+        told no devices, as in a bench, knows of no pairs and checks none.)"""
+        pairs = [n for n in self.devices if n not in (LIFT, WRENCH)]
+        if side not in ("left", "right"):
+            raise web.HTTPNotFound(text=f"no side {side!r}: left or right\n")
+        if pairs and pair not in pairs:
+            raise web.HTTPNotFound(text=f"no pair {pair!r} at this station (its pairs: "
+                                        f"{', '.join(pairs)})\n")
+
     async def _frame(self, request: web.Request) -> web.Response:
         pair, side = request.match_info["pair"], request.match_info["side"]
         width = _int_arg(request, "w", 640)
+        self._known_camera(pair, side)
         data = await asyncio.get_running_loop().run_in_executor(
             None, self.frames.jpeg, pair, side, width)
         if data is None:
@@ -391,6 +403,7 @@ class WebServer:
         pair, side = request.match_info["pair"], request.match_info["side"]
         x, y = _int_arg(request, "x", 0), _int_arg(request, "y", 0)
         size = _int_arg(request, "size", 512)
+        self._known_camera(pair, side)
         data = await asyncio.get_running_loop().run_in_executor(
             None, self.frames.crop, pair, side, x, y, size)
         if data is None:

@@ -146,6 +146,27 @@ def test_cameras_frames_and_crops_on_demand():
     asyncio.run(main())
 
 
+def test_a_camera_the_station_has_not_is_said_so_not_awaited():
+    """``/api/cameras/pair9/left/frame.jpg`` of a station without pair9 said "no frame from
+    pair9/left yet", as if one would come (a new user's trial)."""
+    async def main():
+        frames = LatestFrames()
+        srv = serve(EventBus(), frames=frames, devices=("lift", "wrench", "front"))
+        await srv.start()
+        try:
+            async with ClientSession() as http:
+                for path, said in (
+                        ("pair9/left/frame.jpg", "no pair 'pair9' at this station (its pairs: "
+                                                 "front)"),
+                        ("front/middle/crop.jpg", "no side 'middle': left or right"),
+                        ("front/left/frame.jpg", "no frame from front/left yet")):
+                    async with http.get(srv.url + "api/cameras/" + path) as r:
+                        assert (r.status, (await r.text()).strip()) == (404, said)
+        finally:
+            await srv.stop()
+    asyncio.run(main())
+
+
 def test_results_and_exports_from_a_real_database(tmp_path):
     repo = results_db(tmp_path)
     (tmp_path / "img").mkdir()
