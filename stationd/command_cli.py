@@ -280,13 +280,14 @@ def prompts() -> bool:
     return "STATIOND_PASSWORD" not in os.environ and sys.stdin.isatty()
 
 
-def read_password() -> str:
-    """The password (see the module's words); an empty one (standard input empty, ``<
-    /dev/null``) is bad input, said so, never sent as a login a daemon refuses."""
+def read_password(user: str | None = None) -> str:
+    """The password (see the module's words), of ``user`` as a prompt asks it; an empty one
+    (standard input empty, ``< /dev/null``) is bad input, said so, never sent as a login a
+    daemon refuses."""
     if "STATIOND_PASSWORD" in os.environ:
         password = os.environ["STATIOND_PASSWORD"]
     elif sys.stdin.isatty():
-        password = getpass.getpass("password: ")
+        password = getpass.getpass(f"{user}'s password: " if user else "password: ")
     else:
         line = sys.stdin.readline(MAX_PASSWORD + 1)
         if len(line) > MAX_PASSWORD:
@@ -408,12 +409,12 @@ def _session_command(args: argparse.Namespace, user: str, body: dict[str, Any]) 
     # a password read without a person (the environment, standard input) is read first:
     # none given is told without asking the daemon; a prompt comes after the station is
     # named, so that the person knows whose password is asked
-    password = None if prompts() else read_password()
+    password = None if prompts() else read_password(user)
     known = identify(client, target, body["kind"])
     if isinstance(known, int):
         return known
     if password is None:
-        password = read_password()
+        password = read_password(user)
     try:
         status, who = client.call("/api/login", {"user": user, "password": password,
                                                  "client": "cli"})

@@ -135,8 +135,9 @@ def _ask_daemon(args: argparse.Namespace, cfg: Any, pid: int | None) -> int:
     if isinstance(known, int):
         return known
     try:
+        password = read_password(args.user.strip())
         status, me = client.call("/api/login", {"user": args.user.strip(),
-                                                "password": read_password(), "client": "cli"})
+                                                "password": password, "client": "cli"})
         if status != 200:
             return say_refused("login refused", status, me)
         status, nonce = client.call("/api/nonce")

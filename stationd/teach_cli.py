@@ -103,7 +103,8 @@ def cmd_teach(args: argparse.Namespace) -> int:
 
 def _teach(args: argparse.Namespace, client: ApiClient, out: Path, doc: dict[str, Any],
            ids: list[str], cad: list[dict[str, Any]]) -> int:
-    status, who = client.call("/api/login", {"user": args.user, "password": read_password(),
+    password = read_password(args.user)
+    status, who = client.call("/api/login", {"user": args.user, "password": password,
                                              "client": "cli"})
     if status != 200:
         return say_refused("login refused", status, who)

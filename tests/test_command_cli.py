@@ -138,3 +138,19 @@ def test_a_server_that_is_not_stationd_is_said_so() -> None:
     finally:
         server.shutdown()
         server.server_close()
+
+
+def test_the_password_prompt_says_whose(monkeypatch):
+    """At a terminal the prompt was ``password:`` alone: whose is said (``sam's
+    password:``), as the command names the user."""
+    import getpass
+
+    from stationd import command_cli
+
+    asked: list[str] = []
+    monkeypatch.delenv("STATIOND_PASSWORD", raising=False)
+    monkeypatch.setattr(command_cli.sys.stdin, "isatty", lambda: True, raising=False)
+    monkeypatch.setattr(getpass, "getpass", lambda prompt: asked.append(prompt) or "secret")
+    assert command_cli.read_password("sam") == "secret"
+    assert command_cli.read_password() == "secret"
+    assert asked == ["sam's password: ", "password: "]
