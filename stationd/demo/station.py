@@ -474,10 +474,12 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
                   f"{counted(every['nok_policy']['nok'], 'NOK result')}"
                   + (f"; {operator_words(every['operators'])}" if every["operators"] else ""))
         for v in summary.get("vehicles_closed") or ():
-            if v["missing"]:
-                print(f"vehicle {v['vin']} closed with {counted(v['missing'], 'bolt')} not "
-                      f"worked (the demo works {cycles} of its bolts, then lowers the lift): "
-                      "its report lists them missing; the verdict is the station's part")
+            if v["missing"]:   # the first station's (each station closes it on its own)
+                print(f"{me}vehicle {v['vin']} closed with {counted(v['missing'], 'bolt')} "
+                      f"not worked {'at this station ' if extra else ''}(the demo works "
+                      f"{cycles} of its bolts{' at each station' if extra else ''}, then "
+                      "lowers the lift): its report lists them missing; the verdict is the "
+                      "station's part")
         if instead:
             devices = ", ".join(d.rsplit(" ", 1)[0] for d in instead)
             print(f"simulated, not the station file's devices: {devices} (the records went "
