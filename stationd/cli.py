@@ -87,13 +87,16 @@ class _Parser(argparse.ArgumentParser):
         import difflib
         import re
 
-        m = re.match(r"argument \S+: invalid choice: '([^']*)' \(choose from (.*)\)$", message)
-        if m is None:
+        m = re.match(r"argument (\S+): invalid choice: '([^']*)' \(choose from (.*)\)$",
+                     message)
+        commands = {a.dest for a in self._actions
+                    if isinstance(a, argparse._SubParsersAction)}
+        if m is None or m.group(1) not in commands:   # an option's value: argparse's words
             return None
-        choices = [c.strip().strip("'") for c in m.group(2).split(",")]
-        close = difflib.get_close_matches(m.group(1), choices, n=1, cutoff=0.6)
+        choices = [c.strip().strip("'") for c in m.group(3).split(",")]
+        close = difflib.get_close_matches(m.group(2), choices, n=1, cutoff=0.6)
         return None if not close else \
-            f"no command {m.group(1)!r} (did you mean {close[0]}?)"
+            f"no command {m.group(2)!r} (did you mean {close[0]}?)"
 
     def _mistyped(self) -> str | None:
         """The first option given that this command does not have, with the one it is

@@ -120,6 +120,8 @@ def find_station(args: argparse.Namespace) -> Target:
     except ConfigError as exc:
         # a reload of this file was refused, perhaps: the daemon runs on what it loaded
         # before, and answers at the address the file's http section still says
+        if not Path(config).is_file():
+            raise                               # a typo in the path, most likely
         http = _http_section(config)
         if http is None and url is not None:
             http = SimpleNamespace(http=None)   # the daemon's address given: asked there
@@ -127,9 +129,10 @@ def find_station(args: argparse.Namespace) -> Target:
             raise InputError(f"{exc}; a daemon running on this file before it broke keeps "
                              "its configuration: give --url http://HOST:PORT/ of its "
                              "screens to reach it") from None
-        sys.stderr.write(f"stationd: {config} does not read ({exc}); asking the daemon at "
-                         f"its http section's address (a refused reload leaves it running "
-                         f"on the file it read before)\n")
+        where = "at --url" if url is not None else "at its http section's address"
+        sys.stderr.write(f"stationd: {config} does not read ({exc}); asking the daemon "
+                         f"{where} (a refused reload leaves it running on the file it read "
+                         "before)\n")
         return Target(url or daemon_url(http), token or getattr(http.http, "token", None), None,
                       config)
     if token is None and cfg.http is not None:

@@ -630,6 +630,9 @@ def test_detect_draw_never_writes_through_a_link_or_over_another_file(files, tmp
     (["stauts"], "stationd: error: no command 'stauts' (did you mean status?)"),
     (["db", "exprot"], "stationd db: error: no command 'exprot' (did you mean export?)"),
     (["frobnicate"], "invalid choice: 'frobnicate' (choose from 'detect', "),
+    # an option's value out of its choices is no command
+    (["db", "export", "--results", "--format", "jsno"],
+     "argument --format: invalid choice: 'jsno' (choose from "),
 ])
 def test_a_mistyped_option_is_named_with_the_one_meant(capsys, argv, said):
     """``run --confg X`` said only that --config is required; ``stauts`` only the commands

@@ -17,12 +17,14 @@ daemon`): the two exercise the same rounds, so what the demo passes the daemon s
 from __future__ import annotations
 
 import asyncio
+import shlex
 import signal
 import sys
 import threading
 from collections.abc import Callable, Collection, Iterator, Sequence
 from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -485,8 +487,9 @@ async def wait_for_people(st: Station, bolt: str, vin: str, note: Callable[[str]
     Why: Ctrl-C there printed "stationd: interrupted (Ctrl-C)" alone, no summary, although
     bolts had been tightened."""
     before = len(_releases(st, bolt))
-    path = getattr(st.cfg, "path", None)
-    where = f" --url {url}" if url else f" --config {path}" if path else ""
+    path = getattr(st.cfg, "path", None)   # absolute: pasted in another folder it works
+    where = f" --url {url}" if url else \
+        f" --config {shlex.quote(str(Path(path).resolve()))}" if path else ""
     command = f"stationd release {vin} {bolt}{where} --user NAME"
     note(f"{bolt} of {vin} locked: the operator waits, the vehicle on the lift, for a "
          f"person's release (the screens' Release form, or {command})"

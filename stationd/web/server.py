@@ -378,9 +378,10 @@ class WebServer:
         return web.json_response([{"pair": n, **health[n]} for n in pairs if n in health])
 
     def _known_camera(self, pair: str, side: str) -> None:
-        """A pair the station was configured with, and a side it has: a typo in a URL is said
-        as such, not as "no frame yet" of a camera that never will have one.  (A server
-        told no devices, as in a bench, knows of no pairs and checks none.)"""
+        """Where no frame is kept: a pair the station was configured with, and a side it has,
+        or a typo in a URL said as such, not as "no frame yet" of a camera that never will
+        have one.  (A frame kept is served whatever its pair: one of before a reload; a
+        server told no devices, as in a bench, knows of no pairs and checks none.)"""
         pairs = [n for n in self.devices if n not in (LIFT, WRENCH)]
         if side not in ("left", "right"):
             raise web.HTTPNotFound(text=f"no side {side!r}: left or right\n")
@@ -391,10 +392,10 @@ class WebServer:
     async def _frame(self, request: web.Request) -> web.Response:
         pair, side = request.match_info["pair"], request.match_info["side"]
         width = _int_arg(request, "w", 640)
-        self._known_camera(pair, side)
         data = await asyncio.get_running_loop().run_in_executor(
             None, self.frames.jpeg, pair, side, width)
         if data is None:
+            self._known_camera(pair, side)
             raise web.HTTPNotFound(text=f"no frame from {pair}/{side} yet\n")
         return web.Response(body=data, content_type="image/jpeg",
                             headers={"Cache-Control": "no-store"})
@@ -403,10 +404,10 @@ class WebServer:
         pair, side = request.match_info["pair"], request.match_info["side"]
         x, y = _int_arg(request, "x", 0), _int_arg(request, "y", 0)
         size = _int_arg(request, "size", 512)
-        self._known_camera(pair, side)
         data = await asyncio.get_running_loop().run_in_executor(
             None, self.frames.crop, pair, side, x, y, size)
         if data is None:
+            self._known_camera(pair, side)
             raise web.HTTPNotFound(text=f"no frame from {pair}/{side} yet\n")
         return web.Response(body=data, content_type="image/jpeg",
                             headers={"Cache-Control": "no-store"})

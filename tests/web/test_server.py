@@ -162,6 +162,10 @@ def test_a_camera_the_station_has_not_is_said_so_not_awaited():
                         ("front/left/frame.jpg", "no frame from front/left yet")):
                     async with http.get(srv.url + "api/cameras/" + path) as r:
                         assert (r.status, (await r.text()).strip()) == (404, said)
+                # a frame kept is served whatever its pair (one of before a reload)
+                frames.put("gone", "left", np.full((48, 64), 90, np.uint8), {})
+                async with http.get(srv.url + "api/cameras/gone/left/frame.jpg") as r:
+                    assert r.status == 200 and r.content_type == "image/jpeg"
         finally:
             await srv.stop()
     asyncio.run(main())

@@ -284,4 +284,14 @@ def test_status_with_a_station_file_that_no_longer_reads_still_asks_its_daemon(
     assert "malformed YAML" in err and "give --url http://HOST:PORT/" in err
     assert len(err.strip().splitlines()) == 1
     assert main(["status", "--config", str(bad), "--url", srv.url]) == 0
-    assert capsys.readouterr().out.splitlines()[1].startswith("state:    ")
+    out, err = capsys.readouterr()
+    assert out.splitlines()[1].startswith("state:    ") and "asking the daemon at --url" in err
+    # the http section after others, with Windows line ends: found alike
+    bad.write_bytes(f"vision:\r\n  tolerance_mn: [3\r\nhttp:\r\n  listen: '{listen}'\r\n"
+                    .encode())
+    assert main(["status", "--config", str(bad)]) == 0, capsys.readouterr().err
+    capsys.readouterr()
+    # a path that names no file is a typo, most likely: said alone, no daemon hint
+    assert main(["status", "--config", str(tmp_path / "nothere.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert "not found" in err and "--url" not in err and len(err.strip().splitlines()) == 1
