@@ -23,11 +23,13 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from types import FrameType
-from typing import Any, ClassVar, NoReturn
+from typing import Any, NoReturn
 
+from stationd.cliparse import EXIT_BAD_INPUT
+from stationd.cliparse import Parser as _Parser
 from stationd.errors import InputError, StationError, printable
 
-EXIT_OK, EXIT_NOT_FOUND, EXIT_BAD_INPUT = 0, 1, 2
+EXIT_OK, EXIT_NOT_FOUND = 0, 1
 #: a command stopped by a signal: the shell's 128 + the signal's number, as if it had been
 #: killed by it (a script tells Ctrl-C and systemd's stop apart as it would for any program)
 EXIT_SIGINT, EXIT_SIGTERM = 128 + signal.SIGINT, 128 + signal.SIGTERM
@@ -44,85 +46,6 @@ def _reported() -> tuple[type[Exception], ...]:
     from drivers.errors import DriverError
 
     return (StationError, DbError, DriverError)
-
-
-class _Parser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line and exit code 2."""
-
-    #: the command line being read (set by :func:`_main`): a mistyped option is named
-    argv: Sequence[str] = ()
-    #: every parser made (the command's and its subcommands'): an option unknown to the
-    #: one that reports it may be a subcommand's, mistyped
-    made: ClassVar[list[argparse.ArgumentParser]] = []
-
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        _Parser.made.append(self)
-
-    def error(self, message: str) -> NoReturn:
-        said = self._missing_command(message) or self._no_such_command(message) or message
-        typo = self._mistyped()
-        if typo is not None and message.startswith("unrecognized arguments"):
-            # the option's typo is the whole story (its value was listed as unrecognized
-            # too), said by the command it was given to
-            sys.stderr.write(f"{self._command_prog()}: error: {typo} (see --help)\n")
-        else:
-            sys.stderr.write(f"{self.prog}: error: {typo + '; ' if typo else ''}{said} "
-                             "(see --help)\n")
-        raise SystemExit(EXIT_BAD_INPUT)
-
-    def _command_prog(self) -> str:
-        """The prog of the deepest command the command line names (``stationd demo``), where
-        an unrecognized option is reported by the top parser (``stationd``)."""
-        words = [t for t in _Parser.argv if not t.startswith("-")]
-        best = self.prog
-        for p in _Parser.made:
-            named = p.prog.split()[1:]
-            if named and words[:len(named)] == named and len(p.prog) > len(best):
-                best = p.prog
-        return best
-
-    def _no_such_command(self, message: str) -> str | None:
-        """``stationd stauts``: the command it is likely a typo of, not only the choices."""
-        import difflib
-        import re
-
-        m = re.match(r"argument (\S+): invalid choice: '([^']*)' \(choose from (.*)\)$",
-                     message)
-        commands = {a.dest for a in self._actions
-                    if isinstance(a, argparse._SubParsersAction)}
-        if m is None or m.group(1) not in commands:   # an option's value: argparse's words
-            return None
-        choices = [c.strip().strip("'") for c in m.group(3).split(",")]
-        close = difflib.get_close_matches(m.group(2), choices, n=1, cutoff=0.6)
-        return None if not close else \
-            f"no command {m.group(2)!r} (did you mean {close[0]}?)"
-
-    def _mistyped(self) -> str | None:
-        """The first option given that this command does not have, with the one it is
-        likely a typo of: ``run --confg X`` said only that --config is required."""
-        import difflib
-
-        mine = {o for p in (self, *_Parser.made) if p.prog.startswith(self.prog)
-                for o in p._option_string_actions if o.startswith("--")}
-        known = sorted(mine)
-        for token in _Parser.argv:
-            name = token.split("=", 1)[0]
-            if name.startswith("--") and name not in mine:
-                close = difflib.get_close_matches(name, known, n=1, cutoff=0.7)
-                if close:
-                    return f"no option {name} (did you mean {close[0]}?)"
-        return None
-
-    def _missing_command(self, message: str) -> str | None:
-        """A command given without its subcommand (``stationd config``) is told what to
-        type, not ``the following arguments are required: config_command``."""
-        for action in self._actions:
-            if isinstance(action, argparse._SubParsersAction) and action.dest and \
-                    message == f"the following arguments are required: {action.dest}":
-                choices = " | ".join(action.choices)
-                return f"a command is missing: {self.prog} {choices}"
-        return None
 
 
 def _emit(obj: dict[str, Any]) -> None:
