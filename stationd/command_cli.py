@@ -466,11 +466,13 @@ def cmd_operator(args: argparse.Namespace) -> int:
 def _operator_status(args: argparse.Namespace) -> int:
     target = find_station(args)
     doc = identify(ApiClient(target.url, target.token, args.timeout), target,
-                   "operator status")
+                   "operator status", out=sys.stderr if args.json else sys.stdout)
     if isinstance(doc, int):
         return doc
     op = doc.get("operator") or {}
-    if op.get("user"):
+    if args.json:   # for a script: as the status's own JSON says it
+        print(json.dumps({"user": op.get("user"), "required": bool(op.get("required"))}))
+    elif op.get("user"):
         print(f"operator: {op['user']} signed in")
     else:
         print("operator: nobody signed in" + (
@@ -606,6 +608,9 @@ def add_command_parsers(sub: Any) -> None:
                          epilog=epilog)
     so.add_argument("--user", required=True, help="who gives the command")
     st = osub.add_parser("status", help="who is signed in at the station")
+    st.add_argument("--json", action="store_true",
+                    help="one JSON object on stdout ({\"user\", \"required\"}), the station's "
+                         "line on stderr")
     for p in (si, so):
         p.add_argument("--comment", default="", help="kept with the command")
     for p in (si, so, st):

@@ -8,6 +8,7 @@ after a reload; the sign-in and sign-out are audit entries."""
 
 from __future__ import annotations
 
+import json
 import sqlite3
 
 import pytest
@@ -55,6 +56,9 @@ def test_a_signed_in_operators_rundown_is_recorded_with_them_and_nobody_tightens
         assert got.returncode == 0 and "accepted" in got.stdout, got.stdout + got.stderr
         d.wait_log("operator: olga signed in")
         assert "olga signed in" in _cli("operator", "status", "--url", url).stdout
+        got = _cli("operator", "status", "--url", url, "--json")   # for a script
+        assert json.loads(got.stdout) == {"user": "olga", "required": True}, got.stderr
+        assert got.stderr.startswith("station at ")
         d.wait_log("tightening: tightening bolt B05")
         until(lambda: ctl.tool_enabled, 30, "tool enabled")
         shot = ctl.pull_trigger()
