@@ -371,23 +371,26 @@ def network_words(exc: BaseException) -> str:
     return str(reason) or type(reason).__name__
 
 
-def unreachable_words(url: str, exc: BaseException) -> str:
+def unreachable_words(url: str, exc: BaseException, hint: str | None = None) -> str:
     """"no daemon answers at URL (connection refused): is stationd running?" and the like:
-    the URL asked, why in words, and what to look at."""
+    the URL asked, why in words, and what to look at (``hint``, where the caller knows
+    better than the network's why)."""
     why = network_words(exc)
-    hint = {"connection refused": "is stationd running?",
-            "timed out": "is stationd running there, and not stopped? (a larger --timeout "
-                         "if it is busy)"}.get(why, "is the URL right, and stationd running?")
+    if hint is None:
+        hint = {"connection refused": "is stationd running?",
+                "timed out": "is stationd running there, and not stopped? (a larger "
+                             "--timeout if it is busy)"}.get(
+            why, "is the URL right, and stationd running?")
     return f"no daemon answers at {url} ({why}): {hint}"
 
 
 def _unreachable(target: Target, exc: BaseException, what: str = "") -> int:
-    said = unreachable_words(target.url, exc)
-    if target.no_api:
-        said = (f"{said.split(': ', 1)[0]}: {target.config} has no http: section, so its "
-                "daemon serves no API for stationd status and the commands: add one (http: "
-                "{listen: '127.0.0.1:8080'}) and reload, or give --url")
-    sys.stderr.write(f"stationd: {what + ': ' if what else ''}{said}\n")
+    hint = None if not target.no_api else (
+        f"{target.config} has no http: section, so its daemon serves no API for stationd "
+        "status and the commands: add one (http: {listen: '127.0.0.1:8080'}) and reload, or "
+        "give --url")
+    sys.stderr.write(f"stationd: {what + ': ' if what else ''}"
+                     f"{unreachable_words(target.url, exc, hint)}\n")
     return EXIT_UNREACHABLE
 
 

@@ -374,15 +374,19 @@ class WebServer:
         pairs only): the cameras screen shows a pair that is down, or not opened yet, with
         its reason even when it never handed over a frame."""
         health = self.view.device_health()
-        pairs = [n for n in self.devices if n not in (LIFT, WRENCH)]
-        return web.json_response([{"pair": n, **health[n]} for n in pairs if n in health])
+        return web.json_response([{"pair": n, **health[n]} for n in self._pair_names()
+                                  if n in health])
+
+    def _pair_names(self) -> list[str]:
+        """The camera pairs among the configured devices (in their order)."""
+        return [n for n in self.devices if n not in (LIFT, WRENCH)]
 
     def _known_camera(self, pair: str, side: str) -> None:
         """Where no frame is kept: a pair the station was configured with, and a side it has,
         or a typo in a URL said as such, not as "no frame yet" of a camera that never will
         have one.  (A frame kept is served whatever its pair: one of before a reload; a
         server told no devices, as in a bench, knows of no pairs and checks none.)"""
-        pairs = [n for n in self.devices if n not in (LIFT, WRENCH)]
+        pairs = self._pair_names()
         if side not in ("left", "right"):
             raise web.HTTPNotFound(text=f"no side {side!r}: left or right\n")
         if pairs and pair not in pairs:
