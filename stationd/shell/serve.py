@@ -180,6 +180,8 @@ class Screens:
                                results_error=results_error)
             await server.start()
             self.server = server   # only once it serves (a retry's start is awaited)
+            if self.station is not None:   # started late (its port freed): what is now
+                server.seed(self.station.core.status())
             self.attach(self.station, cfg)
         except OPEN_ERRORS as exc:
             # a port another program holds may be freed: tried again, journaled once

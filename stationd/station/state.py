@@ -140,6 +140,10 @@ class CoreStatus:
     #: comes back to a vehicle, a simulated operator after a reload, goes on with the rest)
     done: frozenset[str] = frozenset()
     skipped: frozenset[str] = frozenset()
+    #: device -> its fault's kind (``down``, ``timeout``, ...), as :class:`DeviceHealth` says it
+    fault_kinds: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
+    #: no parameters are sent while nobody is signed in (``access.operator_required``)
+    operator_required: bool = False
 
     @property
     def cameras_on(self) -> bool:
@@ -241,7 +245,9 @@ class CoreState:
                           self.line,
                           MappingProxyType(dict(self.identifications)),
                           frozenset(() if self.matcher is None else self.matcher.done),
-                          frozenset(() if self.matcher is None else self.matcher.skipped))
+                          frozenset(() if self.matcher is None else self.matcher.skipped),
+                          MappingProxyType({d: str(k) for d, (k, _) in self.faults.items()}),
+                          self.operator_required)
 
     @property
     def selection(self) -> Selection | None:

@@ -38,6 +38,7 @@ from stationd.errors import InputError
 from stationd.station.commands import Right
 from stationd.station.events import PairFrames
 from stationd.station.inputs import LIFT, WRENCH
+from stationd.station.state import CoreStatus
 from stationd.web.commands import POSTS, CommandRoutes
 from stationd.web.config import HttpConfig, open_bind_problem
 from stationd.web.frames import LatestFrames, sharpness
@@ -163,6 +164,15 @@ class WebServer:
         host = self.config.host
         host = f"[{host}]" if ":" in host else host
         return f"http://{host}:{self._port}/"
+
+    def seed(self, now: CoreStatus) -> None:
+        """The running station's snapshot (``core.status()``) taken over the history folded
+        at :meth:`start` (:meth:`View.seed`: what a bounded history lost), then sent."""
+        self.view.seed(now)
+        with contextlib.suppress(TypeError, ValueError):
+            self._snapshot = self._encode()
+        for q in list(self._clients):
+            _offer(q, self._snapshot)
 
     def set_devices(self, devices: tuple[str, ...]) -> None:
         """The configured devices changed (a reload): the next snapshot lists the new set."""

@@ -55,8 +55,8 @@ from stationd.station.events import (
     WrongBolt,
 )
 from stationd.station.inputs import DATABASE
-from stationd.station.state import LOCALIZING
-from stationd.words import check_words, reason_words, state_words
+from stationd.station.state import LOCALIZING, CoreStatus
+from stationd.words import check_words, fault_words, reason_words, state_words
 
 
 class Shown(StrEnum):
@@ -252,6 +252,28 @@ class View:
                     self._refuse("")     # signed in: the next frames decide
             case WrongBolt():
                 self.alarm = f"parameters sent for {e.bolt} while the wrench was on {e.truth}"
+
+    def seed(self, now: CoreStatus) -> None:
+        """Take what the core decided, as of now (its snapshot), over the events folded so
+        far: the state and its reason, which devices are in fault and which are not, what
+        each device said it is, who is signed in.  Why: the events a view starts from are the
+        bus's bounded history; a screens' server started hours into a run (its port freed
+        late) must not show a fault gone from that history as healthy, or the station as
+        starting.  The events published after the snapshot are folded on it as before."""
+        self.state, self.reason = now.state, state_words(now.reason)
+        self.reason_kind = now.reason.kind
+        if now.state not in TRACKING_STATES:
+            self._refuse("")
+        for device, why in now.faults.items():
+            self.devices[device] = {"ok": False, "kind": now.fault_kinds.get(device, ""),
+                                    "reason": fault_words(why)}
+        for device, health in list(self.devices.items()):
+            if not health["ok"] and device not in now.faults:
+                self.devices[device] = {"ok": True, "kind": "", "reason": ""}
+        if now.state != State.STARTING and DATABASE not in now.faults:
+            self.opened = True
+        self.identities.update(now.identities)
+        self.operator, self.operator_required = now.operator, now.operator_required
 
     def _state(self, e: StateChanged) -> None:
         self.state, self.reason, self.reason_kind = e.state, state_words(e.reason), e.reason.kind

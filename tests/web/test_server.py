@@ -6,6 +6,7 @@ import asyncio
 import csv
 import io
 import json
+from typing import Any
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from stationd.station.events import Because, Localized, PairFrames, StateChanged
 from stationd.web.frames import LatestFrames
 from stationd.web.results import Results
 from stationd.web.server import WebServer
+from stationd.web.view import View
 from tests.web.scenario import VIN, fault, opened, results_db, work
 
 
@@ -360,3 +362,58 @@ def test_spc_serves_each_groups_last_results_and_limits_and_refuses_a_bad_count(
             await srv.stop()
             repo.close()
     asyncio.run(main())
+
+
+def test_a_server_started_late_shows_what_the_core_decided_not_what_its_history_lost():
+    """A screens' server started hours into a run (its port freed late): the bus's bounded
+    history has lost, to the localizations since, the fault of a camera pair and the
+    operator's sign-in.  Folding the history alone, the screen said the station was starting
+    and every device ok; seeded with the running core's snapshot, it says the fault, with its
+    kind and words, and who is signed in, and the events after it are folded on it."""
+    from drivers.keeper import FaultKind
+    from stationd.station.actions import Publish
+    from stationd.station.commands import SignIn
+    from stationd.station.inputs import DeviceBack, DeviceFault
+    from stationd.words import worded
+    from tests.station.test_core import _ready
+    from tests.station.test_operator import OLGA
+
+    d = _ready(operator_required=True)
+    d.command(1, SignIn(), OLGA)
+    d.feed(DeviceFault(d.t, "pair2", FaultKind.DOWN, "pair2: camera unplugged"))
+    bus = EventBus(history=50)
+    for _, acts in d.log:
+        for a in acts:
+            if isinstance(a, Publish):
+                bus.publish(worded(a.event))
+    for i in range(60):     # hours of tracking since, in a history of 50
+        bus.publish(Localized(point_mm=None, tilt_deg=None, reason=None, candidate=None,
+                              distance_mm=None, age_ms=30.0, allowed=(), t=float(i)))
+
+    async def status(seeded: bool) -> dict:
+        srv = serve(bus, devices=("lift", "wrench", "pair1", "pair2"))
+        await srv.start()
+        try:
+            if seeded:
+                srv.seed(d.core.status())
+            async with ClientSession() as http, http.get(srv.url + "api/status") as r:
+                doc: dict[str, Any] = await r.json()
+                return doc
+        finally:
+            await srv.stop()
+
+    lost = asyncio.run(status(seeded=False))
+    assert lost["state"] == "starting" and lost["operator"]["user"] is None   # the flaw
+    st = asyncio.run(status(seeded=True))
+    assert st["state"] == "fault" and st["reason_kind"] == "fault"
+    assert {k: st["devices"]["pair2"][k] for k in ("ok", "kind", "reason")} == {
+        "ok": False, "kind": "down", "reason": "pair2: camera unplugged"}
+    assert st["devices"]["pair1"]["ok"] is True and st["devices"]["lift"]["ok"] is True
+    assert st["operator"] == {"user": "olga", "required": True}
+    # the events after the snapshot are folded on it: the pair back, the station with it
+    view = View(configured=("pair2",))
+    view.seed(d.core.status())
+    for a in d.feed(DeviceBack(d.t, "pair2", reconnects=1)):
+        if isinstance(a, Publish):
+            view.apply(worded(a.event))
+    assert view.devices["pair2"]["ok"] is True and view.state != "fault"
