@@ -32,10 +32,11 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         said = self._missing_command(message) or self._no_such_command(message) or message
         typo = self._mistyped()
-        if typo is not None and message.startswith("unrecognized arguments"):
-            # the option's typo is the whole story (its value was listed as unrecognized
-            # too), said by the command it was given to
-            sys.stderr.write(f"{self._command_prog()}: error: {typo} (see --help)\n")
+        if message.startswith("unrecognized arguments"):
+            # said by the command it was given to; a typo is the whole story (its value was
+            # listed as unrecognized too)
+            sys.stderr.write(f"{self._command_prog()}: error: {typo or message} "
+                             "(see --help)\n")
         else:
             sys.stderr.write(f"{self.prog}: error: {typo + '; ' if typo else ''}{said} "
                              "(see --help)\n")
@@ -73,7 +74,8 @@ class Parser(argparse.ArgumentParser):
         likely a typo of: ``run --confg X`` said only that --config is required."""
         import difflib
 
-        mine = {o for p in (self, *Parser.made) if p.prog.startswith(self.prog)
+        command = self._command_prog()    # its own options, not every command's
+        mine = {o for p in (self, *Parser.made) if p.prog == command
                 for o in p._option_string_actions if o.startswith("--")}
         known = sorted(mine)
         for token in Parser.argv:

@@ -626,7 +626,15 @@ def test_detect_draw_never_writes_through_a_link_or_over_another_file(files, tmp
     # its value is no second unrecognized argument, and the command it was given says it
     (["demo", "--cycels", "3"], "stationd demo: error: no option --cycels (did you mean "
                                 "--cycles?)"),
-    (["status", "--zzz"], "unrecognized arguments: --zzz"),
+    (["status", "--zzz"], "stationd status: error: unrecognized arguments: --zzz"),
+    # only the command's own options are suggested: --bolts is another command's, and
+    # following the hint failed (a new user's trial)
+    (["demo", "--bogus"], "stationd demo: error: unrecognized arguments: --bogus"),
+    (["feed", "--bogus"], "stationd feed: error: unrecognized arguments: --bogus"),
+    (["line", "results", "--config", "s.yaml", "--bogus"],
+     "stationd line results: error: unrecognized arguments: --bogus"),
+    (["line", "results", "--config", "s.yaml", "--bolts", "B1"],
+     "stationd line results: error: no option --bolts (did you mean --bolt?)"),
     (["stauts"], "stationd: error: no command 'stauts' (did you mean status?)"),
     (["db", "exprot"], "stationd db: error: no command 'exprot' (did you mean export?)"),
     (["frobnicate"], "invalid choice: 'frobnicate' (choose from 'detect', "),
