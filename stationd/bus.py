@@ -8,8 +8,9 @@ travels on it."""
 from __future__ import annotations
 
 import asyncio
+import threading
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 
 from stationd.station.events import StationEvent
 
@@ -24,17 +25,28 @@ class EventBus:
         self.history: deque[StationEvent] = deque(maxlen=history)
         self._callbacks: list[Callable[[StationEvent], None]] = []
         self._queues: list[tuple[asyncio.AbstractEventLoop, asyncio.Queue[StationEvent]]] = []
+        # a subscriber that replays the history takes it and joins in one step, so that no
+        # event is between the two (missed) or in both (an older state said after a newer)
+        self._joining = threading.RLock()
 
     def publish(self, event: StationEvent) -> None:
-        self.history.append(event)
-        for cb in list(self._callbacks):
-            cb(event)
+        with self._joining:
+            self.history.append(event)
+            for cb in list(self._callbacks):
+                cb(event)
         for loop, q in list(self._queues):
             loop.call_soon_threadsafe(_put_dropping_oldest, q, event)
 
-    def subscribe(self, callback: Callable[[StationEvent], None]) -> Callable[[], None]:
-        """Call ``callback`` with every event from now on; returns the unsubscribe function."""
-        self._callbacks.append(callback)
+    def subscribe(self, callback: Callable[[StationEvent], None],
+                  replay: Callable[[list[StationEvent]], Iterable[StationEvent]] | None = None
+                  ) -> Callable[[], None]:
+        """Call ``callback`` with every event from now on; returns the unsubscribe function.
+        ``replay``: first with the events it picks from the history (what is true now, for a
+        reader that starts while the station runs), then with every event after them."""
+        with self._joining:
+            for event in (() if replay is None else replay(list(self.history))):
+                callback(event)
+            self._callbacks.append(callback)
         return lambda: self._callbacks.remove(callback)
 
     def queue(self, maxsize: int = 1000) -> asyncio.Queue[StationEvent]:

@@ -88,6 +88,7 @@ from stationd.station.events import (
     DeviceIdentified,
     LineLinkChanged,
     ResultRecorded,
+    State,
     StateChanged,
     StationEvent,
 )
@@ -225,7 +226,9 @@ class OpcUaServer:
         self.server = server
         self._loop = asyncio.get_running_loop()
         if self.bus is not None:
-            self._unsubscribe = self.bus.subscribe(self._on_event)
+            # what the station said before this server listened (its state, a device's
+            # fault, the controller's nameplate: said once, at its start) is said now
+            self._unsubscribe = self.bus.subscribe(self._on_event, replay=current)
         log.info("OPC UA: %s (%s)", self.cfg.endpoint, ", ".join(self.cfg.security))
 
     async def stop(self) -> None:
@@ -668,3 +671,20 @@ def _filtered(logger: logging.Logger, kind: type[logging.Filter]) -> None:
 async def _refuse_every_certificate(cert: Any, app: Any) -> None:
     """No client certificate is trusted yet."""
     raise ua.uaerrors.BadCertificateUntrusted()
+
+
+def current(history: list[StationEvent]) -> list[StationEvent]:
+    """The events of ``history`` that say what is true now, oldest first: the last state, each
+    device's last health and nameplate, the line link's last word, of the station running
+    (since its last start: a reload's station reports its own devices).  A rundown is not
+    among them: results are the feed's, read by sequence."""
+    start = max((i for i, e in enumerate(history)
+                 if isinstance(e, StateChanged) and e.state == State.STARTING), default=0)
+    latest: dict[tuple[str, str], tuple[int, StationEvent]] = {}
+    for i, e in enumerate(history[start:], start):
+        match e:
+            case StateChanged() | LineLinkChanged():
+                latest[(type(e).__name__, "")] = (i, e)
+            case DeviceHealth() | DeviceIdentified():
+                latest[(type(e).__name__, e.device)] = (i, e)
+    return [e for _, e in sorted(latest.values(), key=lambda ie: ie[0])]

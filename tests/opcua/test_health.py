@@ -15,9 +15,16 @@ from drivers.identity import DeviceIdentity
 from stationd.bus import EventBus
 from stationd.opcua.health import FAILURE, NO_ERROR, NORMAL, OFF_SPEC
 from stationd.opcua.model import DI_URI, IJT_URI, MACHINERY_URI
-from stationd.opcua.server import NAMESPACE
+from stationd.opcua.server import NAMESPACE, current
 from stationd.opcua.uatypes import ua
-from stationd.station.events import DeviceHealth, DeviceIdentified, LineLinkChanged
+from stationd.station.events import (
+    Because,
+    DeviceHealth,
+    DeviceIdentified,
+    LineLinkChanged,
+    StateChanged,
+    StateReason,
+)
 from tests.opcua.test_server import config, repo, serving, stopping
 
 __all__ = ["repo"]   # the fixture, shared with test_server
@@ -258,3 +265,74 @@ async def _until(node: Any, value: int, timeout: float = 5.0) -> None:
     while await node.read_value() != value:
         assert asyncio.get_running_loop().time() < end, f"never {value}"
         await asyncio.sleep(0.02)
+
+
+def test_what_the_station_said_before_the_server_listened_is_read_by_the_client(repo):
+    """OPC UA starts seconds after the station's devices (its model loads meanwhile): the
+    lift's fault, the station's fault state and the controller's nameplate were said once,
+    before it listened, and a client read the lift healthy, the state 'unknown' and an empty
+    nameplate (an MES integrator's trial).  The server says what is true now from the bus's
+    history as it starts; a reload's station reports its own devices (the last start's
+    reports are not replayed)."""
+    plate = DeviceIdentity("PF6000: supplier ACT, serial A123456789", manufacturer="ACT",
+                           serial_number="A123456789")
+    bus = EventBus()
+    for e in (StateChanged("starting", StateReason(Because.OPENING)),
+              DeviceHealth("front", False, "down", "camera unplugged"),   # the last station's
+              StateChanged("starting", StateReason(Because.OPENING)),           # a reload's start
+              DeviceIdentified("wrench", plate.words, plate),
+              DeviceHealth("lift", False, "down", "no answer from 127.0.0.1:1"),
+              StateChanged("fault", StateReason(Because.FAULT))):
+        bus.publish(e)
+
+    async def scenario() -> dict[str, Any]:
+        srv, stop, task = await serving(config(), repo, bus=bus, devices=DEVICES)
+        try:
+            async with Client(srv.url) as client:
+                uris = await client.get_namespace_array()
+                out: dict[str, Any] = {}
+                for folder, device in (("Accessories", "lift"), ("Sensors", "front")):
+                    health, message, _ = await _asset(client, folder, device)
+                    out[device] = (await health.read_value(),
+                                   getattr(await message.read_value(), "Text", None))
+                _, _, asset = await _asset(client, "Controllers", "wrench")
+                ident = await asset.get_child([f"{uris.index(DI_URI)}:Identification"])
+                serial = await ident.get_child([f"{uris.index(DI_URI)}:SerialNumber"])
+                out["serial"] = await serial.read_value()
+                machine = await client.nodes.objects.get_child(
+                    [f"{uris.index(MACHINERY_URI)}:Machines", f"{uris.index(NAMESPACE)}:ST-07"])
+                state = await machine.get_child([f"{uris.index(NAMESPACE)}:State"])
+                out["state"] = await state.read_value()
+                return out
+        finally:
+            await stopping(srv, stop, task)
+
+    out = asyncio.run(scenario())
+    assert out["lift"] == (FAILURE, "no answer from 127.0.0.1:1")
+    assert out["front"][0] == NORMAL          # the last start's report is not this one's
+    assert out["serial"] == "A123456789"
+    assert out["state"] == "fault"
+
+
+def test_the_replay_is_the_running_stations_last_word_per_device_in_order():
+    start = StateChanged("starting", StateReason(Because.OPENING))
+    old = DeviceHealth("lift", False, "down", "gone")
+    h1, h2 = DeviceHealth("wrench", False, "down", "cut"), DeviceHealth("wrench", True)
+    ident = DeviceIdentified("wrench", "SIM")
+    line = LineLinkChanged(True, "")
+    tracking = StateChanged("tracking", StateReason(Because.TRACKING))
+    assert current([start, old, start, h1, ident, h2, line, tracking]) == [ident, h2, line,
+                                                                           tracking]
+    assert current([]) == []
+    # a history whose start was pushed out keeps every device's last word
+    assert current([old, h1, h2]) == [old, h2]
+
+
+def test_a_subscriber_with_a_replay_gets_it_first_then_every_event_none_twice():
+    bus = EventBus()
+    first, second = DeviceHealth("lift", False, "down", "x"), DeviceHealth("lift", True)
+    bus.publish(first)
+    got: list[Any] = []
+    bus.subscribe(got.append, replay=lambda history: history[-1:])
+    bus.publish(second)
+    assert got == [first, second]
