@@ -72,10 +72,12 @@ class BoltResult:
     #: who skipped it, and why
     skipped_by: str | None = None
     comment: str | None = None
+    skipped_at: datetime | None = None   # ... and when
 
     def to_json(self) -> dict[str, Any]:
         return {"bolt": self.bolt_id, "name": self.name, "status": self.status,
                 "kind": self.kind, "skipped_by": self.skipped_by, "comment": self.comment,
+                "skipped_at": _iso(self.skipped_at),
                 "attempts": self.attempts, "torque_nm": self.torque_nm,
                 "angle_deg": self.angle_deg, "tightening_id": self.tightening_id,
                 "recorded_at": _iso(self.recorded_at), "parameter_version": self.version,
@@ -207,7 +209,7 @@ def build_report(s: Session, v: Vehicle) -> VehicleReport:
             who = skips.get(b.code)
             results.append(BoltResult(b.code, b.name, MISSING, 0) if who is None else
                            BoltResult(b.code, b.name, SKIPPED, 0, skipped_by=who[0],
-                                      comment=who[1] or None))
+                                      comment=who[1] or None, skipped_at=who[2]))
             continue
         last, version = recs[-1]
         # skipped by a person after its last rundown (a bolt locked after its NOKs, a
@@ -221,7 +223,8 @@ def build_report(s: Session, v: Vehicle) -> VehicleReport:
                                   last.recorded_at, version, b.removed_at is not None,
                                   last.kind or TIGHTENING,
                                   skipped_by=who[0] if skipped and who else None,
-                                  comment=(who[1] or None) if skipped and who else None))
+                                  comment=(who[1] or None) if skipped and who else None,
+                                  skipped_at=who[2] if skipped and who else None))
     info = VehicleInfo(v.vin, v.model.name, v.started_at, v.ended_at, v.reopened_at)
     tightenings = [rec for rec, _ in records if (rec.kind or TIGHTENING) == TIGHTENING]
     return VehicleReport(info, tuple(results), len(tightenings),

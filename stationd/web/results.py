@@ -167,7 +167,7 @@ class Results:
              "bolt": b.bolt_id, "attempt": 0,
              "status": PENDING if still_open and b.status == MISSING else
              SKIPPED if b.skipped_by else b.status,
-             "images": [],
+             "images": [], "recorded_at": _iso(b.skipped_at),   # a skip's: when it was
              "skipped_by": b.skipped_by, "comment": b.comment}
             for b in report.bolts if b.status in (MISSING, SKIPPED) or b.skipped_by]
         # a result that could not be read: its bolt's row says so, with the parse error

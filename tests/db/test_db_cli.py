@@ -555,7 +555,8 @@ def test_a_bolt_skipped_by_a_command_is_exported_and_reported_skipped_not_missin
         record(repo, "VIN1", "SF-FL", ok=True, tightening_id=1)
         others = sorted(set(repo.vehicle_report("VIN1").missing))
         skipped = others[0]
-        repo.ledger.record_command(at=datetime.now(UTC), user="sam", source="web",
+        skipped_at = datetime.now(UTC)
+        repo.ledger.record_command(at=skipped_at, user="sam", source="web",
                                    kind="skip", vin="VIN1", bolt=skipped,
                                    comment="no access, fixture in the way")
     code, out, err = run("db", "export", "--results", "--db", db)
@@ -563,6 +564,9 @@ def test_a_bolt_skipped_by_a_command_is_exported_and_reported_skipped_not_missin
     assert code == 0 and err == ""
     assert (rows[skipped]["status"], rows[skipped]["skipped_by"], rows[skipped]["comment"]) \
         == ("skipped", "sam", "no access, fixture in the way")
+    # when it was skipped (every time column was empty: a quality engineer's trial)
+    at = datetime.fromisoformat(rows[skipped]["recorded_at"])
+    assert abs((at.replace(tzinfo=at.tzinfo or UTC) - skipped_at).total_seconds()) < 1
     assert rows[skipped]["torque_nm"] == "" and rows[skipped]["attempt"] == "0"
     assert all(rows[b]["status"] == "pending" and rows[b]["skipped_by"] == ""
                for b in others[1:])          # VIN1 is open: to do, not missing
@@ -571,6 +575,7 @@ def test_a_bolt_skipped_by_a_command_is_exported_and_reported_skipped_not_missin
     (row,) = [r for r in json.loads(out) if r["bolt"] == skipped]
     assert (row["status"], row["skipped_by"], row["comment"]) == (
         "skipped", "sam", "no access, fixture in the way")
+    assert row["recorded_at"] == rows[skipped]["recorded_at"]
     target = tmp_path / "results.csv"
     code, out, _ = run("db", "export", "--results", "--out", str(target), "--db", db)
     assert len(others) == 2 and "1 rundown and 0 missing bolts (and 1 skipped, 1 not run " \
@@ -590,6 +595,7 @@ def test_a_bolt_skipped_by_a_command_is_exported_and_reported_skipped_not_missin
     (bolt,) = [b for b in doc["bolts"] if b["bolt"] == skipped]
     assert (bolt["status"], bolt["skipped_by"], bolt["comment"]) == (
         "skipped", "sam", "no access, fixture in the way")
+    assert bolt["skipped_at"] == rows[skipped]["recorded_at"]
     with Repository.open(db) as repo:     # closed, then reopened for rework: afresh
         repo.close_vehicle("VIN1")
         repo.start_vehicle("VIN1", "WAGON-B", reopen=True)
