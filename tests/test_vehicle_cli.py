@@ -10,6 +10,7 @@ import yaml
 from stationd.config import load_station_config
 from stationd.errors import InputError
 from stationd.geometry.camera import Camera
+from stationd.localize.references import project
 from stationd.sim import scenes as sc
 from stationd.sim.render import MarkerPose, Scene, render
 from stationd.vehicle_cli import cmd_calibrate_vehicle
@@ -392,3 +393,33 @@ def test_a_file_of_another_kind_as_the_points_is_named(tmp_path, capsys):
                                given, "--config", cfg)
         assert code == 2 and words in err, err
         assert not (tmp_path / "pair1.vehicle.yaml").exists()
+
+
+def test_a_pair_is_registered_again_on_a_station_with_references(tmp_path, capsys):
+    """The calibration check found pair1 moved; registering it again read the station with
+    pair1 unregistered, and its reference, seen by no other pair, was refused as seen by no
+    pair: the command could not run until the references were deleted (a line engineer's
+    trial)."""
+    import shutil
+    from pathlib import Path
+    shutil.copy(Path(__file__).resolve().parents[1] / "config/sim/pair1.yaml", tmp_path)
+    cfg = _station(tmp_path, "pair1.yaml")
+    pts = _points(tmp_path)
+    assert cmd_calibrate_vehicle(_args(cfg, pts, "pair1")) == 0
+    assert cmd_calibrate_vehicle(_args(cfg, pts, "pair2")) == 0
+    loaded = load_station_config(cfg)
+    only = {}
+    for v in VEHICLE_POINTS:     # a reference each pair alone sees
+        seen = loaded.references is None and [
+            name for name, pc in loaded.pairs.items()
+            if pc.to_vehicle is not None and pc.calibration is not None
+            and project(pc.calibration, pc.to_vehicle, tuple(v), SPEC) is not None]
+        if seen and len(seen) == 1:
+            only.setdefault(seen[0], v)
+    assert set(only) == {"pair1", "pair2"}
+    cfg.write_text(cfg.read_text() + "references:\n  markers:\n" + "".join(
+        f"    R{i}: {list(map(float, v))}\n" for i, v in enumerate(only.values(), 1)))
+    load_station_config(cfg)                  # the station reads as before
+    capsys.readouterr()
+    assert cmd_calibrate_vehicle(_args(cfg, pts, "pair1")) == 0
+    assert "RMS" in capsys.readouterr().out

@@ -69,6 +69,18 @@ def test_a_registered_pair_that_sees_no_reference_is_refused():
     assert refs.pairs == ("pair1",)
 
 
+def test_a_reference_only_a_pair_not_registered_yet_sees_is_not_refused():
+    """``calibrate vehicle --pair front`` reads the station with front unregistered: its
+    reference R1, seen by no other pair, was refused as seen by no pair, and the command
+    with it (a line engineer re-registering a pair the check found moved had to delete the
+    references first).  While a pair is not registered, it may be the one that sees it."""
+    far = "markers: {R1: [0, 0, -5000]}\n"
+    refs = _read(far, {"pair1": (PAIR, None)})
+    assert refs.sees == {"pair1": ()}
+    with pytest.raises(ConfigError, match="seen by no pair"):
+        _read(far, {"pair1": (PAIR, TV)})      # every pair registered: a wrong position
+
+
 def test_exclusions_cover_each_reference_image_in_both_cameras():
     seen = project(PAIR, TV, R1, MarkerSpec())
     assert seen is not None
