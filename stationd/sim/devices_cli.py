@@ -33,6 +33,7 @@ from stationd.boltfile import load_bolts
 from stationd.config import load_station_config
 from stationd.errors import InputError, StationError
 from stationd.sim.vin import make_vin
+from stationd.station.policy import NokPolicy
 
 HELP = "commands: raise | lower | vehicle CODE [VIN] | next | fault | clear | quit"
 
@@ -59,11 +60,25 @@ def _stop_on_signals() -> threading.Event:
     return stop
 
 
-def _station(path: str | None) -> tuple[RegisterMap, Path | None]:
+#: the controller's loosening program for a loosen pset: a joint that comes loose is OK
+LOOSEN_PROGRAM = SimPset(40.0, 5.0, 150.0, 360.0, 90.0, 720.0, name="loosen")
+
+
+def loosen_programs(policy: NokPolicy) -> dict[int, SimPset]:
+    """The simulated controller's programs for the policy's loosen psets."""
+    rules = [policy.default, *policy.psets.values(), *policy.bolts.values()]
+    return {r.loosen_pset: LOOSEN_PROGRAM for r in rules if r.loosen_pset is not None}
+
+
+def _station(path: str | None) -> tuple[RegisterMap, dict[int, SimPset] | None]:
+    """The station file's lift registers and its controller's programs: the bolt table's
+    psets and the NOK policy's loosen psets (a standalone controller without them refused
+    every loosening the station asked for: a line engineer's trial)."""
     if path is None:
         return RegisterMap(), None
     cfg = load_station_config(path)
-    return cfg.lift.registers, cfg.bolts_path
+    psets = None if cfg.bolts_path is None else psets_of(cfg.bolts_path)
+    return cfg.lift.registers, None if psets is None else {**loosen_programs(cfg.nok), **psets}
 
 
 def first_serial(now: float) -> int:
@@ -161,19 +176,19 @@ def _read_commands(plc: SimulatedPlc, code: int, serial: list[int],
 
 
 def _serve_controller(args: argparse.Namespace, stop: threading.Event, out: TextIO) -> int:
-    _, bolts = _station(args.config)
+    _, psets = _station(args.config)
     try:
-        sim = SimController(psets_of(bolts) if bolts is not None else None, seed=args.seed,
+        sim = SimController(psets, seed=args.seed,
                             nok_rate=args.nok_rate, link_ack=args.link_ack,
                             **behaviour(args))
     except ValueError as exc:
         print(f"stationd: error: {exc}", file=sys.stderr)
         return 2
-    psets = ", ".join(str(p) for p in sorted(sim.psets))
+    listed = ", ".join(str(p) for p in sorted(sim.psets))
     try:
         return serve(sim, args.host, args.port, args.trigger_every, stop,
                      lambda port: f"controller listening on {args.host}:{port} (Open "
-                                  f"Protocol; psets {psets})", out, types=args.result_types)
+                                  f"Protocol; psets {listed})", out, types=args.result_types)
     except ListenError as exc:   # a port in use: the station's words, exit 2
         raise InputError(str(exc)) from None
 
@@ -209,4 +224,4 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         return 2
 
 
-__all__ = ["plc_command", "psets_of", "run"]
+__all__ = ["LOOSEN_PROGRAM", "loosen_programs", "plc_command", "psets_of", "run"]

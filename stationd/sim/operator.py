@@ -33,14 +33,14 @@ from db.repository import BoltInfo
 from drivers.counting import counted
 from drivers.devices import Kind, simulated
 from drivers.lift.sim import SimLift, SimulatedPlc
-from drivers.wrench.sim.controller import SimController, SimPset, SimTightening, SimWrench
+from drivers.wrench.sim.controller import SimController, SimTightening, SimWrench
 from stationd.config import StationConfig
 from stationd.errors import InputError
 from stationd.shell.daemon import Station
+from stationd.sim.devices_cli import LOOSEN_PROGRAM, loosen_programs
 from stationd.sim.world import World, wrench_at
 from stationd.station.commands import Issuer, ReleaseBolt, Right, SignIn
 from stationd.station.events import BoltReleased, BoltSkipped, Localized, ResultRecorded, State
-from stationd.station.policy import NokPolicy
 from stationd.words import reason_words, skip_words, state_words
 
 #: a tightening fails now and then; a stubborn joint (a damaged thread) fails until its bolt
@@ -52,14 +52,6 @@ MAX_RUNDOWNS = 10
 SUPERVISOR = Issuer("supervisor", frozenset({Right.RELEASE}), "demo")
 #: who holds the wrench: signed in at the station through the command path (no right needed)
 OPERATOR = Issuer("operator", frozenset(), "demo")
-#: the controller's loosening program for a loosen pset: a joint that comes loose is OK
-LOOSEN_PROGRAM = SimPset(40.0, 5.0, 150.0, 360.0, 90.0, 720.0, name="loosen")
-
-
-def loosen_programs(policy: NokPolicy) -> dict[int, SimPset]:
-    """The simulated controller's programs for the policy's loosen psets."""
-    rules = [policy.default, *policy.psets.values(), *policy.bolts.values()]
-    return {r.loosen_pset: LOOSEN_PROGRAM for r in rules if r.loosen_pset is not None}
 
 
 def stand_ins(cfg: StationConfig) -> list[str]:

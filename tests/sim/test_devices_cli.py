@@ -149,3 +149,23 @@ def test_vins_have_17_characters_of_the_alphabet_and_their_check_digit() -> None
     assert not is_valid("IM8GDM9AXKP042788")     # I is not in the alphabet
     with pytest.raises(ValueError):
         make_vin(1_000_000)
+
+
+def test_the_simulated_controller_runs_the_nok_policys_loosen_psets(tmp_path: Path) -> None:
+    """A station whose NOK policy loosens with pset 4: the standalone controller announced
+    psets 1, 2, 3 and refused pset 4 (parameter set not present), every loosening the
+    station would ask for (a line engineer's trial); the daemon's own simulator had it."""
+    import shutil
+    for f in STATION.parent.iterdir():
+        shutil.copy(f, tmp_path)
+    station = tmp_path / "station.yaml"
+    station.write_text(station.read_text() + "nok: {max_nok: 2, strategy: loosen, "
+                                              "loosen_pset: 4}\n")
+    port = _free_port()
+    p, first = _start("controller", "--config", str(station), "--port", str(port))
+    try:
+        assert "psets 1, 2, 3, 4)" in first, first
+        with open_wrench(f"openprotocol://127.0.0.1:{port}", timeout=2.0) as w:
+            w.select_pset(4)
+    finally:
+        assert _stop(p) == 0
