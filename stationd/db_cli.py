@@ -470,8 +470,9 @@ def cmd_config_check(args: argparse.Namespace) -> int:
         raise InputError("config check: no file to check: stationd config check FILE ... "
                          "(station files, bolt tables) or --config STATION.yaml")
     failed, errors = 0, 0
+    stations = set(args.config_files)    # --config names a station file, as elsewhere
     for name in files:
-        summary, found, warnings = _check_file(name, args.tolerance)
+        summary, found, warnings = _check_file(name, args.tolerance, name in stations)
         for w in warnings:
             sys.stderr.write(f"warning: {w}\n")
         if not found:
@@ -487,9 +488,11 @@ def cmd_config_check(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _check_file(name: str, tolerance_mm: float,
+def _check_file(name: str, tolerance_mm: float, station_file: bool = False,
                 ) -> tuple[str, list[ConfigError], list[ConfigError]]:
-    """(summary when valid, errors, warnings) of one file, a station file or a bolt table."""
+    """(summary when valid, errors, warnings) of one file, a station file or a bolt table
+    (``station_file``: given as a station file, ``--config``: a bolt table is an error, as
+    ``stationd run --config`` says it)."""
     from stationd.boltfile import check_bolts
     from stationd.stationcheck import check_station
 
@@ -497,6 +500,10 @@ def _check_file(name: str, tolerance_mm: float,
         kind = file_kind(name)
     except ConfigError as exc:
         return "", [exc], []
+    if kind == "bolts" and station_file:
+        return "", [ConfigError("this is a bolt table, not a station file: check it without "
+                                "--config (stationd config check FILE), or give the station "
+                                "file that names it", path=name)], []
     if kind == "bolts":
         bolts = check_bolts(name, tolerance_mm=tolerance_mm)
         return (bolts.table.summary() if bolts.table else ""), bolts.errors, bolts.warnings

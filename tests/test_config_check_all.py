@@ -214,6 +214,12 @@ def test_the_station_file_is_taken_with_config_as_the_other_commands_take_it(sta
     captured = capsys.readouterr()
     assert captured.out.startswith(f"{station.parent / 'bolts.yaml'}: ok, ")
     assert captured.err.endswith("stationd: error: 1 error in 1 of 2 files\n")
+    # a bolt table given as the station file is refused, as run --config refuses it (it
+    # was 'ok': a line engineer's trial)
+    assert main(["config", "check", "--config", str(station.parent / "bolts.yaml")]) == 2
+    said = capsys.readouterr().err
+    assert said.startswith(f"{station.parent / 'bolts.yaml'}: this is a bolt table, not a "
+                           "station file: check it without --config"), said
     assert main(["config", "check"]) == 2
     assert capsys.readouterr().err == ("stationd: error: config check: no file to check: "
                                        "stationd config check FILE ... (station files, bolt "
