@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 from drivers.counting import counted
 from drivers.wrench import takes_targets
-from stationd.config import StationConfig, read_all, read_station
+from stationd.config import STATE_DIRECTORY, StationConfig, read_all, read_station
 from stationd.errors import ConfigError, InputError
 from stationd.station.policy import table_errors
 from stationd.yamlio import YamlNode
@@ -144,6 +144,13 @@ def check_station(path: str | Path) -> StationCheck:
     warning = _not_mine_warning(cfg.database_url, str(p))
     if warning is not None and not errors:
         warnings.append(warning)
+    if _in_missing_state_directory(cfg.database_url) and "database" in top:
+        # no error here (systemd makes it), but `stationd run` by hand refused the file the
+        # check had called ok (a line engineer's trial)
+        warnings.append(top["database"].mapping(("url",), required=("url",))["url"].error(
+            f"folder {STATE_DIRECTORY} does not exist yet: systemd makes it when the service "
+            "starts (StateDirectory=stationd); create it, owned by the user the station runs "
+            "as, to run the daemon by hand (stationd run)"))
     if cfg.opcua is not None and cfg.opcua.users and cfg.opcua.security == ("none",):
         # served, but the MES's user passwords would cross the plant network in clear text
         warnings.append(top["opcua"].error(
@@ -188,6 +195,15 @@ def _database_table(cfg: StationConfig) -> tuple[BoltTable, str] | str | None:
             return repo.table(), f"the database {url.database}"
     except DbError:
         return None
+
+
+def _in_missing_state_directory(url: str) -> bool:
+    """Whether ``url`` is an SQLite file in the service's own folder, which does not exist
+    (yet: :data:`stationd.config.STATE_DIRECTORY`)."""
+    prefix = "sqlite:///"
+    if not url.startswith(prefix) or STATE_DIRECTORY.exists():
+        return False
+    return Path(url[len(prefix):]).parent == STATE_DIRECTORY
 
 
 def _not_mine_warning(url: str, path: str) -> ConfigError | None:

@@ -137,9 +137,18 @@ def test_shipped_station_files_check_clean():
     assert sim.bolts is not None and sim.bolts.table is not None
     assert sim.bolts.table.summary() == "1 model, 50 bolts, 3 psets"
     # the example names the simulated pair's files and the example bolt table
-    # its database is in the service's StateDirectory, made by systemd at the service's start
+    # its database is in the service's StateDirectory, made by systemd at the service's start:
+    # no error, but while it is not there a daemon run by hand refuses the file, which the
+    # check says (it said ok alone: a line engineer's trial)
     example = check_station(ROOT / "config" / "station.example.yaml")
-    assert example.ok and example.warnings == [] and example.bolts is not None
+    assert example.ok and example.bolts is not None
+    said = [w.message for w in example.warnings]
+    if Path("/var/lib/stationd").exists():
+        assert said == []
+    else:
+        assert len(said) == 1 and said[0].startswith(
+            "folder /var/lib/stationd does not exist yet: systemd makes it when the service "
+            "starts"), said
 
 
 def test_independent_errors_are_all_reported_and_load_raises_one_of_them(sim_copy):
@@ -393,7 +402,8 @@ def test_a_database_in_a_missing_folder_is_refused(sim_copy):
         load_station_config(station, station=True)
     if not Path("/var/lib/stationd").exists():
         _edit(station, "sqlite:///gone/r.db", "sqlite:////var/lib/stationd/r.db")
-        assert check_station(station).ok
+        checked = check_station(station)
+        assert checked.ok and [w.key for w in checked.warnings] == ["database.url"]
         with pytest.raises(ConfigError, match="folder /var/lib/stationd does not exist"):
             load_station_config(station, station=True)
 
