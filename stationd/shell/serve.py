@@ -221,6 +221,7 @@ class Screens:
             self.server.line = lambda: None if self.line is None else self.line.last_status
             self.server.line_results.url = None if cfg.line is None else cfg.line.url
             self.server.commands.access = cfg.access
+            self.server.unregistered = unregistered(cfg)
             self.server.commands.submit = None if station is None else station.submit
 
     def refused(self, why: str) -> None:
@@ -404,6 +405,12 @@ def locked_devices(cfg: StationConfig) -> list[tuple[str, str]]:
     return [("lift", cfg.lift.url), ("wrench", cfg.wrench.url), *cams]
 
 
+def unregistered(cfg: StationConfig) -> tuple[str, ...]:
+    """The pairs of ``cfg`` not registered into the vehicle frame yet (no ``to_vehicle``):
+    up and grabbing, but localizing nothing."""
+    return tuple(n for n, p in cfg.pairs.items() if p.to_vehicle is None)
+
+
 def hold_locks(locks: StationLocks, cfg: StationConfig) -> None:
     """Hold the locks of ``cfg``'s database and devices (one daemon per database and per
     device); raises LockHeldError, keeping what ``locks`` held, when another daemon has one."""
@@ -441,6 +448,10 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
         line = asyncio.create_task(forward(cfg, notifier, screens, inner, bus, station.tell))
         served = asyncio.create_task(opcua(cfg, bus, inner))
         log.info("stationd running: %s", cfg_path)
+        for name in unregistered(cfg):   # config check warns; the journal says it too
+            log.warning("pair %s: not registered into the vehicle frame (no to_vehicle): its "
+                        "frames localize nothing until it is (stationd calibrate vehicle "
+                        "--pair %s)", name, name)
         new: StationConfig | None = None
         while new is None and not stop.is_set() and not task.done():
             waiters = {asyncio.create_task(stop.wait()), asyncio.create_task(reload.wait())}

@@ -97,6 +97,9 @@ class WebServer:
         self.config = HttpConfig(listen, token)
         #: why the last reload was refused, until a station runs on a file that reads
         self.reload_refused: str | None = None
+        #: the running station's pairs not registered into the vehicle frame (set by the
+        #: serve loop): up, but localizing nothing
+        self.unregistered: tuple[str, ...] = ()
         self.images_dir = None if images_dir is None else images_dir.resolve()
         self.devices = tuple(devices)
         self.view = View(configured=self.devices)
@@ -326,7 +329,8 @@ class WebServer:
                 "locked_bolts": [b["bolt"] for b in v["bolts"] if b["state"] == "locked"],
                 # the last reload's refusal (the file on disk does not read): the station
                 # runs on the configuration it loaded before (None: it runs on the file)
-                "reload_refused": self.reload_refused}
+                "reload_refused": self.reload_refused,
+                "unregistered": list(self.unregistered)}
 
     async def _status(self, request: web.Request) -> web.Response:
         return web.json_response(self.status(), dumps=lambda o: json.dumps(o, default=_plain))

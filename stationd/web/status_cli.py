@@ -129,7 +129,10 @@ def format_status(st: dict[str, Any], via: str = "") -> str:
             "ok" if d["ok"] else "not opened yet" if d.get("kind") == "opening"
             else f"{d.get('kind', '')} {d.get('reason', '')}")
             + (f"; {check['words']}" if d["ok"] and check and not check.get("trusted")
-               else ""))
+               else "")
+            + ("; not registered into the vehicle frame: its frames localize nothing "
+               f"(stationd calibrate vehicle --pair {name})"
+               if name in st.get("unregistered", ()) else ""))
     lines += line_lines(st.get("line"))
     vers = st.get("versions", {})
     lines.append("versions: " + ", ".join(f"{k} {x}" for k, x in sorted(vers.items())))

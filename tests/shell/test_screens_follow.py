@@ -76,8 +76,11 @@ def test_screens_served_late_start_from_the_running_cores_snapshot(tmp_path, mon
     holder.bind(("127.0.0.1", 0))
     holder.listen(1)
     port = holder.getsockname()[1]
-    cfg = replace(load_station_config(SIM_CONFIG), database_url=f"sqlite:///{tmp_path}/s.db",
-                  http=HttpConfig(f"127.0.0.1:{port}"))
+    cfg = load_station_config(SIM_CONFIG)
+    # and a pair not registered into the vehicle frame: said beside its health
+    cfg = replace(cfg, database_url=f"sqlite:///{tmp_path}/s.db",
+                  http=HttpConfig(f"127.0.0.1:{port}"),
+                  pairs={**cfg.pairs, "pair3": replace(cfg.pairs["pair3"], to_vehicle=None)})
     d = _ready()
     d.feed(DeviceFault(d.t, "pair2", FaultKind.DOWN, "pair2: camera unplugged"))
     bus = EventBus(history=20)
@@ -106,6 +109,6 @@ def test_screens_served_late_start_from_the_running_cores_snapshot(tmp_path, mon
         st = asyncio.run(main())
     finally:
         holder.close()
-    assert st["state"] == "fault"
+    assert st["state"] == "fault" and st["unregistered"] == ["pair3"]
     assert st["devices"]["pair2"]["ok"] is False and "unplugged" in st["devices"]["pair2"][
         "reason"]

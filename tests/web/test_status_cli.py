@@ -295,3 +295,31 @@ def test_status_with_a_station_file_that_no_longer_reads_still_asks_its_daemon(
     assert main(["status", "--config", str(tmp_path / "nothere.yaml")]) == 2
     err = capsys.readouterr().err
     assert "not found" in err and "--url" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_pair_not_registered_into_the_vehicle_frame_is_said_beside_its_health():
+    """A pair without ``to_vehicle`` is up and grabs, but localizes nothing: ``config check``
+    warned of it, and the daemon then said nothing, its status "rear: ok" (a line engineer's
+    trial).  The running station's unregistered pairs are in /api/status (set when the
+    station attaches: :func:`stationd.shell.serve.unregistered`) and on the pair's line."""
+    from dataclasses import replace
+
+    from stationd.bus import EventBus
+    from stationd.config import load_station_config
+    from stationd.demo.station import SIM_CONFIG
+    from stationd.shell.serve import unregistered
+    from stationd.web.server import WebServer
+    from stationd.web.status_cli import format_status
+
+    cfg = load_station_config(SIM_CONFIG)
+    assert unregistered(cfg) == ()
+    pairs = {**cfg.pairs, "pair2": replace(cfg.pairs["pair2"], to_vehicle=None)}
+    assert unregistered(replace(cfg, pairs=pairs)) == ("pair2",)
+    srv = WebServer(EventBus(), None, None, devices=("pair1", "pair2"))
+    srv.unregistered = ("pair2",)
+    st = srv.status()
+    assert st["unregistered"] == ["pair2"]
+    lines = format_status({**st, "devices": {"pair1": {"ok": True}, "pair2": {"ok": True}}})
+    assert "device:   pair1: ok\n" in lines
+    assert "device:   pair2: ok; not registered into the vehicle frame: its frames localize " \
+        "nothing (stationd calibrate vehicle --pair pair2)" in lines
