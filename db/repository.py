@@ -231,6 +231,13 @@ class Repository:
             return s.scalar(select(VehicleModel.name).where(
                 VehicleModel.code == code, VehicleModel.removed_at.is_(None)))
 
+    def model_codes(self) -> dict[str, int | None]:
+        """Each model and its lift code (what a lift PLC reports for it), in table order."""
+        with self._session(write=False) as s:
+            return {name: code for name, code in s.execute(
+                select(VehicleModel.name, VehicleModel.code).where(
+                    VehicleModel.removed_at.is_(None)).order_by(VehicleModel.seq))}
+
     def bolts_for_model(self, model: str) -> list[BoltInfo]:
         """The model's bolts in file order, each with its current parameter version."""
         with self._session(write=False) as s:

@@ -366,9 +366,12 @@ class Records:
             log.info("vehicle %s (%s) closed: it left while the station did not see it go; "
                      "%s", gone.vehicle.vin, gone.vehicle.model, gone.counts())
         model = repo.model_for_code(a.model_code)
-        if model is None:
+        if model is None:   # which vehicle, and the codes there are (a line engineer's trial)
+            codes = ", ".join(f"{name} {code}" for name, code in repo.model_codes().items()
+                              if code is not None) or "none: import a bolt table"
             return VehicleRejected(time.time(), a.vin,
-                                   f"unknown vehicle model code {a.model_code}")
+                                   f"unknown vehicle model code {a.model_code} for {a.vin} "
+                                   f"(the bolt tables' codes: {codes})")
         try:
             started = repo.start_vehicle(a.vin, model, reopen=a.reopen)
         except DataError as exc:   # a closed VIN back, another model's VIN

@@ -113,9 +113,13 @@ def format_status(st: dict[str, Any], via: str = "") -> str:
         lines.append(now)
     v = st.get("vehicle")
     c = st.get("counters", {})
-    lines.append("vehicle:  " + ("none" if not v else
-                                 f"{v['vin']} ({v['model']}{', rework' if v.get('rework') else ''})"
-                                 f": {counter_words(c)}"))
+    said = "none" if not v else \
+        f"{v['vin']} ({v['model']}{', rework' if v.get('rework') else ''}): {counter_words(c)}"
+    if v and v.get("at_station") is False:
+        # closed: the next one is not loaded (rejected, or not raised yet); the last one was
+        # read as the vehicle at the station (a line engineer's trial)
+        said = f"none loaded (the last: {said}, closed)"
+    lines.append("vehicle:  " + said)
     op = st.get("operator") or {}
     if op.get("user") or op.get("required"):
         lines.append("operator: " + (op.get("user") or "nobody signed in: sign in to tighten"))

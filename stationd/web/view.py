@@ -630,8 +630,10 @@ class View:
             "headline_title": self.headline_title(),
             "tone": self.tone(),
             "refused": self.refused, "alarm": self.alarm,
+            # at_station: opened and not closed since (a closed one's bolts stay shown)
             "vehicle": None if self.vin is None else {"vin": self.vin, "model": self.model,
-                                                      "rework": self.rework},
+                                                      "rework": self.rework,
+                                                      "at_station": self.loaded},
             "bolts": [b.to_json() for b in self.bolts.values()],
             "selected": self.selected, "wrench": self.wrench, "counters": self.counters(),
             "wrench_line": self.wrench_line(),

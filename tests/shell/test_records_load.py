@@ -24,3 +24,17 @@ def test_a_nok_loosening_is_loaded_as_one(tmp_path: Path) -> None:
     assert isinstance(loaded, VehicleLoaded)
     assert loaded.status == {"B1": "nok", "B2": "nok"}
     assert loaded.loosen_nok == frozenset({"B1"})
+
+
+def test_a_vehicle_of_an_unknown_model_code_is_refused_naming_it_and_the_codes(
+        tmp_path: Path) -> None:
+    """"unknown vehicle model code 99" named neither the vehicle on the lift nor the codes
+    there are (a line engineer's trial)."""
+    from stationd.station.inputs import VehicleRejected
+
+    records = _records(tmp_path)
+    refused = records.load_vehicle(LoadVehicle(99, "WVWZZZ1JZXW000001"))
+    assert isinstance(refused, VehicleRejected)
+    assert refused.reason.startswith("unknown vehicle model code 99 for WVWZZZ1JZXW000001 "
+                                     "(the bolt tables' codes: ")
+    assert " 12" in refused.reason          # the table's model and its code

@@ -323,3 +323,22 @@ def test_a_pair_not_registered_into_the_vehicle_frame_is_said_beside_its_health(
     assert "device:   pair1: ok\n" in lines
     assert "device:   pair2: ok; not registered into the vehicle frame: its frames localize " \
         "nothing (stationd calibrate vehicle --pair pair2)" in lines
+
+
+def test_a_closed_vehicle_is_not_said_to_be_at_the_station():
+    """The next vehicle raised and rejected (an unknown model code): ``status`` said the
+    vehicle closed before it as the one at the station (a line engineer's trial).  A closed
+    vehicle is the last one, closed; the fault names the VIN refused
+    (``stationd.shell.records``)."""
+    from stationd.station.events import VehicleClosed
+    from stationd.web.status_cli import format_status
+    from stationd.web.view import fold
+    from tests.web.scenario import VIN, opened
+
+    st = fold(opened()).to_json()
+    assert st["vehicle"]["at_station"] is True
+    assert f"vehicle:  {VIN} (SEDAN): 0/4 bolts OK" in format_status(st)
+    st = fold([*opened(), VehicleClosed(VIN, ("B1", "B2", "B3", "B4"), ())]).to_json()
+    assert st["vehicle"]["at_station"] is False
+    assert f"vehicle:  none loaded (the last: {VIN} (SEDAN): 0/4 bolts OK" in format_status(st)
+    assert ", closed)" in format_status(st)
