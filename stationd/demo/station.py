@@ -174,6 +174,15 @@ def run_station_demo(args: argparse.Namespace) -> int:
         print(f"demo: {cfg.path} names real devices ({', '.join(instead)}): the demo runs its "
               "own simulators instead and never opens them; its records go to a temporary "
               f"database, not {cfg.database_url}", file=out, flush=True)
+    own = [(k, why) for k, why, there in (
+        ("opcua:", "the demo serves its own OPC UA (--opcua URL, --no-opcua)",
+         cfg.opcua is not None),
+        ("line:", "it forwards only to --line-db URL", cfg.line is not None)) if there]
+    if own:   # taken silently, a file's OPC UA endpoint and line database went unserved
+        print(f"demo: the {' and '.join(k for k, _ in own)} "
+              f"section{'s' if len(own) > 1 else ''} of {cfg.path} "
+              f"{'are' if len(own) > 1 else 'is'} not used: "
+              f"{'; '.join(why for _, why in own)}", file=out, flush=True)
     pg: PgServer | None = None
     if line_url is None and n_stations > 1:
         pg = PgServer()

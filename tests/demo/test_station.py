@@ -200,3 +200,21 @@ def test_the_summary_counts_the_bolts_its_vehicle_left_with_not_worked():
     s = _summary(st, REPORT, 2, 0)
     assert s["vehicles_closed"] == [{"vin": "V", "missing": 3, "nok": 0}]
     assert s["verdict"].startswith("PASS: 2/2 bolts handled")
+
+
+def test_a_station_files_opcua_and_line_sections_are_said_not_used(tmp_path, capsys):
+    """``demo --config`` on a file with ``opcua:`` and ``line:`` served the demo's own OPC UA
+    and forwarded nowhere, silently (an MES integrator looked for the file's endpoint)."""
+
+    for f in SIM_CONFIG.parent.iterdir():
+        shutil.copy(f, tmp_path)
+    station = tmp_path / "station.yaml"
+    station.write_text(station.read_text() + "opcua: {endpoint: 'opc.tcp://127.0.0.1:4850', "
+                       "station_id: ST-Q1, security: [none]}\n")
+    code = main(["demo", "--config", str(station), "--cycles", "1", "--no-http",
+                 "--no-opcua"])
+    out = capsys.readouterr().out.splitlines()
+    assert code == 0 and out[0] == (
+        f"demo: the opcua: section of {station} is not used: the demo serves its own OPC UA "
+        "(--opcua URL, --no-opcua)")
+    assert not any(line.startswith("demo: the") for line in out[1:])
