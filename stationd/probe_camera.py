@@ -34,6 +34,9 @@ def add_camera_probe(psub: Any) -> None:
     p.add_argument("--timeout", type=float, default=5.0,
                    help="seconds to wait for the frame (default 5)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--config", metavar="STATION.yaml",
+                   help="for a sim:// camera: the station whose simulated world it renders "
+                        "(default: config/sim/station.yaml)")
     p.set_defaults(func=probe_camera)
 
 
@@ -60,10 +63,11 @@ def _check_options(args: argparse.Namespace) -> None:
 SIM_CONFIG = Path(__file__).resolve().parents[1] / "config" / "sim" / "station.yaml"
 
 
-def _sim_world(url: str) -> Any:
-    """For ``sim://PAIR/SIDE``: the simulated station's world (config/sim), so the probe
-    shows what that camera sees, as ``sim://lift`` starts its own PLC.  ``None`` for other
-    URLs, or when a world for the pair is already registered (inside a running demo)."""
+def _sim_world(url: str, config: str | None = None) -> Any:
+    """For ``sim://PAIR/SIDE``: the simulated world of the station ``config`` (default
+    config/sim), so the probe shows what that camera sees, as ``sim://lift`` starts its own
+    PLC.  ``None`` for other URLs, or when a world for the pair is already registered (inside
+    a running demo)."""
     from drivers.devices import world_view
 
     view = world_view(url)   # its driver says; a malformed sim:// URL is a UrlError: exit 2
@@ -77,14 +81,16 @@ def _sim_world(url: str) -> Any:
     from stationd.config import load_station_config
     from stationd.sim.world import World
 
-    cfg = load_station_config(SIM_CONFIG)
-    if pair not in cfg.pairs:
-        raise UrlError(f"no pair {pair!r} in the simulated station ({SIM_CONFIG.name} has "
-                       f"{', '.join(cfg.pairs)})", device=url)
+    path = Path(config) if config else SIM_CONFIG
+    cfg = load_station_config(path)
+    if pair not in cfg.pairs:   # the file named whole: a user's own station is not config/sim
+        hint = "" if config else "; --config STATION.yaml for another station's"
+        raise UrlError(f"no pair {pair!r} in the simulated station ({path.resolve()} has "
+                       f"{', '.join(cfg.pairs)}{hint})", device=url)
     from stationd import progress
 
-    progress.note(f"probe: rendering {url} through the simulated station ({SIM_CONFIG.parent.name}"
-                  "/station.yaml; a few seconds for 20 MP)")
+    progress.note(f"probe: rendering {url} through the simulated station {path.resolve()} "
+                  "(a few seconds for 20 MP)")
     return World(cfg, seed=0)
 
 
@@ -92,7 +98,7 @@ def probe_camera(args: argparse.Namespace) -> int:
     _check_options(args)
     from stationd.lock import probing
 
-    world = _sim_world(args.url)
+    world = _sim_world(args.url, args.config)
     try:
         with probing("camera", args.url):
             return _probe(args)

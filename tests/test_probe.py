@@ -231,6 +231,23 @@ def test_probe_camera_sim_url_of_an_unknown_pair_exits_2(capsys):
     code = main(["probe", "camera", "sim://pair9/left"])
     err = capsys.readouterr().err
     assert code == 2 and "pair9" in err and err.count("\n") == 1
+    # the station named whole, and how to name one's own (a line engineer probed their own
+    # station's sim://front/left and was told of config/sim's "station.yaml")
+    assert str(SIM / "station.yaml") in err and "--config" in err
+
+
+def test_probe_camera_sim_url_renders_the_station_given(capsys, tmp_path):
+    """``--config``: the simulated world of the user's own station (pairs named as theirs)."""
+    for f in SIM.iterdir():
+        shutil.copy(f, tmp_path)
+    station = tmp_path / "station.yaml"
+    station.write_text(station.read_text().replace("pair1", "front"))
+    for f in tmp_path.glob("pair1*.yaml"):
+        f.rename(f.with_name(f.name.replace("pair1", "front")))
+    code = main(["probe", "camera", "sim://front/left", "--config", str(station),
+                 "--timeout", "30", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0 and json.loads(out)["ok"] is True, err
 
 
 def test_probe_url_that_urllib_cannot_split_exits_2(capsys):
