@@ -65,6 +65,12 @@ class Parser(argparse.ArgumentParser):
         if m is None or m.group(1) not in commands:   # an option's value: argparse's words
             return None
         choices = [c.strip().strip("'") for c in m.group(3).split(",")]
+        argv = list(Parser.argv)
+        at = next((i for i, t in enumerate(argv) if t == m.group(2)), None)
+        if at is not None and at > 0 and argv[at - 1].startswith("--"):
+            # ``operator --config S``: the option's value taken for the command
+            return (f"a command is missing: {self.prog} {' | '.join(choices)} (its options, "
+                    f"{argv[at - 1]} too, come after it)")
         close = difflib.get_close_matches(m.group(2), choices, n=1, cutoff=0.6)
         return None if not close else \
             f"no command {m.group(2)!r} (did you mean {close[0]}?)"

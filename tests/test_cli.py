@@ -636,6 +636,10 @@ def test_detect_draw_never_writes_through_a_link_or_over_another_file(files, tmp
     (["line", "results", "--config", "s.yaml", "--bolts", "B1"],
      "stationd line results: error: no option --bolts (did you mean --bolt?)"),
     (["stauts"], "stationd: error: no command 'stauts' (did you mean status?)"),
+    # an option before the command: its value was said to be an invalid command
+    (["operator", "--config", "s.yaml"], "stationd operator: error: a command is missing: "
+     "stationd operator sign-in | sign-out | status (its options, --config too, come after "
+     "it)"),
     (["db", "exprot"], "stationd db: error: no command 'exprot' (did you mean export?)"),
     (["frobnicate"], "invalid choice: 'frobnicate' (choose from 'detect', "),
     # an option's value out of its choices is no command
