@@ -292,8 +292,9 @@ def _report_url(args: argparse.Namespace) -> str:
         nor = "" if not demos else (
             f"; nor is {args.vin} in the database of the running demo of {config} ("
             + ", ".join(f"{sid} {path}" for sid, path in demos) + ")")
-        if isinstance(exc, NotFoundError):
-            raise InputError(f"{exc} of {config}{nor}") from None
+        if isinstance(exc, NotFoundError):   # "... not in the database of FILE (did you
+            head, sep, tail = str(exc).partition(" (did you mean")   # mean ...?)"
+            raise InputError(f"{head} of {config}{sep}{tail}{nor}") from None
         if nor:     # in short: the long hint on where a demo keeps its records is moot here
             absent = _not_there(url)
             if absent is not None:

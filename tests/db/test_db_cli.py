@@ -782,3 +782,19 @@ def test_report_counts_a_bolts_tightenings_and_loosenings_apart(run, db):
     assert fl.split(", by")[0].endswith("v1, 2 tightenings, 1 loosening"), fl
     [fr] = [line for line in out.splitlines() if line.strip().startswith("SF-FR ")]
     assert "v1, 2 attempts" in fr, fr
+
+
+def test_a_vin_in_another_case_is_suggested_after_the_station_file_it_was_looked_for_in(
+        run, tmp_path):
+    """"vehicle 'vin1' is not in the database (did you mean VIN1?) of FILE" read as if the
+    suggestion were of the file (a quality engineer's trial)."""
+    from db.repository import Repository
+
+    station = _sim_station(tmp_path)
+    assert run("db", "import", EXAMPLE, "--config", station)[0] == 0
+    with Repository.open(f"sqlite:///{station.parent / 'stationd-sim.db'}") as repo:
+        repo.start_vehicle("VIN1", "WAGON-B")
+    code, out, err = run("db", "report", "vin1", "--config", station)
+    assert code == 2 and out == "" and _one_line(err) == (
+        f"stationd: error: vehicle 'vin1' is not in the database of {station} (did you mean "
+        "VIN1?)")
