@@ -24,7 +24,7 @@ from drivers.keeper import DeviceKeeper, FaultKind, fault_kind, one_line
 from drivers.wrench import Received, Wrench
 from stationd.bus import EventBus
 from stationd.localize import Localization
-from stationd.reasons import Reason, Why
+from stationd.reasons import Reason, UncheckedKind, Why
 from stationd.shell.blocking import Blocking
 from stationd.shell.journal import RefusalJournal
 from stationd.shell.records import STATION_FAULTS, Records
@@ -109,6 +109,9 @@ Journal = logging.Logger | _Prefixed
 A = TypeVar("A")
 #: a notice's level (:attr:`Notice.level`) as the journal's
 NOTICE_LEVELS = {"info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
+#: a pair not checked for these reasons is being checked as the station works (its start, a
+#: vehicle's arrival): the journal's INFO, where a pair moved or never measurable is a WARNING
+ROUTINE_UNCHECKED = frozenset({UncheckedKind.SINCE_START, UncheckedKind.ARRIVAL})
 #: how long the controller may take to confirm parameters, s
 SEND_TIMEOUT_S = 2.0
 
@@ -242,8 +245,11 @@ class Effects:
             said = self.refusals.refused(ev.reason, ev.t)
             if said is not None:
                 self.log.info("%s", said)
-        elif isinstance(ev, PairChecked):
-            (self.log.info if ev.trusted else self.log.warning)("%s", check_words(ev))
+        elif isinstance(ev, PairChecked):   # a pair moved is a warning; one being checked
+            routine = ev.why is not None and ev.why.unchecked is not None and \
+                ev.why.unchecked.kind in ROUTINE_UNCHECKED       # for a vehicle is not
+            (self.log.info if ev.trusted or routine else self.log.warning)(
+                "%s", check_words(ev))
         elif isinstance(ev, BoltToLoosen):
             self.log.info("%s", reason_words(ev.reason, full=True))   # it names the bolt
         elif isinstance(ev, OperatorChanged):

@@ -114,3 +114,27 @@ def test_a_controller_event_is_published_and_said_by_its_type_s_name(caplog):
         (3, "batch increment")]
     assert "batch increment on the controller: not a tightening" in \
         [r.getMessage() for r in caplog.records]
+
+
+def test_a_pair_being_checked_for_a_vehicle_is_info_a_pair_moved_a_warning(caplog):
+    """Every vehicle's arrival journaled a WARNING "front not checked against the references:
+    checking for vehicle ..." (a line engineer read routine work as a problem)."""
+    from stationd.reasons import Reason, Unchecked, UncheckedKind, Why
+    from stationd.station.events import PairChecked
+
+    def unchecked(kind: UncheckedKind, **kw: Any) -> PairChecked:
+        return PairChecked("front", "not checked", why=Reason(
+            Why.PAIR_UNCHECKED, pair="front", unchecked=Unchecked(kind, **kw)))
+
+    effects = _effects(StationCore(PARAMS))
+    with caplog.at_level(logging.INFO, logger="stationd"):
+        effects.publish(unchecked(UncheckedKind.ARRIVAL, vin="VIN1"))
+        effects.publish(unchecked(UncheckedKind.SINCE_START))
+        effects.publish(unchecked(UncheckedKind.NOT_MEASURED, reference="R1",
+                                  measure="not found"))
+        effects.publish(PairChecked("front", "moved", "R1", 5.5, 2.0, {"R1": 5.5},
+                                    why=Reason(Why.PAIR_MOVED, pair="front")))
+        effects.publish(PairChecked("front", "ok", "R1", 0.1, 2.0, {"R1": 0.1}, trusted=True))
+    assert [r.levelname for r in caplog.records] == ["INFO", "INFO", "WARNING", "WARNING",
+                                                     "INFO"], [
+        (r.levelname, r.getMessage()) for r in caplog.records]
