@@ -197,7 +197,8 @@ class YamlNode:
             mark = getattr(exc, "problem_mark", None)
             line = mark.line + 1 if mark is not None else None
             problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-            raise ConfigError(f"malformed YAML: {problem}", path=path, line=line) from None
+            raise ConfigError(f"malformed YAML: {_plain(problem)}", path=path,
+                              line=line) from None
         except RecursionError:   # PyYAML parses nested collections recursively
             raise ConfigError(f"collections nested more than {MAX_DEPTH} levels deep: not a "
                               "station's file", path=path) from None
@@ -448,3 +449,23 @@ def top_keys(root: YamlNode) -> set[str]:
     """The top-level keys of a file that is a mapping (empty otherwise)."""
     value = root.value()
     return {k for k in value if isinstance(k, str)} if isinstance(value, dict) else set()
+
+
+#: the parser's words for the commonest hand edits, said plainly (its own words kept after)
+_PLAIN = (
+    ("found character '\\t'", "a tab character: YAML indents with spaces only"),
+    ("expected <block end>", "the indentation of this line, or of the line above it, does "
+                             "not line up with the lines around it"),
+    ("mapping values are not allowed here", "a ':' where no key can start (a value with ': ' "
+                                            "in it needs quotes, or the line is indented "
+                                            "too far)"),
+    ("could not find expected ':'", "a key without its ':' (or a line indented too far)"),
+)
+
+
+def _plain(problem: str) -> str:
+    """The parser's ``problem`` with plain words before it where it is a common slip."""
+    for needle, words in _PLAIN:
+        if needle in problem:
+            return f"{words} ({problem})"
+    return problem

@@ -26,6 +26,22 @@ def test_errors_name_file_line_key(text, needle):
     assert needle in str(ei.value)
 
 
+@pytest.mark.parametrize("text,needle", [
+    # the commonest hand edits, in plain words before the parser's (a line engineer's trial)
+    ("tool:\n\tlength_mm: 300\n", "f.yaml:2: malformed YAML: a tab character: YAML indents "
+                                    "with spaces only (found character"),
+    ("tool:\n  length_mm: 300\n max_tilt_deg: 10\n", "f.yaml:3: malformed YAML: the "
+     "indentation of this line, or of the line above it, does not line up with the lines "
+     "around it (expected <block end>"),
+    ("tool:\n  length_mm: 300\n   max_tilt_deg: 10\n", "f.yaml:3: malformed YAML: a ':' "
+     "where no key can start"),
+])
+def test_a_malformed_file_is_said_in_plain_words(text, needle):
+    with pytest.raises(ConfigError) as ei:
+        YamlNode.parse(text, "f.yaml")
+    assert needle in str(ei.value), str(ei.value)
+
+
 def test_matrix_shape_error_names_key_and_line():
     n = YamlNode.parse("x: 0\nK: [[1, 2], [3, 4], [5, 6]]\n", "cam.yaml")
     with pytest.raises(ConfigError, match=r"cam.yaml:2: K\[0\]: expected a 3x3 matrix"):
