@@ -56,6 +56,9 @@ def test_a_port_in_use_at_start_is_tried_again_until_the_screens_are_served(
         holder.close()
     failures = [r for r in caplog.records if "screens not served" in r.getMessage()]
     assert len(failures) == 1      # journaled once, not at every attempt
+    # in words, not asyncio's "[Errno 98] error while attempting to bind on address ..."
+    assert "the port is in use (another program, or another stationd, serves there)" in \
+        failures[0].getMessage() and "Errno" not in failures[0].getMessage()
     with pytest.raises(AttributeError):
         _ = screens.server.url     # stopped
 
