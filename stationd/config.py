@@ -243,7 +243,8 @@ class _StationReader(SectionReader):
             refs = self.section("references", None, partial(
                 References.from_node, marker=marker,
                 matching_tolerance_mm=config.matching.tolerance_mm,
-                pairs={n: (p.calibration, p.to_vehicle) for n, p in pairs.items()}))
+                pairs={n: (p.calibration, p.to_vehicle) for n, p in pairs.items()},
+                registering=self.unregistered))
             config = replace(config, references=refs)
         # after the sections: a mistake written in the file is told before what is missing
         if self.require_devices and isinstance(root.value(), dict) and not self.unreadable:

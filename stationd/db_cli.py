@@ -135,12 +135,16 @@ def cmd_db_import(args: argparse.Namespace) -> int:
     from stationd.boltfile import check_bolts
 
     tolerance = args.tolerance
-    if tolerance is None:   # the station's own matching tolerance, else the default
-        tolerance = 8.0
-        if args.config:
-            from stationd.config import load_station_config
+    own: Path | None = None     # the bolt table the station file names (its daemon imports it)
+    if args.config:
+        from stationd.config import load_station_config
 
-            tolerance = load_station_config(args.config).matching.tolerance_mm
+        cfg = load_station_config(args.config)
+        own = cfg.bolts_path
+        if tolerance is None:   # the station's own matching tolerance, else the default
+            tolerance = cfg.matching.tolerance_mm
+    if tolerance is None:
+        tolerance = 8.0
     result = check_bolts(args.file, tolerance_mm=tolerance)
     if result.errors:
         _print_errors(result.errors)
@@ -153,6 +157,12 @@ def cmd_db_import(args: argparse.Namespace) -> int:
                          "model of the station; nothing imported")
     for w in result.warnings:
         sys.stderr.write(f"warning: {w}\n")
+    if own is not None and Path(args.file).resolve() != own.resolve():
+        # imported, but the daemon imports its own table at each start and reload: this one
+        # is replaced then (a line engineer's trial: the change silently did not last)
+        sys.stderr.write(f"warning: {args.config} names its bolt table ({own}): its daemon "
+                         f"imports that file at each start and reload, replacing this import; "
+                         f"to keep {args.file}'s tables, copy it there or name it in bolts:\n")
     with open_repository(_db_url(args), must_exist=False) as repo:
         report = repo.import_bolts(result.table, where=str(args.file))
     if args.json:

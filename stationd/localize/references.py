@@ -20,8 +20,8 @@ A reference with ``mount: lift`` is where its position says only while the lift 
 height: it is measured only then.  (The key is not ``on``: YAML reads that as a boolean.)  The
 section is refused (with its file and line) when a reference
 is seen by no pair (projected with each registered pair's calibration: in front of both
-cameras and inside both images; while a pair is not registered yet, it may be the one that
-sees it), a registered pair sees none (it could never be checked), two
+cameras and inside both images; while ``calibrate vehicle`` registers a pair, it may be the
+one that sees it), a registered pair sees none (it could never be checked), two
 references overlap, or a value is implausible.
 
 This module is pure geometry: where each pair should see each reference, and the image
@@ -94,9 +94,11 @@ class References:
     @classmethod
     def from_node(cls, node: YamlNode, *, pairs: Mapping[str, tuple[StereoPair,
                                                                    Transform | None]],
-                  marker: MarkerSpec, matching_tolerance_mm: float) -> References:
+                  marker: MarkerSpec, matching_tolerance_mm: float,
+                  registering: str | None = None) -> References:
         """Read the section; ``pairs``: each pair's calibration and registration (a pair not
-        registered yet sees nothing)."""
+        registered yet sees nothing); ``registering``: the pair being registered now
+        (``calibrate vehicle``), whose registration is read as none."""
         m = node.mapping(("markers", "tolerance_mm", "period_min"), required=("markers",))
         default_tol = matching_tolerance_mm / 4.0
         top = matching_tolerance_mm / 2.0
@@ -125,13 +127,12 @@ class References:
                     raise na.error(f"reference {a.name} is {d:.1f} mm from {b.name}: two "
                                    f"markers need {apart:g} mm (their fields would overlap)")
         sees: dict[str, list[str]] = {p: [] for p in pairs}
-        # a pair not registered into the vehicle frame yet (being registered now: ``calibrate
-        # vehicle``) may be the one that sees a reference: unknown, not wrong
-        unregistered = any(tv is None for _, tv in pairs.values())
         for ref, item in zip(refs, nodes, strict=True):
             seen = [p for p, (cal, tv) in pairs.items()
                     if tv is not None and project(cal, tv, ref.position_mm, marker) is not None]
-            if not seen and not unregistered:
+            # the pair being registered (``calibrate vehicle``) may be the one that sees it:
+            # unknown there, not wrong; anywhere else a reference no pair sees is a mistake
+            if not seen and registering is None:
                 raise item.error(
                     f"reference {ref.name} at {list(ref.position_mm)} is seen by no pair "
                     "(projected with each registered pair's calibration, it is not in front "

@@ -373,10 +373,19 @@ def test_db_commands_take_the_database_of_a_station_file(run, tmp_path):
         if f.is_file() and not f.name.startswith("stationd-sim.db"):
             shutil.copy(f, tmp_path)
     station = tmp_path / "station.yaml"
-    code, out, _ = run("db", "import", tmp_path / "bolts.yaml", "--config", station)
-    assert code == 0 and (tmp_path / "stationd-sim.db").exists()
+    code, out, err = run("db", "import", tmp_path / "bolts.yaml", "--config", station)
+    assert code == 0 and (tmp_path / "stationd-sim.db").exists() and err == ""
     code, out, _ = run("db", "export", "--config", station)
     assert code == 0 and "B01" in out
+    # another table than the one the station file names: imported, and said not to last
+    # (its daemon imports its own at each start and reload: a line engineer's trial)
+    other = tmp_path / "other.yaml"
+    other.write_text(out)
+    code, _, err = run("db", "import", other, "--config", station)
+    assert code == 0 and _one_line(err) == (
+        f"warning: {station} names its bolt table ({tmp_path / 'bolts.yaml'}): its daemon "
+        f"imports that file at each start and reload, replacing this import; to keep "
+        f"{other}'s tables, copy it there or name it in bolts:")
     code, out, err = run("db", "export", "--config", station, "--db", "sqlite:///x.db")
     assert code == 2 and "not allowed with argument" in err
     # the station's tolerance: 30 mm makes the simulated vehicle's close bolts too close

@@ -75,10 +75,17 @@ def test_a_reference_only_a_pair_not_registered_yet_sees_is_not_refused():
     with it (a line engineer re-registering a pair the check found moved had to delete the
     references first).  While a pair is not registered, it may be the one that sees it."""
     far = "markers: {R1: [0, 0, -5000]}\n"
-    refs = _read(far, {"pair1": (PAIR, None)})
+    refs = References.from_node(YamlNode.parse(far, "station.yaml"),
+                                pairs={"pair1": (PAIR, None)}, marker=MarkerSpec(),
+                                matching_tolerance_mm=8.0, registering="pair1")
     assert refs.sees == {"pair1": ()}
     with pytest.raises(ConfigError, match="seen by no pair"):
         _read(far, {"pair1": (PAIR, TV)})      # every pair registered: a wrong position
+    # a pair merely not registered in the file does not excuse a reference nobody sees (a
+    # mistyped one would go unmeasured, silently: a reviewer's point)
+    with pytest.raises(ConfigError, match="seen by no pair"):
+        _read(f"markers:\n  R1: {_yaml(R1)}\n  R2: [0, 0, -5000]\n",
+              {"pair1": (PAIR, TV), "pair3": (PAIR, None)})
 
 
 def test_exclusions_cover_each_reference_image_in_both_cameras():
