@@ -42,7 +42,8 @@ class EventBus:
                   ) -> Callable[[], None]:
         """Call ``callback`` with every event from now on; returns the unsubscribe function.
         ``replay``: first with the events it picks from the history (what is true now, for a
-        reader that starts while the station runs), then with every event after them."""
+        reader that starts while the station runs), then with every event after them.  A
+        callback runs under the bus's lock: it must never wait for a thread that publishes."""
         with self._joining:
             for event in (() if replay is None else replay(list(self.history))):
                 callback(event)

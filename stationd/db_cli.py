@@ -476,14 +476,15 @@ def _num(v: float | None) -> str:
 def cmd_config_check(args: argparse.Namespace) -> int:
     """Check station files and bolt tables, told apart by their top-level keys; every error of
     every file, then one summary line.  Warnings (a pair not registered yet) do not fail."""
-    files = [*args.files, *args.config_files]
+    # each with whether it was given as the station file (--config): a bolt table is refused
+    # there, not where the same path is also given as a FILE
+    files = [*((f, False) for f in args.files), *((f, True) for f in args.config_files)]
     if not files:
         raise InputError("config check: no file to check: stationd config check FILE ... "
                          "(station files, bolt tables) or --config STATION.yaml")
     failed, errors = 0, 0
-    stations = set(args.config_files)    # --config names a station file, as elsewhere
-    for name in files:
-        summary, found, warnings = _check_file(name, args.tolerance, name in stations)
+    for name, station_file in files:
+        summary, found, warnings = _check_file(name, args.tolerance, station_file)
         for w in warnings:
             sys.stderr.write(f"warning: {w}\n")
         if not found:

@@ -220,6 +220,11 @@ def test_the_station_file_is_taken_with_config_as_the_other_commands_take_it(sta
     said = capsys.readouterr().err
     assert said.startswith(f"{station.parent / 'bolts.yaml'}: this is a bolt table, not a "
                            "station file: check it without --config"), said
+    # the same path given as a FILE too: checked as what it is there
+    bolts = str(station.parent / "bolts.yaml")
+    assert main(["config", "check", bolts, "--config", bolts]) == 2
+    captured = capsys.readouterr()
+    assert captured.out.startswith(f"{bolts}: ok, ") and "this is a bolt table" in captured.err
     assert main(["config", "check"]) == 2
     assert capsys.readouterr().err == ("stationd: error: config check: no file to check: "
                                        "stationd config check FILE ... (station files, bolt "

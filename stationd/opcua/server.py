@@ -678,13 +678,16 @@ def current(history: list[StationEvent]) -> list[StationEvent]:
     device's last health and nameplate, the line link's last word, of the station running
     (since its last start: a reload's station reports its own devices).  A rundown is not
     among them: results are the feed's, read by sequence."""
-    start = max((i for i, e in enumerate(history)
-                 if isinstance(e, StateChanged) and e.state == State.STARTING), default=0)
+    # from the newest back to the running station's start: the bus lives as long as the
+    # daemon, and this runs under its lock (the publisher waits)
     latest: dict[tuple[str, str], tuple[int, StationEvent]] = {}
-    for i, e in enumerate(history[start:], start):
+    for i in range(len(history) - 1, -1, -1):
+        e = history[i]
         match e:
             case StateChanged() | LineLinkChanged():
-                latest[(type(e).__name__, "")] = (i, e)
+                latest.setdefault((type(e).__name__, ""), (i, e))
             case DeviceHealth() | DeviceIdentified():
-                latest[(type(e).__name__, e.device)] = (i, e)
+                latest.setdefault((type(e).__name__, e.device), (i, e))
+        if isinstance(e, StateChanged) and e.state == State.STARTING:
+            break
     return [e for _, e in sorted(latest.values(), key=lambda ie: ie[0])]

@@ -28,7 +28,7 @@ from typing import TextIO
 from drivers.lift.base import RegisterMap
 from drivers.lift.sim import SimulatedPlc
 from drivers.wrench.sim.cli import ListenError, behaviour, serve
-from drivers.wrench.sim.controller import SimController, SimPset
+from drivers.wrench.sim.controller import DEFAULT_PSETS, SimController, SimPset
 from stationd.boltfile import load_bolts
 from stationd.config import load_station_config
 from stationd.errors import InputError, StationError
@@ -77,8 +77,9 @@ def _station(path: str | None) -> tuple[RegisterMap, dict[int, SimPset] | None]:
     if path is None:
         return RegisterMap(), None
     cfg = load_station_config(path)
-    psets = None if cfg.bolts_path is None else psets_of(cfg.bolts_path)
-    return cfg.lift.registers, None if psets is None else {**loosen_programs(cfg.nok), **psets}
+    # a station whose tables are in its database only: the simulator's default programs
+    psets = DEFAULT_PSETS if cfg.bolts_path is None else psets_of(cfg.bolts_path)
+    return cfg.lift.registers, {**loosen_programs(cfg.nok), **psets}
 
 
 def first_serial(now: float) -> int:

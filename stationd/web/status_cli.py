@@ -118,7 +118,9 @@ def format_status(st: dict[str, Any], via: str = "") -> str:
     if v and v.get("at_station") is False:
         # closed: the next one is not loaded (rejected, or not raised yet); the last one was
         # read as the vehicle at the station (a line engineer's trial)
-        said = f"none loaded (the last: {said}, closed)"
+        how = "closed" if not v.get("reopened_by") else \
+            f"reopened by {v['reopened_by']}: not at the station yet"
+        said = f"none loaded (the last: {said}, {how})"
     lines.append("vehicle:  " + said)
     op = st.get("operator") or {}
     if op.get("user") or op.get("required"):

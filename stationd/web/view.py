@@ -256,10 +256,12 @@ class View:
     def seed(self, now: CoreStatus) -> None:
         """Take what the core decided, as of now (its snapshot), over the events folded so
         far: the state and its reason, which devices are in fault and which are not, what
-        each device said it is, who is signed in.  Why: the events a view starts from are the
-        bus's bounded history; a screens' server started hours into a run (its port freed
-        late) must not show a fault gone from that history as healthy, or the station as
-        starting.  The events published after the snapshot are folded on it as before."""
+        each device said it is, who is signed in, which pairs the calibration check trusts,
+        the vehicle loaded (its VIN and model; its bolts only from its opening).  Why: the
+        events a view starts from are the bus's bounded history; a screens' server started
+        hours into a run (its port freed late) must not show a fault gone from that history
+        as healthy, or the station as starting.  The events published after the snapshot are
+        folded on it as before."""
         self.state, self.reason = now.state, state_words(now.reason)
         self.reason_kind = now.reason.kind
         if now.state not in TRACKING_STATES:
@@ -274,6 +276,20 @@ class View:
             self.opened = True
         self.identities.update(now.identities)
         self.operator, self.operator_required = now.operator, now.operator_required
+        if now.untrusted is not None:   # the calibration check's trust, as the core has it
+            for pair, distrust in now.untrusted.items():
+                self.checks[pair] = {"trusted": False,
+                                     "verdict": "moved" if distrust.kind is Why.PAIR_MOVED
+                                     else "not checked", "words": reason_words(distrust)}
+            for pair, check in self.checks.items():
+                if not check["trusted"] and pair not in now.untrusted:
+                    self.checks[pair] = {**check, "trusted": True}
+        if now.vin != (self.vin if self.loaded else None):
+            # the vehicle opened is gone from the history (its bolts with it): its VIN and
+            # model at least, or none loaded
+            if now.vin is not None:
+                self.vin, self.model, self.bolts = now.vin, now.model, {}
+            self.loaded = now.vin is not None
 
     def _state(self, e: StateChanged) -> None:
         self.state, self.reason, self.reason_kind = e.state, state_words(e.reason), e.reason.kind
@@ -631,9 +647,12 @@ class View:
             "tone": self.tone(),
             "refused": self.refused, "alarm": self.alarm,
             # at_station: opened and not closed since (a closed one's bolts stay shown)
-            "vehicle": None if self.vin is None else {"vin": self.vin, "model": self.model,
-                                                      "rework": self.rework,
-                                                      "at_station": self.loaded},
+            "vehicle": None if self.vin is None else {
+                "vin": self.vin, "model": self.model, "rework": self.rework,
+                "at_station": self.loaded,
+                # reopened for rework by this person, not raised at the station yet
+                "reopened_by": self.reopened[1] if self.reopened is not None
+                and self.reopened[0] == self.vin else None},
             "bolts": [b.to_json() for b in self.bolts.values()],
             "selected": self.selected, "wrench": self.wrench, "counters": self.counters(),
             "wrench_line": self.wrench_line(),

@@ -169,3 +169,10 @@ def test_the_simulated_controller_runs_the_nok_policys_loosen_psets(tmp_path: Pa
             w.select_pset(4)
     finally:
         assert _stop(p) == 0
+    # a station whose bolt tables are in its database only: the simulator's own programs,
+    # and the policy's loosen pset beside them
+    from stationd.sim.devices_cli import _station
+
+    station.write_text(station.read_text().replace("bolts: bolts.yaml\n", ""))
+    _, psets = _station(str(station))
+    assert psets is not None and 4 in psets and 1 in psets

@@ -417,3 +417,29 @@ def test_a_server_started_late_shows_what_the_core_decided_not_what_its_history_
         if isinstance(a, Publish):
             view.apply(worded(a.event))
     assert view.devices["pair2"]["ok"] is True and view.state != "fault"
+
+
+def test_the_seed_takes_the_calibration_trust_and_the_vehicle_too():
+    """A review of the seed: a pair the check found moved, whose PairChecked the history lost,
+    showed "pair2: ok"; a vehicle whose opening it lost showed none."""
+    from types import MappingProxyType
+
+    from stationd.reasons import Reason, Why
+    from stationd.station.events import Because, State, StateReason
+    from stationd.station.state import CoreStatus
+
+    moved = Reason(Why.PAIR_MOVED, pair="pair2", reference="R2")
+    now = CoreStatus(State.TRACKING, StateReason(Because.TRACKING), MappingProxyType({}),
+                     "VIN7", None, False, None, MappingProxyType({"pair2": moved}),
+                     model="SEDAN")
+    view = View(configured=("pair1", "pair2"))
+    view.checks["pair1"] = {"trusted": False, "verdict": "not checked", "words": "x"}
+    view.seed(now)
+    assert view.checks["pair2"]["trusted"] is False and view.checks["pair2"]["verdict"] == \
+        "moved"
+    assert view.checks["pair1"]["trusted"] is True      # the core no longer distrusts it
+    doc = view.to_json()
+    assert doc["vehicle"] == {"vin": "VIN7", "model": "SEDAN", "rework": False,
+                              "at_station": True, "reopened_by": None}
+    health = doc["devices"]["pair2"]
+    assert health["check"]["trusted"] is False and "moved" in health["check"]["words"]

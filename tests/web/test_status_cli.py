@@ -330,7 +330,7 @@ def test_a_closed_vehicle_is_not_said_to_be_at_the_station():
     vehicle closed before it as the one at the station (a line engineer's trial).  A closed
     vehicle is the last one, closed; the fault names the VIN refused
     (``stationd.shell.records``)."""
-    from stationd.station.events import VehicleClosed
+    from stationd.station.events import VehicleClosed, VehicleReopened
     from stationd.web.status_cli import format_status
     from stationd.web.view import fold
     from tests.web.scenario import VIN, opened
@@ -342,3 +342,8 @@ def test_a_closed_vehicle_is_not_said_to_be_at_the_station():
     assert st["vehicle"]["at_station"] is False
     assert f"vehicle:  none loaded (the last: {VIN} (SEDAN): 0/4 bolts OK" in format_status(st)
     assert ", closed)" in format_status(st)
+    st = fold([*opened(), VehicleClosed(VIN, ("B1", "B2", "B3", "B4"), ()),
+               VehicleReopened(VIN, "sam")]).to_json()
+    assert st["vehicle"]["reopened_by"] == "sam"
+    assert any(line.startswith("vehicle:  none loaded") and line.endswith(
+        ", reopened by sam: not at the station yet)") for line in format_status(st).splitlines())
