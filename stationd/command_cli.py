@@ -189,15 +189,18 @@ def _http_alone(path: str) -> Any:
         return None
 
 
-def station_words(url: str, station: Any) -> str:
-    """The station that answered at ``url``, as a command's first line names it."""
+def station_words(url: str, station: Any, hint: bool = True) -> str:
+    """The station that answered at ``url``, as a command's first line names it; ``hint``:
+    with how to give a station without an id one (said by ``status`` and where the wrong
+    station answered; on every command's first line it was noise: two users' trials)."""
     if not isinstance(station, dict) or (not station.get("config") and not station.get("id")):
         return f"station at {url}: it does not say which (not a stationd daemon of this " \
                "version?)"
     if station.get("id"):
         return f"station {station['id']} at {url} ({station.get('config') or 'its file unsaid'})"
-    return f"station at {url}: {station.get('config')} (it has no station id: set " \
-           "line.station_id or opcua.station_id in its station file to name it)"
+    return f"station at {url}: {station.get('config')}" + (
+        " (it has no station id: set line.station_id or opcua.station_id in its station file "
+        "to name it)" if hint else "")
 
 
 def same_station(expected: dict[str, str | None], answered: Any) -> bool:
@@ -230,7 +233,8 @@ def identify(client: ApiClient, target: Target, what: str, *, out: Any = None
             f"(--config {target.config}): nothing done; is that station's daemon running, "
             "and serving its screens at its http.listen? (--url to say where)\n")
         return EXIT_UNREACHABLE
-    print(station_words(target.url, answered), file=out or sys.stdout, flush=True)
+    print(station_words(target.url, answered, hint=what == "status"), file=out or sys.stdout,
+          flush=True)
     return doc
 
 

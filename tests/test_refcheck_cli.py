@@ -133,8 +133,7 @@ def test_while_the_daemon_runs_the_check_is_asked_of_it_through_its_api(
         named, *out = capsys.readouterr().out.splitlines()
         # the first line names the station that answered: the station file's own daemon
         assert named.startswith("station at http://") and named.endswith(
-            f": {path.resolve()} (it has no station id: set line.station_id or "
-            "opcua.station_id in its station file to name it)")
+            f": {path.resolve()}")     # how to give it an id: said by status only
         assert [line.split(":")[0] for line in out] == ["pair1 in place", "pair2 in place"]
         _wait_log(log, "command calibration-check ('after the shift') by erik (cli 127.0.0.1): "
                   "accepted", daemon)
