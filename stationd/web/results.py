@@ -160,8 +160,10 @@ class Results:
         tightened again.  Raises ``NotFoundError`` for an unknown VIN."""
         report = self.repo.vehicle_report(vin)
         still_open = report.vehicle.ended_at is None
-        runs = [{**{k: v for k, v in r.items() if k in CSV_FIELDS}, "skipped_by": None,
-                 "comment": r["entered_comment"]} for r in self.rundowns(vin)]
+        # every row with every field (a JSON row of a release had keys the others had not:
+        # a quality engineer's trial)
+        runs = [{**dict.fromkeys(CSV_FIELDS), **{k: v for k, v in r.items() if k in CSV_FIELDS},
+                 "skipped_by": None, "comment": r["entered_comment"]} for r in self.rundowns(vin)]
         none: list[dict[str, Any]] = [
             {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
              "bolt": b.bolt_id, "attempt": 0,

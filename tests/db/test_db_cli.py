@@ -549,8 +549,11 @@ def test_a_release_of_a_locked_bolt_is_a_row_of_the_results_export(run, db):
         ("released", "sam", "joint cleaned"), ("ok", "", "")]
     code, out, _ = run("db", "export", "--results", "--vin", "VIN1", "--format", "json",
                        "--db", db)
-    [rel] = [r for r in json.loads(out) if r["status"] == "released"]
+    every = json.loads(out)
+    [rel] = [r for r in every if r["status"] == "released"]
     assert (rel["bolt"], rel["released_by"]) == ("SF-FL", "sam")
+    # one set of keys for every row (a release's row had keys the others had not)
+    assert len({tuple(sorted(r)) for r in every}) == 1
     out_file = db.removeprefix("sqlite:///") + ".csv"
     code, out, _ = run("db", "export", "--results", "--vin", "VIN1", "--out", out_file,
                        "--db", db)
