@@ -345,11 +345,18 @@ async def _tool_on(st: Station, bolt: str, tries: int = 600) -> bool:
     return False
 
 
-def _why_not(st: Station) -> str:
-    """Why nothing was selected: the last localization's refusal, else the state's words."""
+def _why_not(st: Station, window_s: float = 30.0) -> str:
+    """Why nothing was selected: the last localization's refusal, else the state's words with
+    how many localizations came in the operator's wait ("tracking the wrench" alone left a
+    loaded machine's few frames unsaid: a line engineer's trial)."""
     seen = [e for e in st.bus.of(Localized) if isinstance(e, Localized)]
     last = seen[-1].reason if seen else None
-    return reason_words(last) if last is not None else state_words(st.core.status().reason)
+    if last is not None:
+        return reason_words(last)
+    recent = sum(1 for e in seen if e.t >= seen[-1].t - window_s) if seen else 0
+    return (f"{state_words(st.core.status().reason)}; {recent} localizations in the last "
+            f"{window_s:g} s, the last without a refusal: a machine too busy for the frames "
+            "a selection needs?")
 
 
 async def _pull(st: Station, loosening: bool, nok: bool) -> tuple[Any, bool]:

@@ -75,3 +75,29 @@ def test_the_simulated_supervisor_releases_as_a_releaser_of_the_file(tmp_path):
     alone = supervisor_of(_cfg(tmp_path, None), "sim operator")   # config/sim: no access
     assert (alone.user, alone.rights, alone.source) == (SUPERVISOR.user, SUPERVISOR.rights,
                                                         "sim operator")
+
+
+def test_a_bolt_not_selected_without_a_refusal_says_how_many_frames_came():
+    """"not selected (tracking the wrench)" on a loaded machine said nothing of why: the
+    localizations of the operator's wait are counted (a line engineer's trial)."""
+    from types import SimpleNamespace
+
+    from stationd.bus import EventBus
+    from stationd.reasons import Reason, Why
+    from stationd.sim.operator import _why_not
+    from stationd.station.core import StationCore
+    from stationd.station.events import Localized
+
+    def seen(t: float, reason: Reason | None = None) -> Localized:
+        return Localized(point_mm=(0.0, 0.0, 0.0), tilt_deg=1.0, reason=reason,
+                         candidate=None, distance_mm=None, age_ms=30.0, allowed=(), t=t)
+
+    bus = EventBus()
+    for t in (10.0, 50.0, 70.0, 75.0):
+        bus.publish(seen(t))
+    st = SimpleNamespace(bus=bus, core=StationCore())
+    said = _why_not(st)
+    assert said.endswith("; 3 localizations in the last 30 s, the last without a refusal: a "
+                         "machine too busy for the frames a selection needs?"), said
+    bus.publish(seen(76.0, Reason(Why.NOT_LOCALIZED, note="marker not found")))
+    assert "localizations in the last" not in _why_not(st)
