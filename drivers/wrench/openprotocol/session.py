@@ -150,10 +150,13 @@ class Session:
                            "fetched late are placed by their tightening ids only",
                            self.device, e)
             return None
-        if round(offset) == 0:
+        # its whole seconds are its clock cut down: an agreeing clock measures -1..0 s, so
+        # the words take the middle of that second (they alternated between "agrees" and
+        # "-1 s" for a clock in step: a line engineer's trial)
+        if round(offset + 0.5) == 0:
             self._log.info("%s: controller clock agrees with the station's (within 1 s)",
                            self.device)
         else:
             self._log.info("%s: controller clock %+.0f s from the station's", self.device,
-                           offset)
+                           offset + 0.5)
         return offset

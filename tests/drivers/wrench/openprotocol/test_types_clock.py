@@ -3,6 +3,7 @@ driver and the simulated controller over TCP on 127.0.0.1."""
 
 from __future__ import annotations
 
+import time
 from datetime import datetime
 
 import pytest
@@ -123,3 +124,18 @@ def test_sim_wrench_takes_the_controllers_behaviour_as_keywords():
         got = w.wait_result(1.0)
     assert isinstance(got, UnreadableResult)   # revision 2 carries no type: held
     assert (got.revision, got.laid_out_as, got.pset) == (7, 2, 1)
+
+
+def test_a_clock_in_step_is_said_to_agree_at_every_connection(tmp_path, caplog):
+    """The controller says whole seconds (its clock cut down): a clock in step measured
+    -1..0 s and the journal said "agrees" at one connection and "-1 s" at the next (a line
+    engineer's trial)."""
+    import logging
+
+    with SimController(seed=4) as sim, caplog.at_level(logging.INFO):
+        for _ in range(4):
+            with connect(sim, "tcp", tmp_path) as w:
+                assert w.clock_offset_s is not None
+            time.sleep(0.3)         # another fraction of a second each time
+    said = [r.getMessage() for r in caplog.records if "controller clock" in r.getMessage()]
+    assert len(said) == 4 and all("agrees with the station's" in m for m in said), said
