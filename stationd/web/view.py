@@ -372,7 +372,12 @@ class View:
                       for b in e.bolts}
 
     def _close(self, e: VehicleClosed) -> None:
-        self.closed = {"vin": e.vin, "missing": list(e.missing), "nok": list(e.nok)}
+        # a bolt skipped by a person is not missing: the headline said "46 missing" beside
+        # the counters' "2 skipped" and the report's 44 (a supervisor's trial)
+        skipped = {b.bolt for b in self.bolts.values() if b.state == SKIPPED} \
+            if e.vin == self.vin else set()
+        self.closed = {"vin": e.vin, "missing": [b for b in e.missing if b not in skipped],
+                       "skipped": [b for b in e.missing if b in skipped], "nok": list(e.nok)}
         if e.vin == self.vin:
             self.loaded = False
         self.reopened = None
@@ -544,8 +549,8 @@ class View:
         if self.selected is not None:
             return "go"
         if self.closed is not None:
-            return ("nok" if self.closed["nok"] else "missing" if self.closed["missing"]
-                    else "done")
+            return ("nok" if self.closed["nok"] else "missing"
+                    if self.closed["missing"] or self.closed.get("skipped") else "done")
         c = self.counters()
         if c["total"] and c["done"] == c["total"]:
             return "done"
@@ -600,7 +605,8 @@ class View:
         ``shown`` names (a panel PC fits no 38 names in large type), every name with None."""
         c = self.closed
         assert c is not None  # noqa: S101 - called when closed
-        parts = [_named(c["missing"], "missing", shown), _named(c["nok"], "NOK", shown)]
+        parts = [_named(c["missing"], "missing", shown),
+                 _named(c.get("skipped", []), "skipped", shown), _named(c["nok"], "NOK", shown)]
         return f"{c['vin']} closed: " + ("; ".join(x for x in parts if x) or "all bolts OK")
 
     def headline_title(self) -> str:

@@ -11,6 +11,7 @@ from datetime import UTC, datetime
 
 import numpy as np
 
+from db.kinds import LOOSENING
 from db.repository import Repository
 from stationd.reasons import Reason, Why
 from stationd.station.events import (
@@ -20,6 +21,7 @@ from stationd.station.events import (
     DeviceIdentified,
     Localized,
     Refused,
+    ResultRecorded,
     StateChanged,
     StateReason,
 )
@@ -116,6 +118,14 @@ def test_operator_screen_follows_the_work_and_shows_the_fault(live_server, page,
     cls, text = page.js(
         "const r = document.querySelector('#results tr'); return [r.className, r.innerText]")
     assert cls == "res-nok" and "B2 NOK" in text and "[45.0-55.0]" in text
+    # a loosening is said as one, never "B2 OK" under its NOK (a supervisor's trial)
+    srv.publish([ResultRecorded(vin=VIN, bolt="B2", ok=True, torque_nm=36.0, angle_deg=446.0,
+                                tightening_id=9, pset=4, torque_min=5.0, torque_max=150.0,
+                                angle_min=90.0, angle_max=720.0, kind=LOOSENING)])
+    page.wait(lambda p: p.js("return document.querySelector('#results tr').className")
+              == "res-loosened", what="the loosening on top of the results")
+    text = page.js("return document.querySelector('#results tr').innerText")
+    assert "B2 loosened" in text and "OK" not in text, text
     check_fits(page, "#bolts", "#headline", "#done", "#nok")
     shots("operator-working")
 

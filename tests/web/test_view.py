@@ -134,7 +134,8 @@ def test_skip_rework_result_close_and_wrong_bolt():
     assert states(v)["B4"] == "skipped" and states(v)["B2"] == "ok"
     assert v.counters() == {"total": 4, "done": 2, "nok": 0, "skipped": 1}
     v.apply(VehicleClosed(vin=VIN, missing=("B3",), nok=()))
-    assert v.closed == {"vin": VIN, "missing": ["B3"], "nok": []} and v.wrench is None
+    assert v.closed == {"vin": VIN, "missing": ["B3"], "skipped": [], "nok": []} \
+        and v.wrench is None
     assert v.headline() == f"{VIN} closed: missing B3"
     v.apply(WrongBolt(bolt="B1", truth="B2"))
     assert v.headline().startswith("WRONG BOLT")
@@ -271,6 +272,21 @@ def test_a_closed_vehicle_with_missing_or_nok_bolts_is_an_alarm_and_its_bolts_sa
     v = fold(opened())
     v.apply(VehicleClosed(vin=VIN, missing=(), nok=()))
     assert (v.tone(), v.headline()) == ("done", f"{VIN} closed: all bolts OK")
+
+
+def test_a_closed_vehicles_skipped_bolts_are_said_skipped_not_missing():
+    """The headline said "46 missing (B01, B02, ...)" of a vehicle whose B01 and B02 a person
+    skipped, beside the counters' "2 skipped" and the report's 44 missing (a supervisor's
+    trial): the core's close names every bolt not done; the skipped ones are said apart."""
+    v = fold([*opened(), BoltSkipped(bolt="B1", reason="no nut fitted")])
+    v.apply(VehicleClosed(vin=VIN, missing=("B1", "B2", "B3", "B4"), nok=()))
+    assert v.headline() == f"{VIN} closed: missing B2, B3, B4; skipped B1"
+    assert v.tone() == "missing"
+    v = fold([*opened(), BoltSkipped(bolt="B1", reason="x"), BoltSkipped(bolt="B2", reason="y"),
+              BoltSkipped(bolt="B3", reason="z"), BoltSkipped(bolt="B4", reason="w")])
+    v.apply(VehicleClosed(vin=VIN, missing=("B1", "B2", "B3", "B4"), nok=()))
+    assert v.headline() == f"{VIN} closed: 4 skipped (B1, B2, B3, ...)"
+    assert v.tone() == "missing"
 
 
 def test_a_reopened_vehicle_is_no_longer_said_closed():

@@ -377,14 +377,18 @@ function drawResults(results) {
   tb.replaceChildren();
   for (const r of results) {
     const tr = document.createElement("tr");
-    tr.className = r.ok ? "res-ok" : "res-nok";
+    // a loosening is no tightening: "✔ B11 OK" under its NOK read as the bolt done
+    const loosening = r.kind === "loosening";
+    tr.className = !r.ok ? "res-nok" : loosening ? "res-loosened" : "res-ok";
     const lim = (v, lo, hi, d) => {
       const out = (lo !== null && v < lo) || (hi !== null && v > hi);
       const rng = lo !== null || hi !== null ? ` [${fmt(lo, d)}-${fmt(hi, d)}]` : "";
       // a range stays on one line ("[22.0-" / "28.0]" wrapped at 1280 px)
       return `<span class="${out ? "out" : ""}">${fmt(v, d)}</span> <small class="rng">${rng.trim()}</small>`;
     };
-    tr.innerHTML = `<td>${esc(r.bolt)} ${r.ok ? "OK" : "NOK" + failedWords(r.torque_nm, r.torque_min, r.torque_max, r.angle_deg, r.angle_min, r.angle_max)}</td>` +
+    const nok = failedWords(r.torque_nm, r.torque_min, r.torque_max, r.angle_deg, r.angle_min, r.angle_max);
+    const said = loosening ? (r.ok ? "loosened" : "loosening NOK" + nok) : (r.ok ? "OK" : "NOK" + nok);
+    tr.innerHTML = `<td>${esc(r.bolt)} ${said}</td>` +
       `<td>${lim(r.torque_nm, r.torque_min, r.torque_max, 1)}</td>` +
       `<td>${lim(r.angle_deg, r.angle_min, r.angle_max, 0)}</td>`;
     tb.appendChild(tr);
