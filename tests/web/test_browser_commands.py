@@ -88,3 +88,13 @@ def test_operator_screen_logs_in_skips_a_bolt_and_shows_a_refusal(page, shots, t
         got = _answer(page, shown)
         assert got == f"refused: vehicle {VIN} is open at the station"
         assert page.js("return document.getElementById('cmd-answer').dataset.ok") == "0"
+        # the session gone behind the screen's back (a daemon restarted has none): when the
+        # screen is live again it asks, and offers the login, not the forms of a session
+        # gone (a supervisor's trial: the first command typed after a restart was lost)
+        page.js("return fetch('/api/logout', {method: 'POST', credentials: 'same-origin', "
+                "headers: {'Content-Type': 'application/json'}, body: '{}'})"
+                ".then(r => r.status)")
+        assert _shown(page, "signed")
+        page.js("window.dispatchEvent(new Event('station-live'))")
+        page.wait(lambda p: _shown(p, "login") and not _shown(p, "signed"), 30,
+                  "the login form back once live again")

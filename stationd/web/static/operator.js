@@ -387,7 +387,7 @@ function drawResults(results) {
       return `<span class="${out ? "out" : ""}">${fmt(v, d)}</span> <small class="rng">${rng.trim()}</small>`;
     };
     const nok = failedWords(r.torque_nm, r.torque_min, r.torque_max, r.angle_deg, r.angle_min, r.angle_max);
-    const said = loosening ? (r.ok ? "loosened" : "loosening NOK" + nok) : (r.ok ? "OK" : "NOK" + nok);
+    const said = !r.ok ? "NOK" + nok : loosening ? "loosened" : "OK";   // one line at 1280 px
     tr.innerHTML = `<td>${esc(r.bolt)} ${said}</td>` +
       `<td>${lim(r.torque_nm, r.torque_min, r.torque_max, 1)}</td>` +
       `<td>${lim(r.angle_deg, r.angle_min, r.angle_max, 0)}</td>`;
@@ -546,6 +546,8 @@ function connect(afterStall = false) {
     if (waitFresh) { waitFresh = false; return; }
     clearTimeout(lostTimer);
     lostTimer = null;
+    // live again: the session is asked again (a restarted daemon has none)
+    if (document.body.classList.contains("not-live")) window.dispatchEvent(new Event("station-live"));
     document.body.classList.remove("not-live");
     $("conn").hidden = true;
     render(view);

@@ -26,7 +26,9 @@ window.StationSession = (function () {
   }
 
   function bind(onWho) {
+    let shown;   // the session last shown (JSON), so a refresh that finds it alike changes nothing
     function show(who) {
+      shown = JSON.stringify(who && who.user ? who : null);
       const signed = Boolean(who && who.user);
       q("login").hidden = signed;
       q("signed").hidden = !signed;
@@ -67,7 +69,18 @@ window.StationSession = (function () {
       show(null);
       answer("logged out", true);
     });
-    fetch("/api/me", {credentials: "same-origin"}).then((r) => r.ok ? r.json() : null).then(show, () => show(null));
+    // who is logged in, asked again: at the start, when the screen is live again (a daemon
+    // restarted has no session: the panel looked logged in and lost the first command typed)
+    // and every 30 s (a reload changed the rights); shown only when it changed (the forms keep
+    // what is being typed)
+    function refresh() {
+      fetch("/api/me", {credentials: "same-origin"}).then((r) => r.ok ? r.json() : null)
+        .then((who) => { if (JSON.stringify(who && who.user ? who : null) !== shown) show(who); },
+              () => {});
+    }
+    refresh();
+    window.addEventListener("station-live", refresh);
+    setInterval(refresh, 30000);
     return {command, show, answer};
   }
 
