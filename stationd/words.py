@@ -622,6 +622,11 @@ def outcome_words(ok: bool, torque_nm: float, angle_deg: float) -> str:
 def answer_words(answer: Answer) -> str:
     """The journal's line: the command, who gave it and from where, and the answer."""
     head = f"command {command_words(answer)} by {answer.issuer.user} ({answer.issuer.source})"
+    if answer.reason is None and isinstance(answer.command, ReopenVehicle):
+        # what comes of it, where "accepted" alone left the person wondering (a supervisor
+        # reopened a vehicle while another was on the lift)
+        return (f"{head}: accepted: it opens as a rework when it is at the station (its "
+                "skips before no longer count)")
     if answer.reason is None:
         return f"{head}: accepted"
     return f"{head}: refused: {reason_words(answer.reason)}"

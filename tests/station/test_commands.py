@@ -146,6 +146,10 @@ def test_a_reopen_of_the_closed_vehicle_at_height_clears_its_fault_and_loads_it(
     assert [type(a).__name__ for a in acts] == ["RecordCommand"]
     acts = core.feed(CommandDone(1.4, 4))
     assert _answer(acts).answer.accepted and "vehicle" not in core.faults
+    # what comes of it said with the answer ("accepted" alone: a supervisor's trial)
+    assert answer_words(_answer(acts).answer).endswith(
+        "accepted: it opens as a rework when it is at the station (its skips before no "
+        "longer count)")
     reopened = [a.event for a in acts if isinstance(a, Publish)
                 and isinstance(a.event, VehicleReopened)]
     assert reopened == [VehicleReopened("OLDVIN", "sam", t=1.4)]   # the screens say so

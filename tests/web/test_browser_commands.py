@@ -61,6 +61,8 @@ def test_operator_screen_logs_in_skips_a_bolt_and_shows_a_refusal(page, shots, t
                 "document.querySelector('#skip button').click()")
         got = _answer(page, shown)
         assert got.endswith(": accepted") and "skip B05" in got and "olga" in got
+        # the comment was this command's: the form is empty for the next one
+        assert page.js("return document.getElementById('skip-comment').value") == ""
         page.wait(lambda p: p.js("const g = document.querySelector("
                                  "'#bolts g.bolt[data-bolt=B05]'); return g && g.dataset.state")
                   == "skipped", 30, "B05 drawn skipped")

@@ -8,7 +8,13 @@
   const q = (id) => document.getElementById(id);
   // logging in and out, and each command's nonce and answer: session.js (the Teach panel's too)
   let me = null;   // the session's user
+  // a comment is one command's: cleared once it is accepted and when the user changes (the
+  // next person found the last one's words in the form: a supervisor's trial)
+  const COMMENTS = ["skip-comment", "release-comment", "enter-comment", "loosen-comment",
+                    "reopen-comment"];
+  const clearComments = () => { for (const id of COMMENTS) if (q(id)) q(id).value = ""; };
   const {command, answer} = window.StationSession.bind((rights, user) => {
+    if (user !== me) clearComments();
     me = user;
     q("skip").hidden = !rights.includes("skip");
     q("reopen").hidden = !rights.includes("reopen");
@@ -16,6 +22,11 @@
     q("enter").hidden = !rights.includes("release");   // the other way to end a hold
     q("loosen").hidden = !rights.includes("loosen");
   });
+
+  async function send(body, comment) {
+    const doc = await command(body);
+    if (doc && doc.accepted) q(comment).value = "";
+  }
 
   // the bolts one may skip (those of the vehicle at the station not done yet) and those one
   // may release (locked after too many NOKs)
@@ -56,14 +67,14 @@
     const view = window.lastView;
     if (!view || !view.vehicle) { answer("no vehicle at the station", false); return; }
     if (!q("skip-bolt").value) { answer("choose the bolt to skip", false); return; }
-    command({kind: "skip", vin: view.vehicle.vin, bolt: q("skip-bolt").value, comment: q("skip-comment").value});
+    send({kind: "skip", vin: view.vehicle.vin, bolt: q("skip-bolt").value, comment: q("skip-comment").value}, "skip-comment");
   });
   q("release").addEventListener("submit", (e) => {
     e.preventDefault();
     const view = window.lastView;
     if (!view || !view.vehicle) { answer("no vehicle at the station", false); return; }
     if (!q("release-bolt").value) { answer("choose the locked bolt to release", false); return; }
-    command({kind: "release", vin: view.vehicle.vin, bolt: q("release-bolt").value, comment: q("release-comment").value});
+    send({kind: "release", vin: view.vehicle.vin, bolt: q("release-bolt").value, comment: q("release-comment").value}, "release-comment");
   });
   q("enter").addEventListener("submit", (e) => {
     e.preventDefault();
@@ -79,19 +90,19 @@
       answer("the angle the controller shows, degrees", false); return;
     }
     if (!q("enter-comment").value.trim()) { answer("say what was checked on the controller", false); return; }
-    command({kind: "enter-outcome", vin: view.vehicle.vin, bolt: q("enter-bolt").value,
-             ok: q("enter-ok").value === "ok", torque_nm: torque, angle_deg: angle,
-             comment: q("enter-comment").value});
+    send({kind: "enter-outcome", vin: view.vehicle.vin, bolt: q("enter-bolt").value,
+          ok: q("enter-ok").value === "ok", torque_nm: torque, angle_deg: angle,
+          comment: q("enter-comment").value}, "enter-comment");
   });
   q("loosen").addEventListener("submit", (e) => {
     e.preventDefault();
     const view = window.lastView;
     if (!view || !view.vehicle) { answer("no vehicle at the station", false); return; }
     if (!q("loosen-bolt").value) { answer("choose the bolt to loosen", false); return; }
-    command({kind: "loosen", vin: view.vehicle.vin, bolt: q("loosen-bolt").value, comment: q("loosen-comment").value});
+    send({kind: "loosen", vin: view.vehicle.vin, bolt: q("loosen-bolt").value, comment: q("loosen-comment").value}, "loosen-comment");
   });
   q("reopen").addEventListener("submit", (e) => {
     e.preventDefault();
-    command({kind: "reopen", vin: q("reopen-vin").value, comment: q("reopen-comment").value});
+    send({kind: "reopen", vin: q("reopen-vin").value, comment: q("reopen-comment").value}, "reopen-comment");
   });
 })();
