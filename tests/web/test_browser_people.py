@@ -70,6 +70,10 @@ def test_a_lock_waits_for_a_person_refused_as_operator_released_as_supervisor(pa
         page.wait(lambda p: p.js("return [...document.querySelectorAll('#release-bolt option')]"
                                  ".map(o => o.value).includes(arguments[0])", bolt), 30,
                   "the locked bolt offered")
+        # nor is it offered to her Skip (the station refuses an operator's skip of a lock)
+        skippable = "return [...document.querySelectorAll('#skip-bolt option')]" \
+                    ".map(o => o.value)"
+        assert bolt not in page.js(skippable) and len(page.js(skippable)) > 1
         shown = page.text("#cmd-answer") or ""
         page.js("document.getElementById('release-bolt').value = arguments[0];"
                 "document.getElementById('release-comment').value = 'looks fine to me';"
@@ -89,6 +93,7 @@ def test_a_lock_waits_for_a_person_refused_as_operator_released_as_supervisor(pa
         page.wait(lambda p: p.js("return [...document.querySelectorAll('#release-bolt option')]"
                                  ".map(o => o.value).includes(arguments[0])", bolt), 30,
                   "the locked bolt offered")
+        page.wait(lambda p: bolt in p.js(skippable), 30, "the locked bolt his to skip too")
         shown = page.text("#cmd-answer") or ""
         page.js("document.getElementById('release-bolt').value = arguments[0];"
                 "document.getElementById('release-comment').value = 'thread chased';"
