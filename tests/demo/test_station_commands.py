@@ -99,12 +99,14 @@ def test_commands_reach_the_demos_station_during_the_run_and_the_hold(tmp_path):
         # the hold: the vehicle left the lift incomplete (closed): a supervisor reopens it
         held = command("reopen", vin)
         assert held.returncode == 0, held
-        assert held.stdout.strip().endswith(": accepted")
+        assert held.stdout.strip().endswith(": accepted: it opens as a rework when it is at "
+                                            "the station (its skips before no longer count)")
         # journaled in the demo's output as in the daemon's journal: accepted ones too (issue
         # 30, item 5: a reopen, a teach start and stop left no line), with a time stamp
         stamp = r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d\.\d{3}[+-]\d{4} "
         line = expect_re(stamp + rf"command reopen {vin}.* by sue \(cli 127\.0\.0\.1\): "
-                         "accepted$")
+                         r"accepted: it opens as a rework when it is at the station \(its skips "
+                         r"before no longer count\)$")
         skip = command("skip", vin, "B01")     # no vehicle on the lift now: the station's no
         assert skip.returncode == 1 and "no vehicle at the station" in skip.stdout, skip
         expect_re(stamp + rf"command skip B01 of {vin}.* by sue \(cli 127\.0\.0\.1\): "
