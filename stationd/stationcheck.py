@@ -199,11 +199,12 @@ def _database_table(cfg: StationConfig) -> tuple[BoltTable, str] | str | None:
 
 def _in_missing_state_directory(url: str) -> bool:
     """Whether ``url`` is an SQLite file in the service's own folder, which does not exist
-    (yet: :data:`stationd.config.STATE_DIRECTORY`)."""
-    prefix = "sqlite:///"
-    if not url.startswith(prefix) or STATE_DIRECTORY.exists():
-        return False
-    return Path(url[len(prefix):]).parent == STATE_DIRECTORY
+    (yet: :data:`stationd.config.STATE_DIRECTORY`): the very problem the reader lets the
+    checker pass (``stationd.config._database_url``), found as the reader finds it."""
+    from db.location import missing_folder, sqlite_problem
+
+    return sqlite_problem(url, read_header=False, as_writer=False) == \
+        missing_folder(STATE_DIRECTORY)
 
 
 def _not_mine_warning(url: str, path: str) -> ConfigError | None:
