@@ -201,7 +201,7 @@ class View:
             case DeviceIdentified():
                 self.identities[e.device] = e.identity
             case DeviceHealth():
-                self.devices[e.device] = {"ok": e.ok, "kind": e.kind, "reason": e.reason}
+                self.devices[e.device] = _health(e.ok, e.kind, e.reason)
             case PairChecked():
                 self.checks[e.pair] = {"trusted": e.trusted, "verdict": e.verdict,
                                        "words": check_words(e)}
@@ -267,11 +267,11 @@ class View:
         if now.state not in TRACKING_STATES:
             self._refuse("")
         for device, why in now.faults.items():
-            self.devices[device] = {"ok": False, "kind": now.fault_kinds.get(device, ""),
-                                    "reason": fault_words(why)}
+            self.devices[device] = _health(False, now.fault_kinds.get(device, ""),
+                                           fault_words(why))
         for device, health in list(self.devices.items()):
             if not health["ok"] and device not in now.faults:
-                self.devices[device] = {"ok": True, "kind": "", "reason": ""}
+                self.devices[device] = _health(True)
         if now.state != State.STARTING and DATABASE not in now.faults:
             self.opened = True
         self.identities.update(now.identities)
@@ -550,7 +550,7 @@ class View:
             return "go"
         if self.closed is not None:
             return ("nok" if self.closed["nok"] else "missing"
-                    if self.closed["missing"] or self.closed.get("skipped") else "done")
+                    if self.closed["missing"] or self.closed["skipped"] else "done")
         c = self.counters()
         if c["total"] and c["done"] == c["total"]:
             return "done"
@@ -605,8 +605,8 @@ class View:
         ``shown`` names (a panel PC fits no 38 names in large type), every name with None."""
         c = self.closed
         assert c is not None  # noqa: S101 - called when closed
-        parts = [_named(c["missing"], "missing", shown),
-                 _named(c.get("skipped", []), "skipped", shown), _named(c["nok"], "NOK", shown)]
+        parts = [_named(c["missing"], "missing", shown), _named(c["skipped"], "skipped", shown),
+                 _named(c["nok"], "NOK", shown)]
         return f"{c['vin']} closed: " + ("; ".join(x for x in parts if x) or "all bolts OK")
 
     def headline_title(self) -> str:
@@ -666,6 +666,12 @@ class View:
             "locks": self.locks(),
             "operator": {"user": self.operator, "required": self.operator_required},
         }
+
+
+def _health(ok: bool, kind: str = "", reason: str = "") -> dict[str, Any]:
+    """A device's health as the view keeps it (a DeviceHealth folded, or the core's snapshot
+    seeded)."""
+    return {"ok": ok, "kind": kind, "reason": reason}
 
 
 def _named(names: list[str], what: str, shown: int | None) -> str:
