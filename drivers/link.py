@@ -16,9 +16,11 @@ from __future__ import annotations
 
 import errno
 import importlib
+import os
 import select
 import socket
 import termios
+import time
 from abc import ABC, abstractmethod
 from typing import Any, Literal
 
@@ -199,6 +201,27 @@ class TcpLink(Link):
             sock.close()
 
 
+def write_all(fd: int, data: bytes, timeout: float) -> bool:
+    """Write ``data`` to the non-blocking ``fd`` (pyserial opens ports so); False once the
+    port has taken no byte for ``timeout`` s.  Not pyserial's ``write``: pyserial 3.5 reads the
+    clock after ``os.write`` and raises a write timeout for bytes already sent when its
+    thread was stalled that long (a loaded host), so a command that reached the device would
+    be taken as not sent.  Here only a port that takes nothing times out."""
+    view = memoryview(data)
+    deadline = time.monotonic() + timeout
+    while view:
+        try:
+            taken = os.write(fd, view)
+        except BlockingIOError:
+            taken = 0
+        if taken:
+            view = view[taken:]
+            deadline = time.monotonic() + timeout
+        elif not select.select([], [fd], [], max(0.0, deadline - time.monotonic()))[1]:
+            return False    # (after a stall past the deadline, a last look without waiting)
+    return True
+
+
 class SerialLink(Link):
     """A serial link through pyserial's ``serial_for_url`` (a device path, a pty, or any
     pyserial URL such as ``socket://`` or ``loop://``), 8N1 unless told."""
@@ -213,6 +236,7 @@ class SerialLink(Link):
         self.where = port
         self._ser: Any = None
         self._timeout: float | None = None
+        self._write_timeout = 1.0
 
     def connect(self, timeout: float) -> None:
         self.close()
@@ -220,17 +244,25 @@ class SerialLink(Link):
                                 stopbits=self.stopbits, timeout=0.05, write_timeout=timeout,
                                 exclusive=False)
         self._timeout = 0.05
+        self._write_timeout = timeout
 
     def send(self, data: bytes) -> None:
         ser = self._ser
         if ser is None:
             raise ConnectionLostError(f"serial port {self.port} is not open")
         serial = pyserial()
+        timed_out = ConnectionLostError(f"writing to {self.port} timed out (the port took "
+                                        f"nothing within {self._write_timeout:g} s)")
         try:
-            ser.write(data)
+            fileno = getattr(ser, "fileno", None)
+            if fileno is None:          # a pyserial URL (socket://, loop://): its own write
+                ser.write(data)
+            elif not write_all(fileno(), data, self._write_timeout):
+                raise timed_out
         except serial.SerialTimeoutException:
-            raise ConnectionLostError(f"writing to {self.port} timed out") from None
-        except (serial.SerialException, OSError) as e:
+            raise timed_out from None
+        except (serial.SerialException, OSError, TypeError) as e:
+            # TypeError: fileno() of a port closed concurrently
             raise ConnectionLostError(f"serial device {self.port} is gone: {e}") from None
 
     def recv(self, timeout: float) -> bytes:
