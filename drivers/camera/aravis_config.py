@@ -22,7 +22,8 @@ from drivers.url import OptionError, parse_url
 
 N = TypeVar("N", int, float)
 FORM = ("aravis://DEVICE-ID?trigger=software|line0|free&pixel_format=" + "|".join(pixels.FORMATS)
-        + "&exposure_us=N&gain_db=N&buffers=4&region=full|X,Y,W,H&frame_rate=HZ&heartbeat_ms=N")
+        + "&exposure_us=N&gain_db=N&buffers=4&region=full|X,Y,W,H&frame_rate=HZ&heartbeat_ms=N"
+        + "&stream_socket=udp|packet")
 DEFAULT_BUFFERS = 4
 # ArvDeviceError codes meaning "the camera is gone": not connected, protocol error, transfer
 # error, timeout, not found; and the ones meaning "someone else controls it"
@@ -45,6 +46,10 @@ class Settings:
     region: tuple[int, int, int, int] | str | None = None
     frame_rate: float | None = None
     heartbeat_ms: int | None = None
+    #: how a GigE stream is read: a UDP socket (what the service, without raw sockets, gets),
+    #: or Aravis's packet socket (a 32 MB ring, for unpaced bursts; needs CAP_NET_RAW, and
+    #: has Aravis 0.8's start-up race: see ``_Link._configure``)
+    stream_socket: str = "udp"
 
 
 def _region(text: str) -> tuple[int, int, int, int] | str:
@@ -111,14 +116,15 @@ def parse_aravis_url(text: str) -> tuple[Settings, dict[str, float | None]]:
         "exposure_us": (_exposure_us, None), "gain_db": (_gain_db, None),
         "buffers": (_buffers, None),
         "region": (_region, None), "frame_rate": (positive, None),
-        "heartbeat_ms": (_heartbeat_ms, None), "timeout": (positive, None)}, FORM)
+        "heartbeat_ms": (_heartbeat_ms, None), "stream_socket": (choice("udp", "packet"), None),
+        "timeout": (positive, None)}, FORM)
     name = unquote(urlsplit(text).netloc)
     if url.scheme != "aravis" or not name or url.path not in ("", "/"):
         raise url.error(f"expected {FORM} (the device id is VENDOR-MODEL-SERIAL, as Aravis "
                         "lists it)")
     settings = Settings(name, opts["trigger"], opts["pixel_format"], opts["exposure_us"],
                         opts["gain_db"], opts["buffers"] or DEFAULT_BUFFERS, opts["region"],
-                        opts["frame_rate"], opts["heartbeat_ms"])
+                        opts["frame_rate"], opts["heartbeat_ms"], opts["stream_socket"] or "udp")
     return settings, {"timeout": opts["timeout"]}
 
 

@@ -40,6 +40,7 @@ def test_registry_imports_lazily():
     ("aravis://cam?exposure=100", "unknown option exposure"),
     ("aravis://cam?heartbeat_ms=500", "a heartbeat timeout in milliseconds is 1500-600000"),
     ("aravis://cam?heartbeat_ms=3s", "heartbeat_ms"),
+    ("aravis://cam?stream_socket=raw", "option stream_socket='raw' is not valid"),
 ])
 def test_bad_urls_say_what_is_wrong(url, needle):
     with pytest.raises(UrlError) as err:
@@ -50,13 +51,14 @@ def test_bad_urls_say_what_is_wrong(url, needle):
 def test_aravis_url_keeps_the_device_id_as_written():
     s, timing = parse_aravis_url("aravis://Hikrobot-MV-CS200-10UC-DA1234567?trigger=Line1"
                                  "&pixel_format=bayerrg8&exposure_us=20000&gain_db=1.5"
-                                 "&buffers=6&region=full&timeout=3&heartbeat_ms=10000")
+                                 "&buffers=6&region=full&timeout=3&heartbeat_ms=10000"
+                                 "&stream_socket=Packet")
     assert s == Settings("Hikrobot-MV-CS200-10UC-DA1234567", "line1", "BayerRG8", 20000.0, 1.5,
-                         6, "full", heartbeat_ms=10000)
+                         6, "full", heartbeat_ms=10000, stream_socket="packet")
     assert timing == {"timeout": 3.0}
     s, _ = parse_aravis_url("aravis://Vendor%20X-Model-1?region=0,0,5472,3648")
     assert s.name == "Vendor X-Model-1" and s.region == (0, 0, 5472, 3648)
-    assert s.trigger == "software" and s.buffers == 4
+    assert s.trigger == "software" and s.buffers == 4 and s.stream_socket == "udp"
 
 
 class _GError(Exception):
