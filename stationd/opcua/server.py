@@ -27,7 +27,14 @@ The workarounds for asyncua 2.1.0 (``../shared/design/PROTOCOLS.md``), beside th
    Here: :class:`ReadOnlyRuleset` (browse, read, subscribe, call for everyone, except the
    methods that change something, AcknowledgeResults, for users only; no write and no node
    management for anyone), :class:`StationUsers` (anonymous, or a configured user with the
-   right password), a trust list for client certificates.
+   right password), a trust list for client certificates;
+8. a Republish of a message the server does not hold is answered Good with an empty
+   message (``SubscriptionService.republish``): the standard's answer is
+   BadMessageNotAvailable (BadSubscriptionIdInvalid for a subscription it does not know),
+   the one a stock node-opcua client waits for before it stops asking.  After a reload (a
+   new server, sessions and subscriptions gone) such a client recreated its subscription,
+   then asked again for its first message some 1,300 times a second, never received another
+   event, and kept two thirds of a core of the station busy: :func:`_republish_by_the_standard`.
 
 And (4): the optional methods RequestResults, RequestUnacknowledgedResults (IJT Base) and
 AcknowledgeResults (Machinery Result) are not instantiated with the JoiningSystem: they are
@@ -55,6 +62,7 @@ from typing import Any
 
 from asyncua.common.instantiate_util import instantiate
 from asyncua.common.node import Node
+from asyncua.common.utils import ServiceError
 from asyncua.crypto.permission_rules import USER_TYPES, SimpleRoleRuleset, User, UserRole
 from asyncua.crypto.truststore import TrustStore
 from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
@@ -213,6 +221,7 @@ class OpcUaServer:
             return
         server = Server(user_manager=StationUsers(self.cfg.users))
         await init_server(server)
+        _republish_by_the_standard(server)
         server.set_endpoint(self.cfg.endpoint)
         server.set_server_name(f"stationd {self.cfg.station_id}")
         await server.set_application_uri(f"urn:stationd:{self.cfg.station_id}")
@@ -618,6 +627,23 @@ async def _set(parent: Node, name: str, value: str, uris: list[str]) -> None:
             else ua.VariantType.String
         await node.write_value(ua.DataValue(ua.Variant(v, vt)))
         return
+
+
+def _republish_by_the_standard(server: Server) -> None:
+    """Workaround (8): a Republish answered with the message asked for, or the standard's
+    fault (the processor sends a ServiceError as a ServiceFault)."""
+    service = server.iserver.subscription_service
+    held = service.republish
+
+    def republish(params: ua.RepublishParameters) -> ua.NotificationMessage:
+        if params.SubscriptionId not in service.subscriptions:
+            raise ServiceError(ua.StatusCodes.BadSubscriptionIdInvalid)
+        message: ua.NotificationMessage = held(params)
+        if message.SequenceNumber != params.RetransmitSequenceNumber:
+            raise ServiceError(ua.StatusCodes.BadMessageNotAvailable)
+        return message
+
+    service.republish = republish  # type: ignore[method-assign]
 
 
 async def _one_identification(js: Node, ident: Node, uris: list[str]) -> None:

@@ -2,7 +2,7 @@
 // Server object, prints "ready", then one JSON line per event that carries a Result
 // (what node-opcua decoded of it), and stops after COUNT of them.
 //
-//   node tests/opcua/node_client.mjs URL COUNT [--fix]
+//   node tests/opcua/node_client.mjs URL COUNT [--fix] [--reconnect]
 //
 // --fix: the client-side fix for node-opcua's optional-bit numbering of subtypes (see
 // fixOptionalBits): its schema builder starts a subtype's own optional bits at the number of
@@ -79,7 +79,12 @@ function fixOptionalBits(dataTypeManager) {
   return fixed;
 }
 
-const client = OPCUAClient.create({ endpointMustExist: false, connectionStrategy: { maxRetry: 2 },
+// --reconnect: keep reconnecting as a long-running MES does (node-opcua's own session and
+// subscription recovery), e.g. across a reload of the station that restarts its server
+const reconnect = flags.includes("--reconnect");
+const client = OPCUAClient.create({ endpointMustExist: false,
+  connectionStrategy: reconnect ? { maxRetry: 1000, initialDelay: 200, maxDelay: 1000 }
+                                : { maxRetry: 2 },
   securityMode: MessageSecurityMode.None, securityPolicy: SecurityPolicy.None });
 await client.connect(url);
 const session = await client.createSession();

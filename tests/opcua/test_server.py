@@ -400,3 +400,36 @@ def test_a_port_in_use_is_no_library_traceback_in_the_journal(caplog):
         with caplog.at_level(logging.DEBUG), pytest.raises(OSError):
             asyncio.run(start())
     assert not [r for r in caplog.records if r.exc_info and r.name.startswith("asyncua")]
+
+
+def test_a_republish_of_a_message_not_held_is_refused_as_the_standard_says(repo):
+    """After a reload a client asks the new server again for messages of its old
+    subscription: "not available" (not Good and empty, which a stock node-opcua client asked
+    again about a thousand times a second, forever), and a subscription the server does not
+    know is said to be unknown."""
+    async def republish(client: Client, subscription: int, number: int) -> str:
+        request = ua.RepublishRequest()
+        request.Parameters.SubscriptionId = subscription
+        request.Parameters.RetransmitSequenceNumber = number
+        protocol = client.uaclient.protocol
+        assert protocol is not None
+        try:
+            await protocol.send_request(request)      # raises the answer's fault
+        except ua.UaStatusCodeError as exc:
+            return str(ua.StatusCode(exc.code).name)
+        return "Good"
+
+    async def scenario() -> tuple[str, str]:
+        srv, stop, task = await serving(config(), repo)
+        try:
+            async with Client(srv.url) as client:
+                sub = await client.create_subscription(50, Collector())
+                await sub.subscribe_events(client.nodes.server)
+                number = sub.subscription_id
+                assert number is not None
+                return (await republish(client, number, 99),
+                        await republish(client, number + 1000, 1))
+        finally:
+            await stopping(srv, stop, task)
+
+    assert asyncio.run(scenario()) == ("BadMessageNotAvailable", "BadSubscriptionIdInvalid")

@@ -112,3 +112,58 @@ def test_node_opcua_decodes_a_result_event_with_the_client_side_fix(repo):
         assert values[0]["LowLimit"] == 23.0 and values[0]["High"] == 27.0
     assert [v["MeasuredValue"] for v in
             events[1]["result"]["ResultContent"][0]["OverallResultValues"]] == [20.0, 303.0]
+
+
+@pytest.mark.system
+@pytest.mark.skipif(NODE is None, reason="node is not installed")
+def test_a_node_opcua_mes_gets_results_again_after_the_server_restarts(repo):
+    """A reload restarts the OPC UA server on the same endpoint: node-opcua's own recovery
+    (reconnect, a new session, its subscription made again) brings the next results.  (It
+    asks the new server to republish its old messages first; answered Good and empty, it
+    asked again for ever and received nothing more.)"""
+    cfg = config()
+
+    async def scenario() -> list[str]:
+        folder = node_opcua()
+        srv, stop, task = await serving(cfg, repo)
+        proc = await asyncio.create_subprocess_exec(
+            str(NODE), str(ROOT / "tests" / "opcua" / "node_client.mjs"), srv.url, "2",
+            "--reconnect", cwd=ROOT, env={**os.environ, "NODE_OPCUA_DIR": str(folder)},
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.DEVNULL)
+        out = proc.stdout
+        assert out is not None
+        loop = asyncio.get_running_loop()
+
+        async def next_event() -> str:
+            while not (line := await asyncio.wait_for(out.readline(), 120)) \
+                    .startswith(b"{"):       # node-opcua logs to stdout too
+                assert line, "node-opcua's client ended"
+            return str(json.loads(line)["message"])
+
+        try:
+            while (line := await asyncio.wait_for(out.readline(), 120)).strip() != b"ready":
+                assert line, "node-opcua's client ended before it subscribed"
+            await loop.run_in_executor(None, _recorder(repo, "B1", {"ok": True}))
+            messages = [await next_event()]
+            await stopping(srv, stop, task)
+            srv, stop, task = await serving(cfg, repo)
+            # results fired before the client has subscribed again reach no one (events
+            # are not kept for a subscription that is gone): one each second until one does
+            waiting = asyncio.ensure_future(next_event())
+            for _ in range(60):
+                await loop.run_in_executor(None, _recorder(repo, "B3", {"ok": True}))
+                done, _ = await asyncio.wait({waiting}, timeout=1.0)
+                if done:
+                    break
+            messages.append(await asyncio.wait_for(waiting, 5))
+            await asyncio.wait_for(proc.wait(), 60)
+            return messages
+        finally:
+            if proc.returncode is None:
+                proc.kill()
+                await proc.wait()
+            await stopping(srv, stop, task)
+
+    messages = asyncio.run(scenario())
+    assert messages[0] == f"{VIN} B1: tightening OK"
+    assert messages[1].startswith(f"{VIN} B3: tightening OK")
