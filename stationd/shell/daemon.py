@@ -107,13 +107,19 @@ class Station:
         self._pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="station")
         call = Blocking(self._pool)
         self.devices = Devices(self.cfg, self.device_kw)
+        # the cameras' own threads, one per pair: their grabs (a 20 MP frame, a simulated
+        # world's first renders: seconds) took every thread of the pool above, and the lift's
+        # poll, the controller's and the database's calls and a stop waited behind them
+        self._camera_pool = ThreadPoolExecutor(
+            max_workers=max(1, len(self.devices.pair_names())), thread_name_prefix="cameras")
+        cameras = Blocking(self._camera_pool)
         self.lift_keeper: DeviceKeeper[Lift] = self._keeper(
             LIFT, self.devices.open_lift, reconnect_lift, close_device)
         self.wrench_keeper: DeviceKeeper[Wrench] = self._keeper(
             WRENCH, self.devices.open_wrench, _reconnect, close_device)
         self.pair_keepers: dict[str, DeviceKeeper[Pair]] = {
             n: self._keeper(n, partial(self.devices.open_pair, n),
-                            partial(self.devices.reconnect_pair, n), close_device)
+                            partial(self.devices.reconnect_pair, n), close_device, cameras)
             for n in self.devices.pair_names()}
         # the database too: opened by ``open`` (a first start that cannot open it exits), then
         # kept like a device: a failed query reports it lost, the keeper probes it with
@@ -121,7 +127,7 @@ class Station:
         self.database_keeper: DeviceKeeper[Repository] = self._keeper(
             DATABASE, self._database, self.records.probe, _leave_open)
         self.tracker = Tracker(self.cfg, self.core, self.pair_keepers, self.bus, self.feed,
-                               call)
+                               cameras)
         self.effects = Effects(self.core, self.records, self.wrench_keeper,
                                self.database_keeper, self.bus, self.notifier, call,
                                self.tracker.request_check)
@@ -129,8 +135,10 @@ class Station:
                                          self.feed, self.tell, call)
 
     def _keeper(self, device: str, opener: Callable[[], D], reconnect: Callable[[D], None],
-                close: Callable[[D], None]) -> DeviceKeeper[D]:
-        """The device's keeper: its faults and returns go to the core as typed events."""
+                close: Callable[[D], None], blocking: Blocking | None = None
+                ) -> DeviceKeeper[D]:
+        """The device's keeper: its faults and returns go to the core as typed events; its
+        driver calls run in ``blocking`` (the station's pool unless told)."""
         async def on_fault(kind: FaultKind, reason: str) -> None:
             await self.feed(DeviceFault(time.time(), device, kind, reason))
 
@@ -143,8 +151,8 @@ class Station:
                 self.controller.came_back()
 
         return DeviceKeeper(device, open=opener, reconnect=reconnect, close=close,
-                            on_fault=on_fault, on_back=on_back, blocking=self._call,
-                            logger=log)
+                            on_fault=on_fault, on_back=on_back,
+                            blocking=blocking or self._call, logger=log)
 
     @property
     def keepers(self) -> dict[str, Keeper]:
@@ -255,6 +263,8 @@ class Station:
         steps: list[tuple[str, Callable[[], None]]] = []
         if self.wrench is not None and self.wrench_keeper.up:
             steps.append(("disable tool", self.wrench.disable_tool))
+        # a grab under way ends before its camera closes
+        steps.append(("the cameras' grabs", partial(self._camera_pool.shutdown, wait=True)))
         steps += [(device, keeper.close) for device, keeper in self.keepers.items()]
         if self.repo is not None:
             steps += [("noting the tool off", self.records.note_off),
