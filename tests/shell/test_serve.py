@@ -313,3 +313,43 @@ def test_a_reload_onto_another_database_moves_the_lock_or_is_refused(tmp_path):
             b_sock.close()
     err = a.stderr.read() if a.stderr else ""
     assert b is not None and f"already run by pid {b.pid}" in err and "Traceback" not in err
+
+
+@pytest.mark.timeout(180)
+def test_a_reload_moving_the_screens_onto_a_port_in_use_is_refused(tmp_path):
+    """The screens are where the operators look: a reload that would move them to a port
+    another program holds is refused, and they stay served where they are (it was accepted
+    and the screens were gone, the journal saying so once)."""
+    import urllib.request
+
+    for f in SIM.iterdir():
+        shutil.copy(f, tmp_path)
+    here, taken = _free_port(), _free_port()
+    text = (SIM / "station.yaml").read_text()
+    assert "127.0.0.1:8080" in text
+    (tmp_path / "station.yaml").write_text(text.replace("127.0.0.1:8080", f"127.0.0.1:{here}"))
+    sock = NotifyManager(tmp_path / "notify")
+    env = {**os.environ, "NOTIFY_SOCKET": str(tmp_path / "notify")}
+    p = subprocess.Popen([sys.executable, "-m", "stationd", "run", "--config", "station.yaml"],
+                         cwd=tmp_path, env=env, stderr=subprocess.PIPE, text=True)
+    holder = socket.socket()
+    try:
+        _recv_until(sock, "READY=1", 90)
+        holder.bind(("127.0.0.1", taken))
+        holder.listen()
+        (tmp_path / "station.yaml").write_text(text.replace("127.0.0.1:8080",
+                                                            f"127.0.0.1:{taken}"))
+        p.send_signal(signal.SIGHUP)
+        refused = _recv_until(sock, "reload refused", 60)
+        with urllib.request.urlopen(f"http://127.0.0.1:{here}/healthz", timeout=30) as answer:
+            assert answer.status in (200, 503)        # served where it was
+        p.send_signal(signal.SIGTERM)
+        assert p.wait(timeout=60) == 0
+    finally:
+        holder.close()
+        err = _ended(p)
+        sock.close()
+    assert any(f"127.0.0.1:{taken}: the port is in use" in m for m in refused), refused
+    assert (f"reload refused, keeping the running configuration: http.listen 127.0.0.1:{taken}: "
+            f"the port is in use") in err, err
+    assert f"the screens stay on 127.0.0.1:{here}" in err
