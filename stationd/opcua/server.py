@@ -309,7 +309,7 @@ class OpcUaServer:
             await _set(ident, name, value, uris)
         await ident.add_property(uris.index(DI_URI), "SoftwareRevision", SOFTWARE_VERSION,
                                  ua.VariantType.String)
-        await _one_identification(js, ident, uris)
+        await _one_building_block(js, ident, uris)
         self._state = await js.add_variable(ua.NodeId(f"JoiningSystem.{sid}.State", idx),
                                             ua.QualifiedName("State", idx), "unknown",
                                             varianttype=ua.VariantType.String)
@@ -319,6 +319,7 @@ class OpcUaServer:
         await self.assets.build(server, js, idx, f"JoiningSystem.{sid}", self.devices)
         mr = uris.index(RESULT_URI)
         rm = await js.get_child([f"{mr}:ResultManagement"])
+        await _one_building_block(js, rm, uris)
         self._requested_result = await _requested_result_variable(
             server, rm, (f"JoiningSystem.{sid}.ResultManagement", idx), mr, ijt)
         gens: list[list[Any]] = []
@@ -646,22 +647,25 @@ def _republish_by_the_standard(server: Server) -> None:
     service.republish = republish  # type: ignore[method-assign]
 
 
-async def _one_identification(js: Node, ident: Node, uris: list[str]) -> None:
-    """MachineryBuildingBlocks' Identification is the machine's own (OPC 40001-1: the
-    building block references the same AddIn); asyncua's instantiation made a second, empty
-    copy there (every value None, a newcomer's client read it): removed, and the building
-    block references the one that is filled."""
+async def _one_building_block(js: Node, block: Node, uris: list[str]) -> None:
+    """MachineryBuildingBlocks' Identification and ResultManagement are the machine's own
+    (OPC 40001-1: the building block references the same AddIn); asyncua's instantiation made
+    second copies there: an Identification with every value None (a newcomer's client read
+    it), a ResultManagement with no result (GetLatestResult BadNothingToDo, no events, no
+    RequestResults: an MES trial's generic Machinery Result client found nothing).  Removed,
+    with what is under them, and the building block references the one that works."""
     try:
         blocks = await js.get_child([f"{uris.index(MACHINERY_URI)}:MachineryBuildingBlocks"])
     except ua.UaError:
         return   # the type has none: nothing to tell apart
+    name = await block.read_browse_name()
     try:
-        copy = await blocks.get_child([f"{uris.index(DI_URI)}:Identification"])
+        copy = await blocks.get_child([f"{name.NamespaceIndex}:{name.Name}"])
     except ua.UaError:
         copy = None
-    if copy is not None and copy.nodeid != ident.nodeid:
-        await copy.delete()
-    await blocks.add_reference(ident.nodeid, ua.ObjectIds.HasAddIn, forward=True,
+    if copy is not None and copy.nodeid != block.nodeid:
+        await copy.delete(recursive=True)
+    await blocks.add_reference(block.nodeid, ua.ObjectIds.HasAddIn, forward=True,
                                bidirectional=False)
 
 

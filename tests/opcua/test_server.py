@@ -199,6 +199,11 @@ def test_identification_state_and_the_result_methods(repo):
                 block_ident = await blocks.get_child([f"{di}:Identification"])
                 out["block_ident"] = block_ident.nodeid == ident.nodeid
                 rm = await js.get_child([f"{mr}:ResultManagement"])
+                # ... and so is its ResultManagement (a copy there had no result at all)
+                block_rm = await blocks.get_child([f"{mr}:ResultManagement"])
+                out["block_rm"] = block_rm.nodeid == rm.nodeid
+                out["block_latest"] = await block_rm.call_method(f"{mr}:GetLatestResult",
+                                                                 ua.Int32(0))
                 out["latest"] = await rm.call_method(f"{mr}:GetLatestResult", ua.Int32(0))
                 out["by_id"] = await rm.call_method(f"{mr}:GetResultById",
                                                     f"{db_id}:1", ua.Int32(0))
@@ -218,7 +223,9 @@ def test_identification_state_and_the_result_methods(repo):
     out = asyncio.run(scenario())
     assert out["Manufacturer"] == "stationd"
     assert out["ManufacturerUri"] == "urn:stationd"
-    assert out["block_ident"]
+    assert out["block_ident"] and out["block_rm"]
+    assert out["block_latest"][2] == 0
+    assert out["block_latest"][1].ResultMetaData.ResultId == f"{db_id}:1"
     assert out["SystemId"] == "ST-07"
     assert out["SoftwareRevision"]
     assert out["state"] == "tracking"
