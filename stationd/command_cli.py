@@ -54,6 +54,7 @@ from stationd.station.events import State
 from stationd.web.status_cli import (
     DEFAULT_URL,
     EXIT_FAULT,
+    EXIT_RELOAD_REFUSED,
     EXIT_UNREACHABLE,
     format_status,
     status_url,
@@ -517,7 +518,8 @@ def cmd_feed(args: argparse.Namespace) -> int:
 def cmd_status(args: argparse.Namespace) -> int:
     """``stationd status``: the station that answered, then its state (``--json``: the
     status object, the station's line on stderr).  Exit 0 not in fault, 1 in fault, 3 no
-    status of this station."""
+    status of this station, 4 not in fault but its last reload refused (the file on disk
+    would not start it)."""
     if not 0 < args.timeout <= 3600:    # NaN too
         raise InputError(f"--timeout {args.timeout:g}: expected seconds in (0, 3600]")
     target = find_station(args)
@@ -528,7 +530,9 @@ def cmd_status(args: argparse.Namespace) -> int:
     via = "" if target.config == str(DEFAULT_CONFIG) else \
         f" --config {target.config}" if target.config is not None else f" --url {target.url}"
     print(json.dumps(doc, indent=1) if args.json else format_status(doc, via))
-    return EXIT_FAULT if doc.get("state") == State.FAULT else 0
+    if doc.get("state") == State.FAULT:
+        return EXIT_FAULT
+    return EXIT_RELOAD_REFUSED if doc.get("reload_refused") else 0
 
 
 def cmd_user_hash(args: argparse.Namespace) -> int:

@@ -20,6 +20,9 @@ EXIT_FAULT = 1          # answered, but the station is in fault: not OK for a mo
 # no status at all (no daemon answers, or it refused: a wrong token): another alarm than a
 # station in fault, so a monitoring script can tell them apart
 EXIT_UNREACHABLE = 3
+#: serving and not in fault, but its last reload was refused: the file on disk does not read,
+#: so the next start (a reboot) will not run: a monitor's warning
+EXIT_RELOAD_REFUSED = 4
 
 
 def status_url(url: str) -> str:

@@ -250,6 +250,22 @@ def test_a_refused_reload_is_said_until_a_station_runs_on_a_file_that_reads():
         {**st, "reload_refused": None}).splitlines())
 
 
+def test_status_exits_4_while_the_last_reload_stands_refused(live_server, capsys):
+    """A monitor running ``stationd status`` saw 0 after a refused reload, and the file on
+    disk would not start the station at the next reboot: exit 4 until a reload reads (a
+    fault still says 1)."""
+    from stationd.cli import main
+
+    srv = live_server()
+    srv.publish(opened())
+    assert main(["status", "--url", srv.url]) == 0
+    srv.server.reload_refused = "station.yaml:3: vision.centre_methd: unknown key"
+    assert main(["status", "--url", srv.url]) == 4
+    assert "config:   reload refused (station.yaml:3" in capsys.readouterr().out
+    srv.server.reload_refused = None
+    assert main(["status", "--url", srv.url]) == 0
+
+
 def test_status_with_a_station_file_that_no_longer_reads_still_asks_its_daemon(
         live_server, capsys, tmp_path):
     """A reload of a mistyped file was refused and the daemon runs on: ``status --config``
