@@ -61,6 +61,18 @@ def connect_tcp(host: str, port: int, timeout: float, refused_hint: str) -> sock
     return sock
 
 
+def bind_words(exc: BaseException) -> str:
+    """Why a server could not listen, in words: a port in use said so (asyncio's "[Errno 98]
+    error while attempting to bind on address ('127.0.0.1', 8080): address already in use"
+    read as a crash, and each server said it its own way)."""
+    if isinstance(exc, OSError) and exc.errno == errno.EADDRINUSE:
+        return "the port is in use (another program, or another stationd, serves there)"
+    if isinstance(exc, OSError) and exc.errno == errno.EACCES:
+        return "the port is not allowed (below 1024 needs privileges)"
+    text = getattr(exc, "strerror", None) or str(exc)
+    return " ".join(text.split()) or type(exc).__name__
+
+
 #: serial line speeds a port can be set to: 0 or a negative speed is a typo (pyserial takes 0
 #: on Linux: B0 hangs the line up, and the device then never answers); above 4 Mbaud no
 #: RS-232/RS-485 adapter goes

@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import errno
 import logging
 import random
 import signal
@@ -27,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 from drivers.devices import Kind, simulated
 from drivers.keeper import Backoff, FaultKind, one_line
+from drivers.link import bind_words
 from stationd.bus import EventBus
 from stationd.config import StationConfig, station_identity
 from stationd.errors import StationError
@@ -186,7 +186,7 @@ class Screens:
             self.attach(self.station, cfg)
         except OPEN_ERRORS as exc:
             # a port another program holds may be freed: tried again, journaled once
-            said = _bind_words(exc)
+            said = bind_words(exc)
             if self._failed != said:
                 self._failed = said
                 log.error("screens not served on %s: %s (tried again every %.0f s)",
@@ -215,7 +215,7 @@ class Screens:
                     probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
                     probe.bind(address)
         except OSError as exc:
-            raise StationError(f"http.listen {cfg.http.listen}: {_bind_words(exc)}; the "
+            raise StationError(f"http.listen {cfg.http.listen}: {bind_words(exc)}; the "
                                f"screens stay on {self.server.config.listen}") from None
 
     @staticmethod
@@ -426,17 +426,6 @@ def locked_devices(cfg: StationConfig) -> list[tuple[str, str]]:
     cams = [(f"camera {cam}", cfg.cameras[cam]) for pc in cfg.pairs.values()
             if pc.left and pc.right for cam in (pc.left, pc.right) if cam in cfg.cameras]
     return [("lift", cfg.lift.url), ("wrench", cfg.wrench.url), *cams]
-
-
-def _bind_words(exc: BaseException) -> str:
-    """Why the screens could not listen, in words: a port in use said so (asyncio's
-    "[Errno 98] error while attempting to bind on address ('127.0.0.1', 8080): address
-    already in use" read as a crash)."""
-    if isinstance(exc, OSError) and exc.errno == errno.EADDRINUSE:
-        return "the port is in use (another program, or another stationd, serves there)"
-    if isinstance(exc, OSError) and exc.errno == errno.EACCES:
-        return "the port is not allowed (below 1024 needs privileges)"
-    return one_line(exc)
 
 
 def unregistered(cfg: StationConfig) -> tuple[str, ...]:

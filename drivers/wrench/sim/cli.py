@@ -26,13 +26,15 @@ from types import FrameType
 from typing import Any, TextIO
 
 from drivers.errors import DriverError
+from drivers.link import bind_words
 from drivers.wrench.sim.controller import SimController
 
 
 class ListenError(DriverError):
     """The simulator cannot listen on its port (in use, not allowed): each command says it
     in one line of its own words, exit 2 (``stationd sim controller``: ``stationd: error:
-    cannot listen on 127.0.0.1:4545: Address already in use``)."""
+    cannot listen on 127.0.0.1:4545: the port is in use (another program, or another stationd,
+    serves there)``)."""
 
 
 def refusal(text: str) -> tuple[int, set[int]]:
@@ -150,7 +152,7 @@ def serve(sim: SimController, host: str, port: int, trigger_every: float,
         try:
             bound = sim.listen_tcp(host, port)
         except OSError as e:
-            raise ListenError(f"cannot listen on {host}:{port}: {e.strerror or e}") from None
+            raise ListenError(f"cannot listen on {host}:{port}: {bind_words(e)}") from None
         print(said(bound), file=out, flush=True)
         while not stop.wait(trigger_every or 0.5):
             if trigger_every and sim.pull_trigger(kind) is not None:
