@@ -151,13 +151,14 @@ def probe_wrench(args: argparse.Namespace) -> int:
                     out["result"] = _result_json(r)
     except DeviceError as exc:
         return _failed(args, "wrench", exc)
+    out["ok"] = code == EXIT_OK     # as the lift's and every failure's object has it
     if args.json:
         sys.stdout.write(strict_json(out) + "\n")
     else:
         print(out["identity"])
-        if args.pset is not None:
+        if args.pset is not None:   # why it was refused: the one line on stderr below
             print(f"  pset {args.pset}: " + ("acknowledged" if out["acknowledged"] else
-                                             f"REFUSED ({out['error']['text']})"))
+                                             "REFUSED"))
         for o in out.get("not_tightenings") or ():
             said = f": {o['error']}" if "error" in o else \
                 f", {'OK' if o['ok'] else 'NOK'} torque {o['torque_nm']:.2f} Nm"
@@ -168,8 +169,6 @@ def probe_wrench(args: argparse.Namespace) -> int:
             print(f"  result: {r['what']} {'OK' if r['ok'] else 'NOK'} torque "
                   f"{r['torque_nm']:.2f} Nm ({r['torque_status']}), angle "
                   f"{r['angle_deg']:.0f} deg ({r['angle_status']}), id {r['tightening_id']}")
-        elif out["error"] and code and args.wait_result and out["acknowledged"]:
-            print(f"  {out['error']['text']}")
     if code and not args.json:
         sys.stderr.write(f"stationd: wrench: {out['error']['text']}\n")
     return code

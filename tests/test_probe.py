@@ -123,6 +123,7 @@ def test_probe_wrench_selects_a_pset_and_reports_one_result(capsys):
         assert not ctl.tool_enabled  # the probe leaves the tool disabled
     obj = json.loads(capsys.readouterr().out)
     assert code == 0 and obj["acknowledged"] is True and obj["error"] is None
+    assert obj["ok"] is True            # as the lift's object and every failure's say it
     r = obj["result"]
     assert r["pset"] == 1 and r["torque_nm"] > 0 and isinstance(r["ok"], bool)
     assert {"angle_deg", "torque_status", "angle_status", "tightening_id", "vin"} <= set(r)
@@ -164,12 +165,20 @@ def test_probe_wrench_refused_pset_exits_1_with_the_code(capsys):
                      "--json"])
     obj = json.loads(capsys.readouterr().out)
     assert code == 1 and obj["acknowledged"] is False and obj["error"]["code"] == 2
+    assert obj["ok"] is False
+    with SimController(refusals={5: 2}) as ctl:   # in words: the refusal said once
+        port = ctl.listen_tcp()
+        code = main(["probe", "wrench", f"openprotocol://127.0.0.1:{port}", "--pset", "5"])
+    out, err = capsys.readouterr()
+    assert code == 1 and out.splitlines()[-1] == "  pset 5: REFUSED"
+    assert err.count("\n") == 1 and err.startswith("stationd: wrench: ")
 
 
 def test_probe_wrench_no_result_in_time_exits_1(capsys):
     code = main(["probe", "wrench", "sim://wrench", "--pset", "1", "--wait-result", "0.3"])
-    err = capsys.readouterr().err
+    out, err = capsys.readouterr()
     assert code == 1 and "no tightening result" in err
+    assert "no tightening result" not in out         # said once, on stderr
 
 
 def test_probe_wrench_bad_input_exits_2(capsys):
