@@ -615,8 +615,8 @@ class SupervisedWrench(Wrench):
     def _down(self, what: str, note: str = "") -> ConnectionLostError:
         """What a caller sees while the link is down (call with ``_cond`` held)."""
         last = f"; last attempt: {self._last_error}" if self._last_error else ""
-        return ConnectionLostError(f"{what}: link down ({self._reason}); "
-                                   f"{counted(self._attempts, 'failed reconnect')}{last}{note}",
+        tried = f"; {counted(self._attempts, 'failed reconnect')}" if self._attempts else ""
+        return ConnectionLostError(f"{what}: link down ({self._reason}){tried}{last}{note}",
                                    device=self.device)
 
     def _status(self) -> LinkStatus:

@@ -116,8 +116,9 @@ def test_the_device_disappears_and_stays_down_until_reconnected(sim):
         sim.power_off()
         assert wait_until(lambda: not w.status().connected)
         t0 = time.monotonic()
-        with pytest.raises(ConnectionLostError, match="select pset 2: link down"):
+        with pytest.raises(ConnectionLostError, match="select pset 2: link down") as down:
             w.select_pset(2)
+        assert "failed reconnect" not in str(down.value)   # none tried yet: not "0 failed"
         with pytest.raises(ConnectionLostError, match="listening for results: link down"):
             w.wait_result(1.0)
         assert time.monotonic() - t0 < 0.1         # fails at once: nothing was sent
@@ -127,6 +128,8 @@ def test_the_device_disappears_and_stays_down_until_reconnected(sim):
             w.reconnect()
         status = w.status()
         assert status.attempts == 1 and "refused" in (status.reason or "")
+        with pytest.raises(ConnectionLostError, match=r"link down \(.*\); 1 failed reconnect;"):
+            w.select_pset(2)
         sim.power_on()
         w.reconnect()
         assert w.status().connected and w.status().reconnects == 1
