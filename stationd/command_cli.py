@@ -127,9 +127,9 @@ def find_station(args: argparse.Namespace) -> Target:
         if http is None and url is not None:
             http = SimpleNamespace(http=None)   # the daemon's address given: asked there
         if http is None:
-            raise InputError(f"{exc}; a daemon running on this file before it broke keeps "
-                             "its configuration: give --url http://HOST:PORT/ of its "
-                             "screens to reach it") from None
+            raise InputError(f"{exc}; if a daemon runs on this file (a reload of it "
+                             "refused, it keeps what it read before), give --url "
+                             "http://HOST:PORT/ of its screens to reach it") from None
         where = "at --url" if url is not None else "at its http section's address"
         sys.stderr.write(f"stationd: {config} does not read ({exc}); asking the daemon "
                          f"{where} (a refused reload leaves it running on the file it read "

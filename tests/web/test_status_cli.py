@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from stationd.cli import main
@@ -363,3 +365,18 @@ def test_a_closed_vehicle_is_not_said_to_be_at_the_station():
     assert st["vehicle"]["reopened_by"] == "sam"
     assert any(line.startswith("vehicle:  none loaded") and line.endswith(
         ", reopened by sam: not at the station yet)") for line in format_status(st).splitlines())
+
+
+def test_status_of_a_bolt_table_says_what_it_is_and_how_to_reach_a_daemon(capsys, tmp_path):
+    """A maintenance trial gave the bolt table by mistake: it was told a daemon "running on
+    this file before it broke" keeps its configuration; nothing broke, it was the wrong
+    file."""
+    from stationd.cli import main
+
+    bolts = tmp_path / "bolts.yaml"
+    bolts.write_text((Path(__file__).resolve().parents[2] / "config" / "sim" / "bolts.yaml")
+                     .read_text())
+    assert main(["status", "--config", str(bolts)]) == 2
+    err = capsys.readouterr().err
+    assert "bolt table" in err and "broke" not in err, err
+    assert "if a daemon runs on this file" in err and err.count("\n") == 1
