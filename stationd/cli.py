@@ -607,7 +607,8 @@ def build_parser() -> argparse.ArgumentParser:
     sm = sub.add_parser("sim", help="the simulated lift PLC or tightening controller on its "
                         "real protocol, to commission a station or a client against")
     sim_sub = sm.add_subparsers(dest="sim_device", required=True)
-    plc = sim_sub.add_parser("plc", help="the lift PLC, Modbus TCP on 127.0.0.1")
+    plc = sim_sub.add_parser("plc", aliases=["lift"],
+                             help="the lift PLC, Modbus TCP on 127.0.0.1 (also: sim lift)")
     plc.add_argument("--config", help="station file: its lift register map (else defaults)")
     plc.add_argument("--port", type=port_arg, default=5020, help="TCP port (%(default)s)")
     plc.add_argument("--model-code", type=int, default=1,
@@ -615,7 +616,10 @@ def build_parser() -> argparse.ArgumentParser:
     plc.add_argument("--every", type=float, default=0.0, metavar="SECONDS",
                      help="cycle vehicles, each at working height this long (default: "
                           "commands on standard input)")
-    ctl = sim_sub.add_parser("controller", help="the tightening controller, Open Protocol")
+    plc.set_defaults(sim_device="plc")
+    ctl = sim_sub.add_parser("controller", aliases=["wrench"],
+                             help="the tightening controller, Open Protocol (also: sim wrench)")
+    ctl.set_defaults(sim_device="controller")
     ctl.add_argument("--config", help="station file: the psets of its bolt table")
     ctl.add_argument("--host", default="127.0.0.1", help="address to listen on (%(default)s)")
     ctl.add_argument("--port", type=port_arg, default=4545, help="TCP port (%(default)s)")

@@ -177,14 +177,17 @@ def probe_wrench(args: argparse.Namespace) -> int:
 def add_probe_parser(sub: Any) -> None:
     p = sub.add_parser("probe", help="connect to one device and show its identity and state")
     psub = p.add_subparsers(dest="device", required=True, parser_class=type(p))
-    lift = psub.add_parser("lift", help="read the lift PLC once")
+    lift = psub.add_parser("lift", aliases=["plc"], help="read the lift PLC once (also: probe "
+                                                          "plc)")
     lift.add_argument("url", help="modbus-tcp://HOST:PORT?unit=N | modbus-rtu:///dev/ttyUSB0?"
                                   "baud=19200&parity=E&unit=N | sim://lift")
     lift.add_argument("--config", help="station YAML (its lift register map)")
     lift.add_argument("--timeout", type=seconds, default=2.0, help="seconds (default 2)")
     lift.add_argument("--json", action="store_true", help="print one JSON object")
-    lift.set_defaults(func=probe_lift)
-    w = psub.add_parser("wrench", help="start a session, select a pset, wait for a result")
+    lift.set_defaults(func=probe_lift, device="lift")
+    w = psub.add_parser("wrench", aliases=["controller"],
+                        help="start a session, select a pset, wait for a result (also: probe "
+                             "controller)")
     w.add_argument("url", help="openprotocol://HOST:4545 | openprotocol+serial:///dev/ttyUSB1"
                                "?baud=9600 | sim://wrench")
     w.add_argument("--pset", type=int, help="select this pset and wait for the acknowledgement")
@@ -192,7 +195,7 @@ def add_probe_parser(sub: Any) -> None:
                    help="enable the tool and wait this long for one tightening result")
     w.add_argument("--timeout", type=seconds, default=2.0, help="seconds (default 2)")
     w.add_argument("--json", action="store_true", help="print one JSON object")
-    w.set_defaults(func=probe_wrench)
+    w.set_defaults(func=probe_wrench, device="wrench")
     from stationd.probe_camera import add_camera_probe
 
     add_camera_probe(psub)

@@ -181,6 +181,15 @@ def test_probe_wrench_no_result_in_time_exits_1(capsys):
     assert "no tightening result" not in out         # said once, on stderr
 
 
+def test_probe_plc_and_controller_are_the_lift_and_the_wrench(capsys):
+    """``sim plc`` and ``sim controller`` start the simulators ``probe lift`` and ``probe
+    wrench`` read: either name reaches the same probe (a maintenance trial typed both)."""
+    assert main(["probe", "plc", "sim://lift", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["kind"] == "lift"
+    assert main(["probe", "controller", "sim://wrench", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["kind"] == "wrench"
+
+
 def test_probe_wrench_bad_input_exits_2(capsys):
     assert main(["probe", "wrench", "ftp://x"]) == 2
     assert main(["probe", "wrench", "sim://wrench", "--pset", "1000"]) == 2

@@ -122,11 +122,12 @@ def test_numbers_that_cannot_work_are_refused_at_the_start(argv: tuple[str, ...]
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
 
 
-@pytest.mark.parametrize("device", ["plc", "controller"])
+@pytest.mark.parametrize("device", ["plc", "controller", "lift", "wrench"])
 def test_a_busy_port_is_one_line_for_the_plc_as_for_the_controller(device: str) -> None:
     """A sweep: the PLC on a port in use ended in pymodbus's RuntimeError traceback; then
     both said ``error: cannot listen ...`` with exit 1, not as the station's other commands
-    say their errors (``stationd: error: ...``, exit 2)."""
+    say their errors (``stationd: error: ...``, exit 2).  ``sim lift`` and ``sim wrench``
+    are the same simulators under the names ``probe``, ``status`` and the journal use."""
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen()
