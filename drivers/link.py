@@ -20,6 +20,7 @@ import os
 import select
 import socket
 import termios
+import threading
 import time
 from abc import ABC, abstractmethod
 from typing import Any, Literal
@@ -70,7 +71,7 @@ def bind_words(exc: BaseException) -> str:
     if isinstance(exc, OSError) and exc.errno == errno.EACCES:
         return "the port is not allowed (below 1024 needs privileges)"
     text = getattr(exc, "strerror", None) or str(exc)
-    return " ".join(text.split()) or type(exc).__name__
+    return (text.strip().splitlines() or [type(exc).__name__])[0]
 
 
 #: serial line speeds a port can be set to: 0 or a negative speed is a typo (pyserial takes 0
@@ -249,6 +250,9 @@ class SerialLink(Link):
         self._ser: Any = None
         self._timeout: float | None = None
         self._write_timeout = 1.0
+        # a send and a close take turns: a write holds the port's file number for up to its
+        # timeout, and a number closed under it could be a newly opened file's by then
+        self._writing = threading.Lock()
 
     def connect(self, timeout: float) -> None:
         self.close()
@@ -259,23 +263,23 @@ class SerialLink(Link):
         self._write_timeout = timeout
 
     def send(self, data: bytes) -> None:
-        ser = self._ser
-        if ser is None:
-            raise ConnectionLostError(f"serial port {self.port} is not open")
         serial = pyserial()
         timed_out = ConnectionLostError(f"writing to {self.port} timed out (the port took "
                                         f"nothing within {self._write_timeout:g} s)")
-        try:
-            fileno = getattr(ser, "fileno", None)
-            if fileno is None:          # a pyserial URL (socket://, loop://): its own write
-                ser.write(data)
-            elif not write_all(fileno(), data, self._write_timeout):
-                raise timed_out
-        except serial.SerialTimeoutException:
-            raise timed_out from None
-        except (serial.SerialException, OSError, TypeError) as e:
-            # TypeError: fileno() of a port closed concurrently
-            raise ConnectionLostError(f"serial device {self.port} is gone: {e}") from None
+        with self._writing:
+            ser = self._ser
+            if ser is None:
+                raise ConnectionLostError(f"serial port {self.port} is not open")
+            posix = getattr(serial, "serialposix", None)
+            try:
+                if posix is None or not isinstance(ser, posix.Serial):
+                    ser.write(data)     # a pyserial URL (socket://, loop://): its own write
+                elif not write_all(ser.fd, data, self._write_timeout):
+                    raise timed_out
+            except serial.SerialTimeoutException:
+                raise timed_out from None
+            except (serial.SerialException, OSError) as e:
+                raise ConnectionLostError(f"serial device {self.port} is gone: {e}") from None
 
     def recv(self, timeout: float) -> bytes:
         ser = self._ser
@@ -297,7 +301,8 @@ class SerialLink(Link):
         return data
 
     def close(self) -> None:
-        ser, self._ser = self._ser, None
+        with self._writing:
+            ser, self._ser = self._ser, None
         if ser is not None:
             try:
                 ser.close()

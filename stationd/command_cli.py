@@ -518,8 +518,8 @@ def cmd_feed(args: argparse.Namespace) -> int:
 def cmd_status(args: argparse.Namespace) -> int:
     """``stationd status``: the station that answered, then its state (``--json``: the
     status object, the station's line on stderr).  Exit 0 not in fault, 1 in fault, 3 no
-    status of this station, 4 not in fault but its last reload refused (the file on disk
-    would not start it)."""
+    status of this station, 4 not in fault but its last reload refused (it runs on what it
+    read before)."""
     if not 0 < args.timeout <= 3600:    # NaN too
         raise InputError(f"--timeout {args.timeout:g}: expected seconds in (0, 3600]")
     target = find_station(args)

@@ -51,11 +51,13 @@ from __future__ import annotations
 import atexit
 import importlib
 import logging
+import socket
 import threading
 import time
 import weakref
 from collections.abc import Callable
 from dataclasses import replace
+from pathlib import Path
 from typing import Any, TypeVar
 
 from drivers.camera import pixels
@@ -119,6 +121,28 @@ def shutdown() -> None:
             _modules[0].shutdown()
 
 
+def _say_stream_limits(device: str, stream_socket: str, payload: int) -> None:
+    """Journal what will break a GigE camera's frames, once per opening: a packet socket
+    asked where none may be opened (Aravis then reads a UDP socket, silently), or a kernel
+    that lets a UDP socket buffer less than a frame's 8 MB or its payload (its packets are
+    then dropped whenever the host is late: broken frames)."""
+    if stream_socket == "packet":
+        try:
+            socket.socket(socket.AF_PACKET, socket.SOCK_RAW).close()
+        except OSError:
+            log.warning("%s: stream_socket=packet, but this process may not open raw "
+                        "sockets (CAP_NET_RAW): the stream is read from a UDP socket", device)
+        return
+    try:
+        allowed = int(Path("/proc/sys/net/core/rmem_max").read_text())
+    except (OSError, ValueError):
+        return
+    if allowed < min(payload, 8 << 20):
+        log.warning("%s: a UDP socket may buffer %.1f MB (net.core.rmem_max), a frame is "
+                    "%.1f MB: frames break whenever the host is late; raise it (sysctl -w "
+                    "net.core.rmem_max=8388608)", device, allowed / 1e6, payload / 1e6)
+
+
 class _Link:
     """One opened camera, configured and acquiring into its buffer pool."""
 
@@ -179,6 +203,9 @@ class _Link:
 
     def _configure(self) -> None:
         s, cam, call = self.settings, self.cam, self._call
+        if s.stream_socket != "udp" and not cam.is_gv_device():   # before anything is set
+            raise UnsupportedError("stream_socket is for GigE Vision cameras (USB3 Vision "
+                                   "streams over USB)", device=self.device)
         call("stop acquisition", cam.stop_acquisition)  # a crashed run may have left it on
         if s.heartbeat_ms is not None:
             if not cam.is_gv_device():
@@ -225,9 +252,8 @@ class _Link:
             # attached (bind, then _set_socket_filter), reads the first one's bytes as a
             # frame id, then drops the camera's frames as late, up to 100 of them
             cam.get_device().set_stream_options(self.arv.GvStreamOption.PACKET_SOCKET_DISABLED)
-        elif s.stream_socket != "udp" and not cam.is_gv_device():
-            raise UnsupportedError("stream_socket is for GigE Vision cameras (USB3 Vision "
-                                   "streams over USB)", device=self.device)
+        if cam.is_gv_device():
+            _say_stream_limits(self.device, s.stream_socket, self.payload)
         self.stream = call("create stream", cam.create_stream, None, None)
         if self.stream is None:
             raise ConnectError("the camera gave no stream", device=self.device)

@@ -66,6 +66,7 @@ from asyncua.common.utils import ServiceError
 from asyncua.crypto.permission_rules import USER_TYPES, SimpleRoleRuleset, User, UserRole
 from asyncua.crypto.truststore import TrustStore
 from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
+from asyncua.server.internal_session import InternalSession
 from asyncua.server.server import Server
 from asyncua.server.user_managers import UserManager
 from asyncua.ua.ua_binary import struct_from_binary
@@ -221,7 +222,7 @@ class OpcUaServer:
             return
         server = Server(user_manager=StationUsers(self.cfg.users))
         await init_server(server)
-        _republish_by_the_standard(server)
+        _republish_by_the_standard()
         server.set_endpoint(self.cfg.endpoint)
         server.set_server_name(f"stationd {self.cfg.station_id}")
         await server.set_application_uri(f"urn:stationd:{self.cfg.station_id}")
@@ -630,21 +631,29 @@ async def _set(parent: Node, name: str, value: str, uris: list[str]) -> None:
         return
 
 
-def _republish_by_the_standard(server: Server) -> None:
+def _republish_by_the_standard() -> None:
     """Workaround (8): a Republish answered with the message asked for, or the standard's
-    fault (the processor sends a ServiceError as a ServiceFault)."""
-    service = server.iserver.subscription_service
-    held = service.republish
+    fault (the processor sends a ServiceError as a ServiceFault): BadSubscriptionIdInvalid
+    for a subscription this session does not own (subscription numbers start again at each
+    server start: after a reload, an MES asking about its old one must not be handed another
+    session's message, which that session would then never get), BadMessageNotAvailable for
+    a message not held.  Set on asyncua's session class once: the process serves one
+    station's server at a time, each session answered alike."""
+    if getattr(InternalSession.republish, "by_the_standard", False):
+        return
 
-    def republish(params: ua.RepublishParameters) -> ua.NotificationMessage:
-        if params.SubscriptionId not in service.subscriptions:
+    def republish(session: InternalSession, params: ua.RepublishParameters
+                  ) -> ua.NotificationMessage:
+        sub = session.subscription_service.subscriptions.get(params.SubscriptionId)
+        if sub is None or sub.session_id != session.session_id:
             raise ServiceError(ua.StatusCodes.BadSubscriptionIdInvalid)
-        message: ua.NotificationMessage = held(params)
+        message: ua.NotificationMessage = sub.republish(params.RetransmitSequenceNumber)
         if message.SequenceNumber != params.RetransmitSequenceNumber:
             raise ServiceError(ua.StatusCodes.BadMessageNotAvailable)
         return message
 
-    service.republish = republish  # type: ignore[method-assign]
+    republish.by_the_standard = True  # type: ignore[attr-defined]
+    InternalSession.republish = republish  # type: ignore[method-assign,assignment]
 
 
 async def _one_building_block(js: Node, block: Node, uris: list[str]) -> None:

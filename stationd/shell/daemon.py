@@ -263,9 +263,12 @@ class Station:
         steps: list[tuple[str, Callable[[], None]]] = []
         if self.wrench is not None and self.wrench_keeper.up:
             steps.append(("disable tool", self.wrench.disable_tool))
-        # a grab under way ends before its camera closes
-        steps.append(("the cameras' grabs", partial(self._camera_pool.shutdown, wait=True)))
-        steps += [(device, keeper.close) for device, keeper in self.keepers.items()]
+        for device, keeper in self.keepers.items():
+            if device == next(iter(self.pair_keepers), None):
+                # a grab under way ends before its camera closes (none queued is started)
+                steps.append(("the cameras' grabs", partial(
+                    self._camera_pool.shutdown, wait=True, cancel_futures=True)))
+            steps.append((device, keeper.close))
         if self.repo is not None:
             steps += [("noting the tool off", self.records.note_off),
                       ("database", self.repo.close)]
@@ -274,6 +277,7 @@ class Station:
                 fn()
             except Exception as exc:
                 log.warning("closing %s: %s", what, one_line(exc))
+        self._camera_pool.shutdown(wait=True, cancel_futures=True)   # (no pairs: not yet)
         self._pool.shutdown(wait=True)
         self.controller.close()
 

@@ -198,25 +198,29 @@ class Screens:
         log.info("screens: %s", self.server.url)
 
     def check_move(self, cfg: StationConfig) -> None:
-        """Refuse (StationError) a reload that moves the screens to an address nothing may
-        listen on now (a port another program holds): the reload would close the screens
-        the operators use and serve none.  Their own address, or none, passes."""
-        if cfg.http is None or self.server is None \
-                or cfg.http.listen == self.server.config.listen:
+        """Refuse (StationError) a reload that moves the screens to a port nothing may listen
+        on now (another program holds it): the reload would close the screens the operators
+        use and serve none.  Their own port passes whatever the host (127.0.0.1 to 0.0.0.0:
+        their own socket holds it, and they are stopped before they listen again), and so
+        does no screens.  Blocking (a host name is resolved): run off the station's loop."""
+        if cfg.http is None or self.server is None:
+            return
+        served = self.server.config.listen
+        if cfg.http.port in (self.server.config.port, self.server.port):
             return
         import socket
 
-        host, port = cfg.http.host, cfg.http.port
         try:
-            infos = socket.getaddrinfo(host or None, port, type=socket.SOCK_STREAM,
-                                       flags=socket.AI_PASSIVE)
-            for family, kind, proto, _, address in infos[:1]:
+            # every address the name gives: the screens listen on each
+            for family, kind, proto, _, address in socket.getaddrinfo(
+                    cfg.http.host or None, cfg.http.port, type=socket.SOCK_STREAM,
+                    flags=socket.AI_PASSIVE):
                 with socket.socket(family, kind, proto) as probe:
                     probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
                     probe.bind(address)
         except OSError as exc:
             raise StationError(f"http.listen {cfg.http.listen}: {bind_words(exc)}; the "
-                               f"screens stay on {self.server.config.listen}") from None
+                               f"screens stay on {served}") from None
 
     @staticmethod
     def _results(cfg: StationConfig) -> tuple[Results | None, str | None]:
@@ -485,7 +489,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
                 reload.clear()
                 try:  # validate first: an invalid station never stops the running one
                     new = await loop.run_in_executor(None, validate_station, cfg_path)
-                    screens.check_move(new)
+                    await loop.run_in_executor(None, screens.check_move, new)
                     if locks is not None:   # a device another daemon drives: refused
                         hold_locks(locks, new)
                 except StationError as exc:

@@ -163,6 +163,11 @@ class WebServer:
             self._runner = None
 
     @property
+    def port(self) -> int:
+        """The port it listens on (the one picked when configured 0)."""
+        return self._port
+
+    @property
     def url(self) -> str:
         host = self.config.host
         host = f"[{host}]" if ":" in host else host

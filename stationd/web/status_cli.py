@@ -20,8 +20,10 @@ EXIT_FAULT = 1          # answered, but the station is in fault: not OK for a mo
 # no status at all (no daemon answers, or it refused: a wrong token): another alarm than a
 # station in fault, so a monitoring script can tell them apart
 EXIT_UNREACHABLE = 3
-#: serving and not in fault, but its last reload was refused: the file on disk does not read,
-#: so the next start (a reboot) will not run: a monitor's warning
+#: serving and not in fault, but its last reload was refused (a file that does not read, a
+#: device another daemon drives, the screens' new port taken): the station runs on what it
+#: read before, and a file that does not read would not start it at the next reboot; a
+#: monitor's warning until a reload goes through
 EXIT_RELOAD_REFUSED = 4
 
 

@@ -77,3 +77,19 @@ def test_a_port_that_takes_nothing_times_out(pty):
         assert time.monotonic() - started < 20
     finally:
         link.close()
+
+
+def test_a_pyserial_url_writes_through_pyserial() -> None:
+    """``loop://`` (any pyserial URL without a device file) is written by pyserial itself:
+    the link's own write is for ports with a file number."""
+    link = SerialLink("loop://")
+    link.connect(0.5)
+    try:
+        link.send(b"00200018001         \x00")
+        got = b""
+        deadline = time.monotonic() + 10
+        while len(got) < 21 and time.monotonic() < deadline:
+            got += link.recv(0.1)
+        assert got == b"00200018001         \x00"
+    finally:
+        link.close()

@@ -46,6 +46,7 @@ def test_a_lift_fault_is_seen_while_every_camera_hangs_in_its_grab(tmp_path, mon
             await until_async(lambda: st.core.status().state is not State.TRACKING, 20,
                               lambda: f"the fault seen ({st.core.status().state})")
             seen.append(time.monotonic() - t0)
+            assert st.core.status().reason.note == "the lift PLC reports a fault"
         finally:
             release.set()
 
