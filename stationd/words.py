@@ -465,6 +465,14 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
 }
 
 
+def closed_after_outage(vin: str) -> str:
+    """What follows a vehicle's close when the lift PLC said the lift down in its first read
+    after an outage (a restarted PLC may have forgotten the vehicle still on the lift)."""
+    return (f"; the lift PLC came back from an outage saying the lift is down (a PLC that "
+            f"restarted forgets the vehicle): if {vin} is still on the lift, stationd reopen "
+            f"{vin} --user NAME")
+
+
 def sent_again_words(tightening_id: int | None, bolt: str | None,
                      vin: str | None = None) -> str:
     """A result the database had already, sent again by the controller: ``result 7 of B11
@@ -650,7 +658,8 @@ def _missed(r: Reason) -> str:
     return f"; {many} without the wrench, the last: {reason_words(r.cause)}"
 
 
-__all__ = ["answer_words", "check_asked_words", "check_words", "command_words", "comment_words",
+__all__ = ["answer_words", "check_asked_words", "check_words", "closed_after_outage",
+           "command_words", "comment_words",
            "fault_words", "gap_plan_words", "notice_words", "operator_words", "outcome_words",
            "reason_words", "records_waiting", "result_type_words", "sent_again_words",
            "skip_words", "state_line", "state_words", "stored_what", "unattributed_words",

@@ -172,7 +172,8 @@ class Effects:
             return await self._database_step(self.records.load_vehicle, a)
         elif isinstance(a, CloseVehicle):
             try:
-                return await self._call(self.records.close_vehicle, a.vin)
+                return await self._call(self.records.close_vehicle, a.vin,
+                                        a.after_lift_outage)
             except STATION_FAULTS as exc:
                 self.log.error("vehicle %s not closed: %s", a.vin, one_line(exc))
         elif isinstance(a, Record):

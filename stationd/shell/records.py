@@ -67,7 +67,13 @@ from stationd.station.inputs import (
 )
 from stationd.station.results import type_code
 from stationd.station.trust import RecordCheck, summary
-from stationd.words import comment_words, sent_again_words, stored_what, unattributed_words
+from stationd.words import (
+    closed_after_outage,
+    comment_words,
+    sent_again_words,
+    stored_what,
+    unattributed_words,
+)
 
 log = logging.getLogger("stationd")
 #: what a device, the database or the station's own data raise: a fault, never an exit
@@ -403,11 +409,12 @@ class Records:
                              loosen_nok=frozenset(b.bolt_id for b in report.bolts
                                                   if b.status is NOK and b.kind == LOOSENING))
 
-    def close_vehicle(self, vin: str) -> VehicleEnded:
+    def close_vehicle(self, vin: str, after_lift_outage: bool = False) -> VehicleEnded:
         report = self._repo().close_vehicle(vin)
         # in db report's words (counted and labelled: "missing B01, ..., B50, skipped none,
         # NOK none" gave 45 names and no count)
-        log.info("vehicle %s (%s) closed: %s", vin, report.vehicle.model, report.counts())
+        log.info("vehicle %s (%s) closed: %s%s", vin, report.vehicle.model, report.counts(),
+                 closed_after_outage(vin) if after_lift_outage else "")
         # the screens' "not tightened when the vehicle left": skipped ones too
         return VehicleEnded(time.time(), vin, tuple(report.untightened), tuple(report.nok))
 

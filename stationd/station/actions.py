@@ -105,7 +105,12 @@ class LoadVehicle:
 
 @dataclass(frozen=True)
 class CloseVehicle:
+    """Close ``vin``: the lift left the working height.  ``after_lift_outage``: the PLC said
+    so in its first read after an outage (a restarted PLC may have forgotten the vehicle
+    still on the lift): the journal says so, with how to reopen it."""
+
     vin: str
+    after_lift_outage: bool = False
 
 
 @dataclass(frozen=True)

@@ -58,7 +58,8 @@ class LiftRules(FaultRules):
     def _on_lift_read(self, ev: LiftRead) -> list[Action]:
         acts: list[Action] = []
         self._lift = ev
-        if LIFT in self.faults:
+        back = LIFT in self.faults
+        if back:
             acts += self._back(ev.t, LIFT)
         if VEHICLE in self.faults and not ev.at_height:
             self._closed_vin = None
@@ -66,7 +67,7 @@ class LiftRules(FaultRules):
         not_ready = StateReason(Because.LIFT_NOT_READY, note=ev.why)
         if self.vin is not None and not ev.at_height:
             acts += self._drop(ev.t, State.WAITING_VEHICLE, not_ready)
-            acts.append(CloseVehicle(self.vin))
+            acts.append(CloseVehicle(self.vin, after_lift_outage=back))
             self._forget_vehicle()
         changed = self._vehicle_changed(ev)
         if changed is not None and VEHICLE not in self.faults:

@@ -15,6 +15,7 @@ import time
 from datetime import datetime
 from pathlib import Path
 
+import pytest
 from sqlalchemy import select
 
 from db.models import TighteningRecord
@@ -231,3 +232,21 @@ def test_a_vehicle_the_station_did_not_see_leave_is_closed_as_the_next_one_loads
     assert said == ["vehicle VIN1 (SEDAN) closed: it left while the station did not see it "
                     "go; bolts: 0 OK, 0 ending NOK, 0 skipped, 2 missing (B1, B2); rundowns: "
                     "0 tightenings, 0 NOK results"], said
+
+
+def test_a_close_after_a_lift_outage_says_how_to_reopen(tmp_path: Path,
+                                                         caplog: pytest.LogCaptureFixture
+                                                         ) -> None:
+    """The journal's close line, when the lift PLC's first read after an outage said the
+    lift down: tied to the outage, with the command that reopens the vehicle."""
+    import logging
+
+    records = _records(tmp_path)
+    assert isinstance(records.load_vehicle(LoadVehicle(12, "VIN1")), VehicleLoaded)
+    caplog.set_level(logging.INFO, logger="stationd")
+    records.close_vehicle("VIN1", after_lift_outage=True)
+    assert records.repo is not None
+    records.repo.close()
+    [line] = [r.getMessage() for r in caplog.records if "closed:" in r.getMessage()]
+    assert "the lift PLC came back from an outage" in line
+    assert line.endswith("if VIN1 is still on the lift, stationd reopen VIN1 --user NAME")

@@ -902,6 +902,23 @@ def test_a_vehicle_that_changes_at_height_is_a_fault_until_the_lift_goes_down():
             [(changed.model_code, changed.vin)]
 
 
+def test_a_vehicle_closed_by_the_first_read_after_a_lift_outage_is_said_so():
+    """A maintenance trial restarted the lift PLC: it came back saying the lift down and the
+    vehicle closed with 50 bolts missing, nothing tying the close to the outage.  The close
+    says it came with the PLC's return (the journal then says how to reopen); a lift lowered
+    while the PLC answers is an ordinary close."""
+    for outage in (True, False):
+        c = StationCore(PARAMS, leave_frames=2)
+        c.feed(Started(1.0))
+        c.feed(LiftRead(1.1, True, True, 7, "VINA"))
+        c.feed(VehicleLoaded(1.2, "VINA", "M", BOLTS))
+        if outage:
+            c.feed(DeviceFault(1.5, "lift", FaultKind.DOWN, "connection refused"))
+        down = c.feed(LiftRead(2.0, False, False, 0, None))
+        assert [(a.vin, a.after_lift_outage) for a in down if isinstance(a, CloseVehicle)] \
+            == [("VINA", outage)]
+
+
 def test_a_fault_heard_before_the_start_does_not_skip_the_start():
     """The database down at boot reaches the core before its loop runs (the serve loop's
     retry): the core is in fault and says so; once it is back and the loop starts, Started
