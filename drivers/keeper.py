@@ -42,6 +42,8 @@ class FaultKind(StrEnum):
     # or a vehicle the database refuses (an unknown model, a closed VIN)
     CHANGED = "changed"
     REJECTED = "rejected"
+    # it answers, and says it is itself in fault (the lift PLC's fault bit)
+    REPORTED = "reported"
 
 
 def fault_kind(exc: BaseException) -> FaultKind:

@@ -517,7 +517,8 @@ def cmd_feed(args: argparse.Namespace) -> int:
 
 def cmd_status(args: argparse.Namespace) -> int:
     """``stationd status``: the station that answered, then its state (``--json``: the
-    status object, the station's line on stderr).  Exit 0 not in fault, 1 in fault, 3 no
+    status object, the station's line on stderr).  Exit 0 not in fault, 1 in fault (the
+    station, or a device that reports one: a lift PLC's fault bit), 3 no
     status of this station, 4 not in fault but its last reload refused (it runs on what it
     read before)."""
     if not 0 < args.timeout <= 3600:    # NaN too
@@ -530,8 +531,10 @@ def cmd_status(args: argparse.Namespace) -> int:
     via = "" if target.config == str(DEFAULT_CONFIG) else \
         f" --config {target.config}" if target.config is not None else f" --url {target.url}"
     print(json.dumps(doc, indent=1) if args.json else format_status(doc, via))
-    if doc.get("state") == State.FAULT:
-        return EXIT_FAULT
+    if doc.get("state") == State.FAULT or any(
+            not d.get("ok", True) and d.get("kind") != "opening"
+            for d in (doc.get("devices") or {}).values()):
+        return EXIT_FAULT     # as /healthz's 503: a device reporting its own fault too
     return EXIT_RELOAD_REFUSED if doc.get("reload_refused") else 0
 
 

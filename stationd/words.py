@@ -106,6 +106,9 @@ _FAULT: dict[CoreFaultKind, Callable[[CoreFault], str]] = {
                                      f"reopened ({f.note}); lower the lift to clear"),
     CoreFaultKind.PARAMS_REFUSED: lambda f: (f"controller refused the parameters for "
                                              f"{f.bolt}: {f.note}"),
+    CoreFaultKind.LIFT_REPORTS_FAULT: lambda f: ("the lift PLC reports a fault of the lift "
+                                                 "(its fault bit): nothing is tightened until "
+                                                 "it is cleared at the lift"),
 }
 
 

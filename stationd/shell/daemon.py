@@ -366,7 +366,7 @@ class Station:
         t0 = time.monotonic()
         s = await self._call(lambda: lift.read_state(1.0))
         await self.feed(LiftRead(time.time(), bool(s.ready), bool(s.at_working_height),
-                                 int(s.model_code), s.vin, s.why_not_ready))
+                                 int(s.model_code), s.vin, s.why_not_ready, bool(s.fault)))
         await asyncio.sleep(max(0.0, self.cfg.lift.poll_ms / 1e3 - (time.monotonic() - t0)))
 
     async def _recorded_late(self) -> None:

@@ -64,6 +64,8 @@ class LiftRead(Input):
     model_code: int
     vin: str | None
     why: str = "lift not at working height"
+    #: the PLC's fault bit (the lift itself in fault, the PLC answering): the lift's health
+    plc_fault: bool = False
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ from stationd.station.events import (
     Because,
     BoltLocked,
     BoltView,
+    DeviceHealth,
     Notice,
     OperatorChange,
     OperatorChanged,
@@ -61,6 +62,15 @@ class LiftRules(FaultRules):
         back = LIFT in self.faults
         if back:
             acts += self._back(ev.t, LIFT)
+            self._plc_fault = False      # its health was just said ok: said again if not
+        if ev.plc_fault != self._plc_fault:
+            # the lift itself in fault (its PLC answers): the lift's health says so, as a
+            # device down would (the screens, /healthz, OPC UA's asset), while the station
+            # waits for the lift as for one lowered
+            self._plc_fault = ev.plc_fault
+            acts.append(Publish(DeviceHealth(
+                LIFT, False, FaultKind.REPORTED, fault=CoreFault(CoreFaultKind.LIFT_REPORTS_FAULT),
+                t=ev.t) if ev.plc_fault else DeviceHealth(LIFT, True, t=ev.t)))
         if VEHICLE in self.faults and not ev.at_height:
             self._closed_vin = None
             acts += self._back(ev.t, VEHICLE)   # a vehicle fault lasts while that vehicle is up

@@ -16,7 +16,8 @@ from types import MappingProxyType
 from db.bolts import Window
 from db.kinds import loosening_note
 from drivers.identity import DeviceIdentity
-from stationd.reasons import FaultWhy, Reason, Skip, SkipKind, Why
+from drivers.keeper import FaultKind
+from stationd.reasons import CoreFault, CoreFaultKind, FaultWhy, Reason, Skip, SkipKind, Why
 from stationd.station.actions import Action, DisableTool, Owed, Publish, Selection
 from stationd.station.commands import TeachPoint
 from stationd.station.events import (
@@ -29,7 +30,7 @@ from stationd.station.events import (
     StateReason,
     ToolDisabled,
 )
-from stationd.station.inputs import CommandIn, LiftRead, LoadedBolt
+from stationd.station.inputs import LIFT, CommandIn, LiftRead, LoadedBolt
 from stationd.station.matching import BoltMatcher, MatchParams
 from stationd.station.policy import NokPolicy
 from stationd.station.trust import PairTrust
@@ -177,6 +178,9 @@ class CoreState:
     tool_on: bool = False
     _specs: dict[str, LoadedBolt] = field(default_factory=dict, repr=False)
     _lift: LiftRead | None = field(default=None, repr=False)
+    #: the lift's own fault bit as last told in its health (the PLC answers: not the
+    #: station's fault, the lift's)
+    _plc_fault: bool = field(default=False, repr=False)
     _loading: bool = field(default=False, repr=False)
     _load_code: int | None = field(default=None, repr=False)   # the model code loaded
     _selection: Selection | None = field(default=None, repr=False)
@@ -230,9 +234,13 @@ class CoreState:
     _operator_seen: float = field(default=0.0, repr=False)   # their last sign-in or work
 
     def status(self) -> CoreStatus:
-        """A copy of the station's state as decided (see :class:`CoreStatus`)."""
+        """A copy of the station's state as decided (see :class:`CoreStatus`); the lift that
+        reports its own fault (its PLC's fault bit) is among the devices in fault."""
+        faults = dict(self.faults)
+        if self._plc_fault and LIFT not in faults:
+            faults[LIFT] = (FaultKind.REPORTED, CoreFault(CoreFaultKind.LIFT_REPORTS_FAULT))
         return CoreStatus(self.state, self.reason,
-                          MappingProxyType({d: r for d, (_, r) in self.faults.items()}),
+                          MappingProxyType({d: r for d, (_, r) in faults.items()}),
                           self.vin, self.bolt, self.tool_on, self.operator,
                           None if self.trust is None
                           else MappingProxyType(self.trust.untrusted()),
@@ -246,7 +254,7 @@ class CoreState:
                           MappingProxyType(dict(self.identifications)),
                           frozenset(() if self.matcher is None else self.matcher.done),
                           frozenset(() if self.matcher is None else self.matcher.skipped),
-                          MappingProxyType({d: str(k) for d, (k, _) in self.faults.items()}),
+                          MappingProxyType({d: str(k) for d, (k, _) in faults.items()}),
                           self.operator_required)
 
     @property

@@ -268,6 +268,40 @@ def test_status_exits_4_while_the_last_reload_stands_refused(live_server, capsys
     assert main(["status", "--url", srv.url]) == 0
 
 
+def test_status_exits_1_while_a_device_reports_its_own_fault(live_server, capsys):
+    """The lift PLC's fault bit: the station waits (not in fault) but the lift is; the
+    monitor's exit says it as /healthz's 503 does (it said 0: a maintenance trial)."""
+    from stationd.cli import main
+    from stationd.station.events import (
+        Because,
+        DeviceHealth,
+        State,
+        StateChanged,
+        StateReason,
+    )
+
+    srv = live_server()
+    srv.publish(opened())
+    srv.publish([DeviceHealth(device="lift", ok=False, kind="reported",
+                              reason="the lift PLC reports a fault of the lift (its fault bit)"),
+                 StateChanged(state=State.WAITING_VEHICLE, reason=StateReason(
+                     Because.LIFT_NOT_READY, note="the lift PLC reports a fault"))])
+    srv.call(_until(lambda: srv.server.view.state == State.WAITING_VEHICLE))
+    assert main(["status", "--url", srv.url]) == 1
+    out = capsys.readouterr().out
+    assert "device:   lift: reported the lift PLC reports a fault" in out
+    assert out.splitlines()[1].startswith("state:    waiting for vehicle")
+    srv.publish([DeviceHealth(device="lift", ok=True)])
+    srv.call(_until(lambda: srv.server.view.device_health()["lift"]["ok"]))
+    assert main(["status", "--url", srv.url]) == 0
+
+
+async def _until(held):
+    import asyncio
+    while not held():
+        await asyncio.sleep(0.02)
+
+
 def test_status_with_a_station_file_that_no_longer_reads_still_asks_its_daemon(
         live_server, capsys, tmp_path):
     """A reload of a mistyped file was refused and the daemon runs on: ``status --config``
