@@ -343,6 +343,9 @@ FAULT_WORDS = [
      "lower the lift to clear"),
     (CoreFault(CoreFaultKind.PARAMS_REFUSED, bolt="B1", note="pset 2 unknown"),
      "controller refused the parameters for B1: pset 2 unknown"),
+    (CoreFault(CoreFaultKind.LIFT_REPORTS_FAULT),
+     "the lift PLC reports a fault of the lift (its fault bit): nothing is tightened until it "
+     "is cleared at the lift"),
 ]
 
 
