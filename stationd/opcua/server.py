@@ -57,6 +57,7 @@ import socket
 from collections import OrderedDict
 from collections.abc import Callable, Coroutine
 from contextvars import ContextVar
+from dataclasses import replace
 from datetime import UTC, datetime
 from typing import Any
 
@@ -729,4 +730,22 @@ def current(history: list[StationEvent]) -> list[StationEvent]:
                 latest.setdefault((type(e).__name__, e.device), (i, e))
         if isinstance(e, StateChanged) and e.state == State.STARTING:
             break
+    for key, (i, e) in latest.items():
+        if isinstance(e, DeviceHealth) and not e.ok:
+            latest[key] = (i, replace(e, t=_failing_since(history, i, e)))
     return [e for _, e in sorted(latest.values(), key=lambda ie: ie[0])]
+
+
+def _failing_since(history: list[StationEvent], i: int, health: DeviceHealth) -> float:
+    """When the device of ``health`` (not ok, at ``history[i]``) went out of order: its
+    ErrorTimestamp.  A device down across a reload was stamped with the reload's time (the
+    new station reports it again, and the server restarts with it: an MES trial read the
+    failure hours late); reports before the last start count here, back to the device's
+    last word that it was ok."""
+    since = health.t
+    for e in reversed(history[:i]):
+        if isinstance(e, DeviceHealth) and e.device == health.device:
+            if e.ok:
+                break
+            since = e.t
+    return since

@@ -328,6 +328,28 @@ def test_the_replay_is_the_running_stations_last_word_per_device_in_order():
     assert current([old, h1, h2]) == [old, h2]
 
 
+def test_a_device_down_across_a_reload_keeps_the_time_it_failed():
+    """An MES trial: the controller down at 14:39:40, a reload at 14:39:48 (the new station
+    reports it again, the OPC UA server restarts with it): its ErrorTimestamp read the
+    reload's time.  The replay stamps a failing device with its failure's first report,
+    back to its last word that it was ok (before the last start too)."""
+    def health(history: list[Any]) -> DeviceHealth:
+        [h] = [e for e in current(history) if isinstance(e, DeviceHealth)]
+        return h
+
+    start = StateChanged("starting", StateReason(Because.OPENING))
+    down = DeviceHealth("wrench", False, "down", "refused", t=100.0)
+    timeout = DeviceHealth("wrench", False, "timeout", "no answer", t=105.0)
+    again = DeviceHealth("wrench", False, "down", "refused", t=160.0)
+    replayed = health([start, down, timeout, start, again])
+    assert replayed.t == 100.0 and replayed.reason == "refused"
+    ok = DeviceHealth("wrench", True, t=120.0)
+    replayed = health([start, down, ok, start, again])
+    assert replayed.t == 160.0                      # back in between: failing since 160
+    replayed = health([start, down, start, DeviceHealth("wrench", True, t=170.0)])
+    assert replayed.ok and replayed.t == 170.0      # ok now: nothing to stamp
+
+
 def test_a_subscriber_with_a_replay_gets_it_first_then_every_event_none_twice():
     bus = EventBus()
     first, second = DeviceHealth("lift", False, "down", "x"), DeviceHealth("lift", True)
