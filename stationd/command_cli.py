@@ -531,10 +531,10 @@ def cmd_status(args: argparse.Namespace) -> int:
     via = "" if target.config == str(DEFAULT_CONFIG) else \
         f" --config {target.config}" if target.config is not None else f" --url {target.url}"
     print(json.dumps(doc, indent=1) if args.json else format_status(doc, via))
-    if doc.get("state") == State.FAULT or any(
-            not d.get("ok", True) and d.get("kind") != "opening"
-            for d in (doc.get("devices") or {}).values()):
-        return EXIT_FAULT     # as /healthz's 503: a device reporting its own fault too
+    # the daemon's own verdict, as /healthz's 503 (a device reporting its fault too); a
+    # daemon of an earlier version gives its state alone
+    if doc.get("in_fault", doc.get("state") == State.FAULT):
+        return EXIT_FAULT
     return EXIT_RELOAD_REFUSED if doc.get("reload_refused") else 0
 
 

@@ -245,14 +245,15 @@ class _Link:
         if s.gain_db is not None:
             self.set_gain(s.gain_db)
         self.payload = int(call("read payload size", cam.get_payload))
-        if cam.is_gv_device() and s.stream_socket == "udp":
-            # a UDP socket unless asked, not Aravis's packet socket (its default where raw
-            # sockets may be opened, as root): the service has no such right, and Aravis
-            # 0.8's packet socket takes any IP packet on the interface until its filter is
-            # attached (bind, then _set_socket_filter), reads the first one's bytes as a
-            # frame id, then drops the camera's frames as late, up to 100 of them
-            cam.get_device().set_stream_options(self.arv.GvStreamOption.PACKET_SOCKET_DISABLED)
         if cam.is_gv_device():
+            if s.stream_socket == "udp":
+                # a UDP socket unless asked, not Aravis's packet socket (its default where
+                # raw sockets may be opened, as root): the service has no such right, and
+                # Aravis 0.8's packet socket takes any IP packet on the interface until its
+                # filter is attached (bind, then _set_socket_filter), reads the first one's
+                # bytes as a frame id, then drops the camera's frames as late, up to 100
+                cam.get_device().set_stream_options(
+                    self.arv.GvStreamOption.PACKET_SOCKET_DISABLED)
             _say_stream_limits(self.device, s.stream_socket, self.payload)
         self.stream = call("create stream", cam.create_stream, None, None)
         if self.stream is None:

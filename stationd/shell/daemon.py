@@ -263,8 +263,9 @@ class Station:
         steps: list[tuple[str, Callable[[], None]]] = []
         if self.wrench is not None and self.wrench_keeper.up:
             steps.append(("disable tool", self.wrench.disable_tool))
+        first_pair = next(iter(self.pair_keepers), None)
         for device, keeper in self.keepers.items():
-            if device == next(iter(self.pair_keepers), None):
+            if device == first_pair:
                 # a grab under way ends before its camera closes (none queued is started)
                 steps.append(("the cameras' grabs", partial(
                     self._camera_pool.shutdown, wait=True, cancel_futures=True)))

@@ -17,6 +17,7 @@ import contextlib
 import logging
 import random
 import signal
+import socket
 import sys
 import threading
 import time
@@ -208,8 +209,6 @@ class Screens:
         served = self.server.config.listen
         if cfg.http.port in (self.server.config.port, self.server.port):
             return
-        import socket
-
         try:
             # every address the name gives: the screens listen on each
             for family, kind, proto, _, address in socket.getaddrinfo(

@@ -37,7 +37,13 @@ from stationd.station.inputs import (
     VinSent,
 )
 from stationd.station.matching import BoltMatcher, BoltRule
-from stationd.station.state import NO_LOOSEN_PSET, NOK_SKIPPED, ON_A_BOLT, _disable
+from stationd.station.state import (
+    LIFT_FAULT_BIT,
+    NO_LOOSEN_PSET,
+    NOK_SKIPPED,
+    ON_A_BOLT,
+    _disable,
+)
 
 
 class LiftRules(FaultRules):
@@ -68,9 +74,9 @@ class LiftRules(FaultRules):
             # device down would (the screens, /healthz, OPC UA's asset), while the station
             # waits for the lift as for one lowered
             self._plc_fault = ev.plc_fault
-            acts.append(Publish(DeviceHealth(
-                LIFT, False, FaultKind.REPORTED, fault=CoreFault(CoreFaultKind.LIFT_REPORTS_FAULT),
-                t=ev.t) if ev.plc_fault else DeviceHealth(LIFT, True, t=ev.t)))
+            acts.append(Publish(
+                DeviceHealth(LIFT, False, FaultKind.REPORTED, fault=LIFT_FAULT_BIT, t=ev.t)
+                if ev.plc_fault else DeviceHealth(LIFT, True, t=ev.t)))
         if VEHICLE in self.faults and not ev.at_height:
             self._closed_vin = None
             acts += self._back(ev.t, VEHICLE)   # a vehicle fault lasts while that vehicle is up

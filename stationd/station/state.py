@@ -105,6 +105,11 @@ def _disable(reason: StateReason, bolt: str | None = None, why: Reason | None = 
     return [Publish(ToolDisabled(reason, bolt, why, t=t)), DisableTool(reason, bolt, why)]
 
 
+#: the lift's own fault, its PLC's fault bit: the lift's health while it is set (told by the
+#: lift's rules, kept in the snapshot)
+LIFT_FAULT_BIT = CoreFault(CoreFaultKind.LIFT_REPORTS_FAULT)
+
+
 @dataclass(frozen=True)
 class CoreStatus:
     """The station as the core decided it, a copy: what the shell and the screens ask for
@@ -238,7 +243,7 @@ class CoreState:
         reports its own fault (its PLC's fault bit) is among the devices in fault."""
         faults = dict(self.faults)
         if self._plc_fault and LIFT not in faults:
-            faults[LIFT] = (FaultKind.REPORTED, CoreFault(CoreFaultKind.LIFT_REPORTS_FAULT))
+            faults[LIFT] = (FaultKind.REPORTED, LIFT_FAULT_BIT)
         return CoreStatus(self.state, self.reason,
                           MappingProxyType({d: r for d, (_, r) in faults.items()}),
                           self.vin, self.bolt, self.tool_on, self.operator,

@@ -314,7 +314,7 @@ class WebServer:
         """``ok`` (200), or ``fault`` (503) while the station is in fault or a device reports
         one: a probe can alarm on the status code alone; no detail is given (the probe is
         not authenticated)."""
-        if self.view.tone() == "stop" and not self.view.alarm:
+        if self.view.in_fault() and not self.view.alarm:
             return web.Response(status=503, text="fault\n")
         return web.Response(text="ok\n")
 
@@ -322,6 +322,8 @@ class WebServer:
         """What ``GET /api/status`` and ``stationd status`` show."""
         v = self.view.to_json()
         return {"station": self.station, "state": v["state"], "reason": v["reason"],
+                # what /healthz answers 503 for, and stationd status exits 1 for
+                "in_fault": self.view.in_fault(),
                 "reason_kind": v["reason_kind"], "headline": v["headline"],
                 # the headline in full (the screen's hover title): ``headline`` cuts a
                 # fault's reason for large type, which a command's line need not

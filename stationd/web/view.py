@@ -533,6 +533,11 @@ class View:
                 out[d]["check"] = dict(check)
         return out
 
+    def in_fault(self) -> bool:
+        """The station in fault, or a device that reports one (the lift PLC's fault bit
+        too): ``/healthz``'s 503, ``stationd status``'s exit 1 and the headline's red."""
+        return self.state == State.FAULT or any(not h["ok"] for h in self.devices.values())
+
     def tone(self) -> str:
         """How the headline reads: ``stop`` (red: a fault or a wrong bolt, the station
         stops), ``act`` (amber: a refusal the operator resolves: stale, ambiguous, tilted,
@@ -541,8 +546,7 @@ class View:
         ones: a joint out of its limits left the station, the worse of the two for quality),
         ``missing`` (amber: it closed with bolts not tightened), ``done`` (vehicle finished),
         else "".  ``nok`` is not ``stop``: the station itself is healthy (/healthz stays ok)."""
-        if self.alarm or self.state == State.FAULT or any(not h["ok"]
-                                                       for h in self.devices.values()):
+        if self.alarm or self.in_fault():
             return "stop"
         if self.refused:
             return "act" if self.act and not self.starting_up() else "idle"
