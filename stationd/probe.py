@@ -9,12 +9,15 @@ the daemon's device lock (``stationd.lock.probing``) for as long as it talks to 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import math
 import sys
+from collections.abc import Iterator
 from typing import Any
 
 from drivers.errors import DeviceError, UrlError
+from stationd.errors import InputError
 from stationd.jsonout import strict_json
 from stationd.lock import probing
 
@@ -40,6 +43,23 @@ def _emit(args: argparse.Namespace, obj: dict[str, Any], text: str) -> None:
         print(text)
 
 
+@contextlib.contextmanager
+def locked(args: argparse.Namespace, kind: str) -> Iterator[None]:
+    """:func:`stationd.lock.probing` for this probe; refused (the device is driven by a daemon
+    or another probe), a ``--json`` probe still prints its one object (``ok`` false, the
+    refusal in ``error``): a script reading stdout gets an answer, not an empty line, and
+    the exit (2) and the line on stderr are the same."""
+    with contextlib.ExitStack() as stack:
+        try:
+            stack.enter_context(probing(kind, args.url))
+        except InputError as exc:
+            if args.json:
+                sys.stdout.write(strict_json({"device": args.url, "kind": kind, "ok": False,
+                                              "error": str(exc)}) + "\n")
+            raise
+        yield
+
+
 def _failed(args: argparse.Namespace, kind: str, exc: DeviceError) -> int:
     """A device that refuses or does not answer: exit 1, one line (and the JSON if asked)."""
     if isinstance(exc, UrlError):
@@ -57,7 +77,7 @@ def probe_lift(args: argparse.Namespace) -> int:
 
     cfg = load_station_config(args.config)
     try:
-        with probing("lift", args.url), \
+        with locked(args, "lift"), \
                 open_device(Kind.LIFT, args.url, register_map=cfg.lift.registers,
                             timeout=args.timeout) as lift:
             ident = lift.identity()
@@ -126,7 +146,7 @@ def probe_wrench(args: argparse.Namespace) -> int:
                            "result": None}
     code = EXIT_OK
     try:
-        with probing("wrench", args.url), open_device(Kind.WRENCH, args.url,
+        with locked(args, "wrench"), open_device(Kind.WRENCH, args.url,
                                                                timeout=args.timeout) as w:
             out["identity"] = w.identity()
             out["acknowledged"] = args.pset is None  # the session itself was accepted

@@ -96,11 +96,11 @@ def _sim_world(url: str, config: str | None = None) -> Any:
 
 def probe_camera(args: argparse.Namespace) -> int:
     _check_options(args)
-    from stationd.lock import probing
+    from stationd.probe import locked
 
     world = _sim_world(args.url, args.config)
     try:
-        with probing("camera", args.url):
+        with locked(args, "camera"):
             return _probe(args)
     finally:
         if world is not None:

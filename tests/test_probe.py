@@ -328,6 +328,13 @@ def test_probe_of_a_device_a_daemon_drives_is_refused_before_touching_it(capsys)
             err = capsys.readouterr().err
             assert code == 2 and f"the station daemon (pid {holder.pid})" in err, err
             assert err.count("\n") == 1
+            # a script reading --json gets its one object, the refusal in it, and exit 2
+            code = main(["probe", "lift", url, "--json"])
+            out, err = capsys.readouterr()
+            obj = json.loads(out)
+            assert code == 2 and obj["ok"] is False and obj["kind"] == "lift", out
+            assert f"(pid {holder.pid}) is driving this device" in obj["error"], obj
+            assert err.count("\n") == 1 and obj["error"] in err, err
         finally:
             _let_go(holder)
         code = main(["probe", "lift", f"modbus-tcp://127.0.0.1:{port}?unit=1", "--json"])
