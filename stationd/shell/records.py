@@ -138,6 +138,14 @@ class Records:
             raise DeviceError("not open", device="database")
         return self.repo
 
+    def _writer(self) -> Repository:
+        """The repository for a write, the SQLite file checked first (:meth:`check_file`): a
+        command, a vehicle's opening or a hold written into a file removed under the daemon
+        would be accepted and gone, as a result would."""
+        repo = self._repo()
+        self.check_file()
+        return repo
+
     # -- what the last station owed -------------------------------------------------------
     def owed(self, late_result_s: float, cut: bool = True) -> Owed | None:
         """The tool enable the last station (a reload, a restart, a kill) left without its
@@ -174,11 +182,11 @@ class Records:
         """The enable for ``sel`` is owed nothing more (:class:`SettleEnable`)."""
         enable = self._settles(sel)
         if enable is not None:
-            self._repo().settle_enable(enable)
+            self._writer().settle_enable(enable)
 
     def note_enable(self, sel: Selection) -> None:
         """The tool is about to be enabled for ``sel``: noted on disk first."""
-        row = self._repo().note_enable(sel.vin, sel.bolt, sel.pset, sel.parameters_id,
+        row = self._writer().note_enable(sel.vin, sel.bolt, sel.pset, sel.parameters_id,
                                        _selection_json(sel), datetime.now(UTC))
         self._enable, self._enable_off = (sel, row), False
 
@@ -222,8 +230,7 @@ class Records:
         when the database has it already (a copy the controller sent again: nothing written;
         the core says so).  The controller's own time of the result goes with it: what tells
         such a copy from another result under the same id."""
-        repo = self._repo()
-        self.check_file()
+        repo = self._writer()
         a = u.record
         r, sel = a.result, a.selection
         done = repo.record_tightening_once(
@@ -316,7 +323,7 @@ class Records:
         """The result, unless the database has it already (a copy the controller sent
         again: said in the journal, stored once)."""
         r = a.result
-        row = self._repo().record_unattributed(
+        row = self._writer().record_unattributed(
             vin=a.vin, controller_vin=str(r.vin or "").strip() or None,
             tightening_id=int(r.tightening_id), pset=int(r.pset), ok=bool(r.ok),
             torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
@@ -329,7 +336,7 @@ class Records:
         held for a person: no later result is owed to it)."""
         r = a.result
         enable = self._settles(a.selection, take=False)
-        row = self._repo().record_controller_event(
+        row = self._writer().record_controller_event(
             result_type=type_code(r) or 0, what=stored_what(a), vin=a.vin, bolt=a.bolt,
             controller_vin=str(r.vin or "").strip() or None,
             tightening_id=int(r.tightening_id), pset=int(r.pset), ok=bool(r.ok),
@@ -343,7 +350,7 @@ class Records:
         """A bolt held after a link cut left its result unknown: a controller event of the
         station's own kind without a result (its note, why), the enable settled with it."""
         enable = self._settles(a.selection, take=False)
-        self._repo().record_controller_event(
+        self._writer().record_controller_event(
             result_type=0, what=CUT_UNKNOWN, vin=a.vin, bolt=a.bolt, controller_vin=None,
             tightening_id=None, pset=a.selection.pset, ok=False, torque_nm=None,
             angle_deg=None, result_at=None, enable_id=enable, note=a.note)
@@ -354,7 +361,7 @@ class Records:
         for a person now: no later result is owed to it)."""
         u, sel = a.unreadable, a.selection
         enable = self._settles(sel, take=False)
-        self._repo().record_unreadable(
+        self._writer().record_unreadable(
             mid=u.mid, revision=u.revision, raw=u.raw, error=u.error, vin=a.vin, bolt=a.bolt,
             controller_vin=u.vin.strip() or None, tightening_id=u.tightening_id, pset=u.pset,
             result_at=_aware(u.timestamp),
@@ -366,7 +373,7 @@ class Records:
         """The vehicle at height, from the database: loaded with its bolts, what is done,
         skipped and NOK so far (a rework resumed after a reload is still one), or rejected
         (unknown model, a closed VIN, another model's VIN)."""
-        repo = self._repo()
+        repo = self._writer()
         gone = repo.left_unseen(a.vin)
         if gone is not None:   # the lowering that closes it was not seen (station down then)
             log.info("vehicle %s (%s) closed: it left while the station did not see it go; "
@@ -410,7 +417,7 @@ class Records:
                                                   if b.status is NOK and b.kind == LOOSENING))
 
     def close_vehicle(self, vin: str, after_lift_outage: bool = False) -> VehicleEnded:
-        report = self._repo().close_vehicle(vin)
+        report = self._writer().close_vehicle(vin)
         # in db report's words (counted and labelled: "missing B01, ..., B50, skipped none,
         # NOK none" gave 45 names and no count)
         log.info("vehicle %s (%s) closed: %s%s", vin, report.vehicle.model, report.counts(),
@@ -422,7 +429,7 @@ class Records:
         """An accepted command on disk with its user (a reopen reopens the vehicle in the
         same transaction); None once recorded, else why not (the database's own faults
         raise)."""
-        repo, cmd, who = self._repo(), a.command, a.issuer
+        repo, cmd, who = self._writer(), a.command, a.issuer
         at = datetime.fromtimestamp(a.t, UTC)
         vin = getattr(cmd, "vin", None) or (
             vin_at_height if not isinstance(cmd, ReopenVehicle) else None)
@@ -466,20 +473,20 @@ class Records:
         return self._repo().last_tightening_id()
 
     def record_gap(self, first: int, last: int, vin: str | None, reason: str) -> None:
-        self._repo().record_gap(first, last, vin, reason)
+        self._writer().record_gap(first, last, vin, reason)
 
     def record_check(self, a: RecordCheck) -> None:
         """A pair's calibration check, with its feed entry (the line gets it)."""
         c, s = a.check, summary(a.check)
         why = None if c.why is None else c.why.value + (f": {c.note}" if c.note else "")
-        record_check(self._repo(), at=datetime.fromtimestamp(a.t, UTC), pair=c.pair,
+        record_check(self._writer(), at=datetime.fromtimestamp(a.t, UTC), pair=c.pair,
                      verdict=c.verdict.value, reference=c.reference, offset_mm=c.offset_mm,
                      tolerance_mm=c.tolerance_mm, reason=why, references=s["references"])
 
     def store_curve(self, curve: Curve) -> None:
         """A tightening curve with its rundown, by tightening id (one stored before its
         rundown is written is found by that id)."""
-        store_curve(self._repo(), tightening_id=curve.tightening_id,
+        store_curve(self._writer(), tightening_id=curve.tightening_id,
                     trace_type=curve.trace_type, unit=curve.unit, values=curve.values,
                     sample_period_s=curve.time_step_s,
                     times_s=None if curve.time_step_s is not None else curve.times_s,

@@ -20,8 +20,10 @@ import tests.shell.daemons as harness
 from db.models import Bolt, TighteningRecord, Vehicle
 from db.repository import Repository
 from stationd.demo.station import SIM_CONFIG
+from stationd.reasons import Why
 from stationd.sim.world import wrench_at
 from stationd.station.actions import DisableTool
+from stationd.station.commands import Issuer, Right, SkipBolt
 from stationd.station.events import (
     Because,
     BoltSelected,
@@ -370,5 +372,11 @@ def test_a_database_file_removed_under_the_daemon_is_a_fault_not_acknowledged(tm
         world.set_wrench(_on(st, bolts[1], 2))
         await asyncio.sleep(2.0)
         assert len(_sends(st)) == sent
+        # a person's command is refused as not recorded, not "accepted" into the lost file
+        vin = st.core.status().vin
+        answer = await st.submit(SkipBolt(vin, bolts[2], "no access"),
+                                 Issuer("sam", frozenset(Right), "cli"))
+        assert not answer.accepted and answer.reason is not None
+        assert answer.reason.kind is Why.NOT_RECORDED and "was removed" in str(answer.reason.note)
 
     scenario(tmp_path, body, **NO_NOK)
