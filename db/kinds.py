@@ -54,6 +54,13 @@ NOT_TAKEN = "untyped OK outside torque window"
 #: how a held bolt's note begins for such a result (the note of a result that could not be
 #: read names that result alone: "tightening 1234", "MID 0061 revision 7")
 NOT_TAKEN_NOTE = "an OK result without a result type"
+#: a bolt locked by the NOK policy (``max_nok`` NOKs in a row), kept in the command ledger
+#: under this kind (user ``station``): the lock stands until a person releases or skips the
+#: bolt, whatever the policy says after a reload or a restart (a raised ``max_nok`` read back
+#: from the streak alone unlocked it with no one's release)
+LOCK = "lock"
+#: who and what decided it, in the ledger's user and source columns
+LOCK_USER, LOCK_SOURCE = "station", "NOK policy"
 #: the link to the controller went down with the tool enabled for a bolt, and what the
 #: controller did meanwhile is not known: stored as a controller event under this name
 #: without a result (its note says why), the bolt held until a person checked it

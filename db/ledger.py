@@ -18,7 +18,7 @@ from typing import Any
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
-from db.kinds import LOOSENING
+from db.kinds import LOCK, LOOSENING
 from db.models import (
     Bolt,
     CalibrationCheck,
@@ -131,6 +131,21 @@ class Ledger:
                 q = q.where(CommandRecord.at >= since)
             return {str(r.bolt): (r.user, r.comment)
                     for r in s.scalars(q.order_by(CommandRecord.id))}
+
+    def locked(self, vin: str, since: datetime | None,
+               ends: frozenset[str]) -> frozenset[str]:
+        """The bolts of ``vin`` the NOK policy locked since ``since`` (the vehicle's last
+        opening) and no command of ``ends`` (a release, a skip) ended since."""
+        with self._session(False) as s:
+            q = select(CommandRecord).where(CommandRecord.vin == vin,
+                                            CommandRecord.kind.in_((LOCK, *ends)))
+            if since is not None:
+                q = q.where(CommandRecord.at >= since)
+            last: dict[str, str] = {}
+            for r in s.scalars(q.order_by(CommandRecord.id)):
+                if r.bolt is not None:
+                    last[r.bolt] = r.kind
+            return frozenset(b for b, kind in last.items() if kind == LOCK)
 
     def get_meta(self, key: str) -> str | None:
         with self._session(False) as s:

@@ -36,6 +36,7 @@ from stationd.station.actions import (
     DisableTool,
     EnableTool,
     LoadVehicle,
+    NoteLock,
     Publish,
     Record,
     RecordCommand,
@@ -207,6 +208,12 @@ class Effects:
                                        "an unreadable result")
         elif isinstance(a, RecordCommand):
             return await self._record_command(a)
+        elif isinstance(a, NoteLock):
+            try:
+                await self._call(self.records.note_lock, a)
+            except STATION_FAULTS as exc:   # the streak still locks it under this policy
+                self.log.warning("the lock of %s not recorded (a reload that raises max_nok "
+                                 "would end it): %s", a.bolt, one_line(exc))
         elif isinstance(a, Reply):
             self._reply(a.answer)
         elif isinstance(a, MeasureReferences):

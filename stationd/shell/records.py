@@ -26,8 +26,18 @@ from db.checks import record_check
 from db.curves import link_curves, store_curve
 from db.entered import record_entered
 from db.errors import DataError, DbError, NotFoundError, VehicleClosedError
-from db.kinds import CUT_UNKNOWN, LOOSENING, MISSING, NOK, OK, TIGHTENING
-from db.repository import Repository
+from db.kinds import (
+    CUT_UNKNOWN,
+    LOCK,
+    LOCK_SOURCE,
+    LOCK_USER,
+    LOOSENING,
+    MISSING,
+    NOK,
+    OK,
+    TIGHTENING,
+)
+from db.repository import ENDS_A_HOLD, Repository
 from drivers.errors import DeviceError, DriverError
 from drivers.keeper import one_line
 from drivers.wrench.base import TighteningResult
@@ -39,6 +49,7 @@ from stationd.localize import Localization
 from stationd.reasons import Reason, Skip, SkipKind, Why
 from stationd.station.actions import (
     LoadVehicle,
+    NoteLock,
     Owed,
     Record,
     RecordCommand,
@@ -395,6 +406,7 @@ class Records:
         since = started.reopened_at or started.started_at
         skipped = repo.ledger.skipped(a.vin, since)
         noks = repo.nok_streaks(a.vin, since)
+        locked = repo.ledger.locked(a.vin, since, ENDS_A_HOLD)
         holds = repo.holds(a.vin, since)   # each with what its result came under
         # the report's "missing" is "no rundown yet": on an open vehicle the bolt is to do
         status = {b.bolt_id: b.status for b in report.bolts if b.status != MISSING}
@@ -410,7 +422,8 @@ class Records:
         return VehicleLoaded(time.time(), a.vin, model, specs, done, started.rework,
                              skipped={b: Skip(SkipKind.COMMAND, user=user, comment=comment)
                                       for b, (user, comment) in skipped.items()},
-                             noks=noks, held={b: note for b, (note, _) in holds.items()},
+                             noks=noks, locked=locked,
+                             held={b: note for b, (note, _) in holds.items()},
                              status=status,
                              held_under={b: under for b, (_, under) in holds.items()},
                              loosen_nok=frozenset(b.bolt_id for b in report.bolts
@@ -460,6 +473,13 @@ class Records:
                 return Reason(Why.NOT_RECORDED, note=one_line(exc))
             return Reason(Why.NOT_CLOSED, vin=vin)
         return None
+
+    def note_lock(self, a: NoteLock) -> None:
+        """The NOK policy's lock in the command ledger (:class:`NoteLock`): by the station,
+        after ``count`` NOKs in a row; a release or a skip ends it."""
+        self._writer().ledger.record_command(
+            at=datetime.fromtimestamp(a.t, UTC), user=LOCK_USER, source=LOCK_SOURCE, kind=LOCK,
+            vin=a.vin, bolt=a.bolt, comment=f"{a.count} NOK in a row")
 
     def operator(self) -> tuple[str, datetime] | None:
         """Who signed in at the station and has not signed out since, with when (the last

@@ -222,6 +222,18 @@ class StoreCutUnknown:
 
 
 @dataclass(frozen=True)
+class NoteLock:
+    """Record that the NOK policy locked ``bolt`` of ``vin`` after ``count`` NOKs in a row:
+    read back with the vehicle, the lock stands until a person releases it, whatever
+    ``max_nok`` a reload or a restart brings (the streak alone is read against it)."""
+
+    vin: str
+    bolt: str
+    count: int
+    t: float
+
+
+@dataclass(frozen=True)
 class Reply:
     """The answer goes back to who gave the command (and to the journal)."""
 
@@ -231,4 +243,4 @@ class Reply:
 Action = (SendParams | EnableTool | DisableTool | SendVin | LoadVehicle | CloseVehicle | Record
           | Acknowledge | StoreUnattributed | StoreGap | StoreControllerEvent | StoreUnreadable
           | StoreCutUnknown | SettleEnable | Publish
-          | RecordCommand | Reply | MeasureReferences | RecordCheck)
+          | RecordCommand | NoteLock | Reply | MeasureReferences | RecordCheck)

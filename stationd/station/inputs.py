@@ -274,6 +274,9 @@ class VehicleLoaded(Input):
     #: held bolt -> what its result came under, as the records tell it (a held bolt without
     #: one: not known, the core decides as for an enable not found)
     held_under: Mapping[str, HeldUnder] = field(default_factory=dict)
+    #: the bolts the NOK policy locked (recorded by :class:`NoteLock`) and no person
+    #: released or skipped since: locked again whatever ``max_nok`` says now
+    locked: frozenset[str] = frozenset()
 
 @dataclass(frozen=True)
 class ToolOn(Input):

@@ -9,7 +9,14 @@ import numpy as np
 from db.kinds import NOK, PENDING, SKIPPED, TO_LOOSEN, HeldUnder
 from drivers.keeper import FaultKind
 from stationd.reasons import CoreFault, CoreFaultKind, FaultWhy
-from stationd.station.actions import Action, CloseVehicle, LoadVehicle, Publish, SendVin
+from stationd.station.actions import (
+    Action,
+    CloseVehicle,
+    LoadVehicle,
+    NoteLock,
+    Publish,
+    SendVin,
+)
 from stationd.station.events import (
     Because,
     BoltLocked,
@@ -133,10 +140,14 @@ class LiftRules(FaultRules):
             self.params, set(ev.done), dict(ev.skipped),
             rules={k: BoltRule(b.order, b.batch) for k, b in ev.bolts.items()})
         self._noks = {k: n for k, n in ev.noks.items() if k in ev.bolts and n > 0}
+        newly: list[Action] = []
         for k, n in self._noks.items():   # the NOK policy's state comes back with the vehicle
             rule = self.nok.rule(k, ev.bolts[k].pset)
-            if n >= rule.max_nok:
+            if k in ev.locked:      # locked then: until a person releases it, whatever
+                self.matcher.locked[k] = n           # max_nok a reload brought
+            elif n >= rule.max_nok:  # locked now by a lowered max_nok: recorded as such
                 self.matcher.locked[k] = n
+                newly.append(NoteLock(ev.vin, k, n, ev.t))
             elif rule.strategy == "skip":
                 self.matcher.skipped.setdefault(k, NOK_SKIPPED)
         self._loosen_back(ev)
@@ -158,7 +169,7 @@ class LiftRules(FaultRules):
         waiting = [Publish(BoltLocked(k, n, t=ev.t)) for k, n in self.matcher.locked.items()]
         waiting += [Publish(BoltLocked(k, 0, held=note, t=ev.t))
                     for k, note in self.matcher.held.items()]
-        return [Publish(opened), *waiting, *self._check_on_arrival(ev.t, ev.vin)]
+        return [*newly, Publish(opened), *waiting, *self._check_on_arrival(ev.t, ev.vin)]
 
     def _holds_back(self, ev: VehicleLoaded) -> None:
         """The holds come back with the vehicle, each a loosening's where its result came

@@ -18,7 +18,7 @@ from db.kinds import loosening_note
 from drivers.identity import DeviceIdentity
 from drivers.keeper import FaultKind
 from stationd.reasons import CoreFault, CoreFaultKind, FaultWhy, Reason, Skip, SkipKind, Why
-from stationd.station.actions import Action, DisableTool, Owed, Publish, Selection
+from stationd.station.actions import Action, DisableTool, NoteLock, Owed, Publish, Selection
 from stationd.station.commands import TeachPoint
 from stationd.station.events import (
     Because,
@@ -327,7 +327,8 @@ class CoreState:
     def _lock(self, t: float, bolt: str, n: int) -> list[Action]:
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
         self.matcher.locked[bolt] = n
-        return [Publish(BoltLocked(bolt, n, t=t)),
+        noted: list[Action] = [] if self.vin is None else [NoteLock(self.vin, bolt, n, t)]
+        return [*noted, Publish(BoltLocked(bolt, n, t=t)),
                 Publish(Notice(Said.LOCKED, bolt=bolt, count=n, t=t))]
 
     def _fault_notes(self) -> tuple[tuple[str, FaultWhy], ...]:

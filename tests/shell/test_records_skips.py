@@ -11,8 +11,8 @@ from pathlib import Path
 from stationd.config import StationConfig
 from stationd.reasons import Skip, SkipKind
 from stationd.shell.records import Records
-from stationd.station.actions import LoadVehicle, RecordCommand
-from stationd.station.commands import Issuer, Right, SkipBolt
+from stationd.station.actions import LoadVehicle, NoteLock, RecordCommand
+from stationd.station.commands import Issuer, ReleaseBolt, Right, SkipBolt
 from stationd.station.inputs import VehicleLoaded
 from stationd.words import skip_words
 from tests.db.conftest import BASE, url_of
@@ -36,4 +36,29 @@ def test_a_skip_comes_back_from_the_ledger_typed_and_said_as_before(tmp_path: Pa
     assert {b: skip_words(s) for b, s in again.skipped.items()} == {
         "B1": "olga's command (no access)", "B2": "sam's command"}
     assert records.repo is not None
+    records.repo.close()
+
+
+def test_a_lock_comes_back_from_the_ledger_until_a_release_ends_it(tmp_path: Path) -> None:
+    """The NOK policy's lock is recorded (by the station) and read back with the vehicle, so
+    that a reload raising ``max_nok`` keeps it; a release or a skip ends it."""
+    bolts = tmp_path / "bolts.yaml"
+    bolts.write_text(BASE)
+    records = Records(StationConfig(database_url=url_of(tmp_path / "st.db"), bolts_path=bolts))
+    records.open()
+    first = records.load_vehicle(LoadVehicle(12, "VIN1"))
+    assert isinstance(first, VehicleLoaded) and first.locked == frozenset()
+    records.note_lock(NoteLock("VIN1", "B1", 3, time.time()))
+    records.note_lock(NoteLock("VIN1", "B2", 3, time.time()))
+    again = records.load_vehicle(LoadVehicle(12, "VIN1"))
+    assert isinstance(again, VehicleLoaded) and again.locked == frozenset({"B1", "B2"})
+    assert records.record_command(RecordCommand(
+        0, ReleaseBolt("VIN1", "B1", "checked"), Issuer("sam", frozenset(Right), "cli"),
+        time.time()), "VIN1") is None
+    after = records.load_vehicle(LoadVehicle(12, "VIN1"))
+    assert isinstance(after, VehicleLoaded) and after.locked == frozenset({"B2"})
+    assert records.repo is not None
+    lock = [c for c in records.repo.ledger.commands("VIN1") if c.kind == "lock"]
+    assert [(c.bolt, c.user, c.comment) for c in lock] == [
+        ("B1", "station", "3 NOK in a row"), ("B2", "station", "3 NOK in a row")]
     records.repo.close()

@@ -11,7 +11,7 @@ import pytest
 
 from stationd.errors import ConfigError
 from stationd.reasons import Reason, Wait, WaitKind, Why
-from stationd.station.actions import Record
+from stationd.station.actions import NoteLock, Record
 from stationd.station.commands import ReleaseBolt, SkipBolt
 from stationd.station.core import StationCore
 from stationd.station.events import BoltLocked, BoltReleased, BoltSkipped, Refused
@@ -143,6 +143,34 @@ def test_the_count_comes_back_with_the_vehicle():
         "B3": NokRule(3, "skip")}))
     skip.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, noks={"B3": 1}))
     assert skip.matcher is not None and "B3" in skip.matcher.skipped
+
+
+def test_a_lock_is_recorded_and_stands_whatever_max_nok_a_reload_brings():
+    """An operator trial: B11 locked after 3 NOKs, the station file's ``max_nok`` raised to 5
+    and reloaded, and the operator tightened B11 twice more, no one having released it (the
+    lock was read back from the streak against the new rule).  The lock is recorded when it
+    happens (:class:`NoteLock`) and comes back as a lock until a person ends it."""
+    d = _driver(NokPolicy(NokRule(max_nok=3)))
+    for tid in (1, 2):
+        acts = _tighten(d, 2, tid, ok=False)
+        assert not [a for a in acts if isinstance(a, NoteLock)]
+    acts = _tighten(d, 2, 3, ok=False)
+    assert [a for a in acts if isinstance(a, NoteLock)] == [NoteLock("VIN1", "B2", 3, d.t)]
+    # read back under max_nok 5: locked, as recorded (no second record of it)
+    raised = StationCore(PARAMS, leave_frames=2, nok=NokPolicy(NokRule(max_nok=5)))
+    acts = raised.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, noks={"B2": 3},
+                                     locked=frozenset({"B2"})))
+    assert raised.status().locked == frozenset({"B2"})
+    assert not [a for a in acts if isinstance(a, NoteLock)]
+    # the streak alone under 5 locks nothing (a lock released since is not in ``locked``)
+    alone = StationCore(PARAMS, leave_frames=2, nok=NokPolicy(NokRule(max_nok=5)))
+    alone.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, noks={"B2": 3}))
+    assert alone.status().locked == frozenset()
+    # a lowered max_nok locks a bolt at its streak when the vehicle comes back: recorded too
+    lowered = StationCore(PARAMS, leave_frames=2, nok=NokPolicy(NokRule(max_nok=2)))
+    acts = lowered.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, noks={"B1": 2, "B3": 1}))
+    assert lowered.status().locked == frozenset({"B1"})
+    assert [a for a in acts if isinstance(a, NoteLock)] == [NoteLock("VIN1", "B1", 2, 1.0)]
 
 
 def test_the_section_is_checked_with_its_line():
