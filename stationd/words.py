@@ -528,7 +528,11 @@ _BECAUSE: dict[Because, Callable[[StateReason], str]] = {
     Because.SELECTED_UNCONFIRMED: lambda r: f"bolt {r.bolt} selected; wrench not confirmed",
     Because.WRENCH_LEFT: lambda r: f"wrench left bolt {r.bolt}",
     Because.LATE_ACK: lambda r: _late_ack(r.bolt),
-    Because.RUNDOWN: lambda r: f"bolt {r.bolt} {'loosened' if r.loosen else 'tightened'}",
+    # a NOK says so: "bolt B42 tightened" after a NOK, in the neutral tone, was read as done
+    # (an operator trial); ``ok`` None (not told) reads as before
+    Because.RUNDOWN: lambda r: f"bolt {r.bolt} " + (
+        ("loosening NOK" if r.loosen else "NOK") if r.ok is False
+        else "loosened" if r.loosen else "tightened"),
     Because.RESULT: lambda r: (f"bolt {r.bolt} {'loosening ' if r.loosen else ''}"
                                f"{'OK' if r.ok else 'NOK'}; tracking"),
     Because.UNREADABLE: _unreadable,

@@ -220,6 +220,8 @@ STATE_WORDS = [
     (StateReason(Because.LATE_ACK, bolt="B11"), "late acknowledgement for B11 ignored"),
     (StateReason(Because.RUNDOWN, bolt="B11"), "bolt B11 tightened"),
     (StateReason(Because.RUNDOWN, bolt="B11", loosen=True), "bolt B11 loosened"),
+    (StateReason(Because.RUNDOWN, bolt="B11", ok=False), "bolt B11 NOK"),
+    (StateReason(Because.RUNDOWN, bolt="B11", loosen=True, ok=False), "bolt B11 loosening NOK"),
     (StateReason(Because.RESULT, bolt="B11", ok=True), "bolt B11 OK; tracking"),
     (StateReason(Because.RESULT, bolt="B11", ok=False, loosen=True),
      "bolt B11 loosening NOK; tracking"),

@@ -456,7 +456,7 @@ class ResultRules(OrderRules):
         acts: list[Action] = []
         if self.tool_on and not cut:
             acts += self._tool_off(ev.t, StateReason(Because.RUNDOWN, bolt=en.bolt,
-                                                     loosen=kind == LOOSENING))
+                                                     loosen=kind == LOOSENING, ok=bool(r.ok)))
         acts.append(Record(en.vin, en.bolt, r, en, late, kind))
         if cut:
             acts.append(Publish(Notice(Said.CUT_RECORDED, tightening_id=int(r.tightening_id),

@@ -337,8 +337,8 @@ class View:
         said = state_words(e.reason)
         if e.why is not None:
             self._refuse(f"{said} ({reason_words(e.why)})", e.why)
-        elif said:
-            self._refuse(said)
+        elif said:   # a NOK rundown is for the operator to act on (amber), never neutral
+            self._refuse(said, act=e.reason.kind is Because.RUNDOWN and e.reason.ok is False)
 
     def _locked(self, e: BoltLocked) -> None:
         b = self.bolts[e.bolt]

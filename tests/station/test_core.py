@@ -384,7 +384,7 @@ def test_the_state_s_reason_and_the_tool_s_are_kinds_with_their_fields():
     off = [(e.reason, e.bolt, e.why is not None) for _, acts in d.log
            for e in published(acts, ToolDisabled)]
     assert off == [(StateReason(Because.STARTED), None, False),
-                   (StateReason(Because.RUNDOWN, bolt="B1"), "B1", False),
+                   (StateReason(Because.RUNDOWN, bolt="B1", ok=True), "B1", False),
                    (StateReason(Because.NOT_CONFIRMED, bolt="B2"), "B2", True),
                    (StateReason(Because.WRENCH_LEFT, bolt="B2"), "B2", True)]
     # the shell is told the same reason with the action

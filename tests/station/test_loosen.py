@@ -98,7 +98,7 @@ def test_after_a_nok_the_loosen_pset_goes_first_then_the_tightening_pset():
     assert StateReason(Because.TIGHTENING, bolt="B1") not in told[told.index(
         StateReason(Because.SELECTED, bolt="B1", pset=90, loosen=True)):]
     assert [e.reason for e in published(acts, ToolDisabled)] == [
-        StateReason(Because.RUNDOWN, bolt="B1", loosen=True)]
+        StateReason(Because.RUNDOWN, bolt="B1", loosen=True, ok=True)]
     assert d.core.reason == StateReason(Because.RESULT, bolt="B1", ok=True, loosen=True)
     assert "B1" not in d.core.matcher.done      # a loosening is never the bolt done
     sent, acts = _rundown(d, 1, 3, ok=True, rtype=1)

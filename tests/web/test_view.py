@@ -127,6 +127,16 @@ def test_tool_disabled_returns_selection_to_pending_with_reason():
     assert v.headline() == f"wrench not confirmed on bolt B3 ({STALE_812})"
 
 
+def test_a_nok_rundown_reads_nok_in_the_amber_headline_never_tightened():
+    """An operator trial: after four NOKs of B42 the headline read "bolt B42 tightened" in
+    the neutral tone each time, as after an OK."""
+    for ok, words, tone in ((False, "bolt B3 NOK", "act"), (True, "bolt B3 tightened", "idle")):
+        v = fold(opened() + work())
+        v.apply(ToolDisabled(reason=StateReason(Because.RUNDOWN, bolt="B3", ok=ok), bolt="B3"))
+        v.apply(result("B3", ok, 200))
+        assert v.headline() == words and v.tone() == tone, (v.headline(), v.tone())
+
+
 def test_skip_rework_result_close_and_wrong_bolt():
     v = fold(opened() + work())
     v.apply(BoltSkipped(bolt="B4", reason="skipped by supervisor"))
