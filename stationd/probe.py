@@ -9,17 +9,14 @@ the daemon's device lock (``stationd.lock.probing``) for as long as it talks to 
 from __future__ import annotations
 
 import argparse
-import contextlib
 import dataclasses
 import math
 import sys
-from collections.abc import Iterator
 from typing import Any
 
 from drivers.errors import DeviceError, UrlError
-from stationd.errors import InputError
 from stationd.jsonout import strict_json
-from stationd.lock import probing
+from stationd.probelock import locked
 
 EXIT_OK, EXIT_NO_ANSWER = 0, 1
 
@@ -41,23 +38,6 @@ def _emit(args: argparse.Namespace, obj: dict[str, Any], text: str) -> None:
         sys.stdout.write(strict_json(obj) + "\n")
     else:
         print(text)
-
-
-@contextlib.contextmanager
-def locked(args: argparse.Namespace, kind: str) -> Iterator[None]:
-    """:func:`stationd.lock.probing` for this probe; refused (the device is driven by a daemon
-    or another probe), a ``--json`` probe still prints its one object (``ok`` false, the
-    refusal in ``error``): a script reading stdout gets an answer, not an empty line, and
-    the exit (2) and the line on stderr are the same."""
-    with contextlib.ExitStack() as stack:
-        try:
-            stack.enter_context(probing(kind, args.url))
-        except InputError as exc:
-            if args.json:
-                sys.stdout.write(strict_json({"device": args.url, "kind": kind, "ok": False,
-                                              "error": str(exc)}) + "\n")
-            raise
-        yield
 
 
 def _failed(args: argparse.Namespace, kind: str, exc: DeviceError) -> int:

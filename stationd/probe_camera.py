@@ -96,7 +96,7 @@ def _sim_world(url: str, config: str | None = None) -> Any:
 
 def probe_camera(args: argparse.Namespace) -> int:
     _check_options(args)
-    from stationd.probe import locked
+    from stationd.probelock import locked
 
     world = _sim_world(args.url, args.config)
     try:
