@@ -21,7 +21,6 @@ from typing import Any
 
 import pytest
 import yaml
-from asyncua.client.client import Client
 from sqlalchemy import create_engine
 from sqlalchemy.pool import NullPool
 
@@ -35,6 +34,7 @@ from stationd.opcua.server import NAMESPACE
 from stationd.opcua.uatypes import ua
 from stationd.sim.vin import is_valid
 from tests.shell.daemons import SIM
+from tests.uaclient import Client
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -72,7 +72,7 @@ async def main(url: str, mode: str, ids: list[str]) -> None:
     mode, _, fix = mode.partition("+")
     if fix == "optional":
         resolvable_optional()
-    async with Client(url) as client:
+    async with Client(url, timeout=30) as client:   # 4 s by default: short on a loaded machine
         if mode in ("legacy", "conformance"):
             await client.load_type_definitions()
         if mode in ("conformance", "stock"):

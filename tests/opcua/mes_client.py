@@ -14,7 +14,7 @@ from stationd.opcua.uatypes import ua
 
 
 async def main(url: str, station: str) -> None:
-    async with Client(url) as client:
+    async with Client(url, timeout=30) as client:   # 4 s by default: short on a loaded machine
         await load_client_types(client)
         uris = await client.get_namespace_array()
         mr = uris.index(RESULT_URI)

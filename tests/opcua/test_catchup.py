@@ -9,7 +9,6 @@ from datetime import UTC, datetime, timedelta
 from typing import Any
 
 import pytest
-from asyncua.client.client import Client
 from asyncua.common.node import Node
 
 from db.repository import Repository
@@ -27,6 +26,7 @@ from stationd.opcua.server import NAMESPACE
 from stationd.opcua.uatypes import ua
 from tests.db.conftest import record
 from tests.opcua.test_server import VIN, Collector, config, repo, serving, stopping
+from tests.uaclient import Client
 
 __all__ = ["repo"]   # the fixture, shared with test_server
 

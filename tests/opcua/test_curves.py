@@ -8,7 +8,6 @@ import asyncio
 from typing import Any
 
 import pytest
-from asyncua.client.client import Client
 
 from db.curves import store_curve
 from stationd.bus import EventBus
@@ -28,6 +27,7 @@ from tests.opcua.test_server import (
     serving,
     stopping,
 )
+from tests.uaclient import Client
 
 __all__ = ["repo"]   # the fixture, shared with test_server
 

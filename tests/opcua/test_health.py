@@ -9,8 +9,6 @@ import contextlib
 from datetime import UTC, datetime
 from typing import Any
 
-from asyncua.client.client import Client
-
 from drivers.identity import DeviceIdentity
 from stationd.bus import EventBus
 from stationd.opcua.health import FAILURE, NO_ERROR, NORMAL, OFF_SPEC
@@ -26,6 +24,7 @@ from stationd.station.events import (
     StateReason,
 )
 from tests.opcua.test_server import config, repo, serving, stopping
+from tests.uaclient import Client
 
 __all__ = ["repo"]   # the fixture, shared with test_server
 

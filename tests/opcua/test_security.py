@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from asyncua.client.client import Client
 from asyncua.crypto.cert_gen import setup_self_signed_certificate
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 from cryptography.x509.oid import ExtendedKeyUsageOID
@@ -24,6 +23,7 @@ from stationd.opcua.server import NAMESPACE
 from stationd.opcua.uatypes import ua
 from tests.db.conftest import record
 from tests.opcua.test_server import VIN, config, repo, serving, stopping
+from tests.uaclient import Client
 
 __all__ = ["repo"]   # the fixture, shared with test_server
 

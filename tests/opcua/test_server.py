@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from asyncua.client.client import Client
 
 from db.repository import Repository
 from stationd.access import hash_password
@@ -23,6 +22,7 @@ from stationd.opcua.server import NAMESPACE, OpcUaServer
 from stationd.opcua.uatypes import ua
 from stationd.yamlio import YamlNode
 from tests.db.conftest import BASE, record
+from tests.uaclient import Client
 
 VIN = "WVWZZZ1JZXW000001"
 ROOT = Path(__file__).resolve().parents[2]

@@ -10,8 +10,6 @@ import threading
 import time
 from typing import Any
 
-from asyncua.client.client import Client
-
 from db.repository import Repository
 from stationd.bus import EventBus
 from stationd.config import StationConfig
@@ -21,6 +19,7 @@ from stationd.opcua.uatypes import ua
 from stationd.shell import serve
 from stationd.station.events import Because, State, StateChanged, StateReason
 from tests.opcua.test_server import config
+from tests.uaclient import Client
 
 
 def test_the_server_runs_on_a_loop_of_its_own_and_hears_the_station(tmp_path, monkeypatch):
