@@ -419,6 +419,11 @@ def _controller_event(n: Notice) -> str:
             + ("; check the controller's result there" if n.said is Said.UNKNOWN_TYPE else ""))
 
 
+def _tightening(tightening_id: int | None) -> str:
+    """``tightening 12``, or "the result" where its id is not told."""
+    return "the result" if tightening_id is None else f"tightening {tightening_id}"
+
+
 _SAID: dict[Said, Callable[[Notice], str]] = {
     Said.NO_REFERENCES: lambda n: ("no calibration check configured (no references in the "
                                    "station file): every pair is trusted"),
@@ -449,7 +454,11 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
                                  f"since fetched): {n.bolt} open as before"),
     Said.CUT_UNKNOWN: lambda n: (f"{n.bolt}: {n.note}: check it on the controller, then "
                                  "release or enter its outcome"),
-    Said.LATE_RESULT: lambda n: f"result for {n.bolt} outside a tightening: recorded, not matched",
+    # recorded to its bolt: "outside a tightening: recorded, not matched" was read as a
+    # result lost to the bolt it went to (a quality engineer's trial)
+    Said.LATE_RESULT: lambda n: (
+        f"{_tightening(n.tightening_id)} came after the tool went off for {n.bolt} (within "
+        f"the late-result window): recorded to {n.bolt}"),
     Said.LOOSEN_PSET_TIGHTENED: lambda n: (f"{n.bolt}: the loosen pset {n.pset} reported a "
                                            "tightening: the bolt counts as tightened; check "
                                            "that pset's program"),

@@ -113,8 +113,12 @@ WORDS = [
             note="its result during the link cut not known: the controller refused MID 0064"),
      "B1: its result during the link cut not known: the controller refused MID 0064: check it "
      "on the controller, then release or enter its outcome"),
+    (Notice(Said.LATE_RESULT, bolt="B1", tightening_id=12),
+     "tightening 12 came after the tool went off for B1 (within the late-result window): "
+     "recorded to B1"),
     (Notice(Said.LATE_RESULT, bolt="B1"),
-     "result for B1 outside a tightening: recorded, not matched"),
+     "the result came after the tool went off for B1 (within the late-result window): "
+     "recorded to B1"),
     (Notice(Said.LOOSEN_PSET_TIGHTENED, bolt="B1", pset=9),
      "B1: the loosen pset 9 reported a tightening: the bolt counts as tightened; check that "
      "pset's program"),

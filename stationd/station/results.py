@@ -462,7 +462,8 @@ class ResultRules(OrderRules):
             acts.append(Publish(Notice(Said.CUT_RECORDED, tightening_id=int(r.tightening_id),
                                        bolt=en.bolt, t=ev.t)))
         elif late:
-            acts.append(Publish(Notice(Said.LATE_RESULT, bolt=en.bolt, t=ev.t)))
+            acts.append(Publish(Notice(Said.LATE_RESULT, bolt=en.bolt,
+                                       tightening_id=int(r.tightening_id), t=ev.t)))
         self._recorded[int(r.tightening_id)] = _said(r)
         if not cut:
             self._enabled = None    # (a cut's result leaves an enable made since owed)
