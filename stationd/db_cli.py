@@ -211,7 +211,14 @@ def _since(text: str) -> datetime:
 def _export_results(args: argparse.Namespace) -> int:
     """Every rundown (OK, NOK, rework) of the chosen vehicles as CSV or JSON, oldest first:
     what quality takes out of the station (the results screen's export, for all vehicles)."""
-    from stationd.web.results import RELEASED_STATUS, Results, rundowns_csv
+    from stationd.web.results import (
+        NOT_RUNDOWNS,
+        RELEASED_STATUS,
+        UNATTRIBUTED_STATUS,
+        UNREADABLE_STATUS,
+        Results,
+        rundowns_csv,
+    )
 
     if args.format == "yaml":
         raise InputError("--results are exported as csv (the default) or json, not yaml")
@@ -245,10 +252,16 @@ def _export_results(args: argparse.Namespace) -> int:
         also = [counted(skipped, "skipped")] if skipped else []
         if released:
             also.append(counted(released, "release"))
+        for status, what in ((UNREADABLE_STATUS, "unreadable result"),
+                             (UNATTRIBUTED_STATUS, "unattributed result")):
+            n = sum(1 for r in runs if r["status"] == status)
+            if n:
+                also.append(counted(n, what))
         if to_do:
             on = len({r["vin"] for r in to_do})
             also.append(f"{len(to_do)} not run down yet on {counted(on, 'open vehicle')}")
-        rundowns = len(runs) - missing - len(to_do) - skipped - released
+        rundowns = len(runs) - missing - len(to_do) - skipped - sum(
+            1 for r in runs if r["status"] in NOT_RUNDOWNS)
         print(f"wrote {args.out}: {counted(rundowns, 'rundown')} and "
               f"{counted(missing, 'missing bolt')}"
               + (f" (and {', '.join(also)})" if also else "")

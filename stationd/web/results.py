@@ -50,6 +50,11 @@ RELEASED_STATUS = "released"
 
 #: an export row of a result the station could not read (kept whole in the database)
 UNREADABLE_STATUS = "unreadable"
+#: a row of a result no bolt owns (made at height, stored unattributed: its reason in the
+#: comment): an export without it lost a rundown a quality engineer has to account for
+UNATTRIBUTED_STATUS = "unattributed"
+#: the rows of an export that are not rundowns of a bolt (their count apart)
+NOT_RUNDOWNS = frozenset({RELEASED_STATUS, UNREADABLE_STATUS, UNATTRIBUTED_STATUS})
 
 
 def _isos(row: dict[str, Any]) -> dict[str, Any]:
@@ -177,9 +182,17 @@ class Results:
             {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
              "bolt": x["bolt"], "attempt": 0, "status": UNREADABLE_STATUS, "images": [],
              "pset": x["pset"], "tightening_id": x["tightening_id"],
-             "recorded_at": _iso(x["recorded_at"]),
-             "comment": f"MID {x['mid']:04d} revision {x['revision']}: {x['error']}"}
+             "result_at": _iso(x["result_at"]), "recorded_at": _iso(x["recorded_at"]),
+             "comment": _unreadable_comment(x)}
             for x in self.repo.unreadable(vin)]
+        loose: list[dict[str, Any]] = [
+            {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
+             "bolt": None, "attempt": 0, "status": UNATTRIBUTED_STATUS, "images": [],
+             "rundown": None, "pset": u["pset"], "tightening_id": u["tightening_id"],
+             "torque_nm": u["torque_nm"], "angle_deg": u["angle_deg"],
+             "result_at": _iso(u["result_at"]), "recorded_at": _iso(u["recorded_at"]),
+             "comment": f"{str(u['status']).upper()}; {u['reason']}"}
+            for u in self.repo.unattributed(vin)]
         for c in self.repo.ledger.commands(vin):
             if c.kind == "release" and c.bolt:      # among the rundowns, where it was given
                 at = c.at.isoformat()
@@ -187,7 +200,15 @@ class Results:
                     **dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
                     "bolt": c.bolt, "attempt": 0, "status": RELEASED_STATUS, "images": [],
                     "recorded_at": at, "released_by": c.user, "comment": c.comment})
-        return runs + none + unread
+        return runs + none + unread + loose
+
+
+def _unreadable_comment(x: dict[str, Any]) -> str:
+    """``MID 0061 revision 7: what could not be read``, the MID said once (the driver's error
+    may begin with it: "MID 0061 revision 7: MID 0061 revision 7 torque ...")."""
+    head = f"MID {x['mid']:04d} revision {x['revision']}"
+    error = str(x["error"])
+    return error if error.startswith(head) else f"{head}: {error}"
 
 
 def _after(rows: list[dict[str, Any]], at: str) -> int:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from datetime import UTC, datetime
 from pathlib import Path
 
 import pytest
@@ -638,9 +639,14 @@ def test_a_table_without_models_is_not_imported_and_an_idle_one_is_warned(run, d
     assert code == 0 and "warning:" in err and "tightens nothing" in err
 
 
-def test_report_shows_controller_events_and_unreadable_results(run, db):
+def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path):
     from db.repository import Repository
-    from stationd.web.results import UNREADABLE_STATUS, Results, rundowns_csv
+    from stationd.web.results import (
+        UNATTRIBUTED_STATUS,
+        UNREADABLE_STATUS,
+        Results,
+        rundowns_csv,
+    )
 
     run("db", "import", EXAMPLE, "--db", db)
     with Repository.open(db) as repo:
@@ -653,7 +659,10 @@ def test_report_shows_controller_events_and_unreadable_results(run, db):
         repo.record_unreadable(
             mid=61, revision=7, raw="00990061007    garbage", error="parameter 01 missing",
             vin="VIN1", bolt="TB-C", controller_vin=None, tightening_id=9, pset=2,
-            result_at=None)
+            result_at=datetime(2026, 11, 30, 17, 27, 55, tzinfo=UTC))
+        repo.record_unattributed(   # a quality trial: in db report, missing from the export
+            vin="VIN1", controller_vin=None, tightening_id=10, pset=2, ok=True, torque_nm=49.5,
+            angle_deg=39.0, result_at=None, reason="fetched after a later one came")
         runs = Results(repo).export("VIN1")
         doc = Results(repo).vehicle("VIN1")
     code, out, _ = run("db", "report", "VIN1", "--db", db)
@@ -668,7 +677,17 @@ def test_report_shows_controller_events_and_unreadable_results(run, db):
     assert [x["raw"] for x in obj["unreadable_results"]] == ["00990061007    garbage"]
     [row] = [r for r in runs if r["status"] == UNREADABLE_STATUS]
     assert (row["bolt"], row["tightening_id"]) == ("TB-C", 9)
+    assert row["result_at"].startswith("2026-11-30T17:27:55")    # the controller's, read
+    assert row["comment"] == "MID 0061 revision 7: parameter 01 missing"
+    [loose] = [r for r in runs if r["status"] == UNATTRIBUTED_STATUS]
+    assert (loose["bolt"], loose["tightening_id"], loose["torque_nm"]) == (None, 10, 49.5)
+    assert "fetched after a later one came" in loose["comment"]
     assert "parameter 01 missing" in rundowns_csv(runs)
+    assert ",unattributed," in rundowns_csv(runs)
+    out_csv = tmp_path / "all.csv"
+    code, out, _ = run("db", "export", "--results", "--db", db, "--out", str(out_csv))
+    assert code == 0 and "1 unreadable result, 1 unattributed result" in out, out
+    assert out.startswith(f"wrote {out_csv}: 1 rundown and "), out
     assert doc["unreadable_results"][0]["bolt"] == "TB-C"
     assert doc["controller_events"][0]["what"] == "batch increment"
 
