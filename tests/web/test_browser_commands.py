@@ -100,3 +100,18 @@ def test_operator_screen_logs_in_skips_a_bolt_and_shows_a_refusal(page, shots, t
         page.js("window.dispatchEvent(new Event('station-live'))")
         page.wait(lambda p: _shown(p, "login") and not _shown(p, "signed"), 30,
                   "the login form back once live again")
+
+        # the station gone (stopped as systemd stops it): a command, a log out say that
+        # nothing reached it (an operator trial: the Release button then did nothing at all)
+        _login(page, "sam", PASSWORD)
+        page.wait(lambda p: (p.text("#who") or "").startswith("sam"), 30, "sam logged in")
+        assert d.stop() == 0
+        shown = page.text("#cmd-answer") or ""
+        page.js("document.getElementById('reopen-vin').value = arguments[0];"
+                "document.querySelector('#reopen button').click()", VIN)
+        assert _answer(page, shown) == "no connection to the station: not sent"
+        assert page.js("return document.getElementById('cmd-answer').dataset.ok") == "0"
+        page.click("#logout")
+        assert _answer(page, "no connection to the station: not sent") == \
+            "no connection to the station: not logged out"
+        assert _shown(page, "signed")       # the session is the station's: not ended here

@@ -9,9 +9,18 @@
 window.StationSession = (function () {
   const q = (id) => document.getElementById(id);
 
+  // what a request that reached no station says: the fetch failed (the daemon stopped, the
+  // network down); a click that silently did nothing was taken for a command given
+  const NO_STATION = "no connection to the station";
+
   async function post(path, body) {
-    const r = await fetch(path, {method: "POST", credentials: "same-origin",
-      headers: {"Content-Type": "application/json"}, body: JSON.stringify(body)});
+    let r;
+    try {
+      r = await fetch(path, {method: "POST", credentials: "same-origin",
+        headers: {"Content-Type": "application/json"}, body: JSON.stringify(body)});
+    } catch (e) {
+      return {status: 0, doc: null, text: "", unreached: true};
+    }
     const text = await r.text();
     let doc = null;
     try { doc = JSON.parse(text); } catch (e) { doc = null; }
@@ -41,13 +50,24 @@ window.StationSession = (function () {
     async function command(body) {
       // a single-use nonce for each command: a captured request cannot be sent again, and
       // the panel PC's clock does not matter
-      const n = await fetch("/api/nonce", {credentials: "same-origin"});
+      let n;
+      try {
+        n = await fetch("/api/nonce", {credentials: "same-origin"});
+      } catch (e) {
+        answer(`${NO_STATION}: not sent`, false);
+        return null;
+      }
       if (!n.ok) {
         if (n.status === 401) show(null);
         answer((await n.text()).trim() || `HTTP ${n.status}`, false);
         return null;
       }
       const r = await post("/api/commands", {...body, nonce: (await n.json()).nonce});
+      if (r.unreached) {   // it may or may not have reached the station: the journal says
+        answer(`${NO_STATION}: the answer did not come (stationd status or the journal says ` +
+               "whether it was taken)", false);
+        return null;
+      }
       if (r.doc && "accepted" in r.doc) {
         answer(r.doc.accepted ? r.doc.words : `refused: ${r.doc.reason.words}`, r.doc.accepted);
         return r.doc;
@@ -61,11 +81,16 @@ window.StationSession = (function () {
       e.preventDefault();
       const r = await post("/api/login", {user: q("login-user").value, password: q("login-password").value});
       q("login-password").value = "";
-      if (r.status === 200 && r.doc) { show(r.doc); answer(`logged in as ${r.doc.user}`, true); }
+      if (r.unreached) answer(`${NO_STATION}: not logged in`, false);
+      else if (r.status === 200 && r.doc) { show(r.doc); answer(`logged in as ${r.doc.user}`, true); }
       else answer(r.text || `HTTP ${r.status}`, false);
     });
     q("logout").addEventListener("click", async () => {
-      await post("/api/logout", {});
+      const r = await post("/api/logout", {});
+      if (r.unreached) {   // the session is the station's: ended only when it hears of it
+        answer(`${NO_STATION}: not logged out`, false);
+        return;
+      }
       show(null);
       answer("logged out", true);
     });
