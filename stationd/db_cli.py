@@ -269,6 +269,22 @@ def _export_results(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _when(run: dict[str, Any]) -> str:
+    """When a rundown was made, as the station took its result (``result_at``), and when it
+    was stored where that was later (a result kept while the database was down: dated by its
+    storing, it read as tightened after its vehicle had left)."""
+    def text(iso: str) -> str:
+        return iso[:19].replace("T", " ")
+    made: str | None = run.get("result_at")
+    stored: str | None = run.get("recorded_at")
+    if made is None:
+        return f"{text(stored)} UTC" if stored is not None else "- UTC"
+    if stored is None or (datetime.fromisoformat(stored)
+                          - datetime.fromisoformat(made)).total_seconds() <= 2.0:
+        return f"{text(made)} UTC"
+    return f"{text(made)} UTC (stored {text(stored)[11:]})"
+
+
 def _aware(t: datetime) -> datetime:
     return t if t.tzinfo is not None else t.replace(tzinfo=UTC)
 
@@ -403,8 +419,7 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                     print(f"    {r['attempt']}. {r['rundown']} {r['status'].upper()} pset "
                           f"{r['pset'] if r['pset'] is not None else '-'}, "
                           f"{_num(r['torque_nm'])} Nm, {_num(r['angle_deg'])} deg, at "
-                          f"{(r['recorded_at'] or '-')[:19].replace('T', ' ')} UTC, by "
-                          f"{r['operator'] or '-'}" + _entered(r))
+                          f"{_when(r)}, by {r['operator'] or '-'}" + _entered(r))
         for c in commands:
             on = f" {c.bolt}" if c.bolt else ""
             why = f": {c.comment}" if c.comment else ""

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import json
-from datetime import UTC, datetime
+import re
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
@@ -120,7 +121,8 @@ def test_report_exit_codes(run, db):
     assert code == 1 and obj["missing"] == ["TB-C"] and obj["nok"] == ["SF-FR"]
     assert obj["unattributed"] == []
     with Repository.open(db) as repo:
-        record(repo, "VIN1", "SF-FR")
+        # taken by the station a minute before it was stored (the database was down)
+        record(repo, "VIN1", "SF-FR", result_at=datetime.now(UTC) - timedelta(minutes=1))
         record(repo, "VIN1", "TB-C")
         repo.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=77, pset=4,
                                  ok=False, torque_nm=9.5, angle_deg=12.0, result_at=None,
@@ -135,6 +137,11 @@ def test_report_exit_codes(run, db):
     assert "unattributed: tightening 77 pset 4 NOK 9.5 Nm" in out
     assert "OK       50.0 Nm, 35.0 deg, v1, 2 attempts" in out and " N m" not in out
     assert "2. tightening OK pset 2, 50.0 Nm, 35.0 deg, at " in out
+    # dated when the station took it, and when it was stored (an operator trial: a rundown
+    # stored late read as tightened after its vehicle had left)
+    [late] = [line for line in out.splitlines() if "2. tightening OK pset 2" in line]
+    assert re.search(r"at \d{4}-\d\d-\d\d \d\d:\d\d:\d\d UTC \(stored \d\d:\d\d:\d\d\), by",
+                     late), late
     code, out, _ = run("db", "report", "VIN1", "--db", db, "--json")
     assert [u["tightening_id"] for u in json.loads(out)["unattributed"]] == [77]
     code, out, err = run("db", "report", "NOPE", "--db", db)
