@@ -21,7 +21,6 @@ from stationd.station.events import (
     Because,
     BoltLocked,
     BoltView,
-    DeviceHealth,
     Notice,
     OperatorChange,
     OperatorChanged,
@@ -72,18 +71,20 @@ class LiftRules(FaultRules):
     def _on_lift_read(self, ev: LiftRead) -> list[Action]:
         acts: list[Action] = []
         self._lift = ev
-        back = LIFT in self.faults
+        # a read is the PLC back from an outage (its fault bit is no outage: the PLC answers)
+        back = LIFT in self.faults and self.faults[LIFT][0] is not FaultKind.REPORTED
         if back:
             acts += self._back(ev.t, LIFT)
             self._plc_fault = False      # its health was just said ok: said again if not
         if ev.plc_fault != self._plc_fault:
-            # the lift itself in fault (its PLC answers): the lift's health says so, as a
-            # device down would (the screens, /healthz, OPC UA's asset), while the station
-            # waits for the lift as for one lowered
+            # the lift itself in fault (its PLC answers and sets its fault bit): a fault of
+            # the station as a device down is (the state FAULT, the tool off, the lift's
+            # health in fault everywhere), until the PLC clears it; the vehicle stays
+            # loaded (an operator trial: "waiting for vehicle" beside the loaded VIN and a
+            # red FAULT headline)
             self._plc_fault = ev.plc_fault
-            acts.append(Publish(
-                DeviceHealth(LIFT, False, FaultKind.REPORTED, fault=LIFT_FAULT_BIT, t=ev.t)
-                if ev.plc_fault else DeviceHealth(LIFT, True, t=ev.t)))
+            acts += self._fault(ev.t, LIFT, FaultKind.REPORTED, LIFT_FAULT_BIT) \
+                if ev.plc_fault else self._back(ev.t, LIFT)
         if VEHICLE in self.faults and not ev.at_height:
             self._closed_vin = None
             acts += self._back(ev.t, VEHICLE)   # a vehicle fault lasts while that vehicle is up

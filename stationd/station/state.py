@@ -16,7 +16,6 @@ from types import MappingProxyType
 from db.bolts import Window
 from db.kinds import loosening_note
 from drivers.identity import DeviceIdentity
-from drivers.keeper import FaultKind
 from stationd.reasons import CoreFault, CoreFaultKind, FaultWhy, Reason, Skip, SkipKind, Why
 from stationd.station.actions import Action, DisableTool, NoteLock, Owed, Publish, Selection
 from stationd.station.commands import TeachPoint
@@ -30,7 +29,7 @@ from stationd.station.events import (
     StateReason,
     ToolDisabled,
 )
-from stationd.station.inputs import LIFT, CommandIn, LiftRead, LoadedBolt
+from stationd.station.inputs import CommandIn, LiftRead, LoadedBolt
 from stationd.station.matching import BoltMatcher, MatchParams
 from stationd.station.policy import NokPolicy
 from stationd.station.trust import PairTrust
@@ -242,8 +241,6 @@ class CoreState:
         """A copy of the station's state as decided (see :class:`CoreStatus`); the lift that
         reports its own fault (its PLC's fault bit) is among the devices in fault."""
         faults = dict(self.faults)
-        if self._plc_fault and LIFT not in faults:
-            faults[LIFT] = (FaultKind.REPORTED, LIFT_FAULT_BIT)
         return CoreStatus(self.state, self.reason,
                           MappingProxyType({d: r for d, (_, r) in faults.items()}),
                           self.vin, self.bolt, self.tool_on, self.operator,

@@ -920,12 +920,13 @@ def test_a_vehicle_closed_by_the_first_read_after_a_lift_outage_is_said_so():
             == [("VINA", outage)]
 
 
-def test_the_lifts_own_fault_bit_is_the_lifts_health_not_the_stations_state():
+def test_the_lifts_own_fault_bit_is_a_fault_of_the_station_the_vehicle_kept():
     """A maintenance trial set the PLC's fault bit: the state said "waiting for vehicle (the
-    lift PLC reports a fault)" and the lift "ok" everywhere else.  The lift's health says it
-    now (once per change, and again after the PLC's own outage), the snapshot has the lift
-    among the devices in fault, and the station waits as for a lift lowered (no FAULT
-    state: the station's devices answer)."""
+    lift PLC reports a fault)" and the lift "ok" everywhere else; then an operator trial saw
+    "waiting for vehicle" beside the loaded VIN under a red FAULT headline.  The lift's
+    health says it (once per change, and again after the PLC's own outage), the snapshot has
+    the lift among the devices in fault, the station is in FAULT (the tool off) with the
+    vehicle kept, and back to tracking once the PLC clears it."""
     def healths(acts: list[Any]) -> list[tuple[bool, str, Any]]:
         return [(a.event.ok, a.event.kind, a.event.fault) for a in acts
                 if isinstance(a, Publish) and isinstance(a.event, DeviceHealth)
@@ -938,12 +939,14 @@ def test_the_lifts_own_fault_bit_is_the_lifts_health_not_the_stations_state():
     c.feed(VehicleLoaded(1.2, "VINA", "M", BOLTS))
     faulty = LiftRead(1.5, False, True, 7, "VINA", "the lift PLC reports a fault", True)
     assert healths(c.feed(faulty)) == [(False, "reported", bit)]
-    assert c.state is State.WAITING_VEHICLE and c.vin == "VINA"
+    assert c.state is State.FAULT and c.vin == "VINA" and not c.tool_on
+    assert c.reason == StateReason(Because.FAULT, faults=(("lift", bit),))
     assert c.status().faults == {"lift": bit} and c.status().fault_kinds == {"lift": "reported"}
     assert healths(c.feed(dataclasses.replace(faulty, t=1.6))) == []       # said once
     c.feed(DeviceFault(1.7, "lift", FaultKind.DOWN, "connection refused"))
     assert healths(c.feed(dataclasses.replace(faulty, t=2.0))) == [
         (True, "", None), (False, "reported", bit)]          # back, and still in fault
+    assert c.state is State.FAULT and c.vin == "VINA"
     assert healths(c.feed(LiftRead(2.5, True, True, 7, "VINA"))) == [(True, "", None)]
     assert c.status().faults == {} and c.state is State.TRACKING
     assert "nothing is tightened until it is cleared" in fault_words(bit)

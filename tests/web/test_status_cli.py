@@ -269,8 +269,9 @@ def test_status_exits_4_while_the_last_reload_stands_refused(live_server, capsys
 
 
 def test_status_exits_1_while_a_device_reports_its_own_fault(live_server, capsys):
-    """The lift PLC's fault bit: the station waits (not in fault) but the lift is; the
-    monitor's exit says it as /healthz's 503 does (it said 0: a maintenance trial)."""
+    """A device reporting its own fault (the lift PLC's fault bit) before the station's state
+    says fault: the monitor's exit says it as /healthz's 503 does (it said 0: a maintenance
+    trial)."""
     from stationd.cli import main
     from stationd.station.events import (
         Because,
