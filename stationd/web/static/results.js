@@ -27,7 +27,7 @@ async function listVehicles() {
     if (!list.length) {
       const tr = document.createElement("tr");
       tr.className = "empty";
-      cell(tr, "No vehicles yet: they appear here once the station opens one.").colSpan = 9;
+      cell(tr, "No vehicles yet: they appear here once the station opens one.").colSpan = 10;
       tb.appendChild(tr);
     }
     for (const v of list) {
@@ -43,6 +43,10 @@ async function listVehicles() {
       cell(tr, v.nok.length + (v.nok.length ? " (" + v.nok.join(", ") + ")" : ""), v.nok.length ? "status-NOK" : "");
       cell(tr, (v.skipped || []).length);
       cell(tr, v.missing.length);
+      // loosened last (or to be loosened): neither OK nor missing, and the vehicle not done
+      // (an operator trial: 2 OK + 1 NOK + 0 skipped + 45 missing of 50 bolts)
+      const again = v.loosen || [];
+      cell(tr, again.length + (again.length ? " (" + again.join(", ") + ")" : ""));
       cell(tr, (v.started_at || "").slice(0, 19));
       cell(tr, (v.ended_at || "open").slice(0, 19));
       tb.appendChild(tr);
@@ -159,6 +163,7 @@ async function showVehicle(vin) {
     const nokRuns = tightenings.filter((r) => r.status === "nok").length;
     q("#summary").textContent = `bolts: ${v.ok.length} OK, ${v.nok.length} ending NOK, ` +
       `${(v.skipped || []).length} skipped, ${v.missing.length} missing` +
+      ((v.loosen || []).length ? `, ${v.loosen.length} to tighten again (${v.loosen.join(", ")})` : "") +
       (v.complete ? " (complete)" : "") +
       `; rundowns: ${counted(tightenings.length, "tightening")}, ${counted(nokRuns, "NOK result")}` +
       // the loosenings too, as db report counts them
