@@ -132,6 +132,10 @@ class BoltState:
     ends_nok: bool = False
     #: it has a rundown: skipped, it is counted by its last rundown, not as skipped
     ran: bool = False
+    #: what its last rundown's verdict went by: ``torque`` or ``angle`` out of its window,
+    #: both, or None (within, or not known): the map's label shows the value that failed (an
+    #: operator trial read "NOK 50.8", a torque within its window, for an angle of 0 deg)
+    failed: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         return {"bolt": self.bolt, "x": self.x_mm, "y": self.y_mm, "pset": self.pset,
@@ -142,7 +146,7 @@ class BoltState:
                 "torque_nm": self.torque_nm, "angle_deg": self.angle_deg,
                 "locked": self.locked, "loosen": self.loosen,
                 "loosen_pset": self.loosen_pset, "nok_count": self.nok_count,
-                "held": self.held}
+                "held": self.held, "failed": self.failed}
 
 
 @dataclass
@@ -466,6 +470,7 @@ class View:
                 self._set(e.bolt, OK if e.ok else NOK, "" if e.ok else "NOK: rework")
             b.torque_nm, b.angle_deg = e.torque_nm, e.angle_deg
             b.ends_nok, b.ran = not e.ok, True
+            b.failed = None if e.ok else _failed(e)
         if e.vin == self.vin and self.selected == e.bolt:   # a late result of a closed
             self.selected, self.selected_loosen = None, None  # vehicle: not this one's
         c = self.closed
@@ -670,6 +675,17 @@ class View:
             "locks": self.locks(),
             "operator": {"user": self.operator, "required": self.operator_required},
         }
+
+
+def _failed(e: ResultRecorded) -> str | None:
+    """Which of a NOK's values lies out of its window: ``torque``, ``angle``, ``torque and
+    angle``, or None (both within, or not known: the controller's verdict alone)."""
+    def out(v: float | None, lo: float | None, hi: float | None) -> bool:
+        return v is not None and ((lo is not None and v < lo) or (hi is not None and v > hi))
+    which = [name for name, v, lo, hi in (("torque", e.torque_nm, e.torque_min, e.torque_max),
+                                          ("angle", e.angle_deg, e.angle_min, e.angle_max))
+             if out(v, lo, hi)]
+    return " and ".join(which) or None
 
 
 def _health(ok: bool, kind: str = "", reason: str = "") -> dict[str, Any]:

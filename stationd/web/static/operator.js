@@ -165,7 +165,10 @@ function placeLabels(placed, r, dense, W, H) {
     if (on && b.loosen && b.loosen_pset !== null) tag += ` P${b.loosen_pset}`;
     else if (b.state === "selected" && b.pset !== null) tag += ` P${b.pset}`;
     if (b.state === "loosen" && b.loosen_pset !== null) tag += ` P${b.loosen_pset}`;
-    if ((b.state === "ok" || b.state === "nok") && b.torque_nm !== null) tag += ` ${fmt(b.torque_nm, 1)}`;
+    // a NOK shows the value that failed: its angle where only the angle was out of its
+    // window ("NOK 50.8" read as a torque fault for an angle of 0 deg)
+    if (b.state === "nok" && b.failed === "angle" && b.angle_deg !== null) tag += ` ${fmt(b.angle_deg, 0)}\u00b0`;
+    else if ((b.state === "ok" || b.state === "nok") && b.torque_nm !== null) tag += ` ${fmt(b.torque_nm, 1)}`;
     // the one bolt pointed out "next" says so (the others are "to do")
     const matters = ["selected", "tightening", "next", "nok", "blocked", "locked", "loosen"]
       .includes(b.state);
