@@ -599,7 +599,8 @@ def operator_words(ev: OperatorChanged) -> str:
     if ev.user is not None:
         return f"operator: {ev.user} signed in" + (
             f" (after {ev.previous})" if ev.previous and ev.previous != ev.user else "") + (
-            " (since before the start)" if ev.how is OperatorChange.STILL_SIGNED_IN else "")
+            " (still, from before this start or reload)"
+            if ev.how is OperatorChange.STILL_SIGNED_IN else "")
     if ev.previous is None:
         return "operator: nobody signed in" + (
             ": sign in to tighten (access.operator_required)" if ev.required else "")

@@ -363,11 +363,15 @@ class View:
             self._set(e.bolt, TO_LOOSEN, reason_words(e.reason))
 
     def _open(self, e: VehicleOpened) -> None:
+        # the vehicle loaded opened again without leaving (a reload reopens the one on the
+        # lift): its last results stay (an operator trial: the panel was empty after a
+        # SIGHUP, B11's NOKs gone from it); another vehicle, or a rework, starts afresh
+        if not (self.loaded and self.vin == e.vin):
+            self.results = []
         self.vin, self.model, self.rework, self.loaded = e.vin, e.model, e.rework, True
         self.closed, self.selected, self.wrench, self.refused = None, None, None, ""
         self.reopened = None
         self.located = None
-        self.results = []
         self.bolts = {b.bolt: BoltState(b.bolt, b.x_mm, b.y_mm, b.pset, b.order, b.batch,
                                         b.status if b.status in BOLT_LABELS else PENDING,
                                         loosen=b.status == TO_LOOSEN,

@@ -69,7 +69,7 @@ def test_a_signed_in_operators_rundown_is_recorded_with_them_and_nobody_tightens
         # a reload: still signed in
         d.p.send_signal(1)   # SIGHUP
         d.wait_log("configuration reloaded")
-        d.wait_log("operator: olga signed in (since before the start)")
+        d.wait_log("operator: olga signed in (still, from before this start or reload)")
         got = _cli("operator", "sign-out", "--user", "sam", "--url", url)
         assert got.returncode == 0 and "accepted" in got.stdout, got.stdout + got.stderr
         d.wait_log("operator: olga signed out by sam")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from stationd.reasons import Reason, Wait, WaitKind, Why
 from stationd.station.events import (
     Because,
@@ -137,6 +139,14 @@ def test_a_nok_rundown_reads_nok_in_the_amber_headline_never_tightened():
         assert v.headline() == words and v.tone() == tone, (v.headline(), v.tone())
 
 
+def test_a_vehicle_opened_again_by_a_reload_keeps_its_last_results():
+    v = fold([*opened(), result("B1", True, 100), result("B2", False, 101)])
+    v.apply(opened()[-1])                      # the reload's opening of the same vehicle
+    assert [(r["bolt"], r["ok"]) for r in v.results] == [("B2", False), ("B1", True)]
+    v.apply(replace(opened()[-1], vin="OTHERVIN000000001"))
+    assert v.results == []
+
+
 def test_skip_rework_result_close_and_wrong_bolt():
     v = fold(opened() + work())
     v.apply(BoltSkipped(bolt="B4", reason="skipped by supervisor"))
@@ -156,8 +166,9 @@ def test_results_keep_only_the_last_few_and_reopen_resets():
     for i in range(20):
         v.apply(result("B1", i % 2 == 0, i))
     assert len(v.results) == 8 and v.results[0]["t"] >= v.results[-1]["t"]
+    v.apply(VehicleClosed(vin=VIN, missing=("B2", "B3", "B4"), nok=()))
     v.apply(StateChanged(state="waiting for vehicle", reason=StateReason(Because.WAITING_LIFT)))
-    v.apply(opened()[-1])
+    v.apply(opened()[-1])                     # back for rework: its visit starts afresh
     assert v.results == [] and states(v)["B1"] == "pending"
 
 
