@@ -93,6 +93,11 @@ class VehicleReport:
     tightenings: int = 0
     nok_results: int = 0
     loosenings: int = 0
+    #: the bolts held for a person (bolt -> which result: its result could not be read, an
+    #: untyped OK outside its window, a link cut that left it unknown): whatever their
+    #: status says, their last result is not known (a quality trial: "B47 MISSING" with no
+    #: word of its hold but at the bottom of the report)
+    held: tuple[tuple[str, str], ...] = ()
 
     @property
     def missing(self) -> list[str]:
@@ -153,6 +158,8 @@ class VehicleReport:
             else ", 0 missing"
         if self.loosen:
             text += f", {len(self.loosen)} to tighten again ({', '.join(self.loosen)})"
+        if self.held:
+            text += f", {len(self.held)} held ({', '.join(b for b, _ in self.held)})"
         # the loosenings too, where there were any: the demo's line read-back counted them
         # beside the tightenings and a reader could not reconcile the two
         return text + (f"; rundowns: {counted(self.tightenings, 'tightening')}, "
@@ -167,6 +174,7 @@ class VehicleReport:
                 "nok": self.nok, "missing": self.missing, "skipped": self.skipped,
                 "loosen": self.loosen, "tightenings": self.tightenings,
                 "nok_results": self.nok_results, "loosenings": self.loosenings,
+                "held": dict(self.held),
                 "bolts": [b.to_json() for b in self.bolts]}
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime, timedelta
 from types import TracebackType
 from typing import Any, Self
@@ -757,7 +757,13 @@ class Repository:
 
     def vehicle_report(self, vin: str) -> VehicleReport:
         with self._session(write=False) as s:
-            return build_report(s, _vehicle(s, vin))
+            v = _vehicle(s, vin)
+            report = build_report(s, v)
+            since = v.reopened_at or v.started_at
+        held = self.held_bolts(vin, since)
+        order = [b.bolt_id for b in report.bolts]
+        return replace(report, held=tuple(sorted(
+            held.items(), key=lambda h: order.index(h[0]) if h[0] in order else len(order))))
 
 
 # -- helpers ------------------------------------------------------------------------------

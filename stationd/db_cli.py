@@ -413,7 +413,9 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                                                     + _entered(last[0]) if last else "") \
                 + (f"; then skipped {skipped}" if b.skipped_by else "")
             retired = " (retired)" if b.retired else ""
-            print(f"  {b.bolt_id:<12} {b.status.upper():<8} {result}  {b.name}{retired}")
+            hold = dict(report.held).get(b.bolt_id)
+            held = "" if hold is None else f"; HELD: {hold} (its outcome to be entered)"
+            print(f"  {b.bolt_id:<12} {b.status.upper():<8} {result}  {b.name}{retired}{held}")
             if b.attempts > 1:   # reworked: each rundown, so the loosenings show
                 for r in (r for r in runs if r["bolt"] == b.bolt_id):
                     print(f"    {r['attempt']}. {r['rundown']} {r['status'].upper()} pset "

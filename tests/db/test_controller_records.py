@@ -136,11 +136,18 @@ def test_a_bolt_is_held_until_a_rundown_or_a_release_after_its_unreadable_result
     _unreadable(repo, None, "B2", raw=RAW + "2")
     _unreadable(repo, 4, None, raw=RAW + "3")            # no bolt: holds nothing
     assert repo.held_bolts("VIN1") == {"B1": "tightening 2", "B2": "MID 0061 revision 7"}
+    # the vehicle's report says so too (a quality trial: "B47 MISSING", its hold unsaid)
+    report = repo.vehicle_report("VIN1")
+    assert report.held == (("B1", "tightening 2"), ("B2", "MID 0061 revision 7"))
+    assert ", 2 held (B1, B2)" in report.counts()
+    assert report.to_json()["held"] == {"B1": "tightening 2", "B2": "MID 0061 revision 7"}
     later = datetime.now(UTC) + timedelta(seconds=1)
     repo.ledger.record_command(at=later, user="sam", source="cli", kind="release",
                                vin="VIN1", bolt="B1", comment="checked on the controller")
     record(repo, "VIN1", "B2", tightening_id=5)
     assert repo.held_bolts("VIN1") == {}
+    assert repo.vehicle_report("VIN1").held == () and "held" not in \
+        repo.vehicle_report("VIN1").counts()
     # a skip ends a hold as a release does
     _unreadable(repo, 6, "B3", raw=RAW + "6")
     assert repo.held_bolts("VIN1") == {"B3": "tightening 6"}

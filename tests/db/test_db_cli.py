@@ -678,6 +678,10 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
             "was on SF-FR: not a rundown") in out
     assert ("unreadable result: tightening 9 (MID 0061 revision 7, TB-C held): parameter 01 "
             "missing") in out
+    # the held bolt says so on its own line and in the counts (a quality trial)
+    assert ", 1 held (TB-C)" in out.splitlines()[0], out
+    [tbc] = [line for line in out.splitlines() if line.strip().startswith("TB-C ")]
+    assert "HELD: tightening 9 (its outcome to be entered)" in tbc, tbc
     code, out, _ = run("db", "report", "VIN1", "--db", db, "--json")
     obj = json.loads(out)
     assert [e["result_type"] for e in obj["controller_events"]] == [3]

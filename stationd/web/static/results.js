@@ -164,6 +164,7 @@ async function showVehicle(vin) {
     q("#summary").textContent = `bolts: ${v.ok.length} OK, ${v.nok.length} ending NOK, ` +
       `${(v.skipped || []).length} skipped, ${v.missing.length} missing` +
       ((v.loosen || []).length ? `, ${v.loosen.length} to tighten again (${v.loosen.join(", ")})` : "") +
+      (Object.keys(v.held || {}).length ? `, ${Object.keys(v.held).length} held (${Object.keys(v.held).join(", ")})` : "") +
       (v.complete ? " (complete)" : "") +
       `; rundowns: ${counted(tightenings.length, "tightening")}, ${counted(nokRuns, "NOK result")}` +
       // the loosenings too, as db report counts them
