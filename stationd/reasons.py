@@ -221,6 +221,9 @@ class UnattributedKind(enum.StrEnum):
     OUTSIDE = "outside"                  # pushed outside any tightening
     FETCHED_LIVE = "fetched live"        # fetched after a later one came, the link up
     FETCHED = "fetched"                  # fetched after a reconnect
+    # fetched after a later one came, the link up, and it is the result that could not be
+    # read for ``bolt`` (the one id between the tightenings read before and after it)
+    UNREAD_READ = "unreadable, read"
 
 
 @dataclass(frozen=True)
@@ -234,6 +237,10 @@ class Unattributed:
     tightening_id: int
     pset: int | None
     unproved: Unproved | None = None
+    #: UNREAD_READ: the held bolt whose unreadable result this is, and the ids read before and
+    #: after that unreadable message
+    bolt: str | None = None
+    between: tuple[int, int] | None = None
 
 
 @dataclass(frozen=True)

@@ -199,14 +199,21 @@ _CAME: dict[UnattributedKind, str] = {
     UnattributedKind.OUTSIDE: "outside any tightening",
     UnattributedKind.FETCHED_LIVE: "fetched after a later one came, the link up",
     UnattributedKind.FETCHED: "fetched after a reconnect",
+    UnattributedKind.UNREAD_READ: "fetched after a later one came, the link up",
 }
 
 
 def unattributed_words(why: Unattributed) -> str:
     """Why a result is stored unattributed, as its record's reason keeps it and the journal
     says it: ``result 12 (pset 3) fetched after a reconnect (VIN V9, not V1)``."""
-    return f"result {why.tightening_id} (pset {why.pset}) {_CAME[why.kind]}" + (
+    said = f"result {why.tightening_id} (pset {why.pset}) {_CAME[why.kind]}" + (
         f" ({unproved_words(why.unproved)})" if why.unproved is not None else "")
+    if why.kind is UnattributedKind.UNREAD_READ and why.between is not None:
+        before, after = why.between
+        said += (f": the result of {why.bolt} that could not be read (the one id between "
+                 f"tightenings {before} and {after}), now read; {why.bolt} stays held until "
+                 "its outcome is entered")
+    return said
 
 
 _TYPE_WORDS = {ResultType.BATCH_INCREMENT: "batch increment",
@@ -432,8 +439,10 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
                                "controller's ids started again (a new or reset controller?); "
                                "taken as a new result"),
     Said.SENT_AGAIN: lambda n: sent_again_words(n.tightening_id, n.bolt, n.vin),
-    Said.UNATTRIBUTED: lambda n: (f"{_unattributed(n.unattributed)}: not attributable to a "
-                                  "bolt, stored unattributed"),
+    Said.UNATTRIBUTED: lambda n: _unattributed(n.unattributed) + (
+        ": stored apart with its values" if n.unattributed is not None
+        and n.unattributed.kind is UnattributedKind.UNREAD_READ
+        else ": not attributable to a bolt, stored unattributed"),
     Said.CONTROLLER_EVENT: _controller_event,
     Said.UNKNOWN_TYPE: _controller_event,
     Said.GAP: lambda n: (f"tightening {_ids(n)} missed "

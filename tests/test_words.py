@@ -540,6 +540,10 @@ UNATTRIBUTED_WORDS = [
      "result 41 (pset 9) fetched after a reconnect (pset 9, not 1 sent for B1)"),
     (Unattributed(UnattributedKind.FETCHED, 42, 1),
      "result 42 (pset 1) fetched after a reconnect"),
+    (Unattributed(UnattributedKind.UNREAD_READ, 6, 2, bolt="B47", between=(5, 7)),
+     "result 6 (pset 2) fetched after a later one came, the link up: the result of B47 that "
+     "could not be read (the one id between tightenings 5 and 7), now read; B47 stays held "
+     "until its outcome is entered"),
 ]
 
 
@@ -548,8 +552,9 @@ UNATTRIBUTED_WORDS = [
 def test_each_unattributed_result_says_what_the_core_stored(why: Unattributed,
                                                              words: str) -> None:
     assert unattributed_words(why) == words
-    assert notice_words(Notice(Said.UNATTRIBUTED, unattributed=why)) == \
-        f"{words}: not attributable to a bolt, stored unattributed"
+    stored = "stored apart with its values" if why.kind is UnattributedKind.UNREAD_READ \
+        else "not attributable to a bolt, stored unattributed"
+    assert notice_words(Notice(Said.UNATTRIBUTED, unattributed=why)) == f"{words}: {stored}"
 
 
 def test_every_unattributed_kind_has_its_words() -> None:

@@ -123,6 +123,22 @@ class _Unread:
         return made_at is None or made_at <= self.seen_at + CLOCK_SLACK_S
 
 
+@dataclass
+class _UnreadGap:
+    """An unreadable message without a tightening id that held ``bolt`` of ``vin``: the id
+    read (pushed) before it, and the first read after it (None: none yet).  Where they are
+    two apart, the message is the one id between them."""
+
+    before: int
+    unread: _Unread
+    vin: str | None
+    after: int | None = None
+
+
+#: unreadable messages without an id kept to be matched by a fetch (the newest)
+UNREAD_GAPS_KEPT = 8
+
+
 class ResultRules(OrderRules):
     """Results: tightenings closing bolts, controller events, unreadable and late results,
     the NOK policy after each."""
@@ -144,6 +160,11 @@ class ResultRules(OrderRules):
                                    t=ev.t)), Acknowledge(r)]
         again: list[Action] = [] if tid not in self._recorded else [
             Publish(Notice(Said.IDS_AGAIN, tightening_id=tid, t=ev.t))]
+        if not ev.fetched:   # read as pushed: the id after any unreadable one waiting for it
+            for gap in self._unread_gaps:
+                if gap.after is None and tid > gap.before:
+                    gap.after = tid
+            self._last_pushed = tid
         return again + self._result_in(ev, tid)
 
     def _on_result_copy(self, ev: ResultCopy) -> list[Action]:
@@ -168,6 +189,9 @@ class ResultRules(OrderRules):
         kind = result_kind(type_code(r), en is not None and en.loosen)
         if kind in (ResultKind.EVENT, ResultKind.UNKNOWN):
             return self._controller_event(ev, kind)
+        read = self._unread_read(ev, tid)
+        if read is not None:
+            return read
         ours = en is not None and (en.pset is None or int(r.pset) == en.pset) and not (
             ev.fetched and self._enabled_at is not None
             and self._enabled_at > self._link_lost_at)
@@ -184,6 +208,32 @@ class ResultRules(OrderRules):
                 Publish(Notice(Said.UNATTRIBUTED, tightening_id=tid, pset=int(r.pset),
                                unattributed=why, t=ev.t)),
                 *self._cut_in_doubt(ev)]
+
+    def _unread_read(self, ev: ResultIn, tid: int) -> list[Action] | None:
+        """A result fetched for the one id missing between two results read, the link up,
+        where an unreadable message without an id came between them and held a bolt: that
+        message, read now (its pset and time, where they could be picked out, agree; the VIN
+        it echoes is the held bolt's vehicle).  Stored apart with its values, its reason
+        naming the held bolt; the bolt stays held for a person, as for an unreadable result
+        whose readable copy comes (a quality trial: it was stored unattributed with no word
+        of the hold, one rundown twice in the records).  None where it is not."""
+        if not (ev.fetched and ev.live):
+            return None
+        r = ev.result
+        echoed = str(r.vin or "").strip()
+        for gap in self._unread_gaps:
+            if gap.before != tid - 1 or gap.after != tid + 1 \
+                    or not gap.unread.same(r, ev.made_at) or (echoed and echoed != gap.vin):
+                continue
+            self._unread_gaps.remove(gap)
+            self._recorded[tid] = gap.unread   # a copy sent again is that result too
+            why = Unattributed(UnattributedKind.UNREAD_READ, tid, int(r.pset),
+                               bolt=gap.unread.bolt, between=(gap.before, tid + 1))
+            return [StoreUnattributed(r, gap.vin, why),
+                    Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
+                    Publish(Notice(Said.UNATTRIBUTED, tightening_id=tid, pset=int(r.pset),
+                                   unattributed=why, t=ev.t))]
+        return None
 
     def _cut_in_doubt(self, ev: ResultIn) -> list[Action]:
         """A result stored unattributed while a link cut's result is owed, of the pset sent
@@ -369,6 +419,10 @@ class ResultRules(OrderRules):
         bolt = en.bolt if en is not None and en.vin else None
         if u.tightening_id is not None:
             self._recorded[u.tightening_id] = _Unread(u.pset, u.timestamp, bolt, ev.t)
+        elif bolt is not None and en is not None and self._last_pushed is not None \
+                and not u.fetched:   # which id it is, the next result read may tell
+            self._unread_gaps = [*self._unread_gaps[-(UNREAD_GAPS_KEPT - 1):], _UnreadGap(
+                self._last_pushed, _Unread(u.pset, u.timestamp, bolt, ev.t), en.vin)]
         if known:
             self._unreadable_seen[(u.mid, u.body)] = bolt
         acts: list[Action] = []

@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
+from typing import Any
 
 from db.bolts import Window
 from db.kinds import loosening_note
@@ -204,6 +205,11 @@ class CoreState:
     # -> the bolt it was held against (None: none)
     _unreadable_seen: dict[tuple[int, str], str | None] = field(default_factory=dict,
                                                                  repr=False)
+    # the newest tightening id pushed (read), and the unreadable messages without an id that
+    # held a bolt, each with the ids read before and after it (results.py ``_UnreadGap``): a
+    # result fetched for the one id between is that message, read
+    _last_pushed: int | None = field(default=None, repr=False)
+    _unread_gaps: list[Any] = field(default_factory=list, repr=False)
     _wrench_epoch: int = field(default=0, repr=False)
     _wrench_reconnects: int | None = field(default=None, repr=False)
     _vin_for: tuple[str, int] | None = field(default=None, repr=False)

@@ -200,6 +200,41 @@ def test_an_unreadable_result_is_stored_whole_and_holds_its_bolt_for_a_superviso
     _enabled(d)
 
 
+@pytest.mark.parametrize("pushed_after", [7, 8], ids=["one id between", "two ids between"])
+def test_the_one_id_fetched_between_two_read_is_the_unreadable_result_without_an_id(
+        pushed_after):
+    """A quality trial: B47's result could not be read, its id with it (held); the next
+    result pushed skipped an id, which was fetched (the link up) and stored unattributed, no
+    word of B47: one rundown twice in the records, never linked.  The one id between the
+    results read before and after the unreadable message is that message, read: stored apart
+    with its values, its reason naming the held bolt, which stays held for a person.  Two
+    ids between: which one it was is not known, both stored unattributed as before."""
+    d = _ready()
+    _enabled(d, 1)
+    d.feed(ResultIn(d.t, res(5, 1, True, 1)))                      # B1, read
+    _enabled(d, 3)
+    acts = d.feed(UnreadableIn(d.t, unreadable(None, None)))       # B3's: held, id unread
+    assert [e.bolt for e in published(acts, BoltLocked)] == ["B3"]
+    _enabled(d, 2)
+    d.feed(ResultIn(d.t, res(pushed_after, 2, True, 1)))           # B2, read
+    fetched = [d.feed(ResultIn(d.t, res(tid, 1, True, 1), fetched=True, follows=5, live=True))
+               for tid in range(6, pushed_after)]
+    stored = [a for acts in fetched for a in acts if isinstance(a, StoreUnattributed)]
+    assert len(stored) == pushed_after - 6
+    assert not [a for acts in fetched for a in acts if isinstance(a, Record)]
+    assert "B3" in d.core.matcher.held and "B3" not in d.core.matcher.done
+    if pushed_after == 7:
+        [why] = [a.why for a in stored]
+        assert (why.kind, why.bolt, why.between) == (UnattributedKind.UNREAD_READ, "B3", (5, 7))
+        assert stored[0].vin == "VIN1"
+        assert ("result 6 (pset 1) fetched after a later one came, the link up: the result of "
+                "B3 that could not be read (the one id between tightenings 5 and 7), now "
+                "read; B3 stays held until its outcome is entered: stored apart with its "
+                "values") in _notices(fetched[0])
+    else:
+        assert {a.why.kind for a in stored} == {UnattributedKind.FETCHED_LIVE}
+
+
 @pytest.mark.parametrize("tid", [7, None], ids=["its id read", "its time read"])
 def test_an_unreadable_result_sent_again_holds_no_other_bolt(tid):
     """The controller sends the same unreadable message again (its acknowledgement lost, or
