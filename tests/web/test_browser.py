@@ -244,7 +244,8 @@ def test_cameras_screen_shows_frames_overlay_and_refusal(live_server, page, shot
     ellipses = [[800, 600, 90, 80, 10], [800, 600, 45, 40, 10]]
     srv.frames.put("front", "left", img, {"found": True, "roi": [600, 400, 400, 400],
                                           "ellipses": ellipses, "centre": [800, 600],
-                                          "exposure_us": 800})
+                                          "exposure_us": 800,
+                                          "reason": "marker tilted 9 deg (at most 5)"})
     srv.frames.put("front", "right", img, {"found": False, "reason": "marker not found"})
     page.get(srv.url + "cameras")
     page.wait(lambda p: p.count(".cam img") == 2, what="two frames")
@@ -257,7 +258,11 @@ def test_cameras_screen_shows_frames_overlay_and_refusal(live_server, page, shot
     assert page.count(f"{left} rect.roi") == 1
     text = page.text(left) or ""
     assert "sharpness" in text and "marker found" in text
-    assert "refused: marker not found" in (page.text(".cam[data-camera='front/right']") or "")
+    # seen and refused: red; none in view (a wrench elsewhere): said plainly, not refused
+    assert page.text(f"{left} .refusal") == "refused: marker tilted 9 deg (at most 5)"
+    right = ".cam[data-camera='front/right']"
+    assert page.text(f"{right} .no-marker") == "no marker: marker not found"
+    assert page.count(f"{right} .refusal") == 0
     check_fits(page, ".cam[data-camera='front/left'] img", ".cam[data-camera='front/right'] img")
     page.click("#live")                      # stop the refresh to click a frame
     click_centre(page, f"{left} img")

@@ -95,9 +95,12 @@ function camDiv(cam, stamp, old) {
     (s.found === undefined ? "" : s.found ? ", marker found" : ", no marker");
   d.appendChild(facts);
   if (s.reason) {
+    // a marker seen and refused (tilted, ambiguous) in red; none in view is the idle state
+    // of a camera whose wrench is elsewhere, said plainly (an operator trial: every camera
+    // of an idle station in bold red "refused: no purple region ...")
     const r = document.createElement("div");
-    r.className = "refusal";
-    r.textContent = `refused: ${s.reason}`;
+    r.className = s.found ? "refusal" : "no-marker";
+    r.textContent = s.found ? `refused: ${s.reason}` : `no marker: ${s.reason}`;
     d.appendChild(r);
   }
   return d;
