@@ -386,7 +386,7 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.TOOL_ON_BOLT: lambda r: f"{r.bolt} is being tightened now",
     Why.ALREADY_OPEN: lambda r: f"vehicle {r.vin} is open at the station",
     Why.NOT_CLOSED: lambda r: f"vehicle {r.vin} is not closed",
-    Why.UNKNOWN_VEHICLE: lambda r: f"vehicle {r.vin} is not in the database",
+    Why.UNKNOWN_VEHICLE: lambda r: f"vehicle {r.vin} is not in the database{_meant(r)}",
     Why.DEVICE_FAULT: lambda r: f"a device is in fault: {_faults(r.faults)}",
     Why.NOT_RECORDED: lambda r: f"the database did not record it: {r.note}",
     Why.SIGN_IN: lambda r: "sign in to tighten: nobody is signed in at the station",

@@ -232,8 +232,13 @@ async def _json(request: web.Request) -> dict[str, Any]:
 
 
 def _text(body: dict[str, Any], key: str, *, limit: int, required: bool = True) -> str:
+    """The text field ``key``, stripped; 400 saying what is wrong with it: missing or blank
+    ("required": a VIN of spaces read "at most 32 characters", as if too long, in an
+    operator trial), too long, or not a text."""
     v = body.get(key, None if required else "")
-    if not isinstance(v, str) or (required and not v.strip()) or len(v) > limit:
+    if required and (v is None or (isinstance(v, str) and not v.strip())):
+        raise web.HTTPBadRequest(text=f"{key}: required (empty)\n")
+    if not isinstance(v, str) or len(v) > limit:
         need = "required" if required else "optional"
         raise web.HTTPBadRequest(text=f"{key}: a text of at most {limit} characters "
                                       f"({need})\n")

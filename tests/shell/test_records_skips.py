@@ -62,3 +62,27 @@ def test_a_lock_comes_back_from_the_ledger_until_a_release_ends_it(tmp_path: Pat
     assert [(c.bolt, c.user, c.comment) for c in lock] == [
         ("B1", "station", "3 NOK in a row"), ("B2", "station", "3 NOK in a row")]
     records.repo.close()
+
+
+def test_a_reopen_of_a_vin_typed_in_lower_case_says_the_one_meant(tmp_path: Path) -> None:
+    """An operator trial: "9sdst..." answered "not in the database", no word of the VIN in
+    capitals the database has (a skip's bolt in another case says "did you mean")."""
+    from stationd.station.commands import ReopenVehicle
+    from stationd.words import reason_words
+
+    bolts = tmp_path / "bolts.yaml"
+    bolts.write_text(BASE)
+    records = Records(StationConfig(database_url=url_of(tmp_path / "st.db"), bolts_path=bolts))
+    records.open()
+    records.load_vehicle(LoadVehicle(12, "VINX1"))
+    records.close_vehicle("VINX1")
+    who = Issuer("sam", frozenset(Right), "cli")
+    why = records.record_command(RecordCommand(0, ReopenVehicle("vinx1", ""), who,
+                                               time.time()), None)
+    assert why is not None and reason_words(why) == \
+        "vehicle vinx1 is not in the database (did you mean VINX1?)"
+    why = records.record_command(RecordCommand(0, ReopenVehicle("NOPE1", ""), who,
+                                               time.time()), None)
+    assert why is not None and reason_words(why) == "vehicle NOPE1 is not in the database"
+    assert records.repo is not None
+    records.repo.close()

@@ -65,3 +65,39 @@ def test_a_refused_teach_point_is_answered_409_with_its_reason_not_a_server_erro
     assert body["reason"]["cause"]["kind"] == "not localized"
     assert "no purple region" in body["words"]
     assert isinstance(TeachPoint("B11"), Command)
+
+
+def test_a_blank_vin_is_refused_as_required_not_as_too_long() -> None:
+    """An operator trial: a VIN of spaces in the Reopen form was answered "vin: a text of at
+    most 32 characters (required)", read as too long."""
+    access = AccessConfig.from_node(YamlNode.parse(
+        f"users:\n  sam: {{role: supervisor, password: '{hash_password('pw-of-sam')}'}}\n",
+        "station.yaml"))
+
+    async def submit(command: Command, issuer: Issuer) -> Answer:
+        return Answer(1, command, issuer)
+
+    async def main() -> list[tuple[int, str]]:
+        srv = WebServer(EventBus(), listen="127.0.0.1:0")
+        srv.commands.access, srv.commands.submit = access, submit
+        await srv.start()
+        got = []
+        try:
+            async with ClientSession(cookie_jar=CookieJar(unsafe=True)) as http:
+                async with http.post(srv.url + "api/login",
+                                     json={"user": "sam", "password": "pw-of-sam"}) as r:
+                    assert r.status == 200
+                for vin in ("   ", "V" * 40, 17):
+                    async with http.get(srv.url + "api/nonce") as r:
+                        nonce = (await r.json())["nonce"]
+                    async with http.post(srv.url + "api/commands", json={
+                            "nonce": nonce, "kind": "reopen", "vin": vin}) as r:
+                        got.append((r.status, (await r.text()).strip()))
+        finally:
+            await srv.stop()
+        return got
+
+    assert asyncio.run(main()) == [
+        (400, "vin: required (empty)"),
+        (400, "vin: a text of at most 32 characters (required)"),
+        (400, "vin: a text of at most 32 characters (required)")]
