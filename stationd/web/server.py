@@ -233,7 +233,7 @@ class WebServer:
 
     def _encode(self) -> bytes:
         doc = {**self.view.to_json(), "heartbeat_s": HEARTBEAT_S, "line": self.line(),
-               "release_by": self.release_by()}
+               "release_by": self.release_by(), "reload_refused": self.reload_refused}
         return b"data: " + json.dumps(doc, separators=(",", ":"),
                                       default=_plain).encode() + b"\n\n"
 

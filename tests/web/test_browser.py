@@ -423,3 +423,24 @@ def test_the_quality_screen_shows_capability_and_the_nok_trend(live_server, page
     trend = page.js("return [...document.querySelectorAll('#trend tbody td')]"
                     ".map(td => td.textContent)")
     assert trend[1:4] == ["8", "1", "12.5 %"]                        # 8 results, 1 NOK
+
+
+def test_a_refused_reload_is_said_in_the_devices_panel(live_server, page):
+    """An operator trial: a refused reload showed only in ``stationd status``; the screens
+    said nothing while the file on disk would not start the station at the next reboot."""
+    srv = live_server()
+    srv.publish(opened())
+    page.get(srv.url)
+    page.wait(lambda p: p.text("#vin") == VIN, what="the vehicle on the screen")
+    assert page.count("#devices li[data-device=config]") == 0
+    srv.server.reload_refused = "station.yaml:12: nok.max_nok: 0 is out of range 1-99"
+    srv.publish(opened()[:1])              # the next snapshot
+    page.wait(lambda p: p.count("#devices li[data-device=config]") == 1,
+              what="the refused reload in the devices panel")
+    assert page.text("#devices li[data-device=config]") == (
+        "configuration: reload refused (station.yaml:12: nok.max_nok: 0 is out of range 1-99):"
+        " running on the file read before")
+    srv.server.reload_refused = None       # a reload that went through
+    srv.publish(opened()[:1])
+    page.wait(lambda p: p.count("#devices li[data-device=config]") == 0,
+              what="the line gone after a good reload")

@@ -330,9 +330,13 @@ function render(view) {
   $("wrench").dataset.seen = !w ? "none" : !w.lost ? "here" : w.seen ? "refused" : "out";
   setText("wrench", view.wrench_line);   // the view's words: the headline's reason
   const results = view.results.slice(0, 6);
-  const rkey = JSON.stringify(results), dkey = JSON.stringify([view.devices, lineShown(view.line)]);
+  const rkey = JSON.stringify(results),
+    dkey = JSON.stringify([view.devices, lineShown(view.line), view.reload_refused]);
   if (rkey !== shownKeys.results) { shownKeys.results = rkey; drawResults(results); }
-  if (dkey !== shownKeys.devices) { shownKeys.devices = dkey; drawDevices(view.devices, view.line); }
+  if (dkey !== shownKeys.devices) {
+    shownKeys.devices = dkey;
+    drawDevices(view.devices, view.line, view.reload_refused);
+  }
 }
 
 // Locked bolts (too many NOKs in a row), and who may release them: the roles with the
@@ -414,9 +418,20 @@ function lineShown(line) {
   return {text, ok: !line.alarm && line.up !== false, title: line.last_error || line.url};
 }
 
-function drawDevices(devices, line) {
+function drawDevices(devices, line, reloadRefused) {
   const ul = $("devices");
   ul.replaceChildren();
+  // a reload refused: the station runs on the file it read before, and the file on disk
+  // would not start it at the next reboot (it was only in stationd status: an operator trial)
+  if (reloadRefused) {
+    const li = document.createElement("li");
+    li.className = "dev-wait";
+    li.dataset.device = "config";
+    li.textContent = `configuration: reload refused (${reloadRefused}): running on the file ` +
+      "read before";
+    li.title = li.textContent;
+    ul.appendChild(oneLine(li));
+  }
   const l = lineShown(line);
   if (l) {
     const li = document.createElement("li");
