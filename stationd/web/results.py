@@ -42,7 +42,11 @@ CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator"
               "entered_by",
               # a bolt locked after its NOKs, or held, released by a person: a row of its own
               # (status ``released``, the time, their comment) between its rundowns
-              "released_by")
+              "released_by",
+              # the controller's own time of the result, on its clock: when it was made, where
+              # ``result_at`` is when the station took it (a result fetched after a link cut
+              # is taken at the reconnect, minutes later: a quality trial)
+              "controller_at")
 
 #: an export row of a person's release of a locked or held bolt
 RELEASED_STATUS = "released"
@@ -144,6 +148,7 @@ class Results:
                 "z_mm": rec.z_mm, "match_distance_mm": rec.match_distance_mm,
                 "tilt_deg": rec.tilt_deg, "sent_at": _iso(rec.sent_at),
                 "result_at": _iso(rec.result_at), "recorded_at": _iso(rec.recorded_at),
+                "controller_at": _iso(rec.controller_at),
                 "images": list(rec.images or []),
                 # entered by a person from the controller's screen, not measured (None:
                 # measured): who, why, and the unreadable result it resolves

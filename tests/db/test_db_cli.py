@@ -658,7 +658,9 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
     run("db", "import", EXAMPLE, "--db", db)
     with Repository.open(db) as repo:
         repo.start_vehicle("VIN1", "WAGON-B")
-        record(repo, "VIN1", "SF-FL")
+        # made at 17:27:47 on the controller's clock (fetched after a link cut, later)
+        record(repo, "VIN1", "SF-FL", controller_at=datetime(2026, 11, 30, 17, 27, 47,
+                                                              tzinfo=UTC))
         repo.record_controller_event(
             result_type=3, what="batch increment", vin="VIN1", bolt="SF-FR",
             controller_vin=None, tightening_id=8, pset=1, ok=True, torque_nm=0.0,
@@ -690,6 +692,9 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
     assert (row["bolt"], row["tightening_id"]) == ("TB-C", 9)
     assert row["result_at"].startswith("2026-11-30T17:27:55")    # the controller's, read
     assert row["comment"] == "MID 0061 revision 7: parameter 01 missing"
+    [made] = [r for r in runs if r["bolt"] == "SF-FL"]
+    assert made["controller_at"].startswith("2026-11-30T17:27:47"), made
+    assert "2026-11-30T17:27:47+00:00" in rundowns_csv(runs)
     [loose] = [r for r in runs if r["status"] == UNATTRIBUTED_STATUS]
     assert (loose["bolt"], loose["tightening_id"], loose["torque_nm"]) == (None, 10, 49.5)
     assert "fetched after a later one came" in loose["comment"]
