@@ -735,7 +735,8 @@ class Repository:
             if here is not None and here.value == vin:
                 here.value = ""
             s.flush()
-            return build_report(s, v)
+            report, since = build_report(s, v), v.reopened_at or v.started_at
+        return self._with_held(report, since)   # the journal's close line counts them
 
     def left_unseen(self, vin: str) -> VehicleReport | None:
         """Close the vehicle the station loaded last, if it is not ``vin`` and still open, and
@@ -753,17 +754,24 @@ class Repository:
                 return None
             v.ended_at = utcnow()
             s.flush()
-            return build_report(s, v)
+            report, since = build_report(s, v), v.reopened_at or v.started_at
+        return self._with_held(report, since)
 
-    def vehicle_report(self, vin: str) -> VehicleReport:
+    def vehicle_report(self, vin: str, *, held: bool = False) -> VehicleReport:
+        """The vehicle's summary; with ``held``, the bolts held for a person too (a read of
+        the ledger and the holds: asked where they are shown, a report or a vehicle's page,
+        not for each row of a list or an export)."""
         with self._session(write=False) as s:
             v = _vehicle(s, vin)
-            report = build_report(s, v)
-            since = v.reopened_at or v.started_at
-        held = self.held_bolts(vin, since)
+            report, since = build_report(s, v), v.reopened_at or v.started_at
+        return self._with_held(report, since) if held else report
+
+    def _with_held(self, report: VehicleReport, since: datetime | None) -> VehicleReport:
+        """``report`` with its held bolts, in the table's order."""
+        holds = self.held_bolts(report.vehicle.vin, since)
         order = [b.bolt_id for b in report.bolts]
         return replace(report, held=tuple(sorted(
-            held.items(), key=lambda h: order.index(h[0]) if h[0] in order else len(order))))
+            holds.items(), key=lambda h: order.index(h[0]) if h[0] in order else len(order))))
 
 
 # -- helpers ------------------------------------------------------------------------------

@@ -282,7 +282,9 @@ def _when(run: dict[str, Any]) -> str:
     if stored is None or (datetime.fromisoformat(stored)
                           - datetime.fromisoformat(made)).total_seconds() <= 2.0:
         return f"{text(made)} UTC"
-    return f"{text(made)} UTC (stored {text(stored)[11:]})"
+    # the day too where it differs (a result kept overnight while the database was down)
+    late = text(stored)[11:] if stored[:10] == made[:10] else text(stored)
+    return f"{text(made)} UTC (stored {late})"
 
 
 def _aware(t: datetime) -> datetime:
@@ -380,7 +382,7 @@ def _read_url(args: argparse.Namespace) -> str:
 
 def cmd_db_report(args: argparse.Namespace) -> int:
     with open_repository(_report_url(args), must_exist=True) as repo:
-        report = repo.vehicle_report(args.vin)
+        report = repo.vehicle_report(args.vin, held=True)
         loose = repo.unattributed(args.vin)   # results made at height that no bolt owns
         events = repo.controller_events(args.vin)   # batch steps, bypasses, ...: no rundown
         unread = repo.unreadable(args.vin)          # results that could not be read

@@ -426,9 +426,10 @@ def _controller_event(n: Notice) -> str:
             + ("; check the controller's result there" if n.said is Said.UNKNOWN_TYPE else ""))
 
 
-def _tightening(tightening_id: int | None) -> str:
-    """``tightening 12``, or "the result" where its id is not told."""
-    return "the result" if tightening_id is None else f"tightening {tightening_id}"
+def _result_id(tightening_id: int | None) -> str:
+    """``result 12`` (a tightening or a loosening), or "the result" where its id is not
+    told."""
+    return "the result" if tightening_id is None else f"result {tightening_id}"
 
 
 _SAID: dict[Said, Callable[[Notice], str]] = {
@@ -466,7 +467,7 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
     # recorded to its bolt: "outside a tightening: recorded, not matched" was read as a
     # result lost to the bolt it went to (a quality engineer's trial)
     Said.LATE_RESULT: lambda n: (
-        f"{_tightening(n.tightening_id)} came after the tool went off for {n.bolt} (within "
+        f"{_result_id(n.tightening_id)} came after the tool went off for {n.bolt} (within "
         f"the late-result window): recorded to {n.bolt}"),
     Said.LOOSEN_PSET_TIGHTENED: lambda n: (f"{n.bolt}: the loosen pset {n.pset} reported a "
                                            "tightening: the bolt counts as tightened; check "

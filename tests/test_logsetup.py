@@ -94,11 +94,12 @@ def test_a_write_to_a_closed_connection_is_said_once_with_its_client(
 
 @pytest.mark.system
 def test_a_refused_opc_ua_request_names_its_client_and_request(journal: io.StringIO) -> None:
-    from asyncua.client.client import Client
     from asyncua.server.server import Server
     from asyncua.ua import uaerrors, uatypes
     from asyncua.ua.object_ids import ObjectIds
     from asyncua.ua.uaprotocol_auto import ReadParameters, ReadValueId
+
+    from tests.uaclient import Client
 
     async def main() -> str:
         port = free_port()

@@ -114,7 +114,7 @@ WORDS = [
      "B1: its result during the link cut not known: the controller refused MID 0064: check it "
      "on the controller, then release or enter its outcome"),
     (Notice(Said.LATE_RESULT, bolt="B1", tightening_id=12),
-     "tightening 12 came after the tool went off for B1 (within the late-result window): "
+     "result 12 came after the tool went off for B1 (within the late-result window): "
      "recorded to B1"),
     (Notice(Said.LATE_RESULT, bolt="B1"),
      "the result came after the tool went off for B1 (within the late-result window): "

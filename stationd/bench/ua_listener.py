@@ -36,8 +36,13 @@ class _Printer:
         sys.stdout.flush()
 
 
+#: seconds a request may wait for its answer (asyncua's 4 s default closed the connection on a
+#: loaded machine during the first walk of the data type definitions)
+REQUEST_TIMEOUT_S = 30.0
+
+
 async def listen(url: str, publishing_ms: float) -> None:
-    async with Client(url) as client:
+    async with Client(url, timeout=REQUEST_TIMEOUT_S) as client:
         await load_client_types(client)
         uris = await client.get_namespace_array()
         etype = client.get_node(ua.NodeId(RESULT_READY_EVENT_TYPE, uris.index(IJT_URI)))

@@ -44,7 +44,7 @@ from stationd.shell.effects import Effects
 from stationd.shell.records import STATION_FAULTS, Records, Unsaved
 from stationd.shell.sdnotify import Notifier
 from stationd.shell.tracking import FrameStore, Tracker
-from stationd.station.actions import Action, Publish
+from stationd.station.actions import Action, NoteLock, Publish
 from stationd.station.commands import Answer, Command, Issuer
 from stationd.station.core import StationCore
 from stationd.station.events import State
@@ -239,14 +239,19 @@ class Station:
             if isinstance(a, Publish):
                 self.effects.publish(a.event)
 
-    def carry(self, unsaved: list[Unsaved]) -> None:
+    def carry(self, unsaved: list[Unsaved], locks: list[NoteLock] | None = None) -> None:
         """Results the last station (a reload) received and could not write: this one writes
-        them once its database takes them, then acknowledges them (before ``run``)."""
-        self.records.carry(unsaved)
+        them once its database takes them, then acknowledges them (before ``run``); and the
+        NOK policy's locks it could not record, written first."""
+        self.records.carry(unsaved, locks)
 
     def unsaved(self) -> list[Unsaved]:
         """The results this station could not write (after ``close``: for the next one)."""
         return self.records.unsaved()
+
+    def locks_owed(self) -> list[NoteLock]:
+        """The locks this station could not record (after ``close``: for the next one)."""
+        return self.records.locks_owed()
 
     def _database(self) -> Repository:
         """The database for its keeper: opened by ``open`` before any device."""
@@ -260,6 +265,10 @@ class Station:
         each: the only copy left (quality re-enters them from the journal)."""
         for u in self.records.unsaved():
             log.error("UNSAVED at shutdown: %s", u.describe())
+        for lock in self.records.locks_owed():
+            log.error("UNSAVED at shutdown: the lock of %s of %s after %d NOK in a row (a "
+                      "supervisor releases it; read back from its NOKs under this max_nok)",
+                      lock.bolt, lock.vin, lock.count)
         steps: list[tuple[str, Callable[[], None]]] = []
         if self.wrench is not None and self.wrench_keeper.up:
             steps.append(("disable tool", self.wrench.disable_tool))

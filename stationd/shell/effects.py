@@ -211,9 +211,10 @@ class Effects:
         elif isinstance(a, NoteLock):
             try:
                 await self._call(self.records.note_lock, a)
-            except STATION_FAULTS as exc:   # the streak still locks it under this policy
-                self.log.warning("the lock of %s not recorded (a reload that raises max_nok "
-                                 "would end it): %s", a.bolt, one_line(exc))
+            except STATION_FAULTS as exc:   # kept: written first when the database is back
+                self._database.lost(DeviceError(one_line(exc)))
+                self.log.warning("the lock of %s not recorded yet (kept, recorded when the "
+                                 "database is back): %s", a.bolt, one_line(exc))
         elif isinstance(a, Reply):
             self._reply(a.answer)
         elif isinstance(a, MeasureReferences):

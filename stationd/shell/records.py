@@ -127,6 +127,8 @@ class Records:
         # results the database refused: kept, written by its keeper before it is called back
         self._unsaved: list[Unsaved] = []
         self._saved_late: list[Unsaved] = []
+        # the NOK policy's locks the database refused: written first when it is back
+        self._locks_owed: list[NoteLock] = []
         self._lock = threading.Lock()
         # the tool enable the station owes a result to (its selection and its row on disk)
         self._enable: tuple[Selection, int] | None = None
@@ -314,10 +316,15 @@ class Records:
         with self._lock:
             self._unsaved.append(u)
 
-    def carry(self, unsaved: list[Unsaved]) -> None:
-        """Results the last station (a reload) could not write: written first."""
+    def carry(self, unsaved: list[Unsaved], locks: list[NoteLock] | None = None) -> None:
+        """Results and locks the last station (a reload) could not write: written first."""
         with self._lock:
             self._unsaved[:0] = unsaved
+            self._locks_owed[:0] = locks or []
+
+    def locks_owed(self) -> list[NoteLock]:
+        with self._lock:
+            return list(self._locks_owed)
 
     def unsaved(self) -> list[Unsaved]:
         with self._lock:
@@ -476,7 +483,17 @@ class Records:
 
     def note_lock(self, a: NoteLock) -> None:
         """The NOK policy's lock in the command ledger (:class:`NoteLock`): by the station,
-        after ``count`` NOKs in a row; a release or a skip ends it."""
+        after ``count`` NOKs in a row; a release or a skip ends it.  One the database refuses
+        is kept and written when it is back (:meth:`probe`), before any result: lost, a
+        reload raising ``max_nok`` would end the lock with no one's release."""
+        try:
+            self._write_lock(a)
+        except STATION_FAULTS:
+            with self._lock:
+                self._locks_owed.append(a)
+            raise
+
+    def _write_lock(self, a: NoteLock) -> None:
         self._writer().ledger.record_command(
             at=datetime.fromtimestamp(a.t, UTC), user=LOCK_USER, source=LOCK_SOURCE, kind=LOCK,
             vin=a.vin, bolt=a.bolt, comment=f"{a.count} NOK in a row")
@@ -538,6 +555,18 @@ class Records:
             self.check_file()   # a removed file still answers through its connection
         except STATION_FAULTS as exc:
             raise DeviceError(one_line(exc)) from None
+        while True:
+            with self._lock:
+                if not self._locks_owed:
+                    break
+                lock = self._locks_owed[0]
+            try:
+                self._write_lock(lock)
+            except STATION_FAULTS as exc:
+                raise DeviceError(f"a lock not recorded: {one_line(exc)}") from None
+            with self._lock:
+                self._locks_owed.pop(0)
+            log.info("the lock of %s of %s recorded late", lock.bolt, lock.vin)
         while True:
             with self._lock:
                 if not self._unsaved:

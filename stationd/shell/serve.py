@@ -36,6 +36,7 @@ from stationd.logsetup import setup_logging
 from stationd.shell.daemon import OPEN_ERRORS, Station
 from stationd.shell.records import STATION_FAULTS, Unsaved
 from stationd.shell.sdnotify import Notifier
+from stationd.station.actions import NoteLock
 from stationd.station.events import ResultRecorded, StationEvent
 from stationd.station.inputs import (
     DATABASE,
@@ -456,12 +457,13 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
     grab) and awaited once it stops."""
     loop = asyncio.get_running_loop()
     carried: list[Unsaved] = []   # results the last station received and could not write
+    owed: list[NoteLock] = []     # ... and the NOK policy's locks it could not record
     while True:
         await screens.follow(cfg)
         station = Station(cfg, notifier=notifier, bus=bus)
         station.announce()   # the screens forget the last configuration's device reports
         station.frames = screens.frames
-        station.carry(carried)
+        station.carry(carried, owed)
         if not await _open(station, notifier, stop):
             await loop.run_in_executor(None, station.close)
             notifier.stopping("stopping")
@@ -526,7 +528,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
             await asyncio.sleep(1.0)
         vin = station.vin      # the vehicle on the lift as the station closes
         await loop.run_in_executor(None, station.close)
-        carried = station.unsaved()
+        carried, owed = station.unsaved(), station.locks_owed()
         if stop.is_set():
             notifier.stopping("closing devices")
             log.info("stationd stopped")

@@ -16,6 +16,7 @@ from stationd.station.events import (
 )
 from stationd.station.inputs import (
     DATABASE,
+    LIFT,
     WRENCH,
     DeviceBack,
     DeviceFault,
@@ -43,6 +44,11 @@ class FaultRules(TeachRules):
             # the load under way failed (the only database call the core waits for): the
             # vehicle is loaded again once the database is back and the lift still ready
             self._loading = False
+        if ev.device == LIFT:
+            # the PLC's fault bit is not known while it does not answer: the first read after
+            # the outage says it again (kept, the bit still set read as no change was lost
+            # with the outage's fault: the lift "ok" everywhere, a review)
+            self._plc_fault = False
         return self._fault(ev.t, ev.device, ev.kind, ev.reason)
 
     def missed_since(self) -> float | None:
@@ -65,6 +71,8 @@ class FaultRules(TeachRules):
         if ev.device == WRENCH and WRENCH in self.faults:
             # the DisableTool sent at the fault may never have arrived: off, whatever it did
             acts += _disable(StateReason(Because.CONTROLLER_BACK), t=ev.t)
+        if ev.device == LIFT and self.faults.get(LIFT, (None,))[0] is FaultKind.REPORTED:
+            return acts   # the PLC answers with its fault bit set (read first): a read ends it
         return acts + self._back(ev.t, ev.device)
 
     def _on_device_said(self, ev: DeviceSaid) -> list[Action]:

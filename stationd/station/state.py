@@ -244,9 +244,8 @@ class CoreState:
     _operator_seen: float = field(default=0.0, repr=False)   # their last sign-in or work
 
     def status(self) -> CoreStatus:
-        """A copy of the station's state as decided (see :class:`CoreStatus`); the lift that
-        reports its own fault (its PLC's fault bit) is among the devices in fault."""
-        faults = dict(self.faults)
+        """A copy of the station's state as decided (see :class:`CoreStatus`)."""
+        faults = self.faults
         return CoreStatus(self.state, self.reason,
                           MappingProxyType({d: r for d, (_, r) in faults.items()}),
                           self.vin, self.bolt, self.tool_on, self.operator,

@@ -94,7 +94,7 @@ class Results:
     def vehicle(self, vin: str) -> dict[str, Any]:
         """The report (last result per bolt) plus every rundown per bolt, oldest first.
         Raises ``NotFoundError`` for an unknown VIN."""
-        report = self.repo.vehicle_report(vin).to_json()
+        report = self.repo.vehicle_report(vin, held=True).to_json()
         rows = self._rows(vin, curves=True)
         runs = [r for _, r in rows]
         for b in report["bolts"]:

@@ -201,7 +201,7 @@ def test_a_result_after_the_wrench_left_is_its_bolts_never_the_next_ones(tmp_pat
         assert late is not None              # the tool was still on: it tightened
         st.on_action = None
         await until_async(lambda: late.tightening_id in ctl.acked_ids, 30)
-        assert any(f"tightening {late.tightening_id} came after the tool went off for {a} "
+        assert any(f"result {late.tightening_id} came after the tool went off for {a} "
                    f"(within the late-result window): recorded to {a}" in m for m in _logs(st))
         # meanwhile the wrench is on b: b is selected and tightened with its own result
         await until_async(lambda: _tightening(st, b), 60)

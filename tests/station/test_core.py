@@ -949,6 +949,18 @@ def test_the_lifts_own_fault_bit_is_a_fault_of_the_station_the_vehicle_kept():
     assert c.state is State.FAULT and c.vin == "VINA"
     assert healths(c.feed(LiftRead(2.5, True, True, 7, "VINA"))) == [(True, "", None)]
     assert c.status().faults == {} and c.state is State.TRACKING
+    # an outage with the bit set, the keeper's DeviceBack before or after the first read (a
+    # review: the bit was lost, the lift "ok" everywhere and the state waiting)
+    for back_first in (True, False):
+        c.feed(dataclasses.replace(faulty, t=3.0))
+        c.feed(DeviceFault(3.1, "lift", FaultKind.DOWN, "connection refused"))
+        steps = [DeviceBack(3.2, "lift"), dataclasses.replace(faulty, t=3.3)]
+        for step in steps if back_first else steps[::-1]:
+            c.feed(step)
+        assert c.status().faults == {"lift": bit} and c.state is State.FAULT, back_first
+        assert c.status().fault_kinds == {"lift": "reported"}
+        c.feed(LiftRead(3.5, True, True, 7, "VINA"))
+        assert c.status().faults == {} and c.state is State.TRACKING
     assert "nothing is tightened until it is cleared" in fault_words(bit)
 
 
