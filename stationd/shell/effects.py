@@ -186,7 +186,8 @@ class Effects:
         elif isinstance(a, StoreGap):
             try:
                 await self._call(self.records.record_gap, a.first, a.last, a.vin, a.reason)
-            except STATION_FAULTS as exc:
+            except STATION_FAULTS as exc:   # the database's fault too: seen, not only said
+                self._database.lost(DeviceError(one_line(exc)))
                 self.log.error("gap %d-%d not stored: %s", a.first, a.last, one_line(exc))
         elif isinstance(a, StoreControllerEvent):
             await self._store_then_ack(self.records.store_controller_event, a, a.result,
@@ -201,6 +202,7 @@ class Effects:
             try:
                 await self._call(self.records.store_cut_unknown, a)
             except STATION_FAULTS as exc:
+                self._database.lost(DeviceError(one_line(exc)))
                 self.log.error("the hold of %s after the link cut not stored (held until a "
                                "restart): %s", a.bolt, one_line(exc))
         elif isinstance(a, StoreUnreadable):
@@ -223,8 +225,9 @@ class Effects:
             try:
                 await self._call(self.records.record_check, a)
             except STATION_FAULTS as exc:
+                self._database.lost(DeviceError(one_line(exc)))
                 self.log.error("calibration check of %s not recorded: %s", a.check.pair,
-                          one_line(exc))
+                               one_line(exc))
         return None
 
     def publish(self, ev: StationEvent) -> None:

@@ -217,4 +217,5 @@ def test_a_bolt_locked_after_three_noks_is_released_by_a_supervisor_from_the_cli
     [b05] = [b for b in report.bolts if b.bolt_id == "B05"]
     assert b05.status == "ok" and b05.attempts == 4
     assert [(c.user, c.kind, c.bolt, c.comment) for c in commands] == [
+        ("station", "lock", "B05", "3 NOK in a row"),     # the NOK policy's, recorded
         ("sam", "release", "B05", "thread checked")]

@@ -152,6 +152,7 @@ def test_loosen_strategy_lock_and_release_through_the_daemon(tmp_path):
     [b05] = [b for b in report["bolts"] if b["bolt"] == "B05"]
     assert (b05["status"], b05["kind"], b05["attempts"]) == ("ok", "tightening", 6)
     assert [(c["user"], c["kind"], c["bolt"], c["comment"]) for c in report["commands"]] == [
+        ("station", "lock", "B05", "3 NOK in a row"),     # the NOK policy's, recorded
         ("sam", "release", "B05", "thread checked")]
     assert report["commands"][0]["at"]
     assert [(r["rundown"], r["status"], r["pset"]) for r in report["rundowns"]] == [
