@@ -27,6 +27,7 @@ import sys
 import tempfile
 import time
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -67,6 +68,7 @@ from stationd.station.events import (
     StationEvent,
     ToolDisabled,
     ToolEnabled,
+    VehicleClosed,
     VehicleOpened,
 )
 from stationd.stationcheck import validate_station
@@ -107,6 +109,8 @@ class Watch:
         self.enabled: str | None = None       # the bolt the tool is enabled for
         self.tally = tally
         self.refusal: Reason | None = None    # the last reason nothing was selected
+        self.stations = 0                     # stations started (the first, each reload's)
+        self.closed = 0                       # vehicles closed
         bus.subscribe(self.see)
 
     def see(self, ev: StationEvent) -> None:
@@ -114,6 +118,13 @@ class Watch:
             self.state, self.reason = ev.state, state_words(ev.reason)
             if ev.state in (State.WAITING_VEHICLE, State.STARTING):
                 self.vin = None
+            if ev.state == State.STARTING:
+                # a new station (a reload's): the last one's tool is not this one's (it
+                # closed with the tool off, saying nothing: its "enabled" was stale)
+                self.stations += 1
+                self.enabled = None
+        elif isinstance(ev, VehicleClosed):
+            self.closed += 1
         elif isinstance(ev, VehicleOpened):
             self.vin = ev.vin
         elif isinstance(ev, Refused):
@@ -180,13 +191,19 @@ class DaemonHooks(SimDevices):
         super().__init__(*args, **kw)
         self.watch, self.files, self._reload, self._recorded = watch, files, reload, recorded
         self.daemon: asyncio.Task[None] | None = None
+        #: how many reloads the daemon refused so far (its notifier's count)
+        self.refusals: Callable[[], int] = lambda: 0
 
     async def arrive(self, vin: str, model_code: int) -> None:
         await super().arrive(vin, model_code)
         await _until(lambda: self.watch.vin == vin and self.watch.state == State.TRACKING, 30)
 
     async def depart(self) -> None:
+        closed = self.watch.closed
         await super().depart()
+        # the vehicle closed, not only a station waiting (the next station of a reload
+        # waits too, and closes nothing)
+        await _until(lambda: self.watch.closed > closed, 30)
         await _until(lambda: self.watch.state == State.WAITING_VEHICLE, 30)
         t = self.watch.tally    # one line per vehicle on stderr: a long soak is never silent
         print(f"soak: {t.tightened} tightened, {len(t.wrong_sends)} wrong, "
@@ -206,9 +223,19 @@ class DaemonHooks(SimDevices):
         await super().device_up(device)
         await _until(lambda: self.watch.state in (State.TRACKING, State.WAITING_VEHICLE), 30)
 
-    async def _reloaded(self) -> None:
-        self._reload.set()                  # what SIGHUP sets
+    async def _reloaded(self, taken: bool = True) -> None:
+        """Reload (what SIGHUP sets) and wait for its outcome: the next station started
+        (``taken``) or the refusal said; the serve loop's taking the request is not it (the
+        shift went on with the station about to be replaced, and pulled a trigger under its
+        enable as it closed: no operator can)."""
+        stations, refused = self.watch.stations, self.refusals()
+        self._reload.set()
         await _until(lambda: not self._reload.is_set(), 15)
+        if taken:
+            await _until(lambda: self.watch.stations > stations
+                         and self.watch.state != State.STARTING, 60)
+        else:
+            await _until(lambda: self.refusals() > refused, 30)
         await asyncio.sleep(RELOAD_SETTLE_S)
 
     async def reload(self, kind: ReloadKind) -> None:
@@ -217,7 +244,7 @@ class DaemonHooks(SimDevices):
             await self._reloaded()
         elif kind == "bad bolt table":
             self.files.duplicate_bolt()
-            await self._reloaded()           # refused: the running station stays
+            await self._reloaded(taken=False)   # refused: the running station stays
             self.files.restore_bolts()
         else:
             self.files.lift_url(f"modbus-tcp://127.0.0.1:{_free_port()}?unit=1&timeout=0.3")
@@ -338,6 +365,7 @@ def soak_station(plan: list[Step], *, load: int = 0, seed: int = 0) -> SoakTally
         hooks = DaemonHooks(watch, files, asyncio.Event(), recorded, world, plc, ctl,
                             {b.bolt_id: b.position for b in model.bolts}, cfg.tool.length_mm,
                             seed=seed)
+        hooks.refusals = lambda: sum(x.startswith("reload refused") for x in notifier.said)
         print(f"rendering {hooks.prepare(plan)} placements ahead (not timed) ...",
               file=sys.stderr, flush=True)
         # spawned, never forked: a forked child would hold the simulated devices' sockets open
