@@ -429,9 +429,14 @@ def test_a_refused_reload_is_said_in_the_devices_panel(live_server, page):
     """An operator trial: a refused reload showed only in ``stationd status``; the screens
     said nothing while the file on disk would not start the station at the next reboot."""
     srv = live_server()
-    srv.publish(opened())
     page.get(srv.url)
+    page.wait(lambda p: p.text("#vin") == "no vehicle", what="the screen, no vehicle yet")
+    # no vehicle, no counters ("0 / 0 bolts OK 0 bolts ending NOK": an operator trial)
+    drawn = "return document.getElementById('counters').getClientRects().length > 0"
+    assert page.js(drawn) is False
+    srv.publish(opened())
     page.wait(lambda p: p.text("#vin") == VIN, what="the vehicle on the screen")
+    page.wait(lambda p: p.js(drawn) is True, what="its counters")
     assert page.count("#devices li[data-device=config]") == 0
     srv.server.reload_refused = "station.yaml:12: nok.max_nok: 0 is out of range 1-99"
     srv.publish(opened()[:1])              # the next snapshot

@@ -306,6 +306,8 @@ function render(view) {
     op.required ? "nobody signed in: sign in to tighten" : "nobody signed in");
   $("operator").dataset.user = op.user || "";
   $("operator").className = "operator" + (!op.user && op.required ? " needed" : "");
+  // no vehicle, no bolts: "0 / 0 bolts OK 0 bolts ending NOK" said nothing (an operator trial)
+  $("counters").hidden = !view.counters.total;
   setText("done", view.counters.done);
   setText("total", view.counters.total);
   setText("nok", view.counters.nok);
