@@ -107,7 +107,8 @@ def test_a_third_nok_locks_the_screen_says_who_releases_and_a_supervisor_release
                                                     "loosening NOK"], kinds
         trail = page.js("return [...document.querySelectorAll('#trail tr.command')]"
                         ".map(r => [...r.children].map(c => c.textContent))")
-        assert [t[1:] for t in trail] == [["release", "B05", "sam", "screen 127.0.0.1",
-                                           "thread checked"]]
+        assert [t[1:] for t in trail] == [
+            ["lock", "B05", "station", "NOK policy", "3 NOK in a row"],   # the station's
+            ["release", "B05", "sam", "screen 127.0.0.1", "thread checked"]]
         assert trail[0][0].startswith("20")
         shots("vehicle-loosen")

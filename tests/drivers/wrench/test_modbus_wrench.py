@@ -195,7 +195,9 @@ def test_mbpoll_sees_the_documented_registers(ctl, transport):
     target = (["-m", "tcp", "-p", path.split(":")[2].split("?")[0], "127.0.0.1"]
               if transport == "tcp" else ["-m", "rtu", "-b", "19200", "-P", "none",
                                           path.split("//")[1].split("?")[0]])
-    with open_wrench(path, **FAST) as w:
+    # a reply waited for generously: nothing here is about a timeout (0.3 s over a pty ran
+    # out on a loaded CI machine, the simulated controller's thread stalled)
+    with open_wrench(path, **{**FAST, "timeout": 5.0}) as w:
         w.set_parameters(2, 44.0, 100.0)
         w.send_vin(VIN)
         w.enable_tool()
