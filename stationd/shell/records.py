@@ -15,10 +15,11 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import cv2
 
@@ -87,6 +88,7 @@ from stationd.words import (
 )
 
 log = logging.getLogger("stationd")
+T = TypeVar("T")
 #: what a device, the database or the station's own data raise: a fault, never an exit
 STATION_FAULTS: tuple[type[Exception], ...] = (StationError, DbError, DriverError)
 
@@ -555,32 +557,29 @@ class Records:
             self.check_file()   # a removed file still answers through its connection
         except STATION_FAULTS as exc:
             raise DeviceError(one_line(exc)) from None
-        while True:
-            with self._lock:
-                if not self._locks_owed:
-                    break
-                lock = self._locks_owed[0]
-            try:
-                self._write_lock(lock)
-            except STATION_FAULTS as exc:
-                raise DeviceError(f"a lock not recorded: {one_line(exc)}") from None
-            with self._lock:
-                self._locks_owed.pop(0)
+        for lock in self._drain(self._locks_owed, self._write_lock, "a lock not recorded"):
             log.info("the lock of %s of %s recorded late", lock.bolt, lock.vin)
-        while True:
+        for u in self._drain(self._unsaved, self.write, "results not stored"):
             with self._lock:
-                if not self._unsaved:
-                    return
-                u = self._unsaved[0]
-            try:
-                self.write(u)
-            except STATION_FAULTS as exc:
-                raise DeviceError(f"results not stored: {one_line(exc)}") from None
-            with self._lock:
-                self._unsaved.pop(0)
                 self._saved_late.append(u)
             log.info("tightening %d of %s stored late", u.record.result.tightening_id,
                      u.record.bolt)
+
+    def _drain(self, owed: list[T], write: Callable[[T], None], failed: str) -> Iterator[T]:
+        """Each of ``owed`` written, oldest first, and yielded once written (taken off the
+        list only then); the first the database refuses raises a device error."""
+        while True:
+            with self._lock:
+                if not owed:
+                    return
+                item = owed[0]
+            try:
+                write(item)
+            except STATION_FAULTS as exc:
+                raise DeviceError(f"{failed}: {one_line(exc)}") from None
+            with self._lock:
+                owed.pop(0)
+            yield item
 
     def save_images(self, vin: str, bolt: str, tightening_id: int,
                     loc: Localization | None) -> list[str]:

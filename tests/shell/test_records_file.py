@@ -12,20 +12,10 @@ from pathlib import Path
 import pytest
 
 from db.errors import DbError
-from stationd.config import StationConfig
-from stationd.shell.records import Records
 from stationd.station.actions import LoadVehicle, RecordCommand
 from stationd.station.commands import Issuer, Right, SkipBolt
 from stationd.station.inputs import VehicleLoaded
-from tests.db.conftest import BASE, url_of
-
-
-def _records(tmp_path: Path) -> Records:
-    bolts = tmp_path / "bolts.yaml"
-    bolts.write_text(BASE)
-    records = Records(StationConfig(database_url=url_of(tmp_path / "st.db"), bolts_path=bolts))
-    records.open()
-    return records
+from tests.shell.test_records_words import _records
 
 
 def _skip(bolt: str) -> RecordCommand:
