@@ -380,6 +380,12 @@ class OpenProtocolServer:
     def clear_link_faults(self) -> None:
         self.call(self._link_faults.clear)
 
+    def link_quiet(self) -> bool:
+        """Every message sent on the link level has its 9997 and none waits its turn: a fault
+        armed now meets the next message, not the acknowledgement of one already sent."""
+        return self.call(lambda: all(s.outstanding is None and not s.outbox
+                                     for s in self._sessions.values()))
+
     # -- the link level -----------------------------------------------------------------
     def _next_out(self, s: Session) -> None:
         if s.outstanding is not None or not s.outbox:

@@ -137,6 +137,9 @@ def test_a_link_level_error_makes_the_driver_resend(lsim, tmp_path):
 def test_a_controller_that_never_hears_the_acknowledgements_drops_the_link(lsim, tmp_path):
     with connect(lsim, "tcp", tmp_path) as w:
         ready(w)
+        # deaf only once the enable's reply has its 9997 (armed before it arrived, the reply
+        # was resent and the link dropped with the result never sent: a CI run)
+        assert wait_until(lsim.link_quiet, 30.0)
         lsim.link_fault("deaf")
         lsim.pull_trigger()
         assert wait_until(lambda: not w.status().connected, 30.0)   # bounded generously
