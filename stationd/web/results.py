@@ -29,7 +29,7 @@ from sqlalchemy.orm import Session
 from db.curves import curves_of_records
 from db.kinds import LOOSENING, MISSING, PENDING, SKIPPED
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
-from db.repository import Repository
+from db.repository import AT_STATION, Repository
 
 CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator", "torque_nm",
               "angle_deg", "torque_min_nm", "torque_max_nm", "angle_min_deg", "angle_max_deg",
@@ -77,15 +77,21 @@ class Results:
         self.repo = repo
 
     def vehicles(self, limit: int = 200) -> list[dict[str, Any]]:
-        """The latest vehicles first, each with its status (open, complete, NOK, missing)."""
+        """The latest vehicles first, each with its status (open, complete, NOK, missing;
+        ``reopened``: reopened for rework and not back at the station yet, which read "open,
+        reworked" as the vehicle on the lift did, before any rework: an operator trial)."""
         with Session(self.repo.engine) as s:
             rows = s.execute(select(Vehicle.vin).order_by(Vehicle.started_at.desc(),
                                                          Vehicle.id.desc()).limit(limit)).all()
+        here = self.repo.ledger.get_meta(AT_STATION)
         out = []
         for (vin,) in rows:
             r = self.repo.vehicle_report(vin)
             j = r.to_json()
-            j["status"] = ("open" if r.vehicle.ended_at is None and not r.complete
+            v = r.vehicle
+            waits = v.ended_at is None and v.reopened_at is not None and here != vin
+            j["status"] = ("reopened" if waits else
+                           "open" if v.ended_at is None and not r.complete
                            else "complete" if r.complete else "NOK" if r.nok else "incomplete")
             j.pop("bolts")
             out.append(j)

@@ -38,7 +38,9 @@ async function listVehicles() {
       a.textContent = v.vin;
       cell(tr, "").appendChild(a);
       cell(tr, v.model);
-      cell(tr, v.status + (v.reopened_at ? ", reworked" : ""), "status-" + v.status);
+      // reopened and not back yet: no rework done, not the vehicle on the lift
+      cell(tr, v.status + (v.reopened_at && v.status !== "reopened" ? ", reworked" : ""),
+           "status-" + v.status);
       cell(tr, v.ok.length);
       cell(tr, v.nok.length + (v.nok.length ? " (" + v.nok.join(", ") + ")" : ""), v.nok.length ? "status-NOK" : "");
       cell(tr, (v.skipped || []).length);
@@ -48,7 +50,8 @@ async function listVehicles() {
       const again = v.loosen || [];
       cell(tr, again.length + (again.length ? " (" + again.join(", ") + ")" : ""));
       cell(tr, (v.started_at || "").slice(0, 19));
-      cell(tr, (v.ended_at || "open").slice(0, 19));
+      cell(tr, v.status === "reopened" ? `reopened ${(v.reopened_at || "").slice(0, 19)}`
+        : (v.ended_at || "open").slice(0, 19));
       tb.appendChild(tr);
     }
   } catch (e) { q("#error").textContent = e.message; }
