@@ -766,12 +766,18 @@ class Repository:
             report, since = build_report(s, v), v.reopened_at or v.started_at
         return self._with_held(report, since) if held else report
 
+    def vin_in_other_case(self, vin: str) -> str | None:
+        """The VIN the database has that is ``vin`` typed in another case, else None (what a
+        refusal suggests: "did you mean ...?")."""
+        with self._session(write=False) as s:
+            return _vin_in_other_case(s, vin)
+
     def _with_held(self, report: VehicleReport, since: datetime | None) -> VehicleReport:
         """``report`` with its held bolts, in the table's order."""
         holds = self.held_bolts(report.vehicle.vin, since)
-        order = [b.bolt_id for b in report.bolts]
+        order = {b.bolt_id: i for i, b in enumerate(report.bolts)}
         return replace(report, held=tuple(sorted(
-            holds.items(), key=lambda h: order.index(h[0]) if h[0] in order else len(order))))
+            holds.items(), key=lambda h: order.get(h[0], len(order)))))
 
 
 # -- helpers ------------------------------------------------------------------------------
@@ -921,8 +927,14 @@ def _vehicle(s: Session, vin: str) -> Vehicle:
 def _other_case(s: Session, vin: str) -> str:
     """" (did you mean VIN?)" when the database has ``vin`` in another case (a VIN typed in
     lower case is another VIN: it is matched exactly), else ""."""
+    other = _vin_in_other_case(s, vin)
+    return f" (did you mean {other}?)" if other is not None else ""
+
+
+def _vin_in_other_case(s: Session, vin: str) -> str | None:
+    """The VIN the database has that is ``vin`` in another case, else None."""
     other = s.scalar(select(Vehicle.vin).where(func.upper(Vehicle.vin) == vin.upper()).limit(1))
-    return f" (did you mean {other}?)" if other is not None and other != vin else ""
+    return other if other is not None and other != vin else None
 
 
 def _info(model: str, b: Bolt) -> BoltInfo:

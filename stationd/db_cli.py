@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections import Counter
 from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
@@ -242,26 +243,21 @@ def _export_results(args: argparse.Namespace) -> int:
         sys.stdout.write(text)
     else:
         write_atomic(Path(args.out), text)
-        missing = sum(1 for r in runs if r["status"] == MISSING)
+        rows = Counter(r["status"] for r in runs)
+        missing = rows[MISSING]
         # a bolt of a vehicle still open (at the station, or reopened) is not run down yet,
         # not missing (its row says pending): quality read the vehicle on the lift as 45
         # bolts forgotten
         to_do = [r for r in runs if r["status"] == PENDING]
-        skipped = sum(1 for r in runs if r["status"] == SKIPPED)
-        released = sum(1 for r in runs if r["status"] == RELEASED_STATUS)
-        also = [counted(skipped, "skipped")] if skipped else []
-        if released:
-            also.append(counted(released, "release"))
-        for status, what in ((UNREADABLE_STATUS, "unreadable result"),
-                             (UNATTRIBUTED_STATUS, "unattributed result")):
-            n = sum(1 for r in runs if r["status"] == status)
-            if n:
-                also.append(counted(n, what))
+        also = [counted(rows[status], what) for status, what in (
+            (SKIPPED, "skipped"), (RELEASED_STATUS, "release"),
+            (UNREADABLE_STATUS, "unreadable result"),
+            (UNATTRIBUTED_STATUS, "unattributed result")) if rows[status]]
         if to_do:
             on = len({r["vin"] for r in to_do})
             also.append(f"{len(to_do)} not run down yet on {counted(on, 'open vehicle')}")
-        rundowns = len(runs) - missing - len(to_do) - skipped - sum(
-            1 for r in runs if r["status"] in NOT_RUNDOWNS)
+        rundowns = len(runs) - missing - len(to_do) - rows[SKIPPED] - sum(
+            rows[status] for status in NOT_RUNDOWNS)
         print(f"wrote {args.out}: {counted(rundowns, 'rundown')} and "
               f"{counted(missing, 'missing bolt')}"
               + (f" (and {', '.join(also)})" if also else "")

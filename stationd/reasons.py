@@ -114,8 +114,8 @@ class CoreFaultKind(enum.StrEnum):
                                          # own words)
     PARAMS_REFUSED = "params refused"    # the controller refused a bolt's parameters (bolt,
                                          # note: the controller's words)
-    LIFT_REPORTS_FAULT = "lift fault"    # the lift PLC answers with its fault bit set: the
-                                         # lift's health, not the station's state
+    LIFT_REPORTS_FAULT = "lift fault"    # the lift PLC answers with its fault bit set: a
+                                         # fault of the station until it clears
 
 
 @dataclass(frozen=True)

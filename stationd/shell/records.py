@@ -476,7 +476,8 @@ class Records:
                                            kind=KIND[type(cmd)], vin=vin,
                                            bolt=getattr(cmd, "bolt", None), comment=comment)
         except NotFoundError:
-            return Reason(Why.UNKNOWN_VEHICLE, vin=vin, other=_known_as(repo, vin))
+            return Reason(Why.UNKNOWN_VEHICLE, vin=vin,
+                          other=None if vin is None else repo.vin_in_other_case(vin))
         except DataError as exc:
             if isinstance(cmd, EnterOutcome):
                 return Reason(Why.NOT_RECORDED, note=one_line(exc))
@@ -621,19 +622,6 @@ def _sqlite_file(url: str) -> tuple[Path, tuple[int, int]] | None:
 def xyz(p: Any) -> tuple[float, float, float]:
     """Three plain floats from any sequence (NumPy values included)."""
     return float(p[0]), float(p[1]), float(p[2])
-
-
-def _known_as(repo: Repository, vin: str | None) -> str | None:
-    """The VIN in capitals where ``vin`` was typed otherwise and the database has that one
-    (a reopen of "9sdst..." said "not in the database", no word of the capitals: an
-    operator trial); None else."""
-    if vin is None or vin.upper() == vin:
-        return None
-    try:
-        repo.vehicle_report(vin.upper())
-    except NotFoundError:
-        return None
-    return vin.upper()
 
 
 def _selection_json(sel: Selection) -> dict[str, Any]:

@@ -64,7 +64,7 @@ class LiftRead(Input):
     model_code: int
     vin: str | None
     why: str = "lift not at working height"
-    #: the PLC's fault bit (the lift itself in fault, the PLC answering): the lift's health
+    #: the PLC's fault bit (the lift itself in fault, the PLC answering): a station fault
     plc_fault: bool = False
 
 

@@ -105,8 +105,8 @@ def _disable(reason: StateReason, bolt: str | None = None, why: Reason | None = 
     return [Publish(ToolDisabled(reason, bolt, why, t=t)), DisableTool(reason, bolt, why)]
 
 
-#: the lift's own fault, its PLC's fault bit: the lift's health while it is set (told by the
-#: lift's rules, kept in the snapshot)
+#: the lift's own fault, its PLC's fault bit: a fault of the station while it is set (the
+#: lift's rules raise and end it as a read says)
 LIFT_FAULT_BIT = CoreFault(CoreFaultKind.LIFT_REPORTS_FAULT)
 
 
@@ -183,8 +183,8 @@ class CoreState:
     tool_on: bool = False
     _specs: dict[str, LoadedBolt] = field(default_factory=dict, repr=False)
     _lift: LiftRead | None = field(default=None, repr=False)
-    #: the lift's own fault bit as last told in its health (the PLC answers: not the
-    #: station's fault, the lift's)
+    #: the lift PLC's fault bit as last read (False while the PLC does not answer: unknown, the
+    #: first read after the outage says it again)
     _plc_fault: bool = field(default=False, repr=False)
     _loading: bool = field(default=False, repr=False)
     _load_code: int | None = field(default=None, repr=False)   # the model code loaded
@@ -245,9 +245,8 @@ class CoreState:
 
     def status(self) -> CoreStatus:
         """A copy of the station's state as decided (see :class:`CoreStatus`)."""
-        faults = self.faults
         return CoreStatus(self.state, self.reason,
-                          MappingProxyType({d: r for d, (_, r) in faults.items()}),
+                          MappingProxyType({d: r for d, (_, r) in self.faults.items()}),
                           self.vin, self.bolt, self.tool_on, self.operator,
                           None if self.trust is None
                           else MappingProxyType(self.trust.untrusted()),
@@ -261,7 +260,7 @@ class CoreState:
                           MappingProxyType(dict(self.identifications)),
                           frozenset(() if self.matcher is None else self.matcher.done),
                           frozenset(() if self.matcher is None else self.matcher.skipped),
-                          MappingProxyType({d: str(k) for d, (k, _) in faults.items()}),
+                          MappingProxyType({d: str(k) for d, (k, _) in self.faults.items()}),
                           self.operator_required)
 
     @property
