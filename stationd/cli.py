@@ -765,6 +765,13 @@ def _signals(restore: bool) -> Iterator[_Stopped]:
     def on_signal(signum: int, frame: FrameType | None) -> None:
         if stopped.signal is None:
             stopped.signal = signum
+        if _importing(frame):
+            # raised here (a module lock's weakref callback, say) the interrupt would be
+            # printed as "Exception ignored" with its traceback and lost: asked again soon
+            again = threading.Timer(0.02, os.kill, (os.getpid(), signum))
+            again.daemon = True
+            again.start()
+            return
         raise KeyboardInterrupt
 
     before = {s: signal.getsignal(s) for s in STOPPING}
@@ -783,6 +790,16 @@ def _signals(restore: bool) -> Iterator[_Stopped]:
                 signal.signal(s, signal.SIG_DFL if handler is None else handler)
         finally:
             signal.pthread_sigmask(signal.SIG_UNBLOCK, STOPPING)
+
+
+def _importing(frame: FrameType | None) -> bool:
+    """Whether ``frame`` runs inside the import machinery, where an exception from a signal
+    handler can land in a callback that prints it and goes on (``_get_module_lock``'s)."""
+    while frame is not None:
+        if frame.f_code.co_filename.startswith("<frozen importlib"):
+            return True
+        frame = frame.f_back
+    return False
 
 
 @contextmanager
