@@ -298,9 +298,12 @@ class ControllerFeed:
         while since is not None and got is not None and len(found) < MAX_FETCH:
             at = made_at(got, offset)
             if at is None:
-                # its time unknown: where the history begins too
+                # its time unknown: where the history begins too; it is kept all the same
+                # (unattributed, or held against the cut's bolt where it does not read)
                 unknown = "the controller's clock is not known: its results cannot be " \
-                          "placed before or after the link was lost"
+                          "placed before or after the link was lost" if offset is None \
+                    else f"the time of tightening {tid} could not be read"
+                found.append((tid, got))
                 break
             if at < since - CLOCK_SLACK_S:
                 follows = tid          # made before: the history ends here

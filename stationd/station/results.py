@@ -414,8 +414,12 @@ class ResultRules(OrderRules):
         if u.fetched:   # after a reconnect (a renewal's catch-up hands its results as pushed)
             en = self._cut.selection if self._cut is not None else None
         if en is not None and u.pset is not None and en.pset is not None \
-                and u.pset != en.pset:
-            en = None        # its pset could be read, and it is not the one sent
+                and u.pset != en.pset and not u.fetched:
+            # its pset could be read, and it is not the one sent.  Not for one fetched after
+            # a link cut: a pset picked out of a body that does not read may be another
+            # field (a job id read as the pset, an independent controller's trial), and
+            # taken as proof, the cut's bolt, perhaps tightened, was left open
+            en = None
         bolt = en.bolt if en is not None and en.vin else None
         if u.tightening_id is not None:
             self._recorded[u.tightening_id] = _Unread(u.pset, u.timestamp, bolt, ev.t)

@@ -18,9 +18,10 @@ from types import SimpleNamespace
 from typing import Any
 
 from drivers.errors import ConnectionLostError, ProtocolError
+from drivers.wrench.base import UnreadableResult
 from stationd.shell.blocking import Blocking
 from stationd.shell.controller import ControllerFeed
-from stationd.station.inputs import CaughtUp, ResultIn
+from stationd.station.inputs import CaughtUp, ResultIn, UnreadableIn
 
 
 class Controller:
@@ -61,7 +62,7 @@ def catch_up(controller: Controller, last: int | None = 40, comebacks: int = 1,
                              lost=lambda exc: None)
     records = SimpleNamespace(repo=SimpleNamespace(read_result_stored=lambda t: False),
                               last_tightening_id=lambda: last,
-                              copy_input=lambda ev, vin: ev)
+                              copy_input=lambda ev, vin: ev, unreadable_input=lambda ev: ev)
     core = SimpleNamespace(missed_since=lambda: time.time() - 60,
                            status=lambda: SimpleNamespace(vin="V", faults={}))
 
@@ -159,3 +160,16 @@ def test_a_register_driven_controller_is_read_once_before_it_is_told():
                    if isinstance(ev, CaughtUp) else None)
     assert _ends(fed) == [(False, "this controller keeps no results to fetch", 1)]
     assert reads and reads[0] < told[0]
+
+
+def test_a_result_whose_time_does_not_read_is_kept_in_a_first_catch_up():
+    """No tightening recorded yet, the controller's newest does not read (its time with it):
+    where it lies against the cut is not known, but it is the controller's record of a
+    tightening all the same: fed to the core (stored, its bolt held), not dropped (an
+    independent controller's trial: two results made during a cut stored nowhere)."""
+    newest = UnreadableResult(raw="0226006500" + "x" * 40, mid=65, revision=2,
+                              error="MID 0065 revision 2 torque '00ABCD' is not a number",
+                              tightening_id=2, pset=1, fetched=True)
+    fed = catch_up(Controller({0: newest, 1: res(1)}), last=None)
+    assert [e.unreadable.tightening_id for e in fed if isinstance(e, UnreadableIn)] == [2]
+    assert _ends(fed) == [(False, "the time of tightening 2 could not be read", 1)]

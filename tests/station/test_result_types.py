@@ -18,6 +18,7 @@ from drivers.wrench import ResultKind, UnreadableResult, result_kind
 from stationd.reasons import Reason, Unattributed, UnattributedKind, Unproved, UnprovedKind, Why
 from stationd.station.actions import (
     DisableTool,
+    Publish,
     Record,
     SendParams,
     StoreControllerEvent,
@@ -484,6 +485,24 @@ def test_an_unreadable_result_fetched_after_a_reconnect_is_no_enable_s_made_sinc
     acts = d.feed(UnreadableIn(d.t, unreadable(pset=2, fetched=True)))
     [store] = [a for a in acts if isinstance(a, StoreUnreadable)]
     assert store.bolt is None and d.core.tool_on and not d.core.matcher.held
+
+
+def test_a_cut_s_unreadable_fetched_result_holds_its_bolt_whatever_pset_it_seems_to_have():
+    """B1 enabled (pset 1), the link cut, a result fetched after it that does not read: the
+    pset picked out of it (0, a job id read where a pset is, in an independent controller's
+    trial) proves nothing.  B1 is held with the message, not left open "as before" by the
+    catch-up (tightened during the cut, it would have been tightened twice)."""
+    d = _ready()
+    sent = _back_after_a_cut(d)
+    assert sent.selection.pset == 1
+    acts = d.feed(UnreadableIn(d.t, unreadable(42, pset=0, fetched=True)))
+    [store] = [a for a in acts if isinstance(a, StoreUnreadable)]
+    assert (store.bolt, store.vin) == ("B1", "VIN1")
+    assert list(d.core.matcher.held) == ["B1"] and "B1" not in d.core.matcher.done
+    acts = d.feed(CaughtUp(d.t, complete=True))
+    assert not any(isinstance(a, Publish) and isinstance(a.event, Notice)
+                   and a.event.said is Said.CUT_NOTHING for a in acts)
+    assert list(d.core.matcher.held) == ["B1"]
 
 
 def test_a_result_made_after_an_unreadable_one_under_its_id_is_not_its_copy():

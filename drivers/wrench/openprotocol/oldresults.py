@@ -14,12 +14,14 @@ to be stored and looked at, not raised.
 
 from __future__ import annotations
 
+import dataclasses
+
 from drivers.errors import ProtocolError, RefusedError
 from drivers.wrench.base import Received, UnreadableResult
 from drivers.wrench.openprotocol import message as op
 from drivers.wrench.openprotocol.channel import Channel
 from drivers.wrench.openprotocol.message import Message
-from drivers.wrench.openprotocol.reading import UntypedInARow, receive
+from drivers.wrench.openprotocol.reading import UntypedInARow, receive, untyped_below
 from drivers.wrench.openprotocol.resultfeed import RESULT_REVISIONS, ResultFeed
 
 
@@ -44,7 +46,8 @@ class OldResults:
               ) -> Received | None:
         """MID 0064 -> 0065 at the agreed revision (or the highest not refused), holding the
         request lock: the result, or None for "not found"; other refusals and failures
-        raise as they come, and a ProtocolError for an answer about another tightening."""
+        raise as they come, and a ProtocolError for a readable answer about another
+        tightening (an unreadable one whose id reads as another is kept, its id unknown)."""
         data = f"{tightening_id:010d}".encode()
         with self._channel.cond:
             agreed = self.agreed
@@ -61,20 +64,23 @@ class OldResults:
                     return None
                 raise
             self._agree(rev)
-            return self._read(reply, tightening_id, what)
+            return self._read(reply, tightening_id, what, rev)
         raise AssertionError("unreachable: revision 1's refusal is raised")
 
     def _agree(self, rev: int) -> None:
         with self._channel.cond:
             self.agreed = rev
 
-    def _read(self, reply: Message, tightening_id: int, what: str) -> Received:
-        result = receive(reply)
+    def _read(self, reply: Message, tightening_id: int, what: str, asked: int) -> Received:
+        result = untyped_below(reply, receive(reply), asked)
         habit = self._untyped.habit(result, reply.revision)
         if isinstance(result, UnreadableResult) and result.laid_out_as is not None:
-            self._log.warning("%s: %s: MID 0065 revision %d is laid out as revision %d, "
-                              "which carries no result type; kept with its raw text",
-                              self.device, what, reply.revision, result.laid_out_as)
+            self._log.warning("%s: %s: MID 0065 revision %d %s, which carries no result "
+                              "type; kept with its raw text", self.device, what,
+                              reply.revision,
+                              f"is laid out as revision {result.laid_out_as}"
+                              if result.laid_out_as != reply.revision
+                              else f"came though revision {asked} was asked for")
             if habit:
                 self._feed.lowered(reply.mid, reply.revision, result.laid_out_as)
                 self._agree(result.laid_out_as)
@@ -86,6 +92,16 @@ class OldResults:
             self._feed.lowered(reply.mid, result.header_revision, result.revision)
             self._agree(result.revision)                 # ask for that one
         if tightening_id and result.tightening_id not in (tightening_id, None):
+            if isinstance(result, UnreadableResult):
+                # an id picked out of a body that does not read may be another field: the
+                # message is kept (the controller's record of a tightening), its id unknown
+                self._log.warning("%s: %s: the unreadable answer reads as tightening %d: "
+                                  "kept without an id", self.device, what,
+                                  result.tightening_id)
+                return dataclasses.replace(
+                    result, tightening_id=None,
+                    error=f"{result.error} (asked for tightening {tightening_id}, its body "
+                          f"reads as {result.tightening_id})")
             raise ProtocolError(f"{what}: the controller answered with tightening "
                                 f"{result.tightening_id}", device=self.device)
         return result

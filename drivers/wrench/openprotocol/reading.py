@@ -41,13 +41,12 @@ from drivers.wrench.openprotocol.result import (
     HEADER_LEN,
     MAX_REVISION,
     MID_RESULT,
-    REV1_0061,
-    REV1_0065,
-    TAGGED,
     TIME_FORMAT,
     LayoutError,
+    fixed_params,
     parse_tightening,
     tagged_length,
+    tags,
 )
 
 #: the fields picked out of an unreadable body, for the station to say which bolt it may be
@@ -123,6 +122,23 @@ def receive(msg: Message) -> TighteningResult | UnreadableResult:
                            picked["timestamp"])
 
 
+def untyped_below(msg: Message, item: TighteningResult | UnreadableResult, asked: int | None
+                  ) -> TighteningResult | UnreadableResult:
+    """``item`` as handed out when ``asked``, the revision subscribed or requested, carries a
+    result type and the controller sent one, labelled honestly, at a revision that does not:
+    not a result that may close a bolt (a loosening read so closed its bolt, an independent
+    controller's trial) but an :class:`UnreadableResult` laid out as its revision, held like
+    a body that lost its type; the feed renews its subscription there only when the next
+    result comes so too (:class:`UntypedInARow`)."""
+    if not isinstance(item, TighteningResult) or asked is None \
+            or not item.revision < TYPED_FROM <= asked:
+        return item
+    return _unreadable(msg, f"sent at revision {item.revision} though asked for at revision "
+                            f"{asked}: revision {item.revision} carries no result type, so "
+                            "whether it is a tightening is not known", item.tightening_id,
+                       item.pset, item.vin, item.timestamp, item.revision)
+
+
 def _unreadable(msg: Message, error: str, tightening_id: int | None, pset: int | None,
                 vin: str, timestamp: datetime | None,
                 laid_out_as: int | None = None) -> UnreadableResult:
@@ -139,7 +155,7 @@ def pick(mid: int, revision: int, text: str) -> dict[str, Any]:
     revision 1's fixed places); each None (VIN: empty) where it is not there or not valid."""
     best: dict[str, Any] = {"tightening_id": None, "pset": None, "vin": "",
                             "timestamp": None}
-    candidates = [_walk_tagged(text), _walk_fixed(mid, text)]
+    candidates = [_walk_tagged(mid, text), _walk_fixed(mid, text)]
     if revision == 1:
         candidates.reverse()
     for raw in candidates:
@@ -152,13 +168,14 @@ def pick(mid: int, revision: int, text: str) -> dict[str, Any]:
     return best
 
 
-def _walk_tagged(text: str) -> dict[str, str]:
+def _walk_tagged(mid: int, text: str) -> dict[str, str]:
     """Parameters read by tag from the start until one is unknown, repeated or cut short."""
+    table = tags(mid)
     out: dict[str, str] = {}
     pos = HEADER_LEN
     while pos + 2 <= len(text):
         tag = text[pos:pos + 2]
-        param = TAGGED.get(int(tag)) if tag.isdigit() else None
+        param = table.get(int(tag)) if tag.isdigit() else None
         if param is None or param.name in out or pos + 2 + param.width > len(text):
             break
         out[param.name] = text[pos + 2:pos + 2 + param.width]
@@ -170,7 +187,7 @@ def _walk_fixed(mid: int, text: str) -> dict[str, str]:
     """Revision 1's parameters at their fixed places, up to the first tag out of place."""
     out: dict[str, str] = {}
     pos = HEADER_LEN
-    for tag, param in enumerate(REV1_0061 if mid == MID_RESULT else REV1_0065, start=1):
+    for tag, param in enumerate(fixed_params(mid), start=1):
         if text[pos:pos + 2] != f"{tag:02d}" or pos + 2 + param.width > len(text):
             break
         out[param.name] = text[pos + 2:pos + 2 + param.width]
@@ -192,4 +209,4 @@ def _values(raw: dict[str, str]) -> dict[str, Any]:
 
 
 __all__ = ["PICKED", "TYPED_FROM", "TypeLostError", "UntypedInARow", "pick", "read_result",
-           "receive"]
+           "receive", "untyped_below"]

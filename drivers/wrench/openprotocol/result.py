@@ -6,8 +6,11 @@ then a value of a fixed width, and a later revision only appends parameters (2 r
 revision 1 and widens the job id).  So revision 1 is read in its fixed order (its byte
 positions are in PROTOCOLS.md), and revisions 2 to 7 are read by tag: each tag says which
 parameter follows and so how wide it is, so a controller that orders them differently or
-sends a later revision's extra parameters is still read right.  MID 0065 revisions 2 to 7
-carry the same parameters as MID 0061; its revision 1 is a short list of its own.
+sends a later revision's extra parameters is still read right.  MID 0065 has lists of its
+own: revision 1 a short one, revisions 2 to 7 parameters 01-38 (the specification's tables
+85-91: the tightening id first, no cell, channel or controller name, no limits, the station's
+id and name in revision 7).  Read with MID 0061's tags, a controller's MID 0065 lost the
+result fetched after a link cut (an independent implementation's trial).
 
 Written from the Open Protocol specification (R2.x); the simulated controller's writer
 (``sim/results.py``) is a separate table, so a misreading must be made twice to pass.
@@ -44,7 +47,7 @@ class Param:
 
     name: str
     width: int
-    kind: str            # int, str, status, ok, torque (x100 Nm), angle, pct, time, float
+    kind: str            # int, str, status, ok, torque (x100 Nm), angle, pct, time, x100
     since: int = 2
     core: bool = False   # must be a value (not spaces): without it there is no result
 
@@ -78,7 +81,15 @@ REV1_0065: tuple[Param, ...] = (
     _p("batch_status", 1, "int", 1),
 )
 
-#: MID 0061 (and 0065) revisions 2-7, by tag.
+#: the parameters revisions 4 to 6 append, to MID 0061 and MID 0065 alike
+_REVISIONS_4_TO_6: tuple[Param, ...] = (
+    _p("identifier2", 25, "str", 4), _p("identifier3", 25, "str", 4),
+    _p("identifier4", 25, "str", 4),
+    _p("customer_error_code", 4, "str", 5),
+    _p("prevail_torque_compensate", 6, "torque", 6), _p("tightening_error_status2", 10, "int", 6),
+)
+
+#: MID 0061 revisions 2-7, by tag.
 TAGGED: dict[int, Param] = dict(enumerate((
     _p("cell_id", 4, "int"), _p("channel_id", 2, "int"), _p("controller_name", 25, "str"),
     _p("vin", 25, "str"), _p("job", 4, "int"), _p("pset", 3, "int", core=True),
@@ -104,12 +115,40 @@ TAGGED: dict[int, Param] = dict(enumerate((
     _p("timestamp", 19, "time", core=True), _p("pset_changed", 19, "time"),
     _p("pset_name", 25, "str", 3), _p("torque_unit", 1, "int", 3),
     _p("result_type", 2, "int", 3, core=True),   # blank: whether it may close a bolt unknown
-    _p("identifier2", 25, "str", 4), _p("identifier3", 25, "str", 4),
-    _p("identifier4", 25, "str", 4),
-    _p("customer_error_code", 4, "str", 5),
-    _p("prevail_torque_compensate", 6, "torque", 6), _p("tightening_error_status2", 10, "int", 6),
-    _p("compensated_angle", 7, "float", 7), _p("angle_decimal", 7, "float", 7),
+    *_REVISIONS_4_TO_6,
+    _p("compensated_angle", 7, "x100", 7), _p("angle_decimal", 7, "x100", 7),
 ), start=1))
+
+#: MID 0065 revisions 2-7, by tag (the specification's tables 86-91).
+TAGGED_0065: dict[int, Param] = dict(enumerate((
+    _p("tightening_id", 10, "int", core=True), _p("vin", 25, "str"), _p("job", 4, "int"),
+    _p("pset", 3, "int", core=True), _p("strategy", 2, "int"),
+    _p("strategy_options", 5, "int"), _p("batch_size", 4, "int"),
+    _p("batch_counter", 4, "int"), _p("ok", 1, "ok", core=True), _p("batch_status", 1, "int"),
+    _p("torque_status", 1, "status", core=True), _p("angle_status", 1, "status", core=True),
+    _p("rundown_angle_status", 1, "status"), _p("current_monitoring_status", 1, "status"),
+    _p("selftap_status", 1, "status"), _p("prevail_torque_monitoring_status", 1, "status"),
+    _p("prevail_torque_compensate_status", 1, "status"),
+    _p("tightening_error_status", 10, "int"), _p("torque", 6, "torque", core=True),
+    _p("angle", 5, "angle", core=True), _p("rundown_angle", 5, "angle"),
+    _p("current_monitoring", 3, "pct"), _p("selftap", 6, "torque"),
+    _p("prevail_torque", 6, "torque"), _p("job_sequence_number", 5, "int"),
+    _p("sync_tightening_id", 5, "int"), _p("tool_serial", 14, "str"),
+    _p("timestamp", 19, "time", core=True),
+    _p("torque_unit", 1, "int", 3), _p("result_type", 2, "int", 3, core=True),
+    *_REVISIONS_4_TO_6,
+    _p("station_id", 10, "int", 7), _p("station_name", 25, "str", 7),
+), start=1))
+
+
+def tags(mid: int) -> dict[int, Param]:
+    """The tagged parameters (revisions 2-7) of a MID 0061 or 0065."""
+    return TAGGED if mid == MID_RESULT else TAGGED_0065
+
+
+def fixed_params(mid: int) -> tuple[Param, ...]:
+    """Revision 1's parameters, in order, of a MID 0061 or 0065."""
+    return REV1_0061 if mid == MID_RESULT else REV1_0065
 
 
 def tagged_length(mid: int, revision: int) -> int:
@@ -117,21 +156,21 @@ def tagged_length(mid: int, revision: int) -> int:
     of that revision once: what a controller sends, and what the simulator's writer is
     checked against."""
     if revision == 1:
-        table = REV1_0061 if mid == MID_RESULT else REV1_0065
-        return HEADER_LEN + sum(2 + p.width for p in table)
-    return HEADER_LEN + sum(2 + p.width for p in TAGGED.values() if p.since <= revision)
+        return HEADER_LEN + sum(2 + p.width for p in fixed_params(mid))
+    return HEADER_LEN + sum(2 + p.width for p in tags(mid).values() if p.since <= revision)
 
 
 def split_fields(mid: int, revision: int, text: str) -> dict[str, str]:
     """The raw parameter values of a result message (``text``: header + data), by name."""
     what = f"MID {mid:04d} revision {revision}"
     if revision == 1:
-        return _split_fixed(what, REV1_0061 if mid == MID_RESULT else REV1_0065, text)
+        return _split_fixed(what, fixed_params(mid), text)
+    table = tags(mid)
     out: dict[str, str] = {}
     pos = HEADER_LEN
     while pos < len(text):
         tag_text = text[pos:pos + 2]
-        param = TAGGED.get(int(tag_text)) if tag_text.isdigit() else None
+        param = table.get(int(tag_text)) if tag_text.isdigit() else None
         if param is None:
             raise LayoutError(f"{what}: unknown parameter {tag_text!r} at byte {pos + 1}")
         if param.name in out:
@@ -141,7 +180,7 @@ def split_fields(mid: int, revision: int, text: str) -> dict[str, str]:
                                 f"at byte {len(text)}")
         out[param.name] = text[pos + 2:pos + 2 + param.width]
         pos += 2 + param.width
-    missing = [f"{tag:02d} ({p.name})" for tag, p in TAGGED.items()
+    missing = [f"{tag:02d} ({p.name})" for tag, p in table.items()
                if p.since <= revision and p.name not in out]
     if missing:
         raise LayoutError(f"{what}: {noun(len(missing), 'parameter')} missing: "
@@ -204,13 +243,6 @@ class _Reader:
                                     "YYYY-MM-DD:HH:MM:SS") from None
             return None   # e.g. a pset never changed sent as zeros: not worth a lost result
 
-    def decimal(self, name: str, raw: str) -> float:
-        text = raw.strip(" ")
-        body = text[1:] if text[:1] in "+-" else text
-        if not body or not body.replace(".", "", 1).isdigit():
-            raise ProtocolError(f"{self.what} {name} {raw!r} is not a decimal number")
-        return float(text)
-
 
 _CONVERT: dict[str, Callable[[_Reader, str, str], Any]] = {
     "int": _Reader.number,
@@ -220,7 +252,7 @@ _CONVERT: dict[str, Callable[[_Reader, str, str], Any]] = {
     "angle": lambda r, n, raw: float(r.number(n, raw)),
     "pct": lambda r, n, raw: float(r.number(n, raw)),
     "time": _Reader.time,
-    "float": _Reader.decimal,
+    "x100": lambda r, n, raw: r.number(n, raw) / 100,
 }
 _TORQUES = ("torque", "torque_min", "torque_max", "torque_target", "selftap_min",
             "selftap_max", "selftap", "prevail_torque_min", "prevail_torque_max",
@@ -249,10 +281,8 @@ def parse_tightening(mid: int, revision: int, text: str) -> TighteningResult:
                             f"{MAX_REVISION})")
     what = f"MID {mid:04d}" if revision == 1 else f"MID {mid:04d} revision {revision}"
     fields = split_fields(mid, revision, text)
-    if revision == 1:
-        params = {p.name: p for p in (REV1_0061 if mid == MID_RESULT else REV1_0065)}
-    else:
-        params = {p.name: p for p in TAGGED.values()}
+    params = {p.name: p for p in (fixed_params(mid) if revision == 1
+                                  else tags(mid).values())}
     r = _Reader(what, fields, params)
     v: dict[str, Any] = {name: r.get(name) for name in params}
     unit = _enum(TorqueUnit, v.get("torque_unit"))

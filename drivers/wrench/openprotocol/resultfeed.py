@@ -26,7 +26,7 @@ from drivers.wrench.base import Received, UnreadableResult
 from drivers.wrench.openprotocol import message as op
 from drivers.wrench.openprotocol.channel import Channel
 from drivers.wrench.openprotocol.message import Message
-from drivers.wrench.openprotocol.reading import UntypedInARow, receive
+from drivers.wrench.openprotocol.reading import UntypedInARow, receive, untyped_below
 
 #: MID 0060/0061 and 0064/0065 revisions asked for, highest first: all that ``result.py``
 #: reads
@@ -78,6 +78,7 @@ class ResultFeed:
         renewal at that revision."""
         item = receive(msg)
         with self._cond:
+            item = untyped_below(msg, item, self.subscribed)
             tid = item.tightening_id
             if tid is not None:
                 if tid in self.caught_up:        # fetched while the subscription was renewed
@@ -88,10 +89,10 @@ class ResultFeed:
             habit = self._untyped.habit(item, msg.revision)
             if isinstance(item, UnreadableResult) and item.laid_out_as is not None:
                 self._log.warning(
-                    "%s: MID 0061 revision %d is laid out as revision %d, which carries no "
-                    "result type; kept with its raw text for the station (tightening id "
-                    "%s), its bolt held: it may be a loosening", self.device, msg.revision,
-                    item.laid_out_as,
+                    "%s: MID 0061 %s, which carries no result type; kept with its raw text "
+                    "for the station (tightening id %s), its bolt held: it may be a "
+                    "loosening", self.device, _layout_words(msg.revision, item.laid_out_as,
+                                                            self.subscribed),
                     item.tightening_id if item.tightening_id is not None else "?")
                 if habit:
                     self._lower(msg.mid, msg.revision, item.laid_out_as)
@@ -119,8 +120,10 @@ class ResultFeed:
             return
         self._lowered_said.add((mid, header, read_at))
         self._log.warning(
-            "%s: MID %04d labelled revision %d is laid out as revision %d (with fields "
-            "appended)%s", self.device, mid, header, read_at,
+            "%s: MID %04d %s%s", self.device, mid,
+            f"labelled revision {header} is laid out as revision {read_at} (with fields "
+            "appended)" if header != read_at else f"comes at revision {read_at}, below the "
+            "one asked for",
             "; results are subscribed at that revision from now on"
             if mid == op.MID_RESULT else "")
 
@@ -162,3 +165,12 @@ class ResultFeed:
                 return False
             with self._cond:
                 self._owed -= 1
+
+
+def _layout_words(header: int, laid_out_as: int, asked: int | None) -> str:
+    """How a result without a type came: labelled one revision and laid out as another, or
+    honestly labelled below the revision ``asked`` for."""
+    if header == laid_out_as:
+        return f"revision {header} came though revision {asked} was subscribed"
+    return f"revision {header} is laid out as revision {laid_out_as}"
+

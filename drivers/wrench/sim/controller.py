@@ -626,14 +626,15 @@ def _spoil_torque(mid: int, revision: int, data: bytes) -> bytes:
     """``data`` with letters where its torque's digits are (the layout kept)."""
     if revision == 1:      # the torque's value at bytes 141-146 (0061) or 82-87 (0065)
         start = 140 - 20 if mid == 61 else 81 - 20
-    else:                  # parameter 24, found by tag as the body is written
+    else:                  # parameter 24 (0061) or 19 (0065), found by tag as written
+        widths, torque = (_TAG_WIDTHS, b"24") if mid == 61 else (_TAG_WIDTHS_0065, b"19")
         start = pos = 0
         while not start:
             tag = data[pos:pos + 2]
-            if tag == b"24":
+            if tag == torque:
                 start = pos + 2
-            elif tag.isdigit() and int(tag) in _TAG_WIDTHS:
-                pos += 2 + _TAG_WIDTHS[int(tag)]
+            elif tag.isdigit() and int(tag) in widths:
+                pos += 2 + widths[int(tag)]
             else:
                 raise AssertionError(f"no torque in {data[:40]!r}")
     return data[:start] + b"TORQUE" + data[start + 6:]
@@ -642,6 +643,9 @@ def _spoil_torque(mid: int, revision: int, data: bytes) -> bytes:
 #: the widths of MID 0061 revision 2-7 parameters 01-23 (to find parameter 24, the torque)
 _TAG_WIDTHS = dict(enumerate((4, 2, 25, 25, 4, 3, 2, 5, 4, 4, 1, 1, 1, 1, 1, 1, 1, 1, 1, 10,
                               6, 6, 6), start=1))
+#: ... and of MID 0065 revision 2-7 parameters 01-18 (to find parameter 19, the torque)
+_TAG_WIDTHS_0065 = dict(enumerate((10, 25, 4, 3, 2, 5, 4, 4, 1, 1, 1, 1, 1, 1, 1, 1, 1, 10),
+                                  start=1))
 
 
 class SimWrench(OpenProtocolWrench):

@@ -1,4 +1,5 @@
-"""The simulated controller's result writer: MID 0061 and 0065, revisions 1 to 7.
+"""The simulated controller's result writer: MID 0061 and 0065, revisions 1 to 7 (each MID
+its own lists: MID 0065 is not MID 0061 relabelled).
 
 Why a module of its own, and tables rather than a loop over the client's: the simulator must
 be an independent reading of the specification.  Here each revision is written out as the
@@ -105,6 +106,26 @@ def _rev2(r: SimRecord) -> list[str]:
             r.pset_changed.strftime(TIME)]
 
 
+def _rev2_0065(r: SimRecord) -> list[str]:
+    """MID 0065's parameters 01-28 (the specification's table 86): the tightening id first,
+    no cell, channel, controller name or limits."""
+    return [fixed(r.tightening_id, 10), text(r.vin, 25), "0000", fixed(r.pset, 3), "02",
+            "00000", fixed(r.batch_size, 4), fixed(r.batch_counter, 4), str(int(r.ok)),
+            str(r.batch_status), str(r.torque_status), str(r.angle_status), "1", "1", "1",
+            "1", "1", fixed(_error_bits(r), 10), _tq(r, r.torque), fixed(r.angle, 5),
+            fixed(720 + r.angle, 5), "055", _tq(r, 150), _tq(r, 80),
+            fixed(r.tightening_id % 100000, 5), "00000", text(r.tool_serial, 14),
+            r.timestamp.strftime(TIME)]
+
+
+def _rev3_0065(r: SimRecord) -> list[str]:
+    return [str(r.torque_unit), f"{r.result_type:02d}"]
+
+
+def _rev7_0065(r: SimRecord) -> list[str]:
+    return [fixed(1, 10), text("Sim station", 25)]
+
+
 def _rev3(r: SimRecord) -> list[str]:
     return [text(r.pset_name, 25), str(r.torque_unit), f"{r.result_type:02d}"]
 
@@ -122,10 +143,13 @@ def _rev6(r: SimRecord) -> list[str]:
 
 
 def _rev7(r: SimRecord) -> list[str]:
-    return [f"{r.angle_exact:07.1f}", f"{r.angle_exact:07.2f}"]
+    """The compensated and the final angle, each x 100 in 7 digits."""
+    return [fixed(r.angle_exact * 100, 7), fixed(r.angle_exact * 100, 7)]
 
 
 _APPENDED = (_rev3, _rev4, _rev5, _rev6, _rev7)   # revisions 3..7
+#: MID 0065's revisions 3..7 (tables 87-91): no pset name; the station's id and name last
+_APPENDED_0065 = (_rev3_0065, _rev4, _rev5, _rev6, _rev7_0065)
 
 
 def result_data(mid: int, revision: int, r: SimRecord) -> bytes:
@@ -134,8 +158,8 @@ def result_data(mid: int, revision: int, r: SimRecord) -> bytes:
     if revision == 1:
         values = _rev1_0061(r) if mid == 61 else _rev1_0065(r)
     else:
-        values = _rev2(r)
-        for extend in _APPENDED[:revision - 2]:
+        values = _rev2(r) if mid == 61 else _rev2_0065(r)
+        for extend in (_APPENDED if mid == 61 else _APPENDED_0065)[:revision - 2]:
             values += extend(r)
     return "".join(f"{tag:02d}{v}" for tag, v in enumerate(values, 1)).encode("ascii")
 

@@ -42,7 +42,7 @@ REV3 = [("47", "Wheel nut M14".ljust(25)), ("48", "1"), ("49", "02")]
 REV4 = [("50", "PART-2".ljust(25)), ("51", "PART-3".ljust(25)), ("52", "".ljust(25))]
 REV5 = [("53", "E042")]
 REV6 = [("54", "000040"), ("55", "0000000016")]
-REV7 = [("56", "00097.3"), ("57", "0097.25")]
+REV7 = [("56", "0009730"), ("57", "0009725")]   # x 100, 7 digits (table 81)
 APPENDED = [REV3, REV4, REV5, REV6, REV7]
 
 
@@ -174,8 +174,44 @@ def test_old_result_revision_1_and_2():
         True, 1234, "WVWZZZ1JZ3W386752", 5, 2)
     assert (old1.ok, old1.torque_nm, old1.angle_deg, old1.torque_min_nm) == (
         True, 25.12, 97.0, 0.0)                                 # rev 1 has no limits
-    old2 = parse_result(build(65, 2, REV2))                     # 0065 rev 2+ = 0061's
-    assert old2.fetched and old2.torque_max_nm == 27.5 and old2.tool_serial == "B1234567890123"
+
+
+
+# MID 0065 revision 2: a list of its own (the specification's table 86), not MID 0061's
+OLD_REV2 = [("01", "0000001235"), ("02", "WVWZZZ1JZ3W386752".ljust(25)), ("03", "0012"),
+            ("04", "005"), ("05", "02"), ("06", "00101"), ("07", "0004"), ("08", "0002"),
+            ("09", "0"), ("10", "0"), ("11", "2"), ("12", "1"), ("13", "1"), ("14", "0"),
+            ("15", "1"), ("16", "2"), ("17", "1"), ("18", "0000000008"), ("19", "002790"),
+            ("20", "00097"), ("21", "00817"), ("22", "055"), ("23", "000150"),
+            ("24", "000080"), ("25", "00060"), ("26", "00120"), ("27", "B1234567890123"),
+            ("28", "2025-03-14:08:15:42")]
+OLD_APPENDED = [[("29", "1"), ("30", "02")],                                  # revision 3
+                [("31", "A".ljust(25)), ("32", "B".ljust(25)), ("33", "C".ljust(25))],
+                [("34", "E042")], [("35", "000040"), ("36", "0000000001")],
+                [("37", "0000000003"), ("38", "Line 3 station 7".ljust(25))]]
+
+
+def test_old_result_revisions_2_to_7_are_the_specifications_own_lists():
+    lengths = [226, 233, 314, 320, 340, 379]        # the last byte of tables 86-91
+    for revision, length in zip(range(2, 8), lengths, strict=True):
+        params = OLD_REV2 + [p for more in OLD_APPENDED[:revision - 2] for p in more]
+        raw = build(65, revision, params)
+        assert len(raw) == length == tagged_length(65, revision)
+        r = parse_result(raw)
+        assert (r.fetched, r.tightening_id, r.vin, r.job, r.pset, r.strategy) == (
+            True, 1235, "WVWZZZ1JZ3W386752", 12, 5, 2)
+        assert (r.ok, r.torque_nm, r.angle_deg, r.rundown_angle_deg) == (
+            False, 27.9, 97.0, 817.0)
+        assert (r.torque_status, r.angle_status, r.tightening_error_status) == (
+            Status.HIGH, Status.OK, 8)
+        assert (r.tool_serial, r.timestamp) == ("B1234567890123",
+                                                datetime(2025, 3, 14, 8, 15, 42))
+        assert (r.torque_min_nm, r.torque_max_nm, r.cell_id, r.controller_name) == (
+            0.0, 0.0, 0, "")                            # none in MID 0065
+        assert r.result_type == (ResultType.LOOSENING if revision >= 3 else None)
+        assert r.customer_error_code == ("E042" if revision >= 5 else "")
+    with pytest.raises(ProtocolError):                  # MID 0061's list is not MID 0065's
+        parse_result(build(65, 2, REV2))
 
 
 # -- the simulator's writer against the parser, every revision ---------------------------------
@@ -199,8 +235,9 @@ def test_simulator_and_client_agree_on_every_revision(mid, revision):
     assert (r.torque_status, r.angle_status, r.timestamp) == (
         Status.LOW, Status.OK, datetime(2025, 5, 6, 7, 8, 9))
     if revision >= 3:
-        assert (r.result_type, r.pset_name) == (ResultType.LOOSENING, "Wheel")
-    if revision == 7:
+        assert (r.result_type, r.pset_name) == (ResultType.LOOSENING,
+                                                "Wheel" if mid == 61 else "")
+    if revision == 7 and mid == 61:
         assert (r.compensated_angle_deg, r.angle_decimal_deg) == (46.8, 46.8)
 
 

@@ -8,11 +8,11 @@ import pytest
 
 from drivers.errors import ConnectionLostError, ProtocolError, RefusedError
 from drivers.wrench import open_wrench
-from drivers.wrench.base import ResultType, Status, TorqueUnit
+from drivers.wrench.base import ResultType, Status, TorqueUnit, UnreadableResult
 from drivers.wrench.sim.controller import SimController, SimPset
 
 from ..conftest import FAST, connect, op, read_message, reconnect_within, wait_until
-from .test_revisions import REV2, build
+from .test_revisions import OLD_APPENDED, OLD_REV2, build
 
 
 def ready(w) -> None:
@@ -120,8 +120,10 @@ def test_fetch_result_by_id_newest_and_not_found(sim, tmp_path):
     assert second is not None and newest is not None and gone is None
     assert second.fetched and not pushed[1].fetched
     assert (second.tightening_id, second.torque_nm, second.angle_deg, second.timestamp,
-            second.torque_max_nm) == (2, pushed[1].torque_nm, pushed[1].angle_deg,
-                                      pushed[1].timestamp, pushed[1].torque_max_nm)
+            second.pset, second.result_type) == (
+        2, pushed[1].torque_nm, pushed[1].angle_deg, pushed[1].timestamp, pushed[1].pset,
+        pushed[1].result_type)
+    assert second.torque_max_nm == 0.0            # MID 0065 carries no limits
     assert newest.tightening_id == 3
     assert [r.data for r in sim.received(64)][:3] == [b"0000000000", b"0000000002",
                                                       b"0000000000"]
@@ -174,22 +176,42 @@ def test_fetch_result_checks_its_arguments_and_the_link(sim, tmp_path):
             w.fetch_result(5)
 
 
-def test_an_answer_about_another_tightening_is_refused(peer):
-    """A controller that answers MID 0064 with another tightening is wrong: never taken for
-    the one asked."""
+def _answering_0064(answer: bytes):
+    """A controller's script: a session (no clock: an unknown MID), then ``answer`` to the
+    first MID 0064."""
     def script(c):
         read_message(c)
         c.sendall(op(2, b"010001020103" + b"Scripted".ljust(25)))
         read_message(c)
         c.sendall(op(5, b"0060"))
         assert read_message(c)[4:8] == b"0080"
-        c.sendall(op(4, b"008099"))                         # no clock here: unknown MID
+        c.sendall(op(4, b"008099"))
         assert read_message(c)[4:8] == b"0064"
-        c.sendall(build(65, 2, REV2) + b"\x00")             # tightening 1234
+        c.sendall(answer + b"\x00")
         c.recv(100)
+    return script
 
-    p = peer(script)
+
+def test_an_answer_about_another_tightening_is_refused(peer):
+    """A controller that answers MID 0064 with another tightening is wrong: never taken for
+    the one asked."""
+    p = peer(_answering_0064(build(65, 3, OLD_REV2 + OLD_APPENDED[0])))   # tightening 1235
     with open_wrench(f"openprotocol://127.0.0.1:{p.port}", **FAST) as w:
         with pytest.raises(ProtocolError, match="fetch tightening 7: the controller "
-                                                "answered with tightening 1234"):
+                                                "answered with tightening 1235"):
             w.fetch_result(7)
+
+
+def test_an_unreadable_answer_whose_id_reads_as_another_is_kept_without_an_id(peer):
+    """An answer to MID 0064 that does not read, with another id picked out of it: the id
+    may be another field of a body laid out otherwise, and the message is the controller's
+    record of a tightening all the same: kept whole, its id unknown, never raised away."""
+    garbled = [(t, "00ABCD" if t == "19" else v) for t, v in OLD_REV2]   # the torque
+
+    p = peer(_answering_0064(build(65, 2, garbled)))          # reads as tightening 1235
+    with open_wrench(f"openprotocol://127.0.0.1:{p.port}", **FAST) as w:
+        got = w.fetch_result(7)
+    assert isinstance(got, UnreadableResult) and got.fetched
+    assert got.tightening_id is None and got.pset == 5
+    assert "asked for tightening 7, its body reads as 1235" in got.error
+    assert got.raw.startswith("0226") and "00ABCD" in got.raw
