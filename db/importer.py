@@ -3,10 +3,12 @@
 Why a diff rather than "delete all, insert all": tightening records point at bolts and at the
 parameter version they were tightened with.  The import therefore matches models by name,
 psets by (scope, number) and bolts by (model, id); it updates what may be updated, versions
-what must be kept (parameters of a bolt whose current version has records), retires what is
-referenced and deletes only what nothing refers to.  It runs inside the caller's transaction,
-so a failure anywhere leaves the database as it was; writing nothing when the file matches the
-database is what makes an import idempotent.
+what must be kept (parameters of a bolt whose current version has records or tool enables:
+the trail says which parameters the tool was enabled with), retires what is referenced and
+deletes only what nothing refers to (a bolt whose tool was enabled and never used is
+referenced: deleted, the database refused the import and the station stayed in fault).  It
+runs inside the caller's transaction, so a failure anywhere leaves the database as it was;
+writing nothing when the file matches the database is what makes an import idempotent.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from db.models import (
     ProcessParameters,
     PsetProgram,
     TighteningRecord,
+    ToolEnable,
     Vehicle,
     VehicleModel,
     utcnow,
@@ -104,6 +107,12 @@ def _has_records(session: Session, **where: int) -> bool:
 def _record_count(session: Session, parameters_id: int) -> int:
     return session.scalar(select(func.count()).select_from(TighteningRecord).where(
         TighteningRecord.parameters_id == parameters_id)) or 0
+
+
+def _enable_count(session: Session, *parameters_ids: int) -> int:
+    """Tool enables made with these parameter versions (the trail points at them)."""
+    return session.scalar(select(func.count()).select_from(ToolEnable).where(
+        ToolEnable.parameters_id.in_(parameters_ids))) or 0
 
 
 class _Importer:
@@ -213,11 +222,13 @@ class _Importer:
         retuned = parameters_of(current) != spec.parameters
         if retuned:
             count = _record_count(self.s, current.id)
-            if count:  # never overwrite what records point at: a new version
+            enables = _enable_count(self.s, current.id)
+            if count or enables:  # never overwrite what points at it: a new version
                 self.add_version(row, spec.parameters, current.version + 1)
+                uses = [counted(count, "record")] if count else []
+                uses += [counted(enables, "tool enable")] if enables else []
                 self.report.new_versions.append(
-                    f"{label} v{current.version + 1} "
-                    f"(v{current.version}: {counted(count, 'record')})")
+                    f"{label} v{current.version + 1} (v{current.version}: {', '.join(uses)})")
             else:
                 self.set_parameters(current, spec.parameters)
         if revived:
@@ -241,7 +252,8 @@ class _Importer:
 
     def remove_bolt(self, model_name: str, row: Bolt) -> None:
         self.report.removed.append(f"{model_name}/{row.code}")
-        if _has_records(self.s, bolt_id=row.id):
+        if _has_records(self.s, bolt_id=row.id) or \
+                _enable_count(self.s, *(v.id for v in row.versions)):
             row.removed_at = utcnow()
             return
         self.s.delete(row)  # with its parameter versions (cascade): nothing refers to them

@@ -651,8 +651,9 @@ def add_command_parsers(sub: Any) -> None:
                         "id, station file and URL).  Exit 0: the daemon answers and its "
                         "station is not in fault; 1: it is in fault (the reason is printed); "
                         "2: bad input; 3: no status of this station (no daemon answers, it "
-                        "refused the token, or another station's daemon answered).  For "
-                        "monitoring scripts.")
+                        "refused the token, or another station's daemon answered); 4: not in "
+                        "fault, but its last reload was refused (it runs on what it read "
+                        "before; the reason is printed).  For monitoring scripts.")
     st.add_argument("--json", action="store_true", help="print the status object as it is "
                     "(the station's line on stderr)")
     client_args(st, timeout=5.0)

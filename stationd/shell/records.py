@@ -24,6 +24,7 @@ from typing import Any, TypeVar
 import cv2
 
 from db.checks import record_check
+from db.counting import counted
 from db.curves import link_curves, store_curve
 from db.entered import record_entered
 from db.errors import DataError, DbError, NotFoundError, VehicleClosedError
@@ -146,6 +147,10 @@ class Records:
             log.info("bolt table %s: %d added, %d changed, %d unchanged, %d removed, "
                      "%d new parameter versions", self.cfg.bolts_path, len(r.added),
                      len(r.changed), len(r.unchanged), len(r.removed), len(r.new_versions))
+            if r.removed:   # a table cut short that still reads removes bolts: said loudly
+                log.warning("bolt table %s: %s removed (%s%s): no longer tightened on new "
+                            "vehicles", self.cfg.bolts_path, counted(len(r.removed), "bolt"),
+                            ", ".join(r.removed[:5]), ", ..." if len(r.removed) > 5 else "")
         return self.repo
 
     def _repo(self) -> Repository:
@@ -442,8 +447,12 @@ class Records:
         report = self._writer().close_vehicle(vin)
         # in db report's words (counted and labelled: "missing B01, ..., B50, skipped none,
         # NOK none" gave 45 names and no count)
-        log.info("vehicle %s (%s) closed: %s%s", vin, report.vehicle.model, report.counts(),
-                 closed_after_outage(vin) if after_lift_outage else "")
+        # a vehicle leaving with a bolt not OK is a warning: a journal read by priority
+        # (journalctl -p warning) missed "50 missing" at INFO (an engineer's trial)
+        whole = not report.untightened and not report.nok
+        log.log(logging.INFO if whole else logging.WARNING, "vehicle %s (%s) closed: %s%s",
+                vin, report.vehicle.model, report.counts(),
+                closed_after_outage(vin) if after_lift_outage else "")
         # the screens' "not tightened when the vehicle left": skipped ones too
         return VehicleEnded(time.time(), vin, tuple(report.untightened), tuple(report.nok))
 
@@ -547,6 +556,26 @@ class Records:
             raise DbError(f"the database file {path} was removed") from None
         if (st.st_dev, st.st_ino) != ident:
             raise DbError(f"the database file {path} was replaced by another file")
+
+    def gone_before(self, url: str) -> str | None:
+        """Why the SQLite file the daemon opened is no longer there (removed or replaced)
+        when ``url``, a reload's database, is that same file; else None.  A reload would
+        open a new, empty database there: the vehicle on the lift with no bolt done, its
+        bolts tightened again (an engineer's trial)."""
+        if self._db_file is None:
+            return None
+        path = self._db_file[0]
+        from sqlalchemy.engine import make_url
+
+        u = make_url(url)
+        if u.get_backend_name() != "sqlite" or not u.database \
+                or Path(u.database).resolve() != path:
+            return None
+        try:
+            self.check_file()
+        except DbError as exc:
+            return str(exc)
+        return None
 
     def probe(self, repo: Repository) -> None:
         """The database's "reconnect" (its keeper's thread): one cheap query (the engine's

@@ -490,6 +490,12 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
                 reload.clear()
                 try:  # validate first: an invalid station never stops the running one
                     new = await loop.run_in_executor(None, validate_station, cfg_path)
+                    gone = station.records.gone_before(new.database_url)
+                    if gone is not None:
+                        raise StationError(
+                            f"{gone} while the daemon ran: a reload would start a new, empty "
+                            "database there (the vehicle's bolts done forgotten); put the "
+                            "file back (a backup), or restart the daemon to start anew")
                     await loop.run_in_executor(None, screens.check_move, new)
                     if locks is not None:   # a device another daemon drives: refused
                         hold_locks(locks, new)

@@ -165,6 +165,34 @@ def test_removed_bolts_are_retired_when_referenced_else_deleted(repo, bolts_file
     assert not import_bolts(repo, bolts_file).has_changes
 
 
+def test_a_bolt_whose_tool_was_enabled_and_never_used_is_retired_or_versioned(repo,
+                                                                              bolts_file):
+    """The tool enabled for B2 (the trail points at its parameters), the operator left
+    before tightening: removing B2 from the table retires it, retuning it makes a new
+    version (an engineer's trial: the delete broke the trail's foreign key, the import was
+    refused by the database and the reloaded station stayed in fault)."""
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    b1, b2 = repo.bolts_for_model("SEDAN")[:2]
+    for b in (b1, b2):
+        repo.note_enable("VIN1", b.bolt_id, 1, b.parameters_id, {}, datetime.now(UTC))
+    bolts_file.write_text(BASE.replace(
+        "      - id: B2\n        name: two\n        position: [100, 0, 0]\n"
+        "        torque: {target: 25, min: 23, max: 27}\n"
+        "        angle: {target: 30, min: 10, max: 50}\n", "")
+        .replace("target: 50, min: 45", "target: 52, min: 45"))
+    report = import_bolts(repo, bolts_file)
+    assert report.removed == ["SEDAN/B2"]
+    assert report.new_versions == ["SEDAN/B1 v2 (v1: 1 tool enable)"]
+    with repo.engine.connect() as c:
+        kept = c.execute(select(Bolt).where(Bolt.code == "B2")).one()
+        assert kept.removed_at is not None
+        v1 = c.execute(select(ProcessParameters).where(
+            ProcessParameters.id == b1.parameters_id)).one()
+        assert v1.torque_target == 50                     # the enable's, unchanged
+    assert [b.bolt_id for b in repo.bolts_for_model("SEDAN")] == ["B1", "B3"]
+
+
 def test_vehicle_cycle_and_close_summary(repo, bolts_file):
     import_bolts(repo, bolts_file)
     info = repo.start_vehicle("WVW1234567890", "SEDAN")

@@ -8,9 +8,13 @@ reason in STATUS=, and the daemon recovers when the device is back."""
 from __future__ import annotations
 
 import itertools
+import os
 import signal
 import socket
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
 
 import pytest
 
@@ -51,14 +55,22 @@ def test_devices_down_at_boot_are_faults_then_it_recovers_and_a_closed_vin_is_a_
         assert d.p.poll() is None
 
 
-@pytest.mark.timeout(300)
-def test_sighup_with_a_bad_bolt_table_is_refused_and_with_a_down_device_is_a_fault(tmp_path):
+@contextmanager
+def _waiting(tmp_path: Path) -> Iterator[tuple[Proc, int]]:
+    """A daemon on a simulated lift and controller, ready and waiting for a vehicle; and its
+    lift's port."""
     lift_port, ctl_port = free_port(), free_port()
     plc, ctl = SimulatedPlc(), controller(seed=2)
     serve_devices(plc, ctl, lift_port, ctl_port)
     with stops_cleanly(Proc(tmp_path, lift_port, ctl_port), ctl.close, plc.close) as d:
         d.status("READY=1")
         d.status("waiting for vehicle")
+        yield d, lift_port
+
+
+@pytest.mark.timeout(300)
+def test_sighup_with_a_bad_bolt_table_is_refused_and_with_a_down_device_is_a_fault(tmp_path):
+    with _waiting(tmp_path) as (d, lift_port):
         bolts = tmp_path / "bolts.yaml"
         good = bolts.read_text()
         assert good.count("    - id: B02\n") == 1
@@ -143,4 +155,24 @@ def test_a_plc_answering_garbage_stays_a_fault_never_back_between_answers(tmp_pa
         d.wait_log("fault: lift")
         time.sleep(8.0)      # several reconnect attempts (backoff 0.5 s doubling)
         assert "lift: back" not in d.log(), d.log()[-2000:]
+        assert d.p.poll() is None
+
+
+@pytest.mark.timeout(300)
+def test_a_reload_after_the_database_file_was_removed_is_refused(tmp_path):
+    """The database file removed under the running daemon (a fault, said), then a reload:
+    it would open a new, empty database there and the vehicle on the lift would come back
+    with no bolt done, its bolts tightened again (an engineer's trial).  Refused, the file
+    not made again; put back, a reload goes through."""
+    with _waiting(tmp_path) as (d, _):
+        db = tmp_path / "station.db"
+        moved = tmp_path / "kept.db"
+        os.rename(db, moved)
+        d.p.send_signal(signal.SIGHUP)
+        d.status("reload refused")
+        assert "was removed while the daemon ran" in d.log()
+        assert not db.exists() and d.p.poll() is None
+        os.rename(moved, db)
+        d.p.send_signal(signal.SIGHUP)
+        d.wait_log("configuration reloaded")
         assert d.p.poll() is None

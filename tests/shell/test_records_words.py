@@ -65,3 +65,25 @@ def test_typed_reasons_are_stored_in_the_words_the_core_wrote(tmp_path: Path) ->
                        "result 42 (pset 3) outside any tightening"]
     assert whats == ["batch increment", "result type 9 (unknown)", NOT_TAKEN]
     assert comments == ["idle for 600 s"]
+
+
+def test_a_table_that_removes_bolts_and_a_vehicle_leaving_unfinished_are_warnings(
+        tmp_path: Path, caplog: Any) -> None:
+    """A bolt table cut short that still reads (30 of 50 bolts gone on a SIGHUP) and a
+    vehicle leaving with bolts missing were INFO lines: a journal read by priority
+    (``journalctl -p warning``) showed neither (an engineer's trial)."""
+    records = _records(tmp_path)
+    assert records.repo is not None
+    records.repo.start_vehicle("VIN1", "SEDAN")
+    caplog.set_level("INFO", logger="stationd.shell.records")
+    records.close_vehicle("VIN1")
+    bolts = tmp_path / "bolts.yaml"
+    bolts.write_text(BASE.split("      - id: B2")[0] + BASE.split("  WAGON:")[1].join(
+        ["  WAGON:", ""]))
+    records.repo.close()
+    records.open()
+    warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert any(m.startswith("vehicle VIN1 (SEDAN) closed: ") and "3 missing" in m
+               for m in warned), warned
+    assert any("2 bolts removed (SEDAN/B2, SEDAN/B3)" in m for m in warned), warned
+    records.repo.close()
