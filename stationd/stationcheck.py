@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from drivers.counting import counted
 from drivers.wrench import takes_targets
 from stationd.config import STATE_DIRECTORY, StationConfig, read_all, read_station
@@ -135,6 +137,10 @@ def check_station(path: str | Path) -> StationCheck:
         warning = _psets_only_warning(cfg.wrench.url, bolts.table, top["wrench"])
         if warning is not None:
             warnings.append(warning)
+    if bolts is not None and bolts.table is not None and "pairs" in top:
+        warning = _unseen_bolts_warning(cfg, bolts.table, top["pairs"])
+        if warning is not None:
+            warnings.append(warning)
     if cfg.bolts_path is None and not read.errors:
         # (a file with errors is read in part: a duplicated key drops its sections, and a
         # station read without its bolts: and database: lines would warn of what it has)
@@ -245,6 +251,33 @@ def _no_models_warning(found: tuple[BoltTable, str] | str | None,
     return ConfigError(f"no bolt table (bolts:) and {where}: every vehicle would be refused "
                        "(unknown vehicle model code); name a bolt table, or import one "
                        f"(stationd db import BOLTS.yaml --config {path})", path=path)
+
+
+def _unseen_bolts_warning(cfg: StationConfig, table: Any, node: YamlNode
+                          ) -> ConfigError | None:
+    """Bolts that no registered pair would see the wrench's marker on (the wrench upright on
+    the bolt, its marker ``tool.length_mm`` below it, projected with each pair's calibration
+    as the reference markers are): a position typed in metres, or in another frame, would be
+    missing on every vehicle, and ``config check`` called it ok (an engineer's trial).  A
+    warning: a pair not registered yet, or a tilted wrench, may still see it."""
+    from stationd.localize.references import project
+
+    pairs = [(p.calibration, p.to_vehicle) for p in cfg.pairs.values()
+             if p.to_vehicle is not None]
+    if not pairs or len(pairs) < len(cfg.pairs):
+        return None     # a pair not registered yet (warned of) may be the one that sees it
+    below = np.array([*cfg.tool.offset_mm, cfg.tool.length_mm])
+    unseen = [f"{b.bolt_id} ({m.name}) at {[round(v, 4) for v in b.position]}"
+              for m in table.models for b in m.bolts
+              if not any(project(cal, tv, np.asarray(b.position) - below, cfg.marker)
+                         is not None for cal, tv in pairs)]
+    if not unseen:
+        return None
+    more = f" and {len(unseen) - 3} more" if len(unseen) > 3 else ""
+    return node.error(f"{'; '.join(unseen[:3])}{more}: seen by no registered pair (the "
+                      f"wrench's marker, {cfg.tool.length_mm:g} mm below the bolt with the "
+                      "wrench upright, is not in front of both cameras and inside both "
+                      f"images): check the positions in {cfg.bolts_path} (vehicle frame, mm)")
 
 
 def _psets_only_warning(url: str, table: Any, node: YamlNode) -> ConfigError | None:

@@ -140,9 +140,14 @@ def test_shipped_station_files_check_clean():
     # its database is in the service's StateDirectory, made by systemd at the service's start:
     # no error, but while it is not there a daemon run by hand refuses the file, which the
     # check says (it said ok alone: a line engineer's trial)
+    # its bolt table is another vehicle than the simulated pair looks at: said (a station
+    # made from the example has its own pairs and table)
     example = check_station(ROOT / "config" / "station.example.yaml")
     assert example.ok and example.bolts is not None
     said = [w.message for w in example.warnings]
+    unseen = [m for m in said if "seen by no registered pair" in m]
+    assert len(unseen) == 1 and unseen[0].startswith("SF-FL (SEDAN-A) at [-350.0, 420.0, 0.0]")
+    said.remove(unseen[0])
     if Path("/var/lib/stationd").exists():
         assert said == []
     else:
@@ -574,6 +579,23 @@ def test_a_bolt_without_pset_on_a_psets_only_controller_is_a_warning(sim_copy):
     [warning] = result.warnings
     assert warning.key == "wrench" and "B01 (SIM-1): no pset" in str(warning)
     assert "selects psets only" in str(warning)
+
+
+def test_a_bolt_no_registered_pair_would_see_is_a_warning(sim_copy):
+    """A position typed in metres: the wrench's marker under it is in no pair's view, and the
+    bolt would be missing on every vehicle (an engineer's trial: ``config check`` said ok).
+    The simulated station's own bolts are all in view: no warning."""
+    assert not check_station(sim_copy / "station.yaml").warnings
+    bolts = sim_copy / "bolts.yaml"
+    text = bolts.read_text()
+    assert text.count("[1489.8, -529.3, -44.3]") == 1
+    bolts.write_text(text.replace("[1489.8, -529.3, -44.3]", "[1.4898, -0.5293, -0.0443]"))
+    result = check_station(sim_copy / "station.yaml")
+    assert result.ok
+    [warning] = result.warnings
+    assert warning.key == "pairs" and "B01 (SIM-1) at [1.4898, -0.5293, -0.0443]: seen by " \
+        "no registered pair" in str(warning)
+    assert f"check the positions in {bolts}" in str(warning)
 
 
 @pytest.mark.parametrize(("old", "new", "key", "message"), [

@@ -253,14 +253,22 @@ def test_config_check_tells_station_files_from_bolt_tables(run, tmp_path):
     sim = ROOT / "config" / "sim"
     example = ROOT / "config" / "station.example.yaml"
     code, out, err = run("config", "check", sim / "station.yaml", example, EXAMPLE)
-    # the example's database folder is the service's, made by systemd: said while missing
+    # the example's database folder is the service's, made by systemd: said while missing;
+    # and its bolt table is another vehicle than the simulated pair it names looks at
     url_line = _first_line(example, "  url: 'sqlite")
-    assert code == 0 and err == ("" if Path("/var/lib/stationd").exists() else
-                                 f"warning: {example}:{url_line}: database.url: "
-                                 "folder /var/lib/stationd does not exist yet: systemd makes "
-                                 "it when the service starts (StateDirectory=stationd); "
-                                 "create it, owned by the user the station runs as, to run "
-                                 "the daemon by hand (stationd run)\n")
+    pairs_line = _first_line(example, "  front:")   # the section's value
+    assert code == 0
+    assert err.splitlines() == [
+        f"warning: {example}:{pairs_line}: pairs: SF-FL (SEDAN-A) at [-350.0, 420.0, 0.0]; "
+        "SF-FR (SEDAN-A) at [-350.0, -420.0, 0.0]; SF-RL (SEDAN-A) at [250.0, 400.0, 5.0] and 4 "
+        "more: seen by no registered pair (the wrench's marker, 300 mm below the bolt with the "
+        "wrench upright, is not in front of both cameras and inside both images): check the "
+        f"positions in {EXAMPLE} (vehicle frame, mm)",
+        *([] if Path("/var/lib/stationd").exists() else [
+            f"warning: {example}:{url_line}: database.url: folder /var/lib/stationd does not "
+            "exist yet: systemd makes it when the service starts (StateDirectory=stationd); "
+            "create it, owned by the user the station runs as, to run the daemon by hand "
+            "(stationd run)"])]
     assert out.splitlines() == [
         f"{sim / 'station.yaml'}: ok, station: 4 pairs, 8 cameras; "
         f"bolts {sim / 'bolts.yaml'}: 1 model, 50 bolts, 3 psets",
