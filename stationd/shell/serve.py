@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import enum
 import logging
 import random
 import signal
@@ -62,9 +63,20 @@ OPEN_RETRY_S = (1.0, 30.0)   # a database that does not open: first and longest 
 Beside = Callable[[StationConfig, Station, asyncio.Event], Coroutine[Any, Any, None]]
 
 
-async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bool:
+class Opened(enum.Enum):
+    """How :func:`_open` ended."""
+
+    OPEN = "open"          # the database opened: the station runs
+    STOPPED = "stopped"    # stopped meanwhile
+    RELOAD = "reload"      # a reload asked meanwhile: its files read before a retry
+
+
+async def _open(station: Station, notifier: Notifier, stop: asyncio.Event,
+                reload: asyncio.Event | None = None) -> Opened:
     """Open the station's database (its devices are the station's to retry); a database that
-    does not open is retried with backoff, never an exit.  False if stopped meanwhile."""
+    does not open is retried with backoff, never an exit.  A reload asked while it waits
+    ends the wait (an engineer who fixed the database's path waited up to 30 s for the next
+    retry, and that retry was of the old path)."""
     loop = asyncio.get_running_loop()
     backoff = Backoff(*OPEN_RETRY_S, rng=random.Random("database"))  # noqa: S311 - jitter
     told = False
@@ -73,7 +85,7 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bo
             await loop.run_in_executor(None, station.open)
             if told:
                 station.heard_before_run(DeviceBack(time.time(), DATABASE))
-            return True
+            return Opened.OPEN
         except STATION_FAULTS as exc:
             wait = backoff.next()
             log.error("fault: database: %s (retrying in %.0f s)", one_line(exc), wait)
@@ -83,11 +95,48 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event) -> bo
             # the core decides; the screens and /healthz say it too (before the loop runs)
             station.heard_before_run(DeviceFault(time.time(), DATABASE, FaultKind.DOWN,
                                                  one_line(exc)))
-        try:
-            await asyncio.wait_for(stop.wait(), wait)
-        except TimeoutError:
-            pass
-    return False
+        waits = {asyncio.create_task(stop.wait())}
+        if reload is not None:
+            waits.add(asyncio.create_task(reload.wait()))
+        await asyncio.wait(waits, timeout=wait, return_when=asyncio.FIRST_COMPLETED)
+        for w in waits:
+            w.cancel()
+        if reload is not None and reload.is_set() and not stop.is_set():
+            return Opened.RELOAD
+    return Opened.STOPPED
+
+
+async def _reloaded(cfg_path: str, station: Station, screens: Screens,
+                    locks: StationLocks | None, notifier: Notifier) -> StationConfig | None:
+    """The station file read again for a reload and checked (every file it names, the
+    screens' port, the devices' locks, the database still there): the new configuration, or
+    None with the refusal said (journal, systemd's status, the screens); the running station
+    is never stopped for an invalid one."""
+    loop = asyncio.get_running_loop()
+    try:  # validate first: an invalid station never stops the running one
+        new = await loop.run_in_executor(None, validate_station, cfg_path)
+        gone = station.records.gone_before(new.database_url)
+        if gone is not None:
+            raise StationError(
+                f"{gone} while the daemon ran: a reload would start a new, empty "
+                "database there (the vehicle's bolts done forgotten); put the "
+                "file back (a backup), or restart the daemon to start anew")
+        await loop.run_in_executor(None, screens.check_move, new)
+        if locks is not None:   # a device another daemon drives: refused
+            hold_locks(locks, new)
+        return new
+    except StationError as exc:
+        more = await loop.run_in_executor(None, more_errors, cfg_path)
+        log.error("reload refused, keeping the running configuration: %s%s",
+                  one_line(exc), more)
+        notifier.status(f"reload refused: {one_line(exc)}")
+        screens.refused(one_line(exc))
+    except Exception as exc:   # a bug in a reader: still never the running station
+        log.exception("reload refused (an error in reading the configuration), "
+                      "keeping the running configuration: %s", one_line(exc))
+        notifier.status(f"reload refused: {one_line(exc)}")
+        screens.refused(one_line(exc))
+    return None
 
 
 async def serve(cfg_path: str, cfg: StationConfig, notifier: Notifier,
@@ -464,10 +513,19 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
         station.announce()   # the screens forget the last configuration's device reports
         station.frames = screens.frames
         station.carry(carried, owed)
-        if not await _open(station, notifier, stop):
+        opened = await _open(station, notifier, stop, reload)
+        if opened is not Opened.OPEN:
             await loop.run_in_executor(None, station.close)
-            notifier.stopping("stopping")
-            return
+            if opened is Opened.STOPPED:
+                notifier.stopping("stopping")
+                return
+            carried, owed = station.unsaved(), station.locks_owed()
+            reload.clear()   # the database did not open: read the files again, retry
+            again = await _reloaded(cfg_path, station, screens, locks, notifier)
+            if again is not None:
+                log.info("configuration reloaded; opening the database again")
+                cfg = again
+            continue
         await screens.follow(cfg)   # their results, if the database opened only now
         inner = asyncio.Event()
         extra = None if beside is None else asyncio.create_task(beside(cfg, station, inner))
@@ -488,30 +546,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
                 w.cancel()
             if reload.is_set() and not stop.is_set():
                 reload.clear()
-                try:  # validate first: an invalid station never stops the running one
-                    new = await loop.run_in_executor(None, validate_station, cfg_path)
-                    gone = station.records.gone_before(new.database_url)
-                    if gone is not None:
-                        raise StationError(
-                            f"{gone} while the daemon ran: a reload would start a new, empty "
-                            "database there (the vehicle's bolts done forgotten); put the "
-                            "file back (a backup), or restart the daemon to start anew")
-                    await loop.run_in_executor(None, screens.check_move, new)
-                    if locks is not None:   # a device another daemon drives: refused
-                        hold_locks(locks, new)
-                except StationError as exc:
-                    new = None
-                    more = await loop.run_in_executor(None, more_errors, cfg_path)
-                    log.error("reload refused, keeping the running configuration: %s%s",
-                              one_line(exc), more)
-                    notifier.status(f"reload refused: {one_line(exc)}")
-                    screens.refused(one_line(exc))
-                except Exception as exc:   # a bug in a reader: still never the running station
-                    new = None
-                    log.exception("reload refused (an error in reading the configuration), "
-                                  "keeping the running configuration: %s", one_line(exc))
-                    notifier.status(f"reload refused: {one_line(exc)}")
-                    screens.refused(one_line(exc))
+                new = await _reloaded(cfg_path, station, screens, locks, notifier)
         if new is not None and not stop.is_set():
             # systemd: reloading until the new station's READY=1 (never STOPPING=1 here)
             notifier.reloading("reloading: closing the devices")

@@ -176,3 +176,26 @@ def test_a_reload_after_the_database_file_was_removed_is_refused(tmp_path):
         d.p.send_signal(signal.SIGHUP)
         d.wait_log("configuration reloaded")
         assert d.p.poll() is None
+
+
+@pytest.mark.timeout(300)
+def test_a_reload_while_the_database_does_not_open_reads_the_files_at_once(tmp_path):
+    """The database does not open at the start (a file that is no database): an engineer
+    points the station at another one and reloads.  The reload is read at once, not at the
+    next retry of the old path (up to 30 s later, an engineer's trial), and the station runs
+    on the new database."""
+    lift_port, ctl_port = free_port(), free_port()
+    plc, ctl = SimulatedPlc(), controller(seed=2)
+    serve_devices(plc, ctl, lift_port, ctl_port)
+    (tmp_path / "station.db").write_bytes(b"not a database, " * 64)
+    with stops_cleanly(Proc(tmp_path, lift_port, ctl_port), ctl.close, plc.close) as d:
+        d.status("fault: database")
+        station = tmp_path / "station.yaml"
+        text = station.read_text()
+        assert text.count(f"sqlite:///{tmp_path}/station.db") == 1
+        station.write_text(text.replace(f"sqlite:///{tmp_path}/station.db",
+                                        f"sqlite:///{tmp_path}/other.db"))
+        d.p.send_signal(signal.SIGHUP)
+        d.wait_log("configuration reloaded; opening the database again")
+        d.status("waiting for vehicle")
+        assert (tmp_path / "other.db").exists() and d.p.poll() is None

@@ -10,9 +10,10 @@ from typing import Any
 
 from db.errors import DbError
 from stationd.bus import EventBus
+from stationd.shell import serve
 from stationd.shell.daemon import Station
 from stationd.shell.sdnotify import Notifier
-from stationd.shell.serve import _open
+from stationd.shell.serve import Opened, _open
 from stationd.station.core import StationCore
 from stationd.station.events import DeviceHealth, StateChanged
 
@@ -49,10 +50,10 @@ class FlakyStation:
 def test_a_database_that_does_not_open_is_retried_then_the_daemon_goes_on():
     station, notifier = FlakyStation(), Recording()
 
-    async def main() -> bool:
+    async def main() -> Opened:
         return await asyncio.wait_for(_open(station, notifier, asyncio.Event()), 30)
 
-    assert asyncio.run(main()) is True
+    assert asyncio.run(main()) is Opened.OPEN
     assert station.attempts == 3
     ready = [f for f in notifier.sent if f.get("ready") == 1]
     assert len(ready) == 1 and "fault: database: unable to open" in str(ready[0]["status"])
@@ -72,8 +73,27 @@ def test_stopping_while_the_database_is_down_ends_the_wait():
 
     stop = asyncio.Event()
 
-    async def main() -> bool:
+    async def main() -> Opened:
         asyncio.get_running_loop().call_later(0.2, stop.set)
         return await asyncio.wait_for(_open(Down(), Recording(), stop), 10)  # type: ignore[arg-type]
 
-    assert asyncio.run(main()) is False
+    assert asyncio.run(main()) is Opened.STOPPED
+
+
+def test_a_reload_while_the_database_is_down_ends_the_wait(monkeypatch):
+    """An engineer who fixed the database's path sent SIGHUP and waited for the next retry
+    (up to 30 s), which was of the old path: the reload ends the wait at once, for the
+    files to be read again.  Here every retry waits 600 s: only the reload ends it."""
+    class Down(FlakyStation):
+        def open(self) -> None:
+            self.attempts += 1
+            raise DbError("no database")
+
+    monkeypatch.setattr(serve, "OPEN_RETRY_S", (600.0, 600.0))
+    stop, reload, down = asyncio.Event(), asyncio.Event(), Down()
+
+    async def main() -> Opened:
+        asyncio.get_running_loop().call_later(0.2, reload.set)
+        return await asyncio.wait_for(_open(down, Recording(), stop, reload), 120)
+
+    assert asyncio.run(main()) is Opened.RELOAD and down.attempts == 1
