@@ -708,7 +708,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     so inside."""
     with _signals(restore=argv is not None) as stopped:
         try:
-            return _main(argv, stopped)
+            code = _main(argv, stopped)
+            if stopped.signal is None:
+                return code
+            raise KeyboardInterrupt   # one deferred and not raised before the command ended
         except SystemExit:
             raise
         except BaseException:
@@ -746,6 +749,9 @@ class _Stopped:
 
 #: the signals a command is stopped by
 STOPPING = (signal.SIGINT, signal.SIGTERM)
+#: a signal that lands in the import machinery's own code is asked again this much later,
+#: at most this many times in a row (then raised wherever it lands)
+DEFER_S, DEFER_TIMES = 0.02, 50
 
 
 @contextmanager
@@ -762,15 +768,27 @@ def _signals(restore: bool) -> Iterator[_Stopped]:
         yield stopped     # signals reach the main thread only: nothing to take over here
         return
 
+    deferred: list[int] = [0]
+    pending: list[threading.Timer] = []      # the one signal asked again, if any
+
+    def again(signum: int) -> None:
+        if signal.getsignal(signum) is on_signal:   # not after the handlers were put back
+            os.kill(os.getpid(), signum)
+
     def on_signal(signum: int, frame: FrameType | None) -> None:
         if stopped.signal is None:
             stopped.signal = signum
-        if _importing(frame):
-            # raised here (a module lock's weakref callback, say) the interrupt would be
-            # printed as "Exception ignored" with its traceback and lost: asked again soon
-            again = threading.Timer(0.02, os.kill, (os.getpid(), signum))
-            again.daemon = True
-            again.start()
+        for timer in pending:
+            timer.cancel()
+        pending.clear()
+        if _importing(frame) and deferred[0] < DEFER_TIMES:
+            # raised here (a module lock's weakref callback) the interrupt would be printed
+            # as "Exception ignored" with its traceback and lost: asked again a moment later
+            deferred[0] += 1
+            timer = threading.Timer(DEFER_S, again, (signum,))
+            timer.daemon = True
+            pending.append(timer)
+            timer.start()
             return
         raise KeyboardInterrupt
 
@@ -781,6 +799,8 @@ def _signals(restore: bool) -> Iterator[_Stopped]:
     try:
         yield stopped
     finally:
+        for timer in pending:   # a signal deferred and not raised: main() says it
+            timer.cancel()
         signal.pthread_sigmask(signal.SIG_BLOCK, STOPPING)   # no signal while they change
         try:
             for s, handler in before.items():
@@ -793,13 +813,11 @@ def _signals(restore: bool) -> Iterator[_Stopped]:
 
 
 def _importing(frame: FrameType | None) -> bool:
-    """Whether ``frame`` runs inside the import machinery, where an exception from a signal
-    handler can land in a callback that prints it and goes on (``_get_module_lock``'s)."""
-    while frame is not None:
-        if frame.f_code.co_filename.startswith("<frozen importlib"):
-            return True
-        frame = frame.f_back
-    return False
+    """Whether ``frame``, the one a signal interrupted, is the import machinery's own code,
+    where an exception from a signal handler can land in a callback that prints it and goes
+    on (``_get_module_lock``'s weakref callback).  Only the innermost frame: a module's own
+    code run by an import (seconds, or hung) is interrupted at once."""
+    return frame is not None and frame.f_code.co_filename.startswith("<frozen importlib")
 
 
 @contextmanager

@@ -1,10 +1,11 @@
-"""A Ctrl-C that lands inside the import machinery is not printed and lost.
+"""A Ctrl-C that lands in the import machinery's own code is not printed and lost.
 
 An exception raised by a signal handler while a module lock's weakref callback runs
 (``importlib._bootstrap._get_module_lock``) is printed as "Exception ignored in ..." with a
 traceback and swallowed: the user saw a traceback and the command went on.  The handler
-defers such an interrupt a moment instead.  The frame is taken from inside a real import (a
-meta path finder), the handler the one :func:`stationd.cli._signals` installs."""
+defers such an interrupt a moment instead, a bounded number of times, and only there: a
+module's own code run by an import is interrupted at once.  The frames are taken from a real
+import (a meta path finder), the handler the one :func:`stationd.cli._signals` installs."""
 
 from __future__ import annotations
 
@@ -20,17 +21,19 @@ from stationd import cli
 
 
 class _FrameTaker(importlib.abc.MetaPathFinder):
-    """Keeps the frame of its ``find_spec`` for one module name: a frame in the import."""
+    """Keeps, for one module name, its own frame (code run by an import) and its caller's
+    (the import machinery's own)."""
 
-    frame: FrameType | None = None
+    ours: FrameType | None = None
+    machinery: FrameType | None = None
 
     def find_spec(self, name: str, path: object, target: ModuleType | None = None) -> None:
         if name == "stationd_test_no_such_module":
-            self.frame = sys._getframe()
+            self.ours, self.machinery = sys._getframe(), sys._getframe(1)
         return None
 
 
-def _import_frame() -> FrameType:
+def _frames() -> tuple[FrameType, FrameType]:
     taker = _FrameTaker()
     sys.meta_path.insert(0, taker)
     try:
@@ -38,22 +41,24 @@ def _import_frame() -> FrameType:
             __import__("stationd_test_no_such_module")
     finally:
         sys.meta_path.remove(taker)
-    assert taker.frame is not None
-    return taker.frame
+    assert taker.ours is not None and taker.machinery is not None
+    return taker.ours, taker.machinery
 
 
-def test_a_frame_of_the_import_machinery_is_told_from_ours():
-    assert cli._importing(_import_frame())
+def test_only_the_import_machinery_s_own_frame_is_told_apart():
+    ours, machinery = _frames()
+    assert cli._importing(machinery)
+    assert not cli._importing(ours)          # code an import runs: interrupted at once
     assert not cli._importing(sys._getframe())
     assert not cli._importing(None)
 
 
-def test_an_interrupt_inside_an_import_comes_a_moment_later_not_lost():
-    frame = _import_frame()
+def test_an_interrupt_in_the_import_machinery_comes_a_moment_later_not_lost():
+    _, machinery = _frames()
     with cli._signals(restore=True) as stopped:
         handler = signal.getsignal(signal.SIGINT)
         assert callable(handler)
-        handler(signal.SIGINT, frame)        # no exception here: it would be printed and lost
+        handler(signal.SIGINT, machinery)    # no exception here: it would be printed, lost
         assert stopped.signal == signal.SIGINT
         with pytest.raises(KeyboardInterrupt):
             deadline = time.monotonic() + 30
@@ -61,10 +66,45 @@ def test_an_interrupt_inside_an_import_comes_a_moment_later_not_lost():
                 time.sleep(0.01)
 
 
-def test_an_interrupt_outside_an_import_stops_at_once():
-    with cli._signals(restore=True) as stopped:
+def test_a_deferred_interrupt_is_deferred_a_bounded_number_of_times():
+    _, machinery = _frames()
+    with cli._signals(restore=True):
         handler = signal.getsignal(signal.SIGINT)
         assert callable(handler)
+        deferred = 0
         with pytest.raises(KeyboardInterrupt):
-            handler(signal.SIGINT, sys._getframe())
-        assert stopped.signal == signal.SIGINT
+            for _ in range(cli.DEFER_TIMES + 1):
+                handler(signal.SIGINT, machinery)
+                deferred += 1
+        assert deferred == cli.DEFER_TIMES
+        time.sleep(10 * cli.DEFER_S)      # no timer left to ask again: nothing raised here
+
+
+def test_an_interrupt_outside_the_import_machinery_stops_at_once():
+    ours, _ = _frames()
+    for frame in (ours, sys._getframe()):
+        with cli._signals(restore=True) as stopped:
+            handler = signal.getsignal(signal.SIGINT)
+            assert callable(handler)
+            with pytest.raises(KeyboardInterrupt):
+                handler(signal.SIGINT, frame)
+            assert stopped.signal == signal.SIGINT
+
+
+def test_a_command_that_ends_with_an_interrupt_deferred_says_it_was_interrupted(
+        monkeypatch, capsys):
+    """A Ctrl-C deferred in the import machinery and a command that ended before it was
+    asked again: the command's own code was returned, and the signal then ended the process
+    silently.  It ends as interrupted, with its line."""
+    _, machinery = _frames()
+
+    def command(argv: object, stopped: object) -> int:
+        handler = signal.getsignal(signal.SIGINT)
+        assert callable(handler)
+        handler(signal.SIGINT, machinery)
+        return 0
+
+    monkeypatch.setattr(cli, "_main", command)
+    assert cli.main(["anything"]) == cli.EXIT_SIGINT
+    assert capsys.readouterr().err == "stationd: interrupted (Ctrl-C)\n"
+    time.sleep(10 * cli.DEFER_S)          # its timer cancelled: nothing raised here

@@ -297,15 +297,14 @@ class ControllerFeed:
         unknown: str | None = None
         while since is not None and got is not None and len(found) < MAX_FETCH:
             at = made_at(got, offset)
-            if at is None:
-                # its time unknown: where the history begins too; it is kept all the same
-                # (unattributed, or held against the cut's bolt where it does not read)
+            if at is None and offset is None:
+                # no time can be placed: where the history begins is not known; the newest
+                # is kept all the same (unattributed, or held against the cut's bolt)
                 unknown = "the controller's clock is not known: its results cannot be " \
-                          "placed before or after the link was lost" if offset is None \
-                    else f"the time of tightening {tid} could not be read"
+                          "placed before or after the link was lost"
                 found.append((tid, got))
                 break
-            if at < since - CLOCK_SLACK_S:
+            if at is not None and at < since - CLOCK_SLACK_S:
                 follows = tid          # made before: the history ends here
                 break
             found.append((tid, got))

@@ -163,13 +163,29 @@ def test_a_register_driven_controller_is_read_once_before_it_is_told():
 
 
 def test_a_result_whose_time_does_not_read_is_kept_in_a_first_catch_up():
-    """No tightening recorded yet, the controller's newest does not read (its time with it):
-    where it lies against the cut is not known, but it is the controller's record of a
-    tightening all the same: fed to the core (stored, its bolt held), not dropped (an
-    independent controller's trial: two results made during a cut stored nowhere)."""
+    """No tightening recorded yet; the controller's newest (3) does not read, its time with
+    it; 2 and 1 were made since the link was lost.  Where 3 lies against the cut is not
+    known, but it is the controller's record of a tightening: fed to the core (stored, the
+    cut's bolt held), and the walk back goes on past it to the results it can place (an
+    independent controller's trial: two results made during a cut stored nowhere; a
+    reviewer: the ones below the unreadable one were never fetched)."""
     newest = UnreadableResult(raw="0226006500" + "x" * 40, mid=65, revision=2,
                               error="MID 0065 revision 2 torque '00ABCD' is not a number",
-                              tightening_id=2, pset=1, fetched=True)
-    fed = catch_up(Controller({0: newest, 1: res(1)}), last=None)
-    assert [e.unreadable.tightening_id for e in fed if isinstance(e, UnreadableIn)] == [2]
-    assert _ends(fed) == [(False, "the time of tightening 2 could not be read", 1)]
+                              tightening_id=3, pset=1, fetched=True)
+    recent = [SimpleNamespace(**{**vars(res(t)), "timestamp": datetime.now()})
+              for t in (1, 2)]
+    fed = catch_up(Controller({0: newest, 2: recent[1], 1: recent[0]}), last=None)
+    assert [e.unreadable.tightening_id for e in fed if isinstance(e, UnreadableIn)] == [3]
+    assert [e.result.tightening_id for e in fed if isinstance(e, ResultIn)] == [1, 2]
+    assert _ends(fed) == [(True, "", 1)]
+
+
+def test_with_the_controller_s_clock_unknown_its_newest_is_kept_and_the_rest_unknown():
+    """No clock offset (the controller did not tell its time): no result can be placed
+    against the cut; the newest is kept (fed) and the catch-up says why it is not complete."""
+    controller = Controller({0: res(2), 1: res(1)})
+    controller.clock_offset_s = None
+    fed = catch_up(controller, last=None)
+    assert [e.result.tightening_id for e in fed if isinstance(e, ResultIn)] == [2]
+    assert _ends(fed) == [(False, "the controller's clock is not known: its results cannot "
+                                  "be placed before or after the link was lost", 1)]

@@ -92,9 +92,11 @@ class OldResults:
             self._feed.lowered(reply.mid, result.header_revision, result.revision)
             self._agree(result.revision)                 # ask for that one
         if tightening_id and result.tightening_id not in (tightening_id, None):
-            if isinstance(result, UnreadableResult):
+            if isinstance(result, UnreadableResult) and result.laid_out_as is None:
                 # an id picked out of a body that does not read may be another field: the
-                # message is kept (the controller's record of a tightening), its id unknown
+                # message is kept (the controller's record of a tightening), its id unknown;
+                # one that read (laid out as a revision without a type) has its own id, and
+                # an answer about another tightening is refused as any readable one
                 self._log.warning("%s: %s: the unreadable answer reads as tightening %d: "
                                   "kept without an id", self.device, what,
                                   result.tightening_id)

@@ -142,7 +142,11 @@ class ResultFeed:
         with self._cond:
             if self.pushed(tid):
                 return False
-            self.caught_up.add(tid)
+            if result.tightening_id == tid:
+                # a push of it later is acknowledged, not handed out twice; one fetched
+                # without its id (it did not read) is not known to be it: its push, a
+                # result of its own, is handed out (a reviewer: acknowledged and dropped)
+                self.caught_up.add(tid)
             self._queue(result, NO_ACK)
             return True
 

@@ -215,3 +215,13 @@ def test_an_unreadable_answer_whose_id_reads_as_another_is_kept_without_an_id(pe
     assert got.tightening_id is None and got.pset == 5
     assert "asked for tightening 7, its body reads as 1235" in got.error
     assert got.raw.startswith("0226") and "00ABCD" in got.raw
+
+
+def test_an_untyped_answer_about_another_tightening_is_refused(peer):
+    """Asked at revision 7, answered at revision 2 (no result type: held as unreadable,
+    ``untyped_below``) about tightening 1235: its id was read, so it is an answer about
+    another tightening, refused as a readable one is, not kept as one without an id."""
+    p = peer(_answering_0064(build(65, 2, OLD_REV2)))
+    with open_wrench(f"openprotocol://127.0.0.1:{p.port}", **FAST) as w:
+        with pytest.raises(ProtocolError, match="answered with tightening 1235"):
+            w.fetch_result(7)

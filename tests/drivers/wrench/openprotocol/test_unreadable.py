@@ -6,6 +6,7 @@ whole as an UnreadableResult, acknowledged only when the station says so."""
 from __future__ import annotations
 
 import logging
+from datetime import datetime
 
 import pytest
 
@@ -331,3 +332,30 @@ def test_results_subscribed_below_revision_3_are_said_to_carry_no_type(tmp_path,
         w.reconnect()
     said = [r for r in caplog.records if "carries no result type" in r.getMessage()]
     assert len(said) == 2 and all(r.levelno == logging.WARNING for r in said)
+
+
+def test_a_fetched_result_without_its_id_does_not_swallow_the_push_of_that_id():
+    """The renewal's catch-up fetched tightening 11 and got a body that does not read, its
+    id unknown (picked as another): when the real tightening 11 is then pushed, it is
+    handed out, not acknowledged and dropped as "fetched already" (a reviewer: lost)."""
+    import threading
+    from types import SimpleNamespace
+
+    from drivers.wrench.openprotocol.resultfeed import ResultFeed
+    from drivers.wrench.sim.results import SimRecord
+
+    queued: list[object] = []
+    channel = SimpleNamespace(cond=threading.Condition(), log=logging.getLogger("t"),
+                              device="wrench", epoch=1, route=lambda mid, fn: None)
+    feed = ResultFeed(channel, lambda item, token: queued.append(item))
+    garbled = UnreadableResult(raw="x" * 60, mid=65, revision=2, error="torque 'AB'",
+                               tightening_id=None, pset=1, fetched=True)
+    assert feed.caught(11, garbled)
+    record = SimRecord(
+        tightening_id=11, cell=1, channel=1, name="Sim", vin="VIN11", pset=1, pset_name="P",
+        batch_size=1, batch_counter=1, batch_status=1, ok=True, torque_status=1,
+        angle_status=1, torque_min=100, torque_max=300, torque_target=200, torque=210,
+        angle_min=10, angle_max=90, angle_target=45, angle=44, angle_exact=44.0,
+        timestamp=datetime(2026, 11, 30, 9, 0, 0), pset_changed=datetime(2026, 11, 30, 8))
+    feed.received(decode(message(61, result_data(61, 3, record), 3)))
+    assert [getattr(q, "tightening_id", None) for q in queued] == [None, 11]
