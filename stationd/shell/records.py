@@ -547,21 +547,30 @@ class Records:
         """Raise DbError when the SQLite file the daemon opened is gone or was replaced (its
         open connection would go on writing into the deleted file: results acknowledged,
         then lost, and the bolts tightened again after a restart)."""
+        changed = self._file_state()
+        if changed is not None:
+            assert self._db_file is not None  # noqa: S101 - a state says there is one
+            raise DbError(f"the database file {self._db_file[0]} was " + (
+                "removed" if changed == "removed" else "replaced by another file"))
+
+    def _file_state(self) -> str | None:
+        """``removed`` or ``replaced``: the SQLite file the daemon opened is no longer there
+        as it opened it; None where it is (or the database is no SQLite file)."""
         if self._db_file is None:
-            return
+            return None
         path, ident = self._db_file
         try:
             st = path.stat()
         except OSError:
-            raise DbError(f"the database file {path} was removed") from None
-        if (st.st_dev, st.st_ino) != ident:
-            raise DbError(f"the database file {path} was replaced by another file")
+            return "removed"
+        return None if (st.st_dev, st.st_ino) == ident else "replaced"
 
-    def gone_before(self, url: str) -> str | None:
-        """Why the SQLite file the daemon opened is no longer there (removed or replaced)
-        when ``url``, a reload's database, is that same file; else None.  A reload would
-        open a new, empty database there: the vehicle on the lift with no bolt done, its
-        bolts tightened again (an engineer's trial)."""
+    def file_changed(self, url: str) -> str | None:
+        """``removed`` or ``replaced`` when the SQLite file the daemon opened is no longer
+        there as it opened it and ``url``, a reload's database, is that same file; else None.
+        Removed, a reload would open a new, empty database there: the vehicle on the lift
+        with no bolt done, its bolts tightened again (an engineer's trial).  Replaced (a
+        backup put back), the reload opens that file."""
         if self._db_file is None:
             return None
         path = self._db_file[0]
@@ -571,11 +580,7 @@ class Records:
         if u.get_backend_name() != "sqlite" or not u.database \
                 or Path(u.database).resolve() != path:
             return None
-        try:
-            self.check_file()
-        except DbError as exc:
-            return str(exc)
-        return None
+        return self._file_state()
 
     def probe(self, repo: Repository) -> None:
         """The database's "reconnect" (its keeper's thread): one cheap query (the engine's

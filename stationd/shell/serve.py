@@ -115,12 +115,17 @@ async def _reloaded(cfg_path: str, station: Station, screens: Screens,
     loop = asyncio.get_running_loop()
     try:  # validate first: an invalid station never stops the running one
         new = await loop.run_in_executor(None, validate_station, cfg_path)
-        gone = station.records.gone_before(new.database_url)
-        if gone is not None:
+        changed = station.records.file_changed(new.database_url)
+        if changed == "removed":
             raise StationError(
-                f"{gone} while the daemon ran: a reload would start a new, empty "
-                "database there (the vehicle's bolts done forgotten); put the "
-                "file back (a backup), or restart the daemon to start anew")
+                f"the database file {new.database_url} was removed while the daemon ran: a "
+                "reload would start a new, empty database there (the vehicle's bolts done "
+                "forgotten); put a copy back (a backup) and reload, or restart the daemon to "
+                "start anew")
+        if changed == "replaced":
+            log.warning("reload: the database file %s was replaced while the daemon ran (a "
+                        "backup put back?): the station opens that file; results stored "
+                        "after it was copied are not in it", new.database_url)
         await loop.run_in_executor(None, screens.check_move, new)
         if locks is not None:   # a device another daemon drives: refused
             hold_locks(locks, new)

@@ -71,6 +71,10 @@ class ResultFeed:
             self._untyped.reset()
             self.caught_up.clear()
             self.cap = RESULT_REVISIONS[0]
+            # until the 0060 is answered, what it asks for: a result the controller pushes
+            # again during the negotiation is judged against that, not against the last
+            # session's revision (lowered to 2 there, it let an untyped one close a bolt)
+            self.subscribed = RESULT_REVISIONS[0]
 
     def received(self, msg: Message) -> None:
         """A MID 0061 (the reading thread): queued, read or not, its acknowledgement token

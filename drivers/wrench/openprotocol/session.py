@@ -111,6 +111,8 @@ class Session:
         except RefusedError as e:
             if e.code != 9:                 # 09: already subscribed, which is the goal
                 raise
+        with channel.cond:   # results pushed from now on are judged against it
+            self._feed.subscribed = result_rev
         with channel.cond:
             curves = self._curves.wanted
         if curves:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 from datetime import datetime
+from typing import Any
 
 import pytest
 
@@ -334,28 +335,51 @@ def test_results_subscribed_below_revision_3_are_said_to_carry_no_type(tmp_path,
     assert len(said) == 2 and all(r.levelno == logging.WARNING for r in said)
 
 
-def test_a_fetched_result_without_its_id_does_not_swallow_the_push_of_that_id():
-    """The renewal's catch-up fetched tightening 11 and got a body that does not read, its
-    id unknown (picked as another): when the real tightening 11 is then pushed, it is
-    handed out, not acknowledged and dropped as "fetched already" (a reviewer: lost)."""
+def _feed(queued: list[object]) -> Any:
     import threading
     from types import SimpleNamespace
 
     from drivers.wrench.openprotocol.resultfeed import ResultFeed
-    from drivers.wrench.sim.results import SimRecord
 
-    queued: list[object] = []
     channel = SimpleNamespace(cond=threading.Condition(), log=logging.getLogger("t"),
                               device="wrench", epoch=1, route=lambda mid, fn: None)
-    feed = ResultFeed(channel, lambda item, token: queued.append(item))
+    return ResultFeed(channel, lambda item, token: queued.append(item))  # type: ignore[arg-type]
+
+
+def _record(tid: int) -> Any:
+    from drivers.wrench.sim.results import SimRecord
+
+    return SimRecord(
+        tightening_id=tid, cell=1, channel=1, name="Sim", vin="VIN11", pset=1,
+        pset_name="P", batch_size=1, batch_counter=1, batch_status=1, ok=True,
+        torque_status=1, angle_status=1, torque_min=100, torque_max=300, torque_target=200,
+        torque=210, angle_min=10, angle_max=90, angle_target=45, angle=44, angle_exact=44.0,
+        timestamp=datetime(2026, 11, 30, 9, 0, 0), pset_changed=datetime(2026, 11, 30, 8),
+        result_type=2)
+
+
+def test_a_new_session_judges_pushes_against_what_it_asks_not_the_last_one_s_revision():
+    """The last session lowered its subscription to revision 2; a new one asks for 7 again,
+    and the controller pushes a loosening again at revision 2 during the negotiation: not a
+    tightening that may close its bolt (a reviewer: judged against the stale 2)."""
+    queued: list[object] = []
+    feed = _feed(queued)
+    feed.subscribed = 2
+    feed.reset()
+    feed.received(decode(message(61, result_data(61, 2, _record(12)), 2)))
+    [held] = queued
+    assert isinstance(held, UnreadableResult) and held.laid_out_as == 2
+
+
+def test_a_fetched_result_without_its_id_does_not_swallow_the_push_of_that_id():
+    """The renewal's catch-up fetched tightening 11 and got a body that does not read, its
+    id unknown (picked as another): when the real tightening 11 is then pushed, it is
+    handed out, not acknowledged and dropped as "fetched already" (a reviewer: lost)."""
+    queued: list[object] = []
+    feed = _feed(queued)
     garbled = UnreadableResult(raw="x" * 60, mid=65, revision=2, error="torque 'AB'",
                                tightening_id=None, pset=1, fetched=True)
     assert feed.caught(11, garbled)
-    record = SimRecord(
-        tightening_id=11, cell=1, channel=1, name="Sim", vin="VIN11", pset=1, pset_name="P",
-        batch_size=1, batch_counter=1, batch_status=1, ok=True, torque_status=1,
-        angle_status=1, torque_min=100, torque_max=300, torque_target=200, torque=210,
-        angle_min=10, angle_max=90, angle_target=45, angle=44, angle_exact=44.0,
-        timestamp=datetime(2026, 11, 30, 9, 0, 0), pset_changed=datetime(2026, 11, 30, 8))
+    record = _record(11)
     feed.received(decode(message(61, result_data(61, 3, record), 3)))
     assert [getattr(q, "tightening_id", None) for q in queued] == [None, 11]
