@@ -98,7 +98,9 @@ class ResultFeed:
                     "loosening", self.device, _layout_words(msg.revision, item.laid_out_as,
                                                             self.subscribed),
                     item.tightening_id if item.tightening_id is not None else "?")
-                if habit:
+                # an honest label is no byte lost on the line: renewed at the first (still
+                # held); a body laid out otherwise than labelled, at the second in a row
+                if habit or item.laid_out_as == msg.revision:
                     self._lower(msg.mid, msg.revision, item.laid_out_as)
             elif isinstance(item, UnreadableResult):
                 self._log.warning(
