@@ -333,7 +333,7 @@ def _record(s: Session, kind: str, ref: int) -> dict[str, Any]:
                 "tightening_id": u.tightening_id, "pset": u.pset, "status": u.status,
                 "torque_nm": u.torque_nm, "angle_deg": u.angle_deg,
                 "result_at": _iso(u.result_at), "recorded_at": _iso(u.recorded_at),
-                "reason": u.reason}
+                "reason": u.reason, "result_type": u.result_type}
     if kind == CONTROLLER_EVENT:
         ev = s.get_one(ControllerEvent, ref)
         return {"id": ev.id, "result_type": ev.result_type, "what": ev.what, "vin": ev.vin,

@@ -260,6 +260,9 @@ class UnattributedResult(Base):
     result_at: Mapped[datetime | None] = mapped_column(UtcDateTime)   # controller's clock
     recorded_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
     reason: Mapped[str] = mapped_column(String(200))
+    #: the result type as the controller sent it (1 tightening, 2 loosening, ...; NULL: none,
+    #: a revision without one): an unattributed loosening read as "tightened OK"
+    result_type: Mapped[int | None]
 
 
 class ControllerEvent(Base):

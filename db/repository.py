@@ -461,8 +461,10 @@ class Repository:
     def record_unattributed(self, *, vin: str | None, controller_vin: str | None,
                             tightening_id: int | None, pset: int | None, ok: bool,
                             torque_nm: float | None, angle_deg: float | None,
-                            result_at: datetime | None, reason: str) -> int | None:
-        """Store a result no bolt owns; return its id, or None when this very result is
+                            result_at: datetime | None, reason: str,
+                            result_type: int | None = None) -> int | None:
+        """Store a result no bolt owns (``result_type``: the code as the controller sent it,
+        None: none); return its id, or None when this very result is
         already stored, attributed or not (a resent copy: the same tightening id, torque and
         angle, and the same controller timestamp ``result_at`` where both have
         one, :func:`_same_result`)."""
@@ -478,7 +480,8 @@ class Repository:
             row = UnattributedResult(
                 vin=vin, controller_vin=controller_vin, tightening_id=tightening_id, pset=pset,
                 status="ok" if ok else "nok", torque_nm=torque, angle_deg=angle,
-                result_at=result_at, recorded_at=utcnow(), reason=reason[:200])
+                result_at=result_at, recorded_at=utcnow(), reason=reason[:200],
+                result_type=result_type)
             s.add(row)
             s.flush()
             append(s, UNATTRIBUTED, row.id)
@@ -721,7 +724,7 @@ class Repository:
                      "tightening_id": r.tightening_id, "pset": r.pset, "status": r.status,
                      "torque_nm": r.torque_nm, "angle_deg": r.angle_deg,
                      "result_at": r.result_at, "recorded_at": r.recorded_at,
-                     "reason": r.reason} for r in s.scalars(q)]
+                     "reason": r.reason, "result_type": r.result_type} for r in s.scalars(q)]
 
     def close_vehicle(self, vin: str) -> VehicleReport:
         """End the vehicle (once; closing again keeps the first end) and return its summary:

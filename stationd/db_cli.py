@@ -26,6 +26,7 @@ from drivers.counting import counted
 from stationd.errors import ConfigError, InputError
 from stationd.jsonout import strict_json
 from stationd.outfile import write_atomic
+from stationd.words import result_type_words
 
 if TYPE_CHECKING:
     from db.repository import Repository
@@ -426,7 +427,8 @@ def cmd_db_report(args: argparse.Namespace) -> int:
             print(f"  {c.kind}{on} by {c.user} ({c.source}) at {c.at:%Y-%m-%d %H:%M:%S} "
                   f"UTC{why}")
         for u in loose:
-            print(f"  unattributed: tightening {u['tightening_id']} pset {u['pset']} "
+            print(f"  unattributed: {result_type_words(u['result_type'])} "
+                  f"{u['tightening_id']} pset {u['pset']} "
                   f"{u['status'].upper()} {_num(u['torque_nm'])} Nm, "
                   f"{_num(u['angle_deg'])} deg ({u['reason']})")
         for e in events:

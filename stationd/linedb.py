@@ -374,6 +374,11 @@ LINE_UNATTRIBUTED = _typed(
      (_tz("recorded_at", "when the station stored it"), _time(_j("recorded_at"))),
      (Column("reason", Text, comment="why it was not attributed"), _text(_j("reason")))],
     Index("ix_line_unattributed_vin", "vin", "at"),
+    # its type: an unattributed loosening read as a tightening OK (an MES integrator's trial)
+    added=[(Column("result_type", Integer, comment="the result type as the controller sent "
+                   "it: 1 tightening, 2 loosening, 7 synchronized tightening, ... (NULL: none "
+                   "sent, a revision without one, or stored before the type was kept)"),
+            _int(_j("result_type")))],
 )
 
 LINE_CONTROLLER_EVENTS = _typed(
@@ -441,8 +446,9 @@ TRIGGER = "line_feed_typed"   # the trigger and its function
 #: the SQL to it).  Why a number and not the SQL compared: on a line whose stations are
 #: upgraded one at a time, an older forwarder would put its older SQL back at each start; it
 #: replaces only an older version.
-TYPED_VERSION = 3   # 2: line_controller_events, line_unreadable_results; 3: line_rundowns'
-#                       entered outcomes (entered_by, entered_comment, unreadable_record_id)
+TYPED_VERSION = 4   # 2: line_controller_events, line_unreadable_results; 3: line_rundowns'
+#                       entered outcomes (entered_by, entered_comment, unreadable_record_id);
+#                       4: line_unattributed's result_type
 _VERSION_LINE = re.compile(r"-- stationd typed tables, version (\d+)\n")
 
 

@@ -153,7 +153,7 @@ def _every_kind(repo):
                  references={"R1": {"offset_mm": 1.5, "measured_mm": [1.0, 2.0, 3.0]}})
     repo.record_unattributed(vin=VIN, controller_vin="OTHERVIN", tightening_id=17, pset=3,
                              ok=True, torque_nm=24.0, angle_deg=30.0, result_at=AT,
-                             reason="no bolt enabled")
+                             reason="no bolt enabled", result_type=2)
     repo.record_controller_event(result_type=3, what="batch increment", vin=VIN, bolt="B3",
                                  controller_vin=VIN, tightening_id=18, pset=21, ok=True,
                                  torque_nm=None, angle_deg=None, result_at=AT)
@@ -212,7 +212,8 @@ def test_every_kind_of_record_lands_typed_with_its_columns_units_and_comments(tm
             ("rundown", "loosening ok", None), ("command", "skip", "sam")]
         un = c.execute(select(LINE_UNATTRIBUTED.table)).one()
         assert (un.vin, un.controller_vin, un.tightening_id, un.pset, un.status,
-                un.reason) == (VIN, "OTHERVIN", 17, 3, OK, "no bolt enabled")
+                un.reason, un.result_type) == (VIN, "OTHERVIN", 17, 3, OK, "no bolt enabled",
+                                               2)        # a loosening, said as one
         ev = c.execute(select(LINE_CONTROLLER_EVENTS.table)).one()
         assert (ev.result_type, ev.what, ev.bolt, ev.tightening_id, ev.pset, ev.status,
                 ev.torque_nm, ev.result_at) == (3, "batch increment", "B3", 18, 21, OK, None,
@@ -502,7 +503,8 @@ def test_two_first_starts_make_the_trigger_once(pg_url):
 #: go up too (else a line database that has the older SQL keeps it: see TYPED_VERSION)
 TRIGGER_SHA256 = {1: "446e86d6658db69f57ddf73563842e00b690eac87fc392c5a61455dc994d1f49",
                   2: "eed0f0cfb83562bb0f0303ab2188f6dccda471d004a541bd82df27fe80f4d4e0",
-                  3: "cc625563ef1638100ca531254b61e304c53501ab1577e943c670e801bf38891c"}
+                  3: "cc625563ef1638100ca531254b61e304c53501ab1577e943c670e801bf38891c",
+                  4: "1ba6cb194967583b94b0dc24eec25ee14f5e0147b2cd15bb2173f5d957a56db6"}
 
 
 def test_the_trigger_version_goes_up_with_its_sql():

@@ -352,7 +352,8 @@ class Records:
             vin=a.vin, controller_vin=str(r.vin or "").strip() or None,
             tightening_id=int(r.tightening_id), pset=int(r.pset), ok=bool(r.ok),
             torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
-            result_at=controller_time(r), reason=unattributed_words(a.why))
+            result_at=controller_time(r), reason=unattributed_words(a.why),
+            result_type=type_code(r))
         if row is None:
             log.info("%s", sent_again_words(int(r.tightening_id), None))
 

@@ -30,6 +30,7 @@ from db.curves import curves_of_records
 from db.kinds import LOOSENING, MISSING, PENDING, SKIPPED
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
 from db.repository import AT_STATION, Repository
+from stationd.words import result_type_words
 
 CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator", "torque_nm",
               "angle_deg", "torque_min_nm", "torque_max_nm", "angle_min_deg", "angle_max_deg",
@@ -193,15 +194,22 @@ class Results:
             {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
              "bolt": x["bolt"], "attempt": 0, "status": UNREADABLE_STATUS, "images": [],
              "pset": x["pset"], "tightening_id": x["tightening_id"],
-             "result_at": _iso(x["result_at"]), "recorded_at": _iso(x["recorded_at"]),
-             "comment": _unreadable_comment(x)}
+             # one clock per column on every row: the station's in result_at, the
+             # controller's own (as it sent it) in controller_at
+             "result_at": _iso(x["recorded_at"]), "controller_at": _iso(x["result_at"]),
+             "recorded_at": _iso(x["recorded_at"]), "comment": _unreadable_comment(x)}
             for x in self.repo.unreadable(vin)]
         loose: list[dict[str, Any]] = [
             {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
              "bolt": None, "attempt": 0, "status": UNATTRIBUTED_STATUS, "images": [],
-             "rundown": None, "pset": u["pset"], "tightening_id": u["tightening_id"],
+             # its type as the controller sent it (an unattributed loosening read as a
+             # tightening OK: an MES integrator's trial); none sent: empty
+             "rundown": None if u["result_type"] is None
+             else result_type_words(u["result_type"]),
+             "pset": u["pset"], "tightening_id": u["tightening_id"],
              "torque_nm": u["torque_nm"], "angle_deg": u["angle_deg"],
-             "result_at": _iso(u["result_at"]), "recorded_at": _iso(u["recorded_at"]),
+             "result_at": _iso(u["recorded_at"]), "controller_at": _iso(u["result_at"]),
+             "recorded_at": _iso(u["recorded_at"]),
              "comment": f"{str(u['status']).upper()}; {u['reason']}"}
             for u in self.repo.unattributed(vin)]
         for c in self.repo.ledger.commands(vin):

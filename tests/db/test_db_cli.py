@@ -126,7 +126,14 @@ def test_report_exit_codes(run, db):
         record(repo, "VIN1", "TB-C")
         repo.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=77, pset=4,
                                  ok=False, torque_nm=9.5, angle_deg=12.0, result_at=None,
-                                 reason="result 77 (pset 4) outside any tightening")
+                                 reason="result 77 (pset 4) outside any tightening",
+                                 result_type=1)
+        # a loosening no bolt owns is said as one (it read "tightening ... OK": an MES
+        # integrator's trial), and one without a type as a result
+        for tid, code in ((78, 2), (79, None)):
+            repo.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=tid,
+                                     pset=4, ok=True, torque_nm=9.5, angle_deg=12.0,
+                                     result_at=None, reason="fetched", result_type=code)
         repo.close_vehicle("VIN1")
     code, out, _ = run("db", "report", "VIN1", "--db", db)
     # SF-FR tightened again to OK: no bolt ends NOK, its NOK result is still said
@@ -135,6 +142,8 @@ def test_report_exit_codes(run, db):
         "1 NOK result"), out
     # torque in the unit the journal, the demo and probe print (it said "N m" alone)
     assert "unattributed: tightening 77 pset 4 NOK 9.5 Nm" in out
+    assert "unattributed: loosening 78 pset 4 OK" in out
+    assert "unattributed: result 79 pset 4 OK" in out
     assert "OK       50.0 Nm, 35.0 deg, v1, 2 attempts" in out and " N m" not in out
     assert "2. tightening OK pset 2, 50.0 Nm, 35.0 deg, at " in out
     # dated when the station took it, and when it was stored (an operator trial: a rundown
@@ -143,7 +152,8 @@ def test_report_exit_codes(run, db):
     assert re.search(r"at \d{4}-\d\d-\d\d \d\d:\d\d:\d\d UTC \(stored \d\d:\d\d:\d\d\), by",
                      late), late
     code, out, _ = run("db", "report", "VIN1", "--db", db, "--json")
-    assert [u["tightening_id"] for u in json.loads(out)["unattributed"]] == [77]
+    assert [(u["tightening_id"], u["result_type"]) for u in json.loads(out)[
+        "unattributed"]] == [(77, 1), (78, 2), (79, None)]
     code, out, err = run("db", "report", "NOPE", "--db", db)
     assert code == 2 and out == ""
     assert _one_line(err) == "stationd: error: vehicle 'NOPE' is not in the database"
@@ -698,13 +708,18 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
     assert [x["raw"] for x in obj["unreadable_results"]] == ["00990061007    garbage"]
     [row] = [r for r in runs if r["status"] == UNREADABLE_STATUS]
     assert (row["bolt"], row["tightening_id"]) == ("TB-C", 9)
-    assert row["result_at"].startswith("2026-11-30T17:27:55")    # the controller's, read
+    # one clock per column on every row (an MES integrator's trial: the controller's time
+    # in result_at on these rows, the station's on rundowns): the controller's, read, in
+    # controller_at; when the station took it in result_at
+    assert row["controller_at"].startswith("2026-11-30T17:27:55")
+    assert row["result_at"] == row["recorded_at"]
     assert row["comment"] == "MID 0061 revision 7: parameter 01 missing"
     [made] = [r for r in runs if r["bolt"] == "SF-FL"]
     assert made["controller_at"].startswith("2026-11-30T17:27:47"), made
     assert "2026-11-30T17:27:47+00:00" in rundowns_csv(runs)
     [loose] = [r for r in runs if r["status"] == UNATTRIBUTED_STATUS]
     assert (loose["bolt"], loose["tightening_id"], loose["torque_nm"]) == (None, 10, 49.5)
+    assert loose["rundown"] is None and loose["result_at"] == loose["recorded_at"]
     assert "fetched after a later one came" in loose["comment"]
     assert "parameter 01 missing" in rundowns_csv(runs)
     assert ",unattributed," in rundowns_csv(runs)

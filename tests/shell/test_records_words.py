@@ -45,7 +45,7 @@ def test_typed_reasons_are_stored_in_the_words_the_core_wrote(tmp_path: Path) ->
     records.store_unattributed(StoreUnattributed(
         _result(41, 1), None, Unattributed(UnattributedKind.FETCHED, 41, 3, unproved)))
     records.store_unattributed(StoreUnattributed(
-        _result(42, 1), None, Unattributed(UnattributedKind.OUTSIDE, 42, 3)))
+        _result(42, 2), None, Unattributed(UnattributedKind.OUTSIDE, 42, 3)))
     records.store_controller_event(StoreControllerEvent(_result(43, 3), None, None))
     records.store_controller_event(StoreControllerEvent(_result(44, 9), None, None))
     records.store_controller_event(StoreControllerEvent(_result(45, None), None, "B1",
@@ -59,11 +59,14 @@ def test_typed_reasons_are_stored_in_the_words_the_core_wrote(tmp_path: Path) ->
     with sqlite3.connect(tmp_path / "st.db") as con:
         reasons = [r for (r,) in con.execute("SELECT reason FROM unattributed_results "
                                              "ORDER BY id")]
+        types = [t for (t,) in con.execute("SELECT result_type FROM unattributed_results "
+                                           "ORDER BY id")]
         whats = [w for (w,) in con.execute("SELECT what FROM controller_events ORDER BY id")]
         comments = [c for (c,) in con.execute("SELECT comment FROM commands ORDER BY id")]
     assert reasons == ["result 41 (pset 3) fetched after a reconnect (VIN OTHER, not VIN1)",
                        "result 42 (pset 3) outside any tightening"]
     assert whats == ["batch increment", "result type 9 (unknown)", NOT_TAKEN]
+    assert types == [1, 2]      # each its type as the controller sent it (2: a loosening)
     assert comments == ["idle for 600 s"]
 
 
