@@ -53,6 +53,8 @@ class Why(enum.Enum):
     NOT_RECORDED = "not recorded"        # the database refused the command's record (note)
     NOT_LOCKED = "not locked"            # a release of a bolt that is not locked (bolt)
     NOT_HELD = "not held"                # an entered outcome for a bolt not held (bolt)
+    #: an OK entered with a value outside the bolt's window (bolt, note: the value and window)
+    ENTERED_OUTSIDE = "entered outside"
     HELD = "held"                        # the controller's result could not be read: a
                                          # supervisor checks it there and releases (note)
     TEACHING = "teaching"                # teach mode is on (note: the model; user; bolt:

@@ -72,7 +72,7 @@ def _locked(bolt: str | None, count: int | None) -> str:
 def _unread(bolt: str | None, note: str | None) -> str:
     """A bolt held for a result that could not be read: the refusal and the notice alike."""
     return (f"{bolt}: the controller's result could not be read ({note}): check it on the "
-            "controller, then release")
+            "controller, then release or enter its outcome")
 
 
 def _command(user: str | None, comment: str | None) -> str:
@@ -345,8 +345,12 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.NOT_LOCKED: lambda r: f"{r.bolt} is not locked",
     Why.NOT_HELD: lambda r: (f"{r.bolt} is not held: an outcome is entered only for a bolt "
                              "whose result the controller could not send readably"),
+    Why.ENTERED_OUTSIDE: lambda r: (f"{r.bolt}: an OK with {r.note}: not this bolt's "
+                                    "tightening OK as entered; check the value on the "
+                                    "controller's screen (a NOK is entered with --nok)"),
     Why.HELD: lambda r: (f"{r.bolt}: {r.note}: not taken as a tightening; check it on the "
-                         "controller, then release" if is_not_taken_note(r.note) else
+                         "controller, then release or enter its outcome"
+                         if is_not_taken_note(r.note) else
                          _unread(r.bolt, r.note)),
     Why.LOOSEN_FIRST: lambda r: (f"{r.bolt}: loosen first (loosen pset {r.pset}), then "
                                  "tighten" + (f": {_command(r.user, r.note)}"

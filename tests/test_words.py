@@ -98,7 +98,7 @@ WORDS = [
      "missing): stored whole; no bolt it could belong to"),
     (Notice(Said.HELD, bolt="B1", note="tightening 7"),
      "B1: the controller's result could not be read (tightening 7): check it on the "
-     "controller, then release"),
+     "controller, then release or enter its outcome"),
     (Notice(Said.NOT_TAKEN, bolt="B1", torque_nm=0.04, torque_min=20.0, torque_max=25.0,
             tightening_id=7),
      "B1: an OK result without a result type, 0.0 Nm outside 20.0-25.0 Nm (tightening 7): "

@@ -96,8 +96,9 @@ class OrderRules(FaultRules):
             return None if cmd.bolt in self.matcher.locked or cmd.bolt in self.matcher.held \
                 else Reason(Why.NOT_LOCKED, bolt=cmd.bolt)
         if isinstance(cmd, EnterOutcome):   # what a person read on the controller's screen
-            return None if cmd.bolt in self.matcher.held \
-                else Reason(Why.NOT_HELD, bolt=cmd.bolt)
+            if cmd.bolt not in self.matcher.held:
+                return Reason(Why.NOT_HELD, bolt=cmd.bolt)
+            return self._entered_outside(cmd)
         if cmd.bolt in self.matcher.done:
             return Reason(Why.DONE, bolt=cmd.bolt)
         if cmd.bolt in self.matcher.skipped:
@@ -112,6 +113,23 @@ class OrderRules(FaultRules):
         if self.tool_on and self.bolt == cmd.bolt:
             return Reason(Why.TOOL_ON_BOLT, bolt=cmd.bolt)
         return None
+
+    def _entered_outside(self, cmd: EnterOutcome) -> Reason | None:
+        """An OK entered with a torque (or angle) outside the bolt's window: a value typed
+        wrong (4.974 for 49.74 closed a 45-55 Nm bolt as OK: a supervisor trial), or not this
+        bolt's result.  Refused, as the station refuses such an OK from the controller as a
+        tightening; a NOK, or a loosening's outcome (its loosen program judges it), is not
+        checked against the bolt's window."""
+        spec = self._specs.get(cmd.bolt)
+        p = spec.parameters if spec is not None else None
+        if not cmd.ok or p is None or cmd.bolt in self._held_loosening:
+            return None
+        out = [f"torque {cmd.torque_nm:g} Nm outside {p.torque.min:g}-{p.torque.max:g} Nm"
+               ] if not p.torque.min <= cmd.torque_nm <= p.torque.max else []
+        if p.angle is not None and not p.angle.min <= cmd.angle_deg <= p.angle.max:
+            out.append(f"angle {cmd.angle_deg:g} deg outside {p.angle.min:g}-"
+                       f"{p.angle.max:g} deg")
+        return Reason(Why.ENTERED_OUTSIDE, bolt=cmd.bolt, note="; ".join(out)) if out else None
 
     def _loosen_refusal(self, cmd: LoosenBolt) -> Reason | None:
         """A loosen is for a bolt tightened (OK, or NOK last) that a loosen pset applies to,

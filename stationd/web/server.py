@@ -334,6 +334,9 @@ class WebServer:
                 "locks": v["locks"], "release_by": self.release_by(),
                 # the bolts those locks are on (the release command names one)
                 "locked_bolts": [b["bolt"] for b in v["bolts"] if b["state"] == "locked"],
+                # of those, the ones held for a result not known (an outcome may be entered)
+                "held_bolts": [b["bolt"] for b in v["bolts"]
+                               if b["state"] == "locked" and b["held"]],
                 # the last reload's refusal (the file on disk does not read): the station
                 # runs on the configuration it loaded before (None: it runs on the file)
                 "reload_refused": self.reload_refused,

@@ -72,7 +72,14 @@ def lock_lines(st: dict[str, Any], via: str = "") -> list[str]:
     # the bolt named where one is locked (a newcomer read BOLT for the only one there was)
     named = list(st.get("locked_bolts") or [])
     bolt = str(named[0]) if len(named) == 1 and len(locks) == 1 else "BOLT"
-    return [f"locked:   {text}" for text in locks] + [
+    held = list(st.get("held_bolts") or [])
+    # a held bolt may have been tightened: the outcome the controller shows is entered (a
+    # supervisor trial: only "release" was suggested, and a release tightens it again)
+    entered = [f"outcome:  stationd enter-outcome {vin} {held[0] if len(held) == 1 else 'BOLT'}"
+               f"{via} --ok|--nok --torque NM --angle DEG --comment TEXT --user NAME (a held "
+               "bolt: what the controller's screen shows), or the operator screen's Enter "
+               "outcome form"] if held else []
+    return [f"locked:   {text}" for text in locks] + entered + [
         f"release:  stationd release {vin} {bolt}{via} --user NAME, or the operator screen's "
         f"Release form{who}"]
 

@@ -109,6 +109,31 @@ def test_a_bolt_that_is_not_held_is_refused_with_why():
         Reason(Why.OTHER_VEHICLE, vin="VIN2")
 
 
+def test_an_ok_entered_outside_the_bolt_s_window_is_refused_a_nok_is_not():
+    """A typo (4.974 for 49.74) closed a 45-55 Nm bolt as OK (a supervisor trial): an OK
+    entered with a value outside the bolt's window is refused, nothing recorded, the bolt
+    still held; a NOK with the same value is what the controller may show, and is taken."""
+    from dataclasses import replace
+
+    from db.bolts import Parameters, Window
+
+    d = _ready()
+    _held(d)
+    spec = Parameters(1, Window(50.0, 45.0, 55.0), Window(30.0, 15.0, 60.0))
+    d.core._specs["B1"] = replace(d.core._specs["B1"], parameters=spec)
+    acts = d.command(1, EnterOutcome("VIN1", "B1", True, 4.974, 31.0, "typo"), SUPERVISOR)
+    refused = _answer(acts).answer
+    assert not refused.accepted and refused.reason is not None
+    assert refused.reason.kind is Why.ENTERED_OUTSIDE
+    assert not any(isinstance(a, RecordCommand) for a in acts)
+    assert reason_words(refused.reason).startswith(
+        f"B1: an OK with torque 4.974 Nm outside {spec.torque.min:g}-{spec.torque.max:g} Nm")
+    assert "B1" in d.core.matcher.held
+    acts = d.command(2, EnterOutcome("VIN1", "B1", False, 4.974, 31.0, "NOK on screen"),
+                     SUPERVISOR)
+    assert _answer(acts).answer.accepted and "B1" not in d.core.matcher.held
+
+
 def test_an_entered_outcome_the_database_refused_changes_nothing():
     d = _ready()
     _held(d)
@@ -194,14 +219,15 @@ def test_a_loosening_held_says_it_is_a_loosening_s_result():
     [lock] = published(acts, BoltLocked)
     assert lock.held == "tightening 2, a loosening with loosen pset 90"
     assert "B1: the controller's result could not be read (tightening 2, a loosening with " \
-        "loosen pset 90): check it on the controller, then release" in _notices(acts)
+        "loosen pset 90): check it on the controller, then release or enter its outcome" \
+        in _notices(acts)
     assert [state_words(e.reason) for e in published(acts, ToolDisabled)] == [
         "bolt B1: its loosening's result could not be read",
         "bolt B1: its loosening's result could not be read; held for a supervisor"]
     # the refusal on the bolt says the same
     assert reason_words(Reason(Why.HELD, bolt="B1", note=d.core.matcher.held["B1"])) == (
         "B1: the controller's result could not be read (tightening 2, a loosening with "
-        "loosen pset 90): check it on the controller, then release")
+        "loosen pset 90): check it on the controller, then release or enter its outcome")
 
 
 def test_an_ok_entered_for_a_held_loosening_loosens_the_bolt_never_closes_it():

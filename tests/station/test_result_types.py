@@ -183,7 +183,7 @@ def test_an_unreadable_result_is_stored_whole_and_holds_its_bolt_for_a_superviso
     [lock] = published(acts, BoltLocked)
     assert (lock.bolt, lock.held) == ("B1", "tightening 7")
     assert "B1: the controller's result could not be read (tightening 7): check it on the " \
-        "controller, then release" in _notices(acts)
+        "controller, then release or enter its outcome" in _notices(acts)
     assert "B1" not in d.core.matcher.done and d.core.state is State.TRACKING
     # held: no new enable for it
     sends = len(d.sends)

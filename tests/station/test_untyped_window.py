@@ -95,7 +95,7 @@ def test_an_untyped_ok_outside_the_torque_window_holds_the_bolt_and_closes_nothi
     assert reason_words(refusal) == (
         f"B1: an OK result without a result type, {torque:.1f} Nm outside the bolt's torque "
         "window (tightening 7): not taken as a tightening; check it on the controller, then "
-        "release")
+        "release or enter its outcome")
     # the same result sent again: acknowledged once more, nothing else
     assert [type(a).__name__ for a in d.feed(ResultIn(d.t, res(7, 1, torque)))] == [
         "Acknowledge"]

@@ -415,3 +415,28 @@ def test_status_of_a_bolt_table_says_what_it_is_and_how_to_reach_a_daemon(capsys
     err = capsys.readouterr().err
     assert "bolt table" in err and "broke" not in err, err
     assert "if a daemon runs on this file" in err and err.count("\n") == 1
+
+
+def test_status_of_a_held_bolt_names_entering_its_outcome_before_a_release(live_server,
+                                                                            capsys):
+    """A bolt held because its result could not be read may have been tightened: the
+    status named only "release" (which tightens it again), never entering the outcome the
+    controller shows (a supervisor trial)."""
+    from stationd.station.events import BoltLocked
+    from tests.web.scenario import VIN
+
+    srv = live_server()
+    srv.publish([*opened(), BoltLocked("B2", 0, held="tightening 7")])
+
+    async def held():
+        import asyncio
+        while not srv.server.view.locks():
+            await asyncio.sleep(0.02)
+    srv.call(held())
+    assert main(["status", "--url", srv.url]) == 0
+    out = capsys.readouterr().out
+    assert "check it on the controller, then release or enter its outcome" in out
+    [line] = [x for x in out.splitlines() if x.startswith("outcome:")]
+    assert line.startswith(f"outcome:  stationd enter-outcome {VIN} B2 --url {srv.url} "
+                           "--ok|--nok --torque NM --angle DEG --comment TEXT --user NAME")
+    assert out.index("outcome:") < out.index("release:")
