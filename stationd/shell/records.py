@@ -18,6 +18,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
+from enum import StrEnum
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -90,6 +91,14 @@ from stationd.words import (
 
 log = logging.getLogger("stationd")
 T = TypeVar("T")
+
+
+class FileChange(StrEnum):
+    """How the SQLite file the daemon opened is no longer there as it opened it (its words
+    after "the database file PATH was")."""
+
+    REMOVED = "removed"
+    REPLACED = "replaced by another file"
 #: what a device, the database or the station's own data raise: a fault, never an exit
 STATION_FAULTS: tuple[type[Exception], ...] = (StationError, DbError, DriverError)
 
@@ -551,35 +560,26 @@ class Records:
         changed = self._file_state()
         if changed is not None:
             assert self._db_file is not None  # noqa: S101 - a state says there is one
-            raise DbError(f"the database file {self._db_file[0]} was " + (
-                "removed" if changed == "removed" else "replaced by another file"))
+            raise DbError(f"the database file {self._db_file[0]} was {changed}")
 
-    def _file_state(self) -> str | None:
-        """``removed`` or ``replaced``: the SQLite file the daemon opened is no longer there
-        as it opened it; None where it is (or the database is no SQLite file)."""
+    def _file_state(self) -> FileChange | None:
+        """How the SQLite file the daemon opened is no longer there as it opened it; None
+        where it is (or the database is no SQLite file)."""
         if self._db_file is None:
             return None
         path, ident = self._db_file
         try:
             st = path.stat()
         except OSError:
-            return "removed"
-        return None if (st.st_dev, st.st_ino) == ident else "replaced"
+            return FileChange.REMOVED
+        return None if (st.st_dev, st.st_ino) == ident else FileChange.REPLACED
 
-    def file_changed(self, url: str) -> str | None:
-        """``removed`` or ``replaced`` when the SQLite file the daemon opened is no longer
-        there as it opened it and ``url``, a reload's database, is that same file; else None.
-        Removed, a reload would open a new, empty database there: the vehicle on the lift
-        with no bolt done, its bolts tightened again (an engineer's trial).  Replaced (a
-        backup put back), the reload opens that file."""
-        if self._db_file is None:
-            return None
-        path = self._db_file[0]
-        from sqlalchemy.engine import make_url
-
-        u = make_url(url)
-        if u.get_backend_name() != "sqlite" or not u.database \
-                or Path(u.database).resolve() != path:
+    def file_changed(self, url: str) -> FileChange | None:
+        """How the SQLite file the daemon opened changed, where ``url``, a reload's
+        database, is that same file; else None.  Removed, a reload would open a new, empty
+        database there: the vehicle on the lift with no bolt done, its bolts tightened again
+        (an engineer's trial).  Replaced (a backup put back), the reload opens that file."""
+        if self._db_file is None or _sqlite_path(url) != self._db_file[0]:
             return None
         return self._file_state()
 
@@ -638,15 +638,22 @@ class Records:
         return out
 
 
-def _sqlite_file(url: str) -> tuple[Path, tuple[int, int]] | None:
-    """The file of an SQLite URL and its (device, inode); None for another database or one
-    in memory."""
+def _sqlite_path(url: str) -> Path | None:
+    """The file an SQLite URL names, resolved; None for another database or one in memory."""
     from sqlalchemy.engine import make_url
 
     u = make_url(url)
     if u.get_backend_name() != "sqlite" or not u.database or u.database == ":memory:":
         return None
-    path = Path(u.database).resolve()
+    return Path(u.database).resolve()
+
+
+def _sqlite_file(url: str) -> tuple[Path, tuple[int, int]] | None:
+    """The file of an SQLite URL and its (device, inode); None for another database, one in
+    memory, or a file that is not there."""
+    path = _sqlite_path(url)
+    if path is None:
+        return None
     try:
         st = path.stat()
     except OSError:

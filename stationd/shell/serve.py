@@ -35,7 +35,7 @@ from stationd.errors import StationError
 from stationd.lock import StationLocks
 from stationd.logsetup import setup_logging
 from stationd.shell.daemon import OPEN_ERRORS, Station
-from stationd.shell.records import STATION_FAULTS, Unsaved
+from stationd.shell.records import STATION_FAULTS, FileChange, Unsaved
 from stationd.shell.sdnotify import Notifier
 from stationd.station.actions import NoteLock
 from stationd.station.events import ResultRecorded, StationEvent
@@ -116,13 +116,13 @@ async def _reloaded(cfg_path: str, station: Station, screens: Screens,
     try:  # validate first: an invalid station never stops the running one
         new = await loop.run_in_executor(None, validate_station, cfg_path)
         changed = station.records.file_changed(new.database_url)
-        if changed == "removed":
+        if changed is FileChange.REMOVED:
             raise StationError(
                 f"the database file {new.database_url} was removed while the daemon ran: a "
                 "reload would start a new, empty database there (the vehicle's bolts done "
                 "forgotten); put a copy back (a backup) and reload, or restart the daemon to "
                 "start anew")
-        if changed == "replaced":
+        if changed is FileChange.REPLACED:
             log.warning("reload: the database file %s was replaced while the daemon ran (a "
                         "backup put back?): the station opens that file; results stored "
                         "after it was copied are not in it", new.database_url)

@@ -124,8 +124,10 @@ class OrderRules(FaultRules):
         p = spec.parameters if spec is not None else None
         if not cmd.ok or p is None or cmd.bolt in self._held_loosening:
             return None
-        out = [f"torque {cmd.torque_nm:g} Nm outside {p.torque.min:g}-{p.torque.max:g} Nm"
-               ] if not p.torque.min <= cmd.torque_nm <= p.torque.max else []
+        out: list[str] = []
+        if not p.torque.min <= cmd.torque_nm <= p.torque.max:
+            out.append(f"torque {cmd.torque_nm:g} Nm outside {p.torque.min:g}-"
+                       f"{p.torque.max:g} Nm")
         if p.angle is not None and not p.angle.min <= cmd.angle_deg <= p.angle.max:
             out.append(f"angle {cmd.angle_deg:g} deg outside {p.angle.min:g}-"
                        f"{p.angle.max:g} deg")

@@ -21,7 +21,12 @@ from drivers.wrench.base import Received, UnreadableResult
 from drivers.wrench.openprotocol import message as op
 from drivers.wrench.openprotocol.channel import Channel
 from drivers.wrench.openprotocol.message import Message
-from drivers.wrench.openprotocol.reading import UntypedInARow, receive, untyped_below
+from drivers.wrench.openprotocol.reading import (
+    UntypedInARow,
+    layout_words,
+    receive,
+    untyped_below,
+)
 from drivers.wrench.openprotocol.resultfeed import RESULT_REVISIONS, ResultFeed
 
 
@@ -75,12 +80,9 @@ class OldResults:
         result = untyped_below(reply, receive(reply), asked)
         habit = self._untyped.habit(result, reply.revision)
         if isinstance(result, UnreadableResult) and result.laid_out_as is not None:
-            self._log.warning("%s: %s: MID 0065 revision %d %s, which carries no result "
-                              "type; kept with its raw text", self.device, what,
-                              reply.revision,
-                              f"is laid out as revision {result.laid_out_as}"
-                              if result.laid_out_as != reply.revision
-                              else f"came though revision {asked} was asked for")
+            self._log.warning("%s: %s: MID 0065 %s, which carries no result type; kept with "
+                              "its raw text", self.device, what,
+                              layout_words(reply.revision, result.laid_out_as, asked))
             if habit or result.laid_out_as == reply.revision:   # honest: at the first
                 self._feed.lowered(reply.mid, reply.revision, result.laid_out_as)
                 self._agree(result.laid_out_as)

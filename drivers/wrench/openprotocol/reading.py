@@ -139,6 +139,15 @@ def untyped_below(msg: Message, item: TighteningResult | UnreadableResult, asked
                        item.pset, item.vin, item.timestamp, item.revision)
 
 
+def layout_words(header: int, laid_out_as: int, asked: int | None) -> str:
+    """How a result without a type came, for the journal: labelled one revision and laid out
+    as another, or honestly labelled below the revision ``asked`` for (subscribed, or
+    requested with MID 0064)."""
+    if header == laid_out_as:
+        return f"revision {header} came though revision {asked} was asked for"
+    return f"revision {header} is laid out as revision {laid_out_as}"
+
+
 def _unreadable(msg: Message, error: str, tightening_id: int | None, pset: int | None,
                 vin: str, timestamp: datetime | None,
                 laid_out_as: int | None = None) -> UnreadableResult:
@@ -208,5 +217,5 @@ def _values(raw: dict[str, str]) -> dict[str, Any]:
             "timestamp": stamp}
 
 
-__all__ = ["PICKED", "TYPED_FROM", "TypeLostError", "UntypedInARow", "pick", "read_result",
-           "receive", "untyped_below"]
+__all__ = ["PICKED", "TYPED_FROM", "TypeLostError", "UntypedInARow", "layout_words", "pick",
+           "read_result", "receive", "untyped_below"]

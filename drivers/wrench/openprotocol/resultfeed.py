@@ -26,7 +26,12 @@ from drivers.wrench.base import Received, UnreadableResult
 from drivers.wrench.openprotocol import message as op
 from drivers.wrench.openprotocol.channel import Channel
 from drivers.wrench.openprotocol.message import Message
-from drivers.wrench.openprotocol.reading import UntypedInARow, receive, untyped_below
+from drivers.wrench.openprotocol.reading import (
+    UntypedInARow,
+    layout_words,
+    receive,
+    untyped_below,
+)
 
 #: MID 0060/0061 and 0064/0065 revisions asked for, highest first: all that ``result.py``
 #: reads
@@ -95,8 +100,8 @@ class ResultFeed:
                 self._log.warning(
                     "%s: MID 0061 %s, which carries no result type; kept with its raw text "
                     "for the station (tightening id %s), its bolt held: it may be a "
-                    "loosening", self.device, _layout_words(msg.revision, item.laid_out_as,
-                                                            self.subscribed),
+                    "loosening", self.device, layout_words(msg.revision, item.laid_out_as,
+                                                           self.subscribed),
                     item.tightening_id if item.tightening_id is not None else "?")
                 # an honest label is no byte lost on the line: renewed at the first (still
                 # held); a body laid out otherwise than labelled, at the second in a row
@@ -176,11 +181,4 @@ class ResultFeed:
             with self._cond:
                 self._owed -= 1
 
-
-def _layout_words(header: int, laid_out_as: int, asked: int | None) -> str:
-    """How a result without a type came: labelled one revision and laid out as another, or
-    honestly labelled below the revision ``asked`` for."""
-    if header == laid_out_as:
-        return f"revision {header} came though revision {asked} was subscribed"
-    return f"revision {header} is laid out as revision {laid_out_as}"
 

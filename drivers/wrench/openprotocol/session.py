@@ -113,7 +113,6 @@ class Session:
                 raise
         with channel.cond:   # results pushed from now on are judged against it
             self._feed.subscribed = result_rev
-        with channel.cond:
             curves = self._curves.wanted
         if curves:
             try:
