@@ -46,6 +46,7 @@ log = logging.getLogger("stationd")
 RESULT_WAIT_S = 0.5         # one blocking wait for pushed results (a condition, not a poll)
 CURVE_WAIT_S = 0.5          # one blocking wait for curves, in their own thread
 CURVE_IDLE_S = 1.0          # the curve loop's wait while the controller sends none
+REFUSED = "the controller refused to give them (MID 0064)"
 
 
 class ControllerFeed:
@@ -67,6 +68,11 @@ class ControllerFeed:
         #: controller's newest when the catch-up asked for it; None: not known yet since the
         #: last (re)connect): a pushed result further on than the next is a live gap
         self._accounted: int | None = None
+        #: the first tightening id pushed since the last (re)connect, and the last one
+        #: recorded before it where the controller refused to say its newest (MID 0064): the
+        #: ids between the two were made during the cut and are a gap (:meth:`_refused`)
+        self._first_pushed: int | None = None
+        self._refused_after: int | None = None
         self._again = False     # a reconnect came while a catch-up ran: one more after it
         self._reads = 0         # the results' loop's reads of the controller so far
 
@@ -157,6 +163,7 @@ class ControllerFeed:
             if who is not None and who.words:   # the driver's own journal line said it
                 self._tell(DeviceSaid.of(time.time(), WRENCH, who))
         self._accounted = None     # the catch-up says up to where (a result may come first)
+        self._first_pushed = self._refused_after = None
         if self.catching_up is None or self.catching_up.done():
             self.catching_up = asyncio.get_running_loop().create_task(self._catch_ups())
         else:   # one of an earlier connection still runs: this one's follows it
@@ -215,7 +222,11 @@ class ControllerFeed:
             await self._read_since(self._reads)
             return "this controller keeps no results to fetch"
         last = await self._call(self.records.last_tightening_id)
-        newest = await self._call(wrench.fetch_result, 0)
+        try:
+            newest = await self._call(wrench.fetch_result, 0)
+        except RefusedError:
+            await self._refused(last)
+            raise
         if newest is None:
             return None                        # the controller has made none
         if newest.tightening_id is None:   # unreadable, its id too: kept, nothing planned
@@ -342,6 +353,12 @@ class ControllerFeed:
             return
         tid, last = int(got.tightening_id), self._accounted
         self._accounted = tid if last is None else max(last, tid)
+        if self._first_pushed is None:
+            self._first_pushed = tid
+        if self._refused_after is not None:
+            after, self._refused_after = self._refused_after, None
+            if tid > after + 1:
+                await self._gap(after + 1, tid - 1, REFUSED)
         if last is None or tid <= last + 1 or not wrench.can_fetch or self.records.repo is None:
             return
         todo = plan_gaps(last, tid - 1)
@@ -369,8 +386,13 @@ class ControllerFeed:
             await self._gap(*todo.gap, missed, live)
         offset = wrench.clock_offset_s
         for tid in todo.fetch:
-            got: Received | None = newest if newest is not None \
-                and tid == newest.tightening_id else await self._call(wrench.fetch_result, tid)
+            try:
+                got: Received | None = newest if newest is not None \
+                    and tid == newest.tightening_id \
+                    else await self._call(wrench.fetch_result, tid)
+            except RefusedError:    # this one and those after it: asking again will not help
+                await self._gap(tid, todo.fetch[-1], REFUSED, live)
+                raise
             if got is None:
                 missed = f"tightening {tid} no longer on the controller"
                 await self._gap(tid, tid, "the controller no longer has it", live)
@@ -405,6 +427,18 @@ class ControllerFeed:
         except STATION_FAULTS as exc:
             log.warning("curves of tightening %d (fetched late) not stored: %s", tid,
                         one_line(exc))
+
+    async def _refused(self, last: int | None) -> None:
+        """The controller refused to say its newest result after a reconnect: the ids made
+        during the cut are those between ``last``, the last one recorded, and the first one
+        pushed since (told now where one came already, else when it comes), a gap.  Nothing
+        recorded yet: no count to compare with."""
+        if last is None:
+            return
+        if self._first_pushed is None:
+            self._refused_after = last
+        elif self._first_pushed > last + 1:
+            await self._gap(last + 1, self._first_pushed - 1, REFUSED)
 
     async def _gap(self, first: int, last: int, reason: str, live: bool = False) -> None:
         """What the controller cannot give any more, for the core (it stores and says it)."""

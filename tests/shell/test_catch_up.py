@@ -11,17 +11,18 @@ The controller and the records are stand-ins answering as the driver and the rep
 from __future__ import annotations
 
 import asyncio
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from datetime import datetime
 from types import SimpleNamespace
 from typing import Any
 
-from drivers.errors import ConnectionLostError, ProtocolError
+from drivers.errors import ConnectionLostError, ProtocolError, RefusedError
 from drivers.wrench.base import UnreadableResult
 from stationd.shell.blocking import Blocking
 from stationd.shell.controller import ControllerFeed
-from stationd.station.inputs import CaughtUp, ResultIn, UnreadableIn
+from stationd.station.inputs import CaughtUp, ResultIn, ResultsMissed, UnreadableIn
 
 
 class Controller:
@@ -189,3 +190,87 @@ def test_with_the_controller_s_clock_unknown_its_newest_is_kept_and_the_rest_unk
     assert [e.result.tightening_id for e in fed if isinstance(e, ResultIn)] == [2]
     assert _ends(fed) == [(False, "the controller's clock is not known: its results cannot "
                                   "be placed before or after the link was lost", 1)]
+
+
+REFUSED = RefusedError("fetch tightening 0: the controller refused (MID 0004 error 99)",
+                       code=99)
+
+
+class Pushing(Controller):
+    """One that pushes tightening ``push`` once; ``first``: it is taken by the results' loop
+    before the catch-up asks for the newest (else after)."""
+
+    def __init__(self, answers: dict[int, Any], push: int, first: bool) -> None:
+        super().__init__(answers)
+        self.push, self.first, self.pushed = push, first, threading.Event()
+
+    def fetch_result(self, tid: int, timeout: float | None = None) -> Any:
+        if tid == 0 and self.first:
+            assert self.pushed.wait(10)
+        return super().fetch_result(tid, timeout)
+
+    def wait_result(self, timeout: float, acknowledge: bool = False) -> Any:
+        if self.pushed.is_set():
+            return super().wait_result(timeout, acknowledge)
+        self.pushed.set()
+        return res(self.push)
+
+
+def refused_then_pushed(controller: Pushing) -> list[Any]:
+    """Fed after a reconnect whose catch-up was refused, and one pushed result."""
+    fed: list[Any] = []
+    keeper = SimpleNamespace(device=controller, reconnects=1, losing=False, up=True)
+    records = SimpleNamespace(repo=SimpleNamespace(read_result_stored=lambda t: False),
+                              last_tightening_id=lambda: 40, copy_input=lambda ev, vin: ev)
+    core = SimpleNamespace(missed_since=lambda: time.time() - 60,
+                           status=lambda: SimpleNamespace(vin="V", faults={}))
+
+    async def feed(ev: Any) -> None:
+        fed.append(ev)
+
+    async def main() -> None:
+        pool = ThreadPoolExecutor(2)
+        feed_ = ControllerFeed(core, records, keeper, feed, lambda ev: None,  # type: ignore[arg-type]
+                               Blocking(pool))
+        feed_.came_back()
+        if not controller.first:
+            assert feed_.catching_up is not None
+            await feed_.catching_up
+        await feed_.results(controller)  # type: ignore[arg-type]
+        assert feed_.catching_up is not None
+        await feed_.catching_up
+        pool.shutdown()
+        feed_.close()
+
+    asyncio.run(main())
+    return fed
+
+
+def _gaps(fed: list[Any]) -> list[tuple[int, int, str]]:
+    return [(e.first, e.last, e.reason) for e in fed if isinstance(e, ResultsMissed)]
+
+
+def test_a_refused_catch_up_records_the_ids_before_the_next_pushed_one_as_a_gap():
+    """The controller refuses MID 0064 after a reconnect (its newest not said): the ids
+    between the last recorded (40) and the first pushed since (43) were made during the cut
+    and went nowhere; a gap says so, whether the push comes after the refusal or before it
+    (the tightenings made during a cut whose catch-up was refused left no row: a helper's
+    trial)."""
+    for first in (False, True):
+        fed = refused_then_pushed(Pushing({0: REFUSED}, 43, first))
+        assert _gaps(fed) == [(41, 42, "the controller refused to give them (MID 0064)")]
+        assert [e.result.tightening_id for e in fed if isinstance(e, ResultIn)] == [43]
+        assert [c.complete for c in fed if isinstance(c, CaughtUp)] == [False]
+
+
+def test_a_refused_catch_up_with_nothing_made_during_the_cut_records_no_gap():
+    fed = refused_then_pushed(Pushing({0: REFUSED}, 41, first=False))
+    assert not _gaps(fed)
+
+
+def test_a_fetch_refused_part_way_records_it_and_the_ones_after_it_as_a_gap():
+    """The controller said its newest (44) and gave 41, then refused 42: 42-44 are a gap."""
+    fed = catch_up(Controller({0: res(44), 41: res(41), 42: REFUSED}))
+    assert [e.result.tightening_id for e in fed if isinstance(e, ResultIn)] == [41]
+    assert _gaps(fed) == [(42, 44, "the controller refused to give them (MID 0064)")]
+    assert [c.complete for c in fed if isinstance(c, CaughtUp)] == [False]

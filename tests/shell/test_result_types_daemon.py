@@ -134,6 +134,41 @@ def test_a_link_cut_during_an_enable_ends_with_the_catch_up_open_or_held(tmp_pat
 
 
 @pytest.mark.timeout(300)
+def test_a_tightening_made_during_a_cut_whose_catch_up_is_refused_is_a_gap(tmp_path):
+    """The controller refuses MID 0064 after the cut, and a tightening was made during it:
+    B05 is held (what was done is not known) and the tightening's id, skipped by the next
+    pushed result, is stored as a gap, not lost without a row (a helper's trial)."""
+    pose = tmp_path / "pose"
+    with tracking(tmp_path, "CUTVIN00000000003") as (d, _, ctl):
+        tool_on(d, ctl, pose, "B04")
+        first = ctl.pull_trigger()               # the last result the station records
+        assert first is not None
+        until(lambda: first.tightening_id in ctl.acked_ids, 30, "the first result stored")
+        tool_on(d, ctl, pose, "B05")
+        ctl.refuse_mid(64, 99)
+        ctl.refuse_revisions(1, range(1, 8))   # the link down, and kept down
+        ctl.drop_connections()
+        d.wait_log("fault: wrench")
+        made = ctl.pull_trigger()              # the operator tightens meanwhile
+        assert made is not None
+        ctl.refuse_revisions(1, ())            # the link back; MID 0064 still refused
+        d.wait_log("B05: its result during the link cut not known: the controller refused to "
+                   "give them")
+        tool_on(d, ctl, pose, "B06")
+        pushed = ctl.pull_trigger()
+        assert pushed is not None and pushed.tightening_id == made.tightening_id + 1
+        d.wait_log(f"tightening {made.tightening_id} missed while the link was down: a gap "
+                   "(the controller refused to give them (MID 0064))")
+        db = tmp_path / "station.db"
+        until(lambda: len(_rows(db, "SELECT id FROM result_gaps")) == 1, 30, "the gap stored")
+    assert _rows(db, "SELECT first_id, last_id FROM result_gaps") == [
+        (made.tightening_id, made.tightening_id)]
+    assert _rows(db, "SELECT r.tightening_id, b.code FROM tightening_records r JOIN bolts b "
+                     "ON b.id = r.bolt_id ORDER BY r.id") == [
+        (first.tightening_id, "B04"), (pushed.tightening_id, "B06")]
+
+
+@pytest.mark.timeout(300)
 @pytest.mark.parametrize("cut_s, restart", [(6.0, ""), (30.0, ""), (6.0, "power"),
                                              (6.0, "ids")],
                          ids=["cut 6 s", "cut 30 s", "controller restarted", "ids restarted"])
