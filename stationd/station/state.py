@@ -323,7 +323,13 @@ class CoreState:
         where it was not held."""
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
         self._held_loosening.pop(bolt, None)
-        return self.matcher.held.pop(bolt, None)
+        note = self.matcher.held.pop(bolt, None)
+        if note is not None and self.state is State.TRACKING and self.reason.bolt == bolt \
+                and self.reason.kind in (Because.UNREADABLE_HELD, Because.NOT_TAKEN_HELD):
+            # the state's reason said it was held: no longer (`stationd status` kept saying
+            # so until the next change: a supervisor's trial)
+            self._to(State.TRACKING, StateReason(Because.TRACKING))
+        return note
 
     def _lock(self, t: float, bolt: str, n: int) -> list[Action]:
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded

@@ -9,14 +9,26 @@ from typing import Any
 from db.kinds import LOOSENING, NOK, OK, TIGHTENING, HeldUnder
 from stationd.reasons import Reason, Why
 from stationd.station.actions import RecordCommand
-from stationd.station.commands import KIND, RIGHT, EnterOutcome, Issuer, ReleaseBolt, Right
+from stationd.station.commands import (
+    KIND,
+    RIGHT,
+    EnterOutcome,
+    Issuer,
+    ReleaseBolt,
+    Right,
+    SkipBolt,
+)
 from stationd.station.core import StationCore
 from stationd.station.events import (
+    Because,
     BoltLocked,
     BoltToLoosen,
     Notice,
     ResultRecorded,
     Said,
+    State,
+    StateChanged,
+    StateReason,
     ToolDisabled,
 )
 from stationd.station.inputs import CommandDone, CommandIn, UnreadableIn, VehicleLoaded
@@ -77,6 +89,21 @@ def test_an_ok_entered_by_a_supervisor_closes_the_held_bolt():
     sends = len(d.sends)
     _on(d, 1, 4)
     assert len(d.sends) == sends
+
+
+def test_the_state_stops_saying_held_when_the_hold_ends():
+    """Released, skipped or its outcome entered: the state's reason no longer says the bolt
+    is held for a supervisor (`stationd status` kept saying it until the next change: a
+    supervisor's trial)."""
+    for end in (ok(), ReleaseBolt("VIN1", "B1", "checked"), SkipBolt("VIN1", "B1", "done")):
+        d = _ready()
+        _held(d)
+        assert d.core.reason == StateReason(Because.UNREADABLE_HELD, bolt="B1")
+        acts = d.command(1, end, SUPERVISOR)
+        assert _answer(acts).answer.accepted
+        assert [(e.state, e.reason) for e in published(acts, StateChanged)] == [
+            (State.TRACKING, StateReason(Because.TRACKING))]
+        assert state_words(d.core.reason) == "tracking the wrench"
 
 
 def test_the_release_right_is_what_it_takes_and_an_operator_is_refused():
