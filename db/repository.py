@@ -589,7 +589,7 @@ class Repository:
             return [{"result_type": e.result_type, "what": e.what, "vin": e.vin,
                      "bolt": e.bolt, "controller_vin": e.controller_vin,
                      "tightening_id": e.tightening_id, "pset": e.pset, "status": e.status,
-                     "torque_nm": e.torque_nm, "angle_deg": e.angle_deg,
+                     "torque_nm": e.torque_nm, "angle_deg": e.angle_deg, "note": e.note,
                      "result_at": e.result_at, "recorded_at": e.recorded_at}
                     for e in s.scalars(q)]
 

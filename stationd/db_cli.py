@@ -21,7 +21,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from db.kinds import LOOSENING, MISSING, PENDING, SKIPPED
+from db.kinds import CUT_UNKNOWN, LOOSENING, MISSING, PENDING, SKIPPED
 from drivers.counting import counted
 from stationd.errors import ConfigError, InputError
 from stationd.jsonout import strict_json
@@ -431,16 +431,30 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                   f"{u['tightening_id']} pset {u['pset']} "
                   f"{u['status'].upper()} {_num(u['torque_nm'])} Nm, "
                   f"{_num(u['angle_deg'])} deg ({u['reason']})")
+        holds = dict(report.held)
         for e in events:
+            if e["what"] == CUT_UNKNOWN:    # no result: what the station knows of the cut
+                print(f"  link cut while the tool was on {e['bolt']}: {e['note']}"
+                      f"{_held_now(e['bolt'], holds, '; ')}")
+                continue
             on = f" while the tool was on {e['bolt']}" if e["bolt"] else ""
             code = "" if "type" in e["what"] else f" (type {e['result_type']})"
             print(f"  controller event: {e['what']}{code}, tightening "
                   f"{e['tightening_id']} pset {e['pset']}{on}: not a rundown")
         for x in unread:
-            on = f", {x['bolt']} held" if x["bolt"] else ""
             print(f"  unreadable result: tightening {x['tightening_id'] or '?'} (MID "
-                  f"{x['mid']:04d} revision {x['revision']}{on}): {x['error']}")
+                  f"{x['mid']:04d} revision {x['revision']}{_held_now(x['bolt'], holds)}): "
+                  f"{x['error']}")
     return EXIT_OK if report.complete else EXIT_INCOMPLETE
+
+
+def _held_now(bolt: str | None, holds: dict[str, str], sep: str = ", ") -> str:
+    """Of a record that held ``bolt``: whether it is held still (``holds``: the bolts held
+    now), or was and a supervisor's command ended it (released, skipped, its outcome
+    entered: the commands say which)."""
+    if not bolt:
+        return ""
+    return f"{sep}{bolt} held" if bolt in holds else f"{sep}{bolt} held then, no longer"
 
 
 def _entered(run: dict[str, Any]) -> str:

@@ -665,6 +665,7 @@ def test_a_table_without_models_is_not_imported_and_an_idle_one_is_warned(run, d
 
 
 def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path):
+    from db.kinds import CUT_UNKNOWN
     from db.repository import Repository
     from stationd.web.results import (
         UNATTRIBUTED_STATUS,
@@ -676,6 +677,17 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
     run("db", "import", EXAMPLE, "--db", db)
     with Repository.open(db) as repo:
         repo.start_vehicle("VIN1", "WAGON-B")
+        # SF-FL held by a result that did not read, then tightened: held then, no longer
+        repo.record_unreadable(
+            mid=61, revision=7, raw="00990061007    garbled", error="parameter 02 missing",
+            vin="VIN1", bolt="SF-FL", controller_vin=None, tightening_id=5, pset=1,
+            result_at=None)
+        # SF-FR held by a link cut during its enable: no result, its note says why
+        repo.record_controller_event(
+            result_type=0, what=CUT_UNKNOWN, vin="VIN1", bolt="SF-FR", controller_vin=None,
+            tightening_id=None, pset=1, ok=False, torque_nm=None, angle_deg=None,
+            result_at=None, note="its result during the link cut not known: the controller "
+            "refused to give them")
         # made at 17:27:47 on the controller's clock (fetched after a link cut, later)
         record(repo, "VIN1", "SF-FL", controller_at=datetime(2026, 11, 30, 17, 27, 47,
                                                               tzinfo=UTC))
@@ -698,23 +710,32 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
             "was on SF-FR: not a rundown") in out
     assert ("unreadable result: tightening 9 (MID 0061 revision 7, TB-C held): parameter 01 "
             "missing") in out
+    # a hold ended since is not said as held; a link cut's hold says what it knows, not a
+    # result's "tightening None ... (type 0)" (a supervisor's trial)
+    assert ("unreadable result: tightening 5 (MID 0061 revision 7, SF-FL held then, no "
+            "longer): parameter 02 missing") in out
+    assert ("link cut while the tool was on SF-FR: its result during the link cut not known: "
+            "the controller refused to give them; SF-FR held") in out
+    assert "None" not in out and "type 0" not in out
     # the held bolt says so on its own line and in the counts (a quality trial)
-    assert ", 1 held (TB-C)" in out.splitlines()[0], out
+    assert ", 2 held (SF-FR, TB-C)" in out.splitlines()[0], out
     [tbc] = [line for line in out.splitlines() if line.strip().startswith("TB-C ")]
     assert "HELD: tightening 9 (its outcome to be entered)" in tbc, tbc
     code, out, _ = run("db", "report", "VIN1", "--db", db, "--json")
     obj = json.loads(out)
-    assert [e["result_type"] for e in obj["controller_events"]] == [3]
-    assert [x["raw"] for x in obj["unreadable_results"]] == ["00990061007    garbage"]
-    [row] = [r for r in runs if r["status"] == UNREADABLE_STATUS]
-    assert (row["bolt"], row["tightening_id"]) == ("TB-C", 9)
+    assert [e["result_type"] for e in obj["controller_events"]] == [0, 3]
+    assert obj["controller_events"][0]["note"].startswith("its result during the link cut")
+    assert [x["raw"] for x in obj["unreadable_results"]] == ["00990061007    garbled",
+                                                              "00990061007    garbage"]
+    [row] = [r for r in runs if r["status"] == UNREADABLE_STATUS and r["tightening_id"] == 9]
+    assert row["bolt"] == "TB-C"
     # one clock per column on every row (an MES integrator's trial: the controller's time
     # in result_at on these rows, the station's on rundowns): the controller's, read, in
     # controller_at; when the station took it in result_at
     assert row["controller_at"].startswith("2026-11-30T17:27:55")
     assert row["result_at"] == row["recorded_at"]
     assert row["comment"] == "MID 0061 revision 7: parameter 01 missing"
-    [made] = [r for r in runs if r["bolt"] == "SF-FL"]
+    [made] = [r for r in runs if r["bolt"] == "SF-FL" and r["status"] != UNREADABLE_STATUS]
     assert made["controller_at"].startswith("2026-11-30T17:27:47"), made
     assert "2026-11-30T17:27:47+00:00" in rundowns_csv(runs)
     [loose] = [r for r in runs if r["status"] == UNATTRIBUTED_STATUS]
@@ -725,10 +746,10 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
     assert ",unattributed," in rundowns_csv(runs)
     out_csv = tmp_path / "all.csv"
     code, out, _ = run("db", "export", "--results", "--db", db, "--out", str(out_csv))
-    assert code == 0 and "1 unreadable result, 1 unattributed result" in out, out
+    assert code == 0 and "2 unreadable results, 1 unattributed result" in out, out
     assert out.startswith(f"wrote {out_csv}: 1 rundown and "), out
-    assert doc["unreadable_results"][0]["bolt"] == "TB-C"
-    assert doc["controller_events"][0]["what"] == "batch increment"
+    assert [x["bolt"] for x in doc["unreadable_results"]] == ["SF-FL", "TB-C"]
+    assert [e["what"] for e in doc["controller_events"]] == [CUT_UNKNOWN, "batch increment"]
 
 
 def _sim_station(tmp_path: Path) -> Path:
