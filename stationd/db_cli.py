@@ -442,9 +442,9 @@ def cmd_db_report(args: argparse.Namespace) -> int:
             print(f"  controller event: {e['what']}{code}, tightening "
                   f"{e['tightening_id']} pset {e['pset']}{on}: not a rundown")
         for x in unread:
-            print(f"  unreadable result: tightening {x['tightening_id'] or '?'} (MID "
-                  f"{x['mid']:04d} revision {x['revision']}{_held_now(x['bolt'], holds)}): "
-                  f"{x['error']}")
+            said = f"MID {x['mid']:04d} revision {x['revision']}"
+            print(f"  unreadable result: tightening {x['tightening_id'] or '?'} ({said}"
+                  f"{_held_now(x['bolt'], holds)}): {x['error'].removeprefix(said + ': ')}")
     return EXIT_OK if report.complete else EXIT_INCOMPLETE
 
 

@@ -110,6 +110,9 @@ class Results:
         # what the controller said that was no rundown, and what could not be read (whole)
         report["controller_events"] = [_isos(e) for e in self.repo.controller_events(vin)]
         report["unreadable_results"] = [_isos(x) for x in self.repo.unreadable(vin)]
+        # results made at height that no bolt owns, each with its type in words
+        report["unattributed"] = [{**_isos(u), "what": result_type_words(u["result_type"])}
+                                  for u in self.repo.unattributed(vin)]
         return report
 
     def commands(self, vin: str) -> list[dict[str, Any]]:

@@ -679,7 +679,8 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
         repo.start_vehicle("VIN1", "WAGON-B")
         # SF-FL held by a result that did not read, then tightened: held then, no longer
         repo.record_unreadable(
-            mid=61, revision=7, raw="00990061007    garbled", error="parameter 02 missing",
+            mid=61, revision=7, raw="00990061007    garbled",
+            error="MID 0061 revision 7: parameter 02 missing",   # the driver's words
             vin="VIN1", bolt="SF-FL", controller_vin=None, tightening_id=5, pset=1,
             result_at=None)
         # SF-FR held by a link cut during its enable: no result, its note says why

@@ -1,7 +1,8 @@
 """The operator screen's Enter outcome form, with the daemon over the real protocols: a bolt
 held (its result could not be read) is in the Locked panel, which says a user with the release
 right releases it or enters the outcome the controller shows; an operator is not offered the
-form, a supervisor is, enters OK with torque, angle and a comment, and the bolt is drawn OK."""
+form, a supervisor is, enters OK with torque, angle and a comment, and the bolt is drawn OK;
+the vehicle's page says the rundown was entered and lists the result that could not be read."""
 
 from __future__ import annotations
 
@@ -66,3 +67,19 @@ def test_a_supervisor_enters_the_outcome_of_a_held_bolt_on_the_screen(page, shot
         page.wait(lambda p: _b05(p, "state") == "ok", 30, "B05 drawn OK")
         page.wait(lambda p: not _shown(p, "locks"), 30, "the locked panel gone")
         shots("operator-outcome-entered")
+
+        # the vehicle's page: the rundown entered says so, and the result that could not be
+        # read is listed with its bolt's hold ended (a supervisor's trial: neither was shown)
+        page.get(f"http://127.0.0.1:{http_port}/vehicles/{VIN}")
+        page.wait(lambda p: p.count("tr.rundown[data-bolt=B05]") == 1, 30, "B05's rundown")
+        status = page.js("return document.querySelector('tr.rundown[data-bolt=B05]')"
+                         ".children[4].textContent")
+        assert status == "OK, entered by sam, not measured", status
+        page.wait(lambda p: p.count("#others tr.other") == 1, 30, "the unreadable result")
+        other = page.js("return [...document.querySelector('#others tr.other').children]"
+                        ".map(c => c.textContent)")
+        # cut short before its tightening id (parameter 41): no id, its pset picked
+        assert other[1:5] == ["could not be read", "-", str(bad.pset),
+                              "B05 (held then, no longer)"], other
+        assert other[5].startswith("MID 0061 revision 7: parameter 38"), other
+        shots("vehicle-entered")

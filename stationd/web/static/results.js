@@ -138,6 +138,42 @@ function showTrail(commands) {
   }
   q("#trail").hidden = q("#trail-title").hidden = !commands.length;
 }
+// What the controller sent that is no rundown of a bolt, oldest first: a result that could
+// not be read (its bolt held, or held then), a link cut that left a bolt's result unknown,
+// a controller event (batch step, ...), a result no bolt owns. Each held bolt says whether a
+// supervisor's command ended its hold since (the trail says which), as db report does.
+function showOthers(v) {
+  const held = v.held || {};
+  const bolt = (b) => !b ? "-" : b + (b in held ? " (held)" : " (held then, no longer)");
+  const rows = [];
+  for (const x of v.unreadable_results || [])
+    rows.push([x.recorded_at, "could not be read", x.tightening_id, x.pset, bolt(x.bolt),
+               // the driver's words name the MID and revision already
+               x.error.startsWith("MID ") ? x.error
+                 : `MID ${String(x.mid).padStart(4, "0")} revision ${x.revision}: ${x.error}`]);
+  for (const e of v.controller_events || []) {
+    if (e.what === "result unknown after a link cut")
+      rows.push([e.recorded_at, "link cut", null, e.pset, bolt(e.bolt), e.note || ""]);
+    else
+      rows.push([e.recorded_at, e.what, e.tightening_id, e.pset,
+                 e.bolt ? `tool on ${e.bolt}` : "-", "not a rundown"]);
+  }
+  for (const u of v.unattributed || [])
+    rows.push([u.recorded_at, `unattributed ${u.what}`, u.tightening_id, u.pset, "-",
+               `${(u.status || "").toUpperCase()} ${fmt(u.torque_nm, 1)} Nm, ` +
+               `${fmt(u.angle_deg, 0)} deg (${u.reason})`]);
+  rows.sort((a, b) => String(a[0]).localeCompare(String(b[0])));
+  const tb = q("#others tbody");
+  tb.replaceChildren();
+  for (const [at, what, tid, pset, b, detail] of rows) {
+    const tr = document.createElement("tr");
+    tr.className = "other";
+    cell(tr, String(at || "").slice(0, 19).replace("T", " "));
+    cell(tr, what); cell(tr, tid ?? "-"); cell(tr, pset ?? "-"); cell(tr, b); cell(tr, detail);
+    tb.appendChild(tr);
+  }
+  q("#others").hidden = q("#others-title").hidden = !rows.length;
+}
 // every quantity of a NOK rundown out of its limits (those of its parameter version)
 function nokWords(r) {
   const out = [];
@@ -185,7 +221,9 @@ async function showVehicle(vin) {
         // status, and says who skipped it and why
         const then = b.skipped_by && b.status !== "skipped"
           ? `, then skipped by ${b.skipped_by}` + (b.comment ? `: ${b.comment}` : "") : "";
-        cell(tr, i ? "" : b.status.toUpperCase() + then,
+        // held: its result not known, a supervisor releases it or enters its outcome
+        const hold = (v.held || {})[b.bolt];
+        cell(tr, i ? "" : b.status.toUpperCase() + then + (hold ? `, HELD: ${hold}` : ""),
              "status-" + (b.status === "nok" ? "NOK" : b.status));
         if (!r) {
           // a skip names who skipped it and why (the exports' skipped_by and comment)
@@ -200,7 +238,9 @@ async function showVehicle(vin) {
           cell(tr, r.attempt_words ?? String(r.attempt));
           // a loosening (the NOK policy's loosen step, a loosen command) undoes a tightening
           cell(tr, r.rundown || "tightening", "rundown-" + (r.rundown || "tightening"));
-          cell(tr, r.status.toUpperCase() + (r.status === "nok" ? nokWords(r) : ""),
+          // an outcome a supervisor read on the controller's screen: never taken for measured
+          cell(tr, r.status.toUpperCase() + (r.status === "nok" ? nokWords(r) : "") +
+               (r.entered_by ? `, entered by ${r.entered_by}, not measured` : ""),
                "status-" + (r.status === "nok" ? "NOK" : "ok"));
           cell(tr, fmt(r.torque_nm, 1)); cell(tr, fmt(r.angle_deg, 0)); cell(tr, r.pset ?? "-");
           cell(tr, fmt(r.tilt_deg, 1)); cell(tr, fmt(r.match_distance_mm, 1));
@@ -230,6 +270,7 @@ async function showVehicle(vin) {
     const crops = v.bolts.some((b) => b.rundowns.some((r) => (r.image_urls || []).length));
     q("#rundowns").classList.toggle("no-crops", !crops);
     q("#curves-note").hidden = !document.querySelector("tr.curve");
+    showOthers(v);
     showTrail(v.commands || []);
   } catch (e) {
     if (e.status === 404) {
