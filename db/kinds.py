@@ -11,6 +11,7 @@ never a bolt done: it undoes what a tightening did.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from datetime import UTC, datetime
 from enum import StrEnum
 
 TIGHTENING, LOOSENING = "tightening", "loosening"
@@ -82,10 +83,19 @@ def unreadable_note(tightening_id: int | None, mid: int, revision: int) -> str:
         else f"MID {mid:04d} revision {revision}"
 
 
-def cut_unknown_note(why: str) -> str:
-    """A held bolt's note where the tool was enabled for it when the link to the controller
-    went down, and what the controller did meanwhile is not known (``why``)."""
-    return f"its result during the link cut not known: {why}"
+def cut_unknown_note(why: str, pset: int | None = None, enabled_at: float | None = None
+                     ) -> str:
+    """A held bolt's note where the tool was enabled for it (with ``pset``, at
+    ``enabled_at``, epoch seconds) when the link to the controller went down, and what the
+    controller did meanwhile is not known (``why``).  The pset and the time are what the
+    supervisor looks for in the controller's result list (a supervisor's trial: the note
+    said neither)."""
+    note = f"its result during the link cut not known: {why}"
+    if enabled_at is None:
+        return note
+    at = datetime.fromtimestamp(enabled_at, UTC).strftime("%Y-%m-%d %H:%M:%S")
+    return note + f"; the tool was enabled{'' if pset is None else f' for pset {pset}'} " \
+        f"at {at} UTC"
 
 
 def loosening_note(note: str, pset: int | None) -> str:

@@ -274,7 +274,7 @@ class ResultRules(OrderRules):
         assert cut is not None  # noqa: S101 - the callers' guard
         en = cut.selection
         self._answered(en)
-        note = cut_unknown_note(why)
+        note = cut_unknown_note(why, en.pset, cut.enabled_at)
         said = Notice(Said.CUT_UNKNOWN, bolt=en.bolt, note=note, t=t)
         stored = StoreCutUnknown(en.vin, en.bolt, note, en)
         if self.matcher is None or self.vin != en.vin or en.bolt not in self.matcher.bolts:

@@ -401,10 +401,15 @@ def test_a_result_fetched_after_a_cut_that_the_data_does_not_place_stays_unattri
     if r.pset == sent.selection.pset:
         assert d.core.matcher.held["B1"] == (f"its result during the link cut not known: "
                                              f"tightening {tid} may be its own (not proved "
-                                             "by the controller's data)")
+                                             f"by the controller's data){ENABLED_B1}")
         assert d.core.missed_since() is not None and "B1" not in d.core.allowed()
     else:
         assert not d.core.matcher.held and "B1" in d.core.allowed()
+
+
+#: the hold's words after a cut during B1's enable: its pset, and when the tool went on (the
+#: driver's clock then: 1,000 s)
+ENABLED_B1 = "; the tool was enabled for pset 1 at 1970-01-01 00:16:40 UTC"
 
 
 def _back_after_a_cut(d: Driver) -> SendParams:
@@ -433,13 +438,15 @@ def test_while_a_cut_result_is_owed_the_tool_stays_off_for_every_bolt(bolt):
         f"bolt B{bolt}: the tool stays off until the controller's results made during the "
         "link cut are fetched (bolt B1 was enabled)")
     acts = d.feed(CaughtUp(d.t, complete=False, reason="the controller refused MID 0064"))
+    # with what the supervisor looks for on the controller: the pset and when it went on
     assert d.core.matcher.held == {"B1": "its result during the link cut not known: the "
-                                         "controller refused MID 0064"}
+                                         f"controller refused MID 0064{ENABLED_B1}"}
     assert [notice_words(n) for n in published(acts, Notice)] == [
-        "B1: its result during the link cut not known: the controller refused MID 0064: "
-        "check it on the controller, then release or enter its outcome"]
+        "B1: its result during the link cut not known: the controller refused MID 0064"
+        f"{ENABLED_B1}: check it on the controller, then release or enter its outcome"]
     assert [(e.bolt, e.held) for e in published(acts, BoltLocked)] == [
-        ("B1", "its result during the link cut not known: the controller refused MID 0064")]
+        ("B1", "its result during the link cut not known: the controller refused MID 0064"
+         f"{ENABLED_B1}")]
     if bolt != 1:
         _on(d, bolt, 2)     # the others go on
         assert d.tool and d.core.tool_on and d.core.bolt == f"B{bolt}"
