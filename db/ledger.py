@@ -311,7 +311,9 @@ def _rundowns(s: Session, refs: list[int]) -> dict[int, dict[str, Any]]:
             # an outcome a person entered from the controller's screen (None: measured):
             # who, why, and the unreadable result it resolves
             "entered_by": rec.entered_by, "entered_comment": rec.entered_comment,
-            "unreadable_id": rec.unreadable_id}
+            "unreadable_id": rec.unreadable_id,
+            # fetched after a link cut: made while the link was down, taken at the reconnect
+            "offline": rec.offline}
     return out
 
 

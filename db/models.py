@@ -31,6 +31,7 @@ from sqlalchemy import (
     Text,
     TypeDecorator,
     UniqueConstraint,
+    false,
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
@@ -214,6 +215,9 @@ class TighteningRecord(Base):
     entered_by: Mapped[str | None] = mapped_column(String(64))
     entered_comment: Mapped[str | None] = mapped_column(String(500))
     unreadable_id: Mapped[int | None]
+    #: fetched after a link cut (Open Protocol MID 0064): made while the link was down, taken
+    #: by the station at the reconnect (its ``result_at``), not as it was made
+    offline: Mapped[bool] = mapped_column(default=False, server_default=false())
 
     vehicle: Mapped[Vehicle] = relationship()
     bolt: Mapped[Bolt] = relationship()

@@ -300,7 +300,7 @@ class Repository:
         tightening_id: int | None = None, sent_at: datetime | None = None,
         result_at: datetime | None = None, images: Sequence[str] = (),
         enable_id: int | None = None, kind: str = TIGHTENING, operator: str | None = None,
-        controller_at: datetime | None = None,
+        controller_at: datetime | None = None, offline: bool = False,
     ) -> Recorded:
         """Record one tightening of ``bolt`` on the open vehicle ``vin``: its id, and whether
         it was a copy the controller sent again (then nothing is written).
@@ -323,7 +323,8 @@ class Repository:
         targets.  ``enable_id`` (:meth:`note_enable`) is settled in the same transaction: the
         station owes that enable nothing more.  ``kind``: ``tightening`` or ``loosening``
         (a loosening never makes the bolt done).  ``operator``: the user signed in at the
-        station when the tool was enabled (None: nobody).
+        station when the tool was enabled (None: nobody).  ``offline``: fetched after a link
+        cut, made while the link was down.
         """
         if len(position_mm) != 3:
             raise DataError("position_mm: expected x, y, z")
@@ -370,7 +371,7 @@ class Repository:
                 angle_deg=_opt_float(angle_deg),
                 tightening_id=None if tightening_id is None else int(tightening_id),
                 sent_at=sent_at, result_at=result_at, recorded_at=utcnow(),
-                controller_at=controller_at,
+                controller_at=controller_at, offline=bool(offline),
                 images=[str(i) for i in images], kind=kind,
                 operator=None if operator is None else str(operator)[:64])
             s.add(rec)

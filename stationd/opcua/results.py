@@ -249,6 +249,9 @@ def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
         ResultState=RESULT_STATE_COMPLETED,
         CreationTime=created,
         ResultEvaluation=_evaluation(ok),
+        # made while the link to the controller was down, fetched at the reconnect: its
+        # CreationTime is when the station took it (absent, as the standard's default false)
+        IsGeneratedOffline=True if rec.get("offline") else None,
         ProductId=rec["vin"],
         InternalRecipeId=None if pset is None else str(pset),
         SequenceNumber=int(entry["seq"]),

@@ -33,7 +33,7 @@ def test_migrated_schema_matches_the_models(tmp_path):
     assert set(inspect(engine).get_table_names()) == TABLES
     assert _diff(engine, Base.metadata) == []
     with engine.connect() as conn:
-        assert current_revision(conn) == head_revision() == "0016"
+        assert current_revision(conn) == head_revision() == "0017"
     engine.dispose()
 
 

@@ -59,6 +59,8 @@ def summary(result: Any) -> dict[str, Any]:
         "seq": meta.SequenceNumber, "evaluation": int(meta.ResultEvaluation),
         "technology": _text(meta.JoiningTechnology), "assembly": meta.AssemblyType,
         "name": meta.Name, "simulated": meta.IsSimulated,
+        # made while the link to the controller was down (absent: the default, false)
+        "offline": bool(getattr(meta, "IsGeneratedOffline", None)),
         "entities": sorted([e.EntityType, e.EntityId] for e in meta.AssociatedEntities),
         "values": [[v.Name, None if math.isnan(v.MeasuredValue) else v.MeasuredValue,
                     v.LowLimit, v.High, v.EngineeringUnits.UnitId]

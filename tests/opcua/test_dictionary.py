@@ -51,7 +51,8 @@ def shapes(repo: Repository) -> list[dict[str, Any]]:
                 sample_period_s=0.002)
     record(repo, VIN, "B2", ok=False, torque_nm=30.0, angle_deg=35.0)
     record(repo, VIN, "B2", ok=True, kind="loosening", torque_nm=20.0, angle_deg=303.0)
-    record(repo, VIN, "B3", ok=True, torque_nm=120.0, angle_deg=40.0)
+    # fetched after a link cut: made while the link was down
+    record(repo, VIN, "B3", ok=True, torque_nm=120.0, angle_deg=40.0, offline=True)
     record(repo, VIN, "B1", ok=False, torque_nm=None, angle_deg=None)
     joint = [[20, VIN]]
     return [
@@ -65,7 +66,7 @@ def shapes(repo: Repository) -> list[dict[str, Any]]:
         {"bolt": "B2", "evaluation": 1, "assembly": DISASSEMBLED, "trace": [],
          "entities": sorted([*joint, [23, "B2"]]),
          "values": [["Torque", 20.0, 23.0, 27.0, NM], ["Angle", 303.0, 10.0, 50.0, DEG]]},
-        {"bolt": "B3", "evaluation": 1, "assembly": 1, "trace": [],
+        {"bolt": "B3", "evaluation": 1, "assembly": 1, "trace": [], "offline": True,
          "entities": sorted([*joint, [23, "B3"]]),
          "values": [["Torque", 120.0, 110.0, 130.0, NM], ["Angle", 40.0, None, None, DEG]]},
         {"bolt": "B1", "evaluation": 2, "assembly": 1, "trace": [],
@@ -144,6 +145,7 @@ def test_every_result_shape_round_trips_through_the_legacy_loader_and_part_6(rep
             assert g["simulated"] is True
             for key in ("evaluation", "assembly", "entities", "values", "trace"):
                 assert g[key] == w[key], (mode, rid, key, g[key])
+            assert g["offline"] is w.get("offline", False), (mode, rid)
 
     # the same bytes read by the specification's layout alone
     model = Model([NODESETS / f"{m}.NodeSet2.xml" for m in MODELS])
@@ -162,6 +164,8 @@ def test_every_result_shape_round_trips_through_the_legacy_loader_and_part_6(rep
         assert meta["JoiningTechnology"]["Text"] == "Tightening"
         assert meta["ResultId"] == rid and meta["AssemblyType"] == w["assembly"]
         assert meta["ResultEvaluation"] == w["evaluation"]
+        # IsGeneratedOffline set (true) only on the one made during a link cut
+        assert meta.get("IsGeneratedOffline") is (True if w.get("offline") else None), rid
         assert sorted([e["EntityType"], e["EntityId"]]
                       for e in meta["AssociatedEntities"]) == w["entities"]
         # the controller's tightening id, where the rundown has one (the first: 101)

@@ -211,8 +211,10 @@ def test_a_tightening_made_during_a_link_cut_is_recorded_to_its_bolt(tmp_path, c
         until(lambda: len(_rows(db, "SELECT id FROM tightening_records")) == 2 and
               len(_rows(db, "SELECT id FROM unattributed_results")) == 1, 30,
               "both results stored")
-    assert _rows(db, "SELECT tightening_id, bolt_id IS NOT NULL FROM tightening_records "
-                     "ORDER BY id") == [(first.tightening_id, 1), (made.tightening_id, 1)]
+    # the one fetched after the cut is marked made offline (OPC UA's IsGeneratedOffline)
+    assert _rows(db, "SELECT tightening_id, bolt_id IS NOT NULL, offline FROM "
+                     "tightening_records ORDER BY id") == [(first.tightening_id, 1, 0),
+                                                           (made.tightening_id, 1, 1)]
     [(tid, reason)] = _rows(db, "SELECT tightening_id, reason FROM unattributed_results")
     assert tid == again.tightening_id and "fetched after a reconnect" in reason
 
