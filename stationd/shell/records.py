@@ -274,7 +274,7 @@ class Records:
             result_at=u.result_at, images=u.images, enable_id=u.enable_id, kind=a.kind,
             params_sent=_loosen_sent(sel.pset) if sel is not None and sel.loosen else None,
             operator=sel.operator if sel is not None else None,
-            controller_at=controller_time(r), offline=bool(r.fetched))
+            controller_at=controller_time(r), offline=a.offline)
         u.again = done.again
         if done.again:
             u.stored_vin, u.stored_bolt = done.vin, done.bolt

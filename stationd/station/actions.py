@@ -123,6 +123,9 @@ class Record:
     selection: Selection | None
     late: bool = False
     kind: str = TIGHTENING     # or LOOSENING (:func:`rundown_kind`)
+    #: made while the link to the controller was down, fetched after the reconnect (a result
+    #: fetched with the link up, a push lost, is not)
+    offline: bool = False
 
 
 @dataclass(frozen=True)

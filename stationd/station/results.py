@@ -515,7 +515,7 @@ class ResultRules(OrderRules):
         if self.tool_on and not cut:
             acts += self._tool_off(ev.t, StateReason(Because.RUNDOWN, bolt=en.bolt,
                                                      loosen=kind == LOOSENING, ok=bool(r.ok)))
-        acts.append(Record(en.vin, en.bolt, r, en, late, kind))
+        acts.append(Record(en.vin, en.bolt, r, en, late, kind, offline=cut))
         if cut:
             acts.append(Publish(Notice(Said.CUT_RECORDED, tightening_id=int(r.tightening_id),
                                        bolt=en.bolt, t=ev.t)))

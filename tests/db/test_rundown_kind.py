@@ -111,7 +111,7 @@ def test_records_before_the_migration_are_tightenings(tmp_path):
 def test_the_station_records_the_kind_and_the_loosen_pset_it_sent(tmp_path, bolts_file):
     _, records, repo, sel = b1_selected(tmp_path, bolts_file, 90, loosen=True)
     result = SimpleNamespace(tightening_id=7, pset=90, ok=True, torque_nm=40.0,
-                             angle_deg=-720.0, fetched=False)
+                             angle_deg=-720.0)
     records.write(records.unsaved_result(Record("VIN1", "B1", result, sel, kind=LOOSENING),
                                          None))
     [entry] = [e["record"] for e in repo.ledger.since(0) if e["kind"] == "rundown"]

@@ -71,8 +71,7 @@ def test_the_station_records_the_selections_operator_also_for_an_owed_enable(tmp
     repo = again.open()
     owed = again.owed(late_result_s=60.0)
     assert owed is not None and owed.selection.operator == "olga"
-    result = SimpleNamespace(tightening_id=7, pset=1, ok=True, torque_nm=50.0, angle_deg=30.0,
-                             fetched=False)
+    result = SimpleNamespace(tightening_id=7, pset=1, ok=True, torque_nm=50.0, angle_deg=30.0)
     again.write(again.unsaved_result(Record("VIN1", "B1", result, owed.selection), None))
     assert [r["operator"] for r in Results(repo).rundowns("VIN1")] == ["olga"]
     repo.close()

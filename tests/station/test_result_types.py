@@ -115,7 +115,7 @@ def test_a_result_that_is_not_a_tightening_never_closes_the_bolt_the_tool_is_on(
     assert d.core.state is State.TIGHTENING
     # the real tightening that follows closes it
     acts = d.feed(ResultIn(d.t, res(8, sent.selection.pset or 0, True, 1)))
-    assert [a.bolt for a in acts if isinstance(a, Record)] == ["B1"]
+    assert [(a.bolt, a.offline) for a in acts if isinstance(a, Record)] == [("B1", False)]
     assert "B1" in d.core.matcher.done
 
 
@@ -350,6 +350,7 @@ def test_a_result_made_during_a_cut_is_recorded_to_its_bolt_when_the_controller_
                            fetched=True, follows=40, made_at=enabled_at + 0.5))
     [rec] = [a for a in acts if isinstance(a, Record)]
     assert (rec.bolt, rec.vin, rec.late, rec.selection) == ("B1", "VIN1", True, sent.selection)
+    assert rec.offline     # made while the link was down (OPC UA's IsGeneratedOffline)
     assert "B1" in d.core.matcher.done
     assert any("made during the link cut" in m for m in _notices(acts))
     assert [(n.said, n.tightening_id, n.bolt) for n in published(acts, Notice)] == [
