@@ -159,5 +159,6 @@ class StationCore(LiftRules, ToolRules, ResultRules):
 
     def _on_tick(self, ev: Tick) -> list[Action]:
         if self._off_at is not None and ev.t - self._off_at >= self.late_result_s:
+            self._unanswered_after()
             self._enabled, self._off_at = None, None
         return self._teach_overdue(ev.t) + self._check_due(ev.t) + self._operator_idle(ev.t)

@@ -61,7 +61,7 @@ from stationd.station.inputs import (
     Written,
 )
 from stationd.station.orders import OrderRules
-from stationd.station.state import NOK_SKIPPED, ON_A_BOLT
+from stationd.station.state import NOK_SKIPPED, ON_A_BOLT, _Cut
 
 #: the controller stamps its results to the second, and its clock's offset is measured to
 #: the second: a result fetched after a link cut is placed between the enable and the cut
@@ -200,6 +200,11 @@ class ResultRules(OrderRules):
         proved, not_proved = self._made_during_cut(ev)
         if proved is not None:
             return self._attribute(ev, proved, cut=True)
+        lost = self._lost_push_of(ev)
+        if lost is not None and not_proved is None:
+            proved, not_proved = self._proof(ev, lost)
+            if proved is not None:
+                return self._attribute(ev, proved, lost=True)
         why = Unattributed(UnattributedKind.OUTSIDE if not ev.fetched else
                            UnattributedKind.FETCHED_LIVE if ev.live else
                            UnattributedKind.FETCHED, tid, int(r.pset), not_proved)
@@ -207,7 +212,33 @@ class ResultRules(OrderRules):
                 Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
                 Publish(Notice(Said.UNATTRIBUTED, tightening_id=tid, pset=int(r.pset),
                                unattributed=why, t=ev.t)),
-                *self._cut_in_doubt(ev)]
+                *self._cut_in_doubt(ev), *self._lost_in_doubt(ev, lost)]
+
+    def _lost_push_of(self, ev: ResultIn) -> _Cut | None:
+        """The unanswered enable a result fetched with the link up (its push lost: a later
+        one skipped its id) may belong to: of the vehicle at the station, its bolt still
+        open and not selected now (the tool on for it again, what it makes is its own),
+        else None."""
+        u, m = self._unanswered, self.matcher
+        if not (ev.fetched and ev.live) or u is None or m is None or u.selection.vin != self.vin:
+            return None
+        b = u.selection.bolt
+        if b == self.bolt or b in m.done or b in m.held or b in m.skipped or b in m.locked:
+            return None
+        return u
+
+    def _lost_in_doubt(self, ev: ResultIn, lost: _Cut | None) -> list[Action]:
+        """A result fetched because its push was lost, of the pset sent for an unanswered
+        enable, not proved that enable's by the controller's data: it may be that bolt's, or
+        not.  Never taken for it, never left open either (it may be tightened): held."""
+        r = ev.result
+        if lost is None or lost.selection.pset is None or int(r.pset) != lost.selection.pset:
+            return []
+        self._unanswered = None
+        en = lost.selection
+        return self._hold(ev.t, en.bolt, f"tightening {int(r.tightening_id)} may be its own "
+                          "(its result's push lost, the link up; not proved by the "
+                          "controller's data)", under=en)
 
     def _unread_read(self, ev: ResultIn, tid: int) -> list[Action] | None:
         """A result fetched for the one id missing between two results read, the link up,
@@ -295,9 +326,16 @@ class ResultRules(OrderRules):
         its tightening id the first after the last the station accounted for, its
         timestamp between the enable and the cut); else None and what did not agree (None
         where nothing was to prove: not fetched, or no cut)."""
-        cut, r = self._cut, ev.result
-        if not ev.fetched or cut is None:
+        if not ev.fetched or self._cut is None:
             return None, None
+        return self._proof(ev, self._cut)
+
+    def _proof(self, ev: ResultIn, cut: _Cut) -> tuple[Selection | None, Unproved | None]:
+        """Whether the controller's own data places the fetched result ``ev`` under
+        ``cut``'s enable (its pset, the VIN it echoes, its id the first after the last one
+        accounted for, its time between the enable and ``cut_at``): that selection, else
+        None and the first of them that did not agree."""
+        r = ev.result
         en = cut.selection
         echoed = str(r.vin or "").strip()
         if en.pset is None or int(r.pset) != en.pset:
@@ -499,12 +537,20 @@ class ResultRules(OrderRules):
                                StateReason(Because.NOT_TAKEN_HELD, bolt=en.bolt))
         return acts
 
-    def _attribute(self, ev: ResultIn, en: Selection, cut: bool = False) -> list[Action]:
+    def _attribute(self, ev: ResultIn, en: Selection, cut: bool = False, lost: bool = False
+                   ) -> list[Action]:
         """The result of the tightening the tool was enabled for: recorded to that bolt (of
         the vehicle it was enabled on, also after a reload or restart, or fetched after a
-        link cut that the controller's data places it in, ``cut``); an OK without a type
-        outside the bolt's torque window is not (:meth:`_not_taken`)."""
+        link cut that the controller's data places it in, ``cut``, or fetched because its
+        push was lost, the link up, and the data places it under an enable that got no
+        result, ``lost``); an OK without a type outside the bolt's torque window is not
+        (:meth:`_not_taken`)."""
         r = ev.result
+        if lost:
+            self._unanswered = None
+            cut = True   # as a cut's: late, the tool and the enable owed now as they are
+        elif self._unanswered is not None and self._unanswered.selection.bolt == en.bolt:
+            self._unanswered = None     # its bolt's own result came: nothing unanswered
         window = self._outside_window(r, en)
         if window is not None:
             return self._not_taken(ev, en, window, cut)
@@ -515,10 +561,11 @@ class ResultRules(OrderRules):
         if self.tool_on and not cut:
             acts += self._tool_off(ev.t, StateReason(Because.RUNDOWN, bolt=en.bolt,
                                                      loosen=kind == LOOSENING, ok=bool(r.ok)))
-        acts.append(Record(en.vin, en.bolt, r, en, late, kind, offline=cut))
+        acts.append(Record(en.vin, en.bolt, r, en, late, kind, offline=cut and not lost))
         if cut:
-            acts.append(Publish(Notice(Said.CUT_RECORDED, tightening_id=int(r.tightening_id),
-                                       bolt=en.bolt, t=ev.t)))
+            acts.append(Publish(Notice(Said.LOST_RECORDED if lost else Said.CUT_RECORDED,
+                                       tightening_id=int(r.tightening_id), bolt=en.bolt,
+                                       t=ev.t)))
         elif late:
             acts.append(Publish(Notice(Said.LATE_RESULT, bolt=en.bolt,
                                        tightening_id=int(r.tightening_id), t=ev.t)))

@@ -195,6 +195,10 @@ class CoreState:
     _off_at: float | None = field(default=None, repr=False)
     _enabled_at: float | None = field(default=None, repr=False)
     _cut: _Cut | None = field(default=None, repr=False)   # a link cut during an enable
+    #: the last enable whose late-result window ended without its result, while the link
+    #: stayed up (``cut_at``: when that window ended): a result fetched because its push was
+    #: lost (a later one skipped its id) is checked against it as against a cut
+    _unanswered: _Cut | None = field(default=None, repr=False)
     # the station's start or the controller's last fault: a result fetched afterwards was
     # made before it, so never under an enable that came later
     _link_lost_at: float = field(default=float("-inf"), repr=False)
@@ -318,6 +322,27 @@ class CoreState:
         self.matcher.held[bolt] = note
         return note
 
+    def _unanswered_before(self, sel: Selection) -> None:
+        """The tool goes on for ``sel``: the enable before it, where its result never came
+        (its late-result window ended, the link up), is remembered as unanswered, so that a
+        result fetched later because its push was lost is checked against it (a quality
+        trial: stored unattributed, its bolt open and tightened twice); the tool on for that
+        bolt again forgets it (what is made now is its own)."""
+        u, prev = self._unanswered, self._enabled
+        if u is not None and u.selection.bolt == sel.bolt:
+            self._unanswered = None
+        if prev is not None and prev.bolt != sel.bolt:
+            self._unanswered_after()
+
+    def _unanswered_after(self) -> None:
+        """The enable owed a result (``_enabled``, its tool off) gets none in its window:
+        remembered as unanswered (:meth:`_unanswered_before`) where the link stayed up from
+        its enable on (a link cut's enable is the catch-up's to settle)."""
+        if self._enabled is not None and self._cut is None and self._off_at is not None \
+                and self._enabled_at is not None and self._enabled_at > self._link_lost_at:
+            self._unanswered = _Cut(self._enabled, self._enabled_at,
+                                    self._off_at + self.late_result_s)
+
     def _unhold(self, bolt: str) -> str | None:
         """``bolt``'s hold ends (released, skipped, its outcome entered): its note, None
         where it was not held."""
@@ -371,7 +396,7 @@ class CoreState:
         return acts
 
     def _forget_vehicle(self) -> None:
-        self._cut = None
+        self._cut = self._unanswered = None
         self.vin, self.model, self.matcher, self._specs = None, None, None, {}
         self._loosen, self._nok_last = set(), set()
         self._loading, self._enabled, self._off_at = False, None, None

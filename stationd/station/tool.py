@@ -66,6 +66,7 @@ class ToolRules(FaultRules):
                     return acts
                 self._to(State.TIGHTENING, StateReason(Because.TIGHTENING, bolt=self.bolt,
                                                        loosen=sel.loosen))
+                self._unanswered_before(sel)
                 self.tool_on, self._enabled, self._off_at = True, sel, None
                 self._enabled_at = ev.t
                 acts.append(EnableTool(self.bolt, sel))

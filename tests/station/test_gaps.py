@@ -82,7 +82,8 @@ def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path
     """With the link up, the controller loses a push (``lose_next_push``): the station hears
     nothing and the tool stays on; the operator's next tightening comes pushed, is recorded
     to the bolt, and the id it skipped is fetched (MID 0064) and stored unattributed, once;
-    two pushes lost, one of them no longer on the controller: one fetched, one a gap."""
+    two pushes lost, one of them no longer on the controller: one fetched, one a gap; a push
+    lost whose bolt the operator left (its enable got no result): recorded to that bolt."""
     pose = tmp_path / "pose"
     with tracking(tmp_path, "LIVEGAPVIN0000001") as (d, _, ctl):
         tool_on(d, ctl, pose, "B04")
@@ -113,6 +114,19 @@ def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path
                    "controller no longer has it)")
         d.wait_log(f"tightening {b.tightening_id} fetched after a later one came")
         d.wait_log(f"result {b.tightening_id} (pset {b.pset}) fetched after a later one came")
+        # B07 tightened, its push lost; the operator goes on to B08, whose tool waits out
+        # B07's late-result window: B07's enable got no result.  B08's result skips B07's
+        # id, which is fetched and, its pset, id and time agreeing, recorded to B07 (a
+        # quality trial: stored unattributed, B07 open and tightened twice)
+        tool_on(d, ctl, pose, "B07")
+        ctl.lose_next_push()
+        b07 = ctl.pull_trigger()
+        assert b07 is not None
+        tool_on(d, ctl, pose, "B08")
+        b08 = ctl.pull_trigger()
+        assert b08 is not None
+        d.wait_log(f"tightening {b07.tightening_id} fetched after a later one came (its push "
+                   "lost, the link up): recorded to B07, whose enable got no result")
         assert "fault: wrench" not in d.log()
     con = sqlite3.connect(tmp_path / "station.db")
     try:
@@ -124,7 +138,8 @@ def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path
     finally:
         con.close()
     assert to_bolts == [(first.tightening_id, "B04"), (pushed.tightening_id, "B05"),
-                        (c.tightening_id, "B06")]
+                        (c.tightening_id, "B06"), (b08.tightening_id, "B08"),
+                        (b07.tightening_id, "B07")]
     assert [t for t, _ in loose] == [lost.tightening_id, b.tightening_id]
     assert all("fetched after a later one came, the link up" in why for _, why in loose)
     assert gaps == [(a.tightening_id, a.tightening_id)]

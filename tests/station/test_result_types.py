@@ -716,3 +716,69 @@ def test_a_complete_catch_up_within_the_late_result_window_still_takes_the_pushe
     assert not [a for a in acts if type(a).__name__ == "SettleEnable"]   # still owed
     acts = d.feed(ResultIn(d.t + 0.5, res(41, sent.selection.pset or 0, True, 1)))
     assert [(a.bolt, a.late) for a in acts if isinstance(a, Record)] == [("B1", True)]
+
+
+# -- a result whose push was lost with the link up -------------------------------------------------
+def _b1_unanswered(d: Driver) -> float:
+    """B1 enabled and tightened, its result's push lost; the wrench to B2 (pset 2), B1's
+    late-result window over, B2 enabled and its result pushed (which skips B1's id, so the
+    shell fetches it with the link up).  B1's enable's time."""
+    _enabled(d, 1)
+    enabled_at = d.t
+    _on(d, 2, 3)                            # the wrench leaves B1: the tool off
+    assert not d.core.tool_on
+    d.t += d.core.late_result_s + 1.0       # B1's window ends without its result
+    d.feed(Tick(d.t))
+    _enabled(d, 2)
+    acts = d.feed(ResultIn(d.t, res(42, 2, True, 1)))
+    assert [a.bolt for a in acts if isinstance(a, Record)] == ["B2"]
+    return enabled_at
+
+
+def test_a_result_whose_push_was_lost_goes_to_the_enable_that_got_none():
+    """The controller's data (its pset, its id the first after the last one accounted for,
+    its time within B1's enable) places tightening 41 under B1's enable, which got no result:
+    recorded to B1, which is done, never enabled and tightened again (a quality trial: stored
+    unattributed, B1 tightened twice)."""
+    d = _ready()
+    enabled_at = _b1_unanswered(d)
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=40,
+                           made_at=enabled_at + 0.5, live=True))
+    [rec] = [a for a in acts if isinstance(a, Record)]
+    assert (rec.bolt, rec.late, rec.offline) == ("B1", True, False)
+    assert not [a for a in acts if isinstance(a, StoreUnattributed)]
+    assert _notices(acts) == [
+        "tightening 41 fetched after a later one came (its push lost, the link up): recorded "
+        "to B1, whose enable got no result (its pset, VIN, tightening id and time agree)"]
+    assert "B1" in d.core.matcher.done and "B1" not in d.core.allowed()
+
+
+def test_a_lost_push_not_proved_holds_the_bolt_and_one_of_another_pset_does_not():
+    """Made outside B1's enable (its time), the result of B1's pset may still be B1's: B1 is
+    held for a person, never left open; of another pset it is not B1's, and B1 stays open."""
+    for pset, held in ((1, True), (2, False)):
+        d = _ready()
+        enabled_at = _b1_unanswered(d)
+        acts = d.feed(ResultIn(d.t, res(41, pset, True, 1), fetched=True, follows=40,
+                               made_at=enabled_at - 60.0, live=True))
+        assert not [a for a in acts if isinstance(a, Record)]
+        assert [a for a in acts if isinstance(a, StoreUnattributed)]
+        if held:
+            assert d.core.matcher.held["B1"] == (
+                "tightening 41 may be its own (its result's push lost, the link up; not "
+                "proved by the controller's data)")
+        else:
+            assert "B1" not in d.core.matcher.held and "B1" in d.core.allowed()
+
+
+def test_a_lost_push_fetched_once_its_bolt_is_enabled_again_is_not_taken_for_it():
+    """The wrench back on B1 and the tool on for it before the lost result is fetched: what
+    it makes now is its own; the fetched one is stored unattributed, as before."""
+    d = _ready()
+    enabled_at = _b1_unanswered(d)
+    _enabled(d, 1)
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=40,
+                           made_at=enabled_at + 0.5, live=True))
+    assert not [a for a in acts if isinstance(a, Record)]
+    assert [a for a in acts if isinstance(a, StoreUnattributed)]
+    assert "B1" not in d.core.matcher.held and d.core.tool_on and d.core.bolt == "B1"
