@@ -214,6 +214,8 @@ def _export_results(args: argparse.Namespace) -> int:
     """Every rundown (OK, NOK, rework) of the chosen vehicles as CSV or JSON, oldest first:
     what quality takes out of the station (the results screen's export, for all vehicles)."""
     from stationd.web.results import (
+        CONTROLLER_EVENT_STATUS,
+        LOCKED_STATUS,
         NOT_RUNDOWNS,
         RELEASED_STATUS,
         UNATTRIBUTED_STATUS,
@@ -251,9 +253,10 @@ def _export_results(args: argparse.Namespace) -> int:
         # bolts forgotten
         to_do = [r for r in runs if r["status"] == PENDING]
         also = [counted(rows[status], what) for status, what in (
-            (SKIPPED, "skipped"), (RELEASED_STATUS, "release"),
+            (SKIPPED, "skipped"), (LOCKED_STATUS, "lock"), (RELEASED_STATUS, "release"),
             (UNREADABLE_STATUS, "unreadable result"),
-            (UNATTRIBUTED_STATUS, "unattributed result")) if rows[status]]
+            (UNATTRIBUTED_STATUS, "unattributed result"),
+            (CONTROLLER_EVENT_STATUS, "controller event")) if rows[status]]
         if to_do:
             on = len({r["vin"] for r in to_do})
             also.append(f"{len(to_do)} not run down yet on {counted(on, 'open vehicle')}")

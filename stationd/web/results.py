@@ -58,8 +58,15 @@ UNREADABLE_STATUS = "unreadable"
 #: a row of a result no bolt owns (made at height, stored unattributed: its reason in the
 #: comment): an export without it lost a rundown a quality engineer has to account for
 UNATTRIBUTED_STATUS = "unattributed"
+#: a row of a controller result that is no rundown (a batch increment, a bypass, a type the
+#: station does not know, a link cut that left a bolt's result unknown): its kind in
+#: ``rundown``, the bolt the tool was on; an export without it hid a bypass from an auditor
+CONTROLLER_EVENT_STATUS = "controller event"
+#: a row of the NOK policy's lock of a bolt (its NOKs in a row in the comment)
+LOCKED_STATUS = "locked"
 #: the rows of an export that are not rundowns of a bolt (their count apart)
-NOT_RUNDOWNS = frozenset({RELEASED_STATUS, UNREADABLE_STATUS, UNATTRIBUTED_STATUS})
+NOT_RUNDOWNS = frozenset({RELEASED_STATUS, UNREADABLE_STATUS, UNATTRIBUTED_STATUS,
+                          CONTROLLER_EVENT_STATUS, LOCKED_STATUS})
 
 
 def _isos(row: dict[str, Any]) -> dict[str, Any]:
@@ -215,14 +222,27 @@ class Results:
              "recorded_at": _iso(u["recorded_at"]),
              "comment": f"{str(u['status']).upper()}; {u['reason']}"}
             for u in self.repo.unattributed(vin)]
+        events: list[dict[str, Any]] = [
+            {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
+             "bolt": e["bolt"], "attempt": 0, "status": CONTROLLER_EVENT_STATUS, "images": [],
+             "rundown": e["what"], "pset": e["pset"], "tightening_id": e["tightening_id"],
+             "torque_nm": e["torque_nm"], "angle_deg": e["angle_deg"],
+             "result_at": _iso(e["recorded_at"]), "controller_at": _iso(e["result_at"]),
+             "recorded_at": _iso(e["recorded_at"]),
+             "comment": e["note"] or ("not a rundown" + (
+                 f"; the tool was on {e['bolt']}" if e["bolt"] else ""))}
+            for e in self.repo.controller_events(vin)]
         for c in self.repo.ledger.commands(vin):
-            if c.kind == "release" and c.bolt:      # among the rundowns, where it was given
+            # a release, and the NOK policy's lock, among the rundowns where they came
+            if c.kind in ("release", "lock") and c.bolt:
                 at = c.at.isoformat()
                 runs.insert(_after(runs, at), {
                     **dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
-                    "bolt": c.bolt, "attempt": 0, "status": RELEASED_STATUS, "images": [],
-                    "recorded_at": at, "released_by": c.user, "comment": c.comment})
-        return runs + none + unread + loose
+                    "bolt": c.bolt, "attempt": 0, "images": [], "recorded_at": at,
+                    "comment": c.comment, **(
+                        {"status": RELEASED_STATUS, "released_by": c.user}
+                        if c.kind == "release" else {"status": LOCKED_STATUS})})
+        return runs + none + unread + loose + events
 
 
 def _unreadable_comment(x: dict[str, Any]) -> str:

@@ -665,9 +665,11 @@ def test_a_table_without_models_is_not_imported_and_an_idle_one_is_warned(run, d
 
 
 def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path):
-    from db.kinds import CUT_UNKNOWN
+    from db.kinds import CUT_UNKNOWN, LOCK
     from db.repository import Repository
     from stationd.web.results import (
+        CONTROLLER_EVENT_STATUS,
+        LOCKED_STATUS,
         UNATTRIBUTED_STATUS,
         UNREADABLE_STATUS,
         Results,
@@ -700,6 +702,11 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
             mid=61, revision=7, raw="00990061007    garbage", error="parameter 01 missing",
             vin="VIN1", bolt="TB-C", controller_vin=None, tightening_id=9, pset=2,
             result_at=datetime(2026, 11, 30, 17, 27, 55, tzinfo=UTC))
+        # the NOK policy's lock of TB-L, said in the export too (a quality trial: only in
+        # db report)
+        repo.ledger.record_command(at=datetime.now(UTC), user="station", source="NOK policy",
+                                   kind=LOCK, vin="VIN1", bolt="TB-L",
+                                   comment="3 NOK in a row")
         repo.record_unattributed(   # a quality trial: in db report, missing from the export
             vin="VIN1", controller_vin=None, tightening_id=10, pset=2, ok=True, torque_nm=49.5,
             angle_deg=39.0, result_at=None, reason="fetched after a later one came")
@@ -747,7 +754,17 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
     assert ",unattributed," in rundowns_csv(runs)
     out_csv = tmp_path / "all.csv"
     code, out, _ = run("db", "export", "--results", "--db", db, "--out", str(out_csv))
-    assert code == 0 and "2 unreadable results, 1 unattributed result" in out, out
+    assert code == 0 and ("1 lock, 2 unreadable results, 1 unattributed result, 2 "
+                          "controller events") in out, out
+    # the controller's results that are no rundown, each a row: a batch increment (an
+    # auditor must see a bypass or a batch step), a link cut that left a result unknown
+    events = [r for r in runs if r["status"] == CONTROLLER_EVENT_STATUS]
+    assert [(r["bolt"], r["rundown"], r["tightening_id"]) for r in events] == [
+        ("SF-FR", CUT_UNKNOWN, None), ("SF-FR", "batch increment", 8)]
+    assert events[0]["comment"].startswith("its result during the link cut not known")
+    assert events[1]["comment"] == "not a rundown; the tool was on SF-FR"
+    [lock] = [r for r in runs if r["status"] == LOCKED_STATUS]
+    assert (lock["bolt"], lock["comment"]) == ("TB-L", "3 NOK in a row")
     assert out.startswith(f"wrote {out_csv}: 1 rundown and "), out
     assert [x["bolt"] for x in doc["unreadable_results"]] == ["SF-FL", "TB-C"]
     assert [e["what"] for e in doc["controller_events"]] == [CUT_UNKNOWN, "batch increment"]
