@@ -21,7 +21,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from db.kinds import CUT_UNKNOWN, LOOSENING, MISSING, PENDING, SKIPPED
+from db.kinds import CUT_UNKNOWN, LOOSENING, MISSING, PENDING, SKIPPED, unreadable_note
 from drivers.counting import counted
 from stationd.errors import ConfigError, InputError
 from stationd.jsonout import strict_json
@@ -438,7 +438,7 @@ def cmd_db_report(args: argparse.Namespace) -> int:
         for e in events:
             if e["what"] == CUT_UNKNOWN:    # no result: what the station knows of the cut
                 print(f"  link cut while the tool was on {e['bolt']}: {e['note']}"
-                      f"{_held_now(e['bolt'], holds, '; ')}")
+                      f"{_held_now(e['bolt'], holds, e['note'] or '', '; ')}")
                 continue
             on = f" while the tool was on {e['bolt']}" if e["bolt"] else ""
             code = "" if "type" in e["what"] else f" (type {e['result_type']})"
@@ -446,18 +446,23 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                   f"{e['tightening_id']} pset {e['pset']}{on}: not a rundown")
         for x in unread:
             said = f"MID {x['mid']:04d} revision {x['revision']}"
+            note = unreadable_note(x["tightening_id"], x["mid"], x["revision"])
             print(f"  unreadable result: tightening {x['tightening_id'] or '?'} ({said}"
-                  f"{_held_now(x['bolt'], holds)}): {x['error'].removeprefix(said + ': ')}")
+                  f"{_held_now(x['bolt'], holds, note)}): "
+                  f"{x['error'].removeprefix(said + ': ')}")
     return EXIT_OK if report.complete else EXIT_INCOMPLETE
 
 
-def _held_now(bolt: str | None, holds: dict[str, str], sep: str = ", ") -> str:
-    """Of a record that held ``bolt``: whether it is held still (``holds``: the bolts held
-    now), or was and a supervisor's command ended it (released, skipped, its outcome
-    entered: the commands say which)."""
+def _held_now(bolt: str | None, holds: dict[str, str], note: str, sep: str = ", ") -> str:
+    """Of a record that held ``bolt`` with ``note``: whether that hold is on still
+    (``holds``: the bolts held now, each with its note: a later hold of the same bolt is
+    another record's), or ended (released, skipped, its outcome entered: the commands say
+    which)."""
     if not bolt:
         return ""
-    return f"{sep}{bolt} held" if bolt in holds else f"{sep}{bolt} held then, no longer"
+    now = holds.get(bolt)
+    return f"{sep}{bolt} held" if now is not None and now.startswith(note) \
+        else f"{sep}{bolt} held then, no longer"
 
 
 def _entered(run: dict[str, Any]) -> str:

@@ -270,8 +270,11 @@ class ControllerFeed:
             log.warning("tightening %d not checked against the one recorded: %s", last,
                         one_line(exc))
             return False
-        got = newest if newest.tightening_id == last else \
-            await self._call(wrench.fetch_result, last)
+        try:
+            got = newest if newest.tightening_id == last else \
+                await self._call(wrench.fetch_result, last)
+        except RefusedError:        # not known: counted on (the fetches say the refusal)
+            return False
         if not isinstance(got, TighteningResult) or not got.controller_clock \
                 or got.timestamp is None:
             return False
@@ -323,7 +326,11 @@ class ControllerFeed:
                 follows = 0            # the controller's first result: nothing before it
                 break
             tid -= 1
-            got = await self._call(wrench.fetch_result, tid)
+            try:
+                got = await self._call(wrench.fetch_result, tid)
+            except RefusedError as exc:     # what was found so far is kept all the same
+                unknown = f"the controller refused to give tightening {tid} ({one_line(exc)})"
+                break
         if since is not None and unknown is None and follows is None:
             unknown = f"the controller no longer has tightening {tid}" if got is None \
                 else f"more than {MAX_FETCH} results made since the link was lost"
@@ -355,10 +362,12 @@ class ControllerFeed:
         self._accounted = tid if last is None else max(last, tid)
         if self._first_pushed is None:
             self._first_pushed = tid
-        if self._refused_after is not None:
+        if self._refused_after is not None and tid > self._refused_after:
+            # (a copy of one recorded, sent again first, says nothing of the cut)
             after, self._refused_after = self._refused_after, None
             if tid > after + 1:
                 await self._gap(after + 1, tid - 1, REFUSED)
+            return           # the ids before it are that gap, not one with the link up
         if last is None or tid <= last + 1 or not wrench.can_fetch or self.records.repo is None:
             return
         todo = plan_gaps(last, tid - 1)
@@ -367,6 +376,9 @@ class ControllerFeed:
                     "(the link up), fetched", tid, last, ids)
         try:
             await self._fetch(wrench, todo, last, live=True)
+        except RefusedError as exc:    # asking again will not help: stored as a gap
+            log.warning("results missed with the link up (%s) not fetched: %s", ids,
+                        one_line(exc))
         except (DeviceError, ValueError) as exc:   # the link's keeper reports it
             log.warning("results missed with the link up (%s) not fetched yet: %s", ids,
                         one_line(exc))
@@ -391,7 +403,7 @@ class ControllerFeed:
                     and tid == newest.tightening_id \
                     else await self._call(wrench.fetch_result, tid)
             except RefusedError:    # this one and those after it: asking again will not help
-                await self._gap(tid, todo.fetch[-1], REFUSED, live)
+                await self._refused_from(wrench, tid, todo, last, newest, live)
                 raise
             if got is None:
                 missed = f"tightening {tid} no longer on the controller"
@@ -428,6 +440,20 @@ class ControllerFeed:
             log.warning("curves of tightening %d (fetched late) not stored: %s", tid,
                         one_line(exc))
 
+    async def _refused_from(self, wrench: Wrench, tid: int, todo: GapPlan, last: int | None,
+                            newest: Received | None, live: bool) -> None:
+        """The controller refused to give tightening ``tid`` (MID 0064): it and the ids after
+        it up to the last planned are a gap, except the controller's newest where it gave
+        that already (fed, after nothing known: its own data cannot prove it the first after
+        ``last``)."""
+        end = todo.fetch[-1]
+        have = newest is not None and newest.tightening_id == end and end > tid
+        if have:
+            end -= 1
+        await self._gap(tid, end, REFUSED, live)
+        if have and newest is not None:
+            await self._fetched(wrench, end + 1, newest, None, wrench.clock_offset_s, live)
+
     async def _refused(self, last: int | None) -> None:
         """The controller refused to say its newest result after a reconnect: the ids made
         during the cut are those between ``last``, the last one recorded, and the first one
@@ -435,8 +461,8 @@ class ControllerFeed:
         recorded yet: no count to compare with."""
         if last is None:
             return
-        if self._first_pushed is None:
-            self._refused_after = last
+        if self._first_pushed is None or self._first_pushed <= last:
+            self._refused_after = last       # the next push beyond it tells
         elif self._first_pushed > last + 1:
             await self._gap(last + 1, self._first_pushed - 1, REFUSED)
 

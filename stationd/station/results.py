@@ -561,7 +561,10 @@ class ResultRules(OrderRules):
         if self.tool_on and not cut:
             acts += self._tool_off(ev.t, StateReason(Because.RUNDOWN, bolt=en.bolt,
                                                      loosen=kind == LOOSENING, ok=bool(r.ok)))
-        acts.append(Record(en.vin, en.bolt, r, en, late, kind, offline=cut and not lost))
+        # made while the link was down: fetched after the reconnect, whichever rule placed
+        # it (proved the cut's, or within its enable's late-result window)
+        acts.append(Record(en.vin, en.bolt, r, en, late, kind,
+                           offline=ev.fetched and not ev.live))
         if cut:
             acts.append(Publish(Notice(Said.LOST_RECORDED if lost else Said.CUT_RECORDED,
                                        tightening_id=int(r.tightening_id), bolt=en.bolt,

@@ -698,6 +698,15 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
             result_type=3, what="batch increment", vin="VIN1", bolt="SF-FR",
             controller_vin=None, tightening_id=8, pset=1, ok=True, torque_nm=0.0,
             angle_deg=0.0, result_at=None)
+        # TB-C held by tightening 4, released, then held again by tightening 9: each record
+        # says whether its own hold is on (a reviewer: both said "held")
+        repo.record_unreadable(
+            mid=61, revision=7, raw="00990061007    first", error="parameter 03 missing",
+            vin="VIN1", bolt="TB-C", controller_vin=None, tightening_id=4, pset=2,
+            result_at=None)
+        repo.ledger.record_command(at=datetime.now(UTC), user="sam", source="cli",
+                                   kind="release", vin="VIN1", bolt="TB-C",
+                                   comment="checked: not tightened")
         repo.record_unreadable(
             mid=61, revision=7, raw="00990061007    garbage", error="parameter 01 missing",
             vin="VIN1", bolt="TB-C", controller_vin=None, tightening_id=9, pset=2,
@@ -722,6 +731,8 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
     # result's "tightening None ... (type 0)" (a supervisor's trial)
     assert ("unreadable result: tightening 5 (MID 0061 revision 7, SF-FL held then, no "
             "longer): parameter 02 missing") in out
+    assert ("unreadable result: tightening 4 (MID 0061 revision 7, TB-C held then, no "
+            "longer): parameter 03 missing") in out
     assert ("link cut while the tool was on SF-FR: its result during the link cut not known: "
             "the controller refused to give them; SF-FR held") in out
     assert "None" not in out and "type 0" not in out
@@ -734,6 +745,7 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
     assert [e["result_type"] for e in obj["controller_events"]] == [0, 3]
     assert obj["controller_events"][0]["note"].startswith("its result during the link cut")
     assert [x["raw"] for x in obj["unreadable_results"]] == ["00990061007    garbled",
+                                                              "00990061007    first",
                                                               "00990061007    garbage"]
     [row] = [r for r in runs if r["status"] == UNREADABLE_STATUS and r["tightening_id"] == 9]
     assert row["bolt"] == "TB-C"
@@ -754,8 +766,8 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
     assert ",unattributed," in rundowns_csv(runs)
     out_csv = tmp_path / "all.csv"
     code, out, _ = run("db", "export", "--results", "--db", db, "--out", str(out_csv))
-    assert code == 0 and ("1 lock, 2 unreadable results, 1 unattributed result, 2 "
-                          "controller events") in out, out
+    assert code == 0 and ("1 lock, 1 release, 3 unreadable results, 1 unattributed "
+                          "result, 2 controller events") in out, out
     # the controller's results that are no rundown, each a row: a batch increment (an
     # auditor must see a bypass or a batch step), a link cut that left a result unknown
     events = [r for r in runs if r["status"] == CONTROLLER_EVENT_STATUS]
@@ -766,7 +778,7 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
     [lock] = [r for r in runs if r["status"] == LOCKED_STATUS]
     assert (lock["bolt"], lock["comment"]) == ("TB-L", "3 NOK in a row")
     assert out.startswith(f"wrote {out_csv}: 1 rundown and "), out
-    assert [x["bolt"] for x in doc["unreadable_results"]] == ["SF-FL", "TB-C"]
+    assert [x["bolt"] for x in doc["unreadable_results"]] == ["SF-FL", "TB-C", "TB-C"]
     assert [e["what"] for e in doc["controller_events"]] == [CUT_UNKNOWN, "batch increment"]
 
 

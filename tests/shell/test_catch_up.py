@@ -55,13 +55,13 @@ def res(tid: int) -> Any:
 
 
 def catch_up(controller: Controller, last: int | None = 40, comebacks: int = 1,
-             on_feed: Any = None, reading: bool = False) -> list[Any]:
+             on_feed: Any = None, reading: bool = False, stored: bool = False) -> list[Any]:
     """What the catch-up fed the core after ``comebacks`` reconnects in a row (each while
     the last one's catch-up ran); ``reading``: the results' loop runs beside it."""
     fed: list[Any] = []
     keeper = SimpleNamespace(device=controller, reconnects=1, losing=False, up=True,
                              lost=lambda exc: None)
-    records = SimpleNamespace(repo=SimpleNamespace(read_result_stored=lambda t: False),
+    records = SimpleNamespace(repo=SimpleNamespace(read_result_stored=lambda t: stored),
                               last_tightening_id=lambda: last,
                               copy_input=lambda ev, vin: ev, unreadable_input=lambda ev: ev)
     core = SimpleNamespace(missed_since=lambda: time.time() - 60,
@@ -216,8 +216,9 @@ class Pushing(Controller):
         return res(self.push)
 
 
-def refused_then_pushed(controller: Pushing) -> list[Any]:
-    """Fed after a reconnect whose catch-up was refused, and one pushed result."""
+def refused_then_pushed(controller: Pushing, then: int | None = None) -> list[Any]:
+    """Fed after a reconnect whose catch-up was refused, and one pushed result (and
+    ``then``, pushed after it)."""
     fed: list[Any] = []
     keeper = SimpleNamespace(device=controller, reconnects=1, losing=False, up=True)
     records = SimpleNamespace(repo=SimpleNamespace(read_result_stored=lambda t: False),
@@ -237,6 +238,10 @@ def refused_then_pushed(controller: Pushing) -> list[Any]:
             assert feed_.catching_up is not None
             await feed_.catching_up
         await feed_.results(controller)  # type: ignore[arg-type]
+        if then is not None:
+            controller.pushed.clear()
+            controller.push = then
+            await feed_.results(controller)  # type: ignore[arg-type]
         assert feed_.catching_up is not None
         await feed_.catching_up
         pool.shutdown()
@@ -269,8 +274,31 @@ def test_a_refused_catch_up_with_nothing_made_during_the_cut_records_no_gap():
 
 
 def test_a_fetch_refused_part_way_records_it_and_the_ones_after_it_as_a_gap():
-    """The controller said its newest (44) and gave 41, then refused 42: 42-44 are a gap."""
+    """The controller said its newest (44) and gave 41, then refused 42: 42-43 are a gap,
+    and 44, which it gave already, is fed (a reviewer: it was thrown away as missed)."""
     fed = catch_up(Controller({0: res(44), 41: res(41), 42: REFUSED}))
-    assert [e.result.tightening_id for e in fed if isinstance(e, ResultIn)] == [41]
-    assert _gaps(fed) == [(42, 44, "the controller refused to give them (MID 0064)")]
+    assert [(e.result.tightening_id, e.follows) for e in fed if isinstance(e, ResultIn)] == [
+        (41, 40), (44, None)]
+    assert _gaps(fed) == [(42, 43, "the controller refused to give them (MID 0064)")]
     assert [c.complete for c in fed if isinstance(c, CaughtUp)] == [False]
+
+
+def test_a_refused_check_of_the_last_id_recorded_counts_on():
+    """Whether the controller's ids restarted is asked by fetching the last one recorded
+    (40); refused, it is not known and the ids after it are fetched as before (a reviewer:
+    the refusal ended the catch-up with 41-43 neither fetched nor a gap)."""
+    controller = Controller({0: res(43), 40: REFUSED, 41: res(41), 42: res(42)})
+    fed = catch_up(controller, stored=True)
+    assert [e.result.tightening_id for e in fed if isinstance(e, ResultIn)] == [41, 42, 43]
+    assert _ends(fed) == [(True, "", 1)]
+
+
+def test_a_copy_sent_again_first_does_not_take_the_refused_catch_up_s_gap():
+    """After a refused catch-up the controller sends the last recorded result (40) again
+    first, then 43: the gap is 41-42, said as made while the link was down, once (a
+    reviewer: the copy took it, and 41-42 were fetched as a live gap, refused, said "with
+    the link up")."""
+    controller = Pushing({0: REFUSED}, 40, first=False)
+    fed = refused_then_pushed(controller, then=43)
+    gaps = [(e.first, e.last, e.live) for e in fed if isinstance(e, ResultsMissed)]
+    assert gaps == [(41, 42, False)]

@@ -413,6 +413,20 @@ def test_a_result_fetched_after_a_cut_that_the_data_does_not_place_stays_unattri
 ENABLED_B1 = "; the tool was enabled for pset 1 at 1970-01-01 00:16:40 UTC"
 
 
+def test_a_result_fetched_within_its_enable_s_window_after_a_short_cut_is_offline():
+    """The link back 2 s after the cut, within the enable's late-result window: the result
+    fetched then is the enable's as any late one, and made while the link was down (a
+    reviewer: only the cut's proof marked it so)."""
+    d = _ready()
+    sent, _, cut_at = _cut_during_enable(d)
+    d.t += 2.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    acts = d.feed(ResultIn(d.t, res(41, sent.selection.pset or 0, True, 1), fetched=True,
+                           follows=40, made_at=cut_at + 0.5))
+    [rec] = [a for a in acts if isinstance(a, Record)]
+    assert (rec.bolt, rec.late, rec.offline) == ("B1", True, True)
+
+
 def _back_after_a_cut(d: Driver) -> SendParams:
     sent, _, _ = _cut_during_enable(d)
     d.t += 10.0

@@ -144,16 +144,22 @@ function showTrail(commands) {
 // supervisor's command ended its hold since (the trail says which), as db report does.
 function showOthers(v) {
   const held = v.held || {};
-  const bolt = (b) => !b ? "-" : b + (b in held ? " (held)" : " (held then, no longer)");
+  // that record's hold on still (a later hold of the same bolt is another record's)
+  const bolt = (b, note) => !b ? "-" : b + (Object.prototype.hasOwnProperty.call(held, b) &&
+    String(held[b]).startsWith(note) ? " (held)" : " (held then, no longer)");
   const rows = [];
   for (const x of v.unreadable_results || [])
-    rows.push([x.recorded_at, "could not be read", x.tightening_id, x.pset, bolt(x.bolt),
+    rows.push([x.recorded_at, "could not be read", x.tightening_id, x.pset,
+               bolt(x.bolt, x.tightening_id !== null && x.tightening_id !== undefined
+                 ? `tightening ${x.tightening_id}`
+                 : `MID ${String(x.mid).padStart(4, "0")} revision ${x.revision}`),
                // the driver's words name the MID and revision already
                x.error.startsWith("MID ") ? x.error
                  : `MID ${String(x.mid).padStart(4, "0")} revision ${x.revision}: ${x.error}`]);
   for (const e of v.controller_events || []) {
     if (e.what === "result unknown after a link cut")
-      rows.push([e.recorded_at, "link cut", null, e.pset, bolt(e.bolt), e.note || ""]);
+      rows.push([e.recorded_at, "link cut", null, e.pset, bolt(e.bolt, e.note || ""),
+                 e.note || ""]);
     else
       rows.push([e.recorded_at, e.what, e.tightening_id, e.pset,
                  e.bolt ? `tool on ${e.bolt}` : "-", "not a rundown"]);
@@ -222,7 +228,8 @@ async function showVehicle(vin) {
         const then = b.skipped_by && b.status !== "skipped"
           ? `, then skipped by ${b.skipped_by}` + (b.comment ? `: ${b.comment}` : "") : "";
         // held: its result not known, a supervisor releases it or enters its outcome
-        const hold = (v.held || {})[b.bolt];
+        const hold = Object.prototype.hasOwnProperty.call(v.held || {}, b.bolt)
+          ? v.held[b.bolt] : null;
         cell(tr, i ? "" : b.status.toUpperCase() + then + (hold ? `, HELD: ${hold}` : ""),
              "status-" + (b.status === "nok" ? "NOK" : b.status));
         if (!r) {
