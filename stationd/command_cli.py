@@ -581,8 +581,10 @@ def add_command_parsers(sub: Any) -> None:
     ro = sub.add_parser("reopen", help="reopen a closed vehicle for rework (a command to the "
                         "running daemon)", epilog=epilog)
     ro.add_argument("vin")
-    rl = sub.add_parser("release", help="release a bolt locked after too many NOKs (a "
-                        "command to the running daemon)", epilog=epilog)
+    rl = sub.add_parser("release", help="release a bolt locked after too many NOKs, or held "
+                        "(its result not known: it is tightened again; where the controller "
+                        "shows its result, enter-outcome instead) (a command to the running "
+                        "daemon; the release right)", epilog=epilog)
     rl.add_argument("vin")
     rl.add_argument("bolt")
     lo = sub.add_parser("loosen", help="loosen a tightened bolt for rework: it gets its loosen "
@@ -607,7 +609,11 @@ def add_command_parsers(sub: Any) -> None:
                     help="the final angle the controller shows, degrees")
     for p, name in ((sk, "skip"), (ro, "reopen"), (rl, "release"), (lo, "loosen"),
                     (eo, "enter-outcome")):
-        p.add_argument("--comment", default="", help="why (kept with the command)")
+        if p is eo:     # what was read on the controller: the entry's only evidence
+            p.add_argument("--comment", required=True,
+                           help="what you checked on the controller (kept with the command)")
+        else:
+            p.add_argument("--comment", default="", help="why (kept with the command)")
         p.add_argument("--user", required=True, help="who gives the command")
         client_args(p)
         p.set_defaults(func=cmd_command, command=name)

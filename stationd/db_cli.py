@@ -411,8 +411,7 @@ def cmd_db_report(args: argparse.Namespace) -> int:
             skipped = f"by {b.skipped_by}" + (f": {b.comment}" if b.comment else "")
             result = "-" if b.status == MISSING else skipped if b.status == SKIPPED else \
                 f"{_num(b.torque_nm)} Nm, {_num(b.angle_deg)} deg, v{b.version}, " \
-                f"{_attempts(b.attempts, mine)}" + (f", by {last[0]['operator'] or '-'}"
-                                                    + _entered(last[0]) if last else "") \
+                f"{_attempts(b.attempts, mine)}" + (_last_run(last[0]) if last else "") \
                 + (f"; then skipped {skipped}" if b.skipped_by else "")
             retired = " (retired)" if b.retired else ""
             hold = dict(report.held).get(b.bolt_id)
@@ -463,6 +462,14 @@ def _held_now(bolt: str | None, holds: dict[str, str], note: str, sep: str = ", 
     now = holds.get(bolt)
     return f"{sep}{bolt} held" if now is not None and now.startswith(note) \
         else f"{sep}{bolt} held then, no longer"
+
+
+def _last_run(run: dict[str, Any]) -> str:
+    """A bolt's last rundown as its line ends: by whom, the controller's tightening id and
+    when (a quality trial: the id and the time were only in --json and the exports)."""
+    tid = run.get("tightening_id")
+    return f", by {run['operator'] or '-'}" + _entered(run) + (
+        f", tightening {tid}" if tid is not None else "") + f", at {_when(run)}"
 
 
 def _entered(run: dict[str, Any]) -> str:

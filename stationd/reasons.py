@@ -200,6 +200,8 @@ class UnprovedKind(enum.StrEnum):
     FOLLOWS_UNKNOWN = "follows unknown"  # the last id accounted for unknown
     CLOCK_UNKNOWN = "clock unknown"      # the controller's clock not known
     OUTSIDE_CUT = "outside cut"          # made outside the enable and the cut (bolt)
+    NO_CUT = "no cut"                    # no enable left without its result by the link cut
+    #                                      (none was on, or its result is in already)
 
 
 @dataclass(frozen=True)

@@ -187,6 +187,8 @@ _UNPROVED: dict[UnprovedKind, Callable[[Unproved], str]] = {
     UnprovedKind.FOLLOWS_UNKNOWN: lambda u: "the last tightening id accounted for unknown",
     UnprovedKind.CLOCK_UNKNOWN: lambda u: "the controller's clock is not known",
     UnprovedKind.OUTSIDE_CUT: lambda u: f"made outside the enable of {u.bolt} and the link cut",
+    UnprovedKind.NO_CUT: lambda u: ("no tool enable left without its result by the link "
+                                    "cut"),
 }
 
 

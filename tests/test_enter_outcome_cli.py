@@ -24,6 +24,8 @@ GOOD = ["VIN1", "B05", "--torque", "49.6", "--angle", "31", "--comment", "read t
     ([*GOOD, "--ok", "--angle", "inf"], "--angle inf"),
     ([*GOOD, "--ok", "--torque", "lots"], "invalid float value: 'lots'"),
     ([*GOOD, "--nok", "--comment", " "], "--comment: what was checked on the controller"),
+    # required, and said so by --help (a quality trial: shown optional, then refused)
+    ([*GOOD[:6], "--nok", "--user", "sam"], "required: --comment"),
     ([*GOOD, "--nok", "--comment", "x" * 501], "--comment: at most 500 characters"),
     (["VIN1", " ", *GOOD[2:], "--ok"], "bolt ' '"),
 ])

@@ -520,6 +520,7 @@ UNPROVED_WORDS = [
     (Unproved(UnprovedKind.CLOCK_UNKNOWN), "the controller's clock is not known"),
     (Unproved(UnprovedKind.OUTSIDE_CUT, bolt="B1"),
      "made outside the enable of B1 and the link cut"),
+    (Unproved(UnprovedKind.NO_CUT), "no tool enable left without its result by the link cut"),
 ]
 
 

@@ -326,8 +326,10 @@ class ResultRules(OrderRules):
         its tightening id the first after the last the station accounted for, its
         timestamp between the enable and the cut); else None and what did not agree (None
         where nothing was to prove: not fetched, or no cut)."""
-        if not ev.fetched or self._cut is None:
+        if not ev.fetched:
             return None, None
+        if self._cut is None:   # after a reconnect, said (a quality trial: no word of why)
+            return None, None if ev.live else Unproved(UnprovedKind.NO_CUT)
         return self._proof(ev, self._cut)
 
     def _proof(self, ev: ResultIn, cut: _Cut) -> tuple[Selection | None, Unproved | None]:

@@ -692,8 +692,8 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
             result_at=None, note="its result during the link cut not known: the controller "
             "refused to give them")
         # made at 17:27:47 on the controller's clock (fetched after a link cut, later)
-        record(repo, "VIN1", "SF-FL", controller_at=datetime(2026, 11, 30, 17, 27, 47,
-                                                              tzinfo=UTC))
+        record(repo, "VIN1", "SF-FL", tightening_id=3,
+               controller_at=datetime(2026, 11, 30, 17, 27, 47, tzinfo=UTC))
         repo.record_controller_event(
             result_type=3, what="batch increment", vin="VIN1", bolt="SF-FR",
             controller_vin=None, tightening_id=8, pset=1, ok=True, torque_nm=0.0,
@@ -736,6 +736,10 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
     assert ("link cut while the tool was on SF-FR: its result during the link cut not known: "
             "the controller refused to give them; SF-FR held") in out
     assert "None" not in out and "type 0" not in out
+    # a bolt's line names its last rundown's tightening id and time (a quality trial: only
+    # in --json and the exports)
+    [sffl] = [line for line in out.splitlines() if line.strip().startswith("SF-FL ")]
+    assert "1 attempt, by -, tightening 3, at 20" in sffl and " UTC" in sffl, sffl
     # the held bolt says so on its own line and in the counts (a quality trial)
     assert ", 2 held (SF-FR, TB-C)" in out.splitlines()[0], out
     [tbc] = [line for line in out.splitlines() if line.strip().startswith("TB-C ")]
