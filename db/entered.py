@@ -27,7 +27,7 @@ from sqlalchemy.orm import Session
 from db.engine import writer
 from db.errors import DatabaseError, DataError, NotFoundError
 from db.importer import current_version, parameters_of
-from db.kinds import CUT_UNKNOWN, LOOSENING, NOT_TAKEN, RUNDOWN_KINDS, TIGHTENING
+from db.kinds import HELD_WITHOUT_RESULT, LOOSENING, NOT_TAKEN, RUNDOWN_KINDS, TIGHTENING
 from db.ledger import RUNDOWN, add_command, append
 from db.models import (
     Bolt,
@@ -82,7 +82,7 @@ def record_entered(repo: Repository, *, vin: str, bolt: str, ok: bool, torque_nm
             # cut during its enable that left its result unknown (no id: none was read)
             not_taken = s.scalar(select(ControllerEvent).where(
                 ControllerEvent.vin == vin, ControllerEvent.bolt == bolt,
-                ControllerEvent.what.in_((NOT_TAKEN, CUT_UNKNOWN)))
+                ControllerEvent.what.in_((NOT_TAKEN, *HELD_WITHOUT_RESULT)))
                 .order_by(ControllerEvent.id.desc()).limit(1))
             if not_taken is not None and (held is None
                                           or not_taken.recorded_at >= held.recorded_at):

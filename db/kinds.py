@@ -66,6 +66,12 @@ LOCK_USER, LOCK_SOURCE = "station", "NOK policy"
 #: controller did meanwhile is not known: stored as a controller event under this name
 #: without a result (its note says why), the bolt held until a person checked it
 CUT_UNKNOWN = "result unknown after a link cut"
+#: a result fetched late because its push was lost (the link up), of the pset of an enable
+#: that got no result: it may be that bolt's, which is held for a person (never taken for
+#: it: other enables came between), stored as a controller event under this name
+LOST_UNKNOWN = "result unknown after a lost push"
+#: the station's own controller events that hold a bolt without a result
+HELD_WITHOUT_RESULT = (CUT_UNKNOWN, LOST_UNKNOWN)
 
 
 def not_taken_note(torque_nm: float | None, tightening_id: int | None) -> str:
@@ -98,6 +104,16 @@ def cut_unknown_note(why: str, pset: int | None = None, enabled_at: float | None
         f"at {at} UTC"
 
 
+def lost_unknown_note(tightening_id: int, pset: int | None, enabled_at: float) -> str:
+    """A held bolt's note where a result whose push was lost (``tightening_id``, fetched
+    later) is of the pset of its enable (with ``pset`` at ``enabled_at``, epoch seconds) that
+    got no result: it may be its own."""
+    at = datetime.fromtimestamp(enabled_at, UTC).strftime("%Y-%m-%d %H:%M:%S")
+    return (f"tightening {tightening_id} may be its own (its push lost, fetched later; other "
+            f"enables came between); the tool was enabled"
+            f"{'' if pset is None else f' for pset {pset}'} at {at} UTC")
+
+
 def loosening_note(note: str, pset: int | None) -> str:
     """A held bolt's note (``note``: which result) where that result came under the bolt's
     loosen pset: the person who reads it on the controller and enters its outcome is told it
@@ -125,7 +141,28 @@ def is_not_taken_note(note: str | None) -> bool:
     return note is not None and note.startswith(NOT_TAKEN_NOTE)
 
 
-__all__ = ["CUT_UNKNOWN", "LOOSENED", "LOOSENING", "MISSING", "NOK", "NOT_TAKEN",
-           "NOT_TAKEN_NOTE", "OK", "PENDING", "RUNDOWN_KINDS", "SKIPPED", "TIGHTENING",
-           "TO_LOOSEN", "BoltStatus", "HeldUnder", "cut_unknown_note", "is_not_taken_note",
-           "loosening_note", "not_taken_note", "unreadable_note"]
+__all__ = [
+    "CUT_UNKNOWN",
+    "HELD_WITHOUT_RESULT",
+    "LOOSENED",
+    "LOOSENING",
+    "LOST_UNKNOWN",
+    "MISSING",
+    "NOK",
+    "NOT_TAKEN",
+    "NOT_TAKEN_NOTE",
+    "OK",
+    "PENDING",
+    "RUNDOWN_KINDS",
+    "SKIPPED",
+    "TIGHTENING",
+    "TO_LOOSEN",
+    "BoltStatus",
+    "HeldUnder",
+    "cut_unknown_note",
+    "is_not_taken_note",
+    "loosening_note",
+    "lost_unknown_note",
+    "not_taken_note",
+    "unreadable_note",
+]

@@ -28,6 +28,7 @@ from db.errors import DatabaseError, DataError, NotFoundError, VehicleClosedErro
 from db.importer import ImportReport, current_version, import_table, parameters_of, read_table
 from db.kinds import (
     CUT_UNKNOWN,
+    HELD_WITHOUT_RESULT,
     LOOSENING,
     NOT_TAKEN,
     RUNDOWN_KINDS,
@@ -635,7 +636,7 @@ class Repository:
                        ControllerEvent.tightening_id, ControllerEvent.torque_nm,
                        ControllerEvent.pset, ControllerEvent.what, ControllerEvent.note).where(
                 ControllerEvent.vin == vin, ControllerEvent.bolt.is_not(None),
-                ControllerEvent.what.in_((NOT_TAKEN, CUT_UNKNOWN)))
+                ControllerEvent.what.in_((NOT_TAKEN, *HELD_WITHOUT_RESULT)))
             if since is not None:
                 q = q.where(UnreadableRecord.recorded_at >= since)
                 n = n.where(ControllerEvent.recorded_at >= since)

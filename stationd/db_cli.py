@@ -21,7 +21,15 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from db.kinds import CUT_UNKNOWN, LOOSENING, MISSING, PENDING, SKIPPED, unreadable_note
+from db.kinds import (
+    CUT_UNKNOWN,
+    LOOSENING,
+    LOST_UNKNOWN,
+    MISSING,
+    PENDING,
+    SKIPPED,
+    unreadable_note,
+)
 from drivers.counting import counted
 from stationd.errors import ConfigError, InputError
 from stationd.jsonout import strict_json
@@ -435,9 +443,9 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                   f"{_num(u['angle_deg'])} deg ({u['reason']})")
         holds = dict(report.held)
         for e in events:
-            if e["what"] == CUT_UNKNOWN:    # no result: what the station knows of the cut
-                print(f"  link cut while the tool was on {e['bolt']}: {e['note']}"
-                      f"{_held_now(e['bolt'], holds, e['note'] or '', '; ')}")
+            if e["what"] in HOLD_WORDS:    # no result: what the station knows of it
+                print(f"  {HOLD_WORDS[e['what']]} while the tool was on {e['bolt']}: "
+                      f"{e['note']}{_held_now(e['bolt'], holds, e['note'] or '', '; ')}")
                 continue
             on = f" while the tool was on {e['bolt']}" if e["bolt"] else ""
             code = "" if "type" in e["what"] else f" (type {e['result_type']})"
@@ -452,6 +460,11 @@ def cmd_db_report(args: argparse.Namespace) -> int:
     return EXIT_OK if report.complete else EXIT_INCOMPLETE
 
 
+#: the station's own controller events that hold a bolt without a result, as db report
+#: names them
+HOLD_WORDS = {CUT_UNKNOWN: "link cut", LOST_UNKNOWN: "a result's push lost"}
+
+
 def _held_now(bolt: str | None, holds: dict[str, str], note: str, sep: str = ", ") -> str:
     """Of a record that held ``bolt`` with ``note``: whether that hold is on still
     (``holds``: the bolts held now, each with its note: a later hold of the same bolt is
@@ -459,9 +472,9 @@ def _held_now(bolt: str | None, holds: dict[str, str], note: str, sep: str = ", 
     which)."""
     if not bolt:
         return ""
-    now = holds.get(bolt)
-    return f"{sep}{bolt} held" if now is not None and now.startswith(note) \
-        else f"{sep}{bolt} held then, no longer"
+    now = holds.get(bolt)       # (a loosening's hold adds ", a loosening ..." to its note)
+    return f"{sep}{bolt} held" if now is not None and (now == note or now.startswith(
+        note + ",")) else f"{sep}{bolt} held then, no longer"
 
 
 def _last_run(run: dict[str, Any]) -> str:

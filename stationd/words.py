@@ -466,10 +466,6 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
     Said.CUT_RECORDED: lambda n: (f"tightening {n.tightening_id} made during the link cut, "
                                   f"fetched after it: recorded to {n.bolt} (its pset, VIN, "
                                   "tightening id and time agree)"),
-    Said.LOST_RECORDED: lambda n: (f"tightening {n.tightening_id} fetched after a later one "
-                                   f"came (its push lost, the link up): recorded to {n.bolt}, "
-                                   "whose enable got no result (its pset, VIN, tightening id "
-                                   "and time agree)"),
     Said.CUT_NOTHING: lambda n: (f"no tightening made during the link cut (every result "
                                  f"since fetched): {n.bolt} open as before"),
     Said.CUT_UNKNOWN: lambda n: (f"{n.bolt}: {n.note}: check it on the controller, then "

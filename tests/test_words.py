@@ -107,9 +107,6 @@ WORDS = [
     (Notice(Said.CUT_RECORDED, tightening_id=41, bolt="B1"),
      "tightening 41 made during the link cut, fetched after it: recorded to B1 (its pset, "
      "VIN, tightening id and time agree)"),
-    (Notice(Said.LOST_RECORDED, tightening_id=41, bolt="B1"),
-     "tightening 41 fetched after a later one came (its push lost, the link up): recorded to "
-     "B1, whose enable got no result (its pset, VIN, tightening id and time agree)"),
     (Notice(Said.CUT_NOTHING, bolt="B1"),
      "no tightening made during the link cut (every result since fetched): B1 open as before"),
     (Notice(Said.CUT_UNKNOWN, bolt="B1",

@@ -30,7 +30,6 @@ from db.curves import link_curves, store_curve
 from db.entered import record_entered
 from db.errors import DataError, DbError, NotFoundError, VehicleClosedError
 from db.kinds import (
-    CUT_UNKNOWN,
     LOCK,
     LOCK_SOURCE,
     LOCK_USER,
@@ -382,11 +381,12 @@ class Records:
             log.info("%s", sent_again_words(int(r.tightening_id), a.bolt))
 
     def store_cut_unknown(self, a: StoreCutUnknown) -> None:
-        """A bolt held after a link cut left its result unknown: a controller event of the
-        station's own kind without a result (its note, why), the enable settled with it."""
+        """A bolt held after a link cut left its result unknown (or a result whose push was
+        lost may be its own): a controller event of the station's own kind without a result
+        (its note, why), the enable settled with it."""
         enable = self._settles(a.selection, take=False)
         self._writer().record_controller_event(
-            result_type=0, what=CUT_UNKNOWN, vin=a.vin, bolt=a.bolt, controller_vin=None,
+            result_type=0, what=a.what, vin=a.vin, bolt=a.bolt, controller_vin=None,
             tightening_id=None, pset=a.selection.pset, ok=False, torque_nm=None,
             angle_deg=None, result_at=None, enable_id=enable, note=a.note)
         self._settles(a.selection)

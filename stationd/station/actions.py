@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from db.bolts import Parameters
-from db.kinds import TIGHTENING
+from db.kinds import CUT_UNKNOWN, TIGHTENING
 from drivers.wrench.base import Received, TighteningResult, UnreadableResult
 from stationd.reasons import Reason, Unattributed
 from stationd.station.commands import (
@@ -222,6 +222,9 @@ class StoreCutUnknown:
     bolt: str
     note: str
     selection: Selection
+    #: the controller event's kind it is stored as (:data:`db.kinds.LOST_UNKNOWN`: a result
+    #: whose push was lost may be this enable's)
+    what: str = CUT_UNKNOWN
 
 
 @dataclass(frozen=True)

@@ -548,8 +548,6 @@ class Said(enum.Enum):
     #                                      (bolt, torque_nm, torque_min, torque_max,
     #                                      tightening_id)
     CUT_RECORDED = "cut recorded"        # made during a link cut, recorded to its bolt
-    LOST_RECORDED = "lost recorded"      # its push lost, the link up: fetched, recorded to
-    #                                      the bolt its enable got no result for
     #                                      (tightening_id, bolt)
     CUT_NOTHING = "cut nothing"          # none made during the link cut: every result since
     #                                      fetched (bolt: the one enabled then)

@@ -10,9 +10,11 @@ from dataclasses import dataclass
 
 from db.kinds import (
     LOOSENING,
+    LOST_UNKNOWN,
     NOT_TAKEN,
     TIGHTENING,
     cut_unknown_note,
+    lost_unknown_note,
     not_taken_note,
     unreadable_note,
 )
@@ -200,11 +202,6 @@ class ResultRules(OrderRules):
         proved, not_proved = self._made_during_cut(ev)
         if proved is not None:
             return self._attribute(ev, proved, cut=True)
-        lost = self._lost_push_of(ev)
-        if lost is not None and not_proved is None:
-            proved, not_proved = self._proof(ev, lost)
-            if proved is not None:
-                return self._attribute(ev, proved, lost=True)
         why = Unattributed(UnattributedKind.OUTSIDE if not ev.fetched else
                            UnattributedKind.FETCHED_LIVE if ev.live else
                            UnattributedKind.FETCHED, tid, int(r.pset), not_proved)
@@ -212,33 +209,38 @@ class ResultRules(OrderRules):
                 Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
                 Publish(Notice(Said.UNATTRIBUTED, tightening_id=tid, pset=int(r.pset),
                                unattributed=why, t=ev.t)),
-                *self._cut_in_doubt(ev), *self._lost_in_doubt(ev, lost)]
+                *self._cut_in_doubt(ev), *self._lost_in_doubt(ev)]
 
-    def _lost_push_of(self, ev: ResultIn) -> _Cut | None:
-        """The unanswered enable a result fetched with the link up (its push lost: a later
-        one skipped its id) may belong to: of the vehicle at the station, its bolt still
-        open and not selected now (the tool on for it again, what it makes is its own),
-        else None."""
-        u, m = self._unanswered, self.matcher
-        if not (ev.fetched and ev.live) or u is None or m is None or u.selection.vin != self.vin:
-            return None
-        b = u.selection.bolt
-        if b == self.bolt or b in m.done or b in m.held or b in m.skipped or b in m.locked:
-            return None
-        return u
-
-    def _lost_in_doubt(self, ev: ResultIn, lost: _Cut | None) -> list[Action]:
-        """A result fetched because its push was lost, of the pset sent for an unanswered
-        enable, not proved that enable's by the controller's data: it may be that bolt's, or
-        not.  Never taken for it, never left open either (it may be tightened): held."""
-        r = ev.result
-        if lost is None or lost.selection.pset is None or int(r.pset) != lost.selection.pset:
+    def _lost_in_doubt(self, ev: ResultIn) -> list[Action]:
+        """A result fetched late (its push lost: a later one skipped its id, or a reconnect's
+        catch-up found it) and stored unattributed may be the result of an enable that got
+        none in its window (the operator left the bolt): of its pset, made within that
+        enable and its window (or when, not known).  Never taken for that bolt (other
+        enables came between: the data cannot prove it), never left open either (it may be
+        tightened: a quality trial's bolt was tightened twice): each such bolt still open and
+        not selected now is held for a person, stored so that the hold outlives a restart."""
+        m, r = self.matcher, ev.result
+        if not ev.fetched or m is None:
             return []
-        self._unanswered = None
-        en = lost.selection
-        return self._hold(ev.t, en.bolt, f"tightening {int(r.tightening_id)} may be its own "
-                          "(its result's push lost, the link up; not proved by the "
-                          "controller's data)", under=en)
+        acts: list[Action] = []
+        held: list[str] = []
+        for u in self._unanswered:
+            en, b = u.selection, u.selection.bolt
+            if en.vin != self.vin or en.pset is None or int(r.pset) != en.pset \
+                    or b == self.bolt or b in m.done or b in m.held or b in m.skipped \
+                    or b in m.locked:
+                continue
+            if ev.made_at is not None and not (
+                    u.enabled_at - CLOCK_SLACK_S <= ev.made_at <= u.cut_at + CLOCK_SLACK_S):
+                continue    # made while its tool was off for good: not its own
+            note = lost_unknown_note(int(r.tightening_id), en.pset, u.enabled_at)
+            said = Notice(Said.CUT_UNKNOWN, bolt=b, note=note, t=ev.t)
+            acts += [StoreCutUnknown(en.vin, b, note, en, what=LOST_UNKNOWN),
+                     *self._hold(ev.t, b, note, said, under=en)]
+            held.append(b)
+        for b in held:
+            self._answered_bolt(b)
+        return acts
 
     def _unread_read(self, ev: ResultIn, tid: int) -> list[Action] | None:
         """A result fetched for the one id missing between two results read, the link up,
@@ -539,20 +541,13 @@ class ResultRules(OrderRules):
                                StateReason(Because.NOT_TAKEN_HELD, bolt=en.bolt))
         return acts
 
-    def _attribute(self, ev: ResultIn, en: Selection, cut: bool = False, lost: bool = False
-                   ) -> list[Action]:
+    def _attribute(self, ev: ResultIn, en: Selection, cut: bool = False) -> list[Action]:
         """The result of the tightening the tool was enabled for: recorded to that bolt (of
         the vehicle it was enabled on, also after a reload or restart, or fetched after a
-        link cut that the controller's data places it in, ``cut``, or fetched because its
-        push was lost, the link up, and the data places it under an enable that got no
-        result, ``lost``); an OK without a type outside the bolt's torque window is not
-        (:meth:`_not_taken`)."""
+        link cut that the controller's data places it in, ``cut``); an OK without a type
+        outside the bolt's torque window is not (:meth:`_not_taken`)."""
         r = ev.result
-        if lost:
-            self._unanswered = None
-            cut = True   # as a cut's: late, the tool and the enable owed now as they are
-        elif self._unanswered is not None and self._unanswered.selection.bolt == en.bolt:
-            self._unanswered = None     # its bolt's own result came: nothing unanswered
+        self._answered_bolt(en.bolt)     # its own result came: nothing unanswered
         window = self._outside_window(r, en)
         if window is not None:
             return self._not_taken(ev, en, window, cut)
@@ -568,9 +563,8 @@ class ResultRules(OrderRules):
         acts.append(Record(en.vin, en.bolt, r, en, late, kind,
                            offline=ev.fetched and not ev.live))
         if cut:
-            acts.append(Publish(Notice(Said.LOST_RECORDED if lost else Said.CUT_RECORDED,
-                                       tightening_id=int(r.tightening_id), bolt=en.bolt,
-                                       t=ev.t)))
+            acts.append(Publish(Notice(Said.CUT_RECORDED, tightening_id=int(r.tightening_id),
+                                       bolt=en.bolt, t=ev.t)))
         elif late:
             acts.append(Publish(Notice(Said.LATE_RESULT, bolt=en.bolt,
                                        tightening_id=int(r.tightening_id), t=ev.t)))

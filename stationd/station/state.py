@@ -52,6 +52,8 @@ OPENING = StateReason(Because.OPENING)
 LOOSEN_TARGETS = Window(0.0, 0.0, 0.0)
 #: why a bolt to loosen is not tightened when no loosen pset applies to it (a reload removed it)
 NO_LOOSEN_PSET = Skip(SkipKind.NO_LOOSEN_PSET)
+#: unanswered enables kept per vehicle (the oldest forgotten first)
+UNANSWERED = 20
 
 
 @dataclass(frozen=True)
@@ -195,10 +197,10 @@ class CoreState:
     _off_at: float | None = field(default=None, repr=False)
     _enabled_at: float | None = field(default=None, repr=False)
     _cut: _Cut | None = field(default=None, repr=False)   # a link cut during an enable
-    #: the last enable whose late-result window ended without its result, while the link
-    #: stayed up (``cut_at``: when that window ended): a result fetched because its push was
-    #: lost (a later one skipped its id) is checked against it as against a cut
-    _unanswered: _Cut | None = field(default=None, repr=False)
+    #: the vehicle's enables whose late-result window ended without their result, the link
+    #: up (``cut_at``: when that window ended), the latest last: a result fetched late (its
+    #: push lost) of one's pset, made within it, may be its bolt's, which is then held
+    _unanswered: list[_Cut] = field(default_factory=list, repr=False)
     # the station's start or the controller's last fault: a result fetched afterwards was
     # made before it, so never under an enable that came later
     _link_lost_at: float = field(default=float("-inf"), repr=False)
@@ -328,9 +330,8 @@ class CoreState:
         result fetched later because its push was lost is checked against it (a quality
         trial: stored unattributed, its bolt open and tightened twice); the tool on for that
         bolt again forgets it (what is made now is its own)."""
-        u, prev = self._unanswered, self._enabled
-        if u is not None and u.selection.bolt == sel.bolt:
-            self._unanswered = None
+        prev = self._enabled
+        self._answered_bolt(sel.bolt)
         if prev is not None and prev.bolt != sel.bolt:
             self._unanswered_after()
 
@@ -340,8 +341,14 @@ class CoreState:
         its enable on (a link cut's enable is the catch-up's to settle)."""
         if self._enabled is not None and self._cut is None and self._off_at is not None \
                 and self._enabled_at is not None and self._enabled_at > self._link_lost_at:
-            self._unanswered = _Cut(self._enabled, self._enabled_at,
-                                    self._off_at + self.late_result_s)
+            self._answered_bolt(self._enabled.bolt)
+            self._unanswered = [*self._unanswered, _Cut(
+                self._enabled, self._enabled_at, self._off_at + self.late_result_s)][-UNANSWERED:]
+
+    def _answered_bolt(self, bolt: str) -> None:
+        """``bolt``'s unanswered enables no longer count: its own result came, it is held, or
+        the tool is on for it again (what it makes now is its own)."""
+        self._unanswered = [u for u in self._unanswered if u.selection.bolt != bolt]
 
     def _unhold(self, bolt: str) -> str | None:
         """``bolt``'s hold ends (released, skipped, its outcome entered): its note, None
@@ -396,7 +403,7 @@ class CoreState:
         return acts
 
     def _forget_vehicle(self) -> None:
-        self._cut = self._unanswered = None
+        self._cut, self._unanswered = None, []
         self.vin, self.model, self.matcher, self._specs = None, None, None, {}
         self._loosen, self._nok_last = set(), set()
         self._loading, self._enabled, self._off_at = False, None, None

@@ -923,3 +923,19 @@ def test_a_vin_in_another_case_is_suggested_after_the_station_file_it_was_looked
     assert code == 2 and out == "" and _one_line(err) == (
         f"stationd: error: vehicle 'vin1' is not in the database of {station} (did you mean "
         "VIN1?)")
+
+
+def test_a_record_says_held_only_for_its_own_hold():
+    """Whether a record's hold is on is its own note's, not its bolt's (a reviewer: the
+    record of "tightening 4" said held while "tightening 41" held the bolt)."""
+    from stationd.db_cli import HOLD_WORDS, _held_now
+
+    holds = {"B1": "tightening 41", "B2": "tightening 7, a loosening with loosen pset 90"}
+    assert _held_now("B1", holds, "tightening 4") == ", B1 held then, no longer"
+    assert _held_now("B1", holds, "tightening 41") == ", B1 held"
+    assert _held_now("B2", holds, "tightening 7", "; ") == "; B2 held"
+    assert _held_now("B3", holds, "tightening 2") == ", B3 held then, no longer"
+    assert _held_now(None, holds, "x") == ""
+    # the station's own holds without a result, each named
+    assert set(HOLD_WORDS) == {"result unknown after a link cut",
+                               "result unknown after a lost push"}

@@ -102,9 +102,6 @@ class Driver:
     fresh: bool = True                # the last localization's frames were fresh
     tool: bool = False
     tool_bolt: str | None = None
-    #: every bolt the tool was enabled for: a late result (a push lost, fetched after a later
-    #: one came) may go to one of them, never to a bolt the tool was never on
-    enabled_bolts: set[str] = field(default_factory=set)
     pending: str | None = None        # parameters sent, not yet answered
     acked: dict[str, float] = field(default_factory=dict)  # bolt -> ack instant
     sends: list[str] = field(default_factory=list)
@@ -159,14 +156,12 @@ class Driver:
             assert self.ready and not self.down
             assert c._cut is None, "the tool enabled while a link cut's result is owed"
             self.tool, self.tool_bolt = True, a.bolt
-            self.enabled_bolts.add(a.bolt)
         elif isinstance(a, DisableTool):
             self.tool = False
         elif isinstance(a, Record):
             tid = int(a.result.tightening_id)
             assert tid not in self.records, "a result recorded twice"
-            assert a.bolt == self.tool_bolt or (a.late and a.bolt in self.enabled_bolts), (
-                a.bolt, self.tool_bolt)
+            assert a.bolt == self.tool_bolt, (a.bolt, self.tool_bolt)
             self.records[tid] = a.bolt
 
     # -- the operations hypothesis draws ------------------------------------------------------

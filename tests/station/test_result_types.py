@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 
+from db.kinds import LOST_UNKNOWN
 from drivers.keeper import FaultKind
 from drivers.wrench import ResultKind, UnreadableResult, result_kind
 from stationd.reasons import Reason, Unattributed, UnattributedKind, Unproved, UnprovedKind, Why
@@ -22,6 +23,7 @@ from stationd.station.actions import (
     Record,
     SendParams,
     StoreControllerEvent,
+    StoreCutUnknown,
     StoreUnattributed,
     StoreUnreadable,
 )
@@ -739,7 +741,7 @@ def test_a_complete_catch_up_within_the_late_result_window_still_takes_the_pushe
 
 # -- a result whose push was lost with the link up -------------------------------------------------
 def _b1_unanswered(d: Driver) -> float:
-    """B1 enabled and tightened, its result's push lost; the wrench to B2 (pset 2), B1's
+    """B1 enabled (and tightened, its result's push lost?); the wrench to B2 (pset 2), B1's
     late-result window over, B2 enabled and its result pushed (which skips B1's id, so the
     shell fetches it with the link up).  B1's enable's time."""
     _enabled(d, 1)
@@ -754,40 +756,60 @@ def _b1_unanswered(d: Driver) -> float:
     return enabled_at
 
 
-def test_a_result_whose_push_was_lost_goes_to_the_enable_that_got_none():
-    """The controller's data (its pset, its id the first after the last one accounted for,
-    its time within B1's enable) places tightening 41 under B1's enable, which got no result:
-    recorded to B1, which is done, never enabled and tightened again (a quality trial: stored
-    unattributed, B1 tightened twice)."""
+def test_a_result_whose_push_was_lost_holds_the_bolt_whose_enable_got_none():
+    """Tightening 41, fetched because its push was lost, is of B1's pset and made within
+    B1's enable, which got no result: it may be B1's (the data cannot prove it: B2 was
+    enabled since, and another bolt of that pset could have been).  Never taken for B1, and
+    B1 is never left open either (a quality trial: stored unattributed, B1 tightened twice;
+    a reviewer: taken for B1 by its time, it closed a bolt never tightened): B1 is held for
+    a person, and the hold is stored (it outlives a restart)."""
     d = _ready()
     enabled_at = _b1_unanswered(d)
     acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=40,
                            made_at=enabled_at + 0.5, live=True))
-    [rec] = [a for a in acts if isinstance(a, Record)]
-    assert (rec.bolt, rec.late, rec.offline) == ("B1", True, False)
-    assert not [a for a in acts if isinstance(a, StoreUnattributed)]
-    assert _notices(acts) == [
-        "tightening 41 fetched after a later one came (its push lost, the link up): recorded "
-        "to B1, whose enable got no result (its pset, VIN, tightening id and time agree)"]
-    assert "B1" in d.core.matcher.done and "B1" not in d.core.allowed()
+    assert not [a for a in acts if isinstance(a, Record)]
+    assert [a for a in acts if isinstance(a, StoreUnattributed)]
+    [stored] = [a for a in acts if isinstance(a, StoreCutUnknown)]
+    assert (stored.bolt, stored.what) == ("B1", LOST_UNKNOWN)
+    note = ("tightening 41 may be its own (its push lost, fetched later; other enables came "
+            "between); the tool was enabled for pset 1 at 1970-01-01 00:16:40 UTC")
+    assert stored.note == note and d.core.matcher.held["B1"] == note
+    assert f"B1: {note}: check it on the controller, then release or enter its outcome" \
+        in _notices(acts)
+    assert "B1" not in d.core.matcher.done and "B1" not in d.core.allowed()
+    # a second late result of that pset holds nothing more
+    acts = d.feed(ResultIn(d.t, res(43, 1, True, 1), fetched=True, follows=42,
+                           made_at=enabled_at + 0.7, live=True))
+    assert not [a for a in acts if isinstance(a, StoreCutUnknown)]
 
 
-def test_a_lost_push_not_proved_holds_the_bolt_and_one_of_another_pset_does_not():
-    """Made outside B1's enable (its time), the result of B1's pset may still be B1's: B1 is
-    held for a person, never left open; of another pset it is not B1's, and B1 stays open."""
-    for pset, held in ((1, True), (2, False)):
+def test_a_late_result_made_outside_the_unanswered_enable_or_of_another_pset_holds_nothing():
+    """Made while B1's tool was off for good (its time known), or of another pset: not B1's,
+    B1 stays open (a reviewer: any later lost push of its pset held it)."""
+    for pset, made in ((1, 60.0), (1, -60.0), (2, 0.5)):
         d = _ready()
         enabled_at = _b1_unanswered(d)
         acts = d.feed(ResultIn(d.t, res(41, pset, True, 1), fetched=True, follows=40,
-                               made_at=enabled_at - 60.0, live=True))
-        assert not [a for a in acts if isinstance(a, Record)]
-        assert [a for a in acts if isinstance(a, StoreUnattributed)]
-        if held:
-            assert d.core.matcher.held["B1"] == (
-                "tightening 41 may be its own (its result's push lost, the link up; not "
-                "proved by the controller's data)")
-        else:
-            assert "B1" not in d.core.matcher.held and "B1" in d.core.allowed()
+                               made_at=enabled_at + made, live=True))
+        assert not [a for a in acts if isinstance(a, Record | StoreCutUnknown)]
+        assert "B1" not in d.core.matcher.held and "B1" in d.core.allowed()
+
+
+def test_a_late_result_with_its_time_unknown_holds_each_unanswered_bolt_of_its_pset():
+    """B1 and B3 (both pset 1) each enabled and left without a result; a result of pset 1
+    fetched late whose time is not known (the controller's clock not known) may be either's:
+    both are held (a reviewer: only the last unanswered enable was kept, and the bolt
+    tightened stayed open)."""
+    d = _ready()
+    _b1_unanswered(d)
+    _enabled(d, 3)
+    _on(d, 2, 3)
+    d.t += d.core.late_result_s + 1.0
+    d.feed(Tick(d.t))
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=40, made_at=None,
+                           live=False))
+    assert sorted(a.bolt for a in acts if isinstance(a, StoreCutUnknown)) == ["B1", "B3"]
+    assert {"B1", "B3"} <= set(d.core.matcher.held)
 
 
 def test_a_lost_push_fetched_once_its_bolt_is_enabled_again_is_not_taken_for_it():

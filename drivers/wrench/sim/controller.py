@@ -53,7 +53,7 @@ import random
 import shutil
 import tempfile
 from collections import OrderedDict
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta
 from typing import Any, Literal
@@ -136,7 +136,9 @@ class SimController(OpenProtocolServer):
                  serial: str = "SIM0000001", curves: bool = True,
                  curves_refusal_code: int = 78, curve_samples: int = 240,
                  part_size: int = PART_SIZE, mislabel: int | None = None,
-                 send_revision: int | None = None, clock_offset_s: float = 0.0) -> None:
+                 send_revision: int | None = None, clock_offset_s: float = 0.0,
+                 result_types: Sequence[int] = (1,), garble_every: int = 0,
+                 lose_push_every: int = 0) -> None:
         if not 0.0 <= nok_rate <= 1.0:
             raise ValueError(f"nok_rate must be in [0, 1], not {nok_rate}")
         if silence_timeout <= 0:
@@ -149,6 +151,10 @@ class SimController(OpenProtocolServer):
             raise ValueError(f"curve_samples must be 2-30000, not {curve_samples}")
         if not 100 <= part_size <= PART_SIZE:
             raise ValueError(f"part_size must be 100-{PART_SIZE}, not {part_size}")
+        if not result_types or any(not 0 <= c <= 99 for c in result_types):
+            raise ValueError(f"result_types must be codes 0-99, not {list(result_types)}")
+        if garble_every < 0 or lose_push_every < 0:
+            raise ValueError("garble_every and lose_push_every must be >= 0 (0: never)")
         for option, rev in (("mislabel", mislabel), ("send_revision", send_revision)):
             if rev is not None and rev not in REVISIONS:
                 raise ValueError(f"{option} must be a revision 1-{REVISIONS[-1]}, not {rev}")
@@ -190,6 +196,12 @@ class SimController(OpenProtocolServer):
         self._store: OrderedDict[int, SimRecord] = OrderedDict()   # for MID 0064
         self._rundown: int | None = None         # the pset of a rundown under way
         self._lose_pushes = 0                    # the next results kept but never pushed
+        # what the trigger makes when no type is asked: these types in turn, every
+        # ``garble_every``-th result's body spoiled, every ``lose_push_every``-th push lost
+        # (0: never), so a whole station can be run against a troubled controller
+        self.result_types = tuple(result_types)
+        self.garble_every, self.lose_push_every = garble_every, lose_push_every
+        self._pulls = 0                          # trigger pulls that made a result
 
     def __enter__(self) -> SimController:
         self.start()
@@ -199,14 +211,16 @@ class SimController(OpenProtocolServer):
         self.close()
 
     # -- controls for the simulation and tests ----------------------------------------------
-    def pull_trigger(self, result_type: int = 1) -> SimTightening | None:
+    def pull_trigger(self, result_type: int | None = None) -> SimTightening | None:
         """The operator pulls the trigger: a tightening with the selected pset, reported to
         subscribed integrators; None (nothing happens) if the tool is disabled or no pset.
         ``result_type`` (MID 0061 revision 3+, parameter 49) makes it another kind of
         result: 2 a loosening, 7 a synchronized tightening (with a rundown too), 3-6 and 8
         a controller event (see the module docstring), any other code 0-99 a type the
-        specification does not name, with a rundown."""
-        if not 0 <= result_type <= 99:
+        specification does not name, with a rundown.  None: the controller's schedule
+        (``result_types`` in turn, with its spoiled bodies and lost pushes; a tightening
+        without one)."""
+        if result_type is not None and not 0 <= result_type <= 99:
             raise ValueError(f"result_type must be a 2-digit code, not {result_type}")
         return self.call(lambda: self._tighten(result_type))
 
@@ -557,9 +571,16 @@ class SimController(OpenProtocolServer):
                 self._batch_counter = 0
             self._ok(s, 18)
 
-    def _tighten(self, result_type: int = 1) -> SimTightening | None:
+    def _tighten(self, result_type: int | None = None) -> SimTightening | None:
         if not self.tool_enabled or self.pset is None:
             return None
+        if result_type is None:      # the schedule's turn
+            n, self._pulls = self._pulls, self._pulls + 1
+            result_type = self.result_types[n % len(self.result_types)]
+            if self.garble_every and (n + 1) % self.garble_every == 0:
+                self._garble = "value"
+            if self.lose_push_every and (n + 1) % self.lose_push_every == 0:
+                self._lose_pushes += 1
         return self._result(self.pset, result_type)
 
     def _result(self, pset: int, result_type: int = 1) -> SimTightening:
@@ -649,9 +670,11 @@ _TAG_WIDTHS_0065 = dict(enumerate((10, 25, 4, 3, 2, 5, 4, 4, 1, 1, 1, 1, 1, 1, 1
 
 
 class SimWrench(OpenProtocolWrench):
-    """``sim://wrench[?transport=tcp|serial&seed=0&nok_rate=0.05]``: starts a SimController
-    in-process and talks to it with the real Open Protocol client.  ``controller`` is the
-    simulation's handle on it (pull the trigger, refuse, inject faults, power cycle)."""
+    """``sim://wrench[?transport=tcp|serial&seed=0&nok_rate=0.05&result_types=1,2,1&
+    garble_every=0&lose_push_every=0]``: starts a SimController in-process and talks to it
+    with the real Open Protocol client.  ``controller`` is the simulation's handle on it
+    (pull the trigger, refuse, inject faults, power cycle); the trouble options make the
+    trigger's results those types in turn, spoil every Nth body and lose every Nth push."""
 
     simulated = True
 
@@ -672,15 +695,23 @@ class SimWrench(OpenProtocolWrench):
         if url.host != "wrench" or url.path not in ("", "/"):
             raise url.error("expected sim://wrench")
         spec: Spec = {**OPTIONS, "transport": (str, "tcp"), "seed": (int, 0),
-                      "nok_rate": (float, 0.05)}
+                      "nok_rate": (float, 0.05), "result_types": (str, "1"),
+                      "garble_every": (int, 0), "lose_push_every": (int, 0)}
         sim_kw = {k: kw.pop(k) for k in ("psets", "refusals", "clock", "silence_timeout",
                                          "mislabel", "send_revision", "clock_offset_s")
                   if k in kw}
         opts = url.typed_options(spec, "sim://wrench?transport=serial&seed=1&nok_rate=0.1")
         opts.update(keyword_options(kw, spec))
         try:
+            types = str(opts.pop("result_types"))
+            try:
+                codes = [int(t) for t in types.split(",") if t.strip()]
+            except ValueError:
+                raise ValueError(f"result_types {types!r}: codes like 1,2,3") from None
             controller = SimController(seed=opts.pop("seed"), nok_rate=opts.pop("nok_rate"),
-                                       **sim_kw)
+                                       result_types=codes,
+                                       garble_every=opts.pop("garble_every"),
+                                       lose_push_every=opts.pop("lose_push_every"), **sim_kw)
             return cls(controller, device=url.text, **opts)
         except ValueError as e:
             raise url.error(str(e)) from None

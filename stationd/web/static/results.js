@@ -145,8 +145,13 @@ function showTrail(commands) {
 function showOthers(v) {
   const held = v.held || {};
   // that record's hold on still (a later hold of the same bolt is another record's)
+  // (a loosening's hold adds ", a loosening ..." to its note)
   const bolt = (b, note) => !b ? "-" : b + (Object.prototype.hasOwnProperty.call(held, b) &&
-    String(held[b]).startsWith(note) ? " (held)" : " (held then, no longer)");
+    (String(held[b]) === note || String(held[b]).startsWith(note + ","))
+    ? " (held)" : " (held then, no longer)");
+  // the station's own events that hold a bolt without a result (db.kinds)
+  const holdWords = {"result unknown after a link cut": "link cut",
+                     "result unknown after a lost push": "push lost"};
   const rows = [];
   for (const x of v.unreadable_results || [])
     rows.push([x.recorded_at, "could not be read", x.tightening_id, x.pset,
@@ -157,8 +162,8 @@ function showOthers(v) {
                x.error.startsWith("MID ") ? x.error
                  : `MID ${String(x.mid).padStart(4, "0")} revision ${x.revision}: ${x.error}`]);
   for (const e of v.controller_events || []) {
-    if (e.what === "result unknown after a link cut")
-      rows.push([e.recorded_at, "link cut", null, e.pset, bolt(e.bolt, e.note || ""),
+    if (Object.prototype.hasOwnProperty.call(holdWords, e.what))
+      rows.push([e.recorded_at, holdWords[e.what], null, e.pset, bolt(e.bolt, e.note || ""),
                  e.note || ""]);
     else
       rows.push([e.recorded_at, e.what, e.tightening_id, e.pset,
