@@ -68,6 +68,8 @@ class FaultRules(TeachRules):
                 self._wrench_epoch += 1   # a reconnected controller may have lost the VIN
             self._wrench_reconnects = ev.reconnects
         acts: list[Action] = []
+        if ev.device == WRENCH and self._link_back_at < self._link_lost_at:
+            self._link_back_at = ev.t
         if ev.device == WRENCH and WRENCH in self.faults:
             # the DisableTool sent at the fault may never have arrived: off, whatever it did
             acts += _disable(StateReason(Because.CONTROLLER_BACK), t=ev.t)

@@ -558,10 +558,7 @@ class ResultRules(OrderRules):
         if self.tool_on and not cut:
             acts += self._tool_off(ev.t, StateReason(Because.RUNDOWN, bolt=en.bolt,
                                                      loosen=kind == LOOSENING, ok=bool(r.ok)))
-        # made while the link was down: fetched after the reconnect, whichever rule placed
-        # it (proved the cut's, or within its enable's late-result window)
-        acts.append(Record(en.vin, en.bolt, r, en, late, kind,
-                           offline=ev.fetched and not ev.live))
+        acts.append(Record(en.vin, en.bolt, r, en, late, kind, offline=self._offline(ev)))
         if cut:
             acts.append(Publish(Notice(Said.CUT_RECORDED, tightening_id=int(r.tightening_id),
                                        bolt=en.bolt, t=ev.t)))
@@ -597,6 +594,16 @@ class ResultRules(OrderRules):
                 self._to(State.TRACKING, StateReason(Because.RESULT, bolt=en.bolt,
                                                      ok=bool(r.ok), loosen=kind == LOOSENING))
         return acts
+
+    def _offline(self, ev: ResultIn) -> bool:
+        """Whether ``ev`` was made while the link to the controller was down: by its own time
+        between the link lost (within the clock's slack) and back, whether fetched after the
+        reconnect or pushed then (a reviewer: only fetched ones were); where its time or the
+        link's return is not known, whether it was fetched after a reconnect."""
+        lost, back = self._link_lost_at, self._link_back_at
+        if ev.made_at is not None and back >= lost > float("-inf"):
+            return lost - CLOCK_SLACK_S <= ev.made_at <= back
+        return ev.fetched and not ev.live
 
     def _after_loosening(self, t: float, bolt: str, ok: bool) -> list[Action]:
         """A loosening (measured, or its outcome entered by a person) is never the bolt done

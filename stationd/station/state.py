@@ -204,6 +204,8 @@ class CoreState:
     # the station's start or the controller's last fault: a result fetched afterwards was
     # made before it, so never under an enable that came later
     _link_lost_at: float = field(default=float("-inf"), repr=False)
+    #: when the controller's link came back last (-inf: not since the station started)
+    _link_back_at: float = field(default=float("-inf"), repr=False)
     # tightening id -> what the result said (a resent copy says the same; a controller whose
     # ids started again says something else under the same id, and is not a copy)
     _recorded: dict[int, object] = field(default_factory=dict, repr=False)

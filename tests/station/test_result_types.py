@@ -432,6 +432,18 @@ def test_a_result_fetched_within_its_enable_s_window_after_a_short_cut_is_offlin
                            follows=40, made_at=cut_at + 0.5))
     [rec] = [a for a in acts if isinstance(a, Record)]
     assert (rec.bolt, rec.late, rec.offline) == ("B1", True, True)
+    # one made well before the link was lost, fetched by the catch-up all the same (its push
+    # lost with the link up): B1's, not made offline (a reviewer)
+    d = _ready()
+    sent = _enabled(d)
+    made = d.t + 1.0
+    d.t += 6.0
+    d.feed(DeviceFault(d.t, "wrench", FaultKind.DOWN, "link lost"))
+    d.t += 2.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    acts = d.feed(ResultIn(d.t, res(41, sent.selection.pset or 0, True, 1), fetched=True,
+                           follows=40, made_at=made))
+    assert [(a.bolt, a.offline) for a in acts if isinstance(a, Record)] == [("B1", False)]
 
 
 def _back_after_a_cut(d: Driver) -> SendParams:
@@ -680,12 +692,14 @@ def test_a_cut_result_pushed_within_the_late_result_window_ends_the_cut():
     made during the cut: it is the enable's own (late), and the cut ends with it (the tool
     is not kept off for a catch-up that has nothing more to say)."""
     d = _ready()
-    sent, _, _ = _cut_during_enable(d)
+    sent, _, cut_at = _cut_during_enable(d)
     d.t += 2.0
     d.feed(DeviceBack(d.t, "wrench", reconnects=1))
-    acts = d.feed(ResultIn(d.t, res(41, sent.selection.pset or 0, True, 1)))
+    acts = d.feed(ResultIn(d.t, res(41, sent.selection.pset or 0, True, 1),
+                           made_at=cut_at + 0.5))
     [rec] = [a for a in acts if isinstance(a, Record)]
     assert rec.bolt == "B1" and rec.late and "B1" in d.core.matcher.done
+    assert rec.offline      # made while the link was down, pushed after (a reviewer)
     assert not d.feed(CaughtUp(d.t, complete=True))      # nothing said: the cut had ended
     d.step(("lift", 0.1, True, True, "VIN1"))
     _enabled(d, 2)
