@@ -54,6 +54,7 @@ from typing import Any
 from sqlalchemy import (
     JSON,
     BigInteger,
+    Boolean,
     Column,
     Connection,
     DateTime,
@@ -138,6 +139,10 @@ def _text(j: str) -> str:
 
 def _float(j: str) -> str:
     return f"CASE WHEN jsonb_typeof({j}) = 'number' THEN ({j})::double precision END"
+
+
+def _bool(j: str) -> str:
+    return f"CASE WHEN jsonb_typeof({j}) = 'boolean' THEN ({j})::boolean END"
 
 
 def _int(j: str, bits: int = 32) -> str:
@@ -298,7 +303,12 @@ LINE_RUNDOWNS = _typed(
                    "they checked (NULL: measured)"), _text(_j("entered_comment"))),
            (Column("unreadable_record_id", BigInteger, comment="the unreadable result it "
                    "resolves: line_unreadable_results.record_id of the same station and "
-                   "db_id (NULL: none)"), _int(_j("unreadable_id"), 64))],
+                   "db_id (NULL: none)"), _int(_j("unreadable_id"), 64)),
+           # made while the link to the controller was down (an MES integrator's trial: a
+           # result fetched late could not be told apart; OPC UA's IsGeneratedOffline)
+           (Column("offline", Boolean, comment="made while the link to the controller was "
+                   "down: taken by the station after the reconnect, at result_at (NULL: "
+                   "stored before the station kept it)"), _bool(_j("offline")))],
 )
 
 LINE_COMMANDS = _typed(
@@ -446,9 +456,9 @@ TRIGGER = "line_feed_typed"   # the trigger and its function
 #: the SQL to it).  Why a number and not the SQL compared: on a line whose stations are
 #: upgraded one at a time, an older forwarder would put its older SQL back at each start; it
 #: replaces only an older version.
-TYPED_VERSION = 4   # 2: line_controller_events, line_unreadable_results; 3: line_rundowns'
+TYPED_VERSION = 5   # 2: line_controller_events, line_unreadable_results; 3: line_rundowns'
 #                       entered outcomes (entered_by, entered_comment, unreadable_record_id);
-#                       4: line_unattributed's result_type
+#                       4: line_unattributed's result_type; 5: line_rundowns' offline
 _VERSION_LINE = re.compile(r"-- stationd typed tables, version (\d+)\n")
 
 

@@ -141,7 +141,8 @@ def _every_kind(repo):
     repo.start_vehicle(VIN, "SEDAN")
     record(repo, VIN, "B1", tightening_id=11, torque_nm=50.5, angle_deg=31.5,
            operator="olga", result_at=AT)
-    record(repo, VIN, "B2", ok=False, tightening_id=12, torque_nm=21.0, angle_deg=12.5)
+    record(repo, VIN, "B2", ok=False, tightening_id=12, torque_nm=21.0, angle_deg=12.5,
+           offline=True)      # made while the link was down, fetched after
     record(repo, VIN, "B2", tightening_id=13, torque_nm=0.0, angle_deg=320.0,
            kind=LOOSENING, params_sent={"pset": 92, "torque": None, "angle": None,
                                         "loosen": True})
@@ -187,6 +188,7 @@ def test_every_kind_of_record_lands_typed_with_its_columns_units_and_comments(tm
         assert (rows[1].torque_min_nm, rows[1].angle_max_deg, rows[1].pset) == (
             23.0, 50.0, None)
         assert (b1.operator, rows[1].operator) == ("olga", None)
+        assert [x.offline for x in rows] == [False, True, False]
         # a loosening ran its loosen pset, with the controller's own limits: none of the bolt's
         assert (rows[2].pset, rows[2].parameters_version, rows[2].torque_min_nm,
                 rows[2].torque_max_nm, rows[2].angle_min_deg) == (92, 1, None, None, None)
@@ -504,7 +506,8 @@ def test_two_first_starts_make_the_trigger_once(pg_url):
 TRIGGER_SHA256 = {1: "446e86d6658db69f57ddf73563842e00b690eac87fc392c5a61455dc994d1f49",
                   2: "eed0f0cfb83562bb0f0303ab2188f6dccda471d004a541bd82df27fe80f4d4e0",
                   3: "cc625563ef1638100ca531254b61e304c53501ab1577e943c670e801bf38891c",
-                  4: "1ba6cb194967583b94b0dc24eec25ee14f5e0147b2cd15bb2173f5d957a56db6"}
+                  4: "1ba6cb194967583b94b0dc24eec25ee14f5e0147b2cd15bb2173f5d957a56db6",
+                  5: "4233cde999117d8e1c20d454e5b30b622b98ed280ff61e971f568e1d45c86c56"}
 
 
 def test_the_trigger_version_goes_up_with_its_sql():
@@ -635,7 +638,8 @@ def _line_database_at_version_2(url) -> Engine:
     create_line_schema(engine)
     with engine.begin() as c:
         c.execute(text("ALTER TABLE line_rundowns DROP COLUMN entered_by, DROP COLUMN "
-                       "entered_comment, DROP COLUMN unreadable_record_id"))
+                       "entered_comment, DROP COLUMN unreadable_record_id, DROP COLUMN "
+                       "offline"))
         c.execute(text("CREATE OR REPLACE FUNCTION line_feed_typed() RETURNS trigger "
                        "LANGUAGE plpgsql SECURITY DEFINER SET search_path FROM CURRENT AS "
                        f"$typed${body}$typed$"))
@@ -684,8 +688,9 @@ def test_an_entered_outcome_has_its_own_columns_in_a_line_database_upgraded_in_p
 
     assert main(["line", "init", pg_url]) == 0
     out = capsys.readouterr().out
-    assert "added to line_rundowns: entered_by, entered_comment, unreadable_record_id (1 " \
-           "row given their values from line_feed)" in out, out
+    # (offline, of version 5, added with them: both rows have it, false)
+    assert "added to line_rundowns: entered_by, entered_comment, unreadable_record_id, " \
+           "offline (2 rows given their values from line_feed)" in out, out
     assert "trigger that types line_feed's new rows: made or brought up to date" in out
     cols = [c["name"] for c in inspect(old).get_columns("line_rundowns")]
     assert cols == [c.name for c in LINE_RUNDOWNS.table.columns]   # one order, any version
