@@ -288,6 +288,16 @@ def tool_on(d: Proc, ctl: SimController, pose: Path, bolt: str) -> None:
     until(lambda: ctl.tool_enabled, 30, f"tool enabled on {bolt}")
 
 
+def stored_on(d: Proc, ctl: SimController, pose: Path, bolt: str) -> Any:
+    """A tightening of ``bolt`` the station has stored (the controller had its
+    acknowledgement): the last result it accounts for, before what a test does next."""
+    tool_on(d, ctl, pose, bolt)
+    made = ctl.pull_trigger()
+    assert made is not None
+    until(lambda: made.tightening_id in ctl.acked_ids, 30, f"{bolt}'s result stored")
+    return made
+
+
 def db_rows(db: Path | str, sql: str) -> list[tuple[Any, ...]]:
     """The rows ``sql`` reads from the station's SQLite database (read after the daemon)."""
     con = sqlite3.connect(db)

@@ -15,7 +15,7 @@ from db.repository import Repository
 from drivers.wrench.sim.controller import SimController
 from stationd.sim.devices_cli import psets_of
 from stationd.words import result_type_words
-from tests.shell.daemons import SIM, controller, tool_on, tracking, until
+from tests.shell.daemons import SIM, controller, stored_on, tool_on, tracking, until
 from tests.shell.daemons import db_rows as _rows
 
 pytestmark = pytest.mark.system      # whole daemons
@@ -140,10 +140,7 @@ def test_a_tightening_made_during_a_cut_whose_catch_up_is_refused_is_a_gap(tmp_p
     pushed result, is stored as a gap, not lost without a row (a helper's trial)."""
     pose = tmp_path / "pose"
     with tracking(tmp_path, "CUTVIN00000000003") as (d, _, ctl):
-        tool_on(d, ctl, pose, "B04")
-        first = ctl.pull_trigger()               # the last result the station records
-        assert first is not None
-        until(lambda: first.tightening_id in ctl.acked_ids, 30, "the first result stored")
+        first = stored_on(d, ctl, pose, "B04")   # the last result the station records
         tool_on(d, ctl, pose, "B05")
         ctl.refuse_mid(64, 99)
         ctl.refuse_revisions(1, range(1, 8))   # the link down, and kept down
@@ -181,10 +178,7 @@ def test_a_tightening_made_during_a_link_cut_is_recorded_to_its_bolt(tmp_path, c
     its bolt; the second, not provably under it, is not."""
     pose = tmp_path / "pose"
     with tracking(tmp_path, "CUTVIN00000000001") as (d, _, ctl):
-        tool_on(d, ctl, pose, "B04")
-        first = ctl.pull_trigger()               # the last result the station accounts for
-        assert first is not None
-        until(lambda: first.tightening_id in ctl.acked_ids, 30, "the first result stored")
+        first = stored_on(d, ctl, pose, "B04")   # the last result the station accounts for
         tool_on(d, ctl, pose, "B05")
         ctl.refuse_revisions(1, range(1, 8))   # the link down, and kept down: no new session
         ctl.drop_connections()

@@ -12,7 +12,7 @@ import pytest
 from db.repository import Repository
 from stationd.station.gaps import GapPlan, NoFetch, plan
 from stationd.words import gap_plan_words
-from tests.shell.daemons import tool_on, tracking, until
+from tests.shell.daemons import stored_on, tool_on, tracking, until
 
 
 def test_the_ids_between_the_last_recorded_and_the_newest_are_fetched():
@@ -87,10 +87,7 @@ def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path
     lost whose bolt the operator left (its enable got no result): that bolt held."""
     pose = tmp_path / "pose"
     with tracking(tmp_path, "LIVEGAPVIN0000001") as (d, _, ctl):
-        tool_on(d, ctl, pose, "B04")
-        first = ctl.pull_trigger()               # the id the station accounts for
-        assert first is not None
-        until(lambda: first.tightening_id in ctl.acked_ids, 30, "the first result stored")
+        first = stored_on(d, ctl, pose, "B04")   # the id the station accounts for
         tool_on(d, ctl, pose, "B05")
         ctl.lose_next_push()
         lost = ctl.pull_trigger()
