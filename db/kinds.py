@@ -89,6 +89,18 @@ def unreadable_note(tightening_id: int | None, mid: int, revision: int) -> str:
         else f"MID {mid:04d} revision {revision}"
 
 
+#: how the notes of a hold without a result read (:func:`cut_unknown_note`,
+#: :func:`lost_unknown_note`): what the words of a hold tell from a result not read
+CUT_NOTE_HEAD = "its result during the link cut not known"
+LOST_NOTE_MARK = " may be its own (its push lost, fetched later;"
+
+
+def is_unknown_note(note: str | None) -> bool:
+    """Whether a held bolt's note is a hold without a result (a link cut's, a lost push's):
+    its result was never in hand, not one that could not be read."""
+    return note is not None and (note.startswith(CUT_NOTE_HEAD) or LOST_NOTE_MARK in note)
+
+
 def cut_unknown_note(why: str, pset: int | None = None, enabled_at: float | None = None
                      ) -> str:
     """A held bolt's note where the tool was enabled for it (with ``pset``, at
@@ -96,7 +108,7 @@ def cut_unknown_note(why: str, pset: int | None = None, enabled_at: float | None
     controller did meanwhile is not known (``why``).  The pset and the time are what the
     supervisor looks for in the controller's result list (a supervisor's trial: the note
     said neither)."""
-    note = f"its result during the link cut not known: {why}"
+    note = f"{CUT_NOTE_HEAD}: {why}"
     if enabled_at is None:
         return note
     at = datetime.fromtimestamp(enabled_at, UTC).strftime("%Y-%m-%d %H:%M:%S")
@@ -109,7 +121,7 @@ def lost_unknown_note(tightening_id: int, pset: int | None, enabled_at: float) -
     later) is of the pset of its enable (with ``pset`` at ``enabled_at``, epoch seconds) that
     got no result: it may be its own."""
     at = datetime.fromtimestamp(enabled_at, UTC).strftime("%Y-%m-%d %H:%M:%S")
-    return (f"tightening {tightening_id} may be its own (its push lost, fetched later; other "
+    return (f"tightening {tightening_id}{LOST_NOTE_MARK} other "
             f"enables came between); the tool was enabled"
             f"{'' if pset is None else f' for pset {pset}'} at {at} UTC")
 
@@ -142,10 +154,12 @@ def is_not_taken_note(note: str | None) -> bool:
 
 
 __all__ = [
+    "CUT_NOTE_HEAD",
     "CUT_UNKNOWN",
     "HELD_WITHOUT_RESULT",
     "LOOSENED",
     "LOOSENING",
+    "LOST_NOTE_MARK",
     "LOST_UNKNOWN",
     "MISSING",
     "NOK",
@@ -161,6 +175,7 @@ __all__ = [
     "HeldUnder",
     "cut_unknown_note",
     "is_not_taken_note",
+    "is_unknown_note",
     "loosening_note",
     "lost_unknown_note",
     "not_taken_note",

@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import replace
 
-from db.kinds import NOT_TAKEN_NOTE, is_not_taken_note
+from db.kinds import NOT_TAKEN_NOTE, is_not_taken_note, is_unknown_note
 from drivers.counting import counted
 from drivers.wrench.base import ResultType
 from stationd.reasons import (
@@ -70,7 +70,11 @@ def _locked(bolt: str | None, count: int | None) -> str:
 
 
 def _unread(bolt: str | None, note: str | None) -> str:
-    """A bolt held for a result that could not be read: the refusal and the notice alike."""
+    """A bolt held for a result that could not be read, or for one never in hand (a link
+    cut's, a lost push's: "could not be read" was wrong there, a supervisor's trial): the
+    refusal and the notice alike."""
+    if is_unknown_note(note):
+        return f"{bolt}: {note}: check it on the controller, then release or enter its outcome"
     return (f"{bolt}: the controller's result could not be read ({note}): check it on the "
             "controller, then release or enter its outcome")
 
@@ -411,7 +415,8 @@ def _entered(n: Notice) -> str:
     """An outcome entered for a held bolt, and the hold it ends (which result it replaces);
     a loosening's says so first (its OK is the bolt loosened, not tightened)."""
     held = ("" if not n.note else f" (the result not taken: {n.note})"
-            if is_not_taken_note(n.note) else f" (the result that could not be read: {n.note})")
+            if is_not_taken_note(n.note) else f" (the hold: {n.note})"
+            if is_unknown_note(n.note) else f" (the result that could not be read: {n.note})")
     ok = n.said in (Said.ENTERED_OK, Said.ENTERED_LOOSENING_OK)
     outcome = outcome_words(ok, n.torque_nm or 0.0, n.angle_deg or 0.0)
     if n.said in (Said.ENTERED_LOOSENING_OK, Said.ENTERED_LOOSENING_NOK):

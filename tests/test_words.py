@@ -605,3 +605,17 @@ def test_the_station_s_idle_sign_out_is_recorded_with_its_comment() -> None:
     assert comment_words(SignOut(user="olga", idle_s=600.0)) == "idle for 600 s"
     assert comment_words(SignOut(user="olga", idle_s=90.5)) == "idle for 90.5 s"
     assert comment_words(SignOut("end of shift", "olga")) == "end of shift"
+
+
+def test_a_hold_without_a_result_is_not_said_as_a_result_not_read():
+    """A link cut's and a lost push's holds: their result was never in hand (a supervisor's
+    trial: "the controller's result could not be read (tightening 26 may be its own ...)")."""
+    from db.kinds import cut_unknown_note, lost_unknown_note
+
+    for note in (cut_unknown_note("the controller refused MID 0064", 1, 1000.0),
+                 lost_unknown_note(26, 1, 1000.0)):
+        said = reason_words(Reason(Why.HELD, bolt="B14", note=note))
+        assert said == (f"B14: {note}: check it on the controller, then release or enter "
+                        "its outcome") and "could not be read" not in said
+    assert "could not be read (tightening 7)" in reason_words(
+        Reason(Why.HELD, bolt="B1", note="tightening 7"))
