@@ -673,6 +673,13 @@ def answer_words(answer: Answer) -> str:
         # reopened a vehicle while another was on the lift)
         return (f"{head}: accepted: it opens as a rework when it is at the station (its "
                 "skips before no longer count)")
+    if answer.reason is None and isinstance(answer.command, ReleaseBolt) and answer.result:
+        # what it ended: a lock after NOKs, or a hold (which result), so that a release
+        # meant for a lock that ends a new hold is seen (a supervisor's trial)
+        ended = answer.result
+        said = ([f"its lock after {ended['lock']} NOK in a row"] if "lock" in ended else []) \
+            + ([f"its hold ({ended['hold']})"] if "hold" in ended else [])
+        return f"{head}: accepted: {' and '.join(said)} ended"
     if answer.reason is None:
         return f"{head}: accepted"
     return f"{head}: refused: {reason_words(answer.reason)}"

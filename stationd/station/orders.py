@@ -5,6 +5,7 @@ out, teach, check), with its record and answer."""
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any
 
 from stationd.reasons import Reason, Skip, SkipKind, Why
 from stationd.station.actions import Action, Publish, RecordCommand, Reply
@@ -175,16 +176,23 @@ class OrderRules(FaultRules):
         if isinstance(cmd, SkipBolt):
             acts += self._skip(ev.t, cmd, c.issuer)
         elif isinstance(cmd, ReleaseBolt):
-            held = self.matcher is not None and self.vin == cmd.vin \
-                and self._unhold(cmd.bolt) is not None
-            if held:
+            note = self._unhold(cmd.bolt) if self.matcher is not None \
+                and self.vin == cmd.vin else None
+            ended: dict[str, Any] = {}   # what the release ended, for its answer
+            if note is not None:
+                ended["hold"] = note
                 acts.append(Publish(BoltReleased(cmd.bolt, c.issuer.user, t=ev.t)))
-            if self.matcher is not None and self.vin == cmd.vin \
-                    and self.matcher.locked.pop(cmd.bolt, None) is not None:
+            locked = self.matcher.locked.pop(cmd.bolt, None) \
+                if self.matcher is not None and self.vin == cmd.vin else None
+            if locked is not None:
+                ended["lock"] = locked
                 self._noks.pop(cmd.bolt, None)
                 acts.append(Publish(BoltReleased(cmd.bolt, c.issuer.user, t=ev.t)))
                 if cmd.bolt in self._loosen:   # released, still to be loosened first
                     acts.append(self._to_loosen(ev.t, cmd.bolt))
+            # (a supervisor's trial: a second release answered "accepted" alike, having ended
+            # a new hold rather than the lock it was meant for)
+            answer = replace(answer, result=ended or None)
         elif isinstance(cmd, LoosenBolt):
             acts += self._loosen_ordered(ev.t, cmd, c.issuer)
         elif isinstance(cmd, ReopenVehicle):

@@ -106,6 +106,20 @@ def test_the_state_stops_saying_held_when_the_hold_ends():
         assert state_words(d.core.reason) == "tracking the wrench"
 
 
+def test_a_release_says_what_it_ended():
+    """A hold (which result) or a lock after NOKs: "accepted" alone answered a second release
+    that ended a new hold rather than the lock it was meant for (a supervisor's trial)."""
+    d = _ready()
+    _held(d)
+    words = answer_words(_answer(d.command(1, ReleaseBolt("VIN1", "B1", "checked"),
+                                           SUPERVISOR)).answer)
+    assert words.endswith(": accepted: its hold (tightening 7) ended"), words
+    d.core.matcher.locked["B2"] = 3
+    words = answer_words(_answer(d.command(2, ReleaseBolt("VIN1", "B2", "thread chased"),
+                                           SUPERVISOR)).answer)
+    assert words.endswith(": accepted: its lock after 3 NOK in a row ended"), words
+
+
 def test_the_release_right_is_what_it_takes_and_an_operator_is_refused():
     d = _ready()
     _held(d)
