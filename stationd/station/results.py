@@ -597,12 +597,14 @@ class ResultRules(OrderRules):
 
     def _offline(self, ev: ResultIn) -> bool:
         """Whether ``ev`` was made while the link to the controller was down: by its own time
-        between the link lost (within the clock's slack) and back, whether fetched after the
+        between the link lost and back (each within the clock's slack), whether fetched after the
         reconnect or pushed then (a reviewer: only fetched ones were); where its time or the
         link's return is not known, whether it was fetched after a reconnect."""
         lost, back = self._link_lost_at, self._link_back_at
         if ev.made_at is not None and back >= lost > float("-inf"):
-            return lost - CLOCK_SLACK_S <= ev.made_at <= back
+            # (its time to the second, through an offset measured at connect: one made just
+            # after the link came back, the station's start too, is not taken for offline)
+            return lost - CLOCK_SLACK_S <= ev.made_at <= back - CLOCK_SLACK_S
         return ev.fetched and not ev.live
 
     def _after_loosening(self, t: float, bolt: str, ok: bool) -> list[Action]:

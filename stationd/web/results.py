@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import csv
 import io
-from datetime import datetime
+from datetime import datetime, timedelta
 from typing import Any
 
 from sqlalchemy import select
@@ -49,6 +49,9 @@ CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator"
               # is taken at the reconnect, minutes later: a quality trial)
               "controller_at")
 
+#: how long after a lock the NOK it comes of may have been taken (the shell takes it after
+#: the core decided, a moment later)
+LOCK_TAKEN_S = timedelta(seconds=2)
 #: an export row of a person's release of a locked or held bolt
 RELEASED_STATUS = "released"
 
@@ -236,7 +239,7 @@ class Results:
             # a release, and the NOK policy's lock, among the rundowns where they came
             if c.kind in ("release", "lock") and c.bolt:
                 at = c.at.isoformat()
-                runs.insert(_after(runs, at), {
+                runs.insert(_after(runs, at, c.bolt if c.kind == "lock" else None), {
                     **dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
                     "bolt": c.bolt, "attempt": 0, "images": [], "recorded_at": at,
                     "comment": c.comment, **(
@@ -253,14 +256,18 @@ def _unreadable_comment(x: dict[str, Any]) -> str:
     return error if error.startswith(head) else f"{head}: {error}"
 
 
-def _after(rows: list[dict[str, Any]], at: str) -> int:
+def _after(rows: list[dict[str, Any]], at: str, bolt: str | None = None) -> int:
     """The place of a row made at ``at`` (ISO) among ``rows`` in the order they were made:
-    after the last one recorded at or before it."""
+    after the last one recorded at or before it; with ``bolt`` (a lock), after that bolt's
+    last NOK taken by then (the NOK it comes of is taken as the lock is decided and stored a
+    moment after it)."""
     when = datetime.fromisoformat(at)
     place = 0
     for k, r in enumerate(rows):
-        t = r.get("recorded_at")
-        if t is not None and datetime.fromisoformat(t) <= when:
+        t = r.get("recorded_at") if bolt is None else r.get("result_at")
+        if t is not None and (datetime.fromisoformat(t) <= when if bolt is None else
+                              r.get("bolt") == bolt and r.get("status") == "nok"
+                              and datetime.fromisoformat(t) <= when + LOCK_TAKEN_S):
             place = k + 1
     return place
 
