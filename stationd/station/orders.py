@@ -181,6 +181,9 @@ class OrderRules(FaultRules):
             ended: dict[str, Any] = {}   # what the release ended, for its answer
             if note is not None:
                 ended["hold"] = note
+                # a release ends the NOKs in a row, a hold's as a lock's: as the records
+                # count them at a reload (a supervisor's trial: the live count went on)
+                self._noks.pop(cmd.bolt, None)
                 acts.append(Publish(BoltReleased(cmd.bolt, c.issuer.user, t=ev.t)))
             locked = self.matcher.locked.pop(cmd.bolt, None) \
                 if self.matcher is not None and self.vin == cmd.vin else None

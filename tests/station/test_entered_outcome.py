@@ -31,14 +31,14 @@ from stationd.station.events import (
     StateReason,
     ToolDisabled,
 )
-from stationd.station.inputs import CommandDone, CommandIn, UnreadableIn, VehicleLoaded
+from stationd.station.inputs import CommandDone, CommandIn, ResultIn, UnreadableIn, VehicleLoaded
 from stationd.station.lift import held_a_loosening
 from stationd.station.policy import NokPolicy, NokRule
 from stationd.words import answer_words, notice_words, reason_words, state_words
 from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
 from tests.station.test_core import BOLTS, PARAMS, Driver, _on, _ready, published
 from tests.station.test_loosen import _rundown
-from tests.station.test_result_types import _enabled, unreadable
+from tests.station.test_result_types import _enabled, res, unreadable
 
 #: a role with the release right and nothing else
 RELEASER = Issuer("lea", frozenset({Right.RELEASE}), "cli")
@@ -118,6 +118,19 @@ def test_a_release_says_what_it_ended():
     words = answer_words(_answer(d.command(2, ReleaseBolt("VIN1", "B2", "thread chased"),
                                            SUPERVISOR)).answer)
     assert words.endswith(": accepted: its lock after 3 NOK in a row ended"), words
+
+
+def test_releasing_a_hold_ends_the_nok_row_as_the_records_count_it():
+    """A NOK, then a result that could not be read (held), then a release: the NOKs in a row
+    start again, as ``Repository.nok_streaks`` counts them after a reload (a supervisor's
+    trial: the live count went on, and the next NOK locked at "3 in a row")."""
+    d = _ready()
+    _enabled(d, 1)
+    d.feed(ResultIn(d.t, res(6, d.core._specs["B1"].pset or 0, False, 1)))
+    assert d.core._noks.get("B1") == 1
+    _held(d)
+    assert _answer(d.command(1, ReleaseBolt("VIN1", "B1", "checked"), SUPERVISOR)).answer.accepted
+    assert "B1" not in d.core._noks
 
 
 def test_the_release_right_is_what_it_takes_and_an_operator_is_refused():
