@@ -181,18 +181,18 @@ class OrderRules(FaultRules):
             ended: dict[str, Any] = {}   # what the release ended, for its answer
             if note is not None:
                 ended["hold"] = note
-                # a release ends the NOKs in a row, a hold's as a lock's: as the records
-                # count them at a reload (a supervisor's trial: the live count went on)
-                self._noks.pop(cmd.bolt, None)
                 acts.append(Publish(BoltReleased(cmd.bolt, c.issuer.user, t=ev.t)))
             locked = self.matcher.locked.pop(cmd.bolt, None) \
                 if self.matcher is not None and self.vin == cmd.vin else None
             if locked is not None:
                 ended["lock"] = locked
-                self._noks.pop(cmd.bolt, None)
                 acts.append(Publish(BoltReleased(cmd.bolt, c.issuer.user, t=ev.t)))
                 if cmd.bolt in self._loosen:   # released, still to be loosened first
                     acts.append(self._to_loosen(ev.t, cmd.bolt))
+            if ended:
+                # a release ends the NOKs in a row, a hold's as a lock's: as the records count
+                # them at a reload (a supervisor's trial: the live count went on)
+                self._noks.pop(cmd.bolt, None)
             # (a supervisor's trial: a second release answered "accepted" alike, having ended
             # a new hold rather than the lock it was meant for)
             answer = replace(answer, result=ended or None)

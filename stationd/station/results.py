@@ -63,7 +63,7 @@ from stationd.station.inputs import (
     Written,
 )
 from stationd.station.orders import OrderRules
-from stationd.station.state import NOK_SKIPPED, ON_A_BOLT, _Cut
+from stationd.station.state import NOK_SKIPPED, ON_A_BOLT
 
 #: the controller stamps its results to the second, and its clock's offset is measured to
 #: the second: a result fetched after a link cut is placed between the enable and the cut
@@ -230,8 +230,7 @@ class ResultRules(OrderRules):
                     or b == self.bolt or b in m.done or b in m.held or b in m.skipped \
                     or b in m.locked:
                 continue
-            if ev.made_at is not None and not (
-                    u.enabled_at - CLOCK_SLACK_S <= ev.made_at <= u.cut_at + CLOCK_SLACK_S):
+            if ev.made_at is not None and not u.spans(ev.made_at, CLOCK_SLACK_S):
                 continue    # made while its tool was off for good: not its own
             note = lost_unknown_note(int(r.tightening_id), en.pset, u.enabled_at)
             said = Notice(Said.CUT_UNKNOWN, bolt=b, note=note, t=ev.t)
@@ -328,18 +327,11 @@ class ResultRules(OrderRules):
         its tightening id the first after the last the station accounted for, its
         timestamp between the enable and the cut); else None and what did not agree (None
         where nothing was to prove: not fetched, or no cut)."""
+        cut, r = self._cut, ev.result
         if not ev.fetched:
             return None, None
-        if self._cut is None:   # after a reconnect, said (a quality trial: no word of why)
+        if cut is None:   # after a reconnect, said (a quality trial: no word of why)
             return None, None if ev.live else Unproved(UnprovedKind.NO_CUT)
-        return self._proof(ev, self._cut)
-
-    def _proof(self, ev: ResultIn, cut: _Cut) -> tuple[Selection | None, Unproved | None]:
-        """Whether the controller's own data places the fetched result ``ev`` under
-        ``cut``'s enable (its pset, the VIN it echoes, its id the first after the last one
-        accounted for, its time between the enable and ``cut_at``): that selection, else
-        None and the first of them that did not agree."""
-        r = ev.result
         en = cut.selection
         echoed = str(r.vin or "").strip()
         if en.pset is None or int(r.pset) != en.pset:
@@ -353,7 +345,7 @@ class ResultRules(OrderRules):
             return None, Unproved(UnprovedKind.NOT_FIRST, follows=ev.follows)
         if ev.made_at is None:
             return None, Unproved(UnprovedKind.CLOCK_UNKNOWN)
-        if not cut.enabled_at - CLOCK_SLACK_S <= ev.made_at <= cut.cut_at + CLOCK_SLACK_S:
+        if not cut.spans(ev.made_at, CLOCK_SLACK_S):
             return None, Unproved(UnprovedKind.OUTSIDE_CUT, bolt=en.bolt)
         return en, None
 

@@ -69,6 +69,11 @@ class _Cut:
     #: catch-up of that connection or an earlier one says nothing of this cut
     reconnects: int | None = None
 
+    def spans(self, made_at: float, slack: float) -> bool:
+        """Whether a result made at ``made_at`` (the station's clock) may have been made
+        under this enable, from it to ``cut_at``, each end within ``slack``."""
+        return self.enabled_at - slack <= made_at <= self.cut_at + slack
+
 
 @dataclass
 class _Teach:

@@ -202,50 +202,50 @@ class Results:
              "images": [], "recorded_at": _iso(b.skipped_at),   # a skip's: when it was
              "skipped_by": b.skipped_by, "comment": b.comment}
             for b in report.bolts if b.status in (MISSING, SKIPPED) or b.skipped_by]
+        model = report.vehicle.model
         # a result that could not be read: its bolt's row says so, with the parse error
-        unread: list[dict[str, Any]] = [
-            {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
-             "bolt": x["bolt"], "attempt": 0, "status": UNREADABLE_STATUS, "images": [],
-             "pset": x["pset"], "tightening_id": x["tightening_id"],
-             # one clock per column on every row: the station's in result_at, the
-             # controller's own (as it sent it) in controller_at
-             "result_at": _iso(x["recorded_at"]), "controller_at": _iso(x["result_at"]),
-             "recorded_at": _iso(x["recorded_at"]), "comment": _unreadable_comment(x)}
-            for x in self.repo.unreadable(vin)]
-        loose: list[dict[str, Any]] = [
-            {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
-             "bolt": None, "attempt": 0, "status": UNATTRIBUTED_STATUS, "images": [],
-             # its type as the controller sent it (an unattributed loosening read as a
-             # tightening OK: an MES integrator's trial); none sent: empty
-             "rundown": None if u["result_type"] is None
-             else result_type_words(u["result_type"]),
-             "pset": u["pset"], "tightening_id": u["tightening_id"],
-             "torque_nm": u["torque_nm"], "angle_deg": u["angle_deg"],
-             "result_at": _iso(u["recorded_at"]), "controller_at": _iso(u["result_at"]),
-             "recorded_at": _iso(u["recorded_at"]),
-             "comment": f"{str(u['status']).upper()}; {u['reason']}"}
-            for u in self.repo.unattributed(vin)]
-        events: list[dict[str, Any]] = [
-            {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
-             "bolt": e["bolt"], "attempt": 0, "status": CONTROLLER_EVENT_STATUS, "images": [],
-             "rundown": e["what"], "pset": e["pset"], "tightening_id": e["tightening_id"],
-             "torque_nm": e["torque_nm"], "angle_deg": e["angle_deg"],
-             "result_at": _iso(e["recorded_at"]), "controller_at": _iso(e["result_at"]),
-             "recorded_at": _iso(e["recorded_at"]),
-             "comment": e["note"] or ("not a rundown" + (
-                 f"; the tool was on {e['bolt']}" if e["bolt"] else ""))}
-            for e in self.repo.controller_events(vin)]
+        unread = [_stored_row(vin, model, UNREADABLE_STATUS, x, bolt=x["bolt"],
+                              comment=_unreadable_comment(x))
+                  for x in self.repo.unreadable(vin)]
+        loose = [_stored_row(vin, model, UNATTRIBUTED_STATUS, u, bolt=None,
+                             # its type as the controller sent it (an unattributed loosening
+                             # read as a tightening OK: an MES integrator's trial); none: empty
+                             rundown=None if u["result_type"] is None
+                             else result_type_words(u["result_type"]),
+                             torque_nm=u["torque_nm"], angle_deg=u["angle_deg"],
+                             comment=f"{str(u['status']).upper()}; {u['reason']}")
+                 for u in self.repo.unattributed(vin)]
+        events = [_stored_row(vin, model, CONTROLLER_EVENT_STATUS, e, bolt=e["bolt"],
+                              rundown=e["what"], torque_nm=e["torque_nm"],
+                              angle_deg=e["angle_deg"],
+                              comment=e["note"] or ("not a rundown" + (
+                                  f"; the tool was on {e['bolt']}" if e["bolt"] else "")))
+                  for e in self.repo.controller_events(vin)]
         for c in self.repo.ledger.commands(vin):
             # a release, and the NOK policy's lock, among the rundowns where they came
             if c.kind in ("release", "lock") and c.bolt:
                 at = c.at.isoformat()
-                runs.insert(_after(runs, at, c.bolt if c.kind == "lock" else None), {
+                runs.insert(_after_nok(runs, at, c.bolt) if c.kind == "lock"
+                            else _after(runs, at), {
                     **dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
                     "bolt": c.bolt, "attempt": 0, "images": [], "recorded_at": at,
                     "comment": c.comment, **(
                         {"status": RELEASED_STATUS, "released_by": c.user}
                         if c.kind == "release" else {"status": LOCKED_STATUS})})
         return runs + none + unread + loose + events
+
+
+def _stored_row(vin: str, model: str, status: str, x: dict[str, Any], **fields: Any
+                ) -> dict[str, Any]:
+    """An export row of a stored result that is no rundown of a bolt (unreadable,
+    unattributed, a controller event: ``x`` as the repository reads it), with ``fields``.
+    One clock per column on every row: the station's in ``result_at`` (when it stored it),
+    the controller's own (as it sent it) in ``controller_at``."""
+    return {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": model, "attempt": 0,
+            "status": status, "images": [], "pset": x["pset"],
+            "tightening_id": x["tightening_id"], "result_at": _iso(x["recorded_at"]),
+            "controller_at": _iso(x["result_at"]), "recorded_at": _iso(x["recorded_at"]),
+            **fields}
 
 
 def _unreadable_comment(x: dict[str, Any]) -> str:
@@ -256,18 +256,28 @@ def _unreadable_comment(x: dict[str, Any]) -> str:
     return error if error.startswith(head) else f"{head}: {error}"
 
 
-def _after(rows: list[dict[str, Any]], at: str, bolt: str | None = None) -> int:
+def _after(rows: list[dict[str, Any]], at: str) -> int:
     """The place of a row made at ``at`` (ISO) among ``rows`` in the order they were made:
-    after the last one recorded at or before it; with ``bolt`` (a lock), after that bolt's
-    last NOK taken by then (the NOK it comes of is taken as the lock is decided and stored a
-    moment after it)."""
+    after the last one recorded at or before it."""
     when = datetime.fromisoformat(at)
     place = 0
     for k, r in enumerate(rows):
-        t = r.get("recorded_at") if bolt is None else r.get("result_at")
-        if t is not None and (datetime.fromisoformat(t) <= when if bolt is None else
-                              r.get("bolt") == bolt and r.get("status") == "nok"
-                              and datetime.fromisoformat(t) <= when + LOCK_TAKEN_S):
+        t = r.get("recorded_at")
+        if t is not None and datetime.fromisoformat(t) <= when:
+            place = k + 1
+    return place
+
+
+def _after_nok(rows: list[dict[str, Any]], at: str, bolt: str) -> int:
+    """The place of ``bolt``'s lock made at ``at`` (ISO) among ``rows``: after that bolt's
+    last NOK taken by then (the NOK it comes of is taken as the lock is decided and stored a
+    moment after it, so it is not placed by the time it was stored)."""
+    latest = datetime.fromisoformat(at) + LOCK_TAKEN_S
+    place = 0
+    for k, r in enumerate(rows):
+        t = r.get("result_at")
+        if r.get("bolt") == bolt and r.get("status") == "nok" and t is not None \
+                and datetime.fromisoformat(t) <= latest:
             place = k + 1
     return place
 
