@@ -27,7 +27,7 @@ from typing import Any, TextIO
 
 from drivers.errors import DriverError
 from drivers.link import bind_words
-from drivers.wrench.sim.controller import SimController
+from drivers.wrench.sim.controller import SimController, parse_result_types
 
 
 class ListenError(DriverError):
@@ -50,12 +50,9 @@ def refusal(text: str) -> tuple[int, set[int]]:
 def result_types(text: str) -> list[int]:
     """``1,3,2`` -> [1, 3, 2]: result type codes (2 digits), pulled in turn."""
     try:
-        codes = [int(t) for t in text.split(",") if t.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected codes like 1,3,2, not {text!r}") from None
-    if not codes or any(not 0 <= c <= 99 for c in codes):
-        raise argparse.ArgumentTypeError(f"expected codes 0-99 like 1,3,2, not {text!r}")
-    return codes
+        return parse_result_types(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def add_behaviour_options(p: argparse.ArgumentParser) -> None:

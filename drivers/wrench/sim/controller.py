@@ -669,6 +669,18 @@ _TAG_WIDTHS_0065 = dict(enumerate((10, 25, 4, 3, 2, 5, 4, 4, 1, 1, 1, 1, 1, 1, 1
                                   start=1))
 
 
+def parse_result_types(text: str, name: str = "") -> list[int]:
+    """``1,3,2`` -> [1, 3, 2]: result type codes (2 digits), made in turn; ValueError with
+    the words for anything else (``name``: the option's, before them)."""
+    try:
+        codes = [int(t) for t in text.split(",") if t.strip()]
+    except ValueError:
+        raise ValueError(f"{name}expected codes like 1,3,2, not {text!r}") from None
+    if not codes or any(not 0 <= c <= 99 for c in codes):
+        raise ValueError(f"{name}expected codes 0-99 like 1,3,2, not {text!r}")
+    return codes
+
+
 class SimWrench(OpenProtocolWrench):
     """``sim://wrench[?transport=tcp|serial&seed=0&nok_rate=0.05&result_types=1,2,1&
     garble_every=0&lose_push_every=0]``: starts a SimController in-process and talks to it
@@ -703,11 +715,7 @@ class SimWrench(OpenProtocolWrench):
         opts = url.typed_options(spec, "sim://wrench?transport=serial&seed=1&nok_rate=0.1")
         opts.update(keyword_options(kw, spec))
         try:
-            types = str(opts.pop("result_types"))
-            try:
-                codes = [int(t) for t in types.split(",") if t.strip()]
-            except ValueError:
-                raise ValueError(f"result_types {types!r}: codes like 1,2,3") from None
+            codes = parse_result_types(str(opts.pop("result_types")), "result_types: ")
             controller = SimController(seed=opts.pop("seed"), nok_rate=opts.pop("nok_rate"),
                                        result_types=codes,
                                        garble_every=opts.pop("garble_every"),

@@ -47,8 +47,9 @@ def test_the_trigger_makes_the_types_in_turn_spoils_and_loses_as_asked():
 
 
 @pytest.mark.parametrize("query, said", [
-    ("result_types=1,x", "result_types '1,x': codes like 1,2,3"),
-    ("result_types=100", "result_types must be codes 0-99"),
+    # (the words of `stationd sim controller --result-types`)
+    ("result_types=1,x", "result_types: expected codes like 1,3,2, not '1,x'"),
+    ("result_types=100", "result_types: expected codes 0-99 like 1,3,2, not '100'"),
     ("garble_every=-1", "must be >= 0"),
 ])
 def test_bad_trouble_options_are_one_readable_error(query, said):
