@@ -473,13 +473,17 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
                                   "tightening id and time agree)"),
     Said.CUT_NOTHING: lambda n: (f"no tightening made during the link cut (every result "
                                  f"since fetched): {n.bolt} open as before"),
-    Said.CUT_UNKNOWN: lambda n: (f"{n.bolt}: {n.note}: check it on the controller, then "
-                                 "release or enter its outcome"),
+    Said.CUT_UNKNOWN: lambda n: (
+        f"{n.bolt}: {n.note}: check it on the controller, then release or enter its outcome"
+        if n.vin is None else
+        f"{n.bolt} of {n.vin} (gone from the station): {n.note}: check it on the controller; "
+        "held when that vehicle is back (stationd reopen), to release or enter its outcome"),
     # recorded to its bolt: "outside a tightening: recorded, not matched" was read as a
     # result lost to the bolt it went to (a quality engineer's trial)
     Said.LATE_RESULT: lambda n: (
         f"{_result_id(n.tightening_id)} came after the tool went off for {n.bolt} (within "
-        f"the late-result window): recorded to {n.bolt}"),
+        f"the late-result window): recorded to {n.bolt}"
+        + (f" of {n.vin} (gone from the station since)" if n.vin else "")),
     Said.LOOSEN_PSET_TIGHTENED: lambda n: (f"{n.bolt}: the loosen pset {n.pset} reported a "
                                            "tightening: the bolt counts as tightened; check "
                                            "that pset's program"),

@@ -63,7 +63,7 @@ from stationd.station.inputs import (
     Written,
 )
 from stationd.station.orders import OrderRules
-from stationd.station.state import NOK_SKIPPED, ON_A_BOLT
+from stationd.station.state import NOK_SKIPPED, ON_A_BOLT, _Cut
 
 #: the controller stamps its results to the second, and its clock's offset is measured to
 #: the second: a result fetched after a link cut is placed between the enable and the cut
@@ -205,40 +205,60 @@ class ResultRules(OrderRules):
         why = Unattributed(UnattributedKind.OUTSIDE if not ev.fetched else
                            UnattributedKind.FETCHED_LIVE if ev.live else
                            UnattributedKind.FETCHED, tid, int(r.pset), not_proved)
-        return [StoreUnattributed(r, self.vin, why),
+        lost = self._lost_enables(ev)
+        # filed under the vehicle its only possible enables were on (one that has left: the
+        # result of its last bolt, its push lost, was filed under the next car)
+        vins = {u.selection.vin for u in lost}
+        filed = vins.pop() if len(vins) == 1 else self.vin
+        return [StoreUnattributed(r, filed, why),
                 Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
                 Publish(Notice(Said.UNATTRIBUTED, tightening_id=tid, pset=int(r.pset),
                                unattributed=why, t=ev.t)),
-                *self._cut_in_doubt(ev), *self._lost_in_doubt(ev)]
+                *self._cut_in_doubt(ev), *self._lost_in_doubt(ev, lost)]
 
-    def _lost_in_doubt(self, ev: ResultIn) -> list[Action]:
-        """A result fetched late (its push lost: a later one skipped its id, or a reconnect's
-        catch-up found it) and stored unattributed may be the result of an enable that got
-        none in its window (the operator left the bolt): of its pset, made within that
-        enable and its window (or when, not known).  Never taken for that bolt (other
-        enables came between: the data cannot prove it), never left open either (it may be
-        tightened: a quality trial's bolt was tightened twice): each such bolt still open and
-        not selected now is held for a person, stored so that the hold outlives a restart."""
+    def _lost_enables(self, ev: ResultIn) -> list[_Cut]:
+        """The enables that got no result in their window (the operator left the bolt) whose
+        result a result fetched late (its push lost: a later one skipped its id, or a
+        reconnect's catch-up found it) may be: of its pset, made within that enable and its
+        window (or when, not known), its bolt still open and not selected now (of a vehicle
+        that has left: whatever it is now, not known here)."""
         m, r = self.matcher, ev.result
-        if not ev.fetched or m is None:
+        if not ev.fetched:
             return []
-        acts: list[Action] = []
-        held: list[str] = []
+        found: list[_Cut] = []
         for u in self._unanswered:
             en, b = u.selection, u.selection.bolt
-            if en.vin != self.vin or en.pset is None or int(r.pset) != en.pset \
-                    or b == self.bolt or b in m.done or b in m.held or b in m.skipped \
-                    or b in m.locked:
+            if en.pset is None or int(r.pset) != en.pset:
+                continue
+            if en.vin == self.vin and m is not None and (
+                    b == self.bolt or b in m.done or b in m.held or b in m.skipped
+                    or b in m.locked):
                 continue
             if ev.made_at is not None and not u.spans(ev.made_at, CLOCK_SLACK_S):
                 continue    # made while its tool was off for good: not its own
-            note = lost_unknown_note(int(r.tightening_id), en.pset, u.enabled_at)
-            said = Notice(Said.CUT_UNKNOWN, bolt=b, note=note, t=ev.t)
-            acts += [StoreCutUnknown(en.vin, b, note, en, what=LOST_UNKNOWN),
-                     *self._hold(ev.t, b, note, said, under=en)]
-            held.append(b)
-        for b in held:
-            self._answered_bolt(b)
+            found.append(u)
+        return found
+
+    def _lost_in_doubt(self, ev: ResultIn, lost: list[_Cut]) -> list[Action]:
+        """The result may be that of each of the ``lost`` enables (:meth:`_lost_enables`).
+        Never taken for one (other enables came between: the data cannot prove it), never
+        left open either (it may be tightened: a quality trial's bolt was tightened twice):
+        each such bolt is held for a person, stored so that the hold outlives a restart and
+        comes back with its vehicle where that one has left."""
+        acts: list[Action] = []
+        tid = int(ev.result.tightening_id)
+        for u in lost:
+            en, b = u.selection, u.selection.bolt
+            assert en.pset is not None  # noqa: S101 - _lost_enables' guard
+            note = lost_unknown_note(tid, en.pset, u.enabled_at)
+            stored = StoreCutUnknown(en.vin, b, note, en, what=LOST_UNKNOWN)
+            if en.vin != self.vin or self.matcher is None:
+                acts += [stored, Publish(Notice(Said.CUT_UNKNOWN, bolt=b, vin=en.vin, note=note,
+                                                t=ev.t))]
+            else:
+                acts += [stored, *self._hold(ev.t, b, note, Notice(
+                    Said.CUT_UNKNOWN, bolt=b, note=note, t=ev.t), under=en)]
+            self._answered_bolt(en.vin, b)
         return acts
 
     def _unread_read(self, ev: ResultIn, tid: int) -> list[Action] | None:
@@ -307,11 +327,13 @@ class ResultRules(OrderRules):
         en = cut.selection
         self._answered(en)
         note = cut_unknown_note(why, en.pset, cut.enabled_at)
-        said = Notice(Said.CUT_UNKNOWN, bolt=en.bolt, note=note, t=t)
         stored = StoreCutUnknown(en.vin, en.bolt, note, en)
         if self.matcher is None or self.vin != en.vin or en.bolt not in self.matcher.bolts:
-            return [stored, Publish(said)]    # held when that vehicle is at the station
-        return [stored, *self._hold(t, en.bolt, note, said, under=en)]
+            # held when that vehicle is at the station again
+            return [stored, Publish(Notice(Said.CUT_UNKNOWN, bolt=en.bolt, vin=en.vin,
+                                           note=note, t=t))]
+        return [stored, *self._hold(t, en.bolt, note, Notice(
+            Said.CUT_UNKNOWN, bolt=en.bolt, note=note, t=t), under=en)]
 
     def _answered(self, en: Selection) -> None:
         """``en``'s result is in, or settled for a person (held): its enable is owed nothing
@@ -539,7 +561,7 @@ class ResultRules(OrderRules):
         link cut that the controller's data places it in, ``cut``); an OK without a type
         outside the bolt's torque window is not (:meth:`_not_taken`)."""
         r = ev.result
-        self._answered_bolt(en.bolt)     # its own result came: nothing unanswered
+        self._answered_bolt(en.vin, en.bolt)     # its own result came: nothing unanswered
         window = self._outside_window(r, en)
         if window is not None:
             return self._not_taken(ev, en, window, cut)
@@ -556,6 +578,7 @@ class ResultRules(OrderRules):
                                        bolt=en.bolt, t=ev.t)))
         elif late:
             acts.append(Publish(Notice(Said.LATE_RESULT, bolt=en.bolt,
+                                       vin=en.vin if en.vin != self.vin else None,
                                        tightening_id=int(r.tightening_id), t=ev.t)))
         self._recorded[int(r.tightening_id)] = _said(r)
         if not cut:

@@ -338,8 +338,8 @@ class CoreState:
         trial: stored unattributed, its bolt open and tightened twice); the tool on for that
         bolt again forgets it (what is made now is its own)."""
         prev = self._enabled
-        self._answered_bolt(sel.bolt)
-        if prev is not None and prev.bolt != sel.bolt:
+        self._answered_bolt(sel.vin, sel.bolt)
+        if prev is not None and (prev.vin, prev.bolt) != (sel.vin, sel.bolt):
             self._unanswered_after()
 
     def _unanswered_after(self) -> None:
@@ -348,14 +348,16 @@ class CoreState:
         its enable on (a link cut's enable is the catch-up's to settle)."""
         if self._enabled is not None and self._cut is None and self._off_at is not None \
                 and self._enabled_at is not None and self._enabled_at > self._link_lost_at:
-            self._answered_bolt(self._enabled.bolt)
+            self._answered_bolt(self._enabled.vin, self._enabled.bolt)
             self._unanswered = [*self._unanswered, _Cut(
                 self._enabled, self._enabled_at, self._off_at + self.late_result_s)][-UNANSWERED:]
 
-    def _answered_bolt(self, bolt: str) -> None:
-        """``bolt``'s unanswered enables no longer count: its own result came, it is held, or
-        the tool is on for it again (what it makes now is its own)."""
-        self._unanswered = [u for u in self._unanswered if u.selection.bolt != bolt]
+    def _answered_bolt(self, vin: str, bolt: str) -> None:
+        """``bolt``'s (of vehicle ``vin``) unanswered enables no longer count: its own result
+        came, it is held, or the tool is on for it again (what it makes now is its own).  By
+        vehicle too: the next car's bolt of the same name answers nothing of the last's."""
+        self._unanswered = [u for u in self._unanswered
+                            if (u.selection.vin, u.selection.bolt) != (vin, bolt)]
 
     def _unhold(self, bolt: str) -> str | None:
         """``bolt``'s hold ends (released, skipped, its outcome entered): its note, None
@@ -410,10 +412,15 @@ class CoreState:
         return acts
 
     def _forget_vehicle(self) -> None:
-        self._cut, self._unanswered = None, []
+        """The vehicle left.  What its controller still owes is kept: the enable whose
+        result may still come (recorded to its bolt of that vehicle within its window), a
+        link cut's enable (the catch-up settles it), the enables left unanswered (a result
+        fetched later, its push lost, is held against them): a supervisor's trial found the
+        last bolt's result, its push lost, stored under the next vehicle and that bolt
+        neither recorded nor held."""
         self.vin, self.model, self.matcher, self._specs = None, None, None, {}
         self._loosen, self._nok_last = set(), set()
-        self._loading, self._enabled, self._off_at = False, None, None
+        self._loading = False
         self._vin_for, self._vin_pending, self._last_refusal = None, False, None
 
     def _to(self, state: State, reason: StateReason) -> None:

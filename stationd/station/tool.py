@@ -136,12 +136,14 @@ class ToolRules(FaultRules):
         window ago, and its result is not in) where it is another bolt than the one selected;
         else None.  The tool is not enabled for the selected bolt meanwhile: a result is
         placed by the enable it came under, and a late one of that bolt would otherwise be
-        taken for this one's (the same pset), or lost to its own (another pset)."""
+        taken for this one's (the same pset), or lost to its own (another pset).  The same
+        across vehicles: the last car's bolt, its result owed as that car left, named with
+        its VIN."""
         en = self._enabled
-        if en is None or en.bolt == self.bolt or en.vin != self.vin \
+        if en is None or (en.vin, en.bolt) == (self.vin, self.bolt) \
                 or not self._result_owed(t):
             return None
-        return en.bolt
+        return en.bolt if en.vin == self.vin else f"{en.bolt} of {en.vin}"
 
     def _on_params_acked(self, ev: ParamsAcked) -> list[Action]:
         acts: list[Action] = [Publish(ParamsSent(ev.bolt, ev.pset, dict(ev.latency_ms),
