@@ -471,6 +471,9 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
     Said.CUT_RECORDED: lambda n: (f"tightening {n.tightening_id} made during the link cut, "
                                   f"fetched after it: recorded to {n.bolt} (its pset, VIN, "
                                   "tightening id and time agree)"),
+    Said.LOST_RECORDED: lambda n: (
+        f"tightening {n.tightening_id}, its push lost, fetched when a later one came: made "
+        f"while the tool was on for {n.bolt} alone, recorded to {n.bolt}"),
     Said.CUT_NOTHING: lambda n: (f"no tightening made during the link cut (every result "
                                  f"since fetched): {n.bolt} open as before"),
     Said.CUT_UNKNOWN: lambda n: (

@@ -119,6 +119,16 @@ WORDS = [
     (Notice(Said.LATE_RESULT, bolt="B1"),
      "the result came after the tool went off for B1 (within the late-result window): "
      "recorded to B1"),
+    (Notice(Said.LATE_RESULT, bolt="B1", vin="VIN1", tightening_id=12),
+     "result 12 came after the tool went off for B1 (within the late-result window): "
+     "recorded to B1 of VIN1 (gone from the station since)"),
+    (Notice(Said.LOST_RECORDED, bolt="B1", tightening_id=41),
+     "tightening 41, its push lost, fetched when a later one came: made while the tool was on "
+     "for B1 alone, recorded to B1"),
+    (Notice(Said.CUT_UNKNOWN, bolt="B1", vin="VIN1", note="tightening 41 may be its own"),
+     "B1 of VIN1 (gone from the station): tightening 41 may be its own: check it on the "
+     "controller; held when that vehicle is back (stationd reopen), to release or enter its "
+     "outcome"),
     (Notice(Said.LOOSEN_PSET_TIGHTENED, bolt="B1", pset=9),
      "B1: the loosen pset 9 reported a tightening: the bolt counts as tightened; check that "
      "pset's program"),

@@ -73,6 +73,8 @@ class ControllerFeed:
         #: ids between the two were made during the cut and are a gap (:meth:`_refused`)
         self._first_pushed: int | None = None
         self._refused_after: int | None = None
+        #: the pushed result whose id skipped those fetched now (fed after them)
+        self._revealed_by: int | None = None
         self._again = False     # a reconnect came while a catch-up ran: one more after it
         self._reads = 0         # the results' loop's reads of the controller so far
 
@@ -100,10 +102,12 @@ class ControllerFeed:
             # a refusal is a fault until the controller answers
             await self._feed(DeviceBack(time.time(), WRENCH, self._keeper.reconnects))
         if result is not None:
+            # the ids it skipped first (its push lost): the core gets them in the order they
+            # were made (a supervisor's trial: a NOK fetched after a later one went uncounted)
+            await self._live_gap(wrench, result)
             await self._feed(await self.checked(
                 result_input(time.time(), result, offset=wrench.clock_offset_s)))
             self.received.remove(result)
-            await self._live_gap(wrench, result)
         self._reads += 1
 
     async def checked(self, ev: ResultIn | UnreadableIn) -> ResultIn | ResultCopy | UnreadableIn:
@@ -371,6 +375,7 @@ class ControllerFeed:
         if last is None or tid <= last + 1 or not wrench.can_fetch or self.records.repo is None:
             return
         todo = plan_gaps(last, tid - 1)
+        self._revealed_by = tid
         ids = str(last + 1) if tid - 1 == last + 1 else f"{last + 1}-{tid - 1}"
         log.warning("results: tightening %d came after %d: %s not pushed by the controller "
                     "(the link up), fetched", tid, last, ids)
@@ -419,7 +424,8 @@ class ControllerFeed:
         log.info("tightening %d fetched %s", tid,
                  "after a later one came (the link up)" if live else "after a reconnect")
         await self._feed(await self.checked(result_input(
-            time.time(), got, fetched=True, follows=follows, offset=offset, live=live)))
+            time.time(), got, fetched=True, follows=follows, offset=offset, live=live,
+            before=self._revealed_by if live else None)))
         if isinstance(got, TighteningResult):
             await self._late_curves(wrench, tid)
 
@@ -496,7 +502,8 @@ class ControllerFeed:
 
 
 def result_input(t: float, got: Received, *, fetched: bool = False, follows: int | None = None,
-                 offset: float | None = None, live: bool = False) -> ResultIn | UnreadableIn:
+                 offset: float | None = None, live: bool = False,
+                 before: int | None = None) -> ResultIn | UnreadableIn:
     """What the controller sent, as the core's input: a result (fetched ones with the last
     tightening id accounted for before, and the controller's timestamp on the station's
     clock where its offset is known; ``live``: fetched because a later one came with the
@@ -504,7 +511,7 @@ def result_input(t: float, got: Received, *, fetched: bool = False, follows: int
     if isinstance(got, UnreadableResult):
         return UnreadableIn(t, got)
     return ResultIn(t, got, fetched=fetched, follows=follows,
-                    made_at=made_at(got, offset), live=live)
+                    made_at=made_at(got, offset), live=live, before=before)
 
 
 def made_at(result: Received, offset: float | None) -> float | None:

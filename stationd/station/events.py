@@ -554,6 +554,9 @@ class Said(enum.Enum):
     CUT_UNKNOWN = "cut unknown"          # the bolt enabled during a link cut held: what the
     #                                      controller did then is not known (bolt, note)
     LATE_RESULT = "late result"          # recorded outside a tightening (bolt)
+    LOST_RECORDED = "lost recorded"      # its push lost, fetched when a later one came:
+    #                                      made under the bolt's own enable, recorded to it
+    #                                      (tightening_id, bolt)
     LOOSEN_PSET_TIGHTENED = "loosen pset tightened"  # (bolt, pset)
     LOOSENED = "loosened"                # a loosening OK: the tightening pset next (bolt)
     LOOSENING_NOK = "loosening nok"      # (bolt, count: NOKs in a row)

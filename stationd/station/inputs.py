@@ -115,6 +115,9 @@ class ResultIn(Input):
     #: fetched with the link up: a later result came pushed and skipped its id (a push the
     #: controller, or a device on the way, lost), not after a reconnect
     live: bool = False
+    #: fetched with the link up: the id of that later result, which comes to the core after
+    #: this one (the results in the order they were made: a NOK counted in its place)
+    before: int | None = None
 
 
 @dataclass(frozen=True)

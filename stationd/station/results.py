@@ -162,10 +162,14 @@ class ResultRules(OrderRules):
                                    t=ev.t)), Acknowledge(r)]
         again: list[Action] = [] if tid not in self._recorded else [
             Publish(Notice(Said.IDS_AGAIN, tightening_id=tid, t=ev.t))]
-        if not ev.fetched:   # read as pushed: the id after any unreadable one waiting for it
+        # the id after any unreadable one waiting for it: this one read as pushed, or the
+        # pushed one that revealed this one (fed after it)
+        after = tid if not ev.fetched else ev.before
+        if after is not None:
             for gap in self._unread_gaps:
-                if gap.after is None and tid > gap.before:
-                    gap.after = tid
+                if gap.after is None and after > gap.before:
+                    gap.after = after
+        if not ev.fetched:
             self._last_pushed = tid
         return again + self._result_in(ev, tid)
 
@@ -199,6 +203,8 @@ class ResultRules(OrderRules):
             and self._enabled_at > self._link_lost_at)
         if ours and en is not None and en.vin and self._result_owed(ev.t):
             return self._attribute(ev, en)
+        if en is not None and self._made_under(ev, en):
+            return self._attribute(ev, en, lost=True)
         proved, not_proved = self._made_during_cut(ev)
         if proved is not None:
             return self._attribute(ev, proved, cut=True)
@@ -371,6 +377,24 @@ class ResultRules(OrderRules):
             return None, Unproved(UnprovedKind.OUTSIDE_CUT, bolt=en.bolt)
         return en, None
 
+    def _made_under(self, ev: ResultIn, en: Selection) -> bool:
+        """Whether a result fetched with the link up (a later one pushed skipped its id: its
+        push lost) was made under the enable ``en`` owed now: of its pset and vehicle (where
+        it echoes one), made after the tool went on for it (beyond the clock's slack) and
+        while it was on, the link up since.  The tool is on for one bolt at a time: then
+        nothing else could have made it (a supervisor's trial: the operator pulled again,
+        the first NOK stored unattributed and uncounted, a 4th NOK before the lock)."""
+        r, made = ev.result, ev.made_at
+        if not (ev.fetched and ev.live and ev.before is not None) or made is None \
+                or not en.vin or self._cut is not None or self._enabled_at is None \
+                or self._enabled_at <= self._link_lost_at or not self._result_owed(ev.t):
+            return False
+        echoed = str(r.vin or "").strip()
+        if (en.pset is not None and int(r.pset) != en.pset) or (echoed and echoed != en.vin):
+            return False
+        off = ev.t if self.tool_on or self._off_at is None else self._off_at
+        return self._enabled_at + CLOCK_SLACK_S <= made <= off + CLOCK_SLACK_S
+
     def _controller_event(self, ev: ResultIn, kind: ResultKind) -> list[Action]:
         """A result that is not a tightening or a loosening (a batch increment a line lead
         pressed, a bypassed pset, an aborted job, a reference setup, or a type the station
@@ -539,7 +563,7 @@ class ResultRules(OrderRules):
         said = Notice(Said.NOT_TAKEN, bolt=en.bolt, torque_nm=float(r.torque_nm),
                       torque_min=lo, torque_max=hi, tightening_id=tid, t=ev.t)
         acts: list[Action] = []
-        if self.tool_on and not cut:
+        if self.tool_on and not cut:    # (a lost one's: its rundown ended there)
             acts += self._tool_off(ev.t, StateReason(Because.NOT_TAKEN, bolt=en.bolt))
         acts.append(StoreControllerEvent(r, en.vin, en.bolt, NOT_TAKEN, en))
         acts.append(Publish(ControllerResultEvent(0, NOT_TAKEN, tid, int(r.pset), True,
@@ -555,35 +579,40 @@ class ResultRules(OrderRules):
                                StateReason(Because.NOT_TAKEN_HELD, bolt=en.bolt))
         return acts
 
-    def _attribute(self, ev: ResultIn, en: Selection, cut: bool = False) -> list[Action]:
+    def _attribute(self, ev: ResultIn, en: Selection, cut: bool = False,
+                   lost: bool = False) -> list[Action]:
         """The result of the tightening the tool was enabled for: recorded to that bolt (of
         the vehicle it was enabled on, also after a reload or restart, or fetched after a
-        link cut that the controller's data places it in, ``cut``); an OK without a type
-        outside the bolt's torque window is not (:meth:`_not_taken`)."""
+        link cut that the controller's data places it in, ``cut``, or fetched with the link
+        up, made under that enable, ``lost``: the later result that revealed it, pushed,
+        comes next and is judged under the same enable); an OK without a type outside the
+        bolt's torque window is not (:meth:`_not_taken`)."""
         r = ev.result
         self._answered_bolt(en.vin, en.bolt)     # its own result came: nothing unanswered
         window = self._outside_window(r, en)
         if window is not None:
             return self._not_taken(ev, en, window, cut)
-        late = not self.tool_on or cut
+        late = not self.tool_on or cut or lost
         kind = LOOSENING if result_kind(type_code(r), en.loosen) is ResultKind.LOOSENING \
             else TIGHTENING
         acts: list[Action] = []
-        if self.tool_on and not cut:
+        if self.tool_on and not cut:    # (a lost one's: its rundown ended there)
             acts += self._tool_off(ev.t, StateReason(Because.RUNDOWN, bolt=en.bolt,
                                                      loosen=kind == LOOSENING, ok=bool(r.ok)))
         acts.append(Record(en.vin, en.bolt, r, en, late, kind, offline=self._offline(ev)))
-        if cut:
-            acts.append(Publish(Notice(Said.CUT_RECORDED, tightening_id=int(r.tightening_id),
-                                       bolt=en.bolt, t=ev.t)))
+        if cut or lost:
+            acts.append(Publish(Notice(Said.CUT_RECORDED if cut else Said.LOST_RECORDED,
+                                       tightening_id=int(r.tightening_id), bolt=en.bolt,
+                                       t=ev.t)))
         elif late:
             acts.append(Publish(Notice(Said.LATE_RESULT, bolt=en.bolt,
                                        vin=en.vin if en.vin != self.vin else None,
                                        tightening_id=int(r.tightening_id), t=ev.t)))
         self._recorded[int(r.tightening_id)] = _said(r)
-        if not cut:
+        if not cut and not lost:
             self._enabled = None    # (a cut's result leaves an enable made since owed)
-        self._answered(en)          # the cut's result is in too (fetched, or pushed late)
+        if not lost:
+            self._answered(en)      # the cut's result is in too (fetched, or pushed late)
         if en.operator is not None and en.operator == self.operator:
             self._operator_seen = max(self._operator_seen, ev.t)
         if self.matcher is not None and self.vin == en.vin:
@@ -599,6 +628,9 @@ class ResultRules(OrderRules):
                 self._nok_last.discard(en.bolt)
                 self.matcher.counted.discard(en.bolt)
             else:
+                # (after an OK of its own only where that one's push was lost: the later
+                # rundown, its last result, says the bolt is NOK, as its records do)
+                self.matcher.done.discard(en.bolt)
                 self._nok_last.add(en.bolt)
                 acts += self._after_nok(ev.t, en.bolt, en.pset)
             self.matcher.reset()     # a new selection: a new streak, from new frames

@@ -127,6 +127,20 @@ def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path
                    "fetched later; other enables came between)")
         db = tmp_path / "station.db"
         until(lambda: _held(db) == ["B07"], 30, "B07's hold stored")
+        # B09 tightened some seconds after its enable, its push lost; the operator pulls
+        # again: both were made while the tool was on for B09 alone (the controller's own
+        # time says so), both are B09's, in the order made (a supervisor's trial: the first
+        # stored unattributed, a NOK of it uncounted)
+        tool_on(d, ctl, pose, "B09")
+        time.sleep(4.5)     # its rundown made beyond the clock's slack after the enable
+        ctl.lose_next_push()
+        n1 = ctl.pull_trigger()
+        assert n1 is not None
+        n2 = ctl.pull_trigger()
+        assert n2 is not None
+        d.wait_log(f"tightening {n1.tightening_id}, its push lost, fetched when a later one "
+                   "came: made while the tool was on for B09 alone, recorded to B09")
+        until(lambda: n2.tightening_id in ctl.acked_ids, 30, "B09's second result stored")
         assert "fault: wrench" not in d.log()
     con = sqlite3.connect(tmp_path / "station.db")
     try:
@@ -138,7 +152,8 @@ def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path
     finally:
         con.close()
     assert to_bolts == [(first.tightening_id, "B04"), (pushed.tightening_id, "B05"),
-                        (c.tightening_id, "B06"), (b08.tightening_id, "B08")]
+                        (c.tightening_id, "B06"), (b08.tightening_id, "B08"),
+                        (n1.tightening_id, "B09"), (n2.tightening_id, "B09")]
     assert [t for t, _ in loose] == [lost.tightening_id, b.tightening_id, b07.tightening_id]
     assert all("fetched after a later one came, the link up" in why for _, why in loose)
     assert gaps == [(a.tightening_id, a.tightening_id)]

@@ -203,15 +203,17 @@ def test_an_unreadable_result_is_stored_whole_and_holds_its_bolt_for_a_superviso
     _enabled(d)
 
 
+@pytest.mark.parametrize("first", [True, False], ids=["fetched first", "pushed first"])
 @pytest.mark.parametrize("pushed_after", [7, 8], ids=["one id between", "two ids between"])
 def test_the_one_id_fetched_between_two_read_is_the_unreadable_result_without_an_id(
-        pushed_after):
+        pushed_after, first):
     """A quality trial: B47's result could not be read, its id with it (held); the next
     result pushed skipped an id, which was fetched (the link up) and stored unattributed, no
     word of B47: one rundown twice in the records, never linked.  The one id between the
     results read before and after the unreadable message is that message, read: stored apart
     with its values, its reason naming the held bolt, which stays held for a person.  Two
-    ids between: which one it was is not known, both stored unattributed as before."""
+    ids between: which one it was is not known, both stored unattributed as before.  The
+    shell feeds the fetched ones first (in the order made), naming the pushed one after."""
     d = _ready()
     _enabled(d, 1)
     d.feed(ResultIn(d.t, res(5, 1, True, 1)))                      # B1, read
@@ -219,9 +221,14 @@ def test_the_one_id_fetched_between_two_read_is_the_unreadable_result_without_an
     acts = d.feed(UnreadableIn(d.t, unreadable(None, None)))       # B3's: held, id unread
     assert [e.bolt for e in published(acts, BoltLocked)] == ["B3"]
     _enabled(d, 2)
-    d.feed(ResultIn(d.t, res(pushed_after, 2, True, 1)))           # B2, read
-    fetched = [d.feed(ResultIn(d.t, res(tid, 1, True, 1), fetched=True, follows=5, live=True))
+    pushed = ResultIn(d.t, res(pushed_after, 2, True, 1))          # B2, read
+    if not first:
+        d.feed(pushed)
+    fetched = [d.feed(ResultIn(d.t, res(tid, 1, True, 1), fetched=True, follows=5, live=True,
+                               before=pushed_after if first else None))
                for tid in range(6, pushed_after)]
+    if first:
+        assert [a.bolt for a in d.feed(pushed) if isinstance(a, Record)] == ["B2"]
     stored = [a for acts in fetched for a in acts if isinstance(a, StoreUnattributed)]
     assert len(stored) == pushed_after - 6
     assert not [a for acts in fetched for a in acts if isinstance(a, Record)]
@@ -919,3 +926,53 @@ def test_a_lost_push_of_a_car_that_left_is_held_against_that_car_and_filed_under
                             made_at=enabled_at + 60.0, live=True))
     assert not [a for a in acts if isinstance(a, StoreCutUnknown)]
     assert [a.vin for a in acts if isinstance(a, StoreUnattributed)] == ["VIN2"]
+
+
+# -- a lost push under the bolt's own enable, the operator pulling again ---------------------------
+def _pulled_twice(d: Driver, first_ok: bool, second_ok: bool, made: float = 3.0) -> list[Any]:
+    """B1 enabled; tightening 41 made ``made`` s after (its push lost), 42 pushed: the shell
+    fetches 41 first (the link up), then feeds 42.  The actions of both."""
+    _enabled(d, 1)
+    enabled_at = d.t
+    d.t += 5.0
+    acts = d.feed(ResultIn(d.t, res(41, 1, first_ok, 1), fetched=True, follows=40,
+                           made_at=enabled_at + made, live=True, before=42))
+    return acts + d.feed(ResultIn(d.t, res(42, 1, second_ok, 1)))
+
+
+def test_a_lost_push_made_under_the_bolt_s_own_enable_is_recorded_to_it_in_its_place():
+    """The operator pulled again after a rundown whose push was lost: both rundowns were
+    made while the tool was on for B1 alone, both are B1's, in the order made; two NOKs count
+    two (a supervisor's trial: the first stored unattributed, a 4th NOK before the lock)."""
+    d = _ready()
+    acts = _pulled_twice(d, False, False)
+    assert [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)] \
+        == [("B1", 41), ("B1", 42)]
+    assert not [a for a in acts if isinstance(a, StoreUnattributed)]
+    assert d.core._noks["B1"] == 2
+    assert ("tightening 41, its push lost, fetched when a later one came: made while the "
+            "tool was on for B1 alone, recorded to B1") in _notices(acts)
+    # an OK whose push was lost, then a NOK: the bolt's last rundown is NOK (as recorded)
+    d = _ready()
+    _pulled_twice(d, True, False)
+    assert "B1" not in d.core.matcher.done and d.core._noks["B1"] == 1
+    d = _ready()
+    _pulled_twice(d, False, True)
+    assert "B1" in d.core.matcher.done and "B1" not in d.core._noks
+
+
+def test_a_lost_push_made_before_the_bolt_s_enable_or_of_unknown_time_is_not_taken_for_it():
+    """Made before the tool went on for B1 (beyond the clock's slack), or its time not known:
+    nothing proves it B1's; stored unattributed, and the pushed one is B1's as before."""
+    for made in (-0.5, 1.5, None):
+        d = _ready()
+        _enabled(d, 1)
+        enabled_at = d.t
+        acts = d.feed(ResultIn(d.t, res(41, 1, False, 1), fetched=True, follows=40,
+                               made_at=None if made is None else enabled_at + made,
+                               live=True, before=42))
+        assert not [a for a in acts if isinstance(a, Record)], made
+        assert [a for a in acts if isinstance(a, StoreUnattributed)]
+        acts = d.feed(ResultIn(d.t, res(42, 1, False, 1)))
+        assert [a.bolt for a in acts if isinstance(a, Record)] == ["B1"]
+        assert d.core._noks["B1"] == 1
