@@ -231,8 +231,10 @@ class ControllerFeed:
         except RefusedError:
             await self._refused(last)
             raise
-        if newest is None:
-            return None                        # the controller has made none
+        if newest is None:    # the controller has none: made none, or its memory cleared
+            return None if last is None else (
+                f"the controller has no results, though tightening {last} was recorded: "
+                "cleared (restarted or replaced), what it made before is not known")
         if newest.tightening_id is None:   # unreadable, its id too: kept, nothing planned
             await self._feed(await self.checked(result_input(time.time(), newest,
                                                               fetched=True)))
@@ -328,6 +330,9 @@ class ControllerFeed:
             found.append((tid, got))
             if tid <= 1:
                 follows = 0            # the controller's first result: nothing before it
+                if restarted:          # but its count started again since the link was lost
+                    unknown = ("its first result since its count started again was made "
+                               "after the link was lost: what it made before is not known")
                 break
             tid -= 1
             try:

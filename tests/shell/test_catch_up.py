@@ -192,6 +192,35 @@ def test_with_the_controller_s_clock_unknown_its_newest_is_kept_and_the_rest_unk
                                   "be placed before or after the link was lost", 1)]
 
 
+def test_a_controller_with_no_results_though_some_were_recorded_does_not_say_none_made():
+    """Tightening 40 recorded; the controller has none at all (restarted with its memory
+    cleared, or replaced): what it made during the cut is not known (a supervisor's trial:
+    "no tightening made during the link cut ... open as before")."""
+    fed = catch_up(Controller({0: None}), last=40)
+    assert _ends(fed) == [(False, "the controller has no results, though tightening 40 was "
+                                  "recorded: cleared (restarted or replaced), what it made "
+                                  "before is not known", 1)]
+    assert _ends(catch_up(Controller({0: None}), last=None)) == [(True, "", 1)]
+
+
+def test_a_count_started_again_since_the_link_was_lost_leaves_the_time_before_unknown():
+    """Tightening 40 recorded; the controller's count started again and its first results
+    (1, 2) were both made since the link was lost: fed, but what it made before its count
+    started again is not known.  Where its history reaches back before the link was lost
+    (1 made before), every result since was found."""
+    recent = {t: SimpleNamespace(**{**vars(res(t)), "timestamp": datetime.now()})
+              for t in (1, 2)}
+    fed = catch_up(Controller({0: recent[2], **recent}), last=40)
+    assert [e.result.tightening_id for e in fed if isinstance(e, ResultIn)] == [1, 2]
+    assert _ends(fed) == [(False, "its first result since its count started again was made "
+                                  "after the link was lost: what it made before is not "
+                                  "known", 1)]
+    old = SimpleNamespace(**{**vars(res(1)), "timestamp": datetime(2020, 1, 1)})
+    fed = catch_up(Controller({0: recent[2], 2: recent[2], 1: old}), last=40)
+    assert [e.result.tightening_id for e in fed if isinstance(e, ResultIn)] == [2]
+    assert _ends(fed) == [(True, "", 1)]
+
+
 REFUSED = RefusedError("fetch tightening 0: the controller refused (MID 0004 error 99)",
                        code=99)
 
