@@ -270,6 +270,16 @@ class Repository:
                 v.reopened_at = utcnow()
             return VehicleInfo(v.vin, model, v.started_at, v.ended_at, v.reopened_at)
 
+    def at_station(self) -> str | None:
+        """The vehicle the station loaded last and did not close (the lift still up when the
+        station stopped: a real PLC keeps it there through the restart), else None."""
+        with self._session(write=False) as s:
+            here = s.get(Meta, AT_STATION)
+            if here is None or not here.value:
+                return None
+            v = s.scalar(select(Vehicle).where(Vehicle.vin == here.value))
+            return None if v is None or v.ended_at is not None else v.vin
+
     def reopen_vehicle(self, vin: str, *, at: datetime, user: str, source: str,
                        comment: str) -> None:
         """Reopen the closed vehicle ``vin`` for rework, recorded as a command of ``user``, in

@@ -30,7 +30,10 @@ import time
 from typing import Any, TextIO
 
 import numpy as np
+from sqlalchemy.exc import SQLAlchemyError
 
+from db.errors import DbError
+from db.repository import Repository
 from drivers.counting import counted
 from drivers.devices import Kind, simulated
 from drivers.lift.base import LiftState
@@ -114,6 +117,18 @@ def _geometry(cfg: StationConfig) -> bytes:
     return pickle.dumps((cfg.pairs, cfg.marker, cfg.references, cfg.cameras))
 
 
+def left_at_height(cfg: StationConfig) -> str | None:
+    """The vehicle the station's database says was at the station, not closed, when the last
+    daemon stopped (its lift still up); None where there is none or the database cannot say
+    (not there yet, not readable: a simulation starts empty then)."""
+    try:
+        with Repository.open(cfg.database_url, read_only=True) as repo:
+            return repo.at_station()
+    except (DbError, StationError, SQLAlchemyError, OSError) as exc:
+        log.debug("no vehicle left at height read from %s: %s", cfg.database_url, exc)
+        return None
+
+
 def _model_code(cfg: StationConfig) -> int:
     """The lift code of the bolt table's first model with bolts (1 without one)."""
     if cfg.bolts_path is None:
@@ -155,6 +170,10 @@ class SimulatedStation:
         #: the simulated lift as the last station left it (a reload): height, fault, vehicle
         self._lift: LiftState | None = None
         self._staying: str | None = None    # its VIN, at working height: the operator goes on
+        #: the vehicle the last daemon left at height (its database says): the first
+        #: station's lift starts with it, as a real PLC keeps it through a restart
+        self._left_up: str | None = left_at_height(cfg)
+        self._across = "reload"     # what the vehicle staying stayed across
         #: the last station's simulated controller: the next one goes on from it
         self._controller: SimController | None = None
         #: whom the scripted operator signs in as (:func:`sim_operator`)
@@ -263,10 +282,25 @@ class SimulatedStation:
         station's ``sim://lift`` starts a new PLC, down and empty, so a reload that changed
         only ``stable_frames`` dropped the vehicle ("lift not at working height")."""
         kept, self._lift = self._lift, None
+        left_up, self._left_up = self._left_up, None
         lift = station.lift
-        if kept is None or not isinstance(lift, SimLift):
+        if not isinstance(lift, SimLift):
             return
         plc = lift.plc
+        if kept is None and left_up is not None:
+            try:
+                plc.set_vehicle(_model_code(station.cfg), left_up)
+            except (ValueError, StationError) as exc:
+                log.warning("the simulated vehicle %s left at height by the last run does not "
+                            "come back: %s", left_up, exc)
+                return
+            plc.raise_lift()
+            self._staying, self._across = left_up, "restart"
+            log.info("simulated lift: vehicle %s still at height from the last run (a PLC "
+                     "keeps it through the station's restart)", left_up)
+            return
+        if kept is None:
+            return
         try:
             plc.set_vehicle(kept.model_code, kept.vin)
         except ValueError as exc:     # the new register map cannot hold it
@@ -280,7 +314,7 @@ class SimulatedStation:
         if kept.fault:
             plc.set_fault(True)
         if kept.vin is not None and kept.at_working_height:
-            self._staying = kept.vin
+            self._staying, self._across = kept.vin, "reload"
 
     def _program(self, cfg: StationConfig, station: Station) -> None:
         """The simulated controller goes on from the last station's (its tightening ids, its
@@ -361,8 +395,8 @@ class SimulatedStation:
                                      "plan": None if kept is None else kept.get("plan")}
             self._truth = truth
             if staying is not None:
-                log.info("simulated operator: vehicle %s stays on the lift across the reload; "
-                         "its bolts go on", staying)
+                log.info("simulated operator: vehicle %s stays on the lift across the %s; "
+                         "its bolts go on", staying, self._across)
             else:
                 log.info("simulated operator: vehicle %s (lift code %d) arrives",
                          truth["vin"], self._code)

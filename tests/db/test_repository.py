@@ -446,13 +446,16 @@ def test_a_vehicle_that_left_unseen_is_closed_when_the_next_one_is_loaded(repo, 
     the same vehicle back (a restart at height) does not, nor does a vehicle reopened for
     rework and not back yet."""
     import_bolts(repo, bolts_file)
+    assert repo.at_station() is None
     repo.start_vehicle("VIN1", "SEDAN")
+    assert repo.at_station() == "VIN1"                     # a restart finds it at height
     record(repo, "VIN1", "B1", tightening_id=1)
     assert repo.left_unseen("VIN1") is None              # the same vehicle, resumed
     repo.start_vehicle("VIN1", "SEDAN")
     gone = repo.left_unseen("VIN2")                        # the station down as VIN1 left
     assert gone is not None and gone.vehicle.vin == "VIN1" and gone.vehicle.ended_at
     assert gone.ok == ["B1"]
+    assert repo.at_station() is None                       # closed: none left at height
     assert repo.left_unseen("VIN2") is None                # once
     repo.start_vehicle("VIN2", "SEDAN")
     repo.close_vehicle("VIN2")                             # lowered, seen: none at the station

@@ -163,6 +163,34 @@ def test_the_scripted_operator_goes_on_with_the_same_vehicle_across_a_reload(tmp
 
 
 @pytest.mark.timeout(600)
+def test_the_vehicle_at_height_stays_on_the_simulated_lift_across_a_restart(tmp_path):
+    """The daemon stopped (SIGTERM) with a vehicle at height and started again: a real PLC
+    keeps the vehicle up, so does the simulated one, and the station resumes it from its
+    database (a supervisor's trial: a new vehicle came, the held one closed, its hold out
+    of reach)."""
+    _station(tmp_path)
+    d = Daemon(tmp_path, "--sim-operator")
+    try:
+        vin = d.wait(r"simulated operator: vehicle (\w{17}) \(lift code 1\) arrives", 120)[1]
+        d.wait(rf"vehicle {vin} \(SIM-1\) opened", 60)
+        d.wait(r"tightening: tightening bolt B\d\d", 300)
+    finally:
+        code = d.stop()
+    assert code == 0, d.log()[-3000:]
+    d = Daemon(tmp_path, "--sim-operator")
+    try:
+        d.wait(rf"simulated lift: vehicle {vin} still at height from the last run", 120)
+        d.wait(rf"simulated operator: vehicle {vin} stays on the lift across the restart; its "
+               r"bolts go on", 120)
+        d.wait(rf"vehicle {vin} \(SIM-1\) opened", 120)
+        journal = d.log()
+        assert "arrives" not in journal.split(f"vehicle {vin} (SIM-1) opened")[0], journal
+    finally:
+        code = d.stop()
+    assert code == 0, d.log()[-3000:]
+
+
+@pytest.mark.timeout(600)
 def test_a_person_signed_in_stays_signed_in_across_a_reload_with_the_scripted_operator(
         tmp_path):
     """The scripted operator signs in only where nobody is: a person who signed in at the
