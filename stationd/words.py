@@ -570,6 +570,8 @@ _BECAUSE: dict[Because, Callable[[StateReason], str]] = {
     Because.RUNDOWN: lambda r: f"bolt {r.bolt} " + (
         ("loosening NOK" if r.loosen else "NOK") if r.ok is False
         else "loosened" if r.loosen else "tightened"),
+    Because.PUSH_AFTER_LOST: lambda r: (f"bolt {r.bolt}: a rundown's result came after "
+                                        "others the controller did not push: those first"),
     Because.RESULT: lambda r: (f"bolt {r.bolt} {'loosening ' if r.loosen else ''}"
                                f"{'OK' if r.ok else 'NOK'}; tracking"),
     Because.UNREADABLE: _unreadable,

@@ -236,6 +236,9 @@ STATE_WORDS = [
     (StateReason(Because.RUNDOWN, bolt="B11", loosen=True), "bolt B11 loosened"),
     (StateReason(Because.RUNDOWN, bolt="B11", ok=False), "bolt B11 NOK"),
     (StateReason(Because.RUNDOWN, bolt="B11", loosen=True, ok=False), "bolt B11 loosening NOK"),
+    (StateReason(Because.PUSH_AFTER_LOST, bolt="B11"),
+     "bolt B11: a rundown's result came after others the controller did not push: those "
+     "first"),
     (StateReason(Because.RESULT, bolt="B11", ok=True), "bolt B11 OK; tracking"),
     (StateReason(Because.RESULT, bolt="B11", ok=False, loosen=True),
      "bolt B11 loosening NOK; tracking"),

@@ -37,6 +37,7 @@ from stationd.station.inputs import (
     ResultCopy,
     ResultIn,
     ResultsMissed,
+    ResultsSkipped,
     UnreadableIn,
 )
 from stationd.station.results import CLOCK_SLACK_S
@@ -103,11 +104,14 @@ class ControllerFeed:
             await self._feed(DeviceBack(time.time(), WRENCH, self._keeper.reconnects))
         if result is not None:
             # the ids it skipped first (its push lost): the core gets them in the order they
-            # were made (a supervisor's trial: a NOK fetched after a later one went uncounted)
-            await self._live_gap(wrench, result)
-            await self._feed(await self.checked(
-                result_input(time.time(), result, offset=wrench.clock_offset_s)))
-            self.received.remove(result)
+            # were made (a supervisor's trial: a NOK fetched after a later one went uncounted);
+            # it is fed after them whatever the fetches did
+            try:
+                await self._live_gap(wrench, result)
+            finally:
+                await self._feed(await self.checked(
+                    result_input(time.time(), result, offset=wrench.clock_offset_s)))
+                self.received.remove(result)
         self._reads += 1
 
     async def checked(self, ev: ResultIn | UnreadableIn) -> ResultIn | ResultCopy | UnreadableIn:
@@ -381,6 +385,8 @@ class ControllerFeed:
             return
         todo = plan_gaps(last, tid - 1)
         self._revealed_by = tid
+        # the rundown is over: the tool off now, not after the fetches (a reviewer)
+        await self._feed(ResultsSkipped(time.time(), tid))
         ids = str(last + 1) if tid - 1 == last + 1 else f"{last + 1}-{tid - 1}"
         log.warning("results: tightening %d came after %d: %s not pushed by the controller "
                     "(the link up), fetched", tid, last, ids)

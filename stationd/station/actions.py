@@ -42,6 +42,9 @@ class Selection:
     parameters_id: int | None = None
     loosen: bool = False    # ``pset`` is the bolt's loosen pset: a loosening was asked for
     operator: str | None = None   # who was signed in at the station (None: nobody)
+    #: the bolt's torque window (min, max Nm) when it was selected: an OK without a type is
+    #: checked against it also once its vehicle has left (None: not known)
+    torque_window: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)

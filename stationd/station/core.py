@@ -61,6 +61,7 @@ from stationd.station.inputs import (
     ResultCopy,
     ResultIn,
     ResultsMissed,
+    ResultsSkipped,
     Started,
     Tick,
     ToolOn,
@@ -120,6 +121,8 @@ class StationCore(LiftRules, ToolRules, ResultRules):
                 return self._on_result_in(ev)
             case ResultCopy():
                 return self._on_result_copy(ev)
+            case ResultsSkipped():
+                return self._on_results_skipped(ev)
             case UnreadableIn():
                 return self._on_unreadable_in(ev)
             case CaughtUp():
@@ -158,7 +161,8 @@ class StationCore(LiftRules, ToolRules, ResultRules):
         return [Publish(StateChanged(self.state, self.reason, t=ev.t))]
 
     def _on_tick(self, ev: Tick) -> list[Action]:
-        if self._off_at is not None and ev.t - self._off_at >= self.late_result_s:
+        if self._off_at is not None and ev.t - self._off_at >= self.late_result_s \
+                and self._pending_push is None:
             self._unanswered_after()
             self._enabled, self._off_at = None, None
         return self._teach_overdue(ev.t) + self._check_due(ev.t) + self._operator_idle(ev.t)

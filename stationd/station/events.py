@@ -127,6 +127,9 @@ class Because(enum.Enum):
     # results
     RUNDOWN = "rundown"                  # the tool off: its result came (bolt; loosen: a
     #                                      loosening)
+    PUSH_AFTER_LOST = "push after lost"  # the tool off: a rundown's result came, after
+    #                                      others the controller did not push, fetched
+    #                                      first (bolt)
     RESULT = "result"                    # back to tracking after it (bolt, ok, loosen)
     UNREADABLE = "unreadable"            # the tool off: its result could not be read (bolt)
     UNREADABLE_HELD = "unreadable held"  # ... and the bolt held, the selection dropped (bolt)

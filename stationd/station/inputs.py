@@ -121,6 +121,17 @@ class ResultIn(Input):
 
 
 @dataclass(frozen=True)
+class ResultsSkipped(Input):
+    """A result pushed with the link up (``tightening_id``) skipped ids: their pushes were
+    lost.  The shell fetches them and feeds them first, then the pushed one.  Why told
+    before: the rundown is over (the tool goes off now, not after the fetches: the operator
+    could pull again), and the enable's result stays owed until the pushed one is in,
+    however long the fetches take."""
+
+    tightening_id: int
+
+
+@dataclass(frozen=True)
 class ResultCopy(Input):
     """A result from the controller that the database has stored already (the shell asked it
     before the core saw the result): a copy the controller sent again, its acknowledgement
@@ -368,7 +379,7 @@ class CommandDone(Input):
 
 
 Event = (Started | Announce | LiftRead | LocalizedIn | ParamsAcked | ParamsRefused | ResultIn
-         | ResultCopy | UnreadableIn
+         | ResultsSkipped | ResultCopy | UnreadableIn
          | ResultsMissed | CaughtUp | NotStored
          | DeviceFault | DeviceBack | DeviceSaid | LineLinkIn
          | VehicleLoaded | VehicleRejected | VinSent | Tick

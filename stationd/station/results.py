@@ -59,6 +59,7 @@ from stationd.station.inputs import (
     ResultCopy,
     ResultIn,
     ResultsMissed,
+    ResultsSkipped,
     UnreadableIn,
     Written,
 )
@@ -146,6 +147,15 @@ class ResultRules(OrderRules):
     the NOK policy after each."""
 
     def _on_result_in(self, ev: ResultIn) -> list[Action]:
+        """:meth:`_result_read`; a result pushed is the one owed since ids it skipped were
+        fetched (or one after it): owed no longer once it is judged."""
+        try:
+            return self._result_read(ev)
+        finally:
+            if not ev.fetched:
+                self._pending_push = None
+
+    def _result_read(self, ev: ResultIn) -> list[Action]:
         """A result: a controller event (never a rundown) by its type; else recorded to the
         bolt the tool was enabled for (its pset, while on or within the late-result window,
         or after a link cut where the controller's own data places it there), else stored
@@ -182,12 +192,23 @@ class ResultRules(OrderRules):
         controller may forget it."""
         r = ev.result
         tid = int(r.tightening_id)
+        self._pending_push = None      # (a pushed one's copy: it is in)
         if self._recorded.get(tid, None) == _said(r):
             return [Acknowledge(r)]   # said already by this core
         self._recorded[tid] = _said(r)
         return [Publish(Notice(Said.SENT_AGAIN, tightening_id=tid, bolt=ev.bolt,
                                vin=ev.vin if ev.vin != self.vin else None, t=ev.t)),
                 Acknowledge(r)]
+
+    def _on_results_skipped(self, ev: ResultsSkipped) -> list[Action]:
+        """A pushed result skipped ids, fetched and fed before it: the rundown is over, the
+        tool goes off now (a reviewer: it stayed on through the fetches, the operator could
+        pull again), and the enable's result stays owed until the pushed one is in."""
+        self._pending_push = ev.tightening_id
+        if self.state not in ON_A_BOLT and not self.tool_on:
+            return []
+        return self._drop(ev.t, State.TRACKING, StateReason(Because.PUSH_AFTER_LOST,
+                                                            bolt=self.bolt))
 
     def _result_in(self, ev: ResultIn, tid: int) -> list[Action]:
         r = ev.result
@@ -473,6 +494,15 @@ class ResultRules(OrderRules):
                                note=ev.reason, t=ev.t))]
 
     def _on_unreadable_in(self, ev: UnreadableIn) -> list[Action]:
+        """:meth:`_unreadable_read`; one pushed (its id picked out, it may be the one whose
+        skipped ids were fetched) is judged as the result owed, then owed no longer."""
+        try:
+            return self._unreadable_read(ev)
+        finally:
+            if not ev.unreadable.fetched:
+                self._pending_push = None
+
+    def _unreadable_read(self, ev: UnreadableIn) -> list[Action]:
         """A result the driver could not read: stored whole; the bolt it may belong to (the
         tool's, while on or within the late-result window, or the one of a link cut for a
         fetched one; of the same pset where one could be read) is held until a supervisor
@@ -525,7 +555,7 @@ class ResultRules(OrderRules):
         if self.matcher is not None and self.vin == en.vin and bolt in self.matcher.bolts:
             acts += self._hold(ev.t, bolt, unreadable_note(u.tightening_id, u.mid, u.revision),
                                under=en)
-        if self.bolt == bolt:
+        if self.bolt == bolt and self.vin == en.vin:   # (not the next car's of that name)
             acts += self._drop(ev.t, State.TRACKING,
                                StateReason(Because.UNREADABLE_HELD, bolt=bolt, loosen=loosen))
         return acts
@@ -540,11 +570,13 @@ class ResultRules(OrderRules):
             return None
         if getattr(r, "torque_unit", None) is TorqueUnit.PERCENT:
             return None      # kept as sent: a percentage of the tool's maximum, not Nm
+        window = en.torque_window
         spec = self._specs.get(en.bolt) if en.vin == self.vin else None
-        p = spec.parameters if spec is not None else None
-        if p is None:
+        if window is None and spec is not None and spec.parameters is not None:
+            window = (float(spec.parameters.torque.min), float(spec.parameters.torque.max))
+        if window is None:
             return None
-        lo, hi = float(p.torque.min), float(p.torque.max)
+        lo, hi = window
         return None if lo <= float(r.torque_nm) <= hi else (lo, hi)
 
     def _not_taken(self, ev: ResultIn, en: Selection, window: tuple[float, float],
@@ -574,7 +606,7 @@ class ResultRules(OrderRules):
             acts += self._hold(ev.t, en.bolt, not_taken_note(float(r.torque_nm), tid), said)
         else:
             acts.append(Publish(said))
-        if self.bolt == en.bolt:
+        if self.bolt == en.bolt and self.vin == en.vin:
             acts += self._drop(ev.t, State.TRACKING,
                                StateReason(Because.NOT_TAKEN_HELD, bolt=en.bolt))
         return acts
@@ -632,10 +664,14 @@ class ResultRules(OrderRules):
                 # rundown, its last result, says the bolt is NOK, as its records do)
                 self.matcher.done.discard(en.bolt)
                 self._nok_last.add(en.bolt)
-                acts += self._after_nok(ev.t, en.bolt, en.pset)
+                if lost:    # counted; the NOK policy after the later one, pushed next (a
+                    # lock for a NOK that a later OK answered: a reviewer)
+                    self._noks[en.bolt] = self._noks.get(en.bolt, 0) + 1
+                else:
+                    acts += self._after_nok(ev.t, en.bolt, en.pset)
             self.matcher.reset()     # a new selection: a new streak, from new frames
         self._not_before = max(self._not_before, ev.t)
-        if self.bolt == en.bolt:
+        if self.bolt == en.bolt and self.vin == en.vin:   # (a reviewer: the next car's B1)
             self.bolt, self._selection, self._acked_at, self._away = None, None, None, 0
             if self.state in ON_A_BOLT:
                 self._to(State.TRACKING, StateReason(Because.RESULT, bolt=en.bolt,

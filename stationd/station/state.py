@@ -206,6 +206,9 @@ class CoreState:
     #: up (``cut_at``: when that window ended), the latest last: a result fetched late (its
     #: push lost) of one's pset, made within it, may be its bolt's, which is then held
     _unanswered: list[_Cut] = field(default_factory=list, repr=False)
+    #: a pushed result (its id) that skipped ids, fed after them (:class:`ResultsSkipped`):
+    #: the enable's result stays owed until it is in
+    _pending_push: int | None = field(default=None, repr=False)
     # the station's start or the controller's last fault: a result fetched afterwards was
     # made before it, so never under an enable that came later
     _link_lost_at: float = field(default=float("-inf"), repr=False)
@@ -302,8 +305,8 @@ class CoreState:
     def _result_owed(self, t: float) -> bool:
         """The tool is on, or went off less than the late-result window before ``t``: its
         enable's result may still come."""
-        return self.tool_on or (self._off_at is not None
-                                and t - self._off_at < self.late_result_s)
+        return self.tool_on or self._pending_push is not None or (
+            self._off_at is not None and t - self._off_at < self.late_result_s)
 
     def _hold(self, t: float, bolt: str, note: str, said: Notice | None = None,
               under: Selection | None = None) -> list[Action]:
@@ -418,6 +421,9 @@ class CoreState:
         fetched later, its push lost, is held against them): a supervisor's trial found the
         last bolt's result, its push lost, stored under the next vehicle and that bolt
         neither recorded nor held."""
+        # (the unanswered of the car before it are forgotten: a result of unknown time held
+        # the bolts of every car that left with one, a reviewer)
+        self._unanswered = [u for u in self._unanswered if u.selection.vin == self.vin]
         self.vin, self.model, self.matcher, self._specs = None, None, None, {}
         self._loosen, self._nok_last = set(), set()
         self._loading = False

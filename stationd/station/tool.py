@@ -56,9 +56,10 @@ class ToolRules(FaultRules):
                     and ev.exposure_t > self._acked_at and self.bolt is not None:
                 sel = self._selection
                 assert sel is not None  # noqa: S101 - a bolt is selected
-                if self._cut is not None and self._cut.selection.vin == self.vin:
-                    self.reason = StateReason(Because.CUT_OWED, bolt=self.bolt,
-                                              owed=self._cut.selection.bolt)
+                if self._cut is not None:    # (also of a car that left: a reviewer)
+                    cut = self._cut.selection
+                    self.reason = StateReason(Because.CUT_OWED, bolt=self.bolt, owed=(
+                        cut.bolt if cut.vin == self.vin else f"{cut.bolt} of {cut.vin}"))
                     return acts
                 owed = self._owed_elsewhere(ev.t)
                 if owed is not None:
@@ -112,9 +113,11 @@ class ToolRules(FaultRules):
                 self.matcher.reset()
                 return []
             params = Parameters(pset, LOOSEN_TARGETS)
+        window = None if spec.parameters is None else (
+            float(spec.parameters.torque.min), float(spec.parameters.torque.max))
         sel = Selection(m.bolt, pset, ev.point_mm, ev.tilt_deg, float(m.distance_mm or 0.0),
                         ev.exposure_t, ev.t, ev.evidence, self.vin, spec.parameters_id, loosen,
-                        self.operator)
+                        self.operator, window)
         self._operator_seen = ev.t
         self.bolt, self._selection, self._acked_at, self._away = m.bolt, sel, None, 0
         self._last_refusal = None
@@ -140,9 +143,9 @@ class ToolRules(FaultRules):
         across vehicles: the last car's bolt, its result owed as that car left, named with
         its VIN."""
         en = self._enabled
-        if en is None or (en.vin, en.bolt) == (self.vin, self.bolt) \
-                or not self._result_owed(t):
-            return None
+        if en is None or not self._result_owed(t) or (
+                (en.vin, en.bolt) == (self.vin, self.bolt) and self._pending_push is None):
+            return None     # (its own bolt too while results skipped are fetched)
         return en.bolt if en.vin == self.vin else f"{en.bolt} of {en.vin}"
 
     def _on_params_acked(self, ev: ParamsAcked) -> list[Action]:

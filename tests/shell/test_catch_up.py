@@ -22,7 +22,7 @@ from drivers.errors import ConnectionLostError, ProtocolError, RefusedError
 from drivers.wrench.base import UnreadableResult
 from stationd.shell.blocking import Blocking
 from stationd.shell.controller import ControllerFeed
-from stationd.station.inputs import CaughtUp, ResultIn, ResultsMissed, UnreadableIn
+from stationd.station.inputs import CaughtUp, ResultIn, ResultsMissed, ResultsSkipped, UnreadableIn
 
 
 class Controller:
@@ -331,3 +331,60 @@ def test_a_copy_sent_again_first_does_not_take_the_refused_catch_up_s_gap():
     fed = refused_then_pushed(controller, then=43)
     gaps = [(e.first, e.last, e.live) for e in fed if isinstance(e, ResultsMissed)]
     assert gaps == [(41, 42, False)]
+
+
+def _pushed(controller: Controller, push: int, accounted: int) -> list[Any]:
+    """What the results' loop fed for one pushed result ``push``, ``accounted`` the last id
+    accounted for on the link."""
+    fed: list[Any] = []
+    sent = threading.Event()
+
+    def wait_result(timeout: float, acknowledge: bool = False) -> Any:
+        if sent.is_set():
+            return None
+        sent.set()
+        return res(push)
+
+    controller.wait_result = wait_result  # type: ignore[method-assign]
+    keeper = SimpleNamespace(device=controller, reconnects=1, losing=False, up=True)
+    records = SimpleNamespace(repo=SimpleNamespace(read_result_stored=lambda t: False),
+                              last_tightening_id=lambda: accounted,
+                              copy_input=lambda ev, vin: ev)
+    core = SimpleNamespace(missed_since=lambda: None,
+                           status=lambda: SimpleNamespace(vin="V", faults={}))
+
+    async def feed(ev: Any) -> None:
+        fed.append(ev)
+
+    async def main() -> None:
+        pool = ThreadPoolExecutor(2)
+        feed_ = ControllerFeed(core, records, keeper, feed, lambda ev: None,  # type: ignore[arg-type]
+                               Blocking(pool))
+        feed_._accounted = accounted
+        await feed_.results(controller)  # type: ignore[arg-type]
+        assert not feed_.received
+        pool.shutdown()
+        feed_.close()
+
+    asyncio.run(main())
+    return fed
+
+
+def _order(fed: list[Any]) -> list[tuple[str, int, bool, int | None]]:
+    return [(type(e).__name__, e.tightening_id, False, None) if isinstance(e, ResultsSkipped)
+            else (type(e).__name__, e.result.tightening_id, e.fetched, e.before)
+            for e in fed if isinstance(e, ResultIn | ResultsSkipped)]
+
+
+def test_a_push_that_skips_ids_is_told_first_and_fed_after_the_ones_it_skipped():
+    """43 pushed after 40: the core is told first (the tool goes off), 41 and 42 are fetched
+    and fed, each naming 43, then 43 itself: the results in the order made (a supervisor's
+    trial: a NOK fetched after a later one went uncounted; a reviewer: the tool stayed on
+    through the fetches).  A fetch that fails still feeds the pushed one."""
+    fed = _pushed(Controller({41: res(41), 42: res(42)}), 43, 40)
+    assert _order(fed) == [("ResultsSkipped", 43, False, None), ("ResultIn", 41, True, 43),
+                           ("ResultIn", 42, True, 43), ("ResultIn", 43, False, None)]
+    fed = _pushed(Controller({41: ProtocolError("fetch tightening 41: garbled")}), 43, 40)
+    assert _order(fed) == [("ResultsSkipped", 43, False, None), ("ResultIn", 43, False, None)]
+    fed = _pushed(Controller({}), 41, 40)          # nothing skipped: nothing told
+    assert _order(fed) == [("ResultIn", 41, False, None)]

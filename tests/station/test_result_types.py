@@ -45,10 +45,12 @@ from stationd.station.inputs import (
     DeviceBack,
     DeviceFault,
     ResultIn,
+    ResultsSkipped,
     Tick,
     UnreadableIn,
     VehicleLoaded,
 )
+from stationd.station.policy import NokPolicy, NokRule
 from stationd.words import (
     notice_words,
     reason_words,
@@ -976,3 +978,85 @@ def test_a_lost_push_made_before_the_bolt_s_enable_or_of_unknown_time_is_not_tak
         acts = d.feed(ResultIn(d.t, res(42, 1, False, 1)))
         assert [a.bolt for a in acts if isinstance(a, Record)] == ["B1"]
         assert d.core._noks["B1"] == 1
+
+
+def test_a_link_cut_of_the_car_that_left_keeps_the_next_car_s_tool_off_until_settled():
+    """VIN1's B1 enabled when the link was cut, then VIN1 left; the link is back, its
+    catch-up not ended: VIN2's bolt is not enabled (a reviewer: it was, and a second cut
+    during it went unrecorded, its bolt tightened and left open), until the catch-up ends
+    the cut."""
+    d = _ready()
+    _enabled(d, 1)
+    d.t += 0.1
+    d.feed(DeviceFault(d.t, "wrench", FaultKind.DOWN, "wrench gone"))
+    d.step(("lift", 0.2, False, False, "VIN1"))
+    d.t += 1.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    d.t += d.core.late_result_s + 1.0
+    d.feed(Tick(d.t))
+    d.step(("lift", 0.2, True, True, "VIN2"))
+    assert d.core.vin == "VIN2"
+    _on(d, 3)
+    d.step(("ack", 0.01, True))
+    _on(d, 3, 1)
+    assert not d.core.tool_on
+    assert "B1 of VIN1" in state_words(d.core.reason)
+    d.feed(CaughtUp(d.t, True, "", 1))
+    _on(d, 3, 1)
+    assert d.core.tool_on and d.core.bolt == "B3"
+
+
+def test_the_tool_goes_off_when_a_push_reveals_lost_ones_and_the_result_stays_owed():
+    """B1's result 42 pushed skips 41 (its push lost): the tool goes off at once (a
+    reviewer: it stayed on through the fetches), and however long the fetch takes, 41 and
+    then 42 are both B1's; an OK then a NOK leaves B1 NOK, and a Tick meanwhile forgets
+    nothing."""
+    d = _ready()
+    _enabled(d, 1)
+    enabled_at = d.t
+    d.t += 5.0
+    acts = d.feed(ResultsSkipped(d.t, 42))
+    assert [a for a in acts if isinstance(a, DisableTool)] and not d.core.tool_on
+    assert state_words(d.core.reason) == ("bolt B1: a rundown's result came after others the "
+                                          "controller did not push: those first")
+    d.t += 3 * d.core.late_result_s
+    d.feed(Tick(d.t))
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=40,
+                           made_at=enabled_at + 3.0, live=True, before=42))
+    d.t += 2 * d.core.late_result_s
+    d.feed(Tick(d.t))
+    acts += d.feed(ResultIn(d.t, res(42, 1, False, 1)))
+    assert [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)] \
+        == [("B1", 41), ("B1", 42)]
+    assert "B1" not in d.core.matcher.done and d.core._noks["B1"] == 1
+    assert not d.core._unanswered
+
+
+def test_a_lost_nok_answered_by_a_pushed_ok_locks_nothing():
+    """max_nok 1: 41 (NOK, its push lost) and then 42 (OK, pushed), both B1's: the NOK policy
+    follows the later one; B1 done, not locked (a reviewer: locked and done both)."""
+    d = _ready(nok=NokPolicy(NokRule(max_nok=1)))
+    acts = _pulled_twice(d, False, True)
+    assert not published(acts, BoltLocked)
+    assert "B1" in d.core.matcher.done and "B1" not in d.core.matcher.locked
+    d = _ready(nok=NokPolicy(NokRule(max_nok=2)))
+    acts = _pulled_twice(d, False, False)
+    assert [e.bolt for e in published(acts, BoltLocked)] == ["B1"]
+
+
+def test_the_last_car_s_late_result_leaves_the_next_car_s_bolt_of_that_name_selected():
+    """VIN1's B1 owed as it left; VIN2's B1 selected; VIN1's result comes: recorded to B1 of
+    VIN1, and VIN2's B1 stays selected (a reviewer: cleared, 'bolt B1 OK; tracking')."""
+    d = _ready()
+    _enabled(d, 1)
+    d.step(("lift", 0.2, False, False, "VIN1"))
+    d.step(("lift", 0.2, True, True, "VIN2"))
+    _on(d, 1)
+    d.step(("ack", 0.01, True))
+    _on(d, 1, 1)
+    assert d.core.bolt == "B1" and not d.core.tool_on
+    d.t += 0.5
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1)))
+    assert [(a.vin, a.bolt) for a in acts if isinstance(a, Record)] == [("VIN1", "B1")]
+    assert d.core.bolt == "B1" and d.core.state is State.BOLT_SELECTED
+    assert "B1" not in d.core.matcher.done

@@ -169,3 +169,19 @@ def test_such_a_hold_comes_back_with_the_vehicle_and_an_entered_outcome_resolves
     assert "B2" in d.core.matcher.done and "B2" not in d.core.matcher.held
     assert any(m.startswith("B2: OK 45.2 Nm, 31.0 deg entered by") and
                f"(the result not taken: {note})" in m for m in _notices(acts))
+
+
+def test_an_untyped_ok_outside_the_window_after_its_vehicle_left_closes_nothing():
+    """The lift went down with B1's tool on; an OK without a type at 0 Nm (a bypass or a
+    batch increment at a revision without types) comes within the late-result window: not
+    taken for B1 of the car that left either (a reviewer: its window was forgotten with the
+    car, and it closed a bolt never tightened)."""
+    d = _windowed()
+    _enabled(d)
+    d.step(("lift", 0.2, False, False, "VIN1"))
+    assert d.core.vin is None
+    d.t += 0.5
+    acts = d.feed(ResultIn(d.t, res(41, 1, 0.0)))
+    assert not [a for a in acts if isinstance(a, Record)]
+    assert [(a.vin, a.bolt) for a in acts if isinstance(a, StoreControllerEvent)] == \
+        [("VIN1", "B1")]
