@@ -332,6 +332,9 @@ class WebServer:
                 "versions": _versions(), "uptime_s": round(time.time() - self.started, 1),
                 "clients": self.clients, "line": self.line(), "operator": v["operator"],
                 "locks": v["locks"], "release_by": self.release_by(),
+                # of the locks, the holds (``stationd status`` says them apart: a held bolt
+                # is no lock of its NOKs, and its outcome may be entered)
+                "holds": self.view.holds(),
                 # the bolts those locks are on (the release command names one)
                 "locked_bolts": [b["bolt"] for b in v["bolts"] if b["state"] == "locked"],
                 # of those, the ones held for a result not known (an outcome may be entered)

@@ -79,7 +79,11 @@ def lock_lines(st: dict[str, Any], via: str = "") -> list[str]:
                f"{via} --ok|--nok --torque NM --angle DEG --comment TEXT --user NAME (a held "
                "bolt: what the controller's screen shows), or the operator screen's Enter "
                "outcome form"] if held else []
-    return [f"locked:   {text}" for text in locks] + entered + [
+    # a held bolt is said as held, with why (a supervisor's trial: holds were listed as
+    # locks); a daemon of an earlier version gives no holds: all its locks are "locked"
+    holds = [text for text in st.get("holds") or [] if text in locks]
+    return [f"locked:   {text}" for text in locks if text not in holds] + \
+        [f"held:     {text}" for text in holds] + entered + [
         f"release:  stationd release {vin} {bolt}{via} --user NAME, or the operator screen's "
         f"Release form{who}"]
 

@@ -521,6 +521,11 @@ class View:
         """Each locked bolt in the operator's words (the screen adds who may release)."""
         return [b.reason for b in self.bolts.values() if b.state == Shown.LOCKED]
 
+    def holds(self) -> list[str]:
+        """Of :meth:`locks`, the bolts held (a result not known: an unreadable one, a link
+        cut's, a lost push's), not locked by their NOKs, in the operator's words."""
+        return [b.reason for b in self.bolts.values() if b.state == Shown.LOCKED and b.held]
+
     def device_health(self) -> dict[str, dict[str, Any]]:
         """Every configured device, then any other that reported: reported health wins; an
         unreported configured device is "opening" ("not opened yet", neutral) until the

@@ -440,3 +440,36 @@ def test_status_of_a_held_bolt_names_entering_its_outcome_before_a_release(live_
     assert line.startswith(f"outcome:  stationd enter-outcome {VIN} B2 --url {srv.url} "
                            "--ok|--nok --torque NM --angle DEG --comment TEXT --user NAME")
     assert out.index("outcome:") < out.index("release:")
+
+
+def test_status_says_a_held_bolt_as_held_with_why_and_a_lock_as_locked(live_server, capsys):
+    """A supervisor's trial: ``stationd status`` listed a held bolt (its result not known:
+    unreadable, a link cut's, a lost push's) under ``locked:``, as if its NOKs had locked
+    it.  A hold is its own ``held:`` line, with why; a lock stays under ``locked:``."""
+    from stationd.station.events import BoltLocked
+
+    srv = live_server()
+    srv.publish([*opened(), BoltLocked("B1", 3), BoltLocked("B2", 0, held="tightening 7")])
+
+    async def both():
+        import asyncio
+        while len(srv.server.view.locks()) < 2:
+            await asyncio.sleep(0.02)
+    srv.call(both())
+    assert main(["status", "--url", srv.url]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [x for x in lines if x.startswith(("locked:", "held:"))] == [
+        "locked:   B1 locked after 3 NOK in a row: a supervisor releases it",
+        "held:     B2: the controller's result could not be read (tightening 7): check it "
+        "on the controller, then release or enter its outcome"]
+
+
+def test_status_of_a_daemon_that_gives_no_holds_says_its_locks_as_before():
+    """A daemon of an earlier version gives ``locks`` only: they stay ``locked:``."""
+    from stationd.web.status_cli import format_status
+
+    st = {"state": "tracking", "vehicle": {"vin": "VIN1", "model": "SEDAN"},
+          "locks": ["B1 locked after 3 NOK in a row: a supervisor releases it"]}
+    assert "locked:   B1 locked after 3 NOK in a row: a supervisor releases it" in \
+        format_status(st).splitlines()
+    assert "held:" not in format_status(st)
