@@ -90,14 +90,17 @@ class Results:
     def vehicles(self, limit: int = 200) -> list[dict[str, Any]]:
         """The latest vehicles first, each with its status (open, complete, NOK, missing;
         ``reopened``: reopened for rework and not back at the station yet, which read "open,
-        reworked" as the vehicle on the lift did, before any rework: an operator trial)."""
+        reworked" as the vehicle on the lift did, before any rework: an operator trial);
+        ``held``: its bolts held for a person (bolt -> which result), as its page has them
+        (a supervisor's trial: the list had no word of them)."""
         with Session(self.repo.engine) as s:
             rows = s.execute(select(Vehicle.vin).order_by(Vehicle.started_at.desc(),
                                                          Vehicle.id.desc()).limit(limit)).all()
         here = self.repo.ledger.get_meta(AT_STATION)
+        may_hold = self.repo.may_hold([vin for (vin,) in rows])
         out = []
         for (vin,) in rows:
-            r = self.repo.vehicle_report(vin)
+            r = self.repo.vehicle_report(vin, held=vin in may_hold)
             j = r.to_json()
             v = r.vehicle
             waits = v.ended_at is None and v.reopened_at is not None and here != vin

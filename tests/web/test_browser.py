@@ -274,6 +274,27 @@ def test_cameras_screen_shows_frames_overlay_and_refusal(live_server, page, shot
     shots("cameras")
 
 
+def test_the_vehicles_list_has_a_held_column(live_server, page, tmp_path):
+    """A supervisor's trial: the list had no word of a held bolt, which the vehicle's page
+    says: a column of the held bolts, counted and named as the NOK ones are."""
+    repo = results_db(tmp_path)
+    repo.record_unreadable(mid=61, revision=7, raw="00230061007 garbled", error="short",
+                           vin=VIN, bolt="B3", controller_vin=None, tightening_id=7, pset=1,
+                           result_at=None)
+    try:
+        srv = live_server(results=Results(repo))
+        page.get(srv.url + "vehicles")
+        page.wait(lambda p: p.count("#vehicles tbody tr") > 0, what="the vehicles' rows")
+        got = page.js("const i = [...document.querySelectorAll('#vehicles th')]"
+                      ".findIndex(t => t.textContent === 'Held');"
+                      "return i < 0 ? null : document.querySelector("
+                      f"\"#vehicles tr[data-vin='{VIN}']\").cells[i].textContent")
+        assert got == "1 (B3)"
+        check_fits(page, "#vehicles")
+    finally:
+        repo.close()
+
+
 def test_results_screens_and_csv_download(live_server, page, shots, tmp_path):
     repo = results_db(tmp_path)
     repo.ledger.record_command(at=datetime.now(UTC), user="sam", source="screen", kind="skip",

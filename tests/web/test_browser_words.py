@@ -64,8 +64,8 @@ def test_the_vehicle_pages_count_bolts_and_results_and_say_rework_only_when_reop
         page.wait(lambda p: p.count("#vehicles tbody tr") > 0, what="the vehicles' rows")
         heads = page.js("return [...document.querySelectorAll('#vehicles th')]"
                         ".map(t => t.textContent)")
-        assert heads[3:8] == ["Bolts OK", "Bolts ending NOK", "Skipped", "Missing",
-                              "Tighten again"], heads
+        assert heads[3:9] == ["Bolts OK", "Bolts ending NOK", "Skipped", "Missing",
+                              "Tighten again", "Held"], heads
         page.get(srv.url + f"vehicles/{VIN}")
         page.wait(lambda p: p.count("tr.rundown") == 5, what="5 rundown rows")
         summary = page.text("#summary") or ""

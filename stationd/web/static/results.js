@@ -27,7 +27,7 @@ async function listVehicles() {
     if (!list.length) {
       const tr = document.createElement("tr");
       tr.className = "empty";
-      cell(tr, "No vehicles yet: they appear here once the station opens one.").colSpan = 10;
+      cell(tr, "No vehicles yet: they appear here once the station opens one.").colSpan = 11;
       tb.appendChild(tr);
     }
     for (const v of list) {
@@ -49,6 +49,10 @@ async function listVehicles() {
       // (an operator trial: 2 OK + 1 NOK + 0 skipped + 45 missing of 50 bolts)
       const again = v.loosen || [];
       cell(tr, again.length + (again.length ? " (" + again.join(", ") + ")" : ""));
+      // held for a person (its result not known), as the vehicle's page says them
+      const held = Object.keys(v.held || {});
+      cell(tr, held.length + (held.length ? " (" + held.join(", ") + ")" : ""),
+           held.length ? "status-held" : "");
       cell(tr, (v.started_at || "").slice(0, 19));
       cell(tr, v.status === "reopened" ? `reopened ${(v.reopened_at || "").slice(0, 19)}`
         : (v.ended_at || "open").slice(0, 19));
