@@ -23,7 +23,7 @@ from stationd.station.events import (
 from stationd.web.server import WebServer
 from tests.web.mapgeo import confusable, map_geometry
 from tests.web.pages import Page
-from tests.web.scenario import LIFT_LOW, fault_state, opened, sim_vehicle, work
+from tests.web.scenario import LIFT_LOW, VIN, fault_state, opened, sim_vehicle, work
 from tests.web.test_browser import label_overlaps
 
 SIM_VIN = "SIMVIN0000000001"
@@ -294,3 +294,40 @@ async def _cancel(task: Any) -> None:
     task.cancel()
     with contextlib.suppress(asyncio.CancelledError):
         await task
+
+
+def test_last_results_mark_an_entered_outcome_and_judge_a_loosening_by_its_status(
+        live_server, page):
+    """A supervisor's trial of the Last results: an outcome entered from the controller's own
+    screen (``enter-outcome``) read as one measured; a loosening's NOK, whose result came
+    with the bolt's tightening window, read "NOK: torque low" against it, the range beside
+    its torque.  An entered outcome says who entered it; a loosening is said by its own
+    status ("loosening NOK"), with no window (as the vehicle's page gives it none)."""
+    from db.kinds import LOOSENING
+
+    srv = live_server()
+    srv.publish([*opened(), *work(),
+                 ResultRecorded(vin=VIN, bolt="B2", ok=False, torque_nm=12.0,
+                                angle_deg=400.0, tightening_id=9, pset=1, torque_min=45.0,
+                                torque_max=55.0, angle_min=10.0, angle_max=60.0,
+                                kind=LOOSENING),
+                 ResultRecorded(vin=VIN, bolt="B3", ok=True, torque_nm=50.0, angle_deg=30.0,
+                                tightening_id=0, pset=1, torque_min=45.0, torque_max=55.0,
+                                entered_by="sue")])
+    page.get(srv.url)
+    page.wait(lambda p: p.count("#results tr") == 4, what="four results")
+    rows = page.js("return [...document.querySelectorAll('#results tr')]"
+                   ".map(r => [r.className, r.innerText, r.title,"
+                   " r.querySelectorAll('.rng, .out').length])")
+    entered, loosening = rows[0], rows[1]
+    assert "B3 OK" in entered[1] and "entered by sue" in entered[1], entered
+    assert entered[2] == "entered by sue from the controller's screen, not measured"
+    assert loosening[0] == "res-nok" and "B2 loosening NOK" in loosening[1], loosening
+    assert "low" not in loosening[1] and "high" not in loosening[1] and "[" not in loosening[1]
+    assert loosening[3] == 0, loosening                 # no window, nothing marked out of it
+    assert "entered" not in rows[2][1] and rows[2][2] == ""    # measured: no mark
+    for w, h in SHORT:
+        page.size(w, h)
+        got = page.js("return [...document.querySelectorAll('#results .entered')]"
+                      ".map(e => e.getClientRects().length)")
+        assert got == [1], f"{page.name} at {w}x{h}: {got}"

@@ -390,14 +390,24 @@ function drawResults(results) {
     const loosening = r.kind === "loosening";
     tr.className = !r.ok ? "res-nok" : loosening ? "res-loosened" : "res-ok";
     const lim = (v, lo, hi, d) => {
+      // a loosening is judged by its own status, never by a window: the limits it came
+      // with may be the bolt's tightening window (a NOK read "torque low" against it), as
+      // the vehicle's page gives a loosening none (a supervisor's trial)
+      if (loosening) return `<span>${fmt(v, d)}</span>`;
       const out = (lo !== null && v < lo) || (hi !== null && v > hi);
       const rng = lo !== null || hi !== null ? ` [${fmt(lo, d)}-${fmt(hi, d)}]` : "";
       // a range stays on one line ("[22.0-" / "28.0]" wrapped at 1280 px)
       return `<span class="${out ? "out" : ""}">${fmt(v, d)}</span> <small class="rng">${rng.trim()}</small>`;
     };
-    const nok = failedWords(r.torque_nm, r.torque_min, r.torque_max, r.angle_deg, r.angle_min, r.angle_max);
-    const said = !r.ok ? "NOK" + nok : loosening ? "loosened" : "OK";   // one line at 1280 px
-    tr.innerHTML = `<td>${esc(r.bolt)} ${said}</td>` +
+    const nok = loosening ? "" :
+      failedWords(r.torque_nm, r.torque_min, r.torque_max, r.angle_deg, r.angle_min, r.angle_max);
+    const said = !r.ok ? (loosening ? "loosening NOK" : "NOK" + nok)
+      : loosening ? "loosened" : "OK";   // one line at 1280 px
+    // an outcome a supervisor entered from the controller's own screen: never taken for one
+    // measured (the vehicle's page says "entered by ..., not measured")
+    if (r.entered_by) tr.title = `entered by ${r.entered_by} from the controller's screen, not measured`;
+    const entered = r.entered_by ? ` <small class="entered">entered by ${esc(r.entered_by)}</small>` : "";
+    tr.innerHTML = `<td>${esc(r.bolt)} ${said}${entered}</td>` +
       `<td>${lim(r.torque_nm, r.torque_min, r.torque_max, 1)}</td>` +
       `<td>${lim(r.angle_deg, r.angle_min, r.angle_max, 0)}</td>`;
     tb.appendChild(tr);
