@@ -28,6 +28,7 @@ from db.kinds import (
     MISSING,
     PENDING,
     SKIPPED,
+    TIGHTENING,
     unreadable_note,
 )
 from drivers.counting import counted
@@ -479,10 +480,13 @@ def _held_now(bolt: str | None, holds: dict[str, str], note: str, sep: str = ", 
 
 def _last_run(run: dict[str, Any]) -> str:
     """A bolt's last rundown as its line ends: by whom, the controller's tightening id and
-    when (a quality trial: the id and the time were only in --json and the exports)."""
+    when (a quality trial: the id and the time were only in --json and the exports).  The
+    id is the controller's, said as the rundown's kind: "loosening 12" for a loosening (a
+    supervisor's trial: "tightening 12" read as the bolt tightened)."""
     tid = run.get("tightening_id")
+    kind = LOOSENING if run.get("rundown") == LOOSENING else TIGHTENING
     return f", by {run['operator'] or '-'}" + _entered(run) + (
-        f", tightening {tid}" if tid is not None else "") + f", at {_when(run)}"
+        f", {kind} {tid}" if tid is not None else "") + f", at {_when(run)}"
 
 
 def _entered(run: dict[str, Any]) -> str:

@@ -909,6 +909,26 @@ def test_report_counts_a_bolts_tightenings_and_loosenings_apart(run, db):
     assert "v1, 2 attempts" in fr, fr
 
 
+def test_report_names_a_loosening_s_controller_id_as_a_loosening(run, db):
+    """A bolt whose last rundown is a loosening: its line named the controller's id
+    "tightening 12" (a supervisor's trial); it is "loosening 12", a tightening's stays
+    "tightening N"."""
+    from db.kinds import LOOSENING
+    from db.repository import Repository
+
+    run("db", "import", EXAMPLE, "--db", db)
+    with Repository.open(db) as repo:
+        repo.start_vehicle("VIN2", "WAGON-B")
+        record(repo, "VIN2", "SF-FL", ok=False, tightening_id=11)
+        record(repo, "VIN2", "SF-FL", kind=LOOSENING, torque_nm=12.0, tightening_id=12)
+        record(repo, "VIN2", "SF-FR", tightening_id=13)
+    _, out, _ = run("db", "report", "VIN2", "--db", db)
+    [fl] = [line for line in out.splitlines() if line.strip().startswith("SF-FL ")]
+    assert ", loosening 12, at " in fl and "tightening 12" not in fl, fl
+    [fr] = [line for line in out.splitlines() if line.strip().startswith("SF-FR ")]
+    assert ", tightening 13, at " in fr, fr
+
+
 def test_a_vin_in_another_case_is_suggested_after_the_station_file_it_was_looked_for_in(
         run, tmp_path):
     """"vehicle 'vin1' is not in the database (did you mean VIN1?) of FILE" read as if the
