@@ -33,6 +33,7 @@ from db.repository import BoltInfo
 from drivers.counting import counted
 from drivers.devices import Kind, simulated
 from drivers.lift.sim import SimLift, SimulatedPlc
+from drivers.wrench.base import ResultKind, ResultType, result_kind
 from drivers.wrench.sim.controller import SimController, SimTightening, SimWrench
 from stationd.config import StationConfig
 from stationd.errors import InputError
@@ -41,7 +42,7 @@ from stationd.sim.devices_cli import LOOSEN_PROGRAM, loosen_programs
 from stationd.sim.world import World, wrench_at
 from stationd.station.commands import Issuer, ReleaseBolt, Right, SignIn
 from stationd.station.events import BoltReleased, BoltSkipped, Localized, ResultRecorded, State
-from stationd.words import reason_words, skip_words, state_words
+from stationd.words import reason_words, result_type_words, skip_words, state_words
 
 #: a tightening fails now and then; a stubborn joint (a damaged thread) fails until its bolt
 #: locks and the supervisor released it; a loosening always comes loose
@@ -376,9 +377,25 @@ async def _pull(st: Station, loosening: bool, nok: bool) -> tuple[Any, bool]:
 
 
 def shot_words(shot: SimTightening) -> str:
-    """A tightening in the demo's words: "OK 25.3 Nm, 31 deg"; a NOK names every quantity
-    that failed with the limit it crossed ("NOK: angle 94 deg > 90 max; torque 50.1 Nm").
-    Why: the line showed the torque alone, so an angle NOK read as a NOK at a good torque."""
+    """A result in the demo's words: a tightening "OK 25.3 Nm, 31 deg"; a NOK names every
+    quantity that failed with the limit it crossed ("NOK: angle 94 deg > 90 max; torque 50.1
+    Nm").  Why: the line showed the torque alone, so an angle NOK read as a NOK at a good
+    torque.  A result that is no tightening says its type: a loosening "loosening OK 36.0 Nm,
+    446 deg", a controller event "batch increment (result type 3): no rundown" (it read "OK
+    0.0 Nm, 0 deg", as if a bolt were tightened: a supervisor's trial), a type the
+    specification does not name by its code before its values."""
+    code = shot.record.result_type if shot.record is not None else ResultType.TIGHTENING
+    kind = result_kind(code)
+    if kind is ResultKind.TIGHTENING:
+        return _rundown_words(shot)
+    if kind is ResultKind.EVENT:
+        return f"{result_type_words(code)} (result type {code}): no rundown"
+    return f"{result_type_words(code)}{':' if kind is ResultKind.UNKNOWN else ''} " \
+        + _rundown_words(shot)
+
+
+def _rundown_words(shot: SimTightening) -> str:
+    """A rundown's result and values (:func:`shot_words`)."""
     rec = shot.record
     torque, angle = f"torque {shot.torque_nm:.1f} Nm", f"angle {shot.angle_deg:.0f} deg"
     if shot.ok:

@@ -32,3 +32,20 @@ def test_a_nok_line_names_each_failed_quantity_and_an_ok_line_both_values() -> N
     assert {(1, 2), (1, 0), (2, 1), (0, 1)} <= set(seen), seen
     ok = SimController(psets={1: PSET}, nok_rate=0.0, seed=3)._result(1)
     assert shot_words(ok) == f"OK {ok.torque_nm:.1f} Nm, {ok.angle_deg:.0f} deg"
+
+
+def test_a_result_that_is_no_tightening_says_its_type() -> None:
+    """A supervisor's trial of ``run --sim-operator`` with ``result_types=1,3``: the batch
+    increment's line read "OK 0.0 Nm, 0 deg", as a bolt tightened at no torque.  A result
+    that is no tightening says its type; a tightening's line is as before."""
+    ctl = SimController(psets={1: PSET}, nok_rate=0.0, seed=3)
+    assert shot_words(ctl._result(1, 3)) == "batch increment (result type 3): no rundown"
+    assert shot_words(ctl._result(1, 6)) == "abort job (result type 6): no rundown"
+    loose = ctl._result(1, 2)
+    assert shot_words(loose) == \
+        f"loosening OK {loose.torque_nm:.1f} Nm, {loose.angle_deg:.0f} deg"
+    odd = ctl._result(1, 42)
+    assert shot_words(odd).startswith("result type 42 (unknown): OK ")
+    for code in (1, 7):                 # a tightening, synchronized or not: no type said
+        shot = ctl._result(1, code)
+        assert shot_words(shot) == f"OK {shot.torque_nm:.1f} Nm, {shot.angle_deg:.0f} deg"
