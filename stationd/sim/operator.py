@@ -6,7 +6,10 @@ path the screens use (``Station.submit``).  Without one (``supervisor=None``: ``
 decision is left to people: the first bolt of each vehicle is a stubborn joint, so a lock is
 met; the locked (or held) bolt waits, the operator tightens the other bolts, then waits with the
 vehicle on the lift until a person releases it (the screens' Release form, ``stationd
-release``) and tightens it.  Why: training and commissioning need the Locked panel and a
+release``) and tightens it.  The lift goes down only when no bolt of the vehicle is locked or
+held: one held after the operator went on (its push lost, found by the next result; a result
+fetched after a reload) is released (by the simulated supervisor, else by a person) and
+tightened again first.  Why: training and commissioning need the Locked panel and a
 person's release, which a simulated supervisor answering within a second never let anyone see.
 
 Why here, below the demo: one operator for ``stationd demo`` (a vehicle, then a verdict) and
@@ -233,6 +236,7 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
                              "result": LEFT_FOR_PEOPLE, "waits": True, "rundowns": 0,
                              "before": noks_before(streaks.get(bolt, 0))})
         for bolt in plan.waiting if supervisor is None}
+    said: dict[str, dict[str, Any]] = {}     # the bolts' lines said in this round
     for bolt_id in plan.visit if supervisor is None else \
             [b for b in planned if b in plan.visit or b in plan.waiting]:
         b = by_id[bolt_id]
@@ -277,11 +281,17 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
             waiting[b.bolt_id] = (b, line)      # its line is said once a person released it
         else:
             report.append(line)
+            said[b.bolt_id] = line
             say(line)
         truth["bolt"] = None
         world.set_wrench(None)
         await asyncio.sleep(0.3)
-    for bolt_id, (b, line) in waiting.items():
+
+    async def for_people(bolt_id: str, b: BoltInfo | None, line: dict[str, Any],
+                         what: str = "locked") -> None:
+        """``bolt_id`` waits for a person's release (``line['waits']``), then is tightened
+        again (``b`` None: not a bolt of the operator's, left as released; ``what``: why it
+        waits, "locked" or "held")."""
         while line.get("waits") and "interrupted" not in truth:
             try:
                 who = await wait_for_people(st, bolt_id, truth["vin"], note or _stderr,
@@ -295,15 +305,18 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
                 line["before"] = [*line.get("before", []), "locked"]
                 line["result"] = f"skipped ({skip})"
                 break
+            # its history says who released it, not that it was left to people
+            before = [*line.get("before", []), released_words(who, what)
+                      if line["result"] == LEFT_FOR_PEOPLE else line["result"]]
+            line.pop("waits")
+            if b is None:
+                line["before"], line["result"] = before, "not a bolt the operator tightens"
+                break
+            rundowns = int(line.get("rundowns", 0))
             pose = wrench_at(np.array(b.position) + np.append(rng.normal(0, 0.3, 2), 0.0), rng,
                              length)
             truth["bolt"] = bolt_id
             world.set_wrench(pose)
-            # its history says who released it, not that it was left to people
-            before = [*line.get("before", []), released_words(who)
-                      if line["result"] == LEFT_FOR_PEOPLE else line["result"]]
-            rundowns = int(line.get("rundowns", 0))
-            line.pop("waits")
             if not await _tool_on(st, bolt_id):
                 line["result"] = f"not selected after the release ({_why_not(st)})"
                 line["before"], line["unfinished"] = before, True
@@ -317,8 +330,68 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
                               f"by {ended_words(truth)}")
             line["unfinished"] = True
             truth["interrupted"]["bolts"].append(bolt_id)
-        report.append(line)
+
+    def tell(line: dict[str, Any]) -> None:
+        if line["bolt"] not in said:
+            said[line["bolt"]] = line
+            report.append(line)
         say(line)
+
+    for bolt_id, (b, line) in waiting.items():
+        await for_people(bolt_id, b, line)
+        tell(line)
+        truth["bolt"] = None
+        world.set_wrench(None)
+        await asyncio.sleep(0.3)
+    # the lift goes down only when no bolt of the vehicle waits for a supervisor (README:
+    # the vehicle waits on the lift for the release): a bolt held after its visit (its push
+    # lost, found when the next result skipped its id; a result fetched after a reload), or
+    # locked or held and in no wait above, was gone past and the lift lowered under it (a
+    # supervisor's trial).  Released (by the simulated supervisor, else by a person), it is
+    # tightened again; its line goes on from the one said
+    released: dict[str, int] = {}
+    while "interrupted" not in truth and (late := waiting_now(st, infos)):
+        bolt_id, info = late[0], by_id.get(late[0])
+        now = st.core.status()
+        what = "held" if bolt_id in now.held else "locked"
+        line = {"bolt": bolt_id, "pset": None if info is None else info.parameters.pset,
+                "result": LEFT_FOR_PEOPLE, "waits": True, "rundowns": 0,
+                "before": [f"{what} after its visit" if bolt_id in said else what]}
+        released[bolt_id] = released.get(bolt_id, 0) + 1
+        if supervisor is not None and released[bolt_id] <= MAX_RUNDOWNS:
+            answer = await st.submit(ReleaseBolt(truth["vin"], bolt_id,
+                                                 f"{supervisor.source}: joint checked"),
+                                     supervisor)
+            if answer.accepted:
+                line["before"].append("released by the supervisor")
+                line.pop("waits")
+                if info is None:
+                    line["result"] = "not a bolt the operator tightens"
+                else:
+                    pose = wrench_at(np.array(info.position) + np.append(rng.normal(0, 0.3, 2),
+                                                                      0.0), rng, length)
+                    truth["bolt"] = bolt_id
+                    world.set_wrench(pose)
+                    first = line["before"]
+                    if not await _tool_on(st, bolt_id):
+                        line["result"] = f"not selected after the release ({_why_not(st)})"
+                        line["unfinished"] = True
+                    else:
+                        await until_ok(st, bolt_id, line, nok_rng, truth["vin"], supervisor,
+                                       stubborn=False)
+                        line["before"] = [*first, *line["before"]]
+            else:
+                line["before"].append(f"release refused ({answer.reason})")
+        await for_people(bolt_id, info, line, what)   # nothing to wait for where released
+        before = said.get(bolt_id)
+        if before is not None:      # its line as said, then what came after
+            line["before"] = [*before.get("before", []), before["result"], *line["before"]]
+            line["rundowns"] = int(before.get("rundowns", 0)) + int(line["rundowns"])
+            kept = {k: before[k] for k in ("xy_error_mm",) if k in before}
+            before.clear()
+            before.update(line, **kept)
+            line = before
+        tell(line)
         truth["bolt"] = None
         world.set_wrench(None)
         await asyncio.sleep(0.3)
@@ -434,9 +507,17 @@ def noks_before(n: int) -> list[str]:
     return [f"{n} NOK before the reload"] if n else []
 
 
-def released_words(user: str | None) -> str:
-    """The step of a bolt a person released: "locked, released by sam"."""
-    return "locked, released" + (f" by {user}" if user else "")
+def waiting_now(st: Station, infos: Sequence[BoltInfo]) -> list[str]:
+    """The vehicle's bolts waiting for a supervisor now (locked after NOKs in a row, or held:
+    their result not known), in the bolt table's order."""
+    now = st.core.status()
+    return [b.bolt_id for b in infos if b.bolt_id in now.locked or b.bolt_id in now.held]
+
+
+def released_words(user: str | None, what: str = "locked") -> str:
+    """The step of a bolt a person released: "locked, released by sam" (``what``: "held"
+    for a bolt held for its result)."""
+    return f"{what}, released" + (f" by {user}" if user else "")
 
 
 def _releases(st: Station, bolt: str) -> list[str]:
@@ -603,4 +684,5 @@ __all__ = [
     "supervisor_of",
     "until_ok",
     "wait_for_people",
+    "waiting_now",
 ]
