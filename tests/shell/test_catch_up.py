@@ -245,23 +245,31 @@ class Pushing(Controller):
         return res(self.push)
 
 
-def refused_then_pushed(controller: Pushing, then: int | None = None) -> list[Any]:
-    """Fed after a reconnect whose catch-up was refused, and one pushed result (and
-    ``then``, pushed after it)."""
-    fed: list[Any] = []
+def _feed_of(controller: Controller, last: int, since: float | None, fed: list[Any],
+             pool: ThreadPoolExecutor) -> ControllerFeed:
+    """The shell's results feed over ``controller``, the last id recorded ``last``, results
+    missed since ``since``: what it feeds the core goes to ``fed``."""
     keeper = SimpleNamespace(device=controller, reconnects=1, losing=False, up=True)
     records = SimpleNamespace(repo=SimpleNamespace(read_result_stored=lambda t: False),
-                              last_tightening_id=lambda: 40, copy_input=lambda ev, vin: ev)
-    core = SimpleNamespace(missed_since=lambda: time.time() - 60,
+                              last_tightening_id=lambda: last, copy_input=lambda ev, vin: ev)
+    core = SimpleNamespace(missed_since=lambda: since,
                            status=lambda: SimpleNamespace(vin="V", faults={}))
 
     async def feed(ev: Any) -> None:
         fed.append(ev)
 
+    return ControllerFeed(core, records, keeper, feed, lambda ev: None,  # type: ignore[arg-type]
+                          Blocking(pool))
+
+
+def refused_then_pushed(controller: Pushing, then: int | None = None) -> list[Any]:
+    """Fed after a reconnect whose catch-up was refused, and one pushed result (and
+    ``then``, pushed after it)."""
+    fed: list[Any] = []
+
     async def main() -> None:
         pool = ThreadPoolExecutor(2)
-        feed_ = ControllerFeed(core, records, keeper, feed, lambda ev: None,  # type: ignore[arg-type]
-                               Blocking(pool))
+        feed_ = _feed_of(controller, 40, time.time() - 60, fed, pool)
         feed_.came_back()
         if not controller.first:
             assert feed_.catching_up is not None
@@ -346,20 +354,10 @@ def _pushed(controller: Controller, push: int, accounted: int) -> list[Any]:
         return res(push)
 
     controller.wait_result = wait_result  # type: ignore[method-assign]
-    keeper = SimpleNamespace(device=controller, reconnects=1, losing=False, up=True)
-    records = SimpleNamespace(repo=SimpleNamespace(read_result_stored=lambda t: False),
-                              last_tightening_id=lambda: accounted,
-                              copy_input=lambda ev, vin: ev)
-    core = SimpleNamespace(missed_since=lambda: None,
-                           status=lambda: SimpleNamespace(vin="V", faults={}))
-
-    async def feed(ev: Any) -> None:
-        fed.append(ev)
 
     async def main() -> None:
         pool = ThreadPoolExecutor(2)
-        feed_ = ControllerFeed(core, records, keeper, feed, lambda ev: None,  # type: ignore[arg-type]
-                               Blocking(pool))
+        feed_ = _feed_of(controller, accounted, None, fed, pool)
         feed_._accounted = accounted
         await feed_.results(controller)  # type: ignore[arg-type]
         assert not feed_.received

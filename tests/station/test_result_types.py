@@ -860,6 +860,17 @@ def _last_bolt_then_the_lift_down(d: Driver) -> float:
     return enabled_at
 
 
+def _next_car_waits(d: Driver, bolt: int) -> None:
+    """VIN2 at height, the wrench on ``bolt`` and its parameters acknowledged: the tool
+    stays off (the car that left still owes something)."""
+    d.step(("lift", 0.2, True, True, "VIN2"))
+    assert d.core.vin == "VIN2"
+    _on(d, bolt)
+    d.step(("ack", 0.01, True))
+    _on(d, bolt, 1)
+    assert not d.core.tool_on
+
+
 def test_a_result_within_its_window_after_its_vehicle_left_is_recorded_to_that_vehicle():
     """The last bolt's result comes just after the lift went down: it is B1's of VIN1 (the
     tool was enabled for it, no other enable since), not a result of no vehicle (a
@@ -881,12 +892,7 @@ def test_the_next_car_waits_while_the_last_car_s_result_may_still_come():
     VIN1 would otherwise be taken for VIN2's bolt of the same pset)."""
     d = _ready()
     _last_bolt_then_the_lift_down(d)
-    d.step(("lift", 0.2, True, True, "VIN2"))
-    assert d.core.vin == "VIN2"
-    _on(d, 1)
-    d.step(("ack", 0.01, True))
-    _on(d, 1, 1)
-    assert not d.core.tool_on
+    _next_car_waits(d, 1)
     assert "until bolt B1 of VIN1's result is in" in state_words(d.core.reason)
     d.t += d.core.late_result_s
     _on(d, 1, 1)
@@ -994,12 +1000,7 @@ def test_a_link_cut_of_the_car_that_left_keeps_the_next_car_s_tool_off_until_set
     d.feed(DeviceBack(d.t, "wrench", reconnects=1))
     d.t += d.core.late_result_s + 1.0
     d.feed(Tick(d.t))
-    d.step(("lift", 0.2, True, True, "VIN2"))
-    assert d.core.vin == "VIN2"
-    _on(d, 3)
-    d.step(("ack", 0.01, True))
-    _on(d, 3, 1)
-    assert not d.core.tool_on
+    _next_car_waits(d, 3)
     assert "B1 of VIN1" in state_words(d.core.reason)
     d.feed(CaughtUp(d.t, True, "", 1))
     _on(d, 3, 1)
