@@ -45,6 +45,9 @@ CURVE = "curve"   # one trace of a tightening (db.curves), its samples in the re
 #: a controller result that is not a rundown (batch step, bypass, abort, reference setup), and
 #: a result message the station could not read (kept whole)
 CONTROLLER_EVENT, UNREADABLE = "controller_event", "unreadable"
+#: the kinds that are a controller's result an MES is sent (OPC UA): the rundowns, those no
+#: bolt owns, those the station could not read
+RESULT_KINDS = (RUNDOWN, UNATTRIBUTED, UNREADABLE)
 FEED_LIMIT = 1000
 
 
@@ -199,13 +202,13 @@ class Ledger:
             return int(s.scalar(select(func.max(FeedEntry.seq)).where(FeedEntry.at < at)) or 0)
 
     def acknowledge(self, seqs: list[int], by: str) -> set[int]:
-        """Mark the rundowns ``seqs`` acknowledged by ``by`` (already acknowledged ones stay
-        as they were); the ones that are rundowns of this database, acknowledged now or
-        before, are returned, the others are unknown."""
+        """Mark the results ``seqs`` acknowledged by ``by`` (already acknowledged ones stay
+        as they were); the ones that are results of this database (:data:`RESULT_KINDS`),
+        acknowledged now or before, are returned, the others are unknown."""
         wanted = sorted(set(seqs))
         with self._session(True) as s:
-            known = set(s.scalars(select(FeedEntry.seq).where(FeedEntry.seq.in_(wanted),
-                                                             FeedEntry.kind == RUNDOWN)))
+            known = set(s.scalars(select(FeedEntry.seq).where(
+                FeedEntry.seq.in_(wanted), FeedEntry.kind.in_(RESULT_KINDS))))
             done = set(s.scalars(select(OpcUaAcknowledged.seq)
                                  .where(OpcUaAcknowledged.seq.in_(known))))
             for seq in sorted(known - done):
@@ -215,11 +218,11 @@ class Ledger:
     def _unacknowledged(self) -> Any:
         return (select(FeedEntry)
                 .outerjoin(OpcUaAcknowledged, OpcUaAcknowledged.seq == FeedEntry.seq)
-                .where(FeedEntry.kind == RUNDOWN, OpcUaAcknowledged.seq.is_(None)))
+                .where(FeedEntry.kind.in_(RESULT_KINDS), OpcUaAcknowledged.seq.is_(None)))
 
     def unacknowledged(self, after: int, limit: int = FEED_LIMIT) -> list[dict[str, Any]]:
-        """The rundowns after ``after`` nobody acknowledged, in order (at most ``limit``),
-        each as :meth:`since` gives it."""
+        """The results (:data:`RESULT_KINDS`) after ``after`` nobody acknowledged, in order
+        (at most ``limit``), each as :meth:`since` gives it."""
         limit = max(1, min(int(limit), FEED_LIMIT))
         with self._session(False) as s:
             entries = list(s.scalars(self._unacknowledged().where(FeedEntry.seq > after)
@@ -367,5 +370,6 @@ def _record(s: Session, kind: str, ref: int) -> dict[str, Any]:
             "kind": c.kind, "vin": c.vin, "bolt": c.bolt, "comment": c.comment}
 
 
-__all__ = ["CHECK", "COMMAND", "CONTROLLER_EVENT", "CURVE", "GAP", "RUNDOWN", "UNATTRIBUTED",
+__all__ = ["CHECK", "COMMAND", "CONTROLLER_EVENT", "CURVE", "GAP", "RESULT_KINDS", "RUNDOWN",
+           "UNATTRIBUTED",
            "UNREADABLE", "CommandEntry", "Ledger", "add_command", "append", "put_meta"]

@@ -23,7 +23,7 @@ from collections import OrderedDict, deque
 from dataclasses import dataclass
 from typing import Any
 
-from db.ledger import CURVE, RUNDOWN
+from db.ledger import CURVE, RESULT_KINDS, RUNDOWN
 
 WAIT_S = 2.0            # the longest a result event waits for its curves
 LOOSE = 200             # curves kept without their rundown (tightening ids)
@@ -67,6 +67,10 @@ class CurveJoin:
         rec = entry["record"]
         if entry["kind"] == RUNDOWN:
             self._rundown(entry, now, hold)
+            return None
+        if entry["kind"] in RESULT_KINDS:   # a result of no joint: no curves, in its turn
+            if hold:
+                self._held.append(_Held(entry, now, False))
             return None
         if entry["kind"] != CURVE:
             return None
@@ -112,6 +116,10 @@ class CurveJoin:
         out = []
         while self._held:
             h = self._held[0]
+            if h.entry["kind"] != RUNDOWN:    # waits for no curve of its own
+                self._held.popleft()
+                out.append(h.entry)
+                continue
             rid = int(h.entry["record"]["id"])
             got = set(self._curves.get(rid, {}))
             complete = bool(self.expect) and self.expect <= got

@@ -22,12 +22,20 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from typing import Any
 
+from db.ledger import UNATTRIBUTED as UNATTRIBUTED_KIND
+from db.ledger import UNREADABLE as UNREADABLE_KIND
+from drivers.wrench.base import ResultType
 from stationd.opcua.uatypes import ua
+
+#: the result type code of a loosening (Open Protocol's, kept with an unattributed result)
+LOOSENING_TYPE = int(ResultType.LOOSENING)
 
 CLASSIFICATION_SINGLE = 1
 PQ_OTHER, PQ_TIME, PQ_TORQUE, PQ_ANGLE = 0, 1, 2, 3       # IJT Base PhysicalQuantity
 TRACE_ANGLE, TRACE_TORQUE = 1, 2                          # Open Protocol trace types
 EVALUATION_OK, EVALUATION_NOT_OK = 1, 2
+#: a result whose message the station could not read: whether it was OK is not known
+EVALUATION_NOT_DECIDABLE = 3
 RESULT_STATE_COMPLETED = 1
 ENTITY_VEHICLE, ENTITY_JOINT = 20, 23     # what the working group's clients use
 #: the operator signed in at the station: the standard has no entity type for a person, and
@@ -59,6 +67,22 @@ def message(rec: dict[str, Any]) -> str:
     return f"{rec['vin']} {rec['bolt']}: {kind} {str(rec['status']).upper()}" + (
         f" (controller id {tid})" if tid is not None else "") + (
         f" (entered by {rec['entered_by']}, not measured)" if rec.get("entered_by") else "")
+
+
+def other_message(kind: str, rec: dict[str, Any]) -> str:
+    """What a result event's Message says of a controller result the station attributed to
+    no bolt (``kind`` unattributed) or could not read (unreadable): "WVW...: tightening OK of
+    no bolt (controller id 17)", "WVW... B12: result not readable (controller id 18): held
+    for a supervisor".  An MES that reads only the Message tells it from a joint's rundown by
+    the words "no bolt" / "not readable" where a bolt and a verdict stand in a rundown's."""
+    vin, tid = rec.get("vin") or "no vehicle", rec.get("tightening_id")
+    said = "" if tid is None else f" (controller id {tid})"
+    if kind == UNREADABLE_KIND:
+        bolt = rec.get("bolt")
+        return f"{vin}{' ' + bolt if bolt else ''}: result not readable{said}" + (
+            ": held for a supervisor" if bolt else "")
+    what = "loosening" if rec.get("result_type") == LOOSENING_TYPE else "tightening"
+    return f"{vin}: {what} {str(rec['status']).upper()} of no bolt{said}"
 
 
 def _unit(code: str, symbol: str, text: str) -> Any:
@@ -282,6 +306,102 @@ def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
             StepResultId=step_id, Name="Rundown", ResultEvaluation=_evaluation(ok),
             StepTraceId=trace_id)]
     return ua.ResultDataType(ResultMetaData=meta, ResultContent=[ua.Variant(content)])
+
+
+def _plain_meta(db_id: str, entry: dict[str, Any], *, simulated: bool, name: str,
+                description: str, evaluation: int, loosening: bool,
+                entities: list[Any]) -> Any:
+    """The metadata of a controller result that is no joint's rundown (its fields as a
+    rundown's: :func:`rundown_result`)."""
+    rec = entry["record"]
+    return ua.JoiningResultMetaDataType(
+        ResultId=result_id(db_id, entry["seq"]), IsPartial=False, IsSimulated=simulated,
+        ResultState=RESULT_STATE_COMPLETED,
+        CreationTime=_time(rec.get("result_at")) or _time(rec.get("recorded_at"))
+        or _time(entry["at"]),
+        ResultEvaluation=ua.ResultEvaluationEnum(evaluation),
+        ProductId=rec.get("vin") or None,
+        InternalRecipeId=None if rec.get("pset") is None else str(rec["pset"]),
+        SequenceNumber=int(entry["seq"]), Name=name,
+        Description=ua.LocalizedText(description),
+        Classification=CLASSIFICATION_SINGLE,
+        JoiningTechnology=ua.LocalizedText(JOINING_TECHNOLOGY),
+        AssemblyType=DISASSEMBLED if loosening else ASSEMBLED,
+        AssociatedEntities=entities, ExtendedMetaData=_extended(rec))
+
+
+def _vehicle(rec: dict[str, Any], why: str) -> list[Any]:
+    """The vehicle entity of a result that is no joint's rundown (``why``: which vehicle it
+    is), none where no vehicle was at the station."""
+    vin = rec.get("vin")
+    return [] if not vin else [ua.EntityDataType(
+        Name="VIN", EntityId=vin, EntityType=ENTITY_VEHICLE, IsExternal=True,
+        Description=why)]
+
+
+def unattributed_result(db_id: str, entry: dict[str, Any], *, simulated: bool = False) -> Any:
+    """The ResultDataType of the feed ``entry`` of kind ``unattributed``: a rundown the
+    controller made that the station attributed to no bolt (why in its Description), its
+    vehicle the one it was filed under, no joint.  Why published: an MES counting the
+    controller's rundowns from the station's results missed these (a rundown outside any
+    tool enable, a result fetched late that nothing proves a bolt's)."""
+    rec = entry["record"]
+    ok = rec["status"] == "ok"
+    loosening = rec.get("result_type") == LOOSENING_TYPE
+    kind = "loosening" if loosening else "tightening"
+    pset = "" if rec.get("pset") is None else f" with pset {rec['pset']}"
+    meta = _plain_meta(
+        db_id, entry, simulated=simulated, evaluation=EVALUATION_OK if ok else
+        EVALUATION_NOT_OK, loosening=loosening,
+        name=f"{rec.get('vin') or 'no vehicle'} unattributed",
+        description=f"{kind}{pset} attributed to no bolt: {rec.get('reason') or 'not said'}",
+        entities=_vehicle(rec, "the vehicle the result was filed under; no bolt is its"))
+    content = ua.JoiningResultDataType(OverallResultValues=[
+        _value("Torque", rec.get("torque_nm"), None, _unit("NU", "N·m", "newton metre"), ok,
+               PQ_TORQUE),
+        _value("Angle", rec.get("angle_deg"), None, _unit("DD", "°", "degree"), ok,
+               PQ_ANGLE)])
+    return ua.ResultDataType(ResultMetaData=meta, ResultContent=[ua.Variant(content)])
+
+
+def unreadable_result(db_id: str, entry: dict[str, Any], *, simulated: bool = False) -> Any:
+    """The ResultDataType of the feed ``entry`` of kind ``unreadable``: a result message the
+    station could not read (kept whole in its records), its evaluation NotDecidable, no
+    values; the bolt it was held against, where one was, is its joint (held for a
+    supervisor, who checks it on the controller).  Why published: an MES saw nothing of it,
+    the bolt neither done nor said held."""
+    rec = entry["record"]
+    bolt = rec.get("bolt")
+    entities = _vehicle(rec, "the vehicle at the station when it came")
+    if bolt:
+        entities.append(ua.EntityDataType(
+            Name="Joint", EntityId=bolt, EntityType=ENTITY_JOINT, IsExternal=False,
+            Description="the bolt it may be the result of: held for a supervisor"))
+    meta = _plain_meta(
+        db_id, entry, simulated=simulated, evaluation=EVALUATION_NOT_DECIDABLE,
+        loosening=False, entities=entities,
+        name=f"{rec.get('vin') or 'no vehicle'}{' ' + bolt if bolt else ''} not readable",
+        description=f"MID {rec.get('mid')} revision {rec.get('revision')} not readable: "
+                    f"{rec.get('error')}" + (f"; {bolt} held for a supervisor" if bolt else ""))
+    return ua.ResultDataType(ResultMetaData=meta,
+                             ResultContent=[ua.Variant(ua.JoiningResultDataType())])
+
+
+def any_result(db_id: str, entry: dict[str, Any], *, simulated: bool = False,
+               curves: list[dict[str, Any]] | None = None) -> Any:
+    """The ResultDataType of any result entry of the feed (:data:`RESULT_KINDS`)."""
+    if entry["kind"] == UNATTRIBUTED_KIND:
+        return unattributed_result(db_id, entry, simulated=simulated)
+    if entry["kind"] == UNREADABLE_KIND:
+        return unreadable_result(db_id, entry, simulated=simulated)
+    return rundown_result(db_id, "", entry, simulated=simulated, curves=curves)
+
+
+def any_message(entry: dict[str, Any]) -> str:
+    """The Message of the result event of any result entry of the feed."""
+    if entry["kind"] in (UNATTRIBUTED_KIND, UNREADABLE_KIND):
+        return other_message(entry["kind"], entry["record"])
+    return message(entry["record"])
 
 
 __all__ = ["ASSEMBLED", "CLASSIFICATION_SINGLE", "DISASSEMBLED", "ENTITY_ENTERED_BY",

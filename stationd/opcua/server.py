@@ -73,7 +73,7 @@ from asyncua.server.user_managers import UserManager
 from asyncua.ua.ua_binary import struct_from_binary
 
 from db.curves import curves_for
-from db.ledger import RUNDOWN
+from db.ledger import RESULT_KINDS, RUNDOWN
 from db.repository import Repository
 from drivers.identity import DeviceIdentity
 from stationd.access import verify_password
@@ -91,7 +91,7 @@ from stationd.opcua.model import (
     load_model,
     publish_dictionaries,
 )
-from stationd.opcua.results import JOINING_TECHNOLOGY, message, result_id, rundown_result
+from stationd.opcua.results import JOINING_TECHNOLOGY, any_message, any_result, result_id
 from stationd.opcua.uatypes import ua
 from stationd.station.events import (
     DeviceHealth,
@@ -422,7 +422,7 @@ class OpcUaServer:
             await self._reason.write_value(reason)
 
     async def run(self, stop: asyncio.Event, repo: Repository) -> None:
-        """Publish every rundown recorded from now on until ``stop``; the last ``keep``
+        """Publish every result recorded from now on until ``stop``; the last ``keep``
         recorded before are kept for the methods."""
         loop = asyncio.get_running_loop()
         self.db_id = await loop.run_in_executor(None, repo.ledger.db_id)
@@ -458,16 +458,16 @@ class OpcUaServer:
         """A feed entry: a rundown kept for the methods (and held for its event), a curve
         joined to its rundown's result (:mod:`stationd.opcua.curves`)."""
         changed = self.join.take(entry, now, hold=hold)
-        if entry["kind"] == RUNDOWN:
+        if entry["kind"] in RESULT_KINDS:
             self._rebuild(entry)
         elif changed is not None and \
                 result_id(self.db_id, changed["seq"]) in self._results:   # still kept
             self._rebuild(changed)
 
     def _rebuild(self, entry: dict[str, Any]) -> Any:
-        result = rundown_result(self.db_id, self.cfg.station_id, entry,
-                                simulated=self.simulated,
-                                curves=self.join.curves(int(entry["record"]["id"])))
+        result = any_result(self.db_id, entry, simulated=self.simulated,
+                            curves=self.join.curves(int(entry["record"]["id"]))
+                            if entry["kind"] == RUNDOWN else None)
         self._keep(result)
         return result
 
@@ -501,23 +501,21 @@ class OpcUaServer:
         if self.server is None:
             return
         rid = int(entry["record"]["id"])
-        curves = self.join.curves(rid)
+        curves = self.join.curves(rid) if entry["kind"] == RUNDOWN else []
         if curves is None and self._repo is not None:
             curves = await asyncio.get_running_loop().run_in_executor(
                 None, lambda: curves_for(self._repo, record_id=rid))   # type: ignore[arg-type]
-        result = rundown_result(self.db_id, self.cfg.station_id, entry,
-                                simulated=self.simulated, curves=curves)
+        result = any_result(self.db_id, entry, simulated=self.simulated, curves=curves)
         if self._requested_result is not None:
             await _write_result(self._requested_result, result)
         await _fire(self._requested, result, entry)
 
 
 async def _fire(gens: list[Any], result: Any, entry: dict[str, Any]) -> None:
-    rec = entry["record"]
     for gen in gens:
         ev = gen.event
         ev.add_variable("Result", result, ua.VariantType.ExtensionObject)
-        ev.Message = ua.LocalizedText(message(rec))
+        ev.Message = ua.LocalizedText(any_message(entry))
         await gen.trigger()
 
 

@@ -7,6 +7,7 @@ import json
 import logging
 import socket
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -83,38 +84,48 @@ async def stopping(srv: OpcUaServer, stop: asyncio.Event, task: asyncio.Task[Non
     await srv.stop()
 
 
-def test_every_rundown_arrives_as_a_result_event_at_the_server_object(repo):
-    tids = {"B1": 41, "B2": 42}          # the controller's numbers of the two tightenings
+async def subscribed(client: Client) -> Collector:
+    """``client`` subscribed to the station's result events at the Server object: what
+    arrives goes to the collector returned."""
+    await load_client_types(client)
+    uris = await client.get_namespace_array()
+    etype = client.get_node(ua.NodeId(1007, uris.index(IJT_URI)))
+    handler = Collector()
+    sub = await client.create_subscription(50, handler)
+    await sub.subscribe_events(client.nodes.server, etype)
+    await asyncio.sleep(0.3)
+    return handler
 
+
+def events_while(repo: Repository, *stores: Callable[[], object]) -> list[Any]:
+    """The result events a subscribed client gets while each of ``stores`` stores a record
+    (one event each)."""
     async def scenario() -> list[Any]:
         srv, stop, task = await serving(config(), repo)
         try:
             async with Client(srv.url) as client:
-                await load_client_types(client)
-                uris = await client.get_namespace_array()
-                etype = client.get_node(ua.NodeId(1007, uris.index(IJT_URI)))
-                handler = Collector()
-                sub = await client.create_subscription(50, handler)
-                await sub.subscribe_events(client.nodes.server, etype)
-                await asyncio.sleep(0.3)
+                handler = await subscribed(client)
                 loop = asyncio.get_running_loop()
-                await loop.run_in_executor(None, lambda: record(repo, VIN, "B1", ok=True,
-                                                                tightening_id=tids["B1"]))
-                await loop.run_in_executor(None, lambda: record(repo, VIN, "B2", ok=False,
-                                                                tightening_id=tids["B2"]))
-                # an id no UInt32 holds (a Modbus map's signed register, a 10-digit Open
-                # Protocol id): its encoding stopped the subscription, no result came after
-                await loop.run_in_executor(None, lambda: record(
-                    repo, VIN, "B2", ok=True, kind="loosening", operator="olga",
-                    tightening_id=2 ** 32 + 5))
-                await loop.run_in_executor(None, lambda: record(repo, VIN, "B3", ok=True,
-                                                                tightening_id=44))
-                await handler.wait_for(4)
+                for store in stores:
+                    await loop.run_in_executor(None, store)
+                await handler.wait_for(len(stores))
                 return handler.events
         finally:
             await stopping(srv, stop, task)
 
-    events = asyncio.run(scenario())
+    return asyncio.run(scenario())
+
+
+def test_every_rundown_arrives_as_a_result_event_at_the_server_object(repo):
+    tids = {"B1": 41, "B2": 42}          # the controller's numbers of the two tightenings
+    events = events_while(
+        repo, lambda: record(repo, VIN, "B1", ok=True, tightening_id=tids["B1"]),
+        lambda: record(repo, VIN, "B2", ok=False, tightening_id=tids["B2"]),
+        # an id no UInt32 holds (a Modbus map's signed register, a 10-digit Open Protocol
+        # id): its encoding stopped the subscription, no result came after
+        lambda: record(repo, VIN, "B2", ok=True, kind="loosening", operator="olga",
+                       tightening_id=2 ** 32 + 5),
+        lambda: record(repo, VIN, "B3", ok=True, tightening_id=44))
     db_id = repo.ledger.db_id()
     seqs = [e["seq"] for e in repo.ledger.since(0)]
     assert [e.SourceName for e in events] == ["ST-07"] * 4
@@ -444,3 +455,40 @@ def test_a_republish_of_a_message_not_held_is_refused_as_the_standard_says(repo)
 
     assert asyncio.run(scenario()) == ("BadMessageNotAvailable", "BadSubscriptionIdInvalid",
                                        "BadSubscriptionIdInvalid")
+
+
+def test_a_result_of_no_bolt_and_one_not_readable_arrive_as_results_told_apart(repo):
+    """A rundown the station attributed to no bolt and a result message it could not read
+    are results of the controller too: an MES counting them from the station's results saw
+    neither.  Each comes as a result event in its turn, told apart from a joint's rundown in
+    its metadata (no Joint; NotDecidable) and its Message ("of no bolt", "not readable"),
+    and counts among those to acknowledge."""
+    events = events_while(
+        repo, lambda: repo.record_unattributed(
+            vin=VIN, controller_vin=None, tightening_id=51, pset=3, ok=False, torque_nm=12.5,
+            angle_deg=40.0, result_at=None, result_type=2, reason="outside a tool enable"),
+        lambda: repo.record_unreadable(
+            mid=61, revision=2, raw="0231006100" + "x" * 40,
+            error="torque '00ABCD' is not a number", vin=VIN, bolt="B2", controller_vin=None,
+            tightening_id=52, pset=1, result_at=None),
+        lambda: record(repo, VIN, "B1", ok=True, tightening_id=53))
+    assert [e.Message.Text for e in events] == [
+        f"{VIN}: loosening NOK of no bolt (controller id 51)",
+        f"{VIN} B2: result not readable (controller id 52): held for a supervisor",
+        f"{VIN} B1: tightening OK (controller id 53)"]
+    loose, unread, rundown = (e.Result.ResultMetaData for e in events)
+    assert [m.SequenceNumber for m in (loose, unread, rundown)] == \
+        [e["seq"] for e in repo.ledger.since(0)]
+    assert [int(m.ResultEvaluation) for m in (loose, unread, rundown)] == [2, 3, 1]
+    assert {(x.EntityType, x.EntityId) for x in loose.AssociatedEntities} == {(20, VIN)}
+    assert loose.AssemblyType == 2 and "attributed to no bolt: outside a tool enable" in \
+        loose.Description.Text
+    assert [(kv.Key, kv.Value.Value) for kv in loose.ExtendedMetaData] == [("TighteningId", 51)]
+    torque, angle = events[0].Result.ResultContent[0].Value.OverallResultValues
+    assert (torque.MeasuredValue, angle.MeasuredValue) == (12.5, 40.0)
+    assert torque.LowLimit is None and torque.High is None
+    assert {(x.EntityType, x.EntityId) for x in unread.AssociatedEntities} == {
+        (20, VIN), (23, "B2")}
+    assert "MID 61 revision 2 not readable" in unread.Description.Text
+    assert not events[1].Result.ResultContent[0].Value.OverallResultValues
+    assert repo.ledger.unacknowledged_count() == 3

@@ -49,7 +49,17 @@ def node_opcua() -> Path:
     return CACHE
 
 
+#: what ``node_reads`` stores for a "bolt" of these names: a result of no bolt, one not read
+NO_BOLT, NOT_READ = "(unattributed)", "(unreadable)"
+
+
 def _recorder(repo: Repository, bolt: str, kw: dict[str, Any]) -> Callable[[], object]:
+    if bolt == NO_BOLT:
+        return lambda: repo.record_unattributed(vin=VIN, controller_vin=None, result_at=None,
+                                                **kw)
+    if bolt == NOT_READ:
+        return lambda: repo.record_unreadable(vin=VIN, controller_vin=None, result_at=None,
+                                              **kw)
     return lambda: record(repo, VIN, bolt, **kw)
 
 
@@ -112,6 +122,33 @@ def test_node_opcua_decodes_a_result_event_with_the_client_side_fix(repo):
         assert values[0]["LowLimit"] == 23.0 and values[0]["High"] == 27.0
     assert [v["MeasuredValue"] for v in
             events[1]["result"]["ResultContent"][0]["OverallResultValues"]] == [20.0, 303.0]
+
+
+@pytest.mark.system
+@pytest.mark.skipif(NODE is None, reason="node is not installed")
+def test_node_opcua_decodes_a_result_of_no_bolt_and_one_not_readable(repo):
+    """An independent stack reads the results that are no joint's rundown as the station
+    sends them: told apart by their Message, their evaluation (NotDecidable for one not
+    read), no Joint for one of no bolt, no values for one not read."""
+    events = asyncio.run(node_reads(repo, [
+        (NO_BOLT, {"tightening_id": 81, "pset": 1, "ok": True, "torque_nm": 25.0,
+                   "angle_deg": 33.0, "reason": "outside a tool enable", "result_type": 1}),
+        (NOT_READ, {"mid": 61, "revision": 2, "raw": "0231006100" + "x" * 40,
+                    "error": "torque '00ABCD' is not a number", "bolt": "B2",
+                    "tightening_id": 82, "pset": 1})], "--fix"))
+    assert [e["message"] for e in events] == [
+        f"{VIN}: tightening OK of no bolt (controller id 81)",
+        f"{VIN} B2: result not readable (controller id 82): held for a supervisor"]
+    loose, unread = (e["result"]["ResultMetaData"] for e in events)
+    assert (loose["ResultEvaluation"], unread["ResultEvaluation"]) == (1, 3)
+    assert [[x["EntityType"], x["EntityId"]] for x in loose["AssociatedEntities"]] == \
+        [[20, VIN]]
+    assert sorted([x["EntityType"], x["EntityId"]] for x in unread["AssociatedEntities"]) \
+        == [[20, VIN], [23, "B2"]]
+    values = events[0]["result"]["ResultContent"][0]["OverallResultValues"]
+    assert [(v["Name"], v["MeasuredValue"]) for v in values] == [("Torque", 25.0),
+                                                                 ("Angle", 33.0)]
+    assert not events[1]["result"]["ResultContent"][0].get("OverallResultValues")
 
 
 @pytest.mark.system
