@@ -70,6 +70,7 @@ from stationd.station.inputs import (
     ParamsAcked,
     ParamsRefused,
     ResultIn,
+    ResultsSkipped,
     Started,
     Tick,
     VehicleLoaded,
@@ -86,7 +87,7 @@ PARAMS = MatchParams(tolerance_mm=8.0, margin_mm=6.0, stable_frames=2, max_age_s
 
 
 def result(tid: int, pset: int, ok: bool = True) -> Any:
-    return SimpleNamespace(tightening_id=tid, pset=pset, ok=ok)
+    return SimpleNamespace(tightening_id=tid, pset=pset, ok=ok, vin="")
 
 
 @dataclass
@@ -102,6 +103,7 @@ class Driver:
     fresh: bool = True                # the last localization's frames were fresh
     tool: bool = False
     tool_bolt: str | None = None
+    tool_vin: str | None = None
     pending: str | None = None        # parameters sent, not yet answered
     acked: dict[str, float] = field(default_factory=dict)  # bolt -> ack instant
     sends: list[str] = field(default_factory=list)
@@ -109,6 +111,8 @@ class Driver:
     closed_vins: set[str] = field(default_factory=set)
     vin_seq: int = 0
     reconnects: int = 0               # the controller's connections so far (DeviceBack's)
+    catching: int | None = None       # the connection whose catch-up has not ended yet
+    ids: int = 10_000                 # the last tightening id of the "lost" steps
     log: list[Any] = field(default_factory=list)
 
     def feed(self, ev: Any) -> list[Any]:
@@ -155,13 +159,15 @@ class Driver:
             assert a.bolt in self.acked and ev.exposure_t > self.acked[a.bolt]
             assert self.ready and not self.down
             assert c._cut is None, "the tool enabled while a link cut's result is owed"
-            self.tool, self.tool_bolt = True, a.bolt
+            self.tool, self.tool_bolt, self.tool_vin = True, a.bolt, c.vin
         elif isinstance(a, DisableTool):
             self.tool = False
         elif isinstance(a, Record):
             tid = int(a.result.tightening_id)
             assert tid not in self.records, "a result recorded twice"
-            assert a.bolt == self.tool_bolt, (a.bolt, self.tool_bolt)
+            # to the bolt the tool was last enabled for, of the vehicle it was enabled on
+            assert (a.vin, a.bolt) == (self.tool_vin, self.tool_bolt), \
+                (a.vin, a.bolt, self.tool_vin, self.tool_bolt)
             self.records[tid] = a.bolt
 
     # -- the operations hypothesis draws ------------------------------------------------------
@@ -201,8 +207,24 @@ class Driver:
             else:
                 self.reconnects += 1
                 self.feed(DeviceBack(self.t, device, reconnects=self.reconnects))
-                # the shell's catch-up then ends (complete now and then not: a refusal)
-                self.feed(CaughtUp(self.t, op[3] != 2, "refused", self.reconnects))
+                # the shell's catch-up then ends (complete now and then not: a refusal), at
+                # once or later (a "caught" step: the station goes on meanwhile)
+                self.catching = self.reconnects
+                if op[3] != 1:
+                    self.step(("caught", 0.0, op[3] != 2))
+        elif kind == "caught" and self.catching is not None:
+            self.feed(CaughtUp(self.t, op[2], "refused", self.catching))
+            self.catching = None
+        elif kind == "lost":
+            # a pushed result skips the id before it (its push lost, the link up): the core is
+            # told, the one skipped fetched and fed (made ``op[3]`` s ago), then the pushed one
+            self.ids += 2
+            pset = BOLTS[self.tool_bolt].pset if self.tool_bolt and op[2] else 9
+            self.feed(ResultsSkipped(self.t, self.ids))
+            self.feed(ResultIn(self.t, result(self.ids - 1, pset or 0, op[4]), fetched=True,
+                               follows=self.ids - 2, made_at=self.t - op[3], live=True,
+                               before=self.ids))
+            self.feed(ResultIn(self.t, result(self.ids, pset or 0, not op[4])))
         elif kind == "tick":
             self.feed(Tick(self.t))
         if self.down:
@@ -232,7 +254,8 @@ class Driver:
             assert self.where == self.tool_bolt and self.fresh
 
 
-KINDS = ["lift"] * 2 + ["loc"] * 8 + ["ack"] * 2 + ["result"] * 2 + ["fault", "back", "tick"]
+KINDS = ["lift"] * 2 + ["loc"] * 8 + ["ack"] * 2 + ["result"] * 2 + ["fault", "back", "tick",
+                                                                    "caught", "lost"]
 RAW = st.tuples(st.sampled_from(KINDS), st.sampled_from([0.02, 0.05, 0.1, 0.2, 0.3]),
                 st.sampled_from(range(256)), st.sampled_from([-3.0, -1.0, 0.0, 0.5, 2.0, 4.0]),
                 st.sampled_from([0.05, 0.05, 0.1, 0.3, 0.6, 2.0]), st.sampled_from([1, 2, 3, 4]))
@@ -253,6 +276,10 @@ def decode(raw: tuple[Any, ...]) -> tuple[Any, ...]:
                 n % 7 != 0)
     if kind == "fault":
         return ("fault", dt, ["lift", "wrench", "pair1", "database"][n % 4])
+    if kind == "caught":
+        return ("caught", dt, n % 3 != 0)
+    if kind == "lost":
+        return ("lost", dt * 30, n % 4 != 0, [0.5, 1.0, 3.0, 30.0][n % 4], n % 3 != 0)
     if kind == "back":
         return ("back", dt, "", n % 3)
     return ("tick", dt * 20)
@@ -287,8 +314,8 @@ def test_seeded_random_walks_keep_the_safety_invariants_and_get_work_done():
     """Hundreds of longer walks with a realistic mix (numpy, seeded): the invariants hold and
     the walks really select, enable and record (else the invariants were checked on nothing)."""
     rng = np.random.default_rng(12)
-    kinds = ["lift", "loc", "ack", "result", "fault", "back", "tick"]
-    weights = np.array([0.04, 0.6, 0.15, 0.1, 0.02, 0.06, 0.03])
+    kinds = ["lift", "loc", "ack", "result", "fault", "back", "tick", "caught", "lost"]
+    weights = np.array([0.04, 0.58, 0.15, 0.09, 0.02, 0.06, 0.03, 0.01, 0.02])
     totals: dict[str, int] = {"send": 0, "enable": 0, "record": 0}
     for _ in range(300):
         d = Driver()
