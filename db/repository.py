@@ -765,8 +765,8 @@ class Repository:
             if here is not None and here.value == vin:
                 here.value = ""
             s.flush()
-            report, since = build_report(s, v), v.reopened_at or v.started_at
-        return self._with_held(report, since)   # the journal's close line counts them
+            report = build_report(s, v)
+        return self._with_held(report)   # the journal's close line counts them
 
     def left_unseen(self, vin: str) -> VehicleReport | None:
         """Close the vehicle the station loaded last, if it is not ``vin`` and still open, and
@@ -784,8 +784,8 @@ class Repository:
                 return None
             v.ended_at = utcnow()
             s.flush()
-            report, since = build_report(s, v), v.reopened_at or v.started_at
-        return self._with_held(report, since)
+            report = build_report(s, v)
+        return self._with_held(report)
 
     def vehicle_report(self, vin: str, *, held: bool = False) -> VehicleReport:
         """The vehicle's summary; with ``held``, the bolts held for a person too (a read of
@@ -793,8 +793,8 @@ class Repository:
         not for each row of a list or an export)."""
         with self._session(write=False) as s:
             v = _vehicle(s, vin)
-            report, since = build_report(s, v), v.reopened_at or v.started_at
-        return self._with_held(report, since) if held else report
+            report = build_report(s, v)
+        return self._with_held(report) if held else report
 
     def vin_in_other_case(self, vin: str) -> str | None:
         """The VIN the database has that is ``vin`` typed in another case, else None (what a
@@ -802,9 +802,11 @@ class Repository:
         with self._session(write=False) as s:
             return _vin_in_other_case(s, vin)
 
-    def _with_held(self, report: VehicleReport, since: datetime | None) -> VehicleReport:
-        """``report`` with its held bolts, in the table's order."""
-        holds = self.held_bolts(report.vehicle.vin, since)
+    def _with_held(self, report: VehicleReport) -> VehicleReport:
+        """``report`` with its held bolts, in the table's order: of every pass of the vehicle
+        (a hold outlives a rework: its result is still not known; a supervisor's trial found
+        the hold of a car that left, its last push lost, gone at its reopening)."""
+        holds = self.held_bolts(report.vehicle.vin)
         order = {b.bolt_id: i for i, b in enumerate(report.bolts)}
         return replace(report, held=tuple(sorted(
             holds.items(), key=lambda h: order.get(h[0], len(order)))))

@@ -194,7 +194,7 @@ class Records:
         sel = Selection(owed.bolt, owed.pset, xyz(j["point_mm"]), float(j["tilt_deg"]),
                         float(j["distance_mm"]), float(j["exposure_t"]), float(j["decided_t"]),
                         None, owed.vin, owed.parameters_id, bool(j.get("loosen", False)),
-                        j.get("operator"))
+                        j.get("operator"), _window(j.get("torque_window")))
         self._enable, self._enable_off = (sel, owed.id), owed.off_at is not None
         if in_window:
             log.info("the tool was enabled for bolt %s of %s (pset %s) when the last station "
@@ -431,7 +431,9 @@ class Records:
         skipped = repo.ledger.skipped(a.vin, since)
         noks = repo.nok_streaks(a.vin, since)
         locked = repo.ledger.locked(a.vin, since, ENDS_A_HOLD)
-        holds = repo.holds(a.vin, since)   # each with what its result came under
+        # each with what its result came under; of every pass (a rework ends no hold: its
+        # result is still not known)
+        holds = repo.holds(a.vin)
         # the report's "missing" is "no rundown yet": on an open vehicle the bolt is to do
         status = {b.bolt_id: b.status for b in report.bolts if b.status != MISSING}
         done = frozenset(k for k, s in status.items() if s is OK)
@@ -671,7 +673,16 @@ def _selection_json(sel: Selection) -> dict[str, Any]:
     after a reload or restart (the evidence, the marker crops, stays in memory)."""
     return {"point_mm": [float(v) for v in sel.point_mm], "tilt_deg": float(sel.tilt_deg),
             "distance_mm": float(sel.distance_mm), "exposure_t": float(sel.exposure_t),
-            "decided_t": float(sel.decided_t), "loosen": sel.loosen, "operator": sel.operator}
+            "decided_t": float(sel.decided_t), "loosen": sel.loosen, "operator": sel.operator,
+            "torque_window": None if sel.torque_window is None else list(sel.torque_window)}
+
+
+def _window(stored: Any) -> tuple[float, float] | None:
+    """A selection's torque window as stored with its enable (None: not stored, an enable
+    of an older release)."""
+    if not isinstance(stored, list | tuple) or len(stored) != 2:
+        return None
+    return float(stored[0]), float(stored[1])
 
 
 def _loosen_sent(pset: int | None) -> dict[str, Any]:

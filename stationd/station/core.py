@@ -161,8 +161,10 @@ class StationCore(LiftRules, ToolRules, ResultRules):
         return [Publish(StateChanged(self.state, self.reason, t=ev.t))]
 
     def _on_tick(self, ev: Tick) -> list[Action]:
+        acts = self._pending_overdue(ev.t)
         if self._off_at is not None and ev.t - self._off_at >= self.late_result_s \
                 and self._pending_push is None:
             self._unanswered_after()
             self._enabled, self._off_at = None, None
-        return self._teach_overdue(ev.t) + self._check_due(ev.t) + self._operator_idle(ev.t)
+        return acts + self._teach_overdue(ev.t) + self._check_due(ev.t) + \
+            self._operator_idle(ev.t)

@@ -64,7 +64,7 @@ from stationd.station.inputs import (
     Written,
 )
 from stationd.station.orders import OrderRules
-from stationd.station.state import NOK_SKIPPED, ON_A_BOLT, _Cut
+from stationd.station.state import NOK_SKIPPED, ON_A_BOLT, PENDING_PUSH_S, _Cut
 
 #: the controller stamps its results to the second, and its clock's offset is measured to
 #: the second: a result fetched after a link cut is placed between the enable and the cut
@@ -148,12 +148,39 @@ class ResultRules(OrderRules):
 
     def _on_result_in(self, ev: ResultIn) -> list[Action]:
         """:meth:`_result_read`; a result pushed is the one owed since ids it skipped were
-        fetched (or one after it): owed no longer once it is judged."""
+        fetched (or one after it; or that one fetched after a reconnect): owed no longer
+        once it is judged, then the NOK policy waiting for it (:meth:`_push_judged`)."""
+        waited, tid = self._pending_push, int(ev.result.tightening_id)
         try:
-            return self._result_read(ev)
+            acts = self._result_read(ev)
         finally:
-            if not ev.fetched:
+            if not ev.fetched or tid == waited:
                 self._pending_push = None
+        # the last result judged: during which enable, the tool left on or off (:meth:`_made_under`)
+        self._judged = (tid, self._enable_serial, self.tool_on)
+        return acts + self._push_judged(ev.t)
+
+    def _push_judged(self, t: float) -> list[Action]:
+        """The pushed result that skipped ids is judged (or no longer waited for): the NOK
+        policy of each bolt whose NOK came fetched before it and is still its last result
+        (a reviewer: a batch increment pushed after a lost NOK left the bolt unlocked)."""
+        if self._pending_push is not None or not self._nok_owed:
+            return []
+        owed, self._nok_owed = self._nok_owed, {}
+        m, acts = self.matcher, []
+        for bolt, pset in owed.items():
+            if m is not None and bolt in m.bolts and bolt in self._nok_last \
+                    and bolt not in m.done and bolt not in m.locked and bolt not in m.held:
+                acts += self._after_nok(t, bolt, pset, counted=True)
+        return acts
+
+    def _pending_overdue(self, t: float) -> list[Action]:
+        """A pushed result waited for longer than :data:`PENDING_PUSH_S` (never fed: a fault
+        of the shell): no longer waited for."""
+        if self._pending_push is None or t - self._pending_at < PENDING_PUSH_S:
+            return []
+        self._pending_push = None
+        return self._push_judged(t)
 
     def _result_read(self, ev: ResultIn) -> list[Action]:
         """A result: a controller event (never a rundown) by its type; else recorded to the
@@ -192,19 +219,22 @@ class ResultRules(OrderRules):
         controller may forget it."""
         r = ev.result
         tid = int(r.tightening_id)
-        self._pending_push = None      # (a pushed one's copy: it is in)
+        owed: list[Action] = []
+        if tid == self._pending_push:    # the pushed one waited for: a copy, it is in
+            self._pending_push = None
+            owed = self._push_judged(ev.t)
         if self._recorded.get(tid, None) == _said(r):
-            return [Acknowledge(r)]   # said already by this core
+            return [*owed, Acknowledge(r)]   # said already by this core
         self._recorded[tid] = _said(r)
-        return [Publish(Notice(Said.SENT_AGAIN, tightening_id=tid, bolt=ev.bolt,
-                               vin=ev.vin if ev.vin != self.vin else None, t=ev.t)),
+        return [*owed, Publish(Notice(Said.SENT_AGAIN, tightening_id=tid, bolt=ev.bolt,
+                                      vin=ev.vin if ev.vin != self.vin else None, t=ev.t)),
                 Acknowledge(r)]
 
     def _on_results_skipped(self, ev: ResultsSkipped) -> list[Action]:
         """A pushed result skipped ids, fetched and fed before it: the rundown is over, the
         tool goes off now (a reviewer: it stayed on through the fetches, the operator could
         pull again), and the enable's result stays owed until the pushed one is in."""
-        self._pending_push = ev.tightening_id
+        self._pending_push, self._pending_at = ev.tightening_id, ev.t
         if self.state not in ON_A_BOLT and not self.tool_on:
             return []
         return self._drop(ev.t, State.TRACKING, StateReason(Because.PUSH_AFTER_LOST,
@@ -401,12 +431,15 @@ class ResultRules(OrderRules):
     def _made_under(self, ev: ResultIn, en: Selection) -> bool:
         """Whether a result fetched with the link up (a later one pushed skipped its id: its
         push lost) was made under the enable ``en`` owed now: of its pset and vehicle (where
-        it echoes one), made after the tool went on for it (beyond the clock's slack) and
-        while it was on, the link up since.  The tool is on for one bolt at a time: then
-        nothing else could have made it (a supervisor's trial: the operator pulled again,
-        the first NOK stored unattributed and uncounted, a 4th NOK before the lock)."""
+        it echoes one), the link up since the enable, and either its id after the last result
+        judged, that one judged during this enable or, the tool off after it, during the one
+        before (the tool is on for one bolt at a time: only this enable could have
+        made it), or its time after the tool went on for it (beyond the clock's slack).  Its
+        time, where known, never before the enable or after its tool went off.  A
+        supervisor's trial: the operator pulled again at once, the first NOK stored
+        unattributed and uncounted (by its time alone, within the slack, never proved)."""
         r, made = ev.result, ev.made_at
-        if not (ev.fetched and ev.live and ev.before is not None) or made is None \
+        if not (ev.fetched and ev.live and ev.before is not None) \
                 or not en.vin or self._cut is not None or self._enabled_at is None \
                 or self._enabled_at <= self._link_lost_at or not self._result_owed(ev.t):
             return False
@@ -414,7 +447,13 @@ class ResultRules(OrderRules):
         if (en.pset is not None and int(r.pset) != en.pset) or (echoed and echoed != en.vin):
             return False
         off = ev.t if self.tool_on or self._off_at is None else self._off_at
-        return self._enabled_at + CLOCK_SLACK_S <= made <= off + CLOCK_SLACK_S
+        if made is not None and not \
+                self._enabled_at - CLOCK_SLACK_S <= made <= off + CLOCK_SLACK_S:
+            return False
+        last, n = self._judged, self._enable_serial
+        ordered = last is not None and last[0] < int(r.tightening_id) and (
+            last[1] == n or (last[1] == n - 1 and not last[2]))
+        return ordered or (made is not None and made >= self._enabled_at + CLOCK_SLACK_S)
 
     def _controller_event(self, ev: ResultIn, kind: ResultKind) -> list[Action]:
         """A result that is not a tightening or a loosening (a batch increment a line lead
@@ -496,11 +535,13 @@ class ResultRules(OrderRules):
     def _on_unreadable_in(self, ev: UnreadableIn) -> list[Action]:
         """:meth:`_unreadable_read`; one pushed (its id picked out, it may be the one whose
         skipped ids were fetched) is judged as the result owed, then owed no longer."""
+        u, waited = ev.unreadable, self._pending_push
         try:
-            return self._unreadable_read(ev)
+            acts = self._unreadable_read(ev)
         finally:
-            if not ev.unreadable.fetched:
+            if not u.fetched or (u.tightening_id is not None and u.tightening_id == waited):
                 self._pending_push = None
+        return acts + self._push_judged(ev.t)
 
     def _unreadable_read(self, ev: UnreadableIn) -> list[Action]:
         """A result the driver could not read: stored whole; the bolt it may belong to (the
@@ -624,7 +665,9 @@ class ResultRules(OrderRules):
         window = self._outside_window(r, en)
         if window is not None:
             return self._not_taken(ev, en, window, cut)
-        late = not self.tool_on or cut or lost
+        # (the pushed one that skipped ids: its tool went off when they were told, not late)
+        pushed = not ev.fetched and int(r.tightening_id) == self._pending_push
+        late = (not self.tool_on and not pushed) or cut or lost
         kind = LOOSENING if result_kind(type_code(r), en.loosen) is ResultKind.LOOSENING \
             else TIGHTENING
         acts: list[Action] = []
@@ -656,6 +699,7 @@ class ResultRules(OrderRules):
                                                pset=en.pset, t=ev.t)))
                 self.matcher.mark_done(en.bolt)
                 self._noks.pop(en.bolt, None)
+                self._nok_owed.pop(en.bolt, None)
                 self._loosen.discard(en.bolt)
                 self._nok_last.discard(en.bolt)
                 self.matcher.counted.discard(en.bolt)
@@ -664,18 +708,24 @@ class ResultRules(OrderRules):
                 # rundown, its last result, says the bolt is NOK, as its records do)
                 self.matcher.done.discard(en.bolt)
                 self._nok_last.add(en.bolt)
-                if lost:    # counted; the NOK policy after the later one, pushed next (a
-                    # lock for a NOK that a later OK answered: a reviewer)
+                if lost and self._pending_push is not None:
+                    # counted; the NOK policy after the later one, pushed next (a lock for a
+                    # NOK that a later OK answered: a reviewer; :meth:`_push_judged`)
                     self._noks[en.bolt] = self._noks.get(en.bolt, 0) + 1
+                    self._nok_owed[en.bolt] = en.pset
                 else:
+                    self._nok_owed.pop(en.bolt, None)
                     acts += self._after_nok(ev.t, en.bolt, en.pset)
             self.matcher.reset()     # a new selection: a new streak, from new frames
         self._not_before = max(self._not_before, ev.t)
+        said = StateReason(Because.RESULT, bolt=en.bolt, ok=bool(r.ok), loosen=kind == LOOSENING)
         if self.bolt == en.bolt and self.vin == en.vin:   # (a reviewer: the next car's B1)
             self.bolt, self._selection, self._acked_at, self._away = None, None, None, 0
             if self.state in ON_A_BOLT:
-                self._to(State.TRACKING, StateReason(Because.RESULT, bolt=en.bolt,
-                                                     ok=bool(r.ok), loosen=kind == LOOSENING))
+                self._to(State.TRACKING, said)
+        elif pushed and self.state is State.TRACKING and self.reason == StateReason(
+                Because.PUSH_AFTER_LOST, bolt=en.bolt):
+            self._to(State.TRACKING, said)    # (it said the results not pushed came first)
         return acts
 
     def _offline(self, ev: ResultIn) -> bool:
@@ -708,12 +758,13 @@ class ResultRules(OrderRules):
             return self._lock(t, bolt, n)
         return [Publish(Notice(Said.LOOSENING_NOK, bolt=bolt, count=n, t=t))]
 
-    def _after_nok(self, t: float, bolt: str, pset: int | None) -> list[Action]:
+    def _after_nok(self, t: float, bolt: str, pset: int | None,
+                   counted: bool = False) -> list[Action]:
         """The NOK policy: the bolt locks after ``max_nok`` in a row; with ``loosen`` it gets
         its loosen pset next (also once released); with ``skip`` it is marked NOK and skipped
         for this vehicle; with ``repeat`` it is open again."""
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
-        n = self._noks[bolt] = self._noks.get(bolt, 0) + 1
+        n = self._noks[bolt] = self._noks.get(bolt, 0) + (0 if counted else 1)
         rule = self.nok.rule(bolt, self._specs[bolt].pset if bolt in self._specs else pset)
         if rule.strategy == "loosen" and rule.loosen_pset is not None:
             self._loosen.add(bolt)

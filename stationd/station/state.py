@@ -52,8 +52,12 @@ OPENING = StateReason(Because.OPENING)
 LOOSEN_TARGETS = Window(0.0, 0.0, 0.0)
 #: why a bolt to loosen is not tightened when no loosen pset applies to it (a reload removed it)
 NO_LOOSEN_PSET = Skip(SkipKind.NO_LOOSEN_PSET)
-#: unanswered enables kept per vehicle (the oldest forgotten first)
+#: unanswered enables kept, of every vehicle (the oldest forgotten first)
 UNANSWERED = 20
+#: the longest a pushed result that skipped ids is waited for after the core was told
+#: (:class:`ResultsSkipped`): the shell feeds it after the fetches, each bounded in time; a
+#: result that never comes (a fault of the shell) keeps no tool off for good
+PENDING_PUSH_S = 60.0
 
 
 @dataclass(frozen=True)
@@ -206,9 +210,18 @@ class CoreState:
     #: up (``cut_at``: when that window ended), the latest last: a result fetched late (its
     #: push lost) of one's pset, made within it, may be its bolt's, which is then held
     _unanswered: list[_Cut] = field(default_factory=list, repr=False)
-    #: a pushed result (its id) that skipped ids, fed after them (:class:`ResultsSkipped`):
-    #: the enable's result stays owed until it is in
+    #: a pushed result (its id, since when) that skipped ids, fed after them
+    #: (:class:`ResultsSkipped`): the enable's result stays owed until it is in
     _pending_push: int | None = field(default=None, repr=False)
+    _pending_at: float = field(default=0.0, repr=False)
+    #: bolts whose NOK came fetched while a pushed result was pending: counted, the NOK
+    #: policy waits for the pushed one (bolt -> its pset)
+    _nok_owed: dict[str, int | None] = field(default_factory=dict, repr=False)
+    #: the tool enables so far (each EnableTool), and the last result judged: its id, the
+    #: enable count then, the tool left on (the order of results proves under which enable
+    #: a result fetched late was made: :meth:`ResultRules._made_under`)
+    _enable_serial: int = field(default=0, repr=False)
+    _judged: tuple[int, int, bool] | None = field(default=None, repr=False)
     # the station's start or the controller's last fault: a result fetched afterwards was
     # made before it, so never under an enable that came later
     _link_lost_at: float = field(default=float("-inf"), repr=False)
@@ -421,11 +434,8 @@ class CoreState:
         fetched later, its push lost, is held against them): a supervisor's trial found the
         last bolt's result, its push lost, stored under the next vehicle and that bolt
         neither recorded nor held."""
-        # (the unanswered of the car before it are forgotten: a result of unknown time held
-        # the bolts of every car that left with one, a reviewer)
-        self._unanswered = [u for u in self._unanswered if u.selection.vin == self.vin]
         self.vin, self.model, self.matcher, self._specs = None, None, None, {}
-        self._loosen, self._nok_last = set(), set()
+        self._loosen, self._nok_last, self._nok_owed = set(), set(), {}
         self._loading = False
         self._vin_for, self._vin_pending, self._last_refusal = None, False, None
 

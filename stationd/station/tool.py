@@ -69,6 +69,7 @@ class ToolRules(FaultRules):
                                                        loosen=sel.loosen))
                 self._unanswered_before(sel)
                 self.tool_on, self._enabled, self._off_at = True, sel, None
+                self._enable_serial += 1
                 self._enabled_at = ev.t
                 acts.append(EnableTool(self.bolt, sel))
             return acts

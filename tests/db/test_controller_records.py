@@ -160,3 +160,10 @@ def test_a_bolt_is_held_until_a_rundown_or_a_release_after_its_unreadable_result
     # the journal's close line counts a bolt still held (a review: it did not)
     _unreadable(repo, 7, "B2", raw=RAW + "7")
     assert ", 1 held (B2)" in repo.close_vehicle("VIN1").counts()
+    # ... and the hold outlives the vehicle's reopening for rework: its result is still not
+    # known (a supervisor's trial: gone at the reopening the journal asked for)
+    repo.reopen_vehicle("VIN1", at=datetime.now(UTC) + timedelta(seconds=3), user="sam",
+                        source="cli", comment="rework")
+    repo.start_vehicle("VIN1", "SEDAN")
+    assert repo.vehicle_report("VIN1", held=True).held == (("B2", "tightening 7"),)
+    assert set(repo.holds("VIN1")) == {"B2"}

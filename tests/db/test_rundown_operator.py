@@ -64,13 +64,17 @@ def test_the_feed_report_and_exports_carry_the_operator_or_none(sedan, tmp_path,
 
 def test_the_station_records_the_selections_operator_also_for_an_owed_enable(tmp_path,
                                                                               bolts_file):
-    cfg, records, repo, sel = b1_selected(tmp_path, bolts_file, 1, operator="olga")
+    cfg, records, repo, sel = b1_selected(tmp_path, bolts_file, 1, operator="olga",
+                                          torque_window=(45.0, 55.0))
     records.note_enable(sel)            # the station stops with the tool on
     repo.close()
     again = Records(cfg)
     repo = again.open()
     owed = again.owed(late_result_s=60.0)
     assert owed is not None and owed.selection.operator == "olga"
+    # its torque window too: an OK without a type outside it is not taken for B1 after the
+    # restart either (a reviewer)
+    assert owed.selection.torque_window == (45.0, 55.0)
     result = SimpleNamespace(tightening_id=7, pset=1, ok=True, torque_nm=50.0, angle_deg=30.0)
     again.write(again.unsaved_result(Record("VIN1", "B1", result, owed.selection), None))
     assert [r["operator"] for r in Results(repo).rundowns("VIN1")] == ["olga"]

@@ -386,3 +386,53 @@ def test_a_push_that_skips_ids_is_told_first_and_fed_after_the_ones_it_skipped()
     assert _order(fed) == [("ResultsSkipped", 43, False, None), ("ResultIn", 43, False, None)]
     fed = _pushed(Controller({}), 41, 40)          # nothing skipped: nothing told
     assert _order(fed) == [("ResultIn", 41, False, None)]
+
+
+def test_a_stop_while_skipped_ids_are_fetched_ends_and_keeps_the_pushed_one():
+    """The daemon stops (or reloads) while a pushed result's skipped ids are fetched: the
+    stop holds the station's lock, cancels the results' task and waits for it (Station.run).
+    It ends at once, the pushed result left in ``received`` for the stop's drain (a
+    reviewer: feeding it on the way out waited for the lock the stop held, the daemon hung)."""
+    fetching, release = threading.Event(), threading.Event()
+
+    class Slow(Controller):
+        def fetch_result(self, tid: int, timeout: float | None = None) -> Any:
+            fetching.set()
+            release.wait(2.0)       # a slow MID 0064 round trip
+            return res(tid)
+
+    controller = Slow({})
+    sent = threading.Event()
+
+    def wait_result(timeout: float, acknowledge: bool = False) -> Any:
+        if sent.is_set():
+            return None
+        sent.set()
+        return res(43)
+
+    controller.wait_result = wait_result
+
+    async def main() -> tuple[bool, list[Any]]:
+        lock = asyncio.Lock()
+
+        async def feed(ev: Any) -> None:       # Station.feed: under the station's lock
+            async with lock:
+                pass
+
+        pool = ThreadPoolExecutor(2)
+        feed_ = _feed_of(controller, 40, None, [], pool)
+        feed_._feed = feed
+        feed_._accounted = 40
+        task = asyncio.create_task(feed_.results(controller))
+        while not fetching.is_set():
+            await asyncio.sleep(0.01)
+        async with lock:                       # Station.run's stop
+            task.cancel()
+            done, _ = await asyncio.wait({task}, timeout=30)
+        release.set()
+        pool.shutdown()
+        feed_.close()
+        return bool(done), [r.tightening_id for r in feed_.received]
+
+    ended, kept = asyncio.run(main())
+    assert ended and kept == [43]

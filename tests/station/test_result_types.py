@@ -32,6 +32,7 @@ from stationd.station.events import (
     Because,
     BoltLocked,
     BoltReleased,
+    BoltSkipped,
     ControllerResultEvent,
     Notice,
     ResultUnreadable,
@@ -44,6 +45,7 @@ from stationd.station.inputs import (
     CaughtUp,
     DeviceBack,
     DeviceFault,
+    ResultCopy,
     ResultIn,
     ResultsSkipped,
     Tick,
@@ -51,6 +53,7 @@ from stationd.station.inputs import (
     VehicleLoaded,
 )
 from stationd.station.policy import NokPolicy, NokRule
+from stationd.station.state import PENDING_PUSH_S
 from stationd.words import (
     notice_words,
     reason_words,
@@ -939,12 +942,13 @@ def test_a_lost_push_of_a_car_that_left_is_held_against_that_car_and_filed_under
 # -- a lost push under the bolt's own enable, the operator pulling again ---------------------------
 def _pulled_twice(d: Driver, first_ok: bool, second_ok: bool, made: float = 3.0) -> list[Any]:
     """B1 enabled; tightening 41 made ``made`` s after (its push lost), 42 pushed: the shell
-    fetches 41 first (the link up), then feeds 42.  The actions of both."""
+    tells the core, fetches 41 (the link up), then feeds 42.  The actions of all."""
     _enabled(d, 1)
     enabled_at = d.t
     d.t += 5.0
-    acts = d.feed(ResultIn(d.t, res(41, 1, first_ok, 1), fetched=True, follows=40,
-                           made_at=enabled_at + made, live=True, before=42))
+    acts = d.feed(ResultsSkipped(d.t, 42))
+    acts += d.feed(ResultIn(d.t, res(41, 1, first_ok, 1), fetched=True, follows=40,
+                            made_at=enabled_at + made, live=True, before=42))
     return acts + d.feed(ResultIn(d.t, res(42, 1, second_ok, 1)))
 
 
@@ -1061,3 +1065,128 @@ def test_the_last_car_s_late_result_leaves_the_next_car_s_bolt_of_that_name_sele
     assert [(a.vin, a.bolt) for a in acts if isinstance(a, Record)] == [("VIN1", "B1")]
     assert d.core.bolt == "B1" and d.core.state is State.BOLT_SELECTED
     assert "B1" not in d.core.matcher.done
+
+
+def _lost_nok_then(d: Driver, pushed: Any) -> list[Any]:
+    """B1 enabled; its NOK 41 (push lost) fetched after the core was told 42 skipped it,
+    then ``pushed`` (id 42) fed.  The actions of all."""
+    _enabled(d, 1)
+    enabled_at = d.t
+    d.t += 5.0
+    acts = d.feed(ResultsSkipped(d.t, 42))
+    acts += d.feed(ResultIn(d.t, res(41, 1, False, 1), fetched=True, follows=40,
+                            made_at=enabled_at + 3.0, live=True, before=42))
+    return acts + d.feed(ResultIn(d.t, pushed))
+
+
+@pytest.mark.parametrize("strategy", ["repeat", "skip"])
+def test_a_lost_nok_revealed_by_no_rundown_of_its_bolt_gets_its_nok_policy(strategy):
+    """The push that revealed B1's lost NOK is a batch increment (no rundown): the NOK
+    policy waiting for it applies then (a reviewer: B1 neither locked nor skipped)."""
+    d = _ready(nok=NokPolicy(NokRule(max_nok=1 if strategy == "repeat" else 3,
+                                     strategy=strategy)))
+    acts = _lost_nok_then(d, res(42, 1, True, 3))
+    assert [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)] \
+        == [("B1", 41)]
+    if strategy == "repeat":
+        assert [e.bolt for e in published(acts, BoltLocked)] == ["B1"]
+        assert d.core.matcher.locked["B1"] == 1
+    else:
+        assert [e.bolt for e in published(acts, BoltSkipped)] == ["B1"]
+    assert "B1" not in d.core.allowed()
+
+
+def test_the_pushed_result_after_skipped_ones_is_no_late_result():
+    """Its tool went off when the core was told ids were skipped, not because the operator
+    left: the pushed one is recorded as the rundown's own (not late), and the state says its
+    result (a reviewer: 'late result', the reason left on the skipped ones)."""
+    d = _ready()
+    acts = _lost_nok_then(d, res(42, 1, True, 1))
+    recs = [a for a in acts if isinstance(a, Record)]
+    assert [(int(a.result.tightening_id), a.late) for a in recs] == [(41, True), (42, False)]
+    assert not [n for n in published(acts, Notice) if n.said is Said.LATE_RESULT]
+    assert d.core.reason == StateReason(Because.RESULT, bolt="B1", ok=True)
+
+
+def test_a_pushed_result_waited_for_is_only_ended_by_itself_or_in_time():
+    """Told 43 skipped ids: a copy of another id (42) ends nothing (a reviewer: it ended the
+    wait, 43 then unattributed and B1 left open); 43 never fed (a fault of the shell), the
+    wait ends after PENDING_PUSH_S (or at the catch-up's end), and no tool stays off for
+    good."""
+    d = _ready()
+    _enabled(d, 1)
+    d.t += 1.0
+    d.feed(ResultsSkipped(d.t, 43))
+    d.feed(ResultCopy(d.t, res(42, 1, True, 1), "VIN1", "B1"))
+    d.t += d.core.late_result_s + 1
+    d.feed(Tick(d.t))
+    acts = d.feed(ResultIn(d.t, res(43, 1, True, 1)))
+    assert [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)] \
+        == [("B1", 43)]
+    d = _ready()
+    _enabled(d, 1)
+    d.feed(ResultsSkipped(d.t, 43))
+    d.t += PENDING_PUSH_S - 1
+    d.feed(Tick(d.t))
+    _on(d, 2)
+    d.step(("ack", 0.01, True))
+    _on(d, 2, 1)
+    assert not d.core.tool_on                   # still waited for
+    d.t += 2.0
+    d.feed(Tick(d.t))
+    d.t += d.core.late_result_s
+    _on(d, 2, 1)
+    assert d.core.tool_on and d.core.bolt == "B2"
+
+
+def test_a_lost_push_of_a_car_two_cars_back_still_holds_its_bolt():
+    """VIN1's last bolt, its push lost; VIN2 comes and goes; VIN3's first push reveals the
+    lost one, made within B1's enable: B1 of VIN1 is held, stored for when VIN1 is back (a
+    reviewer: forgotten when VIN2 left)."""
+    d = _ready()
+    enabled_at = _last_bolt_then_the_lift_down(d)
+    d.t += d.core.late_result_s + 1.0
+    d.feed(Tick(d.t))
+    for vin, up in (("VIN2", True), ("VIN2", False), ("VIN3", True)):
+        d.step(("lift", 30.0, up, up, vin))
+    assert d.core.vin == "VIN3"
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=40,
+                           made_at=enabled_at + 0.5, live=True))
+    assert [(a.vin, a.bolt) for a in acts if isinstance(a, StoreCutUnknown)] == \
+        [("VIN1", "B1")]
+
+
+def test_a_lost_push_is_placed_by_the_order_of_ids_when_its_time_cannot_tell():
+    """B2's result 40 came (its tool off after it), then B1 enabled; 41 (its push lost, made
+    within the clock's slack of the enable, or its time unknown) then 42 pushed: no enable
+    but B1's came after 40, so 41 is B1's (a supervisor's trial: the operator pulled again
+    at once, the NOK stored unattributed).  Where the tool stayed on after 40 (a batch
+    increment during B2's enable) B2's enable may have made 41: not taken for B1."""
+    for made in (0.5, None):
+        d = _ready()
+        _enabled(d, 2)
+        d.feed(ResultIn(d.t, res(40, 2, True, 1)))
+        _enabled(d, 1)
+        enabled_at = d.t
+        d.t += 1.0
+        acts = d.feed(ResultsSkipped(d.t, 42))
+        acts += d.feed(ResultIn(d.t, res(41, 1, False, 1), fetched=True, follows=40,
+                                made_at=None if made is None else enabled_at + made,
+                                live=True, before=42))
+        acts += d.feed(ResultIn(d.t, res(42, 1, True, 1)))
+        assert [(a.bolt, int(a.result.tightening_id)) for a in acts
+                if isinstance(a, Record)] == [("B1", 41), ("B1", 42)], made
+    d = _ready()
+    _enabled(d, 2)
+    d.feed(ResultIn(d.t, res(40, 2, True, 3)))        # an event: B2's tool stays on
+    assert d.core.tool_on
+    _on(d, 3, 3)                                       # the wrench leaves B2
+    d.t += d.core.late_result_s + 1.0
+    d.feed(Tick(d.t))
+    _enabled(d, 1)
+    enabled_at = d.t
+    d.t += 1.0
+    d.feed(ResultsSkipped(d.t, 42))
+    acts = d.feed(ResultIn(d.t, res(41, 1, False, 1), fetched=True, follows=40,
+                           made_at=enabled_at + 0.5, live=True, before=42))
+    assert not [a for a in acts if isinstance(a, Record)]
