@@ -356,6 +356,15 @@ class ResultRules(OrderRules):
                                        "(not proved by the controller's data)")
 
     def _on_caught_up(self, ev: CaughtUp) -> list[Action]:
+        """:meth:`_cut_caught_up`; a pushed result waited for since ids it skipped were told
+        is waited for no longer (the reconnect's catch-up fed what the controller has)."""
+        owed: list[Action] = []
+        if self._pending_push is not None:
+            self._pending_push = None
+            owed = self._push_judged(ev.t)
+        return owed + self._cut_caught_up(ev)
+
+    def _cut_caught_up(self, ev: CaughtUp) -> list[Action]:
         """The catch-up after a reconnect ended.  A link cut's result still owed was not among
         the results fetched: where they are all of them, none was made (the bolt open as
         before); else what the controller did is not known, and the bolt is held."""

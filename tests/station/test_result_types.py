@@ -1126,6 +1126,9 @@ def test_a_pushed_result_waited_for_is_only_ended_by_itself_or_in_time():
     d = _ready()
     _enabled(d, 1)
     d.feed(ResultsSkipped(d.t, 43))
+    d.feed(CaughtUp(d.t, True, "", 0))
+    assert d.core._pending_push is None          # a catch-up's end: no longer waited for
+    d.feed(ResultsSkipped(d.t, 43))
     d.t += PENDING_PUSH_S - 1
     d.feed(Tick(d.t))
     _on(d, 2)
