@@ -65,6 +65,10 @@ class ControllerFeed:
         self.received: list[Received] = []
         self._waiting: Future[Received | None] | None = None
         self.catching_up: asyncio.Task[None] | None = None
+        #: asking the controller for its newest result (:meth:`check_newest`)
+        self.checking: asyncio.Task[None] | None = None
+        #: one gap handled at a time (a push that skips ids, a check of the newest)
+        self._gaps = asyncio.Lock()
         #: the newest tightening id accounted for on this link (a result pushed, or the
         #: controller's newest when the catch-up asked for it; None: not known yet since the
         #: last (re)connect): a pushed result further on than the next is a live gap
@@ -365,7 +369,45 @@ class ControllerFeed:
             await self._fetched(wrench, tid, got, follows, offset)
         return unknown
 
+    def check_newest(self) -> None:
+        """The core's :class:`CheckNewest`: the controller's newest result asked for, and the
+        ids after the last one heard fetched (their pushes lost), in a task of its own (it
+        feeds the core, whose lock the caller holds).  None while one runs or a catch-up
+        does (that one fetches them)."""
+        busy = [t for t in (self.checking, self.catching_up) if t is not None and not t.done()]
+        if not busy:
+            self.checking = asyncio.get_running_loop().create_task(self._check_newest())
+
+    async def _check_newest(self) -> None:
+        wrench = self._keeper.device
+        if wrench is None or not wrench.can_fetch or self.records.repo is None \
+                or not self._keeper.up or self._keeper.losing or self._accounted is None:
+            return      # (no id to count from: a reconnect's catch-up counts from the records)
+        async with self._gaps:
+            last = self._accounted
+            try:
+                newest = await self._call(wrench.fetch_result, 0)
+                if newest is None or newest.tightening_id is None \
+                        or int(newest.tightening_id) <= self._accounted:
+                    return
+                nid = int(newest.tightening_id)
+                self._accounted, self._revealed_by = nid, None
+                ids = str(nid) if nid == last + 1 else f"{last + 1}-{nid}"
+                log.warning("results: the controller's newest tightening is %d, the last one "
+                            "heard %d: %s not pushed by the controller (the link up), fetched",
+                            nid, last, ids)
+                await self._fetch(wrench, plan_gaps(last, nid), last, newest, live=True)
+            except (RefusedError, DeviceError, ValueError) as exc:
+                log.warning("the controller's newest result not read: %s", one_line(exc))
+            except STATION_FAULTS as exc:
+                log.error("the controller's newest result not read: %s", one_line(exc))
+
     async def _live_gap(self, wrench: Wrench, got: Received) -> None:
+        """:meth:`_live_gap_alone`, one gap at a time (:meth:`check_newest`'s too)."""
+        async with self._gaps:
+            await self._live_gap_alone(wrench, got)
+
+    async def _live_gap_alone(self, wrench: Wrench, got: Received) -> None:
         """A pushed result whose tightening id skips ahead of the last one accounted for on
         this link: the ids between were made and never pushed (a push lost with the link
         up).  They are fetched as after a reconnect, at most ``MAX_FETCH`` (older ones are

@@ -128,11 +128,11 @@ class Station:
             DATABASE, self._database, self.records.probe, _leave_open)
         self.tracker = Tracker(self.cfg, self.core, self.pair_keepers, self.bus, self.feed,
                                cameras)
-        self.effects = Effects(self.core, self.records, self.wrench_keeper,
-                               self.database_keeper, self.bus, self.notifier, call,
-                               self.tracker.request_check)
         self.controller = ControllerFeed(self.core, self.records, self.wrench_keeper,
                                          self.feed, self.tell, call)
+        self.effects = Effects(self.core, self.records, self.wrench_keeper,
+                               self.database_keeper, self.bus, self.notifier, call,
+                               self.tracker.request_check, self.controller.check_newest)
 
     def _keeper(self, device: str, opener: Callable[[], D], reconnect: Callable[[D], None],
                 close: Callable[[D], None], blocking: Blocking | None = None
@@ -318,8 +318,8 @@ class Station:
             await stop.wait()
         finally:
             async with self._lock:   # never cut an event's actions (a record) in half
-                if self.controller.catching_up is not None:
-                    tasks.append(self.controller.catching_up)
+                tasks += [t for t in (self.controller.catching_up, self.controller.checking)
+                          if t is not None]
                 for t in tasks:
                     t.cancel()
                 await asyncio.gather(*tasks, return_exceptions=True)

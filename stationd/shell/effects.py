@@ -32,6 +32,7 @@ from stationd.shell.sdnotify import Notifier
 from stationd.station.actions import (
     Acknowledge,
     Action,
+    CheckNewest,
     CloseVehicle,
     DisableTool,
     EnableTool,
@@ -122,9 +123,11 @@ class Effects:
 
     def __init__(self, core: StationCore, records: Records, wrench: DeviceKeeper[Wrench],
                  database: DeviceKeeper[Repository], bus: EventBus, notifier: Notifier,
-                 call: Blocking, measure: Callable[[MeasureReferences], None]) -> None:
+                 call: Blocking, measure: Callable[[MeasureReferences], None],
+                 check_newest: Callable[[], None] = lambda: None) -> None:
         self.core, self.records, self.bus, self.notifier = core, records, bus, notifier
         self._measure = measure
+        self._check_newest = check_newest    # started, never waited for (it feeds the core)
         self._wrench, self._database, self._call = wrench, database, call
         self.answers: dict[int, asyncio.Future[Answer]] = {}   # request -> who waits
         self.refusals = RefusalJournal()   # each refusal journaled once, then counted
@@ -219,6 +222,8 @@ class Effects:
                                  "database is back): %s", a.bolt, one_line(exc))
         elif isinstance(a, Reply):
             self._reply(a.answer)
+        elif isinstance(a, CheckNewest):
+            self._check_newest()
         elif isinstance(a, MeasureReferences):
             self._measure(a)
         elif isinstance(a, RecordCheck):

@@ -215,6 +215,15 @@ class SettleEnable:
 
 
 @dataclass(frozen=True)
+class CheckNewest:
+    """An enable's late-result window ended without its result, the link up: the controller
+    is asked for its newest result (its push may have been lost: the operator left the bolt,
+    or the car left with it), and the ids the station never heard are fetched.  Why: else
+    only the next result pushed revealed it, a car later where it was a car's last bolt (a
+    supervisor's trial: the car closed with the bolt missing, its hold came with the next)."""
+
+
+@dataclass(frozen=True)
 class StoreCutUnknown:
     """Store that ``bolt`` of ``vin`` is held because the link to the controller went down
     while the tool was enabled for it (``selection``, settled with it) and what the controller
@@ -251,5 +260,5 @@ class Reply:
 
 Action = (SendParams | EnableTool | DisableTool | SendVin | LoadVehicle | CloseVehicle | Record
           | Acknowledge | StoreUnattributed | StoreGap | StoreControllerEvent | StoreUnreadable
-          | StoreCutUnknown | SettleEnable | Publish
+          | StoreCutUnknown | SettleEnable | CheckNewest | Publish
           | RecordCommand | NoteLock | Reply | MeasureReferences | RecordCheck)

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 from typing import assert_never
 
-from stationd.station.actions import Action, Publish
+from stationd.station.actions import Action, CheckNewest, Publish
 from stationd.station.events import StateChanged
 from stationd.station.inputs import (
     Announce,
@@ -164,7 +164,8 @@ class StationCore(LiftRules, ToolRules, ResultRules):
         acts = self._pending_overdue(ev.t)
         if self._off_at is not None and ev.t - self._off_at >= self.late_result_s \
                 and self._pending_push is None:
-            self._unanswered_after()
+            if self._unanswered_after():   # its push lost? the controller is asked
+                acts.append(CheckNewest())
             self._enabled, self._off_at = None, None
         return acts + self._teach_overdue(ev.t) + self._check_due(ev.t) + \
             self._operator_idle(ev.t)

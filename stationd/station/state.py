@@ -347,7 +347,7 @@ class CoreState:
         self.matcher.held[bolt] = note
         return note
 
-    def _unanswered_before(self, sel: Selection) -> None:
+    def _unanswered_before(self, sel: Selection) -> bool:
         """The tool goes on for ``sel``: the enable before it, where its result never came
         (its late-result window ended, the link up), is remembered as unanswered, so that a
         result fetched later because its push was lost is checked against it (a quality
@@ -355,10 +355,10 @@ class CoreState:
         bolt again forgets it (what is made now is its own)."""
         prev = self._enabled
         self._answered_bolt(sel.vin, sel.bolt)
-        if prev is not None and (prev.vin, prev.bolt) != (sel.vin, sel.bolt):
-            self._unanswered_after()
+        return prev is not None and (prev.vin, prev.bolt) != (sel.vin, sel.bolt) \
+            and self._unanswered_after()
 
-    def _unanswered_after(self) -> None:
+    def _unanswered_after(self) -> bool:
         """The enable owed a result (``_enabled``, its tool off) gets none in its window:
         remembered as unanswered (:meth:`_unanswered_before`) where the link stayed up from
         its enable on (a link cut's enable is the catch-up's to settle)."""
@@ -367,6 +367,8 @@ class CoreState:
             self._answered_bolt(self._enabled.vin, self._enabled.bolt)
             self._unanswered = [*self._unanswered, _Cut(
                 self._enabled, self._enabled_at, self._off_at + self.late_result_s)][-UNANSWERED:]
+            return True
+        return False
 
     def _answered_bolt(self, vin: str, bolt: str) -> None:
         """``bolt``'s (of vehicle ``vin``) unanswered enables no longer count: its own result

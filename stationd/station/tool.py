@@ -9,7 +9,14 @@ import numpy as np
 from db.bolts import Parameters
 from drivers.keeper import FaultKind
 from stationd.reasons import CoreFault, CoreFaultKind, Reason, Skip, SkipKind, Why
-from stationd.station.actions import Action, EnableTool, Publish, Selection, SendParams
+from stationd.station.actions import (
+    Action,
+    CheckNewest,
+    EnableTool,
+    Publish,
+    Selection,
+    SendParams,
+)
 from stationd.station.events import (
     Because,
     BoltSelected,
@@ -67,7 +74,8 @@ class ToolRules(FaultRules):
                     return acts
                 self._to(State.TIGHTENING, StateReason(Because.TIGHTENING, bolt=self.bolt,
                                                        loosen=sel.loosen))
-                self._unanswered_before(sel)
+                if self._unanswered_before(sel):   # its push lost? asked, not waited for
+                    acts.append(CheckNewest())
                 self.tool_on, self._enabled, self._off_at = True, sel, None
                 self._enable_serial += 1
                 self._enabled_at = ev.t

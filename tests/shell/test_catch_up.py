@@ -436,3 +436,28 @@ def test_a_stop_while_skipped_ids_are_fetched_ends_and_keeps_the_pushed_one():
 
     ended, kept = asyncio.run(main())
     assert ended and kept == [43]
+
+
+def test_the_controller_s_newest_asked_for_fetches_what_was_never_heard():
+    """The core asks (an enable's window ended without its result): the controller's newest
+    (42) is after the last one heard (40): 41 and 42 are fetched and fed, with the link up,
+    as results whose push was lost; a newest already heard fetches nothing."""
+    def asked(answers: dict[int, Any], heard: int) -> list[Any]:
+        fed: list[Any] = []
+
+        async def main() -> None:
+            with ThreadPoolExecutor(2) as pool:
+                feed_ = _feed_of(Controller(answers), heard, None, fed, pool)
+                feed_._accounted = heard
+                feed_.check_newest()
+                await asyncio.gather(*(t for t in (feed_.checking,) if t is not None))
+                feed_.close()
+
+        asyncio.run(main())
+        return fed
+
+    fed = asked({0: res(42), 41: res(41), 42: res(42)}, 40)
+    assert [(e.result.tightening_id, e.fetched, e.live, e.before) for e in fed
+            if isinstance(e, ResultIn)] == [(41, True, True, None), (42, True, True, None)]
+    assert not asked({0: res(40)}, 40)
+    assert not asked({0: REFUSED}, 40)          # refused: said in the journal, nothing fed

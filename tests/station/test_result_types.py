@@ -18,6 +18,7 @@ from drivers.keeper import FaultKind
 from drivers.wrench import ResultKind, UnreadableResult, result_kind
 from stationd.reasons import Reason, Unattributed, UnattributedKind, Unproved, UnprovedKind, Why
 from stationd.station.actions import (
+    CheckNewest,
     DisableTool,
     Publish,
     Record,
@@ -1193,3 +1194,24 @@ def test_a_lost_push_is_placed_by_the_order_of_ids_when_its_time_cannot_tell():
     acts = d.feed(ResultIn(d.t, res(41, 1, False, 1), fetched=True, follows=40,
                            made_at=enabled_at + 0.5, live=True, before=42))
     assert not [a for a in acts if isinstance(a, Record)]
+
+
+def test_an_enable_left_without_its_result_asks_the_controller_for_its_newest():
+    """B1's window ends with no result (the operator left it, or its car left): the core
+    asks for the controller's newest result (its push may be lost), once; at the next
+    enable too when that comes first."""
+    d = _ready()
+    _enabled(d, 1)
+    _on(d, 2, 3)
+    d.t += d.core.late_result_s + 1.0
+    acts = d.feed(Tick(d.t))
+    assert [a for a in acts if isinstance(a, CheckNewest)]
+    d.t += 1.0
+    assert not [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    d = _ready()
+    _enabled(d, 1)
+    _on(d, 3, 3)                                   # the wrench leaves B1, no Tick since
+    d.t += d.core.late_result_s + 1.0
+    n = len(d.log)
+    _enabled(d, 2)
+    assert [a for _, acts in d.log[n:] for a in acts if isinstance(a, CheckNewest)]
