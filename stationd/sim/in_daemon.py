@@ -117,16 +117,17 @@ def _geometry(cfg: StationConfig) -> bytes:
     return pickle.dumps((cfg.pairs, cfg.marker, cfg.references, cfg.cameras))
 
 
-def left_at_height(cfg: StationConfig) -> str | None:
-    """The vehicle the station's database says was at the station, not closed, when the last
-    daemon stopped (its lift still up); None where there is none or the database cannot say
-    (not there yet, not readable: a simulation starts empty then)."""
+def left_by_the_last_run(cfg: StationConfig) -> tuple[str | None, int | None]:
+    """What the last daemon left, as the station's database says: the vehicle at the station,
+    not closed (its lift still up: a real PLC keeps it), and the newest controller tightening
+    id recorded (a real controller's count goes on); None each where there is none or the
+    database cannot say (not there yet, not readable: a simulation starts empty then)."""
     try:
         with Repository.open(cfg.database_url, read_only=True) as repo:
-            return repo.at_station()
+            return repo.at_station(), repo.last_tightening_id()
     except (DbError, StationError, SQLAlchemyError, OSError) as exc:
-        log.debug("no vehicle left at height read from %s: %s", cfg.database_url, exc)
-        return None
+        log.debug("nothing of a last run read from %s: %s", cfg.database_url, exc)
+        return None, None
 
 
 def _model_code(cfg: StationConfig) -> int:
@@ -172,7 +173,7 @@ class SimulatedStation:
         self._staying: str | None = None    # its VIN, at working height: the operator goes on
         #: the vehicle the last daemon left at height (its database says): the first
         #: station's lift starts with it, as a real PLC keeps it through a restart
-        self._left_up: str | None = left_at_height(cfg)
+        self._left_up, self._last_id = left_by_the_last_run(cfg)
         self._across = "reload"     # what the vehicle staying stayed across
         #: the last station's simulated controller: the next one goes on from it
         self._controller: SimController | None = None
@@ -336,6 +337,9 @@ class SimulatedStation:
         before, self._controller = self._controller, wrench.controller
         if before is not None and before is not wrench.controller:
             wrench.controller.go_on_from(before)
+        elif before is None and self._last_id is not None:    # the daemon's first station
+            wrench.controller.go_on_after(self._last_id, self.seed)
+        self._last_id = None
         if cfg.bolts_path is None:
             return
         try:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import re
 import signal
+import sqlite3
 import urllib.request
 from collections.abc import Callable
 from pathlib import Path
@@ -173,10 +174,11 @@ def test_the_vehicle_at_height_stays_on_the_simulated_lift_across_a_restart(tmp_
     try:
         vin = d.wait(r"simulated operator: vehicle (\w{17}) \(lift code 1\) arrives", 120)[1]
         d.wait(rf"vehicle {vin} \(SIM-1\) opened", 60)
-        d.wait(r"tightening: tightening bolt B\d\d", 300)
+        d.wait(r"tracking: bolt B\d\d (OK|NOK)", 300)
     finally:
         code = d.stop()
     assert code == 0, d.log()[-3000:]
+    first = _tightening_ids(tmp_path)
     d = Daemon(tmp_path, "--sim-operator")
     try:
         d.wait(rf"simulated lift: vehicle {vin} still at height from the last run", 120)
@@ -185,9 +187,27 @@ def test_the_vehicle_at_height_stays_on_the_simulated_lift_across_a_restart(tmp_
         d.wait(rf"vehicle {vin} \(SIM-1\) opened", 120)
         journal = d.log()
         assert "arrives" not in journal.split(f"vehicle {vin} (SIM-1) opened")[0], journal
+        d.wait(r"tracking: bolt B\d\d (OK|NOK)", 300)
     finally:
         code = d.stop()
     assert code == 0, d.log()[-3000:]
+    # the simulated controller's count went on as a real one's does: its new rundowns are
+    # new results, none taken for a copy of one stored (a supervisor's trial: ids from 1
+    # again with the same values, a real rundown's values thrown away)
+    ids = _tightening_ids(tmp_path)
+    assert len(ids) > len(first) and min(set(ids) - set(first)) > max(first)
+    assert "sent again" not in d.log()
+
+
+def _tightening_ids(tmp: Path) -> list[int]:
+    """The controller's tightening ids the station recorded to bolts, in order."""
+    con = sqlite3.connect(tmp / "station.db")
+    try:
+        return [int(t) for (t,) in con.execute(
+            "SELECT tightening_id FROM tightening_records WHERE tightening_id IS NOT NULL "
+            "ORDER BY id")]
+    finally:
+        con.close()
 
 
 @pytest.mark.timeout(600)

@@ -302,6 +302,21 @@ class SimController(OpenProtocolServer):
             self._tid, self._store, self._unacked = 0, OrderedDict(), {}
         self.call(clear)
 
+    def go_on_after(self, last_id: int, seed: int) -> None:
+        """Number on after tightening ``last_id`` (the newest its station recorded), its
+        scatter drawn anew from ``seed`` and that id: the station restarted, and a real
+        controller outlives that with its count.  A simulator built anew numbered from 1 with
+        the same scatter, and the station took its new results for copies of stored ones (a
+        supervisor's trial: a real rundown's values thrown away).  What it kept for MID 0064
+        is gone with the last process, as after a controller's own restart."""
+        def take() -> None:
+            self._tid = max(self._tid, int(last_id))
+            self._rng.seed(f"{seed}:{last_id}")
+        if self._thread is None:
+            take()
+        else:
+            self.call(take)
+
     def go_on_from(self, before: SimController) -> None:
         """Go on where ``before`` (closed: the simulator of the same controller, built by the
         daemon before a reload) stopped: its tightening ids, its batch counter, the results

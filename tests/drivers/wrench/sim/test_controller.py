@@ -159,6 +159,24 @@ def test_batch_counter_and_status():
     assert (second.batch_counter, second.batch_status) == (2, 1)
 
 
+def test_a_new_simulator_of_a_restarted_station_numbers_on_with_other_values():
+    """The station restarted (a new simulator in its process): the controller's count goes
+    on after the newest id recorded, its values drawn anew (the same seed from 1 made the
+    same values under the same ids: taken for copies of stored results)."""
+    made = []
+    for last in (None, 40):
+        with SimController({1: SimPset(10, 9, 11, 30, 20, 40)}, seed=3) as sim:
+            if last is not None:
+                sim.go_on_after(last, 3)
+            sim.call(lambda s=sim: setattr(s, "pset", 1))
+            sim.call(lambda s=sim: setattr(s, "tool_enabled", True))
+            shot = sim.pull_trigger()
+            assert shot is not None
+            made.append((shot.tightening_id, shot.torque_nm, shot.angle_deg))
+    assert [m[0] for m in made] == [1, 41]
+    assert made[0][1:] != made[1][1:]
+
+
 def test_bad_settings_are_refused():
     with pytest.raises(ValueError, match="nok_rate"):
         SimController(nok_rate=1.5)
