@@ -67,7 +67,7 @@ SIM_OPERATOR = Issuer("operator", frozenset(), "sim operator")
 #: the role whose users hold the tool: the scripted operator signs in as one of them
 OPERATOR_ROLE = "operator"
 #: the journal's line for an idle simulated lift (said once per daemon)
-IDLE_LINE = ("simulated lift: down, no vehicle; raise it with 'next' (a new vehicle at "
+IDLE_LINE = ("simulated lift: {now}; raise it with 'next' (a new vehicle at "
              "working height) on the daemon's standard input ({help}), or run stationd run "
              "with --sim-operator for a scripted operator")
 
@@ -239,7 +239,11 @@ class SimulatedStation:
                      counted(len(sim_pairs(cfg)), "pair"), who)
         if not scripted and self._plc is not None and not self._told:
             self._told = True
-            log.info(IDLE_LINE.format(help=HELP.removeprefix("commands: ")
+            up = self._plc.state()
+            # (a vehicle the last run left at height is up: not said "down" after it, a trial)
+            now = f"vehicle {up.vin} at working height" if up.at_working_height and up.vin \
+                else "down, no vehicle"
+            log.info(IDLE_LINE.format(now=now, help=HELP.removeprefix("commands: ")
                                       .removesuffix(" | quit")))
         try:
             if scripted:

@@ -179,6 +179,13 @@ def test_the_vehicle_at_height_stays_on_the_simulated_lift_across_a_restart(tmp_
         code = d.stop()
     assert code == 0, d.log()[-3000:]
     first = _tightening_ids(tmp_path)
+    d = Daemon(tmp_path)            # idle: the lift said as it is (not "down" after it)
+    try:
+        d.wait(rf"simulated lift: vehicle {vin} at working height; raise it with 'next'", 120)
+        assert "down, no vehicle" not in d.log()
+    finally:
+        code = d.stop()
+    assert code == 0, d.log()[-3000:]
     d = Daemon(tmp_path, "--sim-operator")
     try:
         d.wait(rf"simulated lift: vehicle {vin} still at height from the last run", 120)
