@@ -69,6 +69,7 @@ class ControllerFeed:
         self.checking: asyncio.Task[None] | None = None
         #: one gap handled at a time (a push that skips ids, a check of the newest)
         self._gaps = asyncio.Lock()
+        self._link = 0          # the connections seen (:meth:`came_back`)
         #: the newest tightening id accounted for on this link (a result pushed, or the
         #: controller's newest when the catch-up asked for it; None: not known yet since the
         #: last (re)connect): a pushed result further on than the next is a live gap
@@ -178,6 +179,7 @@ class ControllerFeed:
             if who is not None and who.words:   # the driver's own journal line said it
                 self._tell(DeviceSaid.of(time.time(), WRENCH, who))
         self._accounted = None     # the catch-up says up to where (a result may come first)
+        self._link += 1
         self._first_pushed = self._refused_after = None
         if self.catching_up is None or self.catching_up.done():
             self.catching_up = asyncio.get_running_loop().create_task(self._catch_ups())
@@ -379,15 +381,22 @@ class ControllerFeed:
             self.checking = asyncio.get_running_loop().create_task(self._check_newest())
 
     async def _check_newest(self) -> None:
-        wrench = self._keeper.device
+        """Only with every tool off and none enabled while it asks (else the newest may be
+        the rundown of a bolt enabled now, fetched before its own push and stored as no
+        bolt's: a reviewer); the link as it was (a reconnect's catch-up counts then)."""
+        wrench, before = self._keeper.device, self.core.status()
         if wrench is None or not wrench.can_fetch or self.records.repo is None \
-                or not self._keeper.up or self._keeper.losing or self._accounted is None:
-            return      # (no id to count from: a reconnect's catch-up counts from the records)
+                or not self._keeper.up or self._keeper.losing or self._accounted is None \
+                or before.tool_on:
+            return
         async with self._gaps:
-            last = self._accounted
+            last, link = self._accounted, self._link
             try:
                 newest = await self._call(wrench.fetch_result, 0)
-                if newest is None or newest.tightening_id is None \
+                now = self.core.status()
+                if newest is None or newest.tightening_id is None or link != self._link \
+                        or self._accounted is None or now.tool_on \
+                        or now.enables != before.enables \
                         or int(newest.tightening_id) <= self._accounted:
                     return
                 nid = int(newest.tightening_id)

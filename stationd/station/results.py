@@ -156,8 +156,10 @@ class ResultRules(OrderRules):
         finally:
             if not ev.fetched or tid == waited:
                 self._pending_push = None
-        # the last result judged: during which enable, the tool left on or off (:meth:`_made_under`)
-        self._judged = (tid, self._enable_serial, self.tool_on)
+        # the newest result judged: during which enable, the tool left on or off (an older id
+        # judged later, a catch-up's or a copy's, says nothing of the order: a reviewer)
+        if self._judged is None or tid > self._judged[0]:
+            self._judged = (tid, self._enable_serial, self.tool_on)
         return acts + self._push_judged(ev.t)
 
     def _push_judged(self, t: float) -> list[Action]:

@@ -161,6 +161,9 @@ class CoreStatus:
     fault_kinds: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
     #: no parameters are sent while nobody is signed in (``access.operator_required``)
     operator_required: bool = False
+    #: the tool enables so far (a check of the controller's newest result is void where
+    #: one came meanwhile: its own rundown would be fetched before its push)
+    enables: int = 0
 
     @property
     def cameras_on(self) -> bool:
@@ -290,7 +293,7 @@ class CoreState:
                           frozenset(() if self.matcher is None else self.matcher.done),
                           frozenset(() if self.matcher is None else self.matcher.skipped),
                           MappingProxyType({d: str(k) for d, (k, _) in self.faults.items()}),
-                          self.operator_required)
+                          self.operator_required, self._enable_serial)
 
     @property
     def selection(self) -> Selection | None:

@@ -11,7 +11,6 @@ from drivers.keeper import FaultKind
 from stationd.reasons import CoreFault, CoreFaultKind, Reason, Skip, SkipKind, Why
 from stationd.station.actions import (
     Action,
-    CheckNewest,
     EnableTool,
     Publish,
     Selection,
@@ -74,8 +73,7 @@ class ToolRules(FaultRules):
                     return acts
                 self._to(State.TIGHTENING, StateReason(Because.TIGHTENING, bolt=self.bolt,
                                                        loosen=sel.loosen))
-                if self._unanswered_before(sel):   # its push lost? asked, not waited for
-                    acts.append(CheckNewest())
+                self._unanswered_before(sel)
                 self.tool_on, self._enabled, self._off_at = True, sel, None
                 self._enable_serial += 1
                 self._enabled_at = ev.t

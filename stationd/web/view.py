@@ -142,6 +142,8 @@ class BoltState:
                 "order": self.order, "batch": self.batch, "state": self.state,
                 # the tool on for its loosen pset: the operator loosens, never "tighten"
                 "label": "loosen" if self.loosen and self.state == Shown.TIGHTENING
+                # held (its result not known) is no lock of NOKs: said apart (a trial)
+                else "held" if self.held and self.state == Shown.LOCKED
                 else BOLT_LABELS.get(self.state, self.state), "reason": self.reason,
                 "torque_nm": self.torque_nm, "angle_deg": self.angle_deg,
                 "locked": self.locked, "loosen": self.loosen,

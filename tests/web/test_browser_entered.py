@@ -36,6 +36,12 @@ def test_a_supervisor_enters_the_outcome_of_a_held_bolt_on_the_screen(page, shot
         pose.write_text("")
         page.wait(lambda p: _b05(p, "state") == "locked", 30, "B05 drawn held")
         page.wait(lambda p: _shown(p, "locks"), 30, "the locked panel")
+        # drawn held, not locked (its result not known; no lock of NOKs: a supervisor's trial)
+        drawn = page.js("const g = document.querySelector('g.bolt[data-bolt=B05]');"
+                        "return [g.getAttribute('class'), g.querySelector('text.icon')"
+                        ".textContent]")
+        assert drawn == ["bolt bolt-held", "?"], drawn
+        assert page.text("#locks-title") == "Held"
         assert page.text("#release-by") == ("Release, or enter the outcome the controller "
                                             "shows: a user with the release right (supervisor)")
 

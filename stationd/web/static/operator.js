@@ -4,10 +4,13 @@
 const NS = "http://www.w3.org/2000/svg";
 const ICONS = {pending: "\u25CB", next: "\u25B6", selected: "\u2691", tightening: "\u21BB",
   ok: "\u2714", nok: "\u2716", skipped: "\u00BB", blocked: "\u2298", missing: "!",
-  locked: "\u2297", loosen: "\u21BA", loosened: "\u21B6"};
+  locked: "\u2297", held: "?", loosen: "\u21BA", loosened: "\u21B6"};
 const LABELS = {pending: "to do", next: "next", selected: "selected", tightening: "tighten",
   ok: "OK", nok: "NOK", skipped: "skipped", blocked: "blocked", missing: "missing",
-  locked: "locked", loosen: "loosen first", loosened: "loosened"};
+  locked: "locked", held: "held", loosen: "loosen first", loosened: "loosened"};
+// a held bolt (its result not known: unreadable, a link cut's, a lost push's) is refused as a
+// locked one is, and drawn apart: it is no lock of NOKs (a supervisor's trial)
+const drawn = (b) => (b.state === "locked" && b.held ? "held" : b.state);
 const $ = (id) => document.getElementById(id);
 
 function el(tag, attrs, text) {
@@ -78,11 +81,11 @@ function buildMap(svg, bolts, W, H) {
   const placed = [];   // bolt -> [group, x, y]
   for (const b of bolts) {
     const x = X(b.x), y = Y(b.y);
-    const g = el("g", {class: `bolt bolt-${b.state}`, "data-bolt": b.bolt, "data-state": b.state,
+    const g = el("g", {class: `bolt bolt-${drawn(b)}`, "data-bolt": b.bolt, "data-state": b.state,
       transform: `translate(${x.toFixed(1)},${y.toFixed(1)})`});
     g.appendChild(el("title", {}, `${b.bolt}: ${b.label}${b.reason ? " (" + b.reason + ")" : ""}`));
     g.appendChild(el("circle", {r: r}));
-    const icon = el("text", {class: "icon", y: 0}, ICONS[b.state] || "?");
+    const icon = el("text", {class: "icon", y: 0}, ICONS[drawn(b)] || "?");
     if (dense) icon.style.fontSize = `${Math.round(1.3 * r)}px`;   // inside its dot
     g.appendChild(icon);
     svg.appendChild(g);
@@ -351,6 +354,9 @@ function drawLocks(view) {
   if (key === shownKeys.locks) return;
   shownKeys.locks = key;
   $("locks").hidden = !locks.length;
+  const kinds = new Set((view.bolts || []).filter((b) => b.state === "locked").map(drawn));
+  setText("locks-title", kinds.has("held") ? (kinds.has("locked") ? "Locked or held" : "Held")
+    : "Locked");
   document.body.classList.toggle("has-locks", locks.length > 0);
   const ul = $("locks-list");
   ul.replaceChildren(...locks.map((text) => {
