@@ -44,16 +44,17 @@ def status_url(url: str) -> str:
                                     "", ""))
 
 
-def counter_words(c: dict[str, Any]) -> str:
+def counter_words(c: dict[str, Any], held: int = 0) -> str:
     """The vehicle's bolts by their state now, in the operator screen's words: "3/50 bolts
-    OK, 1 skipped, 1 bolt ending NOK" (skipped only when there are any).  Why: "3/50 done,
-    1 NOK" left the skipped bolts out and read as 1 NOK result, where it counts the bolts whose
-    last rundown is NOK (a NOK tightened again to OK is not counted)."""
+    OK, 1 skipped, 1 bolt ending NOK, 2 held" (skipped and held only when there are any).
+    Why: "3/50 done, 1 NOK" left the skipped bolts out and read as 1 NOK result, where it
+    counts the bolts whose last rundown is NOK (a NOK tightened again to OK is not counted);
+    and a line with 3 bolts held for a supervisor said none of them (a supervisor's trial)."""
     nok = int(c.get("nok", 0))
     words = f"{c.get('done', 0)}/{c.get('total', 0)} bolts OK"
     if c.get("skipped"):
         words += f", {c['skipped']} skipped"
-    return words + f", {counted(nok, 'bolt')} ending NOK"
+    return words + f", {counted(nok, 'bolt')} ending NOK" + (f", {held} held" if held else "")
 
 
 def lock_lines(st: dict[str, Any], via: str = "") -> list[str]:
@@ -130,7 +131,8 @@ def format_status(st: dict[str, Any], via: str = "") -> str:
     v = st.get("vehicle")
     c = st.get("counters", {})
     said = "none" if not v else \
-        f"{v['vin']} ({v['model']}{', rework' if v.get('rework') else ''}): {counter_words(c)}"
+        f"{v['vin']} ({v['model']}{', rework' if v.get('rework') else ''}): " \
+        f"{counter_words(c, len(st.get('held_bolts') or []))}"
     if v and v.get("at_station") is False:
         # closed: the next one is not loaded (rejected, or not raised yet); the last one was
         # read as the vehicle at the station (a line engineer's trial)

@@ -33,7 +33,7 @@ def test_migrated_schema_matches_the_models(tmp_path):
     assert set(inspect(engine).get_table_names()) == TABLES
     assert _diff(engine, Base.metadata) == []
     with engine.connect() as conn:
-        assert current_revision(conn) == head_revision() == "0017"
+        assert current_revision(conn) == head_revision() == "0018"
     engine.dispose()
 
 
@@ -97,4 +97,37 @@ def test_the_last_revision_goes_down_with_rows_and_curves_that_refer_to_them(tmp
     with engine.connect() as conn:
         assert conn.execute(text("SELECT count(*) FROM tightening_records")).scalar() == 1
         assert conn.execute(text("SELECT count(*) FROM curves")).scalar() == 1
+    engine.dispose()
+
+
+def test_results_of_no_bolt_stored_before_their_release_count_as_acknowledged(tmp_path):
+    """A station upgraded to the release that sends its results of no bolt and those not read
+    over OPC UA: those stored before count as acknowledged (a reviewer: an MES asking for the
+    unacknowledged ones got the station's whole history of them at once); its rundowns stay
+    as they were."""
+    from sqlalchemy import text
+
+    from stationd.boltfile import import_bolts
+    from tests.db.conftest import BASE, record
+
+    url = url_of(tmp_path / "m.db")
+    table = tmp_path / "bolts.yaml"
+    table.write_text(BASE)
+    engine = make_engine(url)
+    with engine.begin() as conn:
+        command.upgrade(alembic_config(connection=conn), "0017")
+    with Repository.open(url) as repo:       # (opening migrates to the head: below, back)
+        import_bolts(repo, table)
+        repo.start_vehicle("VIN1", "SEDAN")
+        record(repo, "VIN1", "B1", tightening_id=1)
+        repo.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=2, pset=1,
+                                 ok=True, torque_nm=1.0, angle_deg=2.0, result_at=None,
+                                 reason="outside a tool enable")
+    with engine.begin() as conn:
+        conn.execute(text("DELETE FROM opcua_acknowledged"))
+        command.downgrade(alembic_config(connection=conn), "0017")
+        command.upgrade(alembic_config(connection=conn), "head")
+    with Repository.open(url) as repo:
+        assert repo.ledger.unacknowledged_count() == 1          # the rundown alone
+        assert [e["kind"] for e in repo.ledger.unacknowledged(0)] == ["rundown"]
     engine.dispose()

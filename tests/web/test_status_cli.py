@@ -462,6 +462,10 @@ def test_status_says_a_held_bolt_as_held_with_why_and_a_lock_as_locked(live_serv
         "locked:   B1 locked after 3 NOK in a row: a supervisor releases it",
         "held:     B2: the controller's result could not be read (tightening 7): check it "
         "on the controller, then release or enter its outcome"]
+    # the vehicle's line counts it (a supervisor's trial: "0/50 bolts OK, 1 bolt ending NOK"
+    # with 3 bolts held)
+    [vehicle] = [x for x in lines if x.startswith("vehicle:")]
+    assert vehicle.endswith("bolts ending NOK, 1 held"), vehicle
 
 
 def test_status_of_a_daemon_that_gives_no_holds_says_its_locks_as_before():
