@@ -405,10 +405,14 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
 }
 
 
-def _ids(n: Notice) -> str:
-    """A gap's tightening ids: ``70061`` or ``70061-70062``."""
-    first, last = n.tightening_id, n.last_id
+def id_span(first: int | None, last: int | None) -> str:
+    """Tightening ids from ``first`` to ``last``: ``70061`` or ``70061-70062``."""
     return str(first) if last is None or first == last else f"{first}-{last}"
+
+
+def _ids(n: Notice) -> str:
+    """A gap's tightening ids (:func:`id_span`)."""
+    return id_span(n.tightening_id, n.last_id)
 
 
 def _entered(n: Notice) -> str:
@@ -714,7 +718,8 @@ def _missed(r: Reason) -> str:
 
 __all__ = ["answer_words", "check_asked_words", "check_words", "closed_after_outage",
            "command_words", "comment_words",
-           "fault_words", "gap_plan_words", "notice_words", "operator_words", "outcome_words",
+           "fault_words", "gap_plan_words", "id_span", "notice_words", "operator_words",
+           "outcome_words",
            "reason_words", "records_waiting", "result_type_words", "sent_again_words",
            "skip_words", "state_line", "state_words", "stored_what", "unattributed_words",
            "unchecked_words", "unproved_words", "wait_words", "worded"]

@@ -264,41 +264,20 @@ def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
                 f" ({rec['entered_comment']})" if rec.get("entered_comment") else "")))
     sent = rec.get("params_sent") or {}
     pset = sent.get("pset")
-    created = _time(rec.get("result_at")) or _time(rec.get("recorded_at")) or \
-        _time(entry["at"])
-    meta = ua.JoiningResultMetaDataType(
-        ResultId=result_id(db_id, entry["seq"]),
-        IsPartial=False,
-        IsSimulated=simulated,
-        ResultState=RESULT_STATE_COMPLETED,
-        CreationTime=created,
-        ResultEvaluation=_evaluation(ok),
+    meta = _meta(
+        db_id, entry, simulated=simulated, evaluation=EVALUATION_OK if ok else
+        EVALUATION_NOT_OK, loosening=loosening, entities=entities, pset=pset,
         # made while the link to the controller was down, fetched at the reconnect: its
         # CreationTime is when the station took it (absent, as the standard's default false)
-        IsGeneratedOffline=True if rec.get("offline") else None,
-        ProductId=rec["vin"],
-        InternalRecipeId=None if pset is None else str(pset),
-        SequenceNumber=int(entry["seq"]),
-        Name=f"{rec['vin']} {rec['bolt']}" + (" loosening" if loosening else "")
+        offline=bool(rec.get("offline")),
+        name=f"{rec['vin']} {rec['bolt']}" + (" loosening" if loosening else "")
         + (" entered" if entered else ""),
-        Description=ua.LocalizedText(f"{'loosening' if loosening else 'tightening'} of "
-                                     f"{rec['bolt']}" + ("" if pset is None else
-                                                         f" with pset {pset}") + (
+        description=f"{'loosening' if loosening else 'tightening'} of {rec['bolt']}"
+        + ("" if pset is None else f" with pset {pset}") + (
             f", entered by {entered} from the controller's screen (not measured)"
-            if entered else "")),
-        Classification=CLASSIFICATION_SINGLE,
-        # the technology of the system that made it (its Identification says the same):
-        # mandatory for a joining result in the working group's reading of 40450-1
-        JoiningTechnology=ua.LocalizedText(JOINING_TECHNOLOGY),
-        AssemblyType=DISASSEMBLED if loosening else ASSEMBLED,
-        AssociatedEntities=entities,
-        ExtendedMetaData=_extended(rec))
-    content = ua.JoiningResultDataType(OverallResultValues=[
-        _value("Torque", rec.get("torque_nm"), sent.get("torque"),
-               _unit("NU", "N·m", "newton metre"), ok, PQ_TORQUE),
-        _value("Angle", rec.get("angle_deg"), sent.get("angle"),
-               _unit("DD", "°", "degree"), ok, PQ_ANGLE),
-    ])
+            if entered else ""))
+    content = ua.JoiningResultDataType(
+        OverallResultValues=_overall(rec, sent.get("torque"), sent.get("angle"), ok))
     if curves:
         rid = meta.ResultId
         content.Trace, step_id, trace_id = trace(rid, curves)
@@ -308,11 +287,12 @@ def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
     return ua.ResultDataType(ResultMetaData=meta, ResultContent=[ua.Variant(content)])
 
 
-def _plain_meta(db_id: str, entry: dict[str, Any], *, simulated: bool, name: str,
-                description: str, evaluation: int, loosening: bool,
-                entities: list[Any]) -> Any:
-    """The metadata of a controller result that is no joint's rundown (its fields as a
-    rundown's: :func:`rundown_result`)."""
+def _meta(db_id: str, entry: dict[str, Any], *, simulated: bool, name: str,
+          description: str, evaluation: int, loosening: bool, entities: list[Any],
+          pset: Any, offline: bool = False) -> Any:
+    """The metadata of a result of the feed ``entry``: a rundown's (:func:`rundown_result`)
+    or a controller result's that is no joint's rundown (``pset``: its recipe, None where
+    not known; ``offline``: made while the link to the controller was down)."""
     rec = entry["record"]
     return ua.JoiningResultMetaDataType(
         ResultId=result_id(db_id, entry["seq"]), IsPartial=False, IsSimulated=simulated,
@@ -320,14 +300,27 @@ def _plain_meta(db_id: str, entry: dict[str, Any], *, simulated: bool, name: str
         CreationTime=_time(rec.get("result_at")) or _time(rec.get("recorded_at"))
         or _time(entry["at"]),
         ResultEvaluation=ua.ResultEvaluationEnum(evaluation),
+        IsGeneratedOffline=True if offline else None,
         ProductId=rec.get("vin") or None,
-        InternalRecipeId=None if rec.get("pset") is None else str(rec["pset"]),
+        InternalRecipeId=None if pset is None else str(pset),
         SequenceNumber=int(entry["seq"]), Name=name,
         Description=ua.LocalizedText(description),
         Classification=CLASSIFICATION_SINGLE,
+        # the technology of the system that made it (its Identification says the same):
+        # mandatory for a joining result in the working group's reading of 40450-1
         JoiningTechnology=ua.LocalizedText(JOINING_TECHNOLOGY),
         AssemblyType=DISASSEMBLED if loosening else ASSEMBLED,
         AssociatedEntities=entities, ExtendedMetaData=_extended(rec))
+
+
+def _overall(rec: dict[str, Any], torque: dict[str, float] | None,
+             angle: dict[str, float] | None, ok: bool) -> list[Any]:
+    """The torque and angle of a result, each with its limits (None: not known) and its
+    own evaluation."""
+    return [_value("Torque", rec.get("torque_nm"), torque,
+                   _unit("NU", "N·m", "newton metre"), ok, PQ_TORQUE),
+            _value("Angle", rec.get("angle_deg"), angle, _unit("DD", "°", "degree"), ok,
+                   PQ_ANGLE)]
 
 
 def _vehicle(rec: dict[str, Any], why: str) -> list[Any]:
@@ -350,17 +343,13 @@ def unattributed_result(db_id: str, entry: dict[str, Any], *, simulated: bool = 
     loosening = rec.get("result_type") == LOOSENING_TYPE
     kind = "loosening" if loosening else "tightening"
     pset = "" if rec.get("pset") is None else f" with pset {rec['pset']}"
-    meta = _plain_meta(
+    meta = _meta(
         db_id, entry, simulated=simulated, evaluation=EVALUATION_OK if ok else
-        EVALUATION_NOT_OK, loosening=loosening,
+        EVALUATION_NOT_OK, loosening=loosening, pset=rec.get("pset"),
         name=f"{rec.get('vin') or 'no vehicle'} unattributed",
         description=f"{kind}{pset} attributed to no bolt: {rec.get('reason') or 'not said'}",
         entities=_vehicle(rec, "the vehicle the result was filed under; no bolt is its"))
-    content = ua.JoiningResultDataType(OverallResultValues=[
-        _value("Torque", rec.get("torque_nm"), None, _unit("NU", "N·m", "newton metre"), ok,
-               PQ_TORQUE),
-        _value("Angle", rec.get("angle_deg"), None, _unit("DD", "°", "degree"), ok,
-               PQ_ANGLE)])
+    content = ua.JoiningResultDataType(OverallResultValues=_overall(rec, None, None, ok))
     return ua.ResultDataType(ResultMetaData=meta, ResultContent=[ua.Variant(content)])
 
 
@@ -377,9 +366,9 @@ def unreadable_result(db_id: str, entry: dict[str, Any], *, simulated: bool = Fa
         entities.append(ua.EntityDataType(
             Name="Joint", EntityId=bolt, EntityType=ENTITY_JOINT, IsExternal=False,
             Description="the bolt it may be the result of: held for a supervisor"))
-    meta = _plain_meta(
+    meta = _meta(
         db_id, entry, simulated=simulated, evaluation=EVALUATION_NOT_DECIDABLE,
-        loosening=False, entities=entities,
+        loosening=False, entities=entities, pset=rec.get("pset"),
         name=f"{rec.get('vin') or 'no vehicle'}{' ' + bolt if bolt else ''} not readable",
         description=f"MID {rec.get('mid')} revision {rec.get('revision')} not readable: "
                     f"{rec.get('error')}" + (f"; {bolt} held for a supervisor" if bolt else ""))

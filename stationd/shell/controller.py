@@ -41,7 +41,7 @@ from stationd.station.inputs import (
     UnreadableIn,
 )
 from stationd.station.results import CLOCK_SLACK_S
-from stationd.words import gap_plan_words
+from stationd.words import gap_plan_words, id_span
 
 log = logging.getLogger("stationd")
 RESULT_WAIT_S = 0.5         # one blocking wait for pushed results (a condition, not a poll)
@@ -401,10 +401,9 @@ class ControllerFeed:
                     return
                 nid = int(newest.tightening_id)
                 self._accounted, self._revealed_by = nid, None
-                ids = str(nid) if nid == last + 1 else f"{last + 1}-{nid}"
                 log.warning("results: the controller's newest tightening is %d, the last one "
                             "heard %d: %s not pushed by the controller (the link up), fetched",
-                            nid, last, ids)
+                            nid, last, id_span(last + 1, nid))
                 await self._fetch(wrench, plan_gaps(last, nid), last, newest, live=True)
             except (RefusedError, DeviceError, ValueError) as exc:
                 log.warning("the controller's newest result not read: %s", one_line(exc))
@@ -441,7 +440,7 @@ class ControllerFeed:
         self._revealed_by = tid
         # the rundown is over: the tool off now, not after the fetches (a reviewer)
         await self._feed(ResultsSkipped(time.time(), tid))
-        ids = str(last + 1) if tid - 1 == last + 1 else f"{last + 1}-{tid - 1}"
+        ids = id_span(last + 1, tid - 1)
         log.warning("results: tightening %d came after %d: %s not pushed by the controller "
                     "(the link up), fetched", tid, last, ids)
         try:

@@ -47,6 +47,14 @@ class Selection:
     torque_window: tuple[float, float] | None = None
 
 
+def torque_window(parameters: Parameters | None) -> tuple[float, float] | None:
+    """A bolt's torque window (min, max Nm) from its process parameters, None where it has
+    none: kept with its selection (:attr:`Selection.torque_window`)."""
+    if parameters is None:
+        return None
+    return float(parameters.torque.min), float(parameters.torque.max)
+
+
 @dataclass(frozen=True)
 class Owed:
     """What a station owes the next one (a reload, a restart): the tool was enabled for

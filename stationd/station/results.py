@@ -38,6 +38,7 @@ from stationd.station.actions import (
     StoreGap,
     StoreUnattributed,
     StoreUnreadable,
+    torque_window,
 )
 from stationd.station.commands import Answer, EnterOutcome, Issuer
 from stationd.station.events import (
@@ -181,6 +182,10 @@ class ResultRules(OrderRules):
         of the shell): no longer waited for."""
         if self._pending_push is None or t - self._pending_at < PENDING_PUSH_S:
             return []
+        return self._end_wait(t)
+
+    def _end_wait(self, t: float) -> list[Action]:
+        """No pushed result is waited for any more: :meth:`_push_judged` then."""
         self._pending_push = None
         return self._push_judged(t)
 
@@ -221,10 +226,8 @@ class ResultRules(OrderRules):
         controller may forget it."""
         r = ev.result
         tid = int(r.tightening_id)
-        owed: list[Action] = []
-        if tid == self._pending_push:    # the pushed one waited for: a copy, it is in
-            self._pending_push = None
-            owed = self._push_judged(ev.t)
+        # the pushed one waited for: a copy, it is in
+        owed = self._end_wait(ev.t) if tid == self._pending_push else []
         if self._recorded.get(tid, None) == _said(r):
             return [*owed, Acknowledge(r)]   # said already by this core
         self._recorded[tid] = _said(r)
@@ -360,11 +363,7 @@ class ResultRules(OrderRules):
     def _on_caught_up(self, ev: CaughtUp) -> list[Action]:
         """:meth:`_cut_caught_up`; a pushed result waited for since ids it skipped were told
         is waited for no longer (the reconnect's catch-up fed what the controller has)."""
-        owed: list[Action] = []
-        if self._pending_push is not None:
-            self._pending_push = None
-            owed = self._push_judged(ev.t)
-        return owed + self._cut_caught_up(ev)
+        return self._end_wait(ev.t) + self._cut_caught_up(ev)
 
     def _cut_caught_up(self, ev: CaughtUp) -> list[Action]:
         """The catch-up after a reconnect ended.  A link cut's result still owed was not among
@@ -624,8 +623,8 @@ class ResultRules(OrderRules):
             return None      # kept as sent: a percentage of the tool's maximum, not Nm
         window = en.torque_window
         spec = self._specs.get(en.bolt) if en.vin == self.vin else None
-        if window is None and spec is not None and spec.parameters is not None:
-            window = (float(spec.parameters.torque.min), float(spec.parameters.torque.max))
+        if window is None and spec is not None:
+            window = torque_window(spec.parameters)
         if window is None:
             return None
         lo, hi = window

@@ -15,6 +15,7 @@ from stationd.station.actions import (
     Publish,
     Selection,
     SendParams,
+    torque_window,
 )
 from stationd.station.events import (
     Because,
@@ -63,9 +64,8 @@ class ToolRules(FaultRules):
                 sel = self._selection
                 assert sel is not None  # noqa: S101 - a bolt is selected
                 if self._cut is not None:    # (also of a car that left: a reviewer)
-                    cut = self._cut.selection
-                    self.reason = StateReason(Because.CUT_OWED, bolt=self.bolt, owed=(
-                        cut.bolt if cut.vin == self.vin else f"{cut.bolt} of {cut.vin}"))
+                    self.reason = StateReason(Because.CUT_OWED, bolt=self.bolt,
+                                              owed=self._named(self._cut.selection))
                     return acts
                 owed = self._owed_elsewhere(ev.t)
                 if owed is not None:
@@ -120,11 +120,9 @@ class ToolRules(FaultRules):
                 self.matcher.reset()
                 return []
             params = Parameters(pset, LOOSEN_TARGETS)
-        window = None if spec.parameters is None else (
-            float(spec.parameters.torque.min), float(spec.parameters.torque.max))
         sel = Selection(m.bolt, pset, ev.point_mm, ev.tilt_deg, float(m.distance_mm or 0.0),
                         ev.exposure_t, ev.t, ev.evidence, self.vin, spec.parameters_id, loosen,
-                        self.operator, window)
+                        self.operator, torque_window(spec.parameters))
         self._operator_seen = ev.t
         self.bolt, self._selection, self._acked_at, self._away = m.bolt, sel, None, 0
         self._last_refusal = None
@@ -153,7 +151,12 @@ class ToolRules(FaultRules):
         if en is None or not self._result_owed(t) or (
                 (en.vin, en.bolt) == (self.vin, self.bolt) and self._pending_push is None):
             return None     # (its own bolt too while results skipped are fetched)
-        return en.bolt if en.vin == self.vin else f"{en.bolt} of {en.vin}"
+        return self._named(en)
+
+    def _named(self, sel: Selection) -> str:
+        """The bolt of ``sel`` as the state's reason names it: with its VIN where that is not
+        the vehicle at the station (the last car's, as it left)."""
+        return sel.bolt if sel.vin == self.vin else f"{sel.bolt} of {sel.vin}"
 
     def _on_params_acked(self, ev: ParamsAcked) -> list[Action]:
         acts: list[Action] = [Publish(ParamsSent(ev.bolt, ev.pset, dict(ev.latency_ms),
