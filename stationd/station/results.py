@@ -443,8 +443,9 @@ class ResultRules(OrderRules):
         push lost) was made under the enable ``en`` owed now: of its pset and vehicle (where
         it echoes one), the link up since the enable, and either its id after the last result
         judged, that one judged during this enable or, the tool off after it, during the one
-        before (the tool is on for one bolt at a time: only this enable could have
-        made it), or its time after the tool went on for it (beyond the clock's slack).  Its
+        before and made after that tool-off (:meth:`_after_last_off`; the tool is on for one
+        bolt at a time: only this enable could have made it), or its time after the tool
+        went on for it (beyond the clock's slack).  Its
         time, where known, never before the enable or after its tool went off.  A
         supervisor's trial: the operator pulled again at once, the first NOK stored
         unattributed and uncounted (by its time alone, within the slack, never proved)."""
@@ -462,8 +463,17 @@ class ResultRules(OrderRules):
             return False
         last, n = self._judged, self._enable_serial
         ordered = last is not None and last[0] < int(r.tightening_id) and (
-            last[1] == n or (last[1] == n - 1 and not last[2]))
+            last[1] == n or (last[1] == n - 1 and not last[2] and self._after_last_off(made)))
         return ordered or (made is not None and made >= self._enabled_at + CLOCK_SLACK_S)
+
+    def _after_last_off(self, made: float | None) -> bool:
+        """Whether a result was made after the tool went off for the enable before this one
+        (beyond the clock's slack): one made sooner may be that bolt's, the operator pulling
+        again as its disable was sent (a rundown begun before the disable took effect ends
+        after it; a reviewer: credited to the next bolt of the same pset enabled within the
+        slack).  Its time not known: not proved."""
+        off = self._off_before_enable
+        return made is not None and (off is None or made > off + CLOCK_SLACK_S)
 
     def _controller_event(self, ev: ResultIn, kind: ResultKind) -> list[Action]:
         """A result that is not a tightening or a loosening (a batch increment a line lead

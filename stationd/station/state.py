@@ -224,6 +224,10 @@ class CoreState:
     #: enable count then, the tool left on (the order of results proves under which enable
     #: a result fetched late was made: :meth:`ResultRules._made_under`)
     _enable_serial: int = field(default=0, repr=False)
+    #: when the tool last went off (never forgotten), and that time as the latest enable
+    #: came: a rundown begun before a disable took effect ends after it was sent
+    _last_off_at: float | None = field(default=None, repr=False)
+    _off_before_enable: float | None = field(default=None, repr=False)
     _judged: tuple[int, int, bool] | None = field(default=None, repr=False)
     # the station's start or the controller's last fault: a result fetched afterwards was
     # made before it, so never under an enable that came later
@@ -417,7 +421,7 @@ class CoreState:
         was = self.tool_on
         self.tool_on = False
         if was:
-            self._off_at = t
+            self._off_at = self._last_off_at = t
         return _disable(reason, self.bolt, why, t=t)
 
     def _drop(self, t: float, state: State, reason: StateReason,

@@ -76,6 +76,7 @@ class ToolRules(FaultRules):
                 self._unanswered_before(sel)
                 self.tool_on, self._enabled, self._off_at = True, sel, None
                 self._enable_serial += 1
+                self._off_before_enable = self._last_off_at
                 self._enabled_at = ev.t
                 acts.append(EnableTool(self.bolt, sel))
             return acts
