@@ -11,6 +11,7 @@ import pytest
 
 from db.repository import Repository
 from stationd.station.gaps import GapPlan, NoFetch, plan
+from stationd.station.lost import CLOCK_SLACK_S
 from stationd.words import gap_plan_words
 from tests.shell.daemons import stored_on, tool_on, tracking, until
 
@@ -78,6 +79,12 @@ def test_results_made_while_the_link_was_cut_are_fetched_or_shown_as_gaps(tmp_pa
     assert first.tightening_id in to_bolts
 
 
+#: how long after the tool went on for a bolt the operator pulls, where a lost push is to be
+#: placed by the order of ids: beyond the clock's slack after the bolt before went off, plus
+#: the controller's timestamps to the second and its offset measured to the second
+AFTER_OFF_S = CLOCK_SLACK_S + 2.0
+
+
 @pytest.mark.timeout(300)
 def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path):
     """With the link up, the controller loses a push (``lose_next_push``): the station hears
@@ -91,6 +98,9 @@ def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path
     with tracking(tmp_path, "LIVEGAPVIN0000001") as (d, plc, ctl):
         first = stored_on(d, ctl, pose, "B04")   # the id the station accounts for
         tool_on(d, ctl, pose, "B05")
+        # the operator pulls beyond the clock's slack after B04's tool went off (sooner, a
+        # rundown could be B04's, pulled again as its disable was sent: not proved B05's)
+        time.sleep(AFTER_OFF_S)
         ctl.lose_next_push()
         lost = ctl.pull_trigger()
         assert lost is not None
@@ -104,6 +114,7 @@ def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path
         d.wait_log(f"tightening {lost.tightening_id}, its push lost, fetched when a later one "
                    "came: made while the tool was on for B05 alone, recorded to B05")
         tool_on(d, ctl, pose, "B06")
+        time.sleep(AFTER_OFF_S)
         ctl.lose_next_push(2)
         a, b = ctl.pull_trigger(), ctl.pull_trigger()
         assert a is not None and b is not None
