@@ -40,7 +40,7 @@ from stationd.station.inputs import (
     ResultsSkipped,
     UnreadableIn,
 )
-from stationd.station.results import CLOCK_SLACK_S
+from stationd.station.lost import CLOCK_SLACK_S
 from stationd.words import gap_plan_words, id_span
 
 log = logging.getLogger("stationd")

@@ -11,9 +11,12 @@ The rules are split by subject, each a layer of one class, the lowest first:
 :mod:`~stationd.station.state` (the state and its shared transitions) <
 :mod:`~stationd.station.teaching` (teach-in, the calibration check) <
 :mod:`~stationd.station.faults` < :mod:`~stationd.station.orders` (commands) <
-:mod:`~stationd.station.results` (results, the NOK policy); beside results, also on faults,
-:mod:`~stationd.station.lift` (the vehicle and the lift) and :mod:`~stationd.station.tool`
-(selection and the tool);
+:mod:`~stationd.station.nok` (the NOK policy, entered outcomes) <
+:mod:`~stationd.station.lost` (results heard late: lost pushes, link cuts) <
+:mod:`~stationd.station.unread` (results not read) <
+:mod:`~stationd.station.results` (results: which enable each answers); beside results,
+also on faults, :mod:`~stationd.station.lift` (the vehicle and the lift) and
+:mod:`~stationd.station.tool` (selection and the tool);
 :class:`StationCore` puts them together and dispatches each input (:mod:`~stationd.station.inputs`)
 to its handler, answering actions (:mod:`~stationd.station.actions`).
 

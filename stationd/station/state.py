@@ -242,7 +242,7 @@ class CoreState:
     _unreadable_seen: dict[tuple[int, str], str | None] = field(default_factory=dict,
                                                                  repr=False)
     # the newest tightening id pushed (read), and the unreadable messages without an id that
-    # held a bolt, each with the ids read before and after it (results.py ``_UnreadGap``): a
+    # held a bolt, each with the ids read before and after it (unread.py ``_UnreadGap``): a
     # result fetched for the one id between is that message, read
     _last_pushed: int | None = field(default=None, repr=False)
     _unread_gaps: list[Any] = field(default_factory=list, repr=False)

@@ -1,0 +1,264 @@
+"""Results the station heard late: fetched because a later one skipped their ids (a push lost),
+or after a link cut (the catch-up).  Which enable each was made under, by the controller's
+own data (its pset, VIN, id and time) and the order of ids; where nothing proves it, never
+taken for a bolt and never left open: the bolts it may be are held for a person."""
+
+from __future__ import annotations
+
+from db.kinds import (
+    LOST_UNKNOWN,
+    cut_unknown_note,
+    lost_unknown_note,
+)
+from stationd.reasons import Unproved, UnprovedKind
+from stationd.station.actions import (
+    Action,
+    Publish,
+    Selection,
+    SettleEnable,
+    StoreCutUnknown,
+)
+from stationd.station.events import (
+    Because,
+    Notice,
+    Said,
+    State,
+    StateReason,
+)
+from stationd.station.inputs import (
+    CaughtUp,
+    ResultIn,
+    ResultsSkipped,
+)
+from stationd.station.nok import NokRules
+from stationd.station.state import ON_A_BOLT, PENDING_PUSH_S, _Cut
+
+#: the controller stamps its results to the second, and its clock's offset is measured to
+#: the second: a result fetched after a link cut is placed between the enable and the cut
+#: within this much
+CLOCK_SLACK_S = 2.0
+
+
+class LostRules(NokRules):
+    """Results whose push was lost or whose link was cut: under which enable each was made,
+    the bolts held where the data cannot tell, a pushed result waited for while the ids it
+    skipped are fetched, and the catch-up's end."""
+
+    def _on_results_skipped(self, ev: ResultsSkipped) -> list[Action]:
+        """A pushed result skipped ids, fetched and fed before it: the rundown is over, the
+        tool goes off now (a reviewer: it stayed on through the fetches, the operator could
+        pull again), and the enable's result stays owed until the pushed one is in."""
+        self._pending_push, self._pending_at = ev.tightening_id, ev.t
+        if self.state not in ON_A_BOLT and not self.tool_on:
+            return []
+        return self._drop(ev.t, State.TRACKING, StateReason(Because.PUSH_AFTER_LOST,
+                                                            bolt=self.bolt))
+
+    def _push_judged(self, t: float) -> list[Action]:
+        """The pushed result that skipped ids is judged (or no longer waited for): the NOK
+        policy of each bolt whose NOK came fetched before it and is still its last result
+        (a reviewer: a batch increment pushed after a lost NOK left the bolt unlocked)."""
+        if self._pending_push is not None or not self._nok_owed:
+            return []
+        owed, self._nok_owed = self._nok_owed, {}
+        m, acts = self.matcher, []
+        for bolt, pset in owed.items():
+            if m is not None and bolt in m.bolts and bolt in self._nok_last \
+                    and bolt not in m.done and bolt not in m.locked and bolt not in m.held:
+                acts += self._after_nok(t, bolt, pset, counted=True)
+        return acts
+
+    def _pending_overdue(self, t: float) -> list[Action]:
+        """A pushed result waited for longer than :data:`PENDING_PUSH_S` (never fed: a fault
+        of the shell): no longer waited for."""
+        if self._pending_push is None or t - self._pending_at < PENDING_PUSH_S:
+            return []
+        return self._end_wait(t)
+
+    def _end_wait(self, t: float) -> list[Action]:
+        """No pushed result is waited for any more: :meth:`_push_judged` then."""
+        self._pending_push = None
+        return self._push_judged(t)
+
+    def _lost_enables(self, ev: ResultIn) -> list[_Cut]:
+        """The enables that got no result in their window (the operator left the bolt) whose
+        result a result fetched late (its push lost: a later one skipped its id, or a
+        reconnect's catch-up found it) may be: of its pset, made within that enable and its
+        window (or when, not known), its bolt still open and not selected now (of a vehicle
+        that has left: whatever it is now, not known here)."""
+        m, r = self.matcher, ev.result
+        if not ev.fetched:
+            return []
+        found: list[_Cut] = []
+        for u in self._unanswered:
+            en, b = u.selection, u.selection.bolt
+            if en.pset is None or int(r.pset) != en.pset:
+                continue
+            if en.vin == self.vin and m is not None and (
+                    b == self.bolt or b in m.done or b in m.held or b in m.skipped
+                    or b in m.locked):
+                continue
+            if ev.made_at is not None and not u.spans(ev.made_at, CLOCK_SLACK_S):
+                continue    # made while its tool was off for good: not its own
+            found.append(u)
+        return found
+
+    def _lost_in_doubt(self, ev: ResultIn, lost: list[_Cut]) -> list[Action]:
+        """The result may be that of each of the ``lost`` enables (:meth:`_lost_enables`).
+        Never taken for one (other enables came between: the data cannot prove it), never
+        left open either (it may be tightened: a quality trial's bolt was tightened twice):
+        each such bolt is held for a person, stored so that the hold outlives a restart and
+        comes back with its vehicle where that one has left."""
+        acts: list[Action] = []
+        tid = int(ev.result.tightening_id)
+        for u in lost:
+            en, b = u.selection, u.selection.bolt
+            assert en.pset is not None  # noqa: S101 - _lost_enables' guard
+            note = lost_unknown_note(tid, en.pset, u.enabled_at)
+            stored = StoreCutUnknown(en.vin, b, note, en, what=LOST_UNKNOWN)
+            if en.vin != self.vin or self.matcher is None:
+                acts += [stored, Publish(Notice(Said.CUT_UNKNOWN, bolt=b, vin=en.vin, note=note,
+                                                t=ev.t))]
+            else:
+                acts += [stored, *self._hold(ev.t, b, note, Notice(
+                    Said.CUT_UNKNOWN, bolt=b, note=note, t=ev.t), under=en)]
+            self._answered_bolt(en.vin, b)
+        return acts
+
+    def _cut_in_doubt(self, ev: ResultIn) -> list[Action]:
+        """A result stored unattributed while a link cut's result is owed, of the pset sent
+        then (pushed again by the controller after the reconnect, or fetched and not proved
+        by its data): it may be that bolt's, or not.  Never taken for it, and never left
+        open either (it may be tightened): the bolt is held for a person."""
+        cut, r = self._cut, ev.result
+        if cut is None or cut.selection.pset is None or int(r.pset) != cut.selection.pset:
+            return []
+        return self._cut_unknown(ev.t, f"tightening {int(r.tightening_id)} may be its own "
+                                       "(not proved by the controller's data)")
+
+    def _on_caught_up(self, ev: CaughtUp) -> list[Action]:
+        """:meth:`_cut_caught_up`; a pushed result waited for since ids it skipped were told
+        is waited for no longer (the reconnect's catch-up fed what the controller has)."""
+        return self._end_wait(ev.t) + self._cut_caught_up(ev)
+
+    def _cut_caught_up(self, ev: CaughtUp) -> list[Action]:
+        """The catch-up after a reconnect ended.  A link cut's result still owed was not among
+        the results fetched: where they are all of them, none was made (the bolt open as
+        before); else what the controller did is not known, and the bolt is held."""
+        cut = self._cut
+        if cut is None:
+            return []
+        if cut.reconnects is not None and ev.reconnects is not None \
+                and ev.reconnects <= cut.reconnects:
+            return []       # a catch-up of the connection that was cut, or of an earlier one
+        if not ev.complete:
+            return self._cut_unknown(ev.t, ev.reason or "its results not fetched")
+        # none made so far; its late-result window, where it still runs, still takes one
+        # pushed now (a restart during a rundown: the result comes after the catch-up)
+        self._cut = None
+        said = Publish(Notice(Said.CUT_NOTHING, bolt=cut.selection.bolt, t=ev.t))
+        if self._enabled is cut.selection:
+            if self._result_owed(ev.t):
+                return [said]
+            self._enabled = None
+        return [SettleEnable(cut.selection), said]
+
+    def _cut_unknown(self, t: float, why: str) -> list[Action]:
+        """The link cut's bolt held (its result not known: ``why``); the cut ends."""
+        cut = self._cut
+        assert cut is not None  # noqa: S101 - the callers' guard
+        en = cut.selection
+        self._answered(en)
+        note = cut_unknown_note(why, en.pset, cut.enabled_at)
+        stored = StoreCutUnknown(en.vin, en.bolt, note, en)
+        if self.matcher is None or self.vin != en.vin or en.bolt not in self.matcher.bolts:
+            # held when that vehicle is at the station again
+            return [stored, Publish(Notice(Said.CUT_UNKNOWN, bolt=en.bolt, vin=en.vin,
+                                           note=note, t=t))]
+        return [stored, *self._hold(t, en.bolt, note, Notice(
+            Said.CUT_UNKNOWN, bolt=en.bolt, note=note, t=t), under=en)]
+
+    def _answered(self, en: Selection) -> None:
+        """``en``'s result is in, or settled for a person (held): its enable is owed nothing
+        more, and a link cut during it is over."""
+        if self._enabled is en:
+            self._enabled = None
+        if self._cut is not None and self._cut.selection is en:
+            self._cut = None
+
+    def _made_during_cut(self, ev: ResultIn) -> tuple[Selection | None, Unproved | None]:
+        """The selection a result fetched after a link cut belongs to, when the controller's
+        own data proves it (its pset the one sent, its VIN the one sent where it echoes one,
+        its tightening id the first after the last the station accounted for, its
+        timestamp between the enable and the cut); else None and what did not agree (None
+        where nothing was to prove: not fetched, or no cut)."""
+        cut, r = self._cut, ev.result
+        if not ev.fetched:
+            return None, None
+        if cut is None:   # after a reconnect, said (a quality trial: no word of why)
+            return None, None if ev.live else Unproved(UnprovedKind.NO_CUT)
+        en = cut.selection
+        echoed = str(r.vin or "").strip()
+        if en.pset is None or int(r.pset) != en.pset:
+            return None, Unproved(UnprovedKind.PSET, bolt=en.bolt, pset=int(r.pset),
+                                  sent_pset=en.pset)
+        if echoed and echoed != en.vin:
+            return None, Unproved(UnprovedKind.VIN, vin=echoed, sent_vin=en.vin)
+        if ev.follows is None:
+            return None, Unproved(UnprovedKind.FOLLOWS_UNKNOWN)
+        if int(r.tightening_id) != ev.follows + 1:
+            return None, Unproved(UnprovedKind.NOT_FIRST, follows=ev.follows)
+        if ev.made_at is None:
+            return None, Unproved(UnprovedKind.CLOCK_UNKNOWN)
+        if not cut.spans(ev.made_at, CLOCK_SLACK_S):
+            return None, Unproved(UnprovedKind.OUTSIDE_CUT, bolt=en.bolt)
+        return en, None
+
+    def _made_under(self, ev: ResultIn, en: Selection) -> bool:
+        """Whether a result fetched with the link up (a later one pushed skipped its id: its
+        push lost) was made under the enable ``en`` owed now: of its pset and vehicle (where
+        it echoes one), the link up since the enable, and either its id after the last result
+        judged, that one judged during this enable or, the tool off after it, during the one
+        before and made after that tool-off (:meth:`_after_last_off`; the tool is on for one
+        bolt at a time: only this enable could have made it), or its time after the tool
+        went on for it (beyond the clock's slack).  Its
+        time, where known, never before the enable or after its tool went off.  A
+        supervisor's trial: the operator pulled again at once, the first NOK stored
+        unattributed and uncounted (by its time alone, within the slack, never proved)."""
+        r, made = ev.result, ev.made_at
+        if not (ev.fetched and ev.live and ev.before is not None) \
+                or not en.vin or self._cut is not None or self._enabled_at is None \
+                or self._enabled_at <= self._link_lost_at or not self._result_owed(ev.t):
+            return False
+        echoed = str(r.vin or "").strip()
+        if (en.pset is not None and int(r.pset) != en.pset) or (echoed and echoed != en.vin):
+            return False
+        off = ev.t if self.tool_on or self._off_at is None else self._off_at
+        if made is not None and not \
+                self._enabled_at - CLOCK_SLACK_S <= made <= off + CLOCK_SLACK_S:
+            return False
+        last, n = self._judged, self._enable_serial
+        ordered = last is not None and last[0] < int(r.tightening_id) and (
+            last[1] == n or (last[1] == n - 1 and not last[2] and self._after_last_off(made)))
+        return ordered or (made is not None and made >= self._enabled_at + CLOCK_SLACK_S)
+
+    def _after_last_off(self, made: float | None) -> bool:
+        """Whether a result was made after the tool went off for the enable before this one
+        (beyond the clock's slack): one made sooner may be that bolt's, the operator pulling
+        again as its disable was sent (a rundown begun before the disable took effect ends
+        after it; a reviewer: credited to the next bolt of the same pset enabled within the
+        slack).  Its time not known: not proved."""
+        off = self._off_before_enable
+        return made is not None and (off is None or made > off + CLOCK_SLACK_S)
+
+    def _offline(self, ev: ResultIn) -> bool:
+        """Whether ``ev`` was made while the link to the controller was down: by its own time
+        between the link lost and back (each within the clock's slack), whether fetched after the
+        reconnect or pushed then (a reviewer: only fetched ones were); where its time or the
+        link's return is not known, whether it was fetched after a reconnect."""
+        lost, back = self._link_lost_at, self._link_back_at
+        if ev.made_at is not None and back >= lost > float("-inf"):
+            # (its time to the second, through an offset measured at connect: one made just
+            # after the link came back, the station's start too, is not taken for offline)
+            return lost - CLOCK_SLACK_S <= ev.made_at <= back - CLOCK_SLACK_S
+        return ev.fetched and not ev.live
