@@ -441,6 +441,13 @@ class Wrench(Openable):
         controller without a clock (register-driven: results are stamped by the station)."""
         return None
 
+    def check_clock(self) -> float | None:
+        """Measure the controller's clock again (:attr:`clock_offset_s` says it from now on)
+        and return it.  Why: a connection lasts days, and a controller's clock drifts from
+        the station's by seconds in that time, beyond the slack within which results fetched
+        late are placed by their time.  A controller without a clock: None, nothing asked."""
+        return self.clock_offset_s
+
     #: whether the controller can send tightening curves (Open Protocol's MID 0900 through
     #: the generic subscription); a register-driven controller sends none
     can_curves: bool = False

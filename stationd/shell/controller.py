@@ -47,6 +47,9 @@ log = logging.getLogger("stationd")
 RESULT_WAIT_S = 0.5         # one blocking wait for pushed results (a condition, not a poll)
 CURVE_WAIT_S = 0.5          # one blocking wait for curves, in their own thread
 CURVE_IDLE_S = 1.0          # the curve loop's wait while the controller sends none
+#: how often the controller's clock is measured again on a link that stays up (a clock
+#: drifting 20 ppm moves 1 s in 14 hours; the slack for results placed by their time is 2 s)
+CLOCK_CHECK_S = 600.0
 REFUSED = "the controller refused to give them (MID 0064)"
 
 
@@ -83,6 +86,9 @@ class ControllerFeed:
         self._revealed_by: int | None = None
         self._again = False     # a reconnect came while a catch-up ran: one more after it
         self._reads = 0         # the results' loop's reads of the controller so far
+        #: when the controller's clock was last measured (at each connect, by the driver;
+        #: then every CLOCK_CHECK_S: :meth:`_check_clock`)
+        self._clock_at = time.monotonic()
 
     async def _read_since(self, reads: int, timeout: float = 10 * RESULT_WAIT_S) -> None:
         """Until the results' loop has read the controller once more than ``reads`` (its
@@ -104,6 +110,8 @@ class ControllerFeed:
         self._waiting = None
         if result is not None:
             self.received.append(result)
+        else:
+            await self._check_clock(wrench)
         if WRENCH in self.core.status().faults and not self._keeper.losing:
             # a refusal is a fault until the controller answers
             await self._feed(DeviceBack(time.time(), WRENCH, self._keeper.reconnects))
@@ -121,6 +129,19 @@ class ControllerFeed:
                 result_input(time.time(), result, offset=wrench.clock_offset_s)))
             self.received.remove(result)
         self._reads += 1
+
+    async def _check_clock(self, wrench: Wrench) -> None:
+        """The controller's clock measured again every :data:`CLOCK_CHECK_S`, in the
+        results' thread between two waits, with the tool off (a command waits behind it for
+        at most the driver's clock timeout): a link up for days drifts by seconds, beyond the
+        slack within which results fetched late are placed by their time."""
+        if time.monotonic() - self._clock_at < CLOCK_CHECK_S or self.core.status().tool_on:
+            return
+        self._clock_at = time.monotonic()
+        try:
+            await asyncio.wrap_future(self._results_pool.submit(wrench.check_clock))
+        except DeviceError as exc:    # the link's own fault is the keeper's, at the next wait
+            log.info("the controller's clock not measured again: %s", one_line(exc))
 
     async def checked(self, ev: ResultIn | UnreadableIn) -> ResultIn | ResultCopy | UnreadableIn:
         """``ev`` after asking the database whether it has this result stored already
@@ -179,6 +200,7 @@ class ControllerFeed:
             if who is not None and who.words:   # the driver's own journal line said it
                 self._tell(DeviceSaid.of(time.time(), WRENCH, who))
         self._accounted = None     # the catch-up says up to where (a result may come first)
+        self._clock_at = time.monotonic()    # measured by the driver at the connect
         self._link += 1
         self._first_pushed = self._refused_after = None
         if self.catching_up is None or self.catching_up.done():

@@ -153,6 +153,14 @@ class OpenProtocolWrench(SupervisedWrench):
         with self._cond:
             return self._session.clock_offset
 
+    def check_clock(self) -> float | None:
+        """MID 0080 again on the live session (:meth:`Session.check_clock`): the offset now.
+        A link down: the last measure, nothing asked."""
+        self._check_open()
+        return self._channel.request(
+            "read the controller's clock", self._session.check_clock,
+            when_down=lambda: self.clock_offset_s)
+
     @property
     def _link(self) -> Link:
         """The link in use (the given one, or the one ``_make_link`` made at open)."""

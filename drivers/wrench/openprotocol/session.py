@@ -136,16 +136,42 @@ class Session:
                                self.device, mid, rev, op.refusal_text(e.code or 0), rev - 1)
         raise AssertionError("unreachable: the last revision's refusal is raised")
 
-    def _read_clock(self) -> float | None:
+    def check_clock(self, epoch: int) -> float | None:
+        """The controller's clock measured again on the live session ``epoch`` (the
+        supervisor reads the answer): the new offset, kept (:attr:`clock_offset`); where it
+        moved by a second or more since the last measure, said.  Not answered or refused:
+        the last measure stays (logged), as good as it was."""
+        try:
+            offset = self._measure_clock(epoch)
+        except (RefusedError, DeviceTimeoutError, ProtocolError) as e:
+            self._log.info("%s: the controller's clock not measured again (MID 0080: %s): "
+                           "its last measure stays", self.device, e)
+            with self._channel.cond:
+                return self.clock_offset
+        with self._channel.cond:
+            before, self.clock_offset = self.clock_offset, offset
+        if before is None or abs(offset - before) >= 1.0:
+            self._log.info("%s: controller clock now %+d s from the station's (%s)",
+                           self.device, _whole(offset), "not known before" if before is None
+                           else f"{_whole(before):+d} s at the last measure")
+        return offset
+
+    def _measure_clock(self, epoch: int | None = None) -> float:
         """The controller's clock minus the station's (MID 0080 -> 0081, in the
         specification since revision 1), measured at the answer, to within a second (the
-        controller says whole seconds); None, logged, when it refuses or does not answer in
-        ``CLOCK_TIMEOUT``.  A late 0081 is then an unexpected MID, ignored."""
+        controller says whole seconds).  A refusal, or no answer in ``CLOCK_TIMEOUT``,
+        raises (a late 0081 is then an unexpected MID, ignored).  ``epoch``: on a live
+        session (:meth:`check_clock`); None at the session's start."""
+        reply = self._channel.transact(Message(op.MID_TIME_REQUEST),
+                                       {op.MID_TIME, op.MID_ERROR},
+                                       min(self._channel.timeout, CLOCK_TIMEOUT), epoch)
+        return (op.controller_time(reply) - datetime.now()).total_seconds()
+
+    def _read_clock(self) -> float | None:
+        """The controller's clock at the session's start (:meth:`_measure_clock`), said;
+        None, logged, where it is not known."""
         try:
-            reply = self._channel.transact(Message(op.MID_TIME_REQUEST),
-                                           {op.MID_TIME, op.MID_ERROR},
-                                           min(self._channel.timeout, CLOCK_TIMEOUT))
-            offset = (op.controller_time(reply) - datetime.now()).total_seconds()
+            offset = self._measure_clock()
         except (RefusedError, DeviceTimeoutError, ProtocolError) as e:
             self._log.info("%s: the controller's clock is not known (MID 0080: %s): results "
                            "fetched late are placed by their tightening ids only",
@@ -154,10 +180,17 @@ class Session:
         # its whole seconds are its clock cut down: an agreeing clock measures -1..0 s, so
         # the words take the middle of that second (they alternated between "agrees" and
         # "-1 s" for a clock in step: a line engineer's trial)
-        if round(offset + 0.5) == 0:
+        if _whole(offset) == 0:
             self._log.info("%s: controller clock agrees with the station's (within 1 s)",
                            self.device)
         else:
-            self._log.info("%s: controller clock %+.0f s from the station's", self.device,
-                           offset + 0.5)
+            self._log.info("%s: controller clock %+d s from the station's", self.device,
+                           _whole(offset))
         return offset
+
+
+def _whole(offset: float) -> int:
+    """An offset in whole seconds as the words say it: the controller's whole seconds are
+    its clock cut down, so a clock in step measures -1..0 s, said 0 (the middle of that
+    second)."""
+    return round(offset + 0.5)

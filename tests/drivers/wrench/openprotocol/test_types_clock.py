@@ -79,6 +79,31 @@ def test_the_controllers_clock_offset(tmp_path):
         assert abs(station - datetime.now().timestamp()) < 3
 
 
+def test_the_clock_measured_again_on_a_live_session(tmp_path, caplog):
+    """A connection lasts days and the controller's clock drifts: measured again (MID 0080)
+    without a reconnect, the new offset is the one results are placed by, and the journal
+    says it moved; a refusal then keeps the last measure; the session goes on."""
+    import logging
+
+    with SimController(seed=4, clock_offset_s=0.0) as sim, \
+            connect(sim, "tcp", tmp_path) as w, caplog.at_level(logging.INFO):
+        ready(w)
+        sim.clock_offset_s = 40.0                     # drifted (set forward) meanwhile
+        offset = w.check_clock()
+        assert offset is not None and 38 < offset < 42
+        assert w.clock_offset_s == offset
+        assert any("controller clock now +40 s from the station's (+0 s at the last "
+                   "measure)" in r.getMessage() for r in caplog.records)
+        sim.refuse_mid(80, 99)
+        assert w.check_clock() == offset              # refused: the last measure stays
+        assert w.status().connected
+        sim.pull_trigger()
+        got = w.wait_result(1.0)
+        assert isinstance(got, TighteningResult)
+        station = got.timestamp.timestamp() - offset
+        assert abs(station - datetime.now().timestamp()) < 3
+
+
 def test_a_controller_that_refuses_the_clock_still_starts(sim, tmp_path):
     sim.refuse_mid(80, 99)
     with connect(sim, "tcp", tmp_path) as w:
