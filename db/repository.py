@@ -514,7 +514,8 @@ class Repository:
         is held for a person instead, :data:`db.kinds.NOT_TAKEN`).  ``note``: why a bolt is
         held where there is no result (:data:`db.kinds.CUT_UNKNOWN`)."""
         with self._session(write=True) as s:
-            if tightening_id is not None:
+            # (a hold names the result it may be, which holds each bolt it may be: not copies)
+            if tightening_id is not None and what not in HELD_WITHOUT_RESULT:
                 same = s.execute(select(ControllerEvent.vin, ControllerEvent.bolt).where(
                     ControllerEvent.result_type == int(result_type),
                     *_same_result(ControllerEvent, ControllerEvent.result_at, tightening_id,
@@ -742,16 +743,32 @@ class Repository:
                     for g in s.scalars(select(ResultGap).order_by(ResultGap.id))]
 
     def unattributed(self, vin: str | None = None) -> list[dict[str, Any]]:
-        """The stored results no bolt owns (of ``vin``, or all), oldest first."""
+        """The stored results no bolt owns (of ``vin``, or all), oldest first.  Each with
+        ``entered_as``: the bolt and the person (``{"bolt", "by"}``) whose entered outcome is
+        that result (the
+        outcome of a bolt held because it may be its own, entered from the controller's
+        screen; a quality trial: the one tightening read as two), else None."""
         with self._session(write=False) as s:
             q = select(UnattributedResult).order_by(UnattributedResult.id)
             if vin is not None:
                 q = q.where(UnattributedResult.vin == vin)
+            rows = list(s.scalars(q))
+            ids = {r.tightening_id for r in rows if r.tightening_id is not None}
+            entered: dict[tuple[str | None, int | None], dict[str, str]] = {
+                (v, tid): {"bolt": bolt, "by": str(who)} for v, tid, bolt, who in s.execute(
+                select(Vehicle.vin, TighteningRecord.tightening_id, Bolt.code,
+                       TighteningRecord.entered_by)
+                .join(Vehicle, Vehicle.id == TighteningRecord.vehicle_id)
+                .join(Bolt, Bolt.id == TighteningRecord.bolt_id)
+                .where(TighteningRecord.entered_by.is_not(None),
+                       TighteningRecord.tightening_id.in_(ids))
+                .order_by(TighteningRecord.id))} if ids else {}
             return [{"vin": r.vin, "controller_vin": r.controller_vin,
                      "tightening_id": r.tightening_id, "pset": r.pset, "status": r.status,
                      "torque_nm": r.torque_nm, "angle_deg": r.angle_deg,
                      "result_at": r.result_at, "recorded_at": r.recorded_at,
-                     "reason": r.reason, "result_type": r.result_type} for r in s.scalars(q)]
+                     "reason": r.reason, "result_type": r.result_type,
+                     "entered_as": entered.get((r.vin, r.tightening_id))} for r in rows]
 
     def close_vehicle(self, vin: str) -> VehicleReport:
         """End the vehicle (once; closing again keeps the first end) and return its summary:

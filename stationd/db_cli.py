@@ -35,7 +35,7 @@ from drivers.counting import counted
 from stationd.errors import ConfigError, InputError
 from stationd.jsonout import strict_json
 from stationd.outfile import write_atomic
-from stationd.words import result_type_words
+from stationd.words import entered_as_words, result_type_words
 
 if TYPE_CHECKING:
     from db.repository import Repository
@@ -441,7 +441,7 @@ def cmd_db_report(args: argparse.Namespace) -> int:
             print(f"  unattributed: {result_type_words(u['result_type'])} "
                   f"{u['tightening_id']} pset {u['pset']} "
                   f"{u['status'].upper()} {_num(u['torque_nm'])} Nm, "
-                  f"{_num(u['angle_deg'])} deg ({u['reason']})")
+                  f"{_num(u['angle_deg'])} deg ({u['reason']})" + entered_as_words(u["entered_as"]))
         holds = dict(report.held)
         for e in events:
             if e["what"] in HOLD_WORDS:    # no result: what the station knows of it

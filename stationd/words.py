@@ -716,10 +716,41 @@ def _missed(r: Reason) -> str:
     return f"; {many} without the wrench, the last: {reason_words(r.cause)}"
 
 
-__all__ = ["answer_words", "check_asked_words", "check_words", "closed_after_outage",
-           "command_words", "comment_words",
-           "fault_words", "gap_plan_words", "id_span", "notice_words", "operator_words",
-           "outcome_words",
-           "reason_words", "records_waiting", "result_type_words", "sent_again_words",
-           "skip_words", "state_line", "state_words", "stored_what", "unattributed_words",
-           "unchecked_words", "unproved_words", "wait_words", "worded"]
+__all__ = [
+    "answer_words",
+    "check_asked_words",
+    "check_words",
+    "closed_after_outage",
+    "command_words",
+    "comment_words",
+    "entered_as_words",
+    "fault_words",
+    "gap_plan_words",
+    "id_span",
+    "notice_words",
+    "operator_words",
+    "outcome_words",
+    "reason_words",
+    "records_waiting",
+    "result_type_words",
+    "sent_again_words",
+    "skip_words",
+    "state_line",
+    "state_words",
+    "stored_what",
+    "unattributed_words",
+    "unchecked_words",
+    "unproved_words",
+    "wait_words",
+    "worded",
+]
+
+
+def entered_as_words(entered_as: dict[str, str] | None) -> str:
+    """"; the outcome entered for B09 by sam": of a result stored unattributed whose entered
+    outcome a person gave a bolt held for it (:meth:`db.repository.Repository.unattributed`:
+    one tightening, the bolt's row that result as read on the controller's screen); empty
+    where there is none."""
+    if not entered_as:
+        return ""
+    return f"; the outcome entered for {entered_as['bolt']} by {entered_as['by']}"

@@ -245,6 +245,9 @@ class StoreCutUnknown:
     #: the controller event's kind it is stored as (:data:`db.kinds.LOST_UNKNOWN`: a result
     #: whose push was lost may be this enable's)
     what: str = CUT_UNKNOWN
+    #: that result's tightening id (stored unattributed): an outcome a person enters for
+    #: the bolt is that result's, and says so (one tightening, not two, in the records)
+    tightening_id: int | None = None
 
 
 @dataclass(frozen=True)

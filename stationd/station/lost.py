@@ -115,7 +115,7 @@ class LostRules(NokRules):
             en, b = u.selection, u.selection.bolt
             assert en.pset is not None  # noqa: S101 - _lost_enables' guard
             note = lost_unknown_note(tid, en.pset, u.enabled_at)
-            stored = StoreCutUnknown(en.vin, b, note, en, what=LOST_UNKNOWN)
+            stored = StoreCutUnknown(en.vin, b, note, en, what=LOST_UNKNOWN, tightening_id=tid)
             if en.vin != self.vin or self.matcher is None:
                 acts += [stored, Publish(Notice(Said.CUT_UNKNOWN, bolt=b, vin=en.vin, note=note,
                                                 t=ev.t))]

@@ -30,7 +30,7 @@ from db.curves import curves_of_records
 from db.kinds import LOOSENING, MISSING, PENDING, SKIPPED
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
 from db.repository import AT_STATION, Repository
-from stationd.words import result_type_words
+from stationd.words import entered_as_words, result_type_words
 
 CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator", "torque_nm",
               "angle_deg", "torque_min_nm", "torque_max_nm", "angle_min_deg", "angle_max_deg",
@@ -216,7 +216,8 @@ class Results:
                              rundown=None if u["result_type"] is None
                              else result_type_words(u["result_type"]),
                              torque_nm=u["torque_nm"], angle_deg=u["angle_deg"],
-                             comment=f"{str(u['status']).upper()}; {u['reason']}")
+                             comment=f"{str(u['status']).upper()}; {u['reason']}"
+                             + entered_as_words(u["entered_as"]))
                  for u in self.repo.unattributed(vin)]
         events = [_stored_row(vin, model, CONTROLLER_EVENT_STATUS, e, bolt=e["bolt"],
                               rundown=e["what"], torque_nm=e["torque_nm"],

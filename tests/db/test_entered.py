@@ -274,3 +274,39 @@ def test_an_outcome_entered_for_a_bolt_held_after_a_link_cut_names_no_older_resu
                and e["record"]["id"] == rid)
     assert (run["tightening_id"], run["unreadable_id"]) == (None, None)
     assert repo.held_bolts("VIN1") == {}
+
+
+def test_an_outcome_entered_for_a_lost_push_hold_is_the_result_stored_unattributed(sedan):
+    """Tightening 41, its push lost, fetched later and stored unattributed, may be B1's or
+    B2's (both held for it, each stored: one result, two holds, not a copy).  The outcome a
+    supervisor enters for B1 is that result: its rundown carries id 41, and the unattributed
+    one says whose outcome it became, in the report's rows and the export (a supervisor's
+    trial: retyped, the one tightening read as two in the export)."""
+    from db.kinds import LOST_UNKNOWN, lost_unknown_note
+
+    repo = sedan
+    repo.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=41, pset=1, ok=True,
+                             torque_nm=49.6, angle_deg=31.0,
+                             result_at=datetime(2026, 12, 1, 8, 0, 0, tzinfo=UTC),
+                             reason="fetched later")
+    for bolt in ("B1", "B2"):
+        repo.record_controller_event(
+            result_type=0, what=LOST_UNKNOWN, vin="VIN1", bolt=bolt, controller_vin=None,
+            tightening_id=41, pset=1, ok=False, torque_nm=None, angle_deg=None,
+            result_at=None, note=lost_unknown_note(41, 1, 1_764_576_000.0))
+    assert sorted(repo.held_bolts("VIN1")) == ["B1", "B2"]
+    [loose] = repo.unattributed("VIN1")
+    assert loose["entered_as"] is None
+    rid = _enter(repo, bolt="B1")
+    run = next(e["record"] for e in repo.ledger.since(0) if e["kind"] == RUNDOWN
+               and e["record"]["id"] == rid)
+    assert (run["tightening_id"], run["entered_by"]) == (41, "sam")
+    [loose] = repo.unattributed("VIN1")
+    assert loose["entered_as"] == {"bolt": "B1", "by": "sam"}
+    assert list(repo.held_bolts("VIN1")) == ["B2"]
+    rows = list(csv.DictReader(io.StringIO(rundowns_csv(Results(repo).export("VIN1")))))
+    [row] = [r for r in rows if r["status"] == "unattributed"]
+    assert row["tightening_id"] == "41"
+    assert row["comment"].endswith("; the outcome entered for B1 by sam")
+    [mine] = [r for r in rows if r["bolt"] == "B1" and r["entered_by"] == "sam"]
+    assert mine["tightening_id"] == "41"

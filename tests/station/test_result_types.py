@@ -798,7 +798,7 @@ def test_a_result_whose_push_was_lost_holds_the_bolt_whose_enable_got_none():
     assert not [a for a in acts if isinstance(a, Record)]
     assert [a for a in acts if isinstance(a, StoreUnattributed)]
     [stored] = [a for a in acts if isinstance(a, StoreCutUnknown)]
-    assert (stored.bolt, stored.what) == ("B1", LOST_UNKNOWN)
+    assert (stored.bolt, stored.what, stored.tightening_id) == ("B1", LOST_UNKNOWN, 41)
     note = ("tightening 41 may be its own (its push lost, fetched later; other enables came "
             "between); the tool was enabled for pset 1 at 1970-01-01 00:16:40 UTC")
     assert stored.note == note and d.core.matcher.held["B1"] == note
