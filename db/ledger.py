@@ -15,10 +15,10 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import func, select
+from sqlalchemy import and_, func, or_, select
 from sqlalchemy.orm import Session
 
-from db.kinds import LOCK, LOOSENING
+from db.kinds import LOCK, LOOSENING, NOT_TAKEN
 from db.models import (
     Bolt,
     CalibrationCheck,
@@ -46,8 +46,25 @@ CURVE = "curve"   # one trace of a tightening (db.curves), its samples in the re
 #: a result message the station could not read (kept whole)
 CONTROLLER_EVENT, UNREADABLE = "controller_event", "unreadable"
 #: the kinds that are a controller's result an MES is sent (OPC UA): the rundowns, those no
-#: bolt owns, those the station could not read
+#: bolt owns, those the station could not read (and, of the controller events, the OK results
+#: not taken for a tightening: :func:`is_result`)
 RESULT_KINDS = (RUNDOWN, UNATTRIBUTED, UNREADABLE)
+
+
+def is_result(entry: Mapping[str, Any]) -> bool:
+    """Whether the feed ``entry`` is a controller's result an MES is sent: of
+    :data:`RESULT_KINDS`, or a controller event that is an OK result without a type outside
+    its bolt's torque window (:data:`db.kinds.NOT_TAKEN`: perhaps a real tightening, its
+    bolt held; an MES counting the controller's rundowns missed it)."""
+    return entry["kind"] in RESULT_KINDS or (
+        entry["kind"] == CONTROLLER_EVENT and entry["record"].get("what") == NOT_TAKEN)
+
+
+def _results() -> Any:
+    """:func:`is_result` as a condition on the feed's rows."""
+    return or_(FeedEntry.kind.in_(RESULT_KINDS), and_(
+        FeedEntry.kind == CONTROLLER_EVENT,
+        FeedEntry.ref.in_(select(ControllerEvent.id).where(ControllerEvent.what == NOT_TAKEN))))
 FEED_LIMIT = 1000
 
 
@@ -203,12 +220,12 @@ class Ledger:
 
     def acknowledge(self, seqs: list[int], by: str) -> set[int]:
         """Mark the results ``seqs`` acknowledged by ``by`` (already acknowledged ones stay
-        as they were); the ones that are results of this database (:data:`RESULT_KINDS`),
+        as they were); the ones that are results of this database (:func:`is_result`),
         acknowledged now or before, are returned, the others are unknown."""
         wanted = sorted(set(seqs))
         with self._session(True) as s:
             known = set(s.scalars(select(FeedEntry.seq).where(
-                FeedEntry.seq.in_(wanted), FeedEntry.kind.in_(RESULT_KINDS))))
+                FeedEntry.seq.in_(wanted), _results())))
             done = set(s.scalars(select(OpcUaAcknowledged.seq)
                                  .where(OpcUaAcknowledged.seq.in_(known))))
             for seq in sorted(known - done):
@@ -218,10 +235,10 @@ class Ledger:
     def _unacknowledged(self) -> Any:
         return (select(FeedEntry)
                 .outerjoin(OpcUaAcknowledged, OpcUaAcknowledged.seq == FeedEntry.seq)
-                .where(FeedEntry.kind.in_(RESULT_KINDS), OpcUaAcknowledged.seq.is_(None)))
+                .where(_results(), OpcUaAcknowledged.seq.is_(None)))
 
     def unacknowledged(self, after: int, limit: int = FEED_LIMIT) -> list[dict[str, Any]]:
-        """The results (:data:`RESULT_KINDS`) after ``after`` nobody acknowledged, in order
+        """The results (:func:`is_result`) after ``after`` nobody acknowledged, in order
         (at most ``limit``), each as :meth:`since` gives it."""
         limit = max(1, min(int(limit), FEED_LIMIT))
         with self._session(False) as s:
@@ -370,6 +387,20 @@ def _record(s: Session, kind: str, ref: int) -> dict[str, Any]:
             "kind": c.kind, "vin": c.vin, "bolt": c.bolt, "comment": c.comment}
 
 
-__all__ = ["CHECK", "COMMAND", "CONTROLLER_EVENT", "CURVE", "GAP", "RESULT_KINDS", "RUNDOWN",
-           "UNATTRIBUTED",
-           "UNREADABLE", "CommandEntry", "Ledger", "add_command", "append", "put_meta"]
+__all__ = [
+    "CHECK",
+    "COMMAND",
+    "CONTROLLER_EVENT",
+    "CURVE",
+    "GAP",
+    "RESULT_KINDS",
+    "RUNDOWN",
+    "UNATTRIBUTED",
+    "UNREADABLE",
+    "CommandEntry",
+    "Ledger",
+    "add_command",
+    "append",
+    "is_result",
+    "put_meta",
+]

@@ -33,7 +33,7 @@ from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
 from datetime import UTC, datetime
 from typing import Any
 
-from db.ledger import RESULT_KINDS
+from db.ledger import is_result
 from db.repository import Repository
 from stationd.opcua.results import parse_result_id
 from stationd.opcua.uatypes import ua
@@ -256,7 +256,7 @@ class CatchUp:
     async def _send(self, entries: AsyncIterator[dict[str, Any]], interval_ms: float) -> None:
         first, sent = True, 0
         async for e in entries:
-            if e["kind"] not in RESULT_KINDS:
+            if not is_result(e):
                 continue
             if sent >= MAX_PER_REQUEST:
                 return

@@ -23,7 +23,7 @@ from collections import OrderedDict, deque
 from dataclasses import dataclass
 from typing import Any
 
-from db.ledger import CURVE, RESULT_KINDS, RUNDOWN
+from db.ledger import CURVE, RUNDOWN, is_result
 
 WAIT_S = 2.0            # the longest a result event waits for its curves
 LOOSE = 200             # curves kept without their rundown (tightening ids)
@@ -68,7 +68,7 @@ class CurveJoin:
         if entry["kind"] == RUNDOWN:
             self._rundown(entry, now, hold)
             return None
-        if entry["kind"] in RESULT_KINDS:   # a result of no joint: no curves, in its turn
+        if is_result(entry):   # a result of no joint: no curves, in its turn
             if hold:
                 self._held.append(_Held(entry, now, False))
             return None

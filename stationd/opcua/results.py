@@ -22,6 +22,7 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from typing import Any
 
+from db.ledger import CONTROLLER_EVENT as CONTROLLER_EVENT_KIND
 from db.ledger import UNATTRIBUTED as UNATTRIBUTED_KIND
 from db.ledger import UNREADABLE as UNREADABLE_KIND
 from drivers.wrench.base import ResultType
@@ -77,6 +78,10 @@ def other_message(kind: str, rec: dict[str, Any]) -> str:
     the words "no bolt" / "not readable" where a bolt and a verdict stand in a rundown's."""
     vin, tid = rec.get("vin") or "no vehicle", rec.get("tightening_id")
     said = "" if tid is None else f" (controller id {tid})"
+    if kind == CONTROLLER_EVENT_KIND:    # an OK not taken (:func:`not_taken_result`)
+        bolt = rec.get("bolt")
+        return f"{vin}{' ' + bolt if bolt else ''}: OK not taken for a tightening{said}" + (
+            ": held for a supervisor" if bolt else "")
     if kind == UNREADABLE_KIND:
         bolt = rec.get("bolt")
         return f"{vin}{' ' + bolt if bolt else ''}: result not readable{said}" + (
@@ -332,6 +337,17 @@ def _vehicle(rec: dict[str, Any], why: str) -> list[Any]:
         Description=why)]
 
 
+def _held_joint(rec: dict[str, Any], why: str) -> list[Any]:
+    """The entities of a result that held a bolt (not read, or not taken): the vehicle at the
+    station when it came, and the bolt held, as its Joint (``why``), where there was one."""
+    entities = _vehicle(rec, "the vehicle at the station when it came")
+    if rec.get("bolt"):
+        entities.append(ua.EntityDataType(
+            Name="Joint", EntityId=rec["bolt"], EntityType=ENTITY_JOINT, IsExternal=False,
+            Description=why))
+    return entities
+
+
 def unattributed_result(db_id: str, entry: dict[str, Any], *, simulated: bool = False) -> Any:
     """The ResultDataType of the feed ``entry`` of kind ``unattributed``: a rundown the
     controller made that the station attributed to no bolt (why in its Description), its
@@ -361,11 +377,7 @@ def unreadable_result(db_id: str, entry: dict[str, Any], *, simulated: bool = Fa
     the bolt neither done nor said held."""
     rec = entry["record"]
     bolt = rec.get("bolt")
-    entities = _vehicle(rec, "the vehicle at the station when it came")
-    if bolt:
-        entities.append(ua.EntityDataType(
-            Name="Joint", EntityId=bolt, EntityType=ENTITY_JOINT, IsExternal=False,
-            Description="the bolt it may be the result of: held for a supervisor"))
+    entities = _held_joint(rec, "the bolt it may be the result of: held for a supervisor")
     meta = _meta(
         db_id, entry, simulated=simulated, evaluation=EVALUATION_NOT_DECIDABLE,
         loosening=False, entities=entities, pset=rec.get("pset"),
@@ -376,6 +388,33 @@ def unreadable_result(db_id: str, entry: dict[str, Any], *, simulated: bool = Fa
                              ResultContent=[ua.Variant(ua.JoiningResultDataType())])
 
 
+def not_taken_result(db_id: str, entry: dict[str, Any], *, simulated: bool = False) -> Any:
+    """The ResultDataType of the feed ``entry`` of a controller event that is an OK result
+    without a type whose torque lies outside its bolt's window (:data:`db.kinds.NOT_TAKEN`):
+    perhaps no tightening at all (a batch increment or a bypass reads so at a revision
+    without types), perhaps a real one with other limits on the controller.  Its evaluation
+    NotDecidable (the controller's OK is not the station's: an MES reading OK for the joint
+    would count it tightened), its values as sent, the bolt held for a supervisor as its
+    joint.  Why published: an MES counting the controller's rundowns missed it, and saw the
+    bolt neither done nor said held."""
+    rec = entry["record"]
+    bolt = rec.get("bolt")
+    entities = _held_joint(rec, "the bolt the tool was enabled for: held for a supervisor")
+    pset = "" if rec.get("pset") is None else f" of pset {rec['pset']}"
+    meta = _meta(
+        db_id, entry, simulated=simulated, evaluation=EVALUATION_NOT_DECIDABLE,
+        loosening=False, entities=entities, pset=rec.get("pset"),
+        name=f"{rec.get('vin') or 'no vehicle'}{' ' + bolt if bolt else ''} not taken",
+        description=f"an OK without a result type{pset}, its torque outside "
+                    f"{bolt or 'the bolt'}'s window: not taken for a tightening"
+                    + (f"; {bolt} held for a supervisor" if bolt else ""))
+    values = _overall(rec, None, None, True)
+    for v in values:      # the controller's OK, not the station's: not decided either
+        v.ResultEvaluation = ua.ResultEvaluationEnum(EVALUATION_NOT_DECIDABLE)
+    content = ua.JoiningResultDataType(OverallResultValues=values)
+    return ua.ResultDataType(ResultMetaData=meta, ResultContent=[ua.Variant(content)])
+
+
 def any_result(db_id: str, entry: dict[str, Any], *, simulated: bool = False,
                curves: list[dict[str, Any]] | None = None) -> Any:
     """The ResultDataType of any result entry of the feed (:data:`RESULT_KINDS`)."""
@@ -383,12 +422,14 @@ def any_result(db_id: str, entry: dict[str, Any], *, simulated: bool = False,
         return unattributed_result(db_id, entry, simulated=simulated)
     if entry["kind"] == UNREADABLE_KIND:
         return unreadable_result(db_id, entry, simulated=simulated)
+    if entry["kind"] == CONTROLLER_EVENT_KIND:
+        return not_taken_result(db_id, entry, simulated=simulated)
     return rundown_result(db_id, "", entry, simulated=simulated, curves=curves)
 
 
 def any_message(entry: dict[str, Any]) -> str:
     """The Message of the result event of any result entry of the feed."""
-    if entry["kind"] in (UNATTRIBUTED_KIND, UNREADABLE_KIND):
+    if entry["kind"] in (UNATTRIBUTED_KIND, UNREADABLE_KIND, CONTROLLER_EVENT_KIND):
         return other_message(entry["kind"], entry["record"])
     return message(entry["record"])
 

@@ -73,7 +73,7 @@ from asyncua.server.user_managers import UserManager
 from asyncua.ua.ua_binary import struct_from_binary
 
 from db.curves import curves_for
-from db.ledger import RESULT_KINDS, RUNDOWN
+from db.ledger import RUNDOWN, is_result
 from db.repository import Repository
 from drivers.identity import DeviceIdentity
 from stationd.access import verify_password
@@ -458,7 +458,7 @@ class OpcUaServer:
         """A feed entry: a rundown kept for the methods (and held for its event), a curve
         joined to its rundown's result (:mod:`stationd.opcua.curves`)."""
         changed = self.join.take(entry, now, hold=hold)
-        if entry["kind"] in RESULT_KINDS:
+        if is_result(entry):
             self._rebuild(entry)
         elif changed is not None and \
                 result_id(self.db_id, changed["seq"]) in self._results:   # still kept

@@ -33,7 +33,7 @@ def test_migrated_schema_matches_the_models(tmp_path):
     assert set(inspect(engine).get_table_names()) == TABLES
     assert _diff(engine, Base.metadata) == []
     with engine.connect() as conn:
-        assert current_revision(conn) == head_revision() == "0018"
+        assert current_revision(conn) == head_revision() == "0019"
     engine.dispose()
 
 
@@ -102,11 +102,13 @@ def test_the_last_revision_goes_down_with_rows_and_curves_that_refer_to_them(tmp
 
 def test_results_of_no_bolt_stored_before_their_release_count_as_acknowledged(tmp_path):
     """A station upgraded to the release that sends its results of no bolt and those not read
-    over OPC UA: those stored before count as acknowledged (a reviewer: an MES asking for the
-    unacknowledged ones got the station's whole history of them at once); its rundowns stay
-    as they were."""
+    over OPC UA (0018), and its OK results not taken for a tightening (0019): those stored
+    before count as acknowledged (a reviewer: an MES asking for the unacknowledged ones got
+    the station's whole history of them at once); its rundowns, and its controller events
+    that are no result (a batch increment), stay as they were."""
     from sqlalchemy import text
 
+    from db.kinds import NOT_TAKEN
     from stationd.boltfile import import_bolts
     from tests.db.conftest import BASE, record
 
@@ -123,6 +125,12 @@ def test_results_of_no_bolt_stored_before_their_release_count_as_acknowledged(tm
         repo.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=2, pset=1,
                                  ok=True, torque_nm=1.0, angle_deg=2.0, result_at=None,
                                  reason="outside a tool enable")
+        for what in (NOT_TAKEN, "batch increment"):
+            repo.record_controller_event(
+                result_type=0, what=what, vin="VIN1", bolt="B2", controller_vin=None,
+                tightening_id=3, pset=1, ok=True, torque_nm=4.9, angle_deg=2.0,
+                result_at=None)
+        assert repo.ledger.unacknowledged_count() == 3   # the rundown, those two results
     with engine.begin() as conn:
         conn.execute(text("DELETE FROM opcua_acknowledged"))
         command.downgrade(alembic_config(connection=conn), "0017")

@@ -97,9 +97,10 @@ async def subscribed(client: Client) -> Collector:
     return handler
 
 
-def events_while(repo: Repository, *stores: Callable[[], object]) -> list[Any]:
+def events_while(repo: Repository, *stores: Callable[[], object],
+                 events: int | None = None) -> list[Any]:
     """The result events a subscribed client gets while each of ``stores`` stores a record
-    (one event each)."""
+    (one event each, or ``events`` in all)."""
     async def scenario() -> list[Any]:
         srv, stop, task = await serving(config(), repo)
         try:
@@ -108,7 +109,7 @@ def events_while(repo: Repository, *stores: Callable[[], object]) -> list[Any]:
                 loop = asyncio.get_running_loop()
                 for store in stores:
                     await loop.run_in_executor(None, store)
-                await handler.wait_for(len(stores))
+                await handler.wait_for(len(stores) if events is None else events)
                 return handler.events
         finally:
             await stopping(srv, stop, task)
@@ -492,3 +493,36 @@ def test_a_result_of_no_bolt_and_one_not_readable_arrive_as_results_told_apart(r
     assert "MID 61 revision 2 not readable" in unread.Description.Text
     assert not events[1].Result.ResultContent[0].Value.OverallResultValues
     assert repo.ledger.unacknowledged_count() == 3
+
+
+def test_an_ok_not_taken_for_a_tightening_arrives_as_a_result_not_decided(repo):
+    """An OK without a result type whose torque lies outside its bolt's window is not taken
+    for the bolt's tightening (perhaps none: a batch increment at a revision without types),
+    its bolt held.  It is a rundown of the controller all the same: an MES counting them
+    missed it (a reviewer).  It comes as a result, NotDecidable in its metadata and in each
+    value (the controller's OK is not the station's), the held bolt its Joint, and counts
+    among those to acknowledge; a batch increment, no rundown, does not come."""
+    from db.kinds import NOT_TAKEN
+
+    def event(what: str, tid: int) -> Callable[[], Any]:
+        return lambda: repo.record_controller_event(
+            result_type=0, what=what, vin=VIN, bolt="B2", controller_vin=None,
+            tightening_id=tid, pset=1, ok=True, torque_nm=4.97, angle_deg=30.0,
+            result_at=None)
+
+    events = events_while(repo, event("batch increment", 60), event(NOT_TAKEN, 61),
+                          lambda: record(repo, VIN, "B1", ok=True, tightening_id=62),
+                          events=2)
+    assert [e.Message.Text for e in events] == [
+        f"{VIN} B2: OK not taken for a tightening (controller id 61): held for a supervisor",
+        f"{VIN} B1: tightening OK (controller id 62)"]
+    meta = events[0].Result.ResultMetaData
+    assert int(meta.ResultEvaluation) == 3
+    assert {(x.EntityType, x.EntityId) for x in meta.AssociatedEntities} == {
+        (20, VIN), (23, "B2")}
+    assert "not taken for a tightening; B2 held for a supervisor" in meta.Description.Text
+    assert [(kv.Key, kv.Value.Value) for kv in meta.ExtendedMetaData] == [("TighteningId", 61)]
+    torque, angle = events[0].Result.ResultContent[0].Value.OverallResultValues
+    assert (torque.MeasuredValue, angle.MeasuredValue) == (4.97, 30.0)
+    assert [int(v.ResultEvaluation) for v in (torque, angle)] == [3, 3]
+    assert repo.ledger.unacknowledged_count() == 2

@@ -19,6 +19,7 @@ from typing import Any
 
 import pytest
 
+from db.kinds import NOT_TAKEN
 from db.repository import Repository
 from tests.db.conftest import record
 from tests.opcua.test_server import VIN, config, repo, serving, stopping
@@ -49,8 +50,9 @@ def node_opcua() -> Path:
     return CACHE
 
 
-#: what ``node_reads`` stores for a "bolt" of these names: a result of no bolt, one not read
-NO_BOLT, NOT_READ = "(unattributed)", "(unreadable)"
+#: what ``node_reads`` stores for a "bolt" of these names: a result of no bolt, one not read,
+#: an OK not taken for a tightening (a controller event)
+NO_BOLT, NOT_READ, NOT_TAKEN_ = "(unattributed)", "(unreadable)", "(not taken)"
 
 
 def _recorder(repo: Repository, bolt: str, kw: dict[str, Any]) -> Callable[[], object]:
@@ -60,6 +62,9 @@ def _recorder(repo: Repository, bolt: str, kw: dict[str, Any]) -> Callable[[], o
     if bolt == NOT_READ:
         return lambda: repo.record_unreadable(vin=VIN, controller_vin=None, result_at=None,
                                               **kw)
+    if bolt == NOT_TAKEN_:
+        return lambda: repo.record_controller_event(
+            result_type=0, what=NOT_TAKEN, vin=VIN, controller_vin=None, result_at=None, **kw)
     return lambda: record(repo, VIN, bolt, **kw)
 
 
@@ -129,18 +134,27 @@ def test_node_opcua_decodes_a_result_event_with_the_client_side_fix(repo):
 def test_node_opcua_decodes_a_result_of_no_bolt_and_one_not_readable(repo):
     """An independent stack reads the results that are no joint's rundown as the station
     sends them: told apart by their Message, their evaluation (NotDecidable for one not
-    read), no Joint for one of no bolt, no values for one not read."""
+    read and an OK not taken), no Joint for one of no bolt, no values for one not read."""
     events = asyncio.run(node_reads(repo, [
         (NO_BOLT, {"tightening_id": 81, "pset": 1, "ok": True, "torque_nm": 25.0,
                    "angle_deg": 33.0, "reason": "outside a tool enable", "result_type": 1}),
         (NOT_READ, {"mid": 61, "revision": 2, "raw": "0231006100" + "x" * 40,
                     "error": "torque '00ABCD' is not a number", "bolt": "B2",
-                    "tightening_id": 82, "pset": 1})], "--fix"))
+                    "tightening_id": 82, "pset": 1}),
+        (NOT_TAKEN_, {"bolt": "B3", "tightening_id": 83, "pset": 1, "ok": True,
+                      "torque_nm": 4.97, "angle_deg": 30.0})], "--fix"))
     assert [e["message"] for e in events] == [
         f"{VIN}: tightening OK of no bolt (controller id 81)",
-        f"{VIN} B2: result not readable (controller id 82): held for a supervisor"]
-    loose, unread = (e["result"]["ResultMetaData"] for e in events)
-    assert (loose["ResultEvaluation"], unread["ResultEvaluation"]) == (1, 3)
+        f"{VIN} B2: result not readable (controller id 82): held for a supervisor",
+        f"{VIN} B3: OK not taken for a tightening (controller id 83): held for a supervisor"]
+    loose, unread, not_taken = (e["result"]["ResultMetaData"] for e in events)
+    assert (loose["ResultEvaluation"], unread["ResultEvaluation"],
+            not_taken["ResultEvaluation"]) == (1, 3, 3)
+    assert sorted([x["EntityType"], x["EntityId"]] for x in not_taken["AssociatedEntities"]) \
+        == [[20, VIN], [23, "B3"]]
+    assert [(v["MeasuredValue"], v["ResultEvaluation"]) for v in
+            events[2]["result"]["ResultContent"][0]["OverallResultValues"]] == [(4.97, 3),
+                                                                                (30.0, 3)]
     assert [[x["EntityType"], x["EntityId"]] for x in loose["AssociatedEntities"]] == \
         [[20, VIN]]
     assert sorted([x["EntityType"], x["EntityId"]] for x in unread["AssociatedEntities"]) \
