@@ -478,6 +478,10 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
     Said.LOST_RECORDED: lambda n: (
         f"tightening {n.tightening_id}, its push lost, fetched when a later one came: made "
         f"while the tool was on for {n.bolt} alone, recorded to {n.bolt}"),
+    Said.LOST_CHECKED: lambda n: (
+        f"tightening {n.tightening_id}, its push lost, fetched as {n.bolt}'s late-result "
+        f"window ended: made while the tool was on for {n.bolt} alone, recorded to {n.bolt}"
+        + (f" of {n.vin} (gone from the station since)" if n.vin else "")),
     Said.CUT_NOTHING: lambda n: (f"no tightening made during the link cut (every result "
                                  f"since fetched): {n.bolt} open as before"),
     Said.CUT_UNKNOWN: lambda n: (

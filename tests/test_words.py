@@ -125,6 +125,12 @@ WORDS = [
     (Notice(Said.LOST_RECORDED, bolt="B1", tightening_id=41),
      "tightening 41, its push lost, fetched when a later one came: made while the tool was on "
      "for B1 alone, recorded to B1"),
+    (Notice(Said.LOST_CHECKED, bolt="B1", tightening_id=41),
+     "tightening 41, its push lost, fetched as B1's late-result window ended: made while the "
+     "tool was on for B1 alone, recorded to B1"),
+    (Notice(Said.LOST_CHECKED, bolt="B9", vin="VIN1", tightening_id=41),
+     "tightening 41, its push lost, fetched as B9's late-result window ended: made while the "
+     "tool was on for B9 alone, recorded to B9 of VIN1 (gone from the station since)"),
     (Notice(Said.CUT_UNKNOWN, bolt="B1", vin="VIN1", note="tightening 41 may be its own"),
      "B1 of VIN1 (gone from the station): tightening 41 may be its own: check it on the "
      "controller; held when that vehicle is back (stationd reopen), to release or enter its "

@@ -34,6 +34,7 @@ from stationd.station.inputs import (
     DeviceBack,
     DeviceSaid,
     Event,
+    NewestChecked,
     ResultCopy,
     ResultIn,
     ResultsMissed,
@@ -396,11 +397,19 @@ class ControllerFeed:
     def check_newest(self) -> None:
         """The core's :class:`CheckNewest`: the controller's newest result asked for, and the
         ids after the last one heard fetched (their pushes lost), in a task of its own (it
-        feeds the core, whose lock the caller holds).  None while one runs or a catch-up
-        does (that one fetches them)."""
-        busy = [t for t in (self.checking, self.catching_up) if t is not None and not t.done()]
-        if not busy:
-            self.checking = asyncio.get_running_loop().create_task(self._check_newest())
+        feeds the core, whose lock the caller holds); then the core is told
+        (:class:`NewestChecked`: the enable it was for is owed nothing more, and the tool
+        may go on again).  Not asked while one runs or a catch-up does (that one fetches
+        them): told at once, or by the check running as it ends."""
+        if self.checking is not None and not self.checking.done():
+            return
+        catching = self.catching_up is not None and not self.catching_up.done()
+        self.checking = asyncio.get_running_loop().create_task(self._checked(not catching))
+
+    async def _checked(self, ask: bool) -> None:
+        if ask:
+            await self._check_newest()
+        await self._feed(NewestChecked(time.time()))
 
     async def _check_newest(self) -> None:
         """Only with every tool off and none enabled while it asks (else the newest may be

@@ -42,7 +42,7 @@ from __future__ import annotations
 
 from typing import assert_never
 
-from stationd.station.actions import Action, CheckNewest, Publish
+from stationd.station.actions import Action, Publish
 from stationd.station.events import StateChanged
 from stationd.station.inputs import (
     Announce,
@@ -57,6 +57,7 @@ from stationd.station.inputs import (
     LineLinkIn,
     LocalizedIn,
     ModelsKnown,
+    NewestChecked,
     NotStored,
     OperatorBack,
     ParamsAcked,
@@ -124,6 +125,8 @@ class StationCore(LiftRules, ToolRules, ResultRules):
                 return self._on_result_in(ev)
             case ResultCopy():
                 return self._on_result_copy(ev)
+            case NewestChecked():
+                return self._on_newest_checked(ev)
             case ResultsSkipped():
                 return self._on_results_skipped(ev)
             case UnreadableIn():
@@ -164,11 +167,7 @@ class StationCore(LiftRules, ToolRules, ResultRules):
         return [Publish(StateChanged(self.state, self.reason, t=ev.t))]
 
     def _on_tick(self, ev: Tick) -> list[Action]:
-        acts = self._pending_overdue(ev.t)
-        if self._off_at is not None and ev.t - self._off_at >= self.late_result_s \
-                and self._pending_push is None:
-            if self._unanswered_after():   # its push lost? the controller is asked
-                acts.append(CheckNewest())
-            self._enabled, self._off_at = None, None
+        acts = self._pending_overdue(ev.t) + self._check_overdue(ev.t) + \
+            self._window_over(ev.t)
         return acts + self._teach_overdue(ev.t) + self._check_due(ev.t) + \
             self._operator_idle(ev.t)

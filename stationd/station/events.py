@@ -560,6 +560,8 @@ class Said(enum.Enum):
     LOST_RECORDED = "lost recorded"      # its push lost, fetched when a later one came:
     #                                      made under the bolt's own enable, recorded to it
     #                                      (tightening_id, bolt)
+    LOST_CHECKED = "lost checked"        # its push lost, fetched as its bolt's late-result
+    #                                      window ended: recorded to it (tightening_id, bolt)
     LOOSEN_PSET_TIGHTENED = "loosen pset tightened"  # (bolt, pset)
     LOOSENED = "loosened"                # a loosening OK: the tightening pset next (bolt)
     LOOSENING_NOK = "loosening nok"      # (bolt, count: NOKs in a row)

@@ -132,6 +132,16 @@ class ResultsSkipped(Input):
 
 
 @dataclass(frozen=True)
+class NewestChecked(Input):
+    """The controller's newest result was asked for (:class:`~stationd.station.actions.
+    CheckNewest`) and what it had since the last one heard fed: or the check could not be
+    made (a catch-up running, the link down), or was void.  Why told: the enable whose
+    window ended stays owed until then (its result, its push lost, is fetched and recorded
+    to it), and no tool goes on meanwhile (a trial: the next bolt's enable, 30 ms after the
+    window's end, voided the check)."""
+
+
+@dataclass(frozen=True)
 class ResultCopy(Input):
     """A result from the controller that the database has stored already (the shell asked it
     before the core saw the result): a copy the controller sent again, its acknowledgement
@@ -379,7 +389,7 @@ class CommandDone(Input):
 
 
 Event = (Started | Announce | LiftRead | LocalizedIn | ParamsAcked | ParamsRefused | ResultIn
-         | ResultsSkipped | ResultCopy | UnreadableIn
+         | ResultsSkipped | NewestChecked | ResultCopy | UnreadableIn
          | ResultsMissed | CaughtUp | NotStored
          | DeviceFault | DeviceBack | DeviceSaid | LineLinkIn
          | VehicleLoaded | VehicleRejected | VinSent | Tick

@@ -27,11 +27,12 @@ from stationd.station.events import (
 )
 from stationd.station.inputs import (
     CaughtUp,
+    NewestChecked,
     ResultIn,
     ResultsSkipped,
 )
 from stationd.station.nok import NokRules
-from stationd.station.state import ON_A_BOLT, PENDING_PUSH_S, _Cut
+from stationd.station.state import CHECK_WAIT_S, ON_A_BOLT, PENDING_PUSH_S, _Cut
 
 #: the controller stamps its results to the second, and its clock's offset is measured to
 #: the second: a result fetched after a link cut is placed between the enable and the cut
@@ -53,6 +54,28 @@ class LostRules(NokRules):
             return []
         return self._drop(ev.t, State.TRACKING, StateReason(Because.PUSH_AFTER_LOST,
                                                             bolt=self.bolt))
+
+    def _on_newest_checked(self, ev: NewestChecked) -> list[Action]:
+        """The controller's newest result was asked for and what it had fed (recorded to the
+        enable owed where made under it: :meth:`_made_under`), or the check could not be
+        made: that enable is owed nothing more."""
+        return self._check_ended()
+
+    def _check_overdue(self, t: float) -> list[Action]:
+        """A check of the controller's newest never answered in :data:`CHECK_WAIT_S` (a fault
+        of the shell): the tool waits no longer."""
+        if self._checking is None or t - self._checking[0] < CHECK_WAIT_S:
+            return []
+        return self._check_ended()
+
+    def _check_ended(self) -> list[Action]:
+        """The check is over: the enable it was for is owed nothing more (an enable since, of
+        that bolt, is its own: kept)."""
+        if self._checking is not None and self._checking[1] == self._enable_serial \
+                and not self.tool_on:
+            self._enabled, self._off_at = None, None
+        self._checking = None
+        return []
 
     def _push_judged(self, t: float) -> list[Action]:
         """The pushed result that skipped ids is judged (or no longer waited for): the NOK
@@ -226,9 +249,11 @@ class LostRules(NokRules):
         supervisor's trial: the operator pulled again at once, the first NOK stored
         unattributed and uncounted (by its time alone, within the slack, never proved)."""
         r, made = ev.result, ev.made_at
-        if not (ev.fetched and ev.live and ev.before is not None) \
+        checked = self._checking is not None and self._checking[1] == self._enable_serial
+        if not (ev.fetched and ev.live and (ev.before is not None or checked)) \
                 or not en.vin or self._cut is not None or self._enabled_at is None \
-                or self._enabled_at <= self._link_lost_at or not self._result_owed(ev.t):
+                or self._enabled_at <= self._link_lost_at \
+                or not (self._result_owed(ev.t) or checked):
             return False
         echoed = str(r.vin or "").strip()
         if (en.pset is not None and int(r.pset) != en.pset) or (echoed and echoed != en.vin):

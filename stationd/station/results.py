@@ -329,8 +329,11 @@ class ResultRules(UnreadRules):
                                                      loosen=kind == LOOSENING, ok=bool(r.ok)))
         acts.append(Record(en.vin, en.bolt, r, en, late, kind, offline=self._offline(ev)))
         if cut or lost:
-            acts.append(Publish(Notice(Said.CUT_RECORDED if cut else Said.LOST_RECORDED,
+            checked = not cut and ev.before is None
+            acts.append(Publish(Notice(Said.CUT_RECORDED if cut else Said.LOST_RECORDED
+                                       if not checked else Said.LOST_CHECKED,
                                        tightening_id=int(r.tightening_id), bolt=en.bolt,
+                                       vin=en.vin if checked and en.vin != self.vin else None,
                                        t=ev.t)))
         elif late:
             acts.append(Publish(Notice(Said.LATE_RESULT, bolt=en.bolt,

@@ -58,6 +58,9 @@ UNANSWERED = 20
 #: (:class:`ResultsSkipped`): the shell feeds it after the fetches, each bounded in time; a
 #: result that never comes (a fault of the shell) keeps no tool off for good
 PENDING_PUSH_S = 60.0
+#: the longest the controller's answer to a check of its newest result is waited for (one
+#: MID 0064 and the fetches of what it had since, each bounded in time by the driver)
+CHECK_WAIT_S = 15.0
 
 
 @dataclass(frozen=True)
@@ -216,6 +219,10 @@ class CoreState:
     #: a pushed result (its id, since when) that skipped ids, fed after them
     #: (:class:`ResultsSkipped`): the enable's result stays owed until it is in
     _pending_push: int | None = field(default=None, repr=False)
+    #: the controller asked for its newest result (:class:`CheckNewest`) as the owed
+    #: enable's window ended: since when, and that enable's count; it stays owed until the
+    #: answer (:class:`NewestChecked`) or CHECK_WAIT_S
+    _checking: tuple[float, int] | None = field(default=None, repr=False)
     _pending_at: float = field(default=0.0, repr=False)
     #: bolts whose NOK came fetched while a pushed result was pending: counted, the NOK
     #: policy waits for the pushed one (bolt -> its pset)

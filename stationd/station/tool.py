@@ -11,6 +11,7 @@ from drivers.keeper import FaultKind
 from stationd.reasons import CoreFault, CoreFaultKind, Reason, Skip, SkipKind, Why
 from stationd.station.actions import (
     Action,
+    CheckNewest,
     EnableTool,
     Publish,
     Selection,
@@ -67,6 +68,7 @@ class ToolRules(FaultRules):
                     self.reason = StateReason(Because.CUT_OWED, bolt=self.bolt,
                                               owed=self._named(self._cut.selection))
                     return acts
+                acts += self._window_over(ev.t)
                 owed = self._owed_elsewhere(ev.t)
                 if owed is not None:
                     self.reason = StateReason(Because.RESULT_OWED, bolt=self.bolt, owed=owed)
@@ -140,6 +142,21 @@ class ToolRules(FaultRules):
     # controller's data -- an enable made before it comes would take it, or tighten the bolt
     # twice.
 
+    def _window_over(self, t: float) -> list[Action]:
+        """The owed enable's late-result window is over (at the first tick or localization
+        after it: a trial found the next bolt's tool on 30 ms after the window's end, before
+        the tick that was to check): with no result, it is unanswered and the controller is
+        asked for its newest (its push lost?); the enable stays owed until the answer
+        (:class:`~stationd.station.inputs.NewestChecked`), and no tool goes on meanwhile."""
+        if self._off_at is None or t - self._off_at < self.late_result_s \
+                or self._pending_push is not None or self._checking is not None:
+            return []
+        if self._unanswered_after():
+            self._checking = (t, self._enable_serial)
+            return [CheckNewest()]
+        self._enabled, self._off_at = None, None
+        return []
+
     def _owed_elsewhere(self, t: float) -> str | None:
         """The bolt whose result may still come (its tool went off less than the late-result
         window ago, and its result is not in) where it is another bolt than the one selected;
@@ -149,6 +166,8 @@ class ToolRules(FaultRules):
         across vehicles: the last car's bolt, its result owed as that car left, named with
         its VIN."""
         en = self._enabled
+        if en is not None and self._checking is not None:
+            return self._named(en)   # (its own bolt too: what the check finds is that one's)
         if en is None or not self._result_owed(t) or (
                 (en.vin, en.bolt) == (self.vin, self.bolt) and self._pending_push is None):
             return None     # (its own bolt too while results skipped are fetched)

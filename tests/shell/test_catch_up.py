@@ -22,7 +22,14 @@ from drivers.errors import ConnectionLostError, ProtocolError, RefusedError
 from drivers.wrench.base import UnreadableResult
 from stationd.shell.blocking import Blocking
 from stationd.shell.controller import ControllerFeed
-from stationd.station.inputs import CaughtUp, ResultIn, ResultsMissed, ResultsSkipped, UnreadableIn
+from stationd.station.inputs import (
+    CaughtUp,
+    NewestChecked,
+    ResultIn,
+    ResultsMissed,
+    ResultsSkipped,
+    UnreadableIn,
+)
 
 
 class Controller:
@@ -441,7 +448,9 @@ def test_a_stop_while_skipped_ids_are_fetched_ends_and_keeps_the_pushed_one():
 def test_the_controller_s_newest_asked_for_fetches_what_was_never_heard():
     """The core asks (an enable's window ended without its result): the controller's newest
     (42) is after the last one heard (40): 41 and 42 are fetched and fed, with the link up,
-    as results whose push was lost; a newest already heard fetches nothing."""
+    as results whose push was lost; a newest already heard fetches nothing.  The core is
+    told the check ended, last, whatever it found (the enable it was for owed no more, the
+    tool free to go on)."""
     def asked(answers: dict[int, Any], heard: int, tool_on: bool = False) -> list[Any]:
         fed: list[Any] = []
 
@@ -460,7 +469,11 @@ def test_the_controller_s_newest_asked_for_fetches_what_was_never_heard():
     fed = asked({0: res(42), 41: res(41), 42: res(42)}, 40)
     assert [(e.result.tightening_id, e.fetched, e.live, e.before) for e in fed
             if isinstance(e, ResultIn)] == [(41, True, True, None), (42, True, True, None)]
-    assert not asked({0: res(40)}, 40)
-    assert not asked({0: REFUSED}, 40)          # refused: said in the journal, nothing fed
+    assert isinstance(fed[-1], NewestChecked)
+    told = [NewestChecked]
+    assert [type(e) for e in asked({0: res(40)}, 40)] == told
+    # refused: said in the journal, nothing fetched
+    assert [type(e) for e in asked({0: REFUSED}, 40)] == told
     # a tool on: its own rundown may be the newest (fetched before its push: a reviewer)
-    assert not asked({0: res(42), 41: res(41), 42: res(42)}, 40, tool_on=True)
+    assert [type(e) for e in asked({0: res(42), 41: res(41), 42: res(42)}, 40,
+                                   tool_on=True)] == told

@@ -46,6 +46,7 @@ from stationd.station.inputs import (
     CaughtUp,
     DeviceBack,
     DeviceFault,
+    NewestChecked,
     ResultCopy,
     ResultIn,
     ResultsSkipped,
@@ -54,7 +55,7 @@ from stationd.station.inputs import (
     VehicleLoaded,
 )
 from stationd.station.policy import NokPolicy, NokRule
-from stationd.station.state import PENDING_PUSH_S
+from stationd.station.state import CHECK_WAIT_S, PENDING_PUSH_S
 from stationd.words import (
     notice_words,
     reason_words,
@@ -899,7 +900,10 @@ def test_the_next_car_waits_while_the_last_car_s_result_may_still_come():
     _next_car_waits(d, 1)
     assert "until bolt B1 of VIN1's result is in" in state_words(d.core.reason)
     d.t += d.core.late_result_s
-    _on(d, 1, 1)
+    _on(d, 1, 1)       # the window over: the controller's newest asked for, the tool waits
+    assert not d.core.tool_on and "until bolt B1 of VIN1's result is in" in \
+        state_words(d.core.reason)
+    _on(d, 1, 1)       # answered (nothing more: the shell's check as the Driver plays it)
     assert d.core.tool_on and d.core.bolt == "B1"
 
 
@@ -1232,15 +1236,92 @@ def test_an_enable_left_without_its_result_asks_the_controller_for_its_newest():
     assert [a for a in acts if isinstance(a, CheckNewest)]
     d.t += 1.0
     assert not [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
-    # not at the next enable: its own rundown could be the newest then, fetched before its
-    # push and stored as no bolt's (a reviewer)
+    # the window's end seen first by the next bolt's frame (no Tick since): asked then, and
+    # the next bolt's tool waits for the answer (a trial: it went on 30 ms after the
+    # window's end, before the tick, and the check never came; were it asked with the tool
+    # on, its own rundown could be the newest, fetched before its push: a reviewer)
     d = _ready()
+    d.answer_checks = False
     _enabled(d, 1)
     _on(d, 3, 3)                                   # the wrench leaves B1, no Tick since
     d.t += d.core.late_result_s + 1.0
     n = len(d.log)
-    _enabled(d, 2)
-    assert not [a for _, acts in d.log[n:] for a in acts if isinstance(a, CheckNewest)]
+    _on(d, 2)
+    d.step(("ack", 0.01, True))
+    _on(d, 2, 2)
+    assert len([a for _, acts in d.log[n:] for a in acts if isinstance(a, CheckNewest)]) == 1
+    assert not d.core.tool_on
+    d.feed(NewestChecked(d.t))
+    _on(d, 2, 1)
+    assert d.core.tool_on and d.core.bolt == "B2"
+
+
+def _b1_window_ends(d: Driver) -> float:
+    """B1 enabled, tightened 3 s later (its push lost: nothing comes), the wrench to B2; B1's
+    window ends: the controller is asked for its newest (the test answers).  B1's enable's
+    time."""
+    d.answer_checks = False
+    _enabled(d, 1)
+    enabled_at = d.t
+    d.t += 3.0
+    _on(d, 2, 3)                                   # the wrench leaves B1: the tool off
+    d.t += d.core.late_result_s + 1.0
+    assert [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    return enabled_at
+
+
+def _b2_waits(d: Driver) -> None:
+    """The wrench on B2, its parameters acknowledged: the tool stays off, for B1."""
+    _on(d, 2)
+    d.step(("ack", 0.01, True))
+    _on(d, 2, 1)
+    assert not d.core.tool_on
+    assert state_words(d.core.reason) == ("bolt B2: the tool stays off until bolt B1's "
+                                          "result is in, or can no longer come")
+
+
+def test_a_push_lost_found_as_the_window_ends_is_recorded_to_its_bolt():
+    """B1's window ends without its result; the controller's newest, asked for then, is 41
+    (its push lost), made while the tool was on for B1 and no enable since: B1's, recorded
+    to it (a trial: held for a supervisor, its words saying other enables came between, when
+    none had).  The next bolt's tool waits for the check's answer (a trial: B2's enable, 30
+    ms after the window's end, voided the check)."""
+    d = _ready()
+    enabled_at = _b1_window_ends(d)
+    _b2_waits(d)
+    acts = d.feed(ResultIn(d.t, res(41, 1, False, 1), fetched=True, follows=40,
+                           made_at=enabled_at + 2.5, live=True))
+    [rec] = [a for a in acts if isinstance(a, Record)]
+    assert (rec.bolt, int(rec.result.tightening_id), rec.late) == ("B1", 41, True)
+    assert not [a for a in acts if isinstance(a, StoreUnattributed | StoreCutUnknown)]
+    assert ("tightening 41, its push lost, fetched as B1's late-result window ended: made "
+            "while the tool was on for B1 alone, recorded to B1") in _notices(acts)
+    assert d.core._noks["B1"] == 1
+    _on(d, 2, 1)
+    assert not d.core.tool_on                      # until the check has ended
+    d.feed(NewestChecked(d.t))
+    _on(d, 2, 1)
+    assert d.core.tool_on and d.core.bolt == "B2"
+
+
+def test_a_check_that_finds_nothing_or_never_answers_keeps_no_tool_off_for_long():
+    """The check finds nothing more (B1's operator left it untightened): the tool goes on
+    for B2 at once; B1's enable stays unanswered (a result found later may be its own, and
+    holds it).  A check never answered (a fault of the shell) ends in CHECK_WAIT_S."""
+    d = _ready()
+    _b1_window_ends(d)
+    _b2_waits(d)
+    d.feed(NewestChecked(d.t))
+    _on(d, 2, 1)
+    assert d.core.tool_on and d.core.bolt == "B2"
+    assert [u.selection.bolt for u in d.core._unanswered] == ["B1"]
+    d = _ready()
+    _b1_window_ends(d)
+    _b2_waits(d)
+    d.t += CHECK_WAIT_S
+    d.feed(Tick(d.t))
+    _on(d, 2, 1)
+    assert d.core.tool_on and d.core.bolt == "B2"
 
 
 def test_an_older_id_judged_later_says_nothing_of_the_order():
