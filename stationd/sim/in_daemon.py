@@ -27,6 +27,7 @@ import pickle
 import sys
 import threading
 import time
+from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
@@ -42,6 +43,7 @@ from drivers.wrench.sim.controller import SimController, SimWrench
 from stationd.boltfile import load_bolts
 from stationd.config import StationConfig
 from stationd.errors import InputError, StationError
+from stationd.lock import lock_path
 from stationd.shell.daemon import Station
 from stationd.sim.devices_cli import HELP, first_serial, plc_command, psets_of
 from stationd.sim.operator import (
@@ -128,6 +130,17 @@ def left_by_the_last_run(cfg: StationConfig) -> tuple[str | None, int | None]:
     except (DbError, StationError, SQLAlchemyError, OSError) as exc:
         log.debug("nothing of a last run read from %s: %s", cfg.database_url, exc)
         return None, None
+
+
+def controller_memory(cfg: StationConfig) -> Path | None:
+    """The file the simulated controller keeps its results in (for MID 0064), in the
+    station's own folder: beside its lock (by its SQLite database, or in the records folder
+    of a database server), ``<database>.sim-wrench.jsonl``; None where the station keeps no
+    file (a database in memory, or on a server without a records folder).  The controller's
+    own file, never the station's database: it stands for a device of its own, whose results
+    outlive the station's restart whatever the station recorded."""
+    held = lock_path(cfg.database_url, cfg.records.images_dir)
+    return None if held is None else held.with_suffix(".sim-wrench.jsonl")
 
 
 def _model_code(cfg: StationConfig) -> int:
@@ -323,9 +336,10 @@ class SimulatedStation:
 
     def _program(self, cfg: StationConfig, station: Station) -> None:
         """The simulated controller goes on from the last station's (its tightening ids, its
-        stored results, its scatter: :meth:`SimController.go_on_from`), and runs the bolt
-        table's psets (and the NOK policy's loosen psets), as ``stationd sim controller
-        --config`` does.
+        stored results, its scatter: :meth:`SimController.go_on_from`), keeps its results in
+        a file of its own (:func:`controller_memory`: after a restart it has those the last
+        daemon's made, as a real controller has), and runs the bolt table's psets (and the
+        NOK policy's loosen psets), as ``stationd sim controller --config`` does.
 
         Why carried: each station opens its own ``sim://wrench``, a new simulator whose ids
         started at 1 again with the same seed, so after a reload it sent the same (id,
@@ -344,6 +358,11 @@ class SimulatedStation:
         elif before is None and self._last_id is not None:    # the daemon's first station
             wrench.controller.go_on_after(self._last_id, self.seed)
         self._last_id = None
+        memory, said = controller_memory(cfg), len(wrench.controller.errors)
+        if memory is not None:
+            wrench.controller.keep_results_in(memory)
+        for problem in wrench.controller.errors[said:]:     # its file: the results in memory
+            log.warning("simulated controller: %s", problem)
         if cfg.bolts_path is None:
             return
         try:
@@ -442,4 +461,4 @@ def _bolt_said(line: dict[str, Any]) -> None:
              line["result"], before)
 
 
-__all__ = ["BOLTS_PER_VEHICLE", "SimulatedStation", "needs_world"]
+__all__ = ["BOLTS_PER_VEHICLE", "SimulatedStation", "controller_memory", "needs_world"]

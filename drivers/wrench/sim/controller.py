@@ -12,7 +12,9 @@ Revisions: 0001 (so 0002), 0060 (so the 0061 pushed) and 0064 (so its 0065) are 
 revisions 1 to 7, except those set to be refused (``refused_revisions``, answered MID 0004
 ``revision_refusal_code``, 97 by default) so that an integrator's step-down can be tested.
 Every result is kept (the newest ``store_size``) for MID 0064; an id it no longer has is
-MID 0004 error 15.  ``link_ack=True`` makes it acknowledge at link level (MID 9997/9998,
+MID 0004 error 15.  With ``keep_results_in(FILE)`` it keeps them in that file too, and a
+simulator built anew on the same file has them (a real controller keeps its results when the
+station restarts).  ``link_ack=True`` makes it acknowledge at link level (MID 9997/9998,
 ``server.py``) and say so in 0002 revision 6+: with an integrator that started at
 revision 6 or later, or that numbers its messages.  Tightening curves: a session that
 subscribes to MID 0900 with the generic subscription (MID 0008; MID 0009 stops it) gets,
@@ -56,6 +58,7 @@ from collections import OrderedDict
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta
+from pathlib import Path
 from typing import Any, Literal
 
 from drivers.link import Link, SerialLink, TcpLink
@@ -69,6 +72,8 @@ from drivers.wrench.sim.results import (
     SimRecord,
     fixed,
     mislabelled_data,
+    record_line,
+    record_of,
     result_data,
     text,
 )
@@ -194,6 +199,8 @@ class SimController(OpenProtocolServer):
         self.resend_unacked = resend_unacked
         self._unacked: dict[int, SimRecord] = {}     # tightening id -> its record
         self._store: OrderedDict[int, SimRecord] = OrderedDict()   # for MID 0064
+        self._kept: Path | None = None           # the file it keeps them in as well
+        self._kept_lines = 0                     # the lines that file holds
         self._rundown: int | None = None         # the pset of a rundown under way
         self._lose_pushes = 0                    # the next results kept but never pushed
         # what the trigger makes when no type is asked: these types in turn, every
@@ -293,14 +300,85 @@ class SimController(OpenProtocolServer):
 
     def forget_results(self, *tightening_ids: int) -> None:
         """The controller no longer has these results (its store is bounded)."""
-        self.call(lambda: [self._store.pop(t, None) for t in tightening_ids])
+        def forget() -> None:
+            for t in tightening_ids:
+                self._store.pop(t, None)
+            self._rewrite()
+        self.call(forget)
 
     def clear_results(self) -> None:
         """The controller's result database cleared (a reset, or another controller put in
         its place): its tightening ids start again from 1, and it keeps no results."""
         def clear() -> None:
             self._tid, self._store, self._unacked = 0, OrderedDict(), {}
+            self._rewrite()
         self.call(clear)
+
+    def keep_results_in(self, path: Path) -> None:
+        """Keep the results for MID 0064 in the file ``path`` as well, and take those it holds
+        (beside any kept already): its newest id is where its count goes on.  A real
+        controller is a box of its own and keeps its results through the station's restart;
+        a simulator in the station's process lost them with it, so the catch-up after a
+        restart found the controller empty and held the bolt whose result was owed (its
+        result "not known").  Each result is a line appended as it is made; the file is
+        written again, the newest ``store_size`` alone, when it is taken and when it holds
+        twice as many lines (bounded).  A line that does not read (the process killed while
+        writing it) is left out.  A file that cannot be written is said in ``errors``: the
+        results are kept in memory as before."""
+        def take() -> None:
+            found: list[SimRecord] = []
+            try:
+                with path.open(encoding="utf-8") as f:
+                    found = [r for r in map(record_of, f) if r is not None]
+            except FileNotFoundError:
+                pass
+            except (OSError, UnicodeDecodeError) as exc:
+                self.errors.append(f"results kept in {path} not read: {exc}")
+            for r in found:
+                if r.tightening_id not in self._store:
+                    self._store[r.tightening_id] = r
+            self._store = OrderedDict(sorted(self._store.items())[-self.store_size:])
+            self._tid = max(self._tid, next(reversed(self._store), 0))
+            self._kept = path
+            self._rewrite()
+        self._at_rest_or_call(take)
+
+    def _remember(self, record: SimRecord) -> None:
+        """``record`` appended to the file the results are kept in (if any); the file
+        written again once it holds twice ``store_size`` lines."""
+        if self._kept is None:
+            return
+        if self._kept_lines >= 2 * self.store_size:
+            self._rewrite()
+            return
+        try:
+            with self._kept.open("a", encoding="utf-8") as f:
+                f.write(record_line(record) + "\n")
+            self._kept_lines += 1
+        except OSError as exc:
+            self.errors.append(f"tightening {record.tightening_id} not kept in "
+                               f"{self._kept}: {exc}")
+
+    def _rewrite(self) -> None:
+        """The file the results are kept in (if any) written again with those kept now,
+        whole or not at all (a new file put in its place)."""
+        if self._kept is None:
+            return
+        part = self._kept.with_name(self._kept.name + ".part")
+        try:
+            part.write_text("".join(record_line(r) + "\n" for r in self._store.values()),
+                            encoding="utf-8")
+            os.replace(part, self._kept)
+            self._kept_lines = len(self._store)
+        except OSError as exc:
+            self.errors.append(f"results not kept in {self._kept}: {exc}")
+
+    def _at_rest_or_call(self, fn: Callable[[], None]) -> None:
+        """``fn`` now where the controller's thread does not run yet, else on it."""
+        if self._thread is None:
+            fn()
+        else:
+            self.call(fn)
 
     def go_on_after(self, last_id: int, seed: int) -> None:
         """Number on after tightening ``last_id`` (the newest its station recorded), its
@@ -308,14 +386,12 @@ class SimController(OpenProtocolServer):
         controller outlives that with its count.  A simulator built anew numbered from 1 with
         the same scatter, and the station took its new results for copies of stored ones (a
         supervisor's trial: a real rundown's values thrown away).  What it kept for MID 0064
-        is gone with the last process, as after a controller's own restart."""
+        is gone with the last process, unless kept in a file (:meth:`keep_results_in`: its
+        newest id counts too)."""
         def take() -> None:
             self._tid = max(self._tid, int(last_id))
             self._rng.seed(f"{seed}:{last_id}")
-        if self._thread is None:
-            take()
-        else:
-            self.call(take)
+        self._at_rest_or_call(take)
 
     def go_on_from(self, before: SimController) -> None:
         """Go on where ``before`` (closed: the simulator of the same controller, built by the
@@ -338,10 +414,7 @@ class SimController(OpenProtocolServer):
             self._store = OrderedDict(store[-self.store_size:])
             self._unacked = unacked if self.resend_unacked else {}
             self._rng.setstate(scatter)
-        if self._thread is None:
-            take()
-        else:
-            self.call(take)
+        self._at_rest_or_call(take)
 
     def on_power_on(self) -> None:
         """Volatile state is lost in a power cycle; the selected pset is kept."""
@@ -639,6 +712,7 @@ class SimController(OpenProtocolServer):
         self._store[self._tid] = record
         while len(self._store) > self.store_size:
             self._store.popitem(last=False)
+        self._remember(record)
         lost = self._lose_pushes > 0
         self._lose_pushes -= lost
         if self.resend_unacked and not lost:

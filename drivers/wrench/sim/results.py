@@ -10,7 +10,8 @@ has to be made twice, differently, to pass the tests.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import json
+from dataclasses import asdict, dataclass, fields
 from datetime import datetime
 
 TIME = "%Y-%m-%d:%H:%M:%S"
@@ -50,6 +51,34 @@ class SimRecord:
     result_type: int = 1
     torque_unit: int = 1
     tool_serial: str = "SIMTOOL0000001"
+
+
+#: a record's times, written as ISO text in a line of the controller's memory
+_TIMES = ("timestamp", "pset_changed")
+
+
+def record_line(r: SimRecord) -> str:
+    """``r`` as one line of JSON (no newline): how the controller keeps it in a file of its
+    own (:meth:`~drivers.wrench.sim.controller.SimController.keep_results_in`)."""
+    doc = asdict(r)
+    for key in _TIMES:
+        doc[key] = doc[key].isoformat()
+    return json.dumps(doc, separators=(",", ":"))
+
+
+def record_of(line: str) -> SimRecord | None:
+    """The record a line of :func:`record_line` holds; None for one that does not read (cut
+    short by a process killed while writing it, or of another layout)."""
+    try:
+        doc = json.loads(line)
+        known = {f.name for f in fields(SimRecord)}
+        if not isinstance(doc, dict) or not known >= set(doc):
+            return None
+        for key in _TIMES:
+            doc[key] = datetime.fromisoformat(doc[key])
+        return SimRecord(**doc)
+    except (ValueError, TypeError, KeyError):
+        return None
 
 
 def fixed(value: float, width: int) -> str:

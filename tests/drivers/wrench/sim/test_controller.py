@@ -15,7 +15,7 @@ import pytest
 from drivers.wrench.openprotocol.message import parse_result
 from drivers.wrench.sim.controller import SimController, SimPset
 
-from ..conftest import op, read_message, wait_until
+from ..conftest import connect, op, read_message, wait_until
 
 STOP = b"\x07\x09\x07\x09\x02"
 
@@ -175,6 +175,41 @@ def test_a_new_simulator_of_a_restarted_station_numbers_on_with_other_values():
             made.append((shot.tightening_id, shot.torque_nm, shot.angle_deg))
     assert [m[0] for m in made] == [1, 41]
     assert made[0][1:] != made[1][1:]
+
+
+def test_results_kept_in_a_file_are_the_next_simulator_s_over_the_protocol(tmp_path):
+    """A real controller keeps its results through the station's restart; the simulator in
+    the station's process lost them with it, so MID 0064 asked for the newest after a restart
+    found none (the catch-up not complete: the owed bolt held).  Kept in a file of its own,
+    the next simulator answers MID 0064 (read by the real client) with them, the newest
+    ``store_size`` (the file bounded too), and numbers on after its newest."""
+    kept = tmp_path / "controller.jsonl"
+    with SimController({1: SimPset(10, 9, 11, 30, 20, 40)}, seed=3, store_size=3) as sim:
+        sim.keep_results_in(kept)
+        sim.call(lambda: setattr(sim, "pset", 1))
+        sim.call(lambda: setattr(sim, "tool_enabled", True))
+        made = [sim.pull_trigger() for _ in range(8)]
+    assert all(m is not None for m in made)
+    assert len(kept.read_text().splitlines()) <= 2 * 3          # bounded
+    with kept.open("a") as f:
+        f.write('{"tightening_id": 9, "cell"')                   # killed while writing it
+    with SimController({1: SimPset(10, 9, 11, 30, 20, 40)}, seed=3, store_size=3) as again:
+        again.go_on_after(7, 3)       # the station recorded up to 7: the controller has 8
+        again.keep_results_in(kept)
+        with connect(again, "tcp", tmp_path) as w:
+            newest, sixth, fifth = w.fetch_result(0), w.fetch_result(6), w.fetch_result(5)
+        again.call(lambda: setattr(again, "pset", 1))
+        again.call(lambda: setattr(again, "tool_enabled", True))
+        after = again.pull_trigger()
+    eighth, six = made[7], made[5]
+    assert eighth is not None and six is not None
+    assert newest is not None and sixth is not None and fifth is None   # the newest 3
+    assert (newest.tightening_id, newest.torque_nm, newest.angle_deg, newest.timestamp) == (
+        8, eighth.torque_nm, eighth.angle_deg, eighth.timestamp)
+    assert (sixth.tightening_id, sixth.torque_nm, sixth.angle_deg) == (
+        6, six.torque_nm, six.angle_deg)
+    assert after is not None and after.tightening_id == 9
+    assert len(kept.read_text().splitlines()) == 3 + 1           # rewritten, then one more
 
 
 def test_bad_settings_are_refused():
