@@ -126,6 +126,16 @@ def lost_unknown_note(tightening_id: int, pset: int | None, enabled_at: float) -
             f"{'' if pset is None else f' for pset {pset}'} at {at} UTC")
 
 
+def lost_unknown_id(note: str | None) -> int | None:
+    """The tightening id a lost push's hold names (:func:`lost_unknown_note`: the result,
+    stored unattributed, that may be the bolt's own, so that the bolt may be tightened
+    already); None for the note of another hold."""
+    if note is None or LOST_NOTE_MARK not in note:
+        return None
+    word, _, tid = note.split(LOST_NOTE_MARK, 1)[0].partition(" ")
+    return int(tid) if word == "tightening" and tid.isdigit() else None
+
+
 def loosening_note(note: str, pset: int | None) -> str:
     """A held bolt's note (``note``: which result) where that result came under the bolt's
     loosen pset: the person who reads it on the controller and enters its outcome is told it
@@ -177,6 +187,7 @@ __all__ = [
     "is_not_taken_note",
     "is_unknown_note",
     "loosening_note",
+    "lost_unknown_id",
     "lost_unknown_note",
     "not_taken_note",
     "unreadable_note",

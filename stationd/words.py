@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import replace
 
-from db.kinds import NOT_TAKEN_NOTE, is_not_taken_note, is_unknown_note
+from db.kinds import NOT_TAKEN_NOTE, is_not_taken_note, is_unknown_note, lost_unknown_id
 from drivers.counting import counted
 from drivers.wrench.base import ResultType
 from stationd.reasons import (
@@ -677,6 +677,17 @@ def command_words(answer: Answer) -> str:
     return what
 
 
+def _reopened(bolt: str, hold: str | None) -> str:
+    """What a release of a lost push's hold leaves (else nothing): the bolt open to be
+    tightened again, though the result fetched late may be its own (a supervisor's trial:
+    "accepted: its hold (...) ended", and the joint, torqued already, was tightened again)."""
+    tid = lost_unknown_id(hold)
+    return "" if tid is None else (
+        f": {bolt} is open to be tightened again, but it may be tightened already, by "
+        f"tightening {tid} (stored unattributed): check the controller before tightening "
+        "it again")
+
+
 def outcome_words(ok: bool, torque_nm: float, angle_deg: float) -> str:
     """An outcome as a person reads it off the controller: ``OK 49.6 Nm, 31.0 deg``."""
     return f"{'OK' if ok else 'NOK'} {torque_nm:.1f} Nm, {angle_deg:.1f} deg"
@@ -696,7 +707,8 @@ def answer_words(answer: Answer) -> str:
         ended = answer.result
         said = ([f"its lock after {ended['lock']} NOK in a row"] if "lock" in ended else []) \
             + ([f"its hold ({ended['hold']})"] if "hold" in ended else [])
-        return f"{head}: accepted: {' and '.join(said)} ended"
+        return f"{head}: accepted: {' and '.join(said)} ended" + _reopened(
+            answer.command.bolt, ended.get("hold"))
     if answer.reason is None:
         return f"{head}: accepted"
     return f"{head}: refused: {reason_words(answer.reason)}"

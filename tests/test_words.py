@@ -638,3 +638,14 @@ def test_a_hold_without_a_result_is_not_said_as_a_result_not_read():
                         "its outcome") and "could not be read" not in said
     assert "could not be read (tightening 7)" in reason_words(
         Reason(Why.HELD, bolt="B1", note="tightening 7"))
+
+
+def test_a_lost_push_s_hold_names_the_result_that_may_be_its_own():
+    """Its release's words (and the vehicle's page) name the result stored unattributed that
+    may be the bolt's own; the notes of other holds name none."""
+    from db.kinds import cut_unknown_note, loosening_note, lost_unknown_id, lost_unknown_note
+
+    note = lost_unknown_note(26, 1, 1000.0)
+    assert lost_unknown_id(note) == 26 == lost_unknown_id(loosening_note(note, 90))
+    assert lost_unknown_id(cut_unknown_note("tightening 26 may be its own", 1, 1000.0)) is None
+    assert lost_unknown_id("tightening 7") is lost_unknown_id(None) is None

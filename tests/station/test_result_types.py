@@ -57,6 +57,7 @@ from stationd.station.inputs import (
 from stationd.station.policy import NokPolicy, NokRule
 from stationd.station.state import CHECK_WAIT_S, PENDING_PUSH_S
 from stationd.words import (
+    answer_words,
     notice_words,
     reason_words,
     result_type_words,
@@ -810,6 +811,27 @@ def test_a_result_whose_push_was_lost_holds_the_bolt_whose_enable_got_none():
     acts = d.feed(ResultIn(d.t, res(43, 1, True, 1), fetched=True, follows=42,
                            made_at=enabled_at + 0.7, live=True))
     assert not [a for a in acts if isinstance(a, StoreCutUnknown)]
+
+
+def test_releasing_a_lost_push_s_hold_says_the_bolt_may_be_tightened_already():
+    """A supervisor's trial: the release of a lost push's hold answered "accepted: its hold
+    (...) ended" as any hold's, and the bolt went back to be tightened, though the result
+    fetched late (stored unattributed) may be its own: the joint torqued already.  The
+    answer (the screens' form, stationd release and the journal all say it) names that
+    result and to check the controller before tightening it again; an unreadable result's
+    hold says what it did (test_entered_outcome)."""
+    d = _ready()
+    enabled_at = _b1_unanswered(d)
+    d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=40,
+                    made_at=enabled_at + 0.5, live=True))
+    note = d.core.matcher.held["B1"]
+    words = answer_words(_answer(d.command(1, ReleaseBolt("VIN1", "B1", "checked"),
+                                           SUPERVISOR)).answer)
+    assert words.endswith(
+        f": accepted: its hold ({note}) ended: B1 is open to be tightened again, but it may "
+        "be tightened already, by tightening 41 (stored unattributed): check the controller "
+        "before tightening it again"), words
+    assert "B1" not in d.core.matcher.held
 
 
 def test_a_late_result_made_outside_the_unanswered_enable_or_of_another_pset_holds_nothing():
