@@ -35,7 +35,7 @@ from drivers.counting import counted
 from stationd.errors import ConfigError, InputError
 from stationd.jsonout import strict_json
 from stationd.outfile import write_atomic
-from stationd.words import entered_as_words, result_type_words
+from stationd.words import entered_as_words, result_type_words, unrecorded_words
 
 if TYPE_CHECKING:
     from db.repository import Repository
@@ -418,12 +418,14 @@ def cmd_db_report(args: argparse.Namespace) -> int:
             mine = [r for r in runs if r["bolt"] == b.bolt_id]
             last = mine[-1:]
             skipped = f"by {b.skipped_by}" + (f": {b.comment}" if b.comment else "")
-            result = "-" if b.status == MISSING else skipped if b.status == SKIPPED else \
+            hold = dict(report.held).get(b.bolt_id)
+            # a held bolt never run down: why held, as the vehicle's page says it
+            result = ("-" if hold is None else unrecorded_words(hold, loose)) \
+                if b.status == MISSING else skipped if b.status == SKIPPED else \
                 f"{_num(b.torque_nm)} Nm, {_num(b.angle_deg)} deg, v{b.version}, " \
                 f"{_attempts(b.attempts, mine)}" + (_last_run(last[0]) if last else "") \
                 + (f"; then skipped {skipped}" if b.skipped_by else "")
             retired = " (retired)" if b.retired else ""
-            hold = dict(report.held).get(b.bolt_id)
             held = "" if hold is None else f"; HELD: {hold} (its outcome to be entered)"
             print(f"  {b.bolt_id:<12} {b.status.upper():<8} {result}  {b.name}{retired}{held}")
             if b.attempts > 1:   # reworked: each rundown, so the loosenings show

@@ -4,8 +4,9 @@ the station's rules."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
+from typing import Any
 
 from db.kinds import NOT_TAKEN_NOTE, is_not_taken_note, is_unknown_note, lost_unknown_id
 from drivers.counting import counted
@@ -688,6 +689,30 @@ def _reopened(bolt: str, hold: str | None) -> str:
         "it again")
 
 
+def unrecorded_words(hold: str | None, loose: Sequence[Mapping[str, Any]] = ()) -> str:
+    """A bolt with no rundown recorded to it, as the vehicle's page and ``db report`` say
+    it: ``not tightened``; held (``hold``: its hold's note), not so: its result is not known,
+    and a lost push's names the result stored unattributed that may be its own, with its
+    values where the vehicle's unattributed results (``loose``, as the repository reads
+    them) have it.  A supervisor's trial: the page said "not tightened" of a bolt whose
+    result may be tightening 41, stored unattributed."""
+    if hold is None:
+        return "not tightened"
+    tid = lost_unknown_id(hold)
+    if tid is None:
+        return "held: no rundown recorded to it, its result not known"
+    found = [u for u in loose if u.get("tightening_id") == tid]
+    values = "" if not found else (
+        f"{str(found[-1]['status']).upper()} {_mm(found[-1]['torque_nm'])} Nm, "
+        f"{_deg(found[-1]['angle_deg'])} deg, ")
+    return (f"held: no rundown recorded to it, but tightening {tid} may be its own ({values}"
+            "stored unattributed)")
+
+
+def _deg(v: float | None) -> str:
+    return "?" if v is None else f"{v:.0f}"
+
+
 def outcome_words(ok: bool, torque_nm: float, angle_deg: float) -> str:
     """An outcome as a person reads it off the controller: ``OK 49.6 Nm, 31.0 deg``."""
     return f"{'OK' if ok else 'NOK'} {torque_nm:.1f} Nm, {angle_deg:.1f} deg"
@@ -757,6 +782,7 @@ __all__ = [
     "unattributed_words",
     "unchecked_words",
     "unproved_words",
+    "unrecorded_words",
     "wait_words",
     "worded",
 ]

@@ -30,7 +30,7 @@ from db.curves import curves_of_records
 from db.kinds import LOOSENING, MISSING, PENDING, SKIPPED
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
 from db.repository import AT_STATION, Repository
-from stationd.words import entered_as_words, result_type_words
+from stationd.words import entered_as_words, result_type_words, unrecorded_words
 
 CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator", "torque_nm",
               "angle_deg", "torque_min_nm", "torque_max_nm", "angle_min_deg", "angle_max_deg",
@@ -117,15 +117,18 @@ class Results:
         report = self.repo.vehicle_report(vin, held=True).to_json()
         rows = self._rows(vin, curves=True)
         runs = [r for _, r in rows]
+        loose = self.repo.unattributed(vin)
         for b in report["bolts"]:
             b["rundowns"] = [r for r in runs if r["bolt"] == b["bolt"]]
+            if not b["rundowns"]:   # "not tightened", or why held (as db report says it)
+                b["unrecorded"] = unrecorded_words(report["held"].get(b["bolt"]), loose)
         report["commands"] = self.commands(vin)
         # what the controller said that was no rundown, and what could not be read (whole)
         report["controller_events"] = [_isos(e) for e in self.repo.controller_events(vin)]
         report["unreadable_results"] = [_isos(x) for x in self.repo.unreadable(vin)]
         # results made at height that no bolt owns, each with its type in words
         report["unattributed"] = [{**_isos(u), "what": result_type_words(u["result_type"])}
-                                  for u in self.repo.unattributed(vin)]
+                                  for u in loose]
         return report
 
     def commands(self, vin: str) -> list[dict[str, Any]]:

@@ -945,6 +945,43 @@ def test_a_vin_in_another_case_is_suggested_after_the_station_file_it_was_looked
         "VIN1?)")
 
 
+def test_a_bolt_held_for_a_lost_push_is_not_said_never_tightened(run, db):
+    """A supervisor's trial: the vehicle's page said "not tightened" of a bolt held because
+    tightening 41, fetched late (its push lost) and stored unattributed, may be its own.  The
+    page and db report say alike that it is held and which result may be its own, with its
+    values; a bolt neither held nor run down is "not tightened" (the page) and "-" (db
+    report) as before, and another hold's says its result is not known."""
+    from db.kinds import CUT_UNKNOWN, LOST_UNKNOWN, cut_unknown_note, lost_unknown_note
+    from db.repository import Repository
+    from stationd.web.results import Results
+
+    run("db", "import", EXAMPLE, "--db", db)
+    note = lost_unknown_note(41, 1, 1000.0)
+    with Repository.open(db) as repo:
+        repo.start_vehicle("VIN1", "WAGON-B")
+        repo.record_unattributed(
+            vin="VIN1", controller_vin=None, tightening_id=41, pset=1, ok=True,
+            torque_nm=49.6, angle_deg=31.0, result_at=None,
+            reason="fetched after a later one came, the link up")
+        for bolt, what, held in (("SF-FL", LOST_UNKNOWN, note),
+                                 ("SF-FR", CUT_UNKNOWN, cut_unknown_note("no answer"))):
+            repo.record_controller_event(
+                result_type=0, what=what, vin="VIN1", bolt=bolt, controller_vin=None,
+                tightening_id=None, pset=1, ok=False, torque_nm=None, angle_deg=None,
+                result_at=None, note=held)
+        page = {b["bolt"]: b for b in Results(repo).vehicle("VIN1")["bolts"]}
+    said = ("held: no rundown recorded to it, but tightening 41 may be its own (OK 49.6 Nm, "
+            "31 deg, stored unattributed)")
+    assert page["SF-FL"]["unrecorded"] == said
+    assert page["SF-FR"]["unrecorded"] == "held: no rundown recorded to it, its result not known"
+    assert page["TB-C"]["unrecorded"] == "not tightened"
+    _, out, _ = run("db", "report", "VIN1", "--db", db)
+    lines = {line.split()[0]: line for line in out.splitlines()[1:] if line.startswith("  ")}
+    assert f"MISSING  {said}  " in lines["SF-FL"] and f"HELD: {note}" in lines["SF-FL"]
+    assert f"MISSING  {page['SF-FR']['unrecorded']}  " in lines["SF-FR"]
+    assert "MISSING  -  " in lines["TB-C"] and "not tightened" not in out
+
+
 def test_a_record_says_held_only_for_its_own_hold():
     """Whether a record's hold is on is its own note's, not its bolt's (a reviewer: the
     record of "tightening 4" said held while "tightening 41" held the bolt)."""

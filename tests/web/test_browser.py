@@ -295,6 +295,33 @@ def test_the_vehicles_list_has_a_held_column(live_server, page, tmp_path):
         repo.close()
 
 
+def test_a_bolt_held_for_a_lost_push_is_not_said_never_tightened(live_server, page, tmp_path):
+    """A supervisor's trial: the vehicle's page said "not tightened" of B3, held because
+    tightening 41 (its push lost, fetched later, stored unattributed) may be its own: it says
+    it is held and which result may be its own, in db report's words (the server's)."""
+    from db.kinds import LOST_UNKNOWN, lost_unknown_note
+
+    repo = results_db(tmp_path)
+    repo.record_unattributed(vin=VIN, controller_vin=None, tightening_id=41, pset=1, ok=True,
+                             torque_nm=49.6, angle_deg=31.0, result_at=None,
+                             reason="fetched after a later one came, the link up")
+    repo.record_controller_event(result_type=0, what=LOST_UNKNOWN, vin=VIN, bolt="B3",
+                                 controller_vin=None, tightening_id=None, pset=1, ok=False,
+                                 torque_nm=None, angle_deg=None, result_at=None,
+                                 note=lost_unknown_note(41, 1, 1000.0))
+    try:
+        srv = live_server(results=Results(repo))
+        page.get(srv.url + f"vehicles/{VIN}")
+        page.wait(lambda p: p.count("tr.rundown[data-bolt=B3]") == 1, what="B3's row")
+        b3 = page.text("tr.rundown[data-bolt=B3]") or ""
+        assert "not tightened" not in b3, b3
+        assert "HELD: tightening 41 may be its own" in b3, b3
+        assert ("held: no rundown recorded to it, but tightening 41 may be its own (OK 49.6 "
+                "Nm, 31 deg, stored unattributed)") in b3, b3
+    finally:
+        repo.close()
+
+
 def test_results_screens_and_csv_download(live_server, page, shots, tmp_path):
     repo = results_db(tmp_path)
     repo.ledger.record_command(at=datetime.now(UTC), user="sam", source="screen", kind="skip",

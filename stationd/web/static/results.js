@@ -242,10 +242,11 @@ async function showVehicle(vin) {
         cell(tr, i ? "" : b.status.toUpperCase() + then + (hold ? `, HELD: ${hold}` : ""),
              "status-" + (b.status === "nok" ? "NOK" : b.status));
         if (!r) {
-          // a skip names who skipped it and why (the exports' skipped_by and comment)
+          // a skip names who skipped it and why (the exports' skipped_by and comment); else
+          // the server's words: "not tightened", or, held, why not so (db report's words)
           const none = b.status === "skipped"
             ? `skipped by ${b.skipped_by || "?"}` + (b.comment ? `: ${b.comment}` : "")
-            : "not tightened";
+            : b.unrecorded || "not tightened";
           cell(tr, "-"); cell(tr, "-"); cell(tr, none);
           for (let k = 0; k < 8; k++) cell(tr, "", k === 7 ? "crops" : "");
         }
