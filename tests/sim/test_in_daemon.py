@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 import time
+from datetime import UTC, datetime
 from pathlib import Path
 
 import pytest
@@ -286,3 +287,43 @@ def test_the_lift_goes_down_only_when_no_bolt_of_the_vehicle_is_locked_or_held(t
         assert re.search(rf"simulated operator: {bolt}: pset \d, .*\(first: .*held after its "
                          r"visit; released by the supervisor", first), first[-3000:]
     assert " held (" not in counts, counts
+
+
+@pytest.mark.timeout(420)
+def test_a_restarted_daemon_s_simulated_controller_has_its_results_for_the_catch_up(tmp_path):
+    """A supervisor's trial: after a restart the simulated controller had no results (its
+    memory went with the last process), so the catch-up for the bolt whose enable the last
+    daemon left owed said "the controller has no results, though tightening N was
+    recorded" and held it, where a real controller keeps its results.  The first daemon's
+    operator tightens a bolt; the database then owes an enable made after it (the daemon
+    stopped with the tool on: its kill's trail, written here so that no race decides it);
+    the restarted daemon's controller has its results (a file of its own beside the
+    database), so its catch-up finds none made since and the bolt stays open."""
+    from sqlalchemy import select
+
+    from db.models import ToolEnable
+    from db.repository import Repository
+
+    _station(tmp_path)
+    first = Daemon(tmp_path, "--sim-operator")
+    try:
+        first.wait(r"simulated operator: B\d\d: pset \d, (OK|NOK) ", 200)
+    finally:
+        assert first.stop() == 0
+    memory = tmp_path / "station.db.sim-wrench.jsonl"
+    assert memory.read_text().strip(), "the controller's results not kept"
+    with Repository.open(f"sqlite:///{tmp_path / 'station.db'}") as repo:
+        with repo.engine.connect() as c:
+            last = c.execute(select(ToolEnable).order_by(ToolEnable.id.desc())).first()
+        assert last is not None
+        repo.note_enable(last.vin, last.bolt, last.pset, last.parameters_id,
+                         dict(last.selection), datetime.now(UTC))
+    second = Daemon(tmp_path)
+    try:
+        said = second.wait(r"(no tightening made during the link cut[^\n]*|[^\n]*its result "
+                           r"during the link cut not known[^\n]*)", 200)[1]
+    finally:
+        second.stop()
+    assert said.startswith(f"no tightening made during the link cut (every result since "
+                           f"fetched): {last.bolt} open as before"), said
+    assert "the controller has no results" not in second.log()
