@@ -362,7 +362,11 @@ def _record(s: Session, kind: str, ref: int) -> dict[str, Any]:
                 "bolt": ev.bolt, "controller_vin": ev.controller_vin,
                 "tightening_id": ev.tightening_id, "pset": ev.pset, "status": ev.status,
                 "torque_nm": ev.torque_nm, "angle_deg": ev.angle_deg,
-                "result_at": _iso(ev.result_at), "recorded_at": _iso(ev.recorded_at)}
+                "result_at": _iso(ev.result_at), "recorded_at": _iso(ev.recorded_at),
+                # why a bolt is held where no result says it (a link cut, a lost push: which
+                # tightening may be its own); without it the line database had the hold but
+                # not its reason (an MES integrator's trial)
+                "note": ev.note}
     if kind == UNREADABLE:
         x = s.get_one(UnreadableRecord, ref)
         return {"id": x.id, "mid": x.mid, "revision": x.revision, "raw": x.raw,

@@ -419,6 +419,11 @@ LINE_CONTROLLER_EVENTS = _typed(
      (_tz("recorded_at", "when the station stored it"), _time(_j("recorded_at")))],
     Index("ix_line_controller_events_vin", "vin", "at"),
     Index("ix_line_controller_events_at", "at"),
+    # a hold's reason: which tightening may be the bolt's own (an MES integrator's trial: the
+    # line had "result unknown after a lost push" and no word of which result it was)
+    added=[(Column("note", Text, comment="why the bolt is held where no result says it (a "
+                   "link cut, a lost push: the tightening that may be its own; NULL: none)"),
+            _text(_j("note")))],
 )
 
 LINE_UNREADABLE = _typed(
@@ -456,9 +461,10 @@ TRIGGER = "line_feed_typed"   # the trigger and its function
 #: the SQL to it).  Why a number and not the SQL compared: on a line whose stations are
 #: upgraded one at a time, an older forwarder would put its older SQL back at each start; it
 #: replaces only an older version.
-TYPED_VERSION = 5   # 2: line_controller_events, line_unreadable_results; 3: line_rundowns'
+TYPED_VERSION = 6   # 2: line_controller_events, line_unreadable_results; 3: line_rundowns'
 #                       entered outcomes (entered_by, entered_comment, unreadable_record_id);
-#                       4: line_unattributed's result_type; 5: line_rundowns' offline
+#                       4: line_unattributed's result_type; 5: line_rundowns' offline;
+#                       6: line_controller_events' note
 _VERSION_LINE = re.compile(r"-- stationd typed tables, version (\d+)\n")
 
 

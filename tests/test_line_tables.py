@@ -507,7 +507,32 @@ TRIGGER_SHA256 = {1: "446e86d6658db69f57ddf73563842e00b690eac87fc392c5a61455dc99
                   2: "eed0f0cfb83562bb0f0303ab2188f6dccda471d004a541bd82df27fe80f4d4e0",
                   3: "cc625563ef1638100ca531254b61e304c53501ab1577e943c670e801bf38891c",
                   4: "1ba6cb194967583b94b0dc24eec25ee14f5e0147b2cd15bb2173f5d957a56db6",
-                  5: "4233cde999117d8e1c20d454e5b30b622b98ed280ff61e971f568e1d45c86c56"}
+                  5: "4233cde999117d8e1c20d454e5b30b622b98ed280ff61e971f568e1d45c86c56",
+                  6: "9639d9829aba29a1a8142382fe51424fe0626ec40653e16ef6b8ee6f3f11f416"}
+
+
+def test_a_held_bolts_reason_reaches_the_line_with_its_controller_event(tmp_path, pg_url):
+    """A bolt held where no result says it (a lost push, a link cut) is stored as a
+    controller event with a note naming the tightening that may be its own: the note is in
+    the record and in ``line_controller_events.note`` (an MES integrator's trial: the line had
+    "result unknown after a lost push", no tightening id and no word of which it was)."""
+    from db.kinds import LOST_UNKNOWN, lost_unknown_note
+
+    repo = _station(tmp_path, "a")
+    repo.start_vehicle(VIN, "SEDAN")
+    note = lost_unknown_note(28, 2, AT.timestamp())
+    repo.record_controller_event(result_type=0, what=LOST_UNKNOWN, vin=VIN, bolt="B3",
+                                 controller_vin=None, tightening_id=None, pset=2, ok=False,
+                                 torque_nm=None, angle_deg=None, result_at=None, note=note)
+    _forward(repo, pg_url, "ST-A")
+    engine = _engine(pg_url)
+    with engine.connect() as c:
+        ev = c.execute(select(LINE_CONTROLLER_EVENTS.table)).one()
+        assert (ev.what, ev.bolt, ev.note) == (LOST_UNKNOWN, "B3", note)
+        assert "tightening 28 may be its own" in ev.note
+        record = c.scalar(select(LINE_FEED.c.record).where(LINE_FEED.c.seq == ev.seq))
+        assert record["note"] == note
+    engine.dispose()
 
 
 def test_the_trigger_version_goes_up_with_its_sql():

@@ -47,6 +47,26 @@ def test_controller_events_and_unreadable_results_are_stored_once_and_fed(repo, 
     assert repo.last_tightening_id() == 6
 
 
+def test_a_held_bolts_note_is_in_its_controller_events_feed_record(repo, bolts_file):
+    """The note of a controller event that holds a bolt (which tightening may be its own) is
+    in its results-feed record, so the forwarder takes it to the line database: the station's
+    own report had it, the line only "result unknown after a lost push" (an MES integrator's
+    trial)."""
+    from db.kinds import LOST_UNKNOWN
+
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    note = "tightening 28 may be its own (its push lost, fetched later; ...)"
+    assert repo.record_controller_event(
+        result_type=0, what=LOST_UNKNOWN, vin="VIN1", bolt="B1", controller_vin=None,
+        tightening_id=None, pset=1, ok=False, torque_nm=None, angle_deg=None, result_at=None,
+        note=note)
+    assert _event(repo, 5)                               # a batch increment: no note
+    held, batch = (e["record"] for e in repo.ledger.since(0))
+    assert (held["what"], held["bolt"], held["note"]) == (LOST_UNKNOWN, "B1", note)
+    assert batch["note"] is None
+
+
 def test_an_unreadable_message_sent_again_under_another_header_is_the_stored_one(
         repo, bolts_file):
     """A copy the controller sends again carries another sequence number in its header: the
