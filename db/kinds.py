@@ -93,12 +93,14 @@ def unreadable_note(tightening_id: int | None, mid: int, revision: int) -> str:
 #: :func:`lost_unknown_note`): what the words of a hold tell from a result not read
 CUT_NOTE_HEAD = "its result during the link cut not known"
 LOST_NOTE_MARK = " may be its own (its push lost, fetched later;"
+GAP_NOTE_MARK = "not given by the controller)"
 
 
 def is_unknown_note(note: str | None) -> bool:
     """Whether a held bolt's note is a hold without a result (a link cut's, a lost push's):
     its result was never in hand, not one that could not be read."""
-    return note is not None and (note.startswith(CUT_NOTE_HEAD) or LOST_NOTE_MARK in note)
+    return note is not None and (note.startswith(CUT_NOTE_HEAD) or LOST_NOTE_MARK in note
+                                 or GAP_NOTE_MARK in note)
 
 
 def cut_unknown_note(why: str, pset: int | None = None, enabled_at: float | None = None
@@ -123,6 +125,18 @@ def lost_unknown_note(tightening_id: int, pset: int | None, enabled_at: float) -
     at = datetime.fromtimestamp(enabled_at, UTC).strftime("%Y-%m-%d %H:%M:%S")
     return (f"tightening {tightening_id}{LOST_NOTE_MARK} other "
             f"enables came between); the tool was enabled"
+            f"{'' if pset is None else f' for pset {pset}'} at {at} UTC")
+
+
+def lost_gap_note(span: str, pset: int | None, enabled_at: float) -> str:
+    """A held bolt's note where tightenings whose pushes were lost (``span``: "7" or "7-8")
+    could not be fetched (the controller no longer has them, or gives none), made after the
+    last result heard, and the bolt's enable (with ``pset`` at ``enabled_at``) got no result
+    in its window: its own may be among them."""
+    at = datetime.fromtimestamp(enabled_at, UTC).strftime("%Y-%m-%d %H:%M:%S")
+    which = f"among tightenings {span} (their pushes" if "-" in span \
+        else f"tightening {span} (its push"
+    return (f"its result may be {which} lost, {GAP_NOTE_MARK}; the tool was enabled"
             f"{'' if pset is None else f' for pset {pset}'} at {at} UTC")
 
 
@@ -166,6 +180,7 @@ def is_not_taken_note(note: str | None) -> bool:
 __all__ = [
     "CUT_NOTE_HEAD",
     "CUT_UNKNOWN",
+    "GAP_NOTE_MARK",
     "HELD_WITHOUT_RESULT",
     "LOOSENED",
     "LOOSENING",
@@ -187,6 +202,7 @@ __all__ = [
     "is_not_taken_note",
     "is_unknown_note",
     "loosening_note",
+    "lost_gap_note",
     "lost_unknown_id",
     "lost_unknown_note",
     "not_taken_note",

@@ -5,9 +5,12 @@ taken for a bolt and never left open: the bolts it may be are held for a person.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from db.kinds import (
     LOST_UNKNOWN,
     cut_unknown_note,
+    lost_gap_note,
     lost_unknown_note,
 )
 from stationd.reasons import Unproved, UnprovedKind
@@ -29,6 +32,7 @@ from stationd.station.inputs import (
     CaughtUp,
     NewestChecked,
     ResultIn,
+    ResultsMissed,
     ResultsSkipped,
 )
 from stationd.station.nok import NokRules
@@ -109,22 +113,25 @@ class LostRules(NokRules):
         reconnect's catch-up found it) may be: of its pset, made within that enable and its
         window (or when, not known), its bolt still open and not selected now (of a vehicle
         that has left: whatever it is now, not known here)."""
-        m, r = self.matcher, ev.result
+        r = ev.result
         if not ev.fetched:
             return []
         found: list[_Cut] = []
         for u in self._unanswered:
-            en, b = u.selection, u.selection.bolt
-            if en.pset is None or int(r.pset) != en.pset:
-                continue
-            if en.vin == self.vin and m is not None and (
-                    b == self.bolt or b in m.done or b in m.held or b in m.skipped
-                    or b in m.locked):
+            en = u.selection
+            if en.pset is None or int(r.pset) != en.pset or not self._still_open(u):
                 continue
             if ev.made_at is not None and not u.spans(ev.made_at, CLOCK_SLACK_S):
                 continue    # made while its tool was off for good: not its own
             found.append(u)
         return found
+
+    def _still_open(self, u: _Cut) -> bool:
+        """Whether the bolt of the unanswered enable ``u`` is still open (not selected now,
+        done, held, skipped or locked; of a vehicle that has left: not known here, open)."""
+        m, b = self.matcher, u.selection.bolt
+        return not (u.selection.vin == self.vin and m is not None and (
+            b == self.bolt or b in m.done or b in m.held or b in m.skipped or b in m.locked))
 
     def _lost_in_doubt(self, ev: ResultIn, lost: list[_Cut]) -> list[Action]:
         """The result may be that of each of the ``lost`` enables (:meth:`_lost_enables`).
@@ -132,21 +139,44 @@ class LostRules(NokRules):
         left open either (it may be tightened: a quality trial's bolt was tightened twice):
         each such bolt is held for a person, stored so that the hold outlives a restart and
         comes back with its vehicle where that one has left."""
-        acts: list[Action] = []
         tid = int(ev.result.tightening_id)
+        return self._hold_unanswered(ev.t, lost, lambda u: lost_unknown_note(
+            tid, u.selection.pset, u.enabled_at), tid)
+
+    def _hold_unanswered(self, t: float, lost: list[_Cut], note_of: Callable[[_Cut], str],
+                         tid: int | None = None) -> list[Action]:
+        """Each bolt of the unanswered enables ``lost`` held (its note ``note_of`` it, the
+        result it may be ``tid``), stored so that the hold outlives a restart and comes back
+        with its vehicle where that one has left."""
+        acts: list[Action] = []
         for u in lost:
             en, b = u.selection, u.selection.bolt
-            assert en.pset is not None  # noqa: S101 - _lost_enables' guard
-            note = lost_unknown_note(tid, en.pset, u.enabled_at)
+            note = note_of(u)
             stored = StoreCutUnknown(en.vin, b, note, en, what=LOST_UNKNOWN, tightening_id=tid)
             if en.vin != self.vin or self.matcher is None:
                 acts += [stored, Publish(Notice(Said.CUT_UNKNOWN, bolt=b, vin=en.vin, note=note,
-                                                t=ev.t))]
+                                                t=t))]
             else:
-                acts += [stored, *self._hold(ev.t, b, note, Notice(
-                    Said.CUT_UNKNOWN, bolt=b, note=note, t=ev.t), under=en)]
+                acts += [stored, *self._hold(t, b, note, Notice(
+                    Said.CUT_UNKNOWN, bolt=b, note=note, t=t), under=en)]
             self._answered_bolt(en.vin, b)
         return acts
+
+    def _gap_in_doubt(self, ev: ResultsMissed) -> list[Action]:
+        """Tightenings made with the link up, their pushes lost, that the controller does not
+        give (a gap): the result of each enable since the last result heard that got none in
+        its window may be among them.  Never left open (it may be tightened: the operator
+        would tighten it twice): each such bolt held for a person."""
+        if not ev.live:
+            return []     # (a link cut's gap: the catch-up's end settles its enable)
+        last = self._judged
+        since = self._judged_at if last is not None and last[0] == ev.first - 1 \
+            else float("-inf")
+        lost = [u for u in self._unanswered
+                if u.enabled_at >= since - CLOCK_SLACK_S and self._still_open(u)]
+        span = str(ev.first) if ev.first == ev.last else f"{ev.first}-{ev.last}"
+        return self._hold_unanswered(ev.t, lost, lambda u: lost_gap_note(
+            span, u.selection.pset, u.enabled_at))
 
     def _cut_in_doubt(self, ev: ResultIn) -> list[Action]:
         """A result stored unattributed while a link cut's result is owed, of the pset sent

@@ -96,6 +96,7 @@ class ResultRules(UnreadRules):
         # judged later, a catch-up's or a copy's, says nothing of the order: a reviewer)
         if self._judged is None or tid > self._judged[0]:
             self._judged = (tid, self._enable_serial, self.tool_on)
+            self._judged_at = ev.t
         return acts + self._push_judged(ev.t)
 
     def _result_read(self, ev: ResultIn) -> list[Action]:
@@ -246,9 +247,12 @@ class ResultRules(UnreadRules):
                           + f" (sent again), not a result of {a.bolt}", under=a.selection)
 
     def _on_results_missed(self, ev: ResultsMissed) -> list[Action]:
+        """A gap stored and said; with the link up, the bolts whose result may be in it
+        held (:meth:`_gap_in_doubt`)."""
         return [StoreGap(ev.first, ev.last, self.vin, ev.reason),
                 Publish(Notice(Said.GAP, tightening_id=ev.first, last_id=ev.last,
-                               link_up=ev.live, note=ev.reason, t=ev.t))]
+                               link_up=ev.live, note=ev.reason, t=ev.t)),
+                *self._gap_in_doubt(ev)]
 
     def _on_not_stored(self, ev: NotStored) -> list[Action]:
         return [Publish(Notice(Said.NOT_STORED, tightening_id=ev.tightening_id, bolt=ev.bolt,

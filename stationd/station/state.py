@@ -236,6 +236,7 @@ class CoreState:
     _last_off_at: float | None = field(default=None, repr=False)
     _off_before_enable: float | None = field(default=None, repr=False)
     _judged: tuple[int, int, bool] | None = field(default=None, repr=False)
+    _judged_at: float = field(default=float("-inf"), repr=False)   # when it came
     # the station's start or the controller's last fault: a result fetched afterwards was
     # made before it, so never under an enable that came later
     _link_lost_at: float = field(default=float("-inf"), repr=False)

@@ -49,6 +49,7 @@ from stationd.station.inputs import (
     NewestChecked,
     ResultCopy,
     ResultIn,
+    ResultsMissed,
     ResultsSkipped,
     Tick,
     UnreadableIn,
@@ -1344,6 +1345,41 @@ def test_a_check_that_finds_nothing_or_never_answers_keeps_no_tool_off_for_long(
     d.feed(Tick(d.t))
     _on(d, 2, 1)
     assert d.core.tool_on and d.core.bolt == "B2"
+
+
+def test_a_gap_with_the_link_up_holds_the_bolts_whose_result_may_be_in_it():
+    """B2's result 40 came; B1 enabled, tightened (41, its push lost), left: its window ends,
+    the check finds nothing (the controller gives no old results); B3 enabled, its 42 pushed
+    skips 41, which the controller does not give (a gap with the link up).  B1's result may
+    be 41: B1 held, never left open to be tightened twice (before: the gap stored, B1 open).
+    An enable before the last result heard (B2's, answered) is no candidate."""
+    d = _ready()
+    _enabled(d, 2)
+    d.feed(ResultIn(d.t, res(40, 2, True, 1)))
+    d.t += 3.0
+    _enabled(d, 1)
+    _on(d, 3, 3)
+    d.t += d.core.late_result_s + 1.0
+    d.feed(Tick(d.t))
+    _enabled(d, 3)
+    d.feed(ResultsSkipped(d.t, 42))
+    acts = d.feed(ResultsMissed(d.t, 41, 41, "the controller no longer has it", live=True))
+    note = ("its result may be tightening 41 (its push lost, not given by the controller); "
+            "the tool was enabled for pset 1 at ")
+    [stored] = [a for a in acts if isinstance(a, StoreCutUnknown)]
+    assert stored.bolt == "B1" and stored.note.startswith(note)
+    assert d.core.matcher.held["B1"].startswith(note)
+    acts = d.feed(ResultIn(d.t, res(42, 1, True, 1)))
+    assert [a.bolt for a in acts if isinstance(a, Record)] == ["B3"]
+    # a gap after a reconnect (the link was down): the catch-up's end settles that enable
+    d = _ready()
+    d.answer_checks = True
+    _enabled(d, 1)
+    _on(d, 3, 3)
+    d.t += d.core.late_result_s + 1.0
+    d.feed(Tick(d.t))
+    acts = d.feed(ResultsMissed(d.t, 41, 41, "the controller no longer has it"))
+    assert not [a for a in acts if isinstance(a, StoreCutUnknown)]
 
 
 def test_an_older_id_judged_later_says_nothing_of_the_order():

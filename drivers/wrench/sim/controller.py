@@ -79,6 +79,9 @@ from drivers.wrench.sim.results import (
 )
 from drivers.wrench.sim.server import OpenProtocolServer, Received, Session, message
 
+#: Open Protocol's error 99, "unknown MID": what a controller answers a MID it does not know
+UNKNOWN_MID = 99
+
 VIN_WIDTH = 25
 REVISIONS = range(1, 8)          # of 0001/0002, 0060/0061, 0064/0065 served
 #: result types with a rundown (torque and angle): tightening, loosening, synchronized
@@ -127,7 +130,8 @@ class SimTightening:
 class SimController(OpenProtocolServer):
     """The simulated controller; ``start()`` it (or use ``with``), then ``listen_tcp()``
     and/or ``open_pty()``.  ``refusals`` maps a pset to the error code its selection gets;
-    ``refused_revisions`` maps a MID (1, 60, 64) to the revisions it refuses."""
+    ``refused_revisions`` maps a MID (1, 60, 64) to the revisions it refuses, and
+    ``refused_mids`` a MID to the error code every one of it gets (:meth:`refuse_mid`)."""
 
     def __init__(self, psets: Mapping[int, SimPset] | None = None, *, seed: int = 0,
                  nok_rate: float = 0.05, name: str = "SimController", cell: int = 1,
@@ -143,7 +147,8 @@ class SimController(OpenProtocolServer):
                  part_size: int = PART_SIZE, mislabel: int | None = None,
                  send_revision: int | None = None, clock_offset_s: float = 0.0,
                  result_types: Sequence[int] = (1,), garble_every: int = 0,
-                 lose_push_every: int = 0) -> None:
+                 lose_push_every: int = 0,
+                 refused_mids: Mapping[int, int] | None = None) -> None:
         if not 0.0 <= nok_rate <= 1.0:
             raise ValueError(f"nok_rate must be in [0, 1], not {nok_rate}")
         if silence_timeout <= 0:
@@ -184,7 +189,7 @@ class SimController(OpenProtocolServer):
         self._clock = clock or (lambda: (datetime.now() + timedelta(
             seconds=self.clock_offset_s)).replace(microsecond=0))
         self._refuse_pset: dict[int, int] = dict(refusals or {})
-        self._refuse_mid: dict[int, int] = {}
+        self._refuse_mid: dict[int, int] = dict(refused_mids or {})
         self._refuse_rev: dict[int, set[int]] = {
             mid: set(revs) for mid, revs in (refused_revisions or {}).items()}
         self.pset: int | None = None
@@ -797,7 +802,8 @@ class SimWrench(OpenProtocolWrench):
             raise url.error("expected sim://wrench")
         spec: Spec = {**OPTIONS, "transport": (str, "tcp"), "seed": (int, 0),
                       "nok_rate": (float, 0.05), "result_types": (str, "1"),
-                      "garble_every": (int, 0), "lose_push_every": (int, 0)}
+                      "garble_every": (int, 0), "lose_push_every": (int, 0),
+                      "old_results": (int, 1)}
         sim_kw = {k: kw.pop(k) for k in ("psets", "refusals", "clock", "silence_timeout",
                                          "mislabel", "send_revision", "clock_offset_s")
                   if k in kw}
@@ -805,10 +811,15 @@ class SimWrench(OpenProtocolWrench):
         opts.update(keyword_options(kw, spec))
         try:
             codes = parse_result_types(str(opts.pop("result_types")), "result_types: ")
+            # old_results=0: a controller that keeps no results to fetch (MID 0064 refused as
+            # an unknown MID): what a push lost becomes when it cannot be found
+            keeps = opts.pop("old_results")
             controller = SimController(seed=opts.pop("seed"), nok_rate=opts.pop("nok_rate"),
                                        result_types=codes,
                                        garble_every=opts.pop("garble_every"),
-                                       lose_push_every=opts.pop("lose_push_every"), **sim_kw)
+                                       lose_push_every=opts.pop("lose_push_every"),
+                                       refused_mids=None if keeps else {64: UNKNOWN_MID},
+                                       **sim_kw)
             return cls(controller, device=url.text, **opts)
         except ValueError as e:
             raise url.error(str(e)) from None
