@@ -590,7 +590,10 @@ async def wait_for_people(st: Station, bolt: str, vin: str, note: Callable[[str]
     where = f" --url {url}" if url else \
         f" --config {shlex.quote(str(Path(path).resolve()))}" if path else ""
     command = f"stationd release {vin} {bolt}{where} --user NAME"
-    note(f"{bolt} of {vin} locked: the operator waits, the vehicle on the lift, for a "
+    # held (its result not read or not known) or locked (its NOKs): as the station has it
+    # (an MES integrator's trial: a held bolt was said locked)
+    what = "held" if bolt in st.core.status().held else "locked"
+    note(f"{bolt} of {vin} {what}: the operator waits, the vehicle on the lift, for a "
          f"person's release (the screens' Release form, or {command})"
          + ("; Ctrl-C ends the wait and the run" if interruptible else ""))
     ended, got = asyncio.Event(), list[int]()
