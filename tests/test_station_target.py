@@ -25,8 +25,8 @@ import pytest
 from stationd.access import hash_password
 from stationd.command_cli import DEFAULT_CONFIG, same_station, station_words
 
-#: each test runs daemons and commands in processes of their own
-pytestmark = pytest.mark.system
+#: the tests that run daemons and commands in processes of their own are marked
+#: ``system``; the pure ones (which station a daemon's answer names) are fast
 
 SIM = Path(__file__).resolve().parents[1] / "config" / "sim"
 PASSWORD = "sam-password-1"  # noqa: S105 - a test user's
@@ -121,6 +121,7 @@ def two(tmp_path: Path) -> Iterator[tuple[Path, Path, int, _Daemon]]:
                 d.stop()
 
 
+@pytest.mark.system
 def test_a_command_for_station_b_is_refused_by_station_a(two) -> None:
     a, b, port, da = two
     url = f"http://127.0.0.1:{port}/"
@@ -160,6 +161,7 @@ def test_a_command_for_station_b_is_refused_by_station_a(two) -> None:
     assert got.returncode == 0 and got.stdout.splitlines()[0] == named, got
 
 
+@pytest.mark.system
 def test_the_station_id_names_it_in_the_first_line_and_json_keeps_stdout_clean(
         tmp_path: Path) -> None:
     """A station with an id (its OPC UA JoiningSystem's) is named by it; a copy of its file
@@ -182,6 +184,7 @@ def test_the_station_id_names_it_in_the_first_line_and_json_keeps_stdout_clean(
         d.stop()
 
 
+@pytest.mark.system
 def test_no_station_named_is_bad_input_saying_what_to_give() -> None:
     if DEFAULT_CONFIG.exists():
         pytest.skip(f"{DEFAULT_CONFIG} exists on this machine: it is the default station")
