@@ -89,6 +89,14 @@ def record_entered(repo: Repository, *, vin: str, bolt: str, ok: bool, torque_nm
                 held = None
             tightening_id = held.tightening_id if held is not None else \
                 not_taken.tightening_id if not_taken is not None else None
+            if tightening_id is not None and held is None and s.scalar(
+                    select(TighteningRecord.id).where(
+                        TighteningRecord.vehicle_id == v.id,
+                        TighteningRecord.tightening_id == tightening_id,
+                        TighteningRecord.entered_by.is_not(None)).limit(1)) is not None:
+                # a lost push's result that held two bolts, entered as the other's outcome
+                # already: one controller result is one bolt's (a reviewer: both carried it)
+                tightening_id = None
             # the bolt is held since that result: no tool enable for it came after
             enable = s.scalar(select(ToolEnable).where(
                 ToolEnable.vin == vin, ToolEnable.bolt == bolt)

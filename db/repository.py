@@ -754,15 +754,16 @@ class Repository:
                 q = q.where(UnattributedResult.vin == vin)
             rows = list(s.scalars(q))
             ids = {r.tightening_id for r in rows if r.tightening_id is not None}
-            entered: dict[tuple[str | None, int | None], dict[str, str]] = {
-                (v, tid): {"bolt": bolt, "by": str(who)} for v, tid, bolt, who in s.execute(
-                select(Vehicle.vin, TighteningRecord.tightening_id, Bolt.code,
-                       TighteningRecord.entered_by)
-                .join(Vehicle, Vehicle.id == TighteningRecord.vehicle_id)
-                .join(Bolt, Bolt.id == TighteningRecord.bolt_id)
-                .where(TighteningRecord.entered_by.is_not(None),
-                       TighteningRecord.tightening_id.in_(ids))
-                .order_by(TighteningRecord.id))} if ids else {}
+            entered: dict[tuple[str | None, int | None], dict[str, str]] = {}
+            for v, tid, bolt, who in (s.execute(
+                    select(Vehicle.vin, TighteningRecord.tightening_id, Bolt.code,
+                           TighteningRecord.entered_by)
+                    .join(Vehicle, Vehicle.id == TighteningRecord.vehicle_id)
+                    .join(Bolt, Bolt.id == TighteningRecord.bolt_id)
+                    .where(TighteningRecord.entered_by.is_not(None),
+                           TighteningRecord.tightening_id.in_(ids))
+                    .order_by(TighteningRecord.id)) if ids else ()):
+                entered.setdefault((v, tid), {"bolt": bolt, "by": str(who)})   # the first
             return [{"vin": r.vin, "controller_vin": r.controller_vin,
                      "tightening_id": r.tightening_id, "pset": r.pset, "status": r.status,
                      "torque_nm": r.torque_nm, "angle_deg": r.angle_deg,

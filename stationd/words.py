@@ -8,7 +8,13 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
-from db.kinds import NOT_TAKEN_NOTE, is_not_taken_note, is_unknown_note, lost_unknown_id
+from db.kinds import (
+    GAP_NOTE_MARK,
+    NOT_TAKEN_NOTE,
+    is_not_taken_note,
+    is_unknown_note,
+    lost_unknown_id,
+)
 from drivers.counting import counted
 from drivers.wrench.base import ResultType
 from stationd.reasons import (
@@ -683,6 +689,11 @@ def _reopened(bolt: str, hold: str | None) -> str:
     tightened again, though the result fetched late may be its own (a supervisor's trial:
     "accepted: its hold (...) ended", and the joint, torqued already, was tightened again)."""
     tid = lost_unknown_id(hold)
+    if tid is None and hold is not None and GAP_NOTE_MARK in hold:
+        # a gap's hold: its result may be among tightenings the controller did not give
+        return (f": {bolt} is open to be tightened again, but it may be tightened already "
+                "(a result the controller did not give): check the controller before "
+                "tightening it again")
     return "" if tid is None else (
         f": {bolt} is open to be tightened again, but it may be tightened already, by "
         f"tightening {tid} (stored unattributed): check the controller before tightening "

@@ -649,3 +649,22 @@ def test_a_lost_push_s_hold_names_the_result_that_may_be_its_own():
     assert lost_unknown_id(note) == 26 == lost_unknown_id(loosening_note(note, 90))
     assert lost_unknown_id(cut_unknown_note("tightening 26 may be its own", 1, 1000.0)) is None
     assert lost_unknown_id("tightening 7") is lost_unknown_id(None) is None
+
+
+def test_releasing_a_gap_s_hold_warns_the_bolt_may_be_tightened_already():
+    """A gap's hold (its result may be among tightenings the controller did not give) is
+    released with the warning a lost push's gets (a reviewer: 'its hold ended' alone, the
+    joint perhaps torqued already); a link cut's says nothing of it."""
+    from db.kinds import cut_unknown_note, is_unknown_note, lost_gap_note
+    from stationd.words import _reopened
+
+    gap = lost_gap_note("41-42", 1, 1000.0)
+    assert gap.startswith("its result may be among tightenings 41-42 (their pushes lost, "
+                          "not given by the controller); the tool was enabled for pset 1 at ")
+    assert lost_gap_note("41", None, 1000.0).startswith(
+        "its result may be tightening 41 (its push lost, not given by the controller); ")
+    assert is_unknown_note(gap)
+    assert _reopened("B1", gap) == (
+        ": B1 is open to be tightened again, but it may be tightened already (a result the "
+        "controller did not give): check the controller before tightening it again")
+    assert _reopened("B1", cut_unknown_note("no answer")) == ""

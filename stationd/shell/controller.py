@@ -51,6 +51,9 @@ CURVE_IDLE_S = 1.0          # the curve loop's wait while the controller sends n
 #: how often the controller's clock is measured again on a link that stays up (a clock
 #: drifting 20 ppm moves 1 s in 14 hours; the slack for results placed by their time is 2 s)
 CLOCK_CHECK_S = 600.0
+#: how long no bolt is selected and the tool off before the clock is measured (a reviewer:
+#: the core's tool off, its disable still being sent, the disable waited behind MID 0080)
+CLOCK_IDLE_S = 5.0
 REFUSED = "the controller refused to give them (MID 0064)"
 
 
@@ -90,6 +93,9 @@ class ControllerFeed:
         #: when the controller's clock was last measured (at each connect, by the driver;
         #: then every CLOCK_CHECK_S: :meth:`_check_clock`)
         self._clock_at = time.monotonic()
+        #: since when the results' loop has seen no bolt selected and the tool off (the clock
+        #: is measured only after CLOCK_IDLE_S of that: never beside a disable being sent)
+        self._idle_since = time.monotonic()
 
     async def _read_since(self, reads: int, timeout: float = 10 * RESULT_WAIT_S) -> None:
         """Until the results' loop has read the controller once more than ``reads`` (its
@@ -133,10 +139,15 @@ class ControllerFeed:
 
     async def _check_clock(self, wrench: Wrench) -> None:
         """The controller's clock measured again every :data:`CLOCK_CHECK_S`, in the
-        results' thread between two waits, with the tool off (a command waits behind it for
-        at most the driver's clock timeout): a link up for days drifts by seconds, beyond the
-        slack within which results fetched late are placed by their time."""
-        if time.monotonic() - self._clock_at < CLOCK_CHECK_S or self.core.status().tool_on:
+        results' thread between two waits, once no bolt has been selected and the tool off for
+        :data:`CLOCK_IDLE_S` (a command would wait behind it for at most the driver's clock
+        timeout): a link up for days drifts by seconds, beyond the slack within which results
+        fetched late are placed by their time."""
+        now, status = time.monotonic(), self.core.status()
+        if status.tool_on or status.bolt is not None:
+            self._idle_since = now
+            return
+        if now - self._clock_at < CLOCK_CHECK_S or now - self._idle_since < CLOCK_IDLE_S:
             return
         self._clock_at = time.monotonic()
         try:

@@ -304,6 +304,8 @@ class LostRules(NokRules):
         after it; a reviewer: credited to the next bolt of the same pset enabled within the
         slack).  Its time not known: not proved."""
         off = self._off_before_enable
+        if self._same_bolt_before:    # a second hit of the bolt before is this bolt's too
+            return True
         return made is not None and (off is None or made > off + CLOCK_SLACK_S)
 
     def _offline(self, ev: ResultIn) -> bool:

@@ -235,6 +235,9 @@ class CoreState:
     #: came: a rundown begun before a disable took effect ends after it was sent
     _last_off_at: float | None = field(default=None, repr=False)
     _off_before_enable: float | None = field(default=None, repr=False)
+    #: the bolt (vin, bolt) of the latest enable, and whether the one before it was that bolt
+    _last_enabled_bolt: tuple[str | None, str] | None = field(default=None, repr=False)
+    _same_bolt_before: bool = field(default=False, repr=False)
     _judged: tuple[int, int, bool] | None = field(default=None, repr=False)
     _judged_at: float = field(default=float("-inf"), repr=False)   # when it came
     # the station's start or the controller's last fault: a result fetched afterwards was

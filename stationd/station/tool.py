@@ -79,6 +79,8 @@ class ToolRules(FaultRules):
                 self.tool_on, self._enabled, self._off_at = True, sel, None
                 self._enable_serial += 1
                 self._off_before_enable = self._last_off_at
+                self._same_bolt_before = self._last_enabled_bolt == (sel.vin, sel.bolt)
+                self._last_enabled_bolt = (sel.vin, sel.bolt)
                 self._enabled_at = ev.t
                 acts.append(EnableTool(self.bolt, sel))
             return acts

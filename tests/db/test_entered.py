@@ -310,3 +310,28 @@ def test_an_outcome_entered_for_a_lost_push_hold_is_the_result_stored_unattribut
     assert row["comment"].endswith("; the outcome entered for B1 by sam")
     [mine] = [r for r in rows if r["bolt"] == "B1" and r["entered_by"] == "sam"]
     assert mine["tightening_id"] == "41"
+
+
+def test_one_lost_result_entered_for_two_held_bolts_is_one_bolt_s(sedan):
+    """41, its push lost, may be B1's or B2's: both held.  The supervisor finds 41 was B1's
+    and enters it; B2, tightened by hand, gets its own entered outcome: 41 is carried by B1's
+    rundown alone, and the unattributed one says it became B1's (a reviewer: both rundowns
+    carried 41, one controller result on two bolts)."""
+    from db.kinds import LOST_UNKNOWN, lost_unknown_note
+
+    repo = sedan
+    repo.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=41, pset=1, ok=True,
+                             torque_nm=49.6, angle_deg=31.0,
+                             result_at=datetime(2026, 12, 1, 8, 0, 0, tzinfo=UTC),
+                             reason="fetched later")
+    for bolt in ("B1", "B2"):
+        repo.record_controller_event(
+            result_type=0, what=LOST_UNKNOWN, vin="VIN1", bolt=bolt, controller_vin=None,
+            tightening_id=41, pset=1, ok=False, torque_nm=None, angle_deg=None,
+            result_at=None, note=lost_unknown_note(41, 1, 1_764_576_000.0))
+    r1 = _enter(repo, bolt="B1")
+    r2 = _enter(repo, bolt="B2", comment="tightened by hand")
+    runs = {e["record"]["id"]: e["record"] for e in repo.ledger.since(0) if e["kind"] == RUNDOWN}
+    assert (runs[r1]["tightening_id"], runs[r2]["tightening_id"]) == (41, None)
+    [loose] = repo.unattributed("VIN1")
+    assert loose["entered_as"] == {"bolt": "B1", "by": "sam"}

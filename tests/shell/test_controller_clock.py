@@ -24,7 +24,8 @@ def _reads(wrench: Any, tool_on: bool, n: int = 2) -> None:
     """``n`` turns of the results' loop on ``wrench``, the core's tool as ``tool_on``."""
     keeper = SimpleNamespace(device=wrench, reconnects=1, losing=False, up=True)
     records = SimpleNamespace(repo=None)
-    core = SimpleNamespace(status=lambda: SimpleNamespace(vin="V", faults={}, tool_on=tool_on))
+    core = SimpleNamespace(status=lambda: SimpleNamespace(vin="V", faults={}, tool_on=tool_on,
+                                                          bolt="B1" if tool_on else None))
 
     async def fed(ev: Any) -> None:
         pass
@@ -46,12 +47,13 @@ def _reads(wrench: Any, tool_on: bool, n: int = 2) -> None:
 def test_the_results_loop_measures_the_controller_s_clock_again_with_the_tool_off(
         monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(shell_controller, "CLOCK_CHECK_S", 0.0)   # every turn, not every 10 min
+    monkeypatch.setattr(shell_controller, "CLOCK_IDLE_S", 0.0)    # idle at once
     with open_wrench("sim://wrench?nok_rate=0", clock_offset_s=0.0, timeout=1.0) as w:
         assert isinstance(w, SimWrench)
         before = w.clock_offset_s
         assert before is not None and -2 < before < 1
         w.controller.clock_offset_s = 30.0           # the controller's clock drifted
-        _reads(w, tool_on=True)                      # the tool on: not now
+        _reads(w, tool_on=True)                      # the tool on, a bolt selected: not now
         assert w.clock_offset_s == before
         _reads(w, tool_on=False)
         after = w.clock_offset_s

@@ -1,0 +1,104 @@
+"""Results heard late (:mod:`stationd.station.lost`): which enable a result fetched late was
+made under, and the bolts held where nothing can tell (found by an independent review)."""
+
+from __future__ import annotations
+
+from stationd.station.actions import CheckNewest, Record, StoreCutUnknown
+from stationd.station.inputs import NewestChecked, ResultIn, ResultsMissed, ResultsSkipped, Tick
+from tests.station.test_core import _on, _ready
+from tests.station.test_result_types import _enabled, res
+
+
+def test_gap_holds_the_bolt_whose_enable_began_before_an_event_judged_during_it():
+    """B1 enabled; 5 s later a line lead's batch increment (40, an event) is pushed, B1's
+    tool staying on.  The operator then tightens B1 (41, its push lost) and leaves; B1's
+    window ends, the check finds nothing; B3's 42 skips 41, which the controller does not
+    give (a gap with the link up).  41 may be B1's: B1 held (a reviewer: only the enables
+    since 40 came were candidates, B1 left open to be tightened twice)."""
+    d = _ready()
+    d.answer_checks = True
+    _enabled(d, 1)
+    d.t += 5.0
+    d.feed(ResultIn(d.t, res(40, 1, True, 3)))        # batch increment: B1's tool stays on
+    assert d.core.tool_on
+    d.t += 2.0                                        # B1 tightened: 41, its push lost
+    _on(d, 3, 3)                                      # the wrench leaves B1
+    d.t += d.core.late_result_s + 1.0
+    d.feed(Tick(d.t))                                 # the check: nothing read (refused)
+    _enabled(d, 3)
+    d.feed(ResultsSkipped(d.t, 42))
+    acts = d.feed(ResultsMissed(d.t, 41, 41, "the controller no longer has it", live=True))
+    assert [a.bolt for a in acts if isinstance(a, StoreCutUnknown)] == ["B1"]
+    assert "B1" in d.core.matcher.held
+
+
+def test_a_check_that_fetches_two_results_of_an_earlier_enable_puts_the_second_on_its_bolt():
+    """The controller's clock not known (results placed by their ids only).  B3 enabled, the
+    operator pulls twice, 41 NOK then 42 OK, both pushes lost, and leaves; B3's check void.
+    B1 enabled, never tightened; its window ends and the check fetches 41 and 42.  41 is not
+    proved B1's, and proves nothing of the order for B1's enable: 42 is not B1's either (a
+    reviewer: 41 taken as judged during B1's enable put 42, B3's, on B1, a bolt never
+    tightened counted done)."""
+    d = _ready()
+    d.answer_checks = False
+    _enabled(d, 3)                                    # 41, 42 made: pushes lost
+    d.t += 3.0
+    _on(d, 2, 3)                                      # the wrench leaves B3: the tool off
+    d.t += d.core.late_result_s + 1.0
+    assert [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    d.feed(NewestChecked(d.t))                        # void: the controller did not answer
+    _enabled(d, 1)
+    d.t += 1.0
+    _on(d, 2, 3)                                      # the wrench leaves B1, untightened
+    d.t += d.core.late_result_s + 1.0
+    assert [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    acts = d.feed(ResultIn(d.t, res(41, 1, False, 1), fetched=True, follows=40,
+                           made_at=None, live=True))
+    acts += d.feed(ResultIn(d.t, res(42, 1, True, 1), fetched=True, follows=40,
+                            made_at=None, live=True))
+    d.feed(NewestChecked(d.t))
+    recorded = [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)]
+    assert recorded == [], f"recorded {recorded}: nothing proves 42 was made under B1"
+
+
+def test_the_same_through_a_push_that_reveals_them():
+    """As above, B1's own 43 pushed revealing 41 and 42: 42 is not taken for B1 by the order
+    of ids after 41, which was not B1's."""
+    d = _ready()
+    d.answer_checks = False
+    _enabled(d, 3)
+    d.t += 3.0
+    _on(d, 2, 3)
+    d.t += d.core.late_result_s + 1.0
+    d.feed(Tick(d.t))
+    d.feed(NewestChecked(d.t))                        # void
+    _enabled(d, 1)
+    d.t += 1.0
+    acts = d.feed(ResultsSkipped(d.t, 43))
+    acts += d.feed(ResultIn(d.t, res(41, 1, False, 1), fetched=True, follows=40,
+                            made_at=None, live=True, before=43))
+    acts += d.feed(ResultIn(d.t, res(42, 1, True, 1), fetched=True, follows=40,
+                            made_at=None, live=True, before=43))
+    recorded = [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)]
+    assert ("B1", 42) not in recorded, recorded
+
+
+def test_a_quick_second_hit_on_the_same_bolt_after_its_nok_is_still_that_bolts():
+    """B1's NOK 40 pushed, its tool off; the tool goes on again for B1 at once (a retry) and
+    the operator pulls: 41 NOK, its push lost, made 1.2 s after the tool-off; 42 OK pushed.
+    Whichever of B1's enables made 41, it is B1's: recorded to it, its NOK counted (a
+    reviewer: refused as perhaps 'the bolt before's' second hit, when that was B1 itself)."""
+    d = _ready()
+    _enabled(d, 1)
+    d.feed(ResultIn(d.t, res(40, 1, False, 1)))       # B1's NOK: the tool off
+    off = d.t
+    assert not d.core.tool_on
+    _enabled(d, 1)                                    # again, at once (a retry)
+    assert d.t - off < 1.0
+    d.t += 1.0
+    acts = d.feed(ResultsSkipped(d.t, 42))
+    acts += d.feed(ResultIn(d.t, res(41, 1, False, 1), fetched=True, follows=40,
+                            made_at=off + 1.2, live=True, before=42))
+    acts += d.feed(ResultIn(d.t, res(42, 1, True, 1)))
+    recorded = [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)]
+    assert recorded == [("B1", 41), ("B1", 42)], recorded
