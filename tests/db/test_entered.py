@@ -276,15 +276,11 @@ def test_an_outcome_entered_for_a_bolt_held_after_a_link_cut_names_no_older_resu
     assert repo.held_bolts("VIN1") == {}
 
 
-def test_an_outcome_entered_for_a_lost_push_hold_is_the_result_stored_unattributed(sedan):
-    """Tightening 41, its push lost, fetched later and stored unattributed, may be B1's or
-    B2's (both held for it, each stored: one result, two holds, not a copy).  The outcome a
-    supervisor enters for B1 is that result: its rundown carries id 41, and the unattributed
-    one says whose outcome it became, in the report's rows and the export (a supervisor's
-    trial: retyped, the one tightening read as two in the export)."""
+def _lost_41_holds_b1_and_b2(repo: Repository) -> None:
+    """Tightening 41, its push lost, fetched later and stored unattributed under VIN1, holds
+    B1 and B2 (it may be either's)."""
     from db.kinds import LOST_UNKNOWN, lost_unknown_note
 
-    repo = sedan
     repo.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=41, pset=1, ok=True,
                              torque_nm=49.6, angle_deg=31.0,
                              result_at=datetime(2026, 12, 1, 8, 0, 0, tzinfo=UTC),
@@ -294,6 +290,16 @@ def test_an_outcome_entered_for_a_lost_push_hold_is_the_result_stored_unattribut
             result_type=0, what=LOST_UNKNOWN, vin="VIN1", bolt=bolt, controller_vin=None,
             tightening_id=41, pset=1, ok=False, torque_nm=None, angle_deg=None,
             result_at=None, note=lost_unknown_note(41, 1, 1_764_576_000.0))
+
+
+def test_an_outcome_entered_for_a_lost_push_hold_is_the_result_stored_unattributed(sedan):
+    """Tightening 41, its push lost, fetched later and stored unattributed, may be B1's or
+    B2's (both held for it, each stored: one result, two holds, not a copy).  The outcome a
+    supervisor enters for B1 is that result: its rundown carries id 41, and the unattributed
+    one says whose outcome it became, in the report's rows and the export (a supervisor's
+    trial: retyped, the one tightening read as two in the export)."""
+    repo = sedan
+    _lost_41_holds_b1_and_b2(repo)
     assert sorted(repo.held_bolts("VIN1")) == ["B1", "B2"]
     [loose] = repo.unattributed("VIN1")
     assert loose["entered_as"] is None
@@ -317,18 +323,8 @@ def test_one_lost_result_entered_for_two_held_bolts_is_one_bolt_s(sedan):
     and enters it; B2, tightened by hand, gets its own entered outcome: 41 is carried by B1's
     rundown alone, and the unattributed one says it became B1's (a reviewer: both rundowns
     carried 41, one controller result on two bolts)."""
-    from db.kinds import LOST_UNKNOWN, lost_unknown_note
-
     repo = sedan
-    repo.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=41, pset=1, ok=True,
-                             torque_nm=49.6, angle_deg=31.0,
-                             result_at=datetime(2026, 12, 1, 8, 0, 0, tzinfo=UTC),
-                             reason="fetched later")
-    for bolt in ("B1", "B2"):
-        repo.record_controller_event(
-            result_type=0, what=LOST_UNKNOWN, vin="VIN1", bolt=bolt, controller_vin=None,
-            tightening_id=41, pset=1, ok=False, torque_nm=None, angle_deg=None,
-            result_at=None, note=lost_unknown_note(41, 1, 1_764_576_000.0))
+    _lost_41_holds_b1_and_b2(repo)
     r1 = _enter(repo, bolt="B1")
     r2 = _enter(repo, bolt="B2", comment="tightened by hand")
     runs = {e["record"]["id"]: e["record"] for e in repo.ledger.since(0) if e["kind"] == RUNDOWN}
