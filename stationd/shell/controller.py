@@ -418,19 +418,19 @@ class ControllerFeed:
         self.checking = asyncio.get_running_loop().create_task(self._checked(not catching))
 
     async def _checked(self, ask: bool) -> None:
-        if ask:
-            await self._check_newest()
-        await self._feed(NewestChecked(time.time()))
+        nothing = await self._check_newest() if ask else False
+        await self._feed(NewestChecked(time.time(), nothing_made=nothing))
 
-    async def _check_newest(self) -> None:
+    async def _check_newest(self) -> bool:
         """Only with every tool off and none enabled while it asks (else the newest may be
         the rundown of a bolt enabled now, fetched before its own push and stored as no
-        bolt's: a reviewer); the link as it was (a reconnect's catch-up counts then)."""
+        bolt's: a reviewer); the link as it was (a reconnect's catch-up counts then).
+        Whether the controller's newest is the last one heard: no tightening made since."""
         wrench, before = self._keeper.device, self.core.status()
         if wrench is None or not wrench.can_fetch or self.records.repo is None \
                 or not self._keeper.up or self._keeper.losing or self._accounted is None \
                 or before.tool_on:
-            return
+            return False
         async with self._gaps:
             last, link = self._accounted, self._link
             try:
@@ -438,9 +438,11 @@ class ControllerFeed:
                 now = self.core.status()
                 if newest is None or newest.tightening_id is None or link != self._link \
                         or self._accounted is None or now.tool_on \
-                        or now.enables != before.enables \
-                        or int(newest.tightening_id) <= self._accounted:
-                    return
+                        or now.enables != before.enables:
+                    return False
+                if int(newest.tightening_id) <= self._accounted:
+                    # nothing since the last one heard, and that one through the core
+                    return int(newest.tightening_id) == self._accounted and not self.received
                 nid = int(newest.tightening_id)
                 self._accounted, self._revealed_by = nid, None
                 log.warning("results: the controller's newest tightening is %d, the last one "
@@ -451,6 +453,7 @@ class ControllerFeed:
                 log.warning("the controller's newest result not read: %s", one_line(exc))
             except STATION_FAULTS as exc:
                 log.error("the controller's newest result not read: %s", one_line(exc))
+        return False
 
     async def _live_gap(self, wrench: Wrench, got: Received) -> None:
         """:meth:`_live_gap_alone`, one gap at a time (:meth:`check_newest`'s too)."""

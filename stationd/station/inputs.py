@@ -138,7 +138,10 @@ class NewestChecked(Input):
     made (a catch-up running, the link down), or was void.  Why told: the enable whose
     window ended stays owed until then (its result, its push lost, is fetched and recorded
     to it), and no tool goes on meanwhile (a trial: the next bolt's enable, 30 ms after the
-    window's end, voided the check)."""
+    window's end, voided the check).  ``nothing_made``: the controller's newest was the last
+    result heard (no tightening since: the enable got none, and no later gap is its)."""
+
+    nothing_made: bool = False
 
 
 @dataclass(frozen=True)

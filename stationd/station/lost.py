@@ -62,7 +62,13 @@ class LostRules(NokRules):
     def _on_newest_checked(self, ev: NewestChecked) -> list[Action]:
         """The controller's newest result was asked for and what it had fed (recorded to the
         enable owed where made under it: :meth:`_made_under`), or the check could not be
-        made: that enable is owed nothing more."""
+        made: that enable is owed nothing more.  Nothing made since the last result heard:
+        its bolt was not tightened, and no later result is its own (a reviewer: a later gap
+        held it beside the bolt whose result was in it)."""
+        en = self._enabled
+        if ev.nothing_made and en is not None and self._checking is not None \
+                and self._checking[1] == self._enable_serial:
+            self._answered_bolt(en.vin, en.bolt)
         return self._check_ended()
 
     def _check_overdue(self, t: float) -> list[Action]:

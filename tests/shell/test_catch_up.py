@@ -470,10 +470,13 @@ def test_the_controller_s_newest_asked_for_fetches_what_was_never_heard():
     assert [(e.result.tightening_id, e.fetched, e.live, e.before) for e in fed
             if isinstance(e, ResultIn)] == [(41, True, True, None), (42, True, True, None)]
     assert isinstance(fed[-1], NewestChecked)
+    assert not fed[-1].nothing_made
     told = [NewestChecked]
-    assert [type(e) for e in asked({0: res(40)}, 40)] == told
-    # refused: said in the journal, nothing fetched
-    assert [type(e) for e in asked({0: REFUSED}, 40)] == told
+    [nothing] = asked({0: res(40)}, 40)          # the newest the last one heard: none made
+    assert isinstance(nothing, NewestChecked) and nothing.nothing_made
+    # refused: said in the journal, nothing fetched, nothing known
+    [refused] = asked({0: REFUSED}, 40)
+    assert isinstance(refused, NewestChecked) and not refused.nothing_made
     # a tool on: its own rundown may be the newest (fetched before its push: a reviewer)
     assert [type(e) for e in asked({0: res(42), 41: res(41), 42: res(42)}, 40,
                                    tool_on=True)] == told

@@ -5,8 +5,20 @@ from __future__ import annotations
 
 from stationd.station.actions import CheckNewest, Record, StoreCutUnknown
 from stationd.station.inputs import NewestChecked, ResultIn, ResultsMissed, ResultsSkipped, Tick
-from tests.station.test_core import _on, _ready
+from tests.station.test_core import Driver, _on, _ready
 from tests.station.test_result_types import _enabled, res
+
+
+def _window_ends(d: Driver, bolt: int, after: float) -> None:
+    """The tool on for ``bolt``, the wrench leaving it ``after`` s later (to B2), its
+    late-result window ending without a result: the controller's newest asked for (the test
+    answers)."""
+    d.answer_checks = False
+    _enabled(d, bolt)
+    d.t += after
+    _on(d, 2, 3)
+    d.t += d.core.late_result_s + 1.0
+    assert [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
 
 
 def test_gap_holds_the_bolt_whose_enable_began_before_an_event_judged_during_it():
@@ -40,18 +52,9 @@ def test_a_check_that_fetches_two_results_of_an_earlier_enable_puts_the_second_o
     reviewer: 41 taken as judged during B1's enable put 42, B3's, on B1, a bolt never
     tightened counted done)."""
     d = _ready()
-    d.answer_checks = False
-    _enabled(d, 3)                                    # 41, 42 made: pushes lost
-    d.t += 3.0
-    _on(d, 2, 3)                                      # the wrench leaves B3: the tool off
-    d.t += d.core.late_result_s + 1.0
-    assert [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    _window_ends(d, 3, 3.0)                           # 41, 42 made: pushes lost
     d.feed(NewestChecked(d.t))                        # void: the controller did not answer
-    _enabled(d, 1)
-    d.t += 1.0
-    _on(d, 2, 3)                                      # the wrench leaves B1, untightened
-    d.t += d.core.late_result_s + 1.0
-    assert [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    _window_ends(d, 1, 1.0)                           # B1 left untightened
     acts = d.feed(ResultIn(d.t, res(41, 1, False, 1), fetched=True, follows=40,
                            made_at=None, live=True))
     acts += d.feed(ResultIn(d.t, res(42, 1, True, 1), fetched=True, follows=40,
@@ -65,12 +68,7 @@ def test_the_same_through_a_push_that_reveals_them():
     """As above, B1's own 43 pushed revealing 41 and 42: 42 is not taken for B1 by the order
     of ids after 41, which was not B1's."""
     d = _ready()
-    d.answer_checks = False
-    _enabled(d, 3)
-    d.t += 3.0
-    _on(d, 2, 3)
-    d.t += d.core.late_result_s + 1.0
-    d.feed(Tick(d.t))
+    _window_ends(d, 3, 3.0)
     d.feed(NewestChecked(d.t))                        # void
     _enabled(d, 1)
     d.t += 1.0
@@ -102,3 +100,18 @@ def test_a_quick_second_hit_on_the_same_bolt_after_its_nok_is_still_that_bolts()
     acts += d.feed(ResultIn(d.t, res(42, 1, True, 1)))
     recorded = [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)]
     assert recorded == [("B1", 41), ("B1", 42)], recorded
+
+
+def test_a_check_that_found_nothing_made_leaves_no_later_gap_to_its_bolt():
+    """B1's window ends, the check finds the controller's newest is the last result heard:
+    nothing made, B1 not tightened.  A later gap (B3's result skipping an id the controller
+    does not give) holds B3's candidates only, not B1 (a reviewer: held beside them).  A check
+    that could not read the controller leaves B1 a candidate."""
+    for nothing_made, held in ((True, []), (False, ["B1"])):
+        d = _ready()
+        _window_ends(d, 1, 1.0)
+        d.feed(NewestChecked(d.t, nothing_made=nothing_made))
+        _enabled(d, 3)
+        d.feed(ResultsSkipped(d.t, 42))
+        acts = d.feed(ResultsMissed(d.t, 41, 41, "the controller no longer has it", live=True))
+        assert [a.bolt for a in acts if isinstance(a, StoreCutUnknown)] == held, nothing_made
