@@ -115,3 +115,16 @@ def test_a_check_that_found_nothing_made_leaves_no_later_gap_to_its_bolt():
         d.feed(ResultsSkipped(d.t, 42))
         acts = d.feed(ResultsMissed(d.t, 41, 41, "the controller no longer has it", live=True))
         assert [a.bolt for a in acts if isinstance(a, StoreCutUnknown)] == held, nothing_made
+
+
+def test_a_push_that_comes_during_the_check_of_its_own_enable_is_its_bolt_s():
+    """B1 tightened (41), its push late, not lost: B1's window ends and the check starts;
+    41's push comes before the check's fetch.  Recorded to B1, as the check's fetch would
+    have (a reviewer: stored unattributed, B1 neither recorded nor held, by which came
+    first)."""
+    d = _ready()
+    _window_ends(d, 1, 3.0)
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1)))
+    assert [(a.bolt, a.late) for a in acts if isinstance(a, Record)] == [("B1", True)]
+    d.feed(NewestChecked(d.t, nothing_made=True))
+    assert "B1" in d.core.matcher.done
