@@ -745,9 +745,8 @@ class Repository:
     def unattributed(self, vin: str | None = None) -> list[dict[str, Any]]:
         """The stored results no bolt owns (of ``vin``, or all), oldest first.  Each with
         ``entered_as``: the bolt and the person (``{"bolt", "by"}``) whose entered outcome is
-        that result (the
-        outcome of a bolt held because it may be its own, entered from the controller's
-        screen; a quality trial: the one tightening read as two), else None."""
+        that result (the outcome of a bolt held because it may be its own, entered from the
+        controller's screen; a quality trial: the one tightening read as two), else None."""
         with self._session(write=False) as s:
             q = select(UnattributedResult).order_by(UnattributedResult.id)
             if vin is not None:

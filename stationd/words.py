@@ -685,19 +685,19 @@ def command_words(answer: Answer) -> str:
 
 
 def _reopened(bolt: str, hold: str | None) -> str:
-    """What a release of a lost push's hold leaves (else nothing): the bolt open to be
-    tightened again, though the result fetched late may be its own (a supervisor's trial:
-    "accepted: its hold (...) ended", and the joint, torqued already, was tightened again)."""
+    """What a release of a lost push's hold, or a gap's, leaves (else nothing): the bolt open
+    to be tightened again, though the result fetched late (or not given by the controller)
+    may be its own (a supervisor's trial: "accepted: its hold (...) ended", and the joint,
+    torqued already, was tightened again)."""
     tid = lost_unknown_id(hold)
-    if tid is None and hold is not None and GAP_NOTE_MARK in hold:
-        # a gap's hold: its result may be among tightenings the controller did not give
-        return (f": {bolt} is open to be tightened again, but it may be tightened already "
-                "(a result the controller did not give): check the controller before "
-                "tightening it again")
-    return "" if tid is None else (
-        f": {bolt} is open to be tightened again, but it may be tightened already, by "
-        f"tightening {tid} (stored unattributed): check the controller before tightening "
-        "it again")
+    if tid is not None:
+        by = f", by tightening {tid} (stored unattributed)"
+    elif hold is not None and GAP_NOTE_MARK in hold:
+        by = " (a result the controller did not give)"
+    else:
+        return ""
+    return (f": {bolt} is open to be tightened again, but it may be tightened already{by}: "
+            "check the controller before tightening it again")
 
 
 def unrecorded_words(hold: str | None, loose: Sequence[Mapping[str, Any]] = ()) -> str:
@@ -718,6 +718,16 @@ def unrecorded_words(hold: str | None, loose: Sequence[Mapping[str, Any]] = ()) 
         f"{_deg(found[-1]['angle_deg'])} deg, ")
     return (f"held: no rundown recorded to it, but tightening {tid} may be its own ({values}"
             "stored unattributed)")
+
+
+def entered_as_words(entered_as: dict[str, str] | None) -> str:
+    """"; the outcome entered for B09 by sam": of a result stored unattributed whose entered
+    outcome a person gave a bolt held for it (:meth:`db.repository.Repository.unattributed`:
+    one tightening, the bolt's row that result as read on the controller's screen); empty
+    where there is none."""
+    if not entered_as:
+        return ""
+    return f"; the outcome entered for {entered_as['bolt']} by {entered_as['by']}"
 
 
 def _deg(v: float | None) -> str:
@@ -797,13 +807,3 @@ __all__ = [
     "wait_words",
     "worded",
 ]
-
-
-def entered_as_words(entered_as: dict[str, str] | None) -> str:
-    """"; the outcome entered for B09 by sam": of a result stored unattributed whose entered
-    outcome a person gave a bolt held for it (:meth:`db.repository.Repository.unattributed`:
-    one tightening, the bolt's row that result as read on the controller's screen); empty
-    where there is none."""
-    if not entered_as:
-        return ""
-    return f"; the outcome entered for {entered_as['bolt']} by {entered_as['by']}"

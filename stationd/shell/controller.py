@@ -149,7 +149,7 @@ class ControllerFeed:
             return
         if now - self._clock_at < CLOCK_CHECK_S or now - self._idle_since < CLOCK_IDLE_S:
             return
-        self._clock_at = time.monotonic()
+        self._clock_at = now
         try:
             await asyncio.wrap_future(self._results_pool.submit(wrench.check_clock))
         except DeviceError as exc:    # the link's own fault is the keeper's, at the next wait

@@ -167,7 +167,6 @@ class StationCore(LiftRules, ToolRules, ResultRules):
         return [Publish(StateChanged(self.state, self.reason, t=ev.t))]
 
     def _on_tick(self, ev: Tick) -> list[Action]:
-        acts = self._pending_overdue(ev.t) + self._check_overdue(ev.t) + \
-            self._window_over(ev.t)
-        return acts + self._teach_overdue(ev.t) + self._check_due(ev.t) + \
+        return self._pending_overdue(ev.t) + self._check_overdue(ev.t) + \
+            self._window_over(ev.t) + self._teach_overdue(ev.t) + self._check_due(ev.t) + \
             self._operator_idle(ev.t)

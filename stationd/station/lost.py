@@ -66,8 +66,7 @@ class LostRules(NokRules):
         its bolt was not tightened, and no later result is its own (a reviewer: a later gap
         held it beside the bolt whose result was in it)."""
         en = self._enabled
-        if ev.nothing_made and en is not None and self._checking is not None \
-                and self._checking[1] == self._enable_serial:
+        if ev.nothing_made and en is not None and self._checking_owed():
             self._answered_bolt(en.vin, en.bolt)
         return self._check_ended()
 
@@ -81,8 +80,7 @@ class LostRules(NokRules):
     def _check_ended(self) -> list[Action]:
         """The check is over: the enable it was for is owed nothing more (an enable since, of
         that bolt, is its own: kept)."""
-        if self._checking is not None and self._checking[1] == self._enable_serial \
-                and not self.tool_on:
+        if self._checking_owed() and not self.tool_on:
             self._enabled, self._off_at = None, None
         self._checking = None
         return []
@@ -280,12 +278,13 @@ class LostRules(NokRules):
         judged, that one judged during this enable or, the tool off after it, during the one
         before and made after that tool-off (:meth:`_after_last_off`; the tool is on for one
         bolt at a time: only this enable could have made it), or its time after the tool
-        went on for it (beyond the clock's slack).  Its
-        time, where known, never before the enable or after its tool went off.  A
+        went on for it (beyond the clock's slack).  Its time, where known, never before the
+        enable or after its tool went off.  Fetched by the check as the enable's window ended
+        (:meth:`_checking_owed`) as well as because a later one skipped its id.  A
         supervisor's trial: the operator pulled again at once, the first NOK stored
         unattributed and uncounted (by its time alone, within the slack, never proved)."""
         r, made = ev.result, ev.made_at
-        checked = self._checking is not None and self._checking[1] == self._enable_serial
+        checked = self._checking_owed()
         if not (ev.fetched and ev.live and (ev.before is not None or checked)) \
                 or not en.vin or self._cut is not None or self._enabled_at is None \
                 or self._enabled_at <= self._link_lost_at \
@@ -308,10 +307,11 @@ class LostRules(NokRules):
         (beyond the clock's slack): one made sooner may be that bolt's, the operator pulling
         again as its disable was sent (a rundown begun before the disable took effect ends
         after it; a reviewer: credited to the next bolt of the same pset enabled within the
-        slack).  Its time not known: not proved."""
-        off = self._off_before_enable
-        if self._same_bolt_before:    # a second hit of the bolt before is this bolt's too
+        slack).  Its time not known: not proved.  Where the enable before was this bolt's
+        own, either enable's rundown is this bolt's (a reviewer: a retry's quick NOK)."""
+        if self._same_bolt_before:
             return True
+        off = self._off_before_enable
         return made is not None and (off is None or made > off + CLOCK_SLACK_S)
 
     def _offline(self, ev: ResultIn) -> bool:

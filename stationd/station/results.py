@@ -166,9 +166,8 @@ class ResultRules(UnreadRules):
             and self._enabled_at > self._link_lost_at)
         # (pushed while its enable's check runs, the window over: that enable's still, every
         # tool off since; a reviewer: stored as no bolt's, or recorded, by which came first)
-        checked = self._checking is not None and self._checking[1] == self._enable_serial
         if ours and en is not None and en.vin and (
-                self._result_owed(ev.t) or (checked and not ev.fetched)):
+                self._result_owed(ev.t) or (self._checking_owed() and not ev.fetched)):
             return self._attribute(ev, en)
         if en is not None and self._made_under(ev, en):
             return self._attribute(ev, en, lost=True)

@@ -219,11 +219,11 @@ class CoreState:
     #: a pushed result (its id, since when) that skipped ids, fed after them
     #: (:class:`ResultsSkipped`): the enable's result stays owed until it is in
     _pending_push: int | None = field(default=None, repr=False)
+    _pending_at: float = field(default=0.0, repr=False)
     #: the controller asked for its newest result (:class:`CheckNewest`) as the owed
     #: enable's window ended: since when, and that enable's count; it stays owed until the
     #: answer (:class:`NewestChecked`) or CHECK_WAIT_S
     _checking: tuple[float, int] | None = field(default=None, repr=False)
-    _pending_at: float = field(default=0.0, repr=False)
     #: bolts whose NOK came fetched while a pushed result was pending: counted, the NOK
     #: policy waits for the pushed one (bolt -> its pset)
     _nok_owed: dict[str, int | None] = field(default_factory=dict, repr=False)
@@ -332,6 +332,11 @@ class CoreState:
             return ()
         return tuple(b for b in m.bolts if b not in m.done and b not in m.skipped
                      and b not in m.locked and b not in m.held and m.why_blocked(b) is None)
+
+    def _checking_owed(self) -> bool:
+        """A check of the controller's newest result runs for the enable owed now (none came
+        since it was asked: :class:`CheckNewest`)."""
+        return self._checking is not None and self._checking[1] == self._enable_serial
 
     def _result_owed(self, t: float) -> bool:
         """The tool is on, or went off less than the late-result window before ``t``: its
