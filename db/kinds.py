@@ -94,13 +94,17 @@ def unreadable_note(tightening_id: int | None, mid: int, revision: int) -> str:
 CUT_NOTE_HEAD = "its result during the link cut not known"
 LOST_NOTE_MARK = " may be its own (its push lost, fetched later;"
 GAP_NOTE_MARK = "not given by the controller)"
+#: the head of a held bolt's note where the controller's newest result could not be read as
+#: its enable's late-result window ended (:func:`check_unknown_note`)
+CHECK_NOTE_HEAD = "its result not known: the controller's newest result not read as its " \
+    "late-result window ended"
 
 
 def is_unknown_note(note: str | None) -> bool:
     """Whether a held bolt's note is a hold without a result (a link cut's, a lost push's):
     its result was never in hand, not one that could not be read."""
-    return note is not None and (note.startswith(CUT_NOTE_HEAD) or LOST_NOTE_MARK in note
-                                 or GAP_NOTE_MARK in note)
+    return note is not None and (note.startswith((CUT_NOTE_HEAD, CHECK_NOTE_HEAD))
+                                 or LOST_NOTE_MARK in note or GAP_NOTE_MARK in note)
 
 
 def cut_unknown_note(why: str, pset: int | None = None, enabled_at: float | None = None
@@ -126,6 +130,16 @@ def lost_unknown_note(tightening_id: int, pset: int | None, enabled_at: float) -
     return (f"tightening {tightening_id}{LOST_NOTE_MARK} other "
             f"enables came between); the tool was enabled"
             f"{'' if pset is None else f' for pset {pset}'} at {at} UTC")
+
+
+def check_unknown_note(why: str, pset: int | None, enabled_at: float) -> str:
+    """A held bolt's note where its enable (with ``pset`` at ``enabled_at``, epoch seconds)
+    got no result in its window and the controller's newest result could not be read then
+    (``why``): a rundown whose push was lost may be its own, and nothing else will ask (a
+    reviewer: the bolt left open, the tool went on for it again, tightened twice)."""
+    at = datetime.fromtimestamp(enabled_at, UTC).strftime("%Y-%m-%d %H:%M:%S")
+    return (f"{CHECK_NOTE_HEAD} ({why}): a rundown whose push was lost may be its own; the "
+            f"tool was enabled{'' if pset is None else f' for pset {pset}'} at {at} UTC")
 
 
 def lost_gap_note(span: str, pset: int | None, enabled_at: float) -> str:
@@ -178,6 +192,7 @@ def is_not_taken_note(note: str | None) -> bool:
 
 
 __all__ = [
+    "CHECK_NOTE_HEAD",
     "CUT_NOTE_HEAD",
     "CUT_UNKNOWN",
     "GAP_NOTE_MARK",
@@ -198,6 +213,7 @@ __all__ = [
     "TO_LOOSEN",
     "BoltStatus",
     "HeldUnder",
+    "check_unknown_note",
     "cut_unknown_note",
     "is_not_taken_note",
     "is_unknown_note",

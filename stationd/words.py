@@ -9,6 +9,7 @@ from dataclasses import replace
 from typing import Any
 
 from db.kinds import (
+    CHECK_NOTE_HEAD,
     GAP_NOTE_MARK,
     NOT_TAKEN_NOTE,
     is_not_taken_note,
@@ -593,6 +594,7 @@ _BECAUSE: dict[Because, Callable[[StateReason], str]] = {
     Because.UNREADABLE_HELD: lambda r: _unreadable(r) + _HELD_FOR,
     Because.NOT_TAKEN: _not_taken,
     Because.NOT_TAKEN_HELD: lambda r: _not_taken(r) + _HELD_FOR,
+    Because.UNKNOWN_HELD: lambda r: f"bolt {r.bolt}: its result not known" + _HELD_FOR,
     Because.SKIPPED: lambda r: f"bolt {r.bolt} {_skipped(r.skip)}",
     Because.LOOSEN_ORDERED: lambda r: f"bolt {r.bolt}: loosen first",
     Because.OPERATOR: lambda r: f"operator {r.how}",
@@ -694,6 +696,8 @@ def _reopened(bolt: str, hold: str | None) -> str:
         by = f", by tightening {tid} (stored unattributed)"
     elif hold is not None and GAP_NOTE_MARK in hold:
         by = " (a result the controller did not give)"
+    elif hold is not None and hold.startswith(CHECK_NOTE_HEAD):
+        by = " (a push lost, the controller's newest result not read)"
     else:
         return ""
     return (f": {bolt} is open to be tightened again, but it may be tightened already{by}: "

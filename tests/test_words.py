@@ -261,6 +261,8 @@ STATE_WORDS = [
     (StateReason(Because.NOT_TAKEN_HELD, bolt="B11"),
      "bolt B11: an OK result without a result type outside its torque window; held for a "
      "supervisor"),
+    (StateReason(Because.UNKNOWN_HELD, bolt="B11"),
+     "bolt B11: its result not known; held for a supervisor"),
     (StateReason(Because.SKIPPED, bolt="B11",
                  skip=Skip(SkipKind.COMMAND, user="sam", comment="no access")),
      "bolt B11 sam's command (no access)"),
@@ -668,3 +670,21 @@ def test_releasing_a_gap_s_hold_warns_the_bolt_may_be_tightened_already():
         ": B1 is open to be tightened again, but it may be tightened already (a result the "
         "controller did not give): check the controller before tightening it again")
     assert _reopened("B1", cut_unknown_note("no answer")) == ""
+
+
+def test_a_check_s_hold_says_why_and_its_release_warns_the_bolt_may_be_tightened():
+    """A bolt held because the controller's newest result could not be read as its window
+    ended: the note says why, the pset and when; its release warns as a lost push's."""
+    from db.kinds import check_unknown_note, is_unknown_note, lost_unknown_id
+    from stationd.words import _reopened
+
+    note = check_unknown_note("refused by the controller: error 99", 3, 1000.0)
+    assert note.startswith("its result not known: the controller's newest result not read as "
+                           "its late-result window ended (refused by the controller: error "
+                           "99): a rundown whose push was lost may be its own; the tool was "
+                           "enabled for pset 3 at 1970-01-01 00:16:40 UTC")
+    assert is_unknown_note(note) and lost_unknown_id(note) is None
+    assert _reopened("B2", note) == (
+        ": B2 is open to be tightened again, but it may be tightened already (a push lost, "
+        "the controller's newest result not read): check the controller before tightening "
+        "it again")

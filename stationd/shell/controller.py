@@ -46,6 +46,8 @@ from stationd.words import gap_plan_words, id_span
 
 log = logging.getLogger("stationd")
 RESULT_WAIT_S = 0.5         # one blocking wait for pushed results (a condition, not a poll)
+#: how long a check of the controller's newest waits for a push on its way to reach the core
+PUSH_FED_S = 5.0
 CURVE_WAIT_S = 0.5          # one blocking wait for curves, in their own thread
 CURVE_IDLE_S = 1.0          # the curve loop's wait while the controller sends none
 #: how often the controller's clock is measured again on a link that stays up (a clock
@@ -86,6 +88,9 @@ class ControllerFeed:
         #: ids between the two were made during the cut and are a gap (:meth:`_refused`)
         self._first_pushed: int | None = None
         self._refused_after: int | None = None
+        #: the controller refused to give its newest result at this link's catch-up: it
+        #: keeps none to give (a check of the newest asks nothing then)
+        self._no_history = False
         #: the pushed result whose id skipped those fetched now (fed after them)
         self._revealed_by: int | None = None
         self._again = False     # a reconnect came while a catch-up ran: one more after it
@@ -215,6 +220,7 @@ class ControllerFeed:
         self._clock_at = time.monotonic()    # measured by the driver at the connect
         self._link += 1
         self._first_pushed = self._refused_after = None
+        self._no_history = False
         if self.catching_up is None or self.catching_up.done():
             self.catching_up = asyncio.get_running_loop().create_task(self._catch_ups())
         else:   # one of an earlier connection still runs: this one's follows it
@@ -405,55 +411,75 @@ class ControllerFeed:
             await self._fetched(wrench, tid, got, follows, offset)
         return unknown
 
-    def check_newest(self) -> None:
-        """The core's :class:`CheckNewest`: the controller's newest result asked for, and the
-        ids after the last one heard fetched (their pushes lost), in a task of its own (it
-        feeds the core, whose lock the caller holds); then the core is told
-        (:class:`NewestChecked`: the enable it was for is owed nothing more, and the tool
-        may go on again).  Not asked while one runs or a catch-up does (that one fetches
-        them): told at once, or by the check running as it ends."""
-        if self.checking is not None and not self.checking.done():
-            return
-        catching = self.catching_up is not None and not self.catching_up.done()
-        self.checking = asyncio.get_running_loop().create_task(self._checked(not catching))
+    def check_newest(self, serial: int | None = None) -> None:
+        """The core's :class:`CheckNewest` (for the enable ``serial``): the controller's
+        newest result asked for, and the ids after the last one heard fetched (their pushes
+        lost), in a task of its own (it feeds the core, whose lock the caller holds); then
+        the core is told (:class:`NewestChecked`: the enable it was for is owed nothing more,
+        and the tool may go on again).  After a check or a catch-up running (the ids they
+        fetch are not asked twice), and after a push on its way (made under that enable, it
+        is its own)."""
+        prev = self.checking
+        self.checking = asyncio.get_running_loop().create_task(self._checked(serial, prev))
 
-    async def _checked(self, ask: bool) -> None:
-        nothing = await self._check_newest() if ask else False
-        await self._feed(NewestChecked(time.time(), nothing_made=nothing))
+    async def _checked(self, serial: int | None, prev: asyncio.Task[None] | None) -> None:
+        for task in (prev, self.catching_up):
+            if task is not None and not task.done():
+                await asyncio.wait({task})
+        nothing, unknown = await self._check_newest()
+        end = time.monotonic() + PUSH_FED_S
+        while self.received and time.monotonic() < end:
+            await asyncio.sleep(RESULT_WAIT_S / 5)
+        await self._feed(NewestChecked(time.time(), nothing_made=nothing, unknown=unknown,
+                                       serial=serial))
 
-    async def _check_newest(self) -> bool:
-        """Only with every tool off and none enabled while it asks (else the newest may be
-        the rundown of a bolt enabled now, fetched before its own push and stored as no
-        bolt's: a reviewer); the link as it was (a reconnect's catch-up counts then).
-        Whether the controller's newest is the last one heard: no tightening made since."""
+    async def _check_newest(self) -> tuple[bool, str]:
+        """Whether the controller's newest is the last one heard (no tightening made since),
+        and where it could not tell, why (the core holds the bolt).  Only with every tool off
+        and none enabled while it asks (else the newest may be the rundown of a bolt enabled
+        now, fetched before its own push and stored as no bolt's: a reviewer); the link as it
+        was.  A controller that keeps no results to give (it cannot fetch, or refused to at
+        the connect's catch-up) tells nothing: the next result pushed does, by its id."""
         wrench, before = self._keeper.device, self.core.status()
-        if wrench is None or not wrench.can_fetch or self.records.repo is None \
-                or not self._keeper.up or self._keeper.losing or self._accounted is None \
-                or before.tool_on:
-            return False
+        if wrench is not None and (not wrench.can_fetch or self._no_history):
+            return False, ""
+        if wrench is None or not self._keeper.up or self._keeper.losing:
+            return False, "the link to the controller was down"
+        if self.records.repo is None:
+            return False, "the station's database was not open"
         async with self._gaps:
             last, link = self._accounted, self._link
             try:
                 newest = await self._call(wrench.fetch_result, 0)
                 now = self.core.status()
-                if newest is None or newest.tightening_id is None or link != self._link \
-                        or self._accounted is None or now.tool_on \
+                if link != self._link or now.tool_on or before.tool_on \
                         or now.enables != before.enables:
-                    return False
-                if int(newest.tightening_id) <= self._accounted:
-                    # nothing since the last one heard, and that one through the core
-                    return int(newest.tightening_id) == self._accounted and not self.received
+                    return False, "the link or the tool changed while it was asked"
+                if newest is None:   # none at all: made none, or its memory cleared
+                    return last is None, "" if last is None else "the controller has none"
+                if newest.tightening_id is None:
+                    return False, "the controller's newest result could not be read"
                 nid = int(newest.tightening_id)
+                if last is None or nid < last:
+                    return False, f"its newest is tightening {nid}, " + (
+                        "none heard on this link" if last is None else f"{last} heard")
+                if nid == last:
+                    # nothing since the last one heard, and that one through the core
+                    return not self.received, ""
                 self._accounted, self._revealed_by = nid, None
                 log.warning("results: the controller's newest tightening is %d, the last one "
                             "heard %d: %s not pushed by the controller (the link up), fetched",
                             nid, last, id_span(last + 1, nid))
                 await self._fetch(wrench, plan_gaps(last, nid), last, newest, live=True)
             except (RefusedError, DeviceError, ValueError) as exc:
+                # (one that keeps no results refused it at the connect's catch-up already:
+                # :meth:`_refused`; a refusal now is of this moment)
                 log.warning("the controller's newest result not read: %s", one_line(exc))
+                return False, one_line(exc)
             except STATION_FAULTS as exc:
                 log.error("the controller's newest result not read: %s", one_line(exc))
-        return False
+                return False, f"the station's database failed: {one_line(exc)}"
+        return False, ""
 
     async def _live_gap(self, wrench: Wrench, got: Received) -> None:
         """:meth:`_live_gap_alone`, one gap at a time (:meth:`check_newest`'s too)."""
@@ -574,6 +600,7 @@ class ControllerFeed:
         during the cut are those between ``last``, the last one recorded, and the first one
         pushed since (told now where one came already, else when it comes), a gap.  Nothing
         recorded yet: no count to compare with."""
+        self._no_history = True
         if last is None:
             return
         if self._first_pushed is None or self._first_pushed <= last:

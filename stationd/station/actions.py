@@ -228,7 +228,11 @@ class CheckNewest:
     is asked for its newest result (its push may have been lost: the operator left the bolt,
     or the car left with it), and the ids the station never heard are fetched.  Why: else
     only the next result pushed revealed it, a car later where it was a car's last bolt (a
-    supervisor's trial: the car closed with the bolt missing, its hold came with the next)."""
+    supervisor's trial: the car closed with the bolt missing, its hold came with the next).
+    ``serial``: that enable's, echoed in the answer (:class:`~stationd.station.inputs.
+    NewestChecked`)."""
+
+    serial: int | None = None
 
 
 @dataclass(frozen=True)

@@ -136,6 +136,8 @@ class Because(enum.Enum):
     NOT_TAKEN = "not taken"              # the tool off: an OK without a type outside the
     #                                      bolt's torque window (bolt)
     NOT_TAKEN_HELD = "not taken held"    # ... and the bolt held, the selection dropped (bolt)
+    UNKNOWN_HELD = "unknown held"        # the bolt selected held, its result not known (a
+    #                                      link cut's, a lost push's): the selection dropped
     # commands
     SKIPPED = "skipped"                  # the bolt selected was skipped (bolt, skip: why,
     #                                      as the matcher keeps it)

@@ -139,9 +139,17 @@ class NewestChecked(Input):
     window ended stays owed until then (its result, its push lost, is fetched and recorded
     to it), and no tool goes on meanwhile (a trial: the next bolt's enable, 30 ms after the
     window's end, voided the check).  ``nothing_made``: the controller's newest was the last
-    result heard (no tightening since: the enable got none, and no later gap is its)."""
+    result heard (no tightening since: the enable got none, and no later gap is its).
+    ``unknown``: why the controller could not tell (its answer failed, the link dropped
+    meanwhile, its newest unreadable): the enable's bolt is held, as a lost push's may be
+    its own (a reviewer: left open, the tool went on for it again, tightened twice); empty
+    where it told, or keeps no results to ask (the next one pushed tells, by its id).
+    ``serial``: the enable the check was asked for (:class:`~stationd.station.actions.
+    CheckNewest`): a check's answer ends no later one (None: whichever runs)."""
 
     nothing_made: bool = False
+    unknown: str = ""
+    serial: int | None = None
 
 
 @dataclass(frozen=True)

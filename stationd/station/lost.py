@@ -9,6 +9,7 @@ from collections.abc import Callable
 
 from db.kinds import (
     LOST_UNKNOWN,
+    check_unknown_note,
     cut_unknown_note,
     lost_gap_note,
     lost_unknown_note,
@@ -65,17 +66,37 @@ class LostRules(NokRules):
         made: that enable is owed nothing more.  Nothing made since the last result heard:
         its bolt was not tightened, and no later result is its own (a reviewer: a later gap
         held it beside the bolt whose result was in it)."""
-        en = self._enabled
-        if ev.nothing_made and en is not None and self._checking_owed():
-            self._answered_bolt(en.vin, en.bolt)
-        return self._check_ended()
+        if self._checking is None or ev.serial not in (None, self._checking[1]):
+            return []       # an earlier check's answer (a reviewer: it ended this one)
+        en, acts = self._enabled, []
+        if en is not None and self._checking_owed() and not self.tool_on:
+            if ev.nothing_made:
+                self._answered_bolt(en.vin, en.bolt)
+            elif ev.unknown:
+                acts = self._check_unknown(ev.t, en, ev.unknown)
+        return acts + self._check_ended()
+
+    def _check_unknown(self, t: float, en: Selection, why: str) -> list[Action]:
+        """The controller could not tell whether it made a rundown under ``en`` (``why``):
+        its bolt, unanswered and not done since, is held (selected again meanwhile too: no
+        tool went on during the check)."""
+        m = self.matcher
+        lost = [u for u in self._unanswered if u.selection is en and not (
+            en.vin == self.vin and m is not None and (
+                en.bolt in m.done or en.bolt in m.held or en.bolt in m.skipped
+                or en.bolt in m.locked))]
+        return self._hold_unanswered(t, lost, lambda u: check_unknown_note(
+            why, u.selection.pset, u.enabled_at))
 
     def _check_overdue(self, t: float) -> list[Action]:
         """A check of the controller's newest never answered in :data:`CHECK_WAIT_S` (a fault
-        of the shell): the tool waits no longer."""
+        of the shell, or a catch-up it waits for running long): the tool waits no longer, and
+        the enable's bolt is held as where the controller could not tell."""
         if self._checking is None or t - self._checking[0] < CHECK_WAIT_S:
             return []
-        return self._check_ended()
+        return self._on_newest_checked(NewestChecked(
+            t, unknown=f"no answer in {CHECK_WAIT_S:.0f} s", serial=self._checking[1]))
+
 
     def _check_ended(self) -> list[Action]:
         """The check is over: the enable it was for is owed nothing more (an enable since, of
@@ -161,9 +182,19 @@ class LostRules(NokRules):
                 acts += [stored, Publish(Notice(Said.CUT_UNKNOWN, bolt=b, vin=en.vin, note=note,
                                                 t=t))]
             else:
-                acts += [stored, *self._hold(t, b, note, Notice(
-                    Said.CUT_UNKNOWN, bolt=b, note=note, t=t), under=en)]
+                acts += [stored, *self._hold_unknown(t, b, note, en)]
             self._answered_bolt(en.vin, b)
+        return acts
+
+    def _hold_unknown(self, t: float, bolt: str, note: str, en: Selection) -> list[Action]:
+        """``bolt`` (of the vehicle at the station) held, its result not known (``note``);
+        where it is selected, its tool waiting, the selection dropped: else its tool went on
+        at the next frame (a bolt held by a check as the operator came back to it)."""
+        acts = self._hold(t, bolt, note, Notice(Said.CUT_UNKNOWN, bolt=bolt, note=note, t=t),
+                          under=en)
+        if self.bolt == bolt and self.state in ON_A_BOLT and not self.tool_on:
+            acts = self._drop(t, State.TRACKING,
+                              StateReason(Because.UNKNOWN_HELD, bolt=bolt)) + acts
         return acts
 
     def _gap_in_doubt(self, ev: ResultsMissed) -> list[Action]:
@@ -232,8 +263,7 @@ class LostRules(NokRules):
             # held when that vehicle is at the station again
             return [stored, Publish(Notice(Said.CUT_UNKNOWN, bolt=en.bolt, vin=en.vin,
                                            note=note, t=t))]
-        return [stored, *self._hold(t, en.bolt, note, Notice(
-            Said.CUT_UNKNOWN, bolt=en.bolt, note=note, t=t), under=en)]
+        return [stored, *self._hold_unknown(t, en.bolt, note, en)]
 
     def _answered(self, en: Selection) -> None:
         """``en``'s result is in, or settled for a person (held): its enable is owed nothing

@@ -155,7 +155,7 @@ class ToolRules(FaultRules):
             return []
         if self._unanswered_after():
             self._checking = (t, self._enable_serial)
-            return [CheckNewest()]
+            return [CheckNewest(self._enable_serial)]
         self._enabled, self._off_at = None, None
         return []
 

@@ -127,11 +127,11 @@ def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path
         d.wait_log(f"tightening {b.tightening_id}, its push lost, fetched when a later one "
                    "came: made while the tool was on for B06 alone, recorded to B06")
         # B07 tightened, its push lost; the operator goes on to B08, whose tool waits out
-        # B07's late-result window: B07's enable got no result.  B08's result skips B07's
-        # id, which is fetched, stored unattributed, and B07 held for a person: it may be
-        # B07's (a quality trial: B07 left open and tightened twice); the hold is stored
-        # (the check of the controller's newest as B07's window ends refused: else it
-        # finds B07's result then, recorded to B07, as B09's below)
+        # B07's late-result window: B07's enable got no result, and the check of the
+        # controller's newest then is refused (else it finds B07's result, recorded to B07,
+        # as B09's below).  B07 is held for a person: its result may be a lost push (a
+        # reviewer: left open, the operator could go back and tighten it twice); the hold
+        # is stored.  B08's result skips B07's id, which is fetched, stored unattributed.
         tool_on(d, ctl, pose, "B07")
         ctl.refuse_mid(64, 99)
         ctl.lose_next_push()
@@ -139,12 +139,13 @@ def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path
         assert b07 is not None
         pose.write_text("B08")
         d.wait_log("the controller's newest result not read")
+        d.wait_log("B07: its result not known: the controller's newest result not read as "
+                   "its late-result window ended (")
         ctl.clear_refusals()
         tool_on(d, ctl, pose, "B08")
         b08 = ctl.pull_trigger()
         assert b08 is not None
-        d.wait_log(f"B07: tightening {b07.tightening_id} may be its own (its push lost, "
-                   "fetched later; other enables came between)")
+        d.wait_log(f"tightening {b07.tightening_id} fetched after a later one came")
         db = tmp_path / "station.db"
         until(lambda: _held(db) == ["B07"], 30, "B07's hold stored")
         # the car's last bolt, B09, tightened as the lift goes down, its push lost: when

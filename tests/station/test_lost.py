@@ -3,13 +3,17 @@ made under, and the bolts held where nothing can tell (found by an independent r
 
 from __future__ import annotations
 
-from stationd.station.actions import CheckNewest, Record, StoreCutUnknown
+import pytest
+
+from db.kinds import CHECK_NOTE_HEAD, LOST_UNKNOWN
+from stationd.station.actions import CheckNewest, Record, SendParams, StoreCutUnknown
 from stationd.station.inputs import NewestChecked, ResultIn, ResultsMissed, ResultsSkipped, Tick
+from stationd.station.state import CHECK_WAIT_S
 from tests.station.test_core import Driver, _on, _ready
 from tests.station.test_result_types import _enabled, res
 
 
-def _window_ends(d: Driver, bolt: int, after: float) -> None:
+def _window_ends(d: Driver, bolt: int, after: float) -> CheckNewest:
     """The tool on for ``bolt``, the wrench leaving it ``after`` s later (to B2), its
     late-result window ending without a result: the controller's newest asked for (the test
     answers)."""
@@ -18,7 +22,8 @@ def _window_ends(d: Driver, bolt: int, after: float) -> None:
     d.t += after
     _on(d, 2, 3)
     d.t += d.core.late_result_s + 1.0
-    assert [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    return check
 
 
 def test_gap_holds_the_bolt_whose_enable_began_before_an_event_judged_during_it():
@@ -128,3 +133,62 @@ def test_a_push_that_comes_during_the_check_of_its_own_enable_is_its_bolt_s():
     assert [(a.bolt, a.late) for a in acts if isinstance(a, Record)] == [("B1", True)]
     d.feed(NewestChecked(d.t, nothing_made=True))
     assert "B1" in d.core.matcher.done
+
+
+@pytest.mark.parametrize("back", [False, True])
+def test_a_check_the_controller_could_not_answer_holds_its_bolt(back):
+    """B1 enabled, left; its window ends and the controller cannot say whether it made a
+    rundown since (its answer refused).  B1 is held for a person, stored, and the tool does
+    not go on for it again (a reviewer: left open, the operator went back to it and
+    tightened it twice where its push had been lost).  ``back``: the wrench on B1 again while
+    the check ran (selected, its tool waiting): held all the same."""
+    d = _ready()
+    check = _window_ends(d, 1, 1.0)
+    if back:
+        _on(d, 1, 4)
+        d.step(("ack", 0.01, True))
+        _on(d, 1, 2)
+        assert not d.core.tool_on, "no tool on during the check"
+    acts = d.feed(NewestChecked(d.t, unknown="refused by the controller: error 99",
+                                serial=check.serial))
+    [stored] = [a for a in acts if isinstance(a, StoreCutUnknown)]
+    assert (stored.bolt, stored.what) == ("B1", LOST_UNKNOWN)
+    assert stored.note.startswith(CHECK_NOTE_HEAD) and "error 99" in stored.note
+    assert "B1" in d.core.matcher.held
+    n = len(d.log)
+    _on(d, 1, 4)
+    d.step(("ack", 0.01, True))
+    _on(d, 1, 2)
+    assert not d.core.tool_on
+    assert not [a for _, acts in d.log[n:] for a in acts if isinstance(a, SendParams)]
+
+
+def test_a_check_never_answered_holds_its_bolt_when_the_tool_waits_no_longer():
+    """The shell never answers the check (its fault, or a catch-up it waits for runs long):
+    after CHECK_WAIT_S the tool may go on again, and B1, its result not known, is held."""
+    d = _ready()
+    _window_ends(d, 1, 1.0)
+    d.t += CHECK_WAIT_S + 0.5
+    acts = d.feed(Tick(d.t))
+    assert [a.bolt for a in acts if isinstance(a, StoreCutUnknown)] == ["B1"]
+    assert "no answer" in d.core.matcher.held["B1"]
+    _enabled(d, 3)
+
+
+def test_an_earlier_checks_answer_does_not_end_a_later_one():
+    """B1's check is answered void only after B3's window ended and B3's check began: that
+    answer (B1's) does not end B3's, whose tool stays off until its own answer (a reviewer:
+    ended early, the check's result could be taken by the next bolt's enable)."""
+    d = _ready()
+    first = _window_ends(d, 1, 1.0)
+    d.feed(NewestChecked(d.t, serial=first.serial))
+    second = _window_ends(d, 3, 1.0)
+    assert second.serial != first.serial
+    d.feed(NewestChecked(d.t, nothing_made=True, serial=first.serial))
+    _on(d, 2, 2)
+    d.step(("ack", 0.01, True))
+    _on(d, 2, 2)
+    assert not d.core.tool_on
+    d.feed(NewestChecked(d.t, nothing_made=True, serial=second.serial))
+    _on(d, 2, 1)
+    assert d.core.tool_on
