@@ -286,7 +286,9 @@ class ControllerEvent(Base):
     controller_vin: Mapped[str | None] = mapped_column(String(32))
     tightening_id: Mapped[int | None]
     pset: Mapped[int | None]
-    status: Mapped[str] = mapped_column(String(3))
+    # NULL: no verdict, a hold the station stored where no result says it (an MES counting
+    # status 'nok' counted those as NOK tightenings: an MES integrator's trial)
+    status: Mapped[str | None] = mapped_column(String(3))
     torque_nm: Mapped[float | None]
     angle_deg: Mapped[float | None]
     result_at: Mapped[datetime | None] = mapped_column(UtcDateTime)   # controller's clock

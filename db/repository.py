@@ -501,9 +501,10 @@ class Repository:
 
     def record_controller_event(self, *, result_type: int, what: str, vin: str | None,
                                 bolt: str | None, controller_vin: str | None,
-                                tightening_id: int | None, pset: int | None, ok: bool,
-                                torque_nm: float | None, angle_deg: float | None,
-                                result_at: datetime | None, enable_id: int | None = None,
+                                tightening_id: int | None, pset: int | None,
+                                ok: bool | None, torque_nm: float | None,
+                                angle_deg: float | None, result_at: datetime | None,
+                                enable_id: int | None = None,
                                 note: str | None = None) -> int | None:
         """Store a controller result that is not a rundown (a batch step, a bypass, an OK
         without a type outside its bolt's torque window, ...); return its id, or None when
@@ -512,7 +513,8 @@ class Repository:
         have one, :func:`_same_result`).
         ``enable_id``: the tool enable it answers, settled in the same transaction (its bolt
         is held for a person instead, :data:`db.kinds.NOT_TAKEN`).  ``note``: why a bolt is
-        held where there is no result (:data:`db.kinds.CUT_UNKNOWN`)."""
+        held where there is no result (:data:`db.kinds.CUT_UNKNOWN`), whose ``ok`` is None
+        (no verdict: status NULL)."""
         with self._session(write=True) as s:
             # (a hold names the result it may be, which holds each bolt it may be: not copies)
             if tightening_id is not None and what not in HELD_WITHOUT_RESULT:
@@ -527,8 +529,9 @@ class Repository:
             row = ControllerEvent(
                 result_type=int(result_type), what=what[:32], vin=vin, bolt=bolt,
                 controller_vin=controller_vin, tightening_id=tightening_id, pset=pset,
-                status="ok" if ok else "nok", torque_nm=_opt_float(torque_nm),
-                angle_deg=_opt_float(angle_deg), result_at=result_at, recorded_at=utcnow(),
+                status=None if ok is None else "ok" if ok else "nok",
+                torque_nm=_opt_float(torque_nm), angle_deg=_opt_float(angle_deg),
+                result_at=result_at, recorded_at=utcnow(),
                 note=None if note is None else note[:500])
             s.add(row)
             _settle(s, enable_id)

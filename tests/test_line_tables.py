@@ -522,13 +522,15 @@ def test_a_held_bolts_reason_reaches_the_line_with_its_controller_event(tmp_path
     repo.start_vehicle(VIN, "SEDAN")
     note = lost_unknown_note(28, 2, AT.timestamp())
     repo.record_controller_event(result_type=0, what=LOST_UNKNOWN, vin=VIN, bolt="B3",
-                                 controller_vin=None, tightening_id=None, pset=2, ok=False,
+                                 controller_vin=None, tightening_id=None, pset=2, ok=None,
                                  torque_nm=None, angle_deg=None, result_at=None, note=note)
     _forward(repo, pg_url, "ST-A")
     engine = _engine(pg_url)
     with engine.connect() as c:
         ev = c.execute(select(LINE_CONTROLLER_EVENTS.table)).one()
         assert (ev.what, ev.bolt, ev.note) == (LOST_UNKNOWN, "B3", note)
+        # no verdict: not counted by a query of status 'nok' (an MES integrator's trial)
+        assert ev.status is None
         assert "tightening 28 may be its own" in ev.note
         record = c.scalar(select(LINE_FEED.c.record).where(LINE_FEED.c.seq == ev.seq))
         assert record["note"] == note

@@ -387,7 +387,7 @@ class Records:
         enable = self._settles(a.selection, take=False)
         self._writer().record_controller_event(
             result_type=0, what=a.what, vin=a.vin, bolt=a.bolt, controller_vin=None,
-            tightening_id=a.tightening_id, pset=a.selection.pset, ok=False, torque_nm=None,
+            tightening_id=a.tightening_id, pset=a.selection.pset, ok=None, torque_nm=None,
             angle_deg=None, result_at=None, enable_id=enable, note=a.note)
         self._settles(a.selection)
 

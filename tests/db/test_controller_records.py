@@ -59,12 +59,13 @@ def test_a_held_bolts_note_is_in_its_controller_events_feed_record(repo, bolts_f
     note = "tightening 28 may be its own (its push lost, fetched later; ...)"
     assert repo.record_controller_event(
         result_type=0, what=LOST_UNKNOWN, vin="VIN1", bolt="B1", controller_vin=None,
-        tightening_id=None, pset=1, ok=False, torque_nm=None, angle_deg=None, result_at=None,
+        tightening_id=None, pset=1, ok=None, torque_nm=None, angle_deg=None, result_at=None,
         note=note)
     assert _event(repo, 5)                               # a batch increment: no note
     held, batch = (e["record"] for e in repo.ledger.since(0))
     assert (held["what"], held["bolt"], held["note"]) == (LOST_UNKNOWN, "B1", note)
     assert batch["note"] is None
+    assert held["status"] is None and batch["status"] in ("ok", "nok")   # no verdict
 
 
 def test_an_unreadable_message_sent_again_under_another_header_is_the_stored_one(

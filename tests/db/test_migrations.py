@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import pytest
 from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.runtime.migration import MigrationContext
@@ -33,7 +34,7 @@ def test_migrated_schema_matches_the_models(tmp_path):
     assert set(inspect(engine).get_table_names()) == TABLES
     assert _diff(engine, Base.metadata) == []
     with engine.connect() as conn:
-        assert current_revision(conn) == head_revision() == "0019"
+        assert current_revision(conn) == head_revision() == "0020"
     engine.dispose()
 
 
@@ -138,4 +139,37 @@ def test_results_of_no_bolt_stored_before_their_release_count_as_acknowledged(tm
     with Repository.open(url) as repo:
         assert repo.ledger.unacknowledged_count() == 1          # the rundown alone
         assert [e["kind"] for e in repo.ledger.unacknowledged(0)] == ["rundown"]
+    engine.dispose()
+
+
+def test_holds_stored_before_have_no_verdict_after_the_upgrade(tmp_path):
+    """A bolt held where no result says it (a link cut's, a lost push's) was stored with
+    status 'nok': an MES counting status 'nok' counted each as a NOK tightening (an MES
+    integrator's trial).  0020 sets them to NULL (no verdict), leaves the controller's own
+    events as they were, keeps the status check, and its downgrade puts 'nok' back."""
+    from sqlalchemy import text
+    from sqlalchemy.exc import IntegrityError
+
+    from db.kinds import CUT_UNKNOWN, LOST_UNKNOWN
+
+    url = url_of(tmp_path / "m.db")
+    engine = make_engine(url)
+    with engine.begin() as conn:
+        command.upgrade(alembic_config(connection=conn), "0019")
+        for what in (CUT_UNKNOWN, LOST_UNKNOWN, "batch increment"):
+            conn.execute(text("INSERT INTO controller_events (result_type, what, status, "
+                              "recorded_at) VALUES (0, :w, 'nok', '2026-12-01 08:00:00')"),
+                         {"w": what})
+        command.upgrade(alembic_config(connection=conn), "head")
+    with engine.connect() as conn:
+        assert dict(conn.execute(text("SELECT what, status FROM controller_events")).all()) \
+            == {CUT_UNKNOWN: None, LOST_UNKNOWN: None, "batch increment": "nok"}
+    with pytest.raises(IntegrityError), engine.begin() as conn:
+        conn.execute(text("INSERT INTO controller_events (result_type, what, status, "
+                          "recorded_at) VALUES (0, 'x', 'bad', '2026-12-01 08:00:00')"))
+    with engine.begin() as conn:
+        command.downgrade(alembic_config(connection=conn), "0019")
+    with engine.connect() as conn:
+        assert {s for (s,) in conn.execute(text("SELECT status FROM controller_events"))} \
+            == {"nok"}
     engine.dispose()

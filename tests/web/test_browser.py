@@ -306,7 +306,7 @@ def test_a_bolt_held_for_a_lost_push_is_not_said_never_tightened(live_server, pa
                              torque_nm=49.6, angle_deg=31.0, result_at=None,
                              reason="fetched after a later one came, the link up")
     repo.record_controller_event(result_type=0, what=LOST_UNKNOWN, vin=VIN, bolt="B3",
-                                 controller_vin=None, tightening_id=None, pset=1, ok=False,
+                                 controller_vin=None, tightening_id=None, pset=1, ok=None,
                                  torque_nm=None, angle_deg=None, result_at=None,
                                  note=lost_unknown_note(41, 1, 1000.0))
     try:
