@@ -435,6 +435,33 @@ def build_parser() -> argparse.ArgumentParser:
                    help="no progress bars (they are also off when stderr is not a terminal)")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
+    _add_vision_parsers(sub)
+    _add_bench_parser(sub)
+
+    from stationd.calibrate_cli import add_calibrate_parser
+    from stationd.command_cli import add_command_parsers
+    from stationd.db_cli import add_config_parser, add_db_parser
+    from stationd.line_cli import add_line_parser
+    from stationd.probe import add_probe_parser
+    from stationd.teach_cli import add_teach_parser
+
+    add_calibrate_parser(sub)
+    _subcommand(sub, "calibrate", "check").set_defaults(func=cmd_calibrate_check)
+    add_probe_parser(sub)
+    add_db_parser(sub)
+    add_config_parser(sub)
+    add_command_parsers(sub)
+    add_teach_parser(sub)
+    add_line_parser(sub)
+
+    _add_run_and_sim_parsers(sub)
+    _add_demo_parser(sub)
+    _quiet_everywhere(p)
+    return p
+
+
+def _add_vision_parsers(sub: Any) -> None:
+    """The vision's commands on images: detect, localize, marker, tune-color."""
     d = sub.add_parser("detect", help="localize the marker in one image")
     d.add_argument("image", help="the image (PNG, TIFF, ...; `stationd demo --vision --save DIR` "
                    "renders some)")
@@ -470,6 +497,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="HSV file to write (the station config reads it as vision.hsv)")
     tc.set_defaults(func=cmd_tune_color)
 
+
+def _add_bench_parser(sub: Any) -> None:
+    """``stationd bench``: the benchmarks that print figures."""
     b = sub.add_parser("bench", help="benchmarks that print figures")
     bsub = b.add_subparsers(dest="bench", required=True, parser_class=_Parser)
     bv = bsub.add_parser("vision", help="the paper's experiments on rendered images")
@@ -573,22 +603,10 @@ def build_parser() -> argparse.ArgumentParser:
     bl.add_argument("--json", action="store_true", help="print one summary object")
     bl.set_defaults(func=cmd_bench_line)
 
-    from stationd.calibrate_cli import add_calibrate_parser
-    from stationd.command_cli import add_command_parsers
-    from stationd.db_cli import add_config_parser, add_db_parser
-    from stationd.line_cli import add_line_parser
-    from stationd.probe import add_probe_parser
-    from stationd.teach_cli import add_teach_parser
 
-    add_calibrate_parser(sub)
-    _subcommand(sub, "calibrate", "check").set_defaults(func=cmd_calibrate_check)
-    add_probe_parser(sub)
-    add_db_parser(sub)
-    add_config_parser(sub)
-    add_command_parsers(sub)
-    add_teach_parser(sub)
-    add_line_parser(sub)
-
+def _add_run_and_sim_parsers(sub: Any) -> None:
+    """``stationd run`` (the daemon) and ``stationd sim`` (a simulated device on its real
+    protocol)."""
     rn = sub.add_parser("run", help="the station daemon (as systemd runs it)")
     rn.add_argument("--config", required=True, help="station YAML")
     rn.add_argument("--sim-operator", action="store_true",
@@ -635,6 +653,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_behaviour_options(ctl)
     sm.set_defaults(func=cmd_sim)
 
+
+def _add_demo_parser(sub: Any) -> None:
+    """``stationd demo``: the main job, a simulated run."""
     dm = sub.add_parser("demo", help="the main job: a simulated run")
     dm.add_argument("--seed", type=seed_arg, default=7, help="(default: %(default)s)")
     dm.add_argument("--cycles", type=int, default=10, help="bolts to tighten (with --vision: "
@@ -667,8 +688,6 @@ def build_parser() -> argparse.ArgumentParser:
     dm.add_argument("--load", type=int, default=0, metavar="N",
                     help="N busy processes beside the station for the run (CPU load)")
     dm.set_defaults(func=cmd_demo)
-    _quiet_everywhere(p)
-    return p
 
 
 def _subcommand(sub: Any, *names: str) -> argparse.ArgumentParser:
