@@ -165,94 +165,156 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     not the daemon's, which stops in order): the bolts left locked are said as such
     (``unfinished``), the vehicle lowered, and ``truth['interrupted']`` names the signal and
     the bolts."""
-    plc, ctl = simulators(st)
-    if operator is not None and st.core.status().operator is None:
-        answer = await st.submit(SignIn(f"{operator.source}: the simulated operator"),
-                                 operator)
-        if not answer.accepted:
-            (note or _stderr)(f"note: the simulated operator did not sign in: "
-                              f"{reason_words(answer.reason) if answer.reason else '?'}")
-    plc.set_vehicle(truth["model_code"], truth["vin"])
-    plc.raise_lift()
-    for _ in range(200):
-        if st.vin is not None and st.core.status().model is not None:
-            break
-        await asyncio.sleep(0.05)
-    else:
-        raise InputError("the simulated vehicle was not opened: "
-                         f"{state_words(st.core.status().reason)}")
-    while operator is None and st.cfg.access.operator_required \
-            and st.core.status().operator is None:   # a person signs in (told once before)
-        await asyncio.sleep(0.2)
-    length = st.cfg.tool.length_mm
-    bolts: list[BoltInfo] = []
-    unseen: list[BoltInfo] = []
-    model = st.core.status().model
-    assert st.repo is not None and model is not None  # noqa: S101 - opened above
-    infos = st.repo.bolts_for_model(model)   # the simulation's truth, from the table
-    for b in infos:   # a bolt no pair sees cannot be demonstrated: say so
-        pairs = world.seen_by(wrench_at(np.array(b.position), np.random.default_rng(0), length,
-                                       max_tilt_deg=0.0))
-        (bolts if pairs else unseen).append(b)
-    if not bolts:
-        raise InputError(f"no bolt of the vehicle (lift code {truth['model_code']}) is in view "
-                         "of any pair of this station (check the pairs' to_vehicle transforms "
-                         "and the bolt positions)")
-    if unseen:
-        (note or _stderr)(f"note: {len(unseen)} of {len(infos)} bolts are in view of no pair "
-                          f"and are left out: {', '.join(b.bolt_id for b in unseen[:8])}"
-                          f"{' ...' if len(unseen) > 8 else ''}")
-    if share != (1, 1):
-        mine = share_of([b.bolt_id for b in bolts], *share)
-        if not mine:
-            raise InputError(f"station {share[0]} of {share[1]} has no bolt of its own: "
-                             f"{counted(len(bolts), 'bolt')} in view for {share[1]} stations")
-        # said after the station's id ("DEMO-1 tightens its own bolts, 25 of the 50 in
-        # view: ..."; it read "DEMO-1 its own bolts: 25 of the 50")
-        (note or _stderr)(f"{'' if note else 'this station '}tightens its own bolts, "
-                          f"{len(mine)} of the {len(bolts)} in view: "
-                          f"{', '.join(mine[:12])}{' ...' if len(mine) > 12 else ''}")
-        bolts = [b for b in bolts if b.bolt_id in mine]
-    truth["share"] = [b.bolt_id for b in bolts]
-    by_id = {b.bolt_id: b for b in bolts}
+    r = _Round(st, world, rng, nok_rng, truth, report, say, note, supervisor, interruptible)
+    await r.arrive(operator)
+    bolts, infos = r.bolts_in_view(share)
+    r.by_id = {b.bolt_id: b for b in bolts}
     if truth.get("plan") is None:
         truth["plan"] = [bolts[int(k)].bolt_id for k in rng.permutation(len(bolts))[:cycles]]
-    planned = [bolt for bolt in truth["plan"] if bolt in by_id]
+    planned = [bolt for bolt in truth["plan"] if bolt in r.by_id]
     truth["cycles"] = len(planned)      # fewer when fewer bolts can be shown
     now = st.core.status()
     plan = plan_of(planned, now.done | now.skipped, now.locked | now.held)
     if plan.finished:
-        (note or _stderr)(f"{truth['vin']}: {', '.join(plan.finished)} done already (the "
-                          f"station says so): the operator goes on with "
-                          f"{', '.join([*plan.visit, *plan.waiting]) or 'none'}")
+        r.tell_note(f"{truth['vin']}: {', '.join(plan.finished)} done already (the station "
+                    f"says so): the operator goes on with "
+                    f"{', '.join([*plan.visit, *plan.waiting]) or 'none'}")
     # the plan's first bolt is the stubborn joint that locks for people (once released, it
     # has been seen to)
-    stubborn_bolt = planned[0] if supervisor is None and planned else None
-    # a bolt locked before a reload: its NOKs were the last round's, said in its line all
-    # the same (its line began with the release, the NOKs that locked it left out)
-    streaks = st.repo.nok_streaks(truth["vin"]) if plan.waiting else {}
-    waiting: dict[str, tuple[BoltInfo, dict[str, Any]]] = {   # locked, left to people
-        bolt: (by_id[bolt], {"bolt": bolt, "pset": by_id[bolt].parameters.pset,
-                             "result": LEFT_FOR_PEOPLE, "waits": True, "rundowns": 0,
-                             "before": noks_before(streaks.get(bolt, 0))})
-        for bolt in plan.waiting if supervisor is None}
-    said: dict[str, dict[str, Any]] = {}     # the bolts' lines said in this round
+    r.stubborn = planned[0] if supervisor is None and planned else None
+    waiting = r.left_to_people(plan.waiting) if supervisor is None else {}
     for bolt_id in plan.visit if supervisor is None else \
             [b for b in planned if b in plan.visit or b in plan.waiting]:
-        b = by_id[bolt_id]
+        await r.visit(r.by_id[bolt_id], bolts, waiting)
+    for bolt_id, (b, line) in waiting.items():
+        await r.for_people(bolt_id, b, line)
+        r.tell(line)
+        await r.away()
+    # the lift goes down only when no bolt of the vehicle waits for a supervisor (README:
+    # the vehicle waits on the lift for the release): a bolt held after its visit (its push
+    # lost, found when the next result skipped its id; a result fetched after a reload), or
+    # locked or held and in no wait above, was gone past and the lift lowered under it (a
+    # supervisor's trial).  Released (by the simulated supervisor, else by a person), it is
+    # tightened again; its line goes on from the one said
+    released: dict[str, int] = {}
+    while "interrupted" not in truth and (late := waiting_now(st, infos)):
+        released[late[0]] = released.get(late[0], 0) + 1
+        await r.late(late[0], released[late[0]])
+    r.plc.lower_lift()
+    await asyncio.sleep(0.5)
+
+
+class _Round:
+    """One vehicle's round of :func:`operate`: what its steps share (the station, the
+    world, the draws, what is said), each step a method of its own."""
+
+    def __init__(self, st: Station, world: World, rng: np.random.Generator,
+                 nok_rng: np.random.Generator, truth: dict[str, Any],
+                 report: list[dict[str, Any]], say: Callable[[dict[str, Any]], None],
+                 note: Callable[[str], None] | None, supervisor: Issuer | None,
+                 interruptible: bool) -> None:
+        self.st, self.world, self.rng, self.nok_rng = st, world, rng, nok_rng
+        self.truth, self.report, self.say, self.note = truth, report, say, note
+        self.tell_note: Callable[[str], None] = note or _stderr
+        self.supervisor, self.interruptible = supervisor, interruptible
+        self.plc, self.ctl = simulators(st)
+        self.length = st.cfg.tool.length_mm
+        self.by_id: dict[str, BoltInfo] = {}
+        self.stubborn: str | None = None
+        self.said: dict[str, dict[str, Any]] = {}    # the bolts' lines said in this round
+
+    async def arrive(self, operator: Issuer | None) -> None:
+        """The operator signs in (unless someone is), the vehicle raised and opened; on a
+        station that requires sign-in without a simulated operator, a person signs in."""
+        st, truth = self.st, self.truth
+        if operator is not None and st.core.status().operator is None:
+            answer = await st.submit(SignIn(f"{operator.source}: the simulated operator"),
+                                     operator)
+            if not answer.accepted:
+                self.tell_note(f"note: the simulated operator did not sign in: "
+                               f"{reason_words(answer.reason) if answer.reason else '?'}")
+        self.plc.set_vehicle(truth["model_code"], truth["vin"])
+        self.plc.raise_lift()
+        for _ in range(200):
+            if st.vin is not None and st.core.status().model is not None:
+                break
+            await asyncio.sleep(0.05)
+        else:
+            raise InputError("the simulated vehicle was not opened: "
+                             f"{state_words(st.core.status().reason)}")
+        while operator is None and st.cfg.access.operator_required \
+                and st.core.status().operator is None:   # a person signs in (told once before)
+            await asyncio.sleep(0.2)
+
+    def bolts_in_view(self, share: tuple[int, int]) -> tuple[list[BoltInfo], list[BoltInfo]]:
+        """The vehicle's bolts some pair sees (of this station's ``share`` of a line; said
+        where some are left out), and all of them."""
+        st, truth = self.st, self.truth
+        bolts: list[BoltInfo] = []
+        unseen: list[BoltInfo] = []
+        model = st.core.status().model
+        assert st.repo is not None and model is not None  # noqa: S101 - opened before
+        infos = st.repo.bolts_for_model(model)   # the simulation's truth, from the table
+        for b in infos:   # a bolt no pair sees cannot be demonstrated: say so
+            pairs = self.world.seen_by(wrench_at(np.array(b.position), np.random.default_rng(0),
+                                                 self.length, max_tilt_deg=0.0))
+            (bolts if pairs else unseen).append(b)
+        if not bolts:
+            raise InputError(f"no bolt of the vehicle (lift code {truth['model_code']}) is in "
+                             "view of any pair of this station (check the pairs' to_vehicle "
+                             "transforms and the bolt positions)")
+        if unseen:
+            self.tell_note(f"note: {len(unseen)} of {len(infos)} bolts are in view of no pair "
+                           f"and are left out: {', '.join(b.bolt_id for b in unseen[:8])}"
+                           f"{' ...' if len(unseen) > 8 else ''}")
+        if share != (1, 1):
+            mine = share_of([b.bolt_id for b in bolts], *share)
+            if not mine:
+                raise InputError(f"station {share[0]} of {share[1]} has no bolt of its own: "
+                                 f"{counted(len(bolts), 'bolt')} in view for {share[1]} "
+                                 "stations")
+            # said after the station's id ("DEMO-1 tightens its own bolts, 25 of the 50 in
+            # view: ..."; it read "DEMO-1 its own bolts: 25 of the 50")
+            self.tell_note(f"{'' if self.note else 'this station '}tightens its own bolts, "
+                           f"{len(mine)} of the {len(bolts)} in view: "
+                           f"{', '.join(mine[:12])}{' ...' if len(mine) > 12 else ''}")
+            bolts = [b for b in bolts if b.bolt_id in mine]
+        truth["share"] = [b.bolt_id for b in bolts]
+        return bolts, infos
+
+    def left_to_people(self, bolts: Sequence[str]
+                       ) -> dict[str, tuple[BoltInfo, dict[str, Any]]]:
+        """The ``bolts`` locked before this round, left to people: their lines, waiting.  A
+        bolt locked before a reload: its NOKs were the last round's, said in its line all
+        the same (its line began with the release, the NOKs that locked it left out)."""
+        assert self.st.repo is not None  # noqa: S101 - opened before
+        streaks = self.st.repo.nok_streaks(self.truth["vin"]) if bolts else {}
+        return {bolt: (self.by_id[bolt], {
+            "bolt": bolt, "pset": self.by_id[bolt].parameters.pset, "result": LEFT_FOR_PEOPLE,
+            "waits": True, "rundowns": 0, "before": noks_before(streaks.get(bolt, 0))})
+            for bolt in bolts}
+
+    async def visit(self, b: BoltInfo, bolts: list[BoltInfo],
+                    waiting: dict[str, tuple[BoltInfo, dict[str, Any]]]) -> None:
+        """The wrench to ``b`` (now and then hovering between two bolts first, or leaving
+        before tightening), tightened as the NOK policy has it; its line said, or kept in
+        ``waiting`` where it waits for a person."""
+        st, rng, truth, world = self.st, self.rng, self.truth, self.world
         target = np.array(b.position)
         if rng.random() < 0.2:  # hovers between two bolts first: nothing may be sent
             other = np.array(bolts[int(rng.integers(len(bolts)))].position)
             truth["bolt"] = None
-            world.set_wrench(wrench_at(0.5 * (target + other), rng, length))
+            world.set_wrench(wrench_at(0.5 * (target + other), rng, self.length))
             await asyncio.sleep(0.6)
-        pose = wrench_at(target + np.append(rng.normal(0, 0.3, 2), 0.0), rng, length)
+        pose = wrench_at(target + np.append(rng.normal(0, 0.3, 2), 0.0), rng, self.length)
         truth["bolt"] = b.bolt_id
         world.set_wrench(pose)
         # drawn always (the seed's stream); the bolt that locks for people is never left
-        leave = rng.random() < 0.1 and b.bolt_id != stubborn_bolt
+        leave = rng.random() < 0.1 and b.bolt_id != self.stubborn
         line: dict[str, Any] = {"bolt": b.bolt_id, "pset": b.parameters.pset, "result": None}
+        supervisor = self.supervisor
         if supervisor is not None and stopped(st, b.bolt_id):   # locked before (a reload)
+            assert st.repo is not None  # noqa: S101 - opened before
             noks = noks_before(st.repo.nok_streaks(truth["vin"]).get(b.bolt_id, 0))
             answer = await st.submit(ReleaseBolt(truth["vin"], b.bolt_id,
                                                  f"{supervisor.source}: joint checked"),
@@ -267,35 +329,45 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
             truth["bolt"] = None
             world.set_wrench(None)  # leaves before tightening: the tool must go off
             for _ in range(100):
-                if not ctl.tool_enabled:
+                if not self.ctl.tool_enabled:
                     break
                 await asyncio.sleep(0.05)
             line["result"] = "left before tightening; tool " + \
-                ("disabled" if not ctl.tool_enabled else "STILL ENABLED")
+                ("disabled" if not self.ctl.tool_enabled else "STILL ENABLED")
         elif line["result"] is None:
             first = line.pop("before", [])
-            await until_ok(st, b.bolt_id, line, nok_rng, truth["vin"], supervisor,
-                           stubborn=True if b.bolt_id == stubborn_bolt else None)
+            await until_ok(st, b.bolt_id, line, self.nok_rng, truth["vin"], supervisor,
+                           stubborn=True if b.bolt_id == self.stubborn else None)
             line["before"] = [*first, *line["before"]]
         if line.get("waits"):
             waiting[b.bolt_id] = (b, line)      # its line is said once a person released it
         else:
-            report.append(line)
-            said[b.bolt_id] = line
-            say(line)
-        truth["bolt"] = None
-        world.set_wrench(None)
+            self.report.append(line)
+            self.said[b.bolt_id] = line
+            self.say(line)
+        await self.away()
+
+    async def away(self) -> None:
+        """The wrench out of view between two bolts."""
+        self.truth["bolt"] = None
+        self.world.set_wrench(None)
         await asyncio.sleep(0.3)
 
-    async def for_people(bolt_id: str, b: BoltInfo | None, line: dict[str, Any],
+    def _pose(self, b: BoltInfo) -> Any:
+        """The wrench on ``b``, a little off its centre (drawn from the round's stream)."""
+        return wrench_at(np.array(b.position) + np.append(self.rng.normal(0, 0.3, 2), 0.0),
+                         self.rng, self.length)
+
+    async def for_people(self, bolt_id: str, b: BoltInfo | None, line: dict[str, Any],
                          what: str = "locked") -> None:
         """``bolt_id`` waits for a person's release (``line['waits']``), then is tightened
         again (``b`` None: not a bolt of the operator's, left as released; ``what``: why it
         waits, "locked" or "held")."""
+        st, truth = self.st, self.truth
         while line.get("waits") and "interrupted" not in truth:
             try:
-                who = await wait_for_people(st, bolt_id, truth["vin"], note or _stderr,
-                                            interruptible, truth.get("screens"))
+                who = await wait_for_people(st, bolt_id, truth["vin"], self.tell_note,
+                                            self.interruptible, truth.get("screens"))
             except WaitEnded as ended:
                 truth["interrupted"] = {"signal": ended.signal, "bolts": []}
                 break
@@ -313,15 +385,15 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
                 line["before"], line["result"] = before, "not a bolt the operator tightens"
                 break
             rundowns = int(line.get("rundowns", 0))
-            pose = wrench_at(np.array(b.position) + np.append(rng.normal(0, 0.3, 2), 0.0), rng,
-                             length)
+            pose = self._pose(b)
             truth["bolt"] = bolt_id
-            world.set_wrench(pose)
+            self.world.set_wrench(pose)
             if not await _tool_on(st, bolt_id):
                 line["result"] = f"not selected after the release ({_why_not(st)})"
                 line["before"], line["unfinished"] = before, True
             else:   # a person had the joint seen to: it is no longer stubborn
-                await until_ok(st, bolt_id, line, nok_rng, truth["vin"], None, stubborn=False)
+                await until_ok(st, bolt_id, line, self.nok_rng, truth["vin"], None,
+                               stubborn=False)
                 line["before"] = [*before, *line["before"]]
                 line["rundowns"] = rundowns + int(line["rundowns"])
         if line.get("waits"):   # the wait ended by a signal: still locked, not released
@@ -331,34 +403,26 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
             line["unfinished"] = True
             truth["interrupted"]["bolts"].append(bolt_id)
 
-    def tell(line: dict[str, Any]) -> None:
-        if line["bolt"] not in said:
-            said[line["bolt"]] = line
-            report.append(line)
-        say(line)
+    def tell(self, line: dict[str, Any]) -> None:
+        """``line`` said (added to the report once)."""
+        if line["bolt"] not in self.said:
+            self.said[line["bolt"]] = line
+            self.report.append(line)
+        self.say(line)
 
-    for bolt_id, (b, line) in waiting.items():
-        await for_people(bolt_id, b, line)
-        tell(line)
-        truth["bolt"] = None
-        world.set_wrench(None)
-        await asyncio.sleep(0.3)
-    # the lift goes down only when no bolt of the vehicle waits for a supervisor (README:
-    # the vehicle waits on the lift for the release): a bolt held after its visit (its push
-    # lost, found when the next result skipped its id; a result fetched after a reload), or
-    # locked or held and in no wait above, was gone past and the lift lowered under it (a
-    # supervisor's trial).  Released (by the simulated supervisor, else by a person), it is
-    # tightened again; its line goes on from the one said
-    released: dict[str, int] = {}
-    while "interrupted" not in truth and (late := waiting_now(st, infos)):
-        bolt_id, info = late[0], by_id.get(late[0])
+    async def late(self, bolt_id: str, times: int) -> None:
+        """``bolt_id`` locked or held after its visit (``times`` so far in this round):
+        released by the simulated supervisor (up to MAX_RUNDOWNS times) and tightened
+        again, else left to people; its line goes on from the one said."""
+        st, truth, supervisor = self.st, self.truth, self.supervisor
+        info = self.by_id.get(bolt_id)
         now = st.core.status()
         what = "held" if bolt_id in now.held else "locked"
-        line = {"bolt": bolt_id, "pset": None if info is None else info.parameters.pset,
-                "result": LEFT_FOR_PEOPLE, "waits": True, "rundowns": 0,
-                "before": [f"{what} after its visit" if bolt_id in said else what]}
-        released[bolt_id] = released.get(bolt_id, 0) + 1
-        if supervisor is not None and released[bolt_id] <= MAX_RUNDOWNS:
+        line: dict[str, Any] = {
+            "bolt": bolt_id, "pset": None if info is None else info.parameters.pset,
+            "result": LEFT_FOR_PEOPLE, "waits": True, "rundowns": 0,
+            "before": [f"{what} after its visit" if bolt_id in self.said else what]}
+        if supervisor is not None and times <= MAX_RUNDOWNS:
             answer = await st.submit(ReleaseBolt(truth["vin"], bolt_id,
                                                  f"{supervisor.source}: joint checked"),
                                      supervisor)
@@ -368,22 +432,21 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
                 if info is None:
                     line["result"] = "not a bolt the operator tightens"
                 else:
-                    pose = wrench_at(np.array(info.position) + np.append(rng.normal(0, 0.3, 2),
-                                                                      0.0), rng, length)
+                    pose = self._pose(info)
                     truth["bolt"] = bolt_id
-                    world.set_wrench(pose)
+                    self.world.set_wrench(pose)
                     first = line["before"]
                     if not await _tool_on(st, bolt_id):
                         line["result"] = f"not selected after the release ({_why_not(st)})"
                         line["unfinished"] = True
                     else:
-                        await until_ok(st, bolt_id, line, nok_rng, truth["vin"], supervisor,
-                                       stubborn=False)
+                        await until_ok(st, bolt_id, line, self.nok_rng, truth["vin"],
+                                       supervisor, stubborn=False)
                         line["before"] = [*first, *line["before"]]
             else:
                 line["before"].append(f"release refused ({answer.reason})")
-        await for_people(bolt_id, info, line, what)   # nothing to wait for where released
-        before = said.get(bolt_id)
+        await self.for_people(bolt_id, info, line, what)   # nothing to wait for where released
+        before = self.said.get(bolt_id)
         if before is not None:      # its line as said, then what came after
             line["before"] = [*before.get("before", []), before["result"], *line["before"]]
             line["rundowns"] = int(before.get("rundowns", 0)) + int(line["rundowns"])
@@ -391,12 +454,8 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
             before.clear()
             before.update(line, **kept)
             line = before
-        tell(line)
-        truth["bolt"] = None
-        world.set_wrench(None)
-        await asyncio.sleep(0.3)
-    plc.lower_lift()
-    await asyncio.sleep(0.5)
+        self.tell(line)
+        await self.away()
 
 
 def share_of(bolts: list[str], k: int, n: int) -> list[str]:
