@@ -137,16 +137,21 @@ class LostRules(NokRules):
         result a result fetched late (its push lost: a later one skipped its id, or a
         reconnect's catch-up found it) may be: of its pset, made within that enable and its
         window (or when, not known), its bolt still open and not selected now (of a vehicle
-        that has left: whatever it is now, not known here)."""
+        that has left: whatever it is now, not known here).  The enable whose window's check
+        fetched it, whatever its time: the check fetches only what was made since the last
+        result heard, and a clock stepped since its last measure (a trial: +60 s) placed
+        it outside that enable, the bolt left open to be tightened twice."""
         r = ev.result
         if not ev.fetched:
             return []
         found: list[_Cut] = []
+        checked = self._enabled if self._checking_owed() else None
         for u in self._unanswered:
             en = u.selection
             if en.pset is None or int(r.pset) != en.pset or not self._still_open(u):
                 continue
-            if ev.made_at is not None and not u.spans(ev.made_at, CLOCK_SLACK_S):
+            if ev.made_at is not None and not u.spans(ev.made_at, CLOCK_SLACK_S) \
+                    and en is not checked:
                 continue    # made while its tool was off for good: not its own
             found.append(u)
         return found

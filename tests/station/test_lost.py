@@ -192,3 +192,51 @@ def test_an_earlier_checks_answer_does_not_end_a_later_one():
     d.feed(NewestChecked(d.t, nothing_made=True, serial=second.serial))
     _on(d, 2, 1)
     assert d.core.tool_on
+
+
+def test_a_check_refused_then_the_bolt_tightened_again_is_not_possible():
+    """A trial against an independent Open Protocol emulator (MID 0064 refused with error
+    99): B1 tightened, its push lost; the check refused; the operator went back to B1, which
+    got the tool again and was tightened twice, then counted OK beside the gap.  B1 is held
+    by the check: the tool does not go on for it, and the later gap holds nothing more."""
+    d = _ready()
+    check = _window_ends(d, 1, 3.0)
+    d.feed(NewestChecked(d.t, unknown="refused by the controller: error 99 (unknown MID)",
+                         serial=check.serial))
+    n = len(d.log)
+    _on(d, 1, 4)                                      # the operator back on B1
+    assert not [a for _, acts in d.log[n:] for a in acts if isinstance(a, SendParams)]
+    assert "B1" in d.core.matcher.held and "B1" not in d.core.matcher.done
+
+
+def test_a_check_cut_by_the_link_holds_its_bolt():
+    """The same trial, the controller silent to MID 0064 (behind a proxy): the check's
+    answer never came, the link was reset, and the bolt whose lost result was being looked
+    for got the tool again a minute later.  The shell tells the check ended unknown (the
+    link changed): B1 held."""
+    d = _ready()
+    check = _window_ends(d, 1, 3.0)
+    d.step(("fault", 0.1, "wrench"))                  # the link reset during the check
+    d.feed(NewestChecked(d.t, unknown="the link to the controller was down",
+                         serial=check.serial))
+    d.step(("back", 0.5, "", 3))
+    d.step(("caught", 2.0, False))                    # its catch-up incomplete too
+    assert "B1" in d.core.matcher.held
+
+
+def test_a_result_the_check_fetches_outside_its_enable_by_the_clock_holds_the_bolt():
+    """The trial with a controller whose clock stepped (+60 s) between two of the station's
+    measures: B1 tightened, its push lost; the check fetches it, of B1's pset, stamped 60 s
+    after B1's window by that clock.  Not proved B1's, stored unattributed; B1 was left
+    open and got the tool again.  The check fetches only what was made since the last
+    result heard: B1, whose enable it checks, is held."""
+    from stationd.station.actions import Record
+
+    d = _ready()
+    check = _window_ends(d, 1, 3.0)
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=40,
+                           made_at=d.t + 60.0, live=True))
+    acts += d.feed(NewestChecked(d.t, serial=check.serial))
+    recorded = [a.bolt for a in acts if isinstance(a, Record)]
+    assert recorded == [] and [a.bolt for a in acts if isinstance(a, StoreCutUnknown)] == ["B1"]
+    assert "B1" in d.core.matcher.held

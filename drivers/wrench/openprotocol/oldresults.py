@@ -10,13 +10,18 @@ no result type and the header's does, only after two such answers in a row (the 
 as unreadable: it may be a loosening).  One that reads at no revision is
 the controller's record of a tightening all the same: handed back as an ``UnreadableResult``,
 to be stored and looked at, not raised.
+
+A controller that does not answer MID 0064 at all (no 0065, no refusal: one that ignores a MID
+it does not know) refuses it by its silence: raised as a refusal, the link kept (its
+keep-alive says whether it is alive).  Taken for a dead link, every reconnect's catch-up asked
+again and reset it again, every 2.5 s, and no tool went on (a trial against an emulator).
 """
 
 from __future__ import annotations
 
 import dataclasses
 
-from drivers.errors import ProtocolError, RefusedError
+from drivers.errors import DeviceTimeoutError, ProtocolError, RefusedError
 from drivers.wrench.base import Received, UnreadableResult
 from drivers.wrench.openprotocol import message as op
 from drivers.wrench.openprotocol.channel import Channel
@@ -61,6 +66,9 @@ class OldResults:
                 reply = self._channel.transact(
                     Message(op.MID_OLD_RESULT_REQUEST, revision=rev, data=data),
                     {op.MID_OLD_RESULT, op.MID_ERROR}, timeout, epoch)
+            except DeviceTimeoutError as e:
+                raise RefusedError(f"{e}: taken as refused (the link kept: its keep-alive "
+                                   "tells whether it is alive)") from None
             except RefusedError as e:
                 if e.code in op.REVISION_REFUSALS and rev > 1:
                     continue

@@ -190,6 +190,7 @@ class SimController(OpenProtocolServer):
             seconds=self.clock_offset_s)).replace(microsecond=0))
         self._refuse_pset: dict[int, int] = dict(refusals or {})
         self._refuse_mid: dict[int, int] = dict(refused_mids or {})
+        self._ignore_mid: set[int] = set()      # answered with nothing (:meth:`ignore_mid`)
         self._refuse_rev: dict[int, set[int]] = {
             mid: set(revs) for mid, revs in (refused_revisions or {}).items()}
         self.pset: int | None = None
@@ -281,6 +282,11 @@ class SimController(OpenProtocolServer):
         """Refuse every command ``mid`` with ``code`` (MID 0004)."""
         self.call(lambda: self._refuse_mid.__setitem__(mid, code))
 
+    def ignore_mid(self, mid: int) -> None:
+        """Answer nothing to ``mid`` (no reply, no MID 0004), as a controller that ignores a
+        MID it does not know (:meth:`clear_refusals` ends it)."""
+        self.call(lambda: self._ignore_mid.add(mid))
+
     def refuse_revisions(self, mid: int, revisions: Iterable[int]) -> None:
         """Refuse ``mid`` (1, 60, 64) at these ``revisions`` (MID 0004 with
         ``revision_refusal_code``), as a controller that does not know them."""
@@ -291,6 +297,7 @@ class SimController(OpenProtocolServer):
         def do() -> None:
             self._refuse_pset.clear()
             self._refuse_mid.clear()
+            self._ignore_mid.clear()
             self._refuse_rev.clear()
         self.call(do)
 
@@ -461,6 +468,8 @@ class SimController(OpenProtocolServer):
                 s.start_link_level(self.link_ack and msg.revision >= 6, self.link_ack)
         elif not s.started:
             self.errors.append(f"MID {mid:04d} before communication start ignored")
+        elif mid in self._ignore_mid:
+            pass
         elif mid in self._refuse_mid:
             self._refuse(s, mid, self._refuse_mid[mid])
         elif self._revision_refused(s, msg):

@@ -170,6 +170,21 @@ def test_fetch_result_checks_its_arguments_and_the_link(sim, tmp_path):
             w.fetch_result(5)
         assert e.value.code == 99 and w.status().connected
         sim.clear_refusals()
+        # a controller that ignores MID 0064 refuses it by its silence: the link kept (a
+        # trial: taken for a dead link, every reconnect's catch-up asked and reset it again)
+        sim.ignore_mid(64)
+        reconnects = w.status().reconnects
+        with pytest.raises(RefusedError, match=r"fetch tightening 5: no answer to MID 0064 "
+                                               r"within .* taken as refused"):
+            w.fetch_result(5, timeout=0.3)
+        assert w.status().connected and w.status().reconnects == reconnects
+        # the same for the VIN (an independent simulator answers MID 0050 with MID 0052)
+        sim.ignore_mid(50)
+        with pytest.raises(RefusedError, match=r"send VIN V1: no answer to MID 0050 within "
+                                               r".* taken as refused"):
+            w.send_vin("V1", timeout=0.3)
+        assert w.status().connected and w.status().reconnects == reconnects
+        sim.clear_refusals()
         sim.power_off()
         assert wait_until(lambda: not w.status().connected)
         with pytest.raises(ConnectionLostError, match="fetch tightening 5: link down"):
