@@ -224,6 +224,8 @@ class UnattributedKind(enum.StrEnum):
 
     OUTSIDE = "outside"                  # pushed outside any tightening
     FETCHED_LIVE = "fetched live"        # fetched after a later one came, the link up
+    FETCHED_CHECKED = "fetched checked"  # fetched when the controller's newest was asked
+    #                                      for as an enable's window ended, the link up
     FETCHED = "fetched"                  # fetched after a reconnect
     # fetched after a later one came, the link up, and it is the result that could not be
     # read for ``bolt`` (the one id between the tightenings read before and after it)

@@ -212,6 +212,9 @@ def unproved_words(unproved: Unproved) -> str:
 _CAME: dict[UnattributedKind, str] = {
     UnattributedKind.OUTSIDE: "outside any tightening",
     UnattributedKind.FETCHED_LIVE: "fetched after a later one came, the link up",
+    # (a trial: "after a later one came" of one fetched by the check, and none came)
+    UnattributedKind.FETCHED_CHECKED: "fetched as an enable's late-result window ended, the "
+                                      "link up",
     UnattributedKind.FETCHED: "fetched after a reconnect",
     UnattributedKind.UNREAD_READ: "fetched after a later one came, the link up",
 }

@@ -558,6 +558,8 @@ UNATTRIBUTED_WORDS = [
     (Unattributed(UnattributedKind.OUTSIDE, 12, 3), "result 12 (pset 3) outside any tightening"),
     (Unattributed(UnattributedKind.FETCHED_LIVE, 13, 3),
      "result 13 (pset 3) fetched after a later one came, the link up"),
+    (Unattributed(UnattributedKind.FETCHED_CHECKED, 13, 3),
+     "result 13 (pset 3) fetched as an enable's late-result window ended, the link up"),
     (Unattributed(UnattributedKind.FETCHED, 41, 9, UNPROVED_WORDS[0][0]),
      "result 41 (pset 9) fetched after a reconnect (pset 9, not 1 sent for B1)"),
     (Unattributed(UnattributedKind.FETCHED, 42, 1),

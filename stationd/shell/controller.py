@@ -74,8 +74,10 @@ class ControllerFeed:
         self.received: list[Received] = []
         self._waiting: Future[Received | None] | None = None
         self.catching_up: asyncio.Task[None] | None = None
-        #: asking the controller for its newest result (:meth:`check_newest`)
+        #: asking the controller for its newest result (:meth:`check_newest`): the last one
+        #: asked, and every one running
         self.checking: asyncio.Task[None] | None = None
+        self._checks: set[asyncio.Task[None]] = set()
         #: one gap handled at a time (a push that skips ids, a check of the newest)
         self._gaps = asyncio.Lock()
         self._link = 0          # the connections seen (:meth:`came_back`)
@@ -421,11 +423,23 @@ class ControllerFeed:
         is its own)."""
         prev = self.checking
         self.checking = asyncio.get_running_loop().create_task(self._checked(serial, prev))
+        self._checks.add(self.checking)
+        self.checking.add_done_callback(self._checks.discard)
+
+    def tasks(self) -> list[asyncio.Task[None]]:
+        """Its tasks running now (the catch-up, every check): for a stop to end them all (a
+        reviewer: a check chained on an earlier one, cancelled, left that one feeding the
+        core after the stop)."""
+        return [t for t in (self.catching_up, *self._checks) if t is not None and not t.done()]
 
     async def _checked(self, serial: int | None, prev: asyncio.Task[None] | None) -> None:
-        for task in (prev, self.catching_up):
-            if task is not None and not task.done():
-                await asyncio.wait({task})
+        if prev is not None and not prev.done():
+            await asyncio.wait({prev})
+        catching = self.catching_up
+        if catching is not None and not catching.done():
+            await asyncio.wait({catching})
+        if serial is not None and self.core.status().checking != serial:
+            return      # the core gave up on it: asking now takes a later enable's result
         nothing, unknown = await self._check_newest()
         end = time.monotonic() + PUSH_FED_S
         while self.received and time.monotonic() < end:
@@ -557,7 +571,9 @@ class ControllerFeed:
         """One result fetched late, through the core as any result (``follows``: the id
         accounted for before it), then its curves."""
         log.info("tightening %d fetched %s", tid,
-                 "after a later one came (the link up)" if live else "after a reconnect")
+                 "after a reconnect" if not live else "after a later one came (the link up)"
+                 if self._revealed_by is not None or self.checking is None else
+                 "as an enable's late-result window ended (the link up)")
         await self._feed(await self.checked(result_input(
             time.time(), got, fetched=True, follows=follows, offset=offset, live=live,
             before=self._revealed_by if live else None)))

@@ -318,8 +318,7 @@ class Station:
             await stop.wait()
         finally:
             async with self._lock:   # never cut an event's actions (a record) in half
-                tasks += [t for t in (self.controller.catching_up, self.controller.checking)
-                          if t is not None]
+                tasks += self.controller.tasks()
                 for t in tasks:
                     t.cancel()
                 await asyncio.gather(*tasks, return_exceptions=True)

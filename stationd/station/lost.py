@@ -158,10 +158,13 @@ class LostRules(NokRules):
 
     def _still_open(self, u: _Cut) -> bool:
         """Whether the bolt of the unanswered enable ``u`` is still open (not selected now,
-        done, held, skipped or locked; of a vehicle that has left: not known here, open)."""
+        done, held, skipped or locked; of a vehicle that has left: not known here, open).
+        Selected again while its own enable's check runs, it is: no tool went on since (a
+        reviewer: a result the check could not place left it open, its tool went on)."""
         m, b = self.matcher, u.selection.bolt
+        selected = b == self.bolt and not (self._checking_owed() and u.selection is self._enabled)
         return not (u.selection.vin == self.vin and m is not None and (
-            b == self.bolt or b in m.done or b in m.held or b in m.skipped or b in m.locked))
+            selected or b in m.done or b in m.held or b in m.skipped or b in m.locked))
 
     def _lost_in_doubt(self, ev: ResultIn, lost: list[_Cut]) -> list[Action]:
         """The result may be that of each of the ``lost`` enables (:meth:`_lost_enables`).
@@ -208,15 +211,20 @@ class LostRules(NokRules):
         its window may be among them.  Never left open (it may be tightened: the operator
         would tighten it twice): each such bolt held for a person."""
         if not ev.live:
-            return []     # (a link cut's gap: the catch-up's end settles its enable)
+            # a link cut's gap: the catch-up's end settles its enable; but one told only by
+            # a push after a refused catch-up may hold results made since the reconnect (a
+            # reviewer: the bolt left since, its push lost, was not held)
+            return self._hold_unanswered(ev.t, [
+                u for u in self._unanswered
+                if u.enabled_at > self._link_back_at and self._still_open(u)],
+                lambda u: lost_gap_note(_span(ev), u.selection.pset, u.enabled_at))
         last = self._judged
         since = self._judged_at if last is not None and last[0] == ev.first - 1 \
             else float("-inf")
         lost = [u for u in self._unanswered
                 if u.enabled_at >= since - CLOCK_SLACK_S and self._still_open(u)]
-        span = str(ev.first) if ev.first == ev.last else f"{ev.first}-{ev.last}"
         return self._hold_unanswered(ev.t, lost, lambda u: lost_gap_note(
-            span, u.selection.pset, u.enabled_at))
+            _span(ev), u.selection.pset, u.enabled_at))
 
     def _cut_in_doubt(self, ev: ResultIn) -> list[Action]:
         """A result stored unattributed while a link cut's result is owed, of the pset sent
@@ -320,7 +328,7 @@ class LostRules(NokRules):
         unattributed and uncounted (by its time alone, within the slack, never proved)."""
         r, made = ev.result, ev.made_at
         checked = self._checking_owed()
-        if not (ev.fetched and ev.live and (ev.before is not None or checked)) \
+        if not (ev.fetched and ev.live) \
                 or not en.vin or self._cut is not None or self._enabled_at is None \
                 or self._enabled_at <= self._link_lost_at \
                 or not (self._result_owed(ev.t) or checked):
@@ -360,3 +368,8 @@ class LostRules(NokRules):
             # after the link came back, the station's start too, is not taken for offline)
             return lost - CLOCK_SLACK_S <= ev.made_at <= back - CLOCK_SLACK_S
         return ev.fetched and not ev.live
+
+
+def _span(ev: ResultsMissed) -> str:
+    """A gap's ids as a hold's note names them: "7" or "7-8"."""
+    return str(ev.first) if ev.first == ev.last else f"{ev.first}-{ev.last}"

@@ -175,6 +175,8 @@ class ResultRules(UnreadRules):
         if proved is not None:
             return self._attribute(ev, proved, cut=True)
         why = Unattributed(UnattributedKind.OUTSIDE if not ev.fetched else
+                           UnattributedKind.FETCHED_CHECKED if ev.live and ev.before is None
+                           and self._checking is not None else
                            UnattributedKind.FETCHED_LIVE if ev.live else
                            UnattributedKind.FETCHED, tid, int(r.pset), not_proved)
         lost = self._lost_enables(ev)

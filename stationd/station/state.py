@@ -167,6 +167,10 @@ class CoreStatus:
     #: the tool enables so far (a check of the controller's newest result is void where
     #: one came meanwhile: its own rundown would be fetched before its push)
     enables: int = 0
+    #: the enable whose check of the controller's newest runs (None: none): a check the
+    #: core gave up on asks nothing (a reviewer: its fetch, late, took the next bolt's
+    #: result as no bolt's, and that bolt's own check then found nothing made)
+    checking: int | None = None
 
     @property
     def cameras_on(self) -> bool:
@@ -308,7 +312,8 @@ class CoreState:
                           frozenset(() if self.matcher is None else self.matcher.done),
                           frozenset(() if self.matcher is None else self.matcher.skipped),
                           MappingProxyType({d: str(k) for d, (k, _) in self.faults.items()}),
-                          self.operator_required, self._enable_serial)
+                          self.operator_required, self._enable_serial,
+                          None if self._checking is None else self._checking[1])
 
     @property
     def selection(self) -> Selection | None:
@@ -407,7 +412,8 @@ class CoreState:
         self._held_loosening.pop(bolt, None)
         note = self.matcher.held.pop(bolt, None)
         if note is not None and self.state is State.TRACKING and self.reason.bolt == bolt \
-                and self.reason.kind in (Because.UNREADABLE_HELD, Because.NOT_TAKEN_HELD):
+                and self.reason.kind in (Because.UNREADABLE_HELD, Because.NOT_TAKEN_HELD,
+                                         Because.UNKNOWN_HELD):
             # the state's reason said it was held: no longer (`stationd status` kept saying
             # so until the next change: a supervisor's trial)
             self._to(State.TRACKING, StateReason(Because.TRACKING))

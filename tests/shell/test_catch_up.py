@@ -11,6 +11,7 @@ The controller and the records are stand-ins answering as the driver and the rep
 from __future__ import annotations
 
 import asyncio
+import logging
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -259,8 +260,9 @@ def _feed_of(controller: Controller, last: int, since: float | None, fed: list[A
     keeper = SimpleNamespace(device=controller, reconnects=1, losing=False, up=True)
     records = SimpleNamespace(repo=SimpleNamespace(read_result_stored=lambda t: False),
                               last_tightening_id=lambda: last, copy_input=lambda ev, vin: ev)
-    core: Any = SimpleNamespace(missed_since=lambda: since, tool_on=False)
-    core.status = lambda: SimpleNamespace(vin="V", faults={}, tool_on=core.tool_on, enables=0)
+    core: Any = SimpleNamespace(missed_since=lambda: since, tool_on=False, checking=None)
+    core.status = lambda: SimpleNamespace(vin="V", faults={}, tool_on=core.tool_on, enables=0,
+                                          checking=core.checking)
 
     async def feed(ev: Any) -> None:
         fed.append(ev)
@@ -445,7 +447,7 @@ def test_a_stop_while_skipped_ids_are_fetched_ends_and_keeps_the_pushed_one():
     assert ended and kept == [43]
 
 
-def test_the_controller_s_newest_asked_for_fetches_what_was_never_heard():
+def test_the_controller_s_newest_asked_for_fetches_what_was_never_heard(caplog):
     """The core asks (an enable's window ended without its result): the controller's newest
     (42) is after the last one heard (40): 41 and 42 are fetched and fed, with the link up,
     as results whose push was lost; a newest already heard fetches nothing.  The core is
@@ -466,7 +468,12 @@ def test_the_controller_s_newest_asked_for_fetches_what_was_never_heard():
         asyncio.run(main())
         return fed
 
-    fed = asked({0: res(42), 41: res(41), 42: res(42)}, 40)
+    with caplog.at_level(logging.INFO, logger="stationd"):
+        fed = asked({0: res(42), 41: res(41), 42: res(42)}, 40)
+    # said as what it was: no later one came (a trial)
+    said = [r.getMessage() for r in caplog.records if "fetched" in r.getMessage()]
+    assert "tightening 41 fetched as an enable's late-result window ended (the link up)" \
+        in said and not [m for m in said if "after a later one came" in m], said
     assert [(e.result.tightening_id, e.fetched, e.live, e.before) for e in fed
             if isinstance(e, ResultIn)] == [(41, True, True, None), (42, True, True, None)]
     assert isinstance(fed[-1], NewestChecked)

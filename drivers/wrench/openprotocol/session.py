@@ -144,10 +144,13 @@ class Session:
         try:
             offset = self._measure_clock(epoch)
         except (RefusedError, DeviceTimeoutError, ProtocolError) as e:
-            self._log.info("%s: the controller's clock not measured again (MID 0080: %s): "
-                           "its last measure stays", self.device, e)
             with self._channel.cond:
-                return self.clock_offset
+                kept = self.clock_offset
+            # (a trial: "its last measure stays" of a clock never measured)
+            self._log.info("%s: the controller's clock not measured again (MID 0080: %s): %s",
+                           self.device, e, "its last measure stays" if kept is not None else
+                           "still not known (results fetched late are placed by their ids)")
+            return kept
         with self._channel.cond:
             before, self.clock_offset = self.clock_offset, offset
         if before is None or abs(offset - before) >= 1.0:

@@ -3,6 +3,7 @@ driver and the simulated controller over TCP on 127.0.0.1."""
 
 from __future__ import annotations
 
+import logging
 import time
 from datetime import datetime
 
@@ -104,11 +105,16 @@ def test_the_clock_measured_again_on_a_live_session(tmp_path, caplog):
         assert abs(station - datetime.now().timestamp()) < 3
 
 
-def test_a_controller_that_refuses_the_clock_still_starts(sim, tmp_path):
+def test_a_controller_that_refuses_the_clock_still_starts(sim, tmp_path, caplog):
     sim.refuse_mid(80, 99)
     with connect(sim, "tcp", tmp_path) as w:
         assert w.clock_offset_s is None and w.status().connected
         ready(w)
+        # measured again, refused: not said to keep a measure it never had (a trial)
+        with caplog.at_level(logging.INFO):
+            assert w.check_clock() is None
+    said = [r.getMessage() for r in caplog.records if "not measured again" in r.getMessage()]
+    assert said and all("still not known" in s and "last measure" not in s for s in said), said
 
 
 def test_results_made_during_a_link_cut_are_kept_and_fetched(sim, tmp_path):

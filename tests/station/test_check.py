@@ -1,0 +1,167 @@
+"""The check of the controller's newest result as an enable's late-result window ends
+(:mod:`stationd.station.lost`): scenarios an independent review found, each a bolt that
+could be tightened twice or a hold that would not end."""
+
+from __future__ import annotations
+
+import pytest
+
+from stationd.station.actions import CheckNewest, EnableTool, Record, StoreCutUnknown
+from stationd.station.commands import ReleaseBolt
+from stationd.station.events import Because
+from stationd.station.inputs import NewestChecked, ResultIn, Tick
+from stationd.station.state import CHECK_WAIT_S
+from stationd.words import state_words
+from tests.station.test_commands import SUPERVISOR, _answer
+from tests.station.test_core import _on, _ready
+from tests.station.test_lost import _window_ends
+from tests.station.test_result_types import _enabled, res
+
+
+@pytest.mark.parametrize("back", [False, True])
+@pytest.mark.parametrize("made", ["clock unknown", "pulled 1 s after the enable"])
+def test_a_result_the_check_fetched_but_cannot_place_holds_the_bolt_selected_again(back, made):
+    """B1 enabled, tightened (41, its push lost), the operator leaves to B2; B1's window
+    ends and the check starts.  Meanwhile the wrench is back on B1 (selected, parameters
+    acknowledged, its tool waiting for the check).  The check fetches 41, which nothing
+    proves B1's (no earlier result judged, the controller's clock not known): stored
+    unattributed.  B1 may be tightened: it must be held (or at least its tool must not go
+    on again) -- as the commit does where the controller could not tell."""
+    d = _ready()
+    check = _window_ends(d, 1, 3.0)
+    made_at = None if made == "clock unknown" else d.core._enabled_at + 1.0
+    if back:
+        _on(d, 1, 4)                                   # back on B1 during the check
+        d.step(("ack", 0.01, True))
+        _on(d, 1, 2)
+    assert not d.core.tool_on, "no tool on during the check"
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=40,
+                           made_at=made_at, live=True))
+    assert not [a for a in acts if isinstance(a, Record)], "not proved B1's"
+    acts += d.feed(NewestChecked(d.t, serial=check.serial))   # nid > last: fetched, told
+    n = len(d.log)
+    _on(d, 1, 4)
+    d.step(("ack", 0.01, True))
+    _on(d, 1, 2)
+    enabled = [a for _, aa in d.log[n:] for a in aa if isinstance(a, EnableTool)]
+    held = [a.bolt for a in acts if isinstance(a, StoreCutUnknown)]
+    assert "B1" in d.core.matcher.held or not enabled, (
+        f"B1 neither held ({held}) nor kept off: its tool went on again "
+        f"({[a.bolt for a in enabled]}) though 41 may be its rundown")
+
+
+def test_the_state_s_reason_no_longer_says_held_after_the_release_of_a_checks_hold():
+    """B1 selected during the check, the check cannot tell: held, the selection dropped with
+    the reason UNKNOWN_HELD.  A supervisor releases B1: the state's reason must no longer say
+    it is held (as for UNREADABLE_HELD / NOT_TAKEN_HELD: `_unhold`)."""
+    d = _ready()
+    check = _window_ends(d, 1, 1.0)
+    _on(d, 1, 4)
+    d.step(("ack", 0.01, True))
+    _on(d, 1, 2)
+    d.feed(NewestChecked(d.t, unknown="refused", serial=check.serial))
+    assert d.core.reason.kind is Because.UNKNOWN_HELD and "B1" in d.core.matcher.held
+    acts = d.command(1, ReleaseBolt("VIN1", "B1", "checked on the controller"), SUPERVISOR)
+    assert _answer(acts).answer.accepted and "B1" not in d.core.matcher.held
+    assert state_words(d.core.reason) == "tracking the wrench", state_words(d.core.reason)
+
+
+@pytest.mark.parametrize("live", [True, False])
+def test_a_gap_the_shell_tells_after_a_refused_catch_up_holds_the_bolt_left_since(live):
+    """The core's side of tests/shell/test_check_newest.py: a controller whose catch-up
+    refused MID 0064.  B1 enabled and tightened (41, its push lost), left; the check asks
+    nothing (NewestChecked without a word).  B3 enabled; its push 42 reveals 41 as the shell
+    tells it (a refused catch-up's gap: live=False).  41 may be B1's: B1 must be held, not
+    left open to be tightened twice."""
+    from stationd.station.inputs import ResultsMissed
+    d = _ready()
+    check = _window_ends(d, 1, 3.0)
+    d.feed(NewestChecked(d.t, serial=check.serial))          # _no_history: nothing said
+    _on(d, 3, 4)
+    d.step(("ack", 0.01, True))
+    _on(d, 3, 2)
+    assert d.core.tool_on
+    acts = d.feed(ResultsMissed(d.t, 41, 41, "the controller refused to give them (MID 0064)",
+                                live=live))
+    acts += d.feed(ResultIn(d.t, res(42, 1, True, 1)))
+    assert "B1" in d.core.matcher.held, (
+        f"B1 left open: {[a for a in acts if isinstance(a, StoreCutUnknown)]}")
+
+
+def test_a_gap_the_check_finds_holds_the_bolt_selected_again():
+    """As the first test, the controller no longer giving 41 (a live gap told by the
+    check's fetch, ``_fetch``: then NewestChecked without a word): B1, selected again during
+    the check, is not held and its tool goes on -- tightened twice where 41 was B1's."""
+    from stationd.station.inputs import ResultsMissed
+    d = _ready()
+    check = _window_ends(d, 1, 3.0)
+    _on(d, 1, 4)
+    d.step(("ack", 0.01, True))
+    _on(d, 1, 2)
+    acts = d.feed(ResultsMissed(d.t, 41, 41, "the controller no longer has it", live=True))
+    acts += d.feed(NewestChecked(d.t, serial=check.serial))
+    n = len(d.log)
+    _on(d, 1, 4)
+    d.step(("ack", 0.01, True))
+    _on(d, 1, 2)
+    enabled = [a.bolt for _, aa in d.log[n:] for a in aa if isinstance(a, EnableTool)]
+    assert "B1" in d.core.matcher.held or not enabled, f"B1 not held, tool on: {enabled}"
+
+
+def test_a_result_the_check_places_on_the_bolt_selected_again_keeps_its_tool_off():
+    """Control: 41 proved B1's (pulled 3 s after the enable) is recorded to B1 during the
+    check while B1 is selected again: B1 done, its tool must not go on."""
+    d = _ready()
+    check = _window_ends(d, 1, 3.0)
+    made_at = d.core._enabled_at + 2.5
+    _on(d, 1, 4)
+    d.step(("ack", 0.01, True))
+    _on(d, 1, 2)
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=40,
+                           made_at=made_at, live=True))
+    assert [a.bolt for a in acts if isinstance(a, Record)] == ["B1"]
+    d.feed(NewestChecked(d.t, serial=check.serial))
+    n = len(d.log)
+    _on(d, 1, 4)
+    d.step(("ack", 0.01, True))
+    _on(d, 1, 2)
+    enabled = [a.bolt for _, aa in d.log[n:] for a in aa if isinstance(a, EnableTool)]
+    assert not enabled, enabled
+
+
+def test_a_check_the_core_gave_up_on_that_fetches_during_the_next_window_leaves_no_bolt_open():
+    """B1's check is overdue (the shell waits for a long catch-up: 4467d86 waits instead of
+    giving up): after CHECK_WAIT_S B1 is held and the tool may go on.  B3 is enabled,
+    tightened (41, its push lost) and left.  Within B3's window the stale check (B1's) runs
+    on: the controller's newest is 41, after the last heard (40): fetched, live, before=None
+    -- not B3's (no check of B3 runs, no push revealed it): stored unattributed, B3 not yet
+    an unanswered enable.  B3's window ends; its own check finds the newest (41) is the last
+    accounted for: nothing made.  B3 is then open, untightened by the core's account, and
+    its tool goes on again: tightened twice."""
+    d = _ready()
+    first = _window_ends(d, 1, 1.0)
+    d.t += CHECK_WAIT_S + 0.5
+    d.feed(Tick(d.t))                                   # overdue: B1 held
+    assert "B1" in d.core.matcher.held
+    _enabled(d, 3)
+    enabled_at = d.core._enabled_at
+    d.t += 3.0                                          # 41 made, its push lost
+    _on(d, 2, 3)                                        # the wrench leaves B3
+    assert not d.core.tool_on
+    d.t += 1.0
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=40,
+                           made_at=enabled_at + 3.0, live=True))   # the stale check's fetch
+    acts += d.feed(NewestChecked(d.t, nothing_made=False, serial=first.serial))
+    d.t += d.core.late_result_s
+    [second] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    # the shell: newest 41 == _accounted 41 (advanced by the stale check), nothing received
+    acts += d.feed(NewestChecked(d.t, nothing_made=True, serial=second.serial))
+    n = len(d.log)
+    _on(d, 3, 4)
+    d.step(("ack", 0.01, True))
+    _on(d, 3, 2)
+    enabled = [a.bolt for _, aa in d.log[n:] for a in aa if isinstance(a, EnableTool)]
+    recorded = [a.bolt for a in acts if isinstance(a, Record)]
+    assert "B3" in d.core.matcher.held or "B3" in recorded or not enabled, (
+        f"41 (made under B3 alone) stored unattributed, B3 neither recorded nor held, and "
+        f"its tool went on again: {enabled}")
