@@ -411,6 +411,10 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                             "kind": c.kind, "bolt": c.bolt, "comment": c.comment}
                            for c in commands]
         out["rundowns"] = [{k: r[k] for k in RUNDOWN_KEYS} for r in runs]
+        run_down = {r["bolt"] for r in runs}
+        for b in out["bolts"]:   # as the vehicle's page: "not tightened", or why held
+            if b["bolt"] not in run_down:
+                b["unrecorded"] = unrecorded_words(out["held"].get(b["bolt"]), loose)
         sys.stdout.write(strict_json(out) + "\n")
     else:
         print(report.summary())

@@ -967,7 +967,7 @@ def test_a_bolt_held_for_a_lost_push_is_not_said_never_tightened(run, db):
                                  ("SF-FR", CUT_UNKNOWN, cut_unknown_note("no answer"))):
             repo.record_controller_event(
                 result_type=0, what=what, vin="VIN1", bolt=bolt, controller_vin=None,
-                tightening_id=None, pset=1, ok=False, torque_nm=None, angle_deg=None,
+                tightening_id=None, pset=1, ok=None, torque_nm=None, angle_deg=None,
                 result_at=None, note=held)
         page = {b["bolt"]: b for b in Results(repo).vehicle("VIN1")["bolts"]}
     said = ("held: no rundown recorded to it, but tightening 41 may be its own (OK 49.6 Nm, "
@@ -980,6 +980,11 @@ def test_a_bolt_held_for_a_lost_push_is_not_said_never_tightened(run, db):
     assert f"MISSING  {said}  " in lines["SF-FL"] and f"HELD: {note}" in lines["SF-FL"]
     assert f"MISSING  {page['SF-FR']['unrecorded']}  " in lines["SF-FR"]
     assert "MISSING  -  " in lines["TB-C"] and "not tightened" not in out
+    # --json says it as the page does (an MES integrator's trial: it had no word of it)
+    _, out, _ = run("db", "report", "VIN1", "--db", db, "--json")
+    bolts = {b["bolt"]: b for b in json.loads(out)["bolts"]}
+    assert {b: bolts[b].get("unrecorded") for b in ("SF-FL", "SF-FR", "TB-C")} == {
+        b: page[b]["unrecorded"] for b in ("SF-FL", "SF-FR", "TB-C")}
 
 
 def test_a_record_says_held_only_for_its_own_hold():
