@@ -72,6 +72,12 @@ class LostRules(NokRules):
         if en is not None and self._checking_owed() and not self.tool_on:
             if ev.nothing_made:
                 self._answered_bolt(en.vin, en.bolt)
+                # nothing since the last result judged until this window's end: a later id
+                # is the next enable's by the order of ids (a supervisor's trial: held as
+                # "other enables came between", released, and tightened twice)
+                self._checked_clear = self._checking[1]
+                if self._judged is not None:
+                    self._judged = (self._judged[0], self._checking[1], False)
             elif ev.unknown:
                 acts = self._check_unknown(ev.t, en, ev.unknown)
         return acts + self._check_ended()
@@ -352,8 +358,8 @@ class LostRules(NokRules):
         after it; a reviewer: credited to the next bolt of the same pset enabled within the
         slack).  Its time not known: not proved.  Where the enable before was this bolt's
         own, either enable's rundown is this bolt's (a reviewer: a retry's quick NOK)."""
-        if self._same_bolt_before:
-            return True
+        if self._same_bolt_before or self._checked_clear == self._enable_serial - 1:
+            return True     # (the enable before checked: nothing made in its window)
         off = self._off_before_enable
         return made is not None and (off is None or made > off + CLOCK_SLACK_S)
 

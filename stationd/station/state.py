@@ -243,6 +243,9 @@ class CoreState:
     _last_enabled_bolt: tuple[str | None, str] | None = field(default=None, repr=False)
     _same_bolt_before: bool = field(default=False, repr=False)
     _judged: tuple[int, int, bool] | None = field(default=None, repr=False)
+    #: the enable whose window's check found nothing made since the last result judged (a
+    #: result after it is the next enable's by the order of ids)
+    _checked_clear: int | None = field(default=None, repr=False)
     _judged_at: float = field(default=float("-inf"), repr=False)   # when it came
     # the station's start or the controller's last fault: a result fetched afterwards was
     # made before it, so never under an enable that came later

@@ -165,3 +165,24 @@ def test_a_check_the_core_gave_up_on_that_fetches_during_the_next_window_leaves_
     assert "B3" in d.core.matcher.held or "B3" in recorded or not enabled, (
         f"41 (made under B3 alone) stored unattributed, B3 neither recorded nor held, and "
         f"its tool went on again: {enabled}")
+
+
+def test_a_result_after_a_check_that_found_nothing_is_the_next_enables():
+    """A supervisor's trial: B2's result 40 came; B1 enabled, left untightened; its window's
+    check found nothing made.  B3 enabled and tightened (41, its push lost), the controller's
+    clock not known: its own check fetches 41.  Nothing was made between 40 and B1's window's
+    end, and the tool went on for B3 alone since: 41 is B3's, recorded (it was held as
+    "other enables came between", released, and B3 tightened twice)."""
+    d = _ready()
+    _enabled(d, 2)
+    d.feed(ResultIn(d.t, res(40, 2, True, 1)))
+    d.t += 3.0
+    first = _window_ends(d, 1, 1.0)
+    d.feed(NewestChecked(d.t, nothing_made=True, serial=first.serial))
+    second = _window_ends(d, 3, 3.0)
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=40,
+                           made_at=None, live=True))
+    acts += d.feed(NewestChecked(d.t, serial=second.serial))
+    assert [a.bolt for a in acts if isinstance(a, Record)] == ["B3"]
+    assert not [a for a in acts if isinstance(a, StoreCutUnknown)]
+    assert "B3" in d.core.matcher.done and "B3" not in d.core.matcher.held
