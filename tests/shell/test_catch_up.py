@@ -72,8 +72,10 @@ def catch_up(controller: Controller, last: int | None = 40, comebacks: int = 1,
     records = SimpleNamespace(repo=SimpleNamespace(read_result_stored=lambda t: stored),
                               last_tightening_id=lambda: last,
                               copy_input=lambda ev, vin: ev, unreadable_input=lambda ev: ev)
+    # the status as the results' loop reads it too (between two waits: its clock check)
     core = SimpleNamespace(missed_since=lambda: time.time() - 60,
-                           status=lambda: SimpleNamespace(vin="V", faults={}))
+                           status=lambda: SimpleNamespace(vin="V", faults={}, tool_on=False,
+                                                          bolt=None))
 
     async def feed(ev: Any) -> None:
         fed.append(ev)
