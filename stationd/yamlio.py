@@ -23,7 +23,16 @@ from db.reach import unreachable
 from drivers.counting import noun
 from stationd.errors import ConfigError, printable
 
-_constructor = SafeConstructor()
+
+def _construct(node: yaml.Node) -> Any:
+    """The plain Python value of ``node`` (deep), by a constructor of its own.  PyYAML's
+    constructor keeps every node it built, and the value built from it, until the end of
+    its document (``construct_document``), which a constructor shared by every call never
+    reaches: the module's one kept every node and value ever read alive (a daemon grew by
+    each reload, a test process by a million objects that every garbage collection walked)."""
+    return SafeConstructor().construct_object(node, deep=True)
+
+
 #: numbers YAML 1.1 reads as text: an exponent without a dot or sign (1e9, 2E-3)
 _EXPONENT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+")
 #: a number written with a decimal comma (300,5)
@@ -251,7 +260,7 @@ class YamlNode:
         previous: yaml.Node | None = None
         previous_name = ""
         for key_node, value_node in self._node.value:
-            name = _constructor.construct_object(key_node, deep=True)
+            name = _construct(key_node)
             if not isinstance(name, str):
                 where = YamlNode(key_node, self.path, self.key)
                 if isinstance(name, int) and previous is not None \
@@ -299,7 +308,7 @@ class YamlNode:
             raise self.error("expected a mapping (key: value)")
         out: list[tuple[object, YamlNode]] = []
         for key_node, value_node in self._node.value:
-            key = _constructor.construct_object(key_node, deep=True)
+            key = _construct(key_node)
             if any(k == key for k, _ in out):
                 raise YamlNode(key_node, self.path, self._child_key(str(key))).error(
                     "duplicate key")
@@ -316,7 +325,7 @@ class YamlNode:
     # -- scalars ------------------------------------------------------------------------
     def value(self) -> Any:
         """The plain Python value of this node (deep)."""
-        return _constructor.construct_object(self._node, deep=True)
+        return _construct(self._node)
 
     def number(self, *, lo: float = -math.inf, hi: float = math.inf) -> float:
         """A finite number within [lo, hi].  ``1e9`` written plainly is one (YAML 1.1, which
