@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
-from typing import Any, ClassVar, NoReturn
+from typing import NoReturn
 
 #: bad input: one readable line on stderr (the entry point's exit codes: :mod:`stationd.cli`)
 EXIT_BAD_INPUT = 2
@@ -21,13 +21,6 @@ class Parser(argparse.ArgumentParser):
 
     #: the command line being read (set by :func:`_main`): a mistyped option is named
     argv: Sequence[str] = ()
-    #: every parser made (the command's and its subcommands'): an option unknown to the
-    #: one that reports it may be a subcommand's, mistyped
-    made: ClassVar[list[argparse.ArgumentParser]] = []
-
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        Parser.made.append(self)
 
     def error(self, message: str) -> NoReturn:
         said = self._missing_command(message) or self._no_such_command(message) or message
@@ -47,11 +40,28 @@ class Parser(argparse.ArgumentParser):
         an unrecognized option is reported by the top parser (``stationd``)."""
         words = [t for t in Parser.argv if not t.startswith("-")]
         best = self.prog
-        for p in Parser.made:
+        for p in self._tree():
             named = p.prog.split()[1:]
             if named and words[:len(named)] == named and len(p.prog) > len(best):
                 best = p.prog
         return best
+
+    def _tree(self) -> list[argparse.ArgumentParser]:
+        """This parser and its subcommands' parsers, theirs too: an option unknown to the
+        one that reports it may be a subcommand's, mistyped.  (Walked from here, not kept in
+        a list of every parser made: that list grew by the whole tree at every build, and
+        each error walked every parser a process, the tests', had ever built.)"""
+        tree: list[argparse.ArgumentParser] = []
+        todo: list[argparse.ArgumentParser] = [self]
+        while todo:
+            p = todo.pop()
+            if any(p is q for q in tree):    # an alias names its command's parser again
+                continue
+            tree.append(p)
+            for action in p._actions:
+                if isinstance(action, argparse._SubParsersAction):
+                    todo.extend(action.choices.values())
+        return tree
 
     def _no_such_command(self, message: str) -> str | None:
         """``stationd stauts``: the command it is likely a typo of, not only the choices."""
@@ -81,7 +91,7 @@ class Parser(argparse.ArgumentParser):
         import difflib
 
         command = self._command_prog()    # its own options, not every command's
-        mine = {o for p in (self, *Parser.made) if p.prog == command
+        mine = {o for p in self._tree() if p.prog == command
                 for o in p._option_string_actions if o.startswith("--")}
         known = sorted(mine)
         for token in Parser.argv:
