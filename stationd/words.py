@@ -360,8 +360,11 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.ELSEWHERE: lambda r: f"nearest {r.bolt}",
     Why.LOCKED: lambda r: _locked(r.bolt, r.count),
     Why.NOT_LOCKED: lambda r: f"{r.bolt} is not locked",
-    Why.NOT_HELD: lambda r: (f"{r.bolt} is not held: an outcome is entered only for a bolt "
-                             "whose result the controller could not send readably"),
+    Why.NOT_HELD: lambda r: (
+        f"{r.bolt} is not held but locked after {r.count} NOK in a row: its results were "
+        "read; it is released (stationd release), not entered" if r.count else
+        f"{r.bolt} is not held: an outcome is entered only for a held bolt (its result could "
+        "not be read, or is not known)"),
     Why.ENTERED_OUTSIDE: lambda r: (f"{r.bolt}: an OK with {r.note}: not this bolt's "
                                     "tightening OK as entered; check the value on the "
                                     "controller's screen (a NOK is entered with --nok)"),

@@ -98,7 +98,9 @@ class OrderRules(FaultRules):
                 else Reason(Why.NOT_LOCKED, bolt=cmd.bolt)
         if isinstance(cmd, EnterOutcome):   # what a person read on the controller's screen
             if cmd.bolt not in self.matcher.held:
-                return Reason(Why.NOT_HELD, bolt=cmd.bolt)
+                # (locked after NOKs: said so, it is released instead: a supervisor's trial)
+                return Reason(Why.NOT_HELD, bolt=cmd.bolt,
+                              count=self.matcher.locked.get(cmd.bolt))
             return self._entered_outside(cmd)
         if cmd.bolt in self.matcher.done:
             return Reason(Why.DONE, bolt=cmd.bolt)

@@ -150,12 +150,16 @@ def test_a_bolt_that_is_not_held_is_refused_with_why():
     assert not any(isinstance(a, RecordCommand) for a in acts)   # nothing recorded
     assert refused.reason == Reason(Why.NOT_HELD, bolt="B2")
     assert reason_words(refused.reason) == (
-        "B2 is not held: an outcome is entered only for a bolt whose result the controller "
-        "could not send readably")
-    # a bolt locked after NOKs is released, not entered: its results were read
+        "B2 is not held: an outcome is entered only for a held bolt (its result could not be "
+        "read, or is not known)")
+    # a bolt locked after NOKs is released, not entered: its results were read (said so: a
+    # supervisor's trial read only that it was not held)
     d.core.matcher.locked["B2"] = 3
-    assert _answer(d.command(2, ok("B2"), SUPERVISOR)).answer.reason == \
-        Reason(Why.NOT_HELD, bolt="B2")
+    refused = _answer(d.command(2, ok("B2"), SUPERVISOR)).answer
+    assert refused.reason == Reason(Why.NOT_HELD, bolt="B2", count=3)
+    assert reason_words(refused.reason) == (
+        "B2 is not held but locked after 3 NOK in a row: its results were read; it is "
+        "released (stationd release), not entered")
     assert _answer(d.command(3, ok("B9"), SUPERVISOR)).answer.reason == \
         Reason(Why.UNKNOWN_BOLT, bolt="B9", vin="VIN1")
     other = EnterOutcome("VIN2", "B1", True, 1.0, 1.0, "x")
