@@ -482,7 +482,7 @@ class ControllerFeed:
                     return not self.received, ""
                 self._accounted, self._revealed_by = nid, None
                 log.warning("results: the controller's newest tightening is %d, the last one "
-                            "heard %d: %s not pushed by the controller (the link up), fetched",
+                            "heard %d: %s not pushed by the controller (the link up): asked for",
                             nid, last, id_span(last + 1, nid))
                 await self._fetch(wrench, plan_gaps(last, nid), last, newest, live=True)
             except (RefusedError, DeviceError, ValueError) as exc:
@@ -526,8 +526,10 @@ class ControllerFeed:
         # the rundown is over: the tool off now, not after the fetches (a reviewer)
         await self._feed(ResultsSkipped(time.time(), tid))
         ids = id_span(last + 1, tid - 1)
+        # ("asked for": each then fetched, or not, said on its own line; a trial read
+        # "fetched" followed at once by "not fetched: refused")
         log.warning("results: tightening %d came after %d: %s not pushed by the controller "
-                    "(the link up), fetched", tid, last, ids)
+                    "(the link up): asked for", tid, last, ids)
         try:
             await self._fetch(wrench, todo, last, live=True)
         except RefusedError as exc:    # asking again will not help: stored as a gap

@@ -109,7 +109,7 @@ def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path
         pushed = ctl.pull_trigger()
         assert pushed is not None
         d.wait_log(f"tightening {pushed.tightening_id} came after {first.tightening_id}: "
-                   f"{lost.tightening_id} not pushed by the controller (the link up), fetched")
+                   f"{lost.tightening_id} not pushed by the controller (the link up): asked for")
         d.wait_log(f"tightening {lost.tightening_id} fetched after a later one came")
         d.wait_log(f"tightening {lost.tightening_id}, its push lost, fetched when a later one "
                    "came: made while the tool was on for B05 alone, recorded to B05")
