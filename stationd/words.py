@@ -405,7 +405,10 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
                                    f"(> {r.limit or 0:g} mm)"),
     Why.NO_RIGHT: lambda r: f"your role does not have the right to {r.right}",
     Why.NO_VEHICLE: lambda r: "no vehicle at the station",
-    Why.OTHER_VEHICLE: lambda r: f"vehicle {r.vin} is not the one at the station{_meant(r)}",
+    # (a supervisor's trial: a car that left with a bolt held, its release refused, nothing
+    # said of reopen)
+    Why.OTHER_VEHICLE: lambda r: f"vehicle {r.vin} is not the one at the station" + (
+        _meant(r) or f" (one that has left is worked again after stationd reopen {r.vin})"),
     Why.UNKNOWN_BOLT: lambda r: f"{r.bolt} is not a bolt of vehicle {r.vin}{_meant(r)}",
     Why.TOOL_ON_BOLT: lambda r: f"{r.bolt} is being tightened now",
     Why.ALREADY_OPEN: lambda r: f"vehicle {r.vin} is open at the station",

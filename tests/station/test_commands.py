@@ -113,6 +113,9 @@ def test_a_case_slip_is_refused_in_words_that_say_what_was_meant():
         "b04 is not a bolt of vehicle VIN1 (did you mean B04?)"
     assert reason_words(Reason(Why.OTHER_VEHICLE, vin="vin1", other="VIN1")) == \
         "vehicle vin1 is not the one at the station (did you mean VIN1?)"
+    assert reason_words(Reason(Why.OTHER_VEHICLE, vin="VIN0")) == (
+        "vehicle VIN0 is not the one at the station (one that has left is worked again after "
+        "stationd reopen VIN0)")
     assert reason_words(Reason(Why.UNKNOWN_BOLT, bolt="B9", vin="VIN1")) == \
         "B9 is not a bolt of vehicle VIN1"
 
