@@ -142,6 +142,12 @@ def check_unknown_note(why: str, pset: int | None, enabled_at: float) -> str:
             f"tool was enabled{'' if pset is None else f' for pset {pset}'} at {at} UTC")
 
 
+def id_span(first: int | None, last: int | None) -> str:
+    """Tightening ids from ``first`` to ``last``: ``70061`` or ``70061-70062`` (a gap's, as
+    a hold's note and the journal name them)."""
+    return str(first) if last is None or first == last else f"{first}-{last}"
+
+
 def lost_gap_note(span: str, pset: int | None, enabled_at: float) -> str:
     """A held bolt's note where tightenings whose pushes were lost (``span``: "7" or "7-8")
     could not be fetched (the controller no longer has them, or gives none), made after the
@@ -215,6 +221,7 @@ __all__ = [
     "HeldUnder",
     "check_unknown_note",
     "cut_unknown_note",
+    "id_span",
     "is_not_taken_note",
     "is_unknown_note",
     "loosening_note",

@@ -12,6 +12,7 @@ from db.kinds import (
     CHECK_NOTE_HEAD,
     GAP_NOTE_MARK,
     NOT_TAKEN_NOTE,
+    id_span,
     is_not_taken_note,
     is_unknown_note,
     lost_unknown_id,
@@ -420,11 +421,6 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.NOT_SIGNED_IN: lambda r: "nobody is signed in at the station",
     Why.SIGNED_IN: lambda r: f"{r.user} is signed in already",
 }
-
-
-def id_span(first: int | None, last: int | None) -> str:
-    """Tightening ids from ``first`` to ``last``: ``70061`` or ``70061-70062``."""
-    return str(first) if last is None or first == last else f"{first}-{last}"
 
 
 def _ids(n: Notice) -> str:

@@ -107,9 +107,7 @@ class ControllerFeed:
     async def _read_since(self, reads: int, timeout: float = 10 * RESULT_WAIT_S) -> None:
         """Until the results' loop has read the controller once more than ``reads`` (its
         count then), or ``timeout``."""
-        end = time.monotonic() + timeout
-        while self._reads <= reads and time.monotonic() < end:
-            await asyncio.sleep(RESULT_WAIT_S / 5)
+        await _until(lambda: self._reads > reads, timeout)
 
     def close(self) -> None:
         self._results_pool.shutdown(wait=True)
@@ -441,9 +439,7 @@ class ControllerFeed:
         if serial is not None and self.core.status().checking != serial:
             return      # the core gave up on it: asking now takes a later enable's result
         nothing, unknown = await self._check_newest()
-        end = time.monotonic() + PUSH_FED_S
-        while self.received and time.monotonic() < end:
-            await asyncio.sleep(RESULT_WAIT_S / 5)
+        await _until(lambda: not self.received, PUSH_FED_S)
         await self._feed(NewestChecked(time.time(), nothing_made=nothing, unknown=unknown,
                                        serial=serial))
 
@@ -685,3 +681,11 @@ def made_at(result: Received, offset: float | None) -> float | None:
 def _wait_briefly(wrench: Wrench) -> Received | None:
     """A result the driver holds already, without acknowledging it (the core does)."""
     return wrench.wait_result(0.05, acknowledge=False)
+
+
+async def _until(done: Callable[[], bool], timeout: float) -> None:
+    """Until ``done()``, or ``timeout`` seconds, looking again every fifth of a results'
+    wait."""
+    end = time.monotonic() + timeout
+    while not done() and time.monotonic() < end:
+        await asyncio.sleep(RESULT_WAIT_S / 5)

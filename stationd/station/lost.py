@@ -11,6 +11,7 @@ from db.kinds import (
     LOST_UNKNOWN,
     check_unknown_note,
     cut_unknown_note,
+    id_span,
     lost_gap_note,
     lost_unknown_note,
 )
@@ -86,11 +87,7 @@ class LostRules(NokRules):
         """The controller could not tell whether it made a rundown under ``en`` (``why``):
         its bolt, unanswered and not done since, is held (selected again meanwhile too: no
         tool went on during the check)."""
-        m = self.matcher
-        lost = [u for u in self._unanswered if u.selection is en and not (
-            en.vin == self.vin and m is not None and (
-                en.bolt in m.done or en.bolt in m.held or en.bolt in m.skipped
-                or en.bolt in m.locked))]
+        lost = [u for u in self._unanswered if u.selection is en and self._still_open(u)]
         return self._hold_unanswered(t, lost, lambda u: check_unknown_note(
             why, u.selection.pset, u.enabled_at))
 
@@ -102,7 +99,6 @@ class LostRules(NokRules):
             return []
         return self._on_newest_checked(NewestChecked(
             t, unknown=f"no answer in {CHECK_WAIT_S:.0f} s", serial=self._checking[1]))
-
 
     def _check_ended(self) -> list[Action]:
         """The check is over: the enable it was for is owed nothing more (an enable since, of
@@ -151,7 +147,7 @@ class LostRules(NokRules):
         if not ev.fetched:
             return []
         found: list[_Cut] = []
-        checked = self._enabled if self._checking_owed() else None
+        checked = self._checked_enable()
         for u in self._unanswered:
             en = u.selection
             if en.pset is None or int(r.pset) != en.pset or not self._still_open(u):
@@ -168,7 +164,7 @@ class LostRules(NokRules):
         Selected again while its own enable's check runs, it is: no tool went on since (a
         reviewer: a result the check could not place left it open, its tool went on)."""
         m, b = self.matcher, u.selection.bolt
-        selected = b == self.bolt and not (self._checking_owed() and u.selection is self._enabled)
+        selected = b == self.bolt and u.selection is not self._checked_enable()
         return not (u.selection.vin == self.vin and m is not None and (
             selected or b in m.done or b in m.held or b in m.skipped or b in m.locked))
 
@@ -223,14 +219,14 @@ class LostRules(NokRules):
             return self._hold_unanswered(ev.t, [
                 u for u in self._unanswered
                 if u.enabled_at > self._link_back_at and self._still_open(u)],
-                lambda u: lost_gap_note(_span(ev), u.selection.pset, u.enabled_at))
+                lambda u: lost_gap_note(id_span(ev.first, ev.last), u.selection.pset, u.enabled_at))
         last = self._judged
         since = self._judged_at if last is not None and last[0] == ev.first - 1 \
             else float("-inf")
         lost = [u for u in self._unanswered
                 if u.enabled_at >= since - CLOCK_SLACK_S and self._still_open(u)]
         return self._hold_unanswered(ev.t, lost, lambda u: lost_gap_note(
-            _span(ev), u.selection.pset, u.enabled_at))
+            id_span(ev.first, ev.last), u.selection.pset, u.enabled_at))
 
     def _cut_in_doubt(self, ev: ResultIn) -> list[Action]:
         """A result stored unattributed while a link cut's result is owed, of the pset sent
@@ -374,8 +370,3 @@ class LostRules(NokRules):
             # after the link came back, the station's start too, is not taken for offline)
             return lost - CLOCK_SLACK_S <= ev.made_at <= back - CLOCK_SLACK_S
         return ev.fetched and not ev.live
-
-
-def _span(ev: ResultsMissed) -> str:
-    """A gap's ids as a hold's note names them: "7" or "7-8"."""
-    return str(ev.first) if ev.first == ev.last else f"{ev.first}-{ev.last}"

@@ -346,6 +346,11 @@ class CoreState:
         since it was asked: :class:`CheckNewest`)."""
         return self._checking is not None and self._checking[1] == self._enable_serial
 
+    def _checked_enable(self) -> Selection | None:
+        """The enable owed now whose check of the controller's newest runs (no tool went on
+        since: its bolt, selected again, is still open), else None."""
+        return self._enabled if self._checking_owed() else None
+
     def _result_owed(self, t: float) -> bool:
         """The tool is on, or went off less than the late-result window before ``t``: its
         enable's result may still come."""

@@ -216,6 +216,18 @@ class Channel:
             raise RefusedError(f"refused by the controller: {op.refusal_text(code)}", code=code)
         return slot.reply
 
+    def ask(self, msg: Message, expect: set[int], timeout: float, epoch: int) -> Message:
+        """:meth:`transact` of a request a controller may ignore (MID 0064, the VIN): no
+        answer at all is its refusal, the link kept (its keep-alive says whether it is
+        alive).  Taken for a dead link, a trial's peers had the link reset at every
+        reconnect, for ever.  A late answer is taken for nothing else: each names the MID
+        it answers."""
+        try:
+            return self.transact(msg, expect, timeout, epoch)
+        except DeviceTimeoutError as e:
+            raise RefusedError(f"{e}: taken as refused (the link kept: its keep-alive tells "
+                               "whether it is alive)") from None
+
     def request(self, what: str, exchange: Callable[[int], T], note: str = RESET,
                 passes: tuple[type[DeviceError], ...] = (),
                 when_down: Callable[[], T] | None = None) -> T:

@@ -31,13 +31,7 @@ import threading
 from typing import Any
 
 from drivers.endpoint import Endpoint
-from drivers.errors import (
-    ConnectionLostError,
-    DeviceError,
-    DeviceTimeoutError,
-    ProtocolError,
-    RefusedError,
-)
+from drivers.errors import ConnectionLostError, DeviceError, ProtocolError
 from drivers.identity import DeviceIdentity
 from drivers.link import Link, TcpLink
 from drivers.url import DeviceUrl, parse_url
@@ -337,20 +331,13 @@ class OpenProtocolWrench(SupervisedWrench):
         self._channel.command(*commands.set_tool(enabled), timeout)
 
     def _send_vin(self, vin: str, timeout: float) -> None:
-        """MID 0050; no answer is taken as a refusal, the link kept (the VIN only labels
-        the controller's results: a trial's peer answered it with MID 0052 and never 0005,
-        the link reset for it at every reconnect and the vehicle never worked).  A late
-        0005 is taken for nothing else: an answer names the MID it answers."""
+        """MID 0050, whose silence is a refusal (``Channel.ask``: the VIN only labels the
+        controller's results; a trial's peer answered it with MID 0052 and never 0005, the
+        link reset for it at every reconnect and the vehicle never worked)."""
         msg, what = commands.send_vin(vin)
         channel = self._channel
-
-        def exchange(epoch: int) -> None:
-            try:
-                channel.transact(msg, {op.MID_ACCEPTED, op.MID_ERROR}, timeout, epoch)
-            except DeviceTimeoutError as e:
-                raise RefusedError(f"{e}: taken as refused (the link kept)") from None
-
-        channel.request(what, exchange)
+        channel.request(what, lambda epoch: channel.ask(
+            msg, {op.MID_ACCEPTED, op.MID_ERROR}, timeout, epoch))
 
 
 def check_tightening_id(tightening_id: int, lowest: int) -> None:

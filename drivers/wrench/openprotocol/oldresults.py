@@ -12,16 +12,16 @@ the controller's record of a tightening all the same: handed back as an ``Unread
 to be stored and looked at, not raised.
 
 A controller that does not answer MID 0064 at all (no 0065, no refusal: one that ignores a MID
-it does not know) refuses it by its silence: raised as a refusal, the link kept (its
-keep-alive says whether it is alive).  Taken for a dead link, every reconnect's catch-up asked
-again and reset it again, every 2.5 s, and no tool went on (a trial against an emulator).
+it does not know) refuses it by its silence (``Channel.ask``): taken for a dead link, every
+reconnect's catch-up asked again and reset it again, every 2.5 s, and no tool went on (a
+trial against an emulator).
 """
 
 from __future__ import annotations
 
 import dataclasses
 
-from drivers.errors import DeviceTimeoutError, ProtocolError, RefusedError
+from drivers.errors import ProtocolError, RefusedError
 from drivers.wrench.base import Received, UnreadableResult
 from drivers.wrench.openprotocol import message as op
 from drivers.wrench.openprotocol.channel import Channel
@@ -63,12 +63,9 @@ class OldResults:
             agreed = self.agreed
         for rev in (agreed,) if agreed else RESULT_REVISIONS:
             try:
-                reply = self._channel.transact(
+                reply = self._channel.ask(
                     Message(op.MID_OLD_RESULT_REQUEST, revision=rev, data=data),
                     {op.MID_OLD_RESULT, op.MID_ERROR}, timeout, epoch)
-            except DeviceTimeoutError as e:
-                raise RefusedError(f"{e}: taken as refused (the link kept: its keep-alive "
-                                   "tells whether it is alive)") from None
             except RefusedError as e:
                 if e.code in op.REVISION_REFUSALS and rev > 1:
                     continue
