@@ -692,19 +692,22 @@ def command_words(answer: Answer) -> str:
 
 
 def _reopened(bolt: str, hold: str | None) -> str:
-    """What a release of a lost push's hold, or a gap's, leaves (else nothing): the bolt open
-    to be tightened again, though the result fetched late (or not given by the controller)
-    may be its own (a supervisor's trial: "accepted: its hold (...) ended", and the joint,
-    torqued already, was tightened again)."""
+    """What a release of a hold leaves (a lock's alone: nothing): the bolt open to be
+    tightened again, though its result is not known: the result fetched late (or not given
+    by the controller, or unreadable, or made during a link cut) may be its own (a
+    supervisor's trial: "accepted: its hold (...) ended", and the joint, torqued already, was
+    tightened again; the operator's screen marks the bolt "check first" alike)."""
+    if hold is None:
+        return ""
     tid = lost_unknown_id(hold)
     if tid is not None:
         by = f", by tightening {tid} (stored unattributed)"
-    elif hold is not None and GAP_NOTE_MARK in hold:
+    elif GAP_NOTE_MARK in hold:
         by = " (a result the controller did not give)"
-    elif hold is not None and hold.startswith(CHECK_NOTE_HEAD):
+    elif hold.startswith(CHECK_NOTE_HEAD):
         by = " (a push lost, the controller's newest result not read)"
     else:
-        return ""
+        by = ""
     return (f": {bolt} is open to be tightened again, but it may be tightened already{by}: "
             "check the controller before tightening it again")
 

@@ -658,7 +658,8 @@ def test_a_lost_push_s_hold_names_the_result_that_may_be_its_own():
 def test_releasing_a_gap_s_hold_warns_the_bolt_may_be_tightened_already():
     """A gap's hold (its result may be among tightenings the controller did not give) is
     released with the warning a lost push's gets (a reviewer: 'its hold ended' alone, the
-    joint perhaps torqued already); a link cut's says nothing of it."""
+    joint perhaps torqued already); a link cut's and an unreadable result's warn too, with
+    no result to name (a supervisor's trial: released, the bolt was tightened twice)."""
     from db.kinds import cut_unknown_note, is_unknown_note, lost_gap_note
     from stationd.words import _reopened
 
@@ -671,7 +672,11 @@ def test_releasing_a_gap_s_hold_warns_the_bolt_may_be_tightened_already():
     assert _reopened("B1", gap) == (
         ": B1 is open to be tightened again, but it may be tightened already (a result the "
         "controller did not give): check the controller before tightening it again")
-    assert _reopened("B1", cut_unknown_note("no answer")) == ""
+    for note in (cut_unknown_note("no answer"), "tightening 7"):
+        assert _reopened("B1", note) == (
+            ": B1 is open to be tightened again, but it may be tightened already: check the "
+            "controller before tightening it again")
+    assert _reopened("B1", None) == ""
 
 
 def test_a_check_s_hold_says_why_and_its_release_warns_the_bolt_may_be_tightened():

@@ -384,10 +384,15 @@ class BoltToLoosen(StationEvent):
 
 @dataclass(frozen=True)
 class BoltReleased(StationEvent):
-    """A locked bolt released by ``user``: it may be tightened again."""
+    """A locked bolt released by ``user``: it may be tightened again.  ``unknown``: what was
+    released is a hold (its result not known: unreadable, a link cut's, a lost push's), so the
+    bolt may be tightened already, and the operator who goes to it is told to check the
+    controller first (a supervisor's trial: only the supervisor was warned, the operator's
+    screen said "to do" and the bolt was tightened twice)."""
 
     bolt: str
     user: str
+    unknown: bool = False
 
 
 class OperatorChange(enum.StrEnum):

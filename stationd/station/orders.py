@@ -183,7 +183,8 @@ class OrderRules(FaultRules):
             ended: dict[str, Any] = {}   # what the release ended, for its answer
             if note is not None:
                 ended["hold"] = note
-                acts.append(Publish(BoltReleased(cmd.bolt, c.issuer.user, t=ev.t)))
+                acts.append(Publish(BoltReleased(cmd.bolt, c.issuer.user, unknown=True,
+                                                 t=ev.t)))
             locked = self.matcher.locked.pop(cmd.bolt, None) \
                 if self.matcher is not None and self.vin == cmd.vin else None
             if locked is not None:

@@ -83,6 +83,11 @@ BOLT_LABELS: dict[BoltShown, str] = {
     LOOSENED: "loosened",       # loosened last: its tightening pset goes next
     Shown.LOCKED: "locked",     # too many NOKs in a row: refused until a release
 }
+# a bolt released from a hold (its result was not known), not run down since: drawn and said
+# apart from "to do" while open, and its selection says so in amber
+CHECK_FIRST = "check first"
+CHECK_FIRST_WORDS = ("may be tightened already (released from a hold, its result not known): "
+                     "check the controller before tightening")
 # states a bolt can no longer be in once its vehicle closed: nothing is next or selected any
 # more on a vehicle that left (the ones the daemon reports missing become "missing")
 LIVE_STATES = (Shown.NEXT, Shown.SELECTED, Shown.TIGHTENING, Shown.BLOCKED)
@@ -132,6 +137,11 @@ class BoltState:
     ends_nok: bool = False
     #: it has a rundown: skipped, it is counted by its last rundown, not as skipped
     ran: bool = False
+    #: released from a hold (its result was not known): it may be tightened already, and
+    #: the operator checks the controller before tightening it again; until its next result,
+    #: a skip or a new lock (a supervisor's trial: the screen said "to do", the bolt was
+    #: tightened twice)
+    check_first: bool = False
     #: what its last rundown's verdict went by: ``torque`` or ``angle`` out of its window,
     #: both, or None (within, or not known): the map's label shows the value that failed (an
     #: operator trial read "NOK 50.8", a torque within its window, for an angle of 0 deg)
@@ -144,11 +154,12 @@ class BoltState:
                 "label": "loosen" if self.loosen and self.state == Shown.TIGHTENING
                 # held (its result not known) is no lock of NOKs: said apart (a trial)
                 else "held" if self.held and self.state == Shown.LOCKED
+                else CHECK_FIRST if self.check_first and self.state in (PENDING, Shown.NEXT)
                 else BOLT_LABELS.get(self.state, self.state), "reason": self.reason,
                 "torque_nm": self.torque_nm, "angle_deg": self.angle_deg,
                 "locked": self.locked, "loosen": self.loosen,
                 "loosen_pset": self.loosen_pset, "nok_count": self.nok_count,
-                "held": self.held, "failed": self.failed}
+                "held": self.held, "check_first": self.check_first, "failed": self.failed}
 
 
 @dataclass
@@ -240,13 +251,17 @@ class View:
                 self._tool_off(e)
             case BoltSkipped():
                 if e.bolt in self.bolts:   # a skip ends a lock or a hold (the core's rule)
-                    self.bolts[e.bolt].locked = self.bolts[e.bolt].held = False
+                    b = self.bolts[e.bolt]
+                    b.locked = b.held = b.check_first = False
                 self._set(e.bolt, SKIPPED, e.reason)
             case BoltLocked() if e.bolt in self.bolts:
                 self._locked(e)
             case BoltReleased() if e.bolt in self.bolts:
-                self.bolts[e.bolt].locked = self.bolts[e.bolt].held = False
-                self._set(e.bolt, PENDING, f"released by {e.user}")
+                b = self.bolts[e.bolt]
+                b.locked = b.held = False
+                b.check_first = b.check_first or e.unknown
+                self._set(e.bolt, PENDING, f"released by {e.user}" + (
+                    f": {CHECK_FIRST_WORDS}" if b.check_first else ""))
             case BoltToLoosen() if e.bolt in self.bolts:
                 self._to_loosen(e)
             case ResultRecorded():
@@ -349,6 +364,7 @@ class View:
     def _locked(self, e: BoltLocked) -> None:
         b = self.bolts[e.bolt]
         b.locked, b.nok_count, b.held = True, e.count, e.held is not None
+        b.check_first = False   # held again: its own words say so
         if self.selected == e.bolt:
             self.selected = None
         self._set(e.bolt, Shown.LOCKED, reason_words(
@@ -368,8 +384,11 @@ class View:
         # the vehicle loaded opened again without leaving (a reload reopens the one on the
         # lift): its last results stay (an operator trial: the panel was empty after a
         # SIGHUP, B11's NOKs gone from it); another vehicle, or a rework, starts afresh
-        if not (self.loaded and self.vin == e.vin):
+        same = self.loaded and self.vin == e.vin
+        if not same:
             self.results = []
+        # a released hold's bolt not run down since stays "check first" through a reload
+        check = {b.bolt for b in self.bolts.values() if b.check_first} if same else set()
         self.vin, self.model, self.rework, self.loaded = e.vin, e.model, e.rework, True
         self.closed, self.selected, self.wrench, self.refused = None, None, None, ""
         self.reopened = None
@@ -378,7 +397,8 @@ class View:
                                         b.status if b.status in BOLT_LABELS else PENDING,
                                         loosen=b.status == TO_LOOSEN,
                                         ends_nok=b.status == NOK or b.last_nok,
-                                        ran=b.ran or b.status not in (PENDING, SKIPPED, MISSING))
+                                        ran=b.ran or b.status not in (PENDING, SKIPPED, MISSING),
+                                        check_first=b.bolt in check and b.status == PENDING)
                       for b in e.bolts}
 
     def _close(self, e: VehicleClosed) -> None:
@@ -450,7 +470,7 @@ class View:
         for b in self.bolts.values():
             if b.state not in shown or (b.state == Shown.BLOCKED and b.bolt not in allowed):
                 continue
-            b.state, b.reason = (Shown.NEXT if b is pointed else PENDING), ""
+            self._set(b.bolt, Shown.NEXT if b is pointed else PENDING)
 
     def _frames_seen(self, e: Localized) -> None:
         """Whether fresh frames came since the station started: until they do, a stale
@@ -467,6 +487,7 @@ class View:
             b = self.bolts[e.bolt]
             if e.entered_by is not None:   # the hold it resolves ends (a NOK may lock it)
                 b.locked = b.held = False
+            b.check_first = False   # a result of its own: what it is, is known
             if e.kind == LOOSENING:
                 b.loosen = b.loosen and not e.ok
                 self._set(e.bolt, LOOSENED if e.ok else TO_LOOSEN,
@@ -502,6 +523,8 @@ class View:
         if b is not None:
             if b.loosen and state == PENDING:   # still to be loosened first
                 state, reason = TO_LOOSEN, reason or "loosen first"
+            elif b.check_first and state in (PENDING, Shown.NEXT):
+                reason = reason or CHECK_FIRST_WORDS
             b.state, b.reason = state, reason
 
     def _unselect(self) -> None:
@@ -567,7 +590,8 @@ class View:
         if self.refused:
             return "act" if self.act and not self.starting_up() else "idle"
         if self.selected is not None:
-            return "go"
+            b = self.bolts.get(self.selected)
+            return "act" if b is not None and b.check_first else "go"
         if self.closed is not None:
             return ("nok" if self.closed["nok"] else "missing"
                     if self.closed["missing"] or self.closed["skipped"] else "done")
@@ -608,6 +632,8 @@ class View:
                 return f"{self.selected}: loosen first (loosen pset {self.selected_loosen})"
             b = self.bolts.get(self.selected)
             pset = f" (pset {b.pset})" if b is not None and b.pset is not None else ""
+            if b is not None and b.check_first:   # its tool goes on: the operator is told
+                return f"{self.selected}{pset}: {CHECK_FIRST_WORDS}"
             return f"{self.selected}{pset}: tighten"
         if self.closed is not None:
             return self._closed_line(NAMES_SHOWN)

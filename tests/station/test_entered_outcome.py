@@ -113,7 +113,9 @@ def test_a_release_says_what_it_ended():
     _held(d)
     words = answer_words(_answer(d.command(1, ReleaseBolt("VIN1", "B1", "checked"),
                                            SUPERVISOR)).answer)
-    assert words.endswith(": accepted: its hold (tightening 7) ended"), words
+    assert words.endswith(": accepted: its hold (tightening 7) ended: B1 is open to be "
+                          "tightened again, but it may be tightened already: check the "
+                          "controller before tightening it again"), words
     d.core.matcher.locked["B2"] = 3
     words = answer_words(_answer(d.command(2, ReleaseBolt("VIN1", "B2", "thread chased"),
                                            SUPERVISOR)).answer)

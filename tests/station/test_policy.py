@@ -62,7 +62,9 @@ def test_a_bolt_locks_after_max_nok_in_a_row_and_a_release_unlocks_it():
     d.core.feed(CommandIn(d.t, 2, ReleaseBolt("VIN1", "B2", "thread checked"), SUPERVISOR))
     acts = d.core.feed(CommandDone(d.t, 2))
     assert _answer(acts).answer.accepted
-    assert [(e.bolt, e.user) for e in _events(acts, BoltReleased)] == [("B2", "sam")]
+    # a lock of NOKs (their results known): no "may be tightened already"
+    assert [(e.bolt, e.user, e.unknown) for e in _events(acts, BoltReleased)] == \
+        [("B2", "sam", False)]
     acts = d.core.feed(CommandIn(d.t, 3, ReleaseBolt("VIN1", "B2"), SUPERVISOR))
     assert _answer(acts).answer.reason == Reason(Why.NOT_LOCKED, bolt="B2")
     _tighten(d, 2, 4, ok=True)                           # the count starts again

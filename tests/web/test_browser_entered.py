@@ -89,3 +89,58 @@ def test_a_supervisor_enters_the_outcome_of_a_held_bolt_on_the_screen(page, shot
                               "B05 (held then, no longer)"], other
         assert other[5].startswith("MID 0061 revision 7: parameter 38"), other
         shots("vehicle-entered")
+
+
+@pytest.mark.timeout(300)
+def test_a_released_hold_is_drawn_check_first_and_its_selection_says_so(page, shots, tmp_path):
+    """A supervisor releases a held bolt on the screen (its result not known): the operator's
+    map draws it "check first", not "to do", and the wrench back on it reads, in amber, that
+    it may be tightened already (a supervisor's trial: the operator tightened it twice)."""
+    http_port = free_port()
+    pose = tmp_path / "pose"
+
+    def edit(text: str) -> str:
+        return _station(http_port)(text).replace("    supervisor: [skip, reopen]\n",
+                                                 "    supervisor: [skip, reopen, release]\n")
+
+    with tracking(tmp_path, VIN, edit=edit) as (d, _, ctl):
+        page.get(f"http://127.0.0.1:{http_port}/")
+        page.wait(lambda p: p.text("#vin") == VIN, 60, "the vehicle on the screen")
+        tool_on(d, ctl, pose, "B05")
+        ctl.garble_next_result("layout")
+        assert ctl.pull_trigger() is not None
+        until(lambda: not ctl.tool_enabled, 30, "the tool off")
+        pose.write_text("")
+        page.wait(lambda p: _b05(p, "state") == "locked", 30, "B05 drawn held")
+        _login(page, "sam", PASSWORD)
+        page.wait(lambda p: _shown(p, "release"), 30, "the release form")
+        page.wait(lambda p: p.js("return [...document.querySelectorAll("
+                                 "'#release-bolt option')].map(o => o.value)") == ["", "B05"],
+                  30, "B05 offered for release")
+        before = page.text("#cmd-answer") or ""
+        page.js("document.getElementById('release-bolt').value = 'B05';"
+                "document.getElementById('release-comment').value = 'tighten again';"
+                "document.querySelector('#release button').click()")
+        got = _answer(page, before)
+        assert "release B05" in got and "may be tightened already" in got, got
+        page.wait(lambda p: _b05(p, "state") == "pending", 30, "B05 open again")
+        drawn = page.js("const g = document.querySelector('g.bolt[data-bolt=B05]');"
+                        "return [g.getAttribute('class'), g.querySelector('text.icon')"
+                        ".textContent, g.querySelector('title').textContent]")
+        assert drawn[:2] == ["bolt bolt-check", "\u26a0"], drawn
+        assert "may be tightened already" in drawn[2], drawn
+        assert _b05(page, "label") == "check first"
+        # the wrench back on it: the tool goes on (the supervisor's decision), the operator
+        # is told to check the controller first, in amber
+        tool_on(d, ctl, pose, "B05")
+        page.wait(lambda p: "may be tightened already" in (p.text("#headline") or ""), 30,
+                  "the headline's warning")
+        assert page.text("#headline").startswith("B05 (pset ")
+        assert "act" in page.js("return document.getElementById('headline').className")
+        shots("operator-check-first")
+        # its own rundown ends it: drawn OK
+        made = ctl.pull_trigger()
+        assert made is not None and made.ok
+        page.wait(lambda p: _b05(p, "state") == "ok", 30, "B05 drawn OK")
+        assert page.js("return document.querySelector('g.bolt[data-bolt=B05]')"
+                       ".getAttribute('class')") == "bolt bolt-ok"

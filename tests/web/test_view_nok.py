@@ -10,23 +10,27 @@ import json
 from db.kinds import BoltStatus
 from stationd.access import AccessConfig, User
 from stationd.bus import EventBus
-from stationd.reasons import Reason, Why
+from stationd.reasons import Reason, Skip, SkipKind, Why
 from stationd.station.commands import Right
 from stationd.station.events import (
+    Because,
     BoltLocked,
     BoltReleased,
     BoltSelected,
+    BoltSkipped,
     BoltToLoosen,
     Localized,
     ParamsSent,
     Refused,
     ResultRecorded,
+    StateReason,
     StationEvent,
+    ToolDisabled,
     ToolEnabled,
     VehicleClosed,
 )
 from stationd.web.server import WebServer
-from stationd.web.view import View, fold
+from stationd.web.view import CHECK_FIRST_WORDS, View, fold
 from tests.web.scenario import VIN, opened, result
 
 LOCKED = "B2 locked after 3 NOK in a row: a supervisor releases it"
@@ -200,3 +204,45 @@ def test_after_a_reload_and_through_skips_and_a_close_the_counts_stay_the_report
     v = fold([*opened(), BoltSkipped("B4", skip=skip)])
     v.apply(VehicleClosed(VIN, ("B1", "B2", "B3", "B4"), ()))
     assert v.bolts["B4"].state == "skipped" and v.counters()["skipped"] == 1
+
+
+def test_a_bolt_released_from_a_hold_reads_check_first_until_its_result():
+    """A hold released (its result was not known: it may be tightened already) is no plain
+    "to do": drawn "check first" with the words, and its selection says to check the
+    controller, in amber (a supervisor's trial: only the supervisor was warned; the operator
+    read "to do" and tightened the bolt twice).  A lock's release (its NOKs known) is not."""
+    held = "tightening 7"
+    v = fold([*opened(), *_on("B2", 400.0), BoltLocked("B2", 0, held=held),
+              BoltReleased("B2", "sam", unknown=True)])
+    b2 = v.bolts["B2"].to_json()
+    assert (b2["state"], b2["label"], b2["check_first"]) == ("pending", "check first", True)
+    assert b2["reason"] == f"released by sam: {CHECK_FIRST_WORDS}"
+    assert "check the controller before tightening" in CHECK_FIRST_WORDS
+    # the wrench seen elsewhere: B2 pointed out next keeps its words (they were cleared)
+    v.apply(_on("B1", 0.0)[0])
+    v.apply(Localized(point_mm=(390.0, 0.0, 0.0), tilt_deg=1.0, reason=None, candidate=None,
+                      distance_mm=None, age_ms=30.0, allowed=("B2", "B3")))
+    b2 = v.bolts["B2"].to_json()
+    assert (b2["state"], b2["label"], b2["reason"]) == ("next", "check first",
+                                                        CHECK_FIRST_WORDS)
+    # the wrench back on it: the tool goes on, the headline says to check first, amber
+    v.apply(_on("B2", 400.0)[1])
+    assert v.headline() == f"B2 (pset 1): {CHECK_FIRST_WORDS}" and v.tone() == "act"
+    # the wrench taken off without a rundown: still "check first", with its words
+    v.apply(ToolDisabled(bolt="B2", reason=StateReason(Because.TRACKING)))
+    b2 = v.bolts["B2"].to_json()
+    assert (b2["label"], b2["reason"]) == ("check first", CHECK_FIRST_WORDS)
+    # a reload of the vehicle on the lift keeps it; its own result ends it
+    v.apply(opened()[-1])
+    assert v.bolts["B2"].to_json()["label"] == "check first"
+    v.apply(result("B2", True, 8))
+    assert (v.bolts["B2"].check_first, v.bolts["B2"].to_json()["label"]) == (False, "OK")
+    # a skip ends it too
+    v = fold([*opened(), BoltLocked("B3", 0, held=held), BoltReleased("B3", "sam", unknown=True),
+              BoltSkipped("B3", skip=Skip(SkipKind.COMMAND, user="sam", comment=""))])
+    assert not v.bolts["B3"].check_first
+    # a lock of NOKs released: tightened again, no "check first"
+    v = _locked()
+    v.apply(BoltReleased("B2", "sam"))
+    v.apply(_on("B2", 400.0)[1])
+    assert not v.bolts["B2"].check_first and v.tone() == "go"

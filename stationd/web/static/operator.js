@@ -4,13 +4,17 @@
 const NS = "http://www.w3.org/2000/svg";
 const ICONS = {pending: "\u25CB", next: "\u25B6", selected: "\u2691", tightening: "\u21BB",
   ok: "\u2714", nok: "\u2716", skipped: "\u00BB", blocked: "\u2298", missing: "!",
-  locked: "\u2297", held: "?", loosen: "\u21BA", loosened: "\u21B6"};
+  locked: "\u2297", held: "?", check: "\u26A0", loosen: "\u21BA", loosened: "\u21B6"};
 const LABELS = {pending: "to do", next: "next", selected: "selected", tightening: "tighten",
   ok: "OK", nok: "NOK", skipped: "skipped", blocked: "blocked", missing: "missing",
-  locked: "locked", held: "held", loosen: "loosen first", loosened: "loosened"};
+  locked: "locked", held: "held", check: "check first", loosen: "loosen first",
+  loosened: "loosened"};
 // a held bolt (its result not known: unreadable, a link cut's, a lost push's) is refused as a
 // locked one is, and drawn apart: it is no lock of NOKs (a supervisor's trial)
-const drawn = (b) => (b.state === "locked" && b.held ? "held" : b.state);
+// A bolt released from a hold and open again may be tightened already: drawn apart from "to
+// do" (a supervisor's trial: the operator read "to do" and tightened it twice)
+const drawn = (b) => (b.state === "locked" && b.held ? "held"
+  : b.check_first && (b.state === "pending" || b.state === "next") ? "check" : b.state);
 const $ = (id) => document.getElementById(id);
 
 function el(tag, attrs, text) {
@@ -128,7 +132,7 @@ function drawWrench(svg, w, W, H) {
 // that finds no room is hidden (shown on hover); the bolt keeps its coloured symbol and
 // state icon, so colour is still never the only cue.
 const PRIORITY = {selected: 0, tightening: 0, next: 1, locked: 1, loosen: 1, nok: 1, blocked: 1,
-  missing: 2};
+  check: 1, missing: 2};
 // A label must read as its own bolt's: it is kept only where its own dot is clearly the
 // nearest, by the box's nearest edge (what the eye pairs first) and by its centre (where
 // the eye lands: "B21" 14 px from B21 and 20 px from B25, its centre between the two, was
@@ -173,8 +177,8 @@ function placeLabels(placed, r, dense, W, H) {
     if (b.state === "nok" && b.failed === "angle" && b.angle_deg !== null) tag += ` ${fmt(b.angle_deg, 0)}\u00b0`;
     else if ((b.state === "ok" || b.state === "nok") && b.torque_nm !== null) tag += ` ${fmt(b.torque_nm, 1)}`;
     // the one bolt pointed out "next" says so (the others are "to do")
-    const matters = ["selected", "tightening", "next", "nok", "blocked", "locked", "loosen"]
-      .includes(b.state);
+    const matters = ["selected", "tightening", "next", "nok", "blocked", "locked", "loosen",
+      "check"].includes(drawn(b));
     if (dense && !matters) tag = null;
     const lbl = el("g", {class: "lbl"});
     lbl.appendChild(el("text", {class: "bolt-id", y: 0}, b.bolt));
@@ -188,7 +192,7 @@ function placeLabels(placed, r, dense, W, H) {
     const at = new Map();
     const taken = labels.map(({x, y}) => [x - r, y - r, x + r, y + r]);   // the symbols
     const dots = labels.map(({x, y}) => [x, y]);
-    const order = [...labels].sort((p, q) => (PRIORITY[p.b.state] ?? 3) - (PRIORITY[q.b.state] ?? 3));
+    const order = [...labels].sort((p, q) => (PRIORITY[drawn(p.b)] ?? 3) - (PRIORITY[drawn(q.b)] ?? 3));
     for (const {lbl, x, y, text} of order) {
       if (!measured.has(text)) {
         const bb = lbl.getBBox();
