@@ -25,17 +25,15 @@ from db import quality
 from db.bolts import BoltTable, Parameters, dump_bolts
 from db.engine import DEFAULT_URL, make_engine, writer
 from db.errors import DatabaseError, DataError, NotFoundError, VehicleClosedError
+from db.holds import ENDS_A_HOLD, open_holds, released_holds
 from db.importer import ImportReport, current_version, import_table, parameters_of, read_table
 from db.kinds import (
-    CUT_UNKNOWN,
     HELD_WITHOUT_RESULT,
     LOOSENING,
     NOT_TAKEN,
     RUNDOWN_KINDS,
     TIGHTENING,
     HeldUnder,
-    not_taken_note,
-    unreadable_note,
 )
 from db.ledger import (
     CONTROLLER_EVENT,
@@ -70,9 +68,6 @@ EXPORT_HEADER = ("stationd bolt table, exported from the process-parameter datab
 VIN_MAX = 32
 #: the meta key of the vehicle loaded at the station now ("": none), for :meth:`left_unseen`
 AT_STATION = "at_station"
-#: the commands that end a bolt's lock (its NOKs in a row) or its hold: a release, and a skip
-#: (the station takes a skip of a locked or held bolt only from a user who may release it)
-ENDS_A_HOLD = frozenset({"release", "skip"})
 
 #: the controller stamps its results to the second, its clock's offset measured to the
 #: second: a result made within this much of an unreadable message's arrival may be its copy
@@ -657,44 +652,13 @@ class Repository:
         station decides).  An OK result without a type outside the window came under the
         tightening pset (never taken so under a loosen pset)."""
         with self._session(write=False) as s:
-            q = select(UnreadableRecord.bolt, UnreadableRecord.recorded_at,
-                       UnreadableRecord.tightening_id, UnreadableRecord.mid,
-                       UnreadableRecord.revision, UnreadableRecord.pset).where(
-                UnreadableRecord.vin == vin, UnreadableRecord.bolt.is_not(None))
-            n = select(ControllerEvent.bolt, ControllerEvent.recorded_at,
-                       ControllerEvent.tightening_id, ControllerEvent.torque_nm,
-                       ControllerEvent.pset, ControllerEvent.what, ControllerEvent.note).where(
-                ControllerEvent.vin == vin, ControllerEvent.bolt.is_not(None),
-                ControllerEvent.what.in_((NOT_TAKEN, *HELD_WITHOUT_RESULT)))
-            if since is not None:
-                q = q.where(UnreadableRecord.recorded_at >= since)
-                n = n.where(ControllerEvent.recorded_at >= since)
-            # (at, bolt, note, pset, whether the pset is an enable's to look up)
-            holds = [(at, str(b), unreadable_note(tid, mid, rev), pset, True)
-                     for b, at, tid, mid, rev, pset in s.execute(q.order_by(UnreadableRecord.id))]
-            # an untyped OK came under the tightening pset; a link cut's enable is looked up
-            holds += [(at, str(b), not_taken_note(torque, tid), pset, False)
-                      if what == NOT_TAKEN else (at, str(b), note or CUT_UNKNOWN, pset, True)
-                      for b, at, tid, torque, pset, what, note
-                      in s.execute(n.order_by(ControllerEvent.id))]
-            held = {b: (note, at, pset, unreadable)
-                    for at, b, note, pset, unreadable in sorted(holds, key=lambda h: h[0])}
-            if not held:
-                return {}
-            v = _vehicle(s, vin)
-            for code, at in s.execute(
-                    select(Bolt.code, func.max(TighteningRecord.recorded_at))
-                    .join(Bolt, TighteningRecord.bolt_id == Bolt.id)
-                    .where(TighteningRecord.vehicle_id == v.id).group_by(Bolt.code)):
-                if code in held and at is not None and at >= held[code][1]:
-                    del held[code]
-            for c in self.ledger.commands(vin):   # a release ends it, as does a skip (only
-                # a user who may release may skip a held bolt)
-                if c.kind in ENDS_A_HOLD and c.bolt in held and c.at >= held[c.bolt][1]:
-                    del held[c.bolt]
-            return {b: (note, _held_under(s, vin, b, at, pset) if unreadable
-                        else HeldUnder(False, pset))
-                    for b, (note, at, pset, unreadable) in held.items()}
+            return open_holds(s, vin, self.ledger.commands(vin), since)
+
+    def released_holds(self, vin: str, since: datetime | None = None) -> frozenset[str]:
+        """The bolts of ``vin`` whose last hold a person released, not run down since: open
+        again, but they may be tightened already (a restart keeps the operator's warning)."""
+        with self._session(write=False) as s:
+            return released_holds(s, vin, self.ledger.commands(vin), since)
 
     def spc(self, model: str | None = None, since: datetime | None = None,
             last: int = quality.LAST_N) -> dict[str, Any]:
@@ -872,21 +836,6 @@ def _copy_of(model: Any, at: Any, vin: Any, tightening_id: int, torque_nm: float
     return [*_same_values(model, tightening_id, torque_nm, angle_deg),
             or_(at == controller_at, at.is_(None) & within) if controller_at is not None
             else within]
-
-
-def _held_under(s: Session, vin: str, bolt: str, at: datetime, pset: int | None
-                ) -> HeldUnder:
-    """What an unreadable result stored at ``at`` for ``bolt`` of ``vin`` came under: the
-    latest tool enable of that bolt noted before it (its selection says whether it was the
-    loosen pset: stored with every enable since loosen psets exist, so one without the flag
-    was a tightening's); none: ``loosen`` unknown, the result's own ``pset``."""
-    enable = s.scalar(select(ToolEnable).where(
-        ToolEnable.vin == vin, ToolEnable.bolt == bolt, ToolEnable.enabled_at <= at)
-        .order_by(ToolEnable.enabled_at.desc(), ToolEnable.id.desc()).limit(1))
-    if enable is None:
-        return HeldUnder(None, pset)
-    return HeldUnder(bool((enable.selection or {}).get("loosen", False)),
-                     enable.pset if enable.pset is not None else pset)
 
 
 def _unreadable_copy(s: Session, mid: int, raw: str, header_len: int

@@ -29,6 +29,7 @@ from db.counting import counted
 from db.curves import link_curves, store_curve
 from db.entered import record_entered
 from db.errors import DataError, DbError, NotFoundError, VehicleClosedError
+from db.holds import ENDS_A_HOLD
 from db.kinds import (
     LOCK,
     LOCK_SOURCE,
@@ -39,7 +40,7 @@ from db.kinds import (
     OK,
     TIGHTENING,
 )
-from db.repository import ENDS_A_HOLD, Repository
+from db.repository import Repository
 from drivers.errors import DeviceError, DriverError
 from drivers.keeper import one_line
 from drivers.wrench.base import TighteningResult
@@ -448,7 +449,7 @@ class Records:
         return VehicleLoaded(time.time(), a.vin, model, specs, done, started.rework,
                              skipped={b: Skip(SkipKind.COMMAND, user=user, comment=comment)
                                       for b, (user, comment) in skipped.items()},
-                             noks=noks, locked=locked,
+                             noks=noks, locked=locked, released=repo.released_holds(a.vin),
                              held={b: note for b, (note, _) in holds.items()},
                              status=status,
                              held_under={b: under for b, (_, under) in holds.items()},

@@ -245,6 +245,9 @@ class BoltView:
     last_nok: bool = False
     #: it has a rundown (the report counts a skipped bolt as skipped only without one)
     ran: bool = False
+    #: released from a hold (its result not known), not run down since: it may be tightened
+    #: already, the operator checks the controller first
+    check_first: bool = False
 
 
 @dataclass(frozen=True)

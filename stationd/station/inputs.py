@@ -312,6 +312,9 @@ class VehicleLoaded(Input):
     #: the bolts the NOK policy locked (recorded by :class:`NoteLock`) and no person
     #: released or skipped since: locked again whatever ``max_nok`` says now
     locked: frozenset[str] = frozenset()
+    #: the bolts whose last hold a person released, not run down since: open again, but they
+    #: may be tightened already (the screens say "check first" after a restart too)
+    released: frozenset[str] = frozenset()
 
 @dataclass(frozen=True)
 class ToolOn(Input):

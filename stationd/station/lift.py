@@ -161,7 +161,8 @@ class LiftRules(FaultRules):
                      status=SKIPPED if k in skipped else TO_LOOSEN if k in self._loosen
                      else ev.status.get(k) or PENDING,
                      last_nok=ev.status.get(k) == NOK,
-                     ran=ev.status.get(k) not in (None, SKIPPED))
+                     ran=ev.status.get(k) not in (None, SKIPPED),
+                     check_first=k in ev.released and k not in skipped)
             for k, b in ev.bolts.items()), rework=ev.rework, t=ev.t)
         if self.state is State.WAITING_VEHICLE and self._lift is not None and self._lift.ready:
             self._to(State.TRACKING, StateReason(Because.TRACKING))

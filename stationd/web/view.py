@@ -384,11 +384,8 @@ class View:
         # the vehicle loaded opened again without leaving (a reload reopens the one on the
         # lift): its last results stay (an operator trial: the panel was empty after a
         # SIGHUP, B11's NOKs gone from it); another vehicle, or a rework, starts afresh
-        same = self.loaded and self.vin == e.vin
-        if not same:
+        if not (self.loaded and self.vin == e.vin):
             self.results = []
-        # a released hold's bolt not run down since stays "check first" through a reload
-        check = {b.bolt for b in self.bolts.values() if b.check_first} if same else set()
         self.vin, self.model, self.rework, self.loaded = e.vin, e.model, e.rework, True
         self.closed, self.selected, self.wrench, self.refused = None, None, None, ""
         self.reopened = None
@@ -398,7 +395,7 @@ class View:
                                         loosen=b.status == TO_LOOSEN,
                                         ends_nok=b.status == NOK or b.last_nok,
                                         ran=b.ran or b.status not in (PENDING, SKIPPED, MISSING),
-                                        check_first=b.bolt in check and b.status == PENDING)
+                                        check_first=b.check_first)
                       for b in e.bolts}
 
     def _close(self, e: VehicleClosed) -> None:

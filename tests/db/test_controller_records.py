@@ -6,7 +6,11 @@ from __future__ import annotations
 
 from datetime import UTC, datetime, timedelta
 
+from sqlalchemy import update
+from sqlalchemy.orm import Session
+
 from db.ledger import CONTROLLER_EVENT, UNREADABLE
+from db.models import TighteningRecord, UnreadableRecord
 from stationd.boltfile import import_bolts
 from tests.db.conftest import record
 
@@ -188,3 +192,42 @@ def test_a_bolt_is_held_until_a_rundown_or_a_release_after_its_unreadable_result
     repo.start_vehicle("VIN1", "SEDAN")
     assert repo.vehicle_report("VIN1", held=True).held == (("B2", "tightening 7"),)
     assert set(repo.holds("VIN1")) == {"B2"}
+
+
+def test_a_released_hold_is_read_back_until_its_bolt_is_run_down(repo, bolts_file):
+    """A hold a person released leaves the bolt open but perhaps tightened already: read
+    back (a restart keeps the operator's "check first") until a rundown of the bolt after
+    the release; a skip, or a hold stored after the release, is no released hold."""
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    _unreadable(repo, 2, "B1")
+    _unreadable(repo, 3, "B2", raw=RAW + "3")
+    _unreadable(repo, 4, "B3", raw=RAW + "4")
+    assert repo.released_holds("VIN1") == frozenset()       # held, not released
+
+    def command(kind: str, bolt: str, s: int) -> None:
+        repo.ledger.record_command(at=datetime.now(UTC) + timedelta(seconds=s), user="sam",
+                                   source="cli", kind=kind, vin="VIN1", bolt=bolt, comment="")
+
+    command("release", "B1", 1)
+    command("release", "B2", 1)
+    command("skip", "B3", 1)
+    assert repo.released_holds("VIN1") == {"B1", "B2"}
+    assert repo.held_bolts("VIN1") == {}
+    # B1 run down after its release (the record's time later than the command's)
+    record(repo, "VIN1", "B1", tightening_id=5)
+    _later(repo, TighteningRecord, 5)
+    assert repo.released_holds("VIN1") == {"B2"}
+    # B2 held again after its release: held, not released
+    _unreadable(repo, 6, "B2", raw=RAW + "6")
+    _later(repo, UnreadableRecord, 6)
+    assert repo.released_holds("VIN1") == frozenset()
+    assert set(repo.held_bolts("VIN1")) == {"B2"}
+
+
+def _later(repo, table, tid: int) -> None:
+    """The record of tightening ``tid`` in ``table`` stored 10 s from now (after the
+    commands a test placed a second or two ahead)."""
+    with Session(repo.engine) as s, s.begin():
+        s.execute(update(table).where(table.tightening_id == tid)
+                  .values(recorded_at=datetime.now(UTC) + timedelta(seconds=10)))

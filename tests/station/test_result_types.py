@@ -41,6 +41,7 @@ from stationd.station.events import (
     State,
     StateReason,
     ToolDisabled,
+    VehicleOpened,
 )
 from stationd.station.inputs import (
     CaughtUp,
@@ -339,6 +340,16 @@ def test_a_hold_comes_back_with_the_vehicle():
     acts = d.feed(VehicleLoaded(d.t, "VIN1", "M", BOLTS, held={"B2": "tightening 9"}))
     assert [(e.bolt, e.held) for e in published(acts, BoltLocked)] == [("B2", "tightening 9")]
     assert "B2" not in d.core.allowed()
+
+
+def test_a_released_hold_comes_back_with_the_vehicle_as_check_first():
+    """A bolt whose hold a person released, not run down since (the records say so): open,
+    and drawn "check first" after a restart as before it (it may be tightened already)."""
+    d = _ready()
+    acts = d.feed(VehicleLoaded(d.t, "VIN1", "M", BOLTS, released=frozenset({"B2"})))
+    [opened] = published(acts, VehicleOpened)
+    assert [b.bolt for b in opened.bolts if b.check_first] == ["B2"]
+    assert "B2" in d.core.allowed() and not published(acts, BoltLocked)
 
 
 # -- attribution after a link cut --------------------------------------------------------------
