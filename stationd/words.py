@@ -68,6 +68,12 @@ from stationd.station.gaps import GapPlan, NoFetch
 from stationd.station.results import type_code
 from stationd.station.trust import Asked, CheckAsked
 
+#: what a held bolt asks of a person, in that order: its outcome entered when the controller
+#: shows it; a release tightens the bolt again (a new user's trial read "release or enter"
+#: as two equal choices, released, and the bolt, good already, was tightened twice)
+CHECK_ON_CONTROLLER = ("check it on the controller, then enter its outcome, or release it to "
+                       "tighten it again")
+
 
 def _mm(v: float | None) -> str:
     return "?" if v is None else f"{v:.1f}"
@@ -83,9 +89,8 @@ def _unread(bolt: str | None, note: str | None) -> str:
     cut's, a lost push's: "could not be read" was wrong there, a supervisor's trial): the
     refusal and the notice alike."""
     if is_unknown_note(note):
-        return f"{bolt}: {note}: check it on the controller, then release or enter its outcome"
-    return (f"{bolt}: the controller's result could not be read ({note}): check it on the "
-            "controller, then release or enter its outcome")
+        return f"{bolt}: {note}: {CHECK_ON_CONTROLLER}"
+    return f"{bolt}: the controller's result could not be read ({note}): {CHECK_ON_CONTROLLER}"
 
 
 def _command(user: str | None, comment: str | None) -> str:
@@ -369,8 +374,7 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.ENTERED_OUTSIDE: lambda r: (f"{r.bolt}: an OK with {r.note}: not this bolt's "
                                     "tightening OK as entered; check the value on the "
                                     "controller's screen (a NOK is entered with --nok)"),
-    Why.HELD: lambda r: (f"{r.bolt}: {r.note}: not taken as a tightening; check it on the "
-                         "controller, then release or enter its outcome"
+    Why.HELD: lambda r: (f"{r.bolt}: {r.note}: not taken as a tightening; {CHECK_ON_CONTROLLER}"
                          if is_not_taken_note(r.note) else
                          _unread(r.bolt, r.note)),
     Why.LOOSEN_FIRST: lambda r: (f"{r.bolt}: loosen first (loosen pset {r.pset}), then "
@@ -483,8 +487,8 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
     Said.HELD: lambda n: _unread(n.bolt, n.note),
     Said.NOT_TAKEN: lambda n: (f"{n.bolt}: {NOT_TAKEN_NOTE}, {_mm(n.torque_nm)} Nm outside "
                                f"{_mm(n.torque_min)}-{_mm(n.torque_max)} Nm (tightening "
-                               f"{n.tightening_id}): not taken as a tightening; check it on "
-                               "the controller, then release or enter its outcome"),
+                               f"{n.tightening_id}): not taken as a tightening; "
+                               f"{CHECK_ON_CONTROLLER}"),
     Said.CUT_RECORDED: lambda n: (f"tightening {n.tightening_id} made during the link cut, "
                                   f"fetched after it: recorded to {n.bolt} (its pset, VIN, "
                                   "tightening id and time agree)"),
@@ -498,7 +502,7 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
     Said.CUT_NOTHING: lambda n: (f"no tightening made during the link cut (every result "
                                  f"since fetched): {n.bolt} open as before"),
     Said.CUT_UNKNOWN: lambda n: (
-        f"{n.bolt}: {n.note}: check it on the controller, then release or enter its outcome"
+        f"{n.bolt}: {n.note}: {CHECK_ON_CONTROLLER}"
         if n.vin is None else
         f"{n.bolt} of {n.vin} (gone from the station): {n.note}: check it on the controller; "
         "held when that vehicle is back (stationd reopen), to release or enter its outcome"),

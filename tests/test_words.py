@@ -98,12 +98,12 @@ WORDS = [
      "missing): stored whole; no bolt it could belong to"),
     (Notice(Said.HELD, bolt="B1", note="tightening 7"),
      "B1: the controller's result could not be read (tightening 7): check it on the "
-     "controller, then release or enter its outcome"),
+     "controller, then enter its outcome, or release it to tighten it again"),
     (Notice(Said.NOT_TAKEN, bolt="B1", torque_nm=0.04, torque_min=20.0, torque_max=25.0,
             tightening_id=7),
      "B1: an OK result without a result type, 0.0 Nm outside 20.0-25.0 Nm (tightening 7): "
-     "not taken as a tightening; check it on the controller, then release or enter its "
-     "outcome"),
+     "not taken as a tightening; check it on the controller, then enter its outcome, or "
+     "release it to tighten it again"),
     (Notice(Said.CUT_RECORDED, tightening_id=41, bolt="B1"),
      "tightening 41 made during the link cut, fetched after it: recorded to B1 (its pset, "
      "VIN, tightening id and time agree)"),
@@ -112,7 +112,7 @@ WORDS = [
     (Notice(Said.CUT_UNKNOWN, bolt="B1",
             note="its result during the link cut not known: the controller refused MID 0064"),
      "B1: its result during the link cut not known: the controller refused MID 0064: check it "
-     "on the controller, then release or enter its outcome"),
+     "on the controller, then enter its outcome, or release it to tighten it again"),
     (Notice(Said.LATE_RESULT, bolt="B1", tightening_id=12),
      "result 12 came after the tool went off for B1 (within the late-result window): "
      "recorded to B1"),
@@ -638,8 +638,9 @@ def test_a_hold_without_a_result_is_not_said_as_a_result_not_read():
     for note in (cut_unknown_note("the controller refused MID 0064", 1, 1000.0),
                  lost_unknown_note(26, 1, 1000.0)):
         said = reason_words(Reason(Why.HELD, bolt="B14", note=note))
-        assert said == (f"B14: {note}: check it on the controller, then release or enter "
-                        "its outcome") and "could not be read" not in said
+        assert said == (f"B14: {note}: check it on the controller, then enter its "
+                        "outcome, or release it to tighten it again")
+        assert "could not be read" not in said
     assert "could not be read (tightening 7)" in reason_words(
         Reason(Why.HELD, bolt="B1", note="tightening 7"))
 

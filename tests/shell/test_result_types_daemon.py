@@ -74,7 +74,8 @@ def test_an_unreadable_result_is_stored_whole_and_holds_its_bolt(tmp_path):
         assert good is not None
         until(lambda: good.tightening_id in ctl.acked_ids, 30, "B06 stored")
         pose.write_text("B05")
-        d.wait_log("check it on the controller, then release or enter its outcome", count=2)
+        d.wait_log("check it on the controller, then enter its outcome, or release it to "
+                   "tighten it again", count=2)
         assert "fault: wrench" not in d.log()
     db = tmp_path / "station.db"
     [(raw, error, bolt, vin)] = _rows(db, "SELECT raw, error, bolt, vin FROM unreadable_results")
@@ -270,7 +271,7 @@ def test_an_untyped_ok_outside_the_torque_window_holds_its_bolt(tmp_path):
         assert lead is not None
         d.wait_log("B05: an OK result without a result type, 0.0 Nm outside ")
         d.wait_log(f"(tightening {lead.tightening_id}): not taken as a tightening; check it on "
-                   "the controller, then release or enter its outcome")
+                   "the controller, then enter its outcome, or release it to tighten it again")
         until(lambda: lead.tightening_id in ctl.acked_ids, 30, "acknowledged once stored")
         until(lambda: not ctl.tool_enabled, 30, "the tool off")
         tool_on(d, ctl, pose, "B06")
@@ -278,8 +279,8 @@ def test_an_untyped_ok_outside_the_torque_window_holds_its_bolt(tmp_path):
         assert good is not None
         until(lambda: good.tightening_id in ctl.acked_ids, 30, "B06 stored")
         pose.write_text("B05")
-        d.wait_log("not taken as a tightening; check it on the controller, then release or "
-                   "enter its outcome", count=2)
+        d.wait_log("not taken as a tightening; check it on the controller, then enter its "
+                   "outcome, or release it to tighten it again", count=2)
         assert not ctl.tool_enabled and "fault: wrench" not in d.log()
     db = tmp_path / "station.db"
     assert _rows(db, "SELECT result_type, what, bolt, tightening_id, torque_nm FROM "

@@ -279,15 +279,16 @@ def test_a_loosening_held_says_it_is_a_loosening_s_result():
     [lock] = published(acts, BoltLocked)
     assert lock.held == "tightening 2, a loosening with loosen pset 90"
     assert "B1: the controller's result could not be read (tightening 2, a loosening with " \
-        "loosen pset 90): check it on the controller, then release or enter its outcome" \
-        in _notices(acts)
+        "loosen pset 90): check it on the controller, then enter its outcome, or release it " \
+        "to tighten it again" in _notices(acts)
     assert [state_words(e.reason) for e in published(acts, ToolDisabled)] == [
         "bolt B1: its loosening's result could not be read",
         "bolt B1: its loosening's result could not be read; held for a supervisor"]
     # the refusal on the bolt says the same
     assert reason_words(Reason(Why.HELD, bolt="B1", note=d.core.matcher.held["B1"])) == (
         "B1: the controller's result could not be read (tightening 2, a loosening with "
-        "loosen pset 90): check it on the controller, then release or enter its outcome")
+        "loosen pset 90): check it on the controller, then enter its outcome, or release it "
+        "to tighten it again")
 
 
 def test_an_ok_entered_for_a_held_loosening_loosens_the_bolt_never_closes_it():

@@ -195,7 +195,7 @@ def test_an_unreadable_result_is_stored_whole_and_holds_its_bolt_for_a_superviso
     [lock] = published(acts, BoltLocked)
     assert (lock.bolt, lock.held) == ("B1", "tightening 7")
     assert "B1: the controller's result could not be read (tightening 7): check it on the " \
-        "controller, then release or enter its outcome" in _notices(acts)
+        "controller, then enter its outcome, or release it to tighten it again" in _notices(acts)
     assert "B1" not in d.core.matcher.done and d.core.state is State.TRACKING
     # held: no new enable for it
     sends = len(d.sends)
@@ -506,7 +506,8 @@ def test_while_a_cut_result_is_owed_the_tool_stays_off_for_every_bolt(bolt):
                                          f"controller refused MID 0064{ENABLED_B1}"}
     assert [notice_words(n) for n in published(acts, Notice)] == [
         "B1: its result during the link cut not known: the controller refused MID 0064"
-        f"{ENABLED_B1}: check it on the controller, then release or enter its outcome"]
+        f"{ENABLED_B1}: check it on the controller, then enter its outcome, or release it to "
+        "tighten it again"]
     assert [(e.bolt, e.held) for e in published(acts, BoltLocked)] == [
         ("B1", "its result during the link cut not known: the controller refused MID 0064"
          f"{ENABLED_B1}")]
@@ -817,8 +818,8 @@ def test_a_result_whose_push_was_lost_holds_the_bolt_whose_enable_got_none():
     note = ("tightening 41 may be its own (its push lost, fetched later; other enables came "
             "between); the tool was enabled for pset 1 at 1970-01-01 00:16:40 UTC")
     assert stored.note == note and d.core.matcher.held["B1"] == note
-    assert f"B1: {note}: check it on the controller, then release or enter its outcome" \
-        in _notices(acts)
+    assert f"B1: {note}: check it on the controller, then enter its outcome, or release it " \
+        "to tighten it again" in _notices(acts)
     assert "B1" not in d.core.matcher.done and "B1" not in d.core.allowed()
     # a second late result of that pset holds nothing more
     acts = d.feed(ResultIn(d.t, res(43, 1, True, 1), fetched=True, follows=42,

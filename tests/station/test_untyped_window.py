@@ -78,7 +78,7 @@ def test_an_untyped_ok_outside_the_torque_window_holds_the_bolt_and_closes_nothi
     assert _notices(acts) == [
         f"B1: an OK result without a result type, {torque:.1f} Nm outside 20.0-25.0 Nm "
         "(tightening 7): not taken as a tightening; check it on the controller, then "
-        "release or enter its outcome"]
+        "enter its outcome, or release it to tighten it again"]
     [said] = published(acts, Notice)
     assert (said.said, said.bolt, said.torque_nm, said.torque_min, said.torque_max,
             said.tightening_id, said.level) == (Said.NOT_TAKEN, "B1", torque, 20.0, 25.0, 7,
@@ -95,7 +95,7 @@ def test_an_untyped_ok_outside_the_torque_window_holds_the_bolt_and_closes_nothi
     assert reason_words(refusal) == (
         f"B1: an OK result without a result type, {torque:.1f} Nm outside the bolt's torque "
         "window (tightening 7): not taken as a tightening; check it on the controller, then "
-        "release or enter its outcome")
+        "enter its outcome, or release it to tighten it again")
     # the same result sent again: acknowledged once more, nothing else
     assert [type(a).__name__ for a in d.feed(ResultIn(d.t, res(7, 1, torque)))] == [
         "Acknowledge"]

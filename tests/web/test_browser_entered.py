@@ -42,8 +42,9 @@ def test_a_supervisor_enters_the_outcome_of_a_held_bolt_on_the_screen(page, shot
                         ".textContent]")
         assert drawn == ["bolt bolt-held", "?"], drawn
         assert page.text("#locks-title") == "Held"
-        assert page.text("#release-by") == ("Release, or enter the outcome the controller "
-                                            "shows: a user with the release right (supervisor)")
+        assert page.text("#release-by") == ("Enter the outcome the controller shows, or "
+                                            "release to tighten again: a user with the "
+                                            "release right (supervisor)")
 
         _login(page, "olga", PASSWORD)
         page.wait(lambda p: (p.text("#who") or "").startswith("olga"), 30, "olga logged in")

@@ -435,7 +435,8 @@ def test_status_of_a_held_bolt_names_entering_its_outcome_before_a_release(live_
     srv.call(held())
     assert main(["status", "--url", srv.url]) == 0
     out = capsys.readouterr().out
-    assert "check it on the controller, then release or enter its outcome" in out
+    assert ("check it on the controller, then enter its outcome, or release it to tighten "
+            "it again") in out
     [line] = [x for x in out.splitlines() if x.startswith("outcome:")]
     assert line.startswith(f"outcome:  stationd enter-outcome {VIN} B2 --url {srv.url} "
                            "--ok|--nok --torque NM --angle DEG --comment TEXT --user NAME")
@@ -461,7 +462,7 @@ def test_status_says_a_held_bolt_as_held_with_why_and_a_lock_as_locked(live_serv
     assert [x for x in lines if x.startswith(("locked:", "held:"))] == [
         "locked:   B1 locked after 3 NOK in a row: a supervisor releases it",
         "held:     B2: the controller's result could not be read (tightening 7): check it "
-        "on the controller, then release or enter its outcome"]
+        "on the controller, then enter its outcome, or release it to tighten it again"]
     # the vehicle's line counts it (a supervisor's trial: "0/50 bolts OK, 1 bolt ending NOK"
     # with 3 bolts held)
     [vehicle] = [x for x in lines if x.startswith("vehicle:")]

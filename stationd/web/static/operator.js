@@ -368,7 +368,10 @@ function drawLocks(view) {
     li.textContent = text;
     return li;
   }));
-  const how = held ? "Release, or enter the outcome the controller shows" : "Release";
+  // the outcome first: a release tightens a held bolt again (a new user's trial released one
+  // that was good already)
+  const how = held ? "Enter the outcome the controller shows, or release to tighten again"
+    : "Release";
   setText("release-by", by.length ? `${how}: a user with the release right (${by.join(", ")})`
     : "Release: no user of this station has the release right (access.users and access.roles)");
 }
