@@ -518,6 +518,12 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
     Said.LOOSENED: lambda n: f"{n.bolt} loosened: its tightening pset goes next",
     Said.LOOSENING_NOK: lambda n: f"{n.bolt}: loosening NOK ({n.count} NOK in a row)",
     Said.LOCKED: lambda n: _locked(n.bolt, n.count),
+    Said.NOK_AFTER_LOCK: lambda n: (
+        f"{n.bolt}: "
+        + (f"tightening {n.tightening_id}, " if n.tightening_id is not None else "")
+        + f"a NOK made after {n.bolt} had reached "
+        f"{n.locked_at} NOK in a row (the push of one of them lost: the station did not know "
+        f"yet), recorded: {n.count} NOK in a row; {n.bolt} stays locked for a supervisor"),
     Said.ENTERED_OK: lambda n: f"{_entered(n)}: {n.bolt} done",
     Said.ENTERED_NOK: lambda n: f"{_entered(n)}: a NOK of {n.bolt}, the NOK policy applies",
     Said.ENTERED_LOOSENING_OK: lambda n: (f"{_entered(n)}: a loosening, not a tightening: "

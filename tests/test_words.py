@@ -142,6 +142,10 @@ WORDS = [
     (Notice(Said.LOOSENING_NOK, bolt="B1", count=2), "B1: loosening NOK (2 NOK in a row)"),
     (Notice(Said.LOCKED, bolt="B12", count=3),
      "B12 locked after 3 NOK in a row: a supervisor releases it"),
+    (Notice(Said.NOK_AFTER_LOCK, bolt="B12", tightening_id=42, count=4, locked_at=3),
+     "B12: tightening 42, a NOK made after B12 had reached 3 NOK in a row (the push of one "
+     "of them lost: the station did not know yet), recorded: 4 NOK in a row; B12 stays "
+     "locked for a supervisor"),
     (Notice(Said.ENTERED_OK, bolt="B1", torque_nm=49.6, angle_deg=31.0, user="sam"),
      "B1: OK 49.6 Nm, 31.0 deg entered by sam from the controller's screen: B1 done"),
     (Notice(Said.ENTERED_OK, bolt="B1", torque_nm=49.6, angle_deg=31.0, user="sam",
@@ -187,7 +191,8 @@ def test_a_notice_s_level_is_its_kind_s() -> None:
     assert warnings == {
         Said.PAIR_DISTRUSTED, Said.IDS_AGAIN, Said.UNATTRIBUTED, Said.UNKNOWN_TYPE, Said.GAP,
         Said.UNREADABLE, Said.HELD, Said.CUT_UNKNOWN, Said.NOT_TAKEN, Said.LOOSEN_PSET_TIGHTENED,
-        Said.LOOSENING_NOK, Said.LOCKED, Said.ENTERED_NOK, Said.ENTERED_LOOSENING_NOK}
+        Said.LOOSENING_NOK, Said.LOCKED, Said.NOK_AFTER_LOCK, Said.ENTERED_NOK,
+        Said.ENTERED_LOOSENING_NOK}
     # a controller event is a warning only while a bolt is still open
     assert Notice(Said.CONTROLLER_EVENT, bolt="B1").level == "warning"
 

@@ -576,6 +576,9 @@ class Said(enum.Enum):
     LOOSENED = "loosened"                # a loosening OK: the tightening pset next (bolt)
     LOOSENING_NOK = "loosening nok"      # (bolt, count: NOKs in a row)
     LOCKED = "locked"                    # too many NOKs in a row (bolt, count)
+    NOK_AFTER_LOCK = "nok after lock"    # a NOK heard late, made after its bolt had reached
+    #                                      max_nok (bolt, tightening_id, count: NOKs in a
+    #                                      row now, locked_at: the count it locked at)
     ENTERED_OK = "entered ok"            # an outcome entered for a held bolt (bolt,
     ENTERED_NOK = "entered nok"          # torque_nm, angle_deg, user; note: the hold's)
     ENTERED_LOOSENING_OK = "entered loosening ok"    # the same for a held loosening (its
@@ -590,7 +593,8 @@ class Said(enum.Enum):
 _WARNINGS = frozenset({
     Said.PAIR_DISTRUSTED, Said.IDS_AGAIN, Said.UNATTRIBUTED, Said.UNKNOWN_TYPE, Said.GAP,
     Said.UNREADABLE, Said.HELD, Said.CUT_UNKNOWN, Said.NOT_TAKEN, Said.LOOSEN_PSET_TIGHTENED,
-    Said.LOOSENING_NOK, Said.LOCKED, Said.ENTERED_NOK, Said.ENTERED_LOOSENING_NOK})
+    Said.LOOSENING_NOK, Said.LOCKED, Said.NOK_AFTER_LOCK, Said.ENTERED_NOK,
+    Said.ENTERED_LOOSENING_NOK})
 
 
 @dataclass(frozen=True)
@@ -618,6 +622,7 @@ class Notice(StationEvent):
     #                                     record's own (a hold's note)
     result_type: int | None = None      # a controller event's type code
     unattributed: Unattributed | None = None  # why a result is stored unattributed
+    locked_at: int | None = None        # the NOKs in a row its bolt locked at
 
     @property
     def level(self) -> str:

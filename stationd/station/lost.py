@@ -120,6 +120,7 @@ class LostRules(NokRules):
             if m is not None and bolt in m.bolts and bolt in self._nok_last \
                     and bolt not in m.done and bolt not in m.locked and bolt not in m.held:
                 acts += self._after_nok(t, bolt, pset, counted=True)
+            self._lock_due.pop(bolt, None)
         return acts
 
     def _pending_overdue(self, t: float) -> list[Action]:

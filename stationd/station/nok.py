@@ -24,6 +24,7 @@ from stationd.station.inputs import (
     CommandDone,
 )
 from stationd.station.orders import OrderRules
+from stationd.station.policy import NokRule
 from stationd.station.state import NOK_SKIPPED
 
 
@@ -31,11 +32,13 @@ class NokRules(OrderRules):
     """A bolt's outcome: the NOK policy after a NOK or a loosening, and an outcome a person
     entered for a held bolt."""
 
-    def _after_loosening(self, t: float, bolt: str, ok: bool) -> list[Action]:
+    def _after_loosening(self, t: float, bolt: str, ok: bool,
+                         tid: int | None = None) -> list[Action]:
         """A loosening (measured, or its outcome entered by a person) is never the bolt done
         (it undoes a tightening).  OK: the bolt's tightening pset goes next; NOK: it counts as
         a NOK of the bolt (the joint did not come loose: ``max_nok`` of them lock it) and a
-        bolt to loosen stays so."""
+        bolt to loosen stays so; one heard late, made after the bolt had locked, is said
+        (:meth:`_nok_after_lock`), the lock standing.  ``tid``: its tightening id."""
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
         self.matcher.done.discard(bolt)
         self._nok_last.discard(bolt)
@@ -44,23 +47,38 @@ class NokRules(OrderRules):
             self._loosen.discard(bolt)
             return [Publish(Notice(Said.LOOSENED, bolt=bolt, t=t))]
         n = self._noks[bolt] = self._noks.get(bolt, 0) + 1
+        if bolt in self.matcher.locked:     # made before the station knew of the lock
+            return [self._nok_after_lock(t, bolt, n, tid)]
         rule = self.nok.rule(bolt, self._specs[bolt].pset)
         if n >= rule.max_nok:
             return self._lock(t, bolt, n)
         return [Publish(Notice(Said.LOOSENING_NOK, bolt=bolt, count=n, t=t))]
 
+    def _nok_rule(self, bolt: str, pset: int | None) -> NokRule:
+        """``bolt``'s NOK rule (``pset``: the one sent, where its spec is not known)."""
+        return self.nok.rule(bolt, self._specs[bolt].pset if bolt in self._specs else pset)
+
     def _after_nok(self, t: float, bolt: str, pset: int | None,
-                   counted: bool = False) -> list[Action]:
+                   counted: bool = False, tid: int | None = None) -> list[Action]:
         """The NOK policy: the bolt locks after ``max_nok`` in a row; with ``loosen`` it gets
         its loosen pset next (also once released); with ``skip`` it is marked NOK and skipped
-        for this vehicle; with ``repeat`` it is open again."""
+        for this vehicle; with ``repeat`` it is open again.  However its NOKs came (live, or
+        heard late: a push lost, fetched later): it locks at the ``max_nok``-th, and a NOK
+        made after that, the tool still on as the station did not know yet (``tid``: its
+        tightening id), is counted and said, the lock standing as it was made (a supervisor's
+        trial: locked after 4 NOK in a row with max_nok 3, not a word of the 4th)."""
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
         n = self._noks[bolt] = self._noks.get(bolt, 0) + (0 if counted else 1)
-        rule = self.nok.rule(bolt, self._specs[bolt].pset if bolt in self._specs else pset)
+        due = self._lock_due.pop(bolt, None)
+        if bolt in self.matcher.locked:
+            return [self._nok_after_lock(t, bolt, n, tid)]
+        rule = self._nok_rule(bolt, pset)
         if rule.strategy == "loosen" and rule.loosen_pset is not None:
             self._loosen.add(bolt)
         if rule.count_in_batch:     # the sequence goes on without an OK of this bolt
             self.matcher.counted.add(bolt)
+        if due is not None and due < n:   # max_nok reached by a NOK heard late, then this
+            return [*self._lock(t, bolt, due), self._nok_after_lock(t, bolt, n, tid)]
         if n >= rule.max_nok:
             return self._lock(t, bolt, n)
         if bolt in self._loosen:
@@ -70,6 +88,14 @@ class NokRules(OrderRules):
             self.matcher.skipped[bolt] = why
             return [Publish(BoltSkipped(bolt, skip=why, t=t))]
         return []
+
+    def _nok_after_lock(self, t: float, bolt: str, n: int, tid: int | None) -> Action:
+        """A NOK of ``bolt`` (``n`` in a row now) made after it had reached its max_nok,
+        heard only now: recorded (its Record is the caller's), counted, and said; the lock
+        stands at the count it was made at."""
+        assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
+        return Publish(Notice(Said.NOK_AFTER_LOCK, bolt=bolt, tightening_id=tid, count=n,
+                              locked_at=self.matcher.locked.get(bolt), t=t))
 
     # -- an outcome entered by a person for a held bolt -----------------------------------------
     def _is_entered_outcome(self, ev: CommandDone) -> bool:

@@ -364,7 +364,8 @@ class ResultRules(UnreadRules):
             self._operator_seen = max(self._operator_seen, ev.t)
         if self.matcher is not None and self.vin == en.vin:
             if kind == LOOSENING:
-                acts += self._after_loosening(ev.t, en.bolt, bool(r.ok))
+                acts += self._after_loosening(ev.t, en.bolt, bool(r.ok),
+                                              tid=int(r.tightening_id))
             elif bool(r.ok):
                 if en.loosen:
                     acts.append(Publish(Notice(Said.LOOSEN_PSET_TIGHTENED, bolt=en.bolt,
@@ -372,6 +373,7 @@ class ResultRules(UnreadRules):
                 self.matcher.mark_done(en.bolt)
                 self._noks.pop(en.bolt, None)
                 self._nok_owed.pop(en.bolt, None)
+                self._lock_due.pop(en.bolt, None)   # (answered by an OK: a reviewer)
                 self._loosen.discard(en.bolt)
                 self._nok_last.discard(en.bolt)
                 self.matcher.counted.discard(en.bolt)
@@ -380,14 +382,20 @@ class ResultRules(UnreadRules):
                 # rundown, its last result, says the bolt is NOK, as its records do)
                 self.matcher.done.discard(en.bolt)
                 self._nok_last.add(en.bolt)
-                if lost and self._pending_push is not None:
+                if lost and self._pending_push is not None \
+                        and en.bolt not in self.matcher.locked:
                     # counted; the NOK policy after the later one, pushed next (a lock for a
-                    # NOK that a later OK answered: a reviewer; :meth:`_push_judged`)
-                    self._noks[en.bolt] = self._noks.get(en.bolt, 0) + 1
+                    # NOK that a later OK answered: a reviewer; :meth:`_push_judged`); where
+                    # this one reaches max_nok, the lock, if it comes, is at this count (a
+                    # supervisor's trial: locked after 4 NOK in a row with max_nok 3)
+                    n = self._noks[en.bolt] = self._noks.get(en.bolt, 0) + 1
                     self._nok_owed[en.bolt] = en.pset
+                    if n >= self._nok_rule(en.bolt, en.pset).max_nok:
+                        self._lock_due.setdefault(en.bolt, n)
                 else:
                     self._nok_owed.pop(en.bolt, None)
-                    acts += self._after_nok(ev.t, en.bolt, en.pset)
+                    acts += self._after_nok(ev.t, en.bolt, en.pset,
+                                            tid=int(r.tightening_id))
             self.matcher.reset()     # a new selection: a new streak, from new frames
         self._not_before = max(self._not_before, ev.t)
         said = StateReason(Because.RESULT, bolt=en.bolt, ok=bool(r.ok), loosen=kind == LOOSENING)

@@ -231,6 +231,10 @@ class CoreState:
     #: bolts whose NOK came fetched while a pushed result was pending: counted, the NOK
     #: policy waits for the pushed one (bolt -> its pset)
     _nok_owed: dict[str, int | None] = field(default_factory=dict, repr=False)
+    #: of those, the bolts whose NOKs so counted reached their max_nok -> the count then:
+    #: locked at that count when the pushed one is a NOK too (a NOK made after it, the tool
+    #: still on, the station not knowing, is said as such: :meth:`NokRules._after_nok`)
+    _lock_due: dict[str, int] = field(default_factory=dict, repr=False)
     #: the tool enables so far (each EnableTool), and the last result judged: its id, the
     #: enable count then, the tool left on (the order of results proves under which enable
     #: a result fetched late was made: :meth:`ResultRules._made_under`)
@@ -475,6 +479,7 @@ class CoreState:
         neither recorded nor held."""
         self.vin, self.model, self.matcher, self._specs = None, None, None, {}
         self._loosen, self._nok_last, self._nok_owed = set(), set(), {}
+        self._lock_due = {}
         self._loading = False
         self._vin_for, self._vin_pending, self._last_refusal = None, False, None
 

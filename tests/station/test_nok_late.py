@@ -1,0 +1,123 @@
+"""The NOK policy for NOKs heard late (:mod:`stationd.station.nok`,
+:mod:`~stationd.station.results`): a NOK whose push was lost, fetched when a later result
+came or by the check of the controller's newest, counts as a live one does.  A supervisor's
+trial (the controller keeping its results): a bolt locked after 4 NOKs in a row with
+``max_nok`` 3, without a word of the NOK beyond the lock.  The bolt locks at ``max_nok``
+however its NOKs arrived; a NOK made after that (the tool still on, the station not
+knowing) is recorded and said."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from stationd.station.actions import CheckNewest, NoteLock, Record
+from stationd.station.events import BoltLocked, Notice, Said
+from stationd.station.inputs import NewestChecked, ResultIn, Tick
+from stationd.station.policy import NokPolicy, NokRule
+from stationd.words import notice_words
+from tests.station.test_core import Driver, _on, _ready, published
+from tests.station.test_result_types import _enabled, _pulled_twice, res
+
+
+def _locks(acts: list[Any]) -> list[tuple[str, int]]:
+    """The locks published and those noted for the ledger, each (bolt, count)."""
+    return [(e.bolt, e.count) for e in published(acts, BoltLocked)] + \
+        [(a.bolt, a.count) for a in acts if isinstance(a, NoteLock)]
+
+
+def _beyond(acts: list[Any]) -> list[Notice]:
+    return [n for n in published(acts, Notice) if n.said is Said.NOK_AFTER_LOCK]
+
+
+def _live_nok(d: Driver, tid: int) -> list[Any]:
+    _enabled(d, 1)
+    return d.feed(ResultIn(d.t, res(tid, 1, False, 1)))
+
+
+def test_a_lost_nok_that_reaches_max_nok_locks_there_and_the_pushed_nok_after_it_is_said():
+    """The trial: max_nok 3, B1 NOK twice (live); the third NOK's push lost, the operator
+    pulls again at once (a fourth NOK, pushed, revealing the third).  B1 locks at 3, the
+    third NOK's; the fourth is recorded, counted and said as made beyond the lock (it was:
+    4 NOKs in a row, locked at 4, no word of max_nok)."""
+    d = _ready(nok=NokPolicy(NokRule(max_nok=3)))
+    acts = _live_nok(d, 38) + _live_nok(d, 39)
+    assert not _locks(acts)
+    d.t += 1.0
+    acts = _pulled_twice(d, False, False)             # 41 lost then 42 pushed, both NOK
+    assert [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)] \
+        == [("B1", 41), ("B1", 42)]
+    assert _locks(acts) == [("B1", 3), ("B1", 3)]     # published and noted, once, at 3
+    assert d.core.matcher.locked == {"B1": 3}
+    [said] = _beyond(acts)
+    assert (said.bolt, said.count, said.locked_at, said.tightening_id) == ("B1", 4, 3, 42)
+    assert said.level == "warning"
+    assert notice_words(said) == (
+        "B1: tightening 42, a NOK made after B1 had reached 3 NOK in a row (the push of one "
+        "of them lost: the station did not know yet), recorded: 4 NOK in a row; B1 stays "
+        "locked for a supervisor")
+
+
+def test_max_nok_1_a_lost_nok_then_a_pushed_nok_locks_at_1():
+    d = _ready(nok=NokPolicy(NokRule(max_nok=1)))
+    acts = _pulled_twice(d, False, False)
+    assert _locks(acts) == [("B1", 1), ("B1", 1)]
+    assert [n.count for n in _beyond(acts)] == [2]
+
+
+def test_two_nok_fetched_by_the_check_lock_at_the_first_and_say_the_second():
+    """B1 enabled, the operator pulls twice (both NOK, both pushes lost) and leaves; the
+    check as B1's window ends fetches both: B1 locks at max_nok (1), the first's, and the
+    second is said as beyond the lock, not a second lock "after 2 NOK"."""
+    d = _ready(nok=NokPolicy(NokRule(max_nok=1)))
+    d.answer_checks = False
+    _enabled(d, 1)
+    enabled_at = d.t
+    d.t += 3.0
+    _on(d, 2, 3)
+    d.t += d.core.late_result_s + 1.0
+    [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    acts = d.feed(ResultIn(d.t, res(41, 1, False, 1), fetched=True, follows=40,
+                           made_at=enabled_at + 2.5, live=True))
+    acts += d.feed(ResultIn(d.t, res(42, 1, False, 1), fetched=True, follows=40,
+                            made_at=enabled_at + 2.8, live=True))
+    acts += d.feed(NewestChecked(d.t, serial=check.serial))
+    assert [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)] \
+        == [("B1", 41), ("B1", 42)]
+    assert _locks(acts) == [("B1", 1), ("B1", 1)]
+    assert [(n.count, n.tightening_id) for n in _beyond(acts)] == [(2, 42)]
+    assert d.core.matcher.locked == {"B1": 1}
+
+
+def test_a_lost_nok_below_max_nok_then_a_pushed_nok_follows_the_policy_as_before():
+    """Neither reaches max_nok early: the pushed NOK locks where it is the max_nok-th, and
+    no NOK is said beyond a lock."""
+    d = _ready(nok=NokPolicy(NokRule(max_nok=2)))
+    acts = _pulled_twice(d, False, False)
+    assert _locks(acts) == [("B1", 2), ("B1", 2)] and not _beyond(acts)
+    d = _ready(nok=NokPolicy(NokRule(max_nok=3)))
+    acts = _pulled_twice(d, False, False)
+    assert not _locks(acts) and not _beyond(acts) and d.core._noks["B1"] == 2
+
+
+def test_two_loosening_nok_fetched_by_the_check_lock_once():
+    """Under ``loosen`` (max_nok 2): B1's NOK (live) sends its loosen pset next; the operator
+    pulls it twice, both loosenings NOK, both pushes lost; the check fetches both.  B1 locks
+    at 2 (the first loosening NOK's), and the second is said beyond the lock."""
+    d = _ready(nok=NokPolicy(NokRule(max_nok=2, strategy="loosen", loosen_pset=91)))
+    _live_nok(d, 38)
+    d.answer_checks = False
+    sent = _enabled(d, 1)
+    assert sent.loosen and sent.selection.pset == 91
+    enabled_at = d.t
+    d.t += 3.0
+    _on(d, 2, 3)
+    d.t += d.core.late_result_s + 1.0
+    [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    acts = d.feed(ResultIn(d.t, res(41, 91, False, 2), fetched=True, follows=40,
+                           made_at=enabled_at + 2.5, live=True))
+    acts += d.feed(ResultIn(d.t, res(42, 91, False, 2), fetched=True, follows=40,
+                            made_at=enabled_at + 2.8, live=True))
+    acts += d.feed(NewestChecked(d.t, serial=check.serial))
+    assert [int(a.result.tightening_id) for a in acts if isinstance(a, Record)] == [41, 42]
+    assert _locks(acts) == [("B1", 2), ("B1", 2)]
+    assert [(n.count, n.locked_at, n.tightening_id) for n in _beyond(acts)] == [(3, 2, 42)]
