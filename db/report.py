@@ -143,21 +143,28 @@ class VehicleReport:
         state += ", reworked" if v.rework else ""
         return f"{v.vin} ({v.model}, {state}): {self.counts()}"
 
-    def counts(self) -> str:
+    def counts(self, due: tuple[str, ...] = ()) -> str:
         """The summary's counts alone ("bolts: 5 OK, ...; rundowns: ..."): also the
         journal's line of a vehicle that closes, so the journal and ``db report`` say one
-        thing in one way."""
-        text = f"bolts: {len(self.ok)} OK"
+        thing in one way.  ``due``: bolts whose result is still due from the controller (the
+        station's word as a vehicle closes): counted apart, "1 result due (B07)", not by
+        what their records say so far (a supervisor's trial: "ending NOK" for a bolt whose
+        OK was recorded a moment later)."""
+        ok = [b for b in self.ok if b not in due]
+        text = f"bolts: {len(ok)} OK"
         nok = [b.bolt_id + (f" skipped by {b.skipped_by}" if b.skipped_by else "")
-               for b in self.bolts if b.status == NOK]
+               for b in self.bolts if b.status == NOK and b.bolt_id not in due]
         text += f", {len(nok)} ending NOK ({', '.join(nok)})" if nok else ", 0 ending NOK"
         who = [f"{b.bolt_id} by {b.skipped_by}" + (f": {b.comment}" if b.comment else "")
-               for b in self.bolts if b.status == SKIPPED]
+               for b in self.bolts if b.status == SKIPPED and b.bolt_id not in due]
         text += f", {len(who)} skipped ({'; '.join(who)})" if who else ", 0 skipped"
-        text += f", {len(self.missing)} missing ({_first(self.missing)})" if self.missing \
-            else ", 0 missing"
-        if self.loosen:
-            text += f", {len(self.loosen)} to tighten again ({', '.join(self.loosen)})"
+        missing = [b for b in self.missing if b not in due]
+        text += f", {len(missing)} missing ({_first(missing)})" if missing else ", 0 missing"
+        loosen = [b for b in self.loosen if b not in due]
+        if loosen:
+            text += f", {len(loosen)} to tighten again ({', '.join(loosen)})"
+        if due:
+            text += f", {len(due)} result due ({', '.join(due)})"
         if self.held:
             text += f", {len(self.held)} held ({', '.join(b for b, _ in self.held)})"
         # the loosenings too, where there were any: the demo's line read-back counted them

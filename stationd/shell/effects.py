@@ -44,6 +44,7 @@ from stationd.station.actions import (
     Reply,
     SendParams,
     SendVin,
+    SettleClosing,
     SettleEnable,
     StoreControllerEvent,
     StoreCutUnknown,
@@ -177,9 +178,16 @@ class Effects:
         elif isinstance(a, CloseVehicle):
             try:
                 return await self._call(self.records.close_vehicle, a.vin,
-                                        a.after_lift_outage)
+                                        a.after_lift_outage, a.due)
             except STATION_FAULTS as exc:
                 self.log.error("vehicle %s not closed: %s", a.vin, one_line(exc))
+        elif isinstance(a, SettleClosing):
+            try:
+                return await self._call(self.records.settle_closing, a)
+            except STATION_FAULTS as exc:   # its records are right: the report reads them
+                self.log.error("vehicle %s: its closing verdict, the result due of %s "
+                               "settled, not read: %s", a.vin, ", ".join(a.settled),
+                               one_line(exc))
         elif isinstance(a, Record):
             return await self._record(a)
         elif isinstance(a, Acknowledge):

@@ -40,6 +40,7 @@ from db.kinds import (
     OK,
     TIGHTENING,
 )
+from db.report import VehicleReport
 from db.repository import Repository
 from drivers.errors import DeviceError, DriverError
 from drivers.keeper import one_line
@@ -57,6 +58,7 @@ from stationd.station.actions import (
     Record,
     RecordCommand,
     Selection,
+    SettleClosing,
     StoreControllerEvent,
     StoreCutUnknown,
     StoreUnattributed,
@@ -456,18 +458,36 @@ class Records:
                              loosen_nok=frozenset(b.bolt_id for b in report.bolts
                                                   if b.status is NOK and b.kind == LOOSENING))
 
-    def close_vehicle(self, vin: str, after_lift_outage: bool = False) -> VehicleEnded:
+    def close_vehicle(self, vin: str, after_lift_outage: bool = False,
+                      due: tuple[str, ...] = ()) -> VehicleEnded:
+        """Close ``vin`` and say its verdict; ``due``: its bolts whose result is still due
+        from the controller, neither missing nor NOK (their verdict follows:
+        :meth:`settle_closing`)."""
         report = self._writer().close_vehicle(vin)
         # in db report's words (counted and labelled: "missing B01, ..., B50, skipped none,
         # NOK none" gave 45 names and no count)
         # a vehicle leaving with a bolt not OK is a warning: a journal read by priority
         # (journalctl -p warning) missed "50 missing" at INFO (an engineer's trial)
-        whole = not report.untightened and not report.nok
-        log.log(logging.INFO if whole else logging.WARNING, "vehicle %s (%s) closed: %s%s",
-                vin, report.vehicle.model, report.counts(),
+        missing, nok = _verdict(report, due)
+        log.log(logging.INFO if not missing and not nok and not due else logging.WARNING,
+                "vehicle %s (%s) closed: %s%s%s", vin, report.vehicle.model,
+                report.counts(due), "; its verdict follows the result due" if due else "",
                 closed_after_outage(vin) if after_lift_outage else "")
         # the screens' "not tightened when the vehicle left": skipped ones too
-        return VehicleEnded(time.time(), vin, tuple(report.untightened), tuple(report.nok))
+        return VehicleEnded(time.time(), vin, missing, nok, due)
+
+    def settle_closing(self, a: SettleClosing) -> VehicleEnded:
+        """The results due as ``a.vin`` closed are settled for ``a.settled`` (recorded to
+        that vehicle, or no longer to come): its closing verdict again, from its records,
+        each settled bolt's status named."""
+        report = self._writer().vehicle_report(a.vin, held=True)
+        missing, nok = _verdict(report, a.due)
+        status = {b.bolt_id: b.status for b in report.bolts}
+        now = ", ".join(f"{b} {str(status.get(b, MISSING)).upper()}" for b in a.settled)
+        log.log(logging.INFO if not missing and not nok and not a.due else logging.WARNING,
+                "vehicle %s (%s) closing verdict, the result due at its close settled (%s): "
+                "%s", a.vin, report.vehicle.model, now, report.counts(a.due))
+        return VehicleEnded(time.time(), a.vin, missing, nok, a.due, a.settled)
 
     def record_command(self, a: RecordCommand, vin_at_height: str | None) -> Reason | None:
         """An accepted command on disk with its user (a reopen reopens the vehicle in the
@@ -639,6 +659,14 @@ class Records:
                 continue
             out.append(str(path))
         return out
+
+
+def _verdict(report: VehicleReport, due: tuple[str, ...]) -> tuple[tuple[str, ...],
+                                                                   tuple[str, ...]]:
+    """A closing vehicle's bolts not tightened (skipped ones too: the screens' "not
+    tightened when the vehicle left") and ending NOK, those whose result is ``due`` aside."""
+    return (tuple(b for b in report.untightened if b not in due),
+            tuple(b for b in report.nok if b not in due))
 
 
 def _sqlite_path(url: str) -> Path | None:

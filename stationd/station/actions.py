@@ -122,6 +122,20 @@ class CloseVehicle:
 
     vin: str
     after_lift_outage: bool = False
+    #: its bolts whose result is still due from the controller (the tool ran, or may have,
+    #: as it left): said so, neither missing nor NOK, their verdict follows
+    due: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class SettleClosing:
+    """The results due as ``vin`` closed (:attr:`CloseVehicle.due`) of the bolts ``settled``
+    are in its records, or no longer to come: its closing verdict again, from its records
+    (``due``: the bolts still due)."""
+
+    vin: str
+    settled: tuple[str, ...]
+    due: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -274,6 +288,7 @@ class Reply:
 
 
 Action = (SendParams | EnableTool | DisableTool | SendVin | LoadVehicle | CloseVehicle | Record
-          | Acknowledge | StoreUnattributed | StoreGap | StoreControllerEvent | StoreUnreadable
+          | SettleClosing | Acknowledge | StoreUnattributed | StoreGap | StoreControllerEvent
+          | StoreUnreadable
           | StoreCutUnknown | SettleEnable | CheckNewest | Publish
           | RecordCommand | NoteLock | Reply | MeasureReferences | RecordCheck)

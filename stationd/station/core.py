@@ -91,6 +91,7 @@ class StationCore(LiftRules, ToolRules, ResultRules):
         before = (self.state, self.reason)
         acts = self._dispatch(ev)
         acts += self._vin_due()
+        acts += self._closing_settled(ev, acts)
         if (self.state, self.reason) != before:  # first: follow-ups may change it again
             acts.insert(0, Publish(StateChanged(self.state, self.reason, t=ev.t)))
         return acts

@@ -263,9 +263,31 @@ class VehicleOpened(StationEvent):
 
 @dataclass(frozen=True)
 class VehicleClosed(StationEvent):
+    """A vehicle left (the lift went down): its bolts not tightened (``missing``, skipped
+    ones too) and those whose last rundown is a NOK, as its records say then.  ``due``: the
+    bolts whose result was still due from the controller as it left (the tool ran, or its
+    late-result window, its check or a link cut's catch-up still ran): neither missing nor
+    NOK, their verdict follows (:class:`ClosingSettled`).  A supervisor's trial: the last
+    bolt said "ending NOK" as the lift went down, its OK result recorded a moment later."""
+
     vin: str
     missing: tuple[str, ...]
     nok: tuple[str, ...]
+    due: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class ClosingSettled(StationEvent):
+    """The results due as ``vin`` left (:attr:`VehicleClosed.due`) are ``settled``: each
+    recorded to its bolt of that vehicle, or no longer to come (its window over and nothing
+    found, or its bolt held for a person).  The vehicle's closing verdict as its records say
+    now (``missing``, ``nok``), the bolts still due (``due``) aside."""
+
+    vin: str
+    missing: tuple[str, ...]
+    nok: tuple[str, ...]
+    due: tuple[str, ...] = ()
+    settled: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -339,11 +339,15 @@ class Written(Input):
 
 @dataclass(frozen=True)
 class VehicleEnded(Input):
-    """The database closed ``vin``: the bolts missing and NOK when it left."""
+    """The database closed ``vin``: the bolts missing and NOK when it left, those whose result
+    was still due (``due``: neither).  ``settled``: not the close but its verdict again, the
+    results due of these bolts settled (:class:`~stationd.station.actions.SettleClosing`)."""
 
     vin: str
     missing: tuple[str, ...] = ()
     nok: tuple[str, ...] = ()
+    due: tuple[str, ...] = ()
+    settled: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

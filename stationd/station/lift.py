@@ -15,12 +15,15 @@ from stationd.station.actions import (
     LoadVehicle,
     NoteLock,
     Publish,
+    Record,
     SendVin,
+    SettleClosing,
 )
 from stationd.station.events import (
     Because,
     BoltLocked,
     BoltView,
+    ClosingSettled,
     Notice,
     OperatorChange,
     OperatorChanged,
@@ -35,12 +38,14 @@ from stationd.station.inputs import (
     LIFT,
     VEHICLE,
     WRENCH,
+    Event,
     LiftRead,
     Started,
     VehicleEnded,
     VehicleLoaded,
     VehicleRejected,
     VinSent,
+    Written,
 )
 from stationd.station.matching import BoltMatcher, BoltRule
 from stationd.station.state import (
@@ -91,7 +96,13 @@ class LiftRules(FaultRules):
         not_ready = StateReason(Because.LIFT_NOT_READY, note=ev.why)
         if self.vin is not None and not ev.at_height:
             acts += self._drop(ev.t, State.WAITING_VEHICLE, not_ready)
-            acts.append(CloseVehicle(self.vin, after_lift_outage=back))
+            # a bolt whose result may still come is neither missing nor NOK yet: said due,
+            # its verdict follows it (a supervisor's trial: "ending NOK" as the lift went
+            # down, its OK recorded a moment later)
+            due = tuple(sorted(b for v, b in self._results_due() if v == self.vin))
+            if due:
+                self._closing[self.vin] = set(due)
+            acts.append(CloseVehicle(self.vin, after_lift_outage=back, due=due))
             self._forget_vehicle()
         changed = self._vehicle_changed(ev)
         if changed is not None and VEHICLE not in self.faults:
@@ -133,6 +144,7 @@ class LiftRules(FaultRules):
 
     def _on_vehicle_loaded(self, ev: VehicleLoaded) -> list[Action]:
         self._loading = False
+        self._closing.pop(ev.vin, None)   # open again (a rework): its close owes nothing
         self.vin, self.model = ev.vin, ev.model
         self._specs = dict(ev.bolts)
         self._recorded = {}
@@ -226,7 +238,39 @@ class LiftRules(FaultRules):
         return self._fault(ev.t, VEHICLE, FaultKind.REJECTED, why)
 
     def _on_vehicle_ended(self, ev: VehicleEnded) -> list[Action]:
-        return [Publish(VehicleClosed(ev.vin, ev.missing, ev.nok, t=ev.t))]
+        if ev.settled:
+            return [Publish(ClosingSettled(ev.vin, ev.missing, ev.nok, ev.due, ev.settled,
+                                           t=ev.t))]
+        return [Publish(VehicleClosed(ev.vin, ev.missing, ev.nok, ev.due, t=ev.t))]
+
+    def _closing_settled(self, ev: Event, acts: list[Action]) -> list[Action]:
+        """After each input: the results on their way to the database followed (a Record
+        out, its Written in: which may come much later, after a database outage); a vehicle
+        closed with results due (:attr:`_closing`) gets its verdict again once they are
+        settled: in its records, or no longer to come (:meth:`_results_due`: its window and
+        check over with nothing found, or its bolt held).  A vehicle back at the station (a
+        rework) is open again: nothing more is owed to its close."""
+        if isinstance(ev, Written):
+            key = (ev.record.vin, ev.record.bolt)
+            if self._flying.get(key, 0) > 1:
+                self._flying[key] -= 1
+            else:
+                self._flying.pop(key, None)
+        for a in acts:
+            if isinstance(a, Record):
+                self._flying[(a.vin, a.bolt)] = self._flying.get((a.vin, a.bolt), 0) + 1
+        if not self._closing:
+            return []
+        due = self._results_due()
+        out: list[Action] = []
+        for vin, bolts in list(self._closing.items()):
+            settled = tuple(sorted(b for b in bolts if (vin, b) not in due))
+            if settled:
+                bolts.difference_update(settled)
+                out.append(SettleClosing(vin, settled, tuple(sorted(bolts))))
+            if not bolts:
+                del self._closing[vin]
+        return out
 
     def _on_vin_sent(self, ev: VinSent) -> list[Action]:
         self._vin_pending = False

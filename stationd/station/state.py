@@ -280,6 +280,11 @@ class CoreState:
     _noks: dict[str, int] = field(default_factory=dict, repr=False)   # NOKs in a row per bolt
     _teach: _Teach | None = field(default=None, repr=False)
     _closed_vin: str | None = field(default=None, repr=False)   # a closed VIN at height
+    #: the results recorded (a Record) whose Written has not come yet, per (vin, bolt): on
+    #: their way to the database, or kept by the shell while it refuses writes
+    _flying: dict[tuple[str, str], int] = field(default_factory=dict, repr=False)
+    #: vehicles closed with results still due (:meth:`_results_due`) -> those bolts
+    _closing: dict[str, set[str]] = field(default_factory=dict, repr=False)
     #: the models of the station's bolt tables (None: not told, teach start not checked)
     models: frozenset[str] | None = None
     # bolts that get their loosen pset next (a NOK under ``loosen``, a loosen command), and
@@ -360,6 +365,19 @@ class CoreState:
         enable's result may still come."""
         return self.tool_on or self._pending_push is not None or (
             self._off_at is not None and t - self._off_at < self.late_result_s)
+
+    def _results_due(self) -> set[tuple[str, str]]:
+        """The bolts (vin, bolt) whose result is still due to their records: one may still
+        come from the controller (the enable still owed: the tool on, its late-result
+        window, or its check of the controller's newest, not over yet, its end decided at the
+        next tick; a link cut's enable, the catch-up settles it), or one taken is not in the
+        database yet (a database outage keeps it in memory until it is back)."""
+        due = {k for k, n in self._flying.items() if n}
+        if self._enabled is not None and self._enabled.vin:
+            due.add((self._enabled.vin, self._enabled.bolt))
+        if self._cut is not None and self._cut.selection.vin:
+            due.add((self._cut.selection.vin, self._cut.selection.bolt))
+        return due
 
     def _hold(self, t: float, bolt: str, note: str, said: Notice | None = None,
               under: Selection | None = None) -> list[Action]:

@@ -34,6 +34,7 @@ from stationd.station.events import (
     BoltSelected,
     BoltSkipped,
     BoltToLoosen,
+    ClosingSettled,
     DeviceHealth,
     DeviceIdentified,
     Localized,
@@ -231,6 +232,8 @@ class View:
                 self._open(e)
             case VehicleClosed():
                 self._close(e)
+            case ClosingSettled():
+                self._settled(e)
             case VehicleReopened():
                 self._reopened(e)
             case Localized():
@@ -404,22 +407,42 @@ class View:
         skipped = {b.bolt for b in self.bolts.values() if b.state == SKIPPED} \
             if e.vin == self.vin else set()
         self.closed = {"vin": e.vin, "missing": [b for b in e.missing if b not in skipped],
-                       "skipped": [b for b in e.missing if b in skipped], "nok": list(e.nok)}
+                       "skipped": [b for b in e.missing if b in skipped], "nok": list(e.nok),
+                       "due": list(e.due)}
         if e.vin == self.vin:
             self.loaded = False
         self.reopened = None
         self.wrench, self.selected = None, None
         if e.vin != self.vin:
             return
-        missing, nok = set(e.missing), set(e.nok)
+        missing, nok, due = set(e.missing), set(e.nok), set(e.due)
         for b in self.bolts.values():
-            if b.state == Shown.LOCKED:   # its last rundown a NOK: the report's word decides
+            if b.bolt in due:   # its result still to come: neither missing nor NOK yet
+                b.state, b.reason = PENDING, "its result due from the controller"
+            elif b.state == Shown.LOCKED:   # its last rundown a NOK: the report's word decides
                 b.state = NOK if b.bolt in nok or b.bolt not in missing else MISSING
                 b.reason = "locked when the vehicle left"
             elif b.bolt in missing and b.state not in (NOK, SKIPPED):   # skipped: said so
                 b.state, b.reason = MISSING, "not tightened when the vehicle left"
             elif b.state in LIVE_STATES:
                 b.state, b.reason = PENDING, ""
+
+    def _settled(self, e: ClosingSettled) -> None:
+        """The results due as the shown closed vehicle left are settled: its close line as
+        its records say now; a bolt no result came for is missing.  Another vehicle's (the
+        screens moved on): nothing shown changes."""
+        c = self.closed
+        if c is None or c["vin"] != e.vin:
+            return
+        skipped = set(c["skipped"])
+        c["missing"] = [b for b in e.missing if b not in skipped]
+        c["nok"], c["due"] = list(e.nok), list(e.due)
+        if e.vin != self.vin:
+            return
+        for name in e.settled:
+            b = self.bolts.get(name)
+            if b is not None and name in e.missing and b.state == PENDING:
+                b.state, b.reason = MISSING, "not tightened when the vehicle left"
 
     def _localized(self, e: Localized) -> None:
         if e.point_mm is None:
@@ -501,6 +524,7 @@ class View:
         if c is not None and c["vin"] == e.vin and e.kind != LOOSENING:   # stored late:
             c["missing"] = [b for b in c["missing"] if b != e.bolt]       # its close line
             c["nok"] = [b for b in c["nok"] if b != e.bolt] + ([] if e.ok else [e.bolt])
+            c["due"] = [b for b in c["due"] if b != e.bolt]
         self.results.insert(0, {
             "t": e.t, "vin": e.vin, "bolt": e.bolt, "ok": e.ok, "pset": e.pset,
             "torque_nm": e.torque_nm, "torque_min": e.torque_min, "torque_max": e.torque_max,
@@ -580,7 +604,7 @@ class View:
         order rule, skipped), ``idle`` (neutral: the wrench is not on a bolt), ``go`` (a bolt
         selected), ``nok`` (red: the vehicle closed with a NOK bolt, with or without missing
         ones: a joint out of its limits left the station, the worse of the two for quality),
-        ``missing`` (amber: it closed with bolts not tightened), ``done`` (vehicle finished),
+        ``missing`` (amber: it closed with bolts not tightened, or results due), ``done``,
         else "".  ``nok`` is not ``stop``: the station itself is healthy (/healthz stays ok)."""
         if self.alarm or self.in_fault():
             return "stop"
@@ -591,7 +615,8 @@ class View:
             return "act" if b is not None and b.check_first else "go"
         if self.closed is not None:
             return ("nok" if self.closed["nok"] else "missing"
-                    if self.closed["missing"] or self.closed["skipped"] else "done")
+                    if self.closed["missing"] or self.closed["skipped"]
+                    or self.closed["due"] else "done")
         c = self.counters()
         if c["total"] and c["done"] == c["total"]:
             return "done"
@@ -649,7 +674,8 @@ class View:
         c = self.closed
         assert c is not None  # noqa: S101 - called when closed
         parts = [_named(c["missing"], "missing", shown), _named(c["skipped"], "skipped", shown),
-                 _named(c["nok"], "NOK", shown)]
+                 _named(c["nok"], "NOK", shown),
+                 _named(c["due"], "result due", shown)]
         return f"{c['vin']} closed: " + ("; ".join(x for x in parts if x) or "all bolts OK")
 
     def headline_title(self) -> str:

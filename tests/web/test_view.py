@@ -8,6 +8,7 @@ from stationd.reasons import Reason, Wait, WaitKind, Why
 from stationd.station.events import (
     Because,
     BoltSkipped,
+    ClosingSettled,
     DeviceHealth,
     Localized,
     ParamsRefusedEvent,
@@ -154,7 +155,8 @@ def test_skip_rework_result_close_and_wrong_bolt():
     assert states(v)["B4"] == "skipped" and states(v)["B2"] == "ok"
     assert v.counters() == {"total": 4, "done": 2, "nok": 0, "skipped": 1}
     v.apply(VehicleClosed(vin=VIN, missing=("B3",), nok=()))
-    assert v.closed == {"vin": VIN, "missing": ["B3"], "skipped": [], "nok": []} \
+    assert v.closed == {"vin": VIN, "missing": ["B3"], "skipped": [], "nok": [],
+                        "due": []} \
         and v.wrench is None
     assert v.headline() == f"{VIN} closed: missing B3"
     v.apply(WrongBolt(bolt="B1", truth="B2"))
@@ -293,6 +295,30 @@ def test_a_closed_vehicle_with_missing_or_nok_bolts_is_an_alarm_and_its_bolts_sa
     v = fold(opened())
     v.apply(VehicleClosed(vin=VIN, missing=(), nok=()))
     assert (v.tone(), v.headline()) == ("done", f"{VIN} closed: all bolts OK")
+
+
+def test_a_bolt_whose_result_is_due_as_the_vehicle_leaves_is_said_due_then_as_recorded():
+    """A supervisor's trial: B3 tightening as the lift went down, its NOK before (B2 here)
+    and its result still to come: the close says "result due B3" (neither missing nor NOK);
+    its OK recorded, then the verdict settled, the close line says what the records do.
+    A settled verdict of another vehicle than the one shown changes nothing."""
+    v = fold(opened() + work())          # B1 OK, B2 NOK, B3 tightening, B4 next
+    v.apply(VehicleClosed(vin=VIN, missing=("B4",), nok=("B2",), due=("B3",)))
+    assert states(v)["B3"] == "pending" and states(v)["B4"] == "missing"
+    assert v.headline() == f"{VIN} closed: missing B4; NOK B2; result due B3"
+    v.apply(result("B3", True, 9))
+    v.apply(ClosingSettled(vin=VIN, missing=("B4",), nok=("B2",), settled=("B3",)))
+    assert states(v)["B3"] == "ok"
+    assert v.headline() == f"{VIN} closed: missing B4; NOK B2"
+    v = fold(opened())
+    v.apply(VehicleClosed(vin=VIN, missing=("B1", "B2", "B4"), nok=(), due=("B3",)))
+    assert v.tone() == "missing"
+    v.apply(ClosingSettled(vin=VIN, missing=("B1", "B2", "B3", "B4"), nok=(),
+                           settled=("B3",)))     # its result never came
+    assert states(v)["B3"] == "missing"
+    assert v.headline() == f"{VIN} closed: 4 missing (B1, B2, B3, ...)"
+    v.apply(ClosingSettled(vin="OTHER", missing=(), nok=(), settled=("B1",)))
+    assert v.headline() == f"{VIN} closed: 4 missing (B1, B2, B3, ...)"
 
 
 def test_a_closed_vehicles_skipped_bolts_are_said_skipped_not_missing():
