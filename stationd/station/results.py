@@ -228,10 +228,26 @@ class ResultRules(UnreadRules):
                     Acknowledge(r)]
         return [Publish(ResultRecorded(
             a.vin, a.bolt, bool(r.ok), float(r.torque_nm), float(r.angle_deg),
-            int(r.tightening_id), int(r.pset), float(r.torque_min_nm), float(r.torque_max_nm),
-            float(r.angle_min_deg), float(r.angle_max_deg), a.late, tuple(ev.images), a.kind,
-            a.selection.operator if a.selection is not None else None, t=ev.t)),
+            int(r.tightening_id), int(r.pset), *self._limits(a, r), a.late, tuple(ev.images),
+            a.kind, a.selection.operator if a.selection is not None else None, t=ev.t)),
             Acknowledge(r)]
+
+    def _limits(self, a: Record, r: TighteningResult) -> tuple[float | None, float | None,
+                                                              float | None, float | None]:
+        """The windows ``r`` was judged against (torque min and max, angle min and max), as
+        the controller sent them; a result fetched late (MID 0065 carries none: 0 to 0) has
+        its bolt's tightening window where it ran under the bolt's pset, as the records give
+        it, else none known (a new user's trial: the screen said a fetched NOK of 44.6 Nm
+        "torque high" against "0.0-0.0", where it was low against 45-55)."""
+        if r.torque_min_nm or r.torque_max_nm:
+            return (float(r.torque_min_nm), float(r.torque_max_nm), float(r.angle_min_deg),
+                    float(r.angle_max_deg))
+        spec = self._specs.get(a.bolt) if a.vin == self.vin else None
+        p = spec.parameters if spec is not None else None
+        if p is None or a.kind == LOOSENING or p.pset != r.pset:
+            return None, None, None, None
+        return (p.torque.min, p.torque.max, None if p.angle is None else p.angle.min,
+                None if p.angle is None else p.angle.max)
 
     def _not_its_copy(self, ev: Written, stored: tuple[str, str]) -> list[Action]:
         """A copy of ``stored``'s (vin, bolt) result that this core had attributed to

@@ -8,6 +8,7 @@ after every event."""
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 from typing import Any
@@ -98,6 +99,7 @@ class Driver:
 
     core: StationCore = field(default_factory=lambda: StationCore(PARAMS, leave_frames=2))
     t: float = 1000.0
+    bolts: Mapping[str, LoadedBolt] = field(default_factory=lambda: BOLTS)  # each vehicle's
     ready: bool = False
     at_height: bool = False
     down: set[str] = field(default_factory=set)
@@ -133,7 +135,7 @@ class Driver:
                     out += self.feed(VehicleRejected(self.t, vin, "closed", closed=True))
                 else:
                     self.closed_vins.discard(vin)
-                    out += self.feed(VehicleLoaded(self.t, vin, "M", BOLTS,
+                    out += self.feed(VehicleLoaded(self.t, vin, "M", self.bolts,
                                                    rework=a.reopen))
             elif isinstance(a, SendVin):
                 out += self.feed(VinSent(self.t, a.vin))
