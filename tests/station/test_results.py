@@ -5,6 +5,7 @@ none), its bolt's tightening window from the records."""
 from __future__ import annotations
 
 from datetime import datetime
+from typing import Any
 
 from db.bolts import Parameters, Window
 from db.kinds import LOOSENING
@@ -27,10 +28,11 @@ def _result(tid: int, limits: bool) -> TighteningResult:
                             datetime(2026, 12, 1, 8, 0, 0), *lim, 30.0)
 
 
-def _published(d: Driver, r: TighteningResult, **how: object) -> ResultRecorded:
+def _published(d: Driver, r: TighteningResult, **how: Any) -> ResultRecorded:
     acts = d.feed(ResultIn(d.t, r, **how))
     [rec] = [a for a in acts if isinstance(a, Record)]
     [said] = published(d.feed(Written(d.t, rec)), ResultRecorded)
+    assert isinstance(said, ResultRecorded)
     return said
 
 
