@@ -413,7 +413,9 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     # (a supervisor's trial: a car that left with a bolt held, its release refused, nothing
     # said of reopen)
     Why.OTHER_VEHICLE: lambda r: f"vehicle {r.vin} is not the one at the station" + (
-        _meant(r) or f" (one that has left is worked again after stationd reopen {r.vin})"),
+        _meant(r) or (": reopened for rework, it is worked when it is back at the station at "
+                      "height" if r.reopened else
+                      f" (one that has left is worked again after stationd reopen {r.vin})")),
     Why.UNKNOWN_BOLT: lambda r: f"{r.bolt} is not a bolt of vehicle {r.vin}{_meant(r)}",
     Why.TOOL_ON_BOLT: lambda r: f"{r.bolt} is being tightened now",
     Why.ALREADY_OPEN: lambda r: f"vehicle {r.vin} is open at the station",

@@ -145,6 +145,7 @@ class LiftRules(FaultRules):
     def _on_vehicle_loaded(self, ev: VehicleLoaded) -> list[Action]:
         self._loading = False
         self._closing.pop(ev.vin, None)   # open again (a rework): its close owes nothing
+        self._reopened.discard(ev.vin)     # back at the station
         self.vin, self.model = ev.vin, ev.model
         self._specs = dict(ev.bolts)
         self._recorded = {}

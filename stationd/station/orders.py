@@ -86,7 +86,8 @@ class OrderRules(FaultRules):
         if cmd.vin != self.vin:
             # typed in lower case: said, not taken (a command names exactly what it acts on)
             return Reason(Why.OTHER_VEHICLE, vin=cmd.vin,
-                          other=self.vin if cmd.vin.upper() == self.vin else None)
+                          other=self.vin if cmd.vin.upper() == self.vin else None,
+                          reopened=cmd.vin in self._reopened)
         if cmd.bolt not in self.matcher.bolts:
             alike = [b for b in self.matcher.bolts if b.casefold() == cmd.bolt.casefold()]
             return Reason(Why.UNKNOWN_BOLT, bolt=cmd.bolt, vin=cmd.vin,
@@ -203,6 +204,7 @@ class OrderRules(FaultRules):
             acts += self._loosen_ordered(ev.t, cmd, c.issuer)
         elif isinstance(cmd, ReopenVehicle):
             acts.append(Publish(VehicleReopened(cmd.vin, c.issuer.user, t=ev.t)))
+            self._reopened.add(cmd.vin)
             if cmd.vin == self._closed_vin and VEHICLE in self.faults:
                 # the closed vehicle at height, reopened: its fault clears and the next lift
                 # read loads it (open now)

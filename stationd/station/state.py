@@ -280,6 +280,8 @@ class CoreState:
     _noks: dict[str, int] = field(default_factory=dict, repr=False)   # NOKs in a row per bolt
     _teach: _Teach | None = field(default=None, repr=False)
     _closed_vin: str | None = field(default=None, repr=False)   # a closed VIN at height
+    #: VINs reopened for rework since this core started, not at the station since
+    _reopened: set[str] = field(default_factory=set, repr=False)
     #: the results recorded (a Record) whose Written has not come yet, per (vin, bolt): on
     #: their way to the database, or kept by the shell while it refuses writes
     _flying: dict[tuple[str, str], int] = field(default_factory=dict, repr=False)

@@ -163,6 +163,25 @@ def test_a_reopen_of_the_closed_vehicle_at_height_clears_its_fault_and_loads_it(
     assert core.state is State.TRACKING
 
 
+def test_a_command_for_a_vehicle_reopened_and_not_back_says_it_waits_for_it():
+    """A skip right after a reopen, the vehicle not back at the station: the refusal says it
+    is reopened and waits for it (a new user's trial: it told them to reopen it again)."""
+    d = _ready()
+    acts = d.core.feed(CommandIn(d.t, 4, ReopenVehicle("OLDVIN", "rework"), SUPERVISOR))
+    acts = d.core.feed(CommandDone(d.t, 4))
+    assert _answer(acts).answer.accepted
+    acts = d.core.feed(CommandIn(d.t, 5, SkipBolt("OLDVIN", "B2"), SUPERVISOR))
+    why = _answer(acts).answer.reason
+    assert why == Reason(Why.OTHER_VEHICLE, vin="OLDVIN", reopened=True)
+    assert reason_words(why) == ("vehicle OLDVIN is not the one at the station: reopened for "
+                                 "rework, it is worked when it is back at the station at "
+                                 "height")
+    # back at the station: open; another VIN keeps the plain words
+    d.core.feed(VehicleLoaded(d.t, "OLDVIN", "M", BOLTS, rework=True))
+    acts = d.core.feed(CommandIn(d.t, 6, SkipBolt("VIN1", "B2"), SUPERVISOR))
+    assert _answer(acts).answer.reason == Reason(Why.OTHER_VEHICLE, vin="VIN1")
+
+
 def test_skips_recorded_before_a_reload_come_back_with_the_vehicle():
     d = _ready()
     d.core.feed(VehicleLoaded(d.t, "VIN1", "M", BOLTS, skipped={
