@@ -111,14 +111,17 @@ class LostRules(NokRules):
     def _push_judged(self, t: float) -> list[Action]:
         """The pushed result that skipped ids is judged (or no longer waited for): the NOK
         policy of each bolt whose NOK came fetched before it and is still its last result
-        (a reviewer: a batch increment pushed after a lost NOK left the bolt unlocked)."""
+        (a reviewer: a batch increment pushed after a lost NOK left the bolt unlocked), held
+        too (the pushed one unreadable: not known to be an OK; a new user's trial: the hold
+        hid the lock at max_nok, and its release reopened the bolt for its tightening pset
+        where the loosen pset was due; an OK entered for it ends the lock)."""
         if self._pending_push is not None or not self._nok_owed:
             return []
         owed, self._nok_owed = self._nok_owed, {}
         m, acts = self.matcher, []
         for bolt, pset in owed.items():
             if m is not None and bolt in m.bolts and bolt in self._nok_last \
-                    and bolt not in m.done and bolt not in m.locked and bolt not in m.held:
+                    and bolt not in m.done and bolt not in m.locked:
                 acts += self._after_nok(t, bolt, pset, counted=True)
             self._lock_due.pop(bolt, None)
         return acts

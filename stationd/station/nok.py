@@ -139,6 +139,9 @@ class NokRules(OrderRules):
             acts += self._after_loosening(t, b, cmd.ok)
         elif cmd.ok:
             m.mark_done(b)
+            # an OK answers the NOKs before it, as a pushed one does: a lock made while the
+            # result was not known (a lost NOK's, judged when the unreadable one came) ends
+            m.locked.pop(b, None)
             self._noks.pop(b, None)
             self._loosen.discard(b)
             self._nok_last.discard(b)

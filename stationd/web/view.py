@@ -366,13 +366,17 @@ class View:
 
     def _locked(self, e: BoltLocked) -> None:
         b = self.bolts[e.bolt]
-        b.locked, b.nok_count, b.held = True, e.count, e.held is not None
+        # a lock of NOKs on a held bolt keeps the hold (its result is still not known), said
+        # with it: the hold's outcome entered, or a release, ends both
+        was_held = b.held and b.state == Shown.LOCKED
+        b.locked, b.nok_count, b.held = True, e.count, b.held or e.held is not None
         b.check_first = False   # held again: its own words say so
         if self.selected == e.bolt:
             self.selected = None
-        self._set(e.bolt, Shown.LOCKED, reason_words(
-            Reason(Why.HELD, bolt=e.bolt, note=e.held) if e.held is not None
-            else Reason(Why.LOCKED, bolt=e.bolt, count=e.count)))
+        words = reason_words(Reason(Why.HELD, bolt=e.bolt, note=e.held) if e.held is not None
+                             else Reason(Why.LOCKED, bolt=e.bolt, count=e.count))
+        self._set(e.bolt, Shown.LOCKED, f"{words}; {b.reason}" if was_held and e.held is None
+                  else words)
 
     def _to_loosen(self, e: BoltToLoosen) -> None:
         self.bolts[e.bolt].loosen = True

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from stationd.station.actions import CheckNewest, NoteLock, Record
+from stationd.station.actions import CheckNewest, NoteLock, Record, SendParams
 from stationd.station.events import BoltLocked, Notice, Said
 from stationd.station.inputs import NewestChecked, ResultIn, Tick
 from stationd.station.policy import NokPolicy, NokRule
@@ -121,3 +121,69 @@ def test_two_loosening_nok_fetched_by_the_check_lock_once():
     assert [int(a.result.tightening_id) for a in acts if isinstance(a, Record)] == [41, 42]
     assert _locks(acts) == [("B1", 2), ("B1", 2)]
     assert [(n.count, n.locked_at, n.tightening_id) for n in _beyond(acts)] == [(3, 2, 42)]
+
+
+def test_a_lost_nok_at_max_nok_answered_by_an_unreadable_result_locks_and_its_release_loosens():
+    """A new user's trial (the loosen policy, max_nok 3): B1 NOK, loosened, NOK, loosened, a
+    third NOK whose push was lost, then an unreadable result pushed (revealing the third).
+    The bolt was held, not locked, and releasing the hold reopened it for its tightening
+    pset: a NOK joint tightened again without the loosen step.  It locks at 3 (the held
+    result, whatever it was, came after the third NOK) and is held; the release ends both
+    and its loosen pset goes first."""
+    from stationd.station.commands import ReleaseBolt
+    from stationd.station.events import BoltToLoosen
+    from stationd.station.inputs import ResultsSkipped, UnreadableIn
+    from tests.station.test_commands import SUPERVISOR, _answer
+    from tests.station.test_loosen import POLICY, _rundown
+    from tests.station.test_result_types import unreadable
+
+    d = _ready(nok=POLICY)
+    _rundown(d, 1, 16, ok=False)
+    _rundown(d, 1, 17, ok=True, rtype=2)
+    _rundown(d, 1, 18, ok=False)
+    _rundown(d, 1, 19, ok=True, rtype=2)
+    sent = _enabled(d, 1)
+    assert not sent.loosen                           # the tightening pset, after a loosening
+    enabled_at = d.t
+    d.t += 5.0
+    acts = d.feed(ResultsSkipped(d.t, 21))
+    acts += d.feed(ResultIn(d.t, res(20, 1, False, 1), fetched=True, follows=19,
+                            made_at=enabled_at + 3.0, live=True, before=21))
+    acts += d.feed(UnreadableIn(d.t, unreadable(21, 1)))
+    assert [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)] \
+        == [("B1", 20)]
+    assert ("B1", 3) in _locks(acts) and d.core.matcher.locked == {"B1": 3}
+    assert "B1" in d.core.matcher.held
+    acts = d.command(1, ReleaseBolt("VIN1", "B1", "checked"), SUPERVISOR)
+    assert _answer(acts).answer.accepted
+    assert "B1" not in d.core.matcher.locked and "B1" not in d.core.matcher.held
+    assert [e.bolt for e in published(acts, BoltToLoosen)] == ["B1"]
+    n = len(d.log)
+    _on(d, 1, 3)
+    [again] = [a for _, acts in d.log[n:] for a in acts if isinstance(a, SendParams)]
+    assert again.loosen                              # the loosen pset first
+
+
+def test_an_ok_entered_for_the_unreadable_result_after_a_lost_nok_ends_its_lock():
+    """As above, max_nok 1: locked and held; the supervisor reads OK on the controller and
+    enters it: the bolt is done, neither locked nor held (an OK answers the NOKs before it,
+    as a pushed OK does)."""
+    from stationd.station.commands import EnterOutcome
+    from stationd.station.inputs import ResultsSkipped, UnreadableIn
+    from tests.station.test_commands import SUPERVISOR, _answer
+    from tests.station.test_result_types import unreadable
+
+    d = _ready(nok=NokPolicy(NokRule(max_nok=1)))
+    _enabled(d, 1)
+    enabled_at = d.t
+    d.t += 5.0
+    d.feed(ResultsSkipped(d.t, 42))
+    d.feed(ResultIn(d.t, res(41, 1, False, 1), fetched=True, follows=40,
+                    made_at=enabled_at + 3.0, live=True, before=42))
+    d.feed(UnreadableIn(d.t, unreadable(42, 1)))
+    assert d.core.matcher.locked == {"B1": 1} and "B1" in d.core.matcher.held
+    acts = d.command(1, EnterOutcome("VIN1", "B1", True, 50.1, 31.0, "read on the controller"),
+                     SUPERVISOR)
+    assert _answer(acts).answer.accepted
+    m = d.core.matcher
+    assert "B1" in m.done and "B1" not in m.locked and "B1" not in m.held

@@ -251,3 +251,18 @@ def test_a_bolt_released_from_a_hold_reads_check_first_until_its_result():
     v.apply(BoltReleased("B2", "sam"))
     v.apply(_on("B2", 400.0)[1])
     assert not v.bolts["B2"].check_first and v.tone() == "go"
+
+
+def test_a_lock_on_a_held_bolt_keeps_the_hold_and_says_both():
+    """A NOK heard late reaches max_nok as the next result comes unreadable: held, then
+    locked.  The screen keeps it held (its outcome may still be entered) and says both (a new
+    user's trial: the hold hid the lock)."""
+    held = "tightening 21"
+    v = fold([*opened(), *_on("B2", 400.0), BoltLocked("B2", 0, held=held),
+              BoltLocked("B2", 3)])
+    b2 = v.bolts["B2"].to_json()
+    assert (b2["state"], b2["label"], b2["held"], b2["locked"]) == ("locked", "held", True, True)
+    assert b2["reason"].startswith(LOCKED + "; B2: the controller's result could not be read "
+                                   "(tightening 21)")
+    v.apply(BoltReleased("B2", "sam", unknown=True))
+    assert (v.bolts["B2"].held, v.bolts["B2"].locked) == (False, False)
