@@ -501,6 +501,10 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
         f"tightening {n.tightening_id}, its push lost, fetched as {n.bolt}'s late-result "
         f"window ended: made while the tool was on for {n.bolt} alone, recorded to {n.bolt}"
         + (f" of {n.vin} (gone from the station since)" if n.vin else "")),
+    Said.LOST_FOUND_ON: lambda n: (
+        f"tightening {n.tightening_id}, its push lost, fetched by a check of the controller's "
+        f"newest with the tool on for {n.bolt}: made while the tool was on for {n.bolt} "
+        f"alone, recorded to {n.bolt}, the tool off"),
     Said.CUT_NOTHING: lambda n: (f"no tightening made during the link cut (every result "
                                  f"since fetched): {n.bolt} open as before"),
     Said.CUT_UNKNOWN: lambda n: (

@@ -411,18 +411,31 @@ class ControllerFeed:
             await self._fetched(wrench, tid, got, follows, offset)
         return unknown
 
-    def check_newest(self, serial: int | None = None) -> None:
+    def check_newest(self, serial: int | None = None, tool_on: bool = False) -> None:
         """The core's :class:`CheckNewest` (for the enable ``serial``): the controller's
         newest result asked for, and the ids after the last one heard fetched (their pushes
         lost), in a task of its own (it feeds the core, whose lock the caller holds); then
         the core is told (:class:`NewestChecked`: the enable it was for is owed nothing more,
         and the tool may go on again).  After a check or a catch-up running (the ids they
         fetch are not asked twice), and after a push on its way (made under that enable, it
-        is its own)."""
+        is its own).  ``tool_on``: the core's periodic check while the tool is on (its
+        enable without a result yet): asked only where nothing else runs and no result waits
+        to go through the core, else told at once as not asked (the next period asks)."""
         prev = self.checking
-        self.checking = asyncio.get_running_loop().create_task(self._checked(serial, prev))
+        if tool_on and (self.received or any(
+                t is not None and not t.done() for t in (prev, self.catching_up))):
+            why = "a result on its way" if self.received else "a check or catch-up running"
+            self.checking = asyncio.get_running_loop().create_task(
+                self._not_asked(serial, why))
+        else:
+            self.checking = asyncio.get_running_loop().create_task(
+                self._checked(serial, prev, tool_on))
         self._checks.add(self.checking)
         self.checking.add_done_callback(self._checks.discard)
+
+    async def _not_asked(self, serial: int | None, why: str) -> None:
+        """A check with the tool on not asked (``why``): the core told, it waits no more."""
+        await self._feed(NewestChecked(time.time(), unknown=f"not asked: {why}", serial=serial))
 
     def tasks(self) -> list[asyncio.Task[None]]:
         """Its tasks running now (the catch-up, every check): for a stop to end them all (a
@@ -430,7 +443,8 @@ class ControllerFeed:
         core after the stop)."""
         return [t for t in (self.catching_up, *self._checks) if t is not None and not t.done()]
 
-    async def _checked(self, serial: int | None, prev: asyncio.Task[None] | None) -> None:
+    async def _checked(self, serial: int | None, prev: asyncio.Task[None] | None,
+                       tool_on: bool = False) -> None:
         if prev is not None and not prev.done():
             await asyncio.wait({prev})
         catching = self.catching_up
@@ -438,18 +452,21 @@ class ControllerFeed:
             await asyncio.wait({catching})
         if serial is not None and self.core.status().checking != serial:
             return      # the core gave up on it: asking now takes a later enable's result
-        nothing, unknown = await self._check_newest()
+        nothing, unknown = await self._check_newest(tool_on)
         await _until(lambda: not self.received, PUSH_FED_S)
         await self._feed(NewestChecked(time.time(), nothing_made=nothing, unknown=unknown,
                                        serial=serial))
 
-    async def _check_newest(self) -> tuple[bool, str]:
+    async def _check_newest(self, tool_on: bool = False) -> tuple[bool, str]:
         """Whether the controller's newest is the last one heard (no tightening made since),
         and where it could not tell, why (the core holds the bolt).  Only with every tool off
         and none enabled while it asks (else the newest may be the rundown of a bolt enabled
         now, fetched before its own push and stored as no bolt's: a reviewer); the link as it
         was.  A controller that keeps no results to give (it cannot fetch, or refused to at
-        the connect's catch-up) tells nothing: the next result pushed does, by its id."""
+        the connect's catch-up) tells nothing: the next result pushed does, by its id.
+        ``tool_on``: the core's check while the tool is on for one enable (its rundown is
+        what is looked for: fetched, the core records it to that enable and turns the tool
+        off); void only where another enable came meanwhile."""
         wrench, before = self._keeper.device, self.core.status()
         if wrench is not None and (not wrench.can_fetch or self._no_history):
             return False, ""
@@ -462,8 +479,8 @@ class ControllerFeed:
             try:
                 newest = await self._call(wrench.fetch_result, 0)
                 now = self.core.status()
-                if link != self._link or now.tool_on or before.tool_on \
-                        or now.enables != before.enables:
+                if link != self._link or now.enables != before.enables or (
+                        not tool_on and (now.tool_on or before.tool_on)):
                     return False, "the link or the tool changed while it was asked"
                 if newest is None:   # none at all: made none, or its memory cleared
                     return last is None, "" if last is None else "the controller has none"

@@ -125,7 +125,7 @@ class Effects:
     def __init__(self, core: StationCore, records: Records, wrench: DeviceKeeper[Wrench],
                  database: DeviceKeeper[Repository], bus: EventBus, notifier: Notifier,
                  call: Blocking, measure: Callable[[MeasureReferences], None],
-                 check_newest: Callable[[int | None], None] = lambda _: None) -> None:
+                 check_newest: Callable[[int | None, bool], None] = lambda *_: None) -> None:
         self.core, self.records, self.bus, self.notifier = core, records, bus, notifier
         self._measure = measure
         self._check_newest = check_newest    # started, never waited for (it feeds the core)
@@ -231,7 +231,7 @@ class Effects:
         elif isinstance(a, Reply):
             self._reply(a.answer)
         elif isinstance(a, CheckNewest):
-            self._check_newest(a.serial)
+            self._check_newest(a.serial, a.tool_on)
         elif isinstance(a, MeasureReferences):
             self._measure(a)
         elif isinstance(a, RecordCheck):

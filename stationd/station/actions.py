@@ -244,9 +244,13 @@ class CheckNewest:
     only the next result pushed revealed it, a car later where it was a car's last bolt (a
     supervisor's trial: the car closed with the bolt missing, its hold came with the next).
     ``serial``: that enable's, echoed in the answer (:class:`~stationd.station.inputs.
-    NewestChecked`)."""
+    NewestChecked`).  ``tool_on``: asked while the tool is on and its enable has no result
+    yet (every :data:`~stationd.station.state.CHECK_ON_S`): a rundown whose push was lost
+    is found then, its tool not left on for the operator to run the bolt down again; the
+    tool on is no reason not to ask, and the enable is not ended by the answer."""
 
     serial: int | None = None
+    tool_on: bool = False
 
 
 @dataclass(frozen=True)

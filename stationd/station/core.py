@@ -169,5 +169,5 @@ class StationCore(LiftRules, ToolRules, ResultRules):
 
     def _on_tick(self, ev: Tick) -> list[Action]:
         return self._pending_overdue(ev.t) + self._check_overdue(ev.t) + \
-            self._window_over(ev.t) + self._teach_overdue(ev.t) + self._check_due(ev.t) + \
-            self._operator_idle(ev.t)
+            self._window_over(ev.t) + self._check_while_on(ev.t) + self._teach_overdue(ev.t) + \
+            self._check_due(ev.t) + self._operator_idle(ev.t)

@@ -594,6 +594,8 @@ class Said(enum.Enum):
     #                                      (tightening_id, bolt)
     LOST_CHECKED = "lost checked"        # its push lost, fetched as its bolt's late-result
     #                                      window ended: recorded to it (tightening_id, bolt)
+    LOST_FOUND_ON = "lost found on"      # its push lost, fetched by a check with the tool
+    #                                      on: recorded to it, the tool off (tightening_id, bolt)
     LOOSEN_PSET_TIGHTENED = "loosen pset tightened"  # (bolt, pset)
     LOOSENED = "loosened"                # a loosening OK: the tightening pset next (bolt)
     LOOSENING_NOK = "loosening nok"      # (bolt, count: NOKs in a row)

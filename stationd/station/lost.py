@@ -69,6 +69,13 @@ class LostRules(NokRules):
         held it beside the bolt whose result was in it)."""
         if self._checking is None or ev.serial not in (None, self._checking[1]):
             return []       # an earlier check's answer (a reviewer: it ended this one)
+        if self._checking_on:
+            # asked with the tool on (:meth:`_check_while_on`): what it found was fed and
+            # recorded already.  Nothing made: the tool stays on, nothing said.  Could not
+            # tell: nothing either -- the tool stays on and the next period asks again; the
+            # bolt is held only by the window-end check, as the enable's window ends without
+            # a result (a hold mid-enable would stop an operator at every slow answer)
+            return self._check_ended()
         en, acts = self._enabled, []
         if en is not None and self._checking_owed() and not self.tool_on:
             if ev.nothing_made:
@@ -103,10 +110,17 @@ class LostRules(NokRules):
     def _check_ended(self) -> list[Action]:
         """The check is over: the enable it was for is owed nothing more (an enable since, of
         that bolt, is its own: kept)."""
-        if self._checking_owed() and not self.tool_on:
+        if self._checking_owed() and not self.tool_on and (
+                not self._checking_on or self._answered_now()):
             self._enabled, self._off_at = None, None
-        self._checking = None
+        self._checking, self._checking_on = None, False
         return []
+
+    def _answered_now(self) -> bool:
+        """The enable owed now had its result (a check with the tool on found it): it owes
+        nothing more (a check asked as the tool went off for the operator leaving, without
+        one, leaves its window to run and its own check at the end)."""
+        return self._judged is not None and self._judged[1] == self._enable_serial
 
     def _push_judged(self, t: float) -> list[Action]:
         """The pushed result that skipped ids is judged (or no longer waited for): the NOK
@@ -230,7 +244,36 @@ class LostRules(NokRules):
         lost = [u for u in self._unanswered
                 if u.enabled_at >= since - CLOCK_SLACK_S and self._still_open(u)]
         return self._hold_unanswered(ev.t, lost, lambda u: lost_gap_note(
-            id_span(ev.first, ev.last), u.selection.pset, u.enabled_at))
+            id_span(ev.first, ev.last), u.selection.pset, u.enabled_at)) + \
+            self._doubt_while_on(ev.t, None, lambda u: lost_gap_note(
+                id_span(ev.first, ev.last), u.selection.pset, u.enabled_at))
+
+    def _fetched_in_doubt(self, ev: ResultIn) -> list[Action]:
+        """A result a check with the tool on fetched (:meth:`_check_while_on`) that nothing
+        proves made under the enable on now (:meth:`_made_under`), of its pset:
+        :meth:`_doubt_while_on`."""
+        if not (ev.fetched and ev.live and ev.before is None):
+            return []
+        tid = int(ev.result.tightening_id)
+        return self._doubt_while_on(ev.t, int(ev.result.pset), lambda u: lost_unknown_note(
+            tid, u.selection.pset, u.enabled_at), tid)
+
+    def _doubt_while_on(self, t: float, pset: int | None, note_of: Callable[[_Cut], str],
+                        tid: int | None = None) -> list[Action]:
+        """A check with the tool on found what may be the rundown of the enable on now, and
+        cannot place it (a result not proved its own, of its pset; ``pset`` None: ids the
+        controller no longer gives).  Never left with its tool on (the operator would run
+        it down again), nor open (the window-end check, finding nothing newer, would leave
+        it so): the tool off and the bolt held for a person; the enable owes nothing more."""
+        en, since = self._enabled, self._enabled_at
+        if not (self._checking_on and self._checking_owed() and self.tool_on) \
+                or en is None or since is None or en.vin != self.vin \
+                or (pset is not None and en.pset is not None and pset != en.pset):
+            return []
+        acts = self._drop(t, State.TRACKING, StateReason(Because.UNKNOWN_HELD, bolt=en.bolt))
+        acts += self._hold_unanswered(t, [_Cut(en, since, t)], note_of, tid)
+        self._enabled, self._off_at = None, None
+        return acts
 
     def _cut_in_doubt(self, ev: ResultIn) -> list[Action]:
         """A result stored unattributed while a link cut's result is owed, of the pset sent

@@ -188,7 +188,8 @@ class ResultRules(UnreadRules):
                 Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
                 Publish(Notice(Said.UNATTRIBUTED, tightening_id=tid, pset=int(r.pset),
                                unattributed=why, t=ev.t)),
-                *self._cut_in_doubt(ev), *self._lost_in_doubt(ev, lost)]
+                *self._cut_in_doubt(ev), *self._lost_in_doubt(ev, lost),
+                *self._fetched_in_doubt(ev)]
 
     def _controller_event(self, ev: ResultIn, kind: ResultKind) -> list[Action]:
         """A result that is not a tightening or a loosening (a batch increment a line lead
@@ -363,7 +364,8 @@ class ResultRules(UnreadRules):
         if cut or lost:
             checked = not cut and ev.before is None
             acts.append(Publish(Notice(Said.CUT_RECORDED if cut else Said.LOST_RECORDED
-                                       if not checked else Said.LOST_CHECKED,
+                                       if not checked else Said.LOST_FOUND_ON
+                                       if self._checking_on else Said.LOST_CHECKED,
                                        tightening_id=int(r.tightening_id), bolt=en.bolt,
                                        vin=en.vin if checked and en.vin != self.vin else None,
                                        t=ev.t)))

@@ -62,6 +62,17 @@ PENDING_PUSH_S = 60.0
 #: MID 0064 and the fetches of what it had since, each bounded in time by the driver)
 CHECK_WAIT_S = 15.0
 
+#: while the tool is on and its enable has no result yet, the controller is asked for its
+#: newest result every this many seconds of tool-on (:class:`CheckNewest` with
+#: ``tool_on``): a rundown whose push was lost is found within it, recorded to its bolt and
+#: the tool goes off, as for a pushed result.  Why: a new-user trial (``lose_push_every``)
+#: found the tool left on after a lost NOK, and the operator ran the bolt down again without
+#: its loosening.  2.5 s: longer than a rundown takes to end and its push to come (a check
+#: that comes first takes the result fetched, its push then a copy), one MID 0064 and its
+#: answer per period (nothing the link feels), and shorter than an operator takes to see a
+#: result, let go and pull again.  None: never
+CHECK_ON_S = 2.5
+
 
 @dataclass(frozen=True)
 class _Cut:
@@ -188,6 +199,7 @@ class CoreState:
     leave_frames: int = 3
     rework: bool = True
     late_result_s: float = LATE_RESULT_S
+    check_on_s: float | None = CHECK_ON_S
     nok: NokPolicy = field(default_factory=NokPolicy)
     state: State = State.STARTING
     reason: StateReason = OPENING
@@ -228,6 +240,10 @@ class CoreState:
     #: enable's window ended: since when, and that enable's count; it stays owed until the
     #: answer (:class:`NewestChecked`) or CHECK_WAIT_S
     _checking: tuple[float, int] | None = field(default=None, repr=False)
+    #: the check running was asked with the tool on (:data:`CHECK_ON_S`): it ends no enable
+    #: and holds nothing, and when the last such check was asked
+    _checking_on: bool = field(default=False, repr=False)
+    _checked_on_at: float = field(default=float("-inf"), repr=False)
     #: bolts whose NOK came fetched while a pushed result was pending: counted, the NOK
     #: policy waits for the pushed one (bolt -> its pset)
     _nok_owed: dict[str, int | None] = field(default_factory=dict, repr=False)

@@ -154,10 +154,28 @@ class ToolRules(FaultRules):
                 or self._pending_push is not None or self._checking is not None:
             return []
         if self._unanswered_after():
-            self._checking = (t, self._enable_serial)
+            self._checking, self._checking_on = (t, self._enable_serial), False
             return [CheckNewest(self._enable_serial)]
         self._enabled, self._off_at = None, None
         return []
+
+    def _check_while_on(self, t: float) -> list[Action]:
+        """The tool on for :data:`~stationd.station.state.CHECK_ON_S` (since the enable or
+        the last such check) and its enable without a result: the controller is asked for its
+        newest (:class:`CheckNewest` ``tool_on``).  A rundown whose push was lost (a new-user
+        trial: the tool stayed on, the NOK bolt run down again without its loosening) is
+        fetched, recorded to the bolt as made under this enable (:meth:`_made_under`) and the
+        tool goes off as for a pushed result.  Not while another check, a pushed result
+        waited for, a link cut's enable or a wrench fault: one at a time, never more often."""
+        en, since = self._enabled, self._enabled_at
+        if self.check_on_s is None or not self.tool_on or en is None or since is None \
+                or self._checking is not None or self._pending_push is not None \
+                or self._cut is not None or WRENCH in self.faults \
+                or t - max(since, self._checked_on_at) < self.check_on_s:
+            return []
+        self._checking, self._checking_on = (t, self._enable_serial), True
+        self._checked_on_at = t
+        return [CheckNewest(self._enable_serial, tool_on=True)]
 
     def _owed_elsewhere(self, t: float) -> str | None:
         """The bolt whose result may still come (its tool went off less than the late-result

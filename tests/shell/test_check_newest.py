@@ -7,12 +7,20 @@ from __future__ import annotations
 
 import asyncio
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 from types import SimpleNamespace
 from typing import Any
 
-from stationd.station.inputs import NewestChecked, ResultIn, ResultsMissed
+from drivers.wrench.sim.controller import SimController, SimPset, SimWrench
+from stationd.shell.blocking import Blocking
+from stationd.shell.controller import ControllerFeed
+from stationd.station.actions import CheckNewest, DisableTool, EnableTool, Record, SendParams
+from stationd.station.core import StationCore
+from stationd.station.inputs import NewestChecked, ResultIn, ResultsMissed, Started, Tick
+from stationd.station.policy import NokPolicy, NokRule
 from tests.shell.test_catch_up import REFUSED, Controller, Pushing, _feed_of, res
+from tests.station.test_core import PARAMS, Driver, _on
 
 
 class Slow(Controller):
@@ -134,3 +142,102 @@ def _core(feed: Any) -> Any:
 
 async def _until(event: asyncio.Event) -> None:
     await event.wait()
+
+
+def test_a_push_lost_with_the_tool_on_is_found_by_the_periodic_check_over_open_protocol():
+    """The new-user trial (``lose_push_every``, NOK policy loosen) over Open Protocol to the
+    simulated controller on loopback, the real core (tests/station/test_core.py's driver)
+    and the shell's results feed: B1 tightened NOK (pushed), loosened (pushed), enabled
+    again for its tightening pset; the operator runs it down, the controller loses that
+    push and keeps the tool enabled (a second rundown would be made under the same enable).
+    The core's periodic check with the tool on asks the controller's newest (MID 0064): the
+    rundown is fetched, recorded to B1, the tool goes off on the controller, and the next
+    selection of B1 is its loosening."""
+    pset = SimPset(12.0, 10.0, 14.0, 30.0, 10.0, 60.0)
+    # the controller's clock not said (MID 0080 refused): the order of ids places the result
+    ctl = SimController({1: pset, 2: pset, 90: SimPset(20.0, 5.0, 150.0, 90.0, 0.0, 720.0)},
+                        seed=5, nok_rate=1.0, refused_mids={80: 99})
+    # the core's clock is the station's (the shell stamps what it feeds with time.time())
+    d = Driver(core=StationCore(PARAMS, leave_frames=2, nok=NokPolicy(NokRule(3, "loosen", 90))))
+    d.t, d.answer_checks = time.time(), False
+    d.feed(Started(d.t))
+    d.step(("lift", 0.1, True, True, "VIN1"))
+    fed: list[Any] = []
+    made: list[int] = []
+
+    with SimWrench(ctl, timeout=2.0) as w:
+        w.open()
+
+        def apply(acts: list[Any]) -> list[Any]:
+            """The core's actions on the controller, as the shell's effects do them."""
+            for a in acts:
+                if isinstance(a, SendParams):
+                    w.select_pset(a.selection.pset)
+                elif isinstance(a, EnableTool):
+                    w.enable_tool()
+                elif isinstance(a, DisableTool):
+                    w.disable_tool()
+            return acts
+
+        async def feed(ev: Any) -> None:
+            fed.append(ev)
+            apply(d.feed(ev))
+
+        def enabled(bolt: int) -> SendParams:
+            d.t = max(d.t, time.time())
+            n = len(d.log)
+            _on(d, bolt)
+            [sent] = [a for _, aa in d.log[n:] for a in aa if isinstance(a, SendParams)]
+            apply([sent])
+            d.step(("ack", 0.01, True))
+            _on(d, bolt, 1)
+            apply([a for _, aa in d.log[n:] for a in aa if isinstance(a, EnableTool)])
+            assert d.core.tool_on and ctl.tool_enabled
+            return sent
+
+        async def main() -> None:
+            pool = ThreadPoolExecutor(2)
+            keeper = SimpleNamespace(device=w, reconnects=1, losing=False, up=True)
+            # the database as it answers: nothing stored twice
+            records = SimpleNamespace(repo=SimpleNamespace(), copy_input=lambda ev, vin: ev)
+            feed_ = ControllerFeed(d.core, records, keeper, feed,  # type: ignore[arg-type]
+                                   lambda ev: None, Blocking(pool))
+            feed_._accounted = 0
+            try:
+                for code, ok in ((1, False), (2, True)):   # NOK, then its loosening
+                    sent = enabled(1)
+                    assert sent.loosen == (code == 2)
+                    ctl.nok_rate = 0.0 if ok else 1.0
+                    shot = ctl.pull_trigger(result_type=code)
+                    assert shot is not None
+                    await feed_.results(w)
+                    assert not d.core.tool_on and not ctl.tool_enabled
+                sent = enabled(1)
+                assert not sent.loosen and sent.selection.pset == 1
+                ctl.nok_rate = 1.0
+                ctl.lose_next_push()
+                lost = ctl.pull_trigger()                  # its push lost
+                assert lost is not None and not lost.ok
+                made.append(lost.tightening_id)
+                assert ctl.tool_enabled and d.core.tool_on   # nobody heard of it
+                d.t += d.core.check_on_s
+                [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+                assert check.tool_on
+                feed_.check_newest(check.serial, check.tool_on)
+                assert feed_.checking is not None
+                await feed_.checking
+            finally:
+                feed_.close()
+                pool.shutdown()
+
+        asyncio.run(main())
+        recorded = [(a.bolt, int(a.result.tightening_id))
+                    for _, aa in d.log for a in aa if isinstance(a, Record)]
+        assert recorded == [("B1", 1), ("B1", 2), ("B1", made[0])], recorded
+        assert not d.core.tool_on and not ctl.tool_enabled, "the tool left on"
+        assert ctl.pull_trigger() is None, "a second rundown under the same enable"
+        assert "B1" not in d.core.matcher.held
+        n = len(d.log)
+        _on(d, 1, 4)
+        sent = [a for _, aa in d.log[n:] for a in aa if isinstance(a, SendParams)]
+        assert [(s.loosen, s.selection.pset) for s in sent] == [(True, 90)]

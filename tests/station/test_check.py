@@ -4,16 +4,19 @@ could be tightened twice or a hold that would not end."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
-from stationd.station.actions import CheckNewest, EnableTool, Record, StoreCutUnknown
+from stationd.station.actions import CheckNewest, EnableTool, Record, SendParams, StoreCutUnknown
 from stationd.station.commands import ReleaseBolt
-from stationd.station.events import Because
+from stationd.station.events import Because, Notice, ToolDisabled
 from stationd.station.inputs import NewestChecked, ResultIn, Tick
-from stationd.station.state import CHECK_WAIT_S
-from stationd.words import state_words
+from stationd.station.policy import NokPolicy, NokRule
+from stationd.station.state import CHECK_ON_S, CHECK_WAIT_S
+from stationd.words import notice_words, state_words
 from tests.station.test_commands import SUPERVISOR, _answer
-from tests.station.test_core import _on, _ready
+from tests.station.test_core import _on, _ready, published
 from tests.station.test_lost import _window_ends
 from tests.station.test_result_types import _enabled, res
 
@@ -186,3 +189,109 @@ def test_a_result_after_a_check_that_found_nothing_is_the_next_enables():
     assert [a.bolt for a in acts if isinstance(a, Record)] == ["B3"]
     assert not [a for a in acts if isinstance(a, StoreCutUnknown)]
     assert "B3" in d.core.matcher.done and "B3" not in d.core.matcher.held
+
+
+def _loosen_done_then_enabled(d: Any) -> None:
+    """B1 (NOK policy loosen) tightened NOK (40, pushed), loosened (41, pushed), then the
+    tool on again for its tightening pset."""
+    for tid, ok, code in ((40, False, 1), (41, True, 2)):
+        sent = _enabled(d, 1)
+        assert sent.loosen == (code == 2)
+        d.feed(ResultIn(d.t, res(tid, sent.selection.pset or 0, ok, code)))
+        assert not d.core.tool_on
+        d.t += 1.0
+    sent = _enabled(d, 1)
+    assert not sent.loosen and sent.selection.pset == 1
+
+
+def test_a_push_lost_with_the_tool_on_is_found_by_the_periodic_check_and_the_tool_goes_off():
+    """A new-user trial (``lose_push_every=7``, NOK policy loosen): B1 tightened NOK,
+    loosened, enabled again for its tightening pset; the operator runs it down (42, NOK),
+    its push lost.  The station heard nothing: the tool stayed on with the same pset and the
+    operator ran the NOK bolt down again without its loosening.  Within CHECK_ON_S of
+    tool-on the controller's newest is asked: 42 fetched (made under this enable: the id
+    after the last result, judged under the enable before, of the same bolt), recorded to
+    B1, the tool off, the NOK policy applied (loosen first): no second rundown under that
+    enable."""
+    d = _ready(nok=NokPolicy(NokRule(3, "loosen", 90)))
+    d.answer_checks = False
+    _loosen_done_then_enabled(d)
+    d.t += 1.0                                         # 42 made: its push lost
+    assert not [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    d.t += CHECK_ON_S
+    [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    assert check.tool_on and d.core.tool_on
+    acts = d.feed(ResultIn(d.t, res(42, 1, False, 1), fetched=True, follows=41,
+                           made_at=None, live=True))
+    acts += d.feed(NewestChecked(d.t, serial=check.serial))
+    assert [(a.bolt, a.result.tightening_id) for a in acts if isinstance(a, Record)] == [
+        ("B1", 42)]
+    assert not d.core.tool_on and not d.tool, "the tool left on after the lost NOK was found"
+    assert [e.reason.kind for e in published(acts, ToolDisabled)] == [Because.RUNDOWN]
+    assert "B1" not in d.core.matcher.held
+    assert any("fetched by a check of the controller's newest with the tool on for B1"
+               in notice_words(e) for e in published(acts, Notice))
+    # no second rundown under that enable: B1's next selection is its loosening
+    n = len(d.log)
+    _on(d, 1, 4)
+    sent = [a for _, aa in d.log[n:] for a in aa if isinstance(a, SendParams)]
+    assert [(s.loosen, s.selection.pset) for s in sent] == [(True, 90)]
+    # the enable is owed nothing more: no window-end check of it, nothing held
+    d.t += d.core.late_result_s + 1.0
+    assert not [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    assert "B1" not in d.core.matcher.held
+
+
+@pytest.mark.parametrize("answer", ["nothing made", "could not tell"])
+def test_a_periodic_check_that_finds_nothing_or_cannot_tell_leaves_the_tool_on(answer):
+    """The tool on for B1, no rundown yet: the periodic check finds the newest the last one
+    accounted for (the tool stays on, nothing held, nothing said), or cannot tell (neither:
+    the next period asks again; only the window-end check holds, as the operator leaves
+    without a result)."""
+    d = _ready()
+    d.answer_checks = False
+    _enabled(d, 1)
+    for _ in range(3):
+        d.t += CHECK_ON_S
+        [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+        assert check.tool_on
+        acts = d.feed(NewestChecked(d.t, nothing_made=answer == "nothing made",
+                                    unknown="" if answer == "nothing made" else "refused",
+                                    serial=check.serial))
+        assert d.core.tool_on and d.tool and "B1" not in d.core.matcher.held
+        assert not published(acts, Notice) and not published(acts, ToolDisabled)
+    _on(d, 2, 3)                                       # the operator leaves B1
+    d.t += d.core.late_result_s + 1.0
+    [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    assert not check.tool_on
+    d.feed(NewestChecked(d.t, unknown="refused", serial=check.serial))
+    assert "B1" in d.core.matcher.held                 # the window-end rule holds it
+
+
+@pytest.mark.parametrize("found", ["a result not proved its own", "a gap"])
+def test_what_a_periodic_check_cannot_place_turns_the_tool_off_and_holds_the_bolt(found):
+    """The tool on for B1, the first enable since the start (no result judged: the order of
+    ids proves nothing), the controller's clock not known.  The periodic check fetches 41
+    (of B1's pset) -- or finds the controller no longer has it (a gap).  It may be B1's
+    rundown: left with its tool on, the operator runs it down again; and the window-end
+    check, the newest then accounted for, would find nothing made and leave B1 open.  The
+    tool goes off and B1 is held for a person."""
+    from stationd.station.inputs import ResultsMissed
+    d = _ready()
+    d.answer_checks = False
+    _enabled(d, 1)
+    d.t += CHECK_ON_S
+    [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    if found == "a gap":
+        acts = d.feed(ResultsMissed(d.t, 41, 41, "the controller no longer has it", live=True))
+    else:
+        acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=None,
+                               made_at=None, live=True))
+        assert not [a for a in acts if isinstance(a, Record)]
+    acts += d.feed(NewestChecked(d.t, serial=check.serial))
+    assert not d.core.tool_on and not d.tool, "the tool left on"
+    assert "B1" in d.core.matcher.held
+    assert [a.bolt for a in acts if isinstance(a, StoreCutUnknown)] == ["B1"]
+    d.t += d.core.late_result_s + 1.0
+    d.feed(Tick(d.t))
+    assert "B1" in d.core.matcher.held and "B1" not in d.core.allowed()

@@ -104,8 +104,9 @@ def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path
         ctl.lose_next_push()
         lost = ctl.pull_trigger()
         assert lost is not None
-        time.sleep(1.0)
         assert ctl.tool_enabled                   # the station heard nothing of it
+        # pulled again at once: before the check with the tool on (every CHECK_ON_S of
+        # tool-on: tests/station/test_check.py) would have found the lost one
         pushed = ctl.pull_trigger()
         assert pushed is not None
         d.wait_log(f"tightening {pushed.tightening_id} came after {first.tightening_id}: "
