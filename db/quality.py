@@ -57,13 +57,16 @@ def _point(rec: TighteningRecord) -> dict[str, Any]:
     """One result for the plot: its values, OK or not, and when it was recorded (UTC, ISO)."""
     return {"torque": None if rec.torque_nm is None else float(rec.torque_nm),
             "angle": None if rec.angle_deg is None else float(rec.angle_deg),
-            "ok": rec.status == "ok", "at": rec.recorded_at.isoformat()}
+            "ok": rec.status == "ok", "at": rec.recorded_at.isoformat(),
+            "entered": rec.entered_by is not None}
 
 
 def spc(s: Session, model: str | None = None, since: datetime | None = None,
         last: int = LAST_N) -> dict[str, Any]:
-    """Per bolt and pset (OK results): torque and angle capability, the group's last ``last``
-    results (OK and NOK, oldest first) and its limits; per day: results and NOK rate."""
+    """Per bolt and pset (OK results measured): torque and angle capability, the group's
+    last ``last`` results (OK and NOK, oldest first; each says whether it was entered by a
+    person) and its limits, the OKs entered (counted apart: not measured); per day: results
+    and NOK rate (entered ones too: they are outcomes)."""
     q = (select(TighteningRecord, Bolt.code, VehicleModel.name, ProcessParameters)
          .join(Bolt, TighteningRecord.bolt_id == Bolt.id)
          .join(Vehicle, TighteningRecord.vehicle_id == Vehicle.id)
@@ -87,11 +90,18 @@ def spc(s: Session, model: str | None = None, since: datetime | None = None,
         limits = (p.torque_min, p.torque_target, p.torque_max,
                   p.angle_min, p.angle_target, p.angle_max)
         g = groups.setdefault((mname, bolt, p.pset, *limits), {
-            "torque": [], "angle": [], "limits": limits, "nok": 0, "version": p.version,
+            "torque": [], "angle": [], "limits": limits, "nok": 0, "entered": 0,
+            "version": p.version,
             "last": deque(maxlen=max(0, last))})
         g["last"].append(_point(rec))
         if rec.status != "ok":
             g["nok"] += 1
+            continue
+        if rec.entered_by is not None:
+            # typed in by a person from the controller's screen (its result could not be
+            # read): counted, never measured: not in the capability (a new user's trial: an
+            # entered 106.7 Nm in a bolt's mean)
+            g["entered"] += 1
             continue
         if rec.torque_nm is not None:
             g["torque"].append(float(rec.torque_nm))
@@ -103,6 +113,7 @@ def spc(s: Session, model: str | None = None, since: datetime | None = None,
         mname, bolt, pset = key[:3]
         t_lo, t_aim, t_hi, a_lo, a_aim, a_hi = g["limits"]
         rows.append({"model": mname, "bolt": bolt, "pset": pset, "nok": g["nok"],
+                     "entered_ok": g["entered"],
                      "parameter_version": g["version"],
                      "torque": capability(g["torque"], t_lo, t_hi),
                      "angle": capability(g["angle"], a_lo, a_hi),

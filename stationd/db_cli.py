@@ -536,6 +536,10 @@ def cmd_db_spc(args: argparse.Namespace) -> int:
               f"{r['nok']:>4} {r['parameter_version'] or '-':>3} {window:>11}  "
               f"{_num(t['mean']):>6} {_fig(t['cp']):>5} {_fig(t['cpk']):>5}  "
               f"{_num(a['mean']):>10} {_fig(a['cp']):>5} {_fig(a['cpk']):>5}")
+    for r in doc["bolts"]:   # typed in from the controller's screen: counted apart
+        if r["entered_ok"]:
+            print(f"{r['model']} {r['bolt']} pset {r['pset'] or '-'}: {r['entered_ok']} OK "
+                  "entered by a person (not measured: not in the figures)")
     for d in doc["trend"]:
         print(f"{d['day']}: {d['results']} results, {d['nok']} NOK "
               f"({100 * (d['nok_rate'] or 0):.1f} %)")

@@ -143,3 +143,31 @@ def test_each_group_carries_its_last_results_ok_and_nok_and_the_limits_of_its_ve
     # fewer asked for: the newest ones
     short = next(r for r in repo.spc(last=5)["bolts"] if r["bolt"] == "B1")
     assert [p["torque"] for p in short["last"]] == pytest.approx([t for t, _, _ in sent[-5:]])
+
+
+def test_an_ok_entered_by_a_person_is_counted_apart_and_not_in_the_capability(
+        repo, bolts_file, tmp_path, capsys):
+    """A held bolt's outcome typed in from the controller's screen is no measurement: not in
+    the mean, Cp or Cpk (a new user's trial: an entered 106.7 Nm in a bolt's mean); counted
+    apart, marked in the plot's points, and in the day's results."""
+    from datetime import UTC, datetime
+
+    from db.entered import record_entered
+
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    for i, torque in enumerate((49.0, 50.0, 51.0, 50.0, 50.5, 49.5)):
+        record(repo, "VIN1", "B1", tightening_id=i + 1, torque_nm=torque)
+    before = repo.spc()["bolts"][0]["torque"]
+    record_entered(repo, vin="VIN1", bolt="B1", ok=True, torque_nm=106.7, angle_deg=31.0,
+                   at=datetime.now(UTC), user="sam", source="cli", comment="read on it")
+    [b1] = [r for r in repo.spc()["bolts"] if r["bolt"] == "B1"]
+    assert b1["torque"]["n"] == 6 and b1["torque"]["mean"] == pytest.approx(before["mean"])
+    assert b1["entered_ok"] == 1 and b1["last"][-1]["entered"] is True
+    assert not any(p["entered"] for p in b1["last"][:-1])
+    assert repo.spc()["trend"][0]["results"] == 7
+    from stationd import cli
+
+    assert cli.main(["db", "spc", "--db", url_of(tmp_path / "station.db")]) == 0
+    assert "SEDAN B1 pset 1: 1 OK entered by a person (not measured: not in the figures)" \
+        in capsys.readouterr().out
