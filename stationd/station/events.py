@@ -248,6 +248,9 @@ class BoltView:
     #: released from a hold (its result not known), not run down since: it may be tightened
     #: already, the operator checks the controller first
     check_first: bool = False
+    #: to be loosened first (status ``loosen``): the loosen pset that goes next (the screen
+    #: says "loosen first P90" after a reload or a rework as live)
+    loosen_pset: int | None = None
 
 
 @dataclass(frozen=True)

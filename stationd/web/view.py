@@ -402,7 +402,7 @@ class View:
                                         loosen=b.status == TO_LOOSEN,
                                         ends_nok=b.status == NOK or b.last_nok,
                                         ran=b.ran or b.status not in (PENDING, SKIPPED, MISSING),
-                                        check_first=b.check_first)
+                                        check_first=b.check_first, loosen_pset=b.loosen_pset)
                       for b in e.bolts}
 
     def _close(self, e: VehicleClosed) -> None:

@@ -222,6 +222,9 @@ def test_the_loosen_state_comes_back_with_the_vehicle():
     [opened] = published(acts, VehicleOpened)
     assert {b.bolt: b.status for b in opened.bolts} == {"B1": TO_LOOSEN, "B2": OK,
                                                           "B3": TO_LOOSEN}
+    # with the loosen pset that goes next (a new user's trial: "loosen first", no pset, on
+    # the screen after a rework)
+    assert {b.bolt: b.loosen_pset for b in opened.bolts} == {"B1": 90, "B2": None, "B3": 91}
     # loosened last: to be tightened (not done); to loosen without a loosen pset: skipped
     plain = StationCore(PARAMS, leave_frames=2, nok=NokPolicy())
     plain.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, status={"B1": LOOSENED,

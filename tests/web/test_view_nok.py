@@ -194,8 +194,10 @@ def test_after_a_reload_and_through_skips_and_a_close_the_counts_stay_the_report
     skip = Skip(SkipKind.COMMAND, user="sam", comment="")
     v = fold([VehicleOpened(vin=VIN, model="SEDAN", bolts=bolts(
         B2=BoltView("B2", 400.0, 0.0, 0.0, 1, status=TO_LOOSEN_STATUS, last_nok=True,
-                    ran=True)))])
+                    ran=True, loosen_pset=90)))])
     assert v.counters() == {"total": 4, "done": 0, "nok": 1, "skipped": 0}
+    b2 = v.bolts["B2"].to_json()    # its loosen pset said after a reload, as live
+    assert (b2["state"], b2["loosen_pset"]) == ("loosen", 90)
     v = fold([*opened(), result("B3", True, 1), _loosen("B3"),
               BoltToLoosen("B3", Reason(Why.LOOSEN_FIRST, bolt="B3", pset=90), "sam"),
               BoltSkipped("B3", skip=skip)])
