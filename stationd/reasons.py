@@ -66,6 +66,8 @@ class Why(enum.Enum):
     LOOSEN_FIRST = "loosen first"        # the bolt gets its loosen pset next (bolt, pset;
                                          # user, note: whose command, and their comment)
     NOTHING_TO_LOOSEN = "nothing to loosen"  # a loosen of a bolt not tightened (bolt)
+    LOOSEN_ORDERED = "loosen ordered"    # a loosen of a bolt to be loosened already (bolt,
+                                         # pset: its loosen pset)
     NO_LOOSEN_PSET = "no loosen pset"    # a loosen of a bolt no loosen_pset applies to (bolt)
     UNKNOWN_MODEL = "unknown model"      # a model no bolt table of the station has (note)
     # the calibration check against the reference markers

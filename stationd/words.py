@@ -365,7 +365,11 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
                                 f"{r.needed} frames)"),
     Why.ELSEWHERE: lambda r: f"nearest {r.bolt}",
     Why.LOCKED: lambda r: _locked(r.bolt, r.count),
-    Why.NOT_LOCKED: lambda r: f"{r.bolt} is not locked",
+    # (a trial: "B01 is not locked" of a bolt neither locked nor held, where holds are
+    # released too)
+    Why.NOT_LOCKED: lambda r: f"{r.bolt} is neither locked nor held: nothing to release",
+    Why.LOOSEN_ORDERED: lambda r: (f"{r.bolt} is to be loosened first already: its loosen "
+                                   f"pset {r.pset} goes next"),
     Why.NOT_HELD: lambda r: (
         f"{r.bolt} is not held but locked after {r.count} NOK in a row: its results were "
         "read; it is released (stationd release), not entered" if r.count else

@@ -146,8 +146,8 @@ class OrderRules(FaultRules):
         loosen_pset = self.nok.rule(b, self._specs[b].pset).loosen_pset
         if loosen_pset is None:
             return Reason(Why.NO_LOOSEN_PSET, bolt=b)
-        if b in self._loosen:
-            return Reason(Why.LOOSEN_FIRST, bolt=b, pset=loosen_pset)
+        if b in self._loosen:   # (said as the rule, it read as an instruction: a trial)
+            return Reason(Why.LOOSEN_ORDERED, bolt=b, pset=loosen_pset)
         if b in m.locked:
             return Reason(Why.LOCKED, bolt=b, count=m.locked[b])
         if b in m.skipped:

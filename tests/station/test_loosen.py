@@ -181,8 +181,10 @@ def test_loosen_commands_against_the_rules_are_refused_and_change_nothing():
     for i, (cmd, why) in enumerate(want.items()):
         assert _command(d, i, cmd, LOOSENER).answer.reason == why, cmd
     _rundown(d, 1, 1, ok=False)                 # to be loosened already
-    assert _command(d, 10, LoosenBolt("VIN1", "B1"), LOOSENER).answer.reason == \
-        Reason(Why.LOOSEN_FIRST, bolt="B1", pset=90)
+    why = _command(d, 10, LoosenBolt("VIN1", "B1"), LOOSENER).answer.reason
+    assert why == Reason(Why.LOOSEN_ORDERED, bolt="B1", pset=90)
+    # said as what is so, not as the rule (it read as an instruction: a new user's trial)
+    assert reason_words(why) == "B1 is to be loosened first already: its loosen pset 90 goes next"
     _rundown(d, 2, 2, ok=False)                 # B2 repeats: its NOK may be loosened...
     _on(d, 2)
     d.step(("ack", 0.01, True))

@@ -67,6 +67,8 @@ def test_a_bolt_locks_after_max_nok_in_a_row_and_a_release_unlocks_it():
         [("B2", "sam", False)]
     acts = d.core.feed(CommandIn(d.t, 3, ReleaseBolt("VIN1", "B2"), SUPERVISOR))
     assert _answer(acts).answer.reason == Reason(Why.NOT_LOCKED, bolt="B2")
+    assert reason_words(Reason(Why.NOT_LOCKED, bolt="B2")) == \
+        "B2 is neither locked nor held: nothing to release"
     _tighten(d, 2, 4, ok=True)                           # the count starts again
     assert "B2" in d.core.matcher.done
 
