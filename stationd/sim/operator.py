@@ -187,7 +187,10 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
             [b for b in planned if b in plan.visit or b in plan.waiting]:
         await r.visit(r.by_id[bolt_id], bolts, waiting)
     for bolt_id, (b, line) in waiting.items():
-        await r.for_people(bolt_id, b, line)
+        # held (its result not known) or locked (its NOKs), as the station has it (a new
+        # user's trial: a held bolt's line said "locked, released by sam")
+        await r.for_people(bolt_id, b, line,
+                           "held" if bolt_id in r.st.core.status().held else "locked")
         r.tell(line)
         await r.away()
     # the lift goes down only when no bolt of the vehicle waits for a supervisor (README:
