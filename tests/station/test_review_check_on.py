@@ -1,0 +1,71 @@
+"""Independent review (rv29) of the periodic check with the tool on (CheckNewest.tool_on)."""
+
+from __future__ import annotations
+
+import pytest
+
+from stationd.station.actions import CheckNewest, Record, StoreCutUnknown
+from stationd.station.inputs import NewestChecked, ResultIn, ResultsMissed, Tick
+from stationd.station.state import CHECK_ON_S
+from tests.station.test_core import _on, _ready
+from tests.station.test_result_types import _enabled, res
+
+
+@pytest.mark.parametrize("found", ["a result not proved its own", "a gap"])
+def test_what_the_tool_on_check_cannot_place_after_the_operator_left_holds_the_bolt(found):
+    """As tests/station/test_check.py::test_what_a_periodic_check_cannot_place_turns_the_
+    tool_off_and_holds_the_bolt, but the operator lifts the wrench off B1 (the tool off,
+    NOT_CONFIRMED) between the check being asked and its fetched 41 coming in -- the usual
+    moment: the rundown ended (its push lost), the operator moves on.  41 (B1's pset, not
+    proved B1's) is stored unattributed; _doubt_while_on asks tool_on and holds nothing; B1
+    is not in _unanswered yet, so _lost_enables holds nothing either.  The shell's
+    _accounted is now 41: the window-end check finds the newest == last heard (nothing
+    made) and B1 is left open -- tightened twice if 41 was its rundown."""
+    d = _ready()
+    d.answer_checks = False
+    _enabled(d, 1)
+    d.t += CHECK_ON_S
+    [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    assert check.tool_on
+    _on(d, 2, 3)                                     # the operator leaves B1: tool off
+    assert not d.core.tool_on
+    if found == "a gap":
+        acts = d.feed(ResultsMissed(d.t, 41, 41, "the controller no longer has it", live=True))
+    else:
+        acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=None,
+                               made_at=None, live=True))
+    assert not [a for a in acts if isinstance(a, Record)]
+    acts += d.feed(NewestChecked(d.t, serial=check.serial))
+    # the window-end check: the shell's _accounted is 41, the newest 41: nothing made
+    d.t += d.core.late_result_s + 1.0
+    ends = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    for c in ends:
+        acts += d.feed(NewestChecked(d.t, nothing_made=True, serial=c.serial))
+    assert [a.bolt for a in acts if isinstance(a, StoreCutUnknown)] == ["B1"], \
+        "41 may be B1's rundown: B1 left open"
+    assert "B1" in d.core.matcher.held and "B1" not in d.core.allowed()
+
+
+def test_a_push_after_the_tool_on_check_fetched_its_result_is_not_recorded_twice():
+    """The rundown 41 of B1 ends just before the periodic check (CHECK_ON_S after the
+    enable); its push is on its way, not lost.  The check fetches 41 (MID 0065 at a revision
+    without a result type, as oldresults.py agrees with controllers that refuse higher ones)
+    and records it to B1 (lost=True: the enable is kept owed until NewestChecked).  The shell
+    feeds the push of 41 (MID 0061 rev 3+, type 1) before NewestChecked (_until(not
+    received)); with the database refusing (copy_input raises: checked() passes the
+    ResultIn through) the core's only guard is _recorded == _said, which differs by the
+    type code: the push is attributed to the enable still owed -- 41 recorded twice to B1,
+    its NOK counted twice."""
+    d = _ready()
+    d.answer_checks = False
+    _enabled(d, 1)
+    at = d.t
+    d.t += CHECK_ON_S
+    [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    acts = d.feed(ResultIn(d.t, res(41, 1, False, None), fetched=True, follows=40,
+                           made_at=at + 2.2, live=True))
+    acts += d.feed(ResultIn(d.t, res(41, 1, False, 1), made_at=at + 2.2))   # its push
+    acts += d.feed(NewestChecked(d.t, serial=check.serial))
+    assert [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)] \
+        == [("B1", 41)], "one rundown recorded twice"
+    assert d.core._noks.get("B1") == 1
