@@ -506,9 +506,9 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
         f"window ended: made while the tool was on for {n.bolt} alone, recorded to {n.bolt}"
         + (f" of {n.vin} (gone from the station since)" if n.vin else "")),
     Said.LOST_FOUND_ON: lambda n: (
-        f"tightening {n.tightening_id}, its push lost, fetched by a check of the controller's "
-        f"newest with the tool on for {n.bolt}: made while the tool was on for {n.bolt} "
-        f"alone, recorded to {n.bolt}, the tool off"),
+        f"tightening {n.tightening_id}, its push not come (lost, or late), fetched by a check "
+        f"of the controller's newest with the tool on for {n.bolt}: made while the tool was "
+        f"on for {n.bolt} alone, recorded to {n.bolt}, the tool off"),
     Said.CUT_NOTHING: lambda n: (f"no tightening made during the link cut (every result "
                                  f"since fetched): {n.bolt} open as before"),
     Said.CUT_UNKNOWN: lambda n: (

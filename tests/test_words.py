@@ -132,8 +132,9 @@ WORDS = [
      "tightening 41, its push lost, fetched as B9's late-result window ended: made while the "
      "tool was on for B9 alone, recorded to B9 of VIN1 (gone from the station since)"),
     (Notice(Said.LOST_FOUND_ON, bolt="B1", tightening_id=42),
-     "tightening 42, its push lost, fetched by a check of the controller's newest with the "
-     "tool on for B1: made while the tool was on for B1 alone, recorded to B1, the tool off"),
+     "tightening 42, its push not come (lost, or late), fetched by a check of the "
+     "controller's newest with the tool on for B1: made while the tool was on for B1 alone, "
+     "recorded to B1, the tool off"),
     (Notice(Said.CUT_UNKNOWN, bolt="B1", vin="VIN1", note="tightening 41 may be its own"),
      "B1 of VIN1 (gone from the station): tightening 41 may be its own: check it on the "
      "controller; held when that vehicle is back (stationd reopen), to release or enter its "

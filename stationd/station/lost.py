@@ -264,13 +264,17 @@ class LostRules(NokRules):
         cannot place it (a result not proved its own, of its pset; ``pset`` None: ids the
         controller no longer gives).  Never left with its tool on (the operator would run
         it down again), nor open (the window-end check, finding nothing newer, would leave
-        it so): the tool off and the bolt held for a person; the enable owes nothing more."""
+        it so): the tool off and the bolt held for a person; the enable owes nothing more.
+        The tool already off (the operator lifted the wrench as the check ran: the usual
+        moment, the rundown over) holds it all the same (a reviewer: left open, the window-end
+        check then found the newest already heard and the bolt could be tightened twice)."""
         en, since = self._enabled, self._enabled_at
-        if not (self._checking_on and self._checking_owed() and self.tool_on) \
+        if not (self._checking_on and self._checking_owed()) \
                 or en is None or since is None or en.vin != self.vin \
                 or (pset is not None and en.pset is not None and pset != en.pset):
             return []
-        acts = self._drop(t, State.TRACKING, StateReason(Because.UNKNOWN_HELD, bolt=en.bolt))
+        acts = self._drop(t, State.TRACKING, StateReason(Because.UNKNOWN_HELD, bolt=en.bolt)) \
+            if self.tool_on else []
         acts += self._hold_unanswered(t, [_Cut(en, since, t)], note_of, tid)
         self._enabled, self._off_at = None, None
         return acts

@@ -59,6 +59,19 @@ def _said(result: TighteningResult) -> object:
             getattr(result, "timestamp", None))
 
 
+def _copy_of(seen: object, result: TighteningResult) -> bool:
+    """Whether ``result`` is a copy of the one recorded under its id (``seen``, what
+    :func:`_said` said of it): the same, its result type left out where either has none (a
+    result fetched as MID 0065 at a revision without one, then pushed as MID 0061 with one,
+    is one rundown: a reviewer found it recorded twice, its NOK counted twice)."""
+    said = _said(result)
+    if not (isinstance(seen, tuple) and isinstance(said, tuple)):
+        return False
+    if seen == said:
+        return True
+    return (seen[0] is None or said[0] is None) and seen[1:] == said[1:]
+
+
 def type_code(result: TighteningResult) -> int | None:
     """A result's type code as the controller sent it (Open Protocol MID 0061 revision 3+,
     parameter 49), None where its revision (or the backend) carries none."""
@@ -113,7 +126,7 @@ class ResultRules(UnreadRules):
         unattributed with why."""
         r = ev.result
         tid = int(r.tightening_id)
-        if self._recorded.get(tid, None) == _said(r):
+        if _copy_of(self._recorded.get(tid), r):
             return [Acknowledge(r)]   # sent again by the controller: stored once already
         seen = self._recorded.get(tid)
         if isinstance(seen, _Unread) and seen.same(r, ev.made_at):
@@ -145,7 +158,7 @@ class ResultRules(UnreadRules):
         tid = int(r.tightening_id)
         # the pushed one waited for: a copy, it is in
         owed = self._end_wait(ev.t) if tid == self._pending_push else []
-        if self._recorded.get(tid, None) == _said(r):
+        if _copy_of(self._recorded.get(tid), r):
             return [*owed, Acknowledge(r)]   # said already by this core
         self._recorded[tid] = _said(r)
         return [*owed, Publish(Notice(Said.SENT_AGAIN, tightening_id=tid, bolt=ev.bolt,

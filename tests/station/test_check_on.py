@@ -1,4 +1,6 @@
-"""Independent review (rv29) of the periodic check with the tool on (CheckNewest.tool_on)."""
+"""The periodic check of the controller's newest with the tool on (``CheckNewest.tool_on``),
+as an independent review found it: what it cannot place holds the bolt though the operator
+lifted the wrench meanwhile; a push after the check fetched its result is a copy."""
 
 from __future__ import annotations
 
