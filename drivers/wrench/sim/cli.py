@@ -27,7 +27,7 @@ from typing import Any, TextIO
 
 from drivers.errors import DriverError
 from drivers.link import bind_words
-from drivers.wrench.sim.controller import SimController, parse_result_types
+from drivers.wrench.sim.controller import UNKNOWN_MID, SimController, parse_result_types
 
 
 class ListenError(DriverError):
@@ -69,11 +69,34 @@ def add_behaviour_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--clock-offset", type=float, default=0.0, metavar="SECONDS",
                    help="the controller's clock (MID 0081, result timestamps) this far from "
                         "the local one (0)")
+    # the troubles the in-daemon sim://wrench URL takes (a new user's trial: only there)
+    p.add_argument("--lose-push-every", type=_count, default=0, metavar="N",
+                   help="lose every N-th result push (kept for MID 0064: found by a later "
+                        "push's id or the station's check) (0: never)")
+    p.add_argument("--garble-every", type=_count, default=0, metavar="N",
+                   help="spoil every N-th result's body (a result that cannot be read) "
+                        "(0: never)")
+    p.add_argument("--no-old-results", action="store_true",
+                   help="keep no results to give: refuse MID 0064 as an unknown MID (a push "
+                        "lost is then lost)")
+
+
+def _count(text: str) -> int:
+    """A count of 0 or more (0: never)."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, not {text!r}")
+    return n
 
 
 def behaviour(args: argparse.Namespace) -> dict[str, Any]:
     """SimController keywords from ``add_behaviour_options``' arguments."""
-    return {"mislabel": args.mislabel, "clock_offset_s": args.clock_offset}
+    return {"mislabel": args.mislabel, "clock_offset_s": args.clock_offset,
+            "lose_push_every": args.lose_push_every, "garble_every": args.garble_every,
+            "refused_mids": {64: UNKNOWN_MID} if args.no_old_results else None}
 
 
 def parser() -> argparse.ArgumentParser:
@@ -128,7 +151,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                             curves=not args.no_curves,
                             curves_refusal_code=args.curves_refusal_code,
                             curve_samples=args.curve_samples, part_size=args.part_size,
-                            mislabel=args.mislabel, clock_offset_s=args.clock_offset)
+                            **behaviour(args))
         return serve(sim, args.host, args.port, args.trigger_every, stop,
                      lambda port: f"listening on {args.host}:{port}", types=args.result_types)
     except (ValueError, ListenError) as e:

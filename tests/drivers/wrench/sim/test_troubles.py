@@ -56,3 +56,24 @@ def test_bad_trouble_options_are_one_readable_error(query, said):
     with pytest.raises(UrlError) as e:          # one line, naming the URL
         open_wrench(f"sim://wrench?{query}", connect=False)
     assert said in str(e.value) and str(e.value).startswith("sim://wrench?")
+
+
+def test_the_standalone_simulator_takes_the_troubles_as_options():
+    """``stationd sim controller`` and ``python -m drivers.wrench.sim``: the troubles of the
+    URL as options (a new user's trial found them only in the URL), read into the same
+    SimController keywords; a negative count is refused in words."""
+    import argparse
+
+    from drivers.wrench.sim import cli as sim_cli
+    from drivers.wrench.sim.controller import UNKNOWN_MID, SimController
+
+    args = sim_cli.parser().parse_args(["--lose-push-every", "3", "--garble-every", "5",
+                                        "--no-old-results"])
+    kw = sim_cli.behaviour(args)
+    assert (kw["lose_push_every"], kw["garble_every"], kw["refused_mids"]) == \
+        (3, 5, {64: UNKNOWN_MID})
+    sim = SimController(**kw)
+    assert (sim.lose_push_every, sim.garble_every) == (3, 5)
+    assert sim_cli.behaviour(sim_cli.parser().parse_args([]))["refused_mids"] is None
+    with pytest.raises(argparse.ArgumentTypeError, match="expected a whole number >= 0"):
+        sim_cli._count("-2")
