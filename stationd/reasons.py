@@ -286,7 +286,8 @@ class Reason:
     wait: Wait | None = None            # which rule of the sequence forbids it (MUST_WAIT)
     unchecked: Unchecked | None = None  # why a pair is not checked (PAIR_UNCHECKED)
     #: OTHER_VEHICLE: the VIN named was reopened for rework and is not back at the station yet
-    reopened: bool = False
+    #: (True; None: not said, as every detail that does not apply)
+    reopened: bool | None = None
     #: the refusal behind this one (a teach point not steady: what the localizations without
     #: the wrench said, e.g. no frame from a camera)
     cause: Reason | None = None

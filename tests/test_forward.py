@@ -463,12 +463,18 @@ def test_two_hundred_rundowns_made_while_the_server_is_stopped_arrive_once_in_or
 
 _FORWARD_SLOWLY = """
 import sys
+import time
 import stationd.forward as fw
 from db.repository import Repository
 fw.BATCH = 10                                   # many small transactions: a kill lands mid-way
 f = fw.Forwarder(Repository.open(sys.argv[1]), fw.LineConfig(sys.argv[2], "ST-K"))
+n = 0
 while f.step():
-    pass
+    n += 1
+    if n == 10:                                 # 100 forwarded: said, then slower, so the
+        print("mid-way", flush=True)            # kill lands before the last of 1000 however
+    if n >= 10:                                 # loaded the machine (it read 1000 under
+        time.sleep(0.2)                         # load: the kill came after the end)
 """
 
 
@@ -479,16 +485,11 @@ def test_a_forwarder_killed_mid_way_loses_and_doubles_nothing(tmp_path, table, p
     for tid in range(1, 1001):
         record(repo, "VINK", "B1" if tid % 2 else "B2", tightening_id=tid)
     p = subprocess.Popen([sys.executable, "-c", _FORWARD_SLOWLY,
-                          f"sqlite:///{tmp_path / 'st.db'}", pg_url], cwd=ROOT)
+                          f"sqlite:///{tmp_path / 'st.db'}", pg_url], cwd=ROOT,
+                         stdout=subprocess.PIPE, text=True)
     try:
-        import time
-
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and p.poll() is None:
-            rows = len(_line_rows(pg_url, "ST-K")) if _has_line_table(pg_url) else 0
-            if rows >= 100:
-                break
-            time.sleep(0.01)
+        assert p.stdout is not None
+        assert p.stdout.readline().strip() == "mid-way"   # (EOF: it died first)
         p.kill()                                # SIGKILL: no cleanup of any kind
         p.wait(30)
     finally:
