@@ -785,8 +785,10 @@ def answer_words(answer: Answer) -> str:
         ended = answer.result
         said = ([f"its lock after {ended['lock']} NOK in a row"] if "lock" in ended else []) \
             + ([f"its hold ({ended['hold']})"] if "hold" in ended else [])
+        loosen = "" if ended.get("loosen_pset") is None else \
+            f"; its loosen pset {ended['loosen_pset']} goes first"
         return f"{head}: accepted: {' and '.join(said)} ended" + _reopened(
-            answer.command.bolt, ended.get("hold"))
+            answer.command.bolt, ended.get("hold")) + loosen
     if answer.reason is None:
         return f"{head}: accepted"
     return f"{head}: refused: {reason_words(answer.reason)}"

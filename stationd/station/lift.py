@@ -228,6 +228,9 @@ class LiftRules(FaultRules):
                     self.matcher.skipped.setdefault(k, NO_LOOSEN_PSET)
                 else:
                     self._loosen.add(k)
+        for k in ev.released:    # a released hold, not run down since: loosened first as
+            if k in ev.bolts:    # at its release (its result not known: it may be a NOK)
+                self._loosen_unknown(k)
 
     def _on_vehicle_rejected(self, ev: VehicleRejected) -> list[Action]:
         if ev.closed and self.rework and ev.vin is not None and self._lift is not None:

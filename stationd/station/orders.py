@@ -186,13 +186,16 @@ class OrderRules(FaultRules):
                 ended["hold"] = note
                 acts.append(Publish(BoltReleased(cmd.bolt, c.issuer.user, unknown=True,
                                                  t=ev.t)))
+                self._loosen_unknown(cmd.bolt)
             locked = self.matcher.locked.pop(cmd.bolt, None) \
                 if self.matcher is not None and self.vin == cmd.vin else None
             if locked is not None:
                 ended["lock"] = locked
                 acts.append(Publish(BoltReleased(cmd.bolt, c.issuer.user, t=ev.t)))
-                if cmd.bolt in self._loosen:   # released, still to be loosened first
-                    acts.append(self._to_loosen(ev.t, cmd.bolt))
+            if ended and cmd.bolt in self._loosen:   # released, still to be loosened first
+                acts.append(self._to_loosen(ev.t, cmd.bolt))
+                ended["loosen_pset"] = self.nok.rule(cmd.bolt,
+                                                     self._specs[cmd.bolt].pset).loosen_pset
             if ended:
                 # a release ends the NOKs in a row, a hold's as a lock's: as the records count
                 # them at a reload (a supervisor's trial: the live count went on)

@@ -467,6 +467,15 @@ class CoreState:
             self._to(State.TRACKING, StateReason(Because.TRACKING))
         return note
 
+    def _loosen_unknown(self, bolt: str) -> None:
+        """A released hold's bolt (its result not known: it may be a NOK) gets its loosen
+        pset first where its NOK rule loosens: a NOK joint is never tightened again without
+        its loosening, and an OK one loosened and tightened again is a rework, not a fault
+        (a supervisor's trial: three held NOK joints, released, tightened again at once)."""
+        rule = self.nok.rule(bolt, self._specs[bolt].pset)
+        if rule.strategy == "loosen" and rule.loosen_pset is not None:
+            self._loosen.add(bolt)
+
     def _lock(self, t: float, bolt: str, n: int) -> list[Action]:
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
         self.matcher.locked[bolt] = n

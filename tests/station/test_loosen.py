@@ -400,3 +400,37 @@ def test_seeded_random_sequences_keep_the_invariants_after_every_event():
             totals[k] = totals.get(k, 0) + v
     # the walks really loosen, lock, release and record (else nothing was checked)
     assert min(totals.values()) >= 10, totals
+
+
+def test_a_released_hold_is_loosened_first_under_the_loosen_strategy():
+    """A supervisor's trial: three held bolts whose unknown results were NOKs, released, were
+    tightened again at once with their tightening pset.  Under ``loosen`` a released hold
+    (its result not known: it may be a NOK) gets its loosen pset first, live and after a
+    restart (the records' released hold); under ``repeat`` it is tightened again."""
+    from stationd.station.inputs import UnreadableIn
+    from tests.station.test_result_types import _enabled, unreadable
+
+    d = _driver()
+    sent = _enabled(d, 1)                         # the tool on for B1: a result not read
+    d.feed(UnreadableIn(d.t, unreadable(2, sent.selection.pset)))
+    assert "B1" in d.core.matcher.held
+    acts = d.command(1, ReleaseBolt("VIN1", "B1", "checked"), SUPERVISOR)
+    assert _answer(acts).answer.accepted
+    assert answer_words(_answer(acts).answer).endswith(
+        "check the controller before tightening it again; its loosen pset 90 goes first")
+    [to_loosen] = published(acts, BoltToLoosen)
+    assert to_loosen.reason == Reason(Why.LOOSEN_FIRST, bolt="B1", pset=90)
+    n = len(d.log)
+    _on(d, 1, 3)
+    [again] = [a for _, acts in d.log[n:] for a in acts if isinstance(a, SendParams)]
+    assert again.loosen and again.selection.pset == 90
+    # after a restart: the records say B1's hold was released, not run down since
+    core = StationCore(PARAMS, leave_frames=2, nok=POLICY)
+    acts = core.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, released=frozenset({"B1"})))
+    [opened] = published(acts, VehicleOpened)
+    assert "B1" in core._loosen
+    assert {b.bolt: (b.status, b.check_first) for b in opened.bolts}["B1"] == (TO_LOOSEN, True)
+    # repeat: tightened again (the supervisor's release says it may be tightened already)
+    plain = StationCore(PARAMS, leave_frames=2, nok=NokPolicy(NokRule(3, "repeat")))
+    plain.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, released=frozenset({"B1"})))
+    assert plain._loosen == set()
