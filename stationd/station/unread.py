@@ -141,6 +141,12 @@ class UnreadRules(LostRules):
         en = self._enabled if self._result_owed(ev.t) else None
         if u.fetched:   # after a reconnect (a renewal's catch-up hands its results as pushed)
             en = self._cut.selection if self._cut is not None else None
+            if en is None and self._checking_owed():
+                # fetched by a check of the controller's newest for the enable owed now (the
+                # tool on, or its window ended): it may be that enable's rundown, its push
+                # lost; held (a supervisor's trial: "no bolt it could belong to", the bolt
+                # left open, the window-end check then finding the newest already heard)
+                en = self._enabled
         if en is not None and u.pset is not None and en.pset is not None \
                 and u.pset != en.pset and not u.fetched:
             # its pset could be read, and it is not the one sent.  Not for one fetched after

@@ -100,3 +100,32 @@ def test_a_quick_rundown_the_tool_on_check_fetches_after_the_operator_left_holds
     recorded = [a.bolt for a in acts if isinstance(a, Record)]
     held = "B1" in d.core.matcher.held
     assert recorded == ["B1"] or held, "41 (perhaps B1's NOK) neither recorded nor held: B1 open"
+
+
+@pytest.mark.parametrize("tool_on", [True, False], ids=["with the tool on", "as the window ended"])
+def test_an_unreadable_result_a_check_fetches_holds_the_enable_s_bolt(tool_on):
+    """A supervisor's trial: the periodic check fetched the controller's newest, B15's
+    rundown whose push was lost, and it did not read: stored "no bolt it could belong to",
+    B15 left open ("not tightened"), to be tightened twice.  Fetched by a check for the
+    enable owed now (with the tool on, or as its window ended), it may be that enable's
+    rundown: B1 is held and its tool goes off."""
+    from stationd.station.actions import StoreUnreadable
+    from stationd.station.inputs import UnreadableIn
+    from tests.station.test_result_types import unreadable
+
+    d = _ready()
+    d.answer_checks = False
+    _enabled(d, 1)
+    if tool_on:
+        d.t += CHECK_ON_S
+    else:
+        _on(d, 2, 3)                                  # the operator left B1
+        d.t += d.core.late_result_s + 1.0
+    [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    assert check.tool_on is tool_on
+    acts = d.feed(UnreadableIn(d.t, unreadable(41, 1, fetched=True)))
+    [stored] = [a for a in acts if isinstance(a, StoreUnreadable)]
+    assert stored.bolt == "B1"
+    assert "B1" in d.core.matcher.held and not d.core.tool_on
+    acts = d.feed(NewestChecked(d.t, serial=check.serial))
+    assert "B1" in d.core.matcher.held and "B1" not in d.core.allowed()
