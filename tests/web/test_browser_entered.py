@@ -6,6 +6,11 @@ the vehicle's page says the rundown was entered and lists the result that could 
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
 import pytest
 
 from tests.shell.daemons import free_port, tool_on, tracking, until
@@ -16,8 +21,11 @@ from tests.web.test_browser_nok import _b05
 VIN = "ENTERSCREENVIN001"
 
 
-@pytest.mark.timeout(300)
-def test_a_supervisor_enters_the_outcome_of_a_held_bolt_on_the_screen(page, shots, tmp_path):
+@contextmanager
+def _b05_held(page: Any, tmp_path: Path) -> Iterator[tuple[Any, Any, Path, int, Any]]:
+    """A daemon over the real protocols whose supervisor may release, its screen open, B05
+    held (its result did not read): (the daemon, the controller, the pose file, the screens'
+    port, the result made)."""
     http_port = free_port()
     pose = tmp_path / "pose"
 
@@ -35,6 +43,12 @@ def test_a_supervisor_enters_the_outcome_of_a_held_bolt_on_the_screen(page, shot
         until(lambda: not ctl.tool_enabled, 30, "the tool off")
         pose.write_text("")
         page.wait(lambda p: _b05(p, "state") == "locked", 30, "B05 drawn held")
+        yield d, ctl, pose, http_port, bad
+
+
+@pytest.mark.timeout(300)
+def test_a_supervisor_enters_the_outcome_of_a_held_bolt_on_the_screen(page, shots, tmp_path):
+    with _b05_held(page, tmp_path) as (d, _ctl, _pose, http_port, bad):
         page.wait(lambda p: _shown(p, "locks"), 30, "the locked panel")
         # drawn held, not locked (its result not known; no lock of NOKs: a supervisor's trial)
         drawn = page.js("const g = document.querySelector('g.bolt[data-bolt=B05]');"
@@ -97,22 +111,7 @@ def test_a_released_hold_is_drawn_check_first_and_its_selection_says_so(page, sh
     """A supervisor releases a held bolt on the screen (its result not known): the operator's
     map draws it "check first", not "to do", and the wrench back on it reads, in amber, that
     it may be tightened already (a supervisor's trial: the operator tightened it twice)."""
-    http_port = free_port()
-    pose = tmp_path / "pose"
-
-    def edit(text: str) -> str:
-        return _station(http_port)(text).replace("    supervisor: [skip, reopen]\n",
-                                                 "    supervisor: [skip, reopen, release]\n")
-
-    with tracking(tmp_path, VIN, edit=edit) as (d, _, ctl):
-        page.get(f"http://127.0.0.1:{http_port}/")
-        page.wait(lambda p: p.text("#vin") == VIN, 60, "the vehicle on the screen")
-        tool_on(d, ctl, pose, "B05")
-        ctl.garble_next_result("layout")
-        assert ctl.pull_trigger() is not None
-        until(lambda: not ctl.tool_enabled, 30, "the tool off")
-        pose.write_text("")
-        page.wait(lambda p: _b05(p, "state") == "locked", 30, "B05 drawn held")
+    with _b05_held(page, tmp_path) as (d, ctl, pose, _, _made):
         _login(page, "sam", PASSWORD)
         page.wait(lambda p: _shown(p, "release"), 30, "the release form")
         page.wait(lambda p: p.js("return [...document.querySelectorAll("
