@@ -9,6 +9,13 @@ import sys
 import tempfile
 from collections.abc import Generator
 
+# One BLAS thread per test process, set before NumPy loads OpenBLAS (this is the first
+# import of it): the suite runs one xdist worker per core, so each worker's pool of BLAS
+# threads only contended for the cores the other worker uses, its threads spinning while
+# they waited; tests/vision/test_enhance's matrix products took twice the CPU for it.  The
+# subprocesses a test starts inherit it; set OPENBLAS_NUM_THREADS to choose otherwise.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import numpy as np
 import pytest
 
