@@ -98,7 +98,12 @@ class Camera:
         k1, k2, p1, p2, k3, k4, k5, k6 = self._coeffs()
         x, y = xy[:, 0], xy[:, 1]
         r2 = x * x + y * y
-        radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+        if k3 == 0 and k4 == 0 and k5 == 0 and k6 == 0:
+            # the general formula below with these zeros, bit for bit (the denominator is
+            # exactly 1): the station's lenses, and the renderer's millions of rays, for less
+            radial = 1 + r2 * (k1 + r2 * k2)
+        else:
+            radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
         xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
         yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
         return np.stack([xd, yd], axis=1)
