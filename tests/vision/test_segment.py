@@ -68,10 +68,11 @@ def render(markers: Sequence[Marker] = (), patches: Sequence[Patch] = (), *,
     c = (scale - 1) / 2.0
     offs = [0.0] if scale == 1 else [c - 0.5, c + 0.5]
     acc = np.zeros((h, w, 3), np.float64)
+    refl = np.empty((h, w, 3), np.float64)
+    gain = np.asarray(cast, dtype=np.float64)[None, None, :]
     for oy, ox in itertools.product(offs, offs):
         X = np.arange(w, dtype=np.float64) * scale + ox
         Y = np.arange(h, dtype=np.float64) * scale + oy
-        refl = np.empty((h, w, 3), np.float64)
         refl[:] = grey
         for p in patches:
             cols = np.flatnonzero((X >= p.x0) & (X < p.x1))
@@ -104,11 +105,14 @@ def render(markers: Sequence[Marker] = (), patches: Sequence[Patch] = (), *,
             sub[rr <= m.r] = BLACK_RGB
             sub[rr <= m.r * m.inner] = WHITE_RGB
         lit = light[0] + (light[1] - light[0]) * np.clip(X / full[0], 0, 1)
-        img = refl * lit[None, :, None] * np.asarray(cast)[None, None, :]
+        # in place, the same operations in the same order as refl * lit * cast etc.
+        img = np.multiply(refl, lit[None, :, None], out=refl)
+        img *= gain
         if noise > 0:
             img += rng.normal(0.0, noise, img.shape)
-        acc += np.clip(np.round(img), 0, 255)
-    return np.ascontiguousarray(np.clip(np.round(acc / len(offs) ** 2), 0, 255)
+        acc += np.clip(np.round(img, out=img), 0, 255, out=img)
+    acc /= len(offs) ** 2
+    return np.ascontiguousarray(np.clip(np.round(acc, out=acc), 0, 255, out=acc)
                                 .astype(np.uint8)[..., ::-1])
 
 
