@@ -87,9 +87,13 @@ def pixel_rays(
         return xd, yd
     coeffs = np.zeros(8)
     coeffs[: camera.dist.size] = camera.dist
-    x, y = (xd.copy(), yd.copy()) if guess is None else (guess[0].copy(), guess[1].copy())
+    # x and y are the rows of one buffer whose transpose is the camera's (N, 2) input: no
+    # stacking per step, and the camera reads contiguous columns
+    xy = np.empty((2, xd.size))
+    x, y = xy[0], xy[1]
+    x[:], y[:] = (xd, yd) if guess is None else guess
     for _ in range(_NEWTON_MAX):
-        dist = camera.distort_normalized(np.stack([x, y], axis=1))
+        dist = camera.distort_normalized(xy.T)
         f0 = dist[:, 0] - xd
         f1 = dist[:, 1] - yd
         err = max(np.max(np.abs(f0), initial=0.0), np.max(np.abs(f1), initial=0.0))
