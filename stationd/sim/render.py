@@ -226,8 +226,15 @@ def render(camera: Camera, scene: Scene, *, window: Window | None = None, seed: 
     with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
         list(pool.map(block, rows[:-1], rows[1:]))
     _salt_pepper(image, scene, camera.size, win, seed)
-    truth = [_truth(camera, pose, spec, win) for pose, spec in scene.markers]
+    truth = [marker_truth(camera, pose, spec, win) for pose, spec in scene.markers]
     return Rendered(image=image, truth=truth, window=win)
+
+
+def marker_truth(camera: Camera, pose: MarkerPose, spec: MarkerSpec,
+                 window: Window | None = None) -> MarkerTruth:
+    """The truth ``render`` reports for this marker in ``window``: geometry only, no pixels."""
+    return _truth(camera, pose, spec, _check_window(window or (0, 0, *camera.size),
+                                                    camera.size))
 
 
 # -- internals ------------------------------------------------------------------------------

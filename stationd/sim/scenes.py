@@ -15,7 +15,14 @@ import numpy as np
 
 from stationd.geometry.camera import Camera, StereoPair
 from stationd.geometry.frames import Transform
-from stationd.sim.render import MarkerPose, Scene, crop_camera, default_camera, render
+from stationd.sim.render import (
+    MarkerPose,
+    Scene,
+    crop_camera,
+    default_camera,
+    marker_truth,
+    render,
+)
 from stationd.vision.marker import MarkerSpec
 
 Window = tuple[int, int, int, int]
@@ -97,9 +104,9 @@ def render_view(camera: Camera, pose: MarkerPose, spec: MarkerSpec, seed: int,
     dirt = int(scene_kw.pop("dirt", 0))
     scene = Scene(markers=[(pose, spec)], **scene_kw)
     if sp:
-        probe = render(camera, replace(scene, noise_sigma=0.0, blur_sigma=0.0), window=win,
-                       seed=seed, supersample=1)
-        bx, by, bw, bh = probe.truth[0].bbox
+        # the field's box is the marker's truth, which the render computes from the geometry
+        # alone: no render needed to know it
+        bx, by, bw, bh = marker_truth(camera, pose, spec, win).bbox
         scene = replace(scene, salt_pepper=sp, salt_pepper_roi=(win[0] + bx, win[1] + by, bw, bh))
     out = render(camera, scene, window=win, seed=seed)
     t = out.truth[0]

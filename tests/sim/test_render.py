@@ -21,6 +21,7 @@ from stationd.sim.render import (
     Window,
     crop_camera,
     default_camera,
+    marker_truth,
     render,
     roi_around,
 )
@@ -111,6 +112,9 @@ def test_distorted_tilted_marker_matches_projectpoints(centre, tilt, azimuth):
     win = window_around(camera, pose)
     r = render(camera, Scene(markers=[(pose, SPEC)]), window=win)
     truth = r.truth[0]
+    alone = marker_truth(camera, pose, SPEC, win)     # the same, without rendering a pixel
+    assert all(np.array_equal(getattr(alone, f), getattr(truth, f))
+               for f in truth.__dataclass_fields__)
     off = np.array(win[:2], dtype=float)
     cv_centre, _ = cv2.projectPoints(pose.centre_mm[None], np.zeros(3), np.zeros(3), camera.K,
                                      camera.dist)
