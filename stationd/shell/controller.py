@@ -95,6 +95,8 @@ class ControllerFeed:
         self._no_history = False
         #: the pushed result whose id skipped those fetched now (fed after them)
         self._revealed_by: int | None = None
+        #: the check asking now was the core's with the tool on (its fetches said so)
+        self._asked_on = False
         self._again = False     # a reconnect came while a catch-up ran: one more after it
         self._reads = 0         # the results' loop's reads of the controller so far
         #: when the controller's clock was last measured (at each connect, by the driver;
@@ -476,6 +478,7 @@ class ControllerFeed:
             return False, "the station's database was not open"
         async with self._gaps:
             last, link = self._accounted, self._link
+            self._asked_on = tool_on
             try:
                 newest = await self._call(wrench.fetch_result, 0)
                 now = self.core.status()
@@ -588,6 +591,8 @@ class ControllerFeed:
         log.info("tightening %d fetched %s", tid,
                  "after a reconnect" if not live else "after a later one came (the link up)"
                  if self._revealed_by is not None or self.checking is None else
+                 "by a check of the controller's newest with the tool on (the link up)"
+                 if self._asked_on else
                  "as an enable's late-result window ended (the link up)")
         await self._feed(await self.checked(result_input(
             time.time(), got, fetched=True, follows=follows, offset=offset, live=live,

@@ -455,7 +455,8 @@ def test_the_controller_s_newest_asked_for_fetches_what_was_never_heard(caplog):
     as results whose push was lost; a newest already heard fetches nothing.  The core is
     told the check ended, last, whatever it found (the enable it was for owed no more, the
     tool free to go on)."""
-    def asked(answers: dict[int, Any], heard: int, tool_on: bool = False) -> list[Any]:
+    def asked(answers: dict[int, Any], heard: int, tool_on: bool = False,
+              asked_on: bool = False) -> list[Any]:
         fed: list[Any] = []
 
         async def main() -> None:
@@ -463,7 +464,7 @@ def test_the_controller_s_newest_asked_for_fetches_what_was_never_heard(caplog):
                 feed_ = _feed_of(Controller(answers), heard, None, fed, pool)
                 feed_.core.tool_on = tool_on
                 feed_._accounted = heard
-                feed_.check_newest()
+                feed_.check_newest(None, asked_on)
                 await asyncio.gather(*(t for t in (feed_.checking,) if t is not None))
                 feed_.close()
 
@@ -489,3 +490,12 @@ def test_the_controller_s_newest_asked_for_fetches_what_was_never_heard(caplog):
     # a tool on: its own rundown may be the newest (fetched before its push: a reviewer)
     assert [type(e) for e in asked({0: res(42), 41: res(41), 42: res(42)}, 40,
                                    tool_on=True)] == told
+    # the core's check with the tool on: its fetches said so, not as a window's end (a
+    # supervisor's trial read both causes for one result)
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="stationd"):
+        fed = asked({0: res(41), 41: res(41)}, 40, tool_on=True, asked_on=True)
+    said = [r.getMessage() for r in caplog.records if "fetched" in r.getMessage()]
+    assert said == ["tightening 41 fetched by a check of the controller's newest with the "
+                    "tool on (the link up)"], said
+    assert [e.result.tightening_id for e in fed if isinstance(e, ResultIn)] == [41]
