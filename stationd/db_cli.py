@@ -523,6 +523,11 @@ def cmd_db_spc(args: argparse.Namespace) -> int:
     if args.json:
         sys.stdout.write(strict_json(doc) + "\n")
         return EXIT_OK
+    if not doc["bolts"]:   # said, not a header alone (a supervisor's trial)
+        print("no tightening results" + (f" of model {args.model}" if args.model else "")
+              + (f" since {args.since.isoformat()}" if args.since else "")
+              + ": nothing to compute")
+        return EXIT_OK
     # OK: the OK results the figures are computed on; NOK: the NOK rundowns (not bolts); a
     # change of limits starts a new row: its parameter version (v) and torque limits tell
     # the rows of one bolt and pset apart

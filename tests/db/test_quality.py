@@ -171,3 +171,8 @@ def test_an_ok_entered_by_a_person_is_counted_apart_and_not_in_the_capability(
     assert cli.main(["db", "spc", "--db", url_of(tmp_path / "station.db")]) == 0
     assert "SEDAN B1 pset 1: 1 OK entered by a person (not measured: not in the figures)" \
         in capsys.readouterr().out
+    # nothing in the span asked for: said, not a header alone (a supervisor's trial)
+    assert cli.main(["db", "spc", "--db", url_of(tmp_path / "station.db"), "--since",
+                     "2030-01-01"]) == 0
+    assert capsys.readouterr().out == ("no tightening results since 2030-01-01T00:00:00+00:00: "
+                                       "nothing to compute\n")
