@@ -27,7 +27,7 @@ from typing import TextIO
 
 from drivers.lift.base import RegisterMap
 from drivers.lift.sim import SimulatedPlc
-from drivers.wrench.sim.cli import ListenError, behaviour, serve
+from drivers.wrench.sim.cli import ListenError, behaviour, serve, troubles_words
 from drivers.wrench.sim.controller import DEFAULT_PSETS, SimController, SimPset
 from stationd.boltfile import load_bolts
 from stationd.config import load_station_config
@@ -186,10 +186,12 @@ def _serve_controller(args: argparse.Namespace, stop: threading.Event, out: Text
         print(f"stationd: error: {exc}", file=sys.stderr)
         return 2
     listed = ", ".join(str(p) for p in sorted(sim.psets))
+    troubles = troubles_words(args)
     try:
         return serve(sim, args.host, args.port, args.trigger_every, stop,
                      lambda port: f"controller listening on {args.host}:{port} (Open "
-                                  f"Protocol; psets {listed})", out, types=args.result_types)
+                                  f"Protocol; psets {listed}{troubles})", out,
+                     types=args.result_types)
     except ListenError as exc:   # a port in use: the station's words, exit 2
         raise InputError(str(exc)) from None
 

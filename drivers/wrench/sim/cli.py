@@ -92,6 +92,15 @@ def _count(text: str) -> int:
     return n
 
 
+def troubles_words(args: argparse.Namespace) -> str:
+    """The troubles asked for, as the simulator's first line says them ("" for none): who
+    starts it sees what it will do (a supervisor's trial: not named)."""
+    said = ([f"1 push in {args.lose_push_every} lost"] if args.lose_push_every else []) \
+        + ([f"1 result in {args.garble_every} unreadable"] if args.garble_every else []) \
+        + (["no old results (MID 0064 refused)"] if args.no_old_results else [])
+    return "; " + ", ".join(said) if said else ""
+
+
 def behaviour(args: argparse.Namespace) -> dict[str, Any]:
     """SimController keywords from ``add_behaviour_options``' arguments."""
     return {"mislabel": args.mislabel, "clock_offset_s": args.clock_offset,
@@ -153,7 +162,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                             curve_samples=args.curve_samples, part_size=args.part_size,
                             **behaviour(args))
         return serve(sim, args.host, args.port, args.trigger_every, stop,
-                     lambda port: f"listening on {args.host}:{port}", types=args.result_types)
+                     lambda port: f"listening on {args.host}:{port}{troubles_words(args)}",
+                     types=args.result_types)
     except (ValueError, ListenError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -74,6 +74,10 @@ def test_the_standalone_simulator_takes_the_troubles_as_options():
         (3, 5, {64: UNKNOWN_MID})
     sim = SimController(**kw)
     assert (sim.lose_push_every, sim.garble_every) == (3, 5)
-    assert sim_cli.behaviour(sim_cli.parser().parse_args([]))["refused_mids"] is None
+    assert sim_cli.troubles_words(args) == ("; 1 push in 3 lost, 1 result in 5 unreadable, "
+                                            "no old results (MID 0064 refused)")
+    plain = sim_cli.parser().parse_args([])
+    assert sim_cli.behaviour(plain)["refused_mids"] is None
+    assert sim_cli.troubles_words(plain) == ""
     with pytest.raises(argparse.ArgumentTypeError, match="expected a whole number >= 0"):
         sim_cli._count("-2")
