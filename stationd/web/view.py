@@ -337,7 +337,13 @@ class View:
         self.reopened = (e.vin, e.user)
 
     def _refused(self, e: Refused) -> None:
-        self._refuse(reason_words(e.reason), e.reason)
+        b = self.bolts.get(e.bolt or "")
+        if b is not None and b.check_first and e.reason.kind is Why.NOT_STABLE:
+            # settling on a bolt that may be tightened already: said now, in amber, not
+            # only once it is selected (a supervisor's trial: neutral while it settled)
+            self._refuse(f"{reason_words(e.reason)}: {CHECK_FIRST_WORDS}", e.reason, act=True)
+        else:
+            self._refuse(reason_words(e.reason), e.reason)
         if e.bolt in self.bolts and self.bolts[e.bolt].state in (PENDING, Shown.NEXT) \
                 and e.reason.kind in BLOCKS:
             self._set(e.bolt, Shown.BLOCKED, self.refused)

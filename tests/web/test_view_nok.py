@@ -229,6 +229,9 @@ def test_a_bolt_released_from_a_hold_reads_check_first_until_its_result():
     b2 = v.bolts["B2"].to_json()
     assert (b2["state"], b2["label"], b2["reason"]) == ("next", "check first",
                                                         CHECK_FIRST_WORDS)
+    # the wrench settling on it: said already, amber
+    v.apply(Refused(Reason(Why.NOT_STABLE, bolt="B2", count=1, needed=3), "B2"))
+    assert v.headline().endswith(f": {CHECK_FIRST_WORDS}") and v.tone() == "act"
     # the wrench back on it: the tool goes on, the headline says to check first, amber
     v.apply(_on("B2", 400.0)[1])
     assert v.headline() == f"B2 (pset 1): {CHECK_FIRST_WORDS}" and v.tone() == "act"
