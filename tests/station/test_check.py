@@ -16,7 +16,7 @@ from stationd.station.policy import NokPolicy, NokRule
 from stationd.station.state import CHECK_ON_S, CHECK_WAIT_S
 from stationd.words import notice_words, state_words
 from tests.station.test_commands import SUPERVISOR, _answer
-from tests.station.test_core import _on, _ready, published
+from tests.station.test_core import Driver, _on, _ready, published
 from tests.station.test_lost import _window_ends
 from tests.station.test_result_types import _enabled, res
 
@@ -276,18 +276,12 @@ def test_what_a_periodic_check_cannot_place_turns_the_tool_off_and_holds_the_bol
     rundown: left with its tool on, the operator runs it down again; and the window-end
     check, the newest then accounted for, would find nothing made and leave B1 open.  The
     tool goes off and B1 is held for a person."""
-    from stationd.station.inputs import ResultsMissed
     d = _ready()
     d.answer_checks = False
     _enabled(d, 1)
     d.t += CHECK_ON_S
     [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
-    if found == "a gap":
-        acts = d.feed(ResultsMissed(d.t, 41, 41, "the controller no longer has it", live=True))
-    else:
-        acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=None,
-                               made_at=None, live=True))
-        assert not [a for a in acts if isinstance(a, Record)]
+    acts = found_by_the_check(d, found)
     acts += d.feed(NewestChecked(d.t, serial=check.serial))
     assert not d.core.tool_on and not d.tool, "the tool left on"
     assert "B1" in d.core.matcher.held
@@ -295,3 +289,18 @@ def test_what_a_periodic_check_cannot_place_turns_the_tool_off_and_holds_the_bol
     d.t += d.core.late_result_s + 1.0
     d.feed(Tick(d.t))
     assert "B1" in d.core.matcher.held and "B1" not in d.core.allowed()
+
+
+def found_by_the_check(d: Driver, found: str) -> list[Any]:
+    """What a check of the controller's newest found that it cannot place as B1's: ``a
+    gap`` (41, no longer on the controller), else 41 of B1's pset, not proved B1's (no
+    clock); nothing is recorded to a bolt."""
+    from stationd.station.inputs import ResultsMissed
+
+    if found == "a gap":
+        acts = d.feed(ResultsMissed(d.t, 41, 41, "the controller no longer has it", live=True))
+    else:
+        acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=None,
+                               made_at=None, live=True))
+    assert not [a for a in acts if isinstance(a, Record)]
+    return acts

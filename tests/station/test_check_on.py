@@ -7,8 +7,9 @@ from __future__ import annotations
 import pytest
 
 from stationd.station.actions import CheckNewest, Record, StoreCutUnknown
-from stationd.station.inputs import NewestChecked, ResultIn, ResultsMissed, Tick
+from stationd.station.inputs import NewestChecked, ResultIn, Tick
 from stationd.station.state import CHECK_ON_S
+from tests.station.test_check import found_by_the_check
 from tests.station.test_core import _on, _ready
 from tests.station.test_result_types import _enabled, res
 
@@ -31,12 +32,7 @@ def test_what_the_tool_on_check_cannot_place_after_the_operator_left_holds_the_b
     assert check.tool_on
     _on(d, 2, 3)                                     # the operator leaves B1: tool off
     assert not d.core.tool_on
-    if found == "a gap":
-        acts = d.feed(ResultsMissed(d.t, 41, 41, "the controller no longer has it", live=True))
-    else:
-        acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=None,
-                               made_at=None, live=True))
-    assert not [a for a in acts if isinstance(a, Record)]
+    acts = found_by_the_check(d, found)
     acts += d.feed(NewestChecked(d.t, serial=check.serial))
     # the window-end check: the shell's _accounted is 41, the newest 41: nothing made
     d.t += d.core.late_result_s + 1.0
