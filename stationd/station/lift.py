@@ -176,8 +176,7 @@ class LiftRules(FaultRules):
                      last_nok=ev.status.get(k) == NOK,
                      ran=ev.status.get(k) not in (None, SKIPPED),
                      check_first=k in ev.released and k not in skipped,
-                     loosen_pset=self.nok.rule(k, b.pset).loosen_pset if k in self._loosen
-                     else None)
+                     loosen_pset=self._nok_rule(k).loosen_pset if k in self._loosen else None)
             for k, b in ev.bolts.items()), rework=ev.rework, t=ev.t)
         if self.state is State.WAITING_VEHICLE and self._lift is not None and self._lift.ready:
             self._to(State.TRACKING, StateReason(Because.TRACKING))

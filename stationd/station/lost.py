@@ -230,23 +230,24 @@ class LostRules(NokRules):
         give (a gap): the result of each enable since the last result heard that got none in
         its window may be among them.  Never left open (it may be tightened: the operator
         would tighten it twice): each such bolt held for a person."""
+        ids = id_span(ev.first, ev.last)
+
+        def note(u: _Cut) -> str:
+            return lost_gap_note(ids, u.selection.pset, u.enabled_at)
+
         if not ev.live:
             # a link cut's gap: the catch-up's end settles its enable; but one told only by
             # a push after a refused catch-up may hold results made since the reconnect (a
             # reviewer: the bolt left since, its push lost, was not held)
             return self._hold_unanswered(ev.t, [
                 u for u in self._unanswered
-                if u.enabled_at > self._link_back_at and self._still_open(u)],
-                lambda u: lost_gap_note(id_span(ev.first, ev.last), u.selection.pset, u.enabled_at))
+                if u.enabled_at > self._link_back_at and self._still_open(u)], note)
         last = self._judged
         since = self._judged_at if last is not None and last[0] == ev.first - 1 \
             else float("-inf")
         lost = [u for u in self._unanswered
                 if u.enabled_at >= since - CLOCK_SLACK_S and self._still_open(u)]
-        return self._hold_unanswered(ev.t, lost, lambda u: lost_gap_note(
-            id_span(ev.first, ev.last), u.selection.pset, u.enabled_at)) + \
-            self._doubt_while_on(ev.t, None, lambda u: lost_gap_note(
-                id_span(ev.first, ev.last), u.selection.pset, u.enabled_at))
+        return self._hold_unanswered(ev.t, lost, note) + self._doubt_while_on(ev.t, None, note)
 
     def _fetched_in_doubt(self, ev: ResultIn) -> list[Action]:
         """A result a check with the tool on fetched (:meth:`_check_while_on`) that nothing

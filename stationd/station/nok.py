@@ -24,7 +24,6 @@ from stationd.station.inputs import (
     CommandDone,
 )
 from stationd.station.orders import OrderRules
-from stationd.station.policy import NokRule
 from stationd.station.state import NOK_SKIPPED
 
 
@@ -49,14 +48,10 @@ class NokRules(OrderRules):
         n = self._noks[bolt] = self._noks.get(bolt, 0) + 1
         if bolt in self.matcher.locked:     # made before the station knew of the lock
             return [self._nok_after_lock(t, bolt, n, tid)]
-        rule = self.nok.rule(bolt, self._specs[bolt].pset)
+        rule = self._nok_rule(bolt)
         if n >= rule.max_nok:
             return self._lock(t, bolt, n)
         return [Publish(Notice(Said.LOOSENING_NOK, bolt=bolt, count=n, t=t))]
-
-    def _nok_rule(self, bolt: str, pset: int | None) -> NokRule:
-        """``bolt``'s NOK rule (``pset``: the one sent, where its spec is not known)."""
-        return self.nok.rule(bolt, self._specs[bolt].pset if bolt in self._specs else pset)
 
     def _after_nok(self, t: float, bolt: str, pset: int | None,
                    counted: bool = False, tid: int | None = None) -> list[Action]:

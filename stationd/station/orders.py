@@ -143,7 +143,7 @@ class OrderRules(FaultRules):
         m = self.matcher
         assert m is not None  # noqa: S101 - checked by the caller
         b = cmd.bolt
-        loosen_pset = self.nok.rule(b, self._specs[b].pset).loosen_pset
+        loosen_pset = self._nok_rule(b).loosen_pset
         if loosen_pset is None:
             return Reason(Why.NO_LOOSEN_PSET, bolt=b)
         if b in self._loosen:   # (said as the rule, it read as an instruction: a trial)
@@ -194,8 +194,7 @@ class OrderRules(FaultRules):
                 acts.append(Publish(BoltReleased(cmd.bolt, c.issuer.user, t=ev.t)))
             if ended and cmd.bolt in self._loosen:   # released, still to be loosened first
                 acts.append(self._to_loosen(ev.t, cmd.bolt))
-                ended["loosen_pset"] = self.nok.rule(cmd.bolt,
-                                                     self._specs[cmd.bolt].pset).loosen_pset
+                ended["loosen_pset"] = self._nok_rule(cmd.bolt).loosen_pset
             if ended:
                 # a release ends the NOKs in a row, a hold's as a lock's: as the records count
                 # them at a reload (a supervisor's trial: the live count went on)
@@ -250,7 +249,7 @@ class OrderRules(FaultRules):
         """``bolt`` gets its loosen pset next: after a NOK (the NOK policy), or by ``user``'s
         loosen command with their ``comment`` (the reason carries both; its words say whose
         command it was)."""
-        pset = self.nok.rule(bolt, self._specs[bolt].pset).loosen_pset
+        pset = self._nok_rule(bolt).loosen_pset
         return Publish(BoltToLoosen(bolt, Reason(Why.LOOSEN_FIRST, bolt=bolt, pset=pset,
                                                  user=user, note=comment), user, t=t))
 

@@ -32,7 +32,7 @@ from stationd.station.events import (
 )
 from stationd.station.inputs import CommandIn, LiftRead, LoadedBolt
 from stationd.station.matching import BoltMatcher, MatchParams
-from stationd.station.policy import NokPolicy
+from stationd.station.policy import NokPolicy, NokRule
 from stationd.station.trust import PairTrust
 
 #: a result this long after the tool went off is not the last bolt's late one: the tool cannot
@@ -472,9 +472,14 @@ class CoreState:
         pset first where its NOK rule loosens: a NOK joint is never tightened again without
         its loosening, and an OK one loosened and tightened again is a rework, not a fault
         (a supervisor's trial: three held NOK joints, released, tightened again at once)."""
-        rule = self.nok.rule(bolt, self._specs[bolt].pset)
+        rule = self._nok_rule(bolt)
         if rule.strategy == "loosen" and rule.loosen_pset is not None:
             self._loosen.add(bolt)
+
+    def _nok_rule(self, bolt: str, pset: int | None = None) -> NokRule:
+        """``bolt``'s NOK rule, by its pset in the vehicle's bolt table (``pset``: the one
+        sent, where the bolt is not in it)."""
+        return self.nok.rule(bolt, self._specs[bolt].pset if bolt in self._specs else pset)
 
     def _lock(self, t: float, bolt: str, n: int) -> list[Action]:
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
