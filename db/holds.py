@@ -27,8 +27,8 @@ from db.models import Bolt, ControllerEvent, TighteningRecord, ToolEnable, Unrea
 
 #: the commands that end a bolt's lock (its NOKs in a row) or its hold: a release, and a skip
 #: (the station takes a skip of a locked or held bolt only from a user who may release it)
-ENDS_A_HOLD = frozenset({"release", "skip"})
 RELEASE = "release"
+ENDS_A_HOLD = frozenset({RELEASE, "skip"})
 
 
 @dataclass(frozen=True)

@@ -92,6 +92,9 @@ CHECK_FIRST_WORDS = ("may be tightened already (released from a hold, its result
 # states a bolt can no longer be in once its vehicle closed: nothing is next or selected any
 # more on a vehicle that left (the ones the daemon reports missing become "missing")
 LIVE_STATES = (Shown.NEXT, Shown.SELECTED, Shown.TIGHTENING, Shown.BLOCKED)
+# a bolt the closed vehicle left with, untightened (at its close, or once its result due came
+# to nothing)
+NOT_TIGHTENED = "not tightened when the vehicle left"
 NAMES_SHOWN = 3   # bolts named in a closed vehicle's headline; the full list is its title
 REASON_SHOWN = 110  # characters of a fault's reason in the headline (whole in its title)
 LAST_RESULTS = 8
@@ -433,7 +436,7 @@ class View:
                 b.state = NOK if b.bolt in nok or b.bolt not in missing else MISSING
                 b.reason = "locked when the vehicle left"
             elif b.bolt in missing and b.state not in (NOK, SKIPPED):   # skipped: said so
-                b.state, b.reason = MISSING, "not tightened when the vehicle left"
+                b.state, b.reason = MISSING, NOT_TIGHTENED
             elif b.state in LIVE_STATES:
                 b.state, b.reason = PENDING, ""
 
@@ -452,7 +455,7 @@ class View:
         for name in e.settled:
             b = self.bolts.get(name)
             if b is not None and name in e.missing and b.state == PENDING:
-                b.state, b.reason = MISSING, "not tightened when the vehicle left"
+                b.state, b.reason = MISSING, NOT_TIGHTENED
 
     def _localized(self, e: Localized) -> None:
         if e.point_mm is None:
