@@ -133,9 +133,10 @@ def test_a_released_hold_is_drawn_check_first_and_its_selection_says_so(page, sh
         # the wrench back on it: the tool goes on (the supervisor's decision), the operator
         # is told to check the controller first, in amber
         tool_on(d, ctl, pose, "B05")
-        page.wait(lambda p: "may be tightened already" in (p.text("#headline") or ""), 30,
-                  "the headline's warning")
-        assert page.text("#headline").startswith("B05 (pset ")
+        # (said already as the wrench settles on it; then its selection's headline)
+        page.wait(lambda p: (p.text("#headline") or "").startswith("B05 (pset "), 30,
+                  "B05 selected")
+        assert "may be tightened already" in page.text("#headline")
         assert "act" in page.js("return document.getElementById('headline').className")
         shots("operator-check-first")
         # its own rundown ends it: drawn OK
