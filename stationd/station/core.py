@@ -43,7 +43,7 @@ from __future__ import annotations
 from typing import assert_never
 
 from stationd.station.actions import Action, Publish
-from stationd.station.events import StateChanged
+from stationd.station.events import StateChanged, VehicleOpened
 from stationd.station.inputs import (
     Announce,
     CaughtUp,
@@ -92,6 +92,11 @@ class StationCore(LiftRules, ToolRules, ResultRules):
         acts = self._dispatch(ev)
         acts += self._vin_due()
         acts += self._closing_settled(ev, acts)
+        # the bolts as they are now, before the news that says why (a lock, a release, a
+        # result): a screen draws a bolt's state from the core's, then takes the news's words
+        at = next((i + 1 for i, a in enumerate(acts)     # (after the vehicle's opening)
+                   if isinstance(a, Publish) and isinstance(a.event, VehicleOpened)), 0)
+        acts[at:at] = self._bolts_changed(ev.t)
         if (self.state, self.reason) != before:  # first: follow-ups may change it again
             acts.insert(0, Publish(StateChanged(self.state, self.reason, t=ev.t)))
         return acts

@@ -251,6 +251,25 @@ class BoltView:
     #: to be loosened first (status ``loosen``): the loosen pset that goes next (the screen
     #: says "loosen first P90" after a reload or a rework as live)
     loosen_pset: int | None = None
+    #: locked after this many NOKs in a row (None: not locked): refused until a release
+    locked: int | None = None
+    #: held: its result is not known (the note says which result; None: not held), refused
+    #: until a supervisor enters its outcome or releases it
+    held: str | None = None
+
+
+@dataclass(frozen=True)
+class BoltsChanged(StationEvent):
+    """Bolts of the loaded vehicle ``vin`` whose state the core changed, each as the core holds
+    it now (:meth:`stationd.station.state.CoreState.bolt_views`; the snapshot:
+    :attr:`stationd.station.state.CoreStatus.bolts`).  Published after the input that changed
+    them, after that input's own events (the news: a lock, a release, a result, with their
+    words).  Why: the core is the one writer of a bolt's state; a screen sets its bolts to
+    these and decides nothing of their status, locks, holds or loosening (the screens kept a
+    second state machine, which had to re-derive each of the core's rules)."""
+
+    vin: str
+    bolts: tuple[BoltView, ...]
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from db.kinds import NOK, PENDING, SKIPPED, TO_LOOSEN, HeldUnder
+from db.kinds import LOOSENED, MISSING, NOK, PENDING, SKIPPED, TO_LOOSEN, HeldUnder
 from drivers.keeper import FaultKind
 from stationd.reasons import CoreFault, CoreFaultKind, FaultWhy
 from stationd.station.actions import (
@@ -22,7 +22,6 @@ from stationd.station.actions import (
 from stationd.station.events import (
     Because,
     BoltLocked,
-    BoltView,
     ClosingSettled,
     Notice,
     OperatorChange,
@@ -166,18 +165,15 @@ class LiftRules(FaultRules):
                 self.matcher.skipped.setdefault(k, NOK_SKIPPED)
         self._loosen_back(ev)
         self._holds_back(ev)
-        # drawn as the station treats it now: skipped (refused as such), to be loosened
-        # first, else its last rundown's status; with what the report counts beside it
-        skipped = self.matcher.skipped
-        opened = VehicleOpened(ev.vin, ev.model, tuple(
-            BoltView(k, *b.position, pset=b.pset, order=b.order, batch=b.batch,
-                     status=SKIPPED if k in skipped else TO_LOOSEN if k in self._loosen
-                     else ev.status.get(k) or PENDING,
-                     last_nok=ev.status.get(k) == NOK,
-                     ran=ev.status.get(k) not in (None, SKIPPED),
-                     check_first=k in ev.released and k not in skipped,
-                     loosen_pset=self._nok_rule(k).loosen_pset if k in self._loosen else None)
-            for k, b in ev.bolts.items()), rework=ev.rework, t=ev.t)
+        # what its records say of each bolt's rundowns: one at all, loosened last, released
+        # from a hold and not run down since (its result not known)
+        ran = {k for k, st in ev.status.items() if st not in (PENDING, MISSING, SKIPPED)}
+        self._ran = ran & ev.bolts.keys()
+        self._loosened = {k for k in self._ran if ev.status[k] == LOOSENED}
+        self._check_first = {k for k in ev.released if k in ev.bolts}
+        # drawn as the station treats it now (:meth:`_bolt_view`)
+        opened = VehicleOpened(ev.vin, ev.model, self.bolt_views(), rework=ev.rework, t=ev.t)
+        self._shown, self._shown_key = {v.bolt: v for v in opened.bolts}, self._bolts_key()
         if self.state is State.WAITING_VEHICLE and self._lift is not None and self._lift.ready:
             self._to(State.TRACKING, StateReason(Because.TRACKING))
         # what waits for a supervisor comes back with the vehicle (a restart, a reload): the

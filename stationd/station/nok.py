@@ -40,11 +40,13 @@ class NokRules(OrderRules):
         (:meth:`_nok_after_lock`), the lock standing.  ``tid``: its tightening id."""
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
         self.matcher.done.discard(bolt)
-        self._nok_last.discard(bolt)
         self.matcher.counted.discard(bolt)   # undone: no longer counts in its batch
         if ok:
+            self._nok_last.discard(bolt)
             self._loosen.discard(bolt)
             return [Publish(Notice(Said.LOOSENED, bolt=bolt, t=t))]
+        # its last rundown a NOK (the joint did not come loose), as its records say it
+        self._nok_last.add(bolt)
         n = self._noks[bolt] = self._noks.get(bolt, 0) + 1
         if bolt in self.matcher.locked:     # made before the station knew of the lock
             return [self._nok_after_lock(t, bolt, n, tid)]
@@ -117,6 +119,7 @@ class NokRules(OrderRules):
             return []   # the vehicle left while the command was being recorded
         b, spec = cmd.bolt, self._specs.get(cmd.bolt)
         held = self._unhold(b)
+        self._ran_once(b, cmd.loosening, cmd.ok)
         p = spec.parameters if spec is not None and not cmd.loosening else None
         acts: list[Action] = [Publish(ResultRecorded(
             cmd.vin, b, cmd.ok, float(cmd.torque_nm), float(cmd.angle_deg), 0,

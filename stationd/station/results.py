@@ -394,6 +394,7 @@ class ResultRules(UnreadRules):
         if en.operator is not None and en.operator == self.operator:
             self._operator_seen = max(self._operator_seen, ev.t)
         if self.matcher is not None and self.vin == en.vin:
+            self._ran_once(en.bolt, kind == LOOSENING, bool(r.ok))
             if kind == LOOSENING:
                 acts += self._after_loosening(ev.t, en.bolt, bool(r.ok),
                                               tid=int(r.tightening_id))

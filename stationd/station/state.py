@@ -15,7 +15,7 @@ from types import MappingProxyType
 from typing import Any
 
 from db.bolts import Window
-from db.kinds import loosening_note
+from db.kinds import LOOSENED, NOK, OK, PENDING, SKIPPED, TO_LOOSEN, loosening_note
 from drivers.identity import DeviceIdentity
 from stationd.reasons import CoreFault, CoreFaultKind, FaultWhy, Reason, Skip, SkipKind, Why
 from stationd.station.actions import Action, DisableTool, NoteLock, Owed, Publish, Selection
@@ -23,6 +23,8 @@ from stationd.station.commands import TeachPoint
 from stationd.station.events import (
     Because,
     BoltLocked,
+    BoltsChanged,
+    BoltView,
     LineLinkChanged,
     Notice,
     Said,
@@ -182,6 +184,9 @@ class CoreStatus:
     #: core gave up on asks nothing (a reviewer: its fetch, late, took the next bolt's
     #: result as no bolt's, and that bolt's own check then found nothing made)
     checking: int | None = None
+    #: the loaded vehicle's bolts as the core holds them (their changes since:
+    #: :class:`BoltsChanged`); none loaded: empty
+    bolts: tuple[BoltView, ...] = ()
 
     @property
     def cameras_on(self) -> bool:
@@ -312,6 +317,15 @@ class CoreState:
     # held bolts whose result came under their loosen pset -> that pset (None: not known):
     # an outcome entered for one is a loosening's, never a tightening's
     _held_loosening: dict[str, int | None] = field(default_factory=dict, repr=False)
+    #: the loaded vehicle's bolts with a rundown (a tightening or a loosening recorded), those
+    #: loosened last (OK: the tightening pset goes next), and those released from a hold, not
+    #: run down since (their result not known: the operator checks the controller first)
+    _ran: set[str] = field(default_factory=set, repr=False)
+    _loosened: set[str] = field(default_factory=set, repr=False)
+    _check_first: set[str] = field(default_factory=set, repr=False)
+    #: each bolt as last published (:class:`BoltsChanged`, or the vehicle's opening)
+    _shown: dict[str, BoltView] = field(default_factory=dict, repr=False)
+    _shown_key: tuple[object, ...] = field(default=(), repr=False)
     #: the calibration check's state (None: no reference markers configured, every pair
     #: trusted as before): :mod:`stationd.station.trust`
     trust: PairTrust | None = None
@@ -343,7 +357,64 @@ class CoreState:
                           frozenset(() if self.matcher is None else self.matcher.skipped),
                           MappingProxyType({d: str(k) for d, (k, _) in self.faults.items()}),
                           self.operator_required, self._enable_serial,
-                          None if self._checking is None else self._checking[1])
+                          None if self._checking is None else self._checking[1],
+                          # as last published: every input ends with their change
+                          tuple(self._shown.values()))
+
+    def bolt_views(self) -> tuple[BoltView, ...]:
+        """The loaded vehicle's bolts as the core holds them now, in the bolt table's order
+        (none loaded: empty)."""
+        if self.matcher is None:
+            return ()
+        return tuple(self._bolt_view(k) for k in self._specs)
+
+    def _bolt_view(self, k: str) -> BoltView:
+        """Bolt ``k`` of the loaded vehicle as the core holds it: skipped (refused as such),
+        to be loosened first, else its last rundown's status (OK, NOK, loosened) or to do;
+        with its lock, its hold, what the report counts (its last rundown a NOK, a rundown at
+        all) and whether it is to be checked on the controller first."""
+        m, b = self.matcher, self._specs[k]
+        assert m is not None  # noqa: S101 - a vehicle is loaded
+        loosen = k in self._loosen
+        status = SKIPPED if k in m.skipped else TO_LOOSEN if loosen else OK if k in m.done \
+            else NOK if k in self._nok_last else LOOSENED if k in self._loosened else PENDING
+        return BoltView(k, *b.position, pset=b.pset, order=b.order, batch=b.batch,
+                        status=status, last_nok=k in self._nok_last, ran=k in self._ran,
+                        check_first=k in self._check_first and k not in m.skipped,
+                        loosen_pset=self._nok_rule(k).loosen_pset if loosen else None,
+                        locked=m.locked.get(k), held=m.held.get(k))
+
+    def _bolts_changed(self, t: float) -> list[Action]:
+        """The bolts whose state changed since last published, published (none: nothing)."""
+        if self.matcher is None or self.vin is None:
+            return []
+        key = self._bolts_key()
+        if key == self._shown_key:   # (most inputs, every localization: nothing of them)
+            return []
+        self._shown_key = key
+        now = self.bolt_views()
+        changed = tuple(v for v in now if self._shown.get(v.bolt) != v)
+        self._shown = {v.bolt: v for v in now}
+        return [Publish(BoltsChanged(self.vin, changed, t=t))] if changed else []
+
+    def _bolts_key(self) -> tuple[object, ...]:
+        """What the bolts' states are made of (:meth:`_bolt_view`), cheap to compare: the
+        same, no bolt changed."""
+        m = self.matcher
+        assert m is not None  # noqa: S101 - a vehicle is loaded
+        return (self.vin, frozenset(m.done), tuple(m.skipped), tuple(m.locked.items()),
+                tuple(m.held.items()), frozenset(self._loosen), frozenset(self._nok_last),
+                frozenset(self._ran), frozenset(self._loosened), frozenset(self._check_first))
+
+    def _ran_once(self, bolt: str, loosening: bool, ok: bool) -> None:
+        """A rundown of ``bolt`` recorded (a tightening or a loosening, measured or entered):
+        its result is known (no check first), and it is loosened last or not."""
+        self._ran.add(bolt)
+        self._check_first.discard(bolt)
+        if loosening and ok:
+            self._loosened.add(bolt)
+        else:
+            self._loosened.discard(bolt)
 
     @property
     def selection(self) -> Selection | None:
@@ -405,6 +476,7 @@ class CoreState:
         is a loosening's (its note says so, and an outcome entered for it is one)."""
         loosening = under is not None and under.loosen
         note = self._held(bolt, note, loosening, under.pset if under is not None else None)
+        self._check_first.discard(bolt)   # held again: its own words say so
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
         self.matcher.reset()
         return [Publish(BoltLocked(bolt, 0, held=note, t=t)),
@@ -484,6 +556,7 @@ class CoreState:
     def _lock(self, t: float, bolt: str, n: int) -> list[Action]:
         assert self.matcher is not None  # noqa: S101 - a vehicle is loaded
         self.matcher.locked[bolt] = n
+        self._check_first.discard(bolt)
         noted: list[Action] = [] if self.vin is None else [NoteLock(self.vin, bolt, n, t)]
         return [*noted, Publish(BoltLocked(bolt, n, t=t)),
                 Publish(Notice(Said.LOCKED, bolt=bolt, count=n, t=t))]
@@ -530,6 +603,8 @@ class CoreState:
         self.vin, self.model, self.matcher, self._specs = None, None, None, {}
         self._loosen, self._nok_last, self._nok_owed = set(), set(), {}
         self._lock_due = {}
+        self._ran, self._loosened, self._check_first, self._shown = set(), set(), set(), {}
+        self._shown_key = ()
         self._loading = False
         self._vin_for, self._vin_pending, self._last_refusal = None, False, None
 

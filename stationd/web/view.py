@@ -29,11 +29,12 @@ from db.kinds import (
 from stationd.reasons import Reason, Why
 from stationd.station.events import (
     Because,
-    BoltLocked,
     BoltReleased,
+    BoltsChanged,
     BoltSelected,
     BoltSkipped,
     BoltToLoosen,
+    BoltView,
     ClosingSettled,
     DeviceHealth,
     DeviceIdentified,
@@ -84,6 +85,11 @@ BOLT_LABELS: dict[BoltShown, str] = {
     LOOSENED: "loosened",       # loosened last: its tightening pset goes next
     Shown.LOCKED: "locked",     # too many NOKs in a row: refused until a release
 }
+# where the operator's attention is on an open bolt: the screen's, over the core's status
+ATTENTION = (Shown.NEXT, Shown.SELECTED, Shown.TIGHTENING, Shown.BLOCKED)
+# a bolt's words by its last rundown
+RUNDOWN_WORDS: dict[BoltShown, str] = {NOK: "NOK: rework",
+                                       LOOSENED: "loosened: tighten it again"}
 # a bolt released from a hold (its result was not known), not run down since: drawn and said
 # apart from "to do" while open, and its selection says so in amber
 CHECK_FIRST = "check first"
@@ -129,6 +135,9 @@ class BoltState:
     batch: str | None
     state: BoltShown = PENDING
     reason: str = ""
+    #: its status as the core holds it (the state drawn is this, or the lock, or where the
+    #: operator's attention is while it is open)
+    status: BoltStatus = PENDING
     torque_nm: float | None = None
     angle_deg: float | None = None
     locked: bool = False        # too many NOKs in a row: a supervisor releases it
@@ -255,21 +264,19 @@ class View:
                 self._set(e.bolt, Shown.TIGHTENING)
             case ToolDisabled():
                 self._tool_off(e)
-            case BoltSkipped():
-                if e.bolt in self.bolts:   # a skip ends a lock or a hold (the core's rule)
-                    b = self.bolts[e.bolt]
-                    b.locked = b.held = b.check_first = False
-                self._set(e.bolt, SKIPPED, e.reason)
-            case BoltLocked() if e.bolt in self.bolts:
-                self._locked(e)
-            case BoltReleased() if e.bolt in self.bolts:
+            case BoltsChanged() if self.loaded and e.vin == self.vin:
+                for bolt in e.bolts:
+                    self._bolt_is(bolt)
+            # the news of a bolt after its state (BoltsChanged): its words
+            case BoltSkipped() if self._drawn(e.bolt, SKIPPED):
+                self.bolts[e.bolt].reason = e.reason
+            case BoltReleased() if self._drawn(e.bolt, PENDING, Shown.NEXT, TO_LOOSEN,
+                                               LOOSENED, OK, NOK):
                 b = self.bolts[e.bolt]
-                b.locked = b.held = False
-                b.check_first = b.check_first or e.unknown
-                self._set(e.bolt, PENDING, f"released by {e.user}" + (
-                    f": {CHECK_FIRST_WORDS}" if b.check_first else ""))
-            case BoltToLoosen() if e.bolt in self.bolts:
-                self._to_loosen(e)
+                b.reason = f"released by {e.user}" + (
+                    f": {CHECK_FIRST_WORDS}" if b.check_first else "")
+            case BoltToLoosen() if self._drawn(e.bolt, TO_LOOSEN):
+                self.bolts[e.bolt].reason = reason_words(e.reason)
             case ResultRecorded():
                 self._result(e)
             case OperatorChanged():
@@ -284,7 +291,7 @@ class View:
         """Take what the core decided, as of now (its snapshot), over the events folded so
         far: the state and its reason, which devices are in fault and which are not, what
         each device said it is, who is signed in, which pairs the calibration check trusts,
-        the vehicle loaded (its VIN and model; its bolts only from its opening).  Why: the
+        the vehicle loaded (its VIN, model and bolts).  Why: the
         events a view starts from are the bus's bounded history; a screens' server started
         hours into a run (its port freed late) must not show a fault gone from that history
         as healthy, or the station as starting.  The events published after the snapshot are
@@ -312,11 +319,14 @@ class View:
                 if not check["trusted"] and pair not in now.untrusted:
                     self.checks[pair] = {**check, "trusted": True}
         if now.vin != (self.vin if self.loaded else None):
-            # the vehicle opened is gone from the history (its bolts with it): its VIN and
-            # model at least, or none loaded
+            # the vehicle opened is gone from the history: as the core holds it, or none
             if now.vin is not None:
-                self.vin, self.model, self.bolts = now.vin, now.model, {}
+                self.vin, self.model = now.vin, now.model
+                self._bolts_are(now.bolts)
             self.loaded = now.vin is not None
+        elif now.vin is not None:
+            for v in now.bolts:   # its bolts as the core holds them now
+                self._bolt_is(v)
 
     def _state(self, e: StateChanged) -> None:
         self.state, self.reason, self.reason_kind = e.state, state_words(e.reason), e.reason.kind
@@ -373,28 +383,35 @@ class View:
         elif said:   # a NOK rundown is for the operator to act on (amber), never neutral
             self._refuse(said, act=e.reason.kind is Because.RUNDOWN and e.reason.ok is False)
 
-    def _locked(self, e: BoltLocked) -> None:
-        b = self.bolts[e.bolt]
-        # a lock of NOKs on a held bolt keeps the hold (its result is still not known), said
-        # with it: the hold's outcome entered, or a release, ends both
-        was_held = b.held and b.state == Shown.LOCKED
-        b.locked, b.nok_count, b.held = True, e.count, b.held or e.held is not None
-        b.check_first = False   # held again: its own words say so
-        if self.selected == e.bolt:
-            self.selected = None
-        words = reason_words(Reason(Why.HELD, bolt=e.bolt, note=e.held) if e.held is not None
-                             else Reason(Why.LOCKED, bolt=e.bolt, count=e.count))
-        self._set(e.bolt, Shown.LOCKED, f"{words}; {b.reason}" if was_held and e.held is None
-                  else words)
+    def _bolt_is(self, v: BoltView) -> None:
+        """Bolt ``v.bolt`` is as the core holds it (:class:`BoltsChanged`): its status, lock,
+        hold, loosening and what the report counts are the core's; where the operator's
+        attention is (next, selected, the tool on, blocked) stays the screen's while its
+        status stays.  Drawn anew, its words are its state's; the news after it (a skip, a
+        release, a loosen command, a result) gives its own."""
+        b = self.bolts.get(v.bolt)
+        if b is None:
+            return
+        was = b.state, b.status, b.locked, b.held, b.nok_count
+        b.locked, b.held = v.locked is not None or v.held is not None, v.held is not None
+        b.nok_count, b.check_first = v.locked or 0, v.check_first
+        b.loosen, b.ends_nok, b.ran = v.status == TO_LOOSEN, v.last_nok, v.ran
+        if v.loosen_pset is not None:
+            b.loosen_pset = v.loosen_pset
+        if b.locked:
+            b.state = Shown.LOCKED
+        elif v.status != b.status or b.state not in ATTENTION:
+            b.state = v.status
+        b.status = v.status
+        if (b.state, b.status, b.locked, b.held, b.nok_count) != was:
+            b.reason = _state_words(b, v)
+        if self.selected == b.bolt and b.state not in (Shown.SELECTED, Shown.TIGHTENING):
+            self.selected, self.selected_loosen = None, None   # the core dropped it
 
-    def _to_loosen(self, e: BoltToLoosen) -> None:
-        self.bolts[e.bolt].loosen = True
-        if e.user is not None:   # a person's loosen command: the report says "loosen first"
-            self.bolts[e.bolt].ends_nok = False
-        if e.reason.pset is not None:
-            self.bolts[e.bolt].loosen_pset = e.reason.pset
-        if not self.bolts[e.bolt].locked:
-            self._set(e.bolt, TO_LOOSEN, reason_words(e.reason))
+    def _drawn(self, bolt: str | None, *states: BoltShown) -> bool:
+        """Bolt ``bolt`` is shown, in one of ``states``."""
+        b = self.bolts.get(bolt or "")
+        return b is not None and b.state in states
 
     def _open(self, e: VehicleOpened) -> None:
         # the vehicle loaded opened again without leaving (a reload reopens the one on the
@@ -406,13 +423,16 @@ class View:
         self.closed, self.selected, self.wrench, self.refused = None, None, None, ""
         self.reopened = None
         self.located = None
-        self.bolts = {b.bolt: BoltState(b.bolt, b.x_mm, b.y_mm, b.pset, b.order, b.batch,
-                                        b.status if b.status in BOLT_LABELS else PENDING,
-                                        loosen=b.status == TO_LOOSEN,
-                                        ends_nok=b.status == NOK or b.last_nok,
-                                        ran=b.ran or b.status not in (PENDING, SKIPPED, MISSING),
-                                        check_first=b.check_first, loosen_pset=b.loosen_pset)
-                      for b in e.bolts}
+        self._bolts_are(e.bolts)
+
+    def _bolts_are(self, views: tuple[BoltView, ...]) -> None:
+        """The loaded vehicle's bolts drawn afresh as the core holds them (its opening, or
+        the core's snapshot where the opening is gone from the history)."""
+        self.bolts = {v.bolt: BoltState(v.bolt, v.x_mm, v.y_mm, v.pset, v.order, v.batch)
+                      for v in views}
+        for v in views:
+            self._bolt_is(v)
+            self.bolts[v.bolt].reason = _state_words(self.bolts[v.bolt], v)
 
     def _close(self, e: VehicleClosed) -> None:
         # a bolt skipped by a person is not missing: the headline said "46 missing" beside
@@ -518,19 +538,19 @@ class View:
     def _result(self, e: ResultRecorded) -> None:
         if e.vin == self.vin and e.bolt in self.bolts:
             b = self.bolts[e.bolt]
-            if e.entered_by is not None:   # the hold it resolves ends (a NOK may lock it)
-                b.locked = b.held = False
-            b.check_first = False   # a result of its own: what it is, is known
-            if e.kind == LOOSENING:
-                b.loosen = b.loosen and not e.ok
-                self._set(e.bolt, LOOSENED if e.ok else TO_LOOSEN,
-                          "loosened: tighten it again" if e.ok else "loosening NOK")
-            else:
-                b.loosen = b.loosen and not e.ok
-                self._set(e.bolt, OK if e.ok else NOK, "" if e.ok else "NOK: rework")
             b.torque_nm, b.angle_deg = e.torque_nm, e.angle_deg
-            b.ends_nok, b.ran = not e.ok, True
             b.failed = None if e.ok else _failed(e)
+            said = (LOOSENED if e.ok else TO_LOOSEN) if e.kind == LOOSENING \
+                else OK if e.ok else NOK
+            if not self.loaded:
+                # a late result of the vehicle that left (the core holds its bolts no more):
+                # as its records say now
+                b.state, b.status, b.ran = said, said, True
+                b.ends_nok = not e.ok if e.kind != LOOSENING else b.ends_nok
+            elif not b.locked:
+                b.state = b.status   # its state the core's (BoltsChanged): the rundown ended
+            if b.state == said:
+                b.reason = "loosening NOK" if said == TO_LOOSEN else RUNDOWN_WORDS.get(said, "")
         if e.vin == self.vin and self.selected == e.bolt:   # a late result of a closed
             self.selected, self.selected_loosen = None, None  # vehicle: not this one's
         c = self.closed
@@ -748,6 +768,24 @@ class View:
             "locks": self.locks(),
             "operator": {"user": self.operator, "required": self.operator_required},
         }
+
+
+def _state_words(b: BoltState, v: BoltView) -> str:
+    """The words of bolt ``b`` drawn anew as the core holds it (``v``): its lock or hold,
+    the loosening it waits for, a check first, or its last rundown's."""
+    if b.state == Shown.LOCKED:
+        held = reason_words(Reason(Why.HELD, bolt=v.bolt, note=v.held)) \
+            if v.held is not None else ""
+        locked = reason_words(Reason(Why.LOCKED, bolt=v.bolt, count=v.locked)) \
+            if v.locked is not None else ""
+        # a lock of NOKs on a held bolt keeps the hold (its result is still not known), said
+        # with it: the hold's outcome entered, or a release, ends both
+        return "; ".join(w for w in (locked, held) if w)
+    if b.state == TO_LOOSEN:
+        return reason_words(Reason(Why.LOOSEN_FIRST, bolt=v.bolt, pset=v.loosen_pset))
+    if b.check_first and b.state in (PENDING, Shown.NEXT):
+        return CHECK_FIRST_WORDS
+    return RUNDOWN_WORDS.get(b.state, "")
 
 
 def _failed(e: ResultRecorded) -> str | None:

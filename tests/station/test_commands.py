@@ -49,10 +49,10 @@ def test_every_input_type_has_its_case_in_the_dispatch():
 
 def test_a_skip_takes_effect_once_recorded_and_is_answered_accepted():
     d = _ready()
-    acts = d.core.feed(CommandIn(d.t, 1, SkipBolt("VIN1", "B2", "no access"), OPERATOR))
+    acts = d.alone(CommandIn(d.t, 1, SkipBolt("VIN1", "B2", "no access"), OPERATOR))
     assert [type(a).__name__ for a in acts] == ["RecordCommand"]
     assert "B2" not in d.core.matcher.skipped          # not before it is on disk
-    acts = d.core.feed(CommandDone(d.t, 1))
+    acts = d.alone(CommandDone(d.t, 1))
     assert _answer(acts).answer.accepted
     why = Skip(SkipKind.COMMAND, user="olga", comment="no access")
     assert d.core.matcher.skipped["B2"] == why
@@ -70,13 +70,13 @@ def test_a_skip_of_the_selected_bolt_turns_the_tool_off():
     _on(d, 2, 1)
     assert d.tool and d.core.state is State.TIGHTENING
     # while the tool is on that bolt: refused
-    acts = d.core.feed(CommandIn(d.t, 1, SkipBolt("VIN1", "B2"), SUPERVISOR))
+    acts = d.alone(CommandIn(d.t, 1, SkipBolt("VIN1", "B2"), SUPERVISOR))
     assert _answer(acts).answer.reason == Reason(Why.TOOL_ON_BOLT, bolt="B2")
     # selected, not yet enabled (a stale frame turned the tool off): accepted, dropped
     d.step(("loc", 0.1, 2, 0.9, 0.0))
     assert d.core.state is State.BOLT_SELECTED and not d.tool
-    d.core.feed(CommandIn(d.t, 2, SkipBolt("VIN1", "B2"), SUPERVISOR))
-    acts = d.core.feed(CommandDone(d.t, 2))
+    d.alone(CommandIn(d.t, 2, SkipBolt("VIN1", "B2"), SUPERVISOR))
+    acts = d.alone(CommandDone(d.t, 2))
     assert _answer(acts).answer.accepted
     assert any(isinstance(a, DisableTool) for a in acts)
     assert d.core.state is State.TRACKING and d.core.bolt is None
@@ -100,7 +100,7 @@ def test_a_command_against_the_rules_is_refused_with_its_reason_and_changes_noth
         command, issuer, why):
     d = _ready()
     before = dict(d.core.matcher.skipped)
-    acts = d.core.feed(CommandIn(d.t, 7, command, issuer))
+    acts = d.alone(CommandIn(d.t, 7, command, issuer))
     reply = _answer(acts)
     assert reply.answer.reason == why and not reply.answer.accepted
     assert not any(isinstance(a, RecordCommand) for a in acts)
@@ -126,17 +126,17 @@ def test_a_skip_without_a_vehicle_or_of_a_done_bolt_is_refused():
     assert _answer(acts).answer.reason == Reason(Why.NO_VEHICLE)
     d = _ready()
     d.core.matcher.mark_done("B1")
-    acts = d.core.feed(CommandIn(d.t, 2, SkipBolt("VIN1", "B1"), OPERATOR))
+    acts = d.alone(CommandIn(d.t, 2, SkipBolt("VIN1", "B1"), OPERATOR))
     assert _answer(acts).answer.reason == Reason(Why.DONE, bolt="B1")
 
 
 def test_a_command_the_database_refuses_is_answered_refused_and_has_no_effect():
     d = _ready()
-    d.core.feed(CommandIn(d.t, 3, SkipBolt("VIN1", "B3"), OPERATOR))
-    acts = d.core.feed(CommandDone(d.t, 3, Reason(Why.NOT_RECORDED, note="disk full")))
+    d.alone(CommandIn(d.t, 3, SkipBolt("VIN1", "B3"), OPERATOR))
+    acts = d.alone(CommandDone(d.t, 3, Reason(Why.NOT_RECORDED, note="disk full")))
     assert _answer(acts).answer.reason == Reason(Why.NOT_RECORDED, note="disk full")
     assert "B3" not in d.core.matcher.skipped
-    assert d.core.feed(CommandDone(d.t, 3)) == []      # answered once
+    assert d.alone(CommandDone(d.t, 3)) == []      # answered once
 
 
 def test_a_reopen_of_the_closed_vehicle_at_height_clears_its_fault_and_loads_it():
@@ -167,24 +167,24 @@ def test_a_command_for_a_vehicle_reopened_and_not_back_says_it_waits_for_it():
     """A skip right after a reopen, the vehicle not back at the station: the refusal says it
     is reopened and waits for it (a new user's trial: it told them to reopen it again)."""
     d = _ready()
-    acts = d.core.feed(CommandIn(d.t, 4, ReopenVehicle("OLDVIN", "rework"), SUPERVISOR))
-    acts = d.core.feed(CommandDone(d.t, 4))
+    acts = d.alone(CommandIn(d.t, 4, ReopenVehicle("OLDVIN", "rework"), SUPERVISOR))
+    acts = d.alone(CommandDone(d.t, 4))
     assert _answer(acts).answer.accepted
-    acts = d.core.feed(CommandIn(d.t, 5, SkipBolt("OLDVIN", "B2"), SUPERVISOR))
+    acts = d.alone(CommandIn(d.t, 5, SkipBolt("OLDVIN", "B2"), SUPERVISOR))
     why = _answer(acts).answer.reason
     assert why == Reason(Why.OTHER_VEHICLE, vin="OLDVIN", reopened=True)
     assert reason_words(why) == ("vehicle OLDVIN is not the one at the station: reopened for "
                                  "rework, it is worked when it is back at the station at "
                                  "height")
     # back at the station: open; another VIN keeps the plain words
-    d.core.feed(VehicleLoaded(d.t, "OLDVIN", "M", BOLTS, rework=True))
-    acts = d.core.feed(CommandIn(d.t, 6, SkipBolt("VIN1", "B2"), SUPERVISOR))
+    d.alone(VehicleLoaded(d.t, "OLDVIN", "M", BOLTS, rework=True))
+    acts = d.alone(CommandIn(d.t, 6, SkipBolt("VIN1", "B2"), SUPERVISOR))
     assert _answer(acts).answer.reason == Reason(Why.OTHER_VEHICLE, vin="VIN1")
 
 
 def test_skips_recorded_before_a_reload_come_back_with_the_vehicle():
     d = _ready()
-    d.core.feed(VehicleLoaded(d.t, "VIN1", "M", BOLTS, skipped={
+    d.alone(VehicleLoaded(d.t, "VIN1", "M", BOLTS, skipped={
         "B3": Skip(SkipKind.COMMAND, user="olga", comment="")}))
     _on(d, 3, 3)
     assert d.sends == []

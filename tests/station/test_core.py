@@ -48,7 +48,9 @@ from stationd.station.actions import (
 from stationd.station.core import StationCore
 from stationd.station.events import (
     Because,
+    BoltsChanged,
     BoltSkipped,
+    BoltView,
     DeviceHealth,
     OperatorChanged,
     Refused,
@@ -57,6 +59,7 @@ from stationd.station.events import (
     StateChanged,
     StateReason,
     ToolDisabled,
+    VehicleOpened,
 )
 from stationd.station.inputs import (
     DATABASE,
@@ -121,11 +124,15 @@ class Driver:
     #: more (False: the test answers it, with what the controller had)
     answer_checks: bool = True
     log: list[Any] = field(default_factory=list)
+    #: the loaded vehicle's bolts as a screen holds them: its opening, then the core's
+    #: changes (BoltsChanged), folded
+    shown: dict[str, BoltView] = field(default_factory=dict)
 
     def feed(self, ev: Any) -> list[Any]:
         before = self.core.state
         acts = self.core.feed(ev)
         self.log.append((ev, acts))
+        self.follow(acts)
         out = list(acts)
         for a in acts:
             self.check(a, before, ev)
@@ -144,6 +151,25 @@ class Driver:
             elif isinstance(a, CheckNewest) and self.answer_checks:
                 out += self.feed(NewestChecked(self.t))
         return out
+
+    def alone(self, ev: Any) -> list[Any]:
+        """``ev`` to the core alone: its actions, none carried out (a test looks at them),
+        the screen following what it published."""
+        acts = self.core.feed(ev)
+        self.follow(acts)
+        return acts
+
+    def follow(self, acts: list[Any]) -> None:
+        """A screen follows the core's bolts by its deltas alone: after every input, what it
+        holds is what the core's snapshot says (the core the one writer of a bolt's state)."""
+        for e in published(acts, VehicleOpened):
+            self.shown = {v.bolt: v for v in e.bolts}
+        for e in published(acts, BoltsChanged):
+            assert e.vin == self.core.vin and e.bolts, e
+            self.shown.update({v.bolt: v for v in e.bolts})
+        if self.core.vin is not None:
+            now = {v.bolt: v for v in self.core.bolt_views()}   # made afresh
+            assert self.shown == now == {v.bolt: v for v in self.core.status().bolts}
 
     def command(self, request: int, cmd: Any, who: Any) -> list[Any]:
         """``cmd`` given by ``who``; when accepted, recorded (the shell's CommandDone, which
@@ -580,11 +606,11 @@ def test_the_vin_is_sent_once_per_vehicle_and_again_after_a_controller_reconnect
 def test_parameters_wait_for_the_vin():
     d = Driver()
     d.feed(Started(d.t))
-    d.core.feed(LiftRead(d.t, True, True, 7, "VIN9"))   # nobody answers the loads here
-    d.core.feed(VehicleLoaded(d.t, "VIN9", "M", BOLTS))
+    d.alone(LiftRead(d.t, True, True, 7, "VIN9"))   # nobody answers the loads here
+    d.alone(VehicleLoaded(d.t, "VIN9", "M", BOLTS))
     assert d.core.state is State.TRACKING
     for k in range(5):
-        acts = d.core.feed(LocalizedIn(d.t + k, d.t + k, (0.0, 0.0, 0.0)))
+        acts = d.alone(LocalizedIn(d.t + k, d.t + k, (0.0, 0.0, 0.0)))
         assert not any(isinstance(a, SendParams) for a in acts)
 
 
@@ -829,7 +855,7 @@ def test_the_enable_carries_its_selection_with_vehicle_and_parameter_version():
     bolts = {k: LoadedBolt(b.position, b.pset, parameters_id=40 + i)
              for i, (k, b) in enumerate(BOLTS.items())}
     d = _ready()
-    d.core.feed(VehicleLoaded(d.t, "VIN1", "M", bolts))
+    d.alone(VehicleLoaded(d.t, "VIN1", "M", bolts))
     _on(d, 2)
     d.step(("ack", 0.01, True))
     _on(d, 2, 1)
@@ -879,12 +905,12 @@ def test_frames_exposed_before_a_rundown_ended_never_select_after_it():
     sends = []
     for k in range(4):   # processed after the rundown, exposed before it: B2 in the picture
         t = end + 0.03 * (k + 1)
-        sends += [a for a in d.core.feed(LocalizedIn(t, end - 0.02, pos, None))
+        sends += [a for a in d.alone(LocalizedIn(t, end - 0.02, pos, None))
                   if isinstance(a, SendParams)]
     assert sends == [] and d.core.state is State.TRACKING
     for k in range(PARAMS.stable_frames):   # frames exposed after it: the wrench still there
         t = end + 0.2 + 0.03 * k
-        sends += [a for a in d.core.feed(LocalizedIn(t, t - 0.02, pos, None))
+        sends += [a for a in d.alone(LocalizedIn(t, t - 0.02, pos, None))
                   if isinstance(a, SendParams)]
     assert [a.bolt for a in sends] == ["B2"]
 

@@ -57,15 +57,15 @@ def test_a_bolt_locks_after_max_nok_in_a_row_and_a_release_unlocks_it():
     assert len(d.sends) == sends                         # locked: never sent again
     assert "B2" not in d.core.allowed()
     # an operator may not release; a supervisor may, once it is locked
-    acts = d.core.feed(CommandIn(d.t, 1, ReleaseBolt("VIN1", "B2", "checked"), OPERATOR))
+    acts = d.alone(CommandIn(d.t, 1, ReleaseBolt("VIN1", "B2", "checked"), OPERATOR))
     assert _answer(acts).answer.reason == Reason(Why.NO_RIGHT, right="release")
-    d.core.feed(CommandIn(d.t, 2, ReleaseBolt("VIN1", "B2", "thread checked"), SUPERVISOR))
-    acts = d.core.feed(CommandDone(d.t, 2))
+    d.alone(CommandIn(d.t, 2, ReleaseBolt("VIN1", "B2", "thread checked"), SUPERVISOR))
+    acts = d.alone(CommandDone(d.t, 2))
     assert _answer(acts).answer.accepted
     # a lock of NOKs (their results known): no "may be tightened already"
     assert [(e.bolt, e.user, e.unknown) for e in _events(acts, BoltReleased)] == \
         [("B2", "sam", False)]
-    acts = d.core.feed(CommandIn(d.t, 3, ReleaseBolt("VIN1", "B2"), SUPERVISOR))
+    acts = d.alone(CommandIn(d.t, 3, ReleaseBolt("VIN1", "B2"), SUPERVISOR))
     assert _answer(acts).answer.reason == Reason(Why.NOT_LOCKED, bolt="B2")
     assert reason_words(Reason(Why.NOT_LOCKED, bolt="B2")) == \
         "B2 is neither locked nor held: nothing to release"
@@ -81,13 +81,13 @@ def test_a_locked_bolt_is_skipped_only_by_who_may_release_it_and_the_skip_ends_t
     _tighten(d, 2, 1, ok=False)
     _tighten(d, 2, 2, ok=False)
     assert d.core.matcher is not None and d.core.matcher.locked == {"B2": 2}
-    acts = d.core.feed(CommandIn(d.t, 1, SkipBolt("VIN1", "B2", "stuck"), OPERATOR))
+    acts = d.alone(CommandIn(d.t, 1, SkipBolt("VIN1", "B2", "stuck"), OPERATOR))
     refused = _answer(acts).answer.reason
     assert refused == Reason(Why.LOCKED, bolt="B2", count=2)
     assert "supervisor" in reason_words(refused)
     assert d.core.matcher.locked == {"B2": 2} and "B2" not in d.core.matcher.skipped
-    d.core.feed(CommandIn(d.t, 2, SkipBolt("VIN1", "B2", "to rework"), SUPERVISOR))
-    acts = d.core.feed(CommandDone(d.t, 2))
+    d.alone(CommandIn(d.t, 2, SkipBolt("VIN1", "B2", "to rework"), SUPERVISOR))
+    acts = d.alone(CommandDone(d.t, 2))
     assert _answer(acts).answer.accepted
     assert [e.bolt for e in _events(acts, BoltSkipped)] == ["B2"]
     assert d.core.matcher.locked == {} and "B2" in d.core.matcher.skipped
@@ -101,10 +101,10 @@ def test_a_held_bolt_is_skipped_only_by_who_may_release_it():
     d = _driver(NokPolicy(NokRule(max_nok=3)))
     assert d.core.matcher is not None
     d.core.matcher.held["B3"] = "tightening 7"           # its result could not be read
-    acts = d.core.feed(CommandIn(d.t, 1, SkipBolt("VIN1", "B3"), OPERATOR))
+    acts = d.alone(CommandIn(d.t, 1, SkipBolt("VIN1", "B3"), OPERATOR))
     assert _answer(acts).answer.reason == Reason(Why.HELD, bolt="B3", note="tightening 7")
-    d.core.feed(CommandIn(d.t, 2, SkipBolt("VIN1", "B3"), SUPERVISOR))
-    assert _answer(d.core.feed(CommandDone(d.t, 2))).answer.accepted
+    d.alone(CommandIn(d.t, 2, SkipBolt("VIN1", "B3"), SUPERVISOR))
+    assert _answer(d.alone(CommandDone(d.t, 2))).answer.accepted
     assert "B3" not in d.core.matcher.held and "B3" in d.core.matcher.skipped
 
 

@@ -689,7 +689,7 @@ def test_a_result_under_an_id_seen_before_with_other_values_is_a_new_result():
     sent = _enabled(d, 3)
     other = SimpleNamespace(**{**vars(first), "torque_nm": 47.5,
                                "timestamp": datetime(2026, 11, 29, 9, 0, 0)})
-    acts = d.core.feed(ResultIn(d.t, other))   # the Driver's check keys records by id alone
+    acts = d.alone(ResultIn(d.t, other))   # the Driver's check keys records by id alone
     assert [a.bolt for a in acts if isinstance(a, Record)] == ["B3"]
     assert any("ids started again" in m for m in _notices(acts))
     assert [(n.said, n.tightening_id) for n in published(acts, Notice)] == [

@@ -23,9 +23,9 @@ ENGINEER = Issuer("ed", frozenset({Right.TEACH}), "cli")
 
 
 def _do(d: Any, request: int, command: Any, who: Issuer = ENGINEER) -> list[Any]:
-    acts: list[Any] = d.core.feed(CommandIn(d.t, request, command, who))
+    acts: list[Any] = d.alone(CommandIn(d.t, request, command, who))
     if any(type(a).__name__ == "RecordCommand" for a in acts):
-        acts = d.core.feed(CommandDone(d.t, request))
+        acts = d.alone(CommandDone(d.t, request))
     return acts
 
 
@@ -33,7 +33,7 @@ def _frames(d: Any, x: float, n: int, jitter: float = 0.05) -> list[Any]:
     acts: list[Any] = []
     for k in range(n):
         d.t += 0.1
-        acts += d.core.feed(LocalizedIn(d.t, d.t - 0.05, (x + jitter * (k % 3), 0.0, 0.0)))
+        acts += d.alone(LocalizedIn(d.t, d.t - 0.05, (x + jitter * (k % 3), 0.0, 0.0)))
     return acts
 
 
@@ -74,7 +74,7 @@ def test_a_wrench_that_moves_while_measured_is_refused_and_frames_before_do_not_
     d = _ready()
     _do(d, 1, TeachStart("M"))
     _do(d, 2, TeachPoint("B7"))
-    d.core.feed(LocalizedIn(d.t + 0.01, d.t - 1.0, (9999.0, 0.0, 0.0)))   # exposed before
+    d.alone(LocalizedIn(d.t + 0.01, d.t - 1.0, (9999.0, 0.0, 0.0)))   # exposed before
     acts = _frames(d, 500.0, TEACH_FRAMES // 2) + _frames(d, 510.0, TEACH_FRAMES // 2)
     [reply] = [a for a in acts if isinstance(a, Reply)]
     assert reply.answer.reason is not None and reply.answer.reason.kind is Why.NOT_STEADY
@@ -102,7 +102,7 @@ def test_a_teach_point_with_pairs_in_fault_is_refused_with_the_stations_reason()
 
     d = _ready()
     _do(d, 1, TeachStart("M"))
-    d.core.feed(DeviceFault(d.t, "pair1", FaultKind.DOWN, NO_WORLD))
+    d.alone(DeviceFault(d.t, "pair1", FaultKind.DOWN, NO_WORLD))
     reply = _answer(_do(d, 2, TeachPoint("B7")))
     assert reply.answer.reason is not None and reply.answer.reason.kind is Why.DEVICE_FAULT
     assert reason_words(reply.answer.reason) == f"a device is in fault: pair1: {NO_WORLD}"
@@ -113,7 +113,7 @@ def test_a_bolt_being_measured_is_answered_when_a_pair_faults():
     _do(d, 1, TeachStart("M"))
     assert not any(isinstance(a, Reply) for a in _do(d, 2, TeachPoint("B7")))
     _frames(d, 500.0, 2)
-    acts = d.core.feed(DeviceFault(d.t, "pair1", FaultKind.DOWN, NO_WORLD))
+    acts = d.alone(DeviceFault(d.t, "pair1", FaultKind.DOWN, NO_WORLD))
     [reply] = [a for a in acts if isinstance(a, Reply)]
     assert reply.answer.reason is not None and reply.answer.reason.kind is Why.DEVICE_FAULT
     assert reply.answer.reason.faults == (("pair1", NO_WORLD),)
@@ -127,8 +127,8 @@ def test_a_bolt_without_frames_is_answered_within_the_wait_with_no_frames_or_not
     _do(d, 1, TeachStart("M"))
     _do(d, 2, TeachPoint("B7"))
     asked = d.t
-    assert not any(isinstance(a, Reply) for a in d.core.feed(Tick(asked + TEACH_WAIT_S - 0.5)))
-    [reply] = [a for a in d.core.feed(Tick(asked + TEACH_WAIT_S)) if isinstance(a, Reply)]
+    assert not any(isinstance(a, Reply) for a in d.alone(Tick(asked + TEACH_WAIT_S - 0.5)))
+    [reply] = [a for a in d.alone(Tick(asked + TEACH_WAIT_S)) if isinstance(a, Reply)]
     assert reply.answer.reason is not None and reply.answer.reason.kind is Why.NO_FRAMES
     assert reason_words(reply.answer.reason).startswith(
         f"no localization from the cameras in {TEACH_WAIT_S:g} s")
@@ -136,7 +136,7 @@ def test_a_bolt_without_frames_is_answered_within_the_wait_with_no_frames_or_not
     _do(d, 3, TeachPoint("B7"))                                 # again: a few frames only
     asked = d.t
     _frames(d, 500.0, 3)
-    [reply] = [a for a in d.core.feed(Tick(asked + TEACH_WAIT_S)) if isinstance(a, Reply)]
+    [reply] = [a for a in d.alone(Tick(asked + TEACH_WAIT_S)) if isinstance(a, Reply)]
     assert reply.answer.reason is not None and reply.answer.reason.kind is Why.NOT_STEADY
     assert (reply.answer.reason.count, reply.answer.reason.needed) == (3, TEACH_FRAMES)
     assert d.core.state is State.TEACHING
@@ -156,8 +156,8 @@ def test_a_teach_point_refused_while_the_cameras_give_no_wrench_names_what_they_
     silent = Reason(Why.NOT_LOCALIZED, per_pair=(("pair1", "left", "no frame for 120 s"),))
     for _ in range(5):
         d.t += 0.1
-        d.core.feed(LocalizedIn(d.t, d.t - 0.05, None, reason=silent))
-    [reply] = [a for a in d.core.feed(Tick(asked + TEACH_WAIT_S)) if isinstance(a, Reply)]
+        d.alone(LocalizedIn(d.t, d.t - 0.05, None, reason=silent))
+    [reply] = [a for a in d.alone(Tick(asked + TEACH_WAIT_S)) if isinstance(a, Reply)]
     why = reply.answer.reason
     assert why is not None and why.kind is Why.NOT_STEADY and why.count == 0
     assert reason_words(why) == (

@@ -5,12 +5,16 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from db.kinds import NOK, OK, PENDING, SKIPPED, BoltStatus
 from db.repository import Repository
 from stationd.boltfile import import_bolts
 from stationd.reasons import Reason, Why
 from stationd.station.events import (
     Because,
+    BoltLocked,
+    BoltsChanged,
     BoltSelected,
+    BoltSkipped,
     BoltView,
     DeviceHealth,
     Localized,
@@ -43,10 +47,48 @@ models:
 """
 
 
+#: the vehicle's bolts: name -> (x, y) mm, in the table's order
+AT = {"B1": (0.0, 0.0), "B2": (400.0, 0.0), "B3": (0.0, 300.0), "B4": (400.0, 300.0)}
+
+
+def bolt(name: str, status: BoltStatus = PENDING, **core: Any) -> BoltView:
+    """Bolt ``name`` as a core would hold it: ``status`` and the ``core``'s other fields
+    (``locked``, ``held``, ``ran``, ``last_nok``, ``check_first``, ``loosen_pset``)."""
+    x, y = AT[name]
+    return BoltView(name, x, y, 0.0, 1, order=list(AT).index(name) + 1, status=status, **core)
+
+
+def changed(*bolts: BoltView) -> BoltsChanged:
+    """The core's change of ``bolts`` (each as it holds it now)."""
+    return BoltsChanged(VIN, bolts)
+
+
+def ran(name: str, ok: bool, tid: int, **core: Any) -> list[StationEvent]:
+    """A tightening of ``name`` as the screens hear it: the core's change (its status now:
+    OK, or NOK and open again, ``core``: more of its fields), then the result recorded."""
+    return [changed(bolt(name, OK if ok else NOK, ran=True, last_nok=not ok, **core)),
+            result(name, ok, tid)]
+
+
+def skipped(name: str, reason: str, **core: Any) -> list[StationEvent]:
+    """A skip of ``name`` as the screens hear it: the core's change, then the news."""
+    return [changed(bolt(name, SKIPPED, **core)), BoltSkipped(bolt=name, reason=reason)]
+
+
+def locked(name: str, count: int, **core: Any) -> list[StationEvent]:
+    """``name`` locked after ``count`` NOKs in a row, as the core says it (``core``: more of
+    its fields; by default its last rundown a NOK)."""
+    now = {"ran": True, "last_nok": True, **core}
+    return [changed(bolt(name, NOK, locked=count, **now)), BoltLocked(name, count)]
+
+
+def held(name: str, note: str, **core: Any) -> list[StationEvent]:
+    """``name`` held (its result not known: ``note``), as the core says it."""
+    return [changed(bolt(name, held=note, **core)), BoltLocked(name, 0, held=note)]
+
+
 def opened() -> list[StationEvent]:
-    bolts = tuple(BoltView(b, x, y, 0.0, 1, order=i + 1)
-                  for i, (b, x, y) in enumerate([("B1", 0, 0), ("B2", 400, 0),
-                                                  ("B3", 0, 300), ("B4", 400, 300)]))
+    bolts = tuple(bolt(b) for b in AT)
     return [
         DeviceHealth(device="lift", ok=True), DeviceHealth(device="wrench", ok=True),
         StateChanged(state=State.TRACKING, reason=StateReason(Because.TRACKING)),
@@ -63,13 +105,13 @@ def result(bolt: str, ok: bool, tid: int) -> ResultRecorded:
 def work() -> list[StationEvent]:
     """B1 tightened OK, B2 NOK, the wrench on B3 selected and tightening."""
     out: list[StationEvent] = []
-    for i, (bolt, x, ok) in enumerate([("B1", 0.0, True), ("B2", 400.0, False)]):
+    for i, (name, x, ok) in enumerate([("B1", 0.0, True), ("B2", 400.0, False)]):
         out += [
-            Localized(point_mm=(x + 1, 1.0, 0.0), tilt_deg=2.0, reason=None, candidate=bolt,
-                      distance_mm=1.4, age_ms=40.0, allowed=(bolt,)),
-            BoltSelected(bolt=bolt, pset=1, point_mm=(x + 1, 1.0, 0.0), distance_mm=1.4,
+            Localized(point_mm=(x + 1, 1.0, 0.0), tilt_deg=2.0, reason=None, candidate=name,
+                      distance_mm=1.4, age_ms=40.0, allowed=(name,)),
+            BoltSelected(bolt=name, pset=1, point_mm=(x + 1, 1.0, 0.0), distance_mm=1.4,
                          tilt_deg=2.0),
-            ParamsSent(bolt=bolt, pset=1), ToolEnabled(bolt=bolt), result(bolt, ok, 100 + i),
+            ParamsSent(bolt=name, pset=1), ToolEnabled(bolt=name), *ran(name, ok, 100 + i),
         ]
     out += [
         Localized(point_mm=(2.0, 299.0, 0.0), tilt_deg=1.0, reason=None, candidate="B3",

@@ -142,13 +142,12 @@ def test_status_names_a_locked_bolt_and_who_releases_it_how(live_server, capsys)
     "1 bolt ending NOK" and "Bring the wrench to a bolt": not the bolt the station waited on,
     nor what to do.  Now a line per lock, then the command and who may give it."""
     from stationd.access import AccessConfig, User
-    from stationd.station.events import BoltLocked
-    from tests.web.scenario import VIN
+    from tests.web.scenario import VIN, locked
 
     srv = live_server()
     srv.server.commands.access = AccessConfig(        # the default roles: supervisor
         users={"sue": User("sue", "supervisor", "x")})  # releases, and sue is one
-    srv.publish([*opened(), BoltLocked("B2", 3)])
+    srv.publish([*opened(), *locked("B2", 3)])
 
     async def locked():
         import asyncio
@@ -422,11 +421,10 @@ def test_status_of_a_held_bolt_names_entering_its_outcome_before_a_release(live_
     """A bolt held because its result could not be read may have been tightened: the
     status named only "release" (which tightens it again), never entering the outcome the
     controller shows (a supervisor trial)."""
-    from stationd.station.events import BoltLocked
-    from tests.web.scenario import VIN
+    from tests.web.scenario import VIN, held
 
     srv = live_server()
-    srv.publish([*opened(), BoltLocked("B2", 0, held="tightening 7")])
+    srv.publish([*opened(), *held("B2", "tightening 7")])
 
     async def held():
         import asyncio
@@ -447,10 +445,10 @@ def test_status_says_a_held_bolt_as_held_with_why_and_a_lock_as_locked(live_serv
     """A supervisor's trial: ``stationd status`` listed a held bolt (its result not known:
     unreadable, a link cut's, a lost push's) under ``locked:``, as if its NOKs had locked
     it.  A hold is its own ``held:`` line, with why; a lock stays under ``locked:``."""
-    from stationd.station.events import BoltLocked
+    from tests.web.scenario import held, locked
 
     srv = live_server()
-    srv.publish([*opened(), BoltLocked("B1", 3), BoltLocked("B2", 0, held="tightening 7")])
+    srv.publish([*opened(), *locked("B1", 3), *held("B2", "tightening 7")])
 
     async def both():
         import asyncio
@@ -466,7 +464,7 @@ def test_status_says_a_held_bolt_as_held_with_why_and_a_lock_as_locked(live_serv
     # the vehicle's line counts it (a supervisor's trial: "0/50 bolts OK, 1 bolt ending NOK"
     # with 3 bolts held)
     [vehicle] = [x for x in lines if x.startswith("vehicle:")]
-    assert vehicle.endswith("bolts ending NOK, 1 held"), vehicle
+    assert vehicle.endswith("1 bolt ending NOK, 1 held"), vehicle   # B1's NOKs, B2
 
 
 def test_status_of_a_daemon_that_gives_no_holds_says_its_locks_as_before():

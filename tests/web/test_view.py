@@ -7,7 +7,6 @@ from dataclasses import replace
 from stationd.reasons import Reason, Wait, WaitKind, Why
 from stationd.station.events import (
     Because,
-    BoltSkipped,
     ClosingSettled,
     DeviceHealth,
     Localized,
@@ -23,7 +22,17 @@ from stationd.station.events import (
 )
 from stationd.web.view import View, fold
 from stationd.words import reason_words
-from tests.web.scenario import LIFT_LOW, VIN, fault, fault_state, opened, result, work
+from tests.web.scenario import (
+    LIFT_LOW,
+    VIN,
+    fault,
+    fault_state,
+    opened,
+    ran,
+    result,
+    skipped,
+    work,
+)
 
 #: the stale-frames refusal as the operator reads it
 STALE_812 = ("camera frames too old (812 ms): the cameras or the station's computer fall "
@@ -150,8 +159,8 @@ def test_a_vehicle_opened_again_by_a_reload_keeps_its_last_results():
 
 def test_skip_rework_result_close_and_wrong_bolt():
     v = fold(opened() + work())
-    v.apply(BoltSkipped(bolt="B4", reason="skipped by supervisor"))
-    v.apply(result("B2", True, 200))
+    for e in [*skipped("B4", "skipped by supervisor"), *ran("B2", True, 200)]:
+        v.apply(e)
     assert states(v)["B4"] == "skipped" and states(v)["B2"] == "ok"
     assert v.counters() == {"total": 4, "done": 2, "nok": 0, "skipped": 1}
     v.apply(VehicleClosed(vin=VIN, missing=("B3",), nok=()))
@@ -325,12 +334,12 @@ def test_a_closed_vehicles_skipped_bolts_are_said_skipped_not_missing():
     """The headline said "46 missing (B01, B02, ...)" of a vehicle whose B01 and B02 a person
     skipped, beside the counters' "2 skipped" and the report's 44 missing (a supervisor's
     trial): the core's close names every bolt not done; the skipped ones are said apart."""
-    v = fold([*opened(), BoltSkipped(bolt="B1", reason="no nut fitted")])
+    v = fold([*opened(), *skipped("B1", "no nut fitted")])
     v.apply(VehicleClosed(vin=VIN, missing=("B1", "B2", "B3", "B4"), nok=()))
     assert v.headline() == f"{VIN} closed: missing B2, B3, B4; skipped B1"
     assert v.tone() == "missing"
-    v = fold([*opened(), BoltSkipped(bolt="B1", reason="x"), BoltSkipped(bolt="B2", reason="y"),
-              BoltSkipped(bolt="B3", reason="z"), BoltSkipped(bolt="B4", reason="w")])
+    v = fold([*opened(), *skipped("B1", "x"), *skipped("B2", "y"), *skipped("B3", "z"),
+              *skipped("B4", "w")])
     v.apply(VehicleClosed(vin=VIN, missing=("B1", "B2", "B3", "B4"), nok=()))
     assert v.headline() == f"{VIN} closed: 4 skipped (B1, B2, B3, ...)"
     assert v.tone() == "missing"

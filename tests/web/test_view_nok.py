@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
+from typing import Any
 
 from db.kinds import BoltStatus
 from stationd.access import AccessConfig, User
@@ -33,19 +34,42 @@ from stationd.station.events import (
 )
 from stationd.web.server import WebServer
 from stationd.web.view import CHECK_FIRST_WORDS, View, fold
-from tests.web.scenario import VIN, opened, result
+from tests.web.scenario import VIN, changed, held, opened, ran, result
+from tests.web.scenario import bolt as bolt_view
 
 LOCKED = "B2 locked after 3 NOK in a row: a supervisor releases it"
 TO_LOOSEN_STATUS = BoltStatus.TO_LOOSEN
 
 
-def _loosen(bolt: str = "B2", pset: int = 90) -> BoltToLoosen:
-    return BoltToLoosen(bolt, Reason(Why.LOOSEN_FIRST, bolt=bolt, pset=pset))
+def _loosen(bolt: str = "B2", pset: int = 90, user: str | None = None,
+           **core: Any) -> list[StationEvent]:
+    """``bolt`` to be loosened first, as the core says it: its state, then the news (``core``:
+    its other fields; by default a NOK's: run down, its last rundown a NOK)."""
+    now = {"ran": True, "last_nok": True, **core}
+    return [changed(bolt_view(bolt, TO_LOOSEN_STATUS, loosen_pset=pset, **now)),
+            BoltToLoosen(bolt, Reason(Why.LOOSEN_FIRST, bolt=bolt, pset=pset), user)]
 
 
-def _loosening(bolt: str, ok: bool, tid: int) -> ResultRecorded:
+def _loosening(bolt: str, ok: bool, tid: int, **core: Any) -> list[StationEvent]:
+    """A loosening of ``bolt``: OK, loosened (its tightening pset next); NOK, still to be
+    loosened, its last rundown a NOK (``core``: more of its fields, a lock)."""
     r = result(bolt, ok, tid)
-    return ResultRecorded(**{**r.__dict__, "kind": "loosening"})
+    now = (bolt_view(bolt, BoltStatus.LOOSENED, ran=True) if ok
+           else bolt_view(bolt, TO_LOOSEN_STATUS, ran=True, last_nok=True, loosen_pset=90,
+                          **core))
+    return [changed(now), ResultRecorded(**{**r.__dict__, "kind": "loosening"})]
+
+
+def _nok(bolt: str, tid: int) -> list[StationEvent]:
+    """A NOK of ``bolt`` under the loosen strategy: the result, then its loosen pset next."""
+    return [*ran(bolt, False, tid), *_loosen(bolt)]
+
+
+def _released(bolt: str, unknown: bool = False, status: BoltStatus = BoltStatus.PENDING,
+              **core: Any) -> list[StationEvent]:
+    """``bolt`` released by sam: open again (``unknown``: a hold's, checked first)."""
+    return [changed(bolt_view(bolt, status, check_first=unknown, **core)),
+            BoltReleased(bolt, "sam", unknown=unknown)]
 
 
 def _on(bolt: str, x: float, *, loosen_pset: int | None = None) -> list[StationEvent]:
@@ -60,22 +84,23 @@ def _on(bolt: str, x: float, *, loosen_pset: int | None = None) -> list[StationE
 
 def _locked() -> View:
     """B2: NOK, loosened NOK twice: locked, the wrench still near it."""
-    return fold([*opened(), *_on("B2", 400.0), result("B2", False, 1), _loosen(),
-                 *_on("B2", 400.0, loosen_pset=90), _loosening("B2", False, 2), _loosen(),
-                 *_on("B2", 400.0, loosen_pset=90), _loosening("B2", False, 3),
+    return fold([*opened(), *_on("B2", 400.0), *_nok("B2", 1),
+                 *_on("B2", 400.0, loosen_pset=90), *_loosening("B2", False, 2),
+                 *_on("B2", 400.0, loosen_pset=90), *_loosening("B2", False, 3, locked=3),
                  BoltLocked("B2", 3)])
 
 
 def test_the_loosen_step_shows_its_loosen_pset_and_never_says_tighten():
-    v = fold([*opened(), *_on("B2", 400.0), result("B2", False, 1), _loosen()])
+    v = fold([*opened(), *_on("B2", 400.0), *_nok("B2", 1)])
     b2 = v.bolts["B2"].to_json()
     assert (b2["state"], b2["label"], b2["loosen_pset"]) == ("loosen", "loosen first", 90)
     assert b2["reason"] == "B2: loosen first (loosen pset 90), then tighten"
-    v = fold([*opened(), *_on("B2", 400.0), result("B2", False, 1), _loosen(),
+    v = fold([*opened(), *_on("B2", 400.0), *_nok("B2", 1),
               *_on("B2", 400.0, loosen_pset=90)])
     assert v.headline() == "B2: loosen first (loosen pset 90)" and v.tone() == "go"
     assert v.bolts["B2"].to_json()["label"] == "loosen"   # the tool on for its loosen pset
-    v.apply(_loosening("B2", True, 2))
+    for e in _loosening("B2", True, 2):
+        v.apply(e)
     assert v.bolts["B2"].state == "loosened" and not v.bolts["B2"].loosen
     v.apply(BoltSelected(bolt="B2", pset=1, point_mm=(400.0, 0.0, 0.0), distance_mm=1.0,
                          tilt_deg=1.0))
@@ -95,8 +120,9 @@ def test_a_locked_bolt_says_so_until_released_then_it_is_loosened_first():
     v.apply(Localized(point_mm=(0.0, 0.0, 0.0), tilt_deg=1.0, reason=None, candidate="B1",
                       distance_mm=1.0, age_ms=30.0, allowed=("B1",)))
     assert v.bolts["B2"].state == "locked"
-    v.apply(BoltReleased("B2", "sam"))
-    v.apply(_loosen())   # the core: released, still to be loosened first
+    for e in _released("B2", status=TO_LOOSEN_STATUS, ran=True, last_nok=True,
+                       loosen_pset=90):   # the core: released, still to be loosened first
+        v.apply(e)
     assert (v.bolts["B2"].state, v.bolts["B2"].locked) == ("loosen", False)
     assert v.locks() == []
 
@@ -150,25 +176,27 @@ def test_the_headers_counts_are_the_vehicle_reports_through_release_skip_and_loo
           "angle_deg": 31.0}
     at = datetime.now(UTC)
 
-    def rundown(bolt: str, ok: bool, tid: int) -> ResultRecorded:
+    def rundown(bolt: str, ok: bool, tid: int, **core: Any) -> list[StationEvent]:
         repo.record_tightening(VIN, bolt, ok=ok, torque_nm=50.2 if ok else 41.0,
                                tightening_id=tid, **kw)
-        return result(bolt, ok, tid)
+        return ran(bolt, ok, tid, **core)
 
     def command(kind: str, bolt: str, n: int) -> None:
         repo.ledger.record_command(at=at + timedelta(seconds=n), user="sam", source="cli",
                                    kind=kind, vin=VIN, bolt=bolt, comment="")
 
-    events: list[StationEvent] = [*opened(), rundown("B1", True, 1)]
-    events += [rundown("B2", False, t) for t in (2, 3, 4)] + [BoltLocked("B2", 3)]
+    events: list[StationEvent] = [*opened(), *rundown("B1", True, 1)]
+    for t in (2, 3, 4):
+        events += rundown("B2", False, t, locked=3 if t == 4 else None)
     command("release", "B2", 10)
-    events.append(BoltReleased("B2", "sam"))
-    events.append(rundown("B3", False, 5))
+    events += _released("B2", status=BoltStatus.NOK, ran=True, last_nok=True)
+    events += rundown("B3", False, 5)
     command("skip", "B3", 11)
-    events.append(BoltSkipped("B3", skip=Skip(SkipKind.COMMAND, user="sam", comment="")))
-    events.append(rundown("B4", False, 6))
+    events += [changed(bolt_view("B3", BoltStatus.SKIPPED, ran=True, last_nok=True)),
+               BoltSkipped("B3", skip=Skip(SkipKind.COMMAND, user="sam", comment=""))]
+    events += rundown("B4", False, 6)
     command("loosen", "B4", 12)
-    events.append(BoltToLoosen("B4", Reason(Why.LOOSEN_FIRST, bolt="B4", pset=90), "sam"))
+    events += _loosen("B4", user="sam", last_nok=False)
     report = repo.vehicle_report(VIN)
     repo.close()
     counts = fold(events).counters()
@@ -198,14 +226,17 @@ def test_after_a_reload_and_through_skips_and_a_close_the_counts_stay_the_report
     assert v.counters() == {"total": 4, "done": 0, "nok": 1, "skipped": 0}
     b2 = v.bolts["B2"].to_json()    # its loosen pset said after a reload, as live
     assert (b2["state"], b2["loosen_pset"]) == ("loosen", 90)
-    v = fold([*opened(), result("B3", True, 1), _loosen("B3"),
-              BoltToLoosen("B3", Reason(Why.LOOSEN_FIRST, bolt="B3", pset=90), "sam"),
+    v = fold([*opened(), *ran("B3", True, 1), *_loosen("B3", user="sam", last_nok=False),
+              changed(bolt_view("B3", BoltStatus.SKIPPED, ran=True)),
               BoltSkipped("B3", skip=skip)])
     assert v.counters()["skipped"] == 0 and v.bolts["B3"].state == "skipped"
     v = _locked()
-    v.apply(BoltSkipped("B2", skip=skip))
+    for e in (changed(bolt_view("B2", BoltStatus.SKIPPED, ran=True, last_nok=True)),
+              BoltSkipped("B2", skip=skip)):
+        v.apply(e)
     assert (v.bolts["B2"].locked, v.bolts["B2"].held, v.locks()) == (False, False, [])
-    v = fold([*opened(), BoltSkipped("B4", skip=skip)])
+    v = fold([*opened(), changed(bolt_view("B4", BoltStatus.SKIPPED)),
+              BoltSkipped("B4", skip=skip)])
     v.apply(VehicleClosed(VIN, ("B1", "B2", "B3", "B4"), ()))
     assert v.bolts["B4"].state == "skipped" and v.counters()["skipped"] == 1
 
@@ -215,9 +246,9 @@ def test_a_bolt_released_from_a_hold_reads_check_first_until_its_result():
     "to do": drawn "check first" with the words, and its selection says to check the
     controller, in amber (a supervisor's trial: only the supervisor was warned; the operator
     read "to do" and tightened the bolt twice).  A lock's release (its NOKs known) is not."""
-    held = "tightening 7"
-    v = fold([*opened(), *_on("B2", 400.0), BoltLocked("B2", 0, held=held),
-              BoltReleased("B2", "sam", unknown=True)])
+    note = "tightening 7"
+    v = fold([*opened(), *_on("B2", 400.0), *held("B2", note),
+              *_released("B2", unknown=True)])
     b2 = v.bolts["B2"].to_json()
     assert (b2["state"], b2["label"], b2["check_first"]) == ("pending", "check first", True)
     assert b2["reason"] == f"released by sam: {CHECK_FIRST_WORDS}"
@@ -245,15 +276,18 @@ def test_a_bolt_released_from_a_hold_reads_check_first_until_its_result():
     v.apply(replace(again, bolts=tuple(replace(b, check_first=b.bolt == "B2")
                                        for b in again.bolts)))
     assert [b.bolt for b in v.bolts.values() if b.to_json()["label"] == "check first"] == ["B2"]
-    v.apply(result("B2", True, 8))
+    for e in ran("B2", True, 8):
+        v.apply(e)
     assert (v.bolts["B2"].check_first, v.bolts["B2"].to_json()["label"]) == (False, "OK")
     # a skip ends it too
-    v = fold([*opened(), BoltLocked("B3", 0, held=held), BoltReleased("B3", "sam", unknown=True),
+    v = fold([*opened(), *held("B3", note), *_released("B3", unknown=True),
+              changed(bolt_view("B3", BoltStatus.SKIPPED)),
               BoltSkipped("B3", skip=Skip(SkipKind.COMMAND, user="sam", comment=""))])
     assert not v.bolts["B3"].check_first
     # a lock of NOKs released: tightened again, no "check first"
     v = _locked()
-    v.apply(BoltReleased("B2", "sam"))
+    for e in _released("B2", status=TO_LOOSEN_STATUS, ran=True, last_nok=True, loosen_pset=90):
+        v.apply(e)
     v.apply(_on("B2", 400.0)[1])
     assert not v.bolts["B2"].check_first and v.tone() == "go"
 
@@ -262,12 +296,15 @@ def test_a_lock_on_a_held_bolt_keeps_the_hold_and_says_both():
     """A NOK heard late reaches max_nok as the next result comes unreadable: held, then
     locked.  The screen keeps it held (its outcome may still be entered) and says both (a new
     user's trial: the hold hid the lock)."""
-    held = "tightening 21"
-    v = fold([*opened(), *_on("B2", 400.0), BoltLocked("B2", 0, held=held),
+    note = "tightening 21"
+    v = fold([*opened(), *_on("B2", 400.0), *held("B2", note),
+              changed(bolt_view("B2", TO_LOOSEN_STATUS, loosen_pset=90, ran=True,
+                                last_nok=True, held=note, locked=3)),
               BoltLocked("B2", 3)])
     b2 = v.bolts["B2"].to_json()
     assert (b2["state"], b2["label"], b2["held"], b2["locked"]) == ("locked", "held", True, True)
     assert b2["reason"].startswith(LOCKED + "; B2: the controller's result could not be read "
                                    "(tightening 21)")
-    v.apply(BoltReleased("B2", "sam", unknown=True))
+    for e in _released("B2", True, TO_LOOSEN_STATUS, loosen_pset=90, ran=True, last_nok=True):
+        v.apply(e)
     assert (v.bolts["B2"].held, v.bolts["B2"].locked) == (False, False)
