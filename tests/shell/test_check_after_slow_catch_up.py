@@ -1,0 +1,83 @@
+"""An independent tester's finding (against dustywill/open-protocol-emulator and
+pydesai/open-protocol-simulator, both of which refuse MID 0064 at once): the station takes
+*any* RefusedError of the catch-up's MID 0064 for "this controller keeps no results"
+(``ControllerFeed._refused`` sets ``_no_history``), and then never asks MID 0064 again on
+that connection -- neither the check every CHECK_ON_S with the tool on nor the window-end
+check.  But the driver raises RefusedError also for a MID 0064 that was merely not answered
+within its timeout (``Channel.ask``: "no answer ... taken as refused"), and for a transient
+MID 0004 such as error 98 ("controller internal request timeout").  One slow answer at a
+reconnect so switches the lost-push check off for the whole connection: a push lost later
+leaves its bolt open with the tool on (the new-user trial the check was made for), though
+the controller answers MID 0064 perfectly well from then on."""
+
+from __future__ import annotations
+
+import asyncio
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+import pytest
+
+from drivers.errors import RefusedError
+from stationd.station.inputs import NewestChecked, ResultIn
+from tests.shell.test_catch_up import Controller, _feed_of, res
+
+
+class SlowOnce(Controller):
+    """Answers MID 0064 normally, except the first ask, which gets ``first`` (what the
+    driver raises for it)."""
+
+    def __init__(self, answers: dict[int, Any], first: RefusedError | None) -> None:
+        super().__init__(answers)
+        self.first: RefusedError | None = first
+        self.asked: list[int] = []
+
+    def fetch_result(self, tid: int, timeout: float | None = None) -> Any:
+        self.asked.append(tid)
+        if self.first is not None:
+            first, self.first = self.first, None
+            raise first
+        return super().fetch_result(tid, timeout)
+
+
+# what OpenProtocolWrench.fetch_result raises for each (Channel.ask / Channel.request)
+SILENT = RefusedError("fetch tightening (newest): no answer to MID 0064 within 2 s: taken as "
+                      "refused (the link kept: its keep-alive tells whether it is alive)")
+BUSY = RefusedError("fetch tightening (newest): refused by the controller: error 98 "
+                    "(controller internal request timeout)", code=98)
+
+
+@pytest.mark.parametrize("first", [None, SILENT, BUSY],
+                         ids=["control-answered", "unanswered-once", "error-98-once"])
+def test_a_tool_on_check_still_finds_a_lost_push_after_one_slow_catch_up(first):
+    # (control-answered passes: the same scenario with the catch-up answered at once)
+    # 40 recorded; the controller's newest at the reconnect is 40 (nothing made in the cut),
+    # but its answer to the catch-up's MID 0064 is late once (40 then heard pushed again).
+    # Then B1's tool goes on, the operator runs B1 down (41), its push is lost; the check
+    # with the tool on asks.
+    controller = SlowOnce({0: res(40), 40: res(40)}, first)
+    fed: list[Any] = []
+
+    async def main() -> None:
+        pool = ThreadPoolExecutor(2)
+        feed_ = _feed_of(controller, 40, None, fed, pool)
+        feed_.came_back()
+        assert feed_.catching_up is not None
+        await feed_.catching_up                  # the one slow MID 0064 (or answered: 40)
+        feed_._accounted = 40                    # 40 the last heard on this link (pushed)
+        controller.answers = {0: res(41), 41: res(41)}   # B1 run down: 41, its push lost
+        core = feed_.core
+        core.tool_on, core.checking = True, 1
+        feed_.check_newest(1, tool_on=True)      # CHECK_ON_S of tool-on: B1's check
+        assert feed_.checking is not None
+        await feed_.checking
+        pool.shutdown()
+        feed_.close()
+
+    asyncio.run(main())
+    found = [e.result.tightening_id for e in fed if isinstance(e, ResultIn)]
+    [checked] = [e for e in fed if isinstance(e, NewestChecked)]
+    assert controller.asked.count(0) >= 2 and found == [41], (
+        f"after one {'unanswered' if first is SILENT else 'error 98'} MID 0064 at the "
+        f"catch-up, the tool-on check asked {controller.asked.count(0) - 1} time(s) and "
+        f"found {found} (41's push lost): {checked}")
