@@ -23,6 +23,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from drivers.errors import DeviceError, RefusedError
 from drivers.keeper import DeviceKeeper, one_line
 from drivers.wrench import Received, TighteningResult, UnreadableResult, Wrench
+from drivers.wrench.openprotocol.message import UNSUPPORTED
 from stationd.shell.blocking import Blocking
 from stationd.shell.records import STATION_FAULTS, Records
 from stationd.station.core import StationCore
@@ -90,8 +91,10 @@ class ControllerFeed:
         #: ids between the two were made during the cut and are a gap (:meth:`_refused`)
         self._first_pushed: int | None = None
         self._refused_after: int | None = None
-        #: the controller refused to give its newest result at this link's catch-up: it
-        #: keeps none to give (a check of the newest asks nothing then)
+        #: the controller refused to give its newest result at this link's catch-up as a
+        #: request it does not support (``UNSUPPORTED``): it keeps none to give (a check of
+        #: the newest asks nothing then).  Not for a refusal of the moment: no answer in
+        #: time (the driver's "taken as refused"), error 98 and the like (the checks ask)
         self._no_history = False
         #: the pushed result whose id skipped those fetched now (fed after them)
         self._revealed_by: int | None = None
@@ -283,8 +286,8 @@ class ControllerFeed:
         last = await self._call(self.records.last_tightening_id)
         try:
             newest = await self._call(wrench.fetch_result, 0)
-        except RefusedError:
-            await self._refused(last)
+        except RefusedError as exc:
+            await self._refused(last, exc)
             raise
         if newest is None:    # the controller has none: made none, or its memory cleared
             return None if last is None else (
@@ -497,6 +500,11 @@ class ControllerFeed:
                     # nothing since the last one heard, and that one through the core
                     return not self.received, ""
                 self._accounted, self._revealed_by = nid, None
+                if self._refused_after is not None and nid > self._refused_after:
+                    # the catch-up's newest not said (refused for the moment): the ids
+                    # beyond the last recorded are fetched now, each found or a gap; a
+                    # push beyond them must not tell them again as the cut's
+                    self._refused_after = None
                 log.warning("results: the controller's newest tightening is %d, the last one "
                             "heard %d: %s not pushed by the controller (the link up): asked for",
                             nid, last, id_span(last + 1, nid))
@@ -631,12 +639,16 @@ class ControllerFeed:
         if have and newest is not None:
             await self._fetched(wrench, end + 1, newest, None, wrench.clock_offset_s, live)
 
-    async def _refused(self, last: int | None) -> None:
+    async def _refused(self, last: int | None, exc: RefusedError) -> None:
         """The controller refused to say its newest result after a reconnect: the ids made
         during the cut are those between ``last``, the last one recorded, and the first one
         pushed since (told now where one came already, else when it comes), a gap.  Nothing
-        recorded yet: no count to compare with."""
-        self._no_history = True
+        recorded yet: no count to compare with.  Only a refusal of the request itself
+        (``UNSUPPORTED``: unknown MID, ...) says the controller keeps no results to give;
+        one of the moment (no answer in time, error 98) leaves the checks of the newest
+        asking, each saying what it could not tell as any failure."""
+        if exc.code in UNSUPPORTED:
+            self._no_history = True
         if last is None:
             return
         if self._first_pushed is None or self._first_pushed <= last:

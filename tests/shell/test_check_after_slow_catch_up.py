@@ -19,7 +19,7 @@ from typing import Any
 import pytest
 
 from drivers.errors import RefusedError
-from stationd.station.inputs import NewestChecked, ResultIn
+from stationd.station.inputs import NewestChecked, ResultIn, ResultsMissed
 from tests.shell.test_catch_up import Controller, _feed_of, res
 
 
@@ -66,7 +66,7 @@ def test_a_tool_on_check_still_finds_a_lost_push_after_one_slow_catch_up(first):
         await feed_.catching_up                  # the one slow MID 0064 (or answered: 40)
         feed_._accounted = 40                    # 40 the last heard on this link (pushed)
         controller.answers = {0: res(41), 41: res(41)}   # B1 run down: 41, its push lost
-        core = feed_.core
+        core: Any = feed_.core
         core.tool_on, core.checking = True, 1
         feed_.check_newest(1, tool_on=True)      # CHECK_ON_S of tool-on: B1's check
         assert feed_.checking is not None
@@ -81,3 +81,44 @@ def test_a_tool_on_check_still_finds_a_lost_push_after_one_slow_catch_up(first):
         f"after one {'unanswered' if first is SILENT else 'error 98'} MID 0064 at the "
         f"catch-up, the tool-on check asked {controller.asked.count(0) - 1} time(s) and "
         f"found {found} (41's push lost): {checked}")
+
+
+class SlowThenPushing(SlowOnce):
+    """:class:`SlowOnce` whose results' loop takes ``push`` (once, when set)."""
+
+    push: int | None = None
+
+    def wait_result(self, timeout: float, acknowledge: bool = False) -> Any:
+        push, self.push = self.push, None
+        return res(push) if push is not None else super().wait_result(timeout, acknowledge)
+
+
+def test_a_result_the_check_fetched_after_a_slow_catch_up_is_not_told_again_as_the_cut_s():
+    """After the catch-up's MID 0064 went unanswered once, the ids beyond the last recorded
+    wait for the first push beyond it to say the cut (``_refused_after``).  The tool-on check
+    fetched 41 meanwhile: the next push (42) skips nothing, and 41 is no gap."""
+    controller = SlowThenPushing({0: res(40), 40: res(40)}, SILENT)
+    fed: list[Any] = []
+
+    async def main() -> None:
+        pool = ThreadPoolExecutor(2)
+        feed_ = _feed_of(controller, 40, None, fed, pool)
+        feed_.came_back()
+        assert feed_.catching_up is not None
+        await feed_.catching_up
+        feed_._accounted = 40
+        controller.answers = {0: res(41), 41: res(41)}
+        core: Any = feed_.core
+        core.tool_on, core.checking = True, 1
+        feed_.check_newest(1, tool_on=True)
+        assert feed_.checking is not None
+        await feed_.checking
+        controller.push = 42
+        await feed_.results(controller)
+        pool.shutdown()
+        feed_.close()
+
+    asyncio.run(main())
+    gaps = [(e.first, e.last) for e in fed if isinstance(e, ResultsMissed)]
+    found = [e.result.tightening_id for e in fed if isinstance(e, ResultIn)]
+    assert 41 in found and gaps == [], f"41 fetched by the check, then told as {gaps}"

@@ -37,6 +37,10 @@ MID_TIME_REQUEST, MID_TIME = 80, 81          # read time upload request / reply 
 MID_LINK_ACK, MID_LINK_ERROR, MID_KEEPALIVE = 9997, 9998, 9999
 #: MID 0004 codes that mean "not this revision": ask again one lower (integrators' practice)
 REVISION_REFUSALS = frozenset({74, 76, 97})
+#: MID 0004 codes that mean "this controller does not do that request" (at the lowest
+#: revision tried): unknown MID, requested MID unsupported, a revision refusal.  Others (98
+#: "controller internal request timeout", ...) say nothing of what it does another time.
+UNSUPPORTED = REVISION_REFUSALS | {75, 99}
 NOT_FOUND = 15                     # MID 0004 to a MID 0064: no result with that id
 
 #: MID 0004 error codes (Open Protocol specification); others are shown as their number.
