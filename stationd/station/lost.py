@@ -129,16 +129,17 @@ class LostRules(NokRules):
         too (the pushed one unreadable: not known to be an OK; a new user's trial: the hold
         hid the lock at max_nok, and its release reopened the bolt for its tightening pset
         where the loosen pset was due; an OK entered for it ends the lock)."""
-        if self._pending_push is not None or not self._nok_owed:
+        if self._pending_push is not None:
             return []
-        owed, self._nok_owed = self._nok_owed, {}
         m, acts = self.matcher, []
+        owed, self._nok_owed = self._nok_owed, {}
         for bolt, pset in owed.items():
             if m is not None and bolt in m.bolts and bolt in self._nok_last \
                     and bolt not in m.done and bolt not in m.locked:
                 acts += self._after_nok(t, bolt, pset, counted=True)
             self._lock_due.pop(bolt, None)
-        return acts
+        # the bolts a gap it revealed may own, run down again since: held after its record
+        return acts + self._held_after_push(t)
 
     def _pending_overdue(self, t: float) -> list[Action]:
         """A pushed result waited for longer than :data:`PENDING_PUSH_S` (never fed: a fault
@@ -229,7 +230,8 @@ class LostRules(NokRules):
         """Tightenings made with the link up, their pushes lost, that the controller does not
         give (a gap): the result of each enable since the last result heard that got none in
         its window may be among them.  Never left open (it may be tightened: the operator
-        would tighten it twice): each such bolt held for a person."""
+        would tighten it twice): each such bolt held for a person, the one whose tool went on
+        again since as well (:meth:`_gap_again`)."""
         ids = id_span(ev.first, ev.last)
 
         def note(u: _Cut) -> str:
@@ -239,15 +241,54 @@ class LostRules(NokRules):
             # a link cut's gap: the catch-up's end settles its enable; but one told only by
             # a push after a refused catch-up may hold results made since the reconnect (a
             # reviewer: the bolt left since, its push lost, was not held)
-            return self._hold_unanswered(ev.t, [
-                u for u in self._unanswered
-                if u.enabled_at > self._link_back_at and self._still_open(u)], note)
-        last = self._judged
-        since = self._judged_at if last is not None and last[0] == ev.first - 1 \
-            else float("-inf")
-        lost = [u for u in self._unanswered
-                if u.enabled_at >= since - CLOCK_SLACK_S and self._still_open(u)]
-        return self._hold_unanswered(ev.t, lost, note) + self._doubt_while_on(ev.t, None, note)
+            def mine(u: _Cut) -> bool:
+                return u.enabled_at > self._link_back_at
+            acts = self._hold_unanswered(ev.t, [
+                u for u in self._unanswered if mine(u) and self._still_open(u)], note)
+        else:
+            last = self._judged
+            since = self._judged_at if last is not None and last[0] == ev.first - 1 \
+                else float("-inf")
+
+            def mine(u: _Cut) -> bool:
+                return u.enabled_at >= since - CLOCK_SLACK_S
+            lost = [u for u in self._unanswered if mine(u) and self._still_open(u)]
+            acts = self._hold_unanswered(ev.t, lost, note) + self._doubt_while_on(ev.t, None,
+                                                                                    note)
+        return acts + self._gap_again(ev.t, [u for u in self._again if mine(u)], note)
+
+    def _gap_again(self, t: float, again: list[_Cut], note: Callable[[_Cut], str]
+                   ) -> list[Action]:
+        """A gap's ids may be the rundown of an enable whose bolt's tool went on again since
+        (``again``: run down again now, or selected): never closed as one rundown where it
+        may be two (under the loosen strategy a NOK joint tightened again without its
+        loosening), each such bolt is held for a person too -- once the pushed result that
+        revealed the gap, that bolt's own as a rule, is judged (recorded to it first: a hold
+        stored before a rundown ends with it), or now where none is waited for.  Not one
+        held or skipped already (a person has it)."""
+        m = self.matcher
+        for u in again:
+            en = u.selection
+            if en.vin == self.vin and m is not None and (en.bolt in m.held
+                                                         or en.bolt in m.skipped):
+                continue
+            if all((w.selection.vin, w.selection.bolt) != (en.vin, en.bolt)
+                   for w, _ in self._hold_after_push):
+                self._hold_after_push.append((u, note(u)))
+        return self._held_after_push(t) if self._pending_push is None else []
+
+    def _held_after_push(self, t: float) -> list[Action]:
+        """The bolts a gap may own whose tool went on again (:meth:`_gap_again`) held, each
+        not held or skipped meanwhile (a person has it already)."""
+        owed, self._hold_after_push = self._hold_after_push, []
+        m, acts = self.matcher, []
+        for u, note in owed:
+            en = u.selection
+            if en.vin == self.vin and m is not None and (en.bolt in m.held
+                                                         or en.bolt in m.skipped):
+                continue
+            acts += self._hold_unanswered(t, [u], _said(note))
+        return acts
 
     def _fetched_in_doubt(self, ev: ResultIn) -> list[Action]:
         """A result a check with the tool on fetched (:meth:`_check_while_on`) that nothing
@@ -422,3 +463,8 @@ class LostRules(NokRules):
             # after the link came back, the station's start too, is not taken for offline)
             return lost - CLOCK_SLACK_S <= ev.made_at <= back - CLOCK_SLACK_S
         return ev.fetched and not ev.live
+
+
+def _said(note: str) -> Callable[[_Cut], str]:
+    """A hold's note made already, as :meth:`LostRules._hold_unanswered` takes one."""
+    return lambda _: note

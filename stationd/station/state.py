@@ -237,6 +237,15 @@ class CoreState:
     #: up (``cut_at``: when that window ended), the latest last: a result fetched late (its
     #: push lost) of one's pset, made within it, may be its bolt's, which is then held
     _unanswered: list[_Cut] = field(default_factory=list, repr=False)
+    #: those of a bolt whose tool went on again since (:meth:`_unanswered_before`), and an
+    #: enable of it still owed then (its window running): what is made now is its own, but
+    #: ids a gap tells before it got a result may be the earlier rundown's (only a gap's:
+    #: :meth:`LostRules._gap_in_doubt`)
+    _again: list[_Cut] = field(default_factory=list, repr=False)
+    #: such enables a gap may own, held once the pushed result that revealed the gap is
+    #: judged (after its record to that bolt: a hold stored before a rundown ends with it),
+    #: each with its hold's note (:meth:`LostRules._held_after_push`)
+    _hold_after_push: list[tuple[_Cut, str]] = field(default_factory=list, repr=False)
     #: a pushed result (its id, since when) that skipped ids, fed after them
     #: (:class:`ResultsSkipped`): the enable's result stays owed until it is in
     _pending_push: int | None = field(default=None, repr=False)
@@ -500,9 +509,18 @@ class CoreState:
         (its late-result window ended, the link up), is remembered as unanswered, so that a
         result fetched later because its push was lost is checked against it (a quality
         trial: stored unattributed, its bolt open and tightened twice); the tool on for that
-        bolt again forgets it (what is made now is its own)."""
+        bolt again forgets it (what is made now is its own) for results fetched, but keeps
+        it, and that bolt's enable still owed, for a gap told before this enable's result
+        (``_again``: an independent tester's trial, the bolt run down twice, the first
+        rundown's push lost and not given, closed as one OK)."""
         prev = self._enabled
-        self._answered_bolt(sel.vin, sel.bolt)
+        if prev is not None and (prev.vin, prev.bolt) == (sel.vin, sel.bolt) \
+                and self._cut is None and self._off_at is not None \
+                and self._enabled_at is not None and self._enabled_at > self._link_lost_at:
+            # (its window still running, its tool off: its rundown's push may be lost too)
+            self._again = [*self._again, _Cut(prev, self._enabled_at,
+                                              self._off_at + self.late_result_s)]
+        self._answered_bolt(sel.vin, sel.bolt, again=True)
         return prev is not None and (prev.vin, prev.bolt) != (sel.vin, sel.bolt) \
             and self._unanswered_after()
 
@@ -518,12 +536,22 @@ class CoreState:
             return True
         return False
 
-    def _answered_bolt(self, vin: str, bolt: str) -> None:
+    def _answered_bolt(self, vin: str, bolt: str, again: bool = False) -> None:
         """``bolt``'s (of vehicle ``vin``) unanswered enables no longer count: its own result
-        came, it is held, or the tool is on for it again (what it makes now is its own).  By
-        vehicle too: the next car's bolt of the same name answers nothing of the last's."""
+        came, it is held, or (``again``) the tool is on for it again: what it makes now is
+        its own, and they count only for a gap told before its result (moved to
+        ``_again``).  By vehicle too: the next car's bolt of the same name answers nothing
+        of the last's."""
+        key = (vin, bolt)
+        if again:
+            self._again = [*self._again, *(u for u in self._unanswered
+                                           if (u.selection.vin, u.selection.bolt) == key)]
+            self._again = self._again[-UNANSWERED:]
+        else:
+            self._again = [u for u in self._again
+                           if (u.selection.vin, u.selection.bolt) != key]
         self._unanswered = [u for u in self._unanswered
-                            if (u.selection.vin, u.selection.bolt) != (vin, bolt)]
+                            if (u.selection.vin, u.selection.bolt) != key]
 
     def _unhold(self, bolt: str) -> str | None:
         """``bolt``'s hold ends (released, skipped, its outcome entered): its note, None
@@ -543,7 +571,12 @@ class CoreState:
         """A released hold's bolt (its result not known: it may be a NOK) gets its loosen
         pset first where its NOK rule loosens: a NOK joint is never tightened again without
         its loosening, and an OK one loosened and tightened again is a rework, not a fault
-        (a supervisor's trial: three held NOK joints, released, tightened again at once)."""
+        (a supervisor's trial: three held NOK joints, released, tightened again at once).
+        Not one done: held after its OK was recorded (a gap's ids may be an earlier rundown
+        of it: :meth:`LostRules._gap_again`), it is released as that OK says (its loosen
+        pset would never be selected; a loosen command reworks it)."""
+        if self.matcher is not None and bolt in self.matcher.done:
+            return
         rule = self._nok_rule(bolt)
         if rule.strategy == "loosen" and rule.loosen_pset is not None:
             self._loosen.add(bolt)
