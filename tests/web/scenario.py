@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from db.kinds import NOK, OK, PENDING, SKIPPED, BoltStatus
+from db.kinds import LOOSENED, LOOSENING, NOK, OK, PENDING, SKIPPED, BoltStatus
 from db.repository import Repository
 from stationd.boltfile import import_bolts
 from stationd.reasons import Reason, Why
@@ -68,6 +69,24 @@ def ran(name: str, ok: bool, tid: int, **core: Any) -> list[StationEvent]:
     OK, or NOK and open again, ``core``: more of its fields), then the result recorded."""
     return [changed(bolt(name, OK if ok else NOK, ran=True, last_nok=not ok, **core)),
             result(name, ok, tid)]
+
+
+def told(news: ResultRecorded | BoltSkipped, vehicle: VehicleOpened | None = None
+         ) -> list[StationEvent]:
+    """``news`` of a bolt of ``vehicle`` (the scenario's by default) as the screens hear it:
+    the core's change of that bolt first (a rundown's status, or skipped), then the news."""
+    bolts = {b.bolt: b for b in (vehicle.bolts if vehicle is not None
+                                 else (bolt(b) for b in AT))}
+    was = bolts[news.bolt]
+    if isinstance(news, BoltSkipped):
+        now = replace(was, status=SKIPPED)
+    elif news.kind == LOOSENING:
+        now = replace(was, status=LOOSENED if news.ok else BoltStatus.TO_LOOSEN, ran=True,
+                      last_nok=not news.ok)
+    else:
+        now = replace(was, status=OK if news.ok else NOK, ran=True, last_nok=not news.ok)
+    vin = vehicle.vin if vehicle is not None else VIN
+    return [BoltsChanged(vin, (now,)), news]
 
 
 def skipped(name: str, reason: str, **core: Any) -> list[StationEvent]:

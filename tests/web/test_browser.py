@@ -35,6 +35,7 @@ from tests.web.scenario import (
     opened,
     results_db,
     sim_vehicle,
+    told,
     work,
 )
 
@@ -129,7 +130,7 @@ def test_operator_screen_follows_the_work_and_shows_the_fault(live_server, page,
     check_fits(page, "#bolts", "#headline", "#done", "#nok")
     shots("operator-working")
 
-    srv.publish([BoltSkipped(bolt="B4", reason="thread damaged"), *fault()])
+    srv.publish([*told(BoltSkipped(bolt="B4", reason="thread damaged")), *fault()])
     page.wait(lambda p: "FAULT" in (p.text("#headline") or ""), what="FAULT headline")
     assert "lift: no answer from 10.0.0.7:502" in (page.text("#headline") or "")
     assert "stop" in page.js("return document.getElementById('headline').className")

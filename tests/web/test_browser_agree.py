@@ -29,7 +29,7 @@ from stationd.station.events import (
 from tests.web.conftest import SIZES
 from tests.web.mapgeo import confusable, map_geometry
 from tests.web.pages import Page
-from tests.web.scenario import sim_vehicle
+from tests.web.scenario import sim_vehicle, told
 from tests.web.test_browser import label_overlaps
 from tests.web.test_browser_fixes import bolt_states, ok, redrawn
 
@@ -120,17 +120,18 @@ def test_without_an_order_one_bolt_is_pointed_out_next(screen, page, shots):
 def test_a_nok_bolt_s_label_shows_the_value_that_failed(screen, page):
     """An operator trial read "B11 NOK 50.8" for a NOK whose torque was within its window and
     whose angle was 0 deg: an angle NOK shows its angle, a torque NOK its torque."""
-    def nok(bolt: str, tid: int, torque: float, angle: float) -> ResultRecorded:
-        return ResultRecorded(vin=VEHICLE.vin, bolt=bolt, ok=False, torque_nm=torque,
-                              angle_deg=angle, tightening_id=tid, pset=1, torque_min=22.0,
-                              torque_max=28.0, angle_min=10.0, angle_max=60.0)
+    def nok(bolt: str, tid: int, torque: float, angle: float) -> list[StationEvent]:
+        return told(ResultRecorded(vin=VEHICLE.vin, bolt=bolt, ok=False, torque_nm=torque,
+                                   angle_deg=angle, tightening_id=tid, pset=1,
+                                   torque_min=22.0, torque_max=28.0, angle_min=10.0,
+                                   angle_max=60.0), VEHICLE)
 
     def tag(p: Page, bolt: str) -> str | None:
         got = p.js("return document.querySelector(`#bolts g.bolt[data-bolt=${arguments[0]}] "
                    "text.tag`)?.textContent", bolt)
         return None if got is None else str(got)
 
-    screen([*tracking(), nok("B25", 1, 25.3, 0.0), nok("B03", 2, 19.4, 30.0)])
+    screen([*tracking(), *nok("B25", 1, 25.3, 0.0), *nok("B03", 2, 19.4, 30.0)])
     page.wait(lambda p: tag(p, "B25") == "NOK 0\u00b0", what="B25's angle on its label")
     page.wait(lambda p: tag(p, "B03") == "NOK 19.4", what="B03's torque on its label")
 

@@ -18,12 +18,13 @@ from stationd.station.events import (
     ResultRecorded,
     StateChanged,
     StateReason,
+    StationEvent,
     VehicleClosed,
 )
 from stationd.web.server import WebServer
 from tests.web.mapgeo import confusable, map_geometry
 from tests.web.pages import Page
-from tests.web.scenario import LIFT_LOW, VIN, fault_state, opened, sim_vehicle, work
+from tests.web.scenario import LIFT_LOW, VIN, fault_state, opened, sim_vehicle, told, work
 from tests.web.test_browser import label_overlaps
 
 SIM_VIN = "SIMVIN0000000001"
@@ -37,16 +38,18 @@ def bolt_states(page: Page) -> dict[str, str]:
     return dict(got)
 
 
-def nok(bolt: str) -> ResultRecorded:
-    return ResultRecorded(vin=SIM_VIN, bolt=bolt, ok=False, torque_nm=18.0, angle_deg=20.0,
-                          tightening_id=7, pset=1, torque_min=22.0, torque_max=28.0,
-                          angle_min=10.0, angle_max=60.0)
+def nok(bolt: str) -> list[StationEvent]:
+    """A NOK of ``bolt`` of the simulated vehicle: the core's change, then the result."""
+    return told(ResultRecorded(vin=SIM_VIN, bolt=bolt, ok=False, torque_nm=18.0,
+                               angle_deg=20.0, tightening_id=7, pset=1, torque_min=22.0,
+                               torque_max=28.0, angle_min=10.0, angle_max=60.0), sim_vehicle())
 
 
-def ok(bolt: str, tid: int) -> ResultRecorded:
-    return ResultRecorded(vin=SIM_VIN, bolt=bolt, ok=True, torque_nm=25.0, angle_deg=30.0,
-                          tightening_id=tid, pset=1, torque_min=22.0, torque_max=28.0,
-                          angle_min=10.0, angle_max=60.0)
+def ok(bolt: str, tid: int) -> list[StationEvent]:
+    """An OK of ``bolt`` of the simulated vehicle: the core's change, then the result."""
+    return told(ResultRecorded(vin=SIM_VIN, bolt=bolt, ok=True, torque_nm=25.0,
+                               angle_deg=30.0, tightening_id=tid, pset=1, torque_min=22.0,
+                               torque_max=28.0, angle_min=10.0, angle_max=60.0), sim_vehicle())
 
 
 def redrawn(page: Page) -> bool:
@@ -73,7 +76,7 @@ def test_bolt_map_labels_read_as_their_own_bolt_and_the_map_keeps_its_size(live_
     srv = live_server(devices=("lift", "wrench", "pair1", "pair2", "pair3", "pair4"))
     allowed = ("B05", "B06", "B07", "B20", "B36")
     srv.publish([StateChanged(state="tracking", reason=StateReason(Because.TRACKING)),
-                 sim_vehicle(), nok("B04"), nok("B13"),
+                 sim_vehicle(), *nok("B04"), *nok("B13"),
                  Localized(point_mm=(0.0, 0.0, 0.0), tilt_deg=1.0, reason=None, candidate="B41",
                            distance_mm=1.0, age_ms=30.0, allowed=allowed),
                  BoltSelected(bolt="B41", pset=1, point_mm=(0.0, 0.0, 0.0), distance_mm=1.0,
@@ -105,7 +108,7 @@ def test_a_closed_incomplete_vehicle_is_an_alarm_with_missing_bolts(live_server,
     missing = tuple(b for b in names if b not in done and b != "B04")
     srv.publish([StateChanged(state="tracking", reason=StateReason(Because.TRACKING)),
                  sim_vehicle(),
-                 *(ok(b, i) for i, b in enumerate(done)), nok("B04"),
+                 *(e for i, b in enumerate(done) for e in ok(b, i)), *nok("B04"),
                  Localized(point_mm=(0.0, 0.0, 0.0), tilt_deg=1.0, reason=None, candidate=None,
                            distance_mm=None, age_ms=30.0, allowed=missing),
                  VehicleClosed(vin=SIM_VIN, missing=missing, nok=("B04",)),

@@ -13,7 +13,7 @@ from __future__ import annotations
 from stationd.station.events import BoltSkipped
 from stationd.web.results import Results
 from tests.web.pages import Page
-from tests.web.scenario import VIN, opened, results_db, work
+from tests.web.scenario import VIN, opened, results_db, told, work
 
 NAV = ["Operator", "Cameras", "Results", "Quality", "Line"]
 PAGES = {"": "Operator", "cameras": "Cameras", "vehicles": "Results",
@@ -44,7 +44,7 @@ def test_one_navigation_bar_on_every_page(live_server, page, tmp_path):
 
 def test_the_counters_say_what_they_count(live_server, page):
     srv = live_server()
-    srv.publish([*opened(), *work(), BoltSkipped(bolt="B4", reason="bracket in the way")])
+    srv.publish([*opened(), *work(), *told(BoltSkipped(bolt="B4", reason="bracket in the way"))])
     page.get(srv.url)
     page.wait(lambda p: p.text("#skipped") == "1", what="the skipped bolt counted")
     counters = " ".join((page.text(".counters") or "").split())
