@@ -590,11 +590,13 @@ class View:
     def counters(self) -> dict[str, int]:
         """The header's counts as the vehicle's report counts its bolts: done (OK), ending
         NOK (the last rundown a NOK, whether the bolt is locked, released or skipped since),
-        skipped (without a rundown: one with is counted by its last)."""
+        skipped (without a rundown: one with is counted by its last); and held (its result not
+        known: a new user's trial, the header never said it where ``stationd status`` did)."""
         bolts = self.bolts.values()
         return {"total": len(bolts), "done": sum(b.state == OK for b in bolts),
                 "nok": sum(b.ends_nok for b in bolts),
-                "skipped": sum(b.state == SKIPPED and not b.ran for b in bolts)}
+                "skipped": sum(b.state == SKIPPED and not b.ran for b in bolts),
+                "held": sum(b.held for b in bolts)}
 
     def locks(self) -> list[str]:
         """Each locked bolt in the operator's words (the screen adds who may release)."""

@@ -13,7 +13,7 @@ from __future__ import annotations
 from stationd.station.events import BoltSkipped
 from stationd.web.results import Results
 from tests.web.pages import Page
-from tests.web.scenario import VIN, opened, results_db, told, work
+from tests.web.scenario import VIN, held, opened, results_db, told, work
 
 NAV = ["Operator", "Cameras", "Results", "Quality", "Line"]
 PAGES = {"": "Operator", "cameras": "Cameras", "vehicles": "Results",
@@ -53,6 +53,11 @@ def test_the_counters_say_what_they_count(live_server, page):
     # the NOK's row names the quantity that failed (torque 41.0 below 45.0), not colour alone
     row = page.js("return document.querySelector('#results tr.res-nok').innerText")
     assert "B2 NOK: torque low" in row, row
+    # a held bolt counted too, as `stationd status` counts it (a new user's trial: never said)
+    srv.publish(held("B3", "tightening 9"))
+    page.wait(lambda p: p.text("#held") == "1", what="the held bolt counted")
+    counters = " ".join((page.text(".counters") or "").split())
+    assert counters == "1 / 4 bolts OK 1 skipped 1 bolt ending NOK 1 held", counters
 
 
 def test_the_vehicle_pages_count_bolts_and_results_and_say_rework_only_when_reopened(

@@ -47,7 +47,7 @@ def test_opened_vehicle_has_pending_bolts_and_counters():
     v = fold(opened())
     assert (v.vin, v.model) == (VIN, "SEDAN")
     assert set(states(v).values()) == {"pending"}
-    assert v.counters() == {"total": 4, "done": 0, "nok": 0, "skipped": 0}
+    assert v.counters() == {"total": 4, "done": 0, "nok": 0, "skipped": 0, "held": 0}
     # no frame localized since the station started: it says so (test_view_agree)
     assert v.headline() == "Starting: waiting for the cameras' first frames"
     v.apply(Localized(point_mm=None, tilt_deg=None, reason=NOT_SEEN, candidate=None,
@@ -162,7 +162,7 @@ def test_skip_rework_result_close_and_wrong_bolt():
     for e in [*skipped("B4", "skipped by supervisor"), *ran("B2", True, 200)]:
         v.apply(e)
     assert states(v)["B4"] == "skipped" and states(v)["B2"] == "ok"
-    assert v.counters() == {"total": 4, "done": 2, "nok": 0, "skipped": 1}
+    assert v.counters() == {"total": 4, "done": 2, "nok": 0, "skipped": 1, "held": 0}
     v.apply(VehicleClosed(vin=VIN, missing=("B3",), nok=()))
     assert v.closed == {"vin": VIN, "missing": ["B3"], "skipped": [], "nok": [],
                         "due": []} \

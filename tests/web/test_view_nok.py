@@ -202,7 +202,7 @@ def test_the_headers_counts_are_the_vehicle_reports_through_release_skip_and_loo
     counts = fold(events).counters()
     assert (report.nok, report.skipped) == (["B2", "B3"], [])
     assert counts == {"total": 4, "done": len([b for b in report.bolts if b.status == "ok"]),
-                      "nok": len(report.nok), "skipped": len(report.skipped)}
+                      "nok": len(report.nok), "skipped": len(report.skipped), "held": 0}
     assert counts["nok"] == 2 and counts["done"] == 1
 
 
@@ -223,7 +223,7 @@ def test_after_a_reload_and_through_skips_and_a_close_the_counts_stay_the_report
     v = fold([VehicleOpened(vin=VIN, model="SEDAN", bolts=bolts(
         B2=BoltView("B2", 400.0, 0.0, 0.0, 1, status=TO_LOOSEN_STATUS, last_nok=True,
                     ran=True, loosen_pset=90)))])
-    assert v.counters() == {"total": 4, "done": 0, "nok": 1, "skipped": 0}
+    assert v.counters() == {"total": 4, "done": 0, "nok": 1, "skipped": 0, "held": 0}
     b2 = v.bolts["B2"].to_json()    # its loosen pset said after a reload, as live
     assert (b2["state"], b2["loosen_pset"]) == ("loosen", 90)
     v = fold([*opened(), *ran("B3", True, 1), *_loosen("B3", user="sam", last_nok=False),
@@ -303,6 +303,7 @@ def test_a_lock_on_a_held_bolt_keeps_the_hold_and_says_both():
               BoltLocked("B2", 3)])
     b2 = v.bolts["B2"].to_json()
     assert (b2["state"], b2["label"], b2["held"], b2["locked"]) == ("locked", "held", True, True)
+    assert v.counters()["held"] == 1     # the header counts it, as `stationd status` does
     assert b2["reason"].startswith(LOCKED + "; B2: the controller's result could not be read "
                                    "(tightening 21)")
     for e in _released("B2", True, TO_LOOSEN_STATUS, loosen_pset=90, ran=True, last_nok=True):

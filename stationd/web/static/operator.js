@@ -323,6 +323,8 @@ function render(view) {
   // skipped bolts are neither OK nor to do: said beside "10 / 50", never left out silently
   setText("skipped", view.counters.skipped || 0);
   $("skipped-wrap").hidden = !view.counters.skipped;
+  setText("held", view.counters.held || 0);   // as `stationd status` counts them
+  $("held-wrap").hidden = !view.counters.held;
   const h = $("headline");
   setText("headline", view.headline);
   h.title = view.headline_title || view.headline;   // a closed vehicle's every bolt
