@@ -240,3 +240,35 @@ def test_a_result_the_check_fetches_outside_its_enable_by_the_clock_holds_the_bo
     recorded = [a.bolt for a in acts if isinstance(a, Record)]
     assert recorded == [] and [a.bolt for a in acts if isinstance(a, StoreCutUnknown)] == ["B1"]
     assert "B1" in d.core.matcher.held
+
+
+def test_a_lost_push_after_an_unreadable_result_is_its_own_bolt_s_by_the_order_of_ids():
+    """A new user's trial: B1's result 41 came unreadable (its id read; B1 held), then B3's
+    push (42) was lost; the check as B3's window ended fetched 42, made 0.5 s after B3's tool
+    went on, 3 s after B1's went off.  It was stored unattributed and B3 held "other enables
+    came between", though none came: the unreadable 41, pushed under B1's enable, orders the
+    ids as a read one does (B1's tool off after it), and 42 is B3's."""
+    from stationd.station.inputs import UnreadableIn
+    from tests.station.test_result_types import unreadable
+
+    d = _ready()
+    d.answer_checks = False
+    _enabled(d, 3)
+    d.feed(ResultIn(d.t, res(40, 1, False, 1)))       # B3's NOK, pushed: open again
+    _enabled(d, 1)
+    d.feed(UnreadableIn(d.t, unreadable(41, 1)))      # B1's, unreadable: held, tool off
+    assert "B1" in d.core.matcher.held and not d.core.tool_on
+    d.t += 3.0
+    _enabled(d, 3)                                    # B3 again
+    made = d.core._enabled_at + 0.5                   # B3 run down at once: 42, push lost
+    d.t += 1.0
+    _on(d, 2, 3)                                      # the wrench leaves B3
+    d.t += d.core.late_result_s + 1.0
+    [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    acts = d.feed(ResultIn(d.t, res(42, 1, True, 1), fetched=True, follows=41,
+                           made_at=made, live=True))
+    d.feed(NewestChecked(d.t, serial=check.serial))
+    recorded = [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)]
+    assert recorded == [("B3", 42)], recorded
+    assert "B3" not in d.core.matcher.held and "B3" in d.core.matcher.done
+    assert "B1" in d.core.matcher.held                # (its own hold stands)
