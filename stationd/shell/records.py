@@ -159,8 +159,11 @@ class Records:
                      "%d new parameter versions", self.cfg.bolts_path, len(r.added),
                      len(r.changed), len(r.unchanged), len(r.removed), len(r.new_versions))
             if r.removed:   # a table cut short that still reads removes bolts: said loudly
-                log.warning("bolt table %s: %s removed (%s%s): no longer tightened on new "
-                            "vehicles", self.cfg.bolts_path, counted(len(r.removed), "bolt"),
+                # (the vehicle at the station too: a reload opens it again with the table;
+                # a new user's trial read "on new vehicles" and saw it gone from the one there)
+                log.warning("bolt table %s: %s removed (%s%s): no longer tightened, on the "
+                            "vehicle at the station too", self.cfg.bolts_path,
+                            counted(len(r.removed), "bolt"),
                             ", ".join(r.removed[:5]), ", ..." if len(r.removed) > 5 else "")
         return self.repo
 
@@ -443,7 +446,8 @@ class Records:
         specs = {b.bolt_id: LoadedBolt(xyz(b.position), b.parameters.pset, b.order, b.batch,
                                      b.parameters_id, b.parameters) for b in infos}
         log.info("vehicle %s (%s) opened%s: %d bolts, %d done", a.vin, model,
-                 " for rework" if started.rework else "", len(infos), len(done))
+                 " for rework" if started.rework else "", len(infos),
+                 len(done & specs.keys()))   # (of its bolts now: one removed is not counted)
         # by keyword: held and status are both bolt -> text, and given by position (status
         # in held's place) every bolt done before a reload or a restart came back held.  A
         # skip read back from the command ledger is the person's command, typed as the core

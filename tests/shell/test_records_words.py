@@ -17,11 +17,13 @@ from stationd.config import StationConfig
 from stationd.reasons import Unattributed, UnattributedKind, Unproved, UnprovedKind
 from stationd.shell.records import Records
 from stationd.station.actions import (
+    LoadVehicle,
     RecordCommand,
     StoreControllerEvent,
     StoreUnattributed,
 )
 from stationd.station.commands import Issuer, SignOut
+from stationd.station.inputs import VehicleLoaded
 from tests.db.conftest import BASE, url_of
 
 
@@ -80,6 +82,12 @@ def test_a_table_that_removes_bolts_and_a_vehicle_leaving_unfinished_are_warning
     records.repo.start_vehicle("VIN1", "SEDAN")
     caplog.set_level("INFO", logger="stationd.shell.records")
     records.close_vehicle("VIN1")
+    # VIN2 at the station, B1 and B2 tightened OK
+    records.repo.start_vehicle("VIN2", "SEDAN")
+    for tid, bolt in ((7, "B1"), (8, "B2")):
+        records.repo.record_tightening("VIN2", bolt, ok=True, torque_nm=50.0, angle_deg=30.0,
+                                       tightening_id=tid, position_mm=(0.0, 0.0, 0.0),
+                                       match_distance_mm=1.0, tilt_deg=1.0)
     bolts = tmp_path / "bolts.yaml"
     bolts.write_text(BASE.split("      - id: B2")[0] + BASE.split("  WAGON:")[1].join(
         ["  WAGON:", ""]))
@@ -88,5 +96,14 @@ def test_a_table_that_removes_bolts_and_a_vehicle_leaving_unfinished_are_warning
     warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
     assert any(m.startswith("vehicle VIN1 (SEDAN) closed: ") and "3 missing" in m
                for m in warned), warned
-    assert any("2 bolts removed (SEDAN/B2, SEDAN/B3)" in m for m in warned), warned
+    # the vehicle at the station too (a new user's trial read "on new vehicles" only)
+    assert any("2 bolts removed (SEDAN/B2, SEDAN/B3): no longer tightened, on the vehicle "
+               "at the station too" in m for m in warned), warned
+    # opened again (a reload): its bolts now, and of them the done ones (B2's OK no more:
+    # the trial read "49 bolts, 5 done" beside the status's 4/49)
+    caplog.set_level("INFO", logger="stationd")
+    loaded = records.load_vehicle(LoadVehicle(12, "VIN2"))
+    assert isinstance(loaded, VehicleLoaded) and set(loaded.bolts) == {"B1"}
+    said = [r.getMessage() for r in caplog.records if "VIN2 (SEDAN) opened" in r.getMessage()]
+    assert said == ["vehicle VIN2 (SEDAN) opened: 1 bolts, 1 done"], said
     records.repo.close()
