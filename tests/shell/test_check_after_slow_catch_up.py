@@ -47,6 +47,24 @@ BUSY = RefusedError("fetch tightening (newest): refused by the controller: error
                     "(controller internal request timeout)", code=98)
 
 
+async def _checked_after_catch_up(controller: SlowOnce, fed: list[Any],
+                                  pool: ThreadPoolExecutor) -> Any:
+    """A reconnect's catch-up (its MID 0064 as ``controller`` answers it first), 40 the last
+    heard on the link; then B1 run down (41, its push lost) and its tool-on check: the feed."""
+    feed_ = _feed_of(controller, 40, None, fed, pool)
+    feed_.came_back()
+    assert feed_.catching_up is not None
+    await feed_.catching_up                  # the one slow MID 0064 (or answered: 40)
+    feed_._accounted = 40                    # 40 the last heard on this link (pushed)
+    controller.answers = {0: res(41), 41: res(41)}   # B1 run down: 41, its push lost
+    core: Any = feed_.core
+    core.tool_on, core.checking = True, 1
+    feed_.check_newest(1, tool_on=True)      # CHECK_ON_S of tool-on: B1's check
+    assert feed_.checking is not None
+    await feed_.checking
+    return feed_
+
+
 @pytest.mark.parametrize("first", [None, SILENT, BUSY],
                          ids=["control-answered", "unanswered-once", "error-98-once"])
 def test_a_tool_on_check_still_finds_a_lost_push_after_one_slow_catch_up(first):
@@ -60,17 +78,7 @@ def test_a_tool_on_check_still_finds_a_lost_push_after_one_slow_catch_up(first):
 
     async def main() -> None:
         pool = ThreadPoolExecutor(2)
-        feed_ = _feed_of(controller, 40, None, fed, pool)
-        feed_.came_back()
-        assert feed_.catching_up is not None
-        await feed_.catching_up                  # the one slow MID 0064 (or answered: 40)
-        feed_._accounted = 40                    # 40 the last heard on this link (pushed)
-        controller.answers = {0: res(41), 41: res(41)}   # B1 run down: 41, its push lost
-        core: Any = feed_.core
-        core.tool_on, core.checking = True, 1
-        feed_.check_newest(1, tool_on=True)      # CHECK_ON_S of tool-on: B1's check
-        assert feed_.checking is not None
-        await feed_.checking
+        feed_ = await _checked_after_catch_up(controller, fed, pool)
         pool.shutdown()
         feed_.close()
 
@@ -102,17 +110,7 @@ def test_a_result_the_check_fetched_after_a_slow_catch_up_is_not_told_again_as_t
 
     async def main() -> None:
         pool = ThreadPoolExecutor(2)
-        feed_ = _feed_of(controller, 40, None, fed, pool)
-        feed_.came_back()
-        assert feed_.catching_up is not None
-        await feed_.catching_up
-        feed_._accounted = 40
-        controller.answers = {0: res(41), 41: res(41)}
-        core: Any = feed_.core
-        core.tool_on, core.checking = True, 1
-        feed_.check_newest(1, tool_on=True)
-        assert feed_.checking is not None
-        await feed_.checking
+        feed_ = await _checked_after_catch_up(controller, fed, pool)
         controller.push = 42
         await feed_.results(controller)
         pool.shutdown()
