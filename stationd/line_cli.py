@@ -366,7 +366,7 @@ def cmd_line_init(args: argparse.Namespace) -> int:
     what the forwarders make on their first connection anyway, so running it again, or
     after stations forwarded, changes nothing."""
     from sqlalchemy import make_url
-    from sqlalchemy.exc import SQLAlchemyError
+    from sqlalchemy.exc import OperationalError, SQLAlchemyError
 
     from db.engine import make_engine
     from stationd.forward import error_line, line_url_problem
@@ -375,7 +375,7 @@ def cmd_line_init(args: argparse.Namespace) -> int:
     problem = line_url_problem(args.url)   # the station file's line.url check
     if problem is not None:
         raise InputError(f"line init: {problem}")
-    parsed = make_url(args.url)
+    parsed, shown = make_url(args.url), _shown(args.url)   # (said as the user gave it)
     if "connect_timeout" not in parsed.query:   # a host that does not answer: not forever
         parsed = parsed.update_query_dict({"connect_timeout": str(CONNECT_TIMEOUT_S)})
     engine = make_engine(parsed.render_as_string(hide_password=False))
@@ -385,19 +385,21 @@ def cmd_line_init(args: argparse.Namespace) -> int:
         # of this role (each of its records would wait); said with the grant that fixes it
         with engine.connect() as conn:
             cannot = write_problem(conn)
+    except OperationalError as exc:   # not reached (or not let in): as line status says it
+        return _unreachable(args.url, exc)
     except SQLAlchemyError as exc:
-        raise InputError(f"line database {parsed.render_as_string()}: "
-                         f"{error_line(exc)}") from None
+        raise InputError(f"line database {shown}: {error_line(exc)}") from None
     finally:
         engine.dispose()
-    if cannot is not None:
-        raise InputError(f"line database {parsed.render_as_string()}: {cannot}")
+    if cannot is not None:   # the forwarders could not write: as line status says it
+        sys.stderr.write(f"stationd: line database {shown}: {cannot}\n")
+        return EXIT_UNREACHABLE
     if change.typed_refused is not None:   # line_feed's part made; the typed part not
-        raise InputError(f"line database {parsed.render_as_string()}: the typed tables: "
+        raise InputError(f"line database {shown}: the typed tables: "
                          f"{change.typed_refused} (run line init as the tables' owner)")
     ours = sorted(t.name for t in LINE.sorted_tables)
     made = sorted(change.made)
-    print(f"line database {parsed.render_as_string()}: "
+    print(f"line database {shown}: "
           + (f"made {', '.join(made)}" if change.made else "every table there already")
           # the tables named once: when it made them all, they are the ones ready
           + (": ready for the stations' forwarders" if made == ours else

@@ -375,6 +375,12 @@ def test_a_quarantine_retry_names_the_line_database_it_could_not_reach(tmp_path,
         err = capsys.readouterr().err
         assert err.startswith(f"stationd: line database {down} unreachable: connection "
                               "failed: ") and err.count("\n") == 1, (command, err)
+    # line init alike: exit 3 and the URL as given (a new user's trial: exit 2, and the URL
+    # with the connect_timeout the command adds)
+    assert main(["line", "init", down]) == 3
+    err = capsys.readouterr().err
+    assert err.startswith(f"stationd: line database {down} unreachable: connection "
+                          "failed: ") and err.count("\n") == 1, err
 
 
 def test_the_line_commands_show_the_backlog_and_retry_or_export_the_quarantine(
@@ -653,10 +659,12 @@ def test_line_init_and_status_say_a_role_that_may_not_write_not_ready_or_answers
 
     other = _as_role(pg_url, "fwd_trial")
     shown = other                                  # no password: shown as it is
-    assert main(["line", "init", other]) == 2
+    # exit 3, as line status's (a new user's trial: init said 2 where status said 3); the
+    # URL as given (it said the connect_timeout the command adds)
+    assert main(["line", "init", other]) == 3
     out, err = capsys.readouterr()
     assert out == "" and err == (
-        f"stationd: error: line database {shown}?connect_timeout=10: role fwd_trial lacks "
+        f"stationd: line database {shown}: role fwd_trial lacks "
         "INSERT and SELECT on line_feed, INSERT on line_parameters: the forwarders cannot "
         "write (as the tables' owner: GRANT SELECT, INSERT ON line_feed, line_parameters "
         "TO fwd_trial)\n")
