@@ -79,9 +79,13 @@ def _mm(v: float | None) -> str:
     return "?" if v is None else f"{v:.1f}"
 
 
+#: who ends a lock of NOKs, said after it
+LOCK_RELEASE = "a supervisor releases it"
+
+
 def _locked(bolt: str | None, count: int | None) -> str:
     """A bolt locked by its NOKs: the refusal and the notice say it alike."""
-    return f"{bolt} locked after {count} NOK in a row: a supervisor releases it"
+    return f"{bolt} locked after {count} NOK in a row: {LOCK_RELEASE}"
 
 
 def _unread(bolt: str | None, note: str | None) -> str:

@@ -58,7 +58,14 @@ from stationd.station.events import (
 )
 from stationd.station.inputs import DATABASE
 from stationd.station.state import LOCALIZING, CoreStatus
-from stationd.words import check_words, fault_words, reason_words, state_words
+from stationd.words import (
+    CHECK_ON_CONTROLLER,
+    LOCK_RELEASE,
+    check_words,
+    fault_words,
+    reason_words,
+    state_words,
+)
 
 
 class Shown(StrEnum):
@@ -602,6 +609,13 @@ class View:
         """Each locked bolt in the operator's words (the screen adds who may release)."""
         return [b.reason for b in self.bolts.values() if b.state == Shown.LOCKED]
 
+    def lock_lines(self) -> list[dict[str, str]]:
+        """:meth:`locks` as the operator screen's panel lists them: each without what to do
+        (the panel says it once, below them: enter the outcome or release, and who may), the
+        whole words its hover title (a new user's trial at 1280x800: three locks' full words
+        pushed the commands below the screen)."""
+        return [{"text": _for_locks_panel(text), "title": text} for text in self.locks()]
+
     def holds(self) -> list[str]:
         """Of :meth:`locks`, the bolts held (a result not known: an unreadable one, a link
         cut's, a lost push's), not locked by their NOKs, in the operator's words."""
@@ -767,7 +781,7 @@ class View:
             "selected": self.selected, "wrench": self.wrench, "counters": self.counters(),
             "wrench_line": self.wrench_line(),
             "devices": self.device_health(), "results": self.results, "closed": self.closed,
-            "locks": self.locks(),
+            "locks": self.locks(), "lock_lines": self.lock_lines(),
             "operator": {"user": self.operator, "required": self.operator_required},
         }
 
@@ -788,6 +802,13 @@ def _state_words(b: BoltState, v: BoltView) -> str:
     if b.check_first and b.state in (PENDING, Shown.NEXT):
         return CHECK_FIRST_WORDS
     return RUNDOWN_WORDS.get(b.state, "")
+
+
+def _for_locks_panel(text: str) -> str:
+    """A lock's or a hold's words without the instruction after each (:meth:`View.lock_lines`)."""
+    for tail in (f": {CHECK_ON_CONTROLLER}", f"; {CHECK_ON_CONTROLLER}", f": {LOCK_RELEASE}"):
+        text = text.replace(tail, "")
+    return text
 
 
 def _failed(e: ResultRecorded) -> str | None:

@@ -58,7 +58,9 @@ def test_a_third_nok_locks_the_screen_says_who_releases_and_a_supervisor_release
         assert not rundown(d, ctl, pose, 3, pset=LOOSEN_PSET, loosening=True).ok
         page.wait(lambda p: _b05(p, "state") == "locked", 30, "B05 drawn locked")
         page.wait(lambda p: _shown(p, "locks"), 30, "the locked panel")
-        assert page.text("#locks-list") == LOCKED
+        # the panel's line without what to do (said once below it), whole on hover
+        assert page.text("#locks-list") == "B05 locked after 3 NOK in a row"
+        assert page.js("return document.querySelector('#locks-list li').title") == LOCKED
         assert page.text("#release-by") == \
             "Release: a user with the release right (supervisor)"
         pose.write_text("B05")   # the wrench on it: refused, amber, with the reason (the

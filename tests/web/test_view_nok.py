@@ -306,6 +306,11 @@ def test_a_lock_on_a_held_bolt_keeps_the_hold_and_says_both():
     assert v.counters()["held"] == 1     # the header counts it, as `stationd status` does
     assert b2["reason"].startswith(LOCKED + "; B2: the controller's result could not be read "
                                    "(tightening 21)")
+    # the operator screen's panel: without what to do (said once below), whole on hover (a
+    # new user's trial at 1280x800: three locks' words pushed the commands off the screen)
+    [line] = v.to_json()["lock_lines"]
+    assert line == {"text": "B2 locked after 3 NOK in a row; B2: the controller's result could "
+                            "not be read (tightening 21)", "title": b2["reason"]}, line
     for e in _released("B2", True, TO_LOOSEN_STATUS, loosen_pset=90, ran=True, last_nok=True):
         v.apply(e)
     assert (v.bolts["B2"].held, v.bolts["B2"].locked) == (False, False)

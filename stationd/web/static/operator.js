@@ -353,7 +353,7 @@ function render(view) {
 // Locked bolts (too many NOKs in a row), and who may release them: the roles with the
 // release right in the station's access section (the station says, the screen shows)
 function drawLocks(view) {
-  const locks = view.locks || [], by = view.release_by || [];
+  const locks = view.lock_lines || [], by = view.release_by || [];
   // a held bolt (its result could not be read) is also resolved by entering its outcome
   const held = (view.bolts || []).some((b) => b.held);
   const key = JSON.stringify([locks, by, held]);
@@ -365,9 +365,11 @@ function drawLocks(view) {
     : "Locked");
   document.body.classList.toggle("has-locks", locks.length > 0);
   const ul = $("locks-list");
-  ul.replaceChildren(...locks.map((text) => {
+  // each lock's words without what to do (said once below), whole on hover
+  ul.replaceChildren(...locks.map((line) => {
     const li = document.createElement("li");
-    li.textContent = text;
+    li.textContent = line.text;
+    li.title = line.title;
     return li;
   }));
   // the outcome first: a release tightens a held bolt again (a new user's trial released one
