@@ -8,6 +8,7 @@ is most of a browser test's time."""
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +18,8 @@ import pytest
 from stationd.reasons import Reason, Why
 from stationd.station.events import (
     Because,
+    BoltLocked,
+    BoltsChanged,
     DeviceHealth,
     Localized,
     Refused,
@@ -134,6 +137,16 @@ def test_a_nok_bolt_s_label_shows_the_value_that_failed(screen, page):
     screen([*tracking(), *nok("B25", 1, 25.3, 0.0), *nok("B03", 2, 19.4, 30.0)])
     page.wait(lambda p: tag(p, "B25") == "NOK 0\u00b0", what="B25's angle on its label")
     page.wait(lambda p: tag(p, "B03") == "NOK 19.4", what="B03's torque on its label")
+
+
+def test_a_held_bolt_says_held_on_the_50_bolt_map(screen, page):
+    """A new user's trial: on the 50-bolt map a locked bolt said "locked" under its name, a
+    held one only its icon."""
+    b17 = next(b for b in VEHICLE.bolts if b.bolt == "B17")
+    screen([*tracking(), BoltsChanged(VEHICLE.vin, (replace(b17, held="tightening 9"),)),
+            BoltLocked("B17", 0, held="tightening 9")])
+    page.wait(lambda p: p.js("return document.querySelector('#bolts g.bolt[data-bolt=B17] "
+                             "text.tag')?.textContent") == "held", what="B17's label: held")
 
 
 # -- labels in a cluster ---------------------------------------------------------------------

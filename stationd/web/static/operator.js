@@ -176,9 +176,10 @@ function placeLabels(placed, r, dense, W, H) {
     // window ("NOK 50.8" read as a torque fault for an angle of 0 deg)
     if (b.state === "nok" && b.failed === "angle" && b.angle_deg !== null) tag += ` ${fmt(b.angle_deg, 0)}\u00b0`;
     else if ((b.state === "ok" || b.state === "nok") && b.torque_nm !== null) tag += ` ${fmt(b.torque_nm, 1)}`;
-    // the one bolt pointed out "next" says so (the others are "to do")
-    const matters = ["selected", "tightening", "next", "nok", "blocked", "locked", "loosen",
-      "check"].includes(drawn(b));
+    // the one bolt pointed out "next" says so (the others are "to do"); a held one says
+    // "held" as a locked one says "locked" (a new user's trial: its icon alone on the map)
+    const matters = ["selected", "tightening", "next", "nok", "blocked", "locked", "held",
+      "loosen", "check"].includes(drawn(b));
     if (dense && !matters) tag = null;
     const lbl = el("g", {class: "lbl"});
     lbl.appendChild(el("text", {class: "bolt-id", y: 0}, b.bolt));
