@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from db.kinds import LOOSENED, NOK, TO_LOOSEN
 from db.repository import BoltInfo
 from drivers.counting import counted
 from drivers.devices import Kind, simulated
@@ -52,6 +53,8 @@ from stationd.words import reason_words, result_type_words, skip_words, state_wo
 NOK_P, STUBBORN_P = 0.1, 0.1
 #: rundowns the simulated operator makes on one bolt before giving up on it
 MAX_RUNDOWNS = 10
+#: a bolt open again after a person's command is tightened again at most this often in a round
+MAX_AGAIN = 3
 #: who releases a locked bolt (the command path is the screens')
 SUPERVISOR = Issuer("supervisor", frozenset({Right.RELEASE}), "demo")
 #: who holds the wrench: signed in at the station through the command path (no right needed)
@@ -200,9 +203,19 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     # supervisor's trial).  Released (by the simulated supervisor, else by a person), it is
     # tightened again; its line goes on from the one said
     released: dict[str, int] = {}
-    while "interrupted" not in truth and (late := waiting_now(st, infos)):
-        released[late[0]] = released.get(late[0], 0) + 1
-        await r.late(late[0], released[late[0]])
+    while "interrupted" not in truth:
+        if late := waiting_now(st, infos):
+            released[late[0]] = released.get(late[0], 0) + 1
+            await r.late(late[0], released[late[0]])
+        elif (again := open_again(st, planned)) and released.get(again[0], 0) < MAX_AGAIN:
+            # released or entered by a person meanwhile, still to be run down (its result
+            # not known, its last rundown a NOK, to be loosened): tightened before the lift
+            # goes down (a new user's trial: a hold released while the operator waited on
+            # another bolt, an entered NOK, were left and the vehicle closed with them)
+            released[again[0]] = released.get(again[0], 0) + 1
+            await r.again(again[0])
+        else:
+            break
     r.plc.lower_lift()
     await asyncio.sleep(0.5)
 
@@ -413,6 +426,43 @@ class _Round:
             self.report.append(line)
         self.say(line)
 
+    async def again(self, bolt_id: str) -> None:
+        """``bolt_id`` open again after a person's release or entered outcome (its result not
+        known, or a NOK): tightened as the NOK policy has it; its line goes on from the one
+        said."""
+        info = self.by_id[bolt_id]
+        views = {v.bolt: v for v in self.st.core.status().bolts}
+        v = views.get(bolt_id)
+        what = "released from a hold" if v is not None and v.check_first else \
+            "open again after a person's command"
+        line: dict[str, Any] = {"bolt": bolt_id, "pset": info.parameters.pset,
+                                "result": "", "rundowns": 0, "before": [what]}
+        self.truth["bolt"] = bolt_id
+        self.world.set_wrench(self._pose(info))
+        if not await _tool_on(self.st, bolt_id):
+            line["result"] = f"not selected again ({_why_not(self.st)})"
+            line["unfinished"] = True
+        else:
+            first = line["before"]
+            await until_ok(self.st, bolt_id, line, self.nok_rng, self.truth["vin"],
+                           self.supervisor, stubborn=False)
+            line["before"] = [*first, *line["before"]]
+        self._said_on(bolt_id, line)
+        await self.away()
+
+    def _said_on(self, bolt_id: str, line: dict[str, Any]) -> None:
+        """``line`` said, going on from ``bolt_id``'s line said before (its steps, its
+        rundowns added)."""
+        before = self.said.get(bolt_id)
+        if before is not None:      # its line as said, then what came after
+            line["before"] = [*before.get("before", []), before["result"], *line["before"]]
+            line["rundowns"] = int(before.get("rundowns", 0)) + int(line["rundowns"])
+            kept = {k: before[k] for k in ("xy_error_mm",) if k in before}
+            before.clear()
+            before.update(line, **kept)
+            line = before
+        self.tell(line)
+
     async def late(self, bolt_id: str, times: int) -> None:
         """``bolt_id`` locked or held after its visit (``times`` so far in this round):
         released by the simulated supervisor (up to MAX_RUNDOWNS times) and tightened
@@ -449,15 +499,7 @@ class _Round:
             else:
                 line["before"].append(f"release refused ({answer.reason})")
         await self.for_people(bolt_id, info, line, what)   # nothing to wait for where released
-        before = self.said.get(bolt_id)
-        if before is not None:      # its line as said, then what came after
-            line["before"] = [*before.get("before", []), before["result"], *line["before"]]
-            line["rundowns"] = int(before.get("rundowns", 0)) + int(line["rundowns"])
-            kept = {k: before[k] for k in ("xy_error_mm",) if k in before}
-            before.clear()
-            before.update(line, **kept)
-            line = before
-        self.tell(line)
+        self._said_on(bolt_id, line)
         await self.away()
 
 
@@ -574,6 +616,16 @@ def waiting_now(st: Station, infos: Sequence[BoltInfo]) -> list[str]:
     their result not known), in the bolt table's order."""
     now = st.core.status()
     return [b.bolt_id for b in infos if b.bolt_id in now.locked or b.bolt_id in now.held]
+
+
+def open_again(st: Station, planned: Sequence[str]) -> list[str]:
+    """The planned bolts the station holds open though the operator went past them: released
+    from a hold (their result not known), their last rundown a NOK (an outcome a person
+    entered), to be loosened first or loosened last; neither locked nor held (those wait for
+    a person: :func:`waiting_now`), in the plan's order."""
+    views = {v.bolt: v for v in st.core.status().bolts}
+    return [b for b in planned if (v := views.get(b)) is not None and v.locked is None
+            and v.held is None and (v.check_first or v.status in (NOK, TO_LOOSEN, LOOSENED))]
 
 
 def released_words(user: str | None, what: str = "locked") -> str:

@@ -32,6 +32,7 @@ def _station(tmp: Path, port: int) -> Path:
     doc["pairs"] = {"pair1": doc["pairs"]["pair1"]}
     doc["cameras"] = {n: c for n, c in doc["cameras"].items() if n.startswith("pair1_")}
     doc["matching"]["max_age_s"] = 5.0     # a loaded machine renders late: not this test's
+    doc["nok"] = {"loosen_pset": 9}        # the controller's loosening program (a command's)
     doc["http"] = {"listen": f"127.0.0.1:{port}"}
     doc["access"] = {"users": {"sue": {"role": "supervisor", "password": hash_password(PASSWORD)},
                                "olga": {"role": "operator", "password": hash_password(PASSWORD)}}}
@@ -98,6 +99,16 @@ def test_a_lock_waits_for_a_persons_release_in_the_demo(tmp_path):
                               capture_output=True, text=True, env=env, timeout=60, check=False)
         assert skip.returncode == 1 and "refused" in skip.stdout, skip
         assert "locked after" in skip.stdout and "supervisor releases it" in skip.stdout, skip
+        # meanwhile a supervisor orders a bolt the operator tightened reworked: it is open
+        # again (a new user's trial: such a bolt, or a released hold, was left and the
+        # vehicle closed with it)
+        done = next(m[1] for m in (re.match(r"(B\d\d): pset \d+, XY error [^,]+, OK", s)
+                                   for s in seen) if m)
+        loosen = subprocess.run([sys.executable, "-m", "stationd", "loosen", vin, done,
+                                 "--comment", "washer missing", "--user", "sue", "--config",
+                                 str(station)], capture_output=True, text=True, env=env,
+                                timeout=60, check=False)
+        assert loosen.returncode == 0 and "accepted" in loosen.stdout, loosen
         accepted = release("sue", vin, bolt)
         # with what it ended (a supervisor's trial: "accepted" alone)
         # (and, under the loosen strategy, that its loosen pset goes first)
@@ -111,6 +122,11 @@ def test_a_lock_waits_for_a_persons_release_in_the_demo(tmp_path):
         assert "; locked, released by sue" in history and "left for" not in history, history
         line = expect(rf"^{bolt}: pset \d+, XY error [^,]+, (.*)$")[1]
         assert line.startswith("OK"), line
+        # the reworked bolt loosened and tightened again before the lift went down
+        history = expect(rf"^  {done} first: (.*)$")[1]
+        assert "open again after a person's command" in history, history
+        line = expect(rf"^{done}: pset \d+, .*?(OK|NOK)")[0]
+        assert line.endswith("OK"), line
         verdict = expect(r"^(PASS|FAIL)")
         assert verdict[1] == "PASS", seen
         assert demo.wait(timeout=120) == 0, seen     # the demo ends by itself after the run
