@@ -108,3 +108,30 @@ def test_a_command_that_ends_with_an_interrupt_deferred_says_it_was_interrupted(
     assert cli.main(["anything"]) == cli.EXIT_SIGINT
     assert capsys.readouterr().err == "stationd: interrupted (Ctrl-C)\n"
     time.sleep(10 * cli.DEFER_S)          # its timer cancelled: nothing raised here
+
+
+def test_an_interrupt_as_the_handlers_are_put_in_is_the_command_s_not_a_traceback(
+        monkeypatch, capsys):
+    """A Ctrl-C that came just as ``_signals`` put its handler in (the suite under load: the
+    handler, in place, raised inside ``signal.signal``, before ``main`` handled anything)
+    printed a traceback.  It is remembered, the other handler put in too, and the command
+    ends interrupted with its line, never begun."""
+    real = signal.signal
+    raised: list[int] = []
+
+    def signal_then_interrupted(signum: int, handler: object) -> object:
+        before = real(signum, handler)
+        if not raised and callable(handler):
+            raised.append(signum)
+            handler(signal.SIGINT, sys._getframe())   # the Ctrl-C, as it lands now
+        return before
+
+    began: list[object] = []
+    monkeypatch.setattr(cli.signal, "signal", signal_then_interrupted)
+    monkeypatch.setattr(cli, "_main", lambda argv, stopped: began.append(argv) or 0)
+    assert cli.main(["anything"]) == cli.EXIT_SIGINT
+    assert capsys.readouterr().err == "stationd: interrupted (Ctrl-C)\n"
+    assert raised and began == []
+    monkeypatch.undo()
+    # the handlers put back as they were (restore: a test's main)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
