@@ -142,6 +142,9 @@ class Effects:
         without its station's name."""
         self.log = _Prefixed(log, prefix)
         self.commands_log = _Prefixed(commands_log, prefix)
+        # its records' lines too (a new user's trial: "vehicle ... closed" of two stations,
+        # one VIN twice with different counts, neither named)
+        self.records.log = _Prefixed(log, prefix)
 
     async def do(self, a: Action) -> Event | None:
         """Carry out one action; what came of it, for the core (or None)."""

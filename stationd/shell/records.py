@@ -135,6 +135,9 @@ class Records:
 
     def __init__(self, cfg: StationConfig) -> None:
         self.cfg = cfg
+        #: where its lines go: the station's journal (the demo's stations each with their
+        #: name first: :meth:`stationd.shell.effects.Effects.label`)
+        self.log: logging.Logger | logging.LoggerAdapter[logging.Logger] = log
         self.repo: Repository | None = None
         # the SQLite file opened and its identity (device, inode)
         self._db_file: tuple[Path, tuple[int, int]] | None = None
@@ -155,13 +158,13 @@ class Records:
         if self.cfg.bolts_path is not None:
             r = import_bolts(self.repo, self.cfg.bolts_path,
                              tolerance_mm=self.cfg.matching.tolerance_mm)
-            log.info("bolt table %s: %d added, %d changed, %d unchanged, %d removed, "
+            self.log.info("bolt table %s: %d added, %d changed, %d unchanged, %d removed, "
                      "%d new parameter versions", self.cfg.bolts_path, len(r.added),
                      len(r.changed), len(r.unchanged), len(r.removed), len(r.new_versions))
             if r.removed:   # a table cut short that still reads removes bolts: said loudly
                 # (the vehicle at the station too: a reload opens it again with the table;
                 # a new user's trial read "on new vehicles" and saw it gone from the one there)
-                log.warning("bolt table %s: %s removed (%s%s): no longer tightened, on the "
+                self.log.warning("bolt table %s: %s removed (%s%s): no longer tightened, on the "
                             "vehicle at the station too", self.cfg.bolts_path,
                             counted(len(r.removed), "bolt"),
                             ", ".join(r.removed[:5]), ", ..." if len(r.removed) > 5 else "")
@@ -203,11 +206,11 @@ class Records:
                         j.get("operator"), _window(j.get("torque_window")))
         self._enable, self._enable_off = (sel, owed.id), owed.off_at is not None
         if in_window:
-            log.info("the tool was enabled for bolt %s of %s (pset %s) when the last station "
+            self.log.info("the tool was enabled for bolt %s of %s (pset %s) when the last station "
                      "stopped: its result within %.0f s is recorded to it", owed.bolt,
                      owed.vin, owed.pset, late_result_s - (now - off))
         else:
-            log.info("the tool was enabled for bolt %s of %s (pset %s), its result not "
+            self.log.info("the tool was enabled for bolt %s of %s (pset %s), its result not "
                      "recorded: the controller's results since are fetched for it", owed.bolt,
                      owed.vin, owed.pset)
         return Owed(sel, off, owed.enabled_at.timestamp() if cut else None, in_window)
@@ -233,7 +236,7 @@ class Records:
             self.repo.note_tool_off(self._enable[1], datetime.now(UTC))
             self._enable_off = True
         except STATION_FAULTS as exc:
-            log.warning("the tool-off time of bolt %s not stored: %s", self._enable[0].bolt,
+            self.log.warning("the tool-off time of bolt %s not stored: %s", self._enable[0].bolt,
                         one_line(exc))
 
     @property
@@ -290,7 +293,7 @@ class Records:
         try:
             link_curves(repo, int(r.tightening_id), rid)
         except STATION_FAULTS as exc:
-            log.warning("curves of tightening %d not linked: %s", r.tightening_id,
+            self.log.warning("curves of tightening %d not linked: %s", r.tightening_id,
                         one_line(exc))
 
     def copy_input(self, ev: ResultIn, vin: str | None) -> ResultIn | ResultCopy:
@@ -369,7 +372,7 @@ class Records:
             result_at=controller_time(r), reason=unattributed_words(a.why),
             result_type=type_code(r))
         if row is None:
-            log.info("%s", sent_again_words(int(r.tightening_id), None))
+            self.log.info("%s", sent_again_words(int(r.tightening_id), None))
 
     def store_controller_event(self, a: StoreControllerEvent) -> None:
         """The result; the tool enable it answers settled with it, where it does (its bolt
@@ -384,7 +387,7 @@ class Records:
             result_at=controller_time(r), enable_id=enable)
         self._settles(a.selection)
         if row is None:
-            log.info("%s", sent_again_words(int(r.tightening_id), a.bolt))
+            self.log.info("%s", sent_again_words(int(r.tightening_id), a.bolt))
 
     def store_cut_unknown(self, a: StoreCutUnknown) -> None:
         """A bolt held after a link cut left its result unknown (or a result whose push was
@@ -417,7 +420,7 @@ class Records:
         repo = self._writer()
         gone = repo.left_unseen(a.vin)
         if gone is not None:   # the lowering that closes it was not seen (station down then)
-            log.info("vehicle %s (%s) closed: it left while the station did not see it go; "
+            self.log.info("vehicle %s (%s) closed: it left while the station did not see it go; "
                      "%s", gone.vehicle.vin, gone.vehicle.model, gone.counts())
         model = repo.model_for_code(a.model_code)
         if model is None:   # which vehicle, and the codes there are (a line engineer's trial)
@@ -445,7 +448,7 @@ class Records:
         done = frozenset(k for k, s in status.items() if s is OK)
         specs = {b.bolt_id: LoadedBolt(xyz(b.position), b.parameters.pset, b.order, b.batch,
                                      b.parameters_id, b.parameters) for b in infos}
-        log.info("vehicle %s (%s) opened%s: %d bolts, %d done", a.vin, model,
+        self.log.info("vehicle %s (%s) opened%s: %d bolts, %d done", a.vin, model,
                  " for rework" if started.rework else "", len(infos),
                  len(done & specs.keys()))   # (of its bolts now: one removed is not counted)
         # by keyword: held and status are both bolt -> text, and given by position (status
@@ -473,7 +476,7 @@ class Records:
         # a vehicle leaving with a bolt not OK is a warning: a journal read by priority
         # (journalctl -p warning) missed "50 missing" at INFO (an engineer's trial)
         missing, nok = _verdict(report, due)
-        log.log(logging.INFO if not missing and not nok and not due else logging.WARNING,
+        self.log.log(logging.INFO if not missing and not nok and not due else logging.WARNING,
                 "vehicle %s (%s) closed: %s%s%s", vin, report.vehicle.model,
                 report.counts(due), "; its verdict follows the result due" if due else "",
                 closed_after_outage(vin) if after_lift_outage else "")
@@ -488,7 +491,7 @@ class Records:
         missing, nok = _verdict(report, a.due)
         status = {b.bolt_id: b.status for b in report.bolts}
         now = ", ".join(f"{b} {str(status.get(b, MISSING)).upper()}" for b in a.settled)
-        log.log(logging.INFO if not missing and not nok and not a.due else logging.WARNING,
+        self.log.log(logging.INFO if not missing and not nok and not a.due else logging.WARNING,
                 "vehicle %s (%s) closing verdict, the result due at its close settled (%s): "
                 "%s", a.vin, report.vehicle.model, now, report.counts(a.due))
         return VehicleEnded(time.time(), a.vin, missing, nok, a.due, a.settled)
@@ -621,11 +624,11 @@ class Records:
         except STATION_FAULTS as exc:
             raise DeviceError(one_line(exc)) from None
         for lock in self._drain(self._locks_owed, self._write_lock, "a lock not recorded"):
-            log.info("the lock of %s of %s recorded late", lock.bolt, lock.vin)
+            self.log.info("the lock of %s of %s recorded late", lock.bolt, lock.vin)
         for u in self._drain(self._unsaved, self.write, "results not stored"):
             with self._lock:
                 self._saved_late.append(u)
-            log.info("tightening %d of %s stored late", u.record.result.tightening_id,
+            self.log.info("tightening %d of %s stored late", u.record.result.tightening_id,
                      u.record.bolt)
 
     def _drain(self, owed: list[T], write: Callable[[T], None], failed: str) -> Iterator[T]:
@@ -659,7 +662,7 @@ class Records:
                 if not cv2.imwrite(str(path), img):
                     raise OSError("the PNG encoder refused it")
             except (OSError, cv2.error) as exc:
-                log.warning("image %s not saved: %s", path, exc)
+                self.log.warning("image %s not saved: %s", path, exc)
                 continue
             out.append(str(path))
         return out

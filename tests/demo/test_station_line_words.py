@@ -14,6 +14,7 @@ import os
 import re
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -89,13 +90,21 @@ def test_two_runs_of_a_two_station_line_say_whose_counts_and_have_their_own_vins
     assert vins[0] != vins[1]
 
 
-def test_a_labelled_stations_journal_lines_carry_its_id(caplog):
+def test_a_labelled_stations_journal_lines_carry_its_id(caplog, tmp_path):
     """Each station of the demo's line is labelled (Effects.label): its notices, its state
-    lines and its commands' lines start with its id."""
-    cfg = load_station_config(ROOT / "config" / "sim" / "station.yaml")
+    lines, its commands' lines and its records' (a vehicle's close: a new user's trial read
+    one VIN closed twice, with different counts, neither line naming its station) start with
+    its id."""
+    cfg = replace(load_station_config(ROOT / "config" / "sim" / "station.yaml"),
+                  database_url=f"sqlite:///{tmp_path}/st.db")
     station = Station(cfg)
     station.effects.label("DEMO-2")
+    repo = station.records.open()
+    repo.start_vehicle("SIMVIN0000000001", "SIM-1")
     with caplog.at_level(logging.INFO, logger="stationd"):
         station.effects.publish(Notice(Said.LOCKED, bolt="B12", count=3))
-    assert [r.getMessage() for r in caplog.records] == [
-        "DEMO-2 B12 locked after 3 NOK in a row: a supervisor releases it"]
+        station.records.close_vehicle("SIMVIN0000000001")
+    repo.close()
+    said = [r.getMessage() for r in caplog.records]
+    assert said[0] == "DEMO-2 B12 locked after 3 NOK in a row: a supervisor releases it"
+    assert said[1].startswith("DEMO-2 vehicle SIMVIN0000000001 (SIM-1) closed: "), said
