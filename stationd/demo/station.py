@@ -67,10 +67,12 @@ from stationd.reasons import Reason, Why
 from stationd.shell.daemon import Station
 from stationd.shell.serve import Screens
 from stationd.sim.devices_cli import psets_of
+from stationd.sim.in_daemon import sim_operator
 from stationd.sim.load import MAX_WORKERS, cpu_load
 from stationd.sim.operator import (
     LOOSEN_PROGRAM,
     MAX_RUNDOWNS,
+    OPERATOR,
     SUPERVISOR,
     check_people,
     ended_words,
@@ -378,7 +380,7 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
             await operate(station, world, rng, cycles, report, say, truth, nok_rng,
                           note=_noter(out, station_id(1) if n_stations > 1 else ""),
                           share=(1, n_stations), supervisor=_supervisor(args, cfg),
-                          interruptible=True)
+                          operator=_operator(cfg), interruptible=True)
             for k in range(2, n_stations + 1):
                 extra.append(await _next_station(args, cfg, k, tmp, taken, endpoints,
                                                  line_url, psets, truth, out, services,
@@ -508,6 +510,15 @@ def _supervisor(args: argparse.Namespace, cfg: StationConfig) -> Issuer | None:
         supervisor_of(cfg, SUPERVISOR.source)
 
 
+def _operator(cfg: StationConfig) -> Issuer:
+    """Whom the demo's operator signs in as: the station file's first user with the
+    ``operator`` role, as ``stationd run --sim-operator``'s (:func:`sim_operator`), else the
+    simulator's own ``operator`` (a new user's trial: the demo signed in ``operator``, a name
+    the file did not give, beside its operator olga; ``status`` said "operator: operator")."""
+    who, _ = sim_operator(cfg)
+    return OPERATOR if who is None else Issuer(who.user, who.rights, OPERATOR.source)
+
+
 def _station(cfg: StationConfig, psets: dict[int, SimPset]) -> Station:
     return Station(cfg, device_kw={"wrench": {"psets": {**loosen_programs(cfg.nok), **psets}}})
 
@@ -592,7 +603,7 @@ async def _next_station(args: argparse.Namespace, first: StationConfig, k: int, 
             await operate(station, world, np.random.default_rng([args.seed, k]), cycles,
                           report, say, truth, np.random.default_rng([args.seed, 21, k]),
                           note=_noter(out, sid), share=(k, n_stations),
-                          supervisor=_supervisor(args, cfg))
+                          supervisor=_supervisor(args, cfg), operator=_operator(cfg))
         finally:
             stop.set()
             await task

@@ -191,3 +191,17 @@ def test_ctrl_c_during_the_peoples_wait_ends_it_with_the_runs_summary(tmp_path, 
     assert lines[-1].startswith(f"FAIL: interrupted ({words}) while the operator waited for a "
                                 f"person's release: {bolt} left locked, not released"), lines
     assert not any(s.startswith("run over") for s in lines), lines
+
+
+def test_the_demos_operator_is_the_station_files_operator(tmp_path):
+    """A new user's trial: the demo signed in ``operator``, a name the station file did not
+    give, beside its operator olga (``status``: "operator: operator"); it signs in as the
+    file's first user with the operator role, as ``run --sim-operator`` does, and as the
+    simulator's ``operator`` where the file gives none."""
+    from stationd.config import load_station_config
+    from stationd.demo.station import _operator
+    from stationd.sim.operator import OPERATOR
+
+    who = _operator(load_station_config(_station(tmp_path, free_port())))
+    assert (who.user, who.source) == ("olga", OPERATOR.source)
+    assert _operator(load_station_config(SIM / "station.yaml")) == OPERATOR
