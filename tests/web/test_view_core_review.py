@@ -41,3 +41,43 @@ def test_a_nok_bolt_open_again_left_before_its_rundown_is_still_drawn_nok():
     # selected again, left: drawn "to do" where the core (and the report) says NOK
     _selected_then_left(d, 1)
     assert d.view.bolts["B1"].state == NOK, d.view.bolts["B1"]
+
+
+def _closed_loosening_due(d: Screened) -> int:
+    """B1 tightened OK, a person's loosen command on it, the tool on for its loosen pset; the
+    lift goes down before its result: the vehicle closes with B1's result due."""
+    from stationd.station.commands import LoosenBolt
+    from stationd.station.actions import CloseVehicle
+    from stationd.station.inputs import VehicleEnded
+    from tests.station.test_commands import SUPERVISOR
+    _rundown(d, 1, 1, ok=True)
+    d.command(1, LoosenBolt("VIN1", "B1", "washer missing"), SUPERVISOR)
+    _on(d, 1, 2)
+    d.step(("ack", 0.01, True))
+    _on(d, 1, 1)
+    assert d.tool and d.core.selection is not None and d.core.selection.loosen
+    pset = d.core.selection.pset
+    for _ in range(4):
+        d.step(("lift", 0.05, False, False, None))
+    close = [a for _, acts in d.log for a in acts if isinstance(a, CloseVehicle)]
+    assert d.core.vin is None and close and close[0].due == ("B1",), close
+    # the database closes it: B2, B3 missing, B1's result due
+    d.feed(VehicleEnded(d.t, "VIN1", missing=("B2", "B3"), due=("B1",)))
+    assert d.view.closed is not None and d.view.closed["due"] == ["B1"]
+    return pset
+
+
+def test_a_late_loosening_nok_of_a_closed_vehicle_counts_it_ending_nok():
+    from db.kinds import LOOSENING
+    from stationd.station.events import ResultRecorded
+    from stationd.station.inputs import ResultIn
+    from tests.station.test_loosen import res
+    d = _screened()
+    pset = _closed_loosening_due(d)
+    assert not d.view.loaded and d.view.counters()["nok"] == 0
+    # its loosening, in its window: a NOK (the joint did not come loose); stored late, as
+    # the records say it the bolt ends NOK (db.report._status: a loosening NOK is NOK)
+    d.feed(ResultIn(d.t, res(2, pset, False)))
+    d.view.apply(ResultRecorded("VIN1", "B1", False, 60.0, 2.0, 2, pset=pset, late=True,
+                                kind=LOOSENING))
+    assert d.view.counters()["nok"] == 1, d.view.bolts["B1"]
