@@ -81,3 +81,27 @@ def test_a_late_loosening_nok_of_a_closed_vehicle_counts_it_ending_nok():
     d.view.apply(ResultRecorded("VIN1", "B1", False, 60.0, 2.0, 2, pset=pset, late=True,
                                 kind=LOOSENING))
     assert d.view.counters()["nok"] == 1, d.view.bolts["B1"]
+
+
+def test_a_result_stored_late_leaves_the_bolt_the_tool_is_on_again_drawn_so():
+    from stationd.station.events import ResultRecorded
+    from stationd.station.inputs import ResultIn
+    from tests.station.test_loosen import res
+    from stationd.web.view import Shown
+    d = _screened()
+    _on(d, 1, 2)
+    d.step(("ack", 0.01, True))
+    _on(d, 1, 1)
+    pset = d.core.selection.pset
+    d.feed(ResultIn(d.t, res(1, pset, False)))   # a NOK: its loosen pset next
+    # its record slow (the database busy, or down and back): meanwhile the wrench stays on
+    # B1, selected again for its loosen pset, the tool on
+    _on(d, 1, 2)
+    d.step(("ack", 0.01, True))
+    _on(d, 1, 1)
+    assert d.tool and d.core.selection.loosen
+    assert d.view.selected == "B1" and d.view.bolts["B1"].state == Shown.SELECTED
+    # the NOK's record done: the screen's news of it
+    d.view.apply(ResultRecorded("VIN1", "B1", False, 41.0, 31.0, 1, pset=pset))
+    assert d.view.selected == "B1", "the selection of the bolt the tool is on was dropped"
+    assert d.view.bolts["B1"].state == Shown.SELECTED, d.view.bolts["B1"]
