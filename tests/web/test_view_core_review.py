@@ -105,3 +105,16 @@ def test_a_result_stored_late_leaves_the_bolt_the_tool_is_on_again_drawn_so():
     d.view.apply(ResultRecorded("VIN1", "B1", False, 41.0, 31.0, 1, pset=pset))
     assert d.view.selected == "B1", "the selection of the bolt the tool is on was dropped"
     assert d.view.bolts["B1"].state == Shown.SELECTED, d.view.bolts["B1"]
+
+
+def test_a_bolt_skipped_by_the_controller_s_refusal_is_drawn_and_counted_skipped():
+    from db.kinds import SKIPPED
+    d = _screened()
+    _on(d, 2, 2)
+    d.step(("ack", 0.01, False))    # the controller refuses B2's parameters: B2 skipped
+    assert "B2" in d.core.matcher.skipped
+    # BoltsChanged (SKIPPED) comes first, then ParamsRefusedEvent draws it "blocked" over
+    # it, and BoltSkipped's words find it not drawn skipped: blocked for good (a status the
+    # core never holds), not counted skipped, and said missing when the vehicle leaves
+    assert d.view.bolts["B2"].state == SKIPPED, d.view.bolts["B2"]
+    assert d.view.counters()["skipped"] == 1
