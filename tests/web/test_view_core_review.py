@@ -118,3 +118,24 @@ def test_a_bolt_skipped_by_the_controller_s_refusal_is_drawn_and_counted_skipped
     # core never holds), not counted skipped, and said missing when the vehicle leaves
     assert d.view.bolts["B2"].state == SKIPPED, d.view.bolts["B2"]
     assert d.view.counters()["skipped"] == 1
+
+
+def test_a_done_bolt_held_by_a_gap_is_not_drawn_nok_when_the_vehicle_leaves():
+    from db.kinds import OK
+    from stationd.station.inputs import NewestChecked, VehicleEnded
+    from tests.station.test_gap_again import _again_and_revealed
+    from tests.station.test_lost import _window_ends
+    d = Screened(core=StationCore(PARAMS, leave_frames=2))
+    d.feed(Started(d.t))
+    d.step(("lift", 0.1, True, True, "VIN1"))
+    check = _window_ends(d, 1, 3.0)
+    d.feed(NewestChecked(d.t, serial=check.serial))
+    _again_and_revealed(d)   # B1 run down again, OK (42); a gap (41) may be its: held
+    assert "B1" in d.core.matcher.done and "B1" in d.core.matcher.held
+    for _ in range(4):
+        d.step(("lift", 0.05, False, False, None))
+    # the records: B1's last rundown OK (neither missing nor NOK), B2 and B3 missing
+    d.feed(VehicleEnded(d.t, "VIN1", missing=("B2", "B3")))
+    # View._close: a bolt drawn LOCKED not missing is drawn NOK, "locked when the vehicle
+    # left" -- a held bolt whose last rundown is an OK
+    assert d.view.bolts["B1"].state != NOK, d.view.bolts["B1"]
