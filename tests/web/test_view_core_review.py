@@ -139,3 +139,26 @@ def test_a_done_bolt_held_by_a_gap_is_not_drawn_nok_when_the_vehicle_leaves():
     # View._close: a bolt drawn LOCKED not missing is drawn NOK, "locked when the vehicle
     # left" -- a held bolt whose last rundown is an OK
     assert d.view.bolts["B1"].state != NOK, d.view.bolts["B1"]
+
+
+def test_a_done_bolt_released_from_a_gap_s_hold_is_not_said_to_be_checked_before_tightening():
+    from db.kinds import OK
+    from stationd.station.commands import ReleaseBolt
+    from stationd.station.inputs import NewestChecked
+    from stationd.web.view import CHECK_FIRST_WORDS
+    from tests.station.test_commands import SUPERVISOR
+    from tests.station.test_gap_again import _again_and_revealed
+    from tests.station.test_lost import _window_ends
+    d = Screened(core=StationCore(PARAMS, leave_frames=2))
+    d.feed(Started(d.t))
+    d.step(("lift", 0.1, True, True, "VIN1"))
+    check = _window_ends(d, 1, 3.0)
+    d.feed(NewestChecked(d.t, serial=check.serial))
+    _again_and_revealed(d)   # B1 done (42), held: a gap (41) may be its
+    d.command(1, ReleaseBolt("VIN1", "B1", "checked on the controller"), SUPERVISOR)
+    b = d.view.bolts["B1"]
+    assert b.state == OK and "B1" in d.core.matcher.done
+    # the core marks it check-first (orders.py adds every released hold's bolt, done or
+    # not), and the screen's release words say it may be tightened already: check the
+    # controller before tightening -- a bolt drawn OK, never to be tightened again
+    assert CHECK_FIRST_WORDS not in b.reason and not b.check_first, b
