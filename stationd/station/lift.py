@@ -170,7 +170,8 @@ class LiftRules(FaultRules):
         ran = {k for k, st in ev.status.items() if st not in (PENDING, MISSING, SKIPPED)}
         self._ran = ran & ev.bolts.keys()
         self._loosened = {k for k in self._ran if ev.status[k] == LOOSENED}
-        self._check_first = {k for k in ev.released if k in ev.bolts}
+        self._check_first = {k for k in ev.released if k in ev.bolts and k not in ev.done}
+        self._ordered_loosen = set()   # (its records say "loosen first": no NOK last)
         # drawn as the station treats it now (:meth:`_bolt_view`)
         opened = VehicleOpened(ev.vin, ev.model, self.bolt_views(), rework=ev.rework, t=ev.t)
         self._shown, self._shown_key = {v.bolt: v for v in opened.bolts}, self._bolts_key()

@@ -186,7 +186,9 @@ class OrderRules(FaultRules):
                 ended["hold"] = note
                 acts.append(Publish(BoltReleased(cmd.bolt, c.issuer.user, unknown=True,
                                                  t=ev.t)))
-                self._check_first.add(cmd.bolt)
+                assert self.matcher is not None  # noqa: S101 - _unhold found a hold
+                if cmd.bolt not in self.matcher.done:   # (its OK recorded since: known)
+                    self._check_first.add(cmd.bolt)
                 self._loosen_unknown(cmd.bolt)
             locked = self.matcher.locked.pop(cmd.bolt, None) \
                 if self.matcher is not None and self.vin == cmd.vin else None
@@ -238,9 +240,10 @@ class OrderRules(FaultRules):
         if self.matcher is None or self.vin != cmd.vin or cmd.bolt not in self.matcher.bolts:
             return []   # the vehicle left while the command was being recorded
         self.matcher.done.discard(cmd.bolt)
-        # its last rundown no longer ends it as a NOK: the rework is ordered (the report says
-        # "loosen first", as its records do after a reload)
-        self._nok_last.discard(cmd.bolt)
+        # its last rundown no longer ends it as a NOK on the report (it says "loosen first",
+        # as its records do after a reload); the NOK row it ends stands (a reviewer: the NOK
+        # policy owed to a fetched NOK was dropped, no lock at max_nok)
+        self._ordered_loosen.add(cmd.bolt)
         self._loosen.add(cmd.bolt)
         acts = [self._to_loosen(t, cmd.bolt, who.user, cmd.comment)]
         if self.bolt == cmd.bolt:

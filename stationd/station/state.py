@@ -332,6 +332,9 @@ class CoreState:
     _ran: set[str] = field(default_factory=set, repr=False)
     _loosened: set[str] = field(default_factory=set, repr=False)
     _check_first: set[str] = field(default_factory=set, repr=False)
+    #: bolts a person's loosen command ordered loosened since their last rundown: the report
+    #: says "loosen first", not "ending NOK", though their NOK row stands
+    _ordered_loosen: set[str] = field(default_factory=set, repr=False)
     #: each bolt as last published (:class:`BoltsChanged`, or the vehicle's opening)
     _shown: dict[str, BoltView] = field(default_factory=dict, repr=False)
     _shown_key: tuple[object, ...] = field(default=(), repr=False)
@@ -388,7 +391,8 @@ class CoreState:
         status = SKIPPED if k in m.skipped else TO_LOOSEN if loosen else OK if k in m.done \
             else NOK if k in self._nok_last else LOOSENED if k in self._loosened else PENDING
         return BoltView(k, *b.position, pset=b.pset, order=b.order, batch=b.batch,
-                        status=status, last_nok=k in self._nok_last, ran=k in self._ran,
+                        status=status, ran=k in self._ran,
+                        last_nok=k in self._nok_last and k not in self._ordered_loosen,
                         check_first=k in self._check_first and k not in m.skipped,
                         loosen_pset=self._nok_rule(k).loosen_pset if loosen else None,
                         locked=m.locked.get(k), held=m.held.get(k))
@@ -413,13 +417,15 @@ class CoreState:
         assert m is not None  # noqa: S101 - a vehicle is loaded
         return (self.vin, frozenset(m.done), tuple(m.skipped), tuple(m.locked.items()),
                 tuple(m.held.items()), frozenset(self._loosen), frozenset(self._nok_last),
-                frozenset(self._ran), frozenset(self._loosened), frozenset(self._check_first))
+                frozenset(self._ran), frozenset(self._loosened), frozenset(self._check_first),
+                frozenset(self._ordered_loosen))
 
     def _ran_once(self, bolt: str, loosening: bool, ok: bool) -> None:
         """A rundown of ``bolt`` recorded (a tightening or a loosening, measured or entered):
         its result is known (no check first), and it is loosened last or not."""
         self._ran.add(bolt)
         self._check_first.discard(bolt)
+        self._ordered_loosen.discard(bolt)
         if loosening and ok:
             self._loosened.add(bolt)
         else:
@@ -637,6 +643,7 @@ class CoreState:
         self._loosen, self._nok_last, self._nok_owed = set(), set(), {}
         self._lock_due = {}
         self._ran, self._loosened, self._check_first, self._shown = set(), set(), set(), {}
+        self._ordered_loosen = set()
         self._shown_key = ()
         self._loading = False
         self._vin_for, self._vin_pending, self._last_refusal = None, False, None

@@ -57,7 +57,7 @@ from stationd.station.events import (
     WrongBolt,
 )
 from stationd.station.inputs import DATABASE
-from stationd.station.state import LOCALIZING, CoreStatus
+from stationd.station.state import LOCALIZING, ON_A_BOLT, CoreStatus
 from stationd.words import (
     CHECK_ON_CONTROLLER,
     LOCK_RELEASE,
@@ -348,6 +348,12 @@ class View:
             # a refusal is about the wrench while tracking: a station waiting for its
             # vehicle (or in fault) says that, not the last vehicle's "bring the wrench"
             self._refuse("")
+        if e.state not in ON_A_BOLT and self.selected is not None:
+            # the core dropped its selection (a result, the wrench gone, a fault): not a
+            # result's record, which a slow database brings after the bolt's next selection
+            # (a reviewer: it dropped that one)
+            self.selected = self.selected_loosen = None
+            self._unselect()
 
     def _reopened(self, e: VehicleReopened) -> None:
         # no longer "closed": it opens as a rework when raised at the station (then
@@ -459,9 +465,10 @@ class View:
         for b in self.bolts.values():
             if b.bolt in due:   # its result still to come: neither missing nor NOK yet
                 b.state, b.reason = PENDING, "its result due from the controller"
-            elif b.state == Shown.LOCKED:   # its last rundown a NOK: the report's word decides
-                b.state = NOK if b.bolt in nok or b.bolt not in missing else MISSING
-                b.reason = "locked when the vehicle left"
+            elif b.state == Shown.LOCKED:   # the report's word decides (a held bolt done
+                # before its hold, by a gap's doubt: OK, as its records say; a reviewer)
+                b.state = NOK if b.bolt in nok else MISSING if b.bolt in missing else b.status
+                b.reason = f"{'held' if b.held else 'locked'} when the vehicle left"
             elif b.bolt in missing and b.state not in (NOK, SKIPPED):   # skipped: said so
                 b.state, b.reason = MISSING, NOT_TIGHTENED
             elif b.state in LIVE_STATES:
@@ -547,19 +554,17 @@ class View:
             b = self.bolts[e.bolt]
             b.torque_nm, b.angle_deg = e.torque_nm, e.angle_deg
             b.failed = None if e.ok else _failed(e)
-            said = (LOOSENED if e.ok else TO_LOOSEN) if e.kind == LOOSENING \
-                else OK if e.ok else NOK
             if not self.loaded:
                 # a late result of the vehicle that left (the core holds its bolts no more):
-                # as its records say now
-                b.state, b.status, b.ran = said, said, True
-                b.ends_nok = not e.ok if e.kind != LOOSENING else b.ends_nok
-            elif not b.locked:
-                b.state = b.status   # its state the core's (BoltsChanged): the rundown ended
+                # as its records say now (a loosening NOK is the bolt NOK: a reviewer)
+                said: BoltStatus = (LOOSENED if e.ok else NOK) if e.kind == LOOSENING \
+                    else OK if e.ok else NOK
+                b.state, b.status, b.ran, b.ends_nok = said, said, True, not e.ok
+            else:   # its state the core's (BoltsChanged, the rundown's end): its words
+                said = (LOOSENED if e.ok else TO_LOOSEN) if e.kind == LOOSENING \
+                    else OK if e.ok else NOK
             if b.state == said:
                 b.reason = "loosening NOK" if said == TO_LOOSEN else RUNDOWN_WORDS.get(said, "")
-        if e.vin == self.vin and self.selected == e.bolt:   # a late result of a closed
-            self.selected, self.selected_loosen = None, None  # vehicle: not this one's
         c = self.closed
         if c is not None and c["vin"] == e.vin and e.kind != LOOSENING:   # stored late:
             c["missing"] = [b for b in c["missing"] if b != e.bolt]       # its close line
@@ -580,13 +585,21 @@ class View:
         self.act = act or (why is not None and why.kind in ACT_ON)
 
     def _set(self, bolt: str, state: BoltShown, reason: str = "") -> None:
+        """Where the operator's attention is on ``bolt``: ``state`` next, selected, the tool
+        on, blocked; ``PENDING``: none, the bolt drawn as the core holds it (to do, NOK,
+        loosened, to be loosened first: a reviewer found a NOK bolt left without a rundown
+        drawn "to do").  A bolt the core holds skipped or locked draws no attention (the
+        controller's refusal drew a skipped bolt "blocked" for good: a reviewer)."""
         b = self.bolts.get(bolt)
-        if b is not None:
-            if b.loosen and state == PENDING:   # still to be loosened first
-                state, reason = TO_LOOSEN, reason or "loosen first"
-            elif b.check_first and state in (PENDING, Shown.NEXT):
-                reason = reason or CHECK_FIRST_WORDS
-            b.state, b.reason = state, reason
+        if b is None or (state in ATTENTION and (b.locked or b.status == SKIPPED)):
+            return
+        if state == PENDING and b.status != PENDING:
+            state = b.status
+            reason = reason or ("loosen first" if state == TO_LOOSEN
+                                else RUNDOWN_WORDS.get(state, ""))
+        elif b.check_first and state in (PENDING, Shown.NEXT):
+            reason = reason or CHECK_FIRST_WORDS
+        b.state, b.reason = state, reason
 
     def _unselect(self) -> None:
         for b in self.bolts.values():
@@ -600,7 +613,7 @@ class View:
         skipped (without a rundown: one with is counted by its last); and held (its result not
         known: a new user's trial, the header never said it where ``stationd status`` did)."""
         bolts = self.bolts.values()
-        return {"total": len(bolts), "done": sum(b.state == OK for b in bolts),
+        return {"total": len(bolts), "done": sum(b.status == OK for b in bolts),
                 "nok": sum(b.ends_nok for b in bolts),
                 "skipped": sum(b.state == SKIPPED and not b.ran for b in bolts),
                 "held": sum(b.held for b in bolts)}
