@@ -10,6 +10,7 @@ import time
 import pytest
 
 from db.repository import Repository
+from drivers.wrench.sim.controller import SimController
 from stationd.station.gaps import GapPlan, NoFetch, plan
 from stationd.station.lost import CLOCK_SLACK_S
 from stationd.words import gap_plan_words
@@ -85,6 +86,19 @@ def test_results_made_while_the_link_was_cut_are_fetched_or_shown_as_gaps(tmp_pa
 AFTER_OFF_S = CLOCK_SLACK_S + 2.0
 
 
+def _tool_off(ctl: SimController) -> float:
+    """When the test saw the controller's tool off (the bolt before's disable taken): at or
+    after the station sent it."""
+    until(lambda: not ctl.tool_enabled, 30, "the tool off")
+    return time.monotonic()
+
+
+def _after_off(off: float) -> None:
+    """Until ``AFTER_OFF_S`` after the bolt before's tool went off (``off``: :func:`_tool_off`):
+    counted from then, not from the next bolt's enable (a second or more later under load)."""
+    time.sleep(max(0.0, off + AFTER_OFF_S - time.monotonic()))
+
+
 @pytest.mark.timeout(300)
 def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path):
     """With the link up, the controller loses a push (``lose_next_push``): the station hears
@@ -97,10 +111,11 @@ def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path
     pose = tmp_path / "pose"
     with tracking(tmp_path, "LIVEGAPVIN0000001") as (d, plc, ctl):
         first = stored_on(d, ctl, pose, "B04")   # the id the station accounts for
+        off = _tool_off(ctl)
         tool_on(d, ctl, pose, "B05")
         # the operator pulls beyond the clock's slack after B04's tool went off (sooner, a
         # rundown could be B04's, pulled again as its disable was sent: not proved B05's)
-        time.sleep(AFTER_OFF_S)
+        _after_off(off)
         ctl.lose_next_push()
         lost = ctl.pull_trigger()
         assert lost is not None
@@ -114,8 +129,9 @@ def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path
         d.wait_log(f"tightening {lost.tightening_id} fetched after a later one came")
         d.wait_log(f"tightening {lost.tightening_id}, its push lost, fetched when a later one "
                    "came: made while the tool was on for B05 alone, recorded to B05")
+        off = _tool_off(ctl)                     # B05's, after its pushed result
         tool_on(d, ctl, pose, "B06")
-        time.sleep(AFTER_OFF_S)
+        _after_off(off)
         ctl.lose_next_push(2)
         a, b = ctl.pull_trigger(), ctl.pull_trigger()
         assert a is not None and b is not None
@@ -154,8 +170,9 @@ def test_a_result_never_pushed_is_fetched_when_a_later_one_skips_its_id(tmp_path
         # is fetched and recorded to B09 of the car that left (a supervisor's trial: the
         # car closed with B09 missing, nobody told until the next car's first result; an
         # MES integrator's trial: held, its words saying other enables came between)
+        off = _tool_off(ctl)                     # B08's, after its result
         tool_on(d, ctl, pose, "B09")
-        time.sleep(AFTER_OFF_S)
+        _after_off(off)
         ctl.lose_next_push()
         b09 = ctl.pull_trigger()
         assert b09 is not None
