@@ -266,13 +266,14 @@ def test_calibrate_check_on_a_simulated_station_measures_its_world(tmp_path, cap
 def test_the_lift_goes_down_only_when_no_bolt_of_the_vehicle_is_locked_or_held(tmp_path):
     """A supervisor's trial: the scripted operator lowered the lift while a bolt was still
     held, though README says the vehicle waits on the lift for a supervisor's release.  Every
-    third push lost, and the controller keeps no results to fetch (``old_results=0``: else
-    the check as the bolt's window ends finds it, and records it to its bolt): the station
-    holds a bolt whose result it never got (a gap when the next result skipped its id),
-    after the operator had gone on.  The bolt is released (here by the simulated
-    supervisor) and tightened again before the lift goes down: the vehicle closes with no
-    bolt held."""
-    _station(tmp_path, wrench={"url": "sim://wrench?lose_push_every=3&old_results=0"})
+    fifth push lost (one is the scenario; every third lost three, each costing the operator's
+    wait for its result and the late-result window: 15 s more), and the controller keeps no
+    results to fetch (``old_results=0``: else the check as the bolt's window ends finds it,
+    and records it to its bolt): the station holds a bolt whose result it never got (a gap
+    when the next result skipped its id), after the operator had gone on.  The bolt is
+    released (here by the simulated supervisor) and tightened again before the lift goes
+    down: the vehicle closes with no bolt held."""
+    _station(tmp_path, wrench={"url": "sim://wrench?lose_push_every=5&old_results=0"})
     d = Daemon(tmp_path, "--sim-operator")
     try:
         closed = d.wait(r"vehicle (\w{17}) \(SIM-1\) closed: (.*)", 360)
