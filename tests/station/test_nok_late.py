@@ -164,22 +164,48 @@ def test_a_lost_nok_at_max_nok_answered_by_an_unreadable_result_locks_and_its_re
     assert again.loosen                              # the loosen pset first
 
 
-def test_an_ok_entered_for_the_unreadable_result_after_a_lost_nok_ends_its_lock():
-    """As above, max_nok 1: locked and held; the supervisor reads OK on the controller and
-    enters it: the bolt is done, neither locked nor held (an OK answers the NOKs before it,
-    as a pushed OK does)."""
-    from stationd.station.commands import EnterOutcome
-    from stationd.station.inputs import ResultsSkipped, UnreadableIn
-    from tests.station.test_commands import SUPERVISOR, _answer
-    from tests.station.test_result_types import unreadable
+def _nok_fetched_push_awaited(policy: NokPolicy) -> Driver:
+    """B1 enabled; 42 pushed skips 41, B1's NOK whose push was lost, fetched: its NOK policy
+    owed until 42 is judged."""
+    from stationd.station.inputs import ResultsSkipped
 
-    d = _ready(nok=NokPolicy(NokRule(max_nok=1)))
+    d = _ready(nok=policy)
     _enabled(d, 1)
     enabled_at = d.t
     d.t += 5.0
     d.feed(ResultsSkipped(d.t, 42))
     d.feed(ResultIn(d.t, res(41, 1, False, 1), fetched=True, follows=40,
                     made_at=enabled_at + 3.0, live=True, before=42))
+    return d
+
+
+def test_a_loosen_command_between_a_lost_nok_and_its_pushed_result_keeps_the_lock_due():
+    """A reviewer: a person's loosen command landing while a fetched NOK's policy waits for
+    the pushed result after it dropped that policy (its lock at max_nok): the command ended
+    the bolt's "NOK last", which the owed policy reads.  The lock comes, as without the
+    command and as the records say at a reload (a loosen command ends no NOK row)."""
+    from stationd.station.commands import LoosenBolt
+    from tests.station.test_commands import SUPERVISOR
+
+    d = _nok_fetched_push_awaited(NokPolicy(NokRule(max_nok=1, strategy="repeat",
+                                                    loosen_pset=90)))
+    assert d.core._lock_due == {"B1": 1} and "B1" not in d.core.matcher.locked
+    acts = d.command(1, LoosenBolt("VIN1", "B1", "rework"), SUPERVISOR)
+    assert "B1" in d.core._loosen, acts
+    d.feed(ResultIn(d.t, res(42, 1, True, 3)))   # a batch increment pushed: judged
+    assert d.core.matcher.locked.get("B1") == 1, d.core.matcher.locked
+
+
+def test_an_ok_entered_for_the_unreadable_result_after_a_lost_nok_ends_its_lock():
+    """As above, max_nok 1: locked and held; the supervisor reads OK on the controller and
+    enters it: the bolt is done, neither locked nor held (an OK answers the NOKs before it,
+    as a pushed OK does)."""
+    from stationd.station.commands import EnterOutcome
+    from stationd.station.inputs import UnreadableIn
+    from tests.station.test_commands import SUPERVISOR, _answer
+    from tests.station.test_result_types import unreadable
+
+    d = _nok_fetched_push_awaited(NokPolicy(NokRule(max_nok=1)))
     d.feed(UnreadableIn(d.t, unreadable(42, 1)))
     assert d.core.matcher.locked == {"B1": 1} and "B1" in d.core.matcher.held
     acts = d.command(1, EnterOutcome("VIN1", "B1", True, 50.1, 31.0, "read on the controller"),

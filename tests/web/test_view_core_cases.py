@@ -1,4 +1,7 @@
-"""Review findings: the screen's bolts against a real core (issue 31)."""
+"""The screens' bolts against a real core, case by case (an independent review of the core's
+writing every bolt's state, issue 31): attention that ends in the core's status, a slow
+database's late record, the controller's refusal of a skipped bolt, a closed vehicle's late
+loosening, a done bolt a gap holds."""
 
 from __future__ import annotations
 
@@ -46,8 +49,8 @@ def test_a_nok_bolt_open_again_left_before_its_rundown_is_still_drawn_nok():
 def _closed_loosening_due(d: Screened) -> int:
     """B1 tightened OK, a person's loosen command on it, the tool on for its loosen pset; the
     lift goes down before its result: the vehicle closes with B1's result due."""
-    from stationd.station.commands import LoosenBolt
     from stationd.station.actions import CloseVehicle
+    from stationd.station.commands import LoosenBolt
     from stationd.station.inputs import VehicleEnded
     from tests.station.test_commands import SUPERVISOR
     _rundown(d, 1, 1, ok=True)
@@ -57,6 +60,7 @@ def _closed_loosening_due(d: Screened) -> int:
     _on(d, 1, 1)
     assert d.tool and d.core.selection is not None and d.core.selection.loosen
     pset = d.core.selection.pset
+    assert pset is not None
     for _ in range(4):
         d.step(("lift", 0.05, False, False, None))
     close = [a for _, acts in d.log for a in acts if isinstance(a, CloseVehicle)]
@@ -86,8 +90,8 @@ def test_a_late_loosening_nok_of_a_closed_vehicle_counts_it_ending_nok():
 def test_a_result_stored_late_leaves_the_bolt_the_tool_is_on_again_drawn_so():
     from stationd.station.events import ResultRecorded
     from stationd.station.inputs import ResultIn
-    from tests.station.test_loosen import res
     from stationd.web.view import Shown
+    from tests.station.test_loosen import res
     d = _screened()
     _on(d, 1, 2)
     d.step(("ack", 0.01, True))
@@ -120,9 +124,10 @@ def test_a_bolt_skipped_by_the_controller_s_refusal_is_drawn_and_counted_skipped
     assert d.view.counters()["skipped"] == 1
 
 
-def test_a_done_bolt_held_by_a_gap_is_not_drawn_nok_when_the_vehicle_leaves():
-    from db.kinds import OK
-    from stationd.station.inputs import NewestChecked, VehicleEnded
+def _done_and_held_by_a_gap() -> Screened:
+    """B1 run down (41, its push lost), its window's check finding nothing; run down again,
+    OK (42), whose push reveals 41 as a gap that may be its first rundown: done and held."""
+    from stationd.station.inputs import NewestChecked
     from tests.station.test_gap_again import _again_and_revealed
     from tests.station.test_lost import _window_ends
     d = Screened(core=StationCore(PARAMS, leave_frames=2))
@@ -130,8 +135,15 @@ def test_a_done_bolt_held_by_a_gap_is_not_drawn_nok_when_the_vehicle_leaves():
     d.step(("lift", 0.1, True, True, "VIN1"))
     check = _window_ends(d, 1, 3.0)
     d.feed(NewestChecked(d.t, serial=check.serial))
-    _again_and_revealed(d)   # B1 run down again, OK (42); a gap (41) may be its: held
-    assert "B1" in d.core.matcher.done and "B1" in d.core.matcher.held
+    _again_and_revealed(d)
+    m = d.core.matcher
+    assert m is not None and "B1" in m.done and "B1" in m.held
+    return d
+
+
+def test_a_done_bolt_held_by_a_gap_is_not_drawn_nok_when_the_vehicle_leaves():
+    from stationd.station.inputs import VehicleEnded
+    d = _done_and_held_by_a_gap()
     for _ in range(4):
         d.step(("lift", 0.05, False, False, None))
     # the records: B1's last rundown OK (neither missing nor NOK), B2 and B3 missing
@@ -144,17 +156,9 @@ def test_a_done_bolt_held_by_a_gap_is_not_drawn_nok_when_the_vehicle_leaves():
 def test_a_done_bolt_released_from_a_gap_s_hold_is_not_said_to_be_checked_before_tightening():
     from db.kinds import OK
     from stationd.station.commands import ReleaseBolt
-    from stationd.station.inputs import NewestChecked
     from stationd.web.view import CHECK_FIRST_WORDS
     from tests.station.test_commands import SUPERVISOR
-    from tests.station.test_gap_again import _again_and_revealed
-    from tests.station.test_lost import _window_ends
-    d = Screened(core=StationCore(PARAMS, leave_frames=2))
-    d.feed(Started(d.t))
-    d.step(("lift", 0.1, True, True, "VIN1"))
-    check = _window_ends(d, 1, 3.0)
-    d.feed(NewestChecked(d.t, serial=check.serial))
-    _again_and_revealed(d)   # B1 done (42), held: a gap (41) may be its
+    d = _done_and_held_by_a_gap()
     d.command(1, ReleaseBolt("VIN1", "B1", "checked on the controller"), SUPERVISOR)
     b = d.view.bolts["B1"]
     assert b.state == OK and "B1" in d.core.matcher.done
