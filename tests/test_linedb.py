@@ -199,13 +199,15 @@ def test_line_init_makes_the_tables_once_and_a_forwarder_uses_them(tmp_path, pg_
 
 def test_line_init_with_a_bad_url_or_the_server_down_is_one_line(pg_url, pg_server, capsys):
     down = pg_url.replace(f":{pg_server.port}/", ":1/")
-    for url, needle in (("not a url", "not a database URL"),
-                        ("sqlite:///line.db", "the line database is PostgreSQL"),
-                        (down, "line database postgresql+psycopg://"),
-                        # a sweep: psycopg took port 0 as its default and named 5432
-                        ("postgresql+psycopg://u@127.0.0.1:0/line", "port 0 is not 1-65535")):
+    # a URL that cannot be one: 2 (bad input); the server down: 3, as line status says it
+    for url, needle, exit_code in (
+            ("not a url", "not a database URL", 2),
+            ("sqlite:///line.db", "the line database is PostgreSQL", 2),
+            (down, f"line database {down} unreachable: ", 3),
+            # a sweep: psycopg took port 0 as its default and named 5432
+            ("postgresql+psycopg://u@127.0.0.1:0/line", "port 0 is not 1-65535", 2)):
         code, out, err = _run(capsys, "line", "init", url)
-        assert code == 2 and out == "", url
+        assert code == exit_code and out == "", url
         assert needle in err and len(err.strip().splitlines()) == 1, err
         assert "Traceback" not in err
 
