@@ -105,18 +105,10 @@ class ResultRules(UnreadRules):
         finally:
             if not ev.fetched or tid == waited:
                 self._pending_push = None
-        # the newest result judged: during which enable, the tool left on or off (an older id
-        # judged later, a catch-up's or a copy's, says nothing of the order: a reviewer)
-        if self._judged is None or tid > self._judged[0]:
-            # (a result fetched late and not taken for the enable owed now was made before
-            # it, under no enable known: it proves nothing of the order for this enable)
-            mine = not ev.fetched or any(isinstance(a, Record) and a.selection is self._enabled
-                                         for a in acts)
-            self._judged = (tid, self._enable_serial if mine else -1, self.tool_on)
-            # (the tool left on after it, its enable's later rundowns are in a gap after it:
-            # from that enable on; a reviewer)
-            self._judged_at = self._enabled_at if self.tool_on and self._enabled_at is not None \
-                else ev.t
+        # (a result fetched late and not taken for the enable owed now was made before it,
+        # under no enable known: it proves nothing of the order for this enable)
+        self._judge(tid, not ev.fetched or any(
+            isinstance(a, Record) and a.selection is self._enabled for a in acts), ev.t)
         return acts + self._push_judged(ev.t)
 
     def _result_read(self, ev: ResultIn) -> list[Action]:

@@ -420,6 +420,19 @@ class CoreState:
                 frozenset(self._ran), frozenset(self._loosened), frozenset(self._check_first),
                 frozenset(self._ordered_loosen))
 
+    def _judge(self, tid: int, mine: bool, t: float) -> None:
+        """Result ``tid`` (read, or its id picked out of an unreadable one) judged at ``t``:
+        where it is the newest, the order of ids goes by it: during which enable (``mine``:
+        the enable owed now; else none known), the tool left on or off.  An older id judged
+        later, a catch-up's or a copy's, says nothing of the order (a reviewer)."""
+        if self._judged is not None and tid <= self._judged[0]:
+            return
+        self._judged = (tid, self._enable_serial if mine else -1, self.tool_on)
+        # (the tool left on after it, its enable's later rundowns are in a gap after it: from
+        # that enable on; a reviewer)
+        self._judged_at = self._enabled_at if self.tool_on and self._enabled_at is not None \
+            else t
+
     def _ran_once(self, bolt: str, loosening: bool, ok: bool) -> None:
         """A rundown of ``bolt`` recorded (a tightening or a loosening, measured or entered):
         its result is known (no check first), and it is loosened last or not."""

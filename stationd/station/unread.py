@@ -112,24 +112,20 @@ class UnreadRules(LostRules):
     def _on_unreadable_in(self, ev: UnreadableIn) -> list[Action]:
         """:meth:`_unreadable_read`; one pushed (its id picked out, it may be the one whose
         skipped ids were fetched) is judged as the result owed, then owed no longer."""
-        u, waited, serial = ev.unreadable, self._pending_push, self._enable_serial
+        u, waited = ev.unreadable, self._pending_push
         try:
             acts = self._unreadable_read(ev)
         finally:
             if not u.fetched or (u.tightening_id is not None and u.tightening_id == waited):
                 self._pending_push = None
-        tid = u.tightening_id
-        if tid is not None and not u.fetched and (self._judged is None
-                                                  or tid > self._judged[0]):
+        if u.tightening_id is not None and not u.fetched:
             # its id read, pushed: it orders the ids as a read result does (judged during
             # the enable it came under, the tool off after it: a result fetched later was
             # made under a later enable; a new user's trial: the next bolt's lost push,
             # fetched, was stored unattributed, "other enables came between", none had).  An
             # id misread proves no result anyone's alone: a result placed by the order is
             # also made after the tool went off for this enable (:meth:`_after_last_off`)
-            self._judged = (tid, serial, self.tool_on)
-            self._judged_at = self._enabled_at if self.tool_on and self._enabled_at is not None \
-                else ev.t
+            self._judge(u.tightening_id, True, ev.t)
         return acts + self._push_judged(ev.t)
 
     def _unreadable_read(self, ev: UnreadableIn) -> list[Action]:
