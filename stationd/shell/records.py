@@ -159,15 +159,15 @@ class Records:
             r = import_bolts(self.repo, self.cfg.bolts_path,
                              tolerance_mm=self.cfg.matching.tolerance_mm)
             self.log.info("bolt table %s: %d added, %d changed, %d unchanged, %d removed, "
-                     "%d new parameter versions", self.cfg.bolts_path, len(r.added),
-                     len(r.changed), len(r.unchanged), len(r.removed), len(r.new_versions))
+                          "%d new parameter versions", self.cfg.bolts_path, len(r.added),
+                          len(r.changed), len(r.unchanged), len(r.removed), len(r.new_versions))
             if r.removed:   # a table cut short that still reads removes bolts: said loudly
                 # (the vehicle at the station too: a reload opens it again with the table;
                 # a new user's trial read "on new vehicles" and saw it gone from the one there)
                 self.log.warning("bolt table %s: %s removed (%s%s): no longer tightened, on the "
-                            "vehicle at the station too", self.cfg.bolts_path,
-                            counted(len(r.removed), "bolt"),
-                            ", ".join(r.removed[:5]), ", ..." if len(r.removed) > 5 else "")
+                                 "vehicle at the station too", self.cfg.bolts_path,
+                                 counted(len(r.removed), "bolt"),
+                                 ", ".join(r.removed[:5]), ", ..." if len(r.removed) > 5 else "")
         return self.repo
 
     def _repo(self) -> Repository:
@@ -207,12 +207,12 @@ class Records:
         self._enable, self._enable_off = (sel, owed.id), owed.off_at is not None
         if in_window:
             self.log.info("the tool was enabled for bolt %s of %s (pset %s) when the last station "
-                     "stopped: its result within %.0f s is recorded to it", owed.bolt,
-                     owed.vin, owed.pset, late_result_s - (now - off))
+                          "stopped: its result within %.0f s is recorded to it", owed.bolt,
+                          owed.vin, owed.pset, late_result_s - (now - off))
         else:
             self.log.info("the tool was enabled for bolt %s of %s (pset %s), its result not "
-                     "recorded: the controller's results since are fetched for it", owed.bolt,
-                     owed.vin, owed.pset)
+                          "recorded: the controller's results since are fetched for it", owed.bolt,
+                          owed.vin, owed.pset)
         return Owed(sel, off, owed.enabled_at.timestamp() if cut else None, in_window)
 
     def settle(self, sel: Selection) -> None:
@@ -237,7 +237,7 @@ class Records:
             self._enable_off = True
         except STATION_FAULTS as exc:
             self.log.warning("the tool-off time of bolt %s not stored: %s", self._enable[0].bolt,
-                        one_line(exc))
+                             one_line(exc))
 
     @property
     def owes_off_time(self) -> bool:
@@ -294,7 +294,7 @@ class Records:
             link_curves(repo, int(r.tightening_id), rid)
         except STATION_FAULTS as exc:
             self.log.warning("curves of tightening %d not linked: %s", r.tightening_id,
-                        one_line(exc))
+                             one_line(exc))
 
     def copy_input(self, ev: ResultIn, vin: str | None) -> ResultIn | ResultCopy:
         """``ev`` as the core is to have it: a :class:`ResultCopy` when the database has
@@ -421,7 +421,7 @@ class Records:
         gone = repo.left_unseen(a.vin)
         if gone is not None:   # the lowering that closes it was not seen (station down then)
             self.log.info("vehicle %s (%s) closed: it left while the station did not see it go; "
-                     "%s", gone.vehicle.vin, gone.vehicle.model, gone.counts())
+                          "%s", gone.vehicle.vin, gone.vehicle.model, gone.counts())
         model = repo.model_for_code(a.model_code)
         if model is None:   # which vehicle, and the codes there are (a line engineer's trial)
             codes = ", ".join(f"{name} {code}" for name, code in repo.model_codes().items()
@@ -449,8 +449,8 @@ class Records:
         specs = {b.bolt_id: LoadedBolt(xyz(b.position), b.parameters.pset, b.order, b.batch,
                                      b.parameters_id, b.parameters) for b in infos}
         self.log.info("vehicle %s (%s) opened%s: %d bolts, %d done", a.vin, model,
-                 " for rework" if started.rework else "", len(infos),
-                 len(done & specs.keys()))   # (of its bolts now: one removed is not counted)
+                      " for rework" if started.rework else "", len(infos),
+                      len(done & specs.keys()))   # (of its bolts now: one removed is not counted)
         # by keyword: held and status are both bolt -> text, and given by position (status
         # in held's place) every bolt done before a reload or a restart came back held.  A
         # skip read back from the command ledger is the person's command, typed as the core
@@ -477,9 +477,9 @@ class Records:
         # (journalctl -p warning) missed "50 missing" at INFO (an engineer's trial)
         missing, nok = _verdict(report, due)
         self.log.log(logging.INFO if not missing and not nok and not due else logging.WARNING,
-                "vehicle %s (%s) closed: %s%s%s", vin, report.vehicle.model,
-                report.counts(due), "; its verdict follows the result due" if due else "",
-                closed_after_outage(vin) if after_lift_outage else "")
+                     "vehicle %s (%s) closed: %s%s%s", vin, report.vehicle.model,
+                     report.counts(due), "; its verdict follows the result due" if due else "",
+                     closed_after_outage(vin) if after_lift_outage else "")
         # the screens' "not tightened when the vehicle left": skipped ones too
         return VehicleEnded(time.time(), vin, missing, nok, due)
 
@@ -492,8 +492,8 @@ class Records:
         status = {b.bolt_id: b.status for b in report.bolts}
         now = ", ".join(f"{b} {str(status.get(b, MISSING)).upper()}" for b in a.settled)
         self.log.log(logging.INFO if not missing and not nok and not a.due else logging.WARNING,
-                "vehicle %s (%s) closing verdict, the result due at its close settled (%s): "
-                "%s", a.vin, report.vehicle.model, now, report.counts(a.due))
+                     "vehicle %s (%s) closing verdict, the result due at its close settled (%s): "
+                     "%s", a.vin, report.vehicle.model, now, report.counts(a.due))
         return VehicleEnded(time.time(), a.vin, missing, nok, a.due, a.settled)
 
     def record_command(self, a: RecordCommand, vin_at_height: str | None) -> Reason | None:
@@ -629,7 +629,7 @@ class Records:
             with self._lock:
                 self._saved_late.append(u)
             self.log.info("tightening %d of %s stored late", u.record.result.tightening_id,
-                     u.record.bolt)
+                          u.record.bolt)
 
     def _drain(self, owed: list[T], write: Callable[[T], None], failed: str) -> Iterator[T]:
         """Each of ``owed`` written, oldest first, and yielded once written (taken off the
