@@ -431,24 +431,29 @@ class _Round:
         known, or a NOK): tightened as the NOK policy has it; its line goes on from the one
         said."""
         info = self.by_id[bolt_id]
-        views = {v.bolt: v for v in self.st.core.status().bolts}
-        v = views.get(bolt_id)
-        what = "released from a hold" if v is not None and v.check_first else \
-            "open again after a person's command"
+        released = any(v.bolt == bolt_id and v.check_first
+                       for v in self.st.core.status().bolts)
+        what = "released from a hold" if released else "open again after a person's command"
         line: dict[str, Any] = {"bolt": bolt_id, "pset": info.parameters.pset,
                                 "result": "", "rundowns": 0, "before": [what]}
+        await self._tighten_again(info, line, "again")
+        self._said_on(bolt_id, line)
+        await self.away()
+
+    async def _tighten_again(self, info: BoltInfo, line: dict[str, Any], when: str) -> None:
+        """The wrench back on ``info``'s bolt, tightened as the NOK policy has it, its steps
+        after ``line``'s; not selected (``when``: after what): said, unfinished."""
+        bolt_id = info.bolt_id
         self.truth["bolt"] = bolt_id
         self.world.set_wrench(self._pose(info))
         if not await _tool_on(self.st, bolt_id):
-            line["result"] = f"not selected again ({_why_not(self.st)})"
+            line["result"] = f"not selected {when} ({_why_not(self.st)})"
             line["unfinished"] = True
-        else:
-            first = line["before"]
-            await until_ok(self.st, bolt_id, line, self.nok_rng, self.truth["vin"],
-                           self.supervisor, stubborn=False)
-            line["before"] = [*first, *line["before"]]
-        self._said_on(bolt_id, line)
-        await self.away()
+            return
+        first = line["before"]
+        await until_ok(self.st, bolt_id, line, self.nok_rng, self.truth["vin"],
+                       self.supervisor, stubborn=False)
+        line["before"] = [*first, *line["before"]]
 
     def _said_on(self, bolt_id: str, line: dict[str, Any]) -> None:
         """``line`` said, going on from ``bolt_id``'s line said before (its steps, its
@@ -485,17 +490,7 @@ class _Round:
                 if info is None:
                     line["result"] = "not a bolt the operator tightens"
                 else:
-                    pose = self._pose(info)
-                    truth["bolt"] = bolt_id
-                    self.world.set_wrench(pose)
-                    first = line["before"]
-                    if not await _tool_on(st, bolt_id):
-                        line["result"] = f"not selected after the release ({_why_not(st)})"
-                        line["unfinished"] = True
-                    else:
-                        await until_ok(st, bolt_id, line, self.nok_rng, truth["vin"],
-                                       supervisor, stubborn=False)
-                        line["before"] = [*first, *line["before"]]
+                    await self._tighten_again(info, line, "after the release")
             else:
                 line["before"].append(f"release refused ({answer.reason})")
         await self.for_people(bolt_id, info, line, what)   # nothing to wait for where released
