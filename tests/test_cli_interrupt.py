@@ -33,6 +33,18 @@ class _FrameTaker(importlib.abc.MetaPathFinder):
         return None
 
 
+@pytest.fixture(autouse=True)
+def _sigint_taken():
+    """The suite run as a background job (``pytest ... &``, nohup) starts with SIGINT
+    ignored, which the CLI rightly leaves ignored: these tests are about the handler it puts
+    in, so SIGINT has Python's own handler while they run."""
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
 def _frames() -> tuple[FrameType, FrameType]:
     taker = _FrameTaker()
     sys.meta_path.insert(0, taker)
