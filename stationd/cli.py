@@ -420,13 +420,19 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 @functools.cache
-def _parser() -> argparse.ArgumentParser:
-    """The parser, built once per process: parsing never changes it, and a process that runs
-    many commands (the tests run thousands) pays its 25 ms once."""
-    return build_parser()
+def _parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of ``command`` (see :func:`build_parser`)."""
+    return build_parser(command)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The command line's parser: every command, or ``command``'s group alone.
+
+    Why the one group: each group's module imports what its commands need (the core's words,
+    numpy, the simulated controller), 0.3 s of every run when all are built, paid again by
+    every command a script or the suite starts; ``stationd status`` needs none of the vision's.
+    A run names its command first, so the others are never asked for; help on the command line
+    itself (``stationd -h``, a command not known) builds them all and lists them all."""
     from stationd import __version__
 
     p = _Parser(prog="stationd", description="Vision-guided bolt-tightening station.")
@@ -434,30 +440,61 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-q", "--quiet", action="store_true",
                    help="no progress bars (they are also off when stderr is not a terminal)")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    for names, add in _GROUPS:
+        if command is None or command in names:
+            add(sub)
+    _quiet_everywhere(p)
+    return p
 
-    _add_vision_parsers(sub)
-    _add_bench_parser(sub)
 
+def command_word(argv: Sequence[str]) -> str | None:
+    """The command ``argv`` names, when one it can parse alone: its first word not an option
+    (the top-level options take no value), a known command, with no help or version asked
+    before it (they list every command).  None: build every command."""
+    for word in argv:
+        if word in ("-h", "--help", "--version"):
+            return None
+        if not word.startswith("-"):
+            return word if any(word in names for names, _ in _GROUPS) else None
+    return None
+
+
+def _add_calibrate(sub: Any) -> None:
     from stationd.calibrate_cli import add_calibrate_parser
-    from stationd.command_cli import add_command_parsers
-    from stationd.db_cli import add_config_parser, add_db_parser
-    from stationd.line_cli import add_line_parser
-    from stationd.probe import add_probe_parser
-    from stationd.teach_cli import add_teach_parser
 
     add_calibrate_parser(sub)
     _subcommand(sub, "calibrate", "check").set_defaults(func=cmd_calibrate_check)
+
+
+def _add_probe(sub: Any) -> None:
+    from stationd.probe import add_probe_parser
+
     add_probe_parser(sub)
+
+
+def _add_db_and_config(sub: Any) -> None:
+    from stationd.db_cli import add_config_parser, add_db_parser
+
     add_db_parser(sub)
     add_config_parser(sub)
-    add_command_parsers(sub)
-    add_teach_parser(sub)
-    add_line_parser(sub)
 
-    _add_run_and_sim_parsers(sub)
-    _add_demo_parser(sub)
-    _quiet_everywhere(p)
-    return p
+
+def _add_commands(sub: Any) -> None:
+    from stationd.command_cli import add_command_parsers
+
+    add_command_parsers(sub)
+
+
+def _add_teach(sub: Any) -> None:
+    from stationd.teach_cli import add_teach_parser
+
+    add_teach_parser(sub)
+
+
+def _add_line(sub: Any) -> None:
+    from stationd.line_cli import add_line_parser
+
+    add_line_parser(sub)
 
 
 def _add_vision_parsers(sub: Any) -> None:
@@ -690,6 +727,23 @@ def _add_demo_parser(sub: Any) -> None:
     dm.set_defaults(func=cmd_demo)
 
 
+#: the top-level commands by the function adding them, in the order help lists them (a
+#: test checks the names against what each function adds)
+_GROUPS: tuple[tuple[tuple[str, ...], Callable[[Any], None]], ...] = (
+    (("detect", "localize", "marker", "tune-color"), _add_vision_parsers),
+    (("bench",), _add_bench_parser),
+    (("calibrate",), _add_calibrate),
+    (("probe",), _add_probe),
+    (("db", "config"), _add_db_and_config),
+    (("skip", "reopen", "release", "loosen", "enter-outcome", "operator", "feed", "user",
+      "status"), _add_commands),
+    (("teach",), _add_teach),
+    (("line",), _add_line),
+    (("run", "sim"), _add_run_and_sim_parsers),
+    (("demo",), _add_demo_parser),
+)
+
+
 def _subcommand(sub: Any, *names: str) -> argparse.ArgumentParser:
     """The parser of ``stationd NAME SUBNAME ...`` (to set what it runs from here)."""
     parser: argparse.ArgumentParser = sub.choices[names[0]]
@@ -891,10 +945,11 @@ def _main(argv: Sequence[str] | None, stopped: _Stopped) -> int:
         from stationd.logsetup import quiet_opencv
 
         quiet_opencv()   # OpenCV's own warnings are no lines of ours (before it loads)
-        parser = _parser()
+        words = list(sys.argv[1:] if argv is None else argv)
+        parser = _parser(command_word(words))
         reported = _reported()
-    _Parser.argv = list(sys.argv[1:] if argv is None else argv)
-    args = parser.parse_args(argv)
+    _Parser.argv = words
+    args = parser.parse_args(words)
     func: Callable[[argparse.Namespace], int] = args.func
     progress.configure(quiet=bool(getattr(args, "quiet", False)))
     try:
