@@ -110,8 +110,8 @@ def station_identity(cfg: StationConfig) -> dict[str, str | None]:
     return {"id": sid, "config": None if cfg.path is None else str(Path(cfg.path).resolve())}
 
 
-def _database_url(node: YamlNode, base: Path, check: bool = False, checker: bool = False
-                  ) -> str:
+def _database_url(node: YamlNode, base: Path, check: bool = False, checker: bool = False,
+                  header: bool = True) -> str:
     """The database URL; a relative SQLite path is relative to the station file, like every
     other path in it (not to the daemon's working directory).  With ``check``, the URL must
     parse and name a database whose driver is installed (nothing is connected), and an SQLite
@@ -121,7 +121,9 @@ def _database_url(node: YamlNode, base: Path, check: bool = False, checker: bool
     :data:`STATE_DIRECTORY` is no error there (the check may run before the service is
     installed; systemd creates it at the service's start), and a file that is not a database
     is an error there, while the daemon starts in fault on it ("database: file is not a
-    database") and opens it once it is replaced (the disk fixed: tests/shell/test_serve.py)."""
+    database") and opens it once it is replaced (the disk fixed: tests/shell/test_serve.py).
+    ``header``: the checker reads the file's header; not in the daemon's own process (a
+    refused reload's list of further errors), whose connections hold the file's locks."""
     url_node = node.mapping(("url",), required=("url",))["url"]
     url = url_node.text()
     prefix = "sqlite:///"
@@ -136,10 +138,10 @@ def _database_url(node: YamlNode, base: Path, check: bool = False, checker: bool
             make_engine(url).dispose()
         except DbError as exc:
             raise url_node.error(_station_forms(str(exc), base)) from None
-        # only the checker (its own process) reads the file: the daemon validates a reload
+        # only the checker in its own process reads the file: the daemon validates a reload
         # while its connections hold SQLite's locks, and closing any descriptor of that file
         # drops every POSIX lock the process holds on it (a db import then deleted the WAL)
-        problem = sqlite_problem(url, read_header=checker, as_writer=not checker)
+        problem = sqlite_problem(url, read_header=checker and header, as_writer=not checker)
         if problem is None or (not checker and problem.startswith(NOT_SQLITE)):
             pass
         elif checker and problem == missing_folder(STATE_DIRECTORY):
@@ -190,8 +192,9 @@ class _StationReader(SectionReader):
     devices must be written and their URLs are checked, as they are when collecting."""
 
     def __init__(self, path: Path, *, collect: bool, require_devices: bool = False,
-                 unregistered: str | None = None) -> None:
+                 unregistered: str | None = None, header: bool = True) -> None:
         super().__init__(collect=collect)
+        self.header = header     # the database file's header read (collecting, not beside it)
         self.path = path
         self.base = base_folder(path)
         self.note = link_note(path, "the station file")  # where a relative path names nothing
@@ -224,7 +227,7 @@ class _StationReader(SectionReader):
             matching=self.section("matching", d.matching, MatchingConfig.from_node),
             database_url=self.section("database", d.database_url,
                                       partial(_database_url, base=base, check=check,
-                                              checker=self.collect)),
+                                              checker=self.collect, header=self.header)),
             bolts_path=self.section("bolts", d.bolts_path,
                                     partial(existing_file, base=base, what="bolt file",
                                             note=self.note)),
@@ -304,13 +307,15 @@ class ReadAll:
     sections: dict[str, YamlNode]
 
 
-def read_all(path: str | Path) -> ReadAll:
+def read_all(path: str | Path, *, header: bool = True) -> ReadAll:
     """Read a station file as a person checking it wants it: each section, camera and pair on
     its own, so independent mistakes are reported together; so are the files it names and
     its device URLs (form and scheme; no device is opened).  What needs the bolt table, a
-    database or a device is checked by :mod:`stationd.stationcheck`, not here."""
+    database or a device is checked by :mod:`stationd.stationcheck`, not here.  ``header``
+    False: the database file is never opened here (the daemon's own process: see
+    :func:`stationd.stationcheck.more_errors`)."""
     p = Path(path)
-    reader = _StationReader(p, collect=True, require_devices=True)
+    reader = _StationReader(p, collect=True, require_devices=True, header=header)
     try:
         cfg = reader.read()
     except ConfigError as exc:

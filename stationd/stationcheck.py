@@ -76,9 +76,15 @@ def more_errors(path: str | Path) -> str:
     """What follows the first error a start or reload refused ``path`` with: ``" (and 2 more
     errors: stationd config check --config PATH lists them)"``, or "" when it was the only
     one (or the file cannot be checked at all).  Why: the refusal names one error, and an
-    engineer who fixes it would meet the next at the next reload, one at a time."""
+    engineer who fixes it would meet the next at the next reload, one at a time.
+
+    Checked without reading the database file's header: this runs in the daemon, whose
+    connections hold SQLite's locks on that file, and closing any other descriptor of it
+    drops every POSIX lock the process holds on it; the next program to close its own
+    connection (a `db import`, a backup) then took itself for the last one and deleted the
+    daemon's WAL, with the results written since (a newcomer's trial)."""
     try:
-        n = len(check_station(path).errors) - 1
+        n = len(check_station(path, header=False).errors) - 1
     except Exception:     # a bug in a checker must not hide the refusal
         return ""
     if n <= 0:
@@ -98,17 +104,18 @@ def table_checks(sections: Mapping[str, YamlNode], table: BoltTable, source: str
     return table_errors(sections["nok"], table, source)
 
 
-def check_station(path: str | Path) -> StationCheck:
+def check_station(path: str | Path, *, header: bool = True) -> StationCheck:
     """Check a station file and collect all its errors, for ``stationd config check``.
 
     Each section, camera and pair is checked on its own, so independent mistakes are reported
     together; so are the files it names (calibration, to_vehicle, HSV, bolt table) and device
     URLs (form and scheme; no device is opened).  The bolt table is checked with the station's
     own matching tolerance, the one its bolts must be told apart with.  An unreadable or
-    malformed file is one error.
+    malformed file is one error.  ``header`` False: the database file is opened only through
+    SQLite (:func:`more_errors`).
     """
     p = Path(path)
-    read = read_all(p)
+    read = read_all(p, header=header)
     cfg, errors, warnings, top = read.config, read.errors, read.warnings, read.sections
     if cfg is None:
         return StationCheck(str(p), None, errors)

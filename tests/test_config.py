@@ -697,6 +697,36 @@ def test_loading_a_station_never_opens_its_database_file(tmp_path, monkeypatch):
     assert opened == [str(db)]          # the checker does read it
 
 
+def test_a_refused_reload_s_further_errors_never_open_the_database_file(sim_copy,
+                                                                        monkeypatch):
+    """A refused reload counts the file's further errors in the daemon's own process
+    (:func:`stationd.stationcheck.more_errors`): it read the database file's header there,
+    which dropped the daemon's SQLite locks (a newcomer's trial: a backup then deleted its
+    WAL, and the results written after).  `config check`, its own process, still reads it."""
+    import pathlib
+
+    from stationd.stationcheck import more_errors
+
+    station = sim_copy / "station.yaml"
+    db = sim_copy / "station.db"
+    station.write_text(station.read_text().replace("sqlite:///stationd-sim.db",
+                                                   f"sqlite:///{db}"))
+    db.write_bytes(b"SQLite format 3\x00" + b"\x00" * 100)
+    opened: list[str] = []
+    real = pathlib.Path.open
+
+    def spy(self, *a, **kw):
+        if self.name.startswith("station.db"):
+            opened.append(str(self))
+        return real(self, *a, **kw)
+
+    monkeypatch.setattr(pathlib.Path, "open", spy)
+    more_errors(station)
+    assert opened == []
+    check_station(station)
+    assert opened == [str(db)]
+
+
 def test_a_pair_calibrated_with_left_and_right_swapped_is_refused(sim_copy, capsys):
     """Issue 19: ``config check`` passed a pair calibrated from swapped images (the right
     camera to the left of the left one: T's x positive); refused with the pair's calibration
