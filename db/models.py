@@ -349,6 +349,10 @@ class FeedEntry(Base):
     at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
 
 
+#: the meta key of the vehicle loaded at the station now ("": none)
+AT_STATION = "at_station"
+
+
 class Meta(Base):
     """The database's own facts: ``db_id``, a random id made when it was created (a station's
     records stay unique on a line when its local database is replaced)."""

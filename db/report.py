@@ -35,7 +35,15 @@ from db.kinds import (
     TO_LOOSEN,
     BoltStatus,
 )
-from db.models import Bolt, CommandRecord, ProcessParameters, TighteningRecord, Vehicle
+from db.models import (
+    AT_STATION,
+    Bolt,
+    CommandRecord,
+    Meta,
+    ProcessParameters,
+    TighteningRecord,
+    Vehicle,
+)
 
 __all__ = ["LOOSENED", "MISSING", "NOK", "OK", "SKIPPED", "TO_LOOSEN", "BoltResult",
            "VehicleInfo", "VehicleReport", "build_report"]
@@ -48,6 +56,9 @@ class VehicleInfo:
     started_at: datetime
     ended_at: datetime | None
     reopened_at: datetime | None = None   # the last reopening for rework
+    #: reopened for rework and not back at the station yet (open in the database, worked
+    #: nowhere: "open" read as if it were on the lift, a newcomer's trial)
+    waiting: bool = False
 
     @property
     def rework(self) -> bool:
@@ -141,6 +152,9 @@ class VehicleReport:
         v = self.vehicle
         state = "closed" if v.ended_at is not None else "open"
         state += ", reworked" if v.rework else ""
+        if v.waiting and v.reopened_at is not None:
+            state = f"reopened for rework at {v.reopened_at:%Y-%m-%d %H:%M:%S} UTC, not " \
+                    "back at the station yet"
         return f"{v.vin} ({v.model}, {state}): {self.counts()}"
 
     def counts(self, due: tuple[str, ...] = ()) -> str:
@@ -177,6 +191,7 @@ class VehicleReport:
         v = self.vehicle
         return {"vin": v.vin, "model": v.model, "started_at": _iso(v.started_at),
                 "ended_at": _iso(v.ended_at), "reopened_at": _iso(v.reopened_at),
+                "waiting": v.waiting,
                 "complete": self.complete, "ok": self.ok,
                 "nok": self.nok, "missing": self.missing, "skipped": self.skipped,
                 "loosen": self.loosen, "tightenings": self.tightenings,
@@ -240,7 +255,10 @@ def build_report(s: Session, v: Vehicle) -> VehicleReport:
                                   skipped_by=who[0] if skipped and who else None,
                                   comment=(who[1] or None) if skipped and who else None,
                                   skipped_at=who[2] if skipped and who else None))
-    info = VehicleInfo(v.vin, v.model.name, v.started_at, v.ended_at, v.reopened_at)
+    here = s.get(Meta, AT_STATION)
+    waiting = v.ended_at is None and v.reopened_at is not None and (
+        here is None or here.value != v.vin)
+    info = VehicleInfo(v.vin, v.model.name, v.started_at, v.ended_at, v.reopened_at, waiting)
     tightenings = [rec for rec, _ in records if (rec.kind or TIGHTENING) == TIGHTENING]
     return VehicleReport(info, tuple(results), len(tightenings),
                          sum(1 for rec in tightenings if rec.status == NOK),

@@ -48,6 +48,7 @@ from db.ledger import (
 )
 from db.migrate import current_revision, head_revision, upgrade
 from db.models import (
+    AT_STATION,
     Bolt,
     ControllerEvent,
     Meta,
@@ -66,8 +67,6 @@ from db.report import VehicleInfo, VehicleReport, build_report
 EXPORT_HEADER = ("stationd bolt table, exported from the process-parameter database.\n"
                  "Units: positions mm (vehicle frame), torque N m, angle degrees.")
 VIN_MAX = 32
-#: the meta key of the vehicle loaded at the station now ("": none), for :meth:`left_unseen`
-AT_STATION = "at_station"
 
 #: the controller stamps its results to the second, its clock's offset measured to the
 #: second: a result made within this much of an unreadable message's arrival may be its copy

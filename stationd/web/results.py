@@ -29,7 +29,7 @@ from sqlalchemy.orm import Session
 from db.curves import curves_of_records
 from db.kinds import LOOSENING, MISSING, PENDING, SKIPPED
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
-from db.repository import AT_STATION, Repository
+from db.repository import Repository
 from stationd.words import entered_as_words, result_type_words, unrecorded_words
 
 CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator", "torque_nm",
@@ -96,15 +96,13 @@ class Results:
         with Session(self.repo.engine) as s:
             rows = s.execute(select(Vehicle.vin).order_by(Vehicle.started_at.desc(),
                                                          Vehicle.id.desc()).limit(limit)).all()
-        here = self.repo.ledger.get_meta(AT_STATION)
         may_hold = self.repo.may_hold([vin for (vin,) in rows])
         out = []
         for (vin,) in rows:
             r = self.repo.vehicle_report(vin, held=vin in may_hold)
             j = r.to_json()
             v = r.vehicle
-            waits = v.ended_at is None and v.reopened_at is not None and here != vin
-            j["status"] = ("reopened" if waits else
+            j["status"] = ("reopened" if v.waiting else
                            "open" if v.ended_at is None and not r.complete
                            else "complete" if r.complete else "NOK" if r.nok else "incomplete")
             j.pop("bolts")

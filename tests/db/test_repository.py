@@ -253,6 +253,28 @@ def test_vehicle_cycle_and_close_summary(repo, bolts_file):
         repo.vehicle_report("wvw1234567890")
 
 
+def test_a_vehicle_reopened_and_not_back_is_said_waiting_not_open(repo, bolts_file):
+    """Reopened by a supervisor while another vehicle is on the lift: its report said "open,
+    reworked" as if it were at the station (a newcomer's trial); it waits for its rework
+    until it is loaded again, then it is open, and closed again after."""
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("WVW1234567890", "SEDAN")
+    repo.close_vehicle("WVW1234567890")
+    repo.start_vehicle("OTHER000000000001", "SEDAN")      # the next one on the lift
+    at = datetime(2026, 1, 2, 3, 4, 5, tzinfo=UTC)
+    repo.reopen_vehicle("WVW1234567890", at=at, user="sam", source="cli", comment="")
+    report = repo.vehicle_report("WVW1234567890")
+    assert report.vehicle.waiting and report.to_json()["waiting"] is True
+    assert "(SEDAN, reopened for rework at 2026-01-02 03:04:05 UTC, not back at the " \
+           "station yet)" in report.summary()
+    assert not repo.vehicle_report("OTHER000000000001").vehicle.waiting
+    repo.start_vehicle("WVW1234567890", "SEDAN")        # back at the station
+    report = repo.vehicle_report("WVW1234567890")
+    assert not report.vehicle.waiting and "(SEDAN, open, reworked)" in report.summary()
+    repo.close_vehicle("WVW1234567890")
+    assert "(SEDAN, closed, reworked)" in repo.vehicle_report("WVW1234567890").summary()
+
+
 def test_a_result_taken_before_the_close_is_recorded_after_it(repo, bolts_file):
     """The database away while a bolt was tightened and the vehicle then closed (the result
     kept in memory meanwhile): stored later, the result is its vehicle's, taken while open.
