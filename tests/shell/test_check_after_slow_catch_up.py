@@ -120,3 +120,35 @@ def test_a_result_the_check_fetched_after_a_slow_catch_up_is_not_told_again_as_t
     gaps = [(e.first, e.last) for e in fed if isinstance(e, ResultsMissed)]
     found = [e.result.tightening_id for e in fed if isinstance(e, ResultIn)]
     assert 41 in found and gaps == [], f"41 fetched by the check, then told as {gaps}"
+
+
+@pytest.mark.parametrize("first", [SILENT, BUSY], ids=["unanswered-once", "error-98-once"])
+def test_the_ids_a_slow_catch_up_did_not_fetch_are_asked_for_not_stored_as_refused(first):
+    """Weakness A (a review): the catch-up's MID 0064 went unanswered once (or error 98), a
+    refusal of the moment (``_no_history`` stays off: the checks ask on).  B1 was run down
+    during the cut (41); the controller still has it and gives it.  The first push beyond
+    the last recorded (42) told 41 at once as a gap "the controller refused to give them"
+    without asking for it: a tightening the controller has was never recorded (the cut's
+    bolt held where the controller's data could settle it), the gap's words untrue, and the
+    id, counted as accounted for (``last_tightening_id`` counts a gap's end), never asked
+    for again.  It is asked for (as the catch-up would have: made while the link was down,
+    not with it up), and no gap is told."""
+    controller = SlowThenPushing({0: res(42), 41: res(41), 42: res(42)}, first)
+    fed: list[Any] = []
+
+    async def main() -> None:
+        pool = ThreadPoolExecutor(2)
+        feed_ = _feed_of(controller, 40, None, fed, pool)
+        feed_.came_back()
+        assert feed_.catching_up is not None
+        await feed_.catching_up                  # the one slow MID 0064: not caught up
+        controller.push = 42                     # B2 run down after the reconnect
+        await feed_.results(controller)
+        pool.shutdown()
+        feed_.close()
+
+    asyncio.run(main())
+    gaps = [(e.first, e.last, e.reason) for e in fed if isinstance(e, ResultsMissed)]
+    got = [(e.result.tightening_id, e.fetched, e.live) for e in fed if isinstance(e, ResultIn)]
+    assert gaps == [] and got == [(41, True, False), (42, False, False)], (
+        f"41, which the controller still has, told as {gaps}; results fed: {got}")
