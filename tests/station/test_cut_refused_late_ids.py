@@ -5,12 +5,15 @@ bolt a result that comes afterwards is taken for."""
 
 from __future__ import annotations
 
+from typing import Any
+
 from drivers.keeper import FaultKind
-from stationd.station.actions import Record
+from stationd.station.actions import CheckNewest, Record, StoreCutUnknown
 from stationd.station.inputs import (
     CaughtUp,
     DeviceBack,
     DeviceFault,
+    NewestChecked,
     ResultIn,
     ResultsMissed,
     Tick,
@@ -64,3 +67,45 @@ def test_an_id_stored_as_the_cut_s_gap_is_not_taken_for_a_bolt_enabled_since():
     recorded = [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)]
     assert recorded == [] and "B3" not in d.core.matcher.done, (
         f"41, stored as the cut's gap before B3's enable, recorded as {recorded}")
+
+
+def test_a_check_after_a_timed_out_catch_up_never_records_a_cut_s_result_to_the_bolt_on_now():
+    """Weakness B, a guard (passes as the code stands): after the timed-out catch-up B3 (of
+    B1's pset) is enabled; its tool-on check asks the controller, whose newest is 41 (made
+    during the cut, by B1) -- fetched as with the link up.  Whatever its time says (not
+    known, or within the cut), 41 is never recorded to B3 (``_made_under`` needs the order
+    of ids or a time after B3's enable): stored unattributed, B3 held for a person (it may
+    be B3's own lost push), B1 held by the cut as before."""
+    for when in (None, "cut"):
+        d = _ready()
+        d.answer_checks = False
+        enabled_at = _cut_caught_up_late(d)
+        _enabled(d, 3)
+        d.t += 2.6
+        [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+        made_at = None if when is None else enabled_at + 0.5
+        acts: list[Any] = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=40,
+                                          made_at=made_at, live=True))
+        acts += d.feed(NewestChecked(d.t, serial=check.serial))
+        assert not [a for a in acts if isinstance(a, Record)], when
+        assert {"B1", "B3"} <= set(d.core.matcher.held), d.core.matcher.held
+        assert "B3" in [a.bolt for a in acts if isinstance(a, StoreCutUnknown)]
+
+
+def test_a_result_made_during_the_cut_pushed_after_a_timed_out_catch_up_is_not_the_bolt_on_now():
+    """Weakness B, the push path: after the timed-out catch-up (B1 held), B3 of B1's pset
+    has its tool on when the controller pushes 41 -- made during the cut by its own time
+    (the controller sends what it made while the link was down; it was busy, which is why
+    the catch-up's MID 0064 went unanswered).  The core itself says 41 was made with the
+    link down (the record's ``offline``), yet recorded it to B3, enabled after the link came
+    back: B3 closed OK by B1's rundown.  A result whose time puts it during the cut is
+    never taken for an enable made after it; B3 (it may be its own, were the clock wrong)
+    is held for a person, its tool off."""
+    d = _ready()
+    enabled_at = _cut_caught_up_late(d)
+    _enabled(d, 3)
+    d.t += 0.5
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), made_at=enabled_at + 0.5))
+    recorded = [(a.bolt, a.offline) for a in acts if isinstance(a, Record)]
+    assert recorded == [], f"41, made during the cut, recorded as (bolt, offline) {recorded}"
+    assert "B3" in d.core.matcher.held and not d.core.tool_on, d.core.matcher.held
