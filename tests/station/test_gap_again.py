@@ -7,9 +7,18 @@ from __future__ import annotations
 
 from typing import Any
 
+from drivers.keeper import FaultKind
 from stationd.station.actions import Record, StoreCutUnknown
 from stationd.station.commands import ReleaseBolt
-from stationd.station.inputs import NewestChecked, ResultIn, ResultsMissed, ResultsSkipped
+from stationd.station.inputs import (
+    CaughtUp,
+    DeviceBack,
+    DeviceFault,
+    NewestChecked,
+    ResultIn,
+    ResultsMissed,
+    ResultsSkipped,
+)
 from stationd.station.policy import NokPolicy, NokRule
 from tests.station.test_commands import SUPERVISOR
 from tests.station.test_core import Driver, _on, _ready
@@ -76,3 +85,35 @@ def test_released_after_its_ok_the_bolt_is_not_left_to_loosen_under_the_loosen_s
     d.command(1, ReleaseBolt("VIN1", "B1", "checked on the controller"), SUPERVISOR)
     assert "B1" not in d.core.matcher.held and "B1" in d.core.matcher.done
     assert "B1" not in d.core._loosen
+
+
+def test_a_result_made_under_the_first_of_two_unanswered_enables_of_a_bolt_still_holds_it():
+    """Weakness C (a review): B1 enabled and run down (41, its push lost), left; its
+    window's check asks nothing (no history).  The operator comes back to B1 (still open:
+    its first enable moves to ``_again``), its tool goes on again, and leaves it without a
+    rundown; that window ends unanswered too.  ``_unanswered_after`` then drops the first
+    enable (``_answered_bolt``) and keeps only the second: more than the hold's note is
+    lost.  After a reconnect the catch-up fetches 41, made (by the controller's own time)
+    under B1's first enable: held against nothing -- B1 left open, tightened twice where 41
+    was its rundown.  Control: without the second enable B1 is held."""
+    held = {}
+    for again in (False, True):
+        d = _ready()
+        d.feed(ResultIn(d.t, res(40, 2, True, 1)))
+        check = _window_ends(d, 1, 3.0)
+        made = d.core._enabled_at + 1.0             # 41: B1's first rundown
+        d.feed(NewestChecked(d.t, serial=check.serial))   # nothing asked
+        if again:
+            check = _window_ends(d, 1, 3.0)            # B1 again, left without a rundown
+            d.feed(NewestChecked(d.t, serial=check.serial))
+        d.t += 5.0
+        d.feed(DeviceFault(d.t, "wrench", FaultKind.DOWN, "link lost"))
+        d.t += 5.0
+        d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+        acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=40,
+                               made_at=made))
+        acts += d.feed(CaughtUp(d.t, True, "", 1))
+        assert not [a for a in acts if isinstance(a, Record)]
+        held[again] = d.core.matcher.held.get("B1")
+    assert held[False] is not None, held
+    assert held[True] is not None, f"B1 left open after its second enable: {held}"
