@@ -201,10 +201,15 @@ class LostRules(NokRules):
                          tid: int | None = None) -> list[Action]:
         """Each bolt of the unanswered enables ``lost`` held (its note ``note_of`` it, the
         result it may be ``tid``), stored so that the hold outlives a restart and comes back
-        with its vehicle where that one has left."""
+        with its vehicle where that one has left.  A bolt once (its first enable's note):
+        a bolt enabled again keeps each unanswered enable (:meth:`_unanswered_after`)."""
         acts: list[Action] = []
+        done: set[tuple[str, str]] = set()
         for u in lost:
             en, b = u.selection, u.selection.bolt
+            if (en.vin, b) in done:
+                continue
+            done.add((en.vin, b))
             note = note_of(u)
             stored = StoreCutUnknown(en.vin, b, note, en, what=LOST_UNKNOWN, tightening_id=tid)
             if en.vin != self.vin or self.matcher is None:

@@ -546,11 +546,17 @@ class CoreState:
     def _unanswered_after(self) -> bool:
         """The enable owed a result (``_enabled``, its tool off) gets none in its window:
         remembered as unanswered (:meth:`_unanswered_before`) where the link stayed up from
-        its enable on (a link cut's enable is the catch-up's to settle)."""
+        its enable on (a link cut's enable is the catch-up's to settle).  The bolt's earlier
+        unanswered enables, kept in ``_again`` since its tool went on again, stay unanswered
+        beside it: a result fetched later may be the rundown of either, and only each one's
+        own span places it (a review: the earlier one dropped, a result made under it held
+        nothing, the bolt left open)."""
         if self._enabled is not None and self._cut is None and self._off_at is not None \
                 and self._enabled_at is not None and self._enabled_at > self._link_lost_at:
-            self._answered_bolt(self._enabled.vin, self._enabled.bolt)
-            self._unanswered = [*self._unanswered, _Cut(
+            key = (self._enabled.vin, self._enabled.bolt)
+            earlier = [u for u in self._again if (u.selection.vin, u.selection.bolt) == key]
+            self._answered_bolt(*key)
+            self._unanswered = [*self._unanswered, *earlier, _Cut(
                 self._enabled, self._enabled_at, self._off_at + self.late_result_s)][-UNANSWERED:]
             return True
         return False
