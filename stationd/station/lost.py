@@ -326,6 +326,15 @@ class LostRules(NokRules):
         self._enabled, self._off_at = None, None
         return acts
 
+    def _before_enable(self, ev: ResultIn) -> bool:
+        """Whether ``ev`` was made before the enable owed now, so never its rundown: its id
+        in a gap told before that enable (a later id, or the controller's newest, had
+        revealed it: the ids grow with every tightening; a review: after a catch-up that
+        timed out, the cut's id stored as a gap and given after all closed the next bolt of
+        its pset)."""
+        tid, n = int(ev.result.tightening_id), self._enable_serial
+        return any(first <= tid <= last and told < n for first, last, told in self._gaps_told)
+
     def _cut_in_doubt(self, ev: ResultIn) -> list[Action]:
         """A result stored unattributed while a link cut's result is owed, of the pset sent
         then (pushed again by the controller after the reconnect, or fetched and not proved

@@ -47,7 +47,7 @@ from stationd.station.inputs import (
     ResultsMissed,
     Written,
 )
-from stationd.station.state import NOK_SKIPPED, ON_A_BOLT
+from stationd.station.state import NOK_SKIPPED, ON_A_BOLT, UNANSWERED
 from stationd.station.unread import UnreadRules, _Unread
 
 
@@ -166,7 +166,10 @@ class ResultRules(UnreadRules):
         read = self._unread_read(ev, tid)
         if read is not None:
             return read
-        ours = en is not None and (en.pset is None or int(r.pset) == en.pset) and not (
+        # (made before the enable owed now, by the order of ids or its own time: never its)
+        before = self._before_enable(ev)
+        ours = not before and en is not None and (
+            en.pset is None or int(r.pset) == en.pset) and not (
             ev.fetched and self._enabled_at is not None
             and self._enabled_at > self._link_lost_at)
         # (pushed while its enable's check runs, the window over: that enable's still, every
@@ -174,7 +177,7 @@ class ResultRules(UnreadRules):
         if ours and en is not None and en.vin and (
                 self._result_owed(ev.t) or (self._checking_owed() and not ev.fetched)):
             return self._attribute(ev, en)
-        if en is not None and self._made_under(ev, en):
+        if en is not None and not before and self._made_under(ev, en):
             return self._attribute(ev, en, lost=True)
         proved, not_proved = self._made_during_cut(ev)
         if proved is not None:
@@ -283,6 +286,8 @@ class ResultRules(UnreadRules):
     def _on_results_missed(self, ev: ResultsMissed) -> list[Action]:
         """A gap stored and said; with the link up, the bolts whose result may be in it
         held (:meth:`_gap_in_doubt`)."""
+        self._gaps_told = [*self._gaps_told, (ev.first, ev.last, self._enable_serial)
+                           ][-UNANSWERED:]
         return [StoreGap(ev.first, ev.last, self.vin, ev.reason),
                 Publish(Notice(Said.GAP, tightening_id=ev.first, last_id=ev.last,
                                link_up=ev.live, note=ev.reason, t=ev.t)),

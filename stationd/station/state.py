@@ -280,6 +280,10 @@ class CoreState:
     #: the enable whose window's check found nothing made since the last result judged (a
     #: result after it is the next enable's by the order of ids)
     _checked_clear: int | None = field(default=None, repr=False)
+    #: the gaps told (first id, last id, the enables so far then), the latest last: their
+    #: ids were made before what revealed them, so before any enable since (a review: one
+    #: the controller gave after all was recorded to the bolt of its pset enabled since)
+    _gaps_told: list[tuple[int, int, int]] = field(default_factory=list, repr=False)
     _judged_at: float = field(default=float("-inf"), repr=False)   # when it came
     # the station's start or the controller's last fault: a result fetched afterwards was
     # made before it, so never under an enable that came later
