@@ -331,9 +331,19 @@ class LostRules(NokRules):
         in a gap told before that enable (a later id, or the controller's newest, had
         revealed it: the ids grow with every tightening; a review: after a catch-up that
         timed out, the cut's id stored as a gap and given after all closed the next bolt of
-        its pset)."""
+        its pset), or its own time while the link was down (:meth:`_made_offline`)."""
         tid, n = int(ev.result.tightening_id), self._enable_serial
-        return any(first <= tid <= last and told < n for first, last, told in self._gaps_told)
+        return self._made_offline(ev) or any(
+            first <= tid <= last and told < n for first, last, told in self._gaps_told)
+
+    def _made_offline(self, ev: ResultIn) -> bool:
+        """Whether ``ev``'s own time puts it while the link was down last (as
+        :meth:`_offline` says by a time) and the enable owed now came after the link was
+        back: made before that enable."""
+        lost, back, at, made = self._link_lost_at, self._link_back_at, self._enabled_at, \
+            ev.made_at
+        return made is not None and at is not None and back >= lost > float("-inf") \
+            and at >= back and lost - CLOCK_SLACK_S <= made <= back - CLOCK_SLACK_S
 
     def _cut_in_doubt(self, ev: ResultIn) -> list[Action]:
         """A result stored unattributed while a link cut's result is owed, of the pset sent
