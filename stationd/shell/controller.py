@@ -541,8 +541,8 @@ class ControllerFeed:
             # (a copy of one recorded, sent again first, says nothing of the cut)
             after, self._refused_after = self._refused_after, None
             if tid > after + 1:
-                await self._gap(after + 1, tid - 1, REFUSED)
-            return           # the ids before it are that gap, not one with the link up
+                await self._cut_ids(wrench, after, tid)
+            return           # the ids before it are the cut's, not lost with the link up
         if last is None or tid <= last + 1 or not wrench.can_fetch or self.records.repo is None:
             return
         todo = plan_gaps(last, tid - 1)
@@ -564,6 +564,33 @@ class ControllerFeed:
                         one_line(exc))
         except STATION_FAULTS as exc:
             log.error("results missed with the link up (%s) not fetched: %s", ids,
+                      one_line(exc))
+
+    async def _cut_ids(self, wrench: Wrench, after: int, tid: int) -> None:
+        """The ids between ``after``, the last recorded, and ``tid``, the first pushed since a
+        reconnect whose catch-up did not say the controller's newest: made during the cut.
+        Where the controller keeps none to give (it refused the catch-up's request as not
+        supported) or cannot fetch, a gap; else asked for as the catch-up would have (made
+        while the link was down, after ``after``), each found or a gap, ``tid`` fed after
+        them.  A refusal of the moment (no answer in time, error 98) said nothing of them: a
+        review found them stored as refused, never asked for, the controller giving them."""
+        if self._no_history or not wrench.can_fetch or self.records.repo is None:
+            await self._gap(after + 1, tid - 1, REFUSED)
+            return
+        await self._feed(ResultsSkipped(time.time(), tid))   # the rundown over: tool off
+        ids = id_span(after + 1, tid - 1)
+        log.warning("results: tightening %d came after %d (the catch-up after the reconnect "
+                    "not done): %s made during the link cut, asked for", tid, after, ids)
+        try:
+            await self._fetch(wrench, plan_gaps(after, tid - 1), after)
+        except RefusedError as exc:    # stored as a gap (:meth:`_refused_from`)
+            log.warning("results made during the link cut (%s) not fetched: %s", ids,
+                        one_line(exc))
+        except (DeviceError, ValueError) as exc:   # the link's keeper reports it
+            log.warning("results made during the link cut (%s) not fetched yet: %s", ids,
+                        one_line(exc))
+        except STATION_FAULTS as exc:
+            log.error("results made during the link cut (%s) not fetched: %s", ids,
                       one_line(exc))
 
     async def _fetch(self, wrench: Wrench, todo: GapPlan, last: int | None,
