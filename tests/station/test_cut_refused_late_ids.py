@@ -111,3 +111,27 @@ def test_a_result_made_during_the_cut_pushed_after_a_timed_out_catch_up_is_not_t
     recorded = [(a.bolt, a.offline) for a in acts if isinstance(a, Record)]
     assert recorded == [], f"41, made during the cut, recorded as (bolt, offline) {recorded}"
     assert "B3" not in d.core.matcher.done and d.core.tool_on
+
+
+def test_the_first_push_after_a_timed_out_catch_up_without_a_time_does_not_close_the_bolt_on_now():
+    """Weakness B, the push path without the controller's clock (no MID 0080 answer: no
+    result has a time on the station's clock): after the timed-out catch-up (B1 held), the
+    first result pushed, 41, of B1's pset, comes while B3 (same pset) has its tool on.  It
+    may be B1's rundown made during the cut (the controller sends what it made meanwhile)
+    or B3's own: nothing tells which.  It was recorded to B3, B3 closed OK.  Never closed by
+    a result that may be another bolt's, and not left with its tool on either (were it
+    B3's, the operator would run it down again): stored unattributed, B3 held for a
+    person.  The next push, made since, is as any."""
+    d = _ready()
+    _cut_caught_up_late(d)
+    _enabled(d, 3)
+    d.t += 0.5
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1)))
+    recorded = [a.bolt for a in acts if isinstance(a, Record)]
+    assert d.core.matcher is not None
+    assert recorded == [] and "B3" in d.core.matcher.held and not d.core.tool_on, (
+        f"41, maybe B1's from the cut, recorded to {recorded}; held "
+        f"{list(d.core.matcher.held)}")
+    _enabled(d, 2)                                   # B2, pset 2: 42 after 41, its own
+    acts = d.feed(ResultIn(d.t, res(42, 2, True, 1)))
+    assert [a.bolt for a in acts if isinstance(a, Record)] == ["B2"]
