@@ -333,8 +333,40 @@ class LostRules(NokRules):
         timed out, the cut's id stored as a gap and given after all closed the next bolt of
         its pset), or its own time while the link was down (:meth:`_made_offline`)."""
         tid, n = int(ev.result.tightening_id), self._enable_serial
-        return self._made_offline(ev) or any(
+        return self._made_offline(ev) or self._sent_late_from_cut(ev) or any(
             first <= tid <= last and told < n for first, last, told in self._gaps_told)
+
+    def _sent_late_from_cut(self, ev: ResultIn) -> bool:
+        """Whether ``ev``, pushed without its own time, may be the rundown of a link cut
+        whose catch-up did not end complete (its bolt held), sent late by the controller:
+        the first result after the newest judged then, of that enable's pset, the enable
+        owed now made after the link came back.  Nothing tells it from that enable's own
+        rundown (a review: recorded to it, the bolt closed by the cut's)."""
+        u, r, at = self._cut_unsettled, ev.result, self._enabled_at
+        if u is None or ev.fetched or ev.made_at is not None or at is None:
+            return False
+        sel, judged = u
+        return (judged is None or int(r.tightening_id) > judged) and sel.pset is not None \
+            and int(r.pset) == sel.pset and at >= self._link_back_at
+
+    def _late_cut_in_doubt(self, ev: ResultIn) -> list[Action]:
+        """A result that may be a link cut's rundown sent late (:meth:`_sent_late_from_cut`)
+        or that of the enable owed now: never taken for it, and never left with its tool on
+        either (were it its own, the operator would run it down again): its bolt held for a
+        person, the tool off, the enable owed nothing more (as :meth:`_doubt_while_on`)."""
+        en, since = self._enabled, self._enabled_at
+        if not self._sent_late_from_cut(ev) or en is None or since is None \
+                or en.vin != self.vin or self._cut_unsettled is None:
+            return []
+        cut, tid = self._cut_unsettled[0], int(ev.result.tightening_id)
+        acts = self._drop(ev.t, State.TRACKING, StateReason(Because.UNKNOWN_HELD, bolt=en.bolt)) \
+            if self.tool_on else []
+        acts += self._hold_unanswered(ev.t, [_Cut(en, since, ev.t)], lambda u: cut_unknown_note(
+            f"tightening {tid} may be its own or {cut.bolt}'s, made during the link cut and "
+            "sent late (the controller's clock not known)", u.selection.pset, u.enabled_at),
+            tid)
+        self._enabled, self._off_at = None, None
+        return acts
 
     def _made_offline(self, ev: ResultIn) -> bool:
         """Whether ``ev``'s own time puts it while the link was down last (as
@@ -358,7 +390,10 @@ class LostRules(NokRules):
 
     def _on_caught_up(self, ev: CaughtUp) -> list[Action]:
         """:meth:`_cut_caught_up`; a pushed result waited for since ids it skipped were told
-        is waited for no longer (the reconnect's catch-up fed what the controller has)."""
+        is waited for no longer (the reconnect's catch-up fed what the controller has).  A
+        complete one fetched what an earlier cut's controller could still send late."""
+        if ev.complete:
+            self._cut_unsettled = None
         return self._end_wait(ev.t) + self._cut_caught_up(ev)
 
     def _cut_caught_up(self, ev: CaughtUp) -> list[Action]:
@@ -372,6 +407,8 @@ class LostRules(NokRules):
                 and ev.reconnects <= cut.reconnects:
             return []       # a catch-up of the connection that was cut, or of an earlier one
         if not ev.complete:
+            self._cut_unsettled = (cut.selection,
+                                   None if self._judged is None else self._judged[0])
             return self._cut_unknown(ev.t, ev.reason or "its results not fetched")
         # none made so far; its late-result window, where it still runs, still takes one
         # pushed now (a restart during a rundown: the result comes after the catch-up)

@@ -105,6 +105,9 @@ class ResultRules(UnreadRules):
         finally:
             if not ev.fetched or tid == waited:
                 self._pending_push = None
+            u = self._cut_unsettled
+            if u is not None and (u[1] is None or tid > u[1]):
+                self._cut_unsettled = None   # a later id judged: what follows, made since
         # (a result fetched late and not taken for the enable owed now was made before it,
         # under no enable known: it proves nothing of the order for this enable)
         self._judge(tid, not ev.fetched or any(
@@ -197,7 +200,7 @@ class ResultRules(UnreadRules):
                 Publish(Notice(Said.UNATTRIBUTED, tightening_id=tid, pset=int(r.pset),
                                unattributed=why, t=ev.t)),
                 *self._cut_in_doubt(ev), *self._lost_in_doubt(ev, lost),
-                *self._fetched_in_doubt(ev)]
+                *self._fetched_in_doubt(ev), *self._late_cut_in_doubt(ev)]
 
     def _controller_event(self, ev: ResultIn, kind: ResultKind) -> list[Action]:
         """A result that is not a tightening or a loosening (a batch increment a line lead
