@@ -13,13 +13,14 @@ the controller answers MID 0064 perfectly well from then on."""
 from __future__ import annotations
 
 import asyncio
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import pytest
 
 from drivers.errors import RefusedError
-from stationd.station.inputs import NewestChecked, ResultIn, ResultsMissed
+from stationd.station.inputs import CaughtUp, NewestChecked, ResultIn, ResultsMissed
 from tests.shell.test_catch_up import Controller, _feed_of, res
 
 
@@ -152,3 +153,48 @@ def test_the_ids_a_slow_catch_up_did_not_fetch_are_asked_for_not_stored_as_refus
     got = [(e.result.tightening_id, e.fetched, e.live) for e in fed if isinstance(e, ResultIn)]
     assert gaps == [] and got == [(41, True, False), (42, False, False)], (
         f"41, which the controller still has, told as {gaps}; results fed: {got}")
+
+
+class PushedFirst(SlowThenPushing):
+    """:class:`SlowThenPushing` whose catch-up's first MID 0064 is answered (slowly) only
+    after the push was taken."""
+
+    def __init__(self, answers: dict[int, Any], first: RefusedError | None) -> None:
+        super().__init__(answers, first)
+        self.taken = threading.Event()
+
+    def wait_result(self, timeout: float, acknowledge: bool = False) -> Any:
+        got = super().wait_result(timeout, acknowledge)
+        self.taken.set()
+        return got
+
+    def fetch_result(self, tid: int, timeout: float | None = None) -> Any:
+        assert self.taken.wait(10)
+        return super().fetch_result(tid, timeout)
+
+
+@pytest.mark.parametrize("first", [SILENT, BUSY], ids=["unanswered-once", "error-98-once"])
+def test_a_push_before_a_slow_catch_up_s_refusal_gets_the_cut_s_ids_asked_for_too(first):
+    """As above, 42 pushed before the catch-up's MID 0064 went unanswered: the ids between
+    the last recorded and it (41) were stored as refused at once (``_refused``); asked for
+    instead, after 42 (fed already).  The core is told the newest was not said
+    (``CaughtUp.unasked``): what the controller made during the cut may still come."""
+    controller = PushedFirst({0: res(42), 41: res(41), 42: res(42)}, first)
+    fed: list[Any] = []
+
+    async def main() -> None:
+        pool = ThreadPoolExecutor(2)
+        feed_ = _feed_of(controller, 40, None, fed, pool)
+        feed_.came_back()
+        controller.push = 42
+        await feed_.results(controller)          # 42 pushed as the link came back
+        assert feed_.catching_up is not None
+        await feed_.catching_up                  # then the one slow MID 0064
+        pool.shutdown()
+        feed_.close()
+
+    asyncio.run(main())
+    gaps = [(e.first, e.last) for e in fed if isinstance(e, ResultsMissed)]
+    got = [(e.result.tightening_id, e.fetched) for e in fed if isinstance(e, ResultIn)]
+    assert gaps == [] and got == [(42, False), (41, True)], (gaps, got)
+    assert [(c.complete, c.unasked) for c in fed if isinstance(c, CaughtUp)] == [(False, True)]
