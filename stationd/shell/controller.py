@@ -101,6 +101,8 @@ class ControllerFeed:
         #: the check asking now was the core's with the tool on (its fetches said so)
         self._asked_on = False
         self._again = False     # a reconnect came while a catch-up ran: one more after it
+        #: the catch-up running was refused the controller's newest (:class:`CaughtUp`)
+        self._unasked = False
         self._reads = 0         # the results' loop's reads of the controller so far
         #: when the controller's clock was last measured (at each connect, by the driver;
         #: then every CLOCK_CHECK_S: :meth:`_check_clock`)
@@ -252,6 +254,7 @@ class ControllerFeed:
         if wrench is None:
             return
         connection = self._keeper.reconnects
+        self._unasked = False
         try:
             why = await self._caught_up(wrench)
         except RefusedError as exc:     # the controller said no: asking again will not help
@@ -270,7 +273,8 @@ class ControllerFeed:
         except STATION_FAULTS as exc:
             log.error("results missed while the link was down not fetched: %s", one_line(exc))
             why = f"the station's database failed ({one_line(exc)})"
-        await self._feed(CaughtUp(time.time(), why is None, why or "", connection))
+        await self._feed(CaughtUp(time.time(), why is None, why or "", connection,
+                                  self._unasked))
 
     async def _caught_up(self, wrench: Wrench) -> str | None:
         """The catch-up's work: None where every result since the link was lost went
@@ -287,7 +291,8 @@ class ControllerFeed:
         try:
             newest = await self._call(wrench.fetch_result, 0)
         except RefusedError as exc:
-            await self._refused(last, exc)
+            self._unasked = True    # what it made during the cut may still come, pushed
+            await self._refused(wrench, last, exc)
             raise
         if newest is None:    # the controller has none: made none, or its memory cleared
             return None if last is None else (
@@ -566,18 +571,22 @@ class ControllerFeed:
             log.error("results missed with the link up (%s) not fetched: %s", ids,
                       one_line(exc))
 
-    async def _cut_ids(self, wrench: Wrench, after: int, tid: int) -> None:
+    async def _cut_ids(self, wrench: Wrench, after: int, tid: int,
+                       skipped: bool = True) -> None:
         """The ids between ``after``, the last recorded, and ``tid``, the first pushed since a
         reconnect whose catch-up did not say the controller's newest: made during the cut.
         Where the controller keeps none to give (it refused the catch-up's request as not
         supported) or cannot fetch, a gap; else asked for as the catch-up would have (made
-        while the link was down, after ``after``), each found or a gap, ``tid`` fed after
-        them.  A refusal of the moment (no answer in time, error 98) said nothing of them: a
-        review found them stored as refused, never asked for, the controller giving them."""
+        while the link was down, after ``after``), each found or a gap; ``skipped``: ``tid``
+        is fed after them, the core told so first (else it came before the refusal, fed
+        already).  A refusal of the moment (no answer in time, error 98) said nothing of
+        them: a review found them stored as refused, never asked for, the controller still
+        giving them."""
         if self._no_history or not wrench.can_fetch or self.records.repo is None:
             await self._gap(after + 1, tid - 1, REFUSED)
             return
-        await self._feed(ResultsSkipped(time.time(), tid))   # the rundown over: tool off
+        if skipped:
+            await self._feed(ResultsSkipped(time.time(), tid))   # the rundown over: tool off
         ids = id_span(after + 1, tid - 1)
         log.warning("results: tightening %d came after %d (the catch-up after the reconnect "
                     "not done): %s made during the link cut, asked for", tid, after, ids)
@@ -666,7 +675,7 @@ class ControllerFeed:
         if have and newest is not None:
             await self._fetched(wrench, end + 1, newest, None, wrench.clock_offset_s, live)
 
-    async def _refused(self, last: int | None, exc: RefusedError) -> None:
+    async def _refused(self, wrench: Wrench, last: int | None, exc: RefusedError) -> None:
         """The controller refused to say its newest result after a reconnect: the ids made
         during the cut are those between ``last``, the last one recorded, and the first one
         pushed since (told now where one came already, else when it comes), a gap.  Nothing
@@ -680,8 +689,8 @@ class ControllerFeed:
             return
         if self._first_pushed is None or self._first_pushed <= last:
             self._refused_after = last       # the next push beyond it tells
-        elif self._first_pushed > last + 1:
-            await self._gap(last + 1, self._first_pushed - 1, REFUSED)
+        elif self._first_pushed > last + 1:    # (fed already: the core waits for none)
+            await self._cut_ids(wrench, last, self._first_pushed, skipped=False)
 
     async def _gap(self, first: int, last: int, reason: str, live: bool = False) -> None:
         """What the controller cannot give any more, for the core (it stores and says it)."""

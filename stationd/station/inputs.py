@@ -190,6 +190,9 @@ class CaughtUp(Input):
     #: the controller's connection it caught up on (its reconnect count, as DeviceBack's;
     #: None: not known): one of the connection that was cut, or earlier, is stale
     reconnects: int | None = None
+    #: the controller refused (or did not answer) the catch-up's ask for its newest: what
+    #: it made during the cut was not counted, and it may still send it, pushed late
+    unasked: bool = False
 
 
 @dataclass(frozen=True)

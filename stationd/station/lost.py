@@ -338,7 +338,8 @@ class LostRules(NokRules):
 
     def _sent_late_from_cut(self, ev: ResultIn) -> bool:
         """Whether ``ev``, pushed without its own time, may be the rundown of a link cut
-        whose catch-up did not end complete (its bolt held), sent late by the controller:
+        whose catch-up did not end complete (its bolt held), the controller's newest not
+        said (:attr:`CaughtUp.unasked`), sent late by the controller:
         the first result after the newest judged then, of that enable's pset, the enable
         owed now made after the link came back.  Nothing tells it from that enable's own
         rundown (a review: recorded to it, the bolt closed by the cut's)."""
@@ -407,8 +408,9 @@ class LostRules(NokRules):
                 and ev.reconnects <= cut.reconnects:
             return []       # a catch-up of the connection that was cut, or of an earlier one
         if not ev.complete:
-            self._cut_unsettled = (cut.selection,
-                                   None if self._judged is None else self._judged[0])
+            if ev.unasked:
+                self._cut_unsettled = (cut.selection,
+                                       None if self._judged is None else self._judged[0])
             return self._cut_unknown(ev.t, ev.reason or "its results not fetched")
         # none made so far; its late-result window, where it still runs, still takes one
         # pushed now (a restart during a rundown: the result comes after the catch-up)

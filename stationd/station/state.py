@@ -284,7 +284,8 @@ class CoreState:
     #: ids were made before what revealed them, so before any enable since (a review: one
     #: the controller gave after all was recorded to the bolt of its pset enabled since)
     _gaps_told: list[tuple[int, int, int]] = field(default_factory=list, repr=False)
-    #: a link cut whose catch-up did not end complete (its bolt held): its enable, and the
+    #: a link cut whose catch-up did not end complete, the controller's newest not said (its
+    #: bolt held): its enable, and the
     #: newest id judged then; until a later id is judged, a result pushed without its own
     #: time may be the cut's rundown sent late (:meth:`LostRules._sent_late_from_cut`)
     _cut_unsettled: tuple[Selection, int | None] | None = field(default=None, repr=False)

@@ -38,7 +38,7 @@ def _cut_caught_up_late(d: Driver) -> float:
     d.t += 10.0
     d.feed(DeviceBack(d.t, "wrench", reconnects=1))
     d.t += 2.0
-    d.feed(CaughtUp(d.t, False, TIMED_OUT, 1))
+    d.feed(CaughtUp(d.t, False, TIMED_OUT, 1, unasked=True))
     assert d.core.matcher is not None and "B1" in d.core.matcher.held
     d.step(("lift", 0.1, True, True, "VIN1"))
     return enabled_at
