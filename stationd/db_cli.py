@@ -35,7 +35,7 @@ from drivers.counting import counted
 from stationd.errors import ConfigError, InputError
 from stationd.jsonout import strict_json
 from stationd.outfile import write_atomic
-from stationd.words import entered_as_words, result_type_words, unrecorded_words
+from stationd.words import entered_as_words, nok_why, result_type_words, unrecorded_words
 
 if TYPE_CHECKING:
     from db.repository import Repository
@@ -410,7 +410,9 @@ def cmd_db_report(args: argparse.Namespace) -> int:
         out["commands"] = [{"at": _iso(c.at), "user": c.user, "source": c.source,
                             "kind": c.kind, "bolt": c.bolt, "comment": c.comment}
                            for c in commands]
-        out["rundowns"] = [{k: r[k] for k in RUNDOWN_KEYS} for r in runs]
+        # a NOK's value out of its limits, as the text says it (None: an OK, no window)
+        out["rundowns"] = [{**{k: r[k] for k in RUNDOWN_KEYS}, "nok_why": nok_why(r) or None}
+                           for r in runs]
         run_down = {r["bolt"] for r in runs}
         for b in out["bolts"]:   # as the vehicle's page: "not tightened", or why held
             if b["bolt"] not in run_down:
@@ -426,8 +428,9 @@ def cmd_db_report(args: argparse.Namespace) -> int:
             # a held bolt never run down: why held, as the vehicle's page says it
             result = ("-" if hold is None else unrecorded_words(hold, loose)) \
                 if b.status == MISSING else skipped if b.status == SKIPPED else \
-                f"{_num(b.torque_nm)} Nm, {_num(b.angle_deg)} deg, v{b.version}, " \
-                f"{_attempts(b.attempts, mine)}" + (_last_run(last[0]) if last else "") \
+                f"{_num(b.torque_nm)} Nm, {_num(b.angle_deg)} deg, v{b.version}" \
+                + _why_nok(last[0] if last else None) + f", {_attempts(b.attempts, mine)}" \
+                + (_last_run(last[0]) if last else "") \
                 + (f"; then skipped {skipped}" if b.skipped_by else "")
             retired = " (retired)" if b.retired else ""
             held = "" if hold is None else f"; HELD: {hold} (its outcome to be entered)"
@@ -436,8 +439,9 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                 for r in (r for r in runs if r["bolt"] == b.bolt_id):
                     print(f"    {r['attempt']}. {r['rundown']} {r['status'].upper()} pset "
                           f"{r['pset'] if r['pset'] is not None else '-'}, "
-                          f"{_num(r['torque_nm'])} Nm, {_num(r['angle_deg'])} deg, at "
-                          f"{_when(r)}, by {r['operator'] or '-'}" + _entered(r))
+                          f"{_num(r['torque_nm'])} Nm, {_num(r['angle_deg'])} deg"
+                          f"{_why_nok(r)}, at {_when(r)}, by {r['operator'] or '-'}"
+                          + _entered(r))
         for c in commands:
             on = f" {c.bolt}" if c.bolt else ""
             why = f": {c.comment}" if c.comment else ""
@@ -482,6 +486,12 @@ def _held_now(bolt: str | None, holds: dict[str, str], note: str, sep: str = ", 
     now = holds.get(bolt)       # (a loosening's hold adds ", a loosening ..." to its note)
     return f"{sep}{bolt} held" if now is not None and (now == note or now.startswith(
         note + ",")) else f"{sep}{bolt} held then, no longer"
+
+
+def _why_nok(run: dict[str, Any] | None) -> str:
+    """" (torque 56.1 Nm > 55.0 max)" after a NOK rundown's values (:func:`nok_why`)."""
+    why = nok_why(run) if run is not None else ""
+    return f" ({why})" if why else ""
 
 
 def _last_run(run: dict[str, Any]) -> str:

@@ -11,6 +11,7 @@ from typing import Any
 from db.kinds import (
     CHECK_NOTE_HEAD,
     GAP_NOTE_MARK,
+    NOK,
     NOT_TAKEN_NOTE,
     id_span,
     is_not_taken_note,
@@ -249,6 +250,34 @@ _TYPE_WORDS = {ResultType.BATCH_INCREMENT: "batch increment",
                ResultType.REFERENCE_SETUP: "reference setup",
                ResultType.TIGHTENING: "tightening", ResultType.LOOSENING: "loosening",
                ResultType.SYNC_TIGHTENING: "synchronized tightening"}
+
+
+def nok_why(run: Mapping[str, Any]) -> str:
+    """Why a NOK rundown (a row of the records: its values and the limits of its parameter
+    version) is NOK, as the demo says it: "torque 56.1 Nm > 55.0 max", each value out of its
+    window; "both within limits: the controller's verdict"; "" for an OK, a loosening (no
+    window) or a rundown without values.  Why: ``db report`` printed "NOK 48.1 Nm, 97.0 deg"
+    and a quality engineer compared each value with the limits by hand (a newcomer's
+    trial), where the vehicle's page said which was out."""
+    if run.get("status") != NOK or run.get("torque_nm") is None:
+        return ""
+    out = []
+    for name, unit, fmt, value, lo, hi in (
+            ("torque", "Nm", ".1f", run.get("torque_nm"), run.get("torque_min_nm"),
+             run.get("torque_max_nm")),
+            ("angle", "deg", ".0f", run.get("angle_deg"), run.get("angle_min_deg"),
+             run.get("angle_max_deg"))):
+        if value is None:
+            continue
+        if lo is not None and value < lo:
+            out.append(f"{name} {value:{fmt}} {unit} < {lo:{fmt}} min")
+        elif hi is not None and value > hi:
+            out.append(f"{name} {value:{fmt}} {unit} > {hi:{fmt}} max")
+    if out:
+        return "; ".join(out)
+    limits = ("torque_min_nm", "torque_max_nm", "angle_min_deg", "angle_max_deg")
+    return "both within limits: the controller's verdict" \
+        if any(run.get(k) is not None for k in limits) else ""
 
 
 def result_type_words(code: int | None) -> str:

@@ -1001,3 +1001,34 @@ def test_a_record_says_held_only_for_its_own_hold():
     # the station's own holds without a result, each named
     assert set(HOLD_WORDS) == {"result unknown after a link cut",
                                "result unknown after a lost push"}
+
+
+def test_report_says_which_value_of_a_nok_rundown_is_out_of_its_limits(run, db):
+    """``db report`` printed "NOK 48.1 Nm, 97.0 deg" and a quality engineer compared each
+    value with the limits by hand (a newcomer's trial): a NOK rundown names the value out of
+    its window and the limit, and a NOK within both is the controller's verdict."""
+    from db.repository import Repository
+
+    run("db", "import", EXAMPLE, "--db", db)
+    with Repository.open(db) as repo:      # pset 2: torque 100-120 Nm, angle 20-80 deg
+        repo.start_vehicle("VIN2", "WAGON-B")
+        record(repo, "VIN2", "SF-FL", ok=False, torque_nm=124.5, angle_deg=12.0)
+        record(repo, "VIN2", "SF-FL", ok=False, torque_nm=95.0, angle_deg=40.0)
+        record(repo, "VIN2", "SF-FR", ok=False, torque_nm=110.0, angle_deg=40.0)
+        record(repo, "VIN2", "TB-C", ok=True, torque_nm=110.0, angle_deg=40.0)
+    code, out, _ = run("db", "report", "VIN2", "--db", db)
+    assert code == 1                       # not complete
+    lines = [line.strip() for line in out.splitlines()]
+    [fl] = [line for line in lines if line.startswith("SF-FL ")]
+    assert "NOK      95.0 Nm, 40.0 deg, v1 (torque 95.0 Nm < 100.0 min), 2 attempts" in fl, fl
+    assert "1. tightening NOK pset 2, 124.5 Nm, 12.0 deg (torque 124.5 Nm > 120.0 max; " \
+           "angle 12 deg < 20 min), at " in out, out
+    [fr] = [line for line in lines if line.startswith("SF-FR ")]
+    assert "(both within limits: the controller's verdict)" in fr, fr
+    [rl] = [line for line in lines if line.startswith("TB-C ")]
+    assert "(" not in rl.split(", by")[0], rl
+    _, out, _ = run("db", "report", "VIN2", "--db", db, "--json")
+    why = [(r["bolt"], r["nok_why"]) for r in json.loads(out)["rundowns"]]
+    assert why == [("SF-FL", "torque 124.5 Nm > 120.0 max; angle 12 deg < 20 min"),
+                   ("SF-FL", "torque 95.0 Nm < 100.0 min"),
+                   ("SF-FR", "both within limits: the controller's verdict"), ("TB-C", None)]
