@@ -154,6 +154,8 @@ def cmd_line_status(args: argparse.Namespace) -> int:
 
 
 def cmd_line_quarantine(args: argparse.Namespace) -> int:
+    from stationd.config import load_station_config
+    from stationd.db_cli import absent_sqlite_file
     from stationd.forward import LineDown, LineRefuses
     from stationd.outfile import need_folder, write_atomic
 
@@ -163,7 +165,19 @@ def cmd_line_quarantine(args: argparse.Namespace) -> int:
             raise InputError(f"--export {out}: exists; the export is written to a new file "
                              "(choose another name)")
         need_folder(out, "--export")
-    fwd = _forwarder(args, write=args.retry)
+    cfg = load_station_config(args.config)
+    try:
+        path = absent_sqlite_file(cfg.database_url) if cfg.line is not None else None
+    except OSError:
+        path = None                      # the forwarder says why
+    if path is not None and not args.export and not args.retry:
+        # as line status says it (a newcomer's trial: "no database", exit 2, beside line
+        # status's "nothing waits", exit 0, for the same station)
+        print(f"no database at {path} yet: the station has recorded nothing, so nothing is "
+              f"quarantined (or {args.config}'s "
+              "database.url names another file)")
+        return 0
+    fwd = _forwarder(args, write=args.retry, cfg=cfg)
     try:
         if args.export:
             rows: list[dict[str, Any]] = fwd.repo.ledger.quarantined()

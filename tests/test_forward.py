@@ -434,7 +434,15 @@ def test_the_line_commands_never_make_a_station_database_and_say_an_empty_quaran
     assert said[0] == (f"no database at {missing} yet: the station has recorded nothing, so "
                        f"nothing waits (or {station}'s database.url names another file)")
     assert said[1].endswith(": answers") and not missing.exists()
-    for args in (("quarantine",), ("quarantine", "--retry")):
+    # its quarantine is said empty as the status says it (it said "no database", exit 2:
+    # a newcomer's trial); a retry, or an export, of a database not made is refused
+    got = _cli("line", "quarantine", "--config", str(station))
+    assert got.returncode == 0 and got.stderr == "", got
+    assert got.stdout == (f"no database at {missing} yet: the station has recorded nothing, "
+                          f"so nothing is quarantined (or {station}'s database.url names "
+                          "another file)\n")
+    for args in (("quarantine", "--retry"), ("quarantine", "--export",
+                                             str(tmp_path / "q.json"))):
         got = _cli("line", *args, "--config", str(station))
         assert got.returncode == 2 and "no database at" in got.stderr, (args, got)
         assert "recorded nothing yet" in got.stderr and "--db" not in got.stderr
