@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from enum import StrEnum
@@ -39,6 +39,7 @@ from db.kinds import (
     NOK,
     OK,
     TIGHTENING,
+    TO_LOOSEN,
 )
 from db.report import VehicleReport
 from db.repository import Repository
@@ -168,7 +169,38 @@ class Records:
                                  "vehicle at the station too", self.cfg.bolts_path,
                                  counted(len(r.removed), "bolt"),
                                  ", ".join(r.removed[:5]), ", ..." if len(r.removed) > 5 else "")
+                self._removed_open(self.repo, r.removed)
         return self.repo
+
+    def _removed_open(self, repo: Repository, removed: Sequence[str]) -> None:
+        """Bolts the table removed that the vehicle at the station ends NOK (or locked, or
+        to be loosened) or holds: said, each with what stays.  Why: the station counts them
+        no more (its bolts are the table's) while the vehicle's report keeps their NOKs and
+        the lock with no release (an engineer's trial: a locked bolt removed, its lock gone
+        from the screen without a word, the report still saying it)."""
+        try:
+            vin = repo.at_station()
+            report = None if vin is None else repo.vehicle_report(vin, held=True)
+        except STATION_FAULTS as exc:   # a word the more, never the database's opening
+            self.log.warning("the vehicle at the station not read: %s", one_line(exc))
+            return
+        if vin is None or report is None:
+            return
+        model = report.vehicle.model
+        held = dict(report.held)
+        open_ = [b.bolt_id + (" held" if b.bolt_id in held else
+                              f" ending {'NOK' if b.status == NOK else 'to be loosened'}")
+                 for b in report.bolts if f"{model}/{b.bolt_id}" in removed
+                 and (b.status in (NOK, TO_LOOSEN) or b.bolt_id in held)]
+        if open_:
+            self.log.warning("vehicle %s at the station: removed from the table while not "
+                             "done: %s; the vehicle's report keeps %s records and counts "
+                             "%s still, the station no more (put %s back to work %s, or "
+                             "skip %s with a reason before removing %s)", vin,
+                             ", ".join(open_), *(("its", "it", "it", "it", "it", "it")
+                                                 if len(open_) == 1 else
+                                                 ("their", "them", "them", "them", "them",
+                                                  "them")))
 
     def _repo(self) -> Repository:
         if self.repo is None:

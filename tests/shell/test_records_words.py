@@ -107,3 +107,30 @@ def test_a_table_that_removes_bolts_and_a_vehicle_leaving_unfinished_are_warning
     said = [r.getMessage() for r in caplog.records if "VIN2 (SEDAN) opened" in r.getMessage()]
     assert said == ["vehicle VIN2 (SEDAN) opened: 1 bolts, 1 done"], said
     records.repo.close()
+
+
+def test_a_removed_bolt_the_vehicle_at_the_station_ends_nok_or_holds_is_said(
+        tmp_path: Path, caplog: Any) -> None:
+    """A bolt locked after its NOKs removed from the table by a reload: the lock left the
+    screen without a word while the vehicle's report still counted the bolt ending NOK (an
+    engineer's trial).  Said, each such bolt, with what stays; one removed done is not."""
+    records = _records(tmp_path)
+    assert records.repo is not None
+    records.repo.start_vehicle("VIN2", "SEDAN")
+    for tid, bolt, ok in ((7, "B1", True), (8, "B2", True), (9, "B3", False)):
+        records.repo.record_tightening("VIN2", bolt, ok=ok, torque_nm=50.0, angle_deg=30.0,
+                                       tightening_id=tid, position_mm=(0.0, 0.0, 0.0),
+                                       match_distance_mm=1.0, tilt_deg=1.0)
+    bolts = tmp_path / "bolts.yaml"
+    bolts.write_text(BASE.split("      - id: B2")[0] + BASE.split("  WAGON:")[1].join(
+        ["  WAGON:", ""]))
+    records.repo.close()
+    caplog.set_level("INFO", logger="stationd.shell.records")
+    records.open()
+    warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert [m for m in warned if "not done" in m] == [
+        "vehicle VIN2 at the station: removed from the table while not done: B3 ending NOK; "
+        "the vehicle's report keeps its records and counts it still, the station no more "
+        "(put it back to work it, or skip it with a reason before removing it)"], warned
+    assert "B3" in records.repo.vehicle_report("VIN2").nok
+    records.repo.close()
