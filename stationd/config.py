@@ -40,8 +40,8 @@ from stationd.deviceconfig import (
     one_device_each,
 )
 from stationd.errors import ConfigError
-from stationd.forward import LineConfig
 from stationd.geometry.tool import ToolGeometry
+from stationd.lineconfig import LineConfig
 from stationd.localize import LocalizeConfig
 from stationd.localize.references import References
 from stationd.opcua import OpcUaConfig
