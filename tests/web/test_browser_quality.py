@@ -134,6 +134,13 @@ def test_each_row_plots_its_last_results_against_its_limits(live_server, page, t
     _check_scale(_plot(page, "B49", "torque"), OWN["torque"], [(t, ok) for t, _, ok in b49])
     _check_scale(_plot(page, "B49", "angle"), OWN["angle"], [(a, ok) for _, a, ok in b49])
 
+    # the parameter version each row's results were tightened with, its limits on hover (a
+    # bolt whose limits changed has a row per version: they read as the same row twice)
+    got = page.js("const c = document.querySelector('#spc tr[data-bolt=B49] td.version');"
+                  "return [c.textContent, c.title];")
+    assert got == ["v1", f"torque: min {OWN['torque'][0]:g} Nm, max {OWN['torque'][2]:g} "
+                         f"Nm; angle: min {OWN['angle'][0]:g} \u00b0, max "
+                         f"{OWN['angle'][2]:g} \u00b0"], got
     check_fits(page, "#spc", long=True)
     shots("quality-plots")
     page.click("input[name=plot][value=angle]")

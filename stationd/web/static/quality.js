@@ -76,7 +76,16 @@
     for (const b of doc.bolts) {
       const tr = document.createElement("tr");
       tr.dataset.bolt = b.bolt;
-      for (const v of [b.model, b.bolt, b.pset ?? "-", b.torque.n, b.nok]) cell(tr, String(v));
+      for (const v of [b.model, b.bolt, b.pset ?? "-"]) cell(tr, String(v));
+      // the version and, on hover, its limits: a bolt whose limits changed has a row per
+      // version, which looked twice the same row (a newcomer's trial)
+      const lim = (k, u) => ["min", "max"].filter((m) => num(b.limits[k][m]))
+        .map((m) => `${m} ${b.limits[k][m]} ${u}`).join(", ");
+      cell(tr, b.parameter_version === null || b.parameter_version === undefined ? "-"
+        : "v" + b.parameter_version, "version").title =
+        [["torque", "Nm"], ["angle", "\u00b0"]].filter(([k]) => b.limits[k])
+          .map(([k, u]) => `${k}: ${lim(k, u) || "no limits"}`).join("; ");
+      for (const v of [b.torque.n, b.nok]) cell(tr, String(v));
       for (const k of ["torque", "angle"]) {
         cell(tr, fmt(b[k].mean, 1));
         cell(tr, fmt(b[k].cp, 2), mark(b[k].cp));
