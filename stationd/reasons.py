@@ -288,6 +288,8 @@ class Reason:
     #: OTHER_VEHICLE: the VIN named was reopened for rework and is not back at the station yet
     #: (True; None: not said, as every detail that does not apply)
     reopened: bool | None = None
+    #: OTHER_VEHICLE: the VIN at the station (a VIN mistyped shows beside it)
+    here: str | None = None
     #: the refusal behind this one (a teach point not steady: what the localizations without
     #: the wrench said, e.g. no frame from a camera)
     cause: Reason | None = None

@@ -449,10 +449,13 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.NO_VEHICLE: lambda r: "no vehicle at the station",
     # (a supervisor's trial: a car that left with a bolt held, its release refused, nothing
     # said of reopen)
+    # (a VIN mistyped: "worked again after stationd reopen" led to a second refusal, "not in
+    # the database"; the VIN at the station beside it shows the slip: a newcomer's trial)
     Why.OTHER_VEHICLE: lambda r: f"vehicle {r.vin} is not the one at the station" + (
         _meant(r) or (": reopened for rework, it is worked when it is back at the station at "
                       "height" if r.reopened else
-                      f" (one that has left is worked again after stationd reopen {r.vin})")),
+                      f" ({r.here + ' is' if r.here else 'another is'}; if {r.vin} has left "
+                      f"the station, stationd reopen {r.vin} opens it for rework)")),
     Why.UNKNOWN_BOLT: lambda r: f"{r.bolt} is not a bolt of vehicle {r.vin}{_meant(r)}",
     Why.TOOL_ON_BOLT: lambda r: f"{r.bolt} is being tightened now",
     Why.ALREADY_OPEN: lambda r: f"vehicle {r.vin} is open at the station",

@@ -87,7 +87,8 @@ class OrderRules(FaultRules):
             # typed in lower case: said, not taken (a command names exactly what it acts on)
             return Reason(Why.OTHER_VEHICLE, vin=cmd.vin,
                           other=self.vin if cmd.vin.upper() == self.vin else None,
-                          reopened=True if cmd.vin in self._reopened else None)
+                          reopened=True if cmd.vin in self._reopened else None,
+                          here=self.vin)
         if cmd.bolt not in self.matcher.bolts:
             alike = [b for b in self.matcher.bolts if b.casefold() == cmd.bolt.casefold()]
             return Reason(Why.UNKNOWN_BOLT, bolt=cmd.bolt, vin=cmd.vin,

@@ -88,10 +88,11 @@ def test_a_skip_of_the_selected_bolt_turns_the_tool_off():
 @pytest.mark.parametrize(("command", "issuer", "why"), [
     (SkipBolt("VIN1", "B2"), NOBODY, Reason(Why.NO_RIGHT, right="skip")),
     (ReopenVehicle("VIN9"), OPERATOR, Reason(Why.NO_RIGHT, right="reopen")),
-    (SkipBolt("VIN9", "B2"), OPERATOR, Reason(Why.OTHER_VEHICLE, vin="VIN9")),
+    (SkipBolt("VIN9", "B2"), OPERATOR, Reason(Why.OTHER_VEHICLE, vin="VIN9", here="VIN1")),
     (SkipBolt("VIN1", "B9"), OPERATOR, Reason(Why.UNKNOWN_BOLT, bolt="B9", vin="VIN1")),
     # typed in another case: refused, with what was meant
-    (SkipBolt("vin1", "B2"), OPERATOR, Reason(Why.OTHER_VEHICLE, vin="vin1", other="VIN1")),
+    (SkipBolt("vin1", "B2"), OPERATOR, Reason(Why.OTHER_VEHICLE, vin="vin1", other="VIN1",
+                                              here="VIN1")),
     (SkipBolt("VIN1", "b2"), OPERATOR, Reason(Why.UNKNOWN_BOLT, bolt="b2", vin="VIN1",
                                               other="B2")),
     (ReopenVehicle("VIN1"), SUPERVISOR, Reason(Why.ALREADY_OPEN, vin="VIN1")),
@@ -111,11 +112,15 @@ def test_a_command_against_the_rules_is_refused_with_its_reason_and_changes_noth
 def test_a_case_slip_is_refused_in_words_that_say_what_was_meant():
     assert reason_words(Reason(Why.UNKNOWN_BOLT, bolt="b04", vin="VIN1", other="B04")) == \
         "b04 is not a bolt of vehicle VIN1 (did you mean B04?)"
-    assert reason_words(Reason(Why.OTHER_VEHICLE, vin="vin1", other="VIN1")) == \
+    assert reason_words(Reason(Why.OTHER_VEHICLE, vin="vin1", other="VIN1",
+                                              here="VIN1")) == \
         "vehicle vin1 is not the one at the station (did you mean VIN1?)"
+    assert reason_words(Reason(Why.OTHER_VEHICLE, vin="VIN0", here="VIN1")) == (
+        "vehicle VIN0 is not the one at the station (VIN1 is; if VIN0 has left the station, "
+        "stationd reopen VIN0 opens it for rework)")
     assert reason_words(Reason(Why.OTHER_VEHICLE, vin="VIN0")) == (
-        "vehicle VIN0 is not the one at the station (one that has left is worked again after "
-        "stationd reopen VIN0)")
+        "vehicle VIN0 is not the one at the station (another is; if VIN0 has left the "
+        "station, stationd reopen VIN0 opens it for rework)")
     assert reason_words(Reason(Why.UNKNOWN_BOLT, bolt="B9", vin="VIN1")) == \
         "B9 is not a bolt of vehicle VIN1"
 
@@ -172,14 +177,14 @@ def test_a_command_for_a_vehicle_reopened_and_not_back_says_it_waits_for_it():
     assert _answer(acts).answer.accepted
     acts = d.alone(CommandIn(d.t, 5, SkipBolt("OLDVIN", "B2"), SUPERVISOR))
     why = _answer(acts).answer.reason
-    assert why == Reason(Why.OTHER_VEHICLE, vin="OLDVIN", reopened=True)
+    assert why == Reason(Why.OTHER_VEHICLE, vin="OLDVIN", reopened=True, here="VIN1")
     assert reason_words(why) == ("vehicle OLDVIN is not the one at the station: reopened for "
                                  "rework, it is worked when it is back at the station at "
                                  "height")
     # back at the station: open; another VIN keeps the plain words
     d.alone(VehicleLoaded(d.t, "OLDVIN", "M", BOLTS, rework=True))
     acts = d.alone(CommandIn(d.t, 6, SkipBolt("VIN1", "B2"), SUPERVISOR))
-    assert _answer(acts).answer.reason == Reason(Why.OTHER_VEHICLE, vin="VIN1")
+    assert _answer(acts).answer.reason == Reason(Why.OTHER_VEHICLE, vin="VIN1", here="OLDVIN")
 
 
 def test_skips_recorded_before_a_reload_come_back_with_the_vehicle():

@@ -166,7 +166,7 @@ def test_a_bolt_that_is_not_held_is_refused_with_why():
         Reason(Why.UNKNOWN_BOLT, bolt="B9", vin="VIN1")
     other = EnterOutcome("VIN2", "B1", True, 1.0, 1.0, "x")
     assert _answer(d.command(4, other, SUPERVISOR)).answer.reason == \
-        Reason(Why.OTHER_VEHICLE, vin="VIN2")
+        Reason(Why.OTHER_VEHICLE, vin="VIN2", here="VIN1")
 
 
 def test_an_ok_entered_outside_the_bolt_s_window_is_refused_a_nok_is_not():

@@ -175,7 +175,7 @@ def test_loosen_commands_against_the_rules_are_refused_and_change_nothing():
     want = {
         LoosenBolt("VIN1", "B1"): Reason(Why.NOTHING_TO_LOOSEN, bolt="B1"),
         LoosenBolt("VIN1", "B3"): Reason(Why.NO_LOOSEN_PSET, bolt="B3"),
-        LoosenBolt("VIN2", "B1"): Reason(Why.OTHER_VEHICLE, vin="VIN2"),
+        LoosenBolt("VIN2", "B1"): Reason(Why.OTHER_VEHICLE, vin="VIN2", here="VIN1"),
         LoosenBolt("VIN1", "B9"): Reason(Why.UNKNOWN_BOLT, bolt="B9", vin="VIN1"),
     }
     for i, (cmd, why) in enumerate(want.items()):
