@@ -378,6 +378,7 @@ def test_results_screens_and_csv_download(live_server, page, shots, tmp_path):
                   what="B3 skipped after its NOK")
         assert "NOK, then skipped by sam: stripped" in (
             page.text("tr.rundown[data-bolt=B3]") or "")
+        assert "ending NOK (B3 skipped by sam), 1 skipped" in (page.text("#summary") or "")
         repo.close_vehicle(VIN)                 # closed, then back for rework
         repo.start_vehicle(VIN, "SEDAN", reopen=True)
         page.get(srv.url + f"vehicles/{VIN}")

@@ -189,8 +189,11 @@ def test_demo_screens_follow_the_simulated_operator(page, shots, tmp_path):
         # is the printed result
         rows = list({b: t for b, t in rows}.items())
         assert sorted(b for b, _ in rows) == sorted(printed)
-        assert (f"bolts: {len(printed) - nok} OK, {nok} ending NOK, 0 skipped, "
-                f"{50 - CYCLES} missing") in (page.text("#summary") or "")
+        ending = [b for b, p in printed.items() if p[3] == "NOK"]
+        assert (f"bolts: {len(printed) - nok} OK, {nok} ending NOK"
+                + (f" ({', '.join(sorted(ending))})" if ending else "")
+                + f", 0 skipped, {50 - CYCLES} missing") in (page.text("#summary") or ""), (
+                    page.text("#summary"))
         for b, text in rows:
             assert printed[b][3] in text and printed[b][4] in text     # status and torque
         check_fits(page, "#rundowns", long=True)

@@ -210,12 +210,22 @@ async function showVehicle(vin) {
     q("#json").href = base + "/export.json";
     q("#exports").hidden = false;
     q("#rundowns").hidden = false;
-    q("#title").textContent = `${v.vin} (${v.model}${v.reopened_at ? ", reworked" : ""})`;
+    // reopened and not back yet: no rework done yet, and not at the station
+    q("#title").textContent = `${v.vin} (${v.model}` + (v.waiting
+      ? ", reopened for rework, not back at the station yet" : v.reopened_at ? ", reworked"
+      : "") + ")";
     // bolts by their last rundown, then the rundowns themselves: "NOK" alone read as either
     const runs = v.bolts.flatMap((b) => b.rundowns);
     const tightenings = runs.filter((r) => (r.rundown || "tightening") === "tightening");
     const nokRuns = tightenings.filter((r) => r.status === "nok").length;
-    q("#summary").textContent = `bolts: ${v.ok.length} OK, ${v.nok.length} ending NOK, ` +
+    // the bolts ending NOK named, a skipped one with who skipped it, as db report says them
+    // (a supervisor read "1 ending NOK, 0 skipped" of a bolt skipped after its NOKs)
+    const skippedBy = (id) => {
+      const b = v.bolts.find((x) => x.bolt === id);
+      return b && b.skipped_by ? ` skipped by ${b.skipped_by}` : "";
+    };
+    const noks = v.nok.length ? ` (${v.nok.map((id) => id + skippedBy(id)).join(", ")})` : "";
+    q("#summary").textContent = `bolts: ${v.ok.length} OK, ${v.nok.length} ending NOK${noks}, ` +
       `${(v.skipped || []).length} skipped, ${v.missing.length} missing` +
       ((v.loosen || []).length ? `, ${v.loosen.length} to tighten again (${v.loosen.join(", ")})` : "") +
       (Object.keys(v.held || {}).length ? `, ${Object.keys(v.held).length} held (${Object.keys(v.held).join(", ")})` : "") +
