@@ -336,6 +336,20 @@ class LostRules(NokRules):
         return self._made_offline(ev) or self._sent_late_from_cut(ev) or any(
             first <= tid <= last and told < n for first, last, told in self._gaps_told)
 
+    def _count_restarted(self, ev: ResultIn) -> None:
+        """A result pushed under an id at or below the newest judged, in no gap told, and not
+        a copy of one recorded (:meth:`_result_read` answered those): the controller's count
+        started again (its memory cleared, replaced, restored).  The gaps told are the old
+        count's: their ids are new rundowns now, never "made before the enable" (a review: a
+        restarted count's rundown in an old gap, stored unattributed, its bolt left open with
+        its tool on, to be tightened twice); and so is the newest judged when a catch-up
+        did not end complete (:meth:`_sent_late_from_cut`)."""
+        tid, last = int(ev.result.tightening_id), self._judged
+        if ev.fetched or last is None or tid > last[0] or any(
+                first <= tid <= end for first, end, _ in self._gaps_told):
+            return
+        self._gaps_told, self._cut_unsettled = [], None
+
     def _sent_late_from_cut(self, ev: ResultIn) -> bool:
         """Whether ``ev``, pushed without its own time, may be the rundown of a link cut
         whose catch-up did not end complete (its bolt held), the controller's newest not

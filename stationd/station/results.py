@@ -169,7 +169,9 @@ class ResultRules(UnreadRules):
         read = self._unread_read(ev, tid)
         if read is not None:
             return read
-        # (made before the enable owed now, by the order of ids or its own time: never its)
+        # (made before the enable owed now, by the order of ids or its own time: never its;
+        # the order of ids only while the controller's count did not start again)
+        self._count_restarted(ev)
         before = self._before_enable(ev)
         ours = not before and en is not None and (
             en.pset is None or int(r.pset) == en.pset) and not (
