@@ -135,3 +135,28 @@ def test_the_first_push_after_a_timed_out_catch_up_without_a_time_does_not_close
     _enabled(d, 2)                                   # B2, pset 2: 42 after 41, its own
     acts = d.feed(ResultIn(d.t, res(42, 2, True, 1)))
     assert [a.bolt for a in acts if isinstance(a, Record)] == ["B2"]
+
+
+def test_the_first_push_after_a_timed_out_catch_up_as_its_car_leaves_holds_that_car_s_bolt():
+    """Weakness B's fix, the vehicle gone: after the timed-out catch-up (B1 held), B3 of
+    VIN1 (B1's pset) has its tool on when the lift goes down (VIN1 leaves, B3's result
+    owed, within its late-result window).  The first result pushed, 41, without a time,
+    comes then: B3's own rundown, or B1's from the cut sent late.  It is not taken for B3
+    (``_sent_late_from_cut``), and ``_late_cut_in_doubt`` holds nothing where the enable's
+    vehicle has left (``en.vin != self.vin``): B3 of VIN1, tightened, is neither recorded
+    nor held -- open when VIN1 comes back for rework, to be tightened twice.  Before the
+    fix it was recorded to B3 of VIN1 (a result within its window after its vehicle left:
+    test_result_types.py::test_a_result_within_its_window_after_its_vehicle_left_is_
+    recorded_to_that_vehicle).  A bolt of a vehicle that left is held as every other hold
+    of such a bolt is (``_hold_unanswered``: stored, held when that vehicle is back)."""
+    d = _ready()
+    _cut_caught_up_late(d)
+    _enabled(d, 3)                                   # B3 of VIN1, pset 1
+    d.step(("lift", 0.2, False, False, "VIN1"))      # VIN1 leaves, B3's result owed
+    assert d.core.vin is None and not d.core.tool_on
+    d.t += 0.5
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1)))
+    recorded = [(a.vin, a.bolt) for a in acts if isinstance(a, Record)]
+    stored = [(a.vin, a.bolt) for a in acts if isinstance(a, StoreCutUnknown)]
+    assert recorded == [("VIN1", "B3")] or ("VIN1", "B3") in stored, (
+        f"41, B3's or B1's, recorded to {recorded}; held {stored}: B3 of VIN1 left open")
