@@ -368,16 +368,20 @@ class LostRules(NokRules):
         """A result that may be a link cut's rundown sent late (:meth:`_sent_late_from_cut`)
         or that of the enable owed now: never taken for it, and never left with its tool on
         either (were it its own, the operator would run it down again): its bolt held for a
-        person, the tool off, the enable owed nothing more (as :meth:`_doubt_while_on`)."""
+        person, the tool off, the enable owed nothing more (as :meth:`_doubt_while_on`).
+        Its vehicle gone (the result within its window after the lift went down), that
+        vehicle's bolt is held all the same, stored for when it is back (a review: neither
+        recorded nor held, open to be tightened twice at a rework)."""
         en, since = self._enabled, self._enabled_at
         if not self._sent_late_from_cut(ev) or en is None or since is None \
-                or en.vin != self.vin or self._cut_unsettled is None:
+                or not en.vin or self._cut_unsettled is None:
             return []
         cut, tid = self._cut_unsettled[0], int(ev.result.tightening_id)
+        whose = cut.bolt if cut.vin == en.vin else f"{cut.bolt} of {cut.vin}"
         acts = self._drop(ev.t, State.TRACKING, StateReason(Because.UNKNOWN_HELD, bolt=en.bolt)) \
-            if self.tool_on else []
+            if self.tool_on and en.vin == self.vin else []
         acts += self._hold_unanswered(ev.t, [_Cut(en, since, ev.t)], lambda u: cut_unknown_note(
-            f"tightening {tid} may be its own or {cut.bolt}'s, made during the link cut and "
+            f"tightening {tid} may be its own or {whose}'s, made during the link cut and "
             "sent late (the controller's clock not known)", u.selection.pset, u.enabled_at),
             tid)
         self._enabled, self._off_at = None, None
