@@ -103,6 +103,10 @@ class ControllerFeed:
         self._again = False     # a reconnect came while a catch-up ran: one more after it
         #: the catch-up running was refused the controller's newest (:class:`CaughtUp`)
         self._unasked = False
+        #: a link cut's ids (after the last recorded, before the first pushed since) whose
+        #: asking :meth:`_cut_ids` could not finish (the link lost meanwhile): the next
+        #: catch-up asks for them first (it counts from the last recorded, beyond them)
+        self._cut_owed: tuple[int, int] | None = None
         self._reads = 0         # the results' loop's reads of the controller so far
         #: when the controller's clock was last measured (at each connect, by the driver;
         #: then every CLOCK_CHECK_S: :meth:`_check_clock`)
@@ -287,6 +291,14 @@ class ControllerFeed:
             # before this is told
             await self._read_since(self._reads)
             return "this controller keeps no results to fetch"
+        if self._cut_owed is not None:     # an earlier cut's ids, not asked for to the end
+            first, end = self._cut_owed
+            try:
+                await self._fetch(wrench, plan_gaps(first - 1, end), first - 1)
+            except RefusedError as exc:    # stored as a gap (:meth:`_refused_from`)
+                log.warning("results made during an earlier link cut (%s) not fetched: %s",
+                            id_span(first, end), one_line(exc))
+            self._cut_owed = None
         last = await self._call(self.records.last_tightening_id)
         try:
             newest = await self._call(wrench.fetch_result, 0)
@@ -596,6 +608,9 @@ class ControllerFeed:
             log.warning("results made during the link cut (%s) not fetched: %s", ids,
                         one_line(exc))
         except (DeviceError, ValueError) as exc:   # the link's keeper reports it
+            # (the next catch-up counts from the last recorded, ``tid`` or beyond: asked for
+            # then, first; a review found them never asked for again, not even a gap)
+            self._cut_owed = (after + 1, tid - 1)
             log.warning("results made during the link cut (%s) not fetched yet: %s", ids,
                         one_line(exc))
         except STATION_FAULTS as exc:
