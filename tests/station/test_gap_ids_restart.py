@@ -67,3 +67,32 @@ def test_a_rundown_of_a_controller_whose_ids_restarted_is_not_left_open_in_an_ol
         f"B3's rundown 41 (a restarted count) recorded to {recorded}; B3 done "
         f"{'B3' in m.done}, held {'B3' in m.held}, its tool on {d.core.tool_on}: "
         "left open to be tightened twice")
+
+
+def test_a_restarted_count_s_first_rundown_in_an_old_gap_is_not_left_open():
+    """As above, but the new count's first rundown falls in the old gap itself (a controller
+    restored or replaced with its count near the old one; or ids from 1 where a gap began
+    at 1): no push below the gap says the count restarted first.  The shell's catch-up
+    found it (the controller has no results though 46 was recorded; or
+    ``_count_restarted``) and says so (``CaughtUp.restarted``): the gaps told are the old
+    count's, forgotten.  B3's own 41 is recorded to B3, not left open with its tool on."""
+    d = _ready()
+    d.feed(ResultIn(d.t, res(40, 2, True, 1)))
+    d.feed(ResultsMissed(d.t, 41, 45, "the controller no longer has it", live=True))
+    d.feed(ResultIn(d.t, res(46, 2, True, 1)))
+    d.t += 1.0
+    d.feed(DeviceFault(d.t, "wrench", FaultKind.DOWN, "link lost"))   # replaced
+    d.t += 60.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    d.t += 1.0
+    d.feed(CaughtUp(d.t, False, CLEARED, 1, restarted=True))
+    d.step(("lift", 0.1, True, True, "VIN1"))
+    _enabled(d, 3)                                            # B3, pset 1
+    d.t += 0.5
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1)))        # B3's own rundown
+    m = d.core.matcher
+    assert m is not None
+    assert [a.bolt for a in acts if isinstance(a, Record)] == ["B3"] or (
+        "B3" in m.held and not d.core.tool_on), (
+        f"B3's rundown 41 (a restarted count) not recorded; held {list(m.held)}, "
+        f"its tool on {d.core.tool_on}")
