@@ -103,6 +103,8 @@ class ControllerFeed:
         self._again = False     # a reconnect came while a catch-up ran: one more after it
         #: the catch-up running was refused the controller's newest (:class:`CaughtUp`)
         self._unasked = False
+        #: the catch-up running found the controller's ids started again (:class:`CaughtUp`)
+        self._restarted = False
         #: a link cut's ids (after the last recorded, before the first pushed since) whose
         #: asking :meth:`_cut_ids` could not finish (the link lost meanwhile): the next
         #: catch-up asks for them first (it counts from the last recorded, beyond them)
@@ -258,7 +260,7 @@ class ControllerFeed:
         if wrench is None:
             return
         connection = self._keeper.reconnects
-        self._unasked = False
+        self._unasked = self._restarted = False
         try:
             why = await self._caught_up(wrench)
         except RefusedError as exc:     # the controller said no: asking again will not help
@@ -278,7 +280,7 @@ class ControllerFeed:
             log.error("results missed while the link was down not fetched: %s", one_line(exc))
             why = f"the station's database failed ({one_line(exc)})"
         await self._feed(CaughtUp(time.time(), why is None, why or "", connection,
-                                  self._unasked))
+                                  self._unasked, self._restarted))
 
     async def _caught_up(self, wrench: Wrench) -> str | None:
         """The catch-up's work: None where every result since the link was lost went
@@ -307,6 +309,7 @@ class ControllerFeed:
             await self._refused(wrench, last, exc)
             raise
         if newest is None:    # the controller has none: made none, or its memory cleared
+            self._restarted = last is not None
             return None if last is None else (
                 f"the controller has no results, though tightening {last} was recorded: "
                 "cleared (restarted or replaced), what it made before is not known")
@@ -328,6 +331,7 @@ class ControllerFeed:
                      "under that id: its ids restarted", last)
             todo = GapPlan(why=NoFetch.IDS_RESTARTED, newest=nid, last_recorded=last)
         if todo.why is NoFetch.IDS_RESTARTED:   # a new count: no id to count from
+            self._restarted = True
             return await self._first_results(wrench, newest, nid, restarted=True)
         return await self._fetch(wrench, todo, last, newest)
 

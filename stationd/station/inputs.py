@@ -193,6 +193,9 @@ class CaughtUp(Input):
     #: the controller refused (or did not answer) the catch-up's ask for its newest: what
     #: it made during the cut was not counted, and it may still send it, pushed late
     unasked: bool = False
+    #: the controller's ids started again (its results cleared, or its count restarted):
+    #: the ids told before are another count's
+    restarted: bool = False
 
 
 @dataclass(frozen=True)

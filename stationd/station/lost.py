@@ -413,6 +413,8 @@ class LostRules(NokRules):
         complete one fetched what an earlier cut's controller could still send late."""
         if ev.complete:
             self._cut_unsettled = None
+        if ev.restarted:    # the gaps told are the old count's: their ids are new rundowns
+            self._gaps_told, self._cut_unsettled = [], None
         return self._end_wait(ev.t) + self._cut_caught_up(ev)
 
     def _cut_caught_up(self, ev: CaughtUp) -> list[Action]:

@@ -231,6 +231,21 @@ def test_a_count_started_again_since_the_link_was_lost_leaves_the_time_before_un
     assert _ends(fed) == [(True, "", 1)]
 
 
+def test_a_catch_up_that_finds_the_ids_started_again_tells_the_core():
+    """The controller's results cleared (none, though 40 was recorded) or its count started
+    again (its newest below the last recorded): the core is told (``CaughtUp.restarted``),
+    the gaps it was told being another count's (tests/station/test_gap_ids_restart.py);
+    a catch-up that counts on does not say it."""
+    def restarted(fed: list[Any]) -> list[bool]:
+        return [e.restarted for e in fed if isinstance(e, CaughtUp)]
+
+    assert restarted(catch_up(Controller({0: None}), last=40)) == [True]
+    recent = SimpleNamespace(**{**vars(res(2)), "timestamp": datetime.now()})
+    assert restarted(catch_up(Controller({0: recent, 2: recent, 1: None}), last=40)) == [True]
+    assert restarted(catch_up(Controller({0: res(42), 41: res(41), 42: res(42)}))) == [False]
+    assert restarted(catch_up(Controller({0: None}), last=None)) == [False]
+
+
 REFUSED = RefusedError("fetch tightening 0: the controller refused (MID 0004 error 99)",
                        code=99)
 
