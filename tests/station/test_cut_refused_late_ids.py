@@ -160,3 +160,22 @@ def test_the_first_push_after_a_timed_out_catch_up_as_its_car_leaves_holds_that_
     stored = [(a.vin, a.bolt) for a in acts if isinstance(a, StoreCutUnknown)]
     assert recorded == [("VIN1", "B3")] or ("VIN1", "B3") in stored, (
         f"41, B3's or B1's, recorded to {recorded}; held {stored}: B3 of VIN1 left open")
+
+
+def test_the_first_push_after_a_timed_out_catch_up_of_another_pset_holds_nothing():
+    """Weakness B's fix, the pset not checked against the enable on now: after the
+    timed-out catch-up (B1, pset 1, held), B2 (pset 2) has its tool on when the first push
+    since, 41 of pset 1 without a time, comes: B1's rundown sent late, never B2's (the
+    controller ran pset 2 for B2).  ``_sent_late_from_cut`` compares the result's pset with
+    the cut's only, and ``_late_cut_in_doubt`` holds the bolt on now whatever its pset: B2
+    held "41 may be its own or B1's", its tool off mid-work -- a hold whose note is untrue,
+    for a supervisor to release.  Before the fix 41 was stored unattributed, B2 left as it
+    was; so it is again."""
+    d = _ready()
+    _cut_caught_up_late(d)
+    _enabled(d, 2)                                   # B2, pset 2
+    d.t += 0.5
+    d.feed(ResultIn(d.t, res(41, 1, True, 1)))
+    assert d.core.matcher is not None
+    assert "B2" not in d.core.matcher.held and d.core.tool_on, (
+        f"B2 (pset 2) held by a pset 1 result: {d.core.matcher.held.get('B2')}")
