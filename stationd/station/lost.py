@@ -374,8 +374,9 @@ class LostRules(NokRules):
         recorded nor held, open to be tightened twice at a rework)."""
         en, since = self._enabled, self._enabled_at
         if not self._sent_late_from_cut(ev) or en is None or since is None \
-                or not en.vin or self._cut_unsettled is None:
-            return []
+                or not en.vin or self._cut_unsettled is None \
+                or (en.pset is not None and int(ev.result.pset) != en.pset):
+            return []   # (of another pset than the enable's: the cut's, never its own)
         cut, tid = self._cut_unsettled[0], int(ev.result.tightening_id)
         whose = cut.bolt if cut.vin == en.vin else f"{cut.bolt} of {cut.vin}"
         acts = self._drop(ev.t, State.TRACKING, StateReason(Because.UNKNOWN_HELD, bolt=en.bolt)) \
