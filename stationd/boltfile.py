@@ -31,7 +31,7 @@ from db.spacing import min_spacing_mm, too_close
 from drivers.counting import counted, noun
 from stationd.errors import ConfigError, InputError
 from stationd.filekind import expect
-from stationd.yamlio import YamlNode
+from stationd.yamlio import YamlNode, unknown_key
 
 DEFAULT_TOLERANCE_MM = 8.0   # the matching tolerance; bolts must be twice as far apart
 METRES_SPAN_MM = 10.0        # bolts all this near the origin: the table is in metres
@@ -183,7 +183,7 @@ class _Checker:
                     return None  # not a mapping, a duplicate or a non-string key: stop here
                 unknown.add(name)  # listed with the keys of the file only, not the unknown ones
                 message = unknown_message(name) if unknown_message is not None \
-                    else f"unknown key (accepted: {', '.join(sorted(allowed_set))})"
+                    else unknown_key(name, allowed_set)
                 self.errors.append(ConfigError(message, path=exc.path, line=exc.line,
                                                key=exc.key))
         missing = [k for k in required if k not in children]

@@ -26,7 +26,7 @@ from typing import ParamSpec, TypeVar
 from db.reach import unreachable
 from stationd.errors import ConfigError
 from stationd.filekind import expect
-from stationd.yamlio import YamlNode, missing_keys
+from stationd.yamlio import YamlNode, missing_keys, unknown_key
 
 T = TypeVar("T")
 P = ParamSpec("P")
@@ -129,9 +129,8 @@ class SectionReader:
                     self.top = {}
                     return self.top
                 unknown.add(key)
-                self.errors.append(ConfigError(
-                    f"unknown key (accepted: {', '.join(sorted(keys))})",
-                    path=exc.path, line=exc.line, key=key))
+                self.errors.append(ConfigError(unknown_key(key, keys), path=exc.path,
+                                               line=exc.line, key=key))
 
 
 def _raise(error: ConfigError) -> None:

@@ -8,6 +8,7 @@ the file is a default written in code, never an environment variable.
 
 from __future__ import annotations
 
+import difflib
 import math
 import re
 import stat
@@ -182,6 +183,15 @@ def _as_pure(root: yaml.Node | None) -> None:
             node.style = None
 
 
+def unknown_key(name: str, accepted: Iterable[str]) -> str:
+    """The words for a key no reader takes: the keys that are, and the one meant where one is
+    close ("pest" for pset: a newcomer's trial read the list of eight to find it)."""
+    keys = sorted(accepted)
+    close = difflib.get_close_matches(name, keys, n=1, cutoff=0.6)
+    return f"unknown key ({f'did you mean {close[0]}? ' if close else ''}accepted: " \
+           f"{', '.join(keys)})"
+
+
 class YamlNode:
     """One node of a YAML document, with its file, line and dotted key path."""
 
@@ -273,9 +283,8 @@ class YamlNode:
             previous, previous_name = value_node, name
             child = YamlNode(value_node, self.path, self._child_key(name))
             if name not in allowed_set:
-                accepted = ", ".join(sorted(allowed_set))
                 raise YamlNode(key_node, self.path, child.key).error(
-                    f"unknown key (accepted: {accepted})")
+                    unknown_key(str(name), allowed_set))
             if name in out:
                 error = YamlNode(key_node, self.path, child.key).error("duplicate key")
                 if duplicates is None:

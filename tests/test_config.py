@@ -166,8 +166,8 @@ def test_independent_errors_are_all_reported_and_load_raises_one_of_them(sim_cop
         "under cameras (cameras: pair1_left, pair1_right, pair2_left, pair2_right, pair3_left, "
         "pair3_right, pair4_left, pair4_right)",
         f"{station}:{_line(station, 'centre_methd')}: vision.centre_methd: unknown key "
-        "(accepted: centre_method, enhance, enhancement, gates, hsv, leitz, max_candidates, "
-        "residual, search_scale)",
+        "(did you mean centre_method? accepted: centre_method, enhance, enhancement, gates, "
+        "hsv, leitz, max_candidates, residual, search_scale)",
     ]
     # the daemon's loader reads the same sections with the same code and stops at the first
     with pytest.raises(ConfigError) as ei:

@@ -255,3 +255,14 @@ def test_a_malformed_file_is_told_in_the_pure_python_parser_s_words(text, monkey
         YamlNode.parse(text, "f.yaml")
     assert str(fast.value) == str(slow.value)
     assert str(fast.value).startswith("f.yaml:")
+
+
+def test_an_unknown_key_says_the_one_meant_where_one_is_close():
+    """A newcomer's "pest:" in a bolt table got the list of eight keys to search; the close
+    one is said first, a key like none of them gets the list alone."""
+    from stationd.yamlio import unknown_key
+
+    keys = ("angle", "batch", "id", "name", "order", "position", "pset", "torque")
+    assert unknown_key("pest", keys) == ("unknown key (did you mean pset? accepted: angle, "
+                                         "batch, id, name, order, position, pset, torque)")
+    assert unknown_key("colour", keys).startswith("unknown key (accepted: angle, ")
