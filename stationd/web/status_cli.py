@@ -144,6 +144,11 @@ def format_status(st: dict[str, Any], via: str = "") -> str:
     if op.get("user") or op.get("required"):
         lines.append("operator: " + (op.get("user") or "nobody signed in: sign in to tighten"))
     lines += lock_lines(st, via)
+    loosen = st.get("to_loosen") or []
+    if loosen:
+        lines.append("loosen:   " + ", ".join(
+            b["bolt"] + (f" (loosen pset {b['loosen_pset']})" if b.get("loosen_pset") is not None
+                         else "") for b in loosen) + ": to be loosened first, then tightened")
     if st.get("reload_refused"):
         lines.append(f"config:   reload refused ({st['reload_refused']}): the station runs on "
                      "the configuration it loaded before")

@@ -476,3 +476,28 @@ def test_status_of_a_daemon_that_gives_no_holds_says_its_locks_as_before():
     assert "locked:   B1 locked after 3 NOK in a row: a supervisor releases it" in \
         format_status(st).splitlines()
     assert "held:" not in format_status(st)
+
+
+def test_status_names_a_bolt_to_be_loosened_first(live_server, capsys):
+    """After ``stationd loosen VIN B2`` the status said only the state's last rundown ("bolt
+    B2 OK; tracking"), nothing of the bolt waiting for its loosening (a newcomer's trial):
+    a line names it with its loosen pset, and the API lists it."""
+    import json
+
+    from db.kinds import TO_LOOSEN
+    from tests.web.scenario import bolt, changed
+
+    srv = live_server()
+    srv.publish([*opened(), changed(bolt("B2", TO_LOOSEN, ran=True, loosen_pset=90))])
+
+    async def shown():
+        import asyncio
+        while not any(b.loosen for b in srv.server.view.bolts.values()):
+            await asyncio.sleep(0.02)
+    srv.call(shown())
+    assert main(["status", "--url", srv.url]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert "loosen:   B2 (loosen pset 90): to be loosened first, then tightened" in lines
+    assert main(["status", "--url", srv.url, "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["to_loosen"] == [
+        {"bolt": "B2", "loosen_pset": 90}]
