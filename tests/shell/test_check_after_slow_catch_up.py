@@ -21,7 +21,7 @@ import pytest
 
 from drivers.errors import ConnectionLostError, RefusedError
 from stationd.station.inputs import CaughtUp, NewestChecked, ResultIn, ResultsMissed
-from tests.shell.test_catch_up import Controller, _feed_of, res
+from tests.shell.test_catch_up import REFUSED, Controller, _feed_of, res
 
 
 class SlowOnce(Controller):
@@ -235,3 +235,51 @@ def test_the_cut_s_ids_asked_for_as_the_link_drops_again_are_not_lost():
     gaps = [(e.first, e.last) for e in fed if isinstance(e, ResultsMissed)]
     assert 41 in got or any(first <= 41 <= last for first, last in gaps), (
         f"41, made during the cut, never fed nor told as a gap: results {got}, gaps {gaps}")
+
+
+@pytest.mark.parametrize("drop_at, then", [(41, "given"), (42, "given"), (41, "refused")],
+                         ids=["drop-at-41", "drop-at-42", "drop-at-41-then-refused"])
+def test_the_ids_a_push_skipped_asked_for_as_the_link_drops_are_not_lost(drop_at, then):
+    """The same hole in the link-up gap (a review): 43 pushed after 40 with the link up
+    skips 41-42 (their pushes lost); they are asked for (``_live_gap_alone``) and the link
+    drops as ``drop_at`` is asked (``ConnectionLostError``): "not fetched yet", nothing
+    told, and 43 is fed and recorded.  The next catch-up counts from the last recorded, 43:
+    the ids not fetched -- rundowns made with the link up, which the controller still has,
+    a bolt's own as a rule -- were never asked for again, never recorded, not even a gap
+    (the bolt they belong to never held: tightened twice).  The next catch-up asks for them
+    first, each fed as it would have been (fetched with the link up, before 43: the core
+    never takes one for a result made during the cut), once; refused, a gap told with the
+    link up (the core holds the bolts whose result it may be)."""
+    answers: dict[int, Any] = {0: res(43), 41: res(41), 42: res(42), 43: res(43)}
+    controller = SlowThenPushing({**answers, drop_at: ConnectionLostError("link lost")}, None)
+    fed: list[Any] = []
+
+    async def main() -> None:
+        pool = ThreadPoolExecutor(2)
+        feed_ = _feed_of(controller, 40, None, fed, pool)
+        feed_._accounted = 40                    # 40 the last heard on this link
+        controller.push = 43                     # 41, 42: their pushes lost
+        await feed_.results(controller)          # 41-42 asked for: the link drops
+        # the link back: 43 recorded; the controller gives 41-42 now (or refuses them)
+        feed_.records.last_tightening_id = lambda: 43    # type: ignore[method-assign]
+        controller.answers = dict(answers)
+        if then == "refused":
+            controller.answers[drop_at] = REFUSED
+        feed_.came_back()
+        assert feed_.catching_up is not None
+        await feed_.catching_up
+        pool.shutdown()
+        feed_.close()
+
+    asyncio.run(main())
+    got = [(e.result.tightening_id, e.fetched, e.live, e.before)
+           for e in fed if isinstance(e, ResultIn)]
+    gaps = [(e.first, e.last, e.live) for e in fed if isinstance(e, ResultsMissed)]
+    before = [(41, True, True, 43)] if drop_at == 42 else []
+    if then == "given":
+        assert got == [*before, (43, False, False, None), *[
+            (t, True, True, 43) for t in range(drop_at, 43)]] and gaps == [], (
+            f"41-42, made with the link up, skipped by 43: results {got}, gaps {gaps}")
+    else:
+        assert got == [(43, False, False, None)] and gaps == [(41, 42, True)], (
+            f"41-42, made with the link up, refused: results {got}, gaps {gaps}")
