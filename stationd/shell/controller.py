@@ -109,6 +109,11 @@ class ControllerFeed:
         #: asking :meth:`_cut_ids` could not finish (the link lost meanwhile): the next
         #: catch-up asks for them first (it counts from the last recorded, beyond them)
         self._cut_owed: tuple[int, int] | None = None
+        #: ids a pushed result skipped with the link up (first, last, and that result's id)
+        #: whose asking :meth:`_live_gap_alone` could not finish (the link lost meanwhile):
+        #: the next catch-up asks for them first (it counts from the last recorded, that
+        #: pushed one or beyond), each fed as it would have been (with the link up, before it)
+        self._live_owed: list[tuple[int, int, int]] = []
         self._reads = 0         # the results' loop's reads of the controller so far
         #: when the controller's clock was last measured (at each connect, by the driver;
         #: then every CLOCK_CHECK_S: :meth:`_check_clock`)
@@ -301,6 +306,8 @@ class ControllerFeed:
                 log.warning("results made during an earlier link cut (%s) not fetched: %s",
                             id_span(first, end), one_line(exc))
             self._cut_owed = None
+        while self._live_owed:      # ids a push skipped with the link up, not all asked for
+            await self._live_owed_fetched(wrench)
         last = await self._call(self.records.last_tightening_id)
         try:
             newest = await self._call(wrench.fetch_result, 0)
@@ -334,6 +341,31 @@ class ControllerFeed:
             self._restarted = True
             return await self._first_results(wrench, newest, nid, restarted=True)
         return await self._fetch(wrench, todo, last, newest)
+
+    async def _live_owed_fetched(self, wrench: Wrench) -> None:
+        """The first ids :meth:`_live_gap_alone` could not finish asking for (the link lost
+        meanwhile), asked for now, one gap at a time: each fed as fetched with the link up
+        before the pushed result that skipped it (made then, not during a cut: the core
+        never proves one the cut's result by its id alone, and holds the bolts whose result
+        a gap of them may be); a refusal stores the rest as a gap told with the link up.  A
+        link lost again leaves those not asked for yet to the next catch-up."""
+        first, end, before = self._live_owed[0]
+        done: list[int] = []
+        async with self._gaps:
+            self._revealed_by = before
+            try:
+                await self._fetch(wrench, plan_gaps(first - 1, end), first - 1, live=True,
+                                  done=done)
+            except RefusedError as exc:    # stored as a gap (:meth:`_refused_from`)
+                log.warning("results missed with the link up (%s) not fetched: %s",
+                            id_span(first, end), one_line(exc))
+            except (DeviceError, ValueError):
+                if done:
+                    self._live_owed[0] = (done[-1] + 1, end, before)
+                raise
+            finally:
+                self._revealed_by = None
+        self._live_owed.pop(0)
 
     async def _count_restarted(self, wrench: Wrench, last: int, newest: Received) -> bool:
         """Whether the controller's ids started again though its newest is not below
@@ -575,12 +607,19 @@ class ControllerFeed:
         # "fetched" followed at once by "not fetched: refused")
         log.warning("results: tightening %d came after %d: %s not pushed by the controller "
                     "(the link up): asked for", tid, last, ids)
+        done: list[int] = []
         try:
-            await self._fetch(wrench, todo, last, live=True)
+            await self._fetch(wrench, todo, last, live=True, done=done)
         except RefusedError as exc:    # asking again will not help: stored as a gap
             log.warning("results missed with the link up (%s) not fetched: %s", ids,
                         one_line(exc))
         except (DeviceError, ValueError) as exc:   # the link's keeper reports it
+            # (the next catch-up counts from the last recorded, ``tid`` or beyond: those not
+            # asked for yet are asked for then, first; a review found them never asked for
+            # again, not even a gap, their bolt left open)
+            rest = [t for t in todo.fetch if t not in done]
+            if rest:
+                self._live_owed.append((rest[0], rest[-1], tid))
             log.warning("results missed with the link up (%s) not fetched yet: %s", ids,
                         one_line(exc))
         except STATION_FAULTS as exc:
@@ -622,11 +661,13 @@ class ControllerFeed:
                       one_line(exc))
 
     async def _fetch(self, wrench: Wrench, todo: GapPlan, last: int | None,
-                     newest: Received | None = None, live: bool = False) -> str | None:
+                     newest: Received | None = None, live: bool = False,
+                     done: list[int] | None = None) -> str | None:
         """The ids ``todo`` fetches, each fed as a fetched result (after ``last``, the id
         accounted for before; ``newest``: one fetched already), with its curves; its gap and
         each id the controller no longer has recorded as gaps.  None where none was missed,
-        else why some were."""
+        else why some were.  ``done``: each id fed or told as a gap is added to it (those
+        a link lost meanwhile left are the others)."""
         missed: str | None = None
         if todo.gap is not None:
             missed = f"more than {MAX_FETCH} results missed"
@@ -643,8 +684,10 @@ class ControllerFeed:
             if got is None:
                 missed = f"tightening {tid} no longer on the controller"
                 await self._gap(tid, tid, "the controller no longer has it", live)
-                continue
-            await self._fetched(wrench, tid, got, last, offset, live)
+            else:
+                await self._fetched(wrench, tid, got, last, offset, live)
+            if done is not None:
+                done.append(tid)
         return missed
 
     async def _fetched(self, wrench: Wrench, tid: int, got: Received, follows: int | None,

@@ -272,3 +272,30 @@ def test_a_lost_push_after_an_unreadable_result_is_its_own_bolt_s_by_the_order_o
     assert recorded == [("B3", 42)], recorded
     assert "B3" not in d.core.matcher.held and "B3" in d.core.matcher.done
     assert "B1" in d.core.matcher.held                # (its own hold stands)
+
+
+@pytest.mark.parametrize("then", ["given", "refused"])
+def test_a_lost_push_asked_for_again_after_the_link_dropped_still_holds_its_bolt(then):
+    """B1 tightened (41, its push lost), its check told nothing; B3's 42 skips 41 and the
+    link drops as 41 is asked for; 42 is fed (recorded to B3), the link comes back.  The
+    shell's next catch-up asks for 41 first (``ControllerFeed._live_owed``) and feeds it as
+    it would have (fetched with the link up, before 42), or, refused, a gap with the link
+    up: B1 held, as without the cut (told as the cut's gap, not live, B1 was left open:
+    tightened twice)."""
+    d = _ready()
+    d.answer_checks = True
+    _enabled(d, 1)
+    d.t += 2.0                                        # B1 tightened: 41, its push lost
+    _on(d, 3, 3)
+    d.t += d.core.late_result_s + 1.0
+    d.feed(Tick(d.t))                                 # the check told nothing
+    _enabled(d, 3)
+    d.feed(ResultsSkipped(d.t, 42))
+    d.step(("fault", 0.1, "wrench"))                  # the link drops as 41 is asked for
+    d.feed(ResultIn(d.t, res(42, 1, True, 1)))        # fed all the same
+    d.step(("back", 0.5, "", 1))                      # its catch-up asks for 41 first
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), fetched=True, follows=40, made_at=None,
+                           live=True, before=42)) if then == "given" else \
+        d.feed(ResultsMissed(d.t, 41, 41, "the controller refused to give them", live=True))
+    assert not [a for a in acts if isinstance(a, Record)]
+    assert "B1" in d.core.matcher.held and "B1" not in d.core.matcher.done
