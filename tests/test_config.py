@@ -667,15 +667,10 @@ def test_a_duplicate_top_level_key_is_the_one_error_not_missing_sections(sim_cop
     assert checked.warnings == [], checked.warnings
 
 
-def test_loading_a_station_never_opens_its_database_file(tmp_path, monkeypatch):
-    """The daemon validates a reload while its SQLite connections hold the file's locks;
-    opening and closing the file in the same process drops those POSIX locks (a `db import`
-    then deleted the daemon's WAL: a newcomer's trial corrupted the database that way).  Only
-    `config check`, in its own process, reads the file's header."""
+def _database_opens(monkeypatch) -> list[str]:
+    """Every opening of a file named station.db* through pathlib, as it happens."""
     import pathlib
 
-    db = tmp_path / "station.db"
-    db.write_bytes(b"SQLite format 3\x00" + b"\x00" * 100)
     opened: list[str] = []
     real = pathlib.Path.open
 
@@ -685,6 +680,17 @@ def test_loading_a_station_never_opens_its_database_file(tmp_path, monkeypatch):
         return real(self, *a, **kw)
 
     monkeypatch.setattr(pathlib.Path, "open", spy)
+    return opened
+
+
+def test_loading_a_station_never_opens_its_database_file(tmp_path, monkeypatch):
+    """The daemon validates a reload while its SQLite connections hold the file's locks;
+    opening and closing the file in the same process drops those POSIX locks (a `db import`
+    then deleted the daemon's WAL: a newcomer's trial corrupted the database that way).  Only
+    `config check`, in its own process, reads the file's header."""
+    db = tmp_path / "station.db"
+    db.write_bytes(b"SQLite format 3\x00" + b"\x00" * 100)
+    opened = _database_opens(monkeypatch)
     station = tmp_path / "station.yaml"
     station.write_text(f"database: {{url: 'sqlite:///{db}'}}\n")
     load_station_config(station)
@@ -703,8 +709,6 @@ def test_a_refused_reload_s_further_errors_never_open_the_database_file(sim_copy
     (:func:`stationd.stationcheck.more_errors`): it read the database file's header there,
     which dropped the daemon's SQLite locks (a newcomer's trial: a backup then deleted its
     WAL, and the results written after).  `config check`, its own process, still reads it."""
-    import pathlib
-
     from stationd.stationcheck import more_errors
 
     station = sim_copy / "station.yaml"
@@ -712,15 +716,7 @@ def test_a_refused_reload_s_further_errors_never_open_the_database_file(sim_copy
     station.write_text(station.read_text().replace("sqlite:///stationd-sim.db",
                                                    f"sqlite:///{db}"))
     db.write_bytes(b"SQLite format 3\x00" + b"\x00" * 100)
-    opened: list[str] = []
-    real = pathlib.Path.open
-
-    def spy(self, *a, **kw):
-        if self.name.startswith("station.db"):
-            opened.append(str(self))
-        return real(self, *a, **kw)
-
-    monkeypatch.setattr(pathlib.Path, "open", spy)
+    opened = _database_opens(monkeypatch)
     more_errors(station)
     assert opened == []
     check_station(station)

@@ -72,6 +72,23 @@ def test_typed_reasons_are_stored_in_the_words_the_core_wrote(tmp_path: Path) ->
     assert comments == ["idle for 600 s"]
 
 
+def _reloaded_without_b2_b3(records: Records, tmp_path: Path,
+                            runs: tuple[tuple[int, str, bool], ...]) -> None:
+    """VIN2 at the station with ``runs`` (tightening id, bolt, OK) recorded, then the
+    station's records opened again (a reload) on a table without SEDAN's B2 and B3."""
+    assert records.repo is not None
+    records.repo.start_vehicle("VIN2", "SEDAN")
+    for tid, bolt, ok in runs:
+        records.repo.record_tightening("VIN2", bolt, ok=ok, torque_nm=50.0, angle_deg=30.0,
+                                       tightening_id=tid, position_mm=(0.0, 0.0, 0.0),
+                                       match_distance_mm=1.0, tilt_deg=1.0)
+    bolts = tmp_path / "bolts.yaml"
+    bolts.write_text(BASE.split("      - id: B2")[0] + BASE.split("  WAGON:")[1].join(
+        ["  WAGON:", ""]))
+    records.repo.close()
+    records.open()
+
+
 def test_a_table_that_removes_bolts_and_a_vehicle_leaving_unfinished_are_warnings(
         tmp_path: Path, caplog: Any) -> None:
     """A bolt table cut short that still reads (30 of 50 bolts gone on a SIGHUP) and a
@@ -83,16 +100,7 @@ def test_a_table_that_removes_bolts_and_a_vehicle_leaving_unfinished_are_warning
     caplog.set_level("INFO", logger="stationd.shell.records")
     records.close_vehicle("VIN1")
     # VIN2 at the station, B1 and B2 tightened OK
-    records.repo.start_vehicle("VIN2", "SEDAN")
-    for tid, bolt in ((7, "B1"), (8, "B2")):
-        records.repo.record_tightening("VIN2", bolt, ok=True, torque_nm=50.0, angle_deg=30.0,
-                                       tightening_id=tid, position_mm=(0.0, 0.0, 0.0),
-                                       match_distance_mm=1.0, tilt_deg=1.0)
-    bolts = tmp_path / "bolts.yaml"
-    bolts.write_text(BASE.split("      - id: B2")[0] + BASE.split("  WAGON:")[1].join(
-        ["  WAGON:", ""]))
-    records.repo.close()
-    records.open()
+    _reloaded_without_b2_b3(records, tmp_path, ((7, "B1", True), (8, "B2", True)))
     warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
     assert any(m.startswith("vehicle VIN1 (SEDAN) closed: ") and "3 missing" in m
                for m in warned), warned
@@ -116,17 +124,9 @@ def test_a_removed_bolt_the_vehicle_at_the_station_ends_nok_or_holds_is_said(
     engineer's trial).  Said, each such bolt, with what stays; one removed done is not."""
     records = _records(tmp_path)
     assert records.repo is not None
-    records.repo.start_vehicle("VIN2", "SEDAN")
-    for tid, bolt, ok in ((7, "B1", True), (8, "B2", True), (9, "B3", False)):
-        records.repo.record_tightening("VIN2", bolt, ok=ok, torque_nm=50.0, angle_deg=30.0,
-                                       tightening_id=tid, position_mm=(0.0, 0.0, 0.0),
-                                       match_distance_mm=1.0, tilt_deg=1.0)
-    bolts = tmp_path / "bolts.yaml"
-    bolts.write_text(BASE.split("      - id: B2")[0] + BASE.split("  WAGON:")[1].join(
-        ["  WAGON:", ""]))
-    records.repo.close()
     caplog.set_level("INFO", logger="stationd.shell.records")
-    records.open()
+    _reloaded_without_b2_b3(records, tmp_path,
+                            ((7, "B1", True), (8, "B2", True), (9, "B3", False)))
     warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
     assert [m for m in warned if "not done" in m] == [
         "vehicle VIN2 at the station: removed from the table while not done: B3 ending NOK; "

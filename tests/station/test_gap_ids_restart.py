@@ -30,6 +30,23 @@ def _next(d: Driver) -> None:
     d.feed(Tick(d.t))
 
 
+
+def _replaced_after_a_gap(restarted: bool) -> Driver:
+    """A station that told 41-45 as a gap with the link up (40 and 46 pushed, no enable),
+    then lost its controller (replaced) and caught up on the new one: its results cleared,
+    the count's restart said (``restarted``) or not."""
+    d = _ready()
+    d.feed(ResultIn(d.t, res(40, 2, True, 1)))               # (no enable)
+    d.feed(ResultsMissed(d.t, 41, 45, "the controller no longer has it", live=True))
+    d.feed(ResultIn(d.t, res(46, 2, True, 1)))
+    d.t += 1.0
+    d.feed(DeviceFault(d.t, "wrench", FaultKind.DOWN, "link lost"))   # replaced
+    d.t += 60.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    d.t += 1.0
+    d.feed(CaughtUp(d.t, False, CLEARED, 1, restarted=restarted))
+    return d
+
 def test_a_rundown_of_a_controller_whose_ids_restarted_is_not_left_open_in_an_old_gap():
     """Ids 41-45 told as a gap (the link up: the controller no longer had them), 46 pushed.
     The controller is then replaced (or its memory cleared): the link drops, the catch-up
@@ -40,16 +57,7 @@ def test_a_rundown_of_a_controller_whose_ids_restarted_is_not_left_open_in_an_ol
     result, runs B3 down again: a bolt tightened twice.  A result pushed with the tool on
     for its pset is that bolt's (recorded), or, where the core doubts it, the bolt is held
     with its tool off -- never left open after its rundown."""
-    d = _ready()
-    d.feed(ResultIn(d.t, res(40, 2, True, 1)))               # (no enable)
-    d.feed(ResultsMissed(d.t, 41, 45, "the controller no longer has it", live=True))
-    d.feed(ResultIn(d.t, res(46, 2, True, 1)))
-    d.t += 1.0
-    d.feed(DeviceFault(d.t, "wrench", FaultKind.DOWN, "link lost"))   # replaced
-    d.t += 60.0
-    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
-    d.t += 1.0
-    d.feed(CaughtUp(d.t, False, CLEARED, 1))
+    d = _replaced_after_a_gap(restarted=False)
     d.step(("lift", 0.1, True, True, "VIN1"))
     _enabled(d, 2)                                            # B2, pset 2
     d.t += 0.5
@@ -76,16 +84,7 @@ def test_a_restarted_count_s_first_rundown_in_an_old_gap_is_not_left_open():
     found it (the controller has no results though 46 was recorded; or
     ``_count_restarted``) and says so (``CaughtUp.restarted``): the gaps told are the old
     count's, forgotten.  B3's own 41 is recorded to B3, not left open with its tool on."""
-    d = _ready()
-    d.feed(ResultIn(d.t, res(40, 2, True, 1)))
-    d.feed(ResultsMissed(d.t, 41, 45, "the controller no longer has it", live=True))
-    d.feed(ResultIn(d.t, res(46, 2, True, 1)))
-    d.t += 1.0
-    d.feed(DeviceFault(d.t, "wrench", FaultKind.DOWN, "link lost"))   # replaced
-    d.t += 60.0
-    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
-    d.t += 1.0
-    d.feed(CaughtUp(d.t, False, CLEARED, 1, restarted=True))
+    d = _replaced_after_a_gap(restarted=True)
     d.step(("lift", 0.1, True, True, "VIN1"))
     _enabled(d, 3)                                            # B3, pset 1
     d.t += 0.5
