@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import random
 import shutil
 import signal
 import socket
@@ -50,10 +51,34 @@ WIRING_MAX_AGE_S = 30.0
 
 
 def free_port() -> int:
-    """A loopback port nothing listens on now (a device the test starts later takes it)."""
-    with socket.socket() as s:
+    """A loopback port nothing uses now, for a device the test starts later.  Taken below
+    the kernel's ephemeral range: a port the kernel gave out (``bind(0)``) is also the one it
+    may give next as the local port of an outgoing connection, and a daemon connecting
+    meanwhile held the controller's port when its simulator came to listen on it (CI once:
+    "Address already in use").  Random, so that two test processes rarely try the same."""
+    low = _ephemeral_low()
+    rng = random.Random()
+    for _ in range(200):
+        port = rng.randrange(20000, low)
+        with socket.socket() as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    with socket.socket() as s:      # the range full: the kernel's choice
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+def _ephemeral_low() -> int:
+    """The first port of the kernel's ephemeral range (Linux's default 32768 elsewhere)."""
+    try:
+        low = int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 32768
+    return low if low > 20100 else 32768
 
 
 def until(pred: Callable[[], Any], timeout: float, what: str) -> None:

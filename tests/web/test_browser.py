@@ -468,7 +468,7 @@ def test_the_quality_screen_shows_capability_and_the_nok_trend(live_server, page
     page.wait(lambda p: p.count("#spc tbody tr") >= 2, what="the capability table")
     row = page.js("return [...document.querySelectorAll('#spc tr[data-bolt=B1] td')]"
                   ".map(td => td.textContent)")
-    assert row[1] == "B1" and row[3] == "6" and row[4] == "0"
+    assert row[1] == "B1" and row[3] == "v1" and row[4] == "6" and row[5] == "0"
     assert float(row[6]) > 1.33                                      # Cp: a capable bolt
     trend = page.js("return [...document.querySelectorAll('#trend tbody td')]"
                     ".map(td => td.textContent)")
