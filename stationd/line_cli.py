@@ -174,8 +174,7 @@ def cmd_line_quarantine(args: argparse.Namespace) -> int:
         # as line status says it (a newcomer's trial: "no database", exit 2, beside line
         # status's "nothing waits", exit 0, for the same station)
         print(f"no database at {path} yet: the station has recorded nothing, so nothing is "
-              f"quarantined (or {args.config}'s "
-              "database.url names another file)")
+              f"quarantined (or {args.config}'s database.url names another file)")
         return 0
     fwd = _forwarder(args, write=args.retry, cfg=cfg)
     try:

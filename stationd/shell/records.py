@@ -188,19 +188,16 @@ class Records:
             return
         model = report.vehicle.model
         held = dict(report.held)
-        open_ = [b.bolt_id + (" held" if b.bolt_id in held else
-                              f" ending {'NOK' if b.status == NOK else 'to be loosened'}")
+        open_ = [b.bolt_id + (" held" if b.bolt_id in held else " ending NOK"
+                              if b.status == NOK else " to be loosened")
                  for b in report.bolts if f"{model}/{b.bolt_id}" in removed
                  and (b.status in (NOK, TO_LOOSEN) or b.bolt_id in held)]
         if open_:
             self.log.warning("vehicle %s at the station: removed from the table while not "
-                             "done: %s; the vehicle's report keeps %s records and counts "
-                             "%s still, the station no more (put %s back to work %s, or "
-                             "skip %s with a reason before removing %s)", vin,
-                             ", ".join(open_), *(("its", "it", "it", "it", "it", "it")
-                                                 if len(open_) == 1 else
-                                                 ("their", "them", "them", "them", "them",
-                                                  "them")))
+                             "done: %s; the vehicle's report keeps each one's records and "
+                             "counts it, the station no more (put a bolt back to work it, "
+                             "or skip it with a reason before removing it)", vin,
+                             ", ".join(open_))
 
     def _repo(self) -> Repository:
         if self.repo is None:

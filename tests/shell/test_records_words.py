@@ -130,7 +130,7 @@ def test_a_removed_bolt_the_vehicle_at_the_station_ends_nok_or_holds_is_said(
     warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
     assert [m for m in warned if "not done" in m] == [
         "vehicle VIN2 at the station: removed from the table while not done: B3 ending NOK; "
-        "the vehicle's report keeps its records and counts it still, the station no more "
-        "(put it back to work it, or skip it with a reason before removing it)"], warned
+        "the vehicle's report keeps each one's records and counts it, the station no more "
+        "(put a bolt back to work it, or skip it with a reason before removing it)"], warned
     assert "B3" in records.repo.vehicle_report("VIN2").nok
     records.repo.close()
