@@ -105,15 +105,12 @@ class ControllerFeed:
         self._unasked = False
         #: the catch-up running found the controller's ids started again (:class:`CaughtUp`)
         self._restarted = False
-        #: a link cut's ids (after the last recorded, before the first pushed since) whose
-        #: asking :meth:`_cut_ids` could not finish (the link lost meanwhile): the next
-        #: catch-up asks for them first (it counts from the last recorded, beyond them)
-        self._cut_owed: tuple[int, int] | None = None
-        #: ids a pushed result skipped with the link up (first, last, and that result's id)
-        #: whose asking :meth:`_live_gap_alone` could not finish (the link lost meanwhile):
-        #: the next catch-up asks for them first (it counts from the last recorded, that
-        #: pushed one or beyond), each fed as it would have been (with the link up, before it)
-        self._live_owed: list[tuple[int, int, int]] = []
+        #: ids whose asking the link's loss cut short (first, last, and the pushed result
+        #: that skipped them with the link up, :meth:`_live_gap_alone`; None: a link cut's,
+        #: :meth:`_cut_ids`): the next catch-up asks for them first, each fed as it would
+        #: have been (it counts from the last recorded, beyond them: a review found them
+        #: never asked for again, not even a gap, their bolt left open)
+        self._owed: list[tuple[int, int, int | None]] = []
         self._reads = 0         # the results' loop's reads of the controller so far
         #: when the controller's clock was last measured (at each connect, by the driver;
         #: then every CLOCK_CHECK_S: :meth:`_check_clock`)
@@ -298,16 +295,8 @@ class ControllerFeed:
             # before this is told
             await self._read_since(self._reads)
             return "this controller keeps no results to fetch"
-        if self._cut_owed is not None:     # an earlier cut's ids, not asked for to the end
-            first, end = self._cut_owed
-            try:
-                await self._fetch(wrench, plan_gaps(first - 1, end), first - 1)
-            except RefusedError as exc:    # stored as a gap (:meth:`_refused_from`)
-                log.warning("results made during an earlier link cut (%s) not fetched: %s",
-                            id_span(first, end), one_line(exc))
-            self._cut_owed = None
-        while self._live_owed:      # ids a push skipped with the link up, not all asked for
-            await self._live_owed_fetched(wrench)
+        while self._owed:       # ids not all asked for before the link was lost
+            await self._owed_fetched(wrench)
         last = await self._call(self.records.last_tightening_id)
         try:
             newest = await self._call(wrench.fetch_result, 0)
@@ -342,30 +331,40 @@ class ControllerFeed:
             return await self._first_results(wrench, newest, nid, restarted=True)
         return await self._fetch(wrench, todo, last, newest)
 
-    async def _live_owed_fetched(self, wrench: Wrench) -> None:
-        """The first ids :meth:`_live_gap_alone` could not finish asking for (the link lost
-        meanwhile), asked for now, one gap at a time: each fed as fetched with the link up
-        before the pushed result that skipped it (made then, not during a cut: the core
+    async def _owed_fetched(self, wrench: Wrench) -> None:
+        """The first ids :attr:`_owed` (the link lost while they were asked for), asked for
+        now, one gap at a time, as they would have been: a push's skipped ids fed as
+        fetched with the link up before that push (made then, not during a cut: the core
         never proves one the cut's result by its id alone, and holds the bolts whose result
-        a gap of them may be); a refusal stores the rest as a gap told with the link up.  A
-        link lost again leaves those not asked for yet to the next catch-up."""
-        first, end, before = self._live_owed[0]
+        a gap of them may be), a cut's as the catch-up's; a refusal stores the rest as a gap
+        (told with the link up for a push's).  A link lost again leaves those not asked for
+        yet to the next catch-up."""
+        first, end, before = self._owed[0]
+        live = before is not None
         done: list[int] = []
         async with self._gaps:
             self._revealed_by = before
             try:
-                await self._fetch(wrench, plan_gaps(first - 1, end), first - 1, live=True,
+                await self._fetch(wrench, plan_gaps(first - 1, end), first - 1, live=live,
                                   done=done)
             except RefusedError as exc:    # stored as a gap (:meth:`_refused_from`)
-                log.warning("results missed with the link up (%s) not fetched: %s",
+                log.warning("results %s (%s) not fetched: %s", "missed with the link up"
+                            if live else "made during an earlier link cut",
                             id_span(first, end), one_line(exc))
             except (DeviceError, ValueError):
                 if done:
-                    self._live_owed[0] = (done[-1] + 1, end, before)
+                    self._owed[0] = (done[-1] + 1, end, before)
                 raise
             finally:
                 self._revealed_by = None
-        self._live_owed.pop(0)
+        self._owed.pop(0)
+
+    def _owe(self, todo: GapPlan, done: list[int], before: int | None) -> None:
+        """The ids of ``todo`` the link's loss left not asked for (not in ``done``): owed
+        to the next catch-up (:attr:`_owed`; ``before``: the push that skipped them)."""
+        rest = [t for t in todo.fetch if t not in done]
+        if rest:
+            self._owed.append((rest[0], rest[-1], before))
 
     async def _count_restarted(self, wrench: Wrench, last: int, newest: Received) -> bool:
         """Whether the controller's ids started again though its newest is not below
@@ -614,12 +613,7 @@ class ControllerFeed:
             log.warning("results missed with the link up (%s) not fetched: %s", ids,
                         one_line(exc))
         except (DeviceError, ValueError) as exc:   # the link's keeper reports it
-            # (the next catch-up counts from the last recorded, ``tid`` or beyond: those not
-            # asked for yet are asked for then, first; a review found them never asked for
-            # again, not even a gap, their bolt left open)
-            rest = [t for t in todo.fetch if t not in done]
-            if rest:
-                self._live_owed.append((rest[0], rest[-1], tid))
+            self._owe(todo, done, tid)     # asked for first by the next catch-up
             log.warning("results missed with the link up (%s) not fetched yet: %s", ids,
                         one_line(exc))
         except STATION_FAULTS as exc:
@@ -645,15 +639,15 @@ class ControllerFeed:
         ids = id_span(after + 1, tid - 1)
         log.warning("results: tightening %d came after %d (the catch-up after the reconnect "
                     "not done): %s made during the link cut, asked for", tid, after, ids)
+        todo = plan_gaps(after, tid - 1)
+        done: list[int] = []
         try:
-            await self._fetch(wrench, plan_gaps(after, tid - 1), after)
+            await self._fetch(wrench, todo, after, done=done)
         except RefusedError as exc:    # stored as a gap (:meth:`_refused_from`)
             log.warning("results made during the link cut (%s) not fetched: %s", ids,
                         one_line(exc))
         except (DeviceError, ValueError) as exc:   # the link's keeper reports it
-            # (the next catch-up counts from the last recorded, ``tid`` or beyond: asked for
-            # then, first; a review found them never asked for again, not even a gap)
-            self._cut_owed = (after + 1, tid - 1)
+            self._owe(todo, done, None)    # asked for first by the next catch-up
             log.warning("results made during the link cut (%s) not fetched yet: %s", ids,
                         one_line(exc))
         except STATION_FAULTS as exc:

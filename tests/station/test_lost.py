@@ -278,7 +278,7 @@ def test_a_lost_push_after_an_unreadable_result_is_its_own_bolt_s_by_the_order_o
 def test_a_lost_push_asked_for_again_after_the_link_dropped_still_holds_its_bolt(then):
     """B1 tightened (41, its push lost), its check told nothing; B3's 42 skips 41 and the
     link drops as 41 is asked for; 42 is fed (recorded to B3), the link comes back.  The
-    shell's next catch-up asks for 41 first (``ControllerFeed._live_owed``) and feeds it as
+    shell's next catch-up asks for 41 first (``ControllerFeed._owed``) and feeds it as
     it would have (fetched with the link up, before 42), or, refused, a gap with the link
     up: B1 held, as without the cut (told as the cut's gap, not live, B1 was left open:
     tightened twice)."""
