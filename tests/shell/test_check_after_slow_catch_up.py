@@ -48,14 +48,19 @@ BUSY = RefusedError("fetch tightening (newest): refused by the controller: error
                     "(controller internal request timeout)", code=98)
 
 
+async def _caught_up(feed_: Any) -> None:
+    """The link back: the feed's catch-up started and run to its end."""
+    feed_.came_back()
+    assert feed_.catching_up is not None
+    await feed_.catching_up
+
+
 async def _checked_after_catch_up(controller: SlowOnce, fed: list[Any],
                                   pool: ThreadPoolExecutor) -> Any:
     """A reconnect's catch-up (its MID 0064 as ``controller`` answers it first), 40 the last
     heard on the link; then B1 run down (41, its push lost) and its tool-on check: the feed."""
     feed_ = _feed_of(controller, 40, None, fed, pool)
-    feed_.came_back()
-    assert feed_.catching_up is not None
-    await feed_.catching_up                  # the one slow MID 0064 (or answered: 40)
+    await _caught_up(feed_)                  # the one slow MID 0064 (or answered: 40)
     feed_._accounted = 40                    # 40 the last heard on this link (pushed)
     controller.answers = {0: res(41), 41: res(41)}   # B1 run down: 41, its push lost
     core: Any = feed_.core
@@ -140,9 +145,7 @@ def test_the_ids_a_slow_catch_up_did_not_fetch_are_asked_for_not_stored_as_refus
     async def main() -> None:
         pool = ThreadPoolExecutor(2)
         feed_ = _feed_of(controller, 40, None, fed, pool)
-        feed_.came_back()
-        assert feed_.catching_up is not None
-        await feed_.catching_up                  # the one slow MID 0064: not caught up
+        await _caught_up(feed_)                  # the one slow MID 0064: not caught up
         controller.push = 42                     # B2 run down after the reconnect
         await feed_.results(controller)
         pool.shutdown()
@@ -216,17 +219,13 @@ def test_the_cut_s_ids_asked_for_as_the_link_drops_again_are_not_lost():
     async def main() -> None:
         pool = ThreadPoolExecutor(2)
         feed_ = _feed_of(controller, 40, None, fed, pool)
-        feed_.came_back()
-        assert feed_.catching_up is not None
-        await feed_.catching_up                  # the one slow MID 0064: not caught up
+        await _caught_up(feed_)                  # the one slow MID 0064: not caught up
         controller.push = 42                     # B2 run down after the reconnect
         await feed_.results(controller)          # 41 asked for: the link drops
         # the link back: 42 recorded, the controller gives 41 now
         feed_.records.last_tightening_id = lambda: 42    # type: ignore[method-assign]
         controller.answers = {0: res(42), 41: res(41), 42: res(42)}
-        feed_.came_back()
-        assert feed_.catching_up is not None
-        await feed_.catching_up
+        await _caught_up(feed_)
         pool.shutdown()
         feed_.close()
 
@@ -265,9 +264,7 @@ def test_the_ids_a_push_skipped_asked_for_as_the_link_drops_are_not_lost(drop_at
         controller.answers = dict(answers)
         if then == "refused":
             controller.answers[drop_at] = REFUSED
-        feed_.came_back()
-        assert feed_.catching_up is not None
-        await feed_.catching_up
+        await _caught_up(feed_)
         pool.shutdown()
         feed_.close()
 
