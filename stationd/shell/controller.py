@@ -606,19 +606,7 @@ class ControllerFeed:
         # "fetched" followed at once by "not fetched: refused")
         log.warning("results: tightening %d came after %d: %s not pushed by the controller "
                     "(the link up): asked for", tid, last, ids)
-        done: list[int] = []
-        try:
-            await self._fetch(wrench, todo, last, live=True, done=done)
-        except RefusedError as exc:    # asking again will not help: stored as a gap
-            log.warning("results missed with the link up (%s) not fetched: %s", ids,
-                        one_line(exc))
-        except (DeviceError, ValueError) as exc:   # the link's keeper reports it
-            self._owe(todo, done, tid)     # asked for first by the next catch-up
-            log.warning("results missed with the link up (%s) not fetched yet: %s", ids,
-                        one_line(exc))
-        except STATION_FAULTS as exc:
-            log.error("results missed with the link up (%s) not fetched: %s", ids,
-                      one_line(exc))
+        await self._ask(wrench, todo, last, tid, ids)
 
     async def _cut_ids(self, wrench: Wrench, after: int, tid: int,
                        skipped: bool = True) -> None:
@@ -639,20 +627,27 @@ class ControllerFeed:
         ids = id_span(after + 1, tid - 1)
         log.warning("results: tightening %d came after %d (the catch-up after the reconnect "
                     "not done): %s made during the link cut, asked for", tid, after, ids)
-        todo = plan_gaps(after, tid - 1)
+        await self._ask(wrench, plan_gaps(after, tid - 1), after, None, ids)
+
+    async def _ask(self, wrench: Wrench, todo: GapPlan, last: int, before: int | None,
+                   ids: str) -> None:
+        """The ids ``todo`` plans after ``last`` (``ids`` in words), asked for: ``before``,
+        the pushed result that skipped them with the link up (:meth:`_live_gap_alone`), or
+        None, a link cut's (:meth:`_cut_ids`).  A refusal stores them as a gap
+        (:meth:`_refused_from`: asking again will not help); a link lost meanwhile leaves
+        those not asked for yet to the next catch-up (:meth:`_owe`)."""
+        what = "missed with the link up" if before is not None else \
+            "made during the link cut"
         done: list[int] = []
         try:
-            await self._fetch(wrench, todo, after, done=done)
-        except RefusedError as exc:    # stored as a gap (:meth:`_refused_from`)
-            log.warning("results made during the link cut (%s) not fetched: %s", ids,
-                        one_line(exc))
+            await self._fetch(wrench, todo, last, live=before is not None, done=done)
+        except RefusedError as exc:
+            log.warning("results %s (%s) not fetched: %s", what, ids, one_line(exc))
         except (DeviceError, ValueError) as exc:   # the link's keeper reports it
-            self._owe(todo, done, None)    # asked for first by the next catch-up
-            log.warning("results made during the link cut (%s) not fetched yet: %s", ids,
-                        one_line(exc))
+            self._owe(todo, done, before)  # asked for first by the next catch-up
+            log.warning("results %s (%s) not fetched yet: %s", what, ids, one_line(exc))
         except STATION_FAULTS as exc:
-            log.error("results made during the link cut (%s) not fetched: %s", ids,
-                      one_line(exc))
+            log.error("results %s (%s) not fetched: %s", what, ids, one_line(exc))
 
     async def _fetch(self, wrench: Wrench, todo: GapPlan, last: int | None,
                      newest: Received | None = None, live: bool = False,
