@@ -421,7 +421,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 @functools.cache
 def _parser(command: str | None = None) -> argparse.ArgumentParser:
-    """The parser of ``command`` (see :func:`build_parser`)."""
+    """The parser of ``command`` (see :func:`build_parser`), built once per process and
+    command: parsing never changes it, and a process that runs many commands (the tests run
+    thousands) pays it once."""
     return build_parser(command)
 
 

@@ -343,8 +343,8 @@ class WebServer:
                 # the bolts to be loosened first (a NOK's loosening, a person's loosen
                 # command), each with its loosen pset: the state line says only the last
                 # rundown (a newcomer's trial: "bolt B21 OK; tracking" after loosen B21)
-                "to_loosen": [{"bolt": b.bolt, "loosen_pset": b.loosen_pset}
-                              for b in self.view.bolts.values() if b.loosen],
+                "to_loosen": [{"bolt": b["bolt"], "loosen_pset": b["loosen_pset"]}
+                              for b in v["bolts"] if b["loosen"]],
                 # the last reload's refusal (the file on disk does not read): the station
                 # runs on the configuration it loaded before (None: it runs on the file)
                 "reload_refused": self.reload_refused,
