@@ -332,9 +332,14 @@ class LostRules(NokRules):
         revealed it: the ids grow with every tightening; a review: after a catch-up that
         timed out, the cut's id stored as a gap and given after all closed the next bolt of
         its pset), or its own time while the link was down (:meth:`_made_offline`)."""
-        tid, n = int(ev.result.tightening_id), self._enable_serial
+        n = self._enable_serial
         return self._made_offline(ev) or self._sent_late_from_cut(ev) or any(
-            first <= tid <= last and told < n for first, last, told in self._gaps_told)
+            told < n for told in self._gaps_holding(int(ev.result.tightening_id)))
+
+    def _gaps_holding(self, tid: int) -> list[int]:
+        """Of the gaps told whose ids hold ``tid``, how many enables had come when each was
+        told (none: ``tid`` in no gap told)."""
+        return [told for first, last, told in self._gaps_told if first <= tid <= last]
 
     def _count_restarted(self, ev: ResultIn) -> None:
         """A result pushed under an id at or below the newest judged, in no gap told, and not
@@ -345,8 +350,7 @@ class LostRules(NokRules):
         its tool on, to be tightened twice); and so is the newest judged when a catch-up
         did not end complete (:meth:`_sent_late_from_cut`)."""
         tid, last = int(ev.result.tightening_id), self._judged
-        if ev.fetched or last is None or tid > last[0] or any(
-                first <= tid <= end for first, end, _ in self._gaps_told):
+        if ev.fetched or last is None or tid > last[0] or self._gaps_holding(tid):
             return
         self._gaps_told, self._cut_unsettled = [], None
 
