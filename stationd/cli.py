@@ -28,6 +28,7 @@ from typing import Any, NoReturn
 from stationd.cliparse import EXIT_BAD_INPUT
 from stationd.cliparse import Parser as _Parser
 from stationd.errors import InputError, StationError, printable
+from stationd.stopping import STOPPING, held
 
 EXIT_OK, EXIT_NOT_FOUND = 0, 1
 #: a command stopped by a signal: the shell's 128 + the signal's number, as if it had been
@@ -781,6 +782,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     was.  A command that takes the signals itself (``stationd run`` stops its station in
     order, ``demo --hold`` ends its hold, ``demo --no-sim-supervisor`` the people's wait) does
     so inside."""
+    outfile = sys.modules.get("stationd.outfile")
+    if outfile is not None:
+        outfile.forget_written()
     with _signals(restore=argv is not None) as stopped:
         try:
             if stopped.signal is not None:   # came as the handlers were put in
@@ -824,8 +828,6 @@ class _Stopped:
     signal: int | None = None
 
 
-#: the signals a command is stopped by
-STOPPING = (signal.SIGINT, signal.SIGTERM)
 #: a signal that lands in the import machinery's own code is asked again this much later,
 #: at most this many times in a row (then raised wherever it lands)
 DEFER_S, DEFER_TIMES = 0.02, 50
@@ -907,42 +909,40 @@ def _importing(frame: FrameType | None) -> bool:
     return frame is not None and frame.f_code.co_filename.startswith("<frozen importlib")
 
 
-@contextmanager
-def _held() -> Iterator[None]:
-    """The signals held back (blocked, delivered when the body ends) while the modules load:
-    one that lands in a C extension's import is turned into an ImportError by some (numpy's
-    ``PyCapsule_Import``), or leaves a module half made; held, it stops the command a moment
-    later, between two lines of ours."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, STOPPING)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
-
-
 def _stopped(stopped: _Stopped) -> int:
     """The one line and the code of a command stopped by a signal.  From here on, a second
     signal ends the process at once (the defaults), silently: the line is said, the files the
     command was writing are either whole or removed (written beside and renamed,
-    :func:`stationd.outfile.write_all`)."""
+    :func:`stationd.outfile.write_all`), and the line names those already in place."""
     for s in STOPPING:
         if signal.getsignal(s) is not signal.SIG_IGN:
             signal.signal(s, signal.SIG_DFL)
     term = stopped.signal == signal.SIGTERM
+    line = "stationd: stopped by SIGTERM" if term else "stationd: interrupted (Ctrl-C)"
     try:
-        sys.stderr.write("stationd: stopped by SIGTERM\n" if term else
-                         "stationd: interrupted (Ctrl-C)\n")
+        sys.stderr.write(f"{line}{_after_writing()}\n")
         sys.stderr.flush()
     except (OSError, ValueError):
         pass   # stderr closed: the code still says it
     return EXIT_SIGTERM if term else EXIT_SIGINT
 
 
+def _after_writing() -> str:
+    """What a stopped command had already put in place, for its stop line: a file written
+    whole just before the signal (the rename done, "wrote" not said yet) is there, and the
+    line says so rather than leaving the user to think nothing was written."""
+    outfile = sys.modules.get("stationd.outfile")   # not loaded: nothing was written
+    files = outfile.written() if outfile is not None else ()
+    if not files:
+        return ""
+    if len(files) <= 3:
+        return " after writing " + ", ".join(printable(str(f)) for f in files)
+    return f" after writing {len(files)} files, the last {printable(str(files[-1]))}"
+
+
 def _main(argv: Sequence[str] | None, stopped: _Stopped) -> int:
-    with _held():
+    with held():   # a signal in a C extension's import: numpy's PyCapsule_Import makes it
+                   # an ImportError, or a module is left half made
         from stationd import progress
         from stationd.logsetup import quiet_opencv
 

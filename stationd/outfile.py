@@ -33,11 +33,14 @@ from pathlib import Path
 
 from stationd.errors import ConfigError, InputError
 from stationd.filekind import KINDS, described, kind_of_keys
+from stationd.stopping import held
 from stationd.yamlio import YamlNode, top_keys
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
 #: how a results CSV export begins (stationd.web.results.CSV_FIELDS)
 RESULTS_CSV_HEAD = "vin,model,bolt,"
+#: every file this process put in place, in order (:func:`written`)
+_WRITTEN: list[Path] = []
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 #: the ``tEXt`` keyword of :func:`stamp_png` (PNG's registered keyword for the program)
 PNG_STAMP_KEY = b"Software"
@@ -186,9 +189,13 @@ def write_all(files: list[tuple[Path, str | bytes]]) -> None:
                     f.flush()
                     os.fsync(f.fileno())
                 os.chmod(tmp, mode)
-            for tmp, path in temps:
-                current = path
-                os.replace(tmp, path)
+            # a signal between two renames would leave some files new and some old, and
+            # one just after a rename a file in place that the command's stop never names
+            with held():
+                for tmp, path in temps:
+                    current = path
+                    os.replace(tmp, path)
+                    _WRITTEN.append(path)
         except BaseException:
             for tmp, _ in temps:
                 with contextlib.suppress(OSError):
@@ -200,6 +207,17 @@ def write_all(files: list[tuple[Path, str | bytes]]) -> None:
         raise InputError(f"{current}: cannot write: No such file or directory") from None
     except OSError as exc:
         raise InputError(f"{current}: cannot write: {exc.strerror or exc}") from None
+
+
+def written() -> tuple[Path, ...]:
+    """The files this process has put in place since :func:`forget_written`: a command
+    stopped by a signal after writing one says so (its stop line), not as if nothing was."""
+    return tuple(_WRITTEN)
+
+
+def forget_written() -> None:
+    """A new command begins (a caller running several in one process, as the tests do)."""
+    _WRITTEN.clear()
 
 
 def folder_missing(path: Path, option: str = "--out") -> str:

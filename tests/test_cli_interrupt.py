@@ -147,3 +147,36 @@ def test_an_interrupt_as_the_handlers_are_put_in_is_the_command_s_not_a_tracebac
     monkeypatch.undo()
     # the handlers put back as they were (restore: a test's main)
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_command_stopped_just_after_its_file_was_put_in_place_names_the_file(
+        monkeypatch, capsys, tmp_path):
+    """A SIGTERM that landed after tune-color's rename and before its "wrote" line (the
+    suite, once) ended it as "stopped" with the whole file there: the user read that nothing
+    was written.  The stop line names what the command had already put in place; a command
+    stopped before writing anything says only that it stopped."""
+    from stationd import outfile
+
+    out = tmp_path / "hsv.yaml"
+
+    def command(argv: object, stopped: object) -> int:
+        outfile.write_atomic(out, "# HSV range\n")
+        handler = signal.getsignal(signal.SIGINT)
+        assert callable(handler)
+        handler(signal.SIGINT, sys._getframe())   # the Ctrl-C, before "wrote" is said
+        return 0
+
+    monkeypatch.setattr(cli, "_main", command)
+    assert cli.main(["anything"]) == cli.EXIT_SIGINT
+    assert capsys.readouterr().err == f"stationd: interrupted (Ctrl-C) after writing {out}\n"
+    assert out.read_text() == "# HSV range\n"
+
+    def stopped_early(argv: object, stopped: object) -> int:
+        handler = signal.getsignal(signal.SIGINT)
+        assert callable(handler)
+        handler(signal.SIGINT, sys._getframe())
+        return 0
+
+    monkeypatch.setattr(cli, "_main", stopped_early)
+    assert cli.main(["another"]) == cli.EXIT_SIGINT   # the first command's file is not its
+    assert capsys.readouterr().err == "stationd: interrupted (Ctrl-C)\n"

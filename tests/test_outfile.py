@@ -15,11 +15,13 @@ import pytest
 from stationd.errors import InputError
 from stationd.outfile import (
     DRAWING_STAMP,
+    forget_written,
     kind_of,
     refuse_to_replace,
     stamp_png,
     write_all,
     write_atomic,
+    written,
 )
 
 SIM = Path(__file__).resolve().parents[1] / "config" / "sim"
@@ -101,3 +103,36 @@ def test_written_files_take_the_umask_mode_or_keep_the_replaced_ones(tmp_path):
     write_atomic(tmp_path / "b.yaml", "b: 2\n")
     assert stat.S_IMODE((tmp_path / "b.yaml").stat().st_mode) == 0o604
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png", "b.yaml", "c.yaml"]
+
+
+def test_a_signal_between_two_renames_comes_after_the_last(tmp_path, monkeypatch):
+    """``calibrate stereo`` writes the pair and a camera together, all or none; a Ctrl-C
+    that landed between the two renames left one new and one old, and one just after a
+    rename a file in place that the stop line never named.  The signal waits until every
+    file is in place, and each is remembered as written."""
+    import signal
+
+    pair, cam = tmp_path / "pair.yaml", tmp_path / "cam.yaml"
+    pair.write_text("old\n")
+    cam.write_text("old\n")
+    real = os.replace
+    sent: list[str] = []
+
+    def replace_then_interrupted(src: str, dst: os.PathLike[str]) -> None:
+        real(src, dst)
+        if not sent:
+            sent.append(str(dst))
+            os.kill(os.getpid(), signal.SIGINT)   # the Ctrl-C, between the two renames
+
+    forget_written()
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    monkeypatch.setattr("stationd.outfile.os.replace", replace_then_interrupted)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            write_all([(pair, "new pair\n"), (cam, "new cam\n")])
+    finally:
+        signal.signal(signal.SIGINT, before)
+    assert sent == [str(pair)]
+    assert (pair.read_text(), cam.read_text()) == ("new pair\n", "new cam\n")
+    assert written() == (pair, cam)
+    assert [f.name for f in tmp_path.iterdir() if f.name.startswith(".")] == []
