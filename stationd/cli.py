@@ -25,6 +25,7 @@ from pathlib import Path
 from types import FrameType
 from typing import Any, NoReturn
 
+from stationd import stopping
 from stationd.cliparse import EXIT_BAD_INPUT
 from stationd.cliparse import Parser as _Parser
 from stationd.errors import InputError, StationError, printable
@@ -857,6 +858,8 @@ def _signals(restore: bool) -> Iterator[_Stopped]:
     def on_signal(signum: int, frame: FrameType | None) -> None:
         if stopped.signal is None:
             stopped.signal = signum
+        if stopping.deferred(signum):
+            return   # a step that must be whole (stopping.held): raised again at its end
         for timer in pending:
             timer.cancel()
         pending.clear()

@@ -5,12 +5,18 @@ one line and 130 (143) wherever they land, and the few steps that must be whole 
 comes (a module's import in a C extension, the renames that put a command's files in place)
 hold the signals back meanwhile; both need the same list and the same rule, below the
 modules that write files.
+
+Why a flag and not the thread's signal mask: a process with threads (an export's progress
+bar, a command's asyncio executor, pytest-xdist's workers) has the kernel deliver a signal to
+any thread that does not block it, and Python then runs its handler in the main thread at
+once: blocking it in the main thread alone held nothing back.  The handler the command line
+puts in asks :func:`deferred` first, so a signal that comes during a hold is raised again as
+the hold ends, whichever thread received it.
 """
 
 from __future__ import annotations
 
 import signal
-import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -18,17 +24,33 @@ from contextlib import contextmanager
 STOPPING = (signal.SIGINT, signal.SIGTERM)
 
 
+class _Hold:
+    """How many holds are open, and the signal that came meanwhile (None: none)."""
+
+    depth = 0
+    pending: int | None = None
+
+
 @contextmanager
 def held() -> Iterator[None]:
-    """SIGINT and SIGTERM held back (blocked, delivered when the body ends) in the main
-    thread, the only one Python runs signal handlers in: one that comes meanwhile stops the
-    command a moment later, between two lines of ours, instead of in the middle of a step
-    that must be whole.  Elsewhere (another thread) nothing to hold."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, STOPPING)
+    """SIGINT and SIGTERM held back while the body runs (holds nest): one that comes
+    meanwhile is raised again as the last hold ends, and stops the command there, between
+    two lines of ours, instead of in the middle of a step that must be whole."""
+    _Hold.depth += 1
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+        _Hold.depth -= 1
+        if _Hold.depth == 0 and _Hold.pending is not None:
+            signum, _Hold.pending = _Hold.pending, None
+            signal.raise_signal(signum)
+
+
+def deferred(signum: int) -> bool:
+    """Whether ``signum``, just received, waits for a hold's end (remembered, raised again
+    then); a handler that gets True does nothing more now."""
+    if _Hold.depth == 0:
+        return False
+    if _Hold.pending is None:
+        _Hold.pending = signum
+    return True

@@ -109,8 +109,12 @@ def test_a_signal_between_two_renames_comes_after_the_last(tmp_path, monkeypatch
     """``calibrate stereo`` writes the pair and a camera together, all or none; a Ctrl-C
     that landed between the two renames left one new and one old, and one just after a
     rename a file in place that the stop line never named.  The signal waits until every
-    file is in place, and each is remembered as written."""
+    file is in place, and each is remembered as written; with the command line's own
+    handler, and threads beside the main one (the kernel may give the signal to any)."""
     import signal
+    import threading
+
+    from stationd.cli import _signals
 
     pair, cam = tmp_path / "pair.yaml", tmp_path / "cam.yaml"
     pair.write_text("old\n")
@@ -125,13 +129,18 @@ def test_a_signal_between_two_renames_comes_after_the_last(tmp_path, monkeypatch
             os.kill(os.getpid(), signal.SIGINT)   # the Ctrl-C, between the two renames
 
     forget_written()
-    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)   # not ignored
     monkeypatch.setattr("stationd.outfile.os.replace", replace_then_interrupted)
+    idle = threading.Event()
+    beside = threading.Thread(target=idle.wait, daemon=True)
+    beside.start()
     try:
-        with pytest.raises(KeyboardInterrupt):
+        with _signals(restore=True) as stopped, pytest.raises(KeyboardInterrupt):
             write_all([(pair, "new pair\n"), (cam, "new cam\n")])
     finally:
+        idle.set()
         signal.signal(signal.SIGINT, before)
+    assert stopped.signal == signal.SIGINT
     assert sent == [str(pair)]
     assert (pair.read_text(), cam.read_text()) == ("new pair\n", "new cam\n")
     assert written() == (pair, cam)
