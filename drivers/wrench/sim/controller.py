@@ -190,6 +190,7 @@ class SimController(OpenProtocolServer):
             seconds=self.clock_offset_s)).replace(microsecond=0))
         self._refuse_pset: dict[int, int] = dict(refusals or {})
         self._refuse_mid: dict[int, int] = dict(refused_mids or {})
+        self._refuse_newest: int | None = None   # MID 0064's id 0 refused with this code
         self._ignore_mid: set[int] = set()      # answered with nothing (:meth:`ignore_mid`)
         self._refuse_rev: dict[int, set[int]] = {
             mid: set(revs) for mid, revs in (refused_revisions or {}).items()}
@@ -282,6 +283,13 @@ class SimController(OpenProtocolServer):
         """Refuse every command ``mid`` with ``code`` (MID 0004)."""
         self.call(lambda: self._refuse_mid.__setitem__(mid, code))
 
+    def refuse_newest(self, code: int) -> None:
+        """Refuse MID 0064 asking for the newest result (id 0) with ``code``, an id asked by
+        number still given: the integrator's checks of the newest tell nothing, while a
+        pushed result that skipped ids still has them fetched (what the pushes alone decide,
+        whenever the checks would have run; :meth:`clear_refusals` ends it)."""
+        self.call(lambda: setattr(self, "_refuse_newest", code))
+
     def ignore_mid(self, mid: int) -> None:
         """Answer nothing to ``mid`` (no reply, no MID 0004), as a controller that ignores a
         MID it does not know (:meth:`clear_refusals` ends it)."""
@@ -299,6 +307,7 @@ class SimController(OpenProtocolServer):
             self._refuse_mid.clear()
             self._ignore_mid.clear()
             self._refuse_rev.clear()
+            self._refuse_newest = None
         self.call(do)
 
     def lose_next_push(self, count: int = 1) -> None:
@@ -637,6 +646,9 @@ class SimController(OpenProtocolServer):
         error 15 for an id this controller does not have (any more)."""
         if len(msg.data) != 10 or not msg.data.isdigit():
             self._refuse(s, 64, 1)
+            return
+        if int(msg.data) == 0 and self._refuse_newest is not None:
+            self._refuse(s, 64, self._refuse_newest)
             return
         tid = int(msg.data) or next(reversed(self._store), 0)
         record = self._store.get(tid)
