@@ -19,6 +19,7 @@ from stationd.reasons import Unproved, UnprovedKind
 from stationd.station.actions import (
     Action,
     Publish,
+    Record,
     Selection,
     SettleEnable,
     StoreCutUnknown,
@@ -75,7 +76,7 @@ class LostRules(NokRules):
             # tell: nothing either -- the tool stays on and the next period asks again; the
             # bolt is held only by the window-end check, as the enable's window ends without
             # a result (a hold mid-enable would stop an operator at every slow answer)
-            return self._check_ended()
+            return self._gaps_on_check_decided(ev.t) + self._check_ended()
         en, acts = self._enabled, []
         if en is not None and self._checking_owed() and not self.tool_on:
             if ev.nothing_made:
@@ -89,6 +90,28 @@ class LostRules(NokRules):
             elif ev.unknown:
                 acts = self._check_unknown(ev.t, en, ev.unknown)
         return acts + self._check_ended()
+
+    def _gaps_on_check_decided(self, t: float) -> list[Action]:
+        """The gaps a check with the tool on told (ids the controller no longer gives, made
+        with the link up): the enable on now may have been run down in them, so its bolt is
+        held (:meth:`_doubt_while_on`) -- unless a rundown made under that enable, fetched
+        after them in the same check, was recorded to it (:meth:`_gaps_superseded`): its
+        last result, as where a push revealed the same ids (the two paths decided alike: a
+        check between two pulls held the bolt and stored its later rundown as no bolt's)."""
+        told, self._gaps_on_check = self._gaps_on_check, []
+        if not told:
+            return []
+        ids = ", ".join(id_span(first, last) for first, last in told)
+        return self._doubt_while_on(t, None, lambda u: lost_gap_note(
+            ids, u.selection.pset, u.enabled_at))
+
+    def _gaps_superseded(self, tid: int, acts: list[Action], en: Selection) -> None:
+        """``tid``, fetched by a check with the tool on, recorded to ``en``, the enable on
+        as it came (in ``acts``): the gaps that check told before it no longer hold that
+        enable."""
+        if self._gaps_on_check and self._checking_on and any(
+                isinstance(a, Record) and a.selection is en for a in acts):
+            self._gaps_on_check = [g for g in self._gaps_on_check if g[1] > tid]
 
     def _check_unknown(self, t: float, en: Selection, why: str) -> list[Action]:
         """The controller could not tell whether it made a rundown under ``en`` (``why``):
@@ -258,8 +281,10 @@ class LostRules(NokRules):
             def mine(u: _Cut) -> bool:
                 return u.enabled_at >= since - CLOCK_SLACK_S
             lost = [u for u in self._unanswered if mine(u) and self._still_open(u)]
-            acts = self._hold_unanswered(ev.t, lost, note) + self._doubt_while_on(ev.t, None,
-                                                                                    note)
+            acts = self._hold_unanswered(ev.t, lost, note)
+            if self._checking_on and self._checking_owed():
+                # told by a check with the tool on: the enable on now decided at its end
+                self._gaps_on_check.append((ev.first, ev.last))
         return acts + self._gap_again(ev.t, [u for u in self._again if mine(u)], note)
 
     def _gap_again(self, t: float, again: list[_Cut], note: Callable[[_Cut], str]

@@ -99,7 +99,7 @@ class ResultRules(UnreadRules):
         """:meth:`_result_read`; a result pushed is the one owed since ids it skipped were
         fetched (or one after it; or that one fetched after a reconnect): owed no longer
         once it is judged, then the NOK policy waiting for it (:meth:`_push_judged`)."""
-        waited, tid = self._pending_push, int(ev.result.tightening_id)
+        waited, tid, en = self._pending_push, int(ev.result.tightening_id), self._enabled
         try:
             acts = self._result_read(ev)
         finally:
@@ -108,6 +108,8 @@ class ResultRules(UnreadRules):
             u = self._cut_unsettled
             if u is not None and (u[1] is None or tid > u[1]):
                 self._cut_unsettled = None   # a later id judged: what follows, made since
+        if ev.fetched and en is not None:
+            self._gaps_superseded(tid, acts, en)
         # (a result fetched late and not taken for the enable owed now was made before it,
         # under no enable known: it proves nothing of the order for this enable)
         self._judge(tid, not ev.fetched or any(

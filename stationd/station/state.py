@@ -257,6 +257,9 @@ class CoreState:
     #: the check running was asked with the tool on (:data:`CHECK_ON_S`): it ends no enable
     #: and holds nothing, and when the last such check was asked
     _checking_on: bool = field(default=False, repr=False)
+    #: the gaps (first, last id) such a check told: whether they hold the enable on now is
+    #: decided at the check's end (:meth:`LostRules._gaps_on_check_decided`)
+    _gaps_on_check: list[tuple[int, int]] = field(default_factory=list, repr=False)
     _checked_on_at: float = field(default=float("-inf"), repr=False)
     #: bolts whose NOK came fetched while a pushed result was pending: counted, the NOK
     #: policy waits for the pushed one (bolt -> its pset)

@@ -125,3 +125,39 @@ def test_an_unreadable_result_a_check_fetches_holds_the_enable_s_bolt(tool_on):
     assert "B1" in d.core.matcher.held and not d.core.tool_on
     acts = d.feed(NewestChecked(d.t, serial=check.serial))
     assert "B1" in d.core.matcher.held and "B1" not in d.core.allowed()
+
+
+@pytest.mark.parametrize("gap_first", [True, False])
+def test_a_gap_the_tool_on_check_tells_before_the_enable_s_fetched_rundown_holds_nothing(
+        gap_first):
+    """B1's tool on; the controller made 41 and 42, both pushes lost, and no longer has 41.
+    Revealed by the push of 43 (the operator pulled again), 41 is a gap and 42, fetched,
+    B1's: recorded to B1, and B1 not held (tests/station/test_gaps.py).  Found instead by
+    the periodic check with the tool on (it ran between two pulls: a loaded machine), the
+    gap held B1 and 42, made under B1's enable alone, was stored as no bolt's -- the same
+    facts decided two ways.  Decided at the check's end now: 42 recorded to B1 and nothing
+    held.  Control: a gap after the rundown fetched (42 gone, 41 B1's) may be a second
+    rundown of B1: held."""
+    from stationd.station.inputs import ResultsMissed
+
+    d = _ready()
+    d.answer_checks = False
+    _enabled(d, 1)
+    at = d.t
+    d.t += CHECK_ON_S
+    [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    gap, ran = (41, 42) if gap_first else (42, 41)
+    found = [ResultsMissed(d.t, gap, gap, "the controller no longer has it", live=True),
+             ResultIn(d.t, res(ran, 1, True, 1), fetched=True, follows=40,
+                      made_at=at + 2.2, live=True)]
+    acts = [a for ev in (found if gap_first else found[::-1]) for a in d.feed(ev)]
+    acts += d.feed(NewestChecked(d.t, serial=check.serial))
+    assert [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)] \
+        == [("B1", ran)]
+    held = [a.bolt for a in acts if isinstance(a, StoreCutUnknown)]
+    if gap_first:
+        assert held == [] and "B1" not in d.core.matcher.held, \
+            "42, B1's rundown after the gap, is its result: B1 held all the same"
+    else:
+        assert held == ["B1"] and "B1" in d.core.matcher.held, \
+            "42, made after B1's rundown with its tool on, may be a second one: B1 open"
