@@ -8,6 +8,10 @@ happened; and asyncua's and asyncio's own lines ("sending service fault response
 or request.  systemd's journal is recognised as systemd documents it: ``JOURNAL_STREAM`` holds
 the device and inode of the stream it connected to standard error (``man systemd.exec``); a
 process whose standard error is something else (a terminal, a file, a pipe) stamps its lines.
+Under the journal each line begins with its syslog priority (``<4>`` a warning, ``man
+sd-daemon``), which the journal takes off and keeps as the entry's priority: without it every
+line was stored at "info", and ``journalctl -u stationd -p warning`` (the README's way to find
+faults, refused reloads and vehicles that left with bolts not OK) showed nothing.
 """
 
 from __future__ import annotations
@@ -50,6 +54,27 @@ class StampedFormatter(logging.Formatter):
         t = time.localtime(record.created)
         return (time.strftime("%Y-%m-%d %H:%M:%S", t) + f".{int(record.msecs):03d}"
                 + time.strftime("%z", t))
+
+
+#: a log level's syslog priority, as the journal reads it from a line's ``<N>`` prefix
+#: (``sd-daemon.h``: SD_CRIT 2, SD_ERR 3, SD_WARNING 4, SD_INFO 6, SD_DEBUG 7)
+PRIORITIES = ((logging.CRITICAL, 2), (logging.ERROR, 3), (logging.WARNING, 4),
+              (logging.INFO, 6))
+DEBUG_PRIORITY = 7
+
+
+def priority(levelno: int) -> int:
+    """The syslog priority of a record at ``levelno`` (a level between two: the lower's)."""
+    return next((p for level, p in PRIORITIES if levelno >= level), DEBUG_PRIORITY)
+
+
+class JournalFormatter(logging.Formatter):
+    """Each line of a record (a traceback's too) prefixed with its priority, ``<3>ERROR
+    fault: ...``: the journal keeps the priority and shows the line without it."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        prefix = f"<{priority(record.levelno)}>"
+        return "\n".join(prefix + line for line in super().format(record).split("\n"))
 
 
 def _frame_local(name: str, code: str, limit: int = 30) -> Any:
@@ -131,12 +156,13 @@ def setup_logging(level: int, stream: TextIO, *, levelname: bool = True,
                   loud: tuple[str, ...] = ()) -> logging.Handler:
     """The station's one handler on the root logger: ``level`` for every logger but
     ``loud`` ones (they write from INFO: the demo's command lines), a time stamp unless
-    ``stream`` is systemd's journal, the library lines in the station's words.  As
+    ``stream`` is systemd's journal (then each line's priority), the library lines in the
+    station's words.  As
     ``logging.basicConfig``: nothing is added when the root logger has a handler already (a
     second demo in one process, a test's capture); the handler is returned either way."""
     fmt = ("%(levelname)s " if levelname else "") + "%(message)s"
     handler = logging.StreamHandler(stream)
-    handler.setFormatter(logging.Formatter(fmt) if under_journal(stream)
+    handler.setFormatter(JournalFormatter(fmt) if under_journal(stream)
                          else StampedFormatter("%(asctime)s " + fmt))
     handler.addFilter(LibraryWords())
     logging.basicConfig(level=level, handlers=[handler])
@@ -145,8 +171,8 @@ def setup_logging(level: int, stream: TextIO, *, levelname: bool = True,
     return handler
 
 
-__all__ = ["LibraryWords", "StampedFormatter", "quiet_opencv", "setup_logging",
-           "under_journal"]
+__all__ = ["JournalFormatter", "LibraryWords", "StampedFormatter", "priority", "quiet_opencv",
+           "setup_logging", "under_journal"]
 
 
 def quiet_opencv() -> None:

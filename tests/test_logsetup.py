@@ -53,6 +53,40 @@ def test_the_journal_stream_is_recognised_by_its_device_and_inode(tmp_path: Path
         assert isinstance(setup_logging(logging.INFO, mine).formatter, StampedFormatter)
 
 
+def test_lines_in_the_journal_carry_their_priority(tmp_path: Path, monkeypatch) -> None:
+    """``journalctl -u stationd -p warning`` (the README's way to find the station's faults)
+    showed nothing: every line went to the journal at "info".  Under the journal each line
+    begins with its syslog priority (sd-daemon), a traceback's lines too; elsewhere none."""
+    root = logging.getLogger()
+    kept = (root.handlers[:], root.level)
+    try:
+        with (tmp_path / "journal").open("w") as mine:
+            st = os.fstat(mine.fileno())
+            monkeypatch.setenv("JOURNAL_STREAM", f"{st.st_dev}:{st.st_ino}")
+            root.handlers.clear()
+            setup_logging(logging.DEBUG, mine)
+            log = logging.getLogger("stationd")
+            log.debug("frame 12 read")
+            log.info("vehicle X opened")
+            log.warning("vehicle X closed: bolts: 3 missing")
+            log.error("fault: database: disk I/O error")
+            log.critical("cannot go on")
+            try:
+                raise ValueError("a reason")
+            except ValueError:
+                log.exception("the loop failed")
+        lines = (tmp_path / "journal").read_text().splitlines()
+    finally:
+        root.handlers[:] = kept[0]
+        root.setLevel(kept[1])
+    assert lines[:5] == ["<7>DEBUG frame 12 read", "<6>INFO vehicle X opened",
+                         "<4>WARNING vehicle X closed: bolts: 3 missing",
+                         "<3>ERROR fault: database: disk I/O error", "<2>CRITICAL cannot go on"]
+    assert lines[5] == "<3>ERROR the loop failed" and len(lines) > 6
+    assert all(line.startswith("<3>") for line in lines[6:]), lines[6:]
+    assert lines[-1] == "<3>ValueError: a reason"
+
+
 def test_lines_outside_the_journal_carry_their_time(journal: io.StringIO) -> None:
     logging.getLogger("stationd").info("vehicle X opened")
     assert re.fullmatch(STAMP + r"INFO vehicle X opened\n", journal.getvalue())
