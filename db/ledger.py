@@ -9,6 +9,7 @@ transaction, so a record and its feed entry are committed together or not at all
 
 from __future__ import annotations
 
+import uuid
 from collections.abc import Callable, Mapping
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
@@ -49,6 +50,23 @@ CONTROLLER_EVENT, UNREADABLE = "controller_event", "unreadable"
 #: bolt owns, those the station could not read (and, of the controller events, the OK results
 #: not taken for a tightening: :func:`is_result`)
 RESULT_KINDS = (RUNDOWN, UNATTRIBUTED, UNREADABLE)
+#: the meta keys of a renewed id (:meth:`Ledger.renew_db_id`): from which sequence number it
+#: holds, and the id the records before it keep
+DB_ID_FROM, DB_ID_BEFORE = "db_id_from", "db_id_before"
+
+
+@dataclass(frozen=True)
+class Series:
+    """The ids a database's records go to the line under: ``db_id`` from ``from_seq`` on,
+    ``before`` (None: the database never renewed its id) for the records below it."""
+
+    db_id: str
+    from_seq: int = 1
+    before: str | None = None
+
+    def id_of(self, seq: int) -> str:
+        """The id record ``seq`` goes under."""
+        return self.db_id if seq >= self.from_seq or self.before is None else self.before
 
 
 def is_result(entry: Mapping[str, Any]) -> bool:
@@ -115,9 +133,29 @@ class Ledger:
         self._session = session
 
     def db_id(self) -> str:
-        """The id this database got when it was created."""
+        """The id this database got when it was created (or renewed: :meth:`renew_db_id`)."""
         with self._session(False) as s:
             return str(s.scalar(select(Meta.value).where(Meta.key == "db_id")))
+
+    def series(self) -> Series:
+        """Under which id each record goes to the line: the database's id from
+        ``from_seq`` on, the id before it below (None: never renewed)."""
+        with self._session(False) as s:
+            meta = {key: value for key, value in s.execute(select(Meta.key, Meta.value).where(
+                Meta.key.in_(("db_id", DB_ID_FROM, DB_ID_BEFORE))))}
+        start = meta.get(DB_ID_FROM)
+        return Series(meta["db_id"], int(start) if start else 1, meta.get(DB_ID_BEFORE))
+
+    def renew_db_id(self, from_seq: int) -> Series:
+        """The records from ``from_seq`` on are a new series (a new random id): the line
+        has other records under this database's id at those sequence numbers, which a copy
+        put back (a backup) numbered again.  The records before keep the id they had."""
+        with self._session(True) as s:
+            old = str(s.scalar(select(Meta.value).where(Meta.key == "db_id")))
+            put_meta(s, "db_id", str(uuid.uuid4()))
+            put_meta(s, DB_ID_FROM, str(from_seq))
+            put_meta(s, DB_ID_BEFORE, old)
+        return self.series()
 
     def record_command(self, *, at: datetime, user: str, source: str, kind: str,
                        vin: str | None, bolt: str | None, comment: str) -> int:

@@ -39,7 +39,7 @@ from collections.abc import Callable
 from datetime import UTC, datetime
 from typing import Any
 
-from sqlalchemy import Engine, make_url
+from sqlalchemy import Connection, Engine, make_url, select
 from sqlalchemy.dialects.postgresql import insert as pg_insert
 from sqlalchemy.exc import DBAPIError, SQLAlchemyError
 
@@ -69,6 +69,17 @@ CURSOR_KEY = "forwarded_seq"
 
 class LineDown(Exception):  # noqa: N818 - a state, not a programming error
     """The line database cannot be reached or refuses writes for now: try again later."""
+
+
+class SeriesDiverged(Exception):  # noqa: N818 - a finding, not a programming error
+    """The line holds, under this database's id, another record at ``seq`` (another kind
+    or time) than this database's: the database was put back from a copy (a backup) and
+    numbered its new records again from where the copy ended.  Nothing of the batch was
+    written (its transaction rolled back)."""
+
+    def __init__(self, seq: int) -> None:
+        super().__init__(f"record {seq} is another record on the line")
+        self.seq = seq
 
 
 class LineRefuses(LineDown):
@@ -166,7 +177,11 @@ class LineDb:
             stmt = pg_insert(LINE_FEED).on_conflict_do_nothing().returning(LINE_FEED.c.seq)
             versions = parameter_rows(station_id, db_id, entries)
             with engine.begin() as conn:
-                new = len(conn.execute(stmt, rows).all())   # the rows that were new
+                taken = set(conn.execute(stmt, rows).scalars())   # the rows that were new
+                new = len(taken)
+                if new < len(rows):   # a replay (the same records), or another series
+                    _same_records(conn, station_id, db_id,
+                                  [r for r in rows if r["seq"] not in taken])
                 if versions:   # the bolt tables the rundowns were tightened with
                     conn.execute(pg_insert(LINE_PARAMETERS).on_conflict_do_nothing(),
                                  versions)
@@ -256,6 +271,21 @@ def error_line(exc: BaseException) -> str:
     return text.splitlines()[0] if text else type(exc).__name__
 
 
+def _same_records(conn: Connection, station_id: str, db_id: str,
+                  rows: list[dict[str, Any]]) -> None:
+    """The rows the line had already are the same records (a replay after a crash between
+    the push and the cursor saved: same kind, same time), else :class:`SeriesDiverged` at
+    the first that is not (the transaction then rolls back)."""
+    f = LINE_FEED.c
+    there = {seq: (kind, at) for seq, kind, at in conn.execute(
+        select(f.seq, f.kind, f.at).where(f.station_id == station_id, f.db_id == db_id,
+                                           f.seq.in_([r["seq"] for r in rows])))}
+    for r in sorted(rows, key=lambda r: r["seq"]):
+        seen = there.get(r["seq"])
+        if seen is not None and seen != (r["kind"], r["at"]):
+            raise SeriesDiverged(r["seq"])
+
+
 class Forwarder:
     """Forwards the local feed to the line database, in order, from where it stopped."""
 
@@ -267,7 +297,7 @@ class Forwarder:
         self._clock = clock      # the records' time (their lag)
         self._ticks = ticks      # intervals (a clock stepped back stops no heartbeat)
         self.cursor = int(repo.ledger.get_meta(CURSOR_KEY) or 0)
-        self.db_id = repo.ledger.db_id()
+        self.series = repo.ledger.series()
         self.up: bool | None = None        # None: not tried yet
         self.last_error: str | None = None
         self.forwarded = 0                 # entries the line database took (this process)
@@ -289,15 +319,13 @@ class Forwarder:
             return 0
         try:
             try:
-                self.forwarded += self.line.push(self.cfg.station_id, self.db_id, entries)
-            except DBAPIError:   # one is refused for good: find it, keep the rest moving
-                for e in entries:
-                    try:
-                        self.forwarded += self.line.push(self.cfg.station_id, self.db_id, [e])
-                    except DBAPIError as exc:
-                        self.repo.ledger.quarantine(e["seq"], error_line(exc))
-                        log.error("line database refused record %d (%s) for good: %s; kept "
-                                  "in quarantine", e["seq"], e["kind"], error_line(exc))
+                self._push_each(entries)
+            except SeriesDiverged as diverged:
+                # the ones before it are this series' (the same records, or new): theirs;
+                # from it on, a new series the line has nothing of
+                self._push_each([e for e in entries if e["seq"] < diverged.seq])
+                self._renew(diverged.seq)
+                self._push_each([e for e in entries if e["seq"] >= diverged.seq])
         except LineDown as exc:   # also midway through the batch: the cursor did not move
             self.up, self.last_error = False, str(exc)
             self.tries += 1
@@ -308,6 +336,42 @@ class Forwarder:
         self.up, self.last_error, self._heard = True, None, self._ticks()
         self.tries += 1
         return len(entries)
+
+    def _push(self, entries: list[dict[str, Any]]) -> int:
+        """``entries`` to the line, each under its series' id (:class:`db.ledger.Series`);
+        how many were new."""
+        new = 0
+        for db_id in dict.fromkeys(self.series.id_of(e["seq"]) for e in entries):
+            new += self.line.push(self.cfg.station_id, db_id,
+                                  [e for e in entries if self.series.id_of(e["seq"]) == db_id])
+        return new
+
+    def _push_each(self, entries: list[dict[str, Any]]) -> None:
+        """``entries`` pushed in one transaction; one refused for good: each alone, the
+        refused kept in quarantine, the rest moving."""
+        try:
+            self.forwarded += self._push(entries)
+        except DBAPIError:   # one is refused for good: find it, keep the rest moving
+            for e in entries:
+                try:
+                    self.forwarded += self._push([e])
+                except DBAPIError as exc:
+                    self.repo.ledger.quarantine(e["seq"], error_line(exc))
+                    log.error("line database refused record %d (%s) for good: %s; kept "
+                              "in quarantine", e["seq"], e["kind"], error_line(exc))
+
+    def _renew(self, seq: int) -> None:
+        """The line has other records under this database's id from ``seq`` on: the
+        database was put back from a copy (a backup), which numbered its new records again.
+        Its records from ``seq`` go as a new series (a new id): the line keeps the ones
+        it has (the records the copy lacked), and takes these beside them, none lost."""
+        old = self.series.db_id
+        self.series = self.repo.ledger.renew_db_id(seq)
+        log.warning("line database: record %d of this station's database is another record "
+                    "there (database %s): the database was put back from a copy (a backup) "
+                    "and numbered its records again; from record %d on they go as a new "
+                    "series (database %s), beside the ones the line keeps", seq, old, seq,
+                    self.series.db_id)
 
     def _probe(self) -> None:
         """Nothing to send, and the line database not known to answer: whether it does
@@ -328,7 +392,7 @@ class Forwarder:
         taken = refused = 0
         for e in self.repo.ledger.quarantined():
             try:
-                self.forwarded += self.line.push(self.cfg.station_id, self.db_id, [e])
+                self.forwarded += self._push([e])
             except DBAPIError as exc:
                 refused += 1
                 self.repo.ledger.quarantine(e["seq"], error_line(exc))
@@ -359,7 +423,8 @@ class Forwarder:
             alarm = f"records not forwarded for {lag / 3600:.1f} h (bound " \
                     f"{self.cfg.max_age_h:g} h)"
         return {"url": make_url(self.cfg.url).render_as_string(), "station_id":
-                self.cfg.station_id, "db_id": self.db_id, "up": self.up, "cursor": self.cursor,
+                self.cfg.station_id, "db_id": self.series.db_id, "up": self.up,
+                "cursor": self.cursor,
                 "last_seq": last, "backlog": backlog, "backlog_bytes": size,
                 "backlog_bytes_partial": not whole, "lag_s": round(lag, 1),
                 "last_error": self.last_error, "alarm": alarm,

@@ -127,6 +127,49 @@ def test_stations_and_a_replaced_database_stay_apart(tmp_path, table, pg_url):
         repo.close()
 
 
+def test_a_database_put_back_from_a_backup_goes_on_as_a_new_series_losing_nothing(
+        tmp_path, table, pg_url, caplog):
+    """A maintenance trial: a backup put back, the station made new records numbered again
+    from where the copy ended, under the same database id; the line (keyed by station, id
+    and sequence number, a replay inserting nothing) dropped them silently as records it
+    had.  The first record that is another record on the line starts a new series (a new
+    id): the line keeps the records the copy lacked and takes the new ones beside them; the
+    records before keep their id, and a replay still inserts nothing."""
+    import sqlite3
+
+    repo = _station(tmp_path, "st.db", table, "VINR1", [(1, "B1"), (2, "B2")])
+    f = Forwarder(repo, LineConfig(pg_url, "ST-R"))
+    assert f.step() == 2
+    old_id = repo.ledger.db_id()
+    src, dst = sqlite3.connect(tmp_path / "st.db"), sqlite3.connect(tmp_path / "backup.db")
+    src.backup(dst)                                      # sqlite3's .backup, as the README
+    src.close()
+    dst.close()
+    record(repo, "VINR1", "B3", tightening_id=3)          # made after the backup ...
+    record(repo, "VINR1", "B1", tightening_id=4)
+    assert f.step() == 2                                 # ... and on the line
+    repo.close()
+    restored = Repository.open(f"sqlite:///{tmp_path / 'backup.db'}")   # put back
+    for tid, bolt in ((30, "B3"), (40, "B1"), (50, "B2")):
+        record(restored, "VINR1", bolt, tightening_id=tid)   # numbered 3, 4, 5 again
+    again = Forwarder(restored, LineConfig(pg_url, "ST-R"))
+    while again.step():
+        pass
+    rows = _line_rows(pg_url, "ST-R")
+    assert sorted(r.record["tightening_id"] for r in rows) == [1, 2, 3, 4, 30, 40, 50], \
+        "records lost on the line"
+    new = restored.ledger.series()
+    assert new.db_id != old_id and (new.from_seq, new.before) == (3, old_id)
+    assert {r.record["tightening_id"] for r in rows if r.db_id == new.db_id} == {30, 40, 50}
+    assert "put back from a copy" in caplog.text
+    restored.ledger.set_meta("forwarded_seq", "0")       # a replay: nothing doubled
+    replay = Forwarder(restored, LineConfig(pg_url, "ST-R"))
+    while replay.step():
+        pass
+    assert replay.forwarded == 0 and len(_line_rows(pg_url, "ST-R")) == 7
+    restored.close()
+
+
 def test_a_line_database_that_is_down_keeps_the_backlog_then_catches_up(tmp_path, table,
                                                                          pg_url, pg_server):
     repo = _station(tmp_path, "st.db", table, "VIND", [(1, "B1"), (2, "B2")])

@@ -251,8 +251,8 @@ def test_a_replay_and_a_second_forwarder_type_nothing_twice(tmp_path, pg_url):
     _forward(repo, pg_url, "ST-A")
     f = Forwarder(repo, LineConfig(pg_url, "ST-A"))      # pushed again, a batch at a time
     entries = repo.ledger.since(0)
-    assert f.line.push("ST-A", f.db_id, entries) == 0
-    assert f.line.push("ST-A", f.db_id, entries[:2] + entries[:2]) == 0
+    assert f.line.push("ST-A", f.series.db_id, entries) == 0
+    assert f.line.push("ST-A", f.series.db_id, entries[:2] + entries[:2]) == 0
     f.line.dispose()
     assert _typed_counts(engine) == once == _feed_counts(engine)
     record(repo, VIN, "B3", tightening_id=20)            # then one more: once
