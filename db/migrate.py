@@ -41,10 +41,13 @@ def current_revision(connection: Connection) -> str | None:
     return MigrationContext.configure(connection).get_current_revision()
 
 
-def upgrade(engine: Engine, revision: str = "head") -> None:
-    """Bring the database at ``engine`` to ``revision`` (all migrations in one transaction)."""
+def upgrade(engine: Engine, revision: str = "head") -> tuple[str | None, str | None]:
+    """Bring the database at ``engine`` to ``revision`` (all migrations in one transaction);
+    its schema before and after (the same: nothing to do)."""
     with writer(engine).begin() as conn:
+        before = current_revision(conn)
         command.upgrade(alembic_config(connection=conn), revision)
+        return before, current_revision(conn)
 
 
 def make_revision(message: str, url: str) -> None:

@@ -9,6 +9,7 @@ callers see plain values (``BoltInfo``, ``VehicleReport``), never ORM objects ti
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
@@ -72,6 +73,8 @@ VIN_MAX = 32
 #: second: a result made within this much of an unreadable message's arrival may be its copy
 COPY_SLACK = timedelta(seconds=2)
 
+log = logging.getLogger(__name__)
+
 
 __all__ = ["BoltInfo", "DataError", "DatabaseError", "NotFoundError", "OwedEnable", "Recorded",
            "Repository", "StoredResult", "VehicleClosedError"]
@@ -133,6 +136,15 @@ class StoredResult:
     bolt: str | None
 
 
+def _other_schema(have: str | None, want: str | None) -> str:
+    """What to do with a database at another schema than this release's: an older one is
+    migrated by opening it for writing; a newer one (a later stationd's) only that stationd
+    reads (a maintenance trial: told to migrate it, which then failed)."""
+    if have is not None and want is not None and have > want:
+        return "a newer stationd's database: read it with that stationd"
+    return "open it once with write access (the daemon or db import migrates it)"
+
+
 class Repository:
     """Open with :meth:`open`; use as a context manager or call :meth:`close`."""
 
@@ -156,11 +168,16 @@ class Repository:
                     have, want = current_revision(conn), head_revision()
                 if have != want:
                     engine.dispose()
-                    raise DatabaseError(
-                        f"{where}: schema {have or 'none'}, this stationd reads {want}: open "
-                        "it once with write access (the daemon or db import migrates it)")
+                    raise DatabaseError(f"{where}: schema {have or 'none'}, this stationd "
+                                        f"reads {want}: " + _other_schema(have, want))
                 return cls(engine)
-            upgrade(engine)
+            before, after = upgrade(engine)
+            if before is not None and before != after:
+                # an upgrade of stationd moved an existing database on: said once (a
+                # maintenance trial found it silent), with the way back
+                log.warning("%s: schema %s migrated to %s (this stationd's); a stationd of "
+                            "schema %s no longer opens it: keep a backup made before",
+                            where, before, after, before)
         except SQLAlchemyError as exc:
             engine.dispose()
             raise DatabaseError(f"{where}: cannot open: {_reason(exc)}") from None

@@ -642,6 +642,15 @@ class Records:
             return None
         return self._file_state()
 
+    def new_file(self, url: str) -> Path | None:
+        """The SQLite file a reload's database ``url`` names where it is not there yet and
+        not the file the daemon opened (a reload would create it, empty); else None."""
+        path = _sqlite_path(url)
+        if path is None or path.exists() or (
+                self._db_file is not None and path == self._db_file[0]):
+            return None
+        return path
+
     def probe(self, repo: Repository) -> None:
         """The database's "reconnect" (its keeper's thread): one cheap query (the engine's
         pool reconnects by itself), then the results it refused, oldest first: it is back

@@ -122,6 +122,16 @@ async def _reloaded(cfg_path: str, station: Station, screens: Screens,
                 "reload would start a new, empty database there (the vehicle's bolts done "
                 "forgotten); put a copy back (a backup) and reload, or restart the daemon to "
                 "start anew")
+        created = station.records.new_file(new.database_url)
+        vin = station.vin
+        if created is not None and vin is not None:
+            # a typo in database.url (a maintenance trial): the vehicle on the lift went on
+            # in a new, empty database, its bolts done offered again
+            raise StationError(
+                f"database.url names {created}, which does not exist: a reload would start a "
+                f"new, empty database while vehicle {vin} is at the station (its bolts done "
+                "forgotten, offered again); check the URL (a typo?), or restart the daemon "
+                "to start a new database there")
         if changed is FileChange.REPLACED:
             log.warning("reload: the database file %s was replaced while the daemon ran (a "
                         "backup put back?): the station opens that file; results stored "

@@ -173,3 +173,36 @@ def test_holds_stored_before_have_no_verdict_after_the_upgrade(tmp_path):
         assert {s for (s,) in conn.execute(text("SELECT status FROM controller_events"))} \
             == {"nok"}
     engine.dispose()
+
+
+def test_an_upgrade_says_the_schema_it_moved_and_a_newer_database_is_named_so(tmp_path,
+                                                                              caplog):
+    """A maintenance trial: a new stationd moved a station's database from 0017 to 0020 with
+    no line in the journal (the way back, an older stationd, then refused it); and a report
+    of a later stationd's database (schema 0021) was told to migrate it, which failed.  The
+    move is said once; a reopen at the same schema says nothing; a newer schema is named
+    as a newer stationd's."""
+    import logging
+
+    from sqlalchemy import text
+
+    from db.errors import DatabaseError
+
+    url = url_of(tmp_path / "old.db")
+    engine = make_engine(url)
+    upgrade(engine, "0017")
+    engine.dispose()
+    with caplog.at_level(logging.INFO, logger="db"):
+        Repository.open(url).close()
+        Repository.open(url).close()
+    said = [r for r in caplog.records if "migrated" in r.getMessage()]
+    assert len(said) == 1 and "schema 0017 migrated to 0020" in said[0].getMessage()
+    assert said[0].levelno == logging.WARNING
+    engine = make_engine(url)
+    with engine.begin() as conn:
+        conn.execute(text("UPDATE alembic_version SET version_num = '0021'"))
+    engine.dispose()
+    with pytest.raises(DatabaseError) as err:
+        Repository.open(url, read_only=True)
+    assert "schema 0021, this stationd reads 0020: a newer stationd's database" in str(err.value)
+    assert "migrates it" not in str(err.value)

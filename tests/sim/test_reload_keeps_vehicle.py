@@ -123,9 +123,19 @@ def test_a_reload_of_each_section_keeps_the_vehicle_and_its_state(tmp_path):
             states = {b["bolt"]: b["state"] for b in view["bolts"]}
             assert states["B05"] == "skipped", (what, states["B05"])
 
-        # another database: the vehicle cannot go on as it was, said in one line
+        # a database file that is not there (a typo in its URL, a maintenance trial): the
+        # vehicle went on in a new, empty database, its bolts done offered again; refused
         _reload(d, station, lambda doc, tmp: doc.update(
             database={"url": f"sqlite:///{tmp / 'other.db'}"}))
+        d.wait(r"reload refused, keeping the running configuration: database\.url names "
+               rf"\S+other\.db, which does not exist: a reload would start a new, empty "
+               rf"database while vehicle {vin} is at the station", 120)
+        assert not (tmp_path / "other.db").exists()
+        # another database that is there (the engineer made it): the vehicle cannot go on
+        # as it was, said in one line
+        sqlite3.connect(tmp_path / "other.db").close()
+        assert (tmp_path / "other.db").exists()
+        d.p.send_signal(signal.SIGHUP)
         line = d.wait(rf"reload: vehicle {vin} cannot go on as it was: its record is in the "
                       r"last database \(sqlite:///\S+station\.db\); the new one "
                       r"\(sqlite:///\S+other\.db\) opens it anew, without its bolts done so "
