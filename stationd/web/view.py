@@ -117,6 +117,10 @@ LAST_RESULTS = 8
 ACT_ON = frozenset({Why.STALE, Why.AMBIGUOUS, Why.TILTED, Why.MUST_WAIT, Why.SKIPPED,
                     Why.DONE, Why.LOCKED, Why.HELD, Why.SIGN_IN})
 NOT_AT_A_BOLT = "Bring the wrench to a bolt"
+#: the same, where the station requires someone signed in and nobody is: the first thing to
+#: do (a maintenance trial read "Bring the wrench to a bolt", and the wrench brought was
+#: refused only then)
+SIGN_IN_FIRST = "Nobody signed in: sign in to tighten"
 TRACKING_STATES = tuple(s.value for s in LOCALIZING)   # where a refusal speaks of the wrench
 # refusals that forbid their bolt (drawn "blocked"): the sequence's; a bolt the wrench is
 # settling on ("B21: hold the wrench still on it (1 of 3 frames)") is not blocked (it was
@@ -709,7 +713,8 @@ class View:
                 return "Starting: the cameras' first frames are late" + (
                     f" ({age:.0f} ms old)" if age else "")
             if not self.act and self._not_at_a_bolt():
-                return NOT_AT_A_BOLT
+                return SIGN_IN_FIRST if self.operator_required and self.operator is None \
+                    else NOT_AT_A_BOLT
             return self.refused
         if self.selected is not None:
             if self.selected_loosen is not None:   # the loosen step: never "tighten"

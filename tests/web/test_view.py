@@ -10,6 +10,7 @@ from stationd.station.events import (
     ClosingSettled,
     DeviceHealth,
     Localized,
+    OperatorChanged,
     ParamsRefusedEvent,
     Refused,
     StateChanged,
@@ -230,6 +231,18 @@ def test_wrench_between_bolts_is_neutral_not_an_alarm():
               Refused(reason=Reason(Why.NO_BOLT_NEAR, bolt="B1", distance_mm=250.0,
                                     limit=15.0))])
     assert (v.tone(), v.headline()) == ("idle", "Bring the wrench to a bolt")
+
+
+def test_nobody_signed_in_where_one_is_required_is_said_before_the_wrench_is_brought():
+    """A maintenance trial: ``operator_required`` and nobody signed in, the headline said
+    "Bring the wrench to a bolt" (the sign-in only on the operator line): the wrench brought
+    was refused then.  Said first; signed in, the usual words."""
+    v = fold([*opened(), OperatorChanged(None, True), lost(NOT_SEEN), Refused(reason=NOT_SEEN)])
+    assert (v.tone(), v.headline()) == ("idle", "Nobody signed in: sign in to tighten")
+    v.apply(OperatorChanged("ann", True))
+    assert v.headline() == "Bring the wrench to a bolt"
+    v = fold([*opened(), OperatorChanged(None, False), lost(NOT_SEEN), Refused(reason=NOT_SEEN)])
+    assert v.headline() == "Bring the wrench to a bolt"    # not required: nothing to say
 
 
 def test_refusals_the_operator_resolves_are_amber_with_the_reason():
