@@ -36,12 +36,17 @@ from db.models import (
     UnattributedResult,
     UnreadableRecord,
     Vehicle,
+    VehicleClosing,
     VehicleModel,
 )
 
 #: the kinds of records the feed carries, each in its own table
 RUNDOWN, UNATTRIBUTED, COMMAND, GAP = "rundown", "unattributed", "command", "gap"
 CHECK = "check"   # a camera pair's calibration check (db.checks)
+CLOSING = "closing"   # a vehicle leaving the station, what it left undone (VehicleClosing)
+#: how a vehicle closed: its lift lowered at the station, or found gone (the station down as
+#: it left) when the next one started
+LOWERED, UNSEEN = "lowered", "unseen"
 CURVE = "curve"   # one trace of a tightening (db.curves), its samples in the record
 #: a controller result that is not a rundown (batch step, bypass, abort, reference setup), and
 #: a result message the station could not read (kept whole)
@@ -418,6 +423,12 @@ def _record(s: Session, kind: str, ref: int) -> dict[str, Any]:
                 "reason": g.reason, "found_at": _iso(g.found_at)}
     if kind == CURVE:
         return _curve(s, s.get_one(TighteningCurve, ref))
+    if kind == CLOSING:
+        v = s.get_one(VehicleClosing, ref)
+        return {"id": v.id, "vin": v.vehicle.vin, "model": v.vehicle.model.name,
+                "closed_at": v.closed_at.isoformat(), "how": v.how, "bolts": v.bolts,
+                "ok": v.ok, "nok": v.nok, "missing": v.missing, "skipped": v.skipped,
+                "loosen": v.loosen, "not_ok": v.not_ok}
     if kind == CHECK:
         k = s.get_one(CalibrationCheck, ref)
         return {"id": k.id, "at": k.at.isoformat(), "pair": k.pair, "verdict": k.verdict,
@@ -431,14 +442,17 @@ def _record(s: Session, kind: str, ref: int) -> dict[str, Any]:
 
 __all__ = [
     "CHECK",
+    "CLOSING",
     "COMMAND",
     "CONTROLLER_EVENT",
     "CURVE",
     "GAP",
+    "LOWERED",
     "RESULT_KINDS",
     "RUNDOWN",
     "UNATTRIBUTED",
     "UNREADABLE",
+    "UNSEEN",
     "CommandEntry",
     "Ledger",
     "add_command",

@@ -167,6 +167,31 @@ class Vehicle(Base):
     model: Mapped[VehicleModel] = relationship()
 
 
+class VehicleClosing(Base):
+    """A vehicle leaving the station (``how``: the lift lowered, or found gone at the next
+    vehicle's start, the station down as it left) and what it left: its bolts' counts by
+    status and the bolts not OK by name (``not_ok``: status -> bolts, in the table's order).
+    Every close is kept (a reworked vehicle closes again; its first close stays); it joins
+    the results feed, so the line and an MES know a vehicle left with bolts undone."""
+
+    __tablename__ = "vehicle_closings"
+    __table_args__ = (Index("ix_vehicle_closings_vehicle", "vehicle_id"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    vehicle_id: Mapped[int] = mapped_column(ForeignKey("vehicles.id"))
+    closed_at: Mapped[datetime] = mapped_column(UtcDateTime)
+    how: Mapped[str] = mapped_column(String(16))
+    bolts: Mapped[int]
+    ok: Mapped[int]
+    nok: Mapped[int]
+    missing: Mapped[int]
+    skipped: Mapped[int]
+    loosen: Mapped[int]
+    not_ok: Mapped[dict[str, list[str]]] = mapped_column(JSON)
+
+    vehicle: Mapped[Vehicle] = relationship()
+
+
 class TighteningRecord(Base):
     """One rundown (a tightening or a loosening): where the wrench was, what was sent, what
     the controller answered."""

@@ -37,11 +37,14 @@ from db.kinds import (
     HeldUnder,
 )
 from db.ledger import (
+    CLOSING,
     CONTROLLER_EVENT,
     GAP,
+    LOWERED,
     RUNDOWN,
     UNATTRIBUTED,
     UNREADABLE,
+    UNSEEN,
     Ledger,
     add_command,
     append,
@@ -60,6 +63,7 @@ from db.models import (
     UnattributedResult,
     UnreadableRecord,
     Vehicle,
+    VehicleClosing,
     VehicleModel,
     utcnow,
 )
@@ -759,13 +763,16 @@ class Repository:
         station any more."""
         with self._session(write=True) as s:
             v = _vehicle(s, vin)
-            if v.ended_at is None:
+            closing = v.ended_at is None
+            if closing:
                 v.ended_at = utcnow()
             here = s.get(Meta, AT_STATION)
             if here is not None and here.value == vin:
                 here.value = ""
             s.flush()
             report = build_report(s, v)
+            if closing:
+                _closed(s, v, report, LOWERED)
         return self._with_held(report)   # the journal's close line counts them
 
     def left_unseen(self, vin: str) -> VehicleReport | None:
@@ -785,6 +792,7 @@ class Repository:
             v.ended_at = utcnow()
             s.flush()
             report = build_report(s, v)
+            _closed(s, v, report, UNSEEN)
         return self._with_held(report)
 
     def vehicle_report(self, vin: str, *, held: bool = False) -> VehicleReport:
@@ -813,6 +821,22 @@ class Repository:
 
 
 # -- helpers ------------------------------------------------------------------------------
+def _closed(s: Session, v: Vehicle, report: VehicleReport, how: str) -> None:
+    """The close of ``v`` kept (:class:`db.models.VehicleClosing`) with what its report
+    says it left, and its feed entry, in the caller's transaction."""
+    not_ok = {"nok": report.nok, "missing": report.missing, "skipped": report.skipped,
+              "loosen": report.loosen}
+    assert v.ended_at is not None  # noqa: S101 - closed by the caller
+    row = VehicleClosing(vehicle_id=v.id, closed_at=v.ended_at, how=how,
+                         bolts=len(report.bolts), ok=len(report.ok), nok=len(report.nok),
+                         missing=len(report.missing), skipped=len(report.skipped),
+                         loosen=len(report.loosen),
+                         not_ok={k: bolts for k, bolts in not_ok.items() if bolts})
+    s.add(row)
+    s.flush()
+    append(s, CLOSING, row.id)
+
+
 def _same_result(model: Any, at: Any, tightening_id: int, torque_nm: float | None,
                  angle_deg: float | None,
                  controller_at: datetime | None) -> list[ColumnElement[bool]]:

@@ -78,6 +78,7 @@ from sqlalchemy.schema import SetColumnComment, SetTableComment
 from db.kinds import LOOSENING, NOK, OK, TIGHTENING
 from db.ledger import (
     CHECK,
+    CLOSING,
     COMMAND,
     CONTROLLER_EVENT,
     GAP,
@@ -452,19 +453,44 @@ LINE_UNREADABLE = _typed(
 )
 
 #: every typed table; a new kind of record is one more ``_typed(...)`` here: the next
+LINE_CLOSINGS = _typed(
+    CLOSING, "line_vehicle_closings",
+    "Every vehicle leaving a station, with what it left undone there: incomplete vehicles "
+    "are the rows with missing, skipped, nok or loosen above 0",
+    [(Column("vin", Text, comment="the vehicle (its VIN)"), _text(_j("vin"))),
+     (Column("model", Text, comment="its model in the station's bolt table"),
+      _text(_j("model"))),
+     (_tz("closed_at", "when it left the station"), _time(_j("closed_at"))),
+     (Column("how", Text, comment="lowered (its lift lowered at the station) or unseen (the "
+             "station down as it left: found gone at the next vehicle's start)"),
+      _text(_j("how"))),
+     (Column("bolts", Integer, comment="its bolts at this station"), _int(_j("bolts"))),
+     (Column("ok", Integer, comment="bolts whose last rundown is OK"), _int(_j("ok"))),
+     (Column("nok", Integer, comment="bolts whose last rundown is NOK"), _int(_j("nok"))),
+     (Column("missing", Integer, comment="bolts never run down"), _int(_j("missing"))),
+     (Column("skipped", Integer, comment="bolts a person skipped, never run down"),
+      _int(_j("skipped"))),
+     (Column("loosen", Integer, comment="bolts loosened last or to be loosened: to be "
+             "tightened again"), _int(_j("loosen"))),
+     (Column("not_ok", JSONB, comment="the bolts not OK by name: {nok, missing, skipped, "
+             "loosen: [bolt, ...]}, each list in the bolt table's order"), _j("not_ok"))],
+    Index("ix_line_vehicle_closings_vin", "vin"),
+)
+
 #: ``line init`` or forwarder start makes its table, fills it from line_feed and types the
 #: new rows from then on
 TYPED: tuple[Typed, ...] = (LINE_RUNDOWNS, LINE_COMMANDS, LINE_GAPS, LINE_CHECKS,
-                            LINE_UNATTRIBUTED, LINE_CONTROLLER_EVENTS, LINE_UNREADABLE)
+                            LINE_UNATTRIBUTED, LINE_CONTROLLER_EVENTS, LINE_UNREADABLE,
+                            LINE_CLOSINGS)
 TRIGGER = "line_feed_typed"   # the trigger and its function
 #: the version of the trigger's SQL, one more with each change of :data:`TYPED` (a test holds
 #: the SQL to it).  Why a number and not the SQL compared: on a line whose stations are
 #: upgraded one at a time, an older forwarder would put its older SQL back at each start; it
 #: replaces only an older version.
-TYPED_VERSION = 6   # 2: line_controller_events, line_unreadable_results; 3: line_rundowns'
+TYPED_VERSION = 7   # 2: line_controller_events, line_unreadable_results; 3: line_rundowns'
 #                       entered outcomes (entered_by, entered_comment, unreadable_record_id);
 #                       4: line_unattributed's result_type; 5: line_rundowns' offline;
-#                       6: line_controller_events' note
+#                       6: line_controller_events' note; 7: line_vehicle_closings
 _VERSION_LINE = re.compile(r"-- stationd typed tables, version (\d+)\n")
 
 

@@ -489,3 +489,34 @@ def test_a_vehicle_that_left_unseen_is_closed_when_the_next_one_is_loaded(repo, 
                             comment="again")
     repo.start_vehicle("VIN3", "SEDAN")
     assert repo.vehicle_report("VIN1").vehicle.ended_at is None
+
+
+def test_every_close_of_a_vehicle_is_kept_with_what_it_left_and_joins_the_feed(sedan):
+    """An MES integrator's trial: a vehicle that left with bolts not tightened never reached
+    the line (no record of it in the feed), and a reopen cleared when it had first left.
+    Each close is its own record in the feed, with the bolts' counts and the bolts not OK
+    by name; closing again keeps nothing twice; a reworked vehicle closes again, its first
+    close kept; one found gone at the next vehicle's start is said so."""
+    from db.ledger import CLOSING
+
+    record(sedan, "VIN1", "B1")
+    record(sedan, "VIN1", "B2", ok=False)
+    sedan.close_vehicle("VIN1")
+    sedan.close_vehicle("VIN1")                       # again: the first close stands
+    closings = [e for e in sedan.ledger.since(0) if e["kind"] == CLOSING]
+    assert len(closings) == 1
+    first = closings[0]["record"]
+    assert (first["vin"], first["model"], first["how"], first["bolts"], first["ok"],
+            first["nok"], first["missing"]) == ("VIN1", "SEDAN", "lowered", 3, 1, 1, 1)
+    assert first["not_ok"] == {"nok": ["B2"], "missing": ["B3"]}
+    sedan.reopen_vehicle("VIN1", at=datetime.now(UTC), user="sam", source="cli",
+                         comment="rework B2, B3")
+    sedan.start_vehicle("VIN1", "SEDAN")
+    record(sedan, "VIN1", "B2")
+    record(sedan, "VIN1", "B3")
+    assert sedan.left_unseen("VIN2") is not None     # VIN1 gone unseen as VIN2 came
+    sedan.start_vehicle("VIN2", "SEDAN")
+    closings = [e["record"] for e in sedan.ledger.since(0) if e["kind"] == CLOSING]
+    assert [(c["how"], c["ok"], c["not_ok"]) for c in closings] == [
+        ("lowered", 1, {"nok": ["B2"], "missing": ["B3"]}), ("unseen", 3, {})]
+    assert closings[0]["closed_at"] < closings[1]["closed_at"]
