@@ -59,7 +59,7 @@ def record_check(repo: Repository, *, at: datetime, pair: str, verdict: str,
         with Session(writer(repo.engine), expire_on_commit=False) as s, s.begin():
             s.add(row)
             s.flush()
-            append(s, CHECK, row.id)
+            append(s, CHECK, row.id, row.recorded_at)
             return int(row.id)
     except SQLAlchemyError as exc:
         raise DatabaseError(f"calibration check of {pair} not stored: "

@@ -89,7 +89,7 @@ def _store(repo: Repository, now: datetime, tightening_id: int, trace_type: int,
             result_at=result_at, recorded_at=now)
         s.add(row)
         s.flush()
-        append(s, CURVE, row.id)
+        append(s, CURVE, row.id, now)
         return row.id
 
 

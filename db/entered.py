@@ -127,7 +127,7 @@ def record_entered(repo: Repository, *, vin: str, bolt: str, ok: bool, torque_nm
                 unreadable_id=held.id if held is not None else None)
             s.add(rec)
             s.flush()
-            append(s, RUNDOWN, rec.id)
+            append(s, RUNDOWN, rec.id, rec.recorded_at)
             return int(rec.id)
     except SQLAlchemyError as exc:
         raise DatabaseError(f"the outcome entered for {bolt} of {vin} not stored: "

@@ -38,6 +38,7 @@ from db.models import (
     Vehicle,
     VehicleClosing,
     VehicleModel,
+    utcnow,
 )
 
 #: the kinds of records the feed carries, each in its own table
@@ -91,10 +92,12 @@ def _results() -> Any:
 FEED_LIMIT = 1000
 
 
-def append(s: Session, kind: str, ref: int) -> None:
+def append(s: Session, kind: str, ref: int, at: datetime | None = None) -> None:
     """The next sequence number for the record ``ref`` of ``kind`` (in the caller's
-    transaction)."""
-    s.add(FeedEntry(kind=kind, ref=ref))
+    transaction).  ``at``: when the station stored it, the record's own ``recorded_at``
+    where it has one (one instant, not two clocks read a few milliseconds apart: the feed's
+    ``at`` read later than the ``recorded_at`` of its record); None: now."""
+    s.add(FeedEntry(kind=kind, ref=ref, at=utcnow() if at is None else at))
 
 
 def add_command(s: Session, *, at: datetime, user: str, source: str, kind: str,

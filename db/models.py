@@ -219,8 +219,11 @@ class TighteningRecord(Base):
     angle_deg: Mapped[float | None]
     tightening_id: Mapped[int | None]  # the controller's own id of the tightening
     sent_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
-    # when the station took the result (its clock; the controller's is in the feed's others)
+    #: when the station took the result, on its clock: the time of the input the core decided
+    #: on (:attr:`stationd.station.actions.Record.t`), so a lock the result caused
+    #: (``commands.at``) is at that time or later; the controller's own is ``controller_at``
     result_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
+    #: when the database took it (its feed entry's ``at``, the same instant)
     recorded_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
     images: Mapped[list[str]] = mapped_column(JSON)  # references (paths/URLs) of the frames
     #: the controller's own time of the tightening (its clock, MID 0061's timestamp): what
@@ -371,6 +374,8 @@ class FeedEntry(Base):
     seq: Mapped[int] = mapped_column(primary_key=True)
     kind: Mapped[str] = mapped_column(String(16))     # rundown, unattributed, command
     ref: Mapped[int]                                  # the id in that kind's table
+    #: when the station stored the record: its ``recorded_at`` (``found_at``) where it has
+    #: one, the same instant (:func:`db.ledger.append`)
     at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
 
 

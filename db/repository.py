@@ -403,7 +403,7 @@ class Repository:
             s.add(rec)
             _settle(s, enable_id)
             s.flush()
-            append(s, RUNDOWN, rec.id)
+            append(s, RUNDOWN, rec.id, rec.recorded_at)
             return Recorded(rec.id)
 
     def nok_streaks(self, vin: str, since: datetime | None = None) -> dict[str, int]:
@@ -511,7 +511,7 @@ class Repository:
                 result_type=result_type)
             s.add(row)
             s.flush()
-            append(s, UNATTRIBUTED, row.id)
+            append(s, UNATTRIBUTED, row.id, row.recorded_at)
             return row.id
 
     def record_controller_event(self, *, result_type: int, what: str, vin: str | None,
@@ -551,7 +551,7 @@ class Repository:
             s.add(row)
             _settle(s, enable_id)
             s.flush()
-            append(s, CONTROLLER_EVENT, row.id)
+            append(s, CONTROLLER_EVENT, row.id, row.recorded_at)
             return row.id
 
     def record_unreadable(self, *, mid: int, revision: int, raw: str, error: str,
@@ -574,7 +574,7 @@ class Repository:
             s.add(row)
             _settle(s, enable_id)
             s.flush()
-            append(s, UNREADABLE, row.id)
+            append(s, UNREADABLE, row.id, row.recorded_at)
             return row.id
 
     def stored_unreadable(self, *, mid: int, raw: str, header_len: int = 0
@@ -720,7 +720,7 @@ class Repository:
             row = ResultGap(first_id=first_id, last_id=last_id, vin=vin, reason=reason[:200])
             s.add(row)
             s.flush()
-            append(s, GAP, row.id)
+            append(s, GAP, row.id, row.found_at)
             return row.id
 
     def gaps(self) -> list[dict[str, Any]]:

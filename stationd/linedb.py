@@ -184,7 +184,8 @@ def _key() -> list[tuple[Column[Any], str]]:
         (Column("seq", BigInteger, primary_key=True,
                 comment="the record's number in the station's results feed (line_feed.seq)"),
          "f.seq"),
-        (_tz("at", "when the station recorded it (its feed entry's time)", False), "f.at"),
+        (_tz("at", "when the station stored it (its feed entry's time: the record's "
+             "recorded_at where it has one)", False), "f.at"),
         (Column("record_id", BigInteger,
                 comment="the record's id in the station's own database"), _int(_j("id"), 64)),
     ]
@@ -286,7 +287,7 @@ LINE_RUNDOWNS = _typed(
      # tightening is kept at the station (tightening_records.controller_at) and not forwarded
      (_tz("result_at", "when the station took the result, on its clock (an outcome entered "
           "from the controller's screen: when it was entered); not the controller's time, "
-          "which the line database does not have"),
+          "which the line database does not have; a lock it caused is at this time or later"),
       _time(_j("result_at"))),
      (_tz("recorded_at", "when the station stored it"), _time(_j("recorded_at")))],
     # one VIN across stations; one bolt over a shift; one station's rundowns in time; the
@@ -316,7 +317,8 @@ LINE_COMMANDS = _typed(
     COMMAND, "line_commands",
     "Every command a person gave a station (skip, reopen, release, loosen, sign-in ...), "
     "with who, from where and why",
-    [(_tz("command_at", "when it was given"), _time(_j("at"))),
+    [(_tz("command_at", "when it was given (a NOK policy's lock: when the station decided it, "
+          "the result_at of the NOK that caused it)"), _time(_j("at"))),
      (Column("user_name", Text, comment="who gave it"), _text(_j("user"))),
      (Column("source", Text, comment="from where (a screen's address, cli, ...)"),
       _text(_j("source"))),

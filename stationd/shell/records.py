@@ -112,6 +112,8 @@ class Unsaved:
 
     record: Record
     images: list[str]
+    #: when the station took the result (the record's ``t``, the input's time the core
+    #: decided on): the rundown's ``result_at``, also where it is stored late
     result_at: datetime
     parameters_id: int | None = None
     enable_id: int | None = None     # the tool enable this result settles
@@ -275,11 +277,16 @@ class Records:
     # -- results ---------------------------------------------------------------------------
     def unsaved_result(self, a: Record, loc: Localization | None) -> Unsaved:
         """The record to write for ``a``: the selection's crops saved beside the records,
-        and the tool enable it settles (in the record's transaction)."""
+        and the tool enable it settles (in the record's transaction).  Its ``result_at`` is
+        ``a.t``, when the station took the result (the input the core decided on), not this
+        call's clock: what the result caused (a lock, :meth:`note_lock`) is dated from the
+        same input or a later one, and a rundown stamped here, after the core had decided,
+        came out later than the lock it caused (an MES integrator's trial)."""
         r, sel = a.result, a.selection
         images = self.save_images(a.vin, a.bolt, int(r.tightening_id), loc)
         enable = self._settles(sel)
-        return Unsaved(a, images, datetime.now(UTC), sel.parameters_id if sel else None, enable)
+        return Unsaved(a, images, datetime.fromtimestamp(a.t, UTC),
+                       sel.parameters_id if sel else None, enable)
 
     def _settles(self, sel: Selection | None, take: bool = True) -> int | None:
         """The noted tool enable a record answering ``sel`` settles, or None; ``take``: the
@@ -564,9 +571,11 @@ class Records:
 
     def note_lock(self, a: NoteLock) -> None:
         """The NOK policy's lock in the command ledger (:class:`NoteLock`): by the station,
-        after ``count`` NOKs in a row; a release or a skip ends it.  One the database refuses
-        is kept and written when it is back (:meth:`probe`), before any result: lost, a
-        reload raising ``max_nok`` would end the lock with no one's release."""
+        after ``count`` NOKs in a row; a release or a skip ends it.  Its time is ``a.t``, when
+        the core decided it: the ``result_at`` of the NOK that caused it, or later.  One the
+        database refuses is kept and written when it is back (:meth:`probe`), before any
+        result: lost, a reload raising ``max_nok`` would end the lock with no one's release
+        (its time stays the decision's, the kept NOK's ``result_at`` its taking)."""
         try:
             self._write_lock(a)
         except STATION_FAULTS:

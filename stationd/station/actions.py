@@ -7,7 +7,7 @@ and nothing else may reach a device or the database."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from db.bolts import Parameters
@@ -140,7 +140,14 @@ class SettleClosing:
 
 @dataclass(frozen=True)
 class Record:
-    """Store ``result`` for ``bolt`` of ``vin``, then acknowledge it to the controller."""
+    """Store ``result`` for ``bolt`` of ``vin``, then acknowledge it to the controller.
+
+    ``t`` is when the station took the result: the time of the input the core decided on
+    (:class:`~stationd.station.inputs.ResultIn`'s), stored as the rundown's ``result_at``.
+    The times of one decision are in causal order: what the result causes (the NOK policy's
+    lock, :class:`NoteLock`, a hold, a notice) is decided at that same input's time or a later
+    one's, so it is never dated before the rundown; the rundown's ``recorded_at`` (and its feed
+    entry's ``at``, the same instant) is when the database took it, after ``t``."""
 
     vin: str
     bolt: str
@@ -151,6 +158,8 @@ class Record:
     #: made while the link to the controller was down, fetched after the reconnect (a result
     #: fetched with the link up, a push lost, is not)
     offline: bool = False
+    #: when the station took the result, on its clock (see above; keyword-only, required)
+    t: float = field(kw_only=True)
 
 
 @dataclass(frozen=True)
@@ -276,7 +285,9 @@ class StoreCutUnknown:
 class NoteLock:
     """Record that the NOK policy locked ``bolt`` of ``vin`` after ``count`` NOKs in a row:
     read back with the vehicle, the lock stands until a person releases it, whatever
-    ``max_nok`` a reload or a restart brings (the streak alone is read against it)."""
+    ``max_nok`` a reload or a restart brings (the streak alone is read against it).  ``t``:
+    when the core decided it, the time of the input it decided on (the NOK's, whose rundown
+    carries the same time as its ``result_at``: :class:`Record`), stored as the lock's time."""
 
     vin: str
     bolt: str

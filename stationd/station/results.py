@@ -377,7 +377,8 @@ class ResultRules(UnreadRules):
         if self.tool_on and not cut:    # (a lost one's: its rundown ended there)
             acts += self._tool_off(ev.t, StateReason(Because.RUNDOWN, bolt=en.bolt,
                                                      loosen=kind == LOOSENING, ok=bool(r.ok)))
-        acts.append(Record(en.vin, en.bolt, r, en, late, kind, offline=self._offline(ev)))
+        acts.append(Record(en.vin, en.bolt, r, en, late, kind, offline=self._offline(ev),
+                           t=ev.t))
         if cut or lost:
             checked = not cut and ev.before is None
             acts.append(Publish(Notice(Said.CUT_RECORDED if cut else Said.LOST_RECORDED

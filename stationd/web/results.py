@@ -49,8 +49,10 @@ CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator"
               # is taken at the reconnect, minutes later: a quality trial)
               "controller_at")
 
-#: how long after a lock the NOK it comes of may have been taken (the shell takes it after
-#: the core decided, a moment later)
+#: how long after a lock the NOK it comes of may have been taken: none for a record stored
+#: by this version (the NOK's result_at is the time the lock was decided at, or earlier);
+#: records of an earlier version took the NOK's time as the shell built its record, a moment
+#: after the core had decided the lock
 LOCK_TAKEN_S = timedelta(seconds=2)
 #: an export row of a person's release of a locked or held bolt
 RELEASED_STATUS = "released"

@@ -5,6 +5,7 @@ the core decided and what was sent for a loosening."""
 
 from __future__ import annotations
 
+import time
 from datetime import UTC, datetime
 from types import SimpleNamespace
 
@@ -112,8 +113,8 @@ def test_the_station_records_the_kind_and_the_loosen_pset_it_sent(tmp_path, bolt
     _, records, repo, sel = b1_selected(tmp_path, bolts_file, 90, loosen=True)
     result = SimpleNamespace(tightening_id=7, pset=90, ok=True, torque_nm=40.0,
                              angle_deg=-720.0)
-    records.write(records.unsaved_result(Record("VIN1", "B1", result, sel, kind=LOOSENING),
-                                         None))
+    records.write(records.unsaved_result(
+        Record("VIN1", "B1", result, sel, kind=LOOSENING, t=time.time()), None))
     [entry] = [e["record"] for e in repo.ledger.since(0) if e["kind"] == "rundown"]
     assert entry["rundown"] == LOOSENING
     assert entry["params_sent"] == {"pset": 90, "torque": None, "angle": None, "loosen": True}

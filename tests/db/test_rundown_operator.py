@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import time
 from datetime import UTC, datetime, timedelta
 from types import SimpleNamespace
 
@@ -76,7 +77,8 @@ def test_the_station_records_the_selections_operator_also_for_an_owed_enable(tmp
     # restart either (a reviewer)
     assert owed.selection.torque_window == (45.0, 55.0)
     result = SimpleNamespace(tightening_id=7, pset=1, ok=True, torque_nm=50.0, angle_deg=30.0)
-    again.write(again.unsaved_result(Record("VIN1", "B1", result, owed.selection), None))
+    again.write(again.unsaved_result(
+        Record("VIN1", "B1", result, owed.selection, t=time.time()), None))
     assert [r["operator"] for r in Results(repo).rundowns("VIN1")] == ["olga"]
     repo.close()
 

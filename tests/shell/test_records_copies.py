@@ -77,7 +77,7 @@ def _stored_then_reloaded(tmp_path: Path) -> tuple[Records, StationCore, Selecti
     assert isinstance(first.load_vehicle(LoadVehicle(12, "VIN1")), VehicleLoaded)
     b1 = _sel("B1")
     first.note_enable(b1)
-    u = first.unsaved_result(Record("VIN1", "B1", _result(), b1), None)
+    u = first.unsaved_result(Record("VIN1", "B1", _result(), b1, t=time.time()), None)
     first.write(u)
     assert not u.again
     first.note_enable(_sel("B2"))
@@ -124,7 +124,7 @@ def test_the_repository_s_last_guard_settles_no_other_bolt_s_enable(tmp_path: Pa
     assert repo is not None
     owed = repo.owed_enable()
     assert owed is not None
-    u = records.unsaved_result(Record("VIN1", "B2", _result(), b2), None)
+    u = records.unsaved_result(Record("VIN1", "B2", _result(), b2, t=time.time()), None)
     assert u.enable_id == owed.id
     records.write(u)
     assert (u.again, u.stored_vin, u.stored_bolt) == (True, "VIN1", "B1")

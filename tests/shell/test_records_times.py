@@ -60,8 +60,9 @@ def _station(tmp_path: Path) -> tuple[Driver, Effects, Records]:
     d.feed(Started(d.t))
     d.step(("lift", 0.1, True, True, "VIN1"))
     none: Any = None
-    effects = Effects(d.core, records, _NoWrench(), none, EventBus(), Notifier({}), _direct,
-                      none)
+    wrench: Any = _NoWrench()
+    call: Any = _direct
+    effects = Effects(d.core, records, wrench, none, EventBus(), Notifier({}), call, none)
     return d, effects, records
 
 
