@@ -834,7 +834,7 @@ def _closed(s: Session, v: Vehicle, report: VehicleReport, how: str) -> None:
                          not_ok={k: bolts for k, bolts in not_ok.items() if bolts})
     s.add(row)
     s.flush()
-    append(s, CLOSING, row.id)
+    append(s, CLOSING, row.id, row.closed_at)
 
 
 def _same_result(model: Any, at: Any, tightening_id: int, torque_nm: float | None,
