@@ -281,8 +281,12 @@ def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
         + ("" if pset is None else f" with pset {pset}") + (
             f", entered by {entered} from the controller's screen (not measured)"
             if entered else ""))
-    content = ua.JoiningResultDataType(
-        OverallResultValues=_overall(rec, sent.get("torque"), sent.get("angle"), ok))
+    # a loosening ran the controller's own program (its limits are the controller's): none
+    # of the bolt's window, as the feed and the line database say it (an MES integrator's
+    # trial: a loosening under the tightening pset read its 44 Nm as NotOK against 45-55)
+    content = ua.JoiningResultDataType(OverallResultValues=_overall(
+        rec, None if loosening else sent.get("torque"),
+        None if loosening else sent.get("angle"), ok))
     if curves:
         rid = meta.ResultId
         content.Trace, step_id, trace_id = trace(rid, curves)

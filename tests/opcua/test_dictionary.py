@@ -65,7 +65,8 @@ def shapes(repo: Repository) -> list[dict[str, Any]]:
          "values": [["Torque", 30.0, 23.0, 27.0, NM], ["Angle", 35.0, 10.0, 50.0, DEG]]},
         {"bolt": "B2", "evaluation": 1, "assembly": DISASSEMBLED, "trace": [],
          "entities": sorted([*joint, [23, "B2"]]),
-         "values": [["Torque", 20.0, 23.0, 27.0, NM], ["Angle", 303.0, 10.0, 50.0, DEG]]},
+         # a loosening: the controller's program judged it, none of the bolt's window
+         "values": [["Torque", 20.0, None, None, NM], ["Angle", 303.0, None, None, DEG]]},
         {"bolt": "B3", "evaluation": 1, "assembly": 1, "trace": [], "offline": True,
          "entities": sorted([*joint, [23, "B3"]]),
          "values": [["Torque", 120.0, 110.0, 130.0, NM], ["Angle", 40.0, None, None, DEG]]},
