@@ -174,7 +174,8 @@ def cmd_calibrate_vehicle(args: argparse.Namespace) -> int:
               f"{args.points}; RMS {fit.rms_mm:.3f} mm\n# x_vehicle = A x_pair + t (mm)\n")
     write_atomic(target, header + yaml.safe_dump(fit.to_dict(), sort_keys=False,
                                                  default_flow_style=None))
-    print(f"wrote {target}")
+    print(f"wrote {target}; a running daemon reads it at its next reload (systemctl reload "
+          "stationd), then check the pair (stationd calibrate check)")
     return _cross_check(cfg, args.pair, fit, points)
 
 

@@ -76,6 +76,8 @@ def test_two_pairs_one_vehicle_frame(tmp_path, capsys):
     assert cmd_calibrate_vehicle(_args(cfg, pts, "pair2")) == 0
     out = capsys.readouterr().out
     assert "RMS" in out and "agree to" in out and "DISAGREE" not in out
+    # a running daemon uses the file from its next reload: said (a maintenance trial)
+    assert out.count("a running daemon reads it at its next reload") == 2
     loaded = load_station_config(cfg)
     for name, (R, t) in TRUE.items():
         tv = loaded.pairs[name].to_vehicle
