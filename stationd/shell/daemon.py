@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import Any, TypeVar
 
+from db.errors import DbError
 from db.repository import Repository
 from drivers.devices import Kind, backend_class
 from drivers.errors import DeviceError
@@ -74,6 +75,8 @@ T = TypeVar("T")
 Keeper = (DeviceKeeper[Lift] | DeviceKeeper[Wrench] | DeviceKeeper[Pair]
           | DeviceKeeper[Repository])
 TICK_S = 0.5
+#: how often the SQLite file is checked to be the one opened (a stat: cheap)
+FILE_CHECK_S = 2.0
 #: what opening a device may raise besides (a port that does not exist, a bad option)
 OPEN_ERRORS: tuple[type[Exception], ...] = (*STATION_FAULTS, OSError, ValueError)
 
@@ -388,9 +391,25 @@ class Station:
     async def _tick_loop(self, stop: asyncio.Event) -> None:
         """Time for the core.  (The systemd watchdog is ``run.keep_watchdog``'s: a feed may
         wait seconds on a locked database, and the daemon must not be killed for that.)"""
+        checked = time.monotonic()
         while not stop.is_set():
             await self.feed(Tick(time.time()))
+            if time.monotonic() - checked >= FILE_CHECK_S:
+                checked = time.monotonic()
+                self._check_database_file()
             await asyncio.sleep(TICK_S)
+
+    def _check_database_file(self) -> None:
+        """The SQLite file removed or replaced under the running daemon is a database fault
+        now, not at the next write (a maintenance trial: the station said "tracking" with
+        its file gone until a command failed; its connection goes on writing into the
+        deleted file, and what it writes there is lost at the next start)."""
+        keeper = self.database_keeper
+        if keeper.up and not keeper.losing:
+            try:
+                self.records.check_file()
+            except DbError as exc:
+                keeper.lost(exc)
 
 
 def _reconnect(wrench: Wrench) -> None:
