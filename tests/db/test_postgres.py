@@ -44,7 +44,8 @@ def test_a_vehicle_its_records_commands_and_feed_on_postgresql(pg_url, bolts_fil
         # (B2 is skipped, not missing, when its skip's time is after the vehicle's start)
         assert report.ok == ["B1"] and sorted(report.untightened) == ["B2", "B3"]
         feed = repo.ledger.since(0)
-        assert [e["kind"] for e in feed] == ["rundown", "command", "unattributed"]
+        assert [e["kind"] for e in feed] == ["rundown", "command", "unattributed", "closing"]
+        assert feed[-1]["record"]["not_ok"] == {"missing": ["B2", "B3"]}
         assert [e["seq"] for e in feed] == sorted(e["seq"] for e in feed)
         assert repo.ledger.skipped("VINPG1", None) == {"B2": ("sam", "no access")}
         assert len(repo.ledger.db_id()) == 36
