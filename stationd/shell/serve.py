@@ -532,7 +532,11 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
         if opened is not Opened.OPEN:
             await loop.run_in_executor(None, station.close)
             if opened is Opened.STOPPED:
+                # said as a stop with the database open is (a maintenance trial: a stop while
+                # it was in fault ended the journal without a word)
                 notifier.stopping("stopping")
+                log.info("stopping: the database never opened; closing the devices")
+                log.info("stationd stopped")
                 return
             carried, owed = station.unsaved(), station.locks_owed()
             reload.clear()   # the database did not open: read the files again, retry

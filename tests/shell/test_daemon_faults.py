@@ -202,6 +202,25 @@ def test_a_reload_after_the_database_file_was_removed_is_refused(tmp_path):
 
 
 @pytest.mark.timeout(300)
+def test_a_stop_while_the_database_does_not_open_is_said_as_any_stop(tmp_path):
+    """A maintenance trial: SIGTERM while the database was in fault ended the daemon (0) with
+    no word of the stop in its journal.  Said as any stop is."""
+    lift_port, ctl_port = free_port(), free_port()
+    plc, ctl = SimulatedPlc(), controller(seed=2)
+    serve_devices(plc, ctl, lift_port, ctl_port)
+    (tmp_path / "station.db").write_bytes(b"not a database, " * 64)
+    d = Proc(tmp_path, lift_port, ctl_port)
+    try:
+        d.status("fault: database")
+        assert d.stop() == 0
+        assert "stationd stopped" in d.log() and "Traceback" not in d.log()
+    finally:
+        d.kill()
+        ctl.close()
+        plc.close()
+
+
+@pytest.mark.timeout(300)
 def test_a_reload_while_the_database_does_not_open_reads_the_files_at_once(tmp_path):
     """The database does not open at the start (a file that is no database): an engineer
     points the station at another one and reloads.  The reload is read at once, not at the
