@@ -560,10 +560,12 @@ def test_a_results_export_larger_than_a_settings_file_is_still_one(tmp_path):
 
     row = {**dict.fromkeys(CSV_FIELDS, ""), "vin": "V1", "bolt": "B01", "images": []}
     n = PARSE_LIMIT_BYTES // 20 + 1
+    one = rundowns_csv([row])            # the export's header and one row, the row repeated
+    head = one.index("\n") + 1
     big_csv = tmp_path / "r.csv"
-    big_csv.write_text(rundowns_csv([row] * n))
+    big_csv.write_text(one[:head] + one[head:] * n)
     big_json = tmp_path / "r.json"
-    big_json.write_text(json.dumps([row] * (n // 4)))
+    big_json.write_text(json.dumps([row] * (PARSE_LIMIT_BYTES // len(json.dumps(row)) + 1)))
     assert big_csv.stat().st_size > PARSE_LIMIT_BYTES < big_json.stat().st_size
     assert kind_of(big_csv) == kind_of(big_json) == "results"
     other = tmp_path / "big.log"
