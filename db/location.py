@@ -14,7 +14,9 @@ traceback, and exit 1, which systemd restarts forever.
 from __future__ import annotations
 
 import os
+import pwd
 import stat
+from collections.abc import Collection
 from pathlib import Path
 
 from db.reach import file_above, not_a_folder, unreachable, user_name
@@ -54,6 +56,51 @@ def unwritable_folder(folder: Path, *, as_writer: bool = True) -> str | None:
         return f"folder {folder} cannot be written by user {user_name()}: give it " \
                "that user, or name another folder"
     return None
+
+
+def unwritable_file(path: Path, who: str = "this process's user", *, uid: int | None = None,
+                    gids: Collection[int] | None = None) -> str | None:
+    """Why ``uid`` (this process's effective user unless told, in ``gids``) may not write the
+    SQLite database at ``path``, in the words of what to do: the file or its ``-wal`` or
+    ``-shm`` beside it (SQLite writes all three, and opens a file it may not write read-only
+    without a word: every read answers, every write fails with "attempt to write a readonly
+    database"), or their file system mounted read-only; None when it may (or where looking
+    fails: the caller keeps SQLite's own words).  ``who``: the user's role in the words ("this
+    daemon's user").  From the files' owners and modes (no ACLs); root writes any file."""
+    uid = os.geteuid() if uid is None else uid
+    gids = {os.getegid(), *os.getgroups()} if gids is None else set(gids)
+    for f in (path, path.with_name(path.name + "-wal"), path.with_name(path.name + "-shm")):
+        try:
+            st = f.stat()
+            read_only = bool(os.statvfs(f).f_flag & os.ST_RDONLY)
+        except OSError:
+            continue   # not there (SQLite creates the -wal and -shm), or out of reach
+        if read_only:
+            return f"the database file {f} is on a read-only file system: remount it " \
+                   "read-write, or name a database on one"
+        if uid == 0 or _may_write(st, uid, gids):
+            continue
+        user = _user(uid)
+        fix = f"chown it to {user}" if st.st_uid != uid else "chmod u+w it"
+        return (f"the database file {f} is not writable by {who} ({user}; the file is "
+                f"{_user(st.st_uid)}'s, mode {stat.S_IMODE(st.st_mode):04o}): {fix}")
+    return None
+
+
+def _may_write(st: os.stat_result, uid: int, gids: Collection[int]) -> bool:
+    """The owner's, the group's or the others' write bit, whichever applies to ``uid``."""
+    if st.st_uid == uid:
+        return bool(st.st_mode & stat.S_IWUSR)
+    if st.st_gid in gids:
+        return bool(st.st_mode & stat.S_IWGRP)
+    return bool(st.st_mode & stat.S_IWOTH)
+
+
+def _user(uid: int) -> str:
+    try:
+        return pwd.getpwuid(uid).pw_name
+    except KeyError:
+        return f"uid {uid}"
 
 
 def sqlite_problem(url: str, *, read_header: bool = True, loses: str = STATION_LOSES,

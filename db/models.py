@@ -381,6 +381,9 @@ class FeedEntry(Base):
 
 #: the meta key of the vehicle loaded at the station now ("": none)
 AT_STATION = "at_station"
+#: the meta key of the last write that proved the database takes writes (its time, ISO):
+#: written at the daemon's start and on the database's way back from a fault
+WRITE_PROVED = "write_proved"
 
 
 class Meta(Base):

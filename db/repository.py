@@ -53,6 +53,7 @@ from db.ledger import (
 from db.migrate import current_revision, head_revision, upgrade
 from db.models import (
     AT_STATION,
+    WRITE_PROVED,
     Bolt,
     ControllerEvent,
     Meta,
@@ -216,6 +217,14 @@ class Repository:
         except SQLAlchemyError as exc:
             raise DatabaseError(f"database {'write' if write else 'read'} failed: "
                                 f"{_reason(exc)}") from None
+
+    def prove_writable(self) -> None:
+        """One committed write (the meta table's ``write_proved``, the time): a database that
+        opened may still take no writes (an SQLite file its user may not write opens
+        read-only, every read answering), and only a write that commits proves it does.
+        Raises :class:`DatabaseError` as any write."""
+        with self._session(write=True) as s:
+            put_meta(s, WRITE_PROVED, utcnow().isoformat())
 
     # -- bolt table -----------------------------------------------------------------------
     def import_bolts(self, table: BoltTable, *, where: str | None = None) -> ImportReport:

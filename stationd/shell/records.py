@@ -28,7 +28,7 @@ from db.checks import record_check
 from db.counting import counted
 from db.curves import link_curves, store_curve
 from db.entered import record_entered
-from db.errors import DataError, DbError, NotFoundError, VehicleClosedError
+from db.errors import DatabaseError, DataError, DbError, NotFoundError, VehicleClosedError
 from db.holds import ENDS_A_HOLD
 from db.kinds import (
     LOCK,
@@ -41,6 +41,7 @@ from db.kinds import (
     TIGHTENING,
     TO_LOOSEN,
 )
+from db.location import unwritable_file
 from db.report import VehicleReport
 from db.repository import Repository
 from drivers.errors import DeviceError, DriverError
@@ -155,8 +156,16 @@ class Records:
         self._enable_off = False          # its tool-off time is on disk
 
     def open(self) -> Repository:
-        """Open (and migrate) the database and import the bolt table."""
-        self.repo = Repository.open(self.cfg.database_url)
+        """Open (and migrate) the database, prove it takes writes (:meth:`prove_writable`)
+        and import the bolt table.  Why the proof: an SQLite file the daemon's user may not
+        write (a copy of root's put in its place) opens read-only without a word; the
+        station ran, every write failed, and a chown needed a second reload."""
+        try:
+            repo = Repository.open(self.cfg.database_url)
+        except DbError as exc:   # a migration is a write: said as one the file refuses
+            raise self._refused(exc) from None
+        self.prove_writable(repo)   # closed again if it refuses: the next open is anew
+        self.repo = repo
         self._db_file = _sqlite_file(self.cfg.database_url)
         if self.cfg.bolts_path is not None:
             r = import_bolts(self.repo, self.cfg.bolts_path,
@@ -662,12 +671,16 @@ class Records:
 
     def probe(self, repo: Repository) -> None:
         """The database's "reconnect" (its keeper's thread): one cheap query (the engine's
-        pool reconnects by itself), then the results it refused, oldest first: it is back
-        only once it has taken them all (a full disk still answers reads).  A failure is a
+        pool reconnects by itself), one write (:meth:`prove_writable`), then the results it
+        refused, oldest first: it is back only once it has taken them all (a full disk still
+        answers reads).  A failure is a
         device error, the keeper's kind of failure."""
         try:
             repo.models()
             self.check_file()   # a removed file still answers through its connection
+            # it answers reads; back only once a write commits (a file its user may not
+            # write answers every read: "back", then the next write failed, a flip-flop)
+            self.prove_writable(repo)
         except STATION_FAULTS as exc:
             raise DeviceError(one_line(exc)) from None
         for lock in self._drain(self._locks_owed, self._write_lock, "a lock not recorded"):
@@ -677,6 +690,28 @@ class Records:
                 self._saved_late.append(u)
             self.log.info("tightening %d of %s stored late", u.record.result.tightening_id,
                           u.record.bolt)
+
+    def prove_writable(self, repo: Repository) -> None:
+        """One write that commits (:meth:`Repository.prove_writable`), else a DatabaseError
+        saying what to do (:meth:`_refused`) and the repository's connections closed: SQLite
+        opens a file its user may not write read-only, and such a connection stays so once
+        the file is chowned; the next attempt opens new ones (back with no reload)."""
+        try:
+            repo.prove_writable()
+        except DbError as exc:
+            repo.engine.dispose()
+            raise self._refused(exc) from None
+
+    def _refused(self, exc: DbError) -> DbError:
+        """``exc``, a database that refused a write or an opening, in the words of what to
+        do where its SQLite file (or its -wal, -shm) is not this daemon's user's to write
+        (:func:`db.location.unwritable_file`: "... chown it to stationd"); else ``exc``, its
+        own words."""
+        path = _sqlite_path(self.cfg.database_url)
+        words = None if path is None else unwritable_file(path, "this daemon's user")
+        if words is None:
+            return exc
+        return DatabaseError(f"the database takes no writes: {words}")
 
     def _drain(self, owed: list[T], write: Callable[[T], None], failed: str) -> Iterator[T]:
         """Each of ``owed`` written, oldest first, and yielded once written (taken off the
