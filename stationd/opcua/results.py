@@ -23,6 +23,7 @@ from datetime import UTC, datetime
 from typing import Any
 
 from db.ledger import CONTROLLER_EVENT as CONTROLLER_EVENT_KIND
+from db.ledger import RUNDOWN as RUNDOWN_KIND
 from db.ledger import UNATTRIBUTED as UNATTRIBUTED_KIND
 from db.ledger import UNREADABLE as UNREADABLE_KIND
 from drivers.wrench.base import ResultType
@@ -306,8 +307,11 @@ def _meta(db_id: str, entry: dict[str, Any], *, simulated: bool, name: str,
     return ua.JoiningResultMetaDataType(
         ResultId=result_id(db_id, entry["seq"]), IsPartial=False, IsSimulated=simulated,
         ResultState=RESULT_STATE_COMPLETED,
-        CreationTime=_time(rec.get("result_at")) or _time(rec.get("recorded_at"))
-        or _time(entry["at"]),
+        # on the station's clock for every kind: a rundown's result_at is when the station
+        # took it, the others' is the controller's own (to the second, its clock apart: an
+        # MES integrator's trial found the two clocks mixed), so theirs is when stored
+        CreationTime=(_time(rec.get("result_at")) if entry["kind"] == RUNDOWN_KIND else None)
+        or _time(rec.get("recorded_at")) or _time(entry["at"]),
         ResultEvaluation=ua.ResultEvaluationEnum(evaluation),
         IsGeneratedOffline=True if offline else None,
         ProductId=rec.get("vin") or None,

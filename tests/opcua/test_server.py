@@ -8,6 +8,7 @@ import logging
 import socket
 import sys
 from collections.abc import Callable
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -463,6 +464,10 @@ def test_a_republish_of_a_message_not_held_is_refused_as_the_standard_says(repo)
                                        "BadSubscriptionIdInvalid")
 
 
+#: a controller's own time of a result, its clock a minute behind the station's
+CONTROLLER_AT = datetime(2026, 12, 1, 9, 59, 1, tzinfo=UTC)
+
+
 def test_a_result_of_no_bolt_and_one_not_readable_arrive_as_results_told_apart(repo):
     """A rundown the station attributed to no bolt and a result message it could not read
     are results of the controller too: an MES counting them from the station's results saw
@@ -472,11 +477,12 @@ def test_a_result_of_no_bolt_and_one_not_readable_arrive_as_results_told_apart(r
     events = events_while(
         repo, lambda: repo.record_unattributed(
             vin=VIN, controller_vin=None, tightening_id=51, pset=3, ok=False, torque_nm=12.5,
-            angle_deg=40.0, result_at=None, result_type=2, reason="outside a tool enable"),
+            angle_deg=40.0, result_at=CONTROLLER_AT, result_type=2,
+            reason="outside a tool enable"),
         lambda: repo.record_unreadable(
             mid=61, revision=2, raw="0231006100" + "x" * 40,
             error="torque '00ABCD' is not a number", vin=VIN, bolt="B2", controller_vin=None,
-            tightening_id=52, pset=1, result_at=None),
+            tightening_id=52, pset=1, result_at=CONTROLLER_AT),
         lambda: record(repo, VIN, "B1", ok=True, tightening_id=53))
     assert [e.Message.Text for e in events] == [
         f"{VIN}: loosening NOK of no bolt (controller id 51)",
@@ -498,6 +504,11 @@ def test_a_result_of_no_bolt_and_one_not_readable_arrive_as_results_told_apart(r
     assert "MID 61 revision 2 not readable" in unread.Description.Text
     assert not events[1].Result.ResultContent[0].Value.OverallResultValues
     assert repo.ledger.unacknowledged_count() == 3
+    # every kind's CreationTime on the station's clock (an MES integrator's trial: the
+    # unreadable one's was the controller's, to the second, its clock apart): when stored
+    stored = [datetime.fromisoformat(e["record"]["recorded_at"])
+              for e in repo.ledger.since(0)[:2]]
+    assert [m.CreationTime.replace(tzinfo=UTC) for m in (loose, unread)] == stored
 
 
 def test_an_ok_not_taken_for_a_tightening_arrives_as_a_result_not_decided(repo):
