@@ -1,0 +1,60 @@
+"""The results feed's ``at`` follows its sequence numbers: a record's feed entry is numbered
+and dated under the database's write lock, so a writer that waited for the lock is dated
+after the one that held it.  Readers rely on it: OPC UA's RequestResults by time starts after
+``Ledger.seq_before(FromTime)``, the last number dated before that time, and stops at the
+first entry dated after ToTime."""
+
+from __future__ import annotations
+
+import sqlite3
+import threading
+import time
+from contextlib import closing
+from datetime import UTC, datetime
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from db.curves import store_curve
+from db.models import FeedEntry
+from tests.db.conftest import record
+
+
+def _feed(repo):
+    with Session(repo.engine) as s:
+        return [(e.seq, e.kind, e.at) for e in s.scalars(select(FeedEntry)
+                                                           .order_by(FeedEntry.seq))]
+
+
+def test_a_curve_that_waited_for_the_write_lock_is_not_dated_before_the_record_that_held_it(
+        sedan):
+    """The controller's curve comes with its result; the station stores the curve in a pool
+    of its own (stationd.shell.controller's _curves_pool) while the result's writer, or
+    another process (a command from the CLI), holds SQLite's write lock.  The curve's time is
+    read before its transaction begins (db.curves.store_curve's ``now``) and, since 42cdc2c,
+    is its feed entry's ``at``: the curve, numbered after the record that held the lock, is
+    dated before it."""
+    rec = record(sedan, "VIN1", "B1", tightening_id=7)
+    assert rec
+    path = sedan.engine.url.database
+    with closing(sqlite3.connect(path, isolation_level=None)) as other:
+        other.execute("PRAGMA busy_timeout=10000")
+        other.execute("BEGIN IMMEDIATE")          # another writer holds the lock ...
+        done: list[int] = []
+        t = threading.Thread(target=lambda: done.append(store_curve(
+            sedan, tightening_id=7, trace_type=1, unit="deg", values=[0.0, 1.0],
+            sample_period_s=0.002)))
+        t.start()                                 # ... the curve waits for it
+        time.sleep(0.3)
+        # what the other writer stores meanwhile: a record's feed entry, dated now
+        held_at = datetime.now(UTC).replace(tzinfo=None)
+        other.execute("INSERT INTO feed (kind, ref, at) VALUES ('rundown', ?, ?)",
+                      (rec, held_at.isoformat(sep=" ")))
+        other.execute("COMMIT")
+    t.join(15)
+    assert done, "the curve was not stored"
+    feed = _feed(sedan)
+    assert [k for _, k, _ in feed][-2:] == ["rundown", "curve"]
+    ats = [at for _, _, at in feed]
+    assert ats == sorted(ats), \
+        f"the feed's at goes back with its sequence numbers: {[(s, k, str(a)) for s, k, a in feed]}"
