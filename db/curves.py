@@ -60,9 +60,8 @@ def store_curve(repo: Repository, *, tightening_id: int, trace_type: int, unit: 
                         f"for {len(vals)} values")
     if result_at is not None and result_at.tzinfo is None:
         raise DataError("result_at: a timestamp with a timezone (UTC) is needed")
-    now = utcnow()
     try:
-        return _store(repo, now, int(tightening_id), int(trace_type), str(unit)[:16], vals,
+        return _store(repo, int(tightening_id), int(trace_type), str(unit)[:16], vals,
                       None if sample_period_s is None else float(sample_period_s), times,
                       result_at, record_id)
     except SQLAlchemyError as exc:
@@ -70,10 +69,15 @@ def store_curve(repo: Repository, *, tightening_id: int, trace_type: int, unit: 
                             f"{str(exc).splitlines()[0]}") from None
 
 
-def _store(repo: Repository, now: datetime, tightening_id: int, trace_type: int, unit: str,
+def _store(repo: Repository, tightening_id: int, trace_type: int, unit: str,
            vals: list[float], period: float | None, times: list[float] | None,
            result_at: datetime | None, record_id: int | None) -> int:
     with Session(writer(repo.engine), expire_on_commit=False) as s, s.begin():
+        # the time read under the write lock (BEGIN IMMEDIATE, taken by this first statement):
+        # it is the feed entry's at, so a curve that waited for the lock is never dated
+        # before the record numbered ahead of it
+        s.connection()
+        now = utcnow()
         if record_id is None:
             record_id = s.scalar(
                 select(TighteningRecord.id)
