@@ -213,6 +213,12 @@ class Repository:
         try:
             with Session(self._writer if write else self._engine,
                          expire_on_commit=False) as s, s.begin():
+                if write:
+                    # the write lock (BEGIN IMMEDIATE) taken now, before the body reads the
+                    # time: a recorded_at is its feed entry's at, and one read before the
+                    # lock, by a write that then waited for it, was dated before the record
+                    # numbered ahead of it
+                    s.connection()
                 yield s
         except SQLAlchemyError as exc:
             raise DatabaseError(f"database {'write' if write else 'read'} failed: "
