@@ -741,3 +741,56 @@ def test_line_init_and_status_say_a_role_that_may_not_write_not_ready_or_answers
     assert "ready for the stations' forwarders" in capsys.readouterr().out
     got = _cli("line", "status", "--config", str(station))
     assert got.returncode == 1 and "line database: answers" in got.stdout.splitlines()
+
+
+def test_two_backups_put_back_in_turn_keep_each_record_under_its_first_series(
+        tmp_path, table, pg_url):
+    """As test_a_database_put_back_from_a_backup_goes_on_as_a_new_series_losing_nothing,
+    twice: the second renewal keeps only the id just before it (Series.before), so the
+    records below the first renewal, under the database's first id on the line, go from
+    then on under the second id.  A replay of them (a crash between a push and the cursor
+    saved, as that test models it; or a quarantined one retried) is then no replay: each
+    is inserted again, under another id, the line holding it twice."""
+    import sqlite3
+
+    def backup(name: str, to: str) -> None:
+        src, dst = sqlite3.connect(tmp_path / name), sqlite3.connect(tmp_path / to)
+        src.backup(dst)
+        src.close()
+        dst.close()
+
+    repo = _station(tmp_path, "st.db", table, "VINT1", [(1, "B1"), (2, "B2")])
+    f = Forwarder(repo, LineConfig(pg_url, "ST-T"))
+    assert f.step() == 2
+    backup("st.db", "b1.db")
+    record(repo, "VINT1", "B3", tightening_id=3)
+    assert f.step() == 1
+    repo.close()
+    first = Repository.open(f"sqlite:///{tmp_path / 'b1.db'}")         # put back: 1
+    record(first, "VINT1", "B3", tightening_id=30)                       # seq 3 again
+    f1 = Forwarder(first, LineConfig(pg_url, "ST-T"))
+    while f1.step():
+        pass
+    first.close()
+    backup("b1.db", "b2.db")
+    first = Repository.open(f"sqlite:///{tmp_path / 'b1.db'}")
+    record(first, "VINT1", "B1", tightening_id=40)                       # seq 4
+    while f1.step():
+        pass
+    first.close()
+    second = Repository.open(f"sqlite:///{tmp_path / 'b2.db'}")        # put back: 2
+    record(second, "VINT1", "B1", tightening_id=400)                     # seq 4 again
+    f2 = Forwarder(second, LineConfig(pg_url, "ST-T"))
+    while f2.step():
+        pass
+    rows = _line_rows(pg_url, "ST-T")
+    assert sorted(r.record["tightening_id"] for r in rows) == [1, 2, 3, 30, 40, 400]
+    second.ledger.set_meta("forwarded_seq", "0")                         # a replay
+    replay = Forwarder(second, LineConfig(pg_url, "ST-T"))
+    while replay.step():
+        pass
+    rows = _line_rows(pg_url, "ST-T")
+    shown = [(r.db_id[:8], r.seq, r.record["tightening_id"]) for r in rows]
+    assert replay.forwarded == 0 and len(rows) == 6, \
+        f"records 1 and 2 inserted again under another id: {shown}"
+    second.close()
