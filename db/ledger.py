@@ -9,6 +9,7 @@ transaction, so a record and its feed entry are committed together or not at all
 
 from __future__ import annotations
 
+import json
 import uuid
 from collections.abc import Callable, Mapping
 from contextlib import AbstractContextManager
@@ -59,6 +60,9 @@ RESULT_KINDS = (RUNDOWN, UNATTRIBUTED, UNREADABLE)
 #: the meta keys of a renewed id (:meth:`Ledger.renew_db_id`): from which sequence number it
 #: holds, and the id the records before it keep
 DB_ID_FROM, DB_ID_BEFORE = "db_id_from", "db_id_before"
+#: the renewals before the last one (a second backup put back): JSON [[from_seq, id before
+#: it], ...], oldest first
+DB_ID_EARLIER = "db_id_earlier"
 
 
 @dataclass(frozen=True)
@@ -69,10 +73,18 @@ class Series:
     db_id: str
     from_seq: int = 1
     before: str | None = None
+    #: the renewals before the last one, oldest first: (from_seq, the id below it); a record
+    #: below one of them keeps the id it had then, not ``before``
+    earlier: tuple[tuple[int, str], ...] = ()
 
     def id_of(self, seq: int) -> str:
         """The id record ``seq`` goes under."""
-        return self.db_id if seq >= self.from_seq or self.before is None else self.before
+        if seq >= self.from_seq or self.before is None:
+            return self.db_id
+        for start, below in self.earlier:   # oldest (lowest) first: the first it is below
+            if seq < start:
+                return below
+        return self.before
 
 
 def is_result(entry: Mapping[str, Any]) -> bool:
@@ -150,9 +162,12 @@ class Ledger:
         ``from_seq`` on, the id before it below (None: never renewed)."""
         with self._session(False) as s:
             meta = {key: value for key, value in s.execute(select(Meta.key, Meta.value).where(
-                Meta.key.in_(("db_id", DB_ID_FROM, DB_ID_BEFORE))))}
+                Meta.key.in_(("db_id", DB_ID_FROM, DB_ID_BEFORE, DB_ID_EARLIER))))}
         start = meta.get(DB_ID_FROM)
-        return Series(meta["db_id"], int(start) if start else 1, meta.get(DB_ID_BEFORE))
+        earlier = tuple((int(f), str(i)) for f, i in json.loads(meta.get(DB_ID_EARLIER)
+                                                                  or "[]"))
+        return Series(meta["db_id"], int(start) if start else 1, meta.get(DB_ID_BEFORE),
+                      earlier)
 
     def renew_db_id(self, from_seq: int) -> Series:
         """The records from ``from_seq`` on are a new series (a new random id): the line
@@ -160,6 +175,12 @@ class Ledger:
         put back (a backup) numbered again.  The records before keep the id they had."""
         with self._session(True) as s:
             old = str(s.scalar(select(Meta.value).where(Meta.key == "db_id")))
+            start = s.scalar(select(Meta.value).where(Meta.key == DB_ID_FROM))
+            below = s.scalar(select(Meta.value).where(Meta.key == DB_ID_BEFORE))
+            if start and below:   # renewed before: the records below that keep their id
+                earlier = json.loads(s.scalar(select(Meta.value).where(
+                    Meta.key == DB_ID_EARLIER)) or "[]")
+                put_meta(s, DB_ID_EARLIER, json.dumps([*earlier, [int(start), below]]))
             put_meta(s, "db_id", str(uuid.uuid4()))
             put_meta(s, DB_ID_FROM, str(from_seq))
             put_meta(s, DB_ID_BEFORE, old)
