@@ -520,3 +520,27 @@ def test_every_close_of_a_vehicle_is_kept_with_what_it_left_and_joins_the_feed(s
     assert [(c["how"], c["ok"], c["not_ok"]) for c in closings] == [
         ("lowered", 1, {"nok": ["B2"], "missing": ["B3"]}), ("unseen", 3, {})]
     assert closings[0]["closed_at"] < closings[1]["closed_at"]
+
+
+def test_a_vehicle_that_leaves_with_a_bolt_held_says_so_in_its_closing(sedan):
+    """A bolt held for a person (its last result not known: here a lost push after its OK
+    rundown, as LostRules._gap_again stores one after the pushed result is recorded) is
+    not OK whatever its status says (VehicleReport.held); the station's own close line
+    counts it (Repository._with_held).  The closing that goes to the line and an MES
+    (line_vehicle_closings) must say it too: without it the vehicle reads complete, every
+    bolt OK, while the station holds B1 for a person."""
+    from db.kinds import LOST_UNKNOWN
+    from db.ledger import CLOSING
+
+    record(sedan, "VIN1", "B1")
+    record(sedan, "VIN1", "B2")
+    record(sedan, "VIN1", "B3")
+    sedan.record_controller_event(result_type=1, what=LOST_UNKNOWN, vin="VIN1", bolt="B1",
+                                  controller_vin=None, tightening_id=None, pset=1, ok=None,
+                                  torque_nm=None, angle_deg=None, result_at=None,
+                                  note="a lost push may be its second rundown")
+    report = sedan.close_vehicle("VIN1")
+    assert [b for b, _ in report.held] == ["B1"]          # the station's close line says it
+    [closing] = [e["record"] for e in sedan.ledger.since(0) if e["kind"] == CLOSING]
+    named = [b for bolts in closing["not_ok"].values() for b in bolts]
+    assert "B1" in named, f"the closing says nothing of B1's hold: {closing}"
