@@ -787,7 +787,7 @@ class Repository:
             s.flush()
             report = build_report(s, v)
             if closing:
-                _closed(s, v, report, LOWERED)
+                _closed(s, v, report, LOWERED, self._held_now(s, vin))
         return self._with_held(report)   # the journal's close line counts them
 
     def left_unseen(self, vin: str) -> VehicleReport | None:
@@ -807,7 +807,7 @@ class Repository:
             v.ended_at = utcnow()
             s.flush()
             report = build_report(s, v)
-            _closed(s, v, report, UNSEEN)
+            _closed(s, v, report, UNSEEN, self._held_now(s, v.vin))
         return self._with_held(report)
 
     def vehicle_report(self, vin: str, *, held: bool = False) -> VehicleReport:
@@ -825,6 +825,11 @@ class Repository:
         with self._session(write=False) as s:
             return _vin_in_other_case(s, vin)
 
+    def _held_now(self, s: Session, vin: str) -> list[str]:
+        """The bolts of ``vin`` held for a person, as :meth:`_with_held` counts them, read in
+        the caller's transaction (a closing says them)."""
+        return list(open_holds(s, vin, self.ledger.commands(vin), None))
+
     def _with_held(self, report: VehicleReport) -> VehicleReport:
         """``report`` with its held bolts, in the table's order: of every pass of the vehicle
         (a hold outlives a rework: its result is still not known; a supervisor's trial found
@@ -836,11 +841,16 @@ class Repository:
 
 
 # -- helpers ------------------------------------------------------------------------------
-def _closed(s: Session, v: Vehicle, report: VehicleReport, how: str) -> None:
+def _closed(s: Session, v: Vehicle, report: VehicleReport, how: str,
+            held: Collection[str] = ()) -> None:
     """The close of ``v`` kept (:class:`db.models.VehicleClosing`) with what its report
-    says it left, and its feed entry, in the caller's transaction."""
+    says it left, and its feed entry, in the caller's transaction.  ``held``: its bolts held
+    for a person, not OK whatever their status says (their last result not known): named
+    in ``not_ok`` too, in the table's order."""
+    order = {b.bolt_id: i for i, b in enumerate(report.bolts)}
     not_ok = {"nok": report.nok, "missing": report.missing, "skipped": report.skipped,
-              "loosen": report.loosen}
+              "loosen": report.loosen,
+              "held": sorted(held, key=lambda b: order.get(b, len(order)))}
     assert v.ended_at is not None  # noqa: S101 - closed by the caller
     row = VehicleClosing(vehicle_id=v.id, closed_at=v.ended_at, how=how,
                          bolts=len(report.bolts), ok=len(report.ok), nok=len(report.nok),

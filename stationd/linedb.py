@@ -475,7 +475,9 @@ LINE_CLOSINGS = _typed(
      (Column("loosen", Integer, comment="bolts loosened last or to be loosened: to be "
              "tightened again"), _int(_j("loosen"))),
      (Column("not_ok", JSONB, comment="the bolts not OK by name: {nok, missing, skipped, "
-             "loosen: [bolt, ...]}, each list in the bolt table's order"), _j("not_ok"))],
+             "loosen, held: [bolt, ...]}, each list in the bolt table's order; held: held for "
+             "a person, their last result not known, whatever the counts say"),
+      _j("not_ok"))],
     Index("ix_line_vehicle_closings_vin", "vin"),
 )
 

@@ -232,7 +232,7 @@ def test_every_kind_of_record_lands_typed_with_its_columns_units_and_comments(tm
         gone = c.execute(select(LINE_CLOSINGS.table)).one()
         assert (gone.vin, gone.model, gone.how, gone.bolts, gone.ok, gone.nok, gone.missing,
                 gone.skipped, gone.loosen) == (VIN, "SEDAN", "lowered", 3, 1, 0, 1, 0, 1)
-        assert gone.not_ok == {"missing": ["B3"], "loosen": ["B2"]}
+        assert gone.not_ok == {"missing": ["B3"], "loosen": ["B2"], "held": ["B3"]}
         assert gone.closed_at.tzinfo is not None and gone.closed_at <= gone.at
         # real types and a comment on every column, for Grafana, Power BI and people
         types = dict(c.execute(text(
