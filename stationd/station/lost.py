@@ -102,8 +102,19 @@ class LostRules(NokRules):
         if not told:
             return []
         ids = ", ".join(id_span(first, last) for first, last in told)
-        return self._doubt_while_on(t, None, lambda u: lost_gap_note(
-            ids, u.selection.pset, u.enabled_at))
+
+        def note(u: _Cut) -> str:
+            return lost_gap_note(ids, u.selection.pset, u.enabled_at)
+
+        en, since = self._enabled, self._enabled_at
+        if self._checking_owed() and en is not None and since is not None \
+                and en.vin != self.vin:
+            # its vehicle left as the check ran (the lift down): held all the same, stored
+            # for when it is back, as the gap held it at once before it was decided here
+            acts = self._hold_unanswered(t, [_Cut(en, since, t)], note)
+            self._enabled, self._off_at = None, None
+            return acts
+        return self._doubt_while_on(t, None, note)
 
     def _gaps_superseded(self, tid: int, acts: list[Action], en: Selection) -> None:
         """``tid``, fetched by a check with the tool on, recorded to ``en``, the enable on
