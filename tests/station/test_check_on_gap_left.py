@@ -35,3 +35,34 @@ def test_a_gap_the_tool_on_check_tells_holds_the_bolt_also_when_its_vehicle_leav
             acts += d.feed(NewestChecked(d.t, nothing_made=True, serial=c.serial))
     assert ("VIN1", "B1") in {(a.vin, a.bolt) for a in acts if isinstance(a, StoreCutUnknown)}, \
         "41 may be B1's rundown: B1 of VIN1 not held, open at a rework"
+
+
+def test_a_gap_the_tool_on_check_tells_holds_the_bolt_also_when_the_link_cut_ends_the_enable():
+    """As above, the wrench's link cut instead, as the check runs: the tool off, the enable
+    the cut's.  The reconnect's catch-up, complete and finding nothing after 41 (the gap was
+    told: accounted for), settles the cut's enable past its late-result window (nothing
+    made) before the check's answer comes (its own wait, or CHECK_WAIT_S): the check's end
+    then finds no enable to hold and B1 is open, tightened twice if 41 was its rundown.
+    Held at once, as before a3b683d."""
+    from drivers.keeper import FaultKind
+    from stationd.station.inputs import CaughtUp, DeviceBack, DeviceFault
+
+    d = _ready()
+    d.answer_checks = False
+    _enabled(d, 1)
+    d.t += CHECK_ON_S
+    [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    acts = d.feed(ResultsMissed(d.t, 41, 41, "the controller no longer has it", live=True))
+    d.t += 0.1
+    acts += d.feed(DeviceFault(d.t, "wrench", FaultKind.DOWN, "wrench gone"))
+    d.t += d.core.late_result_s + 3.0              # a cut of some seconds
+    acts += d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    acts += d.feed(CaughtUp(d.t, True, "", 1))
+    d.t += 0.5
+    acts += d.feed(NewestChecked(d.t, unknown="the link was cut", serial=check.serial))
+    for _ in range(5):
+        d.t += 5.0
+        for c in [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]:
+            acts += d.feed(NewestChecked(d.t, nothing_made=True, serial=c.serial))
+    assert "B1" in d.core.matcher.held and "B1" not in d.core.allowed(), \
+        "41 may be B1's rundown: B1 open after the cut's catch-up"
