@@ -15,6 +15,7 @@ from db.kinds import (
     lost_gap_note,
     lost_unknown_note,
 )
+from drivers.keeper import FaultKind
 from stationd.reasons import Unproved, UnprovedKind
 from stationd.station.actions import (
     Action,
@@ -32,7 +33,9 @@ from stationd.station.events import (
     StateReason,
 )
 from stationd.station.inputs import (
+    WRENCH,
     CaughtUp,
+    DeviceFault,
     NewestChecked,
     ResultIn,
     ResultsMissed,
@@ -90,6 +93,18 @@ class LostRules(NokRules):
             elif ev.unknown:
                 acts = self._check_unknown(ev.t, en, ev.unknown)
         return acts + self._check_ended()
+
+    def _on_device_fault(self, ev: DeviceFault) -> list[Action]:
+        """The wrench's link cut as a check with the tool on runs: the gaps it told decide
+        now, while the enable on is the one they may hold (:meth:`_gaps_on_check_decided`);
+        what the check would have fetched after them is the catch-up's.  Decided only at
+        the check's end, a catch-up ending first (complete, nothing after the gap's ids)
+        settled the cut's enable, and the check's end found none to hold: its bolt open."""
+        acts: list[Action] = []
+        if ev.device == WRENCH and self._checking_on and self._gaps_on_check \
+                and ev.kind is not FaultKind.REFUSED:
+            acts = self._gaps_on_check_decided(ev.t)
+        return acts + super()._on_device_fault(ev)
 
     def _gaps_on_check_decided(self, t: float) -> list[Action]:
         """The gaps a check with the tool on told (ids the controller no longer gives, made
