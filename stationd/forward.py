@@ -393,9 +393,12 @@ class Forwarder:
         for e in self.repo.ledger.quarantined():
             try:
                 self.forwarded += self._push([e])
-            except DBAPIError as exc:
+            except (DBAPIError, SeriesDiverged) as exc:
+                # (diverged: the line has another record at its number under its id, which
+                # a renewal from there would take from the records forwarded since)
                 refused += 1
-                self.repo.ledger.quarantine(e["seq"], error_line(exc))
+                self.repo.ledger.quarantine(e["seq"], error_line(exc) if isinstance(
+                    exc, DBAPIError) else str(exc))
                 continue
             self.repo.ledger.release(e["seq"])
             taken += 1

@@ -794,3 +794,29 @@ def test_two_backups_put_back_in_turn_keep_each_record_under_its_first_series(
     assert replay.forwarded == 0 and len(rows) == 6, \
         f"records 1 and 2 inserted again under another id: {shown}"
     second.close()
+
+
+def test_a_quarantined_record_that_is_another_on_the_line_stays_quarantined(tmp_path, table,
+                                                                          pg_url):
+    """A reviewer: a record kept in quarantine, retried (``line quarantine --retry``) after
+    its database was put back from a backup, is another record on the line at its number:
+    the retry raised (a traceback).  It stays in quarantine, said why; nothing written."""
+    import sqlite3
+
+    repo = _station(tmp_path, "st.db", table, "VINQ1", [(1, "B1")])
+    src, dst = sqlite3.connect(tmp_path / "st.db"), sqlite3.connect(tmp_path / "backup.db")
+    src.backup(dst)
+    src.close()
+    dst.close()
+    record(repo, "VINQ1", "B2", tightening_id=2)
+    assert Forwarder(repo, LineConfig(pg_url, "ST-Q")).step() == 2
+    repo.close()
+    restored = Repository.open(f"sqlite:///{tmp_path / 'backup.db'}")
+    record(restored, "VINQ1", "B3", tightening_id=20)           # numbered 2 again
+    restored.ledger.quarantine(2, "refused for good before")     # as if refused then
+    f = Forwarder(restored, LineConfig(pg_url, "ST-Q"))
+    assert f.retry_quarantined() == (0, 1)
+    [kept] = restored.ledger.quarantined()
+    assert kept["seq"] == 2
+    assert sorted(r.record["tightening_id"] for r in _line_rows(pg_url, "ST-Q")) == [1, 2]
+    restored.close()
