@@ -196,10 +196,7 @@ class Ledger:
     def commands(self, vin: str | None = None) -> list[CommandEntry]:
         """The accepted commands (on ``vin``, or all), oldest first: the audit trail."""
         with self._session(False) as s:
-            q = select(CommandRecord).order_by(CommandRecord.id)
-            if vin is not None:
-                q = q.where(CommandRecord.vin == vin)
-            return [_command(r) for r in s.scalars(q)]
+            return commands_in(s, vin)
 
     def last_of(self, kinds: tuple[str, ...]) -> CommandEntry | None:
         """The last command of one of ``kinds`` (None: none ever)."""
@@ -319,6 +316,15 @@ class Ledger:
             sub = self._unacknowledged().subquery()
             return int(s.scalar(select(func.count()).select_from(sub)) or 0)
 
+
+
+def commands_in(s: Session, vin: str | None = None) -> list[CommandEntry]:
+    """:meth:`Ledger.commands` in the caller's transaction (a vehicle's close reads its
+    holds with the commands that ended them, under its own write lock)."""
+    q = select(CommandRecord).order_by(CommandRecord.id)
+    if vin is not None:
+        q = q.where(CommandRecord.vin == vin)
+    return [_command(r) for r in s.scalars(q)]
 
 
 def _command(r: CommandRecord) -> CommandEntry:
@@ -481,6 +487,7 @@ __all__ = [
     "Ledger",
     "add_command",
     "append",
+    "commands_in",
     "is_result",
     "put_meta",
 ]

@@ -48,15 +48,14 @@ from db.ledger import (
     Ledger,
     add_command,
     append,
+    commands_in,
     put_meta,
 )
-from db.ledger import _command as command_entry
 from db.migrate import current_revision, head_revision, upgrade
 from db.models import (
     AT_STATION,
     WRITE_PROVED,
     Bolt,
-    CommandRecord,
     ControllerEvent,
     Meta,
     ProcessParameters,
@@ -830,9 +829,7 @@ class Repository:
     def _held_now(self, s: Session, vin: str) -> list[str]:
         """The bolts of ``vin`` held for a person, as :meth:`_with_held` counts them, read in
         the caller's transaction (a closing says them)."""
-        commands = [command_entry(r) for r in s.scalars(
-            select(CommandRecord).where(CommandRecord.vin == vin).order_by(CommandRecord.id))]
-        return list(open_holds(s, vin, commands, None))
+        return list(open_holds(s, vin, commands_in(s, vin), None))
 
     def _with_held(self, report: VehicleReport) -> VehicleReport:
         """``report`` with its held bolts, in the table's order: of every pass of the vehicle
