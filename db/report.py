@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from db.counting import counted
@@ -43,6 +43,7 @@ from db.models import (
     ProcessParameters,
     TighteningRecord,
     Vehicle,
+    VehicleClosing,
 )
 
 __all__ = ["LOOSENED", "MISSING", "NOK", "OK", "SKIPPED", "TO_LOOSEN", "BoltResult",
@@ -59,6 +60,9 @@ class VehicleInfo:
     #: reopened for rework and not back at the station yet (open in the database, worked
     #: nowhere: "open" read as if it were on the lift, a newcomer's trial)
     waiting: bool = False
+    #: when it first left the station (its first close, kept through reworks: ``ended_at`` is
+    #: the last); None: never closed, or closed before closings were kept (migration 0021)
+    first_closed_at: datetime | None = None
 
     @property
     def rework(self) -> bool:
@@ -191,6 +195,7 @@ class VehicleReport:
         v = self.vehicle
         return {"vin": v.vin, "model": v.model, "started_at": _iso(v.started_at),
                 "ended_at": _iso(v.ended_at), "reopened_at": _iso(v.reopened_at),
+                "first_closed_at": _iso(v.first_closed_at),
                 "waiting": v.waiting,
                 "complete": self.complete, "ok": self.ok,
                 "nok": self.nok, "missing": self.missing, "skipped": self.skipped,
@@ -258,7 +263,10 @@ def build_report(s: Session, v: Vehicle) -> VehicleReport:
     here = s.get(Meta, AT_STATION)
     waiting = v.ended_at is None and v.reopened_at is not None and (
         here is None or here.value != v.vin)
-    info = VehicleInfo(v.vin, v.model.name, v.started_at, v.ended_at, v.reopened_at, waiting)
+    first = s.scalar(select(func.min(VehicleClosing.closed_at))
+                     .where(VehicleClosing.vehicle_id == v.id))
+    info = VehicleInfo(v.vin, v.model.name, v.started_at, v.ended_at, v.reopened_at, waiting,
+                       first)
     tightenings = [rec for rec, _ in records if (rec.kind or TIGHTENING) == TIGHTENING]
     return VehicleReport(info, tuple(results), len(tightenings),
                          sum(1 for rec in tightenings if rec.status == NOK),

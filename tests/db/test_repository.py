@@ -520,6 +520,12 @@ def test_every_close_of_a_vehicle_is_kept_with_what_it_left_and_joins_the_feed(s
     assert [(c["how"], c["ok"], c["not_ok"]) for c in closings] == [
         ("lowered", 1, {"nok": ["B2"], "missing": ["B3"]}), ("unseen", 3, {})]
     assert closings[0]["closed_at"] < closings[1]["closed_at"]
+    # its report keeps when it first left (ended_at is the last close)
+    info = sedan.vehicle_report("VIN1").vehicle
+    assert info.first_closed_at is not None and info.ended_at is not None
+    assert info.first_closed_at.isoformat() == closings[0]["closed_at"]
+    assert info.ended_at.isoformat() == closings[1]["closed_at"]
+    assert sedan.vehicle_report("VIN1").to_json()["first_closed_at"] == closings[0]["closed_at"]
 
 
 def test_a_vehicle_that_leaves_with_a_bolt_held_says_so_in_its_closing(sedan):
