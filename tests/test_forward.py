@@ -72,6 +72,18 @@ def _line_rows(url, station_id=None):
     return rows
 
 
+def _backup(folder: Path, name: str, to: str) -> None:
+    """``sqlite3 name ".backup to"``, as the README makes a station's backup."""
+    import sqlite3
+
+    src, dst = sqlite3.connect(folder / name), sqlite3.connect(folder / to)
+    try:
+        src.backup(dst)
+    finally:
+        src.close()
+        dst.close()
+
+
 def test_every_record_goes_once_in_order_and_a_replay_inserts_nothing(tmp_path, table,
                                                                        pg_url):
     repo = _station(tmp_path, "st1.db", table, "VINF1", [(1, "B1"), (2, "B2")])
@@ -135,16 +147,11 @@ def test_a_database_put_back_from_a_backup_goes_on_as_a_new_series_losing_nothin
     had.  The first record that is another record on the line starts a new series (a new
     id): the line keeps the records the copy lacked and takes the new ones beside them; the
     records before keep their id, and a replay still inserts nothing."""
-    import sqlite3
-
     repo = _station(tmp_path, "st.db", table, "VINR1", [(1, "B1"), (2, "B2")])
     f = Forwarder(repo, LineConfig(pg_url, "ST-R"))
     assert f.step() == 2
     old_id = repo.ledger.db_id()
-    src, dst = sqlite3.connect(tmp_path / "st.db"), sqlite3.connect(tmp_path / "backup.db")
-    src.backup(dst)                                      # sqlite3's .backup, as the README
-    src.close()
-    dst.close()
+    _backup(tmp_path, "st.db", "backup.db")
     record(repo, "VINR1", "B3", tightening_id=3)          # made after the backup ...
     record(repo, "VINR1", "B1", tightening_id=4)
     assert f.step() == 2                                 # ... and on the line
@@ -751,18 +758,10 @@ def test_two_backups_put_back_in_turn_keep_each_record_under_its_first_series(
     then on under the second id.  A replay of them (a crash between a push and the cursor
     saved, as that test models it; or a quarantined one retried) is then no replay: each
     is inserted again, under another id, the line holding it twice."""
-    import sqlite3
-
-    def backup(name: str, to: str) -> None:
-        src, dst = sqlite3.connect(tmp_path / name), sqlite3.connect(tmp_path / to)
-        src.backup(dst)
-        src.close()
-        dst.close()
-
     repo = _station(tmp_path, "st.db", table, "VINT1", [(1, "B1"), (2, "B2")])
     f = Forwarder(repo, LineConfig(pg_url, "ST-T"))
     assert f.step() == 2
-    backup("st.db", "b1.db")
+    _backup(tmp_path, "st.db", "b1.db")
     record(repo, "VINT1", "B3", tightening_id=3)
     assert f.step() == 1
     repo.close()
@@ -772,7 +771,7 @@ def test_two_backups_put_back_in_turn_keep_each_record_under_its_first_series(
     while f1.step():
         pass
     first.close()
-    backup("b1.db", "b2.db")
+    _backup(tmp_path, "b1.db", "b2.db")
     first = Repository.open(f"sqlite:///{tmp_path / 'b1.db'}")
     record(first, "VINT1", "B1", tightening_id=40)                       # seq 4
     while f1.step():
@@ -801,13 +800,8 @@ def test_a_quarantined_record_that_is_another_on_the_line_stays_quarantined(tmp_
     """A reviewer: a record kept in quarantine, retried (``line quarantine --retry``) after
     its database was put back from a backup, is another record on the line at its number:
     the retry raised (a traceback).  It stays in quarantine, said why; nothing written."""
-    import sqlite3
-
     repo = _station(tmp_path, "st.db", table, "VINQ1", [(1, "B1")])
-    src, dst = sqlite3.connect(tmp_path / "st.db"), sqlite3.connect(tmp_path / "backup.db")
-    src.backup(dst)
-    src.close()
-    dst.close()
+    _backup(tmp_path, "st.db", "backup.db")
     record(repo, "VINQ1", "B2", tightening_id=2)
     assert Forwarder(repo, LineConfig(pg_url, "ST-Q")).step() == 2
     repo.close()

@@ -10,8 +10,21 @@ from stationd.station.actions import CheckNewest, Record, StoreCutUnknown
 from stationd.station.inputs import NewestChecked, ResultIn, Tick
 from stationd.station.state import CHECK_ON_S
 from tests.station.test_check import found_by_the_check
-from tests.station.test_core import _on, _ready
+from tests.station.test_core import Driver, _on, _ready
 from tests.station.test_result_types import _enabled, res
+
+
+def on_and_checked() -> tuple[Driver, CheckNewest, float]:
+    """B1's tool on (enabled at the time returned), the checks answered by the test, and
+    the periodic check with the tool on asked, CHECK_ON_S later."""
+    d = _ready()
+    d.answer_checks = False
+    _enabled(d, 1)
+    at = d.t
+    d.t += CHECK_ON_S
+    [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    assert check.tool_on
+    return d, check, at
 
 
 @pytest.mark.parametrize("found", ["a result not proved its own", "a gap"])
@@ -54,12 +67,7 @@ def test_a_push_after_the_tool_on_check_fetched_its_result_is_not_recorded_twice
     ResultIn through) the core's only guard is _recorded == _said, which differs by the
     type code: the push is attributed to the enable still owed -- 41 recorded twice to B1,
     its NOK counted twice."""
-    d = _ready()
-    d.answer_checks = False
-    _enabled(d, 1)
-    at = d.t
-    d.t += CHECK_ON_S
-    [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    d, check, at = on_and_checked()
     acts = d.feed(ResultIn(d.t, res(41, 1, False, None), fetched=True, follows=40,
                            made_at=at + 2.2, live=True))
     acts += d.feed(ResultIn(d.t, res(41, 1, False, 1), made_at=at + 2.2))   # its push
@@ -140,12 +148,7 @@ def test_a_gap_the_tool_on_check_tells_before_the_enable_s_fetched_rundown_holds
     rundown of B1: held."""
     from stationd.station.inputs import ResultsMissed
 
-    d = _ready()
-    d.answer_checks = False
-    _enabled(d, 1)
-    at = d.t
-    d.t += CHECK_ON_S
-    [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    d, check, at = on_and_checked()
     gap, ran = (41, 42) if gap_first else (42, 41)
     found = [ResultsMissed(d.t, gap, gap, "the controller no longer has it", live=True),
              ResultIn(d.t, res(ran, 1, True, 1), fetched=True, follows=40,

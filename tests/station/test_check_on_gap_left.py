@@ -5,10 +5,8 @@ from __future__ import annotations
 
 from stationd.station.actions import CheckNewest, StoreCutUnknown
 from stationd.station.inputs import NewestChecked, ResultsMissed, Tick
-from stationd.station.state import CHECK_ON_S
+from tests.station.test_check_on import on_and_checked
 from tests.station.test_closing import _down
-from tests.station.test_core import _ready
-from tests.station.test_result_types import _enabled
 
 
 def test_a_gap_the_tool_on_check_tells_holds_the_bolt_also_when_its_vehicle_leaves_meanwhile():
@@ -18,11 +16,7 @@ def test_a_gap_the_tool_on_check_tells_holds_the_bolt_also_when_its_vehicle_leav
     and _doubt_while_on holds nothing, so B1 of VIN1 is neither held nor stored as held: at
     a rework it is open, tightened twice if 41 was its rundown.  Held at once, as before
     a3b683d, it was stored for when VIN1 is back."""
-    d = _ready()
-    d.answer_checks = False
-    _enabled(d, 1)
-    d.t += CHECK_ON_S
-    [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    d, check, _ = on_and_checked()
     acts = d.feed(ResultsMissed(d.t, 41, 41, "the controller no longer has it", live=True))
     n = len(d.log)
     _down(d)                                       # VIN1 leaves as the check runs
@@ -47,11 +41,7 @@ def test_a_gap_the_tool_on_check_tells_holds_the_bolt_also_when_the_link_cut_end
     from drivers.keeper import FaultKind
     from stationd.station.inputs import CaughtUp, DeviceBack, DeviceFault
 
-    d = _ready()
-    d.answer_checks = False
-    _enabled(d, 1)
-    d.t += CHECK_ON_S
-    [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
+    d, check, _ = on_and_checked()
     acts = d.feed(ResultsMissed(d.t, 41, 41, "the controller no longer has it", live=True))
     d.t += 0.1
     acts += d.feed(DeviceFault(d.t, "wrench", FaultKind.DOWN, "wrench gone"))
