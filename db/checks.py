@@ -17,7 +17,7 @@ from sqlalchemy import select
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session
 
-from db.engine import writer
+from db.engine import write_session
 from db.errors import DatabaseError, DataError
 from db.ledger import CHECK, append
 from db.models import CalibrationCheck
@@ -56,7 +56,7 @@ def record_check(repo: Repository, *, at: datetime, pair: str, verdict: str,
                            tolerance_mm=_finite(tolerance_mm, "tolerance_mm"),
                            reason=None if reason is None else reason[:200], references=refs)
     try:
-        with Session(writer(repo.engine), expire_on_commit=False) as s, s.begin():
+        with write_session(repo.engine) as s:
             s.add(row)
             s.flush()
             append(s, CHECK, row.id, row.recorded_at)

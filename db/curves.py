@@ -27,7 +27,7 @@ from sqlalchemy import select
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session
 
-from db.engine import writer
+from db.engine import write_session
 from db.errors import DatabaseError, DataError
 from db.ledger import CURVE, append
 from db.models import TighteningCurve, TighteningRecord, utcnow
@@ -72,12 +72,8 @@ def store_curve(repo: Repository, *, tightening_id: int, trace_type: int, unit: 
 def _store(repo: Repository, tightening_id: int, trace_type: int, unit: str,
            vals: list[float], period: float | None, times: list[float] | None,
            result_at: datetime | None, record_id: int | None) -> int:
-    with Session(writer(repo.engine), expire_on_commit=False) as s, s.begin():
-        # the time read under the write lock (BEGIN IMMEDIATE, taken by this first statement):
-        # it is the feed entry's at, so a curve that waited for the lock is never dated
-        # before the record numbered ahead of it
-        s.connection()
-        now = utcnow()
+    with write_session(repo.engine) as s:
+        now = utcnow()   # under the write lock: the feed entry's at (db.engine.write_session)
         if record_id is None:
             record_id = s.scalar(
                 select(TighteningRecord.id)
@@ -103,7 +99,7 @@ def link_curves(repo: Repository, tightening_id: int, record_id: int) -> int:
     Optional: reading finds them by tightening id anyway; linked, the row says it."""
     now = utcnow()
     try:
-        with Session(writer(repo.engine)) as s, s.begin():
+        with write_session(repo.engine, expire_on_commit=True) as s:
             rows = list(s.scalars(select(TighteningCurve).where(
                 TighteningCurve.record_id.is_(None),
                 TighteningCurve.tightening_id == int(tightening_id),

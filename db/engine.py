@@ -18,12 +18,15 @@ start) on the engine returned by :func:`writer`, so an import never acts on a st
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 from sqlalchemy import Engine, create_engine, event, make_url
 from sqlalchemy.engine import Connection
 from sqlalchemy.exc import ArgumentError, NoSuchModuleError
+from sqlalchemy.orm import Session
 
 from db.errors import DataError
 
@@ -98,6 +101,18 @@ def _url_mistake(url: str, *, loaded: bool = False) -> str | None:
 def writer(engine: Engine) -> Engine:
     """The same engine (same pool), whose transactions take SQLite's write lock at BEGIN."""
     return engine.execution_options(**{_IMMEDIATE: True})
+
+
+@contextmanager
+def write_session(engine: Engine, *, expire_on_commit: bool = False) -> Iterator[Session]:
+    """One write transaction on ``engine`` (a :func:`writer`'s or not), committed when the
+    block ends, rolled back if it raises, holding SQLite's write lock from its start: the
+    session would begin only at its first statement, and a time the body read before it (a
+    record's ``recorded_at``, its feed entry's ``at``), by a write that then waited for the
+    lock, was dated before the record numbered ahead of it."""
+    with Session(writer(engine), expire_on_commit=expire_on_commit) as s, s.begin():
+        s.connection()   # BEGIN IMMEDIATE now
+        yield s
 
 
 def _setup_sqlite(engine: Engine, *, read_only: bool = False) -> None:

@@ -22,9 +22,8 @@ from datetime import datetime
 
 from sqlalchemy import select
 from sqlalchemy.exc import SQLAlchemyError
-from sqlalchemy.orm import Session
 
-from db.engine import writer
+from db.engine import write_session
 from db.errors import DatabaseError, DataError, NotFoundError
 from db.importer import current_version, parameters_of
 from db.kinds import HELD_WITHOUT_RESULT, LOOSENING, NOT_TAKEN, RUNDOWN_KINDS, TIGHTENING
@@ -62,7 +61,7 @@ def record_entered(repo: Repository, *, vin: str, bolt: str, ok: bool, torque_nm
     if at.tzinfo is None:
         raise DataError("at: a timestamp with a timezone (UTC) is needed")
     try:
-        with Session(writer(repo.engine), expire_on_commit=False) as s, s.begin():
+        with write_session(repo.engine) as s:
             v = s.scalar(select(Vehicle).where(Vehicle.vin == vin))
             if v is None:
                 raise NotFoundError(f"vehicle {vin!r} is not in the database")

@@ -24,7 +24,7 @@ from sqlalchemy.orm import Session
 
 from db import quality
 from db.bolts import BoltTable, Parameters, dump_bolts
-from db.engine import DEFAULT_URL, make_engine, writer
+from db.engine import DEFAULT_URL, make_engine, write_session
 from db.errors import DatabaseError, DataError, NotFoundError, VehicleClosedError
 from db.holds import ENDS_A_HOLD, open_holds, released_holds
 from db.importer import ImportReport, current_version, import_table, parameters_of, read_table
@@ -156,7 +156,6 @@ class Repository:
 
     def __init__(self, engine: Engine) -> None:
         self._engine = engine
-        self._writer = writer(engine)
         #: the feed, the commands, the database's id (the same transactions)
         self.ledger = Ledger(lambda write: self._session(write))
 
@@ -212,15 +211,12 @@ class Repository:
     def _session(self, write: bool) -> Iterator[Session]:
         """One transaction: committed when the block ends, rolled back if it raises."""
         try:
-            with Session(self._writer if write else self._engine,
-                         expire_on_commit=False) as s, s.begin():
-                if write:
-                    # the write lock (BEGIN IMMEDIATE) taken now, before the body reads the
-                    # time: a recorded_at is its feed entry's at, and one read before the
-                    # lock, by a write that then waited for it, was dated before the record
-                    # numbered ahead of it
-                    s.connection()
-                yield s
+            if write:   # the write lock taken as it begins (db.engine.write_session)
+                with write_session(self._engine) as s:
+                    yield s
+            else:
+                with Session(self._engine, expire_on_commit=False) as s, s.begin():
+                    yield s
         except SQLAlchemyError as exc:
             raise DatabaseError(f"database {'write' if write else 'read'} failed: "
                                 f"{_reason(exc)}") from None
