@@ -14,7 +14,6 @@ traceback, and exit 1, which systemd restarts forever.
 from __future__ import annotations
 
 import os
-import pwd
 import stat
 from collections.abc import Collection
 from pathlib import Path
@@ -80,10 +79,10 @@ def unwritable_file(path: Path, who: str = "this process's user", *, uid: int | 
                    "read-write, or name a database on one"
         if uid == 0 or _may_write(st, uid, gids):
             continue
-        user = _user(uid)
+        user = user_name(uid)
         fix = f"chown it to {user}" if st.st_uid != uid else "chmod u+w it"
         return (f"the database file {f} is not writable by {who} ({user}; the file is "
-                f"{_user(st.st_uid)}'s, mode {stat.S_IMODE(st.st_mode):04o}): {fix}")
+                f"{user_name(st.st_uid)}'s, mode {stat.S_IMODE(st.st_mode):04o}): {fix}")
     return None
 
 
@@ -94,13 +93,6 @@ def _may_write(st: os.stat_result, uid: int, gids: Collection[int]) -> bool:
     if st.st_gid in gids:
         return bool(st.st_mode & stat.S_IWGRP)
     return bool(st.st_mode & stat.S_IWOTH)
-
-
-def _user(uid: int) -> str:
-    try:
-        return pwd.getpwuid(uid).pw_name
-    except KeyError:
-        return f"uid {uid}"
 
 
 def sqlite_problem(url: str, *, read_header: bool = True, loses: str = STATION_LOSES,

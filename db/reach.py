@@ -24,11 +24,11 @@ import stat
 from pathlib import Path
 
 
-def user_name() -> str:
+def user_name(uid: int | None = None) -> str:
     """The user this process runs as (its effective uid), the one a folder is closed to:
     not ``$USER``, which a process started as another user (``runuser``, ``sudo -u``, a
-    parent that changed uid) may have inherited."""
-    uid = os.geteuid()
+    parent that changed uid) may have inherited; or the user of ``uid`` (a file's owner)."""
+    uid = os.geteuid() if uid is None else uid
     try:
         return pwd.getpwuid(uid).pw_name
     except KeyError:
