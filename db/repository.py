@@ -433,7 +433,7 @@ class Repository:
             if since is not None:
                 q = q.where(TighteningRecord.recorded_at >= since)
             releases: dict[str, datetime] = {}
-            for c in self.ledger.commands(vin):
+            for c in commands_in(s, vin):
                 if c.kind in ENDS_A_HOLD and c.bolt is not None:
                     releases[c.bolt] = c.at
             streak: dict[str, int] = {}
@@ -684,13 +684,13 @@ class Repository:
         station decides).  An OK result without a type outside the window came under the
         tightening pset (never taken so under a loosen pset)."""
         with self._session(write=False) as s:
-            return open_holds(s, vin, self.ledger.commands(vin), since)
+            return open_holds(s, vin, commands_in(s, vin), since)
 
     def released_holds(self, vin: str, since: datetime | None = None) -> frozenset[str]:
         """The bolts of ``vin`` whose last hold a person released, not run down since: open
         again, but they may be tightened already (a restart keeps the operator's warning)."""
         with self._session(write=False) as s:
-            return released_holds(s, vin, self.ledger.commands(vin), since)
+            return released_holds(s, vin, commands_in(s, vin), since)
 
     def spc(self, model: str | None = None, since: datetime | None = None,
             last: int = quality.LAST_N) -> dict[str, Any]:
@@ -782,10 +782,10 @@ class Repository:
             if here is not None and here.value == vin:
                 here.value = ""
             s.flush()
-            report = build_report(s, v)
+            report = _held_in(s, build_report(s, v))   # the journal's close line counts them
             if closing:
-                _closed(s, v, report, LOWERED, self._held_now(s, vin))
-        return self._with_held(report)   # the journal's close line counts them
+                _closed(s, v, report, LOWERED)
+        return report
 
     def left_unseen(self, vin: str) -> VehicleReport | None:
         """Close the vehicle the station loaded last, if it is not ``vin`` and still open, and
@@ -803,9 +803,9 @@ class Repository:
                 return None
             v.ended_at = utcnow()
             s.flush()
-            report = build_report(s, v)
-            _closed(s, v, report, UNSEEN, self._held_now(s, v.vin))
-        return self._with_held(report)
+            report = _held_in(s, build_report(s, v))
+            _closed(s, v, report, UNSEEN)
+        return report
 
     def vehicle_report(self, vin: str, *, held: bool = False) -> VehicleReport:
         """The vehicle's summary; with ``held``, the bolts held for a person too (a read of
@@ -822,32 +822,33 @@ class Repository:
         with self._session(write=False) as s:
             return _vin_in_other_case(s, vin)
 
-    def _held_now(self, s: Session, vin: str) -> list[str]:
-        """The bolts of ``vin`` held for a person, as :meth:`_with_held` counts them, read in
-        the caller's transaction (a closing says them)."""
-        return list(open_holds(s, vin, commands_in(s, vin), None))
-
     def _with_held(self, report: VehicleReport) -> VehicleReport:
         """``report`` with its held bolts, in the table's order: of every pass of the vehicle
         (a hold outlives a rework: its result is still not known; a supervisor's trial found
         the hold of a car that left, its last push lost, gone at its reopening)."""
-        holds = self.held_bolts(report.vehicle.vin)
-        order = {b.bolt_id: i for i, b in enumerate(report.bolts)}
-        return replace(report, held=tuple(sorted(
-            holds.items(), key=lambda h: order.get(h[0], len(order)))))
+        with self._session(write=False) as s:
+            return _held_in(s, report)
 
 
 # -- helpers ------------------------------------------------------------------------------
-def _closed(s: Session, v: Vehicle, report: VehicleReport, how: str,
-            held: Collection[str] = ()) -> None:
-    """The close of ``v`` kept (:class:`db.models.VehicleClosing`) with what its report
-    says it left, and its feed entry, in the caller's transaction.  ``held``: its bolts held
-    for a person, not OK whatever their status says (their last result not known): named
-    in ``not_ok`` too, in the table's order."""
+def _held_in(s: Session, report: VehicleReport) -> VehicleReport:
+    """``report`` with its held bolts (:meth:`Repository._with_held`), read in the caller's
+    transaction, in the table's order."""
+    vin = report.vehicle.vin
+    holds = open_holds(s, vin, commands_in(s, vin), None)
     order = {b.bolt_id: i for i, b in enumerate(report.bolts)}
+    return replace(report, held=tuple(sorted(
+        ((bolt, note) for bolt, (note, _) in holds.items()),
+        key=lambda h: order.get(h[0], len(order)))))
+
+
+def _closed(s: Session, v: Vehicle, report: VehicleReport, how: str) -> None:
+    """The close of ``v`` kept (:class:`db.models.VehicleClosing`) with what its report
+    (with its holds: :func:`_held_in`) says it left, and its feed entry, in the caller's
+    transaction.  Its bolts held for a person are not OK whatever their status says (their
+    last result not known): named in ``not_ok`` too."""
     not_ok = {"nok": report.nok, "missing": report.missing, "skipped": report.skipped,
-              "loosen": report.loosen,
-              "held": sorted(held, key=lambda b: order.get(b, len(order)))}
+              "loosen": report.loosen, "held": [bolt for bolt, _ in report.held]}
     assert v.ended_at is not None  # noqa: S101 - closed by the caller
     row = VehicleClosing(vehicle_id=v.id, closed_at=v.ended_at, how=how,
                          bolts=len(report.bolts), ok=len(report.ok), nok=len(report.nok),
