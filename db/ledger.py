@@ -161,30 +161,21 @@ class Ledger:
         """Under which id each record goes to the line: the database's id from
         ``from_seq`` on, the id before it below (None: never renewed)."""
         with self._session(False) as s:
-            meta = {key: value for key, value in s.execute(select(Meta.key, Meta.value).where(
-                Meta.key.in_(("db_id", DB_ID_FROM, DB_ID_BEFORE, DB_ID_EARLIER))))}
-        start = meta.get(DB_ID_FROM)
-        earlier = tuple((int(f), str(i)) for f, i in json.loads(meta.get(DB_ID_EARLIER)
-                                                                  or "[]"))
-        return Series(meta["db_id"], int(start) if start else 1, meta.get(DB_ID_BEFORE),
-                      earlier)
+            return _series_in(s)
 
     def renew_db_id(self, from_seq: int) -> Series:
         """The records from ``from_seq`` on are a new series (a new random id): the line
         has other records under this database's id at those sequence numbers, which a copy
         put back (a backup) numbered again.  The records before keep the id they had."""
         with self._session(True) as s:
-            old = str(s.scalar(select(Meta.value).where(Meta.key == "db_id")))
-            start = s.scalar(select(Meta.value).where(Meta.key == DB_ID_FROM))
-            below = s.scalar(select(Meta.value).where(Meta.key == DB_ID_BEFORE))
-            if start and below:   # renewed before: the records below that keep their id
-                earlier = json.loads(s.scalar(select(Meta.value).where(
-                    Meta.key == DB_ID_EARLIER)) or "[]")
-                put_meta(s, DB_ID_EARLIER, json.dumps([*earlier, [int(start), below]]))
+            old = _series_in(s)
+            if old.before is not None:   # renewed before: the records below that keep theirs
+                put_meta(s, DB_ID_EARLIER, json.dumps(
+                    [*old.earlier, (old.from_seq, old.before)]))
             put_meta(s, "db_id", str(uuid.uuid4()))
             put_meta(s, DB_ID_FROM, str(from_seq))
-            put_meta(s, DB_ID_BEFORE, old)
-        return self.series()
+            put_meta(s, DB_ID_BEFORE, old.db_id)
+            return _series_in(s)
 
     def record_command(self, *, at: datetime, user: str, source: str, kind: str,
                        vin: str | None, bolt: str | None, comment: str) -> int:
@@ -316,6 +307,15 @@ class Ledger:
             sub = self._unacknowledged().subquery()
             return int(s.scalar(select(func.count()).select_from(sub)) or 0)
 
+
+
+def _series_in(s: Session) -> Series:
+    """:meth:`Ledger.series` in the caller's transaction."""
+    meta = {key: value for key, value in s.execute(select(Meta.key, Meta.value).where(
+        Meta.key.in_(("db_id", DB_ID_FROM, DB_ID_BEFORE, DB_ID_EARLIER))))}
+    start = meta.get(DB_ID_FROM)
+    earlier = tuple((int(f), str(i)) for f, i in json.loads(meta.get(DB_ID_EARLIER) or "[]"))
+    return Series(meta["db_id"], int(start) if start else 1, meta.get(DB_ID_BEFORE), earlier)
 
 
 def commands_in(s: Session, vin: str | None = None) -> list[CommandEntry]:

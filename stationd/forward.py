@@ -340,11 +340,11 @@ class Forwarder:
     def _push(self, entries: list[dict[str, Any]]) -> int:
         """``entries`` to the line, each under its series' id (:class:`db.ledger.Series`);
         how many were new."""
-        new = 0
-        for db_id in dict.fromkeys(self.series.id_of(e["seq"]) for e in entries):
-            new += self.line.push(self.cfg.station_id, db_id,
-                                  [e for e in entries if self.series.id_of(e["seq"]) == db_id])
-        return new
+        by_id: dict[str, list[dict[str, Any]]] = {}
+        for e in entries:
+            by_id.setdefault(self.series.id_of(e["seq"]), []).append(e)
+        return sum(self.line.push(self.cfg.station_id, db_id, group)
+                   for db_id, group in by_id.items())
 
     def _push_each(self, entries: list[dict[str, Any]]) -> None:
         """``entries`` pushed in one transaction; one refused for good: each alone, the
@@ -397,8 +397,7 @@ class Forwarder:
                 # (diverged: the line has another record at its number under its id, which
                 # a renewal from there would take from the records forwarded since)
                 refused += 1
-                self.repo.ledger.quarantine(e["seq"], error_line(exc) if isinstance(
-                    exc, DBAPIError) else str(exc))
+                self.repo.ledger.quarantine(e["seq"], error_line(exc))
                 continue
             self.repo.ledger.release(e["seq"])
             taken += 1
