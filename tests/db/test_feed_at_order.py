@@ -36,24 +36,9 @@ def test_a_curve_that_waited_for_the_write_lock_is_not_dated_before_the_record_t
     dated before it."""
     rec = record(sedan, "VIN1", "B1", tightening_id=7)
     assert rec
-    path = sedan.engine.url.database
-    with closing(sqlite3.connect(path, isolation_level=None)) as other:
-        other.execute("PRAGMA busy_timeout=10000")
-        other.execute("BEGIN IMMEDIATE")          # another writer holds the lock ...
-        done: list[int] = []
-        t = threading.Thread(target=lambda: done.append(store_curve(
-            sedan, tightening_id=7, trace_type=1, unit="deg", values=[0.0, 1.0],
-            sample_period_s=0.002)))
-        t.start()                                 # ... the curve waits for it
-        time.sleep(0.3)
-        # what the other writer stores meanwhile: a record's feed entry, dated now
-        held_at = datetime.now(UTC).replace(tzinfo=None)
-        other.execute("INSERT INTO feed (kind, ref, at) VALUES ('rundown', ?, ?)",
-                      (rec, held_at.isoformat(sep=" ")))
-        other.execute("COMMIT")
-    t.join(15)
-    assert done, "the curve was not stored"
-    feed = _feed(sedan)
+    feed = _while_another_writer_holds_the_lock(sedan, lambda: store_curve(
+        sedan, tightening_id=7, trace_type=1, unit="deg", values=[0.0, 1.0],
+        sample_period_s=0.002), rec)
     assert [k for _, k, _ in feed][-2:] == ["rundown", "curve"]
     ats = [at for _, _, at in feed]
     assert ats == sorted(ats), \
