@@ -36,6 +36,7 @@ from stationd.forward import (
 from stationd.stationcheck import check_station
 from stationd.yamlio import YamlNode
 from tests.db.conftest import BASE, record
+from tests.test_line_tables import _forward
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -159,9 +160,7 @@ def test_a_database_put_back_from_a_backup_goes_on_as_a_new_series_losing_nothin
     restored = Repository.open(f"sqlite:///{tmp_path / 'backup.db'}")   # put back
     for tid, bolt in ((30, "B3"), (40, "B1"), (50, "B2")):
         record(restored, "VINR1", bolt, tightening_id=tid)   # numbered 3, 4, 5 again
-    again = Forwarder(restored, LineConfig(pg_url, "ST-R"))
-    while again.step():
-        pass
+    _forward(restored, pg_url, "ST-R")
     rows = _line_rows(pg_url, "ST-R")
     assert sorted(r.record["tightening_id"] for r in rows) == [1, 2, 3, 4, 30, 40, 50], \
         "records lost on the line"
@@ -170,9 +169,7 @@ def test_a_database_put_back_from_a_backup_goes_on_as_a_new_series_losing_nothin
     assert {r.record["tightening_id"] for r in rows if r.db_id == new.db_id} == {30, 40, 50}
     assert "put back from a copy" in caplog.text
     restored.ledger.set_meta("forwarded_seq", "0")       # a replay: nothing doubled
-    replay = Forwarder(restored, LineConfig(pg_url, "ST-R"))
-    while replay.step():
-        pass
+    replay = _forward(restored, pg_url, "ST-R")
     assert replay.forwarded == 0 and len(_line_rows(pg_url, "ST-R")) == 7
     restored.close()
 
@@ -767,27 +764,20 @@ def test_two_backups_put_back_in_turn_keep_each_record_under_its_first_series(
     repo.close()
     first = Repository.open(f"sqlite:///{tmp_path / 'b1.db'}")         # put back: 1
     record(first, "VINT1", "B3", tightening_id=30)                       # seq 3 again
-    f1 = Forwarder(first, LineConfig(pg_url, "ST-T"))
-    while f1.step():
-        pass
+    _forward(first, pg_url, "ST-T")
     first.close()
     _backup(tmp_path, "b1.db", "b2.db")
     first = Repository.open(f"sqlite:///{tmp_path / 'b1.db'}")
     record(first, "VINT1", "B1", tightening_id=40)                       # seq 4
-    while f1.step():
-        pass
+    _forward(first, pg_url, "ST-T")
     first.close()
     second = Repository.open(f"sqlite:///{tmp_path / 'b2.db'}")        # put back: 2
     record(second, "VINT1", "B1", tightening_id=400)                     # seq 4 again
-    f2 = Forwarder(second, LineConfig(pg_url, "ST-T"))
-    while f2.step():
-        pass
+    _forward(second, pg_url, "ST-T")
     rows = _line_rows(pg_url, "ST-T")
     assert sorted(r.record["tightening_id"] for r in rows) == [1, 2, 3, 30, 40, 400]
     second.ledger.set_meta("forwarded_seq", "0")                         # a replay
-    replay = Forwarder(second, LineConfig(pg_url, "ST-T"))
-    while replay.step():
-        pass
+    replay = _forward(second, pg_url, "ST-T")
     rows = _line_rows(pg_url, "ST-T")
     shown = [(r.db_id[:8], r.seq, r.record["tightening_id"]) for r in rows]
     assert replay.forwarded == 0 and len(rows) == 6, \

@@ -12,9 +12,10 @@ import pytest
 from db.repository import Repository
 from stationd.boltfile import import_bolts
 from stationd.cli import main
-from stationd.forward import Forwarder, LineConfig, LineDb
+from stationd.forward import LineDb
 from stationd.linedb import bolt_versions, parameter_rows, results
 from tests.db.conftest import BASE, record
+from tests.test_line_tables import _forward
 
 VIN = "9SDST0010TL000001"
 OTHER = "9SDST0011TL000002"
@@ -27,13 +28,6 @@ def _station(tmp_path, name, table_text):
     repo = Repository.open(f"sqlite:///{tmp_path / name}.db")
     import_bolts(repo, table)
     return repo, table
-
-
-def _forward(repo, url, sid):
-    f = Forwarder(repo, LineConfig(url, sid))
-    while f.step():
-        pass
-    f.line.dispose()
 
 
 def _config(tmp_path, url, sid="ST-A"):
