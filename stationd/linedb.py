@@ -454,11 +454,10 @@ LINE_UNREADABLE = _typed(
     Index("ix_line_unreadable_results_vin", "vin", "at"),
 )
 
-#: every typed table; a new kind of record is one more ``_typed(...)`` here: the next
 LINE_CLOSINGS = _typed(
     CLOSING, "line_vehicle_closings",
     "Every vehicle leaving a station, with what it left undone there: incomplete vehicles "
-    "are the rows with missing, skipped, nok or loosen above 0",
+    "are the rows with ok below bolts, or held bolts in not_ok",
     [(Column("vin", Text, comment="the vehicle (its VIN)"), _text(_j("vin"))),
      (Column("model", Text, comment="its model in the station's bolt table"),
       _text(_j("model"))),
@@ -481,6 +480,7 @@ LINE_CLOSINGS = _typed(
     Index("ix_line_vehicle_closings_vin", "vin"),
 )
 
+#: every typed table; a new kind of record is one more ``_typed(...)`` here: the next
 #: ``line init`` or forwarder start makes its table, fills it from line_feed and types the
 #: new rows from then on
 TYPED: tuple[Typed, ...] = (LINE_RUNDOWNS, LINE_COMMANDS, LINE_GAPS, LINE_CHECKS,
