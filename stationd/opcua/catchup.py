@@ -33,7 +33,7 @@ from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
 from datetime import UTC, datetime
 from typing import Any
 
-from db.ledger import is_result
+from db.ledger import Series, is_result
 from db.repository import Repository
 from stationd.opcua.results import parse_result_id
 from stationd.opcua.uatypes import ua
@@ -78,14 +78,16 @@ class CatchUp:
     def __init__(self, fire: Fire) -> None:
         self._fire = fire
         self.repo: Repository | None = None
-        self.db_id = ""
+        self.series = Series("")   # the ids of the records' series (:meth:`attach`)
         self._lock = asyncio.Lock()
         self._waiting = 0
         self._tasks: set[asyncio.Task[None]] = set()
         self.sent = 0               # requested results sent (this process)
 
-    def attach(self, repo: Repository, db_id: str) -> None:
-        self.repo, self.db_id = repo, db_id
+    def attach(self, repo: Repository, series: Series) -> None:
+        """Bind to ``repo``; ``series`` gives each record's id (the server updates it when
+        the database's id is renewed)."""
+        self.repo, self.series = repo, series
 
     async def close(self) -> None:
         """Stop the replays under way (the server stops)."""
@@ -203,7 +205,7 @@ class CatchUp:
     # -- AcknowledgeResults -----------------------------------------------------------------
     async def acknowledge(self, result_ids: Any, by: str) -> list[ua.Variant]:
         ids = [str(_plain(i)) for i in (_plain(result_ids) or [])]
-        seqs = {i: parse_result_id(self.db_id, i) for i in ids}
+        seqs = {i: parse_result_id(self.series, i) for i in ids}
         errors = {i: UNKNOWN_RESULT for i, s in seqs.items() if s is None}
         wanted = [s for s in seqs.values() if s is not None]
         repo = self.repo

@@ -26,6 +26,7 @@ from db.ledger import CONTROLLER_EVENT as CONTROLLER_EVENT_KIND
 from db.ledger import RUNDOWN as RUNDOWN_KIND
 from db.ledger import UNATTRIBUTED as UNATTRIBUTED_KIND
 from db.ledger import UNREADABLE as UNREADABLE_KIND
+from db.ledger import Series
 from drivers.wrench.base import ResultType
 from stationd.opcua.uatypes import ua
 
@@ -118,15 +119,14 @@ def result_id(db_id: str, seq: int) -> str:
     return f"{db_id}:{seq}"
 
 
-def parse_result_id(db_id: str, text: str) -> int | None:
-    """The feed's sequence number in a ResultId of this database (:func:`result_id`); None
-    for any other (a replaced database's, or not one of this server's)."""
+def parse_result_id(series: Series, text: str) -> int | None:
+    """The feed's sequence number in a ResultId of this database (:func:`result_id` with
+    the id ``series`` gives that record, as the line keeps it); None for any other (a
+    replaced database's, another series' of this one, or not one of this server's)."""
     head, sep, tail = text.rpartition(":")
-    if not sep or head != db_id or not (tail.isascii() and tail.isdigit()):
+    if not sep or not (tail.isascii() and tail.isdigit()) or not 0 < int(tail) < 2**63:
         return None
-    if not 0 < int(tail) < 2**63:
-        return None
-    return int(tail)
+    return int(tail) if head == series.id_of(int(tail)) else None
 
 
 def _time(text: str | None) -> datetime | None:

@@ -73,7 +73,7 @@ from asyncua.server.user_managers import UserManager
 from asyncua.ua.ua_binary import struct_from_binary
 
 from db.curves import curves_for
-from db.ledger import RUNDOWN, is_result
+from db.ledger import RUNDOWN, Series, is_result
 from db.repository import Repository
 from drivers.identity import DeviceIdentity
 from stationd.access import verify_password
@@ -199,7 +199,8 @@ class OpcUaServer:
         self.joining_system: Node | None = None
         self.published = 0          # result events fired (this process)
         self.cursor = 0             # the last feed entry read
-        self.db_id = ""
+        self.series = Series("")   # each record's id, as the line keeps it (:meth:`_follow`)
+        self._follow_at = 0.0
         self._results: OrderedDict[str, Any] = OrderedDict()   # ResultId -> ResultDataType
         self._event: list[Any] = []        # the result event's generators
         self._requested: list[Any] = []    # the requested results' generators
@@ -425,8 +426,8 @@ class OpcUaServer:
         """Publish every result recorded from now on until ``stop``; the last ``keep``
         recorded before are kept for the methods."""
         loop = asyncio.get_running_loop()
-        self.db_id = await loop.run_in_executor(None, repo.ledger.db_id)
-        self.catchup.attach(repo, self.db_id)
+        self.series = await loop.run_in_executor(None, repo.ledger.series)
+        self.catchup.attach(repo, self.series)
         self._repo = repo
         last = await loop.run_in_executor(None, repo.ledger.last_seq)
         await self._preload(repo, last)
@@ -437,6 +438,9 @@ class OpcUaServer:
             except Exception as exc:   # a database busy or away: tried again, never fatal
                 log.warning("OPC UA: reading the results feed: %s", exc)
                 entries = []
+            if loop.time() >= self._follow_at:   # at the feed's pace, not the curves' 20 ms
+                self._follow_at = loop.time() + POLL_S
+                await self._follow(repo)
             for e in entries:
                 self.cursor = e["seq"]
                 self._take(e, loop.time(), hold=True)
@@ -454,6 +458,32 @@ class OpcUaServer:
         for e in self.join.ready(float("inf")):   # stopping: no result kept back
             await self._publish(e)
 
+    def _id(self, seq: int) -> str:
+        """The ResultId of feed entry ``seq``: under the id the line keeps that record
+        (after a backup put back, the records before it keep the database's earlier id)."""
+        return result_id(self.series.id_of(seq), seq)
+
+    async def _follow(self, repo: Repository) -> None:
+        """The database's series read again: the forwarder renews its id when it finds the
+        database was put back from a copy (:meth:`db.ledger.Ledger.renew_db_id`); the
+        results kept for the methods take the ids their records have from then on."""
+        try:
+            series = await asyncio.get_running_loop().run_in_executor(None, repo.ledger.series)
+        except Exception as exc:   # a database busy or away: the ids as they were
+            log.warning("OPC UA: reading the database's id: %s", exc)
+            return
+        if series == self.series:
+            return
+        log.info("OPC UA: the database's id is %s from result %d on (put back from a copy)",
+                 series.db_id, series.from_seq)
+        self.series = self.catchup.series = series
+        kept = list(self._results.values())
+        self._results.clear()
+        for result in kept:
+            seq = int(result.ResultMetaData.ResultId.rpartition(":")[2])
+            result.ResultMetaData.ResultId = self._id(seq)
+            self._results[result.ResultMetaData.ResultId] = result
+
     def _take(self, entry: dict[str, Any], now: float, *, hold: bool) -> None:
         """A feed entry: a rundown kept for the methods (and held for its event), a curve
         joined to its rundown's result (:mod:`stationd.opcua.curves`)."""
@@ -461,11 +491,11 @@ class OpcUaServer:
         if is_result(entry):
             self._rebuild(entry)
         elif changed is not None and \
-                result_id(self.db_id, changed["seq"]) in self._results:   # still kept
+                self._id(changed["seq"]) in self._results:   # still kept
             self._rebuild(changed)
 
     def _rebuild(self, entry: dict[str, Any]) -> Any:
-        result = any_result(self.db_id, entry, simulated=self.simulated,
+        result = any_result(self.series.id_of(entry["seq"]), entry, simulated=self.simulated,
                             curves=self.join.curves(int(entry["record"]["id"]))
                             if entry["kind"] == RUNDOWN else None)
         self._keep(result)
@@ -491,7 +521,7 @@ class OpcUaServer:
 
     async def _publish(self, entry: dict[str, Any]) -> None:
         # the result kept when the rundown was taken, rebuilt there as its curves came
-        result = self._results.get(result_id(self.db_id, entry["seq"])) or self._rebuild(entry)
+        result = self._results.get(self._id(entry["seq"])) or self._rebuild(entry)
         await _fire(self._event, result, entry)
         self.published += 1
 
@@ -505,7 +535,8 @@ class OpcUaServer:
         if curves is None and self._repo is not None:
             curves = await asyncio.get_running_loop().run_in_executor(
                 None, lambda: curves_for(self._repo, record_id=rid))   # type: ignore[arg-type]
-        result = any_result(self.db_id, entry, simulated=self.simulated, curves=curves)
+        result = any_result(self.series.id_of(entry["seq"]), entry, simulated=self.simulated,
+                            curves=curves)
         if self._requested_result is not None:
             await _write_result(self._requested_result, result)
         await _fire(self._requested, result, entry)

@@ -203,8 +203,11 @@ class CommandRoutes:
         loop = asyncio.get_running_loop()
         entries = await loop.run_in_executor(None, ledger.since, since, limit)
         last = await loop.run_in_executor(None, ledger.last_seq)
-        db_id = await loop.run_in_executor(None, ledger.db_id)
-        return web.json_response({"db_id": db_id, "last_seq": last, "entries": entries})
+        # each record under the id the line keeps it (a database put back from a copy:
+        # the records before the renewal keep the earlier id), the database's own at the top
+        series = await loop.run_in_executor(None, ledger.series)
+        return web.json_response({"db_id": series.db_id, "last_seq": last, "entries": [
+            {**e, "db_id": series.id_of(e["seq"])} for e in entries]})
 
 
 def reason_json(reason: Reason) -> dict[str, Any]:

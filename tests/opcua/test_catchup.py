@@ -287,3 +287,56 @@ def test_acknowledged_results_are_no_longer_unacknowledged_also_after_a_restart(
     assert second["restarted"] == (3, OK, [seqs[1], seqs[3]])
     assert second["anonymous"] == "BadUserAccessDenied"
     assert repo.ledger.unacknowledged_count() == 3
+
+
+def test_after_a_database_put_back_each_result_keeps_the_id_the_line_keeps_it_under(repo):
+    """An MES integrator's join: the line keeps a database's records below a renewal of its
+    id (a backup put back: :meth:`db.ledger.Ledger.renew_db_id`) under the earlier id, the
+    rest under the new one.  OPC UA gave every result the id it read at its start, so an
+    MES joining ResultId to the line's rows found none for the records after the renewal
+    (nor, after a restart, for those before).  The renewal made while the server runs (as
+    the forwarder makes it): new results, the kept ones, GetResultById and
+    AcknowledgeResults all go by each record's own id."""
+    _record(repo, 2)
+    old = repo.ledger.db_id()
+    before = [e["seq"] for e in repo.ledger.since(0) if e["kind"] == "rundown"]
+    cfg = config(users=USERS)
+
+    async def scenario() -> dict[str, Any]:
+        srv, stop, task = await serving_ready(cfg, repo)
+        loop = asyncio.get_running_loop()
+        out: dict[str, Any] = {}
+        try:
+            c = Client(srv.url)
+            c.set_user("mes")
+            c.set_password("s3cret")
+            async with c as client:
+                mes = await Mes(client).open()
+                await asyncio.sleep(0.2)
+                series = await loop.run_in_executor(
+                    None, repo.ledger.renew_db_id, repo.ledger.last_seq() + 1)
+                out["new"] = series.db_id
+                await loop.run_in_executor(None, _record, repo, 2)
+                await mes.events.wait_for(2)
+                out["live"] = [e.Result.ResultMetaData.ResultId for e in mes.events.events]
+                after = [e["seq"] for e in repo.ledger.since(before[-1])
+                         if e["kind"] == "rundown"]
+                out["after"] = after
+                out["by_old"] = await mes.rm.call_method(f"{mes.mr}:GetResultById",
+                                                         f"{old}:{before[0]}", ua.Int32(0))
+                out["by_new"] = await mes.rm.call_method(
+                    f"{mes.mr}:GetResultById", f"{series.db_id}:{after[0]}", ua.Int32(0))
+                out["ack"] = await mes.acknowledge([
+                    f"{old}:{before[0]}", f"{series.db_id}:{after[0]}",
+                    f"{series.db_id}:{before[1]}", f"{old}:{after[1]}"])
+        finally:
+            await stopping(srv, stop, task)
+        return out
+
+    out = asyncio.run(scenario())
+    new, after = out["new"], out["after"]
+    assert out["live"] == [f"{new}:{s}" for s in after]
+    assert out["by_old"][1].ResultMetaData.ResultId == f"{old}:{before[0]}"
+    assert out["by_new"][1].ResultMetaData.ResultId == f"{new}:{after[0]}"
+    per_id, _ = out["ack"]
+    assert per_id == [OK, OK, UNKNOWN_RESULT, UNKNOWN_RESULT]

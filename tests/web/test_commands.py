@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+from pathlib import Path
 from typing import Any
 
 from aiohttp import ClientSession, CookieJar
@@ -16,6 +17,7 @@ from stationd.station.commands import Answer, Command, Issuer, TeachPoint
 from stationd.web.commands import reason_json
 from stationd.web.server import WebServer
 from stationd.yamlio import YamlNode
+from tests.web.scenario import VIN, results_db
 
 #: what the core answers a teach point whose localizations were too few to be steady: the
 #: reason carries, inside it, what the vision missed (as ``stationd.station.teaching`` does)
@@ -101,3 +103,33 @@ def test_a_blank_vin_is_refused_as_required_not_as_too_long() -> None:
         (400, "vin: required (empty)"),
         (400, "vin: a text of at most 32 characters (required)"),
         (400, "vin: a text of at most 32 characters (required)")]
+
+
+def test_the_feed_gives_each_record_the_id_the_line_keeps_it_under(tmp_path: Path) -> None:
+    """After a database put back from a copy renewed its id (the forwarder does), the records
+    before the renewal go to the line under the earlier id: a feed reader (an MES joining
+    ``/api/feed`` to the line's rows) had the new id alone, at the top, for all."""
+    sedan = results_db(tmp_path)                      # three rundowns
+    old = sedan.ledger.db_id()
+    new = sedan.ledger.renew_db_id(sedan.ledger.last_seq() + 1).db_id
+    sedan.record_tightening(VIN, "B1", ok=True, torque_nm=50.0, tightening_id=103,
+                            position_mm=(1.0, 1.0, 0.0), match_distance_mm=1.0, tilt_deg=1.0,
+                            angle_deg=30.0)
+
+    async def main() -> dict[str, Any]:
+        srv = WebServer(EventBus(), sedan, listen="127.0.0.1:0")
+        await srv.start()
+        try:
+            async with ClientSession() as http, http.get(srv.url + "api/feed") as r:
+                assert r.status == 200
+                return dict(await r.json())
+        finally:
+            await srv.stop()
+
+    doc = asyncio.run(main())
+    last = sedan.ledger.last_seq()
+    assert doc["db_id"] == new and doc["last_seq"] == last
+    assert {e["seq"]: e["db_id"] for e in doc["entries"] if e["kind"] == "rundown"} == {
+        e["seq"]: old if e["seq"] < last else new
+        for e in sedan.ledger.since(0) if e["kind"] == "rundown"}
+    sedan.close()
