@@ -1,0 +1,49 @@
+"""A vehicle that left the station keeps the report it left with when the engineer changes
+the model's bolt table afterwards (a new model year: bolts added, bolts removed).  A process
+engineer's and a shift supervisor's trial: a vehicle that left with B2 never tightened read
+complete (``db report`` exit 0, the vehicles list "complete") once B2 was taken out of the
+table for the next model year; a vehicle that left with every bolt OK read incomplete, a
+bolt it never had "missing", once a bolt was added."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from db.repository import Repository
+from stationd.boltfile import import_bolts
+from tests.db.conftest import BASE, record
+
+B2 = ("      - id: B2\n        name: two\n        position: [100, 0, 0]\n"
+      "        torque: {target: 25, min: 23, max: 27}\n"
+      "        angle: {target: 30, min: 10, max: 50}\n")
+B4 = ("      - id: B4\n        name: four\n        position: [300, 0, 0]\n"
+      "        pset: 1\n")
+
+
+def test_a_vehicle_that_left_with_a_bolt_missing_stays_incomplete_when_it_is_removed(
+        repo: Repository, bolts_file: Path) -> None:
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    record(repo, "VIN1", "B1")
+    record(repo, "VIN1", "B3")
+    left = repo.close_vehicle("VIN1")
+    assert left.missing == ["B2"] and not left.complete
+    bolts_file.write_text(BASE.replace(B2, ""))      # the next model year has no B2
+    assert import_bolts(repo, bolts_file).removed == ["SEDAN/B2"]
+    report = repo.vehicle_report("VIN1")
+    assert report.missing == ["B2"], [(b.bolt_id, b.status) for b in report.bolts]
+    assert not report.complete
+
+
+def test_a_vehicle_that_left_complete_stays_complete_when_a_bolt_is_added(
+        repo: Repository, bolts_file: Path) -> None:
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    for bolt in ("B1", "B2", "B3"):
+        record(repo, "VIN1", bolt)
+    assert repo.close_vehicle("VIN1").complete
+    bolts_file.write_text(BASE.replace("  WAGON:", B4 + "  WAGON:"))   # B4 for new vehicles
+    assert import_bolts(repo, bolts_file).added == ["SEDAN/B4"]
+    report = repo.vehicle_report("VIN1")
+    assert report.complete, [(b.bolt_id, b.status) for b in report.bolts]
+    assert "B4" not in [b.bolt_id for b in report.bolts]
