@@ -134,3 +134,32 @@ def test_a_removed_bolt_the_vehicle_at_the_station_ends_nok_or_holds_is_said(
         "(put a bolt back to work it, or skip it with a reason before removing it)"], warned
     assert "B3" in records.repo.vehicle_report("VIN2").nok
     records.repo.close()
+
+
+def test_a_reload_that_changes_or_adds_bolts_of_the_vehicle_at_the_station_says_so(
+        tmp_path: Path, caplog: Any) -> None:
+    """A reload mid-vehicle whose table changes a bolt not done yet (B2's torque window) and
+    adds one (B4): the vehicle at the station goes on under the new table, its B2 tightened
+    to the new window and B4 one more bolt to do ("opened: 4 bolts" where it had 3).  The
+    journal said only "1 added, 1 changed" (a process engineer's trial), where a removal
+    names the vehicle at the station.  Said, naming the vehicle and the bolts; a change of a
+    bolt done already (B1, kept at its version) is not one the vehicle meets."""
+    records = _records(tmp_path)
+    assert records.repo is not None
+    records.repo.start_vehicle("VIN2", "SEDAN")
+    records.repo.record_tightening("VIN2", "B1", ok=True, torque_nm=50.0, angle_deg=30.0,
+                                   tightening_id=7, position_mm=(0.0, 0.0, 0.0),
+                                   match_distance_mm=1.0, tilt_deg=1.0)
+    (tmp_path / "bolts.yaml").write_text(
+        BASE.replace("target: 25, min: 23, max: 27", "target: 25, min: 24, max: 27")
+        .replace("  WAGON:", "      - id: B4\n        name: four\n        position: "
+                 "[300, 0, 0]\n        pset: 1\n  WAGON:"))
+    records.repo.close()
+    caplog.set_level("INFO", logger="stationd")
+    records.open()
+    said = [r.getMessage() for r in caplog.records if "VIN2" in r.getMessage()]
+    assert any("B2" in m and "B4" in m for m in said), [r.getMessage()
+                                                        for r in caplog.records]
+    assert not any("B1" in m for m in said), said
+    assert records.repo is not None
+    records.repo.close()
