@@ -38,6 +38,7 @@ from db.kinds import (
     MISSING,
     NOK,
     OK,
+    SKIPPED,
     TIGHTENING,
     TO_LOOSEN,
 )
@@ -181,7 +182,34 @@ class Records:
                                  counted(len(r.removed), "bolt"),
                                  ", ".join(r.removed[:5]), ", ..." if len(r.removed) > 5 else "")
                 self._removed_open(self.repo, r.removed)
+            if r.changed or r.added:
+                self._changed_open(self.repo, r.changed, r.added)
         return self.repo
+
+    def _changed_open(self, repo: Repository, changed: Sequence[str],
+                      added: Sequence[str]) -> None:
+        """Bolts the table changed or added that the vehicle at the station has not done:
+        said, naming the vehicle.  Why: a reload mid-vehicle goes on with it under the new
+        table (a changed bolt tightened to its new parameters, an added one more to do)
+        while the journal said only "1 added, 1 changed" (a process engineer's trial); a
+        removal names the vehicle at the station (:meth:`_removed_open`)."""
+        try:
+            vin = repo.at_station()
+            report = None if vin is None else repo.vehicle_report(vin)
+        except STATION_FAULTS as exc:   # a word the more, never the database's opening
+            self.log.warning("the vehicle at the station not read: %s", one_line(exc))
+            return
+        if vin is None or report is None:
+            return
+        model = report.vehicle.model
+        open_ = {b.bolt_id for b in report.bolts if b.status not in (OK, SKIPPED)}
+        news = [f"{bolt} {how}" for names, how in ((changed, "changed"), (added, "added"))
+                for m, _, bolt in (n.partition("/") for n in names)
+                if m == model and bolt in open_]
+        if news:
+            self.log.warning("vehicle %s at the station (%s) goes on under the new table: %s "
+                             "(its bolts done keep the parameters they were tightened with)",
+                             vin, model, ", ".join(news))
 
     def _removed_open(self, repo: Repository, removed: Sequence[str]) -> None:
         """Bolts the table removed that the vehicle at the station ends NOK (or locked, or
