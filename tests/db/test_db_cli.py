@@ -1032,3 +1032,35 @@ def test_report_says_which_value_of_a_nok_rundown_is_out_of_its_limits(run, db):
     assert why == [("SF-FL", "torque 124.5 Nm > 120.0 max; angle 12 deg < 20 min"),
                    ("SF-FL", "torque 95.0 Nm < 100.0 min"),
                    ("SF-FR", "both within limits: the controller's verdict"), ("TB-C", None)]
+
+
+def test_a_shift_s_export_keeps_a_vehicle_that_left_with_no_rundown_at_all(run, db):
+    """A shift supervisor's export of the shift (``--since`` its start): a vehicle that
+    passed the station in the shift with not one bolt tightened (every bolt missing: the
+    worst vehicle of the shift) was not in it, the export keeping a vehicle's missing bolts
+    only beside a rundown of its own since then; the vehicle's report says all missing."""
+    import csv
+    import io
+
+    from db.repository import Repository
+    from stationd.boltfile import import_bolts
+
+    with Repository.open(db) as repo:
+        import_bolts(repo, EXAMPLE)
+        repo.start_vehicle("VIN1", "WAGON-B")      # the last shift's
+        record(repo, "VIN1", "SF-FL", ok=True, tightening_id=1)
+        repo.close_vehicle("VIN1")
+    shift = datetime.now(UTC).isoformat()
+    with Repository.open(db) as repo:
+        repo.start_vehicle("VIN2", "WAGON-B")      # this shift's: nothing tightened
+        repo.close_vehicle("VIN2")
+        repo.start_vehicle("VIN3", "WAGON-B")      # this shift's: one bolt
+        record(repo, "VIN3", "SF-FL", ok=True, tightening_id=2)
+        repo.close_vehicle("VIN3")
+        missing = repo.vehicle_report("VIN2").missing
+    assert missing
+    code, out, err = run("db", "export", "--results", "--since", shift, "--db", db)
+    rows = list(csv.DictReader(io.StringIO(out)))
+    assert code == 0, err
+    assert sorted({r["vin"] for r in rows}) == ["VIN2", "VIN3"], rows
+    assert [r["bolt"] for r in rows if r["vin"] == "VIN2"] == missing
