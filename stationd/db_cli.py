@@ -241,13 +241,18 @@ def _export_results(args: argparse.Namespace) -> int:
     with open_repository(url, must_exist=True, missing=_missing(args)) as repo:
         results = Results(repo)
         # (an unknown --vin: the report raises NotFoundError, one line, exit 2)
-        vins = [args.vin] if args.vin is not None else [
-            v["vin"] for v in reversed(results.vehicles(limit=1_000_000))]
-        runs = [r for vin in vins for r in results.export(vin)]
+        listed = [repo.vehicle_report(args.vin).to_json()] if args.vin is not None else \
+            list(reversed(results.vehicles(limit=1_000_000)))
+        runs = [r for v in listed for r in results.export(v["vin"])]
     if args.since is not None:   # a bolt not run down has no time: kept with its vehicle's
         kept = [r for r in runs if r["recorded_at"] is not None
                 and _aware(datetime.fromisoformat(r["recorded_at"])) >= args.since]
-        vins_kept = {r["vin"] for r in kept}
+        # and with a vehicle at the station since (started, reopened or left since then):
+        # one that left with no rundown at all was not in a shift's export
+        vins_kept = {r["vin"] for r in kept} | {
+            v["vin"] for v in listed if any(
+                v[key] is not None and _aware(datetime.fromisoformat(v[key])) >= args.since
+                for key in ("started_at", "reopened_at", "ended_at"))}
         runs = [r for r in runs if r in kept or (r["status"] in (MISSING, PENDING, SKIPPED)
                                                  and r["vin"] in vins_kept)]
     text = rundowns_csv(runs) if fmt == "csv" else strict_json(runs) + "\n"
