@@ -163,3 +163,21 @@ def test_a_reload_that_changes_or_adds_bolts_of_the_vehicle_at_the_station_says_
     assert not any("B1" in m for m in said), said
     assert records.repo is not None
     records.repo.close()
+
+
+def test_a_reload_that_changes_only_a_models_code_does_not_read_as_no_change(
+        tmp_path: Path, caplog: Any) -> None:
+    """A table whose model codes were swapped for the next model year (SEDAN's code 12 now
+    another model's) changes which model the lift's code loads, but the journal's line read
+    "0 added, 0 changed, 4 unchanged, 0 removed" (a process engineer's trial: the reload
+    looked like a no-op; ``db import`` of the same file says "models changed: SEDAN")."""
+    records = _records(tmp_path)
+    assert records.repo is not None
+    records.repo.close()
+    (tmp_path / "bolts.yaml").write_text(BASE.replace("    code: 12\n", "    code: 13\n"))
+    caplog.set_level("INFO", logger="stationd")
+    records.open()
+    said = [r.getMessage() for r in caplog.records if "bolt table" in r.getMessage()]
+    assert any("SEDAN" in m for m in said), said
+    assert records.repo is not None
+    records.repo.close()
