@@ -171,9 +171,16 @@ class Records:
         if self.cfg.bolts_path is not None:
             r = import_bolts(self.repo, self.cfg.bolts_path,
                              tolerance_mm=self.cfg.matching.tolerance_mm)
+            # the models' and psets' own changes too: a model's code swapped changes which
+            # model the lift's code loads, and read "0 changed" (an engineer's trial)
+            others = "".join(f"; {label}: {', '.join(names)}" for label, names in (
+                ("models added", r.models_added), ("models changed", r.models_changed),
+                ("models removed", r.models_removed), ("psets changed", r.psets_changed))
+                if names)
             self.log.info("bolt table %s: %d added, %d changed, %d unchanged, %d removed, "
-                          "%d new parameter versions", self.cfg.bolts_path, len(r.added),
-                          len(r.changed), len(r.unchanged), len(r.removed), len(r.new_versions))
+                          "%d new parameter versions%s", self.cfg.bolts_path, len(r.added),
+                          len(r.changed), len(r.unchanged), len(r.removed), len(r.new_versions),
+                          others)
             if r.removed:   # a table cut short that still reads removes bolts: said loudly
                 # (the vehicle at the station too: a reload opens it again with the table;
                 # a new user's trial read "on new vehicles" and saw it gone from the one there)
