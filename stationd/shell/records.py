@@ -213,10 +213,11 @@ class Records:
         news = [f"{bolt} {how}" for names, how in ((changed, "changed"), (added, "added"))
                 for m, _, bolt in (n.partition("/") for n in names)
                 if m == model and bolt in open_]
-        if news:
+        if news:   # at most ten named (a table of 50 bolts reordered changes each one)
             self.log.warning("vehicle %s at the station (%s) goes on under the new table: %s "
                              "(its bolts done keep the parameters they were tightened with)",
-                             vin, model, ", ".join(news))
+                             vin, model, ", ".join(news[:10]) + (
+                                 f" and {len(news) - 10} more" if len(news) > 10 else ""))
 
     def _removed_open(self, repo: Repository, removed: Sequence[str]) -> None:
         """Bolts the table removed that the vehicle at the station ends NOK (or locked, or
