@@ -41,3 +41,20 @@ def test_the_table_keeps_every_model_and_parameter_and_moves_only_the_taught_bol
                                                          "dispersion_mm": 0.1234}}))
     assert alone == {"model": "M1", "bolts": [{"id": "B02", "position": [1.0, 2.0, 3.0],
                                                "dispersion_mm": 0.123}]}
+
+
+def test_a_taught_bolt_the_table_does_not_have_is_not_dropped_from_the_taught_table():
+    """The commissioning screen's Teach panel takes a typed bolt id (a new bolt of the next
+    model year, or a typo): the daemon accepted "Teach B99", listed it taught, and the
+    downloaded table (the model's table with the taught positions) left it out without a
+    word (a process engineer's trial).  Its measured position is in the file, said as a
+    bolt the table does not have (to be added with its parameters)."""
+    doc = {"psets": [{"id": 1}], "models": {
+        "M1": {"bolts": [{"id": "B01", "position": [100.0, 0.0, 5.0], "pset": 1}]}}}
+    text = table_text(doc, "M1", {"B01": {"position_mm": [101.0, 0.0, 5.0],
+                                          "dispersion_mm": 0.2},
+                                  "B99": {"position_mm": [512.34, 7.0, 5.0],
+                                          "dispersion_mm": 0.1}})
+    assert "B99" in text and "512.3" in text, text
+    back = yaml.safe_load(text)          # still the table to import: B99 is no bolt of it
+    assert [b["id"] for b in back["models"]["M1"]["bolts"]] == ["B01"]
