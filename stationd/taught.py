@@ -80,17 +80,25 @@ def table_text(doc: Mapping[str, Any], model: str, taught: Mapping[str, Mapping[
         return [round(float(v), 1) for v in r["position_mm"]]
 
     body: Any
+    unknown: list[str] = []   # taught, but no bolt of the table: said, never dropped
     if doc:
         body = dict(doc)
+        known = set()
         for b in body["models"][model].get("bolts") or []:
             if isinstance(b, dict) and str(b.get("id")) in taught:
                 b["position"] = pos(taught[str(b["id"])])
+                known.add(str(b["id"]))
+        unknown = [f"#   {b}: position {pos(r)}, dispersion {float(r['dispersion_mm']):.3f} mm\n"
+                   for b, r in taught.items() if b not in known]
     else:
         body = {"model": model, "bolts": [{"id": b, "position": pos(r), "dispersion_mm":
                                            round(float(r["dispersion_mm"]), 3)}
                                           for b, r in taught.items()]}
     head = (f"# taught by stationd teach for {model}: positions in the vehicle frame, mm\n"
-            + ("" if doc else "# positions only: add each bolt's parameters before import\n"))
+            + ("" if doc else "# positions only: add each bolt's parameters before import\n")
+            + (f"# taught, but not bolts of {model} in this table (add each with its "
+               "parameters, or teach it again under its id):\n" + "".join(unknown)
+               if unknown else ""))
     return head + yaml.safe_dump(body, sort_keys=False)
 
 
