@@ -7,6 +7,7 @@ bolt it never had "missing", once a bolt was added."""
 
 from __future__ import annotations
 
+from datetime import UTC, datetime
 from pathlib import Path
 
 from db.repository import Repository
@@ -64,3 +65,25 @@ def test_a_vehicle_whose_model_was_renamed_under_it_does_not_leave_complete(
     assert "SEDAN" in import_bolts(repo, bolts_file).models_removed
     left = repo.close_vehicle("VIN2")
     assert not left.complete and left.missing == ["B2", "B3"], left.counts()
+
+
+def test_a_table_imported_by_hand_under_the_running_station_does_not_refuse_its_results(
+        repo: Repository, bolts_file: Path, tmp_path: Path) -> None:
+    """``db import`` by hand into the running daemon's database (the README: it "lasts until"
+    the next reload; the command warns of that and imports) removed bolts the station still
+    worked from its table in memory: the next tightening of one was refused by the database
+    ("bolt 'B34' is not a bolt of model ..."), the station stayed in a database fault, the
+    tool off, until a reload (a process engineer's trial).  The result of a bolt the station
+    sent parameters for is stored."""
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    b2 = repo.bolts_for_model("SEDAN")[1]        # the daemon's table in memory
+    assert b2.bolt_id == "B2"
+    cut = tmp_path / "cut.yaml"
+    cut.write_text(BASE.replace(B2, ""))
+    url = repo.engine.url.render_as_string(hide_password=False)
+    with Repository.open(url) as by_hand:         # stationd db import cut.yaml --config ...
+        assert import_bolts(by_hand, cut).removed == ["SEDAN/B2"]
+    enable = repo.note_enable("VIN1", "B2", 2, b2.parameters_id, {}, datetime.now(UTC))
+    record(repo, "VIN1", "B2", parameters_id=b2.parameters_id, enable_id=enable)
+    assert repo.vehicle_report("VIN1").ok == ["B2"]
