@@ -22,7 +22,9 @@ from sqlalchemy.orm import Session
 from db.bolts import BoltSpec, BoltTable, ModelSpec, Parameters, Pset, Window
 from db.counting import counted
 from db.models import (
+    AT_STATION,
     Bolt,
+    Meta,
     ProcessParameters,
     PsetProgram,
     TighteningRecord,
@@ -253,10 +255,23 @@ class _Importer:
     def remove_bolt(self, model_name: str, row: Bolt) -> None:
         self.report.removed.append(f"{model_name}/{row.code}")
         if _has_records(self.s, bolt_id=row.id) or \
-                _enable_count(self.s, *(v.id for v in row.versions)):
+                _enable_count(self.s, *(v.id for v in row.versions)) or \
+                self._at_station(row.model_id):
             row.removed_at = utcnow()
             return
         self.s.delete(row)  # with its parameter versions (cascade): nothing refers to them
+
+    def _at_station(self, model_id: int) -> bool:
+        """Whether the vehicle at the station (loaded, not closed) is of this model: its
+        bolts are retired, never deleted.  Why: a running station works from the table it
+        loaded; a table imported by hand under it deleted a bolt it still offered, and that
+        bolt's tool enable and result were refused by the database (a lasting fault)."""
+        here = self.s.get(Meta, AT_STATION)
+        if here is None or not here.value:
+            return False
+        return bool(self.s.scalar(select(exists().where(
+            Vehicle.vin == here.value, Vehicle.model_id == model_id,
+            Vehicle.ended_at.is_(None)))))
 
 
 def import_table(session: Session, table: BoltTable, source: str | None = None) -> ImportReport:

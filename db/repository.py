@@ -392,6 +392,13 @@ class Repository:
                 raise DataError(f"vehicle {vin} is closed: a tightening cannot be recorded")
             b = s.scalar(select(Bolt).where(Bolt.model_id == v.model_id, Bolt.code == bolt,
                                             Bolt.removed_at.is_(None)))
+            if b is None and parameters_id is not None:
+                # the bolt the parameters were sent for, retired since (a table imported
+                # under the running station): its result is still its own
+                sent_for = s.get(ProcessParameters, parameters_id)
+                b = None if sent_for is None else s.scalar(select(Bolt).where(
+                    Bolt.id == sent_for.bolt_id, Bolt.model_id == v.model_id,
+                    Bolt.code == bolt))
             if b is None:
                 raise NotFoundError(f"bolt {bolt!r} is not a bolt of model {v.model.name}")
             version = current_version(b) if parameters_id is None \
