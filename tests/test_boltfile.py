@@ -274,3 +274,15 @@ def test_bolt_positions_in_metres_are_named_so(check_text):
         "      - {id: B02, name: b, position: [1.5, 0.4, 0.0], pset: 1}\n")
     texts = [str(e) for e in got.errors]
     assert len(texts) == 1 and "positions in metres?" in texts[0], texts
+
+
+def test_a_key_written_twice_in_a_pset_is_one_error_not_one_at_every_bolt_using_it(
+        check_text):
+    """An angle line pasted twice into pset 1 (an engineer changing its window for the next
+    model year): ``config check`` said the duplicate key, then "pset 1 is not defined" at
+    every bolt using it (18 lines for config/sim's pset 2), where pset 1 is defined."""
+    text = BASE.replace("    angle: {target: 30, min: 15, max: 60}\n",
+                        "    angle: {target: 30, min: 15, max: 60}\n"
+                        "    angle: {target: 30, min: 20, max: 60}\n", 1)
+    errors = [str(e) for e in check_text(text).errors]
+    assert len(errors) == 1 and "duplicate key" in errors[0], errors
