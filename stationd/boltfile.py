@@ -172,20 +172,24 @@ class _Checker:
         allowed_set, unknown = set(allowed), set[str]()
         prefix = f"{node.key}." if node.key else ""
         while True:
+            # a key written twice: its error, the first one kept (a pset with an angle line
+            # pasted twice was left out, and every bolt using it said "not defined")
+            duplicates: list[ConfigError] = []
             try:
-                children = node.mapping(allowed_set | unknown)
+                children = node.mapping(allowed_set | unknown, duplicates=duplicates)
                 break
             except ConfigError as exc:
                 key = exc.key or ""
                 name = key[len(prefix):] if key.startswith(prefix) else ""
                 if not name or name in allowed_set | unknown:
                     self.errors.append(exc)
-                    return None  # not a mapping, a duplicate or a non-string key: stop here
+                    return None  # not a mapping or a non-string key: stop here
                 unknown.add(name)  # listed with the keys of the file only, not the unknown ones
                 message = unknown_message(name) if unknown_message is not None \
                     else unknown_key(name, allowed_set)
                 self.errors.append(ConfigError(message, path=exc.path, line=exc.line,
                                                key=exc.key))
+        self.errors.extend(duplicates)
         missing = [k for k in required if k not in children]
         if missing:
             self.fail(node, f"missing {noun(len(missing), 'key')}: {', '.join(missing)}")
