@@ -22,9 +22,7 @@ from sqlalchemy.orm import Session
 from db.bolts import BoltSpec, BoltTable, ModelSpec, Parameters, Pset, Window
 from db.counting import counted
 from db.models import (
-    AT_STATION,
     Bolt,
-    Meta,
     ProcessParameters,
     PsetProgram,
     TighteningRecord,
@@ -256,22 +254,20 @@ class _Importer:
         self.report.removed.append(f"{model_name}/{row.code}")
         if _has_records(self.s, bolt_id=row.id) or \
                 _enable_count(self.s, *(v.id for v in row.versions)) or \
-                self._at_station(row.model_id):
+                self._model_used(row.model_id):
             row.removed_at = utcnow()
             return
         self.s.delete(row)  # with its parameter versions (cascade): nothing refers to them
 
-    def _at_station(self, model_id: int) -> bool:
-        """Whether the vehicle at the station (loaded, not closed) is of this model: its
-        bolts are retired, never deleted.  Why: a running station works from the table it
-        loaded; a table imported by hand under it deleted a bolt it still offered, and that
-        bolt's tool enable and result were refused by the database (a lasting fault)."""
-        here = self.s.get(Meta, AT_STATION)
-        if here is None or not here.value:
-            return False
-        return bool(self.s.scalar(select(exists().where(
-            Vehicle.vin == here.value, Vehicle.model_id == model_id,
-            Vehicle.ended_at.is_(None)))))
+    def _model_used(self, model_id: int) -> bool:
+        """Whether a vehicle of this model was ever started: its bolts are retired, never
+        deleted.  Why: a vehicle's report lists its model's bolts, and a closed one keeps
+        the bolts it left without a rundown (:func:`db.report.build_report`); a bolt deleted
+        made a vehicle that left it missing read complete (a process engineer's trial).  And
+        the vehicle at the station works from the table the daemon loaded: a table imported
+        by hand under it deleted a bolt it still offered, and that bolt's tool enable and
+        result were refused by the database (a lasting fault)."""
+        return bool(self.s.scalar(select(exists().where(Vehicle.model_id == model_id))))
 
 
 def import_table(session: Session, table: BoltTable, source: str | None = None) -> ImportReport:

@@ -209,6 +209,35 @@ def _iso(t: datetime | None) -> str | None:
     return None if t is None else t.isoformat()
 
 
+def _left_without_rundown(s: Session, v: Vehicle) -> frozenset[str] | None:
+    """The bolts a closed vehicle left without a rundown (missing, skipped, held: named by
+    its last close); None for a vehicle open, being closed now, or closed before closes
+    were kept (its model's table as it is now)."""
+    if v.ended_at is None:
+        return None
+    last = s.scalar(select(VehicleClosing).where(VehicleClosing.vehicle_id == v.id)
+                    .order_by(VehicleClosing.id.desc()).limit(1))
+    if last is None or last.closed_at != v.ended_at:
+        return None
+    return frozenset(bolt for bolts in last.not_ok.values() for bolt in bolts)
+
+
+def _of_vehicle(b: Bolt, v: Vehicle, left: frozenset[str] | None) -> bool:
+    """Whether bolt ``b``, with no rundown on ``v``, is one of its bolts.  A closed vehicle
+    keeps the bolts it left with (``left``): a bolt the table took out after it left was
+    still missing on it, one the table added after was never its own (a process engineer's
+    trial: a vehicle that left with a bolt missing read complete for the next model year's
+    table, a complete one incomplete).  An open vehicle goes by the table now: a bolt taken
+    out is no longer to do (the station stops asking for it), unless its whole model was
+    (renamed under the vehicle at the station: the vehicle keeps the bolts it was started
+    with, or it left "complete" with most of them never tightened; not those taken out
+    before it was started)."""
+    if left is not None:
+        return b.code in left
+    return b.removed_at is None or (v.model.removed_at is not None
+                                    and b.removed_at >= v.started_at)
+
+
 def build_report(s: Session, v: Vehicle) -> VehicleReport:
     records = s.execute(
         select(TighteningRecord, ProcessParameters.version)
@@ -235,10 +264,11 @@ def build_report(s: Session, v: Vehicle) -> VehicleReport:
             .order_by(CommandRecord.id)):
         if bolt is not None:
             skips[bolt] = (user, comment, at)
+    left = _left_without_rundown(s, v)
     results = []
     for b in bolts:
         recs = by_bolt.get(b.id, [])
-        if b.removed_at is not None and not recs:
+        if not recs and not _of_vehicle(b, v, left):
             continue
         if not recs:
             who = skips.get(b.code)

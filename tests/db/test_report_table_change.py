@@ -87,3 +87,25 @@ def test_a_table_imported_by_hand_under_the_running_station_does_not_refuse_its_
     enable = repo.note_enable("VIN1", "B2", 2, b2.parameters_id, {}, datetime.now(UTC))
     record(repo, "VIN1", "B2", parameters_id=b2.parameters_id, enable_id=enable)
     assert repo.vehicle_report("VIN1").ok == ["B2"]
+
+
+def test_a_vehicle_whose_model_was_renamed_under_it_keeps_only_the_bolts_it_started_with(
+        repo: Repository, bolts_file: Path) -> None:
+    """The model renamed under the vehicle at the station keeps its bolts on it, not the
+    bolts an earlier table had taken out before the vehicle was started."""
+    import_bolts(repo, bolts_file)                   # last year's table had B2
+    repo.start_vehicle("VIN0", "SEDAN")
+    repo.close_vehicle("VIN0")
+    bolts_file.write_text(BASE.replace(B2, ""))      # this year's has not
+    assert import_bolts(repo, bolts_file).removed == ["SEDAN/B2"]
+    repo.start_vehicle("VIN3", "SEDAN")
+    record(repo, "VIN3", "B1")
+    bolts_file.write_text(BASE.replace(B2, "").replace("  SEDAN:\n", "  SEDAN-MY27:\n"))
+    import_bolts(repo, bolts_file)
+    left = repo.close_vehicle("VIN3")
+    assert left.missing == ["B3"], left.counts()
+    # and closed, it keeps them when the next table brings B2 back under the old name
+    bolts_file.write_text(BASE)
+    import_bolts(repo, bolts_file)
+    assert repo.vehicle_report("VIN3").missing == ["B3"]
+    assert repo.vehicle_report("VIN0").missing == ["B1", "B2", "B3"]
