@@ -17,7 +17,7 @@ import argparse
 import sys
 from collections import Counter
 from collections.abc import Sequence
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -574,6 +574,53 @@ def _iso(t: datetime | None) -> str | None:
     return None if t is None else _aware(t).isoformat()
 
 
+def cmd_db_shift(args: argparse.Namespace) -> int:
+    """A shift's hand-over: every vehicle at the station in the window with its status and
+    its bolts not OK, then the commands people gave (who released which lock and why).
+    Exit 0 when every vehicle of the window left complete, 1 when one is open or left with
+    bolts not OK (something to hand over)."""
+    from db.shift import list_status, shift
+
+    until = args.until or datetime.now(UTC)
+    since = args.since or until - timedelta(hours=8)
+    if since >= until:
+        raise InputError(f"--since {since.isoformat()} is not before --until "
+                         f"{until.isoformat()}")
+    with open_repository(_read_url(args), must_exist=True, missing=_missing(args)) as repo:
+        done = shift(repo, since, until)
+    rows = [(r, list_status(r)) for r in done.vehicles]
+    if args.json:
+        sys.stdout.write(strict_json({
+            "since": since.isoformat(), "until": until.isoformat(),
+            "vehicles": [{**{k: v for k, v in r.to_json().items() if k != "bolts"},
+                          "status": status} for r, status in rows],
+            "commands": [{"at": _iso(c.at), "user": c.user, "source": c.source,
+                          "kind": c.kind, "vin": c.vin, "bolt": c.bolt,
+                          "comment": c.comment} for c in done.commands]}) + "\n")
+    else:
+        by = Counter(status for _, status in rows)
+        counts = ", ".join(f"{by[w]} {w}" for w in ("complete", "NOK", "incomplete", "open",
+                                                     "reopened") if by[w])
+        print(f"from {since:%Y-%m-%d %H:%M} to {until:%Y-%m-%d %H:%M} UTC: "
+              f"{counted(len(rows), 'vehicle')} at the station" + (f": {counts}" if counts
+                                                                    else ""))
+        for r, status in rows:
+            v = r.vehicle
+            left = "-" if v.ended_at is None else f"{v.ended_at:%m-%d %H:%M:%S}"
+            undone = [f"{b} NOK" for b in r.nok] + [f"{b} missing" for b in r.missing] + \
+                [f"{b} skipped" for b in r.skipped] + [f"{b} to loosen" for b in r.loosen] + \
+                [f"{b} held" for b, _ in r.held]
+            print(f"  {v.vin:<18} {v.model:<10} in {v.started_at:%m-%d %H:%M:%S}  left "
+                  f"{left:<14} {status:<10} {', '.join(undone)}".rstrip())
+        if done.commands:
+            print("commands:")
+        for c in done.commands:
+            on = " ".join(x for x in (c.bolt, f"of {c.vin}" if c.vin else None) if x)
+            print(f"  {c.kind} {on} by {c.user} ({c.source}) at {c.at:%Y-%m-%d %H:%M:%S} UTC"
+                  + (f": {c.comment}" if c.comment else ""))
+    return EXIT_OK if all(status == "complete" for _, status in rows) else EXIT_INCOMPLETE
+
+
 def _num(v: float | None) -> str:
     return "-" if v is None else f"{v:.1f}"
 
@@ -729,6 +776,22 @@ def add_db_parser(subparsers: Any) -> argparse.ArgumentParser:
     sp.add_argument("--since", type=_since, metavar="DATE", help="results from this date on")
     sp.add_argument("--json", action="store_true", help="print one JSON object")
     sp.set_defaults(func=cmd_db_spc)
+    sh = dsub.add_parser("shift", help="a shift's hand-over: its vehicles, those not OK, who "
+                         "released or skipped what",
+                         description="Every vehicle at the station between --since and "
+                                     "--until (default: the last 8 hours), with its status "
+                                     "and bolts not OK, then the commands given (releases, "
+                                     "skips, reopens, loosenings, entered outcomes).  Exit 0 "
+                                     "when every one left complete, 1 when one is open or "
+                                     "left with bolts not OK.")
+    _add_db_args(sh)
+    sh.add_argument("--since", type=_since, metavar="DATE",
+                    help="the shift's start (ISO date or date-time, UTC; default: 8 hours "
+                         "before --until)")
+    sh.add_argument("--until", type=_since, metavar="DATE",
+                    help="the shift's end (default: now)")
+    sh.add_argument("--json", action="store_true", help="print one JSON object")
+    sh.set_defaults(func=cmd_db_shift)
     return d
 
 

@@ -30,6 +30,7 @@ from db.curves import curves_of_records
 from db.kinds import LOOSENING, MISSING, PENDING, SKIPPED
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
 from db.repository import Repository
+from db.shift import list_status
 from stationd.words import entered_as_words, result_type_words, unrecorded_words
 
 CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator", "torque_nm",
@@ -103,10 +104,7 @@ class Results:
         for (vin,) in rows:
             r = self.repo.vehicle_report(vin, held=vin in may_hold)
             j = r.to_json()
-            v = r.vehicle
-            j["status"] = ("reopened" if v.waiting else
-                           "open" if v.ended_at is None and not r.complete
-                           else "complete" if r.complete else "NOK" if r.nok else "incomplete")
+            j["status"] = list_status(r)
             j.pop("bolts")
             out.append(j)
         return out

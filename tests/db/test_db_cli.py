@@ -1064,3 +1064,59 @@ def test_a_shift_s_export_keeps_a_vehicle_that_left_with_no_rundown_at_all(run, 
     assert code == 0, err
     assert sorted({r["vin"] for r in rows}) == ["VIN2", "VIN3"], rows
     assert [r["bolt"] for r in rows if r["vin"] == "VIN2"] == missing
+
+
+def test_a_shift_s_hand_over_names_its_vehicles_those_not_ok_and_who_released_what(run, db):
+    """A shift supervisor's trial: at the end of a shift, how many vehicles passed, which
+    left with bolts not OK, who released a lock and why; the screens list the newest 200
+    and ``db report`` one vehicle.  ``db shift`` answers for a window: a vehicle that left
+    before it is not in it, one at the station is, open; exit 1 while one is not OK."""
+    import json
+    import time
+    from datetime import UTC, datetime, timedelta
+
+    from db.repository import Repository
+    from stationd.boltfile import import_bolts
+
+    with Repository.open(db) as repo:
+        import_bolts(repo, EXAMPLE)
+        repo.start_vehicle("VIN0", "WAGON-B")             # the shift before's
+        repo.close_vehicle("VIN0")
+        time.sleep(0.01)
+        since = datetime.now(UTC)
+        bolts = [b.bolt_id for b in repo.bolts_for_model("WAGON-B")]
+        repo.start_vehicle("VIN1", "WAGON-B")
+        for tid, bolt in enumerate(bolts, 1):
+            record(repo, "VIN1", bolt, tightening_id=tid)
+        repo.close_vehicle("VIN1")
+        repo.start_vehicle("VIN2", "WAGON-B")
+        for tid in (101, 102, 103):
+            record(repo, "VIN2", bolts[0], ok=False, tightening_id=tid)
+        repo.ledger.record_command(at=datetime.now(UTC), user="sam", source="cli",
+                                   kind="release", vin="VIN2", bolt=bolts[0],
+                                   comment="joint cleaned")
+        repo.close_vehicle("VIN2")
+        repo.start_vehicle("VIN3", "WAGON-B")             # at the station still
+        record(repo, "VIN3", bolts[0], tightening_id=201)
+    code, out, err = run("db", "shift", "--since", since.isoformat(), "--db", db)
+    assert code == 1 and not err, err
+    lines = out.splitlines()
+    assert "3 vehicles at the station: 1 complete, 1 NOK, 1 open" in lines[0]
+    assert [line.split()[0] for line in lines[1:4]] == ["VIN1", "VIN2", "VIN3"]
+    assert "complete" in lines[1] and lines[1].rstrip().endswith("complete")
+    assert f"{bolts[0]} NOK, {bolts[1]} missing" in lines[2]
+    assert "open" in lines[3] and f"{bolts[1]} missing" in lines[3]
+    assert f"release {bolts[0]} of VIN2 by sam (cli)" in out and "joint cleaned" in out
+    code, out, _ = run("db", "shift", "--since", since.isoformat(), "--db", db, "--json")
+    doc = json.loads(out)
+    assert code == 1 and [(v["vin"], v["status"]) for v in doc["vehicles"]] == [
+        ("VIN1", "complete"), ("VIN2", "NOK"), ("VIN3", "open")]
+    assert [(c["kind"], c["vin"], c["comment"]) for c in doc["commands"]] == [
+        ("release", "VIN2", "joint cleaned")]
+    # the shift before: the first vehicle alone, complete or not (it left all missing)
+    code, out, _ = run("db", "shift", "--since", (since - timedelta(hours=1)).isoformat(),
+                       "--until", since.isoformat(), "--db", db)
+    assert code == 1 and "1 vehicle at the station: 1 incomplete" in out and "VIN0" in out
+    code, out, err = run("db", "shift", "--since", since.isoformat(), "--until",
+                         (since - timedelta(hours=1)).isoformat(), "--db", db)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "is not before" in err

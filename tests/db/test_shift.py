@@ -1,0 +1,45 @@
+"""A shift's window (:mod:`db.shift`): which vehicles and commands belong to it."""
+
+from __future__ import annotations
+
+import time
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+
+from db.repository import Repository
+from db.shift import shift
+from stationd.boltfile import import_bolts
+from tests.db.conftest import record
+
+
+def _now() -> datetime:
+    time.sleep(0.01)
+    return datetime.now(UTC)
+
+
+def test_a_shift_holds_the_vehicles_at_the_station_in_it_and_its_commands_alone(
+        repo: Repository, bolts_file: Path) -> None:
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("BEFORE", "SEDAN")
+    repo.close_vehicle("BEFORE")
+    repo.start_vehicle("REWORKED", "SEDAN")
+    repo.close_vehicle("REWORKED")
+    repo.ledger.record_command(at=datetime.now(UTC), user="ann", source="cli", kind="skip",
+                               vin="REWORKED", bolt="B2", comment="before the shift")
+    since = _now()
+    repo.reopen_vehicle("REWORKED", at=datetime.now(UTC), user="sam", source="cli",
+                        comment="B2 to do")                  # reworked in the shift
+    repo.start_vehicle("IN", "SEDAN")
+    record(repo, "IN", "B1")
+    repo.ledger.record_command(at=datetime.now(UTC), user="sam", source="cli",
+                               kind="sign-in", vin=None, bolt=None, comment="")
+    until = _now()
+    repo.ledger.record_command(at=datetime.now(UTC), user="eve", source="cli", kind="skip",
+                               vin="IN", bolt="B2", comment="after the shift")
+    done = shift(repo, since, until)
+    assert [r.vehicle.vin for r in done.vehicles] == ["REWORKED", "IN"]
+    # the reopen is the hand-over's; a sign-in and the commands outside the window are not
+    assert [(c.kind, c.vin, c.user) for c in done.commands] == [("reopen", "REWORKED", "sam")]
+    later = shift(repo, until + timedelta(hours=1), until + timedelta(hours=2))
+    assert [r.vehicle.vin for r in later.vehicles] == ["REWORKED", "IN"]   # both still open
+    assert later.commands == ()
