@@ -23,7 +23,7 @@ import io
 from datetime import datetime, timedelta
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from db.curves import curves_of_records
@@ -87,10 +87,20 @@ def _iso(t: datetime | None) -> str | None:
 class Results:
     """The read-only results source the web server is given."""
 
+    #: the vehicles the results list shows, newest first (the older ones: ``db shift``)
+    list_limit = 200
+
     def __init__(self, repo: Repository) -> None:
         self.repo = repo
 
-    def vehicles(self, limit: int = 200) -> list[dict[str, Any]]:
+    def vehicle_count(self) -> int:
+        """How many vehicles the database has: the list says when it shows only the newest
+        (a supervisor's trial: it stopped at 200, less than a shift at some lines, without a
+        word)."""
+        with Session(self.repo.engine) as s:
+            return int(s.scalar(select(func.count()).select_from(Vehicle)) or 0)
+
+    def vehicles(self, limit: int | None = None) -> list[dict[str, Any]]:
         """The latest vehicles first, each with its status (open, complete, NOK, missing;
         ``reopened``: reopened for rework and not back at the station yet, which read "open,
         reworked" as the vehicle on the lift did, before any rework: an operator trial);
@@ -98,7 +108,8 @@ class Results:
         (a supervisor's trial: the list had no word of them)."""
         with Session(self.repo.engine) as s:
             rows = s.execute(select(Vehicle.vin).order_by(Vehicle.started_at.desc(),
-                                                         Vehicle.id.desc()).limit(limit)).all()
+                                                         Vehicle.id.desc())
+                             .limit(self.list_limit if limit is None else limit)).all()
         may_hold = self.repo.may_hold([vin for (vin,) in rows])
         out = []
         for (vin,) in rows:

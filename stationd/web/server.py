@@ -467,7 +467,12 @@ class WebServer:
                 text=f"results database unavailable: {exc}\n") from None
 
     async def _vehicles(self, request: web.Request) -> web.Response:
-        return web.json_response(await self._db(self._need_results().vehicles))
+        """The newest vehicles (``Results.list_limit``), the database's count of them in
+        ``X-Vehicles-Total``: the list says when it shows only the newest."""
+        res = self._need_results()
+        listed = await self._db(res.vehicles)
+        total = await self._db(res.vehicle_count)
+        return web.json_response(listed, headers={"X-Vehicles-Total": str(total)})
 
     async def _vehicle(self, request: web.Request) -> web.Response:
         res = self._need_results()

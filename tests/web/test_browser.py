@@ -387,6 +387,22 @@ def test_results_screens_and_csv_download(live_server, page, shots, tmp_path):
         page.wait(lambda p: "open, reworked" in (p.text(row) or ""), what="reworked in the list")
     finally:
         repo.close()
+    # more vehicles than the list shows: it says how many, and where the others are
+    (tmp_path / "more").mkdir()
+    more = results_db(tmp_path / "more")
+    try:
+        more.start_vehicle("VINNEW", "SEDAN")
+        res = Results(more)
+        res.list_limit = 1
+        srv = live_server(results=res)
+        page.get(srv.url + "vehicles")
+        page.wait(lambda p: p.count("#vehicles tbody tr.more") == 1, what="the list's limit")
+        assert page.count("#vehicles tr[data-vin]") == 1 and \
+            page.count("#vehicles tr[data-vin='VINNEW']") == 1
+        assert "The newest 1 of 2 vehicles" in (page.text("#vehicles tr.more") or "") and \
+            "db shift" in (page.text("#vehicles tr.more") or "")
+    finally:
+        more.close()
     empty = Repository.open(f"sqlite:///{tmp_path / 'empty.db'}")
     try:
         srv = live_server(results=Results(empty))

@@ -23,7 +23,10 @@ async function getJson(url) {
 async function listVehicles() {
   try {
     const tb = q("#vehicles tbody");
-    const list = await getJson("/api/vehicles");
+    const r = await fetch("/api/vehicles");
+    if (!r.ok) throw new Error((await r.text()).trim());
+    const list = await r.json();
+    const total = Number(r.headers.get("X-Vehicles-Total") || list.length);
     if (!list.length) {
       const tr = document.createElement("tr");
       tr.className = "empty";
@@ -56,6 +59,14 @@ async function listVehicles() {
       cell(tr, (v.started_at || "").slice(0, 19));
       cell(tr, v.status === "reopened" ? `reopened ${(v.reopened_at || "").slice(0, 19)}`
         : (v.ended_at || "open").slice(0, 19));
+      tb.appendChild(tr);
+    }
+    if (total > list.length) {   // said, not cut off without a word (a supervisor's trial)
+      const tr = document.createElement("tr");
+      tr.className = "more";
+      cell(tr, `The newest ${list.length} of ${total} vehicles. A shift's vehicles: ` +
+           "stationd db shift --since DATE; every rundown: stationd db export --results.")
+        .colSpan = 11;
       tb.appendChild(tr);
     }
   } catch (e) { q("#error").textContent = e.message; }
