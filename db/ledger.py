@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import uuid
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from datetime import datetime
@@ -65,6 +65,12 @@ DB_ID_FROM, DB_ID_BEFORE = "db_id_from", "db_id_before"
 DB_ID_EARLIER = "db_id_earlier"
 
 
+def result_id(db_id: str, seq: int) -> str:
+    """``db_id:seq``: a record's key outside the station, unique across a replaced or
+    restored station database (OPC UA's ResultId; the line's rows are keyed by the two)."""
+    return f"{db_id}:{seq}"
+
+
 @dataclass(frozen=True)
 class Series:
     """The ids a database's records go to the line under: ``db_id`` from ``from_seq`` on,
@@ -76,6 +82,11 @@ class Series:
     #: the renewals before the last one, oldest first: (from_seq, the id below it); a record
     #: below one of them keeps the id it had then, not ``before``
     earlier: tuple[tuple[int, str], ...] = ()
+
+    def result_id(self, seq: int) -> str:
+        """The key of record ``seq`` outside the station: OPC UA's ResultId, the line's
+        (db_id, seq) in one text (:func:`result_id`)."""
+        return result_id(self.id_of(seq), seq)
 
     def id_of(self, seq: int) -> str:
         """The id record ``seq`` goes under."""
@@ -162,6 +173,22 @@ class Ledger:
         ``from_seq`` on, the id before it below (None: never renewed)."""
         with self._session(False) as s:
             return _series_in(s)
+
+    def result_ids(self, refs: Iterable[tuple[str, int]]) -> dict[tuple[str, int], str]:
+        """The key outside the station (:meth:`Series.result_id`) of each record ``(kind,
+        id)`` that has a feed entry: an export's rows joined to OPC UA's results and the
+        line's rows."""
+        wanted: dict[str, set[int]] = {}
+        for kind, ref in refs:
+            wanted.setdefault(kind, set()).add(ref)
+        if not wanted:
+            return {}
+        with self._session(False) as s:
+            series = _series_in(s)
+            rows = s.execute(select(FeedEntry.kind, FeedEntry.ref, FeedEntry.seq).where(
+                or_(*(and_(FeedEntry.kind == kind, FeedEntry.ref.in_(ids))
+                      for kind, ids in wanted.items()))))
+            return {(kind, ref): series.result_id(seq) for kind, ref, seq in rows}
 
     def renew_db_id(self, from_seq: int) -> Series:
         """The records from ``from_seq`` on are a new series (a new random id): the line

@@ -636,7 +636,7 @@ class Repository:
             q = select(ControllerEvent).order_by(ControllerEvent.id)
             if vin is not None:
                 q = q.where(ControllerEvent.vin == vin)
-            return [{"result_type": e.result_type, "what": e.what, "vin": e.vin,
+            return [{"id": e.id, "result_type": e.result_type, "what": e.what, "vin": e.vin,
                      "bolt": e.bolt, "controller_vin": e.controller_vin,
                      "tightening_id": e.tightening_id, "pset": e.pset, "status": e.status,
                      "torque_nm": e.torque_nm, "angle_deg": e.angle_deg, "note": e.note,
@@ -650,7 +650,8 @@ class Repository:
             q = select(UnreadableRecord).order_by(UnreadableRecord.id)
             if vin is not None:
                 q = q.where(UnreadableRecord.vin == vin)
-            return [{"mid": x.mid, "revision": x.revision, "raw": x.raw, "error": x.error,
+            return [{"id": x.id, "mid": x.mid, "revision": x.revision, "raw": x.raw,
+                     "error": x.error,
                      "vin": x.vin, "bolt": x.bolt, "controller_vin": x.controller_vin,
                      "tightening_id": x.tightening_id, "pset": x.pset,
                      "result_at": x.result_at, "recorded_at": x.recorded_at}
@@ -769,7 +770,7 @@ class Repository:
                            TighteningRecord.tightening_id.in_(ids))
                     .order_by(TighteningRecord.id)) if ids else ()):
                 entered.setdefault((v, tid), {"bolt": bolt, "by": str(who)})   # the first
-            return [{"vin": r.vin, "controller_vin": r.controller_vin,
+            return [{"id": r.id, "vin": r.vin, "controller_vin": r.controller_vin,
                      "tightening_id": r.tightening_id, "pset": r.pset, "status": r.status,
                      "torque_nm": r.torque_nm, "angle_deg": r.angle_deg,
                      "result_at": r.result_at, "recorded_at": r.recorded_at,

@@ -26,7 +26,7 @@ from db.ledger import CONTROLLER_EVENT as CONTROLLER_EVENT_KIND
 from db.ledger import RUNDOWN as RUNDOWN_KIND
 from db.ledger import UNATTRIBUTED as UNATTRIBUTED_KIND
 from db.ledger import UNREADABLE as UNREADABLE_KIND
-from db.ledger import Series
+from db.ledger import Series, result_id
 from drivers.wrench.base import ResultType
 from stationd.opcua.uatypes import ua
 
@@ -112,11 +112,6 @@ def _other_unit(text: str) -> Any:
     named, UnitId -1 (Part 8: not available)."""
     return ua.EUInformation(NamespaceUri=UNECE, UnitId=-1, DisplayName=ua.LocalizedText(text),
                             Description=ua.LocalizedText(text))
-
-
-def result_id(db_id: str, seq: int) -> str:
-    """The ResultId of feed entry ``seq``: unique across a replaced station database."""
-    return f"{db_id}:{seq}"
 
 
 def parse_result_id(series: Series, text: str) -> int | None:

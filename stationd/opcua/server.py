@@ -91,7 +91,7 @@ from stationd.opcua.model import (
     load_model,
     publish_dictionaries,
 )
-from stationd.opcua.results import JOINING_TECHNOLOGY, any_message, any_result, result_id
+from stationd.opcua.results import JOINING_TECHNOLOGY, any_message, any_result
 from stationd.opcua.uatypes import ua
 from stationd.station.events import (
     DeviceHealth,
@@ -461,7 +461,7 @@ class OpcUaServer:
     def _id(self, seq: int) -> str:
         """The ResultId of feed entry ``seq``: under the id the line keeps that record
         (after a backup put back, the records before it keep the database's earlier id)."""
-        return result_id(self.series.id_of(seq), seq)
+        return self.series.result_id(seq)
 
     async def _follow(self, repo: Repository) -> None:
         """The database's series read again: the forwarder renews its id when it finds the

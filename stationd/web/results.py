@@ -28,6 +28,7 @@ from sqlalchemy.orm import Session
 
 from db.curves import curves_of_records
 from db.kinds import LOOSENING, MISSING, PENDING, SKIPPED
+from db.ledger import COMMAND, CONTROLLER_EVENT, RUNDOWN, UNATTRIBUTED, UNREADABLE
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
 from db.repository import Repository
 from db.shift import list_status
@@ -48,7 +49,11 @@ CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator"
               # the controller's own time of the result, on its clock: when it was made, where
               # ``result_at`` is when the station took it (a result fetched after a link cut
               # is taken at the reconnect, minutes later: a quality trial)
-              "controller_at")
+              "controller_at",
+              # the row's record outside the station: OPC UA's ResultId, the line's (db_id,
+              # seq) as "db_id:seq" (an MES joining an export to its results had no key);
+              # empty for a bolt's row without a record (missing, pending, skipped)
+              "result_id")
 
 #: how long after a lock the NOK it comes of may have been taken: none for a record stored
 #: by this version (the NOK's result_at is the time the lock was decided at, or earlier);
@@ -205,10 +210,20 @@ class Results:
         tightened again.  Raises ``NotFoundError`` for an unknown VIN."""
         report = self.repo.vehicle_report(vin)
         still_open = report.vehicle.ended_at is None
+        rows, unreadable = self._rows(vin), self.repo.unreadable(vin)
+        unattributed, events = self.repo.unattributed(vin), self.repo.controller_events(vin)
+        commands = [c for c in self.repo.ledger.commands(vin)
+                    if c.kind in ("release", "lock") and c.bolt]
+        ids = self.repo.ledger.result_ids(
+            [(RUNDOWN, rid) for rid, _ in rows] + [(UNREADABLE, x["id"]) for x in unreadable]
+            + [(UNATTRIBUTED, u["id"]) for u in unattributed]
+            + [(CONTROLLER_EVENT, e["id"]) for e in events]
+            + [(COMMAND, c.id) for c in commands])
         # every row with every field (a JSON row of a release had keys the others had not:
         # a quality engineer's trial)
         runs = [{**dict.fromkeys(CSV_FIELDS), **{k: v for k, v in r.items() if k in CSV_FIELDS},
-                 "skipped_by": None, "comment": r["entered_comment"]} for r in self.rundowns(vin)]
+                 "skipped_by": None, "comment": r["entered_comment"],
+                 "result_id": ids.get((RUNDOWN, rid))} for rid, r in rows]
         none: list[dict[str, Any]] = [
             {**dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
              "bolt": b.bolt_id, "attempt": 0,
@@ -220,8 +235,9 @@ class Results:
         model = report.vehicle.model
         # a result that could not be read: its bolt's row says so, with the parse error
         unread = [_stored_row(vin, model, UNREADABLE_STATUS, x, bolt=x["bolt"],
-                              comment=_unreadable_comment(x))
-                  for x in self.repo.unreadable(vin)]
+                              comment=_unreadable_comment(x),
+                              result_id=ids.get((UNREADABLE, x["id"])))
+                  for x in unreadable]
         loose = [_stored_row(vin, model, UNATTRIBUTED_STATUS, u, bolt=None,
                              # its type as the controller sent it (an unattributed loosening
                              # read as a tightening OK: an MES integrator's trial); none: empty
@@ -229,25 +245,26 @@ class Results:
                              else result_type_words(u["result_type"]),
                              torque_nm=u["torque_nm"], angle_deg=u["angle_deg"],
                              comment=f"{str(u['status']).upper()}; {u['reason']}"
-                             + entered_as_words(u["entered_as"]))
-                 for u in self.repo.unattributed(vin)]
+                             + entered_as_words(u["entered_as"]),
+                             result_id=ids.get((UNATTRIBUTED, u["id"])))
+                 for u in unattributed]
         events = [_stored_row(vin, model, CONTROLLER_EVENT_STATUS, e, bolt=e["bolt"],
                               rundown=e["what"], torque_nm=e["torque_nm"],
                               angle_deg=e["angle_deg"],
                               comment=e["note"] or ("not a rundown" + (
-                                  f"; the tool was on {e['bolt']}" if e["bolt"] else "")))
-                  for e in self.repo.controller_events(vin)]
-        for c in self.repo.ledger.commands(vin):
+                                  f"; the tool was on {e['bolt']}" if e["bolt"] else "")),
+                              result_id=ids.get((CONTROLLER_EVENT, e["id"])))
+                  for e in events]
+        for c in commands:
             # a release, and the NOK policy's lock, among the rundowns where they came
-            if c.kind in ("release", "lock") and c.bolt:
-                at = c.at.isoformat()
-                runs.insert(_after_nok(runs, at, c.bolt) if c.kind == "lock"
-                            else _after(runs, at), {
-                    **dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
-                    "bolt": c.bolt, "attempt": 0, "images": [], "recorded_at": at,
-                    "comment": c.comment, **(
-                        {"status": RELEASED_STATUS, "released_by": c.user}
-                        if c.kind == "release" else {"status": LOCKED_STATUS})})
+            at = c.at.isoformat()
+            runs.insert(_after_nok(runs, at, c.bolt or "") if c.kind == "lock"
+                        else _after(runs, at), {
+                **dict.fromkeys(CSV_FIELDS), "vin": vin, "model": report.vehicle.model,
+                "bolt": c.bolt, "attempt": 0, "images": [], "recorded_at": at,
+                "comment": c.comment, "result_id": ids.get((COMMAND, c.id)), **(
+                    {"status": RELEASED_STATUS, "released_by": c.user}
+                    if c.kind == "release" else {"status": LOCKED_STATUS})})
         return runs + none + unread + loose + events
 
 

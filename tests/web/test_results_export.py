@@ -1,0 +1,49 @@
+"""A vehicle's export (``Results.export``): each row of a record carries its key outside the
+station, ``db_id:seq``, OPC UA's ResultId and the line's (db_id, seq): an MES integrator
+joining an export to the results it got over OPC UA had no key (the VIN, bolt and controller
+id are not unique: a controller replaced numbers its tightenings again)."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from pathlib import Path
+
+from stationd.web.results import Results, rundowns_csv
+from tests.web.scenario import VIN, results_db
+
+
+def test_every_row_of_a_record_carries_the_id_the_line_and_opc_ua_give_it(
+        tmp_path: Path) -> None:
+    repo = results_db(tmp_path)              # three rundowns: B1 OK, B2 NOK then OK
+    try:
+        old = repo.ledger.db_id()
+        # a backup put back: the records from here on go under a new id, those before keep
+        # theirs (the forwarder renews it; the line and OPC UA key them so)
+        new = repo.ledger.renew_db_id(repo.ledger.last_seq() + 1).db_id
+        repo.record_unreadable(mid=61, revision=7, raw="00230061007 garbled", error="short",
+                               vin=VIN, bolt="B3", controller_vin=None, tightening_id=7,
+                               pset=1, result_at=None)
+        repo.record_unattributed(vin=VIN, controller_vin=None, tightening_id=8, pset=1,
+                                 ok=True, torque_nm=50.0, angle_deg=30.0, result_at=None,
+                                 result_type=1, reason="outside a tool enable")
+        repo.ledger.record_command(at=datetime.now(UTC), user="sue", source="cli",
+                                   kind="release", vin=VIN, bolt="B3", comment="checked")
+        feed = {(e["kind"], e["record"]["id"]): e["seq"] for e in repo.ledger.since(0)}
+        series = repo.ledger.series()
+        rows = Results(repo).export(VIN)
+        keyed = [r for r in rows if r["result_id"] is not None]
+        assert sorted(r["status"] for r in keyed) == sorted(
+            ["ok", "nok", "ok", "unreadable", "unattributed", "released"])
+        # each the feed's own record, under the id of its series
+        assert sorted(r["result_id"] for r in keyed) == sorted(
+            f"{series.id_of(seq)}:{seq}" for seq in feed.values())
+        rundowns = [r["result_id"] for r in rows if r["status"] in ("ok", "nok")]
+        assert all(i.startswith(f"{old}:") for i in rundowns)
+        later = [r["result_id"] for r in keyed if r["status"] not in ("ok", "nok")]
+        assert all(i.startswith(f"{new}:") for i in later)
+        # a bolt's row without a record has none; the CSV has the column
+        assert all(r["result_id"] is None for r in rows if r["status"] in ("pending",
+                                                                            "skipped"))
+        assert rundowns_csv(rows).splitlines()[0].endswith(",result_id")
+    finally:
+        repo.close()
