@@ -130,7 +130,12 @@ class TeachRules(CoreState):
             self.reason = self._teach.reason()
             return []
         self._teach = None
-        self._to(State.WAITING_VEHICLE, StateReason(Because.TEACH_ENDED))
+        if self.vin is not None and self._lift is not None and self._lift.ready:
+            # the vehicle at height works on at once (a process engineer's trial: "teach mode
+            # ended; waiting for the lift" with the car on the lift, until its next read)
+            self._to(State.TRACKING, StateReason(Because.TRACKING))
+        else:
+            self._to(State.WAITING_VEHICLE, StateReason(Because.TEACH_ENDED))
         return [Reply(Answer(c.request, cmd, c.issuer))]
 
     def _teach_overdue(self, t: float) -> list[Action]:

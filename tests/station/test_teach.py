@@ -66,8 +66,9 @@ def test_teach_mode_turns_the_cycle_off_and_measures_a_steady_bolt_end():
     assert r["position_mm"][0] == pytest.approx(500.05, abs=0.05) and r["dispersion_mm"] < 0.2
     assert d.core.reason == StateReason(Because.TEACHING, model="M", user="ed")
     acts = _do(d, 5, TeachStop())
-    assert _answer(acts).answer.accepted and d.core.state is not State.TEACHING
-    assert d.core.reason == StateReason(Because.TEACH_ENDED)
+    assert _answer(acts).answer.accepted
+    # the vehicle at height works on at once, not "waiting for the lift" until its next read
+    assert (d.core.state, d.core.reason) == (State.TRACKING, StateReason(Because.TRACKING))
 
 
 def test_a_wrench_that_moves_while_measured_is_refused_and_frames_before_do_not_count():
@@ -163,3 +164,12 @@ def test_a_teach_point_refused_while_the_cameras_give_no_wrench_names_what_they_
     assert reason_words(why) == (
         f"the wrench was not localized (5 localizations without it, none of the "
         f"{TEACH_FRAMES} needed): pair1: left: no frame for 120 s")
+
+
+def test_teach_mode_ended_with_no_vehicle_at_height_waits_for_the_lift():
+    d = _ready()
+    _do(d, 1, TeachStart("M"))
+    d.step(("lift", 0.1, False, False, None))     # the car lowered during teach mode
+    _do(d, 2, TeachStop())
+    assert (d.core.state, d.core.reason) == (State.WAITING_VEHICLE,
+                                             StateReason(Because.TEACH_ENDED))
