@@ -109,3 +109,26 @@ def test_a_vehicle_whose_model_was_renamed_under_it_keeps_only_the_bolts_it_star
     import_bolts(repo, bolts_file)
     assert repo.vehicle_report("VIN3").missing == ["B3"]
     assert repo.vehicle_report("VIN0").missing == ["B1", "B2", "B3"]
+
+
+def test_a_vehicle_that_left_with_a_bolt_missing_keeps_it_missing_through_a_rework(
+        repo: Repository, bolts_file: Path) -> None:
+    """A vehicle that left with B2 never tightened, B2 taken out of the table afterwards: it
+    stays missing (above); reopened for rework of another bolt (or by mistake) and closed
+    again, it left "complete" (B2 dropped by the table as it is now), the bolt never
+    tightened."""
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    record(repo, "VIN1", "B1")
+    record(repo, "VIN1", "B3")
+    assert repo.close_vehicle("VIN1").missing == ["B2"]
+    bolts_file.write_text(BASE.replace(B2, ""))      # the next model year has no B2
+    assert import_bolts(repo, bolts_file).removed == ["SEDAN/B2"]
+    repo.reopen_vehicle("VIN1", at=datetime.now(UTC), user="quality", source="test",
+                        comment="B3 to check")
+    assert repo.vehicle_report("VIN1").missing == ["B2"]      # reopened, waiting
+    repo.start_vehicle("VIN1", "SEDAN", reopen=True)
+    record(repo, "VIN1", "B3")
+    left = repo.close_vehicle("VIN1")
+    assert left.missing == ["B2"] and not left.complete, left.counts()
+    assert repo.vehicle_report("VIN1").missing == ["B2"]
