@@ -209,20 +209,20 @@ def _iso(t: datetime | None) -> str | None:
     return None if t is None else t.isoformat()
 
 
-def _left_without_rundown(s: Session, v: Vehicle) -> frozenset[str] | None:
-    """The bolts a closed vehicle left without a rundown (missing, skipped, held: named by
-    its last close); None for a vehicle open, being closed now, or closed before closes
-    were kept (its model's table as it is now)."""
-    if v.ended_at is None:
-        return None
+def _left_without_rundown(s: Session, v: Vehicle) -> tuple[frozenset[str], bool] | None:
+    """The bolts the vehicle left without a rundown (missing, skipped, held: named by its
+    last close), and whether that close is its last word (closed, not reopened since); None
+    for a vehicle never closed, or closed before closes were kept (its model's table as it
+    is now)."""
     last = s.scalar(select(VehicleClosing).where(VehicleClosing.vehicle_id == v.id)
                     .order_by(VehicleClosing.id.desc()).limit(1))
-    if last is None or last.closed_at != v.ended_at:
+    if last is None:
         return None
-    return frozenset(bolt for bolts in last.not_ok.values() for bolt in bolts)
+    left = frozenset(bolt for bolts in last.not_ok.values() for bolt in bolts)
+    return left, v.ended_at is not None and last.closed_at == v.ended_at
 
 
-def _of_vehicle(b: Bolt, v: Vehicle, left: frozenset[str] | None) -> bool:
+def _of_vehicle(b: Bolt, v: Vehicle, left: tuple[frozenset[str], bool] | None) -> bool:
     """Whether bolt ``b``, with no rundown on ``v``, is one of its bolts.  A closed vehicle
     keeps the bolts it left with (``left``): a bolt the table took out after it left was
     still missing on it, one the table added after was never its own (a process engineer's
@@ -231,11 +231,14 @@ def _of_vehicle(b: Bolt, v: Vehicle, left: frozenset[str] | None) -> bool:
     out is no longer to do (the station stops asking for it), unless its whole model was
     (renamed under the vehicle at the station: the vehicle keeps the bolts it was started
     with, or it left "complete" with most of them never tightened; not those taken out
-    before it was started)."""
-    if left is not None:
-        return b.code in left
+    before it was started).  A vehicle reopened for rework (or being closed again) keeps
+    too the bolts its last close left without a rundown: a bolt taken out of the table since
+    is still not tightened on it (a reopening and a close made it read complete)."""
+    if left is not None and left[1]:
+        return b.code in left[0]
     return b.removed_at is None or (v.model.removed_at is not None
-                                    and b.removed_at >= v.started_at)
+                                    and b.removed_at >= v.started_at) or (
+        left is not None and b.code in left[0])
 
 
 def build_report(s: Session, v: Vehicle) -> VehicleReport:
