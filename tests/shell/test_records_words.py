@@ -181,3 +181,25 @@ def test_a_reload_that_changes_only_a_models_code_does_not_read_as_no_change(
     assert any("SEDAN" in m for m in said), said
     assert records.repo is not None
     records.repo.close()
+
+
+def test_a_reload_that_changes_bolts_of_the_vehicle_at_the_station_says_so_for_a_model_with_a_slash(
+        tmp_path: Path, caplog: Any) -> None:
+    """A model's name may hold a "/" (the bolt table's name rule: "SEDAN/MY27"): the
+    import names its bolts "SEDAN/MY27/B2", which read as model "SEDAN", bolt "MY27/B2",
+    and the vehicle at the station went on under the changed table without a word."""
+    bolts = tmp_path / "bolts.yaml"
+    table = BASE.replace("  SEDAN:\n", "  SEDAN/MY27:\n")
+    bolts.write_text(table)
+    records = Records(StationConfig(database_url=url_of(tmp_path / "st.db"), bolts_path=bolts))
+    records.open()
+    assert records.repo is not None
+    records.repo.start_vehicle("VIN2", "SEDAN/MY27")
+    bolts.write_text(table.replace("target: 25, min: 23, max: 27", "target: 25, min: 24, max: 27"))
+    records.repo.close()
+    caplog.set_level("INFO", logger="stationd")
+    records.open()
+    said = [r.getMessage() for r in caplog.records if "VIN2" in r.getMessage()]
+    assert any("B2 changed" in m for m in said), [r.getMessage() for r in caplog.records]
+    assert records.repo is not None
+    records.repo.close()
