@@ -210,9 +210,11 @@ class Records:
             return
         model = report.vehicle.model
         open_ = {b.bolt_id for b in report.bolts if b.status not in (OK, SKIPPED)}
-        news = [f"{bolt} {how}" for names, how in ((changed, "changed"), (added, "added"))
-                for m, _, bolt in (n.partition("/") for n in names)
-                if m == model and bolt in open_]
+        # "MODEL/BOLT", a model's name may hold a "/" itself (the name rule): its own prefix
+        prefix = f"{model}/"
+        news = [f"{n[len(prefix):]} {how}"
+                for names, how in ((changed, "changed"), (added, "added"))
+                for n in names if n.startswith(prefix) and n[len(prefix):] in open_]
         if news:   # at most ten named (a table of 50 bolts reordered changes each one)
             self.log.warning("vehicle %s at the station (%s) goes on under the new table: %s "
                              "(its bolts done keep the parameters they were tightened with)",
