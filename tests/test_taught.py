@@ -58,3 +58,16 @@ def test_a_taught_bolt_the_table_does_not_have_is_not_dropped_from_the_taught_ta
     assert "B99" in text and "512.3" in text, text
     back = yaml.safe_load(text)          # still the table to import: B99 is no bolt of it
     assert [b["id"] for b in back["models"]["M1"]["bolts"]] == ["B01"]
+
+
+def test_a_taught_bolt_id_with_a_line_break_stays_in_its_comment():
+    """The Teach panel's bolt id is any text of up to 32 characters (stripped at its ends
+    only): one with a line break in it wrote its second line into the taught table as YAML
+    (here a second ``models:`` that the import then refused as a duplicate key), not as the
+    comment that names the bolt."""
+    doc = {"psets": [{"id": 1}], "models": {
+        "M1": {"bolts": [{"id": "B01", "position": [100.0, 0.0, 5.0], "pset": 1}]}}}
+    text = table_text(doc, "M1", {"B9\nmodels: {}\n#": {"position_mm": [1.0, 2.0, 3.0],
+                                                         "dispersion_mm": 0.1}})
+    assert all(line.startswith("#") for line in text.split("psets:")[0].splitlines()), text
+    assert yaml.safe_load(text) == doc, text
