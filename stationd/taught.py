@@ -88,7 +88,9 @@ def table_text(doc: Mapping[str, Any], model: str, taught: Mapping[str, Mapping[
             if isinstance(b, dict) and str(b.get("id")) in taught:
                 b["position"] = pos(taught[str(b["id"])])
                 known.add(str(b["id"]))
-        unknown = [f"#   {b}: position {pos(r)}, dispersion {float(r['dispersion_mm']):.3f} mm\n"
+        # (an id typed with a line break in it is written escaped: never a line of YAML)
+        unknown = [f"#   {b if b.isprintable() else repr(b)}: position {pos(r)}, "
+                   f"dispersion {float(r['dispersion_mm']):.3f} mm\n"
                    for b, r in taught.items() if b not in known]
     else:
         body = {"model": model, "bolts": [{"id": b, "position": pos(r), "dispersion_mm":
