@@ -132,3 +132,29 @@ def test_a_vehicle_that_left_with_a_bolt_missing_keeps_it_missing_through_a_rewo
     left = repo.close_vehicle("VIN1")
     assert left.missing == ["B2"] and not left.complete, left.counts()
     assert repo.vehicle_report("VIN1").missing == ["B2"]
+
+
+def test_a_table_imported_by_hand_under_the_running_station_leaves_its_records_limits_true(
+        repo: Repository, bolts_file: Path, tmp_path: Path) -> None:
+    """``db import`` by hand into the running daemon's database that retunes a bolt the
+    station has not enabled yet (B2: torque 23-27 -> 20-30) wrote the new window over its
+    parameter version in place (no record, no enable pointed at it).  The station works
+    on from the table it loaded (the README: the hand import "lasts until" the next reload)
+    and tightens B2 to 23-27 under that version's id: its record then says it was
+    tightened with 20-30, the window quality judges it by (the export's limits)."""
+    from stationd.web.results import Results
+
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VIN1", "SEDAN")
+    b2 = repo.bolts_for_model("SEDAN")[1]        # the daemon's table in memory
+    assert b2.bolt_id == "B2" and b2.parameters.torque.min == 23
+    retuned = tmp_path / "retuned.yaml"
+    retuned.write_text(BASE.replace("target: 25, min: 23, max: 27",
+                                    "target: 25, min: 20, max: 30"))
+    url = repo.engine.url.render_as_string(hide_password=False)
+    with Repository.open(url) as by_hand:         # stationd db import retuned.yaml ...
+        assert import_bolts(by_hand, retuned).changed == ["SEDAN/B2"]
+    enable = repo.note_enable("VIN1", "B2", None, b2.parameters_id, {}, datetime.now(UTC))
+    record(repo, "VIN1", "B2", parameters_id=b2.parameters_id, enable_id=enable)
+    [run] = Results(repo).rundowns("VIN1")
+    assert (run["torque_min_nm"], run["torque_max_nm"]) == (23.0, 27.0), run
