@@ -331,3 +331,29 @@ def test_one_lost_result_entered_for_two_held_bolts_is_one_bolt_s(sedan):
     assert (runs[r1]["tightening_id"], runs[r2]["tightening_id"]) == (41, None)
     [loose] = repo.unattributed("VIN1")
     assert loose["entered_as"] == {"bolt": "B1", "by": "sam"}
+
+
+def test_an_outcome_is_entered_for_a_held_bolt_a_table_imported_by_hand_retired(
+        sedan, bolts_file, tmp_path):
+    """``db import`` by hand under the running station took B1 out of the table while the
+    station (on the table it loaded) held B1 for its unreadable result: the result of a
+    bolt the station sent parameters for is stored to it (:meth:`record_tightening`), but
+    the outcome a supervisor read on the controller and entered for it was refused ("bolt
+    'B1' is not a bolt of model SEDAN"): the hold could only be released, the result lost."""
+    from stationd.boltfile import import_bolts
+    from tests.db.conftest import BASE
+
+    repo = sedan
+    b1 = repo.bolts_for_model("SEDAN")[0]
+    repo.note_enable("VIN1", "B1", 1, b1.parameters_id, {}, datetime.now(UTC))
+    _unreadable(repo, 12, "B1")
+    assert repo.held_bolts("VIN1") == {"B1": "tightening 12"}
+    cut = tmp_path / "cut.yaml"
+    cut.write_text(BASE.replace("      - id: B1\n        name: one\n        position: [0, 0, 0]"
+                                "\n        pset: 1\n      - id: B2", "      - id: B2", 1))
+    url = repo.engine.url.render_as_string(hide_password=False)
+    with Repository.open(url) as by_hand:
+        assert import_bolts(by_hand, cut).removed == ["SEDAN/B1"]
+    _enter(repo)
+    assert repo.held_bolts("VIN1") == {}
+    assert repo.vehicle_report("VIN1").ok == ["B1"]
