@@ -70,6 +70,17 @@ def record_entered(repo: Repository, *, vin: str, bolt: str, ok: bool, torque_nm
             b = s.scalar(select(Bolt).where(Bolt.model_id == v.model_id, Bolt.code == bolt,
                                             Bolt.removed_at.is_(None)))
             if b is None:
+                # retired since the station enabled the tool for it (a table imported by
+                # hand under the running station): its outcome is still its own, as a
+                # measured result is (:meth:`Repository.record_tightening_once`)
+                sent_id = s.scalar(select(ToolEnable.parameters_id).where(
+                    ToolEnable.vin == vin, ToolEnable.bolt == bolt)
+                    .order_by(ToolEnable.id.desc()).limit(1))
+                sent_for = None if sent_id is None else s.get(ProcessParameters, sent_id)
+                b = None if sent_for is None else s.scalar(select(Bolt).where(
+                    Bolt.id == sent_for.bolt_id, Bolt.model_id == v.model_id,
+                    Bolt.code == bolt))
+            if b is None:
                 raise NotFoundError(f"bolt {bolt!r} is not a bolt of model {v.model.name}")
             add_command(s, at=at, user=user, source=source, kind=ENTER_OUTCOME, vin=vin,
                         bolt=bolt, comment=comment)
