@@ -223,12 +223,16 @@ class _Importer:
         if retuned:
             count = _record_count(self.s, current.id)
             enables = _enable_count(self.s, current.id)
-            if count or enables:  # never overwrite what points at it: a new version
+            # never overwrite what points at it, nor what a running station may send: a new
+            # version (a table imported by hand under the daemon wrote the new window over
+            # the version it still tightened with, its record then read the new limits)
+            if count or enables or self._model_used(model.id):
                 self.add_version(row, spec.parameters, current.version + 1)
                 uses = [counted(count, "record")] if count else []
                 uses += [counted(enables, "tool enable")] if enables else []
                 self.report.new_versions.append(
-                    f"{label} v{current.version + 1} (v{current.version}: {', '.join(uses)})")
+                    f"{label} v{current.version + 1} (v{current.version}: "
+                    f"{', '.join(uses) or 'its model in use'})")
             else:
                 self.set_parameters(current, spec.parameters)
         if revived:

@@ -737,8 +737,9 @@ def add_db_parser(subparsers: Any) -> argparse.ArgumentParser:
         description="Validates the file (all errors are listed) and brings the database to it "
                     "in one transaction; prints what changed, or 'no changes'.  The file is the "
                     "whole table: models and bolts it no longer lists are removed (kept, "
-                    "retired, while records refer to them).  Changed parameters of a bolt with "
-                    "records become a new version.")
+                    "retired, while records or vehicles refer to them).  Changed parameters of a "
+                    "bolt with records, or of a model a vehicle was started under, become a "
+                    "new version.")
     im.add_argument("file", help="bolts YAML (see config/bolts.example.yaml)")
     _add_db_args(im)
     im.add_argument("--tolerance", type=_tolerance, default=None, metavar="MM",

@@ -112,13 +112,16 @@ def test_changed_parameters_of_a_bolt_with_records_become_a_new_version(repo, bo
     bolts_file.write_text(NEW_B1.replace("target: 25, min: 23", "target: 26, min: 23"))
     report = import_bolts(repo, bolts_file)
     assert report.psets_changed == ["pset 1"]
-    assert report.new_versions == ["SEDAN/B1 v2 (v1: 1 record)"]  # B1 has a record
+    # B1 has a record; B2 none, but its model is in use (VIN1 at the station: a running
+    # station may send v1 as it loaded it): never overwritten either
+    assert report.new_versions == ["SEDAN/B1 v2 (v1: 1 record)",
+                                   "SEDAN/B2 v2 (v1: its model in use)"]
     assert sorted(report.changed) == ["SEDAN/B1", "SEDAN/B2", "WAGON/B1"]
     new = {b.bolt_id: b for b in repo.bolts_for_model("SEDAN")}
     assert new["B1"].version == 2 and new["B1"].parameters.torque.target == 52
     assert new["B1"].parameters_id != old.parameters_id
-    assert new["B2"].version == 1 and new["B2"].parameters.torque.target == 26  # in place
-    wagon = repo.bolts_for_model("WAGON")[0]
+    assert new["B2"].version == 2 and new["B2"].parameters.torque.target == 26
+    wagon = repo.bolts_for_model("WAGON")[0]   # a model no vehicle used: changed in place
     assert wagon.version == 1 and wagon.parameters.torque.target == 52
     with repo.engine.connect() as c:  # the old version is kept, unchanged, and still referenced
         v1 = c.execute(select(ProcessParameters).where(
