@@ -586,6 +586,47 @@ def test_a_release_of_a_locked_bolt_is_a_row_of_the_results_export(run, db):
     assert code == 0 and "4 rundowns" in out and "1 release" in out, out
 
 
+def test_a_nok_tightened_after_a_release_is_exported_after_the_lock_and_release(run, db):
+    """A lock after 3 NOKs, released at once, then a 4th NOK within 2 s of the lock (its
+    tool enabled after the release): the export put the lock and the release after that 4th
+    NOK, as if 4 NOKs in a row came before the lock (an auditor's trial: the demo's own
+    line said "NOK; NOK; NOK; locked, released by the supervisor; NOK")."""
+    import csv
+    import io
+
+    from db.repository import Repository
+    from stationd.boltfile import import_bolts
+
+    t0 = datetime(2026, 12, 1, 22, 50, 34, tzinfo=UTC)
+    with Repository.open(db) as repo:
+        import_bolts(repo, EXAMPLE)
+        repo.start_vehicle("VIN1", "WAGON-B")
+        for tid, sent, taken in ((1, 0.0, 0.15), (2, 0.8, 0.95), (3, 1.5, 1.6)):
+            record(repo, "VIN1", "SF-FL", ok=False, tightening_id=tid,
+                   sent_at=t0 + timedelta(seconds=sent),
+                   result_at=t0 + timedelta(seconds=taken))
+        lock_at = t0 + timedelta(seconds=1.6)     # the third NOK's result_at
+        repo.ledger.record_command(at=lock_at, user="station", source="NOK policy",
+                                   kind="lock", vin="VIN1", bolt="SF-FL",
+                                   comment="3 NOK in a row")
+        repo.ledger.record_command(at=lock_at + timedelta(seconds=0.05), user="sam",
+                                   source="screen", kind="release", vin="VIN1",
+                                   bolt="SF-FL", comment="joint checked")
+        record(repo, "VIN1", "SF-FL", ok=False, tightening_id=4,
+               sent_at=t0 + timedelta(seconds=2.1), result_at=t0 + timedelta(seconds=2.2))
+        record(repo, "VIN1", "SF-FL", ok=True, tightening_id=5,
+               sent_at=t0 + timedelta(seconds=2.8), result_at=t0 + timedelta(seconds=2.9))
+    for fmt in ("csv", "json"):
+        code, out, _ = run("db", "export", "--results", "--vin", "VIN1", "--format", fmt,
+                           "--db", db)
+        assert code == 0
+        rows = list(csv.DictReader(io.StringIO(out))) if fmt == "csv" else json.loads(out)
+        assert [(r["status"], str(r["tightening_id"] or "")) for r in rows
+                if r["bolt"] == "SF-FL"] == [
+            ("nok", "1"), ("nok", "2"), ("nok", "3"), ("locked", ""), ("released", ""),
+            ("nok", "4"), ("ok", "5")], fmt
+
+
 def test_a_bolt_skipped_by_a_command_is_exported_and_reported_skipped_not_missing(run, db,
                                                                                   tmp_path):
     """Issue 19: a bolt a person skipped (with a comment) showed as missing in the results
