@@ -304,13 +304,18 @@ def _after(rows: list[dict[str, Any]], at: str) -> int:
 def _after_nok(rows: list[dict[str, Any]], at: str, bolt: str) -> int:
     """The place of ``bolt``'s lock made at ``at`` (ISO) among ``rows``: after that bolt's
     last NOK taken by then (the NOK it comes of is taken as the lock is decided and stored a
-    moment after it, so it is not placed by the time it was stored)."""
-    latest = datetime.fromisoformat(at) + LOCK_TAKEN_S
+    moment after it, so it is not placed by the time it was stored).  A NOK whose tool was
+    enabled after the lock (``sent_at``: tightened again after a release, within
+    :data:`LOCK_TAKEN_S`) is none it comes of: the lock went after it, as if the bolt had
+    four NOKs in a row before a lock at three (a quality auditor's trial)."""
+    when = datetime.fromisoformat(at)
+    latest = when + LOCK_TAKEN_S
     place = 0
     for k, r in enumerate(rows):
-        t = r.get("result_at")
+        t, sent = r.get("result_at"), r.get("sent_at")
         if r.get("bolt") == bolt and r.get("status") == "nok" and t is not None \
-                and datetime.fromisoformat(t) <= latest:
+                and datetime.fromisoformat(t) <= latest \
+                and (sent is None or datetime.fromisoformat(sent) <= when):
             place = k + 1
     return place
 
