@@ -586,6 +586,41 @@ def test_a_release_of_a_locked_bolt_is_a_row_of_the_results_export(run, db):
     assert code == 0 and "4 rundowns" in out and "1 release" in out, out
 
 
+def test_a_persons_loosen_command_is_a_row_of_the_results_export(run, db):
+    """A supervisor's loosen command on a bolt tightened OK (an auditor's suspicion): the
+    export read OK, a loosening, OK, with no word of who opened the OK bolt again or why;
+    the shift's hand-over and db report name it (a quality auditor's trial)."""
+    import csv
+    import io
+    import time
+
+    from db.repository import Repository
+    from stationd.boltfile import import_bolts
+
+    with Repository.open(db) as repo:
+        import_bolts(repo, EXAMPLE)
+        repo.start_vehicle("VIN1", "WAGON-B")
+        record(repo, "VIN1", "SF-FL", ok=True, tightening_id=1)
+        time.sleep(0.01)
+        repo.ledger.record_command(at=datetime.now(UTC), user="sue",
+                                   source="cli 127.0.0.1", kind="loosen", vin="VIN1",
+                                   bolt="SF-FL", comment="suspected cross-thread")
+        time.sleep(0.01)
+        record(repo, "VIN1", "SF-FL", ok=True, tightening_id=2, kind="loosening")
+        record(repo, "VIN1", "SF-FL", ok=True, tightening_id=3)
+    for fmt in ("csv", "json"):
+        code, out, _ = run("db", "export", "--results", "--vin", "VIN1", "--format", fmt,
+                           "--db", db)
+        assert code == 0
+        rows = list(csv.DictReader(io.StringIO(out))) if fmt == "csv" else json.loads(out)
+        mine = [r for r in rows if r["bolt"] == "SF-FL"]
+        assert [r["rundown"] or "" for r in mine] == [
+            "tightening", "", "loosening", "tightening"], (fmt, mine)
+        order = mine[1]
+        assert order["ordered_by"] == "sue" and order["comment"] == "suspected cross-thread"
+        assert order["result_id"], "the command's record outside the station"
+
+
 def test_a_nok_tightened_after_a_release_is_exported_after_the_lock_and_release(run, db):
     """A lock after 3 NOKs, released at once, then a 4th NOK within 2 s of the lock (its
     tool enabled after the release): the export put the lock and the release after that 4th
