@@ -225,6 +225,7 @@ def _export_results(args: argparse.Namespace) -> int:
     from stationd.web.results import (
         CONTROLLER_EVENT_STATUS,
         LOCKED_STATUS,
+        LOOSEN_ORDERED_STATUS,
         NOT_RUNDOWNS,
         RELEASED_STATUS,
         UNATTRIBUTED_STATUS,
@@ -268,6 +269,7 @@ def _export_results(args: argparse.Namespace) -> int:
         to_do = [r for r in runs if r["status"] == PENDING]
         also = [counted(rows[status], what) for status, what in (
             (SKIPPED, "skipped"), (LOCKED_STATUS, "lock"), (RELEASED_STATUS, "release"),
+            (LOOSEN_ORDERED_STATUS, "loosen command"),
             (UNREADABLE_STATUS, "unreadable result"),
             (UNATTRIBUTED_STATUS, "unattributed result"),
             (CONTROLLER_EVENT_STATUS, "controller event")) if rows[status]]

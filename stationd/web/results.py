@@ -46,6 +46,9 @@ CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator"
               # a bolt locked after its NOKs, or held, released by a person: a row of its own
               # (status ``released``, the time, their comment) between its rundowns
               "released_by",
+              # a person's loosen command on a bolt (an OK opened again): a row of its own
+              # (status ``loosen ordered``, the time, their comment) before its loosening
+              "ordered_by",
               # the controller's own time of the result, on its clock: when it was made, where
               # ``result_at`` is when the station took it (a result fetched after a link cut
               # is taken at the reconnect, minutes later: a quality trial)
@@ -75,9 +78,13 @@ UNATTRIBUTED_STATUS = "unattributed"
 CONTROLLER_EVENT_STATUS = "controller event"
 #: a row of the NOK policy's lock of a bolt (its NOKs in a row in the comment)
 LOCKED_STATUS = "locked"
+#: a row of a person's loosen command on a bolt: OK, a loosening, OK read as the NOK
+#: policy's own, with no word of who opened an OK bolt again or why (a quality auditor's
+#: trial)
+LOOSEN_ORDERED_STATUS = "loosen ordered"
 #: the rows of an export that are not rundowns of a bolt (their count apart)
 NOT_RUNDOWNS = frozenset({RELEASED_STATUS, UNREADABLE_STATUS, UNATTRIBUTED_STATUS,
-                          CONTROLLER_EVENT_STATUS, LOCKED_STATUS})
+                          CONTROLLER_EVENT_STATUS, LOCKED_STATUS, LOOSEN_ORDERED_STATUS})
 
 
 def _isos(row: dict[str, Any]) -> dict[str, Any]:
@@ -213,7 +220,7 @@ class Results:
         rows, unreadable = self._rows(vin), self.repo.unreadable(vin)
         unattributed, events = self.repo.unattributed(vin), self.repo.controller_events(vin)
         commands = [c for c in self.repo.ledger.commands(vin)
-                    if c.kind in ("release", "lock") and c.bolt]
+                    if c.kind in ("release", "lock", "loosen") and c.bolt]
         ids = self.repo.ledger.result_ids(
             [(RUNDOWN, rid) for rid, _ in rows] + [(UNREADABLE, x["id"]) for x in unreadable]
             + [(UNATTRIBUTED, u["id"]) for u in unattributed]
@@ -264,7 +271,9 @@ class Results:
                 "bolt": c.bolt, "attempt": 0, "images": [], "recorded_at": at,
                 "comment": c.comment, "result_id": ids.get((COMMAND, c.id)), **(
                     {"status": RELEASED_STATUS, "released_by": c.user}
-                    if c.kind == "release" else {"status": LOCKED_STATUS})})
+                    if c.kind == "release" else
+                    {"status": LOOSEN_ORDERED_STATUS, "ordered_by": c.user}
+                    if c.kind == "loosen" else {"status": LOCKED_STATUS})})
         return runs + none + unread + loose + events
 
 
