@@ -43,3 +43,21 @@ def test_a_shift_holds_the_vehicles_at_the_station_in_it_and_its_commands_alone(
     later = shift(repo, until + timedelta(hours=1), until + timedelta(hours=2))
     assert [r.vehicle.vin for r in later.vehicles] == ["REWORKED", "IN"]   # both still open
     assert later.commands == ()
+
+
+def test_a_vehicle_that_left_before_a_shift_and_was_reopened_after_it_is_not_its_own(
+        repo: Repository, bolts_file: Path) -> None:
+    """Yesterday's hand-over, read today: a vehicle that left before that shift and was
+    reopened for rework after it was listed in it (reopened, as if at the station then),
+    and the shift's exit said something was open (a quality auditor's trial)."""
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("LEFT", "SEDAN")
+    repo.close_vehicle("LEFT")
+    since = _now()
+    repo.start_vehicle("IN", "SEDAN")
+    until = _now()
+    _now()
+    repo.reopen_vehicle("LEFT", at=datetime.now(UTC), user="sam", source="cli",
+                        comment="B2 to do")                  # reworked after the shift
+    done = shift(repo, since, until)
+    assert [r.vehicle.vin for r in done.vehicles] == ["IN"]
