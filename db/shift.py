@@ -14,7 +14,7 @@ from sqlalchemy import or_, select
 from sqlalchemy.orm import Session
 
 from db.ledger import CommandEntry
-from db.models import Vehicle
+from db.models import CommandRecord, Vehicle, VehicleClosing
 from db.report import VehicleReport
 from db.repository import Repository
 
@@ -38,16 +38,44 @@ class Shift:
 def shift(repo: Repository, since: datetime, until: datetime) -> Shift:
     """The vehicles and commands of the window [``since``, ``until``)."""
     with Session(repo.engine) as s:
-        vins = list(s.scalars(select(Vehicle.vin).where(
+        rows = list(s.execute(select(Vehicle.id, Vehicle.vin, Vehicle.started_at,
+                                     Vehicle.reopened_at).where(
             Vehicle.started_at < until,
             or_(Vehicle.ended_at.is_(None), Vehicle.ended_at >= since,
                 Vehicle.reopened_at >= since))
             .order_by(Vehicle.started_at, Vehicle.id)))
+        vins = [vin for vid, vin, started, reopened in rows
+                if reopened is None or _open_in(s, vid, vin, started, since, until)]
     held = repo.may_hold(vins)
     reports = tuple(repo.vehicle_report(vin, held=vin in held) for vin in vins)
     commands = tuple(c for c in repo.ledger.commands()
                      if c.kind in HANDOVER_KINDS and since <= c.at < until)
     return Shift(since, until, reports, commands)
+
+
+def _open_in(s: Session, vehicle_id: int, vin: str, started: datetime, since: datetime,
+             until: datetime) -> bool:
+    """Whether a vehicle reopened for rework was open (at the station, or reopened and not
+    closed again) at some time in [``since``, ``until``): from its start and each reopen to
+    the close that followed it.  Its ``ended_at`` and ``reopened_at`` are its last ones: a
+    vehicle that left before a shift and was reopened after it read as open in it (an
+    auditor reading yesterday's hand-over today).  Without a close kept (closed before
+    closes were kept) it counts, as before."""
+    closes = sorted(s.scalars(select(VehicleClosing.closed_at)
+                              .where(VehicleClosing.vehicle_id == vehicle_id)))
+    if not closes:
+        return True
+    opens = sorted([started, *s.scalars(select(CommandRecord.at).where(
+        CommandRecord.vin == vin, CommandRecord.kind == "reopen"))])
+    for k, opened in enumerate(opens):
+        if opened >= until:
+            break
+        closed = next((c for c in closes if c >= opened), None)
+        if k + 1 < len(opens) and (closed is None or closed > opens[k + 1]):
+            closed = opens[k + 1]   # no close kept before the next opening: open until it
+        if closed is None or closed >= since:
+            return True
+    return False
 
 
 def list_status(report: VehicleReport) -> str:
