@@ -46,9 +46,6 @@ CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator"
               # a bolt locked after its NOKs, or held, released by a person: a row of its own
               # (status ``released``, the time, their comment) between its rundowns
               "released_by",
-              # a person's loosen command on a bolt (an OK opened again): a row of its own
-              # (status ``loosen ordered``, the time, their comment) before its loosening
-              "ordered_by",
               # the controller's own time of the result, on its clock: when it was made, where
               # ``result_at`` is when the station took it (a result fetched after a link cut
               # is taken at the reconnect, minutes later: a quality trial)
@@ -56,7 +53,11 @@ CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator"
               # the row's record outside the station: OPC UA's ResultId, the line's (db_id,
               # seq) as "db_id:seq" (an MES joining an export to its results had no key);
               # empty for a bolt's row without a record (missing, pending, skipped)
-              "result_id")
+              "result_id",
+              # a person's loosen command on a bolt (an OK opened again): a row of its own
+              # (status ``loosen ordered``, the time, their comment) before its loosening
+              # (new columns go last: a sheet reading the columns by place keeps working)
+              "ordered_by")
 
 #: how long after a lock the NOK it comes of may have been taken: none for a record stored
 #: by this version (the NOK's result_at is the time the lock was decided at, or earlier);
