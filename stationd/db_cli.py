@@ -609,9 +609,14 @@ def cmd_db_shift(args: argparse.Namespace) -> int:
         for r, status in rows:
             v = r.vehicle
             left = "-" if v.ended_at is None else f"{v.ended_at:%m-%d %H:%M:%S}"
-            undone = [f"{b} NOK" for b in r.nok] + [f"{b} missing" for b in r.missing] + \
-                [f"{b} skipped" for b in r.skipped] + [f"{b} to loosen" for b in r.loosen] + \
-                [f"{b} held" for b, _ in r.held]
+            # a held bolt said once: held beside its status (its last result not known)
+            held = {b for b, _ in r.held}
+            undone = [f"{b} {word}" + (" and held" if b in held else "")
+                      for bolts, word in ((r.nok, "NOK"), (r.missing, "missing"),
+                                          (r.skipped, "skipped"), (r.loosen, "to loosen"))
+                      for b in bolts]
+            listed = {*r.nok, *r.missing, *r.skipped, *r.loosen}
+            undone += [f"{b} held" for b in sorted(held - listed)]
             print(f"  {v.vin:<18} {v.model:<10} in {v.started_at:%m-%d %H:%M:%S}  left "
                   f"{left:<14} {status:<10} {', '.join(undone)}".rstrip())
         if done.commands:

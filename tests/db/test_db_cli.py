@@ -1196,3 +1196,25 @@ def test_a_shift_s_hand_over_names_its_vehicles_those_not_ok_and_who_released_wh
     code, out, err = run("db", "shift", "--since", since.isoformat(), "--until",
                          (since - timedelta(hours=1)).isoformat(), "--db", db)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "is not before" in err
+
+
+def test_a_shift_s_hand_over_names_a_held_bolt_once(run, db):
+    """A quality auditor's trial: a bolt held for a person (its result could not be read)
+    read twice in a vehicle's line, "B2 missing, ..., B2 held"."""
+    from datetime import UTC, datetime, timedelta
+
+    from db.repository import Repository
+    from stationd.boltfile import import_bolts
+
+    with Repository.open(db) as repo:
+        import_bolts(repo, EXAMPLE)
+        bolts = [b.bolt_id for b in repo.bolts_for_model("WAGON-B")]
+        repo.start_vehicle("VIN1", "WAGON-B")
+        repo.record_unreadable(mid=61, revision=7, raw="00230061007 garbled", error="short",
+                               vin="VIN1", bolt=bolts[0], controller_vin=None,
+                               tightening_id=7, pset=1, result_at=None)
+    since = (datetime.now(UTC) - timedelta(hours=1)).isoformat()
+    code, out, _ = run("db", "shift", "--since", since, "--db", db)
+    [line] = [x for x in out.splitlines() if x.strip().startswith("VIN1")]
+    assert code == 1 and f"{bolts[0]} missing and held" in line
+    assert line.count(bolts[0]) == 1, line
