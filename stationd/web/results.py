@@ -220,13 +220,15 @@ class Results:
         still_open = report.vehicle.ended_at is None
         rows, unreadable = self._rows(vin), self.repo.unreadable(vin)
         unattributed, events = self.repo.unattributed(vin), self.repo.controller_events(vin)
-        commands = [c for c in self.repo.ledger.commands(vin)
-                    if c.kind in ("release", "lock", "loosen") and c.bolt]
+        given = self.repo.ledger.commands(vin)
+        commands = [c for c in given if c.kind in ("release", "lock", "loosen") and c.bolt]
+        # a skipped bolt's row is its skip's record: (bolt, when) -> the skip command's id
+        skips = {(c.bolt, c.at): c.id for c in given if c.kind == "skip"}
         ids = self.repo.ledger.result_ids(
             [(RUNDOWN, rid) for rid, _ in rows] + [(UNREADABLE, x["id"]) for x in unreadable]
             + [(UNATTRIBUTED, u["id"]) for u in unattributed]
             + [(CONTROLLER_EVENT, e["id"]) for e in events]
-            + [(COMMAND, c.id) for c in commands])
+            + [(COMMAND, c.id) for c in commands] + [(COMMAND, i) for i in skips.values()])
         # every row with every field (a JSON row of a release had keys the others had not:
         # a quality engineer's trial)
         runs = [{**dict.fromkeys(CSV_FIELDS), **{k: v for k, v in r.items() if k in CSV_FIELDS},
@@ -238,7 +240,8 @@ class Results:
              "status": PENDING if still_open and b.status == MISSING else
              SKIPPED if b.skipped_by else b.status,
              "images": [], "recorded_at": _iso(b.skipped_at),   # a skip's: when it was
-             "skipped_by": b.skipped_by, "comment": b.comment}
+             "skipped_by": b.skipped_by, "comment": b.comment,
+             "result_id": ids.get((COMMAND, skips.get((b.bolt_id, b.skipped_at), 0)))}
             for b in report.bolts if b.status in (MISSING, SKIPPED) or b.skipped_by]
         model = report.vehicle.model
         # a result that could not be read: its bolt's row says so, with the parse error

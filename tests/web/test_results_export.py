@@ -28,12 +28,14 @@ def test_every_row_of_a_record_carries_the_id_the_line_and_opc_ua_give_it(
                                  result_type=1, reason="outside a tool enable")
         repo.ledger.record_command(at=datetime.now(UTC), user="sue", source="cli",
                                    kind="release", vin=VIN, bolt="B3", comment="checked")
+        repo.ledger.record_command(at=datetime.now(UTC), user="sue", source="cli",
+                                   kind="skip", vin=VIN, bolt="B4", comment="no thread")
         feed = {(e["kind"], e["record"]["id"]): e["seq"] for e in repo.ledger.since(0)}
         series = repo.ledger.series()
         rows = Results(repo).export(VIN)
         keyed = [r for r in rows if r["result_id"] is not None]
         assert sorted(r["status"] for r in keyed) == sorted(
-            ["ok", "nok", "ok", "unreadable", "unattributed", "released"])
+            ["ok", "nok", "ok", "unreadable", "unattributed", "released", "skipped"])
         # each the feed's own record, under the id of its series
         assert sorted(r["result_id"] for r in keyed) == sorted(
             f"{series.id_of(seq)}:{seq}" for seq in feed.values())
@@ -41,9 +43,9 @@ def test_every_row_of_a_record_carries_the_id_the_line_and_opc_ua_give_it(
         assert all(i.startswith(f"{old}:") for i in rundowns)
         later = [r["result_id"] for r in keyed if r["status"] not in ("ok", "nok")]
         assert all(i.startswith(f"{new}:") for i in later)
-        # a bolt's row without a record has none; the CSV has the column
-        assert all(r["result_id"] is None for r in rows if r["status"] in ("pending",
-                                                                            "skipped"))
+        # a skipped bolt's row is its skip's; a bolt's row without a record has none
+        assert all(r["result_id"] is None for r in rows if r["status"] == "pending")
+        assert [r["bolt"] for r in rows if r["status"] == "pending"] == ["B3"]
         assert ",controller_at,result_id," in rundowns_csv(rows).splitlines()[0]
     finally:
         repo.close()
