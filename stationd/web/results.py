@@ -223,7 +223,8 @@ class Results:
         given = self.repo.ledger.commands(vin)
         commands = [c for c in given if c.kind in ("release", "lock", "loosen") and c.bolt]
         # a skipped bolt's row is its skip's record: (bolt, when) -> the skip command's id
-        skips = {(c.bolt, c.at): c.id for c in given if c.kind == "skip"}
+        skips: dict[tuple[str | None, datetime | None], int] = {
+            (c.bolt, c.at): c.id for c in given if c.kind == "skip"}
         ids = self.repo.ledger.result_ids(
             [(RUNDOWN, rid) for rid, _ in rows] + [(UNREADABLE, x["id"]) for x in unreadable]
             + [(UNATTRIBUTED, u["id"]) for u in unattributed]
