@@ -134,7 +134,12 @@ def record_entered(repo: Repository, *, vin: str, bolt: str, ok: bool, torque_nm
                 result_at=at, recorded_at=utcnow(), images=[], kind=kind,
                 operator=sel.get("operator"), entered_by=user[:64],
                 entered_comment=comment[:500],
-                unreadable_id=held.id if held is not None else None)
+                unreadable_id=held.id if held is not None else None,
+                # the controller's own time of the result this outcome is (a quality
+                # auditor's trial: the entered row had only when it was typed in)
+                controller_at=held.result_at if held is not None else
+                not_taken.result_at if not_taken is not None and tightening_id is not None
+                else None)
             s.add(rec)
             s.flush()
             append(s, RUNDOWN, rec.id, rec.recorded_at)

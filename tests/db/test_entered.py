@@ -27,7 +27,7 @@ from db.ledger import COMMAND, RUNDOWN
 from db.repository import Repository
 from stationd.web.results import Results, rundowns_csv
 from tests.db.conftest import record
-from tests.db.test_controller_records import _unreadable
+from tests.db.test_controller_records import RAW, _unreadable
 
 
 def _enter(repo, ok: bool = True, bolt: str = "B1", **kw):
@@ -357,3 +357,19 @@ def test_an_outcome_is_entered_for_a_held_bolt_a_table_imported_by_hand_retired(
     _enter(repo)
     assert repo.held_bolts("VIN1") == {}
     assert repo.vehicle_report("VIN1").ok == ["B1"]
+
+
+def test_an_entered_outcome_carries_the_controller_s_time_of_the_result_it_is(sedan):
+    """A quality auditor's trial: an entered outcome's row said only when it was typed in
+    (``result_at``); when the controller made that result was on the unreadable one's row
+    alone.  Its ``controller_at`` is the controller's time of the result it resolves."""
+    repo = sedan
+    version = repo.bolts_for_model("SEDAN")[0].parameters_id
+    repo.note_enable("VIN1", "B1", 1, version, {}, datetime.now(UTC))
+    made = datetime(2026, 12, 1, 6, 30, 5, tzinfo=UTC)
+    repo.record_unreadable(mid=61, revision=7, raw=RAW, error="MID 0061 revision 7: short",
+                           vin="VIN1", bolt="B1", controller_vin=None, tightening_id=12,
+                           pset=1, result_at=made)
+    _enter(repo)
+    [b1] = [r for r in Results(repo).export("VIN1") if r["bolt"] == "B1" and r["status"] == "ok"]
+    assert b1["entered_by"] == "sam" and b1["controller_at"] == made.isoformat()
