@@ -662,6 +662,7 @@ _BECAUSE: dict[Because, Callable[[StateReason], str]] = {
     Because.TEACH_MODE: lambda r: "teach mode",
     Because.TEACHING: lambda r: _teaching(r.model, r.user, r.bolt),
     Because.TEACH_ENDED: lambda r: "teach mode ended; waiting for the lift",
+    Because.TEACH_ENDED_TRACKING: lambda r: "teach mode ended; tracking the wrench",
 }
 
 

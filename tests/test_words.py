@@ -284,6 +284,7 @@ STATE_WORDS = [
     (StateReason(Because.TEACHING, model="M1", user="ed", bolt="B7"),
      "teaching M1 (ed): measuring B7"),
     (StateReason(Because.TEACH_ENDED), "teach mode ended; waiting for the lift"),
+    (StateReason(Because.TEACH_ENDED_TRACKING), "teach mode ended; tracking the wrench"),
 ]
 
 

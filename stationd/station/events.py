@@ -147,6 +147,7 @@ class Because(enum.Enum):
     TEACH_MODE = "teach mode"            # the tool off: teach mode starts
     TEACHING = "teaching"                # (model, user; bolt: the one being measured)
     TEACH_ENDED = "teach ended"          # teach mode off: waiting for the lift
+    TEACH_ENDED_TRACKING = "teach ended, tracking"   # teach mode off, a vehicle at height
 
 
 @dataclass(frozen=True)

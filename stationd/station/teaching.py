@@ -133,7 +133,7 @@ class TeachRules(CoreState):
         if self.vin is not None and self._lift is not None and self._lift.ready:
             # the vehicle at height works on at once (a process engineer's trial: "teach mode
             # ended; waiting for the lift" with the car on the lift, until its next read)
-            self._to(State.TRACKING, StateReason(Because.TRACKING))
+            self._to(State.TRACKING, StateReason(Because.TEACH_ENDED_TRACKING))
         else:
             self._to(State.WAITING_VEHICLE, StateReason(Because.TEACH_ENDED))
         return [Reply(Answer(c.request, cmd, c.issuer))]

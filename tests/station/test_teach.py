@@ -68,7 +68,8 @@ def test_teach_mode_turns_the_cycle_off_and_measures_a_steady_bolt_end():
     acts = _do(d, 5, TeachStop())
     assert _answer(acts).answer.accepted
     # the vehicle at height works on at once, not "waiting for the lift" until its next read
-    assert (d.core.state, d.core.reason) == (State.TRACKING, StateReason(Because.TRACKING))
+    assert (d.core.state, d.core.reason) == (State.TRACKING,
+                                             StateReason(Because.TEACH_ENDED_TRACKING))
 
 
 def test_a_wrench_that_moves_while_measured_is_refused_and_frames_before_do_not_count():
