@@ -61,3 +61,23 @@ def test_a_vehicle_that_left_before_a_shift_and_was_reopened_after_it_is_not_its
                         comment="B2 to do")                  # reworked after the shift
     done = shift(repo, since, until)
     assert [r.vehicle.vin for r in done.vehicles] == ["IN"]
+
+
+def test_a_vehicle_the_station_reopened_as_a_rework_in_a_shift_is_its_own(
+        repo: Repository, bolts_file: Path) -> None:
+    """The station's rework rule reopens a closed VIN back at the lift by itself
+    (``start_vehicle(reopen=True)``), with no reopen command: a vehicle that left before the
+    shift and came back for rework in it, on the lift or gone again, was at the station."""
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("AGAIN", "SEDAN")
+    repo.close_vehicle("AGAIN")
+    repo.start_vehicle("GONE", "SEDAN")
+    repo.close_vehicle("GONE")
+    since = _now()
+    repo.start_vehicle("GONE", "SEDAN", reopen=True)     # back at the lift: a rework
+    record(repo, "GONE", "B1")
+    repo.close_vehicle("GONE")
+    repo.start_vehicle("AGAIN", "SEDAN", reopen=True)    # on the lift now
+    until = _now()
+    done = shift(repo, since, until)
+    assert [r.vehicle.vin for r in done.vehicles] == ["AGAIN", "GONE"]
