@@ -9,12 +9,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from datetime import datetime
+from itertools import pairwise
 
-from sqlalchemy import or_, select
+from sqlalchemy import func, or_, select
 from sqlalchemy.orm import Session
 
 from db.ledger import CommandEntry
-from db.models import CommandRecord, Vehicle, VehicleClosing
+from db.models import CommandRecord, TighteningRecord, Vehicle, VehicleClosing
 from db.report import VehicleReport
 from db.repository import Repository
 
@@ -45,7 +46,8 @@ def shift(repo: Repository, since: datetime, until: datetime) -> Shift:
                 Vehicle.reopened_at >= since))
             .order_by(Vehicle.started_at, Vehicle.id)))
         vins = [vin for vid, vin, started, reopened in rows
-                if reopened is None or _open_in(s, vid, vin, started, since, until)]
+                if reopened is None
+                or _open_in(s, vid, vin, started, reopened, since, until)]
     held = repo.may_hold(vins)
     reports = tuple(repo.vehicle_report(vin, held=vin in held) for vin in vins)
     commands = tuple(c for c in repo.ledger.commands()
@@ -53,20 +55,31 @@ def shift(repo: Repository, since: datetime, until: datetime) -> Shift:
     return Shift(since, until, reports, commands)
 
 
-def _open_in(s: Session, vehicle_id: int, vin: str, started: datetime, since: datetime,
-             until: datetime) -> bool:
+def _open_in(s: Session, vehicle_id: int, vin: str, started: datetime, reopened: datetime,
+             since: datetime, until: datetime) -> bool:
     """Whether a vehicle reopened for rework was open (at the station, or reopened and not
     closed again) at some time in [``since``, ``until``): from its start and each reopen to
     the close that followed it.  Its ``ended_at`` and ``reopened_at`` are its last ones: a
     vehicle that left before a shift and was reopened after it read as open in it (an
     auditor reading yesterday's hand-over today).  Without a close kept (closed before
-    closes were kept) it counts, as before."""
+    closes were kept) it counts, as before.  A reopening the station made itself (its
+    rework rule: a closed VIN back at the lift, ``start_vehicle(reopen=True)``) leaves no
+    reopen command: its last one is ``reopened``, and a close with no opening known since
+    the close before it had one, at the latest at the vehicle's first rundown after that
+    close, else at that close itself (the vehicle left the station then)."""
     closes = sorted(s.scalars(select(VehicleClosing.closed_at)
                               .where(VehicleClosing.vehicle_id == vehicle_id)))
     if not closes:
         return True
-    opens = sorted([started, *s.scalars(select(CommandRecord.at).where(
-        CommandRecord.vin == vin, CommandRecord.kind == "reopen"))])
+    known = {started, reopened, *s.scalars(select(CommandRecord.at).where(
+        CommandRecord.vin == vin, CommandRecord.kind == "reopen"))}
+    for before, close in pairwise(closes):
+        if not any(before < o <= close for o in known):
+            first = s.scalar(select(func.min(TighteningRecord.recorded_at)).where(
+                TighteningRecord.vehicle_id == vehicle_id,
+                TighteningRecord.recorded_at > before, TighteningRecord.recorded_at <= close))
+            known.add(close if first is None else first)
+    opens = sorted(known)
     for k, opened in enumerate(opens):
         if opened >= until:
             break
