@@ -553,3 +553,30 @@ def test_a_vehicle_that_leaves_with_a_bolt_held_says_so_in_its_closing(sedan):
     [closing] = [e["record"] for e in sedan.ledger.since(0) if e["kind"] == CLOSING]
     named = [b for bolts in closing["not_ok"].values() for b in bolts]
     assert "B1" in named, f"the closing says nothing of B1's hold: {closing}"
+
+
+def test_an_export_s_result_ids_are_read_by_an_index_not_a_scan_of_the_whole_feed(repo):
+    """``Ledger.result_ids`` (each row's ``db_id:seq`` in a results export) looks the
+    feed up by kind and record id: without an index on them every vehicle's export read
+    the whole feed (a year of rundowns, curves and commands), once per vehicle of ``db
+    export --results``."""
+    from sqlalchemy import event
+
+    from db.ledger import RUNDOWN
+
+    seen: list[tuple[str, object]] = []
+
+    def note(conn, cursor, statement, parameters, context, executemany):
+        if "FROM feed" in statement:
+            seen.append((statement, parameters))
+
+    event.listen(repo.engine, "before_cursor_execute", note)
+    try:
+        repo.ledger.result_ids([(RUNDOWN, 1), (RUNDOWN, 2)])
+    finally:
+        event.remove(repo.engine, "before_cursor_execute", note)
+    [(statement, parameters)] = seen
+    with repo.engine.connect() as c:
+        plan = [row[-1] for row in c.exec_driver_sql("EXPLAIN QUERY PLAN " + statement,
+                                                      parameters)]
+    assert not any(step.startswith("SCAN feed") for step in plan), plan
