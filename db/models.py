@@ -369,7 +369,10 @@ class FeedEntry(Base):
     ("since N") misses nothing and sees each once, in order."""
 
     __tablename__ = "feed"
-    __table_args__ = ({"sqlite_autoincrement": True},)   # a number is never used twice
+    # a number is never used twice; a record's entry found by its kind and id (an export's
+    # result_id of each row: without it the whole feed was read for each vehicle)
+    __table_args__ = (Index("ix_feed_kind_ref", "kind", "ref"),
+                      {"sqlite_autoincrement": True})
 
     seq: Mapped[int] = mapped_column(primary_key=True)
     kind: Mapped[str] = mapped_column(String(16))     # rundown, unattributed, command
