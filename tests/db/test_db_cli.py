@@ -1218,3 +1218,33 @@ def test_a_shift_s_hand_over_names_a_held_bolt_once(run, db):
     [line] = [x for x in out.splitlines() if x.strip().startswith("VIN1")]
     assert code == 1 and f"{bolts[0]} missing and held" in line
     assert line.count(bolts[0]) == 1, line
+
+
+def test_a_shift_s_hand_over_is_not_all_well_with_a_bolt_held_after_its_ok(run, db):
+    """A bolt held for a person after its OK was recorded (a later result of it that could
+    not be read: a gap's ids, a double hit): its last result is not known, its vehicle's
+    close named it not OK, yet the hand-over read the vehicle complete and exited 0, as if
+    nothing were to hand over."""
+    import json
+    from datetime import UTC, datetime, timedelta
+
+    from db.repository import Repository
+    from stationd.boltfile import import_bolts
+
+    with Repository.open(db) as repo:
+        import_bolts(repo, EXAMPLE)
+        bolts = [b.bolt_id for b in repo.bolts_for_model("WAGON-B")]
+        repo.start_vehicle("VIN1", "WAGON-B")
+        for tid, bolt in enumerate(bolts, 1):
+            record(repo, "VIN1", bolt, tightening_id=tid)
+        repo.record_unreadable(mid=61, revision=7, raw="00230061007 garbled", error="short",
+                               vin="VIN1", bolt=bolts[0], controller_vin=None,
+                               tightening_id=99, pset=1, result_at=None)
+        closed = repo.close_vehicle("VIN1")
+    assert closed.held, "the close names the hold"
+    since = (datetime.now(UTC) - timedelta(hours=1)).isoformat()
+    code, out, _ = run("db", "shift", "--since", since, "--db", db)
+    assert f"{bolts[0]} held" in out
+    assert code == 1, out
+    code, out, _ = run("db", "shift", "--since", since, "--db", db, "--json")
+    assert code == 1 and json.loads(out)["vehicles"][0]["held"], out
