@@ -580,7 +580,7 @@ def cmd_db_shift(args: argparse.Namespace) -> int:
     """A shift's hand-over: every vehicle at the station in the window with its status and
     its bolts not OK, then the commands people gave (who released which lock and why).
     Exit 0 when every vehicle of the window left complete, 1 when one is open or left with
-    bolts not OK (something to hand over)."""
+    bolts not OK, a bolt held among them (something to hand over)."""
     from db.shift import list_status, shift
 
     until = args.until or datetime.now(UTC)
@@ -625,7 +625,10 @@ def cmd_db_shift(args: argparse.Namespace) -> int:
             on = " ".join(x for x in (c.bolt, f"of {c.vin}" if c.vin else None) if x)
             print(f"  {c.kind} {on} by {c.user} ({c.source}) at {c.at:%Y-%m-%d %H:%M:%S} UTC"
                   + (f": {c.comment}" if c.comment else ""))
-    return EXIT_OK if all(status == "complete" for _, status in rows) else EXIT_INCOMPLETE
+    # a bolt held for a person is not OK whatever its status says (its last result not
+    # known; its vehicle's close names it not OK): something to hand over
+    return EXIT_OK if all(status == "complete" and not r.held for r, status in rows) \
+        else EXIT_INCOMPLETE
 
 
 def _num(v: float | None) -> str:
