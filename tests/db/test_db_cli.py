@@ -1248,3 +1248,17 @@ def test_a_shift_s_hand_over_is_not_all_well_with_a_bolt_held_after_its_ok(run, 
     assert code == 1, out
     code, out, _ = run("db", "shift", "--since", since, "--db", db, "--json")
     assert code == 1 and json.loads(out)["vehicles"][0]["held"], out
+
+
+def test_a_shift_given_in_local_time_is_said_in_utc(run, db):
+    """``--since 06:00+02:00`` is 04:00 UTC: the hand-over's first line said "from
+    06:00 ... UTC", two hours off, beside vehicles' times in UTC."""
+    from db.repository import Repository
+    from stationd.boltfile import import_bolts
+
+    with Repository.open(db) as repo:
+        import_bolts(repo, EXAMPLE)
+    code, out, err = run("db", "shift", "--since", "2026-11-30T06:00+02:00", "--until",
+                         "2026-11-30T14:00+02:00", "--db", db)
+    assert code == 0, err
+    assert out.startswith("from 2026-11-30 04:00 to 2026-11-30 12:00 UTC"), out
