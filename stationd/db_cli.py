@@ -583,8 +583,9 @@ def cmd_db_shift(args: argparse.Namespace) -> int:
     bolts not OK, a bolt held among them (something to hand over)."""
     from db.shift import list_status, shift
 
-    until = args.until or datetime.now(UTC)
-    since = args.since or until - timedelta(hours=8)
+    # in UTC, as it is said (a zone given is the same instant: "06:00+02:00" read "06:00 UTC")
+    until = (args.until or datetime.now(UTC)).astimezone(UTC)
+    since = (args.since or until - timedelta(hours=8)).astimezone(UTC)
     if since >= until:
         raise InputError(f"--since {since.isoformat()} is not before --until "
                          f"{until.isoformat()}")
