@@ -211,10 +211,12 @@ class Ledger:
             return add_command(s, at=at, user=user, source=source, kind=kind, vin=vin,
                                bolt=bolt, comment=comment)
 
-    def commands(self, vin: str | None = None) -> list[CommandEntry]:
-        """The accepted commands (on ``vin``, or all), oldest first: the audit trail."""
+    def commands(self, vin: str | None = None, *, since: datetime | None = None,
+                 until: datetime | None = None) -> list[CommandEntry]:
+        """The accepted commands (on ``vin``, or all; given from ``since`` and before
+        ``until``), oldest first: the audit trail."""
         with self._session(False) as s:
-            return commands_in(s, vin)
+            return commands_in(s, vin, since=since, until=until)
 
     def last_of(self, kinds: tuple[str, ...]) -> CommandEntry | None:
         """The last command of one of ``kinds`` (None: none ever)."""
@@ -345,12 +347,17 @@ def _series_in(s: Session) -> Series:
     return Series(meta["db_id"], int(start) if start else 1, meta.get(DB_ID_BEFORE), earlier)
 
 
-def commands_in(s: Session, vin: str | None = None) -> list[CommandEntry]:
+def commands_in(s: Session, vin: str | None = None, *, since: datetime | None = None,
+                until: datetime | None = None) -> list[CommandEntry]:
     """:meth:`Ledger.commands` in the caller's transaction (a vehicle's close reads its
     holds with the commands that ended them, under its own write lock)."""
     q = select(CommandRecord).order_by(CommandRecord.id)
     if vin is not None:
         q = q.where(CommandRecord.vin == vin)
+    if since is not None:
+        q = q.where(CommandRecord.at >= since)
+    if until is not None:
+        q = q.where(CommandRecord.at < until)
     return [_command(r) for r in s.scalars(q)]
 
 

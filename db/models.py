@@ -352,6 +352,9 @@ class CommandRecord(Base):
     its rules: who, from where, when, on what, and why (their comment).  Never edited."""
 
     __tablename__ = "commands"
+    # a vehicle's commands found by its VIN (each report reads them; a year of them was read
+    # whole for every vehicle of an export or a hand-over)
+    __table_args__ = (Index("ix_commands_vin", "vin"),)
 
     id: Mapped[int] = mapped_column(primary_key=True)
     at: Mapped[datetime] = mapped_column(UtcDateTime)

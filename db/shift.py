@@ -50,8 +50,8 @@ def shift(repo: Repository, since: datetime, until: datetime) -> Shift:
                 or _open_in(s, vid, vin, started, reopened, since, until)]
     held = repo.may_hold(vins)
     reports = tuple(repo.vehicle_report(vin, held=vin in held) for vin in vins)
-    commands = tuple(c for c in repo.ledger.commands()
-                     if c.kind in HANDOVER_KINDS and since <= c.at < until)
+    commands = tuple(c for c in repo.ledger.commands(since=since, until=until)
+                     if c.kind in HANDOVER_KINDS)
     return Shift(since, until, reports, commands)
 
 

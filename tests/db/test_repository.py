@@ -580,3 +580,13 @@ def test_an_export_s_result_ids_are_read_by_an_index_not_a_scan_of_the_whole_fee
         plan = [row[-1] for row in c.exec_driver_sql("EXPLAIN QUERY PLAN " + statement,
                                                       parameters)]
     assert not any(step.startswith("SCAN feed") for step in plan), plan
+
+
+def test_a_vehicle_s_commands_are_read_by_an_index_not_a_scan_of_every_command(repo):
+    """Each vehicle's report reads its commands by VIN (skips, releases, loosen commands):
+    without an index every report of an export or a shift's hand-over read every command
+    the station ever took."""
+    with repo.engine.connect() as c:
+        plan = [row[-1] for row in c.exec_driver_sql(
+            "EXPLAIN QUERY PLAN SELECT * FROM commands WHERE vin = ?", ("VIN1",))]
+    assert not any(step.startswith("SCAN commands") for step in plan), plan
