@@ -254,8 +254,11 @@ def _export_results(args: argparse.Namespace) -> int:
             v["vin"] for v in listed if any(
                 v[key] is not None and _aware(datetime.fromisoformat(v[key])) >= args.since
                 for key in ("started_at", "reopened_at", "ended_at"))}
-        runs = [r for r in runs if r in kept or (r["status"] in (MISSING, PENDING, SKIPPED)
-                                                 and r["vin"] in vins_kept)]
+        # by identity: ``r in kept`` compared rows by value, each against all (quadratic:
+        # hours for a year's export)
+        kept_ids = {id(r) for r in kept}
+        runs = [r for r in runs if id(r) in kept_ids or (
+            r["status"] in (MISSING, PENDING, SKIPPED) and r["vin"] in vins_kept)]
     text = rundowns_csv(runs) if fmt == "csv" else strict_json(runs) + "\n"
     if args.out is None:
         sys.stdout.write(text)
