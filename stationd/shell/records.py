@@ -200,15 +200,10 @@ class Records:
         table (a changed bolt tightened to its new parameters, an added one more to do)
         while the journal said only "1 added, 1 changed" (a process engineer's trial); a
         removal names the vehicle at the station (:meth:`_removed_open`)."""
-        try:
-            vin = repo.at_station()
-            report = None if vin is None else repo.vehicle_report(vin)
-        except STATION_FAULTS as exc:   # a word the more, never the database's opening
-            self.log.warning("the vehicle at the station not read: %s", one_line(exc))
+        report = self._at_station(repo)
+        if report is None:
             return
-        if vin is None or report is None:
-            return
-        model = report.vehicle.model
+        vin, model = report.vehicle.vin, report.vehicle.model
         open_ = {b.bolt_id for b in report.bolts if b.status not in (OK, SKIPPED)}
         # "MODEL/BOLT", a model's name may hold a "/" itself (the name rule): its own prefix
         prefix = f"{model}/"
@@ -227,15 +222,10 @@ class Records:
         no more (its bolts are the table's) while the vehicle's report keeps their NOKs and
         the lock with no release (an engineer's trial: a locked bolt removed, its lock gone
         from the screen without a word, the report still saying it)."""
-        try:
-            vin = repo.at_station()
-            report = None if vin is None else repo.vehicle_report(vin, held=True)
-        except STATION_FAULTS as exc:   # a word the more, never the database's opening
-            self.log.warning("the vehicle at the station not read: %s", one_line(exc))
+        report = self._at_station(repo)
+        if report is None:
             return
-        if vin is None or report is None:
-            return
-        model = report.vehicle.model
+        vin, model = report.vehicle.vin, report.vehicle.model
         held = dict(report.held)
         open_ = [b.bolt_id + (" held" if b.bolt_id in held else " ending NOK"
                               if b.status == NOK else " to be loosened")
@@ -247,6 +237,17 @@ class Records:
                              "counts it, the station no more (put a bolt back to work it, "
                              "or skip it with a reason before removing it)", vin,
                              ", ".join(open_))
+
+    def _at_station(self, repo: Repository) -> VehicleReport | None:
+        """The report of the vehicle at the station, with its holds, for a reload's words
+        on it; None without one, or when it cannot be read (said: a word the more, never the
+        database's opening)."""
+        try:
+            vin = repo.at_station()
+            return None if vin is None else repo.vehicle_report(vin, held=True)
+        except STATION_FAULTS as exc:
+            self.log.warning("the vehicle at the station not read: %s", one_line(exc))
+            return None
 
     def _repo(self) -> Repository:
         if self.repo is None:
