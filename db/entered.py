@@ -25,7 +25,7 @@ from sqlalchemy.exc import SQLAlchemyError
 
 from db.engine import write_session
 from db.errors import DatabaseError, DataError, NotFoundError
-from db.importer import current_version, parameters_of
+from db.importer import current_version, parameters_of, sent_bolt
 from db.kinds import HELD_WITHOUT_RESULT, LOOSENING, NOT_TAKEN, RUNDOWN_KINDS, TIGHTENING
 from db.ledger import RUNDOWN, add_command, append
 from db.models import (
@@ -70,16 +70,11 @@ def record_entered(repo: Repository, *, vin: str, bolt: str, ok: bool, torque_nm
             b = s.scalar(select(Bolt).where(Bolt.model_id == v.model_id, Bolt.code == bolt,
                                             Bolt.removed_at.is_(None)))
             if b is None:
-                # retired since the station enabled the tool for it (a table imported by
-                # hand under the running station): its outcome is still its own, as a
-                # measured result is (:meth:`Repository.record_tightening_once`)
-                sent_id = s.scalar(select(ToolEnable.parameters_id).where(
+                # retired since the station enabled the tool for it: its outcome is still
+                # its own, as a measured result is
+                b = sent_bolt(s, s.scalar(select(ToolEnable.parameters_id).where(
                     ToolEnable.vin == vin, ToolEnable.bolt == bolt)
-                    .order_by(ToolEnable.id.desc()).limit(1))
-                sent_for = None if sent_id is None else s.get(ProcessParameters, sent_id)
-                b = None if sent_for is None else s.scalar(select(Bolt).where(
-                    Bolt.id == sent_for.bolt_id, Bolt.model_id == v.model_id,
-                    Bolt.code == bolt))
+                    .order_by(ToolEnable.id.desc()).limit(1)), v.model_id, bolt)
             if b is None:
                 raise NotFoundError(f"bolt {bolt!r} is not a bolt of model {v.model.name}")
             add_command(s, at=at, user=user, source=source, kind=ENTER_OUTCOME, vin=vin,

@@ -299,6 +299,16 @@ def current_version(bolt: Bolt) -> ProcessParameters:
     return max(bolt.versions, key=lambda v: v.version)
 
 
+def sent_bolt(s: Session, parameters_id: int | None, model_id: int, code: str) -> Bolt | None:
+    """The bolt ``code`` of model ``model_id`` whose parameter version ``parameters_id`` is,
+    retired or not (None: no such version, or another bolt's).  Why: a table imported by
+    hand under the running station retires a bolt it still works from the table it loaded;
+    the result, or the outcome entered, of the parameters sent for it is still its own."""
+    sent_for = None if parameters_id is None else s.get(ProcessParameters, parameters_id)
+    return None if sent_for is None else s.scalar(select(Bolt).where(
+        Bolt.id == sent_for.bolt_id, Bolt.model_id == model_id, Bolt.code == code))
+
+
 def bolt_spec(row: Bolt) -> BoltSpec:
     return BoltSpec(row.code, row.name, (row.x_mm, row.y_mm, row.z_mm),
                     parameters_of(current_version(row)), row.tighten_order, row.batch)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import func, select
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from db.counting import counted
@@ -209,13 +209,12 @@ def _iso(t: datetime | None) -> str | None:
     return None if t is None else t.isoformat()
 
 
-def _left_without_rundown(s: Session, v: Vehicle) -> tuple[frozenset[str], bool] | None:
+def _left_without_rundown(v: Vehicle, last: VehicleClosing | None
+                          ) -> tuple[frozenset[str], bool] | None:
     """The bolts the vehicle left without a rundown (missing, skipped, held: named by its
-    last close), and whether that close is its last word (closed, not reopened since); None
-    for a vehicle never closed, or closed before closes were kept (its model's table as it
-    is now)."""
-    last = s.scalar(select(VehicleClosing).where(VehicleClosing.vehicle_id == v.id)
-                    .order_by(VehicleClosing.id.desc()).limit(1))
+    ``last`` close), and whether that close is its last word (closed, not reopened since);
+    None for a vehicle never closed, or closed before closes were kept (its model's table as
+    it is now)."""
     if last is None:
         return None
     left = frozenset(bolt for bolts in last.not_ok.values() for bolt in bolts)
@@ -267,7 +266,9 @@ def build_report(s: Session, v: Vehicle) -> VehicleReport:
             .order_by(CommandRecord.id)):
         if bolt is not None:
             skips[bolt] = (user, comment, at)
-    left = _left_without_rundown(s, v)
+    closes = list(s.scalars(select(VehicleClosing).where(VehicleClosing.vehicle_id == v.id)
+                            .order_by(VehicleClosing.id)))
+    left = _left_without_rundown(v, closes[-1] if closes else None)
     results = []
     for b in bolts:
         recs = by_bolt.get(b.id, [])
@@ -296,8 +297,7 @@ def build_report(s: Session, v: Vehicle) -> VehicleReport:
     here = s.get(Meta, AT_STATION)
     waiting = v.ended_at is None and v.reopened_at is not None and (
         here is None or here.value != v.vin)
-    first = s.scalar(select(func.min(VehicleClosing.closed_at))
-                     .where(VehicleClosing.vehicle_id == v.id))
+    first = min((c.closed_at for c in closes), default=None)
     info = VehicleInfo(v.vin, v.model.name, v.started_at, v.ended_at, v.reopened_at, waiting,
                        first)
     tightenings = [rec for rec, _ in records if (rec.kind or TIGHTENING) == TIGHTENING]

@@ -27,7 +27,14 @@ from db.bolts import BoltTable, Parameters, dump_bolts
 from db.engine import DEFAULT_URL, make_engine, write_session
 from db.errors import DatabaseError, DataError, NotFoundError, VehicleClosedError
 from db.holds import ENDS_A_HOLD, open_holds, released_holds
-from db.importer import ImportReport, current_version, import_table, parameters_of, read_table
+from db.importer import (
+    ImportReport,
+    current_version,
+    import_table,
+    parameters_of,
+    read_table,
+    sent_bolt,
+)
 from db.kinds import (
     HELD_WITHOUT_RESULT,
     LOOSENING,
@@ -392,13 +399,8 @@ class Repository:
                 raise DataError(f"vehicle {vin} is closed: a tightening cannot be recorded")
             b = s.scalar(select(Bolt).where(Bolt.model_id == v.model_id, Bolt.code == bolt,
                                             Bolt.removed_at.is_(None)))
-            if b is None and parameters_id is not None:
-                # the bolt the parameters were sent for, retired since (a table imported
-                # under the running station): its result is still its own
-                sent_for = s.get(ProcessParameters, parameters_id)
-                b = None if sent_for is None else s.scalar(select(Bolt).where(
-                    Bolt.id == sent_for.bolt_id, Bolt.model_id == v.model_id,
-                    Bolt.code == bolt))
+            if b is None:   # the bolt the parameters were sent for, retired since
+                b = sent_bolt(s, parameters_id, v.model_id, bolt)
             if b is None:
                 raise NotFoundError(f"bolt {bolt!r} is not a bolt of model {v.model.name}")
             version = current_version(b) if parameters_id is None \
