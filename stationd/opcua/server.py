@@ -480,9 +480,9 @@ class OpcUaServer:
         kept = list(self._results.values())
         self._results.clear()
         for result in kept:
-            seq = int(result.ResultMetaData.ResultId.rpartition(":")[2])
-            result.ResultMetaData.ResultId = self._id(seq)
-            self._results[result.ResultMetaData.ResultId] = result
+            meta = result.ResultMetaData
+            meta.ResultId = self._id(meta.SequenceNumber)
+            self._results[meta.ResultId] = result
 
     def _take(self, entry: dict[str, Any], now: float, *, hold: bool) -> None:
         """A feed entry: a rundown kept for the methods (and held for its event), a curve

@@ -188,21 +188,20 @@ class Records:
                                  "vehicle at the station too", self.cfg.bolts_path,
                                  counted(len(r.removed), "bolt"),
                                  ", ".join(r.removed[:5]), ", ..." if len(r.removed) > 5 else "")
-                self._removed_open(self.repo, r.removed)
-            if r.changed or r.added:
-                self._changed_open(self.repo, r.changed, r.added)
+            # the vehicle at the station read once for both words on it
+            here = self._at_station(self.repo) if r.removed or r.changed or r.added else None
+            if here is not None:
+                self._removed_open(here, r.removed)
+                self._changed_open(here, r.changed, r.added)
         return self.repo
 
-    def _changed_open(self, repo: Repository, changed: Sequence[str],
+    def _changed_open(self, report: VehicleReport, changed: Sequence[str],
                       added: Sequence[str]) -> None:
         """Bolts the table changed or added that the vehicle at the station has not done:
         said, naming the vehicle.  Why: a reload mid-vehicle goes on with it under the new
         table (a changed bolt tightened to its new parameters, an added one more to do)
         while the journal said only "1 added, 1 changed" (a process engineer's trial); a
         removal names the vehicle at the station (:meth:`_removed_open`)."""
-        report = self._at_station(repo)
-        if report is None:
-            return
         vin, model = report.vehicle.vin, report.vehicle.model
         open_ = {b.bolt_id for b in report.bolts if b.status not in (OK, SKIPPED)}
         # "MODEL/BOLT", a model's name may hold a "/" itself (the name rule): its own prefix
@@ -216,15 +215,12 @@ class Records:
                              vin, model, ", ".join(news[:10]) + (
                                  f" and {len(news) - 10} more" if len(news) > 10 else ""))
 
-    def _removed_open(self, repo: Repository, removed: Sequence[str]) -> None:
+    def _removed_open(self, report: VehicleReport, removed: Sequence[str]) -> None:
         """Bolts the table removed that the vehicle at the station ends NOK (or locked, or
         to be loosened) or holds: said, each with what stays.  Why: the station counts them
         no more (its bolts are the table's) while the vehicle's report keeps their NOKs and
         the lock with no release (an engineer's trial: a locked bolt removed, its lock gone
         from the screen without a word, the report still saying it)."""
-        report = self._at_station(repo)
-        if report is None:
-            return
         vin, model = report.vehicle.vin, report.vehicle.model
         held = dict(report.held)
         open_ = [b.bolt_id + (" held" if b.bolt_id in held else " ending NOK"
