@@ -296,29 +296,7 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
     policy = demo_policy(cfg, psets)
     if policy is not None:
         cfg = replace(cfg, nok=policy)
-    whose = "the demo's, the station file has none" if policy is not None else cfg.path
-    print(f"NOK policy ({whose}): {policy_words(cfg.nok)}", file=out, flush=True)
-    if line_url is not None:
-        kind = "a throw-away PostgreSQL for this run" if throwaway else "--line-db"
-        print(f"line database: {shown(line_url)} ({kind}); {counted(n_stations, 'station')}, "
-              f"{', '.join(station_id(k) for k in range(1, n_stations + 1))}"
-              + (f" (each tightens its own bolts of the same vehicle: the bolts in view split "
-                 f"into {n_stations} runs of the bolt table's order; after {station_id(1)}, "
-                 f"each tightens at most {min(cycles, EXTRA_CYCLES)} of its bolts, one "
-                 "station after another)" if n_stations > 1 else ""),
-              file=out, flush=True)
-        problem = None if throwaway else line_problem(line_url)
-        if problem is not None:
-            print(f"line database: {problem} at the start; the demo runs and its forwarder "
-                  "keeps trying, but records it has not handed over by the end are not in the "
-                  "line database (verdict FAIL; the demo keeps its station database with "
-                  "them): start the line database, or give another --line-db", file=out,
-                  flush=True)
-    # where its results are: not the station file's database (db report --config finds a
-    # running demo's by the station file)
-    print(f"records: {tmp / '1' / DATABASE} (the demo's own temporary database, removed when "
-          f"it ends{KEEP_WORDS if line_url is not None else ''}; meanwhile stationd db report "
-          f"VIN --config {cfg.path} reads it)", file=out, flush=True)
+    _say_start(cfg, policy is not None, line_url, throwaway, n_stations, cycles, tmp, out)
     station = _station(cfg, psets)
     if n_stations > 1:     # one output for the line's stations: each line says whose it is
         station.effects.label(station_id(1))
@@ -420,13 +398,60 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
     finally:
         station.close()
     cycles = int(truth.get("cycles", cycles))
+    summary = _verdict(station, report, cycles, truth, instead, extra, line, line_url, tmp,
+                       said)
+    if args.json:
+        if said:
+            print(kept_words(said), file=out, flush=True)
+        sys.stdout.write(strict_json(summary) + "\n")
+    else:
+        _print_summary(summary, extra, cycles, instead, said)
+    interrupted = truth.get("interrupted")
+    if interrupted is not None:   # as a command stopped by the signal: 130 (143)
+        return 128 + signal.Signals[interrupted["signal"]].value
+    return 0 if summary["verdict"].startswith("PASS") else 1
+
+
+def _say_start(cfg: StationConfig, demo_policy: bool, line_url: str | None, throwaway: bool,
+               n_stations: int, cycles: int, tmp: Path, out: Any) -> None:
+    """What the run says before it starts: its NOK policy, its line database and where its
+    records are."""
+    whose = "the demo's, the station file has none" if demo_policy else cfg.path
+    print(f"NOK policy ({whose}): {policy_words(cfg.nok)}", file=out, flush=True)
+    if line_url is not None:
+        kind = "a throw-away PostgreSQL for this run" if throwaway else "--line-db"
+        print(f"line database: {shown(line_url)} ({kind}); {counted(n_stations, 'station')}, "
+              f"{', '.join(station_id(k) for k in range(1, n_stations + 1))}"
+              + (f" (each tightens its own bolts of the same vehicle: the bolts in view split "
+                 f"into {n_stations} runs of the bolt table's order; after {station_id(1)}, "
+                 f"each tightens at most {min(cycles, EXTRA_CYCLES)} of its bolts, one "
+                 "station after another)" if n_stations > 1 else ""),
+              file=out, flush=True)
+        problem = None if throwaway else line_problem(line_url)
+        if problem is not None:
+            print(f"line database: {problem} at the start; the demo runs and its forwarder "
+                  "keeps trying, but records it has not handed over by the end are not in the "
+                  "line database (verdict FAIL; the demo keeps its station database with "
+                  "them): start the line database, or give another --line-db", file=out,
+                  flush=True)
+    # where its results are: not the station file's database (db report --config finds a
+    # running demo's by the station file)
+    print(f"records: {tmp / '1' / DATABASE} (the demo's own temporary database, removed when "
+          f"it ends{KEEP_WORDS if line_url is not None else ''}; meanwhile stationd db report "
+          f"VIN --config {cfg.path} reads it)", file=out, flush=True)
+
+
+def _verdict(station: Station, report: list[dict[str, Any]], cycles: int, truth: dict[str, Any],
+             instead: list[str], extra: list[dict[str, Any]], line: dict[str, Any],
+             line_url: str | None, tmp: Path, said: dict[str, str]) -> dict[str, Any]:
+    """The run's summary and its verdict, from each part's reasons (never read back from a
+    verdict's text)."""
     summary = _summary(station, report, cycles, truth["wrong"], truth["locked_sends"])
     summary["simulated_instead"] = instead
     summary["station_id"] = station_id(1)
     summary["vin"] = truth["vin"]
     summary["share"] = truth.get("share", [])
     summary["opcua"] = truth.get("opcua")
-    # the line's verdict from each part's reasons (never read back from a verdict's text)
     problems: list[str] = summary.pop("problems")
     interrupted = truth.get("interrupted")
     if interrupted is not None:   # Ctrl-C (SIGTERM) ended the people's wait: said first
@@ -453,57 +478,55 @@ def _run(args: argparse.Namespace, cfg: StationConfig, bolts_path: Path, tmp: Pa
         summary["verdict"] = "FAIL: " + "; ".join(problems)
     elif extra:
         summary["verdict"] = _line_verdict(summary, extra)
-    if args.json:
-        if said:
-            print(kept_words(said), file=out, flush=True)
-        sys.stdout.write(strict_json(summary) + "\n")
-    else:
-        me = f"{station_id(1)} " if extra else ""
-        print(f"{me}summary: {summary['ok']}/{cycles} bolts OK{_left_words(summary)}, "
-              "parameters sent for a wrong bolt: "
-              f"{summary['wrong_bolt_sends']}, XY error mean "
-              f"{_ms(summary['xy_error_mm']['mean'], '.3f')} mm max "
-              f"{_ms(summary['xy_error_mm']['max'], '.3f')} mm, "
-              f"{latency_words(summary['latency_ms'])}")
-        n = summary["nok_policy"]
-        whose = f" ({station_id(1)})" if extra else ""
-        print(f"NOK policy{whose}: {nok_words(n)}")
-        if summary.get("operators"):
-            print(me + operator_words(summary["operators"]))
-        for e in extra:
-            print(f"{e['station_id']}: {e['ok']}/{e['bolts']} bolts OK{_left_words(e)}, "
-                  f"parameters sent for a wrong bolt: {e['wrong_bolt_sends']}, "
-                  f"{counted(e['recorded'], 'result')} recorded; NOK policy: "
-                  f"{nok_words(e['nok_policy'])}"
-                  + (f"; {operator_words(e['operators'])}" if e.get("operators") else ""))
-        if extra:
-            every = summary["all_stations"]
-            print(f"NOK policy, all {len(every['stations'])} stations: "
-                  f"{nok_words(every['nok_policy'])}")
-            print(f"all {len(every['stations'])} stations: {every['ok']}/{every['bolts']} "
-                  f"bolts OK{_left_words(every)}, "
-                  f"{counted(every['nok_policy']['nok'], 'NOK result')}"
-                  + (f"; {operator_words(every['operators'])}" if every["operators"] else ""))
-        for v in summary.get("vehicles_closed") or ():
-            if v["missing"]:   # the first station's (each station closes it on its own)
-                print(f"{me}vehicle {v['vin']} closed with {counted(v['missing'], 'bolt')} "
-                      f"not worked {'at this station ' if extra else ''}(the demo works "
-                      f"{cycles} of its bolts"
-                      # (the others fewer: "3 at each station" read wrong beside DEMO-2's 2,
-                      # a newcomer's trial)
-                      + (f" here, at most {min(cycles, EXTRA_CYCLES)} at each other station"
-                         if extra else "") + ", then lowers the lift): its report lists them "
-                      "missing; the verdict is the station's part")
-        if instead:
-            devices = ", ".join(d.rsplit(" ", 1)[0] for d in instead)
-            print(f"simulated, not the station file's devices: {devices} (the records went "
-                  "to a temporary database)")
-        if said:
-            print(kept_words(said))
-        print(summary["verdict"])
-    if interrupted is not None:   # as a command stopped by the signal: 130 (143)
-        return 128 + signal.Signals[interrupted["signal"]].value
-    return 0 if summary["verdict"].startswith("PASS") else 1
+    return summary
+
+
+def _print_summary(summary: dict[str, Any], extra: list[dict[str, Any]], cycles: int,
+                   instead: list[str], said: dict[str, str]) -> None:
+    """The summary in words (``--json``: the summary's JSON instead)."""
+    me = f"{station_id(1)} " if extra else ""
+    print(f"{me}summary: {summary['ok']}/{cycles} bolts OK{_left_words(summary)}, "
+          "parameters sent for a wrong bolt: "
+          f"{summary['wrong_bolt_sends']}, XY error mean "
+          f"{_ms(summary['xy_error_mm']['mean'], '.3f')} mm max "
+          f"{_ms(summary['xy_error_mm']['max'], '.3f')} mm, "
+          f"{latency_words(summary['latency_ms'])}")
+    n = summary["nok_policy"]
+    whose = f" ({station_id(1)})" if extra else ""
+    print(f"NOK policy{whose}: {nok_words(n)}")
+    if summary.get("operators"):
+        print(me + operator_words(summary["operators"]))
+    for e in extra:
+        print(f"{e['station_id']}: {e['ok']}/{e['bolts']} bolts OK{_left_words(e)}, "
+              f"parameters sent for a wrong bolt: {e['wrong_bolt_sends']}, "
+              f"{counted(e['recorded'], 'result')} recorded; NOK policy: "
+              f"{nok_words(e['nok_policy'])}"
+              + (f"; {operator_words(e['operators'])}" if e.get("operators") else ""))
+    if extra:
+        every = summary["all_stations"]
+        print(f"NOK policy, all {len(every['stations'])} stations: "
+              f"{nok_words(every['nok_policy'])}")
+        print(f"all {len(every['stations'])} stations: {every['ok']}/{every['bolts']} "
+              f"bolts OK{_left_words(every)}, "
+              f"{counted(every['nok_policy']['nok'], 'NOK result')}"
+              + (f"; {operator_words(every['operators'])}" if every["operators"] else ""))
+    for v in summary.get("vehicles_closed") or ():
+        if v["missing"]:   # the first station's (each station closes it on its own)
+            print(f"{me}vehicle {v['vin']} closed with {counted(v['missing'], 'bolt')} "
+                  f"not worked {'at this station ' if extra else ''}(the demo works "
+                  f"{cycles} of its bolts"
+                  # (the others fewer: "3 at each station" read wrong beside DEMO-2's 2,
+                  # a newcomer's trial)
+                  + (f" here, at most {min(cycles, EXTRA_CYCLES)} at each other station"
+                     if extra else "") + ", then lowers the lift): its report lists them "
+                  "missing; the verdict is the station's part")
+    if instead:
+        devices = ", ".join(d.rsplit(" ", 1)[0] for d in instead)
+        print(f"simulated, not the station file's devices: {devices} (the records went "
+              "to a temporary database)")
+    if said:
+        print(kept_words(said))
+    print(summary["verdict"])
 
 
 def _supervisor(args: argparse.Namespace, cfg: StationConfig) -> Issuer | None:
