@@ -95,6 +95,7 @@ class SimRegisterController(SimServer):
         self._queue: deque[SimResult] = deque()
         self._tid = 0
         self._ack_delay, self._hung, self._silent, self._mute = 0.0, False, False, False
+        self._garble = False             # the next result published with a torque status 3
         self._fault: tuple[Fault, int, int] | None = None
         self._serving = (False, False)               # TCP, RTU before power_off()
 
@@ -115,9 +116,18 @@ class SimRegisterController(SimServer):
             if self.active is None or not self.map.bit("tool_enabled", self._regs):
                 return None
             result = replace(self._tighten(self.active), result_type=result_type)
+            if self._garble:
+                self._garble = False
+                result = replace(result, torque_status=3)
             self._queue.append(result)
             self._refresh()
             return result
+
+    def garble_next_result(self) -> None:
+        """The next trigger pull's result is published with a torque status 3 in its status
+        register, a code the layout does not define (a result the station cannot read)."""
+        with self._lock:
+            self._garble = True
 
     def refuse_pset(self, pset: int, code: int) -> None:
         with self._lock:

@@ -16,7 +16,13 @@ import pytest
 from drivers.errors import ConnectError, DeviceError, RefusedError, UrlError
 from drivers.identity import DeviceIdentity
 from drivers.wrench import open_wrench
-from drivers.wrench.base import LinkStatus, ResultType, Status, TighteningResult
+from drivers.wrench.base import (
+    LinkStatus,
+    ResultType,
+    Status,
+    TighteningResult,
+    UnreadableResult,
+)
 from drivers.wrench.modbus_map import MapError, Number, WrenchRegisterMap
 from drivers.wrench.modbus_sim import SimModbusWrench, SimParameters, SimRegisterController
 
@@ -268,3 +274,29 @@ def test_a_map_with_a_result_type_register_carries_the_type():
         c.pull_trigger(3)                    # the controller knows; its map does not say
         r = w.wait_result(1.0)
     assert isinstance(r, TighteningResult) and r.result_type_code is None
+
+
+def test_a_result_that_does_not_read_is_handed_out_unreadable_and_kept_until_stored(ctl):
+    """A result whose status register holds a code the layout does not define (a torque
+    status 3) is the controller's record of a rundown all the same: handed out as an
+    :class:`UnreadableResult` with its registers, tightening id and pset (the station stores
+    it and holds its bolt), and the controller is told it may forget it only once it is
+    stored, as for any result.  Before: a ProtocolError out of ``wait_result`` (the wrench's
+    keeper took it for a fault) with the result acknowledged at once: lost."""
+    m = ctl.map
+    with connect(ctl, "tcp") as w:
+        w.select_pset(1)
+        w.enable_tool()
+        ctl.garble_next_result()
+        t = ctl.pull_trigger()
+        r = w.wait_result(1.0, acknowledge=False)
+        assert t is not None and isinstance(r, UnreadableResult), r
+        assert (r.tightening_id, r.pset, r.fetched) == (t.tightening_id, 1, False)
+        assert "status 3" in r.error and f"{m.result_id.address + 1}=" in r.raw
+        assert m.integer("result_ack", ctl.registers()) == 0     # not forgotten yet
+        second = ctl.pull_trigger()          # queued by the controller, not published yet
+        assert second is not None and w.wait_result(0.3) is None
+        w.acknowledge_result(r)
+        assert m.integer("result_ack", ctl.registers()) == 1
+        r2 = w.wait_result(1.0)
+        assert isinstance(r2, TighteningResult) and r2.tightening_id == second.tightening_id
