@@ -23,6 +23,8 @@ station.yaml), so "acknowledged" has to be built from them.  The handshake:
    counter back to ``result_ack``, so none is overwritten unseen).  The station's poller
    reads the status block every ``poll`` seconds, queues a new result and acknowledges it.
    After a lost ack write the same result is seen again: (counter, tightening id) dedupes.
+   A result whose status register does not read is queued all the same, as an
+   ``UnreadableResult`` with its registers (and acknowledged as one, once stored).
    Registers carry no VIN, limits or controller clock (see ``WrenchRegisterMap.result``).
 4. **VIN.**  One multiple-register write; the write's response is the acknowledgement.
 
@@ -64,7 +66,7 @@ from drivers.modbus_link import (
     parse_modbus_url,
 )
 from drivers.url import DeviceUrl
-from drivers.wrench.base import SupervisedWrench, check_positive
+from drivers.wrench.base import Received, SupervisedWrench, check_positive
 from drivers.wrench.modbus_map import ACK_CODES, WrenchRegisterMap, next_sequence, spans
 
 log = logging.getLogger(__name__)
@@ -238,12 +240,16 @@ class ModbusWrench(SupervisedWrench):
             if key != self._delivered:
                 self._delivered = key
                 try:
-                    self._queue_result(m.result(regs, datetime.now()), counter)
-                    return    # acknowledged when the station has stored it
+                    result: Received = m.result(regs, datetime.now())
                 except ValueError as e:
-                    self._results.append(ProtocolError(f"unreadable tightening result, "
-                                                       f"acknowledged anyway: {e}"))
-                    self._cond.notify_all()
+                    # the controller's record of a rundown all the same: kept whole, to be
+                    # stored and its bolt held, never acknowledged before that (it was
+                    # raised as a fault and acknowledged at once: lost)
+                    result = m.unreadable(regs, str(e))
+                    log.warning("%s: result %d does not read (%s); kept with its registers "
+                                "for the station", self.device, counter, e)
+                self._queue_result(result, counter)
+                return    # acknowledged when the station has stored it
             elif counter not in self._ack_wanted:
                 return        # queued or handed out, not yet stored
             # else: taken, and its acknowledgement failed with the link: write it again

@@ -40,7 +40,7 @@ from datetime import datetime
 
 from drivers import registers
 from drivers.registers import Bit, MapError, Number, Text, spans
-from drivers.wrench.base import ResultType, Status, TighteningResult
+from drivers.wrench.base import ResultType, Status, TighteningResult, UnreadableResult
 
 __all__ = ["ACK_CODES", "Bit", "MapError", "Number", "Text", "WrenchRegisterMap", "spans"]
 
@@ -222,6 +222,15 @@ class WrenchRegisterMap:
             torque_min_nm=0.0, torque_max_nm=0.0, torque_target_nm=0.0, angle_min_deg=0.0,
             angle_max_deg=0.0, angle_target_deg=0.0, result_type=kind, result_type_code=code,
             raw=" ".join(f"{a}={regs[a]}" for a in sorted(regs)), controller_clock=False)
+
+    def unreadable(self, regs: Mapping[int, int], error: str) -> UnreadableResult:
+        """The result registers that do not read (:meth:`result`'s ValueError, ``error``),
+        kept whole: the registers as text, with its tightening id and pset (a register
+        holds each on its own, so they read whatever the status says)."""
+        return UnreadableResult(
+            raw=" ".join(f"{a}={regs[a]}" for a in sorted(regs)), mid=0, revision=0,
+            error=f"result status: {error}", tightening_id=self.integer("result_id", regs),
+            pset=self.integer("result_pset", regs))
 
     def encode_vin(self, vin: str) -> dict[int, int]:
         """The VIN registers, NUL-padded; ValueError if there are none or it does not fit."""
