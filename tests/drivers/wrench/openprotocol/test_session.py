@@ -140,6 +140,31 @@ def test_fetch_result_steps_down_once_and_remembers(tmp_path):
         assert [r.revision for r in sim.received(64)] == [7, 6, 5, 5]
 
 
+def test_an_untyped_old_result_of_a_controller_whose_pushes_are_typed_is_held(tmp_path):
+    """A controller that pushes its results at revision 7 (each with its type) but answers
+    MID 0064 only at revision 1 (7 to 2 refused): a loosening made while the link was down,
+    fetched after the reconnect, comes without its type.  Not handed out as a result (the
+    station reads a result without a type as a tightening, and so closed the link cut's bolt
+    with a loosening) but as an :class:`UnreadableResult` laid out as revision 1, its id
+    known: the bolt it may be is held for a person, as for a push that lost its type."""
+    with SimController(seed=1, nok_rate=0.0,
+                       refused_revisions={64: {7, 6, 5, 4, 3, 2}}) as sim, \
+            connect(sim, "tcp", tmp_path) as w:
+        ready(w)
+        sim.pull_trigger()
+        seen = w.wait_result(1.0)
+        assert seen is not None and seen.result_type is ResultType.TIGHTENING
+        sim.drop_connections()
+        assert wait_until(lambda: not w.status().connected)
+        missed = sim.pull_trigger(2)                 # a loosening, nobody subscribed
+        assert missed is not None and reconnect_within(w)
+        got = w.fetch_result(missed.tightening_id)
+        assert [r.revision for r in sim.received(64)][-1] == 1
+    assert isinstance(got, UnreadableResult), got
+    assert (got.tightening_id, got.fetched, got.laid_out_as) == (missed.tightening_id, True, 1)
+    assert "result type" in got.error
+
+
 def test_a_result_made_while_the_link_was_down_is_fetched_after_the_reconnect(sim, tmp_path):
     """The gap the tightening ids show is filled with MID 0064 (the station's part is to
     notice it; here the driver's part: the missed result is there to fetch)."""
