@@ -82,9 +82,18 @@ class OldResults:
             self.agreed = rev
 
     def _read(self, reply: Message, tightening_id: int, what: str, asked: int) -> Received:
-        result = untyped_below(reply, receive(reply), asked)
+        with self._channel.cond:
+            pushed = self._feed.subscribed
+        result = untyped_below(reply, receive(reply), asked, pushed)
         habit = self._untyped.habit(result, reply.revision)
-        if isinstance(result, UnreadableResult) and result.laid_out_as is not None:
+        if isinstance(result, UnreadableResult) and result.laid_out_as is not None \
+                and result.laid_out_as == reply.revision == asked:
+            # the revision agreed carries no type, the pushes' does: each such answer held
+            self._log.warning("%s: %s: MID 0065 revision %d carries no result type, though "
+                              "the pushed results (revision %s) do; kept with its raw text "
+                              "(tightening %s), its bolt held: it may be a loosening",
+                              self.device, what, asked, pushed, result.tightening_id)
+        elif isinstance(result, UnreadableResult) and result.laid_out_as is not None:
             self._log.warning("%s: %s: MID 0065 %s, which carries no result type; kept with "
                               "its raw text", self.device, what,
                               layout_words(reply.revision, result.laid_out_as, asked))

@@ -122,21 +122,32 @@ def receive(msg: Message) -> TighteningResult | UnreadableResult:
                            picked["timestamp"])
 
 
-def untyped_below(msg: Message, item: TighteningResult | UnreadableResult, asked: int | None
-                  ) -> TighteningResult | UnreadableResult:
+def untyped_below(msg: Message, item: TighteningResult | UnreadableResult, asked: int | None,
+                  pushed: int | None = None) -> TighteningResult | UnreadableResult:
     """``item`` as handed out when ``asked``, the revision subscribed or requested, carries a
     result type and the controller sent one, labelled honestly, at a revision that does not:
     not a result that may close a bolt (a loosening read so closed its bolt, an independent
     controller's trial) but an :class:`UnreadableResult` laid out as its revision, held like
     a body that lost its type; the feed renews its subscription there only when the next
-    result comes so too (:class:`UntypedInARow`)."""
-    if not isinstance(item, TighteningResult) or asked is None \
-            or not item.revision < TYPED_FROM <= asked:
+    result comes so too (:class:`UntypedInARow`).  So too a MID 0065 without a type from a
+    controller whose pushed results carry one (``pushed``, the MID 0060 revision agreed): it
+    refuses MID 0064 at a revision with a type, and what it made during a link cut, a
+    loosening as well as a tightening, came as a result able to close the cut's bolt."""
+    if not isinstance(item, TighteningResult) or asked is None:
         return item
-    return _unreadable(msg, f"sent at revision {item.revision} though asked for at revision "
-                            f"{asked}: revision {item.revision} carries no result type, so "
-                            "whether it is a tightening is not known", item.tightening_id,
-                       item.pset, item.vin, item.timestamp, item.revision)
+    if item.revision < TYPED_FROM <= asked:
+        return _unreadable(msg, f"sent at revision {item.revision} though asked for at "
+                                f"revision {asked}: revision {item.revision} carries no "
+                                "result type, so whether it is a tightening is not known",
+                           item.tightening_id, item.pset, item.vin, item.timestamp,
+                           item.revision)
+    if pushed is not None and item.revision < TYPED_FROM <= pushed:
+        return _unreadable(msg, f"fetched at revision {item.revision}, the highest the "
+                                "controller gives for MID 0064, which carries no result type "
+                                f"(its pushed results, at revision {pushed}, do): whether it "
+                                "is a tightening is not known", item.tightening_id, item.pset,
+                           item.vin, item.timestamp, item.revision)
+    return item
 
 
 def layout_words(header: int, laid_out_as: int, asked: int | None) -> str:

@@ -229,7 +229,9 @@ def test_a_result_that_reads_at_no_revision_is_kept_and_acknowledged_when_stored
 def test_fetching_a_result_that_does_not_read(sim, tmp_path):
     """MID 0065 that reads at no revision: an UnreadableResult (fetched), not an error;
     one laid out as a lower revision without a result type is held so too, and after two
-    such answers later fetches ask for that revision."""
+    such answers later fetches ask for that revision; their answers, at a revision without a
+    type while the pushed results carry one, are held as well (a loosening made during a
+    link cut would read as a tightening)."""
     with connect(sim, "tcp", tmp_path) as w:
         ready(w)
         t = sim.pull_trigger()
@@ -244,8 +246,9 @@ def test_fetching_a_result_that_does_not_read(sim, tmp_path):
                    and o.tightening_id == t.tightening_id for o in old)
         assert w.revisions[64] == 1
         again = w.fetch_result(t.tightening_id)
-        assert isinstance(again, TighteningResult) and again.header_revision is None
+        assert isinstance(again, UnreadableResult) and again.laid_out_as == 1
         assert (again.revision, again.tightening_id) == (1, t.tightening_id)
+        assert "its pushed results, at revision 7, do" in again.error
         assert [r.revision for r in sim.received(64)] == [7, 7, 7, 1]
 
 
