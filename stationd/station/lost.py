@@ -469,6 +469,7 @@ class LostRules(NokRules):
         complete one fetched what an earlier cut's controller could still send late."""
         if ev.complete:
             self._cut_unsettled = None
+        self._cut_closed = None          # its catch-up over: what comes now was made since
         if ev.restarted:    # the gaps told are the old count's: their ids are new rundowns
             self._gaps_told, self._cut_unsettled = [], None
         return self._end_wait(ev.t) + self._cut_caught_up(ev)
@@ -498,9 +499,10 @@ class LostRules(NokRules):
             self._enabled = None
         return [SettleEnable(cut.selection), said]
 
-    def _cut_unknown(self, t: float, why: str) -> list[Action]:
-        """The link cut's bolt held (its result not known: ``why``); the cut ends."""
-        cut = self._cut
+    def _cut_unknown(self, t: float, why: str, cut: _Cut | None = None) -> list[Action]:
+        """The link cut's bolt held (its result not known: ``why``); the cut ends.  ``cut``:
+        one whose rundown was recorded already (:meth:`_cut_closed`), else the one open."""
+        cut = cut or self._cut
         assert cut is not None  # noqa: S101 - the callers' guard
         en = cut.selection
         self._answered(en)

@@ -47,6 +47,7 @@ from stationd.station.inputs import (
     ResultsMissed,
     Written,
 )
+from stationd.station.lost import CLOCK_SLACK_S
 from stationd.station.state import NOK_SKIPPED, ON_A_BOLT, UNANSWERED
 from stationd.station.unread import UnreadRules, _Unread
 
@@ -188,6 +189,8 @@ class ResultRules(UnreadRules):
             return self._attribute(ev, en, lost=True)
         proved, not_proved = self._made_during_cut(ev)
         if proved is not None:
+            if self._cut is not None:
+                self._cut_closed = (self._cut, tid)
             return self._attribute(ev, proved, cut=True)
         why = Unattributed(UnattributedKind.OUTSIDE if not ev.fetched else
                            UnattributedKind.FETCHED_CHECKED if ev.live and ev.before is None
@@ -204,7 +207,31 @@ class ResultRules(UnreadRules):
                 Publish(Notice(Said.UNATTRIBUTED, tightening_id=tid, pset=int(r.pset),
                                unattributed=why, t=ev.t)),
                 *self._cut_in_doubt(ev), *self._lost_in_doubt(ev, lost),
-                *self._fetched_in_doubt(ev), *self._late_cut_in_doubt(ev)]
+                *self._fetched_in_doubt(ev), *self._late_cut_in_doubt(ev),
+                *self._loosened_after_cut(ev, kind)]
+
+    def _loosened_after_cut(self, ev: ResultIn, kind: ResultKind) -> list[Action]:
+        """A loosening fetched after the rundown of a link cut's bolt was proved and
+        recorded, by the same catch-up: of that enable's pset (a tightening one) and vehicle
+        (where it echoes one), made after it (a later id, and not before the enable by its
+        own time).  The tool, still enabled on the controller during the cut (the station
+        cannot turn it off), ran again: the cut's bolt, the one the operator was at, may be
+        the one loosened.  Not left done without a word: held for a person, stored so (a
+        review: done OK, the loosening stored as no bolt's)."""
+        closed, r = self._cut_closed, ev.result
+        if closed is None or kind is not ResultKind.LOOSENING or not ev.fetched or ev.live:
+            return []
+        cut, after = closed
+        en, tid = cut.selection, int(r.tightening_id)
+        echoed = str(r.vin or "").strip()
+        if en.loosen or en.pset is None or int(r.pset) != en.pset or tid <= after \
+                or (echoed and echoed != en.vin) \
+                or (ev.made_at is not None and ev.made_at < cut.enabled_at - CLOCK_SLACK_S):
+            return []
+        self._cut_closed = None          # held once
+        return self._cut_unknown(ev.t, f"tightening {tid}, a loosening of its pset made during "
+                                       f"the link cut after its rundown {after}, may have "
+                                       "loosened it", cut)
 
     def _controller_event(self, ev: ResultIn, kind: ResultKind) -> list[Action]:
         """A result that is not a tightening or a loosening (a batch increment a line lead

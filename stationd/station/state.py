@@ -292,6 +292,11 @@ class CoreState:
     #: newest id judged then; until a later id is judged, a result pushed without its own
     #: time may be the cut's rundown sent late (:meth:`LostRules._sent_late_from_cut`)
     _cut_unsettled: tuple[Selection, int | None] | None = field(default=None, repr=False)
+    #: a link cut whose rundown a fetched result proved (that cut, and the result's id), until
+    #: its catch-up ends: the tool, still enabled on the controller during the cut, may have
+    #: run again; a loosening of its pset fetched after it may be its bolt's
+    #: (:meth:`ResultRules._loosened_after_cut`)
+    _cut_closed: tuple[_Cut, int] | None = field(default=None, repr=False)
     _judged_at: float = field(default=float("-inf"), repr=False)   # when it came
     # the station's start or the controller's last fault: a result fetched afterwards was
     # made before it, so never under an enable that came later
