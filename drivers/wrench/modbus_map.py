@@ -225,10 +225,16 @@ class WrenchRegisterMap:
 
     def unreadable(self, regs: Mapping[int, int], error: str) -> UnreadableResult:
         """The result registers that do not read (:meth:`result`'s ValueError, ``error``),
-        kept whole: the registers as text, with its tightening id and pset (a register
-        holds each on its own, so they read whatever the status says)."""
+        kept whole: the result's registers as text (its counter among them; not the status
+        and ack registers, which change with the station's commands: the same result read
+        again after a restart is the same text, a copy), with its tightening id and pset (a
+        register holds each on its own, so they read whatever the status says)."""
+        names = ("result_counter", "result_status", "result_pset", "result_torque",
+                 "result_angle", "result_id", *(("result_type",) if self.result_type else ()))
+        mine = sorted({a for n in names for f in [getattr(self, n)]
+                       for a in range(f.address, f.address + f.words)})
         return UnreadableResult(
-            raw=" ".join(f"{a}={regs[a]}" for a in sorted(regs)), mid=0, revision=0,
+            raw=" ".join(f"{a}={regs[a]}" for a in mine), mid=0, revision=0,
             error=f"result status: {error}", tightening_id=self.integer("result_id", regs),
             pset=self.integer("result_pset", regs))
 
