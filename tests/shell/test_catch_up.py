@@ -514,3 +514,24 @@ def test_the_controller_s_newest_asked_for_fetches_what_was_never_heard(caplog):
     assert said == ["tightening 41 fetched by a check of the controller's newest with the "
                     "tool on (the link up)"], said
     assert [e.result.tightening_id for e in fed if isinstance(e, ResultIn)] == [41]
+
+
+def test_a_register_driven_controller_s_queued_results_are_all_read_before_it_is_told():
+    """A register-driven controller publishes the next result only once the last is
+    acknowledged (``drivers.wrench.modbus``): the tool, still enabled on it during the cut,
+    ran twice (41, 42), and both come one after the other after the reconnect.  Each is read
+    before the catch-up says it is incomplete, while the tool stays off for the cut: told
+    after the first only, 42 came once an enable was possible again, and was taken for the
+    next bolt of its pset (a review of the register-driven cut)."""
+    queued = [res(41), res(42)]
+    controller = Controller({}, can_fetch=False)
+
+    def wait_result(timeout: float, acknowledge: bool = False) -> Any:
+        time.sleep(0.05)
+        return queued.pop(0) if queued else None
+
+    controller.wait_result = wait_result
+    fed = catch_up(controller, reading=True)
+    order = [e.result.tightening_id if isinstance(e, ResultIn) else type(e).__name__
+             for e in fed if isinstance(e, ResultIn | CaughtUp)]
+    assert order == [41, 42, "CaughtUp"], order
