@@ -112,6 +112,9 @@ class ControllerFeed:
         #: never asked for again, not even a gap, their bolt left open)
         self._owed: list[tuple[int, int, int | None]] = []
         self._reads = 0         # the results' loop's reads of the controller so far
+        #: when the last of those reads that found nothing began (monotonic): the controller
+        #: had no result left to give from then on
+        self._quiet_from = float("-inf")
         #: when the controller's clock was last measured (at each connect, by the driver;
         #: then every CLOCK_CHECK_S: :meth:`_check_clock`)
         self._clock_at = time.monotonic()
@@ -131,6 +134,7 @@ class ControllerFeed:
     async def results(self, wrench: Wrench) -> None:
         """The next pushed result (one blocking wait, in the results' thread); a link down
         raises to the wrench's keeper."""
+        began = time.monotonic()
         self._waiting = self._results_pool.submit(wrench.wait_result, RESULT_WAIT_S,
                                                   acknowledge=False)
         result = await asyncio.wrap_future(self._waiting)
@@ -138,6 +142,7 @@ class ControllerFeed:
         if result is not None:
             self.received.append(result)
         else:
+            self._quiet_from = began
             await self._check_clock(wrench)
         if WRENCH in self.core.status().faults and not self._keeper.losing:
             # a refusal is a fault until the controller answers
@@ -290,10 +295,15 @@ class ControllerFeed:
         if self.records.repo is None:
             return "no database to count the results from"
         if not wrench.can_fetch:
-            # a register-driven controller keeps its last result in its registers: read by
-            # the results' loop after the reconnect (recorded late, where it is the cut's)
-            # before this is told
+            # a register-driven controller keeps its last result in its registers, and
+            # publishes the next one it made only once that one is acknowledged: read by the
+            # results' loop after the reconnect (recorded late, where it is the cut's) until
+            # a read finds none left, before this is told (told after the first only, the
+            # tool's second rundown during the cut came once the tool could go on again,
+            # and was taken for the next bolt of its pset: a review)
+            since = time.monotonic()
             await self._read_since(self._reads)
+            await _until(lambda: self._quiet_from >= since, 10 * RESULT_WAIT_S)
             return "this controller keeps no results to fetch"
         while self._owed:       # ids not all asked for before the link was lost
             await self._owed_fetched(wrench)
