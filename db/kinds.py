@@ -86,7 +86,13 @@ def unreadable_note(tightening_id: int | None, mid: int, revision: int) -> str:
     tightening id (the controller's number for every rundown, a loosening's too), else by
     its MID and revision."""
     return f"tightening {tightening_id}" if tightening_id is not None \
-        else f"MID {mid:04d} revision {revision}"
+        else message_words(mid, revision)
+
+
+def message_words(mid: int, revision: int) -> str:
+    """What an unreadable result came as: ``MID 0061 revision 7``; a register-driven
+    controller's (MID 0: no message, its result registers) says so."""
+    return f"MID {mid:04d} revision {revision}" if mid else "result registers"
 
 
 #: how the notes of a hold without a result read (:func:`cut_unknown_note`,

@@ -29,6 +29,7 @@ from db.kinds import (
     PENDING,
     SKIPPED,
     TIGHTENING,
+    message_words,
     unreadable_note,
 )
 from drivers.counting import counted
@@ -473,7 +474,7 @@ def cmd_db_report(args: argparse.Namespace) -> int:
             print(f"  controller event: {e['what']}{code}, tightening "
                   f"{e['tightening_id']} pset {e['pset']}{on}: not a rundown")
         for x in unread:
-            said = f"MID {x['mid']:04d} revision {x['revision']}"
+            said = message_words(x["mid"], x["revision"])
             note = unreadable_note(x["tightening_id"], x["mid"], x["revision"])
             print(f"  unreadable result: tightening {x['tightening_id'] or '?'} ({said}"
                   f"{_held_now(x['bolt'], holds, note)}): "

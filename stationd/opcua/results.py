@@ -22,6 +22,7 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from typing import Any
 
+from db.kinds import message_words
 from db.ledger import CONTROLLER_EVENT as CONTROLLER_EVENT_KIND
 from db.ledger import RUNDOWN as RUNDOWN_KIND
 from db.ledger import UNATTRIBUTED as UNATTRIBUTED_KIND
@@ -385,8 +386,9 @@ def unreadable_result(db_id: str, entry: dict[str, Any], *, simulated: bool = Fa
         db_id, entry, simulated=simulated, evaluation=EVALUATION_NOT_DECIDABLE,
         loosening=False, entities=entities, pset=rec.get("pset"),
         name=f"{rec.get('vin') or 'no vehicle'}{' ' + bolt if bolt else ''} not readable",
-        description=f"MID {rec.get('mid')} revision {rec.get('revision')} not readable: "
-                    f"{rec.get('error')}" + (f"; {bolt} held for a supervisor" if bolt else ""))
+        description=(f"MID {rec.get('mid')} revision {rec.get('revision')}" if rec.get("mid")
+                     else message_words(0, 0)) + f" not readable: {rec.get('error')}"
+                    + (f"; {bolt} held for a supervisor" if bolt else ""))
     return ua.ResultDataType(ResultMetaData=meta,
                              ResultContent=[ua.Variant(ua.JoiningResultDataType())])
 

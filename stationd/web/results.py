@@ -27,7 +27,7 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from db.curves import curves_of_records
-from db.kinds import LOOSENING, MISSING, PENDING, SKIPPED
+from db.kinds import LOOSENING, MISSING, PENDING, SKIPPED, message_words
 from db.ledger import COMMAND, CONTROLLER_EVENT, RUNDOWN, UNATTRIBUTED, UNREADABLE
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
 from db.repository import Repository
@@ -298,7 +298,7 @@ def _stored_row(vin: str, model: str, status: str, x: dict[str, Any], **fields: 
 def _unreadable_comment(x: dict[str, Any]) -> str:
     """``MID 0061 revision 7: what could not be read``, the MID said once (the driver's error
     may begin with it: "MID 0061 revision 7: MID 0061 revision 7 torque ...")."""
-    head = f"MID {x['mid']:04d} revision {x['revision']}"
+    head = message_words(x["mid"], x["revision"])
     error = str(x["error"])
     return error if error.startswith(head) else f"{head}: {error}"
 

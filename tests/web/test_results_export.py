@@ -8,7 +8,8 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from pathlib import Path
 
-from stationd.web.results import Results, rundowns_csv
+from db.kinds import message_words, unreadable_note
+from stationd.web.results import Results, _unreadable_comment, rundowns_csv
 from tests.web.scenario import VIN, results_db
 
 
@@ -49,3 +50,14 @@ def test_every_row_of_a_record_carries_the_id_the_line_and_opc_ua_give_it(
         assert ",controller_at,result_id," in rundowns_csv(rows).splitlines()[0]
     finally:
         repo.close()
+
+
+def test_a_register_driven_result_that_does_not_read_is_said_as_its_registers():
+    """Stored as unreadable, a register-driven controller's result is named as what it came
+    as, its result registers (it has no MID or revision: 0), not "MID 0000 revision 0", in
+    the results export's comment and a held bolt's note without an id."""
+    assert message_words(0, 0) == "result registers" and unreadable_note(None, 0, 0) == \
+        "result registers"
+    assert message_words(61, 7) == "MID 0061 revision 7"
+    assert _unreadable_comment({"mid": 0, "revision": 0, "error": "result status: x"}) == \
+        "result registers: result status: x"

@@ -167,15 +167,18 @@ function showOthers(v) {
   // the station's own events that hold a bolt without a result (db.kinds)
   const holdWords = {"result unknown after a link cut": "link cut",
                      "result unknown after a lost push": "push lost"};
+  // what it came as (db.kinds.message_words): a register-driven controller's is no message
+  const message = (x) => x.mid ? `MID ${String(x.mid).padStart(4, "0")} revision ${x.revision}`
+    : "result registers";
   const rows = [];
   for (const x of v.unreadable_results || [])
     rows.push([x.recorded_at, "could not be read", x.tightening_id, x.pset,
                bolt(x.bolt, x.tightening_id !== null && x.tightening_id !== undefined
                  ? `tightening ${x.tightening_id}`
-                 : `MID ${String(x.mid).padStart(4, "0")} revision ${x.revision}`),
+                 : message(x)),
                // the driver's words name the MID and revision already
                x.error.startsWith("MID ") ? x.error
-                 : `MID ${String(x.mid).padStart(4, "0")} revision ${x.revision}: ${x.error}`]);
+                 : `${message(x)}: ${x.error}`]);
   for (const e of v.controller_events || []) {
     if (Object.prototype.hasOwnProperty.call(holdWords, e.what))
       rows.push([e.recorded_at, holdWords[e.what], null, e.pset, bolt(e.bolt, e.note || ""),
