@@ -302,4 +302,3 @@ def test_a_result_that_does_not_read_is_handed_out_unreadable_and_kept_until_sto
         assert m.integer("result_ack", ctl.registers()) == 1
         r2 = w.wait_result(1.0)
         assert isinstance(r2, TighteningResult) and r2.tightening_id == second.tightening_id
-
