@@ -804,3 +804,34 @@ def test_a_quarantined_record_that_is_another_on_the_line_stays_quarantined(tmp_
     assert kept["seq"] == 2
     assert sorted(r.record["tightening_id"] for r in _line_rows(pg_url, "ST-Q")) == [1, 2]
     restored.close()
+
+
+def test_a_result_garbled_with_a_control_character_reaches_the_line_unreadable(tmp_path, table,
+                                                                             pg_url):
+    """Line noise turned a byte of a MID 0061 into a NUL: the result does not read and is
+    kept whole as unreadable, its raw text with the byte escaped (``\\x00``, as a non-ASCII
+    byte is), so that it reaches the line database like any record.  Before: its text held
+    the NUL itself, which PostgreSQL's jsonb refuses: quarantined for good, every retry
+    refused, the line never heard of it."""
+    from drivers.wrench.openprotocol.message import decode
+    from drivers.wrench.openprotocol.reading import receive
+
+    good = ("02310061001         010001020103PF6000                   04VIN123"
+            "                   050006005070004080002091101111120045001300550014005000150050"
+            "121600010170020018000901900095202026-12-02:01:00:00212026-12-01:01:00:002222300"
+            "00000041")
+    assert len(good) == 231
+    u = receive(decode((good[:150] + "\x00" + good[151:]).encode()))
+    assert u.tightening_id == 41
+    repo = _station(tmp_path, "st.db", table, "VINQ", [(1, "B1")])
+    repo.record_unreadable(mid=u.mid, revision=u.revision, raw=u.raw, error=u.error,
+                           vin="VINQ", bolt="B2", controller_vin=None,
+                           tightening_id=u.tightening_id, pset=u.pset, result_at=None,
+                           header_len=u.header_len)
+    f = Forwarder(repo, LineConfig(pg_url, "ST-Q"))
+    assert f.step() == 2
+    assert [(r.seq, r.kind) for r in _line_rows(pg_url, "ST-Q")] == [(1, "rundown"),
+                                                                      (2, "unreadable")]
+    assert repo.ledger.quarantined() == []
+    assert "\\x00" in u.raw and u.raw.isprintable()
+    repo.close()
