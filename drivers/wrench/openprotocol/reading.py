@@ -162,11 +162,20 @@ def layout_words(header: int, laid_out_as: int, asked: int | None) -> str:
 def _unreadable(msg: Message, error: str, tightening_id: int | None, pset: int | None,
                 vin: str, timestamp: datetime | None,
                 laid_out_as: int | None = None) -> UnreadableResult:
-    return UnreadableResult(raw=msg.raw.decode("ascii", "backslashreplace"), mid=msg.mid,
+    return UnreadableResult(raw=_printable(msg.raw), mid=msg.mid,
                             revision=msg.revision, error=error, tightening_id=tightening_id,
                             pset=pset, vin=vin, timestamp=timestamp,
                             fetched=msg.mid != MID_RESULT, laid_out_as=laid_out_as,
                             header_len=HEADER_LEN)
+
+
+def _printable(raw: bytes) -> str:
+    """A message's bytes as text for the record, every byte that is not printable ASCII
+    escaped (``\\x00``): a non-ASCII byte and a control character alike (line noise).  A
+    NUL kept as such was refused by the line database's JSON (quarantined for good); the
+    same message gives the same text, so a copy is still told by it."""
+    return "".join(c if " " <= c <= "~" else f"\\x{ord(c):02x}"
+                   for c in raw.decode("latin-1"))
 
 
 def pick(mid: int, revision: int, text: str) -> dict[str, Any]:
