@@ -101,6 +101,26 @@ def test_a_value_that_does_not_read_is_not_read_at_a_lower_revision(sim, tmp_pat
     assert picked["timestamp"] == r.timestamp
 
 
+@pytest.mark.parametrize("byte", [b"\xff", b"\x00", b"\x07"])
+def test_a_text_parameter_garbled_on_the_line_does_not_read(byte):
+    """Line noise turned a byte of the VIN into a non-ASCII byte or a control character:
+    the body reads at no revision (as the same byte in a number does; the module says a
+    non-ASCII byte fails its field), kept as unreadable with what can be picked out of it;
+    NULs and spaces after the text are padding.  Before: a TighteningResult whose VIN was
+    'VIN\ufffd23' (or held the NUL), stored so with an unattributed result or a controller
+    event (a NUL then refused by the line database)."""
+    good = (b"02310061001         010001020103PF6000                   04VIN123"
+            b"                   050006005070004080002091101111120045001300550014005000150050"
+            b"121600010170020018000901900095202026-12-02:01:00:00212026-12-01:01:00:002222300"
+            b"00000041")
+    got = receive(decode(good[:62] + byte + good[63:]))
+    assert isinstance(got, UnreadableResult), got
+    assert (got.tightening_id, got.pset, got.vin) == (41, 5, "")
+    assert "vin" in got.error
+    padded = receive(decode(good[:65] + b"\x00" * 19 + good[84:]))
+    assert isinstance(padded, TighteningResult) and padded.vin == "VIN123"
+
+
 def test_what_is_picked_out_of_a_body_cut_short():
     assert pick(61, 7, "0040006100700000001" + "01") == {
         "tightening_id": None, "pset": None, "vin": "", "timestamp": None}
