@@ -230,7 +230,7 @@ def _values(raw: dict[str, str]) -> dict[str, Any]:
         stamp: datetime | None = datetime.strptime(raw.get("timestamp", ""), TIME_FORMAT)
     except ValueError:
         stamp = None
-    vin = raw.get("vin", "").rstrip()
+    vin = raw.get("vin", "").rstrip(" \x00")
     return {"tightening_id": int(tid) if tid.isdigit() else None,
             "pset": int(pset) if pset.isdigit() else None,
             "vin": vin if vin.isprintable() and "\ufffd" not in vin else "",

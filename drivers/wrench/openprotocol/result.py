@@ -216,7 +216,13 @@ class _Reader:
             return None
         param = self.params[name]
         if param.kind == "str":
-            return raw.rstrip()
+            # spaces or NULs after the text are padding; any other byte that is not
+            # printable ASCII (a non-ASCII one reads as U+FFFD) was garbled on the line,
+            # as a letter in a number is: the text is not the controller's
+            text = raw.rstrip(" \x00")
+            if not all(" " <= c <= "~" for c in text):
+                raise ProtocolError(f"{self.what} {name} {text!r} is not printable ASCII")
+            return text
         if not raw.strip(" "):
             if param.core:
                 raise ProtocolError(f"{self.what} {name} is empty")
