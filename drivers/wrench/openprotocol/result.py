@@ -216,13 +216,17 @@ class _Reader:
             return None
         param = self.params[name]
         if param.kind == "str":
-            # spaces or NULs after the text are padding; any other byte that is not
-            # printable ASCII (a non-ASCII one reads as U+FFFD) was garbled on the line,
-            # as a letter in a number is: the text is not the controller's
+            # spaces or NULs after the text are padding.  The VIN (the one the station sent,
+            # echoed: printable ASCII) with any other byte was garbled on the line, as a
+            # letter in a number is: not the controller's.  Another text (a pset name a
+            # controller may write in its own character set) is kept, what is not printable
+            # written as ``\\xNN`` (a NUL refused by the line database's JSON)
             text = raw.rstrip(" \x00")
-            if not all(" " <= c <= "~" for c in text):
+            if all(" " <= c <= "~" for c in text):
+                return text
+            if name == "vin":
                 raise ProtocolError(f"{self.what} {name} {text!r} is not printable ASCII")
-            return text
+            return "".join(c if c.isprintable() else f"\\x{ord(c):02x}" for c in text)
         if not raw.strip(" "):
             if param.core:
                 raise ProtocolError(f"{self.what} {name} is empty")

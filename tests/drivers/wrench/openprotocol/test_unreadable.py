@@ -121,6 +121,25 @@ def test_a_text_parameter_garbled_on_the_line_does_not_read(byte):
     assert isinstance(padded, TighteningResult) and padded.vin == "VIN123"
 
 
+def test_another_text_parameter_in_its_own_character_set_still_reads():
+    """A guard: a pset name with a byte of the controller's own character set (a Latin-1
+    umlaut) or a control character still reads (what is not printable written ``\\xNN``):
+    only the VIN, the station's own text echoed, must be printable ASCII."""
+    r = parse_tightening(61, 3, message(61, _rev3_named(b"T\xfcr\x07"), 3).decode(
+        "ascii", "replace"))
+    assert r.pset_name == "T\ufffdr\\x07" and r.result_type_code == 1
+
+
+def _rev3_named(name: bytes) -> bytes:
+    """A MID 0061 revision 3 body (node-open-protocol's layout) whose pset name is ``name``."""
+    body = (b"010001020103PF6000                   04VIN123                   05000006005"
+            b"070108000000900041000021111221311411511611711811912000000000002100450022005500"
+            b"230050002400501225000102600200270009028000952900000300000031000003200033000340"
+            b"003500000036000000370000003800000039000000400000004100000000414200000430000044"
+            b"T1            452026-12-02:01:00:00462026-12-01:01:00:0047")
+    return body + name.ljust(25, b" ") + b"4814901"
+
+
 def test_what_is_picked_out_of_a_body_cut_short():
     assert pick(61, 7, "0040006100700000001" + "01") == {
         "tightening_id": None, "pset": None, "vin": "", "timestamp": None}
