@@ -178,3 +178,34 @@ def test_the_simulated_controller_runs_the_nok_policys_loosen_psets(tmp_path: Pa
     station.write_text(station.read_text().replace("bolts: bolts.yaml\n", ""))
     _, psets = _station(str(station))
     assert psets is not None and 4 in psets and 1 in psets
+
+
+def test_the_simulated_plc_serves_the_unit_of_the_station_files_lift(tmp_path: Path) -> None:
+    """A commissioning engineer's trial: the station file names the real PLC's unit
+    (``modbus-tcp://...?unit=5``) and ``stationd sim plc --config`` stands in for it.  The
+    simulator took the file's register map but served unit 1 whatever the file said, and had
+    no option to say another: the daemon on that file stayed in fault ("Modbus exception 4
+    ... a unit id it does not serve").  ``--unit`` says another one."""
+    import shutil
+    for f in STATION.parent.iterdir():
+        shutil.copy(f, tmp_path)
+    port = _free_port()
+    station = tmp_path / "station.yaml"
+    station.write_text(station.read_text().replace(
+        "lift: {url: 'sim://lift'}", f"lift: {{url: 'modbus-tcp://127.0.0.1:{port}?unit=5'}}"))
+    assert "unit=5" in station.read_text()
+    p, first = _start("plc", "--config", str(station), "--port", str(port))
+    try:
+        assert "unit 5)" in first, first
+        with open_lift(f"modbus-tcp://127.0.0.1:{port}?unit=5&timeout=2") as lift:
+            assert not lift.read_state().at_working_height
+    finally:
+        assert _stop(p) == 0
+    port = _free_port()
+    p, first = _start("plc", "--config", str(station), "--port", str(port), "--unit", "7")
+    try:
+        assert "unit 7)" in first, first
+        with open_lift(f"modbus-tcp://127.0.0.1:{port}?unit=7&timeout=2") as lift:
+            assert not lift.read_state().at_working_height
+    finally:
+        assert _stop(p) == 0
