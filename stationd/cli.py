@@ -67,6 +67,17 @@ def port_arg(text: str) -> int:
     return value
 
 
+def unit_arg(text: str) -> int:
+    """A Modbus unit id: 0-247."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a unit id") from None
+    if not 0 <= value <= 247:
+        raise argparse.ArgumentTypeError(f"{value}: a Modbus unit id is 0-247")
+    return value
+
+
 def seed_arg(text: str) -> int:
     """``--seed``: a non-negative integer (numpy's generators refuse negative seeds, after the
     command has started)."""
@@ -670,6 +681,9 @@ def _add_run_and_sim_parsers(sub: Any) -> None:
                              help="the lift PLC, Modbus TCP on 127.0.0.1 (also: sim lift)")
     plc.add_argument("--config", help="station file: its lift register map (else defaults)")
     plc.add_argument("--port", type=port_arg, default=5020, help="TCP port (%(default)s)")
+    plc.add_argument("--unit", type=unit_arg, metavar="N",
+                     help="the Modbus unit id it serves (default: the station file's lift "
+                          "URL's unit=, else 1)")
     plc.add_argument("--model-code", type=int, default=1,
                      help="the vehicles' model code (%(default)s)")
     plc.add_argument("--every", type=float, default=0.0, metavar="SECONDS",

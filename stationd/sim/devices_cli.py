@@ -3,10 +3,11 @@ controller on their real protocols, on TCP ports of their own, set up from a sta
 
 Why: to commission a station (or a third-party client: an HMI, an integrator's Open Protocol
 library) against the devices the tests use, before the real ones answer.  The PLC serves the
-station file's register map; the controller runs the psets of its bolt table.  Both serve
-until SIGINT or SIGTERM.  The PLC takes one command per line on its standard input (``raise``,
-``lower``, ``vehicle CODE [VIN]``, ``next``, ``fault``, ``clear``), or cycles vehicles on its
-own with ``--every SECONDS``: a new VIN, the lift up for that long, down, and again.
+station file's register map as the unit its lift URL names (``--unit`` another); the
+controller runs the psets of its bolt table.  Both serve until SIGINT or SIGTERM.  The PLC
+takes one command per line on its standard input (``raise``, ``lower``, ``vehicle CODE
+[VIN]``, ``next``, ``fault``, ``clear``), or cycles vehicles on its own with ``--every
+SECONDS``: a new VIN, the lift up for that long, down, and again.
 
     stationd sim plc --config station.yaml --port 5020 --every 60
     stationd sim controller --config station.yaml --port 4545 --trigger-every 2
@@ -25,8 +26,10 @@ from pathlib import Path
 from types import FrameType
 from typing import TextIO
 
+from drivers.errors import UrlError
 from drivers.lift.base import RegisterMap
-from drivers.lift.sim import SimulatedPlc
+from drivers.lift.sim import SimulatedPlc, parse_sim_lift_url
+from drivers.modbus_link import parse_modbus_url
 from drivers.wrench.sim.cli import ListenError, behaviour, serve, troubles_words
 from drivers.wrench.sim.controller import DEFAULT_PSETS, SimController, SimPset
 from stationd.boltfile import load_bolts
@@ -70,16 +73,29 @@ def loosen_programs(policy: NokPolicy) -> dict[int, SimPset]:
     return {r.loosen_pset: LOOSEN_PROGRAM for r in rules if r.loosen_pset is not None}
 
 
-def _station(path: str | None) -> tuple[RegisterMap, dict[int, SimPset] | None]:
-    """The station file's lift registers and its controller's programs: the bolt table's
-    psets and the NOK policy's loosen psets (a standalone controller without them refused
-    every loosening the station asked for: a line engineer's trial)."""
+def lift_unit(url: str) -> int:
+    """The Modbus unit a station file's lift URL reads (``unit=``, 1 where it says none, and
+    for a lift that is not on Modbus)."""
+    try:
+        if url.startswith("sim:"):
+            return int(parse_sim_lift_url(url)["unit"])
+        return parse_modbus_url(url)[0].unit
+    except UrlError:
+        return 1
+
+
+def _station(path: str | None) -> tuple[RegisterMap, dict[int, SimPset] | None, int]:
+    """The station file's lift registers, its controller's programs (the bolt table's psets
+    and the NOK policy's loosen psets: a standalone controller without them refused every
+    loosening the station asked for: a line engineer's trial) and its lift's Modbus unit
+    (the simulated PLC served unit 1 whatever the file said: its daemon stayed in fault,
+    "a unit id it does not serve")."""
     if path is None:
-        return RegisterMap(), None
+        return RegisterMap(), None, 1
     cfg = load_station_config(path)
     # a station whose tables are in its database only: the simulator's default programs
     psets = DEFAULT_PSETS if cfg.bolts_path is None else psets_of(cfg.bolts_path)
-    return cfg.lift.registers, {**loosen_programs(cfg.nok), **psets}
+    return cfg.lift.registers, {**loosen_programs(cfg.nok), **psets}, lift_unit(cfg.lift.url)
 
 
 def first_serial(now: float) -> int:
@@ -131,13 +147,15 @@ def plc_command(plc: SimulatedPlc, line: str, code: int, serial: list[int],
 
 
 def _serve_plc(args: argparse.Namespace, stop: threading.Event, out: TextIO) -> int:
-    registers, _ = _station(args.config)
+    registers, _, unit = _station(args.config)
+    if args.unit is not None:
+        unit = args.unit
 
     def say(text: str) -> None:
         print(text, file=out, flush=True)
 
     serial = [first_serial(time.time())]
-    with SimulatedPlc(registers) as plc:
+    with SimulatedPlc(registers, unit=unit) as plc:
         try:
             port = plc.start_tcp(args.port)
         except (OSError, RuntimeError) as exc:   # pymodbus says a busy port as RuntimeError
@@ -177,7 +195,7 @@ def _read_commands(plc: SimulatedPlc, code: int, serial: list[int],
 
 
 def _serve_controller(args: argparse.Namespace, stop: threading.Event, out: TextIO) -> int:
-    _, psets = _station(args.config)
+    _, psets, _ = _station(args.config)
     try:
         sim = SimController(psets, seed=args.seed,
                             nok_rate=args.nok_rate, link_ack=args.link_ack,

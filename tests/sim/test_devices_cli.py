@@ -176,7 +176,7 @@ def test_the_simulated_controller_runs_the_nok_policys_loosen_psets(tmp_path: Pa
     from stationd.sim.devices_cli import _station
 
     station.write_text(station.read_text().replace("bolts: bolts.yaml\n", ""))
-    _, psets = _station(str(station))
+    _, psets, _ = _station(str(station))
     assert psets is not None and 4 in psets and 1 in psets
 
 
