@@ -100,3 +100,37 @@ def test_a_reload_while_the_database_is_down_ends_the_wait(monkeypatch):
         return await asyncio.wait_for(_open(down, Recording(), stop, reload), 120)
 
     assert asyncio.run(main()) is Opened.RELOAD and down.attempts == 1
+
+
+def test_a_database_down_at_start_is_said_once_per_reason_not_at_every_retry(monkeypatch,
+                                                                                caplog):
+    """A commissioning trial: the database file left root's by a ``db import`` run as root
+    before the service's first start.  Each retry (every 30 s at most) wrote the same ERROR
+    line to the journal, hours of them (``journalctl -p warning`` full of one line), while
+    a device that stays down is said once per change of its reason.  The first of each
+    reason is said, the retries between are not."""
+    import logging
+
+    same = "attempt to write a readonly database"
+
+    class Down(FlakyStation):
+        def open(self) -> None:
+            self.attempts += 1
+            if self.attempts <= 4:
+                raise DbError(same)
+            if self.attempts == 5:
+                raise DbError("unable to open database file")
+
+    monkeypatch.setattr(serve, "OPEN_RETRY_S", (0.01, 0.02))
+    station = Down()
+
+    async def main() -> Opened:
+        return await asyncio.wait_for(_open(station, Recording(), asyncio.Event()), 30)
+
+    with caplog.at_level(logging.DEBUG, logger="stationd"):
+        assert asyncio.run(main()) is Opened.OPEN
+    assert station.attempts == 6
+    said = [r.getMessage() for r in caplog.records
+            if r.name == "stationd" and r.levelno >= logging.WARNING]
+    assert len(said) == 2, said
+    assert same in said[0] and "unable to open" in said[1]
