@@ -80,6 +80,7 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event,
     loop = asyncio.get_running_loop()
     backoff = Backoff(*OPEN_RETRY_S, rng=random.Random("database"))  # noqa: S311 - jitter
     told = False
+    said = ""   # the reason last said: a retry that fails the same way is said at debug only
     while not stop.is_set():
         try:
             await loop.run_in_executor(None, station.open)
@@ -88,7 +89,12 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event,
             return Opened.OPEN
         except STATION_FAULTS as exc:
             wait = backoff.next()
-            log.error("fault: database: %s (retrying in %.0f s)", one_line(exc), wait)
+            # once per reason, as a device's fault is (each retry, up to every 30 s, wrote
+            # the same error line to the journal for as long as the database stayed down)
+            reason = one_line(exc)
+            (log.debug if reason == said else log.error)(
+                "fault: database: %s (retrying in %.0f s)", reason, wait)
+            said = reason
             if not told:
                 notifier.ready(f"fault: database: {one_line(exc)}")
                 told = True
