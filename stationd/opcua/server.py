@@ -53,12 +53,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 import socket
 from collections import OrderedDict
 from collections.abc import Callable, Coroutine
 from contextvars import ContextVar
 from dataclasses import replace
 from datetime import UTC, datetime
+from pathlib import Path
 from typing import Any
 
 from asyncua.common.instantiate_util import instantiate
@@ -182,6 +184,31 @@ _POLICIES = {
 }
 
 
+def _private_key(key: Path, cert: Path) -> None:
+    """The server's private key at ``key``, readable by its owner alone: made here when it is
+    not there (asyncua's helper writes it under the umask: 0644 by hand, 0640 under the
+    unit, where the ``stationd`` group an engineer joins to read the database could read
+    it), and an existing one's group and others' bits taken away (a key an earlier release
+    made).  A new key's old certificate is removed, for asyncua to make the key's own."""
+    if key.is_file():
+        if os.stat(key).st_mode & 0o077:
+            with contextlib.suppress(OSError):   # not the daemon's to change: as it is
+                os.chmod(key, 0o600)
+        return
+    from asyncua.crypto.cert_gen import dump_private_key_as_pem, generate_private_key
+
+    pem = dump_private_key_as_pem(generate_private_key())
+    part = key.with_name(f".{key.name}.{os.getpid()}.part")
+    fd = os.open(part, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    os.fchmod(fd, 0o600)   # a leftover part file keeps its mode through O_TRUNC
+    with os.fdopen(fd, "wb") as f:
+        f.write(pem)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(part, key)
+    cert.unlink(missing_ok=True)
+
+
 class OpcUaServer:
     """The OPC UA server of one station: :meth:`start`, then :meth:`run` until its stop
     event, :meth:`stop` (safe twice)."""
@@ -270,6 +297,7 @@ class OpcUaServer:
         trusted = folder / "trusted"
         trusted.mkdir(parents=True, exist_ok=True)
         key, cert = folder / "server-key.pem", folder / "server-cert.der"
+        _private_key(key, cert)
         host = socket.gethostname()
         await setup_self_signed_certificate(
             key, cert, f"urn:stationd:{self.cfg.station_id}", host,
