@@ -59,7 +59,8 @@ MODULES: tuple[str, ...] = (
     "shell/test_keeper_hil.py", "opcua/test_daemon.py", "shell/test_serve_opcua.py",
     "sim/test_in_daemon.py",
     "test_forward_daemon.py",
-    "shell/test_serve.py", "shell/test_serve_devicelocks.py", "test_teach_cli.py",
+    "shell/test_serve.py", "shell/test_serve_devicelocks.py", "shell/test_early_sighup.py",
+    "test_teach_cli.py",
     "test_refcheck_cli.py",
     # the OPC UA server on loopback with an MES's client (in this process or its own)
     "opcua/test_server.py", "opcua/test_catchup.py", "opcua/test_curves.py",
