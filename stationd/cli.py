@@ -347,6 +347,9 @@ def cmd_bench_line(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     """``stationd run``; on a station with ``sim://`` devices, with the simulated world (and,
     with ``--sim-operator``, its operator) inside the daemon, beside each station it runs."""
+    from stationd.stopping import take_reloads
+
+    take_reloads()   # a SIGHUP while the files are read is a reload, not the daemon's end
     from stationd.shell.serve import run_daemon
     from stationd.stationcheck import validate_station
 

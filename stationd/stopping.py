@@ -54,3 +54,28 @@ def deferred(signum: int) -> bool:
     if _Hold.pending is None:
         _Hold.pending = signum
     return True
+
+
+class _Reload:
+    """A SIGHUP that came before the daemon's event loop took the signal."""
+
+    asked = False
+
+
+def take_reloads() -> None:
+    """``stationd run``, at its start: a SIGHUP from now on is remembered
+    (:func:`reload_asked`) until the daemon's event loop takes the signal itself.  Why: the
+    signal's default action ended a daemon that was still reading its files, without a line
+    in the journal, and systemd counts an end by SIGHUP as a clean exit (``Restart=
+    on-failure`` left the station down after a ``kill -HUP`` a moment after its restart)."""
+    def on_hup(signum: int, frame: object) -> None:
+        _Reload.asked = True
+
+    signal.signal(signal.SIGHUP, on_hup)
+
+
+def reload_asked() -> bool:
+    """Whether a SIGHUP came since :func:`take_reloads` (and not asked since): its reload is
+    the daemon's to do once it runs."""
+    asked, _Reload.asked = _Reload.asked, False
+    return asked

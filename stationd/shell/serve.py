@@ -49,6 +49,7 @@ from stationd.station.inputs import (
     LineLinkIn,
 )
 from stationd.stationcheck import more_errors, validate_station
+from stationd.stopping import reload_asked
 from stationd.words import records_waiting
 
 if TYPE_CHECKING:
@@ -168,6 +169,10 @@ async def serve(cfg_path: str, cfg: StationConfig, notifier: Notifier,
     for sig in (signal.SIGTERM, signal.SIGINT):
         loop.add_signal_handler(sig, stop.set)
     loop.add_signal_handler(signal.SIGHUP, reload.set)
+    if reload_asked():   # a SIGHUP while the daemon started: its files are read again
+        log.info("reload asked while starting: the station's files are read again once it "
+                 "runs")
+        reload.set()
     bus = EventBus()    # one for the daemon's life: the screens follow it across reloads
     screens = Screens(bus)
     watchdog = asyncio.create_task(keep_watchdog(notifier))
