@@ -60,7 +60,7 @@ MODULES: tuple[str, ...] = (
     "sim/test_in_daemon.py",
     "test_forward_daemon.py",
     "shell/test_serve.py", "shell/test_serve_devicelocks.py", "shell/test_early_sighup.py",
-    "test_teach_cli.py",
+    "test_teach_cli.py", "test_teach_hangup.py",
     "test_refcheck_cli.py",
     # the OPC UA server on loopback with an MES's client (in this process or its own)
     "opcua/test_server.py", "opcua/test_catchup.py", "opcua/test_curves.py",

@@ -1,0 +1,88 @@
+"""``stationd teach`` whose terminal hangs up (an engineer's SSH session dropped, the laptop's
+lid closed): SIGHUP's default action ended the command at once, without its teach stop, and
+the station stayed in teach mode (its normal cycle off: nothing tightened) until someone
+found out why.  A hang-up stops the command as SIGTERM does: teach mode is ended first, one
+line, exit 129.  The daemon is a stand-in here, in this process, that records the commands
+(the whole daemon's teach-in is ``test_teach_cli``)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+from typing import Any, ClassVar
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+class StandIn(BaseHTTPRequestHandler):
+    """The daemon's API as ``stationd teach`` uses it; each command's kind kept."""
+
+    kinds: ClassVar[list[str]] = []
+    started = threading.Event()
+    stopped = threading.Event()
+
+    def log_message(self, *a: Any) -> None:
+        pass
+
+    def _answer(self, doc: Any) -> None:
+        raw = json.dumps(doc).encode()
+        self.send_response(200)
+        self.send_header("Content-Type", "application/json")
+        self.send_header("Content-Length", str(len(raw)))
+        self.end_headers()
+        self.wfile.write(raw)
+
+    def do_GET(self) -> None:
+        if self.path.startswith("/api/status"):
+            self._answer({"station": {"id": "ST-07", "config": "/etc/stationd/station.yaml"},
+                          "state": "tracking"})
+        elif self.path.startswith("/api/nonce"):
+            self._answer({"nonce": "n"})
+        else:
+            self.send_error(404)
+
+    def do_POST(self) -> None:
+        body = json.loads(self.rfile.read(int(self.headers["Content-Length"])) or b"{}")
+        if self.path == "/api/commands":
+            StandIn.kinds.append(body["kind"])
+            if body["kind"] == "teach-start":
+                StandIn.started.set()
+            if body["kind"] == "teach-stop":
+                StandIn.stopped.set()
+        self._answer({"ok": True, "words": "accepted"})
+
+
+@pytest.mark.timeout(120)
+def test_a_hang_up_mid_teach_ends_teach_mode_at_the_station(tmp_path: Path) -> None:
+    server = ThreadingHTTPServer(("127.0.0.1", 0), StandIn)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    url = f"http://127.0.0.1:{server.server_address[1]}/"
+    p = subprocess.Popen(
+        [sys.executable, "-m", "stationd", "teach", "--model", "SIM-1", "--user", "ed",
+         "--bolts", "B01,B02", "--out", str(tmp_path / "taught.yaml"), "--url", url],
+        cwd=ROOT, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True, env={**os.environ, "STATIOND_PASSWORD": "teach-me-please"})
+    try:
+        assert p.stdout is not None
+        while "press Enter" not in (line := p.stdout.readline()):   # waits on B01
+            assert line, p.communicate(timeout=30)
+        assert StandIn.started.is_set()
+        p.send_signal(signal.SIGHUP)           # the terminal hung up
+        _, err = p.communicate(timeout=60)
+        assert StandIn.stopped.is_set(), (p.returncode, err)   # teach mode ended
+        assert p.returncode == 128 + signal.SIGHUP, (p.returncode, err)
+        assert err.strip().splitlines()[-1] == "stationd: stopped by SIGHUP (hang-up)", err
+        assert "Traceback" not in err and not (tmp_path / "taught.yaml").exists()
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait(30)
+        server.shutdown()
