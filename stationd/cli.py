@@ -35,6 +35,11 @@ EXIT_OK, EXIT_NOT_FOUND = 0, 1
 #: a command stopped by a signal: the shell's 128 + the signal's number, as if it had been
 #: killed by it (a script tells Ctrl-C and systemd's stop apart as it would for any program)
 EXIT_SIGINT, EXIT_SIGTERM = 128 + signal.SIGINT, 128 + signal.SIGTERM
+#: each stopping signal's line and exit code
+STOPPED_WORDS: dict[signal.Signals, tuple[str, int]] = {
+    signal.SIGINT: ("stationd: interrupted (Ctrl-C)", EXIT_SIGINT),
+    signal.SIGTERM: ("stationd: stopped by SIGTERM", EXIT_SIGTERM),
+    signal.SIGHUP: ("stationd: stopped by SIGHUP (hang-up)", 128 + signal.SIGHUP)}
 #: the reader of the output went away (``| head``) before the command finished: the code a
 #: program killed by SIGPIPE exits with, never 0 (``status | true`` passed a station in fault)
 EXIT_SIGPIPE = 128 + signal.SIGPIPE
@@ -937,14 +942,14 @@ def _stopped(stopped: _Stopped) -> int:
     for s in STOPPING:
         if signal.getsignal(s) is not signal.SIG_IGN:
             signal.signal(s, signal.SIG_DFL)
-    term = stopped.signal == signal.SIGTERM
-    line = "stationd: stopped by SIGTERM" if term else "stationd: interrupted (Ctrl-C)"
+    line, code = STOPPED_WORDS.get(signal.Signals(stopped.signal or signal.SIGINT),
+                                   STOPPED_WORDS[signal.SIGINT])
     try:
         sys.stderr.write(f"{line}{_after_writing()}\n")
         sys.stderr.flush()
     except (OSError, ValueError):
-        pass   # stderr closed: the code still says it
-    return EXIT_SIGTERM if term else EXIT_SIGINT
+        pass   # stderr closed (a terminal that hung up): the code still says it
+    return code
 
 
 def _after_writing() -> str:

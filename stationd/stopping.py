@@ -20,8 +20,10 @@ import signal
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-#: the signals a command is stopped by
-STOPPING = (signal.SIGINT, signal.SIGTERM)
+#: the signals a command is stopped by: SIGHUP too, its terminal hanging up (an SSH session
+#: dropped): its default action ended a command without its last step (``stationd teach``
+#: left the station in teach mode); ``stationd run`` takes it as a reload
+STOPPING = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 class _Hold:
