@@ -75,6 +75,23 @@ def test_import_prints_changes_then_no_changes(run, db):
     assert code == 0 and obj["changes"] is False and len(obj["unchanged"]) == 9
 
 
+def test_an_import_without_config_or_db_says_which_database_it_went_into(run, tmp_path,
+                                                                         monkeypatch):
+    """A day-one trial: ``stationd db import bolts.yaml`` without ``--config`` imported into a
+    new ``stationd.db`` in the current folder (root's home) and said only what it added, as
+    if the station had the table; its daemon's database never saw it.  Without either option
+    the database is named, new or not, with the option that names the station's."""
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run("db", "import", EXAMPLE)
+    assert code == 0 and "models added: SEDAN-A" in out
+    assert err == (f"note: imported into {tmp_path / 'stationd.db'}, a new database (the "
+                   "default without --config or --db: the current folder's stationd.db); "
+                   "a station's is --config STATION.yaml\n"), err
+    code, out, err = run("db", "import", EXAMPLE)
+    assert code == 0 and out == "no changes (9 bolts unchanged)\n"
+    assert err.startswith(f"note: imported into {tmp_path / 'stationd.db'} (the default"), err
+
+
 def test_import_of_an_invalid_file_lists_every_error_and_changes_nothing(run, db, tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text(BASE.replace("target: 25, min: 23", 'target: "25 Nm", min: 23')
