@@ -175,8 +175,19 @@ def cmd_db_import(args: argparse.Namespace) -> int:
         sys.stderr.write(f"warning: {args.config} names its bolt table ({own}): its daemon "
                          f"imports that file at each start and reload, replacing this import; "
                          f"to keep {args.file}'s tables, copy it there or name it in bolts:\n")
-    with open_repository(_db_url(args), must_exist=False) as repo:
+    url = _db_url(args)
+    default = not args.db and not args.config
+    new = default and absent_sqlite_file(url) is not None
+    with open_repository(url, must_exist=False) as repo:
         report = repo.import_bolts(result.table, where=str(args.file))
+    if default:
+        # without either option the table went into the current folder's stationd.db (a
+        # day-one trial: a new file in root's home, said only as what it added, as if the
+        # station had the table): said which, and how to name the station's
+        sys.stderr.write(f"note: imported into {Path(DEFAULT_DB.split(':///', 1)[1]).resolve()}"
+                         f"{', a new database' if new else ''} (the default without --config "
+                         "or --db: the current folder's stationd.db); a station's is --config "
+                         "STATION.yaml\n")
     if args.json:
         sys.stdout.write(strict_json({"changes": report.has_changes, **report.to_json()}) + "\n")
     else:
