@@ -182,3 +182,49 @@ def test_a_nul_character_in_a_path_is_one_line_not_a_traceback(tmp_path, which):
     assert "NUL" in errors[key] and "\n" not in errors[key]
     with pytest.raises(ConfigError, match="NUL"):
         load_station_config(station, station=True)
+
+
+# -- the selections' images folder the daemon cannot write ------------------------------------
+def test_an_images_folder_nobody_may_write_is_an_error_at_start_and_in_the_check(tmp_path):
+    """A commissioning trial: ``records.images_dir`` that the daemon cannot write was taken at
+    the start, and every bolt selected then wrote two warnings to the journal ("image ... not
+    saved: [Errno 13] Permission denied"), for ever, while a database folder it cannot write
+    is one line at the start, exit 2.  The images folder is checked as the database's is: a
+    folder nobody may write (or on a read-only file system) by ``config check`` and the
+    daemon, one this user may not write by the daemon."""
+    images = tmp_path / "images"
+    images.mkdir()
+    images.chmod(0o555)
+    station = _station(tmp_path)
+    station.write_text(station.read_text() + f"records: {{images_dir: {images}, "
+                                              "save_images: true}\n")
+    said = f"folder {images} cannot be written by anyone"
+    errors = _errors_by_key(station)
+    assert list(errors) == ["records.images_dir"], errors
+    assert said in errors["records.images_dir"]
+    with pytest.raises(ConfigError, match=said):
+        validate_station(station)   # the daemon's start and reload
+    # a folder still to be made: its nearest folder that is there must take it
+    station.write_text(station.read_text().replace(f"images_dir: {images},",
+                                                   f"images_dir: {images}/new/crops,"))
+    with pytest.raises(ConfigError, match=said):
+        validate_station(station)
+
+
+@pytest.mark.system
+def test_an_images_folder_the_daemons_user_cannot_write_is_one_line_and_exit_2(open_folder):
+    images = open_folder / "images"     # root's (or the tests' user's), 0755
+    images.mkdir()
+    images.chmod(0o755)
+    data = open_folder / "data"         # the database's: any user's
+    data.mkdir()
+    data.chmod(0o777)
+    station = _station(open_folder, database=f"{data}/stationd.db")
+    station.write_text(station.read_text() + f"records: {{images_dir: {images}}}\n")
+    as_root = os.geteuid() == 0
+    if not as_root:
+        pytest.skip("needs another user than the folder's owner: run as root")
+    run, user = _as_user(["run", "--config", str(station)], open_folder)
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.count("\n") == 1 and "records.images_dir" in run.stderr, run.stderr
+    assert f"folder {images} cannot be written by user {user}" in run.stderr, run.stderr
