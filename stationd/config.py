@@ -168,15 +168,42 @@ def _station_forms(message: str, base: Path) -> str:
 STATE_DIRECTORY = Path("/var/lib/stationd")
 
 
-def _records(node: YamlNode, base: Path) -> RecordsConfig:
+def _records(node: YamlNode, base: Path, check: bool = False,
+             checker: bool = False) -> RecordsConfig:
+    """The records' section.  With ``check`` (the checker, the daemon's start and reload),
+    the images folder (or, not made yet, its nearest folder that is there) must take files,
+    as the database's folder must (:func:`db.location.unwritable_folder`; ``checker``: only
+    one nobody may write, the check being run by any user): one the daemon could not write
+    was taken, and every selection wrote two warnings ("image ... not saved: Permission
+    denied") for as long as it ran."""
     r = node.mapping(("images_dir", "save_images"))
     images = relative_path(r["images_dir"], base) if "images_dir" in r else None
-    if images is not None and present(r["images_dir"], images, "folder") \
-            and not images.is_dir():
+    there = images is not None and present(r["images_dir"], images, "folder")
+    if images is not None and there and not images.is_dir():
         # issue 19: accepted with SQLite, and then no selection's images could ever be saved
         raise r["images_dir"].error(f"{images} is a file, not a folder (name the folder the "
                                     "selections' images go to)")
+    if check and images is not None:
+        from db.location import unwritable_folder
+
+        folder = images if there else _nearest_folder(images)
+        why = None if folder is None else unwritable_folder(folder, as_writer=not checker)
+        if why is not None:
+            made = "" if folder == images else f" (where {images} is to be made)"
+            raise r["images_dir"].error(f"{why}{made}: the selections' images and, with a "
+                                        "database server, the station's lock go there")
     return RecordsConfig(images, r["save_images"].flag() if "save_images" in r else False)
+
+
+def _nearest_folder(path: Path) -> Path | None:
+    """The nearest folder above ``path`` that is there (None: none can be looked at)."""
+    for up in path.parents:
+        try:
+            if up.is_dir():
+                return up
+        except OSError:
+            return None
+    return None
 
 
 def _missing(root: YamlNode, key: str) -> None:
@@ -231,7 +258,9 @@ class _StationReader(SectionReader):
             bolts_path=self.section("bolts", d.bolts_path,
                                     partial(existing_file, base=base, what="bolt file",
                                             note=self.note)),
-            records=self.section("records", d.records, partial(_records, base=base)),
+            records=self.section("records", d.records, partial(_records, base=base,
+                                                               check=check,
+                                                               checker=self.collect)),
             http=self.section("http", d.http, HttpConfig.from_node),
             access=self.section("access", d.access, AccessConfig.from_node),
             localize=self.section("localize", d.localize, LocalizeConfig.from_node),
