@@ -28,13 +28,14 @@ class StandIn(BaseHTTPRequestHandler):
     kinds: ClassVar[list[str]] = []
     started = threading.Event()
     stopped = threading.Event()
+    teaching = False     # teach mode left on by an earlier session: teach-start refused
 
     def log_message(self, *a: Any) -> None:
         pass
 
-    def _answer(self, doc: Any) -> None:
+    def _answer(self, doc: Any, status: int = 200) -> None:
         raw = json.dumps(doc).encode()
-        self.send_response(200)
+        self.send_response(status)
         self.send_header("Content-Type", "application/json")
         self.send_header("Content-Length", str(len(raw)))
         self.end_headers()
@@ -53,11 +54,19 @@ class StandIn(BaseHTTPRequestHandler):
         body = json.loads(self.rfile.read(int(self.headers["Content-Length"])) or b"{}")
         if self.path == "/api/commands":
             StandIn.kinds.append(body["kind"])
+            if body["kind"] == "teach-start" and StandIn.teaching:
+                words = "command teach-start SIM-1 by ed (cli 127.0.0.1): refused: teach " \
+                        "mode is on (teaching SIM-1 (sue): hold the tool on a bolt)"
+                self._answer({"accepted": False, "words": words, "kind": "teach-start",
+                              "reason": {"kind": "teaching", "words": "teach mode is on"}},
+                             409)
+                return
             if body["kind"] == "teach-start":
                 StandIn.started.set()
             if body["kind"] == "teach-stop":
                 StandIn.stopped.set()
-        self._answer({"ok": True, "words": "accepted"})
+                StandIn.teaching = False
+        self._answer({"accepted": True, "words": "accepted"})
 
 
 @pytest.mark.timeout(120)
@@ -85,4 +94,43 @@ def test_a_hang_up_mid_teach_ends_teach_mode_at_the_station(tmp_path: Path) -> N
         if p.poll() is None:
             p.kill()
             p.wait(30)
+        server.shutdown()
+
+
+def _serve() -> tuple[ThreadingHTTPServer, str]:
+    StandIn.kinds.clear()
+    StandIn.started.clear()
+    StandIn.stopped.clear()
+    server = ThreadingHTTPServer(("127.0.0.1", 0), StandIn)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    return server, f"http://127.0.0.1:{server.server_address[1]}/"
+
+
+def _teach(*argv: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "stationd", "teach", *argv], cwd=ROOT,
+                          capture_output=True, text=True, timeout=60, input="q\n",
+                          env={**os.environ, "STATIOND_PASSWORD": "teach-me-please"})
+
+
+@pytest.mark.timeout(120)
+def test_teach_mode_left_on_is_ended_from_the_command_line(tmp_path: Path) -> None:
+    """Teach mode left on by a session that was cut off (a kill -9, a laptop gone) could not
+    be ended from the command line: a new ``stationd teach`` was refused ("teach mode is
+    on") without a word of what to do, and had no way to stop it; only the commissioning
+    screen's Stop.  The refusal says how, and ``stationd teach --stop`` ends it."""
+    server, url = _serve()
+    StandIn.teaching = True
+    try:
+        r = _teach("--model", "SIM-1", "--user", "ed", "--bolts", "B01", "--out",
+                   str(tmp_path / "t.yaml"), "--url", url)
+        assert r.returncode == 1 and "teach mode is on" in r.stderr, r
+        assert f"stationd teach --stop --user NAME --url {url}" in r.stderr, r.stderr
+        r = _teach("--stop", "--user", "ed", "--url", url)
+        assert r.returncode == 0, r
+        assert StandIn.kinds[-1] == "teach-stop" and not StandIn.teaching
+        assert "teach-start" not in StandIn.kinds[1:]
+        # --model and --out stay needed to teach
+        r = _teach("--user", "ed", "--bolts", "B01", "--url", url)
+        assert r.returncode == 2 and "--model" in r.stderr and "--stop" in r.stderr, r
+    finally:
         server.shutdown()
