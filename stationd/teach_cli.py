@@ -25,9 +25,11 @@ from typing import Any
 
 from drivers.counting import counted
 from stationd.command_cli import (
+    DEFAULT_CONFIG,
     EXIT_REFUSED,
     EXIT_UNREACHABLE,
     ApiClient,
+    Target,
     client_args,
     find_station,
     identify,
@@ -68,6 +70,11 @@ def _ask(bolt: str) -> str:
 
 
 def cmd_teach(args: argparse.Namespace) -> int:
+    if args.stop:
+        return _cmd_stop(args)
+    if args.model is None or args.out is None:
+        raise InputError("teach needs --model M and --out TAUGHT.yaml (or --stop: end teach "
+                         "mode left on at the station)")
     out = Path(args.out)
     if out.exists() or out.is_symlink():   # a link too, dangling or not (outfile's rule)
         raise InputError(f"--out {out}: exists; a taught table is a new file, never an "
@@ -90,6 +97,7 @@ def cmd_teach(args: argparse.Namespace) -> int:
         raise InputError("which bolts: --from a CAD table, or --bolts B01,B02,...")
     target = find_station(args)
     args.url = target.url     # the daemon's, said in the messages below
+    args.via = _via(target)
     client = ApiClient(target.url, target.token, args.timeout)
     known = identify(client, target, "teach")   # named before anything is asked of it
     if isinstance(known, int):
@@ -99,6 +107,48 @@ def cmd_teach(args: argparse.Namespace) -> int:
     except (urllib.error.URLError, OSError) as exc:
         sys.stderr.write(f"stationd: teach: {unreachable_words(args.url, exc)}\n")
         return EXIT_UNREACHABLE
+
+
+def _via(target: Target) -> str:
+    """How this command reached the station, for a command line to give again."""
+    return "" if target.config == str(DEFAULT_CONFIG) else \
+        f" --config {target.config}" if target.config is not None else f" --url {target.url}"
+
+
+#: how teach mode left on by a session that was cut off is ended (a new session is refused)
+LEFT_ON = ("teach mode left on by a session that was cut off (its terminal gone, the "
+           "command killed) is ended with stationd teach --stop --user NAME{via}, or the "
+           "commissioning screen's Stop teach mode")
+
+
+def _cmd_stop(args: argparse.Namespace) -> int:
+    """``stationd teach --stop``: teach mode ended at the station, whoever's session left it
+    on (a kill -9, a laptop gone: a new session was refused, "teach mode is on", and only
+    the commissioning screen could end it)."""
+    target = find_station(args)
+    args.url = target.url
+    client = ApiClient(target.url, target.token, args.timeout)
+    known = identify(client, target, "teach")
+    if isinstance(known, int):
+        return known
+    try:
+        password = read_password(args.user)
+        status, who = client.call("/api/login", {"user": args.user, "password": password,
+                                                 "client": "cli"})
+        if status != 200:
+            return say_refused("login refused", status, who)
+        st, nonce = client.call("/api/nonce")
+        if st != 200 or not isinstance(nonce, dict):
+            return say_refused("teach --stop", st, nonce)
+        status, answer = client.call("/api/commands", {"kind": "teach-stop",
+                                                       "nonce": nonce["nonce"]})
+        client.call("/api/logout", {})
+    except (urllib.error.URLError, OSError) as exc:
+        sys.stderr.write(f"stationd: teach: {unreachable_words(args.url, exc)}\n")
+        return EXIT_UNREACHABLE
+    words = answer.get("words") if isinstance(answer, dict) else answer
+    print(words, file=sys.stdout if status == 200 else sys.stderr)
+    return 0 if status == 200 else EXIT_REFUSED
 
 
 def _teach(args: argparse.Namespace, client: ApiClient, out: Path, doc: dict[str, Any],
@@ -118,6 +168,9 @@ def _teach(args: argparse.Namespace, client: ApiClient, out: Path, doc: dict[str
     status, answer = command({"kind": "teach-start", "model": args.model})
     if status != 200:
         print(answer["words"] if isinstance(answer, dict) else answer, file=sys.stderr)
+        reason = answer.get("reason") if isinstance(answer, dict) else None
+        if isinstance(reason, dict) and reason.get("kind") == "teaching":
+            print(LEFT_ON.format(via=args.via), file=sys.stderr)
         return EXIT_REFUSED
     taught: dict[str, dict[str, Any]] = {}
     cad_at = {str(b["id"]): b.get("position") for b in cad}
@@ -210,12 +263,15 @@ def _write(out: Path, doc: dict[str, Any], model: str, taught: dict[str, dict[st
 def add_teach_parser(sub: Any) -> None:
     t = sub.add_parser("teach", help="teach a model's bolt positions on a vehicle (through "
                        "the running daemon, the teach right)")
-    t.add_argument("--model", required=True, help="the vehicle model (its bolt table name)")
+    t.add_argument("--model", help="the vehicle model (its bolt table name)")
     t.add_argument("--user", required=True, help="who teaches (a user with the teach right)")
     t.add_argument("--from", dest="from_", metavar="CAD.yaml",
                    help="the bolt table to teach (ids, parameters, CAD positions)")
     t.add_argument("--bolts", help="only these bolts, in this order (comma-separated)")
-    t.add_argument("--out", required=True, help="the taught table to write (a new file)")
+    t.add_argument("--out", help="the taught table to write (a new file)")
+    t.add_argument("--stop", action="store_true",
+                   help="end teach mode at the station, left on by a session that was cut "
+                        "off (a new session is refused while it is on)")
     t.add_argument("--tolerance", type=float, default=None,
                    help="flag a bolt farther than this from CAD, mm (default: the station's "
                         "matching tolerance)")
