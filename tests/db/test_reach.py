@@ -66,3 +66,32 @@ def test_the_database_s_check_says_it_in_one_line(tmp_path):
     # a missing folder is still one to create
     assert sqlite_problem(f"sqlite:///{tmp_path}/gone/x.db").startswith(
         f"folder {tmp_path}/gone does not exist: create it")
+
+
+class _ReadOnly:
+    """``os.statvfs``'s answer for a folder the unit's ``ProtectSystem=strict`` mounted
+    read-only in the service's view (the file system itself is read-write)."""
+
+    f_flag = os.ST_RDONLY
+
+
+def test_a_folder_read_only_under_the_unit_says_how_the_unit_lets_it_be_written(
+        monkeypatch, tmp_path):
+    """A commissioning trial: a data partition's folder for the database (or the images)
+    under the systemd unit, whose ``ProtectSystem=strict`` shows every folder but its
+    ``StateDirectory`` (and ``/run/lock``) read-only.  The daemon said "on a read-only file
+    system: name a folder that can be written", of a file system an engineer finds
+    read-write from a shell.  Under systemd (``INVOCATION_ID``, which it sets for each
+    service it runs) the words say why and what to add to the unit; elsewhere they are as
+    they were."""
+    monkeypatch.setattr(os, "statvfs", lambda path: _ReadOnly())
+    monkeypatch.delenv("INVOCATION_ID", raising=False)
+    plain = unwritable_folder(tmp_path)
+    assert plain == f"folder {tmp_path} is on a read-only file system: name a folder that " \
+                    "can be written (e.g. /var/lib/stationd)"
+    monkeypatch.setenv("INVOCATION_ID", "0123456789abcdef0123456789abcdef")
+    said = unwritable_folder(tmp_path)
+    assert said is not None and said.startswith(f"folder {tmp_path} is read-only to this "
+                                                "service"), said
+    assert "ProtectSystem=strict" in said and f"ReadWritePaths={tmp_path}" in said
+    assert "systemctl edit stationd" in said and "\n" not in said
