@@ -46,6 +46,14 @@ def unwritable_folder(folder: Path, *, as_writer: bool = True) -> str | None:
     except OSError:
         return None   # not reachable to look at: what opens it says why
     if read_only:
+        if os.environ.get("INVOCATION_ID"):
+            # systemd runs this process (it sets INVOCATION_ID for each service): the unit's
+            # ProtectSystem=strict shows every folder but its own read-only, whatever the
+            # file system (a data partition "read-only" that is read-write from a shell)
+            return f"folder {folder} is read-only to this service (the systemd unit's " \
+                   "ProtectSystem=strict: only /var/lib/stationd is written): let the unit " \
+                   f"write it (systemctl edit stationd: [Service] ReadWritePaths={folder}), " \
+                   "or name a folder under /var/lib/stationd"
         return f"folder {folder} is on a read-only file system: name a folder that can be " \
                "written (e.g. /var/lib/stationd)"
     if not stat.S_IMODE(mode) & 0o222:
