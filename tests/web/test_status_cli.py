@@ -501,3 +501,19 @@ def test_status_names_a_bolt_to_be_loosened_first(live_server, capsys):
     assert main(["status", "--url", srv.url, "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["to_loosen"] == [
         {"bolt": "B2", "loosen_pset": 90}]
+
+
+def test_status_in_teach_mode_says_the_cycle_is_off_and_how_teach_mode_ends():
+    """A commissioning trial: teach mode left on by a ``stationd teach`` that was cut off;
+    ``status`` said ``state: teaching (...)`` and nothing of what that means for the line
+    (nothing is tightened) or how it ends."""
+    from stationd.web.status_cli import format_status
+
+    st = {"state": "teaching", "reason": "teaching SIM-1 (ed): hold the tool on a bolt",
+          "vehicle": {"vin": "VIN1", "model": "SIM-1"}, "counters": {"total": 50}}
+    lines = format_status(st, " --config /etc/x.yaml").splitlines()
+    assert "teach:    teach mode is on: nothing is tightened until it ends (stationd teach "\
+           "--stop --user NAME --config /etc/x.yaml, or the commissioning screen's Stop " \
+           "teach mode)" in lines, lines
+    st["state"] = "tracking"
+    assert not any(line.startswith("teach:") for line in format_status(st).splitlines())
