@@ -128,6 +128,10 @@ def format_status(st: dict[str, Any], via: str = "") -> str:
     now = now_line(st)
     if now is not None:
         lines.append(now)
+    if st["state"] == "teaching":   # one left on by a session cut off: how it ends
+        lines.append(f"teach:    teach mode is on: nothing is tightened until it ends (stationd "
+                     f"teach --stop --user NAME{via}, or the commissioning screen's Stop teach "
+                     "mode)")
     v = st.get("vehicle")
     c = st.get("counters", {})
     said = "none" if not v else \
