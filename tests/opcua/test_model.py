@@ -124,3 +124,44 @@ def test_a_copied_standard_address_space_is_the_filled_one_node_for_node_and_apa
         assert _differing(f, a) <= _differing(f, _nodes(second))
 
     asyncio.run(scenario())
+
+
+def test_every_structure_of_the_models_has_its_definition_with_its_base_fields() -> None:
+    """A structure whose NodeSet2 ``<Definition>`` has no field of its own (Machinery Result's
+    ResultTransferOptionsDataType adds none to BaseResultTransferOptionsDataType; DI's abstract
+    FetchResultDataType has none) still has a StructureDefinition, with its base type's fields
+    and its Default Binary encoding: a client that builds its types from the definitions
+    (node-opcua: "2 dataType(s) could not be registered") can decode every one of them."""
+    async def scenario() -> None:
+        server, _ = await _server("urn:definitions")
+        uris = await server.get_namespace_array()
+        wanted = {uris.index(u) for u in model.MODEL_URIS}
+        missing: list[str] = []
+
+        async def walk(node: Any, base: list[str]) -> None:
+            for child in await node.get_children(refs=ua.ObjectIds.HasSubtype,
+                                                 nodeclassmask=ua.NodeClass.DataType):
+                name = (await child.read_browse_name()).Name
+                sdef = await child.read_data_type_definition() \
+                    if child.nodeid.NamespaceIndex in wanted else None
+                fields = base
+                if child.nodeid.NamespaceIndex in wanted:
+                    if not isinstance(sdef, ua.StructureDefinition):
+                        missing.append(name)
+                    else:
+                        fields = [f.Name for f in sdef.Fields]
+                        if fields[:len(base)] != base:
+                            missing.append(f"{name}: {fields} lacks {base}")
+                        abstract = await child.read_attribute(ua.AttributeIds.IsAbstract)
+                        if not abstract.Value.Value and sdef.DefaultEncodingId.is_null():
+                            missing.append(f"{name}: no DefaultEncodingId")
+                await walk(child, fields)
+
+        await walk(server.get_node(ua.ObjectIds.Structure), [])
+        assert missing == [], missing
+        result = uris.index(model.RESULT_URI)
+        options = await server.get_node(ua.NodeId(3004, result)).read_data_type_definition()
+        assert isinstance(options, ua.StructureDefinition)
+        assert [f.Name for f in options.Fields] == ["ResultId"]
+
+    asyncio.run(scenario())
