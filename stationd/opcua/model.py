@@ -262,6 +262,8 @@ async def _structures(endpoint: Server | Client, uris: list[str]) -> list[_Struc
                                              nodeclassmask=ua.NodeClass.DataType):
             fields = inherited
             sdef = await _definition(child)
+            if child.nodeid.NamespaceIndex in wanted:
+                sdef = await _complete(child, node, sdef)
             if sdef is not None:
                 own = {f.Name for f in sdef.Fields}
                 sdef.Fields = [f for f in inherited if f.Name not in own] + list(sdef.Fields)
@@ -281,6 +283,23 @@ async def _definition(node: Node) -> ua.StructureDefinition | None:
     except ua.UaError:
         return None
     return sdef if isinstance(sdef, ua.StructureDefinition) else None
+
+
+async def _complete(node: Node, base: Node,
+                    sdef: ua.StructureDefinition | None) -> ua.StructureDefinition:
+    """A structure's definition with what asyncua's import leaves out: a structure whose
+    ``<Definition>`` has no field of its own (Machinery Result's ResultTransferOptionsDataType,
+    DI's abstract FetchResultDataType) gets none at all, and one whose encodings name it only
+    from their side (DI's TransferResultErrorDataType, ...) no DefaultEncodingId; Part 3 has
+    every structure's definition say both (its base type's fields are added by the caller)."""
+    if sdef is None:
+        sdef = ua.StructureDefinition(BaseDataType=base.nodeid,
+                                      StructureType=ua.StructureType.Structure, Fields=[])
+    if sdef.DefaultEncodingId.is_null():
+        for ref in await node.get_references(refs=ua.ObjectIds.HasEncoding):
+            if ref.BrowseName.Name == "Default Binary":
+                sdef = replace(sdef, DefaultEncodingId=ref.NodeId)
+    return sdef
 
 
 def _spec_definition(sdef: ua.StructureDefinition, subtyped: set[str]) -> ua.StructureDefinition:
