@@ -21,7 +21,11 @@ here (``../shared/design/PROTOCOLS.md`` numbers them):
    client (a stock asyncua client decodes a result only with it).
 
 Items 4-7 (methods, where events are fired, the abstract event type, security) are in
-:mod:`stationd.opcua.server`.
+:mod:`stationd.opcua.server`.  Also here: a structure whose ``<Definition>`` has no field of its
+own gets no DataTypeDefinition at all from the import (Machinery Result's
+ResultTransferOptionsDataType, DI's FetchResultDataType: node-opcua could not register them),
+and one whose encodings name it only from their side no DefaultEncodingId: both are completed
+(:func:`_complete`).
 """
 
 from __future__ import annotations
