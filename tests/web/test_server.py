@@ -443,3 +443,24 @@ def test_the_seed_takes_the_calibration_trust_and_the_vehicle_too():
                               "at_station": True, "reopened_by": None}
     health = doc["devices"]["pair2"]
     assert health["check"]["trusted"] is False and "moved" in health["check"]["words"]
+
+
+def test_the_screens_results_export_names_the_station_on_every_row(tmp_path):
+    """The vehicle's CSV export from the screens names the station that made each result
+    (its id as the serve loop gives the server, the one ``/api/status`` says), as the
+    command's export does: a plant collects them from several stations."""
+    repo = results_db(tmp_path)
+
+    async def main():
+        srv = serve(EventBus(), results=Results(repo))
+        srv.station = {"id": "ST-07", "config": "/etc/stationd/station.yaml"}
+        await srv.start()
+        try:
+            async with ClientSession() as http:
+                async with http.get(srv.url + f"api/vehicles/{VIN}/export.csv") as r:
+                    rows = list(csv.DictReader(io.StringIO(await r.text())))
+            assert rows and {x["station"] for x in rows} == {"ST-07"}
+        finally:
+            await srv.stop()
+            repo.close()
+    asyncio.run(main())
