@@ -63,6 +63,16 @@ def _db_url(args: argparse.Namespace) -> str:
     return args.db or DEFAULT_DB
 
 
+def _station_id(args: argparse.Namespace) -> str | None:
+    """The station's id by its station file (``--config``; None without one, or without an
+    id): what its exported rows name as their station."""
+    if not getattr(args, "config", None):
+        return None
+    from stationd.config import load_station_config, station_identity
+
+    return station_identity(load_station_config(args.config))["id"]
+
+
 def _missing(args: argparse.Namespace) -> str:
     """What to do when the database a read command names does not exist, without
     suggesting the option already given."""
@@ -251,12 +261,13 @@ def _export_results(args: argparse.Namespace) -> int:
     fmt = args.format or "csv"
     # one vehicle: found where ``db report`` finds it (a running demo's database too)
     url = _report_url(args) if args.vin is not None else _read_url(args)
+    station = _station_id(args) if url == _db_url(args) else None   # (not a demo's)
     with open_repository(url, must_exist=True, missing=_missing(args)) as repo:
         results = Results(repo)
         # (an unknown --vin: the report raises NotFoundError, one line, exit 2)
         listed = [repo.vehicle_report(args.vin).to_json()] if args.vin is not None else \
             list(reversed(results.vehicles(limit=1_000_000)))
-        runs = [r for v in listed for r in results.export(v["vin"])]
+        runs = [r for v in listed for r in results.export(v["vin"], station)]
     if args.since is not None:   # a bolt not run down has no time: kept with its vehicle's
         kept = [r for r in runs if r["recorded_at"] is not None
                 and _aware(datetime.fromisoformat(r["recorded_at"])) >= args.since]

@@ -57,7 +57,11 @@ CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator"
               # a person's loosen command on a bolt (an OK opened again): a row of its own
               # (status ``loosen ordered``, the time, their comment) before its loosening
               # (new columns go last: a sheet reading the columns by place keeps working)
-              "ordered_by")
+              "ordered_by",
+              # which station made it (its ``line.station_id``, else ``opcua.station_id``):
+              # an export a plant collects from several stations named none; empty where
+              # the database was named without its station file
+              "station")
 
 #: how long after a lock the NOK it comes of may have been taken: none for a record stored
 #: by this version (the NOK's result_at is the time the lock was decided at, or earlier);
@@ -207,7 +211,7 @@ class Results:
             out.append((rec.id, run))
         return out
 
-    def export(self, vin: str) -> list[dict[str, Any]]:
+    def export(self, vin: str, station: str | None = None) -> list[dict[str, Any]]:
         """The vehicle's rundowns, then one row per bolt with none, no values: status
         ``missing`` (``pending`` while the vehicle is open: at the station, or reopened, its
         bolt is still to do, not forgotten), or ``skipped`` with who skipped it and their
@@ -215,7 +219,8 @@ class Results:
         calls a bolt skipped on purpose missing reads as a bolt forgotten).  Each release of
         a locked or held bolt is a row (status ``released``, who, when, why): three NOKs then
         an OK read as a bolt that simply took four tries, where a person decided it may be
-        tightened again.  Raises ``NotFoundError`` for an unknown VIN."""
+        tightened again.  Every row names ``station`` (the station's id; None: not known).
+        Raises ``NotFoundError`` for an unknown VIN."""
         report = self.repo.vehicle_report(vin)
         still_open = report.vehicle.ended_at is None
         rows, unreadable = self._rows(vin), self.repo.unreadable(vin)
@@ -279,7 +284,10 @@ class Results:
                     if c.kind == "release" else
                     {"status": LOOSEN_ORDERED_STATUS, "ordered_by": c.user}
                     if c.kind == "loosen" else {"status": LOCKED_STATUS})})
-        return runs + none + unread + loose + events
+        out = runs + none + unread + loose + events
+        for row in out:
+            row["station"] = station
+        return out
 
 
 def _stored_row(vin: str, model: str, status: str, x: dict[str, Any], **fields: Any

@@ -526,7 +526,8 @@ class WebServer:
     async def _export_csv(self, request: web.Request) -> web.Response:
         res = self._need_results()
         vin = request.match_info["vin"]
-        runs = await self._db(res.export, vin)   # 404 for an unknown VIN
+        station = (self.station or {}).get("id")
+        runs = await self._db(res.export, vin, station)   # 404 for an unknown VIN
         return web.Response(text=rundowns_csv(runs), content_type="text/csv",
                             headers=_attachment(f"{vin}.csv"))
 
