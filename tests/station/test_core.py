@@ -576,7 +576,9 @@ def test_faults_are_per_device_and_the_station_recovers_when_all_are_back():
     assert d.core.state is State.FAULT
     assert [device for device, _ in d.core.reason.faults] == ["pair1"]
     d.step(("back", 0.1, "pair1", 0))
-    assert d.core.state is State.WAITING_VEHICLE
+    # the lift read ready with VIN1 since its outage: tracking at once, not "waiting for
+    # vehicle" until the next read
+    assert d.core.state is State.TRACKING
     d.step(("lift", 0.1, True, True, "VIN1"))
     assert d.core.state is State.TRACKING
     health = [a.event for _, acts in d.log for a in acts
@@ -1083,3 +1085,29 @@ def test_a_new_station_announces_its_state_as_the_core_decided_it():
         [(State.FAULT, core.status().reason)]
     assert all(isinstance(a, Publish) for a in acts)
     assert core.status().faults == {DATABASE: "unable to open database"}
+
+
+@pytest.mark.parametrize("device", ["wrench", "pair1", "database"])
+def test_a_device_back_with_the_vehicle_at_height_tracks_again_not_waiting_for_the_lift(
+        device):
+    """An MES subscribed to the station's State (OPC UA ``JS/State``) saw every controller
+    link cut with a car at height go fault, then "waiting for vehicle: recovered; waiting
+    for the lift", then tracking at the next lift read: a car at the station counted as a
+    station starved of cars.  A device other than the lift back, the lift read ready with
+    the loaded vehicle: tracking at once.  The lift's own outage still waits for its read."""
+    d = _ready()
+    start = len(d.log)
+    d.step(("fault", 0.1, device))
+    d.step(("back", 0.1, "", 0))
+    told = [(e.state, e.reason) for _, acts in d.log[start:]
+            for e in published(acts, StateChanged)]
+    assert told[-1] == (State.TRACKING, StateReason(Because.TRACKING)), told
+    assert all(s is not State.WAITING_VEHICLE for s, _ in told), told
+    assert d.core.state is State.TRACKING
+    # the lift itself back: its state is not known until it is read again
+    d.step(("fault", 0.1, "lift"))
+    d.step(("back", 0.1, "", 0))
+    assert (d.core.state, d.core.reason) == (State.WAITING_VEHICLE,
+                                             StateReason(Because.RECOVERED))
+    d.step(("lift", 0.1, True, True, "VIN1"))
+    assert d.core.state is State.TRACKING
