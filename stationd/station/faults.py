@@ -50,6 +50,7 @@ class FaultRules(TeachRules):
             # the outage says it again (kept, the bit still set read as no change was lost
             # with the outage's fault: the lift "ok" everywhere, a review)
             self._plc_fault = False
+            self._lift_lost_at = ev.t
         return self._fault(ev.t, ev.device, ev.kind, ev.reason)
 
     def missed_since(self) -> float | None:
@@ -118,8 +119,15 @@ class FaultRules(TeachRules):
         del self.faults[device]
         acts: list[Action] = [Publish(DeviceHealth(device, True, t=t))]
         if self.state is State.FAULT:
+            lift = self._lift
             if self.faults:
                 self.reason = self._fault_reason()
+            elif self.vin is not None and lift is not None and lift.ready \
+                    and lift.t > self._lift_lost_at:
+                # the loaded vehicle still at height, the lift read ready since it was last
+                # silent: tracking again at once ("waiting for vehicle" until the next read
+                # counted a car at the station as one awaited, at every controller link cut)
+                self._to(State.TRACKING, StateReason(Because.TRACKING))
             else:
                 self._to(State.WAITING_VEHICLE, StateReason(Because.RECOVERED))
         return acts

@@ -221,6 +221,8 @@ class CoreState:
     tool_on: bool = False
     _specs: dict[str, LoadedBolt] = field(default_factory=dict, repr=False)
     _lift: LiftRead | None = field(default=None, repr=False)
+    #: when the lift PLC last went silent: a read older than that is not the lift as it is
+    _lift_lost_at: float = field(default=float("-inf"), repr=False)
     #: the lift PLC's fault bit as last read (False while the PLC does not answer: unknown, the
     #: first read after the outage says it again)
     _plc_fault: bool = field(default=False, repr=False)
