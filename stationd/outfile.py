@@ -163,32 +163,36 @@ def stamp_png(png: bytes, text: str) -> bytes:
     return png[:end] + chunk + png[end:]
 
 
-def write_atomic(path: Path, data: str | bytes) -> None:
+def write_atomic(path: Path, data: str | bytes, *, mode: int | None = None) -> None:
     """``data`` (text is written as UTF-8) into ``path`` via a temporary file in the same
     folder, flushed to disk and renamed over it: a reader sees the old file or the new one,
     never half of one; a full disk is an error (one line), not "wrote".  The file keeps the
-    mode of the one it replaces (a new one: the umask's), not the temporary file's 0600."""
-    write_all([(path, data)])
+    mode of the one it replaces (a new one: the umask's), not the temporary file's 0600;
+    ``mode`` gives it one (a private key's 0600: never readable by others, not even while
+    it is written)."""
+    write_all([(path, data)], mode=mode)
 
 
-def write_all(files: list[tuple[Path, str | bytes]]) -> None:
+def write_all(files: list[tuple[Path, str | bytes]], *, mode: int | None = None) -> None:
     """Write every file or none (as :func:`write_atomic` each): all are written to temporary
     files beside them first, and renamed only once all are (a full disk or a missing folder
-    leaves nothing half-written behind, and none of the files replaced)."""
+    leaves nothing half-written behind, and none of the files replaced); ``mode``: each
+    file's, else as :func:`write_atomic` says."""
     temps: list[tuple[str, Path]] = []
     current = files[0][0] if files else Path()
     try:
         try:
             for path, data in files:
                 current = path
-                mode = path.stat().st_mode & 0o7777 if path.is_file() else _default_mode()
+                given = mode if mode is not None else path.stat().st_mode & 0o7777 \
+                    if path.is_file() else _default_mode()
                 fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
                 temps.append((tmp, path))
                 with os.fdopen(fd, "wb") as f:
                     f.write(data.encode("utf-8") if isinstance(data, str) else data)
                     f.flush()
                     os.fsync(f.fileno())
-                os.chmod(tmp, mode)
+                os.chmod(tmp, given)
             # a signal between two renames would leave some files new and some old, and
             # one just after a rename a file in place that the command's stop never names
             with held():

@@ -95,6 +95,7 @@ from stationd.opcua.model import (
 )
 from stationd.opcua.results import JOINING_TECHNOLOGY, any_message, any_result
 from stationd.opcua.uatypes import ua
+from stationd.outfile import write_atomic
 from stationd.station.events import (
     DeviceHealth,
     DeviceIdentified,
@@ -197,15 +198,8 @@ def _private_key(key: Path, cert: Path) -> None:
         return
     from asyncua.crypto.cert_gen import dump_private_key_as_pem, generate_private_key
 
-    pem = dump_private_key_as_pem(generate_private_key())
-    part = key.with_name(f".{key.name}.{os.getpid()}.part")
-    fd = os.open(part, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    os.fchmod(fd, 0o600)   # a leftover part file keeps its mode through O_TRUNC
-    with os.fdopen(fd, "wb") as f:
-        f.write(pem)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(part, key)
+    # written whole, 0600 from its first byte (its temporary file is made so)
+    write_atomic(key, dump_private_key_as_pem(generate_private_key()), mode=0o600)
     cert.unlink(missing_ok=True)
 
 
