@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -133,4 +134,63 @@ def test_teach_mode_left_on_is_ended_from_the_command_line(tmp_path: Path) -> No
         r = _teach("--user", "ed", "--bolts", "B01", "--url", url)
         assert r.returncode == 2 and "--model" in r.stderr and "--stop" in r.stderr, r
     finally:
+        server.shutdown()
+
+
+class HangsUpTwice(StandIn):
+    """As :class:`StandIn`; the nonce of the teach stop (after the first hang-up) is answered
+    only once the command received a second SIGHUP, or gave up the request (at most 10 s):
+    a terminal's hang-up reaches the foreground command twice, from the shell that resends
+    it to its jobs and from the kernel as that shell (the session leader) exits."""
+
+    pid = 0
+    hung_up = threading.Event()
+
+    def do_GET(self) -> None:
+        if self.path.startswith("/api/nonce") and HangsUpTwice.hung_up.is_set() \
+                and HangsUpTwice.pid:
+            pid, HangsUpTwice.pid = HangsUpTwice.pid, 0
+            os.kill(pid, signal.SIGHUP)
+            select.select([self.connection], [], [], 10)   # the command gone, or waiting
+            try:
+                self._answer({"nonce": "n"})
+            except OSError:
+                pass   # it went without waiting for the answer
+            return
+        super().do_GET()
+
+
+@pytest.mark.timeout(120)
+def test_a_second_hang_up_does_not_cut_the_teach_stop(tmp_path: Path) -> None:
+    """The teach stop the first SIGHUP sends is not cut by the second one: the stop was
+    interrupted (a KeyboardInterrupt in its request), teach mode left on at the station, as
+    with no handling at all."""
+    StandIn.kinds.clear()
+    StandIn.started.clear()
+    StandIn.stopped.clear()
+    server = ThreadingHTTPServer(("127.0.0.1", 0), HangsUpTwice)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    url = f"http://127.0.0.1:{server.server_address[1]}/"
+    p = subprocess.Popen(
+        [sys.executable, "-m", "stationd", "teach", "--model", "SIM-1", "--user", "ed",
+         "--bolts", "B01,B02", "--out", str(tmp_path / "taught.yaml"), "--url", url],
+        cwd=ROOT, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True, env={**os.environ, "STATIOND_PASSWORD": "teach-me-please"})
+    try:
+        assert p.stdout is not None
+        while "press Enter" not in (line := p.stdout.readline()):   # waits on B01
+            assert line, p.communicate(timeout=30)
+        assert StandIn.started.is_set()
+        HangsUpTwice.pid = p.pid
+        HangsUpTwice.hung_up.set()
+        p.send_signal(signal.SIGHUP)           # the terminal hung up
+        _, err = p.communicate(timeout=60)
+        assert StandIn.stopped.is_set(), (p.returncode, err)   # teach mode ended
+        assert p.returncode == 128 + signal.SIGHUP, (p.returncode, err)
+        assert err.strip().splitlines()[-1] == "stationd: stopped by SIGHUP (hang-up)", err
+        assert "Traceback" not in err, err
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait(30)
         server.shutdown()
