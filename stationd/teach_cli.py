@@ -42,6 +42,7 @@ from stationd.errors import ConfigError, InputError
 from stationd.filekind import expect
 from stationd.outfile import write_atomic
 from stationd.station.matching import MatchParams, check_spacing
+from stationd.stopping import held
 from stationd.taught import table_text
 from stationd.yamlio import YamlNode
 
@@ -243,10 +244,14 @@ def finish(out: Path, doc: dict[str, Any], model: str, taught: dict[str, dict[st
 
 def _stop(args: argparse.Namespace, command: Any, client: ApiClient) -> None:
     """Teach mode off and the session closed; a daemon that no longer answers is said (teach
-    mode then stays on there until stopped), never a traceback."""
+    mode then stays on there until stopped), never a traceback.  Held against the signals
+    (one that comes meanwhile stops the command once it is sent): a terminal's hang-up
+    reaches the command twice (the shell resends it to its jobs, the kernel sends it as the
+    shell exits), and the second cut the stop the first one sent: teach mode left on."""
     try:
-        command({"kind": "teach-stop"})
-        client.call("/api/logout", {})
+        with held():
+            command({"kind": "teach-stop"})
+            client.call("/api/logout", {})
     except (urllib.error.URLError, OSError) as exc:
         sys.stderr.write(f"stationd: teach: the daemon at {args.url} did not answer teach "
                          f"stop ({network_words(exc)}): teach mode may still be on "
