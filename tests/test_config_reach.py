@@ -211,6 +211,27 @@ def test_an_images_folder_nobody_may_write_is_an_error_at_start_and_in_the_check
         validate_station(station)
 
 
+
+def test_an_images_folder_the_daemon_never_writes_is_not_checked(tmp_path):
+    """``save_images`` off with an SQLite database (its lock beside it): the daemon writes
+    nothing in ``records.images_dir`` (the screens only read the images saved earlier, a
+    read-only archive of them too), so its being read-only refuses nothing: the check
+    refused the start with exit 2, which the unit does not restart (a station that ran
+    before the upgrade stayed down)."""
+    images = tmp_path / "images"
+    images.mkdir()
+    images.chmod(0o555)
+    station = _station(tmp_path)
+    station.write_text(station.read_text() + f"records: {{images_dir: {images}, "
+                                              "save_images: false}\n")
+    assert "records.images_dir" not in _errors_by_key_or_none(station)
+    validate_station(station)   # the daemon's start and reload: taken
+
+
+def _errors_by_key_or_none(station: Path) -> dict[str, str]:
+    checked = check_station(station)
+    return {e.key or "": str(e) for e in checked.errors}
+
 @pytest.mark.system
 def test_an_images_folder_the_daemons_user_cannot_write_is_one_line_and_exit_2(open_folder):
     images = open_folder / "images"     # root's (or the tests' user's), 0755
@@ -220,7 +241,8 @@ def test_an_images_folder_the_daemons_user_cannot_write_is_one_line_and_exit_2(o
     data.mkdir()
     data.chmod(0o777)
     station = _station(open_folder, database=f"{data}/stationd.db")
-    station.write_text(station.read_text() + f"records: {{images_dir: {images}}}\n")
+    station.write_text(station.read_text() + f"records: {{images_dir: {images}, "
+                                              "save_images: true}\n")
     as_root = os.geteuid() == 0
     if not as_root:
         pytest.skip("needs another user than the folder's owner: run as root")
