@@ -169,13 +169,16 @@ STATE_DIRECTORY = Path("/var/lib/stationd")
 
 
 def _records(node: YamlNode, base: Path, check: bool = False,
-             checker: bool = False) -> RecordsConfig:
+             checker: bool = False, database_url: str | None = None) -> RecordsConfig:
     """The records' section.  With ``check`` (the checker, the daemon's start and reload),
     the images folder (or, not made yet, its nearest folder that is there) must take files,
     as the database's folder must (:func:`db.location.unwritable_folder`; ``checker``: only
     one nobody may write, the check being run by any user): one the daemon could not write
     was taken, and every selection wrote two warnings ("image ... not saved: Permission
-    denied") for as long as it ran."""
+    denied") for as long as it ran.  Only a folder the daemon writes: with ``save_images``,
+    or the station's lock there (``database_url`` not an SQLite file); else it only reads
+    the images saved earlier (a read-only archive is refused nothing: a start refused,
+    exit 2, is not restarted)."""
     r = node.mapping(("images_dir", "save_images"))
     images = relative_path(r["images_dir"], base) if "images_dir" in r else None
     there = images is not None and present(r["images_dir"], images, "folder")
@@ -183,7 +186,8 @@ def _records(node: YamlNode, base: Path, check: bool = False,
         # issue 19: accepted with SQLite, and then no selection's images could ever be saved
         raise r["images_dir"].error(f"{images} is a file, not a folder (name the folder the "
                                     "selections' images go to)")
-    if check and images is not None:
+    save = r["save_images"].flag() if "save_images" in r else False
+    if check and images is not None and (save or _lock_there(database_url, images)):
         from db.location import unwritable_folder
 
         folder = images if there else _nearest_folder(images)
@@ -192,7 +196,15 @@ def _records(node: YamlNode, base: Path, check: bool = False,
             made = "" if folder == images else f" (where {images} is to be made)"
             raise r["images_dir"].error(f"{why}{made}: the selections' images and, with a "
                                         "database server, the station's lock go there")
-    return RecordsConfig(images, r["save_images"].flag() if "save_images" in r else False)
+    return RecordsConfig(images, save)
+
+
+def _lock_there(database_url: str | None, images: Path) -> bool:
+    """Whether the station's lock goes in the images folder (a database server's station:
+    :func:`stationd.lock.lock_path`)."""
+    from stationd.lock import LOCK_NAME, lock_path
+
+    return lock_path(database_url or "", images) == images / LOCK_NAME
 
 
 def _nearest_folder(path: Path) -> Path | None:
@@ -252,15 +264,17 @@ class _StationReader(SectionReader):
             wrench=self.section("wrench", d.wrench,
                                 partial(WrenchConfig.from_node, check_url=check)),
             matching=self.section("matching", d.matching, MatchingConfig.from_node),
-            database_url=self.section("database", d.database_url,
-                                      partial(_database_url, base=base, check=check,
-                                              checker=self.collect, header=self.header)),
+            # (named: the records' folder holds the lock of a database server's station)
+            database_url=(database_url := self.section(
+                "database", d.database_url, partial(_database_url, base=base, check=check,
+                                                    checker=self.collect, header=self.header))),
             bolts_path=self.section("bolts", d.bolts_path,
                                     partial(existing_file, base=base, what="bolt file",
                                             note=self.note)),
             records=self.section("records", d.records, partial(_records, base=base,
                                                                check=check,
-                                                               checker=self.collect)),
+                                                               checker=self.collect,
+                                                               database_url=database_url)),
             http=self.section("http", d.http, HttpConfig.from_node),
             access=self.section("access", d.access, AccessConfig.from_node),
             localize=self.section("localize", d.localize, LocalizeConfig.from_node),
