@@ -81,6 +81,13 @@ class Target:
     #: finds nothing says so, not "is stationd running?" of a daemon that runs)
     no_api: bool = False
 
+    def via(self) -> str:
+        """How the command reached the station, for a command line it says to give again
+        (``stationd teach --stop --user NAME --url ...``): nothing for the default station
+        file, else its ``--config`` or ``--url``."""
+        return "" if self.config == str(DEFAULT_CONFIG) else \
+            f" --config {self.config}" if self.config is not None else f" --url {self.url}"
+
 
 def daemon_url(cfg: Any) -> str:
     """Where a station's daemon serves its API: its ``http.listen`` (127.0.0.1:8080 without
@@ -528,9 +535,7 @@ def cmd_status(args: argparse.Namespace) -> int:
                    out=sys.stderr if args.json else sys.stdout)
     if isinstance(doc, int):
         return doc
-    via = "" if target.config == str(DEFAULT_CONFIG) else \
-        f" --config {target.config}" if target.config is not None else f" --url {target.url}"
-    print(json.dumps(doc, indent=1) if args.json else format_status(doc, via))
+    print(json.dumps(doc, indent=1) if args.json else format_status(doc, target.via()))
     # the daemon's own verdict, as /healthz's 503 (a device reporting its fault too); a
     # daemon of an earlier version gives its state alone
     if doc.get("in_fault", doc.get("state") == State.FAULT):

@@ -25,11 +25,9 @@ from typing import Any
 
 from drivers.counting import counted
 from stationd.command_cli import (
-    DEFAULT_CONFIG,
     EXIT_REFUSED,
     EXIT_UNREACHABLE,
     ApiClient,
-    Target,
     client_args,
     find_station,
     identify,
@@ -98,7 +96,7 @@ def cmd_teach(args: argparse.Namespace) -> int:
         raise InputError("which bolts: --from a CAD table, or --bolts B01,B02,...")
     target = find_station(args)
     args.url = target.url     # the daemon's, said in the messages below
-    args.via = _via(target)
+    args.via = target.via()
     client = ApiClient(target.url, target.token, args.timeout)
     known = identify(client, target, "teach")   # named before anything is asked of it
     if isinstance(known, int):
@@ -108,12 +106,6 @@ def cmd_teach(args: argparse.Namespace) -> int:
     except (urllib.error.URLError, OSError) as exc:
         sys.stderr.write(f"stationd: teach: {unreachable_words(args.url, exc)}\n")
         return EXIT_UNREACHABLE
-
-
-def _via(target: Target) -> str:
-    """How this command reached the station, for a command line to give again."""
-    return "" if target.config == str(DEFAULT_CONFIG) else \
-        f" --config {target.config}" if target.config is not None else f" --url {target.url}"
 
 
 #: how teach mode left on by a session that was cut off is ended (a new session is refused)
