@@ -239,11 +239,12 @@ def _stop(args: argparse.Namespace, command: Any, client: ApiClient) -> None:
     mode then stays on there until stopped), never a traceback.  Held against the signals
     (one that comes meanwhile stops the command once it is sent): a terminal's hang-up
     reaches the command twice (the shell resends it to its jobs, the kernel sends it as the
-    shell exits), and the second cut the stop the first one sent: teach mode left on."""
+    shell exits), and the second cut the stop the first one sent: teach mode left on.  A
+    daemon that does not answer holds a Ctrl-C for at most two requests' --timeout."""
     try:
-        with held():
+        with held():    # (the stop alone: a signal then cuts only the logout)
             command({"kind": "teach-stop"})
-            client.call("/api/logout", {})
+        client.call("/api/logout", {})
     except (urllib.error.URLError, OSError) as exc:
         sys.stderr.write(f"stationd: teach: the daemon at {args.url} did not answer teach "
                          f"stop ({network_words(exc)}): teach mode may still be on "
