@@ -63,3 +63,20 @@ def test_a_tightening_or_another_pset_s_loosening_after_the_cut_s_rundown_holds_
         assert not any(isinstance(a, StoreCutUnknown) for a in acts)
         assert d.core.matcher is not None and "B1" in d.core.matcher.done
         assert "B1" not in d.core.matcher.held
+
+
+def test_a_refused_command_during_the_catch_up_keeps_the_loosening_s_hold():
+    """A command the controller refuses between the cut's rundown and the loosening (a
+    refusal keeps the link: no cut, no new catch-up, its results go on coming) does not end
+    the catch-up's watch for a loosening after the rundown: B1 held as without it (a
+    reviewer: any fault of the wrench ended it)."""
+    d = _ready()
+    t0 = _cut_with_its_rundown(d)
+    d.feed(DeviceFault(d.t, "wrench", FaultKind.REFUSED, "MID 0042 refused"))
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    acts = d.feed(ResultIn(d.t, res(42, 1, True, 2), fetched=True, follows=40,
+                           made_at=t0 + 6.0))
+    acts += d.feed(CaughtUp(d.t, True, "", 1))
+    assert [(a.vin, a.bolt) for a in acts if isinstance(a, StoreCutUnknown)] == [
+        ("VIN1", "B1")]
+    assert d.core.matcher is not None and "B1" in d.core.matcher.held
