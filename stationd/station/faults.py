@@ -34,7 +34,8 @@ class FaultRules(TeachRules):
         if ev.device == WRENCH:
             self._vin_pending = False
             self._link_lost_at = ev.t
-            self._cut_closed = None
+            if ev.kind is not FaultKind.REFUSED:   # a refusal keeps the link and its catch-up
+                self._cut_closed = None
             if self._enabled is not None and self._enabled_at is not None and self._cut is None \
                     and self._result_owed(ev.t) and ev.kind is not FaultKind.REFUSED:
                 # the tool's result may come only after the reconnect: where it belongs is
