@@ -32,6 +32,9 @@ window.StationSession = (function () {
     a.textContent = text;
     a.className = ok ? "cmd-ok" : "cmd-refused";
     a.dataset.ok = ok ? "1" : "0";
+    // in sight where the command was given: on a panel PC or a tablet the forms reach below
+    // the window (or the panel scrolls), and an answer out of view was no answer at all
+    a.scrollIntoView({block: "nearest"});
   }
 
   function bind(onWho) {

@@ -1,0 +1,74 @@
+"""The Commands panel's answer, in both real browsers: seen where the command was given.
+
+Why: a supervisor's trial at 1280x800 and on a 1024x768 tablet, signed in with two bolts
+locked: the panel's forms reach below the window, so the answer line under them (accepted,
+or refused with its reason) was out of sight; the Release button gave no visible feedback
+and the lock leaving the Locked panel was the only sign the release was taken."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from stationd.access import AccessConfig, hash_password
+from stationd.station.commands import Answer, Command, Issuer
+from stationd.yamlio import YamlNode
+from tests.web.pages import Page
+from tests.web.scenario import VIN, locked, opened, work
+from tests.web.test_browser_commands import _answer, _login, _shown
+
+PASSWORD = "pw-of-sue-1234"  # noqa: S105 - a test user's
+
+
+def _in_view(page: Page, element_id: str) -> list[float]:
+    """The element's box clipped by the window and each scrolling box it is in: its visible
+    height against its own (all of it in view: the two equal)."""
+    return list(page.js("""
+        const e = document.getElementById(arguments[0]), r = e.getBoundingClientRect();
+        let top = Math.max(r.top, 0), bottom = Math.min(r.bottom, window.innerHeight);
+        for (let p = e.parentElement; p; p = p.parentElement) {
+          const s = getComputedStyle(p);
+          if (!/(auto|scroll|hidden)/.test(s.overflowY)) continue;
+          const b = p.getBoundingClientRect();
+          top = Math.max(top, b.top); bottom = Math.min(bottom, b.bottom);
+        }
+        return [Math.max(0, bottom - top), r.height];""", element_id))
+
+
+@pytest.mark.parametrize("size", [(1280, 800), (1024, 768)])
+def test_a_commands_answer_is_in_view_on_a_small_screen(live_server, page, size: Any) -> None:
+    srv = live_server(devices=("lift", "wrench", "pair1"))
+    srv.server.commands.access = AccessConfig.from_node(YamlNode.parse(
+        f"users:\n  sue: {{role: supervisor, password: '{hash_password(PASSWORD)}'}}\n",
+        "station.yaml"))
+
+    async def submit(command: Command, issuer: Issuer) -> Answer:
+        return Answer(1, command, issuer)
+    srv.server.commands.submit = submit
+    srv.publish([*opened(), *work(), *locked("B2", 3), *locked("B4", 3)])
+    page.size(*size)
+    page.get(srv.url)
+    page.wait(lambda p: p.text("#vin") == VIN, what="the vehicle on the screen")
+    _login(page, "sue", PASSWORD)
+    page.wait(lambda p: (p.text("#who") or "").startswith("sue"), 30, "sue logged in")
+    page.wait(lambda p: _shown(p, "release"), 30, "the Release form")
+    page.wait(lambda p: p.js("return [...document.querySelectorAll('#release-bolt option')]"
+                             ".map(o => o.value).includes('B2')"), 30, "B2 offered")
+    page.js("window.scrollTo(0, 0)")
+
+    # a refusal on the screen itself (no bolt chosen), then the station's acceptance
+    shown = page.text("#cmd-answer") or ""
+    page.click("#release button")
+    assert _answer(page, shown) == "choose the locked bolt to release"
+    seen, height = _in_view(page, "cmd-answer")
+    assert height > 0 and seen >= height - 1, f"{page.name} at {size}: {seen} of {height} px"
+
+    page.js("window.scrollTo(0, 0); document.querySelector('.side .commands').scrollTop = 0;"
+            "document.getElementById('release-bolt').value = 'B2';"
+            "document.getElementById('release-comment').value = 'joint checked'")
+    page.click("#release button")
+    got = _answer(page, "choose the locked bolt to release")
+    assert "accepted" in got or got.startswith("command"), got
+    seen, height = _in_view(page, "cmd-answer")
+    assert height > 0 and seen >= height - 1, f"{page.name} at {size}: {seen} of {height} px"
