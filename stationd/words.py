@@ -405,12 +405,14 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
                                    f"pset {r.pset} goes next"),
     Why.NOT_HELD: lambda r: (
         f"{r.bolt} is not held but locked after {r.count} NOK in a row: its results were "
-        "read; it is released (stationd release), not entered" if r.count else
+        "read; it is released (the screen's Release form, or stationd release), not entered"
+        if r.count else
         f"{r.bolt} is not held: an outcome is entered only for a held bolt (its result could "
         "not be read, or is not known)"),
     Why.ENTERED_OUTSIDE: lambda r: (f"{r.bolt}: an OK with {r.note}: not this bolt's "
                                     "tightening OK as entered; check the value on the "
-                                    "controller's screen (a NOK is entered with --nok)"),
+                                    "controller's screen (a NOK is entered as a NOK: NOK in "
+                                    "the screen's form, or --nok)"),
     Why.HELD: lambda r: (f"{r.bolt}: {r.note}: not taken as a tightening; {CHECK_ON_CONTROLLER}"
                          if is_not_taken_note(r.note) else
                          _unread(r.bolt, r.note)),

@@ -161,7 +161,7 @@ def test_a_bolt_that_is_not_held_is_refused_with_why():
     assert refused.reason == Reason(Why.NOT_HELD, bolt="B2", count=3)
     assert reason_words(refused.reason) == (
         "B2 is not held but locked after 3 NOK in a row: its results were read; it is "
-        "released (stationd release), not entered")
+        "released (the screen's Release form, or stationd release), not entered")
     assert _answer(d.command(3, ok("B9"), SUPERVISOR)).answer.reason == \
         Reason(Why.UNKNOWN_BOLT, bolt="B9", vin="VIN1")
     other = EnterOutcome("VIN2", "B1", True, 1.0, 1.0, "x")
@@ -188,6 +188,10 @@ def test_an_ok_entered_outside_the_bolt_s_window_is_refused_a_nok_is_not():
     assert not any(isinstance(a, RecordCommand) for a in acts)
     assert reason_words(refused.reason).startswith(
         f"B1: an OK with torque 4.974 Nm outside {spec.torque.min:g}-{spec.torque.max:g} Nm")
+    # said to a person at the screen as well as at the command line: the screen's form has no
+    # --nok (a supervisor's trial read only the command line's flag there)
+    assert reason_words(refused.reason).endswith(
+        "(a NOK is entered as a NOK: NOK in the screen's form, or --nok)")
     assert "B1" in d.core.matcher.held
     acts = d.command(2, EnterOutcome("VIN1", "B1", False, 4.974, 31.0, "NOK on screen"),
                      SUPERVISOR)
