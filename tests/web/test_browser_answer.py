@@ -18,7 +18,7 @@ from stationd.access import AccessConfig, hash_password
 from stationd.station.commands import Answer, Command, Issuer
 from stationd.yamlio import YamlNode
 from tests.web.pages import Page
-from tests.web.scenario import VIN, locked, opened, work
+from tests.web.scenario import VIN, held, locked, opened, work
 from tests.web.test_browser_commands import _answer, _login, _shown
 
 PASSWORD = "pw-of-sue-1234"  # noqa: S105 - a test user's
@@ -87,3 +87,32 @@ def test_a_commands_answer_is_in_view_on_a_small_screen(live_server, page, size:
     assert height > 0 and seen >= height - 1, f"{page.name} at {size}: {seen} of {height} px"
     assert _page_fits(page), f"{page.name} at {size}: the headline out of the window"
 
+
+def test_an_entered_outcome_leaves_no_value_for_the_next_hold(live_server, page) -> None:
+    """A supervisor's trial: after an outcome was entered (NOK, 40 N·m, 20 deg) the form kept
+    NOK and both values, only the comment emptied; the next held bolt, another tightening,
+    was one click and a comment away from being given the last one's outcome."""
+    srv = live_server(devices=("lift", "wrench", "pair1"))
+    srv.server.commands.access = AccessConfig.from_node(YamlNode.parse(
+        f"users:\n  sue: {{role: supervisor, password: '{hash_password(PASSWORD)}'}}\n",
+        "station.yaml"))
+
+    async def submit(command: Command, issuer: Issuer) -> Answer:
+        return Answer(1, command, issuer)
+    srv.server.commands.submit = submit
+    srv.publish([*opened(), *held("B2", "the controller's result could not be read")])
+    page.get(srv.url)
+    page.wait(lambda p: p.text("#vin") == VIN, what="the vehicle on the screen")
+    _login(page, "sue", PASSWORD)
+    page.wait(lambda p: _shown(p, "enter"), 30, "the Enter outcome form")
+    page.wait(lambda p: p.js("return [...document.querySelectorAll('#enter-bolt option')]"
+                             ".map(o => o.value).includes('B2')"), 30, "B2 offered")
+    shown = page.text("#cmd-answer") or ""
+    page.js("const v = (id, x) => { document.getElementById(id).value = x; };"
+            "v('enter-bolt', 'B2'); v('enter-ok', 'nok'); v('enter-torque', '40');"
+            "v('enter-angle', '20'); v('enter-comment', 'controller shows NOK');"
+            "document.querySelector('#enter button').click()")
+    assert _answer(page, shown).startswith("command"), page.text("#cmd-answer")
+    left = page.js("return ['enter-ok', 'enter-torque', 'enter-angle', 'enter-comment']"
+                   ".map(id => document.getElementById(id).value)")
+    assert left == ["", "", "", ""], left

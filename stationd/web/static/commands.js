@@ -25,9 +25,11 @@
     q("loosen").hidden = !rights.includes("loosen");
   });
 
-  async function send(body, comment) {
+  // (an entered outcome's verdict and values are that bolt's too: left in the form, the next
+  // hold was one click and a comment away from the last one's outcome)
+  async function send(body, comment, more = []) {
     const doc = await command(body);
-    if (doc && doc.accepted) q(comment).value = "";
+    if (doc && doc.accepted) for (const id of [comment, ...more]) q(id).value = "";
   }
 
   // the bolts one may skip (those of the vehicle at the station not done yet) and those one
@@ -96,7 +98,8 @@
     if (!q("enter-comment").value.trim()) { answer("say what was checked on the controller", false); return; }
     send({kind: "enter-outcome", vin: view.vehicle.vin, bolt: q("enter-bolt").value,
           ok: q("enter-ok").value === "ok", torque_nm: torque, angle_deg: angle,
-          comment: q("enter-comment").value}, "enter-comment");
+          comment: q("enter-comment").value}, "enter-comment",
+         ["enter-ok", "enter-torque", "enter-angle"]);
   });
   q("loosen").addEventListener("submit", (e) => {
     e.preventDefault();
