@@ -56,9 +56,12 @@ async function listVehicles() {
       const held = Object.keys(v.held || {});
       cell(tr, held.length + (held.length ? " (" + held.join(", ") + ")" : ""),
            held.length ? "status-held" : "");
-      cell(tr, (v.started_at || "").slice(0, 19));
-      cell(tr, v.status === "reopened" ? `reopened ${(v.reopened_at || "").slice(0, 19)}`
-        : (v.ended_at || "open").slice(0, 19));
+      // date and clock apart (as the commands' tables give them): a narrow window wraps
+      // between the two, never inside the date, and a T gave Firefox no place to wrap at all
+      const when = (t) => (t || "").slice(0, 19).replace("T", " ");
+      cell(tr, when(v.started_at));
+      cell(tr, v.status === "reopened" ? `reopened ${when(v.reopened_at)}`
+        : v.ended_at ? when(v.ended_at) : "open");
       tb.appendChild(tr);
     }
     if (total > list.length) {   // said, not cut off without a word (a supervisor's trial)
