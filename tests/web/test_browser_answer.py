@@ -116,3 +116,23 @@ def test_an_entered_outcome_leaves_no_value_for_the_next_hold(live_server, page)
     left = page.js("return ['enter-ok', 'enter-torque', 'enter-angle', 'enter-comment']"
                    ".map(id => document.getElementById(id).value)")
     assert left == ["", "", "", ""], left
+
+
+def test_a_reopen_without_a_vin_is_answered_in_the_panel(live_server, page) -> None:
+    """A supervisor's trial: Reopen for rework with the VIN left empty said nothing in the
+    panel (the browser's own bubble, where it shows one, beside the field), and the answer
+    line went on showing the last command's answer, read as this one's."""
+    srv = live_server(devices=("lift", "wrench", "pair1"))
+    srv.server.commands.access = AccessConfig.from_node(YamlNode.parse(
+        f"users:\n  sue: {{role: supervisor, password: '{hash_password(PASSWORD)}'}}\n",
+        "station.yaml"))
+    srv.publish(opened())
+    page.get(srv.url)
+    page.wait(lambda p: p.text("#vin") == VIN, what="the vehicle on the screen")
+    _login(page, "sue", PASSWORD)
+    page.wait(lambda p: _shown(p, "reopen"), 30, "the Reopen form")
+    page.click("#loosen button")
+    assert _answer(page, "logged in as sue") == "choose the bolt to loosen"
+    page.click("#reopen button")
+    assert _answer(page, "choose the bolt to loosen") == "type the VIN of the vehicle to reopen"
+    assert page.js("return document.getElementById('cmd-answer').dataset.ok") == "0"

@@ -110,6 +110,9 @@
   });
   q("reopen").addEventListener("submit", (e) => {
     e.preventDefault();
+    // said in the panel as every other form's missing choice (the browser's own bubble, where
+    // it showed one, left the last command's answer below, read as this one's)
+    if (!q("reopen-vin").value.trim()) { answer("type the VIN of the vehicle to reopen", false); return; }
     send({kind: "reopen", vin: q("reopen-vin").value, comment: q("reopen-comment").value}, "reopen-comment");
   });
 })();
