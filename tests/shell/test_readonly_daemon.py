@@ -65,6 +65,10 @@ class Journal:
             return list(self.lines)
 
 
+#: the daemon's line as a reload begins
+RELOADED = "configuration reloaded"
+
+
 def _since(lines: list[str], start: int, needle: str) -> list[str]:
     return [x for x in lines[start:] if needle in x]
 
@@ -105,8 +109,15 @@ def test_a_database_file_the_daemon_may_not_write_is_a_lasting_fault_until_chown
         assert p.stdin is not None
         start = 0
         if how == "reload":
-            lines = journal.wait(lambda ls: any("stationd running" in x for x in ls),
-                                 "the daemon running on the service user's own file")
+            journal.wait(lambda ls: any("stationd running" in x for x in ls),
+                         "the daemon running on the service user's own file")
+            # the vehicle at working height first, the station idle (a 'next' that comes
+            # while it reloads is ignored, "reloading": CI once), then the file replaced:
+            # the reloaded station loads it, a write
+            p.stdin.write("next\n")
+            p.stdin.flush()
+            lines = journal.wait(lambda ls: any("lift at working height" in x for x in ls),
+                                 "the simulated lift raised")
             copy = folder / "copy.db"                 # the technician's copy, root's, 0644
             shutil.copyfile(db, copy)
             os.chown(copy, 0, 0)
@@ -115,14 +126,19 @@ def test_a_database_file_the_daemon_may_not_write_is_a_lasting_fault_until_chown
             start = len(lines)
             p.send_signal(signal.SIGHUP)
             # the reloaded station waiting for a vehicle (the file opened), or its
-            # database's fault
-            journal.wait(lambda ls: bool(_since(ls, start, "lift not at working height")
-                                         or _since(ls, start, "fault: database")),
+            # database's fault: after the reload's own line (the station before it says
+            # it waits too)
+            lines = journal.wait(lambda ls: bool(_since(ls, start, RELOADED)),
+                                 "the reload begun")
+            begun = start + next(i for i, x in enumerate(lines[start:]) if RELOADED in x)
+            journal.wait(lambda ls: bool(_since(ls, begun, "lift not at working height")
+                                         or _since(ls, begun, "fault: database")),
                          "the reload taken")
-        # a new vehicle at working height (the simulated lift reads its standard input):
-        # its loading is a write, as a bolt's tool enable is
-        p.stdin.write("next\n")
-        p.stdin.flush()
+        else:
+            # a new vehicle at working height (the simulated lift reads its standard input):
+            # its loading is a write, as a bolt's tool enable is
+            p.stdin.write("next\n")
+            p.stdin.flush()
         hint = f"chown it to {nobody}"
 
         def decided(ls: list[str]) -> bool:   # a retry said the fault again, or it flipped
