@@ -70,21 +70,30 @@ class StandIn(BaseHTTPRequestHandler):
         self._answer({"accepted": True, "words": "accepted"})
 
 
-@pytest.mark.timeout(120)
-def test_a_hang_up_mid_teach_ends_teach_mode_at_the_station(tmp_path: Path) -> None:
-    server = ThreadingHTTPServer(("127.0.0.1", 0), StandIn)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
-    url = f"http://127.0.0.1:{server.server_address[1]}/"
+def _teaching(url: str, tmp_path: Path) -> subprocess.Popen[str]:
+    """``stationd teach`` of B01 and B02 against the stand-in at ``url``, once it waits on
+    B01 (teach mode started at the station)."""
     p = subprocess.Popen(
         [sys.executable, "-m", "stationd", "teach", "--model", "SIM-1", "--user", "ed",
          "--bolts", "B01,B02", "--out", str(tmp_path / "taught.yaml"), "--url", url],
         cwd=ROOT, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
         text=True, env={**os.environ, "STATIOND_PASSWORD": "teach-me-please"})
+    assert p.stdout is not None
+    while "press Enter" not in (line := p.stdout.readline()):   # waits on B01
+        if not line:
+            p.kill()
+            raise AssertionError(p.communicate(timeout=30))
+    assert StandIn.started.is_set()
+    return p
+
+
+@pytest.mark.timeout(120)
+def test_a_hang_up_mid_teach_ends_teach_mode_at_the_station(tmp_path: Path) -> None:
+    server = ThreadingHTTPServer(("127.0.0.1", 0), StandIn)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    url = f"http://127.0.0.1:{server.server_address[1]}/"
+    p = _teaching(url, tmp_path)
     try:
-        assert p.stdout is not None
-        while "press Enter" not in (line := p.stdout.readline()):   # waits on B01
-            assert line, p.communicate(timeout=30)
-        assert StandIn.started.is_set()
         p.send_signal(signal.SIGHUP)           # the terminal hung up
         _, err = p.communicate(timeout=60)
         assert StandIn.stopped.is_set(), (p.returncode, err)   # teach mode ended
@@ -171,16 +180,8 @@ def test_a_second_hang_up_does_not_cut_the_teach_stop(tmp_path: Path) -> None:
     server = ThreadingHTTPServer(("127.0.0.1", 0), HangsUpTwice)
     threading.Thread(target=server.serve_forever, daemon=True).start()
     url = f"http://127.0.0.1:{server.server_address[1]}/"
-    p = subprocess.Popen(
-        [sys.executable, "-m", "stationd", "teach", "--model", "SIM-1", "--user", "ed",
-         "--bolts", "B01,B02", "--out", str(tmp_path / "taught.yaml"), "--url", url],
-        cwd=ROOT, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-        text=True, env={**os.environ, "STATIOND_PASSWORD": "teach-me-please"})
+    p = _teaching(url, tmp_path)
     try:
-        assert p.stdout is not None
-        while "press Enter" not in (line := p.stdout.readline()):   # waits on B01
-            assert line, p.communicate(timeout=30)
-        assert StandIn.started.is_set()
         HangsUpTwice.pid = p.pid
         HangsUpTwice.hung_up.set()
         p.send_signal(signal.SIGHUP)           # the terminal hung up
