@@ -47,8 +47,9 @@ def _in_view(page: Page, element_id: str) -> list[float]:
         return [Math.max(0, bottom - top), r.height];""", element_id))
 
 
-@pytest.mark.parametrize("size", [(1280, 800), (1024, 768)])
-def test_a_commands_answer_is_in_view_on_a_small_screen(live_server, page, size: Any) -> None:
+def _accepting(live_server: Any) -> Any:
+    """A screens' server whose supervisor sue signs in and whose every command the station
+    accepts (the station's rules are not these tests' subject)."""
     srv = live_server(devices=("lift", "wrench", "pair1"))
     srv.server.commands.access = AccessConfig.from_node(YamlNode.parse(
         f"users:\n  sue: {{role: supervisor, password: '{hash_password(PASSWORD)}'}}\n",
@@ -57,6 +58,12 @@ def test_a_commands_answer_is_in_view_on_a_small_screen(live_server, page, size:
     async def submit(command: Command, issuer: Issuer) -> Answer:
         return Answer(1, command, issuer)
     srv.server.commands.submit = submit
+    return srv
+
+
+@pytest.mark.parametrize("size", [(1280, 800), (1024, 768)])
+def test_a_commands_answer_is_in_view_on_a_small_screen(live_server, page, size: Any) -> None:
+    srv = _accepting(live_server)
     srv.publish([*opened(), *work(), *locked("B2", 3), *locked("B4", 3)])
     page.size(*size)
     page.get(srv.url)
@@ -92,14 +99,7 @@ def test_an_entered_outcome_leaves_no_value_for_the_next_hold(live_server, page)
     """A supervisor's trial: after an outcome was entered (NOK, 40 N·m, 20 deg) the form kept
     NOK and both values, only the comment emptied; the next held bolt, another tightening,
     was one click and a comment away from being given the last one's outcome."""
-    srv = live_server(devices=("lift", "wrench", "pair1"))
-    srv.server.commands.access = AccessConfig.from_node(YamlNode.parse(
-        f"users:\n  sue: {{role: supervisor, password: '{hash_password(PASSWORD)}'}}\n",
-        "station.yaml"))
-
-    async def submit(command: Command, issuer: Issuer) -> Answer:
-        return Answer(1, command, issuer)
-    srv.server.commands.submit = submit
+    srv = _accepting(live_server)
     srv.publish([*opened(), *held("B2", "the controller's result could not be read")])
     page.get(srv.url)
     page.wait(lambda p: p.text("#vin") == VIN, what="the vehicle on the screen")
