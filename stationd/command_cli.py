@@ -416,10 +416,10 @@ def cmd_command(args: argparse.Namespace) -> int:
         body["bolt"] = args.bolt.strip()
     if args.command == "enter-outcome":
         body.update(ok=args.ok, torque_nm=args.torque, angle_deg=args.angle)
-    return _session_command(args, args.user, body)
+    return session_command(args, args.user, body)
 
 
-def _session_command(args: argparse.Namespace, user: str, body: dict[str, Any]) -> int:
+def session_command(args: argparse.Namespace, user: str, body: dict[str, Any]) -> int:
     """Name the station, log in as ``user``, give ``body``'s command, print the station's
     answer."""
     target = find_station(args)
@@ -474,7 +474,7 @@ def cmd_operator(args: argparse.Namespace) -> int:
     if not user or not user.strip() or len(user) > 64:
         raise InputError(f"user {user!r}: the name of a user of the station's access section")
     check_comment(args.comment)
-    return _session_command(args, user.strip(), {"kind": args.operator_command,
+    return session_command(args, user.strip(), {"kind": args.operator_command,
                                                  "comment": args.comment or ""})
 
 

@@ -34,6 +34,7 @@ from stationd.command_cli import (
     network_words,
     read_password,
     say_refused,
+    session_command,
     unreachable_words,
 )
 from stationd.errors import ConfigError, InputError
@@ -117,31 +118,8 @@ LEFT_ON = ("teach mode left on by a session that was cut off (its terminal gone,
 def _cmd_stop(args: argparse.Namespace) -> int:
     """``stationd teach --stop``: teach mode ended at the station, whoever's session left it
     on (a kill -9, a laptop gone: a new session was refused, "teach mode is on", and only
-    the commissioning screen could end it)."""
-    target = find_station(args)
-    args.url = target.url
-    client = ApiClient(target.url, target.token, args.timeout)
-    known = identify(client, target, "teach")
-    if isinstance(known, int):
-        return known
-    try:
-        password = read_password(args.user)
-        status, who = client.call("/api/login", {"user": args.user, "password": password,
-                                                 "client": "cli"})
-        if status != 200:
-            return say_refused("login refused", status, who)
-        st, nonce = client.call("/api/nonce")
-        if st != 200 or not isinstance(nonce, dict):
-            return say_refused("teach --stop", st, nonce)
-        status, answer = client.call("/api/commands", {"kind": "teach-stop",
-                                                       "nonce": nonce["nonce"]})
-        client.call("/api/logout", {})
-    except (urllib.error.URLError, OSError) as exc:
-        sys.stderr.write(f"stationd: teach: {unreachable_words(args.url, exc)}\n")
-        return EXIT_UNREACHABLE
-    words = answer.get("words") if isinstance(answer, dict) else answer
-    print(words, file=sys.stdout if status == 200 else sys.stderr)
-    return 0 if status == 200 else EXIT_REFUSED
+    the commissioning screen could end it), given as every command by a person is."""
+    return session_command(args, args.user, {"kind": "teach-stop"})
 
 
 def _teach(args: argparse.Namespace, client: ApiClient, out: Path, doc: dict[str, Any],
