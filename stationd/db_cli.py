@@ -63,14 +63,16 @@ def _db_url(args: argparse.Namespace) -> str:
     return args.db or DEFAULT_DB
 
 
-def _station_id(args: argparse.Namespace) -> str | None:
+def _station_id(args: argparse.Namespace, url: str) -> str | None:
     """The station's id by its station file (``--config``; None without one, or without an
-    id): what its exported rows name as their station."""
+    id), where ``url`` is that file's own database (not a running demo's): what its exported
+    rows name as their station."""
     if not getattr(args, "config", None):
         return None
     from stationd.config import load_station_config, station_identity
 
-    return station_identity(load_station_config(args.config))["id"]
+    cfg = load_station_config(args.config)
+    return station_identity(cfg)["id"] if url == cfg.database_url else None
 
 
 def _missing(args: argparse.Namespace) -> str:
@@ -261,7 +263,7 @@ def _export_results(args: argparse.Namespace) -> int:
     fmt = args.format or "csv"
     # one vehicle: found where ``db report`` finds it (a running demo's database too)
     url = _report_url(args) if args.vin is not None else _read_url(args)
-    station = _station_id(args) if url == _db_url(args) else None   # (not a demo's)
+    station = _station_id(args, url)
     with open_repository(url, must_exist=True, missing=_missing(args)) as repo:
         results = Results(repo)
         # (an unknown --vin: the report raises NotFoundError, one line, exit 2)
