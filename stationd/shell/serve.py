@@ -97,7 +97,7 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event,
                 "fault: database: %s (retrying in %.0f s)", reason, wait)
             said = reason
             if not told:
-                notifier.ready(f"fault: database: {one_line(exc)}")
+                notifier.ready(f"fault: database: {reason}")
                 told = True
             # the core decides; the screens and /healthz say it too (before the loop runs)
             station.heard_before_run(DeviceFault(time.time(), DATABASE, FaultKind.DOWN,
