@@ -185,6 +185,18 @@ def test_a_nul_character_in_a_path_is_one_line_not_a_traceback(tmp_path, which):
 
 
 # -- the selections' images folder the daemon cannot write ------------------------------------
+def _read_only_images(tmp_path: Path, *, save: bool) -> tuple[Path, Path]:
+    """A station file (and its images folder, read-only to everyone) whose records go to
+    that folder, ``save_images`` as ``save``."""
+    images = tmp_path / "images"
+    images.mkdir()
+    images.chmod(0o555)
+    station = _station(tmp_path)
+    station.write_text(station.read_text() + f"records: {{images_dir: {images}, "
+                                              f"save_images: {str(save).lower()}}}\n")
+    return station, images
+
+
 def test_an_images_folder_nobody_may_write_is_an_error_at_start_and_in_the_check(tmp_path):
     """A commissioning trial: ``records.images_dir`` that the daemon cannot write was taken at
     the start, and every bolt selected then wrote two warnings to the journal ("image ... not
@@ -192,12 +204,7 @@ def test_an_images_folder_nobody_may_write_is_an_error_at_start_and_in_the_check
     is one line at the start, exit 2.  The images folder is checked as the database's is: a
     folder nobody may write (or on a read-only file system) by ``config check`` and the
     daemon, one this user may not write by the daemon."""
-    images = tmp_path / "images"
-    images.mkdir()
-    images.chmod(0o555)
-    station = _station(tmp_path)
-    station.write_text(station.read_text() + f"records: {{images_dir: {images}, "
-                                              "save_images: true}\n")
+    station, images = _read_only_images(tmp_path, save=True)
     said = f"folder {images} cannot be written by anyone"
     errors = _errors_by_key(station)
     assert list(errors) == ["records.images_dir"], errors
@@ -211,19 +218,13 @@ def test_an_images_folder_nobody_may_write_is_an_error_at_start_and_in_the_check
         validate_station(station)
 
 
-
 def test_an_images_folder_the_daemon_never_writes_is_not_checked(tmp_path):
     """``save_images`` off with an SQLite database (its lock beside it): the daemon writes
     nothing in ``records.images_dir`` (the screens only read the images saved earlier, a
     read-only archive of them too), so its being read-only refuses nothing: the check
     refused the start with exit 2, which the unit does not restart (a station that ran
     before the upgrade stayed down)."""
-    images = tmp_path / "images"
-    images.mkdir()
-    images.chmod(0o555)
-    station = _station(tmp_path)
-    station.write_text(station.read_text() + f"records: {{images_dir: {images}, "
-                                              "save_images: false}\n")
+    station, _ = _read_only_images(tmp_path, save=False)
     assert "records.images_dir" not in _errors_by_key_or_none(station)
     validate_station(station)   # the daemon's start and reload: taken
 

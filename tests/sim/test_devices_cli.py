@@ -194,18 +194,12 @@ def test_the_simulated_plc_serves_the_unit_of_the_station_files_lift(tmp_path: P
     station.write_text(station.read_text().replace(
         "lift: {url: 'sim://lift'}", f"lift: {{url: 'modbus-tcp://127.0.0.1:{port}?unit=5'}}"))
     assert "unit=5" in station.read_text()
-    p, first = _start("plc", "--config", str(station), "--port", str(port))
-    try:
-        assert "unit 5)" in first, first
-        with open_lift(f"modbus-tcp://127.0.0.1:{port}?unit=5&timeout=2") as lift:
-            assert not lift.read_state().at_working_height
-    finally:
-        assert _stop(p) == 0
-    port = _free_port()
-    p, first = _start("plc", "--config", str(station), "--port", str(port), "--unit", "7")
-    try:
-        assert "unit 7)" in first, first
-        with open_lift(f"modbus-tcp://127.0.0.1:{port}?unit=7&timeout=2") as lift:
-            assert not lift.read_state().at_working_height
-    finally:
-        assert _stop(p) == 0
+    for given, unit in (((), 5), (("--unit", "7"), 7)):   # the file's, then another
+        p, first = _start("plc", "--config", str(station), "--port", str(port), *given)
+        try:
+            assert f"unit {unit})" in first, first
+            with open_lift(f"modbus-tcp://127.0.0.1:{port}?unit={unit}&timeout=2") as lift:
+                assert not lift.read_state().at_working_height
+        finally:
+            assert _stop(p) == 0
+        port = _free_port()
