@@ -4,6 +4,9 @@ const q = (s) => document.querySelector(s);
 // A count in words, as stationd.counting says it: "1 tightening", "3 tightenings".
 function counted(n, word, plural) { return `${n} ${n === 1 ? word : plural || word + "s"}`; }
 function fmt(v, d) { return v === null || v === undefined ? "-" : Number(v).toFixed(d); }
+// A time as date and clock apart, to the second: a narrow window wraps between the two,
+// never inside the date (a T gave Firefox no place to wrap at all).
+function when(t) { return String(t || "").slice(0, 19).replace("T", " "); }
 function cell(tr, text, cls) {
   const td = document.createElement("td");
   td.textContent = text;
@@ -56,9 +59,6 @@ async function listVehicles() {
       const held = Object.keys(v.held || {});
       cell(tr, held.length + (held.length ? " (" + held.join(", ") + ")" : ""),
            held.length ? "status-held" : "");
-      // date and clock apart (as the commands' tables give them): a narrow window wraps
-      // between the two, never inside the date, and a T gave Firefox no place to wrap at all
-      const when = (t) => (t || "").slice(0, 19).replace("T", " ");
       cell(tr, when(v.started_at));
       cell(tr, v.status === "reopened" ? `reopened ${when(v.reopened_at)}`
         : v.ended_at ? when(v.ended_at) : "open");
@@ -149,7 +149,7 @@ function showTrail(commands) {
     const tr = document.createElement("tr");
     tr.className = "command";
     tr.dataset.kind = c.kind;
-    cell(tr, (c.at || "").slice(0, 19).replace("T", " "));
+    cell(tr, when(c.at));
     cell(tr, c.kind); cell(tr, c.bolt || "-"); cell(tr, c.user); cell(tr, c.source);
     cell(tr, c.comment || "");
     tb.appendChild(tr);
@@ -200,7 +200,7 @@ function showOthers(v) {
   for (const [at, what, tid, pset, b, detail] of rows) {
     const tr = document.createElement("tr");
     tr.className = "other";
-    cell(tr, String(at || "").slice(0, 19).replace("T", " "));
+    cell(tr, when(at));
     cell(tr, what); cell(tr, tid ?? "-"); cell(tr, pset ?? "-"); cell(tr, b); cell(tr, detail);
     tb.appendChild(tr);
   }
