@@ -19,9 +19,9 @@ start) on the engine returned by :func:`writer`, so an import never acts on a st
 from __future__ import annotations
 
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from sqlalchemy import Engine, create_engine, event, make_url
 from sqlalchemy.engine import Connection
@@ -33,6 +33,14 @@ from db.errors import DataError
 DEFAULT_URL = "sqlite:///stationd.db"
 BUSY_TIMEOUT_MS = 10_000
 _IMMEDIATE = "stationd_begin_immediate"
+
+
+class Transactions(Protocol):
+    """The repository's transactions (``Repository._session``), given to the parts it is made
+    of: ``write`` takes the write lock as it begins; committed when the block ends, rolled
+    back if it raises (a :class:`db.errors.DatabaseError` then)."""
+
+    def __call__(self, write: bool) -> AbstractContextManager[Session]: ...
 
 
 def make_engine(url: str = DEFAULT_URL, *, read_only: bool = False) -> Engine:

@@ -11,8 +11,7 @@ from __future__ import annotations
 
 import json
 import uuid
-from collections.abc import Callable, Iterable, Mapping
-from contextlib import AbstractContextManager
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
@@ -20,6 +19,7 @@ from typing import Any
 from sqlalchemy import and_, func, or_, select
 from sqlalchemy.orm import Session
 
+from db.engine import Transactions
 from db.kinds import LOCK, LOOSENING, NOT_TAKEN
 from db.models import (
     Bolt,
@@ -160,7 +160,7 @@ class CommandEntry:
 class Ledger:
     """Reads and writes of the append-only records, through the repository's transactions."""
 
-    def __init__(self, session: Callable[[bool], AbstractContextManager[Session]]) -> None:
+    def __init__(self, session: Transactions) -> None:
         self._session = session
 
     def db_id(self) -> str:

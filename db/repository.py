@@ -13,17 +13,19 @@ import logging
 from collections.abc import Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
-from datetime import datetime, timedelta
+from datetime import datetime
 from types import TracebackType
 from typing import Any, Self
 
 from alembic.util import CommandError
-from sqlalchemy import ColumnElement, Engine, func, make_url, null, or_, select
+from sqlalchemy import Engine, func, make_url, select
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session
 
 from db import quality
 from db.bolts import BoltTable, Parameters, dump_bolts
+from db.copies import StoredResult, opt_float, stored_copy
+from db.enables import OwedEnable, ToolEnables, settle
 from db.engine import DEFAULT_URL, make_engine, write_session
 from db.errors import DatabaseError, DataError, NotFoundError, VehicleClosedError
 from db.holds import ENDS_A_HOLD, open_holds, released_holds
@@ -45,12 +47,8 @@ from db.kinds import (
 )
 from db.ledger import (
     CLOSING,
-    CONTROLLER_EVENT,
-    GAP,
     LOWERED,
     RUNDOWN,
-    UNATTRIBUTED,
-    UNREADABLE,
     UNSEEN,
     Ledger,
     add_command,
@@ -68,7 +66,6 @@ from db.models import (
     ProcessParameters,
     ResultGap,
     TighteningRecord,
-    ToolEnable,
     UnattributedResult,
     UnreadableRecord,
     Vehicle,
@@ -76,15 +73,13 @@ from db.models import (
     VehicleModel,
     utcnow,
 )
+from db.others import OtherResults
 from db.report import VehicleInfo, VehicleReport, build_report
 
 EXPORT_HEADER = ("stationd bolt table, exported from the process-parameter database.\n"
                  "Units: positions mm (vehicle frame), torque N m, angle degrees.")
 VIN_MAX = 32
 
-#: the controller stamps its results to the second, its clock's offset measured to the
-#: second: a result made within this much of an unreadable message's arrival may be its copy
-COPY_SLACK = timedelta(seconds=2)
 
 log = logging.getLogger(__name__)
 
@@ -109,20 +104,6 @@ class BoltInfo:
 
 
 @dataclass(frozen=True)
-class OwedEnable:
-    """The last tool enable whose result is not recorded (what a station owes the next)."""
-
-    id: int
-    vin: str
-    bolt: str
-    pset: int | None
-    parameters_id: int | None
-    selection: dict[str, Any]
-    enabled_at: datetime
-    off_at: datetime | None
-
-
-@dataclass(frozen=True)
 class Recorded:
     """What :meth:`Repository.record_tightening_once` did: the record's ``id``, and
     ``again``: True when the result was a copy the controller sent again of one stored
@@ -135,18 +116,6 @@ class Recorded:
     again: bool = False
     vin: str | None = None
     bolt: str | None = None
-
-
-@dataclass(frozen=True)
-class StoredResult:
-    """A stored result that a result from the controller is the very copy of
-    (:meth:`Repository.stored_result`): its id, and the vehicle and bolt it is of (None: a
-    result no bolt owns, stored unattributed, or a controller event of no bolt; ``vin`` None
-    where no vehicle was at height)."""
-
-    id: int
-    vin: str | None
-    bolt: str | None
 
 
 def _other_schema(have: str | None, want: str | None) -> str:
@@ -164,7 +133,12 @@ class Repository:
     def __init__(self, engine: Engine) -> None:
         self._engine = engine
         #: the feed, the commands, the database's id (the same transactions)
-        self.ledger = Ledger(lambda write: self._session(write))
+        self.ledger = Ledger(self._session)
+        #: the tool enables the station owes a result (noted before the tool goes on)
+        self.enables = ToolEnables(self._session)
+        #: the results no bolt's rundown owns: unattributed, controller events, unreadable
+        #: messages, gaps
+        self.others = OtherResults(self._session)
 
     @classmethod
     def open(cls, url: str = DEFAULT_URL, *, read_only: bool = False) -> Repository:
@@ -294,7 +268,7 @@ class Repository:
                 s.flush()
             elif v.model_id != m.id:
                 raise DataError(f"vehicle {vin} is already known as model {v.model.name}, "
-                                 f"not {model}")
+                                f"not {model}")
             elif v.ended_at is not None:
                 if not reopen:
                     raise VehicleClosedError(
@@ -354,7 +328,7 @@ class Repository:
         tightening: a record with the same ``tightening_id``, torque and angle, and the same
         controller timestamp (``controller_at``, the controller's own time of the
         tightening, MID 0061): of any vehicle where both have that timestamp, of this
-        vehicle where one lacks it (:func:`_stored_copy`).  The returned :class:`Recorded`
+        vehicle where one lacks it (:func:`stored_copy`).  The returned :class:`Recorded`
         names the stored record's vehicle and bolt, and ``enable_id`` is settled only when
         it is that bolt's own enable (a copy is no result of another bolt).  Why the
         timestamp: a controller replaced or reset numbers its tightenings from 1 again,
@@ -365,11 +339,11 @@ class Repository:
         ``result_at`` is the station's time of taking the result (its clock).
         ``parameters_id`` is the version that was sent (``BoltInfo.parameters_id``); without
         it, the bolt's current version.  ``params_sent`` defaults to that version's pset and
-        targets.  ``enable_id`` (:meth:`note_enable`) is settled in the same transaction: the
-        station owes that enable nothing more.  ``kind``: ``tightening`` or ``loosening``
-        (a loosening never makes the bolt done).  ``operator``: the user signed in at the
-        station when the tool was enabled (None: nobody).  ``offline``: fetched after a link
-        cut, made while the link was down.
+        targets.  ``enable_id`` (:meth:`db.enables.ToolEnables.note`) is settled in the same
+        transaction: the station owes that enable nothing more.  ``kind``: ``tightening`` or
+        ``loosening`` (a loosening never makes the bolt done).  ``operator``: the user signed
+        in at the station when the tool was enabled (None: nobody).  ``offline``: fetched
+        after a link cut, made while the link was down.
         """
         if len(position_mm) != 3:
             raise DataError("position_mm: expected x, y, z")
@@ -382,12 +356,12 @@ class Repository:
         with self._session(write=True) as s:
             v = _vehicle(s, vin)
             if tightening_id is not None:  # a result the controller sent again: stored once
-                known = _stored_copy(s, tightening_id, torque_nm, angle_deg, controller_at,
-                                     (vin,), others=False)
+                known = stored_copy(s, tightening_id, torque_nm, angle_deg, controller_at,
+                                    (vin,), others=False)
                 if known is not None:
                     # only the stored record's own bolt's enable: another bolt's enable is
                     # still owed its tool's own result (the copy answers nothing of it)
-                    _settle(s, enable_id, of=(known.vin, known.bolt))
+                    settle(s, enable_id, of=(known.vin, known.bolt))
                     return Recorded(known.id, again=True, vin=known.vin, bolt=known.bolt)
             # a result of a tool enabled (or a result taken) while the vehicle was open is its
             # result, also stored after the close (the database away meanwhile, the lift went
@@ -414,15 +388,15 @@ class Repository:
                 vehicle_id=v.id, bolt_id=b.id, parameters_id=version.id, x_mm=x, y_mm=y,
                 z_mm=z, match_distance_mm=float(match_distance_mm), tilt_deg=float(tilt_deg),
                 params_sent=sent, acknowledged=bool(acknowledged),
-                status="ok" if ok else "nok", torque_nm=_opt_float(torque_nm),
-                angle_deg=_opt_float(angle_deg),
+                status="ok" if ok else "nok", torque_nm=opt_float(torque_nm),
+                angle_deg=opt_float(angle_deg),
                 tightening_id=None if tightening_id is None else int(tightening_id),
                 sent_at=sent_at, result_at=result_at, recorded_at=utcnow(),
                 controller_at=controller_at, offline=bool(offline),
                 images=[str(i) for i in images], kind=kind,
                 operator=None if operator is None else str(operator)[:64])
             s.add(rec)
-            _settle(s, enable_id)
+            settle(s, enable_id)
             s.flush()
             append(s, RUNDOWN, rec.id, rec.recorded_at)
             return Recorded(rec.id)
@@ -469,196 +443,9 @@ class Repository:
         taken for the result of the bolt the tool is enabled for now: it would close, count
         or settle a bolt that was never tightened."""
         with self._session(write=False) as s:
-            return _stored_copy(s, tightening_id, torque_nm, angle_deg, controller_at, vins)
+            return stored_copy(s, tightening_id, torque_nm, angle_deg, controller_at, vins)
 
-    # -- what the station owes, results no bolt owns ----------------------------------------
-    def note_enable(self, vin: str, bolt: str, pset: int | None, parameters_id: int | None,
-                    selection: Mapping[str, Any], at: datetime) -> int:
-        """The tool is about to be enabled for ``bolt`` of ``vin``: noted (committed) first, so
-        that the next station (a reload, a restart) records a late result to that bolt."""
-        with self._session(write=True) as s:
-            row = ToolEnable(vin=vin, bolt=bolt, pset=pset, parameters_id=parameters_id,
-                             selection=dict(selection), enabled_at=at)
-            s.add(row)
-            s.flush()
-            return row.id
-
-    def settle_enable(self, enable_id: int) -> None:
-        """The station owes tool enable ``enable_id`` nothing more without a record of it:
-        every result the controller made since was fetched, and none was its."""
-        with self._session(write=True) as s:
-            _settle(s, enable_id)
-
-    def note_tool_off(self, enable_id: int, at: datetime) -> None:
-        """The tool went off (the first time counts: the late-result window starts there)."""
-        with self._session(write=True) as s:
-            row = s.get(ToolEnable, enable_id)
-            if row is not None and row.off_at is None:
-                row.off_at = at
-
-    def owed_enable(self) -> OwedEnable | None:
-        """The latest tool enable, if its result is not recorded (an older one was superseded
-        by it: the tool can only have been enabled for the latest)."""
-        with self._session(write=False) as s:
-            row = s.scalar(select(ToolEnable).order_by(ToolEnable.id.desc()).limit(1))
-            if row is None or row.settled_at is not None:
-                return None
-            return OwedEnable(row.id, row.vin, row.bolt, row.pset, row.parameters_id,
-                              dict(row.selection), row.enabled_at, row.off_at)
-
-    def record_unattributed(self, *, vin: str | None, controller_vin: str | None,
-                            tightening_id: int | None, pset: int | None, ok: bool,
-                            torque_nm: float | None, angle_deg: float | None,
-                            result_at: datetime | None, reason: str,
-                            result_type: int | None = None) -> int | None:
-        """Store a result no bolt owns (``result_type``: the code as the controller sent it,
-        None: none); return its id, or None when this very result is
-        already stored, attributed or not (a resent copy: the same tightening id, torque and
-        angle, and the same controller timestamp ``result_at`` where both have
-        one, :func:`_same_result`)."""
-        torque, angle = _opt_float(torque_nm), _opt_float(angle_deg)
-        with self._session(write=True) as s:
-            if tightening_id is not None:
-                for model, at in ((TighteningRecord, TighteningRecord.controller_at),
-                                  (UnattributedResult, UnattributedResult.result_at)):
-                    same = s.scalar(select(model.id).where(*_same_result(
-                        model, at, tightening_id, torque, angle, result_at)).limit(1))
-                    if same is not None:
-                        return None
-            row = UnattributedResult(
-                vin=vin, controller_vin=controller_vin, tightening_id=tightening_id, pset=pset,
-                status="ok" if ok else "nok", torque_nm=torque, angle_deg=angle,
-                result_at=result_at, recorded_at=utcnow(), reason=reason[:200],
-                result_type=result_type)
-            s.add(row)
-            s.flush()
-            append(s, UNATTRIBUTED, row.id, row.recorded_at)
-            return row.id
-
-    def record_controller_event(self, *, result_type: int, what: str, vin: str | None,
-                                bolt: str | None, controller_vin: str | None,
-                                tightening_id: int | None, pset: int | None,
-                                ok: bool | None, torque_nm: float | None,
-                                angle_deg: float | None, result_at: datetime | None,
-                                enable_id: int | None = None,
-                                note: str | None = None) -> int | None:
-        """Store a controller result that is not a rundown (a batch step, a bypass, an OK
-        without a type outside its bolt's torque window, ...); return its id, or None when
-        this very result is stored already (a resent copy: the same type, and the same
-        tightening id, torque and angle, and controller timestamp ``result_at`` where both
-        have one, :func:`_same_result`).
-        ``enable_id``: the tool enable it answers, settled in the same transaction (its bolt
-        is held for a person instead, :data:`db.kinds.NOT_TAKEN`).  ``note``: why a bolt is
-        held where there is no result (:data:`db.kinds.CUT_UNKNOWN`), whose ``ok`` is None
-        (no verdict: status NULL)."""
-        with self._session(write=True) as s:
-            # (a hold names the result it may be, which holds each bolt it may be: not copies)
-            if tightening_id is not None and what not in HELD_WITHOUT_RESULT:
-                same = s.execute(select(ControllerEvent.vin, ControllerEvent.bolt).where(
-                    ControllerEvent.result_type == int(result_type),
-                    *_same_result(ControllerEvent, ControllerEvent.result_at, tightening_id,
-                                  torque_nm, angle_deg, result_at)).limit(1)).first()
-                if same is not None:
-                    # only its own bolt's enable: another bolt's is still owed (as a rundown)
-                    _settle(s, enable_id, of=(same[0], same[1]))
-                    return None
-            row = ControllerEvent(
-                result_type=int(result_type), what=what[:32], vin=vin, bolt=bolt,
-                controller_vin=controller_vin, tightening_id=tightening_id, pset=pset,
-                status=None if ok is None else "ok" if ok else "nok",
-                torque_nm=_opt_float(torque_nm), angle_deg=_opt_float(angle_deg),
-                result_at=result_at, recorded_at=utcnow(),
-                note=None if note is None else note[:500])
-            s.add(row)
-            _settle(s, enable_id)
-            s.flush()
-            append(s, CONTROLLER_EVENT, row.id, row.recorded_at)
-            return row.id
-
-    def record_unreadable(self, *, mid: int, revision: int, raw: str, error: str,
-                          vin: str | None, bolt: str | None, controller_vin: str | None,
-                          tightening_id: int | None, pset: int | None,
-                          result_at: datetime | None, enable_id: int | None = None,
-                          header_len: int = 0) -> int | None:
-        """Store a result message that could not be read, whole; return its id, or None when
-        the same message is stored already (:meth:`stored_unreadable`: a resent copy; no
-        enable is settled by it: it answers none).  ``enable_id``: the tool enable it
-        answers, settled in the same transaction (the station owes it nothing more: the
-        bolt is held for a person instead)."""
-        with self._session(write=True) as s:
-            if _unreadable_copy(s, mid, raw, header_len) is not None:
-                return None
-            row = UnreadableRecord(
-                mid=int(mid), revision=int(revision), raw=raw, error=error[:500], vin=vin,
-                bolt=bolt, controller_vin=controller_vin, tightening_id=tightening_id,
-                pset=pset, result_at=result_at, recorded_at=utcnow())
-            s.add(row)
-            _settle(s, enable_id)
-            s.flush()
-            append(s, UNREADABLE, row.id, row.recorded_at)
-            return row.id
-
-    def stored_unreadable(self, *, mid: int, raw: str, header_len: int = 0
-                          ) -> tuple[str | None, str | None] | None:
-        """The vehicle and bolt a stored unreadable message was stored for, where the same
-        message is stored already (a copy the controller sent again: the same text after
-        its first ``header_len`` characters, its header, whose sequence number a resend
-        changes; the text carries the tightening id, the values and the controller's
-        timestamp as far as they were written), else None.  Asked before the station's
-        core sees the message, so a copy is never held against the bolt enabled now."""
-        with self._session(write=False) as s:
-            row = _unreadable_copy(s, mid, raw, header_len)
-            return None if row is None else (row.vin, row.bolt)
-
-    def unreadable_of(self, *, tightening_id: int, pset: int | None, at: datetime | None,
-                      made: datetime | None = None) -> tuple[str | None, str | None] | None:
-        """The vehicle and bolt of a stored unreadable message a readable result is the
-        copy of: its tightening id, and its pset and controller time where they could be
-        picked out of it (and the result has one); else None.  Where a controller time is
-        missing on either side, a result ``made`` (on the station's clock, where the
-        controller's is known) after the message was stored is not its copy: another
-        result under the same id, from a controller whose ids started again."""
-        with self._session(write=False) as s:
-            for row in s.scalars(select(UnreadableRecord).where(
-                    UnreadableRecord.tightening_id == tightening_id)
-                    .order_by(UnreadableRecord.id)):
-                if row.pset is not None and pset is not None and row.pset != pset:
-                    continue
-                if row.result_at is not None and at is not None:
-                    if row.result_at == at:
-                        return row.vin, row.bolt
-                    continue
-                if made is None or made <= row.recorded_at + COPY_SLACK:
-                    return row.vin, row.bolt
-            return None
-
-    def controller_events(self, vin: str | None = None) -> list[dict[str, Any]]:
-        """The controller results that were not rundowns (of ``vin``, or all), oldest first."""
-        with self._session(write=False) as s:
-            q = select(ControllerEvent).order_by(ControllerEvent.id)
-            if vin is not None:
-                q = q.where(ControllerEvent.vin == vin)
-            return [{"id": e.id, "result_type": e.result_type, "what": e.what, "vin": e.vin,
-                     "bolt": e.bolt, "controller_vin": e.controller_vin,
-                     "tightening_id": e.tightening_id, "pset": e.pset, "status": e.status,
-                     "torque_nm": e.torque_nm, "angle_deg": e.angle_deg, "note": e.note,
-                     "result_at": e.result_at, "recorded_at": e.recorded_at}
-                    for e in s.scalars(q)]
-
-    def unreadable(self, vin: str | None = None) -> list[dict[str, Any]]:
-        """The result messages that could not be read (of ``vin``, or all), oldest first,
-        each whole."""
-        with self._session(write=False) as s:
-            q = select(UnreadableRecord).order_by(UnreadableRecord.id)
-            if vin is not None:
-                q = q.where(UnreadableRecord.vin == vin)
-            return [{"id": x.id, "mid": x.mid, "revision": x.revision, "raw": x.raw,
-                     "error": x.error,
-                     "vin": x.vin, "bolt": x.bolt, "controller_vin": x.controller_vin,
-                     "tightening_id": x.tightening_id, "pset": x.pset,
-                     "result_at": x.result_at, "recorded_at": x.recorded_at}
-                    for x in s.scalars(q)]
-
+    # -- bolts held for a person ---------------------------------------------------------
     def held_bolts(self, vin: str, since: datetime | None = None) -> dict[str, str]:
         """Bolts of ``vin`` held by an unreadable result (bolt -> which result: its tightening
         id, else its MID and revision), or by an OK result without a type outside the bolt's
@@ -735,49 +522,6 @@ class Repository:
                 select(UnattributedResult.id).where(
                     UnattributedResult.tightening_id == tightening_id),
                 select(ControllerEvent.id).where(ControllerEvent.tightening_id == tightening_id)))
-
-    def record_gap(self, first_id: int, last_id: int, vin: str | None, reason: str) -> int:
-        """Tightening ids the station could not get (the controller no longer has them)."""
-        with self._session(write=True) as s:
-            row = ResultGap(first_id=first_id, last_id=last_id, vin=vin, reason=reason[:200])
-            s.add(row)
-            s.flush()
-            append(s, GAP, row.id, row.found_at)
-            return row.id
-
-    def gaps(self) -> list[dict[str, Any]]:
-        with self._session(write=False) as s:
-            return [{"first_id": g.first_id, "last_id": g.last_id, "vin": g.vin,
-                     "reason": g.reason, "found_at": g.found_at}
-                    for g in s.scalars(select(ResultGap).order_by(ResultGap.id))]
-
-    def unattributed(self, vin: str | None = None) -> list[dict[str, Any]]:
-        """The stored results no bolt owns (of ``vin``, or all), oldest first.  Each with
-        ``entered_as``: the bolt and the person (``{"bolt", "by"}``) whose entered outcome is
-        that result (the outcome of a bolt held because it may be its own, entered from the
-        controller's screen; a quality trial: the one tightening read as two), else None."""
-        with self._session(write=False) as s:
-            q = select(UnattributedResult).order_by(UnattributedResult.id)
-            if vin is not None:
-                q = q.where(UnattributedResult.vin == vin)
-            rows = list(s.scalars(q))
-            ids = {r.tightening_id for r in rows if r.tightening_id is not None}
-            entered: dict[tuple[str | None, int | None], dict[str, str]] = {}
-            for v, tid, bolt, who in (s.execute(
-                    select(Vehicle.vin, TighteningRecord.tightening_id, Bolt.code,
-                           TighteningRecord.entered_by)
-                    .join(Vehicle, Vehicle.id == TighteningRecord.vehicle_id)
-                    .join(Bolt, Bolt.id == TighteningRecord.bolt_id)
-                    .where(TighteningRecord.entered_by.is_not(None),
-                           TighteningRecord.tightening_id.in_(ids))
-                    .order_by(TighteningRecord.id)) if ids else ()):
-                entered.setdefault((v, tid), {"bolt": bolt, "by": str(who)})   # the first
-            return [{"id": r.id, "vin": r.vin, "controller_vin": r.controller_vin,
-                     "tightening_id": r.tightening_id, "pset": r.pset, "status": r.status,
-                     "torque_nm": r.torque_nm, "angle_deg": r.angle_deg,
-                     "result_at": r.result_at, "recorded_at": r.recorded_at,
-                     "reason": r.reason, "result_type": r.result_type,
-                     "entered_as": entered.get((r.vin, r.tightening_id))} for r in rows]
 
     def close_vehicle(self, vin: str) -> VehicleReport:
         """End the vehicle (once; closing again keeps the first end) and return its summary:
@@ -870,112 +614,9 @@ def _closed(s: Session, v: Vehicle, report: VehicleReport, how: str) -> None:
     append(s, CLOSING, row.id, row.closed_at)
 
 
-def _same_result(model: Any, at: Any, tightening_id: int, torque_nm: float | None,
-                 angle_deg: float | None,
-                 controller_at: datetime | None) -> list[ColumnElement[bool]]:
-    """The conditions under which a stored row of ``model`` (``at``: its column of the
-    controller's timestamp) is the very result given, sent again by the controller: the same
-    tightening id, torque and angle, and the same controller timestamp where both have one.
-
-    Why all of them: a copy the controller resends (unacknowledged before a reload, a link
-    cut) is the same message, every value equal; a controller replaced or reset numbers its
-    tightenings from 1 again, and its values can coincide (torque to 0.01 N m, angle to
-    whole degrees near the target), so the id and values alone took another tightening for
-    a copy and it was lost without a word.  The controller stamps each tightening (MID
-    0061), so a different time is another tightening.  A missing time (a controller without
-    a clock, a row stored before it was kept) agrees with any: there the values decide, as
-    before, rather than storing a true copy twice."""
-    same = _same_values(model, tightening_id, torque_nm, angle_deg)
-    if controller_at is not None:
-        same.append(or_(at.is_(None), at == controller_at))
-    return same
-
-
-def _same_values(model: Any, tightening_id: int, torque_nm: float | None,
-                 angle_deg: float | None) -> list[ColumnElement[bool]]:
-    """A stored row of ``model`` with the given tightening id, torque and angle (what every
-    copy rule starts from)."""
-    return [model.tightening_id == int(tightening_id), model.torque_nm == _opt_float(torque_nm),
-            model.angle_deg == _opt_float(angle_deg)]
-
-
-def _copy_of(model: Any, at: Any, vin: Any, tightening_id: int, torque_nm: float | None,
-             angle_deg: float | None, controller_at: datetime | None,
-             vins: Collection[str]) -> list[ColumnElement[bool]]:
-    """:func:`_stored_copy`'s rule on a row of ``model`` (``at``: its column of the
-    controller's timestamp, ``vin``: of its vehicle): the same values, and the same
-    timestamp on any vehicle, or where either lacks one, a vehicle of ``vins``."""
-    within = vin.in_(list(vins))
-    return [*_same_values(model, tightening_id, torque_nm, angle_deg),
-            or_(at == controller_at, at.is_(None) & within) if controller_at is not None
-            else within]
-
-
-def _unreadable_copy(s: Session, mid: int, raw: str, header_len: int
-                     ) -> UnreadableRecord | None:
-    """The stored unreadable message ``raw`` is a copy of: the same MID and the same text
-    after its header (``header_len`` characters).  Compared here, not in SQL: SQLite's text
-    functions stop at a NUL, which a garbled message may hold."""
-    body = raw[header_len:]
-    for row in s.scalars(select(UnreadableRecord).where(UnreadableRecord.mid == int(mid))
-                         .order_by(UnreadableRecord.id)):
-        if row.raw[header_len:] == body:
-            return row
-    return None
-
-
-def _settle(s: Session, enable_id: int | None,
-            of: tuple[str | None, str | None] | None = None) -> None:
-    """The tool enable ``enable_id`` answered (the station owes it nothing more); with ``of``
-    (vin, bolt), only when it is an enable of that bolt of that vehicle."""
-    if enable_id is not None:
-        row = s.get(ToolEnable, enable_id)
-        if row is not None and row.settled_at is None and (
-                of is None or (row.vin, row.bolt) == of):
-            row.settled_at = utcnow()
-
-
-def _stored_copy(s: Session, tightening_id: int, torque_nm: float | None,
-                 angle_deg: float | None, controller_at: datetime | None,
-                 vins: Collection[str], *, others: bool = True) -> StoredResult | None:
-    """The tightening record a result is the very copy of: :func:`_same_result`'s id and
-    values, and either the same controller timestamp (both have one: any vehicle's record,
-    the tightening is the controller's, wherever the station put it; a copy resent after
-    the vehicle changed was stored again as the next vehicle's bolt's OK) or, where one of
-    them lacks it, a record of one of ``vins`` (the values alone decide there, as before,
-    and only within the vehicle: a value coincidence across vehicles is not a copy).  Then,
-    with ``others``, the same among the results stored unattributed and the controller
-    events (the rundowns' own write asks the rundowns only: those are checked as they are
-    stored, each in its own table)."""
-    rec = TighteningRecord
-    row = s.execute(select(rec.id, Vehicle.vin, Bolt.code)
-                    .join(Vehicle, rec.vehicle_id == Vehicle.id)
-                    .join(Bolt, rec.bolt_id == Bolt.id)
-                    .where(*_copy_of(rec, rec.controller_at, Vehicle.vin, tightening_id,
-                                     torque_nm, angle_deg, controller_at, vins))
-                    .order_by(rec.id).limit(1)).first()
-    if row is not None:
-        return StoredResult(int(row[0]), str(row[1]), str(row[2]))
-    if not others:
-        return None
-    # stored as a result no bolt owns, or as a controller event: a copy of one, taken for
-    # the owed enable's result, would close that bolt as well
-    for model, bolt in ((UnattributedResult, null()), (ControllerEvent, ControllerEvent.bolt)):
-        found = s.execute(select(model.id, model.vin, bolt).where(*_copy_of(
-            model, model.result_at, model.vin, tightening_id, torque_nm, angle_deg,
-            controller_at, vins)).order_by(model.id).limit(1)).first()
-        if found is not None:
-            return StoredResult(int(found[0]), found[1], found[2])
-    return None
-
-
 def _reason(exc: SQLAlchemyError) -> str:
     orig = getattr(exc, "orig", None)
     return str(orig if orig is not None else exc).splitlines()[0]
-
-
-def _opt_float(v: float | None) -> float | None:
-    return None if v is None else float(v)
 
 
 def _check_vin(vin: str) -> None:

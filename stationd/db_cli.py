@@ -427,9 +427,9 @@ def _read_url(args: argparse.Namespace) -> str:
 def cmd_db_report(args: argparse.Namespace) -> int:
     with open_repository(_report_url(args), must_exist=True) as repo:
         report = repo.vehicle_report(args.vin, held=True)
-        loose = repo.unattributed(args.vin)   # results made at height that no bolt owns
-        events = repo.controller_events(args.vin)   # batch steps, bypasses, ...: no rundown
-        unread = repo.unreadable(args.vin)          # results that could not be read
+        loose = repo.others.unattributed(args.vin)   # results made at height that no bolt owns
+        events = repo.others.controller_events(args.vin)   # batch steps, bypasses, ...: no rundown
+        unread = repo.others.unreadable(args.vin)          # results that could not be read
         commands = repo.ledger.commands(args.vin)   # the audit trail: skips, reopens
         from stationd.web.results import Results
 

@@ -793,7 +793,7 @@ def unrecorded_words(hold: str | None, loose: Sequence[Mapping[str, Any]] = ()) 
 
 def entered_as_words(entered_as: dict[str, str] | None) -> str:
     """"; the outcome entered for B09 by sam": of a result stored unattributed whose entered
-    outcome a person gave a bolt held for it (:meth:`db.repository.Repository.unattributed`:
+    outcome a person gave a bolt held for it (:meth:`db.others.OtherResults.unattributed`:
     one tightening, the bolt's row that result as read on the controller's screen); empty
     where there is none."""
     if not entered_as:

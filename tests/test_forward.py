@@ -824,10 +824,10 @@ def test_a_result_garbled_with_a_control_character_reaches_the_line_unreadable(t
     u = receive(decode((good[:150] + "\x00" + good[151:]).encode()))
     assert u.tightening_id == 41
     repo = _station(tmp_path, "st.db", table, "VINQ", [(1, "B1")])
-    repo.record_unreadable(mid=u.mid, revision=u.revision, raw=u.raw, error=u.error,
-                           vin="VINQ", bolt="B2", controller_vin=None,
-                           tightening_id=u.tightening_id, pset=u.pset, result_at=None,
-                           header_len=u.header_len)
+    repo.others.record_unreadable(mid=u.mid, revision=u.revision, raw=u.raw, error=u.error,
+                                  vin="VINQ", bolt="B2", controller_vin=None,
+                                  tightening_id=u.tightening_id, pset=u.pset, result_at=None,
+                                  header_len=u.header_len)
     f = Forwarder(repo, LineConfig(pg_url, "ST-Q"))
     assert f.step() == 2
     assert [(r.seq, r.kind) for r in _line_rows(pg_url, "ST-Q")] == [(1, "rundown"),

@@ -150,19 +150,19 @@ def _every_kind(repo):
                                         "loosen": True})
     repo.ledger.record_command(at=AT, user="sam", source="cli", kind="skip", vin=VIN,
                                bolt="B3", comment="no access")
-    repo.record_gap(14, 16, VIN, "the controller no longer has them")
+    repo.others.record_gap(14, 16, VIN, "the controller no longer has them")
     record_check(repo, at=AT, pair="pair1", verdict="moved", reference="R1", offset_mm=1.5,
                  tolerance_mm=0.5, reason=None,
                  references={"R1": {"offset_mm": 1.5, "measured_mm": [1.0, 2.0, 3.0]}})
-    repo.record_unattributed(vin=VIN, controller_vin="OTHERVIN", tightening_id=17, pset=3,
-                             ok=True, torque_nm=24.0, angle_deg=30.0, result_at=AT,
-                             reason="no bolt enabled", result_type=2)
-    repo.record_controller_event(result_type=3, what="batch increment", vin=VIN, bolt="B3",
-                                 controller_vin=VIN, tightening_id=18, pset=21, ok=True,
-                                 torque_nm=None, angle_deg=None, result_at=AT)
-    repo.record_unreadable(mid=61, revision=7, raw="00230061007 garbled", error="too short",
-                           vin=VIN, bolt="B3", controller_vin=None, tightening_id=19,
-                           pset=None, result_at=None)
+    repo.others.record_unattributed(vin=VIN, controller_vin="OTHERVIN", tightening_id=17, pset=3,
+                                    ok=True, torque_nm=24.0, angle_deg=30.0, result_at=AT,
+                                    reason="no bolt enabled", result_type=2)
+    repo.others.record_controller_event(result_type=3, what="batch increment", vin=VIN, bolt="B3",
+                                        controller_vin=VIN, tightening_id=18, pset=21, ok=True,
+                                        torque_nm=None, angle_deg=None, result_at=AT)
+    repo.others.record_unreadable(mid=61, revision=7, raw="00230061007 garbled", error="too short",
+                                  vin=VIN, bolt="B3", controller_vin=None, tightening_id=19,
+                                  pset=None, result_at=None)
 
 
 def test_every_kind_of_record_lands_typed_with_its_columns_units_and_comments(tmp_path,
@@ -533,9 +533,9 @@ def test_a_held_bolts_reason_reaches_the_line_with_its_controller_event(tmp_path
     repo = _station(tmp_path, "a")
     repo.start_vehicle(VIN, "SEDAN")
     note = lost_unknown_note(28, 2, AT.timestamp())
-    repo.record_controller_event(result_type=0, what=LOST_UNKNOWN, vin=VIN, bolt="B3",
-                                 controller_vin=None, tightening_id=None, pset=2, ok=None,
-                                 torque_nm=None, angle_deg=None, result_at=None, note=note)
+    repo.others.record_controller_event(result_type=0, what=LOST_UNKNOWN, vin=VIN, bolt="B3",
+                                        controller_vin=None, tightening_id=None, pset=2, ok=None,
+                                        torque_nm=None, angle_deg=None, result_at=None, note=note)
     _forward(repo, pg_url, "ST-A")
     engine = _engine(pg_url)
     with engine.connect() as c:
@@ -642,9 +642,9 @@ def test_a_kind_typed_in_a_later_version_is_filled_from_what_line_feed_holds(tmp
     change = create_line_schema(engine)
     assert change.made == ("line_controller_events",) and change.trigger
     assert ("line_controller_events", 1) in change.filled
-    repo.record_controller_event(result_type=5, what="bypass", vin=VIN, bolt=None,
-                                 controller_vin=None, tightening_id=40, pset=None, ok=True,
-                                 torque_nm=None, angle_deg=None, result_at=None)
+    repo.others.record_controller_event(result_type=5, what="bypass", vin=VIN, bolt=None,
+                                        controller_vin=None, tightening_id=40, pset=None, ok=True,
+                                        torque_nm=None, angle_deg=None, result_at=None)
     _forward(repo, pg_url, "ST-A")
     with engine.connect() as c:
         assert c.execute(select(LINE_CONTROLLER_EVENTS.table.c.what).order_by(
@@ -689,9 +689,9 @@ def _line_database_at_version_2(url) -> Engine:
 
 def _entered(repo, bolt: str, tightening_id: int, comment: str) -> tuple[int, int]:
     """An unreadable result for ``bolt`` and the outcome sam entered for it: their ids."""
-    uid = repo.record_unreadable(mid=61, revision=7, raw=f"00230061007 garbled {bolt}",
-                                 error="too short", vin=VIN, bolt=bolt, controller_vin=None,
-                                 tightening_id=tightening_id, pset=None, result_at=None)
+    uid = repo.others.record_unreadable(mid=61, revision=7, raw=f"00230061007 garbled {bolt}",
+                                        error="too short", vin=VIN, bolt=bolt, controller_vin=None,
+                                        tightening_id=tightening_id, pset=None, result_at=None)
     rid = record_entered(repo, vin=VIN, bolt=bolt, ok=True, torque_nm=49.6, angle_deg=31.0,
                          at=datetime.now(UTC), user="sam", source="cli", comment=comment)
     return uid, rid

@@ -266,7 +266,7 @@ class Records:
         ``cut`` (a controller that keeps its results to fetch), the new station takes it as a
         link cut during it (its result, made meanwhile, fetched and proved; its tool kept off
         until then).  None where neither applies."""
-        owed = self._repo().owed_enable()
+        owed = self._repo().enables.owed()
         if owed is None:
             return None
         now = time.time()
@@ -294,11 +294,11 @@ class Records:
         """The enable for ``sel`` is owed nothing more (:class:`SettleEnable`)."""
         enable = self._settles(sel)
         if enable is not None:
-            self._writer().settle_enable(enable)
+            self._writer().enables.settle(enable)
 
     def note_enable(self, sel: Selection) -> None:
         """The tool is about to be enabled for ``sel``: noted on disk first."""
-        row = self._writer().note_enable(sel.vin, sel.bolt, sel.pset, sel.parameters_id,
+        row = self._writer().enables.note(sel.vin, sel.bolt, sel.pset, sel.parameters_id,
                                        _selection_json(sel), datetime.now(UTC))
         self._enable, self._enable_off = (sel, row), False
 
@@ -308,7 +308,7 @@ class Records:
         if self._enable is None or self._enable_off or self.repo is None:
             return
         try:
-            self.repo.note_tool_off(self._enable[1], datetime.now(UTC))
+            self.repo.enables.tool_off(self._enable[1], datetime.now(UTC))
             self._enable_off = True
         except STATION_FAULTS as exc:
             self.log.warning("the tool-off time of bolt %s not stored: %s", self._enable[0].bolt,
@@ -400,19 +400,20 @@ class Records:
         # a copy that reads of a message stored unreadable (garbled on the line the first
         # time): that result, held for a person, never the enable owed now
         made = None if ev.made_at is None else datetime.fromtimestamp(ev.made_at, UTC)
-        held = self._repo().unreadable_of(tightening_id=int(r.tightening_id),
-                                          pset=int(r.pset), at=controller_time(r), made=made)
+        held = self._repo().others.unreadable_of(tightening_id=int(r.tightening_id),
+                                                 pset=int(r.pset), at=controller_time(r), made=made)
         return ev if held is None else ResultCopy(ev.t, r, held[0], held[1])
 
     def unreadable_input(self, ev: UnreadableIn) -> UnreadableIn:
         """``ev`` as the core is to have it: saying where it was stored when the database has
-        this very message already (:meth:`Repository.stored_unreadable`: a copy the
+        this very message already (:meth:`db.others.OtherResults.stored_unreadable`: a copy the
         controller sent again, after a reload or a restart), which the core then attributes
         to no bolt.  Blocking (the executor's, as every read)."""
         u = ev.unreadable
         if u.tightening_id is None and u.timestamp is None:
             return ev       # it says nothing of itself: the same text is no proof of a copy
-        stored = self._repo().stored_unreadable(mid=u.mid, raw=u.raw, header_len=u.header_len)
+        stored = self._repo().others.stored_unreadable(mid=u.mid, raw=u.raw,
+                                                        header_len=u.header_len)
         return ev if stored is None else replace(ev, stored=stored)
 
     def keep(self, u: Unsaved) -> None:
@@ -445,7 +446,7 @@ class Records:
         """The result, unless the database has it already (a copy the controller sent
         again: said in the journal, stored once)."""
         r = a.result
-        row = self._writer().record_unattributed(
+        row = self._writer().others.record_unattributed(
             vin=a.vin, controller_vin=str(r.vin or "").strip() or None,
             tightening_id=int(r.tightening_id), pset=int(r.pset), ok=bool(r.ok),
             torque_nm=float(r.torque_nm), angle_deg=float(r.angle_deg),
@@ -459,7 +460,7 @@ class Records:
         held for a person: no later result is owed to it)."""
         r = a.result
         enable = self._settles(a.selection, take=False)
-        row = self._writer().record_controller_event(
+        row = self._writer().others.record_controller_event(
             result_type=type_code(r) or 0, what=stored_what(a), vin=a.vin, bolt=a.bolt,
             controller_vin=str(r.vin or "").strip() or None,
             tightening_id=int(r.tightening_id), pset=int(r.pset), ok=bool(r.ok),
@@ -474,7 +475,7 @@ class Records:
         lost may be its own): a controller event of the station's own kind without a result
         (its note, why), the enable settled with it."""
         enable = self._settles(a.selection, take=False)
-        self._writer().record_controller_event(
+        self._writer().others.record_controller_event(
             result_type=0, what=a.what, vin=a.vin, bolt=a.bolt, controller_vin=None,
             tightening_id=a.tightening_id, pset=a.selection.pset, ok=None, torque_nm=None,
             angle_deg=None, result_at=None, enable_id=enable, note=a.note)
@@ -485,7 +486,7 @@ class Records:
         for a person now: no later result is owed to it)."""
         u, sel = a.unreadable, a.selection
         enable = self._settles(sel, take=False)
-        self._writer().record_unreadable(
+        self._writer().others.record_unreadable(
             mid=u.mid, revision=u.revision, raw=u.raw, error=u.error, vin=a.vin, bolt=a.bolt,
             controller_vin=u.vin.strip() or None, tightening_id=u.tightening_id, pset=u.pset,
             result_at=_aware(u.timestamp),
@@ -644,7 +645,7 @@ class Records:
         return self._repo().last_tightening_id()
 
     def record_gap(self, first: int, last: int, vin: str | None, reason: str) -> None:
-        self._writer().record_gap(first, last, vin, reason)
+        self._writer().others.record_gap(first, last, vin, reason)
 
     def record_check(self, a: RecordCheck) -> None:
         """A pair's calibration check, with its feed entry (the line gets it)."""

@@ -143,15 +143,15 @@ class Results:
         report = self.repo.vehicle_report(vin, held=True).to_json()
         rows = self._rows(vin, curves=True)
         runs = [r for _, r in rows]
-        loose = self.repo.unattributed(vin)
+        loose = self.repo.others.unattributed(vin)
         for b in report["bolts"]:
             b["rundowns"] = [r for r in runs if r["bolt"] == b["bolt"]]
             if not b["rundowns"]:   # "not tightened", or why held (as db report says it)
                 b["unrecorded"] = unrecorded_words(report["held"].get(b["bolt"]), loose)
         report["commands"] = self.commands(vin)
         # what the controller said that was no rundown, and what could not be read (whole)
-        report["controller_events"] = [_isos(e) for e in self.repo.controller_events(vin)]
-        report["unreadable_results"] = [_isos(x) for x in self.repo.unreadable(vin)]
+        report["controller_events"] = [_isos(e) for e in self.repo.others.controller_events(vin)]
+        report["unreadable_results"] = [_isos(x) for x in self.repo.others.unreadable(vin)]
         # results made at height that no bolt owns, each with its type in words
         report["unattributed"] = [{**_isos(u), "what": result_type_words(u["result_type"])}
                                   for u in loose]
@@ -223,8 +223,9 @@ class Results:
         Raises ``NotFoundError`` for an unknown VIN."""
         report = self.repo.vehicle_report(vin)
         still_open = report.vehicle.ended_at is None
-        rows, unreadable = self._rows(vin), self.repo.unreadable(vin)
-        unattributed, events = self.repo.unattributed(vin), self.repo.controller_events(vin)
+        others = self.repo.others
+        rows, unreadable = self._rows(vin), others.unreadable(vin)
+        unattributed, events = others.unattributed(vin), others.controller_events(vin)
         given = self.repo.ledger.commands(vin)
         commands = [c for c in given if c.kind in ("release", "lock", "loosen") and c.bolt]
         # a skipped bolt's row is its skip's record: (bolt, when) -> the skip command's id

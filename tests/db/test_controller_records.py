@@ -18,14 +18,14 @@ RAW = "02310061007    " + "0100010200SimController" + "\x00garbage"
 
 
 def _event(repo, tid: int, code: int = 3, bolt: str | None = "B1"):
-    return repo.record_controller_event(
+    return repo.others.record_controller_event(
         result_type=code, what="batch increment", vin="VIN1", bolt=bolt, controller_vin=None,
         tightening_id=tid, pset=1, ok=True, torque_nm=0.0, angle_deg=0.0,
         result_at=datetime(2026, 11, 29, 8, 0, tzinfo=UTC))
 
 
 def _unreadable(repo, tid: int | None, bolt: str | None = "B1", raw: str = RAW):
-    return repo.record_unreadable(
+    return repo.others.record_unreadable(
         mid=61, revision=7, raw=raw, error="MID 0061 revision 7: parameter 01 missing",
         vin="VIN1", bolt=bolt, controller_vin=None, tightening_id=tid, pset=1,
         result_at=None)
@@ -61,7 +61,7 @@ def test_a_held_bolts_note_is_in_its_controller_events_feed_record(repo, bolts_f
     import_bolts(repo, bolts_file)
     repo.start_vehicle("VIN1", "SEDAN")
     note = "tightening 28 may be its own (its push lost, fetched later; ...)"
-    assert repo.record_controller_event(
+    assert repo.others.record_controller_event(
         result_type=0, what=LOST_UNKNOWN, vin="VIN1", bolt="B1", controller_vin=None,
         tightening_id=None, pset=1, ok=None, torque_nm=None, angle_deg=None, result_at=None,
         note=note)
@@ -79,19 +79,19 @@ def test_an_unreadable_message_sent_again_under_another_header_is_the_stored_one
     stored once; another text is another message."""
     import_bolts(repo, bolts_file)
     repo.start_vehicle("VIN1", "SEDAN")
-    assert repo.stored_unreadable(mid=61, raw=RAW, header_len=20) is None
-    assert repo.record_unreadable(
+    assert repo.others.stored_unreadable(mid=61, raw=RAW, header_len=20) is None
+    assert repo.others.record_unreadable(
         mid=61, revision=7, raw=RAW, error="x", vin="VIN1", bolt="B1", controller_vin=None,
         tightening_id=None, pset=1, result_at=None, header_len=20)
     resent = RAW[:16] + "07" + RAW[18:]
     assert resent != RAW
-    assert repo.stored_unreadable(mid=61, raw=resent, header_len=20) == ("VIN1", "B1")
-    assert repo.stored_unreadable(mid=65, raw=resent, header_len=20) is None
-    assert repo.stored_unreadable(mid=61, raw=resent[:-1] + "?", header_len=20) is None
-    assert repo.record_unreadable(
+    assert repo.others.stored_unreadable(mid=61, raw=resent, header_len=20) == ("VIN1", "B1")
+    assert repo.others.stored_unreadable(mid=65, raw=resent, header_len=20) is None
+    assert repo.others.stored_unreadable(mid=61, raw=resent[:-1] + "?", header_len=20) is None
+    assert repo.others.record_unreadable(
         mid=61, revision=7, raw=resent, error="x", vin="VIN1", bolt="B3", controller_vin=None,
         tightening_id=None, pset=1, result_at=None, header_len=20) is None
-    assert [u["bolt"] for u in repo.unreadable()] == ["B1"]
+    assert [u["bolt"] for u in repo.others.unreadable()] == ["B1"]
 
 
 def test_an_id_holds_a_read_result_only_where_one_the_controller_sent_is_stored(
@@ -104,11 +104,11 @@ def test_an_id_holds_a_read_result_only_where_one_the_controller_sent_is_stored(
     repo.start_vehicle("VIN1", "SEDAN")
     record(repo, "VIN1", "B2", tightening_id=3)
     _event(repo, 4)
-    repo.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=5, pset=1,
-                             ok=True, torque_nm=1.0, angle_deg=2.0, result_at=None,
-                             reason="outside")
+    repo.others.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=5, pset=1,
+                                    ok=True, torque_nm=1.0, angle_deg=2.0, result_at=None,
+                                    reason="outside")
     _unreadable(repo, 7)
-    repo.record_gap(8, 9, "VIN1", "the controller no longer has it")
+    repo.others.record_gap(8, 9, "VIN1", "the controller no longer has it")
     assert [repo.read_result_stored(t) for t in (3, 4, 5, 6, 7, 8, 9)] == [
         True, True, True, False, False, False, False]
     assert repo.last_tightening_id() == 9
@@ -120,28 +120,28 @@ def test_a_readable_copy_of_an_unreadable_message_finds_it(repo, bolts_file):
     import_bolts(repo, bolts_file)
     repo.start_vehicle("VIN1", "SEDAN")
     at = datetime(2026, 11, 29, 8, 0, tzinfo=UTC)
-    repo.record_unreadable(mid=61, revision=7, raw=RAW, error="x", vin="VIN1", bolt="B1",
-                           controller_vin=None, tightening_id=7, pset=1, result_at=at)
-    assert repo.unreadable_of(tightening_id=7, pset=1, at=at) == ("VIN1", "B1")
-    assert repo.unreadable_of(tightening_id=7, pset=None, at=None) == ("VIN1", "B1")
-    assert repo.unreadable_of(tightening_id=7, pset=2, at=at) is None      # another pset
-    assert repo.unreadable_of(tightening_id=7, pset=1,
-                              at=datetime(2026, 11, 29, 9, 0, tzinfo=UTC)) is None
-    assert repo.unreadable_of(tightening_id=8, pset=1, at=at) is None
+    repo.others.record_unreadable(mid=61, revision=7, raw=RAW, error="x", vin="VIN1", bolt="B1",
+                                  controller_vin=None, tightening_id=7, pset=1, result_at=at)
+    assert repo.others.unreadable_of(tightening_id=7, pset=1, at=at) == ("VIN1", "B1")
+    assert repo.others.unreadable_of(tightening_id=7, pset=None, at=None) == ("VIN1", "B1")
+    assert repo.others.unreadable_of(tightening_id=7, pset=2, at=at) is None      # another pset
+    assert repo.others.unreadable_of(tightening_id=7, pset=1,
+                                     at=datetime(2026, 11, 29, 9, 0, tzinfo=UTC)) is None
+    assert repo.others.unreadable_of(tightening_id=8, pset=1, at=at) is None
 
 
 def test_a_result_made_after_a_timeless_unreadable_one_under_its_id_is_not_its_copy(repo):
     """A controller whose ids started again: tightening 7 again, made (on the station's
     clock) after the unreadable 7 without a time was stored, is another result."""
-    repo.record_unreadable(mid=61, revision=7, raw=RAW, error="x", vin="VIN1", bolt="B1",
-                           controller_vin=None, tightening_id=7, pset=1, result_at=None)
+    repo.others.record_unreadable(mid=61, revision=7, raw=RAW, error="x", vin="VIN1", bolt="B1",
+                                  controller_vin=None, tightening_id=7, pset=1, result_at=None)
     stored = datetime.now(UTC)
     at = datetime(2026, 11, 29, 8, 0, tzinfo=UTC)
-    assert repo.unreadable_of(tightening_id=7, pset=1, at=at) == ("VIN1", "B1")
-    assert repo.unreadable_of(tightening_id=7, pset=1, at=at,
-                              made=stored - timedelta(minutes=5)) == ("VIN1", "B1")
-    assert repo.unreadable_of(tightening_id=7, pset=1, at=at,
-                              made=stored + timedelta(minutes=5)) is None
+    assert repo.others.unreadable_of(tightening_id=7, pset=1, at=at) == ("VIN1", "B1")
+    assert repo.others.unreadable_of(tightening_id=7, pset=1, at=at,
+                                     made=stored - timedelta(minutes=5)) == ("VIN1", "B1")
+    assert repo.others.unreadable_of(tightening_id=7, pset=1, at=at,
+                                     made=stored + timedelta(minutes=5)) is None
 
 
 def test_an_unreadable_result_without_an_id_still_counts_nothing_it_cannot(repo, bolts_file):

@@ -141,16 +141,16 @@ def test_report_exit_codes(run, db):
         # taken by the station a minute before it was stored (the database was down)
         record(repo, "VIN1", "SF-FR", result_at=datetime.now(UTC) - timedelta(minutes=1))
         record(repo, "VIN1", "TB-C")
-        repo.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=77, pset=4,
-                                 ok=False, torque_nm=9.5, angle_deg=12.0, result_at=None,
-                                 reason="result 77 (pset 4) outside any tightening",
-                                 result_type=1)
+        repo.others.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=77, pset=4,
+                                        ok=False, torque_nm=9.5, angle_deg=12.0, result_at=None,
+                                        reason="result 77 (pset 4) outside any tightening",
+                                        result_type=1)
         # a loosening no bolt owns is said as one (it read "tightening ... OK": an MES
         # integrator's trial), and one without a type as a result
         for tid, code in ((78, 2), (79, None)):
-            repo.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=tid,
-                                     pset=4, ok=True, torque_nm=9.5, angle_deg=12.0,
-                                     result_at=None, reason="fetched", result_type=code)
+            repo.others.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=tid,
+                                            pset=4, ok=True, torque_nm=9.5, angle_deg=12.0,
+                                            result_at=None, reason="fetched", result_type=code)
         repo.close_vehicle("VIN1")
     code, out, _ = run("db", "report", "VIN1", "--db", db)
     # SF-FR tightened again to OK: no bolt ends NOK, its NOK result is still said
@@ -773,13 +773,13 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
     with Repository.open(db) as repo:
         repo.start_vehicle("VIN1", "WAGON-B")
         # SF-FL held by a result that did not read, then tightened: held then, no longer
-        repo.record_unreadable(
+        repo.others.record_unreadable(
             mid=61, revision=7, raw="00990061007    garbled",
             error="MID 0061 revision 7: parameter 02 missing",   # the driver's words
             vin="VIN1", bolt="SF-FL", controller_vin=None, tightening_id=5, pset=1,
             result_at=None)
         # SF-FR held by a link cut during its enable: no result, its note says why
-        repo.record_controller_event(
+        repo.others.record_controller_event(
             result_type=0, what=CUT_UNKNOWN, vin="VIN1", bolt="SF-FR", controller_vin=None,
             tightening_id=None, pset=1, ok=False, torque_nm=None, angle_deg=None,
             result_at=None, note="its result during the link cut not known: the controller "
@@ -787,20 +787,20 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
         # made at 17:27:47 on the controller's clock (fetched after a link cut, later)
         record(repo, "VIN1", "SF-FL", tightening_id=3,
                controller_at=datetime(2026, 11, 30, 17, 27, 47, tzinfo=UTC))
-        repo.record_controller_event(
+        repo.others.record_controller_event(
             result_type=3, what="batch increment", vin="VIN1", bolt="SF-FR",
             controller_vin=None, tightening_id=8, pset=1, ok=True, torque_nm=0.0,
             angle_deg=0.0, result_at=None)
         # TB-C held by tightening 4, released, then held again by tightening 9: each record
         # says whether its own hold is on (a reviewer: both said "held")
-        repo.record_unreadable(
+        repo.others.record_unreadable(
             mid=61, revision=7, raw="00990061007    first", error="parameter 03 missing",
             vin="VIN1", bolt="TB-C", controller_vin=None, tightening_id=4, pset=2,
             result_at=None)
         repo.ledger.record_command(at=datetime.now(UTC), user="sam", source="cli",
                                    kind="release", vin="VIN1", bolt="TB-C",
                                    comment="checked: not tightened")
-        repo.record_unreadable(
+        repo.others.record_unreadable(
             mid=61, revision=7, raw="00990061007    garbage", error="parameter 01 missing",
             vin="VIN1", bolt="TB-C", controller_vin=None, tightening_id=9, pset=2,
             result_at=datetime(2026, 11, 30, 17, 27, 55, tzinfo=UTC))
@@ -809,7 +809,7 @@ def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path
         repo.ledger.record_command(at=datetime.now(UTC), user="station", source="NOK policy",
                                    kind=LOCK, vin="VIN1", bolt="TB-L",
                                    comment="3 NOK in a row")
-        repo.record_unattributed(   # a quality trial: in db report, missing from the export
+        repo.others.record_unattributed(   # a quality trial: in db report, missing from the export
             vin="VIN1", controller_vin=None, tightening_id=10, pset=2, ok=True, torque_nm=49.5,
             angle_deg=39.0, result_at=None, reason="fetched after a later one came")
         runs = Results(repo).export("VIN1")
@@ -1052,13 +1052,13 @@ def test_a_bolt_held_for_a_lost_push_is_not_said_never_tightened(run, db):
     note = lost_unknown_note(41, 1, 1000.0)
     with Repository.open(db) as repo:
         repo.start_vehicle("VIN1", "WAGON-B")
-        repo.record_unattributed(
+        repo.others.record_unattributed(
             vin="VIN1", controller_vin=None, tightening_id=41, pset=1, ok=True,
             torque_nm=49.6, angle_deg=31.0, result_at=None,
             reason="fetched after a later one came, the link up")
         for bolt, what, held in (("SF-FL", LOST_UNKNOWN, note),
                                  ("SF-FR", CUT_UNKNOWN, cut_unknown_note("no answer"))):
-            repo.record_controller_event(
+            repo.others.record_controller_event(
                 result_type=0, what=what, vin="VIN1", bolt=bolt, controller_vin=None,
                 tightening_id=None, pset=1, ok=None, torque_nm=None, angle_deg=None,
                 result_at=None, note=held)
@@ -1227,9 +1227,9 @@ def test_a_shift_s_hand_over_names_a_held_bolt_once(run, db):
         import_bolts(repo, EXAMPLE)
         bolts = [b.bolt_id for b in repo.bolts_for_model("WAGON-B")]
         repo.start_vehicle("VIN1", "WAGON-B")
-        repo.record_unreadable(mid=61, revision=7, raw="00230061007 garbled", error="short",
-                               vin="VIN1", bolt=bolts[0], controller_vin=None,
-                               tightening_id=7, pset=1, result_at=None)
+        repo.others.record_unreadable(mid=61, revision=7, raw="00230061007 garbled", error="short",
+                                      vin="VIN1", bolt=bolts[0], controller_vin=None,
+                                      tightening_id=7, pset=1, result_at=None)
     since = (datetime.now(UTC) - timedelta(hours=1)).isoformat()
     code, out, _ = run("db", "shift", "--since", since, "--db", db)
     [line] = [x for x in out.splitlines() if x.strip().startswith("VIN1")]
@@ -1254,9 +1254,9 @@ def test_a_shift_s_hand_over_is_not_all_well_with_a_bolt_held_after_its_ok(run, 
         repo.start_vehicle("VIN1", "WAGON-B")
         for tid, bolt in enumerate(bolts, 1):
             record(repo, "VIN1", bolt, tightening_id=tid)
-        repo.record_unreadable(mid=61, revision=7, raw="00230061007 garbled", error="short",
-                               vin="VIN1", bolt=bolts[0], controller_vin=None,
-                               tightening_id=99, pset=1, result_at=None)
+        repo.others.record_unreadable(mid=61, revision=7, raw="00230061007 garbled", error="short",
+                                      vin="VIN1", bolt=bolts[0], controller_vin=None,
+                                      tightening_id=99, pset=1, result_at=None)
         closed = repo.close_vehicle("VIN1")
     assert closed.held, "the close names the hold"
     since = (datetime.now(UTC) - timedelta(hours=1)).isoformat()

@@ -41,7 +41,7 @@ def test_an_entered_ok_is_a_rundown_marked_entered_that_ends_the_hold(sedan):
     sel = {"point_mm": [1.0, 2.0, 3.0], "tilt_deg": 2.5, "distance_mm": 0.7,
            "exposure_t": 1.0, "decided_t": 1.1, "loosen": False, "operator": "olga"}
     version = repo.bolts_for_model("SEDAN")[0].parameters_id
-    repo.note_enable("VIN1", "B1", 1, version, sel, datetime.now(UTC))
+    repo.enables.note("VIN1", "B1", 1, version, sel, datetime.now(UTC))
     uid = _unreadable(repo, 12, "B1")
     assert repo.held_bolts("VIN1") == {"B1": "tightening 12"}
     rid = _enter(repo)
@@ -109,7 +109,7 @@ def test_opc_ua_says_an_entered_result_was_entered_and_by_whom():
 def _not_taken(repo, tid: int, bolt: str = "B1", enable_id: int | None = None):
     """An OK result without a type outside the bolt's torque window, as the station stores
     it (a controller event, its bolt held)."""
-    return repo.record_controller_event(
+    return repo.others.record_controller_event(
         result_type=0, what=NOT_TAKEN, vin="VIN1", bolt=bolt, controller_vin=None,
         tightening_id=tid, pset=1, ok=True, torque_nm=0.0, angle_deg=0.0, result_at=None,
         enable_id=enable_id)
@@ -122,11 +122,11 @@ def test_an_untyped_ok_outside_the_window_holds_its_bolt_over_a_restart_until_re
     release ends the next one."""
     repo = sedan
     version = repo.bolts_for_model("SEDAN")[0].parameters_id
-    enable = repo.note_enable("VIN1", "B1", 1, version, {"operator": "olga"},
-                              datetime.now(UTC))
-    assert repo.owed_enable() is not None
+    enable = repo.enables.note("VIN1", "B1", 1, version, {"operator": "olga"},
+                               datetime.now(UTC))
+    assert repo.enables.owed() is not None
     assert _not_taken(repo, 21, enable_id=enable)
-    assert repo.owed_enable() is None
+    assert repo.enables.owed() is None
     assert repo.held_bolts("VIN1") == {"B1": not_taken_note(0.0, 21)}
     assert is_not_taken_note(repo.held_bolts("VIN1")["B1"])
     _enter(repo)
@@ -147,9 +147,9 @@ def test_an_untyped_ok_outside_the_window_holds_its_bolt_over_a_restart_until_re
                                comment="a batch increment on the controller")
     assert repo.held_bolts("VIN1") == {}
     # a controller event of another kind holds nothing
-    repo.record_controller_event(result_type=3, what="batch increment", vin="VIN1",
-                                 bolt="B1", controller_vin=None, tightening_id=33, pset=1,
-                                 ok=True, torque_nm=0.0, angle_deg=0.0, result_at=None)
+    repo.others.record_controller_event(result_type=3, what="batch increment", vin="VIN1",
+                                        bolt="B1", controller_vin=None, tightening_id=33, pset=1,
+                                        ok=True, torque_nm=0.0, angle_deg=0.0, result_at=None)
     assert repo.held_bolts("VIN1") == {}
 
 
@@ -163,8 +163,8 @@ def _held_loosening(repo: Repository, tid: int = 2) -> int | None:
     notes and stores them): the unreadable record's id."""
     record(repo, "VIN1", "B1", ok=False, tightening_id=tid - 1)
     version = repo.bolts_for_model("SEDAN")[0].parameters_id
-    repo.note_enable("VIN1", "B1", 90, version, LOOSEN_SEL, datetime.now(UTC))
-    return repo.record_unreadable(
+    repo.enables.note("VIN1", "B1", 90, version, LOOSEN_SEL, datetime.now(UTC))
+    return repo.others.record_unreadable(
         mid=61, revision=7, raw=f"unreadable loosening {tid}", error="parameter 01 missing",
         vin="VIN1", bolt="B1", controller_vin=None, tightening_id=tid, pset=90,
         result_at=None)
@@ -234,18 +234,18 @@ def test_what_a_held_result_came_under_is_read_from_the_enable_it_answered(sedan
     repo = sedan
     version = repo.bolts_for_model("SEDAN")[1].parameters_id
     # B2: no enable at all; its unreadable result's own pset as far as read
-    repo.record_unreadable(mid=61, revision=7, raw="no enable", error="x", vin="VIN1",
-                           bolt="B2", controller_vin=None, tightening_id=None, pset=77,
-                           result_at=None)
+    repo.others.record_unreadable(mid=61, revision=7, raw="no enable", error="x", vin="VIN1",
+                                  bolt="B2", controller_vin=None, tightening_id=None, pset=77,
+                                  result_at=None)
     # B3: a loosening enabled first, then a tightening: the latest before the result decides
     sel = {**LOOSEN_SEL}
-    repo.note_enable("VIN1", "B3", 90, None, sel, datetime.now(UTC) - timedelta(seconds=5))
-    repo.note_enable("VIN1", "B3", 21, None, {**sel, "loosen": False},
-                     datetime.now(UTC) - timedelta(seconds=1))
-    repo.record_unreadable(mid=61, revision=7, raw="b3", error="x", vin="VIN1", bolt="B3",
-                           controller_vin=None, tightening_id=40, pset=None, result_at=None)
+    repo.enables.note("VIN1", "B3", 90, None, sel, datetime.now(UTC) - timedelta(seconds=5))
+    repo.enables.note("VIN1", "B3", 21, None, {**sel, "loosen": False},
+                      datetime.now(UTC) - timedelta(seconds=1))
+    repo.others.record_unreadable(mid=61, revision=7, raw="b3", error="x", vin="VIN1", bolt="B3",
+                                  controller_vin=None, tightening_id=40, pset=None, result_at=None)
     # B1: an enable from before loosen psets existed (no flag): a tightening's
-    repo.note_enable("VIN1", "B1", 1, version, {"point_mm": [0, 0, 0]}, datetime.now(UTC))
+    repo.enables.note("VIN1", "B1", 1, version, {"point_mm": [0, 0, 0]}, datetime.now(UTC))
     _not_taken(repo, 41, "B1")
     assert repo.holds("VIN1") == {
         "B2": ("MID 0061 revision 7", HeldUnder(None, 77)),
@@ -265,9 +265,9 @@ def test_an_outcome_entered_for_a_bolt_held_after_a_link_cut_names_no_older_resu
     repo.ledger.record_command(at=datetime.now(UTC), user="sam", source="cli", kind="release",
                                vin="VIN1", bolt="B1", comment="checked")
     note = cut_unknown_note("the controller refused to give them")
-    repo.record_controller_event(result_type=0, what=CUT_UNKNOWN, vin="VIN1", bolt="B1",
-                                 controller_vin=None, tightening_id=None, pset=1, ok=False,
-                                 torque_nm=None, angle_deg=None, result_at=None, note=note)
+    repo.others.record_controller_event(result_type=0, what=CUT_UNKNOWN, vin="VIN1", bolt="B1",
+                                        controller_vin=None, tightening_id=None, pset=1, ok=False,
+                                        torque_nm=None, angle_deg=None, result_at=None, note=note)
     assert repo.held_bolts("VIN1") == {"B1": note}
     rid = _enter(repo)
     run = next(e["record"] for e in repo.ledger.since(0) if e["kind"] == RUNDOWN
@@ -281,12 +281,12 @@ def _lost_41_holds_b1_and_b2(repo: Repository) -> None:
     B1 and B2 (it may be either's)."""
     from db.kinds import LOST_UNKNOWN, lost_unknown_note
 
-    repo.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=41, pset=1, ok=True,
-                             torque_nm=49.6, angle_deg=31.0,
-                             result_at=datetime(2026, 12, 1, 8, 0, 0, tzinfo=UTC),
-                             reason="fetched later")
+    repo.others.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=41, pset=1,
+                                    ok=True, torque_nm=49.6, angle_deg=31.0,
+                                    result_at=datetime(2026, 12, 1, 8, 0, 0, tzinfo=UTC),
+                                    reason="fetched later")
     for bolt in ("B1", "B2"):
-        repo.record_controller_event(
+        repo.others.record_controller_event(
             result_type=0, what=LOST_UNKNOWN, vin="VIN1", bolt=bolt, controller_vin=None,
             tightening_id=41, pset=1, ok=False, torque_nm=None, angle_deg=None,
             result_at=None, note=lost_unknown_note(41, 1, 1_764_576_000.0))
@@ -301,13 +301,13 @@ def test_an_outcome_entered_for_a_lost_push_hold_is_the_result_stored_unattribut
     repo = sedan
     _lost_41_holds_b1_and_b2(repo)
     assert sorted(repo.held_bolts("VIN1")) == ["B1", "B2"]
-    [loose] = repo.unattributed("VIN1")
+    [loose] = repo.others.unattributed("VIN1")
     assert loose["entered_as"] is None
     rid = _enter(repo, bolt="B1")
     run = next(e["record"] for e in repo.ledger.since(0) if e["kind"] == RUNDOWN
                and e["record"]["id"] == rid)
     assert (run["tightening_id"], run["entered_by"]) == (41, "sam")
-    [loose] = repo.unattributed("VIN1")
+    [loose] = repo.others.unattributed("VIN1")
     assert loose["entered_as"] == {"bolt": "B1", "by": "sam"}
     assert list(repo.held_bolts("VIN1")) == ["B2"]
     rows = list(csv.DictReader(io.StringIO(rundowns_csv(Results(repo).export("VIN1")))))
@@ -329,7 +329,7 @@ def test_one_lost_result_entered_for_two_held_bolts_is_one_bolt_s(sedan):
     r2 = _enter(repo, bolt="B2", comment="tightened by hand")
     runs = {e["record"]["id"]: e["record"] for e in repo.ledger.since(0) if e["kind"] == RUNDOWN}
     assert (runs[r1]["tightening_id"], runs[r2]["tightening_id"]) == (41, None)
-    [loose] = repo.unattributed("VIN1")
+    [loose] = repo.others.unattributed("VIN1")
     assert loose["entered_as"] == {"bolt": "B1", "by": "sam"}
 
 
@@ -345,7 +345,7 @@ def test_an_outcome_is_entered_for_a_held_bolt_a_table_imported_by_hand_retired(
 
     repo = sedan
     b1 = repo.bolts_for_model("SEDAN")[0]
-    repo.note_enable("VIN1", "B1", 1, b1.parameters_id, {}, datetime.now(UTC))
+    repo.enables.note("VIN1", "B1", 1, b1.parameters_id, {}, datetime.now(UTC))
     _unreadable(repo, 12, "B1")
     assert repo.held_bolts("VIN1") == {"B1": "tightening 12"}
     cut = tmp_path / "cut.yaml"
@@ -365,11 +365,11 @@ def test_an_entered_outcome_carries_the_controller_s_time_of_the_result_it_is(se
     alone.  Its ``controller_at`` is the controller's time of the result it resolves."""
     repo = sedan
     version = repo.bolts_for_model("SEDAN")[0].parameters_id
-    repo.note_enable("VIN1", "B1", 1, version, {}, datetime.now(UTC))
+    repo.enables.note("VIN1", "B1", 1, version, {}, datetime.now(UTC))
     made = datetime(2026, 12, 1, 6, 30, 5, tzinfo=UTC)
-    repo.record_unreadable(mid=61, revision=7, raw=RAW, error="MID 0061 revision 7: short",
-                           vin="VIN1", bolt="B1", controller_vin=None, tightening_id=12,
-                           pset=1, result_at=made)
+    repo.others.record_unreadable(mid=61, revision=7, raw=RAW, error="MID 0061 revision 7: short",
+                                  vin="VIN1", bolt="B1", controller_vin=None, tightening_id=12,
+                                  pset=1, result_at=made)
     _enter(repo)
     [b1] = [r for r in Results(repo).export("VIN1") if r["bolt"] == "B1" and r["status"] == "ok"]
     assert b1["entered_by"] == "sam" and b1["controller_at"] == made.isoformat()

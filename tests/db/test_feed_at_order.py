@@ -74,10 +74,10 @@ def test_a_result_without_an_id_or_a_hold_that_waited_for_the_lock_is_not_dated_
     from db.kinds import CUT_UNKNOWN
 
     rec = record(sedan, "VIN1", "B1", tightening_id=7)
-    feed = _while_another_writer_holds_the_lock(sedan, lambda: sedan.record_unattributed(
+    feed = _while_another_writer_holds_the_lock(sedan, lambda: sedan.others.record_unattributed(
         vin="VIN1", controller_vin=None, tightening_id=None, pset=1, ok=True, torque_nm=50.0,
         angle_deg=30.0, result_at=None, reason="test"), rec)
-    feed = _while_another_writer_holds_the_lock(sedan, lambda: sedan.record_controller_event(
+    feed = _while_another_writer_holds_the_lock(sedan, lambda: sedan.others.record_controller_event(
         result_type=1, what=CUT_UNKNOWN, vin="VIN1", bolt="B2", controller_vin=None,
         tightening_id=None, pset=1, ok=None, torque_nm=None, angle_deg=None, result_at=None,
         note="held"), rec)

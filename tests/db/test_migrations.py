@@ -124,11 +124,11 @@ def test_results_of_no_bolt_stored_before_their_release_count_as_acknowledged(tm
         import_bolts(repo, table)
         repo.start_vehicle("VIN1", "SEDAN")
         record(repo, "VIN1", "B1", tightening_id=1)
-        repo.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=2, pset=1,
-                                 ok=True, torque_nm=1.0, angle_deg=2.0, result_at=None,
-                                 reason="outside a tool enable")
+        repo.others.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=2, pset=1,
+                                        ok=True, torque_nm=1.0, angle_deg=2.0, result_at=None,
+                                        reason="outside a tool enable")
         for what in (NOT_TAKEN, "batch increment"):
-            repo.record_controller_event(
+            repo.others.record_controller_event(
                 result_type=0, what=what, vin="VIN1", bolt="B2", controller_vin=None,
                 tightening_id=3, pset=1, ok=True, torque_nm=4.9, angle_deg=2.0,
                 result_at=None)

@@ -31,15 +31,15 @@ def test_a_vehicle_its_records_commands_and_feed_on_postgresql(pg_url, bolts_fil
         import_bolts(repo, bolts_file)
         repo.start_vehicle("VINPG1", "SEDAN")
         at = datetime(2026, 11, 27, 8, 0, tzinfo=UTC)
-        enable = repo.note_enable("VINPG1", "B1", 1, None, {"point_mm": [0, 0, 0]}, at)
+        enable = repo.enables.note("VINPG1", "B1", 1, None, {"point_mm": [0, 0, 0]}, at)
         record(repo, "VINPG1", "B1", tightening_id=11, enable_id=enable)
-        assert repo.owed_enable() is None
+        assert repo.enables.owed() is None
         assert record(repo, "VINPG1", "B1", tightening_id=11) is not None   # resent: once
         repo.ledger.record_command(at=at, user="sam", source="cli", kind="skip", vin="VINPG1",
                                    bolt="B2", comment="no access")
-        assert repo.record_unattributed(vin="VINPG1", controller_vin=None, tightening_id=12,
-                                        pset=1, ok=False, torque_nm=1.0, angle_deg=2.0,
-                                        result_at=None, reason="outside any tightening")
+        assert repo.others.record_unattributed(vin="VINPG1", controller_vin=None, tightening_id=12,
+                                               pset=1, ok=False, torque_nm=1.0, angle_deg=2.0,
+                                               result_at=None, reason="outside any tightening")
         report = repo.close_vehicle("VINPG1")
         # (B2 is skipped, not missing, when its skip's time is after the vehicle's start)
         assert report.ok == ["B1"] and sorted(report.untightened) == ["B2", "B3"]

@@ -84,7 +84,7 @@ def test_a_table_imported_by_hand_under_the_running_station_does_not_refuse_its_
     url = repo.engine.url.render_as_string(hide_password=False)
     with Repository.open(url) as by_hand:         # stationd db import cut.yaml --config ...
         assert import_bolts(by_hand, cut).removed == ["SEDAN/B2"]
-    enable = repo.note_enable("VIN1", "B2", 2, b2.parameters_id, {}, datetime.now(UTC))
+    enable = repo.enables.note("VIN1", "B2", 2, b2.parameters_id, {}, datetime.now(UTC))
     record(repo, "VIN1", "B2", parameters_id=b2.parameters_id, enable_id=enable)
     assert repo.vehicle_report("VIN1").ok == ["B2"]
 
@@ -154,7 +154,7 @@ def test_a_table_imported_by_hand_under_the_running_station_leaves_its_records_l
     url = repo.engine.url.render_as_string(hide_password=False)
     with Repository.open(url) as by_hand:         # stationd db import retuned.yaml ...
         assert import_bolts(by_hand, retuned).changed == ["SEDAN/B2"]
-    enable = repo.note_enable("VIN1", "B2", None, b2.parameters_id, {}, datetime.now(UTC))
+    enable = repo.enables.note("VIN1", "B2", None, b2.parameters_id, {}, datetime.now(UTC))
     record(repo, "VIN1", "B2", parameters_id=b2.parameters_id, enable_id=enable)
     [run] = Results(repo).rundowns("VIN1")
     assert (run["torque_min_nm"], run["torque_max_nm"]) == (23.0, 27.0), run

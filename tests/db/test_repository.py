@@ -178,7 +178,7 @@ def test_a_bolt_whose_tool_was_enabled_and_never_used_is_retired_or_versioned(re
     repo.start_vehicle("VIN1", "SEDAN")
     b1, b2 = repo.bolts_for_model("SEDAN")[:2]
     for b in (b1, b2):
-        repo.note_enable("VIN1", b.bolt_id, 1, b.parameters_id, {}, datetime.now(UTC))
+        repo.enables.note("VIN1", b.bolt_id, 1, b.parameters_id, {}, datetime.now(UTC))
     bolts_file.write_text(BASE.replace(
         "      - id: B2\n        name: two\n        position: [100, 0, 0]\n"
         "        torque: {target: 25, min: 23, max: 27}\n"
@@ -365,14 +365,14 @@ def test_a_resent_copy_is_only_the_same_tightening_by_the_controller_s_time(repo
     # the same rule where a result no bolt owns is stored, and for a controller event
     un = {"vin": "VINDUP", "controller_vin": None, "pset": 1, "ok": False, "torque_nm": 30.0,
           "angle_deg": 35.0, "reason": "outside any tightening"}
-    assert repo.record_unattributed(tightening_id=7, result_at=at, **un) is None  # recorded
-    assert repo.record_unattributed(tightening_id=7, result_at=at.replace(minute=9), **un)
+    assert repo.others.record_unattributed(tightening_id=7, result_at=at, **un) is None  # recorded
+    assert repo.others.record_unattributed(tightening_id=7, result_at=at.replace(minute=9), **un)
     ev = {"result_type": 3, "what": "batch increment", "vin": "VINDUP", "bolt": None,
           "controller_vin": None, "tightening_id": 8, "pset": 1, "ok": True, "torque_nm": 0.0,
           "angle_deg": 0.0}
-    assert repo.record_controller_event(result_at=at, **ev)
-    assert repo.record_controller_event(result_at=at, **ev) is None       # sent again
-    assert repo.record_controller_event(result_at=later, **ev)            # another one
+    assert repo.others.record_controller_event(result_at=at, **ev)
+    assert repo.others.record_controller_event(result_at=at, **ev) is None       # sent again
+    assert repo.others.record_controller_event(result_at=later, **ev)            # another one
 
 
 def test_the_owed_enable_is_the_latest_unsettled_one_and_its_record_settles_it(repo,
@@ -381,20 +381,20 @@ def test_the_owed_enable_is_the_latest_unsettled_one_and_its_record_settles_it(r
     record settles it; an older one is superseded by a newer enable."""
     import_bolts(repo, bolts_file)
     repo.start_vehicle("VIN1", "SEDAN")
-    assert repo.owed_enable() is None
+    assert repo.enables.owed() is None
     at = datetime(2026, 11, 27, 8, 0, tzinfo=UTC)
     pid = repo.bolts_for_model("SEDAN")[1].parameters_id
-    first = repo.note_enable("VIN1", "B1", 1, None, {"point_mm": [0, 0, 0]}, at)
-    second = repo.note_enable("VIN1", "B2", 21, pid, {"point_mm": [1, 2, 3]}, at)
-    owed = repo.owed_enable()
+    first = repo.enables.note("VIN1", "B1", 1, None, {"point_mm": [0, 0, 0]}, at)
+    second = repo.enables.note("VIN1", "B2", 21, pid, {"point_mm": [1, 2, 3]}, at)
+    owed = repo.enables.owed()
     assert owed is not None and owed.id == second != first
     assert (owed.bolt, owed.pset, owed.parameters_id, owed.off_at) == ("B2", 21, pid, None)
-    repo.note_tool_off(second, at.replace(second=5))
-    repo.note_tool_off(second, at.replace(second=9))       # the first time counts
-    owed = repo.owed_enable()
+    repo.enables.tool_off(second, at.replace(second=5))
+    repo.enables.tool_off(second, at.replace(second=9))       # the first time counts
+    owed = repo.enables.owed()
     assert owed is not None and owed.off_at == at.replace(second=5)
     record(repo, "VIN1", "B2", tightening_id=70060, parameters_id=pid, enable_id=second)
-    assert repo.owed_enable() is None
+    assert repo.enables.owed() is None
 
 
 def test_an_unattributed_result_is_stored_once_and_not_when_already_recorded(repo,
@@ -403,17 +403,17 @@ def test_an_unattributed_result_is_stored_once_and_not_when_already_recorded(rep
     repo.start_vehicle("VIN1", "SEDAN")
     kw = {"vin": "VIN1", "controller_vin": None, "pset": 1, "ok": False,
           "result_at": None, "reason": "result 7 (pset 1) outside any tightening"}
-    assert repo.record_unattributed(tightening_id=7, torque_nm=12.5, angle_deg=30.0, **kw)
-    assert repo.record_unattributed(tightening_id=7, torque_nm=12.5, angle_deg=30.0,
-                                    **kw) is None                     # a resent copy
-    assert repo.record_unattributed(tightening_id=7, torque_nm=13.0, angle_deg=30.0, **kw)
+    assert repo.others.record_unattributed(tightening_id=7, torque_nm=12.5, angle_deg=30.0, **kw)
+    assert repo.others.record_unattributed(tightening_id=7, torque_nm=12.5, angle_deg=30.0,
+                                           **kw) is None                     # a resent copy
+    assert repo.others.record_unattributed(tightening_id=7, torque_nm=13.0, angle_deg=30.0, **kw)
     record(repo, "VIN1", "B1", tightening_id=8, torque_nm=50.0, angle_deg=40.0)
-    assert repo.record_unattributed(tightening_id=8, torque_nm=50.0, angle_deg=40.0,
-                                    **kw) is None                     # stored to its bolt
-    rows = repo.unattributed("VIN1")
+    assert repo.others.record_unattributed(tightening_id=8, torque_nm=50.0, angle_deg=40.0,
+                                           **kw) is None                     # stored to its bolt
+    rows = repo.others.unattributed("VIN1")
     assert [(r["tightening_id"], r["torque_nm"], r["status"]) for r in rows] == \
         [(7, 12.5, "nok"), (7, 13.0, "nok")]
-    assert repo.unattributed("OTHER") == []
+    assert repo.others.unattributed("OTHER") == []
 
 
 def test_nok_streaks_count_the_noks_in_a_row_since_an_ok_or_a_release(repo, bolts_file):
@@ -544,10 +544,10 @@ def test_a_vehicle_that_leaves_with_a_bolt_held_says_so_in_its_closing(sedan):
     record(sedan, "VIN1", "B1")
     record(sedan, "VIN1", "B2")
     record(sedan, "VIN1", "B3")
-    sedan.record_controller_event(result_type=1, what=LOST_UNKNOWN, vin="VIN1", bolt="B1",
-                                  controller_vin=None, tightening_id=None, pset=1, ok=None,
-                                  torque_nm=None, angle_deg=None, result_at=None,
-                                  note="a lost push may be its second rundown")
+    sedan.others.record_controller_event(result_type=1, what=LOST_UNKNOWN, vin="VIN1", bolt="B1",
+                                         controller_vin=None, tightening_id=None, pset=1, ok=None,
+                                         torque_nm=None, angle_deg=None, result_at=None,
+                                         note="a lost push may be its second rundown")
     report = sedan.close_vehicle("VIN1")
     assert [b for b, _ in report.held] == ["B1"]          # the station's close line says it
     [closing] = [e["record"] for e in sedan.ledger.since(0) if e["kind"] == CLOSING]

@@ -475,11 +475,11 @@ def test_a_result_of_no_bolt_and_one_not_readable_arrive_as_results_told_apart(r
     its metadata (no Joint; NotDecidable) and its Message ("of no bolt", "not readable"),
     and counts among those to acknowledge."""
     events = events_while(
-        repo, lambda: repo.record_unattributed(
+        repo, lambda: repo.others.record_unattributed(
             vin=VIN, controller_vin=None, tightening_id=51, pset=3, ok=False, torque_nm=12.5,
             angle_deg=40.0, result_at=CONTROLLER_AT, result_type=2,
             reason="outside a tool enable"),
-        lambda: repo.record_unreadable(
+        lambda: repo.others.record_unreadable(
             mid=61, revision=2, raw="0231006100" + "x" * 40,
             error="torque '00ABCD' is not a number", vin=VIN, bolt="B2", controller_vin=None,
             tightening_id=52, pset=1, result_at=CONTROLLER_AT),
@@ -521,7 +521,7 @@ def test_an_ok_not_taken_for_a_tightening_arrives_as_a_result_not_decided(repo):
     from db.kinds import NOT_TAKEN
 
     def event(what: str, tid: int) -> Callable[[], Any]:
-        return lambda: repo.record_controller_event(
+        return lambda: repo.others.record_controller_event(
             result_type=0, what=what, vin=VIN, bolt="B2", controller_vin=None,
             tightening_id=tid, pset=1, ok=True, torque_nm=4.97, angle_deg=30.0,
             result_at=None)

@@ -57,13 +57,13 @@ NO_BOLT, NOT_READ, NOT_TAKEN_ = "(unattributed)", "(unreadable)", "(not taken)"
 
 def _recorder(repo: Repository, bolt: str, kw: dict[str, Any]) -> Callable[[], object]:
     if bolt == NO_BOLT:
-        return lambda: repo.record_unattributed(vin=VIN, controller_vin=None, result_at=None,
-                                                **kw)
+        return lambda: repo.others.record_unattributed(vin=VIN, controller_vin=None, result_at=None,
+                                                       **kw)
     if bolt == NOT_READ:
-        return lambda: repo.record_unreadable(vin=VIN, controller_vin=None, result_at=None,
-                                              **kw)
+        return lambda: repo.others.record_unreadable(vin=VIN, controller_vin=None, result_at=None,
+                                                     **kw)
     if bolt == NOT_TAKEN_:
-        return lambda: repo.record_controller_event(
+        return lambda: repo.others.record_controller_event(
             result_type=0, what=NOT_TAKEN, vin=VIN, controller_vin=None, result_at=None, **kw)
     return lambda: record(repo, VIN, bolt, **kw)
 

@@ -107,7 +107,7 @@ def test_a_copy_is_found_stored_before_the_core_and_never_closes_the_owed_bolt(
     [n] = [a.event for a in acts if isinstance(a, Publish)]
     assert isinstance(n, Notice) and (n.said, n.bolt, n.vin) == (Said.SENT_AGAIN, "B1", None)
     assert "B2" not in core.status().done and "B2" in core.allowed()
-    owed = repo.owed_enable()
+    owed = repo.enables.owed()
     assert owed is not None and owed.bolt == "B2"        # still owed its own result
     # another result (the next id) is no copy: it goes to the core as it came
     other = ResultIn(time.time(), _result(8))
@@ -122,13 +122,13 @@ def test_the_repository_s_last_guard_settles_no_other_bolt_s_enable(tmp_path: Pa
     records, _, b2 = _stored_then_reloaded(tmp_path)
     repo = records.repo
     assert repo is not None
-    owed = repo.owed_enable()
+    owed = repo.enables.owed()
     assert owed is not None
     u = records.unsaved_result(Record("VIN1", "B2", _result(), b2, t=time.time()), None)
     assert u.enable_id == owed.id
     records.write(u)
     assert (u.again, u.stored_vin, u.stored_bolt) == (True, "VIN1", "B1")
-    assert repo.owed_enable() is not None                # B2's enable not settled
+    assert repo.enables.owed() is not None                # B2's enable not settled
     with repo.engine.connect() as c:
         assert len(c.execute(select(TighteningRecord.id)).all()) == 1
     repo.close()
@@ -168,7 +168,7 @@ def test_a_copy_of_a_result_stored_unattributed_is_no_owed_bolts_result(tmp_path
     records, core, _ = _stored_then_reloaded(tmp_path)
     repo = records.repo
     assert repo is not None
-    stored = repo.record_unattributed(
+    stored = repo.others.record_unattributed(
         vin="VIN1", controller_vin=None, tightening_id=9, pset=1, ok=True, torque_nm=50.0,
         angle_deg=30.0, result_at=AT.astimezone(), reason="made during a link cut")
     assert stored is not None
@@ -178,8 +178,8 @@ def test_a_copy_of_a_result_stored_unattributed_is_no_owed_bolts_result(tmp_path
     [n] = [a.event for a in acts if isinstance(a, Publish)]
     assert isinstance(n, Notice) and (n.said, n.bolt) == (Said.SENT_AGAIN, None)
     assert "B2" not in core.status().done and "B2" in core.allowed()
-    assert repo.owed_enable() is not None
-    event = repo.record_controller_event(
+    assert repo.enables.owed() is not None
+    event = repo.others.record_controller_event(
         result_type=3, what="batch increment", vin="VIN1", bolt="B1", controller_vin=None,
         tightening_id=10, pset=1, ok=True, torque_nm=50.0, angle_deg=30.0,
         result_at=AT.astimezone())
@@ -198,18 +198,18 @@ def test_a_controller_event_copy_settles_no_other_bolt_s_enable(tmp_path: Path) 
     records, _, _ = _stored_then_reloaded(tmp_path)
     repo = records.repo
     assert repo is not None
-    owed = repo.owed_enable()
+    owed = repo.enables.owed()
     assert owed is not None and owed.bolt == "B2"
 
     def event(bolt: str, enable_id: int | None) -> int | None:
-        return repo.record_controller_event(
+        return repo.others.record_controller_event(
             result_type=3, what="batch increment", vin="VIN1", bolt=bolt, controller_vin=None,
             tightening_id=11, pset=1, ok=True, torque_nm=50.0, angle_deg=30.0,
             result_at=AT.astimezone(), enable_id=enable_id)
 
     assert event("B1", None) is not None
     assert event("B2", owed.id) is None                  # a copy of B1's: stored once
-    assert repo.owed_enable() is not None                # B2's enable not settled
+    assert repo.enables.owed() is not None                # B2's enable not settled
     repo.close()
 
 

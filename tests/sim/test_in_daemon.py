@@ -321,8 +321,8 @@ def test_a_restarted_daemon_s_simulated_controller_has_its_results_for_the_catch
         with repo.engine.connect() as c:
             last = c.execute(select(ToolEnable).order_by(ToolEnable.id.desc())).first()
         assert last is not None
-        repo.note_enable(last.vin, last.bolt, last.pset, last.parameters_id,
-                         dict(last.selection), datetime.now(UTC))
+        repo.enables.note(last.vin, last.bolt, last.pset, last.parameters_id,
+                          dict(last.selection), datetime.now(UTC))
     second = Daemon(tmp_path)
     try:
         said = second.wait(r"(no tightening made during the link cut[^\n]*|[^\n]*its result "

@@ -279,9 +279,9 @@ def test_the_vehicles_list_has_a_held_column(live_server, page, tmp_path):
     """A supervisor's trial: the list had no word of a held bolt, which the vehicle's page
     says: a column of the held bolts, counted and named as the NOK ones are."""
     repo = results_db(tmp_path)
-    repo.record_unreadable(mid=61, revision=7, raw="00230061007 garbled", error="short",
-                           vin=VIN, bolt="B3", controller_vin=None, tightening_id=7, pset=1,
-                           result_at=None)
+    repo.others.record_unreadable(mid=61, revision=7, raw="00230061007 garbled", error="short",
+                                  vin=VIN, bolt="B3", controller_vin=None, tightening_id=7, pset=1,
+                                  result_at=None)
     try:
         srv = live_server(results=Results(repo))
         page.get(srv.url + "vehicles")
@@ -303,13 +303,13 @@ def test_a_bolt_held_for_a_lost_push_is_not_said_never_tightened(live_server, pa
     from db.kinds import LOST_UNKNOWN, lost_unknown_note
 
     repo = results_db(tmp_path)
-    repo.record_unattributed(vin=VIN, controller_vin=None, tightening_id=41, pset=1, ok=True,
-                             torque_nm=49.6, angle_deg=31.0, result_at=None,
-                             reason="fetched after a later one came, the link up")
-    repo.record_controller_event(result_type=0, what=LOST_UNKNOWN, vin=VIN, bolt="B3",
-                                 controller_vin=None, tightening_id=None, pset=1, ok=None,
-                                 torque_nm=None, angle_deg=None, result_at=None,
-                                 note=lost_unknown_note(41, 1, 1000.0))
+    repo.others.record_unattributed(vin=VIN, controller_vin=None, tightening_id=41, pset=1, ok=True,
+                                    torque_nm=49.6, angle_deg=31.0, result_at=None,
+                                    reason="fetched after a later one came, the link up")
+    repo.others.record_controller_event(result_type=0, what=LOST_UNKNOWN, vin=VIN, bolt="B3",
+                                        controller_vin=None, tightening_id=None, pset=1, ok=None,
+                                        torque_nm=None, angle_deg=None, result_at=None,
+                                        note=lost_unknown_note(41, 1, 1000.0))
     try:
         srv = live_server(results=Results(repo))
         page.get(srv.url + f"vehicles/{VIN}")

@@ -21,12 +21,12 @@ def test_every_row_of_a_record_carries_the_id_the_line_and_opc_ua_give_it(
         # a backup put back: the records from here on go under a new id, those before keep
         # theirs (the forwarder renews it; the line and OPC UA key them so)
         new = repo.ledger.renew_db_id(repo.ledger.last_seq() + 1).db_id
-        repo.record_unreadable(mid=61, revision=7, raw="00230061007 garbled", error="short",
-                               vin=VIN, bolt="B3", controller_vin=None, tightening_id=7,
-                               pset=1, result_at=None)
-        repo.record_unattributed(vin=VIN, controller_vin=None, tightening_id=8, pset=1,
-                                 ok=True, torque_nm=50.0, angle_deg=30.0, result_at=None,
-                                 result_type=1, reason="outside a tool enable")
+        repo.others.record_unreadable(mid=61, revision=7, raw="00230061007 garbled", error="short",
+                                      vin=VIN, bolt="B3", controller_vin=None, tightening_id=7,
+                                      pset=1, result_at=None)
+        repo.others.record_unattributed(vin=VIN, controller_vin=None, tightening_id=8, pset=1,
+                                        ok=True, torque_nm=50.0, angle_deg=30.0, result_at=None,
+                                        result_type=1, reason="outside a tool enable")
         repo.ledger.record_command(at=datetime.now(UTC), user="sue", source="cli",
                                    kind="release", vin=VIN, bolt="B3", comment="checked")
         repo.ledger.record_command(at=datetime.now(UTC), user="sue", source="cli",

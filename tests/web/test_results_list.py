@@ -34,9 +34,9 @@ def test_the_list_counts_a_vehicle_s_held_bolts_as_its_page_does(tmp_path: Path)
     repo = results_db(tmp_path)
     try:
         repo.start_vehicle("VIN2", "SEDAN")             # no hold: its row says none
-        repo.record_unreadable(mid=61, revision=7, raw="00230061007 garbled", error="short",
-                               vin=VIN, bolt="B3", controller_vin=None, tightening_id=7,
-                               pset=1, result_at=None)
+        repo.others.record_unreadable(mid=61, revision=7, raw="00230061007 garbled", error="short",
+                                      vin=VIN, bolt="B3", controller_vin=None, tightening_id=7,
+                                      pset=1, result_at=None)
         assert repo.may_hold([VIN, "VIN2"]) == {VIN}
         results = Results(repo)
         rows = {v["vin"]: v for v in results.vehicles()}
