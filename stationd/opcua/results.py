@@ -386,8 +386,8 @@ def unreadable_result(db_id: str, entry: dict[str, Any], *, simulated: bool = Fa
         db_id, entry, simulated=simulated, evaluation=EVALUATION_NOT_DECIDABLE,
         loosening=False, entities=entities, pset=rec.get("pset"),
         name=f"{rec.get('vin') or 'no vehicle'}{' ' + bolt if bolt else ''} not readable",
-        description=(f"MID {rec.get('mid')} revision {rec.get('revision')}" if rec.get("mid")
-                     else message_words(0, 0)) + f" not readable: {rec.get('error')}"
+        description=message_words(int(rec.get("mid") or 0), int(rec.get("revision") or 0))
+                    + f" not readable: {rec.get('error')}"
                     + (f"; {bolt} held for a supervisor" if bolt else ""))
     return ua.ResultDataType(ResultMetaData=meta,
                              ResultContent=[ua.Variant(ua.JoiningResultDataType())])

@@ -501,7 +501,7 @@ def test_a_result_of_no_bolt_and_one_not_readable_arrive_as_results_told_apart(r
     assert torque.LowLimit is None and torque.High is None
     assert {(x.EntityType, x.EntityId) for x in unread.AssociatedEntities} == {
         (20, VIN), (23, "B2")}
-    assert "MID 61 revision 2 not readable" in unread.Description.Text
+    assert "MID 0061 revision 2 not readable" in unread.Description.Text
     assert not events[1].Result.ResultContent[0].Value.OverallResultValues
     assert repo.ledger.unacknowledged_count() == 3
     # every kind's CreationTime on the station's clock (an MES integrator's trial: the
