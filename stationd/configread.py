@@ -19,6 +19,7 @@ system's) is an error at its key, like any other (:func:`present`), never a trac
 
 from __future__ import annotations
 
+import ipaddress
 from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import ParamSpec, TypeVar
@@ -186,6 +187,17 @@ def _is_link(path: Path) -> bool:
         return False
 
 
+def is_local(host: str) -> bool:
+    """True for a loopback address or ``localhost``: only this machine can connect (the
+    screens' and the OPC UA server's listen addresses)."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
 def link_note(path: Path, what: str) -> str:
     """What a missing relative path's message adds when the file at ``path`` (``what``: "the
     station file") is a link: both names, and which folder was read."""
@@ -241,4 +253,5 @@ def named_items(node: YamlNode) -> list[tuple[str, YamlNode]]:
 
 
 __all__ = ["MAX_SECTION_ERRORS", "SectionReader", "base_folder", "existing_file", "in_order",
-           "left_out", "link_note", "missing_as_written", "named_items", "present", "relative_path"]
+           "is_local", "left_out", "link_note", "missing_as_written", "named_items", "present",
+           "relative_path"]

@@ -362,10 +362,14 @@ class YamlNode:
             raise self.error(f"{v} is out of range [{lo}, {hi}]")
         return v
 
-    def text(self, choices: Sequence[str] | None = None) -> str:
+    def text(self, choices: Sequence[str] | None = None, *, secret: bool = False) -> str:
+        """The value, a string (one of ``choices`` where given).  ``secret``: a token or a
+        password, whose value a refusal never repeats (it went to the journal and
+        ``/api/status``), only its type."""
         v = self.value()
         if not isinstance(v, str):
-            raise self.error(f"expected a string, got {v!r}")
+            got = f"a {_type_words(v)} (not shown: a secret)" if secret else repr(v)
+            raise self.error(f"expected a string, got {got}")
         if choices is not None and v not in choices:
             raise self.error(f"{v!r} is not one of: {', '.join(choices) or '(none given)'}")
         return v
@@ -487,3 +491,9 @@ def _plain(problem: str) -> str:
         if needle in problem:
             return f"{words} ({problem})"
     return problem
+
+
+def _type_words(v: Any) -> str:
+    """What a YAML value is, in words (a number, a list, ...), not what it says."""
+    return {bool: "true/false", int: "number", float: "number", list: "list",
+            dict: "mapping"}.get(type(v), type(v).__name__)

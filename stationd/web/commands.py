@@ -227,7 +227,7 @@ async def _json(request: web.Request) -> dict[str, Any]:
         raise web.HTTPUnsupportedMediaType(text="send JSON (Content-Type: application/json)\n")
     try:
         body = await request.json(loads=json.loads)
-    except (ValueError, UnicodeDecodeError):
+    except (ValueError, UnicodeDecodeError, RecursionError):   # (nested past Python's depth)
         raise web.HTTPBadRequest(text="the body is not JSON\n") from None
     if not isinstance(body, dict):
         raise web.HTTPBadRequest(text="the body must be a JSON object\n")

@@ -11,6 +11,7 @@ from __future__ import annotations
 import ipaddress
 from dataclasses import dataclass
 
+from stationd.configread import is_local
 from stationd.errors import ConfigError
 from stationd.yamlio import YamlNode
 
@@ -33,7 +34,7 @@ class HttpConfig:
             split_listen(listen)
         except ValueError as exc:
             raise m["listen"].error(str(exc)) from None
-        token = m["token"].text() if "token" in m else None
+        token = m["token"].text(secret=True) if "token" in m else None
         if token is not None and len(token) < 8:
             raise m["token"].error("token: at least 8 characters")
         cfg = cls(listen, token)
@@ -79,14 +80,9 @@ def _host_ok(host: str) -> bool:
                and part.isascii() for part in host.split("."))
 
 
-def is_local(host: str) -> bool:
-    """True for a loopback address or ``localhost``: only this machine can connect."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
+#: the shortest token a non-local bind takes, and the example file's placeholder's words
+OPEN_TOKEN_MIN = 16
+PLACEHOLDER = "change-me"
 
 
 def open_bind_problem(cfg: HttpConfig) -> str | None:
@@ -99,6 +95,11 @@ def open_bind_problem(cfg: HttpConfig) -> str | None:
     if not is_local(host) and not cfg.token:
         return (f"http listen {cfg.listen}: a non-local bind needs a token (anyone on the "
                 "network could watch the station); set http.token or listen on 127.0.0.1")
+    if not is_local(host) and cfg.token and (len(cfg.token) < OPEN_TOKEN_MIN
+                                             or PLACEHOLDER in cfg.token):
+        return (f"http.token: a non-local bind ({cfg.listen}) needs a token of at least "
+                f"{OPEN_TOKEN_MIN} characters that is not the example's (anyone on the "
+                "network may guess it); make one with `openssl rand -hex 16`")
     return None
 
 

@@ -29,11 +29,13 @@ from pathlib import Path
 from typing import Any
 
 from aiohttp import web
+from aiohttp.http_exceptions import HttpProcessingError
 
 from db.errors import NotFoundError
 from db.quality import LAST_N
 from db.repository import Repository
 from stationd.bus import EventBus
+from stationd.configread import is_local
 from stationd.errors import InputError
 from stationd.station.commands import Right
 from stationd.station.events import PairFrames
@@ -41,6 +43,7 @@ from stationd.station.inputs import LIFT, WRENCH
 from stationd.station.state import CoreStatus
 from stationd.web.commands import POSTS, CommandRoutes
 from stationd.web.config import HttpConfig, open_bind_problem
+from stationd.web.connections import Connections, WrongTokens
 from stationd.web.frames import LatestFrames, sharpness
 from stationd.web.line import LineRoutes
 from stationd.web.results import Results, attempt_words, rundowns_csv
@@ -52,6 +55,19 @@ FLUSH_HZ = 10.0
 #: with nothing to tell, the latest snapshot is sent again this often, s: a screen that hears
 #: nothing for three of these knows its stream stalled (a dead link need not break it)
 HEARTBEAT_S = 5.0
+#: the files the image route serves (the station saves PNGs; a record may name others)
+IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp"})
+KEEPALIVE_S = 75.0   # an idle kept-alive connection is closed after this
+#: on every answer: no page of the station inside another site's frame, no content-type
+#: guessing, no address (with a ``?token=``) sent on as a referrer, no script or style
+#: from elsewhere (the screens load only their own)
+SECURITY_HEADERS = {
+    "X-Content-Type-Options": "nosniff",
+    "X-Frame-Options": "DENY",
+    "Referrer-Policy": "no-referrer",
+    "Content-Security-Policy": "default-src 'self'; img-src 'self' data: blob:; "
+                               "frame-ancestors 'none'",
+}
 STOP_RETRY_S = 1.0   # a pump not ended by its cancellation is cancelled again
 _MAX_LAST = 500   # results per group the quality screen may ask to plot
 CLIENT_QUEUE = 16
@@ -118,6 +134,11 @@ class WebServer:
         self._snapshot = b""
         self._clients: set[asyncio.Queue[bytes]] = set()
         self._runner: web.AppRunner | None = None
+        self._listening: asyncio.Server | None = None
+        #: requests with a wrong token, told in the journal (at most once a minute)
+        self._wrong_tokens = WrongTokens()
+        #: the connections kept (counted, each given a time to send its first request)
+        self.connections: Connections | None = None
         self._pump: asyncio.Task[None] | None = None
         self._port = 0
         #: logins, commands and the results feed; the serve loop sets ``commands.submit`` and
@@ -137,13 +158,18 @@ class WebServer:
         self._snapshot = self._encode()
         self._pump = asyncio.get_running_loop().create_task(self._run_pump(queue))
         app = web.Application(middlewares=[self._guard])
+        app.on_response_prepare.append(_secure)
         self._routes(app)
-        self._runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0)
+        # (keep-alive: an idle connection closed after KEEPALIVE_S, not aiohttp's hour)
+        self._runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0,
+                                     keepalive_timeout=KEEPALIVE_S)
         await self._runner.setup()
-        site = web.TCPSite(self._runner, self.config.host, self.config.port)
-        await site.start()
-        addr = self._runner.addresses[0]
-        self._port = int(addr[1])
+        server = self._runner.server
+        assert server is not None  # noqa: S101 - made by setup()
+        self.connections = Connections(server)
+        self._listening = await asyncio.get_running_loop().create_server(
+            self.connections, self.config.host, self.config.port, reuse_address=True)
+        self._port = int(self._listening.sockets[0].getsockname()[1])
 
     async def stop(self) -> None:
         for q in list(self._clients):
@@ -158,6 +184,9 @@ class WebServer:
                 await asyncio.wait({pump}, timeout=STOP_RETRY_S)
             with contextlib.suppress(asyncio.CancelledError):
                 await pump
+        if self._listening is not None:
+            self._listening.close()     # no new connection; the runner closes the open ones
+            self._listening = None
         if self._runner is not None:
             await self._runner.cleanup()
             self._runner = None
@@ -283,19 +312,37 @@ class WebServer:
                                                           and request.path in POSTS):
             return web.Response(status=405, text="read-only: GET only (POST: "
                                 f"{', '.join(POSTS)})\n")
+        if self.connections is not None:
+            self.connections.served(request.transport)
         route = request.match_info.route.resource
         self.requests[route.canonical if route is not None else "?"] += 1
         token = self.config.token
         set_cookie = False
+        if not token and not _local_host(request.host, self.config.host):
+            # no token: a loopback bind; a page of another site whose name was made to
+            # point at 127.0.0.1 (DNS rebinding) must not read the station through the
+            # browser of someone on this machine
+            return web.Response(status=421, text="this server answers only its own "
+                                                 "address (localhost)\n")
         # /healthz is for a monitoring probe that holds no token: it says "ok" or "fault"
         # and nothing else, so it stays open; every other endpoint needs the token
         if token and request.path != "/healthz":
             given = request.headers.get("Authorization", "").removeprefix("Bearer ").strip() \
                 or request.cookies.get("token", "") or request.query.get("token", "")
             if not hmac.compare_digest(given.encode(), token.encode()):
+                self._wrong_tokens.tell(request.remote or "?", bool(given))
                 # a browser shows this text: how to get in (the token itself never said)
                 return web.Response(status=401, text=UNAUTHORIZED_PAGE)
             set_cookie = request.query.get("token") == token
+            if set_cookie and request.method == "GET" \
+                    and "text/html" in request.headers.get("Accept", ""):
+                # a browser opening /?token=...: the cookie set, and the address without
+                # the token (it stayed in the address bar, the history and bookmarks)
+                url = request.rel_url
+                moved = web.HTTPSeeOther(url.with_query([(k, v) for k, v in url.query.items()
+                                                         if k != "token"]))
+                moved.set_cookie("token", token, httponly=True, samesite="Strict")
+                raise moved
         resp: web.StreamResponse = await handler(request)
         if set_cookie and token and not resp.prepared:
             resp.set_cookie("token", token, httponly=True, samesite="Strict")
@@ -370,8 +417,8 @@ class WebServer:
                 if not data:
                     break
                 await resp.write(data)
-        except (ConnectionResetError, asyncio.CancelledError):
-            pass
+        except (ConnectionError, asyncio.CancelledError):
+            pass      # the client went (aiohttp says so as ConnectionError "Connection lost")
         finally:
             self._clients.discard(q)
         return resp
@@ -532,13 +579,52 @@ class WebServer:
                             headers=_attachment(f"{vin}.csv"))
 
     async def _image(self, request: web.Request) -> web.StreamResponse:
-        """A saved crop of a record, only from inside the records' image directory."""
+        """A saved crop of a record: an image file (:data:`IMAGE_SUFFIXES`) inside the
+        records' image directory, nothing else (a folder named as the images' that also held
+        the database or the OPC UA server's key served them to any holder of the token)."""
         if self.images_dir is None:
             raise web.HTTPNotFound(text="no image directory configured\n")
         p = (self.images_dir / request.match_info["path"]).resolve()
-        if not p.is_relative_to(self.images_dir) or not p.is_file():
+        if not p.is_relative_to(self.images_dir) or not p.is_file() \
+                or p.suffix.lower() not in IMAGE_SUFFIXES:
             raise web.HTTPNotFound(text="no such image\n")
         return web.FileResponse(p)
+
+
+def _local_host(host: str, listen: str) -> bool:
+    """Whether a request's ``Host`` (with or without its port) names this machine's loopback
+    or the address listened on."""
+    if host.startswith("["):            # [::1]:8080
+        name = host[1:].partition("]")[0]
+    elif host.count(":") == 1:          # 127.0.0.1:8080, localhost:8080
+        name = host.partition(":")[0]
+    else:                               # no port, or a bare IPv6 address
+        name = host
+    return name in ("localhost", listen) or is_local(name)
+
+
+class _QuietBadRequests(logging.Filter):
+    """aiohttp logs a request it could not parse (a header over 8 KiB, a broken request
+    line) as an ERROR with its traceback, after answering it 400: anyone reaching the port
+    could fill the journal with them.  Kept as one line at DEBUG (the client has its 400)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        if isinstance(exc, HttpProcessingError):
+            record.msg = "screens: bad request: %s"
+            record.args = (" ".join(str(exc.message).split())[:200],)
+            record.exc_info, record.exc_text = None, None
+            record.levelno, record.levelname = logging.DEBUG, "DEBUG"
+        return True
+
+
+logging.getLogger("aiohttp.server").addFilter(_QuietBadRequests())
+
+
+async def _secure(request: web.Request, response: web.StreamResponse) -> None:
+    """Every answer carries :data:`SECURITY_HEADERS` and names no server software."""
+    response.headers.update(SECURITY_HEADERS)
+    response.headers["Server"] = "stationd"
 
 
 def _offer(q: asyncio.Queue[bytes], data: bytes) -> None:

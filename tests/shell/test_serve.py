@@ -339,7 +339,7 @@ def test_a_reload_moving_the_screens_onto_a_port_in_use_is_refused(tmp_path):
     try:
         _recv_until(sock, "READY=1", 90)
         (tmp_path / "station.yaml").write_text(text.replace(
-            "'127.0.0.1:8080'}", f"'0.0.0.0:{here}', token: 'line-network-1'}}"))
+            "'127.0.0.1:8080'}", f"'0.0.0.0:{here}', token: 'line-network-token-1'}}"))
         p.send_signal(signal.SIGHUP)
         reloaded = _recv_until(sock, "READY=1", 90)
         assert not any("reload refused" in m for m in reloaded), reloaded

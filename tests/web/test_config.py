@@ -15,8 +15,9 @@ def read(text: str) -> HttpConfig:
 
 def test_defaults_and_reading():
     assert read("{}") == HttpConfig("127.0.0.1:8080", None)
-    cfg = read("listen: 0.0.0.0:9000\ntoken: s3cret-token\n")
-    assert (cfg.host, cfg.port, cfg.token) == ("0.0.0.0", 9000, "s3cret-token")  # noqa: S104
+    cfg = read("listen: 0.0.0.0:9000\ntoken: s3cret-token-of-the-line\n")
+    assert (cfg.host, cfg.port, cfg.token) == ("0.0.0.0", 9000,  # noqa: S104
+                                               "s3cret-token-of-the-line")
     assert split_listen("[::1]:8080") == ("::1", 8080)
 
 
@@ -45,3 +46,19 @@ def test_local_bind_needs_no_token(listen):
 def test_bad_section_is_one_readable_error(text, msg):
     with pytest.raises(ConfigError, match=msg):
         read(text)
+
+
+@pytest.mark.parametrize("token", ["'12345678'", "change-me-to-a-long-secret"])
+def test_a_short_or_example_token_is_refused_for_a_non_local_bind(token):
+    """The example's placeholder and a token of eight digits were taken for a bind on the
+    line network (a security review: guessed, never told)."""
+    with pytest.raises(ConfigError, match="at least 16 characters that is not the example"):
+        read(f"listen: 0.0.0.0:9000\ntoken: {token}\n")
+    assert read(f"listen: 127.0.0.1:9000\ntoken: {token}\n").token == token.strip("'")
+
+
+def test_a_token_that_is_no_text_is_refused_without_being_repeated():
+    with pytest.raises(ConfigError) as err:
+        read("listen: 0.0.0.0:9000\ntoken: 98765432109876543\n")
+    assert "98765432109876543" not in str(err.value)
+    assert "expected a string, got a number (not shown: a secret)" in str(err.value)

@@ -323,3 +323,11 @@ async function showVehicle(vin) {
     } else q("#error").textContent = e.message;
   }
 }
+
+// which page this is (its script tag says: no inline script, which the screens' content
+// security policy refuses)
+(() => {
+  const show = document.currentScript && document.currentScript.dataset.show;
+  if (show === "vehicles") listVehicles();
+  else if (show === "vehicle") showVehicle(decodeURIComponent(location.pathname.split("/").pop()));
+})();

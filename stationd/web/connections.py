@@ -1,0 +1,142 @@
+"""The screens' listening socket, with a limit on the connections it keeps, and who knocks at
+it with a wrong token.
+
+Why not aiohttp's own site: aiohttp reads a request's head with no time limit and keeps any
+number of connections, so anyone who reached the port, without the token, could open a
+thousand connections that never finish a request: the daemon ran out of file descriptors (the
+screens, OPC UA and the devices share them), ``/healthz`` stopped answering and asyncio logged
+a traceback for every refused accept (135,000 in 80 s in a security review).  Here each
+connection must finish its first request head within :data:`FIRST_REQUEST_S`, and at most
+:data:`MOST_CONNECTIONS` are kept; one over is closed at once.  aiohttp's protocol is wrapped,
+not changed: its churn stays out of this file.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Callable
+from typing import Any
+
+#: connections kept at once (two screens per station, a few browsers, the CLI: far fewer)
+MOST_CONNECTIONS = 128
+#: seconds a new connection has to send a whole request head
+FIRST_REQUEST_S = 10.0
+#: at most one warning of refused connections per this many seconds
+WARN_EVERY_S = 60.0
+
+log = logging.getLogger("stationd.web")
+
+
+class Connections:
+    """Counts the open connections and closes those that send no request in time.
+
+    ``factory``: aiohttp's protocol factory (``AppRunner.server``).  :meth:`served` is called
+    for every request whose head was read (the server's middleware): from then on aiohttp's
+    keep-alive timeout governs the connection."""
+
+    def __init__(self, factory: Callable[[], Any], *, most: int = MOST_CONNECTIONS,
+                 first_request_s: float = FIRST_REQUEST_S) -> None:
+        self._factory = factory
+        self.most, self.first_request_s = most, first_request_s
+        self.open: set[asyncio.Transport] = set()
+        self._waiting: dict[asyncio.Transport, asyncio.TimerHandle] = {}
+        self.refused = 0              # connections closed as over the limit, since the start
+        self._told_at = -WARN_EVERY_S
+        self._untold = 0
+
+    def __call__(self) -> asyncio.Protocol:
+        return _Counted(self._factory(), self)
+
+    def served(self, transport: asyncio.Transport | None) -> None:
+        """A request head was read on ``transport``: it is no longer on probation."""
+        timer = self._waiting.pop(transport, None) if transport is not None else None
+        if timer is not None:
+            timer.cancel()
+
+    def _made(self, transport: asyncio.Transport) -> bool:
+        if len(self.open) >= self.most:
+            self.refused += 1
+            self._tell_refused()
+            transport.abort()
+            return False
+        self.open.add(transport)
+        loop = asyncio.get_running_loop()
+        self._waiting[transport] = loop.call_later(self.first_request_s, _close, transport)
+        return True
+
+    def _lost(self, transport: asyncio.Transport) -> None:
+        self.open.discard(transport)
+        timer = self._waiting.pop(transport, None)
+        if timer is not None:
+            timer.cancel()
+
+    def _tell_refused(self) -> None:
+        """One warning, then at most one a minute with the count (never one per refusal)."""
+        self._untold += 1
+        now = time.monotonic()
+        if now - self._told_at >= WARN_EVERY_S:
+            log.warning("screens: %d connection(s) refused, %d open (at most %d); another "
+                        "program or client keeps connections to the screens' port",
+                        self._untold, len(self.open), self.most)
+            self._told_at, self._untold = now, 0
+
+
+def _close(transport: asyncio.Transport) -> None:
+    """No whole request head in time: the connection is closed (nothing was answered)."""
+    if not transport.is_closing():
+        transport.abort()
+
+
+class _Counted(asyncio.Protocol):
+    """aiohttp's protocol for one connection, counted by :class:`Connections`."""
+
+    def __init__(self, inner: Any, limits: Connections) -> None:
+        self._inner, self._limits = inner, limits
+        self._transport: asyncio.Transport | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)  # noqa: S101 - a TCP server's
+        if self._limits._made(transport):
+            self._transport = transport
+            self._inner.connection_made(transport)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self._transport is not None:
+            self._limits._lost(self._transport)
+            self._inner.connection_lost(exc)
+
+    def data_received(self, data: bytes) -> None:
+        self._inner.data_received(data)
+
+    def eof_received(self) -> bool | None:
+        return bool(self._inner.eof_received())
+
+    def pause_writing(self) -> None:
+        self._inner.pause_writing()
+
+    def resume_writing(self) -> None:
+        self._inner.resume_writing()
+
+
+class WrongTokens:
+    """Requests refused for a wrong or missing token, told in the journal: the first, then at
+    most one line a minute with the count and the addresses (a guessing client was silent:
+    300 guesses, no line).  A request without any token is a browser not signed in yet: only
+    counted when a wrong one came too."""
+
+    def __init__(self) -> None:
+        self._told_at = -WARN_EVERY_S
+        self._wrong: dict[str, int] = {}
+
+    def tell(self, remote: str, given: bool) -> None:
+        if not given:
+            return
+        self._wrong[remote] = self._wrong.get(remote, 0) + 1
+        now = time.monotonic()
+        if now - self._told_at >= WARN_EVERY_S:
+            who = ", ".join(f"{n} from {r}" for r, n in sorted(self._wrong.items()))
+            log.warning("screens: requests with a wrong token refused: %s", who)
+            self._told_at = now
+            self._wrong.clear()
