@@ -153,8 +153,8 @@ class AccessConfig:
         """The user with the rights of their role when the password is theirs, else None
         (an unknown user costs the same time as a wrong password)."""
         u = self.users.get(user)
-        stored = u.password_hash if u is not None else _dummy()
-        if not verify_password(password, stored) or u is None:
+        if not password_matches(password, u.password_hash if u is not None else None) \
+                or u is None:
             return None
         return Issuer(u.name, self.roles.get(u.role, frozenset()), source)
 
@@ -183,6 +183,14 @@ def _user(name: str, item: YamlNode, roles: Mapping[str, frozenset[Right]]) -> U
         item.mapping(USER_KEYS, required=USER_KEYS)   # says which key is missing
     assert role is not None and stored is not None  # noqa: S101 - raised above otherwise
     return User(name, role, stored)
+
+
+def password_matches(password: str, stored: str | None) -> bool:
+    """Whether ``password`` is the one ``stored`` (a scrypt hash) was made from; with no hash
+    (an unknown user) it is checked against a dummy one and is False: an unknown user costs
+    the same time as a wrong password, so a guesser cannot tell the users' names apart."""
+    return verify_password(password, stored if stored is not None else _dummy()) \
+        and stored is not None
 
 
 @functools.cache

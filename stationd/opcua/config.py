@@ -9,11 +9,13 @@
       users:                             # user tokens (scrypt hashes: ``stationd user hash``)
         mes: "scrypt$16384$8$1$<salt>$<key>"
       keep: 1000                         # results kept for GetLatestResult / GetResultById
+      anonymous: true                    # false: only the users above (the default: true)
 
 Secure by default: anonymous clients may browse, read, subscribe and call the methods that only
 read (GetLatestResult, GetResultById, RequestResults, RequestUnacknowledgedResults); only a user
 of this section may call AcknowledgeResults; nobody may write a variable or change the address
-space; a user name is accepted only with its password's hash in this section; with ``sign`` or
+space; a user name is accepted only with its password's hash in this section (with
+``anonymous: false``, nobody else: the results carry VINs and operators' names); with ``sign`` or
 ``encrypt`` offered, a client's certificate must be in ``certificates/trusted`` (the server's
 own certificate is generated there on first start, one year valid).
 """
@@ -25,6 +27,7 @@ from pathlib import Path
 from urllib.parse import urlparse
 
 from stationd.access import parse_hash
+from stationd.configread import is_local
 from stationd.yamlio import YamlNode
 
 SECURITY = ("none", "sign", "encrypt")
@@ -38,10 +41,17 @@ class OpcUaConfig:
     certificates: Path | None = None
     users: dict[str, str] = field(default_factory=dict)
     keep: int = 1000
+    anonymous: bool = True
+
+    @property
+    def on_loopback(self) -> bool:
+        """Whether the endpoint listens on this machine's loopback only."""
+        return is_local(urlparse(self.endpoint).hostname or "")
 
     @classmethod
     def from_node(cls, node: YamlNode, base_dir: Path | None = None) -> OpcUaConfig:
-        m = node.mapping(("endpoint", "station_id", "security", "certificates", "users", "keep"))
+        m = node.mapping(("endpoint", "station_id", "security", "certificates", "users", "keep",
+                          "anonymous"))
         d = cls()
         endpoint = m["endpoint"].text() if "endpoint" in m else d.endpoint
         url = urlparse(endpoint)
@@ -81,7 +91,7 @@ class OpcUaConfig:
         users: dict[str, str] = {}
         if "users" in m:
             for name, value in m["users"].pairs():
-                stored = value.text()
+                stored = value.text(secret=True)
                 try:
                     parse_hash(stored)
                 except ValueError:
@@ -89,7 +99,11 @@ class OpcUaConfig:
                                       "never a password") from None
                 users[str(name)] = stored
         keep = m["keep"].integer(lo=1, hi=1_000_000) if "keep" in m else d.keep
-        return cls(endpoint, sid, security, certs, users, keep)
+        anonymous = m["anonymous"].flag() if "anonymous" in m else d.anonymous
+        if not anonymous and not users:
+            raise m["anonymous"].error("false with no users: no client could connect (add "
+                                       "the MES's user under users)")
+        return cls(endpoint, sid, security, certs, users, keep, anonymous)
 
 
 __all__ = ["SECURITY", "OpcUaConfig"]
