@@ -27,6 +27,16 @@ NOT_SQLITE = "not an SQLite database: "
 STATION_LOSES = "every result is lost when the station stops"
 
 
+def sqlite_path(url: str) -> Path | None:
+    """The file an SQLite URL names, resolved; None for another database or one in memory."""
+    from sqlalchemy.engine import make_url
+
+    u = make_url(url)
+    if u.get_backend_name() != "sqlite" or not u.database or u.database == ":memory:":
+        return None
+    return Path(u.database).resolve()
+
+
 def missing_folder(folder: Path) -> str:
     """A database's folder that does not exist: a typo, or a folder to create."""
     return (f"folder {folder} does not exist: create it, owned by the user the station runs "

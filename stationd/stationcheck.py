@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from db.location import sqlite_path
 from drivers.counting import counted
 from drivers.wrench import takes_targets
 from stationd.config import STATE_DIRECTORY, StationConfig, read_all, read_station
@@ -170,7 +171,45 @@ def check_station(path: str | Path, *, header: bool = True) -> StationCheck:
             "users with security [none] only: their passwords cross the network in clear "
             "text (the client says 'Sending plain-text password'); offer sign or encrypt too "
             "(with certificates)"))
+    warnings += _exposure_warnings(cfg, top, p)
     return StationCheck(str(p), cfg if not errors else None, errors, warnings, bolts)
+
+
+def _exposure_warnings(cfg: StationConfig, top: Mapping[str, YamlNode],
+                       path: Path) -> list[ConfigError]:
+    """What a security review found the station gave away, each a warning (the daemon runs
+    as written): a station file holding the screens' token that every user of the machine
+    may read; an images folder (served to the token's holders) holding the database or the
+    OPC UA server's key; an OPC UA server anonymous clients read from the network."""
+    found: list[ConfigError] = []
+    if cfg.http is not None and cfg.http.token and "http" in top:
+        try:
+            readable = path.stat().st_mode & 0o004
+        except OSError:
+            readable = 0
+        if readable:
+            found.append(top["http"].error(
+                f"the token is in a file every user of this machine may read ({path}): "
+                f"chmod 640 {path} (and chgrp stationd: the daemon's group reads it)"))
+    images = cfg.records.images_dir
+    if images is not None and "records" in top:
+        inside = [(what, there) for what, there in (
+            ("the station's database", sqlite_path(cfg.database_url)),
+            ("the OPC UA server's key and certificates",
+             cfg.opcua.certificates if cfg.opcua is not None else None))
+            if there is not None and there.resolve().is_relative_to(images.resolve())]
+        for what, there in inside:
+            found.append(top["records"].error(
+                f"images_dir {images} holds {what} ({there}): the screens serve that folder "
+                f"(images only) to every holder of the token; give the images a folder of "
+                f"their own (e.g. {images / 'images'})"))
+    if cfg.opcua is not None and cfg.opcua.anonymous and not cfg.opcua.on_loopback \
+            and "opcua" in top:
+        found.append(top["opcua"].error(
+            f"anonymous clients may browse, read and subscribe at {cfg.opcua.endpoint} from "
+            "the network (the results carry VINs and operators' names): give the MES a user "
+            "(users) and write 'anonymous: false', or listen on 127.0.0.1"))
+    return found
 
 
 def _nok_errors(top: Mapping[str, YamlNode], cfg: StationConfig, bolts: Any,

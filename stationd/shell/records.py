@@ -13,6 +13,7 @@ calls them from its executor threads) and raises what the database raises.
 from __future__ import annotations
 
 import logging
+import re
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -42,7 +43,7 @@ from db.kinds import (
     TIGHTENING,
     TO_LOOSEN,
 )
-from db.location import unwritable_file
+from db.location import sqlite_path, unwritable_file
 from db.report import VehicleReport
 from db.repository import Repository
 from drivers.errors import DeviceError, DriverError
@@ -692,14 +693,14 @@ class Records:
         database, is that same file; else None.  Removed, a reload would open a new, empty
         database there: the vehicle on the lift with no bolt done, its bolts tightened again
         (an engineer's trial).  Replaced (a backup put back), the reload opens that file."""
-        if self._db_file is None or _sqlite_path(url) != self._db_file[0]:
+        if self._db_file is None or sqlite_path(url) != self._db_file[0]:
             return None
         return self._file_state()
 
     def new_file(self, url: str) -> Path | None:
         """The SQLite file a reload's database ``url`` names where it is not there yet and
         not the file the daemon opened (a reload would create it, empty); else None."""
-        path = _sqlite_path(url)
+        path = sqlite_path(url)
         if path is None or path.exists() or (
                 self._db_file is not None and path == self._db_file[0]):
             return None
@@ -743,7 +744,7 @@ class Records:
         do where its SQLite file (or its -wal, -shm) is not this daemon's user's to write
         (:func:`db.location.unwritable_file`: "... chown it to stationd"); else ``exc``, its
         own words."""
-        path = _sqlite_path(self.cfg.database_url)
+        path = sqlite_path(self.cfg.database_url)
         words = None if path is None else unwritable_file(path, "this daemon's user")
         if words is None:
             return exc
@@ -774,7 +775,8 @@ class Records:
             return []
         out = []
         for key, img in sorted(loc.crops.items()):
-            path = folder / vin / f"{bolt}-{tightening_id}-{key.replace('/', '-')}.png"
+            path = folder / _path_part(vin) / (f"{_path_part(bolt)}-{tightening_id}-"
+                                               f"{_path_part(key.replace('/', '-'))}.png")
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
                 if not cv2.imwrite(str(path), img):
@@ -794,20 +796,19 @@ def _verdict(report: VehicleReport, due: tuple[str, ...]) -> tuple[tuple[str, ..
             tuple(b for b in report.nok if b not in due))
 
 
-def _sqlite_path(url: str) -> Path | None:
-    """The file an SQLite URL names, resolved; None for another database or one in memory."""
-    from sqlalchemy.engine import make_url
-
-    u = make_url(url)
-    if u.get_backend_name() != "sqlite" or not u.database or u.database == ":memory:":
-        return None
-    return Path(u.database).resolve()
+def _path_part(text: str) -> str:
+    """``text`` as one file or folder name: every character but letters, digits, ``-``,
+    ``_`` and ``.`` as ``_``, never a leading dot.  Why: the VIN comes from the PLC, and a
+    garbled or hostile one (``../../x``, ``/run/x``) made the images go outside their folder;
+    a bolt's code comes from the bolt table."""
+    safe = re.sub(r"[^A-Za-z0-9_.-]", "_", text) or "_"
+    return "_" + safe[1:] if safe.startswith(".") else safe
 
 
 def _sqlite_file(url: str) -> tuple[Path, tuple[int, int]] | None:
     """The file of an SQLite URL and its (device, inode); None for another database, one in
     memory, or a file that is not there."""
-    path = _sqlite_path(url)
+    path = sqlite_path(url)
     if path is None:
         return None
     try:
