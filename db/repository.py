@@ -491,7 +491,8 @@ class Repository:
 
     def spc(self, model: str | None = None, since: datetime | None = None,
             last: int = quality.LAST_N) -> dict[str, Any]:
-        """Cp/Cpk of torque and angle per bolt and pset (OK results) with each group's last
+        """Cp/Cpk of torque and angle per bolt and pset (every measured tightening, OK and
+        NOK) with each group's last
         ``last`` results and limits, NOK rate per day."""
         with self._session(write=False) as s:
             return quality.spc(s, model, since, last)

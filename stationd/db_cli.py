@@ -573,27 +573,47 @@ def cmd_db_spc(args: argparse.Namespace) -> int:
               + (f" since {args.since.isoformat()}" if args.since else "")
               + ": nothing to compute")
         return EXIT_OK
-    # OK: the OK results the figures are computed on; NOK: the NOK rundowns (not bolts); a
-    # change of limits starts a new row: its parameter version (v) and torque limits tell
-    # the rows of one bolt and pset apart
-    print(f"{'model':<10} {'bolt':<8} {'pset':>4} {'OK':>4} {'NOK':>4} {'v':>3} "
-          f"{'torque Nm':>11}  {'mean':>6} {'Cp':>5} {'Cpk':>5}  {'angle mean':>10} "
-          f"{'Cp':>5} {'Cpk':>5}")
+    # n: the measured tightenings the figures are computed on (OK and NOK); NOK: of them
+    # and entered ones, the NOK rundowns (not bolts); a change of limits starts a new row:
+    # its parameter version (v) and limits tell the rows of one bolt and pset apart; s: the
+    # sample standard deviation
+    print(f"{'model':<10} {'bolt':<8} {'pset':>4} {'n':>4} {'NOK':>4} {'v':>3} "
+          f"{'torque Nm':>11}  {'mean':>6} {'s':>5} {'Cp':>5} {'Cpk':>5}  "
+          f"{'angle deg':>11}  {'mean':>6} {'s':>5} {'Cp':>5} {'Cpk':>5}")
+    rough = False
     for r in doc["bolts"]:
         t, a = r["torque"], r["angle"]
-        window = f"{_num(t['lsl'])}-{_num(t['usl'])}"
+        rough |= any(q["cp"] is not None and q["n"] < ROUGH_N for q in (t, a))
         print(f"{r['model']:<10} {r['bolt']:<8} {r['pset'] or '-':>4} {t['n']:>4} "
-              f"{r['nok']:>4} {r['parameter_version'] or '-':>3} {window:>11}  "
-              f"{_num(t['mean']):>6} {_fig(t['cp']):>5} {_fig(t['cpk']):>5}  "
-              f"{_num(a['mean']):>10} {_fig(a['cp']):>5} {_fig(a['cpk']):>5}")
+              f"{r['nok']:>4} {r['parameter_version'] or '-':>3} {_window(t):>11}  "
+              f"{_num(t['mean']):>6} {_num(t['sigma'], 2):>5} {_figs(t)}  "
+              f"{_window(a):>11}  {_num(a['mean']):>6} {_num(a['sigma'], 2):>5} {_figs(a)}")
+    if rough:
+        print(f"* from fewer than {ROUGH_N} results: a rough figure (Cpk of a few results is "
+              "off by several tenths either way)")
     for r in doc["bolts"]:   # typed in from the controller's screen: counted apart
         if r["entered_ok"]:
             print(f"{r['model']} {r['bolt']} pset {r['pset'] or '-'}: {r['entered_ok']} OK "
                   "entered by a person (not measured: not in the figures)")
     for d in doc["trend"]:
-        print(f"{d['day']}: {d['results']} results, {d['nok']} NOK "
+        print(f"{d['day']} (UTC): {d['results']} results, {d['nok']} NOK "
               f"({100 * (d['nok_rate'] or 0):.1f} %)")
     return EXIT_OK
+
+
+#: fewer measured results than this make a capability figure rough (marked ``*``)
+ROUGH_N = 25
+
+
+def _window(q: dict[str, Any]) -> str:
+    """A capability's limits, ``45.0-55.0`` (``-`` for a limit not set)."""
+    return f"{_num(q['lsl'])}-{_num(q['usl'])}"
+
+
+def _figs(q: dict[str, Any]) -> str:
+    """Cp and Cpk, each marked ``*`` when from fewer than :data:`ROUGH_N` results."""
+    mark = "*" if q["cp"] is not None and q["n"] < ROUGH_N else ""
+    return f"{_fig(q['cp']) + mark:>5} {_fig(q['cpk']) + mark:>5}"
 
 
 def _fig(v: float | None) -> str:
@@ -660,8 +680,8 @@ def cmd_db_shift(args: argparse.Namespace) -> int:
         else EXIT_INCOMPLETE
 
 
-def _num(v: float | None) -> str:
-    return "-" if v is None else f"{v:.1f}"
+def _num(v: float | None, digits: int = 1) -> str:
+    return "-" if v is None else f"{v:.{digits}f}"
 
 
 # -- config check ----------------------------------------------------------------------------
@@ -808,12 +828,16 @@ def add_db_parser(subparsers: Any) -> argparse.ArgumentParser:
     rp.set_defaults(func=cmd_db_report)
     sp = dsub.add_parser("spc", help="Cp/Cpk of torque and angle per bolt and pset, and the "
                          "NOK trend per day",
-                         description="On OK results: Cp = (USL-LSL)/6s, Cpk = min(USL-mean, "
-                                     "mean-LSL)/3s against the limits sent; '-' with fewer "
-                                     "than 5 results.")
+                         description="On every measured tightening (OK and NOK; an outcome "
+                                     "a person entered is counted apart): Cp = (USL-LSL)/6s, "
+                                     "Cpk = min(USL-mean, mean-LSL)/3s against the limits "
+                                     "sent; '-' with fewer than 5 results, '*' on a figure "
+                                     f"from fewer than {ROUGH_N} (rough).  Days are UTC "
+                                     "days.")
     _add_db_args(sp)
     sp.add_argument("--model", help="this vehicle model only")
-    sp.add_argument("--since", type=_since, metavar="DATE", help="results from this date on")
+    sp.add_argument("--since", type=_since, metavar="DATE",
+                    help="results from this date on (UTC unless an offset is given)")
     sp.add_argument("--json", action="store_true", help="print one JSON object")
     sp.set_defaults(func=cmd_db_spc)
     sh = dsub.add_parser("shift", help="a shift's hand-over: its vehicles, those not OK, who "

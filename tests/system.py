@@ -81,7 +81,7 @@ TESTS: tuple[str, ...] = (
     "test_cli.py::test_db_report_into_a_closed_pipe_is_quiet",
     "test_cli.py::test_demo_vision_save_writes_by_the_one_output_rule",
     "db/test_db_cli.py::test_reports_and_exports_open_the_database_read_only",
-    "db/test_quality.py::test_spc_groups_by_bolt_and_pset_on_ok_results_and_counts_noks",
+    "db/test_quality.py::test_spc_groups_by_bolt_and_pset_on_measured_results_and_counts_noks",
     "db/test_quality.py::test_a_parameter_change_starts_a_new_group_and_an_unknown_model_is_bad_input",
     "test_probe.py::test_probe_of_a_device_a_daemon_drives_is_refused_before_touching_it",
     "test_probe.py::test_probe_of_a_device_another_probe_holds_says_so",

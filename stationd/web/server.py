@@ -541,8 +541,9 @@ class WebServer:
         return "/images/" + p.relative_to(self.images_dir).as_posix()
 
     async def _spc(self, request: web.Request) -> web.Response:
-        """Cp/Cpk per bolt and pset on OK results with the last results and limits for the
-        plot, NOK per day (``?model=``, ``?since=``, ``?last=`` results per group)."""
+        """Cp/Cpk per bolt and pset on every measured tightening with the last results and
+        limits for the plot, NOK per day (``?model=``, ``?since=``, ``?last=`` results per
+        group)."""
         res = self._need_results()
         last = request.query.get("last", "")
         if last and not (last.isdigit() and 1 <= int(last) <= _MAX_LAST):

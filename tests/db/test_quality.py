@@ -29,7 +29,8 @@ def test_capability_is_the_textbook_formula_and_none_without_enough_results():
     assert capability(v, None, 55.0)["cpk"] is None
 
 
-def test_spc_groups_by_bolt_and_pset_on_ok_results_and_counts_noks(repo, bolts_file, tmp_path):
+def test_spc_groups_by_bolt_and_pset_on_measured_results_and_counts_noks(repo, bolts_file,
+                                                                          tmp_path):
     import_bolts(repo, bolts_file)
     rng = np.random.default_rng(3)
     for k in range(3):
@@ -44,7 +45,7 @@ def test_spc_groups_by_bolt_and_pset_on_ok_results_and_counts_noks(repo, bolts_f
     assert b1["torque"]["lsl"] == 45 and b1["torque"]["usl"] == 55
     assert b1["torque"]["cpk"] is not None and math.isfinite(b1["torque"]["cpk"])
     b2 = next(r for r in doc["bolts"] if r["bolt"] == "B2")
-    assert b2["nok"] == 3 and b2["torque"]["n"] == 0 and b2["torque"]["cp"] is None
+    assert b2["nok"] == 3 and b2["torque"]["n"] == 3 and b2["torque"]["cp"] is None
     [day] = doc["trend"]
     assert (day["results"], day["nok"]) == (15, 3) and day["nok_rate"] == pytest.approx(0.2)
     assert repo.spc(model="WAGON")["bolts"] == []
@@ -57,9 +58,31 @@ def test_spc_groups_by_bolt_and_pset_on_ok_results_and_counts_noks(repo, bolts_f
                           capture_output=True, text=True, cwd=ROOT, timeout=60, check=False)
     assert text.returncode == 0 and "B1" in text.stdout and "20.0 %" in text.stdout
     head = text.stdout.splitlines()[0].split()
-    assert head[:5] == ["model", "bolt", "pset", "OK", "NOK"]     # counts named by kind
+    assert head[:5] == ["model", "bolt", "pset", "n", "NOK"]     # counts named by kind
+    assert head[6:12] == ["torque", "Nm", "mean", "s", "Cp", "Cpk"]
+    assert head[12:] == ["angle", "deg", "mean", "s", "Cp", "Cpk"]
     [b2_row] = [line.split() for line in text.stdout.splitlines() if " B2 " in f" {line} "]
-    assert b2_row[3:5] == ["0", "3"]
+    assert b2_row[3:5] == ["3", "3"]
+    [b1_row] = [line.split() for line in text.stdout.splitlines() if " B1 " in f" {line} "]
+    assert b1_row[6] == "45.0-55.0" and b1_row[10].endswith("*")   # 12 results: rough
+    assert "* from fewer than 25 results: a rough figure" in text.stdout
+    assert "(UTC): 15 results, 3 NOK (20.0 %)" in text.stdout
+
+
+def test_the_noks_of_a_bolt_are_in_its_capability_as_its_oks_are(repo, bolts_file):
+    """A quality trial: a bolt's OK results, cut at the limits, read Cpk 1.91; with its NOKs
+    (the process made them too) 0.32.  An outcome a person entered stays out."""
+    import_bolts(repo, bolts_file)
+    repo.start_vehicle("VINQ", "SEDAN")
+    oks = [49.0, 50.0, 51.0, 50.5, 49.5, 50.0]
+    for i, t in enumerate(oks):
+        record(repo, "VINQ", "B1", tightening_id=i + 1, torque_nm=t)
+    record(repo, "VINQ", "B1", ok=False, tightening_id=20, torque_nm=57.5)   # above 55
+    [b1] = [r for r in repo.spc()["bolts"] if r["bolt"] == "B1"]
+    everything = capability([*oks, 57.5], 45.0, 55.0)
+    assert b1["torque"]["n"] == 7 and b1["nok"] == 1
+    assert b1["torque"]["cpk"] == pytest.approx(everything["cpk"])
+    assert b1["torque"]["cpk"] < capability(oks, 45.0, 55.0)["cpk"] / 2
 
 
 def test_a_parameter_change_starts_a_new_group_and_an_unknown_model_is_bad_input(
@@ -123,13 +146,13 @@ def test_each_group_carries_its_last_results_ok_and_nok_and_the_limits_of_its_ve
         {"min": 45, "target": 50, "max": 55}, {"min": 45, "target": 51, "max": 55},
         {"min": 47, "target": 52, "max": 57}]
     assert all(r["limits"]["angle"] == {"min": 15, "target": 30, "max": 60} for r in b1)
-    # the last 30 of 35, oldest first, NOKs included; the figures still use every OK result
+    # the last 30 of 35, oldest first, NOKs included; the figures use every measured result
     v1 = b1[0]
     assert len(v1["last"]) == 30
     assert [p["ok"] for p in v1["last"]] == [ok for _, _, ok in sent[-30:]]
     assert [p["torque"] for p in v1["last"]] == pytest.approx([t for t, _, _ in sent[-30:]])
     assert [p["angle"] for p in v1["last"]] == pytest.approx([a for _, a, _ in sent[-30:]])
-    assert v1["torque"]["n"] == sum(ok for _, _, ok in sent)
+    assert v1["torque"]["n"] == len(sent)
     assert v1["nok"] == sum(not ok for _, _, ok in sent) > 0
     ats = [p["at"] for p in v1["last"]]
     assert ats == sorted(ats) and all("T" in a for a in ats)
