@@ -36,6 +36,9 @@ from stationd.words import entered_as_words, result_type_words, unrecorded_words
 
 CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator", "torque_nm",
               "angle_deg", "torque_min_nm", "torque_max_nm", "angle_min_deg", "angle_max_deg",
+              # the targets sent with those limits (a quality trial: the line had them, the
+              # station's own export did not)
+              "torque_target_nm", "angle_target_deg",
               "pset",
               "parameter_version", "tightening_id", "x_mm", "y_mm", "z_mm",
               "match_distance_mm", "tilt_deg", "sent_at", "result_at", "recorded_at", "images",
@@ -384,13 +387,15 @@ def plot_curve(traces: list[dict[str, Any]]) -> dict[str, Any] | None:
 
 
 def _limits(params: Any, kind: str) -> dict[str, float | None]:
-    """A rundown's limits columns: its version's window for a tightening, empty for a
-    loosening."""
+    """A rundown's limits and targets columns: its version's window and target for a
+    tightening, empty for a loosening."""
     mine = kind != LOOSENING
     return {"torque_min_nm": params.torque_min if mine else None,
             "torque_max_nm": params.torque_max if mine else None,
             "angle_min_deg": params.angle_min if mine else None,
-            "angle_max_deg": params.angle_max if mine else None}
+            "angle_max_deg": params.angle_max if mine else None,
+            "torque_target_nm": params.torque_target if mine else None,
+            "angle_target_deg": params.angle_target if mine else None}
 
 
 #: the first characters that make a spreadsheet read a cell as a formula

