@@ -2,10 +2,10 @@
 path: log in with a user's password, give the command, read the station's answer), and the
 password hashes the station file keeps.
 
-    stationd skip VIN BOLT [--comment TEXT] --user NAME
+    stationd skip VIN BOLT --comment TEXT --user NAME
     stationd reopen VIN [--comment TEXT] --user NAME
-    stationd release VIN BOLT [--comment TEXT] --user NAME
-    stationd loosen VIN BOLT [--comment TEXT] --user NAME
+    stationd release VIN BOLT --comment TEXT --user NAME
+    stationd loosen VIN BOLT --comment TEXT --user NAME
     stationd enter-outcome VIN BOLT --ok|--nok --torque NM --angle DEG --comment TEXT --user NAME
     stationd operator sign-in USER [--comment TEXT]   # USER signs in at the station
     stationd operator sign-out --user NAME [--comment TEXT]
@@ -341,6 +341,9 @@ def _check_command(args: argparse.Namespace) -> None:
     if args.command in BOLT_COMMANDS and not 1 <= len(args.bolt.strip()) <= 32:
         raise InputError(f"bolt {args.bolt!r}: 1-32 characters")
     check_comment(args.comment)
+    if args.command in REASON_COMMANDS and not (args.comment or "").strip():
+        raise InputError(f"--comment: why ({REASON_COMMANDS[args.command]} is kept with its "
+                         "reason: quality reads it)")
     if args.command == "enter-outcome":
         _check_outcome(args)
 
@@ -359,6 +362,9 @@ def _check_outcome(args: argparse.Namespace) -> None:
 
 #: the longest comment a command keeps (the screens' limit too)
 MAX_COMMENT = 500
+#: the commands that change a bolt's verdict, each given only with its reason (a quality
+#: engineer's trial: a NOK bolt released with no word of why), as the screens ask it
+REASON_COMMANDS = {"skip": "a skip", "release": "a release", "loosen": "a loosen order"}
 
 
 def check_comment(comment: str | None) -> None:
@@ -366,6 +372,9 @@ def check_comment(comment: str | None) -> None:
     if len(comment or "") > MAX_COMMENT:
         raise InputError(f"--comment: at most {MAX_COMMENT} characters ({len(comment or '')} "
                          "given)")
+    if not (comment or "").isprintable():
+        raise InputError("--comment: printable characters only (no newline, tab or control "
+                         "character)")
 
 
 def network_words(exc: BaseException) -> str:
@@ -617,6 +626,9 @@ def add_command_parsers(sub: Any) -> None:
         if p is eo:     # what was read on the controller: the entry's only evidence
             p.add_argument("--comment", required=True,
                            help="what you checked on the controller (kept with the command)")
+        elif name in REASON_COMMANDS:
+            p.add_argument("--comment", default="", help="why (required: kept with the "
+                                                         "command)")
         else:
             p.add_argument("--comment", default="", help="why (kept with the command)")
         p.add_argument("--user", required=True, help="who gives the command")

@@ -69,7 +69,7 @@ def slow() -> Iterator[tuple[str, type[_SlowCommands]]]:
 
 def _skip(url: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "stationd", "skip", "VIN1", "B03", "--user",
-                           "olga", "--url", url, "--timeout", "1"],
+                           "olga", "--comment", "no access", "--url", url, "--timeout", "1"],
                           input="secret-pw\n", capture_output=True, text=True, timeout=60)
 
 
@@ -129,7 +129,8 @@ def test_a_server_that_is_not_stationd_is_said_so() -> None:
     threading.Thread(target=server.serve_forever, daemon=True).start()
     url = f"http://127.0.0.1:{server.server_address[1]}/"
     try:
-        for argv in (("skip", "VIN1", "B03", "--user", "olga"), ("operator", "status")):
+        for argv in (("skip", "VIN1", "B03", "--user", "olga", "--comment", "no access"),
+                     ("operator", "status")):
             got = subprocess.run([sys.executable, "-m", "stationd", *argv, "--url", url],
                                  input="secret-pw\n", capture_output=True, text=True,
                                  timeout=60)

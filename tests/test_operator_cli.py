@@ -46,7 +46,8 @@ def test_no_daemon_is_one_line_and_exit_3(argv, capsys, monkeypatch):
 
 
 @pytest.mark.parametrize("argv", [["operator", "sign-in", "olga"],
-                                  ["skip", "VIN1", "B01", "--user", "sam"]])
+                                  ["skip", "VIN1", "B01", "--user", "sam", "--comment",
+                                   "no access"]])
 def test_no_password_is_said_so_without_asking_the_daemon(argv, capsys, monkeypatch):
     """Standard input empty (``< /dev/null``) was sent as an empty password, and the daemon's
     answer said "login refused: wrong user or password". The port is closed: had the daemon
@@ -65,3 +66,18 @@ def test_sign_out_names_who_gives_it(capsys):
     with pytest.raises(SystemExit) as exit_:
         main(["operator", "sign-out"])
     assert exit_.value.code == 2 and "--user" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", [["skip", "VIN1", "B01"], ["release", "VIN1", "B01"],
+                                     ["loosen", "VIN1", "B01"]])
+def test_a_skip_a_release_and_a_loosen_order_need_their_reason(command, capsys):
+    """A quality engineer's trial: a bolt locked after three NOKs was released with no word
+    of why (an entered outcome needed one).  Refused before any login or password."""
+    for comment in ([], ["--comment", "  "]):
+        assert main([*command, "--user", "sam", *comment, "--url", "http://127.0.0.1:9/"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "--comment: why (a " in err, err
+        assert "is kept with its reason" in err
+    assert main([*command, "--user", "sam", "--comment", "ok\nFAKE LOG LINE", "--url",
+                 "http://127.0.0.1:9/"]) == 2
+    assert "--comment: printable characters only" in capsys.readouterr().err

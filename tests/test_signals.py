@@ -127,8 +127,8 @@ def test_a_background_job_ignores_ctrl_c_and_stops_on_sigterm(silent) -> None:
 @pytest.mark.parametrize(("sig", "code", "line"), SIGNALS)
 @pytest.mark.parametrize("argv", [["status", "--url", "http://127.0.0.1:9/"],
                                   ["config", "check", "config/sim/station.yaml"],
-                                  ["skip", "VIN1", "B01", "--user", "ed", "--url",
-                                   "http://127.0.0.1:9/"]])
+                                  ["skip", "VIN1", "B01", "--user", "ed", "--comment", "x",
+                                   "--url", "http://127.0.0.1:9/"]])
 def test_as_soon_as_the_entry_point_runs(argv, sig, code, line) -> None:
     """While the modules load and the parser is built (1.5 s on a busy machine: the moment
     ``stationd status`` printed a KeyboardInterrupt from SQLAlchemy's import)."""

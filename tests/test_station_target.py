@@ -133,11 +133,13 @@ def test_a_command_for_station_b_is_refused_by_station_a(two) -> None:
         f"not the station of {b.resolve()} (--config {b}): nothing "
         "done; is that station's daemon running, and serving its screens at its "
         "http.listen? (--url to say where)"]
-    got = _cli("skip", "VIN00000000000001", "B01", "--user", "sam", "--config", str(b))
+    got = _cli("skip", "VIN00000000000001", "B01", "--user", "sam", "--comment", "no access",
+               "--config", str(b))
     assert got.returncode == 3 and got.stdout == "" and "nothing done" in got.stderr, got
     assert "skip" not in da.log().lower()     # A heard no login, no command
     # --url does not get around it: the station file names the station
-    got = _cli("skip", "VIN00000000000001", "B01", "--user", "sam", "--config", str(b),
+    got = _cli("skip", "VIN00000000000001", "B01", "--user", "sam", "--comment", "no access",
+               "--config", str(b),
                "--url", url)
     assert got.returncode == 3 and "nothing done" in got.stderr, got
     assert "skip" not in da.log().lower()
@@ -149,7 +151,8 @@ def test_a_command_for_station_b_is_refused_by_station_a(two) -> None:
     assert first == f"station at {url}: {a.resolve()} (it has no station id: set " \
                     "line.station_id or opcua.station_id in its station file to name it)"
     assert rest[0].startswith("state:    fault")
-    got = _cli("skip", "VIN00000000000001", "B01", "--user", "sam", "--config", str(a))
+    got = _cli("skip", "VIN00000000000001", "B01", "--user", "sam", "--comment", "no access",
+               "--config", str(a))
     assert got.returncode == 1, got      # taken to the station, which refuses it
     # named as status names it, without how to give it an id (status says that)
     named = first.split(" (it has no station id")[0]

@@ -240,11 +240,18 @@ def _text(body: dict[str, Any], key: str, *, limit: int, required: bool = True) 
     operator trial), too long, or not a text."""
     v = body.get(key, None if required else "")
     if required and (v is None or (isinstance(v, str) and not v.strip())):
-        raise web.HTTPBadRequest(text=f"{key}: required (empty)\n")
+        why = ": say why (a skip, a release or a loosen order is kept with its reason)" \
+            if key == "comment" else " (empty)"
+        raise web.HTTPBadRequest(text=f"{key}: required{why}\n")
     if not isinstance(v, str) or len(v) > limit:
         need = "required" if required else "optional"
         raise web.HTTPBadRequest(text=f"{key}: a text of at most {limit} characters "
                                       f"({need})\n")
+    if not v.isprintable():
+        # a control character (a newline, an escape) kept in the records, the exports and
+        # the line database read as something else there (a quality trial)
+        raise web.HTTPBadRequest(text=f"{key}: printable characters only (no newline, tab "
+                                      "or control character)\n")
     return v.strip()
 
 
@@ -272,7 +279,8 @@ def _number(body: dict[str, Any], key: str, low: float, high: float) -> float:
 def _command(body: dict[str, Any]) -> Command:
     """The typed command of a request's body; 400 for anything else."""
     kind = body.get("kind")
-    comment = _text(body, "comment", limit=500, required=False)
+    # a skip, a release and a loosen order change a bolt's verdict: each with its reason
+    comment = _text(body, "comment", limit=500, required=kind in ("skip", "release", "loosen"))
     if kind == "skip":
         return SkipBolt(_text(body, "vin", limit=32), _text(body, "bolt", limit=32), comment)
     if kind == "reopen":

@@ -107,7 +107,8 @@ def test_commands_reach_the_demos_station_during_the_run_and_the_hold(tmp_path):
         line = expect_re(stamp + rf"command reopen {vin}.* by sue \(cli 127\.0\.0\.1\): "
                          r"accepted: it opens as a rework when it is at the station \(its skips "
                          r"before no longer count\)$")
-        skip = command("skip", vin, "B01")     # no vehicle on the lift now: the station's no
+        # no vehicle on the lift now: the station's no
+        skip = command("skip", vin, "B01", "--comment", "no access")
         assert skip.returncode == 1 and "no vehicle at the station" in skip.stdout, skip
         expect_re(stamp + rf"command skip B01 of {vin}.* by sue \(cli 127\.0\.0\.1\): "
                   "refused: no vehicle at the station.*")

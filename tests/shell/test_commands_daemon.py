@@ -92,27 +92,29 @@ def test_commands_through_the_daemon_are_authenticated_recorded_and_outlive_a_re
         (tmp_path / "pose").write_text("")
 
         # refused: a role without the right, a bolt already skipped, a wrong password
-        got = _cli("skip", VIN, "B06", "--user", "nina", "--url", url)
+        got = _cli("skip", VIN, "B06", "--user", "nina", "--comment", "no access", "--url", url)
         assert got.returncode == 1 and "does not have the right to skip" in got.stdout
         got = _cli("reopen", "OLDVIN", "--user", "olga", "--url", url)
         assert got.returncode == 1 and "right to reopen" in got.stdout
-        got = _cli("skip", VIN, "B05", "--user", "sam", "--url", url)
+        got = _cli("skip", VIN, "B05", "--user", "sam", "--comment", "no access", "--url", url)
         assert got.returncode == 1 and "B05 skipped: olga's command" in got.stdout
-        got = _cli("skip", VIN, "B07", "--user", "sam", "--url", url, password="guess1234")  # noqa: S106
+        got = _cli("skip", VIN, "B07", "--user", "sam", "--comment", "no access", "--url", url,
+                   password="guess1234")  # noqa: S106
         assert got.returncode == 3 and "login refused" in got.stderr
         d.wait_log("login refused for user 'sam'")
         got = _cli("reopen", VIN, "--user", "sam", "--url", url)   # open at the station
         assert got.returncode == 1 and f"vehicle {VIN} is open at the station" in got.stdout
         for bad in (("--url", "not a url"), ("--timeout", "-1"), ("--timeout", "nan"),
                     ("--comment", "x" * 501)):
-            got = _cli("skip", VIN, "B07", "--user", "olga", "--url", url, *bad)
+            got = _cli("skip", VIN, "B07", "--user", "olga", "--comment", "no access", "--url",
+                       url, *bad)
             assert got.returncode == 2 and "Traceback" not in got.stderr, (bad, got.stderr)
-        got = _cli("skip", VIN, " ", "--user", "olga", "--url", url)
+        got = _cli("skip", VIN, " ", "--user", "olga", "--comment", "no access", "--url", url)
         assert got.returncode == 2 and "bolt ' '" in got.stderr
 
         # by hand: without a session, with a nonce the server never issued, replayed
         c = Client(url)
-        body = {"kind": "skip", "vin": VIN, "bolt": "B08"}
+        body = {"kind": "skip", "vin": VIN, "bolt": "B08", "comment": "no access"}
         assert c.post("/api/commands", {**body, "nonce": "a" * 24})[0] == 401
         assert c.post("/api/login", {"user": "sam", "password": PASSWORD})[0] == 200
         status, text = c.post("/api/commands", {**body, "nonce": "a" * 24})
@@ -139,7 +141,7 @@ def test_commands_through_the_daemon_are_authenticated_recorded_and_outlive_a_re
         finally:
             con.close()
         assert rows == [("olga", "cli 127.0.0.1", "skip", VIN, "B05", "no access"),
-                        ("sam", "screen 127.0.0.1", "skip", VIN, "B08", "")]
+                        ("sam", "screen 127.0.0.1", "skip", VIN, "B08", "no access")]
         got = _cli("feed", "--url", url)
         assert got.returncode == 0, got.stderr
         feed = [json.loads(line) for line in got.stdout.splitlines()]
@@ -197,7 +199,8 @@ def test_a_bolt_locked_after_three_noks_is_released_by_a_supervisor_from_the_cli
         pose.write_text("B05")
         d.wait_log("no bolt: B05 locked after 3 NOK in a row")
         assert d.log().count("tightening bolt B05") == 3
-        got = _cli("release", VIN, "B05", "--user", "olga", "--url", url)
+        got = _cli("release", VIN, "B05", "--user", "olga", "--comment", "looks fine",
+                   "--url", url)
         assert got.returncode == 1 and "right to release" in got.stdout
         got = _cli("release", VIN, "B05", "--user", "sam", "--comment", "thread checked",
                    "--url", url)

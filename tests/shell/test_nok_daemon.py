@@ -122,12 +122,12 @@ def test_loosen_strategy_lock_and_release_through_the_daemon(tmp_path):
             "kind": "no right", "right": "release",
             "words": "your role does not have the right to release"}, answer
         assert c.post("/api/login", {"user": "sam", "password": PASSWORD})[0] == 200
-        status, answer = command(c, "loosen")
+        status, answer = command(c, "loosen", "rework")
         # ordered already (its kind says so: "loosen first" read as an instruction)
         assert status == 409 and answer["reason"]["kind"] == "loosen ordered", answer
         status, answer = command(c, "release", "thread checked")
         assert status == 200 and answer["accepted"], answer
-        status, answer = command(c, "release")   # released already: nothing changes
+        status, answer = command(c, "release", "again")   # released already: nothing changes
         assert status == 409 and answer["reason"]["kind"] == "not locked", answer
 
         # released, still to be loosened first: the loosen pset, then the tightening one

@@ -105,6 +105,51 @@ def test_a_blank_vin_is_refused_as_required_not_as_too_long() -> None:
         (400, "vin: a text of at most 32 characters (required)")]
 
 
+def test_a_skip_a_release_and_a_loosen_order_are_refused_without_their_reason() -> None:
+    """A quality engineer's trial: a NOK bolt released with no word of why, and a loosen
+    order the same (an entered outcome needed its comment); a reopen still takes none."""
+    access = AccessConfig.from_node(YamlNode.parse(
+        f"users:\n  sam: {{role: supervisor, password: '{hash_password('pw-of-sam')}'}}\n",
+        "station.yaml"))
+    given: list[Command] = []
+
+    async def submit(command: Command, issuer: Issuer) -> Answer:
+        given.append(command)
+        return Answer(1, command, issuer)
+
+    async def main() -> list[tuple[str, int, str]]:
+        srv = WebServer(EventBus(), listen="127.0.0.1:0")
+        srv.commands.access, srv.commands.submit = access, submit
+        await srv.start()
+        got = []
+        try:
+            async with ClientSession(cookie_jar=CookieJar(unsafe=True)) as http:
+                async with http.post(srv.url + "api/login",
+                                     json={"user": "sam", "password": "pw-of-sam"}) as r:
+                    assert r.status == 200
+                for kind, comment in (("skip", None), ("release", "  "), ("loosen", ""),
+                                      ("release", "joint\x01checked"),
+                                      ("release", "joint checked"), ("reopen", None)):
+                    async with http.get(srv.url + "api/nonce") as r:
+                        nonce = (await r.json())["nonce"]
+                    body = {"nonce": nonce, "kind": kind, "vin": "VIN1", "bolt": "B1"}
+                    if comment is not None:
+                        body["comment"] = comment
+                    async with http.post(srv.url + "api/commands", json=body) as r:
+                        got.append((kind, r.status, (await r.text()).strip()))
+        finally:
+            await srv.stop()
+        return got
+
+    got = asyncio.run(main())
+    why = "comment: required: say why (a skip, a release or a loosen order is kept with its reason)"
+    assert [g[1:] for g in got[:3]] == [(400, why)] * 3
+    assert got[3][1:] == (400, "comment: printable characters only (no newline, tab or control "
+                               "character)")
+    assert [g[1] for g in got[4:]] == [200, 200]
+    assert [type(c).__name__ for c in given] == ["ReleaseBolt", "ReopenVehicle"]
+
+
 def test_the_feed_gives_each_record_the_id_the_line_keeps_it_under(tmp_path: Path) -> None:
     """After a database put back from a copy renewed its id (the forwarder does), the records
     before the renewal go to the line under the earlier id: a feed reader (an MES joining

@@ -73,6 +73,7 @@
     const view = window.lastView;
     if (!view || !view.vehicle) { answer("no vehicle at the station", false); return; }
     if (!q("skip-bolt").value) { answer("choose the bolt to skip", false); return; }
+    if (!q("skip-comment").value.trim()) { answer("say why the bolt is skipped", false); return; }
     send({kind: "skip", vin: view.vehicle.vin, bolt: q("skip-bolt").value, comment: q("skip-comment").value}, "skip-comment");
   });
   q("release").addEventListener("submit", (e) => {
@@ -80,6 +81,7 @@
     const view = window.lastView;
     if (!view || !view.vehicle) { answer("no vehicle at the station", false); return; }
     if (!q("release-bolt").value) { answer("choose the locked bolt to release", false); return; }
+    if (!q("release-comment").value.trim()) { answer("say why it is released (what was checked)", false); return; }
     send({kind: "release", vin: view.vehicle.vin, bolt: q("release-bolt").value, comment: q("release-comment").value}, "release-comment");
   });
   q("enter").addEventListener("submit", (e) => {
@@ -106,6 +108,7 @@
     const view = window.lastView;
     if (!view || !view.vehicle) { answer("no vehicle at the station", false); return; }
     if (!q("loosen-bolt").value) { answer("choose the bolt to loosen", false); return; }
+    if (!q("loosen-comment").value.trim()) { answer("say why it is to be loosened", false); return; }
     send({kind: "loosen", vin: view.vehicle.vin, bolt: q("loosen-bolt").value, comment: q("loosen-comment").value}, "loosen-comment");
   });
   q("reopen").addEventListener("submit", (e) => {
