@@ -171,7 +171,7 @@ def _user(name: str, item: YamlNode, roles: Mapping[str, frozenset[Right]]) -> U
     its role only, its plain-text password at the next check."""
     u = item.mapping(USER_KEYS)
     role = u["role"].text(tuple(roles)) if "role" in u else None
-    stored = u["password"].text() if "password" in u else None
+    stored = u["password"].text(secret=True) if "password" in u else None
     if stored is not None:
         try:
             parse_hash(stored)

@@ -6,8 +6,10 @@ number of connections, so anyone who reached the port, without the token, could 
 thousand connections that never finish a request: the daemon ran out of file descriptors (the
 screens, OPC UA and the devices share them), ``/healthz`` stopped answering and asyncio logged
 a traceback for every refused accept (135,000 in 80 s in a security review).  Here each
-connection must finish its first request head within :data:`FIRST_REQUEST_S`, and at most
-:data:`MOST_CONNECTIONS` are kept; one over is closed at once.  aiohttp's protocol is wrapped,
+connection must be let in by its first request (a head read, the token and the address
+accepted: the server's middleware says so) within :data:`FIRST_REQUEST_S`, a refused request
+ends its connection, and at most :data:`MOST_CONNECTIONS` are kept, :data:`MOST_PER_ADDRESS`
+from one address off this machine; one over is closed at once.  aiohttp's protocol is wrapped,
 not changed: its churn stays out of this file.
 """
 
@@ -19,8 +21,12 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-#: connections kept at once (two screens per station, a few browsers, the CLI: far fewer)
+from stationd.configread import is_local
+
+#: connections kept at once (two screens per station, a few browsers, the CLI: far fewer),
+#: and from one address off this machine (one client cannot take them all)
 MOST_CONNECTIONS = 128
+MOST_PER_ADDRESS = 16
 #: seconds a new connection has to send a whole request head
 FIRST_REQUEST_S = 10.0
 #: at most one warning of refused connections per this many seconds
@@ -40,7 +46,10 @@ class Connections:
                  first_request_s: float = FIRST_REQUEST_S) -> None:
         self._factory = factory
         self.most, self.first_request_s = most, first_request_s
+        self.most_per_address = MOST_PER_ADDRESS
         self.open: set[asyncio.Transport] = set()
+        self._address: dict[asyncio.Transport, str] = {}
+        self._per_address: dict[str, int] = {}
         self._waiting: dict[asyncio.Transport, asyncio.TimerHandle] = {}
         self.refused = 0              # connections closed as over the limit, since the start
         self._told_at = -WARN_EVERY_S
@@ -56,18 +65,31 @@ class Connections:
             timer.cancel()
 
     def _made(self, transport: asyncio.Transport) -> bool:
-        if len(self.open) >= self.most:
+        peer = transport.get_extra_info("peername")
+        address = str(peer[0]) if isinstance(peer, tuple) and peer else "?"
+        mine = self._per_address.get(address, 0)
+        if len(self.open) >= self.most or (mine >= self.most_per_address
+                                           and not is_local(address)):
             self.refused += 1
             self._tell_refused()
             transport.abort()
             return False
         self.open.add(transport)
+        self._address[transport] = address
+        self._per_address[address] = mine + 1
         loop = asyncio.get_running_loop()
         self._waiting[transport] = loop.call_later(self.first_request_s, _close, transport)
         return True
 
     def _lost(self, transport: asyncio.Transport) -> None:
         self.open.discard(transport)
+        address = self._address.pop(transport, None)
+        if address is not None:
+            left = self._per_address.get(address, 1) - 1
+            if left > 0:
+                self._per_address[address] = left
+            else:
+                self._per_address.pop(address, None)
         timer = self._waiting.pop(transport, None)
         if timer is not None:
             timer.cancel()
@@ -129,14 +151,32 @@ class WrongTokens:
     def __init__(self) -> None:
         self._told_at = -WARN_EVERY_S
         self._wrong: dict[str, int] = {}
+        self._later: asyncio.TimerHandle | None = None
 
     def tell(self, remote: str, given: bool) -> None:
         if not given:
             return
+        if remote not in self._wrong and len(self._wrong) >= 1000:
+            remote = "other addresses"           # bounded
         self._wrong[remote] = self._wrong.get(remote, 0) + 1
         now = time.monotonic()
         if now - self._told_at >= WARN_EVERY_S:
-            who = ", ".join(f"{n} from {r}" for r, n in sorted(self._wrong.items()))
-            log.warning("screens: requests with a wrong token refused: %s", who)
-            self._told_at = now
-            self._wrong.clear()
+            self._flush()
+        elif self._later is None:   # the rest of a burst told when the minute is over
+            self._later = asyncio.get_running_loop().call_later(
+                self._told_at + WARN_EVERY_S - now, self._flush)
+
+    def _flush(self) -> None:
+        self._later = None
+        if not self._wrong:
+            return
+        who = ", ".join(f"{n} from {r}" for r, n in sorted(self._wrong.items()))
+        log.warning("screens: requests with a wrong token refused: %s", who)
+        self._told_at = time.monotonic()
+        self._wrong.clear()
+
+    def close(self) -> None:
+        """The server stops: what is left untold is told now."""
+        if self._later is not None:
+            self._later.cancel()
+        self._flush()

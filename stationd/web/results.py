@@ -36,9 +36,6 @@ from stationd.words import entered_as_words, result_type_words, unrecorded_words
 
 CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator", "torque_nm",
               "angle_deg", "torque_min_nm", "torque_max_nm", "angle_min_deg", "angle_max_deg",
-              # the targets sent with those limits (a quality trial: the line had them, the
-              # station's own export did not)
-              "torque_target_nm", "angle_target_deg",
               "pset",
               "parameter_version", "tightening_id", "x_mm", "y_mm", "z_mm",
               "match_distance_mm", "tilt_deg", "sent_at", "result_at", "recorded_at", "images",
@@ -64,7 +61,10 @@ CSV_FIELDS = ("vin", "model", "bolt", "attempt", "rundown", "status", "operator"
               # which station made it (its ``line.station_id``, else ``opcua.station_id``):
               # an export a plant collects from several stations named none; empty where
               # the database was named without its station file
-              "station")
+              "station",
+              # the targets sent with the row's limits (a quality trial: the line had them,
+              # the station's own export did not); empty for a loosening
+              "torque_target_nm", "angle_target_deg")
 
 #: how long after a lock the NOK it comes of may have been taken: none for a record stored
 #: by this version (the NOK's result_at is the time the lock was decided at, or earlier);

@@ -16,10 +16,12 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import hmac
 import json
 import logging
 import platform
+import socket
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -184,6 +186,7 @@ class WebServer:
                 await asyncio.wait({pump}, timeout=STOP_RETRY_S)
             with contextlib.suppress(asyncio.CancelledError):
                 await pump
+        self._wrong_tokens.close()
         if self._listening is not None:
             self._listening.close()     # no new connection; the runner closes the open ones
             self._listening = None
@@ -310,42 +313,44 @@ class WebServer:
         only for who presents it."""
         if request.method not in ("GET", "HEAD") and not (request.method == "POST"
                                                           and request.path in POSTS):
-            return web.Response(status=405, text="read-only: GET only (POST: "
-                                f"{', '.join(POSTS)})\n")
-        if self.connections is not None:
-            self.connections.served(request.transport)
+            return _refused(405, "read-only: GET only (POST: " + ", ".join(POSTS) + ")")
         route = request.match_info.route.resource
         self.requests[route.canonical if route is not None else "?"] += 1
         token = self.config.token
         set_cookie = False
-        if not token and not _local_host(request.host, self.config.host):
+        # /healthz is for a monitoring probe that holds no token: it says "ok" or "fault"
+        # and nothing else, so it stays open; every other endpoint needs the token
+        if not token and request.path != "/healthz" \
+                and not _local_host(request.host, self.config.host):
             # no token: a loopback bind; a page of another site whose name was made to
             # point at 127.0.0.1 (DNS rebinding) must not read the station through the
             # browser of someone on this machine
-            return web.Response(status=421, text="this server answers only its own "
-                                                 "address (localhost)\n")
-        # /healthz is for a monitoring probe that holds no token: it says "ok" or "fault"
-        # and nothing else, so it stays open; every other endpoint needs the token
+            return _refused(421, "this server answers only its own address (localhost, "
+                                 "this machine's name); set http.token to be reached by "
+                                 "another name (a proxy)")
         if token and request.path != "/healthz":
             given = request.headers.get("Authorization", "").removeprefix("Bearer ").strip() \
                 or request.cookies.get("token", "") or request.query.get("token", "")
             if not hmac.compare_digest(given.encode(), token.encode()):
                 self._wrong_tokens.tell(request.remote or "?", bool(given))
                 # a browser shows this text: how to get in (the token itself never said)
-                return web.Response(status=401, text=UNAUTHORIZED_PAGE)
+                return _refused(401, UNAUTHORIZED_PAGE.rstrip("\n"))
             set_cookie = request.query.get("token") == token
             if set_cookie and request.method == "GET" \
                     and "text/html" in request.headers.get("Accept", ""):
                 # a browser opening /?token=...: the cookie set, and the address without
-                # the token (it stayed in the address bar, the history and bookmarks)
+                # the token (it stayed in the address bar, the history and bookmarks); the
+                # path made relative to this server whatever it was (//other.example/x)
                 url = request.rel_url
-                moved = web.HTTPSeeOther(url.with_query([(k, v) for k, v in url.query.items()
-                                                         if k != "token"]))
-                moved.set_cookie("token", token, httponly=True, samesite="Strict")
+                moved = web.HTTPSeeOther(url.with_path("/" + url.path.lstrip("/")).with_query(
+                    [(k, v) for k, v in url.query.items() if k != "token"]))
+                _token_cookie(moved, token)
                 raise moved
+        if self.connections is not None:   # let in: no longer on probation
+            self.connections.served(request.transport)
         resp: web.StreamResponse = await handler(request)
         if set_cookie and token and not resp.prepared:
-            resp.set_cookie("token", token, httponly=True, samesite="Strict")
+            _token_cookie(resp, token)
         return resp
 
     def _page(self, name: str) -> Any:
@@ -592,31 +597,52 @@ class WebServer:
         return web.FileResponse(p)
 
 
+def _refused(status: int, text: str) -> web.Response:
+    """A refusal that also ends its connection (a client refused keeps no slot of
+    :class:`Connections` for the keep-alive time: 128 of them shut the screens out)."""
+    resp = web.Response(status=status, text=text + "\n")
+    resp.force_close()
+    return resp
+
+
+def _token_cookie(resp: web.StreamResponse, token: str) -> None:
+    """The token kept by the browser.  SameSite=Lax, not Strict: a link to the screens with
+    ``?token=`` followed from another site (the MES, the plant's portal) is redirected to the
+    address without it, and a Strict cookie is not sent on that redirect (the page then
+    asked for the token it was just given).  Lax sends it on top-level GETs only: every
+    command is a POST with its own session cookie (Strict) and nonce."""
+    resp.set_cookie("token", token, httponly=True, samesite="Lax")
+
+
+@functools.cache
+def _own_names() -> frozenset[str]:
+    """This machine's name (``hostname``, lower case): a kiosk browser on the station PC may
+    open the screens by it (not its DNS name: a lookup would hold the loop)."""
+    name = socket.gethostname().lower()
+    return frozenset({name} if name else set())
+
+
 def _local_host(host: str, listen: str) -> bool:
-    """Whether a request's ``Host`` (with or without its port) names this machine's loopback
-    or the address listened on."""
+    """Whether a request's ``Host`` (with or without its port, any case) names this machine:
+    its loopback, its own names, or the address listened on."""
+    host = host.lower()
     if host.startswith("["):            # [::1]:8080
         name = host[1:].partition("]")[0]
     elif host.count(":") == 1:          # 127.0.0.1:8080, localhost:8080
         name = host.partition(":")[0]
     else:                               # no port, or a bare IPv6 address
         name = host
-    return name in ("localhost", listen) or is_local(name)
+    return name in ("localhost", listen.lower()) or name in _own_names() or is_local(name)
 
 
 class _QuietBadRequests(logging.Filter):
     """aiohttp logs a request it could not parse (a header over 8 KiB, a broken request
     line) as an ERROR with its traceback, after answering it 400: anyone reaching the port
-    could fill the journal with them.  Kept as one line at DEBUG (the client has its 400)."""
+    could fill the journal with them.  Left out (the client has its 400)."""
 
     def filter(self, record: logging.LogRecord) -> bool:
         exc = record.exc_info[1] if record.exc_info else None
-        if isinstance(exc, HttpProcessingError):
-            record.msg = "screens: bad request: %s"
-            record.args = (" ".join(str(exc.message).split())[:200],)
-            record.exc_info, record.exc_text = None, None
-            record.levelno, record.levelname = logging.DEBUG, "DEBUG"
-        return True
+        return not isinstance(exc, HttpProcessingError)
 
 
 logging.getLogger("aiohttp.server").addFilter(_QuietBadRequests())

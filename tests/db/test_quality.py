@@ -1,5 +1,5 @@
-"""Quality figures from the records: Cp/Cpk per bolt and pset on OK results against the
-limits sent, the NOK trend; and `stationd db spc`."""
+"""Quality figures from the records: Cp/Cpk per bolt and pset on every measured tightening
+(OK and NOK) against the limits sent, the NOK trend; and `stationd db spc`."""
 
 from __future__ import annotations
 

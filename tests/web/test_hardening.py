@@ -115,6 +115,14 @@ def test_a_token_in_a_browsers_address_is_taken_as_a_cookie_and_removed(caplog):
                     assert r.headers["Location"] == "/vehicles?x=1"
                     assert "token=" in r.headers["Set-Cookie"]
                     assert "HttpOnly" in r.headers["Set-Cookie"]
+                    # Lax: a link followed from another site keeps it on the redirect
+                    assert "SameSite=Lax" in r.headers["Set-Cookie"]
+                # the address sent on stays on this server whatever path was asked
+                async with http.get(srv.url.rstrip("/") + f"//evil.example/x?token={TOKEN}",
+                                    headers={"Accept": "text/html"},
+                                    allow_redirects=False) as r:
+                    assert r.status == 303
+                    assert r.headers["Location"] == "/evil.example/x", r.headers["Location"]
                 async with http.get(srv.url + "vehicles?x=1") as r:       # the cookie kept
                     assert r.status == 200
             async with ClientSession() as http:   # a program asking with ?token= is answered
@@ -124,12 +132,15 @@ def test_a_token_in_a_browsers_address_is_taken_as_a_cookie_and_removed(caplog):
                     async with http.get(srv.url + "api/status",
                                         headers={"Authorization": f"Bearer guess{i}"}) as r:
                         assert r.status == 401
+                        # a refusal ends its connection: it keeps no slot
+                        assert r.headers.get("Connection", "").lower() == "close"
         finally:
             await srv.stop()
     caplog.set_level(logging.WARNING, logger="stationd.web")
     asyncio.run(main())
     told = [r.getMessage() for r in caplog.records if "wrong token" in r.getMessage()]
-    assert len(told) == 1 and "1 from 127.0.0.1" in told[0]   # the first; then once a minute
+    # the first at once; the others (a minute later, or as here as the server stops)
+    assert [t.rsplit(": ", 1)[1] for t in told] == ["1 from 127.0.0.1", "29 from 127.0.0.1"]
     assert TOKEN not in " ".join(r.getMessage() for r in caplog.records)
 
 
@@ -146,9 +157,14 @@ def test_a_server_without_a_token_answers_only_requests_for_its_own_address():
                     async with http.get(srv.url + "api/status", headers={"Host": host}) as r:
                         assert r.status == 421, host
                 for host in (f"127.0.0.1:{srv.port}", f"localhost:{srv.port}", "127.0.0.1",
-                             f"[::1]:{srv.port}"):
+                             f"[::1]:{srv.port}", f"LOCALHOST:{srv.port}",
+                             f"{socket.gethostname()}:{srv.port}"):
                     async with http.get(srv.url + "api/status", headers={"Host": host}) as r:
                         assert r.status == 200, host
+                # a monitoring probe asks /healthz by whatever name it was given
+                async with http.get(srv.url + "healthz",
+                                    headers={"Host": "station.plant.example"}) as r:
+                    assert r.status == 200
         finally:
             await srv.stop()
     asyncio.run(main())
@@ -204,3 +220,70 @@ def test_hostile_requests_are_one_bad_request_each_and_no_traceback(caplog):
     caplog.set_level(logging.DEBUG)
     asyncio.run(main())
     assert not [r for r in caplog.records if r.levelno >= logging.ERROR]
+
+
+def test_the_rest_of_a_burst_of_wrong_tokens_is_told_when_the_minute_is_over(caplog,
+                                                                          monkeypatch):
+    """A review: 300 wrong tokens then silence told "1 from X", the 299 others never."""
+    import stationd.web.connections as connections
+
+    monkeypatch.setattr(connections, "WARN_EVERY_S", 0.5)
+
+    async def main():
+        srv = _serve(token=TOKEN)
+        await srv.start()
+        try:
+            async with ClientSession() as http:
+                for i in range(5):
+                    async with http.get(srv.url + "api/status",
+                                        headers={"Authorization": f"Bearer guess{i}"}) as r:
+                        assert r.status == 401
+            for _ in range(100):
+                if len([r for r in caplog.records if "wrong token" in r.getMessage()]) > 1:
+                    break
+                await asyncio.sleep(0.1)
+        finally:
+            await srv.stop()
+    caplog.set_level(logging.WARNING, logger="stationd.web")
+    asyncio.run(main())
+    told = [r.getMessage() for r in caplog.records if "wrong token" in r.getMessage()]
+    assert told == ["screens: requests with a wrong token refused: 1 from 127.0.0.1",
+                    "screens: requests with a wrong token refused: 4 from 127.0.0.1"]
+
+
+class _Transport:
+    """Enough of a TCP transport for :class:`Connections`: its peer, and whether it was
+    closed."""
+
+    def __init__(self, address: str) -> None:
+        self.address, self.aborted = address, False
+
+    def get_extra_info(self, name: str) -> object:
+        return (self.address, 40000) if name == "peername" else None
+
+    def abort(self) -> None:
+        self.aborted = True
+
+    def is_closing(self) -> bool:
+        return self.aborted
+
+
+def test_one_address_off_the_machine_cannot_take_every_connection():
+    """A review: 128 connections from one client shut every screen and /healthz out."""
+    from stationd.web.connections import MOST_PER_ADDRESS, Connections
+
+    async def main():
+        conns = Connections(lambda: None)
+        made = [_Transport("10.0.0.9") for _ in range(MOST_PER_ADDRESS + 3)]
+        kept = [t for t in made if conns._made(t)]
+        assert len(kept) == MOST_PER_ADDRESS and all(t.aborted for t in made[len(kept):])
+        other = _Transport("10.0.0.10")
+        assert conns._made(other)                  
+        local = [_Transport("127.0.0.1") for _ in range(MOST_PER_ADDRESS + 3)]
+        assert all(conns._made(t) for t in local)  
+        conns._lost(kept[0])                       
+        assert conns._made(_Transport("10.0.0.9")) 
+        assert conns.refused == 3
+        for t in [*kept, other, *local]:
+            conns._lost(t)                         
+    asyncio.run(main())
