@@ -332,11 +332,12 @@ class _Round:
         if supervisor is not None and stopped(st, b.bolt_id):   # locked before (a reload)
             assert st.repo is not None  # noqa: S101 - opened before
             noks = noks_before(st.repo.nok_streaks(truth["vin"]).get(b.bolt_id, 0))
+            what = stopped_words(st, b.bolt_id)
             answer = await st.submit(ReleaseBolt(truth["vin"], b.bolt_id,
                                                  f"{supervisor.source}: joint checked"),
                                      supervisor)
-            line["before"] = [*noks, "locked, released by the supervisor" if answer.accepted
-                              else f"locked, release refused ({answer.reason})"]
+            line["before"] = [*noks, f"{what}, released by the supervisor" if answer.accepted
+                              else f"{what}, release refused ({answer.reason})"]
         if not await _tool_on(st, b.bolt_id):
             line["result"] = f"not selected ({_why_not(st)})"
         if st.last is not None and st.last.point_mm is not None:
@@ -597,6 +598,13 @@ def stopped(st: Station, bolt: str) -> bool:
     return bolt in now.locked or bolt in now.held
 
 
+def stopped_words(st: Station, bolt: str) -> str:
+    """What ``bolt`` waits for a supervisor as: "held" (its result not known), else
+    "locked" (a quality trial: a held bolt's line said "locked, released by the
+    supervisor", and the records had no lock)."""
+    return "held" if bolt in st.core.status().held else "locked"
+
+
 #: a bolt's step while it waits for a person's release (``until_ok``), and once released
 LEFT_FOR_PEOPLE = "locked: left for a person's release"
 
@@ -762,10 +770,11 @@ async def until_ok(st: Station, bolt: str, line: dict[str, Any],
             line["waits"] = True
             break
         if stopped(st, bolt) and supervisor is not None:
+            what = stopped_words(st, bolt)
             answer = await st.submit(ReleaseBolt(vin, bolt, f"{supervisor.source}: joint "
                                                  "checked"), supervisor)
-            steps.append("locked, released by the supervisor" if answer.accepted else
-                         f"locked, release refused ({answer.reason})")
+            steps.append(f"{what}, released by the supervisor" if answer.accepted else
+                         f"{what}, release refused ({answer.reason})")
             stubborn = False    # the supervisor had the thread seen to
         if not await _tool_on(st, bolt):
             steps.append(f"not selected again ({_why_not(st)})")

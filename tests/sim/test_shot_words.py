@@ -49,3 +49,18 @@ def test_a_result_that_is_no_tightening_says_its_type() -> None:
     for code in (1, 7):                 # a tightening, synchronized or not: no type said
         shot = ctl._result(1, code)
         assert shot_words(shot) == f"OK {shot.torque_nm:.1f} Nm, {shot.angle_deg:.0f} deg"
+
+
+def test_a_bolt_held_for_its_result_is_said_held_not_locked() -> None:
+    """A quality trial: the simulated operator's line said "locked, released by the
+    supervisor" for a bolt held for an unreadable result, and the records had no lock."""
+    from types import SimpleNamespace
+
+    from stationd.sim.operator import stopped_words
+
+    def station(held: dict[str, str], locked: dict[str, int]) -> object:
+        now = SimpleNamespace(held=held, locked=locked)
+        return SimpleNamespace(core=SimpleNamespace(status=lambda: now))
+
+    assert stopped_words(station({"B06": "tightening 21"}, {}), "B06") == "held"  # type: ignore[arg-type]
+    assert stopped_words(station({}, {"B06": 3}), "B06") == "locked"  # type: ignore[arg-type]
