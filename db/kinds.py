@@ -62,6 +62,11 @@ NOT_TAKEN_NOTE = "an OK result without a result type"
 LOCK = "lock"
 #: who and what decided it, in the ledger's user and source columns
 LOCK_USER, LOCK_SOURCE = "station", "NOK policy"
+#: a command the station refused that would have changed a bolt or a vehicle (a skip, a
+#: release, a loosen order, an entered outcome, a reopen), kept in the command ledger under
+#: this kind with who gave it and why it was refused (a quality trial: an OK of 5 Nm entered
+#: for a 22-28 Nm bolt, refused, was in the journal alone); it changes nothing
+REFUSED = "refused"
 #: the link to the controller went down with the tool enabled for a bolt, and what the
 #: controller did meanwhile is not known: stored as a controller event under this name
 #: without a result (its note says why), the bolt held until a person checked it

@@ -41,6 +41,7 @@ from stationd.station.actions import (
     Publish,
     Record,
     RecordCommand,
+    RecordRefusal,
     Reply,
     SendParams,
     SendVin,
@@ -224,6 +225,12 @@ class Effects:
                                        "an unreadable result")
         elif isinstance(a, RecordCommand):
             return await self._record_command(a)
+        elif isinstance(a, RecordRefusal):
+            try:
+                await self._call(self.records.record_refusal, a)
+            except STATION_FAULTS as exc:   # the person has the answer; the trail lacks it
+                self.log.warning("the refused command of %s not recorded: %s", a.issuer.user,
+                                 one_line(exc))
         elif isinstance(a, NoteLock):
             try:
                 await self._call(self.records.note_lock, a)

@@ -39,6 +39,7 @@ from db.kinds import (
     MISSING,
     NOK,
     OK,
+    REFUSED,
     SKIPPED,
     TIGHTENING,
     TO_LOOSEN,
@@ -61,6 +62,7 @@ from stationd.station.actions import (
     Owed,
     Record,
     RecordCommand,
+    RecordRefusal,
     Selection,
     SettleClosing,
     StoreControllerEvent,
@@ -70,6 +72,7 @@ from stationd.station.actions import (
 )
 from stationd.station.commands import (
     KIND,
+    Answer,
     EnterOutcome,
     ReopenVehicle,
     SignIn,
@@ -89,7 +92,9 @@ from stationd.station.results import type_code
 from stationd.station.trust import RecordCheck, summary
 from stationd.words import (
     closed_after_outage,
+    command_words,
     comment_words,
+    reason_words,
     sent_again_words,
     stored_what,
     unattributed_words,
@@ -577,6 +582,19 @@ class Records:
                      "vehicle %s (%s) closing verdict, the result due at its close settled (%s): "
                      "%s", a.vin, report.vehicle.model, now, report.counts(a.due))
         return VehicleEnded(time.time(), a.vin, missing, nok, a.due, a.settled)
+
+    def record_refusal(self, a: RecordRefusal) -> None:
+        """A refused command that would have changed a bolt or a vehicle, kept as a
+        :data:`db.kinds.REFUSED` command: who, from where, on what, and in its comment what
+        it was and why it was refused (``enter-outcome B01 of VIN1: OK 5 Nm, 2 deg
+        ('looked'): refused: torque 5 Nm outside 22-28 Nm``)."""
+        cmd = a.command
+        words = f"{command_words(Answer(0, cmd, a.issuer, a.reason))}: refused: " \
+                f"{reason_words(a.reason)}"
+        self._writer().ledger.record_command(
+            at=datetime.fromtimestamp(a.t, UTC), user=a.issuer.user, source=a.issuer.source,
+            kind=REFUSED, vin=getattr(cmd, "vin", None), bolt=getattr(cmd, "bolt", None),
+            comment=words[:500])
 
     def record_command(self, a: RecordCommand, vin_at_height: str | None) -> Reason | None:
         """An accepted command on disk with its user (a reopen reopens the vehicle in the

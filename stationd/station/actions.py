@@ -238,6 +238,18 @@ class RecordCommand:
 
 
 @dataclass(frozen=True)
+class RecordRefusal:
+    """Keep a refused command that would have changed a bolt or a vehicle in the records
+    (:data:`db.kinds.REFUSED`, with ``reason``): the audit trail shows the attempt.  Written
+    after the answer went back; one not written is said in the journal, nothing more."""
+
+    command: Command
+    issuer: Issuer
+    reason: Reason
+    t: float
+
+
+@dataclass(frozen=True)
 class SettleEnable:
     """The tool enable for ``selection`` is owed nothing more, without a record: every result
     the controller made since was fetched after a link cut, and none was its."""
@@ -306,4 +318,4 @@ Action = (SendParams | EnableTool | DisableTool | SendVin | LoadVehicle | CloseV
           | SettleClosing | Acknowledge | StoreUnattributed | StoreGap | StoreControllerEvent
           | StoreUnreadable
           | StoreCutUnknown | SettleEnable | CheckNewest | Publish
-          | RecordCommand | NoteLock | Reply | MeasureReferences | RecordCheck)
+          | RecordCommand | RecordRefusal | NoteLock | Reply | MeasureReferences | RecordCheck)

@@ -8,7 +8,7 @@ from dataclasses import replace
 from typing import Any
 
 from stationd.reasons import Reason, Skip, SkipKind, Why
-from stationd.station.actions import Action, Publish, RecordCommand, Reply
+from stationd.station.actions import Action, Publish, RecordCommand, RecordRefusal, Reply
 from stationd.station.commands import (
     RIGHT,
     Answer,
@@ -42,6 +42,10 @@ from stationd.station.faults import FaultRules
 from stationd.station.inputs import VEHICLE, CommandDone, CommandIn, OperatorBack
 from stationd.station.state import ON_A_BOLT
 
+#: the commands whose refusals are kept in the records: those that change a bolt's verdict
+#: or a vehicle (a refused falsified OK must show in the trail, not in the journal alone)
+AUDITED = (SkipBolt, ReleaseBolt, LoosenBolt, EnterOutcome, ReopenVehicle)
+
 
 class OrderRules(FaultRules):
     """Commands: who may give which, why one is refused, what each does."""
@@ -50,7 +54,10 @@ class OrderRules(FaultRules):
         """A command is checked against the rules now and takes effect once recorded."""
         why = self._refusal(ev.command, ev.issuer)
         if why is not None:
-            return [Reply(Answer(ev.request, ev.command, ev.issuer, why))]
+            acts: list[Action] = [Reply(Answer(ev.request, ev.command, ev.issuer, why))]
+            if isinstance(ev.command, AUDITED):   # would have changed a bolt or a vehicle:
+                acts.append(RecordRefusal(ev.command, ev.issuer, why, ev.t))   # the trail
+            return acts
         if isinstance(ev.command, SignOut):   # its record names who is signed out
             ev = replace(ev, command=replace(ev.command, user=self.operator))
         if isinstance(ev.command, EnterOutcome):   # its record is the held result's kind

@@ -133,18 +133,27 @@ def test_commands_through_the_daemon_are_authenticated_recorded_and_outlive_a_re
         status, text = c.post("/api/login", {"user": "nina", "password": PASSWORD})
         assert status == 429 and "too many wrong passwords" in text
 
-        # the record: the two accepted skips, with their users, in the feed in order
+        # the record: the two accepted skips, with their users, in the feed in order; the
+        # refused ones that would have changed a bolt or a vehicle kept as refusals, with why
         con = sqlite3.connect(tmp_path / "station.db")
         try:
             rows = list(con.execute("SELECT user, source, kind, vin, bolt, comment "
                                     "FROM commands ORDER BY id"))
         finally:
             con.close()
-        assert rows == [("olga", "cli 127.0.0.1", "skip", VIN, "B05", "no access"),
-                        ("sam", "screen 127.0.0.1", "skip", VIN, "B08", "no access")]
+        assert [r for r in rows if r[2] != "refused"] == [
+            ("olga", "cli 127.0.0.1", "skip", VIN, "B05", "no access"),
+            ("sam", "screen 127.0.0.1", "skip", VIN, "B08", "no access")]
+        refused = [(r[0], r[4], r[5].split(": refused: ")[1]) for r in rows
+                   if r[2] == "refused"]
+        assert ("nina", "B06", "your role does not have the right to skip") in refused
+        assert ("olga", None, "your role does not have the right to reopen") in refused
+        assert any(user == "sam" and bolt == "B05" and "skipped" in why
+                   for user, bolt, why in refused), refused
         got = _cli("feed", "--url", url)
         assert got.returncode == 0, got.stderr
         feed = [json.loads(line) for line in got.stdout.splitlines()]
+        feed = [e for e in feed if e["record"]["kind"] != "refused"]
         assert [(e["kind"], e["record"]["bolt"]) for e in feed] == [("command", "B05"),
                                                                     ("command", "B08")]
         assert feed[0]["seq"] < feed[1]["seq"] and len({e["db_id"] for e in feed}) == 1
@@ -219,6 +228,8 @@ def test_a_bolt_locked_after_three_noks_is_released_by_a_supervisor_from_the_cli
         repo.close()
     [b05] = [b for b in report.bolts if b.bolt_id == "B05"]
     assert b05.status == "ok" and b05.attempts == 4
-    assert [(c.user, c.kind, c.bolt, c.comment) for c in commands] == [
+    assert [(c.user, c.kind, c.bolt, c.comment) for c in commands if c.kind != "refused"] == [
         ("station", "lock", "B05", "3 NOK in a row"),     # the NOK policy's, recorded
         ("sam", "release", "B05", "thread checked")]
+    # olga's release, refused (no right), kept as the attempt it was
+    assert [(c.user, c.bolt) for c in commands if c.kind == "refused"] == [("olga", "B05")]

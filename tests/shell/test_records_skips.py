@@ -86,3 +86,39 @@ def test_a_reopen_of_a_vin_typed_in_lower_case_says_the_one_meant(tmp_path: Path
     assert why is not None and reason_words(why) == "vehicle NOPE1 is not in the database"
     assert records.repo is not None
     records.repo.close()
+
+
+def test_a_refused_command_is_kept_as_a_refusal_that_changes_nothing(tmp_path: Path) -> None:
+    """A quality trial: an OK of 5 Nm entered for a 22-28 Nm bolt was refused, and only the
+    journal knew; it is a ``refused`` command now, with what it was and why, and it ends
+    no lock (a refused release is no release)."""
+    from stationd.reasons import Reason, Why
+    from stationd.station.actions import RecordRefusal
+    from stationd.station.commands import EnterOutcome
+
+    bolts = tmp_path / "bolts.yaml"
+    bolts.write_text(BASE)
+    records = Records(StationConfig(database_url=url_of(tmp_path / "st.db"), bolts_path=bolts))
+    records.open()
+    records.load_vehicle(LoadVehicle(12, "VIN1"))
+    records.note_lock(NoteLock("VIN1", "B1", 3, time.time()))
+    sam = Issuer("sam", frozenset(Right), "cli 127.0.0.1")
+    records.record_refusal(RecordRefusal(
+        EnterOutcome("VIN1", "B2", True, 5.0, 2.0, "looked"), sam,
+        Reason(Why.ENTERED_OUTSIDE, bolt="B2", note="torque 5 Nm outside 45-55 Nm"),
+        time.time()))
+    records.record_refusal(RecordRefusal(
+        ReleaseBolt("VIN1", "B1", "fine"), Issuer("olga", frozenset(), "screen"),
+        Reason(Why.NO_RIGHT, right="release"), time.time()))
+    assert records.repo is not None
+    refused = [c for c in records.repo.ledger.commands("VIN1") if c.kind == "refused"]
+    assert [(c.user, c.source, c.bolt) for c in refused] == [
+        ("sam", "cli 127.0.0.1", "B2"), ("olga", "screen", "B1")]
+    assert refused[0].comment.startswith("enter-outcome B2 of VIN1: ")
+    assert "'looked'" in refused[0].comment and ": refused: " in refused[0].comment
+    assert "5 Nm outside 45-55 Nm" in refused[0].comment
+    assert refused[1].comment.endswith("refused: your role does not have the right to "
+                                       "release")
+    again = records.load_vehicle(LoadVehicle(12, "VIN1"))
+    assert isinstance(again, VehicleLoaded) and again.locked == frozenset({"B1"})
+    records.repo.close()

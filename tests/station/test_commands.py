@@ -9,8 +9,8 @@ import pytest
 
 from stationd.reasons import Reason, Skip, SkipKind, Why
 from stationd.station import core as core_module
-from stationd.station.actions import DisableTool, Publish, RecordCommand, Reply
-from stationd.station.commands import Issuer, ReopenVehicle, Right, SkipBolt
+from stationd.station.actions import DisableTool, Publish, RecordCommand, RecordRefusal, Reply
+from stationd.station.commands import Issuer, ReopenVehicle, Right, SkipBolt, TeachStop
 from stationd.station.core import StationCore
 from stationd.station.events import (
     Because,
@@ -107,6 +107,17 @@ def test_a_command_against_the_rules_is_refused_with_its_reason_and_changes_noth
     assert not any(isinstance(a, RecordCommand) for a in acts)
     assert d.core.matcher.skipped == before
     assert "refused" in answer_words(reply.answer) and issuer.user in answer_words(reply.answer)
+    # kept in the records as a refusal, with why (a quality trial: the journal alone had it)
+    assert [(a.command, a.issuer, a.reason) for a in acts if isinstance(a, RecordRefusal)] \
+        == [(command, issuer, why)]
+
+
+def test_a_refused_sign_in_or_teach_is_answered_and_not_kept_as_a_refusal():
+    """Only the commands that change a bolt or a vehicle leave a refusal in the records."""
+    d = _ready()
+    acts = d.alone(CommandIn(d.t, 8, TeachStop(), NOBODY))
+    assert not _answer(acts).answer.accepted
+    assert not any(isinstance(a, RecordRefusal) for a in acts)
 
 
 def test_a_case_slip_is_refused_in_words_that_say_what_was_meant():
