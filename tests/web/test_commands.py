@@ -69,14 +69,17 @@ def test_a_refused_teach_point_is_answered_409_with_its_reason_not_a_server_erro
     assert isinstance(TeachPoint("B11"), Command)
 
 
-def test_a_blank_vin_is_refused_as_required_not_as_too_long() -> None:
-    """An operator trial: a VIN of spaces in the Reopen form was answered "vin: a text of at
-    most 32 characters (required)", read as too long."""
+def _posted_as_sam(bodies: list[dict[str, Any]]) -> tuple[list[tuple[int, str]],
+                                                         list[Command]]:
+    """Each body posted to ``/api/commands`` (with a fresh nonce) by sam, a supervisor
+    logged in: the answers (status, text) and the commands that reached the station."""
     access = AccessConfig.from_node(YamlNode.parse(
         f"users:\n  sam: {{role: supervisor, password: '{hash_password('pw-of-sam')}'}}\n",
         "station.yaml"))
+    given: list[Command] = []
 
     async def submit(command: Command, issuer: Issuer) -> Answer:
+        given.append(command)
         return Answer(1, command, issuer)
 
     async def main() -> list[tuple[int, str]]:
@@ -89,17 +92,24 @@ def test_a_blank_vin_is_refused_as_required_not_as_too_long() -> None:
                 async with http.post(srv.url + "api/login",
                                      json={"user": "sam", "password": "pw-of-sam"}) as r:
                     assert r.status == 200
-                for vin in ("   ", "V" * 40, 17):
+                for body in bodies:
                     async with http.get(srv.url + "api/nonce") as r:
                         nonce = (await r.json())["nonce"]
-                    async with http.post(srv.url + "api/commands", json={
-                            "nonce": nonce, "kind": "reopen", "vin": vin}) as r:
+                    async with http.post(srv.url + "api/commands",
+                                         json={**body, "nonce": nonce}) as r:
                         got.append((r.status, (await r.text()).strip()))
         finally:
             await srv.stop()
         return got
 
-    assert asyncio.run(main()) == [
+    return asyncio.run(main()), given
+
+
+def test_a_blank_vin_is_refused_as_required_not_as_too_long() -> None:
+    """An operator trial: a VIN of spaces in the Reopen form was answered "vin: a text of at
+    most 32 characters (required)", read as too long."""
+    got, _ = _posted_as_sam([{"kind": "reopen", "vin": vin} for vin in ("   ", "V" * 40, 17)])
+    assert got == [
         (400, "vin: required (empty)"),
         (400, "vin: a text of at most 32 characters (required)"),
         (400, "vin: a text of at most 32 characters (required)")]
@@ -108,45 +118,20 @@ def test_a_blank_vin_is_refused_as_required_not_as_too_long() -> None:
 def test_a_skip_a_release_and_a_loosen_order_are_refused_without_their_reason() -> None:
     """A quality engineer's trial: a NOK bolt released with no word of why, and a loosen
     order the same (an entered outcome needed its comment); a reopen still takes none."""
-    access = AccessConfig.from_node(YamlNode.parse(
-        f"users:\n  sam: {{role: supervisor, password: '{hash_password('pw-of-sam')}'}}\n",
-        "station.yaml"))
-    given: list[Command] = []
-
-    async def submit(command: Command, issuer: Issuer) -> Answer:
-        given.append(command)
-        return Answer(1, command, issuer)
-
-    async def main() -> list[tuple[str, int, str]]:
-        srv = WebServer(EventBus(), listen="127.0.0.1:0")
-        srv.commands.access, srv.commands.submit = access, submit
-        await srv.start()
-        got = []
-        try:
-            async with ClientSession(cookie_jar=CookieJar(unsafe=True)) as http:
-                async with http.post(srv.url + "api/login",
-                                     json={"user": "sam", "password": "pw-of-sam"}) as r:
-                    assert r.status == 200
-                for kind, comment in (("skip", None), ("release", "  "), ("loosen", ""),
-                                      ("release", "joint\x01checked"),
-                                      ("release", "joint checked"), ("reopen", None)):
-                    async with http.get(srv.url + "api/nonce") as r:
-                        nonce = (await r.json())["nonce"]
-                    body = {"nonce": nonce, "kind": kind, "vin": "VIN1", "bolt": "B1"}
-                    if comment is not None:
-                        body["comment"] = comment
-                    async with http.post(srv.url + "api/commands", json=body) as r:
-                        got.append((kind, r.status, (await r.text()).strip()))
-        finally:
-            await srv.stop()
-        return got
-
-    got = asyncio.run(main())
+    bodies: list[dict[str, Any]] = []
+    for kind, comment in (("skip", None), ("release", "  "), ("loosen", ""),
+                          ("release", "joint\x01checked"), ("release", "joint checked"),
+                          ("reopen", None)):
+        body: dict[str, Any] = {"kind": kind, "vin": "VIN1", "bolt": "B1"}
+        if comment is not None:
+            body["comment"] = comment
+        bodies.append(body)
+    got, given = _posted_as_sam(bodies)
     why = "comment: required: say why (a skip, a release or a loosen order is kept with its reason)"
-    assert [g[1:] for g in got[:3]] == [(400, why)] * 3
-    assert got[3][1:] == (400, "comment: printable characters only (no newline, tab or control "
-                               "character)")
-    assert [g[1] for g in got[4:]] == [200, 200]
+    assert got[:3] == [(400, why)] * 3
+    assert got[3] == (400, "comment: printable characters only (no newline, tab or control "
+                           "character)")
+    assert [g[0] for g in got[4:]] == [200, 200]
     assert [type(c).__name__ for c in given] == ["ReleaseBolt", "ReopenVehicle"]
 
 
