@@ -27,7 +27,7 @@ from stationd.configread import is_local
 #: and from one address off this machine (one client cannot take them all)
 MOST_CONNECTIONS = 128
 MOST_PER_ADDRESS = 16
-#: seconds a new connection has to send a whole request head
+#: seconds a new connection has to be let in by a request (its token and address accepted)
 FIRST_REQUEST_S = 10.0
 #: at most one warning of refused connections per this many seconds
 WARN_EVERY_S = 60.0
@@ -39,8 +39,8 @@ class Connections:
     """Counts the open connections and closes those that send no request in time.
 
     ``factory``: aiohttp's protocol factory (``AppRunner.server``).  :meth:`served` is called
-    for every request whose head was read (the server's middleware): from then on aiohttp's
-    keep-alive timeout governs the connection."""
+    for every request let in (the server's middleware, after its token and address checks):
+    from then on aiohttp's keep-alive timeout governs the connection."""
 
     def __init__(self, factory: Callable[[], Any], *, most: int = MOST_CONNECTIONS,
                  first_request_s: float = FIRST_REQUEST_S) -> None:
@@ -59,7 +59,7 @@ class Connections:
         return _Counted(self._factory(), self)
 
     def served(self, transport: asyncio.Transport | None) -> None:
-        """A request head was read on ``transport``: it is no longer on probation."""
+        """A request was let in on ``transport``: it is no longer on probation."""
         timer = self._waiting.pop(transport, None) if transport is not None else None
         if timer is not None:
             timer.cancel()
