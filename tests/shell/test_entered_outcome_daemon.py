@@ -67,5 +67,8 @@ def test_a_supervisor_enters_the_outcome_of_a_held_bolt_from_the_cli(tmp_path):
     assert db_rows(db, "SELECT status, torque_nm, angle_deg, entered_by, entered_comment "
                        "FROM tightening_records") == [
         ("ok", 49.6, 31.0, "sam", "read on the controller's screen")]
-    assert db_rows(db, "SELECT kind, user, bolt FROM commands") == [
+    assert db_rows(db, "SELECT kind, user, bolt FROM commands WHERE kind != 'refused'") == [
         ("enter-outcome", "sam", "B05")]
+    # the two refused (olga's: no right; sam's of a bolt not held) kept as the attempts
+    assert db_rows(db, "SELECT user, bolt FROM commands WHERE kind = 'refused' "
+                       "ORDER BY id") == [("olga", "B05"), ("sam", "B06")]
