@@ -20,6 +20,7 @@ import logging
 import os
 import sys
 import time
+from collections.abc import Callable
 from types import FrameType
 from typing import Any, TextIO
 
@@ -152,6 +153,33 @@ def _request_name(typeid: Any) -> str:
     return name.removesuffix("_Encoding_DefaultBinary") or "request"
 
 
+class Sparing:
+    """Journal lines a client can cause at any rate (refused logins, connections over a limit):
+    each key's first line at once, then at most one a minute, saying how many were left
+    untold.  Why: a guesser or a flood filled the journal (135,000 lines in 80 s) and
+    journald's own rate limit then drops the lines that matter."""
+
+    def __init__(self, log: logging.Logger, *, every_s: float = 60.0,
+                 clock: Callable[[], float] = time.monotonic, most_keys: int = 1000) -> None:
+        self._log, self.every_s, self._clock, self._most = log, every_s, clock, most_keys
+        self._last: dict[str, float] = {}
+        self._untold: dict[str, int] = {}
+
+    def tell(self, key: str, line: str) -> None:
+        """A warning ``line`` of kind ``key``, or counted when one of that kind was told in
+        the last ``every_s``."""
+        now = self._clock()
+        if now - self._last.get(key, -self.every_s) < self.every_s:
+            self._untold[key] = self._untold.get(key, 0) + 1
+            return
+        more = self._untold.pop(key, 0)
+        self._log.warning("%s%s", line, f" ({more} more like it in the last minute)"
+                          if more else "")
+        self._last[key] = now
+        if len(self._last) > self._most:       # bounded: keys a guesser chose
+            self._last.pop(next(iter(self._last)))
+
+
 def setup_logging(level: int, stream: TextIO, *, levelname: bool = True,
                   loud: tuple[str, ...] = ()) -> logging.Handler:
     """The station's one handler on the root logger: ``level`` for every logger but
@@ -171,8 +199,8 @@ def setup_logging(level: int, stream: TextIO, *, levelname: bool = True,
     return handler
 
 
-__all__ = ["JournalFormatter", "LibraryWords", "StampedFormatter", "priority", "quiet_opencv",
-           "setup_logging", "under_journal"]
+__all__ = ["JournalFormatter", "LibraryWords", "Sparing", "StampedFormatter", "priority",
+           "quiet_opencv", "setup_logging", "under_journal"]
 
 
 def quiet_opencv() -> None:

@@ -81,6 +81,7 @@ from db.repository import Repository
 from drivers.identity import DeviceIdentity
 from stationd.access import password_matches
 from stationd.bus import EventBus
+from stationd.logsetup import Sparing
 from stationd.opcua.catchup import CatchUp
 from stationd.opcua.config import OpcUaConfig
 from stationd.opcua.curves import CurveJoin
@@ -178,24 +179,27 @@ class StationUsers(UserManager):
                  clock: Callable[[], float] = time.monotonic) -> None:
         self._users, self.anonymous, self._clock = users, anonymous, clock
         self._tokens, self._filled = float(CHECKS_BURST), clock()
-        self._told = _Told(clock)
+        self._told = Sparing(log, clock=clock)
 
     def get_user(self, iserver: Any, username: str | None = None,
                  password: str | None = None, certificate: Any = None) -> User | None:
         if username is None:
             if not self.anonymous:
-                self._told.tell("an anonymous client refused (opcua.anonymous: false)")
+                self._refused("an anonymous client refused (opcua.anonymous: false)")
                 return None
             return User(role=UserRole.Anonymous)
         name = username[:64]
         if not self._take():
             # (no name: one line for them all, whatever names a guesser tries)
-            self._told.tell(f"logins refused unchecked: more than {CHECKS_PER_S} a second")
+            self._refused(f"logins refused unchecked: more than {CHECKS_PER_S} a second")
             return None
         if not password_matches(password or "", self._users.get(username)):
-            self._told.tell(f"user {name!r} refused: wrong user or password")
+            self._refused(f"user {name!r} refused: wrong user or password")
             return None
         return User(role=UserRole.User, name=username)
+
+    def _refused(self, line: str) -> None:
+        self._told.tell(line, f"OPC UA: {line}")
 
     def _take(self) -> bool:
         """One password check from the budget (refilled at :data:`CHECKS_PER_S`)."""
@@ -211,28 +215,6 @@ class StationUsers(UserManager):
 
 #: password checks a second, and the burst allowed (an MES logs in once per session)
 CHECKS_PER_S, CHECKS_BURST = 2, 5
-
-
-class _Told:
-    """Refusals in the journal: each new kind of line at once, then at most one a minute
-    with how many were left untold."""
-
-    def __init__(self, clock: Callable[[], float]) -> None:
-        self._clock = clock
-        self._last: dict[str, float] = {}
-        self._untold: dict[str, int] = {}
-
-    def tell(self, line: str) -> None:
-        now = self._clock()
-        if now - self._last.get(line, -60.0) < 60.0:
-            self._untold[line] = self._untold.get(line, 0) + 1
-            return
-        more = self._untold.pop(line, 0)
-        log.warning("OPC UA: %s%s", line, f" ({more} more like it in the last minute)"
-                    if more else "")
-        self._last[line] = now
-        if len(self._last) > 1000:       # bounded: names guessed
-            self._last.pop(next(iter(self._last)))
 
 
 _POLICIES = {

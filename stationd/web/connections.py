@@ -22,6 +22,7 @@ from collections.abc import Callable
 from typing import Any
 
 from stationd.configread import is_local
+from stationd.logsetup import Sparing
 
 #: connections kept at once (two screens per station, a few browsers, the CLI: far fewer),
 #: and from one address off this machine (one client cannot take them all)
@@ -52,8 +53,7 @@ class Connections:
         self._per_address: dict[str, int] = {}
         self._waiting: dict[asyncio.Transport, asyncio.TimerHandle] = {}
         self.refused = 0              # connections closed as over the limit, since the start
-        self._told_at = -WARN_EVERY_S
-        self._untold = 0
+        self._told = Sparing(log, every_s=WARN_EVERY_S)
 
     def __call__(self) -> asyncio.Protocol:
         return _Counted(self._factory(), self)
@@ -71,7 +71,9 @@ class Connections:
         if len(self.open) >= self.most or (mine >= self.most_per_address
                                            and not is_local(address)):
             self.refused += 1
-            self._tell_refused()
+            self._told.tell("refused", f"screens: connection(s) refused, {len(self.open)} open "
+                            f"(at most {self.most}, {self.most_per_address} from one address); "
+                            "another program or client keeps connections to the screens' port")
             transport.abort()
             return False
         self.open.add(transport)
@@ -93,16 +95,6 @@ class Connections:
         timer = self._waiting.pop(transport, None)
         if timer is not None:
             timer.cancel()
-
-    def _tell_refused(self) -> None:
-        """One warning, then at most one a minute with the count (never one per refusal)."""
-        self._untold += 1
-        now = time.monotonic()
-        if now - self._told_at >= WARN_EVERY_S:
-            log.warning("screens: %d connection(s) refused, %d open (at most %d); another "
-                        "program or client keeps connections to the screens' port",
-                        self._untold, len(self.open), self.most)
-            self._told_at, self._untold = now, 0
 
 
 def _close(transport: asyncio.Transport) -> None:
