@@ -50,6 +50,7 @@ from typing import Any
 from drivers.counting import counted
 from stationd.access import hash_password
 from stationd.errors import InputError
+from stationd.station.commands import WITH_REASON
 from stationd.station.events import State
 from stationd.web.status_cli import (
     DEFAULT_URL,
@@ -341,8 +342,8 @@ def _check_command(args: argparse.Namespace) -> None:
     if args.command in BOLT_COMMANDS and not 1 <= len(args.bolt.strip()) <= 32:
         raise InputError(f"bolt {args.bolt!r}: 1-32 characters")
     check_comment(args.comment)
-    if args.command in REASON_COMMANDS and not (args.comment or "").strip():
-        raise InputError(f"--comment: why ({REASON_COMMANDS[args.command]} is kept with its "
+    if args.command in WITH_REASON and not (args.comment or "").strip():
+        raise InputError(f"--comment: why ({REASON_NOUNS[args.command]} is kept with its "
                          "reason: quality reads it)")
     if args.command == "enter-outcome":
         _check_outcome(args)
@@ -362,9 +363,9 @@ def _check_outcome(args: argparse.Namespace) -> None:
 
 #: the longest comment a command keeps (the screens' limit too)
 MAX_COMMENT = 500
-#: the commands that change a bolt's verdict, each given only with its reason (a quality
-#: engineer's trial: a NOK bolt released with no word of why), as the screens ask it
-REASON_COMMANDS = {"skip": "a skip", "release": "a release", "loosen": "a loosen order"}
+#: how a refusal for a missing reason names each command given only with its reason
+#: (``station.commands.WITH_REASON``, which decides)
+REASON_NOUNS = {"skip": "a skip", "release": "a release", "loosen": "a loosen order"}
 
 
 def check_comment(comment: str | None) -> None:
@@ -626,7 +627,7 @@ def add_command_parsers(sub: Any) -> None:
         if p is eo:     # what was read on the controller: the entry's only evidence
             p.add_argument("--comment", required=True,
                            help="what you checked on the controller (kept with the command)")
-        elif name in REASON_COMMANDS:
+        elif name in WITH_REASON:
             p.add_argument("--comment", default="", help="why (required: kept with the "
                                                          "command)")
         else:

@@ -176,6 +176,10 @@ KIND: dict[type[Command], str] = {SkipBolt: "skip", ReopenVehicle: "reopen",
                                   TeachPoint: "teach-point", TeachStop: "teach-stop",
                                   CheckCalibration: "calibration-check",
                                   SignIn: "sign-in", SignOut: "sign-out"}
+#: the kinds of command that change a bolt's verdict, given only with their reason (their
+#: comment; a quality trial: a NOK bolt released with no word of why): the command line and
+#: the screens' API both refuse one without it
+WITH_REASON = frozenset(KIND[c] for c in (SkipBolt, ReleaseBolt, LoosenBolt))
 
 
 @dataclass(frozen=True)
@@ -193,7 +197,6 @@ class Answer:
         return self.reason is None
 
 
-__all__ = ["KIND", "RIGHT", "Answer", "CheckCalibration", "Command", "EnterOutcome", "Issuer",
-           "LoosenBolt",
-           "ReleaseBolt", "ReopenVehicle", "Right", "SignIn", "SignOut", "SkipBolt",
-           "TeachPoint", "TeachStart", "TeachStop"]
+__all__ = ["KIND", "RIGHT", "WITH_REASON", "Answer", "CheckCalibration", "Command",
+           "EnterOutcome", "Issuer", "LoosenBolt", "ReleaseBolt", "ReopenVehicle", "Right",
+           "SignIn", "SignOut", "SkipBolt", "TeachPoint", "TeachStart", "TeachStop"]

@@ -44,6 +44,7 @@ from stationd.access import AccessConfig, LoginThrottle, ReplayGuard, Sessions
 from stationd.reasons import Reason
 from stationd.station.commands import (
     KIND,
+    WITH_REASON,
     Answer,
     CheckCalibration,
     Command,
@@ -280,7 +281,7 @@ def _command(body: dict[str, Any]) -> Command:
     """The typed command of a request's body; 400 for anything else."""
     kind = body.get("kind")
     # a skip, a release and a loosen order change a bolt's verdict: each with its reason
-    comment = _text(body, "comment", limit=500, required=kind in ("skip", "release", "loosen"))
+    comment = _text(body, "comment", limit=500, required=kind in WITH_REASON)
     if kind == "skip":
         return SkipBolt(_text(body, "vin", limit=32), _text(body, "bolt", limit=32), comment)
     if kind == "reopen":
