@@ -727,9 +727,8 @@ def reason_words(reason: Reason, *, full: bool = False) -> str:
     return _WORDS[reason.kind](reason)
 
 
-def command_words(answer: Answer) -> str:
+def command_words(cmd: Command) -> str:
     """What the command was: ``skip B07 of VIN123 ("no access")``."""
-    cmd = answer.command
     what = KIND[type(cmd)]
     if isinstance(cmd, SkipBolt | ReleaseBolt | LoosenBolt):
         what += f" {cmd.bolt} of {cmd.vin}"
@@ -812,7 +811,8 @@ def outcome_words(ok: bool, torque_nm: float, angle_deg: float) -> str:
 
 def answer_words(answer: Answer) -> str:
     """The journal's line: the command, who gave it and from where, and the answer."""
-    head = f"command {command_words(answer)} by {answer.issuer.user} ({answer.issuer.source})"
+    who = answer.issuer
+    head = f"command {command_words(answer.command)} by {who.user} ({who.source})"
     if answer.reason is None and isinstance(answer.command, ReopenVehicle):
         # what comes of it, where "accepted" alone left the person wondering (a supervisor
         # reopened a vehicle while another was on the lift)

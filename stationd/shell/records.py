@@ -72,7 +72,6 @@ from stationd.station.actions import (
 )
 from stationd.station.commands import (
     KIND,
-    Answer,
     EnterOutcome,
     ReopenVehicle,
     SignIn,
@@ -589,7 +588,7 @@ class Records:
         it was and why it was refused (``enter-outcome B01 of VIN1: OK 5 Nm, 2 deg
         ('looked'): refused: torque 5 Nm outside 22-28 Nm``)."""
         cmd = a.command
-        words = f"{command_words(Answer(0, cmd, a.issuer, a.reason))}: refused: " \
+        words = f"{command_words(cmd)}: refused: " \
                 f"{reason_words(a.reason)}"
         self._writer().ledger.record_command(
             at=datetime.fromtimestamp(a.t, UTC), user=a.issuer.user, source=a.issuer.source,
