@@ -97,7 +97,7 @@ def open_bind_problem(cfg: HttpConfig) -> str | None:
                 "network could watch the station); set http.token or listen on 127.0.0.1")
     if not is_local(host) and cfg.token and (len(cfg.token) < OPEN_TOKEN_MIN
                                              or PLACEHOLDER in cfg.token):
-        return (f"http.token: a non-local bind ({cfg.listen}) needs a token of at least "
+        return (f"a non-local bind ({cfg.listen}) needs a token of at least "
                 f"{OPEN_TOKEN_MIN} characters that is not the example's (anyone on the "
                 "network may guess it); make one with `openssl rand -hex 16`")
     return None
