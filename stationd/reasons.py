@@ -267,6 +267,9 @@ class Reason:
     count: int | None = None
     needed: int | None = None
     right: str | None = None
+    #: NO_RIGHT: the command asked, where its right has another name (an entered outcome
+    #: ends a hold: the release right; a supervisor's trial read "no right to release" of it)
+    asked: str | None = None
     angle_deg: float | None = None
     blocking: tuple[str, ...] = ()
     # (pair, camera side or "", the vision's reason) for each pair

@@ -447,7 +447,8 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
     Why.TILTED: lambda r: f"wrench tilted {r.angle_deg or 0:.1f} deg (> {r.limit or 0:g} deg)",
     Why.PAIRS_DISAGREE: lambda r: (f"pairs disagree by {r.distance_mm or 0:.2f} mm "
                                    f"(> {r.limit or 0:g} mm)"),
-    Why.NO_RIGHT: lambda r: f"your role does not have the right to {r.right}",
+    Why.NO_RIGHT: lambda r: f"your role does not have the right to {r.right}" + (
+        f" ({r.asked} needs it)" if r.asked else ""),
     Why.NO_VEHICLE: lambda r: "no vehicle at the station",
     # (a supervisor's trial: a car that left with a bolt held, its release refused, nothing
     # said of reopen)

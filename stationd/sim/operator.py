@@ -706,7 +706,8 @@ async def wait_for_people(st: Station, bolt: str, vin: str, note: Callable[[str]
     path = getattr(st.cfg, "path", None)   # absolute: pasted in another folder it works
     where = f" --url {url}" if url else \
         f" --config {shlex.quote(str(Path(path).resolve()))}" if path else ""
-    command = f"stationd release {vin} {bolt}{where} --user NAME"
+    # with the reason a release needs (a supervisor's trial: pasted as said, it was refused)
+    command = f"stationd release {vin} {bolt}{where} --comment TEXT --user NAME"
     # held (its result not read or not known) or locked (its NOKs): as the station has it
     # (an MES integrator's trial: a held bolt was said locked)
     what = "held" if bolt in st.core.status().held else "locked"

@@ -10,6 +10,7 @@ from typing import Any
 from stationd.reasons import Reason, Skip, SkipKind, Why
 from stationd.station.actions import Action, Publish, RecordCommand, RecordRefusal, Reply
 from stationd.station.commands import (
+    KIND,
     RIGHT,
     Answer,
     CheckCalibration,
@@ -72,7 +73,9 @@ class OrderRules(FaultRules):
         """Why ``cmd`` may not be carried out now, or None."""
         right = RIGHT.get(type(cmd))
         if right is not None and right not in who.rights:
-            return Reason(Why.NO_RIGHT, right=right.value)
+            asked = KIND[type(cmd)]
+            return Reason(Why.NO_RIGHT, right=right.value,
+                          asked=None if asked.startswith(right.value) else asked)
         if isinstance(cmd, SignIn):
             return Reason(Why.SIGNED_IN, user=who.user) if self.operator == who.user else None
         if isinstance(cmd, SignOut):

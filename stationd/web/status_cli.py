@@ -85,8 +85,8 @@ def lock_lines(st: dict[str, Any], via: str = "") -> list[str]:
     holds = [text for text in st.get("holds") or [] if text in locks]
     return [f"locked:   {text}" for text in locks if text not in holds] + \
         [f"held:     {text}" for text in holds] + entered + [
-        f"release:  stationd release {vin} {bolt}{via} --user NAME, or the operator screen's "
-        f"Release form{who}"]
+        f"release:  stationd release {vin} {bolt}{via} --comment TEXT --user NAME, or the "
+        f"operator screen's Release form{who}"]
 
 
 def line_lines(line: dict[str, Any] | None) -> list[str]:

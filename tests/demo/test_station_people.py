@@ -80,7 +80,8 @@ def test_a_lock_waits_for_a_persons_release_in_the_demo(tmp_path):
         bolt, vin = found[1], found[2]
         # the release command said whole, with the demo's screens (not the default daemon's)
         assert (f"(the screens' Release form, or stationd release {vin} {bolt} --url "
-                f"http://127.0.0.1:{port}/ --user NAME)") in found.string, found.string
+                f"http://127.0.0.1:{port}/ --comment TEXT --user NAME)") in found.string, \
+            found.string
         assert not any("released by the supervisor" in s for s in seen)
         # the operator tightened the other bolts before waiting: their lines came first
         assert sum(1 for s in seen if re.match(r"B\d\d: pset \d+, ", s)) >= 1, seen

@@ -139,8 +139,10 @@ def test_the_release_right_is_what_it_takes_and_an_operator_is_refused():
     d = _ready()
     _held(d)
     refused = _answer(d.command(1, ok(), OPERATOR)).answer
-    assert refused.reason == Reason(Why.NO_RIGHT, right="release")
-    assert reason_words(refused.reason) == "your role does not have the right to release"
+    assert refused.reason == Reason(Why.NO_RIGHT, right="release", asked="enter-outcome")
+    # the command asked named (a supervisor's trial read "no right to release" of it)
+    assert reason_words(refused.reason) == \
+        "your role does not have the right to release (enter-outcome needs it)"
     assert "B1" in d.core.matcher.held
     assert _answer(d.command(2, ok(), RELEASER)).answer.accepted
 

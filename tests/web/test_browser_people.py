@@ -48,8 +48,10 @@ def test_a_lock_waits_for_a_person_refused_as_operator_released_as_supervisor(pa
         assert "released by the supervisor" not in journal
         assert "command release" not in journal
         # the release command said can be pasted: it names the station (a new user's paste
-        # of "stationd release VIN BOLT --user NAME" asked /etc/stationd's station)
-        assert re.search(rf"or stationd release {vin} {bolt} --(config|url) \S+ --user NAME",
+        # of "stationd release VIN BOLT --user NAME" asked /etc/stationd's station), with the
+        # reason a release needs
+        assert re.search(rf"or stationd release {vin} {bolt} --(config|url) \S+ "
+                         r"--comment TEXT --user NAME",
                          journal), journal[-3000:]
         # the operator tightened other bolts after the lock, before waiting
         after = journal[journal.index(f"{bolt} locked after"):]

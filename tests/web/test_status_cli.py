@@ -159,8 +159,9 @@ def test_status_names_a_locked_bolt_and_who_releases_it_how(live_server, capsys)
     assert "locked:   B2 locked after 3 NOK in a row: a supervisor releases it" in lines
     # the one locked bolt named in the command (a newcomer read BOLT for it), and the
     # station as this status reached it: run as printed, the command reaches it too
-    assert f"release:  stationd release {VIN} B2 --url {srv.url} --user NAME, or the " \
-        "operator screen's Release form (a user with the release right: supervisor)" in lines
+    assert f"release:  stationd release {VIN} B2 --url {srv.url} --comment TEXT --user NAME, " \
+        "or the operator screen's Release form (a user with the release right: supervisor)" \
+        in lines
 
 
 def test_status_without_a_lock_has_no_lock_lines_and_says_when_nobody_may_release():
@@ -172,11 +173,12 @@ def test_status_without_a_lock_has_no_lock_lines_and_says_when_nobody_may_releas
               release_by=[])
     assert format_status(st).splitlines()[2:4] == [
         "locked:   B1 locked after 3 NOK in a row: a supervisor releases it",
-        "release:  stationd release VIN1 BOLT --user NAME, or the operator screen's Release "
+        "release:  stationd release VIN1 BOLT --comment TEXT --user NAME, or the operator "
+        "screen's Release "
         "form (no user of this station has the release right: access.users and "
         "access.roles)"]
-    assert "release:  stationd release VIN1 BOLT --config /srv/line/station.yaml --user NAME" \
-        in format_status(st, " --config /srv/line/station.yaml")
+    assert "release:  stationd release VIN1 BOLT --config /srv/line/station.yaml --comment " \
+        "TEXT --user NAME" in format_status(st, " --config /srv/line/station.yaml")
 
 
 def test_the_status_says_the_line_database_s_forwarding_in_the_screen_s_words():
