@@ -26,7 +26,14 @@ from sqlalchemy.exc import SQLAlchemyError
 from db.engine import write_session
 from db.errors import DatabaseError, DataError, NotFoundError
 from db.importer import current_version, parameters_of, sent_bolt
-from db.kinds import HELD_WITHOUT_RESULT, LOOSENING, NOT_TAKEN, RUNDOWN_KINDS, TIGHTENING
+from db.kinds import (
+    ENTER_OUTCOME,
+    HELD_WITHOUT_RESULT,
+    LOOSENING,
+    NOT_TAKEN,
+    RUNDOWN_KINDS,
+    TIGHTENING,
+)
 from db.ledger import RUNDOWN, add_command, append
 from db.models import (
     Bolt,
@@ -39,9 +46,6 @@ from db.models import (
     utcnow,
 )
 from db.repository import Repository, _params_json
-
-#: the command's kind in the records (``stationd.station.commands.KIND``)
-ENTER_OUTCOME = "enter-outcome"
 
 
 def record_entered(repo: Repository, *, vin: str, bolt: str, ok: bool, torque_nm: float,

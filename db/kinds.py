@@ -67,6 +67,9 @@ LOCK_USER, LOCK_SOURCE = "station", "NOK policy"
 #: this kind with who gave it and why it was refused (a quality trial: an OK of 5 Nm entered
 #: for a 22-28 Nm bolt, refused, was in the journal alone); it changes nothing
 REFUSED = "refused"
+#: an outcome a person entered for a held bolt, from the controller's screen, kept in the
+#: command ledger under this kind with its rundown (``stationd.station.commands.KIND``)
+ENTER_OUTCOME = "enter-outcome"
 #: the link to the controller went down with the tool enabled for a bolt, and what the
 #: controller did meanwhile is not known: stored as a controller event under this name
 #: without a result (its note says why), the bolt held until a person checked it

@@ -245,11 +245,8 @@ class Ledger:
                                             CommandRecord.kind.in_((LOCK, *ends)))
             if since is not None:
                 q = q.where(CommandRecord.at >= since)
-            last: dict[str, str] = {}
-            for r in s.scalars(q.order_by(CommandRecord.id)):
-                if r.bolt is not None:
-                    last[r.bolt] = r.kind
-            return frozenset(b for b, kind in last.items() if kind == LOCK)
+            return open_locks([_command(r) for r in s.scalars(q.order_by(CommandRecord.id))],
+                              None, ends)    # (``since`` asked of the database)
 
     def get_meta(self, key: str) -> str | None:
         with self._session(False) as s:
@@ -359,6 +356,19 @@ def commands_in(s: Session, vin: str | None = None, *, since: datetime | None = 
     if until is not None:
         q = q.where(CommandRecord.at < until)
     return [_command(r) for r in s.scalars(q)]
+
+
+def open_locks(commands: Iterable[CommandEntry], since: datetime | None,
+               ends: frozenset[str]) -> frozenset[str]:
+    """The bolts a lock among ``commands`` (oldest first) left locked: locked by the NOK
+    policy at or after ``since`` (the vehicle's last opening: a rework starts afresh) and
+    ended by no command of ``ends`` (a release, a skip) since.  One rule for the station's
+    start (:meth:`Ledger.locked`) and for the reports that show the locks."""
+    last: dict[str, str] = {}
+    for c in commands:
+        if c.bolt is not None and c.kind in (LOCK, *ends) and (since is None or c.at >= since):
+            last[c.bolt] = c.kind
+    return frozenset(b for b, kind in last.items() if kind == LOCK)
 
 
 def _command(r: CommandRecord) -> CommandEntry:

@@ -113,6 +113,9 @@ class VehicleReport:
     #: status says, their last result is not known (a quality trial: "B47 MISSING" with no
     #: word of its hold but at the bottom of the report)
     held: tuple[tuple[str, str], ...] = ()
+    #: the bolts the NOK policy locked since the vehicle's last opening and no release or
+    #: skip ended (read with ``held``): they wait for a supervisor's check and release
+    locked: tuple[str, ...] = ()
 
     @property
     def missing(self) -> list[str]:
@@ -201,7 +204,7 @@ class VehicleReport:
                 "nok": self.nok, "missing": self.missing, "skipped": self.skipped,
                 "loosen": self.loosen, "tightenings": self.tightenings,
                 "nok_results": self.nok_results, "loosenings": self.loosenings,
-                "held": dict(self.held),
+                "held": dict(self.held), "locked": list(self.locked),
                 "bolts": [b.to_json() for b in self.bolts]}
 
 

@@ -39,6 +39,7 @@ from db.importer import (
 )
 from db.kinds import (
     HELD_WITHOUT_RESULT,
+    LOCK,
     LOOSENING,
     NOT_TAKEN,
     RUNDOWN_KINDS,
@@ -54,6 +55,7 @@ from db.ledger import (
     add_command,
     append,
     commands_in,
+    open_locks,
     put_meta,
 )
 from db.migrate import current_revision, head_revision, upgrade
@@ -61,6 +63,7 @@ from db.models import (
     AT_STATION,
     WRITE_PROVED,
     Bolt,
+    CommandRecord,
     ControllerEvent,
     Meta,
     ProcessParameters,
@@ -458,9 +461,10 @@ class Repository:
 
     def may_hold(self, vins: Collection[str]) -> set[str]:
         """Of ``vins``, those with a record that may hold one of their bolts (an unreadable
-        result, an untyped OK outside its window, a hold without a result), whatever
-        ended it since: a list of vehicles asks :meth:`held_bolts` only for these (two
-        reads for the whole list, not two for each of its rows)."""
+        result, an untyped OK outside its window, a hold without a result) or lock one (the
+        NOK policy's lock), whatever ended it since: a list of vehicles asks for its holds
+        and locks (``vehicle_report(held=True)``) only for these (three reads for the whole
+        list, not three for each of its rows)."""
         if not vins:
             return set()
         with self._session(write=False) as s:
@@ -469,6 +473,8 @@ class Repository:
             found |= set(s.scalars(select(ControllerEvent.vin).distinct().where(
                 ControllerEvent.vin.in_(vins), ControllerEvent.bolt.is_not(None),
                 ControllerEvent.what.in_((NOT_TAKEN, *HELD_WITHOUT_RESULT)))))
+            found |= set(s.scalars(select(CommandRecord.vin).distinct().where(
+                CommandRecord.vin.in_(vins), CommandRecord.kind == LOCK)))
         return {str(v) for v in found if v is not None}
 
     def holds(self, vin: str, since: datetime | None = None
@@ -589,12 +595,18 @@ class Repository:
 def _held_in(s: Session, report: VehicleReport) -> VehicleReport:
     """``report`` with its held bolts (:meth:`Repository._with_held`), read in the caller's
     transaction, in the table's order."""
-    vin = report.vehicle.vin
-    holds = open_holds(s, vin, commands_in(s, vin), None)
+    v = report.vehicle
+    commands = commands_in(s, v.vin)
+    holds = open_holds(s, v.vin, commands, None)
     order = {b.bolt_id: i for i, b in enumerate(report.bolts)}
+    # its locks too (a supervisor's trial: a bolt left locked read "NOK" in the hand-over
+    # and the report, as one that simply ended NOK): since its last opening, as the station
+    # reads them at its start
+    locked = open_locks(commands, v.reopened_at or v.started_at, ENDS_A_HOLD)
     return replace(report, held=tuple(sorted(
         ((bolt, note) for bolt, (note, _) in holds.items()),
-        key=lambda h: order.get(h[0], len(order)))))
+        key=lambda h: order.get(h[0], len(order)))),
+        locked=tuple(sorted(locked, key=lambda b: (order.get(b, len(order)), b))))
 
 
 def _closed(s: Session, v: Vehicle, report: VehicleReport, how: str) -> None:

@@ -7,20 +7,23 @@ export (a shift supervisor's trial)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import datetime
 from itertools import pairwise
 
 from sqlalchemy import func, or_, select
 from sqlalchemy.orm import Session
 
+from db.kinds import ENTER_OUTCOME, LOOSENING, REFUSED
 from db.ledger import CommandEntry
 from db.models import CommandRecord, TighteningRecord, Vehicle, VehicleClosing
 from db.report import VehicleReport
 from db.repository import Repository
 
-#: the commands a hand-over names (sign-in, teach and calibration checks are no vehicle's)
-HANDOVER_KINDS = ("release", "skip", "reopen", "loosen", "enter-outcome")
+#: the commands a hand-over names (sign-in, teach and calibration checks are no vehicle's),
+#: and the refused ones among them (a supervisor's trial: a release refused for a mistyped
+#: VIN was kept, but under a VIN no report finds, and the hand-over named no refusal)
+HANDOVER_KINDS = ("release", "skip", "reopen", "loosen", ENTER_OUTCOME, REFUSED)
 
 
 @dataclass(frozen=True)
@@ -34,6 +37,9 @@ class Shift:
     vehicles: tuple[VehicleReport, ...]
     #: the hand-over's commands given in the window, oldest first
     commands: tuple[CommandEntry, ...]
+    #: what each entered outcome entered (command id -> "OK 25.1 Nm, 31.0 deg"; a
+    #: supervisor's trial: the hand-over gave the comment alone, not the verdict)
+    entered: dict[int, str] = field(default_factory=dict)
 
 
 def shift(repo: Repository, since: datetime, until: datetime) -> Shift:
@@ -52,7 +58,27 @@ def shift(repo: Repository, since: datetime, until: datetime) -> Shift:
     reports = tuple(repo.vehicle_report(vin, held=vin in held) for vin in vins)
     commands = tuple(c for c in repo.ledger.commands(since=since, until=until)
                      if c.kind in HANDOVER_KINDS)
-    return Shift(since, until, reports, commands)
+    with Session(repo.engine) as s:
+        entered = {c.id: words for c in commands if c.kind == ENTER_OUTCOME
+                   and (words := _entered(s, c)) is not None}
+    return Shift(since, until, reports, commands, entered)
+
+
+def _entered(s: Session, c: CommandEntry) -> str | None:
+    """What the entered outcome ``c`` entered, in words ("OK 25.1 Nm, 31.0 deg"; "loosening
+    NOK ..."): its rundown, stored with it (the person, the vehicle, the bolt and the time
+    are the command's)."""
+    r = s.execute(select(TighteningRecord.status, TighteningRecord.torque_nm,
+                         TighteningRecord.angle_deg, TighteningRecord.kind)
+                  .join(Vehicle, Vehicle.id == TighteningRecord.vehicle_id)
+                  .where(Vehicle.vin == c.vin, TighteningRecord.entered_by == c.user,
+                         TighteningRecord.result_at == c.at)
+                  .order_by(TighteningRecord.id.desc()).limit(1)).first()
+    if r is None:
+        return None
+    status, torque, angle, kind = r
+    return ("loosening " if kind == LOOSENING else "") + \
+        f"{str(status).upper()} {torque:.1f} Nm, {angle:.1f} deg"
 
 
 def _open_in(s: Session, vehicle_id: int, vin: str, started: datetime, reopened: datetime,

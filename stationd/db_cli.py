@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 from db.kinds import (
     CUT_UNKNOWN,
+    LOOSENED,
     LOOSENING,
     LOST_UNKNOWN,
     MISSING,
@@ -39,6 +40,7 @@ from stationd.outfile import write_atomic
 from stationd.words import entered_as_words, nok_why, result_type_words, unrecorded_words
 
 if TYPE_CHECKING:
+    from db.report import VehicleReport
     from db.repository import Repository
 
 EXIT_OK, EXIT_INCOMPLETE, EXIT_BAD_INPUT = 0, 1, 2
@@ -296,7 +298,7 @@ def _export_results(args: argparse.Namespace) -> int:
         # bolts forgotten
         to_do = [r for r in runs if r["status"] == PENDING]
         also = [counted(rows[status], what) for status, what in (
-            (SKIPPED, "skipped"), (LOCKED_STATUS, "lock"), (RELEASED_STATUS, "release"),
+            (SKIPPED, "skipped bolt"), (LOCKED_STATUS, "lock"), (RELEASED_STATUS, "release"),
             (LOOSEN_ORDERED_STATUS, "loosen command"),
             (UNREADABLE_STATUS, "unreadable result"),
             (UNATTRIBUTED_STATUS, "unattributed result"),
@@ -469,6 +471,8 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                 + (f"; then skipped {skipped}" if b.skipped_by else "")
             retired = " (retired)" if b.retired else ""
             held = "" if hold is None else f"; HELD: {hold} (its outcome to be entered)"
+            if b.bolt_id in report.locked:   # waits for a supervisor (a supervisor's trial)
+                held += "; LOCKED after its NOKs: a supervisor checks it and releases it"
             print(f"  {b.bolt_id:<12} {b.status.upper():<8} {result}  {b.name}{retired}{held}")
             if b.attempts > 1:   # reworked: each rundown, so the loosenings show
                 for r in (r for r in runs if r["bolt"] == b.bolt_id):
@@ -657,27 +661,54 @@ def cmd_db_shift(args: argparse.Namespace) -> int:
                                                                     else ""))
         for r, status in rows:
             v = r.vehicle
-            left = "-" if v.ended_at is None else f"{v.ended_at:%m-%d %H:%M:%S}"
-            # a held bolt said once: held beside its status (its last result not known)
-            held = {b for b, _ in r.held}
-            undone = [f"{b} {word}" + (" and held" if b in held else "")
-                      for bolts, word in ((r.nok, "NOK"), (r.missing, "missing"),
-                                          (r.skipped, "skipped"), (r.loosen, "to loosen"))
-                      for b in bolts]
-            listed = {*r.nok, *r.missing, *r.skipped, *r.loosen}
-            undone += [f"{b} held" for b in sorted(held - listed)]
+            # a vehicle reopened for rework, not back yet, did leave: when it left first
+            # (a supervisor's trial: "left -" read as still on the lift)
+            gone = v.ended_at or (v.first_closed_at if v.waiting else None)
+            left = "-" if gone is None else f"{gone:%m-%d %H:%M:%S}"
             print(f"  {v.vin:<18} {v.model:<10} in {v.started_at:%m-%d %H:%M:%S}  left "
-                  f"{left:<14} {status:<10} {', '.join(undone)}".rstrip())
+                  f"{left:<14} {status:<10} {_undone(r)}".rstrip())
         if done.commands:
             print("commands:")
         for c in done.commands:
             on = " ".join(x for x in (c.bolt, f"of {c.vin}" if c.vin else None) if x)
+            what = done.entered.get(c.id)
             print(f"  {c.kind} {on} by {c.user} ({c.source}) at {c.at:%Y-%m-%d %H:%M:%S} UTC"
-                  + (f": {c.comment}" if c.comment else ""))
+                  + (f": {what}" if what else "") + (f": {c.comment}" if c.comment else ""))
     # a bolt held for a person is not OK whatever its status says (its last result not
     # known; its vehicle's close names it not OK): something to hand over
     return EXIT_OK if all(status == "complete" and not r.held for r, status in rows) \
         else EXIT_INCOMPLETE
+
+
+def _undone(r: VehicleReport) -> str:
+    """A vehicle's bolts not OK in a hand-over's row: what waits for a person first (locked,
+    held, NOK, loosened or to loosen), then the skipped, then the missing, these counted and
+    the first named (a supervisor's trial: 47 missing bolts on one 700-character line buried
+    "B37 NOK").  A held or locked bolt is said once, beside its status."""
+    held = {b for b, _ in r.held}
+    status = {b.bolt_id: b.status for b in r.bolts}
+
+    def said(b: str, word: str) -> str:
+        return f"{b} {word}" + (" and locked" if b in r.locked else "") + \
+            (" and held" if b in held else "")
+
+    first = [said(b, "NOK") for b in r.nok] + \
+        [said(b, "loosened" if status[b] == LOOSENED else "to loosen") for b in r.loosen]
+    listed = {*r.nok, *r.loosen, *r.skipped, *r.missing}
+    first += [said(b, "locked") for b in r.locked if b not in listed] + \
+        [f"{b} held" for b in sorted(held - listed - set(r.locked))]
+    first += [said(b, "skipped") for b in r.skipped]
+    missing = [b for b in r.missing if b not in held and b not in r.locked]
+    first += [said(b, "missing") for b in r.missing if b in held or b in r.locked]
+    if missing:
+        first.append(f"{len(missing)} missing ({', '.join(missing[:SHIFT_NAMED])}"
+                     + (f" and {len(missing) - SHIFT_NAMED} more" if len(missing) > SHIFT_NAMED
+                        else "") + ")")
+    return ", ".join(first)
+
+
+#: the missing bolts a hand-over's row names (the rest counted)
+SHIFT_NAMED = 5
 
 
 def _num(v: float | None, digits: int = 1) -> str:

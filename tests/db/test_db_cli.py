@@ -721,7 +721,7 @@ def test_a_bolt_skipped_by_a_command_is_exported_and_reported_skipped_not_missin
     assert row["recorded_at"] == rows[skipped]["recorded_at"]
     target = tmp_path / "results.csv"
     code, out, _ = run("db", "export", "--results", "--out", str(target), "--db", db)
-    assert len(others) == 2 and "1 rundown and 0 missing bolts (and 1 skipped, 1 not run " \
+    assert len(others) == 2 and "1 rundown and 0 missing bolts (and 1 skipped bolt, 1 not run " \
         "down yet on 1 open vehicle) of 1 vehicle" in out
     code, out, _ = run("db", "report", "VIN1", "--db", db)
     assert code == 1     # not complete: a skipped bolt is not tightened
@@ -1197,8 +1197,8 @@ def test_a_shift_s_hand_over_names_its_vehicles_those_not_ok_and_who_released_wh
     assert "3 vehicles at the station: 1 complete, 1 NOK, 1 open" in lines[0]
     assert [line.split()[0] for line in lines[1:4]] == ["VIN1", "VIN2", "VIN3"]
     assert "complete" in lines[1] and lines[1].rstrip().endswith("complete")
-    assert f"{bolts[0]} NOK, {bolts[1]} missing" in lines[2]
-    assert "open" in lines[3] and f"{bolts[1]} missing" in lines[3]
+    assert f"{bolts[0]} NOK, {len(bolts) - 1} missing ({bolts[1]}" in lines[2]
+    assert "open" in lines[3] and f"missing ({bolts[1]}" in lines[3]
     assert f"release {bolts[0]} of VIN2 by sam (cli)" in out and "joint cleaned" in out
     code, out, _ = run("db", "shift", "--since", since.isoformat(), "--db", db, "--json")
     doc = json.loads(out)
@@ -1213,6 +1213,63 @@ def test_a_shift_s_hand_over_names_its_vehicles_those_not_ok_and_who_released_wh
     code, out, err = run("db", "shift", "--since", since.isoformat(), "--until",
                          (since - timedelta(hours=1)).isoformat(), "--db", db)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "is not before" in err
+
+
+def test_a_shift_s_hand_over_says_locks_outcomes_refusals_and_counts_the_missing(run, db):
+    """A supervisor's trial of the hand-over: a bolt left locked read "NOK" as one that
+    simply ended NOK; a loosened bolt read "to loosen"; an entered outcome gave the comment
+    alone, not the verdict; a release refused for a mistyped VIN was kept but not listed;
+    a vehicle reopened for rework read "left -" as if on the lift; 47 missing bolts made a
+    700-character line.  Each said now, the missing counted after the first five."""
+    import json
+
+    from db.entered import record_entered
+    from db.kinds import LOCK, LOCK_SOURCE, LOCK_USER, LOOSENING, REFUSED
+    from db.repository import Repository
+    from stationd.boltfile import import_bolts
+
+    with Repository.open(db) as repo:
+        import_bolts(repo, ROOT / "config" / "sim" / "bolts.yaml")    # 50 bolts
+        since = datetime.now(UTC) - timedelta(minutes=1)
+        model = "SIM-1"
+        bolts = [b.bolt_id for b in repo.bolts_for_model(model)]
+        repo.start_vehicle("VIN1", model)
+        for tid in (1, 2, 3):
+            record(repo, "VIN1", bolts[0], ok=False, tightening_id=tid)
+        repo.ledger.record_command(at=datetime.now(UTC), user=LOCK_USER, source=LOCK_SOURCE,
+                                   kind=LOCK, vin="VIN1", bolt=bolts[0], comment="3 NOK")
+        record(repo, "VIN1", bolts[1], ok=False, tightening_id=4)
+        record(repo, "VIN1", bolts[1], tightening_id=5, kind=LOOSENING, torque_nm=8.0)
+        at = datetime.now(UTC)
+        record_entered(repo, vin="VIN1", bolt=bolts[2], ok=True, torque_nm=25.1,
+                       angle_deg=31.0, at=at, user="pete", source="cli",
+                       comment="controller shows OK")
+        repo.ledger.record_command(at=datetime.now(UTC), user="sam", source="cli",
+                                   kind=REFUSED, vin="VIN9", bolt=bolts[0],
+                                   comment="release: refused: not at the station")
+        repo.start_vehicle("VIN2", model)
+        for tid, bolt in enumerate(bolts, 10):
+            record(repo, "VIN2", bolt, tightening_id=tid)
+        repo.close_vehicle("VIN2")
+        repo.reopen_vehicle("VIN2", at=datetime.now(UTC), user="sam", source="cli",
+                            comment="rework")
+    code, out, err = run("db", "shift", "--since", since.isoformat(), "--db", db)
+    assert code == 1 and not err, err
+    [vin1] = [x for x in out.splitlines() if x.strip().startswith("VIN1")]
+    assert f"{bolts[0]} NOK and locked, {bolts[1]} loosened" in vin1, vin1
+    assert f"{len(bolts) - 3} missing ({', '.join(bolts[3:8])} and {len(bolts) - 8} more)" \
+        in vin1 and bolts[-1] not in vin1, vin1
+    [vin2] = [x for x in out.splitlines() if x.strip().startswith("VIN2")]
+    assert "left -" not in vin2 and "reopened" in vin2, vin2
+    assert f"enter-outcome {bolts[2]} of VIN1 by pete (cli) at " in out
+    assert "UTC: OK 25.1 Nm, 31.0 deg: controller shows OK" in out
+    assert f"refused {bolts[0]} of VIN9 by sam (cli)" in out and "not at the station" in out
+    doc = json.loads(run("db", "shift", "--since", since.isoformat(), "--db", db,
+                         "--json")[1])
+    assert [v["locked"] for v in doc["vehicles"]] == [[bolts[0]], []]
+    code, out, _ = run("db", "report", "VIN1", "--db", db)
+    [row] = [x for x in out.splitlines() if x.strip().startswith(f"{bolts[0]} ")]
+    assert "LOCKED" in row and "NOK" in row, row
 
 
 def test_a_shift_s_hand_over_names_a_held_bolt_once(run, db):

@@ -70,6 +70,16 @@ def test_a_third_nok_locks_the_screen_says_who_releases_and_a_supervisor_release
             "the refusal, amber")
         check_fits(page, "#bolts", "#headline", "#commands", "#locks")
         shots("operator-locked")
+        # the vehicle's page says the lock too (a supervisor's trial: "NOK" alone there, as
+        # a bolt that simply ended NOK), in its summary and on B05's row
+        page.get(f"http://127.0.0.1:{http_port}/vehicles/{VIN}")
+        page.wait(lambda p: p.count("tr.rundown[data-bolt=B05]") == 3, 30, "B05's rundowns")
+        assert "1 locked (B05)" in (page.text("#summary") or "")
+        assert "LOCKED: a supervisor" in page.js(
+            "return document.querySelector('tr.rundown[data-bolt=B05]').children[1]"
+            ".textContent")
+        page.get(f"http://127.0.0.1:{http_port}/")
+        page.wait(lambda p: _shown(p, "locks"), 30, "the locked panel again")
 
         # an operator is not offered the release; a supervisor is, and releases B05
         _login(page, "olga", PASSWORD)

@@ -246,6 +246,7 @@ async function showVehicle(vin) {
       `${(v.skipped || []).length} skipped, ${v.missing.length} missing` +
       ((v.loosen || []).length ? `, ${v.loosen.length} to tighten again (${v.loosen.join(", ")})` : "") +
       (Object.keys(v.held || {}).length ? `, ${Object.keys(v.held).length} held (${Object.keys(v.held).join(", ")})` : "") +
+      ((v.locked || []).length ? `, ${v.locked.length} locked (${v.locked.join(", ")})` : "") +
       (v.complete ? " (complete)" : "") +
       `; rundowns: ${counted(tightenings.length, "tightening")}, ${counted(nokRuns, "NOK result")}` +
       // the loosenings too, as db report counts them
@@ -266,7 +267,11 @@ async function showVehicle(vin) {
         // held: its result not known, a supervisor releases it or enters its outcome
         const hold = Object.prototype.hasOwnProperty.call(v.held || {}, b.bolt)
           ? v.held[b.bolt] : null;
-        cell(tr, i ? "" : b.status.toUpperCase() + then + (hold ? `, HELD: ${hold}` : ""),
+        // locked after its NOKs: waits for a supervisor's check and release (a supervisor's
+        // trial read it as a bolt that simply ended NOK)
+        const locked = (v.locked || []).includes(b.bolt)
+          ? ", LOCKED: a supervisor checks it and releases it" : "";
+        cell(tr, i ? "" : b.status.toUpperCase() + then + (hold ? `, HELD: ${hold}` : "") + locked,
              "status-" + (b.status === "nok" ? "NOK" : b.status));
         if (!r) {
           // a skip names who skipped it and why (the exports' skipped_by and comment); else
