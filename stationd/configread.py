@@ -176,8 +176,21 @@ def base_folder(path: Path) -> Path:
     for a symbolic link (``/etc/stationd/station.yaml -> /opt/line/station.yaml``, the
     natural install) the folder of the file it points to, where the files it names are kept
     with it (``/opt/line``), wherever the link is.  A file that cannot be looked at is taken
-    as no link: reading it says why."""
-    return path.resolve().parent if _is_link(path) else path.parent
+    as no link: reading it says why (a loop of links too: ``resolve`` raises RuntimeError
+    for it, which a command told as a traceback: a maintenance technician's trial)."""
+    target = _target(path)
+    return path.parent if target is None else target.parent
+
+
+def _target(path: Path) -> Path | None:
+    """The file the link ``path`` points to, or None: no link, or one that cannot be
+    followed (a loop of links: reading the file says why)."""
+    if not _is_link(path):
+        return None
+    try:
+        return path.resolve()
+    except (OSError, RuntimeError):
+        return None
 
 
 def _is_link(path: Path) -> bool:
@@ -201,9 +214,9 @@ def is_local(host: str) -> bool:
 def link_note(path: Path, what: str) -> str:
     """What a missing relative path's message adds when the file at ``path`` (``what``: "the
     station file") is a link: both names, and which folder was read."""
-    if not _is_link(path):
+    target = _target(path)
+    if target is None:
         return ""
-    target = path.resolve()
     return (f" (relative paths are read from {target.parent}, the folder of {target}, which "
             f"{what} {path} links to)")
 

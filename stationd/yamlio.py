@@ -143,6 +143,35 @@ def _walk(root: yaml.Node) -> Iterator[tuple[yaml.Node, int]]:
             todo.extend((part, depth + 1) for pair in node.value for part in pair)
 
 
+def _holding_itself(root: yaml.Node) -> yaml.Node | None:
+    """Where an alias names a collection it is inside of (``a: &x {b: *x}``: the key ``b``,
+    or the list holding the alias), or None: the document's graph has a cycle, which no
+    value can be built from.  A depth-first walk
+    without recursion (the depth already checked), the collections on the way kept."""
+    on_way: set[int] = set()
+    done: set[int] = set()
+    todo: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while todo:
+        node, leaving = todo.pop()
+        if leaving:
+            on_way.discard(id(node))
+            done.add(id(node))
+            continue
+        if not isinstance(node, yaml.CollectionNode) or id(node) in done:
+            continue
+        on_way.add(id(node))
+        todo.append((node, True))
+        # each child with where an alias to it is written: a mapping's key, a list itself
+        children = [(child, node) for child in node.value] \
+            if isinstance(node, yaml.SequenceNode) else \
+            [(part, key) for key, value in node.value for part in (key, value)]
+        for child, at in children:
+            if id(child) in on_way:
+                return at
+            todo.append((child, False))
+    return None
+
+
 def _too_deep(root: yaml.Node) -> yaml.Node | None:
     """The first collection nested deeper than :data:`MAX_DEPTH`, or None (a scalar nests
     nothing)."""
@@ -228,6 +257,11 @@ class YamlNode:
             raise ConfigError(f"collections nested more than {MAX_DEPTH} levels deep: not a "
                               "station's file", path=path,
                               line=int(deep.start_mark.line) + 1)
+        loop = _holding_itself(node)
+        if loop is not None:   # (a technician's trial: PyYAML's ConstructorError, a traceback)
+            raise ConfigError("an alias (*name) names a collection it is inside of: it would "
+                              "hold itself, not a station's file", path=path,
+                              line=int(loop.start_mark.line) + 1)
         return cls(node, path, "")
 
     # -- errors -------------------------------------------------------------------------

@@ -135,6 +135,14 @@ def test_localize_json_and_repeat(files, capsys):
      "latin1.yaml:2: not UTF-8 text (Latin-1 or Windows-1252?)"),
     (lambda d: ["status", "--url", "http://a b/"],
      "--url 'http://a b/': a URL has no spaces or control characters"),
+    # a maintenance technician's trial: tracebacks (RuntimeError, PyYAML's ConstructorError)
+    # where config check said one line
+    *((lambda d, c=c: [*c, "--config", str(d / "loop1.yaml")],
+       "loop1.yaml: cannot be reached (too many levels of symbolic links)")
+      for c in (["run"], ["status"], ["db", "report", "X"])),
+    *((lambda d, c=c: [*c, "--config", str(d / "anchor.yaml")],
+       "anchor.yaml:2: an alias (*name) names a collection it is inside of")
+      for c in (["run"], ["db", "report", "X"])),
 ])
 def test_bad_input_exits_2_with_one_line(files, capsys, make_args, needle):
     import os
@@ -157,6 +165,10 @@ def test_bad_input_exits_2_with_one_line(files, capsys, make_args, needle):
     (d / "bad_k.yaml").write_text("K: [[1, 0], [0, 1]]\nsize: [10, 10]\n")
     (d / "bad_config.yaml").write_text("vision:\n  centre_method: magic\n")
     (d / "deep.yaml").write_text("vision: " + "[" * 3000 + "]" * 3000 + "\n")
+    (d / "anchor.yaml").write_text("cameras: &a\n  x: *a\n")
+    for a, b in (("loop1.yaml", "loop2.yaml"), ("loop2.yaml", "loop1.yaml")):
+        if not (d / a).is_symlink():
+            (d / a).symlink_to(d / b)
     code, _, err = _run(capsys, *make_args(d))
     assert code == 2
     assert needle in err and err.count("\n") == 1 and "Traceback" not in err

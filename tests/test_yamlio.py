@@ -68,6 +68,26 @@ def test_collections_nested_too_deeply_are_one_error_not_a_recursion_crash(tmp_p
         YamlNode.load(path)
 
 
+@pytest.mark.parametrize("text, line", [
+    ("cameras: &a\n  x: *a\n", 2),                       # a mapping holding itself
+    ("pairs:\n  - &l [1, *l]\n", 2),                      # a list holding itself
+    ("a: &m\n  b:\n    c: [*m]\n", 3),                   # two levels down
+])
+def test_an_alias_to_a_collection_it_is_inside_of_is_one_error_at_its_line(text, line):
+    """A maintenance technician's trial: ``cameras: &a {x: *a}`` crashed every command but
+    ``config check`` with PyYAML's ConstructorError, and a reload told it without file or
+    line."""
+    with pytest.raises(ConfigError, match="names a collection it is inside of") as err:
+        YamlNode.parse(text, "anchor.yaml")
+    assert err.value.line == line
+
+
+def test_aliases_that_do_not_hold_themselves_read():
+    """An alias used twice, or to a sibling, is no loop."""
+    root = YamlNode.parse("base: &b {x: 1}\none: *b\ntwo: [*b, *b]\n", "ok.yaml")
+    assert root.value() == {"base": {"x": 1}, "one": {"x": 1}, "two": [{"x": 1}, {"x": 1}]}
+
+
 @pytest.mark.parametrize("levels", [65, 300])
 def test_block_collections_nested_deeper_than_the_limit_are_refused_at_their_line(levels):
     """Block style composes without recursion trouble, but every reader then walks the
