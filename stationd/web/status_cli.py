@@ -89,6 +89,20 @@ def lock_lines(st: dict[str, Any], via: str = "") -> list[str]:
         f"operator screen's Release form{who}"]
 
 
+#: a device fault's kind (``drivers.keeper.FaultKind``) as ``status`` says it before the
+#: reason (a technician's trial: "lift: reported the lift PLC reports a fault ...")
+FAULT_WORDS = {"timeout": "timed out", "garbage": "garbled", "refused": "refused",
+               "down": "down", "changed": "changed", "rejected": "rejected",
+               "reported": "in fault"}
+
+
+def _fault(d: dict[str, Any]) -> str:
+    """A device in fault: its kind in words, then why (``down: disk I/O error``)."""
+    kind, reason = str(d.get("kind") or ""), str(d.get("reason") or "")
+    word = FAULT_WORDS.get(kind, kind)
+    return f"{word}: {reason}" if word and reason else word or reason
+
+
 def line_lines(line: dict[str, Any] | None) -> list[str]:
     """The line database's forwarding in the operator screen's words (never a fault of the
     station: a status that left it out said nothing while 13 records waited)."""
@@ -160,7 +174,7 @@ def format_status(st: dict[str, Any], via: str = "") -> str:
         check = d.get("check") or {}   # a pair's calibration check: up is not trusted
         lines.append(f"device:   {name}: " + (
             "ok" if d["ok"] else "not opened yet" if d.get("kind") == "opening"
-            else f"{d.get('kind', '')} {d.get('reason', '')}")
+            else _fault(d))
             + (f"; {check['words']}" if d["ok"] and check and not check.get("trusted")
                else "")
             + ("; not registered into the vehicle frame: its frames localize nothing "

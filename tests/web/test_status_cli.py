@@ -21,7 +21,7 @@ def test_status_prints_state_vehicle_and_faulty_device(live_server, capsys):
     out = capsys.readouterr().out
     assert "state:    fault (lift: no answer" in out
     assert "vehicle:  WVWZZZ1JZ3W386752 (SEDAN): 0/4 bolts OK, 0 bolts ending NOK" in out
-    assert "device:   lift: timeout no answer" in out and "versions: aiohttp" in out
+    assert "device:   lift: timed out: no answer" in out and "versions: aiohttp" in out
 
 
 def test_status_says_what_each_count_counts_and_shows_skipped_bolts():
@@ -110,7 +110,7 @@ def test_status_says_not_opened_yet_while_the_database_keeps_the_devices_closed(
     assert main(["status", "--url", srv.url]) == 1
     out = capsys.readouterr().out
     assert "device:   lift: not opened yet" in out and "device:   wrench: not opened yet" in out
-    assert "device:   database: down disk I/O error" in out
+    assert "device:   database: down: disk I/O error" in out
 
 
 def test_status_refused_for_its_token_is_exit_3_with_the_hint(live_server, capsys):
@@ -291,7 +291,7 @@ def test_status_exits_1_while_a_device_reports_its_own_fault(live_server, capsys
     srv.call(_until(lambda: srv.server.view.state == State.WAITING_VEHICLE))
     assert main(["status", "--url", srv.url]) == 1
     out = capsys.readouterr().out
-    assert "device:   lift: reported the lift PLC reports a fault" in out
+    assert "device:   lift: in fault: the lift PLC reports a fault" in out
     assert out.splitlines()[1].startswith("state:    waiting for vehicle")
     srv.publish([DeviceHealth(device="lift", ok=True)])
     srv.call(_until(lambda: srv.server.view.device_health()["lift"]["ok"]))
