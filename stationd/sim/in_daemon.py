@@ -53,6 +53,7 @@ from stationd.sim.operator import (
     releasers,
     stand_ins,
     supervisor_of,
+    undriven,
 )
 from stationd.sim.vin import make_vin
 from stationd.sim.world import World
@@ -166,6 +167,12 @@ class SimulatedStation:
                 raise InputError(f"{cfg.path}: --sim-operator drives simulated devices only; "
                                  f"this station names real ones ({', '.join(real)}): run it "
                                  "without --sim-operator")
+            twins = undriven(cfg)
+            if twins:
+                raise InputError(f"{cfg.path}: --sim-operator drives the simulated lift and "
+                                 "Open Protocol controller (sim://lift, sim://wrench) only; "
+                                 f"this station names {', '.join(twins)}: name sim://wrench, "
+                                 "or run it without --sim-operator")
             if not supervisor:
                 check_people(cfg)     # before the world is built: one line, at the start
         self.operator, self.seed = operator, seed

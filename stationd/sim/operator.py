@@ -29,6 +29,7 @@ from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+from urllib.parse import urlsplit
 
 import numpy as np
 
@@ -72,6 +73,18 @@ def stand_ins(cfg: StationConfig) -> list[str]:
                                                 (Kind.WRENCH, cfg.wrench.url))
              if not simulated(kind, url)]
     return real
+
+
+def undriven(cfg: StationConfig) -> list[str]:
+    """The simulated devices the scripted operator cannot drive ("wrench sim+modbus://..."):
+    it raises the simulated PLC's lift and pulls the simulated Open Protocol controller's
+    trigger in this process (``sim://lift``, ``sim://wrench``: :func:`simulators`); another
+    twin (``sim+modbus://wrench``, a register-driven controller) it cannot reach.  Asked at
+    the start (a technician's trial: the daemon started, then its operator failed every 3 s
+    for good)."""
+    return [f"{kind} {url}" for kind, url in ((Kind.LIFT, cfg.lift.url),
+                                              (Kind.WRENCH, cfg.wrench.url))
+            if simulated(kind, url) and urlsplit(str(url)).scheme != "sim"]
 
 
 def releasers(cfg: StationConfig) -> list[str]:

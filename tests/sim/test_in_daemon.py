@@ -173,6 +173,19 @@ def test_the_scripted_operator_is_refused_for_a_station_with_real_devices(tmp_pa
     assert "--sim-operator drives simulated devices only" in err and "lift modbus-tcp" in err
 
 
+def test_the_scripted_operator_is_refused_for_a_register_driven_simulated_controller(
+        tmp_path, capsys):
+    """A maintenance technician's trial: ``sim+modbus://wrench`` with ``--sim-operator``
+    started, then the operator failed every 3 s for good ("needs the simulated lift and
+    controller"): it cannot pull that controller's trigger.  Refused at the start now."""
+    station = _station(tmp_path, wrench={"url": "sim+modbus://wrench"})
+    code = main(["run", "--config", str(station), "--sim-operator"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "\n" not in err and "Traceback" not in err
+    assert "--sim-operator drives the simulated lift and Open Protocol controller" in err
+    assert "wrench sim+modbus://wrench" in err
+
+
 def test_no_sim_supervisor_without_a_user_who_may_release_is_refused_at_the_start(
         tmp_path, capsys):
     """Issue 30: ``run --sim-operator --no-sim-supervisor`` on a station whose users cannot
