@@ -143,6 +143,21 @@ def _say_stream_limits(device: str, stream_socket: str, payload: int) -> None:
                     "net.core.rmem_max=8388608)", device, allowed / 1e6, payload / 1e6)
 
 
+def no_frame_words(timeout: float, trigger: str, broken: str) -> str:
+    """Why a grab got no frame, for the journal and ``probe``: frames that came broken
+    (``broken``: "2 broken buffers: timeout") are packets lost on the way, not a trigger
+    missed (a technician's trial read "call trigger() before grab()", a developer's hint, of
+    a camera that was triggered and sent its frame in pieces); no frame at all after a
+    software trigger is a trigger not taken."""
+    if broken:
+        return (f"no whole frame within {timeout:g} s: {broken} (frames arrive incomplete: "
+                "packets lost on the link; a GigE camera's packet size or the receive buffer "
+                "net.core.rmem_max, a USB3 port's bandwidth shared with another camera)")
+    hint = " after its software trigger (not taken, or the camera busy)" \
+        if trigger == "software" else ""
+    return f"no frame within {timeout:g} s{hint}"
+
+
 class _Link:
     """One opened camera, configured and acquiring into its buffer pool."""
 
@@ -502,10 +517,8 @@ class AravisCamera(CameraDevice):
         got = self._use(deadline, lambda link: link.grab(deadline))
         if isinstance(got, Frame):
             return got
-        hint = " (software trigger: call trigger() before grab())" \
-            if self.settings.trigger == "software" else ""
-        raise DeviceTimeoutError(f"no frame within {timeout:g} s{hint}"
-                                 + (f"; {got}" if got else ""), device=self.url)
+        raise DeviceTimeoutError(no_frame_words(timeout, self.settings.trigger, got),
+                                 device=self.url)
 
     def _set_exposure_us(self, exposure_us: float) -> float:
         applied = self._use(time.monotonic() + self.timeout,
