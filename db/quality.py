@@ -95,6 +95,7 @@ def spc(s: Session, model: str | None = None, since: datetime | None = None,
                   p.angle_min, p.angle_target, p.angle_max)
         g = groups.setdefault((mname, bolt, p.pset, *limits), {
             "torque": [], "angle": [], "limits": limits, "nok": 0, "entered": 0,
+            "entered_nok": 0,
             "version": p.version,
             "last": deque(maxlen=max(0, last))})
         g["last"].append(_point(rec))
@@ -104,6 +105,7 @@ def spc(s: Session, model: str | None = None, since: datetime | None = None,
             # read): counted, never measured: not in the capability (a new user's trial: an
             # entered 106.7 Nm in a bolt's mean)
             g["entered"] += rec.status == "ok"
+            g["entered_nok"] += rec.status != "ok"   # in "nok", said apart (not in n)
             continue
         if rec.torque_nm is not None:
             g["torque"].append(float(rec.torque_nm))
@@ -115,7 +117,7 @@ def spc(s: Session, model: str | None = None, since: datetime | None = None,
         mname, bolt, pset = key[:3]
         t_lo, t_aim, t_hi, a_lo, a_aim, a_hi = g["limits"]
         rows.append({"model": mname, "bolt": bolt, "pset": pset, "nok": g["nok"],
-                     "entered_ok": g["entered"],
+                     "entered_ok": g["entered"], "entered_nok": g["entered_nok"],
                      "parameter_version": g["version"],
                      "torque": capability(g["torque"], t_lo, t_hi),
                      "angle": capability(g["angle"], a_lo, a_hi),

@@ -596,9 +596,13 @@ def cmd_db_spc(args: argparse.Namespace) -> int:
         print(f"* from fewer than {ROUGH_N} results: a rough figure (Cpk of a few results is "
               "off by several tenths either way)")
     for r in doc["bolts"]:   # typed in from the controller's screen: counted apart
-        if r["entered_ok"]:
-            print(f"{r['model']} {r['bolt']} pset {r['pset'] or '-'}: {r['entered_ok']} OK "
-                  "entered by a person (not measured: not in the figures)")
+        # (a supervisor's trial: an entered NOK was in the NOK column, not in n, unsaid)
+        entered = [f"{r[k]} {w}" for k, w in (("entered_ok", "OK"), ("entered_nok", "NOK"))
+                   if r.get(k)]
+        if entered:
+            print(f"{r['model']} {r['bolt']} pset {r['pset'] or '-'}: {' and '.join(entered)} "
+                  "entered by a person (not measured: not in n and the figures"
+                  + ("; the NOK column counts them" if r.get("entered_nok") else "") + ")")
     for d in doc["trend"]:
         print(f"{d['day']} (UTC): {d['results']} results, {d['nok']} NOK "
               f"({100 * (d['nok_rate'] or 0):.1f} %)")

@@ -192,8 +192,17 @@ def test_an_ok_entered_by_a_person_is_counted_apart_and_not_in_the_capability(
     from stationd import cli
 
     assert cli.main(["db", "spc", "--db", url_of(tmp_path / "station.db")]) == 0
-    assert "SEDAN B1 pset 1: 1 OK entered by a person (not measured: not in the figures)" \
-        in capsys.readouterr().out
+    assert "SEDAN B1 pset 1: 1 OK entered by a person (not measured: not in n and the " \
+        "figures)" in capsys.readouterr().out
+    # an entered NOK: in the NOK column, said apart (a supervisor's trial: unsaid, it read
+    # as a measured NOK missing from n)
+    record_entered(repo, vin="VIN1", bolt="B1", ok=False, torque_nm=43.0, angle_deg=20.0,
+                   at=datetime.now(UTC), user="sam", source="cli", comment="shows NOK")
+    [b1] = [r for r in repo.spc()["bolts"] if r["bolt"] == "B1"]
+    assert (b1["torque"]["n"], b1["nok"], b1["entered_ok"], b1["entered_nok"]) == (6, 1, 1, 1)
+    assert cli.main(["db", "spc", "--db", url_of(tmp_path / "station.db")]) == 0
+    assert "SEDAN B1 pset 1: 1 OK and 1 NOK entered by a person (not measured: not in n and " \
+        "the figures; the NOK column counts them)" in capsys.readouterr().out
     # nothing in the span asked for: said, not a header alone (a supervisor's trial)
     assert cli.main(["db", "spc", "--db", url_of(tmp_path / "station.db"), "--since",
                      "2030-01-01"]) == 0
