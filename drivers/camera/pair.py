@@ -48,6 +48,13 @@ class FrameMissingError(StereoError):
         self.errors = errors
 
 
+def _bare(exc: DeviceError) -> str:
+    """A camera's error without the URL it begins with (said after it instead)."""
+    text = str(exc)
+    prefix = f"{exc.device}: " if exc.device else ""
+    return text[len(prefix):] if prefix and text.startswith(prefix) else text
+
+
 class StereoGrabber:
     """Grab (left, right) frames taken on one trigger, at most ``max_skew_s`` apart."""
 
@@ -60,7 +67,9 @@ class StereoGrabber:
         self.left = left
         self.right = right
         self.max_skew_s = float(max_skew_s)
-        self.name = name or f"stereo {left.url} + {right.url}"
+        #: what its errors begin with: the pair's name, or both URLs; "" for none (the
+        #: station names the pair itself before the reason: "p1: no frame from left ...")
+        self.name = f"stereo {left.url} + {right.url}" if name is None else name
 
     def grab(self, timeout: float | None = None) -> tuple[Frame, Frame]:
         """Trigger both cameras, then wait (``timeout`` seconds in all, default the slower
@@ -86,9 +95,12 @@ class StereoGrabber:
             except DeviceError as exc:
                 errors[side] = exc
         if errors:
-            detail = "; ".join(f"{side}: {exc}" for side, exc in errors.items())
-            raise FrameMissingError(f"no frame from {' and '.join(errors)} within {total:g} s "
-                                    f"({detail})", device=self.name, errors=errors)
+            # why first, then which camera (a technician's trial: the headline, cut at 160
+            # characters, showed both URLs and no reason); each camera's URL after its words
+            detail = "; ".join(f"{side}: {_bare(exc)} ({cams[side].url})"
+                               for side, exc in errors.items())
+            raise FrameMissingError(f"no frame from {' and '.join(errors)} within {total:g} s: "
+                                    f"{detail}", device=self.name or None, errors=errors)
         left, right = frames["left"], frames["right"]
         skew = abs(left.timestamp - right.timestamp)
         if skew > self.max_skew_s:

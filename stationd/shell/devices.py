@@ -84,7 +84,8 @@ class Devices:
             for cam in cams:
                 quiet(cam.close)
             raise
-        return Pair(cams, StereoGrabber(cams[0], cams[1], pc.max_skew_s))
+        # unnamed: the station says the pair's name before its reason
+        return Pair(cams, StereoGrabber(cams[0], cams[1], pc.max_skew_s, name=""))
 
     def reconnect_pair(self, name: str, pair: Pair) -> None:
         """Both cameras back and one grab: back only with frames its calibration describes

@@ -88,8 +88,24 @@ def test_a_missing_frame_names_the_side(left, right, missing):
 def test_a_closed_camera_is_a_missing_frame():
     g, a, _ = _pair([1.0], [1.0])
     a.close()
-    with pytest.raises(FrameMissingError, match="left: L: the camera is not open"):
+    with pytest.raises(FrameMissingError, match=r"left: the camera is not open \(L\)"):
         g.grab()
+
+
+def test_a_missing_frame_says_why_before_which_camera():
+    """A technician's trial: a camera lost mid-run made the operator's headline "FAULT: p1:
+    stereo aravis://...&region=0,0,64,48 +...", both URLs and no reason.  The reason comes
+    first, each camera's URL after its words; unnamed (the station names the pair), nothing
+    before it."""
+    from drivers.camera.pair import StereoGrabber
+
+    g, a, b = _pair([None, None], [1.0, 1.0])
+    with pytest.raises(FrameMissingError) as err:
+        StereoGrabber(a, b, 0.005, name="").grab(0.2)
+    assert str(err.value).startswith("no frame from left within 0.2 s: left: "), err.value
+    assert str(err.value).endswith(f"({a.url})") and str(err.value).count(a.url) == 1
+    with pytest.raises(FrameMissingError, match=rf"^stereo {a.url} \+ {b.url}: no frame"):
+        g.grab(0.2)
 
 
 def test_arguments():
