@@ -32,8 +32,10 @@ the login was refused.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import getpass
 import http.cookiejar
+import io
 import json
 import math
 import os
@@ -541,11 +543,26 @@ def cmd_status(args: argparse.Namespace) -> int:
     if not 0 < args.timeout <= 3600:    # NaN too
         raise InputError(f"--timeout {args.timeout:g}: expected seconds in (0, 3600]")
     target = find_station(args)
-    doc = identify(ApiClient(target.url, target.token, args.timeout), target, "status",
-                   out=sys.stderr if args.json else sys.stdout)
-    if isinstance(doc, int):
-        return doc
-    print(json.dumps(doc, indent=1) if args.json else format_status(doc, target.via()))
+    client = ApiClient(target.url, target.token, args.timeout)
+    if not args.json:
+        doc = identify(client, target, "status", out=sys.stdout)
+        if isinstance(doc, int):
+            return doc
+        print(format_status(doc, target.via()))
+    else:
+        # no status: a JSON object still, saying why (a technician's trial: a monitoring
+        # script got nothing on stdout); the words on stderr as ever
+        said = io.StringIO()
+        with contextlib.redirect_stderr(said):
+            doc = identify(client, target, "status", out=sys.stderr)
+        sys.stderr.write(said.getvalue())
+        if isinstance(doc, int):
+            why = said.getvalue().strip().splitlines()
+            print(json.dumps({"answered": False, "url": target.url, "exit": doc,
+                              "error": why[-1].removeprefix("stationd: ") if why else None},
+                             indent=1))
+            return doc
+        print(json.dumps(doc, indent=1))
     # the daemon's own verdict, as /healthz's 503 (a device reporting its fault too); a
     # daemon of an earlier version gives its state alone
     if doc.get("in_fault", doc.get("state") == State.FAULT):

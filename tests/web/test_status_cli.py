@@ -51,6 +51,20 @@ def test_status_without_daemon_is_one_line_exit_3(capsys):
     assert err.startswith("stationd: status: no daemon answers at") and err.count("\n") == 1
 
 
+def test_status_json_without_daemon_is_a_json_object_saying_why(capsys):
+    """A technician's trial: ``status --json`` of no daemon printed nothing on stdout, so a
+    monitoring script had no JSON to read; now an object saying it did not answer, and why
+    (the words on stderr as ever)."""
+    import json
+
+    assert main(["status", "--url", "http://127.0.0.1:9/", "--timeout", "2", "--json"]) == 3
+    out, err = capsys.readouterr()
+    doc = json.loads(out)
+    assert doc["answered"] is False and doc["exit"] == 3 and doc["url"] == "http://127.0.0.1:9/"
+    assert "no daemon answers at" in doc["error"] and doc["error"] in err
+    assert err.count("\n") == 1
+
+
 def test_a_station_file_without_an_http_section_is_said_to_serve_no_api(tmp_path, capsys):
     """A daemon runs on a station file without ``http:``: ``status --config`` said "no daemon
     answers ...: is stationd running?" of a daemon that runs (it serves no API).  The file
