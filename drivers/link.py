@@ -14,6 +14,7 @@ and connected again by ``reconnect()`` (the station's keeper decides when).
 
 from __future__ import annotations
 
+import difflib
 import errno
 import importlib
 import os
@@ -80,12 +81,28 @@ def bind_words(exc: BaseException) -> str:
 BAUD = (50, 4_000_000)
 
 
+#: the speeds serial ports are set to (Linux's termios speeds, and the few others adapters
+#: take): a speed off the list is a typo far more often than a device's (a technician's
+#: trial: ``baud=96000`` passed ``config check``, and the controller never answered)
+STANDARD_BAUD = (50, 75, 110, 134, 150, 200, 300, 600, 1200, 1800, 2400, 4800, 9600, 14400,
+                 19200, 28800, 38400, 57600, 76800, 115200, 230400, 250000, 460800, 500000,
+                 576000, 921600, 1000000, 1152000, 1500000, 2000000, 2500000, 3000000,
+                 3500000, 4000000)
+
+
 def baud_rate(text: str | int) -> int:
-    """A serial speed in baud (URL option converter); ValueError saying the range."""
+    """A serial speed in baud (URL option converter); OptionError saying the range, or the
+    standard speed meant."""
     value = int(text)
     if not BAUD[0] <= value <= BAUD[1]:
         raise OptionError(f"a serial speed is {BAUD[0]}-{BAUD[1]} baud (e.g. 9600, 19200, "
-                         "115200)")
+                          "115200)")
+    if value not in STANDARD_BAUD:
+        close = difflib.get_close_matches(str(value), [str(b) for b in STANDARD_BAUD], n=2,
+                                          cutoff=0.6)
+        meant = f"did you mean {' or '.join(close)}? " if close else ""
+        raise OptionError(f"{value} is not a standard serial speed ({meant}e.g. 9600, 19200, "
+                          "38400, 115200)")
     return value
 
 

@@ -87,8 +87,8 @@ class Wording:
 
 def _choice(*allowed: str) -> Callable[[str], str]:
     def conv(text: str) -> str:
-        if text.upper() not in allowed:
-            raise ValueError(text)
+        if text.upper() not in allowed:   # the accepted ones said (a technician's trial)
+            raise OptionError(f"one of {', '.join(allowed)}")
         return text.upper()
     return conv
 

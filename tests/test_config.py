@@ -333,6 +333,15 @@ def test_a_missing_to_vehicle_file_is_a_warning_not_an_error(sim_copy):
      "lift.url", "option baud='0' is not valid: a serial speed is 50-4000000 baud"),
     ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'openprotocol://10.0.0.9:0'}",
      "wrench.url", "the port is not a number in 1-65535"),
+    # a technician's trial: typos of a speed passed, a parity said no accepted values
+    ("wrench: {url: 'sim://wrench'}",
+     "wrench: {url: 'openprotocol+serial:///dev/ttyUSB9?baud=96000'}", "wrench.url",
+     "option baud='96000' is not valid: 96000 is not a standard serial speed (did you mean "
+     "9600"),
+    ("lift: {url: 'sim://lift'}", "lift: {url: 'modbus-rtu:///dev/ttyUSB0?baud=1920&unit=1'}",
+     "lift.url", "1920 is not a standard serial speed (did you mean 19200"),
+    ("lift: {url: 'sim://lift'}", "lift: {url: 'modbus-rtu:///dev/ttyUSB0?parity=X&unit=1'}",
+     "lift.url", "option parity='X' is not valid: one of N, E, O"),
 ])
 def test_device_urls_are_checked_without_opening_a_device(sim_copy, old, new, key, message):
     station = _edit(sim_copy / "station.yaml", old, new)

@@ -14,7 +14,7 @@ from typing import Any
 
 from drivers.counting import noun
 from drivers.endpoint import SerialEndpoint, TcpEndpoint
-from drivers.link import Link, SerialLink, TcpLink
+from drivers.link import Link, SerialLink, TcpLink, baud_rate
 from drivers.url import DeviceUrl, OptionError
 
 #: Open Protocol's port, where an ``openprotocol://`` URL without one connects
@@ -60,7 +60,7 @@ def link_from_url(url: DeviceUrl, kw: dict[str, Any]) -> tuple[Link, dict[str, A
     """The link ``url`` names and the driver's options (the URL's, overridden by ``kw``):
     ``openprotocol://HOST[:PORT]`` or ``openprotocol+serial:///dev/ttyUSB1?baud=9600``."""
     if url.scheme == "openprotocol+serial":
-        spec: Spec = {**OPTIONS, "baud": (int, 9600)}
+        spec: Spec = {**OPTIONS, "baud": (baud_rate, 9600)}
         opts = url.typed_options(spec, "openprotocol+serial:///dev/ttyUSB1?baud=9600")
         if url.host or not url.path:
             raise url.error("expected a device path: openprotocol+serial:///dev/ttyUSB1")
