@@ -577,6 +577,11 @@ class Repository:
             report = build_report(s, v)
         return self._with_held(report) if held else report
 
+    def knows_vehicle(self, vin: str) -> bool:
+        """Whether the database has the vehicle ``vin`` (exactly so written)."""
+        with self._session(write=False) as s:
+            return s.scalar(select(Vehicle.id).where(Vehicle.vin == vin).limit(1)) is not None
+
     def vin_in_other_case(self, vin: str) -> str | None:
         """The VIN the database has that is ``vin`` typed in another case, else None (what a
         refusal suggests: "did you mean ...?")."""

@@ -341,9 +341,13 @@ class Station:
         request = self._requests
         answer: asyncio.Future[Answer] = asyncio.get_running_loop().create_future()
         self.effects.answers[request] = answer
+        vin = getattr(command, "vin", None)
         try:
-            await asyncio.wait_for(self.feed(CommandIn(time.time(), request, command, issuer)),
-                                   timeout)
+            # what the database knows of the VIN named: a fact the core decides with
+            known = None if not isinstance(vin, str) else await asyncio.wait_for(
+                self._call(lambda: self.records.knows_vehicle(vin)), timeout)
+            await asyncio.wait_for(
+                self.feed(CommandIn(time.time(), request, command, issuer, known)), timeout)
             return await asyncio.wait_for(answer, timeout)
         finally:
             self.effects.answers.pop(request, None)

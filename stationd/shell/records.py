@@ -651,6 +651,15 @@ class Records:
             at=datetime.fromtimestamp(a.t, UTC), user=LOCK_USER, source=LOCK_SOURCE, kind=LOCK,
             vin=a.vin, bolt=a.bolt, comment=f"{a.count} NOK in a row")
 
+    def knows_vehicle(self, vin: str) -> bool | None:
+        """Whether the database has the vehicle ``vin``; None when it cannot say (not open,
+        failing): what a command naming a VIN is fed with (:class:`CommandIn`)."""
+        try:
+            return self._repo().knows_vehicle(vin)
+        except (DbError, DeviceError) as exc:
+            self.log.debug("vehicle %s not looked up: %s", vin, one_line(exc))
+            return None
+
     def operator(self) -> tuple[str, datetime] | None:
         """Who signed in at the station and has not signed out since, with when (the last
         sign-in or sign-out command decides; None: nobody)."""

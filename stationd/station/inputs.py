@@ -384,6 +384,10 @@ class CommandIn(Input):
     request: int
     command: Command
     issuer: Issuer
+    #: whether the database has the VIN the command names (the shell looked it up: a VIN
+    #: mistyped is refused as unknown, not told to reopen it: a supervisor's trial); None:
+    #: the command names none, or the database could not say
+    known: bool | None = None
 
 
 @dataclass(frozen=True)

@@ -104,6 +104,12 @@ def test_commands_through_the_daemon_are_authenticated_recorded_and_outlive_a_re
         d.wait_log("login refused for user 'sam'")
         got = _cli("reopen", VIN, "--user", "sam", "--url", url)   # open at the station
         assert got.returncode == 1 and f"vehicle {VIN} is open at the station" in got.stdout
+        # a VIN mistyped, which the database does not know: said so, not "reopen it" (the
+        # daemon looks the VIN up for the core: a supervisor's trial)
+        got = _cli("skip", "COMMANDVIN0000009", "B07", "--user", "sam", "--comment", "no",
+                   "--url", url)
+        assert got.returncode == 1 and "vehicle COMMANDVIN0000009 is not in the database" \
+            in got.stdout and "reopen" not in got.stdout, got.stdout
         for bad in (("--url", "not a url"), ("--timeout", "-1"), ("--timeout", "nan"),
                     ("--comment", "x" * 501)):
             got = _cli("skip", VIN, "B07", "--user", "olga", "--comment", "no access", "--url",

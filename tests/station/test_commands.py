@@ -112,6 +112,24 @@ def test_a_command_against_the_rules_is_refused_with_its_reason_and_changes_noth
         == [(command, issuer, why)]
 
 
+@pytest.mark.parametrize(("vin", "known", "why"), [
+    # a VIN the database does not know: unknown, not "reopen it" (a supervisor's trial: the
+    # advice to reopen a mistyped VIN led to a second refusal)
+    ("VIN8", False, Reason(Why.UNKNOWN_VEHICLE, vin="VIN8")),
+    # one it knows (a vehicle that left), or the database could not say: reopen is advice
+    ("VIN8", True, Reason(Why.OTHER_VEHICLE, vin="VIN8", here="VIN1")),
+    ("VIN8", None, Reason(Why.OTHER_VEHICLE, vin="VIN8", here="VIN1")),
+    # the station's VIN in another case: what was meant, whatever the database says
+    ("vin1", False, Reason(Why.OTHER_VEHICLE, vin="vin1", other="VIN1", here="VIN1")),
+])
+def test_a_vin_the_database_does_not_know_is_refused_as_unknown(vin, known, why):
+    d = _ready()
+    reply = _answer(d.alone(CommandIn(d.t, 7, SkipBolt(vin, "B2", "why"), SUPERVISOR, known)))
+    assert reply.answer.reason == why
+    assert ("reopen" in reason_words(why)) == (why.kind is Why.OTHER_VEHICLE
+                                               and why.other is None)
+
+
 def test_a_refused_sign_in_or_teach_is_answered_and_not_kept_as_a_refusal():
     """Only the commands that change a bolt or a vehicle leave a refusal in the records."""
     d = _ready()
