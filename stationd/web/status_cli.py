@@ -44,7 +44,8 @@ def status_url(url: str) -> str:
                                     "", ""))
 
 
-def counter_words(c: dict[str, Any], held: int = 0) -> str:
+def counter_words(c: dict[str, Any], held: int = 0,
+                  bolts: list[dict[str, Any]] | None = None) -> str:
     """The vehicle's bolts by their state now, in the operator screen's words: "3/50 bolts
     OK, 1 skipped, 1 bolt ending NOK, 2 held" (skipped and held only when there are any).
     Why: "3/50 done, 1 NOK" left the skipped bolts out and read as 1 NOK result, where it
@@ -54,7 +55,13 @@ def counter_words(c: dict[str, Any], held: int = 0) -> str:
     words = f"{c.get('done', 0)}/{c.get('total', 0)} bolts OK"
     if c.get("skipped"):
         words += f", {c['skipped']} skipped"
-    return words + f", {counted(nok, 'bolt')} ending NOK" + (f", {held} held" if held else "")
+    # which ones, each skipped one said (a supervisor's trial: a bolt skipped after its lock
+    # was "1 bolt ending NOK", no bolt named, where db report says "B39 skipped by pete")
+    named = [str(b["bolt"]) + (", skipped" if b.get("state") == "skipped" else "")
+             for b in bolts or [] if b.get("ends_nok")]
+    which = f" ({'; '.join(named)})" if named and len(named) == nok else ""
+    return words + f", {counted(nok, 'bolt')} ending NOK{which}" + \
+        (f", {held} held" if held else "")
 
 
 def lock_lines(st: dict[str, Any], via: str = "") -> list[str]:
@@ -150,7 +157,7 @@ def format_status(st: dict[str, Any], via: str = "") -> str:
     c = st.get("counters", {})
     said = "none" if not v else \
         f"{v['vin']} ({v['model']}{', rework' if v.get('rework') else ''}): " \
-        f"{counter_words(c, len(st.get('held_bolts') or []))}"
+        f"{counter_words(c, len(st.get('held_bolts') or []), st.get('bolts'))}"
     if v and v.get("at_station") is False:
         # closed: the next one is not loaded (rejected, or not raised yet); the last one was
         # read as the vehicle at the station (a line engineer's trial)

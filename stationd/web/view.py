@@ -183,7 +183,8 @@ class BoltState:
                 "torque_nm": self.torque_nm, "angle_deg": self.angle_deg,
                 "locked": self.locked, "loosen": self.loosen,
                 "loosen_pset": self.loosen_pset, "nok_count": self.nok_count,
-                "held": self.held, "check_first": self.check_first, "failed": self.failed}
+                "held": self.held, "check_first": self.check_first, "failed": self.failed,
+                "ends_nok": self.ends_nok}
 
 
 @dataclass

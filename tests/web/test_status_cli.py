@@ -36,6 +36,13 @@ def test_status_says_what_each_count_counts_and_shows_skipped_bolts():
     st["counters"] = {"total": 50, "done": 3, "nok": 2, "skipped": 0}
     assert "vehicle:  VIN1 (SEDAN): 3/50 bolts OK, 2 bolts ending NOK" \
         in format_status(st).splitlines()
+    # the bolts named, a skipped one said (a supervisor's trial: a bolt skipped after its
+    # lock was "1 bolt ending NOK", no bolt named)
+    st["bolts"] = [{"bolt": "B07", "state": "nok", "ends_nok": True},
+                   {"bolt": "B39", "state": "skipped", "ends_nok": True},
+                   {"bolt": "B40", "state": "skipped", "ends_nok": False}]
+    assert "vehicle:  VIN1 (SEDAN): 3/50 bolts OK, 2 bolts ending NOK (B07; B39, skipped)" \
+        in format_status(st).splitlines()
 
 
 async def _settle(srv):
