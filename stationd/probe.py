@@ -112,6 +112,17 @@ def _wait_tightening(w: Any, seconds: float) -> tuple[Any, list[dict[str, Any]]]
     return None, others
 
 
+def clock_words(offset: float | None) -> str:
+    """A controller's clock against this machine's, as ``probe wrench`` says it."""
+    if offset is None:
+        return "not known (it did not say its time, or keeps none)"
+    whole = round(offset + 0.5) if offset < 0 else round(offset)
+    if abs(offset) < 1.5:
+        return "agrees with this machine's (within 1 s)"
+    return f"{whole:+d} s from this machine's" + (
+        ": set the controller's clock" if abs(offset) >= 60 else "")
+
+
 def probe_wrench(args: argparse.Namespace) -> int:
     """Session start, optionally a pset selection (acknowledged or refused with the
     controller's code) and one tightening result (the tool is enabled for it, and disabled
@@ -129,6 +140,9 @@ def probe_wrench(args: argparse.Namespace) -> int:
         with locked(args, "wrench"), open_device(Kind.WRENCH, args.url,
                                                                timeout=args.timeout) as w:
             out["identity"] = w.identity()
+            # its clock as the session measured it (a technician checking a controller
+            # swapped in could not see it): None, not said or no clock
+            out["clock_offset_s"] = w.clock_offset_s
             out["acknowledged"] = args.pset is None  # the session itself was accepted
             if args.pset is not None:
                 try:
@@ -156,6 +170,7 @@ def probe_wrench(args: argparse.Namespace) -> int:
         sys.stdout.write(strict_json(out) + "\n")
     else:
         print(out["identity"])
+        print(f"  clock: {clock_words(out.get('clock_offset_s'))}")
         if args.pset is not None:   # why it was refused: the one line on stderr below
             print(f"  pset {args.pset}: " + ("acknowledged" if out["acknowledged"] else
                                              "REFUSED"))

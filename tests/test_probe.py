@@ -129,6 +129,24 @@ def test_probe_wrench_selects_a_pset_and_reports_one_result(capsys):
     assert {"angle_deg", "torque_status", "angle_status", "tightening_id", "vin"} <= set(r)
 
 
+def test_probe_wrench_says_the_controller_s_clock(capsys):
+    """A technician checking a controller swapped in could not see its clock (an INFO line
+    of the daemon's journal said it): the probe says it, text and JSON."""
+    from drivers.wrench.sim.controller import SimController
+    from stationd.probe import clock_words
+
+    with SimController(seed=3, clock_offset_s=-7200.0) as ctl:
+        port = ctl.listen_tcp()
+        assert main(["probe", "wrench", f"openprotocol://127.0.0.1:{port}"]) == 0
+        assert "  clock: -7200 s from this machine's: set the controller's clock" in \
+            capsys.readouterr().out.splitlines()
+        assert main(["probe", "wrench", f"openprotocol://127.0.0.1:{port}", "--json"]) == 0
+        assert -7202 < json.loads(capsys.readouterr().out)["clock_offset_s"] < -7198
+    assert clock_words(None).startswith("not known")
+    assert clock_words(-0.4) == "agrees with this machine's (within 1 s)"
+    assert clock_words(12.2) == "+12 s from this machine's"
+
+
 def test_probe_wrench_says_what_is_not_a_tightening_and_waits_for_one(capsys):
     """A batch increment, a loosening, a type nobody knows and a message that does not read
     came before the tightening: each printed as what it is (they printed as "result: OK

@@ -186,10 +186,19 @@ class Session:
         if _whole(offset) == 0:
             self._log.info("%s: controller clock agrees with the station's (within 1 s)",
                            self.device)
-        else:
+        elif abs(offset) < CLOCK_FAR_S:
             self._log.info("%s: controller clock %+d s from the station's", self.device,
                            _whole(offset))
+        else:   # an hour off is a clock not set, or a time zone: worth a technician's look
+            self._log.warning("%s: controller clock %+d s from the station's: set the "
+                              "controller's clock (the station places results fetched late "
+                              "through this offset meanwhile)", self.device, _whole(offset))
         return offset
+
+
+#: a controller clock this far from the station's is said as a warning (a technician's
+#: trial: a controller an hour or two off was an INFO line, easily missed), s
+CLOCK_FAR_S = 60.0
 
 
 def _whole(offset: float) -> int:

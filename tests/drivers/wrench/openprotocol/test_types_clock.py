@@ -65,11 +65,15 @@ def test_revision_2_carries_no_type(tmp_path):
     assert isinstance(got, TighteningResult) and got.result_type_code is None
 
 
-def test_the_controllers_clock_offset(tmp_path):
+def test_the_controllers_clock_offset(tmp_path, caplog):
     with SimController(seed=4, clock_offset_s=-3600.0) as sim, \
             connect(sim, "tcp", tmp_path) as w:
         offset = w.clock_offset_s
         assert offset is not None and -3602 < offset < -3598
+        # an hour off: a warning saying to set it (a technician's trial: an INFO line)
+        assert any(r.levelname == "WARNING" and "controller clock -3600 s from the "
+                   "station's: set the controller's clock" in r.getMessage()
+                   for r in caplog.records), caplog.text
         ready(w)
         t = sim.pull_trigger()
         got = w.wait_result(1.0)
