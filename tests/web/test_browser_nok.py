@@ -87,12 +87,23 @@ def test_a_third_nok_locks_the_screen_says_who_releases_and_a_supervisor_release
         assert not _shown(page, "release")
         page.click("#logout")
         page.wait(lambda p: _shown(p, "login"), 30, "logged out")
+        # at a panel PC's 1280x800 the locked panel shrinks Commands to a scroll box: the
+        # Release form is brought into its view as a supervisor logs in (a supervisor's
+        # trial: Reopen was shown, the form he came for out of sight), wherever the box was
+        page.size(1280, 800)
+        page.js("document.getElementById('commands').scrollTop = 1e6")
         _login(page, "sam", PASSWORD)
         page.wait(lambda p: (p.text("#who") or "").startswith("sam"), 30, "sam logged in")
         assert _shown(page, "release")
         page.wait(lambda p: p.js("return [...document.querySelectorAll("
                                  "'#release-bolt option')].map(o => o.value)") == ["", "B05"],
                   30, "B05 offered for release")
+        page.wait(lambda p: p.js(
+            "const p = document.getElementById('commands').getBoundingClientRect(),"
+            " r = document.getElementById('release').getBoundingClientRect();"
+            " return r.top >= p.top - 1 && r.bottom <= p.bottom + 1"), 30,
+            "the Release form in the Commands panel's view")
+        page.size(1920, 1080)
         shown = page.text("#cmd-answer") or ""
         page.js("document.getElementById('release-bolt').value = 'B05';"
                 "document.getElementById('release-comment').value = 'thread checked';"

@@ -55,6 +55,23 @@
     q("sign-out").hidden = !op;
     q("sign-out").textContent = op && op !== me ? `Sign out ${op}` : "Sign out";
   }
+  // a bolt locked or held and a user who may release it: the Release form brought into
+  // the Commands panel's view, once for each set of bolts and user (a supervisor's trial at
+  // 1280x800: the locked panel shrank Commands to a scroll box showing Reopen, the form he
+  // came for out of sight)
+  let shownFor = "";
+  function toRelease() {
+    const key = q("release-bolt").dataset.key || "";
+    if (!mayRelease || !key || q("release").hidden) { shownFor = ""; return; }
+    if (shownFor === `${me} ${key}`) return;
+    shownFor = `${me} ${key}`;
+    const panel = q("commands"), form = q("release");
+    const top = form.getBoundingClientRect().top - panel.getBoundingClientRect().top
+      - panel.clientTop + panel.scrollTop;   // the form's place in the panel's content
+    if (top < panel.scrollTop || top + form.offsetHeight > panel.scrollTop + panel.clientHeight) {
+      panel.scrollTop = Math.max(0, top - 4);
+    }
+  }
   q("sign-in").addEventListener("click", () => command({kind: "sign-in", comment: ""}));
   q("sign-out").addEventListener("click", () => command({kind: "sign-out", comment: ""}));
   setInterval(() => {
@@ -64,6 +81,7 @@
          (mayRelease || (!b.locked && !b.held)));
     fill("release-bolt", (b) => b.locked);
     fill("enter-bolt", (b) => b.held);
+    toRelease();
     // a bolt tightened (OK, or NOK last) and not to be loosened already: rework
     fill("loosen-bolt", (b) => (b.state === "ok" || b.state === "nok") && !b.loosen && !b.locked);
   }, 500);
