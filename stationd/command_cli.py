@@ -83,6 +83,8 @@ class Target:
     #: the station file has no ``http:`` section: its daemon serves no API (a command that
     #: finds nothing says so, not "is stationd running?" of a daemon that runs)
     no_api: bool = False
+    #: the address is the station file's ``http.listen`` (no ``--url``)
+    from_file: bool = False
 
     def via(self) -> str:
         """How the command reached the station, for a command line it says to give again
@@ -149,7 +151,8 @@ def find_station(args: argparse.Namespace) -> Target:
     if token is None and cfg.http is not None:
         token = cfg.http.token
     return Target(url or daemon_url(cfg), token, station_identity(cfg), config,
-                  no_api=url is None and cfg.http is None)
+                  no_api=url is None and cfg.http is None,
+                  from_file=url is None and cfg.http is not None)
 
 
 def _http_section(path: str) -> Any:
@@ -413,6 +416,15 @@ def _unreachable(target: Target, exc: BaseException, what: str = "") -> int:
         f"{target.config} has no http: section, so its daemon serves no API for stationd "
         "status and the commands: add one (http: {listen: '127.0.0.1:8080'}) and reload, or "
         "give --url")
+    if hint is None and target.from_file:
+        # the file's address, which a daemon whose reload of it was refused does not serve
+        # (a technician's trial: http.listen moved to a port in use, the reload refused, the
+        # daemon alive on its old port, and status said only "is stationd running?")
+        why = network_words(exc)
+        hint = ("is stationd running? " if why == "connection refused" else
+                "is stationd running there? ") + \
+            "(a daemon whose reload of this file was refused serves the address it read " \
+            "before: its journal says which; --url to ask it there)"
     sys.stderr.write(f"stationd: {what + ': ' if what else ''}"
                      f"{unreachable_words(target.url, exc, hint)}\n")
     return EXIT_UNREACHABLE

@@ -103,6 +103,14 @@ def test_a_station_file_without_an_http_section_is_said_to_serve_no_api(tmp_path
         config=str(Path(__file__).parents[2] / "config" / "sim" / "station.yaml"), url=None,
         token=None))
     assert not with_http.no_api
+    # its http.listen asked and nothing there: a daemon whose reload was refused may serve
+    # the address it read before (a technician's trial: "is stationd running?" alone)
+    assert _unreachable(with_http, ConnectionRefusedError(), "status") == 3
+    err = capsys.readouterr().err
+    assert "is stationd running? (a daemon whose reload of this file was refused serves " \
+        "the address it read before: its journal says which; --url to ask it there)" in err
+    assert _unreachable(given, ConnectionRefusedError(), "status") == 3
+    assert "reload" not in capsys.readouterr().err     # --url given: said as before
 
 
 @pytest.mark.parametrize("url", ["ftp://x/", "localhost:8080", "http://[::1",
