@@ -46,7 +46,7 @@ from stationd.shell.records import STATION_FAULTS, Records, Unsaved
 from stationd.shell.sdnotify import Notifier
 from stationd.shell.tracking import FrameStore, Tracker
 from stationd.station.actions import Action, NoteLock, Publish
-from stationd.station.commands import Answer, Command, Issuer
+from stationd.station.commands import Answer, Command, Issuer, ReopenVehicle
 from stationd.station.core import StationCore
 from stationd.station.events import State
 from stationd.station.inputs import (
@@ -77,6 +77,9 @@ Keeper = (DeviceKeeper[Lift] | DeviceKeeper[Wrench] | DeviceKeeper[Pair]
 TICK_S = 0.5
 #: how often the SQLite file is checked to be the one opened (a stat: cheap)
 FILE_CHECK_S = 2.0
+#: the longest a command waits for the database to say whether it knows the VIN named (a
+#: database slow or hanging: the command is decided without, as before)
+KNOWS_TIMEOUT_S = 1.0
 #: what opening a device may raise besides (a port that does not exist, a bad option)
 OPEN_ERRORS: tuple[type[Exception], ...] = (*STATION_FAULTS, OSError, ValueError)
 
@@ -341,16 +344,29 @@ class Station:
         request = self._requests
         answer: asyncio.Future[Answer] = asyncio.get_running_loop().create_future()
         self.effects.answers[request] = answer
-        vin = getattr(command, "vin", None)
         try:
-            # what the database knows of the VIN named: a fact the core decides with
-            known = None if not isinstance(vin, str) else await asyncio.wait_for(
-                self._call(lambda: self.records.knows_vehicle(vin)), timeout)
-            await asyncio.wait_for(
-                self.feed(CommandIn(time.time(), request, command, issuer, known)), timeout)
+            known, meant = await self._knows(command)
+            await asyncio.wait_for(self.feed(
+                CommandIn(time.time(), request, command, issuer, known, meant)), timeout)
             return await asyncio.wait_for(answer, timeout)
         finally:
             self.effects.answers.pop(request, None)
+
+    async def _knows(self, command: Command) -> tuple[bool | None, str | None]:
+        """Whether the database has the VIN ``command`` names, and the one meant in another
+        case (:meth:`Records.knows_vehicle`): facts the core decides a refusal with (a VIN
+        mistyped is unknown, not one to reopen).  Asked only where they tell: a VIN other
+        than the vehicle at the station's, of a bolt command (a reopen's own record says
+        it), the database up; within a second (else not known: None)."""
+        vin = getattr(command, "vin", None)
+        if not isinstance(vin, str) or isinstance(command, ReopenVehicle) or vin == self.vin \
+                or not self.database_keeper.up:
+            return None, None
+        try:
+            return await asyncio.wait_for(self._call(lambda: self.records.knows_vehicle(vin)),
+                                          KNOWS_TIMEOUT_S)
+        except TimeoutError:
+            return None, None
 
     async def _call(self, fn: Callable[[], T]) -> T:
         return await asyncio.get_running_loop().run_in_executor(self._pool, fn)

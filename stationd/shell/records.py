@@ -651,14 +651,18 @@ class Records:
             at=datetime.fromtimestamp(a.t, UTC), user=LOCK_USER, source=LOCK_SOURCE, kind=LOCK,
             vin=a.vin, bolt=a.bolt, comment=f"{a.count} NOK in a row")
 
-    def knows_vehicle(self, vin: str) -> bool | None:
-        """Whether the database has the vehicle ``vin``; None when it cannot say (not open,
+    def knows_vehicle(self, vin: str) -> tuple[bool | None, str | None]:
+        """Whether the database has the vehicle ``vin``, and the VIN it has that is ``vin``
+        typed in another case (else None); (None, None) when it cannot say (not open,
         failing): what a command naming a VIN is fed with (:class:`CommandIn`)."""
         try:
-            return self._repo().knows_vehicle(vin)
+            repo = self._repo()
+            if repo.knows_vehicle(vin):
+                return True, None
+            return False, repo.vin_in_other_case(vin)
         except (DbError, DeviceError) as exc:
             self.log.debug("vehicle %s not looked up: %s", vin, one_line(exc))
-            return None
+            return None, None
 
     def operator(self) -> tuple[str, datetime] | None:
         """Who signed in at the station and has not signed out since, with when (the last

@@ -386,8 +386,10 @@ class CommandIn(Input):
     issuer: Issuer
     #: whether the database has the VIN the command names (the shell looked it up: a VIN
     #: mistyped is refused as unknown, not told to reopen it: a supervisor's trial); None:
-    #: the command names none, or the database could not say
+    #: not asked (no VIN, the one at the station, a reopen), or the database could not say
     known: bool | None = None
+    #: the VIN the database has that the one named is in another case (what was meant)
+    meant: str | None = None
 
 
 @dataclass(frozen=True)

@@ -53,7 +53,7 @@ class OrderRules(FaultRules):
 
     def _on_command_in(self, ev: CommandIn) -> list[Action]:
         """A command is checked against the rules now and takes effect once recorded."""
-        why = self._refusal(ev.command, ev.issuer, ev.known)
+        why = self._refusal(ev.command, ev.issuer, ev.known, ev.meant)
         if why is not None:
             acts: list[Action] = [Reply(Answer(ev.request, ev.command, ev.issuer, why))]
             if isinstance(ev.command, AUDITED):   # would have changed a bolt or a vehicle:
@@ -69,10 +69,10 @@ class OrderRules(FaultRules):
         self._commands[ev.request] = ev
         return [RecordCommand(ev.request, ev.command, ev.issuer, ev.t)]
 
-    def _refusal(self, cmd: Command, who: Issuer, known: bool | None = None
-                 ) -> Reason | None:
+    def _refusal(self, cmd: Command, who: Issuer, known: bool | None = None,
+                 meant: str | None = None) -> Reason | None:
         """Why ``cmd`` may not be carried out now, or None (``known``: whether the database
-        has the VIN it names, :class:`CommandIn`)."""
+        has the VIN it names, ``meant`` the one it has in another case: :class:`CommandIn`)."""
         right = RIGHT.get(type(cmd))
         if right is not None and right not in who.rights:
             asked = KIND[type(cmd)]
@@ -99,7 +99,7 @@ class OrderRules(FaultRules):
             # typed in lower case: said, not taken (a command names exactly what it acts on)
             if known is False and cmd.vin.upper() != self.vin:
                 # a VIN the database does not know: not "reopen it" (a supervisor's trial)
-                return Reason(Why.UNKNOWN_VEHICLE, vin=cmd.vin)
+                return Reason(Why.UNKNOWN_VEHICLE, vin=cmd.vin, other=meant)
             return Reason(Why.OTHER_VEHICLE, vin=cmd.vin,
                           other=self.vin if cmd.vin.upper() == self.vin else None,
                           reopened=True if cmd.vin in self._reopened else None,

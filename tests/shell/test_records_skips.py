@@ -122,3 +122,21 @@ def test_a_refused_command_is_kept_as_a_refusal_that_changes_nothing(tmp_path: P
     again = records.load_vehicle(LoadVehicle(12, "VIN1"))
     assert isinstance(again, VehicleLoaded) and again.locked == frozenset({"B1"})
     records.repo.close()
+
+
+def test_the_records_say_whether_the_database_knows_a_vin_and_the_one_meant(
+        tmp_path: Path) -> None:
+    """What a command naming a VIN is fed with (a supervisor's trial: a mistyped VIN was
+    told to be reopened): known, unknown with the VIN meant in another case, or not
+    known at all with the database not open."""
+    bolts = tmp_path / "bolts.yaml"
+    bolts.write_text(BASE)
+    records = Records(StationConfig(database_url=url_of(tmp_path / "st.db"), bolts_path=bolts))
+    assert records.knows_vehicle("VINX1") == (None, None)      # not open: cannot say
+    records.open()
+    records.load_vehicle(LoadVehicle(12, "VINX1"))
+    assert records.knows_vehicle("VINX1") == (True, None)
+    assert records.knows_vehicle("vinx1") == (False, "VINX1")
+    assert records.knows_vehicle("NOPE1") == (False, None)
+    assert records.repo is not None
+    records.repo.close()

@@ -130,6 +130,17 @@ def test_a_vin_the_database_does_not_know_is_refused_as_unknown(vin, known, why)
                                                and why.other is None)
 
 
+def test_a_vin_known_in_another_case_is_refused_with_what_was_meant():
+    """The database has VIN8, ``vin8`` was typed: "did you mean VIN8?" (a review: the
+    records' refusal said it, the core's new one did not)."""
+    d = _ready()
+    reply = _answer(d.alone(CommandIn(d.t, 7, SkipBolt("vin8", "B2", "why"), SUPERVISOR,
+                                      False, "VIN8")))
+    why = Reason(Why.UNKNOWN_VEHICLE, vin="vin8", other="VIN8")
+    assert reply.answer.reason == why
+    assert reason_words(why) == "vehicle vin8 is not in the database (did you mean VIN8?)"
+
+
 def test_a_refused_sign_in_or_teach_is_answered_and_not_kept_as_a_refusal():
     """Only the commands that change a bolt or a vehicle leave a refusal in the records."""
     d = _ready()
