@@ -14,9 +14,9 @@ and connected again by ``reconnect()`` (the station's keeper decides when).
 
 from __future__ import annotations
 
-import difflib
 import errno
 import importlib
+import math
 import os
 import select
 import socket
@@ -81,29 +81,51 @@ def bind_words(exc: BaseException) -> str:
 BAUD = (50, 4_000_000)
 
 
-#: the speeds serial ports are set to (Linux's termios speeds, and the few others adapters
-#: take): a speed off the list is a typo far more often than a device's (a technician's
-#: trial: ``baud=96000`` passed ``config check``, and the controller never answered)
+#: the speeds serial ports are set to (Linux's termios speeds, Windows' CBR speeds and the
+#: few others adapters take): a speed off the list is more often a typo than a device's (a
+#: technician's trial: ``baud=96000`` passed ``config check``, and the controller never
+#: answered): ``config check`` warns of one (:func:`baud_warning`), the driver takes it
 STANDARD_BAUD = (50, 75, 110, 134, 150, 200, 300, 600, 1200, 1800, 2400, 4800, 9600, 14400,
-                 19200, 28800, 38400, 57600, 76800, 115200, 230400, 250000, 460800, 500000,
-                 576000, 921600, 1000000, 1152000, 1500000, 2000000, 2500000, 3000000,
-                 3500000, 4000000)
+                 19200, 28800, 38400, 56000, 57600, 76800, 115200, 128000, 230400, 250000,
+                 256000, 460800, 500000, 576000, 921600, 1000000, 1152000, 1500000, 2000000,
+                 2500000, 3000000, 3500000, 4000000)
 
 
 def baud_rate(text: str | int) -> int:
-    """A serial speed in baud (URL option converter); OptionError saying the range, or the
-    standard speed meant."""
+    """A serial speed in baud (URL option converter); OptionError saying the range."""
     value = int(text)
     if not BAUD[0] <= value <= BAUD[1]:
         raise OptionError(f"a serial speed is {BAUD[0]}-{BAUD[1]} baud (e.g. 9600, 19200, "
                           "115200)")
-    if value not in STANDARD_BAUD:
-        close = difflib.get_close_matches(str(value), [str(b) for b in STANDARD_BAUD], n=2,
-                                          cutoff=0.6)
-        meant = f"did you mean {' or '.join(close)}? " if close else ""
-        raise OptionError(f"{value} is not a standard serial speed ({meant}e.g. 9600, 19200, "
-                          "38400, 115200)")
     return value
+
+
+def baud_warning(value: int) -> str | None:
+    """Words for a speed off :data:`STANDARD_BAUD` naming the standard ones meant: those a
+    digit's typo away (96000: 9600), else the nearest (a factor, not digits: 128500:
+    128000); None for a standard speed."""
+    if value in STANDARD_BAUD:
+        return None
+    # a digit changed: only a speed near it (96000 is not 56000); one added or left out:
+    # whatever it makes (96000: 9600); at most two said, the closest first
+    typed = sorted((b for b in STANDARD_BAUD if _one_edit(str(value), str(b)) and (
+        len(str(b)) != len(str(value)) or abs(math.log(value / b)) < math.log(1.5))),
+        key=lambda b: abs(math.log(value / b)))
+    nearest = min(STANDARD_BAUD, key=lambda b: abs(math.log(value / b)))
+    meant = [*typed, *([nearest] if nearest not in typed else [])][:2]
+    return (f"baud={value} is not a standard serial speed: "
+            f"{' or '.join(str(b) for b in meant)}? (right if the device's manual says "
+            f"{value})")
+
+
+def _one_edit(a: str, b: str) -> bool:
+    """Whether ``a`` becomes ``b`` by one digit changed, added or left out."""
+    if abs(len(a) - len(b)) > 1 or a == b:
+        return False
+    if len(a) == len(b):
+        return sum(x != y for x, y in zip(a, b, strict=True)) == 1
+    short, long = (a, b) if len(a) < len(b) else (b, a)
+    return any(long[:i] + long[i + 1:] == short for i in range(len(long)))
 
 
 def open_serial(port: str, *, baudrate: int, parity: str = "N", stopbits: int = 1,

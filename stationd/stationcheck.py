@@ -23,6 +23,7 @@ import numpy as np
 
 from db.location import sqlite_path
 from drivers.counting import counted
+from drivers.errors import DriverError
 from drivers.wrench import takes_targets
 from stationd.config import STATE_DIRECTORY, StationConfig, read_all, read_station
 from stationd.errors import ConfigError, InputError
@@ -172,6 +173,7 @@ def check_station(path: str | Path, *, header: bool = True) -> StationCheck:
             "text (the client says 'Sending plain-text password'); offer sign or encrypt too "
             "(with certificates)"))
     warnings += _exposure_warnings(cfg, top, p)
+    warnings += _baud_warnings(cfg, top)
     return StationCheck(str(p), cfg if not errors else None, errors, warnings, bolts)
 
 
@@ -257,6 +259,24 @@ def _in_missing_state_directory(url: str) -> bool:
 
     return sqlite_problem(url, read_header=False, as_writer=False) == \
         missing_folder(STATE_DIRECTORY)
+
+
+def _baud_warnings(cfg: StationConfig, top: Mapping[str, YamlNode]) -> list[ConfigError]:
+    """A serial link's speed off the standard ones (the lift's, the controller's): taken,
+    but said with the speed meant (a technician's trial: ``baud=96000`` passed the check)."""
+    from drivers.link import baud_warning
+    from drivers.url import parse_url
+
+    out = []
+    for section, url in (("lift", cfg.lift.url), ("wrench", cfg.wrench.url)):
+        try:
+            baud = int(parse_url(str(url)).options.get("baud", ""))
+        except (DriverError, ValueError):
+            continue      # none, or an error told already
+        words = baud_warning(baud)
+        if words is not None and section in top:
+            out.append(top[section].mapping(("url",), required=("url",))["url"].error(words))
+    return out
 
 
 def _not_mine_warning(url: str, path: str) -> ConfigError | None:

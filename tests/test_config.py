@@ -333,15 +333,12 @@ def test_a_missing_to_vehicle_file_is_a_warning_not_an_error(sim_copy):
      "lift.url", "option baud='0' is not valid: a serial speed is 50-4000000 baud"),
     ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'openprotocol://10.0.0.9:0'}",
      "wrench.url", "the port is not a number in 1-65535"),
-    # a technician's trial: typos of a speed passed, a parity said no accepted values
-    ("wrench: {url: 'sim://wrench'}",
-     "wrench: {url: 'openprotocol+serial:///dev/ttyUSB9?baud=96000'}", "wrench.url",
-     "option baud='96000' is not valid: 96000 is not a standard serial speed (did you mean "
-     "9600"),
-    ("lift: {url: 'sim://lift'}", "lift: {url: 'modbus-rtu:///dev/ttyUSB0?baud=1920&unit=1'}",
-     "lift.url", "1920 is not a standard serial speed (did you mean 19200"),
+    # a technician's trial: a parity said no accepted values
     ("lift: {url: 'sim://lift'}", "lift: {url: 'modbus-rtu:///dev/ttyUSB0?parity=X&unit=1'}",
      "lift.url", "option parity='X' is not valid: one of N, E, O"),
+    ("wrench: {url: 'sim://wrench'}",
+     "wrench: {url: 'openprotocol+serial:///dev/ttyUSB9?baud=0'}", "wrench.url",
+     "option baud='0' is not valid: a serial speed is 50-4000000 baud"),
 ])
 def test_device_urls_are_checked_without_opening_a_device(sim_copy, old, new, key, message):
     station = _edit(sim_copy / "station.yaml", old, new)
@@ -352,6 +349,36 @@ def test_device_urls_are_checked_without_opening_a_device(sim_copy, old, new, ke
     with pytest.raises(ConfigError, match=re.escape(message)):
         load_station_config(station, station=True)
     load_station_config(station)  # other readers of a station file need not open its devices
+
+
+@pytest.mark.parametrize(("new", "key", "words"), [
+    ("wrench: {url: 'openprotocol+serial:///dev/ttyUSB9?baud=96000'}", "wrench.url",
+     "baud=96000 is not a standard serial speed: 9600 or 115200? (right if the device's "
+     "manual says 96000)"),
+    ("lift: {url: 'modbus-rtu:///dev/ttyUSB0?baud=1920&unit=1'}", "lift.url",
+     "baud=1920 is not a standard serial speed: 19200 or 1800?"),
+])
+def test_a_serial_speed_off_the_standard_ones_is_a_warning_naming_the_one_meant(
+        sim_copy, new, key, words):
+    """A technician's trial: ``baud=96000`` passed ``config check`` and the controller never
+    answered.  Taken (a device may use an odd speed: 31250, 187500), but said, with the
+    standard speed a digit's typo away, or the nearest."""
+    old = "wrench: {url: 'sim://wrench'}" if new.startswith("wrench") else \
+        "lift: {url: 'sim://lift'}"
+    station = _edit(sim_copy / "station.yaml", old, new)
+    check = check_station(station)
+    assert check.errors == []
+    [warning] = [w for w in check.warnings if w.key == key]
+    assert words in str(warning) and warning.line == _line(station, new.split("'")[1])
+    load_station_config(station, station=True)     # the daemon takes it
+
+
+def test_standard_serial_speeds_and_odd_ones_a_device_uses_are_not_typos():
+    from drivers.link import baud_warning
+
+    assert all(baud_warning(b) is None for b in (9600, 19200, 115200, 56000, 256000))
+    assert baud_warning(31250) is not None      # taken, but said (MIDI's: rare on a line)
+    assert "standard serial speed: 115200 or" in (baud_warning(115000) or "")  # nearest first
 
 
 DB = "database: {url: 'sqlite:///stationd-sim.db'}"
