@@ -63,6 +63,9 @@ class VehicleInfo:
     #: when it first left the station (its first close, kept through reworks: ``ended_at`` is
     #: the last); None: never closed, or closed before closings were kept (migration 0021)
     first_closed_at: datetime | None = None
+    #: when it last left the station (its last close kept): a vehicle reopened for rework
+    #: and not back yet left then (``ended_at`` is None since the reopening)
+    last_closed_at: datetime | None = None
 
     @property
     def rework(self) -> bool:
@@ -301,8 +304,9 @@ def build_report(s: Session, v: Vehicle) -> VehicleReport:
     waiting = v.ended_at is None and v.reopened_at is not None and (
         here is None or here.value != v.vin)
     first = min((c.closed_at for c in closes), default=None)
+    last_close = max((c.closed_at for c in closes), default=None)
     info = VehicleInfo(v.vin, v.model.name, v.started_at, v.ended_at, v.reopened_at, waiting,
-                       first)
+                       first, last_close)
     tightenings = [rec for rec, _ in records if (rec.kind or TIGHTENING) == TIGHTENING]
     return VehicleReport(info, tuple(results), len(tightenings),
                          sum(1 for rec in tightenings if rec.status == NOK),

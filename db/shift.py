@@ -16,7 +16,7 @@ from sqlalchemy.orm import Session
 
 from db.kinds import ENTER_OUTCOME, LOOSENING, REFUSED
 from db.ledger import CommandEntry
-from db.models import CommandRecord, TighteningRecord, Vehicle, VehicleClosing
+from db.models import Bolt, CommandRecord, TighteningRecord, Vehicle, VehicleClosing
 from db.report import VehicleReport
 from db.repository import Repository
 
@@ -39,7 +39,7 @@ class Shift:
     commands: tuple[CommandEntry, ...]
     #: what each entered outcome entered (command id -> "OK 25.1 Nm, 31.0 deg"; a
     #: supervisor's trial: the hand-over gave the comment alone, not the verdict)
-    entered: dict[int, str] = field(default_factory=dict)
+    entered: dict[int, str] = field(default_factory=dict, hash=False)
 
 
 def shift(repo: Repository, since: datetime, until: datetime) -> Shift:
@@ -71,7 +71,9 @@ def _entered(s: Session, c: CommandEntry) -> str | None:
     r = s.execute(select(TighteningRecord.status, TighteningRecord.torque_nm,
                          TighteningRecord.angle_deg, TighteningRecord.kind)
                   .join(Vehicle, Vehicle.id == TighteningRecord.vehicle_id)
-                  .where(Vehicle.vin == c.vin, TighteningRecord.entered_by == c.user,
+                  .join(Bolt, Bolt.id == TighteningRecord.bolt_id)
+                  .where(Vehicle.vin == c.vin, Bolt.code == c.bolt,
+                         TighteningRecord.entered_by == c.user,
                          TighteningRecord.result_at == c.at)
                   .order_by(TighteningRecord.id.desc()).limit(1)).first()
     if r is None:

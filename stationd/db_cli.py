@@ -655,7 +655,8 @@ def cmd_db_shift(args: argparse.Namespace) -> int:
                           "status": status} for r, status in rows],
             "commands": [{"at": _iso(c.at), "user": c.user, "source": c.source,
                           "kind": c.kind, "vin": c.vin, "bolt": c.bolt,
-                          "comment": c.comment} for c in done.commands]}) + "\n")
+                          "comment": c.comment, "entered": done.entered.get(c.id)}
+                         for c in done.commands]}) + "\n")
     else:
         by = Counter(status for _, status in rows)
         counts = ", ".join(f"{by[w]} {w}" for w in ("complete", "NOK", "incomplete", "open",
@@ -665,9 +666,9 @@ def cmd_db_shift(args: argparse.Namespace) -> int:
                                                                     else ""))
         for r, status in rows:
             v = r.vehicle
-            # a vehicle reopened for rework, not back yet, did leave: when it left first
-            # (a supervisor's trial: "left -" read as still on the lift)
-            gone = v.ended_at or (v.first_closed_at if v.waiting else None)
+            # a vehicle reopened for rework, not back yet, did leave: when it last left (a
+            # supervisor's trial: "left -" read as still on the lift)
+            gone = v.ended_at or (v.last_closed_at if v.waiting else None)
             left = "-" if gone is None else f"{gone:%m-%d %H:%M:%S}"
             print(f"  {v.vin:<18} {v.model:<10} in {v.started_at:%m-%d %H:%M:%S}  left "
                   f"{left:<14} {status:<10} {_undone(r)}".rstrip())

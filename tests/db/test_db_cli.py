@@ -1267,6 +1267,8 @@ def test_a_shift_s_hand_over_says_locks_outcomes_refusals_and_counts_the_missing
     doc = json.loads(run("db", "shift", "--since", since.isoformat(), "--db", db,
                          "--json")[1])
     assert [v["locked"] for v in doc["vehicles"]] == [[bolts[0]], []]
+    assert [c["entered"] for c in doc["commands"] if c["kind"] == "enter-outcome"] == [
+        "OK 25.1 Nm, 31.0 deg"]
     code, out, _ = run("db", "report", "VIN1", "--db", db)
     [row] = [x for x in out.splitlines() if x.strip().startswith(f"{bolts[0]} ")]
     assert "LOCKED" in row and "NOK" in row, row
