@@ -565,9 +565,11 @@ def cmd_status(args: argparse.Namespace) -> int:
         # no status: a JSON object still, saying why (a technician's trial: a monitoring
         # script got nothing on stdout); the words on stderr as ever
         said = io.StringIO()
-        with contextlib.redirect_stderr(said):
-            doc = identify(client, target, "status", out=sys.stderr)
-        sys.stderr.write(said.getvalue())
+        try:
+            with contextlib.redirect_stderr(said):
+                doc = identify(client, target, "status", out=sys.stderr)
+        finally:    # said whatever happened (an error raised is told after it)
+            sys.stderr.write(said.getvalue())
         if isinstance(doc, int):
             why = said.getvalue().strip().splitlines()
             print(json.dumps({"answered": False, "url": target.url, "exit": doc,
