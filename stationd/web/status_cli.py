@@ -180,8 +180,8 @@ def format_status(st: dict[str, Any], via: str = "") -> str:
     for name, d in sorted(st.get("devices", {}).items()):
         check = d.get("check") or {}   # a pair's calibration check: up is not trusted
         lines.append(f"device:   {name}: " + (
-            "ok" if d["ok"] else "not opened yet" if d.get("kind") == "opening"
-            else _fault(d))
+            "ok" if d["ok"] else str(d.get("reason") or "not opened yet")
+            if d.get("kind") == "opening" else _fault(d))
             + (f"; {check['words']}" if d["ok"] and check and not check.get("trusted")
                else "")
             + ("; not registered into the vehicle frame: its frames localize nothing "

@@ -347,7 +347,11 @@ class View:
             # reports are not about these devices (a reload kept a fixed wrench "down")
             self.devices, self.opened, self.checks = {}, False, {}
             self.fresh, self.stale_since = False, None
-        if e.state != State.STARTING and self.devices.get(DATABASE, {}).get("ok", True):
+        # the devices are tried once the database opened: a fault of it said before its
+        # health event (a first start on a database down) leaves them "not opened yet" (a
+        # technician's trial: the lift and the controller, never tried, read "ok")
+        if e.state != State.STARTING and self.devices.get(DATABASE, {}).get("ok", True) \
+                and all(d != DATABASE for d, _ in e.reason.faults):
             self.opened = True
         if e.state not in TRACKING_STATES:
             # a refusal is about the wrench while tracking: a station waiting for its
@@ -646,9 +650,13 @@ class View:
         A pair the calibration check measures carries its trust (``check``: ``trusted``,
         ``verdict`` ok / moved / not checked, ``words``): a pair can be up and not trusted."""
         up = self.opened
+        # the devices wait for the database (a technician read them as never reported)
+        waiting = "not opened yet" + (
+            ": the database opens first" if not self.devices.get(DATABASE, {}).get("ok", True)
+            else "")
         out: dict[str, dict[str, Any]] = {
             d: {"ok": up, "kind": "" if up else "opening",
-                "reason": "" if up else "not opened yet", "reported": False}
+                "reason": "" if up else waiting, "reported": False}
             for d in self.configured}
         for d, h in self.devices.items():
             out[d] = {**h, "reported": True}
