@@ -407,6 +407,15 @@ class _Round:
                 line["before"] = [*line.get("before", []), "locked"]
                 line["result"] = f"skipped ({skip})"
                 break
+            entered = entered_outcomes(st, bolt_id)
+            if who is None and entered and bolt_id in st.core.status().done:
+                # its outcome entered OK (a held bolt): done, not released (a supervisor's
+                # trial: "held, released" in its line, then the done bolt tried again)
+                line.pop("waits")
+                line["before"] = [*line.get("before", []), what]
+                line["result"] = f"OK entered by {entered[-1][0]}"
+                line["ok"] = True
+                break
             # its history says who released it, not that it was left to people
             before = [*line.get("before", []), released_words(who, what)
                       if line["result"] == LEFT_FOR_PEOPLE else line["result"]]
@@ -656,6 +665,13 @@ def _releases(st: Station, bolt: str) -> list[str]:
             and e.bolt == bolt]
 
 
+def entered_outcomes(st: Station, bolt: str) -> list[tuple[str, bool]]:
+    """The outcomes people entered for ``bolt`` (who, OK), oldest first (the station's
+    ResultRecorded events of entered results)."""
+    return [(e.entered_by, e.ok) for e in st.bus.of(ResultRecorded)
+            if isinstance(e, ResultRecorded) and e.bolt == bolt and e.entered_by is not None]
+
+
 def _skipped_by(st: Station, bolt: str) -> str | None:
     """Why ``bolt`` is skipped, in the station's words (``sam's command (to rework)``), or
     None: not skipped (a person with the release right may skip a locked bolt instead)."""
@@ -715,7 +731,7 @@ async def wait_for_people(st: Station, bolt: str, vin: str, note: Callable[[str]
     with the station's file: ``stationd release`` alone asks the default station's).
     Why: Ctrl-C there printed "stationd: interrupted (Ctrl-C)" alone, no summary, although
     bolts had been tightened."""
-    before = len(_releases(st, bolt))
+    before, entered_before = len(_releases(st, bolt)), len(entered_outcomes(st, bolt))
     path = getattr(st.cfg, "path", None)   # absolute: pasted in another folder it works
     where = f" --url {url}" if url else \
         f" --config {shlex.quote(str(Path(path).resolve()))}" if path else ""
@@ -739,6 +755,17 @@ async def wait_for_people(st: Station, bolt: str, vin: str, note: Callable[[str]
     skip = _skipped_by(st, bolt)
     if skip is not None:    # a person with the release right skipped it instead
         note(f"{bolt} of {vin} skipped ({skip}): the operator leaves it")
+        return None
+    for _ in range(40):     # or its outcome entered (a held bolt): its record follows
+        entered = entered_outcomes(st, bolt)[entered_before:]
+        if entered or _releases(st, bolt)[before:]:
+            break
+        await asyncio.sleep(0.05)
+    if entered and bolt in st.core.status().done:
+        # an OK entered: done, nothing to tighten (a supervisor's trial: said "released",
+        # then the operator tried the done bolt for 30 s)
+        note(f"{bolt} of {vin}: its outcome entered by {entered[-1][0]} (OK): done, the "
+             "operator leaves it")
         return None
     for _ in range(40):     # the release's event follows the lock's end (the core's act)
         after = _releases(st, bolt)

@@ -345,3 +345,35 @@ def test_a_restarted_daemon_s_simulated_controller_has_its_results_for_the_catch
     assert said.startswith(f"no tightening made during the link cut (every result since "
                            f"fetched): {last.bolt} open as before"), said
     assert "the controller has no results" not in second.log()
+
+
+@pytest.mark.timeout(300)
+def test_an_outcome_entered_for_the_held_bolt_the_operator_waits_on_ends_the_wait_as_done(
+        tmp_path):
+    """A supervisor's trial: the scripted operator waiting on a held bolt took the outcome a
+    person entered for a release ("released: the operator tightens it again"), said its line
+    "held, released", and tried the done bolt for 30 s.  Its outcome entered OK: the bolt is
+    done, the operator leaves it, nobody tightens it again."""
+    from tests.shell.daemons import free_port
+    from tests.shell.test_commands_daemon import HASH, _cli
+
+    port = free_port()
+    access = {"users": {"sam": {"role": "supervisor", "password": HASH}}}
+    _station(tmp_path, access=access, http={"listen": f"127.0.0.1:{port}"},
+             wrench={"url": "sim://wrench?garble_every=2&nok_rate=0"})
+    d = Daemon(tmp_path, "--sim-operator", "--no-sim-supervisor")
+    try:
+        found = d.wait(r"simulated operator: (B\d\d) of (\w{17}) held: the operator waits", 180)
+        bolt, vin = found[1], found[2]
+        got = _cli("enter-outcome", vin, bolt, "--ok", "--torque", "25", "--angle", "30",
+                   "--comment", "read on the controller", "--user", "sam", "--url",
+                   f"http://127.0.0.1:{port}/")
+        assert got.returncode == 0 and "accepted" in got.stdout, got.stdout + got.stderr
+        d.wait(rf"simulated operator: {bolt} of {vin}: its outcome entered by sam \(OK\): "
+               r"done, the operator leaves it", 60)
+    finally:
+        code = d.stop()
+    journal = d.log()
+    assert code == 0, journal[-3000:]
+    assert f"{bolt} of {vin} released: the operator tightens it again" not in journal
+    assert f"no bolt: {bolt} is already done" not in journal, journal[-3000:]
