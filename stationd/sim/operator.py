@@ -216,11 +216,18 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     # supervisor's trial).  Released (by the simulated supervisor, else by a person), it is
     # tightened again; its line goes on from the one said
     released: dict[str, int] = {}
+    # the bolts that waited for a person this round, planned or not: one locked before a
+    # restart (the new process's plan is drawn anew) and released while the operator was at
+    # other bolts is open again all the same (a supervisor's trial: never tightened again,
+    # the vehicle closed with it ending NOK)
+    waited = [b.bolt_id for b in bolts if b.bolt_id in now.locked or b.bolt_id in now.held]
     while "interrupted" not in truth:
+        again = open_again(st, [*planned, *(b for b in waited if b not in planned)])
         if late := waiting_now(st, infos):
+            waited += [b for b in late if b not in waited and b in r.by_id]
             released[late[0]] = released.get(late[0], 0) + 1
             await r.late(late[0], released[late[0]])
-        elif (again := open_again(st, planned)) and released.get(again[0], 0) < MAX_AGAIN:
+        elif again and released.get(again[0], 0) < MAX_AGAIN:
             # released or entered by a person meanwhile, still to be run down (its result
             # not known, its last rundown a NOK, to be loosened): tightened before the lift
             # goes down (a new user's trial: a hold released while the operator waited on
