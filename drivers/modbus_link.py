@@ -232,7 +232,10 @@ class ModbusLink:
         except ConnectionException as exc:
             if client.heard > heard:   # it answered, then hung up: not a Modbus device
                 raise self._garbage(client, what) from None
-            said = "the device closed the connection without an answer" \
+            # (a Modbus server answers even what it refuses: a technician's trial, the lift's
+            # and the controller's ports swapped, read no hint of another device's port)
+            said = "the device closed the connection without an answer (a Modbus server " \
+                "answers, even with an exception: another device's port?)" \
                 if "closed" in exc.string else exc.string.replace(type(client).__name__,
                                                                   self._protocol())
             raise self._error(ConnectionLostError, f"link lost {what}: {said}") from None

@@ -34,6 +34,25 @@ def test_probe_lift_reads_a_real_modbus_server(capsys):
     assert abs(obj["state"]["height_mm"] - 1800.0) < 0.1
 
 
+def test_the_lift_s_and_the_controller_s_ports_swapped_are_said_as_another_device_s(capsys):
+    """A technician's trial: the lift's URL on the controller's port and the controller's on
+    the PLC's read "the device closed the connection without an answer" and "no answer to
+    MID 0001", with no hint of a port of another device."""
+    from drivers.wrench.sim.controller import SimController
+
+    with SimController(seed=3) as ctl, SimulatedPlc() as plc:
+        op_port, mb_port = ctl.listen_tcp(), plc.start_tcp()
+        assert main(["probe", "lift", f"modbus-tcp://127.0.0.1:{op_port}?unit=1",
+                     "--timeout", "2"]) == 1
+        err = capsys.readouterr().err
+        assert "another device's port?" in err and err.count("\n") == 1, err
+        assert main(["probe", "wrench", f"openprotocol://127.0.0.1:{mb_port}",
+                     "--timeout", "2"]) == 1
+        err = capsys.readouterr().err
+        assert "no answer to MID 0001" in err and "not an Open Protocol controller's: " \
+            "another device's port" in err and err.count("\n") == 1, err
+
+
 def test_probe_lift_nothing_listening_exits_1(capsys):
     code = main(["probe", "lift", f"modbus-tcp://127.0.0.1:{_free_port()}?unit=1",
                  "--timeout", "0.5"])

@@ -70,7 +70,14 @@ class Session:
         except DeviceError as e:
             channel.link.close()
             what = "communication start" if self.identity is None else "session restart"
-            raise type(e)(f"{what}: {e}", code=e.code) from None
+            # silence to MID 0001 from a port that took the connection: another device's
+            # port, most likely (a technician's trial: the lift's and the controller's ports
+            # swapped, told as "no answer" alone)
+            hint = " (a port that takes the connection and stays silent to MID 0001 is not " \
+                "an Open Protocol controller's: another device's port, or Open Protocol off " \
+                "on it?)" if isinstance(e, DeviceTimeoutError) and \
+                f"MID {op.MID_START:04d}" in str(e) and self.identity is None else ""
+            raise type(e)(f"{what}: {e}{hint}", code=e.code) from None
         except BaseException:
             channel.link.close()
             raise
