@@ -548,8 +548,11 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
         f"tightening {n.tightening_id}, its push not come (lost, or late), fetched by a check "
         f"of the controller's newest with the tool on for {n.bolt}: made while the tool was "
         f"on for {n.bolt} alone, recorded to {n.bolt}, the tool off"),
-    Said.CUT_NOTHING: lambda n: (f"no tightening made during the link cut (every result "
-                                 f"since fetched): {n.bolt} open as before"),
+    # (a link cut, or a restart that took the enable it left as one: a technician read
+    # "during the link cut" after a kill and a restart)
+    Said.CUT_NOTHING: lambda n: (f"no tightening made while the link was down (cut, or the "
+                                 f"station stopped; every result since fetched): {n.bolt} "
+                                 "open as before"),
     Said.CUT_UNKNOWN: lambda n: (
         f"{n.bolt}: {n.note}: {CHECK_ON_CONTROLLER}"
         if n.vin is None else

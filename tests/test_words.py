@@ -108,7 +108,8 @@ WORDS = [
      "tightening 41 made during the link cut, fetched after it: recorded to B1 (its pset, "
      "VIN, tightening id and time agree)"),
     (Notice(Said.CUT_NOTHING, bolt="B1"),
-     "no tightening made during the link cut (every result since fetched): B1 open as before"),
+     "no tightening made while the link was down (cut, or the station stopped; every result "
+     "since fetched): B1 open as before"),
     (Notice(Said.CUT_UNKNOWN, bolt="B1",
             note="its result during the link cut not known: the controller refused MID 0064"),
      "B1: its result during the link cut not known: the controller refused MID 0064: check it "

@@ -205,7 +205,7 @@ def test_with_the_controller_s_clock_unknown_its_newest_is_kept_and_the_rest_unk
 def test_a_controller_with_no_results_though_some_were_recorded_does_not_say_none_made():
     """Tightening 40 recorded; the controller has none at all (restarted with its memory
     cleared, or replaced): what it made during the cut is not known (a supervisor's trial:
-    "no tightening made during the link cut ... open as before")."""
+    "no tightening made while the link was down ... open as before")."""
     fed = catch_up(Controller({0: None}), last=40)
     assert _ends(fed) == [(False, "the controller has no results, though tightening 40 was "
                                   "recorded: cleared (restarted or replaced), what it made "

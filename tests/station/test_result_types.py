@@ -521,8 +521,8 @@ def test_a_complete_catch_up_without_the_cut_result_leaves_its_bolt_open_as_befo
     _back_after_a_cut(d)
     acts = d.feed(CaughtUp(d.t, complete=True))
     assert [notice_words(n) for n in published(acts, Notice)] == [
-        "no tightening made during the link cut (every result since fetched): B1 open as "
-        "before"]
+        "no tightening made while the link was down (cut, or the station stopped; every "
+        "result since fetched): B1 open as before"]
     assert not d.core.matcher.held and "B1" in d.core.allowed()
     assert d.core.missed_since() is not None
     _enabled(d, 1)
