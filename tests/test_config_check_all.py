@@ -233,3 +233,15 @@ def test_the_station_file_is_taken_with_config_as_the_other_commands_take_it(sta
     assert isinstance(commands.choices, dict)
     config = commands.choices["config"]
     assert "every error of each file" in " ".join(config.format_help().split())
+
+
+def test_the_summary_names_the_bolt_table_the_station_file_names_where_its_errors_are(
+        station: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A technician's trial: an error in the bolt table a station file names was summed up
+    as "1 error in 1 of 1 file", the file given, not the one with the error."""
+    _edit(station.parent / "bolts.yaml", "target: 25.0", "target: 250.0")
+    assert main(["config", "check", "--config", str(station)]) == 2
+    err = capsys.readouterr().err
+    assert err.endswith(f"stationd: error: 1 error in 1 of 1 file (those of "
+                        f"{station.parent / 'bolts.yaml'} counted with the station file "
+                        "naming it)\n"), err

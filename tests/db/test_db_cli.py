@@ -334,7 +334,8 @@ def test_config_check_of_a_broken_station_lists_every_error(run, tmp_path):
     assert lines[5].startswith(f"{neither}:1: neither a station file nor a bolt table (it has "
                                "no keys; a station file has marker, vision, cameras")
     assert lines[6] == f"{empty}: the file is empty"
-    assert lines[7:] == ["stationd: error: 7 errors in 4 of 4 files"]
+    assert lines[7:] == [f"stationd: error: 7 errors in 4 of 4 files (those of "
+                         f"{tmp_path / 'bolts.yaml'} counted with the station file naming it)"]
 
 
 def test_config_check_warns_of_an_unregistered_pair_but_passes(run, tmp_path):
