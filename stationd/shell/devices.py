@@ -17,7 +17,7 @@ from typing import Any
 from drivers.camera import CameraDevice
 from drivers.camera.pair import StereoGrabber
 from drivers.devices import Kind, open_device
-from drivers.errors import ProtocolError
+from drivers.errors import DeviceError, ProtocolError
 from drivers.keeper import one_line
 from drivers.lift import Lift
 from drivers.wrench import Wrench
@@ -77,13 +77,21 @@ class Devices:
         if pc.left is None or pc.right is None:
             raise ValueError(f"pair {name} is not wired to two cameras")
         cams: list[CameraDevice] = []
+        failed: list[tuple[str, Exception]] = []
         try:
             for side in (pc.left, pc.right):
-                cams.append(open_device(Kind.CAMERA, self.cfg.cameras[side]))
+                try:
+                    cams.append(open_device(Kind.CAMERA, self.cfg.cameras[side]))
+                except DeviceError as exc:   # the other one tried too: both said at once
+                    failed.append((side, exc))
         except BaseException:
             for cam in cams:
                 quiet(cam.close)
             raise
+        if failed:
+            for cam in cams:
+                quiet(cam.close)
+            raise _both(failed)
         # unnamed: the station says the pair's name before its reason
         return Pair(cams, StereoGrabber(cams[0], cams[1], pc.max_skew_s, name=""))
 
@@ -114,3 +122,17 @@ def quiet(fn: Callable[[], None]) -> None:
         fn()
     except Exception as exc:
         log.warning("closing: %s", one_line(exc))
+
+
+def _both(failed: list[tuple[str, Exception]]) -> Exception:
+    """The error of a pair whose cameras did not open: the one camera's, or, both failing,
+    one of the first's kind saying both (a technician's trial: the second camera's fault was
+    said only once the first came back)."""
+    if len(failed) == 1:
+        return failed[0][1]
+    first = failed[0][1]
+    words = "; ".join(f"camera {side}: {exc}" for side, exc in failed)
+    try:
+        return type(first)(words)
+    except TypeError:   # a kind with other arguments: the first as it is
+        return first
