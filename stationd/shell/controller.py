@@ -329,6 +329,12 @@ class ControllerFeed:
         self._accounted = nid if self._accounted is None else max(self._accounted, nid)
         if last is None:
             return await self._first_results(wrench, newest, nid)
+        if nid < last and await self._recorded_already(newest):
+            # its newest is recorded already: a controller whose ids started again earlier
+            # (replaced), counted from its own newest, not said again at every reload (a
+            # technician's trial: "... older than the last recorded (5): its ids restarted"
+            # at each SIGHUP, 1 and 2 this controller's and recorded)
+            last = nid
         todo = plan_gaps(last, nid)
         if todo.why is not None:
             log.info("results: %s", gap_plan_words(todo))
@@ -375,6 +381,24 @@ class ControllerFeed:
         rest = [t for t in todo.fetch if t not in done]
         if rest:
             self._owed.append((rest[0], rest[-1], before))
+
+    async def _recorded_already(self, newest: Received) -> bool:
+        """Whether the controller's newest result is recorded already, the very same (its
+        id, values and its own time: :meth:`Records.copy_input`); a result without the
+        controller's time is not told apart from another under the same id: False."""
+        if not isinstance(newest, TighteningResult) or not newest.controller_clock \
+                or newest.timestamp is None:
+            return False
+        ev = result_input(time.time(), newest, fetched=True)
+        if not isinstance(ev, ResultIn):
+            return False
+        try:
+            asked = await self._call(self.records.copy_input, ev, self.core.status().vin)
+        except STATION_FAULTS as exc:
+            log.warning("tightening %s not checked against the one recorded: %s",
+                        newest.tightening_id, one_line(exc))
+            return False
+        return isinstance(asked, ResultCopy)
 
     async def _count_restarted(self, wrench: Wrench, last: int, newest: Received) -> bool:
         """Whether the controller's ids started again though its newest is not below

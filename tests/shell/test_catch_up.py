@@ -26,6 +26,7 @@ from stationd.shell.controller import ControllerFeed
 from stationd.station.inputs import (
     CaughtUp,
     NewestChecked,
+    ResultCopy,
     ResultIn,
     ResultsMissed,
     ResultsSkipped,
@@ -63,15 +64,20 @@ def res(tid: int) -> Any:
 
 
 def catch_up(controller: Controller, last: int | None = 40, comebacks: int = 1,
-             on_feed: Any = None, reading: bool = False, stored: bool = False) -> list[Any]:
+             on_feed: Any = None, reading: bool = False, stored: bool = False,
+             copies: bool = False) -> list[Any]:
     """What the catch-up fed the core after ``comebacks`` reconnects in a row (each while
-    the last one's catch-up ran); ``reading``: the results' loop runs beside it."""
+    the last one's catch-up ran); ``reading``: the results' loop runs beside it;
+    ``copies``: every result asked of the records is one recorded already."""
     fed: list[Any] = []
     keeper = SimpleNamespace(device=controller, reconnects=1, losing=False, up=True,
                              lost=lambda exc: None)
     records = SimpleNamespace(repo=SimpleNamespace(read_result_stored=lambda t: stored),
                               last_tightening_id=lambda: last,
-                              copy_input=lambda ev, vin: ev, unreadable_input=lambda ev: ev)
+                              copy_input=(lambda ev, vin: ResultCopy(ev.t, ev.result, vin,
+                                                                      "B1"))
+                              if copies else (lambda ev, vin: ev),
+                              unreadable_input=lambda ev: ev)
     # the status as the results' loop reads it too (between two waits: its clock check)
     core = SimpleNamespace(missed_since=lambda: time.time() - 60,
                            status=lambda: SimpleNamespace(vin="V", faults={}, tool_on=False,
@@ -244,6 +250,32 @@ def test_a_catch_up_that_finds_the_ids_started_again_tells_the_core():
     assert restarted(catch_up(Controller({0: recent, 2: recent, 1: None}), last=40)) == [True]
     assert restarted(catch_up(Controller({0: res(42), 41: res(41), 42: res(42)}))) == [False]
     assert restarted(catch_up(Controller({0: None}), last=None)) == [False]
+
+
+def test_a_replaced_controller_s_newest_recorded_already_is_counted_from_not_restarted(
+        caplog):
+    """A technician's trial: after a controller was replaced (its ids from 1 again, 1 and 2
+    recorded), every reload said "the controller's newest tightening (2) is older than the
+    last recorded (5): its ids restarted", the highest id ever recorded being the old
+    controller's.  Its newest recorded already (the very same: id, values, its own time):
+    counted from it, nothing fetched, nothing said; not recorded, as before."""
+    from drivers.wrench.base import ResultType, Status, TighteningResult
+
+    newest = TighteningResult(
+        ok=True, torque_nm=25.0, angle_deg=30.0, torque_status=Status.OK,
+        angle_status=Status.OK, tightening_id=2, pset=1, vin="", timestamp=datetime.now(),
+        torque_min_nm=22.0, torque_max_nm=28.0, torque_target_nm=25.0, angle_min_deg=15.0,
+        angle_max_deg=90.0, angle_target_deg=30.0, result_type=ResultType.TIGHTENING,
+        result_type_code=1)
+    with caplog.at_level(logging.INFO, logger="stationd"):
+        fed = catch_up(Controller({0: newest, 2: newest}), last=5, copies=True)
+    assert "ids restarted" not in caplog.text
+    assert [e.restarted for e in fed if isinstance(e, CaughtUp)] == [False]
+    assert not [e for e in fed if isinstance(e, ResultIn)]
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="stationd"):
+        fed = catch_up(Controller({0: newest, 2: newest, 1: None}), last=5)
+    assert [e.restarted for e in fed if isinstance(e, CaughtUp)] == [True]
 
 
 REFUSED = RefusedError("fetch tightening 0: the controller refused (MID 0004 error 99)",
