@@ -384,21 +384,27 @@ class ControllerFeed:
 
     async def _recorded_already(self, newest: Received) -> bool:
         """Whether the controller's newest result is recorded already, the very same (its
-        id, values and its own time: :meth:`Records.copy_input`); a result without the
-        controller's time is not told apart from another under the same id: False."""
-        if not isinstance(newest, TighteningResult) or not newest.controller_clock \
-                or newest.timestamp is None:
-            return False
-        ev = result_input(time.time(), newest, fetched=True)
+        id, values and its own time: :meth:`_against_recorded`)."""
+        return isinstance(await self._against_recorded(newest), ResultCopy)
+
+    async def _against_recorded(self, got: Received | None) -> ResultIn | ResultCopy | None:
+        """``got`` compared with what is recorded under its id (:meth:`Records.copy_input`):
+        a :class:`ResultCopy` when it is the very same, else the result as read; None where
+        it cannot be told: a result without the controller's own time (only that tells
+        another result under the same id from the one stored), or the database failing."""
+        if not isinstance(got, TighteningResult) or not got.controller_clock \
+                or got.timestamp is None:
+            return None
+        ev = result_input(time.time(), got, fetched=True)
         if not isinstance(ev, ResultIn):
-            return False
+            return None
         try:
             asked = await self._call(self.records.copy_input, ev, self.core.status().vin)
         except STATION_FAULTS as exc:
             log.warning("tightening %s not checked against the one recorded: %s",
-                        newest.tightening_id, one_line(exc))
-            return False
-        return isinstance(asked, ResultCopy)
+                        got.tightening_id, one_line(exc))
+            return None
+        return asked
 
     async def _count_restarted(self, wrench: Wrench, last: int, newest: Received) -> bool:
         """Whether the controller's ids started again though its newest is not below
@@ -425,19 +431,7 @@ class ControllerFeed:
                 await self._call(wrench.fetch_result, last)
         except RefusedError:        # not known: counted on (the fetches say the refusal)
             return False
-        if not isinstance(got, TighteningResult) or not got.controller_clock \
-                or got.timestamp is None:
-            return False
-        ev = result_input(time.time(), got, fetched=True)
-        if not isinstance(ev, ResultIn):
-            return False
-        try:
-            asked = await self._call(self.records.copy_input, ev, self.core.status().vin)
-        except STATION_FAULTS as exc:
-            log.warning("tightening %d not checked against the one recorded: %s", last,
-                        one_line(exc))
-            return False
-        return isinstance(asked, ResultIn)
+        return isinstance(await self._against_recorded(got), ResultIn)
 
     async def _first_results(self, wrench: Wrench, newest: Received, nid: int,
                              restarted: bool = False) -> str | None:
