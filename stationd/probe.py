@@ -113,14 +113,17 @@ def _wait_tightening(w: Any, seconds: float) -> tuple[Any, list[dict[str, Any]]]
 
 
 def clock_words(offset: float | None) -> str:
-    """A controller's clock against this machine's, as ``probe wrench`` says it."""
+    """A controller's clock against this machine's, as ``probe wrench`` says it (in whole
+    seconds as the daemon's journal says them)."""
+    from drivers.wrench.base import CLOCK_FAR_S, clock_seconds
+
     if offset is None:
         return "not known (it did not say its time, or keeps none)"
-    whole = round(offset + 0.5) if offset < 0 else round(offset)
-    if abs(offset) < 1.5:
+    whole = clock_seconds(offset)
+    if whole == 0:
         return "agrees with this machine's (within 1 s)"
     return f"{whole:+d} s from this machine's" + (
-        ": set the controller's clock" if abs(offset) >= 60 else "")
+        ": set the controller's clock" if abs(offset) >= CLOCK_FAR_S else "")
 
 
 def probe_wrench(args: argparse.Namespace) -> int:

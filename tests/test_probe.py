@@ -163,7 +163,9 @@ def test_probe_wrench_says_the_controller_s_clock(capsys):
         assert -7202 < json.loads(capsys.readouterr().out)["clock_offset_s"] < -7198
     assert clock_words(None).startswith("not known")
     assert clock_words(-0.4) == "agrees with this machine's (within 1 s)"
-    assert clock_words(12.2) == "+12 s from this machine's"
+    # whole seconds as the daemon's journal says them (the controller's clock cut down to
+    # its second: 12.2 s measured is +13 s)
+    assert clock_words(12.2) == "+13 s from this machine's"
 
 
 def test_probe_wrench_says_what_is_not_a_tightening_and_waits_for_one(capsys):

@@ -249,6 +249,19 @@ class LinkStatus:
     reconnects: int = 0      # successful reconnects since open()
 
 
+
+#: a controller clock this far from the station's is worth a person's look (a clock not
+#: set, or a time zone): the journal warns of it and ``probe wrench`` says to set it, s
+CLOCK_FAR_S = 60.0
+
+
+def clock_seconds(offset: float) -> int:
+    """A controller clock's offset (:attr:`Wrench.clock_offset_s`) in whole seconds as the
+    words say it: the controller's whole seconds are its clock cut down, so a clock in step
+    measures -1..0 s, said 0 (the middle of that second)."""
+    return round(offset + 0.5)
+
+
 class Wrench(Openable):
     """A tightening controller: select a parameter set, enable the tool, receive results.
 

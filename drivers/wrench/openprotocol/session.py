@@ -18,6 +18,7 @@ from collections.abc import Callable, Sequence
 from datetime import datetime
 
 from drivers.errors import DeviceError, DeviceTimeoutError, ProtocolError, RefusedError
+from drivers.wrench.base import CLOCK_FAR_S, clock_seconds
 from drivers.wrench.openprotocol import message as op
 from drivers.wrench.openprotocol.channel import Channel
 from drivers.wrench.openprotocol.curvefeed import CurveFeed
@@ -162,8 +163,8 @@ class Session:
             before, self.clock_offset = self.clock_offset, offset
         if before is None or abs(offset - before) >= 1.0:
             self._log.info("%s: controller clock now %+d s from the station's (%s)",
-                           self.device, _whole(offset), "not known before" if before is None
-                           else f"{_whole(before):+d} s at the last measure")
+                           self.device, clock_seconds(offset), "not known before" if before is None
+                           else f"{clock_seconds(before):+d} s at the last measure")
         return offset
 
     def _measure_clock(self, epoch: int | None = None) -> float:
@@ -190,26 +191,16 @@ class Session:
         # its whole seconds are its clock cut down: an agreeing clock measures -1..0 s, so
         # the words take the middle of that second (they alternated between "agrees" and
         # "-1 s" for a clock in step: a line engineer's trial)
-        if _whole(offset) == 0:
+        if clock_seconds(offset) == 0:
             self._log.info("%s: controller clock agrees with the station's (within 1 s)",
                            self.device)
         elif abs(offset) < CLOCK_FAR_S:
             self._log.info("%s: controller clock %+d s from the station's", self.device,
-                           _whole(offset))
-        else:   # an hour off is a clock not set, or a time zone: worth a technician's look
+                           clock_seconds(offset))
+        else:   # said as a warning (a technician's trial: an hour off was an INFO line)
             self._log.warning("%s: controller clock %+d s from the station's: set the "
                               "controller's clock (the station places results fetched late "
-                              "through this offset meanwhile)", self.device, _whole(offset))
+                              "through this offset meanwhile)", self.device, clock_seconds(offset))
         return offset
 
 
-#: a controller clock this far from the station's is said as a warning (a technician's
-#: trial: a controller an hour or two off was an INFO line, easily missed), s
-CLOCK_FAR_S = 60.0
-
-
-def _whole(offset: float) -> int:
-    """An offset in whole seconds as the words say it: the controller's whole seconds are
-    its clock cut down, so a clock in step measures -1..0 s, said 0 (the middle of that
-    second)."""
-    return round(offset + 0.5)
