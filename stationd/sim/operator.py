@@ -763,9 +763,12 @@ async def wait_for_people(st: Station, bolt: str, vin: str, note: Callable[[str]
     if skip is not None:    # a person with the release right skipped it instead
         note(f"{bolt} of {vin} skipped ({skip}): the operator leaves it")
         return None
-    for _ in range(40):     # or its outcome entered (a held bolt): its record follows
+    # the release's event, or the record of an outcome entered (a held bolt), follows the
+    # lock's end (the core's act): waited for once, either
+    for _ in range(40):
         entered = entered_outcomes(st, bolt)[entered_before:]
-        if entered or _releases(st, bolt)[before:]:
+        after = _releases(st, bolt)[before:]
+        if entered or after:
             break
         await asyncio.sleep(0.05)
     if entered and bolt in st.core.status().done:
@@ -774,12 +777,7 @@ async def wait_for_people(st: Station, bolt: str, vin: str, note: Callable[[str]
         note(f"{bolt} of {vin}: its outcome entered by {entered[-1][0]} (OK): done, the "
              "operator leaves it")
         return None
-    for _ in range(40):     # the release's event follows the lock's end (the core's act)
-        after = _releases(st, bolt)
-        if len(after) > before:
-            break
-        await asyncio.sleep(0.05)
-    who = after[-1] if len(after) > before else None
+    who = after[-1] if after else None
     note(f"{bolt} of {vin} released: the operator tightens it again")
     return who
 
