@@ -42,7 +42,7 @@ from stationd.station.inputs import (
     ResultsSkipped,
 )
 from stationd.station.nok import NokRules
-from stationd.station.state import CHECK_WAIT_S, ON_A_BOLT, PENDING_PUSH_S, _Cut
+from stationd.station.state import CHECK_WAIT_S, ON_A_BOLT, PENDING_PUSH_S, UNANSWERED, _Cut
 
 #: the controller stamps its results to the second, and its clock's offset is measured to
 #: the second: a result fetched after a link cut is placed between the enable and the cut
@@ -84,6 +84,10 @@ class LostRules(NokRules):
         if en is not None and self._checking_owed() and not self.tool_on:
             if ev.nothing_made:
                 self._answered_bolt(en.vin, en.bolt)
+                if self._enabled_at is not None and self._off_at is not None:
+                    self._cleared = [*self._cleared, _Cut(
+                        en, self._enabled_at, self._off_at + self.late_result_s)
+                    ][-UNANSWERED:]
                 # nothing since the last result judged until this window's end: a later id
                 # is the next enable's by the order of ids (a supervisor's trial: held as
                 # "other enables came between", released, and tightened twice)
@@ -210,9 +214,11 @@ class LostRules(NokRules):
         that has left: whatever it is now, not known here).  The enable whose window's check
         fetched it, whatever its time: the check fetches only what was made since the last
         result heard, and a clock stepped since its last measure (a trial: +60 s) placed
-        it outside that enable, the bolt left open to be tightened twice."""
+        it outside that enable, the bolt left open to be tightened twice.  A push made
+        before the enable owed now (:meth:`_made_before_enable`: the controller held it
+        back) is late as well: the same enables."""
         r = ev.result
-        if not ev.fetched:
+        if not ev.fetched and not self._made_before_enable(ev):
             return []
         found: list[_Cut] = []
         checked = self._checked_enable()
@@ -224,7 +230,10 @@ class LostRules(NokRules):
                     and en is not checked:
                 continue    # made while its tool was off for good: not its own
             found.append(u)
-        return found
+        # a check found nothing made under these: placed by the result's time alone
+        return found + [u for u in self._cleared if ev.made_at is not None
+                        and u.selection.pset == int(r.pset) and self._still_open(u)
+                        and u.spans(ev.made_at, CLOCK_SLACK_S)]
 
     def _still_open(self, u: _Cut) -> bool:
         """Whether the bolt of the unanswered enable ``u`` is still open (not selected now,
@@ -382,10 +391,22 @@ class LostRules(NokRules):
         in a gap told before that enable (a later id, or the controller's newest, had
         revealed it: the ids grow with every tightening; a review: after a catch-up that
         timed out, the cut's id stored as a gap and given after all closed the next bolt of
-        its pset), or its own time while the link was down (:meth:`_made_offline`)."""
+        its pset), its own time while the link was down (:meth:`_made_offline`), or its own
+        time before that enable's tool went on (:meth:`_made_before_enable`)."""
         n = self._enable_serial
-        return self._made_offline(ev) or self._sent_late_from_cut(ev) or any(
-            told < n for told in self._gaps_holding(int(ev.result.tightening_id)))
+        return self._made_offline(ev) or self._sent_late_from_cut(ev) \
+            or self._made_before_enable(ev) or any(
+                told < n for told in self._gaps_holding(int(ev.result.tightening_id)))
+
+    def _made_before_enable(self, ev: ResultIn) -> bool:
+        """Whether ``ev``'s own time puts it before the enable owed now, beyond the clock's
+        slack: a push the controller held back (an integrator's trial: 13 s late, of the
+        bolt before, same pset), never this enable's rundown, the tool being off or on for
+        another bolt then.  Not where the enable before was this bolt's own (a retry: either
+        enable's rundown is this bolt's, :meth:`_after_last_off`)."""
+        made, at = ev.made_at, self._enabled_at
+        return made is not None and at is not None and not self._same_bolt_before \
+            and made < at - CLOCK_SLACK_S
 
     def _gaps_holding(self, tid: int) -> list[int]:
         """Of the gaps told whose ids hold ``tid``, how many enables had come when each was

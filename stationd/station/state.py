@@ -239,6 +239,11 @@ class CoreState:
     #: up (``cut_at``: when that window ended), the latest last: a result fetched late (its
     #: push lost) of one's pset, made within it, may be its bolt's, which is then held
     _unanswered: list[_Cut] = field(default_factory=list, repr=False)
+    #: the vehicle's enables whose window's check found nothing made (the controller's newest
+    #: the last result heard: taken as not tightened), the latest last: a result made within
+    #: one that comes later all the same (the controller stored and pushed it late: an
+    #: integrator's trial) may be its bolt's, which is then held, placed by its time alone
+    _cleared: list[_Cut] = field(default_factory=list, repr=False)
     #: those of a bolt whose tool went on again since (:meth:`_unanswered_before`), and an
     #: enable of it still owed then (its window running): what is made now is its own, but
     #: ids a gap tells before it got a result may be the earlier rundown's (only a gap's:
@@ -596,6 +601,7 @@ class CoreState:
                            if (u.selection.vin, u.selection.bolt) != key]
         self._unanswered = [u for u in self._unanswered
                             if (u.selection.vin, u.selection.bolt) != key]
+        self._cleared = [u for u in self._cleared if (u.selection.vin, u.selection.bolt) != key]
 
     def _unhold(self, bolt: str) -> str | None:
         """``bolt``'s hold ends (released, skipped, its outcome entered): its note, None

@@ -299,3 +299,34 @@ def test_a_lost_push_asked_for_again_after_the_link_dropped_still_holds_its_bolt
         d.feed(ResultsMissed(d.t, 41, 41, "the controller refused to give them", live=True))
     assert not [a for a in acts if isinstance(a, Record)]
     assert "B1" in d.core.matcher.held and "B1" not in d.core.matcher.done
+
+
+@pytest.mark.parametrize("checked", [True, False], ids=["check found nothing", "check void"])
+def test_a_late_push_made_before_the_enable_owed_now_is_never_that_bolts(checked):
+    """B1 tightened (41, made while its tool was on), its push held back by the controller
+    (an integrator's trial: 13 s late), the wrench leaving B1; B1's window ends, the check of
+    the controller's newest finds nothing new (or cannot read it).  B3, of the same pset, is
+    enabled 10 s later; 41 arrives then, its own time 10 s before B3's enable.  It is not
+    B3's: B3 is not closed by it (an integrator's trial: B3 recorded OK with B1's result, B1
+    left missing, B3's own result stored as no bolt's), and B3's tool stays on for its own
+    rundown; B1, whose enable got no result, is held for a person."""
+    d = _ready()
+    d.answer_checks = False
+    _enabled(d, 1)
+    d.t += 1.0
+    made = d.t                                        # B1 tightened: 41, pushed late
+    _on(d, 3, 3)                                      # the wrench leaves B1
+    d.t += d.core.late_result_s + 1.0
+    d.feed(Tick(d.t))
+    d.feed(NewestChecked(d.t, nothing_made=checked))
+    d.t += 10.0
+    _enabled(d, 3)
+    d.t += 2.0
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), made_at=made))
+    recorded = [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)]
+    assert recorded == [], f"recorded {recorded}: 41 was made 12 s before B3's enable"
+    assert d.core.tool_on and d.core.bolt == "B3"
+    assert "B1" in d.core.matcher.held
+    acts = d.feed(ResultIn(d.t + 1.0, res(42, 1, True, 1), made_at=d.t + 0.5))
+    recorded = [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)]
+    assert recorded == [("B3", 42)], recorded
