@@ -100,6 +100,10 @@ class Channel:
         self._pending: Pending | None = None
         self._parts = PartAssembler()           # the reading thread's only
         self.last_sent = 0.0
+        # when the controller last sent anything: a controller that stops answering while
+        # the station keeps asking (each unanswered ask taken as refused) is asked to mirror
+        # a keep-alive as soon as it has been silent for the keep-alive's interval
+        self.last_heard = 0.0
         self._routes: dict[int, Handler] = {}
         self._on_broken: Callable[[BrokenParts], None] = lambda broken: None
 
@@ -118,7 +122,7 @@ class Channel:
         link level off and counting from 1, no message half put together."""
         self.link.connect(connect_timeout)
         self.framer = SerialFramer() if self.link.kind == "serial" else TcpFramer()
-        self.last_sent = time.monotonic()
+        self.last_sent = self.last_heard = time.monotonic()
         self.links.reset()
         self._parts.reset()
 
@@ -219,9 +223,10 @@ class Channel:
     def ask(self, msg: Message, expect: set[int], timeout: float, epoch: int) -> Message:
         """:meth:`transact` of a request a controller may ignore (MID 0064, the VIN): no
         answer at all is its refusal, the link kept (its keep-alive says whether it is
-        alive).  Taken for a dead link, a trial's peers had the link reset at every
-        reconnect, for ever.  A late answer is taken for nothing else: each names the MID
-        it answers."""
+        alive: sent once the controller has been silent for its interval, however much the
+        station asks: the supervisor's ``KeepAlive``).  Taken for a dead link, a trial's
+        peers had the link reset at every reconnect, for ever.  A late answer is taken for
+        nothing else: each names the MID it answers."""
         try:
             return self.transact(msg, expect, timeout, epoch)
         except DeviceTimeoutError as e:
@@ -271,6 +276,8 @@ class Channel:
                                           f"{self.framer.pending} bytes of it received)") \
                     from None
             raise
+        if data:
+            self.last_heard = time.monotonic()
         for item in self.framer.feed(data) if data else ():
             if isinstance(item, ProtocolError):
                 raise item

@@ -192,6 +192,7 @@ class SimController(OpenProtocolServer):
         self._refuse_mid: dict[int, int] = dict(refused_mids or {})
         self._refuse_newest: int | None = None   # MID 0064's id 0 refused with this code
         self._ignore_mid: set[int] = set()      # answered with nothing (:meth:`ignore_mid`)
+        self._hung = False                      # nothing answered at all (:meth:`hang`)
         self._refuse_rev: dict[int, set[int]] = {
             mid: set(revs) for mid, revs in (refused_revisions or {}).items()}
         self.pset: int | None = None
@@ -295,6 +296,11 @@ class SimController(OpenProtocolServer):
         MID it does not know (:meth:`clear_refusals` ends it)."""
         self.call(lambda: self._ignore_mid.add(mid))
 
+    def hang(self) -> None:
+        """Answer nothing at all, the keep-alive neither, the connection kept open: a
+        controller whose software hangs (:meth:`clear_refusals` ends it)."""
+        self.call(lambda: setattr(self, "_hung", True))
+
     def refuse_revisions(self, mid: int, revisions: Iterable[int]) -> None:
         """Refuse ``mid`` (1, 60, 64) at these ``revisions`` (MID 0004 with
         ``revision_refusal_code``), as a controller that does not know them."""
@@ -306,6 +312,7 @@ class SimController(OpenProtocolServer):
             self._refuse_pset.clear()
             self._refuse_mid.clear()
             self._ignore_mid.clear()
+            self._hung = False
             self._refuse_rev.clear()
             self._refuse_newest = None
         self.call(do)
@@ -459,6 +466,8 @@ class SimController(OpenProtocolServer):
 
     def handle(self, s: Session, msg: Received) -> None:
         mid, data = msg.mid, msg.data
+        if self._hung:
+            return
         if mid == 9999:
             self.reply(s, 9999, 9999)
         elif mid == 1:

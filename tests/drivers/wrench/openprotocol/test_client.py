@@ -249,3 +249,29 @@ def test_an_acknowledgement_never_crosses_to_a_new_session(sim, tmp_path):
         with pytest.raises(DeviceError, match=r"acknowledge tightening 1: .*still holds it"):
             w.acknowledge_result(r)
         assert sim.acks == 0
+
+
+def test_a_controller_that_hangs_while_asked_is_a_lost_link(sim, tmp_path):
+    """The controller hangs with its socket open while the station keeps asking for results
+    (each unanswered MID 0064 taken as a refusal, the traffic never idle): once it has said
+    nothing for the keep-alive's interval, a keep-alive is sent, and unmirrored it is a lost
+    link (an integrator's trial: 18 refusals in 45 s, the wrench "ok" throughout).  A
+    controller that ignores MID 0064 alone keeps its link: it mirrors the keep-alive."""
+    with connect(sim, "tcp", tmp_path, keepalive=0.3, timeout=0.2) as w:
+        sim.ignore_mid(64)
+        for _ in range(8):                       # 1.6 s of asking, never idle
+            with pytest.raises(RefusedError, match="taken as refused"):
+                w.fetch_result(0, timeout=0.2)
+        assert w.status().connected and sim.received(9999), "a refusal alone is no lost link"
+        sim.hang()
+        lost = False
+        for _ in range(50):
+            try:
+                w.fetch_result(0, timeout=0.2)
+            except RefusedError:
+                continue
+            except DeviceError:
+                lost = True
+                break
+        assert lost and not w.status().connected
+        assert "keep-alive (MID 9999) not mirrored" in str(w.status().reason)
