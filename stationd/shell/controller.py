@@ -96,6 +96,10 @@ class ControllerFeed:
         #: the newest asks nothing then).  Not for a refusal of the moment: no answer in
         #: time (the driver's "taken as refused"), error 98 and the like (the checks ask)
         self._no_history = False
+        #: the catch-up found the controller with no result at all (its memory cleared, or
+        #: a new controller): where its count begins is known only from the first pushed
+        #: result, whose ids before it are then asked for (:meth:`_began_empty`)
+        self._empty = False
         #: the pushed result whose id skipped those fetched now (fed after them)
         self._revealed_by: int | None = None
         #: the check asking now was the core's with the tool on (its fetches said so)
@@ -240,7 +244,7 @@ class ControllerFeed:
         self._clock_at = time.monotonic()    # measured by the driver at the connect
         self._link += 1
         self._first_pushed = self._refused_after = None
-        self._no_history = False
+        self._no_history = self._empty = False
         if self.catching_up is None or self.catching_up.done():
             self.catching_up = asyncio.get_running_loop().create_task(self._catch_ups())
         else:   # one of an earlier connection still runs: this one's follows it
@@ -316,6 +320,7 @@ class ControllerFeed:
             raise
         if newest is None:    # the controller has none: made none, or its memory cleared
             self._restarted = last is not None
+            self._empty = self._accounted is None
             return None if last is None else (
                 f"the controller has no results, though tightening {last} was recorded: "
                 "cleared (restarted or replaced), what it made before is not known")
@@ -623,6 +628,8 @@ class ControllerFeed:
             if tid > after + 1:
                 await self._cut_ids(wrench, after, tid)
             return           # the ids before it are the cut's, not lost with the link up
+        if last is None and self._empty:
+            last = await self._began_empty(wrench, tid)
         if last is None or tid <= last + 1 or not wrench.can_fetch or self.records.repo is None:
             return
         todo = plan_gaps(last, tid - 1)
@@ -635,6 +642,25 @@ class ControllerFeed:
         log.warning("results: tightening %d came after %d: %s not pushed by the controller "
                     "(the link up): asked for", tid, last, ids)
         await self._ask(wrench, todo, last, tid, ids)
+
+    async def _began_empty(self, wrench: Wrench, tid: int) -> int | None:
+        """The first result pushed since the catch-up found the controller empty: where its
+        count began, 0 where it holds the id before ``tid`` (the ids 1 to ``tid`` - 1 made
+        since, their pushes lost: asked for as any live gap), else not known (a controller
+        that cleared its results but counts on: the ids below are none of this link's).  An
+        integrator's trial: a controller restarted with ids from 1, the push of 1 lost; 2
+        and 3 were stored, 1 never asked for, nothing said."""
+        self._empty = False
+        if tid <= 1 or not wrench.can_fetch or self.records.repo is None:
+            return None
+        try:
+            before = await self._call(wrench.fetch_result, tid - 1)
+        except DeviceError as exc:
+            log.warning("results: tightening %d is the first since the controller had none; "
+                        "whether it made %s before it is not known: %s", tid,
+                        id_span(1, tid - 1), one_line(exc))
+            return None
+        return 0 if before is not None else None
 
     async def _cut_ids(self, wrench: Wrench, after: int, tid: int,
                        skipped: bool = True) -> None:

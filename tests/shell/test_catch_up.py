@@ -19,6 +19,8 @@ from datetime import datetime
 from types import SimpleNamespace
 from typing import Any
 
+import pytest
+
 from drivers.errors import ConnectionLostError, ProtocolError, RefusedError
 from drivers.wrench.base import UnreadableResult
 from stationd.shell.blocking import Blocking
@@ -567,3 +569,64 @@ def test_a_register_driven_controller_s_queued_results_are_all_read_before_it_is
     order = [e.result.tightening_id if isinstance(e, ResultIn) else type(e).__name__
              for e in fed if isinstance(e, ResultIn | CaughtUp)]
     assert order == [41, 42, "CaughtUp"], order
+
+
+class PushesAfter(Controller):
+    """A controller that pushes ``pushes`` in turn (then nothing) besides its fetches."""
+
+    def __init__(self, answers: dict[int, Any], pushes: list[Any]) -> None:
+        super().__init__(answers)
+        self.pushes = pushes
+
+    def wait_result(self, timeout: float, acknowledge: bool = False) -> Any:
+        return self.pushes.pop(0) if self.pushes else None
+
+
+def pushed_after_catch_up(controller: PushesAfter, last: int | None) -> list[Any]:
+    """What was fed after a catch-up (``last`` the last id recorded) and then one read of
+    the controller's push."""
+    fed: list[Any] = []
+    keeper = SimpleNamespace(device=controller, reconnects=1, losing=False, up=True,
+                             lost=lambda exc: None)
+    records = SimpleNamespace(repo=SimpleNamespace(read_result_stored=lambda t: False),
+                              last_tightening_id=lambda: last,
+                              copy_input=lambda ev, vin: ev, unreadable_input=lambda ev: ev)
+    core = SimpleNamespace(missed_since=lambda: time.time() - 60,
+                           status=lambda: SimpleNamespace(vin="V", faults={}, tool_on=False,
+                                                          bolt=None))
+
+    async def feed(ev: Any) -> None:
+        fed.append(ev)
+
+    async def main() -> None:
+        pool = ThreadPoolExecutor(2)
+        feed_ = ControllerFeed(core, records, keeper, feed, lambda ev: None,  # type: ignore[arg-type]
+                               Blocking(pool))
+        feed_.came_back()
+        assert feed_.catching_up is not None
+        await feed_.catching_up
+        await feed_.results(controller)  # type: ignore[arg-type]
+        pool.shutdown()
+        feed_.close()
+
+    asyncio.run(main())
+    return fed
+
+
+@pytest.mark.parametrize("last", [5, None], ids=["controller restarted", "fresh database"])
+def test_ids_before_the_first_push_of_a_controller_found_empty_are_asked_for(last):
+    """The catch-up finds the controller with no result (restarted with ids from 1, or new);
+    then 1 is made, its push lost, and 2 is pushed: 1 is asked for and fed before 2 (an
+    integrator's trial: 2 and 3 stored, 1 never asked for, nothing said)."""
+    fed = pushed_after_catch_up(PushesAfter({1: res(1), 2: res(2)}, [res(2)]), last)
+    assert [(type(e).__name__, getattr(e, "tightening_id", None)
+             or e.result.tightening_id) for e in fed
+            if isinstance(e, (ResultIn, ResultsSkipped))] == [
+        ("ResultsSkipped", 2), ("ResultIn", 1), ("ResultIn", 2)]
+
+
+def test_a_controller_found_empty_that_counts_on_has_no_gap_below_its_first_push():
+    """The controller cleared its results but counts on: its first push is 500, and it has
+    no 499.  Nothing below it is this link's: no gap, nothing asked but 499."""
+    fed = pushed_after_catch_up(PushesAfter({500: res(500)}, [res(500)]), 40)
+    assert [type(e).__name__ for e in fed if not isinstance(e, CaughtUp)] == ["ResultIn"]
