@@ -463,7 +463,12 @@ async def _opcua_on_own_loop(ua_cfg: OpcUaConfig, devices: tuple[str, ...], bus:
     there.set_result((loop, stop))
     server = OpcUaServer(ua_cfg, bus=bus, devices=devices, simulated=sim)
     try:
-        await server.start()
+        if not await _started(server, stop):
+            log.info("OPC UA: its start given up: the daemon stops")
+            with contextlib.suppress(Exception):
+                await server.stop()
+            await loop.run_in_executor(None, repo.close)
+            return
     except Exception as exc:   # a port in use, certificates: never the station's fault
         log.error("OPC UA: not served on %s: %s", ua_cfg.endpoint, one_line(exc))
         with contextlib.suppress(Exception):
@@ -476,6 +481,26 @@ async def _opcua_on_own_loop(ua_cfg: OpcUaConfig, devices: tuple[str, ...], bus:
     finally:
         await server.stop()
         await loop.run_in_executor(None, repo.close)
+
+
+async def _started(server: Any, stop: asyncio.Event) -> bool:
+    """Whether ``server`` started before ``stop`` was set (its start then cancelled): loading
+    the companion models takes tens of seconds on a busy machine, and a daemon stopped
+    meanwhile waited for it to end (an IT administrator's trial: stops of 25 to 53 s, beyond
+    the unit's TimeoutStopSec, systemd's SIGKILL before the devices closed)."""
+    start = asyncio.ensure_future(server.start())
+    halt = asyncio.ensure_future(stop.wait())
+    try:
+        await asyncio.wait({start, halt}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        halt.cancel()
+    if start.done():
+        start.result()            # its failure raised as it was
+        return True
+    start.cancel()
+    with contextlib.suppress(asyncio.CancelledError, Exception):
+        await start
+    return False
 
 
 def configured_devices(cfg: StationConfig) -> tuple[str, ...]:
@@ -584,12 +609,10 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
             # said at once: under load the station's last cycle, the forwarder and the
             # devices take seconds to end, and a silent journal read as a hang
             notifier.stopping("stopping: ending the station's work, then closing devices")
-            log.info("stopping: the station's last cycle, the line forwarder and OPC UA end, "
-                     "then the devices close")
+            log.info("stopping: the station's last cycle ends, then the devices close as "
+                     "the line forwarder and OPC UA end")
         screens.attach(None, cfg)
         inner.set()
-        await line
-        await served
         if extra is not None:
             await _beside_ended(extra)
         try:
@@ -598,7 +621,13 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
             log.error("station loop failed: %s: %s", type(exc).__name__, one_line(exc))
             await asyncio.sleep(1.0)
         vin = station.vin      # the vehicle on the lift as the station closes
-        await loop.run_in_executor(None, station.close)
+        # the devices close as the line forwarder and OPC UA end, not after them: the tool
+        # off first, within the unit's TimeoutStopSec whatever they take (an IT
+        # administrator's trial: systemd's SIGKILL came while OPC UA still started)
+        closing = loop.run_in_executor(None, station.close)
+        await line
+        await served
+        await closing
         carried, owed = station.unsaved(), station.locks_owed()
         if stop.is_set():
             notifier.stopping("closing devices")
