@@ -73,6 +73,13 @@ class Notifier:
         return self.send(reloading=1, monotonic_usec=usec,
                          **({"status": status} if status else {}))
 
+    def extend_timeout(self, seconds: float, status: str = "") -> bool:
+        """Ask systemd (236+) for ``seconds`` more before it takes the start, reload or stop
+        under way for hung (``EXTEND_TIMEOUT_USEC``): sent again before they run out while
+        the work goes on."""
+        return self.send(extend_timeout_usec=int(seconds * 1_000_000),
+                         **({"status": status} if status else {}))
+
     def stopping(self, status: str = "") -> bool:
         return self.send(stopping=1, **({"status": status} if status else {}))
 

@@ -58,6 +58,10 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("stationd")
 OPEN_RETRY_S = (1.0, 30.0)   # a database that does not open: first and longest wait
+#: while the database opens (a schema upgrade of a large database runs then: 38 s for 15 M
+#: rows in an IT administrator's trial, against the unit's TimeoutStartSec=60s), systemd is
+#: asked every this many seconds for twice as long again, the time it has taken said
+OPEN_EXTEND_S = 10.0
 #: what runs beside each station the loop starts, until that station stops (its configuration,
 #: the station, its stop): ``stationd run``'s simulated world and operator on a ``sim://``
 #: station, handed in by ``stationd.cli`` (the runtime never imports the simulator)
@@ -84,7 +88,7 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event,
     said = ""   # the reason last said: a retry that fails the same way is said at debug only
     while not stop.is_set():
         try:
-            await loop.run_in_executor(None, station.open)
+            await _extending(loop.run_in_executor(None, station.open), notifier)
             if told:
                 station.heard_before_run(DeviceBack(time.time(), DATABASE))
             return Opened.OPEN
@@ -111,6 +115,21 @@ async def _open(station: Station, notifier: Notifier, stop: asyncio.Event,
         if reload is not None and reload.is_set() and not stop.is_set():
             return Opened.RELOAD
     return Opened.STOPPED
+
+
+async def _extending(opening: asyncio.Future[None], notifier: Notifier,
+                     every: float = OPEN_EXTEND_S) -> None:
+    """Wait for the database's ``opening``, asking systemd for more time (and saying how
+    long it has taken) every ``every`` seconds it goes on: a migration before READY=1 must
+    not be killed by TimeoutStartSec and restarted mid-way, in a loop."""
+    began = time.monotonic()
+    while True:
+        done, _ = await asyncio.wait({opening}, timeout=every)
+        if done:
+            return opening.result()
+        taken = time.monotonic() - began
+        notifier.extend_timeout(2 * every, f"opening the database: {taken:.0f} s so far (a "
+                                           "schema upgrade runs before the station starts)")
 
 
 async def _reloaded(cfg_path: str, station: Station, screens: Screens,
