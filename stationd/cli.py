@@ -986,7 +986,10 @@ def _main(argv: Sequence[str] | None, stopped: _Stopped) -> int:
     except reported as exc:
         if stopped.signal is not None:   # a library's words for the interruption
             raise
-        sys.stderr.write(f"stationd: error: {printable(str(exc), keep=chr(10))}\n")
+        from stationd.logsetup import error_mark
+
+        sys.stderr.write(f"{error_mark()}stationd: error: "
+                         f"{printable(str(exc), keep=chr(10))}\n")
         return EXIT_BAD_INPUT
     except BrokenPipeError:
         # ``stationd db report VIN | head``: the reader has all it wanted, quietly; but the

@@ -12,6 +12,8 @@ import sys
 from collections.abc import Sequence
 from typing import NoReturn
 
+from stationd.logsetup import error_mark
+
 #: bad input: one readable line on stderr (the entry point's exit codes: :mod:`stationd.cli`)
 EXIT_BAD_INPUT = 2
 
@@ -25,13 +27,14 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         said = self._missing_command(message) or self._no_such_command(message) or message
         typo = self._mistyped()
+        mark = error_mark()
         if message.startswith("unrecognized arguments"):
             # said by the command it was given to; a typo is the whole story (its value was
             # listed as unrecognized too)
-            sys.stderr.write(f"{self._command_prog()}: error: {typo or message} "
+            sys.stderr.write(f"{mark}{self._command_prog()}: error: {typo or message} "
                              "(see --help)\n")
         else:
-            sys.stderr.write(f"{self.prog}: error: {typo + '; ' if typo else ''}{said} "
+            sys.stderr.write(f"{mark}{self.prog}: error: {typo + '; ' if typo else ''}{said} "
                              "(see --help)\n")
         raise SystemExit(EXIT_BAD_INPUT)
 

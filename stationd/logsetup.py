@@ -47,6 +47,14 @@ def under_journal(stream: TextIO | None = None) -> bool:
     return (st.st_dev, st.st_ino) == (int(dev), int(ino))
 
 
+def error_mark(stream: TextIO | None = None) -> str:
+    """What begins a command's one-line error on ``stream`` (standard error): ``<3>`` (err)
+    where that is the journal, so ``journalctl -p warning`` shows why a service did not start
+    (an IT administrator's trial: the exit line stored at the default priority), else
+    nothing."""
+    return f"<{priority(logging.ERROR)}>" if under_journal(stream) else ""
+
+
 class StampedFormatter(logging.Formatter):
     """``2026-11-29 04:31:07.412 INFO ...`` in local time with its UTC offset: a line
     whose time is its own (outside the journal)."""

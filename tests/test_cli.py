@@ -1,8 +1,10 @@
 """The command line contract: JSON fields, exit codes, one-line errors."""
 
 import json
+import os
 import subprocess
 import sys
+from contextlib import nullcontext
 from pathlib import Path
 
 import cv2
@@ -666,3 +668,24 @@ def test_a_mistyped_option_is_named_with_the_one_meant(capsys, argv, said):
     code, _, err = _usage_error(capsys, *argv)
     assert code == 2 and said in _one_line(err) and _one_line(err).rstrip("\n").endswith(
         " (see --help)"), err
+
+
+@pytest.mark.parametrize("argv", [["run", "--config", "/nonexistent/station.yaml"],
+                                  ["run", "--confg", "x"]], ids=["refused", "usage"])
+def test_an_error_line_to_the_journal_carries_its_priority(tmp_path, monkeypatch, argv):
+    """Standard error connected to systemd's journal (``JOURNAL_STREAM`` names that very
+    stream): the exit's one line begins ``<3>`` (err), so ``journalctl -p warning`` shows why
+    the service did not start (an IT administrator's trial: stored at the default priority).
+    Anywhere else it is the plain line."""
+    for journal in (True, False):
+        path = tmp_path / f"stderr-{journal}"
+        with open(path, "w") as err:
+            st = os.fstat(err.fileno())
+            monkeypatch.setenv("JOURNAL_STREAM", f"{st.st_dev}:{st.st_ino}" if journal
+                               else "1:1")
+            monkeypatch.setattr(sys, "stderr", err)
+            with pytest.raises(SystemExit) if argv[1] == "--confg" else nullcontext():
+                main(argv)
+        text = path.read_text()
+        assert len(text.splitlines()) == 1, text
+        assert text.startswith("<3>stationd" if journal else "stationd"), text

@@ -506,8 +506,12 @@ class Records:
         repo = self._writer()
         gone = repo.left_unseen(a.vin)
         if gone is not None:   # the lowering that closes it was not seen (station down then)
-            self.log.info("vehicle %s (%s) closed: it left while the station did not see it go; "
-                          "%s", gone.vehicle.vin, gone.vehicle.model, gone.counts())
+            # a warning where a bolt is not OK, as at any close (an IT administrator's trial:
+            # "45 missing" at INFO, a journal read by priority missed it)
+            missing, nok = _verdict(gone, ())
+            self.log.log(logging.INFO if not missing and not nok else logging.WARNING,
+                         "vehicle %s (%s) closed: it left while the station did not see it go; "
+                         "%s", gone.vehicle.vin, gone.vehicle.model, gone.counts())
         model = repo.model_for_code(a.model_code)
         if model is None:   # which vehicle, and the codes there are (a line engineer's trial)
             codes = ", ".join(f"{name} {code}" for name, code in repo.model_codes().items()

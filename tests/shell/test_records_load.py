@@ -38,3 +38,20 @@ def test_a_vehicle_of_an_unknown_model_code_is_refused_naming_it_and_the_codes(
     assert refused.reason.startswith("unknown vehicle model code 99 for WVWZZZ1JZXW000001 "
                                      "(the bolt tables' codes: ")
     assert " 12" in refused.reason          # the table's model and its code
+
+
+def test_a_vehicle_that_left_unseen_with_bolts_not_ok_is_a_warning(tmp_path: Path,
+                                                                   caplog) -> None:
+    """The station was down as VIN1 left with a bolt tightened and the rest missing: closed
+    as VIN2 loads, said at WARNING, as any close with a bolt not OK (an IT administrator's
+    trial: "45 missing" at INFO, a journal read by priority missed it)."""
+    import logging
+
+    records = _records(tmp_path)
+    assert isinstance(records.load_vehicle(LoadVehicle(12, "VIN1")), VehicleLoaded)
+    assert records.repo is not None
+    record(records.repo, "VIN1", "B1", ok=True, tightening_id=1)
+    with caplog.at_level(logging.INFO):
+        assert isinstance(records.load_vehicle(LoadVehicle(12, "VIN2")), VehicleLoaded)
+    [line] = [r for r in caplog.records if "did not see it go" in r.getMessage()]
+    assert line.levelno == logging.WARNING and "missing" in line.getMessage()
