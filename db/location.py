@@ -22,6 +22,8 @@ from db.reach import file_above, not_a_folder, unreachable, user_name
 
 #: the first 16 bytes of every SQLite database file (https://sqlite.org/fileformat.html)
 SQLITE_HEADER = b"SQLite format 3\x00"
+#: the systemd unit's StateDirectory: the one folder its ProtectSystem=strict lets it write
+STATE_DIRECTORY = Path("/var/lib/stationd")
 NOT_SQLITE = "not an SQLite database: "
 #: what an in-memory database loses, in the station's words (a command says its own)
 STATION_LOSES = "every result is lost when the station stops"
@@ -56,6 +58,12 @@ def unwritable_folder(folder: Path, *, as_writer: bool = True) -> str | None:
     except OSError:
         return None   # not reachable to look at: what opens it says why
     if read_only:
+        if folder.is_relative_to(STATE_DIRECTORY):
+            # the unit's own StateDirectory, always written: the mount itself is read-only
+            # (an IT administrator's trial was told to let the unit write this very folder)
+            return f"folder {folder} is on a file system mounted read-only: remount it " \
+                   "read-write (mount -o remount,rw, and see why it went read-only: " \
+                   "dmesg; a disk error does that)"
         if os.environ.get("INVOCATION_ID"):
             # systemd runs this process (it sets INVOCATION_ID for each service): the unit's
             # ProtectSystem=strict shows every folder but its own read-only, whatever the

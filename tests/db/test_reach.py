@@ -95,3 +95,21 @@ def test_a_folder_read_only_under_the_unit_says_how_the_unit_lets_it_be_written(
                                                 "service"), said
     assert "ProtectSystem=strict" in said and f"ReadWritePaths={tmp_path}" in said
     assert "systemctl edit stationd" in said and "\n" not in said
+
+
+def test_the_units_own_folder_read_only_is_a_read_only_mount(monkeypatch):
+    """/var/lib/stationd, the unit's StateDirectory, read-only: the unit writes it always,
+    so the file system is mounted read-only (an IT administrator's trial was told to add
+    ``ReadWritePaths=/var/lib/stationd`` to the unit, the folder it names already)."""
+    from db.location import STATE_DIRECTORY
+
+    monkeypatch.setattr(os, "statvfs", lambda path: _ReadOnly())
+    monkeypatch.setattr(Path, "stat", lambda self: os.stat("/"))
+    for invocation in ("0123456789abcdef0123456789abcdef", None):
+        if invocation is None:
+            monkeypatch.delenv("INVOCATION_ID", raising=False)
+        else:
+            monkeypatch.setenv("INVOCATION_ID", invocation)
+        said = unwritable_folder(STATE_DIRECTORY / "images")
+        assert said is not None and "mounted read-only: remount it read-write" in said, said
+        assert "ReadWritePaths" not in said and "\n" not in said
