@@ -65,6 +65,11 @@ class RecordsConfig:
 
     images_dir: Path | None = None
     save_images: bool = False
+    #: MB left free on the images' file system: below it a selection's images are not
+    #: saved (its tightening is recorded all the same), so that they never fill the disk the
+    #: database writes to (an IT administrator's trial: ~400 KB a tightening, the disk
+    #: full, the database in fault and the tool off)
+    images_keep_free_mb: int = 1024
 
 
 @dataclass(frozen=True)
@@ -179,7 +184,7 @@ def _records(node: YamlNode, base: Path, check: bool = False,
     or the station's lock there (``database_url`` not an SQLite file); else it only reads
     the images saved earlier (a read-only archive is refused nothing: a start refused,
     exit 2, is not restarted)."""
-    r = node.mapping(("images_dir", "save_images"))
+    r = node.mapping(("images_dir", "save_images", "images_keep_free_mb"))
     images = relative_path(r["images_dir"], base) if "images_dir" in r else None
     there = images is not None and present(r["images_dir"], images, "folder")
     if images is not None and there and not images.is_dir():
@@ -196,7 +201,9 @@ def _records(node: YamlNode, base: Path, check: bool = False,
             made = "" if folder == images else f" (where {images} is to be made)"
             raise r["images_dir"].error(f"{why}{made}: the selections' images and, with a "
                                         "database server, the station's lock go there")
-    return RecordsConfig(images, save)
+    keep = r["images_keep_free_mb"].integer(lo=0) if "images_keep_free_mb" in r \
+        else RecordsConfig.images_keep_free_mb
+    return RecordsConfig(images, save, keep)
 
 
 def _lock_there(database_url: str | None, images: Path) -> bool:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import re
+import shutil
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -157,6 +158,7 @@ class Records:
         # the NOK policy's locks the database refused: written first when it is back
         self._locks_owed: list[NoteLock] = []
         self._lock = threading.Lock()
+        self._images_room = True   # the images' disk had room at the last save (said once)
         # the tool enable the station owes a result to (its selection and its row on disk)
         self._enable: tuple[Selection, int] | None = None
         self._enable_off = False          # its tool-off time is on disk
@@ -807,6 +809,8 @@ class Records:
         folder = self.cfg.records.images_dir
         if not self.cfg.records.save_images or folder is None or loc is None:
             return []
+        if not self._room_for_images(folder):
+            return []
         out = []
         for key, img in sorted(loc.crops.items()):
             path = folder / _path_part(vin) / (f"{_path_part(bolt)}-{tightening_id}-"
@@ -820,6 +824,36 @@ class Records:
                 continue
             out.append(str(path))
         return out
+
+
+    def _room_for_images(self, folder: Path) -> bool:
+        """Whether the images' file system has more than ``images_keep_free_mb`` free: below
+        it the images are not saved, said once as a warning until there is room again (said
+        then too); the records go on.  A file system that cannot be looked at: saved, as
+        before (the writes say what fails)."""
+        keep = self.cfg.records.images_keep_free_mb
+        try:
+            free = shutil.disk_usage(_nearest(folder)).free / 1e6
+        except OSError:
+            return True
+        room = free > keep
+        if room != self._images_room:
+            self._images_room = room
+            if room:
+                self.log.info("images saved again: %.0f MB free on %s", free, folder)
+            else:
+                self.log.warning("images not saved: %.0f MB free on %s, within the %d MB "
+                                 "kept free for the database (records.images_keep_free_mb); "
+                                 "the tightenings are recorded without them: move old "
+                                 "images to an archive", free, folder, keep)
+        return room
+
+
+def _nearest(folder: Path) -> Path:
+    """``folder``, or its nearest parent that exists (not made yet: its file system)."""
+    while not folder.exists() and folder.parent != folder:
+        folder = folder.parent
+    return folder
 
 
 def _verdict(report: VehicleReport, due: tuple[str, ...]) -> tuple[tuple[str, ...],
