@@ -62,3 +62,21 @@ def test_a_token_that_is_no_text_is_refused_without_being_repeated():
         read("listen: 0.0.0.0:9000\ntoken: 98765432109876543\n")
     assert "98765432109876543" not in str(err.value)
     assert "expected a string, got a number (not shown: a secret)" in str(err.value)
+
+
+def test_a_short_token_off_this_machine_is_one_error_with_one_rule(tmp_path):
+    """An IT administrator's trial: ``token: short1`` with a listen off the machine was told
+    "at least 8 characters" and "a non-local bind needs a token ... set http.token" (one was
+    set), then "16" with 10 characters.  Now one error, the 16-character rule, by config
+    check too; on this machine the 8-character rule says the other."""
+    from stationd.stationcheck import check_station
+
+    with pytest.raises(ConfigError, match="at least 16 characters") as err:
+        read("listen: 0.0.0.0:9000\ntoken: short1\n")
+    assert "set http.token" not in str(err.value)
+    with pytest.raises(ConfigError, match=r"at least 8 characters \(16 for a listen off"):
+        read("listen: 127.0.0.1:9000\ntoken: short1\n")
+    station = tmp_path / "station.yaml"
+    station.write_text("http: {listen: '0.0.0.0:9000', token: short1}\n")
+    errors = [str(e) for e in check_station(station).errors if "http" in str(e)]
+    assert len(errors) == 1 and "at least 16 characters" in errors[0], errors
