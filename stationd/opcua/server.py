@@ -343,8 +343,12 @@ class OpcUaServer:
         if not any(trusted.iterdir()):
             # nothing trusted yet (a first start): no client certificate is accepted, rather
             # than every one (asyncua's store cannot be empty)
-            log.warning("OPC UA: no client certificate in %s yet: signed and encrypted "
-                        "sessions are refused until one is placed there", trusted)
+            # a warning only where such sessions are offered (an IT administrator's trial:
+            # said at every start of a server configured with security [none])
+            signed = any(s != "none" for s in self.cfg.security)
+            (log.warning if signed else log.info)(
+                "OPC UA: no client certificate in %s yet: signed and encrypted sessions are "
+                "refused until one is placed there", trusted)
             server.set_certificate_validator(_refuse_every_certificate)
             return
         store = TrustStore([trusted], [])

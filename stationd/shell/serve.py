@@ -585,7 +585,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
         station.carry(carried, owed)
         opened = await _open(station, notifier, stop, reload)
         if opened is not Opened.OPEN:
-            await loop.run_in_executor(None, station.close)
+            await loop.run_in_executor(None, station.close, opened is Opened.STOPPED)
             if opened is Opened.STOPPED:
                 # said as a stop with the database open is (a maintenance trial: a stop while
                 # it was in fault ended the journal without a word)
@@ -643,7 +643,7 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
         # the devices close as the line forwarder and OPC UA end, not after them: the tool
         # off first, within the unit's TimeoutStopSec whatever they take (an IT
         # administrator's trial: systemd's SIGKILL came while OPC UA still started)
-        closing = loop.run_in_executor(None, station.close)
+        closing = loop.run_in_executor(None, station.close, stop.is_set())
         await line
         await served
         await closing
