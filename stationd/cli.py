@@ -456,10 +456,10 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     every command a script or the suite starts; ``stationd status`` needs none of the vision's.
     A run names its command first, so the others are never asked for; help on the command line
     itself (``stationd -h``, a command not known) builds them all and lists them all."""
-    from stationd import __version__
+    from stationd.release import release
 
     p = _Parser(prog="stationd", description="Vision-guided bolt-tightening station.")
-    p.add_argument("--version", action="version", version=f"stationd {__version__}")
+    p.add_argument("--version", action="version", version=f"stationd {release()}")
     p.add_argument("-q", "--quiet", action="store_true",
                    help="no progress bars (they are also off when stderr is not a terminal)")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)

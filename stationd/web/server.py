@@ -83,7 +83,9 @@ def _versions() -> dict[str, str]:
             return metadata.version(name)
         except metadata.PackageNotFoundError:
             return "unknown"
-    return {"stationd": v("stationd"), "aiohttp": v("aiohttp"),
+    from stationd.release import release
+
+    return {"stationd": release(), "aiohttp": v("aiohttp"),
             "python": platform.python_version()}
 
 
