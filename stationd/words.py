@@ -564,6 +564,10 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
         f"{_result_id(n.tightening_id)} came after the tool went off for {n.bolt} (within "
         f"the late-result window): recorded to {n.bolt}"
         + (f" of {n.vin} (gone from the station since)" if n.vin else "")),
+    Said.OTHER_VIN: lambda n: (
+        f"tightening {n.tightening_id} of {n.bolt} carries the controller's VIN {n.note}, not "
+        f"{n.vin}: recorded to {n.bolt} (its tool was on for it); the controller files it "
+        "under that VIN: its VIN download (MID 0050) did not take, or another program set it"),
     Said.LOOSEN_PSET_TIGHTENED: lambda n: (f"{n.bolt}: the loosen pset {n.pset} reported a "
                                            "tightening: the bolt counts as tightened; check "
                                            "that pset's program"),

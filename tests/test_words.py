@@ -173,6 +173,11 @@ WORDS = [
      "B1: loosening NOK 60.0 Nm, 2.0 deg entered by sam from the controller's screen (the "
      "result that could not be read: tightening 7, a loosening with loosen pset 90): a "
      "loosening NOK of B1, the NOK policy applies"),
+    (Notice(Said.OTHER_VIN, tightening_id=14, bolt="B17", vin="VIN1",
+            note="WVWZZZ1JZ3W000001"),
+     "tightening 14 of B17 carries the controller's VIN WVWZZZ1JZ3W000001, not VIN1: "
+     "recorded to B17 (its tool was on for it); the controller files it under that VIN: its "
+     "VIN download (MID 0050) did not take, or another program set it"),
     (Notice(Said.REWORK_REOPENED, vin="VIN1"),
      "VIN VIN1 already closed: reopened as a rework (its records kept)"),
     (Notice(Said.LATE_ACK, bolt="B1"), "late acknowledgement for B1 ignored"),
@@ -197,7 +202,7 @@ def test_a_notice_s_level_is_its_kind_s() -> None:
         Said.PAIR_DISTRUSTED, Said.IDS_AGAIN, Said.UNATTRIBUTED, Said.UNKNOWN_TYPE, Said.GAP,
         Said.UNREADABLE, Said.HELD, Said.CUT_UNKNOWN, Said.NOT_TAKEN, Said.LOOSEN_PSET_TIGHTENED,
         Said.LOOSENING_NOK, Said.LOCKED, Said.NOK_AFTER_LOCK, Said.ENTERED_NOK,
-        Said.ENTERED_LOOSENING_NOK}
+        Said.ENTERED_LOOSENING_NOK, Said.OTHER_VIN}
     # a controller event is a warning only while a bolt is still open
     assert Notice(Said.CONTROLLER_EVENT, bolt="B1").level == "warning"
 

@@ -612,6 +612,10 @@ class Said(enum.Enum):
     CUT_UNKNOWN = "cut unknown"          # the bolt enabled during a link cut held: what the
     #                                      controller did then is not known (bolt, note)
     LATE_RESULT = "late result"          # recorded outside a tightening (bolt)
+    OTHER_VIN = "other vin"              # recorded to the bolt its tool was on for, the
+    #                                      controller's VIN another than the vehicle's
+    #                                      (tightening_id, bolt, vin: the vehicle's, note:
+    #                                      the controller's)
     LOST_RECORDED = "lost recorded"      # its push lost, fetched when a later one came:
     #                                      made under the bolt's own enable, recorded to it
     #                                      (tightening_id, bolt)
@@ -641,7 +645,7 @@ _WARNINGS = frozenset({
     Said.PAIR_DISTRUSTED, Said.IDS_AGAIN, Said.UNATTRIBUTED, Said.UNKNOWN_TYPE, Said.GAP,
     Said.UNREADABLE, Said.HELD, Said.CUT_UNKNOWN, Said.NOT_TAKEN, Said.LOOSEN_PSET_TIGHTENED,
     Said.LOOSENING_NOK, Said.LOCKED, Said.NOK_AFTER_LOCK, Said.ENTERED_NOK,
-    Said.ENTERED_LOOSENING_NOK})
+    Said.ENTERED_LOOSENING_NOK, Said.OTHER_VIN})
 
 
 @dataclass(frozen=True)

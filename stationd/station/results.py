@@ -418,6 +418,11 @@ class ResultRules(UnreadRules):
             acts.append(Publish(Notice(Said.LATE_RESULT, bolt=en.bolt,
                                        vin=en.vin if en.vin != self.vin else None,
                                        tightening_id=int(r.tightening_id), t=ev.t)))
+        echoed = str(r.vin or "").strip()
+        if echoed and en.vin and echoed != en.vin:
+            # an integrator's trial: four results under another VIN recorded without a word
+            acts.append(Publish(Notice(Said.OTHER_VIN, tightening_id=int(r.tightening_id),
+                                       bolt=en.bolt, vin=en.vin, note=echoed, t=ev.t)))
         self._recorded[int(r.tightening_id)] = _said(r)
         if not cut and not lost:
             self._enabled = None    # (a cut's result leaves an enable made since owed)

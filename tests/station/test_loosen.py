@@ -51,7 +51,7 @@ POLICY = NokPolicy(NokRule(3, "loosen", 90), psets={2: NokRule(2, "skip", 92)},
 
 
 def res(tid: int, pset: int, ok: bool, rtype: int | None = None) -> Any:
-    return SimpleNamespace(tightening_id=tid, pset=pset, ok=ok, result_type=rtype)
+    return SimpleNamespace(tightening_id=tid, pset=pset, ok=ok, result_type=rtype, vin="")
 
 
 def _driver(policy: NokPolicy = POLICY) -> Driver:

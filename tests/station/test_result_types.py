@@ -1418,3 +1418,22 @@ def test_an_older_id_judged_later_says_nothing_of_the_order():
                            live=True, before=42))
     assert not [a for a in acts if isinstance(a, Record)]
     assert [a.bolt for a in acts if isinstance(a, StoreCutUnknown)] == ["B3"]
+
+
+def test_a_result_under_another_vin_is_recorded_to_its_bolt_and_said():
+    """The controller's VIN in a result is another than the vehicle's (its VIN download did
+    not take, or another program set it): the rundown is the bolt's the tool was on for,
+    recorded so, and said as a warning naming both VINs (an integrator's trial: four such
+    results recorded without a word).  Its own VIN, or none: nothing said."""
+    for vin, said in (("WVWZZZ1JZ3W000001", True), ("VIN1", False), ("", False)):
+        d = _ready("VIN1")
+        _enabled(d, 1)
+        acts = d.feed(ResultIn(d.t, res(41, 1, True, 1, vin=vin)))
+        assert [(a.bolt, int(a.result.tightening_id)) for a in acts
+                if isinstance(a, Record)] == [("B1", 41)]
+        other = [n for n in published(acts, Notice) if n.said is Said.OTHER_VIN]
+        assert bool(other) is said
+        if said:
+            assert other[0].level == "warning"
+            words = notice_words(other[0])
+            assert "WVWZZZ1JZ3W000001" in words and "VIN1" in words and "B1" in words
