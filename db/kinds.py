@@ -146,6 +146,13 @@ def lost_unknown_note(tightening_id: int, pset: int | None, enabled_at: float) -
             f"{'' if pset is None else f' for pset {pset}'} at {at} UTC")
 
 
+def other_pset_note(tightening_id: int, pset: int, sent: int) -> str:
+    """A held bolt's note where a result of another pset (``pset``) than the one sent for it
+    (``sent``) came while its tool was on: a rundown with another program, or none of it."""
+    return (f"tightening {tightening_id} came under pset {pset} while its tool was on for "
+            f"pset {sent}: run with another program, or not its own")
+
+
 def check_unknown_note(why: str, pset: int | None, enabled_at: float) -> str:
     """A held bolt's note where its enable (with ``pset`` at ``enabled_at``, epoch seconds)
     got no result in its window and the controller's newest result could not be read then

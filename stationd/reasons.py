@@ -229,6 +229,9 @@ class UnattributedKind(enum.StrEnum):
     FETCHED_CHECKED = "fetched checked"  # fetched when the controller's newest was asked
     #                                      for as an enable's window ended, the link up
     FETCHED = "fetched"                  # fetched after a reconnect
+    # pushed while the tool was on for ``bolt`` (or within its late-result window), of
+    # another pset than the one sent for it: run with another program, its bolt held
+    OTHER_PSET = "other pset"
     # fetched after a later one came, the link up, and it is the result that could not be
     # read for ``bolt`` (the one id between the tightenings read before and after it)
     UNREAD_READ = "unreadable, read"

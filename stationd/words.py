@@ -228,6 +228,7 @@ _CAME: dict[UnattributedKind, str] = {
                                       "link up",
     UnattributedKind.FETCHED: "fetched after a reconnect",
     UnattributedKind.UNREAD_READ: "fetched after a later one came, the link up",
+    UnattributedKind.OTHER_PSET: "pushed while the tool was on",
 }
 
 
@@ -236,6 +237,10 @@ def unattributed_words(why: Unattributed) -> str:
     says it: ``result 12 (pset 3) fetched after a reconnect (VIN V9, not V1)``."""
     said = f"result {why.tightening_id} (pset {why.pset}) {_CAME[why.kind]}" + (
         f" ({unproved_words(why.unproved)})" if why.unproved is not None else "")
+    if why.kind is UnattributedKind.OTHER_PSET:
+        said = (f"result {why.tightening_id} (pset {why.pset}) pushed while the tool was on "
+                f"for {why.bolt} with another pset: run with another program (one selected on "
+                f"the controller?), or none of {why.bolt}'s: {why.bolt} held")
     if why.kind is UnattributedKind.UNREAD_READ and why.between is not None:
         before, after = why.between
         said += (f": the result of {why.bolt} that could not be read (the one id between "
@@ -519,7 +524,7 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
     Said.SENT_AGAIN: lambda n: sent_again_words(n.tightening_id, n.bolt, n.vin),
     Said.UNATTRIBUTED: lambda n: _unattributed(n.unattributed) + (
         ": stored apart with its values" if n.unattributed is not None
-        and n.unattributed.kind is UnattributedKind.UNREAD_READ
+        and n.unattributed.kind in (UnattributedKind.UNREAD_READ, UnattributedKind.OTHER_PSET)
         else ": not attributable to a bolt, stored unattributed"),
     Said.CONTROLLER_EVENT: _controller_event,
     Said.UNKNOWN_TYPE: _controller_event,

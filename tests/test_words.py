@@ -584,6 +584,9 @@ UNATTRIBUTED_WORDS = [
      "result 6 (pset 2) fetched after a later one came, the link up: the result of B47 that "
      "could not be read (the one id between tightenings 5 and 7), now read; B47 stays held "
      "until its outcome is entered"),
+    (Unattributed(UnattributedKind.OTHER_PSET, 12, 9, bolt="B1"),
+     "result 12 (pset 9) pushed while the tool was on for B1 with another pset: run with "
+     "another program (one selected on the controller?), or none of B1's: B1 held"),
 ]
 
 
@@ -592,7 +595,8 @@ UNATTRIBUTED_WORDS = [
 def test_each_unattributed_result_says_what_the_core_stored(why: Unattributed,
                                                              words: str) -> None:
     assert unattributed_words(why) == words
-    stored = "stored apart with its values" if why.kind is UnattributedKind.UNREAD_READ \
+    stored = "stored apart with its values" if why.kind in (
+        UnattributedKind.UNREAD_READ, UnattributedKind.OTHER_PSET) \
         else "not attributable to a bolt, stored unattributed"
     assert notice_words(Notice(Said.UNATTRIBUTED, unattributed=why)) == f"{words}: {stored}"
 

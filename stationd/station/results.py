@@ -11,6 +11,7 @@ from db.kinds import (
     NOT_TAKEN,
     TIGHTENING,
     not_taken_note,
+    other_pset_note,
 )
 from drivers.wrench.base import (
     ResultKind,
@@ -48,7 +49,7 @@ from stationd.station.inputs import (
     Written,
 )
 from stationd.station.lost import CLOCK_SLACK_S
-from stationd.station.state import NOK_SKIPPED, ON_A_BOLT, UNANSWERED
+from stationd.station.state import NOK_SKIPPED, ON_A_BOLT, UNANSWERED, _Cut
 from stationd.station.unread import UnreadRules, _Unread
 
 
@@ -187,6 +188,8 @@ class ResultRules(UnreadRules):
             return self._attribute(ev, en)
         if en is not None and not before and self._made_under(ev, en):
             return self._attribute(ev, en, lost=True)
+        if en is not None and not before and self._of_another_pset(ev, en):
+            return self._other_pset(ev, en)
         proved, not_proved = self._made_during_cut(ev)
         if proved is not None:
             if self._cut is not None:
@@ -209,6 +212,39 @@ class ResultRules(UnreadRules):
                 *self._cut_in_doubt(ev), *self._lost_in_doubt(ev, lost),
                 *self._fetched_in_doubt(ev), *self._late_cut_in_doubt(ev),
                 *self._loosened_after_cut(ev, kind)]
+
+    def _of_another_pset(self, ev: ResultIn, en: Selection) -> bool:
+        """Whether ``ev``, pushed while the tool is on for ``en`` (or within its late-result
+        window), the link up since, is of another pset than the one sent for it: a rundown
+        with another program (one selected on the controller's own screen) where the
+        operator was, or no rundown of this bolt at all."""
+        return not ev.fetched and bool(en.vin) and en.pset is not None \
+            and int(ev.result.pset) != en.pset and self._cut is None \
+            and self._enabled_at is not None and self._enabled_at > self._link_lost_at \
+            and (self.tool_on or self._result_owed(ev.t))
+
+    def _other_pset(self, ev: ResultIn, en: Selection) -> list[Action]:
+        """A result of another pset than the one sent for the enable on (:meth:`
+        _of_another_pset`): never that bolt's result, never "outside any tightening" either
+        (an integrator's trial: the tool stayed on, the bolt was run down again and closed OK,
+        the other program's rundown in no bolt's history).  Stored naming the bolt, the tool
+        off, the bolt held for a person who checks it on the controller (released, or its
+        outcome entered); the enable owes nothing more."""
+        r, tid = ev.result, int(ev.result.tightening_id)
+        self._recorded[tid] = _said(r)
+        why = Unattributed(UnattributedKind.OTHER_PSET, tid, int(r.pset), bolt=en.bolt)
+        since = self._enabled_at if self._enabled_at is not None else ev.t
+        acts: list[Action] = [StoreUnattributed(r, en.vin, why),
+                              Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
+                              Publish(Notice(Said.UNATTRIBUTED, tightening_id=tid,
+                                             pset=int(r.pset), unattributed=why, t=ev.t))]
+        if self.tool_on:
+            acts += self._drop(ev.t, State.TRACKING, StateReason(Because.UNKNOWN_HELD,
+                                                                 bolt=en.bolt))
+        acts += self._hold_unanswered(ev.t, [_Cut(en, since, ev.t)], lambda u: other_pset_note(
+            tid, int(r.pset), int(en.pset or 0)), tid)
+        self._enabled, self._off_at = None, None
+        return acts
 
     def _loosened_after_cut(self, ev: ResultIn, kind: ResultKind) -> list[Action]:
         """A loosening fetched after the rundown of a link cut's bolt was proved and

@@ -333,12 +333,19 @@ def _walk(rng: np.random.Generator, steps: int) -> dict[str, int]:
                 name = sorted(m.locked)[int(rng.integers(len(m.locked)))]
             cmd = ReleaseBolt("VIN1", name) if op == "release" else LoosenBolt("VIN1", name)
             who = SUPERVISOR if rng.random() > 0.2 else OPERATOR
+            # held (a result of another pset came while its tool was on): its result not
+            # known, it may be a NOK
+            held = d.core.matcher is not None and name in d.core.matcher.held \
+                and name not in d.core.matcher.done
             reply = _command(d, request, cmd, who)
             if reply.answer.accepted:
                 counts["releases" if op == "release" else "loosen commands"] += 1
                 if op == "release":
                     m.locked.discard(name)
                     m.noks[name] = 0
+                    rule = m.rule(name)
+                    if held and rule.strategy == "loosen" and rule.loosen_pset is not None:
+                        m.loosen.add(name)      # a released hold loosens first
                 else:
                     m.loosen.add(name)
         if op == "result":
