@@ -18,7 +18,7 @@ from types import TracebackType
 from typing import Any, Self
 
 from alembic.util import CommandError
-from sqlalchemy import Engine, func, make_url, select
+from sqlalchemy import Connection, Engine, func, inspect, make_url, select
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session
 
@@ -121,6 +121,13 @@ class Recorded:
     bolt: str | None = None
 
 
+def _line_tables(conn: Connection) -> str:
+    """The line database's own tables in ``conn``'s database (``line_*``, as
+    ``stationd line init`` makes them), named for the words; "" where there are none."""
+    names = sorted(n for n in inspect(conn).get_table_names() if n.startswith("line_"))
+    return ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
+
+
 def _other_schema(have: str | None, want: str | None) -> str:
     """What to do with a database at another schema than this release's: an older one is
     migrated by opening it for writing; a newer one (a later stationd's) only that stationd
@@ -152,9 +159,17 @@ class Repository:
         engine = make_engine(url, read_only=read_only)
         where = make_url(url).render_as_string()  # the password, if any, is masked
         try:
+            with engine.connect() as conn:
+                have, want = current_revision(conn), head_revision()
+                line = have is None and _line_tables(conn)
+            if line:
+                # a quality trial: told to open the line's database with write access, which
+                # would have put a station's schema into it
+                engine.dispose()
+                raise DatabaseError(f"{where}: a line database (its tables {line}), not a "
+                                    "station's: read it with `stationd line results "
+                                    "--config STATION.yaml` (or `line status`)")
             if read_only:
-                with engine.connect() as conn:
-                    have, want = current_revision(conn), head_revision()
                 if have != want:
                     engine.dispose()
                     raise DatabaseError(f"{where}: schema {have or 'none'}, this stationd "
