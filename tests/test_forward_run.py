@@ -136,3 +136,48 @@ def test_a_new_reason_while_down_is_told(repo, monkeypatch):
 
     asyncio.run(main())
     assert said == [(False, "connection refused"), (False, "role st lacks INSERT")]
+
+
+def test_an_outage_is_said_again_while_it_lasts_and_its_end_once_caught_up(repo, monkeypatch):
+    """The line database down: said as it goes down, then again every DOWN_SAID_S with the
+    backlog grown; back up, said once caught up, with how many records waited at most (a
+    quality trial: one line as the outage began, then nothing while 52 records waited).  The
+    loop's statuses are given (the line database's own behaviour is the system tests')."""
+    monkeypatch.setattr(forward, "DOWN_SAID_S", 0.05)
+    monkeypatch.setattr(forward, "STATUS_S", 0.01)
+    monkeypatch.setattr(forward, "BACKOFF_S", (0.01, 0.01))
+    monkeypatch.setattr(forward, "POLL_S", 0.01)
+    f = Forwarder(repo, LineConfig("postgresql+psycopg://u@127.0.0.1:1/line", "ST-W"))
+    steps = {"n": 0}
+    backlog = iter([3, 5, 8, 13, 21] + [21] * 200)
+    heard: list[dict] = []
+
+    def step() -> int:
+        steps["n"] += 1
+        if len(heard) < 3:
+            time.sleep(0.02)
+            raise forward.LineDown("connection refused")
+        return 0
+
+    def status(measure_s=None) -> dict:
+        down = len(heard) < 3
+        return {"up": not down, "alarm": None, "last_error": "refused" if down else None,
+                "backlog": next(backlog) if down else (4 if len(heard) == 3 else 0),
+                "url": "line"}
+
+    f.step = step                # type: ignore[method-assign]
+    f.status = status            # type: ignore[method-assign]
+
+    async def main() -> None:
+        stop = asyncio.Event()
+        task = asyncio.create_task(f.run(stop, heard.append))
+        await _until(lambda: any("caught_up" in h for h in heard), 20.0)
+        stop.set()
+        await task
+
+    asyncio.run(main())
+    downs = [h for h in heard if h["up"] is False]
+    assert len(downs) >= 2 and downs[-1]["backlog"] > downs[0]["backlog"], heard
+    [end] = [h for h in heard if "caught_up" in h]
+    assert end["up"] is True and end["caught_up"] == max(h["backlog"] for h in downs)
+    f.line.dispose()

@@ -407,6 +407,9 @@ async def forward(cfg: StationConfig, notifier: Notifier, screens: Screens,
     def told(st: dict[str, Any]) -> None:
         if st["alarm"]:
             line = f"line database: ALARM: {st['alarm']}"
+        elif st.get("caught_up") is not None:
+            line = f"line database: caught up after the outage: every record forwarded " \
+                f"({st['caught_up']} waited at most)"
         elif st["up"] is False:
             n = st["backlog"]
             line = f"line database: down ({st['last_error']}); {records_waiting(n)} (the " \
