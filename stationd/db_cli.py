@@ -339,7 +339,7 @@ def _aware(t: datetime) -> datetime:
 
 #: what ``db report --json`` gives of each rundown (the export has every field)
 RUNDOWN_KEYS = ("bolt", "attempt", "rundown", "status", "pset", "torque_nm", "angle_deg",
-                "tightening_id", "recorded_at", "operator")
+                "tightening_id", "result_at", "controller_at", "recorded_at", "operator")
 
 
 def _report_url(args: argparse.Namespace) -> str:
@@ -476,11 +476,15 @@ def cmd_db_report(args: argparse.Namespace) -> int:
             print(f"  {b.bolt_id:<12} {b.status.upper():<8} {result}  {b.name}{retired}{held}")
             if b.attempts > 1:   # reworked: each rundown, so the loosenings show
                 for r in (r for r in runs if r["bolt"] == b.bolt_id):
+                    # the controller's id of each attempt, not the last's alone (a quality
+                    # trial: a complaint's attempts needed the export for their ids)
+                    tid = r.get("tightening_id")
                     print(f"    {r['attempt']}. {r['rundown']} {r['status'].upper()} pset "
                           f"{r['pset'] if r['pset'] is not None else '-'}, "
                           f"{_num(r['torque_nm'])} Nm, {_num(r['angle_deg'])} deg"
-                          f"{_why_nok(r)}, at {_when(r)}, by {r['operator'] or '-'}"
-                          + _entered(r))
+                          f"{_why_nok(r)}" + (f", {r['rundown']} {tid}" if tid is not None
+                                              else "")
+                          + f", at {_when(r)}, by {r['operator'] or '-'}" + _entered(r))
         for c in commands:
             on = f" {c.bolt}" if c.bolt else ""
             why = f": {c.comment}" if c.comment else ""

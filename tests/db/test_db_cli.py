@@ -1106,8 +1106,10 @@ def test_report_says_which_value_of_a_nok_rundown_is_out_of_its_limits(run, db):
     run("db", "import", EXAMPLE, "--db", db)
     with Repository.open(db) as repo:      # pset 2: torque 100-120 Nm, angle 20-80 deg
         repo.start_vehicle("VIN2", "WAGON-B")
-        record(repo, "VIN2", "SF-FL", ok=False, torque_nm=124.5, angle_deg=12.0)
-        record(repo, "VIN2", "SF-FL", ok=False, torque_nm=95.0, angle_deg=40.0)
+        record(repo, "VIN2", "SF-FL", ok=False, torque_nm=124.5, angle_deg=12.0,
+               tightening_id=41)
+        record(repo, "VIN2", "SF-FL", ok=False, torque_nm=95.0, angle_deg=40.0,
+               tightening_id=42)
         record(repo, "VIN2", "SF-FR", ok=False, torque_nm=110.0, angle_deg=40.0)
         record(repo, "VIN2", "TB-C", ok=True, torque_nm=110.0, angle_deg=40.0)
     code, out, _ = run("db", "report", "VIN2", "--db", db)
@@ -1115,14 +1117,19 @@ def test_report_says_which_value_of_a_nok_rundown_is_out_of_its_limits(run, db):
     lines = [line.strip() for line in out.splitlines()]
     [fl] = [line for line in lines if line.startswith("SF-FL ")]
     assert "NOK      95.0 Nm, 40.0 deg, v1 (torque 95.0 Nm < 100.0 min), 2 attempts" in fl, fl
+    # each attempt with the controller's id (a quality trial: the last one's alone)
     assert "1. tightening NOK pset 2, 124.5 Nm, 12.0 deg (torque 124.5 Nm > 120.0 max; " \
-           "angle 12 deg < 20 min), at " in out, out
+           "angle 12 deg < 20 min), tightening 41, at " in out, out
+    assert "2. tightening NOK pset 2, 95.0 Nm, 40.0 deg (torque 95.0 Nm < 100.0 min), " \
+           "tightening 42, at " in out, out
     [fr] = [line for line in lines if line.startswith("SF-FR ")]
     assert "(both within limits: the controller's verdict)" in fr, fr
     [rl] = [line for line in lines if line.startswith("TB-C ")]
     assert "(" not in rl.split(", by")[0], rl
     _, out, _ = run("db", "report", "VIN2", "--db", db, "--json")
-    why = [(r["bolt"], r["nok_why"]) for r in json.loads(out)["rundowns"]]
+    rundowns = json.loads(out)["rundowns"]
+    assert {"tightening_id", "result_at", "controller_at", "recorded_at"} <= set(rundowns[0])
+    why = [(r["bolt"], r["nok_why"]) for r in rundowns]
     assert why == [("SF-FL", "torque 124.5 Nm > 120.0 max; angle 12 deg < 20 min"),
                    ("SF-FL", "torque 95.0 Nm < 100.0 min"),
                    ("SF-FR", "both within limits: the controller's verdict"), ("TB-C", None)]
