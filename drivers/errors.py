@@ -19,6 +19,7 @@ class DeviceError(DriverError):
                  code: int | str | None = None) -> None:
         self.device = device
         self.code = code
+        self.reason = message    # without the device: a wrapper that names it again says it
         prefix = f"{device}: " if device else ""
         super().__init__(prefix + message)
 

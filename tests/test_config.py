@@ -282,7 +282,7 @@ def test_a_missing_to_vehicle_file_is_a_warning_not_an_error(sim_copy):
     ("lift: {url: 'sim://lift'}", "lift: {url: 'modbus-udp://10.0.0.1'}", "lift.url",
      "unknown lift scheme 'modbus-udp'; accepted: modbus-tcp://"),
     ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'openprotocol://h:99999'}", "wrench.url",
-     "openprotocol://h:99999: the port is not a number in 1-65535; accepted: openprotocol://"),
+     "wrench.url: the port is not a number in 1-65535; accepted: openprotocol://"),
     ("wrench: {url: 'sim://wrench'}", "wrench: {url: 'wrench.local'}", "wrench.url",
      "'wrench.local' is not a device URL (scheme://...)"),
     ("lift: {url: 'sim://lift'}", "lift: {url: 'modbus-tcp://10.0.0.1?unit=300'}", "lift.url",

@@ -59,7 +59,7 @@ def wrench_class(url: str) -> type[Wrench]:
     try:
         parsed = parse_url(url)
     except UrlError as exc:
-        raise UrlError(f"{exc}; accepted: {FORMS}", device=url) from None
+        raise UrlError(f"{exc.reason}; accepted: {FORMS}", device=url) from None
     backend: type[Wrench] | None = load_backend(BACKENDS, parsed.scheme)
     if backend is None:
         raise UrlError(f"unknown wrench scheme {parsed.scheme!r} (accepted: {FORMS})",

@@ -91,7 +91,8 @@ class OldResults:
             # the revision agreed carries no type, the pushes' does: each such answer held
             self._log.warning("%s: %s: MID 0065 revision %d carries no result type, though "
                               "the pushed results (revision %s) do; kept with its raw text "
-                              "(tightening %s), its bolt held: it may be a loosening",
+                              "(tightening %s), never taken for a tightening (it may be a "
+                              "loosening: the station holds the bolt it may be of, if any)",
                               self.device, what, asked, pushed, result.tightening_id)
         elif isinstance(result, UnreadableResult) and result.laid_out_as is not None:
             self._log.warning("%s: %s: MID 0065 %s, which carries no result type; kept with "

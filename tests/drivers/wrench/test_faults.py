@@ -237,3 +237,16 @@ def test_without_keepalive_the_controller_drops_an_idle_link(sim, tmp_path):
     with connect(sim, "tcp", tmp_path, keepalive=10.0) as w:
         assert wait_until(lambda: not w.status().connected)
         assert sim.drops >= 1
+
+
+def test_a_bad_wrench_url_names_itself_once():
+    """``probe wrench openprotocol://127.0.0.1:99999`` said the URL twice before why (an
+    integrator's trial)."""
+    from drivers.errors import UrlError
+    from drivers.wrench import wrench_class
+
+    url = "openprotocol://127.0.0.1:99999"
+    with pytest.raises(UrlError) as err:
+        wrench_class(url)
+    said = str(err.value)
+    assert said.count(url) == 1 and said.startswith(f"{url}: the port is not a number"), said
