@@ -216,10 +216,12 @@ class LostRules(NokRules):
         result heard, and a clock stepped since its last measure (a trial: +60 s) placed
         it outside that enable, the bolt left open to be tightened twice.  A push made
         before the enable owed now (:meth:`_made_before_enable`: the controller held it
-        back) is late as well: the same enables."""
+        back), or pushed with no enable owed, is late as well: the enables its own time
+        places it in (:meth:`_pushed_late_of`; a reviewer: a push held back until the wrench
+        rested held nothing, its bolt left open)."""
         r = ev.result
-        if not ev.fetched and not self._made_before_enable(ev):
-            return []
+        if not ev.fetched:
+            return self._pushed_late_of(ev)
         found: list[_Cut] = []
         checked = self._checked_enable()
         for u in self._unanswered:
@@ -400,13 +402,37 @@ class LostRules(NokRules):
 
     def _made_before_enable(self, ev: ResultIn) -> bool:
         """Whether ``ev``'s own time puts it before the enable owed now, beyond the clock's
-        slack: a push the controller held back (an integrator's trial: 13 s late, of the
-        bolt before, same pset), never this enable's rundown, the tool being off or on for
-        another bolt then.  Not where the enable before was this bolt's own (a retry: either
-        enable's rundown is this bolt's, :meth:`_after_last_off`)."""
+        slack, within the span of another bolt's enable of its pset that got no result (or
+        whose check found none: :meth:`_pushed_late_of`): a push the controller held back
+        (an integrator's trial: 13 s late, of the bolt before, same pset, closed the bolt on
+        now), never this enable's rundown.  Its time alone decides nothing (a reviewer: a
+        controller clock stepped back since it was measured put every rundown of the bolt
+        on before its own enable): only where another enable could have made it."""
         made, at = ev.made_at, self._enabled_at
-        return made is not None and at is not None and not self._same_bolt_before \
-            and made < at - CLOCK_SLACK_S
+        if made is None or at is None or made >= at - CLOCK_SLACK_S:
+            return False
+        en = self._enabled
+        mine = None if en is None else (en.vin, en.bolt)
+        return any((u.selection.vin, u.selection.bolt) != mine
+                   for u in self._pushed_late_of(ev))
+
+    def _pushed_late_of(self, ev: ResultIn) -> list[_Cut]:
+        """The enables a result pushed late may be of: of its pset, their bolt still open,
+        their span (from the tool on to their late-result window's end) holding its own time:
+        those that got no result in their window, and those whose check found nothing made
+        (the controller stored and pushed it late).  Its time not known: none."""
+        made, pset = ev.made_at, int(ev.result.pset)
+        if made is None:
+            return []
+        m = self.matcher
+
+        def open_(u: _Cut) -> bool:   # selected now too: its tool would go on again
+            b = u.selection.bolt
+            return not (u.selection.vin == self.vin and m is not None and (
+                b in m.done or b in m.held or b in m.skipped or b in m.locked))
+
+        return [u for u in (*self._unanswered, *self._cleared)
+                if u.selection.pset == pset and open_(u) and u.spans(made, CLOCK_SLACK_S)]
 
     def _gaps_holding(self, tid: int) -> list[int]:
         """Of the gaps told whose ids hold ``tid``, how many enables had come when each was

@@ -330,3 +330,56 @@ def test_a_late_push_made_before_the_enable_owed_now_is_never_that_bolts(checked
     acts = d.feed(ResultIn(d.t + 1.0, res(42, 1, True, 1), made_at=d.t + 0.5))
     recorded = [(a.bolt, int(a.result.tightening_id)) for a in acts if isinstance(a, Record)]
     assert recorded == [("B3", 42)], recorded
+
+
+def test_a_result_timed_before_its_enable_with_no_other_enable_there_is_its_own():
+    """The controller's clock stepped back since it was measured: B1's own rundown pushed
+    while its tool is on reads 5 s before B1's enable.  No other enable could have made it:
+    recorded to B1 as ever (a reviewer: taken for "made before the enable", stored outside
+    any tightening with B1's tool left on, for every bolt until the clock was measured)."""
+    d = _ready()
+    _enabled(d, 1)
+    enabled = d.t
+    d.t += 1.0
+    acts = d.feed(ResultIn(d.t, res(41, 1, False, 1), made_at=enabled - 5.0))
+    assert [(a.bolt, int(a.result.tightening_id)) for a in acts
+            if isinstance(a, Record)] == [("B1", 41)]
+
+
+def test_a_late_push_of_a_bolts_first_enable_while_it_is_on_again_is_its_own():
+    """B1 enabled (its NOK 41 pushed late), then B2 (no result), then B1 again: 41 arrives,
+    made during B1's first enable.  Whichever of B1's enables made it, it is B1's: recorded
+    to B1, its NOK counted (a reviewer: stored outside any tightening, the NOK lost)."""
+    d = _ready()
+    d.answer_checks = False
+    _enabled(d, 1)
+    made = d.t + 0.5
+    d.t += 1.0
+    _on(d, 2, 3)                                      # the wrench leaves B1 for B2
+    d.t += d.core.late_result_s + 1.0
+    d.feed(Tick(d.t))
+    d.feed(NewestChecked(d.t))                        # void
+    _enabled(d, 1)                                    # back on B1
+    d.t += 1.0
+    acts = d.feed(ResultIn(d.t, res(41, 1, False, 1), made_at=made))
+    assert [(a.bolt, int(a.result.tightening_id)) for a in acts
+            if isinstance(a, Record)] == [("B1", 41)]
+
+
+def test_a_late_push_with_no_enable_on_holds_the_bolt_its_time_places_it_in():
+    """B1 tightened (41, its push held back), the wrench leaves it and rests; B1's window
+    ends, the check finds nothing new.  41 comes with no tool on: its time places it in B1's
+    enable: B1 held, never left open to be tightened twice (a reviewer)."""
+    d = _ready()
+    d.answer_checks = False
+    _enabled(d, 1)
+    made = d.t + 0.5
+    d.t += 1.0
+    d.step(("loc", 0.1, 0, 0.05, 0.0))                # the wrench leaves B1, on no bolt
+    d.t += d.core.late_result_s + 1.0
+    d.feed(Tick(d.t))
+    d.feed(NewestChecked(d.t, nothing_made=True))
+    d.t += 5.0
+    acts = d.feed(ResultIn(d.t, res(41, 1, True, 1), made_at=made))
+    assert not [a for a in acts if isinstance(a, Record)]
+    assert "B1" in d.core.matcher.held
