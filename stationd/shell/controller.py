@@ -645,16 +645,17 @@ class ControllerFeed:
 
     async def _began_empty(self, wrench: Wrench, tid: int) -> int | None:
         """The first result pushed since the catch-up found the controller empty: where its
-        count began, 0 where it holds the id before ``tid`` (the ids 1 to ``tid`` - 1 made
-        since, their pushes lost: asked for as any live gap), else not known (a controller
-        that cleared its results but counts on: the ids below are none of this link's).  An
+        count began, 0 where it holds tightening 1 (its count began again at 1 since: the
+        ids 1 to ``tid`` - 1 made since, their pushes lost, asked for as any live gap), else
+        not known (a controller that cleared its results but counts on: the ids below are
+        none of this link's; a reviewer: the id before alone took 1-499 for a gap).  An
         integrator's trial: a controller restarted with ids from 1, the push of 1 lost; 2
         and 3 were stored, 1 never asked for, nothing said."""
         self._empty = False
         if tid <= 1 or not wrench.can_fetch or self.records.repo is None:
             return None
         try:
-            before = await self._call(wrench.fetch_result, tid - 1)
+            before = await self._call(wrench.fetch_result, 1)
         except DeviceError as exc:
             log.warning("results: tightening %d is the first since the controller had none; "
                         "whether it made %s before it is not known: %s", tid,

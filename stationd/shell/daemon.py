@@ -259,6 +259,16 @@ class Station:
         """The locks this station could not record (after ``close``: for the next one)."""
         return self.records.locks_owed()
 
+    def journal_unsaved(self) -> None:
+        """Each result and lock the database never took, in full, one line each: the only
+        copy left once the daemon stops (quality re-enters them from the journal)."""
+        for u in self.records.unsaved():
+            log.error("UNSAVED at shutdown: %s", u.describe())
+        for lock in self.records.locks_owed():
+            log.error("UNSAVED at shutdown: the lock of %s of %s after %d NOK in a row (a "
+                      "supervisor releases it; read back from its NOKs under this max_nok)",
+                      lock.bolt, lock.vin, lock.count)
+
     def _database(self) -> Repository:
         """The database for its keeper: opened by ``open`` before any device."""
         if self.repo is None:
@@ -276,12 +286,8 @@ class Station:
         if not final and (unsaved or owed):
             log.warning("reload: %d results and %d locks not written yet go on to the "
                         "reloaded station", len(unsaved), len(owed))
-        for u in unsaved if final else ():
-            log.error("UNSAVED at shutdown: %s", u.describe())
-        for lock in owed if final else ():
-            log.error("UNSAVED at shutdown: the lock of %s of %s after %d NOK in a row (a "
-                      "supervisor releases it; read back from its NOKs under this max_nok)",
-                      lock.bolt, lock.vin, lock.count)
+        if final:
+            self.journal_unsaved()
         steps: list[tuple[str, Callable[[], None]]] = []
         if self.wrench is not None and self.wrench_keeper.up:
             steps.append(("disable tool", self.wrench.disable_tool))

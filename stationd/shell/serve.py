@@ -486,7 +486,7 @@ async def _opcua_on_own_loop(ua_cfg: OpcUaConfig, devices: tuple[str, ...], bus:
     server = OpcUaServer(ua_cfg, bus=bus, devices=devices, simulated=sim)
     try:
         if not await _started(server, stop):
-            log.info("OPC UA: its start given up: the daemon stops")
+            log.info("OPC UA: its start given up: the station closes (a stop or a reload)")
             with contextlib.suppress(Exception):
                 await server.stop()
             await loop.run_in_executor(None, repo.close)
@@ -646,11 +646,16 @@ async def serve_station(cfg_path: str, cfg: StationConfig, notifier: Notifier, b
         # the devices close as the line forwarder and OPC UA end, not after them: the tool
         # off first, within the unit's TimeoutStopSec whatever they take (an IT
         # administrator's trial: systemd's SIGKILL came while OPC UA still started)
-        closing = loop.run_in_executor(None, station.close, stop.is_set())
+        final = stop.is_set()
+        closing = loop.run_in_executor(None, station.close, final)
         await line
         await served
         await closing
         carried, owed = station.unsaved(), station.locks_owed()
+        if stop.is_set() and not final:
+            # a stop came as a reload closed the station: what it would have carried on is
+            # journaled now, the only copy left (a reviewer: neither journaled nor carried)
+            station.journal_unsaved()
         if stop.is_set():
             notifier.stopping("closing devices")
             log.info("stationd stopped")

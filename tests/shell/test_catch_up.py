@@ -626,7 +626,8 @@ def test_ids_before_the_first_push_of_a_controller_found_empty_are_asked_for(las
 
 
 def test_a_controller_found_empty_that_counts_on_has_no_gap_below_its_first_push():
-    """The controller cleared its results but counts on: its first push is 500, and it has
-    no 499.  Nothing below it is this link's: no gap, nothing asked but 499."""
-    fed = pushed_after_catch_up(PushesAfter({500: res(500)}, [res(500)]), 40)
+    """The controller cleared its results but counts on: 499 made (its push lost), 500
+    pushed; it has no tightening 1.  Its count did not begin again: no gap of 1-499 (a
+    reviewer: the id before alone took it for one, every open bolt held)."""
+    fed = pushed_after_catch_up(PushesAfter({499: res(499), 500: res(500)}, [res(500)]), 40)
     assert [type(e).__name__ for e in fed if not isinstance(e, CaughtUp)] == ["ResultIn"]
