@@ -101,6 +101,9 @@ class Station:
     _pending: list[Event] = field(default_factory=list)    # faults found before run()
     _requests: int = 0                   # commands numbered for their answers
     _told: set[asyncio.Future[None]] = field(default_factory=set)   # tell()'s, on their way
+    #: ``close`` has begun: what is told now is dropped (the line forwarder and OPC UA end as
+    #: the devices close, and a late word from them must not reach a station shutting down)
+    _closing: bool = False
 
     def __post_init__(self) -> None:
         self.records = Records(self.cfg)
@@ -282,6 +285,7 @@ class Station:
         full, one line each, the only copy left (quality re-enters them from the journal);
         at a reload they are counted (an IT administrator's trial: "UNSAVED at shutdown"
         at every reload)."""
+        self._closing = True
         unsaved, owed = self.records.unsaved(), self.records.locks_owed()
         if not final and (unsaved or owed):
             log.warning("reload: %d results and %d locks not written yet go on to the "
@@ -392,7 +396,11 @@ class Station:
     def tell(self, ev: Event) -> None:
         """:meth:`feed` from a callback that cannot wait (what a device said as it came back,
         the line forwarder's link), on the station's loop: fed in its turn, its task kept
-        until it is."""
+        until it is.  Dropped once the station closes (a reviewer: the line forwarder's last
+        word reached a station whose pools and database were closing)."""
+        if self._closing:
+            log.debug("told as the station closes, dropped: %s", type(ev).__name__)
+            return
         task = asyncio.ensure_future(self.feed(ev))
         self._told.add(task)
         task.add_done_callback(self._told.discard)

@@ -32,3 +32,21 @@ def test_a_result_not_written_is_journaled_in_full_at_a_stop_and_counted_at_a_re
     counted = [line for line in lines if line.startswith("reload: 1 results")]
     assert (len(full), len(counted)) == ((1, 0) if final else (0, 1)), lines
     assert station.unsaved() == [unsaved]      # kept for the next station either way
+
+
+def test_what_is_told_as_the_station_closes_is_dropped(tmp_path: Path):
+    """The line forwarder and OPC UA end as the devices close: a word told then (the line's
+    link state) never reaches a station shutting down (a reviewer)."""
+    import asyncio
+
+    from stationd.station.inputs import LineLinkIn
+
+    station = Station(StationConfig(database_url=url_of(tmp_path / "st.db")))
+    station.close()
+
+    async def main() -> int:
+        station.tell(LineLinkIn(time.time(), False, "down", None))
+        await asyncio.sleep(0)
+        return len(station._told)
+
+    assert asyncio.run(main()) == 0
