@@ -286,10 +286,11 @@ def test_probe_time_options_must_be_finite_positive_seconds(argv, needle, capsys
 
 
 def test_version(capsys):
-    from stationd import __version__
+    """The version, and the checkout's commit where it runs from one (stationd.release)."""
+    from stationd.release import release
 
     code, out, _ = _usage_error(capsys, "--version")
-    assert code == 0 and out.strip() == f"stationd {__version__}"
+    assert code == 0 and out.strip() == f"stationd {release()}"
 
 
 def test_localize_refuses_a_pair_without_baseline(files, capsys, tmp_path):
