@@ -47,6 +47,7 @@ from stationd.sim.devices_cli import LOOSEN_PROGRAM, loosen_programs
 from stationd.sim.world import World, wrench_at
 from stationd.station.commands import Issuer, ReleaseBolt, Right, SignIn
 from stationd.station.events import BoltReleased, BoltSkipped, Localized, ResultRecorded, State
+from stationd.station.state import CoreStatus
 from stationd.words import reason_words, result_type_words, skip_words, state_words
 
 #: a tightening fails now and then; a stubborn joint (a damaged thread) fails until its bolt
@@ -220,7 +221,7 @@ async def operate(st: Station, world: World, rng: np.random.Generator, cycles: i
     # restart (the new process's plan is drawn anew) and released while the operator was at
     # other bolts is open again all the same (a supervisor's trial: never tightened again,
     # the vehicle closed with it ending NOK)
-    waited = [b.bolt_id for b in bolts if b.bolt_id in now.locked or b.bolt_id in now.held]
+    waited = left_over(now, [b.bolt_id for b in bolts])
     while "interrupted" not in truth:
         again = open_again(st, [*planned, *(b for b in waited if b not in planned)])
         if late := waiting_now(st, infos):
@@ -655,9 +656,24 @@ def open_again(st: Station, planned: Sequence[str]) -> list[str]:
     from a hold (their result not known), their last rundown a NOK (an outcome a person
     entered), to be loosened first or loosened last; neither locked nor held (those wait for
     a person: :func:`waiting_now`), in the plan's order."""
-    views = {v.bolt: v for v in st.core.status().bolts}
-    return [b for b in planned if (v := views.get(b)) is not None and v.locked is None
+    return open_in(st.core.status(), planned)
+
+
+def open_in(now: CoreStatus, bolts: Sequence[str]) -> list[str]:
+    """:func:`open_again` of the station's status ``now``, of ``bolts``."""
+    views = {v.bolt: v for v in now.bolts}
+    return [b for b in bolts if (v := views.get(b)) is not None and v.locked is None
             and v.held is None and (v.check_first or v.status in (NOK, TO_LOOSEN, LOOSENED))]
+
+
+def left_over(now: CoreStatus, in_view: Sequence[str]) -> list[str]:
+    """The bolts of ``in_view`` a round finds waiting for a person (locked, held) or open
+    again (:func:`open_in`) as it begins: left by the round before a restart, whose new plan
+    is drawn anew and may not name them.  Each is run down before the lift goes down (a
+    quality trial: B02, released and loosened before a restart, never tightened again, the
+    vehicle closed with "1 to tighten again")."""
+    waiting = [b for b in in_view if b in now.locked or b in now.held]
+    return waiting + [b for b in open_in(now, in_view) if b not in waiting]
 
 
 def released_words(user: str | None, what: str = "locked") -> str:

@@ -441,3 +441,4 @@ def test_a_released_hold_is_loosened_first_under_the_loosen_strategy():
     plain = StationCore(PARAMS, leave_frames=2, nok=NokPolicy(NokRule(3, "repeat")))
     plain.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, released=frozenset({"B1"})))
     assert plain._loosen == set()
+
