@@ -286,18 +286,7 @@ def cmd_line_results(args: argparse.Namespace) -> int:
         return EXIT_UNREACHABLE
     if args.json:
         for r in rows:
-            print(strict_json({"station_id": r.station_id, "db_id": r.db_id, "seq": r.seq,
-                               "at": r.at.isoformat(), "vin": r.vin, "model": r.model,
-                               "bolt": r.bolt, "ok": r.ok, "kind": r.kind,
-                               "torque_nm": r.torque_nm, "angle_deg": r.angle_deg,
-                               "parameters_version": r.version, "operator": r.operator,
-                               "received_at": r.received_at.isoformat(), "pset": r.pset,
-                               "tightening_id": r.tightening_id,
-                               "torque_window_nm": list(r.torque),
-                               "angle_window_deg": list(r.angle),
-                               "entered_by": r.entered_by,
-                               "entered_comment": r.entered_comment,
-                               "unreadable_record_id": r.unreadable_record_id}))
+            print(strict_json(r.to_json()))
         return 0 if rows else EXIT_WAITING
     what = " ".join(x for x in (f"VIN {args.vin}" if args.vin else "",
                                 f"station {args.station}" if args.station else "",

@@ -800,6 +800,27 @@ class LineResult:
     entered_comment: str | None = None
     unreadable_record_id: int | None = None
 
+    def to_json(self) -> dict[str, Any]:
+        """The rundown as ``line results --json`` and ``/api/line/results`` give it: the
+        windows as arrays (target, min, max) and, named as the station's exports name them,
+        each limit and ``parameter_version`` and ``status`` beside (a quality trial: the
+        arrays were not self-describing, and ``ok``/``parameters_version`` spelled
+        otherwise than the exports)."""
+        (tt, tmin, tmax), (at, amin, amax) = self.torque, self.angle
+        return {"station_id": self.station_id, "db_id": self.db_id, "seq": self.seq,
+                "at": self.at.isoformat(), "vin": self.vin, "model": self.model,
+                "bolt": self.bolt, "ok": self.ok, "status": "ok" if self.ok else "nok",
+                "kind": self.kind, "torque_nm": self.torque_nm, "angle_deg": self.angle_deg,
+                "parameters_version": self.version, "parameter_version": self.version,
+                "received_at": self.received_at.isoformat(), "operator": self.operator,
+                "pset": self.pset, "tightening_id": self.tightening_id,
+                "torque_window_nm": list(self.torque), "angle_window_deg": list(self.angle),
+                "torque_target_nm": tt, "torque_min_nm": tmin, "torque_max_nm": tmax,
+                "angle_target_deg": at, "angle_min_deg": amin, "angle_max_deg": amax,
+                # an outcome a person entered from the controller's screen (None: measured)
+                "entered_by": self.entered_by, "entered_comment": self.entered_comment,
+                "unreadable_record_id": self.unreadable_record_id}
+
 
 def results(engine: Engine, *, vin: str | None = None, station: str | None = None,
             bolt: str | None = None, since: datetime | None = None,

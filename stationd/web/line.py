@@ -27,15 +27,7 @@ LIMIT = (1, 1000)
 
 
 def _plain(r: LineResult) -> dict[str, Any]:
-    return {"station_id": r.station_id, "db_id": r.db_id, "seq": r.seq,
-            "at": r.at.isoformat(), "vin": r.vin, "model": r.model, "bolt": r.bolt,
-            "ok": r.ok, "kind": r.kind, "torque_nm": r.torque_nm, "angle_deg": r.angle_deg,
-            "parameters_version": r.version, "received_at": r.received_at.isoformat(),
-            "operator": r.operator, "pset": r.pset, "tightening_id": r.tightening_id,
-            "torque_window_nm": list(r.torque), "angle_window_deg": list(r.angle),
-            # an outcome a person entered from the controller's screen (None: measured)
-            "entered_by": r.entered_by, "entered_comment": r.entered_comment,
-            "unreadable_record_id": r.unreadable_record_id}
+    return r.to_json()
 
 
 class NotUpgraded(Exception):  # noqa: N818 - a state of the line database
