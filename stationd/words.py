@@ -569,6 +569,10 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
         f"{_result_id(n.tightening_id)} came after the tool went off for {n.bolt} (within "
         f"the late-result window): recorded to {n.bolt}"
         + (f" of {n.vin} (gone from the station since)" if n.vin else "")),
+    Said.TYPED_COPY: lambda n: (
+        f"tightening {n.tightening_id}, fetched without its result type and {n.bolt} held "
+        f"for it, came pushed with its type, made while the tool was on for {n.bolt}: "
+        f"recorded to {n.bolt}, its hold ended"),
     Said.OTHER_VIN: lambda n: (
         f"tightening {n.tightening_id} of {n.bolt} carries the controller's VIN {n.note}, not "
         f"{n.vin}: recorded to {n.bolt} (its tool was on for it); the controller files it "

@@ -173,6 +173,9 @@ WORDS = [
      "B1: loosening NOK 60.0 Nm, 2.0 deg entered by sam from the controller's screen (the "
      "result that could not be read: tightening 7, a loosening with loosen pset 90): a "
      "loosening NOK of B1, the NOK policy applies"),
+    (Notice(Said.TYPED_COPY, tightening_id=41, bolt="B11"),
+     "tightening 41, fetched without its result type and B11 held for it, came pushed with "
+     "its type, made while the tool was on for B11: recorded to B11, its hold ended"),
     (Notice(Said.OTHER_VIN, tightening_id=14, bolt="B17", vin="VIN1",
             note="WVWZZZ1JZ3W000001"),
      "tightening 14 of B17 carries the controller's VIN WVWZZZ1JZ3W000001, not VIN1: "

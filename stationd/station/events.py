@@ -612,6 +612,10 @@ class Said(enum.Enum):
     CUT_UNKNOWN = "cut unknown"          # the bolt enabled during a link cut held: what the
     #                                      controller did then is not known (bolt, note)
     LATE_RESULT = "late result"          # recorded outside a tightening (bolt)
+    TYPED_COPY = "typed copy"            # a result fetched without its type, its bolt
+    #                                      held, then pushed with its type, made under that
+    #                                      bolt's enable: recorded to it, its hold ended
+    #                                      (tightening_id, bolt)
     OTHER_VIN = "other vin"              # recorded to the bolt its tool was on for, the
     #                                      controller's VIN another than the vehicle's
     #                                      (tightening_id, bolt, vin: the vehicle's, note:

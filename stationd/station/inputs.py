@@ -165,6 +165,8 @@ class ResultCopy(Input):
     result: TighteningResult
     vin: str | None
     bolt: str | None
+    #: its time on the station's clock, as :attr:`ResultIn.made_at` (None: not known)
+    made_at: float | None = None
 
 
 @dataclass(frozen=True)

@@ -128,6 +128,9 @@ class ResultRules(UnreadRules):
         if _copy_of(self._recorded.get(tid), r):
             return [Acknowledge(r)]   # sent again by the controller: stored once already
         seen = self._recorded.get(tid)
+        typed = self._typed_copy(ev, seen)
+        if typed is not None:
+            return typed
         if isinstance(seen, _Unread) and seen.same(r, ev.made_at):
             # an unreadable message's copy that reads: stored (whole) once, its bolt held;
             # taken for the enable owed now, it closed a bolt never tightened
@@ -155,6 +158,11 @@ class ResultRules(UnreadRules):
         controller may forget it."""
         r = ev.result
         tid = int(r.tightening_id)
+        seen = self._recorded.get(tid)
+        if isinstance(seen, _Unread) and seen.en is not None:
+            # this core held its bolt for want of its type: judged as the result it is
+            # (:meth:`_typed_copy`), not echoed as a copy
+            return self._on_result_in(ResultIn(ev.t, r, made_at=ev.made_at))
         # the pushed one waited for: a copy, it is in
         owed = self._end_wait(ev.t) if tid == self._pending_push else []
         if _copy_of(self._recorded.get(tid), r):
@@ -212,6 +220,37 @@ class ResultRules(UnreadRules):
                 *self._cut_in_doubt(ev), *self._lost_in_doubt(ev, lost),
                 *self._fetched_in_doubt(ev), *self._late_cut_in_doubt(ev),
                 *self._loosened_after_cut(ev, kind)]
+
+    def _typed_copy(self, ev: ResultIn, seen: object) -> list[Action] | None:
+        """A result pushed with its type whose copy fetched without one (MID 0065 at a
+        revision that has none) held the bolt of the enable it was fetched for
+        (:class:`_Unread` ``en``): where its own time puts it after that enable's tool went
+        on and before the copy was fetched (each within the clock's slack), of that enable's
+        pset and a rundown by its type, it is that enable's rundown: recorded to its bolt
+        (late), the hold ended.  An integrator's trial: the push, 7 s late, was taken for a
+        copy "stored once", B11's second NOK never counted and B47's OK left held, released
+        and tightened twice.  None where that is not shown (its time not known, the hold
+        ended already, the vehicle gone): held, as before."""
+        r = ev.result
+        if not isinstance(seen, _Unread) or seen.en is None or seen.since is None \
+                or ev.made_at is None or ev.fetched:
+            return None
+        en, code = seen.en, type_code(r)
+        if code is None or result_kind(code, en.loosen) not in (ResultKind.TIGHTENING,
+                                                                 ResultKind.LOOSENING) \
+                or en.pset != int(r.pset) or not seen.same(r, ev.made_at):
+            return None
+        # (beyond the slack after the tool went on, the bolt before another: a rundown of
+        # that one begun as its disable was sent ends after it; a retry's is its own)
+        lower = seen.since + (-CLOCK_SLACK_S if seen.retry else CLOCK_SLACK_S)
+        if not lower <= ev.made_at <= seen.seen_at + CLOCK_SLACK_S:
+            return None
+        m = self.matcher
+        if m is None or self.vin != en.vin or m.held.get(en.bolt) is None:
+            return None
+        self._unhold(en.bolt)
+        return [Publish(Notice(Said.TYPED_COPY, tightening_id=int(r.tightening_id),
+                               bolt=en.bolt, t=ev.t)), *self._attribute(ev, en, typed=True)]
 
     def _of_another_pset(self, ev: ResultIn, en: Selection) -> bool:
         """Whether ``ev``, pushed while the tool is on for ``en`` (or within its late-result
@@ -419,7 +458,7 @@ class ResultRules(UnreadRules):
         return acts
 
     def _attribute(self, ev: ResultIn, en: Selection, cut: bool = False,
-                   lost: bool = False) -> list[Action]:
+                   lost: bool = False, typed: bool = False) -> list[Action]:
         """The result of the tightening the tool was enabled for: recorded to that bolt (of
         the vehicle it was enabled on, also after a reload or restart, or fetched after a
         link cut that the controller's data places it in, ``cut``, or fetched with the link
@@ -433,16 +472,19 @@ class ResultRules(UnreadRules):
             return self._not_taken(ev, en, window, cut)
         # (the pushed one that skipped ids: its tool went off when they were told, not late)
         pushed = not ev.fetched and int(r.tightening_id) == self._pending_push
-        late = (not self.tool_on and not pushed) or cut or lost
+        late = (not self.tool_on and not pushed) or cut or lost or typed
         kind = LOOSENING if result_kind(type_code(r), en.loosen) is ResultKind.LOOSENING \
             else TIGHTENING
         acts: list[Action] = []
-        if self.tool_on and not cut:    # (a lost one's: its rundown ended there)
+        # (a lost one's: its rundown ended there; a typed copy's enable ended long since)
+        if self.tool_on and not cut and not typed:
             acts += self._tool_off(ev.t, StateReason(Because.RUNDOWN, bolt=en.bolt,
                                                      loosen=kind == LOOSENING, ok=bool(r.ok)))
         acts.append(Record(en.vin, en.bolt, r, en, late, kind, offline=self._offline(ev),
                            t=ev.t))
-        if cut or lost:
+        if typed:
+            pass    # said by the caller (Said.TYPED_COPY)
+        elif cut or lost:
             checked = not cut and ev.before is None
             acts.append(Publish(Notice(Said.CUT_RECORDED if cut else Said.LOST_RECORDED
                                        if not checked else Said.LOST_FOUND_ON
@@ -460,9 +502,9 @@ class ResultRules(UnreadRules):
             acts.append(Publish(Notice(Said.OTHER_VIN, tightening_id=int(r.tightening_id),
                                        bolt=en.bolt, vin=en.vin, note=echoed, t=ev.t)))
         self._recorded[int(r.tightening_id)] = _said(r)
-        if not cut and not lost:
+        if not cut and not lost and not typed:
             self._enabled = None    # (a cut's result leaves an enable made since owed)
-        if not lost:
+        if not lost and not typed:  # (a typed copy's enable was answered by its hold)
             self._answered(en)      # the cut's result is in too (fetched, or pushed late)
         if en.operator is not None and en.operator == self.operator:
             self._operator_seen = max(self._operator_seen, ev.t)

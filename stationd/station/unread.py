@@ -17,6 +17,7 @@ from stationd.station.actions import (
     Acknowledge,
     Action,
     Publish,
+    Selection,
     StoreUnattributed,
     StoreUnreadable,
 )
@@ -46,6 +47,12 @@ class _Unread:
     timestamp: object
     bolt: str | None
     seen_at: float          # when it came (the station's clock)
+    #: held only for want of its type (fetched at a revision without one, for the enable on
+    #: or whose window ended): that enable and when its tool went on.  The typed push of it
+    #: made in between is that enable's rundown (ResultRules._typed_copy)
+    en: Selection | None = None
+    since: float | None = None
+    retry: bool = False     # the enable before it was its bolt's own (either is its rundown)
 
     def same(self, r: TighteningResult, made_at: float | None) -> bool:
         """``r`` says what could be picked out of the unreadable one (pset, time).  Where the
@@ -164,7 +171,11 @@ class UnreadRules(LostRules):
             en = None
         bolt = en.bolt if en is not None and en.vin else None
         if u.tightening_id is not None:
-            self._recorded[u.tightening_id] = _Unread(u.pset, u.timestamp, bolt, ev.t)
+            untyped = u.fetched and u.laid_out_as is not None and bolt is not None \
+                and en is self._enabled and self._cut is None and self._enabled_at is not None
+            self._recorded[u.tightening_id] = _Unread(
+                u.pset, u.timestamp, bolt, ev.t, en if untyped else None,
+                self._enabled_at if untyped else None, self._same_bolt_before)
         elif bolt is not None and en is not None and self._last_pushed is not None \
                 and not u.fetched:   # which id it is, the next result read may tell
             self._unread_gaps = [*self._unread_gaps[-(UNREAD_GAPS_KEPT - 1):], _UnreadGap(
