@@ -165,8 +165,8 @@ def test_an_outage_is_said_again_while_it_lasts_and_its_end_once_caught_up(repo,
                 "backlog": next(backlog) if down else (4 if len(heard) == 3 else 0),
                 "url": "line"}
 
-    f.step = step                # type: ignore[method-assign]
-    f.status = status            # type: ignore[method-assign]
+    f.step = step
+    f.status = status
 
     async def main() -> None:
         stop = asyncio.Event()

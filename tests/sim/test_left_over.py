@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from stationd.sim.operator import left_over
 from stationd.station.inputs import ResultIn
-from tests.station.test_loosen import _driver, _on, res
+from tests.station.test_core import _on
+from tests.station.test_loosen import _driver, res
 
 
 def test_a_round_after_a_restart_finds_the_bolts_left_open_again():

@@ -8,6 +8,7 @@ released and tightened twice (found with the diagnosis of a helper session)."""
 from __future__ import annotations
 
 from datetime import datetime
+from typing import Any
 
 import pytest
 
@@ -30,7 +31,7 @@ def _untyped_fetch(tid: int, pset: int) -> UnreadableResult:
         timestamp=WHEN, fetched=True, laid_out_as=1, header_len=20)
 
 
-def _held_by_an_untyped_copy(retry: bool) -> tuple[object, float]:
+def _held_by_an_untyped_copy(retry: bool) -> tuple[Any, float]:
     """B1 on (after its own NOK 40: a retry; else after B2's enable), the check with the tool
     on fetches 41 without a type: B1 held.  The driver, and when B1's tool went on."""
     d = _ready()
@@ -43,11 +44,11 @@ def _held_by_an_untyped_copy(retry: bool) -> tuple[object, float]:
         d.feed(ResultIn(d.t, res(40, 2, True, 1)))        # B2 OK
     _enabled(d, 1)
     on_at = d.t
-    d.t += d.core.check_on_s + 0.1
+    d.t += float(d.core.check_on_s or 0.0) + 0.1
     [check] = [a for a in d.feed(Tick(d.t)) if isinstance(a, CheckNewest)]
     d.feed(UnreadableIn(d.t, _untyped_fetch(41, 1)))
     d.feed(NewestChecked(d.t, serial=check.serial))
-    assert "B1" in d.core.matcher.held
+    assert d.core.matcher is not None and "B1" in d.core.matcher.held
     return d, on_at
 
 
