@@ -403,13 +403,13 @@ class Records:
             tightening_id=int(r.tightening_id), torque_nm=float(r.torque_nm),
             angle_deg=float(r.angle_deg), controller_at=controller_time(r), vins=vins)
         if stored is not None:
-            return ResultCopy(ev.t, r, stored.vin, stored.bolt, ev.made_at)
+            return ResultCopy(ev.t, r, stored.vin, stored.bolt, ev)
         # a copy that reads of a message stored unreadable (garbled on the line the first
         # time): that result, held for a person, never the enable owed now
         made = None if ev.made_at is None else datetime.fromtimestamp(ev.made_at, UTC)
         held = self._repo().others.unreadable_of(tightening_id=int(r.tightening_id),
                                                  pset=int(r.pset), at=controller_time(r), made=made)
-        return ev if held is None else ResultCopy(ev.t, r, held[0], held[1], ev.made_at)
+        return ev if held is None else ResultCopy(ev.t, r, held[0], held[1], ev)
 
     def unreadable_input(self, ev: UnreadableIn) -> UnreadableIn:
         """``ev`` as the core is to have it: saying where it was stored when the database has

@@ -165,8 +165,8 @@ class ResultCopy(Input):
     result: TighteningResult
     vin: str | None
     bolt: str | None
-    #: its time on the station's clock, as :attr:`ResultIn.made_at` (None: not known)
-    made_at: float | None = None
+    #: the result as it came (how, its time), where the shell had it as a ResultIn
+    of: ResultIn | None = None
 
 
 @dataclass(frozen=True)

@@ -113,8 +113,12 @@ class ResultRules(UnreadRules):
         if ev.fetched and en is not None:
             self._gaps_superseded(tid, acts, en)
         # (a result fetched late and not taken for the enable owed now was made before it,
-        # under no enable known: it proves nothing of the order for this enable)
-        self._judge(tid, not ev.fetched or any(
+        # under no enable known: it proves nothing of the order for this enable; nor does a
+        # typed copy of one held, made under an earlier enable: a reviewer found the next
+        # result, perhaps the bolt before's, recorded to the enable on by that order)
+        typed = any(isinstance(a, Publish) and isinstance(a.event, Notice)
+                    and a.event.said is Said.TYPED_COPY for a in acts)
+        self._judge(tid, (not ev.fetched and not typed) or any(
             isinstance(a, Record) and a.selection is self._enabled for a in acts), ev.t)
         return acts + self._push_judged(ev.t)
 
@@ -159,10 +163,10 @@ class ResultRules(UnreadRules):
         r = ev.result
         tid = int(r.tightening_id)
         seen = self._recorded.get(tid)
-        if isinstance(seen, _Unread) and seen.en is not None:
+        if isinstance(seen, _Unread) and seen.en is not None and ev.of is not None:
             # this core held its bolt for want of its type: judged as the result it is
-            # (:meth:`_typed_copy`), not echoed as a copy
-            return self._on_result_in(ResultIn(ev.t, r, made_at=ev.made_at))
+            # (:meth:`_typed_copy`), as it came, not echoed as a copy
+            return self._on_result_in(ev.of)
         # the pushed one waited for: a copy, it is in
         owed = self._end_wait(ev.t) if tid == self._pending_push else []
         if _copy_of(self._recorded.get(tid), r):

@@ -100,8 +100,9 @@ def test_a_copy_is_found_stored_before_the_core_and_never_closes_the_owed_bolt(
     records, core, _ = _stored_then_reloaded(tmp_path)
     repo = records.repo
     assert repo is not None
-    ev = records.copy_input(ResultIn(time.time(), _result()), core.status().vin)
-    assert ev == ResultCopy(ev.t, _result(), "VIN1", "B1")
+    came = ResultIn(time.time(), _result())
+    ev = records.copy_input(came, core.status().vin)
+    assert ev == ResultCopy(ev.t, _result(), "VIN1", "B1", came)
     acts = core.feed(ev)
     assert [type(a).__name__ for a in acts] == ["Publish", "Acknowledge"]
     [n] = [a.event for a in acts if isinstance(a, Publish)]
@@ -172,8 +173,9 @@ def test_a_copy_of_a_result_stored_unattributed_is_no_owed_bolts_result(tmp_path
         vin="VIN1", controller_vin=None, tightening_id=9, pset=1, ok=True, torque_nm=50.0,
         angle_deg=30.0, result_at=AT.astimezone(), reason="made during a link cut")
     assert stored is not None
-    ev = records.copy_input(ResultIn(time.time(), _result(9)), core.status().vin)
-    assert ev == ResultCopy(ev.t, _result(9), "VIN1", None)
+    came = ResultIn(time.time(), _result(9))
+    ev = records.copy_input(came, core.status().vin)
+    assert ev == ResultCopy(ev.t, _result(9), "VIN1", None, came)
     acts = core.feed(ev)
     [n] = [a.event for a in acts if isinstance(a, Publish)]
     assert isinstance(n, Notice) and (n.said, n.bolt) == (Said.SENT_AGAIN, None)

@@ -52,9 +52,11 @@ from stationd.station.events import (
     BoltSkipped,
     BoltView,
     DeviceHealth,
+    Notice,
     OperatorChanged,
     Refused,
     ResultUnattributed,
+    Said,
     State,
     StateChanged,
     StateReason,
@@ -115,6 +117,7 @@ class Driver:
     acked: dict[str, float] = field(default_factory=dict)  # bolt -> ack instant
     sends: list[str] = field(default_factory=list)
     records: dict[int, str] = field(default_factory=dict)
+    typed: tuple[str | None, str | None] | None = None   # a typed copy said: its record
     closed_vins: set[str] = field(default_factory=set)
     vin_seq: int = 0
     reconnects: int = 0               # the controller's connections so far (DeviceBack's)
@@ -197,12 +200,20 @@ class Driver:
             self.tool, self.tool_bolt, self.tool_vin = True, a.bolt, c.vin
         elif isinstance(a, DisableTool):
             self.tool = False
+        elif isinstance(a, Publish) and isinstance(a.event, Notice) \
+                and a.event.said is Said.TYPED_COPY:
+            # its record follows: to the bolt of the enable its untyped copy was fetched for
+            # (held then), by the result's own time (ResultRules._typed_copy)
+            self.typed = (c.vin, a.event.bolt)
         elif isinstance(a, Record):
             tid = int(a.result.tightening_id)
             assert tid not in self.records, "a result recorded twice"
-            # to the bolt the tool was last enabled for, of the vehicle it was enabled on
-            assert (a.vin, a.bolt) == (self.tool_vin, self.tool_bolt), \
-                (a.vin, a.bolt, self.tool_vin, self.tool_bolt)
+            # to the bolt the tool was last enabled for, of the vehicle it was enabled on;
+            # or that of an earlier enable, said as a typed copy just before
+            if (a.vin, a.bolt) != self.typed:
+                assert (a.vin, a.bolt) == (self.tool_vin, self.tool_bolt), \
+                    (a.vin, a.bolt, self.tool_vin, self.tool_bolt)
+            self.typed = None
             self.records[tid] = a.bolt
 
     # -- the operations hypothesis draws ------------------------------------------------------

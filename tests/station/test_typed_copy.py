@@ -58,8 +58,8 @@ def test_the_typed_push_of_a_held_untyped_copy_is_its_bolts_rundown(ok, via):
     d, on_at = _held_by_an_untyped_copy(retry=True)
     d.t = on_at + 7.0                                     # the typed push, late
     pushed = res(41, 1, ok, 1, when=WHEN)
-    acts = d.feed(ResultIn(d.t, pushed, made_at=on_at + 0.1) if via == "pushed"
-                  else ResultCopy(d.t, pushed, "VIN1", "B1", made_at=on_at + 0.1))
+    came = ResultIn(d.t, pushed, made_at=on_at + 0.1)
+    acts = d.feed(came if via == "pushed" else ResultCopy(d.t, pushed, "VIN1", "B1", came))
     recorded = [(a.bolt, int(a.result.tightening_id), bool(a.result.ok))
                 for a in acts if isinstance(a, Record)]
     assert recorded == [("B1", 41, ok)], recorded
@@ -101,3 +101,27 @@ def test_a_hold_released_meanwhile_stays_as_the_person_decided():
     assert reply.answer.accepted and "B1" not in d.core.matcher.held
     acts = d.feed(ResultIn(on_at + 7.0, res(41, 1, True, 1, when=WHEN), made_at=on_at + 0.1))
     assert not [a for a in acts if isinstance(a, Record)]
+
+
+def test_a_typed_copy_says_nothing_of_the_order_for_the_enable_on_now():
+    """B1's copy held it; B3 (same pset) enabled; the typed copy of 41 comes and is recorded
+    to B1.  It was made under B1's enable: the id order must not take it as judged during
+    B3's, or 42, fetched live and made within the slack of B1's tool-off (perhaps B1's
+    rundown begun as its disable was sent), would be recorded to B3 by that order alone (a
+    reviewer)."""
+    d, on_at = _held_by_an_untyped_copy(retry=True)
+    d.t = on_at + 3.0
+    _enabled(d, 3)
+    assert d.core._enabled is not None
+    b3_on = d.core._enabled_at
+    d.t += 0.3
+    pushed = res(41, 1, True, 1, when=WHEN)
+    came = ResultIn(d.t, pushed, made_at=on_at + 0.1)
+    acts = d.feed(ResultCopy(d.t, pushed, "VIN1", "B1", came))
+    assert [(a.bolt, int(a.result.tightening_id)) for a in acts
+            if isinstance(a, Record)] == [("B1", 41)]
+    assert d.core.tool_on and d.core.bolt == "B3"          # B3's tool untouched
+    d.t += 0.2
+    acts = d.feed(ResultIn(d.t, res(42, 1, True, 1, when=WHEN), made_at=b3_on + 0.5,
+                           fetched=True, live=True))
+    assert not [a for a in acts if isinstance(a, Record) and a.bolt == "B3"]
