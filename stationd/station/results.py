@@ -260,11 +260,19 @@ class ResultRules(UnreadRules):
         """Whether ``ev``, pushed while the tool is on for ``en`` (or within its late-result
         window), the link up since, is of another pset than the one sent for it: a rundown
         with another program (one selected on the controller's own screen) where the
-        operator was, or no rundown of this bolt at all."""
-        return not ev.fetched and bool(en.vin) and en.pset is not None \
+        operator was, or no rundown of this bolt at all.  Fetched with the link up (its push
+        lost) as well, where its own time puts it after the tool went on for ``en`` (beyond
+        the clock's slack: only that enable's tool was on since; a reviewer: the same rundown
+        reached through a lost push was stored outside any tightening, the tool left on)."""
+        at = self._enabled_at
+        if ev.fetched and not (ev.live and ev.made_at is not None and at is not None
+                               and ev.made_at >= at + CLOCK_SLACK_S):
+            return False
+        return bool(en.vin) and en.pset is not None \
             and int(ev.result.pset) != en.pset and self._cut is None \
-            and self._enabled_at is not None and self._enabled_at > self._link_lost_at \
-            and (self.tool_on or self._result_owed(ev.t))
+            and at is not None and at > self._link_lost_at \
+            and (self.tool_on or self._result_owed(ev.t) or (ev.fetched
+                                                              and self._checking_owed()))
 
     def _other_pset(self, ev: ResultIn, en: Selection) -> list[Action]:
         """A result of another pset than the one sent for the enable on (:meth:`

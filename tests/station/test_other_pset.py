@@ -57,3 +57,23 @@ def test_its_own_pset_after_it_is_the_bolts_and_another_pset_after_the_window_is
     acts = d.feed(ResultIn(d.t, res(13, 9, True, 1)))
     assert any("outside any tightening" in s for s in _said(acts))
     assert "B1" not in d.core.matcher.held
+
+
+@pytest.mark.parametrize(("after", "held"), [(1.5 + 2.0, True), (None, False)],
+                         ids=["its time after the tool went on", "its time not known"])
+def test_a_result_of_another_pset_fetched_with_the_link_up_holds_the_bolt_on(after, held):
+    """The same rundown under another program, its push lost, fetched with the tool on for
+    B1 (a later push skipped its id): made after B1's tool went on, only B1's tool was on
+    since: B1 held, the tool off (a reviewer: stored outside any tightening, the tool left
+    on).  Its time not known: stored as before, nothing proved."""
+    d = _ready()
+    _enabled(d, 1)
+    on_at = d.core._enabled_at
+    assert on_at is not None
+    d.t += 4.0
+    acts = d.feed(ResultIn(d.t, res(12, 9, True, 1), fetched=True, live=True, before=13,
+                           made_at=None if after is None else on_at + after))
+    assert not [a for a in acts if isinstance(a, Record)]
+    assert d.core.matcher is not None
+    assert ("B1" in d.core.matcher.held) is held
+    assert (not d.core.tool_on) is held
