@@ -825,7 +825,6 @@ class Records:
             out.append(str(path))
         return out
 
-
     def _room_for_images(self, folder: Path) -> bool:
         """Whether the images' file system has more than ``images_keep_free_mb`` free: below
         it the images are not saved, said once as a warning until there is room again (said

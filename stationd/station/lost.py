@@ -237,13 +237,15 @@ class LostRules(NokRules):
                         and u.selection.pset == int(r.pset) and self._still_open(u)
                         and u.spans(ev.made_at, CLOCK_SLACK_S)]
 
-    def _still_open(self, u: _Cut) -> bool:
+    def _still_open(self, u: _Cut, selected_too: bool = False) -> bool:
         """Whether the bolt of the unanswered enable ``u`` is still open (not selected now,
         done, held, skipped or locked; of a vehicle that has left: not known here, open).
         Selected again while its own enable's check runs, it is: no tool went on since (a
-        reviewer: a result the check could not place left it open, its tool went on)."""
+        reviewer: a result the check could not place left it open, its tool went on).
+        ``selected_too``: selected now, it is open as well (its tool would go on again)."""
         m, b = self.matcher, u.selection.bolt
-        selected = b == self.bolt and u.selection is not self._checked_enable()
+        selected = not selected_too and b == self.bolt \
+            and u.selection is not self._checked_enable()
         return not (u.selection.vin == self.vin and m is not None and (
             selected or b in m.done or b in m.held or b in m.skipped or b in m.locked))
 
@@ -382,6 +384,13 @@ class LostRules(NokRules):
                 or en is None or since is None or en.vin != self.vin \
                 or (pset is not None and en.pset is not None and pset != en.pset):
             return []
+        return self._hold_enable(t, en, since, note_of, tid)
+
+    def _hold_enable(self, t: float, en: Selection, since: float,
+                     note_of: Callable[[_Cut], str], tid: int | None = None) -> list[Action]:
+        """The enable ``en`` (its tool on since ``since``) ends with its bolt held for a
+        person (its note ``note_of`` it, the result it may be ``tid``): the tool off where it
+        is on, and the enable owes nothing more."""
         acts = self._drop(t, State.TRACKING, StateReason(Because.UNKNOWN_HELD, bolt=en.bolt)) \
             if self.tool_on else []
         acts += self._hold_unanswered(t, [_Cut(en, since, t)], note_of, tid)
@@ -424,15 +433,9 @@ class LostRules(NokRules):
         made, pset = ev.made_at, int(ev.result.pset)
         if made is None:
             return []
-        m = self.matcher
-
-        def open_(u: _Cut) -> bool:   # selected now too: its tool would go on again
-            b = u.selection.bolt
-            return not (u.selection.vin == self.vin and m is not None and (
-                b in m.done or b in m.held or b in m.skipped or b in m.locked))
-
         return [u for u in (*self._unanswered, *self._cleared)
-                if u.selection.pset == pset and open_(u) and u.spans(made, CLOCK_SLACK_S)]
+                if u.selection.pset == pset and self._still_open(u, selected_too=True)
+                and u.spans(made, CLOCK_SLACK_S)]
 
     def _gaps_holding(self, tid: int) -> list[int]:
         """Of the gaps told whose ids hold ``tid``, how many enables had come when each was

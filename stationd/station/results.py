@@ -49,7 +49,7 @@ from stationd.station.inputs import (
     Written,
 )
 from stationd.station.lost import CLOCK_SLACK_S
-from stationd.station.state import NOK_SKIPPED, ON_A_BOLT, UNANSWERED, _Cut
+from stationd.station.state import NOK_SKIPPED, ON_A_BOLT, UNANSWERED
 from stationd.station.unread import UnreadRules, _Unread
 
 
@@ -289,13 +289,8 @@ class ResultRules(UnreadRules):
                               Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
                               Publish(Notice(Said.UNATTRIBUTED, tightening_id=tid,
                                              pset=int(r.pset), unattributed=why, t=ev.t))]
-        if self.tool_on:
-            acts += self._drop(ev.t, State.TRACKING, StateReason(Because.UNKNOWN_HELD,
-                                                                 bolt=en.bolt))
-        acts += self._hold_unanswered(ev.t, [_Cut(en, since, ev.t)], lambda u: other_pset_note(
+        return acts + self._hold_enable(ev.t, en, since, lambda u: other_pset_note(
             tid, int(r.pset), int(en.pset or 0)), tid)
-        self._enabled, self._off_at = None, None
-        return acts
 
     def _loosened_after_cut(self, ev: ResultIn, kind: ResultKind) -> list[Action]:
         """A loosening fetched after the rundown of a link cut's bolt was proved and
