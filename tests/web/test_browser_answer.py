@@ -19,7 +19,7 @@ from stationd.station.commands import Answer, Command, Issuer
 from stationd.yamlio import YamlNode
 from tests.web.pages import Page
 from tests.web.scenario import VIN, held, locked, opened, work
-from tests.web.test_browser_commands import _answer, _login, _shown
+from tests.web.test_browser_commands import _answer, _shown, _signed_in
 
 PASSWORD = "pw-of-sue-1234"  # noqa: S105 - a test user's
 
@@ -68,7 +68,7 @@ def test_a_commands_answer_is_in_view_on_a_small_screen(live_server, page, size:
     page.size(*size)
     page.get(srv.url)
     page.wait(lambda p: p.text("#vin") == VIN, what="the vehicle on the screen")
-    _login(page, "sue", PASSWORD)
+    _signed_in(page, "sue", PASSWORD)
     page.wait(lambda p: (p.text("#who") or "").startswith("sue"), 30, "sue logged in")
     page.wait(lambda p: _shown(p, "release"), 30, "the Release form")
     page.wait(lambda p: p.js("return [...document.querySelectorAll('#release-bolt option')]"
@@ -103,7 +103,7 @@ def test_an_entered_outcome_leaves_no_value_for_the_next_hold(live_server, page)
     srv.publish([*opened(), *held("B2", "the controller's result could not be read")])
     page.get(srv.url)
     page.wait(lambda p: p.text("#vin") == VIN, what="the vehicle on the screen")
-    _login(page, "sue", PASSWORD)
+    _signed_in(page, "sue", PASSWORD)
     page.wait(lambda p: _shown(p, "enter"), 30, "the Enter outcome form")
     page.wait(lambda p: p.js("return [...document.querySelectorAll('#enter-bolt option')]"
                              ".map(o => o.value).includes('B2')"), 30, "B2 offered")
@@ -129,7 +129,7 @@ def test_a_reopen_without_a_vin_is_answered_in_the_panel(live_server, page) -> N
     srv.publish(opened())
     page.get(srv.url)
     page.wait(lambda p: p.text("#vin") == VIN, what="the vehicle on the screen")
-    _login(page, "sue", PASSWORD)
+    _signed_in(page, "sue", PASSWORD)
     page.wait(lambda p: _shown(p, "reopen"), 30, "the Reopen form")
     page.click("#loosen button")
     assert _answer(page, "logged in as sue") == "choose the bolt to loosen"

@@ -22,6 +22,14 @@ def _login(page: Page, user: str, password: str) -> None:
             "document.querySelector('#login button').click()", user, password)
 
 
+def _signed_in(page: Page, user: str, password: str) -> None:
+    """Log in and wait for the login's own answer: the screen can show the forms (the
+    session asked again) before the login's answer comes, and that answer, arriving after
+    the next command's, replaced it (seen under load)."""
+    _login(page, user, password)
+    page.wait(lambda p: p.text("#cmd-answer") == f"logged in as {user}", 30, "the login's answer")
+
+
 def _shown(page: Page, element_id: str) -> bool:
     """Whether the element is drawn (its ``hidden`` attribute is not overridden by CSS)."""
     return bool(page.js("const e = document.getElementById(arguments[0]);"
