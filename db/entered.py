@@ -28,9 +28,9 @@ from db.errors import DatabaseError, DataError, NotFoundError
 from db.importer import current_version, parameters_of, sent_bolt
 from db.kinds import (
     ENTER_OUTCOME,
+    HELD_WITH_RESULT,
     HELD_WITHOUT_RESULT,
     LOOSENING,
-    NOT_TAKEN,
     RUNDOWN_KINDS,
     TIGHTENING,
 )
@@ -91,7 +91,7 @@ def record_entered(repo: Repository, *, vin: str, bolt: str, ok: bool, torque_nm
             # cut during its enable that left its result unknown (no id: none was read)
             not_taken = s.scalar(select(ControllerEvent).where(
                 ControllerEvent.vin == vin, ControllerEvent.bolt == bolt,
-                ControllerEvent.what.in_((NOT_TAKEN, *HELD_WITHOUT_RESULT)))
+                ControllerEvent.what.in_((*HELD_WITH_RESULT, *HELD_WITHOUT_RESULT)))
                 .order_by(ControllerEvent.id.desc()).limit(1))
             if not_taken is not None and (held is None
                                           or not_taken.recorded_at >= held.recorded_at):

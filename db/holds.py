@@ -16,10 +16,13 @@ from sqlalchemy.orm import Session
 
 from db.kinds import (
     CUT_UNKNOWN,
+    HELD_WITH_RESULT,
     HELD_WITHOUT_RESULT,
     NOT_TAKEN,
+    UNKNOWN_HELD,
     HeldUnder,
     not_taken_note,
+    unknown_type_note,
     unreadable_note,
 )
 from db.ledger import CommandEntry
@@ -81,18 +84,23 @@ def _stored(s: Session, vin: str, since: datetime | None) -> dict[str, _Stored]:
         UnreadableRecord.vin == vin, UnreadableRecord.bolt.is_not(None))
     n = select(ControllerEvent.bolt, ControllerEvent.recorded_at,
                ControllerEvent.tightening_id, ControllerEvent.torque_nm,
-               ControllerEvent.pset, ControllerEvent.what, ControllerEvent.note).where(
+               ControllerEvent.pset, ControllerEvent.what, ControllerEvent.note,
+               ControllerEvent.result_type).where(
         ControllerEvent.vin == vin, ControllerEvent.bolt.is_not(None),
-        ControllerEvent.what.in_((NOT_TAKEN, *HELD_WITHOUT_RESULT)))
+        ControllerEvent.what.in_((*HELD_WITH_RESULT, *HELD_WITHOUT_RESULT)))
     if since is not None:
         q = q.where(UnreadableRecord.recorded_at >= since)
         n = n.where(ControllerEvent.recorded_at >= since)
     holds = [(str(b), _Stored(unreadable_note(tid, mid, rev), at, pset, True))
              for b, at, tid, mid, rev, pset in s.execute(q.order_by(UnreadableRecord.id))]
-    # an untyped OK came under the tightening pset; a link cut's enable is looked up
+    # an untyped OK came under the tightening pset, as did a result of an unknown type (no
+    # loosening by its type); a link cut's enable is looked up
     holds += [(str(b), _Stored(not_taken_note(torque, tid), at, pset, False)
-               if what == NOT_TAKEN else _Stored(note or CUT_UNKNOWN, at, pset, True))
-              for b, at, tid, torque, pset, what, note in s.execute(n.order_by(ControllerEvent.id))]
+               if what == NOT_TAKEN else
+               _Stored(unknown_type_note(code, tid), at, pset, False)
+               if what == UNKNOWN_HELD else _Stored(note or CUT_UNKNOWN, at, pset, True))
+              for b, at, tid, torque, pset, what, note, code
+              in s.execute(n.order_by(ControllerEvent.id))]
     return dict(sorted(holds, key=lambda h: h[1].at))
 
 

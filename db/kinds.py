@@ -55,6 +55,18 @@ NOT_TAKEN = "untyped OK outside torque window"
 #: how a held bolt's note begins for such a result (the note of a result that could not be
 #: read names that result alone: "tightening 1234", "MID 0061 revision 7")
 NOT_TAKEN_NOTE = "an OK result without a result type"
+#: a result of a type the station does not know (MID 0061 revision 3+, parameter 49: 0, 9 or
+#: more; the specification names 1-8) under a bolt's tool enable: perhaps that bolt's
+#: tightening (a controller of a later specification), perhaps none.  Never taken for one,
+#: never left open as if nothing was made (an MES's trial: the bolt left open, run down
+#: again): stored as a controller event under this name, its bolt held as for
+#: :data:`NOT_TAKEN`, published to an MES as a result not decided
+UNKNOWN_HELD = "unknown result type, bolt held"
+#: how a held bolt's note begins for such a result
+UNKNOWN_TYPE_NOTE = "a result of a type the station does not know"
+#: the controller events that are a result an MES is sent and that hold their bolt: perhaps
+#: the bolt's tightening, not taken for one
+HELD_WITH_RESULT = (NOT_TAKEN, UNKNOWN_HELD)
 #: a bolt locked by the NOK policy (``max_nok`` NOKs in a row), kept in the command ledger
 #: under this kind (user ``station``): the lock stands until a person releases or skips the
 #: bolt, whatever the policy says after a reload or a restart (a raised ``max_nok`` read back
@@ -87,6 +99,13 @@ def not_taken_note(torque_nm: float | None, tightening_id: int | None) -> str:
     torque = "" if torque_nm is None else f", {torque_nm:.1f} Nm"
     which = "" if tightening_id is None else f" (tightening {tightening_id})"
     return f"{NOT_TAKEN_NOTE}{torque} outside the bolt's torque window{which}"
+
+
+def unknown_type_note(result_type: int | None, tightening_id: int | None) -> str:
+    """A held bolt's note for a result of a type the station does not know."""
+    which = [f"type {result_type}"] if result_type is not None else []
+    which += [f"tightening {tightening_id}"] if tightening_id is not None else []
+    return f"{UNKNOWN_TYPE_NOTE} ({', '.join(which)})" if which else UNKNOWN_TYPE_NOTE
 
 
 def unreadable_note(tightening_id: int | None, mid: int, revision: int) -> str:
@@ -214,8 +233,10 @@ class HeldUnder:
 
 
 def is_not_taken_note(note: str | None) -> bool:
-    """Whether a held bolt's note is such a result's (else: a result not read)."""
-    return note is not None and note.startswith(NOT_TAKEN_NOTE)
+    """Whether a held bolt's note is a result read but not taken for a tightening (an OK
+    without a type outside its window, a type the station does not know; else: a result not
+    read)."""
+    return note is not None and note.startswith((NOT_TAKEN_NOTE, UNKNOWN_TYPE_NOTE))
 
 
 __all__ = [
@@ -224,6 +245,7 @@ __all__ = [
     "CUT_UNKNOWN",
     "GAP_NOTE_MARK",
     "HELD_WITHOUT_RESULT",
+    "HELD_WITH_RESULT",
     "LOOSENED",
     "LOOSENING",
     "LOST_NOTE_MARK",
@@ -238,6 +260,8 @@ __all__ = [
     "SKIPPED",
     "TIGHTENING",
     "TO_LOOSEN",
+    "UNKNOWN_HELD",
+    "UNKNOWN_TYPE_NOTE",
     "BoltStatus",
     "HeldUnder",
     "check_unknown_note",
@@ -250,5 +274,6 @@ __all__ = [
     "lost_unknown_id",
     "lost_unknown_note",
     "not_taken_note",
+    "unknown_type_note",
     "unreadable_note",
 ]

@@ -20,7 +20,7 @@ from sqlalchemy import and_, func, or_, select
 from sqlalchemy.orm import Session
 
 from db.engine import Transactions
-from db.kinds import LOCK, LOOSENING, NOT_TAKEN
+from db.kinds import HELD_WITH_RESULT, LOCK, LOOSENING
 from db.models import (
     Bolt,
     CalibrationCheck,
@@ -101,17 +101,19 @@ class Series:
 def is_result(entry: Mapping[str, Any]) -> bool:
     """Whether the feed ``entry`` is a controller's result an MES is sent: of
     :data:`RESULT_KINDS`, or a controller event that is an OK result without a type outside
-    its bolt's torque window (:data:`db.kinds.NOT_TAKEN`: perhaps a real tightening, its
+    its bolt's torque window, or a result of a type the station does not know, under a bolt's
+    enable (:data:`db.kinds.HELD_WITH_RESULT`: perhaps a real tightening, its
     bolt held; an MES counting the controller's rundowns missed it)."""
     return entry["kind"] in RESULT_KINDS or (
-        entry["kind"] == CONTROLLER_EVENT and entry["record"].get("what") == NOT_TAKEN)
+        entry["kind"] == CONTROLLER_EVENT and entry["record"].get("what") in HELD_WITH_RESULT)
 
 
 def _results() -> Any:
     """:func:`is_result` as a condition on the feed's rows."""
     return or_(FeedEntry.kind.in_(RESULT_KINDS), and_(
         FeedEntry.kind == CONTROLLER_EVENT,
-        FeedEntry.ref.in_(select(ControllerEvent.id).where(ControllerEvent.what == NOT_TAKEN))))
+        FeedEntry.ref.in_(select(ControllerEvent.id).where(
+            ControllerEvent.what.in_(HELD_WITH_RESULT)))))
 FEED_LIMIT = 1000
 
 

@@ -38,10 +38,10 @@ from db.importer import (
     sent_bolt,
 )
 from db.kinds import (
+    HELD_WITH_RESULT,
     HELD_WITHOUT_RESULT,
     LOCK,
     LOOSENING,
-    NOT_TAKEN,
     RUNDOWN_KINDS,
     TIGHTENING,
     HeldUnder,
@@ -487,7 +487,7 @@ class Repository:
                 UnreadableRecord.vin.in_(vins), UnreadableRecord.bolt.is_not(None))))
             found |= set(s.scalars(select(ControllerEvent.vin).distinct().where(
                 ControllerEvent.vin.in_(vins), ControllerEvent.bolt.is_not(None),
-                ControllerEvent.what.in_((NOT_TAKEN, *HELD_WITHOUT_RESULT)))))
+                ControllerEvent.what.in_((*HELD_WITH_RESULT, *HELD_WITHOUT_RESULT)))))
             found |= set(s.scalars(select(CommandRecord.vin).distinct().where(
                 CommandRecord.vin.in_(vins), CommandRecord.kind == LOCK)))
         return {str(v) for v in found if v is not None}

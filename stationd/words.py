@@ -539,6 +539,9 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
                                f"{_mm(n.torque_min)}-{_mm(n.torque_max)} Nm (tightening "
                                f"{n.tightening_id}): not taken as a tightening; "
                                f"{CHECK_ON_CONTROLLER}"),
+    Said.UNKNOWN_HELD: lambda n: (f"{n.bolt}: result {n.tightening_id} of type "
+                                  f"{n.result_type}, a type the station does not know: not "
+                                  f"taken as a tightening; {CHECK_ON_CONTROLLER}"),
     Said.CUT_RECORDED: lambda n: (f"tightening {n.tightening_id} made during the link cut, "
                                   f"fetched after it: recorded to {n.bolt} (its pset, VIN, "
                                   "tightening id and time agree)"),
@@ -633,7 +636,10 @@ def _unreadable(r: StateReason) -> str:
 
 
 def _not_taken(r: StateReason) -> str:
-    return f"bolt {r.bolt}: an OK result without a result type outside its torque window"
+    """A result not taken for a tightening: its note says which (a type the station does
+    not know), else an untyped OK outside the window."""
+    return f"bolt {r.bolt}: " + (
+        r.note or "an OK result without a result type outside its torque window")
 
 
 _BECAUSE: dict[Because, Callable[[StateReason], str]] = {

@@ -104,6 +104,9 @@ WORDS = [
      "B1: an OK result without a result type, 0.0 Nm outside 20.0-25.0 Nm (tightening 7): "
      "not taken as a tightening; check it on the controller, then enter its outcome, or "
      "release it to tighten it again"),
+    (Notice(Said.UNKNOWN_HELD, bolt="B1", result_type=9, tightening_id=7),
+     "B1: result 7 of type 9, a type the station does not know: not taken as a tightening; "
+     "check it on the controller, then enter its outcome, or release it to tighten it again"),
     (Notice(Said.CUT_RECORDED, tightening_id=41, bolt="B1"),
      "tightening 41 made during the link cut, fetched after it: recorded to B1 (its pset, "
      "VIN, tightening id and time agree)"),
@@ -203,9 +206,9 @@ def test_a_notice_s_level_is_its_kind_s() -> None:
     assert errors == {Said.NOT_STORED}
     assert warnings == {
         Said.PAIR_DISTRUSTED, Said.IDS_AGAIN, Said.UNATTRIBUTED, Said.UNKNOWN_TYPE, Said.GAP,
-        Said.UNREADABLE, Said.HELD, Said.CUT_UNKNOWN, Said.NOT_TAKEN, Said.LOOSEN_PSET_TIGHTENED,
-        Said.LOOSENING_NOK, Said.LOCKED, Said.NOK_AFTER_LOCK, Said.ENTERED_NOK,
-        Said.ENTERED_LOOSENING_NOK, Said.OTHER_VIN}
+        Said.UNREADABLE, Said.HELD, Said.CUT_UNKNOWN, Said.NOT_TAKEN, Said.UNKNOWN_HELD,
+        Said.LOOSEN_PSET_TIGHTENED, Said.LOOSENING_NOK, Said.LOCKED, Said.NOK_AFTER_LOCK,
+        Said.ENTERED_NOK, Said.ENTERED_LOOSENING_NOK, Said.OTHER_VIN}
     # a controller event is a warning only while a bolt is still open
     assert Notice(Said.CONTROLLER_EVENT, bolt="B1").level == "warning"
 
@@ -279,6 +282,10 @@ STATE_WORDS = [
     (StateReason(Because.NOT_TAKEN_HELD, bolt="B11"),
      "bolt B11: an OK result without a result type outside its torque window; held for a "
      "supervisor"),
+    (StateReason(Because.NOT_TAKEN_HELD, bolt="B11",
+                 note="a result of a type the station does not know (type 9, tightening 7)"),
+     "bolt B11: a result of a type the station does not know (type 9, tightening 7); held for "
+     "a supervisor"),
     (StateReason(Because.UNKNOWN_HELD, bolt="B11"),
      "bolt B11: its result not known; held for a supervisor"),
     (StateReason(Because.SKIPPED, bolt="B11",

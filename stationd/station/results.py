@@ -10,8 +10,10 @@ from db.kinds import (
     LOOSENING,
     NOT_TAKEN,
     TIGHTENING,
+    UNKNOWN_HELD,
     not_taken_note,
     other_pset_note,
+    unknown_type_note,
 )
 from drivers.wrench.base import (
     ResultKind,
@@ -180,9 +182,13 @@ class ResultRules(UnreadRules):
         r = ev.result
         en = self._enabled
         kind = result_kind(type_code(r), en is not None and en.loosen)
-        if kind in (ResultKind.EVENT, ResultKind.UNKNOWN):
+        if kind is ResultKind.EVENT:
             return self._controller_event(ev, kind)
-        read = self._unread_read(ev, tid)
+        unknown = kind is ResultKind.UNKNOWN
+        # (a type the station does not know: judged as a rundown would be for whose enable
+        # it answers, that bolt held (:meth:`_not_taken`); answering none, a controller
+        # event as any other)
+        read = None if unknown else self._unread_read(ev, tid)
         if read is not None:
             return read
         # (made before the enable owed now, by the order of ids or its own time: never its;
@@ -200,6 +206,10 @@ class ResultRules(UnreadRules):
             return self._attribute(ev, en)
         if en is not None and not before and self._made_under(ev, en):
             return self._attribute(ev, en, lost=True)
+        if unknown:
+            proved, _ = self._made_during_cut(ev)
+            return self._controller_event(ev, kind) if proved is None \
+                else self._attribute(ev, proved, cut=True)
         if en is not None and not before and self._of_another_pset(ev, en):
             return self._other_pset(ev, en)
         proved, not_proved = self._made_during_cut(ev)
@@ -432,36 +442,50 @@ class ResultRules(UnreadRules):
         lo, hi = window
         return None if lo <= float(r.torque_nm) <= hi else (lo, hi)
 
-    def _not_taken(self, ev: ResultIn, en: Selection, window: tuple[float, float],
+    def _not_taken(self, ev: ResultIn, en: Selection, window: tuple[float, float] | None,
                    cut: bool) -> list[Action]:
-        """An OK result without a type whose torque is outside its bolt's window: perhaps no
-        tightening at all (at a revision without types, a batch increment or a bypass reads
-        as an OK, of 0 Nm), perhaps one whose limits on the controller are not the station's.
-        Never taken as the bolt done: stored as a controller event (the enable it answers
-        settled with it), the tool off, and the bolt held, as for a result that could not be
-        read, until a supervisor checked it on the controller and released it or entered its
-        outcome (a real tightening counted once, never tightened twice)."""
+        """An OK result without a type whose torque is outside its bolt's ``window``: perhaps
+        no tightening at all (at a revision without types, a batch increment or a bypass
+        reads as an OK, of 0 Nm), perhaps one whose limits on the controller are not the
+        station's; or (``window`` None) a result of a type the station does not know (0, 9
+        or more): perhaps the bolt's tightening, perhaps none (an MES integrator's trial:
+        stored as a controller event, the bolt left open and run down again, or left
+        "missing" after a link cut said nothing was made).  Never taken as the bolt done:
+        stored as a controller event (the enable it answers settled with it), the tool off,
+        and the bolt held, as for a result that could not be read, until a supervisor
+        checked it on the controller and released it or entered its outcome (a real
+        tightening counted once, never tightened twice)."""
         r = ev.result
         tid = int(r.tightening_id)
         self._recorded[tid] = _said(r)
-        lo, hi = window
-        said = Notice(Said.NOT_TAKEN, bolt=en.bolt, torque_nm=float(r.torque_nm),
-                      torque_min=lo, torque_max=hi, tightening_id=tid, t=ev.t)
+        if window is None:
+            code = type_code(r)
+            what, note = UNKNOWN_HELD, unknown_type_note(code, tid)
+            said = Notice(Said.UNKNOWN_HELD, bolt=en.bolt, result_type=code,
+                          tightening_id=tid, t=ev.t)
+            reason = StateReason(Because.NOT_TAKEN, bolt=en.bolt, note=note)
+            held = StateReason(Because.NOT_TAKEN_HELD, bolt=en.bolt, note=note)
+        else:
+            lo, hi = window
+            code, what, note = 0, NOT_TAKEN, not_taken_note(float(r.torque_nm), tid)
+            said = Notice(Said.NOT_TAKEN, bolt=en.bolt, torque_nm=float(r.torque_nm),
+                          torque_min=lo, torque_max=hi, tightening_id=tid, t=ev.t)
+            reason = StateReason(Because.NOT_TAKEN, bolt=en.bolt)
+            held = StateReason(Because.NOT_TAKEN_HELD, bolt=en.bolt)
         acts: list[Action] = []
         if self.tool_on and not cut:    # (a lost one's: its rundown ended there)
-            acts += self._tool_off(ev.t, StateReason(Because.NOT_TAKEN, bolt=en.bolt))
-        acts.append(StoreControllerEvent(r, en.vin, en.bolt, NOT_TAKEN, en))
-        acts.append(Publish(ControllerResultEvent(0, NOT_TAKEN, tid, int(r.pset), True,
-                                                  en.bolt, t=ev.t)))
+            acts += self._tool_off(ev.t, reason)
+        acts.append(StoreControllerEvent(r, en.vin, en.bolt, what, en))
+        acts.append(Publish(ControllerResultEvent(code or 0, what, tid, int(r.pset),
+                                                  bool(r.ok), en.bolt, t=ev.t)))
         self._answered(en)
         self._not_before = max(self._not_before, ev.t)
         if self.matcher is not None and self.vin == en.vin and en.bolt in self.matcher.bolts:
-            acts += self._hold(ev.t, en.bolt, not_taken_note(float(r.torque_nm), tid), said)
+            acts += self._hold(ev.t, en.bolt, note, said)
         else:
             acts.append(Publish(said))
         if self.bolt == en.bolt and self.vin == en.vin:
-            acts += self._drop(ev.t, State.TRACKING,
-                               StateReason(Because.NOT_TAKEN_HELD, bolt=en.bolt))
+            acts += self._drop(ev.t, State.TRACKING, held)
         return acts
 
     def _attribute(self, ev: ResultIn, en: Selection, cut: bool = False,
@@ -474,6 +498,8 @@ class ResultRules(UnreadRules):
         bolt's torque window is not (:meth:`_not_taken`)."""
         r = ev.result
         self._answered_bolt(en.vin, en.bolt)     # its own result came: nothing unanswered
+        if result_kind(type_code(r)) is ResultKind.UNKNOWN:
+            return self._not_taken(ev, en, None, cut)
         window = self._outside_window(r, en)
         if window is not None:
             return self._not_taken(ev, en, window, cut)

@@ -19,9 +19,11 @@ from db.kinds import (
     LOOSENING,
     NOT_TAKEN,
     TIGHTENING,
+    UNKNOWN_HELD,
     HeldUnder,
     is_not_taken_note,
     not_taken_note,
+    unknown_type_note,
 )
 from db.ledger import COMMAND, RUNDOWN
 from db.repository import Repository
@@ -151,6 +153,32 @@ def test_an_untyped_ok_outside_the_window_holds_its_bolt_over_a_restart_until_re
                                         bolt="B1", controller_vin=None, tightening_id=33, pset=1,
                                         ok=True, torque_nm=0.0, angle_deg=0.0, result_at=None)
     assert repo.held_bolts("VIN1") == {}
+
+
+def test_a_result_of_an_unknown_type_holds_its_bolt_over_a_restart_until_entered(sedan):
+    """A result of a type the station does not know under B1's enable (an MES integrator's
+    trial: type 9, a rundown of 49 Nm, left B1 open): stored as a controller event under the
+    station's own kind, the enable settled, B1 held (what a restart reads, its note naming
+    the type and the result), may hold the vehicle, and an outcome entered for it carries
+    that result's id."""
+    repo = sedan
+    version = repo.bolts_for_model("SEDAN")[0].parameters_id
+    enable = repo.enables.note("VIN1", "B1", 1, version, {"operator": "olga"},
+                               datetime.now(UTC))
+    assert repo.others.record_controller_event(
+        result_type=9, what=UNKNOWN_HELD, vin="VIN1", bolt="B1", controller_vin=None,
+        tightening_id=41, pset=1, ok=True, torque_nm=49.4, angle_deg=30.0, result_at=None,
+        enable_id=enable)
+    assert repo.enables.owed() is None
+    assert repo.held_bolts("VIN1") == {"B1": unknown_type_note(9, 41)}
+    assert unknown_type_note(9, 41) == ("a result of a type the station does not know "
+                                        "(type 9, tightening 41)")
+    assert is_not_taken_note(repo.held_bolts("VIN1")["B1"])
+    assert repo.holds("VIN1")["B1"][1] == HeldUnder(False, 1)
+    assert repo.may_hold(["VIN1", "VIN2"]) == {"VIN1"}
+    _enter(repo)
+    assert repo.held_bolts("VIN1") == {}
+    assert repo.ledger.since(0)[-1]["record"]["tightening_id"] == 41
 
 
 # -- an outcome entered for a held loosening: a loosening in the records --------------------------

@@ -542,3 +542,32 @@ def test_an_ok_not_taken_for_a_tightening_arrives_as_a_result_not_decided(repo):
     assert (torque.MeasuredValue, angle.MeasuredValue) == (4.97, 30.0)
     assert [int(v.ResultEvaluation) for v in (torque, angle)] == [3, 3]
     assert repo.ledger.unacknowledged_count() == 2
+
+
+def test_a_result_of_an_unknown_type_that_held_its_bolt_arrives_as_a_result_not_decided(repo):
+    """A result of a type the station does not know under a bolt's enable (type 9: an MES
+    integrator's trial found such rundowns in the export and not on OPC UA, GetResultById
+    answering "not found"): it holds its bolt and comes as a result, NotDecidable, its type
+    said; one with no bolt's enable (a plain controller event) does not come."""
+    from db.kinds import UNKNOWN_HELD
+
+    def event(what: str, tid: int, bolt: str | None) -> Callable[[], Any]:
+        return lambda: repo.others.record_controller_event(
+            result_type=9, what=what, vin=VIN, bolt=bolt, controller_vin=None,
+            tightening_id=tid, pset=1, ok=True, torque_nm=49.38, angle_deg=30.0,
+            result_at=None)
+
+    events = events_while(repo, event("result type 9 (unknown)", 70, None),
+                          event(UNKNOWN_HELD, 71, "B2"),
+                          lambda: record(repo, VIN, "B1", ok=True, tightening_id=72),
+                          events=2)
+    assert [e.Message.Text for e in events] == [
+        f"{VIN} B2: result of unknown type 9 not taken for a tightening (controller id 71): "
+        "held for a supervisor", f"{VIN} B1: tightening OK (controller id 72)"]
+    meta = events[0].Result.ResultMetaData
+    assert int(meta.ResultEvaluation) == 3
+    assert meta.Description.Text == ("a result of type 9 of pset 1, a type the station does "
+                                      "not know: not taken for a tightening; B2 held for a "
+                                      "supervisor")
+    torque, _ = events[0].Result.ResultContent[0].Value.OverallResultValues
+    assert torque.MeasuredValue == 49.38 and int(torque.ResultEvaluation) == 3

@@ -11,7 +11,7 @@ from typing import Any
 
 import pytest
 
-from db.kinds import CUT_UNKNOWN, NOT_TAKEN
+from db.kinds import CUT_UNKNOWN, NOT_TAKEN, UNKNOWN_HELD
 from db.repository import Repository
 from drivers.keeper import Backoff
 from drivers.wrench.sim.controller import SimController
@@ -25,8 +25,11 @@ pytestmark = pytest.mark.system      # whole daemons
 
 @pytest.mark.timeout(300)
 def test_only_a_tightening_closes_the_bolt_the_tool_is_on(tmp_path):
+    """Batch steps, a bypass, an aborted job, a reference setup leave B05 open, the tool on;
+    a type the station does not know (9) holds B05, the tool off (perhaps its tightening);
+    B06's tightening closes B06."""
     pose = tmp_path / "pose"
-    codes = (3, 4, 5, 6, 8, 9)
+    codes = (3, 4, 5, 6, 8)
     with tracking(tmp_path, "TYPEVIN0000000001") as (d, _, ctl):
         tool_on(d, ctl, pose, "B05")
         made = []
@@ -38,6 +41,13 @@ def test_only_a_tightening_closes_the_bolt_the_tool_is_on(tmp_path):
                        "still open")
             until(lambda m=m: m.tightening_id in ctl.acked_ids, 30, "the event acknowledged")
             assert ctl.tool_enabled         # the tool as the station left it
+        odd = ctl.pull_trigger(result_type=9)
+        assert odd is not None
+        d.wait_log(f"B05: result {odd.tightening_id} of type 9, a type the station does not "
+                   "know: not taken as a tightening")
+        until(lambda: odd.tightening_id in ctl.acked_ids, 30, "acknowledged once stored")
+        until(lambda: not ctl.tool_enabled, 30, "the tool off")
+        tool_on(d, ctl, pose, "B06")
         real = ctl.pull_trigger()
         assert real is not None
         until(lambda: real.tightening_id in ctl.acked_ids, 30, "the tightening stored")
@@ -49,9 +59,11 @@ def test_only_a_tightening_closes_the_bolt_the_tool_is_on(tmp_path):
     db = tmp_path / "station.db"
     events = _rows(db, "SELECT result_type, tightening_id, bolt, vin FROM controller_events "
                        "ORDER BY id")
-    assert events == [*((c, t, "B05", "TYPEVIN0000000001") for c, t in zip(codes, made,
-                                                                           strict=True)),
-                      (3, lead.tightening_id, None, "TYPEVIN0000000001")]
+    vin = "TYPEVIN0000000001"
+    assert events == [*((c, t, "B05", vin) for c, t in zip(codes, made, strict=True)),
+                      (9, odd.tightening_id, "B05", vin), (3, lead.tightening_id, None, vin)]
+    assert _rows(db, "SELECT what FROM controller_events WHERE result_type = 9") == [
+        (UNKNOWN_HELD,)]
     rundowns = _rows(db, "SELECT tightening_id, kind FROM tightening_records")
     assert rundowns == [(real.tightening_id, "tightening")]
     assert _rows(db, "SELECT count(*) FROM unattributed_results") == [(0,)]

@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 
-from db.kinds import LOST_UNKNOWN
+from db.kinds import LOST_UNKNOWN, UNKNOWN_HELD
 from drivers.keeper import FaultKind
 from drivers.wrench import ResultKind, UnreadableResult, result_kind
 from stationd.reasons import Reason, Unattributed, UnattributedKind, Unproved, UnprovedKind, Why
@@ -142,17 +142,75 @@ def test_a_batch_increment_with_the_tool_off_is_a_controller_event_of_no_bolt():
     assert not d.core.matcher.done
 
 
-def test_a_type_the_station_does_not_know_is_not_a_tightening():
+@pytest.mark.parametrize("code", [9, 0])
+def test_a_type_the_station_does_not_know_under_the_enable_holds_its_bolt(code):
+    """An MES integrator's trial: a result of type 9 (a real rundown, 49 Nm OK) made under
+    B35's enable was stored as a controller event, B35 left open ("still open"), and it
+    left missing.  Perhaps the bolt's tightening, perhaps none: never taken for one, never
+    left open to be run down again: the tool off, the bolt held for a person, the enable
+    answered, and the result stored as the station's own kind (an MES is sent it, not
+    decided)."""
     d = _ready()
     sent = _enabled(d)
-    acts = d.feed(ResultIn(d.t, res(7, sent.selection.pset or 0, True, 9)))
+    acts = d.feed(ResultIn(d.t, res(7, sent.selection.pset or 0, True, code)))
     assert not [a for a in acts if isinstance(a, Record)]
     [store] = [a for a in acts if isinstance(a, StoreControllerEvent)]
-    assert stored_what(store) == "result type 9 (unknown)"
+    assert (store.what, store.bolt, store.selection) == (UNKNOWN_HELD, "B1", sent.selection)
+    assert stored_what(store) == UNKNOWN_HELD
+    [ev] = published(acts, ControllerResultEvent)
+    assert (ev.result_type, ev.what, ev.bolt, ev.tightening_id) == (code, UNKNOWN_HELD, "B1", 7)
+    [n] = [n for n in published(acts, Notice) if n.said is Said.UNKNOWN_HELD]
+    assert (n.bolt, n.result_type, n.tightening_id, n.level) == ("B1", code, 7, "warning")
+    assert notice_words(n) == (f"B1: result 7 of type {code}, a type the station does not "
+                               "know: not taken as a tightening; check it on the controller, "
+                               "then enter its outcome, or release it to tighten it again")
+    assert [a for a in acts if isinstance(a, DisableTool)]
+    assert not d.core.tool_on and "B1" not in d.core.matcher.done
+    assert d.core.matcher.held == {"B1": f"a result of a type the station does not know "
+                                         f"(type {code}, tightening 7)"}
+    assert state_words(d.core.reason) == (f"bolt B1: a result of a type the station does not "
+                                          f"know (type {code}, tightening 7); held for a "
+                                          "supervisor")
+    # the hold refuses it until a person's release
+    _on(d, 1)
+    assert not d.tool and "B1" not in d.core.allowed()
+
+
+def test_a_type_the_station_does_not_know_with_the_tool_off_is_a_controller_event():
+    d = _ready()
+    acts = d.feed(ResultIn(d.t, res(7, 1, True, 9)))
+    [store] = [a for a in acts if isinstance(a, StoreControllerEvent)]
+    assert store.what is None and stored_what(store) == "result type 9 (unknown)"
     [n] = published(acts, Notice)
-    assert (n.said, n.bolt, n.result_type) == (Said.UNKNOWN_TYPE, "B1", 9)
-    assert n.level == "warning" and "check the controller's result there" in notice_words(n)
-    assert "B1" not in d.core.matcher.done
+    assert (n.said, n.bolt, n.result_type) == (Said.UNKNOWN_TYPE, None, 9)
+    assert not d.core.matcher.held and not d.core.matcher.done
+
+
+def test_a_type_the_station_does_not_know_of_another_pset_holds_nothing():
+    d = _ready()
+    sent = _enabled(d)
+    acts = d.feed(ResultIn(d.t, res(7, (sent.selection.pset or 0) + 1, True, 9)))
+    [store] = [a for a in acts if isinstance(a, StoreControllerEvent)]
+    assert store.what is None and not d.core.matcher.held
+    assert d.core.tool_on      # B1's own result still to come
+
+
+def test_a_type_the_station_does_not_know_made_during_a_cut_holds_its_bolt():
+    """The integrator's reload cut: tightening 201, of B47's pset and VIN, made under its
+    enable while the link was down, of type 9: the journal said "no tightening made while
+    the link was down: B47 open as before".  Placed by the controller's data, it holds the
+    bolt, and the catch-up's end says nothing more."""
+    d = _ready()
+    sent, enabled_at, _ = _cut_during_enable(d)
+    d.t += 10.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    acts = d.feed(ResultIn(d.t, res(41, sent.selection.pset or 0, True, 9, vin="VIN1"),
+                           fetched=True, follows=40, made_at=enabled_at + 0.5))
+    [store] = [a for a in acts if isinstance(a, StoreControllerEvent)]
+    assert (store.what, store.bolt) == (UNKNOWN_HELD, "B1")
+    assert list(d.core.matcher.held) == ["B1"] and "B1" not in d.core.matcher.done
+    said = [notice_words(n) for n in published(d.feed(CaughtUp(d.t, complete=True)), Notice)]
+    assert not [w for w in said if "open as before" in w], said
 
 
 def test_a_synchronized_tightening_closes_the_bolt():
@@ -627,17 +685,19 @@ def test_a_result_fetched_after_a_cut_never_goes_to_an_enable_made_since():
 
 def test_seeded_walks_with_every_result_type_close_bolts_only_by_tightenings():
     """Walks with the realistic mix of test_core, where a result is of any type and now and
-    then unreadable: the core's invariants hold (test_core's Driver checks them on every
-    action), a bolt is done only after a tightening recorded to it, a held bolt gets no
-    parameters until released, and every result is stored somewhere exactly once."""
+    then unreadable (and a held bolt now and then released by a supervisor): the core's
+    invariants hold (test_core's Driver checks them on every action), a bolt is done only
+    after a tightening recorded to it, a held bolt gets no parameters until released, and
+    every result is stored somewhere exactly once."""
     import numpy as np
 
     from tests.station.test_core import decode, seeded_steps
     rng = np.random.default_rng(28)
     kinds = ["lift", "loc", "ack", "result", "fault", "back", "tick"]
     weights = np.array([0.02, 0.6, 0.25, 0.05, 0.01, 0.04, 0.03])
-    seen = {"event": 0, "unreadable": 0, "record": 0, "held": 0}
-    for _ in range(200):
+    seen = {"event": 0, "unreadable": 0, "record": 0, "held": 0, "unknown held": 0}
+    released = 0
+    for _ in range(400):
         d = _ready()
         tid = 1000
         for raw in seeded_steps(rng, kinds, weights, 100):
@@ -647,6 +707,11 @@ def test_seeded_walks_with_every_result_type_close_bolts_only_by_tightenings():
                 n = len(d.sends)
                 d.step(op)
                 assert not set(d.sends[n:]) & before, "parameters sent for a held bolt"
+                if before and d.core.vin is not None and rng.random() < 0.1:
+                    # a supervisor checked the held bolt on the controller and releases it
+                    released += 1
+                    d.command(released, ReleaseBolt(d.core.vin, sorted(before)[0],
+                                                    "checked on the controller"), SUPERVISOR)
                 if not d.tool or rng.random() < 0.6:
                     continue
                 op = ("result", 0.05, True)         # the operator pulls the trigger
@@ -668,6 +733,8 @@ def test_seeded_walks_with_every_result_type_close_bolts_only_by_tightenings():
                 if result_kind(code) in (ResultKind.EVENT, ResultKind.UNKNOWN):
                     seen["event"] += 1
                     assert [type(a) for a in stored] == [StoreControllerEvent]
+                    # a type the station does not know under its bolt's enable holds it
+                    seen["unknown held"] += bool(published(acts, BoltLocked))
                 seen["record"] += sum(isinstance(a, Record) for a in stored)
             assert len(stored) == 1, acts           # stored somewhere, exactly once
             if d.core.matcher is not None:
