@@ -34,7 +34,10 @@ The workarounds for asyncua 2.1.0 (``../shared/design/PROTOCOLS.md``), beside th
    the one a stock node-opcua client waits for before it stops asking.  After a reload (a
    new server, sessions and subscriptions gone) such a client recreated its subscription,
    then asked again for its first message some 1,300 times a second, never received another
-   event, and kept two thirds of a core of the station busy: :func:`_republish_by_the_standard`.
+   event, and kept two thirds of a core of the station busy: :func:`_republish_by_the_standard`;
+9. an event filter's ``OfType`` matches the type named alone, not its subtypes: an MES
+   subscribing with ``OfType(JoiningSystemResultReadyEventType)`` got no result (the station
+   fires its subtype, 6): :func:`stationd.opcua.oftype.follow_subtypes`.
 
 And (4): the optional methods RequestResults, RequestUnacknowledgedResults (IJT Base) and
 AcknowledgeResults (Machinery Result) are not instantiated with the JoiningSystem: they are
@@ -95,6 +98,7 @@ from stationd.opcua.model import (
     load_model,
     publish_dictionaries,
 )
+from stationd.opcua.oftype import follow_subtypes
 from stationd.opcua.results import JOINING_TECHNOLOGY, any_message, any_result
 from stationd.opcua.uatypes import ua
 from stationd.outfile import write_atomic
@@ -286,6 +290,7 @@ class OpcUaServer:
                                                   anonymous=self.cfg.anonymous))
         await init_server(server)
         _republish_by_the_standard()
+        follow_subtypes()
         server.set_endpoint(self.cfg.endpoint)
         server.set_server_name(f"stationd {self.cfg.station_id}")
         await server.set_application_uri(f"urn:stationd:{self.cfg.station_id}")

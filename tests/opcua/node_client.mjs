@@ -2,7 +2,7 @@
 // Server object, prints "ready", then one JSON line per event that carries a Result
 // (what node-opcua decoded of it), and stops after COUNT of them.
 //
-//   node tests/opcua/node_client.mjs URL COUNT [--fix] [--reconnect]
+//   node tests/opcua/node_client.mjs URL COUNT [--fix] [--reconnect] [--of-type]
 //
 // --fix: the client-side fix for node-opcua's optional-bit numbering of subtypes (see
 // fixOptionalBits): its schema builder starts a subtype's own optional bits at the number of
@@ -14,7 +14,7 @@ import path from "node:path";
 const require = createRequire(path.join(process.env.NODE_OPCUA_DIR || process.cwd(), "x.js"));
 const opcua = await import(require.resolve("node-opcua"));
 const { OPCUAClient, AttributeIds, constructEventFilter, TimestampsToReturn,
-        MessageSecurityMode, SecurityPolicy } = opcua;
+        MessageSecurityMode, SecurityPolicy, ofType } = opcua;
 
 const [url, countText, ...flags] = process.argv.slice(2);
 const count = Number(countText);
@@ -98,9 +98,12 @@ if (flags.includes("--fix")) {
 const subscription = await session.createSubscription2({ requestedPublishingInterval: 50,
   requestedLifetimeCount: 1000, requestedMaxKeepAliveCount: 10, publishingEnabled: true });
 const fields = ["EventType", "Message", "SourceName", `${ijt}:Result`];
+// --of-type: only JoiningSystemResultReadyEventType's events (and its subtypes', Part 4
+// 7.7.3), by a where clause, as an MES that filters on the server does
+const where = flags.includes("--of-type") ? ofType(`ns=${ijt};i=1007`) : undefined;
 const item = await subscription.monitor(
   { nodeId: "i=2253", attributeId: AttributeIds.EventNotifier },
-  { samplingInterval: 0, queueSize: 1000, filter: constructEventFilter(fields) },
+  { samplingInterval: 0, queueSize: 1000, filter: constructEventFilter(fields, where) },
   TimestampsToReturn.Neither);
 let seen = 0;
 const done = new Promise((resolve) => {

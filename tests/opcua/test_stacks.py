@@ -133,6 +133,17 @@ def test_node_opcua_decodes_a_result_event_with_the_client_side_fix(repo):
 
 @pytest.mark.system
 @pytest.mark.skipif(NODE is None, reason="node is not installed")
+def test_a_node_opcua_mes_filtering_of_type_result_ready_gets_every_result(repo):
+    """An MES integrator's trial: node-opcua's ``ofType(JoiningSystemResultReadyEventType)``
+    where clause, as the README tells an MES to subscribe, got no event (the server matched
+    the type named alone; the station fires its subtype).  Part 4: the type or a subtype."""
+    events = asyncio.run(node_reads(repo, RUNDOWNS, "--fix", "--of-type"))
+    assert [e["message"] for e in events] == [f"{VIN} B2: tightening NOK (controller id 71)",
+                                              f"{VIN} B2: loosening OK (controller id 72)"]
+
+
+@pytest.mark.system
+@pytest.mark.skipif(NODE is None, reason="node is not installed")
 def test_node_opcua_decodes_a_result_of_no_bolt_and_one_not_readable(repo):
     """An independent stack reads the results that are no joint's rundown as the station
     sends them: told apart by their Message, their evaluation (NotDecidable for one not
