@@ -131,17 +131,26 @@ class CatchUp:
             after, stop_seq, stop_at = first - 1, last, None
         else:
             after, stop_seq, stop_at = 0, None, t1
-            if t0 is not None:
-                try:
-                    after = await _run(repo.ledger.seq_before, t0)
-                except Exception as exc:   # a database busy or away: an answer, never a fault
-                    log.warning("OPC UA: reading the results feed: %s", exc)
-                    return [_duration(revised), *_status(
-                        NOT_READY, "the station's records cannot be read now")]
+        try:
+            if t0 is not None and not first:
+                after = await _run(repo.ledger.seq_before, t0)
+            count = await _run(repo.ledger.results_in, after, stop_seq, stop_at)
+            newest = await _run(repo.ledger.last_seq)
+        except Exception as exc:   # a database busy or away: an answer, never a fault
+            log.warning("OPC UA: reading the results feed: %s", exc)
+            return [_duration(revised), *_status(
+                NOT_READY, "the station's records cannot be read now")]
+        if not count:
+            # said as none (an MES integrator's trial: a range past the last read as results
+            # on their way, and nothing came): the request is answered, nothing to send
+            return [_duration(revised), *_status(
+                OK, f"no result {what}: none is sent (the last sequence number so far: "
+                f"{newest})")]
         self._spawn(self._send_feed(repo, after, stop_seq, stop_at, revised))
+        sending = min(count, MAX_PER_REQUEST)
         return [_duration(revised), *_status(
-            OK, f"the results {what} are sent as events (at most {MAX_PER_REQUEST} per "
-            "request: ask again after the last one received)")]
+            OK, f"{sending} of the {count} results {what} are sent as events (at most "
+            f"{MAX_PER_REQUEST} per request: ask again after the last one received)")]
 
     async def _send_feed(self, repo: Repository, after: int, stop_seq: int | None,
                          stop_at: datetime | None, interval_ms: float) -> None:

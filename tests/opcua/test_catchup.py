@@ -196,6 +196,55 @@ def test_request_results_by_time_and_a_paced_range(repo):
     assert out["took"] >= 0.19             # two gaps of 100 ms between three results
 
 
+def test_a_request_says_how_many_results_it_sends_and_arguments_are_counted(repo):
+    """An MES integrator's trial: RequestResults for numbers past the last answered "the
+    results ... are sent as events" and nothing came; RequestResults with no argument was
+    answered Good and sent every result from the first; GetResultById without its Timeout
+    was Good.  The answer counts what it sends (none said as none, with the last number so
+    far); a call with fewer arguments than its method declares is BadArgumentsMissing, with
+    more BadTooManyArguments (Part 4), and sends nothing."""
+    _record(repo, 3)
+    seqs = [e["seq"] for e in repo.ledger.since(0) if e["kind"] == "rundown"]
+
+    async def scenario() -> dict[str, Any]:
+        srv, stop, task = await serving_ready(config(), repo)
+        out: dict[str, Any] = {}
+        try:
+            async with Client(srv.url) as client:
+                mes = await Mes(client).open()
+                out["past"] = await mes.request_results(10**8, 10**8)
+                out["two"] = await mes.request_results(seqs[1], 10**6)
+                out["sent"] = await mes.wait_requested(2)
+                calls: dict[str, tuple[Any, ...]] = {
+                         "none": (f"{mes.ijt}:RequestResults",),
+                         "by id alone": (f"{mes.mr}:GetResultById", "x:1"),
+                         "by id and more": (f"{mes.mr}:GetResultById", "x:1",
+                                            ua.Variant(0, ua.VariantType.Int32), 7)}
+                for name, (method, *args) in calls.items():
+                    try:
+                        await mes.rm.call_method(str(method), *args)
+                        out[name] = "Good"
+                    except ua.UaStatusCodeError as exc:
+                        out[name] = type(exc).__name__
+                await asyncio.sleep(0.5)
+                out["after"] = mes.requested()
+        finally:
+            await stopping(srv, stop, task)
+        return out
+
+    out = asyncio.run(scenario())
+    last = repo.ledger.last_seq()
+    assert out["past"][1] == OK and out["past"][2].Text == (
+        f"no result with sequence numbers {10**8} to {10**8}: none is sent (the last "
+        f"sequence number so far: {last})")
+    assert out["two"][1] == OK and out["two"][2].Text.startswith(
+        f"2 of the 2 results with sequence numbers {seqs[1]} to {10**6} are sent as events")
+    assert out["sent"] == seqs[1:]
+    assert (out["none"], out["by id alone"], out["by id and more"]) == (
+        "BadArgumentsMissing", "BadArgumentsMissing", "BadTooManyArguments")
+    assert out["after"] == seqs[1:]      # the refused call sent nothing
+
+
 def test_no_request_holds_the_queue_for_long(repo, monkeypatch):
     """An anonymous client asks with an infinite interval: it is revised to the maximum, and
     a request sends at most MAX_PER_REQUEST results, so the next client is served (an
