@@ -64,8 +64,12 @@ class BoltCheck:
     path: str
     table: BoltTable | None
     errors: list[ConfigError] = field(default_factory=list)
-    #: valid, but a station with it tightens nothing (no model, a model without bolts)
+    #: valid, but a station with it tightens nothing (no model, a model without bolts), or
+    #: two bolts of a model share a name
     warnings: list[ConfigError] = field(default_factory=list)
+    #: where each bolt is written ((model, bolt id) -> its entry): the checks of the table
+    #: against the station (its controller, its cameras) point at the bolt's own line
+    nodes: dict[tuple[str, str], YamlNode] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -108,7 +112,8 @@ def _check(root: YamlNode, tolerance_mm: float) -> BoltCheck:
     errors = sorted(checker.errors, key=lambda e: e.line or 0)  # stable: same line keeps order
     if errors or table is None:
         return BoltCheck(root.path, None, errors)
-    return BoltCheck(root.path, table, [], _idle(root, table))
+    return BoltCheck(root.path, table, [], [*_idle(root, table), *checker.warnings],
+                     checker.nodes)
 
 
 def _idle(root: YamlNode, table: BoltTable) -> list[ConfigError]:
@@ -148,7 +153,9 @@ class _Checker:
     def __init__(self, tolerance_mm: float) -> None:
         self.tolerance_mm = tolerance_mm
         self.errors: list[ConfigError] = []
+        self.warnings: list[ConfigError] = []
         self.broken_globals: set[int] = set()  # numbers of global psets defined with errors
+        self.nodes: dict[tuple[str, str], YamlNode] = {}   # (model, bolt id) -> its entry
 
     def fail(self, node: YamlNode, message: str) -> None:
         self.errors.append(node.error(message))
@@ -338,6 +345,21 @@ class _Checker:
                           "the pset; give the same values or leave them out")
         return False
 
+    def same_names(self, model: str, bolts: list[_Bolt]) -> None:
+        """A warning for each bolt named as one before it in ``model``: the screens, the
+        journal and the reports name bolts to people, and two alike are told apart by id
+        alone (a line engineer's trial: "bolt 7" given to B07 and B51, taken silently)."""
+        first: dict[str, _Bolt] = {}
+        for b in bolts:
+            if b.spec is None or b.bolt_id is None:
+                continue
+            seen = first.setdefault(b.spec.name, b)
+            if seen is not b:
+                self.warnings.append(b.item.keys["name"].error(
+                    f"{b.bolt_id}: named {b.spec.name!r} as {seen.bolt_id} (line "
+                    f"{seen.item.node.line}) of model {model}: people tell the two apart by "
+                    "their id alone"))
+
     def too_close(self, bolts: list[_Bolt]) -> None:
         """Two bolts nearer in plan than twice the tolerance would both match one wrench
         position (:mod:`db.spacing`, the matcher's metric: X and Y of the vehicle frame).
@@ -400,7 +422,9 @@ class _Checker:
                 continue
             if bolt.bolt_id is not None:
                 ids[bolt.bolt_id] = bolt
+                self.nodes[(name, bolt.bolt_id)] = bolt.item.node
             bolts.append(bolt)
+        self.same_names(name, bolts)
         self.too_close(bolts)
         spec_ = ModelSpec(name, tuple(b.spec for b in bolts if b.spec is not None),
                           tuple(p for p, _ in own), description, code)

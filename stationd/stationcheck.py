@@ -14,7 +14,7 @@ validated (here), so both callers check the overrides with the same code
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -31,7 +31,7 @@ from stationd.station.policy import table_errors
 from stationd.yamlio import YamlNode
 
 if TYPE_CHECKING:
-    from db.bolts import BoltTable
+    from db.bolts import BoltSpec, BoltTable
     from stationd.boltfile import BoltCheck
 
 
@@ -56,21 +56,32 @@ class StationCheck:
         return not self.errors
 
 
-def validate_station(path: str | Path) -> StationConfig:
+def validate_station(path: str | Path, warn: Callable[[str], object] | None = None
+                     ) -> StationConfig:
     """The whole station, checked before it is used, for the daemon's first start and every
     reload: the file and every file it names (the reader loads calibrations and transforms,
-    and checks device URLs), the bolt table with the station's own matching tolerance, and
-    the NOK policy against that table (an override no table has is refused: at a reload,
-    the running station is kept).  Raises the first error (one line, file and key)."""
-    from stationd.boltfile import load_bolts
+    and checks device URLs), the bolt table with the station's own matching tolerance, the
+    NOK policy against that table (an override no table has is refused: at a reload, the
+    running station is kept), and its bolts against its controller (a bolt without a pset on
+    one that selects psets only).  Raises the first error (one line, file and key).
+    ``warn``: told of bolts no pair sees (the daemon's journal: a line engineer's reload
+    said only "B51 added", and B51 was missing on every vehicle after it)."""
+    from stationd.boltfile import check_bolts
 
     read = read_station(path, station=True)
     cfg = read.config
     if cfg.bolts_path is not None:
-        table = load_bolts(cfg.bolts_path, tolerance_mm=cfg.matching.tolerance_mm)
-        errors = table_checks(read.sections, table, str(cfg.bolts_path))
+        bolts = check_bolts(cfg.bolts_path, tolerance_mm=cfg.matching.tolerance_mm)
+        if bolts.table is None:
+            raise bolts.errors[0]
+        errors = [*table_checks(read.sections, bolts.table, str(cfg.bolts_path)),
+                  *psets_only_errors(cfg.wrench.url, bolts)]
         if errors:
             raise errors[0]
+        if warn is not None:
+            unseen = _unseen_bolts_warning(cfg, bolts)
+            if unseen is not None:   # (the daemon's journal, at its start and every reload)
+                warn(str(unseen))
     return cfg
 
 
@@ -143,11 +154,9 @@ def check_station(path: str | Path, *, header: bool = True) -> StationCheck:
 
         warnings += unused_loosen_psets(top["nok"], cfg.nok)
     if bolts is not None and bolts.table is not None and "wrench" in top:
-        warning = _psets_only_warning(cfg.wrench.url, bolts.table, top["wrench"])
-        if warning is not None:
-            warnings.append(warning)
+        errors += psets_only_errors(cfg.wrench.url, bolts)
     if bolts is not None and bolts.table is not None and "pairs" in top:
-        warning = _unseen_bolts_warning(cfg, bolts.table, top["pairs"])
+        warning = _unseen_bolts_warning(cfg, bolts)
         if warning is not None:
             warnings.append(warning)
     if cfg.bolts_path is None and not read.errors:
@@ -319,44 +328,50 @@ def _no_models_warning(found: tuple[BoltTable, str] | str | None,
                        f"(stationd db import BOLTS.yaml --config {path})", path=path)
 
 
-def _unseen_bolts_warning(cfg: StationConfig, table: Any, node: YamlNode
-                          ) -> ConfigError | None:
+def _unseen_bolts_warning(cfg: StationConfig, bolts: BoltCheck) -> ConfigError | None:
     """Bolts that no registered pair would see the wrench's marker on (the wrench upright on
     the bolt, its marker ``tool.length_mm`` below it, projected with each pair's calibration
     as the reference markers are): a position typed in metres, or in another frame, would be
     missing on every vehicle, and ``config check`` called it ok (an engineer's trial).  A
-    warning: a pair not registered yet, or a tilted wrench, may still see it."""
+    warning: a pair not registered yet, or a tilted wrench, may still see it.  At the first
+    such bolt's line in the bolt file (where it is fixed)."""
     from stationd.localize.references import project
 
+    table = bolts.table
     pairs = [(p.calibration, p.to_vehicle) for p in cfg.pairs.values()
              if p.to_vehicle is not None]
-    if not pairs or len(pairs) < len(cfg.pairs):
+    if table is None or not pairs or len(pairs) < len(cfg.pairs):
         return None     # a pair not registered yet (warned of) may be the one that sees it
     below = np.array([*cfg.tool.offset_mm, cfg.tool.length_mm])
-    unseen = [f"{b.bolt_id} ({m.name}) at {[round(v, 4) for v in b.position]}"
-              for m in table.models for b in m.bolts
+    unseen = [(m.name, b) for m in table.models for b in m.bolts
               if not any(project(cal, tv, np.asarray(b.position) - below, cfg.marker)
                          is not None for cal, tv in pairs)]
     if not unseen:
         return None
-    more = f" and {len(unseen) - 3} more" if len(unseen) > 3 else ""
-    return node.error(f"{'; '.join(unseen[:3])}{more}: seen by no registered pair (the "
-                      f"wrench's marker, {cfg.tool.length_mm:g} mm below the bolt with the "
-                      "wrench upright, is not in front of both cameras and inside both "
-                      f"images): check the positions in {cfg.bolts_path} (vehicle frame, mm)")
+    said = [f"{b.bolt_id} ({m}) at {[round(v, 4) for v in b.position]}" for m, b in unseen]
+    more = f" and {len(said) - 3} more" if len(said) > 3 else ""
+    return _at_bolt(bolts, *unseen[0], (
+        f"{'; '.join(said[:3])}{more}: seen by no registered pair (the wrench's marker, "
+        f"{cfg.tool.length_mm:g} mm below the bolt with the wrench upright, is not in front "
+        "of both cameras and inside both images): check the positions (vehicle frame, mm)"))
 
 
-def _psets_only_warning(url: str, table: Any, node: YamlNode) -> ConfigError | None:
+def psets_only_errors(url: str, bolts: BoltCheck) -> list[ConfigError]:
     """Bolts with their own torque and no pset, on a controller that selects psets only (its
-    driver says: Open Protocol, and its simulated twin): the daemon would refuse them at
-    every visit."""
-    if takes_targets(url):
-        return None
-    nopset = [f"{b.bolt_id} ({m.name})" for m in table.models for b in m.bolts
-              if b.parameters.pset is None]
-    if not nopset:
-        return None
-    more = f" and {len(nopset) - 5} more" if len(nopset) > 5 else ""
-    return node.error(f"{', '.join(nopset[:5])}{more}: no pset, and this controller ({url}) "
-                      "selects psets only: they will be refused at the station (give them a "
-                      "pset, or drive the controller over Modbus)")
+    driver says: Open Protocol, and its simulated twin): each would be refused at every
+    visit, the station in fault and the bolt missing on every vehicle, so the table is
+    refused with them, each at its line (a line engineer's trial: a warning that the check
+    and the reload passed)."""
+    if bolts.table is None or takes_targets(url):
+        return []
+    return [_at_bolt(bolts, m.name, b, (
+                f"{b.bolt_id} ({m.name}): no pset, and the controller {url} selects psets "
+                "only: it would be refused at every visit (give it a pset, or drive the "
+                "controller over Modbus)"))
+            for m in bolts.table.models for b in m.bolts if b.parameters.pset is None]
+
+
+def _at_bolt(bolts: BoltCheck, model: str, bolt: BoltSpec, message: str) -> ConfigError:
+    """``message`` at the line of ``bolt`` (of ``model``) in its bolt file."""
+    node = bolts.nodes.get((model, bolt.bolt_id))
+    return node.error(message) if node is not None else ConfigError(message, path=bolts.path)

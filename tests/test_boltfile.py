@@ -286,3 +286,19 @@ def test_a_key_written_twice_in_a_pset_is_one_error_not_one_at_every_bolt_using_
                         "    angle: {target: 30, min: 20, max: 60}\n", 1)
     errors = [str(e) for e in check_text(text).errors]
     assert len(errors) == 1 and "duplicate key" in errors[0], errors
+
+
+def test_two_bolts_of_a_model_named_alike_is_a_warning_at_the_second(check_text):
+    """A line engineer's trial: B51 named "bolt 7" as B07, taken silently; the screens, the
+    journal and the reports name bolts to people.  Said at the second one's name, the table
+    still valid; the same name in another model is not said."""
+    text = BASE.replace("name: three", "name: one", 1)
+    assert text != BASE
+    result = check_text(text)
+    assert result.ok
+    [warning] = [w for w in result.warnings if "named" in w.message]
+    assert warning.key == f"{B3}.name" and warning.line == line_of(text, "name: one", 1)
+    assert warning.message == ("B3: named 'one' as B1 (line "
+                               f"{line_of(text, '- id: B1')}) of model SEDAN: people tell the "
+                               "two apart by their id alone")
+    assert not [w for w in check_text(BASE).warnings if "named" in w.message]

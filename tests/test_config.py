@@ -7,7 +7,7 @@ import pytest
 
 from stationd.config import load_station_config
 from stationd.errors import ConfigError
-from stationd.stationcheck import check_station
+from stationd.stationcheck import check_station, validate_station
 from tests.conftest import SPEC
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
@@ -604,17 +604,29 @@ def test_an_unreadable_station_file_is_one_error(tmp_path, text, message):
     assert str(error).startswith(str(tmp_path / message))
 
 
-def test_a_bolt_without_pset_on_a_psets_only_controller_is_a_warning(sim_copy):
+def test_a_bolt_without_pset_on_a_psets_only_controller_is_refused_at_its_line(sim_copy):
+    """A line engineer's trial: a bolt given a torque window and no pset passed the check
+    (a warning) and the reload, then put the station in fault at every visit, the bolt
+    missing on every vehicle.  Refused by the check, the start and a reload, at the bolt's
+    line, each such bolt; the same bolt for a controller over Modbus (its own targets) is
+    taken."""
     bolts = sim_copy / "bolts.yaml"
     text = bolts.read_text()
     head, tail = text.split("- id: B01", 1)
     bolts.write_text(head + "- id: B01" + tail.replace(
         "pset: 1", "torque: {target: 9.0, min: 8.0, max: 10.0}", 1))
     result = check_station(sim_copy / "station.yaml")
-    assert result.ok
-    [warning] = result.warnings
-    assert warning.key == "wrench" and "B01 (SIM-1): no pset" in str(warning)
-    assert "selects psets only" in str(warning)
+    assert not result.ok and not result.warnings
+    [error] = result.errors
+    assert (error.path, error.line) == (str(bolts), _line(bolts, "- id: B01"))
+    assert error.message == ("B01 (SIM-1): no pset, and the controller sim://wrench selects "
+                             "psets only: it would be refused at every visit (give it a pset, "
+                             "or drive the controller over Modbus)")
+    with pytest.raises(ConfigError) as refused:
+        validate_station(sim_copy / "station.yaml")
+    assert str(refused.value) == str(error)
+    _edit(sim_copy / "station.yaml", "url: 'sim://wrench'", "url: 'sim+modbus://wrench'")
+    assert check_station(sim_copy / "station.yaml").ok
 
 
 def test_a_bolt_no_registered_pair_would_see_is_a_warning(sim_copy):
@@ -629,9 +641,14 @@ def test_a_bolt_no_registered_pair_would_see_is_a_warning(sim_copy):
     result = check_station(sim_copy / "station.yaml")
     assert result.ok
     [warning] = result.warnings
-    assert warning.key == "pairs" and "B01 (SIM-1) at [1.4898, -0.5293, -0.0443]: seen by " \
-        "no registered pair" in str(warning)
-    assert f"check the positions in {bolts}" in str(warning)
+    # at the bolt's own line (it pointed at the station file's pairs: a line engineer's
+    # trial), and said by the daemon at its start and every reload
+    assert (warning.path, warning.line) == (str(bolts), _line(bolts, "- id: B01"))
+    assert warning.message.startswith("B01 (SIM-1) at [1.4898, -0.5293, -0.0443]: seen by "
+                                      "no registered pair")
+    told: list[str] = []
+    validate_station(sim_copy / "station.yaml", told.append)
+    assert told == [str(warning)]
 
 
 @pytest.mark.parametrize(("old", "new", "key", "message"), [

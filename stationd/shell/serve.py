@@ -140,7 +140,7 @@ async def _reloaded(cfg_path: str, station: Station, screens: Screens,
     is never stopped for an invalid one."""
     loop = asyncio.get_running_loop()
     try:  # validate first: an invalid station never stops the running one
-        new = await loop.run_in_executor(None, validate_station, cfg_path)
+        new = await loop.run_in_executor(None, validate_station, cfg_path, log.warning)
         changed = station.records.file_changed(new.database_url)
         if changed is FileChange.REMOVED:
             raise StationError(
@@ -700,7 +700,8 @@ def run_daemon(args: argparse.Namespace, beside: Beside | None = None) -> int:
     setup_logging(logging.INFO, sys.stderr)
     logging.getLogger("alembic").setLevel(logging.WARNING)
     logging.getLogger("asyncua").setLevel(logging.WARNING)   # ~1000 lines per start otherwise
-    cfg = validate_station(args.config)  # an invalid station at the first start: exit 2
+    # an invalid station at the first start: exit 2
+    cfg = validate_station(args.config, log.warning)
     locks = StationLocks()
     # a second daemon on this database or on one of its devices: one line naming the holder
     # and the device, exit 2 (taken before any device is opened)

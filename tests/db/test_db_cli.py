@@ -283,14 +283,14 @@ def test_config_check_tells_station_files_from_bolt_tables(run, tmp_path):
     # the example's database folder is the service's, made by systemd: said while missing;
     # and its bolt table is another vehicle than the simulated pair it names looks at
     url_line = _first_line(example, "  url: 'sqlite")
-    pairs_line = _first_line(example, "  front:")   # the section's value
+    bolt_line = _first_line(EXAMPLE, "      - id: SF-FL")   # the first bolt no pair sees
     assert code == 0
     assert err.splitlines() == [
-        f"warning: {example}:{pairs_line}: pairs: SF-FL (SEDAN-A) at [-350.0, 420.0, 0.0]; "
-        "SF-FR (SEDAN-A) at [-350.0, -420.0, 0.0]; SF-RL (SEDAN-A) at [250.0, 400.0, 5.0] and 4 "
-        "more: seen by no registered pair (the wrench's marker, 300 mm below the bolt with the "
-        "wrench upright, is not in front of both cameras and inside both images): check the "
-        f"positions in {EXAMPLE} (vehicle frame, mm)",
+        f"warning: {EXAMPLE}:{bolt_line}: models.SEDAN-A.bolts[0]: SF-FL (SEDAN-A) at "
+        "[-350.0, 420.0, 0.0]; SF-FR (SEDAN-A) at [-350.0, -420.0, 0.0]; SF-RL (SEDAN-A) at "
+        "[250.0, 400.0, 5.0] and 4 more: seen by no registered pair (the wrench's marker, 300 "
+        "mm below the bolt with the wrench upright, is not in front of both cameras and inside "
+        "both images): check the positions (vehicle frame, mm)",
         *([] if Path("/var/lib/stationd").exists() else [
             f"warning: {example}:{url_line}: database.url: folder /var/lib/stationd does not "
             "exist yet: systemd makes it when the service starts (StateDirectory=stationd); "
