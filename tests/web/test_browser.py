@@ -511,6 +511,15 @@ def test_a_refused_reload_is_said_in_the_devices_panel(live_server, page):
     assert page.text("#devices li[data-device=config]") == (
         "configuration: reload refused (station.yaml:12: nok.max_nok: 0 is out of range 1-99):"
         " running on the file read before")
+    # a long one whole, wrapped, not cut to one line (a line engineer's trial on a touch
+    # panel: its file and line showed only on a mouse's hover)
+    long = "/etc/stationd/bolts/" + "sedan-2027-" * 8 + "bolts.yaml:218: models.SEDAN.bolts[50]"
+    srv.server.reload_refused = long
+    srv.publish(opened()[:1])
+    page.wait(lambda p: long in (p.text("#devices li[data-device=config]") or ""),
+              what="the long refusal")
+    assert page.js("const e = document.querySelector('#devices li[data-device=config]');"
+                   " return e.scrollWidth <= e.clientWidth + 1") is True
     srv.server.reload_refused = None       # a reload that went through
     srv.publish(opened()[:1])
     page.wait(lambda p: p.count("#devices li[data-device=config]") == 0,

@@ -452,15 +452,17 @@ function drawDevices(devices, line, reloadRefused) {
   const ul = $("devices");
   ul.replaceChildren();
   // a reload refused: the station runs on the file it read before, and the file on disk
-  // would not start it at the next reboot (it was only in stationd status: an operator trial)
+  // would not start it at the next reboot (it was only in stationd status: an operator trial).
+  // Whole, wrapped: the file, line and key are what the engineer at the panel fixes (cut to
+  // one line, they showed only on a mouse's hover: a line engineer's trial on a touch panel)
   if (reloadRefused) {
     const li = document.createElement("li");
-    li.className = "dev-wait";
+    li.className = "dev-wait full";
     li.dataset.device = "config";
     li.textContent = `configuration: reload refused (${reloadRefused}): running on the file ` +
       "read before";
     li.title = li.textContent;
-    ul.appendChild(oneLine(li));
+    ul.appendChild(li);
   }
   const l = lineShown(line);
   if (l) {
