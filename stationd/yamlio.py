@@ -245,7 +245,13 @@ class YamlNode:
             mark = getattr(exc, "problem_mark", None)
             line = mark.line + 1 if mark is not None else None
             problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-            raise ConfigError(f"malformed YAML: {_plain(problem)}", path=path,
+            # where what it was reading began, when on another line (an unclosed "{" on
+            # line 9 was told at line 10 alone: a line engineer's trial)
+            context, begun = getattr(exc, "context", None), getattr(exc, "context_mark", None)
+            where = f" (in the {_OPENED.get(context, context)} opened at line " \
+                f"{begun.line + 1})" if context and begun is not None \
+                and begun.line + 1 != line else ""
+            raise ConfigError(f"malformed YAML: {_plain(problem)}{where}", path=path,
                               line=line) from None
         except RecursionError:   # PyYAML parses nested collections recursively
             raise ConfigError(f"collections nested more than {MAX_DEPTH} levels deep: not a "
@@ -517,6 +523,11 @@ _PLAIN = (
                                             "too far)"),
     ("could not find expected ':'", "a key without its ':' (or a line indented too far)"),
 )
+
+
+#: what the parser was reading when it failed, in the words of what a person typed
+_OPENED = {"while parsing a flow mapping": "{ }", "while parsing a flow sequence": "[ ]",
+           "while scanning a quoted scalar": "quoted text"}
 
 
 def _plain(problem: str) -> str:

@@ -35,6 +35,12 @@ def test_errors_name_file_line_key(text, needle):
      "around it (expected <block end>"),
     ("tool:\n  length_mm: 300\n   max_tilt_deg: 10\n", "f.yaml:3: malformed YAML: a ':' "
      "where no key can start"),
+    # an unclosed "{" on line 2 is found on line 3: both said (a line engineer's trial: line
+    # 3 alone sent him to a line with nothing wrong on it)
+    ("a: 1\nb: {x: 1, y: 2\nc: 3\n", "f.yaml:3: malformed YAML: expected ',' or '}', but "
+     "got ':' (in the { } opened at line 2)"),
+    ("a:\n  - [1, 2\n  - 3\n", "(in the [ ] opened at line 2)"),
+    ("a: 'abc\nb: 2\n", "(in the quoted text opened at line 1)"),
 ])
 def test_a_malformed_file_is_said_in_plain_words(text, needle):
     with pytest.raises(ConfigError) as ei:
